@@ -1,0 +1,27 @@
+"""Physical constants and unit factors: the only numeric literals the models share.
+
+SI inside: m, s, kg, rad, W, J. Units appear in names only where data leaves the code.
+"""
+
+#: Standard gravity used by the seed paper and by VSP (Jiménez-Palacios 1999) [m/s²].
+G = 9.81
+#: Default air density at 20 °C, 101.325 kPa (also SUMO's Energy model) [kg/m³].
+RHO_DEFAULT = 1.2041
+#: Specific gas constant of dry air [J/(kg·K)].
+R_DRY_AIR = 287.058
+#: Standard sea-level pressure [kPa].
+P_STD_KPA = 101.325
+#: 0 °C in kelvin.
+KELVIN = 273.15
+
+KMH = 1.0 / 3.6          # km/h → m/s
+MPH = 0.44704            # mph → m/s
+FT = 0.3048              # ft → m
+LBF = 4.4482216152605    # lbf → N
+LB = 0.45359237          # lb → kg
+RPM = 2.0 * 3.141592653589793 / 60.0  # rpm → rad/s
+
+#: Boundary between light and heavy load in the seed paper's Table 3 [W].
+HEAVY_LOAD_W = 50_000.0
+#: Speed above which the seed paper's Fig. 8 shows VSP underprediction [m/s].
+HIGH_SPEED_MPS = 80.0 * KMH
