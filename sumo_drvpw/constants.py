@@ -20,6 +20,9 @@ FT = 0.3048              # ft → m
 LBF = 4.4482216152605    # lbf → N
 LB = 0.45359237          # lb → kg
 RPM = 2.0 * 3.141592653589793 / 60.0  # rpm → rad/s
+MILE = 1609.344         # mile → m
+GAL = 3.785411784e-3    # US gallon → m³
+HP = 745.69987158227022  # mechanical horsepower → W
 
 #: Boundary between light and heavy load in the seed paper's Table 3 [W].
 HEAVY_LOAD_W = 50_000.0
