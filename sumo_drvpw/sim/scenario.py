@@ -1,0 +1,394 @@
+"""Scenario files (TOML): which SUMO run, which equations, which vehicles, wind, air, classes.
+
+Schema (every table optional except ``[sumo]`` and ``equations``; paths are relative to
+the scenario file)::
+
+    equations = ["vsp_ldv1999", "drvpw_prius3", "my_fit.toml"]   # built-in names or files
+
+    [sumo]
+    config = "city.sumocfg"         # a SUMO config, or: net = "x.net.xml", routes = [..]
+    # net = "..."; routes = ["..."]; additional = ["..."]
+    begin = 0                       # [s] (default: the config's)
+    end = 600                       # [s] (default: the config's)
+    step_length = 0.5               # [s] (default: the config's)
+    connection = "libsumo"          # or "traci" (e.g. with gui = true to watch in sumo-gui)
+    gui = false
+    options = ["--seed", "7"]       # extra SUMO command-line options
+
+    [vehicles]
+    vtypes = ["prius3"]             # vTypes to account (default: all vehicles)
+
+    [vtypes.prius3]                 # per-vType vehicle data (optional)
+    mass_kg = 1625                  # overrides the vType's mass / drvpw.mass param [kg]
+    equations = ["drvpw_prius3"]    # the equations applied to it (default: all)
+
+    [wind]                          # absent: no wind
+    speed_mps = 4.0
+    from_deg = 270                  # direction the wind blows FROM, clockwise from north
+
+    [air]                           # one of:
+    density_kgm3 = 1.2041
+    # temperature_c = 20; pressure_kpa = 101.325   (ρ = p / (R_dry · T))
+
+    [road_class]
+    highway_min_speed_kmh = 80      # lane speed limit ≥ this → highway
+    highway_types = ["highway.motorway", "highway.motorway_link", "highway.trunk",
+                     "highway.trunk_link"]
+    types = { "highway.primary" = "arterial" }   # edge type → class (wins over the above)
+    edges = { "e12" = "highway" }                 # edge id → class (wins over everything)
+
+    [slope]
+    window_m = 20.0                 # distance window of the robust lane slope [m]
+    max_rad = 0.25                  # plausible |θ| limit [rad]
+    tolerance_rad = 0.01            # |θ_getSlope − θ_robust| above this counts as corrected
+
+    [outputs]
+    trace = false                   # per vehicle-step trace.parquet
+    edgedata = true                 # SUMO edgeData-style XML
+    figures = true
+    difference = ["vsp_ldv1999", "drvpw_prius3"]   # equations of the difference map
+    progress = true                 # tqdm progress bar (only on a TTY)
+
+Vehicle mass (see :mod:`sumo_drvpw.sim.vtypes`): scenario ``mass_kg`` > vType param
+``drvpw.mass`` > vType ``mass`` attribute written in the route/additional files. A vType
+with none of them has no mass: SUMO would silently use its default, so this is an error.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..constants import KELVIN, P_STD_KPA, R_DRY_AIR, RHO_DEFAULT
+from ..equations import Equation, load_equation
+from ..errors import UserError
+from ..terms import parse_term
+
+DEFAULT_HIGHWAY_TYPES = ("highway.motorway", "highway.motorway_link", "highway.trunk",
+                         "highway.trunk_link")
+#: Speed limit at or above which an edge is highway by default [km/h].
+DEFAULT_HIGHWAY_MIN_SPEED_KMH = 80.0
+
+_SCHEMA: dict[str, set[str] | None] = {
+    "equations": None,
+    "sumo": {"config", "net", "routes", "additional", "begin", "end", "step_length",
+             "connection", "gui", "options"},
+    "vehicles": {"vtypes"},
+    "vtypes": None,  # table of vType id → {mass_kg, equations}
+    "wind": {"speed_mps", "from_deg"},
+    "air": {"density_kgm3", "temperature_c", "pressure_kpa"},
+    "road_class": {"highway_min_speed_kmh", "highway_types", "types", "edges"},
+    "slope": {"window_m", "max_rad", "tolerance_rad"},
+    "outputs": {"trace", "edgedata", "figures", "difference", "progress"},
+}
+_VTYPE_KEYS = {"mass_kg", "equations"}
+#: keyword overrides accepted by run_scenario (and the CLI)
+OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
+             "trace", "edgedata", "figures", "progress", "difference"}
+
+
+@dataclass
+class RoadClassRule:
+    """How an edge gets its road class: edge id map > type map > highway types/speed > city."""
+
+    highway_min_speed_mps: float = DEFAULT_HIGHWAY_MIN_SPEED_KMH / 3.6
+    highway_types: tuple[str, ...] = DEFAULT_HIGHWAY_TYPES
+    types: dict[str, str] = field(default_factory=dict)
+    edges: dict[str, str] = field(default_factory=dict)
+
+    def classify(self, edge_id: str, edge_type: str, speed_mps: float) -> str:
+        """Road class of a (non-internal) edge; speed limit in [m/s]."""
+        if edge_id in self.edges:
+            return self.edges[edge_id]
+        if edge_type in self.types:
+            return self.types[edge_type]
+        if edge_type in self.highway_types or speed_mps >= self.highway_min_speed_mps - 1e-6:
+            return "highway"
+        return "city"
+
+    @property
+    def classes(self) -> list[str]:
+        """Every class the rule can produce, city and highway first."""
+        out = ["city", "highway"]
+        for c in list(self.types.values()) + list(self.edges.values()):
+            if c not in out:
+                out.append(c)
+        return out
+
+
+@dataclass
+class Scenario:
+    """A parsed scenario: SUMO command pieces, equations and the physics settings (SI)."""
+
+    path: Path | None
+    sumo_args: list[str]
+    route_files: list[Path]
+    net_file: Path
+    begin: float | None
+    end: float | None
+    step_length: float | None
+    connection: str
+    gui: bool
+    equations: list[Equation]
+    vtype_filter: list[str] | None
+    vtype_data: dict[str, dict]
+    wind_speed: float
+    wind_from_deg: float
+    rho: float
+    road_class: RoadClassRule
+    slope_window: float = 20.0
+    slope_max: float = 0.25
+    slope_tol: float = 0.01
+    trace: bool = False
+    edgedata: bool = True
+    figures: bool = True
+    difference: list[str] | None = None
+    progress: bool = True
+
+
+def _where(path) -> str:
+    return str(path) if path else "<scenario>"
+
+
+def _num(v, where: str, key: str, positive: bool = False) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise UserError(f"{where}: '{key}' must be a number, got {v!r}")
+    if positive and v <= 0:
+        raise UserError(f"{where}: '{key}' must be > 0, got {v!r}")
+    return float(v)
+
+
+def _strlist(v, where: str, key: str) -> list[str]:
+    if isinstance(v, str):
+        v = [v]
+    if not isinstance(v, list) or not all(isinstance(x, (str, Equation)) for x in v):
+        raise UserError(f"{where}: '{key}' must be a list of strings, got {v!r}")
+    return list(v)
+
+
+def resolve_equation(spec, base: Path | None, where: str) -> Equation:
+    """Load one equation (Equation object, built-in name or TOML path relative to ``base``)
+    and check it can run in SUMO (no log-only ``[column]`` or ``trip=`` factors)."""
+    if isinstance(spec, Equation):
+        eq = spec
+    else:
+        p = Path(spec)
+        if base is not None and not p.is_absolute() and (base / p).exists():
+            p = base / p
+            eq = load_equation(p)
+        else:
+            eq = load_equation(spec)
+    for t in eq.term_names:
+        term = parse_term(t)
+        if term.signals:
+            raise UserError(f"{where}: equation '{eq.name}' cannot run in SUMO: term '{t}' needs "
+                            f"the log-only signal '{term.signals[0]}'")
+        if any(f.startswith("trip=") for f in term.factors):
+            raise UserError(f"{where}: equation '{eq.name}' cannot run in SUMO: term '{t}' "
+                            "needs trip ids of a drive log")
+    return eq
+
+
+def _config_files(cfg: Path) -> tuple[Path, list[Path], dict[str, str]]:
+    """Net file, route+additional files and time values named in a SUMO config."""
+    try:
+        root = ET.parse(cfg).getroot()
+    except ET.ParseError as e:
+        raise UserError(f"SUMO config {cfg}: not valid XML: {e}") from None
+    except OSError as e:
+        raise UserError(f"SUMO config {cfg}: cannot read: {e}") from None
+    vals: dict[str, str] = {}
+    for el in root.iter():
+        tag = el.tag.split("}")[-1]
+        if "value" in el.attrib:
+            vals[tag] = el.attrib["value"]
+    net = vals.get("net-file")
+    if not net:
+        raise UserError(f"SUMO config {cfg}: no <net-file>")
+    files = []
+    for key in ("route-files", "additional-files"):
+        for f in vals.get(key, "").split(","):
+            if f.strip():
+                files.append((cfg.parent / f.strip()).resolve())
+    return (cfg.parent / net).resolve(), files, vals
+
+
+def load_scenario(path: str | Path | None = None, doc: dict | None = None,
+                  **overrides) -> Scenario:
+    """Parse and check a scenario file (or an already parsed ``doc``); UserError on bad input.
+
+    Parameters
+    ----------
+    path : scenario TOML file
+    doc : parsed document instead of a file (paths then relative to the working directory)
+    overrides : values replacing the file's (keys in ``OVERRIDES``)
+    """
+    where = _where(path)
+    base = None
+    if doc is None:
+        if path is None:
+            raise UserError("no scenario given")
+        p = Path(path)
+        if not p.is_file():
+            raise UserError(f"scenario file not found: {p}")
+        try:
+            doc = tomllib.loads(p.read_text(encoding="utf-8"))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+            raise UserError(f"{p}: not a valid TOML scenario: {e}") from None
+        base = p.resolve().parent
+        path = p
+    bad = set(overrides) - OVERRIDES
+    if bad:
+        raise UserError(f"unknown override(s) {sorted(bad)} (known: {sorted(OVERRIDES)})")
+    for key, val in doc.items():
+        if key not in _SCHEMA:
+            raise UserError(f"{where}: unknown key '{key}' (known: {', '.join(_SCHEMA)})")
+        allowed = _SCHEMA[key]
+        if allowed is not None:
+            if not isinstance(val, dict):
+                raise UserError(f"{where}: '{key}' must be a table")
+            for k in val:
+                if k not in allowed:
+                    raise UserError(f"{where}: unknown key '{key}.{k}' "
+                                    f"(known: {', '.join(sorted(allowed))})")
+    rel = (lambda s: (base / s) if base is not None and not Path(s).is_absolute() else Path(s))
+
+    sumo = dict(doc.get("sumo", {}))
+    for k in ("begin", "end", "step_length", "connection", "gui", "options"):
+        if k in overrides:
+            sumo[k] = overrides[k]
+    if "config" in sumo:
+        if "net" in sumo or "routes" in sumo:
+            raise UserError(f"{where}: give either sumo.config or sumo.net + sumo.routes")
+        cfg = rel(sumo["config"])
+        if not cfg.is_file():
+            raise UserError(f"{where}: SUMO config not found: {cfg}")
+        net, files, cfgvals = _config_files(cfg)
+        args = ["-c", str(cfg)]
+    elif "net" in sumo:
+        net = rel(sumo["net"]).resolve()
+        routes = [rel(r).resolve() for r in _strlist(sumo.get("routes", []), where, "sumo.routes")]
+        adds = [rel(r).resolve() for r in _strlist(sumo.get("additional", []), where,
+                                                    "sumo.additional")]
+        files, cfgvals = routes + adds, {}
+        args = ["-n", str(net)]
+        if routes:
+            args += ["-r", ",".join(map(str, routes))]
+        if adds:
+            args += ["-a", ",".join(map(str, adds))]
+    else:
+        raise UserError(f"{where}: [sumo] needs 'config' or 'net' (+ 'routes')")
+    if not net.is_file():
+        raise UserError(f"{where}: SUMO network not found: {net}")
+    for f in files:
+        if not f.is_file():
+            raise UserError(f"{where}: SUMO input file not found: {f}")
+    times = {}
+    for k in ("begin", "end", "step_length"):
+        if k in sumo:
+            times[k] = _num(sumo[k], where, f"sumo.{k}", positive=(k == "step_length"))
+            args += [f"--{k.replace('_', '-')}", repr(times[k])]
+        elif k.replace("_", "-") in cfgvals:
+            try:
+                times[k] = float(cfgvals[k.replace("_", "-")])
+            except ValueError:
+                raise UserError(f"SUMO config: bad {k} value {cfgvals[k.replace('_', '-')]!r}") \
+                    from None
+    if "begin" in times and "end" in times and times["end"] <= times["begin"]:
+        raise UserError(f"{where}: sumo.end ({times['end']}) must be after sumo.begin "
+                        f"({times['begin']})")
+    args += [str(o) for o in _strlist(sumo.get("options", []), where, "sumo.options")]
+    connection = str(sumo.get("connection", "libsumo"))
+    if connection not in ("libsumo", "traci"):
+        raise UserError(f"{where}: sumo.connection must be 'libsumo' or 'traci', got "
+                        f"{connection!r}")
+
+    eq_specs = overrides.get("equations", doc.get("equations"))
+    if not eq_specs:
+        raise UserError(f"{where}: 'equations' must name at least one equation")
+    equations = [resolve_equation(s, base, where)
+                 for s in _strlist(eq_specs, where, "equations")]
+    names = [e.name for e in equations]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise UserError(f"{where}: equation name(s) {sorted(dup)} appear twice")
+
+    veh = doc.get("vehicles", {})
+    vfilter = _strlist(veh["vtypes"], where, "vehicles.vtypes") if "vtypes" in veh else None
+    vdata = {}
+    for vt, d in doc.get("vtypes", {}).items():
+        if not isinstance(d, dict):
+            raise UserError(f"{where}: 'vtypes.{vt}' must be a table")
+        for k in d:
+            if k not in _VTYPE_KEYS:
+                raise UserError(f"{where}: unknown key 'vtypes.{vt}.{k}' "
+                                f"(known: {', '.join(sorted(_VTYPE_KEYS))})")
+        entry = {}
+        if "mass_kg" in d:
+            entry["mass_kg"] = _num(d["mass_kg"], where, f"vtypes.{vt}.mass_kg", positive=True)
+        if "equations" in d:
+            eqs = _strlist(d["equations"], where, f"vtypes.{vt}.equations")
+            for e in eqs:
+                if e not in names:
+                    raise UserError(f"{where}: vtypes.{vt}.equations names '{e}', which is not "
+                                    f"among the scenario's equations ({', '.join(names)})")
+            entry["equations"] = eqs
+        vdata[str(vt)] = entry
+
+    wind = doc.get("wind", {})
+    ws = _num(wind.get("speed_mps", 0.0), where, "wind.speed_mps")
+    wd = _num(wind.get("from_deg", 0.0), where, "wind.from_deg")
+    if wind and "speed_mps" not in wind:
+        raise UserError(f"{where}: [wind] needs speed_mps (and from_deg)")
+    if ws < 0:
+        raise UserError(f"{where}: wind.speed_mps must be ≥ 0, got {ws}")
+
+    air = doc.get("air", {})
+    if "density_kgm3" in air:
+        if "temperature_c" in air:
+            raise UserError(f"{where}: give air.density_kgm3 or air.temperature_c, not both")
+        rho = _num(air["density_kgm3"], where, "air.density_kgm3", positive=True)
+    elif "temperature_c" in air:
+        t = _num(air["temperature_c"], where, "air.temperature_c")
+        pk = _num(air.get("pressure_kpa", P_STD_KPA), where, "air.pressure_kpa", positive=True)
+        if t + KELVIN <= 0:
+            raise UserError(f"{where}: air.temperature_c below absolute zero: {t}")
+        rho = pk * 1000.0 / (R_DRY_AIR * (t + KELVIN))
+    else:
+        rho = RHO_DEFAULT
+
+    rc = doc.get("road_class", {})
+    rule = RoadClassRule(
+        highway_min_speed_mps=_num(rc.get("highway_min_speed_kmh", DEFAULT_HIGHWAY_MIN_SPEED_KMH),
+                                   where, "road_class.highway_min_speed_kmh", True) / 3.6,
+        highway_types=tuple(_strlist(rc.get("highway_types", list(DEFAULT_HIGHWAY_TYPES)),
+                                     where, "road_class.highway_types")),
+        types={str(k): str(v) for k, v in dict(rc.get("types", {})).items()},
+        edges={str(k): str(v) for k, v in dict(rc.get("edges", {})).items()})
+
+    sl = doc.get("slope", {})
+    out = dict(doc.get("outputs", {}))
+    for k in ("trace", "edgedata", "figures", "progress", "difference"):
+        if k in overrides:
+            out[k] = overrides[k]
+    diff = out.get("difference")
+    if diff is not None:
+        diff = _strlist(diff, where, "outputs.difference")
+        if len(diff) != 2 or any(d not in names for d in diff):
+            raise UserError(f"{where}: outputs.difference must name two of the scenario's "
+                            f"equations ({', '.join(names)}), got {diff}")
+    return Scenario(
+        path=Path(path) if path else None, sumo_args=args, route_files=files, net_file=net,
+        begin=times.get("begin"), end=times.get("end"), step_length=times.get("step_length"),
+        connection=connection, gui=bool(sumo.get("gui", False)), equations=equations,
+        vtype_filter=vfilter, vtype_data=vdata, wind_speed=ws, wind_from_deg=wd, rho=rho,
+        road_class=rule,
+        slope_window=_num(sl.get("window_m", 20.0), where, "slope.window_m", True),
+        slope_max=_num(sl.get("max_rad", 0.25), where, "slope.max_rad", True),
+        slope_tol=_num(sl.get("tolerance_rad", 0.01), where, "slope.tolerance_rad", True),
+        trace=bool(out.get("trace", False)), edgedata=bool(out.get("edgedata", True)),
+        figures=bool(out.get("figures", True)), difference=diff,
+        progress=bool(out.get("progress", True)))
