@@ -238,3 +238,24 @@ def _tomlable(o):
     if isinstance(o, Path):
         return str(o)
     return o
+
+
+def vsp_from_specs(vehicle) -> Equation:
+    """VSP with a vehicle's physical specs (seed paper Eq. 1), as an equation.
+
+    P = m·v·[a(1 + ε_i) + g·sin θ + g·C_r] + ½·ρ·C_d·A·v(v − v_w)²: in this basis
+    acc = 1 + ε_i, grade = 1, m_v1 = g·C_r (VSP has no cos θ), aero_rho = C_d·A.
+
+    Parameters
+    ----------
+    vehicle : :class:`sumo_drvpw.vehicles.Vehicle` with [body] drag_coefficient,
+        frontal_area_m2, rolling_coefficient and optional rotating_mass_factor
+    """
+    cd = vehicle.need("body", "drag_coefficient")
+    area = vehicle.need("body", "frontal_area_m2")
+    cr = vehicle.need("body", "rolling_coefficient")
+    eps = float(vehicle.body.get("rotating_mass_factor", 0.1))
+    return Equation(name=f"vsp_{vehicle.name}spec",
+                    terms={"acc": 1.0 + eps, "grade": 1.0, "m_v1": G * cr, "aero_rho": cd * area},
+                    description=f"VSP with the physical specs of {vehicle.name} (seed paper Eq. 1)",
+                    source=f"vehicle file {vehicle.path}")
