@@ -53,6 +53,15 @@ def _r2(pred: np.ndarray, meas: np.ndarray) -> float:
     return 1.0 - float(np.sum((pred - meas) ** 2)) / sst
 
 
+def _r2_corr(pred: np.ndarray, meas: np.ndarray) -> float:
+    """Squared Pearson correlation of pred and meas; NaN as for :func:`_r2`."""
+    if len(meas) < MIN_SAMPLES:
+        return math.nan
+    pc, mc = pred - pred.mean(), meas - meas.mean()
+    den = float(pc @ pc) * float(mc @ mc)
+    return float(pc @ mc) ** 2 / den if den > 0.0 else math.nan
+
+
 def _rmse(err: np.ndarray) -> float:
     return float(np.sqrt(np.mean(err * err))) if len(err) else math.nan
 
@@ -70,7 +79,10 @@ def metrics(pred_w, meas_w) -> dict:
     dict with ``n`` (finite pairs used), ``r2`` (centred, 1 − SSE/SST), ``r2_light`` and
     ``r2_heavy`` (measured < / ≥ 50 kW, each on its own mean), ``rmse_w``, ``mae_w``,
     ``bias_w`` = mean(pred − meas) [W], ``rmse_light_w``, ``rmse_heavy_w``,
-    ``bias_light_w``, ``bias_heavy_w`` [W], ``n_light``, ``n_heavy``. Pairs with a NaN
+    ``bias_light_w``, ``bias_heavy_w`` [W], ``n_light``, ``n_heavy``, and
+    ``r2_corr``/``r2_corr_light``/``r2_corr_heavy``: the squared Pearson correlation
+    (the R² of regressing measured on predicted with intercept, blind to bias and
+    scale), for matching published values whose R² definition is unstated. Pairs with a NaN
     or infinite value are left out. R² needs ≥ 3 samples and a non-constant
     measurement, else it is NaN; the other subset statistics are NaN for an empty subset.
     """
@@ -99,6 +111,9 @@ def metrics(pred_w, meas_w) -> dict:
         "rmse_heavy_w": _rmse(err[heavy]),
         "bias_light_w": float(np.mean(err[light])) if light.any() else math.nan,
         "bias_heavy_w": float(np.mean(err[heavy])) if heavy.any() else math.nan,
+        "r2_corr": _r2_corr(pred, meas),
+        "r2_corr_light": _r2_corr(pred[light], meas[light]),
+        "r2_corr_heavy": _r2_corr(pred[heavy], meas[heavy]),
     }
     return out
 

@@ -6,7 +6,6 @@ reading, converted here at the edge.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -79,13 +78,29 @@ def _coef(x) -> str:
 
 
 def _ctx_value(v) -> str:
+    """One-line rendering of a context value (long structures stay in report.json)."""
     if isinstance(v, (list, tuple)):
+        if any(isinstance(x, (dict, list, tuple)) for x in v):
+            return f"{len(v)} entries (see report.json)"
         return ", ".join(_ctx_value(x) for x in v)
     if isinstance(v, dict):
-        return json.dumps(v, default=str, ensure_ascii=False)
+        text = ", ".join(f"{k} = {_ctx_value(x)}" for k, x in v.items())
+        return text if len(text) <= 300 else f"{len(v)} entries (see report.json)"
     if isinstance(v, float):
-        return f"{v:.6g}"
+        return f"{v:.0f}" if 1e4 <= abs(v) < 1e12 else f"{v:.4g}"
     return str(v)
+
+
+def _ctx_lines(context: dict, depth: int = 0) -> list[str]:
+    """Bullets for the context: nested dicts become one level of sub-bullets."""
+    out = []
+    for k, v in context.items():
+        if isinstance(v, dict) and v and depth == 0:
+            out.append(f"- **{k}**:")
+            out += ["  " + line for line in _ctx_lines(v, depth + 1)]
+        else:
+            out.append(f"- {'**' + str(k) + '**' if depth == 0 else k}: {_ctx_value(v)}")
+    return out
 
 
 def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> str:
@@ -95,7 +110,7 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
     n = doc["n_samples"]
     lines = [f"# {title}", ""]
     if context:
-        lines += [f"- **{k}**: {_ctx_value(v)}" for k, v in context.items()] + [""]
+        lines += _ctx_lines(context) + [""]
 
     lines += ["## Summary", ""]
     lines.append(f"{n} samples: {meas['n_light']} at light load (< {HEAVY_LOAD_W * _KW:.0f} kW "

@@ -80,6 +80,19 @@ def test_metrics_heavy_subset_uses_its_own_mean_and_50kw_is_heavy():
     assert off["bias_w"] == pytest.approx(5e3) and off["rmse_w"] == pytest.approx(5e3)
 
 
+def test_r2_corr_is_blind_to_scale_and_offset_but_r2_is_not():
+    meas = np.array([10, 20, 30, 40, 60, 70, 90]) * 1e3
+    pred = 2.0 * meas + 5e3
+    m = metrics(pred, meas)
+    assert m["r2_corr"] == pytest.approx(1.0)
+    assert m["r2_corr_light"] == pytest.approx(1.0) and m["r2_corr_heavy"] == pytest.approx(1.0)
+    # centred R² by hand: error = meas + 5 kW; SSE = Σ(m + 5)², SST = Σ(m − m̄)²
+    sse = float(np.sum((meas + 5e3) ** 2))
+    sst = float(np.sum((meas - meas.mean()) ** 2))
+    assert m["r2"] == pytest.approx(1.0 - sse / sst)
+    assert m["r2"] < 0.0
+
+
 def test_metrics_centred_r2_can_be_negative_and_ignores_nan_pairs():
     meas = np.array([1.0, 2.0, 3.0, 4.0]) * 1e3
     m = metrics(-meas, meas)  # worse than the mean
