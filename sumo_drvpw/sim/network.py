@@ -153,7 +153,7 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     return Network(
         path=Path(path), edge_ids=edge_ids, edge_class=classes, edge_type=types,
         edge_length=np.array([e.getLength() for e in edges], float), edge_speed=speeds,
-        edge_shapes=[np.asarray(e.getShape(), float)[:, :2] for e in edges],
+        edge_shapes=[np.asarray(e.getLanes()[0].getShape(), float)[:, :2] for e in edges],
         lane_index=lane_index, lane_edge=lane_edge,
         lane_length=np.array([ln.getLength() for ln in lanes], float),
         lane_offset=off, lane_nbins=nb, profile=np.concatenate(profs),

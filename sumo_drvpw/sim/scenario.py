@@ -254,6 +254,13 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                 if k not in allowed:
                     raise UserError(f"{where}: unknown key '{key}.{k}' "
                                     f"(known: {', '.join(sorted(allowed))})")
+    for vt, d in doc.get("vtypes", {}).items():
+        if not isinstance(d, dict):
+            raise UserError(f"{where}: 'vtypes.{vt}' must be a table")
+        for k in d:
+            if k not in _VTYPE_KEYS:
+                raise UserError(f"{where}: unknown key 'vtypes.{vt}.{k}' "
+                                f"(known: {', '.join(sorted(_VTYPE_KEYS))})")
     rel = (lambda s: (base / s) if base is not None and not Path(s).is_absolute() else Path(s))
 
     sumo = dict(doc.get("sumo", {}))
@@ -375,6 +382,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         if k in overrides:
             out[k] = overrides[k]
     diff = out.get("difference")
+    if diff is not None and "equations" in overrides and "difference" not in overrides \
+            and any(d not in names for d in diff):
+        diff = None  # the file's pair is gone with its equations: use the first two
     if diff is not None:
         diff = _strlist(diff, where, "outputs.difference")
         if len(diff) != 2 or any(d not in names for d in diff):

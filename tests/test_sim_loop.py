@@ -1,0 +1,204 @@
+"""The stepping loop and the ledger with a fake connection (no SUMO process).
+
+The fake replays scripted vehicle states on the bundled highway network, so every
+expected energy is a hand calculation: P = Σ c·term with θ from the network geometry.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sumo_drvpw.constants import G
+from sumo_drvpw.equations import Equation
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim import VTypeResolver
+from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
+from sumo_drvpw.sim.loop import Physics, run_loop
+from sumo_drvpw.sim.network import load_network
+from sumo_drvpw.sim.scenario import RoadClassRule, load_scenario
+from sumo_drvpw.terms import Inputs
+
+REPO = Path(__file__).resolve().parent.parent
+NET = load_network(REPO / "networks" / "highway.net.xml", RoadClassRule())
+GRADE = math.atan(0.04)  # e12: +40 m over 1000 m
+
+
+class _Sim:
+    def __init__(self, fake):
+        self.f = fake
+
+    def getDeltaT(self):
+        return self.f.dt
+
+    def getTime(self):
+        return self.f.t
+
+    def getMinExpectedNumber(self):
+        return int(self.f.k < len(self.f.script))
+
+    def getDepartedIDList(self):
+        return self.f.departed
+
+
+class _Veh:
+    def __init__(self, fake):
+        self.f = fake
+
+    def getIDList(self):
+        return tuple(self.f.state)
+
+    def getTypeID(self, vid):
+        return self.f.types[vid]
+
+    def __getattr__(self, name):  # getSpeed, getAcceleration, ... from the scripted state
+        key = {"getSpeed": 0, "getAcceleration": 1, "getAngle": 2, "getLaneID": 3,
+               "getLanePosition": 4, "getSlope": 5}[name]
+        return lambda vid: self.f.state[vid][key]
+
+
+class FakeConnection:
+    """Replays ``script``: a list of steps, each {vehicle: (v, a, angle, lane, pos, slope_deg)}."""
+
+    def __init__(self, script, types, dt=1.0):
+        self.script, self.types, self.dt = script, types, dt
+        self.t, self.k, self.state, self.departed = 0.0, 0, {}, ()
+        self.simulation, self.vehicle = _Sim(self), _Veh(self)
+
+    def simulationStep(self):
+        before = set(self.state)
+        self.state = self.script[self.k]
+        self.departed = tuple(v for v in self.state if v not in before)
+        self.k += 1
+        self.t += self.dt
+
+
+def _resolver(mass, n_eq=2):
+    return lambda vt, vid: (mass.get(vt, np.nan), np.ones(n_eq), vt in mass)
+
+
+def test_loop_books_hand_calculated_energies():
+    eqs = [Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.6, "roll": 0.01}),
+           Equation("fixed", {"acc": 1.0, "grade": 1.0}, mass_kg=1000.0)]
+    slope_deg = math.degrees(GRADE)
+    script = [
+        {"a": (20.0, 0.0, 90.0, "e12_0", 100.0, slope_deg)},
+        {"a": (20.0, 0.5, 90.0, "e12_0", 120.0, slope_deg),
+         "b": (10.0, -1.0, 90.0, "e01_0", 50.0, 30.0)},   # getSlope noise: corrected
+        {"a": (21.0, 0.0, 90.0, ":h2_0_0", 0.05, 0.0),    # internal lane → e23
+         "b": (9.0, -1.0, 90.0, "e01_0", 60.0, 0.0),
+         "p": (5.0, 0.0, 90.0, "e01_1", 10.0, 0.0),       # a type not accounted
+         "t": (7.0, 0.0, 90.0, "", 0.0, 0.0)},            # teleporting: no lane
+    ]
+    types = {"a": "car", "b": "car", "p": "bus", "t": "car"}
+    conn = FakeConnection(script, types, dt=0.5)
+    led = Ledger(len(NET.edge_ids), 2)
+    phys = Physics(wind_speed=2.0, wind_from_deg=270.0, rho=1.2, slope_tol=0.01)
+    info = run_loop(conn, NET, EquationSet(eqs), led, phys, _resolver({"car": 1500.0}))
+    assert info == {"interrupted": False, "end_time_s": 1.5}
+    assert led.steps == 3 and led.samples == 5
+    assert led.corrected == 1  # b at step 2: getSlope 30° vs a flat lane
+
+    def p_phys(v, a, th, w, m=1500.0):
+        u = v - w  # eastbound (90°) with wind from 270°: tailwind +2 m/s
+        return (m * v * a + m * G * v * math.sin(th) + 0.6 * 0.5 * 1.2 * v * u * abs(u)
+                + 0.01 * m * G * v * math.cos(th))
+
+    def p_fixed(v, a, th):
+        return 1000.0 * v * a + 1000.0 * G * v * math.sin(th)
+
+    a_steps = [(20.0, 0.0, GRADE), (20.0, 0.5, GRADE), (21.0, 0.0, 0.0)]
+    b_steps = [(10.0, -1.0, 0.0), (9.0, -1.0, 0.0)]
+    ia, ib = led.veh_ids.index("a"), led.veh_ids.index("b")
+    ea = sum(p_phys(v, a, th, 2.0) * 0.5 for v, a, th in a_steps)
+    np.testing.assert_allclose(led.veh_trac[ia, 0].sum(), ea, rtol=1e-12)
+    eb = [p_phys(v, a, th, 2.0) * 0.5 for v, a, th in b_steps]
+    assert all(e < 0 for e in eb)  # braking: recuperable
+    np.testing.assert_allclose(led.veh_recup[ib, 0].sum(), sum(eb), rtol=1e-12)
+    assert led.veh_trac[ib].sum() == 0.0
+    np.testing.assert_allclose(led.veh_trac[ia, 1].sum(),
+                               sum(p_fixed(v, a, th) * 0.5 for v, a, th in a_steps), rtol=1e-12)
+    # per category: grade of a on e12
+    g = LEDGER_CATEGORIES.index("grade")
+    np.testing.assert_allclose(led.veh_trac[ia, 0, g], 2 * 1500 * G * 20 * math.sin(GRADE) * 0.5)
+    # edges: a's last step is on e23 (via the internal lane), b on e01; p and t not booked
+    e12, e23, e01 = (NET.edge_ids.index(e) for e in ("e12", "e23", "e01"))
+    np.testing.assert_allclose(led.edge_trac[e23, 0].sum(), p_phys(21.0, 0.0, 0.0, 2.0) * 0.5)
+    np.testing.assert_allclose(led.edge_recup[e01, 0].sum(), sum(eb))
+    np.testing.assert_allclose(led.edge_count[[e12, e23, e01], 0], [1, 1, 1])
+    np.testing.assert_allclose(led.edge_trac.sum(0), led.veh_trac[:led.n_veh].sum(0))
+    np.testing.assert_allclose(led.edge_dist.sum(), led.veh_dist[:led.n_veh].sum())
+    assert led.veh_keep[led.veh_ids.index("p")] == False  # noqa: E712
+    assert led.veh_dist[led.veh_ids.index("t")] == 0.0
+
+
+def test_loop_stops_at_end_and_on_ctrl_c():
+    script = [{"a": (10.0, 0.0, 90.0, "e01_0", float(k), 0.0)} for k in range(10)]
+    conn = FakeConnection(script, {"a": "car"})
+    led = Ledger(len(NET.edge_ids), 1)
+    es = EquationSet([Equation("r", {"roll": 0.01})])
+    run_loop(conn, NET, es, led, Physics(), _resolver({"car": 1000.0}, 1), end=4.0)
+    assert led.steps == 4
+
+    class Interrupting(FakeConnection):
+        def simulationStep(self):
+            if self.k == 6:
+                raise KeyboardInterrupt
+            super().simulationStep()
+
+    conn = Interrupting(script, {"a": "car"})
+    led = Ledger(len(NET.edge_ids), 1)
+    info = run_loop(conn, NET, es, led, Physics(), _resolver({"car": 1000.0}, 1))
+    assert info["interrupted"] and led.steps == 6
+    # every booked step is complete: 6 × roll power × 1 s
+    np.testing.assert_allclose(led.veh_trac[0, 0].sum(), 6 * 0.01 * 1000 * G * 10.0)
+
+
+def test_vtype_without_mass_is_an_error():
+    sc = load_scenario(REPO / "scenarios" / "city.toml", equations=[Equation("r", {"roll": 0.01})])
+    res = VTypeResolver(sc, {}, ["r"])
+    with pytest.raises(UserError, match=r"vType 'prius3' of vehicle 'v0'.*no mass"):
+        res("prius3", "v0")
+    assert res("other", "v1")[2] is False  # not in vehicles.vtypes: not accounted, no error
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 40), st.integers(0, 2 ** 31 - 1))
+def test_equation_set_matches_each_equation(n, seed):
+    rng = np.random.default_rng(seed)
+    x = Inputs(rng.uniform(0, 40, n), rng.uniform(-3, 3, n), rng.uniform(-0.1, 0.1, n),
+               rng.uniform(-5, 5, n), rng.uniform(800, 3000, n), np.full(n, 1.2))
+    eqs = [Equation("a", {"acc": 1.1, "grade": 1.0, "m_v1": 0.132, "m_v3": 0.000302}),
+           Equation("b", {"acc": 0.99, "grade": 1.1, "aero": 0.9, "roll": 0.0129}),
+           Equation("c", {"acc": 1.0, "roll_v2": 0.001, "one": 300.0}, mass_kg=1530.9)]
+    pc = EquationSet(eqs).category_powers(x)
+    for e, eq in enumerate(eqs):
+        cp = eq.category_powers(x)
+        for k, cat in enumerate(LEDGER_CATEGORIES):
+            np.testing.assert_allclose(pc[:, e, k], cp.get(cat, np.zeros(n)), rtol=1e-12,
+                                       atol=1e-9)
+        np.testing.assert_allclose(pc[:, e].sum(1), eq.power(x), rtol=1e-12, atol=1e-9)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1))
+def test_ledger_balances(seed):
+    rng = np.random.default_rng(seed)
+    led = Ledger(7, 2, capacity=2)
+    for i in range(12):
+        led.add_vehicle(f"v{i}", "car", 1000.0, np.array([1.0, 0.0 if i % 3 else 1.0]), True)
+    for _ in range(5):
+        vidx = rng.permutation(12)[:rng.integers(1, 12)]
+        eidx = rng.integers(0, 7, len(vidx))
+        pc = rng.normal(0, 1e4, (len(vidx), 2, len(LEDGER_CATEGORIES)))
+        pc *= led.veh_app[vidx][:, :, None]
+        tr, rc = led.book(vidx, eidx, rng.uniform(0, 30, len(vidx)), 0.5, pc)
+        np.testing.assert_allclose(tr + rc, pc * 0.5)
+        assert (tr.sum(2) >= 0).all() and (rc.sum(2) <= 0).all()
+    np.testing.assert_allclose(led.edge_trac.sum(0), led.veh_trac[:12].sum(0), rtol=1e-10)
+    np.testing.assert_allclose(led.edge_recup.sum(0), led.veh_recup[:12].sum(0), rtol=1e-10)

@@ -1,0 +1,164 @@
+"""Scenario parsing, road classes, wind projection and robust slope profiles (no SUMO run)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sumo_drvpw.constants import R_DRY_AIR
+from sumo_drvpw.equations import Equation
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.loop import tailwind
+from sumo_drvpw.sim.network import BIN_M, lane_profile, load_network
+from sumo_drvpw.sim.scenario import RoadClassRule, load_scenario
+from sumo_drvpw.sim.vtypes import read_vtypes
+
+REPO = Path(__file__).resolve().parent.parent
+SCEN = REPO / "scenarios"
+EQ = [Equation("e1", {"acc": 1.0, "roll": 0.01}), Equation("e2", {"grade": 1.0})]
+
+
+def _write(tmp_path, text, name="s.toml"):
+    p = tmp_path / name
+    p.write_text(text, encoding="utf-8")
+    return p
+
+
+def test_bundled_scenarios_parse():
+    for name in ("city", "highway"):
+        sc = load_scenario(SCEN / f"{name}.toml", equations=EQ)
+        assert sc.net_file.is_file()
+        assert sc.end > sc.begin
+        assert [e.name for e in sc.equations] == ["e1", "e2"]
+    hw = load_scenario(SCEN / "highway.toml", equations=EQ)
+    assert hw.wind_speed == 3.0 and hw.wind_from_deg == 270.0
+
+
+@pytest.mark.parametrize("text,needle", [
+    ('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\nbogus = 1\n', "sumo.bogus"),
+    ('equations = ["x"]\ncolour = "red"\n', "colour"),
+    ('equations = ["x"]\n[wind]\nspeed = 3\n', "wind.speed"),
+    ('equations = ["x"]\n[vtypes.car]\nmas_kg = 3\n', "vtypes.car.mas_kg"),
+])
+def test_unknown_keys_are_named(tmp_path, text, needle):
+    with pytest.raises(UserError, match=needle.replace(".", r"\.")):
+        load_scenario(_write(tmp_path, text))
+
+
+def test_missing_config_and_broken_config(tmp_path):
+    with pytest.raises(UserError, match="SUMO config not found"):
+        load_scenario(_write(tmp_path, 'equations = ["x"]\n[sumo]\nconfig = "nope.sumocfg"\n'))
+    (tmp_path / "bad.sumocfg").write_text("<configuration><input>", encoding="utf-8")
+    with pytest.raises(UserError, match="not valid XML"):
+        load_scenario(_write(tmp_path, 'equations = ["x"]\n[sumo]\nconfig = "bad.sumocfg"\n'))
+
+
+def test_unknown_equation_is_named(tmp_path):
+    text = f'equations = ["no_such_equation"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
+    with pytest.raises(UserError, match="no_such_equation"):
+        load_scenario(_write(tmp_path, text))
+
+
+def test_log_only_equation_refused(tmp_path):
+    eq = Equation("heater", {"acc": 1.0, "[heater_w]": 1.0})
+    with pytest.raises(UserError, match=r"heater.*heater_w"):
+        load_scenario(SCEN / "city.toml", equations=[eq])
+
+
+def test_air_density_from_temperature(tmp_path):
+    text = (f'equations = ["x"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
+            '[air]\ntemperature_c = 0.0\npressure_kpa = 100.0\n')
+    sc = load_scenario(_write(tmp_path, text), equations=EQ)
+    # ideal gas, hand calculation: 100000 / (287.058 · 273.15) = 1.2753 kg/m³
+    assert sc.rho == pytest.approx(100000.0 / (R_DRY_AIR * 273.15))
+    assert sc.rho == pytest.approx(1.2753, abs=1e-4)
+
+
+def test_road_class_rule():
+    r = RoadClassRule(types={"highway.primary": "arterial"}, edges={"x": "tunnel"})
+    assert r.classify("a", "highway.residential", 50 / 3.6) == "city"
+    assert r.classify("a", "highway.residential", 80 / 3.6) == "highway"   # speed ≥ 80 km/h
+    assert r.classify("a", "highway.motorway_link", 40 / 3.6) == "highway"  # type
+    assert r.classify("a", "highway.primary", 100 / 3.6) == "arterial"     # type map wins
+    assert r.classify("x", "highway.motorway", 30.0) == "tunnel"            # edge map wins
+    assert r.classes == ["city", "highway", "arterial", "tunnel"]
+
+
+def test_network_classes_and_internal_lanes():
+    city = load_network(REPO / "networks" / "city.net.xml", RoadClassRule())
+    assert set(city.edge_class) == {"city"}
+    assert 30 / 3.6 - 1e-3 <= city.edge_speed.min() and city.edge_speed.max() <= 60 / 3.6 + 1e-3
+    hw = load_network(REPO / "networks" / "highway.net.xml", RoadClassRule())
+    assert set(hw.edge_class) == {"highway"}
+    assert 80 / 3.6 - 1e-3 <= hw.edge_speed.min() and hw.edge_speed.max() <= 120 / 3.6 + 1e-3
+    # internal lane of node h1 leads to e12: booked there
+    assert hw.edge_ids[hw.lane_edge[hw.lane_index[":h1_0_0"]]] == "e12"
+    # e12 climbs 40 m over 1000 m (networks/src/highway.nod.xml): θ = atan(0.04) everywhere
+    lane = np.full(5, hw.lane_index["e12_0"])
+    th, cl = hw.slope(lane, np.array([0.0, 100.0, 500.0, 999.0, 2000.0]))
+    np.testing.assert_allclose(th, math.atan(0.04), rtol=1e-6)
+    assert not cl.any()
+
+
+def test_lane_profile_window_and_clip():
+    # 20 m flat, a 2 m long 1 m step (a netconvert artefact), 20 m flat
+    shape = [(0, 0, 0.0), (20, 0, 0.0), (22, 0, 1.0), (42, 0, 1.0)]
+    length = 42.0
+    raw = math.atan2(1.0, 2.0)  # 26.6° over the step itself
+    th, cl = lane_profile(shape, length, window=20.0, max_rad=0.25)
+    assert len(th) == math.ceil(length / BIN_M)
+    assert np.abs(th).max() <= 0.25
+    # over a 20 m window the step reads as 1 m / 20 m
+    assert th[len(th) // 2] == pytest.approx(math.atan(1.0 / 20.0), rel=1e-6)
+    assert th.max() < raw
+    th2, cl2 = lane_profile(shape, length, window=2.0, max_rad=0.25)
+    assert cl2.any() and np.abs(th2).max() == pytest.approx(0.25)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(-0.2, 0.2), st.floats(5.0, 500.0), st.floats(1.0, 50.0))
+def test_lane_profile_constant_grade(grade, length_h, window):
+    z1 = grade * length_h
+    shape = [(0.0, 0.0, 0.0), (length_h, 0.0, z1)]
+    length3 = math.hypot(length_h, z1)
+    th, cl = lane_profile(shape, length3, window, 0.25)
+    np.testing.assert_allclose(th, math.atan(grade), atol=1e-9)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(0, 360), st.floats(0, 360), st.floats(0, 20))
+def test_tailwind_projection(heading, wind_from, w):
+    tw = tailwind(np.array([heading]), w, wind_from)[0]
+    assert abs(tw) <= w + 1e-9
+    # driving straight into where the wind comes from: full headwind
+    np.testing.assert_allclose(tailwind(np.array([wind_from]), w, wind_from), -w, atol=1e-9)
+    # driving away from it: full tailwind
+    np.testing.assert_allclose(tailwind(np.array([wind_from + 180.0]), w, wind_from), w,
+                               atol=1e-9)
+
+
+def test_tailwind_cardinal():
+    # SUMO angle: 0 = north, 90 = east. Wind from the west (270°) pushes an eastbound car.
+    np.testing.assert_allclose(tailwind(np.array([90.0, 270.0, 0.0]), 4.0, 270.0),
+                               [4.0, -4.0, 0.0], atol=1e-12)
+
+
+def test_read_vtypes_mass_precedence(tmp_path):
+    f = _write(tmp_path, """<routes>
+      <vType id="a" mass="1625"/>
+      <vType id="b" mass="1625"><param key="drvpw.mass" value="1400"/>
+         <param key="drvpw.equation" value="e2"/></vType>
+      <vTypeDistribution id="d"><vType id="c" probability="1"/></vTypeDistribution>
+    </routes>""", "r.rou.xml")
+    vt = read_vtypes([f])
+    assert vt["a"].mass_kg == 1625 and vt["a"].equation is None
+    assert vt["b"].mass_kg == 1400 and vt["b"].equation == "e2"
+    assert vt["c"].mass_kg is None
+    bad = _write(tmp_path, '<routes><vType id="a" mass="heavy"/></routes>', "bad.rou.xml")
+    with pytest.raises(UserError, match="vType 'a'.*heavy"):
+        read_vtypes([bad])
