@@ -144,8 +144,11 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
             raise UserError(f"{path}: missing column '{label}' named in {m['path']}{hint}")
     na = tuple(m["na_values"])
     out: dict[str, pd.Series] = {}
+    comma = m["decimal"] != "." and path.suffix.lower() not in (".parquet", ".pq")
     for label in raw.columns:
         s = raw[label]
+        if comma:  # CSV read as text (exact cells for error messages): apply the decimal mark here
+            s = s.astype(str).str.replace(m["decimal"], ".", regex=False)
         e = m["columns"].get(label)
         if e is None:
             if not m["keep_unmapped"]:
@@ -154,11 +157,12 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
             try:
                 out[name] = numeric(s, path, label, na) * f + o
             except UserError:
-                out[name] = s.astype(str)  # text extra (e.g. a date or a mode label)
+                out[name] = raw[label].astype(str)  # text extra (e.g. a date or a mode label)
             continue
         if e["kind"] == "text":
-            out[e["name"]] = s.astype(str).str.strip()
+            out[e["name"]] = raw[label].astype(str).str.strip()
         elif e["kind"] == "datetime":
+            s = raw[label]
             t = pd.to_datetime(s, format=m["time_format"], errors="coerce")
             bad = t.isna() & ~s.astype(str).str.strip().isin(na)
             if bad.any():

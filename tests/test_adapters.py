@@ -1,0 +1,447 @@
+"""Adapters: real-data excerpts read at run time (../shared/data), broken files, CLI round trip."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sumo_drvpw.adapters import FORMATS, read
+from sumo_drvpw.adapters._common import clean_time_and_speed, new_report
+from sumo_drvpw.adapters.cli import read_report
+from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.constants import RPM
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.vehicles import load_vehicle
+
+REPO = Path(__file__).resolve().parent.parent
+DATA = Path(os.environ.get("SUMO_DRVPW_DATA", REPO.parent / "shared" / "data"))
+
+
+def data(*parts) -> Path:
+    p = DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"real data not found at {p} (set SUMO_DRVPW_DATA or provide ../shared/data)")
+    return p
+
+
+def assert_canonical(df: pd.DataFrame, report: dict):
+    """Invariants every adapter output must satisfy (spec: ../shared/spec/drive-log.md)."""
+    assert {"trip_id", "time_s", "speed_mps"} <= set(df.columns)
+    assert list(df.columns[:3]) == ["trip_id", "time_s", "speed_mps"]
+    for _, g in df.groupby("trip_id"):
+        assert (np.diff(g["time_s"].to_numpy()) > 0).all()
+    assert df["speed_mps"].between(0, 100).all()
+    assert report["kept"] == len(df)
+    assert report["rows_read"] == report["kept"] + sum(report["dropped"].values())
+    for r in report["files"]:
+        assert r["rows_read"] == r["kept"] + sum(r["dropped"].values())
+
+
+# ---------------------------------------------------------------- BMW i3 (TUM)
+
+@pytest.mark.shared_data
+def test_bmw_trip_units_by_physics():
+    df, rep = read("bmw-i3-tum", data("bmw_i3_tum", "TripB02.csv"))
+    assert_canonical(df, rep)
+    assert set(df["trip_id"]) == {"TripB02"}
+    assert np.allclose(np.diff(df["time_s"]), 0.1)                  # 10 Hz
+    assert 20 < df["speed_mps"].max() < 45                            # km/h → m/s (max 135 km/h)
+    assert df["elevation_m"].between(400, 700).all()                  # Munich ≈ 450–600 m
+    # the accelerometer is kept apart from the canonical dv/dt
+    assert "imu_accel_mps2" in df and "accel_mps2" not in df
+    # motor speed from v through the vehicle file: 10 m/s → 10/0.35·9.665/(2π/60) = 2637 rpm
+    veh = load_vehicle("bmw_i3")
+    i = int(np.argmin(abs(df["speed_mps"] - 10)))
+    expect = df["speed_mps"].iat[i] / 0.35 * 9.665 * 60 / (2 * math.pi)
+    assert df["motor_speed_rpm"].iat[i] == pytest.approx(expect, rel=1e-9)
+    assert veh.powertrain["gear_ratio"] == 9.665
+    # P_mech = τ·ω at steady 13–17 m/s is a few kW, of the size of a road-load estimate
+    v = df["speed_mps"]
+    a = np.gradient(v, df["time_s"])
+    p_mech = df["motor_torque_nm"] * df["motor_speed_rpm"] * RPM
+    cruise = (v > 13) & (v < 17) & (abs(a) < 0.05)
+    assert cruise.sum() > 100
+    road = v * (0.5 * 1.2 * 0.29 * 2.38 * v**2 + 0.008 * veh.mass_kg * 9.81)  # W, flat road
+    ratio = p_mech[cruise].median() / road[cruise].median()
+    assert 0.5 < ratio < 3.0, ratio
+    # canonical current is positive when discharging: hard acceleration draws V·I > τ·ω
+    hard = p_mech > 20_000
+    assert (df["battery_current_a"][hard] > 0).mean() > 0.95
+    eff = (p_mech / (df["battery_voltage_v"] * df["battery_current_a"]))[hard].median()
+    assert 0.6 < eff < 1.0
+
+
+@pytest.mark.shared_data
+def test_bmw_extras_and_overview_join():
+    src = data("bmw_i3_tum")
+    df, rep = read("bmw-i3-tum", [src / "TripA01.csv", src / "TripB33.csv"])
+    assert_canonical(df, rep)
+    raw = pd.read_csv(src / "TripA01.csv", sep=";", encoding="latin-1", nrows=50)
+    a01 = df[df.trip_id == "TripA01"].head(50)
+    np.testing.assert_allclose(a01["heater_power_w"], 1000 * raw["Heating Power CAN [kW]"])
+    np.testing.assert_allclose(a01["aircon_power_w"], 1000 * raw["AirCon Power [kW]"])
+    np.testing.assert_allclose(a01["battery_current_a"], -raw["Battery Current [A]"])
+    np.testing.assert_allclose(a01["speed_mps"], raw["Velocity [km/h]"] / 3.6)
+    for c in ("ambient_c", "cabin_temp_c", "soc_pct", "battery_temp_c"):
+        assert pd.api.types.is_float_dtype(df[c]), c
+    by = df.groupby("trip_id").first()
+    ov = pd.read_csv(src / "overview.csv").set_index("Trip")
+    assert by.loc["TripA01", "season"] == "summer" and not by.loc["TripA01", "winter"]
+    assert by.loc["TripB33", "season"] == "winter" and by.loc["TripB33", "winter"]
+    assert by.loc["TripA01", "route"] == ov.loc["TripA01", "Route/Area"]
+    assert by.loc["TripA01", "cabin_setpoint_c"] == ov.loc["TripA01", "Target Cabin Temperature"]
+    # overview note "+ 160 kg" → added load on top of the vehicle file's mass
+    mass = load_vehicle("bmw_i3").mass_kg
+    assert by.loc["TripB33", "added_mass_kg"] == 160
+    assert by.loc["TripB33", "mass_kg"] == mass + 160
+    assert by.loc["TripA01", "mass_kg"] == mass
+
+
+# ---------------------------------------------------------------- Prius Gen 2 (Torque Pro)
+
+@pytest.mark.shared_data
+def test_prius_units_and_power_split_kinematics():
+    df, rep = read("torquepro-prius2", data("prius_gen2_torquepro", "From_CdA_Act.json"))
+    assert_canonical(df, rep)
+    assert rep["dropped"].get("link not up (-)", 0) >= 1       # first record has '-' powertrain fields
+    dt = np.diff(df["time_s"])
+    assert 0.5 < np.median(dt) < 1.0                          # ≈1.4 Hz, irregular
+    v, gps = df["speed_mps"], df["gps_speed_mps"]
+    ok = gps.notna()
+    assert np.corrcoef(v[ok], gps[ok])[0, 1] > 0.99            # OBD and GPS agree after mph → m/s
+    assert (v - gps)[ok].abs().median() < 1.0
+    assert 20 < v.max() < 40                                  # highway, < 90 mph
+    assert df["ambient_c"].between(5, 13).all()                # README: 7–10 °C; °F → °C
+    assert df["elevation_m"].between(500, 800).all()           # Spokane ≈ 600 m; ft → m
+    assert (df["elevation_m"] - df["altitude_phone_m"]).abs().median() < 1.0
+    # Willis equation of the planetary set (sun 30, ring 78; ring = MG2 in Gen 2):
+    # ω_ice·(30+78) = 30·ω_mg1 + 78·ω_mg2
+    run = df["ice_speed_rpm"] > 1000
+    pred = (30 * df["mg1_speed_rpm"] + 78 * df["mg2_speed_rpm"]) / 108
+    assert ((pred - df["ice_speed_rpm"]) / df["ice_speed_rpm"])[run].abs().median() < 0.03
+    # MG2 turns with the wheels: ω_mg2 / v = final drive / r ≈ 4.113 / 0.31 m ≈ 13.3 1/m
+    moving = v > 5
+    assert 12 < (df["mg2_speed_rpm"] * RPM / v)[moving].median() < 14.5
+    # battery current positive when discharging: V·I equals the app's battery power
+    pb = df["battery_voltage_v"] * df["battery_current_a"]
+    assert (pb - df["battery_power_obd_w"]).abs().median() < 50
+
+
+@pytest.mark.shared_data
+def test_prius_time_going_backwards_counted():
+    df, rep = read("torquepro-prius2", data("prius_gen2_torquepro", "To_CdA_Act.json"))
+    assert_canonical(df, rep)
+    assert rep["dropped"].get("time going backwards", 0) >= 1   # one Device Time step of −0.345 s
+
+
+# ---------------------------------------------------------------- JLU dynamometer
+
+@pytest.mark.shared_data
+def test_jlu_udds_and_constant_speed_against_road_load():
+    src = data("jlu_bev_dyno")
+    files = [src / "UDDS_HWY_US06_NYCC_CSS__08_UDDS_1.parquet",
+             src / "UDDS_HWY_US06_NYCC_CSS__13_CS_80_1.parquet"]
+    df, rep = read("jlu-dyno", files)
+    assert_canonical(df, rep)
+    assert (df["grade_rad"] == 0).all() and (df["mass_kg"] == 1919).all()
+    udds = df[df["cycle"] == "UDDS"]
+    assert np.median(np.diff(udds["time_s"])) == pytest.approx(0.05)   # 20 Hz
+    # UDDS peak speed is 56.7 mph = 91.2 km/h = 25.35 m/s (EPA schedule)
+    assert udds["schedule_speed_mps"].max() == pytest.approx(25.35, abs=0.1)
+    assert udds["speed_mps"].max() == pytest.approx(25.35, abs=0.5)
+    # accelerating draws current: canonical positive when discharging
+    a = np.gradient(udds["speed_mps"], udds["time_s"])
+    assert (udds["battery_current_a"][(a > 0.5) & (udds["speed_mps"] > 3)] > 0).mean() > 0.95
+    # at 80 km/h steady, battery power ≥ published road-load power at the wheels (F·v), and
+    # within a plausible drivetrain efficiency: F = 179.4 + 0.28·80 + 0.0235·80² = 352.2 N
+    cs = df[df["cycle"] == "CS_80"]
+    steady = (cs["speed_mps"] * 3.6 - 80).abs() < 1
+    p_bat = (cs["battery_voltage_v"] * cs["battery_current_a"])[steady].median()
+    p_wheel = 352.2 * 80 / 3.6
+    assert p_wheel < p_bat < 1.5 * p_wheel
+    # PhaseTime stops at the schedule end while the logger runs on: tail dropped and counted
+    cs_rep = [r for r in rep["files"] if "CS_80" in r["file"]][0]
+    assert sum(cs_rep["dropped"].values()) >= 1
+    assert cs["time_s"].max() <= 1200
+
+
+def test_jlu_cycle_names():
+    from sumo_drvpw.adapters.jlu_dyno import cycle_name
+    assert cycle_name("WLTC_CADC_JC08_CSS__07_Artemis_rural_1") == "Artemis_rural"
+    assert cycle_name("CLTC_CSS__03_CS_110_01") == "CS_110"
+    assert cycle_name("UDDS_HWY_US06_NYCC_CSS__04_SPEED_65") == "SPEED_65"
+    assert cycle_name("WLTC_CADC_JC08_CSS__13_Artemis_motorway_130_2") == "Artemis_motorway_130"
+
+
+def test_jlu_vehicle_road_load_si_conversions():
+    import tomllib
+    doc = tomllib.loads((REPO / "calibration/vehicles/jlu_bev.toml").read_text())
+    rl = doc["road_load"]
+    assert rl["b_n_per_mps"] == pytest.approx(rl["b_n_per_kmh"] * 3.6)
+    assert rl["c_n_per_mps2"] == pytest.approx(rl["c_n_per_kmh2"] * 3.6**2)
+    for key in ("vehicle.mass_kg", "road_load.a_n", "road_load.b_n_per_kmh", "road_load.c_n_per_kmh2"):
+        assert key in doc["sources"]
+    bmw = tomllib.loads((REPO / "calibration/vehicles/bmw_i3.toml").read_text())
+    for table, values in bmw.items():
+        if table in ("sources",) or not isinstance(values, dict):
+            continue
+        for k, val in values.items():
+            if isinstance(val, (int, float)) and not isinstance(val, bool):
+                assert f"{table}.{k}" in bmw["sources"], f"bmw_i3.toml {table}.{k} lacks a source"
+
+
+# ---------------------------------------------------------------- generic columns mapping
+
+MAPPING = """
+[options]
+sep = ";"
+decimal = ","
+[columns.Zeit]
+name = "time_s"
+unit = "ms"
+[columns.Tempo]
+name = "speed_mps"
+unit = "km/h"
+[columns.Aussen]
+name = "ambient_c"
+unit = "°F"
+[columns.Heizung]
+name = "heater_power_w"
+unit = "kW"
+[columns.Hoehe]
+name = "elevation_m"
+unit = "ft"
+[columns.Strom]
+name = "battery_current_a"
+unit = "A"
+scale = -1
+"""
+CSV = ("Zeit;Tempo;Aussen;Heizung;Hoehe;Strom;Modus\n"
+       "0;36;212;1,5;1000;-10;eco\n"
+       "100;36;32;0;0;5;eco\n"
+       "100;40;32;0;0;5;eco\n"       # duplicate timestamp
+       "50;40;32;0;0;5;eco\n"        # time going backwards
+       "200;;32;0;0;5;eco\n"         # NaN speed
+       "300;72;-40;2;3280,84;0;sport\n")
+
+
+def write(tmp_path, name, text, encoding="utf-8"):
+    p = tmp_path / name
+    p.write_text(text, encoding=encoding)
+    return p
+
+
+def test_columns_conversions_and_counts(tmp_path):
+    m = write(tmp_path, "map.toml", MAPPING)
+    src = write(tmp_path, "log1.csv", CSV)
+    df, rep = read("columns", [src], columns=m)
+    assert_canonical(df, rep)
+    assert rep["dropped"] == {"NaN speed": 1, "duplicate timestamp": 1, "time going backwards": 1}
+    np.testing.assert_allclose(df["time_s"], [0, 0.1, 0.3])
+    np.testing.assert_allclose(df["speed_mps"], [10, 10, 20])                 # 36, 72 km/h
+    np.testing.assert_allclose(df["ambient_c"], [100, 0, -40])                # 212, 32, −40 °F
+    np.testing.assert_allclose(df["heater_power_w"], [1500, 0, 2000])
+    np.testing.assert_allclose(df["elevation_m"], [304.8, 0, 1000.0], rtol=1e-6)  # ft
+    np.testing.assert_allclose(df["battery_current_a"], [10, -5, 0])          # scale −1
+    assert list(df["modus"]) == ["eco", "eco", "sport"]                       # unmapped text kept
+    assert set(df["trip_id"]) == {"log1"}
+
+
+@pytest.mark.shared_data
+def test_columns_mapping_reproduces_jlu_adapter(tmp_path):
+    src = data("jlu_bev_dyno", "UDDS_HWY_US06_NYCC_CSS__06_US06_1.parquet")
+    m = write(tmp_path, "jlu.toml", """
+[columns.PhaseTime]
+name = "time_s"
+unit = "s"
+[columns.DAActualSpeed]
+name = "speed_mps"
+unit = "km/h"
+[columns.REESSCurrent]
+name = "battery_current_a"
+unit = "A"
+scale = -1
+[columns.REESSVoltage]
+name = "battery_voltage_v"
+unit = "V"
+""")
+    a, ra = read("columns", src, columns=m)
+    b, rb = read("jlu-dyno", src)
+    assert ra["dropped"] == rb["dropped"]
+    for c in ("time_s", "speed_mps", "battery_current_a", "battery_voltage_v"):
+        np.testing.assert_allclose(a[c], b[c])
+
+
+def test_columns_datetime_time_and_trip_column(tmp_path):
+    m = write(tmp_path, "map.toml", """
+[options]
+time_unit = "datetime"
+time_format = "%Y-%m-%d %H:%M:%S"
+[columns.t]
+name = "time_s"
+[columns.v]
+name = "speed_mps"
+unit = "mph"
+[columns.trip]
+name = "trip_id"
+""")
+    src = write(tmp_path, "x.csv", "t,v,trip\n2024-01-01 10:00:00,10,a\n2024-01-01 10:00:02,20,a\n"
+                "2024-01-01 10:00:03,0,b\n2024-01-01 10:00:03,5,b\n")
+    df, rep = read("columns", src, columns=m)
+    assert_canonical(df, rep)
+    assert rep["dropped"] == {"duplicate timestamp": 1}
+    np.testing.assert_allclose(df["time_s"], [0, 2, 3])
+    np.testing.assert_allclose(df["speed_mps"], [4.4704, 8.9408, 0])
+    assert list(df["trip_id"]) == ["a", "a", "b"]
+
+
+# ---------------------------------------------------------------- broken input → UserError
+
+BMW_HEADER = ("Time [s];Velocity [km/h];Elevation [m];Motor Torque [Nm];"
+              "Battery Voltage [V];Battery Current [A]\n")
+
+
+@pytest.mark.parametrize("name,text,match", [
+    ("TripX01.csv", "", "empty"),
+    ("TripX02.csv", BMW_HEADER, "no data rows"),
+    ("TripX03.csv", "Time [s];Velocity [km/h]\n0;1\n", "missing column 'motor torque'"),
+    ("TripX04.csv", BMW_HEADER.replace(";", ",") + "0,1,500,0,390,-1\n", "not ';'-separated"),
+    ("TripX05.csv", BMW_HEADER + "0;1;500;0;390;-1\n0.1;fast;500;0;390;-1\n",
+     "'Velocity \\[km/h\\]' is not numeric: data row 1 holds 'fast'"),
+    ("TripX06.csv", BMW_HEADER + "0;400;500;0;390;-1\n", "outside \\[0, 100\\] m/s"),
+])
+def test_bmw_broken_files(tmp_path, name, text, match):
+    p = write(tmp_path, name, text, encoding="latin-1")
+    with pytest.raises(UserError, match=match) as e:
+        read("bmw-i3-tum", p)
+    assert name in str(e.value)
+
+
+def test_bmw_without_overview_still_reads(tmp_path):
+    p = write(tmp_path, "TripZ01.csv", BMW_HEADER + "0;36;500;10;390;-1\n0.1;36;500;10;390;-1\n")
+    df, rep = read("bmw-i3-tum", p)
+    assert df["speed_mps"].tolist() == [10, 10]
+    assert any("overview" in n for n in rep["files"][0]["notes"])
+
+
+@pytest.mark.parametrize("text,match", [
+    ("", "empty"),
+    ("{\"a\": 1}", "JSON list of records"),
+    ("[{\"Device Time\": \"25-Mar-2017 11:46:29.523\"", "not valid JSON"),
+    ("[{\"Device Time\": \"25-Mar-2017 11:46:29.523\", \"x\": 1}]", "missing column 'Speed \\(OBD\\)\\(mph\\)'"),
+    ("[{\"Device Time\": \"yesterday\", \"Speed (OBD)(mph)\": 1}]", "'Device Time' data row 0"),
+    ("[{\"Device Time\": \"25-Mar-2017 11:46:29.523\", \"Speed (OBD)(mph)\": \"n/a\"}]",
+     "'Speed \\(OBD\\)\\(mph\\)' is not numeric"),
+])
+def test_prius_broken_files(tmp_path, text, match):
+    p = write(tmp_path, "log.json", text)
+    with pytest.raises(UserError, match=match):
+        read("torquepro-prius2", p)
+
+
+def test_jlu_broken_files(tmp_path):
+    p = write(tmp_path, "bad.parquet", "not parquet")
+    with pytest.raises(UserError, match="bad.parquet: cannot be read as Parquet"):
+        read("jlu-dyno", p)
+    q = tmp_path / "nocur.parquet"
+    pd.DataFrame({"PhaseTime": [0.0, 0.05], "DAActualSpeed": [0.0, 1.0],
+                  "REESSVoltage": [390.0, 390.0]}).to_parquet(q)
+    with pytest.raises(UserError, match="nocur.parquet: missing column 'REESSCurrent'"):
+        read("jlu-dyno", q)
+
+
+@pytest.mark.parametrize("mapping,match", [
+    ("[columns.a\nname=", "not a valid TOML"),
+    ("[options]\nsep=';'", "no \\[columns"),
+    ("[columns.v]\nname='speed_mps'\nunit='furlong/fortnight'", "columns.v.unit 'furlong/fortnight' is not a known unit"),
+    ("[columns.t]\nname='time_s'\n[columns.v]\nname='speed_mps'\nunit='ft'", "unit 'ft' is a length"),
+    ("[columns.v]\nname='speed_mps'\nunit='km/h'", "mapped to 'time_s'"),
+    ("[options]\nseperator=';'\n[columns.v]\nname='speed_mps'", "unknown option 'options.seperator'"),
+])
+def test_columns_bad_mapping(tmp_path, mapping, match):
+    m = write(tmp_path, "map.toml", mapping)
+    src = write(tmp_path, "x.csv", "t,v\n0,1\n")
+    with pytest.raises(UserError, match=match) as e:
+        read("columns", src, columns=m)
+    assert "map.toml" in str(e.value)
+
+
+def test_columns_wrong_separator_and_missing_mapping(tmp_path):
+    m = write(tmp_path, "map.toml", MAPPING)
+    src = write(tmp_path, "x.csv", CSV.replace(";", "|"))
+    with pytest.raises(UserError, match="missing column 'Zeit'.*wrong sep"):
+        read("columns", src, columns=m)
+    with pytest.raises(UserError, match="needs a mapping file"):
+        read("columns", src)
+    with pytest.raises(UserError, match="no such mapping file"):
+        read("columns", src, columns=tmp_path / "nope.toml")
+
+
+def test_unknown_format_and_missing_path(tmp_path):
+    with pytest.raises(UserError, match="unknown format 'csv'"):
+        read("csv", tmp_path)
+    with pytest.raises(UserError, match="no such file or folder"):
+        read("jlu-dyno", tmp_path / "missing")
+    with pytest.raises(UserError, match="folder holds no"):
+        read("jlu-dyno", tmp_path)
+    assert set(FORMATS) == {"bmw-i3-tum", "torquepro-prius2", "jlu-dyno", "columns"}
+
+
+# ---------------------------------------------------------------- time cleaning property
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 20), st.floats(0, 50)), min_size=1, max_size=40))
+def test_clean_time_keeps_strictly_increasing_and_counts(samples):
+    df = pd.DataFrame({"time_s": [float(t) for t, _ in samples], "speed_mps": [v for _, v in samples]})
+    rep = new_report(Path("x"), "x", len(df))
+    out = clean_time_and_speed(df, "x", rep)
+    t = out["time_s"].to_numpy()
+    assert (np.diff(t) > 0).all()
+    assert len(out) + sum(rep["dropped"].values()) == len(df)
+    # the running maximum is kept: every kept time is the largest seen so far
+    assert t[0] == df["time_s"].iat[0] and t[-1] == df["time_s"].max()
+
+
+# ---------------------------------------------------------------- CLI round trip
+
+def test_cli_round_trip(tmp_path, capsys):
+    m = write(tmp_path, "map.toml", MAPPING)
+    src = write(tmp_path, "log1.csv", CSV)
+    out = tmp_path / "out" / "log.parquet"
+    assert cli_main(["import", "columns", str(src), "--columns", str(m), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "log1.csv: read 6, kept 3" in text and "duplicate timestamp 1" in text
+    df = pd.read_parquet(out)
+    assert {"trip_id", "time_s", "speed_mps", "ambient_c", "heater_power_w"} <= set(df.columns)
+    rep = read_report(out)
+    assert rep["kept"] == 3 and rep["rows_read"] == 6 and rep["format"] == "columns"
+    assert json.loads(pq.read_schema(out).metadata[b"sumo_drvpw.import"])["out"] == str(out)
+    src.write_text("")                                             # broken input: exit 2, old file kept
+    assert cli_main(["import", "columns", str(src), "--columns", str(m), "--out", str(out)]) == 2
+    assert "file is empty" in capsys.readouterr().err
+    assert len(pd.read_parquet(out)) == 3
+    assert cli_main(["import", "nope", str(src), "--out", str(out)]) == 2
+    assert cli_main(["import", "jlu-dyno", str(src), "--out", str(tmp_path / "x.csv")]) == 2
+
+
+@pytest.mark.shared_data
+def test_cli_real_prius(tmp_path, capsys):
+    out = tmp_path / "prius.parquet"
+    assert cli_main(["import", "torquepro-prius2", str(data("prius_gen2_torquepro")),
+                     "--out", str(out)]) == 0
+    df = pd.read_parquet(out)
+    for c in ("ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm", "mg2_speed_rpm", "mg2_torque_nm",
+              "battery_voltage_v", "battery_current_a", "elevation_m", "ambient_c"):
+        assert c in df and pd.api.types.is_float_dtype(df[c]), c
+    rep = read_report(out)
+    assert {Path(r["file"]).name for r in rep["files"]} == {"From_CdA_Act.json", "To_CdA_Act.json"}
+    assert rep["kept"] == len(df)
