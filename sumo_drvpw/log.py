@@ -317,17 +317,40 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
     for p in files:
         df, m = _read_table(p)
         meta.update(m)
-        if "trip_id" not in df:
-            df.insert(0, "trip_id", p.stem)
-        else:
-            tid = df["trip_id"]
-            if tid.isna().any():
-                i = int(np.flatnonzero(tid.isna().to_numpy())[0])
-                raise UserError(f"{p}: column 'trip_id' is empty at row {i}")
-            df["trip_id"] = tid.astype(str)
-        _validate(df, p)
-        frames.append(df)
+        frames.append(_prepare(df, p, p.stem))
     df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+    return _derive(df, [str(p) for p in files], meta, vehicle, opt)
+
+
+def from_frame(df: pd.DataFrame, vehicle=None, options: ReadOptions | None = None,
+               name: str = "<frame>") -> DriveLog:
+    """A :class:`DriveLog` from an in-memory canonical table (e.g. an adapter's output).
+
+    Same validation and derivations as :func:`read_log` (one shared code path), without
+    writing a file. ``df`` is copied, never modified; ``name`` stands for the file name in
+    error messages and in ``DriveLog.files``.
+    """
+    opt = options or ReadOptions()
+    frame = _prepare(df.copy(), Path(name), Path(name).stem)
+    return _derive(frame.reset_index(drop=True), [str(name)], {}, vehicle, opt)
+
+
+def _prepare(df: pd.DataFrame, p: Path, default_trip: str) -> pd.DataFrame:
+    """trip_id (default: the file stem) as text, then the spec's bad-input checks."""
+    if "trip_id" not in df:
+        df.insert(0, "trip_id", default_trip)
+    else:
+        tid = df["trip_id"]
+        if tid.isna().any():
+            i = int(np.flatnonzero(tid.isna().to_numpy())[0])
+            raise UserError(f"{p}: column 'trip_id' is empty at row {i}")
+        df["trip_id"] = tid.astype(str)
+    _validate(df, p)
+    return df
+
+
+def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOptions) -> DriveLog:
+    """Derived inputs, exclusion mask and counts of validated, concatenated tables."""
     counts: dict = {"files": len(files), "rows": int(len(df))}
     if len(files) > 1:
         dup = df["trip_id"].duplicated() & _trip_starts(df["trip_id"].to_numpy())
@@ -418,5 +441,5 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
             counts[f"excluded_nan_{c}"] = int((nan & ~excluded).sum())
             excluded |= nan
     counts["excluded_total"] = int(excluded.sum())
-    return DriveLog(df=df, files=[str(p) for p in files], counts=counts, excluded=excluded,
+    return DriveLog(df=df, files=list(files), counts=counts, excluded=excluded,
                     metadata=meta)
