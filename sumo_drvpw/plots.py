@@ -73,6 +73,7 @@ def parity(comp: Comparison, path) -> Path:
         ax.legend(fontsize=7, loc="upper left")
         ax.grid(alpha=0.3)
     fig.suptitle("Predicted against measured driving power (cf. paper Fig. 4)", fontsize=10)
+    fig.tight_layout()
     write_figure(path, fig)
     return Path(path)
 
@@ -107,7 +108,8 @@ def error_histograms(comp: Comparison, path) -> Path:
             ax.set_title(f"{nm}, {label} (n = {sub.size})", fontsize=9)
             ax.set_xlabel("error, predicted − measured [kW]")
             ax.set_ylabel("samples")
-    fig.suptitle("Error distribution by load (cf. paper Fig. 5)", fontsize=10)
+    fig.suptitle("Error distribution by load (cf. paper Fig. 5); errors beyond "
+                 f"±{lim:.0f} kW are counted in the outermost bins", fontsize=10)
     fig.tight_layout()
     write_figure(path, fig)
     return Path(path)
