@@ -64,6 +64,7 @@ class DriveLog:
     counts: dict = field(default_factory=dict)
     excluded: np.ndarray | None = None
     metadata: dict = field(default_factory=dict)
+    options: ReadOptions = field(default_factory=ReadOptions)
 
     def __len__(self) -> int:
         return len(self.df)
@@ -255,7 +256,9 @@ def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s: f
     d[ok] = (y[hi] - y[lo])[ok] / dt[ok]
     med_dt = float(np.median(np.diff(t)[~start[1:]])) if (~start[1:]).any() else 1.0
     window = int(round(window_s / med_dt)) if med_dt > 0 else 1
-    return _per_trip_rolling_mean(d, trip_codes, max(window, 1))
+    # an odd width keeps the centred mean centred (an even one shifts by half a sample)
+    window = max(window, 1) | 1
+    return _per_trip_rolling_mean(d, trip_codes, window)
 
 
 def grade_from_elevation(z: np.ndarray, dist: np.ndarray, trip_codes: np.ndarray,
@@ -442,4 +445,4 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
             excluded |= nan
     counts["excluded_total"] = int(excluded.sum())
     return DriveLog(df=df, files=list(files), counts=counts, excluded=excluded,
-                    metadata=meta)
+                    metadata=meta, options=opt)

@@ -61,8 +61,8 @@ class Noise:
     speed_rpm: float = 1.0
     imu_mps2: float = 0.05
     gps_elevation_m: float = 0.5
-    process_w: float = 300.0
-    process_rel: float = 0.02
+    process_w: float = 800.0
+    process_rel: float = 0.03
 
 
 @dataclass
