@@ -1,0 +1,214 @@
+"""Canonical drive-log reader: the spec's bad-input rules and the derived signals."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from numpy.testing import assert_allclose
+
+from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.constants import G, RHO_DEFAULT
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.log import ReadOptions, derivative, grade_from_elevation, read_log
+
+
+def _log(n=200, hz=10.0, **cols):
+    t = np.arange(n) / hz
+    df = pd.DataFrame({"time_s": t, "speed_mps": 10.0 + 0.5 * t})
+    for k, v in cols.items():
+        df[k] = v
+    return df
+
+
+def _write(tmp_path, df, name="log.csv"):
+    p = tmp_path / name
+    if name.endswith(".parquet"):
+        df.to_parquet(p)
+    else:
+        df.to_csv(p, index=False)
+    return p
+
+
+# ---------------------------------------------------------------- bad input rules
+
+def _expect_exit2(tmp_path, capsys, path, *needles):
+    """The CLI exits 2 with a one-line message naming the problem, no traceback."""
+    code = cli_main(["calibrate", str(path), "--vehicle", "prius3", "--out", str(tmp_path / "e.toml")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "Traceback" not in err
+    for n in needles:
+        assert n in err, err
+    return err
+
+
+def test_missing_required_column(tmp_path, capsys):
+    p = _write(tmp_path, _log().drop(columns="speed_mps"))
+    _expect_exit2(tmp_path, capsys, p, str(p), "speed_mps", "missing required column")
+
+
+def test_speed_in_kmh(tmp_path, capsys):
+    df = _log()
+    df.loc[57, "speed_mps"] = 130.0
+    p = _write(tmp_path, df)
+    _expect_exit2(tmp_path, capsys, p, "speed_mps", "row 57", "km/h")
+
+
+def test_time_going_backwards(tmp_path, capsys):
+    df = _log()
+    df.loc[40, "time_s"] = df.loc[38, "time_s"]
+    p = _write(tmp_path, df)
+    _expect_exit2(tmp_path, capsys, p, "time_s", "row 40")
+
+
+def test_time_may_restart_in_a_new_trip(tmp_path):
+    a, b = _log(50), _log(50)
+    a["trip_id"], b["trip_id"] = "a", "b"
+    log = read_log([_write(tmp_path, pd.concat([a, b]))])
+    assert log.counts["trips"] == 2
+
+
+def test_empty_file(tmp_path, capsys):
+    p = tmp_path / "empty.csv"
+    p.write_text("")
+    _expect_exit2(tmp_path, capsys, p, str(p), "empty")
+    p2 = tmp_path / "header.csv"
+    p2.write_text("time_s,speed_mps\n")
+    _expect_exit2(tmp_path, capsys, p2, "no samples")
+
+
+def test_nan_in_required_column(tmp_path, capsys):
+    df = _log()
+    df.loc[12, "speed_mps"] = np.nan
+    p = _write(tmp_path, df)
+    _expect_exit2(tmp_path, capsys, p, "speed_mps", "row 12")
+
+
+def test_nan_in_optional_column_drops_and_counts(tmp_path):
+    df = _log(grade_rad=0.01)
+    df.loc[[5, 6, 7], "grade_rad"] = np.nan
+    log = read_log([_write(tmp_path, df)])
+    assert log.counts["excluded_nan_grade_rad"] == 3
+    assert log.excluded.sum() == 3
+    assert len(log) == 200  # nothing silently removed from the table
+
+
+def test_non_numeric_cell(tmp_path, capsys):
+    df = _log()
+    df["speed_mps"] = df["speed_mps"].astype(object)
+    df.loc[33, "speed_mps"] = "fast"
+    p = _write(tmp_path, df)
+    _expect_exit2(tmp_path, capsys, p, "speed_mps", "'fast'", "row 33")
+
+
+def test_unknown_file_type(tmp_path, capsys):
+    p = tmp_path / "log.xlsx"
+    p.write_bytes(b"PK")
+    _expect_exit2(tmp_path, capsys, p, "unknown file type", ".xlsx")
+
+
+def test_missing_file(tmp_path, capsys):
+    _expect_exit2(tmp_path, capsys, tmp_path / "nope.parquet", "no such file")
+
+
+def test_grade_out_of_range(tmp_path):
+    df = _log(grade_rad=0.0)
+    df.loc[9, "grade_rad"] = 0.9
+    with pytest.raises(UserError, match=r"grade_rad.*row 9"):
+        read_log([_write(tmp_path, df)])
+
+
+def test_bad_boolean_flag(tmp_path):
+    df = _log(brake="no")
+    df.loc[3, "brake"] = "maybe"
+    with pytest.raises(UserError, match=r"brake.*'maybe'.*row 3"):
+        read_log([_write(tmp_path, df)])
+
+
+def test_input_file_not_modified(tmp_path):
+    p = _write(tmp_path, _log(), "log.parquet")
+    before = p.read_bytes()
+    read_log([p])
+    assert p.read_bytes() == before
+
+
+# ---------------------------------------------------------------- derivations
+
+def test_acceleration_of_a_parabola_is_exact():
+    t = np.arange(0, 20, 0.125)
+    v = 2.0 + 0.8 * t + 0.01 * t ** 2  # a = 0.8 + 0.02 t
+    a = derivative(v, t, np.zeros(len(t), int), 0.5)
+    inner = slice(3, -3)
+    assert_allclose(a[inner], (0.8 + 0.02 * t)[inner], atol=1e-9)
+
+
+def test_derivative_never_crosses_trips():
+    t = np.r_[np.arange(10.0), np.arange(10.0)]
+    v = np.r_[np.full(10, 5.0), np.full(10, 25.0)]  # a jump between trips is no acceleration
+    a = derivative(v, t, np.r_[np.zeros(10, int), np.ones(10, int)], 0.0)
+    assert_allclose(a, 0.0)
+
+
+def test_grade_from_coarse_elevation():
+    # 3 % climb logged in whole metres: smoothing over 100 m recovers the grade
+    s = np.arange(0, 2000.0, 2.0)
+    z = np.floor(500 + 0.03 * s)
+    th = grade_from_elevation(z, s, np.zeros(len(s), int), 100.0)
+    inner = (s > 150) & (s < 1850)
+    assert_allclose(np.tan(th[inner]).mean(), 0.03, rtol=0.01)
+    assert np.abs(np.tan(th[inner]) - 0.03).max() < 0.012
+
+
+def test_derived_columns_and_extras_kept(tmp_path):
+    n = 400
+    t = np.arange(n) * 0.5
+    v = np.full(n, 20.0)
+    df = pd.DataFrame({"time_s": t, "speed_mps": v, "elevation_m": 100 + 0.02 * v * t,
+                       "airspeed_mps": v - 3.0, "ambient_c": 0.0, "heater_w": 1500.0,
+                       "wiper": False})
+    log = read_log([_write(tmp_path, df, "x.parquet")])
+    d = log.df
+    inner = slice(20, -20)
+    assert_allclose(np.tan(d["grade_rad"].to_numpy()[inner]), 0.02, rtol=1e-3)
+    assert_allclose(d["wind_mps"], 3.0)  # tailwind = speed − airspeed
+    assert_allclose(d["air_density_kgm3"], 101_325 / (287.058 * 273.15))  # 1.2922 kg/m³
+    assert {"heater_w", "wiper"} <= set(log.extra_columns)
+    x = log.inputs(1500.0)
+    assert set(x.signals) >= {"heater_w", "wiper"}
+
+
+def test_defaults_without_optional_columns(tmp_path):
+    log = read_log([_write(tmp_path, _log())])
+    assert (log.df["grade_rad"] == 0).all() and (log.df["wind_mps"] == 0).all()
+    assert (log.df["air_density_kgm3"] == RHO_DEFAULT).all()
+    with pytest.raises(UserError, match="mass"):
+        log.inputs()
+
+
+def test_accel_outliers_reported_and_excluded(tmp_path):
+    df = _log()
+    df.loc[100, "speed_mps"] += 3.0  # a 3 m/s spike in one 0.1 s sample
+    log = read_log([_write(tmp_path, df)], options=ReadOptions(accel_window_s=0.0))
+    assert log.counts["excluded_accel_outlier"] >= 1
+    assert log.excluded[99] or log.excluded[101]
+
+
+def test_folder_of_files_one_trip_each(tmp_path):
+    d = tmp_path / "logs"
+    d.mkdir()
+    _write(d, _log(30), "a.csv")
+    _write(d, _log(40), "b.parquet")
+    log = read_log([d])
+    assert log.counts["trips"] == 2 and len(log) == 70
+    assert set(log.df["trip_id"]) == {"a", "b"}
+
+
+def test_time_weights_sum_to_duration(tmp_path):
+    log = read_log([_write(tmp_path, _log(101, hz=8.0))])
+    assert log.df["dt_s"].sum() == pytest.approx(100 / 8.0)
+
+
+def test_grade_sign_uphill_positive_in_power():
+    from sumo_drvpw.terms import Inputs, term_matrix
+    x = Inputs(np.array([10.0]), np.array([0.0]), np.array([np.arctan(0.05)]), np.array([0.0]),
+               np.array([1000.0]), np.array([1.2]))
+    assert term_matrix(["grade"], x)[0, 0] == pytest.approx(1000 * G * 10 * np.sin(np.arctan(0.05)))
