@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..equations import Equation
-from ..terms import CATEGORIES, Inputs, parse_term, term_matrix
+from ..terms import CATEGORIES, Inputs, parse_term
 
 #: Reporting categories of the ledger: the four physical ones and "other".
 LEDGER_CATEGORIES = CATEGORIES + ("other",)
@@ -41,23 +41,38 @@ class EquationSet:
                 for t in self.equations[i].term_names:
                     if t not in terms:
                         terms.append(t)
-            W = np.zeros((len(terms), E * C))
+            # sparse map: (term number, output row e·C + c, coefficient); a handful of
+            # vector axpys per step instead of a matmul (BLAS threads fight SUMO's)
+            entries = []
             for i in members:
-                eq = self.equations[i]
-                for t, c in eq.terms.items():
+                for t, c in self.equations[i].terms.items():
                     cat = LEDGER_CATEGORIES.index(parse_term(t).category)
-                    W[terms.index(t), i * C + cat] += c
-            self.groups.append((mass, terms, W))
+                    entries.append((terms.index(t), i * C + cat, float(c)))
+            self.groups.append((mass, [parse_term(t) for t in terms], entries))
         self.uses_other = any(parse_term(t).category == "other"
                               for e in self.equations for t in e.term_names)
 
-    def category_powers(self, x: Inputs) -> np.ndarray:
-        """Power [W] per sample, equation and category, shape (n, E, C)."""
-        out = None
-        for mass, terms, W in self.groups:
-            part = term_matrix(terms, x.with_mass(mass)) @ W
-            out = part if out is None else out + part
-        return out.reshape(len(x), len(self.equations), len(LEDGER_CATEGORIES))
+    def category_powers(self, x: Inputs, app: np.ndarray | None = None) -> np.ndarray:
+        """Power [W] per sample, equation and category, shape (n, E, C).
+
+        Parameters
+        ----------
+        x : inputs of n samples
+        app : optional (n, E) weights (1: the equation applies to the vehicle, 0: not)
+
+        The result is a view of an (E, C, n) array (what :meth:`Ledger.book` uses).
+        """
+        E, C, n = len(self.equations), len(LEDGER_CATEGORIES), len(x)
+        out = np.zeros((E * C, n))
+        for mass, terms, entries in self.groups:
+            xm = x.with_mass(mass)
+            vals = [t.evaluate(xm) for t in terms]
+            for u, row, c in entries:
+                out[row] += c * vals[u]
+        out = out.reshape(E, C, n)
+        if app is not None:
+            out *= np.asarray(app, float).T[:, None, :]
+        return out.transpose(2, 0, 1)
 
 
 class Ledger:
@@ -71,9 +86,9 @@ class Ledger:
 
     def __init__(self, n_edges: int, n_equations: int, capacity: int = 1024):
         self.E, self.C, self.n_edges = n_equations, len(LEDGER_CATEGORIES), n_edges
-        shape = (n_edges, self.E, self.C)
-        self.edge_trac = np.zeros(shape)
-        self.edge_recup = np.zeros(shape)
+        # edge energies as (2, E·C, edges): [traction, recuperable] rows for bincount adds
+        self._edge_energy = np.zeros((2, self.E * self.C, n_edges))
+        self._rows = None
         self.edge_count = np.zeros((n_edges, self.E))
         self.edge_dist = np.zeros(n_edges)
         self.n_veh = 0
@@ -85,6 +100,26 @@ class Ledger:
         self.corrected = 0
         self.clipped = 0
 
+    @property
+    def edge_trac(self) -> np.ndarray:
+        """Traction energy per edge, equation, category [J], (edges, E, C)."""
+        return self._edge_energy[0].reshape(self.E, self.C, self.n_edges).transpose(2, 0, 1)
+
+    @property
+    def edge_recup(self) -> np.ndarray:
+        """Recuperable energy per edge, equation, category [J], (edges, E, C)."""
+        return self._edge_energy[1].reshape(self.E, self.C, self.n_edges).transpose(2, 0, 1)
+
+    @property
+    def veh_trac(self) -> np.ndarray:
+        """Traction energy per vehicle, equation, category [J], (capacity, E, C)."""
+        return self._veh_energy[:, 0]
+
+    @property
+    def veh_recup(self) -> np.ndarray:
+        """Recuperable energy per vehicle, equation, category [J], (capacity, E, C)."""
+        return self._veh_energy[:, 1]
+
     def _alloc(self, cap: int) -> None:
         def grow(name, shape, dtype=float, fill=0):
             old = getattr(self, name, None)
@@ -93,8 +128,7 @@ class Ledger:
                 new[:len(old)] = old
             setattr(self, name, new)
         E, C = self.E, self.C
-        grow("veh_trac", (cap, E, C))
-        grow("veh_recup", (cap, E, C))
+        grow("_veh_energy", (cap, 2, E, C))
         grow("veh_dist", (cap,))
         grow("veh_time", (cap,))
         grow("veh_mass", (cap,), float, np.nan)
@@ -132,24 +166,28 @@ class Ledger:
         Returns traction and recuperable energies [J] of the step, (n, E, C) each.
         """
         E, C = self.E, self.C
-        pos = pc.sum(axis=2) > 0.0
-        energy = pc * dt
-        trac = energy * pos[:, :, None]
-        recup = energy - trac
-        self.veh_trac[vidx] += trac
-        self.veh_recup[vidx] += recup
+        EC, n = E * C, len(vidx)
+        pct = pc.transpose(1, 2, 0)  # (E, C, n): contiguous when pc is from EquationSet
+        split = np.empty((2, E, C, n))  # [traction, recuperable] energies of the step
+        energy = np.multiply(pct, dt, out=split[1])
+        pos = energy.sum(axis=1) > 0.0
+        np.multiply(energy, pos[:, None, :], out=split[0])
+        split[1] -= split[0]
+        # one scatter-add per vehicle row and one bincount for the edges: the per-call
+        # overhead, not the arithmetic, dominates at a few thousand vehicles
+        self._veh_energy[vidx] += split.transpose(3, 0, 1, 2)
         d = v * dt
         self.veh_dist[vidx] += d
         self.veh_time[vidx] += dt
-        EC = E * C
-        flat = (eidx[:, None] * EC + np.arange(EC)).ravel()
-        size = self.n_edges * EC
-        self.edge_trac += np.bincount(flat, trac.ravel(), size).reshape(self.edge_trac.shape)
-        self.edge_recup += np.bincount(flat, recup.ravel(), size).reshape(self.edge_trac.shape)
+        if self._rows is None:
+            self._rows = (np.arange(2 * EC) * self.n_edges)[:, None]
+        flat = (self._rows + eidx).ravel()
+        self._edge_energy += np.bincount(flat, split.ravel(), 2 * EC * self.n_edges
+                                         ).reshape(self._edge_energy.shape)
         self.edge_dist += np.bincount(eidx, d, self.n_edges)
         enter = eidx != self.veh_prev_edge[vidx]
         if enter.any():
             self.veh_prev_edge[vidx[enter]] = eidx[enter]
             np.add.at(self.edge_count, eidx[enter], self.veh_app[vidx[enter]])
-        self.samples += len(vidx)
-        return trac, recup
+        self.samples += n
+        return split[0].transpose(2, 0, 1), split[1].transpose(2, 0, 1)
