@@ -276,7 +276,19 @@ def epa_road_load_equation(vehicle):
                            "v3": float(rl["f2_N_per_mps2"]), "acc": 1.0, "grade": 1.0},
                     mass_kg=float(rl["etw_kg"]),
                     description=f"EPA target road load of {vehicle.name} with ETW as mass",
-                    source=f"{vehicle.path} [road_load] ({rl.get('source_file', '')}; {rl.get('rows', '')})")
+                    source=f"{_vehicle_ref(vehicle)} [road_load] ({rl.get('source_file', '')}; "
+                           f"{rl.get('rows', '')})")
+
+
+def _vehicle_ref(vehicle) -> str:
+    """The vehicle file relative to the repository when it lives there (stable across checkouts)."""
+    from .fileio import repo_root
+
+    p = Path(vehicle.path).resolve()
+    try:
+        return str(p.relative_to(repo_root()))
+    except ValueError:
+        return p.name
 
 
 def _toml_table(path, table: str) -> dict:
