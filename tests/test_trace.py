@@ -1,0 +1,187 @@
+"""Residual tracer (sumo_drvpw.trace): planted effects are found, nothing else is.
+
+Synthetic logs: 4 trips × 8 min of the virtual test track (truth drvpw_prius3) with
+effects from sumo_drvpw.effects planted, distractor columns that carry nothing, and the
+driving power and acceleration logged directly (effects.LogPower) so the noise floor is
+the planted process noise. The floor is computed from the truth: RMSE of
+measured − (truth equation + planted power) on the analysis samples.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from sumo_drvpw import effects as E
+from sumo_drvpw.equations import Equation, load_equation
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.synth import Noise
+from sumo_drvpw.trace import TraceOptions, screen_signals, trace
+from sumo_drvpw.workflow import load_measured
+
+NOISE = Noise(process_w=200.0, process_rel=0.01)
+TRUTH = "drvpw_prius3"
+#: speed-power family of a term: which forms are the same effect up to cos θ and mass
+FAMILY = {"roll": "v1", "v^1": "v1", "m_v1": "v1", "aero": "v3", "v^3": "v3", "m_v3": "v3"}
+
+
+def _family(term: str) -> set[str]:
+    parts = term.split("*")
+    return {FAMILY.get(p, p) for p in parts if not p.startswith("[")}
+
+
+def _run(tmp_path, effects, equation=TRUTH, seed=11, n_trips=4, minutes=8.0, **opt):
+    df, _ = E.synth_trips(n_trips, minutes, seed=seed, effects=list(effects) + [E.LogPower()], noise=NOISE)
+    path = tmp_path / "log.parquet"
+    df.to_parquet(path)
+    m = load_measured([path], "prius3")
+    eq = load_equation(equation) if isinstance(equation, str) else equation
+    res = trace(m, eq, TraceOptions(**opt))
+    # noise floor from the truth, on the analysis samples (usable, moving)
+    truth = load_equation(TRUTH)
+    use = m.usable & (m.inputs.v >= 0.1)
+    planted = E.planted_power(effects, df["trip_id"]) if effects else 0.0
+    err = m.power_w - truth.power(m.inputs) - planted
+    floor = float(np.sqrt(np.mean(err[use] ** 2)))
+    return res, floor
+
+
+def test_nothing_planted_with_distractors_finds_nothing(tmp_path):
+    res, floor = _run(tmp_path, [E.Distractors()])
+    assert res.report["findings"] == []
+    offered = set(res.details["signals_offered"])
+    assert {"random_walk", "white_noise", "wiper_on", "cabin_noise_db"} <= offered
+    assert res.report["final"]["metrics"] == res.report["baseline"]["metrics"]
+    assert res.report["final"]["metrics"]["rmse_w"] < 1.03 * floor
+
+
+def test_aux_load_signal_found_with_size(tmp_path):
+    aux = E.AuxLoad()
+    res, floor = _run(tmp_path, [aux, E.Distractors()])
+    f = res.report["findings"]
+    assert len(f) == 1, f
+    assert f[0]["signals"] == ["ac_power_w"] and f[0]["term"] == "[ac_power_w]"
+    # planted gain 1.0 W/W: found within 4 standard errors and 5 %
+    assert abs(f[0]["coefficient"] - 1.0) < max(4 * f[0]["std_err"], 0.05)
+    assert f[0]["metrics_after"]["rmse_w"] < f[0]["metrics_before"]["rmse_w"]
+    assert res.report["final"]["metrics"]["rmse_w"] < 1.03 * floor
+    assert 0.005 < f[0]["energy_share"] < 0.2
+
+
+def test_term_changed_by_signal_found(tmp_path):
+    res, floor = _run(tmp_path, [E.TermScaledBySignal(), E.Distractors()])
+    f = res.report["findings"]
+    assert len(f) == 1, f
+    assert f[0]["signals"] == ["tyre_temp_c"]
+    assert _family(f[0]["term"]) == {"v1"}           # [tyre_temp_c]*roll or *v^1
+    assert f[0]["coefficient"] < 0                     # colder tyres roll harder
+    assert res.report["final"]["metrics"]["rmse_w"] < 1.03 * floor
+
+
+def test_per_trip_mass_found(tmp_path):
+    res, floor = _run(tmp_path, [E.PerTripMass(), E.Distractors()])
+    f = res.report["findings"]
+    assert len(f) >= 1
+    assert f[0]["term"].startswith("trip=ID*(") and f[0]["signals"] == []
+    assert "blocks" in res.report["validation"]
+    assert res.report["final"]["metrics"]["rmse_w"] < 1.03 * floor
+    # the expanded equation reproduces the per-trip factors: trip=ID*acc terms exist
+    assert any(t.startswith("trip=synth-1*acc") for t in res.equation.terms)
+
+
+def test_speed_function_missing_from_basis_found(tmp_path):
+    # declared basis without rolling resistance: the truth's roll (∝ v) plus the planted
+    # quadratic are a function of speed alone that the basis lacks
+    decl = Equation("no_roll", {"acc": 1.0, "grade": 1.0, "aero": 1.0})
+    res, floor = _run(tmp_path, [E.SpeedFunction(), E.Distractors()], equation=decl)
+    f = res.report["findings"]
+    assert len(f) >= 1
+    assert all(x["signals"] == [] for x in f), [x["term"] for x in f]
+    assert all(x["term"].startswith("v^") for x in f)
+    assert res.report["final"]["metrics"]["rmse_w"] < 1.03 * floor
+
+
+def test_two_planted_effects_both_found(tmp_path):
+    res, floor = _run(tmp_path, [E.AuxLoad(), E.TermScaledBySignal(), E.Distractors()])
+    sig = [tuple(x["signals"]) for x in res.report["findings"]]
+    assert ("ac_power_w",) in sig and ("tyre_temp_c",) in sig
+    assert len(sig) == 2
+    assert res.report["final"]["metrics"]["rmse_w"] < 1.03 * floor
+
+
+def test_block_validation_single_trip_and_report_files(tmp_path):
+    from sumo_drvpw.trace_cli import run
+
+    df, _ = E.synth_trips(1, 16.0, seed=5, effects=[E.AuxLoad(), E.LogPower()], noise=NOISE)
+    path = tmp_path / "one.parquet"
+    df.to_parquet(path)
+    out = tmp_path / "out"
+    res = run([path], "prius3", None, out, TraceOptions(), figures=True)
+    doc = json.loads((out / "trace.json").read_text())
+    assert set(doc) == {"target", "n_samples", "validation", "baseline", "findings", "final"}
+    assert set(doc["baseline"]) == {"terms", "coefficients", "metrics"}
+    assert set(doc["baseline"]["metrics"]) == {"rmse_w", "mae_w", "r2", "r2_light", "r2_heavy", "bias_w"}
+    assert doc["validation"].startswith("5-fold cross-validation over contiguous")
+    assert doc["findings"] and doc["findings"][0]["signals"] == ["ac_power_w"]
+    assert set(doc["findings"][0]) == {"effect", "signals", "term", "coefficient", "std_err", "p_value",
+                                      "energy_share", "metrics_before", "metrics_after"}
+    # the final equation file round-trips and predicts with the saved coefficients
+    eq = load_equation(out / "final_equation.toml")
+    assert "[ac_power_w]" in eq.terms
+    assert eq.provenance["declared_equation"] == "calibrated_indt_var_1"
+    assert (out / "error_vs_speed.png").stat().st_size > 1000
+    assert list(out.glob("finding1_residual_vs_*.png"))
+    assert "Findings" in (out / "trace.md").read_text()
+
+
+def test_leaky_columns_are_not_offered():
+    rng = np.random.default_rng(0)
+    n = 5000
+    v = rng.uniform(0, 30, n)
+    a = rng.normal(0, 0.5, n)
+    y = 1500 * v * a + 0.4 * v ** 3 + 200 * v + rng.normal(0, 300, n)
+    from sumo_drvpw.terms import Inputs
+
+    x = Inputs(v, a, np.zeros(n), np.zeros(n), np.full(n, 1500.0), np.full(n, 1.2))
+    sig = {"power_copy_w": y + rng.normal(0, 10, n),           # the target itself
+           "motor_torque_nm": y / 300.0,                        # a measured-power source column
+           "gps_speed_mps": v + rng.normal(0, 0.05, n),         # derived from the model inputs
+           "counter": np.arange(n, dtype=float),               # id-like
+           "flat": np.ones(n),                                  # constant
+           "holes": np.where(rng.random(n) < 0.3, np.nan, 1.0),  # too many NaN
+           "ambient_c": rng.normal(10, 3, n)}                   # a legitimate signal
+    kept, skipped = screen_signals(sig, y, x, np.zeros(n, int), np.ones(n, bool), TraceOptions())
+    assert list(kept) == ["ambient_c"]
+    reasons = {s["column"]: s["reason"] for s in skipped}
+    assert "proxy" in reasons["power_copy_w"]
+    assert "source" in reasons["motor_torque_nm"]
+    assert "derived" in reasons["gps_speed_mps"]
+    assert "id-like" in reasons["counter"]
+    assert reasons["flat"] == "constant"
+    assert "NaN" in reasons["holes"]
+    kept, _ = screen_signals(sig, y, x, np.zeros(n, int), np.ones(n, bool), TraceOptions(exclude=("amb*",)))
+    assert kept == {}
+
+
+def test_bad_options_are_user_errors():
+    with pytest.raises(UserError, match="--validation"):
+        TraceOptions(validation="random").check()
+    with pytest.raises(UserError, match="--alpha"):
+        TraceOptions(alpha=2).check()
+
+
+def test_cli_exit_codes(tmp_path, capsys):
+    from sumo_drvpw.cli import main
+
+    df, _ = E.synth_trips(1, 6.0, seed=2, effects=[E.LogPower()], noise=NOISE)
+    path = tmp_path / "l.parquet"
+    df.to_parquet(path)
+    assert main(["diagnose", str(path), "--vehicle", "prius3", "--out", str(tmp_path / "o"),
+                 "--validation", "trip", "--quiet"]) == 2
+    assert "needs ≥ 3 trips" in capsys.readouterr().err
+    assert main(["diagnose", str(path), "--vehicle", "prius3", "--equation", TRUTH, "--out",
+                 str(tmp_path / "o"), "--no-figures", "--quiet"]) == 0
+    doc = json.loads((tmp_path / "o" / "trace.json").read_text())
+    assert doc["findings"] == []
