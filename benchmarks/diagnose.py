@@ -1,0 +1,82 @@
+"""Benchmark: `diagnose` on one million samples with twenty extra columns (< 60 s target).
+
+The log is built from synthetic 8 Hz trips (sumo_drvpw.synth, truth drvpw_prius3, driving
+power logged directly) tiled to 1e6 rows with distinct trip ids, plus twenty extra
+columns (one planted A/C load and its flag, the rest distractors). Generation is not
+timed; the timed part is what `sumo-drvpw diagnose LOG --vehicle prius3 --equation
+drvpw_prius3 --out DIR --no-figures` does (read the log, trace, write the report).
+
+    .venv/bin/python benchmarks/diagnose.py [--rows 1000000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+
+def build(rows: int, path: Path) -> None:
+    from sumo_drvpw import effects as E
+    from sumo_drvpw.synth import Noise
+
+    base, _ = E.synth_trips(4, 30.0, seed=1, effects=[E.AuxLoad(), E.LogPower()],
+                            noise=Noise(process_w=200.0, process_rel=0.01))
+    reps = int(np.ceil(rows / len(base)))
+    frames = []
+    for r in range(reps):
+        f = base.copy()
+        f["trip_id"] = f["trip_id"] + f"-r{r}"
+        frames.append(f)
+    df = pd.concat(frames, ignore_index=True).iloc[:rows].copy()
+    rng = np.random.default_rng(0)
+    n = len(df)
+    v = df["speed_mps"].to_numpy()
+    extra = {}
+    for i in range(6):
+        extra[f"walk_{i}"] = np.cumsum(rng.normal(0, 0.05, n))
+    for i in range(6):
+        extra[f"noise_{i}"] = rng.normal(0, 1, n)
+    for i in range(3):
+        extra[f"speedish_{i}"] = 40 + (0.5 + i) * v + rng.normal(0, 5, n)
+    for i in range(3):
+        extra[f"flag_{i}"] = rng.random(n) < 0.3
+    for k, col in extra.items():
+        df[k] = col
+    keep_extra = ["ac_power_w", "ac_on"] + list(extra)
+    assert len(keep_extra) == 20
+    drop = [c for c in ("gps_elevation_m", "imu_accel_mps2", "heading_deg", "engine_on", "ev_mode", "phase")
+            if c in df]
+    df = df.drop(columns=drop)
+    df.to_parquet(path)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rows", type=int, default=1_000_000)
+    a = ap.parse_args()
+    from sumo_drvpw.log import read_log
+    from sumo_drvpw.trace_cli import run
+    from sumo_drvpw.trace import TraceOptions
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "bench.parquet"
+        build(a.rows, path)
+        n_extra = len(read_log([path]).extra_columns)
+        t0 = time.perf_counter()
+        res = run([path], "prius3", "drvpw_prius3", Path(tmp) / "out", TraceOptions(), figures=False,
+                  progress=print)
+        dt = time.perf_counter() - t0
+    r = res.report
+    print(f"rows={a.rows} extra_columns_in_log={n_extra} findings={[f['term'] for f in r['findings']]} "
+          f"rmse {r['baseline']['metrics']['rmse_w']:.1f} -> {r['final']['metrics']['rmse_w']:.1f} W")
+    print(f"seconds={dt:.1f} candidates_scored={res.n_candidates_scored}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
