@@ -29,7 +29,9 @@ and current — the target or a component of it, whichever source was used); mat
 usable samples; is constant; is id-like (monotone within every trip with > 50 %
 distinct values: a clock, counter or odometer); is derived from the model inputs
 (R² ≥ ``derived_r2`` of an OLS on 1, v, a, sin θ, wind — e.g. a GPS speed or an IMU
-acceleration); or is a proxy of the target (|corr(c·vᵏ, P)| ≥ ``proxy_corr`` for some
+acceleration); is the same quantity as a source column under another name (|corr| ≥
+``proxy_corr`` with a source column present in the log, e.g. an "executed" MG2
+torque); or is a proxy of the target (|corr(c·vᵏ, P)| ≥ ``proxy_corr`` for some
 k = 0…3 — a logged power, a torque, a pedal that *is* the demand). The reasons are
 reported. Driver-command columns below the proxy threshold (pedal position, throttle)
 are still offered; exclude them with ``exclude`` when they should not count as effects.
@@ -175,6 +177,16 @@ def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarr
     yc = yu - yu.mean()
     tc = trip_codes[u]
     same_trip = tc[1:] == tc[:-1]
+    src = {}
+    for c in POWER_SOURCE_COLUMNS:
+        if c in signals:
+            a = np.asarray(signals[c], float)[u]
+            a = np.where(np.isfinite(a), a, np.nanmean(a) if np.isfinite(a).any() else 0.0)
+            if a.std() > 0:
+                proj = kin_q.T @ a
+                r2 = 1.0 - max(float(a @ a) - float(proj @ proj), 0.0) / float(((a - a.mean()) ** 2).sum())
+                if r2 < opt.derived_r2:  # a motor speed ∝ vehicle speed is no power component to match
+                    src[c] = (a - a.mean()) / a.std()
     for name in signals:
         arr = np.asarray(signals[name], dtype=float)
         if name in POWER_SOURCE_COLUMNS:
@@ -210,6 +222,18 @@ def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarr
             if r2 >= opt.derived_r2:
                 skipped.append({"column": name, "reason": f"derived from the model inputs (R² = {r2:.4f} on 1, v, a, sin θ, wind)"})
                 continue
+        dup = None
+        if sz.std() > 0:
+            zs = (sz - sz.mean()) / sz.std()
+            for c, a in src.items():
+                r = abs(float(zs @ a)) / len(zs)
+                if r >= opt.proxy_corr:
+                    dup = (c, r)
+                    break
+        if dup:
+            skipped.append({"column": name, "reason": f"same quantity as the measured-power source column "
+                                                      f"'{dup[0]}' (|corr| = {dup[1]:.3f})"})
+            continue
         best = 0.0
         for k in range(4):
             f = sz * v ** k
