@@ -165,6 +165,19 @@ class CalibrationResult:
         return "\n".join(lines)
 
 
+def _design(terms, x: Inputs, y: np.ndarray, use: np.ndarray, chunk: int = CHUNK):
+    """Design matrix and target of the used samples, filled chunk by chunk (no full-size
+    temporaries, no copy of the inputs)."""
+    idx = None if use.all() else np.flatnonzero(use)
+    n = len(y) if idx is None else len(idx)
+    xs = np.empty((n, len(terms)))
+    for lo in range(0, n, chunk):
+        hi = min(lo + chunk, n)
+        sel = slice(lo, hi) if idx is None else idx[lo:hi]
+        xs[lo:hi] = term_matrix(terms, x.take(sel))
+    return xs, (y if idx is None else y[idx])
+
+
 def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = None,
               p_enter: float = 0.10, p_remove: float = 0.15, counts: dict | None = None,
               reference_mass_kg: float | None = None) -> CalibrationResult:
@@ -202,13 +215,18 @@ def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = No
     if not sel:
         raise UserError("no candidate term entered the model at p-to-enter "
                         f"{p_enter}: the measured power is not explained by {list(candidates)}")
-    idx = np.flatnonzero(use)
-    xs = term_matrix(sel, x.take(idx))
-    ys = y[idx]
-    res = sm.OLS(ys, xs).fit()
-    resid = ys - xs @ res.params
+    xs, ys = _design(sel, x, y, use)
+    # hasconst=False: no intercept by design; it also skips statsmodels' constant detection,
+    # which costs three extra SVDs of the design matrix
+    res = sm.OLS(ys, xs, hasconst=False).fit()
+    del xs
+    sse = float(res.ssr)
+    _ = (res.bse, res.pvalues, res.tvalues, res.rsquared)  # cached before the data go
+    # the results keep the design matrix and its pseudo-inverse (2 × n × k floats) alive;
+    # drop the sample-length arrays so a CalibrationResult stays small
+    res.remove_data()
     sst = float(((ys - ys.mean()) ** 2).sum())
-    r2 = 1.0 - float(resid @ resid) / sst if sst > 0 else float("nan")
+    r2 = 1.0 - sse / sst if sst > 0 else float("nan")
     counts["used"] = n_use
     return CalibrationResult(
         terms=list(sel), params=dict(zip(sel, map(float, res.params))),

@@ -81,7 +81,8 @@ class DriveLog:
         if "mass_kg" in df and df["mass_kg"].notna().all():
             mass = df["mass_kg"].to_numpy(float)
         elif mass_kg is not None:
-            mass = np.full(len(df), float(mass_kg))
+            # one constant mass: a read-only broadcast view costs no memory
+            mass = np.broadcast_to(float(mass_kg), (len(df),))
             if "mass_kg" in df:
                 given = df["mass_kg"].to_numpy(float)
                 mass = np.where(np.isnan(given), mass, given)
