@@ -96,13 +96,19 @@ def _sumo_runs(out: Path, eq_path: Path) -> list[str]:
         if not scen.is_file():
             print(f"[4/4] {scen} missing, skipped")
             continue
-        summary = run_scenario(scen, out / f"sumo_{name}", extra_equations=[str(eq_path)])
+        from ..equations import load_equation
+        from ..sim.scenario import load_scenario
+
+        eqs = list(load_scenario(scen).equations) + [load_equation(eq_path)]
+        summary = run_scenario(scen, out / f"sumo_{name}", equations=eqs)
         print(f"[4/4] SUMO {name}: {summary['steps']} steps, {summary['vehicles']} vehicles → {out / f'sumo_{name}'}")
         lines += [f"### {name} (`sumo_{name}/`)", "", "| equation | class | acc | grade | aero | roll | traction [kWh] |",
                   "|---|---|---|---|---|---|---|"]
         for eqn, e in summary["equations"].items():
             for cls, en in e["energy_j"].items():
                 tot = en.get("total", 0.0) or 0.0
+                if tot <= 0:  # this scenario has no traction in that class
+                    continue
                 sh = [f"{100 * en.get(t, 0.0) / tot:.1f} %" if tot > 0 else "–" for t in ("acc", "grade", "aero", "roll")]
                 lines.append(f"| {eqn} | {cls} | " + " | ".join(sh) + f" | {tot / 3.6e6:.2f} |")
         lines.append("")
