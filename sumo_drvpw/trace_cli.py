@@ -76,6 +76,9 @@ def write_outputs(res, out, figures: bool = True) -> None:
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    for old in list(out.glob("finding*_residual_vs_*.png")) + [out / "error_vs_speed.png"]:
+        if old.exists():  # figures of an earlier run in the same folder
+            old.unlink()
     write_json(out / "trace.json", res.report)
     write_json(out / "trace_details.json", res.details)
     save_equation(res.equation, out / "final_equation.toml")
