@@ -24,7 +24,6 @@ path is looked up there.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,6 +31,7 @@ import numpy as np
 
 from .constants import G
 from .errors import UserError
+from .fileio import read_toml
 from .terms import CATEGORIES, Inputs, parse_term, term_matrix
 
 BUILTIN_DIR = Path(__file__).parent / "equations"
@@ -131,22 +131,18 @@ def beta_to_coefficients(beta: dict[str, float], reference_mass_kg: float) -> di
     beta : term → β on the mass-free basis
     reference_mass_kg : mass at which β were fitted [kg]
     """
-    out = {}
-    for t, b in beta.items():
-        order = parse_term(t).mg_order
-        scale = 1.0 if order == 0 else reference_mass_kg * (G if order == 2 else 1.0)
-        out[t] = float(b) / scale
-    return out
+    return {t: float(b) / _mass_scale(t, reference_mass_kg) for t, b in beta.items()}
 
 
 def coefficients_to_beta(terms: dict[str, float], reference_mass_kg: float) -> dict[str, float]:
     """Inverse of :func:`beta_to_coefficients`."""
-    out = {}
-    for t, c in terms.items():
-        order = parse_term(t).mg_order
-        scale = 1.0 if order == 0 else reference_mass_kg * (G if order == 2 else 1.0)
-        out[t] = float(c) * scale
-    return out
+    return {t: float(c) * _mass_scale(t, reference_mass_kg) for t, c in terms.items()}
+
+
+def _mass_scale(term: str, mass_kg: float) -> float:
+    """The factor a term carries beyond its mass-free form: 1, m, or m·g."""
+    order = parse_term(term).mg_order
+    return 1.0 if order == 0 else mass_kg * (G if order == 2 else 1.0)
 
 
 def builtin_names() -> list[str]:
@@ -202,16 +198,10 @@ def load_equation(spec: str | Path) -> Equation:
     """Load an equation by built-in name or from a TOML file path."""
     p = Path(spec)
     if p.suffix == ".toml" or p.exists():
-        if not p.is_file():
-            raise UserError(f"equation file not found: {p}")
-        try:
-            doc = tomllib.loads(p.read_text(encoding="utf-8"))
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-            raise UserError(f"{p}: not a valid TOML equation file: {e}") from None
-        return equation_from_dict(doc, str(p))
+        return equation_from_dict(read_toml(p, "equation file"), str(p))
     builtin = BUILTIN_DIR / f"{spec}.toml"
     if builtin.is_file():
-        eq = equation_from_dict(tomllib.loads(builtin.read_text(encoding="utf-8")), str(builtin))
+        eq = equation_from_dict(read_toml(builtin, "equation file"), str(builtin))
         return eq
     raise UserError(f"unknown equation '{spec}': not a file and not a built-in "
                     f"(built-ins: {', '.join(builtin_names())})")

@@ -90,3 +90,24 @@ def write_figure(path, fig) -> None:
 def repo_root() -> Path:
     """The project checkout this package runs from (editable install)."""
     return Path(__file__).resolve().parent.parent
+
+
+def read_toml(path, what: str) -> dict:
+    """Parse a TOML file; a missing or invalid file is a UserError naming it.
+
+    Parameters
+    ----------
+    path : file path
+    what : what the file is, for the message (e.g. "equation file", "--columns mapping")
+    """
+    import tomllib
+
+    from .errors import UserError
+
+    p = Path(path)
+    if not p.is_file():
+        raise UserError(f"{what} not found: {p}")
+    try:
+        return tomllib.loads(p.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise UserError(f"{p}: not a valid TOML {what}: {e}") from None

@@ -735,7 +735,6 @@ def trace(measured, equation: Equation | None = None, opt: TraceOptions | None =
     base_coefs, _ = tr.coefficients()
     findings, rounds = [], []
     plot = {"y": y, "v": x.v, "pred_base": pred0, "signals": sig, "findings": []}
-    pred_prev = pred0
     in_model = set(declared)
     for rnd in range(opt.max_findings):
         pool = [c for c in cands if c.term not in in_model]
@@ -818,7 +817,6 @@ def trace(measured, equation: Equation | None = None, opt: TraceOptions | None =
             "energy_share": share, "metrics_before": _pick_metrics(m_before),
             "metrics_after": _pick_metrics(m_after)})
         plot["findings"].append({"cand": cbest, "before": before_pred, "after": after_pred})
-        pred_prev = after_pred
 
     final_fold = tr.fold_of(False)
     pred_final = tr.heldout_pred(final_fold) if findings else pred0

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import UserError
 
 
 def configure(p):

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .constants import G, HEAVY_LOAD_W, KMH
+from .constants import HEAVY_LOAD_W, KMH
 from .errors import UserError
 
 #: data-set folder → (adapter format, vehicle)

@@ -38,12 +38,11 @@ paper writes G_r, G_c, G_f as their inverses (< 1).
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import UserError
-from .fileio import repo_root
+from .fileio import read_toml, repo_root
 
 VEHICLE_DIR = repo_root() / "calibration" / "vehicles"
 POWERTRAIN_TYPES = ("power_split", "single_motor", "battery", "direct")
@@ -91,12 +90,7 @@ def load_vehicle(spec: str | Path) -> Vehicle:
         if not p.is_file():
             raise UserError(f"unknown vehicle '{spec}': not a file and not one of "
                             f"{', '.join(vehicle_names())}")
-    if not p.is_file():
-        raise UserError(f"vehicle file not found: {p}")
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{p}: not a valid TOML vehicle file: {e}") from None
+    doc = read_toml(p, "vehicle file")
     meta = doc.get("vehicle", {})
     if "mass_kg" not in meta:
         raise UserError(f"{p}: [vehicle] lacks 'mass_kg'")

@@ -91,7 +91,6 @@ def test_battery_sign_conventions():
 def test_measured_power_on_synthetic_signals_matches_truth():
     """Inverse (synth) then forward (measured_power) reproduces the truth power without noise."""
     from sumo_drvpw.equations import load_equation
-    from sumo_drvpw.fileio import write_parquet  # noqa: F401 (atomic writer used by write_synth)
     from sumo_drvpw.synth import Noise, SynthOptions, synthesize
     from sumo_drvpw.workflow import load_measured
     import tempfile

@@ -29,13 +29,13 @@ Temperatures go to °C (``_c``), rotational speeds to rpm (``_rpm``), angles to 
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from ..errors import UserError
+from ..fileio import read_toml
 from ._common import (CANONICAL, DIMENSIONS, clean_time_and_speed, expand_paths, generic_name,
                       lookup_unit, new_report, numeric, read_csv_strict, unique_names)
 
@@ -49,12 +49,7 @@ SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 def load_mapping(path) -> dict:
     """Read and check a mapping TOML; every problem is a UserError naming the file and key."""
     p = Path(path)
-    if not p.is_file():
-        raise UserError(f"--columns {p}: no such mapping file")
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{p}: not a valid TOML mapping: {e}") from None
+    doc = read_toml(p, "--columns mapping")
     opts = doc.get("options", {})
     if not isinstance(opts, dict):
         raise UserError(f"{p}: [options] must be a table")

@@ -65,7 +65,7 @@ def main(args) -> int:
     write_comparison_report(comp, rep, "DrvPw against classic VSP on a held-out Prius3 test-track log", ctx)
     doc = comp.to_json()
     print(f"[3/4] compared on the bundled held-out log → {rep / 'report.md'}")
-    lines += ["## Comparison on the bundled held-out log", "", f"Full report: `report/report.md`", "",
+    lines += ["## Comparison on the bundled held-out log", "", "Full report: `report/report.md`", "",
               "| equation | R² < 50 kW | R² ≥ 50 kW | RMSE [kW] | bias [kW] |", "|---|---|---|---|---|"]
     for name, r in doc["equations"].items():
         lines.append(f"| {name} | {_f(r['r2_light'])} | {_f(r['r2_heavy'])} | {r['rmse_w'] / 1e3:.2f} | "
