@@ -87,7 +87,7 @@ def build_routes(work: Path, n: int, seed: int = 1) -> Path:
         edges = edges[rot:] + edges[:rot]
         lines.append(f'  <vehicle id="v{k}" type="car" depart="{k * 60.0 / n:.3f}" '
                      f'departPos="random_free" departLane="free" departSpeed="0">'
-                     f'<route edges="{" ".join(edges)}" repeat="1000"/></vehicle>')
+                     f'<route edges="{" ".join(edges)}" repeat="8"/></vehicle>')
     lines.append("</routes>")
     p = work / f"cars{n}.rou.xml"
     p.write_text("\n".join(lines), encoding="utf-8")

@@ -142,8 +142,8 @@ def test_tailwind_lowers_aero_power_as_v_minus_w_squared(tmp_path):
     aero = Equation("aero", {"aero_rho": 0.25 * 2.23})
     runs = {}
     for label, wind in (("calm", ""), ("windy", f"[wind]\nspeed_mps = {w}\nfrom_deg = 270\n")):
-        p = _scenario(tmp_path / label if (tmp_path / label).mkdir() is None else None,
-                      routes, extra=wind, end=60)
+        (tmp_path / label).mkdir()
+        p = _scenario(tmp_path / label, routes, extra=wind, end=60)
         run_scenario(p, tmp_path / label / "o", equations=[aero], trace=True, figures=False)
         runs[label] = pd.read_parquet(tmp_path / label / "o" / "trace.parquet")
     calm, windy = runs["calm"], runs["windy"]
@@ -289,7 +289,8 @@ def test_cli_vtype_without_mass_and_sumo_start_failure(tmp_path, capsys):
     assert code == 2 and "vType 'test'" in err and "no mass" in err
     # SUMO itself refuses the routes (unknown edge): libsumo raises, we exit 2
     bad = ONE_CAR.format(m=M, v=20.0, route="east", pos=0, more="").replace("e23", "nowhere")
-    p2 = _scenario(tmp_path / "x" if (tmp_path / "x").mkdir() is None else None, bad, end=10)
+    (tmp_path / "x").mkdir()
+    p2 = _scenario(tmp_path / "x", bad, end=10)
     code, err = _cli([p2, "--out", tmp_path / "o2", "--equation", eq], capsys)
     assert code == 2 and "SUMO failed" in err
 
