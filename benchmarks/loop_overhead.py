@@ -10,8 +10,11 @@ at once. The network is warmed up once per size and saved with ``simulation.save
 every timed run loads that state and steps the same ``--steps`` steps:
 
 - ``bare``: ``simulationStep`` only;
-- ``plugin``: the sumo-drvpw loop (getters for speed, acceleration, angle, lane,
-  position and slope of every vehicle, robust slope, wind, 4 equations, ledger);
+- ``plugin``: the sumo-drvpw loop with default settings (getters for speed,
+  acceleration, angle, lane, position and slope of every vehicle, robust slope, wind
+  3 m/s so the heading is read, 4 equations, ledger);
+- ``plugin_fast``: the same with ``sumo.acceleration = "speed_difference"`` and
+  ``slope.reference = "geometry"`` (two getters less per vehicle);
 - ``emissions``: bare stepping with SUMO's own ``--device.emissions.probability 1``.
 
 Prints median wall times of ``--repeats`` runs (variants interleaved), then the ratios;
@@ -124,19 +127,23 @@ def timed(variant: str, net, routes, state, steps: int, eqs) -> float:
     extra = ["--load-state", str(state)]
     if variant == "emissions":
         extra += ["--device.emissions.probability", "1"]
-    if variant == "plugin":
+    if variant.startswith("plugin"):
         table = timed.nets.get(str(net)) or load_network(Path(net), RoadClassRule())
         timed.nets[str(net)] = table
     conn = _start(net, routes, extra)
     try:
         t_begin = conn.simulation.getTime()
         end = t_begin + steps * conn.simulation.getDeltaT()
-        if variant == "plugin":
+        if variant.startswith("plugin"):
             eqset = EquationSet(eqs)
             led = Ledger(len(table.edge_ids), len(eqs), capacity=8192)
             app = np.ones(len(eqs))
             t0 = time.perf_counter()
-            run_loop(conn, table, eqset, led, Physics(wind_speed=3.0, wind_from_deg=270.0),
+            fast = variant == "plugin_fast"
+            phys = Physics(wind_speed=3.0, wind_from_deg=270.0,
+                           slope_reference="geometry" if fast else "getslope",
+                           acceleration="speed_difference" if fast else "getter")
+            run_loop(conn, table, eqset, led, phys,
                      lambda vt, vid: (1625.0, app, True), end=end)
             dt = time.perf_counter() - t0
             assert led.samples > 0
@@ -172,7 +179,7 @@ def main(argv=None) -> int:
             routes = build_routes(work, n)
             state = work / f"state{n}.xml.gz"
             running = warm_up(net, routes, state, args.warm)
-            times = {"bare": [], "plugin": [], "emissions": []}
+            times = {"bare": [], "plugin": [], "plugin_fast": [], "emissions": []}
             for _ in range(args.repeats):
                 for variant in times:
                     times[variant].append(timed(variant, net, routes, state, args.steps, eqs))
@@ -184,6 +191,7 @@ def main(argv=None) -> int:
     print(f"equations: {', '.join(e.name for e in eqs)}")
     for n, (running, med) in results.items():
         print(f"ratios N={n}: plugin/bare={med['plugin'] / med['bare']:.3f} "
+              f"plugin_fast/bare={med['plugin_fast'] / med['bare']:.3f} "
               f"emissions/bare={med['emissions'] / med['bare']:.3f}")
     big = max(results)
     print(f"overhead_ratio={results[big][1]['plugin'] / results[big][1]['bare']:.3f}")

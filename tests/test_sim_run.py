@@ -299,3 +299,21 @@ def test_cli_subprocess_exit_code(tmp_path):
     r = subprocess.run([sys.executable, "-m", "sumo_drvpw.cli", "run", str(tmp_path / "x.toml"),
                         "--out", str(tmp_path)], capture_output=True, text=True)
     assert r.returncode == 2 and "Traceback" not in r.stderr
+
+
+def test_fast_paths_agree_with_getters(tmp_path):
+    """acceleration = speed_difference reproduces getAcceleration ((v_t − v_t−1)/Δt, 0 when
+    first seen), so energies agree to rounding; slope.reference = geometry reproduces
+    getSlope from the lane shape, so the corrected-sample counts nearly agree."""
+    base = run_scenario(REPO / "scenarios" / "city.toml", tmp_path / "a", end=200,
+                        equations=[PHYS, VSP], figures=False)
+    fast = run_scenario(REPO / "scenarios" / "city.toml", tmp_path / "b", end=200,
+                        equations=[PHYS, VSP], figures=False, acceleration="speed_difference",
+                        slope_reference="geometry")
+    assert fast["samples"] == base["samples"] > 0
+    for name in ("phys", "vsp"):
+        for cat, val in base["equations"][name]["energy_j"]["city"].items():
+            assert fast["equations"][name]["energy_j"]["city"][cat] == pytest.approx(
+                val, rel=1e-9, abs=1e-6)
+    assert fast["slope_corrected_samples"] == pytest.approx(
+        base["slope_corrected_samples"], rel=0.5, abs=0.01 * base["samples"])

@@ -165,7 +165,8 @@ def run_scenario(scenario_path, out_dir, **overrides) -> dict:
     ledger = Ledger(len(net.edge_ids), len(equations))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    physics = Physics(sc.wind_speed, sc.wind_from_deg, sc.rho, sc.slope_tol)
+    physics = Physics(sc.wind_speed, sc.wind_from_deg, sc.rho, sc.slope_tol,
+                      sc.slope_reference, sc.acceleration)
     t0 = time.perf_counter()
     conn = start_sumo(sc.sumo_args, sc.connection, sc.gui)
     trace = None
@@ -191,6 +192,7 @@ def run_scenario(scenario_path, out_dir, **overrides) -> dict:
              "end_s": info["end_time_s"], "step_length_s": sc.step_length,
              "interrupted": info["interrupted"], "wall_time_s": wall,
              "connection": sc.connection, "air_density_kgm3": sc.rho,
+             "slope_reference": sc.slope_reference, "acceleration_source": sc.acceleration,
              "wind": {"speed_mps": sc.wind_speed, "from_deg": sc.wind_from_deg},
              "equation_sources": {e.name: (e.path or "<object>") for e in equations}}
     if sc.trace:

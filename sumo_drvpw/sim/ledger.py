@@ -135,6 +135,7 @@ class Ledger:
         grow("veh_app", (cap, E))
         grow("veh_keep", (cap,), bool, False)
         grow("veh_prev_edge", (cap,), np.int64, -1)
+        grow("veh_prev_speed", (cap,), float, np.nan)
         self.capacity = cap
 
     def add_vehicle(self, vid: str, vtype: str, mass: float, app: np.ndarray,

@@ -38,6 +38,12 @@ class Physics:
     wind_from_deg: float = 0.0
     rho: float = 1.2041
     slope_tol: float = 0.01
+    #: "getslope": compare the robust slope with SUMO's getSlope (one more getter per
+    #: vehicle); "geometry": with the same front-to-back slope taken from the lane shape
+    slope_reference: str = "getslope"
+    #: "getter": vehicle.getAcceleration; "speed_difference": (v_t − v_t−1)/Δt from the
+    #: speeds already read, which is how SUMO defines getAcceleration (0 when first seen)
+    acceleration: str = "getter"
 
 
 def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
@@ -59,10 +65,10 @@ def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray
 class _Reader:
     """Reads the per-vehicle state of a step as lists (getters or traci subscriptions)."""
 
-    def __init__(self, conn, use_subscriptions: bool, need_angle: bool = True):
+    def __init__(self, conn, use_subscriptions: bool, need: tuple[bool, ...] = (True,) * 6):
         self.conn = conn
         self.subs = use_subscriptions
-        self.need_angle = need_angle
+        self.need = need  # speed, accel, angle, lane, position, slope
 
         V = conn.vehicle
         self.getters = [V.getSpeed, V.getAcceleration, V.getAngle, V.getLaneID,
@@ -79,8 +85,8 @@ class _Reader:
 
     def read(self, ids):
         if not self.subs:  # the heading is only needed for the wind projection
-            return tuple(list(map(g, ids)) if (k != 2 or self.need_angle) else None
-                         for k, g in enumerate(self.getters))
+            return tuple(list(map(g, ids)) if need else None
+                         for g, need in zip(self.getters, self.need))
         V = self.conn.vehicle
         res = V.getAllSubscriptionResults()
         rows = [res.get(vid) for vid in ids]
@@ -124,7 +130,10 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
     lane_index = dict(net.lane_index)
     lane_index[""] = -1
     lane_edge_ext = np.append(net.lane_edge, -1)  # lane -1 → edge -1
-    reader = _Reader(conn, use_subscriptions, need_angle=physics.wind_speed != 0.0)
+    read_accel = physics.acceleration == "getter"
+    read_slope = physics.slope_reference == "getslope"
+    reader = _Reader(conn, use_subscriptions,
+                     (True, read_accel, physics.wind_speed != 0.0, True, True, read_slope))
     interrupted = False
     bar = None
     if progress and end is not None and sys.stderr.isatty():
@@ -185,18 +194,26 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
                 lane = np.fromiter(map(lane_number, ln), np.int64, n)
             keep = ledger.veh_keep[vidx] & (lane >= 0)
             v = np.asarray(sp, float)
-            a = np.asarray(ac, float)
+            a = np.asarray(ac, float) if ac is not None else None
             angle = np.asarray(an, float) if an is not None else np.zeros(n)
             pos = np.asarray(lp, float)
-            slope_deg = np.asarray(sl, float)
+            if a is None:
+                prev = ledger.veh_prev_speed[vidx]
+                a = np.nan_to_num((v - prev) * (1.0 / dt), nan=0.0)
+                ledger.veh_prev_speed[vidx] = v
+            raw = np.radians(np.asarray(sl, float)) if sl is not None else None
             if not keep.all():
-                vidx, lane, v, a, angle, pos, slope_deg = (
-                    x[keep] for x in (vidx, lane, v, a, angle, pos, slope_deg))
+                vidx, lane, v, a, angle, pos = (
+                    x[keep] for x in (vidx, lane, v, a, angle, pos))
+                if raw is not None:
+                    raw = raw[keep]
                 if len(vidx) == 0:
                     continue
             theta, clipped = net.slope(lane, pos)
+            if raw is None:
+                raw = net.raw_slope(lane, pos)
             ledger.corrected += int(np.count_nonzero(
-                (np.abs(np.radians(slope_deg) - theta) > physics.slope_tol) | clipped))
+                (np.abs(raw - theta) > physics.slope_tol) | clipped))
             ledger.clipped += int(np.count_nonzero(clipped))
             wind = tailwind(angle, physics.wind_speed, physics.wind_from_deg)
             m = len(vidx)

@@ -23,6 +23,8 @@ from .scenario import RoadClassRule
 
 #: Resolution of the lane slope profiles [m].
 BIN_M = 2.0
+#: Front-to-back distance of the raw (getSlope-like) geometric slope: a car length [m].
+RAW_LENGTH_M = 5.0
 
 
 @dataclass
@@ -57,6 +59,14 @@ class Network:
     profile: np.ndarray
     clipped: np.ndarray
     classes: list[str]
+    raw: np.ndarray | None = None
+
+    def raw_slope(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """Unsmoothed geometric slope [rad] over the ``RAW_LENGTH_M`` behind ``pos``: what
+        SUMO's getSlope computes from a vehicle's front and back positions."""
+        b = np.minimum((np.maximum(pos, 0.0) * (1.0 / BIN_M)).astype(np.int64),
+                       self.lane_nbins[lane] - 1)
+        return self.raw[self.lane_offset[lane] + b]
 
     def slope(self, lane: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Robust slope [rad] and clipped flag at lane numbers ``lane``, positions ``pos`` [m]."""
@@ -66,7 +76,8 @@ class Network:
         return self.profile[i], self.clipped[i]
 
 
-def lane_profile(shape3d, length: float, window: float, max_rad: float):
+def lane_profile(shape3d, length: float, window: float, max_rad: float,
+                 behind: bool = False):
     """Robust slope profile of one lane: (θ per bin [rad], clipped flags).
 
     Parameters
@@ -94,8 +105,12 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float):
     centre = np.minimum(centre, total_3)
     sh = np.interp(centre, s_3, s_h)
     w = min(window, total_h)
-    lo = np.clip(sh - 0.5 * w, 0.0, total_h - w)
-    hi = lo + w
+    if behind:  # [s − w, s]: a vehicle's back and front
+        hi = np.clip(sh, w, total_h)
+        lo = hi - w
+    else:
+        lo = np.clip(sh - 0.5 * w, 0.0, total_h - w)
+        hi = lo + w
     z_lo = np.interp(lo, s_h, p[:, 2])
     z_hi = np.interp(hi, s_h, p[:, 2])
     theta = np.arctan2(z_hi - z_lo, np.maximum(hi - lo, 1e-9))
@@ -139,11 +154,13 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     for i in np.flatnonzero(lane_edge < 0):
         inc = lanes[i].getIncoming() if hasattr(lanes[i], "getIncoming") else []
         lane_edge[i] = eidx.get(inc[0].getEdge().getID(), 0) if inc else 0
-    profs, clips = [], []
+    profs, clips, raws = [], [], []
     for ln in lanes:
-        th, cl = lane_profile(ln.getShape3D(), ln.getLength(), window, max_rad)
+        shape = ln.getShape3D()
+        th, cl = lane_profile(shape, ln.getLength(), window, max_rad)
         profs.append(th)
         clips.append(cl)
+        raws.append(lane_profile(shape, ln.getLength(), RAW_LENGTH_M, np.inf, behind=True)[0])
     nb = np.array([len(p) for p in profs], np.int64)
     off = np.concatenate([[0], np.cumsum(nb)[:-1]]).astype(np.int64)
     all_classes = list(rule.classes)
@@ -157,4 +174,4 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         lane_index=lane_index, lane_edge=lane_edge,
         lane_length=np.array([ln.getLength() for ln in lanes], float),
         lane_offset=off, lane_nbins=nb, profile=np.concatenate(profs),
-        clipped=np.concatenate(clips), classes=all_classes)
+        clipped=np.concatenate(clips), classes=all_classes, raw=np.concatenate(raws))

@@ -14,6 +14,9 @@ the scenario file)::
     connection = "libsumo"          # or "traci" (e.g. with gui = true to watch in sumo-gui)
     gui = false
     options = ["--seed", "7"]       # extra SUMO command-line options
+    acceleration = "getter"         # or "speed_difference": (v_t − v_t−1)/Δt from the
+                                    # speeds read anyway (SUMO's own definition), one
+                                    # getter less per vehicle and step
 
     [vehicles]
     vtypes = ["prius3"]             # vTypes to account (default: all vehicles)
@@ -41,6 +44,8 @@ the scenario file)::
     window_m = 20.0                 # distance window of the robust lane slope [m]
     max_rad = 0.25                  # plausible |θ| limit [rad]
     tolerance_rad = 0.01            # |θ_getSlope − θ_robust| above this counts as corrected
+    reference = "getslope"          # or "geometry": the front-to-back (5 m) slope of the
+                                    # lane shape, as getSlope computes it, without calling it
 
     [outputs]
     trace = false                   # per vehicle-step trace.parquet
@@ -75,19 +80,20 @@ DEFAULT_HIGHWAY_MIN_SPEED_KMH = 80.0
 _SCHEMA: dict[str, set[str] | None] = {
     "equations": None,
     "sumo": {"config", "net", "routes", "additional", "begin", "end", "step_length",
-             "connection", "gui", "options"},
+             "connection", "gui", "options", "acceleration"},
     "vehicles": {"vtypes"},
     "vtypes": None,  # table of vType id → {mass_kg, equations}
     "wind": {"speed_mps", "from_deg"},
     "air": {"density_kgm3", "temperature_c", "pressure_kpa"},
     "road_class": {"highway_min_speed_kmh", "highway_types", "types", "edges"},
-    "slope": {"window_m", "max_rad", "tolerance_rad"},
+    "slope": {"window_m", "max_rad", "tolerance_rad", "reference"},
     "outputs": {"trace", "edgedata", "figures", "difference", "progress"},
 }
 _VTYPE_KEYS = {"mass_kg", "equations"}
 #: keyword overrides accepted by run_scenario (and the CLI)
 OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
-             "trace", "edgedata", "figures", "progress", "difference"}
+             "trace", "edgedata", "figures", "progress", "difference", "acceleration",
+             "slope_reference"}
 
 
 @dataclass
@@ -142,6 +148,8 @@ class Scenario:
     slope_window: float = 20.0
     slope_max: float = 0.25
     slope_tol: float = 0.01
+    slope_reference: str = "getslope"
+    acceleration: str = "getter"
     trace: bool = False
     edgedata: bool = True
     figures: bool = True
@@ -159,6 +167,12 @@ def _num(v, where: str, key: str, positive: bool = False) -> float:
     if positive and v <= 0:
         raise UserError(f"{where}: '{key}' must be > 0, got {v!r}")
     return float(v)
+
+
+def _choice(v, allowed: tuple[str, ...], where: str, key: str) -> str:
+    if v not in allowed:
+        raise UserError(f"{where}: '{key}' must be one of {', '.join(allowed)}, got {v!r}")
+    return str(v)
 
 
 def _strlist(v, where: str, key: str) -> list[str]:
@@ -264,7 +278,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     rel = (lambda s: (base / s) if base is not None and not Path(s).is_absolute() else Path(s))
 
     sumo = dict(doc.get("sumo", {}))
-    for k in ("begin", "end", "step_length", "connection", "gui", "options"):
+    for k in ("begin", "end", "step_length", "connection", "gui", "options", "acceleration"):
         if k in overrides:
             sumo[k] = overrides[k]
     if "config" in sumo:
@@ -399,6 +413,10 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         slope_window=_num(sl.get("window_m", 20.0), where, "slope.window_m", True),
         slope_max=_num(sl.get("max_rad", 0.25), where, "slope.max_rad", True),
         slope_tol=_num(sl.get("tolerance_rad", 0.01), where, "slope.tolerance_rad", True),
+        slope_reference=_choice(overrides.get("slope_reference", sl.get("reference", "getslope")),
+                                ("getslope", "geometry"), where, "slope.reference"),
+        acceleration=_choice(sumo.get("acceleration", "getter"),
+                             ("getter", "speed_difference"), where, "sumo.acceleration"),
         trace=bool(out.get("trace", False)), edgedata=bool(out.get("edgedata", True)),
         figures=bool(out.get("figures", True)), difference=diff,
         progress=bool(out.get("progress", True)))
