@@ -13,8 +13,9 @@ every timed run loads that state and steps the same ``--steps`` steps:
 - ``plugin``: the sumo-drvpw loop with default settings (getters for speed,
   acceleration, angle, lane, position and slope of every vehicle, robust slope, wind
   3 m/s so the heading is read, 4 equations, ledger);
-- ``plugin_fast``: the same with ``sumo.acceleration = "speed_difference"`` and
-  ``slope.reference = "geometry"`` (two getters less per vehicle);
+- ``plugin_fast``: the same with ``sumo.acceleration = "speed_difference"``,
+  ``slope.reference = "geometry"`` and ``wind.heading = "geometry"`` (three getters less
+  per vehicle: only speed, lane and lane position are read);
 - ``emissions``: bare stepping with SUMO's own ``--device.emissions.probability 1``.
 
 Prints median wall times of ``--repeats`` runs (variants interleaved), then the ratios;
@@ -142,7 +143,8 @@ def timed(variant: str, net, routes, state, steps: int, eqs) -> float:
             fast = variant == "plugin_fast"
             phys = Physics(wind_speed=3.0, wind_from_deg=270.0,
                            slope_reference="geometry" if fast else "getslope",
-                           acceleration="speed_difference" if fast else "getter")
+                           acceleration="speed_difference" if fast else "getter",
+                           heading="geometry" if fast else "getangle")
             run_loop(conn, table, eqset, led, phys,
                      lambda vt, vid: (1625.0, app, True), end=end)
             dt = time.perf_counter() - t0

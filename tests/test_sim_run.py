@@ -317,3 +317,23 @@ def test_fast_paths_agree_with_getters(tmp_path):
                 val, rel=1e-9, abs=1e-6)
     assert fast["slope_corrected_samples"] == pytest.approx(
         base["slope_corrected_samples"], rel=0.5, abs=0.01 * base["samples"])
+
+
+def test_heading_from_lane_geometry_agrees_with_getangle(tmp_path):
+    """wind.heading = geometry (lane direction at the car's position, no getter) gives the
+    same tailwind as vehicle.getAngle except while cars change lanes: aero energy within 1 %."""
+    text = (REPO / "scenarios" / "city.toml").read_text(encoding="utf-8")
+    text = text.replace('config = "city.sumocfg"', f'config = "{REPO / "scenarios" / "city.sumocfg"}"')
+    scen = tmp_path / "windy.toml"
+    scen.write_text(text + '\n[wind]\nspeed_mps = 6.0\nfrom_deg = 300\n', encoding="utf-8")
+    base = run_scenario(scen, tmp_path / "a", end=300, equations=[PHYS], figures=False)
+    geo = run_scenario(scen, tmp_path / "b", end=300, equations=[PHYS], figures=False,
+                       wind_heading="geometry")
+    assert geo["wind"]["heading_source"] == "geometry"
+    calm = run_scenario(REPO / "scenarios" / "city.toml", tmp_path / "c", end=300, equations=[PHYS],
+                        figures=False)  # no wind at all
+    a, g, c = (r["equations"]["phys"]["energy_j"]["city"]["aero"] for r in (base, geo, calm))
+    # the wind changes aero energy by far more than the two heading sources differ
+    assert abs(a - c) > 0.05 * c
+    assert abs(g - a) < 0.1 * abs(a - c)
+    assert g == pytest.approx(a, rel=0.01)

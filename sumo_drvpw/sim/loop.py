@@ -44,6 +44,9 @@ class Physics:
     #: "getter": vehicle.getAcceleration; "speed_difference": (v_t − v_t−1)/Δt from the
     #: speeds already read, which is how SUMO defines getAcceleration (0 when first seen)
     acceleration: str = "getter"
+    #: "getangle": vehicle.getAngle for the wind projection; "geometry": the lane's
+    #: direction at the vehicle's position (no getter; differs only during lane changes)
+    heading: str = "getangle"
 
 
 def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
@@ -133,7 +136,9 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
     read_accel = physics.acceleration == "getter"
     read_slope = physics.slope_reference == "getslope"
     reader = _Reader(conn, use_subscriptions,
-                     (True, read_accel, physics.wind_speed != 0.0, True, True, read_slope))
+                     (True, read_accel, physics.wind_speed != 0.0 and physics.heading == "getangle",
+                      True, True, read_slope))
+    heading_from_lane = physics.wind_speed != 0.0 and physics.heading == "geometry"
     interrupted = False
     bar = None
     if progress and end is not None and sys.stderr.isatty():
@@ -210,6 +215,8 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
                 if len(vidx) == 0:
                     continue
             theta, clipped = net.slope(lane, pos)
+            if heading_from_lane:
+                angle = net.heading(lane, pos)
             if raw is None:
                 raw = net.raw_slope(lane, pos)
             ledger.corrected += int(np.count_nonzero(

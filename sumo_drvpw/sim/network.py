@@ -60,6 +60,13 @@ class Network:
     clipped: np.ndarray
     classes: list[str]
     raw: np.ndarray | None = None
+    heading_deg: np.ndarray | None = None
+
+    def heading(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """Direction of the lane at ``pos`` [deg clockwise from north, SUMO's angle]."""
+        b = np.minimum((np.maximum(pos, 0.0) * (1.0 / BIN_M)).astype(np.int64),
+                       self.lane_nbins[lane] - 1)
+        return self.heading_deg[self.lane_offset[lane] + b]
 
     def raw_slope(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Unsmoothed geometric slope [rad] over the ``RAW_LENGTH_M`` behind ``pos``: what
@@ -118,6 +125,23 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float,
     return np.clip(theta, -max_rad, max_rad), clipped
 
 
+def lane_heading(shape, length: float) -> np.ndarray:
+    """Lane direction per ``BIN_M`` bin [deg clockwise from north]: the heading of the
+    shape segment under each bin centre (what ``vehicle.getAngle`` reports for a car
+    following the lane; it differs only while a car changes lanes)."""
+    p = np.asarray(shape, dtype=float)[:, :2]
+    nb = max(1, int(np.ceil(max(length, 1e-9) / BIN_M)))
+    if len(p) < 2:
+        return np.zeros(nb)
+    d = np.diff(p, axis=0)
+    seg = np.hypot(d[:, 0], d[:, 1])
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    ang = np.degrees(np.arctan2(d[:, 0], d[:, 1])) % 360.0
+    centre = np.minimum((np.arange(nb) + 0.5) * BIN_M * (s[-1] / max(length, 1e-9)), s[-1])
+    k = np.clip(np.searchsorted(s, centre, side="right") - 1, 0, len(seg) - 1)
+    return ang[k]
+
+
 def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
                  max_rad: float = 0.25) -> Network:
     """Read a SUMO network with sumolib and build the edge/lane table (see module doc)."""
@@ -154,13 +178,14 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     for i in np.flatnonzero(lane_edge < 0):
         inc = lanes[i].getIncoming() if hasattr(lanes[i], "getIncoming") else []
         lane_edge[i] = eidx.get(inc[0].getEdge().getID(), 0) if inc else 0
-    profs, clips, raws = [], [], []
+    profs, clips, raws, heads = [], [], [], []
     for ln in lanes:
         shape = ln.getShape3D()
         th, cl = lane_profile(shape, ln.getLength(), window, max_rad)
         profs.append(th)
         clips.append(cl)
         raws.append(lane_profile(shape, ln.getLength(), RAW_LENGTH_M, np.inf, behind=True)[0])
+        heads.append(lane_heading(shape, ln.getLength()))
     nb = np.array([len(p) for p in profs], np.int64)
     off = np.concatenate([[0], np.cumsum(nb)[:-1]]).astype(np.int64)
     all_classes = list(rule.classes)
@@ -174,4 +199,5 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         lane_index=lane_index, lane_edge=lane_edge,
         lane_length=np.array([ln.getLength() for ln in lanes], float),
         lane_offset=off, lane_nbins=nb, profile=np.concatenate(profs),
-        clipped=np.concatenate(clips), classes=all_classes, raw=np.concatenate(raws))
+        clipped=np.concatenate(clips), classes=all_classes, raw=np.concatenate(raws),
+        heading_deg=np.concatenate(heads))

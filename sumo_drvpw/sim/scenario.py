@@ -28,6 +28,8 @@ the scenario file)::
     [wind]                          # absent: no wind
     speed_mps = 4.0
     from_deg = 270                  # direction the wind blows FROM, clockwise from north
+    heading = "getangle"            # or "geometry": the lane's direction at the car's
+                                    # position instead of vehicle.getAngle (one getter less)
 
     [air]                           # one of:
     density_kgm3 = 1.2041
@@ -83,7 +85,7 @@ _SCHEMA: dict[str, set[str] | None] = {
              "connection", "gui", "options", "acceleration"},
     "vehicles": {"vtypes"},
     "vtypes": None,  # table of vType id → {mass_kg, equations}
-    "wind": {"speed_mps", "from_deg"},
+    "wind": {"speed_mps", "from_deg", "heading"},
     "air": {"density_kgm3", "temperature_c", "pressure_kpa"},
     "road_class": {"highway_min_speed_kmh", "highway_types", "types", "edges"},
     "slope": {"window_m", "max_rad", "tolerance_rad", "reference"},
@@ -93,7 +95,7 @@ _VTYPE_KEYS = {"mass_kg", "equations"}
 #: keyword overrides accepted by run_scenario (and the CLI)
 OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
              "trace", "edgedata", "figures", "progress", "difference", "acceleration",
-             "slope_reference"}
+             "slope_reference", "wind_heading"}
 
 
 @dataclass
@@ -150,6 +152,7 @@ class Scenario:
     slope_tol: float = 0.01
     slope_reference: str = "getslope"
     acceleration: str = "getter"
+    wind_heading: str = "getangle"
     trace: bool = False
     edgedata: bool = True
     figures: bool = True
@@ -417,6 +420,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                                 ("getslope", "geometry"), where, "slope.reference"),
         acceleration=_choice(sumo.get("acceleration", "getter"),
                              ("getter", "speed_difference"), where, "sumo.acceleration"),
+        wind_heading=_choice(overrides.get("wind_heading", wind.get("heading", "getangle")),
+                             ("getangle", "geometry"), where, "wind.heading"),
         trace=bool(out.get("trace", False)), edgedata=bool(out.get("edgedata", True)),
         figures=bool(out.get("figures", True)), difference=diff,
         progress=bool(out.get("progress", True)))
