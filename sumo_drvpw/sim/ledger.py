@@ -30,7 +30,7 @@ class EquationSet:
     def __init__(self, equations: list[Equation]):
         self.equations = list(equations)
         self.names = [e.name for e in self.equations]
-        E, C = len(self.equations), len(LEDGER_CATEGORIES)
+        C = len(LEDGER_CATEGORIES)
         groups: dict[float | None, list[int]] = {}
         for i, e in enumerate(self.equations):
             groups.setdefault(e.mass_kg, []).append(i)

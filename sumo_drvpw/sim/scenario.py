@@ -64,7 +64,6 @@ with none of them has no mass: SUMO would silently use its default, so this is a
 from __future__ import annotations
 
 import math
-import tomllib
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,6 +71,7 @@ from pathlib import Path
 from ..constants import KELVIN, P_STD_KPA, R_DRY_AIR, RHO_DEFAULT
 from ..equations import Equation, load_equation
 from ..errors import UserError
+from ..fileio import read_toml
 from ..terms import parse_term
 
 DEFAULT_HIGHWAY_TYPES = ("highway.motorway", "highway.motorway_link", "highway.trunk",
@@ -249,12 +249,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         if path is None:
             raise UserError("no scenario given")
         p = Path(path)
-        if not p.is_file():
-            raise UserError(f"scenario file not found: {p}")
-        try:
-            doc = tomllib.loads(p.read_text(encoding="utf-8"))
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-            raise UserError(f"{p}: not a valid TOML scenario: {e}") from None
+        doc = read_toml(p, "scenario file")
         base = p.resolve().parent
         path = p
     bad = set(overrides) - OVERRIDES
