@@ -338,13 +338,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     veh = doc.get("vehicles", {})
     vfilter = _strlist(veh["vtypes"], where, "vehicles.vtypes") if "vtypes" in veh else None
     vdata = {}
-    for vt, d in doc.get("vtypes", {}).items():
-        if not isinstance(d, dict):
-            raise UserError(f"{where}: 'vtypes.{vt}' must be a table")
-        for k in d:
-            if k not in _VTYPE_KEYS:
-                raise UserError(f"{where}: unknown key 'vtypes.{vt}.{k}' "
-                                f"(known: {', '.join(sorted(_VTYPE_KEYS))})")
+    for vt, d in doc.get("vtypes", {}).items():  # keys were checked with the schema above
         entry = {}
         if "mass_kg" in d:
             entry["mass_kg"] = _num(d["mass_kg"], where, f"vtypes.{vt}.mass_kg", positive=True)
