@@ -72,7 +72,12 @@ def parity(comp: Comparison, path) -> Path:
         ax.set_ylabel("predicted power [kW]")
         ax.legend(fontsize=7, loc="upper left")
         ax.grid(alpha=0.3)
-    fig.suptitle("Predicted against measured driving power (cf. paper Fig. 4)", fontsize=10)
+    return _finish(fig, path, "Predicted against measured driving power (cf. paper Fig. 4)")
+
+
+def _finish(fig, path, title: str) -> Path:
+    """Title, tight layout, atomic PNG write; returns the path."""
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     write_figure(path, fig)
     return Path(path)
@@ -108,11 +113,8 @@ def error_histograms(comp: Comparison, path) -> Path:
             ax.set_title(f"{nm}, {label} (n = {sub.size})", fontsize=9)
             ax.set_xlabel("error, predicted − measured [kW]")
             ax.set_ylabel("samples")
-    fig.suptitle("Error distribution by load (cf. paper Fig. 5); errors beyond "
-                 f"±{lim:.0f} kW are counted in the outermost bins", fontsize=10)
-    fig.tight_layout()
-    write_figure(path, fig)
-    return Path(path)
+    return _finish(fig, path, "Error distribution by load (cf. paper Fig. 5); errors beyond "
+                   f"±{lim:.0f} kW are counted in the outermost bins")
 
 
 def error_vs_speed(comp: Comparison, path) -> Path:
@@ -147,10 +149,7 @@ def error_vs_speed(comp: Comparison, path) -> Path:
         ax.set_ylabel("error, predicted − measured [kW]")
         ax.legend(fontsize=7, loc="lower left")
         ax.grid(alpha=0.3)
-    fig.suptitle("Error against speed (cf. paper Fig. 8)", fontsize=10)
-    fig.tight_layout()
-    write_figure(path, fig)
-    return Path(path)
+    return _finish(fig, path, "Error against speed (cf. paper Fig. 8)")
 
 
 def error_vs_term_power(comp: Comparison, path) -> Path:
@@ -198,10 +197,7 @@ def error_vs_term_power(comp: Comparison, path) -> Path:
             if col == 0:
                 ax.set_ylabel("error [kW]", fontsize=8)
             ax.tick_params(labelsize=7)
-    fig.suptitle("Error against the power of each term (cf. paper Fig. 9)", fontsize=10)
-    fig.tight_layout()
-    write_figure(path, fig)
-    return Path(path)
+    return _finish(fig, path, "Error against the power of each term (cf. paper Fig. 9)")
 
 
 def energy_share_bars(comp: Comparison, path) -> Path:

@@ -58,6 +58,12 @@ _KWH = 1.0 / 3.6e6
 
 # ------------------------------------------------------------------------------- CLI
 
+
+def _read_counts(ds) -> dict:
+    """The reader's counts every dataset section reports."""
+    return {k: ds.log.counts[k] for k in ("rows", "trips", "grade_source", "accel_source",
+                                          "excluded_total")}
+
 def configure(p):
     p.add_argument("--data", default=None, metavar="DIR",
                    help="folder of the shared data (default: $SUMO_DRVPW_DATA, else <repo>/../shared/data)")
@@ -238,8 +244,7 @@ def validate_i3(ds: Dataset, out: Path, figures: list) -> tuple[dict, dict]:
     summary = {
         "target": ds.source,
         "import": ds.import_report,
-        "read_counts": {k: ds.log.counts[k] for k in ("rows", "trips", "grade_source",
-                                                       "accel_source", "excluded_total")},
+        "read_counts": _read_counts(ds),
         "split": {"rule": "alternate trips in trip-id order within each season: 1st, 3rd, … "
                           "calibrate; 2nd, 4th, … test",
                   "calibration_trips": cal_trips, "test_trips": test_trips,
@@ -427,8 +432,7 @@ def validate_prius2(ds: Dataset, out: Path, figures: list) -> tuple[dict, dict]:
     summary = {
         "target": ds.source,
         "import": ds.import_report,
-        "read_counts": {k: ds.log.counts[k] for k in ("rows", "trips", "grade_source",
-                                                       "accel_source", "excluded_total")},
+        "read_counts": _read_counts(ds),
         "epa_equation": {"name": epa.name, "terms": dict(epa.terms), "mass_kg": epa.mass_kg,
                          "source": epa.source},
         "n_usable": int(u.sum()),
@@ -584,8 +588,7 @@ def validate_jlu(ds: Dataset, out: Path, figures: list) -> tuple[dict, dict]:
     summary = {
         "target": ds.source,
         "import": ds.import_report,
-        "read_counts": {k: ds.log.counts[k] for k in ("rows", "trips", "grade_source",
-                                                       "accel_source", "excluded_total")},
+        "read_counts": _read_counts(ds),
         "mass_kg": m_kg,
         "model": "traction (a ≥ 0, v > 2 m/s): P_batt = c1·v + c2·v² + c3·v³ + c_acc·m·v·a + P_aux, "
                  "η = 1/c_acc, A = c1·η, B = c2·η, C = c3·η",
