@@ -4,8 +4,13 @@ Every equation's terms are evaluated for all vehicles of a step in one pass: one
 matrix per distinct equation mass (the union of the terms of the equations sharing it)
 times a coefficient matrix that maps terms to (equation, category) columns. Energies are
 power × Δt, split by the sign of each equation's total power: traction (P > 0) and
-recuperable (P ≤ 0) energy are kept apart per category. Accumulation uses fancy-index
-adds for vehicles (unique within a step) and ``np.bincount`` for edges.
+recuperable (P ≤ 0) energy are kept apart per category. Each step is added to the
+vehicles' running totals (one fancy-index add; vehicles are unique within a step). Edges
+are booked by differences of those running totals: when a vehicle enters an edge, the
+energy and distance it accumulated since entering its previous edge are added to that
+edge, and the segments still open are added when the edge totals are read. Per step only
+the few vehicles that change edge touch the edge arrays, and the sums equal direct
+per-step booking up to rounding.
 """
 
 from __future__ import annotations
@@ -86,11 +91,11 @@ class Ledger:
 
     def __init__(self, n_edges: int, n_equations: int, capacity: int = 1024):
         self.E, self.C, self.n_edges = n_equations, len(LEDGER_CATEGORIES), n_edges
-        # edge energies as (2, E·C, edges): [traction, recuperable] rows for bincount adds
-        self._edge_energy = np.zeros((2, self.E * self.C, n_edges))
-        self._rows = None
+        # closed edge segments: energies (edges, 2, E, C) [traction, recuperable], distances
+        self._edge_closed = np.zeros((n_edges, 2, self.E, self.C))
+        self._edge_dist_closed = np.zeros(n_edges)
+        self._edge_cache = None
         self.edge_count = np.zeros((n_edges, self.E))
-        self.edge_dist = np.zeros(n_edges)
         self.n_veh = 0
         self._alloc(capacity)
         self.veh_ids: list[str] = []
@@ -99,16 +104,36 @@ class Ledger:
         self.samples = 0
         self.corrected = 0
         self.clipped = 0
+        #: lane/position reads of tracked positions, and resync reads that disagreed
+        self.position_reads = 0
+        self.position_mismatches = 0
+
+    def _edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """Edge energies (edges, 2, E, C) and distances: closed plus open segments."""
+        if self._edge_cache is None:
+            energy, dist = self._edge_closed.copy(), self._edge_dist_closed.copy()
+            n = self.n_veh
+            open_ = np.flatnonzero(self.veh_prev_edge[:n] >= 0)
+            e = self.veh_prev_edge[open_]
+            np.add.at(energy, e, self._veh_energy[open_] - self._seg_energy[open_])
+            np.add.at(dist, e, self.veh_dist[open_] - self._seg_dist[open_])
+            self._edge_cache = (energy, dist)
+        return self._edge_cache
 
     @property
     def edge_trac(self) -> np.ndarray:
         """Traction energy per edge, equation, category [J], (edges, E, C)."""
-        return self._edge_energy[0].reshape(self.E, self.C, self.n_edges).transpose(2, 0, 1)
+        return self._edges()[0][:, 0]
 
     @property
     def edge_recup(self) -> np.ndarray:
         """Recuperable energy per edge, equation, category [J], (edges, E, C)."""
-        return self._edge_energy[1].reshape(self.E, self.C, self.n_edges).transpose(2, 0, 1)
+        return self._edges()[0][:, 1]
+
+    @property
+    def edge_dist(self) -> np.ndarray:
+        """Distance driven per edge [m], (edges,)."""
+        return self._edges()[1]
 
     @property
     def veh_trac(self) -> np.ndarray:
@@ -129,6 +154,8 @@ class Ledger:
             setattr(self, name, new)
         E, C = self.E, self.C
         grow("_veh_energy", (cap, 2, E, C))
+        grow("_seg_energy", (cap, 2, E, C))  # running totals when the edge was entered
+        grow("_seg_dist", (cap,))
         grow("veh_dist", (cap,))
         grow("veh_time", (cap,))
         grow("veh_mass", (cap,), float, np.nan)
@@ -136,6 +163,8 @@ class Ledger:
         grow("veh_keep", (cap,), bool, False)
         grow("veh_prev_edge", (cap,), np.int64, -1)
         grow("veh_prev_speed", (cap,), float, np.nan)
+        grow("veh_lane", (cap,), np.int64, -2)  # tracked lane (-2: never read)
+        grow("veh_pos", (cap,), float, np.nan)  # tracked lane position [m]
         self.capacity = cap
 
     def add_vehicle(self, vid: str, vtype: str, mass: float, app: np.ndarray,
@@ -167,28 +196,31 @@ class Ledger:
         Returns traction and recuperable energies [J] of the step, (n, E, C) each.
         """
         E, C = self.E, self.C
-        EC, n = E * C, len(vidx)
+        n = len(vidx)
         pct = pc.transpose(1, 2, 0)  # (E, C, n): contiguous when pc is from EquationSet
         split = np.empty((2, E, C, n))  # [traction, recuperable] energies of the step
         energy = np.multiply(pct, dt, out=split[1])
         pos = energy.sum(axis=1) > 0.0
         np.multiply(energy, pos[:, None, :], out=split[0])
         split[1] -= split[0]
-        # one scatter-add per vehicle row and one bincount for the edges: the per-call
-        # overhead, not the arithmetic, dominates at a few thousand vehicles
-        self._veh_energy[vidx] += split.transpose(3, 0, 1, 2)
-        d = v * dt
-        self.veh_dist[vidx] += d
-        self.veh_time[vidx] += dt
-        if self._rows is None:
-            self._rows = (np.arange(2 * EC) * self.n_edges)[:, None]
-        flat = (self._rows + eidx).ravel()
-        self._edge_energy += np.bincount(flat, split.ravel(), 2 * EC * self.n_edges
-                                         ).reshape(self._edge_energy.shape)
-        self.edge_dist += np.bincount(eidx, d, self.n_edges)
+        self._edge_cache = None
         enter = eidx != self.veh_prev_edge[vidx]
-        if enter.any():
-            self.veh_prev_edge[vidx[enter]] = eidx[enter]
-            np.add.at(self.edge_count, eidx[enter], self.veh_app[vidx[enter]])
+        if enter.any():  # close the segments on the edges left, open new ones
+            vi = vidx[enter]
+            old = self.veh_prev_edge[vi]
+            had = old >= 0
+            if had.any():
+                vo = vi[had]
+                np.add.at(self._edge_closed, old[had], self._veh_energy[vo] - self._seg_energy[vo])
+                np.add.at(self._edge_dist_closed, old[had], self.veh_dist[vo] - self._seg_dist[vo])
+            self._seg_energy[vi] = self._veh_energy[vi]
+            self._seg_dist[vi] = self.veh_dist[vi]
+            self.veh_prev_edge[vi] = eidx[enter]
+            np.add.at(self.edge_count, eidx[enter], self.veh_app[vi])
+        # one scatter-add of the vehicle rows: the per-call overhead, not the arithmetic,
+        # dominates at a few thousand vehicles
+        self._veh_energy[vidx] += split.transpose(3, 0, 1, 2)
+        self.veh_dist[vidx] += v * dt
+        self.veh_time[vidx] += dt
         self.samples += n
         return split[0].transpose(2, 0, 1), split[1].transpose(2, 0, 1)
