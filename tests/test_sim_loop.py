@@ -27,6 +27,9 @@ from sumo_drvpw.terms import Inputs
 REPO = Path(__file__).resolve().parent.parent
 NET = load_network(REPO / "networks" / "highway.net.xml", RoadClassRule())
 GRADE = math.atan(0.04)  # e12: +40 m over 1000 m
+#: everything read from the (scripted) getters every step, as the hand calculations assume
+GETTERS = dict(acceleration="getter", slope_reference="getslope", heading="getangle",
+               positions="getter")
 
 
 class _Sim:
@@ -98,7 +101,7 @@ def test_loop_books_hand_calculated_energies():
     types = {"a": "car", "b": "car", "p": "bus", "t": "car"}
     conn = FakeConnection(script, types, dt=0.5)
     led = Ledger(len(NET.edge_ids), 2)
-    phys = Physics(wind_speed=2.0, wind_from_deg=270.0, rho=1.2, slope_tol=0.01)
+    phys = Physics(wind_speed=2.0, wind_from_deg=270.0, rho=1.2, slope_tol=0.01, **GETTERS)
     info = run_loop(conn, NET, EquationSet(eqs), led, phys, _resolver({"car": 1500.0}))
     assert info == {"interrupted": False, "end_time_s": 1.5}
     assert led.steps == 3 and led.samples == 5
@@ -142,7 +145,7 @@ def test_loop_stops_at_end_and_on_ctrl_c():
     conn = FakeConnection(script, {"a": "car"})
     led = Ledger(len(NET.edge_ids), 1)
     es = EquationSet([Equation("r", {"roll": 0.01})])
-    run_loop(conn, NET, es, led, Physics(), _resolver({"car": 1000.0}, 1), end=4.0)
+    run_loop(conn, NET, es, led, Physics(**GETTERS), _resolver({"car": 1000.0}, 1), end=4.0)
     assert led.steps == 4
 
     class Interrupting(FakeConnection):
@@ -153,7 +156,7 @@ def test_loop_stops_at_end_and_on_ctrl_c():
 
     conn = Interrupting(script, {"a": "car"})
     led = Ledger(len(NET.edge_ids), 1)
-    info = run_loop(conn, NET, es, led, Physics(), _resolver({"car": 1000.0}, 1))
+    info = run_loop(conn, NET, es, led, Physics(**GETTERS), _resolver({"car": 1000.0}, 1))
     assert info["interrupted"] and led.steps == 6
     # every booked step is complete: 6 × roll power × 1 s
     np.testing.assert_allclose(led.veh_trac[0, 0].sum(), 6 * 0.01 * 1000 * G * 10.0)
@@ -192,13 +195,144 @@ def test_ledger_balances(seed):
     led = Ledger(7, 2, capacity=2)
     for i in range(12):
         led.add_vehicle(f"v{i}", "car", 1000.0, np.array([1.0, 0.0 if i % 3 else 1.0]), True)
-    for _ in range(5):
+    # reference: every step booked directly on the edge of the vehicle at that step
+    C = len(LEDGER_CATEGORIES)
+    ref_tr, ref_rc, ref_d = np.zeros((7, 2, C)), np.zeros((7, 2, C)), np.zeros(7)
+    edge_of = rng.integers(0, 7, 12)
+    for _ in range(8):
         vidx = rng.permutation(12)[:rng.integers(1, 12)]
-        eidx = rng.integers(0, 7, len(vidx))
+        moved = rng.random(len(vidx)) < 0.4  # some vehicles change edge, most stay
+        edge_of[vidx[moved]] = rng.integers(0, 7, int(moved.sum()))
+        eidx = edge_of[vidx]
         pc = rng.normal(0, 1e4, (len(vidx), 2, len(LEDGER_CATEGORIES)))
         pc *= led.veh_app[vidx][:, :, None]
-        tr, rc = led.book(vidx, eidx, rng.uniform(0, 30, len(vidx)), 0.5, pc)
+        v = rng.uniform(0, 30, len(vidx))
+        tr, rc = led.book(vidx, eidx, v, 0.5, pc)
         np.testing.assert_allclose(tr + rc, pc * 0.5)
         assert (tr.sum(2) >= 0).all() and (rc.sum(2) <= 0).all()
+        np.add.at(ref_tr, eidx, tr)
+        np.add.at(ref_rc, eidx, rc)
+        np.add.at(ref_d, eidx, v * 0.5)
+        # edge totals read mid-run include the open segments and stay right afterwards
+        np.testing.assert_allclose(led.edge_trac, ref_tr, rtol=1e-9, atol=1e-6)
+        np.testing.assert_allclose(led.edge_recup, ref_rc, rtol=1e-9, atol=1e-6)
+        np.testing.assert_allclose(led.edge_dist, ref_d, rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(led.edge_trac.sum(0), led.veh_trac[:12].sum(0), rtol=1e-10)
     np.testing.assert_allclose(led.edge_recup.sum(0), led.veh_recup[:12].sum(0), rtol=1e-10)
+
+
+# ---- tracked positions ------------------------------------------------------------
+# A fake SUMO that moves cars with SUMO's Euler update along the bundled highway
+# (e01 → :h1_0 → e12 → …, both lanes), changing lanes now and then (same edge, same
+# position) and crossing lane ends as SUMO does (x > length: next lane, x − length).
+ROUTE = ["e01", ":h1_0", "e12", ":h2_0", "e23", ":h3_0", "e34", ":h4_0", "e45", ":h5_0", "e56"]
+
+
+def _lane_len(lid):
+    return float(NET.lane_length[NET.lane_index[lid]])
+
+
+def euler_script(seed, n_veh=6, steps=60, dt=0.5, jump=None):
+    """Steps of {vid: (v, a, angle, lane, pos, slope)}; ``jump=(step, vid, metres)``
+    moves a car without speed (what a teleport or moveTo does) to test the full reads."""
+    rng = np.random.default_rng(seed)
+    cars = {}  # vid → [route index, lane suffix, pos, v]
+    script = []
+    for k in range(steps):
+        if len(cars) < n_veh and rng.random() < 0.5:  # departures at random places
+            cars[f"c{len(cars)}"] = [2 * int(rng.integers(0, 4)), int(rng.integers(0, 2)),
+                                     float(rng.uniform(0, 900)), 0.0]
+        state = {}
+        for vid, c in list(cars.items()):
+            v_old = c[3]
+            v = float(np.clip(v_old + rng.normal(0, 1.5), 0, 40)) if rng.random() > 0.1 else 0.0
+            c[2] += v * dt
+            if jump is not None and (k, vid) == jump[:2]:
+                c[2] += jump[2]
+            while c[2] > _lane_len(f"{ROUTE[c[0]]}_{c[1]}") and c[0] < len(ROUTE) - 1:
+                c[2] -= _lane_len(f"{ROUTE[c[0]]}_{c[1]}")
+                c[0] += 1
+            if c[0] == len(ROUTE) - 1 and c[2] > 900:  # arrival
+                del cars[vid]
+                continue
+            if not ROUTE[c[0]].startswith(":") and rng.random() < 0.05:
+                c[1] = 1 - c[1]  # lane change: same edge, same position
+            c[3] = v
+            state[vid] = (v, (v - v_old) / dt, 90.0, f"{ROUTE[c[0]]}_{c[1]}", c[2], 0.0)
+        script.append(state)
+    return script
+
+
+class EulerFake(FakeConnection):
+    """The fake SUMO as it reports itself: Euler update; lane/position reads counted."""
+
+    def __init__(self, script, types, dt=0.5):
+        super().__init__(script, types, dt)
+        self.simulation.getOption = lambda key: "false" if key == "step-method.ballistic" else ""
+        self.simulation.getEndingTeleportIDList = lambda: ()
+        self.lane_reads = 0
+        veh = self.vehicle
+
+        class Counting(type(veh)):
+            def __getattr__(inner, name):
+                g = _Veh.__getattr__(inner, name)
+                if name != "getLaneID":
+                    return g
+
+                def counted(vid):
+                    self.lane_reads += 1
+                    return g(vid)
+                return counted
+        self.vehicle = Counting(self)
+
+
+def _run(conn, positions):
+    led = Ledger(len(NET.edge_ids), 2)
+    eqs = [Equation("phys", {"acc": 1.0, "grade": 1.0, "aero": 0.8, "roll": 0.01}),
+           Equation("g", {"grade": 1.0})]
+    phys = Physics(positions=positions, resync_steps=10)
+    run_loop(conn, NET, EquationSet(eqs), led, phys, _resolver({"car": 1500.0}))
+    return led
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1))
+def test_tracked_positions_equal_read_positions(seed):
+    """Tracking lane and position under the Euler update books exactly what reading them
+    every step books, with far fewer reads, and the full reads find no disagreement."""
+    script = euler_script(seed)
+    types = {f"c{i}": "car" for i in range(6)}
+    read, tracked = EulerFake(script, types), EulerFake(script, types)
+    a, b = _run(read, "getter"), _run(tracked, "tracked")
+    assert a.samples == b.samples
+    n = a.n_veh
+    np.testing.assert_allclose(b._veh_energy[:n], a._veh_energy[:n], rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(b.edge_trac, a.edge_trac, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(b.edge_dist, a.edge_dist, rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(b.edge_count, a.edge_count)
+    assert b.position_mismatches == 0 and b.position_reads == tracked.lane_reads
+    assert read.lane_reads == a.samples
+    if a.samples > 100:
+        assert tracked.lane_reads < 0.5 * read.lane_reads
+
+
+def test_tracking_counts_and_repairs_a_jump():
+    """A car moved without speed (like moveTo) is caught at the next full read: counted
+    as a disagreement, and from then on its position is right again."""
+    script = euler_script(3, n_veh=2, steps=40, jump=(12, "c0", 30.0))
+    types = {"c0": "car", "c1": "car"}
+    a, b = _run(EulerFake(script, types), "getter"), _run(EulerFake(script, types), "tracked")
+    assert b.position_mismatches == 1  # found at the full read of step 20
+    assert a.position_mismatches == 0
+    # between the jump and the full read the tracked car's grade lookups lag 30 m; after it
+    # they agree again, so only those steps differ: distance stays exact (v·Δt)
+    np.testing.assert_allclose(b.veh_dist[:2], a.veh_dist[:2], rtol=1e-12)
+
+
+def test_tracking_off_without_euler_update():
+    """A connection that does not say it integrates with Euler (here: the plain fake) is
+    read every step whatever Physics.positions says."""
+    script = euler_script(5, n_veh=3, steps=20)
+    conn = FakeConnection(script, {f"c{i}": "car" for i in range(3)}, dt=0.5)
+    led = _run(conn, "tracked")
+    assert led.position_reads == 0 and led.samples > 0

@@ -243,6 +243,9 @@ def test_most_window_robust_slope(tmp_path):
     assert 0 < s["slope_corrected_samples"] < s["samples"]
     e = s["equations"]["phys"]["energy_j"]
     assert e["city"]["total"] > 0 and e["highway"]["total"] > 0
+    # tracked positions hold on a real network with the sublane model and 0.25 s steps
+    assert s["position_source"] == "tracked" and s["position_mismatches"] == 0
+    assert 0 < s["position_reads"] < 0.3 * s["samples"]
 
 
 # --- bad input: exit code 2, one line, no traceback ------------------------------------
@@ -301,22 +304,35 @@ def test_cli_subprocess_exit_code(tmp_path):
     assert r.returncode == 2 and "Traceback" not in r.stderr
 
 
-def test_fast_paths_agree_with_getters(tmp_path):
-    """acceleration = speed_difference reproduces getAcceleration ((v_t − v_t−1)/Δt, 0 when
-    first seen), so energies agree to rounding; slope.reference = geometry reproduces
-    getSlope from the lane shape, so the corrected-sample counts nearly agree."""
+def test_default_fast_paths_agree_with_getters(tmp_path):
+    """The defaults read only the speed every step. acceleration = speed_difference is
+    SUMO's own definition of getAcceleration ((v_t − v_t−1)/Δt, 0 when first seen);
+    positions = tracked advances x by v·Δt (SUMO's Euler update) and reads lane and
+    position only at edge ends, so energies equal the all-getter run to rounding and the
+    periodic full reads find no disagreement; slope.reference = geometry reproduces getSlope
+    from the lane shape, so the corrected-sample counts nearly agree."""
     base = run_scenario(REPO / "scenarios" / "city.toml", tmp_path / "a", end=200,
-                        equations=[PHYS, VSP], figures=False)
+                        equations=[PHYS, VSP], figures=False, acceleration="getter",
+                        slope_reference="getslope", positions="getter")
     fast = run_scenario(REPO / "scenarios" / "city.toml", tmp_path / "b", end=200,
-                        equations=[PHYS, VSP], figures=False, acceleration="speed_difference",
-                        slope_reference="geometry")
+                        equations=[PHYS, VSP], figures=False)
+    assert (fast["acceleration_source"], fast["position_source"]) == ("speed_difference",
+                                                                       "tracked")
     assert fast["samples"] == base["samples"] > 0
     for name in ("phys", "vsp"):
         for cat, val in base["equations"][name]["energy_j"]["city"].items():
             assert fast["equations"][name]["energy_j"]["city"][cat] == pytest.approx(
                 val, rel=1e-9, abs=1e-6)
+    assert fast["position_mismatches"] == 0
+    # the getter run reads every sample; the tracked run a small part of them
+    assert base["position_reads"] == 0 and 0 < fast["position_reads"] < 0.25 * fast["samples"]
     assert fast["slope_corrected_samples"] == pytest.approx(
         base["slope_corrected_samples"], rel=0.5, abs=0.01 * base["samples"])
+    for f in ("edges.parquet", "vehicles.parquet"):
+        a, b = pd.read_parquet(tmp_path / "a" / f), pd.read_parquet(tmp_path / "b" / f)
+        num = a.select_dtypes("number").columns
+        np.testing.assert_allclose(b[num].to_numpy(float), a[num].to_numpy(float),
+                                   rtol=1e-9, atol=1e-6)
 
 
 def test_heading_from_lane_geometry_agrees_with_getangle(tmp_path):
@@ -326,9 +342,9 @@ def test_heading_from_lane_geometry_agrees_with_getangle(tmp_path):
     text = text.replace('config = "city.sumocfg"', f'config = "{REPO / "scenarios" / "city.sumocfg"}"')
     scen = tmp_path / "windy.toml"
     scen.write_text(text + '\n[wind]\nspeed_mps = 6.0\nfrom_deg = 300\n', encoding="utf-8")
-    base = run_scenario(scen, tmp_path / "a", end=300, equations=[PHYS], figures=False)
-    geo = run_scenario(scen, tmp_path / "b", end=300, equations=[PHYS], figures=False,
-                       wind_heading="geometry")
+    base = run_scenario(scen, tmp_path / "a", end=300, equations=[PHYS], figures=False,
+                        wind_heading="getangle")
+    geo = run_scenario(scen, tmp_path / "b", end=300, equations=[PHYS], figures=False)
     assert geo["wind"]["heading_source"] == "geometry"
     calm = run_scenario(REPO / "scenarios" / "city.toml", tmp_path / "c", end=300, equations=[PHYS],
                         figures=False)  # no wind at all

@@ -166,7 +166,7 @@ def run_scenario(scenario_path, out_dir, **overrides) -> dict:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     physics = Physics(sc.wind_speed, sc.wind_from_deg, sc.rho, sc.slope_tol,
-                      sc.slope_reference, sc.acceleration, sc.wind_heading)
+                      sc.slope_reference, sc.acceleration, sc.wind_heading, sc.positions)
     t0 = time.perf_counter()
     conn = start_sumo(sc.sumo_args, sc.connection, sc.gui)
     trace = None
@@ -193,6 +193,7 @@ def run_scenario(scenario_path, out_dir, **overrides) -> dict:
              "interrupted": info["interrupted"], "wall_time_s": wall,
              "connection": sc.connection, "air_density_kgm3": sc.rho,
              "slope_reference": sc.slope_reference, "acceleration_source": sc.acceleration,
+             "position_source": sc.positions,
              "wind": {"speed_mps": sc.wind_speed, "from_deg": sc.wind_from_deg,
                       "heading_source": sc.wind_heading},
              "equation_sources": {e.name: (e.path or "<object>") for e in equations}}

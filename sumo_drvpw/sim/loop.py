@@ -6,9 +6,11 @@ fake). With libsumo, plain getters mapped over the id list are the cheapest way 
 (design.md: ≈1.15× a bare step vs 1.4–1.7× for subscriptions, which build Python dicts);
 with traci each getter is a socket round trip, so a subscription per vehicle is used.
 
-Per step and vehicle: speed [m/s], acceleration [m/s²] (SUMO: (v_t − v_t−1)/Δt), angle
-[deg clockwise from north], lane id and position [m], getSlope [deg]. Everything after
-reading is vectorized over the vehicles of the step.
+Per step and vehicle: speed [m/s]; by default the rest follows from it and the network
+(see :class:`Physics`): acceleration as (v_t − v_t−1)/Δt, lane and position tracked under
+SUMO's Euler update, heading and front-to-back slope from the lane shape. Each can be
+read from SUMO instead (getAcceleration, getLaneID/getLanePosition every step, getAngle,
+getSlope). Everything after reading is vectorized over the vehicles of the step.
 """
 
 from __future__ import annotations
@@ -40,13 +42,24 @@ class Physics:
     slope_tol: float = 0.01
     #: "getslope": compare the robust slope with SUMO's getSlope (one more getter per
     #: vehicle); "geometry": with the same front-to-back slope taken from the lane shape
-    slope_reference: str = "getslope"
+    slope_reference: str = "geometry"
     #: "getter": vehicle.getAcceleration; "speed_difference": (v_t − v_t−1)/Δt from the
     #: speeds already read, which is how SUMO defines getAcceleration (0 when first seen)
-    acceleration: str = "getter"
+    acceleration: str = "speed_difference"
     #: "getangle": vehicle.getAngle for the wind projection; "geometry": the lane's
     #: direction at the vehicle's position (no getter; differs only during lane changes)
-    heading: str = "getangle"
+    heading: str = "geometry"
+    #: "tracked": lane and position are read when a vehicle is first seen, when its
+    #: position advanced by v·Δt (SUMO's Euler update) reaches the end of its edge (the
+    #: shortest lane of the edge), after a teleport, and for every vehicle each
+    #: ``resync_steps`` steps; otherwise they follow from the speed. A lane change keeps
+    #: edge and position, so until the next read the tracked lane may be a neighbour of
+    #: the same edge (same slope profile unless the lanes' shapes differ); a different
+    #: edge or position at a full read is counted in ``Ledger.position_mismatches``.
+    #: "getter": read every step. Tracking needs getters and the Euler update; with
+    #: traci or ``--step-method.ballistic`` the loop reads every step whatever this says.
+    positions: str = "tracked"
+    resync_steps: int = 25
 
 
 def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
@@ -86,10 +99,15 @@ class _Reader:
             except (ImportError, AttributeError):
                 pass
 
-    def read(self, ids):
-        if not self.subs:  # the heading is only needed for the wind projection
-            return tuple(list(map(g, ids)) if need else None
-                         for g, need in zip(self.getters, self.need))
+    def read(self, ids, skip_lanes: bool = False):
+        """(speed, accel, angle, lane, position, slope) of ``ids``: float arrays, a list
+        of lane ids, or None for what is not needed (and lane/position if skip_lanes)."""
+        if not self.subs:
+            n = len(ids)
+            return tuple(
+                None if not need or (skip_lanes and k in (3, 4))
+                else list(map(g, ids)) if k == 3 else np.fromiter(map(g, ids), float, n)
+                for k, (g, need) in enumerate(zip(self.getters, self.need)))
         V = self.conn.vehicle
         res = V.getAllSubscriptionResults()
         rows = [res.get(vid) for vid in ids]
@@ -99,7 +117,8 @@ class _Reader:
                 V.subscribe(vid, _TRACI_VARS)
             res = V.getAllSubscriptionResults()
             rows = [res[vid] for vid in ids]
-        return tuple([r[k] for r in rows] for k in _TRACI_VARS)
+        cols = [[r[k] for r in rows] for k in _TRACI_VARS]
+        return tuple(c if k == 3 else np.asarray(c, float) for k, c in enumerate(cols))
 
     def subscribe_existing(self, ids):
         if self.subs:
@@ -139,6 +158,20 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
                      (True, read_accel, physics.wind_speed != 0.0 and physics.heading == "getangle",
                       True, True, read_slope))
     heading_from_lane = physics.wind_speed != 0.0 and physics.heading == "geometry"
+    tracking = (physics.positions == "tracked" and not use_subscriptions
+                and _euler_update(conn) and net.lane_end is not None)
+    if tracking:
+        get_lane, get_pos = reader.getters[3], reader.getters[4]
+        # lanes -1 (no lane) and -2 (never read): an end of −∞, so they are always read
+        lane_end = np.append(net.lane_end - 1e-6, [-np.inf, -np.inf])
+        teleported = getattr(conn.simulation, "getEndingTeleportIDList", lambda: ())
+        resync = max(1, int(physics.resync_steps))
+        # the edge (internal ones included) each lane belongs to: a lane change keeps the
+        # position and the edge, so only a different edge or position is a disagreement
+        own: dict[str, int] = {}
+        lane_own = np.full(len(net.lane_length) + 2, -1, np.int64)
+        for lid, i in net.lane_index.items():
+            lane_own[i] = own.setdefault(lid.rsplit("_", 1)[0], len(own))
     interrupted = False
     bar = None
     if progress and end is not None and sys.stderr.isatty():
@@ -155,13 +188,15 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
         reader.subscribe_existing([vid])
         return i
 
-    def lane_number(lid: str) -> int:
-        if lid not in lane_index:  # a lane the net file lacks (should not happen)
-            lane_index[lid] = -1
-        return lane_index[lid]
+    def lane_numbers(lane_ids: list[str]) -> np.ndarray:
+        try:
+            return np.fromiter(map(lane_index.__getitem__, lane_ids), np.int64, len(lane_ids))
+        except KeyError:  # a lane the net file lacks (should not happen): no lane
+            return np.fromiter((lane_index.get(x, -1) for x in lane_ids), np.int64,
+                               len(lane_ids))
 
     first = True
-    prev_ids, prev_vidx = None, None
+    prev_ids, prev_sel = None, None
     try:
         while True:
             t = conn.simulation.getTime()
@@ -180,38 +215,70 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
             for vid in conn.simulation.getDepartedIDList():
                 if vid not in vmap:
                     register(vid)
-            n = len(ids)
-            if n == 0:
+                else:  # an id used again (e.g. vehicle.add): its state starts afresh
+                    ledger.veh_lane[vmap[vid]] = -2
+                    ledger.veh_prev_speed[vmap[vid]] = np.nan
+            if len(ids) == 0:
                 continue
             if ids == prev_ids:  # no arrival or departure: same vehicles, same order
-                vidx = prev_vidx
+                vidx, kids = prev_sel
             else:
+                n_all = len(ids)
                 try:
-                    vidx = np.fromiter(map(vmap.__getitem__, ids), np.int64, n)
+                    vidx = np.fromiter(map(vmap.__getitem__, ids), np.int64, n_all)
                 except KeyError:
                     vidx = np.fromiter((vmap[v] if v in vmap else register(v) for v in ids),
-                                       np.int64, n)
-                prev_ids, prev_vidx = ids, vidx
-            sp, ac, an, ln, lp, sl = reader.read(ids)
-            try:
-                lane = np.fromiter(map(lane_index.__getitem__, ln), np.int64, n)
-            except KeyError:
-                lane = np.fromiter(map(lane_number, ln), np.int64, n)
-            keep = ledger.veh_keep[vidx] & (lane >= 0)
-            v = np.asarray(sp, float)
-            a = np.asarray(ac, float) if ac is not None else None
-            angle = np.asarray(an, float) if an is not None else np.zeros(n)
-            pos = np.asarray(lp, float)
-            if a is None:
+                                       np.int64, n_all)
+                kept = ledger.veh_keep[vidx]
+                if kept.all():
+                    kids = ids
+                else:  # only the vehicles accounted for are read
+                    sel = np.flatnonzero(kept)
+                    vidx, kids = vidx[sel], [ids[i] for i in sel]
+                prev_ids, prev_sel = ids, (vidx, kids)
+            n = len(kids)
+            if n == 0:
+                continue
+            v, a, angle, ln, pos, raw = reader.read(kids, skip_lanes=tracking)
+            if tracking:
+                lane = ledger.veh_lane[vidx]
+                pos = ledger.veh_pos[vidx] + v * dt  # SUMO's Euler update: x += v_t·Δt
+                trusted = pos < lane_end[lane]
+                full = ledger.steps % resync == 0
+                stale = np.ones(n, bool) if full else ~trusted
+                gone = teleported()
+                if gone:
+                    stale[np.isin(vidx, [vmap[x] for x in gone if x in vmap])] = True
+                k = np.flatnonzero(stale)
+                if len(k):
+                    sub = kids if len(k) == n else [kids[i] for i in k]
+                    lk = lane_numbers(list(map(get_lane, sub)))
+                    pk = np.fromiter(map(get_pos, sub), float, len(k))
+                    if full:  # were the tracked ones right?
+                        ledger.position_mismatches += int(np.count_nonzero(
+                            trusted & ((lane_own[lk] != lane_own[lane])
+                                       | (np.abs(pk - pos) > 1e-6))))
+                    lane[k], pos[k] = lk, pk
+                    ledger.position_reads += len(k)
+                ledger.veh_lane[vidx] = lane
+                ledger.veh_pos[vidx] = pos
+            else:
+                lane = lane_numbers(ln)
+            if a is None:  # SUMO's definition: (v_t − v_t−1)/Δt, 0 when first seen
                 prev = ledger.veh_prev_speed[vidx]
-                a = np.nan_to_num((v - prev) * (1.0 / dt), nan=0.0)
+                a = (v - prev) / dt
+                a[np.isnan(a)] = 0.0
                 ledger.veh_prev_speed[vidx] = v
-            raw = np.radians(np.asarray(sl, float)) if sl is not None else None
-            if not keep.all():
+            if angle is None:
+                angle = np.zeros(n)
+            if raw is not None:
+                raw = np.radians(raw)
+            on_lane = lane >= 0
+            if not on_lane.all():  # teleporting: no lane, not booked
                 vidx, lane, v, a, angle, pos = (
-                    x[keep] for x in (vidx, lane, v, a, angle, pos))
+                    x[on_lane] for x in (vidx, lane, v, a, angle, pos))
                 if raw is not None:
-                    raw = raw[keep]
+                    raw = raw[on_lane]
                 if len(vidx) == 0:
                     continue
             theta, clipped = net.slope(lane, pos)
@@ -236,3 +303,13 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
         if bar is not None:
             bar.close()
     return {"interrupted": interrupted, "end_time_s": float(conn.simulation.getTime())}
+
+
+def _euler_update(conn) -> bool:
+    """True when SUMO integrates positions with the Euler update (x += v_t·Δt), which
+    position tracking relies on; False for the ballistic update or when the connection
+    cannot say."""
+    try:
+        return str(conn.simulation.getOption("step-method.ballistic")).lower() in ("false", "0")
+    except Exception:  # a fake connection or an old SUMO without getOption
+        return False

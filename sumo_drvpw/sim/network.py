@@ -61,6 +61,9 @@ class Network:
     classes: list[str]
     raw: np.ndarray | None = None
     heading_deg: np.ndarray | None = None
+    #: per lane: the shortest lane length of its edge [m]; a car whose position stays
+    #: below it cannot have left the edge, whichever of its lanes it changed to
+    lane_end: np.ndarray | None = None
 
     def heading(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Direction of the lane at ``pos`` [deg clockwise from north, SUMO's angle]."""
@@ -186,6 +189,9 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         clips.append(cl)
         raws.append(lane_profile(shape, ln.getLength(), RAW_LENGTH_M, np.inf, behind=True)[0])
         heads.append(lane_heading(shape, ln.getLength()))
+    lane_length = np.array([ln.getLength() for ln in lanes], float)
+    lane_end = np.concatenate([np.full(len(e.getLanes()), min(ln.getLength() for ln in e.getLanes()))
+                               for e in net.getEdges() if e.getLanes()] or [np.zeros(0)])
     nb = np.array([len(p) for p in profs], np.int64)
     off = np.concatenate([[0], np.cumsum(nb)[:-1]]).astype(np.int64)
     all_classes = list(rule.classes)
@@ -197,7 +203,7 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         edge_length=np.array([e.getLength() for e in edges], float), edge_speed=speeds,
         edge_shapes=[np.asarray(e.getLanes()[0].getShape(), float)[:, :2] for e in edges],
         lane_index=lane_index, lane_edge=lane_edge,
-        lane_length=np.array([ln.getLength() for ln in lanes], float),
+        lane_length=lane_length, lane_end=lane_end,
         lane_offset=off, lane_nbins=nb, profile=np.concatenate(profs),
         clipped=np.concatenate(clips), classes=all_classes, raw=np.concatenate(raws),
         heading_deg=np.concatenate(heads))

@@ -148,6 +148,8 @@ def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: boo
            "samples": int(ledger.samples),
            "slope_corrected_samples": int(ledger.corrected),
            "slope_clipped_samples": int(ledger.clipped),
+           "position_reads": int(ledger.position_reads),
+           "position_mismatches": int(ledger.position_mismatches),
            "internal_edges": "energy on internal junction lanes is booked on the edge "
                              "they lead to",
            "energy_definition": "energy_j: Σ term power × Δt over vehicle-steps with total "

@@ -14,9 +14,14 @@ the scenario file)::
     connection = "libsumo"          # or "traci" (e.g. with gui = true to watch in sumo-gui)
     gui = false
     options = ["--seed", "7"]       # extra SUMO command-line options
-    acceleration = "getter"         # or "speed_difference": (v_t − v_t−1)/Δt from the
-                                    # speeds read anyway (SUMO's own definition), one
-                                    # getter less per vehicle and step
+    acceleration = "speed_difference"   # (v_t − v_t−1)/Δt from the speeds read anyway:
+                                    # SUMO's own definition of getAcceleration, so the
+                                    # same numbers; or "getter" (vehicle.getAcceleration)
+    positions = "tracked"           # lane and position read only when a car is first
+                                    # seen, reaches the end of its edge, ends a teleport,
+                                    # and every 25 steps (checked, disagreements counted
+                                    # in summary.json); in between x += v·Δt, SUMO's Euler
+                                    # update. Or "getter": both read every step.
 
     [vehicles]
     vtypes = ["prius3"]             # vTypes to account (default: all vehicles)
@@ -28,8 +33,9 @@ the scenario file)::
     [wind]                          # absent: no wind
     speed_mps = 4.0
     from_deg = 270                  # direction the wind blows FROM, clockwise from north
-    heading = "getangle"            # or "geometry": the lane's direction at the car's
-                                    # position instead of vehicle.getAngle (one getter less)
+    heading = "geometry"            # the lane's direction at the car's position, or
+                                    # "getangle": vehicle.getAngle (differs while a car
+                                    # changes lanes or turns; one more getter per car)
 
     [air]                           # one of:
     density_kgm3 = 1.2041
@@ -46,8 +52,8 @@ the scenario file)::
     window_m = 20.0                 # distance window of the robust lane slope [m]
     max_rad = 0.25                  # plausible |θ| limit [rad]
     tolerance_rad = 0.01            # |θ_getSlope − θ_robust| above this counts as corrected
-    reference = "getslope"          # or "geometry": the front-to-back (5 m) slope of the
-                                    # lane shape, as getSlope computes it, without calling it
+    reference = "geometry"          # the front-to-back (5 m) slope of the lane shape, as
+                                    # getSlope computes it; or "getslope" to call it
 
     [outputs]
     trace = false                   # per vehicle-step trace.parquet
@@ -82,7 +88,7 @@ DEFAULT_HIGHWAY_MIN_SPEED_KMH = 80.0
 _SCHEMA: dict[str, set[str] | None] = {
     "equations": None,
     "sumo": {"config", "net", "routes", "additional", "begin", "end", "step_length",
-             "connection", "gui", "options", "acceleration"},
+             "connection", "gui", "options", "acceleration", "positions"},
     "vehicles": {"vtypes"},
     "vtypes": None,  # table of vType id → {mass_kg, equations}
     "wind": {"speed_mps", "from_deg", "heading"},
@@ -95,7 +101,7 @@ _VTYPE_KEYS = {"mass_kg", "equations"}
 #: keyword overrides accepted by run_scenario (and the CLI)
 OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
              "trace", "edgedata", "figures", "progress", "difference", "acceleration",
-             "slope_reference", "wind_heading"}
+             "slope_reference", "wind_heading", "positions"}
 
 
 @dataclass
@@ -150,9 +156,10 @@ class Scenario:
     slope_window: float = 20.0
     slope_max: float = 0.25
     slope_tol: float = 0.01
-    slope_reference: str = "getslope"
-    acceleration: str = "getter"
-    wind_heading: str = "getangle"
+    slope_reference: str = "geometry"
+    acceleration: str = "speed_difference"
+    wind_heading: str = "geometry"
+    positions: str = "tracked"
     trace: bool = False
     edgedata: bool = True
     figures: bool = True
@@ -276,7 +283,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     rel = (lambda s: (base / s) if base is not None and not Path(s).is_absolute() else Path(s))
 
     sumo = dict(doc.get("sumo", {}))
-    for k in ("begin", "end", "step_length", "connection", "gui", "options", "acceleration"):
+    for k in ("begin", "end", "step_length", "connection", "gui", "options", "acceleration",
+              "positions"):
         if k in overrides:
             sumo[k] = overrides[k]
     if "config" in sumo:
@@ -405,11 +413,13 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         slope_window=_num(sl.get("window_m", 20.0), where, "slope.window_m", True),
         slope_max=_num(sl.get("max_rad", 0.25), where, "slope.max_rad", True),
         slope_tol=_num(sl.get("tolerance_rad", 0.01), where, "slope.tolerance_rad", True),
-        slope_reference=_choice(overrides.get("slope_reference", sl.get("reference", "getslope")),
+        slope_reference=_choice(overrides.get("slope_reference", sl.get("reference", "geometry")),
                                 ("getslope", "geometry"), where, "slope.reference"),
-        acceleration=_choice(sumo.get("acceleration", "getter"),
+        acceleration=_choice(sumo.get("acceleration", "speed_difference"),
                              ("getter", "speed_difference"), where, "sumo.acceleration"),
-        wind_heading=_choice(overrides.get("wind_heading", wind.get("heading", "getangle")),
+        positions=_choice(sumo.get("positions", "tracked"), ("tracked", "getter"), where,
+                          "sumo.positions"),
+        wind_heading=_choice(overrides.get("wind_heading", wind.get("heading", "geometry")),
                              ("getangle", "geometry"), where, "wind.heading"),
         trace=bool(out.get("trace", False)), edgedata=bool(out.get("edgedata", True)),
         figures=bool(out.get("figures", True)), difference=diff,
