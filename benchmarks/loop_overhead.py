@@ -14,7 +14,9 @@ every timed run loads that state and steps the same ``--steps`` steps:
   slope, ledger; per vehicle and step only ``getSpeed`` is called, acceleration is
   (v_t − v_t−1)/Δt, lane and position are tracked (read at edge ends and every 25 steps),
   heading and front-to-back slope come from the lane shape;
-- ``plugin_getters``: the same with everything read from SUMO every step
+- ``plugin_getangle``: the defaults but the wind projected on ``vehicle.getAngle``
+  (``wind.heading = "getangle"``, one getter more per vehicle and step);
+- ``plugin_getters``: the defaults but everything read from SUMO every step
   (``acceleration = "getter"``, ``positions = "getter"``, ``slope.reference =
   "getslope"``, ``wind.heading = "getangle"``: six getters per vehicle and step);
 - ``emissions``: bare stepping with SUMO's own ``--device.emissions.probability 1``.
@@ -141,9 +143,9 @@ def timed(variant: str, net, routes, state, steps: int, eqs) -> float:
             led = Ledger(len(table.edge_ids), len(eqs), capacity=8192)
             app = np.ones(len(eqs))
             t0 = time.perf_counter()
-            getters = (dict(slope_reference="getslope", acceleration="getter",
-                            heading="getangle", positions="getter")
-                       if variant == "plugin_getters" else {})
+            getters = {"plugin_getters": dict(slope_reference="getslope", acceleration="getter",
+                                              heading="getangle", positions="getter"),
+                       "plugin_getangle": dict(heading="getangle")}.get(variant, {})
             phys = Physics(wind_speed=3.0, wind_from_deg=270.0, **getters)
             run_loop(conn, table, eqset, led, phys,
                      lambda vt, vid: (1625.0, app, True), end=end)
@@ -183,7 +185,8 @@ def main(argv=None) -> int:
             routes = build_routes(work, n)
             state = work / f"state{n}.xml.gz"
             running = warm_up(net, routes, state, args.warm)
-            times = {"bare": [], "plugin": [], "plugin_getters": [], "emissions": []}
+            times = {"bare": [], "plugin": [], "plugin_getangle": [], "plugin_getters": [],
+                     "emissions": []}
             for _ in range(args.repeats):
                 for variant in times:
                     times[variant].append(timed(variant, net, routes, state, args.steps, eqs))
@@ -198,6 +201,7 @@ def main(argv=None) -> int:
     print(f"equations: {', '.join(e.name for e in eqs)}")
     for n, (running, med) in results.items():
         print(f"ratios N={n}: plugin/bare={med['plugin'] / med['bare']:.3f} "
+              f"plugin_getangle/bare={med['plugin_getangle'] / med['bare']:.3f} "
               f"plugin_getters/bare={med['plugin_getters'] / med['bare']:.3f} "
               f"emissions/bare={med['emissions'] / med['bare']:.3f}")
     big = max(results)

@@ -336,3 +336,23 @@ def test_tracking_off_without_euler_update():
     conn = FakeConnection(script, {f"c{i}": "car" for i in range(3)}, dt=0.5)
     led = _run(conn, "tracked")
     assert led.position_reads == 0 and led.samples > 0
+
+
+def test_equations_applied_per_vtype():
+    """A vType may name its equations: the others book nothing for its vehicles, also when
+    such a vehicle departs after vehicles that take every equation."""
+    script = [{"a": (10.0, 0.0, 90.0, "e01_0", 10.0, 0.0)},
+              {"a": (10.0, 0.0, 90.0, "e01_0", 20.0, 0.0),
+               "b": (20.0, 0.0, 90.0, "e01_1", 50.0, 0.0)}]
+    apps = {"all": np.array([1.0, 1.0]), "only_g": np.array([0.0, 1.0])}
+    types = {"a": "all", "b": "only_g"}
+    led = Ledger(len(NET.edge_ids), 2)
+    eqs = [Equation("roll", {"roll": 0.01}), Equation("aero", {"aero": 0.6})]
+    run_loop(FakeConnection(script, types, dt=0.5), NET, EquationSet(eqs), led,
+             Physics(**GETTERS), lambda vt, vid: (1000.0, apps[vt], True))
+    ia, ib = led.veh_ids.index("a"), led.veh_ids.index("b")
+    np.testing.assert_allclose(led.veh_trac[ia, 0].sum(), 2 * 0.01 * 1000 * G * 10.0 * 0.5)
+    assert led.veh_trac[ib, 0].sum() == 0.0  # roll does not apply to b
+    # "aero" is v·(v − w)·|v − w| (the ½ρ·Cd·A lives in the coefficient), no wind here
+    np.testing.assert_allclose(led.veh_trac[ib, 1].sum(), 0.6 * 20.0 ** 3 * 0.5)
+    np.testing.assert_array_equal(led.edge_count[NET.edge_ids.index("e01")], [1, 2])

@@ -180,11 +180,15 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
         t0 = conn.simulation.getTime()
         bar = tqdm(total=max(0, int(round((end - t0) / dt))), unit="step", file=sys.stderr)
 
+    every_equation_applies = [True]  # to every vehicle accounted so far
+
     def register(vid: str) -> int:
         vt = conn.vehicle.getTypeID(vid)
         mass, app, keep = resolve(vt, vid)
         i = ledger.add_vehicle(vid, vt, mass, app, keep)
         vmap[vid] = i
+        if keep and not np.all(ledger.veh_app[i] == 1.0):
+            every_equation_applies[0] = False
         reader.subscribe_existing([vid])
         return i
 
@@ -281,18 +285,20 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
                     raw = raw[on_lane]
                 if len(vidx) == 0:
                     continue
-            theta, clipped = net.slope(lane, pos)
+            at = net.bin_index(lane, pos)  # robust slope, shape slope, heading there
+            theta, clipped = net.profile[at], net.clipped[at]
             if heading_from_lane:
-                angle = net.heading(lane, pos)
+                angle = net.heading_deg[at]
             if raw is None:
-                raw = net.raw_slope(lane, pos)
+                raw = net.raw[at]
             ledger.corrected += int(np.count_nonzero(
                 (np.abs(raw - theta) > physics.slope_tol) | clipped))
             ledger.clipped += int(np.count_nonzero(clipped))
             wind = tailwind(angle, physics.wind_speed, physics.wind_from_deg)
             m = len(vidx)
             x = Inputs(v, a, theta, wind, ledger.veh_mass[vidx], np.full(m, physics.rho))
-            pc = eqset.category_powers(x, ledger.veh_app[vidx])
+            pc = eqset.category_powers(x, None if every_equation_applies[0]
+                                       else ledger.veh_app[vidx])
             eidx = lane_edge_ext[lane]
             ledger.book(vidx, eidx, v, dt, pc)
             if trace is not None:

@@ -65,24 +65,25 @@ class Network:
     #: below it cannot have left the edge, whichever of its lanes it changed to
     lane_end: np.ndarray | None = None
 
-    def heading(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
-        """Direction of the lane at ``pos`` [deg clockwise from north, SUMO's angle]."""
+    def bin_index(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """Index into the per-bin arrays (``profile``, ``clipped``, ``raw``,
+        ``heading_deg``) of lane numbers ``lane`` at positions ``pos`` [m]."""
         b = np.minimum((np.maximum(pos, 0.0) * (1.0 / BIN_M)).astype(np.int64),
                        self.lane_nbins[lane] - 1)
-        return self.heading_deg[self.lane_offset[lane] + b]
+        return self.lane_offset[lane] + b
+
+    def heading(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """Direction of the lane at ``pos`` [deg clockwise from north, SUMO's angle]."""
+        return self.heading_deg[self.bin_index(lane, pos)]
 
     def raw_slope(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Unsmoothed geometric slope [rad] over the ``RAW_LENGTH_M`` behind ``pos``: what
         SUMO's getSlope computes from a vehicle's front and back positions."""
-        b = np.minimum((np.maximum(pos, 0.0) * (1.0 / BIN_M)).astype(np.int64),
-                       self.lane_nbins[lane] - 1)
-        return self.raw[self.lane_offset[lane] + b]
+        return self.raw[self.bin_index(lane, pos)]
 
     def slope(self, lane: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Robust slope [rad] and clipped flag at lane numbers ``lane``, positions ``pos`` [m]."""
-        b = np.minimum((np.maximum(pos, 0.0) * (1.0 / BIN_M)).astype(np.int64),
-                       self.lane_nbins[lane] - 1)
-        i = self.lane_offset[lane] + b
+        i = self.bin_index(lane, pos)
         return self.profile[i], self.clipped[i]
 
 
