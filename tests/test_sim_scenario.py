@@ -50,6 +50,19 @@ def test_unknown_keys_are_named(tmp_path, text, needle):
         load_scenario(_write(tmp_path, text))
 
 
+@pytest.mark.parametrize("table,key,value", [
+    ("sumo", "positions", "maybe"), ("sumo", "acceleration", "imu"),
+    ("wind", "heading", "compass"), ("slope", "reference", "gps")])
+def test_bad_read_choices_are_named(tmp_path, table, key, value):
+    cfg = (SCEN / "city.sumocfg").as_posix()
+    text = f'equations = ["x"]\n[sumo]\nconfig = "{cfg}"\n'
+    text += f'{key} = "{value}"\n' if table == "sumo" else f'[{table}]\n{key} = "{value}"\n'
+    if table == "wind":
+        text += "speed_mps = 3\n"
+    with pytest.raises(UserError, match=rf"'{table}\.{key}' must be one of .*'{value}'"):
+        load_scenario(_write(tmp_path, text), equations=EQ)
+
+
 def test_missing_config_and_broken_config(tmp_path):
     with pytest.raises(UserError, match="SUMO config not found"):
         load_scenario(_write(tmp_path, 'equations = ["x"]\n[sumo]\nconfig = "nope.sumocfg"\n'))

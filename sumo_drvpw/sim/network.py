@@ -191,8 +191,9 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         raws.append(lane_profile(shape, ln.getLength(), RAW_LENGTH_M, np.inf, behind=True)[0])
         heads.append(lane_heading(shape, ln.getLength()))
     lane_length = np.array([ln.getLength() for ln in lanes], float)
-    lane_end = np.concatenate([np.full(len(e.getLanes()), min(ln.getLength() for ln in e.getLanes()))
-                               for e in net.getEdges() if e.getLanes()] or [np.zeros(0)])
+    lane_end = np.concatenate(  # lanes are listed edge by edge
+        [np.full(len(e.getLanes()), min(ln.getLength() for ln in e.getLanes()))
+         for e in net.getEdges() if e.getLanes()] or [np.zeros(0)])
     nb = np.array([len(p) for p in profs], np.int64)
     off = np.concatenate([[0], np.cumsum(nb)[:-1]]).astype(np.int64)
     all_classes = list(rule.classes)
