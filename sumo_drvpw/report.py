@@ -172,29 +172,17 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
             f"Below {kmh}, the mean error is {_num(hs['mean_below_w'], 2, _KW)} kW.")
     lines.append("")
 
-    cats = _categories(eqs, "error_term_correlation")
     lines += ["## Which term carries the error (cf. paper Fig. 9)", "",
               "Correlation r of the error with each term's power in the same equation, and "
               "the partial slope when the error is regressed on all terms at once. A partial "
               "slope s means the data ask for about (1 − s) times that term: −0.5 → the term "
-              "is too small by half of itself. A missing term shows as “–”.", "",
-              "| Equation | " + " | ".join(f"{c}: r / partial slope" for c in cats) + " |",
-              "|---|" + "---|" * len(cats)]
-    for nm, d in eqs.items():
-        cells = [_corr_cell(d["error_term_correlation"].get(c)) for c in cats]
-        lines.append(f"| {nm} | " + " | ".join(cells) + " |")
-    lines.append("")
+              "is too small by half of itself. A missing term shows as “–”.", ""]
+    lines += _corr_table(eqs, "error_term_correlation")
     if doc["settings"].get("reference"):
         ref = doc["settings"]["reference"]
-        rcats = _categories(eqs, "error_reference_correlation")
         lines += [f"Against the term powers of the reference equation **{ref}** (this reveals "
-                  "a term an equation lacks):", "",
-                  "| Equation | " + " | ".join(f"{c}: r / partial slope" for c in rcats) + " |",
-                  "|---|" + "---|" * len(rcats)]
-        for nm, d in eqs.items():
-            cells = [_corr_cell(d["error_reference_correlation"].get(c)) for c in rcats]
-            lines.append(f"| {nm} | " + " | ".join(cells) + " |")
-        lines.append("")
+                  "a term an equation lacks):", ""]
+        lines += _corr_table(eqs, "error_reference_correlation")
 
     scats = _categories(eqs, "energy_share")
     lines += ["## Energy share of each term (cf. paper Fig. 10)", "",
@@ -225,6 +213,16 @@ def _categories(eqs: dict, key: str) -> list[str]:
             if c not in cats:
                 cats.append(c)
     return cats
+
+
+def _corr_table(eqs: dict, key: str) -> list[str]:
+    """Markdown table of r / partial slope per equation and term category (``key``)."""
+    cats = _categories(eqs, key)
+    lines = ["| Equation | " + " | ".join(f"{c}: r / partial slope" for c in cats) + " |",
+             "|---|" + "---|" * len(cats)]
+    for nm, d in eqs.items():
+        lines.append(f"| {nm} | " + " | ".join(_corr_cell(d[key].get(c)) for c in cats) + " |")
+    return lines + [""]
 
 
 def _corr_cell(c: dict | None) -> str:

@@ -59,10 +59,12 @@ _KWH = 1.0 / 3.6e6
 # ------------------------------------------------------------------------------- CLI
 
 
-def _read_counts(ds) -> dict:
-    """The reader's counts every dataset section reports."""
-    return {k: ds.log.counts[k] for k in ("rows", "trips", "grade_source", "accel_source",
-                                          "excluded_total")}
+def _provenance(ds) -> dict:
+    """What every dataset section reports first: source, import report, reader counts."""
+    return {"target": ds.source, "import": ds.import_report,
+            "read_counts": {k: ds.log.counts[k] for k in ("rows", "trips", "grade_source",
+                                                          "accel_source", "excluded_total")}}
+
 
 def configure(p):
     p.add_argument("--data", default=None, metavar="DIR",
@@ -242,9 +244,7 @@ def validate_i3(ds: Dataset, out: Path, figures: list) -> tuple[dict, dict]:
         figures.append(fname)
     p_test = ds.power_w[test]
     summary = {
-        "target": ds.source,
-        "import": ds.import_report,
-        "read_counts": _read_counts(ds),
+        **_provenance(ds),
         "split": {"rule": "alternate trips in trip-id order within each season: 1st, 3rd, … "
                           "calibrate; 2nd, 4th, … test",
                   "calibration_trips": cal_trips, "test_trips": test_trips,
@@ -430,9 +430,7 @@ def validate_prius2(ds: Dataset, out: Path, figures: list) -> tuple[dict, dict]:
     write_figure(out / "prius2_bands.png", fig)
     figures.append("prius2_bands.png")
     summary = {
-        "target": ds.source,
-        "import": ds.import_report,
-        "read_counts": _read_counts(ds),
+        **_provenance(ds),
         "epa_equation": {"name": epa.name, "terms": dict(epa.terms), "mass_kg": epa.mass_kg,
                          "source": epa.source},
         "n_usable": int(u.sum()),
@@ -586,9 +584,7 @@ def validate_jlu(ds: Dataset, out: Path, figures: list) -> tuple[dict, dict]:
     write_figure(out / "jlu_road_load.png", fig)
     figures.append("jlu_road_load.png")
     summary = {
-        "target": ds.source,
-        "import": ds.import_report,
-        "read_counts": _read_counts(ds),
+        **_provenance(ds),
         "mass_kg": m_kg,
         "model": "traction (a ≥ 0, v > 2 m/s): P_batt = c1·v + c2·v² + c3·v³ + c_acc·m·v·a + P_aux, "
                  "η = 1/c_acc, A = c1·η, B = c2·η, C = c3·η",

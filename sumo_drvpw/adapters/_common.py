@@ -248,6 +248,12 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
     return df, report
 
 
+def read_each(files, read_one) -> tuple[list, list]:
+    """Read every file with ``read_one(path) → (frame, report)``: (frames, reports)."""
+    pairs = [read_one(f) for f in files]
+    return [df for df, _ in pairs], [rep for _, rep in pairs]
+
+
 def expand_paths(paths, suffixes: tuple[str, ...], what: str) -> list[Path]:
     """Files from a list of files and folders (folders: every file with one of suffixes, sorted)."""
     if isinstance(paths, (str, Path)):

@@ -178,19 +178,19 @@ def _join_overview(df, trip, overview, vehicle, rep):
 def read(paths) -> tuple[list[pd.DataFrame], list[dict], list[str]]:
     """Read TUM trip files (overview.csv in the same folder is joined, never read as a trip)."""
     from ..vehicles import load_vehicle
-    from ._common import expand_paths
+    from ._common import expand_paths, read_each
 
     vehicle = load_vehicle(VEHICLE)
     files = [f for f in expand_paths(paths, SUFFIXES, "TUM trip CSV") if f.name != "overview.csv"]
     if not files:
         raise UserError(f"{FORMAT}: no trip file among {paths} (overview.csv alone is not a trip)")
     overviews: dict[Path, pd.DataFrame | None] = {}
-    frames, reports = [], []
-    for f in files:
+
+    def read_one(f: Path):
         folder = f.parent.resolve()
         if folder not in overviews:
             overviews[folder] = read_overview(folder)
-        df, rep = read_file(f, overviews[folder], vehicle)
-        frames.append(df)
-        reports.append(rep)
+        return read_file(f, overviews[folder], vehicle)
+
+    frames, reports = read_each(files, read_one)
     return frames, reports, [f"vehicle file {vehicle.path}"]

@@ -37,7 +37,7 @@ import pandas as pd
 from ..errors import UserError
 from ..fileio import read_toml
 from ._common import (CANONICAL, DIMENSIONS, clean_time_and_speed, expand_paths, generic_name,
-                      lookup_unit, new_report, numeric, read_csv_strict, unique_names)
+                      lookup_unit, new_report, numeric, read_csv_strict, read_each, unique_names)
 
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
@@ -195,9 +195,6 @@ def read(paths, columns):
     if columns is None:
         raise UserError("format 'columns' needs a mapping file: --columns mapping.toml")
     m = load_mapping(columns)
-    frames, reports = [], []
-    for f in expand_paths(paths, SUFFIXES, "CSV/Parquet"):
-        df, rep = read_file(f, m)
-        frames.append(df)
-        reports.append(rep)
+    frames, reports = read_each(expand_paths(paths, SUFFIXES, "CSV/Parquet"),
+                                lambda f: read_file(f, m))
     return frames, reports, [f"mapping {m['path']}"]

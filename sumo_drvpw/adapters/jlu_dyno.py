@@ -88,12 +88,9 @@ def read_file(path: Path, vehicle) -> tuple[pd.DataFrame, dict]:
 def read(paths):
     """Read JLU dynamometer tests (files or folders of .parquet)."""
     from ..vehicles import load_vehicle
-    from ._common import expand_paths
+    from ._common import expand_paths, read_each
 
     vehicle = load_vehicle(VEHICLE)
-    frames, reports = [], []
-    for f in expand_paths(paths, SUFFIXES, "dynamometer Parquet"):
-        df, rep = read_file(f, vehicle)
-        frames.append(df)
-        reports.append(rep)
+    frames, reports = read_each(expand_paths(paths, SUFFIXES, "dynamometer Parquet"),
+                                lambda f: read_file(f, vehicle))
     return frames, reports, [f"vehicle file {vehicle.path}"]

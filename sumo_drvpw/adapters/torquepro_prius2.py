@@ -154,11 +154,7 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
 
 def read(paths):
     """Read Torque Pro Prius logs (files or folders of .json/.csv)."""
-    from ._common import expand_paths
+    from ._common import expand_paths, read_each
 
-    frames, reports = [], []
-    for f in expand_paths(paths, SUFFIXES, "Torque Pro log"):
-        df, rep = read_file(f)
-        frames.append(df)
-        reports.append(rep)
+    frames, reports = read_each(expand_paths(paths, SUFFIXES, "Torque Pro log"), read_file)
     return frames, reports, ["battery_current_a as logged (positive when discharging)"]

@@ -165,8 +165,10 @@ def run_scenario(scenario_path, out_dir, **overrides) -> dict:
     ledger = Ledger(len(net.edge_ids), len(equations))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    physics = Physics(sc.wind_speed, sc.wind_from_deg, sc.rho, sc.slope_tol,
-                      sc.slope_reference, sc.acceleration, sc.wind_heading, sc.positions)
+    physics = Physics(wind_speed=sc.wind_speed, wind_from_deg=sc.wind_from_deg, rho=sc.rho,
+                      slope_tol=sc.slope_tol, slope_reference=sc.slope_reference,
+                      acceleration=sc.acceleration, heading=sc.wind_heading,
+                      positions=sc.positions)
     t0 = time.perf_counter()
     conn = start_sumo(sc.sumo_args, sc.connection, sc.gui)
     trace = None

@@ -159,19 +159,17 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
                       True, True, read_slope))
     heading_from_lane = physics.wind_speed != 0.0 and physics.heading == "geometry"
     tracking = (physics.positions == "tracked" and not use_subscriptions
-                and _euler_update(conn) and net.lane_end is not None)
+                and _euler_update(conn) and net.lane_end is not None
+                and net.lane_own_edge is not None)
     if tracking:
         get_lane, get_pos = reader.getters[3], reader.getters[4]
         # lanes -1 (no lane) and -2 (never read): an end of −∞, so they are always read
         lane_end = np.append(net.lane_end - 1e-6, [-np.inf, -np.inf])
         teleported = getattr(conn.simulation, "getEndingTeleportIDList", lambda: ())
         resync = max(1, int(physics.resync_steps))
-        # the edge (internal ones included) each lane belongs to: a lane change keeps the
-        # position and the edge, so only a different edge or position is a disagreement
-        own: dict[str, int] = {}
-        lane_own = np.full(len(net.lane_length) + 2, -1, np.int64)
-        for lid, i in net.lane_index.items():
-            lane_own[i] = own.setdefault(lid.rsplit("_", 1)[0], len(own))
+        # a lane change keeps the position and the edge (internal ones included), so only
+        # a different edge or position is a disagreement; lanes -1, -2 belong to none
+        lane_own = np.append(net.lane_own_edge, [-1, -1])
     interrupted = False
     bar = None
     if progress and end is not None and sys.stderr.isatty():
@@ -180,15 +178,16 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
         t0 = conn.simulation.getTime()
         bar = tqdm(total=max(0, int(round((end - t0) / dt))), unit="step", file=sys.stderr)
 
-    every_equation_applies = [True]  # to every vehicle accounted so far
+    every_equation_applies = True  # to every vehicle accounted so far
 
     def register(vid: str) -> int:
+        nonlocal every_equation_applies
         vt = conn.vehicle.getTypeID(vid)
         mass, app, keep = resolve(vt, vid)
         i = ledger.add_vehicle(vid, vt, mass, app, keep)
         vmap[vid] = i
         if keep and not np.all(ledger.veh_app[i] == 1.0):
-            every_equation_applies[0] = False
+            every_equation_applies = False
         reader.subscribe_existing([vid])
         return i
 
@@ -297,7 +296,7 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
             wind = tailwind(angle, physics.wind_speed, physics.wind_from_deg)
             m = len(vidx)
             x = Inputs(v, a, theta, wind, ledger.veh_mass[vidx], np.full(m, physics.rho))
-            pc = eqset.category_powers(x, None if every_equation_applies[0]
+            pc = eqset.category_powers(x, None if every_equation_applies
                                        else ledger.veh_app[vidx])
             eidx = lane_edge_ext[lane]
             ledger.book(vidx, eidx, v, dt, pc)

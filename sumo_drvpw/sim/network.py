@@ -64,6 +64,9 @@ class Network:
     #: per lane: the shortest lane length of its edge [m]; a car whose position stays
     #: below it cannot have left the edge, whichever of its lanes it changed to
     lane_end: np.ndarray | None = None
+    #: per lane: number of the edge it belongs to, internal edges included (unlike
+    #: ``lane_edge``, which maps internal lanes to the edge they lead to)
+    lane_own_edge: np.ndarray | None = None
 
     def bin_index(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Index into the per-bin arrays (``profile``, ``clipped``, ``raw``,
@@ -191,9 +194,12 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         raws.append(lane_profile(shape, ln.getLength(), RAW_LENGTH_M, np.inf, behind=True)[0])
         heads.append(lane_heading(shape, ln.getLength()))
     lane_length = np.array([ln.getLength() for ln in lanes], float)
-    lane_end = np.concatenate(  # lanes are listed edge by edge
+    with_lanes = [e for e in net.getEdges() if e.getLanes()]  # lanes are listed edge by edge
+    lane_end = np.concatenate(
         [np.full(len(e.getLanes()), min(ln.getLength() for ln in e.getLanes()))
-         for e in net.getEdges() if e.getLanes()] or [np.zeros(0)])
+         for e in with_lanes] or [np.zeros(0)])
+    lane_own_edge = np.repeat(np.arange(len(with_lanes)),
+                              [len(e.getLanes()) for e in with_lanes]).astype(np.int64)
     nb = np.array([len(p) for p in profs], np.int64)
     off = np.concatenate([[0], np.cumsum(nb)[:-1]]).astype(np.int64)
     all_classes = list(rule.classes)
@@ -205,7 +211,7 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         edge_length=np.array([e.getLength() for e in edges], float), edge_speed=speeds,
         edge_shapes=[np.asarray(e.getLanes()[0].getShape(), float)[:, :2] for e in edges],
         lane_index=lane_index, lane_edge=lane_edge,
-        lane_length=lane_length, lane_end=lane_end,
+        lane_length=lane_length, lane_end=lane_end, lane_own_edge=lane_own_edge,
         lane_offset=off, lane_nbins=nb, profile=np.concatenate(profs),
         clipped=np.concatenate(clips), classes=all_classes, raw=np.concatenate(raws),
         heading_deg=np.concatenate(heads))

@@ -179,6 +179,16 @@ def _num(v, where: str, key: str, positive: bool = False) -> float:
     return float(v)
 
 
+def _check_table(val, allowed: set[str], where: str, name: str) -> None:
+    """``val`` must be a table whose keys are all in ``allowed``; errors name the key."""
+    if not isinstance(val, dict):
+        raise UserError(f"{where}: '{name}' must be a table")
+    for k in val:
+        if k not in allowed:
+            raise UserError(f"{where}: unknown key '{name}.{k}' "
+                            f"(known: {', '.join(sorted(allowed))})")
+
+
 def _choice(v, allowed: tuple[str, ...], where: str, key: str) -> str:
     if v not in allowed:
         raise UserError(f"{where}: '{key}' must be one of {', '.join(allowed)}, got {v!r}")
@@ -265,21 +275,10 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     for key, val in doc.items():
         if key not in _SCHEMA:
             raise UserError(f"{where}: unknown key '{key}' (known: {', '.join(_SCHEMA)})")
-        allowed = _SCHEMA[key]
-        if allowed is not None:
-            if not isinstance(val, dict):
-                raise UserError(f"{where}: '{key}' must be a table")
-            for k in val:
-                if k not in allowed:
-                    raise UserError(f"{where}: unknown key '{key}.{k}' "
-                                    f"(known: {', '.join(sorted(allowed))})")
+        if _SCHEMA[key] is not None:
+            _check_table(val, _SCHEMA[key], where, key)
     for vt, d in doc.get("vtypes", {}).items():
-        if not isinstance(d, dict):
-            raise UserError(f"{where}: 'vtypes.{vt}' must be a table")
-        for k in d:
-            if k not in _VTYPE_KEYS:
-                raise UserError(f"{where}: unknown key 'vtypes.{vt}.{k}' "
-                                f"(known: {', '.join(sorted(_VTYPE_KEYS))})")
+        _check_table(d, _VTYPE_KEYS, where, f"vtypes.{vt}")
     rel = (lambda s: (base / s) if base is not None and not Path(s).is_absolute() else Path(s))
 
     sumo = dict(doc.get("sumo", {}))
