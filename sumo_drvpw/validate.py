@@ -59,6 +59,11 @@ _KWH = 1.0 / 3.6e6
 # ------------------------------------------------------------------------------- CLI
 
 
+def _worst_band(bands: list[dict]) -> dict | None:
+    """The non-empty band with the largest absolute mean error, None if all are empty."""
+    return max((r for r in bands if r["n"]), key=lambda r: abs(r["mean_error_w"]), default=None)
+
+
 def _provenance(ds) -> dict:
     """What every dataset section reports first: source, import report, reader counts."""
     return {"target": ds.source, "import": ds.import_report,
@@ -909,23 +914,20 @@ def _speed_table(evs: dict, what: str) -> list[str]:
 def _prius_reading(pr: dict) -> list[str]:
     """Plain-language reading of the Prius bands, chosen from the computed numbers."""
     out = []
-    sp = [r for r in pr["bands"]["speed_kmh_traction"] if r["n"]]
-    if sp:
-        worst = max(sp, key=lambda r: abs(r["mean_error_w"]))
+    worst = _worst_band(pr["bands"]["speed_kmh_traction"])
+    if worst:
         verb = "over" if worst["mean_error_w"] > 0 else "under"
         out.append(f"- In traction the largest mean gap is at {worst['band']}: the EPA road load "
                    f"{verb}states P_PTdrv by {_n(abs(worst['mean_error_w']), 2, _KW)} kW on average "
                    f"(measured {_n(worst['mean_measured_w'], 2, _KW)} kW).")
-    ac = [r for r in pr["bands"]["accel_mps2"] if r["n"]]
-    if ac:
-        worst = max(ac, key=lambda r: abs(r["mean_error_w"]))
+    worst = _worst_band(pr["bands"]["accel_mps2"])
+    if worst:
         out.append(f"- By acceleration the largest gap is at {worst['band']} "
                    f"(mean error {_n(worst['mean_error_w'], 2, _KW)} kW): hard braking is friction "
                    "braking outside P_PTdrv; hard acceleration errors mix the mass (ETW vs the real car), "
                    "the ≈1.4 Hz OBD timing and the acceleration derived from OBD speed.")
-    gr = [r for r in pr["bands"]["grade_pct"] if r["n"]]
-    if gr:
-        worst = max(gr, key=lambda r: abs(r["mean_error_w"]))
+    worst = _worst_band(pr["bands"]["grade_pct"])
+    if worst:
         out.append(f"- By grade the largest gap is at {worst['band']} (mean error "
                    f"{_n(worst['mean_error_w'], 2, _KW)} kW): grade comes from GPS altitude smoothed "
                    "over 100 m, so steep short sections are blurred, and downhill the road load asks "
