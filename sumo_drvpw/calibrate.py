@@ -88,29 +88,79 @@ def gram(x: Inputs, y: np.ndarray, names, mask: np.ndarray | None = None, chunk:
     return Gram(xtx, xty, yty, n, names)
 
 
+#: A candidate whose column keeps less than this share of its sum of squares after
+#: projection on the columns kept before it is numerically spanned by them (|r| > 1 − 5e-11
+#: for a pair): dropped before selection, so no tie is ever broken by rounding.
+SPAN_TOL = 1e-10
+#: |t| values within this relative distance count as a tie, broken by candidate order.
+TIE_RTOL = 1e-9
+
+
+def drop_spanned(g: Gram, tol: float = SPAN_TOL) -> tuple[list[int], list[dict]]:
+    """Deterministic collinearity screen of the candidates, in candidate order.
+
+    For candidate j, the share of its sum of squares left after projection on the columns
+    kept so far is 1 − R²_j = (x_jᵀx_j − x_jᵀX_K (X_KᵀX_K)⁻¹ X_Kᵀx_j) / x_jᵀx_j (from the
+    Gram matrix, no pass over the samples). Below ``tol`` the column is dropped: the first
+    of identical columns in candidate order wins. Returns (kept indices, dropped records
+    ``{"term", "reason", "spanned_by"}``).
+    """
+    kept: list[int] = []
+    dropped: list[dict] = []
+    for j, name in enumerate(g.names):
+        d = g.xtx[j, j]
+        if not d > 0:
+            dropped.append({"term": name, "reason": "zero on these data", "spanned_by": []})
+            continue
+        if kept:
+            a = g.xtx[np.ix_(kept, kept)]
+            b = g.xtx[kept, j]
+            sc = np.sqrt(np.diag(a))
+            coef = np.linalg.lstsq(a / np.outer(sc, sc), b / sc, rcond=None)[0] / sc
+            left = (d - coef @ b) / d
+            if left < tol:
+                parts = [(g.names[k], c) for k, c in zip(kept, coef)
+                         if abs(c) * np.sqrt(g.xtx[k, k]) > 1e-6 * np.sqrt(d)]
+                names = [n for n, _ in parts]
+                one = len(parts) == 1 and abs(parts[0][1] - 1) < 1e-6
+                reason = (f"identical to {names[0]}" if one else
+                          f"spanned by {', '.join(names)}") + " on these data"
+                dropped.append({"term": name, "reason": reason, "spanned_by": names})
+                continue
+        kept.append(j)
+    return kept, dropped
+
+
 def stepwise(g: Gram, p_enter: float = 0.10, p_remove: float = 0.15, max_steps: int = 100):
     """Forward–backward stepwise selection on sufficient statistics.
 
-    Each round adds the candidate with the smallest p-value if it is below ``p_enter``,
-    then removes, one at a time, the selected term with the largest p-value while it is
-    above ``p_remove``. Stops when nothing enters. Returns (selected names, trace list).
+    Candidates that are identical to, or numerically spanned by, candidates before them
+    are dropped first (:func:`drop_spanned`; listed in the trace with action ``drop``).
+    Each round adds the candidate with the largest |t| (the smallest p-value) if its
+    p-value is below ``p_enter``, then removes, one at a time, the selected term with the
+    largest p-value while it is above ``p_remove``. Stops when nothing enters. |t| values
+    equal within ``TIE_RTOL`` are a tie, broken by candidate order. Returns (selected
+    names, trace list).
     """
     if p_enter > p_remove:
-        raise UserError(f"--p-enter ({p_enter}) must not exceed --p-remove ({p_remove}), "
+        raise UserError(f"p_enter ({p_enter}) must not exceed p_remove ({p_remove}), "
                         "or selection can cycle")
+    kept, dropped = drop_spanned(g)
+    trace = [{"step": i + 1, "action": "drop", "term": d["term"], "reason": d["reason"]}
+             for i, d in enumerate(dropped)]
     sel: list[int] = []
-    trace = []
     for _ in range(max_steps):
         # rank by |t| (same order as p at equal dof, but no underflow to p = 0 ties)
         best, best_t, best_p = None, -1.0, 1.0
-        for j in range(len(g.names)):
+        for j in kept:
             if j in sel:
                 continue
             f = g.fit(sel + [j])
             if f is None:
                 continue
-            if abs(f["t"][-1]) > best_t:
-                best, best_t, best_p = j, abs(float(f["t"][-1])), float(f["p"][-1])
+            t = abs(float(f["t"][-1]))
+            if t > best_t * (1.0 + TIE_RTOL):
+                best, best_t, best_p = j, t, float(f["p"][-1])
         if best is None or best_p >= p_enter:
             break
         sel.append(best)
@@ -118,7 +168,10 @@ def stepwise(g: Gram, p_enter: float = 0.10, p_remove: float = 0.15, max_steps: 
                       "t_value": best_t, "p_value": best_p})
         while len(sel) > 1:
             f = g.fit(sel)
-            worst = int(np.argmin(np.abs(f["t"])))
+            at = np.abs(f["t"])
+            # the smallest |t|; among ties the latest in candidate order leaves
+            worst = min((i for i in range(len(sel)) if at[i] <= at.min() * (1.0 + TIE_RTOL)),
+                        key=lambda i: -sel[i])
             if f["p"][worst] <= p_remove:
                 break
             trace.append({"step": len(trace) + 1, "action": "remove", "term": g.names[sel[worst]],
@@ -143,12 +196,15 @@ class CalibrationResult:
     settings: dict
     reference_mass_kg: float | None = None
     results: object = field(default=None, repr=False)
+    #: candidates dropped before selection: [{"term", "reason", "spanned_by"}]
+    dropped: list = field(default_factory=list)
 
     def to_equation(self, name: str, provenance: dict | None = None) -> Equation:
         """The calibrated equation, ready for ``compare`` and the SUMO loop."""
         prov = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                 "method": "forward-backward stepwise OLS without intercept, final fit statsmodels OLS",
-                "settings": self.settings, "selection_trace": self.trace, "sample_counts": self.counts}
+                "settings": self.settings, "selection_trace": self.trace, "sample_counts": self.counts,
+                "dropped_candidates": self.dropped}
         prov.update(provenance or {})
         metrics = {"n": self.n, "r2": self.r2, "r2_uncentered": self.r2_uncentered}
         if self.reference_mass_kg:
@@ -162,6 +218,8 @@ class CalibrationResult:
         lines = [f"n = {self.n}, R² = {self.r2:.4f}", f"{'term':<12}{'coefficient':>14}{'std err':>12}{'p':>10}"]
         for t in self.terms:
             lines.append(f"{t:<12}{self.params[t]:>14.6g}{self.std_err[t]:>12.3g}{self.p_values[t]:>10.2g}")
+        for d in self.dropped:
+            lines.append(f"`{d['term']}` dropped: {d['reason']}")
         return "\n".join(lines)
 
 
@@ -212,6 +270,7 @@ def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = No
         bad = [candidates[j] for j in range(len(candidates)) if not np.isfinite(g.xtx[j, j])]
         raise UserError(f"candidate term(s) {bad} are not finite on the usable samples")
     sel, trace = stepwise(g, p_enter, p_remove)
+    dropped = [{"term": t["term"], "reason": t["reason"]} for t in trace if t["action"] == "drop"]
     if not sel:
         raise UserError("no candidate term entered the model at p-to-enter "
                         f"{p_enter}: the measured power is not explained by {list(candidates)}")
@@ -219,12 +278,12 @@ def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = No
     # hasconst=False: no intercept by design; it also skips statsmodels' constant detection,
     # which costs three extra SVDs of the design matrix
     res = sm.OLS(ys, xs, hasconst=False).fit()
-    del xs
+    # named exog, so summary() and params read as terms; the results keep their data
+    # (summary(), aic, bic, condition_number work); the pseudo-inverse (n × k) is not
+    # needed once the covariance is computed
+    res.model.data.xnames = list(sel)
+    res.model.__dict__.pop("pinv_wexog", None)
     sse = float(res.ssr)
-    _ = (res.bse, res.pvalues, res.tvalues, res.rsquared)  # cached before the data go
-    # the results keep the design matrix and its pseudo-inverse (2 × n × k floats) alive;
-    # drop the sample-length arrays so a CalibrationResult stays small
-    res.remove_data()
     sst = float(((ys - ys.mean()) ** 2).sum())
     r2 = 1.0 - sse / sst if sst > 0 else float("nan")
     counts["used"] = n_use
@@ -233,7 +292,7 @@ def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = No
         std_err=dict(zip(sel, map(float, res.bse))), p_values=dict(zip(sel, map(float, res.pvalues))),
         r2=r2, r2_uncentered=float(res.rsquared), n=n_use, counts=counts, trace=trace,
         settings={"candidates": list(candidates), "p_enter": p_enter, "p_remove": p_remove},
-        reference_mass_kg=reference_mass_kg, results=res)
+        reference_mass_kg=reference_mass_kg, results=res, dropped=dropped)
 
 
 def resolve_candidates(spec: str) -> tuple[str, ...]:

@@ -257,7 +257,8 @@ def validate_i3(ds: Dataset, out: Path, figures: list) -> tuple[dict, dict]:
         "reference_mass_kg": ref_mass,
         "calibration": {lab: {"equation": eq.name, "candidates": list(res.settings["candidates"]),
                               "terms": _coef_block(eq), "r2_in_sample": res.r2, "n": res.n,
-                              "selection": [f"{t['action']} {t['term']}" for t in res.trace]}
+                              "selection": [f"{t['action']} {t['term']}" + (f" ({t['reason']})" if "reason" in t else "")
+                                            for t in res.trace]}
                         for lab, (res, eq) in cals.items()},
         "vsp_spec": {"equation": vsp_spec.name, "terms": dict(vsp_spec.terms), "note": note},
         "test": {e.name: _metrics_row(comp, e.name) for e in eqs},

@@ -173,3 +173,55 @@ def test_bad_options_exit_2(long_log, tmp_path, capsys):
     assert "nosuchcar" in capsys.readouterr().err
     assert cli_main(["calibrate", str(long_log), "--out", str(tmp_path / "e.toml")]) == 2
     assert "--vehicle" in capsys.readouterr().err  # power-split signals need a vehicle
+
+
+def _no_wind_inputs(rng, n):
+    """Inputs without wind: `aero` = v·v·|v| is then the same column as `v3`."""
+    return Inputs(rng.uniform(0, 45, n), rng.normal(0, 1, n), rng.normal(0, 0.03, n), np.zeros(n),
+                  np.full(n, 1625.0), np.full(n, 1.2))
+
+
+@pytest.mark.parametrize("order", [("acc", "grade", "aero", "roll", "v3"), ("acc", "grade", "v3", "roll", "aero")])
+@pytest.mark.parametrize("noise_seed", range(4))
+def test_identical_candidates_first_in_order_wins(order, noise_seed):
+    """Without wind, aero ≡ v3: the later one is dropped, whatever the rounding noise."""
+    rng = np.random.default_rng(3)
+    x = _no_wind_inputs(rng, 5000)
+    y = load_equation("drvpw_prius3").power(x) + rng.normal(0, 1500, 5000)
+    # perturb the target by a relative 1e-15: a change of rounding, not of data
+    y = y * (1 + 1e-15 * np.random.default_rng(noise_seed).standard_normal(5000))
+    res = calibrate(x, y, order)
+    first, second = [t for t in order if t in ("aero", "v3")]
+    assert res.dropped == [{"term": second, "reason": f"identical to {first} on these data"}]
+    assert first in res.terms and second not in res.terms
+    assert res.trace[0] == {"step": 1, "action": "drop", "term": second,
+                            "reason": f"identical to {first} on these data"}
+
+
+def test_spanned_candidate_is_named_with_its_span():
+    """A candidate that is a combination of earlier ones (v·(1 + v²) = v1 + v3) is dropped."""
+    rng = np.random.default_rng(4)
+    n = 4000
+    x = _no_wind_inputs(rng, n)
+    x.signals["combo"] = 1 + x.v ** 2  # [combo]*v1 = v1 + v3
+    y = load_equation("drvpw_prius3").power(x) + rng.normal(0, 800, n)
+    res = calibrate(x, y, ("acc", "grade", "aero", "roll", "v1", "v3", "[combo]*v1"))
+    reasons = {d["term"]: d["reason"] for d in res.dropped}
+    assert reasons["v3"] == "identical to aero on these data"
+    assert reasons["[combo]*v1"].startswith("spanned by ") and "v1" in reasons["[combo]*v1"]
+
+
+def test_results_object_stays_usable():
+    """The statsmodels results keep named exog, summary(), AIC/BIC and the condition number."""
+    rng = np.random.default_rng(6)
+    x = _random_inputs(rng, 3000)
+    y = load_equation("drvpw_prius3").power(x) + rng.normal(0, 1500, 3000)
+    res = calibrate(x, y, CANDIDATES["indt-var-1"])
+    r = res.results
+    assert list(r.model.exog_names) == res.terms
+    text = r.summary().as_text()
+    for t in res.terms:
+        assert t in text
+    ref = sm.OLS(y, term_matrix(res.terms, x)).fit()
+    assert r.aic == pytest.approx(ref.aic, rel=1e-9) and r.bic == pytest.approx(ref.bic, rel=1e-9)
+    assert r.condition_number == pytest.approx(ref.condition_number, rel=1e-6)

@@ -31,6 +31,9 @@ def main(args) -> int:
         val = getattr(args, opt)
         if not 0 < val < 1:
             raise UserError(f"--{opt.replace('_', '-')} must be between 0 and 1, got {val}")
+    if args.p_enter > args.p_remove:
+        raise UserError(f"--p-enter ({args.p_enter}) must not exceed --p-remove ({args.p_remove}), "
+                        "or selection can cycle")
     out = Path(args.out)
     if out.suffix != ".toml":
         raise UserError(f"--out {out}: an equation file ends in .toml")
@@ -68,6 +71,8 @@ def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
                           "p_values": eq.p_values, "r2": res.r2, "n": res.n,
                           "selection_trace": res.trace, "settings": res.settings,
                           "beta_mass_free": eq.metrics.get("beta_mass_free"),
-                          "reference_mass_kg": res.reference_mass_kg}
+                          "reference_mass_kg": res.reference_mass_kg,
+                          "dropped_candidates": [f"{d['term']} dropped: {d['reason']}"
+                                                 for d in res.dropped]}
     write_comparison_report(comp, out_dir, f"Calibration of {eq.name} against classic VSP", ctx)
     return comp.to_json()
