@@ -18,9 +18,9 @@ import time
 
 import numpy as np
 
-from sumo_drvpw.calibrate import CANDIDATES, calibrate
-from sumo_drvpw.equations import load_equation
-from sumo_drvpw.terms import Inputs
+from sumo_drvpw.fit.calibrate import CANDIDATES, calibrate
+from sumo_drvpw.model.equations import load_equation
+from sumo_drvpw.model.terms import Inputs
 
 
 def main():

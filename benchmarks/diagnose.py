@@ -1,6 +1,6 @@
 """Benchmark: `diagnose` on one million samples with twenty extra columns (< 60 s target).
 
-The log is built from synthetic 8 Hz trips (sumo_drvpw.synth, truth drvpw_prius3, driving
+The log is built from synthetic 8 Hz trips (sumo_drvpw.synth.track, truth drvpw_prius3, driving
 power logged directly) tiled to 1e6 rows with distinct trip ids, plus twenty extra
 columns (one planted A/C load and its flag, the rest distractors). Generation is not
 timed; the timed part is what `sumo-drvpw diagnose LOG --vehicle prius3 --equation
@@ -21,8 +21,8 @@ import pandas as pd
 
 
 def build(rows: int, path: Path) -> None:
-    from sumo_drvpw import effects as E
-    from sumo_drvpw.synth import Noise
+    import sumo_drvpw.synth.effects as E
+    from sumo_drvpw.synth.track import Noise
 
     base, _ = E.synth_trips(4, 30.0, seed=1, effects=[E.AuxLoad(), E.LogPower()],
                             noise=Noise(process_w=200.0, process_rel=0.01))
@@ -59,9 +59,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rows", type=int, default=1_000_000)
     a = ap.parse_args()
-    from sumo_drvpw.log import read_log
-    from sumo_drvpw.trace_cli import run
-    from sumo_drvpw.trace import TraceOptions
+    from sumo_drvpw.data.log import read_log
+    from sumo_drvpw.cli.diagnose import run
+    from sumo_drvpw.fit.diagnose import TraceOptions
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench.parquet"

@@ -47,7 +47,7 @@ GRID, BLOCK = 12, 300.0
 
 
 def _equations():
-    from sumo_drvpw.equations import Equation, load_equation
+    from sumo_drvpw.model.equations import Equation, load_equation
     from sumo_drvpw.errors import UserError
 
     out = []

@@ -3,7 +3,7 @@
     .venv/bin/python scripts/closing_the_loop.py --data ../shared/data --out docs
 
 Reads the BMW i3 (TUM) trips and the Prius Gen-2 (TorquePro) logs in place through the
-adapters (sumo_drvpw.adapters), runs `diagnose` (declared equation calibrated on the
+adapters (sumo_drvpw.data.adapters), runs `diagnose` (declared equation calibrated on the
 spot, stepwise on indt-var-1; default tracer settings) and writes
 OUT/closing-the-loop.md with each run's outputs in OUT/closing-the-loop/<name>/.
 """
@@ -44,10 +44,10 @@ def main() -> int:
     ap.add_argument("--data", default=os.environ.get("SUMO_DRVPW_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data")))
     ap.add_argument("--out", default="docs")
     a = ap.parse_args()
-    from sumo_drvpw.adapters import read
+    from sumo_drvpw.data.adapters import read
     from sumo_drvpw.fileio import write_text
-    from sumo_drvpw.trace import TraceOptions
-    from sumo_drvpw.trace_cli import run
+    from sumo_drvpw.fit.diagnose import TraceOptions
+    from sumo_drvpw.cli.diagnose import run
 
     out = Path(a.out)
     sections = []

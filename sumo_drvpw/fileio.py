@@ -102,7 +102,7 @@ def read_toml(path, what: str) -> dict:
     """
     import tomllib
 
-    from .errors import UserError
+    from sumo_drvpw.errors import UserError
 
     p = Path(path)
     if not p.is_file():

@@ -14,13 +14,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sumo_drvpw.adapters import FORMATS, read
-from sumo_drvpw.adapters._common import clean_time_and_speed, new_report
-from sumo_drvpw.adapters.cli import read_report
+from sumo_drvpw.data.adapters import FORMATS, read
+from sumo_drvpw.data.adapters._common import clean_time_and_speed, new_report
+from sumo_drvpw.cli.import_ import read_report
 from sumo_drvpw.cli import main as cli_main
-from sumo_drvpw.constants import RPM
+from sumo_drvpw.model.constants import RPM
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.vehicles import load_vehicle
+from sumo_drvpw.model.vehicles import load_vehicle
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = Path(os.environ.get("SUMO_DRVPW_DATA", REPO.parent / "shared" / "data"))
@@ -175,7 +175,7 @@ def test_jlu_udds_and_constant_speed_against_road_load():
 
 
 def test_jlu_cycle_names():
-    from sumo_drvpw.adapters.jlu_dyno import cycle_name
+    from sumo_drvpw.data.adapters.jlu_dyno import cycle_name
     assert cycle_name("WLTC_CADC_JC08_CSS__07_Artemis_rural_1") == "Artemis_rural"
     assert cycle_name("CLTC_CSS__03_CS_110_01") == "CS_110"
     assert cycle_name("UDDS_HWY_US06_NYCC_CSS__04_SPEED_65") == "SPEED_65"
@@ -184,13 +184,13 @@ def test_jlu_cycle_names():
 
 def test_jlu_vehicle_road_load_si_conversions():
     import tomllib
-    doc = tomllib.loads((REPO / "calibration/vehicles/jlu_bev.toml").read_text())
+    doc = tomllib.loads((REPO / "sumo_drvpw/model/builtin/vehicles/jlu_bev.toml").read_text())
     rl = doc["road_load"]
     assert rl["b_n_per_mps"] == pytest.approx(rl["b_n_per_kmh"] * 3.6)
     assert rl["c_n_per_mps2"] == pytest.approx(rl["c_n_per_kmh2"] * 3.6**2)
     for key in ("vehicle.mass_kg", "road_load.a_n", "road_load.b_n_per_kmh", "road_load.c_n_per_kmh2"):
         assert key in doc["sources"]
-    bmw = tomllib.loads((REPO / "calibration/vehicles/bmw_i3.toml").read_text())
+    bmw = tomllib.loads((REPO / "sumo_drvpw/model/builtin/vehicles/bmw_i3.toml").read_text())
     for table, values in bmw.items():
         if table in ("sources",) or not isinstance(values, dict):
             continue

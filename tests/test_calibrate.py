@@ -8,13 +8,13 @@ import statsmodels.api as sm
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sumo_drvpw.calibrate import CANDIDATES, calibrate, gram, resolve_candidates, stepwise
+from sumo_drvpw.fit.calibrate import CANDIDATES, calibrate, gram, resolve_candidates, stepwise
 from sumo_drvpw.cli import main as cli_main
-from sumo_drvpw.equations import load_equation
+from sumo_drvpw.model.equations import load_equation
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.synth import SynthOptions, synthesize, write_synth
-from sumo_drvpw.terms import Inputs, term_matrix
-from sumo_drvpw.workflow import load_measured
+from sumo_drvpw.synth.track import SynthOptions, synthesize, write_synth
+from sumo_drvpw.model.terms import Inputs, term_matrix
+from sumo_drvpw.data.measured import load_measured
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Tests of sumo_drvpw.compare, plots and report (paper Table 3, Fig. 4, 5, 8, 9, 10)."""
+"""Tests of sumo_drvpw.fit.compare, plots and report (paper Table 3, Fig. 4, 5, 8, 9, 10)."""
 
 from __future__ import annotations
 
@@ -11,14 +11,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from sumo_drvpw.compare import (compare, energy_shares, error_term_correlation, metrics,
+from sumo_drvpw.fit.compare import (compare, energy_shares, error_term_correlation, metrics,
                                 speed_bins)
-from sumo_drvpw.constants import G, HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
-from sumo_drvpw.equations import Equation
+from sumo_drvpw.model.constants import G, HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
+from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.plots import subsample_index
-from sumo_drvpw.report import FIGURES, write_comparison_report
-from sumo_drvpw.terms import Inputs
+from sumo_drvpw.report.figures import subsample_index
+from sumo_drvpw.report.comparison import FIGURES, write_comparison_report
+from sumo_drvpw.model.terms import Inputs
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 TRUTH = {"acc": 1.0, "grade": 1.0, "aero": 0.9, "roll": 0.012}

@@ -6,12 +6,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
-from sumo_drvpw.constants import G
-from sumo_drvpw.equations import (Equation, beta_to_coefficients, builtin_names, coefficients_to_beta,
+from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.equations import (Equation, beta_to_coefficients, builtin_names, coefficients_to_beta,
                                   load_equation, save_equation, vsp_from_specs)
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.terms import Inputs, category_of, parse_term, term_matrix
-from sumo_drvpw.vehicles import load_vehicle
+from sumo_drvpw.model.terms import Inputs, category_of, parse_term, term_matrix
+from sumo_drvpw.model.vehicles import load_vehicle
 
 
 def one(v=20.0, a=0.5, theta=0.02, wind=0.0, m=1500.0, rho=1.2, **signals):

@@ -6,9 +6,9 @@ import pytest
 from numpy.testing import assert_allclose
 
 from sumo_drvpw.cli import main as cli_main
-from sumo_drvpw.constants import G, RHO_DEFAULT
+from sumo_drvpw.model.constants import G, RHO_DEFAULT
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.log import ReadOptions, derivative, grade_from_elevation, read_log
+from sumo_drvpw.data.log import ReadOptions, derivative, grade_from_elevation, read_log
 
 
 def _log(n=200, hz=10.0, **cols):
@@ -208,7 +208,7 @@ def test_time_weights_sum_to_duration(tmp_path):
 
 
 def test_grade_sign_uphill_positive_in_power():
-    from sumo_drvpw.terms import Inputs, term_matrix
+    from sumo_drvpw.model.terms import Inputs, term_matrix
     x = Inputs(np.array([10.0]), np.array([0.0]), np.array([np.arctan(0.05)]), np.array([0.0]),
                np.array([1000.0]), np.array([1.2]))
     assert term_matrix(["grade"], x)[0, 0] == pytest.approx(1000 * G * 10 * np.sin(np.arctan(0.05)))

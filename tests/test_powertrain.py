@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.powertrain import battery_power, planetary_mg1_speed, power_split_power
+from sumo_drvpw.data.powertrain import battery_power, planetary_mg1_speed, power_split_power
 
 # simple ratios so every case is checkable by hand: k_r = 2, k_c = 1, k_f = 4 (k = 8)
 GEAR = dict(sun_teeth=30, ring_teeth=78, mg2_reduction=2.0, counter_ratio=1.0, final_drive=4.0)
@@ -90,12 +90,12 @@ def test_battery_sign_conventions():
 
 def test_measured_power_on_synthetic_signals_matches_truth():
     """Inverse (synth) then forward (measured_power) reproduces the truth power without noise."""
-    from sumo_drvpw.equations import load_equation
-    from sumo_drvpw.synth import Noise, SynthOptions, synthesize
-    from sumo_drvpw.workflow import load_measured
+    from sumo_drvpw.model.equations import load_equation
+    from sumo_drvpw.synth.track import Noise, SynthOptions, synthesize
+    from sumo_drvpw.data.measured import load_measured
     import tempfile
     from pathlib import Path
-    from sumo_drvpw.synth import write_synth
+    from sumo_drvpw.synth.track import write_synth
 
     quiet = Noise(speed_mps=0, airspeed_mps=0, torque_nm=0, speed_rpm=0, imu_mps2=0, gps_elevation_m=0,
                   process_w=0, process_rel=0)
@@ -103,7 +103,7 @@ def test_measured_power_on_synthetic_signals_matches_truth():
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / "q.parquet"
         write_synth(df, truth, p)
-        from sumo_drvpw.log import ReadOptions
+        from sumo_drvpw.data.log import ReadOptions
 
         # unsmoothed derivatives: the inverse model used exact central differences
         m = load_measured([p], "prius3", ReadOptions(accel_window_s=0.0))

@@ -14,15 +14,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sumo_drvpw.constants import G
-from sumo_drvpw.equations import Equation
+from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim import VTypeResolver
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
 from sumo_drvpw.sim.loop import Physics, run_loop
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.scenario import RoadClassRule, load_scenario
-from sumo_drvpw.terms import Inputs
+from sumo_drvpw.model.terms import Inputs
 
 REPO = Path(__file__).resolve().parent.parent
 NET = load_network(REPO / "networks" / "highway.net.xml", RoadClassRule())

@@ -19,8 +19,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from sumo_drvpw.cli import main as cli_main
-from sumo_drvpw.constants import G
-from sumo_drvpw.equations import Equation
+from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.sim import close_sumo, run_scenario, start_sumo
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
 from sumo_drvpw.sim.loop import Physics, run_loop

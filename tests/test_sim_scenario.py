@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sumo_drvpw.constants import R_DRY_AIR
-from sumo_drvpw.equations import Equation
+from sumo_drvpw.model.constants import R_DRY_AIR
+from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.loop import tailwind
 from sumo_drvpw.sim.network import BIN_M, lane_profile, load_network

@@ -7,8 +7,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from sumo_drvpw.cli import main as cli_main
-from sumo_drvpw.constants import KMH
-from sumo_drvpw.synth import SynthOptions, synthesize
+from sumo_drvpw.model.constants import KMH
+from sumo_drvpw.synth.track import SynthOptions, synthesize
 
 
 def test_patterns_and_signals():

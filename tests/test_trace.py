@@ -1,7 +1,7 @@
-"""Residual tracer (sumo_drvpw.trace): planted effects are found, nothing else is.
+"""Residual tracer (sumo_drvpw.fit.diagnose): planted effects are found, nothing else is.
 
 Synthetic logs: 4 trips × 8 min of the virtual test track (truth drvpw_prius3) with
-effects from sumo_drvpw.effects planted, distractor columns that carry nothing, and the
+effects from sumo_drvpw.synth.effects planted, distractor columns that carry nothing, and the
 driving power and acceleration logged directly (effects.LogPower) so the noise floor is
 the planted process noise. The floor is computed from the truth: RMSE of
 measured − (truth equation + planted power) on the analysis samples.
@@ -14,12 +14,12 @@ import json
 import numpy as np
 import pytest
 
-from sumo_drvpw import effects as E
-from sumo_drvpw.equations import Equation, load_equation
+import sumo_drvpw.synth.effects as E
+from sumo_drvpw.model.equations import Equation, load_equation
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.synth import Noise
-from sumo_drvpw.trace import TraceOptions, screen_signals, trace
-from sumo_drvpw.workflow import load_measured
+from sumo_drvpw.synth.track import Noise
+from sumo_drvpw.fit.diagnose import TraceOptions, screen_signals, trace
+from sumo_drvpw.data.measured import load_measured
 
 NOISE = Noise(process_w=200.0, process_rel=0.01)
 TRUTH = "drvpw_prius3"
@@ -112,7 +112,7 @@ def test_two_planted_effects_both_found(tmp_path):
 
 
 def test_block_validation_single_trip_and_report_files(tmp_path):
-    from sumo_drvpw.trace_cli import run
+    from sumo_drvpw.cli.diagnose import run
 
     df, _ = E.synth_trips(1, 16.0, seed=5, effects=[E.AuxLoad(), E.LogPower()], noise=NOISE)
     path = tmp_path / "one.parquet"
@@ -142,7 +142,7 @@ def test_leaky_columns_are_not_offered():
     v = rng.uniform(0, 30, n)
     a = rng.normal(0, 0.5, n)
     y = 1500 * v * a + 0.4 * v ** 3 + 200 * v + rng.normal(0, 300, n)
-    from sumo_drvpw.terms import Inputs
+    from sumo_drvpw.model.terms import Inputs
 
     x = Inputs(v, a, np.zeros(n), np.zeros(n), np.full(n, 1500.0), np.full(n, 1.2))
     sig = {"power_copy_w": y + rng.normal(0, 10, n),           # the target itself

@@ -1,4 +1,4 @@
-"""The validation report on the real shared data (sumo_drvpw.validate).
+"""The validation report on the real shared data (sumo_drvpw.validation.study).
 
 One module-scoped run of the whole validation into a temporary folder (≈ 1 min); the
 tests check its structure, physically sane numbers, and that the committed
@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sumo_drvpw import validate as V
+import sumo_drvpw.validation.study as V
 from sumo_drvpw.cli import main as cli_main
-from sumo_drvpw.equations import builtin_names
+from sumo_drvpw.model.equations import builtin_names
 from sumo_drvpw.fileio import repo_root
 
 DATA = Path(os.environ.get("SUMO_DRVPW_DATA") or repo_root().parent / "shared" / "data")

@@ -1,6 +1,6 @@
 """Vehicle files and sourced built-in equations: every number checked by hand arithmetic.
 
-Covers calibration/vehicles/prius3.toml, prius2.toml and the built-ins vsp_prius3spec,
+Covers sumo_drvpw/model/builtin/vehicles/prius3.toml, prius2.toml and the built-ins vsp_prius3spec,
 moves_passenger_car and epa_prius3. The EPA road load is re-read from the shared CSV
 (``../shared/data`` or ``$SUMO_DRVPW_DATA``) when present; otherwise those checks use the
 numbers quoted in the files' provenance and the CSV test is skipped with a reason.
@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sumo_drvpw.constants import G, LB, LBF, MPH, RHO_DEFAULT
-from sumo_drvpw.equations import load_equation
-from sumo_drvpw.terms import Inputs
-from sumo_drvpw.vehicles import INERTIA_KEYS, load_vehicle
+from sumo_drvpw.model.constants import G, LB, LBF, MPH, RHO_DEFAULT
+from sumo_drvpw.model.equations import load_equation
+from sumo_drvpw.model.terms import Inputs
+from sumo_drvpw.model.vehicles import INERTIA_KEYS, load_vehicle
 
 ROOT = Path(__file__).resolve().parents[1]
 V100 = 100.0 / 3.6  # 100 km/h [m/s]
@@ -35,7 +35,7 @@ def _data_dir() -> Path | None:
 
 
 def _raw(name: str) -> dict:
-    return tomllib.loads((ROOT / "calibration" / "vehicles" / f"{name}.toml").read_text("utf-8"))
+    return tomllib.loads((ROOT / "sumo_drvpw" / "model" / "builtin" / "vehicles" / f"{name}.toml").read_text("utf-8"))
 
 
 def _inputs(v, a=0.0, theta=0.0, wind=0.0, mass=1625.0, rho=RHO_DEFAULT) -> Inputs:

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..equations import Equation
-from ..terms import CATEGORIES, Inputs, parse_term
+from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.model.terms import CATEGORIES, Inputs, parse_term
 
 #: Reporting categories of the ledger: the four physical ones and "other".
 LEDGER_CATEGORIES = CATEGORIES + ("other",)

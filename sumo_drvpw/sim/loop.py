@@ -21,9 +21,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..terms import Inputs
-from .ledger import EquationSet, Ledger
-from .network import Network
+from sumo_drvpw.model.terms import Inputs
+from sumo_drvpw.sim.ledger import EquationSet, Ledger
+from sumo_drvpw.sim.network import Network
 
 # traci variable ids (traci.constants), fixed by the TraCI protocol
 _VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE = 0x40, 0x72, 0x43

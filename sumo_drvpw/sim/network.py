@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import UserError
-from .scenario import RoadClassRule
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.scenario import RoadClassRule
 
 #: Resolution of the lane slope profiles [m].
 BIN_M = 2.0

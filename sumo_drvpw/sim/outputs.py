@@ -15,9 +15,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from ..fileio import atomic_path, write_figure, write_json, write_parquet, write_text
-from .ledger import LEDGER_CATEGORIES, Ledger
-from .network import Network
+from sumo_drvpw.fileio import atomic_path, write_figure, write_json, write_parquet, write_text
+from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, Ledger
+from sumo_drvpw.sim.network import Network
 
 UNITS = {"_j": "J", "_m": "m", "_s": "s", "_kg": "kg", "_w": "W", "_mps": "m/s",
          "_mps2": "m/s2", "_rad": "rad", "share": "1"}

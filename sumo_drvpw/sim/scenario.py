@@ -74,11 +74,11 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..constants import KELVIN, P_STD_KPA, R_DRY_AIR, RHO_DEFAULT
-from ..equations import Equation, load_equation
-from ..errors import UserError
-from ..fileio import read_toml
-from ..terms import parse_term
+from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, R_DRY_AIR, RHO_DEFAULT
+from sumo_drvpw.model.equations import Equation, load_equation
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fileio import read_toml
+from sumo_drvpw.model.terms import parse_term
 
 DEFAULT_HIGHWAY_TYPES = ("highway.motorway", "highway.motorway_link", "highway.trunk",
                          "highway.trunk_link")

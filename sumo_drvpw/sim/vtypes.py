@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import UserError
+from sumo_drvpw.errors import UserError
 
 
 @dataclass

@@ -1,0 +1,7 @@
+"""`python -m sumo_drvpw.cli ...` = `sumo-drvpw ...`."""
+
+import sys
+
+from sumo_drvpw.cli import main
+
+sys.exit(main())

@@ -1,0 +1,78 @@
+"""`sumo-drvpw calibrate`: stepwise-calibrate a DrvPw equation and report against VSP."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sumo_drvpw.errors import UserError
+
+
+def configure(p):
+    p.add_argument("logs", nargs="+", metavar="LOG", help="drive logs (Parquet/CSV files or folders)")
+    p.add_argument("--vehicle", help="vehicle name or TOML file (optional when the log has power_w and mass_kg)")
+    p.add_argument("--candidates", default="indt-var-1",
+                   help="candidate terms: indt-var-1, indt-var-2, a TOML file with terms = [...], "
+                        "or a comma list (default indt-var-1)")
+    p.add_argument("--out", required=True, metavar="EQUATION.toml", help="calibrated equation file")
+    p.add_argument("--name", help="equation name (default: the output file's stem)")
+    p.add_argument("--report", metavar="DIR", help="also write the comparison report here")
+    p.add_argument("--compare-with", action="append", metavar="EQ",
+                   help="equations for the report (default: vsp_ldv1999 and VSP from the vehicle's specs)")
+    p.add_argument("--p-enter", type=float, default=0.10, help="p-value to enter (default 0.10)")
+    p.add_argument("--p-remove", type=float, default=0.15, help="p-value to remove (default 0.15)")
+
+
+def main(args) -> int:
+    from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
+    from sumo_drvpw.model.equations import save_equation
+    from sumo_drvpw.data.measured import load_measured
+
+    for opt in ("p_enter", "p_remove"):
+        val = getattr(args, opt)
+        if not 0 < val < 1:
+            raise UserError(f"--{opt.replace('_', '-')} must be between 0 and 1, got {val}")
+    if args.p_enter > args.p_remove:
+        raise UserError(f"--p-enter ({args.p_enter}) must not exceed --p-remove ({args.p_remove}), "
+                        "or selection can cycle")
+    out = Path(args.out)
+    if out.suffix != ".toml":
+        raise UserError(f"--out {out}: an equation file ends in .toml")
+    cands = resolve_candidates(args.candidates)
+    m = load_measured(args.logs, args.vehicle)
+    ref_mass = float(m.inputs.mass[m.usable].mean())
+    res = calibrate(m.inputs, m.power_w, cands, mask=m.usable, p_enter=args.p_enter,
+                    p_remove=args.p_remove, counts=m.counts, reference_mass_kg=ref_mass)
+    name = args.name or out.stem
+    eq = res.to_equation(name, provenance={
+        "logs": m.log.files, "vehicle": m.vehicle.path if m.vehicle else None,
+        "power_source": m.source, "candidates_spec": args.candidates})
+    save_equation(eq, out)
+    print(res.summary())
+    print(f"wrote {out}")
+    if args.report:
+        write_calibration_report(m, eq, res, args.report, args.compare_with)
+        print(f"wrote {Path(args.report) / 'report.md'}")
+    return 0
+
+
+def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
+    """Compare the calibrated equation with classic ones on the calibration samples."""
+    from sumo_drvpw.fit.compare import compare
+    from sumo_drvpw.report.comparison import write_comparison_report
+    from sumo_drvpw.data.measured import resolve_equations
+
+    specs = compare_with or (["vsp_ldv1999"] + (["vsp_spec"] if m.vehicle is not None and m.vehicle.body else []))
+    eqs = [eq] + [e for e in resolve_equations(specs, m.vehicle) if e.name != eq.name]
+    u = m.usable
+    comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],
+                   reference=eq.name)
+    ctx = m.context()
+    ctx["calibration"] = {"equation": eq.name, "terms": eq.terms, "std_err": eq.std_err,
+                          "p_values": eq.p_values, "r2": res.r2, "n": res.n,
+                          "selection_trace": res.trace, "settings": res.settings,
+                          "beta_mass_free": eq.metrics.get("beta_mass_free"),
+                          "reference_mass_kg": res.reference_mass_kg,
+                          "dropped_candidates": [f"{d['term']} dropped: {d['reason']}"
+                                                 for d in res.dropped]}
+    write_comparison_report(comp, out_dir, f"Calibration of {eq.name} against classic VSP", ctx)
+    return comp.to_json()

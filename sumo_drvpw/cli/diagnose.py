@@ -1,0 +1,237 @@
+"""`sumo-drvpw diagnose`: trace the residual of an equation to effects it lacks.
+
+Writes DIR/trace.json (the issue's shape), DIR/trace_details.json (screening, every
+round's best candidates, the test), DIR/trace.md, DIR/final_equation.toml and figures
+(residual against the chosen signal before and after each finding; error against speed
+before and after). See :mod:`sumo_drvpw.fit.diagnose` for the method and the test.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+
+def configure(p):
+    p.add_argument("logs", nargs="+", metavar="LOG", help="drive logs (Parquet/CSV files or folders)")
+    p.add_argument("--vehicle", help="vehicle name or TOML file")
+    p.add_argument("--equation", help="declared equation, name or TOML file (default: calibrate one "
+                                      "on the spot, stepwise on indt-var-1)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--validation", default="auto", choices=("auto", "trip", "blocks"),
+                   help="held-out data: whole trips (needs ≥ 3), contiguous blocks within trips, or "
+                        "auto (trips when ≥ 3, else blocks; default)")
+    p.add_argument("--block-s", type=float, default=60.0, help="block length [s] (default 60)")
+    p.add_argument("--folds", type=int, default=5, help="number of folds K (default 5)")
+    p.add_argument("--alpha", type=float, default=0.05, help="family-wise level of the test per round (default 0.05)")
+    p.add_argument("--min-gain", type=float, default=0.01,
+                   help="minimum relative held-out RMSE gain to accept a finding (default 0.01)")
+    p.add_argument("--max-findings", type=int, default=5, help="stop after this many findings (default 5)")
+    p.add_argument("--signals", help="comma list of glob patterns: offer only these columns")
+    p.add_argument("--exclude", help="comma list of glob patterns: never offer these columns")
+    p.add_argument("--max-nan", type=float, default=0.05,
+                   help="skip columns with more than this fraction of NaN (default 0.05)")
+    p.add_argument("--proxy-corr", type=float, default=0.9,
+                   help="skip columns whose |corr(c·v^k, P)| reaches this: proxies of the target (default 0.9)")
+    p.add_argument("--no-per-trip", action="store_true", help="do not offer per-trip offsets and masses")
+    p.add_argument("--min-speed", type=float, default=0.1, help="leave out samples slower than this [m/s] (default 0.1)")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.add_argument("--quiet", action="store_true", help="no progress messages")
+
+
+def _globs(s):
+    return tuple(x.strip() for x in s.split(",") if x.strip()) if s else ()
+
+
+def options_from_args(args):
+    from sumo_drvpw.fit.diagnose import TraceOptions
+
+    return TraceOptions(validation=args.validation, block_s=args.block_s, folds=args.folds, alpha=args.alpha,
+                        min_gain=args.min_gain, max_findings=args.max_findings, include=_globs(args.signals),
+                        exclude=_globs(args.exclude), max_nan=args.max_nan, proxy_corr=args.proxy_corr,
+                        per_trip=not args.no_per_trip, min_speed_mps=args.min_speed)
+
+
+def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, progress=None, measured=None):
+    """Load, trace and write every output; returns the TraceResult."""
+    from sumo_drvpw.model.equations import load_equation
+    from sumo_drvpw.fit.diagnose import trace
+    from sumo_drvpw.data.measured import load_measured, resolve_equations
+
+    m = measured if measured is not None else load_measured(logs, vehicle)
+    eq = None
+    if equation:
+        eq = resolve_equations([equation], m.vehicle)[0] if equation == "vsp_spec" else load_equation(equation)
+    res = trace(m, eq, opt, progress=progress)
+    write_outputs(res, out, figures=figures)
+    return res
+
+
+def write_outputs(res, out, figures: bool = True) -> None:
+    from sumo_drvpw.model.equations import save_equation
+    from sumo_drvpw.fileio import write_json, write_text
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for old in list(out.glob("finding*_residual_vs_*.png")) + [out / "error_vs_speed.png"]:
+        if old.exists():  # figures of an earlier run in the same folder
+            old.unlink()
+    write_json(out / "trace.json", res.report)
+    write_json(out / "trace_details.json", res.details)
+    save_equation(res.equation, out / "final_equation.toml")
+    figs = _figures(res, out) if figures else []
+    write_text(out / "trace.md", markdown(res, figs))
+
+
+def _fmt(x, nd=4):
+    if isinstance(x, dict):
+        vals = np.array(list(x.values()), float)
+        if len(vals) == 0:
+            return "–"
+        return f"{len(vals)} values, {np.min(vals):.{nd}g} … {np.max(vals):.{nd}g}"
+    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+        return "–"
+    return f"{x:.{nd}g}"
+
+
+def _mrow(name, m):
+    return (f"| {name} | {m['rmse_w']:.1f} | {m['mae_w']:.1f} | {_fmt(m['r2'])} | {_fmt(m['r2_light'])} | "
+            f"{_fmt(m['r2_heavy'])} | {m['bias_w']:.1f} |")
+
+
+def markdown(res, figs) -> str:
+    r, d = res.report, res.details
+    L = [f"# Residual trace: {d['declared_equation']}", "",
+         f"- target: {r['target']}", f"- analysis samples: {r['n_samples']} "
+         f"(rows {d['samples']['rows']}, usable {d['samples']['usable']}, trips {d['samples']['trips']}, "
+         f"blocks {d['samples']['blocks']})",
+         f"- validation: {r['validation']}", f"- test: {d['test']}",
+         f"- declared equation {'calibrated on the spot (stepwise, indt-var-1)' if d['calibrated_on_the_spot'] else 'given'}; "
+         "its terms are kept and their coefficients refitted on each training fold",
+         f"- signals offered ({len(d['signals_offered'])}): {', '.join(d['signals_offered']) or 'none'}",
+         f"- candidates scored (all rounds): {d['candidates_scored']}", "",
+         "## Error on held-out data (W)", "",
+         "| model | RMSE | MAE | R² | R² light | R² heavy | bias |", "|---|---|---|---|---|---|---|",
+         _mrow("baseline", r["baseline"]["metrics"])]
+    for i, f in enumerate(r["findings"], 1):
+        L.append(_mrow(f"+ finding {i}: `{f['term']}`", f["metrics_after"]))
+    L += ["", "## Findings", ""]
+    if not r["findings"]:
+        L.append("None: no candidate improved the held-out error significantly. The declared terms "
+                 "explain what these data can tell apart.")
+    for i, f in enumerate(r["findings"], 1):
+        gain = 1 - f["metrics_after"]["rmse_w"] / f["metrics_before"]["rmse_w"]
+        L += [f"{i}. **{f['effect']}** — term `{f['term']}`, signals: {', '.join(f['signals']) or 'speed only'}; "
+              f"coefficient {_fmt(f['coefficient'])} ± {_fmt(f['std_err'])} (s.e.), held-out test p = {f['p_value']:.3g} "
+              f"(Bonferroni), energy share {100 * f['energy_share']:.2f} %; held-out RMSE "
+              f"{f['metrics_before']['rmse_w']:.1f} → {f['metrics_after']['rmse_w']:.1f} W ({100 * gain:.2f} %)."]
+    L += ["", "## Rounds (best candidates by held-out RMSE gain)", ""]
+    for rd in d["rounds"]:
+        L.append(f"Round {rd['round']}: {rd['candidates_scored']} candidates scored; "
+                 f"{'added' if rd['accepted'] else 'nothing added'} (best `{rd['best']}`, gain "
+                 f"{100 * rd['rmse_gain']:.2f} %, p·m = {rd['p_value_bonferroni']:.3g}).")
+        L += ["", "| candidate | RMSE gain % | p (Bonferroni) |", "|---|---|---|"]
+        for t in rd["top"][:6]:
+            L.append(f"| `{t['term']}` | {100 * t['rmse_gain']:.2f} | {t['p_value_bonferroni']:.3g} |")
+        L.append("")
+    L += ["## Final equation", "", "| term | coefficient |", "|---|---|"]
+    for t, c in r["final"]["coefficients"].items():
+        L.append(f"| `{t}` | {c:.6g} |")
+    L += ["", "## Columns not offered", "", "| column | reason |", "|---|---|"]
+    for s in d["signals_skipped"]:
+        L.append(f"| {s['column']} | {s['reason']} |")
+    if figs:
+        L += ["", "## Figures", ""] + [f"![{Path(p).stem}]({Path(p).name})" for p in figs]
+    return "\n".join(L) + "\n"
+
+
+def _binned(xv, yv, nb=20, quantile=True):
+    ok = np.isfinite(xv) & np.isfinite(yv)
+    xv, yv = xv[ok], yv[ok]
+    if len(np.unique(xv)) <= 2:
+        edges = np.unique(xv)
+        cx = edges
+        mean = np.array([yv[xv == e].mean() for e in edges])
+        rms = np.array([np.sqrt(np.mean(yv[xv == e] ** 2)) for e in edges])
+        return cx, mean, rms
+    edges = np.unique(np.quantile(xv, np.linspace(0, 1, nb + 1))) if quantile else np.linspace(xv.min(), xv.max(), nb + 1)
+    k = np.clip(np.searchsorted(edges, xv, side="right") - 1, 0, len(edges) - 2)
+    cnt = np.bincount(k, minlength=len(edges) - 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cx = np.bincount(k, xv, len(edges) - 1) / cnt
+        mean = np.bincount(k, yv, len(edges) - 1) / cnt
+        rms = np.sqrt(np.bincount(k, yv * yv, len(edges) - 1) / cnt)
+    return cx, mean, rms
+
+
+def _figures(res, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sumo_drvpw.fileio import write_figure
+
+    p = res.plot
+    y, v = p["y"], p["v"]
+    rng = np.random.default_rng(0)
+    sub = rng.choice(len(y), size=min(len(y), 20000), replace=False)
+    files = []
+    for i, f in enumerate(p["findings"], 1):
+        c = f["cand"]
+        if c.signals:
+            xs, label = p["signals"][c.signals[0]], c.signals[0]
+        else:
+            xs, label = v * 3.6, "speed [km/h]"
+        fig, ax = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+        for a, key, title in ((ax[0], "before", "before"), (ax[1], "after", "after")):
+            resid = y - f[key]
+            a.scatter(xs[sub], resid[sub], s=2, alpha=0.15, color="0.5", rasterized=True)
+            cx, mean, _ = _binned(xs, resid)
+            a.plot(cx, mean, "o-", color="C3", label="binned mean")
+            a.axhline(0, color="k", lw=0.8)
+            a.set_title(f"{title} `{c.term}`")
+            a.set_xlabel(label)
+            lo, hi = np.percentile(resid, [1, 99])
+            a.set_ylim(lo * 1.2, hi * 1.2)
+        ax[0].set_ylabel("held-out residual, measured − predicted [W]")
+        ax[0].legend()
+        name = f"finding{i}_residual_vs_{''.join(ch if ch.isalnum() else '_' for ch in label)}.png"
+        write_figure(out / name, fig)
+        files.append(str(out / name))
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    for key, lab, col in (("pred_base", "baseline", "C0"), ("pred_final", "final", "C2")):
+        err = p[key] - y
+        cx, mean, rms = _binned(v * 3.6, err, nb=16, quantile=False)
+        ax[0].plot(cx, mean, "o-", color=col, label=lab)
+        ax[1].plot(cx, rms, "o-", color=col, label=lab)
+    ax[0].axhline(0, color="k", lw=0.8)
+    ax[0].set_ylabel("mean error, predicted − measured [W]")
+    ax[1].set_ylabel("RMS error [W]")
+    for a in ax:
+        a.set_xlabel("speed [km/h]")
+        a.legend()
+    fig.suptitle("held-out error against speed, before and after")
+    write_figure(out / "error_vs_speed.png", fig)
+    files.append(str(out / "error_vs_speed.png"))
+    return files
+
+
+def main(args) -> int:
+    import sys
+
+    opt = options_from_args(args)
+    opt.check()
+    progress = None if args.quiet else (lambda s: print(s, file=sys.stderr))
+    res = run(args.logs, args.vehicle, args.equation, args.out, opt, figures=not args.no_figures,
+              progress=progress)
+    r = res.report
+    print(f"baseline held-out RMSE {r['baseline']['metrics']['rmse_w']:.1f} W; "
+          f"{len(r['findings'])} finding(s)")
+    for f in r["findings"]:
+        print(f"  + {f['term']}: {f['effect']} (RMSE {f['metrics_before']['rmse_w']:.1f} → "
+              f"{f['metrics_after']['rmse_w']:.1f} W, energy share {100 * f['energy_share']:.2f} %)")
+    print(f"final held-out RMSE {r['final']['metrics']['rmse_w']:.1f} W; wrote {Path(args.out) / 'trace.json'}")
+    return 0

@@ -1,0 +1,73 @@
+"""``sumo-drvpw import FORMAT SRC... --out LOG.parquet [--columns mapping.toml]``.
+
+Converts vendor logs to one canonical drive log (Parquet), prints kept/dropped samples per
+reason and per file, and stores that report as JSON in the Parquet schema metadata under
+the key ``sumo_drvpw.import``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.data.adapters import FORMATS, read
+
+META_KEY = b"sumo_drvpw.import"
+
+
+def configure(parser) -> None:
+    parser.add_argument("format", metavar="FORMAT", help="one of: " + ", ".join(FORMATS))
+    parser.add_argument("src", metavar="SRC", nargs="+", help="vendor files or folders")
+    parser.add_argument("--out", required=True, metavar="LOG.parquet",
+                        help="canonical drive log to write (Parquet)")
+    parser.add_argument("--columns", metavar="mapping.toml",
+                        help="column mapping (format 'columns' only)")
+
+
+def format_report(report: dict) -> str:
+    """Human-readable kept/dropped table: one line per file, then the totals."""
+    lines = [f"import {report['format']}: {len(report['files'])} file(s)"]
+    for r in report["files"]:
+        d = ", ".join(f"{k} {n}" for k, n in r["dropped"].items()) or "none"
+        lines.append(f"  {Path(r['file']).name}: read {r['rows_read']}, kept {r['kept']}, dropped: {d}")
+        lines += [f"      note: {n}" for n in r["notes"]]
+    d = ", ".join(f"{k} {n}" for k, n in report["dropped"].items()) or "none"
+    lines.append(f"total: read {report['rows_read']}, kept {report['kept']}, dropped: {d}")
+    lines += [f"note: {n}" for n in report["notes"]]
+    return "\n".join(lines)
+
+
+def write_log(df, report: dict, out) -> None:
+    """Write the canonical log atomically with the import report in the schema metadata."""
+    import pyarrow as pa
+
+    from sumo_drvpw.fileio import _clean, write_parquet
+
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    meta = dict(table.schema.metadata or {})
+    meta[META_KEY] = json.dumps(_clean(report)).encode("utf-8")
+    write_parquet(out, table.replace_schema_metadata(meta))
+
+
+def read_report(path) -> dict:
+    """The import report stored in a canonical log written by ``sumo-drvpw import``."""
+    import pyarrow.parquet as pq
+
+    meta = pq.read_schema(path).metadata or {}
+    if META_KEY not in meta:
+        raise UserError(f"{path}: no '{META_KEY.decode()}' metadata (not written by sumo-drvpw import)")
+    return json.loads(meta[META_KEY])
+
+
+def main(args) -> int:
+    out = Path(args.out)
+    if out.suffix.lower() != ".parquet":
+        raise UserError(f"--out {out}: must end in .parquet")
+    df, report = read(args.format, args.src, columns=args.columns)
+    report["out"] = str(out)
+    write_log(df, report, out)
+    print(format_report(report))
+    print(f"wrote {out} ({len(df)} samples, {df['trip_id'].nunique()} trip(s), "
+          f"{df.shape[1]} columns)")
+    return 0

@@ -1,0 +1,1 @@
+"""Drive logs in: the canonical drive log, measured power, the one loader, vendor adapters."""

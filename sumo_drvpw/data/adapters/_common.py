@@ -1,0 +1,274 @@
+"""Shared helpers of the adapters: unit table, strict numeric parsing, time cleaning, reports.
+
+Every adapter turns one vendor file into a canonical frame (SI, names of
+../shared/spec/drive-log.md) and a per-file report of kept and dropped samples.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.model.constants import FT, G, GAL, HP, KELVIN, KMH, LB, LBF, MILE, MPH, RPM
+from sumo_drvpw.errors import UserError
+
+#: Canonical columns in the order of the spec; everything else is an extra column.
+CANONICAL = (
+    "trip_id", "time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "elevation_m",
+    "wind_mps", "airspeed_mps", "air_density_kgm3", "ambient_c", "pressure_kpa", "mass_kg",
+    "brake", "reverse", "power_w", "motor_torque_nm", "motor_speed_rpm", "battery_voltage_v",
+    "battery_current_a", "ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm", "mg2_speed_rpm",
+    "mg2_torque_nm",
+)
+
+#: dimension → suffix of the column name that holds it in the canonical unit
+DIMENSIONS = {
+    "speed": "mps", "length": "m", "time": "s", "temperature": "c", "rotational_speed": "rpm",
+    "power": "w", "force": "n", "torque": "nm", "mass": "kg", "acceleration": "mps2",
+    "pressure": "kpa", "voltage": "v", "current": "a", "percent": "pct", "angle": "rad",
+    "energy": "j", "volume_flow": "lph", "density": "kgm3", "dimensionless": "",
+}
+
+#: unit spelling → (dimension, factor, offset): value_canonical = value · factor + offset.
+#: Canonical units: m/s, m, s, °C, rpm, W, N, N·m, kg, m/s², kPa, V, A, %, rad, J, l/h, kg/m³.
+UNITS: dict[str, tuple[str, float, float]] = {}
+
+
+def _u(dimension: str, factor: float, offset: float, *names: str) -> None:
+    for n in names:
+        UNITS[n.lower()] = (dimension, factor, offset)
+
+
+_u("speed", 1.0, 0.0, "m/s", "mps", "meters-second", "m s-1")
+_u("speed", KMH, 0.0, "km/h", "kmh", "kph", "km/hr")
+_u("speed", MPH, 0.0, "mph", "mi/h")
+_u("speed", FT, 0.0, "ft/s", "fps")
+_u("length", 1.0, 0.0, "m", "meter", "metre")
+_u("length", 1000.0, 0.0, "km")
+_u("length", FT, 0.0, "ft", "feet")
+_u("length", MILE, 0.0, "mi", "mile", "miles")
+_u("time", 1.0, 0.0, "s", "sec")
+_u("time", 1e-3, 0.0, "ms")
+_u("time", 1e-6, 0.0, "us")
+_u("time", 60.0, 0.0, "min")
+_u("time", 3600.0, 0.0, "h", "hr")
+_u("temperature", 1.0, 0.0, "°c", "degc", "c", "celsius")
+_u("temperature", 5.0 / 9.0, -32.0 * 5.0 / 9.0, "°f", "degf", "f", "fahrenheit")
+_u("temperature", 1.0, -KELVIN, "k", "kelvin")
+_u("rotational_speed", 1.0, 0.0, "rpm", "1/min", "min-1")
+_u("rotational_speed", 1.0 / RPM, 0.0, "rad/s")
+_u("power", 1.0, 0.0, "w")
+_u("power", 1000.0, 0.0, "kw")
+_u("power", HP, 0.0, "hp")
+_u("force", 1.0, 0.0, "n")
+_u("force", 1000.0, 0.0, "kn")
+_u("force", LBF, 0.0, "lbf")
+_u("torque", 1.0, 0.0, "nm", "n·m", "n.m", "n m")
+_u("torque", LBF * FT, 0.0, "lbf·ft", "lbf.ft", "lbf ft", "lb-ft", "ft-lb", "ft·lbf")
+_u("mass", 1.0, 0.0, "kg")
+_u("mass", 1000.0, 0.0, "t")
+_u("mass", LB, 0.0, "lb", "lbs")
+_u("acceleration", 1.0, 0.0, "m/s^2", "m/s²", "m/s2", "mps2")
+_u("acceleration", G, 0.0, "g")
+_u("pressure", 1.0, 0.0, "kpa")
+_u("pressure", 1e-3, 0.0, "pa")
+_u("pressure", 0.1, 0.0, "hpa", "mbar")
+_u("pressure", 100.0, 0.0, "bar")
+_u("pressure", LBF / (FT / 12.0) ** 2 / 1000.0, 0.0, "psi")
+_u("voltage", 1.0, 0.0, "v", "volt")
+_u("voltage", 1e-3, 0.0, "mv")
+_u("current", 1.0, 0.0, "a", "amp", "ampere")
+_u("current", 1e-3, 0.0, "ma")
+_u("percent", 1.0, 0.0, "%", "pct", "percent")
+_u("angle", 1.0, 0.0, "rad")
+_u("angle", math.pi / 180.0, 0.0, "deg", "°", "degree", "degrees")
+_u("energy", 1.0, 0.0, "j")
+_u("energy", 1000.0, 0.0, "kj")
+_u("energy", 3600.0, 0.0, "wh")
+_u("energy", 3.6e6, 0.0, "kwh")
+_u("volume_flow", 1.0, 0.0, "l/h", "lph")
+_u("volume_flow", GAL * 1000.0, 0.0, "gal/h", "gal-hr", "gph")
+_u("density", 1.0, 0.0, "kg/m3", "kg/m^3", "kg/m³")
+_u("dimensionless", 1.0, 0.0, "", "-", "1", "bool", "text")
+
+
+def lookup_unit(unit: str):
+    """(dimension, factor, offset) of a unit spelling, or None when unknown."""
+    return UNITS.get(unit.strip().lower().replace("Â", ""))
+
+
+def snake(name: str) -> str:
+    """A clean snake_case identifier from a vendor label ('Heating Power CAN' → 'heating_power_can')."""
+    s = re.sub(r"[^0-9a-zA-Z]+", "_", name.replace("Â", "")).strip("_").lower()
+    return s or "column"
+
+
+_HEADER = re.compile(r"^(?P<name>.*?)\s*[\[(](?P<unit>[^\[\]()]*)[\])]\s*$")
+
+
+def split_header(label: str) -> tuple[str, str]:
+    """Split 'Velocity [km/h]' or 'Engine RPM(rpm)' into ('Velocity', 'km/h'); no unit → ''."""
+    m = _HEADER.match(label.strip())
+    if not m:
+        return label.strip(), ""
+    return m.group("name").strip(), m.group("unit").strip()
+
+
+def generic_name(label: str, notes: list | None = None) -> tuple[str, float, float]:
+    """Extra-column name with canonical unit suffix, and the (factor, offset) to convert to it."""
+    name, unit = split_header(label)
+    u = lookup_unit(unit)
+    if u is None:
+        if notes is not None:
+            notes.append(f"column '{label}': unit '{unit}' unknown, kept unconverted")
+        return f"{snake(name)}_{snake(unit)}", 1.0, 0.0
+    dim, f, o = u
+    suffix = DIMENSIONS[dim]
+    if dim == "angle":  # angles from loggers are positions (lat/lon, bearing): keep degrees
+        return f"{snake(name)}_deg", f * 180.0 / math.pi, 0.0
+    return (f"{snake(name)}_{suffix}" if suffix else snake(name)), f, o
+
+
+def unique_names(names: list[str]) -> list[str]:
+    """Make names unique by appending _2, _3, … to repeats (vendor files repeat labels)."""
+    seen: dict[str, int] = {}
+    out = []
+    for n in names:
+        k = seen.get(n, 0) + 1
+        seen[n] = k
+        out.append(n if k == 1 else f"{n}_{k}")
+    return out
+
+
+def numeric(series: pd.Series, file, column: str, na_tokens=("-", "")) -> pd.Series:
+    """Float column from a vendor column; tokens in na_tokens become NaN, anything else non-numeric is a UserError."""
+    if pd.api.types.is_bool_dtype(series):
+        return series.astype(float)
+    if pd.api.types.is_numeric_dtype(series):
+        return series.astype(float)
+    s = series.astype(object)
+    is_na = s.isna() | s.map(lambda x: isinstance(x, str) and x.strip() in na_tokens)
+    conv = pd.to_numeric(s.where(~is_na, np.nan), errors="coerce")
+    bad = conv.isna() & ~is_na
+    if bad.any():
+        i = int(np.flatnonzero(bad.to_numpy())[0])
+        raise UserError(f"{file}: column '{column}' is not numeric: data row {i} holds "
+                        f"{s.iloc[i]!r}")
+    return conv.astype(float)
+
+
+def read_csv_strict(path: Path, **kw) -> pd.DataFrame:
+    """pandas.read_csv with empty or undecodable files turned into a UserError naming the file."""
+    try:
+        df = pd.read_csv(path, **kw)
+    except pd.errors.EmptyDataError:
+        raise UserError(f"{path}: file is empty") from None
+    except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as e:
+        raise UserError(f"{path}: cannot be read as CSV ({kw.get('sep', ',')!r}-separated, "
+                        f"{kw.get('encoding', 'utf-8')}): {str(e).splitlines()[0]}") from None
+    if len(df) == 0:
+        raise UserError(f"{path}: no data rows")
+    return df
+
+
+def new_report(path: Path, trip_id: str, rows: int) -> dict:
+    """Per-file report: rows read, kept, dropped per reason, notes."""
+    return {"file": str(path), "trip_id": trip_id, "rows_read": int(rows), "kept": 0,
+            "dropped": {}, "notes": []}
+
+
+def drop(df: pd.DataFrame, mask, reason: str, report: dict) -> pd.DataFrame:
+    """Remove rows where mask is True and count them under reason."""
+    mask = np.asarray(mask, dtype=bool)
+    n = int(mask.sum())
+    if n:
+        report["dropped"][reason] = report["dropped"].get(reason, 0) + n
+        df = df.loc[~mask]
+    return df
+
+
+def clean_time_and_speed(df: pd.DataFrame, path, report: dict) -> pd.DataFrame:
+    """Drop NaN time/speed and samples whose time does not increase; check speed is plausible.
+
+    A sample whose time equals the latest kept time is a 'duplicate timestamp' (the first
+    one is kept); one whose time is earlier is 'time going backwards'. Speed must be in
+    [0, 100] m/s after conversion, else a UserError names file and row (wrong unit).
+    """
+    df = drop(df, df["time_s"].isna(), "NaN time", report)
+    df = drop(df, df["speed_mps"].isna(), "NaN speed", report)
+    t = df["time_s"].to_numpy(float)
+    prev_max = np.concatenate([[-np.inf], np.maximum.accumulate(t)[:-1]])
+    df = drop(df, t == prev_max, "duplicate timestamp", report)
+    t = df["time_s"].to_numpy(float)
+    prev_max = np.concatenate([[-np.inf], np.maximum.accumulate(t)[:-1]])
+    back = t < prev_max
+    df = drop(df, back, "time going backwards", report)
+    v = df["speed_mps"].to_numpy(float)
+    bad = (v < -0.01) | (v > 100.0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"{path}: speed {v[i]:.3g} m/s at data row {df.index[i]} is outside "
+                        "[0, 100] m/s: wrong unit or sign?")
+    df = df.copy()
+    df["speed_mps"] = np.clip(v, 0.0, None)
+    report["kept"] = int(len(df))
+    if len(df) == 0:
+        raise UserError(f"{path}: no sample left after dropping {report['dropped']}")
+    return df
+
+
+def order_columns(df: pd.DataFrame) -> pd.DataFrame:
+    """Canonical columns first in spec order, extras after in vendor order."""
+    first = [c for c in CANONICAL if c in df.columns]
+    return df[first + [c for c in df.columns if c not in first]]
+
+
+def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=()) -> tuple:
+    """Concatenate per-file frames and build the import report (totals + per file)."""
+    if not frames:
+        raise UserError(f"{fmt}: no input files")
+    ids = [r["trip_id"] for r in reports]
+    dup = sorted({i for i in ids if ids.count(i) > 1})
+    if dup:
+        raise UserError(f"{fmt}: trip_id {dup[0]!r} comes from more than one file: "
+                        + ", ".join(r["file"] for r in reports if r["trip_id"] == dup[0]))
+    df = pd.concat(frames, ignore_index=True, sort=False)
+    df = order_columns(df)
+    dropped: dict[str, int] = {}
+    for r in reports:
+        for k, n in r["dropped"].items():
+            dropped[k] = dropped.get(k, 0) + n
+    report = {"format": fmt, "files": reports, "rows_read": sum(r["rows_read"] for r in reports),
+              "kept": int(len(df)), "dropped": dropped, "notes": list(notes),
+              "columns": list(df.columns)}
+    return df, report
+
+
+def read_each(files, read_one) -> tuple[list, list]:
+    """Read every file with ``read_one(path) → (frame, report)``: (frames, reports)."""
+    pairs = [read_one(f) for f in files]
+    return [df for df, _ in pairs], [rep for _, rep in pairs]
+
+
+def expand_paths(paths, suffixes: tuple[str, ...], what: str) -> list[Path]:
+    """Files from a list of files and folders (folders: every file with one of suffixes, sorted)."""
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in suffixes)
+            if not found:
+                raise UserError(f"{p}: folder holds no {what} file ({', '.join(suffixes)})")
+            out.extend(found)
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise UserError(f"{p}: no such file or folder")
+    if not out:
+        raise UserError(f"no {what} input given")
+    return out

@@ -1,0 +1,200 @@
+"""Generic adapter (``columns``): any CSV/Parquet log through a user's mapping TOML.
+
+Mapping file::
+
+    [options]                 # all optional
+    sep = ";"                 # CSV separator (default ",")
+    encoding = "latin-1"      # CSV encoding (default "utf-8")
+    decimal = ","             # CSV decimal mark (default ".")
+    time_unit = "ms"          # unit of the time column when its entry has none (default "s");
+                              # "datetime" parses timestamps (time_format = "%Y-%m-%d %H:%M:%S")
+    na_values = ["-", "N/A"]  # cells read as missing
+    keep_unmapped = true      # keep other columns as snake_case extras (default true)
+
+    [columns."Speed"]         # source column label
+    name = "speed_mps"        # canonical or extra name; the suffix must fit the unit
+    unit = "km/h"             # converted to SI (see _common.UNITS)
+    scale = -1                # optional extra factor (e.g. flip a current's sign)
+
+    [columns."Trip"]
+    name = "trip_id"          # text; without it trip_id = file stem
+
+``time_s`` and ``speed_mps`` must be mapped. Units: m/s km/h mph ft/s · m km ft mi ·
+s ms min h · °C °F K · rpm rad/s · W kW hp · N kN lbf · Nm lbf·ft · kg t lb · m/s² g ·
+kPa Pa hPa bar psi · V mV · A mA · % · rad deg · J kJ Wh kWh · l/h gal/h · "" (none).
+Temperatures go to °C (``_c``), rotational speeds to rpm (``_rpm``), angles to rad
+(``_rad``) unless the name ends in ``_deg``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fileio import read_toml
+from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, clean_time_and_speed, expand_paths, generic_name,
+                      lookup_unit, new_report, numeric, read_csv_strict, read_each, unique_names)
+
+FORMAT = "columns"
+SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
+OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped"}
+ENTRY = {"name", "unit", "scale"}
+SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
+
+
+def load_mapping(path) -> dict:
+    """Read and check a mapping TOML; every problem is a UserError naming the file and key."""
+    p = Path(path)
+    doc = read_toml(p, "--columns mapping")
+    opts = doc.get("options", {})
+    if not isinstance(opts, dict):
+        raise UserError(f"{p}: [options] must be a table")
+    for k in opts:
+        if k not in OPTIONS:
+            raise UserError(f"{p}: unknown option 'options.{k}' (known: {', '.join(sorted(OPTIONS))})")
+    cols = doc.get("columns")
+    if not isinstance(cols, dict) or not cols:
+        raise UserError(f"{p}: no [columns.\"<source label>\"] table")
+    time_unit = str(opts.get("time_unit", "s"))
+    entries = {}
+    for label, e in cols.items():
+        key = f"columns.{label!r}" if not label.isidentifier() else f"columns.{label}"
+        if not isinstance(e, dict) or "name" not in e:
+            raise UserError(f"{p}: {key} needs a table with 'name' (and 'unit')")
+        for k in e:
+            if k not in ENTRY:
+                raise UserError(f"{p}: {key}.{k} is not one of {', '.join(sorted(ENTRY))}")
+        name = str(e["name"])
+        unit = str(e.get("unit", time_unit if name == "time_s" else ""))
+        scale = e.get("scale", 1.0)
+        if not isinstance(scale, (int, float)) or isinstance(scale, bool) or not math.isfinite(scale):
+            raise UserError(f"{p}: {key}.scale must be a number, got {scale!r}")
+        entries[label] = _entry(p, key, name, unit, float(scale))
+    names = [e["name"] for e in entries.values()]
+    for need in ("time_s", "speed_mps"):
+        if need not in names:
+            raise UserError(f"{p}: no source column is mapped to '{need}' (required)")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise UserError(f"{p}: more than one source column is mapped to '{dup[0]}'")
+    na = opts.get("na_values", ["-", ""])
+    if isinstance(na, str):
+        na = [na]
+    return {"path": p, "sep": str(opts.get("sep", ",")), "encoding": str(opts.get("encoding", "utf-8")),
+            "decimal": str(opts.get("decimal", ".")), "time_format": opts.get("time_format"),
+            "na_values": [str(x) for x in na], "keep_unmapped": bool(opts.get("keep_unmapped", True)),
+            "columns": entries}
+
+
+def _entry(p, key, name, unit, scale) -> dict:
+    """Conversion of one mapped column: (kind, factor, offset) checked against the name's suffix."""
+    if name == "trip_id":
+        return {"name": name, "kind": "text", "factor": 1.0, "offset": 0.0}
+    if name == "time_s" and unit.strip().lower() == "datetime":
+        return {"name": name, "kind": "datetime", "factor": 1.0, "offset": 0.0}
+    u = lookup_unit(unit)
+    if u is None:
+        raise UserError(f"{p}: {key}.unit '{unit}' is not a known unit (e.g. km/h, mph, m/s, ft, "
+                        "°F, K, rpm, kW, lbf, …)")
+    dim, f, o = u
+    if unit.strip().lower() == "text":
+        return {"name": name, "kind": "text", "factor": 1.0, "offset": 0.0}
+    suffix = name.rsplit("_", 1)[-1] if "_" in name else ""
+    if dim == "angle" and suffix == "deg":
+        f = f * 180.0 / math.pi
+    elif suffix in SUFFIX_DIM and dim != "dimensionless" and SUFFIX_DIM[suffix] != dim:
+        raise UserError(f"{p}: {key}: unit '{unit}' is a {dim}, but name '{name}' ends in "
+                        f"'_{suffix}' ({SUFFIX_DIM[suffix]}); use a name ending in '_{DIMENSIONS[dim]}'")
+    elif name in CANONICAL and dim == "dimensionless" and suffix in SUFFIX_DIM:
+        raise UserError(f"{p}: {key}: '{name}' needs a {SUFFIX_DIM[suffix]} unit, got '{unit}'")
+    return {"name": name, "kind": "number", "factor": f * scale, "offset": o * scale}
+
+
+def _read_table(path: Path, m: dict) -> pd.DataFrame:
+    if path.suffix.lower() in (".parquet", ".pq"):
+        try:
+            df = pd.read_parquet(path)
+        except Exception as e:
+            raise UserError(f"{path}: cannot be read as Parquet: {str(e).splitlines()[0]}") from None
+        if len(df) == 0:
+            raise UserError(f"{path}: no data rows")
+        return df
+    return read_csv_strict(path, sep=m["sep"], encoding=m["encoding"], decimal=m["decimal"],
+                           dtype=str, keep_default_na=False, na_filter=False)
+
+
+def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
+    """One CSV/Parquet file through the mapping → canonical frame and report."""
+    raw = _read_table(path, m)
+    raw.columns = [str(c).strip() for c in raw.columns]
+    rep = new_report(path, path.stem, len(raw))
+    for label in m["columns"]:
+        if label not in raw.columns:
+            hint = (f" (only one column '{raw.columns[0][:40]}': wrong sep {m['sep']!r}?)"
+                    if raw.shape[1] == 1 else "")
+            raise UserError(f"{path}: missing column '{label}' named in {m['path']}{hint}")
+    na = tuple(m["na_values"])
+    out: dict[str, pd.Series] = {}
+    comma = m["decimal"] != "." and path.suffix.lower() not in (".parquet", ".pq")
+    for label in raw.columns:
+        s = raw[label]
+        if comma:  # CSV read as text (exact cells for error messages): apply the decimal mark here
+            s = s.astype(str).str.replace(m["decimal"], ".", regex=False)
+        e = m["columns"].get(label)
+        if e is None:
+            if not m["keep_unmapped"]:
+                continue
+            name, f, o = generic_name(label, rep["notes"])
+            try:
+                out[name] = numeric(s, path, label, na) * f + o
+            except UserError:
+                out[name] = raw[label].astype(str)  # text extra (e.g. a date or a mode label)
+            continue
+        if e["kind"] == "text":
+            out[e["name"]] = raw[label].astype(str).str.strip()
+        elif e["kind"] == "datetime":
+            s = raw[label]
+            t = pd.to_datetime(s, format=m["time_format"], errors="coerce")
+            bad = t.isna() & ~s.astype(str).str.strip().isin(na)
+            if bad.any():
+                i = int(np.flatnonzero(bad.to_numpy())[0])
+                raise UserError(f"{path}: column '{label}' data row {i} holds {s.iloc[i]!r}: "
+                                "not a date/time")
+            out["time_s"] = (t - t.min()).dt.total_seconds()
+        else:
+            out[e["name"]] = numeric(s, path, label, na) * e["factor"] + e["offset"]
+    names = unique_names(list(out))
+    df = pd.DataFrame(dict(zip(names, out.values())), index=raw.index)
+    if "trip_id" in df:
+        return _split_trips(df, path, rep)
+    df = clean_time_and_speed(df, path, rep)
+    df.insert(0, "trip_id", path.stem)
+    return df.reset_index(drop=True), rep
+
+
+def _split_trips(df, path, rep):
+    """Clean time per trip when the file carries its own trip_id column."""
+    parts = []
+    for trip, g in df.groupby("trip_id", sort=False):
+        sub = new_report(path, str(trip), len(g))
+        parts.append(clean_time_and_speed(g, f"{path} (trip {trip})", sub))
+        for k, n in sub["dropped"].items():
+            rep["dropped"][k] = rep["dropped"].get(k, 0) + n
+    out = pd.concat(parts)
+    rep["kept"] = int(len(out))
+    rep["trip_id"] = ",".join(map(str, out["trip_id"].unique()))
+    return out.reset_index(drop=True), rep
+
+
+def read(paths, columns):
+    """Read CSV/Parquet files through the mapping TOML ``columns``."""
+    if columns is None:
+        raise UserError("format 'columns' needs a mapping file: --columns mapping.toml")
+    m = load_mapping(columns)
+    frames, reports = read_each(expand_paths(paths, SUFFIXES, "CSV/Parquet"),
+                                lambda f: read_file(f, m))
+    return frames, reports, [f"mapping {m['path']}"]

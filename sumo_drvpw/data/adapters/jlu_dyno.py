@@ -1,0 +1,96 @@
+"""Adapter for the JLU chassis-dynamometer tests of a BEV (``jlu-dyno``).
+
+Source: Yuan et al., Patterns 5(4) 2024, repository MOTIVES-LAB/generalized-energy-
+consumption-evaluation-for-ev (xlsx converted to Parquet, values unchanged). One Parquet
+file per test, 20 Hz; columns Time (timestamp), PhaseTime [s], DAScheduleSpeed and
+DAActualSpeed [km/h], REESSCurrent/REESSCurrent2 [A], REESSVoltage/REESSVoltage2 [V].
+
+Mapping: PhaseTime → ``time_s``; DAActualSpeed → ``speed_mps``; DAScheduleSpeed →
+``schedule_speed_mps``; REESSVoltage → ``battery_voltage_v``; REESSCurrent →
+``battery_current_a`` with the sign flipped (logged negative when discharging; canonical
+positive when discharging, as declared in ``sumo_drvpw/model/builtin/vehicles/jlu_bev.toml``);
+REESSCurrent2/REESSVoltage2 (a second, unexplained channel) kept as ``reess_current2_a``
+and ``reess_voltage2_v`` as logged; Time → ``clock_s`` (Unix seconds). A dynamometer has
+no slope: ``grade_rad`` = 0; ``mass_kg`` = the test mass of jlu_bev.toml (1919 kg).
+trip_id = file stem; ``cycle`` = the test's cycle name (UDDS, CS_110, Artemis_rural, …).
+
+PhaseTime stops at the schedule's end while the logger runs on: those tail samples are
+dropped as 'time going backwards' / 'duplicate timestamp'.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pandas as pd
+
+from sumo_drvpw.model.constants import KMH
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.data.adapters._common import clean_time_and_speed, generic_name, new_report, numeric, unique_names
+
+FORMAT = "jlu-dyno"
+SUFFIXES = (".parquet",)
+VEHICLE = "jlu_bev"
+
+#: vendor column → (name, factor)
+NAMES = {
+    "PhaseTime": ("time_s", 1.0),
+    "DAActualSpeed": ("speed_mps", KMH),
+    "DAScheduleSpeed": ("schedule_speed_mps", KMH),
+    "REESSVoltage": ("battery_voltage_v", 1.0),
+    "REESSCurrent": ("battery_current_a", -1.0),
+    "REESSVoltage2": ("reess_voltage2_v", 1.0),
+    "REESSCurrent2": ("reess_current2_a", 1.0),
+}
+REQUIRED = ("PhaseTime", "DAActualSpeed", "REESSVoltage", "REESSCurrent")
+
+
+def cycle_name(stem: str) -> str:
+    """Cycle of a test from its file name: 'WLTC_CADC_JC08_CSS__07_Artemis_rural_1' → 'Artemis_rural'."""
+    tail = stem.split("__", 1)[-1]
+    tail = re.sub(r"^\d+_", "", tail)
+    return re.sub(r"_0?[1-9]$", "", tail) or stem  # repetition index _1, _01, _2 …
+
+
+def read_file(path: Path, vehicle) -> tuple[pd.DataFrame, dict]:
+    """One dynamometer Parquet file → canonical frame and report."""
+    try:
+        raw = pd.read_parquet(path)
+    except Exception as e:  # pyarrow raises several types for broken files
+        raise UserError(f"{path}: cannot be read as Parquet: {str(e).splitlines()[0]}") from None
+    trip = path.stem
+    rep = new_report(path, trip, len(raw))
+    if len(raw) == 0:
+        raise UserError(f"{path}: no data rows")
+    for k in REQUIRED:
+        if k not in raw.columns:
+            raise UserError(f"{path}: missing column '{k}'; found {', '.join(map(str, raw.columns))}")
+    names, cols = [], []
+    for c in raw.columns:
+        s = raw[c]
+        if c == "Time" and pd.api.types.is_datetime64_any_dtype(s):
+            names.append("clock_s")
+            cols.append((s - pd.Timestamp("1970-01-01")).dt.total_seconds())
+            continue
+        name, f, o = (NAMES[c] + (0.0,)) if c in NAMES else generic_name(str(c), rep["notes"])
+        names.append(name)
+        cols.append(numeric(s, path, str(c)) * f + o)
+    df = pd.DataFrame(dict(zip(unique_names(names), cols)), index=raw.index)
+    df = clean_time_and_speed(df, path, rep)
+    df["grade_rad"] = 0.0
+    df["mass_kg"] = vehicle.mass_kg
+    df.insert(0, "trip_id", trip)
+    df["cycle"] = cycle_name(trip)
+    return df.reset_index(drop=True), rep
+
+
+def read(paths):
+    """Read JLU dynamometer tests (files or folders of .parquet)."""
+    from sumo_drvpw.model.vehicles import load_vehicle
+    from sumo_drvpw.data.adapters._common import expand_paths, read_each
+
+    vehicle = load_vehicle(VEHICLE)
+    frames, reports = read_each(expand_paths(paths, SUFFIXES, "dynamometer Parquet"),
+                                lambda f: read_file(f, vehicle))
+    return frames, reports, [f"vehicle file {vehicle.path}"]

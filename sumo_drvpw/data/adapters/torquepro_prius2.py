@@ -1,0 +1,160 @@
+"""Adapter for Torque Pro (phone OBD app) logs of a 2nd-generation Prius (``torquepro-prius2``).
+
+Source: repository denjiv/PETS (``From_CdA_Act.json``, ``To_CdA_Act.json``): a JSON list of
+records, one per sample (≈1.4 Hz, irregular), numbers sometimes as strings, ``"-"`` while
+the OBD link (or a PID) has no value. Also accepts the same columns as Torque's CSV export.
+
+Mapping (everything else kept as ``snake_name_<unit suffix>`` in SI):
+
+- Device Time (ms resolution) → ``time_s`` = seconds since the file's first sample.
+- Speed (OBD)(mph) → ``speed_mps``; Speed (GPS)(mph) → ``gps_speed_mps``.
+- GPS Altitude(ft) → ``elevation_m`` (the phone's 'Altitude' [m] fills its ``-`` gaps).
+- Engine RPM → ``ice_speed_rpm``; MG1/MG2 Revolution(RPM) and Torque(Nm) →
+  ``mg1_speed_rpm``, ``mg1_torque_nm``, ``mg2_speed_rpm``, ``mg2_torque_nm``.
+- HV Battery Current(Amp) → ``battery_current_a`` (as logged: positive when discharging);
+  Power Resource VB(Volt) → ``battery_voltage_v``.
+- Ambient air temp(°F) → ``ambient_c``; G(x/y/z) are phone accelerometer axes in m/s²
+  (``phone_ax_mps2`` …; include gravity), G(calibrated) and Acceleration Sensor(Total)(g)
+  in g → m/s².
+
+Samples before the OBD link is up (any powertrain field ``-``) are dropped and counted as
+'link not up (-)'; later ``-`` cells become NaN (counted per column in the notes).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.model.constants import FT, G, MPH
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.data.adapters._common import clean_time_and_speed, drop, generic_name, new_report, numeric, unique_names
+
+FORMAT = "torquepro-prius2"
+SUFFIXES = (".json", ".csv")
+TIME = "Device Time"
+TIME_FORMAT = "%d-%b-%Y %H:%M:%S.%f"
+
+#: vendor label → (name, factor, offset)
+NAMES = {
+    "Speed (OBD)(mph)": ("speed_mps", MPH, 0.0),
+    "Speed (GPS)(mph)": ("gps_speed_mps", MPH, 0.0),
+    "GPS Speed (Meters-second)": ("gps_speed_phone_mps", 1.0, 0.0),
+    "GPS Altitude(ft)": ("elevation_m", FT, 0.0),
+    "Altitude": ("altitude_phone_m", 1.0, 0.0),
+    "Longitude": ("longitude_deg", 1.0, 0.0),
+    "Latitude": ("latitude_deg", 1.0, 0.0),
+    "Bearing": ("bearing_deg", 1.0, 0.0),
+    "Horizontal Dilution of Precision": ("gps_hdop", 1.0, 0.0),
+    "G(x)": ("phone_ax_mps2", 1.0, 0.0),
+    "G(y)": ("phone_ay_mps2", 1.0, 0.0),
+    "G(z)": ("phone_az_mps2", 1.0, 0.0),
+    "G(calibrated)": ("phone_accel_calibrated_mps2", G, 0.0),
+    "Acceleration Sensor(Total)(g)": ("phone_accel_total_mps2", G, 0.0),
+    "Ambient air temp(°F)": ("ambient_c", 5.0 / 9.0, -32.0 * 5.0 / 9.0),
+    "Battery power (kW)(kW)": ("battery_power_obd_w", 1000.0, 0.0),
+    "Engine RPM(rpm)": ("ice_speed_rpm", 1.0, 0.0),
+    "HV Battery Current(Amp)": ("battery_current_a", 1.0, 0.0),
+    "Power Resource VB(Volt)": ("battery_voltage_v", 1.0, 0.0),
+    "Power Resource IB(Amp)": ("battery_current_ib_a", 1.0, 0.0),
+    "MG1 Revolution(RPM)": ("mg1_speed_rpm", 1.0, 0.0),
+    "MG1 Torque(Nm)": ("mg1_torque_nm", 1.0, 0.0),
+    "MG2 Revolution(RPM)": ("mg2_speed_rpm", 1.0, 0.0),
+    "MG2 Torque(Nm)": ("mg2_torque_nm", 1.0, 0.0),
+    "Motor (MG1) Torque Execute Value(Nm)": ("mg1_torque_exec_nm", 1.0, 0.0),
+    "Motor (MG2) Torque Execute Value(Nm)": ("mg2_torque_exec_nm", 1.0, 0.0),
+    "Regenerative Brake Torque(Nm)": ("regen_brake_torque_nm", 1.0, 0.0),
+    "State Of Charge(%)": ("soc_pct", 1.0, 0.0),
+    "Accelerator Pedal Angle(%)": ("accel_pedal_pct", 1.0, 0.0),
+    "Engine Load(%)": ("engine_load_pct", 1.0, 0.0),
+    "Engine Load(Absolute)(%)": ("engine_load_abs_pct", 1.0, 0.0),
+    "GPS Latitude(°)": ("gps_latitude_deg", 1.0, 0.0),
+    "GPS Longitude(°)": ("gps_longitude_deg", 1.0, 0.0),
+}
+TEXT = {"GPS Time": "gps_time"}
+REQUIRED = (TIME, "Speed (OBD)(mph)")
+#: powertrain fields whose first complete row marks the OBD link as up
+LINK = ("Engine RPM(rpm)", "MG1 Revolution(RPM)", "MG1 Torque(Nm)", "MG2 Revolution(RPM)",
+        "MG2 Torque(Nm)", "HV Battery Current(Amp)", "Power Resource VB(Volt)")
+
+
+def _load(path: Path) -> pd.DataFrame:
+    """The raw records of one Torque log (JSON list of objects, or Torque CSV) as strings/numbers."""
+    if path.suffix.lower() == ".csv":
+        from sumo_drvpw.data.adapters._common import read_csv_strict
+        return read_csv_strict(path, sep=",", dtype=str, skipinitialspace=True)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise UserError(f"{path}: not UTF-8 text: {e}") from None
+    if not text.strip():
+        raise UserError(f"{path}: file is empty")
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise UserError(f"{path}: not valid JSON: {e}") from None
+    if not isinstance(doc, list) or not all(isinstance(r, dict) for r in doc):
+        raise UserError(f"{path}: expected a JSON list of records (objects), got {type(doc).__name__}")
+    if not doc:
+        raise UserError(f"{path}: no data rows")
+    return pd.DataFrame.from_records(doc)
+
+
+def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
+    """One Torque Pro log → canonical frame and report (trip_id = file stem)."""
+    raw = _load(path)
+    trip = path.stem
+    rep = new_report(path, trip, len(raw))
+    labels = [str(c).strip() for c in raw.columns]
+    raw.columns = labels
+    for k in REQUIRED:
+        if k not in labels:
+            raise UserError(f"{path}: missing column '{k}'; found {', '.join(labels[:6])} …")
+    t = pd.to_datetime(raw[TIME].astype(str).str.strip(), format=TIME_FORMAT, errors="coerce")
+    bad = t.isna() & raw[TIME].notna()
+    if bad.any():
+        i = int(np.flatnonzero(bad.to_numpy())[0])
+        raise UserError(f"{path}: column '{TIME}' data row {i} holds {raw[TIME].iloc[i]!r}, "
+                        f"expected like '25-Mar-2017 11:46:29.523'")
+    cols = {"time_s": (t - t.min()).dt.total_seconds()}
+    dash = {}
+    for label in labels:
+        if label == TIME:
+            continue
+        if label in TEXT:
+            cols[TEXT[label]] = raw[label].astype(str)
+            continue
+        name, f, o = NAMES.get(label) or generic_name(label, rep["notes"])
+        s = raw[label]
+        n_dash = int(s.map(lambda x: isinstance(x, str) and x.strip() == "-").sum())
+        if n_dash:
+            dash[name] = n_dash
+        cols[name] = numeric(s, path, label) * f + o
+    names = unique_names(list(cols))
+    df = pd.DataFrame(dict(zip(names, cols.values())), index=raw.index)
+    if "altitude_phone_m" in df and "elevation_m" in df:
+        df["elevation_m"] = df["elevation_m"].fillna(df["altitude_phone_m"])
+    # samples before the OBD link is up: leading rows with any powertrain field '-'
+    link = [NAMES[k][0] for k in LINK if k in labels]
+    if link:
+        complete = df[link].notna().all(axis=1).to_numpy()
+        first = int(np.argmax(complete)) if complete.any() else len(df)
+        df = drop(df, np.arange(len(df)) < first, "link not up (-)", rep)
+    df = clean_time_and_speed(df, path, rep)
+    left = {k: int(df[k].isna().sum()) for k in dash if k in df and df[k].isna().any()}
+    if left:
+        rep["notes"].append("'-' cells kept as NaN after the link is up: "
+                            + ", ".join(f"{k} {n}" for k, n in left.items()))
+    df.insert(0, "trip_id", trip)
+    return df.reset_index(drop=True), rep
+
+
+def read(paths):
+    """Read Torque Pro Prius logs (files or folders of .json/.csv)."""
+    from sumo_drvpw.data.adapters._common import expand_paths, read_each
+
+    frames, reports = read_each(expand_paths(paths, SUFFIXES, "Torque Pro log"), read_file)
+    return frames, reports, ["battery_current_a as logged (positive when discharging)"]

@@ -1,0 +1,449 @@
+"""Read and validate canonical drive logs (``../shared/spec/drive-log.md``).
+
+A log is a Parquet or CSV file, or a folder of them, one row per sample. The reader
+checks the spec's bad-input rules, derives what the spec lets a log omit (acceleration,
+grade, wind, air density) and keeps every other column for the residual tracer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, R_DRY_AIR, RHO_DEFAULT
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.terms import Inputs
+
+#: Canonical numeric columns the reader checks when present.
+NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "elevation_m",
+           "wind_mps", "airspeed_mps", "air_density_kgm3", "ambient_c", "pressure_kpa",
+           "mass_kg", "power_w", "ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm",
+           "mg2_speed_rpm", "mg2_torque_nm", "motor_torque_nm", "motor_speed_rpm",
+           "battery_voltage_v", "battery_current_a")
+REQUIRED = ("time_s", "speed_mps")
+FLAGS = ("brake", "reverse")
+#: Columns the reader derives; every other column is an extra signal.
+DERIVED = ("trip_id", "time_s", "speed_mps", "accel_mps2", "grade_rad", "wind_mps",
+           "air_density_kgm3", "mass_kg", "brake", "reverse", "dt_s")
+SPEED_MAX_MPS = 100.0
+GRADE_MAX_RAD = 0.6
+
+
+@dataclass
+class ReadOptions:
+    """How derived signals are computed.
+
+    Parameters
+    ----------
+    accel_window_s : width of the centred moving average applied to the central-
+        difference acceleration [s]
+    grade_window_m : distance over which elevation is smoothed before differentiating [m]
+    accel_outlier_mps2 : |a| above this is an outlier, left out of calibration [m/s²]
+    """
+
+    accel_window_s: float = 0.5
+    grade_window_m: float = 100.0
+    accel_outlier_mps2: float = 8.0
+
+
+@dataclass
+class DriveLog:
+    """A validated canonical drive log with derived columns.
+
+    ``df`` holds every row read, the canonical SI columns (derived where absent), a
+    per-sample ``dt_s`` (time weight for energies) and all extra columns. ``excluded``
+    is a boolean mask of samples left out of calibration (brake, reverse, outliers,
+    NaN in a needed value); ``counts`` reports why.
+    """
+
+    df: pd.DataFrame
+    files: list[str]
+    counts: dict = field(default_factory=dict)
+    excluded: np.ndarray | None = None
+    metadata: dict = field(default_factory=dict)
+    options: ReadOptions = field(default_factory=ReadOptions)
+
+    def __len__(self) -> int:
+        return len(self.df)
+
+    @property
+    def extra_columns(self) -> list[str]:
+        """Columns that are not canonical inputs: candidate signals for the tracer."""
+        skip = set(DERIVED) | {"grade_pct", "elevation_m", "airspeed_mps"}
+        return [c for c in self.df.columns if c not in skip]
+
+    def inputs(self, mass_kg: float | None = None, signals: bool = True) -> Inputs:
+        """Term-basis inputs for every row; mass from ``mass_kg`` column else the argument."""
+        df = self.df
+        if "mass_kg" in df and df["mass_kg"].notna().all():
+            mass = df["mass_kg"].to_numpy(float)
+        elif mass_kg is not None:
+            # one constant mass: a read-only broadcast view costs no memory
+            mass = np.broadcast_to(float(mass_kg), (len(df),))
+            if "mass_kg" in df:
+                given = df["mass_kg"].to_numpy(float)
+                mass = np.where(np.isnan(given), mass, given)
+        else:
+            raise UserError(f"{self.describe()}: no vehicle mass: the log has no complete "
+                            "'mass_kg' column; give --vehicle NAME|FILE")
+        sig = {}
+        if signals:
+            for c in self.extra_columns:
+                col = df[c]
+                if pd.api.types.is_bool_dtype(col) or pd.api.types.is_numeric_dtype(col):
+                    sig[c] = col.to_numpy(float, na_value=np.nan)
+        return Inputs(v=df["speed_mps"].to_numpy(float), a=df["accel_mps2"].to_numpy(float),
+                      theta=df["grade_rad"].to_numpy(float), wind=df["wind_mps"].to_numpy(float),
+                      mass=mass, rho=df["air_density_kgm3"].to_numpy(float), signals=sig,
+                      trip=df["trip_id"].to_numpy())
+
+    def describe(self) -> str:
+        return self.files[0] if len(self.files) == 1 else f"{len(self.files)} files"
+
+
+def expand_paths(paths) -> list[Path]:
+    """Files named, and the Parquet/CSV files inside folders named (sorted)."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() in (".parquet", ".csv"))
+            if not found:
+                raise UserError(f"{p}: folder holds no .parquet or .csv drive log")
+            out += found
+        elif p.is_file():
+            if p.suffix.lower() not in (".parquet", ".csv"):
+                raise UserError(f"{p}: unknown file type '{p.suffix}' (a drive log is .parquet "
+                                "or .csv, or a folder of them)")
+            out.append(p)
+        else:
+            raise UserError(f"{p}: no such file or folder")
+    if not out:
+        raise UserError("no drive log given")
+    return out
+
+
+def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
+    meta = {}
+    try:
+        if p.suffix.lower() == ".parquet":
+            import pyarrow.parquet as pq
+
+            table = pq.read_table(p)
+            for k, v in (table.schema.metadata or {}).items():
+                if k.startswith(b"sumo_drvpw"):
+                    meta[k.decode()] = v.decode()
+            df = table.to_pandas()
+        else:
+            df = pd.read_csv(p, low_memory=False)
+    except pd.errors.EmptyDataError:
+        raise UserError(f"{p}: empty file (no header, no rows)") from None
+    except (OSError, ValueError, pd.errors.ParserError) as e:
+        raise UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}") from None
+    if len(df) == 0:
+        raise UserError(f"{p}: empty table (header only, no samples)")
+    return df, meta
+
+
+def _check_numeric(df: pd.DataFrame, p: Path) -> None:
+    for c in NUMERIC:
+        if c not in df or pd.api.types.is_numeric_dtype(df[c]):
+            continue
+        conv = pd.to_numeric(df[c], errors="coerce")
+        bad = conv.isna() & df[c].notna() & (df[c].astype(str).str.strip() != "")
+        if bad.any():
+            i = int(np.flatnonzero(bad.to_numpy())[0])
+            raise UserError(f"{p}: column '{c}' has a non-numeric value {df[c].iloc[i]!r} "
+                            f"at row {i}")
+        df[c] = conv
+
+
+def _check_flags(df: pd.DataFrame, p: Path) -> None:
+    for c in FLAGS:
+        if c not in df:
+            continue
+        col = df[c]
+        if pd.api.types.is_bool_dtype(col):
+            df[c] = col.fillna(False).astype(bool)
+            continue
+        s = col.astype(str).str.strip().str.lower()
+        mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True,
+                   "0.0": False, "yes": True, "no": False, "nan": False, "": False,
+                   "none": False, "<na>": False}
+        bad = ~s.isin(list(mapping))
+        if bad.any():
+            i = int(np.flatnonzero(bad.to_numpy())[0])
+            raise UserError(f"{p}: column '{c}' must be boolean, got {col.iloc[i]!r} at row {i}")
+        df[c] = s.map(mapping).astype(bool)
+
+
+def _validate(df: pd.DataFrame, p: Path) -> None:
+    for c in REQUIRED:
+        if c not in df:
+            raise UserError(f"{p}: missing required column '{c}' (columns: "
+                            f"{', '.join(map(str, df.columns[:12]))}{'…' if df.shape[1] > 12 else ''})")
+    _check_numeric(df, p)
+    _check_flags(df, p)
+    for c in REQUIRED:
+        nan = df[c].isna().to_numpy()
+        if nan.any():
+            raise UserError(f"{p}: column '{c}' is empty (NaN) at row {int(np.flatnonzero(nan)[0])}; "
+                            "a required column needs a value in every row")
+    v = df["speed_mps"].to_numpy(float)
+    if (v > SPEED_MAX_MPS).any():
+        i = int(np.flatnonzero(v > SPEED_MAX_MPS)[0])
+        raise UserError(f"{p}: column 'speed_mps' is {v[i]:g} at row {i}, above {SPEED_MAX_MPS:g} m/s: "
+                        "is the speed in km/h? convert to m/s (divide by 3.6)")
+    if (v < 0).any():
+        i = int(np.flatnonzero(v < 0)[0])
+        raise UserError(f"{p}: column 'speed_mps' is negative ({v[i]:g}) at row {i}; speed over "
+                        "ground is >= 0 (mark reversing with the 'reverse' column)")
+    t = df["time_s"].to_numpy(float)
+    trip = df["trip_id"].to_numpy()
+    same = trip[1:] == trip[:-1]
+    back = same & (np.diff(t) <= 0)
+    if back.any():
+        i = int(np.flatnonzero(back)[0]) + 1
+        raise UserError(f"{p}: column 'time_s' does not increase within trip '{trip[i]}' at row {i} "
+                        f"({t[i - 1]:g} then {t[i]:g}); time must be strictly increasing")
+    for c, lim in (("grade_rad", GRADE_MAX_RAD), ("grade_pct", 100 * np.tan(GRADE_MAX_RAD))):
+        if c in df:
+            g = df[c].to_numpy(float)
+            bad = np.abs(g) > lim
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise UserError(f"{p}: column '{c}' is {g[i]:g} at row {i}, beyond ±{lim:.3g} "
+                                f"({'rad' if c == 'grade_rad' else '%'}): not a road grade")
+
+
+def _trip_starts(trip: np.ndarray) -> np.ndarray:
+    return np.r_[True, trip[1:] != trip[:-1]]
+
+
+def _per_trip_rolling_mean(x: np.ndarray, trip_codes: np.ndarray, window: int) -> np.ndarray:
+    """Centred moving average of width ``window`` samples that never crosses trips."""
+    if window <= 1:
+        return x
+    s = pd.Series(x)
+    return s.groupby(trip_codes, sort=False).transform(
+        lambda g: g.rolling(window, center=True, min_periods=1).mean()).to_numpy()
+
+
+def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s: float) -> np.ndarray:
+    """Smoothed time derivative within trips: central difference, then a centred mean.
+
+    Parameters
+    ----------
+    y : signal [any unit]
+    t : time [s], strictly increasing within a trip
+    trip_codes : integer trip code per sample (samples of a trip are contiguous)
+    window_s : width of the moving average [s]
+
+    Returns dy/dt [unit/s]; one-sided differences at trip ends, 0 for one-sample trips.
+    """
+    n = len(y)
+    d = np.zeros(n)
+    if n < 2:
+        return d
+    start = _trip_starts(trip_codes)
+    end = np.r_[start[1:], True]
+    i = np.arange(n)
+    lo = np.where(start, i, i - 1)
+    hi = np.where(end, i, i + 1)
+    dt = t[hi] - t[lo]
+    ok = dt > 0
+    d[ok] = (y[hi] - y[lo])[ok] / dt[ok]
+    med_dt = float(np.median(np.diff(t)[~start[1:]])) if (~start[1:]).any() else 1.0
+    window = int(round(window_s / med_dt)) if med_dt > 0 else 1
+    # an odd width keeps the centred mean centred (an even one shifts by half a sample)
+    window = max(window, 1) | 1
+    return _per_trip_rolling_mean(d, trip_codes, window)
+
+
+def grade_from_elevation(z: np.ndarray, dist: np.ndarray, trip_codes: np.ndarray,
+                         window_m: float) -> np.ndarray:
+    """Grade angle from elevation smoothed over distance, within trips.
+
+    For each trip the elevation is interpolated onto a 1 m distance grid, averaged over
+    ``window_m`` (centred), differentiated, and read back at each sample's distance.
+    Coarse elevation (whole metres) then gives a grade resolution of about 1/window_m.
+
+    Parameters
+    ----------
+    z : elevation [m]; dist : distance travelled since trip start [m]
+    trip_codes : integer trip code per sample; window_m : smoothing distance [m]
+
+    Returns θ [rad] = atan(dz/ds).
+    """
+    theta = np.zeros(len(z))
+    starts = np.flatnonzero(_trip_starts(trip_codes))
+    bounds = np.r_[starts, len(z)]
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        s, zz = dist[a:b], z[a:b]
+        ok = np.isfinite(zz)
+        if ok.sum() < 2 or s[-1] - s[0] < 2:
+            continue
+        su, first = np.unique(s[ok], return_index=True)
+        zu = zz[ok][first]
+        grid = np.arange(su[0], su[-1] + 1.0, 1.0)
+        zg = np.interp(grid, su, zu)
+        w = max(int(round(window_m)), 1)
+        if w > 1 and len(zg) > w:
+            kernel = np.ones(w) / w
+            pad = np.pad(zg, (w // 2, w - 1 - w // 2), mode="edge")
+            zg = np.convolve(pad, kernel, mode="valid")
+        slope = np.gradient(zg, grid) if len(grid) > 1 else np.zeros_like(grid)
+        theta[a:b] = np.arctan(np.interp(s, grid, slope))
+    return theta
+
+
+def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLog:
+    """Read canonical drive logs, validate them and derive the model inputs.
+
+    Parameters
+    ----------
+    paths : file or folder paths (Parquet, CSV)
+    vehicle : optional :class:`sumo_drvpw.model.vehicles.Vehicle` (mass when the log has none)
+    options : :class:`ReadOptions`
+
+    Derivations (all within a trip):
+    acceleration = smoothed central difference of speed when ``accel_mps2`` is absent;
+    grade = ``grade_rad``, else atan(``grade_pct``/100), else from ``elevation_m``
+    smoothed over distance, else 0; wind = ``wind_mps``, else speed − ``airspeed_mps``,
+    else 0; air density = ``air_density_kgm3``, else p/(R·T) from ``ambient_c`` and
+    ``pressure_kpa`` (101.325 kPa if absent), else 1.2041 kg/m³.
+    """
+    opt = options or ReadOptions()
+    files = expand_paths(paths)
+    frames, meta = [], {}
+    for p in files:
+        df, m = _read_table(p)
+        meta.update(m)
+        frames.append(_prepare(df, p, p.stem))
+    df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+    return _derive(df, [str(p) for p in files], meta, vehicle, opt)
+
+
+def from_frame(df: pd.DataFrame, vehicle=None, options: ReadOptions | None = None,
+               name: str = "<frame>") -> DriveLog:
+    """A :class:`DriveLog` from an in-memory canonical table (e.g. an adapter's output).
+
+    Same validation and derivations as :func:`read_log` (one shared code path), without
+    writing a file. ``df`` is copied, never modified; ``name`` stands for the file name in
+    error messages and in ``DriveLog.files``.
+    """
+    opt = options or ReadOptions()
+    frame = _prepare(df.copy(), Path(name), Path(name).stem)
+    return _derive(frame.reset_index(drop=True), [str(name)], {}, vehicle, opt)
+
+
+def _prepare(df: pd.DataFrame, p: Path, default_trip: str) -> pd.DataFrame:
+    """trip_id (default: the file stem) as text, then the spec's bad-input checks."""
+    if "trip_id" not in df:
+        df.insert(0, "trip_id", default_trip)
+    else:
+        tid = df["trip_id"]
+        if tid.isna().any():
+            i = int(np.flatnonzero(tid.isna().to_numpy())[0])
+            raise UserError(f"{p}: column 'trip_id' is empty at row {i}")
+        df["trip_id"] = tid.astype(str)
+    _validate(df, p)
+    return df
+
+
+def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOptions) -> DriveLog:
+    """Derived inputs, exclusion mask and counts of validated, concatenated tables."""
+    counts: dict = {"files": len(files), "rows": int(len(df))}
+    if len(files) > 1:
+        dup = df["trip_id"].duplicated() & _trip_starts(df["trip_id"].to_numpy())
+        if dup.any():
+            i = int(np.flatnonzero(dup.to_numpy())[0])
+            raise UserError(f"trip_id '{df['trip_id'].iloc[i]}' appears in more than one place "
+                            f"(row {i} of the combined logs); give each trip its own id")
+    trip_codes = pd.factorize(df["trip_id"])[0]
+    counts["trips"] = int(trip_codes.max() + 1)
+    t = df["time_s"].to_numpy(float)
+    v = df["speed_mps"].to_numpy(float)
+    start = _trip_starts(trip_codes)
+
+    # time weight per sample: half the interval to each neighbour within the trip
+    dtf = np.r_[np.diff(t), 0.0]
+    dtf[np.r_[start[1:], True]] = 0.0
+    dtb = np.r_[0.0, dtf[:-1]]
+    dt = 0.5 * (dtf + dtb)
+    gaps = np.r_[np.diff(t), 0.0]
+    med = float(np.median(gaps[~np.r_[start[1:], True]])) if len(df) > 1 else 0.0
+    if med > 0:
+        big = (dtf > 5 * med)
+        counts["time_gaps"] = int(big.sum())
+    df["dt_s"] = dt
+
+    if "accel_mps2" not in df:
+        df["accel_mps2"] = derivative(v, t, trip_codes, opt.accel_window_s)
+        counts["accel_source"] = f"derived: central difference of speed, {opt.accel_window_s:g} s moving average"
+    else:
+        counts["accel_source"] = "accel_mps2 column"
+
+    if "grade_rad" in df:
+        counts["grade_source"] = "grade_rad column"
+    elif "grade_pct" in df:
+        df["grade_rad"] = np.arctan(df["grade_pct"].to_numpy(float) / 100.0)
+        counts["grade_source"] = "grade_pct column"
+    elif "elevation_m" in df:
+        dist = np.zeros(len(df))
+        step = v * np.r_[0.0, np.diff(t)]
+        step[start] = 0.0
+        dist = pd.Series(step).groupby(trip_codes, sort=False).cumsum().to_numpy()
+        df["grade_rad"] = grade_from_elevation(df["elevation_m"].to_numpy(float), dist,
+                                               trip_codes, opt.grade_window_m)
+        counts["grade_source"] = (f"elevation_m over distance: 1 m grid, {opt.grade_window_m:g} m "
+                                  "moving average, gradient")
+    else:
+        df["grade_rad"] = 0.0
+        counts["grade_source"] = "none (flat road assumed)"
+
+    if "wind_mps" in df:
+        counts["wind_source"] = "wind_mps column"
+    elif "airspeed_mps" in df:
+        df["wind_mps"] = v - df["airspeed_mps"].to_numpy(float)
+        counts["wind_source"] = "speed − airspeed_mps"
+    else:
+        df["wind_mps"] = 0.0
+        counts["wind_source"] = "none (still air assumed)"
+
+    if "air_density_kgm3" in df:
+        counts["air_density_source"] = "air_density_kgm3 column"
+    elif "ambient_c" in df:
+        p_kpa = df["pressure_kpa"].to_numpy(float) if "pressure_kpa" in df else P_STD_KPA
+        df["air_density_kgm3"] = p_kpa * 1000.0 / (R_DRY_AIR * (df["ambient_c"].to_numpy(float) + KELVIN))
+        counts["air_density_source"] = "ideal gas from ambient_c and pressure_kpa"
+    else:
+        df["air_density_kgm3"] = RHO_DEFAULT
+        counts["air_density_source"] = f"default {RHO_DEFAULT} kg/m³"
+
+    if "mass_kg" not in df and vehicle is not None:
+        df["mass_kg"] = float(vehicle.mass_kg)
+    for c in FLAGS:
+        if c not in df:
+            df[c] = False
+
+    excluded = np.zeros(len(df), bool)
+    for c in FLAGS:
+        m = df[c].to_numpy(bool)
+        counts[f"excluded_{c}"] = int(m.sum())
+        excluded |= m
+    a = df["accel_mps2"].to_numpy(float)
+    out = np.abs(a) > opt.accel_outlier_mps2
+    counts["excluded_accel_outlier"] = int((out & ~excluded).sum())
+    counts["accel_outlier_limit_mps2"] = opt.accel_outlier_mps2
+    excluded |= out
+    for c in ("accel_mps2", "grade_rad", "wind_mps", "air_density_kgm3", "mass_kg"):
+        if c in df:
+            nan = df[c].isna().to_numpy()
+            counts[f"excluded_nan_{c}"] = int((nan & ~excluded).sum())
+            excluded |= nan
+    counts["excluded_total"] = int(excluded.sum())
+    return DriveLog(df=df, files=list(files), counts=counts, excluded=excluded,
+                    metadata=meta, options=opt)

@@ -1,0 +1,75 @@
+"""Glue shared by calibrate, compare, the tracer and the validation report.
+
+``load_measured`` reads logs, picks the vehicle, computes the measured driving power
+and the term-basis inputs, and the mask of samples usable for fitting; everything that
+compares a model with a log goes through it, so they all see the same samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sumo_drvpw.model.equations import Equation, load_equation, vsp_from_specs
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.data.log import DriveLog, ReadOptions, read_log
+from sumo_drvpw.data.powertrain import measured_power
+from sumo_drvpw.model.terms import Inputs
+from sumo_drvpw.model.vehicles import Vehicle, load_vehicle
+
+
+@dataclass
+class Measured:
+    """A log with its measured power [W], model inputs and the usable-sample mask."""
+
+    log: DriveLog
+    vehicle: Vehicle | None
+    power_w: np.ndarray
+    source: str
+    inputs: Inputs
+    usable: np.ndarray
+
+    @property
+    def counts(self) -> dict:
+        c = dict(self.log.counts)
+        c["power_source"] = self.source
+        c["excluded_nonfinite_power"] = int((~np.isfinite(self.power_w)).sum())
+        c["usable"] = int(self.usable.sum())
+        return c
+
+    def context(self) -> dict:
+        return {"logs": self.log.files, "vehicle": self.vehicle.name if self.vehicle else None,
+                "power_source": self.source, "samples": len(self.log), "usable": int(self.usable.sum()),
+                "counts": self.counts}
+
+
+def load_measured(paths, vehicle: str | None = None, options: ReadOptions | None = None) -> Measured:
+    """Read logs and compute measured power and inputs (see module docstring)."""
+    veh = load_vehicle(vehicle) if vehicle else None
+    log = read_log(paths, veh, options)
+    p, source = measured_power(log, veh)
+    x = log.inputs(veh.mass_kg if veh else None)
+    usable = ~log.excluded & np.isfinite(p)
+    for arr in (x.v, x.a, x.theta, x.wind, x.mass, x.rho):
+        usable &= np.isfinite(arr)
+    if not usable.any():
+        raise UserError(f"{log.describe()}: no usable samples (all excluded: {log.counts})")
+    return Measured(log, veh, p, source, x, usable)
+
+
+def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:
+    """Equations by name or file; ``vsp_spec`` means VSP from the vehicle's body specs."""
+    out = []
+    for s in specs:
+        if s == "vsp_spec":
+            if vehicle is None:
+                raise UserError("--equation vsp_spec needs --vehicle (its body specs)")
+            out.append(vsp_from_specs(vehicle))
+        else:
+            out.append(load_equation(s))
+    names = [e.name for e in out]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise UserError(f"--equation: the same equation name given twice: {dup}")
+    return out

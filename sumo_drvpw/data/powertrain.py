@@ -1,0 +1,167 @@
+"""Measured driving power from powertrain signals: power-split hybrid, single motor, battery.
+
+Sign conventions (all machines)
+-------------------------------
+* Speeds are positive in the forward-driving direction of rotation [rad/s].
+* A machine's torque is positive when it drives its shaft forward (motoring MG2,
+  engine firing); MG1 reacting the engine while generating has τ_MG1 < 0 at ω_MG1 > 0.
+* Mechanical power of a machine τ·ω > 0 means it delivers power to the gear set.
+* Driving power P_PTdrv > 0: the powertrain pushes the car; < 0: it brakes the car
+  (regeneration). Friction braking is not in it (the log's ``brake`` flag marks it).
+
+Power-split gear (Toyota Hybrid System, seed paper Eq. 5–12)
+------------------------------------------------------------
+Planetary set: engine on the carrier (C), MG1 on the sun (S teeth), ring (R teeth) on
+the output. Willis: S·ω_MG1 + R·ω_R = (R + S)·ω_ice. The ring drives the wheels through
+the counter gear and final drive; MG2 drives the ring through its reduction gear.
+Ratios here are conventional (> 1 slows the wheel): ω_R = ω_MG2/k_r,
+ω_wh = ω_R/(k_c·k_f). The paper writes G_r = 1/k_r, G_c = 1/k_c, G_f = 1/k_f.
+
+Engine torque from MG1 (Eq. 5–8):
+    τ_ice = ω̇_ice(I_ice + I_C) + ((R+S)/S)·[ω̇_MG1(I_MG1 + I_S) − τ_MG1]
+Torque the carrier passes into the gear set (engine torque less what accelerates the
+engine and carrier), and its ring share:
+    τ_C = τ_ice − ω̇_ice(I_ice + I_C) = ((R+S)/S)·[ω̇_MG1(I_MG1 + I_S) − τ_MG1]
+    τ_R,ice = (R/(R+S))·τ_C
+Wheel torque (Eq. 9–11), each inertia at its own shaft's acceleration:
+    τ_PTdrv = k_r·k_c·k_f·τ_MG2 + k_c·k_f·τ_R,ice
+              − ω̇_wh·[I_R·(k_c·k_f)² + I_MG2·(k_r·k_c·k_f)² + I_wh]
+    P_PTdrv = τ_PTdrv·ω_wh                                           (Eq. 12)
+
+Differences from the paper's printed form, on purpose: the ring receives R/(R+S) of the
+carrier's *net* torque τ_C (the printed form applies it to τ_ice, which would pass the
+engine's own inertia torque to the wheels), and reflected inertias scale with the square
+of the ratio (the printed form has single powers, which is not dimensionally a reflected
+inertia). Both agree with the printed form at steady state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sumo_drvpw.model.constants import RPM
+from sumo_drvpw.errors import UserError
+
+
+def planetary_mg1_speed(ice_rad_s, ring_rad_s, sun_teeth: float, ring_teeth: float):
+    """MG1 (sun) speed from engine (carrier) and ring speeds, Willis equation [rad/s]."""
+    s, r = float(sun_teeth), float(ring_teeth)
+    return ((r + s) * np.asarray(ice_rad_s) - r * np.asarray(ring_rad_s)) / s
+
+
+def power_split_power(ice_w, ice_dw, mg1_w, mg1_dw, mg1_tq, mg2_w, mg2_tq, wh_dw, *,
+                      sun_teeth, ring_teeth, mg2_reduction, counter_ratio, final_drive,
+                      inertia: dict) -> dict:
+    """Driving power of a power-split hybrid at the wheels (seed paper Eq. 5–12).
+
+    Parameters
+    ----------
+    ice_w, ice_dw : engine speed [rad/s] and its time derivative [rad/s²]
+    mg1_w, mg1_dw, mg1_tq : MG1 speed [rad/s], acceleration [rad/s²], torque [N·m]
+    mg2_w, mg2_tq : MG2 speed [rad/s] and torque [N·m]
+    wh_dw : wheel angular acceleration [rad/s²]
+    sun_teeth, ring_teeth : planetary tooth counts [-]
+    mg2_reduction, counter_ratio, final_drive : conventional ratios k_r, k_c, k_f [-]
+    inertia : kg·m² for keys ice, carrier, mg1, sun, ring, mg2, wheels (missing = 0)
+
+    Returns a dict of arrays: ``ice_torque_nm`` (τ_ice), ``wheel_speed`` ω_wh [rad/s],
+    ``wheel_torque_nm`` τ_PTdrv, ``power_w`` P_PTdrv [W].
+    """
+    s, r = float(sun_teeth), float(ring_teeth)
+    kr, kc, kf = float(mg2_reduction), float(counter_ratio), float(final_drive)
+    inn = {k: float(inertia.get(k, 0.0)) for k in ("ice", "carrier", "mg1", "sun", "ring", "mg2", "wheels")}
+    tau_c = ((r + s) / s) * (np.asarray(mg1_dw) * (inn["mg1"] + inn["sun"]) - np.asarray(mg1_tq))
+    tau_ice = np.asarray(ice_dw) * (inn["ice"] + inn["carrier"]) + tau_c
+    tau_ring = (r / (r + s)) * tau_c
+    j_wheel = inn["ring"] * (kc * kf) ** 2 + inn["mg2"] * (kr * kc * kf) ** 2 + inn["wheels"]
+    tau_wh = kr * kc * kf * np.asarray(mg2_tq) + kc * kf * tau_ring - np.asarray(wh_dw) * j_wheel
+    w_wh = np.asarray(mg2_w) / (kr * kc * kf)
+    return {"ice_torque_nm": tau_ice, "wheel_speed": w_wh, "wheel_torque_nm": tau_wh,
+            "power_w": tau_wh * w_wh}
+
+
+def single_motor_power(torque_nm, speed_rad_s):
+    """Mechanical motor shaft power τ·ω [W] (positive when driving)."""
+    return np.asarray(torque_nm, float) * np.asarray(speed_rad_s, float)
+
+
+def battery_power(voltage_v, current_a, current_positive: str = "discharge"):
+    """Electrical battery power [W], positive when the battery delivers power.
+
+    Parameters
+    ----------
+    voltage_v : terminal voltage [V]; current_a : current [A]
+    current_positive : "discharge" if the logged current is positive when discharging,
+        "charge" if it is positive when charging
+    """
+    p = np.asarray(voltage_v, float) * np.asarray(current_a, float)
+    if current_positive == "discharge":
+        return p
+    if current_positive == "charge":
+        return -p
+    raise UserError(f"battery.current_positive must be 'discharge' or 'charge', got {current_positive!r}")
+
+
+POWER_SPLIT_COLUMNS = ("ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm", "mg2_speed_rpm", "mg2_torque_nm")
+
+
+def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np.ndarray, str]:
+    """The measured driving power of a :class:`~sumo_drvpw.data.log.DriveLog` [W] and its source.
+
+    Shaft accelerations use the same smoothed derivative as the log's acceleration
+    (``log.options.accel_window_s``, or ``window_s`` [s] when given).
+
+    Exactly one source is used, in the spec's order: ``power_w``; the power-split signals
+    (needs a ``power_split`` vehicle); motor torque and speed (speed from vehicle speed,
+    gear ratio and wheel radius when ``motor_speed_rpm`` is absent); battery V·I.
+    """
+    from sumo_drvpw.data.log import derivative
+
+    df = log.df
+    where = log.describe()
+    if "power_w" in df:
+        return df["power_w"].to_numpy(float), "direct (power_w)"
+    trip_codes = np.asarray(df["trip_id"].factorize()[0])
+    t = df["time_s"].to_numpy(float)
+    win = log.options.accel_window_s if window_s is None else window_s
+    if all(c in df for c in POWER_SPLIT_COLUMNS):
+        if vehicle is None or vehicle.powertrain_type != "power_split":
+            raise UserError(f"{where}: the log has power-split signals ({', '.join(POWER_SPLIT_COLUMNS)}); "
+                            "give --vehicle with a power_split powertrain (e.g. prius3, prius2)")
+        pt = vehicle.powertrain
+        kr = float(pt.get("mg2_reduction", 1.0))
+        kc = float(pt.get("counter_ratio", 1.0))
+        kf = vehicle.need("powertrain", "final_drive")
+        ice = df["ice_speed_rpm"].to_numpy(float) * RPM
+        mg1 = df["mg1_speed_rpm"].to_numpy(float) * RPM
+        mg2 = df["mg2_speed_rpm"].to_numpy(float) * RPM
+        wh = mg2 / (kr * kc * kf)
+        out = power_split_power(
+            ice, derivative(ice, t, trip_codes, win), mg1, derivative(mg1, t, trip_codes, win),
+            df["mg1_torque_nm"].to_numpy(float), mg2, df["mg2_torque_nm"].to_numpy(float),
+            derivative(wh, t, trip_codes, win),
+            sun_teeth=vehicle.need("powertrain", "sun_teeth"),
+            ring_teeth=vehicle.need("powertrain", "ring_teeth"),
+            mg2_reduction=kr, counter_ratio=kc, final_drive=kf,
+            inertia=pt.get("inertia_kgm2", {}))
+        return out["power_w"], "power-split (MG1, MG2, engine; Eq. 5-12)"
+    if "motor_torque_nm" in df:
+        if "motor_speed_rpm" in df:
+            w = df["motor_speed_rpm"].to_numpy(float) * RPM
+            how = "motor torque × motor speed"
+        else:
+            if vehicle is None:
+                raise UserError(f"{where}: 'motor_torque_nm' without 'motor_speed_rpm' needs --vehicle "
+                                "(gear_ratio and wheel_radius_m)")
+            w = (df["speed_mps"].to_numpy(float) / vehicle.need("powertrain", "wheel_radius_m")
+                 * vehicle.need("powertrain", "gear_ratio"))
+            how = "motor torque × (speed / wheel radius × gear ratio)"
+        return single_motor_power(df["motor_torque_nm"].to_numpy(float), w), f"single motor ({how})"
+    if "battery_voltage_v" in df and "battery_current_a" in df:
+        conv = (vehicle.battery.get("current_positive", "discharge") if vehicle is not None
+                else "discharge")
+        return (battery_power(df["battery_voltage_v"], df["battery_current_a"], conv),
+                f"battery V·I (current positive = {conv})")
+    raise UserError(f"{where}: no measured power: the log needs 'power_w', or the power-split columns "
+                    f"({', '.join(POWER_SPLIT_COLUMNS)}), or 'motor_torque_nm', or "
+                    "'battery_voltage_v' and 'battery_current_a'")

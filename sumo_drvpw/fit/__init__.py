@@ -1,0 +1,1 @@
+"""Fitting against measured power: stepwise calibration, comparison metrics, the residual tracer (diagnose)."""

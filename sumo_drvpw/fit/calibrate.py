@@ -1,0 +1,331 @@
+"""Forward–backward stepwise multiple regression (OLS, no intercept) → a DrvPw equation.
+
+The seed paper calibrates DrvPw by stepwise multiple regression over candidate terms
+(Indt var. 1: acc, grade, aero, roll; Indt var. 2: all eight), then a final multiple
+regression of the selected terms.
+
+Selection works on the sufficient statistics XᵀX, Xᵀy, yᵀy of all candidates, computed
+in chunks, so a step costs O(k³) instead of a pass over the samples: for a subset S the
+OLS estimate is β = (X_SᵀX_S)⁻¹X_Sᵀy, RSS = yᵀy − βᵀX_Sᵀy, s² = RSS/(n − |S|),
+se = √(s²·diag((X_SᵀX_S)⁻¹)), and the p-value is two-sided Student-t with n − |S| dof —
+exactly what ``statsmodels.OLS(y, X_S).fit()`` reports (a test checks this). The final
+model is fitted by statsmodels on the selected columns.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from sumo_drvpw.model.equations import Equation, coefficients_to_beta
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.terms import Inputs, parse_term, term_matrix
+
+#: The seed paper's candidate sets (Table 3).
+CANDIDATES = {
+    "indt-var-1": ("acc", "grade", "aero", "roll"),
+    "indt-var-2": ("acc", "grade", "aero", "roll_v2", "roll", "v3", "v2", "v1"),
+}
+CHUNK = 1_000_000
+
+
+@dataclass
+class Gram:
+    """Sufficient statistics of a no-intercept regression of y on X."""
+
+    xtx: np.ndarray
+    xty: np.ndarray
+    yty: float
+    n: int
+    names: tuple[str, ...]
+
+    def fit(self, idx: list[int]) -> dict | None:
+        """OLS on the columns ``idx``: β, se, p, rss; None if the columns are collinear."""
+        k = len(idx)
+        if k == 0:
+            return {"beta": np.zeros(0), "se": np.zeros(0), "t": np.zeros(0), "p": np.zeros(0),
+                    "rss": self.yty}
+        a = self.xtx[np.ix_(idx, idx)]
+        d = np.sqrt(np.diag(a))
+        if np.any(d == 0):
+            return None
+        scaled = a / np.outer(d, d)
+        if np.linalg.cond(scaled) > 1e12:
+            return None
+        inv = np.linalg.inv(scaled) / np.outer(d, d)
+        beta = inv @ self.xty[idx]
+        rss = max(self.yty - beta @ self.xty[idx], 0.0)
+        dof = self.n - k
+        if dof <= 0:
+            return None
+        s2 = rss / dof
+        se = np.sqrt(np.maximum(np.diag(inv) * s2, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tval = np.where(se > 0, beta / se, np.inf)
+        p = 2.0 * stats.t.sf(np.abs(tval), dof)
+        return {"beta": beta, "se": se, "t": tval, "p": p, "rss": rss}
+
+
+def gram(x: Inputs, y: np.ndarray, names, mask: np.ndarray | None = None, chunk: int = CHUNK) -> Gram:
+    """Accumulate XᵀX, Xᵀy, yᵀy over samples (chunked: memory O(chunk·k))."""
+    names = tuple(names)
+    k = len(names)
+    xtx, xty, yty, n = np.zeros((k, k)), np.zeros(k), 0.0, 0
+    for lo in range(0, len(y), chunk):
+        sl = slice(lo, min(lo + chunk, len(y)))
+        xs = term_matrix(names, x.take(sl))
+        ys = np.asarray(y[sl], float)
+        if mask is not None:
+            keep = mask[sl]
+            xs, ys = xs[keep], ys[keep]
+        xtx += xs.T @ xs
+        xty += xs.T @ ys
+        yty += float(ys @ ys)
+        n += len(ys)
+    return Gram(xtx, xty, yty, n, names)
+
+
+#: A candidate whose column keeps less than this share of its sum of squares after
+#: projection on the columns kept before it is numerically spanned by them (|r| > 1 − 5e-11
+#: for a pair): dropped before selection, so no tie is ever broken by rounding.
+SPAN_TOL = 1e-10
+#: |t| values within this relative distance count as a tie, broken by candidate order.
+TIE_RTOL = 1e-9
+
+
+def drop_spanned(g: Gram, tol: float = SPAN_TOL) -> tuple[list[int], list[dict]]:
+    """Deterministic collinearity screen of the candidates, in candidate order.
+
+    For candidate j, the share of its sum of squares left after projection on the columns
+    kept so far is 1 − R²_j = (x_jᵀx_j − x_jᵀX_K (X_KᵀX_K)⁻¹ X_Kᵀx_j) / x_jᵀx_j (from the
+    Gram matrix, no pass over the samples). Below ``tol`` the column is dropped: the first
+    of identical columns in candidate order wins. Returns (kept indices, dropped records
+    ``{"term", "reason", "spanned_by"}``).
+    """
+    kept: list[int] = []
+    dropped: list[dict] = []
+    for j, name in enumerate(g.names):
+        d = g.xtx[j, j]
+        if not d > 0:
+            dropped.append({"term": name, "reason": "zero on these data", "spanned_by": []})
+            continue
+        if kept:
+            a = g.xtx[np.ix_(kept, kept)]
+            b = g.xtx[kept, j]
+            sc = np.sqrt(np.diag(a))
+            coef = np.linalg.lstsq(a / np.outer(sc, sc), b / sc, rcond=None)[0] / sc
+            left = (d - coef @ b) / d
+            if left < tol:
+                parts = [(g.names[k], c) for k, c in zip(kept, coef)
+                         if abs(c) * np.sqrt(g.xtx[k, k]) > 1e-6 * np.sqrt(d)]
+                names = [n for n, _ in parts]
+                one = len(parts) == 1 and abs(parts[0][1] - 1) < 1e-6
+                reason = (f"identical to {names[0]}" if one else
+                          f"spanned by {', '.join(names)}") + " on these data"
+                dropped.append({"term": name, "reason": reason, "spanned_by": names})
+                continue
+        kept.append(j)
+    return kept, dropped
+
+
+def stepwise(g: Gram, p_enter: float = 0.10, p_remove: float = 0.15, max_steps: int = 100):
+    """Forward–backward stepwise selection on sufficient statistics.
+
+    Candidates that are identical to, or numerically spanned by, candidates before them
+    are dropped first (:func:`drop_spanned`; listed in the trace with action ``drop``).
+    Each round adds the candidate with the largest |t| (the smallest p-value) if its
+    p-value is below ``p_enter``, then removes, one at a time, the selected term with the
+    largest p-value while it is above ``p_remove``. Stops when nothing enters. |t| values
+    equal within ``TIE_RTOL`` are a tie, broken by candidate order. Returns (selected
+    names, trace list).
+    """
+    if p_enter > p_remove:
+        raise UserError(f"p_enter ({p_enter}) must not exceed p_remove ({p_remove}), "
+                        "or selection can cycle")
+    kept, dropped = drop_spanned(g)
+    trace = [{"step": i + 1, "action": "drop", "term": d["term"], "reason": d["reason"]}
+             for i, d in enumerate(dropped)]
+    sel: list[int] = []
+    for _ in range(max_steps):
+        # rank by |t| (same order as p at equal dof, but no underflow to p = 0 ties)
+        best, best_t, best_p = None, -1.0, 1.0
+        for j in kept:
+            if j in sel:
+                continue
+            f = g.fit(sel + [j])
+            if f is None:
+                continue
+            t = abs(float(f["t"][-1]))
+            if t > best_t * (1.0 + TIE_RTOL):
+                best, best_t, best_p = j, t, float(f["p"][-1])
+        if best is None or best_p >= p_enter:
+            break
+        sel.append(best)
+        trace.append({"step": len(trace) + 1, "action": "enter", "term": g.names[best],
+                      "t_value": best_t, "p_value": best_p})
+        while len(sel) > 1:
+            f = g.fit(sel)
+            at = np.abs(f["t"])
+            # the smallest |t|; among ties the latest in candidate order leaves
+            worst = min((i for i in range(len(sel)) if at[i] <= at.min() * (1.0 + TIE_RTOL)),
+                        key=lambda i: -sel[i])
+            if f["p"][worst] <= p_remove:
+                break
+            trace.append({"step": len(trace) + 1, "action": "remove", "term": g.names[sel[worst]],
+                          "p_value": float(f["p"][worst])})
+            sel.pop(worst)
+    return [g.names[j] for j in sel], trace
+
+
+@dataclass
+class CalibrationResult:
+    """Outcome of a calibration: the fitted terms and their statistics (statsmodels)."""
+
+    terms: list[str]
+    params: dict[str, float]
+    std_err: dict[str, float]
+    p_values: dict[str, float]
+    r2: float
+    r2_uncentered: float
+    n: int
+    counts: dict
+    trace: list[dict]
+    settings: dict
+    reference_mass_kg: float | None = None
+    results: object = field(default=None, repr=False)
+    #: candidates dropped before selection: [{"term", "reason", "spanned_by"}]
+    dropped: list = field(default_factory=list)
+
+    def to_equation(self, name: str, provenance: dict | None = None) -> Equation:
+        """The calibrated equation, ready for ``compare`` and the SUMO loop."""
+        prov = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                "method": "forward-backward stepwise OLS without intercept, final fit statsmodels OLS",
+                "settings": self.settings, "selection_trace": self.trace, "sample_counts": self.counts,
+                "dropped_candidates": self.dropped}
+        prov.update(provenance or {})
+        metrics = {"n": self.n, "r2": self.r2, "r2_uncentered": self.r2_uncentered}
+        if self.reference_mass_kg:
+            metrics["reference_mass_kg"] = self.reference_mass_kg
+            metrics["beta_mass_free"] = coefficients_to_beta(self.params, self.reference_mass_kg)
+        return Equation(name=name, terms=dict(self.params), std_err=dict(self.std_err),
+                        p_values=dict(self.p_values), provenance=prov, metrics=metrics,
+                        description="DrvPw calibrated by sumo-drvpw stepwise regression")
+
+    def summary(self) -> str:
+        lines = [f"n = {self.n}, R² = {self.r2:.4f}", f"{'term':<12}{'coefficient':>14}{'std err':>12}{'p':>10}"]
+        for t in self.terms:
+            lines.append(f"{t:<12}{self.params[t]:>14.6g}{self.std_err[t]:>12.3g}{self.p_values[t]:>10.2g}")
+        for d in self.dropped:
+            lines.append(f"`{d['term']}` dropped: {d['reason']}")
+        return "\n".join(lines)
+
+
+def _design(terms, x: Inputs, y: np.ndarray, use: np.ndarray, chunk: int = CHUNK):
+    """Design matrix and target of the used samples, filled chunk by chunk (no full-size
+    temporaries, no copy of the inputs)."""
+    idx = None if use.all() else np.flatnonzero(use)
+    n = len(y) if idx is None else len(idx)
+    xs = np.empty((n, len(terms)))
+    for lo in range(0, n, chunk):
+        hi = min(lo + chunk, n)
+        sel = slice(lo, hi) if idx is None else idx[lo:hi]
+        xs[lo:hi] = term_matrix(terms, x.take(sel))
+    return xs, (y if idx is None else y[idx])
+
+
+def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = None,
+              p_enter: float = 0.10, p_remove: float = 0.15, counts: dict | None = None,
+              reference_mass_kg: float | None = None) -> CalibrationResult:
+    """Select terms stepwise and fit the final OLS (statsmodels, no intercept).
+
+    Parameters
+    ----------
+    x : term-basis inputs; y : measured driving power [W]
+    candidates : term strings to choose from
+    mask : samples to use (True = use); NaN rows in y or X are left out too
+    p_enter, p_remove : p-value thresholds of forward–backward selection
+    """
+    import statsmodels.api as sm
+
+    candidates = tuple(dict.fromkeys(candidates))
+    for t in candidates:
+        parse_term(t)
+    y = np.asarray(y, float)
+    use = np.isfinite(y) if mask is None else (np.asarray(mask, bool) & np.isfinite(y))
+    # rows whose candidate terms are not finite (NaN signals) are left out as well
+    for t in candidates:
+        for s in parse_term(t).signals:
+            if s in x.signals:
+                use &= np.isfinite(np.asarray(x.signals[s], float))
+    counts = dict(counts or {})
+    counts["excluded_nonfinite_power"] = int((~np.isfinite(y)).sum())
+    n_use = int(use.sum())
+    if n_use <= len(candidates):
+        raise UserError(f"too few usable samples ({n_use}) to calibrate {len(candidates)} candidate terms")
+    g = gram(x, y, candidates, use)
+    if not np.all(np.isfinite(g.xtx)):
+        bad = [candidates[j] for j in range(len(candidates)) if not np.isfinite(g.xtx[j, j])]
+        raise UserError(f"candidate term(s) {bad} are not finite on the usable samples")
+    sel, trace = stepwise(g, p_enter, p_remove)
+    dropped = [{"term": t["term"], "reason": t["reason"]} for t in trace if t["action"] == "drop"]
+    if not sel:
+        raise UserError("no candidate term entered the model at p-to-enter "
+                        f"{p_enter}: the measured power is not explained by {list(candidates)}")
+    xs, ys = _design(sel, x, y, use)
+    # hasconst=False: no intercept by design; it also skips statsmodels' constant detection,
+    # which costs three extra SVDs of the design matrix
+    res = sm.OLS(ys, xs, hasconst=False).fit()
+    # named exog, so summary() and params read as terms; the results keep their data
+    # (summary(), aic, bic, condition_number work); the pseudo-inverse (n × k) is not
+    # needed once the covariance is computed
+    res.model.data.xnames = list(sel)
+    res.model.__dict__.pop("pinv_wexog", None)
+    sse = float(res.ssr)
+    sst = float(((ys - ys.mean()) ** 2).sum())
+    r2 = 1.0 - sse / sst if sst > 0 else float("nan")
+    counts["used"] = n_use
+    return CalibrationResult(
+        terms=list(sel), params=dict(zip(sel, map(float, res.params))),
+        std_err=dict(zip(sel, map(float, res.bse))), p_values=dict(zip(sel, map(float, res.pvalues))),
+        r2=r2, r2_uncentered=float(res.rsquared), n=n_use, counts=counts, trace=trace,
+        settings={"candidates": list(candidates), "p_enter": p_enter, "p_remove": p_remove},
+        reference_mass_kg=reference_mass_kg, results=res, dropped=dropped)
+
+
+def resolve_candidates(spec: str) -> tuple[str, ...]:
+    """Candidate terms from a set name (indt-var-1, indt-var-2), a TOML file, or a comma list."""
+    if spec in CANDIDATES:
+        return CANDIDATES[spec]
+    from pathlib import Path
+
+    p = Path(spec)
+    if p.suffix == ".toml" or p.exists():
+        import tomllib
+
+        if not p.is_file():
+            raise UserError(f"--candidates: file not found: {p}")
+        try:
+            doc = tomllib.loads(p.read_text(encoding="utf-8"))
+        except tomllib.TOMLDecodeError as e:
+            raise UserError(f"--candidates {p}: invalid TOML: {e}") from None
+        terms = doc.get("candidates", {}).get("terms") if isinstance(doc.get("candidates"), dict) else doc.get("terms")
+        if not isinstance(terms, list) or not terms:
+            raise UserError(f"--candidates {p}: needs `terms = [\"acc\", ...]` (top level or in [candidates])")
+        for t in terms:
+            try:
+                parse_term(str(t))
+            except UserError as e:
+                raise UserError(f"--candidates {p}: {e}") from None
+        return tuple(map(str, terms))
+    if "," in spec or spec:
+        terms = tuple(s.strip() for s in spec.split(",") if s.strip())
+        try:
+            for t in terms:
+                parse_term(t)
+        except UserError as e:
+            raise UserError(f"--candidates '{spec}': {e} (or use indt-var-1, indt-var-2, a TOML file)") from None
+        return terms
+    raise UserError("--candidates is empty")

@@ -1,0 +1,473 @@
+"""Compare driving-power equations with a log's measured power (paper Table 3, Fig. 4–10).
+
+Everything here is SI: power in W, energy in J, speed in m/s. Speed bins are labelled in
+km/h because the paper bins that way; the edges themselves are also given in m/s.
+
+Conventions
+-----------
+* error = predicted − measured [W] per sample: a negative error is underprediction.
+* R² is the ordinary, centred coefficient of determination of the prediction against
+  the measurement, R² = 1 − Σ(p − m)² / Σ(m − m̄)². It is *not* the uncentred,
+  no-intercept R² that statsmodels reports for a regression without constant; it is
+  what a reader of the paper's Table 3 compares equations by, and it can be negative
+  for a prediction worse than the mean.
+* Light load: measured power < 50 kW (``constants.HEAVY_LOAD_W``); heavy load: ≥ 50 kW.
+  Each subset's R² uses that subset's own mean (Table 3 reports them this way).
+* A subset metric is NaN (JSON null) when the subset has fewer than 3 samples.
+
+References
+----------
+Pitanuwat, S. et al., "Development of Hybrid-Vehicle Energy-Consumption Model for
+Transportation Applications — Part I": Table 3 (R² by load), Fig. 4 (parity), Fig. 5
+(error histograms), Fig. 8 (error against speed, ≥ 80 km/h), Fig. 9 (error against the
+power of each term), Fig. 10 (energy share of each term).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
+from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.errors import UserError, first_bad_row
+from sumo_drvpw.model.terms import CATEGORIES, Inputs
+
+#: Width of the speed bins of Fig. 8 [m/s] (10 km/h).
+SPEED_BIN_MPS = 10.0 * KMH
+#: Fewest samples for which a subset statistic (R², correlation) is reported.
+MIN_SAMPLES = 3
+
+
+# ----------------------------------------------------------------------------- metrics
+
+def _r2(pred: np.ndarray, meas: np.ndarray) -> float:
+    """Centred R² = 1 − SSE/SST; NaN with < MIN_SAMPLES samples or a constant measurement."""
+    if len(meas) < MIN_SAMPLES:
+        return math.nan
+    sst = float(np.sum((meas - meas.mean()) ** 2))
+    if sst <= 0.0:
+        return math.nan
+    return 1.0 - float(np.sum((pred - meas) ** 2)) / sst
+
+
+def _r2_corr(pred: np.ndarray, meas: np.ndarray) -> float:
+    """Squared Pearson correlation of pred and meas; NaN as for :func:`_r2`."""
+    if len(meas) < MIN_SAMPLES:
+        return math.nan
+    pc, mc = pred - pred.mean(), meas - meas.mean()
+    den = float(pc @ pc) * float(mc @ mc)
+    return float(pc @ mc) ** 2 / den if den > 0.0 else math.nan
+
+
+def _rmse(err: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(err * err))) if len(err) else math.nan
+
+
+def metrics(pred_w, meas_w) -> dict:
+    """Goodness of fit of predicted against measured driving power (paper Table 3).
+
+    Parameters
+    ----------
+    pred_w : predicted driving power per sample [W]
+    meas_w : measured driving power per sample [W]
+
+    Returns
+    -------
+    dict with ``n`` (finite pairs used), ``r2`` (centred, 1 − SSE/SST), ``r2_light`` and
+    ``r2_heavy`` (measured < / ≥ 50 kW, each on its own mean), ``rmse_w``, ``mae_w``,
+    ``bias_w`` = mean(pred − meas) [W], ``rmse_light_w``, ``rmse_heavy_w``,
+    ``bias_light_w``, ``bias_heavy_w`` [W], ``n_light``, ``n_heavy``, and
+    ``r2_corr``/``r2_corr_light``/``r2_corr_heavy``: the squared Pearson correlation
+    (the R² of regressing measured on predicted with intercept, blind to bias and
+    scale), for matching published values whose R² definition is unstated. Pairs with a NaN
+    or infinite value are left out. R² needs ≥ 3 samples and a non-constant
+    measurement, else it is NaN; the other subset statistics are NaN for an empty subset.
+    """
+    pred = np.asarray(pred_w, dtype=float).ravel()
+    meas = np.asarray(meas_w, dtype=float).ravel()
+    if pred.shape != meas.shape:
+        raise UserError(f"metrics: predicted power has {pred.size} samples, measured "
+                        f"power {meas.size}")
+    ok = np.isfinite(pred) & np.isfinite(meas)
+    if not ok.all():
+        pred, meas = pred[ok], meas[ok]
+    err = pred - meas
+    heavy = meas >= HEAVY_LOAD_W
+    light = ~heavy
+    out = {
+        "n": int(meas.size),
+        "r2": _r2(pred, meas),
+        "r2_light": _r2(pred[light], meas[light]),
+        "r2_heavy": _r2(pred[heavy], meas[heavy]),
+        "rmse_w": _rmse(err),
+        "mae_w": float(np.mean(np.abs(err))) if err.size else math.nan,
+        "bias_w": float(np.mean(err)) if err.size else math.nan,
+        "n_light": int(light.sum()),
+        "n_heavy": int(heavy.sum()),
+        "rmse_light_w": _rmse(err[light]),
+        "rmse_heavy_w": _rmse(err[heavy]),
+        "bias_light_w": float(np.mean(err[light])) if light.any() else math.nan,
+        "bias_heavy_w": float(np.mean(err[heavy])) if heavy.any() else math.nan,
+        "r2_corr": _r2_corr(pred, meas),
+        "r2_corr_light": _r2_corr(pred[light], meas[light]),
+        "r2_corr_heavy": _r2_corr(pred[heavy], meas[heavy]),
+    }
+    return out
+
+
+# --------------------------------------------------------------- error statistics
+
+def _error_summary(err: np.ndarray) -> dict:
+    """n, mean, median, 5th/95th percentile and RMSE of an error sample [W]."""
+    if err.size == 0:
+        return {"n": 0, "mean_w": math.nan, "median_w": math.nan, "p5_w": math.nan,
+                "p95_w": math.nan, "rmse_w": math.nan}
+    p5, p50, p95 = np.percentile(err, [5.0, 50.0, 95.0])
+    return {"n": int(err.size), "mean_w": float(err.mean()), "median_w": float(p50),
+            "p5_w": float(p5), "p95_w": float(p95), "rmse_w": _rmse(err)}
+
+
+def speed_bins(err_w, speed_mps, width_mps: float = SPEED_BIN_MPS) -> list[dict]:
+    """Error statistics in speed bins of 10 km/h (paper Fig. 8).
+
+    Parameters
+    ----------
+    err_w : error pred − meas per sample [W]
+    speed_mps : speed per sample [m/s]; negative speeds fall into the first bin
+    width_mps : bin width [m/s]
+
+    Returns
+    -------
+    One dict per bin from 0 to the highest speed, contiguous (empty bins have n = 0
+    and NaN statistics): ``lo_kmh``, ``hi_kmh``, ``lo_mps``, ``hi_mps``, ``n``,
+    ``mean_w``, ``median_w``, ``p5_w``, ``p95_w``, ``rmse_w``. A bin is [lo, hi).
+    """
+    err = np.asarray(err_w, dtype=float)
+    v = np.asarray(speed_mps, dtype=float)
+    if err.size == 0:
+        return []
+    # the small tolerance keeps 20 km/h (= 5.5555… m/s) in the 20–30 bin despite rounding
+    idx = np.floor(np.maximum(v, 0.0) / width_mps + 1e-9).astype(np.int64)
+    order = np.argsort(idx, kind="stable")
+    sorted_idx = idx[order]
+    sorted_err = err[order]
+    nbins = int(sorted_idx[-1]) + 1
+    starts = np.searchsorted(sorted_idx, np.arange(nbins), side="left")
+    ends = np.searchsorted(sorted_idx, np.arange(nbins), side="right")
+    out = []
+    for k in range(nbins):  # a handful of bins, not samples
+        lo, hi = k * width_mps, (k + 1) * width_mps
+        row = {"lo_kmh": lo / KMH, "hi_kmh": hi / KMH, "lo_mps": lo, "hi_mps": hi}
+        row.update(_error_summary(sorted_err[starts[k]:ends[k]]))
+        out.append(row)
+    return out
+
+
+def high_speed_summary(err_w, speed_mps, threshold_mps: float = HIGH_SPEED_MPS) -> dict:
+    """Error at and above 80 km/h, where the paper's VSP equations underpredict (Fig. 8).
+
+    Parameters
+    ----------
+    err_w : error pred − meas per sample [W]
+    speed_mps : speed per sample [m/s]
+    threshold_mps : lower edge of the range [m/s] (default ``constants.HIGH_SPEED_MPS``)
+
+    Returns
+    -------
+    ``threshold_kmh``, ``fraction`` of samples in the range, ``n``, ``mean_w``
+    (mean error), ``median_w``, ``p5_w``, ``p95_w``, ``rmse_w`` [W] in the range, and
+    ``mean_below_w``/``rmse_below_w`` below it for contrast.
+    """
+    err = np.asarray(err_w, dtype=float)
+    v = np.asarray(speed_mps, dtype=float)
+    hi = v >= threshold_mps
+    out = {"threshold_kmh": threshold_mps / KMH,
+           "fraction": float(hi.mean()) if err.size else math.nan}
+    out.update(_error_summary(err[hi]))
+    below = err[~hi]
+    out["mean_below_w"] = float(below.mean()) if below.size else math.nan
+    out["rmse_below_w"] = _rmse(below)
+    return out
+
+
+def error_term_correlation(err_w, category_w: dict[str, np.ndarray]) -> dict[str, dict]:
+    """Which term carries the error: error against each category's power (paper Fig. 9).
+
+    Parameters
+    ----------
+    err_w : error pred − meas per sample [W]
+    category_w : category → power per sample [W]
+
+    Returns
+    -------
+    category → ``r`` (Pearson correlation of error and category power), ``slope``
+    (least-squares slope of error on that power alone, with intercept, W/W) and
+    ``partial_slope`` (its coefficient when the error is regressed on all categories
+    at once, with intercept). When the error is (c − c_true)/c times the equation's own
+    term power, ``partial_slope`` is that relative coefficient error, e.g. −0.5 for an
+    aero coefficient half the truth. NaN for a category whose power is constant
+    (e.g. absent) or with fewer than 3 samples.
+    """
+    err = np.asarray(err_w, dtype=float)
+    n = err.size
+    out: dict[str, dict] = {}
+    names, cols = [], []
+    ec = err - err.mean() if n else err
+    see = float(ec @ ec)
+    for cat, p in category_w.items():
+        p = np.asarray(p, dtype=float)
+        pc = p - p.mean() if n else p
+        spp = float(pc @ pc)
+        r = slope = math.nan
+        if n >= MIN_SAMPLES and spp > 0.0 and np.ptp(p) > 1e-9 * max(1.0, np.abs(p).max()):
+            sep = float(ec @ pc)
+            slope = sep / spp
+            r = sep / math.sqrt(spp * see) if see > 0.0 else math.nan
+            names.append(cat)
+            cols.append(pc)
+        out[cat] = {"r": r, "slope": slope, "partial_slope": math.nan}
+    if names and n > len(names) + 1:
+        coef, *_ = np.linalg.lstsq(np.column_stack(cols), ec, rcond=None)
+        for cat, c in zip(names, coef):
+            out[cat]["partial_slope"] = float(c)
+    return out
+
+
+def energy_shares(category_w: dict[str, np.ndarray], dt_s) -> tuple[dict, dict]:
+    """Traction energy of each category and its share of the total (paper Fig. 10).
+
+    Parameters
+    ----------
+    category_w : category → power per sample [W]
+    dt_s : duration of each sample [s] (array or scalar)
+
+    Returns
+    -------
+    (energy_j, share): ``energy_j[cat]`` = Σ P_cat·Δt over samples whose total
+    predicted power Σ_cat P_cat > 0 [J], ``energy_j["total"]`` their sum (the predicted
+    traction energy); ``share[cat]`` = energy_j[cat] / energy_j["total"]. The shares sum
+    to 1; a category can have a negative share (downhill grade during traction). NaN
+    shares when there is no traction.
+    """
+    cats = list(category_w)
+    if not cats:
+        return {"total": 0.0}, {}
+    total_p = np.sum([np.asarray(category_w[c], dtype=float) for c in cats], axis=0)
+    dt = np.broadcast_to(np.asarray(dt_s, dtype=float), total_p.shape)
+    w = np.where(total_p > 0.0, dt, 0.0)
+    energy = {c: float(np.asarray(category_w[c], dtype=float) @ w) for c in cats}
+    total = float(sum(energy.values()))
+    energy["total"] = total
+    share = {c: (energy[c] / total if total > 0.0 else math.nan) for c in cats}
+    return energy, share
+
+
+# -------------------------------------------------------------------- comparison
+
+@dataclass
+class EquationResult:
+    """One equation's predictions and statistics against the measured power."""
+
+    equation: Equation
+    pred_w: np.ndarray
+    category_w: dict[str, np.ndarray]
+    metrics: dict
+    speed_bins: list[dict]
+    high_speed: dict
+    error_term_correlation: dict
+    energy_j: dict
+    energy_share: dict
+    traction_energy_ratio: float
+    error_reference_correlation: dict | None = None
+
+    @property
+    def name(self) -> str:
+        return self.equation.name
+
+    def error_w(self, meas_w: np.ndarray) -> np.ndarray:
+        return self.pred_w - meas_w
+
+
+@dataclass
+class Comparison:
+    """Equations against one set of measured power; build with :func:`compare`.
+
+    Attributes
+    ----------
+    meas_w : measured driving power [W]
+    speed_mps : speed [m/s]
+    dt_s : duration of each sample [s]
+    results : equation name → :class:`EquationResult`, in the order given
+    measured_traction_energy_j : Σ P_meas·Δt over samples with P_meas > 0 [J]
+    reference : name of the equation whose category powers the errors were also
+        correlated with (``error_reference_correlation``), or None
+    """
+
+    meas_w: np.ndarray
+    speed_mps: np.ndarray
+    dt_s: np.ndarray
+    results: dict[str, EquationResult] = field(default_factory=dict)
+    measured_traction_energy_j: float = math.nan
+    reference: str | None = None
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.meas_w.size)
+
+    def error_w(self, name: str) -> np.ndarray:
+        """Error pred − meas [W] of the named equation."""
+        return self.results[name].pred_w - self.meas_w
+
+    def to_json(self) -> dict:
+        """JSON-ready summary (NaN → None) with the keys other tools read.
+
+        ``{"equations": {NAME: {"n", "r2", "r2_light", "r2_heavy", "rmse_w", "bias_w",
+        "mae_w", …, "speed_bins", "high_speed", "error_term_correlation",
+        "energy_share", "energy_j", …}}, "n_samples", …}``
+        """
+        eqs = {}
+        for name, r in self.results.items():
+            d = dict(r.metrics)
+            d["terms"] = dict(r.equation.terms)
+            if r.equation.std_err:
+                d["std_err"] = dict(r.equation.std_err)
+            if r.equation.mass_kg is not None:
+                d["mass_kg"] = r.equation.mass_kg
+            d["speed_bins"] = r.speed_bins
+            d["high_speed"] = r.high_speed
+            d["error_term_correlation"] = r.error_term_correlation
+            if r.error_reference_correlation is not None:
+                d["error_reference_correlation"] = r.error_reference_correlation
+            d["energy_share"] = r.energy_share
+            d["energy_j"] = r.energy_j
+            d["measured_traction_energy_j"] = self.measured_traction_energy_j
+            d["traction_energy_ratio"] = r.traction_energy_ratio
+            eqs[name] = d
+        return _jsonable({
+            "equations": eqs,
+            "n_samples": self.n_samples,
+            "measured": {
+                "traction_energy_j": self.measured_traction_energy_j,
+                "mean_w": float(self.meas_w.mean()) if self.n_samples else math.nan,
+                "n_light": int((self.meas_w < HEAVY_LOAD_W).sum()),
+                "n_heavy": int((self.meas_w >= HEAVY_LOAD_W).sum()),
+                "n_high_speed": int((self.speed_mps >= HIGH_SPEED_MPS).sum()),
+            },
+            "settings": {
+                "heavy_load_w": HEAVY_LOAD_W,
+                "high_speed_mps": HIGH_SPEED_MPS,
+                "speed_bin_mps": SPEED_BIN_MPS,
+                "reference": self.reference,
+                "error": "predicted - measured",
+                "r2": "centred: 1 - SSE/SST",
+            },
+        })
+
+
+def _jsonable(o):
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _jsonable(o.tolist())
+    if isinstance(o, (bool, np.bool_)):
+        return bool(o)
+    if isinstance(o, (int, np.integer)):
+        return int(o)
+    if isinstance(o, (float, np.floating)):
+        f = float(o)
+        return f if math.isfinite(f) else None
+    return o
+
+
+def _dt_array(dt_s, n: int) -> np.ndarray:
+    if dt_s is None:
+        return np.ones(n)
+    dt = np.asarray(dt_s, dtype=float)
+    if dt.ndim == 0:
+        dt = np.full(n, float(dt))
+    if dt.shape != (n,):
+        raise UserError(f"compare: dt_s has {dt.size} values for {n} samples")
+    bad = ~np.isfinite(dt) | (dt < 0.0)
+    if bad.any():
+        raise UserError(f"compare: dt_s must be finite and ≥ 0 s; {first_bad_row(bad)} "
+                        f"has {dt[bad][0]!r}")
+    return dt
+
+
+def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
+            reference: str | None = None) -> Comparison:
+    """Evaluate equations against measured driving power (paper Table 3, Fig. 4–10).
+
+    Parameters
+    ----------
+    meas_w : measured driving power per sample [W]
+    inputs : the term-basis inputs of the same samples (speed, acceleration, grade …)
+    equations : the equations to compare; names must be unique
+    dt_s : duration of each sample [s] (array or scalar) for energies; None: 1 s each
+    reference : optional name of one of ``equations`` (e.g. the calibrated DrvPw);
+        every equation's error is then also correlated with the reference's category
+        powers (``error_reference_correlation``), which shows a term an equation lacks
+        altogether — its own power of a missing term is zero and carries no signal.
+
+    Returns
+    -------
+    :class:`Comparison`. Samples where an equation's prediction is not finite are
+    left out of that equation's statistics.
+    """
+    meas = np.asarray(meas_w, dtype=float).ravel()
+    n = meas.size
+    if len(inputs) != n:
+        raise UserError(f"compare: measured power has {n} samples, inputs {len(inputs)}")
+    bad = ~np.isfinite(meas)
+    if bad.any():
+        raise UserError(f"compare: measured power is not finite at {first_bad_row(bad)}")
+    if not equations:
+        raise UserError("compare: no equations given")
+    names = [eq.name for eq in equations]
+    dup = {x for x in names if names.count(x) > 1}
+    if dup:
+        raise UserError(f"compare: equation names must be unique; repeated: {sorted(dup)}")
+    if reference is not None and reference not in names:
+        raise UserError(f"compare: reference equation '{reference}' is not among "
+                        f"{', '.join(names)}")
+    dt = _dt_array(dt_s, n)
+    v = np.asarray(inputs.v, dtype=float)
+    meas_traction = float(np.where(meas > 0.0, meas, 0.0) @ dt)
+
+    comp = Comparison(meas_w=meas, speed_mps=v, dt_s=dt,
+                      measured_traction_energy_j=meas_traction, reference=reference)
+    cat_powers = {eq.name: eq.category_powers(inputs) for eq in equations}
+    for eq in equations:
+        cats = cat_powers[eq.name]
+        # drop empty "other"; keep the four physical categories always (Fig. 10 axes)
+        cats = {c: p for c, p in cats.items() if c in CATEGORIES or np.any(p != 0.0)}
+        pred = np.sum(list(cats.values()), axis=0) if cats else np.zeros(n)
+        err = pred - meas
+        ok = np.isfinite(err)
+        allok = bool(ok.all())
+        e, vv = (err, v) if allok else (err[ok], v[ok])
+        cats_ok = cats if allok else {c: p[ok] for c, p in cats.items()}
+        energy, share = energy_shares(cats_ok, dt if allok else dt[ok])
+        ref_corr = None
+        if reference is not None:
+            rc = cat_powers[reference]
+            ref_corr = error_term_correlation(
+                e, {c: (p if allok else p[ok]) for c, p in rc.items()
+                    if c in CATEGORIES or np.any(p != 0.0)})
+        comp.results[eq.name] = EquationResult(
+            equation=eq, pred_w=pred, category_w=cats,
+            metrics=metrics(pred, meas),
+            speed_bins=speed_bins(e, vv),
+            high_speed=high_speed_summary(e, vv),
+            error_term_correlation=error_term_correlation(e, cats_ok),
+            energy_j=energy, energy_share=share,
+            traction_energy_ratio=(energy["total"] / meas_traction if meas_traction > 0.0
+                                   else math.nan),
+            error_reference_correlation=ref_corr,
+        )
+    return comp

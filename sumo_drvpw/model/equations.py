@@ -1,0 +1,253 @@
+"""Driving-power equations as data: named basis terms with coefficients (TOML).
+
+File format (all tables but ``[equation]`` and one of ``[terms]``/``[beta]`` optional)::
+
+    [equation]
+    name = "drvpw_prius3"
+    description = "..."
+    source = "where the numbers come from"
+    mass_kg = 1530.9          # optional: a fixed mass for this equation's m-terms [kg]
+    reference_mass_kg = 1625  # needed with [beta]: the mass the β were fitted at [kg]
+
+    [terms]       # coefficient per term of the basis (sumo_drvpw.model.terms); power = Σ c·term
+    acc = 0.9994
+    [beta]        # or: Table-3-style coefficients on mass-free bases, converted on load:
+    acc = 1624    #   c = β / m_ref for m-terms, β / (m_ref·g) for m·g-terms
+    [std_err]     # optional, same keys, same basis as the coefficients they go with
+    [p_values]
+    [provenance]  # free-form: log, vehicle, date, settings of a calibration
+    [metrics]     # free-form fit statistics
+
+Built-in equations live in ``sumo_drvpw/model/builtin/equations/*.toml``; a name that is not a file
+path is looked up there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from sumo_drvpw.model.constants import G
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fileio import read_toml
+from sumo_drvpw.model.terms import CATEGORIES, Inputs, parse_term, term_matrix
+
+#: built-in equations: package data (importlib.resources; a regular install unpacks them)
+BUILTIN_DIR = Path(str(resources.files("sumo_drvpw.model") / "builtin" / "equations"))
+
+
+@dataclass
+class Equation:
+    """A driving-power equation: P [W] = Σ coefficient × term.
+
+    Parameters
+    ----------
+    name : identifier used in reports and outputs
+    terms : term string → coefficient (unit: W per unit of the term)
+    mass_kg : fixed mass for the m-terms [kg], or None to use the vehicle's/sample's mass
+    """
+
+    name: str
+    terms: dict[str, float]
+    mass_kg: float | None = None
+    description: str = ""
+    source: str = ""
+    std_err: dict[str, float] = field(default_factory=dict)
+    p_values: dict[str, float] = field(default_factory=dict)
+    provenance: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)
+    path: str | None = None
+
+    def __post_init__(self):
+        if not self.terms:
+            raise UserError(f"equation '{self.name}' has no terms")
+        for t in self.terms:
+            parse_term(t)
+
+    @property
+    def term_names(self) -> list[str]:
+        return list(self.terms)
+
+    @property
+    def coefficients(self) -> np.ndarray:
+        return np.array([self.terms[t] for t in self.terms], dtype=float)
+
+    @property
+    def categories(self) -> list[str]:
+        return [parse_term(t).category for t in self.terms]
+
+    @property
+    def signals(self) -> set[str]:
+        """Log columns the equation needs beyond the standard inputs."""
+        return {s for t in self.terms for s in parse_term(t).signals}
+
+    def term_powers(self, x: Inputs) -> np.ndarray:
+        """Power of each term [W], shape (n samples, k terms)."""
+        return term_matrix(self.term_names, x.with_mass(self.mass_kg)) * self.coefficients
+
+    def power(self, x: Inputs) -> np.ndarray:
+        """Total driving power [W] per sample."""
+        return self.term_powers(x).sum(axis=1)
+
+    def category_powers(self, x: Inputs) -> dict[str, np.ndarray]:
+        """Power [W] per reporting category (acc, grade, aero, roll, and other if used)."""
+        tp = self.term_powers(x)
+        out = {c: np.zeros(len(x)) for c in CATEGORIES}
+        for j, c in enumerate(self.categories):
+            out[c] = out.get(c, np.zeros(len(x))) + tp[:, j]
+        return out
+
+    def beta(self, reference_mass_kg: float) -> dict[str, float]:
+        """Coefficients on mass-free bases (Table-3 style) at a reference mass [kg]."""
+        return coefficients_to_beta(self.terms, self.mass_kg or reference_mass_kg)
+
+    def to_dict(self) -> dict:
+        """The TOML document of this equation."""
+        eq = {"name": self.name}
+        if self.description:
+            eq["description"] = self.description
+        if self.source:
+            eq["source"] = self.source
+        if self.mass_kg is not None:
+            eq["mass_kg"] = float(self.mass_kg)
+        doc = {"equation": eq, "terms": {k: float(v) for k, v in self.terms.items()}}
+        for key in ("std_err", "p_values", "provenance", "metrics"):
+            val = getattr(self, key)
+            if val:
+                doc[key] = val
+        return doc
+
+
+def beta_to_coefficients(beta: dict[str, float], reference_mass_kg: float) -> dict[str, float]:
+    """Convert coefficients on mass-free bases to this basis (Table 3 → Eq. 14 form).
+
+    Table 3 of the seed paper fits β on v·a, v·sin θ, v(v − v_w)², v·cos θ… at the test
+    mass. Our ``acc`` = m·v·a, so c_acc = β_acc/m; ``grade``/``roll``/``roll_v2`` carry
+    m·g, so c = β/(m·g); terms without m are unchanged.
+
+    Parameters
+    ----------
+    beta : term → β on the mass-free basis
+    reference_mass_kg : mass at which β were fitted [kg]
+    """
+    return {t: float(b) / _mass_scale(t, reference_mass_kg) for t, b in beta.items()}
+
+
+def coefficients_to_beta(terms: dict[str, float], reference_mass_kg: float) -> dict[str, float]:
+    """Inverse of :func:`beta_to_coefficients`."""
+    return {t: float(c) * _mass_scale(t, reference_mass_kg) for t, c in terms.items()}
+
+
+def _mass_scale(term: str, mass_kg: float) -> float:
+    """The factor a term carries beyond its mass-free form: 1, m, or m·g."""
+    order = parse_term(term).mg_order
+    return 1.0 if order == 0 else mass_kg * (G if order == 2 else 1.0)
+
+
+def builtin_names() -> list[str]:
+    return sorted(p.stem for p in BUILTIN_DIR.glob("*.toml"))
+
+
+def _floats(table: dict, where: str) -> dict[str, float]:
+    out = {}
+    for k, v in table.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise UserError(f"{where}: value of '{k}' must be a number, got {v!r}")
+        out[str(k)] = float(v)
+    return out
+
+
+def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
+    """Build an :class:`Equation` from a parsed TOML document; errors name ``where``."""
+    known = {"equation", "terms", "beta", "std_err", "p_values", "provenance", "metrics", "paper"}
+    unknown = set(doc) - known
+    if unknown:
+        raise UserError(f"{where}: unknown table(s) {sorted(unknown)} (known: {sorted(known)})")
+    meta = doc.get("equation")
+    if not isinstance(meta, dict) or "name" not in meta:
+        raise UserError(f"{where}: missing [equation] table with a 'name'")
+    ref = meta.get("reference_mass_kg")
+    if "beta" in doc and "terms" in doc:
+        raise UserError(f"{where}: give either [terms] or [beta], not both")
+    if "beta" in doc:
+        if ref is None:
+            raise UserError(f"{where}: [beta] needs equation.reference_mass_kg")
+        terms = beta_to_coefficients(_floats(doc["beta"], f"{where} [beta]"), float(ref))
+        std = doc.get("std_err", {})
+        std = beta_to_coefficients(_floats(std, f"{where} [std_err]"), float(ref)) if std else {}
+    elif "terms" in doc:
+        terms = _floats(doc["terms"], f"{where} [terms]")
+        std = _floats(doc.get("std_err", {}), f"{where} [std_err]")
+    else:
+        raise UserError(f"{where}: missing [terms] (or [beta]) table")
+    mass = meta.get("mass_kg")
+    try:
+        return Equation(
+            name=str(meta["name"]), terms=terms,
+            mass_kg=None if mass is None else float(mass),
+            description=str(meta.get("description", "")), source=str(meta.get("source", "")),
+            std_err=std, p_values=_floats(doc.get("p_values", {}), f"{where} [p_values]"),
+            provenance=dict(doc.get("provenance", {})), metrics=dict(doc.get("metrics", {})),
+            path=None if where.startswith("<") else where)
+    except UserError as e:
+        raise UserError(f"{where}: {e}") from None
+
+
+def load_equation(spec: str | Path) -> Equation:
+    """Load an equation by built-in name or from a TOML file path."""
+    p = Path(spec)
+    if p.suffix == ".toml" or p.exists():
+        return equation_from_dict(read_toml(p, "equation file"), str(p))
+    builtin = BUILTIN_DIR / f"{spec}.toml"
+    if builtin.is_file():
+        eq = equation_from_dict(read_toml(builtin, "equation file"), str(builtin))
+        return eq
+    raise UserError(f"unknown equation '{spec}': not a file and not a built-in "
+                    f"(built-ins: {', '.join(builtin_names())})")
+
+
+def save_equation(eq: Equation, path: str | Path) -> None:
+    """Write an equation as TOML atomically."""
+    import tomli_w
+
+    from sumo_drvpw.fileio import write_text
+
+    write_text(path, tomli_w.dumps(_tomlable(eq.to_dict())))
+
+
+def _tomlable(o):
+    if isinstance(o, dict):
+        return {str(k): _tomlable(v) for k, v in o.items() if v is not None}
+    if isinstance(o, (list, tuple)):
+        return [_tomlable(v) for v in o]
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, Path):
+        return str(o)
+    return o
+
+
+def vsp_from_specs(vehicle) -> Equation:
+    """VSP with a vehicle's physical specs (seed paper Eq. 1), as an equation.
+
+    P = m·v·[a(1 + ε_i) + g·sin θ + g·C_r] + ½·ρ·C_d·A·v(v − v_w)²: in this basis
+    acc = 1 + ε_i, grade = 1, m_v1 = g·C_r (VSP has no cos θ), aero_rho = C_d·A.
+
+    Parameters
+    ----------
+    vehicle : :class:`sumo_drvpw.model.vehicles.Vehicle` with [body] drag_coefficient,
+        frontal_area_m2, rolling_coefficient and optional rotating_mass_factor
+    """
+    cd = vehicle.need("body", "drag_coefficient")
+    area = vehicle.need("body", "frontal_area_m2")
+    cr = vehicle.need("body", "rolling_coefficient")
+    eps = float(vehicle.body.get("rotating_mass_factor", 0.1))
+    return Equation(name=f"vsp_{vehicle.name}spec",
+                    terms={"acc": 1.0 + eps, "grade": 1.0, "m_v1": G * cr, "aero_rho": cd * area},
+                    description=f"VSP with the physical specs of {vehicle.name} (seed paper Eq. 1)",
+                    source=f"vehicle file {vehicle.path}")

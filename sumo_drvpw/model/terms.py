@@ -1,0 +1,216 @@
+"""The term basis: every equation is a sum of coefficient × basis term.
+
+One basis serves calibration, comparison, the SUMO loop and the residual tracer. A term
+is written as a product of factors joined by ``*``:
+
+=================  ==================================  ==========  =========
+factor             value                                unit        category
+=================  ==================================  ==========  =========
+``acc``            m·v·a                                W           acc
+``grade``          m·g·v·sin θ                          W           grade
+``aero``           v·(v − v_w)·|v − v_w|                m³/s³       aero
+``aero_rho``       ½·ρ·v·(v − v_w)·|v − v_w|            W/m²        aero
+``roll``           m·g·v·cos θ                          W           roll
+``roll_v2``        m·g·v²·cos θ                         W·m/s       roll
+``m_v1``           m·v                                  kg·m/s      roll
+``m_v3``           m·v³                                 kg·m³/s³    aero
+``v1``/``v2``/``v3``  v, v², v³                         (m/s)^k     roll/roll/aero
+``one``            1                                    –           other
+``v^k``            v to an integer power k (0…4)        (m/s)^k     v^3 aero, else roll
+``[col]``          the log column ``col`` (``[col]^2`` squared)     other
+``trip=ID``        1 on samples of trip ID, else 0      –           other
+=================  ==================================  ==========  =========
+
+The category of a product is that of its first physics factor (``acc``…``m_v3``,
+``v1``…``v3``, ``v^k``), else ``other``. Power [W] = coefficient × term value.
+
+Notes
+-----
+The basis carries the vehicle mass where physics puts it, so one equation serves
+vehicles of different mass (Pitanuwat et al., Part I, Eq. 14 restates Table 3 this way).
+``aero`` is the seed paper's v(v − v_wind)² (Table 3's β_aero multiplies it), signed
+so that a tailwind faster than the car pushes it; ``aero_rho`` includes ½ρ, so its
+coefficient is C_d·A [m²] and air density enters. ``m_v1``/``m_v3`` carry VSP LDV 1999's
+mass-specific rolling and drag terms (Jiménez-Palacios 1999, Eq. 2 of the seed paper),
+which have no cos θ.
+
+References
+----------
+Pitanuwat, S. et al., "Development of Hybrid-Vehicle Energy-Consumption Model for
+Transportation Applications — Part I", Eq. 1, 2, 13, 14 and Table 3.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Callable, Mapping
+
+import numpy as np
+
+from sumo_drvpw.model.constants import G
+from sumo_drvpw.errors import UserError
+
+#: The four physical categories the product reports, in display order.
+CATEGORIES = ("acc", "grade", "aero", "roll")
+
+
+@dataclass
+class Inputs:
+    """Per-sample inputs of the term basis; all arrays have one value per sample (SI).
+
+    Parameters
+    ----------
+    v : speed over ground [m/s]
+    a : longitudinal acceleration dv/dt [m/s²]
+    theta : road grade angle, uphill positive [rad]
+    wind : wind along the direction of travel, tailwind positive [m/s]
+    mass : vehicle mass [kg]
+    rho : air density [kg/m³]
+    signals : extra columns by name (any unit), for ``[col]`` factors
+    trip : trip id per sample, for ``trip=ID`` factors
+    """
+
+    v: np.ndarray
+    a: np.ndarray
+    theta: np.ndarray
+    wind: np.ndarray
+    mass: np.ndarray
+    rho: np.ndarray
+    signals: Mapping[str, np.ndarray] = field(default_factory=dict)
+    trip: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.v)
+
+    def with_mass(self, mass_kg: float | None) -> "Inputs":
+        """A copy whose mass is fixed to ``mass_kg`` [kg] (None: unchanged)."""
+        if mass_kg is None:
+            return self
+        return Inputs(self.v, self.a, self.theta, self.wind,
+                      np.full_like(self.v, float(mass_kg), dtype=float), self.rho,
+                      self.signals, self.trip)
+
+    def take(self, idx) -> "Inputs":
+        """The samples selected by a boolean mask or an index array."""
+        return Inputs(self.v[idx], self.a[idx], self.theta[idx], self.wind[idx],
+                      self.mass[idx], self.rho[idx],
+                      {k: np.asarray(s)[idx] for k, s in self.signals.items()},
+                      None if self.trip is None else np.asarray(self.trip)[idx])
+
+
+def _airspeed_term(x: Inputs) -> np.ndarray:
+    u = x.v - x.wind
+    return x.v * u * np.abs(u)
+
+
+#: Physics factors: name → (function of Inputs, category, power of m·g in it for Table-3
+#: conversion: 0 none, 1 mass only, 2 mass and g).
+PRIMITIVES: dict[str, tuple[Callable[[Inputs], np.ndarray], str, int]] = {
+    "acc": (lambda x: x.mass * x.v * x.a, "acc", 1),
+    "grade": (lambda x: x.mass * G * x.v * np.sin(x.theta), "grade", 2),
+    "aero": (_airspeed_term, "aero", 0),
+    "aero_rho": (lambda x: 0.5 * x.rho * _airspeed_term(x), "aero", 0),
+    "roll": (lambda x: x.mass * G * x.v * np.cos(x.theta), "roll", 2),
+    "roll_v2": (lambda x: x.mass * G * x.v ** 2 * np.cos(x.theta), "roll", 2),
+    "m_v1": (lambda x: x.mass * x.v, "roll", 1),
+    "m_v3": (lambda x: x.mass * x.v ** 3, "aero", 1),
+    "v1": (lambda x: x.v.astype(float, copy=True), "roll", 0),
+    "v2": (lambda x: x.v ** 2, "roll", 0),
+    "v3": (lambda x: x.v ** 3, "aero", 0),
+    "one": (lambda x: np.ones_like(x.v, dtype=float), "other", 0),
+}
+
+_VPOW = re.compile(r"^v\^([0-4])$")
+_COL = re.compile(r"^\[([^\[\]]+)\](?:\^2)?$")
+_TRIP = re.compile(r"^trip=(.+)$")
+
+
+@dataclass(frozen=True)
+class Term:
+    """A parsed term: a product of factors, with its category and mass/g order."""
+
+    text: str
+    factors: tuple[str, ...]
+    category: str
+    mg_order: int  # 0: no m, 1: m, 2: m·g (for converting mass-free β)
+
+    @property
+    def signals(self) -> tuple[str, ...]:
+        """The log columns this term reads."""
+        out = []
+        for f in self.factors:
+            m = _COL.match(f)
+            if m:
+                out.append(m.group(1))
+        return tuple(out)
+
+    def evaluate(self, x: Inputs) -> np.ndarray:
+        """Value of the term for every sample (unit: see the module table)."""
+        val = None
+        for f in self.factors:
+            fv = _factor_value(f, x)
+            val = fv if val is None else val * fv
+        return np.asarray(val, dtype=float)
+
+
+def _factor_value(f: str, x: Inputs) -> np.ndarray:
+    if f in PRIMITIVES:
+        return PRIMITIVES[f][0](x)
+    m = _VPOW.match(f)
+    if m:
+        return x.v.astype(float) ** int(m.group(1))
+    m = _COL.match(f)
+    if m:
+        name = m.group(1)
+        if name not in x.signals:
+            raise UserError(f"term factor '{f}' needs the signal '{name}', which the data "
+                            f"do not have (available: {', '.join(sorted(x.signals)) or 'none'})")
+        s = np.asarray(x.signals[name], dtype=float)
+        return s * s if f.endswith("^2") else s
+    m = _TRIP.match(f)
+    if m:
+        if x.trip is None:
+            raise UserError(f"term factor '{f}' needs trip ids, which the data do not have")
+        return (np.asarray(x.trip).astype(str) == m.group(1)).astype(float)
+    raise UserError(f"unknown term factor '{f}' (known: {', '.join(PRIMITIVES)}, v^k, [column], "
+                    "[column]^2, trip=ID)")
+
+
+@lru_cache(maxsize=4096)
+def parse_term(text: str) -> Term:
+    """Parse a term string such as ``acc``, ``[heater_w]*v^0`` or ``[ambient_c]*aero``."""
+    factors = tuple(p.strip() for p in str(text).split("*"))
+    if not factors or any(not p for p in factors):
+        raise UserError(f"empty factor in term '{text}'")
+    category, mg = "other", 0
+    for f in factors:
+        if f in PRIMITIVES:
+            fn, cat, order = PRIMITIVES[f]
+            if category == "other" and cat != "other":
+                category = cat
+            mg = max(mg, order)
+            continue
+        m = _VPOW.match(f)
+        if m:
+            if category == "other":
+                category = "aero" if m.group(1) == "3" else "roll"
+            continue
+        if _COL.match(f) or _TRIP.match(f):
+            continue
+        _factor_value(f, Inputs(*(np.zeros(0),) * 6))  # raises a UserError naming the factor
+    return Term(str(text), factors, category, mg)
+
+
+def term_matrix(terms: list[str] | tuple[str, ...], x: Inputs) -> np.ndarray:
+    """Matrix (n samples × k terms) of term values, column order as given."""
+    out = np.empty((len(x), len(terms)), dtype=float)
+    for j, t in enumerate(terms):
+        out[:, j] = parse_term(t).evaluate(x)
+    return out
+
+
+def category_of(term: str) -> str:
+    """The reporting category of a term: acc, grade, aero, roll or other."""
+    return parse_term(term).category

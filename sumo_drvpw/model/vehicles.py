@@ -1,0 +1,106 @@
+"""Vehicle files (TOML): mass, body, powertrain gearing and inertias, battery convention.
+
+Schema (every number may have a public source under ``[sources]`` with the same dotted key)::
+
+    [vehicle]
+    name = "prius3"
+    description = "..."
+    mass_kg = 1625                 # test mass [kg]
+
+    [body]                         # optional: physical road-load specs
+    drag_coefficient = 0.25        # C_d [-]
+    frontal_area_m2 = 2.23         # A [m²]
+    rolling_coefficient = 0.008    # C_r [-]
+    rotating_mass_factor = 0.1     # ε_i [-]
+
+    [powertrain]
+    type = "power_split"           # power_split | single_motor | battery | direct
+    sun_teeth = 30                 # power_split
+    ring_teeth = 78
+    mg2_reduction = 2.636          # MG2 → ring shaft (1.0 when there is none) [-], > 1
+    counter_ratio = 1.0            # ring shaft → counter shaft [-], > 1 slows the wheel
+    final_drive = 3.267            # counter shaft → wheels [-]
+    gear_ratio = 9.665             # single_motor: motor → wheels [-]
+    wheel_radius_m = 0.3127        # dynamic tyre radius [m]
+
+    [powertrain.inertia_kgm2]      # power_split: ice, carrier, mg1, sun, ring, mg2, wheels
+    ice = 0.18
+
+    [battery]
+    current_positive = "discharge" # or "charge": sign of battery_current_a when discharging
+
+    [sources]
+    "vehicle.mass_kg" = "Pitanuwat et al. Part I, Sec. 2"
+
+Ratios are written the conventional way (> 1 means the wheel turns slower); the seed
+paper writes G_r, G_c, G_f as their inverses (< 1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fileio import read_toml
+
+#: built-in vehicles: package data (importlib.resources; a regular install unpacks them)
+VEHICLE_DIR = Path(str(resources.files("sumo_drvpw.model") / "builtin" / "vehicles"))
+POWERTRAIN_TYPES = ("power_split", "single_motor", "battery", "direct")
+INERTIA_KEYS = ("ice", "carrier", "mg1", "sun", "ring", "mg2", "wheels")
+
+
+@dataclass
+class Vehicle:
+    """A vehicle as data. Lengths [m], masses [kg], inertias [kg·m²], ratios [-]."""
+
+    name: str
+    mass_kg: float
+    description: str = ""
+    body: dict = field(default_factory=dict)
+    powertrain: dict = field(default_factory=dict)
+    battery: dict = field(default_factory=dict)
+    sources: dict = field(default_factory=dict)
+    path: str | None = None
+
+    @property
+    def powertrain_type(self) -> str:
+        return self.powertrain.get("type", "direct")
+
+    def need(self, table: str, key: str) -> float:
+        """A required number from [table], or a UserError naming file and key."""
+        t = getattr(self, table)
+        if key not in t:
+            raise UserError(f"vehicle '{self.name}' ({self.path}): [{table}] lacks '{key}'")
+        return float(t[key])
+
+    def inertia(self, key: str) -> float:
+        """Rotational inertia [kg·m²] of a powertrain element (0 if not given)."""
+        return float(self.powertrain.get("inertia_kgm2", {}).get(key, 0.0))
+
+
+def vehicle_names() -> list[str]:
+    return sorted(p.stem for p in VEHICLE_DIR.glob("*.toml"))
+
+
+def load_vehicle(spec: str | Path) -> Vehicle:
+    """Load a vehicle by name (``sumo_drvpw/model/builtin/vehicles/NAME.toml``) or from a TOML path."""
+    p = Path(spec)
+    if not (p.suffix == ".toml" or p.exists()):
+        p = VEHICLE_DIR / f"{spec}.toml"
+        if not p.is_file():
+            raise UserError(f"unknown vehicle '{spec}': not a file and not one of "
+                            f"{', '.join(vehicle_names())}")
+    doc = read_toml(p, "vehicle file")
+    meta = doc.get("vehicle", {})
+    if "mass_kg" not in meta:
+        raise UserError(f"{p}: [vehicle] lacks 'mass_kg'")
+    v = Vehicle(name=str(meta.get("name", p.stem)), mass_kg=float(meta["mass_kg"]),
+                description=str(meta.get("description", "")), body=doc.get("body", {}),
+                powertrain=doc.get("powertrain", {}), battery=doc.get("battery", {}),
+                sources=doc.get("sources", {}), path=str(p))
+    if v.powertrain_type not in POWERTRAIN_TYPES:
+        raise UserError(f"{p}: powertrain.type '{v.powertrain_type}' is not one of "
+                        f"{', '.join(POWERTRAIN_TYPES)}")
+    return v

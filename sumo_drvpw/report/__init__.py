@@ -1,0 +1,1 @@
+"""Reports and figures: comparison report (report.json, report.md) and its figures."""

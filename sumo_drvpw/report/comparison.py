@@ -1,0 +1,231 @@
+"""The comparison report: ``report.json``, ``report.md`` and PNG figures (paper Table 3, Fig. 4–10).
+
+Numbers are SI in ``report.json`` (W, J, m/s); ``report.md`` shows kW, kWh and km/h for
+reading, converted here at the edge.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from sumo_drvpw.report import figures as plots
+from sumo_drvpw.fit.compare import Comparison
+from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
+from sumo_drvpw.fileio import write_json, write_text
+
+#: Figure file name → (plot function, caption).
+FIGURES = {
+    "fig4_parity.png": (plots.parity, "Predicted against measured power (cf. Fig. 4)"),
+    "fig5_error_hist.png": (plots.error_histograms, "Error histograms, light and heavy load (cf. Fig. 5)"),
+    "fig8_error_speed.png": (plots.error_vs_speed, "Error against speed, ≥ 80 km/h shaded (cf. Fig. 8)"),
+    "fig9_error_terms.png": (plots.error_vs_term_power, "Error against each term's power (cf. Fig. 9)"),
+    "fig10_energy_share.png": (plots.energy_share_bars, "Energy share of each term (cf. Fig. 10)"),
+}
+
+_KW = 1e-3        # W → kW, display only
+_KWH = 1.0 / 3.6e6  # J → kWh, display only
+
+
+def write_comparison_report(comparison: Comparison, out_dir, title: str,
+                            context: dict | None = None) -> None:
+    """Write ``report.json``, ``report.md`` and the figures of a comparison to ``out_dir``.
+
+    Parameters
+    ----------
+    comparison : result of :func:`sumo_drvpw.fit.compare.compare`
+    out_dir : output folder (created if missing)
+    title : report title
+    context : what was compared (log files, vehicle, calibration result …); copied into
+        ``report.json`` under ``"context"`` and listed at the top of ``report.md``
+
+    Notes
+    -----
+    ``report.json`` = ``comparison.to_json()`` plus ``title``, ``context`` and
+    ``figures`` (file names). Every file is written atomically.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    doc = comparison.to_json()
+    doc["title"] = title
+    doc["context"] = context or {}
+    doc["figures"] = list(FIGURES)
+    for fname, (fn, _) in FIGURES.items():
+        fn(comparison, out / fname)
+    write_json(out / "report.json", doc)
+    write_text(out / "report.md", render_markdown(comparison, doc, title, context or {}))
+
+
+# ------------------------------------------------------------------------ Markdown
+
+def _num(x, nd: int = 2, scale: float = 1.0) -> str:
+    if x is None:
+        return "–"
+    try:
+        f = float(x) * scale
+    except (TypeError, ValueError):
+        return "–"
+    if not math.isfinite(f):
+        return "–"
+    s = f"{f:.{nd}f}"
+    if s.startswith("-") and float(s) == 0.0:  # no "−0.00"
+        s = s[1:]
+    return s.replace("-", "−")
+
+
+def _coef(x) -> str:
+    return f"{float(x):.4g}".replace("-", "−")
+
+
+def _ctx_value(v) -> str:
+    """One-line rendering of a context value (long structures stay in report.json)."""
+    if isinstance(v, (list, tuple)):
+        if any(isinstance(x, (dict, list, tuple)) for x in v):
+            return f"{len(v)} entries (see report.json)"
+        return ", ".join(_ctx_value(x) for x in v)
+    if isinstance(v, dict):
+        text = ", ".join(f"{k} = {_ctx_value(x)}" for k, x in v.items())
+        return text if len(text) <= 300 else f"{len(v)} entries (see report.json)"
+    if isinstance(v, float):
+        return f"{v:.0f}" if 1e4 <= abs(v) < 1e12 else f"{v:.4g}"
+    return str(v)
+
+
+def _ctx_lines(context: dict, depth: int = 0) -> list[str]:
+    """Bullets for the context: nested dicts become one level of sub-bullets."""
+    out = []
+    for k, v in context.items():
+        if isinstance(v, dict) and v and depth == 0:
+            out.append(f"- **{k}**:")
+            out += ["  " + line for line in _ctx_lines(v, depth + 1)]
+        else:
+            out.append(f"- {'**' + str(k) + '**' if depth == 0 else k}: {_ctx_value(v)}")
+    return out
+
+
+def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> str:
+    """The Markdown text of the report (see :func:`write_comparison_report`)."""
+    eqs = doc["equations"]
+    meas = doc["measured"]
+    n = doc["n_samples"]
+    lines = [f"# {title}", ""]
+    if context:
+        lines += _ctx_lines(context) + [""]
+
+    lines += ["## Summary", ""]
+    lines.append(f"{n} samples: {meas['n_light']} at light load (< {HEAVY_LOAD_W * _KW:.0f} kW "
+                 f"measured), {meas['n_heavy']} at heavy load (≥ {HEAVY_LOAD_W * _KW:.0f} kW), "
+                 f"{meas['n_high_speed']} at ≥ {HIGH_SPEED_MPS / KMH:.0f} km/h.")
+    lines.append("Error is predicted minus measured power: negative means the equation "
+                 "underpredicts.")
+    heavy_ranked = sorted(((d["r2_heavy"], nm) for nm, d in eqs.items()
+                           if d["r2_heavy"] is not None), reverse=True)
+    if heavy_ranked:
+        r2, nm = heavy_ranked[0]
+        lines.append(f"Best fit at heavy load: **{nm}** (R² = {_num(r2, 3)}).")
+    if len(heavy_ranked) > 1:
+        r2w, nmw = heavy_ranked[-1]
+        lines.append(f"Weakest at heavy load: **{nmw}** (R² = {_num(r2w, 3)}).")
+    lines.append("")
+
+    lines += ["## Goodness of fit (cf. paper Table 3)", "",
+              "Coefficients are on this project's basis (`acc` = m·v·a, `grade` = m·g·v·sin θ, "
+              "`aero` = v·(v − v_wind)·|v − v_wind|, `roll` = m·g·v·cos θ, …), "
+              "± one standard error where known. R² is 1 − SSE/SST, each load range on its "
+              "own mean.", "",
+              "| Equation | Coefficients | R² < 50 kW | R² ≥ 50 kW | R² all | RMSE [kW] "
+              "| RMSE ≥ 50 kW [kW] | Bias [kW] | n |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for nm, d in eqs.items():
+        eq = comp.results[nm].equation
+        parts = []
+        for t, c in eq.terms.items():
+            s = f"`{t}` {_coef(c)}"
+            if t in eq.std_err:
+                s += f" ± {_coef(eq.std_err[t])}"
+            parts.append(s)
+        if eq.mass_kg is not None:
+            parts.append(f"(m = {eq.mass_kg:.0f} kg)")
+        lines.append(f"| {nm} | {'<br>'.join(parts)} | {_num(d['r2_light'], 3)} "
+                     f"| {_num(d['r2_heavy'], 3)} | {_num(d['r2'], 3)} "
+                     f"| {_num(d['rmse_w'], 2, _KW)} | {_num(d['rmse_heavy_w'], 2, _KW)} "
+                     f"| {_num(d['bias_w'], 2, _KW)} | {d['n']} |")
+    lines.append("")
+
+    lines += [f"## Error at ≥ {HIGH_SPEED_MPS / KMH:.0f} km/h (cf. paper Fig. 8)", ""]
+    for nm, d in eqs.items():
+        hs = d["high_speed"]
+        if not hs["n"]:
+            lines.append(f"- **{nm}**: no samples at ≥ {hs['threshold_kmh']:.0f} km/h.")
+            continue
+        mean, kmh = hs["mean_w"], f"{hs['threshold_kmh']:.0f} km/h"
+        where = f"{hs['n']} samples, {_num(100 * hs['fraction'], 1)} % of the log"
+        if abs(mean) < 0.1 * hs["rmse_w"]:
+            head = (f"**{nm}** shows no systematic error above {kmh} "
+                    f"(mean {_num(mean, 2, _KW)} kW; {where}).")
+        else:
+            verb = "underpredicts" if mean < 0 else "overpredicts"
+            head = f"**{nm}** {verb} by {_num(abs(mean), 2, _KW)} kW on average above {kmh} ({where})."
+        lines.append(
+            f"- {head} RMSE there is {_num(hs['rmse_w'], 2, _KW)} kW; 90 % of errors lie "
+            f"between {_num(hs['p5_w'], 2, _KW)} and {_num(hs['p95_w'], 2, _KW)} kW. "
+            f"Below {kmh}, the mean error is {_num(hs['mean_below_w'], 2, _KW)} kW.")
+    lines.append("")
+
+    lines += ["## Which term carries the error (cf. paper Fig. 9)", "",
+              "Correlation r of the error with each term's power in the same equation, and "
+              "the partial slope when the error is regressed on all terms at once. A partial "
+              "slope s means the data ask for about (1 − s) times that term: −0.5 → the term "
+              "is too small by half of itself. A missing term shows as “–”.", ""]
+    lines += _corr_table(eqs, "error_term_correlation")
+    if doc["settings"].get("reference"):
+        ref = doc["settings"]["reference"]
+        lines += [f"Against the term powers of the reference equation **{ref}** (this reveals "
+                  "a term an equation lacks):", ""]
+        lines += _corr_table(eqs, "error_reference_correlation")
+
+    scats = _categories(eqs, "energy_share")
+    lines += ["## Energy share of each term (cf. paper Fig. 10)", "",
+              "Share of the predicted traction energy (samples where the equation's total "
+              "power is positive). A negative share is energy the term returns during "
+              "traction, e.g. downhill grade.", "",
+              "| Equation | " + " | ".join(f"{c} [%]" for c in scats)
+              + " | Predicted traction [kWh] | Measured traction [kWh] | Predicted / measured |",
+              "|---|" + "---|" * (len(scats) + 3)]
+    for nm, d in eqs.items():
+        cells = [_num(d["energy_share"].get(c), 1, 100.0) for c in scats]
+        lines.append(f"| {nm} | " + " | ".join(cells)
+                     + f" | {_num(d['energy_j']['total'], 3, _KWH)}"
+                     f" | {_num(meas['traction_energy_j'], 3, _KWH)}"
+                     f" | {_num(d['traction_energy_ratio'], 3)} |")
+    lines.append("")
+
+    lines += ["## Figures", ""]
+    for fname, (_, caption) in FIGURES.items():
+        lines += [f"![{caption}]({fname})", f"*{caption}*", ""]
+    return "\n".join(lines)
+
+
+def _categories(eqs: dict, key: str) -> list[str]:
+    cats: list[str] = []
+    for d in eqs.values():
+        for c in d.get(key) or {}:
+            if c not in cats:
+                cats.append(c)
+    return cats
+
+
+def _corr_table(eqs: dict, key: str) -> list[str]:
+    """Markdown table of r / partial slope per equation and term category (``key``)."""
+    cats = _categories(eqs, key)
+    lines = ["| Equation | " + " | ".join(f"{c}: r / partial slope" for c in cats) + " |",
+             "|---|" + "---|" * len(cats)]
+    for nm, d in eqs.items():
+        lines.append(f"| {nm} | " + " | ".join(_corr_cell(d[key].get(c)) for c in cats) + " |")
+    return lines + [""]
+
+
+def _corr_cell(c: dict | None) -> str:
+    if not c or c.get("r") is None and c.get("partial_slope") is None:
+        return "–"
+    return f"{_num(c.get('r'), 2)} / {_num(c.get('partial_slope'), 2)}"

@@ -1,0 +1,229 @@
+"""Planted effects for synthetic logs: loads the declared equation lacks, and distractors.
+
+Each effect is a callable ``f(state, rng) -> (extra_power_w, {column: values})`` for
+:func:`sumo_drvpw.synth.track.synthesize` (``state``: arrays v [m/s], a [m/s²], theta [rad],
+wind [m/s], mass [kg], rho [kg/m³], t [s], trip, power_w [W]). The planted power of the
+last call is kept in ``self.last_power_w`` (per trip in ``self.power_w``) so tests can
+compute the noise floor from the truth. ``describe()`` names the effect for the
+synthetic log's truth record. Sizes are realistic: a few per cent of driving energy.
+
+:func:`synth_trips` concatenates several synthetic trips (distinct seeds and trip ids).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.equations import load_equation
+from sumo_drvpw.model.terms import Inputs
+
+
+def _ou(n: int, dt: float, tau_s: float, sd: float, rng, x0: float = 0.0) -> np.ndarray:
+    """Ornstein–Uhlenbeck path (mean 0, stationary s.d. ``sd``, correlation time ``tau_s``)."""
+    phi = np.exp(-dt / tau_s)
+    e = rng.normal(0.0, sd * np.sqrt(1 - phi * phi), n)
+    out = np.empty(n)
+    x = x0
+    # vectorized AR(1) through a linear filter
+    from scipy.signal import lfilter
+
+    out = lfilter([1.0], [1.0, -phi], e, zi=np.array([phi * x]))[0]
+    return out
+
+
+def _switching(n: int, dt: float, mean_on_s: float, mean_off_s: float, rng) -> np.ndarray:
+    """A two-state (on/off) Markov signal with mean dwell times [s]."""
+    out = np.zeros(n, bool)
+    i, state = 0, bool(rng.random() < mean_on_s / (mean_on_s + mean_off_s))
+    while i < n:
+        dur = rng.exponential(mean_on_s if state else mean_off_s)
+        k = max(1, int(round(dur / dt)))
+        out[i:i + k] = state
+        i += k
+        state = not state
+    return out
+
+
+class _Effect:
+    def __init__(self):
+        self.power_w: dict = {}
+        self.last_power_w = None
+
+    def _keep(self, state, dp):
+        self.last_power_w = dp
+        self.power_w[str(state["trip"][0])] = dp
+        return dp
+
+
+class AuxLoad(_Effect):
+    """An accessory load logged as a signal: A/C compressor power ``column`` [W] with an
+    on/off flag ``flag``; the compressor cycles (mean 60 s on, 40 s off), runs only while
+    moving (v > 0.5 m/s), and its level drifts between about 0.8 and 2.4 kW.
+
+    Planted power [W] = ``gain`` × column (form ``[column]``: additive c·signal·v⁰).
+    """
+
+    def __init__(self, column: str = "ac_power_w", flag: str = "ac_on", level_w: float = 1600.0,
+                 gain: float = 1.0):
+        super().__init__()
+        self.column, self.flag, self.level_w, self.gain = column, flag, level_w, gain
+
+    def __call__(self, state, rng):
+        v, t = state["v"], state["t"]
+        dt = float(t[1] - t[0]) if len(t) > 1 else 1.0
+        on = _switching(len(v), dt, 60.0, 40.0, rng) & (v > 0.5)
+        level = np.clip(self.level_w + _ou(len(v), dt, 120.0, 400.0, rng), 800.0, 2400.0)
+        sig = np.where(on, level, 0.0)
+        return self._keep(state, self.gain * sig), {self.column: sig, self.flag: on}
+
+    def describe(self):
+        return f"AuxLoad: {self.gain:g} × [{self.column}] (A/C compressor, flag {self.flag})"
+
+
+class TermScaledBySignal(_Effect):
+    """A declared term changed by a logged signal: cold tyres roll harder.
+
+    ``tyre_temp_c`` warms from ambient (2–10 °C) towards 45 °C with a 12-min time
+    constant; the rolling coefficient changes by ``per_k`` per kelvin below ``ref_c``:
+    planted power [W] = c_roll · per_k · (ref_c − T) · roll, i.e. the forms
+    ``[tyre_temp_c]*roll`` (and ``roll``, already declared).
+    """
+
+    def __init__(self, term: str = "roll", column: str = "tyre_temp_c", per_k: float = 0.01,
+                 ref_c: float = 45.0, truth: str = "drvpw_prius3"):
+        super().__init__()
+        self.term, self.column, self.per_k, self.ref_c = term, column, per_k, ref_c
+        self.coef = float(load_equation(truth).terms[term])
+
+    def __call__(self, state, rng):
+        from sumo_drvpw.model.terms import parse_term
+
+        t = state["t"]
+        start = rng.uniform(2.0, 10.0)
+        temp = self.ref_c - (self.ref_c - start) * np.exp(-(t - t[0]) / 720.0)
+        temp = temp + _ou(len(t), float(t[1] - t[0]), 30.0, 0.5, rng)
+        x = Inputs(state["v"], state["a"], state["theta"], state["wind"], state["mass"], state["rho"])
+        term = parse_term(self.term).evaluate(x)
+        dp = self.coef * self.per_k * (self.ref_c - temp) * term
+        return self._keep(state, dp), {self.column: temp}
+
+    def describe(self):
+        return (f"TermScaledBySignal: {self.term} × (1 + {self.per_k:g}·({self.ref_c:g} − [{self.column}]))")
+
+
+class SpeedFunction(_Effect):
+    """A function of speed alone (the seed paper's residual was quadratic in speed):
+    planted power [W] = Σ c_k·v^k while moving (v > 0.05 m/s; the synthetic powertrain
+    delivers nothing at standstill), default 300 + 0.8·v² (≈ 0.9 kW at 100 km/h)."""
+
+    def __init__(self, coefs: dict | None = None):
+        super().__init__()
+        self.coefs = dict(coefs or {0: 300.0, 2: 0.8})
+
+    def __call__(self, state, rng):
+        v = state["v"]
+        dp = sum(c * v ** k for k, c in self.coefs.items()) * (v > 0.05)
+        return self._keep(state, dp), {}
+
+    def describe(self):
+        return "SpeedFunction: " + " + ".join(f"{c:g}·v^{k}" for k, c in self.coefs.items())
+
+
+class PerTripMass(_Effect):
+    """A per-trip mass change (passengers, cargo) the log's ``mass_kg`` does not show:
+    Δm drawn per trip from ``deltas_kg`` in turn (or N(0, sd_kg)); planted power [W] =
+    Δm/m × (acc + grade + roll power of the truth equation)."""
+
+    def __init__(self, deltas_kg=(120.0, -60.0, 0.0, 180.0, -100.0, 60.0), truth: str = "drvpw_prius3"):
+        super().__init__()
+        self.deltas_kg = tuple(deltas_kg)
+        self.truth = load_equation(truth)
+        self.i = 0
+        self.drawn: dict = {}
+
+    def __call__(self, state, rng):
+        dm = self.deltas_kg[self.i % len(self.deltas_kg)]
+        self.i += 1
+        self.drawn[str(state["trip"][0])] = dm
+        x = Inputs(state["v"], state["a"], state["theta"], state["wind"], state["mass"], state["rho"])
+        cats = self.truth.category_powers(x)
+        dp = dm / state["mass"] * (cats["acc"] + cats["grade"] + cats["roll"])
+        return self._keep(state, dp), {}
+
+    def describe(self):
+        return f"PerTripMass: Δm per trip from {self.deltas_kg} kg on acc, grade, roll"
+
+
+class Distractors(_Effect):
+    """Columns that carry nothing: a random walk, white noise, an on/off flag, and a
+    signal correlated with speed (cabin noise, R² ≈ 0.8 with v) without any effect."""
+
+    def __call__(self, state, rng):
+        v, t = state["v"], state["t"]
+        n = len(v)
+        dt = float(t[1] - t[0]) if n > 1 else 1.0
+        cols = {
+            "random_walk": np.cumsum(rng.normal(0.0, 0.05, n)),
+            "white_noise": rng.normal(0.0, 1.0, n),
+            "wiper_on": _switching(n, dt, 30.0, 90.0, rng),
+            "cabin_noise_db": 45.0 + 0.9 * v + rng.normal(0.0, 4.0, n),
+        }
+        return self._keep(state, np.zeros(n)), cols
+
+    def describe(self):
+        return "Distractors: random_walk, white_noise, wiper_on, cabin_noise_db (no effect)"
+
+
+class LogPower(_Effect):
+    """Logs the driving power itself as ``power_w`` (truth + process noise + the effects
+    before it), which the drive-log spec lets a log carry; put it last. With it the
+    measured power skips the power-split reconstruction, so the noise floor is the
+    planted process noise. It also logs the acceleration (``accel_mps2``, as an
+    accelerometer would), so the acceleration is not differentiated from a noisy speed."""
+
+    def __call__(self, state, rng):
+        return self._keep(state, np.zeros(len(state["v"]))), {"power_w": np.array(state["power_w"], float),
+                                                              "accel_mps2": np.array(state["a"], float)}
+
+    def describe(self):
+        return "LogPower: power_w column = driving power"
+
+
+def synth_trips(n_trips: int = 4, minutes: float = 10.0, seed: int = 0, effects=(), **kw):
+    """Concatenate ``n_trips`` synthetic trips (seeds seed…seed+n−1, ids synth-1…).
+
+    Returns (DataFrame, list of truth dicts). ``kw`` go to :class:`SynthOptions`.
+    """
+    from sumo_drvpw.synth.track import SynthOptions, synthesize
+
+    frames, truths = [], []
+    for i in range(n_trips):
+        df, truth = synthesize(SynthOptions(minutes=minutes, seed=seed + i, trip_id=f"synth-{i + 1}", **kw),
+                               effects=tuple(effects))
+        frames.append(df)
+        truths.append(truth)
+    return pd.concat(frames, ignore_index=True), truths
+
+
+def planted_power(effects, trip_ids) -> np.ndarray:
+    """Planted power [W] per row of a :func:`synth_trips` log (rows in trip order)."""
+    parts = []
+    for tid in pd.unique(np.asarray(trip_ids)):
+        tot = None
+        for e in effects:
+            if isinstance(e, LogPower):
+                continue
+            dp = e.power_w[str(tid)]
+            tot = dp if tot is None else tot + dp
+        parts.append(tot)
+    return np.concatenate(parts)
+
+
+#: Effects by short name (for ``synth --plant``).
+PLANTS = {"ac": AuxLoad, "tyre": TermScaledBySignal, "speed2": SpeedFunction,
+          "mass": PerTripMass, "distractors": Distractors, "logpower": LogPower}
+
+__all__ = ["AuxLoad", "TermScaledBySignal", "SpeedFunction", "PerTripMass", "Distractors",
+           "LogPower", "synth_trips", "planted_power", "PLANTS", "G"]

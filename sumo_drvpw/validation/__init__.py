@@ -1,0 +1,1 @@
+"""Validation on the shared real data: one study per dataset and the report renderer."""
