@@ -70,6 +70,10 @@ class Inputs:
     rho : air density [kg/m³]
     signals : extra columns by name (any unit), for ``[col]`` factors
     trip : trip id per sample, for ``trip=ID`` factors
+    v_acc : speed the ``acc`` factor multiplies a by [m/s]; None: ``v``. The SUMO loop
+        passes the step's mean speed (v_t + v_t−1)/2, so that m·v_acc·a·Δt is exactly
+        the kinetic-energy change ½m(v_t² − v_t−1²) of the step at any step length;
+        drive logs leave it None (acc = m·v·a).
     """
 
     v: np.ndarray
@@ -80,6 +84,7 @@ class Inputs:
     rho: np.ndarray
     signals: Mapping[str, np.ndarray] = field(default_factory=dict)
     trip: np.ndarray | None = None
+    v_acc: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.v)
@@ -90,14 +95,15 @@ class Inputs:
             return self
         return Inputs(self.v, self.a, self.theta, self.wind,
                       np.full_like(self.v, float(mass_kg), dtype=float), self.rho,
-                      self.signals, self.trip)
+                      self.signals, self.trip, self.v_acc)
 
     def take(self, idx) -> "Inputs":
         """The samples selected by a boolean mask or an index array."""
         return Inputs(self.v[idx], self.a[idx], self.theta[idx], self.wind[idx],
                       self.mass[idx], self.rho[idx],
                       {k: np.asarray(s)[idx] for k, s in self.signals.items()},
-                      None if self.trip is None else np.asarray(self.trip)[idx])
+                      None if self.trip is None else np.asarray(self.trip)[idx],
+                      None if self.v_acc is None else np.asarray(self.v_acc)[idx])
 
 
 def _airspeed_term(x: Inputs) -> np.ndarray:
@@ -108,7 +114,7 @@ def _airspeed_term(x: Inputs) -> np.ndarray:
 #: Physics factors: name → (function of Inputs, category, power of m·g in it for Table-3
 #: conversion: 0 none, 1 mass only, 2 mass and g).
 PRIMITIVES: dict[str, tuple[Callable[[Inputs], np.ndarray], str, int]] = {
-    "acc": (lambda x: x.mass * x.v * x.a, "acc", 1),
+    "acc": (lambda x: x.mass * (x.v if x.v_acc is None else x.v_acc) * x.a, "acc", 1),
     "grade": (lambda x: x.mass * G * x.v * np.sin(x.theta), "grade", 2),
     "aero": (_airspeed_term, "aero", 0),
     "aero_rho": (lambda x: 0.5 * x.rho * _airspeed_term(x), "aero", 0),
