@@ -265,6 +265,74 @@ def energy_shares(category_w: dict[str, np.ndarray], dt_s) -> tuple[dict, dict]:
     return energy, share
 
 
+# ------------------------------------------------------------------ energy per trip
+
+def _trip_energy(pred_w, meas_w, dt_s, trip, net: bool) -> dict:
+    pred = np.asarray(pred_w, dtype=float).ravel()
+    meas = np.asarray(meas_w, dtype=float).ravel()
+    n = meas.size
+    if pred.shape != meas.shape:
+        raise UserError(f"trip energy: predicted power has {pred.size} samples, measured "
+                        f"power {n}")
+    dt = _dt_array(dt_s, n)
+    tr = np.asarray(trip).ravel() if trip is not None else np.zeros(n, dtype=np.int64)
+    if tr.shape != (n,):
+        raise UserError(f"trip energy: trip has {tr.size} values for {n} samples")
+    ok = np.isfinite(pred) & np.isfinite(meas)
+    if net:
+        pm, mm = np.where(ok, pred, 0.0), np.where(ok, meas, 0.0)
+    else:
+        pm = np.where(ok & (pred > 0.0), pred, 0.0)
+        mm = np.where(ok & (meas > 0.0), meas, 0.0)
+    codes, names = _codes(tr)
+    k = len(names)
+    e_meas = np.bincount(codes, weights=mm * dt, minlength=k)
+    e_pred = np.bincount(codes, weights=pm * dt, minlength=k)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        err = np.where(e_meas != 0.0, e_pred / e_meas - 1.0, np.nan)
+    trips = {str(t): {"measured_j": float(em), "predicted_j": float(ep), "error": float(er)}
+             for t, em, ep, er in zip(names, e_meas, e_pred, err)}
+    fin = np.abs(err[np.isfinite(err)])
+    return {"mean_abs_error": float(fin.mean()) if fin.size else math.nan,
+            "max_abs_error": float(fin.max()) if fin.size else math.nan,
+            "trips": trips}
+
+
+def _codes(trip: np.ndarray) -> tuple[np.ndarray, list]:
+    """Integer code per sample and the trip names in order of first appearance."""
+    import pandas as pd
+
+    codes, uniques = pd.factorize(pd.Series(trip), sort=False)
+    return codes.astype(np.int64), list(uniques)
+
+
+def trip_energy(pred_w, meas_w, dt_s, trip) -> dict:
+    """Traction energy per trip, predicted against measured (issue #11 §5).
+
+    Parameters
+    ----------
+    pred_w : predicted driving power per sample [W]
+    meas_w : measured driving power per sample [W]
+    dt_s : duration of each sample [s] (array or scalar; None: 1 s each)
+    trip : trip id per sample (None: one trip)
+
+    Returns
+    -------
+    ``{"mean_abs_error", "max_abs_error", "trips": {TRIP: {"measured_j", "predicted_j",
+    "error"}}}`` with E = Σ max(P, 0)·Δt over the trip's samples [J], computed separately
+    for measured and predicted power, and error = E_pred/E_meas − 1 (NaN when the trip has
+    no measured traction; left out of the mean and max). Samples with a non-finite value
+    count as zero power.
+    """
+    return _trip_energy(pred_w, meas_w, dt_s, trip, net=False)
+
+
+def trip_net_energy(pred_w, meas_w, dt_s, trip) -> dict:
+    """Net energy per trip, E = Σ P·Δt (traction minus recuperation) [J]; else as
+    :func:`trip_energy` (error = E_pred/E_meas − 1, NaN when E_meas = 0)."""
+    return _trip_energy(pred_w, meas_w, dt_s, trip, net=True)
+
+
 # -------------------------------------------------------------------- comparison
 
 @dataclass
@@ -304,6 +372,8 @@ class Comparison:
     measured_traction_energy_j : Σ P_meas·Δt over samples with P_meas > 0 [J]
     reference : name of the equation whose category powers the errors were also
         correlated with (``error_reference_correlation``), or None
+    trip : trip id per sample, or None; when given, ``to_json`` reports energy per trip
+        (``trip_energy``, ``trip_net_energy``) for each equation
     """
 
     meas_w: np.ndarray
@@ -312,6 +382,7 @@ class Comparison:
     results: dict[str, EquationResult] = field(default_factory=dict)
     measured_traction_energy_j: float = math.nan
     reference: str | None = None
+    trip: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -326,7 +397,8 @@ class Comparison:
 
         ``{"equations": {NAME: {"n", "r2", "r2_light", "r2_heavy", "rmse_w", "bias_w",
         "mae_w", …, "speed_bins", "high_speed", "error_term_correlation",
-        "energy_share", "energy_j", …}}, "n_samples", …}``
+        "energy_share", "energy_j", "trip_energy", "trip_net_energy", …}},
+        "n_samples", …}``; the per-trip energies only when the trips are known.
         """
         eqs = {}
         for name, r in self.results.items():
@@ -345,6 +417,10 @@ class Comparison:
             d["energy_j"] = r.energy_j
             d["measured_traction_energy_j"] = self.measured_traction_energy_j
             d["traction_energy_ratio"] = r.traction_energy_ratio
+            if self.trip is not None:
+                d["trip_energy"] = trip_energy(r.pred_w, self.meas_w, self.dt_s, self.trip)
+                d["trip_net_energy"] = trip_net_energy(r.pred_w, self.meas_w, self.dt_s,
+                                                       self.trip)
             eqs[name] = d
         return _jsonable({
             "equations": eqs,
@@ -400,7 +476,7 @@ def _dt_array(dt_s, n: int) -> np.ndarray:
 
 
 def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
-            reference: str | None = None) -> Comparison:
+            reference: str | None = None, trip=None) -> Comparison:
     """Evaluate equations against measured driving power (paper Table 3, Fig. 4–10).
 
     Parameters
@@ -413,6 +489,8 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
         every equation's error is then also correlated with the reference's category
         powers (``error_reference_correlation``), which shows a term an equation lacks
         altogether — its own power of a missing term is zero and carries no signal.
+    trip : trip id per sample (default: ``inputs.trip``); when known, the report gives
+        energy per trip (:func:`trip_energy`, :func:`trip_net_energy`)
 
     Returns
     -------
@@ -439,8 +517,15 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
     v = np.asarray(inputs.v, dtype=float)
     meas_traction = float(np.where(meas > 0.0, meas, 0.0) @ dt)
 
+    if trip is None:
+        trip = inputs.trip
+    if trip is not None:
+        trip = np.asarray(trip).ravel()
+        if trip.shape != (n,):
+            raise UserError(f"compare: trip has {trip.size} values for {n} samples")
     comp = Comparison(meas_w=meas, speed_mps=v, dt_s=dt,
-                      measured_traction_energy_j=meas_traction, reference=reference)
+                      measured_traction_energy_j=meas_traction, reference=reference,
+                      trip=trip)
     cat_powers = {eq.name: eq.category_powers(inputs) for eq in equations}
     for eq in equations:
         cats = cat_powers[eq.name]
