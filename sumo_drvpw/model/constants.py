@@ -28,3 +28,12 @@ HP = 745.69987158227022  # mechanical horsepower → W
 HEAVY_LOAD_W = 50_000.0
 #: Speed above which the seed paper's Fig. 8 shows VSP underprediction [m/s].
 HIGH_SPEED_MPS = 80.0 * KMH
+
+#: Fuels of the energy chain (sumo_drvpw.model.chain): lower heating value [J/kg], density
+#: [kg/L] and CO₂ per kg of fuel burnt [kg/kg]. Sources in docs/sources.md ("Fuels"):
+#: LHV and density as in JEC Well-to-Wheels v5 (2020) fuel properties (E0 petrol, B0 diesel);
+#: CO₂ = carbon mass fraction (petrol 0.865, diesel 0.862) × 44.01/12.011, full oxidation.
+FUELS = {
+    "gasoline": {"lhv_j_per_kg": 43.2e6, "density_kg_per_l": 0.745, "co2_kg_per_kg": 3.169},
+    "diesel": {"lhv_j_per_kg": 43.1e6, "density_kg_per_l": 0.832, "co2_kg_per_kg": 3.158},
+}
