@@ -16,3 +16,10 @@ def first_bad_row(mask, index=None) -> str:
     pos = int(np.flatnonzero(np.asarray(mask))[0])
     label = pos if index is None else index[pos]
     return f"row {label}"
+
+
+class OutputExists(UserError):
+    """An output folder exists with files not written by sumo-drvpw.
+
+    The CLI adds how to replace it anyway (``--force``); library code never names flags.
+    """

@@ -111,3 +111,181 @@ def read_toml(path, what: str) -> dict:
         return tomllib.loads(p.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise UserError(f"{p}: not a valid TOML {what}: {e}") from None
+
+
+# ------------------------------------------------------------------ whole output sets
+
+#: The command line of the running CLI invocation (set by ``sumo_drvpw.cli.main``);
+#: written into every output set's ``manifest.json`` when no ``command`` is given.
+CURRENT_COMMAND: list[str] | None = None
+
+MANIFEST = "manifest.json"
+_NO_SPACE = {28, 122}  # ENOSPC, EDQUOT
+
+
+def _version() -> str:
+    from sumo_drvpw import __version__
+
+    return __version__
+
+
+def _is_within(a: Path, b: Path) -> bool:
+    """True when ``a`` is ``b`` or lies inside the tree of ``b`` (resolved paths)."""
+    return a == b or b in a.parents
+
+
+def check_output_path(out, inputs=(), kind: str = "folder") -> Path:
+    """Refuse an output path that is, holds or lies inside an input; return it resolved.
+
+    Parameters
+    ----------
+    out : the output file or folder
+    inputs : input files and folders of the command (never written to)
+    kind : "folder" (an output set) or "file" (a single output file)
+
+    Raises :class:`sumo_drvpw.errors.UserError` when ``out`` equals an input, lies inside
+    an input folder, or (a folder replaced whole) contains an input; when a folder output
+    is an existing file or a file output is an existing folder.
+    """
+    from sumo_drvpw.errors import UserError
+
+    out = Path(out)
+    res = out.resolve()
+    for i in inputs:
+        if i is None:
+            continue
+        ri = Path(i).resolve()
+        if _is_within(res, ri):
+            raise UserError(f"{out}: output is {'the input' if res == ri else 'inside the input'} "
+                            f"{i}; inputs are never overwritten, choose another output path")
+        if kind == "folder" and _is_within(ri, res):
+            raise UserError(f"{out}: output folder holds the input {i}, and an output folder "
+                            "is replaced whole; choose another output path")
+    if kind == "folder" and out.exists() and not out.is_dir():
+        raise UserError(f"{out}: exists and is a file, not a folder; choose a folder path")
+    if kind == "file" and out.is_dir():
+        raise UserError(f"{out}: is a folder; give a file name")
+    return res
+
+
+def no_space_message(path, e: OSError) -> str:
+    """One line for a full disk (ENOSPC/EDQUOT) while writing under ``path``."""
+    where = e.filename or path
+    return f"{path}: disk full (no space left on the device) while writing {where}; nothing written"
+
+
+@contextlib.contextmanager
+def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
+               meta: dict | None = None) -> Iterator[Path]:
+    """Write a whole set of outputs: into a temporary sibling folder, then move into place.
+
+    Usage::
+
+        with output_set(out, force=args.force, inputs=args.logs) as tmp:
+            write_json(tmp / "report.json", doc)      # every file of the set under tmp
+            write_text(tmp.parent / f"{tmp.name}.md", md)  # optional companion beside it
+
+    The yielded folder has the same name as ``out_dir`` (it lives in a hidden temporary
+    folder beside ``out_dir``), so code that derives names from the folder's name works
+    unchanged; files written beside it in ``tmp.parent`` are companions moved beside
+    ``out_dir`` (e.g. ``validation.md`` beside ``validation/``).
+
+    On success ``manifest.json`` (files with sizes, command line, version, UTC time and
+    ``meta``) is written into the set, an existing ``out_dir`` is replaced whole and the
+    temporary folder removed. On any exception (KeyboardInterrupt included) the temporary
+    folder is removed and ``out_dir`` stays as it was; a full disk becomes a UserError.
+
+    Parameters
+    ----------
+    out_dir : final output folder
+    force : replace an existing non-empty folder that is not an earlier output set
+        (a folder with a sumo-drvpw ``manifest.json``, or an empty one, is always replaced)
+    command : command line for the manifest (default: the running CLI's argv)
+    inputs : input paths; ``out_dir`` may neither be nor lie inside nor contain one
+    meta : extra manifest fields; the caller may fill it inside the block (e.g.
+        ``meta["interrupted"] = True`` for a run stopped by Ctrl-C that writes what it has)
+    """
+    import datetime
+    import shutil
+    import signal
+
+    from sumo_drvpw.errors import OutputExists, UserError
+
+    out = Path(out_dir)
+    check_output_path(out, inputs, "folder")
+    if out.is_dir() and any(out.iterdir()) and not force and not _is_output_set(out):
+        raise OutputExists(f"{out}: folder exists, is not empty and was not written by "
+                           "sumo-drvpw (no manifest.json); it is left untouched")
+    parent = out.parent if str(out.parent) else Path(".")
+    made = [d for d in [parent, *parent.parents] if not d.exists()]
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=parent))
+    except PermissionError:
+        raise UserError(f"{out}: cannot write in {made[-1].parent if made else parent} "
+                        "(permission denied)") from None
+    except OSError as e:
+        if e.errno in _NO_SPACE:
+            raise UserError(no_space_message(out, e)) from None
+        raise UserError(f"{out}: cannot create the output folder: {e.strerror}") from None
+    tmp = stage / out.name
+    tmp.mkdir()
+    info = meta if meta is not None else {}
+    done = False
+    try:
+        try:
+            yield tmp
+            files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())
+            companions = sorted(p.name for p in stage.iterdir() if p.name != out.name)
+            manifest = {"tool": "sumo-drvpw", "version": _version(),
+                        "command": list(command if command is not None else (CURRENT_COMMAND or [])),
+                        "created_utc": datetime.datetime.now(datetime.timezone.utc)
+                        .isoformat(timespec="seconds"),
+                        "interrupted": False, **info,
+                        "files": [{"path": f, "bytes": (tmp / f).stat().st_size} for f in files],
+                        "companions": [{"path": f"../{c}", "bytes": (stage / c).stat().st_size}
+                                       for c in companions]}
+            write_json(tmp / MANIFEST, manifest)
+        except OSError as e:
+            if e.errno in _NO_SPACE:
+                raise UserError(no_space_message(out, e)) from None
+            raise
+        # publish: no signal may split the moves
+        blocked = {signal.SIGINT, signal.SIGTERM}
+        old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, blocked)
+        try:
+            old = None
+            if out.exists():
+                old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
+                os.replace(out, old / out.name)
+            try:
+                os.replace(tmp, out)
+            except OSError:
+                if old is not None:  # put the earlier set back
+                    os.replace(old / out.name, out)
+                    shutil.rmtree(old, ignore_errors=True)
+                raise
+            for c in companions:
+                os.replace(stage / c, parent / c)
+            done = True
+            if old is not None:
+                shutil.rmtree(old, ignore_errors=True)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+        if not done:
+            for d in made:  # folders created for this set only
+                try:
+                    d.rmdir()
+                except OSError:
+                    pass
+
+
+def _is_output_set(folder: Path) -> bool:
+    """True when ``folder`` holds a manifest.json written by :func:`output_set`."""
+    p = folder / MANIFEST
+    try:
+        return json.loads(p.read_text(encoding="utf-8")).get("tool") == "sumo-drvpw"
+    except (OSError, ValueError, AttributeError):
+        return False

@@ -8,11 +8,13 @@ anywhere becomes a one-line message on stderr and exit code 2, without a traceba
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
+import signal
 import sys
 import warnings
 
-from sumo_drvpw.errors import UserError
+from sumo_drvpw.errors import OutputExists, UserError
 
 #: sub-command → (module, one-line help)
 COMMANDS = {
@@ -34,7 +36,10 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from sumo_drvpw import __version__
+
     parser = _Parser(prog="sumo-drvpw", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"sumo-drvpw {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for name, (module, help_) in COMMANDS.items():
         p = sub.add_parser(name, help=help_, description=help_)
@@ -50,22 +55,74 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def add_force(p) -> None:
+    """The ``--force`` option of a command that writes an output folder."""
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing output folder even if sumo-drvpw did not write it")
+
+
+def output_set(args, out, inputs=()):
+    """:func:`sumo_drvpw.fileio.output_set` for a command: ``--force`` from ``args``."""
+    from sumo_drvpw import fileio
+
+    return fileio.output_set(out, force=bool(getattr(args, "force", False)), inputs=inputs)
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Ctrl-C (SIGINT) would be: the run stops the same clean way."""
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
-    warnings.filterwarnings("ignore", message=".*pyarrow.*")
+    from sumo_drvpw import fileio
+
+    argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "_missing", None):
         print(f"sumo-drvpw: error: command '{args.command}' is not available in this build",
               file=sys.stderr)
         return 2
+    fileio.CURRENT_COMMAND = ["sumo-drvpw", *argv]
+    prev_term = None
+    try:  # only the main thread may install handlers (tests may call main elsewhere)
+        prev_term = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:
+        pass
     try:
-        return int(args._main(args) or 0)
+        # numeric warnings (empty slices, 0/0) are handled by the code; never shown raw
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*pyarrow.*")
+            warnings.filterwarnings("ignore", category=RuntimeWarning)
+            import numpy as np
+
+            with np.errstate(all="ignore"):
+                return int(args._main(args) or 0)
+    except OutputExists as e:
+        print(f"sumo-drvpw {args.command}: error: {e}; give --force to replace it", file=sys.stderr)
+        return 2
     except UserError as e:
         print(f"sumo-drvpw {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except _Terminated:
+        print("sumo-drvpw: terminated (SIGTERM); no partial output written", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
-        print("sumo-drvpw: interrupted", file=sys.stderr)
+        print("sumo-drvpw: interrupted; no partial output written", file=sys.stderr)
         return 130
+    except OSError as e:
+        if e.errno in (errno.ENOSPC, errno.EDQUOT):
+            print(f"sumo-drvpw {args.command}: error: disk full (no space left on the device) "
+                  f"while writing {e.filename or 'the output'}", file=sys.stderr)
+            return 2
+        raise
+    finally:
+        fileio.CURRENT_COMMAND = None
+        if prev_term is not None:
+            signal.signal(signal.SIGTERM, prev_term)
 
 
 if __name__ == "__main__":
