@@ -5,11 +5,10 @@ The seed paper calibrates DrvPw by stepwise multiple regression over candidate t
 regression of the selected terms.
 
 Selection works on the sufficient statistics XᵀX, Xᵀy, yᵀy of all candidates, computed
-in chunks, so a step costs O(k³) instead of a pass over the samples: for a subset S the
-OLS estimate is β = (X_SᵀX_S)⁻¹X_Sᵀy, RSS = yᵀy − βᵀX_Sᵀy, s² = RSS/(n − |S|),
-se = √(s²·diag((X_SᵀX_S)⁻¹)), and the p-value is two-sided Student-t with n − |S| dof —
-exactly what ``statsmodels.OLS(y, X_S).fit()`` reports (a test checks this). The final
-model is fitted by statsmodels on the selected columns.
+in chunks (:mod:`sumo_drvpw.fit.ols`, the one OLS path), so a step costs O(k³) instead of
+a pass over the samples; the statistics of a subset are exactly what
+``statsmodels.OLS(y, X_S).fit()`` reports (a test checks this). The final model is fitted
+by statsmodels on the selected columns.
 """
 
 from __future__ import annotations
@@ -18,76 +17,20 @@ import datetime as _dt
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
 from sumo_drvpw.model.equations import Equation, coefficients_to_beta
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.fit.ols import CHUNK, Gram, gram
 from sumo_drvpw.model.terms import Inputs, parse_term, term_matrix
+
+__all__ = ["CANDIDATES", "CHUNK", "Gram", "gram", "drop_spanned", "stepwise", "calibrate",
+           "CalibrationResult", "resolve_candidates"]
 
 #: The seed paper's candidate sets (Table 3).
 CANDIDATES = {
     "indt-var-1": ("acc", "grade", "aero", "roll"),
     "indt-var-2": ("acc", "grade", "aero", "roll_v2", "roll", "v3", "v2", "v1"),
 }
-CHUNK = 1_000_000
-
-
-@dataclass
-class Gram:
-    """Sufficient statistics of a no-intercept regression of y on X."""
-
-    xtx: np.ndarray
-    xty: np.ndarray
-    yty: float
-    n: int
-    names: tuple[str, ...]
-
-    def fit(self, idx: list[int]) -> dict | None:
-        """OLS on the columns ``idx``: β, se, p, rss; None if the columns are collinear."""
-        k = len(idx)
-        if k == 0:
-            return {"beta": np.zeros(0), "se": np.zeros(0), "t": np.zeros(0), "p": np.zeros(0),
-                    "rss": self.yty}
-        a = self.xtx[np.ix_(idx, idx)]
-        d = np.sqrt(np.diag(a))
-        if np.any(d == 0):
-            return None
-        scaled = a / np.outer(d, d)
-        if np.linalg.cond(scaled) > 1e12:
-            return None
-        inv = np.linalg.inv(scaled) / np.outer(d, d)
-        beta = inv @ self.xty[idx]
-        rss = max(self.yty - beta @ self.xty[idx], 0.0)
-        dof = self.n - k
-        if dof <= 0:
-            return None
-        s2 = rss / dof
-        se = np.sqrt(np.maximum(np.diag(inv) * s2, 0.0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tval = np.where(se > 0, beta / se, np.inf)
-        p = 2.0 * stats.t.sf(np.abs(tval), dof)
-        return {"beta": beta, "se": se, "t": tval, "p": p, "rss": rss}
-
-
-def gram(x: Inputs, y: np.ndarray, names, mask: np.ndarray | None = None, chunk: int = CHUNK) -> Gram:
-    """Accumulate XᵀX, Xᵀy, yᵀy over samples (chunked: memory O(chunk·k))."""
-    names = tuple(names)
-    k = len(names)
-    xtx, xty, yty, n = np.zeros((k, k)), np.zeros(k), 0.0, 0
-    for lo in range(0, len(y), chunk):
-        sl = slice(lo, min(lo + chunk, len(y)))
-        xs = term_matrix(names, x.take(sl))
-        ys = np.asarray(y[sl], float)
-        if mask is not None:
-            keep = mask[sl]
-            xs, ys = xs[keep], ys[keep]
-        xtx += xs.T @ xs
-        xty += xs.T @ ys
-        yty += float(ys @ ys)
-        n += len(ys)
-    return Gram(xtx, xty, yty, n, names)
-
-
 #: A candidate whose column keeps less than this share of its sum of squares after
 #: projection on the columns kept before it is numerically spanned by them (|r| > 1 − 5e-11
 #: for a pair): dropped before selection, so no tie is ever broken by rounding.
@@ -246,7 +189,29 @@ def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = No
     x : term-basis inputs; y : measured driving power [W]
     candidates : term strings to choose from
     mask : samples to use (True = use); NaN rows in y or X are left out too
-    p_enter, p_remove : p-value thresholds of forward–backward selection
+    p_enter, p_remove : p-value thresholds of forward–backward selection [-]
+    counts : sample counts of the log, carried into the provenance
+    reference_mass_kg : mass the coefficients refer to [kg]; adds the mass-free β to the
+        equation's metrics
+
+    The model is P = Σ_j c_j·term_j (no intercept), the terms of paper Table 3 (Indt var.
+    1: acc, grade, aero, roll), selected forward–backward as in the paper's §3.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from sumo_drvpw.model.terms import Inputs
+    >>> from sumo_drvpw.fit.calibrate import calibrate
+    >>> rng = np.random.default_rng(0)
+    >>> n = 5000
+    >>> v, a, zero = rng.uniform(1, 30, n), rng.normal(0, 0.5, n), np.zeros(n)
+    >>> x = Inputs(v=v, a=a, theta=zero, wind=zero, mass=np.full(n, 1500.0),
+    ...            rho=np.full(n, 1.2041))
+    >>> y = 1.05 * 1500 * v * a + 0.35 * v**3 + 0.009 * 1500 * 9.81 * v
+    >>> res = calibrate(x, y + rng.normal(0, 200, n), ("acc", "aero", "roll"))
+    >>> res.terms, round(res.params["aero"], 2)
+    (['acc', 'aero', 'roll'], 0.35)
+    >>> eq = res.to_equation("my_car")   # ready for compare() and the SUMO loop
     """
     import statsmodels.api as sm
 
@@ -306,19 +271,19 @@ def resolve_candidates(spec: str) -> tuple[str, ...]:
         import tomllib
 
         if not p.is_file():
-            raise UserError(f"--candidates: file not found: {p}")
+            raise UserError(f"candidate file not found: {p}")
         try:
             doc = tomllib.loads(p.read_text(encoding="utf-8"))
         except tomllib.TOMLDecodeError as e:
-            raise UserError(f"--candidates {p}: invalid TOML: {e}") from None
+            raise UserError(f"candidate file {p}: invalid TOML: {e}") from None
         terms = doc.get("candidates", {}).get("terms") if isinstance(doc.get("candidates"), dict) else doc.get("terms")
         if not isinstance(terms, list) or not terms:
-            raise UserError(f"--candidates {p}: needs `terms = [\"acc\", ...]` (top level or in [candidates])")
+            raise UserError(f"candidate file {p}: needs `terms = [\"acc\", ...]` (top level or in [candidates])")
         for t in terms:
             try:
                 parse_term(str(t))
             except UserError as e:
-                raise UserError(f"--candidates {p}: {e}") from None
+                raise UserError(f"candidate file {p}: {e}") from None
         return tuple(map(str, terms))
     if "," in spec or spec:
         terms = tuple(s.strip() for s in spec.split(",") if s.strip())
@@ -326,6 +291,6 @@ def resolve_candidates(spec: str) -> tuple[str, ...]:
             for t in terms:
                 parse_term(t)
         except UserError as e:
-            raise UserError(f"--candidates '{spec}': {e} (or use indt-var-1, indt-var-2, a TOML file)") from None
+            raise UserError(f"candidate terms '{spec}': {e} (or use indt-var-1, indt-var-2, a TOML file)") from None
         return terms
-    raise UserError("--candidates is empty")
+    raise UserError("candidate terms: empty (give indt-var-1, indt-var-2, a TOML file or a comma list)")
