@@ -17,6 +17,7 @@ File format (all tables but ``[equation]`` and one of ``[terms]``/``[beta]`` opt
     [p_values]
     [provenance]  # free-form: log, vehicle, date, settings of a calibration
     [metrics]     # free-form fit statistics
+    [chain]       # optional energy chain after the road-load terms (sumo_drvpw.model.chain)
 
 Built-in equations live in ``sumo_drvpw/model/builtin/equations/*.toml``; a name that is not a file
 path is looked up there.
@@ -60,6 +61,13 @@ class Equation:
     provenance: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
     path: str | None = None
+    #: optional :class:`sumo_drvpw.model.chain.EnergyChain` (``[chain]``): battery or fuel
+    chain: object | None = None
+
+    @property
+    def predicts(self) -> str:
+        """What the equation file predicts: ``wheel`` without a chain, else the chain's target."""
+        return "wheel" if self.chain is None else self.chain.predicts
 
     def __post_init__(self):
         if not self.terms:
@@ -118,6 +126,8 @@ class Equation:
             val = getattr(self, key)
             if val:
                 doc[key] = val
+        if self.chain is not None:
+            doc["chain"] = self.chain.to_dict()
         return doc
 
 
@@ -162,7 +172,8 @@ def _floats(table: dict, where: str) -> dict[str, float]:
 
 def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
     """Build an :class:`Equation` from a parsed TOML document; errors name ``where``."""
-    known = {"equation", "terms", "beta", "std_err", "p_values", "provenance", "metrics", "paper"}
+    known = {"equation", "terms", "beta", "std_err", "p_values", "provenance", "metrics", "paper",
+             "chain"}
     unknown = set(doc) - known
     if unknown:
         raise UserError(f"{where}: unknown table(s) {sorted(unknown)} (known: {sorted(known)})")
@@ -184,6 +195,11 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
     else:
         raise UserError(f"{where}: missing [terms] (or [beta]) table")
     mass = meta.get("mass_kg")
+    chain = None
+    if "chain" in doc:
+        from sumo_drvpw.model.chain import chain_from_dict
+
+        chain = chain_from_dict(doc["chain"], where)
     try:
         return Equation(
             name=str(meta["name"]), terms=terms,
@@ -191,7 +207,7 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
             description=str(meta.get("description", "")), source=str(meta.get("source", "")),
             std_err=std, p_values=_floats(doc.get("p_values", {}), f"{where} [p_values]"),
             provenance=dict(doc.get("provenance", {})), metrics=dict(doc.get("metrics", {})),
-            path=None if where.startswith("<") else where)
+            path=None if where.startswith("<") else where, chain=chain)
     except UserError as e:
         raise UserError(f"{where}: {e}") from None
 
