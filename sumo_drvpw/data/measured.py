@@ -47,14 +47,20 @@ class Measured:
 def load_measured(paths, vehicle: str | None = None, options: ReadOptions | None = None) -> Measured:
     """Read logs and compute measured power and inputs (see module docstring)."""
     veh = load_vehicle(vehicle) if vehicle else None
-    log = read_log(paths, veh, options)
+    m = measure(read_log(paths, veh, options), veh)
+    if not m.usable.any():
+        raise UserError(f"{m.log.describe()}: no usable samples (all excluded: {m.log.counts})")
+    return m
+
+
+def measure(log: DriveLog, veh: Vehicle | None) -> Measured:
+    """Measured power, inputs and usable mask of a read log (the streaming reader calls
+    this per batch of whole trips, so it sees the same samples as :func:`load_measured`)."""
     p, source = measured_power(log, veh)
     x = log.inputs(veh.mass_kg if veh else None)
     usable = ~log.excluded & np.isfinite(p)
     for arr in (x.v, x.a, x.theta, x.wind, x.mass, x.rho):
         usable &= np.isfinite(arr)
-    if not usable.any():
-        raise UserError(f"{log.describe()}: no usable samples (all excluded: {log.counts})")
     return Measured(log, veh, p, source, x, usable)
 
 
