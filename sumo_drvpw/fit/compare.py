@@ -33,6 +33,7 @@ import numpy as np
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.errors import UserError, first_bad_row
+from sumo_drvpw.fit.ols import dense_gram
 from sumo_drvpw.model.terms import CATEGORIES, Inputs
 
 #: Width of the speed bins of Fig. 8 [m/s] (10 km/h).
@@ -209,7 +210,9 @@ def error_term_correlation(err_w, category_w: dict[str, np.ndarray]) -> dict[str
     at once, with intercept). When the error is (c − c_true)/c times the equation's own
     term power, ``partial_slope`` is that relative coefficient error, e.g. −0.5 for an
     aero coefficient half the truth. NaN for a category whose power is constant
-    (e.g. absent) or with fewer than 3 samples.
+    (e.g. absent) or with fewer than 3 samples; ``partial_slope`` is NaN for all when
+    the category powers are collinear. Fitted by :mod:`sumo_drvpw.fit.ols` on the
+    centred columns.
     """
     err = np.asarray(err_w, dtype=float)
     n = err.size
@@ -230,9 +233,10 @@ def error_term_correlation(err_w, category_w: dict[str, np.ndarray]) -> dict[str
             cols.append(pc)
         out[cat] = {"r": r, "slope": slope, "partial_slope": math.nan}
     if names and n > len(names) + 1:
-        coef, *_ = np.linalg.lstsq(np.column_stack(cols), ec, rcond=None)
-        for cat, c in zip(names, coef):
-            out[cat]["partial_slope"] = float(c)
+        fit = dense_gram(np.column_stack(cols), ec, names).fit(list(range(len(names))))
+        if fit is not None:  # collinear category powers: no partial slope (NaN)
+            for cat, c in zip(names, fit["beta"]):
+                out[cat]["partial_slope"] = float(c)
     return out
 
 
@@ -496,6 +500,26 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
     -------
     :class:`Comparison`. Samples where an equation's prediction is not finite are
     left out of that equation's statistics.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from sumo_drvpw.model.equations import Equation, load_equation
+    >>> from sumo_drvpw.model.terms import Inputs
+    >>> from sumo_drvpw.fit.compare import compare
+    >>> n = 600
+    >>> v = np.linspace(5.0, 35.0, n); zero = np.zeros(n)
+    >>> x = Inputs(v=v, a=zero, theta=zero, wind=zero, mass=np.full(n, 1500.0),
+    ...            rho=np.full(n, 1.2041))
+    >>> truth = Equation(name="truth", terms={"aero": 0.35, "roll": 0.009})
+    >>> half_aero = Equation(name="half_aero", terms={"aero": 0.175, "roll": 0.009})
+    >>> comp = compare(truth.power(x), x, [truth, half_aero, load_equation("vsp_ldv1999")],
+    ...                dt_s=0.1)
+    >>> round(comp.results["truth"].metrics["r2"], 6)
+    1.0
+    >>> comp.results["half_aero"].traction_energy_ratio < 1.0   # underpredicts
+    True
+    >>> report = comp.to_json()   # what `sumo-drvpw compare` writes to report.json
     """
     meas = np.asarray(meas_w, dtype=float).ravel()
     n = meas.size
