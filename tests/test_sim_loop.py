@@ -103,17 +103,19 @@ def test_loop_books_hand_calculated_energies():
     led = Ledger(len(NET.edge_ids), 2)
     phys = Physics(wind_speed=2.0, wind_from_deg=270.0, rho=1.2, slope_tol=0.01, **GETTERS)
     info = run_loop(conn, NET, EquationSet(eqs), led, phys, _resolver({"car": 1500.0}))
-    assert info == {"interrupted": False, "end_time_s": 1.5}
+    assert info == {"interrupted": False, "end_time_s": 1.5, "step_length_s": 0.5,
+                    "step_method": "euler"}
     assert led.steps == 3 and led.samples == 5
     assert led.corrected == 1  # b at step 2: getSlope 30° vs a flat lane
 
+    # the acc term takes the step's mean speed v − a·Δt/2 (kinetic-energy change / Δt)
     def p_phys(v, a, th, w, m=1500.0):
         u = v - w  # eastbound (90°) with wind from 270°: tailwind +2 m/s
-        return (m * v * a + m * G * v * math.sin(th) + 0.6 * 0.5 * 1.2 * v * u * abs(u)
+        return (m * (v - 0.25 * a) * a + m * G * v * math.sin(th) + 0.6 * 0.5 * 1.2 * v * u * abs(u)
                 + 0.01 * m * G * v * math.cos(th))
 
     def p_fixed(v, a, th):
-        return 1000.0 * v * a + 1000.0 * G * v * math.sin(th)
+        return 1000.0 * (v - 0.25 * a) * a + 1000.0 * G * v * math.sin(th)
 
     a_steps = [(20.0, 0.0, GRADE), (20.0, 0.5, GRADE), (21.0, 0.0, 0.0)]
     b_steps = [(10.0, -1.0, 0.0), (9.0, -1.0, 0.0)]

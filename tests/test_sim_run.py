@@ -179,15 +179,19 @@ ENERGY_ROUTES = """<routes>
 </routes>"""
 
 
-def test_matches_sumo_energy_model(tmp_path):
-    """The physical terms against SUMO's Energy model (1.28), whole run, within 2 %.
+@pytest.mark.parametrize("dt", [1.0, 0.1])
+def test_matches_sumo_energy_model(tmp_path, dt):
+    """The physical terms against SUMO's Energy model (1.28), whole run, within 2 %, at
+    SUMO's usual 1 s steps and at 0.1 s, with the default driver noise (sigma 0.5).
 
     Like for like: mass 1625 kg through the vType ``mass`` attribute (the Energy model's
     mass; the old ``vehicleMass`` param is ignored), C_w·A = 0.25·2.23, c_roll 0.01,
     ρ = 1.2041 (our default and SUMO's), no rotating mass, no radial drag, no auxiliary
-    power, efficiencies 1, so SUMO's Wh/s × 3600 is its road-load power [W]. Known
-    differences left in: SUMO's kinetic power is ½m(v² − v_prev²)/Δt, ours m·v·a (they
-    differ by ½m·a²·Δt per step, small at Δt = 0.1 s); rolling uses ``m_v1`` (c·g·m·v,
+    power, efficiencies 1, so SUMO's Wh/s × 3600 is its road-load power [W]. Kinetic
+    power is ½m(v² − v_prev²)/Δt in both (src/utils/emissions/HelpersEnergy.cpp; ours
+    m·v̄·a with the step's mean speed), aero, rolling and grade at v_t in both (Euler).
+    Known differences left in: SUMO books 0 in a step that ends at v = 0 (ours books the
+    last kinetic energy lost); rolling uses ``m_v1`` (c·g·m·v,
     no cos θ) as SUMO does; SUMO's slope is getSlope (front/back positions), ours the
     robust lane slope, which differ over the few metres where a car straddles a grade
     change; the road is straight, so SUMO's radial term is zero anyway.
@@ -196,7 +200,6 @@ def test_matches_sumo_energy_model(tmp_path):
     eq = Equation("sumo_like", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23,
                                 "m_v1": 0.01 * G})
     net = load_network(HW_NET, RoadClassRule())
-    dt = 0.1
     ours, theirs = [], []
     conn = start_sumo(["-n", str(HW_NET), "-r", str(tmp_path / "r.rou.xml"),
                        "--step-length", str(dt), "--end", "330", "--no-warnings", "true"])
@@ -215,7 +218,7 @@ def test_matches_sumo_energy_model(tmp_path):
         close_sumo(conn)
     p_ours = np.concatenate(ours)
     p_sumo = np.concatenate(theirs) * 3600.0  # Wh/s → W
-    assert len(p_ours) > 10_000 and led.n_veh >= 8
+    assert len(p_ours) > 1000 / dt and led.n_veh >= 8
     e_ours, e_sumo = p_ours.sum() * dt, p_sumo.sum() * dt
     trac_ours, trac_sumo = np.clip(p_ours, 0, None).sum() * dt, np.clip(p_sumo, 0, None).sum() * dt
     assert e_ours == pytest.approx(e_sumo, rel=0.02)

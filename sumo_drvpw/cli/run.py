@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -42,6 +43,8 @@ def main(args: argparse.Namespace) -> int:
     if args.no_progress:
         overrides["progress"] = False
     s = run_scenario(args.scenario, args.out, **overrides)
+    for w in s.get("warnings", []):
+        print(f"warning: {w}", file=sys.stderr)
     print(f"{s['steps']} steps, {s['vehicles']} vehicles, {s['slope_corrected_samples']} "
           f"slope-corrected samples; outputs in {args.out}")
     for name, eq in s["equations"].items():

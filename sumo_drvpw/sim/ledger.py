@@ -107,6 +107,8 @@ class Ledger:
         #: lane/position reads of tracked positions, and resync reads that disagreed
         self.position_reads = 0
         self.position_mismatches = 0
+        #: vehicle-steps on a clipped slope, per lane number (sized by the loop)
+        self.lane_clipped = np.zeros(0, np.int64)
 
     def _edges(self) -> tuple[np.ndarray, np.ndarray]:
         """Edge energies (edges, 2, E, C) and distances: closed plus open segments."""

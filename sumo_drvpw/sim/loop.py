@@ -126,11 +126,10 @@ class _Reader:
                 self.conn.vehicle.subscribe(vid, _TRACI_VARS)
 
 
-def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Physics,
-             resolve: Callable[[str, str], tuple[float, np.ndarray, bool]],
-             end: float | None = None, progress: bool = False, trace=None,
-             use_subscriptions: bool = False) -> dict:
-    """Step the simulation to ``end`` [s] (or until no vehicle is left) and book energies.
+class Stepper:
+    """Books one SUMO step at a time: call :meth:`after_step` after every
+    ``simulationStep`` (``run_loop`` does; so does :class:`sumo_drvpw.sim.Accountant`
+    as a step listener in the user's own loop).
 
     Parameters
     ----------
@@ -140,36 +139,205 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
     ledger : accumulators (filled in place)
     physics : wind, air density, slope tolerance
     resolve : vType id, vehicle id → (mass [kg], applicability per equation, keep)
-    end : simulation end time [s]; None: until ``getMinExpectedNumber`` is 0
     trace : optional object with ``write(t, vidx, eidx, v, a, theta, wind, pc)``
     use_subscriptions : read with subscriptions (traci) instead of getters (libsumo)
-
-    Returns ``{"interrupted": bool, "end_time_s": t}``; Ctrl-C stops the loop cleanly so
-    that every output of the partial run can still be written.
     """
-    dt = float(conn.simulation.getDeltaT())
-    vmap: dict[str, int] = {}
-    lane_index = dict(net.lane_index)
-    lane_index[""] = -1
-    lane_edge_ext = np.append(net.lane_edge, -1)  # lane -1 → edge -1
-    read_accel = physics.acceleration == "getter"
-    read_slope = physics.slope_reference == "getslope"
-    reader = _Reader(conn, use_subscriptions,
-                     (True, read_accel, physics.wind_speed != 0.0 and physics.heading == "getangle",
-                      True, True, read_slope))
-    heading_from_lane = physics.wind_speed != 0.0 and physics.heading == "geometry"
-    tracking = (physics.positions == "tracked" and not use_subscriptions
-                and _euler_update(conn) and net.lane_end is not None
-                and net.lane_own_edge is not None)
-    if tracking:
-        get_lane, get_pos = reader.getters[3], reader.getters[4]
-        # lanes -1 (no lane) and -2 (never read): an end of −∞, so they are always read
-        lane_end = np.append(net.lane_end - 1e-6, [-np.inf, -np.inf])
-        teleported = getattr(conn.simulation, "getEndingTeleportIDList", lambda: ())
-        resync = max(1, int(physics.resync_steps))
-        # a lane change keeps the position and the edge (internal ones included), so only
-        # a different edge or position is a disagreement; lanes -1, -2 belong to none
-        lane_own = np.append(net.lane_own_edge, [-1, -1])
+
+    def __init__(self, conn, net: Network, eqset: EquationSet, ledger: Ledger,
+                 physics: Physics, resolve: Callable[[str, str], tuple[float, np.ndarray, bool]],
+                 trace=None, use_subscriptions: bool = False):
+        self.conn, self.net, self.eqset, self.ledger = conn, net, eqset, ledger
+        self.physics, self.resolve, self.trace = physics, resolve, trace
+        self.use_subscriptions = use_subscriptions
+        self.dt = float(conn.simulation.getDeltaT())
+        if len(ledger.lane_clipped) != len(net.lane_edge):
+            ledger.lane_clipped = np.zeros(len(net.lane_edge), np.int64)
+        self.vmap: dict[str, int] = {}
+        self.lane_index = dict(net.lane_index)
+        self.lane_index[""] = -1
+        self.lane_edge_ext = np.append(net.lane_edge, -1)  # lane -1 → edge -1
+        read_accel = physics.acceleration == "getter"
+        read_slope = physics.slope_reference == "getslope"
+        self.reader = _Reader(conn, use_subscriptions,
+                              (True, read_accel,
+                               physics.wind_speed != 0.0 and physics.heading == "getangle",
+                               True, True, read_slope))
+        self.heading_from_lane = physics.wind_speed != 0.0 and physics.heading == "geometry"
+        method = _step_method(conn)
+        self.ballistic = method == "ballistic"
+        self.tracking = (physics.positions == "tracked" and not use_subscriptions
+                         and method == "euler" and net.lane_end is not None
+                         and net.lane_own_edge is not None)
+        if self.tracking:
+            # lanes -1 (no lane) and -2 (never read): an end of −∞, so they are always read
+            self.lane_end = np.append(net.lane_end - 1e-6, [-np.inf, -np.inf])
+            self.teleported = getattr(conn.simulation, "getEndingTeleportIDList", lambda: ())
+            self.resync = max(1, int(physics.resync_steps))
+            # a lane change keeps the position and the edge (internal ones included), so
+            # only a different edge or position is a disagreement; lanes -1, -2 belong to none
+            self.lane_own = np.append(net.lane_own_edge, [-1, -1])
+        self.every_equation_applies = True  # to every vehicle accounted so far
+        self.first = True
+        self.prev_ids, self.prev_sel = None, None
+        #: simulation time of the last booked step [s]; steps skipped (a
+        #: ``simulationStep(t)`` jumping several steps) are counted in ``missed_steps``
+        self.last_t: float | None = None
+        self.missed_steps = 0
+
+    @property
+    def step_method(self) -> str:
+        return "ballistic" if self.ballistic else "euler"
+
+    def register(self, vid: str) -> int:
+        ledger = self.ledger
+        vt = self.conn.vehicle.getTypeID(vid)
+        mass, app, keep = self.resolve(vt, vid)
+        i = ledger.add_vehicle(vid, vt, mass, app, keep)
+        self.vmap[vid] = i
+        if keep and not np.all(ledger.veh_app[i] == 1.0):
+            self.every_equation_applies = False
+        self.reader.subscribe_existing([vid])
+        return i
+
+    def lane_numbers(self, lane_ids: list[str]) -> np.ndarray:
+        lane_index = self.lane_index
+        try:
+            return np.fromiter(map(lane_index.__getitem__, lane_ids), np.int64, len(lane_ids))
+        except KeyError:  # a lane the net file lacks (should not happen): no lane
+            return np.fromiter((lane_index.get(x, -1) for x in lane_ids), np.int64,
+                               len(lane_ids))
+
+    def after_step(self) -> None:
+        """Read the state SUMO reached in the step just made and book its energies."""
+        conn, ledger, net, physics, dt = self.conn, self.ledger, self.net, self.physics, self.dt
+        vmap = self.vmap
+        ledger.steps += 1
+        t_now = conn.simulation.getTime()
+        if self.last_t is not None and t_now - self.last_t > 1.5 * dt:
+            self.missed_steps += int(round((t_now - self.last_t) / dt)) - 1
+        self.last_t = t_now
+        ids = conn.vehicle.getIDList()
+        if self.first:
+            self.reader.subscribe_existing(ids)
+            self.first = False
+        for vid in conn.simulation.getDepartedIDList():
+            if vid not in vmap:
+                self.register(vid)
+            else:  # an id used again (e.g. vehicle.add): its state starts afresh
+                ledger.veh_lane[vmap[vid]] = -2
+                ledger.veh_prev_speed[vmap[vid]] = np.nan
+        if len(ids) == 0:
+            return
+        if ids == self.prev_ids:  # no arrival or departure: same vehicles, same order
+            vidx, kids = self.prev_sel
+        else:
+            n_all = len(ids)
+            try:
+                vidx = np.fromiter(map(vmap.__getitem__, ids), np.int64, n_all)
+            except KeyError:
+                vidx = np.fromiter((vmap[v] if v in vmap else self.register(v) for v in ids),
+                                   np.int64, n_all)
+            kept = ledger.veh_keep[vidx]
+            if kept.all():
+                kids = ids
+            else:  # only the vehicles accounted for are read
+                sel = np.flatnonzero(kept)
+                vidx, kids = vidx[sel], [ids[i] for i in sel]
+            self.prev_ids, self.prev_sel = ids, (vidx, kids)
+        n = len(kids)
+        if n == 0:
+            return
+        tracking = self.tracking
+        v, a, angle, ln, pos, raw = self.reader.read(kids, skip_lanes=tracking)
+        if tracking:
+            lane = ledger.veh_lane[vidx]
+            pos = ledger.veh_pos[vidx] + v * dt  # SUMO's Euler update: x += v_t·Δt
+            trusted = pos < self.lane_end[lane]
+            full = ledger.steps % self.resync == 0
+            stale = np.ones(n, bool) if full else ~trusted
+            gone = self.teleported()
+            if gone:
+                stale[np.isin(vidx, [vmap[x] for x in gone if x in vmap])] = True
+            k = np.flatnonzero(stale)
+            if len(k):
+                get_lane, get_pos = self.reader.getters[3], self.reader.getters[4]
+                sub = kids if len(k) == n else [kids[i] for i in k]
+                lk = self.lane_numbers(list(map(get_lane, sub)))
+                pk = np.fromiter(map(get_pos, sub), float, len(k))
+                if full:  # were the tracked ones right?
+                    lane_own = self.lane_own
+                    ledger.position_mismatches += int(np.count_nonzero(
+                        trusted & ((lane_own[lk] != lane_own[lane])
+                                   | (np.abs(pk - pos) > 1e-6))))
+                lane[k], pos[k] = lk, pk
+                ledger.position_reads += len(k)
+            ledger.veh_lane[vidx] = lane
+            ledger.veh_pos[vidx] = pos
+        else:
+            lane = self.lane_numbers(ln)
+        if a is None:  # SUMO's definition: (v_t − v_t−1)/Δt, 0 when first seen
+            prev = ledger.veh_prev_speed[vidx]
+            a = (v - prev) / dt
+            a[np.isnan(a)] = 0.0
+            ledger.veh_prev_speed[vidx] = v
+        if angle is None:
+            angle = np.zeros(n)
+        if raw is not None:
+            raw = np.radians(raw)
+        on_lane = lane >= 0
+        if not on_lane.all():  # teleporting: no lane, not booked
+            vidx, lane, v, a, angle, pos = (
+                x[on_lane] for x in (vidx, lane, v, a, angle, pos))
+            if raw is not None:
+                raw = raw[on_lane]
+            if len(vidx) == 0:
+                return
+        at = net.bin_index(lane, pos)  # robust slope, shape slope, heading there
+        theta, clipped = net.profile[at], net.clipped[at]
+        if self.heading_from_lane:
+            angle = net.heading_deg[at]
+        if raw is None:
+            raw = net.raw[at]
+        ledger.corrected += int(np.count_nonzero(
+            (np.abs(raw - theta) > physics.slope_tol) | clipped))
+        nclip = int(np.count_nonzero(clipped))
+        if nclip:
+            ledger.clipped += nclip
+            np.add.at(ledger.lane_clipped, lane[clipped], 1)
+        wind = tailwind(angle, physics.wind_speed, physics.wind_from_deg)
+        m = len(vidx)
+        # energy conserved at any Δt: the acc factor takes the step's mean speed, so
+        # m·v̄·a·Δt = ½m(v_t² − v_t−1²); the other terms the speed of the distance SUMO
+        # moved the car in the step (Euler: v_t·Δt; ballistic: v̄·Δt)
+        v_mean = v - 0.5 * dt * a
+        if self.ballistic:
+            v = v_mean
+        x = Inputs(v, a, theta, wind, ledger.veh_mass[vidx], np.full(m, physics.rho),
+                   v_acc=v_mean)
+        pc = self.eqset.category_powers(x, None if self.every_equation_applies
+                                        else ledger.veh_app[vidx])
+        eidx = self.lane_edge_ext[lane]
+        ledger.book(vidx, eidx, v, dt, pc)
+        if self.trace is not None:
+            self.trace.write(t_now, vidx, eidx, v, a, theta, wind, pc)
+
+
+def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Physics,
+             resolve: Callable[[str, str], tuple[float, np.ndarray, bool]],
+             end: float | None = None, progress: bool = False, trace=None,
+             use_subscriptions: bool = False) -> dict:
+    """Step the simulation to ``end`` [s] (or until no vehicle is left) and book energies.
+
+    Parameters: as :class:`Stepper`, and
+    end : simulation end time [s]; None: until ``getMinExpectedNumber`` is 0
+    progress : tqdm progress bar on a TTY
+
+    Returns ``{"interrupted": bool, "end_time_s": t, "step_length_s": Δt,
+    "step_method": "euler"|"ballistic"}``; Ctrl-C stops the loop cleanly so that every
+    output of the partial run can still be written.
+    """
+    stepper = Stepper(conn, net, eqset, ledger, physics, resolve, trace, use_subscriptions)
+    dt = stepper.dt
     interrupted = False
     bar = None
     if progress and end is not None and sys.stderr.isatty():
@@ -177,29 +345,6 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
 
         t0 = conn.simulation.getTime()
         bar = tqdm(total=max(0, int(round((end - t0) / dt))), unit="step", file=sys.stderr)
-
-    every_equation_applies = True  # to every vehicle accounted so far
-
-    def register(vid: str) -> int:
-        nonlocal every_equation_applies
-        vt = conn.vehicle.getTypeID(vid)
-        mass, app, keep = resolve(vt, vid)
-        i = ledger.add_vehicle(vid, vt, mass, app, keep)
-        vmap[vid] = i
-        if keep and not np.all(ledger.veh_app[i] == 1.0):
-            every_equation_applies = False
-        reader.subscribe_existing([vid])
-        return i
-
-    def lane_numbers(lane_ids: list[str]) -> np.ndarray:
-        try:
-            return np.fromiter(map(lane_index.__getitem__, lane_ids), np.int64, len(lane_ids))
-        except KeyError:  # a lane the net file lacks (should not happen): no lane
-            return np.fromiter((lane_index.get(x, -1) for x in lane_ids), np.int64,
-                               len(lane_ids))
-
-    first = True
-    prev_ids, prev_sel = None, None
     try:
         while True:
             t = conn.simulation.getTime()
@@ -208,113 +353,24 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
             if end is None and conn.simulation.getMinExpectedNumber() <= 0:
                 break
             conn.simulationStep()
-            ledger.steps += 1
+            stepper.after_step()
             if bar is not None and ledger.steps % 50 == 0:
                 bar.update(50)
-            ids = conn.vehicle.getIDList()
-            if first:
-                reader.subscribe_existing(ids)
-                first = False
-            for vid in conn.simulation.getDepartedIDList():
-                if vid not in vmap:
-                    register(vid)
-                else:  # an id used again (e.g. vehicle.add): its state starts afresh
-                    ledger.veh_lane[vmap[vid]] = -2
-                    ledger.veh_prev_speed[vmap[vid]] = np.nan
-            if len(ids) == 0:
-                continue
-            if ids == prev_ids:  # no arrival or departure: same vehicles, same order
-                vidx, kids = prev_sel
-            else:
-                n_all = len(ids)
-                try:
-                    vidx = np.fromiter(map(vmap.__getitem__, ids), np.int64, n_all)
-                except KeyError:
-                    vidx = np.fromiter((vmap[v] if v in vmap else register(v) for v in ids),
-                                       np.int64, n_all)
-                kept = ledger.veh_keep[vidx]
-                if kept.all():
-                    kids = ids
-                else:  # only the vehicles accounted for are read
-                    sel = np.flatnonzero(kept)
-                    vidx, kids = vidx[sel], [ids[i] for i in sel]
-                prev_ids, prev_sel = ids, (vidx, kids)
-            n = len(kids)
-            if n == 0:
-                continue
-            v, a, angle, ln, pos, raw = reader.read(kids, skip_lanes=tracking)
-            if tracking:
-                lane = ledger.veh_lane[vidx]
-                pos = ledger.veh_pos[vidx] + v * dt  # SUMO's Euler update: x += v_t·Δt
-                trusted = pos < lane_end[lane]
-                full = ledger.steps % resync == 0
-                stale = np.ones(n, bool) if full else ~trusted
-                gone = teleported()
-                if gone:
-                    stale[np.isin(vidx, [vmap[x] for x in gone if x in vmap])] = True
-                k = np.flatnonzero(stale)
-                if len(k):
-                    sub = kids if len(k) == n else [kids[i] for i in k]
-                    lk = lane_numbers(list(map(get_lane, sub)))
-                    pk = np.fromiter(map(get_pos, sub), float, len(k))
-                    if full:  # were the tracked ones right?
-                        ledger.position_mismatches += int(np.count_nonzero(
-                            trusted & ((lane_own[lk] != lane_own[lane])
-                                       | (np.abs(pk - pos) > 1e-6))))
-                    lane[k], pos[k] = lk, pk
-                    ledger.position_reads += len(k)
-                ledger.veh_lane[vidx] = lane
-                ledger.veh_pos[vidx] = pos
-            else:
-                lane = lane_numbers(ln)
-            if a is None:  # SUMO's definition: (v_t − v_t−1)/Δt, 0 when first seen
-                prev = ledger.veh_prev_speed[vidx]
-                a = (v - prev) / dt
-                a[np.isnan(a)] = 0.0
-                ledger.veh_prev_speed[vidx] = v
-            if angle is None:
-                angle = np.zeros(n)
-            if raw is not None:
-                raw = np.radians(raw)
-            on_lane = lane >= 0
-            if not on_lane.all():  # teleporting: no lane, not booked
-                vidx, lane, v, a, angle, pos = (
-                    x[on_lane] for x in (vidx, lane, v, a, angle, pos))
-                if raw is not None:
-                    raw = raw[on_lane]
-                if len(vidx) == 0:
-                    continue
-            at = net.bin_index(lane, pos)  # robust slope, shape slope, heading there
-            theta, clipped = net.profile[at], net.clipped[at]
-            if heading_from_lane:
-                angle = net.heading_deg[at]
-            if raw is None:
-                raw = net.raw[at]
-            ledger.corrected += int(np.count_nonzero(
-                (np.abs(raw - theta) > physics.slope_tol) | clipped))
-            ledger.clipped += int(np.count_nonzero(clipped))
-            wind = tailwind(angle, physics.wind_speed, physics.wind_from_deg)
-            m = len(vidx)
-            x = Inputs(v, a, theta, wind, ledger.veh_mass[vidx], np.full(m, physics.rho))
-            pc = eqset.category_powers(x, None if every_equation_applies
-                                       else ledger.veh_app[vidx])
-            eidx = lane_edge_ext[lane]
-            ledger.book(vidx, eidx, v, dt, pc)
-            if trace is not None:
-                trace.write(conn.simulation.getTime(), vidx, eidx, v, a, theta, wind, pc)
     except KeyboardInterrupt:
         interrupted = True
     finally:
         if bar is not None:
             bar.close()
-    return {"interrupted": interrupted, "end_time_s": float(conn.simulation.getTime())}
+    return {"interrupted": interrupted, "end_time_s": float(conn.simulation.getTime()),
+            "step_length_s": dt, "step_method": stepper.step_method}
 
 
-def _euler_update(conn) -> bool:
-    """True when SUMO integrates positions with the Euler update (x += v_t·Δt), which
-    position tracking relies on; False for the ballistic update or when the connection
-    cannot say."""
+def _step_method(conn) -> str | None:
+    """SUMO's position update: "euler" (x += v_t·Δt, which position tracking relies on),
+    "ballistic" (x += ½(v_t−1 + v_t)·Δt), or None when the connection cannot say (the
+    terms then take v_t, as under Euler, and positions are read every step)."""
     try:
-        return str(conn.simulation.getOption("step-method.ballistic")).lower() in ("false", "0")
+        val = str(conn.simulation.getOption("step-method.ballistic")).lower()
     except Exception:  # a fake connection or an old SUMO without getOption
-        return False
+        return None
+    return "euler" if val in ("false", "0") else "ballistic"

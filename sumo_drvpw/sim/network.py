@@ -67,6 +67,12 @@ class Network:
     #: per lane: number of the edge it belongs to, internal edges included (unlike
     #: ``lane_edge``, which maps internal lanes to the edge they lead to)
     lane_own_edge: np.ndarray | None = None
+    #: lane ids in lane-number order (for naming lanes in the summary)
+    lane_ids: list[str] | None = None
+    #: False when no lane shape has a z coordinate other than 0 (slopes are then all 0)
+    has_elevation: bool = True
+    #: share of the lane length whose shape carries a non-zero z [-]
+    z_share: float = 1.0
 
     def bin_index(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Index into the per-bin arrays (``profile``, ``clipped``, ``raw``,
@@ -186,8 +192,11 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         inc = lanes[i].getIncoming() if hasattr(lanes[i], "getIncoming") else []
         lane_edge[i] = eidx.get(inc[0].getEdge().getID(), 0) if inc else 0
     profs, clips, raws, heads = [], [], [], []
+    z_len = 0.0
     for ln in lanes:
         shape = ln.getShape3D()
+        if any(len(p) > 2 and p[2] != 0.0 for p in shape):
+            z_len += ln.getLength()
         th, cl = lane_profile(shape, ln.getLength(), window, max_rad)
         profs.append(th)
         clips.append(cl)
@@ -214,4 +223,6 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         lane_length=lane_length, lane_end=lane_end, lane_own_edge=lane_own_edge,
         lane_offset=off, lane_nbins=nb, profile=np.concatenate(profs),
         clipped=np.concatenate(clips), classes=all_classes, raw=np.concatenate(raws),
-        heading_deg=np.concatenate(heads))
+        heading_deg=np.concatenate(heads), lane_ids=[ln.getID() for ln in lanes],
+        has_elevation=z_len > 0.0,
+        z_share=float(z_len / max(float(lane_length.sum()), 1e-9)))

@@ -76,6 +76,32 @@ class VTypeResolver:
         return out
 
 
+#: How a step is booked (summary.json ``energy_booking``; docs/scenario.md).
+ENERGY_BOOKING = ("acc term: coefficient × m·v̄·a with v̄ = (v_t + v_t−1)/2, i.e. the "
+                  "kinetic-energy change ½m(v_t² − v_t−1²)/Δt, conserved at any step length; "
+                  "other terms at the speed of the distance SUMO moved the car in the step "
+                  "(Euler update: v_t; ballistic: v̄)")
+
+
+def network_info(net, ledger, top: int = 10) -> dict:
+    """The ``network`` block of summary.json: file, elevation, most-clipped lanes."""
+    counts = ledger.lane_clipped
+    order = np.argsort(-counts, kind="stable")[:top] if len(counts) else []
+    lanes = {net.lane_ids[i]: int(counts[i]) for i in order if counts[i] > 0} \
+        if net.lane_ids is not None else {}
+    return {"file": str(net.path), "has_elevation": bool(net.has_elevation),
+            "z_share": float(net.z_share), "slope_clipped_lanes": lanes}
+
+
+def network_warnings(net) -> list[str]:
+    """Warnings about the network a user should see (printed by the CLI)."""
+    if net.has_elevation:
+        return []
+    return [f"network {net.path.name} has no elevation (no z in any lane shape): every slope "
+            "is 0, so the grade term is 0; build it with elevation (netconvert "
+            "--heightmap.geotiffs / OSM ele) for hilly areas"]
+
+
 def _sumo_env() -> None:
     if not os.environ.get("SUMO_HOME"):
         try:
@@ -191,7 +217,10 @@ def run_scenario(scenario_path, out_dir, **overrides) -> dict:
         close_sumo(conn)
     wall = time.perf_counter() - t0
     extra = {"scenario": str(sc.path) if sc.path else None, "begin_s": begin,
-             "end_s": info["end_time_s"], "step_length_s": sc.step_length,
+             "end_s": info["end_time_s"], "step_length_s": info["step_length_s"],
+             "step_method": info["step_method"],
+             "energy_booking": ENERGY_BOOKING,
+             "network": network_info(net, ledger),
              "interrupted": info["interrupted"], "wall_time_s": wall,
              "connection": sc.connection, "air_density_kgm3": sc.rho,
              "slope_reference": sc.slope_reference, "acceleration_source": sc.acceleration,
@@ -201,6 +230,7 @@ def run_scenario(scenario_path, out_dir, **overrides) -> dict:
              "equation_sources": {e.name: (e.path or "<object>") for e in equations}}
     if sc.trace:
         extra["files"] = {"trace": "trace.parquet"}
+    extra["warnings"] = network_warnings(net)
     summary = summary_dict(ledger, net, names, eqset.uses_other, extra)
     write_outputs(out_dir, ledger, net, names, summary, begin, info["end_time_s"],
                   sc.edgedata, sc.figures, sc.difference)
