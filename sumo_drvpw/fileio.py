@@ -41,30 +41,41 @@ def write_text(path, text: str) -> None:
 
 def write_json(path, obj) -> None:
     """Write JSON atomically, indented, NaN written as null."""
-    write_text(path, json.dumps(_clean(obj), indent=2, sort_keys=False) + "\n")
+    write_text(path, json.dumps(plain(obj), indent=2, sort_keys=False) + "\n")
 
 
-def _clean(o):
+def plain(o, toml: bool = False):
+    """The one cleaner of documents for JSON and TOML: plain Python values only.
+
+    Keys become str, tuples and arrays lists, NumPy scalars int/float/bool, paths str.
+    For JSON (default) a NaN or infinite float becomes None (null); for TOML
+    (``toml=True``), which has no null, dict entries whose value is None are left out and
+    floats are kept as they are (TOML writes nan and inf).
+    """
     import math
 
     import numpy as np
 
     if isinstance(o, dict):
-        return {str(k): _clean(v) for k, v in o.items()}
+        return {str(k): plain(v, toml) for k, v in o.items() if not (toml and v is None)}
     if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    if isinstance(o, (np.integer,)):
+        return [plain(v, toml) for v in o]
+    if isinstance(o, np.ndarray):
+        return plain(o.tolist(), toml)
+    if isinstance(o, (bool, np.bool_)):
+        return bool(o)
+    if isinstance(o, np.integer):
         return int(o)
     if isinstance(o, (np.floating, float)):
         f = float(o)
-        return None if not math.isfinite(f) else f
-    if isinstance(o, np.bool_):
-        return bool(o)
-    if isinstance(o, np.ndarray):
-        return _clean(o.tolist())
+        return f if toml or math.isfinite(f) else None
     if isinstance(o, Path):
         return str(o)
     return o
+
+
+#: former name of :func:`plain` (JSON mode)
+_clean = plain
 
 
 def write_parquet(path, table) -> None:

@@ -33,6 +33,7 @@ import numpy as np
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.errors import UserError, first_bad_row
+from sumo_drvpw.fileio import plain
 from sumo_drvpw.fit.ols import dense_gram
 from sumo_drvpw.model.terms import CATEGORIES, Inputs
 
@@ -426,7 +427,7 @@ class Comparison:
                 d["trip_net_energy"] = trip_net_energy(r.pred_w, self.meas_w, self.dt_s,
                                                        self.trip)
             eqs[name] = d
-        return _jsonable({
+        return plain({
             "equations": eqs,
             "n_samples": self.n_samples,
             "measured": {
@@ -445,23 +446,6 @@ class Comparison:
                 "r2": "centred: 1 - SSE/SST",
             },
         })
-
-
-def _jsonable(o):
-    if isinstance(o, dict):
-        return {str(k): _jsonable(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_jsonable(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _jsonable(o.tolist())
-    if isinstance(o, (bool, np.bool_)):
-        return bool(o)
-    if isinstance(o, (int, np.integer)):
-        return int(o)
-    if isinstance(o, (float, np.floating)):
-        f = float(o)
-        return f if math.isfinite(f) else None
-    return o
 
 
 def _dt_array(dt_s, n: int) -> np.ndarray:

@@ -229,23 +229,9 @@ def save_equation(eq: Equation, path: str | Path) -> None:
     """Write an equation as TOML atomically."""
     import tomli_w
 
-    from sumo_drvpw.fileio import write_text
+    from sumo_drvpw.fileio import plain, write_text
 
-    write_text(path, tomli_w.dumps(_tomlable(eq.to_dict())))
-
-
-def _tomlable(o):
-    if isinstance(o, dict):
-        return {str(k): _tomlable(v) for k, v in o.items() if v is not None}
-    if isinstance(o, (list, tuple)):
-        return [_tomlable(v) for v in o]
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, (np.floating,)):
-        return float(o)
-    if isinstance(o, Path):
-        return str(o)
-    return o
+    write_text(path, tomli_w.dumps(plain(eq.to_dict(), toml=True)))
 
 
 def vsp_from_specs(vehicle) -> Equation:
