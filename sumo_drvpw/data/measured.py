@@ -29,11 +29,16 @@ class Measured:
     source: str
     inputs: Inputs
     usable: np.ndarray
+    #: what ``power_w`` measures: wheel (driving power), battery (V·I) or fuel (ṁ·LHV)
+    target: str = "wheel"
+    #: for the fuel target: the hybrid battery's V·I [W] when logged (SOC correction), else None
+    battery_w: np.ndarray | None = None
 
     @property
     def counts(self) -> dict:
         c = dict(self.log.counts)
         c["power_source"] = self.source
+        c["target"] = self.target
         c["excluded_nonfinite_power"] = int((~np.isfinite(self.power_w)).sum())
         c["usable"] = int(self.usable.sum())
         return c
@@ -44,24 +49,45 @@ class Measured:
                 "counts": self.counts}
 
 
-def load_measured(paths, vehicle: str | None = None, options: ReadOptions | None = None) -> Measured:
-    """Read logs and compute measured power and inputs (see module docstring)."""
+#: what a measured power can be (``load_measured(target=...)``)
+TARGETS = ("wheel", "battery", "fuel")
+
+
+def load_measured(paths, vehicle: str | None = None, options: ReadOptions | None = None,
+                  target: str = "wheel") -> Measured:
+    """Read logs and compute measured power and inputs (see module docstring).
+
+    ``target``: ``wheel`` (default) the measured driving power; ``battery`` the battery's
+    V·I; ``fuel`` the fuel power ṁ·LHV (with the hybrid battery's V·I in ``battery_w``).
+    """
+    if target not in TARGETS:
+        raise UserError(f"target must be one of {', '.join(TARGETS)}, got {target!r}")
     veh = load_vehicle(vehicle) if vehicle else None
-    m = measure(read_log(paths, veh, options), veh)
+    m = measure(read_log(paths, veh, options), veh, target)
     if not m.usable.any():
         raise UserError(f"{m.log.describe()}: no usable samples (all excluded: {m.log.counts})")
     return m
 
 
-def measure(log: DriveLog, veh: Vehicle | None) -> Measured:
+def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measured:
     """Measured power, inputs and usable mask of a read log (the streaming reader calls
     this per batch of whole trips, so it sees the same samples as :func:`load_measured`)."""
-    p, source = measured_power(log, veh)
+    from sumo_drvpw.data.powertrain import measured_battery_power, measured_fuel_power
+
+    battery_w = None
+    if target == "battery":
+        p, source = measured_battery_power(log, veh)
+    elif target == "fuel":
+        p, source = measured_fuel_power(log, veh)
+        if "battery_voltage_v" in log.df and "battery_current_a" in log.df:
+            battery_w = np.nan_to_num(measured_battery_power(log, veh)[0], nan=0.0)
+    else:
+        p, source = measured_power(log, veh)
     x = log.inputs(veh.mass_kg if veh else None)
     usable = ~log.excluded & np.isfinite(p)
     for arr in (x.v, x.a, x.theta, x.wind, x.mass, x.rho):
         usable &= np.isfinite(arr)
-    return Measured(log, veh, p, source, x, usable)
+    return Measured(log, veh, p, source, x, usable, target, battery_w)
 
 
 def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:
