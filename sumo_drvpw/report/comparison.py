@@ -6,13 +6,13 @@ reading, converted here at the edge.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from sumo_drvpw.report import figures as plots
 from sumo_drvpw.fit.compare import Comparison
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
 from sumo_drvpw.fileio import write_json, write_text
+from sumo_drvpw.report.format import coef, num
 
 #: Figure file name → (plot function, caption).
 FIGURES = {
@@ -57,25 +57,6 @@ def write_comparison_report(comparison: Comparison, out_dir, title: str,
 
 
 # ------------------------------------------------------------------------ Markdown
-
-def _num(x, nd: int = 2, scale: float = 1.0) -> str:
-    if x is None:
-        return "–"
-    try:
-        f = float(x) * scale
-    except (TypeError, ValueError):
-        return "–"
-    if not math.isfinite(f):
-        return "–"
-    s = f"{f:.{nd}f}"
-    if s.startswith("-") and float(s) == 0.0:  # no "−0.00"
-        s = s[1:]
-    return s.replace("-", "−")
-
-
-def _coef(x) -> str:
-    return f"{float(x):.4g}".replace("-", "−")
-
 
 def _ctx_value(v) -> str:
     """One-line rendering of a context value (long structures stay in report.json)."""
@@ -122,10 +103,10 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
                            if d["r2_heavy"] is not None), reverse=True)
     if heavy_ranked:
         r2, nm = heavy_ranked[0]
-        lines.append(f"Best fit at heavy load: **{nm}** (R² = {_num(r2, 3)}).")
+        lines.append(f"Best fit at heavy load: **{nm}** (R² = {num(r2, 3)}).")
     if len(heavy_ranked) > 1:
         r2w, nmw = heavy_ranked[-1]
-        lines.append(f"Weakest at heavy load: **{nmw}** (R² = {_num(r2w, 3)}).")
+        lines.append(f"Weakest at heavy load: **{nmw}** (R² = {num(r2w, 3)}).")
     lines.append("")
 
     lines += ["## Goodness of fit (cf. paper Table 3)", "",
@@ -140,16 +121,16 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
         eq = comp.results[nm].equation
         parts = []
         for t, c in eq.terms.items():
-            s = f"`{t}` {_coef(c)}"
+            s = f"`{t}` {coef(c)}"
             if t in eq.std_err:
-                s += f" ± {_coef(eq.std_err[t])}"
+                s += f" ± {coef(eq.std_err[t])}"
             parts.append(s)
         if eq.mass_kg is not None:
             parts.append(f"(m = {eq.mass_kg:.0f} kg)")
-        lines.append(f"| {nm} | {'<br>'.join(parts)} | {_num(d['r2_light'], 3)} "
-                     f"| {_num(d['r2_heavy'], 3)} | {_num(d['r2'], 3)} "
-                     f"| {_num(d['rmse_w'], 2, _KW)} | {_num(d['rmse_heavy_w'], 2, _KW)} "
-                     f"| {_num(d['bias_w'], 2, _KW)} | {d['n']} |")
+        lines.append(f"| {nm} | {'<br>'.join(parts)} | {num(d['r2_light'], 3)} "
+                     f"| {num(d['r2_heavy'], 3)} | {num(d['r2'], 3)} "
+                     f"| {num(d['rmse_w'], 2, _KW)} | {num(d['rmse_heavy_w'], 2, _KW)} "
+                     f"| {num(d['bias_w'], 2, _KW)} | {d['n']} |")
     lines.append("")
 
     lines += [f"## Error at ≥ {HIGH_SPEED_MPS / KMH:.0f} km/h (cf. paper Fig. 8)", ""]
@@ -159,17 +140,17 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
             lines.append(f"- **{nm}**: no samples at ≥ {hs['threshold_kmh']:.0f} km/h.")
             continue
         mean, kmh = hs["mean_w"], f"{hs['threshold_kmh']:.0f} km/h"
-        where = f"{hs['n']} samples, {_num(100 * hs['fraction'], 1)} % of the log"
+        where = f"{hs['n']} samples, {num(100 * hs['fraction'], 1)} % of the log"
         if abs(mean) < 0.1 * hs["rmse_w"]:
             head = (f"**{nm}** shows no systematic error above {kmh} "
-                    f"(mean {_num(mean, 2, _KW)} kW; {where}).")
+                    f"(mean {num(mean, 2, _KW)} kW; {where}).")
         else:
             verb = "underpredicts" if mean < 0 else "overpredicts"
-            head = f"**{nm}** {verb} by {_num(abs(mean), 2, _KW)} kW on average above {kmh} ({where})."
+            head = f"**{nm}** {verb} by {num(abs(mean), 2, _KW)} kW on average above {kmh} ({where})."
         lines.append(
-            f"- {head} RMSE there is {_num(hs['rmse_w'], 2, _KW)} kW; 90 % of errors lie "
-            f"between {_num(hs['p5_w'], 2, _KW)} and {_num(hs['p95_w'], 2, _KW)} kW. "
-            f"Below {kmh}, the mean error is {_num(hs['mean_below_w'], 2, _KW)} kW.")
+            f"- {head} RMSE there is {num(hs['rmse_w'], 2, _KW)} kW; 90 % of errors lie "
+            f"between {num(hs['p5_w'], 2, _KW)} and {num(hs['p95_w'], 2, _KW)} kW. "
+            f"Below {kmh}, the mean error is {num(hs['mean_below_w'], 2, _KW)} kW.")
     lines.append("")
 
     lines += ["## Which term carries the error (cf. paper Fig. 9)", "",
@@ -193,11 +174,11 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
               + " | Predicted traction [kWh] | Measured traction [kWh] | Predicted / measured |",
               "|---|" + "---|" * (len(scats) + 3)]
     for nm, d in eqs.items():
-        cells = [_num(d["energy_share"].get(c), 1, 100.0) for c in scats]
+        cells = [num(d["energy_share"].get(c), 1, 100.0) for c in scats]
         lines.append(f"| {nm} | " + " | ".join(cells)
-                     + f" | {_num(d['energy_j']['total'], 3, _KWH)}"
-                     f" | {_num(meas['traction_energy_j'], 3, _KWH)}"
-                     f" | {_num(d['traction_energy_ratio'], 3)} |")
+                     + f" | {num(d['energy_j']['total'], 3, _KWH)}"
+                     f" | {num(meas['traction_energy_j'], 3, _KWH)}"
+                     f" | {num(d['traction_energy_ratio'], 3)} |")
     lines.append("")
 
     lines += ["## Figures", ""]
@@ -228,4 +209,4 @@ def _corr_table(eqs: dict, key: str) -> list[str]:
 def _corr_cell(c: dict | None) -> str:
     if not c or c.get("r") is None and c.get("partial_slope") is None:
         return "–"
-    return f"{_num(c.get('r'), 2)} / {_num(c.get('partial_slope'), 2)}"
+    return f"{num(c.get('r'), 2)} / {num(c.get('partial_slope'), 2)}"

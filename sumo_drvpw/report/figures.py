@@ -22,10 +22,10 @@ import numpy as np  # noqa: E402
 from sumo_drvpw.fit.compare import Comparison  # noqa: E402
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH  # noqa: E402
 from sumo_drvpw.fileio import write_figure  # noqa: E402
+from sumo_drvpw.report.format import KW as _KW, kw, num  # noqa: E402
 
 #: Most points drawn in one scatter panel.
 MAX_POINTS = 50_000
-_KW = 1e-3  # W → kW, display only
 _CAT_COLOURS = {"acc": "tab:blue", "grade": "tab:green", "aero": "tab:orange",
                 "roll": "tab:red", "other": "tab:gray"}
 
@@ -66,7 +66,7 @@ def parity(comp: Comparison, path) -> Path:
         ax.axvline(HEAVY_LOAD_W * _KW, color="tab:red", lw=0.8, ls="--", label="50 kW")
         ax.axhline(HEAVY_LOAD_W * _KW, color="tab:red", lw=0.8, ls="--")
         m = r.metrics
-        ax.set_title(f"{name}\nR² <50 kW {_f(m['r2_light'])}, ≥50 kW {_f(m['r2_heavy'])}",
+        ax.set_title(f"{name}\nR² <50 kW {num(m['r2_light'], 3)}, ≥50 kW {num(m['r2_heavy'], 3)}",
                      fontsize=9)
         ax.set_xlabel("measured power [kW]")
         ax.set_ylabel("predicted power [kW]")
@@ -142,8 +142,8 @@ def error_vs_speed(comp: Comparison, path) -> Path:
                    label="≥ 80 km/h")
         ax.axhline(0.0, color="k", lw=0.6)
         hs = r.high_speed
-        ax.set_title(f"{name}\n≥ 80 km/h: mean error {_kw(hs['mean_w'])} kW, "
-                     f"RMSE {_kw(hs['rmse_w'])} kW", fontsize=9)
+        ax.set_title(f"{name}\n≥ 80 km/h: mean error {kw(hs['mean_w'])} kW, "
+                     f"RMSE {kw(hs['rmse_w'])} kW", fontsize=9)
         ax.set_xlim(0.0, xmax)
         ax.set_xlabel("speed [km/h]")
         ax.set_ylabel("error, predicted − measured [kW]")
@@ -185,7 +185,7 @@ def error_vs_term_power(comp: Comparison, path) -> Path:
                 a0 = float(np.mean(e_all[ok]) - b * np.mean(pa[ok]))
                 ax.plot([x0 * _KW, x1 * _KW], [(a0 + b * x0) * _KW, (a0 + b * x1) * _KW],
                         color="k", lw=1)
-                ax.set_title(f"{nm}: {c}\nr = {_f(corr['r'], 2)}, slope {_f(b, 3)}",
+                ax.set_title(f"{nm}: {c}\nr = {num(corr['r'], 2)}, slope {num(b, 3)}",
                              fontsize=8)
             else:
                 ax.set_title(f"{nm}: {c}", fontsize=8)
@@ -225,7 +225,7 @@ def energy_share_bars(comp: Comparison, path) -> Path:
         pos = pos + np.where(vals >= 0, vals, 0.0)
         neg = neg + np.where(vals < 0, vals, 0.0)
     ax.set_xticks(x)
-    ax.set_xticklabels([f"{nm}\npred./meas. {_f(comp.results[nm].traction_energy_ratio, 3)}"
+    ax.set_xticklabels([f"{nm}\npred./meas. {num(comp.results[nm].traction_energy_ratio, 3)}"
                         for nm in names], fontsize=8)
     ax.axhline(0.0, color="k", lw=0.6)
     ax.set_ylabel("share of predicted traction energy [%]")
@@ -233,14 +233,3 @@ def energy_share_bars(comp: Comparison, path) -> Path:
     ax.set_title("Energy share of each term (cf. paper Fig. 10)", fontsize=10)
     write_figure(path, fig)
     return Path(path)
-
-
-def _f(x, nd: int = 3) -> str:
-    if x is None or not np.isfinite(x):
-        return "–"
-    s = f"{x:.{nd}f}"
-    return s[1:] if s.startswith("-") and float(s) == 0.0 else s  # no "-0.00"
-
-
-def _kw(w) -> str:
-    return "–" if w is None or not np.isfinite(w) else _f(w * _KW, 2)
