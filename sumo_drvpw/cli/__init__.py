@@ -61,11 +61,29 @@ def add_force(p) -> None:
                    help="replace an existing output folder even if sumo-drvpw did not write it")
 
 
-def output_set(args, out, inputs=()):
+def existing_paths(*groups) -> list[str]:
+    """The arguments that name existing files or folders (inputs an output must avoid);
+    each group is a path, a list of paths or None (names like ``prius3`` are skipped)."""
+    from pathlib import Path
+
+    out = []
+    for g in groups:
+        if g is None:
+            continue
+        if isinstance(g, (str, Path)):
+            if Path(g).exists():
+                out.append(str(g))
+        else:  # a list of paths, or of lists
+            out += existing_paths(*g)
+    return out
+
+
+def output_set(args, out, inputs=(), meta=None):
     """:func:`sumo_drvpw.fileio.output_set` for a command: ``--force`` from ``args``."""
     from sumo_drvpw import fileio
 
-    return fileio.output_set(out, force=bool(getattr(args, "force", False)), inputs=inputs)
+    return fileio.output_set(out, force=bool(getattr(args, "force", False)),
+                             inputs=existing_paths(inputs), meta=meta)
 
 
 class _Terminated(KeyboardInterrupt):

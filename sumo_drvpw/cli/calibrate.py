@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from sumo_drvpw.cli import add_force, existing_paths, output_set
 from sumo_drvpw.errors import UserError
 
 
@@ -15,7 +16,9 @@ def configure(p):
                         "or a comma list (default indt-var-1)")
     p.add_argument("--out", required=True, metavar="EQUATION.toml", help="calibrated equation file")
     p.add_argument("--name", help="equation name (default: the output file's stem)")
-    p.add_argument("--report", metavar="DIR", help="also write the comparison report here")
+    p.add_argument("--report", metavar="DIR", help="also write the comparison report here "
+                   "(the folder is written whole, or not at all)")
+    add_force(p)
     p.add_argument("--compare-with", action="append", metavar="EQ",
                    help="equations for the report (default: vsp_ldv1999 and VSP from the vehicle's specs)")
     p.add_argument("--p-enter", type=float, default=0.10, help="p-value to enter (default 0.10)")
@@ -26,6 +29,7 @@ def main(args) -> int:
     from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
     from sumo_drvpw.model.equations import save_equation
     from sumo_drvpw.data.measured import load_measured
+    from sumo_drvpw.fileio import _is_within, check_output_path
 
     for opt in ("p_enter", "p_remove"):
         val = getattr(args, opt)
@@ -37,6 +41,13 @@ def main(args) -> int:
     out = Path(args.out)
     if out.suffix != ".toml":
         raise UserError(f"--out {out}: an equation file ends in .toml")
+    inputs = existing_paths(args.logs, args.vehicle, args.candidates, args.compare_with)
+    check_output_path(out, inputs, "file")
+    if args.report:
+        check_output_path(args.report, inputs, "folder")
+        if _is_within(out.resolve(), Path(args.report).resolve()):
+            raise UserError(f"--out {out} lies inside --report {args.report}, which is replaced "
+                            "whole; write the equation elsewhere")
     cands = resolve_candidates(args.candidates)
     m = load_measured(args.logs, args.vehicle)
     ref_mass = float(m.inputs.mass[m.usable].mean())
@@ -46,12 +57,15 @@ def main(args) -> int:
     eq = res.to_equation(name, provenance={
         "logs": m.log.files, "vehicle": m.vehicle.path if m.vehicle else None,
         "power_source": m.source, "candidates_spec": args.candidates})
-    save_equation(eq, out)
     print(res.summary())
-    print(f"wrote {out}")
-    if args.report:
-        write_calibration_report(m, eq, res, args.report, args.compare_with)
+    if args.report:  # report and equation together: the equation is written last
+        with output_set(args, args.report, inputs) as tmp:
+            write_calibration_report(m, eq, res, tmp, args.compare_with)
+            save_equation(eq, out)
         print(f"wrote {Path(args.report) / 'report.md'}")
+    else:
+        save_equation(eq, out)
+    print(f"wrote {out}")
     return 0
 
 

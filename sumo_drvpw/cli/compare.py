@@ -4,13 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from sumo_drvpw.cli import add_force, output_set
+
 
 def configure(p):
     p.add_argument("logs", nargs="+", metavar="LOG", help="drive logs (Parquet/CSV files or folders)")
     p.add_argument("--vehicle", help="vehicle name or TOML file (optional when the log has power_w and mass_kg)")
     p.add_argument("--equation", action="append", required=True, metavar="NAME|FILE",
                    help="equation to compare (repeat); 'vsp_spec' = VSP from the vehicle's specs")
-    p.add_argument("--out", required=True, metavar="DIR", help="report folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="report folder (written whole, or not at all)")
+    add_force(p)
 
 
 def main(args) -> int:
@@ -18,11 +21,12 @@ def main(args) -> int:
     from sumo_drvpw.report.comparison import write_comparison_report
     from sumo_drvpw.data.measured import load_measured, resolve_equations
 
-    m = load_measured(args.logs, args.vehicle)
-    eqs = resolve_equations(args.equation, m.vehicle)
-    u = m.usable
-    comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u])
-    write_comparison_report(comp, args.out, "Equations against measured driving power", m.context())
+    with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
+        m = load_measured(args.logs, args.vehicle)
+        eqs = resolve_equations(args.equation, m.vehicle)
+        u = m.usable
+        comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u])
+        write_comparison_report(comp, tmp, "Equations against measured driving power", m.context())
     doc = comp.to_json()
     for name, r in doc["equations"].items():
         print(f"{name:<24} n={r['n']:<8} R²={_f(r['r2'])}  R²<50kW={_f(r['r2_light'])}  "

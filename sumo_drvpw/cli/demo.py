@@ -12,19 +12,37 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from sumo_drvpw.cli import add_force, output_set
 from sumo_drvpw.fileio import repo_root, write_text
 
-BUNDLED_LOG = repo_root() / "calibration" / "logs" / "prius3_testtrack.parquet"
 COMPARED = ["drvpw_prius3", "vsp_ldv1999", "vsp_prius3spec", "moves_passenger_car", "epa_prius3"]
 
 
 def configure(p):
-    p.add_argument("--out", default="demo-out", help="output folder (default demo-out)")
+    p.add_argument("--out", default="demo-out",
+                   help="output folder (default demo-out), written whole or not at all")
+    add_force(p)
     p.add_argument("--minutes", type=float, default=40.0, help="length of the calibration log [min]")
     p.add_argument("--no-sumo", action="store_true", help="skip the SUMO scenario runs")
 
 
 def main(args) -> int:
+    from sumo_drvpw.data.log import bundled_log
+
+    if not args.minutes > 0:
+        from sumo_drvpw.errors import UserError
+
+        raise UserError(f"--minutes must be > 0, got {args.minutes}")
+    final = Path(args.out)
+    held_log = bundled_log()
+    with output_set(args, final, [held_log]) as out:
+        _demo(args, out, final, held_log)
+    print(f"done: {final / 'README.md'}")
+    return 0
+
+
+def _demo(args, out: Path, final: Path, held_log: Path) -> None:
+    """Every step of the demo, written into ``out`` (the set published as ``final``)."""
     from sumo_drvpw.fit.calibrate import CANDIDATES, calibrate
     from sumo_drvpw.fit.compare import compare
     from sumo_drvpw.model.equations import save_equation
@@ -32,14 +50,12 @@ def main(args) -> int:
     from sumo_drvpw.synth.track import SynthOptions, synthesize, write_synth
     from sumo_drvpw.data.measured import load_measured, resolve_equations
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     lines = ["# sumo-drvpw demo", ""]
 
     log_path = out / "prius3_calibration_log.parquet"
     df, truth = synthesize(SynthOptions(minutes=args.minutes, seed=7, trip_id="synth-cal"))
     write_synth(df, truth, log_path)
-    print(f"[1/4] synthesized {log_path} ({len(df)} samples at 8 Hz, truth {truth['equation']})")
+    print(f"[1/4] synthesized {final / log_path.name} ({len(df)} samples at 8 Hz, truth {truth['equation']})")
 
     m = load_measured([log_path], "prius3")
     res = calibrate(m.inputs, m.power_w, CANDIDATES["indt-var-1"], mask=m.usable,
@@ -48,23 +64,23 @@ def main(args) -> int:
                                                          "power_source": m.source})
     eq_path = out / "drvpw_calibrated.toml"
     save_equation(eq, eq_path)
-    print(f"[2/4] calibrated {eq_path}\n{res.summary()}")
+    print(f"[2/4] calibrated {final / eq_path.name}\n{res.summary()}")
     lines += ["## Calibration", "", f"Log: `{log_path.name}`; equation: `{eq_path.name}`", "",
               "```", res.summary(), "```", "",
               "Truth (Table 3 Indt var. 1 on this basis): " +
               ", ".join(f"{k} = {v:.6g}" for k, v in truth["terms"].items()), ""]
 
-    held = load_measured([BUNDLED_LOG], "prius3")
+    held = load_measured([held_log], "prius3")
     eqs = [eq] + resolve_equations(COMPARED, held.vehicle)
     u = held.usable
     comp = compare(held.power_w[u], held.inputs.take(u), eqs, dt_s=held.log.df["dt_s"].to_numpy()[u],
                    reference=eq.name)
     rep = out / "report"
     ctx = held.context()
-    ctx["calibrated_on"] = str(log_path)
+    ctx["calibrated_on"] = str(final / log_path.name)
     write_comparison_report(comp, rep, "DrvPw against classic VSP on a held-out Prius3 test-track log", ctx)
     doc = comp.to_json()
-    print(f"[3/4] compared on the bundled held-out log → {rep / 'report.md'}")
+    print(f"[3/4] compared on the bundled held-out log → {final / 'report' / 'report.md'}")
     lines += ["## Comparison on the bundled held-out log", "", "Full report: `report/report.md`", "",
               "| equation | R² < 50 kW | R² ≥ 50 kW | RMSE [kW] | bias [kW] |", "|---|---|---|---|---|"]
     for name, r in doc["equations"].items():
@@ -75,15 +91,22 @@ def main(args) -> int:
     lines.append("")
 
     if not args.no_sumo:
-        lines += _sumo_runs(out, eq_path)
+        lines += _sumo_runs(out, eq_path, final)
     else:
         print("[4/4] SUMO runs skipped (--no-sumo)")
     write_text(out / "README.md", "\n".join(lines) + "\n")
-    print(f"done: {out / 'README.md'}")
-    return 0
 
 
-def _sumo_runs(out: Path, eq_path: Path) -> list[str]:
+def _scenario(name: str) -> Path:
+    """A bundled scenario: package data when the build ships it, else the checkout's."""
+    try:
+        from sumo_drvpw.sim.scenario import bundled_scenario
+    except ImportError:
+        return repo_root() / "scenarios" / f"{name}.toml"
+    return Path(bundled_scenario(name))
+
+
+def _sumo_runs(out: Path, eq_path: Path, final: Path) -> list[str]:
     """Run the bundled city and highway scenarios, adding the calibrated equation."""
     try:
         from sumo_drvpw.sim import run_scenario
@@ -92,7 +115,7 @@ def _sumo_runs(out: Path, eq_path: Path) -> list[str]:
         return ["SUMO runs skipped: the plug-in is not available in this build.", ""]
     lines = ["## Where the energy goes in SUMO (traction energy per term, per road class)", ""]
     for name in ("city", "highway"):
-        scen = repo_root() / "scenarios" / f"{name}.toml"
+        scen = _scenario(name)
         if not scen.is_file():
             print(f"[4/4] {scen} missing, skipped")
             continue
@@ -101,7 +124,7 @@ def _sumo_runs(out: Path, eq_path: Path) -> list[str]:
 
         eqs = list(load_scenario(scen).equations) + [load_equation(eq_path)]
         summary = run_scenario(scen, out / f"sumo_{name}", equations=eqs)
-        print(f"[4/4] SUMO {name}: {summary['steps']} steps, {summary['vehicles']} vehicles → {out / f'sumo_{name}'}")
+        print(f"[4/4] SUMO {name}: {summary['steps']} steps, {summary['vehicles']} vehicles → {final / f'sumo_{name}'}")
         lines += [f"### {name} (`sumo_{name}/`)", "", "| equation | class | acc | grade | aero | roll | traction [kWh] |",
                   "|---|---|---|---|---|---|---|"]
         for eqn, e in summary["equations"].items():

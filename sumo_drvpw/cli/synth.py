@@ -42,6 +42,16 @@ def main(args) -> int:
     bad = [s for s in names if s not in PLANTS]
     if bad:
         raise UserError(f"--plant: unknown effect {bad[0]!r} (known: {', '.join(PLANTS)})")
+    from sumo_drvpw.cli import existing_paths
+    from sumo_drvpw.fileio import check_output_path
+
+    inputs = existing_paths(args.truth, args.vehicle)
+    check_output_path(args.out, inputs, "file")
+    if str(args.out).lower().endswith(".csv"):
+        from pathlib import Path
+
+        check_output_path(Path(args.out).with_suffix(".truth.json"), inputs, "file")
+    _check_power_split(args.vehicle)
     effects = tuple(PLANTS[s]() for s in names)
     kw = dict(minutes=args.minutes, truth=args.truth, vehicle=args.vehicle)
     if args.trips == 1:
@@ -56,3 +66,23 @@ def main(args) -> int:
     print(f"wrote {args.out}: {len(df)} samples, {args.trips} trip(s) × {args.minutes:g} min at 8 Hz, "
           f"truth {truth['equation']}" + (f", planted: {', '.join(names)}" if names else ""))
     return 0
+
+
+#: vehicle-file keys the synthetic power-split signals need (``[powertrain]``)
+POWER_SPLIT_KEYS = ("sun_teeth", "ring_teeth", "final_drive", "wheel_radius_m")
+
+
+def _check_power_split(spec) -> None:
+    """The vehicle must be a power-split hybrid with the gear data the synthesizer uses."""
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    veh = load_vehicle(spec)
+    where = veh.path or spec
+    if veh.powertrain_type != "power_split":
+        raise UserError(f"--vehicle {spec} ({where}): synth writes power-split (THS) signals and needs "
+                        f"a [powertrain] type = \"power_split\" vehicle, got {veh.powertrain_type!r} "
+                        "(e.g. prius3, prius2)")
+    missing = [k for k in POWER_SPLIT_KEYS if k not in veh.powertrain]
+    if missing:
+        raise UserError(f"--vehicle {spec} ({where}): [powertrain] lacks {', '.join(missing)}, "
+                        "needed for the synthetic power-split signals")

@@ -4,13 +4,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from sumo_drvpw.cli import add_force, output_set
+
 
 def configure(p):
     p.add_argument("--data", default=None, metavar="DIR",
                    help="folder of the shared data (default: $SUMO_DRVPW_DATA, else <repo>/../shared/data)")
-    p.add_argument("--out", default="docs/validation", metavar="DIR",
-                   help="folder for figures and summary.json; the report is <DIR>.md beside it "
-                        "(default docs/validation → docs/validation.md)")
+    p.add_argument("--out", default="validation-out", metavar="DIR",
+                   help="folder for figures and summary.json, written whole or not at all; the "
+                        "report is <DIR>.md beside it (default validation-out → validation-out.md; "
+                        "the repository's docs are regenerated with --out docs/validation)")
+    add_force(p)
 
 
 def main(args) -> int:
@@ -19,7 +23,8 @@ def main(args) -> int:
     data = resolve_data(args.data)
     out = Path(args.out)
     cmd = f"sumo-drvpw validate --data {args.data or data} --out {args.out}"
-    summary = run_validation(data, out, command=cmd)
+    with output_set(args, out, [data]) as tmp:  # tmp has out's name: links in the report hold
+        summary = run_validation(data, tmp, command=cmd)
     print(f"wrote {report_path(out)}, {out / 'summary.json'} and "
           f"{len(summary['figures'])} figures in {summary['run']['seconds']:.1f} s")
     return 0
