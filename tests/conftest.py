@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
-BUNDLED_LOG = REPO / "calibration" / "logs" / "prius3_testtrack.parquet"
+BUNDLED_LOG = REPO / "sumo_drvpw" / "data" / "builtin" / "logs" / "prius3_testtrack.parquet"
 
 
 def shared_data_dir() -> Path | None:

@@ -29,6 +29,8 @@ FLAGS = ("brake", "reverse")
 DERIVED = ("trip_id", "time_s", "speed_mps", "accel_mps2", "grade_rad", "wind_mps",
            "air_density_kgm3", "mass_kg", "brake", "reverse", "dt_s")
 SPEED_MAX_MPS = 100.0
+#: Bundled demo log (package data): a synthetic Prius3 test-track log, see its README.
+BUNDLED_LOG = "prius3_testtrack.parquet"
 GRADE_MAX_RAD = 0.6
 
 
@@ -102,6 +104,16 @@ class DriveLog:
 
     def describe(self) -> str:
         return self.files[0] if len(self.files) == 1 else f"{len(self.files)} files"
+
+
+def bundled_log(name: str = BUNDLED_LOG) -> Path:
+    """Path of a drive log shipped in the package (``sumo_drvpw/data/builtin/logs/``)."""
+    from importlib import resources
+
+    p = Path(str(resources.files("sumo_drvpw.data") / "builtin" / "logs" / name))
+    if not p.is_file():
+        raise UserError(f"bundled log {name!r} not found in the installed package ({p})")
+    return p
 
 
 def expand_paths(paths) -> list[Path]:
