@@ -64,6 +64,10 @@ def main(args) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".parquet":
         raise UserError(f"--out {out}: must end in .parquet")
+    from sumo_drvpw.cli import existing_paths
+    from sumo_drvpw.fileio import check_output_path
+
+    check_output_path(out, existing_paths(args.src, args.columns), "file")  # never onto an input
     df, report = read(args.format, args.src, columns=args.columns)
     report["out"] = str(out)
     write_log(df, report, out)
