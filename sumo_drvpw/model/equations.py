@@ -8,6 +8,11 @@ File format (all tables but ``[equation]`` and one of ``[terms]``/``[beta]`` opt
     source = "where the numbers come from"
     mass_kg = 1530.9          # optional: a fixed mass for this equation's m-terms [kg]
     reference_mass_kg = 1625  # needed with [beta]: the mass the β were fitted at [kg]
+    vclasses = ["passenger"]  # SUMO vClasses it is made for (default: DEFAULT_VCLASSES)
+    predicts = "wheel"        # what the terms give: "wheel" (road-load power at the
+                              # wheels) or "powertrain_output" (incl. drivetrain losses)
+    speed_range_mps = [0, 33] # optional validity range of the data behind it [m/s]
+    accel_range_mps2 = [-3, 2]  # [m/s²]; calibrated equations record both
 
     [terms]       # coefficient per term of the basis (sumo_drvpw.model.terms); power = Σ c·term
     acc = 0.9994
@@ -20,11 +25,13 @@ File format (all tables but ``[equation]`` and one of ``[terms]``/``[beta]`` opt
     [chain]       # optional energy chain after the road-load terms (sumo_drvpw.model.chain)
 
 Built-in equations live in ``sumo_drvpw/model/builtin/equations/*.toml``; a name that is not a file
-path is looked up there.
+path is looked up there. A loaded equation's name must match ``NAME_PATTERN`` (it becomes
+part of column names and XML attribute names).
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -35,6 +42,14 @@ from sumo_drvpw.model.constants import G
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.model.terms import CATEGORIES, Inputs, parse_term, term_matrix
+
+#: Names an equation file may give: a letter, then letters, digits, ``_ . -`` (≤ 64 chars),
+#: so that names are safe in column names, file names and XML attribute names.
+NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_.-]{0,63}$"
+#: SUMO vClasses an equation is for when it does not say (``vclasses``): the car classes.
+DEFAULT_VCLASSES = ("passenger", "private", "taxi", "hov", "evehicle", "emergency", "authority")
+#: What an equation's terms can predict (``predicts``).
+PREDICTS = ("wheel", "powertrain_output")
 
 #: built-in equations: package data (importlib.resources; a regular install unpacks them)
 BUILTIN_DIR = Path(str(resources.files("sumo_drvpw.model") / "builtin" / "equations"))
@@ -63,11 +78,19 @@ class Equation:
     path: str | None = None
     #: optional :class:`sumo_drvpw.model.chain.EnergyChain` (``[chain]``): battery or fuel
     chain: object | None = None
+    #: SUMO vClasses the equation is made for (``equation.vclasses``)
+    vclasses: tuple[str, ...] = DEFAULT_VCLASSES
+    #: what the terms give: "wheel" or "powertrain_output" (``equation.predicts``)
+    terms_predict: str = "wheel"
+    #: validity range of the data behind the equation: speed [m/s], acceleration [m/s²]
+    speed_range_mps: tuple[float, float] | None = None
+    accel_range_mps2: tuple[float, float] | None = None
 
     @property
     def predicts(self) -> str:
-        """What the equation file predicts: ``wheel`` without a chain, else the chain's target."""
-        return "wheel" if self.chain is None else self.chain.predicts
+        """What the equation file predicts: what its terms give (``wheel`` or
+        ``powertrain_output``) without a chain, else the chain's target."""
+        return self.terms_predict if self.chain is None else self.chain.predicts
 
     def __post_init__(self):
         if not self.terms:
@@ -121,6 +144,14 @@ class Equation:
             eq["source"] = self.source
         if self.mass_kg is not None:
             eq["mass_kg"] = float(self.mass_kg)
+        if tuple(self.vclasses) != DEFAULT_VCLASSES:
+            eq["vclasses"] = list(self.vclasses)
+        if self.terms_predict != "wheel":
+            eq["predicts"] = self.terms_predict
+        for key in ("speed_range_mps", "accel_range_mps2"):
+            r = getattr(self, key)
+            if r is not None:
+                eq[key] = [float(r[0]), float(r[1])]
         doc = {"equation": eq, "terms": {k: float(v) for k, v in self.terms.items()}}
         for key in ("std_err", "p_values", "provenance", "metrics"):
             val = getattr(self, key)
@@ -195,6 +226,31 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
     else:
         raise UserError(f"{where}: missing [terms] (or [beta]) table")
     mass = meta.get("mass_kg")
+    name = str(meta["name"])
+    if not re.match(NAME_PATTERN, name):
+        raise UserError(f"{where}: equation.name {name!r} is not allowed: use a letter, then "
+                        "letters, digits, '_', '.', '-' (at most 64 characters)")
+    vcl = meta.get("vclasses", list(DEFAULT_VCLASSES))
+    if isinstance(vcl, str):
+        vcl = [vcl]
+    if not isinstance(vcl, list) or not all(isinstance(v, str) and v for v in vcl):
+        raise UserError(f"{where}: equation.vclasses must be a list of SUMO vClass names, "
+                        f"got {vcl!r}")
+    pred = meta.get("predicts", "wheel")
+    if pred not in PREDICTS:
+        raise UserError(f"{where}: equation.predicts must be one of {', '.join(PREDICTS)}, "
+                        f"got {pred!r}")
+    ranges = {}
+    for key in ("speed_range_mps", "accel_range_mps2"):
+        r = meta.get(key)
+        if r is None:
+            continue
+        if (not isinstance(r, list) or len(r) != 2 or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
+                or not r[0] < r[1]):
+            raise UserError(f"{where}: equation.{key} must be [low, high] numbers with "
+                            f"low < high, got {r!r}")
+        ranges[key] = (float(r[0]), float(r[1]))
     chain = None
     if "chain" in doc:
         from sumo_drvpw.model.chain import chain_from_dict
@@ -202,7 +258,7 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
         chain = chain_from_dict(doc["chain"], where)
     try:
         return Equation(
-            name=str(meta["name"]), terms=terms,
+            name=name, terms=terms, vclasses=tuple(vcl), terms_predict=pred, **ranges,
             mass_kg=None if mass is None else float(mass),
             description=str(meta.get("description", "")), source=str(meta.get("source", "")),
             std_err=std, p_values=_floats(doc.get("p_values", {}), f"{where} [p_values]"),
