@@ -61,14 +61,14 @@ def main() -> int:
     a = ap.parse_args()
     from sumo_drvpw.data.log import read_log
     from sumo_drvpw.cli.diagnose import run
-    from sumo_drvpw.fit.diagnose import TraceOptions
+    from sumo_drvpw.fit.diagnose import DiagnoseOptions
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench.parquet"
         build(a.rows, path)
         n_extra = len(read_log([path]).extra_columns)
         t0 = time.perf_counter()
-        res = run([path], "prius3", "drvpw_prius3", Path(tmp) / "out", TraceOptions(), figures=False,
+        res = run([path], "prius3", "drvpw_prius3", Path(tmp) / "out", DiagnoseOptions(), figures=False,
                   progress=print)
         dt = time.perf_counter() - t0
     r = res.report

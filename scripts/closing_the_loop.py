@@ -46,7 +46,7 @@ def main() -> int:
     a = ap.parse_args()
     from sumo_drvpw.data.adapters import read
     from sumo_drvpw.fileio import write_text
-    from sumo_drvpw.fit.diagnose import TraceOptions
+    from sumo_drvpw.fit.diagnose import DiagnoseOptions
     from sumo_drvpw.cli.diagnose import run
 
     out = Path(a.out)
@@ -62,7 +62,7 @@ def main() -> int:
             df, rep = read(fmt, src)
             p = Path(tmp) / f"{name}.parquet"
             df.to_parquet(p)
-            res = run([p], vehicle, None, out / "closing-the-loop" / name, TraceOptions(exclude=excl),
+            res = run([p], vehicle, None, out / "closing-the-loop" / name, DiagnoseOptions(exclude=excl),
                       figures=True, progress=lambda s: print(f"[{name}] {s}", file=sys.stderr))
         sections.append((name, res, f"{time.perf_counter() - t0:.0f} s", src, vehicle, target))
     write_text(out / "closing-the-loop.md", render(sections))
@@ -77,7 +77,7 @@ def render(sections) -> str:
          "target, the declared equation is calibrated on the spot (stepwise OLS on indt-var-1: acc, grade, "
          "aero, roll), and `sumo-drvpw diagnose` searches every extra column of the log (in the forms "
          "c·vᵏ, c × declared term, c²·vᵏ), functions of speed alone and per-trip offsets/masses, scoring "
-         "each on held-out data (method and test: `sumo_drvpw/trace.py`). The numbers below are copied "
+         "each on held-out data (method and test: `sumo_drvpw/fit/diagnose/`). The numbers below are copied "
          "from each run's `trace.json`; per-run reports with every round's best candidates and the list of "
          "columns not offered (and why) are linked.", ""]
     for sec in sections:

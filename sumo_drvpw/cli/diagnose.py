@@ -46,25 +46,25 @@ def _globs(s):
 
 
 def options_from_args(args):
-    from sumo_drvpw.fit.diagnose import TraceOptions
+    from sumo_drvpw.fit.diagnose import DiagnoseOptions
 
-    return TraceOptions(validation=args.validation, block_s=args.block_s, folds=args.folds, alpha=args.alpha,
+    return DiagnoseOptions(validation=args.validation, block_s=args.block_s, folds=args.folds, alpha=args.alpha,
                         min_gain=args.min_gain, max_findings=args.max_findings, include=_globs(args.signals),
                         exclude=_globs(args.exclude), max_nan=args.max_nan, proxy_corr=args.proxy_corr,
                         per_trip=not args.no_per_trip, min_speed_mps=args.min_speed)
 
 
 def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, progress=None, measured=None):
-    """Load, trace and write every output; returns the TraceResult."""
+    """Load, trace and write every output; returns the DiagnoseResult."""
     from sumo_drvpw.model.equations import load_equation
-    from sumo_drvpw.fit.diagnose import trace
+    from sumo_drvpw.fit.diagnose import diagnose
     from sumo_drvpw.data.measured import load_measured, resolve_equations
 
     m = measured if measured is not None else load_measured(logs, vehicle)
     eq = None
     if equation:
         eq = resolve_equations([equation], m.vehicle)[0] if equation == "vsp_spec" else load_equation(equation)
-    res = trace(m, eq, opt, progress=progress)
+    res = diagnose(m, eq, opt, progress=progress)
     write_outputs(res, out, figures=figures)
     return res
 
@@ -222,8 +222,16 @@ def _figures(res, out: Path) -> list[str]:
 def main(args) -> int:
     import sys
 
+    from sumo_drvpw.errors import UserError
+
     opt = options_from_args(args)
-    opt.check()
+    try:
+        opt.check()
+    except UserError as e:  # the library names the option; the user typed a flag
+        msg = str(e)
+        for field in ("validation", "block_s", "folds", "alpha", "min_gain", "max_findings", "max_nan"):
+            msg = msg.replace(f"diagnose option {field} ", f"--{field.replace('_', '-')} ")
+        raise UserError(msg) from None
     progress = None if args.quiet else (lambda s: print(s, file=sys.stderr))
     res = run(args.logs, args.vehicle, args.equation, args.out, opt, figures=not args.no_figures,
               progress=progress)

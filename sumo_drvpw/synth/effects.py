@@ -221,9 +221,10 @@ def planted_power(effects, trip_ids) -> np.ndarray:
     return np.concatenate(parts)
 
 
-#: Effects by short name (for ``synth --plant``).
-PLANTS = {"ac": AuxLoad, "tyre": TermScaledBySignal, "speed2": SpeedFunction,
-          "mass": PerTripMass, "distractors": Distractors, "logpower": LogPower}
+#: The one table of planted effects: name (as ``synth --plant`` takes it) → class; every
+#: class builds with its defaults.
+PLANTS = {"ac": AuxLoad, "cold-tyres": TermScaledBySignal, "speed-quadratic": SpeedFunction,
+          "trip-mass": PerTripMass, "distractors": Distractors, "log-power": LogPower}
 
 __all__ = ["AuxLoad", "TermScaledBySignal", "SpeedFunction", "PerTripMass", "Distractors",
            "LogPower", "synth_trips", "planted_power", "PLANTS", "G"]

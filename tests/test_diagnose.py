@@ -18,7 +18,7 @@ import sumo_drvpw.synth.effects as E
 from sumo_drvpw.model.equations import Equation, load_equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.synth.track import Noise
-from sumo_drvpw.fit.diagnose import TraceOptions, screen_signals, trace
+from sumo_drvpw.fit.diagnose import DiagnoseOptions, screen_signals, diagnose
 from sumo_drvpw.data.measured import load_measured
 
 NOISE = Noise(process_w=200.0, process_rel=0.01)
@@ -38,7 +38,7 @@ def _run(tmp_path, effects, equation=TRUTH, seed=11, n_trips=4, minutes=8.0, **o
     df.to_parquet(path)
     m = load_measured([path], "prius3")
     eq = load_equation(equation) if isinstance(equation, str) else equation
-    res = trace(m, eq, TraceOptions(**opt))
+    res = diagnose(m, eq, DiagnoseOptions(**opt))
     # noise floor from the truth, on the analysis samples (usable, moving)
     truth = load_equation(TRUTH)
     use = m.usable & (m.inputs.v >= 0.1)
@@ -118,7 +118,7 @@ def test_block_validation_single_trip_and_report_files(tmp_path):
     path = tmp_path / "one.parquet"
     df.to_parquet(path)
     out = tmp_path / "out"
-    res = run([path], "prius3", None, out, TraceOptions(), figures=True)
+    res = run([path], "prius3", None, out, DiagnoseOptions(), figures=True)
     doc = json.loads((out / "trace.json").read_text())
     assert set(doc) == {"target", "n_samples", "validation", "baseline", "findings", "final"}
     assert set(doc["baseline"]) == {"terms", "coefficients", "metrics"}
@@ -152,7 +152,7 @@ def test_leaky_columns_are_not_offered():
            "flat": np.ones(n),                                  # constant
            "holes": np.where(rng.random(n) < 0.3, np.nan, 1.0),  # too many NaN
            "ambient_c": rng.normal(10, 3, n)}                   # a legitimate signal
-    kept, skipped = screen_signals(sig, y, x, np.zeros(n, int), np.ones(n, bool), TraceOptions())
+    kept, skipped = screen_signals(sig, y, x, np.zeros(n, int), np.ones(n, bool), DiagnoseOptions())
     assert list(kept) == ["ambient_c"]
     reasons = {s["column"]: s["reason"] for s in skipped}
     assert "proxy" in reasons["power_copy_w"] or "same quantity" in reasons["power_copy_w"]
@@ -161,15 +161,24 @@ def test_leaky_columns_are_not_offered():
     assert "id-like" in reasons["counter"]
     assert reasons["flat"] == "constant"
     assert "NaN" in reasons["holes"]
-    kept, _ = screen_signals(sig, y, x, np.zeros(n, int), np.ones(n, bool), TraceOptions(exclude=("amb*",)))
+    kept, _ = screen_signals(sig, y, x, np.zeros(n, int), np.ones(n, bool), DiagnoseOptions(exclude=("amb*",)))
     assert kept == {}
 
 
-def test_bad_options_are_user_errors():
-    with pytest.raises(UserError, match="--validation"):
-        TraceOptions(validation="random").check()
-    with pytest.raises(UserError, match="--alpha"):
-        TraceOptions(alpha=2).check()
+def test_bad_options_are_user_errors_naming_the_option_not_a_flag():
+    with pytest.raises(UserError, match="option validation") as e:
+        DiagnoseOptions(validation="random").check()
+    assert "--" not in str(e.value)
+    with pytest.raises(UserError, match="option alpha"):
+        DiagnoseOptions(alpha=2).check()
+
+
+def test_cli_names_the_flag(tmp_path, capsys):
+    from sumo_drvpw.cli import main
+
+    assert main(["diagnose", str(tmp_path / "missing.parquet"), "--out", str(tmp_path / "o"),
+                 "--block-s", "0"]) == 2
+    assert "--block-s" in capsys.readouterr().err
 
 
 def test_cli_exit_codes(tmp_path, capsys):
@@ -185,3 +194,18 @@ def test_cli_exit_codes(tmp_path, capsys):
                  str(tmp_path / "o"), "--no-figures", "--quiet"]) == 0
     doc = json.loads((tmp_path / "o" / "trace.json").read_text())
     assert doc["findings"] == []
+
+
+def test_duplicate_candidates_dropped_first_in_order_wins(tmp_path):
+    """A column proportional to an earlier one, and forms identical given the model, are
+    dropped before scoring and listed; the A/C load is still found on its first name."""
+    df, _ = E.synth_trips(4, 6.0, seed=5, effects=[E.AuxLoad(), E.LogPower()], noise=NOISE)
+    df["ac_power_kw"] = df["ac_power_w"] / 1000.0        # the same quantity in other units
+    path = tmp_path / "log.parquet"
+    df.to_parquet(path)
+    m = load_measured([path], "prius3")
+    res = diagnose(m, load_equation(TRUTH), DiagnoseOptions(max_findings=1))
+    dropped = {d["term"]: d["reason"] for d in res.details["candidates_dropped"]}
+    assert "[ac_power_kw]" in dropped and "ac_power_w" in dropped["[ac_power_kw]"]
+    assert "[ac_power_w]" not in dropped
+    assert [f["term"] for f in res.report["findings"]] == ["[ac_power_w]"]

@@ -1,0 +1,152 @@
+"""Candidate effects of the residual tracer: column screening and candidate generation.
+
+See :mod:`sumo_drvpw.fit.diagnose` for the forms and the screening rules.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sumo_drvpw.fit.diagnose.options import POWER_SOURCE_COLUMNS, DiagnoseOptions
+from sumo_drvpw.model.terms import Inputs, parse_term
+
+
+@dataclass
+class Candidate:
+    """One candidate effect: a column (or a per-trip family of columns) to add."""
+
+    term: str                 # term as added ("[c]*v^1", "v^2", "trip=*", "trip=*·mass")
+    effect: str               # plain-language name
+    signals: tuple[str, ...]
+    kind: str                 # signal | signal_x_term | signal_sq | speed | trip_offset | trip_mass
+    scatter: bool = False     # one coefficient per trip
+
+
+def _vname(k: int) -> str:
+    return {0: "", 1: " × v (a force proportional to it)", 2: " × v²",
+            3: " × v³ (drag-like)"}[k]
+
+
+def _glob_any(name: str, patterns) -> bool:
+    return any(fnmatch.fnmatchcase(name, p) for p in patterns)
+
+
+def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarray,
+                   usable: np.ndarray, opt: DiagnoseOptions) -> tuple[dict, list[dict]]:
+    """Pick the extra columns to offer as candidate signals (see module docstring).
+
+    Returns (name → float array over all samples, list of {column, reason} skipped).
+    """
+    kept, skipped = {}, []
+    u = usable
+    v, a, th, w = x.v[u], x.a[u], x.theta[u], x.wind[u]
+    kin = np.column_stack([np.ones(u.sum()), v, a, np.sin(th), w])
+    kin_q, _ = np.linalg.qr(kin)
+    yu = y[u]
+    yc = yu - yu.mean()
+    tc = trip_codes[u]
+    same_trip = tc[1:] == tc[:-1]
+    src = {}
+    for c in POWER_SOURCE_COLUMNS:
+        if c in signals:
+            a = np.asarray(signals[c], float)[u]
+            a = np.where(np.isfinite(a), a, np.nanmean(a) if np.isfinite(a).any() else 0.0)
+            if a.std() > 0:
+                proj = kin_q.T @ a
+                r2 = 1.0 - max(float(a @ a) - float(proj @ proj), 0.0) / float(((a - a.mean()) ** 2).sum())
+                if r2 < opt.derived_r2:  # a motor speed ∝ vehicle speed is no power component to match
+                    src[c] = (a - a.mean()) / a.std()
+    for name in signals:
+        arr = np.asarray(signals[name], dtype=float)
+        if name in POWER_SOURCE_COLUMNS:
+            skipped.append({"column": name, "reason": "measured-power source column (target or a component of it)"})
+            continue
+        if opt.include and not _glob_any(name, opt.include):
+            skipped.append({"column": name, "reason": "not among the included columns (include)"})
+            continue
+        if opt.exclude and _glob_any(name, opt.exclude):
+            skipped.append({"column": name, "reason": "excluded (exclude)"})
+            continue
+        s = arr[u]
+        fin = np.isfinite(s)
+        nan_frac = 1.0 - fin.mean() if len(s) else 1.0
+        if nan_frac > opt.max_nan:
+            skipped.append({"column": name, "reason": f"{100 * nan_frac:.1f} % NaN among usable samples (> {100 * opt.max_nan:g} %)"})
+            continue
+        sf = s[fin]
+        if len(sf) == 0 or np.nanmax(sf) == np.nanmin(sf):
+            skipped.append({"column": name, "reason": "constant"})
+            continue
+        ds = np.diff(s)
+        ok = same_trip & np.isfinite(ds)
+        if ok.any() and (np.all(ds[ok] >= 0) or np.all(ds[ok] <= 0)) and len(np.unique(sf)) > 0.5 * len(sf):
+            skipped.append({"column": name, "reason": "id-like (monotone within every trip: clock, counter or odometer)"})
+            continue
+        sz = np.where(fin, s, np.nanmean(sf))
+        sc = sz - sz.mean()
+        ss = float(sc @ sc)
+        if ss > 0:
+            proj = kin_q.T @ sz
+            r2 = 1.0 - max(float(sz @ sz) - float(proj @ proj), 0.0) / ss
+            if r2 >= opt.derived_r2:
+                skipped.append({"column": name, "reason": f"derived from the model inputs (R² = {r2:.4f} on 1, v, a, sin θ, wind)"})
+                continue
+        dup = None
+        if sz.std() > 0:
+            zs = (sz - sz.mean()) / sz.std()
+            for c, a in src.items():
+                r = abs(float(zs @ a)) / len(zs)
+                if r >= opt.proxy_corr:
+                    dup = (c, r)
+                    break
+        if dup:
+            skipped.append({"column": name, "reason": f"same quantity as the measured-power source column "
+                                                      f"'{dup[0]}' (|corr| = {dup[1]:.3f})"})
+            continue
+        best = 0.0
+        for k in range(4):
+            f = sz * v ** k
+            fc = f - f.mean()
+            den = math.sqrt(float(fc @ fc) * float(yc @ yc))
+            if den > 0:
+                best = max(best, abs(float(fc @ yc)) / den)
+        if best >= opt.proxy_corr:
+            skipped.append({"column": name, "reason": f"proxy of the target (|corr(c·vᵏ, P)| = {best:.3f} ≥ {opt.proxy_corr:g})"})
+            continue
+        kept[name] = arr
+    return kept, skipped
+
+
+def generate_candidates(signals: dict, declared_terms, n_trips: int, opt: DiagnoseOptions,
+                        binary: set) -> list[Candidate]:
+    """All candidate effects for the screened signals and the declared terms."""
+    out = []
+    for c in signals:
+        for k in range(4):
+            term = f"[{c}]" if k == 0 else f"[{c}]*v^{k}"
+            what = "an additive load proportional to" if k == 0 else "a load"
+            out.append(Candidate(term, f"{what} '{c}'{_vname(k)}", (c,), "signal"))
+        for t in declared_terms:
+            if parse_term(t).signals:
+                continue
+            cat = parse_term(t).category
+            label = {"acc": "inertia", "grade": "grade", "aero": "aerodynamic drag",
+                     "roll": "rolling-resistance"}.get(cat, cat)
+            out.append(Candidate(f"[{c}]*{t}", f"'{c}' changes the {label} term '{t}'", (c,),
+                                 "signal_x_term"))
+        if c not in binary:
+            for k in range(4):
+                term = f"[{c}]^2" if k == 0 else f"[{c}]^2*v^{k}"
+                out.append(Candidate(term, f"a load with the square of '{c}'{_vname(k)}", (c,), "signal_sq"))
+    for k in range(5):
+        out.append(Candidate(f"v^{k}", f"a function of speed alone: v^{k} (the declared terms lack it)",
+                             (), "speed"))
+    if opt.per_trip and 2 <= n_trips <= opt.max_trips_per_trip_effects:
+        out.append(Candidate("trip=*", "a per-trip constant load (one offset per trip)", (), "trip_offset", True))
+        out.append(Candidate("trip=*·mass", "a per-trip mass change (one factor per trip on the "
+                             "mass-bearing terms)", (), "trip_mass", True))
+    return out

@@ -1,0 +1,61 @@
+"""Settings of the residual tracer (:func:`sumo_drvpw.fit.diagnose.diagnose`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sumo_drvpw.errors import UserError
+
+#: Columns from which the spec derives measured power: never offered as effects.
+POWER_SOURCE_COLUMNS = ("power_w", "motor_torque_nm", "motor_speed_rpm", "mg1_speed_rpm",
+                        "mg1_torque_nm", "mg2_speed_rpm", "mg2_torque_nm", "ice_speed_rpm",
+                        "battery_voltage_v", "battery_current_a")
+#: Metrics copied into the report (from :func:`sumo_drvpw.fit.compare.metrics`).
+METRIC_KEYS = ("rmse_w", "mae_w", "r2", "r2_light", "r2_heavy", "bias_w")
+
+
+@dataclass
+class DiagnoseOptions:
+    """Settings of the tracer (see :mod:`sumo_drvpw.fit.diagnose` for their meaning).
+
+    Library messages name the option (``block_s``), never a command-line flag.
+    """
+
+    validation: str = "auto"      # auto | trip | blocks
+    block_s: float = 60.0         # block length [s]
+    folds: int = 5
+    alpha: float = 0.05
+    min_gain: float = 0.01        # minimum relative held-out RMSE gain
+    max_findings: int = 5
+    include: tuple = ()           # glob patterns of columns to offer (empty: all)
+    exclude: tuple = ()           # glob patterns of columns never to offer
+    max_nan: float = 0.05
+    proxy_corr: float = 0.9
+    derived_r2: float = 0.99
+    per_trip: bool = True
+    min_speed_mps: float = 0.1    # samples below this speed are left out [m/s]
+    max_trips_per_trip_effects: int = 400
+    batch: int = 16
+    responses: bool = False       # also offer columns whose role is 'response'
+    structural: bool = True       # offer structural effects (lag, regimes, air density, grade)
+    max_lag_s: float = 3.0        # largest power–speed lag searched [s]
+
+    def check(self):
+        """Raise :class:`UserError` naming the first setting out of range."""
+        if self.validation not in ("auto", "trip", "blocks"):
+            raise UserError(f"diagnose option validation must be auto, trip or blocks, "
+                            f"got '{self.validation}'")
+        if not self.block_s > 0:
+            raise UserError(f"diagnose option block_s must be > 0 s, got {self.block_s}")
+        if self.folds < 2:
+            raise UserError(f"diagnose option folds must be ≥ 2, got {self.folds}")
+        if not 0 < self.alpha < 1:
+            raise UserError(f"diagnose option alpha must be between 0 and 1, got {self.alpha}")
+        if not 0 <= self.min_gain < 1:
+            raise UserError(f"diagnose option min_gain must be in [0, 1), got {self.min_gain}")
+        if self.max_findings < 0:
+            raise UserError(f"diagnose option max_findings must be ≥ 0, got {self.max_findings}")
+        if not 0 <= self.max_nan <= 1:
+            raise UserError(f"diagnose option max_nan must be in [0, 1], got {self.max_nan}")
+        if not 0 <= self.max_lag_s <= 30:
+            raise UserError(f"diagnose option max_lag_s must be in [0, 30] s, got {self.max_lag_s}")

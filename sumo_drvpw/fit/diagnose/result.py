@@ -1,0 +1,104 @@
+"""The tracer's result: report documents, the final equation and the data behind the figures."""
+
+from __future__ import annotations
+
+import datetime as _dt
+from dataclasses import dataclass
+
+from sumo_drvpw.fit.compare import metrics as _metrics
+from sumo_drvpw.fit.diagnose.blocks import BlockModel
+from sumo_drvpw.fit.diagnose.candidates import Candidate
+from sumo_drvpw.fit.diagnose.options import METRIC_KEYS
+from sumo_drvpw.model.equations import Equation
+
+
+@dataclass
+class DiagnoseResult:
+    """What the tracer found: the report document, the final equation and plot data."""
+
+    report: dict
+    details: dict
+    equation: Equation
+    plot: dict
+    n_candidates_scored: int
+
+
+def pick_metrics(m: dict) -> dict:
+    """The metrics the report carries (``METRIC_KEYS``)."""
+    return {k: m[k] for k in METRIC_KEYS}
+
+
+def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrated: bool, opt,
+             findings, rounds, pred0, m_base, base_coefs, plot, y, n_rows: int, n_usable: int,
+             skipped, sig, n_candidates: int, n_trips: int, dropped) -> DiagnoseResult:
+    """Final fit, report (``trace.json`` shape), details and the traced equation."""
+    log = measured.log
+    n = len(y)
+    final_fold = tr.fold_of(False)
+    pred_final = tr.heldout_pred(final_fold) if findings else pred0
+    m_final = _metrics(pred_final, y)
+    co, se = tr.coefficients()
+    plot["pred_final"] = pred_final
+    final_terms = expand_terms(tr, co)
+    eq_se = expand_terms(tr, se, std=True)
+    now = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    prov = {"date": now, "method": "sumo-drvpw diagnose: residual tracer (sumo_drvpw.fit.diagnose)",
+            "logs": list(log.files), "declared_equation": equation.name,
+            "declared_terms": list(declared), "calibrated_on_the_spot": calibrated,
+            "power_source": measured.source, "validation": tr.validation,
+            "findings": [f["term"] for f in findings],
+            "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(opt).items()}}
+    final_eq = Equation(name=f"{equation.name}_traced", terms=dict(final_terms), mass_kg=equation.mass_kg,
+                        description=f"{equation.name} refitted with the effects found by the residual tracer",
+                        source="sumo-drvpw diagnose", std_err=eq_se, provenance=prov,
+                        metrics={"heldout": pick_metrics(m_final), "n": n})
+    report = {
+        "target": f"measured driving power [W] ({measured.source})",
+        "n_samples": n,
+        "validation": tr.validation,
+        "baseline": {"terms": list(declared), "coefficients": {t: base_coefs[t] for t in declared},
+                     "metrics": pick_metrics(m_base)},
+        "findings": findings,
+        "final": {"terms": list(final_terms),
+                  "coefficients": final_terms, "metrics": pick_metrics(m_final)},
+    }
+    details = {"declared_equation": equation.name, "calibrated_on_the_spot": calibrated,
+               "samples": {"rows": n_rows, "usable": n_usable, "analysis": n,
+                           "trips": n_trips, "blocks": tr.n_blocks},
+               "signals_offered": sorted(sig), "signals_skipped": skipped,
+               "candidates_dropped": dropped,
+               "candidates_per_round": n_candidates, "candidates_scored": tr.n_scored,
+               "rounds": rounds, "test": ("one-sided paired tests over held-out blocks of "
+                                           "d = SSE(model) − SSE(model + candidate): 2 × min(p of t-test on "
+                                           "mean d, p of Wilcoxon signed-rank), Bonferroni over the "
+                                           f"candidates scored per round, alpha = {opt.alpha}, and relative "
+                                           f"held-out RMSE gain ≥ {opt.min_gain}; equal gains are "
+                                           "ranked by candidate order"),
+               "final_std_err": se, "settings": prov["settings"]}
+    return DiagnoseResult(report, details, final_eq, plot, tr.n_scored)
+
+
+def term_label(c: Candidate, mass_terms: dict) -> str:
+    if c.kind == "trip_offset":
+        return "trip=ID (one per trip)"
+    if c.kind == "trip_mass":
+        inner = " + ".join(f"{v:.6g}·{t}" for t, v in mass_terms.items())
+        return f"trip=ID*({inner}) (one factor per trip)"
+    return c.term
+
+
+def expand_terms(tr: BlockModel, co: dict, std: bool = False) -> dict:
+    """Terms of the final equation in the term grammar (per-trip effects expanded)."""
+    out = {}
+    for c in tr.cols:
+        val = co[c.cand.term]
+        if c.cand.kind == "trip_offset":
+            for trip, v in val.items():
+                out[f"trip={trip}"] = v
+        elif c.cand.kind == "trip_mass":
+            for trip, v in val.items():
+                for t, ct in c.mass_terms.items():
+                    out[f"trip={trip}*{t}"] = v * abs(ct) if std else v * ct
+        else:
+            out[c.cand.term] = val
+    return out
