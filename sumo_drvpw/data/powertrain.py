@@ -165,3 +165,61 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
     raise UserError(f"{where}: no measured power: the log needs 'power_w', or the power-split columns "
                     f"({', '.join(POWER_SPLIT_COLUMNS)}), or 'motor_torque_nm', or "
                     "'battery_voltage_v' and 'battery_current_a'")
+
+
+def measured_battery_power(log, vehicle=None) -> tuple[np.ndarray, str]:
+    """Battery power V·I of a drive log [W], positive when discharging, and its source.
+
+    The sign convention is the vehicle file's ``battery.current_positive`` (default
+    ``discharge``, the spec's canonical sign).
+    """
+    df = log.df
+    missing = [c for c in ("battery_voltage_v", "battery_current_a") if c not in df]
+    if missing:
+        raise UserError(f"{log.describe()}: the battery target needs the column '{missing[0]}' "
+                        "(battery_voltage_v and battery_current_a)")
+    conv = vehicle.battery.get("current_positive", "discharge") if vehicle is not None else "discharge"
+    return (battery_power(df["battery_voltage_v"], df["battery_current_a"], conv),
+            f"battery V·I (current positive = {conv})")
+
+
+#: fuel-flow columns in the order they are used: mass flow [g/s], or volume flow [L/h]
+FUEL_COLUMNS = ("fuel_rate_gps", "fuel_rate_lph")
+
+
+def fuel_column(df) -> str | None:
+    """The fuel-flow column of a log: ``fuel_rate_gps``, ``fuel_rate_lph``, or the one
+    extra column named ``fuel…_lph`` (what adapters make of a vendor's L/h or gal/h flow)."""
+    for c in FUEL_COLUMNS:
+        if c in df:
+            return c
+    cands = [c for c in df.columns if str(c).startswith("fuel") and str(c).endswith("_lph")]
+    return cands[0] if len(cands) == 1 else None
+
+
+def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.ndarray, str]:
+    """Fuel power of a drive log [W] (mass flow × lower heating value) and its source.
+
+    P_fuel = ṁ·LHV with ṁ [kg/s] from ``fuel_rate_gps`` / 1000, or from a volume flow [L/h]
+    × density / 3600. The fuel is ``fuel`` if given, else the vehicle file's
+    ``powertrain.fuel``, else gasoline; its LHV and density are in
+    :data:`sumo_drvpw.model.constants.FUELS`.
+    """
+    from sumo_drvpw.model.constants import FUELS
+
+    df = log.df
+    col = fuel_column(df)
+    if col is None:
+        raise UserError(f"{log.describe()}: the fuel target needs a fuel-flow column "
+                        f"({', '.join(FUEL_COLUMNS)}, or one 'fuel…_lph' column)")
+    name = fuel or (vehicle.powertrain.get("fuel", "gasoline") if vehicle is not None else "gasoline")
+    if name not in FUELS:
+        raise UserError(f"fuel '{name}' is not one of {', '.join(FUELS)}")
+    fp = FUELS[name]
+    x = df[col].to_numpy(float)
+    kgps = x / 1000.0 if col == "fuel_rate_gps" else x * fp["density_kg_per_l"] / 3600.0
+    bad = np.isfinite(x) & (x < 0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"{log.describe()}: column '{col}' is negative at row {i} ({x[i]!r})")
+    return kgps * fp["lhv_j_per_kg"], f"fuel flow {col} × LHV of {name}"

@@ -1,0 +1,354 @@
+"""Calibrate an energy chain (sumo_drvpw.model.chain) on top of a road-load equation.
+
+Given the driving power P [W] of the road-load equation, the battery form is linear in its
+parameters (model/chain.py)::
+
+    P_bat = x_t·max(P, 0) + η_r·max(min(P, 0), −P_lim) + P_aux,0 + Σ g_k·L_k
+            + h_heat·max(T_set − T, 0) + h_cool·max(T − T_set, 0),      x_t = 1/η_t
+
+so for a fixed recuperation limit P_lim it is a bounded linear least-squares problem,
+solved by ``scipy.optimize.lsq_linear`` (x_t ≥ 1, 0 < η_r ≤ 1, P_aux,0, g_k, h ≥ 0), each
+sample weighted by its duration (√Δt on the rows), so irregular logs weigh time, not rows.
+The limit is profiled over a grid of the observed braking powers and kept only when it
+lowers the BIC (n·ln RSS + k·ln n). The fuel form (Willans line with engine-off, SOC
+corrected with k = 1/η_m) is linear too::
+
+    P_fuel = a·on + b·(on·max(P, 0) − P_bat) + Σ c_k·on·L_k,    b = 1/η_m, a = P_idle,fuel
+
+with the engine-off threshold P_off profiled the same way (``on`` = P > P_off).
+
+Uncertainty: the covariance of the linear fit on the free (inactive) parameters,
+s²·(X_fᵀW X_f)⁻¹ with s² = RSS/(n − k_free); parameters at a bound get none. Samples of
+a drive log are autocorrelated, so these are lower bounds: per-trip hold-out errors
+(validation/chain.py) are the honest measure.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.chain import EnergyChain, corrected_fuel_power
+
+#: smallest efficiency the fit may return (the bound (0, 1] made closed) [-]
+ETA_MIN = 1e-3
+#: quantiles of the observed braking power |min(P, 0)| tried as recuperation limits
+LIMIT_QUANTILES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995)
+#: engine-off thresholds tried for the fuel chain [W]
+ENGINE_OFF_GRID_W = (0.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 8000.0, 10000.0, 12000.0, 15000.0)
+
+
+@dataclass
+class ChainFit:
+    """A calibrated chain with its parameters, uncertainties and readings."""
+
+    chain: EnergyChain
+    parameters: dict = field(default_factory=dict)
+    n: int = 0
+    r2: float = math.nan
+    rmse_w: float = math.nan
+    energy_ratio: float = math.nan
+    profile: list = field(default_factory=list)
+
+    def summary(self) -> str:
+        lines = [f"energy chain ({self.chain.predicts}): n={self.n}  R²={self.r2:.4f}  "
+                 f"RMSE={self.rmse_w / 1000:.3f} kW  predicted/measured energy={self.energy_ratio:.4f}"]
+        for k, p in self.parameters.items():
+            se = p.get("std_err")
+            se_s = "at bound" if p.get("at_bound") else (f"± {se:.4g}" if se is not None else "")
+            lines.append(f"  {k:<28} {p['value']:>12.5g} {se_s:<14} {p.get('reading', '')}")
+        return "\n".join(lines)
+
+
+def _col(signals: dict, name: str, n: int) -> np.ndarray:
+    if name not in signals:
+        raise UserError(f"energy chain: the log has no column '{name}' (available: "
+                        f"{', '.join(sorted(signals)) or 'none'})")
+    x = np.asarray(signals[name], float)
+    return np.nan_to_num(x, nan=0.0)
+
+
+def _solve(x: np.ndarray, y: np.ndarray, w: np.ndarray, lb, ub):
+    sw = np.sqrt(w)
+    xs = x * sw[:, None]
+    ys = y * sw
+    scale = np.sqrt((xs ** 2).sum(axis=0))
+    scale[scale == 0] = 1.0
+    res = lsq_linear(xs / scale, ys, bounds=(np.asarray(lb) * scale, np.asarray(ub) * scale),
+                     method="bvls", lsmr_tol="auto")
+    beta = res.x / scale
+    r = ys - xs @ beta
+    rss = float(r @ r)
+    return beta, rss, res.active_mask, xs
+
+
+def _covariance(xs: np.ndarray, rss: float, active: np.ndarray) -> np.ndarray:
+    k = xs.shape[1]
+    se = np.full(k, np.nan)
+    free = np.flatnonzero(active == 0)
+    dof = xs.shape[0] - free.size
+    if free.size and dof > 0:
+        a = xs[:, free]
+        try:
+            cov = np.linalg.inv(a.T @ a) * rss / dof
+            se[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        except np.linalg.LinAlgError:
+            pass
+    return se
+
+
+def _bic(rss: float, n: int, k: int) -> float:
+    return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
+
+
+def _stats(pred, y, w) -> tuple[float, float, float]:
+    e = pred - y
+    ybar = float(np.average(y, weights=w))
+    sst = float(w @ (y - ybar) ** 2)
+    r2 = 1.0 - float(w @ e ** 2) / sst if sst > 0 else math.nan
+    rmse = math.sqrt(float(w @ e ** 2) / float(w.sum()))
+    ey = float(w @ y)
+    return r2, rmse, (float(w @ pred) / ey if ey != 0 else math.nan)
+
+
+def _reading(name: str, val: float) -> str:
+    """One-line physical reading of a calibrated parameter, flagging implausible values."""
+    if name == "traction_efficiency":
+        s = f"battery → wheel on traction {val:.1%} (motor, inverter, gear, battery resistance)"
+        return s + ("; IMPLAUSIBLE for a BEV (expected 0.75–0.95): the road load is off"
+                    if not 0.7 <= val <= 0.97 else "")
+    if name == "recuperation_efficiency":
+        s = f"wheel → battery on braking {val:.1%} (incl. the blended friction share)"
+        return s + ("; low: friction braking or a recuperation limit dominates" if val < 0.4 else "")
+    if name == "recuperation_limit_w":
+        return f"braking power beyond {val / 1000:.1f} kW goes to the friction brakes"
+    if name == "aux_power_w":
+        return f"constant auxiliary draw {val:.0f} W (12 V net, pumps, control; accrues at standstill)"
+    if name.startswith("loads."):
+        s = f"{val:.3f} W at the battery per W logged"
+        return s + ("; far from 1: the logged load is not electrical power at the battery"
+                    if not 0.7 <= val <= 1.3 else "")
+    if name.startswith("hvac."):
+        return f"{val:.0f} W per K from the set-point"
+    if name == "marginal_efficiency":
+        s = f"fuel → engine output at the margin {val:.1%} (Willans slope)"
+        return s + ("; IMPLAUSIBLE for a petrol engine (expected 0.3–0.45)" if not 0.25 <= val <= 0.5 else "")
+    if name == "idle_fuel_power_w":
+        return f"fuel power with the engine on at zero output {val / 1000:.2f} kW (friction, pumping, warm-up, auxiliaries)"
+    if name == "engine_off_below_w":
+        return f"engine off below {val / 1000:.1f} kW of driving power"
+    return ""
+
+
+def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = None, *,
+                      loads=(), hvac: dict | None = None, mask=None, limit="profile",
+                      predicts: str = "battery") -> ChainFit:
+    """Calibrate a battery (or powertrain-output) chain on measured power.
+
+    Parameters
+    ----------
+    p_drive_w : driving power of the road-load equation [W]
+    v_mps : speed [m/s]
+    meas_w : measured battery power V·I, positive when discharging [W]
+    dt_s : sample durations [s] (weights)
+    signals : column → array (loads, HVAC temperature)
+    loads : logged load columns (gains fitted, ≥ 0)
+    hvac : None or {"column", "setpoint_c"}: fit heating and cooling gains [W/K] ≥ 0
+    mask : samples to fit on (default: all with finite values)
+    limit : "profile" (profile a recuperation limit, kept if it lowers the BIC), None
+        (no limit) or a number [W] (fixed)
+    predicts : "battery" or "powertrain_output" (no auxiliary power)
+    """
+    p = np.asarray(p_drive_w, float)
+    n = p.size
+    y = np.asarray(meas_w, float)
+    v = np.broadcast_to(np.asarray(v_mps, float), (n,))
+    w = np.broadcast_to(np.asarray(dt_s, float), (n,)).astype(float)
+    sig = signals or {}
+    cols = [np.maximum(p, 0.0), None]
+    names = ["traction_efficiency", "recuperation_efficiency"]
+    lb, ub = [1.0, ETA_MIN], [1.0 / ETA_MIN, 1.0]
+    if predicts == "battery":
+        cols.append(np.ones(n))
+        names.append("aux_power_w")
+        lb.append(0.0)
+        ub.append(np.inf)
+        for c in loads:
+            cols.append(_col(sig, c, n))
+            names.append(f"loads.{c}")
+            lb.append(0.0)
+            ub.append(np.inf)
+        if hvac:
+            t = _col(sig, hvac.get("column", "ambient_c"), n)
+            ts = float(hvac.get("setpoint_c", 20.0))
+            cols += [np.maximum(ts - t, 0.0), np.maximum(t - ts, 0.0)]
+            names += ["hvac.heating_w_per_k", "hvac.cooling_w_per_k"]
+            lb += [0.0, 0.0]
+            ub += [np.inf, np.inf]
+    ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w)
+    for c in cols:
+        if c is not None:
+            ok &= np.isfinite(c)
+    if mask is not None:
+        ok &= np.asarray(mask, bool)
+    if ok.sum() < len(names) + 2:
+        raise UserError(f"energy chain: only {int(ok.sum())} usable samples for {len(names)} parameters")
+    neg = np.minimum(p, 0.0)
+    brake = -neg[ok & (neg < 0)]
+    if limit == "profile":
+        grid = [None] + (sorted({float(np.quantile(brake, q)) for q in LIMIT_QUANTILES})
+                         if brake.size > 20 else [])
+    elif limit is None:
+        grid = [None]
+    else:
+        grid = [float(limit)]
+
+    def design(lim):
+        c = list(cols)
+        c[1] = neg if lim is None else np.maximum(neg, -lim)
+        return np.column_stack(c)[ok]
+
+    best, profile = None, []
+    for lim in grid:
+        x = design(lim)
+        beta, rss, active, xs = _solve(x, y[ok], w[ok], lb, ub)
+        k = len(names) + (lim is not None)
+        bic = _bic(rss, int(ok.sum()), k)
+        profile.append({"recuperation_limit_w": lim, "rss": rss, "bic": bic})
+        if best is None or bic < best[0]:
+            best = (bic, lim, beta, rss, active, xs)
+    _, lim, beta, rss, active, xs = best
+    se = _covariance(xs, rss, active)
+    params = {}
+    kw = {"predicts": predicts, "loads": {}, "hvac": None}
+    for j, name in enumerate(names):
+        val, s = float(beta[j]), float(se[j])
+        if name == "traction_efficiency":  # fitted x_t = 1/η_t; delta method for se
+            val, s = 1.0 / val, s / val ** 2
+        params[name] = {"value": val, "std_err": None if math.isnan(s) else s,
+                        "at_bound": bool(active[j] != 0)}
+        if name.startswith("loads."):
+            kw["loads"][name[6:]] = val
+        elif name.startswith("hvac."):
+            kw["hvac"] = kw["hvac"] or {"column": hvac.get("column", "ambient_c"),
+                                        "setpoint_c": float(hvac.get("setpoint_c", 20.0))}
+            kw["hvac"][name[5:]] = val
+        else:
+            kw[name] = val
+    if lim is not None:
+        kw["recuperation_limit_w"] = lim
+        params["recuperation_limit_w"] = {"value": lim, "std_err": None, "at_bound": False,
+                                          "how": "profiled (BIC) over quantiles of the braking power"}
+    for name, p_ in params.items():
+        p_["reading"] = _reading(name, p_["value"])
+    chain = EnergyChain(**kw)
+    pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
+    r2, rmse, ratio = _stats(pred, y[ok], w[ok])
+    chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
+    chain.metrics = {"n": int(ok.sum()), "r2": r2, "rmse_w": rmse, "energy_ratio": ratio}
+    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile)
+
+
+def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict | None = None, *,
+                   loads=(), mask=None, engine_off="profile", fuel: str = "gasoline",
+                   engine_on_above_mps: float | None = None) -> ChainFit:
+    """Calibrate a Willans-line fuel chain with engine-off and battery (SOC) correction.
+
+    Parameters
+    ----------
+    p_drive_w : driving power of the road-load equation [W]
+    v_mps : speed [m/s]
+    fuel_w : measured fuel power ṁ·LHV [W]
+    dt_s : sample durations [s]
+    battery_w : hybrid battery power V·I, positive when discharging [W], or None
+    loads : logged load columns (gains ≥ 0, at the engine output)
+    engine_off : "profile" (grid :data:`ENGINE_OFF_GRID_W`, by RSS) or a number [W]
+    fuel : key of :data:`sumo_drvpw.model.constants.FUELS`
+    engine_on_above_mps : optional speed above which the engine always runs [m/s]
+    """
+    p = np.asarray(p_drive_w, float)
+    n = p.size
+    y = np.asarray(fuel_w, float)
+    v = np.broadcast_to(np.asarray(v_mps, float), (n,))
+    w = np.broadcast_to(np.asarray(dt_s, float), (n,)).astype(float)
+    pb = np.zeros(n) if battery_w is None else np.nan_to_num(np.asarray(battery_w, float))
+    sig = signals or {}
+    lcols = [_col(sig, c, n) for c in loads]
+    ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w)
+    if mask is not None:
+        ok &= np.asarray(mask, bool)
+    names = ["idle_fuel_power_w", "marginal_efficiency"] + [f"loads.{c}" for c in loads]
+    lb = [0.0, 1.0] + [0.0] * len(loads)
+    ub = [np.inf, 1.0 / ETA_MIN] + [np.inf] * len(loads)
+    grid = ENGINE_OFF_GRID_W if engine_off == "profile" else (float(engine_off),)
+    best, profile = None, []
+    for off in grid:
+        tmpl = EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=engine_on_above_mps)
+        on = tmpl.engine_on(p, v).astype(float)
+        x = np.column_stack([on, on * np.maximum(p, 0.0) - pb] + [on * c for c in lcols])[ok]
+        beta, rss, active, xs = _solve(x, y[ok], w[ok], lb, ub)
+        profile.append({"engine_off_below_w": off, "rss": rss})
+        if best is None or rss < best[0]:
+            best = (rss, off, beta, active, xs)
+    rss, off, beta, active, xs = best
+    se = _covariance(xs, rss, active)
+    b = float(beta[1])
+    eta = 1.0 / b
+    params = {"idle_fuel_power_w": {"value": float(beta[0]), "std_err": _nan_none(se[0]),
+                                    "at_bound": bool(active[0] != 0)},
+              "marginal_efficiency": {"value": eta, "std_err": _nan_none(se[1] / b ** 2),
+                                      "at_bound": bool(active[1] != 0)}}
+    gains = {}
+    for j, c in enumerate(loads):  # c_k = g_k/η_m → g_k = c_k·η_m
+        gains[c] = float(beta[2 + j]) * eta
+        params[f"loads.{c}"] = {"value": gains[c], "std_err": _nan_none(se[2 + j] * eta),
+                                "at_bound": bool(active[2 + j] != 0)}
+    params["engine_off_below_w"] = {"value": off, "std_err": None, "at_bound": False,
+                                    "how": "profiled (RSS) over a grid"}
+    for name, p_ in params.items():
+        p_["reading"] = _reading(name, p_["value"])
+    chain = EnergyChain(predicts="fuel", idle_fuel_power_w=float(beta[0]), marginal_efficiency=eta,
+                        engine_off_below_w=off, engine_on_above_mps=engine_on_above_mps,
+                        loads=gains, fuel=fuel)
+    pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
+    target = corrected_fuel_power(y, pb, chain.battery_fuel_factor)[ok]
+    r2, rmse, ratio = _stats(pred, target, w[ok])
+    chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
+    chain.metrics = {"n": int(ok.sum()), "r2": r2, "rmse_w": rmse, "energy_ratio": ratio,
+                     "target": "fuel power + battery power / η_m (SOC-corrected)"}
+    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile)
+
+
+def _nan_none(x) -> float | None:
+    x = float(x)
+    return None if math.isnan(x) else x
+
+
+def chain_target(m, chain: EnergyChain) -> np.ndarray:
+    """The measured power a chain is compared with [W]: battery V·I, or SOC-corrected fuel
+    power (:func:`sumo_drvpw.model.chain.corrected_fuel_power`) for a fuel chain."""
+    if chain.predicts == "fuel" and m.battery_w is not None:
+        return corrected_fuel_power(m.power_w, m.battery_w, chain.battery_fuel_factor)
+    return m.power_w
+
+
+def calibrate_on(m, equation, *, loads=(), hvac=None, limit="profile", engine_off="profile",
+                 mask=None) -> ChainFit:
+    """Calibrate the chain of ``m.target`` on a :class:`~sumo_drvpw.data.measured.Measured`,
+    driving power from ``equation`` (its road-load terms); fit on ``m.usable`` (and ``mask``)."""
+    p = equation.power(m.inputs)
+    dt = m.log.df["dt_s"].to_numpy(float)
+    use = m.usable if mask is None else (m.usable & mask)
+    sig = m.inputs.signals
+    if m.target == "fuel":
+        fuel = m.vehicle.powertrain.get("fuel", "gasoline") if m.vehicle is not None else "gasoline"
+        return calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads,
+                              mask=use, engine_off=engine_off, fuel=fuel)
+    if m.target != "battery":
+        raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
+    return calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
+                             mask=use, limit=limit)

@@ -1,0 +1,383 @@
+"""The powertrain's energy chain as data: from driving power to battery or tank.
+
+An equation file may carry a ``[chain]`` table after its road-load terms. The road-load
+equation gives the driving power P [W] at the wheels (or the powertrain output); the
+chain turns it into what a user pays for::
+
+    [chain]
+    predicts = "battery"              # wheel | powertrain_output | battery | fuel
+    traction_efficiency = 0.90        # η_t (0, 1]; or a table, see below
+    recuperation_efficiency = 0.75    # η_r (0, 1]
+    recuperation_limit_w = 40000      # optional: braking power beyond it goes to the friction brakes [W]
+    aux_power_w = 300                 # constant auxiliary power P_aux,0 ≥ 0 [W]
+    [chain.loads]                     # logged loads: column → gain [W/W] ≥ 0
+    heater_power_w = 1.0
+    [chain.hvac]                      # optional temperature-dependent HVAC power
+    column = "ambient_c"              # ambient temperature column [°C]
+    setpoint_c = 20.0
+    heating_w_per_k = 150.0           # P = h_heat·max(T_set − T, 0) + h_cool·max(T − T_set, 0)
+    cooling_w_per_k = 50.0
+    [chain.traction_efficiency]       # a table instead of a constant (linear interpolation,
+    speed_mps = [0, 10, 30]           #   held constant beyond the ends): axes speed_mps and/or
+    power_w = [0, 20000, 60000]       #   power_w (|P|), values shaped (len(speed), len(power))
+    values = [[0.8, 0.9, 0.9], ...]
+
+Battery (``predicts = "battery"``), battery power positive when discharging::
+
+    P_trac = max(P, 0) / η_t(v, P)
+    P_rec  = η_r(v, P) · max(min(P, 0), −P_lim)                    (≤ 0)
+    P_aux  = P_aux,0 + Σ g_k·L_k + h_heat·max(T_set − T, 0) + h_cool·max(T − T_set, 0)
+    P_bat  = P_trac + P_rec + P_aux       (P_aux accrues at standstill too)
+
+``powertrain_output`` is the same without auxiliaries (η are the transmission's).
+``wheel`` returns P unchanged.
+
+Fuel (``predicts = "fuel"``), a Willans line with engine-off (power-split hybrid)::
+
+    P_eng  = max(P, 0) / η_t + P_aux                      (engine output demand) [W]
+    on     = P > P_off  or  v > v_on                      (engine on)
+    P_fuel = on · (P_idle,fuel + P_eng / η_m)             [W of fuel, lower heating value]
+    fuel rate [L/s] = P_fuel / (LHV · ρ_fuel);  CO₂ [kg/s] = P_fuel / LHV · c_CO₂
+
+with ``idle_fuel_power_w`` (P_idle,fuel ≥ 0), ``marginal_efficiency`` (η_m, (0, 1]),
+``engine_off_below_w`` (P_off), optional ``engine_on_above_mps`` (v_on) and ``fuel``
+(a key of :data:`sumo_drvpw.model.constants.FUELS`). Measured fuel is corrected for
+the hybrid battery's energy change before it is compared (``battery_to_fuel``: fuel
+energy per unit of battery energy, default 1/η_m; see :func:`corrected_fuel_power`).
+
+Sources: the battery form is the usual BEV energy balance (e.g. Fiori, Ahn & Rakha,
+Applied Energy 168 (2016) 257–268, Eq. 8–10; SUMO's Energy model, Kurczveil et al. 2014);
+the Willans line is Rizzoni, Guzzella & Baumann, IEEE/ASME Trans. Mechatronics 4(3)
+(1999) 246–257; the battery correction of hybrid fuel follows SAE J1711 (2010), §4.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.constants import FUELS
+
+PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
+#: keys of the [chain] table, besides sub-tables loads, hvac and efficiency tables
+KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
+        "aux_power_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
+        "engine_off_below_w", "engine_on_above_mps", "fuel", "battery_to_fuel",
+        "std_err", "reading", "provenance", "metrics")
+HVAC_KEYS = ("column", "setpoint_c", "heating_w_per_k", "cooling_w_per_k")
+
+
+@dataclass(eq=False)
+class Table:
+    """A small efficiency table over speed [m/s] and/or |power| [W], linearly interpolated."""
+
+    values: np.ndarray
+    speed_mps: np.ndarray | None = None
+    power_w: np.ndarray | None = None
+
+    def __call__(self, v, p) -> np.ndarray:
+        """Interpolated value at speed ``v`` [m/s] and power ``p`` [W] (|p| is used)."""
+        from scipy.interpolate import RegularGridInterpolator
+
+        axes, pts = [], []
+        if self.speed_mps is not None:
+            axes.append(self.speed_mps)
+            pts.append(np.clip(np.asarray(v, float), self.speed_mps[0], self.speed_mps[-1]))
+        if self.power_w is not None:
+            axes.append(self.power_w)
+            pts.append(np.clip(np.abs(np.asarray(p, float)), self.power_w[0], self.power_w[-1]))
+        f = RegularGridInterpolator(tuple(axes), self.values, method="linear")
+        return f(np.stack(np.broadcast_arrays(*pts), axis=-1))
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Table) and self.to_dict() == other.to_dict()
+
+    def to_dict(self) -> dict:
+        d = {}
+        if self.speed_mps is not None:
+            d["speed_mps"] = self.speed_mps.tolist()
+        if self.power_w is not None:
+            d["power_w"] = self.power_w.tolist()
+        d["values"] = self.values.tolist()
+        return d
+
+
+Efficiency = float | Table
+
+
+def _efficiency(val, key: str, where: str) -> Efficiency:
+    if isinstance(val, dict):
+        unknown = set(val) - {"speed_mps", "power_w", "values"}
+        if unknown:
+            raise UserError(f"{where} [chain.{key}]: unknown key(s) {sorted(unknown)} "
+                            "(known: speed_mps, power_w, values)")
+        axes = {}
+        for ax in ("speed_mps", "power_w"):
+            if ax in val:
+                a = np.asarray(val[ax], float)
+                if a.ndim != 1 or a.size < 2 or np.any(np.diff(a) <= 0):
+                    raise UserError(f"{where} [chain.{key}]: '{ax}' must be ≥ 2 strictly "
+                                    f"increasing numbers, got {val[ax]!r}")
+                axes[ax] = a
+        if not axes or "values" not in val:
+            raise UserError(f"{where} [chain.{key}]: a table needs 'values' and at least one "
+                            "axis of speed_mps, power_w")
+        vals = np.asarray(val["values"], float)
+        shape = tuple(a.size for a in axes.values())
+        if vals.shape != shape:
+            raise UserError(f"{where} [chain.{key}]: 'values' has shape {vals.shape}, the axes "
+                            f"need {shape}")
+        bad = ~((vals > 0) & (vals <= 1))
+        if bad.any():
+            raise UserError(f"{where} [chain.{key}]: efficiencies must be in (0, 1], got "
+                            f"{vals[bad].flat[0]!r}")
+        return Table(vals, axes.get("speed_mps"), axes.get("power_w"))
+    x = _number(val, key, where)
+    if not 0 < x <= 1:
+        raise UserError(f"{where} [chain]: '{key}' must be in (0, 1], got {val!r}")
+    return x
+
+
+def _number(val, key: str, where: str) -> float:
+    if isinstance(val, bool) or not isinstance(val, (int, float)):
+        raise UserError(f"{where} [chain]: '{key}' must be a number, got {val!r}")
+    return float(val)
+
+
+def _nonneg(val, key: str, where: str) -> float:
+    x = _number(val, key, where)
+    if not x >= 0:
+        raise UserError(f"{where} [chain]: '{key}' must be ≥ 0, got {val!r}")
+    return x
+
+
+@dataclass
+class EnergyChain:
+    """Driving power → battery or fuel power; parameters as in the module docstring.
+
+    Units: efficiencies [-], powers [W], gains [W/W] or [W/K], speeds [m/s].
+    """
+
+    predicts: str = "battery"
+    traction_efficiency: Efficiency = 1.0
+    recuperation_efficiency: Efficiency = 1.0
+    recuperation_limit_w: float | None = None
+    aux_power_w: float = 0.0
+    loads: dict[str, float] = field(default_factory=dict)
+    hvac: dict | None = None
+    idle_fuel_power_w: float = 0.0
+    marginal_efficiency: float = 1.0
+    engine_off_below_w: float = 0.0
+    engine_on_above_mps: float | None = None
+    fuel: str = "gasoline"
+    battery_to_fuel: float | None = None
+    std_err: dict = field(default_factory=dict)
+    reading: dict = field(default_factory=dict)
+    provenance: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)
+
+    @property
+    def signals(self) -> set[str]:
+        """Log columns the chain reads (loads and the HVAC temperature)."""
+        s = set(self.loads)
+        if self.hvac:
+            s.add(self.hvac.get("column", "ambient_c"))
+        return s
+
+    @property
+    def fuel_props(self) -> dict:
+        return FUELS[self.fuel]
+
+    # ------------------------------------------------------------------ evaluation
+    def auxiliary(self, n: int, signals: dict | None = None) -> np.ndarray:
+        """Auxiliary power [W] per sample: constant + Σ gain·load + HVAC(T)."""
+        p = np.full(n, self.aux_power_w)
+        sig = signals or {}
+        for col, gain in self.loads.items():
+            p = p + gain * _signal(sig, col, n)
+        if self.hvac:
+            t = _signal(sig, self.hvac.get("column", "ambient_c"), n)
+            ts = float(self.hvac.get("setpoint_c", 20.0))
+            p = p + float(self.hvac.get("heating_w_per_k", 0.0)) * np.maximum(ts - t, 0.0)
+            p = p + float(self.hvac.get("cooling_w_per_k", 0.0)) * np.maximum(t - ts, 0.0)
+        return p
+
+    def evaluate(self, p_drive_w, v_mps, dt_s=None, signals: dict | None = None) -> dict:
+        """Battery or fuel power per sample from driving power (vectorized).
+
+        Parameters
+        ----------
+        p_drive_w : driving power of the road-load equation [W]
+        v_mps : speed [m/s]
+        dt_s : sample durations [s] (scalar or array); when given, energies [J] (and for fuel,
+            litres and kg CO₂) per sample are added as ``*_j`` / ``fuel_l`` / ``co2_kg``
+        signals : column → array for the loads and the HVAC temperature
+
+        Returns
+        -------
+        dict of arrays. Battery / powertrain output: ``traction_w``, ``recuperated_w`` (≤ 0),
+        ``auxiliary_w``, ``friction_brake_w`` (≤ 0, braking power beyond the limit),
+        ``power_w`` (net). Fuel: ``engine_on`` (bool), ``engine_w``, ``power_w`` (fuel power,
+        LHV), ``fuel_lps`` [L/s], ``co2_kgps`` [kg/s]. Wheel: ``power_w``.
+        """
+        p = np.asarray(p_drive_w, float)
+        v = np.broadcast_to(np.asarray(v_mps, float), p.shape)
+        n = p.size
+        if self.predicts == "wheel":
+            out = {"power_w": p.copy()}
+        elif self.predicts == "fuel":
+            out = self._fuel(p, v, n, signals)
+        else:
+            out = self._battery(p, v, n, signals)
+        if dt_s is not None:
+            dt = np.broadcast_to(np.asarray(dt_s, float), p.shape)
+            for k in [k for k in out if k.endswith("_w")]:
+                out[k[:-2] + "_j"] = out[k] * dt
+            if self.predicts == "fuel":
+                out["fuel_l"] = out["fuel_lps"] * dt
+                out["co2_kg"] = out["co2_kgps"] * dt
+        return out
+
+    def _battery(self, p, v, n, signals) -> dict:
+        pos = np.maximum(p, 0.0)
+        neg = np.minimum(p, 0.0)
+        if self.recuperation_limit_w is not None:
+            rec_mech = np.maximum(neg, -self.recuperation_limit_w)
+        else:
+            rec_mech = neg
+        trac = pos / _eval(self.traction_efficiency, v, p)
+        rec = _eval(self.recuperation_efficiency, v, p) * rec_mech
+        aux = (self.auxiliary(n, signals) if self.predicts == "battery" else np.zeros(n))
+        return {"traction_w": trac, "recuperated_w": rec, "auxiliary_w": aux,
+                "friction_brake_w": neg - rec_mech, "power_w": trac + rec + aux}
+
+    def engine_on(self, p, v) -> np.ndarray:
+        """Engine state: on when P > P_off or v > v_on."""
+        on = np.asarray(p, float) > self.engine_off_below_w
+        if self.engine_on_above_mps is not None:
+            on |= np.asarray(v, float) > self.engine_on_above_mps
+        return on
+
+    def _fuel(self, p, v, n, signals) -> dict:
+        on = self.engine_on(p, v)
+        eng = np.maximum(p, 0.0) / _eval(self.traction_efficiency, v, p) + self.auxiliary(n, signals)
+        pf = np.where(on, self.idle_fuel_power_w + eng / self.marginal_efficiency, 0.0)
+        fp = self.fuel_props
+        kgps = pf / fp["lhv_j_per_kg"]
+        return {"engine_on": on, "engine_w": np.where(on, eng, 0.0), "power_w": pf,
+                "fuel_lps": kgps / fp["density_kg_per_l"], "co2_kgps": kgps * fp["co2_kg_per_kg"]}
+
+    @property
+    def battery_fuel_factor(self) -> float:
+        """Fuel energy per unit of battery energy k [-] (default 1/η_m)."""
+        return (self.battery_to_fuel if self.battery_to_fuel is not None
+                else 1.0 / self.marginal_efficiency)
+
+    # ------------------------------------------------------------------ TOML
+    def to_dict(self) -> dict:
+        """The ``[chain]`` table of this chain."""
+        d: dict = {"predicts": self.predicts}
+        if self.predicts == "wheel":
+            return d
+        for k in ("traction_efficiency",) + (("recuperation_efficiency",) if self.predicts != "fuel" else ()):
+            val = getattr(self, k)
+            d[k] = val.to_dict() if isinstance(val, Table) else float(val)
+        if self.predicts != "fuel" and self.recuperation_limit_w is not None:
+            d["recuperation_limit_w"] = float(self.recuperation_limit_w)
+        if self.predicts in ("battery", "fuel"):
+            d["aux_power_w"] = float(self.aux_power_w)
+            if self.loads:
+                d["loads"] = {k: float(g) for k, g in self.loads.items()}
+            if self.hvac:
+                d["hvac"] = dict(self.hvac)
+        if self.predicts == "fuel":
+            d.update(idle_fuel_power_w=float(self.idle_fuel_power_w),
+                     marginal_efficiency=float(self.marginal_efficiency),
+                     engine_off_below_w=float(self.engine_off_below_w), fuel=self.fuel)
+            if self.engine_on_above_mps is not None:
+                d["engine_on_above_mps"] = float(self.engine_on_above_mps)
+            if self.battery_to_fuel is not None:
+                d["battery_to_fuel"] = float(self.battery_to_fuel)
+        for k in ("std_err", "reading", "provenance", "metrics"):
+            if getattr(self, k):
+                d[k] = getattr(self, k)
+        return d
+
+
+def _eval(eff: Efficiency, v, p) -> np.ndarray | float:
+    return eff(v, p) if isinstance(eff, Table) else eff
+
+
+def _signal(sig: dict, col: str, n: int) -> np.ndarray:
+    if col not in sig:
+        raise UserError(f"energy chain needs the log column '{col}', which the data do not have "
+                        f"(available: {', '.join(sorted(sig)) or 'none'})")
+    x = np.asarray(sig[col], float)
+    return np.nan_to_num(x, nan=0.0) if x.shape == (n,) else np.broadcast_to(x, (n,))
+
+
+def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
+    """Build an :class:`EnergyChain` from a parsed ``[chain]`` table; errors name ``where``."""
+    if not isinstance(doc, dict):
+        raise UserError(f"{where}: [chain] must be a table")
+    unknown = set(doc) - set(KEYS)
+    if unknown:
+        raise UserError(f"{where} [chain]: unknown key(s) {sorted(unknown)} (known: {', '.join(KEYS)})")
+    pred = doc.get("predicts", "battery")
+    if pred not in PREDICTS:
+        raise UserError(f"{where} [chain]: predicts must be one of {', '.join(PREDICTS)}, got {pred!r}")
+    kw: dict = {"predicts": pred}
+    for k in ("traction_efficiency", "recuperation_efficiency"):
+        if k in doc:
+            kw[k] = _efficiency(doc[k], k, where)
+    if "marginal_efficiency" in doc:
+        kw["marginal_efficiency"] = _efficiency(doc["marginal_efficiency"], "marginal_efficiency", where)
+        if isinstance(kw["marginal_efficiency"], Table):
+            raise UserError(f"{where} [chain]: marginal_efficiency must be a number")
+    for k in ("recuperation_limit_w", "aux_power_w", "idle_fuel_power_w", "engine_off_below_w",
+              "engine_on_above_mps", "battery_to_fuel"):
+        if k in doc:
+            kw[k] = _nonneg(doc[k], k, where)
+    loads = doc.get("loads", {})
+    if not isinstance(loads, dict):
+        raise UserError(f"{where} [chain.loads]: must be a table column → gain")
+    kw["loads"] = {str(c): _nonneg(g, f"loads.{c}", where) for c, g in loads.items()}
+    if "hvac" in doc:
+        h = doc["hvac"]
+        if not isinstance(h, dict):
+            raise UserError(f"{where} [chain.hvac]: must be a table")
+        bad = set(h) - set(HVAC_KEYS)
+        if bad:
+            raise UserError(f"{where} [chain.hvac]: unknown key(s) {sorted(bad)} (known: {', '.join(HVAC_KEYS)})")
+        hv = {"column": str(h.get("column", "ambient_c")),
+              "setpoint_c": _number(h.get("setpoint_c", 20.0), "hvac.setpoint_c", where)}
+        for k in ("heating_w_per_k", "cooling_w_per_k"):
+            hv[k] = _nonneg(h.get(k, 0.0), f"hvac.{k}", where)
+        kw["hvac"] = hv
+    if "fuel" in doc:
+        if doc["fuel"] not in FUELS:
+            raise UserError(f"{where} [chain]: fuel must be one of {', '.join(FUELS)}, got {doc['fuel']!r}")
+        kw["fuel"] = doc["fuel"]
+    for k in ("std_err", "reading", "provenance", "metrics"):
+        if k in doc:
+            kw[k] = dict(doc[k])
+    return EnergyChain(**kw)
+
+
+def corrected_fuel_power(fuel_power_w, battery_power_w, battery_to_fuel: float) -> np.ndarray:
+    """Fuel power corrected for the hybrid battery's energy change (SAE J1711 §4 idea) [W].
+
+    P_fuel,corr = P_fuel + k·P_bat: battery energy delivered (P_bat > 0, discharging) would
+    otherwise have come from fuel at k fuel joules per battery joule; energy stored
+    (P_bat < 0) was paid for with fuel. Summed over a trip this removes the bias of a
+    state-of-charge swing.
+
+    Parameters
+    ----------
+    fuel_power_w : measured fuel power (mass flow × LHV) [W]
+    battery_power_w : HV battery power, positive when discharging [W]
+    battery_to_fuel : k [-], fuel energy per unit of battery energy (≈ 1/η_marginal)
+    """
+    return np.asarray(fuel_power_w, float) + battery_to_fuel * np.asarray(battery_power_w, float)

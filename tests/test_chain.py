@@ -1,0 +1,259 @@
+"""Energy chain: evaluator by hand calculation, TOML round trip, measured targets, calibration
+recovering planted chains, bounds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fit.chain import calibrate_battery, calibrate_fuel
+from sumo_drvpw.model.chain import EnergyChain, chain_from_dict, corrected_fuel_power
+from sumo_drvpw.model.constants import FUELS
+from sumo_drvpw.model.equations import equation_from_dict, load_equation, save_equation
+
+
+# ------------------------------------------------------------------ evaluator by hand
+
+def test_battery_traction_recuperation_and_standstill_auxiliary_by_hand():
+    ch = EnergyChain(predicts="battery", traction_efficiency=0.8, recuperation_efficiency=0.6,
+                     aux_power_w=400.0, loads={"heater_power_w": 1.0})
+    p = np.array([20_000.0, -10_000.0, 0.0])
+    v = np.array([15.0, 10.0, 0.0])
+    out = ch.evaluate(p, v, dt_s=2.0, signals={"heater_power_w": np.array([0.0, 0.0, 2500.0])})
+    # traction 20 kW / 0.8 = 25 kW; recuperation 0.6 · (−10 kW) = −6 kW; standstill: aux only
+    np.testing.assert_allclose(out["traction_w"], [25_000.0, 0.0, 0.0])
+    np.testing.assert_allclose(out["recuperated_w"], [0.0, -6_000.0, 0.0])
+    np.testing.assert_allclose(out["auxiliary_w"], [400.0, 400.0, 2900.0])
+    np.testing.assert_allclose(out["power_w"], [25_400.0, -5_600.0, 2900.0])
+    np.testing.assert_allclose(out["auxiliary_j"], [800.0, 800.0, 5800.0])
+    # terms sum to the net
+    np.testing.assert_allclose(out["traction_w"] + out["recuperated_w"] + out["auxiliary_w"], out["power_w"])
+
+
+def test_recuperation_limit_sends_the_rest_to_friction_brakes():
+    ch = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.7,
+                     recuperation_limit_w=30_000.0)
+    p = np.array([-10_000.0, -50_000.0])
+    out = ch.evaluate(p, np.array([10.0, 20.0]))
+    # below the limit: 0.7·(−10 kW); beyond: 0.7·(−30 kW) and 20 kW to the friction brakes
+    np.testing.assert_allclose(out["recuperated_w"], [-7_000.0, -21_000.0])
+    np.testing.assert_allclose(out["friction_brake_w"], [0.0, -20_000.0])
+    no_limit = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.7)
+    np.testing.assert_allclose(no_limit.evaluate(p, np.array([10.0, 20.0]))["recuperated_w"],
+                               [-7_000.0, -35_000.0])
+
+
+def test_hvac_term_by_hand():
+    ch = EnergyChain(predicts="battery", hvac={"column": "ambient_c", "setpoint_c": 21.0,
+                                               "heating_w_per_k": 100.0, "cooling_w_per_k": 50.0})
+    out = ch.evaluate(np.zeros(3), np.zeros(3), signals={"ambient_c": np.array([1.0, 21.0, 31.0])})
+    np.testing.assert_allclose(out["auxiliary_w"], [2000.0, 0.0, 500.0])
+
+
+def test_efficiency_table_interpolates_over_speed_and_power():
+    ch = chain_from_dict({"predicts": "battery", "traction_efficiency": {
+        "speed_mps": [0.0, 20.0], "power_w": [0.0, 40_000.0], "values": [[0.6, 0.8], [0.8, 0.9]]}})
+    out = ch.evaluate(np.array([20_000.0, 80_000.0]), np.array([10.0, 50.0]))
+    # bilinear at the centre: mean of the four corners (0.6+0.8+0.8+0.9)/4 = 0.775; beyond
+    # both ends: clamped to the corner 0.9
+    np.testing.assert_allclose(out["traction_w"], [20_000.0 / 0.775, 80_000.0 / 0.9])
+
+
+def test_fuel_willans_line_with_engine_off_by_hand():
+    ch = EnergyChain(predicts="fuel", idle_fuel_power_w=5_000.0, marginal_efficiency=0.4,
+                     engine_off_below_w=3_000.0, engine_on_above_mps=19.0, fuel="gasoline")
+    p = np.array([2_000.0, 20_000.0, 0.0, -5_000.0])
+    v = np.array([10.0, 15.0, 20.0, 5.0])
+    out = ch.evaluate(p, v, dt_s=1.0)
+    # engine off below 3 kW (unless v > 19 m/s); on: 5 kW + P/0.4
+    np.testing.assert_array_equal(out["engine_on"], [False, True, True, False])
+    np.testing.assert_allclose(out["power_w"], [0.0, 55_000.0, 5_000.0, 0.0])
+    g = FUELS["gasoline"]
+    lps = 55_000.0 / g["lhv_j_per_kg"] / g["density_kg_per_l"]
+    np.testing.assert_allclose(out["fuel_lps"][1], lps)
+    np.testing.assert_allclose(out["co2_kgps"][1], 55_000.0 / g["lhv_j_per_kg"] * g["co2_kg_per_kg"])
+    # 1 L of petrol: 0.745 kg → 2.36 kg CO₂ (EPA: 8887 g per US gallon = 2.35 kg/L)
+    assert g["density_kg_per_l"] * g["co2_kg_per_kg"] == pytest.approx(8.887 / 3.785411784, rel=0.01)
+
+
+def test_soc_correction_removes_a_battery_swing():
+    # a trip that drained 1 MJ from the battery burnt 1 MJ·k less fuel: corrected fuel adds it back
+    fuel = np.full(10, 20_000.0)
+    bat = np.full(10, 100_000.0 / 10)  # 10 kW discharge for 10 s... = 100 kJ
+    np.testing.assert_allclose(corrected_fuel_power(fuel, bat, 2.5).sum(), 200_000.0 + 250_000.0)
+
+
+# ------------------------------------------------------------------ as data
+
+def test_chain_round_trips_through_the_equation_file(tmp_path):
+    doc = {"equation": {"name": "ev"}, "terms": {"acc": 1.05, "roll": 0.009, "aero_rho": 0.6},
+           "chain": {"predicts": "battery", "traction_efficiency": {"speed_mps": [0.0, 30.0],
+                                                                    "values": [0.85, 0.9]},
+                     "recuperation_efficiency": 0.7, "recuperation_limit_w": 40_000.0,
+                     "aux_power_w": 350.0, "loads": {"heater_power_w": 1.0, "aircon_power_w": 0.9},
+                     "hvac": {"setpoint_c": 20.0, "heating_w_per_k": 80.0}}}
+    eq = equation_from_dict(doc)
+    save_equation(eq, tmp_path / "ev.toml")
+    back = load_equation(tmp_path / "ev.toml")
+    assert back.chain == eq.chain and back.predicts == "battery"
+    assert back.chain.signals == {"heater_power_w", "aircon_power_w", "ambient_c"}
+    assert load_equation("drvpw_prius3").predicts == "wheel"
+
+
+@pytest.mark.parametrize("chain, msg", [
+    ({"predicts": "tank"}, "predicts must be one of"),
+    ({"traction_efficiency": 1.2}, "'traction_efficiency' must be in (0, 1]"),
+    ({"recuperation_efficiency": 0.0}, "must be in (0, 1]"),
+    ({"aux_power_w": -5.0}, "'aux_power_w' must be ≥ 0"),
+    ({"loads": {"heater_power_w": -1.0}}, "loads.heater_power_w"),
+    ({"fuel": "kerosene"}, "fuel must be one of"),
+    ({"efficiency": 0.9}, "unknown key(s) ['efficiency']"),
+    ({"traction_efficiency": {"speed_mps": [0, 10], "values": [0.9]}}, "shape"),
+])
+def test_bad_chain_is_a_user_error_naming_the_key(chain, msg):
+    with pytest.raises(UserError) as e:
+        equation_from_dict({"equation": {"name": "x"}, "terms": {"acc": 1.0}, "chain": chain}, "f.toml")
+    assert msg in str(e.value) and "f.toml" in str(e.value)
+
+
+def test_missing_load_column_is_a_user_error():
+    ch = EnergyChain(loads={"heater_power_w": 1.0})
+    with pytest.raises(UserError, match="heater_power_w"):
+        ch.evaluate(np.zeros(2), np.zeros(2), signals={})
+
+
+# ------------------------------------------------------------------ calibration
+
+def _drive(n=20_000, seed=1):
+    """A random but physical drive: speed, road-load driving power, loads, temperature."""
+    rng = np.random.default_rng(seed)
+    v = np.clip(np.cumsum(rng.normal(0, 0.3, n)) % 30.0, 0.0, None)
+    a = rng.normal(0, 0.8, n)
+    p = 1500.0 * v * a + 180.0 * v + 0.35 * v ** 3
+    p[rng.random(n) < 0.08] = 0.0  # standstill samples
+    heater = np.where(rng.random(n) < 0.5, rng.uniform(0, 4000, n), 0.0)
+    temp = rng.uniform(-5, 30, n)
+    dt = rng.uniform(0.05, 0.15, n)
+    return rng, v, p, heater, temp, dt
+
+
+def test_calibration_recovers_a_planted_battery_chain_within_2_percent():
+    rng, v, p, heater, temp, dt = _drive()
+    plant = EnergyChain(predicts="battery", traction_efficiency=0.88, recuperation_efficiency=0.72,
+                        recuperation_limit_w=None, aux_power_w=450.0, loads={"heater_power_w": 0.95},
+                        hvac={"column": "ambient_c", "setpoint_c": 20.0, "heating_w_per_k": 30.0,
+                              "cooling_w_per_k": 40.0})
+    sig = {"heater_power_w": heater, "ambient_c": temp}
+    meas = plant.evaluate(p, v, signals=sig)["power_w"] + rng.normal(0, 300.0, p.size)
+    fit = calibrate_battery(p, v, meas, dt, sig, loads=["heater_power_w"],
+                            hvac={"column": "ambient_c", "setpoint_c": 20.0}, limit=None)
+    c = fit.chain
+    assert c.traction_efficiency == pytest.approx(0.88, rel=0.02)
+    assert c.recuperation_efficiency == pytest.approx(0.72, rel=0.02)
+    assert c.aux_power_w == pytest.approx(450.0, rel=0.02)
+    assert c.loads["heater_power_w"] == pytest.approx(0.95, rel=0.02)
+    assert c.hvac["heating_w_per_k"] == pytest.approx(30.0, rel=0.02)
+    assert c.hvac["cooling_w_per_k"] == pytest.approx(40.0, rel=0.02)
+    # uncertainties reported, and the truth within 4 standard errors
+    for k, truth in (("traction_efficiency", 0.88), ("aux_power_w", 450.0)):
+        se = fit.parameters[k]["std_err"]
+        assert se is not None and abs(fit.parameters[k]["value"] - truth) < 4 * se + 1e-9
+    assert "reading" in fit.parameters["traction_efficiency"]
+
+
+def test_calibration_finds_a_planted_recuperation_limit():
+    rng, v, p, heater, temp, dt = _drive(seed=2)
+    brake = -p[p < 0]
+    lim = float(np.quantile(brake, 0.9))  # a grid point of the profile
+    plant = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.7,
+                        recuperation_limit_w=lim, aux_power_w=300.0)
+    meas = plant.evaluate(p, v)["power_w"] + rng.normal(0, 200.0, p.size)
+    fit = calibrate_battery(p, v, meas, dt)
+    assert fit.chain.recuperation_limit_w == pytest.approx(lim, rel=1e-9)
+    assert fit.chain.recuperation_efficiency == pytest.approx(0.7, rel=0.02)
+    assert fit.chain.traction_efficiency == pytest.approx(0.9, rel=0.02)
+    # without a limit in the data, the profile keeps none
+    plant.recuperation_limit_w = None
+    meas = plant.evaluate(p, v)["power_w"] + rng.normal(0, 200.0, p.size)
+    assert calibrate_battery(p, v, meas, dt).chain.recuperation_limit_w is None
+
+
+def test_calibration_recovers_a_planted_fuel_chain_with_soc_swings():
+    rng, v, p, heater, temp, dt = _drive(seed=3)
+    plant = EnergyChain(predicts="fuel", idle_fuel_power_w=4_000.0, marginal_efficiency=0.36,
+                        engine_off_below_w=5_000.0)
+    on = plant.engine_on(p, v)
+    # with the engine on, the battery assists (> 0) or is charged (< 0) by up to 30 % of the
+    # demand: the engine delivers P − P_bat, so fuel = P_idle + (P − P_bat)/η_m (the chain's form)
+    assist = np.where(on, rng.uniform(-0.3, 0.3, p.size) * np.maximum(p, 0), 0.0)
+    fuel = np.where(on, 4_000.0 + (np.maximum(p, 0) - assist) / 0.36, 0.0)
+    fuel = fuel + rng.normal(0, 200.0, p.size) * on
+    fit = calibrate_fuel(p, v, fuel, dt, battery_w=assist)
+    assert fit.chain.marginal_efficiency == pytest.approx(0.36, rel=0.02)
+    assert fit.chain.idle_fuel_power_w == pytest.approx(4_000.0, rel=0.02)
+    assert fit.chain.engine_off_below_w == 5_000.0
+    # a trip that only charges the battery: without the correction η_m comes out biased
+    charge = np.where(on, -0.2 * np.maximum(p, 0), 0.0)
+    fuel_c = np.where(on, 4_000.0 + (np.maximum(p, 0) - charge) / 0.36, 0.0)
+    corrected = calibrate_fuel(p, v, fuel_c, dt, battery_w=charge).chain.marginal_efficiency
+    naive = calibrate_fuel(p, v, fuel_c, dt, battery_w=None).chain.marginal_efficiency
+    assert corrected == pytest.approx(0.36, rel=0.01) and naive == pytest.approx(0.30, rel=0.01)
+
+
+@settings(max_examples=25, deadline=None)
+@given(eta_t=st.floats(0.3, 1.0), eta_r=st.floats(0.0, 1.0), aux=st.floats(-2000.0, 2000.0),
+       seed=st.integers(0, 10_000))
+def test_constrained_parameters_stay_in_bounds(eta_t, eta_r, aux, seed):
+    """Whatever the data (even unphysical: η_r = 0, negative auxiliary, noise), the fit stays
+    in (0, 1] for efficiencies and ≥ 0 for powers and gains."""
+    rng = np.random.default_rng(seed)
+    n = 2000
+    v = rng.uniform(0, 30, n)
+    p = rng.normal(0, 20_000, n)
+    heater = rng.uniform(0, 3000, n)
+    meas = (np.maximum(p, 0) / eta_t + eta_r * np.minimum(p, 0) + aux - 0.5 * heater
+            + rng.normal(0, 5000, n))
+    fit = calibrate_battery(p, v, meas, np.full(n, 0.1), {"heater_power_w": heater},
+                            loads=["heater_power_w"])
+    c = fit.chain
+    assert 0 < c.traction_efficiency <= 1 and 0 < c.recuperation_efficiency <= 1
+    assert c.aux_power_w >= 0 and c.loads["heater_power_w"] >= 0
+    assert c.recuperation_limit_w is None or c.recuperation_limit_w >= 0
+    # the fitted chain writes and reads back as valid data
+    chain_from_dict(c.to_dict())
+
+
+# ------------------------------------------------------------------ measured targets
+
+def _log(tmp_path, **cols):
+    from sumo_drvpw.data.measured import load_measured
+
+    n = 50
+    df = pd.DataFrame({"time_s": np.arange(n) * 0.5, "speed_mps": np.linspace(0, 10, n),
+                       "mass_kg": 1500.0, **{k: np.full(n, v) for k, v in cols.items()}})
+    f = tmp_path / "log.csv"
+    df.to_csv(f, index=False)
+    return lambda target: load_measured([f], None, target=target)
+
+
+def test_measured_battery_and_fuel_targets(tmp_path):
+    load = _log(tmp_path, battery_voltage_v=350.0, battery_current_a=20.0, fuel_rate_gps=1.5)
+    m = load("battery")
+    np.testing.assert_allclose(m.power_w, 7000.0)
+    assert m.target == "battery"
+    f = load("fuel")
+    np.testing.assert_allclose(f.power_w, 1.5e-3 * FUELS["gasoline"]["lhv_j_per_kg"])
+    np.testing.assert_allclose(f.battery_w, 7000.0)
+    with pytest.raises(UserError, match="target must be one of"):
+        load("tank")
+
+
+def test_fuel_target_from_volume_flow_and_missing_columns(tmp_path):
+    load = _log(tmp_path, fuel_flow_rate_hour_lph=3.6)
+    g = FUELS["gasoline"]
+    np.testing.assert_allclose(load("fuel").power_w, 3.6 * g["density_kg_per_l"] / 3600 * g["lhv_j_per_kg"])
+    with pytest.raises(UserError, match="battery_voltage_v"):
+        load("battery")
