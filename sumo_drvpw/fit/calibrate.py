@@ -141,6 +141,9 @@ class CalibrationResult:
     results: object = field(default=None, repr=False)
     #: candidates dropped before selection: [{"term", "reason", "spanned_by"}]
     dropped: list = field(default_factory=list)
+    #: range of the samples used [m/s], [m/s²]: the equation's validity range
+    speed_range_mps: tuple[float, float] | None = None
+    accel_range_mps2: tuple[float, float] | None = None
 
     def to_equation(self, name: str, provenance: dict | None = None) -> Equation:
         """The calibrated equation, ready for ``compare`` and the SUMO loop."""
@@ -155,7 +158,9 @@ class CalibrationResult:
             metrics["beta_mass_free"] = coefficients_to_beta(self.params, self.reference_mass_kg)
         return Equation(name=name, terms=dict(self.params), std_err=dict(self.std_err),
                         p_values=dict(self.p_values), provenance=prov, metrics=metrics,
-                        description="DrvPw calibrated by sumo-drvpw stepwise regression")
+                        description="DrvPw calibrated by sumo-drvpw stepwise regression",
+                        speed_range_mps=self.speed_range_mps,
+                        accel_range_mps2=self.accel_range_mps2)
 
     def summary(self) -> str:
         lines = [f"n = {self.n}, R² = {self.r2:.4f}", f"{'term':<12}{'coefficient':>14}{'std err':>12}{'p':>10}"]
@@ -257,7 +262,14 @@ def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = No
         std_err=dict(zip(sel, map(float, res.bse))), p_values=dict(zip(sel, map(float, res.pvalues))),
         r2=r2, r2_uncentered=float(res.rsquared), n=n_use, counts=counts, trace=trace,
         settings={"candidates": list(candidates), "p_enter": p_enter, "p_remove": p_remove},
-        reference_mass_kg=reference_mass_kg, results=res, dropped=dropped)
+        reference_mass_kg=reference_mass_kg, results=res, dropped=dropped,
+        speed_range_mps=_range(x.v, use), accel_range_mps2=_range(x.a, use))
+
+
+def _range(values, use) -> tuple[float, float]:
+    """(min, max) of ``values`` over the used samples."""
+    v = np.asarray(values, float)[use]
+    return float(np.nanmin(v)), float(np.nanmax(v))
 
 
 def resolve_candidates(spec: str) -> tuple[str, ...]:
