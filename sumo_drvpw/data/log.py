@@ -145,7 +145,7 @@ def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
 
             table = pq.read_table(p)
             for k, v in (table.schema.metadata or {}).items():
-                if k.startswith(b"sumo_drvpw"):
+                if k.startswith((b"sumo_drvpw", b"drive_log.")):  # drive_log.roles: spec
                     meta[k.decode()] = v.decode()
             df = table.to_pandas()
         else:
