@@ -409,6 +409,9 @@ class Comparison:
         for name, r in self.results.items():
             d = dict(r.metrics)
             d["terms"] = dict(r.equation.terms)
+            if r.equation.chain is not None:
+                d["predicts"] = r.equation.predicts
+                d["chain"] = r.equation.chain.to_dict()
             if r.equation.std_err:
                 d["std_err"] = dict(r.equation.std_err)
             if r.equation.mass_kg is not None:
@@ -463,8 +466,21 @@ def _dt_array(dt_s, n: int) -> np.ndarray:
     return dt
 
 
+def _chain_prediction(eq: Equation, p_drive, inputs: Inputs, dt, target: str, battery_w):
+    """An equation's battery or fuel power [W] through its energy chain (model/chain.py)."""
+    ch = eq.chain
+    if ch is None or ch.predicts != target:
+        raise UserError(f"compare: equation '{eq.name}' ({eq.path or 'built in'}) has no energy "
+                        f"chain predicting '{target}' (it predicts '{eq.predicts}')")
+    pred = ch.evaluate(p_drive, inputs.v, signals=inputs.signals)["power_w"]
+    if target == "fuel" and battery_w is not None:
+        pred = pred - ch.battery_fuel_factor * np.asarray(battery_w, float)
+    return pred
+
+
 def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
-            reference: str | None = None, trip=None) -> Comparison:
+            reference: str | None = None, trip=None, target: str = "wheel",
+            battery_w=None) -> Comparison:
     """Evaluate equations against measured driving power (paper Table 3, Fig. 4–10).
 
     Parameters
@@ -479,6 +495,13 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
         altogether — its own power of a missing term is zero and carries no signal.
     trip : trip id per sample (default: ``inputs.trip``); when known, the report gives
         energy per trip (:func:`trip_energy`, :func:`trip_net_energy`)
+    target : ``wheel`` (default): the prediction is the driving power; ``battery`` or
+        ``fuel``: each equation's energy chain (``[chain]``, model/chain.py) turns its
+        driving power into battery or fuel power, and ``meas_w`` is that measured power
+        (the category powers stay at the wheel)
+    battery_w : fuel target only: the hybrid battery's measured V·I [W]; each chain's
+        prediction is then P_fuel − k·P_bat (its battery-to-fuel factor k), so a
+        state-of-charge swing does not count as a fuel error
 
     Returns
     -------
@@ -540,6 +563,8 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
         # drop empty "other"; keep the four physical categories always (Fig. 10 axes)
         cats = {c: p for c, p in cats.items() if c in CATEGORIES or np.any(p != 0.0)}
         pred = np.sum(list(cats.values()), axis=0) if cats else np.zeros(n)
+        if target != "wheel":
+            pred = _chain_prediction(eq, pred, inputs, dt, target, battery_w)
         err = pred - meas
         ok = np.isfinite(err)
         allok = bool(ok.all())
