@@ -1,0 +1,157 @@
+"""Engine flags and the streamed paths of `calibrate` and `compare` (issue #14).
+
+``--engine local`` (default) streams the logs batch by batch of whole trips in bounded
+memory; ``--engine dask`` runs the same reduction on a Dask cluster (``--scheduler
+ADDRESS``, else a local cluster of ``--workers N`` processes); ``--engine memory`` reads
+everything at once (the reference path the streamed results are tested against).
+"""
+
+from __future__ import annotations
+
+import sys
+from functools import partial
+from pathlib import Path
+
+from sumo_drvpw.errors import UserError
+
+ENGINES = ("local", "dask", "memory")
+
+
+def add_engine_arguments(p) -> None:
+    """--engine, --scheduler, --workers."""
+    g = p.add_argument_group("scale (bounded memory, Dask)")
+    g.add_argument("--engine", choices=ENGINES, default="local",
+                   help="local: stream the logs trip by trip in bounded memory (default); dask: the "
+                        "same on a Dask cluster (pip install 'sumo-drvpw[dask]'); memory: read all at once")
+    g.add_argument("--scheduler", metavar="ADDRESS",
+                   help="Dask scheduler of an existing cluster, e.g. tcp://host:8786 "
+                        "(--engine dask; default: a local cluster)")
+    g.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes of the local Dask cluster (default: one per CPU)")
+
+
+def check_engine_arguments(args) -> None:
+    """The flags go together: --scheduler and --workers only with --engine dask."""
+    engine = getattr(args, "engine", "local")
+    if engine != "dask":
+        for flag in ("scheduler", "workers"):
+            if getattr(args, flag, None) is not None:
+                raise UserError(f"--{flag} goes with --engine dask (got --engine {engine})")
+    workers = getattr(args, "workers", None)
+    if workers is not None and workers < 1:
+        raise UserError(f"--workers must be at least 1, got {workers}")
+    if engine == "dask":
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            raise UserError("--engine dask needs Dask: pip install 'sumo-drvpw[dask]'") from None
+
+
+def _run(args, make, vehicle):
+    from sumo_drvpw.fit.engine import run
+
+    return run(args.logs, make, vehicle, engine=args.engine, scheduler=args.scheduler,
+               workers=args.workers)
+
+
+def _context(st, vehicle, n_used: int) -> dict:
+    """What :meth:`sumo_drvpw.data.measured.Measured.context` reports, from streamed sums."""
+    counts = dict(st.counts)
+    counts["files"] = len(st.files)
+    return {"logs": st.files, "vehicle": vehicle.name if vehicle else None,
+            "power_source": st.source, "samples": st.rows, "usable": counts.get("usable", n_used),
+            "counts": counts}
+
+
+def calibrate_streamed(args, cands, out: Path, inputs) -> int:
+    """`calibrate` (driving power) through the streaming engines; same outputs."""
+    from sumo_drvpw.cli import output_set
+    from sumo_drvpw.data.measured import resolve_equations
+    from sumo_drvpw.fit.stream import CalibrationStats, CompareStats, calibrate_from_stats
+    from sumo_drvpw.model.equations import save_equation
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    check_engine_arguments(args)
+    veh = load_vehicle(args.vehicle) if args.vehicle else None
+    st, info = _run(args, partial(CalibrationStats, tuple(cands)), veh)
+    if st.mass_n == 0:
+        raise UserError(f"{', '.join(map(str, args.logs))}: no usable samples "
+                        f"(all excluded: {st.counts})")
+    res = calibrate_from_stats(st, args.p_enter, args.p_remove)
+    eq = res.to_equation(args.name or out.stem, provenance={
+        "logs": st.files, "vehicle": veh.path if veh else None, "power_source": st.source,
+        "candidates_spec": args.candidates})
+    print(res.summary())
+    lines = [info.line()]
+    if args.report:
+        specs = args.compare_with or (["vsp_ldv1999"] + (["vsp_spec"] if veh is not None and veh.body else []))
+        eqs = [eq] + [e for e in resolve_equations(specs, veh) if e.name != eq.name]
+        with output_set(args, args.report, inputs) as tmp:
+            cs, info2 = _run(args, partial(CompareStats, eqs, eq.name), veh)
+            ctx = _context(st, veh, res.n)
+            ctx["calibration"] = {
+                "equation": eq.name, "terms": eq.terms, "std_err": eq.std_err,
+                "p_values": eq.p_values, "r2": res.r2, "n": res.n, "selection_trace": res.trace,
+                "settings": res.settings, "beta_mass_free": eq.metrics.get("beta_mass_free"),
+                "reference_mass_kg": res.reference_mass_kg,
+                "dropped_candidates": [f"{d['term']} dropped: {d['reason']}" for d in res.dropped]}
+            from sumo_drvpw.report.comparison import write_comparison_report
+
+            write_comparison_report(cs.comparison(), tmp,
+                                    f"Calibration of {eq.name} against classic VSP", ctx)
+            save_equation(eq, out)
+        lines.append(info2.line() + " (report pass)")
+        print(f"wrote {Path(args.report) / 'report.md'}")
+    else:
+        save_equation(eq, out)
+    print(f"wrote {out}")
+    for ln in lines:
+        print(ln, file=sys.stderr)
+    return 0
+
+
+def compare_streamed(args, tmp: Path, title: str):
+    """`compare` of driving power through the streaming engines: writes the report into
+    ``tmp`` and returns the comparison (whose ``to_json`` covers every sample)."""
+    from sumo_drvpw.data.measured import resolve_equations
+    from sumo_drvpw.fit.stream import CompareStats
+    from sumo_drvpw.model.vehicles import load_vehicle
+    from sumo_drvpw.report.comparison import write_comparison_report
+
+    check_engine_arguments(args)
+    veh = load_vehicle(args.vehicle) if args.vehicle else None
+    eqs = resolve_equations(args.equation, veh)
+    cs, info = _run(args, partial(CompareStats, eqs, None), veh)
+    comp = cs.comparison()
+    write_comparison_report(comp, tmp, title, _context(cs, veh, cs.n))
+    print(info.line(), file=sys.stderr)
+    return comp
+
+
+def compare_main(args) -> int | None:
+    """`compare` through the streaming engines when it compares driving power (the
+    default target); None when it compares battery or fuel power (read in memory)."""
+    from sumo_drvpw.cli import output_set
+    from sumo_drvpw.cli.compare import _f
+
+    if getattr(args, "engine", "memory") == "memory":
+        return None
+    target = getattr(args, "target", None)
+    if target is None:
+        from sumo_drvpw.model.equations import load_equation
+
+        pred = {getattr(load_equation(s), "predicts", "wheel") for s in args.equation if s != "vsp_spec"}
+        target = pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
+    if target != "wheel":
+        if args.engine == "dask":
+            raise UserError(f"--engine dask compares driving power only (this is --target {target}); "
+                            "use --engine memory")
+        return None
+    with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
+        comp = compare_streamed(args, tmp, "Equations against measured driving power")
+    doc = comp.to_json(trips=False)
+    for name, r in doc["equations"].items():
+        print(f"{name:<24} n={r['n']:<8} R²={_f(r['r2'])}  R²<50kW={_f(r['r2_light'])}  "
+              f"R²≥50kW={_f(r['r2_heavy'])}  RMSE={r['rmse_w'] / 1000:.2f} kW  bias={r['bias_w'] / 1000:+.2f} kW")
+    print(f"wrote {Path(args.out) / 'report.md'}")
+    return 0

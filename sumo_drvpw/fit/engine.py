@@ -1,0 +1,149 @@
+"""Engines that reduce drive logs of any size to mergeable statistics: local or Dask.
+
+Both engines run the same function on each :class:`~sumo_drvpw.data.stream.Part` (whole
+trips of one file): read it batch by batch of whole trips, derive the model inputs and
+measured power the reader's way, and add each batch to an accumulator
+(:class:`~sumo_drvpw.fit.stream.CalibrationStats` or
+:class:`~sumo_drvpw.fit.stream.CompareStats`). The accumulators of the Parts are merged in
+Part order, so the local and the Dask engine add the same numbers in the same order.
+
+* ``local``: one process, Parts one after the other; memory is one batch (about
+  ``BATCH_ROWS`` rows plus the longest trip) plus the accumulator, whatever the rows.
+* ``dask``: one task per Part on a Dask cluster: ``scheduler`` = the address of an
+  existing one (``tcp://host:8786``; a dask-jobqueue or Kubernetes cluster prints it),
+  else a ``LocalCluster`` of ``workers`` processes. Dask is an optional extra:
+  ``pip install 'sumo-drvpw[dask]'``.
+
+Progress goes to stderr (tqdm: rows or Parts done, rate, ETA) when it is a terminal.
+"""
+
+from __future__ import annotations
+
+import resource
+import sys
+import time
+from dataclasses import dataclass
+from functools import partial
+
+from sumo_drvpw.data.stream import BATCH_ROWS, Part, iter_measured, plan
+from sumo_drvpw.errors import UserError
+
+ENGINES = ("local", "dask")
+
+
+@dataclass
+class RunInfo:
+    """What a run cost: rows read, wall time [s], peak RSS of this process [MB], Parts."""
+
+    rows: int
+    seconds: float
+    peak_rss_mb: float
+    parts: int
+    engine: str
+
+    def line(self) -> str:
+        """One-line resource summary for the end of a command."""
+        rate = self.rows / self.seconds if self.seconds > 0 else float("nan")
+        return (f"{self.engine} engine: {self.rows:,} rows from {self.parts} part(s) in "
+                f"{self.seconds:.1f} s ({rate:,.0f} rows/s), peak RSS {self.peak_rss_mb:,.0f} MB")
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process so far [MB] (Linux: ru_maxrss in KiB)."""
+    r = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return r / (1024.0 * 1024.0) if sys.platform == "darwin" else r / 1024.0
+
+
+def part_stats(part: Part, make, vehicle=None, options=None, rows: int = BATCH_ROWS, tick=None):
+    """The statistics of one Part: ``make()`` (an empty accumulator) + every batch."""
+    st = make()
+    for m in iter_measured(part, vehicle, options, rows):
+        st.add(m)
+        if tick is not None:
+            tick(len(m.power_w))
+    return st
+
+
+def _progress(total, unit):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit=unit, unit_scale=True, disable=None, file=sys.stderr,
+                dynamic_ncols=True, leave=False)
+
+
+def run(paths, make, vehicle=None, options=None, engine: str = "local",
+        scheduler: str | None = None, workers: int | None = None, rows: int = BATCH_ROWS,
+        parts: list[Part] | None = None):
+    """Reduce the logs ``paths`` to one accumulator.
+
+    Parameters
+    ----------
+    paths : drive log files or folders
+    make : picklable callable returning an empty accumulator with ``add(measured)`` and
+        ``merge(other)`` (e.g. ``functools.partial(CalibrationStats, names)``)
+    vehicle, options : as for :func:`sumo_drvpw.data.measured.load_measured`
+    engine : ``local`` or ``dask``
+    scheduler : Dask scheduler address (``dask`` only); None: a local cluster
+    workers : processes of the local Dask cluster (default: CPU count)
+    rows : rows per chunk read [-]
+    parts : the Parts (default :func:`sumo_drvpw.data.stream.plan` of ``paths``)
+
+    Returns (accumulator, :class:`RunInfo`).
+    """
+    if engine not in ENGINES:
+        raise UserError(f"engine '{engine}' unknown; choose {' or '.join(ENGINES)}")
+    if engine == "local" and scheduler is not None:
+        raise UserError("a scheduler address needs the dask engine")
+    if workers is not None and workers < 1:
+        raise UserError(f"workers must be at least 1, got {workers}")
+    t0 = time.perf_counter()
+    parts = plan(paths) if parts is None else parts
+    total = sum(p.rows for p in parts) or None
+    if engine == "local":
+        acc = None
+        bar = _progress(total, "rows")
+        try:
+            for p in parts:
+                st = part_stats(p, make, vehicle, options, rows, tick=bar.update)
+                acc = st if acc is None else acc.merge(st)
+        finally:
+            bar.close()
+    else:
+        acc = _run_dask(parts, make, vehicle, options, scheduler, workers, rows)
+    nrows = int(getattr(acc, "rows", 0))
+    return acc, RunInfo(nrows, time.perf_counter() - t0, peak_rss_mb(), len(parts), engine)
+
+
+def _run_dask(parts, make, vehicle, options, scheduler, workers, rows):
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise UserError("the dask engine needs Dask: pip install 'sumo-drvpw[dask]'") from None
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as e:
+            raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
+    try:
+        fn = partial(part_stats, make=make, vehicle=vehicle, options=options, rows=rows)
+        futures = client.map(fn, parts, pure=False)
+        bar = _progress(len(parts), "part")
+        acc = None
+        try:
+            for f in futures:  # in Part order: the same sums, in the same order, as local
+                st = f.result()
+                f.release()
+                acc = st if acc is None else acc.merge(st)
+                bar.update(1)
+        finally:
+            bar.close()
+        return acc
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
