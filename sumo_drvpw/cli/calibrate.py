@@ -25,9 +25,25 @@ def configure(p):
     p.add_argument("--p-enter", type=float, default=0.10, help="p-value to enter (default 0.10)")
     p.add_argument("--p-remove", type=float, default=0.15, help="p-value to remove (default 0.15)")
     add_engine_arguments(p)
+    g = p.add_argument_group("energy chain (battery or fuel; docs/energy-chain.md)")
+    g.add_argument("--target", choices=("wheel", "battery", "fuel"), default="wheel",
+                   help="what to calibrate on: driving power (default), battery V·I, or fuel flow; "
+                        "battery/fuel fit the energy chain on top of the road-load equation")
+    g.add_argument("--equation", metavar="NAME|FILE",
+                   help="road-load equation under the chain (default: calibrate one stepwise on the "
+                        "log's measured driving power first)")
+    g.add_argument("--load", action="append", default=[], metavar="COLUMN",
+                   help="logged auxiliary load in W (e.g. heater_power_w); repeat")
+    g.add_argument("--hvac", metavar="COLUMN[:SETPOINT_C]",
+                   help="fit heating and cooling power per K of COLUMN (ambient °C) from the set-point "
+                        "(default 20)")
 
 
 def main(args) -> int:
+    if getattr(args, "target", "wheel") != "wheel":
+        return main_chain(args)
+    if getattr(args, "equation", None) or getattr(args, "load", None) or getattr(args, "hvac", None):
+        raise UserError("--equation, --load and --hvac go with --target battery or fuel")
     from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
     from sumo_drvpw.model.equations import save_equation
     from sumo_drvpw.data.measured import load_measured
@@ -96,3 +112,66 @@ def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
                                                  for d in res.dropped]}
     write_comparison_report(comp, out_dir, f"Calibration of {eq.name} against classic VSP", ctx)
     return comp.to_json()
+
+
+def main_chain(args) -> int:
+    """``calibrate --target battery|fuel``: the energy chain on top of a road-load equation."""
+    from sumo_drvpw.data.measured import load_measured, resolve_equations
+    from sumo_drvpw.fileio import check_output_path
+    from sumo_drvpw.fit.chain import calibrate_on
+    from sumo_drvpw.fit.compare import compare
+    from sumo_drvpw.model.equations import save_equation
+
+    out = Path(args.out)
+    if out.suffix != ".toml":
+        raise UserError(f"--out {out}: an equation file ends in .toml")
+    inputs = existing_paths(args.logs, args.vehicle, args.equation)
+    check_output_path(out, inputs, "file")
+    hvac = None
+    if args.hvac:
+        col, _, sp = args.hvac.partition(":")
+        try:
+            hvac = {"column": col, "setpoint_c": float(sp) if sp else 20.0}
+        except ValueError:
+            raise UserError(f"--hvac {args.hvac}: the set-point after ':' must be a number (°C)") from None
+    m = load_measured(args.logs, args.vehicle, target=args.target)
+    if args.equation:
+        eq = resolve_equations([args.equation], m.vehicle)[0]
+        road = f"road-load equation {eq.name} ({eq.path or 'built in'})"
+    else:
+        from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
+
+        mw = load_measured(args.logs, args.vehicle)
+        res = calibrate(mw.inputs, mw.power_w, resolve_candidates(args.candidates), mask=mw.usable,
+                        p_enter=args.p_enter, p_remove=args.p_remove, counts=mw.counts,
+                        reference_mass_kg=float(mw.inputs.mass[mw.usable].mean()))
+        eq = res.to_equation(args.name or out.stem, provenance={
+            "logs": mw.log.files, "power_source": mw.source, "candidates_spec": args.candidates})
+        print(res.summary())
+        road = f"road-load equation calibrated stepwise on {mw.source}"
+    fit = calibrate_on(m, eq, loads=args.load, hvac=hvac)
+    eq.name = args.name or out.stem
+    eq.chain = fit.chain
+    eq.chain.provenance = {"logs": m.log.files, "target": m.source, "road_load": road,
+                           "vehicle": m.vehicle.path if m.vehicle else None}
+    eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
+    print(fit.summary())
+    if args.report:
+        with output_set(args, args.report, inputs) as tmp:
+            from sumo_drvpw.report.comparison import write_comparison_report
+
+            u = m.usable
+            comp = compare(m.power_w[u], m.inputs.take(u), [eq], dt_s=m.log.df["dt_s"].to_numpy()[u],
+                           target=args.target,
+                           battery_w=None if m.battery_w is None else m.battery_w[u])
+            ctx = m.context()
+            ctx["calibration"] = {"equation": eq.name, "chain": fit.parameters, "r2": fit.r2,
+                                  "n": fit.n, "road_load": road}
+            write_comparison_report(comp, tmp, f"Energy chain of {eq.name} against measured "
+                                    f"{args.target} power", ctx)
+            save_equation(eq, out)
+        print(f"wrote {Path(args.report) / 'report.md'}")
+    else:
+        save_equation(eq, out)
+    print(f"wrote {out}")
+    return 0

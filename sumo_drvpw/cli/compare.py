@@ -14,6 +14,9 @@ def configure(p):
     p.add_argument("--equation", action="append", required=True, metavar="NAME|FILE",
                    help="equation to compare (repeat); 'vsp_spec' = VSP from the vehicle's specs")
     p.add_argument("--out", required=True, metavar="DIR", help="report folder (written whole, or not at all)")
+    p.add_argument("--target", choices=("wheel", "battery", "fuel"),
+                   help="compare driving power (wheel), battery V·I or fuel flow (default: what the "
+                        "equations' energy chains predict when they all predict the same, else wheel)")
     add_force(p)
     add_engine_arguments(p)
 
@@ -27,11 +30,19 @@ def main(args) -> int:
     if compare_main(args) is not None:  # driving power, streamed in bounded memory (issue #14)
         return 0
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
-        m = load_measured(args.logs, args.vehicle)
+        target = getattr(args, "target", None)
+        if target is None:
+            from sumo_drvpw.model.equations import load_equation
+
+            pred = {load_equation(s).predicts for s in args.equation if s != "vsp_spec"}
+            target = pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
+        m = load_measured(args.logs, args.vehicle, target=target)
         eqs = resolve_equations(args.equation, m.vehicle)
         u = m.usable
-        comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u])
-        write_comparison_report(comp, tmp, "Equations against measured driving power", m.context())
+        comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],
+                       target=target, battery_w=None if m.battery_w is None else m.battery_w[u])
+        what = {"wheel": "driving", "battery": "battery", "fuel": "fuel"}[target]
+        write_comparison_report(comp, tmp, f"Equations against measured {what} power", m.context())
     doc = comp.to_json()
     for name, r in doc["equations"].items():
         print(f"{name:<24} n={r['n']:<8} R²={_f(r['r2'])}  R²<50kW={_f(r['r2_light'])}  "
