@@ -125,7 +125,7 @@ def test_block_validation_single_trip_and_report_files(tmp_path):
     assert set(doc["baseline"]["metrics"]) == {"rmse_w", "mae_w", "r2", "r2_light", "r2_heavy", "bias_w"}
     assert doc["validation"].startswith("5-fold cross-validation over contiguous")
     assert doc["findings"] and doc["findings"][0]["signals"] == ["ac_power_w"]
-    assert set(doc["findings"][0]) == {"effect", "signals", "term", "coefficient", "std_err", "p_value",
+    assert set(doc["findings"][0]) == {"effect", "role", "signals", "term", "coefficient", "std_err", "p_value",
                                       "energy_share", "metrics_before", "metrics_after"}
     # the final equation file round-trips and predicts with the saved coefficients
     eq = load_equation(out / "final_equation.toml")
@@ -209,3 +209,26 @@ def test_duplicate_candidates_dropped_first_in_order_wins(tmp_path):
     assert "[ac_power_kw]" in dropped and "ac_power_w" in dropped["[ac_power_kw]"]
     assert "[ac_power_w]" not in dropped
     assert [f["term"] for f in res.report["findings"]] == ["[ac_power_w]"]
+
+
+def test_response_column_never_a_finding_by_default(tmp_path):
+    """A pedal that follows the demand (role response, inferred from its name) is not
+    offered by default; the planted A/C load (role load) is found instead. Asked for, the
+    pedal may be found, and is then labelled as a response of the target."""
+    effects = [E.AuxLoad(), E.Pedal()]
+    df, _ = E.synth_trips(4, 6.0, seed=3, effects=effects + [E.LogPower()], noise=NOISE)
+    path = tmp_path / "log.parquet"
+    df.to_parquet(path)
+    m = load_measured([path], "prius3")
+    res = diagnose(m, load_equation(TRUTH), DiagnoseOptions(max_findings=2))
+    skipped = {s["column"]: s for s in res.details["signals_skipped"]}
+    assert skipped["throttle_pct"]["role"] == "response"
+    assert all("throttle_pct" not in f["signals"] for f in res.report["findings"])
+    assert [(f["term"], f["role"]) for f in res.report["findings"]] == [("[ac_power_w]", "load")]
+    res2 = diagnose(m, load_equation(TRUTH), DiagnoseOptions(max_findings=2, responses=True))
+    skipped2 = {s["column"]: s["reason"] for s in res2.details["signals_skipped"]}
+    # asked for, the pedal passes the role screen (here the proxy screen may still stop it)
+    assert "throttle_pct" in res2.details["signals_offered"] or "role" not in skipped2["throttle_pct"]
+    for f in res2.report["findings"]:
+        if "throttle_pct" in f["signals"]:
+            assert f["role"] == "response" and f["effect"].startswith("response of the target")

@@ -36,6 +36,9 @@ def configure(p):
     p.add_argument("--proxy-corr", type=float, default=0.9,
                    help="skip columns whose |corr(c·v^k, P)| reaches this: proxies of the target (default 0.9)")
     p.add_argument("--no-per-trip", action="store_true", help="do not offer per-trip offsets and masses")
+    p.add_argument("--responses", action="store_true",
+                   help="also offer columns whose role is 'response' (pedal, torques, currents, SOC …); "
+                        "such findings are labelled 'response of the target', not effects the model lacks")
     p.add_argument("--min-speed", type=float, default=0.1, help="leave out samples slower than this [m/s] (default 0.1)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
@@ -51,7 +54,8 @@ def options_from_args(args):
     return DiagnoseOptions(validation=args.validation, block_s=args.block_s, folds=args.folds, alpha=args.alpha,
                         min_gain=args.min_gain, max_findings=args.max_findings, include=_globs(args.signals),
                         exclude=_globs(args.exclude), max_nan=args.max_nan, proxy_corr=args.proxy_corr,
-                        per_trip=not args.no_per_trip, min_speed_mps=args.min_speed)
+                        per_trip=not args.no_per_trip, min_speed_mps=args.min_speed,
+                        responses=args.responses)
 
 
 def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, progress=None, measured=None):
@@ -110,7 +114,12 @@ def markdown(res, figs) -> str:
          f"- validation: {r['validation']}", f"- test: {d['test']}",
          f"- declared equation {'calibrated on the spot (stepwise, indt-var-1)' if d['calibrated_on_the_spot'] else 'given'}; "
          "its terms are kept and their coefficients refitted on each training fold",
-         f"- signals offered ({len(d['signals_offered'])}): {', '.join(d['signals_offered']) or 'none'}",
+         f"- signals offered ({len(d['signals_offered'])}): "
+         + (", ".join(f"{c} ({d.get('signal_roles', {}).get(c, {}).get('role', 'unknown')})"
+                      for c in d["signals_offered"]) or "none"),
+         "- columns of unknown role are offered only after the screens (constant, NaN, id-like, "
+         "derived from the inputs, same quantity as a power source, proxy of the target); "
+         "response columns only on request",
          f"- candidates scored (all rounds): {d['candidates_scored']}", "",
          "## Error on held-out data (W)", "",
          "| model | RMSE | MAE | R² | R² light | R² heavy | bias |", "|---|---|---|---|---|---|---|",
@@ -123,7 +132,7 @@ def markdown(res, figs) -> str:
                  "explain what these data can tell apart.")
     for i, f in enumerate(r["findings"], 1):
         gain = 1 - f["metrics_after"]["rmse_w"] / f["metrics_before"]["rmse_w"]
-        L += [f"{i}. **{f['effect']}** — term `{f['term']}`, signals: {', '.join(f['signals']) or 'speed only'}; "
+        L += [f"{i}. **{f['effect']}** ({f.get('role', 'unknown')}) — term `{f['term']}`, signals: {', '.join(f['signals']) or 'speed only'}; "
               f"coefficient {_fmt(f['coefficient'])} ± {_fmt(f['std_err'])} (s.e.), held-out test p = {f['p_value']:.3g} "
               f"(Bonferroni), energy share {100 * f['energy_share']:.2f} %; held-out RMSE "
               f"{f['metrics_before']['rmse_w']:.1f} → {f['metrics_after']['rmse_w']:.1f} W ({100 * gain:.2f} %)."]
@@ -142,6 +151,10 @@ def markdown(res, figs) -> str:
     L += ["", "## Columns not offered", "", "| column | reason |", "|---|---|"]
     for s in d["signals_skipped"]:
         L.append(f"| {s['column']} | {s['reason']} |")
+    if d.get("candidates_dropped"):
+        L += ["", "## Candidates dropped before scoring (identical or spanned; first in order wins)", "",
+              "| candidate | reason |", "|---|---|"]
+        L += [f"| `{c['term']}` | {c['reason']} |" for c in d["candidates_dropped"]]
     if figs:
         L += ["", "## Figures", ""] + [f"![{Path(p).stem}]({Path(p).name})" for p in figs]
     return "\n".join(L) + "\n"

@@ -47,6 +47,10 @@ def write_log(df, report: dict, out) -> None:
     table = pa.Table.from_pandas(df, preserve_index=False)
     meta = dict(table.schema.metadata or {})
     meta[META_KEY] = json.dumps(_clean(report)).encode("utf-8")
+    if report.get("roles"):
+        from sumo_drvpw.data.roles import to_metadata
+
+        meta.update(to_metadata(report["roles"]))
     write_parquet(out, table.replace_schema_metadata(meta))
 
 

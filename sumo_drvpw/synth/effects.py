@@ -176,6 +176,25 @@ class Distractors(_Effect):
         return "Distractors: random_walk, white_noise, wiper_on, cabin_noise_db (no effect)"
 
 
+class Pedal(_Effect):
+    """A response column: an accelerator pedal that follows the power demand (truth, noise
+    and the effects before it), ``throttle_pct`` = 100·clip(P/``p_max_w``, 0, 1) + noise
+    (s.d. ``noise_pct``). It plants no power: it *is* the demand, seen through the
+    driver, and must never be reported as an effect the model lacks."""
+
+    def __init__(self, p_max_w: float = 60e3, noise_pct: float = 3.0):
+        super().__init__()
+        self.p_max_w, self.noise_pct = p_max_w, noise_pct
+
+    def __call__(self, state, rng):
+        p = np.asarray(state["power_w"], float)
+        pedal = 100.0 * np.clip(p / self.p_max_w, 0.0, 1.0) + rng.normal(0.0, self.noise_pct, len(p))
+        return self._keep(state, np.zeros(len(p))), {"throttle_pct": np.clip(pedal, 0.0, 100.0)}
+
+    def describe(self):
+        return "Pedal: throttle_pct follows the power demand (a response, no effect)"
+
+
 class LogPower(_Effect):
     """Logs the driving power itself as ``power_w`` (truth + process noise + the effects
     before it), which the drive-log spec lets a log carry; put it last. With it the
@@ -224,7 +243,8 @@ def planted_power(effects, trip_ids) -> np.ndarray:
 #: The one table of planted effects: name (as ``synth --plant`` takes it) → class; every
 #: class builds with its defaults.
 PLANTS = {"ac": AuxLoad, "cold-tyres": TermScaledBySignal, "speed-quadratic": SpeedFunction,
-          "trip-mass": PerTripMass, "distractors": Distractors, "log-power": LogPower}
+          "trip-mass": PerTripMass, "distractors": Distractors, "pedal": Pedal,
+          "log-power": LogPower}
 
 __all__ = ["AuxLoad", "TermScaledBySignal", "SpeedFunction", "PerTripMass", "Distractors",
-           "LogPower", "synth_trips", "planted_power", "PLANTS", "G"]
+           "Pedal", "LogPower", "synth_trips", "planted_power", "PLANTS", "G"]

@@ -2,7 +2,9 @@
 
 ``read(format, paths, columns=None) -> (DataFrame, report)`` is the one entry point; the
 CLI ``sumo-drvpw import`` wraps it. FORMATS maps each format name to its reader module.
-The report counts, per file and in total, the rows read, kept and dropped per reason.
+The report counts, per file and in total, the rows read, kept and dropped per reason, and
+lists the roles the adapter declares for its columns (``report["roles"]``, stored with the
+log as ``drive_log.roles``; see :mod:`sumo_drvpw.data.roles`).
 """
 
 from __future__ import annotations
@@ -37,4 +39,9 @@ def read(format: str, paths, columns=None):
         frames, reports, notes = mod.read(paths)
     from sumo_drvpw.data.adapters._common import combine
 
-    return combine(format, frames, reports, notes)
+    df, report = combine(format, frames, reports, notes)
+    declared = dict(getattr(mod, "ROLES", {}))
+    if format == "columns":
+        declared.update(mod.mapping_roles(columns))
+    report["roles"] = {c: r for c, r in declared.items() if c in df.columns}
+    return df, report

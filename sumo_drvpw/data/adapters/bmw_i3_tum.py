@@ -67,6 +67,20 @@ NAMES = {
     "cabin temperature sensor": ("cabin_temp_c", 1.0),
 }
 REQUIRED = ("time", "velocity", "motor torque", "battery voltage", "battery current")
+#: roles of the columns this adapter writes (drive-log spec "Roles"; stored with the log)
+ROLES = {
+    "throttle_pct": "response", "regen_braking_signal": "response", "battery_temp_c": "response",
+    "battery_temp_max_c": "response", "soc_pct": "response", "soc_displayed_pct": "response",
+    "soc_min_pct": "response", "soc_max_pct": "response", "heater_power_w": "load",
+    "heater_power_lin_w": "load", "heater_power_requested_w": "load", "aircon_power_w": "load",
+    "heater_voltage_v": "response", "heater_current_a": "response", "heater_signal": "response",
+    "ambient_c": "condition", "ambient_sensor_c": "condition", "cabin_temp_c": "condition",
+    "winter": "condition", "weather": "condition", "season": "condition", "route": "condition",
+    "cabin_setpoint_c": "condition", "added_mass_kg": "condition", "fan": "condition",
+    "trip_ambient_start_c": "condition", "trip_battery_temp_start_c": "condition",
+    "trip_soc_start_pct": "condition", "trip_battery_temp_end_c": "response",
+    "trip_soc_end_pct": "response", "trip_distance_m": "response", "trip_duration_s": "response",
+}
 WINTER_MONTHS = (11, 12, 1, 2, 3)
 
 

@@ -15,6 +15,7 @@ Mapping file::
     name = "speed_mps"        # canonical or extra name; the suffix must fit the unit
     unit = "km/h"             # converted to SI (see _common.UNITS)
     scale = -1                # optional extra factor (e.g. flip a current's sign)
+    role = "response"         # optional: condition | load | response (drive-log spec)
 
     [columns."Trip"]
     name = "trip_id"          # text; without it trip_id = file stem
@@ -42,7 +43,7 @@ from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, clean_time_
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
 OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped"}
-ENTRY = {"name", "unit", "scale"}
+ENTRY = {"name", "unit", "scale", "role"}
 SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 
 
@@ -74,6 +75,10 @@ def load_mapping(path) -> dict:
         if not isinstance(scale, (int, float)) or isinstance(scale, bool) or not math.isfinite(scale):
             raise UserError(f"{p}: {key}.scale must be a number, got {scale!r}")
         entries[label] = _entry(p, key, name, unit, float(scale))
+        if "role" in e:
+            from sumo_drvpw.data.roles import check_role
+
+            entries[label]["role"] = check_role(str(e["role"]), f"{p}: {key}.role")
     names = [e["name"] for e in entries.values()]
     for need in ("time_s", "speed_mps"):
         if need not in names:
@@ -88,6 +93,13 @@ def load_mapping(path) -> dict:
             "decimal": str(opts.get("decimal", ".")), "time_format": opts.get("time_format"),
             "na_values": [str(x) for x in na], "keep_unmapped": bool(opts.get("keep_unmapped", True)),
             "columns": entries}
+
+
+def mapping_roles(path) -> dict[str, str]:
+    """Roles declared in a mapping TOML: canonical/extra column name → role."""
+    if path is None:
+        return {}
+    return {e["name"]: e["role"] for e in load_mapping(path)["columns"].values() if "role" in e}
 
 
 def _entry(p, key, name, unit, scale) -> dict:

@@ -44,6 +44,9 @@ NAMES = {
     "REESSCurrent2": ("reess_current2_a", 1.0),
 }
 REQUIRED = ("PhaseTime", "DAActualSpeed", "REESSVoltage", "REESSCurrent")
+#: roles of the columns this adapter writes (drive-log spec "Roles"; stored with the log)
+ROLES = {"reess_voltage2_v": "response", "reess_current2_a": "response", "cycle": "condition",
+         "clock_s": "response"}
 
 
 def cycle_name(stem: str) -> str:

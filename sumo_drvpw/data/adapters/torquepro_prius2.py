@@ -75,6 +75,13 @@ NAMES = {
     "GPS Longitude(°)": ("gps_longitude_deg", 1.0, 0.0),
 }
 TEXT = {"GPS Time": "gps_time"}
+#: roles of the columns this adapter writes (drive-log spec "Roles"; stored with the log)
+ROLES = {
+    "ambient_c": "condition", "battery_power_obd_w": "response", "battery_current_ib_a": "response",
+    "mg1_torque_exec_nm": "response", "mg2_torque_exec_nm": "response",
+    "regen_brake_torque_nm": "response", "soc_pct": "response", "accel_pedal_pct": "response",
+    "engine_load_pct": "response", "engine_load_abs_pct": "response",
+}
 REQUIRED = (TIME, "Speed (OBD)(mph)")
 #: powertrain fields whose first complete row marks the OBD link as up
 LINK = ("Engine RPM(rpm)", "MG1 Revolution(RPM)", "MG1 Torque(Nm)", "MG2 Revolution(RPM)",

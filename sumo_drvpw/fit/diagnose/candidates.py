@@ -36,10 +36,14 @@ def _glob_any(name: str, patterns) -> bool:
 
 
 def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarray,
-                   usable: np.ndarray, opt: DiagnoseOptions) -> tuple[dict, list[dict]]:
-    """Pick the extra columns to offer as candidate signals (see module docstring).
+                   usable: np.ndarray, opt: DiagnoseOptions,
+                   roles: dict | None = None) -> tuple[dict, list[dict]]:
+    """Pick the extra columns to offer as candidate signals (see the package docstring).
 
-    Returns (name → float array over all samples, list of {column, reason} skipped).
+    ``roles``: column → ``{"role", "source"}`` (:func:`sumo_drvpw.data.roles.resolve`);
+    a ``response`` column is left out unless ``opt.responses``; conditions, loads and
+    columns of unknown role go through the screens below. Returns (name → float array
+    over all samples, list of {column, reason} skipped).
     """
     kept, skipped = {}, []
     u = usable
@@ -64,6 +68,12 @@ def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarr
         arr = np.asarray(signals[name], dtype=float)
         if name in POWER_SOURCE_COLUMNS:
             skipped.append({"column": name, "reason": "measured-power source column (target or a component of it)"})
+            continue
+        role = (roles or {}).get(name, {})
+        if role.get("role") == "response" and not opt.responses:
+            skipped.append({"column": name, "role": "response",
+                            "reason": f"role response ({role.get('source', 'declared')}): a consequence "
+                                      "of the power demand, not a cause (offered only with responses)"})
             continue
         if opt.include and not _glob_any(name, opt.include):
             skipped.append({"column": name, "reason": "not among the included columns (include)"})

@@ -30,7 +30,7 @@ def pick_metrics(m: dict) -> dict:
 
 def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrated: bool, opt,
              findings, rounds, pred0, m_base, base_coefs, plot, y, n_rows: int, n_usable: int,
-             skipped, sig, n_candidates: int, n_trips: int, dropped) -> DiagnoseResult:
+             skipped, sig, n_candidates: int, n_trips: int, dropped, roles=None) -> DiagnoseResult:
     """Final fit, report (``trace.json`` shape), details and the traced equation."""
     log = measured.log
     n = len(y)
@@ -66,6 +66,7 @@ def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrat
                "samples": {"rows": n_rows, "usable": n_usable, "analysis": n,
                            "trips": n_trips, "blocks": tr.n_blocks},
                "signals_offered": sorted(sig), "signals_skipped": skipped,
+               "signal_roles": roles or {},
                "candidates_dropped": dropped,
                "candidates_per_round": n_candidates, "candidates_scored": tr.n_scored,
                "rounds": rounds, "test": ("one-sided paired tests over held-out blocks of "

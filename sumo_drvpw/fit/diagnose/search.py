@@ -7,6 +7,7 @@ import math
 import numpy as np
 from scipy import stats
 
+from sumo_drvpw.data.roles import of_log as column_roles
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.calibrate import CANDIDATES, calibrate
 from sumo_drvpw.fit.compare import metrics as _metrics
@@ -44,6 +45,13 @@ def paired_test(d: np.ndarray) -> float:
 
 
 _paired_test = paired_test
+
+
+def _role_of(cand: Candidate, roles: dict) -> str:
+    """Role of a finding: its column's role; ``structural`` for effects no column names."""
+    if not cand.signals:
+        return "structural"
+    return roles.get(cand.signals[0], {}).get("role", "unknown")
 
 
 def _score_all(tr: BlockModel, pool: list[Candidate], opt: DiagnoseOptions) -> list[tuple]:
@@ -106,7 +114,8 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
 
     # screen signals
     binary = set()
-    kept, skipped = screen_signals(dict(x_all.signals), y_all, x_all, trip_codes_all, usable, opt)
+    roles = column_roles(log)
+    kept, skipped = screen_signals(dict(x_all.signals), y_all, x_all, trip_codes_all, usable, opt, roles)
     for name in list(kept):
         if name in equation.signals:
             skipped.append({"column": name, "reason": "already a factor of a declared term"})
@@ -207,8 +216,12 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
         wgt = np.where(total > 0, dt, 0.0)
         e_tot = float(total @ wgt)
         share = float(powers[:, j_new] @ wgt) / e_tot if e_tot > 0 else math.nan
+        role = _role_of(cbest, roles)
+        effect = cbest.effect
+        if role == "response":
+            effect = f"response of the target — not an effect the model lacks ({effect})"
         findings.append({
-            "effect": cbest.effect, "signals": list(cbest.signals), "term": _term_label(cbest, mass_terms),
+            "effect": effect, "role": role, "signals": list(cbest.signals), "term": _term_label(cbest, mass_terms),
             "coefficient": co[cbest.term], "std_err": se[cbest.term], "p_value": p_adj,
             "energy_share": share, "metrics_before": _pick_metrics(m_before),
             "metrics_after": _pick_metrics(m_after)})
@@ -218,4 +231,5 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
                     calibrated=calibrated, opt=opt, findings=findings, rounds=rounds, pred0=pred0,
                     m_base=m_base, base_coefs=base_coefs, plot=plot, y=y, n_rows=len(y_all),
                     n_usable=int(usable.sum()), skipped=skipped, sig=sig, n_candidates=len(cands),
-                    n_trips=n_trips, dropped=dropped)
+                    n_trips=n_trips, dropped=dropped,
+                    roles={k: roles[k] for k in sig if k in roles})
