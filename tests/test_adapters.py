@@ -174,6 +174,53 @@ def test_jlu_udds_and_constant_speed_against_road_load():
     assert cs["time_s"].max() <= 1200
 
 
+@pytest.mark.shared_data
+def test_jlu_road_trips_read_with_elevation_temperature_and_roles(tmp_path):
+    """The dyno adapter's car on the road (issue #11 §6): text timestamps, elevation, ambient
+    temperature; grade from elevation by the reader; counters stored with role response."""
+    from sumo_drvpw.data import roles
+    from sumo_drvpw.data.log import read_log
+
+    src = data("jlu_bev_road", "001.parquet")
+    out = tmp_path / "road.parquet"
+    assert cli_main(["import", "jlu-road", str(src), "--out", str(out)]) == 0
+    log = read_log([out])
+    df = log.df
+    assert np.median(np.diff(df["time_s"])) == pytest.approx(0.05)        # 20 Hz
+    assert "schedule_speed_mps" not in df and "clock_s" in df
+    assert df["ambient_c"].between(0, 40).all() and df["elevation_m"].between(100, 400).all()
+    assert log.counts["grade_source"].startswith("elevation")
+    assert np.abs(df["grade_rad"]).max() < 0.15 and df["grade_rad"].std() > 1e-4
+    # ρ from ambient temperature at standard pressure: 1.17–1.22 kg/m³ at 7–26 °C
+    assert df["air_density_kgm3"].between(1.15, 1.26).all()
+    r = roles.of_log(log)
+    assert r["tot_char"] == {"role": "response", "source": "declared"}
+    assert r["ambient_c"]["role"] == "condition"
+    # battery power positive when discharging: accelerating draws current
+    a = df["accel_mps2"].to_numpy()
+    p = (df["battery_voltage_v"] * df["battery_current_a"]).to_numpy()
+    assert (p[(a > 0.5) & (df["speed_mps"] > 3)] > 0).mean() > 0.95
+
+
+def test_jlu_road_text_time_and_bad_timestamp(tmp_path):
+    n = 40
+    base = {"PhaseTime": np.arange(n) * 0.05, "DAActualSpeed": np.linspace(0, 20, n),
+            "DAScheduleSpeed": np.zeros(n, int), "REESSCurrent": np.full(n, -10.0),
+            "REESSCurrent2": np.zeros(n, int), "REESSVoltage": np.full(n, 370.0),
+            "REESSVoltage2": np.zeros(n, int), "tempAmb": np.full(n, 15.0),
+            "elevation": np.full(n, 200), "gear": np.full(n, 4)}
+    t = pd.Timestamp("2023-04-19 09:19:44.83") + pd.to_timedelta(np.arange(n) * 0.05, unit="s")
+    pd.DataFrame(dict(base, Time=t.astype(str))).to_parquet(tmp_path / "a.parquet")
+    df, rep = read("jlu-road", tmp_path / "a.parquet")
+    assert df["clock_s"].iloc[0] == pytest.approx(t[0].timestamp())
+    assert df["battery_current_a"].iloc[0] == 10.0 and "grade_rad" not in df
+    assert rep["roles"]["gear"] == "response"
+    bad = dict(base, Time=["not a time"] * n)
+    pd.DataFrame(bad).to_parquet(tmp_path / "b.parquet")
+    with pytest.raises(UserError, match="b.parquet: column 'Time'.*'not a time' at row 0"):
+        read("jlu-road", tmp_path / "b.parquet")
+
+
 def test_jlu_cycle_names():
     from sumo_drvpw.data.adapters.jlu_dyno import cycle_name
     assert cycle_name("WLTC_CADC_JC08_CSS__07_Artemis_rural_1") == "Artemis_rural"
@@ -393,7 +440,7 @@ def test_unknown_format_and_missing_path(tmp_path):
         read("jlu-dyno", tmp_path / "missing")
     with pytest.raises(UserError, match="folder holds no"):
         read("jlu-dyno", tmp_path)
-    assert set(FORMATS) == {"bmw-i3-tum", "torquepro-prius2", "jlu-dyno", "columns"}
+    assert set(FORMATS) == {"bmw-i3-tum", "torquepro-prius2", "jlu-dyno", "jlu-road", "columns"}
 
 
 # ---------------------------------------------------------------- time cleaning property

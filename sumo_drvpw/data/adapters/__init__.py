@@ -18,6 +18,7 @@ FORMATS = {
     "bmw-i3-tum": "sumo_drvpw.data.adapters.bmw_i3_tum",
     "torquepro-prius2": "sumo_drvpw.data.adapters.torquepro_prius2",
     "jlu-dyno": "sumo_drvpw.data.adapters.jlu_dyno",
+    "jlu-road": "sumo_drvpw.data.adapters.jlu_road",
     "columns": "sumo_drvpw.data.adapters.columns",
 }
 

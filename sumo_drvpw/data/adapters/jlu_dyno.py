@@ -46,7 +46,9 @@ NAMES = {
 REQUIRED = ("PhaseTime", "DAActualSpeed", "REESSVoltage", "REESSCurrent")
 #: roles of the columns this adapter writes (drive-log spec "Roles"; stored with the log)
 ROLES = {"reess_voltage2_v": "response", "reess_current2_a": "response", "cycle": "condition",
-         "clock_s": "response"}
+         "clock_s": "response", "schedule_speed_mps": "condition", "ambient_c": "condition",
+         "gear": "response", "tot_disc": "response", "tot_char": "response",
+         "latitude_deg": "condition", "longitude_deg": "condition"}
 
 
 def cycle_name(stem: str) -> str:
@@ -56,8 +58,40 @@ def cycle_name(stem: str) -> str:
     return re.sub(r"_0?[1-9]$", "", tail) or stem  # repetition index _1, _01, _2 …
 
 
-def read_file(path: Path, vehicle) -> tuple[pd.DataFrame, dict]:
-    """One dynamometer Parquet file → canonical frame and report."""
+#: road logs (``jlu-road``): the dyno columns plus these
+ROAD_NAMES = {
+    "tempAmb": ("ambient_c", 1.0),
+    "elevation": ("elevation_m", 1.0),
+    "lat": ("latitude_deg", 1.0),
+    "long": ("longitude_deg", 1.0),
+    "gear": ("gear", 1.0),
+    "tot_disc": ("tot_disc", 1.0),
+    "tot_char": ("tot_char", 1.0),
+}
+#: constant zero on the road (no schedule, no second channel): not written
+ROAD_DROP = ("DAScheduleSpeed", "REESSCurrent2", "REESSVoltage2")
+
+
+def _clock_s(s: pd.Series, path: Path) -> pd.Series:
+    """Wall-clock timestamps (datetime or text) → Unix seconds."""
+    if not pd.api.types.is_datetime64_any_dtype(s):
+        t = pd.to_datetime(s, errors="coerce", format="ISO8601")
+        bad = t.isna() & s.notna()
+        if bad.any():
+            i = int(bad.to_numpy().nonzero()[0][0])
+            raise UserError(f"{path}: column 'Time' has a value that is not a timestamp, "
+                            f"{s.iloc[i]!r} at row {i}")
+        s = t
+    return (s - pd.Timestamp("1970-01-01")).dt.total_seconds()
+
+
+def read_file(path: Path, vehicle, road: bool = False) -> tuple[pd.DataFrame, dict]:
+    """One JLU Parquet file → canonical frame and report.
+
+    road: a road log (``jlu-road``): elevation, ambient temperature, gear and the
+    cumulative counters are mapped, the grade comes from the elevation (the log reader
+    smooths it over distance), and the all-zero schedule/second-channel columns are left out.
+    """
     try:
         raw = pd.read_parquet(path)
     except Exception as e:  # pyarrow raises several types for broken files
@@ -70,21 +104,26 @@ def read_file(path: Path, vehicle) -> tuple[pd.DataFrame, dict]:
         if k not in raw.columns:
             raise UserError(f"{path}: missing column '{k}'; found {', '.join(map(str, raw.columns))}")
     names, cols = [], []
+    known = dict(NAMES, **ROAD_NAMES) if road else NAMES
     for c in raw.columns:
         s = raw[c]
-        if c == "Time" and pd.api.types.is_datetime64_any_dtype(s):
-            names.append("clock_s")
-            cols.append((s - pd.Timestamp("1970-01-01")).dt.total_seconds())
+        if road and c in ROAD_DROP:
             continue
-        name, f, o = (NAMES[c] + (0.0,)) if c in NAMES else generic_name(str(c), rep["notes"])
+        if c == "Time":
+            names.append("clock_s")
+            cols.append(_clock_s(s, path))
+            continue
+        name, f, o = (known[c] + (0.0,)) if c in known else generic_name(str(c), rep["notes"])
         names.append(name)
         cols.append(numeric(s, path, str(c)) * f + o)
     df = pd.DataFrame(dict(zip(unique_names(names), cols)), index=raw.index)
     df = clean_time_and_speed(df, path, rep)
-    df["grade_rad"] = 0.0
+    if not road:
+        df["grade_rad"] = 0.0
     df["mass_kg"] = vehicle.mass_kg
     df.insert(0, "trip_id", trip)
-    df["cycle"] = cycle_name(trip)
+    if not road:
+        df["cycle"] = cycle_name(trip)
     return df.reset_index(drop=True), rep
 
 
