@@ -18,7 +18,7 @@ def configure(p):
 
 
 def main(args) -> int:
-    from sumo_drvpw.validation.study import report_path, resolve_data, run_validation
+    from sumo_drvpw.validation import report_path, resolve_data, run_validation
 
     data = resolve_data(args.data)
     out = Path(args.out)

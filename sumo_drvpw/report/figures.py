@@ -233,3 +233,78 @@ def energy_share_bars(comp: Comparison, path) -> Path:
     ax.set_title("Energy share of each term (cf. paper Fig. 10)", fontsize=10)
     write_figure(path, fig)
     return Path(path)
+
+
+# ------------------------------------------------------------- validation figures
+
+def band_means(panels: list[tuple[str, list[dict]]], measured_label: str, predicted_label: str,
+               path, title_prefix: str = "") -> Path:
+    """Mean measured and predicted power per band, one panel per banding.
+
+    Parameters
+    ----------
+    panels : (title, rows) per panel; a row has ``band`` (label), ``n``,
+        ``mean_measured_w`` and ``mean_predicted_w`` [W]; empty bands are skipped
+    measured_label, predicted_label : legend labels of the two bars
+    path : PNG to write
+    """
+    fig, axes = plt.subplots(1, len(panels), figsize=(13, 3.6), squeeze=False)
+    axes = axes.ravel()
+    for ax, (title, bands) in zip(axes, panels):
+        rows = [r for r in bands if r["n"]]
+        xs = np.arange(len(rows))
+        ax.bar(xs - 0.2, [r["mean_measured_w"] * _KW for r in rows], 0.4, label=measured_label)
+        ax.bar(xs + 0.2, [r["mean_predicted_w"] * _KW for r in rows], 0.4, label=predicted_label)
+        ax.set_xticks(xs)
+        ax.set_xticklabels([r["band"] for r in rows], fontsize=7, rotation=20)
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_title(f"{title_prefix}mean power by {title}", fontsize=9)
+        ax.set_ylabel("mean power [kW]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    write_figure(path, fig)
+    return Path(path)
+
+
+def road_load_and_cycle_errors(published: dict, recovered: dict, eta: float,
+                               points: list[dict], per_cycle: list[dict], path,
+                               max_kmh: float = 135.0) -> Path:
+    """Published against recovered road-load force, and error per cycle (JLU dyno).
+
+    Parameters
+    ----------
+    published, recovered : ``A_n`` [N], ``B_n_per_mps`` [N/(m/s)], ``C_n_per_mps2``
+        [N/(m/s)²]: F(v) = A + B·v + C·v²
+    eta : recovered drivetrain efficiency [-] (legend)
+    points : constant-speed tests, ``speed_kmh`` and ``force_n`` [N] each (may be empty)
+    per_cycle : ``cycle``, ``bias_w``, ``rmse_w`` [W] per cycle
+    path : PNG to write
+    """
+    vv = np.linspace(0, max_kmh, 100) * KMH
+
+    def force(c):
+        return c["A_n"] + c["B_n_per_mps"] * vv + c["C_n_per_mps2"] * vv ** 2
+
+    fig, ax = plt.subplots(1, 2, figsize=(11, 3.8))
+    ax[0].plot(vv / KMH, force(published), "k-", label="published dyno road load")
+    ax[0].plot(vv / KMH, force(recovered), "tab:blue", ls="--", label=f"recovered (η = {eta:.3f})")
+    if points:
+        ax[0].plot([p["speed_kmh"] for p in points], [p["force_n"] for p in points], "o",
+                   color="tab:orange", ms=4, label="constant-speed tests: η·(P_batt − P_aux)/v")
+    ax[0].set_xlabel("speed [km/h]")
+    ax[0].set_ylabel("road-load force [N]")
+    ax[0].set_title("JLU dyno: published vs recovered road load", fontsize=9)
+    ax[0].legend(fontsize=7)
+    ax[0].grid(alpha=0.3)
+    xs = np.arange(len(per_cycle))
+    ax[1].bar(xs - 0.2, [r["bias_w"] * _KW for r in per_cycle], 0.4, label="bias")
+    ax[1].bar(xs + 0.2, [r["rmse_w"] * _KW for r in per_cycle], 0.4, label="RMSE")
+    ax[1].set_xticks(xs)
+    ax[1].set_xticklabels([r["cycle"] for r in per_cycle], rotation=60, fontsize=7, ha="right")
+    ax[1].set_ylabel("battery power error [kW]")
+    ax[1].set_title("JLU: two-regime model, error per cycle", fontsize=9)
+    ax[1].axhline(0, color="k", lw=0.6)
+    ax[1].legend(fontsize=7)
+    ax[1].grid(alpha=0.3)
+    write_figure(path, fig)
+    return Path(path)
