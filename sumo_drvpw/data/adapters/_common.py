@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from sumo_drvpw.data.paths import expand_paths  # noqa: F401  (re-exported for the adapters)
 from sumo_drvpw.model.constants import FT, G, GAL, HP, KELVIN, KMH, LB, LBF, MILE, MPH, RPM
 from sumo_drvpw.errors import UserError
 
@@ -252,23 +253,3 @@ def read_each(files, read_one) -> tuple[list, list]:
     """Read every file with ``read_one(path) → (frame, report)``: (frames, reports)."""
     pairs = [read_one(f) for f in files]
     return [df for df, _ in pairs], [rep for _, rep in pairs]
-
-
-def expand_paths(paths, suffixes: tuple[str, ...], what: str) -> list[Path]:
-    """Files from a list of files and folders (folders: every file with one of suffixes, sorted)."""
-    if isinstance(paths, (str, Path)):
-        paths = [paths]
-    out: list[Path] = []
-    for p in map(Path, paths):
-        if p.is_dir():
-            found = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in suffixes)
-            if not found:
-                raise UserError(f"{p}: folder holds no {what} file ({', '.join(suffixes)})")
-            out.extend(found)
-        elif p.is_file():
-            out.append(p)
-        else:
-            raise UserError(f"{p}: no such file or folder")
-    if not out:
-        raise UserError(f"no {what} input given")
-    return out

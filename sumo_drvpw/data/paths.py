@@ -1,0 +1,47 @@
+"""Input files from what the user named: files, and the matching files inside folders.
+
+The one ``expand_paths`` of the package: the drive-log reader and every adapter list
+their inputs through it, so a folder, a file and a wrong name behave alike everywhere.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sumo_drvpw.errors import UserError
+
+
+def expand_paths(paths, suffixes: tuple[str, ...], what: str,
+                 check_files: bool = False) -> list[Path]:
+    """Files named in ``paths`` plus, for each folder named, its files with one of
+    ``suffixes`` (sorted by name).
+
+    Parameters
+    ----------
+    paths : a path or a list of paths (str or Path) to files or folders
+    suffixes : lower-case suffixes with the dot, e.g. ``(".parquet", ".csv")``
+    what : what the files are, for messages ("drive log", "TUM trip CSV")
+    check_files : also refuse a named file whose suffix is not in ``suffixes``
+
+    Raises :class:`UserError` naming the path for a missing path, an empty folder, a file
+    of the wrong type (``check_files``), or no input at all.
+    """
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in suffixes)
+            if not found:
+                raise UserError(f"{p}: folder holds no {what} file ({', '.join(suffixes)})")
+            out.extend(found)
+        elif p.is_file():
+            if check_files and p.suffix.lower() not in suffixes:
+                raise UserError(f"{p}: unknown file type '{p.suffix}' (a {what} is "
+                                f"{' or '.join(suffixes)}, or a folder of them)")
+            out.append(p)
+        else:
+            raise UserError(f"{p}: no such file or folder")
+    if not out:
+        raise UserError(f"no {what} given")
+    return out
