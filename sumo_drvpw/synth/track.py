@@ -19,6 +19,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
+from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import G, KMH, RPM
 from sumo_drvpw.model.equations import Equation, load_equation
 from sumo_drvpw.model.terms import Inputs
@@ -204,7 +205,7 @@ def synthesize(opt: SynthOptions | None = None,
     wind = (opt.track.wind_mps + gust) * np.cos(np.deg2rad(heading) - wind_to)
     ambient_c = 20.0 + 0.5 * np.sin(2 * np.pi * t / 3600.0)
     pressure_kpa = np.full(n, 100.8)
-    rho = pressure_kpa * 1000.0 / (287.058 * (ambient_c + 273.15))
+    rho = air_density(ambient_c, pressure_kpa)
     x = Inputs(v, a, theta, wind, np.full(n, mass), rho)
     p_truth = truth.power(x)
     p = p_truth + rng.normal(0.0, 1.0, n) * (opt.noise.process_w + opt.noise.process_rel * np.abs(p_truth))
