@@ -12,8 +12,8 @@ until the trip ends (or the file does), so a trip is never cut. Memory is theref
 O(``rows`` + the longest trip); a trip longer than ``max_trip_rows`` is refused with a
 ``UserError`` (split it into trips: ``trip_id``). A file without ``trip_id`` is one trip.
 
-A :class:`Part` is a piece of the input that holds whole trips (a file, or a run of
-Parquet row groups that starts and ends at trip boundaries): the unit of work of the
+A :class:`Part` is a piece of the input that holds whole trips (a file, or a range of
+rows of a Parquet file that starts and ends at trip boundaries): the unit of work of the
 engines in :mod:`sumo_drvpw.fit.engine`.
 
 Difference from the in-memory reader, on purpose: the moving-average width of the derived
@@ -39,73 +39,92 @@ from sumo_drvpw.errors import UserError
 BATCH_ROWS = 1_000_000
 #: Longest trip streamed [rows] (about 29 days at 8 Hz); longer ones must be split.
 MAX_TRIP_ROWS = 20_000_000
-#: Rows a Part of a Parquet file aims at when a file is split for parallel engines.
+#: Rows a Part of a Parquet file has at least when a file is cut for parallel engines.
 PART_ROWS = 4_000_000
 
 
 @dataclass(frozen=True)
 class Part:
-    """Whole trips of one file: all of it, or the Parquet row groups ``row_groups``."""
+    """Whole trips of one file: all of it, or its rows ``start`` to ``stop`` (Parquet)."""
 
     path: str
-    row_groups: tuple[int, ...] | None = None
+    start: int | None = None
+    stop: int | None = None
     rows: int = 0
 
     def describe(self) -> str:
-        if self.row_groups is None:
+        if self.start is None:
             return self.path
-        return f"{self.path} [row groups {self.row_groups[0]}–{self.row_groups[-1]}]"
+        return f"{self.path} [rows {self.start}–{self.stop - 1}]"
 
 
 def _is_parquet(p: Path) -> bool:
     return p.suffix.lower() == ".parquet"
 
 
-def _parquet_file(p: Path):
+def _parquet_file(p: Path, **kw):
     import pyarrow.parquet as pq
 
     try:
-        return pq.ParquetFile(p)
+        return pq.ParquetFile(p, **kw)
     except (OSError, ValueError) as e:
         raise UserError(f"{p}: cannot read as parquet: {e}") from None
 
 
-def plan(paths, part_rows: int = PART_ROWS) -> list[Part]:
+def trip_starts(p: Path) -> np.ndarray:
+    """Row numbers where a new trip starts in a Parquet file with ``trip_id`` (row 0 first).
+
+    Reads only the ``trip_id`` column, one row group at a time, dictionary-encoded (the
+    comparison is on integer codes within a row group)."""
+    f = _parquet_file(p, read_dictionary=["trip_id"])
+    out, offset, prev = [np.zeros(1, np.int64)], 0, None
+    for i in range(f.metadata.num_row_groups):
+        col = f.read_row_group(i, columns=["trip_id"]).column(0).combine_chunks()
+        n = len(col)
+        if n == 0:
+            continue
+        if hasattr(col, "indices"):
+            codes = col.indices.to_numpy(zero_copy_only=False)
+            first, last = col.dictionary[codes[0]].as_py(), col.dictionary[codes[-1]].as_py()
+        else:
+            codes = pd.factorize(col.to_numpy(zero_copy_only=False))[0]
+            first, last = col[0].as_py(), col[n - 1].as_py()
+        new = np.flatnonzero(codes[1:] != codes[:-1]) + 1 + offset
+        if prev is not None and str(first) != str(prev) and offset > 0:
+            out.append(np.array([offset]))
+        out.append(new)
+        prev = last
+        offset += n
+    return np.concatenate(out)
+
+
+def plan(paths, part_rows: int | None = None) -> list[Part]:
     """The input as Parts of whole trips, in reading order.
 
     Parameters
     ----------
     paths : files or folders (Parquet, CSV), as for :func:`sumo_drvpw.data.log.read_log`
-    part_rows : Parquet files with several row groups are split into runs of about this
-        many rows [-], cut only where a row group starts a new trip (the ``trip_id`` of its
-        first row differs from the last row of the group before); CSV files are one Part.
+    part_rows : when given, a Parquet file with ``trip_id`` is cut into Parts of at least
+        this many rows [-], each cut at the start of a trip (for parallel engines); CSV
+        files and files without ``trip_id`` are one Part each. None: one Part per file.
     """
     parts: list[Part] = []
     for p in expand_paths(paths):
         if not _is_parquet(p):
-            parts.append(Part(str(p), None, 0))
+            parts.append(Part(str(p)))
             continue
         f = _parquet_file(p)
-        md = f.metadata
-        if md.num_row_groups <= 1 or "trip_id" not in f.schema_arrow.names:
-            parts.append(Part(str(p), None, md.num_rows))
+        n = f.metadata.num_rows
+        if part_rows is None or n <= part_rows or "trip_id" not in f.schema_arrow.names:
+            parts.append(Part(str(p), rows=n))
             continue
-        run: list[int] = []
-        rows = 0
-        prev_last = None
-        for i in range(md.num_row_groups):
-            tid = f.read_row_group(i, columns=["trip_id"]).column(0)
-            n = len(tid)
-            first = None if n == 0 else str(tid[0].as_py())
-            if run and rows >= part_rows and first != prev_last:
-                parts.append(Part(str(p), tuple(run), rows))
-                run, rows = [], 0
-            run.append(i)
-            rows += n
-            if n:
-                prev_last = str(tid[n - 1].as_py())
-        if run:
-            parts.append(Part(str(p), tuple(run), rows))
+        starts = trip_starts(p)
+        cuts = [0]
+        for s0 in starts:
+            if s0 - cuts[-1] >= part_rows:
+                cuts.append(int(s0))
+        cuts.append(n)
+        parts += [Part(str(p), a, b, b - a) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
     return parts
 
 
@@ -114,8 +133,20 @@ def _chunks(part: Part, rows: int) -> Iterator[pd.DataFrame]:
     try:
         if _is_parquet(p):
             f = _parquet_file(p)
-            groups = list(part.row_groups) if part.row_groups is not None else None
+            groups, at = None, 0
+            if part.start is not None:
+                sizes = [f.metadata.row_group(i).num_rows for i in range(f.metadata.num_row_groups)]
+                ends = np.cumsum(sizes)
+                groups = [i for i in range(len(sizes))
+                          if ends[i] > part.start and ends[i] - sizes[i] < part.stop]
+                at = int(ends[groups[0]] - sizes[groups[0]]) if groups else 0
             for b in f.iter_batches(batch_size=rows, row_groups=groups):
+                lo, hi = at, at + b.num_rows
+                at = hi
+                if part.start is not None:
+                    if hi <= part.start or lo >= part.stop:
+                        continue
+                    b = b.slice(max(part.start - lo, 0), min(hi, part.stop) - max(lo, part.start))
                 yield b.to_pandas()
         else:
             for df in pd.read_csv(p, chunksize=rows, low_memory=False):
@@ -178,8 +209,8 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
 
     stem = Path(part.path).stem
     for df, off in whole_trips(part, rows, max_trip_rows):
-        name = part.path if off == 0 and part.row_groups in (None, ()) or off == 0 and \
-            part.row_groups and part.row_groups[0] == 0 else f"{part.path} (batch from row {off})"
+        first = off + (part.start or 0)
+        name = part.path if first == 0 else f"{part.path} (batch from row {first})"
         if "trip_id" not in df:
             df.insert(0, "trip_id", stem)
         log = from_frame(df, vehicle, options, name=name)

@@ -25,7 +25,7 @@ import time
 from dataclasses import dataclass
 from functools import partial
 
-from sumo_drvpw.data.stream import BATCH_ROWS, Part, iter_measured, plan
+from sumo_drvpw.data.stream import BATCH_ROWS, PART_ROWS, Part, iter_measured, plan
 from sumo_drvpw.errors import UserError
 
 ENGINES = ("local", "dask")
@@ -86,7 +86,8 @@ def run(paths, make, vehicle=None, options=None, engine: str = "local",
     scheduler : Dask scheduler address (``dask`` only); None: a local cluster
     workers : processes of the local Dask cluster (default: CPU count)
     rows : rows per chunk read [-]
-    parts : the Parts (default :func:`sumo_drvpw.data.stream.plan` of ``paths``)
+    parts : the Parts (default :func:`sumo_drvpw.data.stream.plan` of ``paths``: one
+        per file locally, big Parquet files cut at trip starts for Dask)
 
     Returns (accumulator, :class:`RunInfo`).
     """
@@ -97,7 +98,8 @@ def run(paths, make, vehicle=None, options=None, engine: str = "local",
     if workers is not None and workers < 1:
         raise UserError(f"workers must be at least 1, got {workers}")
     t0 = time.perf_counter()
-    parts = plan(paths) if parts is None else parts
+    if parts is None:  # Dask: cut big Parquet files at trip starts so workers share them
+        parts = plan(paths, PART_ROWS if engine == "dask" else None)
     total = sum(p.rows for p in parts) or None
     if engine == "local":
         acc = None

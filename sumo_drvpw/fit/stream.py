@@ -5,10 +5,14 @@ length is reduced batch by batch (:mod:`sumo_drvpw.data.stream`) into small, mer
 accumulators — the same on one machine and on a Dask cluster
 (:mod:`sumo_drvpw.fit.engine`):
 
-* calibrate: per trip XᵀX, Xᵀy, yᵀy, n of all candidate terms plus the mean and centred
-  sum of squares of y (centred R²), so trip-grouped use (hold-out by trip) stays possible.
-  The final fit is statsmodels OLS on a compact design with the same sufficient
-  statistics (:func:`ols_from_gram`).
+* calibrate: per trip the triangular factor R of [X y] (X = all candidate terms; RᵀR
+  holds XᵀX, Xᵀy and yᵀy) plus the mean and centred sum of squares of y (centred R²), so
+  trip-grouped use (hold-out by trip) stays possible. Factors merge by stacking and one
+  more QR (TSQR: Demmel et al. 2012, "Communication-optimal parallel and sequential QR"),
+  which keeps the precision of a QR of the whole design — normal equations square the
+  condition number, and v, v² and the rolling term are nearly collinear. Stepwise
+  selection works on the Gram matrix RᵀR; the final fit is statsmodels OLS on the compact
+  design the factor gives (:func:`ols_from_r`).
 * compare: per equation the co-moments (Chan et al. pairwise update) of measured,
   predicted and category powers on all / light / heavy samples, Σ|e|, Σe², energies, per
   trip energies, min/max of each category power, and a bounded reservoir sample (bottom-k
@@ -107,7 +111,8 @@ def calibration_mask(m, candidates) -> np.ndarray:
 class CalibrationStats:
     """Mergeable sufficient statistics of the stepwise calibration.
 
-    ``trips[id] = (xtx, xty, yty, moments_of_y)`` of the used samples of that trip;
+    ``trips[id] = (R, moments_of_y)`` of the used samples of that trip: R the upper
+    triangular factor of [X y] (columns: the candidate terms, then y);
     ``mass_sum``/``mass_n`` over usable samples (the reference mass); ``counts`` as
     :attr:`sumo_drvpw.data.measured.Measured.counts`, summed over batches.
     """
@@ -151,7 +156,8 @@ class CalibrationStats:
             if t in self.trips:
                 raise UserError(f"trip_id '{t}' appears in more than one place; give each "
                                 "trip its own id")
-            self.trips[t] = (xs.T @ xs, xs.T @ ys, float(ys @ ys), Moments.of(ys[:, None]))
+            self.trips[t] = (np.linalg.qr(np.column_stack([xs, ys]), mode="r"),
+                             Moments.of(ys[:, None]))
         return self
 
     def merge(self, o: "CalibrationStats") -> "CalibrationStats":
@@ -166,53 +172,56 @@ class CalibrationStats:
                                self.files + [f for f in o.files if f not in self.files])
         return out
 
-    def gram(self, trips=None):
-        """The :class:`~sumo_drvpw.fit.calibrate.Gram` of all (or the named) trips, and
-        the moments of y."""
+    def factor(self, trips=None) -> tuple[np.ndarray, Moments]:
+        """R of [X y] over all (or the named) trips (TSQR) and the moments of y."""
         k = len(self.names)
-        xtx, xty, yty, mom = np.zeros((k, k)), np.zeros(k), 0.0, Moments.empty(1)
-        n = 0
+        rs, mom = [np.zeros((0, k + 1))], Moments.empty(1)
         for t in (self.trips if trips is None else trips):
-            a, b, c, mm = self.trips[t]
-            xtx += a
-            xty += b
-            yty += c
+            r, mm = self.trips[t]
+            rs.append(r)
             mom = mom.merge(mm)
-            n += mm.n
-        return Gram(xtx, xty, yty, n, self.names), mom
+        return np.linalg.qr(np.vstack(rs), mode="r"), mom
+
+    def gram(self, trips=None):
+        """The :class:`~sumo_drvpw.fit.ols.Gram` (XᵀX, Xᵀy, yᵀy, n) of all or the named
+        trips, the factor R of [X y] and the moments of y."""
+        r, mom = self.factor(trips)
+        k = len(self.names)
+        x, y = r[:, :k], r[:, k]
+        return Gram(x.T @ x, x.T @ y, float(y @ y), mom.n, self.names), r, mom
 
 
-def ols_from_gram(g, idx: list[int]):
-    """statsmodels OLS results of the columns ``idx`` from sufficient statistics alone.
+def ols_from_r(r: np.ndarray, idx: list[int], n: int):
+    """statsmodels OLS results of the columns ``idx`` from the triangular factor alone.
 
-    With XᵀX = RᵀR (Cholesky) and z = R⁻ᵀXᵀy, OLS of [z; √RSS] on the (k+1) × k design
-    [R; 0] has the same params, XᵀX, Xᵀy, ssr (RSS = yᵀy − zᵀz) and uncentred TSS (yᵀy) as
-    the full regression; nobs and df_resid are set to the real n and n − k, so bse,
-    t and p-values, llf, AIC/BIC, R² (uncentred: no intercept, ``hasconst=False``) and
-    the condition number are exact. Residual diagnostics of ``summary()`` (Omnibus,
+    Parameters
+    ----------
+    r : upper triangular R of [X y] ((k+1) × (k+1), or any matrix with RᵀR = [X y]ᵀ[X y])
+    idx : the columns of X to regress on; n : the number of samples [-]
+
+    With [X_S y] = Q·[R_S z; 0 ρ] (QR of the selected columns), OLS of [z; ρ] on the
+    (|S|+1) × |S| design [R_S; 0] has the same params, XᵀX, Xᵀy, ssr (ρ²) and uncentred
+    TSS (yᵀy) as the full regression; nobs and df_resid are set to the real n and n − |S|,
+    so bse, t and p-values, llf, AIC/BIC, R² (uncentred: no intercept, ``hasconst=False``)
+    and the condition number are exact. Residual diagnostics of ``summary()`` (Omnibus,
     Jarque–Bera, Durbin–Watson, skew, kurtosis) describe the compact design, not the
     samples: they are not meaningful here.
     """
     import statsmodels.api as sm
-    from scipy.linalg import solve_triangular
 
-    a = g.xtx[np.ix_(idx, idx)]
-    b = g.xty[idx]
-    d = np.sqrt(np.diag(a))
-    rs = np.linalg.cholesky(a / np.outer(d, d)).T      # scaled: Rs = chol(D⁻¹AD⁻¹)
-    r = rs * d                                           # R = Rs·D, so RᵀR = A
-    z = solve_triangular(r, b, trans="T")
-    rss = max(g.yty - float(z @ z), 0.0)
     k = len(idx)
-    design = np.vstack([r, np.zeros((1, k))])
-    target = np.r_[z, math.sqrt(rss)]
+    rs = np.linalg.qr(r[:, list(idx) + [r.shape[1] - 1]], mode="r")
+    design, target = np.zeros((k + 1, k)), np.zeros(k + 1)
+    m = min(rs.shape[0], k + 1)
+    design[:m] = rs[:m, :k]
+    target[:m] = rs[:m, k]
     model = sm.OLS(target, design, hasconst=False)
-    model.nobs = float(g.n)
-    model.df_resid = float(g.n - k)
+    model.nobs = float(n)
+    model.df_resid = float(n - k)
     res = model.fit()
     inner = getattr(res, "_results", res)
-    inner.__dict__["_nobs_int"] = float(g.n)
-    inner._cache["nobs"] = float(g.n)
+    inner.__dict__["_nobs_int"] = float(n)
+    inner._cache["nobs"] = float(n)
     res.model.__dict__.pop("pinv_wexog", None)
     return res
 
@@ -233,7 +242,7 @@ def calibrate_from_stats(st: CalibrationStats, p_enter: float = 0.10, p_remove: 
     from sumo_drvpw.fit.calibrate import CalibrationResult, stepwise
 
     cands = st.names
-    g, mom = st.gram(trips)
+    g, r, mom = st.gram(trips)
     if g.n <= len(cands):
         raise UserError(f"too few usable samples ({g.n}) to calibrate {len(cands)} candidate terms")
     if not np.all(np.isfinite(g.xtx)):
@@ -244,7 +253,7 @@ def calibrate_from_stats(st: CalibrationStats, p_enter: float = 0.10, p_remove: 
     if not sel:
         raise UserError("no candidate term entered the model at p-to-enter "
                         f"{p_enter}: the measured power is not explained by {list(cands)}")
-    res = ols_from_gram(g, [cands.index(s) for s in sel])
+    res = ols_from_r(r, [cands.index(s) for s in sel], g.n)
     res.model.data.xnames = list(sel)
     sst = float(mom.m2[0, 0])
     r2 = 1.0 - float(res.ssr) / sst if sst > 0 else float("nan")
