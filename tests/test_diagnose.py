@@ -125,7 +125,7 @@ def test_block_validation_single_trip_and_report_files(tmp_path):
     assert set(doc["baseline"]["metrics"]) == {"rmse_w", "mae_w", "r2", "r2_light", "r2_heavy", "bias_w"}
     assert doc["validation"].startswith("5-fold cross-validation over contiguous")
     assert doc["findings"] and doc["findings"][0]["signals"] == ["ac_power_w"]
-    assert set(doc["findings"][0]) == {"effect", "role", "signals", "term", "coefficient", "std_err", "p_value",
+    assert set(doc["findings"][0]) == {"effect", "role", "replication", "signals", "term", "coefficient", "std_err", "p_value",
                                       "energy_share", "metrics_before", "metrics_after"}
     # the final equation file round-trips and predicts with the saved coefficients
     eq = load_equation(out / "final_equation.toml")

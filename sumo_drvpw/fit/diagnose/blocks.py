@@ -184,6 +184,14 @@ class BlockModel:
         self.cols.append(col)
         self._full = None
 
+    def drop_last(self) -> None:
+        """Remove the last model column (a finding that did not replicate)."""
+        self.cols.pop()
+        q = len(self.cols)
+        self.block_zz = self.block_zz[:, :q, :q].copy()
+        self.block_zy = self.block_zy[:, :q].copy()
+        self._full = None
+
     def replace_last(self, values: np.ndarray, mass_terms: dict) -> None:
         """Replace the values of the last model column (per-trip mass refinement)."""
         last = self.cols.pop()

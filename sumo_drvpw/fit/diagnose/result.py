@@ -30,7 +30,8 @@ def pick_metrics(m: dict) -> dict:
 
 def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrated: bool, opt,
              findings, rounds, pred0, m_base, base_coefs, plot, y, n_rows: int, n_usable: int,
-             skipped, sig, n_candidates: int, n_trips: int, dropped, roles=None) -> DiagnoseResult:
+             skipped, sig, n_candidates: int, n_trips: int, dropped, roles=None,
+             extra=None) -> DiagnoseResult:
     """Final fit, report (``trace.json`` shape), details and the traced equation."""
     log = measured.log
     n = len(y)
@@ -40,6 +41,7 @@ def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrat
     co, se = tr.coefficients()
     plot["pred_final"] = pred_final
     final_terms = expand_terms(tr, co)
+    lag = next((f for f in findings if f.get("kind") == "timing"), None)
     eq_se = expand_terms(tr, se, std=True)
     now = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     prov = {"date": now, "method": "sumo-drvpw diagnose: residual tracer (sumo_drvpw.fit.diagnose)",
@@ -47,6 +49,7 @@ def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrat
             "declared_terms": list(declared), "calibrated_on_the_spot": calibrated,
             "power_source": measured.source, "validation": tr.validation,
             "findings": [f["term"] for f in findings],
+            "power_lag_s": lag["coefficient"] if lag else 0.0,
             "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(opt).items()}}
     final_eq = Equation(name=f"{equation.name}_traced", terms=dict(final_terms), mass_kg=equation.mass_kg,
                         description=f"{equation.name} refitted with the effects found by the residual tracer",
@@ -76,6 +79,7 @@ def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrat
                                            f"held-out RMSE gain ≥ {opt.min_gain}; equal gains are "
                                            "ranked by candidate order"),
                "final_std_err": se, "settings": prov["settings"]}
+    details.update(extra or {})
     return DiagnoseResult(report, details, final_eq, plot, tr.n_scored)
 
 

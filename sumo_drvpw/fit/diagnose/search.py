@@ -14,6 +14,8 @@ from sumo_drvpw.fit.compare import metrics as _metrics
 from sumo_drvpw.fit.diagnose.blocks import BlockModel
 from sumo_drvpw.fit.diagnose.candidates import Candidate, generate_candidates, screen_signals
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
+from sumo_drvpw.fit.diagnose.structural import (lag_range, per_trip_lags, shift_within_trips,
+                                                structural_signals, timing)
 from sumo_drvpw.fit.diagnose.result import (DiagnoseResult, assemble, pick_metrics as _pick_metrics,
                                             term_label as _term_label)
 from sumo_drvpw.model.equations import Equation
@@ -125,6 +127,11 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
     ana = usable & np.all(np.isfinite(decl_vals), axis=1) & (x_eq.v >= opt.min_speed_mps)
     for name, arr in kept.items():
         ana &= np.isfinite(arr)
+    # timing (measurement side): a power–speed lag is corrected in the data before the search
+    timing_finding, lag_note = None, None
+    if opt.structural and opt.max_lag_s > 0:
+        y_all, ana, timing_finding, lag_note = _timing_step(
+            y_all, ana, x_eq, decl_vals, trip_codes_all, trip_names, t_all, dt_all, declared, opt, say)
     n = int(ana.sum())
     if n < 50:
         raise UserError(f"{log.describe()}: only {n} analysis samples (usable, with finite terms and signals); "
@@ -139,15 +146,17 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
     dt = dt_all[idx]
     trip_codes = trip_codes_all[idx]
     n_trips = len(np.unique(trip_codes))
-    tr = BlockModel(x, y, dt, t_all[idx], trip_codes, trip_names, sig, opt)
-    for j, t in enumerate(declared):
-        vals = decl_vals[idx, j]
-        cand = Candidate(t, f"declared term {t}", tuple(parse_term(t).signals), "declared")
-        tr._factor_cache[t] = vals
-        tr.add(cand, vals)
+    tr = _declared_model(x, y, dt, t_all[idx], trip_codes, trip_names, dict(sig), opt, declared,
+                         decl_vals[idx])
     say(f"{n} analysis samples, {n_trips} trip(s), {tr.n_blocks} blocks, {len(sig)} signal(s) offered")
 
     cands = generate_candidates(sig, declared, n_trips, opt, binary)
+    structural_notes = {}
+    if opt.structural:
+        s_sig, s_cands, structural_notes = structural_signals(tr, declared, x_all.signals, idx, log.df,
+                                                              log.counts)
+        tr.signals.update(s_sig)
+        cands = cands + s_cands
     cands, dropped = tr.drop_spanned(cands)
     if dropped:
         say(f"{len(dropped)} candidate(s) dropped before scoring: identical to or spanned by earlier ones")
@@ -155,8 +164,10 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
     pred0 = tr.heldout_pred(base_fold)
     m_base = _metrics(pred0, y)
     base_coefs, _ = tr.coefficients()
-    findings, rounds = [], []
-    plot = {"y": y, "v": x.v, "pred_base": pred0, "signals": sig, "findings": []}
+    findings, rounds, rejected = [], [], []
+    if timing_finding is not None:
+        findings.append(timing_finding)
+    plot = {"y": y, "v": x.v, "pred_base": pred0, "signals": tr.signals, "findings": []}
     in_model = set(declared)
     for rnd in range(opt.max_findings):
         pool = [c for c in cands if c.term not in in_model]
@@ -175,61 +186,171 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
             p = _paired_test(d)
             table.append({"term": c.term, "effect": c.effect, "rmse_gain": gains[i],
                           "p_value_bonferroni": min(1.0, p * m_scored)})
-        best = int(order[0])
-        cbest, sse_b, d_b, sse0_b, fold_b = results[best]
-        p_raw = _paired_test(d_b)
-        p_adj = min(1.0, p_raw * m_scored)
-        accepted = p_adj < opt.alpha and gains[best] >= opt.min_gain
-        rounds.append({"round": rnd + 1, "candidates_scored": m_scored, "best": cbest.term,
-                       "rmse_gain": gains[best], "p_value_bonferroni": p_adj, "accepted": bool(accepted),
-                       "top": table})
-        say(f"round {rnd + 1}: {m_scored} candidates, best {cbest.term} gain {100 * gains[best]:.2f} % "
-            f"p·m = {p_adj:.3g} → {'added' if accepted else 'stop'}")
-        if not accepted:
+        added = None
+        for pos, i in enumerate(order[:MAX_TRIES]):
+            cbest, sse_b, d_b, sse0_b, fold_b = results[int(i)]
+            p_adj = min(1.0, _paired_test(d_b) * m_scored)
+            if not (p_adj < opt.alpha and gains[int(i)] >= opt.min_gain):
+                break
+            f, extra = _try_add(tr, cbest, fold_b, y, dt, roles, opt, p_adj)
+            if f is None:
+                in_model.add(cbest.term)          # not offered again
+                rejected.append(dict(extra, term=cbest.term, round=rnd + 1, rmse_gain=gains[int(i)],
+                                     p_value_bonferroni=p_adj))
+                say(f"round {rnd + 1}: {cbest.term} passes the block test but {extra['reason']}")
+                continue
+            added = (cbest, gains[int(i)], p_adj)
+            findings.append(f)
+            plot["findings"].append({"cand": cbest, "before": extra["before"], "after": extra["after"]})
             break
-        before_pred = tr.heldout_pred(fold_b)
-        m_before = _metrics(before_pred, y)
-        mass_terms = {}
-        if cbest.kind == "trip_mass":
-            vals, mass_terms = tr.mass_part()
-            tr.add(cbest, vals, mass_terms)
-            # the composite was built with coefficients fitted without per-trip mass: rebuild it
-            # from the refitted (mean-mass) coefficients until they settle (≤ 3 passes)
-            for _ in range(3):
-                vals, new_terms = tr.mass_part()
-                change = max(abs(new_terms[k] / mass_terms[k] - 1.0) for k in mass_terms) if mass_terms else 0.0
-                mass_terms = new_terms
-                tr.replace_last(vals, mass_terms)
-                if change < 1e-4:
-                    break
-        else:
-            tr.add(cbest)
-        in_model.add(cbest.term)
-        fold_after = tr.fold_of(False)
-        after_pred = tr.heldout_pred(fold_after)
-        m_after = _metrics(after_pred, y)
-        co, se = tr.coefficients()
-        # energy share of the new term
-        j_new = len(tr.cols) - 1
-        powers = np.column_stack([tr.column_power(j) for j in range(len(tr.cols))])
-        total = powers.sum(axis=1)
-        wgt = np.where(total > 0, dt, 0.0)
-        e_tot = float(total @ wgt)
-        share = float(powers[:, j_new] @ wgt) / e_tot if e_tot > 0 else math.nan
-        role = _role_of(cbest, roles)
-        effect = cbest.effect
-        if role == "response":
-            effect = f"response of the target — not an effect the model lacks ({effect})"
-        findings.append({
-            "effect": effect, "role": role, "signals": list(cbest.signals), "term": _term_label(cbest, mass_terms),
-            "coefficient": co[cbest.term], "std_err": se[cbest.term], "p_value": p_adj,
-            "energy_share": share, "metrics_before": _pick_metrics(m_before),
-            "metrics_after": _pick_metrics(m_after)})
-        plot["findings"].append({"cand": cbest, "before": before_pred, "after": after_pred})
+        best_i = int(order[0])
+        rounds.append({"round": rnd + 1, "candidates_scored": m_scored,
+                       "best": results[best_i][0].term, "rmse_gain": gains[best_i],
+                       "p_value_bonferroni": min(1.0, _paired_test(results[best_i][2]) * m_scored),
+                       "accepted": added is not None, "added": added[0].term if added else None,
+                       "top": table})
+        say(f"round {rnd + 1}: {m_scored} candidates, best {results[best_i][0].term} gain "
+            f"{100 * gains[best_i]:.2f} % → {'added ' + added[0].term if added else 'stop'}")
+        if added is None:
+            break
+        in_model.add(added[0].term)
 
     return assemble(tr=tr, measured=measured, equation=equation, declared=declared,
                     calibrated=calibrated, opt=opt, findings=findings, rounds=rounds, pred0=pred0,
                     m_base=m_base, base_coefs=base_coefs, plot=plot, y=y, n_rows=len(y_all),
                     n_usable=int(usable.sum()), skipped=skipped, sig=sig, n_candidates=len(cands),
                     n_trips=n_trips, dropped=dropped,
-                    roles={k: roles[k] for k in sig if k in roles})
+                    roles={k: roles[k] for k in sig if k in roles},
+                    extra={"not_replicated": rejected, "timing": lag_note,
+                           "structural": structural_notes})
+
+
+#: candidates tried per round when the best one does not replicate or is implausible
+MAX_TRIES = 5
+#: largest plausible |energy share| of one finding (a share beyond it is a proxy or a fit artefact)
+MAX_ENERGY_SHARE = 0.5
+
+
+def _declared_model(x, y, dt, t, trip_codes, trip_names, sig, opt, declared, decl_vals) -> BlockModel:
+    """A block model holding the declared terms."""
+    tr = BlockModel(x, y, dt, t, trip_codes, trip_names, sig, opt)
+    for j, term in enumerate(declared):
+        vals = decl_vals[:, j]
+        tr._factor_cache[term] = vals
+        tr.add(Candidate(term, f"declared term {term}", tuple(parse_term(term).signals), "declared"), vals)
+    return tr
+
+
+def _per_trip_sse(tr: BlockModel, pred: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.bincount(tr.trip, weights=(pred - y) ** 2, minlength=tr.n_trips)
+
+
+def _try_add(tr: BlockModel, cand: Candidate, fold, y, dt, roles, opt, p_adj):
+    """Add ``cand``; keep it only if it replicates on held-out trips and is plausible (§4).
+
+    Replication: the held-out SSE of each trip before and after; with ≥ 3 trips the
+    finding must lower it on more than half of them. Plausibility: |energy share| ≤
+    ``MAX_ENERGY_SHARE``. Returns (finding dict, extras) or (None, {"reason", …}) after
+    removing the column again.
+    """
+    before = tr.heldout_pred(fold)
+    mass_terms = {}
+    if cand.kind == "trip_mass":
+        vals, mass_terms = tr.mass_part()
+        tr.add(cand, vals, mass_terms)
+        # the composite was built with coefficients fitted without per-trip mass: rebuild it
+        # from the refitted (mean-mass) coefficients until they settle (≤ 3 passes)
+        for _ in range(3):
+            vals, new_terms = tr.mass_part()
+            change = max(abs(new_terms[k] / mass_terms[k] - 1.0) for k in mass_terms) if mass_terms else 0.0
+            mass_terms = new_terms
+            tr.replace_last(vals, mass_terms)
+            if change < 1e-4:
+                break
+    else:
+        tr.add(cand)
+    after = tr.heldout_pred(tr.fold_of(False))
+    present = np.bincount(tr.trip, minlength=tr.n_trips) > 0
+    sse_b, sse_a = _per_trip_sse(tr, before, y)[present], _per_trip_sse(tr, after, y)[present]
+    helped, n_tr = int((sse_a < sse_b).sum()), int(present.sum())
+    co, se = tr.coefficients()
+    j_new = len(tr.cols) - 1
+    powers = np.column_stack([tr.column_power(j) for j in range(len(tr.cols))])
+    total = powers.sum(axis=1)
+    wgt = np.where(total > 0, dt, 0.0)
+    e_tot = float(total @ wgt)
+    share = float(powers[:, j_new] @ wgt) / e_tot if e_tot > 0 else math.nan
+    names = [str(tr.trip_names[i]) for i in np.flatnonzero(present)]
+    per_trip = {t: {"rmse_before_w": math.sqrt(b / max(c, 1)), "rmse_after_w": math.sqrt(a / max(c, 1))}
+                for t, b, a, c in zip(names, sse_b, sse_a,
+                                      np.bincount(tr.trip, minlength=tr.n_trips)[present])}
+    reason = None
+    if n_tr >= 3 and helped * 2 <= n_tr:
+        reason = f"did not replicate: lowered the held-out error on {helped} of {n_tr} trips"
+    elif not (abs(share) <= MAX_ENERGY_SHARE):
+        reason = f"implausible: energy share {100 * share:.1f} % (|share| > {100 * MAX_ENERGY_SHARE:g} %)"
+    if reason is not None:
+        tr.drop_last()
+        return None, {"reason": reason, "helped_trips": helped, "trips": n_tr, "energy_share": share}
+    role = _role_of(cand, roles)
+    effect = cand.effect
+    if role == "response":
+        effect = f"response of the target — not an effect the model lacks ({effect})"
+    finding = {
+        "effect": effect, "role": role, "signals": list(cand.signals), "term": _term_label(cand, mass_terms),
+        "coefficient": co[cand.term], "std_err": se[cand.term], "p_value": p_adj,
+        "energy_share": share, "metrics_before": _pick_metrics(_metrics(before, y)),
+        "metrics_after": _pick_metrics(_metrics(after, y)),
+        "replication": {"helped_trips": helped, "trips": n_tr, "per_trip": per_trip}}
+    return finding, {"before": before, "after": after}
+
+
+def _timing_step(y_all, ana, x_eq, decl_vals, trip_codes_all, trip_names, t_all, dt_all, declared, opt, say):
+    """Estimate, test and (if accepted) apply a power–speed lag (see ``structural``)."""
+    dt_med = float(np.median(np.diff(t_all)[np.diff(trip_codes_all) == 0])) if len(t_all) > 1 else 0.0
+    lags = lag_range(dt_med, opt.max_lag_s)
+    if len(lags) < 2:
+        return y_all, ana, None, None
+    shifted = {int(k): shift_within_trips(y_all, trip_codes_all, int(k)) for k in lags}
+    common = ana.copy()
+    for v in shifted.values():
+        common &= np.isfinite(v)
+    if common.sum() < 50:
+        return y_all, ana, None, None
+    idx = np.flatnonzero(common)
+    x = x_eq.take(idx)
+    tr0 = _declared_model(x, shifted[0][idx], dt_all[idx], t_all[idx], trip_codes_all[idx],
+                          trip_names, {}, opt, declared, decl_vals[idx])
+    res = timing(tr0, {k: v[idx] for k, v in shifted.items()}, dt_med, _paired_test)
+    note = {k: v for k, v in res.items() if k != "d"}
+    note["per_trip_lag_s"] = per_trip_lags(tr0, {k: v[idx] for k, v in shifted.items()}, dt_med)
+    note["test"] = ("lag chosen per fold on the training folds, scored on held-out blocks; "
+                    "d = SSE(lag 0) − SSE(chosen lag), the tracer's paired block test")
+    accepted = res["lag_samples"] != 0 and res["p_value"] < opt.alpha and res["rmse_gain"] >= opt.min_gain
+    note["accepted"] = bool(accepted)
+    say(f"timing: best lag {res['lag_s']:+.3g} s, held-out gain {100 * res['rmse_gain']:.2f} %, "
+        f"p = {res['p_value']:.3g} → {'applied' if accepted else 'not applied'}")
+    if not accepted:
+        return y_all, ana, None, note
+    y_new = shifted[res["lag_samples"]]
+    fold = tr0.fold_of(False)
+    before = tr0.heldout_pred(fold)
+    tr1 = _declared_model(x, y_new[idx], dt_all[idx], t_all[idx], trip_codes_all[idx],
+                          trip_names, {}, opt, declared, decl_vals[idx])
+    after = tr1.heldout_pred(fold)
+    y0, y1 = shifted[0][idx], y_new[idx]
+    per_trip_lag = note["per_trip_lag_s"]
+    same_sign = sum(1 for v in per_trip_lag.values() if np.sign(v) == np.sign(res["lag_s"]))
+    finding = {
+        "effect": (f"timing: the power signal is read {res['lag_s']:+.3g} s later relative to speed "
+                   f"({'power late, speed leads' if res['lag_s'] > 0 else 'speed lags the power'}); "
+                   "corrected in the data, not absorbed by coefficients"),
+        "role": "structural", "kind": "timing", "signals": [], "term": f"lag {res['lag_s']:+.3g} s",
+        "coefficient": res["lag_s"], "std_err": float(np.std(res["fold_lags_s"])),
+        "p_value": res["p_value"], "energy_share": None,
+        "metrics_before": _pick_metrics(_metrics(before, y0)),
+        "metrics_after": _pick_metrics(_metrics(after, y1)),
+        "replication": {"helped_trips": same_sign, "trips": len(per_trip_lag),
+                        "per_trip": {k: {"lag_s": v} for k, v in per_trip_lag.items()},
+                        "fold_lags_s": res["fold_lags_s"]}}
+    return y_new, common, finding, note

@@ -1,0 +1,228 @@
+"""Structural effects no column names (issue #11 §2): timing, regimes, air density, grade.
+
+Measurement-side effects are corrected in the data, not absorbed by coefficients:
+
+* **timing** — a lag between the power signal and the speed signal. For every shift ℓ
+  (whole samples, |ℓ·Δt| ≤ ``max_lag_s``) the measured power is read ℓ samples later,
+  y_ℓ(i) = y(i + ℓ) within a trip, and the declared terms are refitted. Held out: for each
+  fold the lag is chosen on the other folds (smallest training SSE) and the held-out
+  blocks are scored with it; d_b = SSE_b(ℓ = 0) − SSE_b(ℓ_fold) feeds the same paired test
+  as every candidate (one test, no multiplicity beyond it). When accepted, the lag chosen
+  on all data is applied to the measured power before the search goes on, and reported in
+  seconds: τ > 0 means the power signal is late relative to the speed signal (the speed
+  leads), τ < 0 that the speed lags. Per-trip lags are reported too.
+
+Model-side structure is offered as candidates (their own kind, role ``structural``):
+
+* **regimes** — ``[recuperation]*model``: the baseline model's power where it is negative
+  (drivetrain efficiency differs by direction: a coefficient c scales recuperation by
+  1 + c); ``[recuperation_below_<X>kW]``: min(P̂ + X, 0), the part of predicted
+  recuperation beyond X kW that friction brakes take over (c ≈ −1 when measured power
+  stops following the model there);
+* **air density** — ``[air_density_altitude]*TERM`` for each declared aero term, when the
+  log has elevation and ambient temperature but no pressure (the reader then assumes
+  101.325 kPa): the relative error of ρ, p(h)/p₀ − 1 with the standard-atmosphere
+  pressure p(h) = p₀·(1 − L·h/T₀)^(g·M/(R·L)) (ISO 2533);
+* **grade from an accelerometer** — where the log has a longitudinal accelerometer
+  (``imu_accel_mps2``, which reads dv/dt + g·sin θ), sin θ_acc = (a_imu − dv/dt)/g
+  smoothed over ``ACC_GRADE_WINDOW_S``; the candidate ``[grade_accelerometer]*grade`` is
+  (sin θ_acc − sin θ_log)/sin-scale × the grade term, i.e. it replaces the logged grade by
+  the accelerometer's where that fits better. Both grades are reported.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sumo_drvpw.fit.diagnose.candidates import Candidate
+from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.terms import parse_term
+
+#: ISO 2533 standard atmosphere: lapse rate [K/m], sea-level temperature [K], molar mass of
+#: dry air [kg/mol], universal gas constant [J/(mol·K)], sea-level pressure [kPa]
+LAPSE_K_PER_M = 0.0065
+T0_K = 288.15
+M_AIR = 0.0289644
+R_UNIVERSAL = 8.31446
+P0_KPA = 101.325
+#: smoothing of the accelerometer grade [s]
+ACC_GRADE_WINDOW_S = 5.0
+#: names of a longitudinal accelerometer column (reads dv/dt + g·sin θ)
+ACCELEROMETER_COLUMNS = ("imu_accel_mps2", "accel_long_mps2", "longitudinal_accel_mps2")
+#: recuperation levels of the brake-limit candidates: quantiles of predicted recuperation
+RECUP_QUANTILES = (0.5, 0.75, 0.9)
+
+
+def pressure_at_altitude_kpa(h_m) -> np.ndarray:
+    """Standard-atmosphere pressure at altitude h [m] → [kPa] (ISO 2533, troposphere)."""
+    h = np.asarray(h_m, dtype=float)
+    return P0_KPA * (1.0 - LAPSE_K_PER_M * h / T0_K) ** (G * M_AIR / (R_UNIVERSAL * LAPSE_K_PER_M))
+
+
+def shift_within_trips(y: np.ndarray, trip_codes: np.ndarray, lag: int) -> np.ndarray:
+    """y(i + lag) where sample i + lag is in the same trip, else NaN."""
+    n = len(y)
+    out = np.full(n, np.nan)
+    if lag == 0:
+        return np.asarray(y, float).copy()
+    src = np.arange(n) + lag
+    ok = (src >= 0) & (src < n)
+    ok[ok] &= trip_codes[src[ok]] == trip_codes[ok]
+    out[ok] = y[src[ok]]
+    return out
+
+
+def lag_range(dt_s: float, max_lag_s: float) -> np.ndarray:
+    """Whole-sample shifts to try: −L … L with L = floor(max_lag_s / dt)."""
+    if not dt_s > 0:
+        return np.array([0])
+    k = int(math.floor(max_lag_s / dt_s + 1e-9))
+    return np.arange(-k, k + 1)
+
+
+def timing(tr, y_by_lag: dict[int, np.ndarray], dt_s: float, paired_test) -> dict:
+    """Held-out test of a power–speed lag on the declared model (see module docstring).
+
+    Parameters
+    ----------
+    tr : :class:`~sumo_drvpw.fit.diagnose.blocks.BlockModel` with the declared terms, built
+        on samples where every shifted power is finite
+    y_by_lag : shift [samples] → measured power read that many samples later [W] (on tr's samples)
+    dt_s : sample interval [s]
+    paired_test : the tracer's one-sided block test (d_b → p)
+
+    Returns a dict with ``lag_samples``, ``lag_s`` (chosen on all data), ``fold_lags_s``,
+    ``p_value``, ``rmse_gain`` and the per-block ``d``.
+    """
+    lags = sorted(y_by_lag)
+    fold = tr.fold_of(False)
+    k = int(fold.max()) + 1
+    zz = tr.block_zz                                   # B × q × q
+    fold_zz = np.zeros((k,) + zz.shape[1:])
+    np.add.at(fold_zz, fold, zz)
+    train_zz = fold_zz.sum(0)[None] - fold_zz           # K × q × q
+    sse_train, sse_block = {}, {}
+    zmat = np.column_stack([tr.scaled(j) for j in range(len(tr.cols))])
+    for lag in lags:
+        ys = y_by_lag[lag] / tr.y_scale
+        zy = np.add.reduceat(zmat * ys[:, None], tr.starts, axis=0)   # B × q
+        yy = np.add.reduceat(ys * ys, tr.starts)
+        fzy = np.zeros((k, zy.shape[1]))
+        np.add.at(fzy, fold, zy)
+        fyy = np.bincount(fold, weights=yy, minlength=k)
+        tzy, tyy = fzy.sum(0)[None] - fzy, fyy.sum() - fyy
+        beta = tr._solve(train_zz, tzy)                                # K × q
+        sse_train[lag] = tyy - np.einsum("kq,kq->k", beta, tzy)
+        b = beta[fold]
+        sse_block[lag] = np.maximum(yy - 2 * np.einsum("bq,bq->b", b, zy)
+                                    + np.einsum("bi,bij,bj->b", b, zz, b), 0.0)
+        # all-data fit for the lag reported
+        full = tr._solve(fold_zz.sum(0), fzy.sum(0))
+        sse_train[(lag, "all")] = fyy.sum() - float(full @ fzy.sum(0))
+    train = np.array([sse_train[lag] for lag in lags])                # L × K
+    best_fold = np.argmin(train, axis=0)                               # per fold, in lag order
+    chosen = np.array([sse_block[lags[best_fold[f]]][b] for b, f in enumerate(fold)])
+    d = sse_block[0] - chosen
+    sse0, sse1 = float(sse_block[0].sum()), float(chosen.sum())
+    gain = 1.0 - math.sqrt(sse1 / sse0) if sse0 > 0 else 0.0
+    all_sse = [sse_train[(lag, "all")] for lag in lags]
+    lag_all = lags[int(np.argmin(all_sse))]
+    return {"lag_samples": int(lag_all), "lag_s": lag_all * dt_s,
+            "fold_lags_s": [lags[i] * dt_s for i in best_fold],
+            "p_value": paired_test(d) if lag_all != 0 else 1.0, "rmse_gain": gain, "d": d,
+            "rmse_by_lag_s": {f"{lag * dt_s:+.3g}": math.sqrt(max(s, 0.0) / len(tr.y)) * tr.y_scale
+                              for lag, s in zip(lags, all_sse)}}
+
+
+def per_trip_lags(tr, y_by_lag: dict[int, np.ndarray], dt_s: float) -> dict[str, float]:
+    """Best lag of each trip alone [s] (declared terms refitted per trip; for the report)."""
+    lags = sorted(y_by_lag)
+    zmat = np.column_stack([tr.scaled(j) for j in range(len(tr.cols))])
+    out = {}
+    for t in np.unique(tr.trip):
+        m = tr.trip == t
+        if m.sum() < 10 * zmat.shape[1]:
+            continue
+        zt = zmat[m]
+        a = zt.T @ zt
+        best, best_sse = 0, math.inf
+        for lag in lags:
+            yt = y_by_lag[lag][m] / tr.y_scale
+            b = zt.T @ yt
+            sse = float(yt @ yt - b @ np.linalg.lstsq(a, b, rcond=None)[0])
+            if sse < best_sse:
+                best, best_sse = lag, sse
+        out[str(tr.trip_names[t])] = best * dt_s
+    return out
+
+
+def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_df,
+                       counts: dict) -> tuple[dict, list[Candidate], dict]:
+    """Derived columns and candidates of the model-side structural effects.
+
+    Returns (name → values on the analysis samples, candidates, notes for the report).
+    """
+    sig, cands, notes = {}, [], {}
+    # regimes from the baseline (declared terms, all-data fit) prediction
+    f = tr.full_fit()
+    pred = np.zeros(tr.n)
+    for j, c in enumerate(tr.cols):
+        pred += f["beta"][c.offset] * tr.scaled(j) * tr.y_scale
+    neg = pred < 0
+    if neg.mean() > 0.02:
+        sig["recuperation"] = np.where(neg, pred, 0.0)
+        cands.append(Candidate("[recuperation]", "recuperation on its own coefficient: "
+                               "drivetrain efficiency differs by direction (1 + c scales recuperation)",
+                               (), "structural"))
+        for q in RECUP_QUANTILES:
+            lim = float(np.quantile(-pred[neg], q))
+            if lim <= 0:
+                continue
+            name = f"recuperation_below_{lim / 1000:.3g}kW"
+            sig[name] = np.minimum(pred + lim, 0.0)
+            cands.append(Candidate(f"[{name}]", f"a recuperation limit: beyond {lim / 1000:.3g} kW "
+                                   "of predicted recuperation, friction brakes take over", (), "structural"))
+    # air density from altitude when pressure is not logged
+    if ("elevation_m" in log_df and "ambient_c" in log_df and "pressure_kpa" not in log_df
+            and str(counts.get("air_density_source", "")).startswith("ideal gas")):
+        h = log_df["elevation_m"].to_numpy(float)[idx]
+        if np.isfinite(h).all():
+            rel = pressure_at_altitude_kpa(h) / P0_KPA - 1.0
+            sig["air_density_altitude"] = rel
+            notes["air_density_altitude"] = {"mean_relative_error_of_rho": float(np.mean(rel)),
+                                             "altitude_m": [float(h.min()), float(h.max())]}
+            for t in declared:
+                if parse_term(t).category == "aero" and not parse_term(t).signals:
+                    cands.append(Candidate(f"[air_density_altitude]*{t}",
+                                           f"air density from altitude: the log's ρ assumes sea-level "
+                                           f"pressure; {t} scaled by p(h)/p₀ − 1", (), "structural"))
+    # grade from a longitudinal accelerometer
+    acc_col = next((c for c in ACCELEROMETER_COLUMNS if c in x_all_signals), None)
+    grade_terms = [t for t in declared if parse_term(t).category == "grade" and not parse_term(t).signals]
+    if acc_col is not None and grade_terms:
+        imu = np.asarray(x_all_signals[acc_col], float)[idx]
+        if np.isfinite(imu).all():
+            x = tr.x
+            win = max(1, int(round(ACC_GRADE_WINDOW_S / max(float(np.median(np.diff(log_df["time_s"].to_numpy(float)))), 1e-3))))
+            import pandas as pd
+
+            s = pd.Series((imu - x.a) / G).groupby(tr.trip).transform(
+                lambda z: z.rolling(win, center=True, min_periods=1).mean()).to_numpy()
+            sin_acc = np.clip(s, -0.3, 0.3)
+            sin_log = np.sin(x.theta)
+            # factor on the grade term: (sin θ_acc − sin θ_log)/sin θ_log is ill-posed at 0;
+            # the candidate is the grade power difference m·g·v·(sin θ_acc − sin θ_log)
+            sig["grade_accelerometer"] = x.mass * G * x.v * (sin_acc - sin_log)
+            cands.append(Candidate("[grade_accelerometer]", f"grade measured by the accelerometer "
+                                   f"'{acc_col}' (reads dv/dt + g·sin θ) instead of the logged grade: "
+                                   "m·g·v·(sin θ_acc − sin θ_log)", (), "structural"))
+            notes["grade_sources"] = {
+                "accelerometer_column": acc_col,
+                "logged": {"mean_abs_deg": float(np.degrees(np.mean(np.abs(np.arcsin(np.clip(sin_log, -1, 1)))))),
+                           "sd_deg": float(np.degrees(np.std(np.arcsin(np.clip(sin_log, -1, 1)))))},
+                "accelerometer": {"mean_abs_deg": float(np.degrees(np.mean(np.abs(np.arcsin(sin_acc))))),
+                                  "sd_deg": float(np.degrees(np.std(np.arcsin(sin_acc))))},
+                "corr": float(np.corrcoef(sin_acc, sin_log)[0, 1]) if sin_log.std() > 0 else math.nan}
+    return sig, cands, notes
