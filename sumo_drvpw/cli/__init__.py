@@ -30,9 +30,8 @@ COMMANDS = {
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # argparse already exits 2; keep its one-line style
-        self.print_usage(sys.stderr)
-        self.exit(2, f"{self.prog}: error: {message}\n")
+    def error(self, message):  # exit 2 with one line, as for every other bad input
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -84,6 +83,39 @@ def output_set(args, out, inputs=(), meta=None):
 
     return fileio.output_set(out, force=bool(getattr(args, "force", False)),
                              inputs=existing_paths(inputs), meta=meta)
+
+
+def add_log_options(p) -> None:
+    """How drive logs are read: --speed-unit and --negative-speed-tolerance."""
+    g = p.add_argument_group("reading drive logs")
+    g.add_argument("--speed-unit", choices=("m/s", "km/h", "mph"),
+                   help="unit of the logs' speed_mps column (default m/s, checked: speeds whose implied "
+                        "accelerations only make sense in km/h are refused; m/s = trust the log)")
+    g.add_argument("--negative-speed-tolerance", type=float, default=0.1, metavar="M_S",
+                   help="speeds in [-M_S, 0) are standstill noise, clipped to 0 and counted (default 0.1)")
+
+
+def read_options(args):
+    """:class:`sumo_drvpw.data.log.ReadOptions` from the options of :func:`add_log_options`."""
+    from sumo_drvpw.data.log import ReadOptions, check_options
+
+    tol = getattr(args, "negative_speed_tolerance", None)
+    opt = ReadOptions(speed_unit=getattr(args, "speed_unit", None),
+                      negative_speed_tolerance_mps=0.1 if tol is None else tol)
+    try:
+        return check_options(opt)
+    except UserError as e:
+        raise UserError(f"--negative-speed-tolerance / --speed-unit: {e}") from None
+
+
+def note_counts(counts: dict) -> None:
+    """Print what the log reader changed or assumed (e.g. clipped standstill noise)."""
+    n = int(counts.get("clipped_negative_speed", 0) or 0)
+    if n:
+        tol = counts.get("negative_speed_tolerance_mps", 0.1)
+        print(f"note: {n} speed sample(s) in [-{tol:g}, 0) m/s clipped to 0 (standstill sensor noise)")
+    if counts.get("speed_unit"):
+        print(f"note: speed_mps read in {counts['speed_unit']}")
 
 
 class _Terminated(KeyboardInterrupt):

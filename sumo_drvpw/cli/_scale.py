@@ -50,8 +50,12 @@ def check_engine_arguments(args) -> None:
 def _run(args, make, vehicle):
     from sumo_drvpw.fit.engine import run
 
-    return run(args.logs, make, vehicle, engine=args.engine, scheduler=args.scheduler,
-               workers=args.workers)
+    from sumo_drvpw.cli import read_options
+    from sumo_drvpw.data.log import check_distinct_trips
+
+    check_distinct_trips(args.logs)  # the in-memory reader checks this while reading
+    return run(args.logs, make, vehicle, options=read_options(args), engine=args.engine,
+               scheduler=args.scheduler, workers=args.workers)
 
 
 def _context(st, vehicle, n_used: int) -> dict:
@@ -77,7 +81,13 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     if st.mass_n == 0:
         raise UserError(f"{', '.join(map(str, args.logs))}: no usable samples "
                         f"(all excluded: {st.counts})")
+    from sumo_drvpw.cli import note_counts
+    from sumo_drvpw.cli.calibrate import check_identified
+
+    note_counts(st.counts)
     res = calibrate_from_stats(st, args.p_enter, args.p_remove)
+
+    check_identified(res, ", ".join(map(str, args.logs)))
     eq = res.to_equation(args.name or out.stem, provenance={
         "logs": st.files, "vehicle": veh.path if veh else None, "power_source": st.source,
         "candidates_spec": args.candidates})

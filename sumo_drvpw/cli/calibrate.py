@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sumo_drvpw.cli import add_force, existing_paths, output_set
+import numpy as np
+
+from sumo_drvpw.cli import add_force, add_log_options, existing_paths, note_counts, output_set, read_options
 from sumo_drvpw.cli._scale import add_engine_arguments
 from sumo_drvpw.errors import UserError
 
@@ -20,6 +22,7 @@ def configure(p):
     p.add_argument("--report", metavar="DIR", help="also write the comparison report here "
                    "(the folder is written whole, or not at all)")
     add_force(p)
+    add_log_options(p)
     p.add_argument("--compare-with", action="append", metavar="EQ",
                    help="equations for the report (default: vsp_ldv1999 and VSP from the vehicle's specs)")
     p.add_argument("--p-enter", type=float, default=0.10, help="p-value to enter (default 0.10)")
@@ -71,10 +74,17 @@ def main(args) -> int:
         from sumo_drvpw.cli._scale import calibrate_streamed
 
         return calibrate_streamed(args, cands, out, inputs)
-    m = load_measured(args.logs, args.vehicle)
+    m = load_measured(args.logs, args.vehicle, read_options(args))
+    note_counts(m.counts)
+    moving = np.unique(np.round(m.inputs.v[m.usable & (m.inputs.v > MOVING_MPS)], 1))
+    if len(moving) < 2:
+        raise UserError(f"{m.log.describe()}: speed takes {len(moving)} distinct value(s) above "
+                        f"{MOVING_MPS:g} m/s on the usable samples; {', '.join(cands)} cannot be "
+                        "identified (they need the speed to vary); calibrate on a log with varying speed")
     ref_mass = float(m.inputs.mass[m.usable].mean())
     res = calibrate(m.inputs, m.power_w, cands, mask=m.usable, p_enter=args.p_enter,
                     p_remove=args.p_remove, counts=m.counts, reference_mass_kg=ref_mass)
+    check_identified(res, m.log.describe())
     name = args.name or out.stem
     eq = res.to_equation(name, provenance={
         "logs": m.log.files, "vehicle": m.vehicle.path if m.vehicle else None,
@@ -89,6 +99,34 @@ def main(args) -> int:
         save_equation(eq, out)
     print(f"wrote {out}")
     return 0
+
+
+#: speeds above this count as moving for the identifiability check [m/s]
+MOVING_MPS = 0.5
+#: power of v in the flat-road, still-air column of the speed-only terms (others: not checked)
+SPEED_POWER = {"aero": 3, "aero_rho": 3, "v3": 3, "roll_v2": 2, "v2": 2, "roll": 1, "v1": 1}
+
+
+def check_identified(res, where: str) -> None:
+    """Refuse a calibration whose data cannot tell its candidate terms apart.
+
+    Two collapses mean the log is unfit, not that the model lacks a term: ``acc`` (m·v·a)
+    zero on the data (speed never changes), or fewer distinct powers of v among the kept
+    speed-only terms (aero ~ v³, roll ~ v, …) than among the candidates (too few distinct
+    speeds: v³ becomes proportional to v). A column identical to another by physics on these
+    data (``v3`` = ``aero`` without wind) is dropped quietly, as stepwise reports.
+    """
+    dropped = {d["term"]: d["reason"] for d in res.dropped}
+    bad = [t for t, r in dropped.items() if t == "acc" and r.startswith("zero")]
+    offered = {SPEED_POWER[t] for t in list(res.settings.get("candidates", [])) + list(dropped)
+               if t in SPEED_POWER}
+    kept = {SPEED_POWER[t] for t in res.settings.get("candidates", []) if t in SPEED_POWER and t not in dropped}
+    if len(kept) < len(offered):
+        bad += [t for t in dropped if t in SPEED_POWER and SPEED_POWER[t] not in kept]
+    if bad:
+        raise UserError(f"{where}: {', '.join(f'{t} ({dropped[t]})' for t in bad)}: these terms cannot "
+                        "be identified because the speed takes too few distinct values; calibrate on "
+                        "a log with varying speed")
 
 
 def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
@@ -134,14 +172,14 @@ def main_chain(args) -> int:
             hvac = {"column": col, "setpoint_c": float(sp) if sp else 20.0}
         except ValueError:
             raise UserError(f"--hvac {args.hvac}: the set-point after ':' must be a number (°C)") from None
-    m = load_measured(args.logs, args.vehicle, target=args.target)
+    m = load_measured(args.logs, args.vehicle, read_options(args), target=args.target)
     if args.equation:
         eq = resolve_equations([args.equation], m.vehicle)[0]
         road = f"road-load equation {eq.name} ({eq.path or 'built in'})"
     else:
         from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
 
-        mw = load_measured(args.logs, args.vehicle)
+        mw = load_measured(args.logs, args.vehicle, read_options(args))
         res = calibrate(mw.inputs, mw.power_w, resolve_candidates(args.candidates), mask=mw.usable,
                         p_enter=args.p_enter, p_remove=args.p_remove, counts=mw.counts,
                         reference_mass_kg=float(mw.inputs.mass[mw.usable].mean()))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sumo_drvpw.cli import add_force, output_set
+from sumo_drvpw.cli import add_force, add_log_options, note_counts, output_set, read_options
 from sumo_drvpw.cli._scale import add_engine_arguments
 
 
@@ -18,6 +18,7 @@ def configure(p):
                    help="compare driving power (wheel), battery V·I or fuel flow (default: what the "
                         "equations' energy chains predict when they all predict the same, else wheel)")
     add_force(p)
+    add_log_options(p)
     add_engine_arguments(p)
 
 
@@ -36,7 +37,8 @@ def main(args) -> int:
 
             pred = {load_equation(s).predicts for s in args.equation if s != "vsp_spec"}
             target = pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
-        m = load_measured(args.logs, args.vehicle, target=target)
+        m = load_measured(args.logs, args.vehicle, read_options(args), target=target)
+        note_counts(m.counts)
         eqs = resolve_equations(args.equation, m.vehicle)
         u = m.usable
         comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],

@@ -29,6 +29,21 @@ FLAGS = ("brake", "reverse")
 DERIVED = ("trip_id", "time_s", "speed_mps", "accel_mps2", "grade_rad", "wind_mps",
            "air_density_kgm3", "mass_kg", "brake", "reverse", "dt_s")
 SPEED_MAX_MPS = 100.0
+#: Speed units a log may declare (``ReadOptions.speed_unit``) → factor to m/s.
+SPEED_UNITS = {"m/s": 1.0, "km/h": 1 / 3.6, "mph": 0.44704}
+#: 99th percentile of |Δv/Δt| over ~1 s above which m/s speeds are implausible [m/s²]:
+#: real logs stay below 3.2 (BMW i3 trips 2.2 overall, 3.1 in the liveliest trip; Prius
+#: Gen-2 OBD 1.7; JLU dynamometer cycles 1.5); the same speeds in km/h give 3.6× that.
+KMH_SUSPECT_ACCEL_MPS2 = 4.5
+#: Plausible ranges of optional physical columns: (low, high, unit, hint when outside).
+RANGES = {
+    "mass_kg": (1.0, 1.0e5, "kg", "a vehicle mass is > 0 and at most 100 t"),
+    "pressure_kpa": (10.0, 200.0, "kPa", "ambient pressure in kPa (101.3 at sea level; in Pa? divide by 1000)"),
+    "ambient_c": (-90.0, 80.0, "°C", "ambient temperature in °C (in K? subtract 273.15)"),
+    "air_density_kgm3": (0.1, 2.0, "kg/m³", "air density is about 1.2 kg/m³"),
+    "wind_mps": (-100.0, 100.0, "m/s", "wind along the direction of travel, in m/s"),
+    "airspeed_mps": (-50.0, 150.0, "m/s", "air speed in m/s"),
+}
 #: Bundled demo log (package data): a synthetic Prius3 test-track log, see its README.
 BUNDLED_LOG = "prius3_testtrack.parquet"
 GRADE_MAX_RAD = 0.6
@@ -49,6 +64,11 @@ class ReadOptions:
     accel_window_s: float = 0.5
     grade_window_m: float = 100.0
     accel_outlier_mps2: float = 8.0
+    #: speeds in [−tolerance, 0) are standstill sensor noise: clipped to 0 and counted [m/s]
+    negative_speed_tolerance_mps: float = 0.1
+    #: unit of ``speed_mps`` as logged: None = m/s, checked against implausible implied
+    #: accelerations (km/h mistaken for m/s); "m/s" = trust; "km/h" or "mph" = convert
+    speed_unit: str | None = None
 
 
 @dataclass
@@ -191,11 +211,29 @@ def _check_flags(df: pd.DataFrame, p: Path) -> None:
         df[c] = s.map(mapping).astype(bool)
 
 
-def _validate(df: pd.DataFrame, p: Path) -> None:
+def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
+    """The spec's bad-input rules; converts a declared speed unit and clips standstill noise.
+
+    Returns the number of speeds in [−tolerance, 0) clipped to 0 (``df`` is changed in place).
+    """
+    opt = opt or ReadOptions()
+    dup = df.columns[df.columns.duplicated()]
+    if len(dup):
+        raise UserError(f"{p}: column '{dup[0]}' appears twice; give each column once")
+    if not isinstance(df.columns, pd.RangeIndex):
+        mangled = [c for c in map(str, df.columns) if c.rsplit(".", 1)[0] in REQUIRED + NUMERIC
+                   and c.rsplit(".", 1)[-1].isdigit() and c.rsplit(".", 1)[0] in df]
+        if mangled:  # pandas renames a repeated CSV header 'x' to 'x.1'
+            raise UserError(f"{p}: column '{mangled[0].rsplit('.', 1)[0]}' appears twice "
+                            f"(the second is read as '{mangled[0]}'); give each column once")
     for c in REQUIRED:
         if c not in df:
             raise UserError(f"{p}: missing required column '{c}' (columns: "
                             f"{', '.join(map(str, df.columns[:12]))}{'…' if df.shape[1] > 12 else ''})")
+    for c in NUMERIC:
+        if c in df and pd.api.types.is_bool_dtype(df[c]):
+            raise UserError(f"{p}: column '{c}' is boolean (True/False), not a number in "
+                            f"{'m/s' if c == 'speed_mps' else 'SI units'}")
     _check_numeric(df, p)
     _check_flags(df, p)
     for c in REQUIRED:
@@ -203,15 +241,39 @@ def _validate(df: pd.DataFrame, p: Path) -> None:
         if nan.any():
             raise UserError(f"{p}: column '{c}' is empty (NaN) at row {int(np.flatnonzero(nan)[0])}; "
                             "a required column needs a value in every row")
+    for c in NUMERIC:
+        if c in df:
+            x = df[c].to_numpy(float, na_value=np.nan)
+            inf = np.isinf(x)
+            if inf.any():
+                i = int(np.flatnonzero(inf)[0])
+                raise UserError(f"{p}: column '{c}' is {x[i]:g} at row {i}; values must be finite")
+    if opt.speed_unit not in (None, "m/s"):
+        df["speed_mps"] = df["speed_mps"].to_numpy(float) * SPEED_UNITS[opt.speed_unit]
     v = df["speed_mps"].to_numpy(float)
     if (v > SPEED_MAX_MPS).any():
         i = int(np.flatnonzero(v > SPEED_MAX_MPS)[0])
         raise UserError(f"{p}: column 'speed_mps' is {v[i]:g} at row {i}, above {SPEED_MAX_MPS:g} m/s: "
                         "is the speed in km/h? convert to m/s (divide by 3.6)")
-    if (v < 0).any():
-        i = int(np.flatnonzero(v < 0)[0])
-        raise UserError(f"{p}: column 'speed_mps' is negative ({v[i]:g}) at row {i}; speed over "
-                        "ground is >= 0 (mark reversing with the 'reverse' column)")
+    tol = opt.negative_speed_tolerance_mps
+    if (v < -tol).any():
+        i = int(np.flatnonzero(v < -tol)[0])
+        raise UserError(f"{p}: column 'speed_mps' is negative ({v[i]:g}) at row {i}, below the "
+                        f"standstill noise tolerance −{tol:g} m/s; speed over ground is >= 0 "
+                        "(mark reversing with the 'reverse' column)")
+    noise = v < 0
+    n_clipped = int(noise.sum())
+    if n_clipped:
+        v = np.where(noise, 0.0, v)
+        df["speed_mps"] = v
+    for c, (lo, hi, unit, hint) in RANGES.items():
+        if c in df:
+            x = df[c].to_numpy(float, na_value=np.nan)
+            bad = (x < lo) | (x > hi)
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise UserError(f"{p}: column '{c}' is {x[i]:g} at row {i}, outside "
+                                f"[{lo:g}, {hi:g}] {unit}: {hint}")
     t = df["time_s"].to_numpy(float)
     trip = df["trip_id"].to_numpy()
     same = trip[1:] == trip[:-1]
@@ -228,6 +290,83 @@ def _validate(df: pd.DataFrame, p: Path) -> None:
                 i = int(np.flatnonzero(bad)[0])
                 raise UserError(f"{p}: column '{c}' is {g[i]:g} at row {i}, beyond ±{lim:.3g} "
                                 f"({'rad' if c == 'grade_rad' else '%'}): not a road grade")
+    if opt.speed_unit is None:
+        _check_speed_unit(v, t, trip, p)
+    return n_clipped
+
+
+def implied_acceleration(v: np.ndarray, t: np.ndarray, trip: np.ndarray, horizon_s: float = 1.0) -> np.ndarray:
+    """|Δv/Δt| over about ``horizon_s`` within trips, for samples where the car moves [m/s²].
+
+    Parameters
+    ----------
+    v : speed [m/s]; t : time [s], increasing within a trip; trip : trip id per sample
+    horizon_s : time to the partner sample [s] (≥ 1 s damps quantisation noise)
+
+    Each sample is paired with the first sample at least ``horizon_s`` later in the same
+    trip; pairs more than 3·horizon apart (gaps) or both below 0.5 m/s are left out.
+    """
+    n = len(v)
+    if n < 2:
+        return np.zeros(0)
+    codes = pd.factorize(trip)[0]
+    key = codes * (np.nanmax(np.abs(t)) * 4 + 4 * horizon_s + 1.0) + t  # trips never overlap
+    j = np.searchsorted(key, key + horizon_s)
+    ok = j < n
+    i = np.flatnonzero(ok)
+    j = j[ok]
+    dt = t[j] - t[i]
+    good = (codes[j] == codes[i]) & (dt > 0) & (dt <= 3 * horizon_s) & (np.maximum(v[i], v[j]) > 0.5)
+    return np.abs((v[j] - v[i])[good] / dt[good])
+
+
+def _check_speed_unit(v: np.ndarray, t: np.ndarray, trip: np.ndarray, p: Path) -> None:
+    """Refuse m/s speeds whose implied accelerations only make sense in km/h."""
+    a = implied_acceleration(v, t, trip)
+    if len(a) < 50:
+        return
+    q = float(np.percentile(a, 99))
+    if q > KMH_SUSPECT_ACCEL_MPS2:
+        raise UserError(f"{p}: column 'speed_mps' implies accelerations of {q:.1f} m/s² (99th "
+                        f"percentile over 1 s; real driving stays below {KMH_SUSPECT_ACCEL_MPS2:g}), "
+                        f"{q / 3.6:.1f} m/s² if the speed is in km/h: is it km/h? declare the unit "
+                        "(speed unit km/h or m/s)")
+
+
+def check_distinct_trips(paths) -> None:
+    """No trip id in two files (a file without ``trip_id`` is the trip named by its stem).
+
+    Reads only the ``trip_id`` column; raises UserError naming the trip and both files.
+    """
+    seen: dict[str, Path] = {}
+    for p in expand_paths(paths):
+        ids = _trip_ids(p)
+        for tid in ids:
+            if tid in seen:
+                raise UserError(f"{p}: trip_id '{tid}' is also in {seen[tid]}; samples of one trip "
+                                "belong in one file, give each trip its own id")
+        for tid in ids:
+            seen[tid] = p
+
+
+def _trip_ids(p: Path) -> list[str]:
+    try:
+        if p.suffix.lower() == ".parquet":
+            import pyarrow.parquet as pq
+
+            if "trip_id" not in pq.read_schema(p).names:
+                return [p.stem]
+            col = pq.read_table(p, columns=["trip_id"]).column(0).to_pandas()
+        else:
+            head = pd.read_csv(p, nrows=0)
+            if "trip_id" not in head:
+                return [p.stem]
+            col = pd.read_csv(p, usecols=["trip_id"])["trip_id"]
+    except pd.errors.EmptyDataError:
+        return []
+    except (OSError, ValueError, pd.errors.ParserError) as e:
+        raise UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}") from None
+    return [str(x) for x in pd.unique(col.dropna().astype(str))]
 
 
 def _trip_starts(trip: np.ndarray) -> np.ndarray:
@@ -327,15 +466,32 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
     else 0; air density = ``air_density_kgm3``, else p/(R·T) from ``ambient_c`` and
     ``pressure_kpa`` (101.325 kPa if absent), else 1.2041 kg/m³.
     """
-    opt = options or ReadOptions()
+    opt = check_options(options or ReadOptions())
     files = expand_paths(paths)
-    frames, meta = [], {}
+    frames, meta, clipped, owner = [], {}, 0, {}
     for p in files:
         df, m = _read_table(p)
         meta.update(m)
-        frames.append(_prepare(df, p, p.stem))
+        df, n = _prepare(df, p, p.stem, opt)
+        for tid in pd.unique(df["trip_id"]):
+            if tid in owner:
+                raise UserError(f"{p}: trip_id '{tid}' is also in {owner[tid]}; samples of one trip "
+                                "belong in one file, give each trip its own id")
+            owner[tid] = p
+        frames.append(df)
+        clipped += n
     df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
-    return _derive(df, [str(p) for p in files], meta, vehicle, opt)
+    return _derive(df, [str(p) for p in files], meta, vehicle, opt, clipped)
+
+
+def check_options(opt: ReadOptions) -> ReadOptions:
+    """Reading options within their meaning; a UserError names the option's value."""
+    if opt.speed_unit is not None and opt.speed_unit not in SPEED_UNITS:
+        raise UserError(f"speed unit {opt.speed_unit!r} is not one of {', '.join(SPEED_UNITS)}")
+    tol = opt.negative_speed_tolerance_mps
+    if not (np.isfinite(tol) and 0 <= tol <= 1.0):
+        raise UserError(f"negative speed tolerance {tol:g} m/s: give a value in [0, 1] m/s")
+    return opt
 
 
 def from_frame(df: pd.DataFrame, vehicle=None, options: ReadOptions | None = None,
@@ -346,13 +502,16 @@ def from_frame(df: pd.DataFrame, vehicle=None, options: ReadOptions | None = Non
     writing a file. ``df`` is copied, never modified; ``name`` stands for the file name in
     error messages and in ``DriveLog.files``.
     """
-    opt = options or ReadOptions()
-    frame = _prepare(df.copy(), Path(name), Path(name).stem)
-    return _derive(frame.reset_index(drop=True), [str(name)], {}, vehicle, opt)
+    opt = check_options(options or ReadOptions())
+    frame, clipped = _prepare(df.copy(), Path(name), Path(name).stem, opt)
+    return _derive(frame.reset_index(drop=True), [str(name)], {}, vehicle, opt, clipped)
 
 
-def _prepare(df: pd.DataFrame, p: Path, default_trip: str) -> pd.DataFrame:
-    """trip_id (default: the file stem) as text, then the spec's bad-input checks."""
+def _prepare(df: pd.DataFrame, p: Path, default_trip: str,
+             opt: ReadOptions | None = None) -> tuple[pd.DataFrame, int]:
+    """trip_id (default: the file stem) as text, then the spec's bad-input checks.
+
+    Returns the frame and the number of standstill-noise speeds clipped to 0."""
     if "trip_id" not in df:
         df.insert(0, "trip_id", default_trip)
     else:
@@ -361,19 +520,29 @@ def _prepare(df: pd.DataFrame, p: Path, default_trip: str) -> pd.DataFrame:
             i = int(np.flatnonzero(tid.isna().to_numpy())[0])
             raise UserError(f"{p}: column 'trip_id' is empty at row {i}")
         df["trip_id"] = tid.astype(str)
-    _validate(df, p)
-    return df
+    if len(df) < 2:
+        raise UserError(f"{p}: a single sample; a drive log needs at least 2 samples per file "
+                        "(acceleration and time weights come from neighbouring samples)")
+    clipped = _validate(df, p, opt)
+    return df, clipped
 
 
-def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOptions) -> DriveLog:
+def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOptions,
+            clipped: int = 0) -> DriveLog:
     """Derived inputs, exclusion mask and counts of validated, concatenated tables."""
-    counts: dict = {"files": len(files), "rows": int(len(df))}
-    if len(files) > 1:
-        dup = df["trip_id"].duplicated() & _trip_starts(df["trip_id"].to_numpy())
-        if dup.any():
-            i = int(np.flatnonzero(dup.to_numpy())[0])
-            raise UserError(f"trip_id '{df['trip_id'].iloc[i]}' appears in more than one place "
-                            f"(row {i} of the combined logs); give each trip its own id")
+    counts: dict = {"files": len(files), "rows": int(len(df)),
+                    "clipped_negative_speed": int(clipped),
+                    "negative_speed_tolerance_mps": opt.negative_speed_tolerance_mps}
+    if opt.speed_unit not in (None, "m/s"):
+        counts["speed_unit"] = f"{opt.speed_unit} (converted to m/s)"
+    # a trip that reappears after another trip (within a file, or across files)
+    dup = df["trip_id"].duplicated() & _trip_starts(df["trip_id"].to_numpy())
+    if dup.any():
+        i = int(np.flatnonzero(dup.to_numpy())[0])
+        where = files[0] if len(files) == 1 else f"{len(files)} files"
+        raise UserError(f"{where}: trip_id '{df['trip_id'].iloc[i]}' appears in more than one "
+                        f"place (again at row {i}); samples of a trip must be contiguous, give "
+                        "each trip its own id")
     trip_codes = pd.factorize(df["trip_id"])[0]
     counts["trips"] = int(trip_codes.max() + 1)
     t = df["time_s"].to_numpy(float)
@@ -428,9 +597,13 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     if "air_density_kgm3" in df:
         counts["air_density_source"] = "air_density_kgm3 column"
     elif "ambient_c" in df:
-        p_kpa = df["pressure_kpa"].to_numpy(float) if "pressure_kpa" in df else P_STD_KPA
-        df["air_density_kgm3"] = p_kpa * 1000.0 / (R_DRY_AIR * (df["ambient_c"].to_numpy(float) + KELVIN))
+        p_kpa = df["pressure_kpa"].to_numpy(float) if "pressure_kpa" in df else np.full(len(df), P_STD_KPA)
+        p_kpa = np.where(np.isnan(p_kpa), P_STD_KPA, p_kpa)  # missing pressure: standard
+        rho = p_kpa * 1000.0 / (R_DRY_AIR * (df["ambient_c"].to_numpy(float) + KELVIN))
+        missing = np.isnan(rho)  # no temperature logged in that sample: the default density
+        df["air_density_kgm3"] = np.where(missing, RHO_DEFAULT, rho)
         counts["air_density_source"] = "ideal gas from ambient_c and pressure_kpa"
+        counts["air_density_default_samples"] = int(missing.sum())
     else:
         df["air_density_kgm3"] = RHO_DEFAULT
         counts["air_density_source"] = f"default {RHO_DEFAULT} kg/m³"
