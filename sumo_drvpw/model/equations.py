@@ -31,6 +31,7 @@ part of column names and XML attribute names).
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from importlib import resources
@@ -192,13 +193,39 @@ def builtin_names() -> list[str]:
     return sorted(p.stem for p in BUILTIN_DIR.glob("*.toml"))
 
 
+#: |coefficient| above this is not a physical coefficient in any term basis (masses are in
+#: the basis; β on mass-free bases stay below 1e5 even for 40 t trucks)
+COEF_MAX = 1.0e6
+#: plausible vehicle mass for equation.mass_kg and reference_mass_kg [kg]
+MASS_RANGE_KG = (1.0, 1.0e5)
+
+
 def _floats(table: dict, where: str) -> dict[str, float]:
+    if not isinstance(table, dict):
+        raise UserError(f"{where}: must be a table of term = number, got {table!r}")
     out = {}
     for k, v in table.items():
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise UserError(f"{where}: value of '{k}' must be a number, got {v!r}")
+        if not math.isfinite(v):
+            raise UserError(f"{where}: value of '{k}' must be a finite number, got {v!r}")
+        if abs(v) > COEF_MAX:
+            raise UserError(f"{where}: value of '{k}' is {v:g}, beyond ±{COEF_MAX:g}: not a "
+                            "coefficient of this term basis")
         out[str(k)] = float(v)
     return out
+
+
+def _mass(meta: dict, key: str, where: str) -> float | None:
+    """equation.<key> as a plausible mass [kg], or None when absent."""
+    v = meta.get(key)
+    if v is None:
+        return None
+    lo, hi = MASS_RANGE_KG
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi):
+        raise UserError(f"{where}: equation.{key} must be a vehicle mass in [{lo:g}, {hi:g}] kg, "
+                        f"got {v!r}")
+    return float(v)
 
 
 def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
@@ -211,7 +238,8 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
     meta = doc.get("equation")
     if not isinstance(meta, dict) or "name" not in meta:
         raise UserError(f"{where}: missing [equation] table with a 'name'")
-    ref = meta.get("reference_mass_kg")
+    ref = _mass(meta, "reference_mass_kg", where)
+    _mass(meta, "mass_kg", where)
     if "beta" in doc and "terms" in doc:
         raise UserError(f"{where}: give either [terms] or [beta], not both")
     if "beta" in doc:
@@ -225,6 +253,9 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
         std = _floats(doc.get("std_err", {}), f"{where} [std_err]")
     else:
         raise UserError(f"{where}: missing [terms] (or [beta]) table")
+    neg = [k for k, v in std.items() if v < 0]
+    if neg:
+        raise UserError(f"{where}: [std_err] '{neg[0]}' is {std[neg[0]]:g}; a standard error is >= 0")
     mass = meta.get("mass_kg")
     name = str(meta["name"])
     if not re.match(NAME_PATTERN, name):
