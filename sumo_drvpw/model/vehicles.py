@@ -80,6 +80,60 @@ class Vehicle:
         return float(self.powertrain.get("inertia_kgm2", {}).get(key, 0.0))
 
 
+#: Physical ranges of vehicle-file numbers, "table.key" → (low, high) with low < value ≤ high
+#: (zero or negative is refused wherever physics forbids it). Units as in the key names.
+NUMBER_RANGES = {
+    "vehicle.mass_kg": (0.0, 1.0e5),
+    "body.drag_coefficient": (0.0, 3.0),
+    "body.frontal_area_m2": (0.0, 30.0),
+    "body.rolling_coefficient": (0.0, 0.1),
+    "body.rotating_mass_factor": (-1e-12, 1.0),  # ε_i ≥ 0
+    "powertrain.sun_teeth": (0.0, 500.0),
+    "powertrain.ring_teeth": (0.0, 500.0),
+    "powertrain.mg2_reduction": (0.0, 50.0),
+    "powertrain.counter_ratio": (0.0, 50.0),
+    "powertrain.final_drive": (0.0, 50.0),
+    "powertrain.gear_ratio": (0.0, 50.0),
+    "powertrain.wheel_radius_m": (0.05, 2.0),
+}
+#: rotational inertias [kg·m²]: 0 ≤ J ≤ this
+INERTIA_MAX_KGM2 = 1.0e3
+
+
+def check_numbers(doc: dict, p) -> None:
+    """Every number in [vehicle], [body], [powertrain] finite; known keys in physical range.
+
+    Raises UserError naming the file, the key and the value.
+    """
+    import math
+
+    def num(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    for table in ("vehicle", "body", "powertrain"):
+        t = doc.get(table, {})
+        if not isinstance(t, dict):
+            raise UserError(f"{p}: [{table}] must be a table")
+        for k, v in t.items():
+            key = f"{table}.{k}"
+            if isinstance(v, dict):
+                for k2, v2 in v.items():
+                    if not num(v2) or not math.isfinite(v2) or (
+                            k == "inertia_kgm2" and not 0 <= v2 <= INERTIA_MAX_KGM2):
+                        raise UserError(f"{p}: {key}.{k2} = {v2!r}: "
+                                        + (f"an inertia is a number in [0, {INERTIA_MAX_KGM2:g}] kg·m²"
+                                           if k == "inertia_kgm2" else "must be a finite number"))
+                continue
+            if key in NUMBER_RANGES:
+                lo, hi = NUMBER_RANGES[key]
+                if not num(v) or not math.isfinite(v) or not lo < v <= hi:
+                    raise UserError(f"{p}: {key} = {v!r}: must be a number in "
+                                    f"({max(lo, 0):g}, {hi:g}]" if lo >= 0 else
+                                    f"{p}: {key} = {v!r}: must be a number in [0, {hi:g}]")
+            elif num(v) and not math.isfinite(v):
+                raise UserError(f"{p}: {key} = {v!r}: must be a finite number")
+
+
 def vehicle_names() -> list[str]:
     return sorted(p.stem for p in VEHICLE_DIR.glob("*.toml"))
 
@@ -96,6 +150,7 @@ def load_vehicle(spec: str | Path) -> Vehicle:
     meta = doc.get("vehicle", {})
     if "mass_kg" not in meta:
         raise UserError(f"{p}: [vehicle] lacks 'mass_kg'")
+    check_numbers(doc, p)
     v = Vehicle(name=str(meta.get("name", p.stem)), mass_kg=float(meta["mass_kg"]),
                 description=str(meta.get("description", "")), body=doc.get("body", {}),
                 powertrain=doc.get("powertrain", {}), battery=doc.get("battery", {}),
