@@ -89,10 +89,34 @@ def load_mapping(path) -> dict:
     na = opts.get("na_values", ["-", ""])
     if isinstance(na, str):
         na = [na]
+    _check_text_options(p, opts, entries)
     return {"path": p, "sep": str(opts.get("sep", ",")), "encoding": str(opts.get("encoding", "utf-8")),
             "decimal": str(opts.get("decimal", ".")), "time_format": opts.get("time_format"),
             "na_values": [str(x) for x in na], "keep_unmapped": bool(opts.get("keep_unmapped", True)),
             "columns": entries}
+
+
+def _check_text_options(p, opts: dict, entries: dict) -> None:
+    """options.encoding a known codec, sep/decimal distinct single characters, scale ≠ 0."""
+    import codecs
+
+    enc = opts.get("encoding", "utf-8")
+    try:
+        if not isinstance(enc, str):
+            raise LookupError
+        codecs.lookup(enc)
+    except LookupError:
+        raise UserError(f"{p}: options.encoding {enc!r} is not a known text encoding "
+                        "(e.g. utf-8, latin-1, cp1252, utf-16)") from None
+    sep, dec = opts.get("sep", ","), opts.get("decimal", ".")
+    for k, v in (("sep", sep), ("decimal", dec)):
+        if not isinstance(v, str) or not v:
+            raise UserError(f"{p}: options.{k} must be a non-empty text, got {v!r}")
+    if sep == dec:
+        raise UserError(f"{p}: options.decimal {dec!r} equals options.sep: numbers could not be told apart")
+    zero = [label for label, e in entries.items() if e.get("kind") == "number" and e["factor"] == 0]
+    if zero:
+        raise UserError(f"{p}: columns.{zero[0]!r}.scale is 0: every value would read as 0")
 
 
 def mapping_roles(path) -> dict[str, str]:
