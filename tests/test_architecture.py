@@ -1,0 +1,180 @@
+"""The house keeps its shape: docs/architecture.md matches the package, imports run one
+way, library code names no command-line flag, modules stay short.
+
+Each check lists every offender in its failure message.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import re
+from pathlib import Path
+
+import pytest
+
+from sumo_drvpw.cli import build_parser
+
+PKG = Path(__file__).resolve().parent.parent / "sumo_drvpw"
+DOC = PKG.parent / "docs" / "architecture.md"
+#: Longest module [lines] (issue #13: "no module longer than about 600 lines").
+MAX_LINES = 600
+#: Import layers, lowest first: a package imports from lower layers and itself only.
+LAYERS = [{"errors"}, {"fileio"}, {"model"}, {"data"}, {"fit"}, {"report"},
+          {"sim", "synth", "validation"}, {"cli"}]
+RANK = {name: i for i, layer in enumerate(LAYERS) for name in layer}
+
+
+def _modules() -> list[Path]:
+    return sorted(p for p in PKG.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def _packages() -> list[str]:
+    """Every package under sumo_drvpw/ as 'a/' or 'a/b/'."""
+    return sorted(str(p.parent.relative_to(PKG)) + "/" for p in PKG.rglob("__init__.py")
+                  if p.parent != PKG)
+
+
+def _doc_names() -> set[str]:
+    """Backticked package ('a/', 'a/b/') and module ('a/b.py', 'b.py') names of the doc."""
+    return set(re.findall(r"`([a-z_][a-z0-9_/]*(?:/|\.py))`", DOC.read_text(encoding="utf-8")))
+
+
+def _resolve(name: str, context: str | None) -> list[Path]:
+    """Where a name of the doc may live: relative to the package, or to the package of
+    the table row it appears in (``context``)."""
+    out = [PKG / name]
+    if context:
+        out.append(PKG / context / name)
+    return out
+
+
+def test_every_name_in_the_doc_exists():
+    """Each backticked module or package of docs/architecture.md exists; a bare module
+    name in a package's row is looked for in that package."""
+    missing = []
+    for line in DOC.read_text(encoding="utf-8").splitlines():
+        row = re.match(r"\|\s*`([a-z_][a-z0-9_/]*/)`\s*\|", line)
+        context = row.group(1) if row else None
+        for name in re.findall(r"`([a-z_][a-z0-9_/]*(?:/|\.py))`", line):
+            if name == "sumo_drvpw/":
+                continue
+            if name.startswith(("tests/", "docs/", "benchmarks/", "scenarios/")):
+                if not (PKG.parent / name).exists():
+                    missing.append(name)
+                continue
+            if not any(p.exists() for p in _resolve(name.rstrip("/"), context)):
+                missing.append(f"{name} (row {context})" if context else name)
+    assert not missing, f"docs/architecture.md names what does not exist: {missing}"
+
+
+def test_every_package_is_in_the_doc():
+    named = _doc_names()
+    absent = [p for p in _packages() if p not in named]
+    assert not absent, f"packages missing from docs/architecture.md: {absent}"
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    """(line, top-level sumo_drvpw sub-package or module) of every import in a file."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        names = []
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            if node.module == "sumo_drvpw":
+                names = [f"sumo_drvpw.{a.name}" for a in node.names]
+            elif node.module.startswith("sumo_drvpw."):
+                names = [node.module]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names if a.name.startswith("sumo_drvpw.")]
+        out += [(node.lineno, n.split(".")[1]) for n in names]
+    return out
+
+
+def test_no_upward_imports():
+    """errors ← fileio ← model ← data ← fit ← report ← sim/synth/validation ← cli;
+    packages of one layer do not import each other."""
+    bad = []
+    for path in _modules():
+        rel = path.relative_to(PKG)
+        if len(rel.parts) == 1:
+            src = rel.stem
+            if src not in RANK:  # __init__, __main__: the package root
+                continue
+        else:
+            src = rel.parts[0]
+        assert src in RANK, f"{rel}: package '{src}' has no layer in this test and the doc"
+        for line, dst in _imports(path):
+            if dst == src or dst not in RANK:  # itself, or the root (__version__)
+                continue
+            if RANK[dst] >= RANK[src]:
+                bad.append(f"{rel}:{line} imports {dst}")
+    assert not bad, "imports against the layers:\n" + "\n".join(bad)
+
+
+def _flags() -> set[str]:
+    """Every long option of the command line, from the real parser."""
+    out: set[str] = set()
+
+    def walk(parser):
+        for action in parser._actions:
+            out.update(s for s in action.option_strings if s.startswith("--"))
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    walk(sub)
+
+    walk(build_parser())
+    out.discard("--help")
+    return out
+
+
+def _docstring_nodes(tree) -> set[int]:
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                out.add(id(body[0].value))
+    return out
+
+
+def flag_offenders() -> list[str]:
+    """'file:line --flag' for every string literal outside cli/ (docstrings aside) that
+    names an option of the command line."""
+    flags = _flags()
+    bad = []
+    for path in _modules():
+        rel = path.relative_to(PKG)
+        if rel.parts[0] == "cli":
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        docs = _docstring_nodes(tree)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs:
+                for m in re.findall(r"--[a-z][a-z-]+", node.value):
+                    if m in flags:
+                        bad.append(f"{rel}:{node.lineno} {m}")
+    return bad
+
+
+def test_the_flag_scan_sees_the_parser():
+    flags = _flags()
+    assert {"--vehicle", "--out", "--candidates", "--data"} <= flags
+
+
+def test_library_code_names_no_flag():
+    bad = flag_offenders()
+    assert not bad, "command-line flags named outside cli/:\n" + "\n".join(bad)
+
+
+def test_no_module_longer_than_600_lines():
+    long = [f"{p.relative_to(PKG)}: {n}" for p in _modules()
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES]
+    assert not long, f"modules longer than {MAX_LINES} lines: {long}"
+
+
+@pytest.mark.parametrize("src,dst,ok", [("fit", "model", True), ("model", "fit", False),
+                                        ("sim", "validation", False), ("cli", "sim", True),
+                                        ("validation", "report", True), ("data", "errors", True)])
+def test_layer_rule_itself(src, dst, ok):
+    """The rule the import check applies, on known cases."""
+    assert (RANK[dst] < RANK[src]) == ok
