@@ -29,6 +29,8 @@ from sumo_drvpw.data.stream import BATCH_ROWS, PART_ROWS, Part, iter_measured, p
 from sumo_drvpw.errors import UserError
 
 ENGINES = ("local", "dask")
+#: Seconds to wait for a Dask scheduler named by address.
+CONNECT_TIMEOUT_S = 10.0
 
 
 @dataclass
@@ -124,11 +126,11 @@ def _run_dask(parts, make, vehicle, options, scheduler, workers, rows):
     cluster = None
     if scheduler is None:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+                               dashboard_address=":0")
         client = Client(cluster)
     else:
         try:
-            client = Client(scheduler, timeout="20s")
+            client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
         except (OSError, TimeoutError) as e:
             raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
     try:
