@@ -96,12 +96,12 @@ def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:
     for s in specs:
         if s == "vsp_spec":
             if vehicle is None:
-                raise UserError("--equation vsp_spec needs --vehicle (its body specs)")
+                raise UserError("equation vsp_spec needs a vehicle: VSP is built from its body specs")
             out.append(vsp_from_specs(vehicle))
         else:
             out.append(load_equation(s))
     names = [e.name for e in out]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise UserError(f"--equation: the same equation name given twice: {dup}")
+        raise UserError(f"equations: the same equation name given twice: {dup}")
     return out
