@@ -73,6 +73,9 @@ def main(args) -> int:
 
     check_output_path(out, existing_paths(args.src, args.columns), "file")  # never onto an input
     df, report = read(args.format, args.src, columns=args.columns)
+    if len(df) < 2:  # a drive log needs two samples (sumo_drvpw.data.log)
+        raise UserError(f"{', '.join(map(str, args.src))}: {len(df)} sample(s) kept of "
+                        f"{report['rows_read']} read; nothing sensible to import")
     report["out"] = str(out)
     write_log(df, report, out)
     print(format_report(report))

@@ -173,13 +173,45 @@ def read_csv_strict(path: Path, **kw) -> pd.DataFrame:
                         f"{kw.get('encoding', 'utf-8')}): {str(e).splitlines()[0]}") from None
     if len(df) == 0:
         raise UserError(f"{path}: no data rows")
+    if _cut_mid_row(Path(path), kw.get("sep", ","), str(kw.get("encoding") or "utf-8")):
+        df = df.iloc[:-1]
+        if len(df) < 2:
+            raise UserError(f"{path}: file is cut short (truncated mid-row) and holds {len(df)} complete "
+                            "data row(s): nothing sensible to import")
+        TRUNCATED[str(path)] = 1
     return df
 
 
+#: files whose last row was cut mid-row (path → rows dropped), read by :func:`new_report`
+TRUNCATED: dict[str, int] = {}
+
+
+def _cut_mid_row(path: Path, sep: str, encoding: str) -> bool:
+    """True when the file ends inside a row: no final newline (loggers end every row with
+    one; a cut inside the last field leaves the field count whole)."""
+    if encoding.lower().replace("-", "").startswith(("utf16", "utf32")) or len(sep) != 1:
+        return False
+    with open(path, "rb") as f:
+        head = f.readline()
+        f.seek(0, 2)
+        size = f.tell()
+        f.seek(max(0, size - 65536))
+        tail = f.read()
+    if not tail or tail.endswith((b"\n", b"\r")):
+        return False
+    return True
+
+
 def new_report(path: Path, trip_id: str, rows: int) -> dict:
-    """Per-file report: rows read, kept, dropped per reason, notes."""
-    return {"file": str(path), "trip_id": trip_id, "rows_read": int(rows), "kept": 0,
-            "dropped": {}, "notes": []}
+    """Per-file report: rows read, kept, dropped per reason, notes (a cut-short file says so)."""
+    rep = {"file": str(path), "trip_id": trip_id, "rows_read": int(rows), "kept": 0,
+           "dropped": {}, "notes": []}
+    cut = TRUNCATED.pop(str(path), 0)
+    if cut:
+        rep["rows_read"] += cut
+        rep["dropped"]["truncated last row"] = cut
+        rep["notes"].append("file is cut short (truncated): it ends inside its last row, which is dropped")
+    return rep
 
 
 def drop(df: pd.DataFrame, mask, reason: str, report: dict) -> pd.DataFrame:
