@@ -1,0 +1,349 @@
+"""Validation of the energy chain (issue #12) on the shared real data: energy per held-out trip.
+
+Run::
+
+    .venv/bin/python -m sumo_drvpw.validation.chain [--data ../shared/data] \
+        [--out docs/energy-chain-validation.md]
+
+writes the Markdown report and ``<out>.json`` beside it. Every number is computed by the run.
+
+Studies (each trip's prediction comes from a chain calibrated without that trip):
+
+* **BMW i3** (TUM, 50 trips): road load calibrated stepwise (Indt var. 1) on the motor's
+  mechanical power, the battery chain on V·I with the heater and A/C as logged loads;
+  2-fold: trips alternately in fold A/B, calibrate on one fold, predict the other.
+  The heater load is the heater's own electrical power V·I. Trips A03–A21 lack heater V
+  and I: their heater load is unknown (0 in the fit) and they are *flagged*; their "Heating
+  Power CAN" is no substitute — in summer trips it reads up to 5 kW on average, more than
+  the battery energy not delivered to the motor (E_bat − E_motor), which no heater can.
+* **JLU BEV**: chain calibrated on all dynamometer tests on the published dyno road load
+  (A, B, C at 1919 kg, ``jlu_bev.toml``); then the six road trips: *before* with the dyno
+  chain (flat, and with grade from elevation), *after* closing the loop — road load plus
+  grade, chain re-fitted on the other five road trips (leave-one-trip-out), which finds the
+  standstill auxiliary load and the road's recuperation.
+* **Prius Gen 2** (2 trips): road load calibrated on the power-split P_PTdrv of the other
+  trip, the Willans fuel chain on its fuel flow with the HV battery's V·I as SOC
+  correction; fuel per trip in litres, measured raw and SOC-corrected.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sumo_drvpw.model.chain import corrected_fuel_power
+
+KWH = 3.6e6  # J per kWh
+
+
+def _measured(data: Path, folder: str, fmt: str, vehicle: str, add=None):
+    """(wheel-target Measured or None, log, vehicle) of a shared data set read in place."""
+    from sumo_drvpw.data import adapters
+    from sumo_drvpw.data.log import from_frame
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    veh = load_vehicle(vehicle)
+    df, _ = adapters.read(fmt, data / folder)
+    if add is not None:
+        df = add(df)
+    return from_frame(df, veh, name=f"{folder}"), veh
+
+
+def _trip_rows(pred_w, meas_w, dt, trips, scale=KWH, unit="kwh") -> list[dict]:
+    """Net energy per trip, predicted vs measured: Σ P·Δt over finite samples."""
+    ok = np.isfinite(pred_w) & np.isfinite(meas_w)
+    rows = []
+    for t in dict.fromkeys(trips):
+        s = ok & (trips == t)
+        em = float(meas_w[s] @ dt[s]) / scale
+        ep = float(pred_w[s] @ dt[s]) / scale
+        rows.append({"trip": str(t), f"measured_{unit}": em, f"predicted_{unit}": ep,
+                     "error": ep / em - 1.0 if em != 0 else math.nan})
+    return rows
+
+
+def _mean_abs(rows, key="error", where=None) -> float:
+    e = [abs(r[key]) for r in rows if math.isfinite(r[key]) and (where is None or where(r))]
+    return float(np.mean(e)) if e else math.nan
+
+
+def _params(fit) -> dict:
+    return {k: {kk: p.get(kk) for kk in ("value", "std_err", "at_bound", "reading")}
+            for k, p in fit.parameters.items()}
+
+
+# ------------------------------------------------------------------ BMW i3
+
+def i3_study(data: Path) -> dict:
+    """2-fold held-out battery energy per trip of the TUM BMW i3 (see module docstring)."""
+    from sumo_drvpw.data.measured import measure
+    from sumo_drvpw.fit.calibrate import CANDIDATES, calibrate
+    from sumo_drvpw.fit.chain import calibrate_on
+
+    def add(df):
+        df = df.copy()
+        df["heater_logged"] = (df["heater_voltage_v"].notna() & df["heater_current_a"].notna())
+        df["heater_electric_w"] = (df["heater_voltage_v"] * df["heater_current_a"]).fillna(0.0)
+        df["aircon_power_w"] = df["aircon_power_w"].fillna(0.0)
+        return df
+
+    log, veh = _measured(data, "bmw_i3_tum", "bmw-i3-tum", "bmw_i3", add)
+    mw, mb = measure(log, veh), measure(log, veh, "battery")
+    trips = np.asarray(log.df["trip_id"]).astype(str)
+    dt = log.df["dt_s"].to_numpy(float)
+    ids = list(dict.fromkeys(sorted(trips)))
+    folds = {"A": set(ids[0::2]), "B": set(ids[1::2])}
+    loads = ["heater_electric_w", "aircon_power_w"]
+    pred = np.full(trips.size, np.nan)
+    fits = {}
+    for name, fold in folds.items():
+        train = np.isin(trips, sorted(fold))
+        res = calibrate(mw.inputs, mw.power_w, CANDIDATES["indt-var-1"], mask=mw.usable & train,
+                        reference_mass_kg=veh.mass_kg)
+        eq = res.to_equation(f"i3_fold{name}")
+        fit = calibrate_on(mb, eq, loads=loads, mask=train)
+        p = fit.chain.evaluate(eq.power(mb.inputs), mb.inputs.v, signals=mb.inputs.signals)["power_w"]
+        pred[~train] = p[~train]
+        fits[name] = {"trips": sorted(fold), "road_load": dict(eq.terms), "chain": _params(fit),
+                      "r2": fit.r2, "rmse_w": fit.rmse_w}
+    rows = _trip_rows(pred, mb.power_w, dt, trips)
+    season = dict(zip(trips, np.asarray(log.df["season"]).astype(str)))
+    ok = np.isfinite(mb.power_w) & np.isfinite(mw.power_w)
+    for r in rows:
+        s = ok & (trips == r["trip"])
+        gap = float((mb.power_w[s] - mw.power_w[s]) @ dt[s]) / KWH
+        heat = float(log.df["heater_electric_w"].to_numpy(float)[s] @ dt[s]) / KWH
+        can = float(np.nan_to_num(log.df["heater_power_w"].to_numpy(float)[s]) @ dt[s]) / KWH
+        logged = bool(log.df["heater_logged"].to_numpy(bool)[s].mean() > 0.5)
+        r.update(season=season[r["trip"]], heater_kwh=heat, heater_can_kwh=can,
+                 battery_minus_motor_kwh=gap, flagged=not logged)
+    return {"rows": rows, "fits": fits,
+            "mean_abs_error": _mean_abs(rows),
+            "mean_abs_error_unflagged": _mean_abs(rows, where=lambda r: not r["flagged"]),
+            "mean_abs_error_summer": _mean_abs(rows, where=lambda r: r["season"] == "summer"),
+            "mean_abs_error_winter": _mean_abs(rows, where=lambda r: r["season"] == "winter"),
+            "mean_error": float(np.nanmean([r["error"] for r in rows])),
+            "n_flagged": sum(r["flagged"] for r in rows)}
+
+
+# ------------------------------------------------------------------ JLU BEV
+
+def jlu_study(data: Path) -> dict:
+    """Dyno-calibrated chain on the JLU road trips, before and after closing the loop."""
+    from sumo_drvpw.data.measured import measure
+    from sumo_drvpw.fit.chain import calibrate_on
+    from sumo_drvpw.model.equations import Equation
+
+    dlog, veh = _measured(data, "jlu_bev_dyno", "jlu-dyno", "jlu_bev")
+    rl = {}
+    from sumo_drvpw.fileio import read_toml
+
+    rl = read_toml(veh.path, "vehicle file")["road_load"]
+    terms = {"acc": 1.0, "v1": float(rl["a_n"]), "v2": float(rl["b_n_per_mps"]),
+             "v3": float(rl["c_n_per_mps2"])}
+    flat = Equation("jlu_dyno_roadload", dict(terms))
+    graded = Equation("jlu_dyno_roadload_grade", dict(terms, grade=1.0))
+    dy = measure(dlog, veh, "battery")
+    dfit = calibrate_on(dy, flat)
+    rlog, _ = _measured(data, "jlu_bev_road", "jlu-road", "jlu_bev")
+    ro = measure(rlog, veh, "battery")
+    trips = np.asarray(rlog.df["trip_id"]).astype(str)
+    dt = rlog.df["dt_s"].to_numpy(float)
+
+    def ev(chain, eq):
+        return chain.evaluate(eq.power(ro.inputs), ro.inputs.v, signals=ro.inputs.signals)["power_w"]
+
+    before = _trip_rows(ev(dfit.chain, flat), ro.power_w, dt, trips)
+    before_g = _trip_rows(ev(dfit.chain, graded), ro.power_w, dt, trips)
+    after = np.full(trips.size, np.nan)
+    loo = {}
+    for t in dict.fromkeys(trips):
+        train = trips != t
+        f = calibrate_on(ro, graded, mask=train)
+        after[~train] = ev(f.chain, graded)[~train]
+        loo[t] = {k: p["value"] for k, p in f.parameters.items()}
+    after_rows = _trip_rows(after, ro.power_w, dt, trips)
+    g = rlog.df.groupby("trip_id", sort=False)
+    info = {str(k): {"ambient_c": float(v["ambient_c"].mean()), "duration_s": float(v["time_s"].max() - v["time_s"].min()),
+                     "standstill_share": float((v["speed_mps"] < 0.1).mean()),
+                     "net_elevation_m": float(v["elevation_m"].iloc[-1] - v["elevation_m"].iloc[0])}
+            for k, v in g}
+    st_road = ro.inputs.v < 0.1
+    st_dyno = dy.inputs.v < 0.1
+    return {"dyno_chain": _params(dfit), "dyno_r2": dfit.r2, "dyno_n": dfit.n,
+            "road_load_terms": terms,
+            "standstill_battery_w": {"dyno": float(np.nanmean(dy.power_w[st_dyno])),
+                                     "road": float(np.nanmean(ro.power_w[st_road]))},
+            "before": before, "before_grade": before_g, "after": after_rows, "loo_parameters": loo,
+            "trip_info": info,
+            "mean_abs_error_before": _mean_abs(before), "mean_abs_error_before_grade": _mean_abs(before_g),
+            "mean_abs_error_after": _mean_abs(after_rows)}
+
+
+# ------------------------------------------------------------------ Prius Gen 2
+
+def prius2_study(data: Path) -> dict:
+    """Fuel per held-out trip of the Prius Gen 2 (Willans chain, SOC-corrected)."""
+    from sumo_drvpw.data.measured import measure
+    from sumo_drvpw.fit.calibrate import CANDIDATES, calibrate
+    from sumo_drvpw.fit.chain import calibrate_on
+    from sumo_drvpw.model.constants import FUELS
+
+    log, veh = _measured(data, "prius_gen2_torquepro", "torquepro-prius2", "prius2")
+    mw, mf = measure(log, veh), measure(log, veh, "fuel")
+    trips = np.asarray(log.df["trip_id"]).astype(str)
+    dt = log.df["dt_s"].to_numpy(float)
+    fp = FUELS["gasoline"]
+    per_l = fp["lhv_j_per_kg"] * fp["density_kg_per_l"]  # J per litre
+    rows, fits = [], {}
+    for t in dict.fromkeys(trips):
+        train = trips != t
+        res = calibrate(mw.inputs, mw.power_w, CANDIDATES["indt-var-1"], mask=mw.usable & train,
+                        reference_mass_kg=veh.mass_kg)
+        eq = res.to_equation(f"prius2_without_{t}")
+        fit = calibrate_on(mf, eq, mask=train)
+        out = fit.chain.evaluate(eq.power(mf.inputs), mf.inputs.v, dt_s=dt, signals=mf.inputs.signals)
+        k = fit.chain.battery_fuel_factor
+        corr = corrected_fuel_power(mf.power_w, mf.battery_w, k)
+        s = ~train & np.isfinite(out["power_w"]) & np.isfinite(corr)
+        raw_l = float(np.nan_to_num(mf.power_w[s]) @ dt[s]) / per_l
+        corr_l = float(corr[s] @ dt[s]) / per_l
+        pred_l = float(out["fuel_l"][s].sum())
+        dist_km = float(mf.inputs.v[s] @ dt[s]) / 1000.0
+        rows.append({"trip": t, "distance_km": dist_km, "measured_l": raw_l,
+                     "battery_kwh": float(mf.battery_w[s] @ dt[s]) / KWH,
+                     "measured_corrected_l": corr_l, "predicted_l": pred_l,
+                     "predicted_co2_kg": float(out["co2_kg"][s].sum()),
+                     "error": pred_l / corr_l - 1.0, "error_vs_raw": pred_l / raw_l - 1.0,
+                     "measured_l_per_100km": 100.0 * raw_l / dist_km})
+        fits[t] = {"road_load": dict(eq.terms), "chain": _params(fit), "r2": fit.r2}
+    return {"rows": rows, "fits": fits, "mean_abs_error": _mean_abs(rows)}
+
+
+# ------------------------------------------------------------------ report
+
+def _pct(x) -> str:
+    return "n/a" if x is None or not math.isfinite(x) else f"{100 * x:+.1f} %"
+
+
+def _param_table(params: dict) -> list[str]:
+    out = ["| parameter | value | std. error | reading |", "|---|---|---|---|"]
+    for k, p in params.items():
+        se = "at bound" if p.get("at_bound") else (f"{p['std_err']:.3g}" if p.get("std_err") is not None else "–")
+        out.append(f"| {k} | {p['value']:.4g} | {se} | {p.get('reading', '')} |")
+    return out
+
+
+def render(res: dict, command: str) -> str:
+    """The Markdown report of :func:`run`."""
+    L = ["# Energy chain on real data (issue #12)", "",
+         f"Generated by `{command}` in {res['seconds']:.0f} s; every number below is computed by "
+         "that run. Method: `sumo_drvpw/validation/chain.py` (module docstring); the chain: "
+         "[energy-chain.md](energy-chain.md). Errors are predicted/measured − 1 of the net energy "
+         "per trip, each trip predicted by a chain calibrated without it.", ""]
+    i3 = res.get("bmw_i3")
+    if i3:
+        L += ["## BMW i3 (TUM): battery energy per held-out trip", "",
+              f"Mean |error| over {len(i3['rows'])} trips: **{_pct(i3['mean_abs_error'])[1:]}** "
+              f"(mean signed {_pct(i3['mean_error'])}); summer {_pct(i3['mean_abs_error_summer'])[1:]}, "
+              f"winter {_pct(i3['mean_abs_error_winter'])[1:]}; without the {i3['n_flagged']} flagged "
+              f"trips {_pct(i3['mean_abs_error_unflagged'])[1:]}. Target (issue #12): 5 %.", "",
+              "Flagged = the trip has no heater voltage and current, so its heater load is unknown "
+              "(its CAN heater power, shown for reference, can exceed E_bat − E_motor, which no "
+              "heater can).", ""]
+        for name, f in i3["fits"].items():
+            L += [f"Fold {name} calibration ({len(f['trips'])} trips; R² = {f['r2']:.3f}); road load "
+                  + ", ".join(f"{k} = {v:.4g}" for k, v in f["road_load"].items()) + ":", ""]
+            L += _param_table(f["chain"]) + [""]
+        L += ["| trip | season | measured kWh | predicted kWh | error | heater V·I kWh | heater CAN kWh | E_bat − E_motor kWh | flagged |",
+              "|---|---|---|---|---|---|---|---|---|"]
+        for r in i3["rows"]:
+            L.append(f"| {r['trip']} | {r['season']} | {r['measured_kwh']:.3f} | {r['predicted_kwh']:.3f} | "
+                     f"{_pct(r['error'])} | {r['heater_kwh']:.3f} | {r['heater_can_kwh']:.3f} | "
+                     f"{r['battery_minus_motor_kwh']:.3f} | {'no heater V·I' if r['flagged'] else ''} |")
+        L.append("")
+    j = res.get("jlu")
+    if j:
+        L += ["## JLU BEV: dynamometer chain on the road, then closing the loop", "",
+              f"Dyno calibration ({j['dyno_n']} samples, R² = {j['dyno_r2']:.3f}) on the published road "
+              "load " + ", ".join(f"{k} = {v:.4g}" for k, v in j["road_load_terms"].items()) + ":", ""]
+        L += _param_table(j["dyno_chain"]) + [""]
+        s = j["standstill_battery_w"]
+        L += [f"Mean battery power at standstill: dyno {s['dyno']:.0f} W, road {s['road']:.0f} W.", "",
+              f"Mean |error| per road trip: before (dyno chain, flat) **{_pct(j['mean_abs_error_before'])[1:]}**, "
+              f"before with grade {_pct(j['mean_abs_error_before_grade'])[1:]}, after closing the loop "
+              f"(grade + road chain, leave-one-trip-out) **{_pct(j['mean_abs_error_after'])[1:]}**. "
+              "Target (issue #12): 8 %.", "",
+              "| trip | ambient °C | standstill | net Δz m | measured kWh | before | before + grade | after (LOO) |",
+              "|---|---|---|---|---|---|---|---|"]
+        for b, bg, a in zip(j["before"], j["before_grade"], j["after"]):
+            i = j["trip_info"][b["trip"]]
+            L.append(f"| {b['trip']} | {i['ambient_c']:.1f} | {100 * i['standstill_share']:.0f} % | "
+                     f"{i['net_elevation_m']:+.0f} | {b['measured_kwh']:.3f} | {_pct(b['error'])} | "
+                     f"{_pct(bg['error'])} | {_pct(a['error'])} |")
+        L += ["", "Road chain parameters per left-out trip:", "",
+              "| left out | " + " | ".join(next(iter(j["loo_parameters"].values()))) + " |",
+              "|---|" + "---|" * len(next(iter(j["loo_parameters"].values())))]
+        for t, p in j["loo_parameters"].items():
+            L.append(f"| {t} | " + " | ".join(f"{v:.4g}" for v in p.values()) + " |")
+        L.append("")
+    p = res.get("prius2")
+    if p:
+        L += ["## Prius Gen 2: fuel per held-out trip", "",
+              f"Mean |error| against SOC-corrected fuel: **{_pct(p['mean_abs_error'])[1:]}** (2 trips).", "",
+              "| trip | km | measured L | L/100 km | battery kWh | corrected L | predicted L | error | error vs raw | CO₂ kg |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
+        for r in p["rows"]:
+            L.append(f"| {r['trip']} | {r['distance_km']:.1f} | {r['measured_l']:.3f} | "
+                     f"{r['measured_l_per_100km']:.2f} | {r['battery_kwh']:+.3f} | {r['measured_corrected_l']:.3f} | "
+                     f"{r['predicted_l']:.3f} | {_pct(r['error'])} | {_pct(r['error_vs_raw'])} | "
+                     f"{r['predicted_co2_kg']:.2f} |")
+        for t, f in p["fits"].items():
+            L += ["", f"Chain calibrated without {t} (R² = {f['r2']:.3f}):", ""] + _param_table(f["chain"])
+        L.append("")
+    return "\n".join(L)
+
+
+STUDIES = {"bmw_i3": i3_study, "jlu": jlu_study, "prius2": prius2_study}
+
+
+def run(data: Path, studies=None) -> dict:
+    """Run the studies (default all) on the shared data folder; return their results."""
+    t0 = time.perf_counter()
+    res = {k: f(Path(data)) for k, f in STUDIES.items() if studies is None or k in studies}
+    res["seconds"] = time.perf_counter() - t0
+    return res
+
+
+def main(argv=None) -> int:
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.fileio import plain, write_json, write_text
+    from sumo_drvpw.validation.data import resolve_data
+
+    ap = argparse.ArgumentParser(prog="python -m sumo_drvpw.validation.chain", description=__doc__.splitlines()[0])
+    ap.add_argument("--data", help="shared data folder (default $SUMO_DRVPW_DATA or ../shared/data)")
+    ap.add_argument("--out", default="docs/energy-chain-validation.md", help="Markdown report (JSON beside it)")
+    ap.add_argument("--study", action="append", choices=sorted(STUDIES), help="run only these (repeat)")
+    a = ap.parse_args(argv)
+    try:
+        data = resolve_data(a.data, {"bmw_i3_tum": 0, "jlu_bev_dyno": 0, "jlu_bev_road": 0,
+                                     "prius_gen2_torquepro": 0})
+        res = run(data, a.study)
+    except UserError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    out = Path(a.out)
+    cmd = "python -m sumo_drvpw.validation.chain" + (f" --out {a.out}" if argv is None else "")
+    write_json(out.with_suffix(".json"), plain(res))
+    write_text(out, render(res, cmd))
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
