@@ -58,13 +58,25 @@ BUILTIN_DIR = Path(str(resources.files("sumo_drvpw.model") / "builtin" / "equati
 
 @dataclass
 class Equation:
-    """A driving-power equation: P [W] = Σ coefficient × term.
+    """A driving-power equation: P [W] = Σ_j c_j·term_j (seed paper Eq. 13/14 form).
 
     Parameters
     ----------
     name : identifier used in reports and outputs
-    terms : term string → coefficient (unit: W per unit of the term)
+    terms : term string → coefficient c_j [W per unit of the term; the term units are
+        in :mod:`sumo_drvpw.model.terms`]
     mass_kg : fixed mass for the m-terms [kg], or None to use the vehicle's/sample's mass
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from sumo_drvpw.model.terms import Inputs
+    >>> eq = Equation(name="car", terms={"acc": 1.05, "aero": 0.35, "roll": 0.009})
+    >>> one = np.ones(1)
+    >>> x = Inputs(v=20 * one, a=0 * one, theta=0 * one, wind=0 * one, mass=1500 * one,
+    ...            rho=1.2041 * one)
+    >>> round(float(eq.power(x)[0]))   # 0.35·20³ + 0.009·1500·9.81·20 [W]
+    5449
     """
 
     name: str
@@ -101,14 +113,17 @@ class Equation:
 
     @property
     def term_names(self) -> list[str]:
+        """The term strings, in the equation's order."""
         return list(self.terms)
 
     @property
     def coefficients(self) -> np.ndarray:
+        """Coefficients c_j [W per unit of term j], in the order of :attr:`term_names`."""
         return np.array([self.terms[t] for t in self.terms], dtype=float)
 
     @property
     def categories(self) -> list[str]:
+        """Reporting category (acc, grade, aero, roll, other) of each term, in order."""
         return [parse_term(t).category for t in self.terms]
 
     @property
@@ -179,7 +194,13 @@ def beta_to_coefficients(beta: dict[str, float], reference_mass_kg: float) -> di
 
 
 def coefficients_to_beta(terms: dict[str, float], reference_mass_kg: float) -> dict[str, float]:
-    """Inverse of :func:`beta_to_coefficients`."""
+    """Inverse of :func:`beta_to_coefficients`: β = c·m for m-terms, c·m·g for m·g-terms.
+
+    Parameters
+    ----------
+    terms : term → coefficient in this basis [W per unit of the term]
+    reference_mass_kg : mass to express β at [kg]
+    """
     return {t: float(c) * _mass_scale(t, reference_mass_kg) for t, c in terms.items()}
 
 
@@ -190,6 +211,7 @@ def _mass_scale(term: str, mass_kg: float) -> float:
 
 
 def builtin_names() -> list[str]:
+    """Names of the built-in equations (package data ``model/builtin/equations/``), sorted."""
     return sorted(p.stem for p in BUILTIN_DIR.glob("*.toml"))
 
 

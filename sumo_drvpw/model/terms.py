@@ -210,7 +210,16 @@ def parse_term(text: str) -> Term:
 
 
 def term_matrix(terms: list[str] | tuple[str, ...], x: Inputs) -> np.ndarray:
-    """Matrix (n samples × k terms) of term values, column order as given."""
+    """Matrix (n samples × k terms) of term values, column order as given.
+
+    Parameters
+    ----------
+    terms : term strings (grammar and unit of each factor: module table)
+    x : the inputs, SI (v [m/s], a [m/s²], θ [rad], wind [m/s], m [kg], ρ [kg/m³])
+
+    Column j holds term_j per sample in the unit of the module table (e.g. ``acc`` = m·v·a
+    [W], ``aero`` = v·(v − v_w)·|v − v_w| [m³/s³]); power = coefficient × column.
+    """
     out = np.empty((len(x), len(terms)), dtype=float)
     for j, t in enumerate(terms):
         out[:, j] = parse_term(t).evaluate(x)

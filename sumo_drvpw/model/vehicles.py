@@ -66,6 +66,8 @@ class Vehicle:
 
     @property
     def powertrain_type(self) -> str:
+        """How measured power is computed (:mod:`sumo_drvpw.data.powertrain`): power_split,
+        single_motor, battery or direct (the default)."""
         return self.powertrain.get("type", "direct")
 
     def need(self, table: str, key: str) -> float:
@@ -135,6 +137,7 @@ def check_numbers(doc: dict, p) -> None:
 
 
 def vehicle_names() -> list[str]:
+    """Names of the built-in vehicles (package data ``model/builtin/vehicles/``), sorted."""
     return sorted(p.stem for p in VEHICLE_DIR.glob("*.toml"))
 
 
