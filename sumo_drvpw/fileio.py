@@ -119,8 +119,15 @@ def read_toml(path, what: str) -> dict:
     if not p.is_file():
         raise UserError(f"{what} not found: {p}")
     try:
-        return tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise UserError(f"{p}: not a valid TOML {what}: not UTF-8 text (byte {e.start}); "
+                        "save it as UTF-8") from None
+    except OSError as e:  # PermissionError, I/O error
+        raise UserError(f"{p}: cannot read the {what}: {e.strerror or e}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
         raise UserError(f"{p}: not a valid TOML {what}: {e}") from None
 
 
