@@ -143,10 +143,12 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         pass
     try:
-        # numeric warnings (empty slices, 0/0) are handled by the code; never shown raw
+        # numeric warnings (empty slices, 0/0) are handled by the code, library warnings
+        # address developers: none reach the user's terminal unless asked for with
+        # python -W / PYTHONWARNINGS (the idiom of the warnings module's documentation)
         with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message=".*pyarrow.*")
-            warnings.filterwarnings("ignore", category=RuntimeWarning)
+            if not sys.warnoptions:
+                warnings.simplefilter("ignore")
             import numpy as np
 
             with np.errstate(all="ignore"):
