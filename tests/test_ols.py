@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import doctest
 
 import numpy as np
 import pytest
@@ -10,7 +9,6 @@ import statsmodels.api as sm
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import sumo_drvpw.fit.ols as O
 from sumo_drvpw.fit.ols import dense_gram, ols
 
 
@@ -79,7 +77,3 @@ def test_gram_of_dense_design_equals_term_gram():
     np.testing.assert_allclose(g1.xtx, g2.xtx, rtol=1e-12)
     np.testing.assert_allclose(g1.xty, g2.xty, rtol=1e-12)
     assert g1.n == g2.n == n and g1.yty == pytest.approx(g2.yty, rel=1e-12)
-
-
-def test_docstring_examples_run():
-    assert doctest.testmod(O).failed == 0
