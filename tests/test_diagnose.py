@@ -232,3 +232,66 @@ def test_response_column_never_a_finding_by_default(tmp_path):
     for f in res2.report["findings"]:
         if "throttle_pct" in f["signals"]:
             assert f["role"] == "response" and f["effect"].startswith("response of the target")
+
+
+# ------------------------------------------------------------ structural effects (§2)
+
+def _structural(tmp_path, effects, drop=(), **opt):
+    df, _ = E.synth_trips(4, 8.0, seed=21, effects=list(effects) + [E.LogPower()], noise=NOISE)
+    df = df.drop(columns=list(drop))
+    path = tmp_path / "log.parquet"
+    df.to_parquet(path)
+    m = load_measured([path], "prius3")
+    return diagnose(m, load_equation(TRUTH), DiagnoseOptions(**opt))
+
+
+def test_power_lag_found_corrected_in_the_data_and_reported_in_seconds(tmp_path):
+    res = _structural(tmp_path, [E.PowerLag(1.5)], max_findings=1)
+    f = res.report["findings"][0]
+    assert f["kind"] == "timing" and f["role"] == "structural"
+    assert f["coefficient"] == pytest.approx(1.5, abs=0.125)       # one 8 Hz sample
+    assert f["metrics_after"]["rmse_w"] < 0.8 * f["metrics_before"]["rmse_w"]
+    assert res.details["timing"]["accepted"]
+    assert all(abs(v - 1.5) <= 0.125 for v in res.details["timing"]["per_trip_lag_s"].values())
+    assert res.equation.provenance["power_lag_s"] == f["coefficient"]
+    # the declared coefficients stay physical once the lag is corrected (acc ≈ truth)
+    truth = load_equation(TRUTH).terms
+    assert res.report["final"]["coefficients"]["acc"] == pytest.approx(truth["acc"], rel=0.05)
+
+
+def test_no_lag_planted_no_lag_applied(tmp_path):
+    res = _structural(tmp_path, [], max_findings=0)
+    assert res.report["findings"] == [] and not res.details["timing"]["accepted"]
+
+
+def test_recuperation_efficiency_found(tmp_path):
+    res = _structural(tmp_path, [E.RecuperationEfficiency(0.75)], max_findings=2)
+    f = res.report["findings"]
+    assert f and f[0]["term"] == "[recuperation]" and f[0]["role"] == "structural"
+    assert f[0]["coefficient"] == pytest.approx(-0.25, abs=0.06)   # recuperation × 0.75
+    assert f[0]["replication"]["helped_trips"] >= 3
+
+
+def test_recuperation_limit_found(tmp_path):
+    res = _structural(tmp_path, [E.RecuperationLimit(8000.0)], max_findings=2)
+    f = res.report["findings"]
+    assert f and f[0]["term"].startswith("[recuperation"), [x["term"] for x in f]
+    assert f[0]["metrics_after"]["rmse_w"] < 0.9 * f[0]["metrics_before"]["rmse_w"]
+
+
+def test_air_density_from_altitude_found(tmp_path):
+    res = _structural(tmp_path, [E.AltitudeAir()], drop=("pressure_kpa",), max_findings=2)
+    f = res.report["findings"]
+    assert f and f[0]["term"] == "[air_density_altitude]*aero", [x["term"] for x in f]
+    # its coefficient is the aero coefficient (a relative change of ρ scales the aero term)
+    assert f[0]["coefficient"] == pytest.approx(load_equation(TRUTH).terms["aero"], rel=0.15)
+    assert res.details["structural"]["air_density_altitude"]["mean_relative_error_of_rho"] < -0.05
+
+
+def test_attenuated_grade_replaced_by_the_accelerometer(tmp_path):
+    res = _structural(tmp_path, [E.AttenuatedGrade(0.5)], max_findings=2)
+    f = res.report["findings"]
+    assert f and f[0]["term"] == "[grade_accelerometer]", [x["term"] for x in f]
+    assert f[0]["coefficient"] == pytest.approx(load_equation(TRUTH).terms["grade"], rel=0.1)
+    g = res.details["structural"]["grade_sources"]
+    assert g["accelerometer"]["sd_deg"] > 1.5 * g["logged"]["sd_deg"]

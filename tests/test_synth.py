@@ -12,8 +12,8 @@ from sumo_drvpw.synth.track import SynthOptions, synthesize
 
 
 def test_patterns_and_signals():
-    df, truth = synthesize(SynthOptions(minutes=12, seed=4))
-    assert len(df) == 12 * 60 * 8
+    df, truth = synthesize(SynthOptions(minutes=15, seed=4))
+    assert len(df) == 15 * 60 * 8
     assert np.allclose(np.diff(df["time_s"]), 0.125)
     # the paper's analytical patterns are all driven
     assert {"max_accel", "max_brake", "cruise", "coast", "const_accel", "free", "ev_max"} <= set(df["phase"])

@@ -195,6 +195,117 @@ class Pedal(_Effect):
         return "Pedal: throttle_pct follows the power demand (a response, no effect)"
 
 
+def _shift(x: np.ndarray, k: int) -> np.ndarray:
+    """x(i − k): the signal k samples late (edge value held)."""
+    if k == 0:
+        return x.copy()
+    if k > 0:
+        return np.r_[np.full(k, x[0]), x[:-k]]
+    return np.r_[x[-k:], np.full(-k, x[-1])]
+
+
+class PowerLag(_Effect):
+    """Timing: the logged power is ``lag_s`` late relative to speed (a slow power channel,
+    or an OBD speed that leads it): planted power [W] = P(t − lag) − P(t), so the power
+    column reads P(t − lag). Structural: no column names it; put it after the other
+    effects (it delays them too)."""
+
+    def __init__(self, lag_s: float = 1.5):
+        super().__init__()
+        self.lag_s = lag_s
+
+    def __call__(self, state, rng):
+        p = np.asarray(state["power_w"], float)
+        t = state["t"]
+        dt = float(t[1] - t[0]) if len(t) > 1 else 1.0
+        k = int(round(self.lag_s / dt))
+        return self._keep(state, _shift(p, k) - p), {}
+
+    def describe(self):
+        return f"PowerLag: power logged {self.lag_s:g} s late"
+
+
+class RecuperationEfficiency(_Effect):
+    """Regimes: recuperation on its own coefficient (drivetrain efficiency differs by
+    direction): planted power [W] = (factor − 1)·min(P, 0)."""
+
+    def __init__(self, factor: float = 0.75):
+        super().__init__()
+        self.factor = factor
+
+    def __call__(self, state, rng):
+        p = np.asarray(state["power_w"], float)
+        return self._keep(state, (self.factor - 1.0) * np.minimum(p, 0.0)), {}
+
+    def describe(self):
+        return f"RecuperationEfficiency: recuperation × {self.factor:g}"
+
+
+class RecuperationLimit(_Effect):
+    """Regimes: beyond ``limit_w`` of recuperation friction brakes take over, unflagged:
+    planted power [W] = max(P, −limit) − P (measured power stops following the model)."""
+
+    def __init__(self, limit_w: float = 8000.0):
+        super().__init__()
+        self.limit_w = limit_w
+
+    def __call__(self, state, rng):
+        p = np.asarray(state["power_w"], float)
+        return self._keep(state, np.maximum(p, -self.limit_w) - p), {}
+
+    def describe(self):
+        return f"RecuperationLimit: recuperation capped at {self.limit_w / 1000:g} kW, brakes unflagged"
+
+
+class AltitudeAir(_Effect):
+    """Air density from altitude: trips at different altitudes (``altitudes_m`` in turn,
+    ±30 m relief); the true ρ follows the standard-atmosphere pressure there while the log
+    (drop its ``pressure_kpa`` column) lets the reader assume sea level. Logs
+    ``elevation_m``; planted power [W] = aero power of the truth × (p(h)/p_state − 1)."""
+
+    def __init__(self, altitudes_m=(0.0, 600.0, 1200.0, 300.0, 900.0, 1500.0), truth: str = "drvpw_prius3"):
+        super().__init__()
+        self.altitudes_m = tuple(altitudes_m)
+        self.truth = load_equation(truth)
+        self.i = 0
+
+    def __call__(self, state, rng):
+        from sumo_drvpw.fit.diagnose.structural import pressure_at_altitude_kpa
+
+        h0 = self.altitudes_m[self.i % len(self.altitudes_m)]
+        self.i += 1
+        t = state["t"]
+        h = h0 + 30.0 * np.sin(2 * np.pi * (t - t[0]) / 400.0)
+        x = Inputs(state["v"], state["a"], state["theta"], state["wind"], state["mass"], state["rho"])
+        aero = self.truth.category_powers(x)["aero"]
+        # the synthetic log's pressure is 100.8 kPa (track.synthesize)
+        dp = aero * (pressure_at_altitude_kpa(h) / 100.8 - 1.0)
+        return self._keep(state, dp), {"elevation_m": h}
+
+    def describe(self):
+        return f"AltitudeAir: trips at {self.altitudes_m} m, ρ from altitude"
+
+
+class AttenuatedGrade(_Effect):
+    """Grade measurement: the logged grade is the true one smoothed over ``window_s`` and
+    attenuated by ``factor`` (coarse elevation), while the accelerometer column
+    ``imu_accel_mps2`` (dv/dt + g·sin θ + noise) stays true. Plants no power."""
+
+    def __init__(self, factor: float = 0.5, window_s: float = 20.0):
+        super().__init__()
+        self.factor, self.window_s = factor, window_s
+
+    def __call__(self, state, rng):
+        t = state["t"]
+        dt = float(t[1] - t[0]) if len(t) > 1 else 1.0
+        w = max(1, int(round(self.window_s / dt)))
+        sm = pd.Series(state["theta"]).rolling(w, center=True, min_periods=1).mean().to_numpy()
+        return self._keep(state, np.zeros(len(t))), {"grade_rad": self.factor * sm}
+
+    def describe(self):
+        return f"AttenuatedGrade: logged grade = {self.factor:g} × true grade smoothed over {self.window_s:g} s"
+
+
 class LogPower(_Effect):
     """Logs the driving power itself as ``power_w`` (truth + process noise + the effects
     before it), which the drive-log spec lets a log carry; put it last. With it the
@@ -244,7 +355,10 @@ def planted_power(effects, trip_ids) -> np.ndarray:
 #: class builds with its defaults.
 PLANTS = {"ac": AuxLoad, "cold-tyres": TermScaledBySignal, "speed-quadratic": SpeedFunction,
           "trip-mass": PerTripMass, "distractors": Distractors, "pedal": Pedal,
-          "log-power": LogPower}
+          "power-lag": PowerLag, "recuperation-efficiency": RecuperationEfficiency,
+          "recuperation-limit": RecuperationLimit, "altitude-air": AltitudeAir,
+          "attenuated-grade": AttenuatedGrade, "log-power": LogPower}
 
 __all__ = ["AuxLoad", "TermScaledBySignal", "SpeedFunction", "PerTripMass", "Distractors",
-           "Pedal", "LogPower", "synth_trips", "planted_power", "PLANTS", "G"]
+           "Pedal", "PowerLag", "RecuperationEfficiency", "RecuperationLimit", "AltitudeAir",
+           "AttenuatedGrade", "LogPower", "synth_trips", "planted_power", "PLANTS", "G"]

@@ -79,7 +79,8 @@ class SynthOptions:
     ev_max_power_w: float = 35_000.0    # battery-limited EV-mode power
     regen_max_w: float = 30_000.0       # recuperation limit at the wheels
     max_accel_mps2: float = 3.5
-    max_brake_mps2: float = 7.0
+    max_brake_mps2: float = 4.0         # firm braking (~0.4 g); harder braking in > 1 % of
+    # samples reads as km/h mistaken for m/s to the log reader (99th pct > 4.5 m/s²)
     trip_id: str = "synth-1"
 
 
