@@ -165,11 +165,42 @@ def test_loop_stops_at_end_and_on_ctrl_c():
 
 
 def test_vtype_without_mass_is_an_error():
+    """Without a mass: an error when class defaults are off; else the vClass default
+    (MOVES source mass), listed as an assumption."""
+    import dataclasses
+
     sc = load_scenario(REPO / "scenarios" / "city.toml", equations=[Equation("r", {"roll": 0.01})])
-    res = VTypeResolver(sc, {}, ["r"])
+    res = VTypeResolver(dataclasses.replace(sc, default_masses=False), {}, ["r"])
     with pytest.raises(UserError, match=r"vType 'prius3' of vehicle 'v0'.*no mass"):
         res("prius3", "v0")
     assert res("other", "v1")[2] is False  # not in vehicles.vtypes: not accounted, no error
+    assert res.excluded == 1 and res.skipped["by_vclass"] == {}
+    res = VTypeResolver(sc, {}, ["r"])
+    mass, app, keep, vclass = res("prius3", "v0")
+    assert (mass, keep, vclass) == (1478.8, True, "passenger")
+    assert res.assumptions["prius3"]["mass_kg"] == 1478.8
+
+
+def test_vclass_selects_equations_and_skips_the_rest():
+    """Equations apply by vClass; vehicles of a class no equation is made for are counted
+    as skipped by vClass and vType; [vclasses.X] picks equations and masses for a class."""
+    from sumo_drvpw.sim.vtypes import VTypeInfo
+
+    car = Equation("car", {"roll": 0.01}, vclasses=("passenger",))
+    bus = Equation("bus", {"roll": 0.007}, vclasses=("bus", "coach"))
+    files = {vt: VTypeInfo(vt, None, None, "f.xml", vc) for vt, vc in
+             (("pkw", "passenger"), ("bus1", "bus"), ("bike", "bicycle"), ("coach1", "coach"))}
+    sc = load_scenario(doc={"equations": ["vsp_ldv1999"], "sumo": {"net": str(
+        REPO / "networks" / "highway.net.xml")}, "vclasses": {"coach": {"mass_kg": 12000}}})
+    res = VTypeResolver(sc, files, [car, bus])
+    np.testing.assert_array_equal(res("pkw", "a")[1], [1, 0])
+    assert res("bus1", "b")[:3:2] == (16556.0, True)
+    np.testing.assert_array_equal(res("bus1", "b2")[1], [0, 1])
+    assert res("coach1", "c")[0] == 12000.0  # the scenario's class mass, not the default
+    for k in range(3):
+        assert res("bike", f"k{k}")[2] is False
+    assert res.skipped == {"by_vclass": {"bicycle": 3}, "by_vtype": {"bike": 3}}
+    assert set(res.assumptions) == {"pkw", "bus1"}
 
 
 @settings(max_examples=40, deadline=None)

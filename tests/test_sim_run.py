@@ -58,7 +58,7 @@ def test_city_run_balances_and_outputs(tmp_path):
     s = run_scenario(REPO / "scenarios" / "city.toml", out, end=300,
                      equations=[PHYS, VSP, HEAVY], trace=True, progress=False)
     assert s["steps"] == 600 and s["vehicles"] > 20
-    assert json.loads((out / "summary.json").read_text()) == json.loads(json.dumps(s))
+    assert json.loads((out / "summary.json").read_text()) == json.loads(json.dumps(s.summary))
     veh = pd.read_parquet(out / "vehicles.parquet")
     edges = pd.read_parquet(out / "edges.parquet")
     classes = pd.read_parquet(out / "classes.parquet")
@@ -96,7 +96,7 @@ def test_city_run_balances_and_outputs(tmp_path):
     assert pq.read_schema(out / "trace.parquet").field("p_total_w").metadata[b"unit"] == b"W"
     # edgeData XML agrees with edges.parquet
     root = ET.parse(out / "edgedata.xml").getroot()
-    xml_tot = sum(float(el.get("drvpw_phys_total_j")) for el in root.iter("edge"))
+    xml_tot = sum(float(el.get("phys_total_j")) for el in root.iter("edge"))
     np.testing.assert_allclose(xml_tot, edges[edges.equation == "phys"].traction_total_j.sum(),
                                rtol=1e-6)
     assert (out / "shares.png").stat().st_size > 0
@@ -285,7 +285,7 @@ def test_cli_bad_inputs(tmp_path, capsys):
 def test_cli_vtype_without_mass_and_sumo_start_failure(tmp_path, capsys):
     routes = ONE_CAR.format(m=M, v=20.0, route="east", pos=0, more="").replace(
         f'mass="{M}" ', "")
-    p = _scenario(tmp_path, routes, end=10)
+    p = _scenario(tmp_path, routes, end=10, extra="[vehicles]\ndefault_masses = false\n")
     code, err = _cli([p, "--out", tmp_path / "o", "--equation", str(REPO / "nonexistent.toml")],
                      capsys)
     assert code == 2 and "nonexistent.toml" in err

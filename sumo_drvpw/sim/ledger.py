@@ -94,12 +94,22 @@ class Ledger:
         # closed edge segments: energies (edges, 2, E, C) [traction, recuperable], distances
         self._edge_closed = np.zeros((n_edges, 2, self.E, self.C))
         self._edge_dist_closed = np.zeros(n_edges)
+        self._edge_time_closed = np.zeros(n_edges)
+        self._edge_dist_eq_closed = np.zeros((n_edges, self.E))
         self._edge_cache = None
         self.edge_count = np.zeros((n_edges, self.E))
+        #: accounted vehicles that entered each edge (SUMO's edgeData ``entered``)
+        self.edge_entered = np.zeros(n_edges)
+        #: cumulative edge totals at interval boundaries: [(time [s], energies, distances,
+        #: times, counts, entered)] (see :meth:`snapshot`)
+        self.snapshots: list[tuple] = []
         self.n_veh = 0
         self._alloc(capacity)
         self.veh_ids: list[str] = []
         self.veh_type: list[str] = []
+        self.veh_class: list[str] = []
+        #: vehicle-steps per equation outside the equation's speed/acceleration range
+        self.out_of_range = np.zeros(n_equations, np.int64)
         self.steps = 0
         self.samples = 0
         self.corrected = 0
@@ -110,17 +120,39 @@ class Ledger:
         #: vehicle-steps on a clipped slope, per lane number (sized by the loop)
         self.lane_clipped = np.zeros(0, np.int64)
 
-    def _edges(self) -> tuple[np.ndarray, np.ndarray]:
-        """Edge energies (edges, 2, E, C) and distances: closed plus open segments."""
+    def _edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Edge energies (edges, 2, E, C), distances, times and distances per equation
+        (edges, E) of the vehicles it applies to: closed plus open segments."""
         if self._edge_cache is None:
             energy, dist = self._edge_closed.copy(), self._edge_dist_closed.copy()
+            etime = self._edge_time_closed.copy()
+            dist_eq = self._edge_dist_eq_closed.copy()
             n = self.n_veh
             open_ = np.flatnonzero(self.veh_prev_edge[:n] >= 0)
             e = self.veh_prev_edge[open_]
             np.add.at(energy, e, self._veh_energy[open_] - self._seg_energy[open_])
-            np.add.at(dist, e, self.veh_dist[open_] - self._seg_dist[open_])
-            self._edge_cache = (energy, dist)
+            d = self.veh_dist[open_] - self._seg_dist[open_]
+            np.add.at(dist, e, d)
+            np.add.at(dist_eq, e, d[:, None] * self.veh_app[open_])
+            np.add.at(etime, e, self.veh_time[open_] - self._seg_time[open_])
+            self._edge_cache = (energy, dist, etime, dist_eq)
         return self._edge_cache
+
+    @property
+    def edge_dist_eq(self) -> np.ndarray:
+        """Distance driven per edge by the vehicles each equation applies to [m], (edges, E)."""
+        return self._edges()[3]
+
+    @property
+    def edge_time(self) -> np.ndarray:
+        """Vehicle-seconds spent per edge [s] (SUMO's ``sampledSeconds``), (edges,)."""
+        return self._edges()[2]
+
+    def snapshot(self, t: float) -> None:
+        """Keep the cumulative edge totals at time ``t`` [s] (an interval boundary)."""
+        energy, dist, etime, dist_eq = self._edges()
+        self.snapshots.append((float(t), energy.copy(), dist_eq.copy(), etime.copy(),
+                               self.edge_count.copy(), self.edge_entered.copy()))
 
     @property
     def edge_trac(self) -> np.ndarray:
@@ -158,6 +190,7 @@ class Ledger:
         grow("_veh_energy", (cap, 2, E, C))
         grow("_seg_energy", (cap, 2, E, C))  # running totals when the edge was entered
         grow("_seg_dist", (cap,))
+        grow("_seg_time", (cap,))
         grow("veh_dist", (cap,))
         grow("veh_time", (cap,))
         grow("veh_mass", (cap,), float, np.nan)
@@ -170,13 +203,14 @@ class Ledger:
         self.capacity = cap
 
     def add_vehicle(self, vid: str, vtype: str, mass: float, app: np.ndarray,
-                    keep: bool) -> int:
+                    keep: bool, vclass: str = "") -> int:
         """Register a vehicle; returns its index."""
         if self.n_veh >= self.capacity:
             self._alloc(2 * self.capacity)
         i = self.n_veh
         self.veh_ids.append(vid)
         self.veh_type.append(vtype)
+        self.veh_class.append(vclass)
         self.veh_mass[i] = mass
         self.veh_app[i] = app
         self.veh_keep[i] = keep
@@ -214,11 +248,16 @@ class Ledger:
             if had.any():
                 vo = vi[had]
                 np.add.at(self._edge_closed, old[had], self._veh_energy[vo] - self._seg_energy[vo])
-                np.add.at(self._edge_dist_closed, old[had], self.veh_dist[vo] - self._seg_dist[vo])
+                d = self.veh_dist[vo] - self._seg_dist[vo]
+                np.add.at(self._edge_dist_closed, old[had], d)
+                np.add.at(self._edge_dist_eq_closed, old[had], d[:, None] * self.veh_app[vo])
+                np.add.at(self._edge_time_closed, old[had], self.veh_time[vo] - self._seg_time[vo])
             self._seg_energy[vi] = self._veh_energy[vi]
             self._seg_dist[vi] = self.veh_dist[vi]
+            self._seg_time[vi] = self.veh_time[vi]
             self.veh_prev_edge[vi] = eidx[enter]
             np.add.at(self.edge_count, eidx[enter], self.veh_app[vi])
+            np.add.at(self.edge_entered, eidx[enter], 1.0)
         # one scatter-add of the vehicle rows: the per-call overhead, not the arithmetic,
         # dominates at a few thousand vehicles
         self._veh_energy[vidx] += split.transpose(3, 0, 1, 2)

@@ -177,6 +177,11 @@ class Stepper:
             # only a different edge or position is a disagreement; lanes -1, -2 belong to none
             self.lane_own = np.append(net.lane_own_edge, [-1, -1])
         self.every_equation_applies = True  # to every vehicle accounted so far
+        #: (equation number, speed range [m/s] or None, acceleration range [m/s²] or None)
+        self.ranges = [(k, e.speed_range_mps, e.accel_range_mps2)
+                       for k, e in enumerate(eqset.equations)
+                       if getattr(e, "speed_range_mps", None) is not None
+                       or getattr(e, "accel_range_mps2", None) is not None]
         self.first = True
         self.prev_ids, self.prev_sel = None, None
         #: simulation time of the last booked step [s]; steps skipped (a
@@ -191,8 +196,9 @@ class Stepper:
     def register(self, vid: str) -> int:
         ledger = self.ledger
         vt = self.conn.vehicle.getTypeID(vid)
-        mass, app, keep = self.resolve(vt, vid)
-        i = ledger.add_vehicle(vid, vt, mass, app, keep)
+        res = self.resolve(vt, vid)
+        mass, app, keep = res[:3]
+        i = ledger.add_vehicle(vid, vt, mass, app, keep, res[3] if len(res) > 3 else "")
         self.vmap[vid] = i
         if keep and not np.all(ledger.veh_app[i] == 1.0):
             self.every_equation_applies = False
@@ -316,6 +322,15 @@ class Stepper:
                    v_acc=v_mean)
         pc = self.eqset.category_powers(x, None if self.every_equation_applies
                                         else ledger.veh_app[vidx])
+        for k, vr, ar in self.ranges:  # vehicle-steps outside an equation's validity range
+            out = np.zeros(m, bool)
+            if vr is not None:
+                out |= (v < vr[0]) | (v > vr[1])
+            if ar is not None:
+                out |= (a < ar[0]) | (a > ar[1])
+            if not self.every_equation_applies:
+                out &= ledger.veh_app[vidx, k] > 0
+            ledger.out_of_range[k] += int(np.count_nonzero(out))
         eidx = self.lane_edge_ext[lane]
         ledger.book(vidx, eidx, v, dt, pc)
         if self.trace is not None:
@@ -328,16 +343,30 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
              use_subscriptions: bool = False) -> dict:
     """Step the simulation to ``end`` [s] (or until no vehicle is left) and book energies.
 
-    Parameters: as :class:`Stepper`, and
-    end : simulation end time [s]; None: until ``getMinExpectedNumber`` is 0
+    Parameters: as :class:`Stepper` and :func:`step_until`.
+    """
+    stepper = Stepper(conn, net, eqset, ledger, physics, resolve, trace, use_subscriptions)
+    return step_until(conn, stepper, end, progress)
+
+
+def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool = False,
+               period: float | None = None) -> dict:
+    """Call ``simulationStep`` and book each step until ``end`` [s] (None: until
+    ``getMinExpectedNumber`` is 0).
+
+    Parameters
+    ----------
+    conn : the connection the stepper reads
+    stepper : the :class:`Stepper`
+    end : simulation end time [s]
     progress : tqdm progress bar on a TTY
+    period : edgeData interval [s]: edge totals are kept at each multiple of it
 
     Returns ``{"interrupted": bool, "end_time_s": t, "step_length_s": Δt,
     "step_method": "euler"|"ballistic"}``; Ctrl-C stops the loop cleanly so that every
     output of the partial run can still be written.
     """
-    stepper = Stepper(conn, net, eqset, ledger, physics, resolve, trace, use_subscriptions)
-    dt = stepper.dt
+    ledger, dt = stepper.ledger, stepper.dt
     interrupted = False
     bar = None
     if progress and end is not None and sys.stderr.isatty():
@@ -345,6 +374,10 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
 
         t0 = conn.simulation.getTime()
         bar = tqdm(total=max(0, int(round((end - t0) / dt))), unit="step", file=sys.stderr)
+    next_cut = None
+    if period:
+        t0 = conn.simulation.getTime()
+        next_cut = (np.floor(t0 / period + 1e-9) + 1) * period
     try:
         while True:
             t = conn.simulation.getTime()
@@ -354,6 +387,9 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
                 break
             conn.simulationStep()
             stepper.after_step()
+            if next_cut is not None and conn.simulation.getTime() >= next_cut - 1e-9:
+                ledger.snapshot(next_cut)
+                next_cut += period
             if bar is not None and ledger.steps % 50 == 0:
                 bar.update(50)
     except KeyboardInterrupt:

@@ -20,7 +20,7 @@ from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, Ledger
 from sumo_drvpw.sim.network import Network
 
 UNITS = {"_j": "J", "_m": "m", "_s": "s", "_kg": "kg", "_w": "W", "_mps": "m/s",
-         "_mps2": "m/s2", "_rad": "rad", "share": "1"}
+         "_mps2": "m/s2", "_rad": "rad", "share": "1", "_whpkm": "Wh/km", "_kwh": "kWh"}
 
 
 def _unit(name: str) -> str | None:
@@ -47,7 +47,15 @@ def _energy_cols(prefix: str, x: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
-def vehicles_table(ledger: Ledger, names: list[str]) -> pa.Table:
+def _whpkm(energy_j: np.ndarray, dist_m: np.ndarray) -> np.ndarray:
+    """Energy per distance [Wh/km] (NaN where nothing was driven): J/m ÷ 3.6."""
+    e = np.asarray(energy_j, float)
+    d = np.asarray(dist_m, float)
+    return np.divide(e, d * 3.6, out=np.full_like(e, np.nan), where=d > 0)
+
+
+def vehicles_table(ledger: Ledger, names: list[str],
+                   predicts: list[str] | None = None) -> pa.Table:
     """Per vehicle × equation (only accounted vehicles and equations applied to them)."""
     n = ledger.n_veh
     keep = ledger.veh_keep[:n]
@@ -56,12 +64,16 @@ def vehicles_table(ledger: Ledger, names: list[str]) -> pa.Table:
     rc = ledger.veh_recup[vi, ei]
     cols = {"vehicle": [ledger.veh_ids[i] for i in vi],
             "vtype": [ledger.veh_type[i] for i in vi],
+            "vclass": [ledger.veh_class[i] if i < len(ledger.veh_class) else "" for i in vi],
             "equation": [names[e] for e in ei],
+            "predicts": [(predicts or ["wheel"] * len(names))[e] for e in ei],
             "mass_kg": ledger.veh_mass[vi], "distance_m": ledger.veh_dist[vi],
             "time_s": ledger.veh_time[vi]}
     cols.update(_energy_cols("traction", tr))
     cols.update(_energy_cols("recup", rc))
     cols["net_total_j"] = cols["traction_total_j"] + cols["recup_total_j"]
+    cols["traction_whpkm"] = _whpkm(cols["traction_total_j"], cols["distance_m"])
+    cols["net_whpkm"] = _whpkm(cols["net_total_j"], cols["distance_m"])
     return table_with_units(cols)
 
 
@@ -73,10 +85,12 @@ def edges_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
     cols = {"edge": [net.edge_ids[i] for i in ed], "equation": [names[e] for e in eq],
             "class": [str(net.edge_class[i]) for i in ed], "type": [net.edge_type[i] for i in ed],
             "length_m": net.edge_length[ed], "speed_limit_mps": net.edge_speed[ed],
-            "vehicles": ledger.edge_count[ed, eq], "distance_m": ledger.edge_dist[ed]}
+            "vehicles": ledger.edge_count[ed, eq], "distance_m": ledger.edge_dist_eq[ed, eq]}
     cols.update(_energy_cols("traction", ledger.edge_trac[ed, eq]))
     cols.update(_energy_cols("recup", ledger.edge_recup[ed, eq]))
     cols["net_total_j"] = cols["traction_total_j"] + cols["recup_total_j"]
+    cols["traction_whpkm"] = _whpkm(cols["traction_total_j"], cols["distance_m"])
+    cols["net_whpkm"] = _whpkm(cols["net_total_j"], cols["distance_m"])
     return table_with_units(cols)
 
 
@@ -92,10 +106,14 @@ def class_energy(ledger: Ledger, net: Network) -> tuple[list[str], np.ndarray, n
 
 
 def classes_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
-    """Per road class × equation × category: traction energy, its share, recuperable energy."""
+    """Per road class × equation × category: traction energy, its share, recuperable
+    energy, and per distance driven in the class [Wh/km]."""
     classes, tr, rc = class_energy(ledger, net)
+    k = np.array([classes.index(c) for c in net.edge_class], np.int64)
+    cdist = np.stack([np.bincount(k, weights=ledger.edge_dist_eq[:, e], minlength=len(classes))
+                      for e in range(ledger.E)], axis=1) if ledger.E else np.zeros((len(classes), 0))
     rows = {"class": [], "equation": [], "term": [], "traction_energy_j": [], "share": [],
-            "recup_energy_j": []}
+            "recup_energy_j": [], "distance_m": [], "traction_whpkm": []}
     for ki, c in enumerate(classes):
         for e, name in enumerate(names):
             tot = tr[ki, e].sum()
@@ -106,26 +124,58 @@ def classes_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
                 rows["traction_energy_j"].append(tr[ki, e, ci])
                 rows["share"].append(tr[ki, e, ci] / tot if tot > 0 else np.nan)
                 rows["recup_energy_j"].append(rc[ki, e, ci])
+                rows["distance_m"].append(cdist[ki, e])
+                rows["traction_whpkm"].append(
+                    tr[ki, e, ci] / (cdist[ki, e] * 3.6) if cdist[ki, e] > 0 else np.nan)
     return table_with_units(rows)
 
 
 def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
                  end: float) -> str:
-    """SUMO edgeData-style XML: per edge, traction energy [J] per equation and category
-    (attributes ``drvpw_<eq>_<cat>_j`` and ``drvpw_<eq>_total_j``)."""
+    """SUMO edgeData XML (``<meandata><interval begin end id><edge .../>``), one interval per
+    boundary kept with :meth:`Ledger.snapshot` (else the whole run), edges driven on only.
+
+    Per edge: ``sampledSeconds`` (vehicle-seconds [s]), ``entered`` (accounted vehicles
+    that entered), and per equation ``<eq>_<term>_j`` (traction energy per term [J]),
+    ``<eq>_recup_j`` (recuperable energy, ≤ 0 [J]), ``<eq>_total_j`` (traction [J]),
+    ``<eq>_total_perVeh_j`` (per vehicle that entered [J]) and ``<eq>_total_normed_jpm``
+    (per metre driven [J/m]), in the manner of SUMO's ``CO2_abs``/``_perVeh``/``_normed``.
+    Equation names are restricted to ``NAME_PATTERN`` (valid XML names); ids are escaped.
+    """
     from xml.sax.saxutils import quoteattr
 
+    energy_, _, etime_, dist_eq_ = ledger._edges()
+    cur = (float(end), energy_, dist_eq_, etime_, ledger.edge_count, ledger.edge_entered)
+    bounds = [s for s in ledger.snapshots if begin < s[0] < end] + [cur]
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
-             "<!-- sumo-drvpw: traction energy [J] per edge, equation and term -->",
-             "<meandata>", f'    <interval begin="{begin:g}" end="{end:g}" id="drvpw">']
-    for i, eid in enumerate(net.edge_ids):
-        attrs = []
-        for e, name in enumerate(names):
-            for ci, cat in enumerate(LEDGER_CATEGORIES):
-                attrs.append(f'drvpw_{name}_{cat}_j="{ledger.edge_trac[i, e, ci]:.3f}"')
-            attrs.append(f'drvpw_{name}_total_j="{ledger.edge_trac[i, e].sum():.3f}"')
-        lines.append(f"        <edge id={quoteattr(eid)} {' '.join(attrs)}/>")
-    lines += ["    </interval>", "</meandata>", ""]
+             "<!-- sumo-drvpw: driving energy per edge, equation and term (traction [J], "
+             "recuperable [J], per vehicle [J], per metre [J/m]) -->",
+             '<meandata xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" '
+             'xsi:noNamespaceSchemaLocation="http://sumo.dlr.de/xsd/meandata_file.xsd">']
+    prev = (float(begin), np.zeros_like(cur[1]), np.zeros_like(cur[2]), np.zeros_like(cur[3]),
+            np.zeros_like(cur[4]), np.zeros_like(cur[5]))
+    cats = [c for c in LEDGER_CATEGORIES]
+    for b in bounds:
+        t0, t1 = prev[0], b[0]
+        energy, dist, etime, count, entered = (b[k] - prev[k] for k in range(1, 6))
+        lines.append(f'    <interval begin="{t0:.2f}" end="{t1:.2f}" id="drvpw">')
+        for i in np.flatnonzero(etime > 0):
+            attrs = [f'sampledSeconds="{etime[i]:.2f}"', f'entered="{entered[i]:.0f}"']
+            for e, name in enumerate(names):
+                tr = energy[i, 0, e]
+                tot = float(tr.sum())
+                for ci, cat in enumerate(cats):
+                    attrs.append(f'{name}_{cat}_j="{tr[ci]:.3f}"')
+                attrs.append(f'{name}_recup_j="{energy[i, 1, e].sum():.3f}"')
+                attrs.append(f'{name}_total_j="{tot:.3f}"')
+                per_veh = tot / count[i, e] if count[i, e] > 0 else 0.0
+                attrs.append(f'{name}_total_perVeh_j="{per_veh:.3f}"')
+                normed = tot / dist[i, e] if dist[i, e] > 0 else 0.0
+                attrs.append(f'{name}_total_normed_jpm="{normed:.6f}"')
+            lines.append(f"        <edge id={quoteattr(net.edge_ids[i])} {' '.join(attrs)}/>")
+        lines.append("    </interval>")
+        prev = b
+    lines += ["</meandata>", ""]
     return "\n".join(lines)
 
 
@@ -236,8 +286,14 @@ class TraceWriter:
             raise
 
 
+#: One colour per term category in every figure (matplotlib's tab10 entries).
+TERM_COLOURS = {"acc": "#1f77b4", "grade": "#8c564b", "aero": "#2ca02c", "roll": "#ff7f0e",
+                "other": "#7f7f7f"}
+
+
 def share_figure(classes_tbl: pa.Table, path: Path) -> None:
-    """Bar chart: traction-energy share by term for each road class and equation."""
+    """Stacked bars: traction energy [kWh] by term for each road class and equation, with
+    the share of each term printed and the energy per distance [Wh/km] above each bar."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -245,26 +301,35 @@ def share_figure(classes_tbl: pa.Table, path: Path) -> None:
 
     df = classes_tbl.to_pandas()
     df = df[df["term"].isin(LEDGER_CATEGORIES)]
-    piv = df.pivot_table(index=["class", "equation"], columns="term", values="share",
-                         sort=False).fillna(0.0)
-    piv = piv[[c for c in LEDGER_CATEGORIES if c in piv.columns and piv[c].abs().sum() > 0]]
-    tot = df.groupby(["class", "equation"], sort=False)["traction_energy_j"].sum()
-    piv = piv[tot.reindex(piv.index).to_numpy() > 0]
-    fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(piv) + 2), 4))
-    if len(piv):
-        piv.plot.bar(stacked=True, ax=ax, width=0.75)
-        ax.set_xticklabels([f"{c}\n{e}" for c, e in piv.index], rotation=0, fontsize=7)
-    ax.set_ylabel("share of traction energy [-]")
+    kwh = df.pivot_table(index=["class", "equation"], columns="term",
+                         values="traction_energy_j", sort=False).fillna(0.0) / 3.6e6
+    kwh = kwh[[c for c in LEDGER_CATEGORIES if c in kwh.columns and kwh[c].abs().sum() > 0]]
+    kwh = kwh[kwh.sum(axis=1) > 0]
+    whpkm = df.groupby(["class", "equation"], sort=False)["traction_whpkm"].sum()
+    fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(kwh) + 2), 4.5))
+    if len(kwh):
+        kwh.plot.bar(stacked=True, ax=ax, width=0.75,
+                     color=[TERM_COLOURS[c] for c in kwh.columns])
+        ax.set_xticklabels([f"{c}\n{e}" for c, e in kwh.index], rotation=0, fontsize=7)
+        tot = kwh.sum(axis=1).to_numpy()
+        for k, (idx, t) in enumerate(zip(kwh.index, tot)):
+            w = whpkm.get(idx, np.nan)
+            ax.annotate(f"{t:.2f} kWh\n{w:.0f} Wh/km" if np.isfinite(w) else f"{t:.2f} kWh",
+                        (k, t), ha="center", va="bottom", fontsize=7)
+        ax.set_ylim(0, 1.18 * float(tot.max()))
+    ax.set_ylabel("traction energy [kWh]")
     ax.set_xlabel("")
     ax.set_title("Traction energy by term, per road class and equation")
-    ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5))
+    if len(kwh):
+        ax.legend(title="term", loc="center left", bbox_to_anchor=(1.0, 0.5))
     write_figure(path, fig)
 
 
 def difference_map(ledger: Ledger, net: Network, names: list[str], pair: list[str],
                    path: Path) -> None:
     """Network map coloured by the per-edge traction-energy difference of two equations,
-    per metre driven [J/m] (sumolib geometry)."""
+    per kilometre driven [Wh/km] (sumolib geometry). Long thin networks get a stretched
+    cross axis (equal aspect only when the extent is within 1:8)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -273,49 +338,116 @@ def difference_map(ledger: Ledger, net: Network, names: list[str], pair: list[st
 
     a, b = names.index(pair[0]), names.index(pair[1])
     diff = ledger.edge_trac[:, a].sum(1) - ledger.edge_trac[:, b].sum(1)
-    per_m = np.divide(diff, ledger.edge_dist, out=np.full_like(diff, np.nan),
-                      where=ledger.edge_dist > 0)
+    both = np.minimum(ledger.edge_dist_eq[:, a], ledger.edge_dist_eq[:, b])
+    per_km = _whpkm(diff, both)
     fig, ax = plt.subplots(figsize=(7, 6))
-    used = np.isfinite(per_m)
+    used = np.isfinite(per_km)
     ax.add_collection(LineCollection([s for s, u in zip(net.edge_shapes, used) if not u],
                                      colors="0.85", linewidths=0.8))
-    lim = float(np.nanmax(np.abs(per_m))) if used.any() else 1.0
+    lim = float(np.nanmax(np.abs(per_km))) if used.any() else 1.0
     lc = LineCollection([s for s, u in zip(net.edge_shapes, used) if u], cmap="coolwarm",
                         linewidths=2.5)
-    lc.set_array(per_m[used])
+    lc.set_array(per_km[used])
     lc.set_clim(-lim or -1.0, lim or 1.0)
     ax.add_collection(lc)
-    fig.colorbar(lc, ax=ax, label=f"{pair[0]} − {pair[1]} traction energy per metre [J/m]")
+    fig.colorbar(lc, ax=ax, label=f"{pair[0]} − {pair[1]} traction energy [Wh/km]")
     ax.autoscale()
-    ax.set_aspect("equal")
+    pts = np.concatenate(net.edge_shapes) if net.edge_shapes else np.zeros((1, 2))
+    span = np.ptp(pts, axis=0)
+    if span.min() > 0 and span.max() / span.min() <= 8:
+        ax.set_aspect("equal")
+    else:  # a strip (e.g. a 6 km × 40 m motorway): pad the short axis to stay readable
+        k = int(np.argmin(span))
+        mid = pts[:, k].mean()
+        half = max(span.max() / 16, 1.0)
+        (ax.set_ylim if k == 1 else ax.set_xlim)(mid - half, mid + half)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
     ax.set_title(f"Per-edge difference {pair[0]} − {pair[1]}")
     write_figure(path, fig)
 
 
-def write_outputs(out_dir: Path, ledger: Ledger, net: Network, names: list[str],
-                  summary: dict, begin: float, end: float, edgedata: bool, figures: bool,
-                  difference: list[str] | None) -> dict[str, str]:
+class RunResult:
+    """What a run booked: tables as DataFrames, the summary, and :meth:`write`.
+
+    ``result["steps"]`` reads ``result.summary["steps"]`` (the summary dict as before).
+    """
+
+    def __init__(self, ledger: Ledger, net: Network, names: list[str], predicts: list[str],
+                 summary: dict, begin: float, end: float, edgedata: bool = True,
+                 figures: bool = True, difference: list[str] | None = None,
+                 period: float | None = None):
+        self.ledger, self.net, self.names, self.predicts = ledger, net, names, predicts
+        self.summary, self.begin, self.end = summary, begin, end
+        self.edgedata, self.figures, self.difference, self.period = \
+            edgedata, figures, difference, period
+
+    def __getitem__(self, key):
+        return self.summary[key]
+
+    def get(self, key, default=None):
+        return self.summary.get(key, default)
+
+    def __contains__(self, key) -> bool:
+        return key in self.summary
+
+    def vehicles_arrow(self) -> pa.Table:
+        return vehicles_table(self.ledger, self.names, self.predicts)
+
+    def edges_arrow(self) -> pa.Table:
+        return edges_table(self.ledger, self.net, self.names)
+
+    def classes_arrow(self) -> pa.Table:
+        return classes_table(self.ledger, self.net, self.names)
+
+    @property
+    def vehicles(self):
+        """Per vehicle × equation (pandas DataFrame; columns as in vehicles.parquet)."""
+        return self.vehicles_arrow().to_pandas()
+
+    @property
+    def edges(self):
+        """Per edge × equation (pandas DataFrame; columns as in edges.parquet)."""
+        return self.edges_arrow().to_pandas()
+
+    @property
+    def classes(self):
+        """Per road class × equation × term (pandas DataFrame; classes.parquet)."""
+        return self.classes_arrow().to_pandas()
+
+    def edgedata_xml(self) -> str:
+        return edgedata_xml(self.ledger, self.net, self.names, self.begin, self.end)
+
+    def write(self, out_dir) -> dict[str, str]:
+        """Write every table, figure and summary.json atomically into ``out_dir``."""
+        return write_outputs(Path(out_dir), self)
+
+
+def write_outputs(out_dir: Path, result: RunResult) -> dict[str, str]:
     """Write every table/figure atomically into ``out_dir``; returns name → path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    summary = result.summary
     files = {}
-    write_parquet(out_dir / "vehicles.parquet", vehicles_table(ledger, names))
-    write_parquet(out_dir / "edges.parquet", edges_table(ledger, net, names))
-    ct = classes_table(ledger, net, names)
+    write_parquet(out_dir / "vehicles.parquet", result.vehicles_arrow())
+    write_parquet(out_dir / "edges.parquet", result.edges_arrow())
+    ct = result.classes_arrow()
     write_parquet(out_dir / "classes.parquet", ct)
     write_text(out_dir / "shares.csv", ct.to_pandas().to_csv(index=False))
     files.update({k: str(out_dir / f) for k, f in (
         ("vehicles", "vehicles.parquet"), ("edges", "edges.parquet"),
         ("classes", "classes.parquet"), ("shares", "shares.csv"))})
-    if edgedata:
-        write_text(out_dir / "edgedata.xml", edgedata_xml(ledger, net, names, begin, end))
+    if result.edgedata:
+        write_text(out_dir / "edgedata.xml", result.edgedata_xml())
         files["edgedata"] = str(out_dir / "edgedata.xml")
-    if figures:
+    names = result.names
+    if result.figures:
         share_figure(ct, out_dir / "shares.png")
         files["shares_figure"] = str(out_dir / "shares.png")
         if len(names) >= 2:
-            pair = difference or names[:2]
-            difference_map(ledger, net, names, pair, out_dir / "difference_map.png")
+            pair = result.difference or names[:2]
+            difference_map(result.ledger, result.net, names, pair,
+                           out_dir / "difference_map.png")
             files["difference_map"] = str(out_dir / "difference_map.png")
     summary.setdefault("files", {}).update({k: os.path.basename(v) for k, v in files.items()})
     write_json(out_dir / "summary.json", summary)

@@ -11,7 +11,6 @@ connection passed in), ``outputs``.
 from __future__ import annotations
 
 import os
-import time
 from pathlib import Path
 
 import numpy as np
@@ -22,17 +21,32 @@ __all__ = ["run_scenario", "start_sumo", "close_sumo", "VTypeResolver"]
 
 
 class VTypeResolver:
-    """vType id → (mass [kg], applicability per equation, accounted?) for the loop.
+    """vType id → (mass [kg], applicability per equation, accounted?, vClass) for the loop.
 
+    vClass: SUMO's (``vehicletype.getVehicleClass``) > the vType's ``vClass`` attribute in
+    the files > ``passenger`` (SUMO's default).
+    Equations: scenario ``vtypes.<id>.equations`` > param ``drvpw.equation`` > scenario
+    ``vclasses.<vClass>.equations`` > every equation whose ``vclasses`` contain the vClass.
+    A vType with none is not accounted and counted in :attr:`skipped` (by vClass and vType).
     Mass: scenario ``vtypes.<id>.mass_kg`` > param ``drvpw.mass`` > ``mass`` attribute
-    written in the route/additional files; none of them → UserError (see
-    :mod:`sumo_drvpw.sim.vtypes` for why SUMO's own default is not accepted).
-    Equations: scenario ``vtypes.<id>.equations`` > param ``drvpw.equation`` > all.
+    written in the route/additional files > scenario ``vclasses.<vClass>.mass_kg`` > the
+    built-in default of the vClass (:data:`sumo_drvpw.sim.vtypes.DEFAULT_MASS_KG`, listed
+    in :attr:`assumptions`) unless ``vehicles.default_masses = false``; none → UserError.
     """
 
-    def __init__(self, scenario, file_vtypes: dict, names: list[str], conn=None):
-        self.sc, self.files, self.names, self.conn = scenario, file_vtypes, names, conn
+    def __init__(self, scenario, file_vtypes: dict, equations: list, conn=None):
+        self.sc, self.files, self.conn = scenario, file_vtypes, conn
+        self.names = [e if isinstance(e, str) else e.name for e in equations]
+        #: equation name → vClasses it is made for (names given as plain strings: any)
+        self.vclasses = {(e if isinstance(e, str) else e.name):
+                         (None if isinstance(e, str) else set(e.vclasses)) for e in equations}
         self.cache: dict[str, tuple] = {}
+        #: vehicles not accounted because no equation is made for their vClass
+        self.skipped: dict[str, dict[str, int]] = {"by_vclass": {}, "by_vtype": {}}
+        #: vehicles left out by ``vehicles.vtypes``
+        self.excluded = 0
+        #: vType → {"vclass", "mass_kg", "source"} for masses taken from class defaults
+        self.assumptions: dict[str, dict] = {}
 
     def _param(self, vt: str, key: str) -> str:
         if self.conn is None:
@@ -42,13 +56,48 @@ class VTypeResolver:
         except Exception:
             return ""
 
+    def _vclass(self, vt: str, info) -> str:
+        if self.conn is not None:
+            try:
+                vc = self.conn.vehicletype.getVehicleClass(vt)
+                if vc:
+                    return str(vc)
+            except Exception:
+                pass
+        return (info.vclass if info is not None and info.vclass else None) or "passenger"
+
     def __call__(self, vt: str, vid: str):
-        if vt in self.cache:
-            return self.cache[vt]
+        out = self.cache.get(vt)
+        if out is None:
+            out = self.cache[vt] = self._resolve(vt, vid)
+        if not out[2]:
+            if out[4] == "filter":
+                self.excluded += 1
+            else:
+                for key, k in (("by_vclass", out[3]), ("by_vtype", vt)):
+                    self.skipped[key][k] = self.skipped[key].get(k, 0) + 1
+        return out[:4]
+
+    def _resolve(self, vt: str, vid: str):
+        from sumo_drvpw.sim.vtypes import DEFAULT_MASS_KG, DEFAULT_MASS_SOURCE
+
         sc = self.sc
-        keep = sc.vtype_filter is None or vt in sc.vtype_filter
         data = sc.vtype_data.get(vt, {})
         info = self.files.get(vt)
+        vclass = self._vclass(vt, info)
+        cdata = getattr(sc, "vclass_data", {}).get(vclass, {})
+        if sc.vtype_filter is not None and vt not in sc.vtype_filter:
+            return (np.nan, np.zeros(len(self.names)), False, vclass, "filter")
+        eq = data.get("equations")
+        if eq is None:
+            one = (info.equation if info is not None else None) or self._param(vt, "drvpw.equation")
+            eq = [one] if one else cdata.get("equations")
+        if eq is None:
+            eq = [n for n in self.names
+                  if self.vclasses[n] is None or vclass in self.vclasses[n]]
+        app = np.array([1.0 if n in eq else 0.0 for n in self.names])
+        if not app.any():
+            return (np.nan, app, False, vclass, "vclass")
         mass = data.get("mass_kg")
         if mass is None and info is not None:
             mass = info.mass_kg
@@ -59,47 +108,20 @@ class VTypeResolver:
                     mass = float(p)
                 except ValueError:
                     raise UserError(f"vType '{vt}': drvpw.mass is not a number: {p!r}") from None
-        eq = data.get("equations")
-        if eq is None:
-            one = (info.equation if info is not None else None) or self._param(vt, "drvpw.equation")
-            eq = [one] if one else list(self.names)
-        app = np.array([1.0 if n in eq else 0.0 for n in self.names])
-        if keep and mass is None:
+        if mass is None:
+            mass = cdata.get("mass_kg")
+        if mass is None and getattr(sc, "default_masses", True) and vclass in DEFAULT_MASS_KG:
+            mass = DEFAULT_MASS_KG[vclass]
+            self.assumptions[vt] = {"vclass": vclass, "mass_kg": mass,
+                                    "source": DEFAULT_MASS_SOURCE[vclass]}
+        if mass is None:
             where = f" (defined in {info.source})" if info is not None else \
                 " (not defined in the route/additional files: SUMO's default type?)"
             raise UserError(
                 f"vType '{vt}' of vehicle '{vid}'{where} has no mass: give it a mass attribute, "
-                f'a <param key="drvpw.mass" value="..."/>, or vtypes.{vt}.mass_kg in the '
-                "scenario (or leave it out with vehicles.vtypes)")
-        out = (float(mass) if mass is not None else np.nan, app, keep)
-        self.cache[vt] = out
-        return out
-
-
-#: How a step is booked (summary.json ``energy_booking``; docs/scenario.md).
-ENERGY_BOOKING = ("acc term: coefficient × m·v̄·a with v̄ = (v_t + v_t−1)/2, i.e. the "
-                  "kinetic-energy change ½m(v_t² − v_t−1²)/Δt, conserved at any step length; "
-                  "other terms at the speed of the distance SUMO moved the car in the step "
-                  "(Euler update: v_t; ballistic: v̄)")
-
-
-def network_info(net, ledger, top: int = 10) -> dict:
-    """The ``network`` block of summary.json: file, elevation, most-clipped lanes."""
-    counts = ledger.lane_clipped
-    order = np.argsort(-counts, kind="stable")[:top] if len(counts) else []
-    lanes = {net.lane_ids[i]: int(counts[i]) for i in order if counts[i] > 0} \
-        if net.lane_ids is not None else {}
-    return {"file": str(net.path), "has_elevation": bool(net.has_elevation),
-            "z_share": float(net.z_share), "slope_clipped_lanes": lanes}
-
-
-def network_warnings(net) -> list[str]:
-    """Warnings about the network a user should see (printed by the CLI)."""
-    if net.has_elevation:
-        return []
-    return [f"network {net.path.name} has no elevation (no z in any lane shape): every slope "
-            "is 0, so the grade term is 0; build it with elevation (netconvert "
-            "--heightmap.geotiffs / OSM ele) for hilly areas"]
+                f'a <param key="drvpw.mass" value="..."/>, or vtypes.{vt}.mass_kg or '
+                f"vclasses.{vclass}.mass_kg in the scenario (or leave it out with vehicles.vtypes)")
+        return (float(mass), app, True, vclass, "")
 
 
 def _sumo_env() -> None:
@@ -151,87 +173,59 @@ def close_sumo(conn) -> None:
         pass
 
 
-def run_scenario(scenario_path, out_dir, **overrides) -> dict:
-    """Run a scenario and write its outputs; returns the summary (also in summary.json).
+def run_scenario(scenario_path, out_dir=None, **overrides):
+    """Run a scenario; returns its :class:`~sumo_drvpw.sim.outputs.RunResult` and writes
+    its outputs into ``out_dir`` when given (``result["steps"]`` reads the summary).
 
     Parameters
     ----------
     scenario_path : scenario TOML file
-    out_dir : output directory (created)
+    out_dir : output directory (created), or None to write nothing
     overrides : replace scenario values: begin, end, step_length [s], connection, gui,
         options, equations (names, paths or Equation objects), trace, edgedata, figures,
-        progress, difference
+        progress, difference, period
     """
-    from sumo_drvpw.sim.ledger import EquationSet, Ledger
-    from sumo_drvpw.sim.loop import Physics, run_loop
-    from sumo_drvpw.sim.network import load_network
-    from sumo_drvpw.sim.outputs import TraceWriter, summary_dict, write_outputs
+    from sumo_drvpw.sim.accountant import Accountant
+    from sumo_drvpw.sim.loop import step_until
     from sumo_drvpw.sim.scenario import load_scenario
-    from sumo_drvpw.sim.vtypes import read_vtypes
 
     sc = load_scenario(scenario_path, **overrides)
-    file_vtypes = read_vtypes(sc.route_files)
-    equations = list(sc.equations)
-    names = [e.name for e in equations]
-    for info in file_vtypes.values():  # vTypes naming an equation the scenario lacks
-        if info.equation and info.equation not in names:
-            if sc.vtype_filter is not None and info.id not in sc.vtype_filter:
-                continue
-            from sumo_drvpw.sim.scenario import resolve_equation
-
-            eq = resolve_equation(info.equation, Path(info.source).parent,
-                                  f"{info.source}: vType '{info.id}' drvpw.equation")
-            if eq.name != info.equation:
-                raise UserError(f"{info.source}: vType '{info.id}' names equation "
-                                f"'{info.equation}', whose name is '{eq.name}'")
-            equations.append(eq)
-            names.append(eq.name)
-    net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
-    eqset = EquationSet(equations)
-    ledger = Ledger(len(net.edge_ids), len(equations))
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    physics = Physics(wind_speed=sc.wind_speed, wind_from_deg=sc.wind_from_deg, rho=sc.rho,
-                      slope_tol=sc.slope_tol, slope_reference=sc.slope_reference,
-                      acceleration=sc.acceleration, heading=sc.wind_heading,
-                      positions=sc.positions)
-    t0 = time.perf_counter()
+    if sc.trace and out_dir is None:
+        raise UserError("outputs.trace needs an output directory")
+    if out_dir is not None:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
     conn = start_sumo(sc.sumo_args, sc.connection, sc.gui)
-    trace = None
+    acc = None
     try:
-        begin = float(conn.simulation.getTime())
-        resolver = VTypeResolver(sc, file_vtypes, names, conn)
-        if sc.trace:
-            trace = TraceWriter(out_dir / "trace.parquet", ledger, names, net.edge_ids)
+        acc = Accountant(conn, scenario=sc,
+                         trace_path=Path(out_dir) / "trace.parquet" if sc.trace else None)
         try:
-            info = run_loop(conn, net, eqset, ledger, physics, resolver, end=sc.end,
-                            progress=sc.progress, trace=trace,
-                            use_subscriptions=(sc.connection == "traci"))
+            info = step_until(conn, acc.stepper, end=sc.end, progress=sc.progress,
+                              period=sc.period)
         except Exception as e:
             if type(e).__name__ in ("TraCIException", "FatalTraCIError"):
                 raise UserError(f"SUMO failed during the run: {e}") from None
             raise
+        acc.interrupted = info["interrupted"]
+        result = acc.result({"files": {"trace": "trace.parquet"}} if sc.trace else None)
     finally:
-        if trace is not None:
-            trace.close()
+        if acc is not None:
+            acc.close_trace()
         close_sumo(conn)
-    wall = time.perf_counter() - t0
-    extra = {"scenario": str(sc.path) if sc.path else None, "begin_s": begin,
-             "end_s": info["end_time_s"], "step_length_s": info["step_length_s"],
-             "step_method": info["step_method"],
-             "energy_booking": ENERGY_BOOKING,
-             "network": network_info(net, ledger),
-             "interrupted": info["interrupted"], "wall_time_s": wall,
-             "connection": sc.connection, "air_density_kgm3": sc.rho,
-             "slope_reference": sc.slope_reference, "acceleration_source": sc.acceleration,
-             "position_source": sc.positions,
-             "wind": {"speed_mps": sc.wind_speed, "from_deg": sc.wind_from_deg,
-                      "heading_source": sc.wind_heading},
-             "equation_sources": {e.name: (e.path or "<object>") for e in equations}}
-    if sc.trace:
-        extra["files"] = {"trace": "trace.parquet"}
-    extra["warnings"] = network_warnings(net)
-    summary = summary_dict(ledger, net, names, eqset.uses_other, extra)
-    write_outputs(out_dir, ledger, net, names, summary, begin, info["end_time_s"],
-                  sc.edgedata, sc.figures, sc.difference)
-    return summary
+    check_vtype_filter(sc, acc.ledger)
+    if out_dir is not None:
+        result.write(out_dir)
+    return result
+
+
+def check_vtype_filter(sc, ledger) -> None:
+    """Every vType named in ``vehicles.vtypes`` must have appeared in the run (else a typo
+    would silently account nothing): UserError naming the missing ones."""
+    if sc.vtype_filter is None:
+        return
+    seen = set(ledger.veh_type)
+    missing = [vt for vt in sc.vtype_filter if vt not in seen]
+    if missing:
+        raise UserError(f"{sc.path or '<scenario>'}: vehicles.vtypes names vType(s) "
+                        f"{', '.join(missing)} that no vehicle of the run had "
+                        f"(seen: {', '.join(sorted(seen)) or 'none'})")

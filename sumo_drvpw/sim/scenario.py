@@ -70,12 +70,13 @@ with none of them has no mass: SUMO would silently use its default, so this is a
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, R_DRY_AIR, RHO_DEFAULT
-from sumo_drvpw.model.equations import Equation, load_equation
+from sumo_drvpw.model.equations import NAME_PATTERN, Equation, load_equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.model.terms import parse_term
@@ -89,19 +90,20 @@ _SCHEMA: dict[str, set[str] | None] = {
     "equations": None,
     "sumo": {"config", "net", "routes", "additional", "begin", "end", "step_length",
              "connection", "gui", "options", "acceleration", "positions"},
-    "vehicles": {"vtypes"},
+    "vehicles": {"vtypes", "default_masses"},
     "vtypes": None,  # table of vType id → {mass_kg, equations}
+    "vclasses": None,  # table of SUMO vClass → {mass_kg, equations}
     "wind": {"speed_mps", "from_deg", "heading"},
     "air": {"density_kgm3", "temperature_c", "pressure_kpa"},
     "road_class": {"highway_min_speed_kmh", "highway_types", "types", "edges"},
     "slope": {"window_m", "max_rad", "tolerance_rad", "reference"},
-    "outputs": {"trace", "edgedata", "figures", "difference", "progress"},
+    "outputs": {"trace", "edgedata", "figures", "difference", "progress", "period"},
 }
 _VTYPE_KEYS = {"mass_kg", "equations"}
 #: keyword overrides accepted by run_scenario (and the CLI)
 OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
              "trace", "edgedata", "figures", "progress", "difference", "acceleration",
-             "slope_reference", "wind_heading", "positions"}
+             "slope_reference", "wind_heading", "positions", "period"}
 
 
 @dataclass
@@ -165,6 +167,12 @@ class Scenario:
     figures: bool = True
     difference: list[str] | None = None
     progress: bool = True
+    #: SUMO vClass → {"mass_kg": default mass [kg], "equations": [names]}
+    vclass_data: dict[str, dict] = field(default_factory=dict)
+    #: vTypes without a mass take their vClass's built-in default mass (else: error)
+    default_masses: bool = True
+    #: edgeData interval [s] (None: one interval for the whole run)
+    period: float | None = None
 
 
 def _where(path) -> str:
@@ -189,6 +197,12 @@ def _check_table(val, allowed: set[str], where: str, name: str) -> None:
                             f"(known: {', '.join(sorted(allowed))})")
 
 
+def _bool(v, where: str, key: str) -> bool:
+    if not isinstance(v, bool):
+        raise UserError(f"{where}: '{key}' must be true or false, got {v!r}")
+    return v
+
+
 def _choice(v, allowed: tuple[str, ...], where: str, key: str) -> str:
     if v not in allowed:
         raise UserError(f"{where}: '{key}' must be one of {', '.join(allowed)}, got {v!r}")
@@ -208,6 +222,9 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
     and check it can run in SUMO (no log-only ``[column]`` or ``trip=`` factors)."""
     if isinstance(spec, Equation):
         eq = spec
+        if not re.match(NAME_PATTERN, eq.name):
+            raise UserError(f"{where}: equation name {eq.name!r} is not allowed: use a letter, "
+                            "then letters, digits, '_', '.', '-' (at most 64 characters)")
     else:
         p = Path(spec)
         if base is not None and not p.is_absolute() and (base / p).exists():
@@ -279,6 +296,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             _check_table(val, _SCHEMA[key], where, key)
     for vt, d in doc.get("vtypes", {}).items():
         _check_table(d, _VTYPE_KEYS, where, f"vtypes.{vt}")
+    for vc, d in doc.get("vclasses", {}).items():
+        _check_table(d, _VTYPE_KEYS, where, f"vclasses.{vc}")
     rel = (lambda s: (base / s) if base is not None and not Path(s).is_absolute() else Path(s))
 
     sumo = dict(doc.get("sumo", {}))
@@ -344,19 +363,25 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
 
     veh = doc.get("vehicles", {})
     vfilter = _strlist(veh["vtypes"], where, "vehicles.vtypes") if "vtypes" in veh else None
-    vdata = {}
-    for vt, d in doc.get("vtypes", {}).items():  # keys were checked with the schema above
-        entry = {}
-        if "mass_kg" in d:
-            entry["mass_kg"] = _num(d["mass_kg"], where, f"vtypes.{vt}.mass_kg", positive=True)
-        if "equations" in d:
-            eqs = _strlist(d["equations"], where, f"vtypes.{vt}.equations")
-            for e in eqs:
-                if e not in names:
-                    raise UserError(f"{where}: vtypes.{vt}.equations names '{e}', which is not "
-                                    f"among the scenario's equations ({', '.join(names)})")
-            entry["equations"] = eqs
-        vdata[str(vt)] = entry
+    def entries(table: str) -> dict[str, dict]:
+        out = {}
+        for vt, d in doc.get(table, {}).items():  # keys were checked with the schema above
+            entry = {}
+            if "mass_kg" in d:
+                entry["mass_kg"] = _num(d["mass_kg"], where, f"{table}.{vt}.mass_kg",
+                                        positive=True)
+            if "equations" in d:
+                eqs = _strlist(d["equations"], where, f"{table}.{vt}.equations")
+                for e in eqs:
+                    if e not in names:
+                        raise UserError(f"{where}: {table}.{vt}.equations names '{e}', which is "
+                                        f"not among the scenario's equations ({', '.join(names)})")
+                entry["equations"] = eqs
+            out[str(vt)] = entry
+        return out
+
+    vdata = entries("vtypes")
+    cdata = entries("vclasses")
 
     wind = doc.get("wind", {})
     ws = _num(wind.get("speed_mps", 0.0), where, "wind.speed_mps")
@@ -391,7 +416,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
 
     sl = doc.get("slope", {})
     out = dict(doc.get("outputs", {}))
-    for k in ("trace", "edgedata", "figures", "progress", "difference"):
+    for k in ("trace", "edgedata", "figures", "progress", "difference", "period"):
         if k in overrides:
             out[k] = overrides[k]
     diff = out.get("difference")
@@ -407,7 +432,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         path=Path(path) if path else None, sumo_args=args, route_files=files, net_file=net,
         begin=times.get("begin"), end=times.get("end"), step_length=times.get("step_length"),
         connection=connection, gui=bool(sumo.get("gui", False)), equations=equations,
-        vtype_filter=vfilter, vtype_data=vdata, wind_speed=ws, wind_from_deg=wd, rho=rho,
+        vtype_filter=vfilter, vtype_data=vdata, vclass_data=cdata,
+        default_masses=_bool(veh.get("default_masses", True), where, "vehicles.default_masses"),
+        wind_speed=ws, wind_from_deg=wd, rho=rho,
         road_class=rule,
         slope_window=_num(sl.get("window_m", 20.0), where, "slope.window_m", True),
         slope_max=_num(sl.get("max_rad", 0.25), where, "slope.max_rad", True),
@@ -422,4 +449,6 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                              ("getangle", "geometry"), where, "wind.heading"),
         trace=bool(out.get("trace", False)), edgedata=bool(out.get("edgedata", True)),
         figures=bool(out.get("figures", True)), difference=diff,
-        progress=bool(out.get("progress", True)))
+        progress=bool(out.get("progress", True)),
+        period=None if out.get("period") is None else _num(out["period"], where,
+                                                             "outputs.period", positive=True))

@@ -17,14 +17,45 @@ from pathlib import Path
 from sumo_drvpw.errors import UserError
 
 
+#: Default mass per SUMO vClass [kg] for vTypes that give none: the MOVES source mass of
+#: the source type whose road load the class's built-in equation uses (docs/sources.md
+#: [MOVES-ST]; sourceTypeID in brackets). Used only when neither the vType nor the scenario
+#: gives a mass; every use is listed in summary.json ``assumptions``.
+DEFAULT_MASS_KG = {
+    "passenger": 1478.8, "private": 1478.8, "taxi": 1478.8, "hov": 1478.8,  # (21)
+    "evehicle": 1478.8, "emergency": 1478.8, "authority": 1478.8,           # (21)
+    "motorcycle": 285.0, "moped": 285.0,                                    # (11)
+    "delivery": 2059.7,                                                     # (32)
+    "bus": 16556.0,                                                         # (42)
+    "coach": 19593.0,                                                       # (41)
+    "truck": 8538.9, "army": 8538.9,                                        # (52)
+    "trailer": 24419.0,                                                     # (62)
+}
+#: MOVES source type behind each default mass (for the summary's assumptions).
+DEFAULT_MASS_SOURCE = {
+    **{c: "MOVES source type 21 (passenger car) source mass" for c in (
+        "passenger", "private", "taxi", "hov", "evehicle", "emergency", "authority")},
+    "motorcycle": "MOVES source type 11 (motorcycle) source mass",
+    "moped": "MOVES source type 11 (motorcycle) source mass",
+    "delivery": "MOVES source type 32 (light commercial truck) source mass",
+    "bus": "MOVES source type 42 (transit bus) source mass",
+    "coach": "MOVES source type 41 (intercity bus) source mass",
+    "truck": "MOVES source type 52 (single unit short-haul truck) source mass",
+    "army": "MOVES source type 52 (single unit short-haul truck) source mass",
+    "trailer": "MOVES source type 62 (combination long-haul truck) source mass",
+}
+
+
 @dataclass
 class VTypeInfo:
-    """What the files say about one vType: mass [kg] (None: not given), equation, source."""
+    """What the files say about one vType: mass [kg] (None: not given), equation, source,
+    vClass (None: not given; SUMO's default is passenger)."""
 
     id: str
     mass_kg: float | None
     equation: str | None
     source: str
+    vclass: str | None = None
 
 
 def _open(path: Path):
@@ -66,7 +97,7 @@ def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
                         if not mass > 0:
                             raise UserError(f"{where}: {key} must be > 0, got {val!r}")
                     out[vid] = VTypeInfo(vid, mass, params.get("drvpw.equation") or None,
-                                         str(path))
+                                         str(path), el.attrib.get("vClass"))
                     el.clear()
         except ET.ParseError as e:
             raise UserError(f"{path}: not valid XML: {e}") from None

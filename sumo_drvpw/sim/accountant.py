@@ -1,0 +1,242 @@
+"""The plug-in inside a user's own TraCI/libsumo script: ``Accountant`` and ``RunResult``.
+
+    import libsumo as conn                       # or a traci connection
+    from sumo_drvpw.sim import Accountant
+
+    conn.start(["sumo", "-c", "city.sumocfg"])
+    acc = Accountant(conn, equations=["vsp_ldv1999", "drvpw_prius3"])
+    conn.addStepListener(acc)                    # books every step after simulationStep()
+    while conn.simulation.getMinExpectedNumber() > 0:
+        conn.simulationStep()
+        e = acc.energy("veh0")                   # energies so far [J] per equation and term
+    result = acc.result()                        # RunResult: .vehicles, .edges, .classes, .summary
+    result.write("out")                          # exactly what `sumo-drvpw run` writes
+    conn.close()
+
+Masses, vClasses and equations per vType are resolved as in ``run``
+(:class:`sumo_drvpw.sim.run.VTypeResolver`); options (wind, air, slopes, road classes,
+outputs) come from a scenario file when given (``scenario=``), else the defaults of
+:mod:`sumo_drvpw.sim.scenario`. Step one step at a time (``simulationStep()`` without a
+target time): a listener is called once per call, so a call that jumps several steps
+cannot be booked step by step; such jumps are counted in ``summary["missed_steps"]``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
+from sumo_drvpw.sim.loop import Physics, Stepper
+from sumo_drvpw.sim.network import load_network
+from sumo_drvpw.sim.outputs import RunResult, TraceWriter, summary_dict
+from sumo_drvpw.sim.scenario import Scenario, load_scenario, resolve_equation
+from sumo_drvpw.sim.vtypes import read_vtypes
+
+__all__ = ["Accountant", "RunResult"]
+
+try:  # traci and libsumo accept only subclasses of traci.StepListener as listeners
+    from traci import StepListener as _Listener
+except ImportError:  # pragma: no cover - traci ships with every SUMO Python install
+    _Listener = object
+
+#: How a step is booked (summary.json ``energy_booking``; docs/scenario.md).
+ENERGY_BOOKING = ("acc term: coefficient × m·v̄·a with v̄ = (v_t + v_t−1)/2, i.e. the "
+                  "kinetic-energy change ½m(v_t² − v_t−1²)/Δt, conserved at any step length; "
+                  "other terms at the speed of the distance SUMO moved the car in the step "
+                  "(Euler update: v_t; ballistic: v̄)")
+
+
+def _option_files(conn, key: str) -> list[Path]:
+    try:
+        val = str(conn.simulation.getOption(key))
+    except Exception:  # a fake connection or an old SUMO
+        return []
+    return [Path(f.strip()) for f in val.split(",") if f.strip()]
+
+
+def scenario_for(conn, equations, scenario=None, **overrides) -> Scenario:
+    """The scenario of an Accountant: a file or parsed :class:`Scenario` (its equations
+    replaced by ``equations`` when given), or defaults around SUMO's own net file."""
+    if isinstance(scenario, Scenario):
+        if equations is None:
+            return scenario
+        import dataclasses
+
+        return dataclasses.replace(scenario, equations=[
+            resolve_equation(e, scenario.path.parent if scenario.path else None, "Accountant")
+            for e in equations])
+    if scenario is not None:
+        if equations is not None:
+            overrides["equations"] = list(equations)
+        return load_scenario(scenario, **overrides)
+    if not equations:
+        raise UserError("Accountant: give equations=[...] or scenario=...")
+    nets = _option_files(conn, "net-file")
+    if not nets:
+        raise UserError("Accountant: SUMO does not say its net-file (getOption); give "
+                        "scenario=... with [sumo] net")
+    doc = {"equations": list(equations), "sumo": {"net": str(nets[0])}}
+    return load_scenario(doc=doc, **overrides)
+
+
+class Accountant(_Listener):
+    """Books driving power and energy per term for every vehicle of a running simulation.
+
+    Parameters
+    ----------
+    conn : the ``libsumo`` module or a ``traci`` connection, already started
+    equations : built-in names, TOML paths or :class:`Equation` objects (default: the
+        scenario's)
+    scenario : optional scenario TOML (or parsed :class:`Scenario`) for the options
+    trace_path : optional path of a per vehicle-step ``trace.parquet``
+    overrides : scenario values to replace (see ``sumo_drvpw.sim.scenario.OVERRIDES``)
+
+    Use it as a step listener (``conn.addStepListener(acc)``) or call :meth:`step` after
+    each ``simulationStep()`` yourself.
+    """
+
+    def __init__(self, conn, equations=None, scenario=None, trace_path=None, **overrides):
+        from sumo_drvpw.sim.run import VTypeResolver
+
+        self._t0 = time.perf_counter()
+        self.conn = conn
+        sc = self.scenario = scenario_for(conn, equations, scenario, **overrides)
+        files = list(sc.route_files) or (_option_files(conn, "route-files")
+                                          + _option_files(conn, "additional-files"))
+        self.file_vtypes = read_vtypes([f for f in files if f.is_file()])
+        self.equations = list(sc.equations)
+        names = [e.name for e in self.equations]
+        for info in self.file_vtypes.values():  # vTypes naming an equation the scenario lacks
+            if info.equation and info.equation not in names:
+                if sc.vtype_filter is not None and info.id not in sc.vtype_filter:
+                    continue
+                eq = resolve_equation(info.equation, Path(info.source).parent,
+                                      f"{info.source}: vType '{info.id}' drvpw.equation")
+                if eq.name != info.equation:
+                    raise UserError(f"{info.source}: vType '{info.id}' names equation "
+                                    f"'{info.equation}', whose name is '{eq.name}'")
+                self.equations.append(eq)
+                names.append(eq.name)
+        self.names = names
+        self.net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
+        self.eqset = EquationSet(self.equations)
+        self.ledger = Ledger(len(self.net.edge_ids), len(self.equations))
+        self.physics = Physics(wind_speed=sc.wind_speed, wind_from_deg=sc.wind_from_deg,
+                               rho=sc.rho, slope_tol=sc.slope_tol,
+                               slope_reference=sc.slope_reference,
+                               acceleration=sc.acceleration, heading=sc.wind_heading,
+                               positions=sc.positions)
+        self.resolver = VTypeResolver(sc, self.file_vtypes, self.equations, conn)
+        self.trace = None
+        if trace_path is not None:
+            self.trace = TraceWriter(Path(trace_path), self.ledger, names, self.net.edge_ids)
+        use_subs = getattr(conn, "__name__", "") != "libsumo" and hasattr(conn, "getLabel")
+        self.stepper = Stepper(conn, self.net, self.eqset, self.ledger, self.physics,
+                               self.resolver, self.trace, use_subscriptions=use_subs)
+        self.begin = float(conn.simulation.getTime())
+        self.interrupted = False
+
+    # -- the step listener protocol (traci.StepListener) ---------------------------------
+    def step(self, t=0) -> bool:
+        """Book the step SUMO just made; returns True (stay active)."""
+        self.stepper.after_step()
+        return True
+
+    def cleanUp(self) -> None:  # noqa: N802 (traci's name)
+        pass
+
+    # -- reading while the simulation runs ----------------------------------------------
+    def energy(self, vehicle_id: str) -> dict[str, dict[str, float]]:
+        """Energies of a vehicle so far [J]: equation → {acc, grade, aero, roll, other
+        (net per term), traction, recuperable, net}; only equations that apply to it."""
+        i = self.stepper.vmap.get(vehicle_id)
+        if i is None:
+            raise KeyError(f"vehicle '{vehicle_id}' has not been seen by the Accountant")
+        led = self.ledger
+        out = {}
+        for e, name in enumerate(self.names):
+            if not led.veh_keep[i] or led.veh_app[i, e] <= 0:
+                continue
+            tr, rc = led.veh_trac[i, e], led.veh_recup[i, e]
+            d = {c: float(tr[k] + rc[k]) for k, c in enumerate(LEDGER_CATEGORIES)}
+            d.update(traction=float(tr.sum()), recuperable=float(rc.sum()),
+                     net=float(tr.sum() + rc.sum()))
+            out[name] = d
+        return out
+
+    # -- the end --------------------------------------------------------------------------
+    def close_trace(self) -> None:
+        if self.trace is not None:
+            self.trace.close()
+            self.trace = None
+
+    def result(self, extra: dict | None = None) -> RunResult:
+        """Everything booked so far as a :class:`RunResult` (tables, summary, writer)."""
+        self.close_trace()
+        sc, led, net, st = self.scenario, self.ledger, self.net, self.stepper
+        end = float(self.conn.simulation.getTime())
+        summary_extra = {
+            "scenario": str(sc.path) if sc.path else None, "begin_s": self.begin,
+            "end_s": end, "step_length_s": st.dt, "step_method": st.step_method,
+            "missed_steps": st.missed_steps, "energy_booking": ENERGY_BOOKING,
+            "network": network_info(net, led), "interrupted": self.interrupted,
+            "wall_time_s": time.perf_counter() - self._t0, "connection": sc.connection,
+            "air_density_kgm3": sc.rho, "slope_reference": sc.slope_reference,
+            "acceleration_source": sc.acceleration, "position_source": sc.positions,
+            "wind": {"speed_mps": sc.wind_speed, "from_deg": sc.wind_from_deg,
+                     "heading_source": sc.wind_heading},
+            "equation_sources": {e.name: (e.path or "<object>") for e in self.equations},
+            "skipped": {k: dict(sorted(v.items())) for k, v in self.resolver.skipped.items()},
+            "excluded_by_vehicles_vtypes": self.resolver.excluded,
+            "assumptions": {"default_masses": dict(sorted(self.resolver.assumptions.items()))},
+        }
+        summary_extra.update(extra or {})
+        warnings = network_warnings(net)
+        if self.resolver.assumptions:
+            warnings.append("vTypes without a mass took their vClass's default mass: " + ", ".join(
+                f"{vt} ({a['vclass']}, {a['mass_kg']:g} kg)"
+                for vt, a in sorted(self.resolver.assumptions.items()))
+                + " (summary.json assumptions; set vtypes.<id>.mass_kg or "
+                "vclasses.<vClass>.mass_kg to override)")
+        if self.resolver.skipped["by_vclass"]:
+            warnings.append("vehicles of vClasses no equation is made for were not booked: "
+                            + ", ".join(f"{c} {n}" for c, n in
+                                        sorted(self.resolver.skipped["by_vclass"].items())))
+        if st.missed_steps:
+            warnings.append(f"{st.missed_steps} simulation steps were not booked: call "
+                            "simulationStep() without a target time")
+        summary_extra["warnings"] = warnings + list(summary_extra.get("warnings", []))
+        summary = summary_dict(led, net, self.names, self.eqset.uses_other, summary_extra)
+        for e, eq in enumerate(self.equations):
+            summary["equations"][eq.name].update({
+                "predicts": eq.predicts, "vclasses": list(eq.vclasses),
+                "speed_range_mps": list(eq.speed_range_mps) if eq.speed_range_mps else None,
+                "accel_range_mps2": list(eq.accel_range_mps2) if eq.accel_range_mps2 else None,
+                "out_of_range_samples": int(led.out_of_range[e])})
+        return RunResult(ledger=led, net=net, names=self.names,
+                         predicts=[e.predicts for e in self.equations], summary=summary,
+                         begin=self.begin, end=end, edgedata=sc.edgedata, figures=sc.figures,
+                         difference=sc.difference, period=getattr(sc, "period", None))
+
+
+def network_info(net, ledger, top: int = 10) -> dict:
+    """The ``network`` block of summary.json: file, elevation, most-clipped lanes."""
+    counts = ledger.lane_clipped
+    order = np.argsort(-counts, kind="stable")[:top] if len(counts) else []
+    lanes = {net.lane_ids[i]: int(counts[i]) for i in order if counts[i] > 0} \
+        if net.lane_ids is not None else {}
+    return {"file": str(net.path), "has_elevation": bool(net.has_elevation),
+            "z_share": float(net.z_share), "slope_clipped_lanes": lanes}
+
+
+def network_warnings(net) -> list[str]:
+    """Warnings about the network a user should see (printed by the CLI)."""
+    if net.has_elevation:
+        return []
+    return [f"network {net.path.name} has no elevation (no z in any lane shape): every slope "
+            "is 0, so the grade term is 0; build it with elevation (netconvert "
+            "--heightmap.geotiffs / OSM ele) for hilly areas"]

@@ -1,0 +1,158 @@
+"""The plug-in where SUMO users work: Accountant in a user's own loop, edgeData as SUMO
+writes it (parsed by sumolib), vClass-aware equations on a mixed scenario. Real SUMO."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.sim import Accountant, close_sumo, run_scenario, start_sumo
+from sumo_drvpw.sim.scenario import load_scenario
+
+pytestmark = pytest.mark.sumo
+
+REPO = Path(__file__).resolve().parent.parent
+CITY = REPO / "scenarios" / "city.toml"
+PHYS = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01})
+VSP = Equation("vsp", {"acc": 1.1, "grade": 1.0, "m_v1": 0.132, "m_v3": 0.000302})
+COLS = ["traction_acc_j", "traction_grade_j", "traction_aero_j", "traction_roll_j",
+        "recup_total_j", "net_total_j", "distance_m", "time_s"]
+
+
+def test_accountant_in_a_user_loop_equals_run(tmp_path):
+    """A step listener in the user's own libsumo loop books what `run` books, writes the
+    same files, and answers energy(vehicle) while the simulation runs."""
+    ran = run_scenario(CITY, tmp_path / "run", end=200, equations=[PHYS, VSP], figures=False)
+    sc = load_scenario(CITY, end=200)
+    conn = start_sumo(sc.sumo_args)
+    seen = {}
+    try:
+        acc = Accountant(conn, equations=[PHYS, VSP], scenario=CITY, figures=False)
+        conn.addStepListener(acc)
+        while conn.simulation.getTime() < 200 - 1e-9:
+            conn.simulationStep()
+            ids = conn.vehicle.getIDList()
+            if ids and "probe" not in seen:
+                seen["probe"] = ids[0]
+            if "probe" in seen and seen["probe"] in ids:
+                seen["energy"] = acc.energy(seen["probe"])  # readable during the run
+        res = acc.result()
+        res.write(tmp_path / "user")
+    finally:
+        close_sumo(conn)
+    a = ran.vehicles.sort_values(["vehicle", "equation"]).reset_index(drop=True)
+    b = res.vehicles.sort_values(["vehicle", "equation"]).reset_index(drop=True)
+    assert len(a) == len(b) > 40
+    assert (a.vehicle == b.vehicle).all()
+    np.testing.assert_allclose(b[COLS], a[COLS], rtol=1e-12, atol=1e-9)
+    assert res["equations"] == ran["equations"]
+    for name in ("vehicles.parquet", "edges.parquet", "classes.parquet", "edgedata.xml"):
+        assert (tmp_path / "user" / name).is_file()
+    doc = json.loads((tmp_path / "user" / "summary.json").read_text())
+    assert doc["equations"]["phys"]["energy_j"] == ran["equations"]["phys"]["energy_j"]
+    # energy(vehicle) while running: the vehicle's running totals, per equation and term
+    row = b[(b.vehicle == seen["probe"]) & (b.equation == "phys")].iloc[0]
+    e = acc.energy(seen["probe"])["phys"]
+    assert e["traction"] == pytest.approx(row.traction_total_j, rel=1e-12)
+    assert e["net"] == pytest.approx(row.net_total_j, rel=1e-12)
+    assert seen["energy"]["phys"]["net"] == pytest.approx(e["net"], abs=1e-6) or \
+        seen["energy"]["phys"]["traction"] <= e["traction"] + 1e-6
+    with pytest.raises(KeyError):
+        acc.energy("no such vehicle")
+
+
+def test_edgedata_intervals_parsed_by_sumolib(tmp_path):
+    """edgeData with one <interval> per outputs.period, SUMO's layout: sumolib reads it;
+    intervals add up to edges.parquet; sampledSeconds to the vehicles' time."""
+    import sumolib
+
+    res = run_scenario(CITY, tmp_path / "o", end=300, equations=[PHYS, VSP], figures=False,
+                       period=100.0)
+    intervals = list(sumolib.xml.parse(str(tmp_path / "o" / "edgedata.xml"), "interval"))
+    assert [(float(i.begin), float(i.end)) for i in intervals] == \
+        [(0.0, 100.0), (100.0, 200.0), (200.0, 300.0)]
+    edges = res.edges
+    veh = res.vehicles
+    for name in ("phys", "vsp"):
+        tot = sum(float(getattr(e, f"{name}_total_j")) for i in intervals for e in i.edge)
+        np.testing.assert_allclose(tot, edges[edges.equation == name].traction_total_j.sum(),
+                                   rtol=1e-6)
+        rec = sum(float(getattr(e, f"{name}_recup_j")) for i in intervals for e in i.edge)
+        np.testing.assert_allclose(rec, edges[edges.equation == name].recup_total_j.sum(),
+                                   rtol=1e-6, atol=1.0)
+        terms = sum(float(getattr(e, f"{name}_{t}_j")) for i in intervals for e in i.edge
+                    for t in ("acc", "grade", "aero", "roll", "other"))
+        np.testing.assert_allclose(terms, tot, rtol=1e-6)
+    secs = sum(float(e.sampledSeconds) for i in intervals for e in i.edge)
+    np.testing.assert_allclose(secs, veh[veh.equation == "phys"].time_s.sum(), rtol=1e-6)
+    # per-vehicle and per-metre figures are the totals divided as SUMO's _perVeh/_normed
+    e0 = next(e for i in intervals for e in i.edge if float(e.phys_total_j) > 0)
+    assert float(e0.phys_total_perVeh_j) > 0 and float(e0.phys_total_normed_jpm) > 0
+    assert not any(f.startswith("drvpw_") for f in e0._fields)  # no doubled prefixes
+
+
+MIXED = """<routes>
+  <vType id="car" vClass="passenger" mass="1500" sigma="0"/>
+  <vType id="lorry" vClass="trailer" sigma="0"/>
+  <vType id="bike" vClass="bicycle" sigma="0"/>
+  <flow id="c" type="car" from="c00c10" to="c34c44" begin="0" end="60" period="10"/>
+  <flow id="b" type="bike" from="c00c10" to="c34c44" begin="2" end="60" period="30"/>
+  <flow id="l" type="lorry" from="c00c10" to="c34c44" begin="5" end="60" period="20"/>
+</routes>"""
+
+
+def test_vclasses_each_get_their_equation_or_are_skipped(tmp_path):
+    """Cars get the car equations, trailers the MOVES combination-truck one (with its
+    MOVES source mass as the assumed mass), bicycles are skipped and counted."""
+    (tmp_path / "r.rou.xml").write_text(MIXED, encoding="utf-8")
+    (tmp_path / "s.toml").write_text(
+        'equations = ["vsp_ldv1999", "drvpw_prius3", "moves_combination_truck"]\n'
+        f'[sumo]\nnet = "{REPO / "networks" / "city.net.xml"}"\nroutes = ["r.rou.xml"]\n'
+        'end = 200\noptions = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n',
+        encoding="utf-8")
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    v = res.vehicles
+    by = v.groupby("vclass").equation.unique().to_dict()
+    assert sorted(by["passenger"]) == ["drvpw_prius3", "vsp_ldv1999"]
+    assert list(by["trailer"]) == ["moves_combination_truck"]
+    assert "bicycle" not in by
+    assert res["skipped"] == {"by_vclass": {"bicycle": 2}, "by_vtype": {"bike": 2}}
+    assert res["assumptions"]["default_masses"]["lorry"]["mass_kg"] == 24419.0
+    assert (v[v.vclass == "trailer"].mass_kg == 24419.0).all()
+    eqs = res["equations"]
+    assert eqs["drvpw_prius3"]["predicts"] == "powertrain_output"
+    assert eqs["moves_combination_truck"]["predicts"] == "wheel"
+    assert (v.predicts[v.equation == "drvpw_prius3"] == "powertrain_output").all()
+    # a 24 t trailer needs far more energy per km than a car on the same climbs
+    wh = v.groupby("equation").traction_whpkm.median()
+    assert wh["moves_combination_truck"] > 5 * wh["vsp_ldv1999"]
+    assert np.isfinite(v.traction_whpkm).all()
+
+
+def test_out_of_range_vehicle_steps_counted(tmp_path):
+    """An equation's recorded validity range: vehicle-steps outside it are counted."""
+    (tmp_path / "r.rou.xml").write_text(MIXED.replace(
+        'from="c00c10" to="c34c44"', 'route="r"').replace(
+        '<flow id="c"', '<route id="r" edges="e01 e12 e23"/>\n  <flow id="c"').replace(
+        'period="10"', 'period="10" departSpeed="max"'), encoding="utf-8")
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["x"]\n[sumo]\nnet = "{REPO / "networks" / "highway.net.xml"}"\n'
+        'routes = ["r.rou.xml"]\nend = 60\noptions = ["--no-warnings", "true"]\n'
+        '[vehicles]\nvtypes = ["car"]\n[outputs]\nfigures = false\nedgedata = false\n',
+        encoding="utf-8")
+    slow = Equation("slow", {"roll": 0.01}, speed_range_mps=(0.0, 15.0))
+    wide = Equation("wide", {"roll": 0.01}, speed_range_mps=(0.0, 60.0),
+                    accel_range_mps2=(-9.0, 9.0))
+    res = run_scenario(tmp_path / "s.toml", None, equations=[slow, wide])
+    # cars depart at max speed on a 120 km/h motorway: well above 15 m/s
+    assert res["equations"]["slow"]["out_of_range_samples"] > 0.5 * res["samples"]
+    assert res["equations"]["wide"]["out_of_range_samples"] == 0
+    with pytest.raises(Exception, match="vehicles.vtypes names vType"):
+        (tmp_path / "t.toml").write_text(
+            (tmp_path / "s.toml").read_text().replace('["car"]', '["car", "kar"]'))
+        run_scenario(tmp_path / "t.toml", None, equations=[slow])
