@@ -31,7 +31,8 @@ _CAT_COLOURS = {"acc": "tab:blue", "grade": "tab:green", "aero": "tab:orange",
 
 
 def subsample_index(n: int, max_points: int = MAX_POINTS, seed: int = 0) -> np.ndarray:
-    """Sorted indices of at most ``max_points`` of ``n`` samples (all when n is small)."""
+    """Sorted indices of at most ``max_points`` of ``n`` samples (all when n is small);
+    a fixed random subset (``seed``), so figures are reproducible."""
     if n <= max_points:
         return np.arange(n)
     rng = np.random.default_rng(seed)
@@ -53,6 +54,11 @@ def parity(comp: Comparison, path) -> Path:
 
     The 1:1 line and the 50 kW light/heavy boundary on both axes are drawn; the panel
     title carries R² below and above 50 kW.
+
+    Parameters
+    ----------
+    comp : the comparison (:func:`sumo_drvpw.fit.compare.compare`): powers [W], drawn in kW
+    path : the PNG file to write (atomically); returned
     """
     idx = subsample_index(comp.n_samples)
     meas = comp.meas_w[idx] * _KW
@@ -87,6 +93,11 @@ def error_histograms(comp: Comparison, path) -> Path:
     """Histograms of the error pred − meas at light and heavy load (paper Fig. 5).
 
     One row per equation; left light load (measured < 50 kW), right heavy load.
+
+    Parameters
+    ----------
+    comp : the comparison (:func:`sumo_drvpw.fit.compare.compare`): powers [W], drawn in kW
+    path : the PNG file to write (atomically); returned
     """
     names = list(comp.results)
     heavy = comp.meas_w >= HEAVY_LOAD_W
@@ -121,6 +132,11 @@ def error_vs_speed(comp: Comparison, path) -> Path:
     """Error against speed with 10 km/h bin statistics, ≥ 80 km/h shaded (paper Fig. 8).
 
     Points: a subsample of samples. Line: bin mean; band: 5th–95th percentile per bin.
+
+    Parameters
+    ----------
+    comp : the comparison (:func:`sumo_drvpw.fit.compare.compare`): powers [W], drawn in kW
+    path : the PNG file to write (atomically); returned
     """
     idx = subsample_index(comp.n_samples)
     v_kmh = comp.speed_mps[idx] / KMH
@@ -158,6 +174,11 @@ def error_vs_term_power(comp: Comparison, path) -> Path:
     One row per equation, one column per category (acc, grade, aero, roll, other if
     used); each panel shows the least-squares line and Pearson r. A category the
     equation lacks shows an empty panel.
+
+    Parameters
+    ----------
+    comp : the comparison (:func:`sumo_drvpw.fit.compare.compare`): powers [W], drawn in kW
+    path : the PNG file to write (atomically); returned
     """
     names = list(comp.results)
     cats: list[str] = []
@@ -205,6 +226,11 @@ def energy_share_bars(comp: Comparison, path) -> Path:
 
     One bar per equation; negative shares (e.g. downhill grade during traction) are
     stacked below zero. The measured traction energy over the predicted one is noted.
+
+    Parameters
+    ----------
+    comp : the comparison (:func:`sumo_drvpw.fit.compare.compare`): powers [W], drawn in kW
+    path : the PNG file to write (atomically); returned
     """
     names = list(comp.results)
     cats: list[str] = []
