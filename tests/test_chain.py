@@ -315,3 +315,90 @@ def test_cli_calibrate_battery_then_compare_uses_the_chain(tmp_path, capsys):
                      "--out", str(tmp_path / "f")]) == 2
     assert "fuel-flow column" in capsys.readouterr().err
     assert not (tmp_path / "f").exists()
+
+
+# ------------------------------------------------------------------ SUMO accounts
+
+def test_sumo_run_chain_accounts_balance():
+    """A real SUMO run (city scenario, 150 s): chain energy per vehicle = Σ over its steps;
+    vehicle, edge and class totals agree; auxiliary energy accrues while standing."""
+    libsumo = pytest.importorskip("libsumo")
+    from pathlib import Path
+
+    from sumo_drvpw.model.terms import Inputs
+    from sumo_drvpw.sim.chain import QUANTITIES, ChainLedger
+
+    repo = Path(__file__).resolve().parent.parent
+    fuel_eq = load_equation("drvpw_prius3")
+    fuel_eq.chain = EnergyChain(predicts="fuel", idle_fuel_power_w=5000.0, marginal_efficiency=0.36,
+                                engine_off_below_w=4000.0)
+    bev = equation_from_dict({"equation": {"name": "bev"}, "terms": {"acc": 1.05, "grade": 1.0, "roll": 0.009,
+                                                                       "aero_rho": 0.6},
+                              "chain": {"predicts": "battery", "traction_efficiency": 0.9,
+                                        "recuperation_efficiency": 0.7, "recuperation_limit_w": 20000.0,
+                                        "aux_power_w": 500.0}})
+    eqs = [fuel_eq, bev]
+    libsumo.start(["sumo", "-c", str(repo / "scenarios" / "city.sumocfg"), "--end", "150",
+                   "--no-step-log", "true", "--no-warnings", "true"])
+    try:
+        dt = libsumo.simulation.getDeltaT()
+        led = ChainLedger([e.name for e in eqs], [e.chain for e in eqs], n_edges=0)
+        vix, eix, classes, edges = {}, {}, [], []
+        prev_v: dict[str, float] = {}
+        direct = {}
+        stood = np.zeros(0)
+        while libsumo.simulation.getTime() < 150:
+            libsumo.simulationStep()
+            ids = libsumo.vehicle.getIDList()
+            if not ids:
+                continue
+            for vid in ids:
+                if vid not in vix:
+                    vix[vid] = len(vix)
+                    classes.append(libsumo.vehicle.getVehicleClass(vid) + ("_odd" if len(vix) % 2 else ""))
+            road = [libsumo.vehicle.getRoadID(v) for v in ids]
+            for r in road:
+                if r not in eix:
+                    eix[r] = len(eix)
+                    edges.append(r)
+            if led.edge.shape[0] < len(eix):  # edges appear as vehicles reach them
+                grow = len(eix) - led.edge.shape[0]
+                led.edge = np.concatenate([led.edge, np.zeros((grow, led.E, led.Q))])
+                led.edge_dist = np.concatenate([led.edge_dist, np.zeros(grow)])
+            v = np.array([libsumo.vehicle.getSpeed(x) for x in ids])
+            a = (v - np.array([prev_v.get(x, 0.0) for x in ids])) / dt
+            th = np.radians([libsumo.vehicle.getSlope(x) for x in ids])
+            n = len(ids)
+            x = Inputs(v=v, a=a, theta=th, wind=np.zeros(n), mass=np.full(n, 1625.0), rho=np.full(n, 1.2041))
+            p = np.column_stack([e.power(x) for e in eqs])
+            vi = np.array([vix[i] for i in ids])
+            q = led.book(vi, np.array([eix[r] for r in road]), v, dt, p)
+            for j, i in enumerate(vi):
+                direct[i] = direct.get(i, 0.0) + q[j]
+            stood = np.concatenate([stood, np.zeros(len(vix) - stood.size)])
+            stood[vi] += dt * (v == 0.0)
+            prev_v = dict(zip(ids, v))
+    finally:
+        libsumo.close()
+    nv = len(vix)
+    assert nv > 20 and stood.sum() > 0  # vehicles came, and some stood
+    tot = led.vehicle_totals(nv)
+    np.testing.assert_allclose(tot, np.stack([direct[i] for i in range(nv)]), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(led.edge.sum(axis=0), tot.sum(axis=0), rtol=1e-9, atol=1e-6)
+    cls = led.class_totals(classes)
+    assert len(cls) == 2
+    np.testing.assert_allclose(sum(cls.values()), tot.sum(axis=0), rtol=1e-9, atol=1e-6)
+    # battery: auxiliary = 500 W × time in the network, standing included; net = sum of parts
+    k = {q: j for j, q in enumerate(QUANTITIES)}
+    np.testing.assert_allclose(tot[:, 1, k["auxiliary_j"]], 500.0 * led.veh_time[:nv], rtol=1e-12)
+    np.testing.assert_allclose(tot[:, 1, k["traction_j"]] + tot[:, 1, k["recuperated_j"]]
+                               + tot[:, 1, k["auxiliary_j"]], tot[:, 1, k["net_j"]], rtol=1e-9, atol=1e-6)
+    # fuel: litres and CO₂ from the fuel energy through the fuel's constants
+    g = FUELS["gasoline"]
+    np.testing.assert_allclose(tot[:, 0, k["fuel_l"]],
+                               tot[:, 0, k["fuel_j"]] / g["lhv_j_per_kg"] / g["density_kg_per_l"], rtol=1e-12)
+    rep = led.report(list(vix), classes, edges)
+    per_class = [r for r in rep["classes"] if r["equation"] == "bev"]
+    assert all(0.05 < r["net_kwh_per_km"] < 1.0 for r in per_class)  # a car: 50–1000 Wh/km
+    fuel_rows = [r for r in rep["classes"] if r["equation"] == fuel_eq.name]
+    assert all(1.0 < r["fuel_l_per_100km"] < 40.0 for r in fuel_rows)
