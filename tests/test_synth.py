@@ -62,3 +62,14 @@ def test_bad_synth_options(tmp_path, capsys):
     assert "gremlins" in capsys.readouterr().err
     assert cli_main(["synth", "--out", str(tmp_path / "x.txt")]) == 2
     assert cli_main(["synth", "--out", str(tmp_path / "x.parquet"), "--minutes", "0"]) == 2
+
+
+def test_one_table_of_plants_cli_names_match(tmp_path):
+    from sumo_drvpw.cli.synth import PLANT_NAMES
+    from sumo_drvpw.synth.effects import PLANTS
+
+    assert set(PLANT_NAMES) == set(PLANTS) - {"log-power"}
+    p = tmp_path / "s.parquet"
+    assert cli_main(["synth", "--out", str(p), "--minutes", "2", "--plant", "power-lag,pedal"]) == 0
+    assert "throttle_pct" in pq.read_schema(p).names
+    assert cli_main(["synth", "--out", str(p), "--minutes", "2", "--plant", "nope"]) == 2

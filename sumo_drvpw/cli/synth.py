@@ -8,14 +8,10 @@ from __future__ import annotations
 
 from sumo_drvpw.errors import UserError
 
-#: --plant name → factory of a planted effect (sumo_drvpw.synth.effects)
-PLANTS = {
-    "ac": lambda: __import__("sumo_drvpw.synth.effects", fromlist=["AuxLoad"]).AuxLoad(),
-    "cold-tyres": lambda: __import__("sumo_drvpw.synth.effects", fromlist=["x"]).TermScaledBySignal(),
-    "speed-quadratic": lambda: __import__("sumo_drvpw.synth.effects", fromlist=["x"]).SpeedFunction(),
-    "trip-mass": lambda: __import__("sumo_drvpw.synth.effects", fromlist=["x"]).PerTripMass(),
-    "distractors": lambda: __import__("sumo_drvpw.synth.effects", fromlist=["x"]).Distractors(),
-}
+#: --plant names: the one table of planted effects (sumo_drvpw.synth.effects.PLANTS), without
+#: log-power, which the synthetic log needs no plant for
+PLANT_NAMES = ("ac", "cold-tyres", "speed-quadratic", "trip-mass", "distractors", "pedal", "power-lag",
+               "recuperation-efficiency", "recuperation-limit", "altitude-air", "attenuated-grade")
 
 
 def configure(p):
@@ -26,7 +22,7 @@ def configure(p):
     p.add_argument("--truth", default="drvpw_prius3", help="truth equation, name or file (default drvpw_prius3)")
     p.add_argument("--vehicle", default="prius3", help="vehicle (power-split) name or file (default prius3)")
     p.add_argument("--plant", default="", metavar="EFFECT,...",
-                   help=f"undeclared effects to plant: {', '.join(PLANTS)} (comma list)")
+                   help=f"undeclared effects to plant: {', '.join(PLANT_NAMES)} (comma list)")
 
 
 def main(args) -> int:
@@ -39,9 +35,9 @@ def main(args) -> int:
     if not str(args.out).lower().endswith((".parquet", ".csv")):
         raise UserError(f"--out {args.out}: give a .parquet or .csv file name")
     names = [s.strip() for s in args.plant.split(",") if s.strip()]
-    bad = [s for s in names if s not in PLANTS]
+    bad = [s for s in names if s not in PLANT_NAMES]
     if bad:
-        raise UserError(f"--plant: unknown effect {bad[0]!r} (known: {', '.join(PLANTS)})")
+        raise UserError(f"--plant: unknown effect {bad[0]!r} (known: {', '.join(PLANT_NAMES)})")
     from sumo_drvpw.cli import existing_paths
     from sumo_drvpw.fileio import check_output_path
 
@@ -52,6 +48,8 @@ def main(args) -> int:
 
         check_output_path(Path(args.out).with_suffix(".truth.json"), inputs, "file")
     _check_power_split(args.vehicle)
+    from sumo_drvpw.synth.effects import PLANTS
+
     effects = tuple(PLANTS[s]() for s in names)
     kw = dict(minutes=args.minutes, truth=args.truth, vehicle=args.vehicle)
     if args.trips == 1:
