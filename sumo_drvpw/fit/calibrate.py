@@ -163,6 +163,8 @@ class CalibrationResult:
                         accel_range_mps2=self.accel_range_mps2)
 
     def summary(self) -> str:
+        """A plain-text table: n, R², and per term the coefficient [W per unit of the
+        term], its standard error and p-value; then the dropped candidates."""
         lines = [f"n = {self.n}, R² = {self.r2:.4f}", f"{'term':<12}{'coefficient':>14}{'std err':>12}{'p':>10}"]
         for t in self.terms:
             lines.append(f"{t:<12}{self.params[t]:>14.6g}{self.std_err[t]:>12.3g}{self.p_values[t]:>10.2g}")

@@ -358,9 +358,11 @@ class EquationResult:
 
     @property
     def name(self) -> str:
+        """The equation's name."""
         return self.equation.name
 
     def error_w(self, meas_w: np.ndarray) -> np.ndarray:
+        """Error pred − meas [W] per sample against measured power ``meas_w`` [W]."""
         return self.pred_w - meas_w
 
 
@@ -391,6 +393,7 @@ class Comparison:
 
     @property
     def n_samples(self) -> int:
+        """Number of samples compared."""
         return int(self.meas_w.size)
 
     def error_w(self, name: str) -> np.ndarray:
