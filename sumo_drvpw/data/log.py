@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, R_DRY_AIR, RHO_DEFAULT
+from sumo_drvpw.data.paths import expand_paths as _expand_paths
+from sumo_drvpw.model.air import air_density
+from sumo_drvpw.model.constants import P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.terms import Inputs
 
@@ -137,24 +139,10 @@ def bundled_log(name: str = BUNDLED_LOG) -> Path:
 
 
 def expand_paths(paths) -> list[Path]:
-    """Files named, and the Parquet/CSV files inside folders named (sorted)."""
-    out: list[Path] = []
-    for p in map(Path, paths):
-        if p.is_dir():
-            found = sorted(q for q in p.iterdir() if q.suffix.lower() in (".parquet", ".csv"))
-            if not found:
-                raise UserError(f"{p}: folder holds no .parquet or .csv drive log")
-            out += found
-        elif p.is_file():
-            if p.suffix.lower() not in (".parquet", ".csv"):
-                raise UserError(f"{p}: unknown file type '{p.suffix}' (a drive log is .parquet "
-                                "or .csv, or a folder of them)")
-            out.append(p)
-        else:
-            raise UserError(f"{p}: no such file or folder")
-    if not out:
-        raise UserError("no drive log given")
-    return out
+    """Files named, and the Parquet/CSV files inside folders named (sorted): the drive-log
+    case of :func:`sumo_drvpw.data.paths.expand_paths` (a named file of another type is
+    refused)."""
+    return _expand_paths(paths, (".parquet", ".csv"), "drive log", check_files=True)
 
 
 def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
@@ -599,7 +587,7 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     elif "ambient_c" in df:
         p_kpa = df["pressure_kpa"].to_numpy(float) if "pressure_kpa" in df else np.full(len(df), P_STD_KPA)
         p_kpa = np.where(np.isnan(p_kpa), P_STD_KPA, p_kpa)  # missing pressure: standard
-        rho = p_kpa * 1000.0 / (R_DRY_AIR * (df["ambient_c"].to_numpy(float) + KELVIN))
+        rho = air_density(df["ambient_c"].to_numpy(float), p_kpa)
         missing = np.isnan(rho)  # no temperature logged in that sample: the default density
         df["air_density_kgm3"] = np.where(missing, RHO_DEFAULT, rho)
         counts["air_density_source"] = "ideal gas from ambient_c and pressure_kpa"
