@@ -17,8 +17,13 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     An interrupted writer leaves either the old file or the new one, never a partial one.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as e:  # read-only, permission denied, disk full: the user's to fix
+        from sumo_drvpw.errors import UserError
+
+        raise UserError(f"{path}: cannot write here: {e.strerror or e}") from None
     os.close(fd)
     tmp = Path(tmp)
     umask = os.umask(0)
@@ -183,6 +188,9 @@ def check_output_path(out, inputs=(), kind: str = "folder") -> Path:
         raise UserError(f"{out}: exists and is a file, not a folder; choose a folder path")
     if kind == "file" and out.is_dir():
         raise UserError(f"{out}: is a folder; give a file name")
+    base = next((d for d in res.parents if d.exists()), None)  # where the file or sibling goes
+    if base is not None and not os.access(base, os.W_OK | os.X_OK):
+        raise UserError(f"{out}: cannot write in {base} (read-only or permission denied)")
     return res
 
 
