@@ -1,0 +1,679 @@
+"""A corpus of bad (and borderline) user inputs for the command line, by class.
+
+Each :class:`Case` builds its files in its own empty folder and gives the CLI arguments.
+``expect = "refuse"``: exit 2, one line on stderr naming the culprit (``needles``), no
+traceback, and the folder exactly as it was (nothing written, no input changed).
+``expect = "accept"``: exit 0, inputs unchanged, ``needles`` found in the output.
+
+Used by ``tests/test_bad_input.py`` (in-process, every case) and by
+``scripts/bad_input_corpus.py`` (subprocess per case, counts per class).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+REPO = Path(__file__).resolve().parent.parent
+SHARED = Path(os.environ.get("SUMO_DRVPW_DATA") or REPO.parent / "shared" / "data")
+PRIUS3 = REPO / "sumo_drvpw" / "model" / "builtin" / "vehicles" / "prius3.toml"
+DRVPW = REPO / "sumo_drvpw" / "model" / "builtin" / "equations" / "drvpw_prius3.toml"
+
+
+@dataclass
+class Case:
+    cls: str
+    name: str
+    build: Callable[[Path], list[str]]  # folder → argv (without the program name)
+    needles: tuple[str, ...] = ()
+    expect: str = "refuse"
+    needs: str = ""  # "shared": needs ../shared/data; "root": needs root (mounts)
+    marks: dict = field(default_factory=dict)
+
+    @property
+    def id(self) -> str:
+        return f"{self.cls}/{self.name}"
+
+
+# ------------------------------------------------------------------------ builders
+
+def base_log(n: int = 1600, hz: float = 8.0, seed: int = 0) -> pd.DataFrame:
+    """A plausible canonical log with measured power_w and mass_kg (no vehicle needed).
+
+    Speed: stop-and-go cycles 0 … 25 m/s; power: road-load physics + noise [W].
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / hz
+    v = np.clip(12.5 - 12.5 * np.cos(2 * np.pi * t / 40.0) + 2 * np.sin(t / 7.0), 0, None)
+    a = np.gradient(v, t)
+    m = 1500.0
+    p = m * v * a + 0.3 * v ** 3 + 0.01 * m * 9.81 * v + rng.normal(0, 300, n)
+    return pd.DataFrame({"trip_id": "t1", "time_s": t, "speed_mps": v, "mass_kg": m, "power_w": p})
+
+
+def write(folder: Path, name: str, df: pd.DataFrame) -> Path:
+    p = folder / name
+    if name.endswith(".parquet"):
+        df.to_parquet(p, index=False)
+    else:
+        df.to_csv(p, index=False)
+    return p
+
+
+def text(folder: Path, name: str, s: str | bytes) -> Path:
+    p = folder / name
+    if isinstance(s, bytes):
+        p.write_bytes(s)
+    else:
+        p.write_text(s, encoding="utf-8")
+    return p
+
+
+def snapshot(folder: Path) -> dict[str, str]:
+    """Relative path → sha256 (folders → 'dir') of everything under ``folder``."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        rel = str(p.relative_to(folder))
+        out[rel] = "dir" if p.is_dir() else hashlib.sha256(p.read_bytes()).hexdigest()
+    return out
+
+
+# ------------------------------------------------------------------------ cases
+
+CASES: list[Case] = []
+
+
+def case(cls, name, needles=(), expect="refuse", needs=""):
+    def deco(fn):
+        CASES.append(Case(cls, name, fn, tuple(needles), expect, needs))
+        return fn
+    return deco
+
+
+def _cal(log, d, *extra):
+    return ["calibrate", str(log), "--out", str(d / "eq.toml"), *extra]
+
+
+def _cmp(log, d, *extra):
+    return ["compare", str(log), "--out", str(d / "cmp"), *extra]
+
+
+# --- drive logs (calibrate and compare) -------------------------------------------
+
+def _log_case(name, mutate, needles, fmt="csv", cmd="calibrate", expect="refuse"):
+    def build(d):
+        df = mutate(base_log())
+        p = write(d, f"log.{fmt}", df) if isinstance(df, pd.DataFrame) else text(d, f"log.{fmt}", df)
+        return _cal(p, d) if cmd == "calibrate" else _cmp(p, d, "--equation", "drvpw_prius3")
+    CASES.append(Case("drive-log", name, build, tuple(needles), expect))
+
+
+def _set(col, idx, val):
+    def f(df):
+        df = df.copy()
+        if df[col].dtype != object and isinstance(val, str):
+            df[col] = df[col].astype(object)
+        df.loc[idx, col] = val
+        return df
+    return f
+
+
+_log_case("missing speed", lambda df: df.drop(columns="speed_mps"), ("speed_mps", "missing"))
+_log_case("missing time", lambda df: df.drop(columns="time_s"), ("time_s", "missing"))
+_log_case("missing speed parquet", lambda df: df.drop(columns="speed_mps"), ("speed_mps",), fmt="parquet")
+_log_case("speed above 100", _set("speed_mps", 57, 130.0), ("speed_mps", "row 57"))
+_log_case("speed km/h below 100", lambda df: df.assign(speed_mps=df.speed_mps * 3.6), ("speed_mps", "km/h"))
+_log_case("speed km/h parquet", lambda df: df.assign(speed_mps=df.speed_mps * 3.6), ("speed_mps", "km/h"),
+          fmt="parquet")
+_log_case("speed clearly negative", _set("speed_mps", 40, -3.0), ("speed_mps", "row 40", "-3"))
+_log_case("speed just beyond noise", _set("speed_mps", 41, -0.15), ("speed_mps", "row 41"))
+_log_case("speed NaN", _set("speed_mps", 12, np.nan), ("speed_mps", "row 12"))
+_log_case("speed inf", _set("speed_mps", 13, np.inf), ("speed_mps", "row 13"))
+_log_case("speed text", _set("speed_mps", 14, "fast"), ("speed_mps", "row 14", "fast"))
+_log_case("speed boolean", lambda df: df.assign(speed_mps=df.speed_mps > 5), ("speed_mps", "boolean"),
+          fmt="parquet")
+_log_case("speed boolean csv", lambda df: df.assign(speed_mps=np.where(df.speed_mps > 5, "True", "False")),
+          ("speed_mps",))
+_log_case("speed duplicated column csv",
+          lambda df: df.to_csv(index=False).replace("power_w", "speed_mps", 1), ("speed_mps", "twice"))
+_log_case("time backwards", _set("time_s", 40, 1.0), ("time_s", "row 40"))
+_log_case("time duplicate", _set("time_s", 41, 40 / 8.0), ("time_s", "row 41"))
+_log_case("time NaN", _set("time_s", 9, np.nan), ("time_s", "row 9"))
+_log_case("time text", _set("time_s", 10, "noon"), ("time_s", "noon"))
+_log_case("time inf", _set("time_s", 1599, np.inf), ("time_s", "row 1599"))
+_log_case("grade beyond 0.6 rad", lambda df: df.assign(grade_rad=0.0).pipe(_set("grade_rad", 30, 2.0)),
+          ("grade_rad", "row 30"))
+_log_case("grade pct absurd", lambda df: df.assign(grade_pct=0.0).pipe(_set("grade_pct", 31, 300.0)),
+          ("grade_pct", "row 31"))
+_log_case("mass negative", _set("mass_kg", 22, -1500.0), ("mass_kg", "row 22"))
+_log_case("mass zero", _set("mass_kg", 23, 0.0), ("mass_kg", "row 23"))
+_log_case("mass absurd", _set("mass_kg", 24, 5e7), ("mass_kg", "row 24"))
+_log_case("mass text", _set("mass_kg", 25, "heavy"), ("mass_kg", "heavy"))
+_log_case("pressure negative", lambda df: df.assign(ambient_c=20.0, pressure_kpa=101.3)
+          .pipe(_set("pressure_kpa", 5, -101.0)), ("pressure_kpa", "row 5"))
+_log_case("pressure in Pa", lambda df: df.assign(ambient_c=20.0, pressure_kpa=101325.0),
+          ("pressure_kpa", "row 0"))
+_log_case("ambient below absolute zero", lambda df: df.assign(ambient_c=20.0).pipe(_set("ambient_c", 6, -300.0)),
+          ("ambient_c", "row 6"))
+_log_case("air density negative", lambda df: df.assign(air_density_kgm3=1.2).pipe(_set("air_density_kgm3", 7, -1.0)),
+          ("air_density_kgm3", "row 7"))
+_log_case("power inf", _set("power_w", 8, np.inf), ("power_w", "row 8"))
+_log_case("power text", _set("power_w", 9, "n/a?"), ("power_w", "n/a?"))
+_log_case("brake not boolean", lambda df: df.assign(brake="maybe"), ("brake", "maybe"))
+_log_case("trip id empty", _set("trip_id", 3, np.nan), ("trip_id", "row 3"))
+_log_case("single sample", lambda df: df.iloc[:1], ("sample",))
+_log_case("two samples", lambda df: df.iloc[:2], ("sample",))
+_log_case("constant speed", lambda df: df.assign(speed_mps=15.0), ("speed",))
+_log_case("standstill only", lambda df: df.assign(speed_mps=0.0), ("candidate",))
+_log_case("one moving speed and standstill", lambda df: df.assign(speed_mps=np.where(np.arange(len(df)) % 400 < 200, 0.0, 15.0)),
+          ("speed",))
+_log_case("constant speed parquet", lambda df: df.assign(speed_mps=15.0), ("speed",), fmt="parquet")
+_log_case("every sample braking", lambda df: df.assign(brake=True), ("usable",))
+_log_case("empty file", lambda df: "", ("empty",))
+_log_case("header only", lambda df: "time_s,speed_mps,power_w,mass_kg\n", ("empty",))
+_log_case("binary garbage csv", lambda df: bytes(range(256)) * 8, ("log.csv",))
+_log_case("garbage parquet", lambda df: b"PAR1" + b"\0" * 100, ("log.parquet",), fmt="parquet")
+_log_case("constant speed compare", lambda df: df.assign(speed_mps=15.0), ("wrote",), cmd="compare",
+          expect="accept")
+_log_case("tiny negative speeds", lambda df: df.assign(speed_mps=np.where(df.speed_mps < 0.05, -0.001, df.speed_mps)),
+          ("clipped",), expect="accept")
+_log_case("negative speed at the noise limit", _set("speed_mps", 0, -0.1), ("clipped",), expect="accept")
+
+
+@case("drive-log", "same trip id in two files", ("trip_id", "t1"))
+def _(d):
+    a = write(d, "a.csv", base_log())
+    b = write(d, "b.csv", base_log(seed=1))
+    return ["calibrate", str(a), str(b), "--out", str(d / "eq.toml")]
+
+
+@case("drive-log", "same trip id in a folder", ("trip_id",))
+def _(d):
+    (d / "logs").mkdir()
+    write(d / "logs", "a.parquet", base_log())
+    write(d / "logs", "b.parquet", base_log(seed=1))
+    return _cmp(d / "logs", d, "--equation", "drvpw_prius3")
+
+
+@case("drive-log", "unknown file type", ("log.xlsx",))
+def _(d):
+    return _cal(text(d, "log.xlsx", "x"), d)
+
+
+@case("drive-log", "no such file", ("nope.csv",))
+def _(d):
+    return _cal(d / "nope.csv", d)
+
+
+@case("drive-log", "empty folder", ("logs",))
+def _(d):
+    (d / "logs").mkdir()
+    return _cal(d / "logs", d)
+
+
+@case("drive-log", "no mass and no vehicle", ("mass",))
+def _(d):
+    return _cal(write(d, "log.csv", base_log().drop(columns="mass_kg")), d)
+
+
+@case("drive-log", "no measured power", ("power",))
+def _(d):
+    return _cal(write(d, "log.csv", base_log().drop(columns="power_w")), d)
+
+
+@case("drive-log", "speed unit km/h option", ("wrote",), expect="accept")
+def _(d):
+    df = base_log()
+    return _cal(write(d, "log.csv", df.assign(speed_mps=df.speed_mps * 3.6)), d, "--speed-unit", "km/h")
+
+
+@case("drive-log", "speed unit unknown", ("--speed-unit",))
+def _(d):
+    return _cal(write(d, "log.csv", base_log()), d, "--speed-unit", "furlong/fortnight")
+
+
+@case("drive-log", "negative speed tolerance option", ("clipped",), expect="accept")
+def _(d):
+    return _cal(write(d, "log.csv", _set("speed_mps", 30, -0.3)(base_log())), d, "--negative-speed-tolerance", "0.5")
+
+
+@case("drive-log", "negative speed tolerance bad", ("--negative-speed-tolerance",))
+def _(d):
+    return _cal(write(d, "log.csv", base_log()), d, "--negative-speed-tolerance", "-1")
+
+
+# --- TOML numbers: equation files (compare --equation FILE) ---------------------
+
+EQ_HEAD = '[equation]\nname = "bad"\n'
+
+
+def _eq_case(name, body, needles, head=EQ_HEAD):
+    def build(d):
+        log = write(d, "log.parquet", base_log())
+        eq = text(d, "bad.toml", head + body)
+        return _cmp(log, d, "--equation", str(eq))
+    CASES.append(Case("toml-equation", name, build, ("bad.toml", *needles)))
+
+
+_eq_case("coefficient text", '[terms]\nacc = "one"\n', ("acc",))
+_eq_case("coefficient nan", "[terms]\nacc = nan\naero = 0.3\n", ("acc", "nan"))
+_eq_case("coefficient inf", "[terms]\nacc = 1.0\naero = inf\n", ("aero", "inf"))
+_eq_case("coefficient -inf", "[terms]\nacc = 1.0\nroll = -inf\n", ("roll", "inf"))
+_eq_case("coefficient boolean", "[terms]\nacc = true\n", ("acc",))
+_eq_case("coefficient array", "[terms]\nacc = [1, 2]\n", ("acc",))
+_eq_case("coefficient absurd", "[terms]\nacc = 1e30\n", ("acc", "1e+30"))
+_eq_case("beta nan", "[beta]\nacc = nan\n", ("acc",), EQ_HEAD + "reference_mass_kg = 1500\n")
+_eq_case("reference mass zero", "[beta]\nacc = 1500\n", ("reference_mass_kg",), EQ_HEAD + "reference_mass_kg = 0\n")
+_eq_case("reference mass negative", "[beta]\nacc = 1500\n", ("reference_mass_kg",),
+         EQ_HEAD + "reference_mass_kg = -1500\n")
+_eq_case("reference mass nan", "[beta]\nacc = 1500\n", ("reference_mass_kg",), EQ_HEAD + "reference_mass_kg = nan\n")
+_eq_case("reference mass text", "[beta]\nacc = 1500\n", ("reference_mass_kg",),
+         EQ_HEAD + 'reference_mass_kg = "1.5 t"\n')
+_eq_case("mass zero", "[terms]\nacc = 1.0\n", ("mass_kg",), EQ_HEAD + "mass_kg = 0\n")
+_eq_case("mass inf", "[terms]\nacc = 1.0\n", ("mass_kg",), EQ_HEAD + "mass_kg = inf\n")
+_eq_case("mass absurd", "[terms]\nacc = 1.0\n", ("mass_kg",), EQ_HEAD + "mass_kg = 1e12\n")
+_eq_case("unknown term", "[terms]\nwarp = 1.0\n", ("warp",))
+_eq_case("no terms", "", ("terms",))
+_eq_case("toml syntax", "[terms\nacc = 1\n", ("TOML",))
+_eq_case("name with quotes and markup", '[terms]\nacc = 1.0\n', ("name",),
+         head='[equation]\nname = "x\\" evil=\\"<&"\n')
+_eq_case("std_err nan", "[terms]\nacc = 1.0\n[std_err]\nacc = nan\n", ("std_err",))
+
+
+@case("toml-equation", "invalid utf-8", ("bad.toml",))
+def _(d):
+    eq = text(d, "bad.toml", (EQ_HEAD + '# caf\xe9\n[terms]\nacc = 1.0\n').encode("latin-1"))
+    return _cmp(write(d, "log.parquet", base_log()), d, "--equation", str(eq))
+
+
+@case("toml-equation", "folder instead of file", ("bad.toml",))
+def _(d):
+    (d / "bad.toml").mkdir()
+    return _cmp(write(d, "log.parquet", base_log()), d, "--equation", str(d / "bad.toml"))
+
+
+@case("toml-equation", "unknown name", ("no_such_equation",))
+def _(d):
+    return _cmp(write(d, "log.parquet", base_log()), d, "--equation", "no_such_equation")
+
+
+@case("toml-equation", "calibrate candidates file with nan", ("cands.toml",))
+def _(d):
+    c = text(d, "cands.toml", 'terms = ["acc", 3.5]\n')
+    return _cal(write(d, "log.parquet", base_log()), d, "--candidates", str(c))
+
+
+# --- TOML numbers: vehicle files (compare --vehicle FILE) ---------------------------
+
+def _veh(text_: str, key: str, value: str) -> str:
+    """prius3.toml with ``key = …`` (first occurrence, any table) set to ``value``."""
+    import re
+
+    new, n = re.subn(rf"(?m)^{re.escape(key)}\s*=\s*[^#\n]*", f"{key} = {value}", text_, count=1)
+    assert n == 1, key
+    return new
+
+
+def _veh_case(name, key, value, needles=()):
+    def build(d):
+        v = text(d, "car.toml", _veh(PRIUS3.read_text(encoding="utf-8"), key, value))
+        return _cmp(write(d, "log.parquet", base_log().drop(columns="mass_kg")), d,
+                    "--vehicle", str(v), "--equation", "drvpw_prius3")
+    CASES.append(Case("toml-vehicle", name, build, ("car.toml", key, *needles)))
+
+
+for _k, _v in (("mass_kg", "0"), ("mass_kg", "-1625"), ("mass_kg", "nan"), ("mass_kg", "inf"),
+               ("mass_kg", '"heavy"'), ("mass_kg", "1e9"), ("wheel_radius_m", "0"),
+               ("wheel_radius_m", "-0.3"), ("wheel_radius_m", "nan"), ("wheel_radius_m", "30"),
+               ("final_drive", "0"), ("final_drive", "-3.2"), ("sun_teeth", "0"), ("ring_teeth", "nan"),
+               ("mg2_reduction", "inf"), ("counter_ratio", "0"), ("ice", "-0.18"), ("wheels", "nan"),
+               ("drag_coefficient", "nan"), ("drag_coefficient", "-0.25"), ("frontal_area_m2", "0"),
+               ("frontal_area_m2", "2e3"), ("rolling_coefficient", "-0.01"), ("rolling_coefficient", "5"),
+               ("rotating_mass_factor", "-1")):
+    _veh_case(f"{_k} = {_v}", _k, _v)
+
+
+@case("toml-vehicle", "unknown vehicle name", ("no_such_car",))
+def _(d):
+    return _cmp(write(d, "log.parquet", base_log()), d, "--vehicle", "no_such_car", "--equation", "drvpw_prius3")
+
+
+@case("toml-vehicle", "synth with a BEV", ("bmw_i3", "power_split"))
+def _(d):
+    return ["synth", "--vehicle", "bmw_i3", "--minutes", "1", "--out", str(d / "s.parquet")]
+
+
+@case("toml-vehicle", "synth with a vehicle lacking gear teeth", ("car.toml", "sun_teeth"))
+def _(d):
+    v = text(d, "car.toml", PRIUS3.read_text(encoding="utf-8").replace("sun_teeth = 30", ""))
+    return ["synth", "--vehicle", str(v), "--minutes", "1", "--out", str(d / "s.parquet")]
+
+
+# --- TOML numbers: column mappings (import columns --columns FILE) -------------------
+
+MAP_OK = ('[columns."t"]\nname = "time_s"\nunit = "s"\n'
+          '[columns."v"]\nname = "speed_mps"\nunit = "km/h"\n')
+
+
+def _map_case(name, mapping: str | bytes, needles=(), src: str | None = None):
+    def build(d):
+        s = text(d, "src.csv", src if src is not None else "t,v\n" + "".join(f"{i / 8},{20 + i % 7}\n" for i in range(80)))
+        m = text(d, "map.toml", mapping)
+        return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
+    CASES.append(Case("toml-mapping", name, build, ("map.toml", *needles)))
+
+
+_map_case("scale text", MAP_OK + 'scale = "x"\n', ("scale",))
+_map_case("scale nan", MAP_OK + "scale = nan\n", ("scale",))
+_map_case("scale inf", MAP_OK + "scale = inf\n", ("scale",))
+_map_case("scale zero", MAP_OK + "scale = 0\n", ("scale",))
+_map_case("unknown unit", MAP_OK.replace("km/h", "furlong/fortnight"), ("furlong",))
+_map_case("unknown encoding", "[options]\nencoding = \"klingon-8\"\n" + MAP_OK, ("encoding", "klingon-8"))
+_map_case("encoding is a number", "[options]\nencoding = 8\n" + MAP_OK, ("encoding",))
+_map_case("unknown option", "[options]\nspeed = 1\n" + MAP_OK, ("speed",))
+_map_case("speed not mapped", '[columns."t"]\nname = "time_s"\n', ("speed_mps",))
+_map_case("mapping not utf-8", ("# Geschwindigkeit \xfc\n" + MAP_OK).encode("latin-1"), ())
+_map_case("mapping toml syntax", MAP_OK + "[[[", ("TOML",))
+
+
+@case("toml-mapping", "wrong encoding for the data", ("src.csv", "utf-16"))
+def _(d):
+    s = text(d, "src.csv", "t,v\n" + "".join(f"{i / 8},{20 + i % 7}\n" for i in range(80)))
+    m = text(d, "map.toml", "[options]\nencoding = \"utf-16\"\n" + MAP_OK)
+    return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
+
+
+_map_case("decimal equals separator", "[options]\ndecimal = \",\"\n" + MAP_OK, ("decimal",))
+
+
+# --- output paths -------------------------------------------------------------------
+
+@case("out-path", "import onto its input", ("src.parquet", "input"))
+def _(d):
+    s = write(d, "src.parquet", base_log()[["time_s", "speed_mps"]])
+    m = text(d, "map.toml", MAP_OK.replace('"t"', '"time_s"').replace('"v"', '"speed_mps"').replace("km/h", "m/s"))
+    return ["import", "columns", str(s), "--columns", str(m), "--out", str(s)]
+
+
+@case("out-path", "import onto its mapping", ("map.toml",))
+def _(d):
+    s = text(d, "src.csv", "t,v\n0,1\n1,2\n2,3\n")
+    m = text(d, "map.toml", MAP_OK)
+    return ["import", "columns", str(s), "--columns", str(m), "--out", str(m)]
+
+
+@case("out-path", "compare into the folder of its input", ("input",))
+def _(d):
+    log = write(d, "log.parquet", base_log())
+    return ["compare", str(log), "--equation", "drvpw_prius3", "--out", str(d)]
+
+
+@case("out-path", "compare inside an input folder", ("input",))
+def _(d):
+    (d / "logs").mkdir()
+    write(d / "logs", "log.parquet", base_log())
+    return ["compare", str(d / "logs"), "--equation", "drvpw_prius3", "--out", str(d / "logs" / "report")]
+
+
+@case("out-path", "compare --out is a file", ("note.txt", "file"))
+def _(d):
+    text(d, "note.txt", "keep me")
+    return ["compare", str(write(d, "log.parquet", base_log())), "--equation", "drvpw_prius3",
+            "--out", str(d / "note.txt")]
+
+
+@case("out-path", "compare into a foreign folder", ("mine", "--force"))
+def _(d):
+    (d / "mine").mkdir()
+    text(d / "mine", "thesis.tex", "years of work")
+    return ["compare", str(write(d, "log.parquet", base_log())), "--equation", "drvpw_prius3",
+            "--out", str(d / "mine")]
+
+
+@case("out-path", "compare equation file as --out", ("eq.toml", "input"))
+def _(d):
+    eq = text(d, "eq.toml", DRVPW.read_text(encoding="utf-8"))
+    return ["compare", str(write(d, "log.parquet", base_log())), "--equation", str(eq), "--out", str(eq)]
+
+
+@case("out-path", "calibrate --out is a folder", ("eq.toml", "folder"))
+def _(d):
+    (d / "eq.toml").mkdir()
+    return _cal(write(d, "log.parquet", base_log()), d)
+
+
+@case("out-path", "calibrate --out onto a vehicle file", ("car.toml", "input"))
+def _(d):
+    v = text(d, "car.toml", PRIUS3.read_text(encoding="utf-8"))
+    return ["calibrate", str(write(d, "log.parquet", base_log())), "--vehicle", str(v), "--out", str(v)]
+
+
+@case("out-path", "calibrate --report holds the log", ("input",))
+def _(d):
+    log = write(d, "log.parquet", base_log())
+    return ["calibrate", str(log), "--out", str(d / "x" / "eq.toml"), "--report", str(d)]
+
+
+@case("out-path", "calibrate --out inside --report", ("--report",))
+def _(d):
+    log = write(d, "log.parquet", base_log())
+    return ["calibrate", str(log), "--out", str(d / "rep" / "eq.toml"), "--report", str(d / "rep")]
+
+
+@case("out-path", "synth --out is a folder", ("s.parquet", "folder"))
+def _(d):
+    (d / "s.parquet").mkdir()
+    return ["synth", "--minutes", "1", "--out", str(d / "s.parquet")]
+
+
+@case("out-path", "demo --out is a file", ("note.txt", "file"))
+def _(d):
+    text(d, "note.txt", "keep me")
+    return ["demo", "--no-sumo", "--minutes", "1", "--out", str(d / "note.txt")]
+
+
+@case("out-path", "not writable folder", ("ro",), needs="root")
+def _(d):
+    return _cmp(write(d, "log.parquet", base_log()), d / "ro" / "x", "--equation", "drvpw_prius3")
+
+
+# --- options -------------------------------------------------------------------------
+
+@case("options", "p-enter above 1", ("--p-enter",))
+def _(d):
+    return _cal(write(d, "log.parquet", base_log()), d, "--p-enter", "2")
+
+
+@case("options", "p-enter nan", ("--p-enter",))
+def _(d):
+    return _cal(write(d, "log.parquet", base_log()), d, "--p-enter", "nan")
+
+
+@case("options", "unknown candidate", ("warp",))
+def _(d):
+    return _cal(write(d, "log.parquet", base_log()), d, "--candidates", "acc,warp")
+
+
+@case("options", "synth minutes negative", ("--minutes",))
+def _(d):
+    return ["synth", "--minutes", "-1", "--out", str(d / "s.parquet")]
+
+
+@case("options", "synth minutes nan", ("--minutes",))
+def _(d):
+    return ["synth", "--minutes", "nan", "--out", str(d / "s.parquet")]
+
+
+@case("options", "synth trips zero", ("--trips",))
+def _(d):
+    return ["synth", "--trips", "0", "--out", str(d / "s.parquet")]
+
+
+@case("options", "synth unknown plant", ("--plant",))
+def _(d):
+    return ["synth", "--plant", "gremlins", "--out", str(d / "s.parquet")]
+
+
+@case("options", "vsp_spec without vehicle", ("vsp_spec",))
+def _(d):
+    return _cmp(write(d, "log.parquet", base_log()), d, "--equation", "vsp_spec")
+
+
+@case("options", "same equation twice", ("twice",))
+def _(d):
+    return _cmp(write(d, "log.parquet", base_log()), d, "--equation", "drvpw_prius3", "--equation", "drvpw_prius3")
+
+
+@case("options", "demo minutes zero", ("--minutes",))
+def _(d):
+    return ["demo", "--no-sumo", "--minutes", "0", "--out", str(d / "demo")]
+
+
+@case("options", "validate missing data folder", ("data",))
+def _(d):
+    return ["validate", "--data", str(d / "nope"), "--out", str(d / "v")]
+
+
+# --- vendor files cut short (import) --------------------------------------------------
+
+def _cut(src: Path, dst: Path, nbytes: int | None = None, lines: int | None = None) -> Path:
+    raw = src.read_bytes()
+    if lines is not None:
+        raw = b"".join(raw.splitlines(keepends=True)[:lines])
+    if nbytes is not None:
+        raw = raw[:nbytes]
+    dst.write_bytes(raw)
+    return dst
+
+
+def _vendor_case(name, fmt, src_rel, needles, nbytes=None, lines=None, expect="refuse"):
+    def build(d):
+        src = SHARED / src_rel
+        p = _cut(src, d / Path(src_rel).name, nbytes, lines)
+        return ["import", fmt, str(p), "--out", str(d / "out.parquet")]
+    CASES.append(Case("vendor-truncated", name, build, tuple(needles), expect, needs="shared"))
+
+
+_vendor_case("bmw header cut", "bmw-i3-tum", "bmw_i3_tum/TripA01.csv", ("TripA01.csv",), nbytes=300)
+_vendor_case("bmw one complete row", "bmw-i3-tum", "bmw_i3_tum/TripA01.csv", ("TripA01.csv", "sample"),
+             lines=2, nbytes=None)
+_vendor_case("bmw second row cut mid-row", "bmw-i3-tum", "bmw_i3_tum/TripA01.csv", ("TripA01.csv", "truncated"),
+             lines=3, nbytes=-10)
+_vendor_case("bmw mid-row after 1000 bytes", "bmw-i3-tum", "bmw_i3_tum/TripA01.csv", ("truncated",), nbytes=1000,
+             expect="accept")
+_vendor_case("bmw mid-row after 200 kB", "bmw-i3-tum", "bmw_i3_tum/TripA01.csv", ("truncated",), nbytes=200_000,
+             expect="accept")
+_vendor_case("bmw empty", "bmw-i3-tum", "bmw_i3_tum/TripA01.csv", ("TripA01.csv",), nbytes=0)
+
+
+@case("vendor-truncated", "jlu parquet cut short", ("parquet",), needs="shared")
+def _(d):
+    src = sorted((SHARED / "jlu_bev_dyno").glob("*.parquet"))[0]
+    p = _cut(src, d / src.name, nbytes=src.stat().st_size // 2)
+    return ["import", "jlu-dyno", str(p), "--out", str(d / "out.parquet")]
+
+
+@case("vendor-truncated", "columns csv cut mid-row", ("truncated",), expect="accept")
+def _(d):
+    s = text(d, "src.csv", ("t,v\n" + "".join(f"{i / 8},{20 + i % 7}\n" for i in range(80)))[:-3])
+    m = text(d, "map.toml", MAP_OK)
+    return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
+
+
+@case("vendor-truncated", "columns csv cut in the first row", ("src.csv",))
+def _(d):
+    s = text(d, "src.csv", "t,v\n0.0,2")
+    m = text(d, "map.toml", MAP_OK)
+    return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
+
+
+# --- numpy warnings never reach the terminal -------------------------------------------
+
+@case("warnings", "all-NaN optional column", ("wrote",), expect="accept")
+def _(d):
+    return _cal(write(d, "log.csv", base_log().assign(ambient_c=np.nan)), d)
+
+
+@case("warnings", "all-NaN grade", ("grade_rad",))
+def _(d):
+    return _cal(write(d, "log.csv", base_log().assign(grade_rad=np.nan)), d)
+
+
+@case("warnings", "all-NaN elevation", ("wrote",), expect="accept")
+def _(d):
+    return _cal(write(d, "log.csv", base_log().assign(elevation_m=np.nan)), d)
+
+
+# ------------------------------------------------------------------------ running
+
+def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:
+    """(outcome, detail). Outcomes: "refused cleanly", "accepted cleanly" (the expected
+    result), "traceback", "warning" (a Python/numpy warning reached the terminal),
+    "accepted" (a bad input let through), "refused" (a good input refused), "input
+    changed", "output written", "message" (culprit not named, not one line or not exit 2)."""
+    if exc is not None or "Traceback" in err:
+        return "traceback", (exc or err.strip().splitlines()[-1])[:200]
+    import re
+
+    if re.search(r"[A-Za-z]*Warning: ", err):
+        return "warning", err.strip()[:200]
+    changed = [k for k in before if after.get(k) != before[k]]
+    if changed:
+        return "input changed", ", ".join(changed[:3])
+    text_ = (out + err).lower()
+    missing = [n for n in c.needles if n.lower() not in text_]
+    if c.expect == "accept":
+        if code != 0:
+            return "refused", err.strip()[:200]
+        if missing:
+            return "message", f"missing {missing} in output"
+        return "accepted cleanly", ""
+    if code == 0:
+        return "accepted", out.strip().splitlines()[-1][:200] if out.strip() else ""
+    new = [k for k in after if k not in before]
+    if new:
+        return "output written", ", ".join(new[:3])
+    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+    if code != 2 or len(lines) != 1 or missing:
+        return "message", f"exit {code}, {len(lines)} lines, missing {missing}: {err.strip()[:200]}"
+    return "refused cleanly", lines[0][:200]
+
+
+def run_inprocess(c: Case, d: Path) -> tuple[str, str]:
+    """Build the case in the empty folder ``d``, run the CLI in this process, judge it."""
+    import contextlib
+    import io
+    import traceback
+
+    from sumo_drvpw.cli import main
+
+    argv = c.build(d)
+    before = snapshot(d)
+    out, err = io.StringIO(), io.StringIO()
+    exc = None
+    code = None
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as e:  # argparse
+            code = e.code
+        except Exception:  # noqa: BLE001 - a traceback is the finding
+            exc = traceback.format_exc().strip().splitlines()[-1]
+    return judge(c, code, out.getvalue(), err.getvalue(), before, snapshot(d), exc)
+
+
+def run_subprocess(c: Case, d: Path, python: str, timeout: float = 300) -> tuple[str, str]:
+    """As :func:`run_inprocess`, through ``python -m sumo_drvpw`` in a child process."""
+    import subprocess
+
+    argv = c.build(d)
+    before = snapshot(d)
+    r = subprocess.run([python, "-m", "sumo_drvpw", *argv], capture_output=True, text=True,
+                       timeout=timeout, cwd=d)
+    return judge(c, r.returncode, r.stdout, r.stderr, before, snapshot(d))
