@@ -9,7 +9,8 @@ from scipy import stats
 
 from sumo_drvpw.data.roles import of_log as column_roles
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.fit.calibrate import CANDIDATES, calibrate
+from sumo_drvpw.fit.calibrate import CANDIDATES
+from sumo_drvpw.fit.physical import physical_calibration
 from sumo_drvpw.fit.compare import metrics as _metrics
 from sumo_drvpw.fit.diagnose.blocks import BlockModel
 from sumo_drvpw.fit.diagnose.candidates import Candidate, generate_candidates, screen_signals
@@ -103,11 +104,13 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
     # declared equation
     calibrated = False
     if equation is None:
-        res = calibrate(x_all, y_all, CANDIDATES["indt-var-1"], mask=usable,
-                        reference_mass_kg=float(x_all.mass[usable].mean()))
-        equation = res.to_equation("calibrated_indt_var_1", provenance={"logs": log.files})
+        equation, phys = physical_calibration(x_all, y_all, CANDIDATES["indt-var-1"], mask=usable,
+                                              reference_mass_kg=float(x_all.mass[usable].mean()))
+        equation.name = "calibrated_indt_var_1"
+        equation.provenance["logs"] = list(log.files)
         calibrated = True
-        say(f"calibrated on the spot: {', '.join(equation.term_names)}")
+        say(f"calibrated on the spot ({phys['used']}): {', '.join(equation.term_names)}"
+            + (f"; {phys['why']}" if phys["used"] == "constrained" else ""))
     declared = equation.term_names
     x_eq = x_all.with_mass(equation.mass_kg)
     for s in equation.signals:

@@ -1,0 +1,232 @@
+"""Vehicle physics separated from the measurement (issue #11 §3).
+
+An equation that goes into SUMO must describe the vehicle, not the logger. This module
+reads each coefficient physically, flags implausible values, and fits under physical
+constraints when the unconstrained fit is implausible.
+
+Physical readings (term basis of :mod:`sumo_drvpw.model.terms`; P in W):
+
+========  ==========================  ===========================================
+term      coefficient reads as        plausible
+========  ==========================  ===========================================
+acc       mass factor (1 + J/(m·r²))/η 0.95 … 1.4 (rotating masses; well below 1 is a lag
+                                      or a smoothed speed, not physics)
+grade     1/η (1 at the wheels)        0.9 … 1.3 (η: drivetrain efficiency between the wheels
+                                      and the measured power; far below 1: attenuated grade)
+aero      ½·ρ·C_d·A → C_d·A = 2c/ρ     C_d·A ≥ 0 (cars 0.5 … 1.1 m² at the wheels; more at
+                                      a powertrain output with losses)
+aero_rho  C_d·A                        as aero
+roll      c_r (rolling coefficient)    0 … 0.03
+========  ==========================  ===========================================
+
+The constrained fit minimises the same least-squares objective as OLS, ‖Xβ − y‖², under
+bounds and fixed coefficients, exactly from the sufficient statistics: with XᵀX = L·Lᵀ
+(Cholesky), ‖Xβ − y‖² = ‖Lᵀβ − L⁻¹Xᵀy‖² + const, solved by
+:func:`scipy.optimize.lsq_linear`. Fixed coefficients are moved to the target first.
+
+Every coefficient of a target measured behind a drivetrain (motor shaft, powertrain output,
+battery) carries the factor 1/η; the grade coefficient reads it directly (potential energy
+is exact physics), and acc/grade is then the mass factor.
+
+Constraints are declared in a candidate TOML file beside ``terms``::
+
+    terms = ["acc", "grade", "aero", "roll"]
+    [constraints]
+    grade = { fixed = 1.0 }
+    aero = { min = 0.0 }
+    acc = { min = 1.0, max = 1.3 }
+
+:data:`DEFAULT_CONSTRAINTS` apply when none are declared.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import cholesky, solve_triangular
+from scipy.optimize import lsq_linear
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fit.ols import Gram, gram
+from sumo_drvpw.model.constants import RHO_DEFAULT
+
+#: term → (low, high) of the plausible coefficient (see the module table)
+PLAUSIBLE = {"acc": (0.95, 1.4), "grade": (0.9, 1.3), "roll": (0.0, 0.03)}
+#: plausible C_d·A [m²]: ≥ 0 (a powertrain-output target includes losses: no upper bound)
+CDA_MIN = 0.0
+#: constraints used when the unconstrained fit is implausible and none are declared
+#: (grade: 1/η ≥ 1 behind a drivetrain; = 1 at the wheels, declare ``grade = { fixed = 1.0 }``)
+DEFAULT_CONSTRAINTS = {"grade": {"min": 1.0, "max": 1.3}, "aero": {"min": 0.0},
+                       "aero_rho": {"min": 0.0}, "roll": {"min": 0.0}, "acc": {"min": 1.0}}
+
+
+def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> dict[str, dict]:
+    """Physical reading of each coefficient and whether it is plausible.
+
+    Parameters
+    ----------
+    terms : term → coefficient
+    rho_kgm3 : mean air density of the data [kg/m³] (reads the aero coefficient as C_d·A)
+
+    Returns term → ``{"coefficient", "reads_as", "value", "unit", "plausible", "note"}``
+    (``plausible`` None for a term without a physical reading).
+    """
+    out = {}
+    for t, c in terms.items():
+        c = float(c)
+        if t == "acc":
+            ok = PLAUSIBLE["acc"][0] <= c <= PLAUSIBLE["acc"][1]
+            out[t] = {"coefficient": c, "reads_as": "mass factor", "value": c, "unit": "-",
+                      "plausible": ok, "note": "" if ok else (
+                          "below 1: a lag between power and speed or a smoothed speed absorbed"
+                          if c < PLAUSIBLE["acc"][0] else "above 1.4: more rotating mass than a car has")}
+        elif t == "grade":
+            ok = PLAUSIBLE["grade"][0] <= c <= PLAUSIBLE["grade"][1]
+            out[t] = {"coefficient": c, "reads_as": "1/η: share of m·g·v·sin θ (1 at the wheels)", "value": c,
+                      "unit": "-", "plausible": ok, "note": "" if ok else (
+                          "below 1: the logged grade is attenuated (coarse or smoothed elevation)"
+                          if c < PLAUSIBLE["grade"][0] else "above 1.3: the logged grade is too small")}
+        elif t in ("aero", "aero_rho"):
+            cda = 2.0 * c / rho_kgm3 if t == "aero" else c
+            ok = cda >= CDA_MIN
+            out[t] = {"coefficient": c, "reads_as": f"C_d·A at ρ = {rho_kgm3:.4g} kg/m³", "value": cda,
+                      "unit": "m²", "plausible": ok,
+                      "note": "" if ok else "negative drag: another term or an artefact took its place"}
+        elif t == "roll":
+            ok = PLAUSIBLE["roll"][0] <= c <= PLAUSIBLE["roll"][1]
+            out[t] = {"coefficient": c, "reads_as": "rolling coefficient c_r", "value": c, "unit": "-",
+                      "plausible": ok, "note": "" if ok else (
+                          "negative rolling resistance" if c < 0 else "above 0.03: more than tyres")}
+        else:
+            out[t] = {"coefficient": c, "reads_as": "no physical reading", "value": None, "unit": "",
+                      "plausible": None, "note": ""}
+    return out
+
+
+def implausible(reading: dict[str, dict]) -> list[str]:
+    """Terms whose reading is implausible, in term order."""
+    return [t for t, r in reading.items() if r["plausible"] is False]
+
+
+def parse_constraints(doc: dict, where: str) -> dict[str, dict]:
+    """Check a ``[constraints]`` table: term → {"fixed": x} or {"min": lo, "max": hi}."""
+    out = {}
+    for t, spec in (doc or {}).items():
+        if not isinstance(spec, dict) or not spec or set(spec) - {"fixed", "min", "max"}:
+            raise UserError(f"{where}: constraints.{t} must be a table with 'fixed' or 'min'/'max', "
+                            f"got {spec!r}")
+        if "fixed" in spec and len(spec) > 1:
+            raise UserError(f"{where}: constraints.{t}: 'fixed' excludes 'min'/'max'")
+        for k, v in spec.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise UserError(f"{where}: constraints.{t}.{k} must be a finite number, got {v!r}")
+        if spec.get("min", -math.inf) > spec.get("max", math.inf):
+            raise UserError(f"{where}: constraints.{t}: min {spec['min']} > max {spec['max']}")
+        out[str(t)] = {k: float(v) for k, v in spec.items()}
+    return out
+
+
+def read_constraints(path) -> dict[str, dict]:
+    """The ``[constraints]`` table of a candidate TOML file (empty when it has none)."""
+    from pathlib import Path
+
+    from sumo_drvpw.fileio import read_toml
+
+    p = Path(path)
+    return parse_constraints(read_toml(p, "candidate file").get("constraints", {}), str(p))
+
+
+@dataclass
+class ConstrainedFit:
+    """Least squares under bounds and fixed coefficients, from sufficient statistics."""
+
+    params: dict[str, float]
+    rss: float
+    active: list[str] = field(default_factory=list)   # terms at a bound or fixed
+    constraints: dict = field(default_factory=dict)
+
+
+def constrained_fit(g: Gram, constraints: dict[str, dict]) -> ConstrainedFit:
+    """Minimise ‖Xβ − y‖² subject to ``constraints`` (see the module docstring).
+
+    Parameters
+    ----------
+    g : sufficient statistics of the terms (:func:`sumo_drvpw.fit.ols.gram`)
+    constraints : term → {"fixed": x} or {"min": lo, "max": hi}; terms not in ``g`` ignored
+    """
+    names = list(g.names)
+    k = len(names)
+    beta = np.zeros(k)
+    fixed = [j for j, t in enumerate(names) if "fixed" in constraints.get(t, {})]
+    free = [j for j in range(k) if j not in fixed]
+    for j in fixed:
+        beta[j] = constraints[names[j]]["fixed"]
+    if free:
+        a = g.xtx[np.ix_(free, free)]
+        b = g.xty[free] - g.xtx[np.ix_(free, fixed)] @ beta[fixed] if fixed else g.xty[free]
+        s = np.sqrt(np.maximum(np.diag(a), 1e-300))       # unit-diagonal scaling for precision
+        a_s = a / np.outer(s, s)
+        try:
+            low = cholesky(a_s + 1e-13 * np.eye(len(free)), lower=True)
+        except np.linalg.LinAlgError:
+            raise UserError(f"constrained fit: the terms {[names[j] for j in free]} are collinear "
+                            "on these data") from None
+        rhs = solve_triangular(low, b / s, lower=True)
+        lo = np.array([constraints.get(names[j], {}).get("min", -np.inf) for j in free]) * s
+        hi = np.array([constraints.get(names[j], {}).get("max", np.inf) for j in free]) * s
+        res = lsq_linear(low.T, rhs, bounds=(lo, hi), method="bvls", tol=1e-12)
+        beta[free] = res.x / s
+    rss = float(g.yty - 2.0 * beta @ g.xty + beta @ g.xtx @ beta)
+    active = [names[j] for j in fixed]
+    for j in free:
+        c = constraints.get(names[j], {})
+        if any(abs(beta[j] - c[key]) <= 1e-9 * max(1.0, abs(c[key])) for key in ("min", "max") if key in c):
+            active.append(names[j])
+    return ConstrainedFit(dict(zip(names, map(float, beta))), max(rss, 0.0), active,
+                          {t: constraints[t] for t in names if t in constraints})
+
+
+def physical_calibration(x, y, candidates, mask=None, constraints: dict | None = None,
+                         force: bool = False, **kw):
+    """Calibrate stepwise; when the fit is implausible (or ``force``), refit the selected
+    terms under ``constraints`` (default :data:`DEFAULT_CONSTRAINTS`), saying so.
+
+    Parameters
+    ----------
+    x, y, candidates, mask, **kw : as :func:`sumo_drvpw.fit.calibrate.calibrate`
+    constraints : declared constraints (e.g. from :func:`read_constraints`)
+    force : use the constrained fit even when the unconstrained one is plausible
+
+    Returns (Equation, report dict with ``unconstrained``, ``reading``, ``implausible``,
+    ``constrained`` (or None) and ``used``).
+    """
+    from sumo_drvpw.fit.calibrate import calibrate
+
+    res = calibrate(x, y, candidates, mask=mask, **kw)
+    use = res.results.model.exog.shape[0] if res.results is not None else None
+    m = np.isfinite(np.asarray(y, float)) if mask is None else (np.asarray(mask, bool) & np.isfinite(y))
+    rho = float(np.nanmean(np.asarray(x.rho, float)[m]))
+    reading = physical_reading(res.params, rho)
+    bad = implausible(reading)
+    rep = {"unconstrained": dict(res.params), "reading": reading, "implausible": bad,
+           "rho_kgm3": rho, "constrained": None, "used": "unconstrained", "n": use}
+    eq = res.to_equation("calibrated")
+    if not bad and not force:
+        return eq, rep
+    cons = constraints or DEFAULT_CONSTRAINTS
+    g = gram(x, np.asarray(y, float), tuple(res.terms), m)
+    fit = constrained_fit(g, cons)
+    rep["constrained"] = {"params": fit.params, "active": fit.active, "constraints": fit.constraints,
+                          "reading": physical_reading(fit.params, rho), "rss": fit.rss,
+                          "rss_unconstrained": float(g.yty - np.linalg.lstsq(g.xtx, g.xty, rcond=None)[0] @ g.xty)}
+    rep["used"] = "constrained"
+    rep["why"] = ("unconstrained fit implausible: " + ", ".join(f"{t} ({reading[t]['note']})" for t in bad)
+                  if bad else "constrained fit requested")
+    eq.terms = dict(fit.params)
+    eq.std_err = {}
+    eq.p_values = {}
+    eq.provenance["physical"] = {"used": "constrained", "why": rep["why"], "constraints": fit.constraints,
+                                 "active": fit.active, "unconstrained": dict(res.params)}
+    return eq, rep

@@ -1,0 +1,92 @@
+"""Physics separated from the measurement (issue #11 §3): readings, flags, constrained fit."""
+
+import numpy as np
+import pytest
+import statsmodels.api as sm
+from hypothesis import given, settings, strategies as st
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fit.ols import gram
+from sumo_drvpw.fit.physical import (constrained_fit, implausible, parse_constraints,
+                                     physical_calibration, physical_reading)
+from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.terms import Inputs, term_matrix
+
+TERMS = ("acc", "grade", "aero", "roll")
+
+
+def _drive(n=6000, seed=0, grade_factor=1.0):
+    rng = np.random.default_rng(seed)
+    v = np.clip(15 + np.cumsum(rng.normal(0, 0.2, n)), 1, 35)
+    a = np.gradient(v)
+    th = 0.04 * np.sin(np.arange(n) / 300.0)
+    m = np.full(n, 1500.0)
+    x = Inputs(v=v, a=a, theta=th, wind=np.zeros(n), mass=m, rho=np.full(n, 1.2))
+    # truth at the wheels: mass factor 1.05, C_dA 0.6 m², c_r 0.009
+    y = 1.05 * m * v * a + m * G * v * np.sin(th) + 0.5 * 1.2 * 0.6 * v ** 3 + 0.009 * m * G * v
+    y = y + rng.normal(0, 300, n)
+    # the logger's grade is attenuated (coarse elevation)
+    x_logged = Inputs(v=v, a=a, theta=grade_factor * th, wind=x.wind, mass=m, rho=x.rho)
+    return x_logged, y
+
+
+def test_readings_of_known_coefficients():
+    r = physical_reading({"acc": 1.05, "grade": 0.69, "aero": 0.36, "roll": 0.009, "v^2": 3.0}, 1.2)
+    assert r["aero"]["value"] == pytest.approx(0.6)          # C_dA = 2·0.36/1.2
+    assert r["acc"]["plausible"] and r["roll"]["plausible"]
+    assert not r["grade"]["plausible"] and "attenuated" in r["grade"]["note"]
+    assert r["v^2"]["plausible"] is None
+    assert implausible(r) == ["grade"]
+    assert implausible(physical_reading({"aero": -0.36, "acc": 0.435})) == ["aero", "acc"]
+
+
+def test_unconstrained_bounds_reproduce_ols():
+    x, y = _drive()
+    g = gram(x, y, TERMS)
+    fit = constrained_fit(g, {})
+    X = term_matrix(TERMS, x)
+    ref = sm.OLS(y, X).fit()
+    assert np.allclose(list(fit.params.values()), ref.params, rtol=1e-7)
+    assert fit.rss == pytest.approx(ref.ssr, rel=1e-7)
+
+
+def test_fixed_grade_recovers_the_vehicle_from_an_attenuated_grade():
+    x, y = _drive(grade_factor=0.6)
+    g = gram(x, y, TERMS)
+    free = constrained_fit(g, {})
+    assert free.params["grade"] > 1.3                           # 1/0.6 absorbed
+    fixed = constrained_fit(g, {"grade": {"fixed": 1.0 / 0.6}})
+    assert fixed.params["acc"] == pytest.approx(1.05, rel=0.02)
+    assert fixed.active == ["grade"]
+    # a fixed or bounded fit never beats OLS in-sample
+    assert fixed.rss >= free.rss - 1e-6 * free.rss
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.floats(0.4, 1.0), st.floats(0.02, 0.2))
+def test_bounds_are_respected_and_active_when_binding(aero_min, roll_max):
+    x, y = _drive(n=2000, seed=3)
+    g = gram(x, y, TERMS)
+    fit = constrained_fit(g, {"aero": {"min": aero_min}, "roll": {"max": roll_max}})
+    assert fit.params["aero"] >= aero_min - 1e-9 and fit.params["roll"] <= roll_max + 1e-12
+    assert fit.active == ["aero"]               # truth 0.36 < aero_min binds; roll 0.009 does not
+
+
+def test_physical_calibration_uses_constraints_only_when_implausible():
+    x, y = _drive()
+    eq, rep = physical_calibration(x, y, TERMS)
+    assert rep["used"] == "unconstrained" and rep["implausible"] == []
+    x2, y2 = _drive(grade_factor=2.5)                           # grade coefficient 0.4
+    eq2, rep2 = physical_calibration(x2, y2, TERMS)
+    assert rep2["used"] == "constrained" and "grade" in rep2["implausible"]
+    assert "grade" in rep2["why"] and eq2.provenance["physical"]["used"] == "constrained"
+    assert 1.0 <= eq2.terms["grade"] <= 1.3 and eq2.terms["aero"] >= 0
+
+
+def test_bad_constraints_named():
+    with pytest.raises(UserError, match="cands.toml: constraints.grade"):
+        parse_constraints({"grade": {"fixed": 1.0, "min": 0.0}}, "cands.toml")
+    with pytest.raises(UserError, match="constraints.aero.min must be a finite number"):
+        parse_constraints({"aero": {"min": "zero"}}, "cands.toml")
+    with pytest.raises(UserError, match="min 2.0 > max 1.0"):
+        parse_constraints({"acc": {"min": 2.0, "max": 1.0}}, "cands.toml")
