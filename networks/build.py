@@ -1,6 +1,7 @@
 """Build the bundled networks from their plain-XML sources with netconvert.
 
-Usage: python networks/build.py   (writes networks/<name>.net.xml next to this script)
+Usage: python networks/build.py   (writes sumo_drvpw/sim/builtin/networks/<name>.net.xml,
+the package data the built-in scenarios and `sumo-drvpw demo` use)
 
 Each network has ``src/<name>.nod.xml`` (nodes with elevation z [m]), ``src/<name>.edg.xml``
 and the shared ``src/types.typ.xml`` (OSM-style edge types ``highway.*`` with speed
@@ -16,6 +17,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+OUT = HERE.parent / "sumo_drvpw" / "sim" / "builtin" / "networks"
 NETWORKS = ("city", "highway")
 
 
@@ -25,7 +27,7 @@ def build(name: str) -> Path:
     import sumolib
 
     src = HERE / "src"
-    out = HERE / f"{name}.net.xml"
+    out = OUT / f"{name}.net.xml"
     cmd = [sumolib.checkBinary("netconvert"),
            "--node-files", str(src / f"{name}.nod.xml"),
            "--edge-files", str(src / f"{name}.edg.xml"),

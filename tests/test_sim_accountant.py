@@ -112,7 +112,7 @@ def test_vclasses_each_get_their_equation_or_are_skipped(tmp_path):
     (tmp_path / "r.rou.xml").write_text(MIXED, encoding="utf-8")
     (tmp_path / "s.toml").write_text(
         'equations = ["vsp_ldv1999", "drvpw_prius3", "moves_combination_truck"]\n'
-        f'[sumo]\nnet = "{REPO / "networks" / "city.net.xml"}"\nroutes = ["r.rou.xml"]\n'
+        f'[sumo]\nnet = "{REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"}"\nroutes = ["r.rou.xml"]\n'
         'end = 200\noptions = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n',
         encoding="utf-8")
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
@@ -141,7 +141,7 @@ def test_out_of_range_vehicle_steps_counted(tmp_path):
         '<flow id="c"', '<route id="r" edges="e01 e12 e23"/>\n  <flow id="c"').replace(
         'period="10"', 'period="10" departSpeed="max"'), encoding="utf-8")
     (tmp_path / "s.toml").write_text(
-        f'equations = ["x"]\n[sumo]\nnet = "{REPO / "networks" / "highway.net.xml"}"\n'
+        f'equations = ["x"]\n[sumo]\nnet = "{REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml"}"\n'
         'routes = ["r.rou.xml"]\nend = 60\noptions = ["--no-warnings", "true"]\n'
         '[vehicles]\nvtypes = ["car"]\n[outputs]\nfigures = false\nedgedata = false\n',
         encoding="utf-8")

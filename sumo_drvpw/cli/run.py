@@ -1,14 +1,26 @@
-"""``sumo-drvpw run SCENARIO.toml --out DIR``: apply equations to every vehicle of a SUMO run."""
+"""``sumo-drvpw run SCENARIO... --out DIR``: apply equations to every vehicle of SUMO runs.
+
+One scenario: its outputs in DIR. Several (``run a.toml b.toml --jobs 2``): one SUMO per
+process, each scenario's outputs in ``DIR/<scenario name>/`` and all of them side by side in
+``DIR/runs.csv`` (per scenario, equation and road class: traction energy [kWh] and
+energy per distance [Wh/km]). A scenario is a TOML file or a built-in name (``city``,
+``highway``: ``sumo_drvpw/sim/builtin/scenarios``).
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
+from sumo_drvpw.cli import add_force, output_set
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scenario", help="scenario TOML file (see sumo_drvpw.sim.scenario)")
+    parser.add_argument("scenario", nargs="+",
+                        help="scenario TOML file(s) or built-in name(s) (docs/scenario.md)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    parser.add_argument("--jobs", type=int, default=1, metavar="N",
+                        help="run up to N scenarios at once, one SUMO process each (default 1)")
     parser.add_argument("--begin", type=float, help="override sumo.begin [s]")
     parser.add_argument("--end", type=float, help="override sumo.end [s]")
     parser.add_argument("--equation", action="append", metavar="NAME_OR_FILE",
@@ -18,40 +30,128 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gui", action="store_true", help="watch in sumo-gui (implies --traci)")
     parser.add_argument("--trace", action="store_true",
                         help="also write trace.parquet (per vehicle-step power per term)")
+    parser.add_argument("--period", type=float, metavar="S",
+                        help="edgeData interval [s] (default: the scenario's, else the whole run)")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_force(parser)
 
 
-def main(args: argparse.Namespace) -> int:
-    from sumo_drvpw.sim import run_scenario
-
-    overrides = {}
-    if args.begin is not None:
-        overrides["begin"] = args.begin
-    if args.end is not None:
-        overrides["end"] = args.end
+def _overrides(args) -> dict:
+    o = {}
+    for key in ("begin", "end", "period"):
+        if getattr(args, key) is not None:
+            o[key] = getattr(args, key)
     if args.equation:
-        overrides["equations"] = args.equation
+        o["equations"] = args.equation
     if args.traci or args.gui:
-        overrides["connection"] = "traci"
+        o["connection"] = "traci"
     if args.gui:
-        overrides["gui"] = True
+        o["gui"] = True
     if args.trace:
-        overrides["trace"] = True
+        o["trace"] = True
     if args.no_figures:
-        overrides["figures"] = False
-    if args.no_progress:
-        overrides["progress"] = False
-    s = run_scenario(args.scenario, args.out, **overrides)
+        o["figures"] = False
+    if args.no_progress or len(args.scenario) > 1:
+        o["progress"] = False
+    return o
+
+
+def _run_one(scenario: str, out: str, overrides: dict) -> dict:
+    """One scenario in this process; returns its summary (picklable for --jobs)."""
+    from sumo_drvpw.sim import run_scenario
+    from sumo_drvpw.sim.scenario import scenario_path
+
+    return run_scenario(scenario_path(scenario), out, **overrides).summary
+
+
+def _print_summary(s: dict, out, label: str = "") -> None:
     for w in s.get("warnings", []):
-        print(f"warning: {w}", file=sys.stderr)
-    print(f"{s['steps']} steps, {s['vehicles']} vehicles, {s['slope_corrected_samples']} "
-          f"slope-corrected samples; outputs in {args.out}")
+        print(f"warning: {label}{w}", file=sys.stderr)
+    print(f"{label}{s['steps']} steps, {s['vehicles']} vehicles, "
+          f"{s['slope_corrected_samples']} slope-corrected samples; outputs in {out}")
+    skipped = s.get("skipped", {}).get("by_vclass", {})
+    if skipped:
+        print("  not booked (no equation for the vClass): "
+              + ", ".join(f"{c} {n}" for c, n in skipped.items()))
     for name, eq in s["equations"].items():
         parts = ", ".join(f"{c} {d['total'] / 3.6e6:.3f} kWh" for c, d in eq["energy_j"].items()
                           if d["total"] > 0)
-        print(f"  {name}: traction {parts or '0'}")
-    if s.get("interrupted"):
-        print("interrupted: outputs cover the simulated part")
-        return 130
+        print(f"  {name} ({eq.get('predicts', 'wheel')}): traction {parts or '0'}")
+
+
+def _names(scenarios: list[str]) -> list[str]:
+    from pathlib import Path
+
+    out, used = [], {}
+    for s in scenarios:
+        stem = Path(s).stem if s.endswith(".toml") else s
+        used[stem] = used.get(stem, 0) + 1
+        out.append(stem if used[stem] == 1 else f"{stem}_{used[stem]}")
+    return out
+
+
+def _combined(summaries: dict[str, dict]):
+    """One row per scenario × equation × road class: traction energy and Wh/km."""
+    import pandas as pd
+
+    rows = []
+    for scen, s in summaries.items():
+        for eq, d in s["equations"].items():
+            for cls, e in d["energy_j"].items():
+                m = d.get("distance_m", {}).get(cls, 0.0)
+                rows.append({"scenario": scen, "equation": eq, "predicts": d.get("predicts"),
+                             "class": cls, "vehicles": s["vehicles"],
+                             "traction_kwh": e["total"] / 3.6e6,
+                             "recuperable_kwh": d["recuperable_energy_j"][cls]["total"] / 3.6e6,
+                             "distance_km": m / 1000.0,
+                             "traction_whpkm": e["total"] / m / 3.6 if m > 0 else float("nan")})
+    return pd.DataFrame(rows)
+
+
+def main(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.fileio import write_text
+
+    if args.jobs < 1:
+        raise UserError(f"--jobs must be ≥ 1, got {args.jobs}")
+    overrides = _overrides(args)
+    scen = list(args.scenario)
+    inputs = [s for s in scen if Path(s).exists()]
+    meta: dict = {}
+    if len(scen) == 1:
+        with output_set(args, args.out, inputs, meta=meta) as tmp:
+            s = _run_one(scen[0], str(tmp), overrides)
+            meta["interrupted"] = bool(s.get("interrupted"))
+        _print_summary(s, args.out)
+        if s.get("interrupted"):
+            print("interrupted: outputs cover the simulated part")
+            return 130
+        return 0
+    if args.gui:
+        raise UserError("--gui watches one scenario at a time")
+    names = _names(scen)
+    with output_set(args, args.out, inputs, meta=meta) as tmp:
+        summaries: dict[str, dict] = {}
+        if args.jobs == 1:
+            for n, s in zip(names, scen):
+                summaries[n] = _run_one(s, str(tmp / n), overrides)
+        else:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+
+            # spawn: each worker imports libsumo afresh (one simulation per process)
+            with ProcessPoolExecutor(max_workers=args.jobs,
+                                     mp_context=mp.get_context("spawn")) as pool:
+                futs = {n: pool.submit(_run_one, s, str(tmp / n), overrides)
+                        for n, s in zip(names, scen)}
+                for n, f in futs.items():
+                    summaries[n] = f.result()
+        write_text(tmp / "runs.csv", _combined(summaries).to_csv(index=False))
+        meta["scenarios"] = dict(zip(names, scen))
+    for n, s in summaries.items():
+        _print_summary(s, Path(args.out) / n, f"[{n}] ")
+    print(f"all runs side by side: {Path(args.out) / 'runs.csv'}")
     return 0

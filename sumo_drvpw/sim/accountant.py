@@ -211,7 +211,12 @@ class Accountant(_Listener):
                             "simulationStep() without a target time")
         summary_extra["warnings"] = warnings + list(summary_extra.get("warnings", []))
         summary = summary_dict(led, net, self.names, self.eqset.uses_other, summary_extra)
+        classes = list(net.classes)
+        k = np.array([classes.index(c) for c in net.edge_class], np.int64)
         for e, eq in enumerate(self.equations):
+            dist = np.bincount(k, weights=led.edge_dist_eq[:, e], minlength=len(classes))
+            summary["equations"][eq.name]["distance_m"] = {
+                c: float(d) for c, d in zip(classes, dist)}
             summary["equations"][eq.name].update({
                 "predicts": eq.predicts, "vclasses": list(eq.vclasses),
                 "speed_range_mps": list(eq.speed_range_mps) if eq.speed_range_mps else None,

@@ -243,6 +243,32 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
     return eq
 
 
+#: Built-in scenarios (package data): ``sumo-drvpw run city`` / ``highway``, the demo's.
+BUILTIN_SCENARIOS = Path(__file__).resolve().parent / "builtin" / "scenarios"
+
+
+def builtin_scenario_names() -> list[str]:
+    return sorted(p.stem for p in BUILTIN_SCENARIOS.glob("*.toml"))
+
+
+def bundled_scenario(name: str) -> Path:
+    """The built-in scenario ``name`` (package data); UserError naming the known ones."""
+    p = BUILTIN_SCENARIOS / f"{name}.toml"
+    if not p.is_file():
+        raise UserError(f"unknown built-in scenario '{name}' (built-ins: "
+                        f"{', '.join(builtin_scenario_names())})")
+    return p
+
+
+def scenario_path(spec) -> Path:
+    """A scenario file path, or a built-in scenario's when ``spec`` is a built-in name and
+    no such file exists."""
+    p = Path(spec)
+    if p.exists() or p.suffix == ".toml" or any(c in str(spec) for c in "/\\"):
+        return p
+    return bundled_scenario(str(spec))
+
+
 def _config_files(cfg: Path) -> tuple[Path, list[Path], dict[str, str]]:
     """Net file, route+additional files and time values named in a SUMO config."""
     try:

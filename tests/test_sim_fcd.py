@@ -1,0 +1,114 @@
+"""After the run: SUMO's FCD output through the same ledger as the live loop (real SUMO),
+and the run command's built-in names and parallel runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.sim import run_scenario
+from sumo_drvpw.sim.fcd import process_fcd, read_fcd
+
+pytestmark = pytest.mark.sumo
+
+REPO = Path(__file__).resolve().parent.parent
+CITY = REPO / "scenarios" / "city.toml"
+PHYS = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01})
+VSP = Equation("vsp", {"acc": 1.1, "grade": 1.0, "m_v1": 0.132, "m_v3": 0.000302})
+COLS = ["traction_total_j", "recup_total_j", "net_total_j", "traction_acc_j",
+        "traction_grade_j", "traction_aero_j", "traction_roll_j", "distance_m", "time_s"]
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    """The city scenario in the loop, recording FCD as XML (with --precision 6, as the fcd
+    command recommends: SUMO's default 2 decimals moves net energy by ~0.14 %) and as
+    SUMO's Parquet output (float32 speeds)."""
+    d = tmp_path_factory.mktemp("live")
+    res = run_scenario(CITY, None, end=200, equations=[PHYS, VSP], figures=False,
+                       options=["--fcd-output", str(d / "fcd.xml.gz"),
+                                "--fcd-output.acceleration", "true", "--precision", "6"])
+    run_scenario(CITY, None, end=200, equations=[PHYS], figures=False,
+                 options=["--fcd-output", str(d / "fcd.parquet")])
+    return d, res
+
+
+@pytest.mark.parametrize("name", ["fcd.xml.gz", "fcd.parquet"])
+def test_fcd_equals_the_live_run(live, tmp_path, name):
+    """The city scenario processed from its FCD equals the in-loop run to 0.1 % per
+    vehicle (energies and distances), with the same vehicles and vehicle-steps."""
+    d, res = live
+    fcd = process_fcd(d / name, scenario=CITY, out_dir=tmp_path / "o", equations=[PHYS, VSP],
+                      end=200, figures=False)
+    a = res.vehicles.sort_values(["vehicle", "equation"]).reset_index(drop=True)
+    b = fcd.vehicles.sort_values(["vehicle", "equation"]).reset_index(drop=True)
+    assert fcd["samples"] == res["samples"] and len(a) == len(b) > 40
+    assert (a.vehicle == b.vehicle).all()
+    for c in COLS:
+        np.testing.assert_allclose(b[c].sum(), a[c].sum(), rtol=1e-3)
+    big = a.traction_total_j > 1e4
+    np.testing.assert_allclose(b.traction_total_j[big], a.traction_total_j[big], rtol=1e-2)
+    for cls in ("city",):
+        for t in ("acc", "grade", "aero", "roll", "total"):
+            np.testing.assert_allclose(fcd["equations"]["phys"]["energy_j"][cls][t],
+                                       res["equations"]["phys"]["energy_j"][cls][t], rtol=1e-3)
+    for f in ("vehicles.parquet", "edges.parquet", "edgedata.xml", "summary.json"):
+        assert (tmp_path / "o" / f).is_file()
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["source"]["fcd"]
+
+
+def test_fcd_formats_read_alike(live, tmp_path):
+    """XML and SUMO's tabular CSV carry the same rows; a missing column is named."""
+    d, _ = live
+    x = read_fcd(d / "fcd.xml.gz")
+    assert {"time", "id", "type", "speed", "lane", "pos", "accel"} <= set(x.columns)
+    csv = tmp_path / "fcd.csv"
+    x.rename(columns={"time": "timestep_time", "id": "vehicle_id", "type": "vehicle_type",
+                      "speed": "vehicle_speed", "lane": "vehicle_lane", "pos": "vehicle_pos",
+                      "angle": "vehicle_angle", "slope": "vehicle_slope",
+                      "accel": "vehicle_acceleration"}).to_csv(csv, sep=";", index=False)
+    c = read_fcd(csv)
+    pd.testing.assert_frame_equal(c[["time", "id", "speed", "pos"]].reset_index(drop=True),
+                                  x[["time", "id", "speed", "pos"]].reset_index(drop=True))
+    pd.read_csv(csv, sep=";").drop(columns=["vehicle_lane"]).to_csv(csv, sep=";", index=False)
+    code = cli_main(["fcd", str(csv), "--scenario", str(CITY), "--out", str(tmp_path / "x")])
+    assert code == 2 and not (tmp_path / "x").exists()
+
+
+def test_fcd_cli(live, tmp_path, capsys):
+    d, res = live
+    code = cli_main(["fcd", str(d / "fcd.xml.gz"), "--net",
+                     str(REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"),
+                     "--vtypes", str(REPO / "sumo_drvpw" / "sim" / "builtin" / "scenarios"
+                                     / "prius3.vtype.xml"),
+                     "--equation", "vsp_ldv1999", "--end", "200", "--no-figures",
+                     "--out", str(tmp_path / "o")])
+    assert code == 0
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["vehicles"] == res["vehicles"] and (tmp_path / "o" / "manifest.json").is_file()
+    assert s["assumptions"]["default_masses"] == {}  # masses from prius3.vtype.xml
+
+
+def test_run_builtin_name_and_parallel_runs(tmp_path, capsys):
+    """`run city highway --jobs 2`: built-in names, one SUMO per process, outputs per
+    scenario and one combined table."""
+    code = cli_main(["run", "city", "highway", "--jobs", "2", "--end", "60", "--no-figures",
+                     "--out", str(tmp_path / "runs")])
+    assert code == 0
+    runs = pd.read_csv(tmp_path / "runs" / "runs.csv")
+    assert set(runs.scenario) == {"city", "highway"}
+    for n in ("city", "highway"):
+        s = json.loads((tmp_path / "runs" / n / "summary.json").read_text())
+        tot = s["equations"]["drvpw_prius3"]["energy_j"]
+        r = runs[(runs.scenario == n) & (runs.equation == "drvpw_prius3")]
+        np.testing.assert_allclose(r.traction_kwh.sum(), sum(v["total"] for v in tot.values())
+                                   / 3.6e6, rtol=1e-9)
+    assert (runs.traction_whpkm.dropna() > 0).all()
+    code = cli_main(["run", "no_such_builtin", "--out", str(tmp_path / "x")])
+    assert code == 2 and "city" in capsys.readouterr().err
