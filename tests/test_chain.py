@@ -319,6 +319,66 @@ def test_cli_calibrate_battery_then_compare_uses_the_chain(tmp_path, capsys):
 
 # ------------------------------------------------------------------ SUMO accounts
 
+def _city_sumocfg():
+    """The city scenario's SUMO config (package data, or the repo's scenarios/ folder)."""
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parent.parent
+    for p in (repo / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.sumocfg",
+              repo / "scenarios" / "city.sumocfg"):
+        if p.is_file():
+            return p
+    pytest.skip("city scenario not found")
+
+
+def _chain_equations():
+    fuel_eq = load_equation("drvpw_prius3")
+    fuel_eq.chain = EnergyChain(predicts="fuel", idle_fuel_power_w=5000.0, marginal_efficiency=0.36,
+                                engine_off_below_w=4000.0)
+    bev = equation_from_dict({"equation": {"name": "bev"}, "terms": {"acc": 1.05, "grade": 1.0, "roll": 0.009,
+                                                                       "aero_rho": 0.6},
+                              "chain": {"predicts": "battery", "traction_efficiency": 0.9,
+                                        "recuperation_efficiency": 0.7, "recuperation_limit_w": 20000.0,
+                                        "aux_power_w": 500.0}})
+    return [fuel_eq, bev]
+
+
+@pytest.mark.parametrize("scenario", ["city", "highway"])
+def test_run_scenario_reports_battery_and_fuel_per_class(tmp_path, scenario):
+    """`run_scenario` with chain equations writes kWh/km and L/100 km per class; vehicle,
+    edge and class tables balance; auxiliary energy = 500 W × time in the network."""
+    pytest.importorskip("libsumo")
+    import pandas as pd_
+
+    from pathlib import Path
+
+    from sumo_drvpw.sim import run_scenario
+
+    repo = Path(__file__).resolve().parent.parent
+    path = next((p for p in (repo / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / f"{scenario}.toml",
+                             repo / "scenarios" / f"{scenario}.toml") if p.is_file()), None)
+    if path is None:
+        pytest.skip(f"scenario {scenario} not found")
+    res = run_scenario(path, tmp_path / "out", equations=_chain_equations(), end=150.0,
+                       figures=False)
+    cls = res.summary["chain"]["classes"]
+    assert {r["equation"] for r in cls} == {"drvpw_prius3", "bev"}
+    for r in cls:
+        if r["equation"] == "bev":
+            assert 0.05 < r["net_kwh_per_km"] < 1.0
+        else:
+            assert 1.0 < r["fuel_l_per_100km"] < 40.0
+    tabs = {k: pd_.read_csv(tmp_path / "out" / f"chain_{k}.csv") for k in ("vehicles", "edges", "classes")}
+    for col in ("net_kwh", "auxiliary_kwh", "fuel_l", "co2_kg"):
+        tot = [t[col].sum() for t in tabs.values()]
+        np.testing.assert_allclose(tot, tot[0], rtol=1e-9, atol=1e-12)
+    led = res.ledger
+    bev_rows = tabs["vehicles"][tabs["vehicles"]["equation"] == "bev"]
+    t_in = dict(zip(led.veh_ids, led.chain.veh_time[:led.n_veh]))
+    np.testing.assert_allclose(bev_rows["auxiliary_kwh"], 500.0 * bev_rows["key"].map(t_in) / 3.6e6,
+                               rtol=1e-9)
+
+
 def test_sumo_run_chain_accounts_balance():
     """A real SUMO run (city scenario, 150 s): chain energy per vehicle = Σ over its steps;
     vehicle, edge and class totals agree; auxiliary energy accrues while standing."""
@@ -328,17 +388,10 @@ def test_sumo_run_chain_accounts_balance():
     from sumo_drvpw.model.terms import Inputs
     from sumo_drvpw.sim.chain import QUANTITIES, ChainLedger
 
-    repo = Path(__file__).resolve().parent.parent
-    fuel_eq = load_equation("drvpw_prius3")
-    fuel_eq.chain = EnergyChain(predicts="fuel", idle_fuel_power_w=5000.0, marginal_efficiency=0.36,
-                                engine_off_below_w=4000.0)
-    bev = equation_from_dict({"equation": {"name": "bev"}, "terms": {"acc": 1.05, "grade": 1.0, "roll": 0.009,
-                                                                       "aero_rho": 0.6},
-                              "chain": {"predicts": "battery", "traction_efficiency": 0.9,
-                                        "recuperation_efficiency": 0.7, "recuperation_limit_w": 20000.0,
-                                        "aux_power_w": 500.0}})
-    eqs = [fuel_eq, bev]
-    libsumo.start(["sumo", "-c", str(repo / "scenarios" / "city.sumocfg"), "--end", "150",
+    cfg = _city_sumocfg()
+    eqs = _chain_equations()
+    fuel_eq = eqs[0]
+    libsumo.start(["sumo", "-c", str(cfg), "--end", "150",
                    "--no-step-log", "true", "--no-warnings", "true"])
     try:
         dt = libsumo.simulation.getDeltaT()

@@ -17,6 +17,8 @@ it on a real SUMO run, with the per-step sums).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from sumo_drvpw.model.chain import EnergyChain
@@ -37,7 +39,12 @@ class ChainLedger:
     """
 
     def __init__(self, names: list[str], chains: list[EnergyChain | None], n_edges: int,
-                 capacity: int = 1024):
+                 capacity: int = 1024, signal_values: dict | None = None):
+        #: constant values of the chains' signals (loads, ambient temperature) in SUMO,
+        #: which has no such columns; a signal not given is taken as 0 and listed in
+        #: :attr:`assumed_zero` (a logged heater or A/C load then adds nothing)
+        self.signal_values = dict(signal_values or {})
+        self.assumed_zero: set[str] = set()
         self.names = list(names)
         self.chains = list(chains)
         self.active = [i for i, c in enumerate(self.chains) if c is not None and c.predicts != "wheel"]
@@ -92,13 +99,18 @@ class ChainLedger:
         return q
 
     def book(self, vidx: np.ndarray, eidx: np.ndarray, v: np.ndarray, dt: float,
-             p_drive_w: np.ndarray, signals: dict | None = None) -> np.ndarray:
+             p_drive_w: np.ndarray, signals: dict | None = None, app=None) -> np.ndarray:
         """Book one step for vehicles ``vidx`` (each once) on edges ``eidx``; returns the
-        step's quantities (n, E, Q)."""
+        step's quantities (n, E, Q). ``app`` (n, E): 1 where an equation applies to the
+        vehicle, 0 where not (nothing booked, not even auxiliary power)."""
         vidx = np.asarray(vidx, np.int64)
         if vidx.size:
             self._grow(int(vidx.max()) + 1)
+        if signals is None:
+            signals = self._constant_signals(len(vidx))
         q = self.step_quantities(p_drive_w, v, dt, signals)
+        if app is not None:
+            q *= np.asarray(app, float)[:, :, None]
         self.veh[vidx] += q
         d = np.asarray(v, float) * dt
         self.veh_dist[vidx] += d
@@ -106,6 +118,14 @@ class ChainLedger:
         np.add.at(self.edge, eidx, q)
         np.add.at(self.edge_dist, eidx, d)
         return q
+
+    def _constant_signals(self, n: int) -> dict:
+        out = {}
+        for s in self.signals:
+            if s not in self.signal_values:
+                self.assumed_zero.add(s)
+            out[s] = np.full(n, float(self.signal_values.get(s, 0.0)))
+        return out
 
     # ------------------------------------------------------------------ reports
     def vehicle_totals(self, n: int) -> np.ndarray:
@@ -151,3 +171,44 @@ class ChainLedger:
                 "edges": self.table(self.edge, self.edge_dist, list(edge_ids)),
                 "classes": self.table(np.stack(list(cls.values())) if cls else np.zeros((0, self.E, self.Q)),
                                       cdist, list(cls))}
+
+
+def chain_ledger(equations, n_edges: int, signal_values: dict | None = None) -> ChainLedger | None:
+    """A :class:`ChainLedger` for the equations that carry a battery or fuel chain, or None."""
+    chains = [getattr(e, "chain", None) for e in equations]
+    if not any(c is not None and c.predicts != "wheel" for c in chains):
+        return None
+    return ChainLedger([e.name for e in equations], chains, n_edges, signal_values=signal_values)
+
+
+def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]) -> dict:
+    """Per vehicle class and equation: battery kWh (traction, recuperated, auxiliary, net)
+    and kWh/km, or fuel L, L/100 km and CO₂ kg, g/km; plus the run's totals."""
+    rep = chain.report(veh_ids, veh_classes, [])
+    return {"classes": rep["classes"],
+            "quantities": "battery: traction/recuperated/auxiliary/net kWh (auxiliary accrues "
+                          "while standing); fuel: litres (LHV, density of the chain's fuel), CO2 kg",
+            "signals_assumed_zero": sorted(chain.assumed_zero),
+            "signal_values": chain.signal_values}
+
+
+def write_chain_outputs(out_dir, result) -> dict[str, str]:
+    """Write ``chain_vehicles.csv``, ``chain_edges.csv``, ``chain_classes.csv`` of a run
+    (:class:`sumo_drvpw.sim.outputs.RunResult` whose ledger has a ``chain``) and put the
+    per-class summary under ``result.summary["chain"]``; returns name → path."""
+    import pandas as pd
+
+    from sumo_drvpw.fileio import write_text
+
+    led = result.ledger
+    chain = led.chain
+    n = led.n_veh
+    ids, classes = list(led.veh_ids[:n]), [c or "unknown" for c in led.veh_class[:n]]
+    rep = chain.report(ids, classes, list(result.net.edge_ids))
+    files = {}
+    for key, rows in rep.items():
+        path = Path(out_dir) / f"chain_{key}.csv"
+        write_text(path, pd.DataFrame(rows).to_csv(index=False))
+        files[f"chain_{key}"] = str(path)
+    result.summary["chain"] = chain_summary(chain, ids, classes)
+    return files

@@ -119,6 +119,8 @@ class Ledger:
         self.position_mismatches = 0
         #: vehicle-steps on a clipped slope, per lane number (sized by the loop)
         self.lane_clipped = np.zeros(0, np.int64)
+        #: battery/fuel accounts (sumo_drvpw.sim.chain.ChainLedger) when an equation has a chain
+        self.chain = None
 
     def _edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Edge energies (edges, 2, E, C), distances, times and distances per equation

@@ -147,6 +147,10 @@ class Stepper:
                  physics: Physics, resolve: Callable[[str, str], tuple[float, np.ndarray, bool]],
                  trace=None, use_subscriptions: bool = False):
         self.conn, self.net, self.eqset, self.ledger = conn, net, eqset, ledger
+        if ledger.chain is None:  # battery/fuel accounts when an equation has a chain (#12)
+            from sumo_drvpw.sim.chain import chain_ledger
+
+            ledger.chain = chain_ledger(eqset.equations, ledger.n_edges)
         self.physics, self.resolve, self.trace = physics, resolve, trace
         self.use_subscriptions = use_subscriptions
         self.dt = float(conn.simulation.getDeltaT())
@@ -333,6 +337,8 @@ class Stepper:
             ledger.out_of_range[k] += int(np.count_nonzero(out))
         eidx = self.lane_edge_ext[lane]
         ledger.book(vidx, eidx, v, dt, pc)
+        if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
+            ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx])
         if self.trace is not None:
             self.trace.write(t_now, vidx, eidx, v, a, theta, wind, pc)
 

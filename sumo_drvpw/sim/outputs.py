@@ -449,6 +449,10 @@ def write_outputs(out_dir: Path, result: RunResult) -> dict[str, str]:
             difference_map(result.ledger, result.net, names, pair,
                            out_dir / "difference_map.png")
             files["difference_map"] = str(out_dir / "difference_map.png")
+    if getattr(result.ledger, "chain", None) is not None:  # battery/fuel accounts (#12)
+        from sumo_drvpw.sim.chain import write_chain_outputs
+
+        files.update(write_chain_outputs(out_dir, result))
     summary.setdefault("files", {}).update({k: os.path.basename(v) for k, v in files.items()})
     write_json(out_dir / "summary.json", summary)
     return files
