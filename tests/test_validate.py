@@ -185,3 +185,17 @@ def test_committed_summary_is_reproduced(run):
     assert not diffs, ("docs/validation/summary.json differs from a fresh run (regenerate with "
                        "`sumo-drvpw validate --data ../shared/data --out docs/validation`):\n"
                        + "\n".join(sorted(diffs)[:20]))
+
+
+def test_committed_report_is_rendered_from_committed_summary():
+    """docs/validation.md is exactly the renderer's output for docs/validation/summary.json:
+    every number and data-dependent phrase of the report comes from the summary."""
+    from sumo_drvpw.validation import render
+    from sumo_drvpw.validation.run import STUDIES
+
+    summary = json.loads(COMMITTED.read_text(encoding="utf-8"))
+    md = render.render(summary, COMMITTED.parent.name,
+                       [(st.key, st.render, st.label) for st in STUDIES])
+    assert md == V.report_path(COMMITTED.parent).read_text(encoding="utf-8"), (
+        "docs/validation.md is not the rendering of docs/validation/summary.json: regenerate "
+        "with `sumo-drvpw validate --data ../shared/data --out docs/validation`")

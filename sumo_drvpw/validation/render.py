@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sumo_drvpw.report.format import KW as _KW, KWH as _KWH, num
+from sumo_drvpw.report.format import KW as _KW, KWH as _KWH, coef, num
 
 
 def _worst_band(bands: list[dict]) -> dict | None:
@@ -48,8 +48,8 @@ def header(s: dict, rel: str, sections) -> list[str]:
          "(`" + f"{rel}/summary.json" + "` holds them all, machine-readable). Do not edit by hand.", "",
          f"- **Command**: `{s['run']['command']}`",
          f"- **Data folder**: `{s['run']['data']}` (read in place, see its README for provenance)",
-         f"- **Runtime**: {s['run']['seconds']:.1f} s (sections: "
-         + ", ".join(f"{k} {v:.1f} s" for k, v in s["run"]["section_seconds"].items()) + ")",
+         f"- **Runtime**: {num(s['run']['seconds'], 1)} s (sections: "
+         + ", ".join(f"{k} {num(v, 1)} s" for k, v in s["run"]["section_seconds"].items()) + ")",
          "- Error = predicted − measured; R² is centred (1 − SSE/SST), light (< 50 kW) and "
          "heavy (≥ 50 kW measured) each on their own mean; “traction energy pred/meas” is the "
          "predicted over the measured energy of samples with positive power.",
@@ -76,7 +76,7 @@ def i3_section(i3: dict, rel: str) -> list[str]:
           "`aero` = v³ (still air), `roll` = m·g·v·cos θ …), ± standard error:", "",
           "| equation | selected terms (stepwise order) | coefficients | R² in sample |", "|---|---|---|---|"]
     for lab, c in i3["calibration"].items():
-        coefs = "<br>".join(f"`{t}` {v['coef']:.4g} ± {v['std_err']:.2g}" for t, v in c["terms"].items())
+        coefs = "<br>".join(f"`{t}` {coef(v['coef'])} ± {coef(v['std_err'], 2)}" for t, v in c["terms"].items())
         L.append(f"| {c['equation']} | {', '.join(c['selection'])} | {coefs} | {num(c['r2_in_sample'], 3)} |")
     ms = i3["measured"]
     L += ["", f"**Held-out test trips** ({ms['n']} samples). The i3's motor power rarely exceeds "
@@ -123,9 +123,9 @@ def prius2_section(pr: dict, rel: str) -> list[str]:
           f"{pr['import']['files']} trips, {pr['read_counts']['rows']} samples "
           f"({pr['n_usable']} usable); grade: {pr['read_counts']['grade_source']}.", "",
           f"Reference: **{e['name']}**, the EPA Test Car List target road load "
-          f"(F = {e['terms']['v1']:.2f} N + {e['terms']['v2']:.4f} N/(m/s)·v + "
-          f"{e['terms']['v3']:.4f} N/(m/s)²·v²) plus m·a·v and m·g·v·sin θ with m = ETW "
-          f"{e['mass_kg']:.0f} kg; source: {e['source']}.", "",
+          f"(F = {num(e['terms']['v1'], 2)} N + {num(e['terms']['v2'], 4)} N/(m/s)·v + "
+          f"{num(e['terms']['v3'], 4)} N/(m/s)²·v²) plus m·a·v and m·g·v·sin θ with m = ETW "
+          f"{num(e['mass_kg'], 0)} kg; source: {e['source']}.", "",
           f"- Correlation of P_PTdrv with the EPA road-load power: **r = {num(pr['correlation_all'], 3)}** "
           f"on all usable samples, r = {num(pr['correlation_traction'], 3)} on the {pr['n_traction']} "
           "samples where both are positive (traction).", "",
@@ -171,7 +171,7 @@ def jlu_section(jl: dict, rel: str) -> list[str]:
     pub, rec, fx = jl["published"], jl["recovered"], jl["published_road_load_fixed"]
     L = [f"## JLU chassis dynamometer (BEV, {jl['read_counts']['trips']} tests)", "",
           f"Target: {jl['target']} (current sign per {jl['vehicle']['file']}); no grade on a dyno; mass "
-          f"{jl['mass_kg']:.0f} kg. {jl['import']['files']} tests, {jl['read_counts']['rows']} samples.", "",
+          f"{num(jl['mass_kg'], 0)} kg. {jl['import']['files']} tests, {jl['read_counts']['rows']} samples.", "",
           f"**Model** — {jl['model']}. Fitted by OLS on {jl['n_traction']} traction samples "
           "(selected by the kinematics only, not by the measured power or the answer). The "
           "efficiency η lumps motor, inverter and gear losses as one constant; P_aux is the "
@@ -179,28 +179,28 @@ def jlu_section(jl: dict, rel: str) -> list[str]:
           "(not in the dyno's 1919 kg) adds to c_acc, so 1/c_acc reads η/(1 + ε) and A, B, C come "
           "out low by the same factor 1 + ε (a few per cent).", "",
           "| coefficient | published | recovered (± s.e.) | recovered / published |", "|---|---|---|---|",
-          f"| A [N] | {pub['A_n']:.1f} | {rec['A_n']:.1f} ± {rec['A_se_n']:.1f} | {num(rec['A_n'] / pub['A_n'], 3)} |",
-          f"| B [N/(km/h)] | {pub['B_n_per_kmh']:.3f} | {rec['B_n_per_kmh']:.3f} ± {rec['B_se_n_per_kmh']:.3f} | {num(rec['B_n_per_kmh'] / pub['B_n_per_kmh'], 3)} |",
-          f"| C [N/(km/h)²] | {pub['C_n_per_kmh2']:.4f} | {rec['C_n_per_kmh2']:.4f} ± {rec['C_se_n_per_kmh2']:.4f} | {num(rec['C_n_per_kmh2'] / pub['C_n_per_kmh2'], 3)} |",
-          f"| η (battery → wheel) | – | {rec['eta']:.3f} | |",
-          f"| P_aux [W] | – | {rec['p_aux_w']:.0f} | |", "",
+          f"| A [N] | {num(pub['A_n'], 1)} | {num(rec['A_n'], 1)} ± {num(rec['A_se_n'], 1)} | {num(rec['A_n'] / pub['A_n'], 3)} |",
+          f"| B [N/(km/h)] | {num(pub['B_n_per_kmh'], 3)} | {num(rec['B_n_per_kmh'], 3)} ± {num(rec['B_se_n_per_kmh'], 3)} | {num(rec['B_n_per_kmh'] / pub['B_n_per_kmh'], 3)} |",
+          f"| C [N/(km/h)²] | {num(pub['C_n_per_kmh2'], 4)} | {num(rec['C_n_per_kmh2'], 4)} ± {num(rec['C_se_n_per_kmh2'], 4)} | {num(rec['C_n_per_kmh2'] / pub['C_n_per_kmh2'], 3)} |",
+          f"| η (battery → wheel) | – | {num(rec['eta'], 3)} | |",
+          f"| P_aux [W] | – | {num(rec['p_aux_w'], 0)} | |", "",
           "The three coefficients trade off against each other (v, v², v³ are strongly "
           "collinear over 0–130 km/h); the force they add up to is what the data pin down:", "",
           "| speed [km/h] | published force [N] | recovered force [N] | ratio |", "|---|---|---|---|"]
     for f in jl["forces"]:
-        L.append(f"| {f['speed_kmh']} | {f['published_n']:.0f} | {f['recovered_n']:.0f} | {num(f['ratio'], 3)} |")
+        L.append(f"| {f['speed_kmh']} | {num(f['published_n'], 0)} | {num(f['recovered_n'], 0)} | {num(f['ratio'], 3)} |")
     rg = jl["regen_with_published_road_load"]
     L += ["", f"With the published road load held fixed, the implied traction efficiency is "
-          f"**η = {fx['eta']:.3f}** (P_aux {fx['p_aux_w']:.0f} W); in regeneration (samples where the "
+          f"**η = {num(fx['eta'], 3)}** (P_aux {num(fx['p_aux_w'], 0)} W); in regeneration (samples where the "
           f"traction model's wheel power is negative, {jl['n_regen']} samples) the battery receives "
-          f"{rg['eta_regen']:.3f} of the published-road-load wheel power (friction-brake blending "
+          f"{num(rg['eta_regen'], 3)} of the published-road-load wheel power (friction-brake blending "
           "included).", ""]
     if jl["constant_speed"]:
         L += ["Constant-speed tests (steady samples, |a| < 0.05 m/s²): published wheel power over "
               "mean battery power (efficiency including auxiliaries):", "",
               "| test | speed [km/h] | battery [kW] | published wheel power [kW] | ratio |", "|---|---|---|---|---|"]
         for c in jl["constant_speed"]:
-            L.append(f"| {c['test']} | {c['speed_kmh']:.1f} | {num(c['battery_w'], 2, _KW)} | "
+            L.append(f"| {c['test']} | {num(c['speed_kmh'], 1)} | {num(c['battery_w'], 2, _KW)} | "
                      f"{num(c['published_wheel_w'], 2, _KW)} | {num(c['implied_eta_incl_aux'], 3)} |")
         L.append("")
     m2 = jl["two_regime_all"]
@@ -211,7 +211,7 @@ def jlu_section(jl: dict, rel: str) -> list[str]:
           "| cycle | tests | mean / max speed [km/h] | RMS accel [m/s²] | measured [Wh/km] | RMSE [kW] | bias [kW] | RMSE / RMS power | net energy pred/meas |",
           "|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(jl["per_cycle"], key=lambda r: -r["relative_rmse"]):
-        L.append(f"| {r['cycle']} | {r['tests']} | {r['mean_speed_kmh']:.0f} / {r['max_speed_kmh']:.0f} | "
+        L.append(f"| {r['cycle']} | {r['tests']} | {num(r['mean_speed_kmh'], 0)} / {num(r['max_speed_kmh'], 0)} | "
                  f"{num(r['rms_accel_mps2'], 2)} | {num(r['measured_wh_per_km'], 0)} | {num(r['rmse_w'], 2, _KW)} | "
                  f"{num(r['bias_w'], 2, _KW)} | {num(r['relative_rmse'], 3)} | {num(r['net_energy_ratio'], 3)} |")
     L += [""] + _jlu_reading(jl) + ["", f"![JLU road load]({rel}/jlu_road_load.png)", ""]
@@ -234,7 +234,7 @@ def all_equations_section(table: dict) -> list[str]:
         L += ["Built-ins made for other vehicle classes (their `vclasses`) are not evaluated on "
               "these passenger cars: " + ", ".join(f"`{n}`" for n in other) + ".", ""]
     for key, d in table.items():
-        L += [f"### {key} ({d['n']} samples, target {d['target']}, mean mass {d['mass_kg_mean']:.0f} kg)", ""]
+        L += [f"### {key} ({d['n']} samples, target {d['target']}, mean mass {num(d['mass_kg_mean'], 0)} kg)", ""]
         L += _metrics_table(d["equations"])
         L.append("")
     return L
@@ -263,7 +263,7 @@ def _speed_table(evs: dict, what: str) -> list[str]:
            "| speed [km/h] | n | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
     for k, b in enumerate(bins):
         if b["n"]:
-            out.append(f"| {b['lo_kmh']:.0f}–{b['hi_kmh']:.0f} | {b['n']} | "
+            out.append(f"| {num(b['lo_kmh'], 0)}–{num(b['hi_kmh'], 0)} | {b['n']} | "
                        + " | ".join(num(evs[nm][k]["mean_w"], 2, _KW) for nm in names) + " |")
     return out + [""]
 
@@ -332,7 +332,7 @@ def _jlu_reading(jl: dict) -> list[str]:
             why.append("no single cause stands out in speed or acceleration")
         out.append(f"- **{r['cycle']}**: RMSE {num(r['rmse_w'], 2, _KW)} kW, bias "
                    f"{num(r['bias_w'], 2, _KW)} kW, net energy pred/meas {num(r['net_energy_ratio'], 3)} "
-                   f"(mean speed {r['mean_speed_kmh']:.0f} km/h, RMS acceleration "
+                   f"(mean speed {num(r['mean_speed_kmh'], 0)} km/h, RMS acceleration "
                    f"{num(r['rms_accel_mps2'], 2)} m/s²): " + "; ".join(why) + ".")
     steady = [r for r in jl["per_cycle"] if r["rms_accel_mps2"] < 0.25]
     dyn = [r for r in jl["per_cycle"] if r["rms_accel_mps2"] >= 0.25]
