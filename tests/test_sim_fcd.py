@@ -112,3 +112,41 @@ def test_run_builtin_name_and_parallel_runs(tmp_path, capsys):
     assert (runs.traction_whpkm.dropna() > 0).all()
     code = cli_main(["run", "no_such_builtin", "--out", str(tmp_path / "x")])
     assert code == 2 and "city" in capsys.readouterr().err
+
+
+EXPORT_ROUTES = """<routes>
+  <flow id="f" type="{vt}" from="e01" to="e56" begin="0" end="80" period="exp(0.15)"
+        departSpeed="0"/>
+</routes>"""
+
+
+@pytest.mark.parametrize("dt", [1.0, 0.2])
+def test_export_vtype_agrees_with_sumos_emissions_device(tmp_path, capsys, dt):
+    """export-vtype writes an Energy-model vType from an equation; SUMO's emissions device
+    with it (outputs.sumo_device) and the plug-in agree within 3 % on net energy. The
+    equation has a rotating-mass share (acc 1.08), drag, rolling and a constant load."""
+    from sumo_drvpw.fileio import write_text
+    from sumo_drvpw.model.equations import save_equation
+
+    eq = Equation("ev_fit", {"acc": 1.08, "grade": 1.0, "aero_rho": 0.62, "m_v1": 0.0098 * 9.81,
+                             "one": 300.0})
+    save_equation(eq, tmp_path / "ev_fit.toml")
+    code = cli_main(["export-vtype", str(tmp_path / "ev_fit.toml"), "--mass", "1700",
+                     "--id", "ev", "--out", str(tmp_path / "ev.add.xml")])
+    assert code == 0 and "not expressible" not in capsys.readouterr().out
+    write_text(tmp_path / "r.rou.xml", EXPORT_ROUTES.format(vt="ev"))
+    net = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml"
+    write_text(tmp_path / "s.toml",
+               f'equations = ["ev_fit.toml"]\n[sumo]\nnet = "{net}"\nroutes = ["r.rou.xml"]\n'
+               f'additional = ["ev.add.xml"]\nend = 300\nstep_length = {dt}\n'
+               'options = ["--no-warnings", "true"]\n'
+               '[outputs]\nsumo_device = true\nfigures = false\n')
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    cmp = pd.read_csv(tmp_path / "o" / "sumo_device.csv")
+    row = cmp[cmp.equation == "ev_fit"].iloc[0]
+    assert row.vehicles >= 10
+    assert row.ratio == pytest.approx(1.0, abs=0.03)
+    v = res.vehicles
+    assert v.sumo_electricity_wh.notna().all()  # beside ours in vehicles.parquet
+    assert res["assumptions"]["default_masses"] == {}  # mass from the exported vType
+    assert (v.mass_kg == 1700.0).all()

@@ -20,7 +20,8 @@ from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, Ledger
 from sumo_drvpw.sim.network import Network
 
 UNITS = {"_j": "J", "_m": "m", "_s": "s", "_kg": "kg", "_w": "W", "_mps": "m/s",
-         "_mps2": "m/s2", "_rad": "rad", "share": "1", "_whpkm": "Wh/km", "_kwh": "kWh"}
+         "_mps2": "m/s2", "_rad": "rad", "share": "1", "_whpkm": "Wh/km", "_kwh": "kWh",
+         "_wh": "Wh", "_mg": "mg"}
 
 
 def _unit(name: str) -> str | None:
@@ -141,6 +142,8 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
     ``<eq>_total_perVeh_j`` (per vehicle that entered [J]) and ``<eq>_total_normed_jpm``
     (per metre driven [J/m]), in the manner of SUMO's ``CO2_abs``/``_perVeh``/``_normed``.
     Equation names are restricted to ``NAME_PATTERN`` (valid XML names); ids are escaped.
+    Equations with an energy chain add ``<eq>_battery_{traction,recuperated,auxiliary,net}_kwh``
+    or ``<eq>_fuel_l`` and ``<eq>_co2_kg`` (:meth:`sumo_drvpw.sim.chain.ChainLedger.edge_attrs`).
     """
     from xml.sax.saxutils import quoteattr
 
@@ -155,6 +158,11 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
     prev = (float(begin), np.zeros_like(cur[1]), np.zeros_like(cur[2]), np.zeros_like(cur[3]),
             np.zeros_like(cur[4]), np.zeros_like(cur[5]))
     cats = [c for c in LEDGER_CATEGORIES]
+    chain = getattr(ledger, "chain", None)  # battery/fuel per edge (sim/chain.py, #12)
+    if chain is not None:
+        chain_at = dict(chain.snapshots)
+        chain_at[float(end)] = chain.edge
+        chain_prev = np.zeros_like(chain.edge)
     for b in bounds:
         t0, t1 = prev[0], b[0]
         energy, dist, etime, count, entered = (b[k] - prev[k] for k in range(1, 6))
@@ -172,8 +180,12 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
                 attrs.append(f'{name}_total_perVeh_j="{per_veh:.3f}"')
                 normed = tot / dist[i, e] if dist[i, e] > 0 else 0.0
                 attrs.append(f'{name}_total_normed_jpm="{normed:.6f}"')
+            if chain is not None:
+                attrs += chain.edge_attrs(chain_at[b[0]][i] - chain_prev[i])
             lines.append(f"        <edge id={quoteattr(net.edge_ids[i])} {' '.join(attrs)}/>")
         lines.append("    </interval>")
+        if chain is not None:
+            chain_prev = chain_at[b[0]]
         prev = b
     lines += ["</meandata>", ""]
     return "\n".join(lines)
@@ -381,6 +393,8 @@ class RunResult:
         self.summary, self.begin, self.end = summary, begin, end
         self.edgedata, self.figures, self.difference, self.period = \
             edgedata, figures, difference, period
+        #: SUMO's emissions-device totals per vehicle (outputs.sumo_device), or None
+        self.sumo_device = None
 
     def __getitem__(self, key):
         return self.summary[key]
@@ -392,7 +406,32 @@ class RunResult:
         return key in self.summary
 
     def vehicles_arrow(self) -> pa.Table:
-        return vehicles_table(self.ledger, self.names, self.predicts)
+        t = vehicles_table(self.ledger, self.names, self.predicts)
+        if self.sumo_device is None:
+            return t
+        df = t.to_pandas().merge(self.sumo_device, on="vehicle", how="left")
+        cols = {c: df[c].to_numpy() if df[c].dtype != object else df[c].tolist()
+                for c in df.columns}
+        return table_with_units(cols)
+
+    def sumo_device_comparison(self):
+        """Per equation: the plug-in's net energy and SUMO's emissions-device electricity
+        [kWh] over the vehicles SUMO reports electricity for (its Energy-model vTypes)."""
+        import pandas as pd
+
+        rows = []
+        if self.sumo_device is None:
+            return pd.DataFrame(rows)
+        v = vehicles_table(self.ledger, self.names, self.predicts).to_pandas().merge(
+            self.sumo_device, on="vehicle", how="inner")
+        v = v[v.sumo_electricity_wh.abs() > 0]
+        for eq, g in v.groupby("equation", sort=False):
+            ours = g.net_total_j.sum() / 3.6e6
+            sumo = g.sumo_electricity_wh.sum() / 1e3
+            rows.append({"equation": eq, "vehicles": int(len(g)), "net_kwh": ours,
+                         "sumo_electricity_kwh": sumo,
+                         "ratio": ours / sumo if sumo else float("nan")})
+        return pd.DataFrame(rows)
 
     def edges_arrow(self) -> pa.Table:
         return edges_table(self.ledger, self.net, self.names)
@@ -437,6 +476,9 @@ def write_outputs(out_dir: Path, result: RunResult) -> dict[str, str]:
     files.update({k: str(out_dir / f) for k, f in (
         ("vehicles", "vehicles.parquet"), ("edges", "edges.parquet"),
         ("classes", "classes.parquet"), ("shares", "shares.csv"))})
+    if result.sumo_device is not None:
+        write_text(out_dir / "sumo_device.csv", result.sumo_device_comparison().to_csv(index=False))
+        files["sumo_device"] = str(out_dir / "sumo_device.csv")
     if result.edgedata:
         write_text(out_dir / "edgedata.xml", result.edgedata_xml())
         files["edgedata"] = str(out_dir / "edgedata.xml")

@@ -194,7 +194,16 @@ def run_scenario(scenario_path, out_dir=None, **overrides):
         raise UserError("outputs.trace needs an output directory")
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
-    conn = start_sumo(sc.sumo_args, sc.connection, sc.gui)
+    args = list(sc.sumo_args)
+    tmpdir = None
+    if sc.sumo_device:  # SUMO's own model beside ours: its tripinfo, read after the run
+        import tempfile
+
+        tmpdir = tempfile.TemporaryDirectory(prefix="drvpw-tripinfo-")
+        tripinfo = Path(tmpdir.name) / "tripinfo.xml"
+        args += ["--device.emissions.probability", "1", "--tripinfo-output", str(tripinfo),
+                 "--tripinfo-output.write-unfinished", "true"]
+    conn = start_sumo(args, sc.connection, sc.gui)
     acc = None
     try:
         acc = Accountant(conn, scenario=sc,
@@ -213,9 +222,37 @@ def run_scenario(scenario_path, out_dir=None, **overrides):
             acc.close_trace()
         close_sumo(conn)
     check_vtype_filter(sc, acc.ledger)
+    if tmpdir is not None:
+        try:
+            result.sumo_device = read_tripinfo_emissions(tripinfo)
+        finally:
+            tmpdir.cleanup()
+        result.summary["sumo_device"] = result.sumo_device_comparison().to_dict("records")
     if out_dir is not None:
         result.write(out_dir)
     return result
+
+
+def read_tripinfo_emissions(path: Path):
+    """Per vehicle SUMO's emissions-device totals from a tripinfo file: DataFrame vehicle,
+    sumo_electricity_wh (Energy model) and sumo_fuel_mg (fuel models)."""
+    import xml.etree.ElementTree as ET
+
+    import pandas as pd
+
+    rows = []
+    try:
+        for _, el in ET.iterparse(path, events=("end",)):
+            if el.tag == "tripinfo":
+                em = el.find("emissions")
+                if em is not None:
+                    rows.append({"vehicle": el.get("id"),
+                                 "sumo_electricity_wh": float(em.get("electricity_abs", "nan")),
+                                 "sumo_fuel_mg": float(em.get("fuel_abs", "nan"))})
+                el.clear()
+    except (ET.ParseError, OSError) as e:
+        raise UserError(f"SUMO tripinfo {path}: cannot read: {e}") from None
+    return pd.DataFrame(rows, columns=["vehicle", "sumo_electricity_wh", "sumo_fuel_mg"])
 
 
 def check_vtype_filter(sc, ledger) -> None:

@@ -97,13 +97,14 @@ _SCHEMA: dict[str, set[str] | None] = {
     "air": {"density_kgm3", "temperature_c", "pressure_kpa"},
     "road_class": {"highway_min_speed_kmh", "highway_types", "types", "edges"},
     "slope": {"window_m", "max_rad", "tolerance_rad", "reference"},
-    "outputs": {"trace", "edgedata", "figures", "difference", "progress", "period"},
+    "outputs": {"trace", "edgedata", "figures", "difference", "progress", "period",
+                "sumo_device"},
 }
 _VTYPE_KEYS = {"mass_kg", "equations"}
 #: keyword overrides accepted by run_scenario (and the CLI)
 OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
              "trace", "edgedata", "figures", "progress", "difference", "acceleration",
-             "slope_reference", "wind_heading", "positions", "period"}
+             "slope_reference", "wind_heading", "positions", "period", "sumo_device"}
 
 
 @dataclass
@@ -173,6 +174,8 @@ class Scenario:
     default_masses: bool = True
     #: edgeData interval [s] (None: one interval for the whole run)
     period: float | None = None
+    #: also run SUMO's emissions device and put its per-vehicle totals beside ours
+    sumo_device: bool = False
 
 
 def _where(path) -> str:
@@ -442,7 +445,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
 
     sl = doc.get("slope", {})
     out = dict(doc.get("outputs", {}))
-    for k in ("trace", "edgedata", "figures", "progress", "difference", "period"):
+    for k in ("trace", "edgedata", "figures", "progress", "difference", "period", "sumo_device"):
         if k in overrides:
             out[k] = overrides[k]
     diff = out.get("difference")
@@ -476,5 +479,6 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         trace=bool(out.get("trace", False)), edgedata=bool(out.get("edgedata", True)),
         figures=bool(out.get("figures", True)), difference=diff,
         progress=bool(out.get("progress", True)),
+        sumo_device=_bool(out.get("sumo_device", False), where, "outputs.sumo_device"),
         period=None if out.get("period") is None else _num(out["period"], where,
                                                              "outputs.period", positive=True))

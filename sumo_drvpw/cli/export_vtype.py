@@ -1,0 +1,42 @@
+"""``sumo-drvpw export-vtype EQ --vehicle NAME --id ID --out FILE.add.xml``: an equation as
+a vType for SUMO's own Energy model (where its parameters come from: a calibration)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("equation", metavar="EQ", help="equation TOML file or built-in name")
+    parser.add_argument("--vehicle", metavar="NAME_OR_FILE",
+                        help="vehicle file or built-in name: mass and frontal area")
+    parser.add_argument("--mass", type=float, metavar="KG",
+                        help="vehicle mass [kg] (instead of the vehicle file's)")
+    parser.add_argument("--id", required=True, metavar="ID", help="vType id to write")
+    parser.add_argument("--vclass", metavar="VCLASS", help="SUMO vClass of the vType")
+    parser.add_argument("--out", required=True, metavar="FILE.add.xml",
+                        help="additional file to write")
+
+
+def main(args: argparse.Namespace) -> int:
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.fileio import write_text
+    from sumo_drvpw.model.equations import load_equation
+    from sumo_drvpw.sim.export import energy_vtype_xml
+
+    eq = load_equation(args.equation)
+    mass, area = args.mass, None
+    if args.vehicle:
+        from sumo_drvpw.model.vehicles import load_vehicle
+
+        v = load_vehicle(args.vehicle)
+        mass = mass if mass is not None else v.mass_kg
+        area = v.body.get("frontal_area_m2")
+    if mass is not None and not mass > 0:
+        raise UserError(f"--mass must be > 0, got {mass}")
+    xml, missing = energy_vtype_xml(eq, args.id, mass, area, args.vclass)
+    write_text(args.out, xml)
+    print(f"wrote vType '{args.id}' (Energy/unknown) from equation '{eq.name}' to {args.out}")
+    for m in missing:
+        print(f"  not expressible in SUMO's Energy model: {m}")
+    return 0

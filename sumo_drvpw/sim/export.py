@@ -1,0 +1,130 @@
+"""An equation as a vType for SUMO's own Energy model (``emissionClass="Energy/unknown"``).
+
+SUMO's Energy model (src/utils/emissions/HelpersEnergy.cpp, SUMO 1.28) computes per step
+
+    P = m·g·sin θ·v + ½(m + m_rot)(v² − v_prev²)/Δt + ½·ρ·A·C_d·v³ + c_r·g·m·v
+        + radial drag + constant power intake,
+
+with ρ = 1.2041 kg/m³, then divides traction by the propulsion efficiency and multiplies
+recuperation by the recuperation efficiency. Our terms map onto it as follows (m: the
+equation's fixed mass, else the vehicle's):
+
+============  ==========================================  =============================
+term          coefficient c means                          Energy-model parameter
+============  ==========================================  =============================
+acc           c·m·v̄·a = ½·c·m·Δ(v²)/Δt                    rotatingMass = (c − 1)·m (c ≥ 1)
+grade         c·m·g·v·sin θ                                 exact only for c = 1
+aero_rho      ½·ρ·c·v³ (no wind)                            A·C_d = c
+aero          c·v³ (no wind)                                A·C_d = 2c/ρ_SUMO
+m_v3, v3      c·m·v³, c·v³                                  A·C_d = 2c·m/ρ_SUMO, 2c/ρ_SUMO
+roll          c·m·g·v·cos θ                                 rollDragCoefficient = c (no cos θ)
+m_v1, v1      c·m·v, c·v                                    c_r = c/g, c/(g·m)
+one           c                                             constantPowerIntake = c [W]
+============  ==========================================  =============================
+
+Anything else (``v2``, ``roll_v2``, products, log columns) has no counterpart: it is left
+out and listed. ``frontSurfaceArea`` is the vehicle's frontal area when known (then
+``airDragCoefficient`` = A·C_d / A), else 1 m² (then ``airDragCoefficient`` carries A·C_d).
+"""
+
+from __future__ import annotations
+
+from xml.sax.saxutils import quoteattr
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.constants import G, RHO_DEFAULT
+from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.model.terms import parse_term
+
+#: SUMO's fixed air density in the Energy model [kg/m³] (HelpersEnergy.cpp)
+RHO_SUMO = RHO_DEFAULT
+
+
+def energy_model_params(eq: Equation, mass_kg: float | None = None,
+                        frontal_area_m2: float | None = None) -> tuple[dict, list[str]]:
+    """SUMO Energy-model vType values for ``eq``: ({attribute/param: value}, [terms or
+    factors it cannot express, with why]).
+
+    Parameters
+    ----------
+    eq : the equation
+    mass_kg : vehicle mass [kg] (needed unless the equation fixes one)
+    frontal_area_m2 : frontal area A [m²] to split A·C_d (default 1 m²)
+    """
+    m = eq.mass_kg if eq.mass_kg is not None else mass_kg
+    if m is None or not m > 0:
+        raise UserError(f"equation '{eq.name}' has no fixed mass: give the vehicle's mass "
+                        "(a vehicle file with mass_kg, or a mass)")
+    m = float(m)
+    cda = 0.0
+    cr = 0.0
+    rot = 0.0
+    const = 0.0
+    missing: list[str] = []
+    for t, c in eq.terms.items():
+        term = parse_term(t)
+        f = term.factors
+        if len(f) != 1:
+            missing.append(f"{t} (a product of factors)")
+            continue
+        f = f[0]
+        if f == "acc":
+            if c < 1.0:
+                missing.append(f"acc coefficient {c:g} < 1 (SUMO adds rotating mass only; "
+                               "exported as rotatingMass 0)")
+            rot = max(0.0, (c - 1.0) * m)
+        elif f == "grade":
+            if abs(c - 1.0) > 1e-9:
+                missing.append(f"grade coefficient {c:g} (SUMO's grade term is m·g·v·sin θ, "
+                               "coefficient 1)")
+        elif f == "aero_rho":
+            cda += c
+        elif f == "aero":
+            cda += 2.0 * c / RHO_SUMO
+        elif f == "m_v3":
+            cda += 2.0 * c * m / RHO_SUMO
+        elif f in ("v3", "v^3"):
+            cda += 2.0 * c / RHO_SUMO
+        elif f == "roll":
+            cr += c
+        elif f == "m_v1":
+            cr += c / G
+        elif f in ("v1", "v^1"):
+            cr += c / (G * m)
+        elif f in ("one", "v^0"):
+            const += c
+        else:
+            missing.append(f"{t} (no Energy-model counterpart)")
+    if cda < 0 or cr < 0:
+        raise UserError(f"equation '{eq.name}': negative drag ({cda:g} m²) or rolling "
+                        f"({cr:g}) coefficient cannot be exported to SUMO's Energy model")
+    area = float(frontal_area_m2) if frontal_area_m2 else 1.0
+    params = {"mass": m, "frontSurfaceArea": area, "airDragCoefficient": cda / area,
+              "rollDragCoefficient": cr, "rotatingMass": rot, "constantPowerIntake": const,
+              "radialDragCoefficient": 0.0, "propulsionEfficiency": 1.0,
+              "recuperationEfficiency": 1.0}
+    return params, missing
+
+
+def energy_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
+                     frontal_area_m2: float | None = None, vclass: str | None = None) -> tuple[str, list[str]]:
+    """An additional file with one Energy-model vType for ``eq``; returns (XML, missing)."""
+    params, missing = energy_model_params(eq, mass_kg, frontal_area_m2)
+    attrs = f"id={quoteattr(vtype_id)} emissionClass=\"Energy/unknown\" mass=\"{params['mass']:.6g}\""
+    if vclass:
+        attrs += f" vClass={quoteattr(vclass)}"
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             f"<!-- sumo-drvpw export-vtype: equation {eq.name} ({eq.predicts}) as SUMO's "
+             "Energy model (HelpersEnergy). -->"]
+    if missing:
+        lines.append("<!-- not expressible in SUMO's Energy model, left out: "
+                     + "; ".join(m.replace("--", "- -") for m in missing) + " -->")
+    lines += ["<additional>", f"    <vType {attrs}>",
+              f'        <param key="drvpw.equation" value={quoteattr(eq.name)}/>',
+              f'        <param key="drvpw.mass" value="{params["mass"]:.6g}"/>']
+    for k in ("frontSurfaceArea", "airDragCoefficient", "rollDragCoefficient", "rotatingMass",
+              "constantPowerIntake", "radialDragCoefficient", "propulsionEfficiency",
+              "recuperationEfficiency"):
+        lines.append(f'        <param key="{k}" value="{params[k]:.9g}"/>')
+    lines += ["    </vType>", "</additional>", ""]
+    return "\n".join(lines), missing
