@@ -300,3 +300,25 @@ def test_engine_flag_errors_exit_2(logs, tmp_path, capsys, argv, msg):
     assert rc == 2
     assert msg in capsys.readouterr().err
     assert not (tmp_path / "x.toml").exists()
+
+
+def test_tall_r_handles_zero_duplicate_and_nearly_collinear_columns():
+    """A flat trip (grade column zero), still air at one density (aero = c·v³) and
+    v1 against roll (nearly collinear at one mass) all occur per trip in real logs."""
+    from sumo_drvpw.fit.stream import tall_r
+
+    rng = np.random.default_rng(3)
+    v = rng.uniform(0, 35, 5000)
+    cols = [v, v ** 2, v ** 3, 0.37 * v ** 3, np.zeros_like(v),
+            v * np.cos(rng.normal(0, 0.01, v.size)), rng.normal(0, 1e3, v.size)]
+    a = np.column_stack(cols)
+    r = tall_r(a)
+    scale = np.sqrt(np.outer(np.diag(a.T @ a), np.diag(a.T @ a))) + 1e-300
+    assert np.max(np.abs(r.T @ r - a.T @ a) / scale) < 1e-13
+    y = 3.0 * v + 0.2 * v ** 3 + rng.normal(0, 50, v.size)
+    ry = tall_r(np.column_stack([a, y]))
+    keep = [0, 2, 5, 6]
+    ref = sm.OLS(y, a[:, keep], hasconst=False).fit()
+    got = ols_from_r(ry, keep, len(y))
+    np.testing.assert_allclose(got.params, ref.params, rtol=1e-8)
+    np.testing.assert_allclose(got.bse, ref.bse, rtol=1e-8)

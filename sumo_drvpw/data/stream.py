@@ -171,9 +171,10 @@ def whole_trips(part: Part, rows: int = BATCH_ROWS,
         seen_rows += len(df)
         if carry is not None and len(carry):
             df = pd.concat([carry, df], ignore_index=True)
-        if "trip_id" in df:
-            tid = df["trip_id"].astype(str).to_numpy()
-            other = np.flatnonzero(tid != tid[-1]) if len(tid) else np.zeros(0, int)
+        if "trip_id" in df and len(df):
+            # integer codes, not Python strings (the costly part of a text column)
+            codes = pd.factorize(df["trip_id"].astype(str))[0]
+            other = np.flatnonzero(codes != codes[-1])
             cut = int(other[-1]) + 1 if len(other) else 0
         else:
             cut = 0

@@ -107,6 +107,52 @@ def calibration_mask(m, candidates) -> np.ndarray:
 
 # ---------------------------------------------------------------------- calibrate
 
+def tall_r(a: np.ndarray) -> np.ndarray:
+    """Upper triangular R with RᵀR = aᵀa of a tall matrix a (n × k), about as precise as
+    a Householder QR at the cost of two Gram products.
+
+    CholeskyQR2 on the column-scaled matrix (Fukaya et al. 2014, "CholeskyQR2: a simple
+    and communication-avoiding algorithm for computing a tall-skinny QR factorization"):
+    R₁ = chol(SᵀS), Q₁ = S·R₁⁻¹, R₂ = chol(Q₁ᵀQ₁), R = R₂·R₁·D for S = a·D⁻¹. Columns
+    that are zero, or a multiple c·a_i of an earlier column (e.g. aero and v³ in still air
+    at one air density), get R's column c·R_i, which is exact: R = Qᵀa. Beyond a scaled
+    condition number of 1e7 (or when a Cholesky fails) Householder QR is used.
+    """
+    k = a.shape[1]
+    d = np.sqrt(np.einsum("ij,ij->j", a, a))
+    safe = np.where(d > 0, d, 1.0)
+    s = a / safe
+    g = s.T @ s
+    base = np.arange(k)          # column whose multiple each column is (itself if kept)
+    coef = np.ones(k)
+    for j in range(k):
+        if d[j] == 0:
+            base[j], coef[j] = -1, 0.0
+            continue
+        for i in range(j):
+            if base[i] == i and abs(g[i, j]) > 1.0 - 1e-13:
+                base[j], coef[j] = i, np.sign(g[i, j]) * d[j] / d[i]
+                break
+    keep = np.flatnonzero(base == np.arange(k))
+    if len(keep) == 0:
+        return np.zeros((1, k))
+    try:
+        r1 = np.linalg.cholesky(g[np.ix_(keep, keep)]).T
+        if np.linalg.cond(r1) > 1e7:
+            raise np.linalg.LinAlgError("ill-conditioned")
+        q = s[:, keep] @ np.linalg.inv(r1)
+        rk = (np.linalg.cholesky(q.T @ q).T @ r1) * d[keep]
+    except np.linalg.LinAlgError:
+        rk = np.linalg.qr(a[:, keep], mode="r")
+    r = np.zeros((len(keep), k))
+    r[:, keep] = rk
+    pos = {c: n for n, c in enumerate(keep)}
+    for j in range(k):
+        if base[j] >= 0 and base[j] != j:
+            r[:, j] = coef[j] * rk[:, pos[base[j]]]
+    return r
+
+
 @dataclass
 class CalibrationStats:
     """Mergeable sufficient statistics of the stepwise calibration.
@@ -156,8 +202,7 @@ class CalibrationStats:
             if t in self.trips:
                 raise UserError(f"trip_id '{t}' appears in more than one place; give each "
                                 "trip its own id")
-            self.trips[t] = (np.linalg.qr(np.column_stack([xs, ys]), mode="r"),
-                             Moments.of(ys[:, None]))
+            self.trips[t] = (tall_r(np.column_stack([xs, ys])), Moments.of(ys[:, None]))
         return self
 
     def merge(self, o: "CalibrationStats") -> "CalibrationStats":
@@ -180,7 +225,8 @@ class CalibrationStats:
             r, mm = self.trips[t]
             rs.append(r)
             mom = mom.merge(mm)
-        return np.linalg.qr(np.vstack(rs), mode="r"), mom
+        stack = np.vstack(rs)
+        return np.linalg.qr(stack, mode="r") if len(stack) else np.zeros((1, k + 1)), mom
 
     def gram(self, trips=None):
         """The :class:`~sumo_drvpw.fit.ols.Gram` (XᵀX, Xᵀy, yᵀy, n) of all or the named
