@@ -360,7 +360,7 @@ def test_run_scenario_reports_battery_and_fuel_per_class(tmp_path, scenario):
     if path is None:
         pytest.skip(f"scenario {scenario} not found")
     res = run_scenario(path, tmp_path / "out", equations=_chain_equations(), end=150.0,
-                       figures=False)
+                       figures=False, edgedata=True, period=60.0)
     cls = res.summary["chain"]["classes"]
     assert {r["equation"] for r in cls} == {"drvpw_prius3", "bev"}
     for r in cls:
@@ -372,6 +372,15 @@ def test_run_scenario_reports_battery_and_fuel_per_class(tmp_path, scenario):
     for col in ("net_kwh", "auxiliary_kwh", "fuel_l", "co2_kg"):
         tot = [t[col].sum() for t in tabs.values()]
         np.testing.assert_allclose(tot, tot[0], rtol=1e-9, atol=1e-12)
+    # edgeData: the intervals' battery and fuel per edge add up to the run's totals
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(tmp_path / "out" / "edgedata.xml").getroot()
+    assert len(root.findall("interval")) >= 3
+    for attr, col, eq in (("bev_battery_net_kwh", "net_kwh", "bev"), ("drvpw_prius3_fuel_l", "fuel_l", "drvpw_prius3")):
+        xml_sum = sum(float(e.get(attr)) for e in root.iter("edge"))
+        c = tabs["classes"]
+        assert xml_sum == pytest.approx(c[c["equation"] == eq][col].sum(), rel=1e-4, abs=1e-5)
     led = res.ledger
     bev_rows = tabs["vehicles"][tabs["vehicles"]["equation"] == "bev"]
     t_in = dict(zip(led.veh_ids, led.chain.veh_time[:led.n_veh]))

@@ -54,6 +54,8 @@ class ChainLedger:
         self.veh = np.zeros((capacity, self.E, self.Q))
         self.veh_dist = np.zeros(capacity)
         self.veh_time = np.zeros(capacity)
+        #: cumulative edge totals at interval boundaries [(time [s], (edges, E, Q))]
+        self.snapshots: list[tuple[float, np.ndarray]] = []
 
     @property
     def signals(self) -> set[str]:
@@ -118,6 +120,24 @@ class ChainLedger:
         np.add.at(self.edge, eidx, q)
         np.add.at(self.edge_dist, eidx, d)
         return q
+
+    def snapshot(self, t: float) -> None:
+        """Keep the cumulative edge totals at time ``t`` [s] (with :meth:`Ledger.snapshot`)."""
+        self.snapshots.append((float(t), self.edge.copy()))
+
+    def edge_attrs(self, q: np.ndarray) -> list[str]:
+        """edgeData attributes of one edge's quantities ``q`` (E, Q) of an interval:
+        ``<eq>_battery_{traction,recuperated,auxiliary,net}_kwh`` or ``<eq>_fuel_l``,
+        ``<eq>_co2_kg``."""
+        out = []
+        for e in self.active:
+            n = self.names[e]
+            if self.chains[e].predicts == "fuel":
+                out += [f'{n}_fuel_l="{q[e, 5]:.6f}"', f'{n}_co2_kg="{q[e, 6]:.6f}"']
+            else:
+                out += [f'{n}_battery_{k}_kwh="{q[e, j] / KWH:.6f}"'
+                        for j, k in enumerate(("traction", "recuperated", "auxiliary", "net"))]
+        return out
 
     def _constant_signals(self, n: int) -> dict:
         out = {}

@@ -153,6 +153,8 @@ class Ledger:
     def snapshot(self, t: float) -> None:
         """Keep the cumulative edge totals at time ``t`` [s] (an interval boundary)."""
         energy, dist, etime, dist_eq = self._edges()
+        if self.chain is not None:
+            self.chain.snapshot(t)
         self.snapshots.append((float(t), energy.copy(), dist_eq.copy(), etime.copy(),
                                self.edge_count.copy(), self.edge_entered.copy()))
 
