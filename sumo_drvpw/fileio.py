@@ -279,24 +279,15 @@ def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
         # publish: no signal may split the moves
         blocked = {signal.SIGINT, signal.SIGTERM}
         old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, blocked)
+        olds = []
         try:
-            old = None
-            if out.exists():
-                old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
-                os.replace(out, old / out.name)
-            try:
-                os.replace(tmp, out)
-            except OSError:
-                if old is not None:  # put the earlier set back
-                    os.replace(old / out.name, out)
-                    shutil.rmtree(old, ignore_errors=True)
-                raise
+            _publish(tmp, out, parent, olds)
             for c in companions:
                 os.replace(stage / c, parent / c)
             done = True
-            if old is not None:
-                shutil.rmtree(old, ignore_errors=True)
         finally:
+            for o in olds:  # earlier sets moved aside
+                shutil.rmtree(o, ignore_errors=True)
             signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
@@ -306,6 +297,34 @@ def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
                     d.rmdir()
                 except OSError:
                     pass
+
+
+def _publish(tmp: Path, out: Path, parent: Path, olds: list, attempts: int = 20) -> None:
+    """Move the folder ``tmp`` onto ``out``, moving an existing ``out`` aside first.
+
+    Two runs publishing into one folder at once: each move is atomic, so ``out`` is always
+    one whole set; when another run publishes between our two moves, its set is moved aside
+    too and the last one to publish wins. The folders moved aside are appended to ``olds``.
+    """
+    import errno
+
+    for attempt in range(attempts):
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
+            olds.append(old)
+            try:
+                os.replace(out, old / out.name)
+            except FileNotFoundError:  # another run moved it aside first
+                pass
+        try:
+            os.replace(tmp, out)
+            return
+        except OSError as e:
+            if e.errno in (errno.ENOTEMPTY, errno.EEXIST) and attempt < attempts - 1:
+                continue  # another run published in between: move its set aside as well
+            if olds and not out.exists() and (olds[-1] / out.name).exists():
+                os.replace(olds[-1] / out.name, out)  # put the earlier set back
+            raise
 
 
 def _is_output_set(folder: Path) -> bool:
