@@ -395,9 +395,9 @@ def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s: f
     ok = dt > 0
     d[ok] = (y[hi] - y[lo])[ok] / dt[ok]
     med_dt = float(np.median(np.diff(t)[~start[1:]])) if (~start[1:]).any() else 1.0
-    window = int(round(window_s / med_dt)) if med_dt > 0 else 1
+    window = min(window_s / med_dt, n) if med_dt > 0 else 1  # never wider than the log
     # an odd width keeps the centred mean centred (an even one shifts by half a sample)
-    window = max(window, 1) | 1
+    window = max(int(round(window)), 1) | 1
     return _per_trip_rolling_mean(d, trip_codes, window)
 
 
