@@ -169,6 +169,7 @@ def study(ds: Dataset, out: Path) -> StudyResult:
         "two_regime_all": metrics(two_regime[u], meas[u]),
         "per_cycle": per_cycle,
         "constant_speed": cs,
+        "steady_max_accel_mps2": STEADY_MAX_ACCEL_MPS2,
         "constant_speed_repeat_spread": spread,
     }
     return StudyResult(summary, u, [eq, pub_eq], ["jlu_road_load.png"],

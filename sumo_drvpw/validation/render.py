@@ -176,7 +176,7 @@ def jlu_section(jl: dict, rel: str) -> list[str]:
           "(selected by the kinematics only, not by the measured power or the answer). The "
           "efficiency η lumps motor, inverter and gear losses as one constant; P_aux is the "
           "constant auxiliary draw. The rotating inertia of the car's own driven wheels and motor "
-          "(not in the dyno's 1919 kg) adds to c_acc, so 1/c_acc reads η/(1 + ε) and A, B, C come "
+          f"(not in the dyno's {num(jl['mass_kg'], 0)} kg) adds to c_acc, so 1/c_acc reads η/(1 + ε) and A, B, C come "
           "out low by the same factor 1 + ε (a few per cent).", "",
           "| coefficient | published | recovered (± s.e.) | recovered / published |", "|---|---|---|---|",
           f"| A [N] | {num(pub['A_n'], 1)} | {num(rec['A_n'], 1)} ± {num(rec['A_se_n'], 1)} | {num(rec['A_n'] / pub['A_n'], 3)} |",
@@ -185,7 +185,8 @@ def jlu_section(jl: dict, rel: str) -> list[str]:
           f"| η (battery → wheel) | – | {num(rec['eta'], 3)} | |",
           f"| P_aux [W] | – | {num(rec['p_aux_w'], 0)} | |", "",
           "The three coefficients trade off against each other (v, v², v³ are strongly "
-          "collinear over 0–130 km/h); the force they add up to is what the data pin down:", "",
+          f"collinear over 0–{num(max(r['max_speed_kmh'] for r in jl['per_cycle']), 0)} km/h); "
+          "the force they add up to is what the data pin down:", "",
           "| speed [km/h] | published force [N] | recovered force [N] | ratio |", "|---|---|---|---|"]
     for f in jl["forces"]:
         L.append(f"| {f['speed_kmh']} | {num(f['published_n'], 0)} | {num(f['recovered_n'], 0)} | {num(f['ratio'], 3)} |")
@@ -196,7 +197,8 @@ def jlu_section(jl: dict, rel: str) -> list[str]:
           f"{num(rg['eta_regen'], 3)} of the published-road-load wheel power (friction-brake blending "
           "included).", ""]
     if jl["constant_speed"]:
-        L += ["Constant-speed tests (steady samples, |a| < 0.05 m/s²): published wheel power over "
+        L += [f"Constant-speed tests (steady samples, |a| < {jl['steady_max_accel_mps2']:g} m/s²): "
+              "published wheel power over "
               "mean battery power (efficiency including auxiliaries):", "",
               "| test | speed [km/h] | battery [kW] | published wheel power [kW] | ratio |", "|---|---|---|---|---|"]
         for c in jl["constant_speed"]:
@@ -282,7 +284,8 @@ def _prius_reading(pr: dict) -> list[str]:
         out.append(f"- By acceleration the largest gap is at {worst['band']} "
                    f"(mean error {num(worst['mean_error_w'], 2, _KW)} kW): hard braking is friction "
                    "braking outside P_PTdrv; hard acceleration errors mix the mass (ETW vs the real car), "
-                   "the ≈1.4 Hz OBD timing and the acceleration derived from OBD speed.")
+                   f"the ≈{num(pr['sample_rate_hz'], 1)} Hz OBD timing and the acceleration derived "
+                   "from OBD speed.")
     worst = _worst_band(pr["bands"]["grade_pct"])
     if worst:
         out.append(f"- By grade the largest gap is at {worst['band']} (mean error "
