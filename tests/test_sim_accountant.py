@@ -94,6 +94,19 @@ def test_edgedata_intervals_parsed_by_sumolib(tmp_path):
     e0 = next(e for i in intervals for e in i.edge if float(e.phys_total_j) > 0)
     assert float(e0.phys_total_perVeh_j) > 0 and float(e0.phys_total_normed_jpm) > 0
     assert not any(f.startswith("drvpw_") for f in e0._fields)  # no doubled prefixes
+    # SUMO's router takes it as edge weights (energy-optimal routes)
+    import subprocess
+
+    (tmp_path / "t.xml").write_text(
+        '<routes><trip id="t" depart="0" from="c00c10" to="c34c44"/></routes>')
+    r = subprocess.run([sumolib.checkBinary("duarouter"), "-n",
+                        str(REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"),
+                        "-r", str(tmp_path / "t.xml"), "--weight-files",
+                        str(tmp_path / "o" / "edgedata.xml"), "--weight-attribute",
+                        "phys_total_j", "-o", str(tmp_path / "eco.rou.xml"), "--no-step-log"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "<route edges=" in (tmp_path / "eco.rou.xml").read_text()
 
 
 MIXED = """<routes>

@@ -175,3 +175,41 @@ def test_read_vtypes_mass_precedence(tmp_path):
     bad = _write(tmp_path, '<routes><vType id="a" mass="heavy"/></routes>', "bad.rou.xml")
     with pytest.raises(UserError, match="vType 'a'.*heavy"):
         read_vtypes([bad])
+
+
+@pytest.mark.parametrize("table,key,value", [
+    ("sumo", "step_length", "nan"), ("sumo", "step_length", "0"), ("sumo", "end", "inf"),
+    ("sumo", "begin", '"early"'), ("vtypes.car", "mass_kg", "-5"),
+    ("vclasses.bus", "mass_kg", "0"), ("wind", "speed_mps", "-1"),
+    ("air", "density_kgm3", "-inf"), ("air", "density_kgm3", "0"),
+    ("slope", "window_m", "0"), ("slope", "max_rad", "nan"),
+    ("road_class", "highway_min_speed_kmh", "-80"), ("outputs", "period", "0"),
+    ("outputs", "sumo_device", '"yes"'), ("vehicles", "default_masses", "1")])
+def test_bad_numbers_are_named_with_file_and_key(tmp_path, table, key, value):
+    """Non-numeric, NaN, ±inf and ≤ 0 where physics forbids: one message naming the file
+    and the key."""
+    cfg = (SCEN / "city.sumocfg").as_posix()
+    sumo = f'[sumo]\nconfig = "{cfg}"\n'
+    if table == "sumo":
+        text = f'equations = ["vsp_ldv1999"]\n{sumo}{key} = {value}\n'
+    else:
+        extra = "speed_mps = 1\n" if table == "wind" and key != "speed_mps" else ""
+        text = f'equations = ["vsp_ldv1999"]\n{sumo}[{table}]\n{key} = {value}\n{extra}'
+    p = _write(tmp_path, text)
+    with pytest.raises(UserError) as e:
+        load_scenario(p)
+    msg = str(e.value)
+    assert str(p) in msg and f"{table.split('.')[0]}" in msg and key in msg
+    assert "\n" not in msg
+
+
+def test_equation_names_must_be_safe(tmp_path):
+    """Names become column and XML attribute names: loaded files and Equation objects
+    given to a run are checked against NAME_PATTERN."""
+    bad = _write(tmp_path, '[equation]\nname = "a b\\"<x>"\n[terms]\nacc = 1.0\n', "e.toml")
+    with pytest.raises(UserError, match="not allowed"):
+        load_scenario(SCEN / "city.toml", equations=[str(bad)])
+    with pytest.raises(UserError, match="not allowed"):
+        load_scenario(SCEN / "city.toml", equations=[Equation("1st", {"acc": 1.0})])
+    ok = load_scenario(SCEN / "city.toml", equations=[Equation("my-fit.v2_x", {"acc": 1.0})])
+    assert ok.equations[0].name == "my-fit.v2_x"

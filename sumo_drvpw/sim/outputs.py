@@ -153,8 +153,8 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              "<!-- sumo-drvpw: driving energy per edge, equation and term (traction [J], "
              "recuperable [J], per vehicle [J], per metre [J/m]) -->",
-             '<meandata xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" '
-             'xsi:noNamespaceSchemaLocation="http://sumo.dlr.de/xsd/meandata_file.xsd">']
+             # no XSD reference: SUMO validates declared schemas, and ours adds attributes
+             "<meandata>"]
     prev = (float(begin), np.zeros_like(cur[1]), np.zeros_like(cur[2]), np.zeros_like(cur[3]),
             np.zeros_like(cur[4]), np.zeros_like(cur[5]))
     cats = [c for c in LEDGER_CATEGORIES]
