@@ -35,6 +35,7 @@ import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
+import pandas as pd
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.ols import Gram
@@ -442,8 +443,9 @@ class CompareStats:
         x = m.inputs.take(idx)
         meas = np.asarray(m.power_w, float)[idx]
         dt = m.log.df["dt_s"].to_numpy(float)[idx]
-        trip = np.asarray(x.trip).astype(str)
-        uniq, codes = np.unique(trip, return_inverse=True)
+        codes, uniq = pd.factorize(np.asarray(x.trip), sort=False)  # hashing, not sorting text
+        uniq = np.asarray(uniq).astype(str)
+        trip = np.asarray(x.trip)
         if self.trips.intersection(uniq):
             raise UserError(f"trip_id '{sorted(self.trips.intersection(uniq))[0]}' appears in "
                             "more than one place; give each trip its own id")
