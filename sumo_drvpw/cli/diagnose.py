@@ -8,6 +8,7 @@ before and after). See :mod:`sumo_drvpw.fit.diagnose` for the method and the tes
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -132,10 +133,33 @@ def markdown(res, figs) -> str:
                  "explain what these data can tell apart.")
     for i, f in enumerate(r["findings"], 1):
         gain = 1 - f["metrics_after"]["rmse_w"] / f["metrics_before"]["rmse_w"]
-        L += [f"{i}. **{f['effect']}** ({f.get('role', 'unknown')}) — term `{f['term']}`, signals: {', '.join(f['signals']) or 'speed only'}; "
+        rep = f.get("replication") or {}
+        helped = (f"; replicated on {rep['helped_trips']} of {rep['trips']} trips"
+                  if rep.get("trips") else "")
+        if f.get("kind") == "timing":
+            L += [f"{i}. **{f['effect']}** (structural) — lag {f['coefficient']:+.3g} s "
+                  f"(s.d. over folds {_fmt(f['std_err'])} s), held-out test p = {f['p_value']:.3g}; "
+                  f"held-out RMSE {f['metrics_before']['rmse_w']:.1f} → {f['metrics_after']['rmse_w']:.1f} W "
+                  f"({100 * gain:.2f} %){helped} (trips whose own best lag has the same sign)."]
+            continue
+        L += [f"{i}. **{f['effect']}** ({f.get('role', 'unknown')}) — term `{f['term']}`, signals: "
+              f"{', '.join(f['signals']) or 'none'}; "
               f"coefficient {_fmt(f['coefficient'])} ± {_fmt(f['std_err'])} (s.e.), held-out test p = {f['p_value']:.3g} "
               f"(Bonferroni), energy share {100 * f['energy_share']:.2f} %; held-out RMSE "
-              f"{f['metrics_before']['rmse_w']:.1f} → {f['metrics_after']['rmse_w']:.1f} W ({100 * gain:.2f} %)."]
+              f"{f['metrics_before']['rmse_w']:.1f} → {f['metrics_after']['rmse_w']:.1f} W ({100 * gain:.2f} %){helped}."]
+    if d.get("not_replicated"):
+        L += ["", "## Passed the block test but rejected", ""]
+        L += [f"- `{x['term']}` (round {x['round']}): {x['reason']}" for x in d["not_replicated"]]
+    if d.get("timing"):
+        tm = d["timing"]
+        L += ["", "## Timing (power against speed)", "",
+              f"Best lag on all data {tm['lag_s']:+.3g} s (power read that much later; + = power late), "
+              f"held-out RMSE gain {100 * tm['rmse_gain']:.2f} %, p = {tm['p_value']:.3g}: "
+              f"{'applied to the data' if tm['accepted'] else 'not applied'}. Per trip: "
+              + ", ".join(f"{k} {v:+.3g} s" for k, v in tm.get("per_trip_lag_s", {}).items()) + ". "
+              f"Test: {tm['test']}."]
+    if d.get("structural"):
+        L += ["", "## Structural notes", "", "```", json.dumps(d["structural"], indent=1, default=str), "```"]
     L += ["", "## Rounds (best candidates by held-out RMSE gain)", ""]
     for rd in d["rounds"]:
         L.append(f"Round {rd['round']}: {rd['candidates_scored']} candidates scored; "
@@ -252,7 +276,9 @@ def main(args) -> int:
     print(f"baseline held-out RMSE {r['baseline']['metrics']['rmse_w']:.1f} W; "
           f"{len(r['findings'])} finding(s)")
     for f in r["findings"]:
+        share = ("" if f["energy_share"] is None
+                 else f", energy share {100 * f['energy_share']:.2f} %")
         print(f"  + {f['term']}: {f['effect']} (RMSE {f['metrics_before']['rmse_w']:.1f} → "
-              f"{f['metrics_after']['rmse_w']:.1f} W, energy share {100 * f['energy_share']:.2f} %)")
+              f"{f['metrics_after']['rmse_w']:.1f} W{share})")
     print(f"final held-out RMSE {r['final']['metrics']['rmse_w']:.1f} W; wrote {Path(args.out) / 'trace.json'}")
     return 0

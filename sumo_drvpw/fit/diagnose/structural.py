@@ -23,6 +23,8 @@ Model-side structure is offered as candidates (their own kind, role ``structural
   log has elevation and ambient temperature but no pressure (the reader then assumes
   101.325 kPa): the relative error of ρ, p(h)/p₀ − 1 with the standard-atmosphere
   pressure p(h) = p₀·(1 − L·h/T₀)^(g·M/(R·L)) (ISO 2533);
+* **missing grade** — ``grade`` when the declared equation has none (calibrated on a flat
+  road or a dynamometer) and the data's grade varies;
 * **grade from an accelerometer** — where the log has a longitudinal accelerometer
   (``imu_accel_mps2``, which reads dv/dt + g·sin θ), sin θ_acc = (a_imu − dv/dt)/g
   smoothed over ``ACC_GRADE_WINDOW_S``; the candidate ``[grade_accelerometer]*grade`` is
@@ -158,6 +160,27 @@ def per_trip_lags(tr, y_by_lag: dict[int, np.ndarray], dt_s: float) -> dict[str,
     return out
 
 
+def accelerometer_sin_grade(imu_mps2, accel_mps2, trip_codes, dt_s: float,
+                            window_s: float = ACC_GRADE_WINDOW_S) -> np.ndarray:
+    """sin θ from a longitudinal accelerometer: (a_imu − dv/dt)/g, a centred moving mean of
+    ``window_s`` within trips, clipped to ±0.3 (17°).
+
+    Parameters
+    ----------
+    imu_mps2 : accelerometer reading, dv/dt + g·sin θ [m/s²]
+    accel_mps2 : dv/dt from the speed signal [m/s²]
+    trip_codes : trip code per sample (contiguous trips)
+    dt_s : sample interval [s]
+    """
+    import pandas as pd
+
+    win = max(1, int(round(window_s / max(dt_s, 1e-3))))
+    s = pd.Series((np.asarray(imu_mps2, float) - np.asarray(accel_mps2, float)) / G)
+    sm = s.groupby(np.asarray(trip_codes)).transform(
+        lambda z: z.rolling(win, center=True, min_periods=1).mean()).to_numpy()
+    return np.clip(sm, -0.3, 0.3)
+
+
 def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_df,
                        counts: dict) -> tuple[dict, list[Candidate], dict]:
     """Derived columns and candidates of the model-side structural effects.
@@ -198,6 +221,10 @@ def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_d
                     cands.append(Candidate(f"[air_density_altitude]*{t}",
                                            f"air density from altitude: the log's ρ assumes sea-level "
                                            f"pressure; {t} scaled by p(h)/p₀ − 1", (), "structural"))
+    # a missing grade term (an equation calibrated where the road is flat: a dynamometer)
+    if not any(parse_term(t).category == "grade" for t in declared) and np.ptp(tr.x.theta) > 1e-4:
+        cands.append(Candidate("grade", "road grade: the declared equation has no grade term "
+                               "(calibrated where the road is flat, e.g. on a dynamometer)", (), "structural"))
     # grade from a longitudinal accelerometer
     acc_col = next((c for c in ACCELEROMETER_COLUMNS if c in x_all_signals), None)
     grade_terms = [t for t in declared if parse_term(t).category == "grade" and not parse_term(t).signals]
@@ -205,12 +232,9 @@ def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_d
         imu = np.asarray(x_all_signals[acc_col], float)[idx]
         if np.isfinite(imu).all():
             x = tr.x
-            win = max(1, int(round(ACC_GRADE_WINDOW_S / max(float(np.median(np.diff(log_df["time_s"].to_numpy(float)))), 1e-3))))
-            import pandas as pd
-
-            s = pd.Series((imu - x.a) / G).groupby(tr.trip).transform(
-                lambda z: z.rolling(win, center=True, min_periods=1).mean()).to_numpy()
-            sin_acc = np.clip(s, -0.3, 0.3)
+            t = log_df["time_s"].to_numpy(float)
+            dt_med = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+            sin_acc = accelerometer_sin_grade(imu, x.a, tr.trip, dt_med)
             sin_log = np.sin(x.theta)
             # factor on the grade term: (sin θ_acc − sin θ_log)/sin θ_log is ill-posed at 0;
             # the candidate is the grade power difference m·g·v·(sin θ_acc − sin θ_log)
