@@ -113,7 +113,9 @@ MIXED = """<routes>
   <vType id="car" vClass="passenger" mass="1500" sigma="0"/>
   <vType id="lorry" vClass="trailer" sigma="0"/>
   <vType id="bike" vClass="bicycle" sigma="0"/>
+  <vType id="walker" vClass="pedestrian"/>
   <flow id="c" type="car" from="c00c10" to="c34c44" begin="0" end="60" period="10"/>
+  <person id="p0" type="walker" depart="1"><walk from="c00c10" to="c10c20"/></person>
   <flow id="b" type="bike" from="c00c10" to="c34c44" begin="2" end="60" period="30"/>
   <flow id="l" type="lorry" from="c00c10" to="c34c44" begin="5" end="60" period="20"/>
 </routes>"""
@@ -121,7 +123,8 @@ MIXED = """<routes>
 
 def test_vclasses_each_get_their_equation_or_are_skipped(tmp_path):
     """Cars get the car equations, trailers the MOVES combination-truck one (with its
-    MOVES source mass as the assumed mass), bicycles are skipped and counted."""
+    MOVES source mass as the assumed mass), bicycles and pedestrians are skipped and
+    counted."""
     (tmp_path / "r.rou.xml").write_text(MIXED, encoding="utf-8")
     (tmp_path / "s.toml").write_text(
         'equations = ["vsp_ldv1999", "drvpw_prius3", "moves_combination_truck"]\n'
@@ -134,7 +137,8 @@ def test_vclasses_each_get_their_equation_or_are_skipped(tmp_path):
     assert sorted(by["passenger"]) == ["drvpw_prius3", "vsp_ldv1999"]
     assert list(by["trailer"]) == ["moves_combination_truck"]
     assert "bicycle" not in by
-    assert res["skipped"] == {"by_vclass": {"bicycle": 2}, "by_vtype": {"bike": 2}}
+    assert res["skipped"] == {"by_vclass": {"bicycle": 2, "pedestrian": 1},
+                              "by_vtype": {"bike": 2, "walker": 1}}
     assert res["assumptions"]["default_masses"]["lorry"]["mass_kg"] == 24419.0
     assert (v[v.vclass == "trailer"].mass_kg == 24419.0).all()
     eqs = res["equations"]
@@ -149,7 +153,8 @@ def test_vclasses_each_get_their_equation_or_are_skipped(tmp_path):
 
 def test_out_of_range_vehicle_steps_counted(tmp_path):
     """An equation's recorded validity range: vehicle-steps outside it are counted."""
-    (tmp_path / "r.rou.xml").write_text(MIXED.replace(
+    mixed = "\n".join(ln for ln in MIXED.splitlines() if "<person" not in ln)
+    (tmp_path / "r.rou.xml").write_text(mixed.replace(
         'from="c00c10" to="c34c44"', 'route="r"').replace(
         '<flow id="c"', '<route id="r" edges="e01 e12 e23"/>\n  <flow id="c"').replace(
         'period="10"', 'period="10" departSpeed="max"'), encoding="utf-8")

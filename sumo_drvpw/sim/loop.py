@@ -192,6 +192,10 @@ class Stepper:
         #: ``simulationStep(t)`` jumping several steps) are counted in ``missed_steps``
         self.last_t: float | None = None
         self.missed_steps = 0
+        #: persons (pedestrians, also riding) are never booked; a resolver with
+        #: ``skip_person`` counts them by vClass and vType (one more call per step)
+        self.count_persons = (hasattr(resolve, "skip_person") and hasattr(conn, "person")
+                              and hasattr(conn.simulation, "getDepartedPersonIDList"))
 
     @property
     def step_method(self) -> str:
@@ -230,6 +234,9 @@ class Stepper:
         if self.first:
             self.reader.subscribe_existing(ids)
             self.first = False
+        if self.count_persons:
+            for pid in conn.simulation.getDepartedPersonIDList():
+                self.resolve.skip_person(conn.person.getTypeID(pid))
         for vid in conn.simulation.getDepartedIDList():
             if vid not in vmap:
                 self.register(vid)

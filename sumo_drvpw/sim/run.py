@@ -78,6 +78,12 @@ class VTypeResolver:
                     self.skipped[key][k] = self.skipped[key].get(k, 0) + 1
         return out[:4]
 
+    def skip_person(self, vt: str) -> None:
+        """Count a departing person (vType ``vt``) as skipped: persons are not booked."""
+        vclass = self._vclass(vt, self.files.get(vt))
+        for key, k in (("by_vclass", vclass), ("by_vtype", vt)):
+            self.skipped[key][k] = self.skipped[key].get(k, 0) + 1
+
     def _resolve(self, vt: str, vid: str):
         from sumo_drvpw.sim.vtypes import DEFAULT_MASS_KG, DEFAULT_MASS_SOURCE
 
