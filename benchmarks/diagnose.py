@@ -6,7 +6,10 @@ columns (one planted A/C load and its flag, the rest distractors). Generation is
 timed; the timed part is what `sumo-drvpw diagnose LOG --vehicle prius3 --equation
 drvpw_prius3 --out DIR --no-figures` does (read the log, trace, write the report).
 
-    .venv/bin/python benchmarks/diagnose.py [--rows 1000000]
+    .venv/bin/python benchmarks/diagnose.py [--rows 1000000] [--rows 500000,2000000 --profile 20]
+
+With several sizes it prints the time ratio against the row ratio (linear: equal); with
+--profile the functions with the most own time, to find what grows faster than the rows.
 """
 
 from __future__ import annotations
@@ -57,24 +60,44 @@ def build(rows: int, path: Path) -> None:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rows", type=int, default=1_000_000)
+    ap.add_argument("--rows", default="1000000",
+                    help="rows, or a comma list of sizes to see how time grows (e.g. 500000,2000000)")
+    ap.add_argument("--profile", type=int, default=0, metavar="N",
+                    help="also print the N functions with the most own time (cProfile) per size")
     a = ap.parse_args()
     from sumo_drvpw.data.log import read_log
     from sumo_drvpw.cli.diagnose import run
     from sumo_drvpw.fit.diagnose import DiagnoseOptions
 
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "bench.parquet"
-        build(a.rows, path)
-        n_extra = len(read_log([path]).extra_columns)
-        t0 = time.perf_counter()
-        res = run([path], "prius3", "drvpw_prius3", Path(tmp) / "out", DiagnoseOptions(), figures=False,
-                  progress=print)
-        dt = time.perf_counter() - t0
-    r = res.report
-    print(f"rows={a.rows} extra_columns_in_log={n_extra} findings={[f['term'] for f in r['findings']]} "
-          f"rmse {r['baseline']['metrics']['rmse_w']:.1f} -> {r['final']['metrics']['rmse_w']:.1f} W")
-    print(f"seconds={dt:.1f} candidates_scored={res.n_candidates_scored}")
+    times = {}
+    for rows in (int(float(r)) for r in a.rows.split(",")):
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "bench.parquet"
+            build(rows, path)
+            n_extra = len(read_log([path]).extra_columns)
+            prof = None
+            if a.profile:
+                import cProfile
+
+                prof = cProfile.Profile()
+                prof.enable()
+            t0 = time.perf_counter()
+            res = run([path], "prius3", "drvpw_prius3", Path(tmp) / "out", DiagnoseOptions(),
+                      figures=False, progress=print)
+            dt = time.perf_counter() - t0
+            if prof is not None:
+                import pstats
+
+                prof.disable()
+                pstats.Stats(prof).sort_stats("tottime").print_stats(a.profile)
+        r = res.report
+        times[rows] = dt
+        print(f"rows={rows} extra_columns_in_log={n_extra} findings={[f['term'] for f in r['findings']]} "
+              f"rmse {r['baseline']['metrics']['rmse_w']:.1f} -> {r['final']['metrics']['rmse_w']:.1f} W")
+        print(f"seconds={dt:.1f} rows_per_s={rows / dt:.0f} candidates_scored={res.n_candidates_scored}")
+    if len(times) > 1:
+        (r0, t0), (r1, t1) = min(times.items()), max(times.items())
+        print(f"time ratio {t1 / t0:.2f} for {r1 / r0:.2f}x the rows (linear: equal)")
     return 0
 
 
