@@ -115,8 +115,12 @@ def study(ds: Dataset, out: Path) -> StudyResult:
     regen = u & (wheel_model < 0)
     rec = {"A_n": b[0] * eta, "B_n_per_mps": b[1] * eta, "C_n_per_mps2": b[2] * eta,
            "eta": eta, "p_aux_w": b[4]}
+    pub_eq = Equation(name="jlu_published_road_load",
+                      terms={"v1": pub["A_n"], "v2": pub["B_n_per_mps"], "v3": pub["C_n_per_mps2"],
+                             "acc": 1.0},
+                      description="published dyno road load at the wheel (no losses)")
     # implied efficiency with the published road load held fixed: P = (F_pub·v + m·a·v)/η + P_aux
-    wheel_pub = road_load_force(pub, x.v) * x.v + x.mass * x.v * x.a
+    wheel_pub = pub_eq.power(x)
     fixed_fit = ols(np.column_stack([wheel_pub[trac], np.ones(int(trac.sum()))]), meas[trac],
                     ("wheel", "one"))
     b2, se2 = fixed_fit.beta, fixed_fit.se
@@ -141,10 +145,6 @@ def study(ds: Dataset, out: Path) -> StudyResult:
     eq = Equation(name="drvpw_jlu_traction", terms=fit.params, std_err=fit.std_err, mass_kg=None,
                   description="battery power of the JLU car on traction samples: "
                               "(A·v + B·v² + C·v³ + m·a·v)/η + P_aux")
-    pub_eq = Equation(name="jlu_published_road_load",
-                      terms={"v1": pub["A_n"], "v2": pub["B_n_per_mps"], "v3": pub["C_n_per_mps2"],
-                             "acc": 1.0},
-                      description="published dyno road load at the wheel (no losses)")
     points = [{"speed_kmh": c["speed_kmh"],
                "force_n": fixed["eta"] * (c["battery_w"] - fixed["p_aux_w"]) / (c["speed_kmh"] * KMH)}
               for c in cs]
