@@ -12,7 +12,7 @@ from sumo_drvpw.report import figures as plots
 from sumo_drvpw.fit.compare import Comparison
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
 from sumo_drvpw.fileio import write_json, write_text
-from sumo_drvpw.report.format import coef, num
+from sumo_drvpw.report.format import KW as _KW, KWH as _KWH, coef, num
 
 #: Figure file name → (plot function, caption).
 FIGURES = {
@@ -23,8 +23,6 @@ FIGURES = {
     "fig10_energy_share.png": (plots.energy_share_bars, "Energy share of each term (cf. Fig. 10)"),
 }
 
-_KW = 1e-3        # W → kW, display only
-_KWH = 1.0 / 3.6e6  # J → kWh, display only
 
 
 def write_comparison_report(comparison: Comparison, out_dir, title: str,
