@@ -295,3 +295,20 @@ def test_attenuated_grade_replaced_by_the_accelerometer(tmp_path):
     assert f[0]["coefficient"] == pytest.approx(load_equation(TRUTH).terms["grade"], rel=0.1)
     g = res.details["structural"]["grade_sources"]
     assert g["accelerometer"]["sd_deg"] > 1.5 * g["logged"]["sd_deg"]
+
+
+@pytest.mark.shared_data
+def test_prius_gen2_lag_found_on_real_data(shared_data, tmp_path):
+    """Issue #11: on the Prius Gen-2 OBD logs the speed lags the MG signals by about 1.5 s;
+    the tracer finds the lag on each trip alone and corrects it (held-out blocks)."""
+    from sumo_drvpw.data.adapters import read
+
+    df, _ = read("torquepro-prius2", shared_data / "prius_gen2_torquepro")
+    path = tmp_path / "p.parquet"
+    df.to_parquet(path)
+    res = diagnose(load_measured([path], "prius2"), None, DiagnoseOptions(max_findings=0))
+    tm = res.details["timing"]
+    assert tm["accepted"] and -1.8 <= tm["lag_s"] <= -1.1
+    assert len(tm["per_trip_lag_s"]) == 2 and all(-1.8 <= v <= -1.1 for v in tm["per_trip_lag_s"].values())
+    f = res.report["findings"][0]
+    assert f["kind"] == "timing" and f["metrics_after"]["r2"] > f["metrics_before"]["r2"] + 0.03
