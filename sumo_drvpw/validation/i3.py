@@ -31,13 +31,12 @@ def vsp_with_specs(vehicle):
     file has none. Returns (equation, note or None)."""
     from sumo_drvpw.model.equations import vsp_from_specs
 
-    note = None
-    if "rolling_coefficient" not in vehicle.body:
-        body = dict(vehicle.body, rolling_coefficient=ROLLING_COEFFICIENT_ASSUMED)
-        vehicle = replace(vehicle, body=body)
-        note = (f"{Path(vehicle.path).name} has no [body] rolling_coefficient: "
-                f"C_r = {ROLLING_COEFFICIENT_ASSUMED} ASSUMED for vsp_bmw_i3spec")
-    return vsp_from_specs(vehicle), note
+    if "rolling_coefficient" in vehicle.body:
+        return vsp_from_specs(vehicle), None
+    vehicle = replace(vehicle, body=dict(vehicle.body, rolling_coefficient=ROLLING_COEFFICIENT_ASSUMED))
+    eq = vsp_from_specs(vehicle)
+    return eq, (f"{Path(vehicle.path).name} has no [body] rolling_coefficient: "
+                f"C_r = {ROLLING_COEFFICIENT_ASSUMED} ASSUMED for {eq.name}")
 
 
 def split_trips(trips: np.ndarray, season: np.ndarray) -> tuple[list[str], list[str]]:
