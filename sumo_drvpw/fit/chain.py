@@ -40,6 +40,8 @@ ETA_MIN = 1e-3
 LIMIT_QUANTILES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995)
 #: engine-off thresholds tried for the fuel chain [W]
 ENGINE_OFF_GRID_W = (0.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 8000.0, 10000.0, 12000.0, 15000.0)
+#: speeds above which the engine always runs, tried for the fuel chain [m/s] (None: no such speed)
+ENGINE_ON_SPEED_GRID_MPS = (None, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 17.0, 20.0)
 
 
 @dataclass
@@ -123,6 +125,9 @@ def _reading(name: str, val: float) -> str:
                     if not 0.7 <= val <= 0.97 else "")
     if name == "recuperation_efficiency":
         s = f"wheel → battery on braking {val:.1%} (incl. the blended friction share)"
+        if val >= 0.99:
+            return s + ("; IMPLAUSIBLE (no generator is lossless): the braking power is "
+                        "underestimated or other terms absorb losses")
         return s + ("; low: friction braking or a recuperation limit dominates" if val < 0.4 else "")
     if name == "recuperation_limit_w":
         return f"braking power beyond {val / 1000:.1f} kW goes to the friction brakes"
@@ -141,6 +146,8 @@ def _reading(name: str, val: float) -> str:
         return f"fuel power with the engine on at zero output {val / 1000:.2f} kW (friction, pumping, warm-up, auxiliaries)"
     if name == "engine_off_below_w":
         return f"engine off below {val / 1000:.1f} kW of driving power"
+    if name == "engine_on_above_mps":
+        return f"engine always on above {val * 3.6:.0f} km/h"
     return ""
 
 
@@ -255,7 +262,7 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
 
 def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict | None = None, *,
                    loads=(), mask=None, engine_off="profile", fuel: str = "gasoline",
-                   engine_on_above_mps: float | None = None) -> ChainFit:
+                   engine_on_above_mps="profile") -> ChainFit:
     """Calibrate a Willans-line fuel chain with engine-off and battery (SOC) correction.
 
     Parameters
@@ -268,7 +275,8 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     loads : logged load columns (gains ≥ 0, at the engine output)
     engine_off : "profile" (grid :data:`ENGINE_OFF_GRID_W`, by RSS) or a number [W]
     fuel : key of :data:`sumo_drvpw.model.constants.FUELS`
-    engine_on_above_mps : optional speed above which the engine always runs [m/s]
+    engine_on_above_mps : speed above which the engine always runs [m/s]: "profile" (grid
+        :data:`ENGINE_ON_SPEED_GRID_MPS` jointly with the threshold, by BIC), None or a number
     """
     p = np.asarray(p_drive_w, float)
     n = p.size
@@ -285,16 +293,19 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     lb = [0.0, 1.0] + [0.0] * len(loads)
     ub = [np.inf, 1.0 / ETA_MIN] + [np.inf] * len(loads)
     grid = ENGINE_OFF_GRID_W if engine_off == "profile" else (float(engine_off),)
+    vgrid = (ENGINE_ON_SPEED_GRID_MPS if engine_on_above_mps == "profile" else (engine_on_above_mps,))
     best, profile = None, []
     for off in grid:
-        tmpl = EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=engine_on_above_mps)
-        on = tmpl.engine_on(p, v).astype(float)
-        x = np.column_stack([on, on * np.maximum(p, 0.0) - pb] + [on * c for c in lcols])[ok]
-        beta, rss, active, xs = _solve(x, y[ok], w[ok], lb, ub)
-        profile.append({"engine_off_below_w": off, "rss": rss})
-        if best is None or rss < best[0]:
-            best = (rss, off, beta, active, xs)
-    rss, off, beta, active, xs = best
+        for von in vgrid:
+            tmpl = EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von)
+            on = tmpl.engine_on(p, v).astype(float)
+            x = np.column_stack([on, on * np.maximum(p, 0.0) - pb] + [on * c for c in lcols])[ok]
+            beta, rss, active, xs = _solve(x, y[ok], w[ok], lb, ub)
+            bic = _bic(rss, int(ok.sum()), len(names) + 1 + (von is not None))
+            profile.append({"engine_off_below_w": off, "engine_on_above_mps": von, "rss": rss, "bic": bic})
+            if best is None or bic < best[0]:
+                best = (bic, off, von, beta, active, xs, rss)
+    _, off, engine_on_above_mps, beta, active, xs, rss = best
     se = _covariance(xs, rss, active)
     b = float(beta[1])
     eta = 1.0 / b
@@ -308,7 +319,10 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
         params[f"loads.{c}"] = {"value": gains[c], "std_err": _nan_none(se[2 + j] * eta),
                                 "at_bound": bool(active[2 + j] != 0)}
     params["engine_off_below_w"] = {"value": off, "std_err": None, "at_bound": False,
-                                    "how": "profiled (RSS) over a grid"}
+                                    "how": "profiled (BIC) over a grid"}
+    if engine_on_above_mps is not None:
+        params["engine_on_above_mps"] = {"value": engine_on_above_mps, "std_err": None,
+                                         "at_bound": False, "how": "profiled (BIC) over a grid"}
     for name, p_ in params.items():
         p_["reading"] = _reading(name, p_["value"])
     chain = EnergyChain(predicts="fuel", idle_fuel_power_w=float(beta[0]), marginal_efficiency=eta,
@@ -336,11 +350,19 @@ def chain_target(m, chain: EnergyChain) -> np.ndarray:
     return m.power_w
 
 
-def calibrate_on(m, equation, *, loads=(), hvac=None, limit="profile", engine_off="profile",
-                 mask=None) -> ChainFit:
-    """Calibrate the chain of ``m.target`` on a :class:`~sumo_drvpw.data.measured.Measured`,
-    driving power from ``equation`` (its road-load terms); fit on ``m.usable`` (and ``mask``)."""
-    p = equation.power(m.inputs)
+def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engine_off="profile",
+                 mask=None, p_drive_w=None) -> ChainFit:
+    """Calibrate the chain of ``m.target`` on a :class:`~sumo_drvpw.data.measured.Measured`;
+    fit on ``m.usable`` (and ``mask``).
+
+    The chain's input is ``p_drive_w`` [W] when given, else ``equation``'s driving power.
+    Give the *measured* driving power when the log has one (motor torque × speed, the
+    power-split P_PTdrv): the chain's parameters then describe the powertrain alone. Fitted
+    on a road-load equation's power instead, they also absorb that equation's errors, and
+    noise in the input attenuates the fitted slopes (errors in variables): on the Prius
+    Gen 2 this turns η_m ≈ 0.39 into an implausible 0.6 (docs/energy-chain.md).
+    """
+    p = equation.power(m.inputs) if p_drive_w is None else np.asarray(p_drive_w, float)
     dt = m.log.df["dt_s"].to_numpy(float)
     use = m.usable if mask is None else (m.usable & mask)
     sig = m.inputs.signals
