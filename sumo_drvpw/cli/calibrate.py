@@ -187,10 +187,22 @@ def main_chain(args) -> int:
             "logs": mw.log.files, "power_source": mw.source, "candidates_spec": args.candidates})
         print(res.summary())
         road = f"road-load equation calibrated stepwise on {mw.source}"
-    fit = calibrate_on(m, eq, loads=args.load, hvac=hvac)
+    # the chain's input: the log's measured driving power when it has one (the chain then
+    # describes the powertrain, not the road-load equation's errors), else the equation's
+    from sumo_drvpw.data.measured import load_measured as _lm
+
+    p_in, chain_input = None, f"driving power of {eq.name}"
+    try:
+        mw = _lm(args.logs, args.vehicle)
+        if not mw.source.startswith("battery"):
+            p_in, chain_input = mw.power_w, f"measured driving power ({mw.source})"
+    except UserError:
+        pass
+    fit = calibrate_on(m, eq, loads=args.load, hvac=hvac, p_drive_w=p_in)
     eq.name = args.name or out.stem
     eq.chain = fit.chain
     eq.chain.provenance = {"logs": m.log.files, "target": m.source, "road_load": road,
+                           "chain_input": chain_input,
                            "vehicle": m.vehicle.path if m.vehicle else None}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     print(fit.summary())
