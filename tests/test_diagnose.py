@@ -312,3 +312,21 @@ def test_prius_gen2_lag_found_on_real_data(shared_data, tmp_path):
     assert len(tm["per_trip_lag_s"]) == 2 and all(-1.8 <= v <= -1.1 for v in tm["per_trip_lag_s"].values())
     f = res.report["findings"][0]
     assert f["kind"] == "timing" and f["metrics_after"]["r2"] > f["metrics_before"]["r2"] + 0.03
+
+
+def test_cli_writes_one_output_set_and_never_half(tmp_path, capsys):
+    from sumo_drvpw.cli import main
+
+    df, _ = E.synth_trips(1, 4.0, seed=2, effects=[E.LogPower()], noise=NOISE)
+    path = tmp_path / "l.parquet"
+    df.to_parquet(path)
+    out = tmp_path / "o"
+    assert main(["diagnose", str(path), "--vehicle", "prius3", "--equation", TRUTH, "--out", str(out),
+                 "--no-figures", "--quiet"]) == 0
+    assert {"trace.json", "trace.md", "final_equation.toml", "manifest.json"} <= {p.name for p in out.iterdir()}
+    # a folder sumo-drvpw did not write is left untouched without --force
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("keep")
+    assert main(["diagnose", str(path), "--vehicle", "prius3", "--out", str(foreign), "--quiet"]) != 0
+    assert [p.name for p in foreign.iterdir()] == ["notes.txt"]

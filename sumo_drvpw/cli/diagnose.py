@@ -1,6 +1,7 @@
 """`sumo-drvpw diagnose`: trace the residual of an equation to effects it lacks.
 
-Writes DIR/trace.json (the issue's shape), DIR/trace_details.json (screening, every
+Writes, as one output set (whole or absent, with manifest.json; ``--force`` to replace a
+folder sumo-drvpw did not write), DIR/trace.json (the issue's shape), DIR/trace_details.json (screening, every
 round's best candidates, the test), DIR/trace.md, DIR/final_equation.toml and figures
 (residual against the chosen signal before and after each finding; error against speed
 before and after). See :mod:`sumo_drvpw.fit.diagnose` for the method and the test.
@@ -43,6 +44,10 @@ def configure(p):
     p.add_argument("--min-speed", type=float, default=0.1, help="leave out samples slower than this [m/s] (default 0.1)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
+    from sumo_drvpw.cli import add_force, add_log_options
+
+    add_force(p)
+    add_log_options(p)
 
 
 def _globs(s):
@@ -59,13 +64,14 @@ def options_from_args(args):
                         responses=args.responses)
 
 
-def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, progress=None, measured=None):
+def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, progress=None, measured=None,
+        read_options=None):
     """Load, trace and write every output; returns the DiagnoseResult."""
     from sumo_drvpw.model.equations import load_equation
     from sumo_drvpw.fit.diagnose import diagnose
     from sumo_drvpw.data.measured import load_measured, resolve_equations
 
-    m = measured if measured is not None else load_measured(logs, vehicle)
+    m = measured if measured is not None else load_measured(logs, vehicle, read_options)
     eq = None
     if equation:
         eq = resolve_equations([equation], m.vehicle)[0] if equation == "vsp_spec" else load_equation(equation)
@@ -270,8 +276,11 @@ def main(args) -> int:
             msg = msg.replace(f"diagnose option {field} ", f"--{field.replace('_', '-')} ")
         raise UserError(msg) from None
     progress = None if args.quiet else (lambda s: print(s, file=sys.stderr))
-    res = run(args.logs, args.vehicle, args.equation, args.out, opt, figures=not args.no_figures,
-              progress=progress)
+    from sumo_drvpw.cli import output_set, read_options
+
+    with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
+        res = run(args.logs, args.vehicle, args.equation, tmp, opt, figures=not args.no_figures,
+                  progress=progress, read_options=read_options(args))
     r = res.report
     print(f"baseline held-out RMSE {r['baseline']['metrics']['rmse_w']:.1f} W; "
           f"{len(r['findings'])} finding(s)")
