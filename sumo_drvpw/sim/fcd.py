@@ -248,14 +248,14 @@ def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
     from sumo_drvpw.sim.scenario import load_scenario
 
     if scenario is None and net is None:
-        raise UserError("give the network the FCD was recorded on (--net) or a scenario")
+        raise UserError("FCD: give the network the FCD was recorded on, or a scenario")
     if equations is not None:
         overrides["equations"] = list(equations)
     if scenario is not None:
         sc = load_scenario(scenario, **overrides)
     else:
         if "equations" not in overrides:
-            raise UserError("give equations (--equation) or a scenario with equations")
+            raise UserError("FCD: give the equations, or a scenario that names them")
         sc = load_scenario(doc={"equations": overrides.pop("equations"),
                                 "sumo": {"net": str(net)}}, **overrides)
     import dataclasses
