@@ -81,6 +81,14 @@ ROLES = {
     "mg1_torque_exec_nm": "response", "mg2_torque_exec_nm": "response",
     "regen_brake_torque_nm": "response", "soc_pct": "response", "accel_pedal_pct": "response",
     "engine_load_pct": "response", "engine_load_abs_pct": "response",
+    # the phone's accelerometer axes and the GPS speeds measure the car's motion, which
+    # follows the power demand: the model's own inputs seen through another sensor
+    "phone_ax_mps2": "response", "phone_ay_mps2": "response", "phone_az_mps2": "response",
+    "phone_accel_calibrated_mps2": "response", "phone_accel_total_mps2": "response",
+    "gps_speed_mps": "response", "gps_speed_phone_mps": "response",
+    "bearing_deg": "condition", "latitude_deg": "condition", "longitude_deg": "condition",
+    "gps_latitude_deg": "condition", "gps_longitude_deg": "condition",
+    "altitude_phone_m": "condition",
 }
 REQUIRED = (TIME, "Speed (OBD)(mph)")
 #: powertrain fields whose first complete row marks the OBD link as up
