@@ -174,3 +174,25 @@ def test_out_of_range_vehicle_steps_counted(tmp_path):
         (tmp_path / "t.toml").write_text(
             (tmp_path / "s.toml").read_text().replace('["car"]', '["car", "kar"]'))
         run_scenario(tmp_path / "t.toml", None, equations=[slow])
+
+
+def test_accountant_with_equations_only_finds_net_and_vtypes(tmp_path):
+    """Without a scenario: the net file and the vTypes (masses) come from SUMO's own
+    options; Ctrl-free user loop with traci-style target-time steps counted as missed."""
+    sc = load_scenario(CITY, end=60)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, equations=["vsp_ldv1999"])
+        assert acc.net.path.name == "city.net.xml"
+        for _ in range(40):
+            conn.simulationStep()
+            acc.step()
+        conn.simulationStep(conn.simulation.getTime() + 2.0)  # jumps 4 steps at once
+        acc.step()
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    assert res["vehicles"] > 0 and res["missed_steps"] == 3
+    assert res["assumptions"]["default_masses"] == {}  # prius3.vtype.xml gives 1625 kg
+    assert (res.vehicles.mass_kg == 1625.0).all()
+    assert any("not booked" in w for w in res["warnings"])

@@ -389,3 +389,26 @@ def test_equations_applied_per_vtype():
     # "aero" is v·(v − w)·|v − w| (the ½ρ·Cd·A lives in the coefficient), no wind here
     np.testing.assert_allclose(led.veh_trac[ib, 1].sum(), 0.6 * 20.0 ** 3 * 0.5)
     np.testing.assert_array_equal(led.edge_count[NET.edge_ids.index("e01")], [1, 2])
+
+
+@settings(max_examples=40, deadline=None)
+@given(speeds=st.lists(st.floats(0.0, 40.0), min_size=1, max_size=40),
+       dt=st.sampled_from([0.1, 0.25, 0.5, 1.0, 2.0]), coef=st.floats(0.5, 1.5))
+def test_acc_energy_is_the_kinetic_energy_change(speeds, dt, coef):
+    """Any speed history from rest to rest at any Δt: the acc term's net energy is 0 to
+    rounding, and at every step the running net equals coef·½m·v_t² (the loop books
+    coef·m·v̄·a·Δt = coef·½m(v_t² − v_t−1²))."""
+    m = 1300.0
+    vs = [0.0, *speeds, 0.0]
+    script = [{"a": (v, 0.0, 90.0, "e01_0", 10.0, 0.0)} for v in vs]
+    led = Ledger(len(NET.edge_ids), 1)
+    run_loop(FakeConnection(script, {"a": "car"}, dt=dt), NET,
+             EquationSet([Equation("k", {"acc": coef})]), led,
+             Physics(positions="getter", slope_reference="getslope"),
+             _resolver({"car": m}, 1))
+    net = led.veh_trac[0, 0].sum() + led.veh_recup[0, 0].sum()
+    scale = coef * 0.5 * m * max(vs) ** 2 + 1.0
+    assert abs(net) <= 1e-9 * scale
+    gained = led.veh_trac[0, 0].sum()
+    assert gained == pytest.approx(coef * 0.5 * m * sum(
+        max(b * b - a * a, 0.0) for a, b in zip(vs, vs[1:])), rel=1e-9, abs=1e-6)
