@@ -322,3 +322,19 @@ def test_tall_r_handles_zero_duplicate_and_nearly_collinear_columns():
     got = ols_from_r(ry, keep, len(y))
     np.testing.assert_allclose(got.params, ref.params, rtol=1e-8)
     np.testing.assert_allclose(got.bse, ref.bse, rtol=1e-8)
+
+
+def test_signal_candidates_are_read_and_other_extra_columns_are_not(logs):
+    """Calibrate reads the canonical columns plus the signals its candidates name; the
+    result equals the in-memory path, which reads every column."""
+    cands = ("acc", "grade", "aero", "roll", "[engine_on]")
+    ref, _ = _in_memory_calibration(logs["parquet"], cands)
+    make = partial(CalibrationStats, cands)
+    assert "engine_on" in make().columns() and "heading_deg" not in make().columns()
+    st, _ = run([logs["parquet"]], make, load_vehicle("prius3"), rows=20_000)
+    got = calibrate_from_stats(st)
+    assert got.terms == ref.terms
+    for t in ref.terms:
+        assert got.params[t] == pytest.approx(ref.params[t], rel=RTOL)
+    batch = next(whole_trips(Part(str(logs["parquet"])), rows=20_000, columns=make().columns()))[0]
+    assert "engine_on" in batch and "heading_deg" not in batch and "speed_mps" in batch

@@ -32,9 +32,12 @@ from typing import Iterator
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.log import ReadOptions, expand_paths, from_frame
+from sumo_drvpw.data.log import DERIVED, FLAGS, NUMERIC, ReadOptions, expand_paths, from_frame
 from sumo_drvpw.errors import UserError
 
+#: Columns the reader and measured power use; calibrate and compare read these plus the
+#: signals their terms name (extra columns are for the tracer, not read here).
+CANONICAL = frozenset(NUMERIC) | frozenset(FLAGS) | frozenset(DERIVED)
 #: Rows read per chunk [-]: the memory bound besides the longest trip.
 BATCH_ROWS = 1_000_000
 #: Longest trip streamed [rows] (about 29 days at 8 Hz); longer ones must be split.
@@ -128,11 +131,12 @@ def plan(paths, part_rows: int | None = None) -> list[Part]:
     return parts
 
 
-def _chunks(part: Part, rows: int) -> Iterator[pd.DataFrame]:
+def _chunks(part: Part, rows: int, columns=None) -> Iterator[pd.DataFrame]:
     p = Path(part.path)
     try:
         if _is_parquet(p):
             f = _parquet_file(p)
+            cols = None if columns is None else [c for c in f.schema_arrow.names if c in columns]
             groups, at = None, 0
             if part.start is not None:
                 sizes = [f.metadata.row_group(i).num_rows for i in range(f.metadata.num_row_groups)]
@@ -140,7 +144,7 @@ def _chunks(part: Part, rows: int) -> Iterator[pd.DataFrame]:
                 groups = [i for i in range(len(sizes))
                           if ends[i] > part.start and ends[i] - sizes[i] < part.stop]
                 at = int(ends[groups[0]] - sizes[groups[0]]) if groups else 0
-            for b in f.iter_batches(batch_size=rows, row_groups=groups):
+            for b in f.iter_batches(batch_size=rows, row_groups=groups, columns=cols):
                 lo, hi = at, at + b.num_rows
                 at = hi
                 if part.start is not None:
@@ -149,7 +153,8 @@ def _chunks(part: Part, rows: int) -> Iterator[pd.DataFrame]:
                     b = b.slice(max(part.start - lo, 0), min(hi, part.stop) - max(lo, part.start))
                 yield b.to_pandas()
         else:
-            for df in pd.read_csv(p, chunksize=rows, low_memory=False):
+            use = None if columns is None else (lambda c: c in columns)
+            for df in pd.read_csv(p, chunksize=rows, low_memory=False, usecols=use):
                 yield df
     except pd.errors.EmptyDataError:
         raise UserError(f"{p}: empty file (no header, no rows)") from None
@@ -157,9 +162,10 @@ def _chunks(part: Part, rows: int) -> Iterator[pd.DataFrame]:
         raise UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}") from None
 
 
-def whole_trips(part: Part, rows: int = BATCH_ROWS,
-                max_trip_rows: int = MAX_TRIP_ROWS) -> Iterator[tuple[pd.DataFrame, int]]:
-    """Raw frames of whole trips of a Part, each with the offset of its first row.
+def whole_trips(part: Part, rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRIP_ROWS,
+                columns=None) -> Iterator[tuple[pd.DataFrame, int]]:
+    """Raw frames of whole trips of a Part, each with the offset of its first row
+    (``columns``: read only these, when present; None: all).
 
     The rows of the last trip of a chunk are carried into the next chunk until a new
     trip starts; a trip longer than ``max_trip_rows`` raises :class:`UserError`.
@@ -167,7 +173,7 @@ def whole_trips(part: Part, rows: int = BATCH_ROWS,
     carry: pd.DataFrame | None = None
     offset = 0
     seen_rows = 0
-    for df in _chunks(part, rows):
+    for df in _chunks(part, rows, columns):
         seen_rows += len(df)
         if carry is not None and len(carry):
             df = pd.concat([carry, df], ignore_index=True)
@@ -196,7 +202,7 @@ def whole_trips(part: Part, rows: int = BATCH_ROWS,
 
 
 def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
-                  rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRIP_ROWS):
+                  rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRIP_ROWS, columns=None):
     """:class:`~sumo_drvpw.data.measured.Measured` per batch of whole trips of a Part.
 
     Parameters
@@ -205,11 +211,13 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
     vehicle : a :class:`~sumo_drvpw.model.vehicles.Vehicle` or None
     options : :class:`~sumo_drvpw.data.log.ReadOptions`
     rows : rows per chunk read [-]
+    columns : read only these columns (e.g. :data:`CANONICAL` and the signals the terms
+        name); None: all
     """
     from sumo_drvpw.data.measured import measure
 
     stem = Path(part.path).stem
-    for df, off in whole_trips(part, rows, max_trip_rows):
+    for df, off in whole_trips(part, rows, max_trip_rows, columns):
         first = off + (part.start or 0)
         name = part.path if first == 0 else f"{part.path} (batch from row {first})"
         if "trip_id" not in df:

@@ -65,7 +65,8 @@ def part_stats(part: Part, make, vehicle=None, options=None, rows: int = BATCH_R
     """
     with _one_blas_thread():
         st = make()
-        for m in iter_measured(part, vehicle, options, rows):
+        cols = st.columns() if hasattr(st, "columns") else None
+        for m in iter_measured(part, vehicle, options, rows, columns=cols):
             st.add(m)
             if tick is not None:
                 tick(len(m.power_w))

@@ -174,6 +174,12 @@ class CalibrationStats:
     vehicle: object = None
     files: list = field(default_factory=list)
 
+    def columns(self) -> frozenset:
+        """Columns to read: the reader's canonical ones and the signals the candidates name."""
+        from sumo_drvpw.data.stream import CANONICAL
+
+        return CANONICAL | {s for t in self.names for s in parse_term(t).signals}
+
     def add(self, m) -> "CalibrationStats":
         """Accumulate one batch (a :class:`~sumo_drvpw.data.measured.Measured` of whole trips)."""
         use = calibration_mask(m, self.names)
@@ -427,6 +433,13 @@ class CompareStats:
         self.source: str | None = None
         self.vehicle = None
         self.files: list = []
+
+    def columns(self) -> frozenset:
+        """Columns to read: the reader's canonical ones and the signals the equations name."""
+        from sumo_drvpw.data.stream import CANONICAL
+
+        return CANONICAL | {s for eq in self.equations for t in eq.terms
+                            for s in parse_term(t).signals}
 
     def add(self, m) -> "CompareStats":
         """Accumulate one batch: the usable samples of a Measured of whole trips."""
