@@ -39,7 +39,7 @@ from sumo_drvpw.errors import UserError
 #: signals their terms name (extra columns are for the tracer, not read here).
 CANONICAL = frozenset(NUMERIC) | frozenset(FLAGS) | frozenset(DERIVED)
 #: Rows read per chunk [-]: the memory bound besides the longest trip.
-BATCH_ROWS = 1_000_000
+BATCH_ROWS = 500_000
 #: Longest trip streamed [rows] (about 29 days at 8 Hz); longer ones must be split.
 MAX_TRIP_ROWS = 20_000_000
 #: Rows a Part of a Parquet file has at least when a file is cut for parallel engines.
@@ -185,11 +185,16 @@ def whole_trips(part: Part, rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRI
         else:
             cut = 0
         if cut > 0:
-            yield df.iloc[:cut].reset_index(drop=True), offset
+            # the unfinished trip is copied out first, so the chunk is freed once the
+            # batch is used (slices would keep the whole chunk alive: two chunks in memory)
+            carry = df.iloc[cut:].copy().reset_index(drop=True)
+            out = [(df.iloc[:cut].reset_index(drop=True), offset)]
+            del df
+            yield out.pop()  # this frame keeps no reference to the batch while it is used
             offset += cut
-            carry = df.iloc[cut:].reset_index(drop=True)
         else:
             carry = df
+            del df
         if len(carry) > max_trip_rows:
             trip = carry["trip_id"].iloc[0] if "trip_id" in carry else Path(part.path).stem
             raise UserError(f"{part.describe()}: trip '{trip}' has more than {max_trip_rows} rows "
@@ -198,7 +203,9 @@ def whole_trips(part: Part, rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRI
     if seen_rows == 0:
         raise UserError(f"{part.path}: empty table (header only, no samples)")
     if carry is not None and len(carry):
-        yield carry, offset
+        out = [(carry, offset)]
+        del carry
+        yield out.pop()
 
 
 def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
@@ -224,4 +231,8 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
             df.insert(0, "trip_id", stem)
         log = from_frame(df, vehicle, options, name=name)
         log.files = [part.path]
-        yield measure(log, vehicle)
+        del df
+        m = measure(log, vehicle)
+        del log
+        yield m
+        del m  # before the next chunk is read: one batch in memory at a time

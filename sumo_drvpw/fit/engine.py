@@ -68,8 +68,10 @@ def part_stats(part: Part, make, vehicle=None, options=None, rows: int = BATCH_R
         cols = st.columns() if hasattr(st, "columns") else None
         for m in iter_measured(part, vehicle, options, rows, columns=cols):
             st.add(m)
+            n = len(m.power_w)
+            del m  # freed before the next batch is read
             if tick is not None:
-                tick(len(m.power_w))
+                tick(n)
     return st
 
 
