@@ -122,6 +122,8 @@ def main() -> int:
     ap.add_argument("--diagnose-max", type=float, default=1e6,
                     help="largest size diagnose (in memory) is run at")
     ap.add_argument("--tmp", default=tempfile.gettempdir(), help="where the logs are generated")
+    ap.add_argument("--commands", default="calibrate,compare,diagnose",
+                    help="which commands to run (comma list)")
     args = ap.parse_args()
     sizes = [int(float(s)) for s in args.sizes.split(",")]
     results = {}
@@ -139,14 +141,17 @@ def main() -> int:
                   f"generated in {gen_s:.0f} s)", flush=True)
             r = {}
             cal = d / "cal_local.toml"
-            r["calibrate"] = _timed(["calibrate", str(logs), "--candidates", "indt-var-2",
-                                     "--out", str(cal)])
-            r["compare"] = _timed(["compare", str(logs), "--equation", "drvpw_prius3",
-                                   "--equation", "vsp_ldv1999", "--out", str(d / "cmp")])
-            if rows <= args.diagnose_max:
+            cmds = args.commands.split(",")
+            if "calibrate" in cmds:
+                r["calibrate"] = _timed(["calibrate", str(logs), "--candidates", "indt-var-2",
+                                         "--out", str(cal)])
+            if "compare" in cmds:
+                r["compare"] = _timed(["compare", str(logs), "--equation", "drvpw_prius3",
+                                       "--equation", "vsp_ldv1999", "--out", str(d / "cmp")])
+            if "diagnose" in cmds and rows <= args.diagnose_max:
                 r["diagnose"] = _timed(["diagnose", str(logs), "--equation", "drvpw_prius3",
                                         "--out", str(d / "diag"), "--no-figures", "--quiet"])
-            if args.dask_workers and size == max(sizes):
+            if args.dask_workers and size == max(sizes) and "calibrate" in cmds:
                 cal_d = d / "cal_dask.toml"
                 r["calibrate (dask)"] = _timed(["calibrate", str(logs), "--candidates", "indt-var-2",
                                                 "--out", str(cal_d), "--engine", "dask",
@@ -167,7 +172,7 @@ def main() -> int:
     big = {k: v for k, v in results.items() if k >= 99_000_000}
     b = next(iter(big.values()), None)
     largest = max(results)
-    cal_rate = largest / results[largest]["calibrate"][0]
+    cal_rate = largest / results[largest]["calibrate"][0] if "calibrate" in results[largest] else float("nan")
     f = lambda r, k: f"{r[k][1]:.0f}" if r and k in r else "n/a"  # noqa: E731
     print(f"calibrate_peak_mb_100M={f(b, 'calibrate')} calibrate_rows_per_s={cal_rate:.0f} "
           f"diagnose_peak_mb_100M={f(b, 'diagnose')}")
