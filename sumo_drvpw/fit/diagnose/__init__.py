@@ -57,7 +57,22 @@ best candidate (smallest held-out SSE) is accepted when its one-sided p-value �
 the smaller of a paired t-test of mean(d_b) > 0 and a Wilcoxon signed-rank test of a
 positive shift of d_b (Bonferroni over the two) — times m, the number of candidates
 scored in that round (Bonferroni), is < ``alpha``, **and** its relative held-out RMSE
-gain 1 − √(SSE_c/SSE_0) ≥ ``min_gain``.
+gain 1 − √(SSE_c/SSE_0) ≥ ``min_gain``. Equal gains are ranked by candidate order, never
+by rounding; before scoring, candidates identical to or spanned by earlier ones (given the
+model) are dropped and listed (``details["candidates_dropped"]``).
+
+Replication (issue #11 §4): a candidate that passes the test is kept only if it lowers the
+held-out error on more than half of the trips (with ≥ 3 trips) and its energy share is
+plausible (|share| ≤ 50 %); otherwise it is removed again, listed under
+``details["not_replicated"]``, and the next best candidate of the round is tried. Every
+finding reports ``replication``: on how many trips it helped, and per-trip RMSE before
+and after.
+
+Roles and structure: columns carry roles (:mod:`sumo_drvpw.data.roles`); responses are
+offered only with ``responses`` and then labelled "response of the target — not an effect
+the model lacks". Structural effects (:mod:`sumo_drvpw.fit.diagnose.structural`): a
+power–speed lag is tested first and corrected in the data; recuperation regimes, air
+density from altitude, a missing grade term and the accelerometer grade are candidates.
 
 Reported numbers: coefficients and their standard errors come from an OLS fit on all
 analysis samples (classical standard errors; autocorrelated residuals make them
@@ -68,9 +83,6 @@ the model's total traction energy.
 """
 
 from __future__ import annotations
-
-import datetime as _dt
-import fnmatch
 
 from sumo_drvpw.fit.diagnose.candidates import Candidate, generate_candidates, screen_signals
 from sumo_drvpw.fit.diagnose.options import POWER_SOURCE_COLUMNS, DiagnoseOptions

@@ -47,8 +47,6 @@ def paired_test(d: np.ndarray) -> float:
     return min(1.0, 2.0 * min(p_t, p_w))
 
 
-_paired_test = paired_test
-
 
 def _role_of(cand: Candidate, roles: dict) -> str:
     """Role of a finding: its column's role; ``structural`` for effects no column names."""
@@ -186,13 +184,13 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
         table = []
         for i in order[:10]:
             c, s, d, s0, _ = results[i]
-            p = _paired_test(d)
+            p = paired_test(d)
             table.append({"term": c.term, "effect": c.effect, "rmse_gain": gains[i],
                           "p_value_bonferroni": min(1.0, p * m_scored)})
         added = None
         for pos, i in enumerate(order[:MAX_TRIES]):
             cbest, sse_b, d_b, sse0_b, fold_b = results[int(i)]
-            p_adj = min(1.0, _paired_test(d_b) * m_scored)
+            p_adj = min(1.0, paired_test(d_b) * m_scored)
             if not (p_adj < opt.alpha and gains[int(i)] >= opt.min_gain):
                 break
             f, extra = _try_add(tr, cbest, fold_b, y, dt, roles, opt, p_adj)
@@ -209,7 +207,7 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
         best_i = int(order[0])
         rounds.append({"round": rnd + 1, "candidates_scored": m_scored,
                        "best": results[best_i][0].term, "rmse_gain": gains[best_i],
-                       "p_value_bonferroni": min(1.0, _paired_test(results[best_i][2]) * m_scored),
+                       "p_value_bonferroni": min(1.0, paired_test(results[best_i][2]) * m_scored),
                        "accepted": added is not None, "added": added[0].term if added else None,
                        "top": table})
         say(f"round {rnd + 1}: {m_scored} candidates, best {results[best_i][0].term} gain "
@@ -324,7 +322,7 @@ def _timing_step(y_all, ana, x_eq, decl_vals, trip_codes_all, trip_names, t_all,
     x = x_eq.take(idx)
     tr0 = _declared_model(x, shifted[0][idx], dt_all[idx], t_all[idx], trip_codes_all[idx],
                           trip_names, {}, opt, declared, decl_vals[idx])
-    res = timing(tr0, {k: v[idx] for k, v in shifted.items()}, dt_med, _paired_test)
+    res = timing(tr0, {k: v[idx] for k, v in shifted.items()}, dt_med, paired_test)
     note = {k: v for k, v in res.items() if k != "d"}
     note["per_trip_lag_s"] = per_trip_lags(tr0, {k: v[idx] for k, v in shifted.items()}, dt_med)
     note["test"] = ("lag chosen per fold on the training folds, scored on held-out blocks; "
