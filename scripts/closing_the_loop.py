@@ -12,8 +12,10 @@ once in turn. On the training trips only:
    constraints, saying why;
 2. ``diagnose`` (default settings: conditions, loads and structural effects; responses
    left out) searches what the equation lacks, with trip-grouped cross-validation;
-3. measurement-side findings are corrected in the data (a power–speed lag; the
-   accelerometer grade), and the equation is recalibrated on the corrected data.
+3. measurement-side findings are corrected in the data (a power–speed lag; when the
+   tracer finds that the accelerometer carries grade the logged grade lacks, the grade is
+   fused: accelerometer above a 60 s crossover, logged grade below it, which removes the
+   accelerometer's mounting-pitch bias), and the equation is recalibrated on it.
 
 The held-out trips then give R² and per-trip traction energy errors (Σ max(P, 0)·Δt,
 predicted/measured − 1) before and after, against VSP LDV 1999 as a reference. The JLU
@@ -64,9 +66,11 @@ def write_subset(df, trips, path, keep: bool, roles: dict | None = None):
 
 def corrected_measured(path, vehicle, lag_s: float, accel_grade: bool):
     """Measured power and inputs of a log with the measurement-side corrections applied:
-    the power read ``lag_s`` later within trips; the grade from the accelerometer."""
+    the power read ``lag_s`` later within trips; the grade fused from the accelerometer (fast
+    part) and the logged grade (slow part, free of the accelerometer's mounting pitch)."""
     from sumo_drvpw.data.measured import load_measured
-    from sumo_drvpw.fit.diagnose.structural import accelerometer_sin_grade, shift_within_trips
+    from sumo_drvpw.fit.diagnose.structural import (accelerometer_sin_grade, fused_sin_grade,
+                                                    shift_within_trips)
 
     m = load_measured([path], vehicle)
     trip = m.log.df["trip_id"].to_numpy()
@@ -77,8 +81,8 @@ def corrected_measured(path, vehicle, lag_s: float, accel_grade: bool):
         m.power_w = shift_within_trips(np.asarray(m.power_w, float), codes, int(round(lag_s / dt)))
         m.usable = m.usable & np.isfinite(m.power_w)
     if accel_grade and "imu_accel_mps2" in m.inputs.signals:
-        s = accelerometer_sin_grade(m.inputs.signals["imu_accel_mps2"], m.inputs.a, codes, dt)
-        m.inputs.theta = np.arcsin(s)
+        s_acc = accelerometer_sin_grade(m.inputs.signals["imu_accel_mps2"], m.inputs.a, codes, dt)
+        m.inputs.theta = np.arcsin(fused_sin_grade(s_acc, np.sin(m.inputs.theta), codes, dt))
         m.usable = m.usable & np.isfinite(m.inputs.theta)
     return m
 
@@ -305,7 +309,8 @@ def render(cars, took) -> str:
             gs = d.get("structural", {}).get("grade_sources")
             if gs:
                 L.append(f"- grade from each source: logged s.d. {gs['logged']['sd_deg']:.2f}°, accelerometer "
-                         f"s.d. {gs['accelerometer']['sd_deg']:.2f}°, correlation {gs['corr']:.2f}")
+                         f"s.d. {gs['accelerometer']['sd_deg']:.2f}° (correlation with logged {gs['corr']:.2f}), "
+                         f"fused (crossover {gs['fused']['crossover_s']:g} s) s.d. {gs['fused']['sd_deg']:.2f}°")
             if run["corr_eq"] is not None:
                 cp = run["corr_phys"]
                 L.append(f"- recalibrated on the corrected training data ({cp['used']}): {_terms(run['corr_eq'])}; "
@@ -329,7 +334,7 @@ def render(cars, took) -> str:
                 L.append(row(eqname, doc, "as logged"))
             if run["held_corr"]:
                 fixes = [x for x in (f"lag {run['lag']:+.3g} s" if run["lag"] else "",
-                                     "accelerometer grade" if run["acc_grade"] else "") if x]
+                                     "fused accelerometer grade" if run["acc_grade"] else "") if x]
                 for eqname, doc in run["held_corr"].items():
                     L.append(row(eqname, doc, f"corrected ({', '.join(fixes)})" if fixes else "as logged"))
             L.append("")

@@ -330,3 +330,23 @@ def test_cli_writes_one_output_set_and_never_half(tmp_path, capsys):
     (foreign / "notes.txt").write_text("keep")
     assert main(["diagnose", str(path), "--vehicle", "prius3", "--out", str(foreign), "--quiet"]) != 0
     assert [p.name for p in foreign.iterdir()] == ["notes.txt"]
+
+
+def test_fused_grade_keeps_the_fast_accelerometer_and_drops_its_mounting_pitch():
+    """Complementary fusion: the logged grade is smoothed (slow part right), the
+    accelerometer is sharp but biased by its mounting pitch (0.02 rad here)."""
+    import pandas as pd
+
+    from sumo_drvpw.fit.diagnose.structural import fused_sin_grade
+
+    dt, n = 0.1, 30000
+    t = np.arange(n) * dt
+    true = 0.03 * np.sin(2 * np.pi * t / 40.0) + 0.02 * np.sin(2 * np.pi * t / 900.0)
+    logged = pd.Series(true).rolling(300, center=True, min_periods=1).mean().to_numpy()  # 30 s
+    acc = true + 0.02
+    codes = np.zeros(n, int)
+    fused = fused_sin_grade(acc, logged, codes, dt)
+    inner = slice(1000, n - 1000)
+    err = lambda s: float(np.sqrt(np.mean((s[inner] - true[inner]) ** 2)))  # noqa: E731
+    assert err(fused) < 0.3 * err(acc) and err(fused) < 0.3 * err(logged)
+    assert abs(np.mean(fused[inner] - true[inner])) < 0.002

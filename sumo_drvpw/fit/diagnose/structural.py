@@ -51,6 +51,10 @@ R_UNIVERSAL = 8.31446
 P0_KPA = 101.325
 #: smoothing of the accelerometer grade [s]
 ACC_GRADE_WINDOW_S = 5.0
+#: crossover of the complementary grade fusion [s]: above it the logged (elevation) grade,
+#: below it the accelerometer; well above the ~10 s the 100 m elevation smoothing spans at
+#: town speeds, well below a trip (an accelerometer's mounting pitch biases its slow part)
+FUSION_TAU_S = 60.0
 #: names of a longitudinal accelerometer column (reads dv/dt + g·sin θ)
 ACCELEROMETER_COLUMNS = ("imu_accel_mps2", "accel_long_mps2", "longitudinal_accel_mps2")
 #: recuperation levels of the brake-limit candidates: quantiles of predicted recuperation
@@ -185,6 +189,22 @@ def accelerometer_sin_grade(imu_mps2, accel_mps2, trip_codes, dt_s: float,
     return np.clip(sm, -0.3, 0.3)
 
 
+def fused_sin_grade(sin_acc, sin_log, trip_codes, dt_s: float, tau_s: float = FUSION_TAU_S) -> np.ndarray:
+    """Complementary fusion of two grades: sin θ = LP(sin θ_log) + (sin θ_acc − LP(sin θ_acc)),
+    LP a centred moving mean of ``tau_s`` within trips. The logged grade (from elevation) is
+    unbiased over long distances but smoothed; the accelerometer is sharp but carries its
+    mounting pitch as a bias. [sin θ, -]"""
+    import pandas as pd
+
+    win = max(1, int(round(tau_s / max(dt_s, 1e-3))))
+    codes = np.asarray(trip_codes)
+
+    def lp(x):
+        return pd.Series(np.asarray(x, float)).groupby(codes).transform(
+            lambda z: z.rolling(win, center=True, min_periods=1).mean()).to_numpy()
+    return np.clip(lp(sin_log) + np.asarray(sin_acc, float) - lp(sin_acc), -0.3, 0.3)
+
+
 def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_df,
                        counts: dict) -> tuple[dict, list[Candidate], dict]:
     """Derived columns and candidates of the model-side structural effects.
@@ -252,5 +272,9 @@ def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_d
                            "sd_deg": float(np.degrees(np.std(np.arcsin(np.clip(sin_log, -1, 1)))))},
                 "accelerometer": {"mean_abs_deg": float(np.degrees(np.mean(np.abs(np.arcsin(sin_acc))))),
                                   "sd_deg": float(np.degrees(np.std(np.arcsin(sin_acc))))},
+                "fused": (lambda f: {"mean_abs_deg": float(np.degrees(np.mean(np.abs(np.arcsin(f))))),
+                                     "sd_deg": float(np.degrees(np.std(np.arcsin(f)))),
+                                     "crossover_s": FUSION_TAU_S})(
+                    fused_sin_grade(sin_acc, sin_log, tr.trip, dt_med)),
                 "corr": float(np.corrcoef(sin_acc, sin_log)[0, 1]) if sin_log.std() > 0 else math.nan}
     return sig, cands, notes
