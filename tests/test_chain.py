@@ -464,3 +464,22 @@ def test_sumo_run_chain_accounts_balance():
     assert all(0.05 < r["net_kwh_per_km"] < 1.0 for r in per_class)  # a car: 50–1000 Wh/km
     fuel_rows = [r for r in rep["classes"] if r["equation"] == fuel_eq.name]
     assert all(1.0 < r["fuel_l_per_100km"] < 40.0 for r in fuel_rows)
+
+
+def test_fixed_parameters_stay_and_the_rest_is_recovered():
+    """Closing the loop from a dynamometer: efficiencies held at the dyno's, the road's
+    auxiliary power found; a fixed name that is not a parameter is a UserError."""
+    rng, v, p, heater, temp, dt = _drive(seed=4)
+    plant = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.8,
+                        aux_power_w=450.0)
+    meas = plant.evaluate(p, v)["power_w"] + rng.normal(0, 300.0, p.size)
+    fit = calibrate_battery(p, v, meas, dt, limit=None,
+                            fixed={"traction_efficiency": 0.9, "recuperation_efficiency": 0.8})
+    assert fit.chain.traction_efficiency == 0.9 and fit.chain.recuperation_efficiency == 0.8
+    assert fit.parameters["traction_efficiency"]["fixed"] and fit.parameters["aux_power_w"]["std_err"]
+    assert fit.chain.aux_power_w == pytest.approx(450.0, rel=0.02)
+    # held at a wrong value, the free parameter moves to compensate (what the road "adds")
+    wrong = calibrate_battery(p, v, meas, dt, limit=None, fixed={"traction_efficiency": 0.95})
+    assert wrong.chain.aux_power_w > 450.0
+    with pytest.raises(UserError, match="cannot fix"):
+        calibrate_battery(p, v, meas, dt, fixed={"marginal_efficiency": 0.3})

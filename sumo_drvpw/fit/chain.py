@@ -153,7 +153,7 @@ def _reading(name: str, val: float) -> str:
 
 def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = None, *,
                       loads=(), hvac: dict | None = None, mask=None, limit="profile",
-                      predicts: str = "battery") -> ChainFit:
+                      predicts: str = "battery", fixed: dict | None = None) -> ChainFit:
     """Calibrate a battery (or powertrain-output) chain on measured power.
 
     Parameters
@@ -169,6 +169,8 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     limit : "profile" (profile a recuperation limit, kept if it lowers the BIC), None
         (no limit) or a number [W] (fixed)
     predicts : "battery" or "powertrain_output" (no auxiliary power)
+    fixed : parameters held at given values (e.g. the dynamometer's efficiencies when a road
+        calibration should find only what the road adds), name → value; reported as fixed
     """
     p = np.asarray(p_drive_w, float)
     n = p.size
@@ -219,25 +221,45 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
         c[1] = neg if lim is None else np.maximum(neg, -lim)
         return np.column_stack(c)[ok]
 
+    fixed = dict(fixed or {})
+    bad = set(fixed) - set(names)
+    if bad:
+        raise UserError(f"energy chain: cannot fix {sorted(bad)}: not among {', '.join(names)}")
+    fx = {j: (1.0 / fixed[n] if n == "traction_efficiency" else float(fixed[n]))
+          for j, n in enumerate(names) if n in fixed}
+    free = [j for j in range(len(names)) if j not in fx]
+    lb_f, ub_f = [lb[j] for j in free], [ub[j] for j in free]
     best, profile = None, []
     for lim in grid:
         x = design(lim)
-        beta, rss, active, xs = _solve(x, y[ok], w[ok], lb, ub)
-        k = len(names) + (lim is not None)
+        off = sum(x[:, j] * val for j, val in fx.items()) if fx else 0.0
+        b_free, rss, act_free, xs = _solve(x[:, free], y[ok] - off, w[ok], lb_f, ub_f)
+        k = len(free) + (lim is not None)
         bic = _bic(rss, int(ok.sum()), k)
         profile.append({"recuperation_limit_w": lim, "rss": rss, "bic": bic})
         if best is None or bic < best[0]:
-            best = (bic, lim, beta, rss, active, xs)
-    _, lim, beta, rss, active, xs = best
-    se = _covariance(xs, rss, active)
+            best = (bic, lim, b_free, rss, act_free, xs)
+    _, lim, b_free, rss, act_free, xs = best
+    beta = np.empty(len(names))
+    beta[free] = b_free
+    se = np.full(len(names), np.nan)
+    se[free] = _covariance(xs, rss, act_free)
+    active = np.zeros(len(names), int)
+    active[free] = act_free
+    for j, val in fx.items():
+        beta[j] = val
     params = {}
     kw = {"predicts": predicts, "loads": {}, "hvac": None}
     for j, name in enumerate(names):
         val, s = float(beta[j]), float(se[j])
-        if name == "traction_efficiency":  # fitted x_t = 1/η_t; delta method for se
+        if name in fixed:
+            val = float(fixed[name])
+        elif name == "traction_efficiency":  # fitted x_t = 1/η_t; delta method for se
             val, s = 1.0 / val, s / val ** 2
         params[name] = {"value": val, "std_err": None if math.isnan(s) else s,
                         "at_bound": bool(active[j] != 0)}
+        if j in fx:
+            params[name]["fixed"] = True
         if name.startswith("loads."):
             kw["loads"][name[6:]] = val
         elif name.startswith("hvac."):
@@ -351,7 +373,7 @@ def chain_target(m, chain: EnergyChain) -> np.ndarray:
 
 
 def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engine_off="profile",
-                 mask=None, p_drive_w=None) -> ChainFit:
+                 mask=None, p_drive_w=None, fixed: dict | None = None) -> ChainFit:
     """Calibrate the chain of ``m.target`` on a :class:`~sumo_drvpw.data.measured.Measured`;
     fit on ``m.usable`` (and ``mask``).
 
@@ -373,4 +395,4 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     if m.target != "battery":
         raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
     return calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
-                             mask=use, limit=limit)
+                             mask=use, limit=limit, fixed=fixed)

@@ -8,8 +8,8 @@ step) and is booked in quantities a user pays for::
     traction_j, recuperated_j (≤ 0), auxiliary_j, net_j    battery chains [J]
     fuel_j (LHV), fuel_l [L], co2_kg [kg]                    fuel chains
 
-Auxiliary power accrues at every step a vehicle is in the network, standing or driving
-(SUMO's Energy model books it only while driving). Vehicles' running totals take one
+Auxiliary power accrues at every step a vehicle is in the network, standing or driving.
+Vehicles' running totals take one
 scatter-add per step; edges take one ``np.add.at`` per step; class totals are sums of
 the vehicle totals, so vehicle, edge and class totals agree by construction (tests check
 it on a real SUMO run, with the per-step sums).
