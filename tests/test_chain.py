@@ -483,3 +483,22 @@ def test_fixed_parameters_stay_and_the_rest_is_recovered():
     assert wrong.chain.aux_power_w > 450.0
     with pytest.raises(UserError, match="cannot fix"):
         calibrate_battery(p, v, meas, dt, fixed={"marginal_efficiency": 0.3})
+
+
+# ------------------------------------------------------------------ real data
+
+def test_real_prius2_fuel_chain_is_physical_and_soc_corrected(shared_data):
+    """Prius Gen 2 (shared data): the fuel chain fitted on the measured P_PTdrv has a
+    petrol engine's marginal efficiency; the held-out trip's fuel is within 20 %; litres
+    per 100 km of the measured trips are a Prius's (4–8)."""
+    from sumo_drvpw.validation.chain import prius2_study
+
+    r = prius2_study(shared_data)
+    for f in r["fits"].values():
+        assert 0.3 < f["chain"]["marginal_efficiency"]["value"] < 0.45
+        assert f["chain"]["idle_fuel_power_w"]["value"] > 0
+    for row in r["rows"]:
+        assert 4.0 < row["measured_l_per_100km"] < 8.0
+        assert abs(row["error"]) < 0.2
+        # SOC correction: a trip that charged the battery (energy < 0) burnt fuel for it
+        assert (row["measured_corrected_l"] < row["measured_l"]) == (row["battery_kwh"] < 0)
