@@ -1,6 +1,6 @@
 """The validation report on the real shared data (sumo_drvpw.validation).
 
-One module-scoped run of the whole validation into a temporary folder (≈ 1 min); the
+One module-scoped run of the whole validation into a temporary folder (1–2 min); the
 tests check its structure, physically sane numbers, and that the committed
 docs/validation/summary.json is what the current code computes from the same data.
 Skipped, with the reason, when ../shared/data (or $SUMO_DRVPW_DATA) is absent.
