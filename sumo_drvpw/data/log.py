@@ -112,7 +112,7 @@ class DriveLog:
                 mass = np.where(np.isnan(given), mass, given)
         else:
             raise UserError(f"{self.describe()}: no vehicle mass: the log has no complete "
-                            "'mass_kg' column; give --vehicle NAME|FILE")
+                            "'mass_kg' column; give the vehicle (a name or a vehicle file) for its mass")
         sig = {}
         if signals:
             for c in self.extra_columns:
