@@ -90,3 +90,27 @@ def test_bad_constraints_named():
         parse_constraints({"aero": {"min": "zero"}}, "cands.toml")
     with pytest.raises(UserError, match="min 2.0 > max 1.0"):
         parse_constraints({"acc": {"min": 2.0, "max": 1.0}}, "cands.toml")
+
+
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_calibrate_cli_uses_the_constrained_fit_when_implausible(tmp_path, capsys, engine):
+    """`sumo-drvpw calibrate` keeps a plausible fit and refits an implausible one under the
+    constraints declared in the candidate file, saying so (issue #11 §3)."""
+    import pandas as pd
+
+    from sumo_drvpw.cli import main
+    from sumo_drvpw.model.equations import load_equation
+
+    x, y = _drive(grade_factor=2.5)                  # attenuated-grade logger: grade → 0.4
+    t = np.arange(len(y)) * 1.0
+    pd.DataFrame({"time_s": t, "speed_mps": x.v, "accel_mps2": x.a, "grade_rad": x.theta,
+                  "mass_kg": x.mass, "power_w": y}).to_parquet(tmp_path / "log.parquet")
+    (tmp_path / "c.toml").write_text('terms = ["acc", "grade", "aero", "roll"]\n'
+                                     '[constraints]\ngrade = { fixed = 2.5 }\n')
+    out = tmp_path / "eq.toml"
+    assert main(["calibrate", str(tmp_path / "log.parquet"), "--candidates", str(tmp_path / "c.toml"),
+                 "--out", str(out), "--engine", engine]) == 0
+    assert "physically constrained fit used" in capsys.readouterr().out
+    eq = load_equation(out)
+    assert eq.terms["grade"] == 2.5 and eq.terms["acc"] == pytest.approx(1.05, rel=0.02)
+    assert eq.provenance["physical"]["unconstrained"]["grade"] < 0.6

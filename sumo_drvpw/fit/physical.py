@@ -230,3 +230,48 @@ def physical_calibration(x, y, candidates, mask=None, constraints: dict | None =
     eq.provenance["physical"] = {"used": "constrained", "why": rep["why"], "constraints": fit.constraints,
                                  "active": fit.active, "unconstrained": dict(res.params)}
     return eq, rep
+
+
+def apply_physics(eq, x, y, mask, constraints: dict | None = None):
+    """Keep ``eq`` if its coefficients read plausibly; else refit its terms under
+    ``constraints`` (default :data:`DEFAULT_CONSTRAINTS`) on the same samples.
+
+    Returns (equation, message or None); the unconstrained coefficients and the reason stay
+    in ``eq.provenance["physical"]``.
+    """
+    from sumo_drvpw.model.terms import term_matrix
+
+    terms = tuple(eq.terms)
+    use = np.asarray(mask, bool) & np.isfinite(np.asarray(y, float))
+    rho = float(np.nanmean(np.asarray(x.rho, float)[use])) if use.any() else RHO_DEFAULT
+    if not implausible(physical_reading(eq.terms, rho)):
+        return apply_physics_gram(eq, None, rho, constraints)
+    use &= np.all(np.isfinite(term_matrix(terms, x)), axis=1)
+    return apply_physics_gram(eq, gram(x, np.where(use, y, 0.0), terms, use), rho, constraints)
+
+
+def apply_physics_gram(eq, g: Gram | None, rho_kgm3: float = RHO_DEFAULT,
+                       constraints: dict | None = None):
+    """:func:`apply_physics` from sufficient statistics ``g`` (any superset of the
+    equation's terms, e.g. a streamed calibration's); ``rho_kgm3`` reads the aero term."""
+    reading = physical_reading(eq.terms, rho_kgm3)
+    bad = implausible(reading)
+    if not bad:
+        eq.provenance["physical"] = {"used": "unconstrained", "reading": reading}
+        return eq, None
+    idx = [list(g.names).index(t) for t in eq.terms]
+    sub = Gram(g.xtx[np.ix_(idx, idx)], g.xty[idx], g.yty, g.n, tuple(eq.terms))
+    fit = constrained_fit(sub, constraints or DEFAULT_CONSTRAINTS)
+    why = ", ".join(f"{t} = {eq.terms[t]:.4g} ({reading[t]['note']})" for t in bad)
+    eq.provenance["physical"] = {"used": "constrained", "why": why, "constraints": fit.constraints,
+                                 "active": fit.active, "unconstrained": dict(eq.terms),
+                                 "reading": physical_reading(fit.params, rho_kgm3)}
+    eq.terms = dict(fit.params)
+    eq.std_err, eq.p_values = {}, {}
+    return eq, (f"physically constrained fit used: the free fit is implausible: {why}; "
+                f"constraints {fit.constraints} (active: {', '.join(fit.active) or 'none'})")
+
+
+def constraints_of(candidates_spec) -> dict | None:
+    """Constraints declared in a candidate TOML file, or None (a set name or a list)."""
+    return read_constraints(candidates_spec) if str(candidates_spec).endswith(".toml") else None
