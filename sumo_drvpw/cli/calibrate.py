@@ -90,6 +90,11 @@ def main(args) -> int:
         "logs": m.log.files, "vehicle": m.vehicle.path if m.vehicle else None,
         "power_source": m.source, "candidates_spec": args.candidates})
     print(res.summary())
+    from sumo_drvpw.fit.physical import apply_physics, constraints_of  # issue #11 §3
+
+    eq, note = apply_physics(eq, m.inputs, m.power_w, m.usable, constraints_of(args.candidates))
+    if note:
+        print(note)
     if args.report:  # report and equation together: the equation is written last
         with output_set(args, args.report, inputs) as tmp:
             write_calibration_report(m, eq, res, tmp, args.compare_with)
