@@ -92,6 +92,11 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
         "logs": st.files, "vehicle": veh.path if veh else None, "power_source": st.source,
         "candidates_spec": args.candidates})
     print(res.summary())
+    from sumo_drvpw.fit.physical import apply_physics_gram, constraints_of  # issue #11 §3
+
+    eq, note = apply_physics_gram(eq, st.gram()[0], constraints=constraints_of(args.candidates))
+    if note:
+        print(note)
     lines = [info.line()]
     if args.report:
         specs = args.compare_with or (["vsp_ldv1999"] + (["vsp_spec"] if veh is not None and veh.body else []))
