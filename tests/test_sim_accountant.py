@@ -17,6 +17,7 @@ from sumo_drvpw.sim.scenario import load_scenario
 pytestmark = pytest.mark.sumo
 
 REPO = Path(__file__).resolve().parent.parent
+NETS = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks"  # the built-in networks
 CITY = REPO / "scenarios" / "city.toml"
 PHYS = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01})
 VSP = Equation("vsp", {"acc": 1.1, "grade": 1.0, "m_v1": 0.132, "m_v3": 0.000302})
@@ -100,7 +101,7 @@ def test_edgedata_intervals_parsed_by_sumolib(tmp_path):
     (tmp_path / "t.xml").write_text(
         '<routes><trip id="t" depart="0" from="c00c10" to="c34c44"/></routes>')
     r = subprocess.run([sumolib.checkBinary("duarouter"), "-n",
-                        str(REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"),
+                        str(NETS / "city.net.xml"),
                         "-r", str(tmp_path / "t.xml"), "--weight-files",
                         str(tmp_path / "o" / "edgedata.xml"), "--weight-attribute",
                         "phys_total_j", "-o", str(tmp_path / "eco.rou.xml"), "--no-step-log"],
@@ -128,7 +129,7 @@ def test_vclasses_each_get_their_equation_or_are_skipped(tmp_path):
     (tmp_path / "r.rou.xml").write_text(MIXED, encoding="utf-8")
     (tmp_path / "s.toml").write_text(
         'equations = ["vsp_ldv1999", "drvpw_prius3", "moves_combination_truck"]\n'
-        f'[sumo]\nnet = "{REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"}"\nroutes = ["r.rou.xml"]\n'
+        f'[sumo]\nnet = "{NETS / "city.net.xml"}"\nroutes = ["r.rou.xml"]\n'
         'end = 200\noptions = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n',
         encoding="utf-8")
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
@@ -159,7 +160,7 @@ def test_out_of_range_vehicle_steps_counted(tmp_path):
         '<flow id="c"', '<route id="r" edges="e01 e12 e23"/>\n  <flow id="c"').replace(
         'period="10"', 'period="10" departSpeed="max"'), encoding="utf-8")
     (tmp_path / "s.toml").write_text(
-        f'equations = ["x"]\n[sumo]\nnet = "{REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml"}"\n'
+        f'equations = ["x"]\n[sumo]\nnet = "{NETS / "highway.net.xml"}"\n'
         'routes = ["r.rou.xml"]\nend = 60\noptions = ["--no-warnings", "true"]\n'
         '[vehicles]\nvtypes = ["car"]\n[outputs]\nfigures = false\nedgedata = false\n',
         encoding="utf-8")

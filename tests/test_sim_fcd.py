@@ -18,6 +18,7 @@ from sumo_drvpw.sim.fcd import process_fcd, read_fcd
 pytestmark = pytest.mark.sumo
 
 REPO = Path(__file__).resolve().parent.parent
+NETS = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks"  # the built-in networks
 CITY = REPO / "scenarios" / "city.toml"
 PHYS = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01})
 VSP = Equation("vsp", {"acc": 1.1, "grade": 1.0, "m_v1": 0.132, "m_v3": 0.000302})
@@ -84,7 +85,7 @@ def test_fcd_formats_read_alike(live, tmp_path):
 def test_fcd_cli(live, tmp_path, capsys):
     d, res = live
     code = cli_main(["fcd", str(d / "fcd.xml.gz"), "--net",
-                     str(REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"),
+                     str(NETS / "city.net.xml"),
                      "--vtypes", str(REPO / "sumo_drvpw" / "sim" / "builtin" / "scenarios"
                                      / "prius3.vtype.xml"),
                      "--equation", "vsp_ldv1999", "--end", "200", "--no-figures",
@@ -135,7 +136,7 @@ def test_export_vtype_agrees_with_sumos_emissions_device(tmp_path, capsys, dt):
                      "--id", "ev", "--out", str(tmp_path / "ev.add.xml")])
     assert code == 0 and "not expressible" not in capsys.readouterr().out
     write_text(tmp_path / "r.rou.xml", EXPORT_ROUTES.format(vt="ev"))
-    net = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml"
+    net = NETS / "highway.net.xml"
     write_text(tmp_path / "s.toml",
                f'equations = ["ev_fit.toml"]\n[sumo]\nnet = "{net}"\nroutes = ["r.rou.xml"]\n'
                f'additional = ["ev.add.xml"]\nend = 300\nstep_length = {dt}\n'

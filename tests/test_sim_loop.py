@@ -25,7 +25,8 @@ from sumo_drvpw.sim.scenario import RoadClassRule, load_scenario
 from sumo_drvpw.model.terms import Inputs
 
 REPO = Path(__file__).resolve().parent.parent
-NET = load_network(REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml", RoadClassRule())
+NETS = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks"  # the built-in networks
+NET = load_network(NETS / "highway.net.xml", RoadClassRule())
 GRADE = math.atan(0.04)  # e12: +40 m over 1000 m
 #: everything read from the (scripted) getters every step, as the hand calculations assume
 GETTERS = dict(acceleration="getter", slope_reference="getslope", heading="getangle",
@@ -191,7 +192,7 @@ def test_vclass_selects_equations_and_skips_the_rest():
     files = {vt: VTypeInfo(vt, None, None, "f.xml", vc) for vt, vc in
              (("pkw", "passenger"), ("bus1", "bus"), ("bike", "bicycle"), ("coach1", "coach"))}
     sc = load_scenario(doc={"equations": ["vsp_ldv1999"], "sumo": {"net": str(
-        REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml")}, "vclasses": {"coach": {"mass_kg": 12000}}})
+        NETS / "highway.net.xml")}, "vclasses": {"coach": {"mass_kg": 12000}}})
     res = VTypeResolver(sc, files, [car, bus])
     np.testing.assert_array_equal(res("pkw", "a")[1], [1, 0])
     assert res("bus1", "b")[:3:2] == (16556.0, True)

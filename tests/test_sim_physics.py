@@ -21,7 +21,8 @@ from sumo_drvpw.sim import run_scenario
 pytestmark = pytest.mark.sumo
 
 REPO = Path(__file__).resolve().parent.parent
-HW_NET = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml"
+NETS = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks"  # the built-in networks
+HW_NET = NETS / "highway.net.xml"
 
 # default driver noise (sigma 0.5); every car departs at rest and ends at rest at a stop on
 # the flat first kilometre (networks/src/highway.nod.xml: h0, h1 at z = 0)

@@ -30,7 +30,8 @@ from sumo_drvpw.sim.scenario import RoadClassRule
 pytestmark = pytest.mark.sumo
 
 REPO = Path(__file__).resolve().parent.parent
-HW_NET = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml"
+NETS = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks"  # the built-in networks
+HW_NET = NETS / "highway.net.xml"
 MOST = REPO.parent / "shared" / "scenarios" / "most" / "most.sumocfg"
 M = 1500.0  # test vehicle mass [kg]
 

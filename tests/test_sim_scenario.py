@@ -19,6 +19,7 @@ from sumo_drvpw.sim.scenario import RoadClassRule, load_scenario
 from sumo_drvpw.sim.vtypes import read_vtypes
 
 REPO = Path(__file__).resolve().parent.parent
+NETS = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks"  # the built-in networks
 SCEN = REPO / "scenarios"
 EQ = [Equation("e1", {"acc": 1.0, "roll": 0.01}), Equation("e2", {"grade": 1.0})]
 
@@ -103,10 +104,10 @@ def test_road_class_rule():
 
 
 def test_network_classes_and_internal_lanes():
-    city = load_network(REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml", RoadClassRule())
+    city = load_network(NETS / "city.net.xml", RoadClassRule())
     assert set(city.edge_class) == {"city"}
     assert 30 / 3.6 - 1e-3 <= city.edge_speed.min() and city.edge_speed.max() <= 60 / 3.6 + 1e-3
-    hw = load_network(REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml", RoadClassRule())
+    hw = load_network(NETS / "highway.net.xml", RoadClassRule())
     assert set(hw.edge_class) == {"highway"}
     assert 80 / 3.6 - 1e-3 <= hw.edge_speed.min() and hw.edge_speed.max() <= 120 / 3.6 + 1e-3
     # internal lane of node h1 leads to e12: booked there

@@ -45,7 +45,8 @@ except ImportError:  # pragma: no cover - traci ships with every SUMO Python ins
 
 #: How a step is booked (summary.json ``energy_booking``; docs/scenario.md).
 ENERGY_BOOKING = ("acc term: coefficient × m·v̄·a with v̄ = (v_t + v_t−1)/2, i.e. the "
-                  "kinetic-energy change ½m(v_t² − v_t−1²)/Δt, conserved at any step length; "
+                  "kinetic-energy change ½m(v_t² − v_t−1²)/Δt, conserved at any step "
+                  "length; "
                   "other terms at the speed of the distance SUMO moved the car in the step "
                   "(Euler update: v_t; ballistic: v̄)")
 

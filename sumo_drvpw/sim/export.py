@@ -107,10 +107,12 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
 
 
 def energy_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
-                     frontal_area_m2: float | None = None, vclass: str | None = None) -> tuple[str, list[str]]:
+                     frontal_area_m2: float | None = None,
+                     vclass: str | None = None) -> tuple[str, list[str]]:
     """An additional file with one Energy-model vType for ``eq``; returns (XML, missing)."""
     params, missing = energy_model_params(eq, mass_kg, frontal_area_m2)
-    attrs = f"id={quoteattr(vtype_id)} emissionClass=\"Energy/unknown\" mass=\"{params['mass']:.6g}\""
+    attrs = (f"id={quoteattr(vtype_id)} emissionClass=\"Energy/unknown\" "
+             f"mass=\"{params['mass']:.6g}\"")
     if vclass:
         attrs += f" vClass={quoteattr(vclass)}"
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',

@@ -111,8 +111,9 @@ def classes_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
     energy, and per distance driven in the class [Wh/km]."""
     classes, tr, rc = class_energy(ledger, net)
     k = np.array([classes.index(c) for c in net.edge_class], np.int64)
-    cdist = np.stack([np.bincount(k, weights=ledger.edge_dist_eq[:, e], minlength=len(classes))
-                      for e in range(ledger.E)], axis=1) if ledger.E else np.zeros((len(classes), 0))
+    cdist = np.zeros((len(classes), ledger.E))
+    for e in range(ledger.E):
+        cdist[:, e] = np.bincount(k, weights=ledger.edge_dist_eq[:, e], minlength=len(classes))
     rows = {"class": [], "equation": [], "term": [], "traction_energy_j": [], "share": [],
             "recup_energy_j": [], "distance_m": [], "traction_whpkm": []}
     for ki, c in enumerate(classes):
