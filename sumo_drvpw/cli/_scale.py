@@ -77,7 +77,9 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
 
     check_engine_arguments(args)
     veh = load_vehicle(args.vehicle) if args.vehicle else None
-    st, info = _run(args, partial(CalibrationStats, tuple(cands)), veh)
+    from sumo_drvpw.cli.calibrate import MOVING_MPS
+
+    st, info = _run(args, partial(CalibrationStats, tuple(cands), moving_mps=MOVING_MPS), veh)
     if st.mass_n == 0:
         raise UserError(f"{', '.join(map(str, args.logs))}: no usable samples "
                         f"(all excluded: {st.counts})")
@@ -85,6 +87,11 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     from sumo_drvpw.cli.calibrate import check_identified
 
     note_counts(st.counts)
+    if len(st.speeds) < 2:  # the in-memory path's identifiability check, from streamed sums
+        where = st.files[0] if len(st.files) == 1 else f"{len(st.files)} files"
+        raise UserError(f"{where}: speed takes {len(st.speeds)} distinct value(s) above "
+                        f"{MOVING_MPS:g} m/s on the usable samples; {', '.join(cands)} cannot be "
+                        "identified (they need the speed to vary); calibrate on a log with varying speed")
     res = calibrate_from_stats(st, args.p_enter, args.p_remove)
 
     check_identified(res, ", ".join(map(str, args.logs)))
@@ -94,7 +101,8 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     print(res.summary())
     from sumo_drvpw.fit.physical import apply_physics_gram, constraints_of  # issue #11 §3
 
-    eq, note = apply_physics_gram(eq, st.gram()[0], constraints=constraints_of(args.candidates))
+    eq, note = apply_physics_gram(eq, st.gram()[0], st.rho_sum / st.mass_n,
+                                  constraints=constraints_of(args.candidates))
     if note:
         print(note)
     lines = [info.line()]

@@ -173,6 +173,13 @@ class CalibrationStats:
     source: str | None = None
     vehicle: object = None
     files: list = field(default_factory=list)
+    #: Σ air density over usable samples [kg/m³] (the mean reads the aero coefficient)
+    rho_sum: float = 0.0
+    #: up to two distinct speeds (0.1 m/s steps) above ``moving_mps``: can v-terms be told apart?
+    speeds: frozenset = frozenset()
+    moving_mps: float = 0.5
+    #: (min, max) of speed [m/s] and acceleration [m/s²] over the used samples
+    ranges: tuple = ((math.inf, -math.inf), (math.inf, -math.inf))
 
     def columns(self) -> frozenset:
         """Columns to read: the reader's canonical ones and the signals the candidates name."""
@@ -186,7 +193,12 @@ class CalibrationStats:
         y = np.asarray(m.power_w, float)
         u = np.asarray(m.usable, bool)
         self.mass_sum += float(np.sum(m.inputs.mass[u]))
+        self.rho_sum += float(np.sum(m.inputs.rho[u]))
         self.mass_n += int(u.sum())
+        if len(self.speeds) < 2:
+            v = np.asarray(m.inputs.v, float)
+            mv = np.unique(np.round(v[u & (v > self.moving_mps)], 1))[:2]
+            self.speeds = frozenset(list(self.speeds | set(mv.tolist()))[:2])
         self.rows += len(y)
         c = m.counts
         c["excluded_nonfinite_power"] = int((~np.isfinite(y)).sum())
@@ -199,6 +211,9 @@ class CalibrationStats:
         idx = np.flatnonzero(use)
         if len(idx) == 0:
             return self
+        self.ranges = _merge_ranges(self.ranges, tuple(
+            (float(np.nanmin(a[idx])), float(np.nanmax(a[idx])))
+            for a in (np.asarray(m.inputs.v, float), np.asarray(m.inputs.a, float))))
         x = term_matrix(self.names, m.inputs.take(idx))
         yu = y[idx]
         trip = np.asarray(m.inputs.trip)[idx]
@@ -221,7 +236,10 @@ class CalibrationStats:
                                self.mass_n + o.mass_n, _add_counts(self.counts, o.counts),
                                self.rows + o.rows, self.source or o.source,
                                self.vehicle or o.vehicle,
-                               self.files + [f for f in o.files if f not in self.files])
+                               self.files + [f for f in o.files if f not in self.files],
+                               self.rho_sum + o.rho_sum,
+                               frozenset(list(self.speeds | o.speeds)[:2]), self.moving_mps,
+                               _merge_ranges(self.ranges, o.ranges))
         return out
 
     def factor(self, trips=None) -> tuple[np.ndarray, Moments]:
@@ -242,6 +260,10 @@ class CalibrationStats:
         k = len(self.names)
         x, y = r[:, :k], r[:, k]
         return Gram(x.T @ x, x.T @ y, float(y @ y), mom.n, self.names), r, mom
+
+
+def _merge_ranges(a: tuple, b: tuple) -> tuple:
+    return tuple((min(x[0], y[0]), max(x[1], y[1])) for x, y in zip(a, b))
 
 
 def ols_from_r(r: np.ndarray, idx: list[int], n: int):
@@ -320,7 +342,9 @@ def calibrate_from_stats(st: CalibrationStats, p_enter: float = 0.10, p_remove: 
         std_err=dict(zip(sel, map(float, res.bse))), p_values=dict(zip(sel, map(float, res.pvalues))),
         r2=r2, r2_uncentered=float(res.rsquared), n=g.n, counts=counts, trace=trace,
         settings={"candidates": list(cands), "p_enter": p_enter, "p_remove": p_remove},
-        reference_mass_kg=reference_mass_kg, results=res, dropped=dropped)
+        reference_mass_kg=reference_mass_kg, results=res, dropped=dropped,
+        # the validity range of all trips streamed (also when fitted on a subset of them)
+        speed_range_mps=st.ranges[0], accel_range_mps2=st.ranges[1])
 
 
 # ------------------------------------------------------------------------ compare
