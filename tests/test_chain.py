@@ -404,7 +404,8 @@ def test_sumo_run_chain_accounts_balance():
                    "--no-step-log", "true", "--no-warnings", "true"])
     try:
         dt = libsumo.simulation.getDeltaT()
-        led = ChainLedger([e.name for e in eqs], [e.chain for e in eqs], n_edges=0)
+        n_edges = len(libsumo.edge.getIDList())  # internal edges included
+        led = ChainLedger([e.name for e in eqs], [e.chain for e in eqs], n_edges=n_edges)
         vix, eix, classes, edges = {}, {}, [], []
         prev_v: dict[str, float] = {}
         direct = {}
@@ -423,10 +424,6 @@ def test_sumo_run_chain_accounts_balance():
                 if r not in eix:
                     eix[r] = len(eix)
                     edges.append(r)
-            if led.edge.shape[0] < len(eix):  # edges appear as vehicles reach them
-                grow = len(eix) - led.edge.shape[0]
-                led.edge = np.concatenate([led.edge, np.zeros((grow, led.E, led.Q))])
-                led.edge_dist = np.concatenate([led.edge_dist, np.zeros(grow)])
             v = np.array([libsumo.vehicle.getSpeed(x) for x in ids])
             a = (v - np.array([prev_v.get(x, 0.0) for x in ids])) / dt
             th = np.radians([libsumo.vehicle.getSlope(x) for x in ids])
@@ -434,7 +431,7 @@ def test_sumo_run_chain_accounts_balance():
             x = Inputs(v=v, a=a, theta=th, wind=np.zeros(n), mass=np.full(n, 1625.0), rho=np.full(n, 1.2041))
             p = np.column_stack([e.power(x) for e in eqs])
             vi = np.array([vix[i] for i in ids])
-            q = led.book(vi, np.array([eix[r] for r in road]), v, dt, p)
+            q = led.expand(led.book(vi, np.array([eix[r] for r in road]), v, dt, p))
             for j, i in enumerate(vi):
                 direct[i] = direct.get(i, 0.0) + q[j]
             stood = np.concatenate([stood, np.zeros(len(vix) - stood.size)])
@@ -459,6 +456,10 @@ def test_sumo_run_chain_accounts_balance():
     g = FUELS["gasoline"]
     np.testing.assert_allclose(tot[:, 0, k["fuel_l"]],
                                tot[:, 0, k["fuel_j"]] / g["lhv_j_per_kg"] / g["density_kg_per_l"], rtol=1e-12)
+    one = led.vehicle(0)  # what a TraCI script reads during a run
+    assert set(one) == {fuel_eq.name, "bev"} and set(one["bev"]) == {"traction_j", "recuperated_j",
+                                                                    "auxiliary_j", "net_j"}
+    assert one["bev"]["net_j"] == pytest.approx(tot[0, 1, k["net_j"]])
     rep = led.report(list(vix), classes, edges)
     per_class = [r for r in rep["classes"] if r["equation"] == "bev"]
     assert all(0.05 < r["net_kwh_per_km"] < 1.0 for r in per_class)  # a car: 50–1000 Wh/km

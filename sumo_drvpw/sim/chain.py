@@ -49,9 +49,15 @@ class ChainLedger:
         self.chains = list(chains)
         self.active = [i for i, c in enumerate(self.chains) if c is not None and c.predicts != "wheel"]
         self.E, self.Q = len(self.names), len(QUANTITIES)
-        self.edge = np.zeros((n_edges, self.E, self.Q))
+        #: (equation, quantity) columns a chain books: battery 0–3, fuel 4–6
+        self._cols = [(e, k) for e in self.active
+                      for k in ((4, 5, 6) if self.chains[e].predicts == "fuel" else (0, 1, 2, 3))]
+        self._ce = np.array([e for e, _ in self._cols], np.int64)
+        self._ck = np.array([k for _, k in self._cols], np.int64)
+        # compact storage: only the booked columns, (rows, C); veh/edge expand on read
+        self._edge = np.zeros((n_edges, len(self._cols)))
         self.edge_dist = np.zeros(n_edges)
-        self.veh = np.zeros((capacity, self.E, self.Q))
+        self._veh = np.zeros((capacity, len(self._cols)))
         self.veh_dist = np.zeros(capacity)
         self.veh_time = np.zeros(capacity)
         #: cumulative edge totals at interval boundaries [(time [s], (edges, E, Q))]
@@ -63,18 +69,35 @@ class ChainLedger:
         constants per vehicle, or leave them out of chains used in SUMO)."""
         return set().union(*(self.chains[i].signals for i in self.active)) if self.active else set()
 
+    def expand(self, compact: np.ndarray) -> np.ndarray:
+        """(rows, C) booked columns → (rows, E, Q), zeros where a chain books nothing."""
+        out = np.zeros((compact.shape[0], self.E, self.Q))
+        out[:, self._ce, self._ck] = compact
+        return out
+
+    @property
+    def veh(self) -> np.ndarray:
+        """Running totals per vehicle, equation and quantity, (capacity, E, Q)."""
+        return self.expand(self._veh)
+
+    @property
+    def edge(self) -> np.ndarray:
+        """Totals per edge, equation and quantity, (edges, E, Q)."""
+        return self.expand(self._edge)
+
     def _grow(self, n: int) -> None:
         cap = len(self.veh_dist)
         if n <= cap:
             return
         new = max(n, 2 * cap)
-        self.veh = np.concatenate([self.veh, np.zeros((new - cap, self.E, self.Q))])
+        self._veh = np.concatenate([self._veh, np.zeros((new - cap, self._veh.shape[1]))])
         self.veh_dist = np.concatenate([self.veh_dist, np.zeros(new - cap)])
         self.veh_time = np.concatenate([self.veh_time, np.zeros(new - cap)])
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
                         signals: dict | None = None) -> np.ndarray:
-        """Chain quantities of one step, (n vehicles, E, Q).
+        """Chain quantities of one step, (n vehicles, C booked columns) (:meth:`expand`
+        gives (n, E, Q)).
 
         Parameters
         ----------
@@ -85,26 +108,24 @@ class ChainLedger:
         """
         p = np.asarray(p_drive_w, float)
         n = p.shape[0]
-        q = np.zeros((n, self.E, self.Q))
+        q = np.empty((n, len(self._cols)))
+        j = 0
         for e in self.active:
             ch = self.chains[e]
             out = ch.evaluate(p[:, e], v, dt, signals)
-            if ch.predicts == "fuel":
-                q[:, e, 4] = out["power_j"]
-                q[:, e, 5] = out["fuel_l"]
-                q[:, e, 6] = out["co2_kg"]
-            else:
-                q[:, e, 0] = out["traction_j"]
-                q[:, e, 1] = out["recuperated_j"]
-                q[:, e, 2] = out["auxiliary_j"]
-                q[:, e, 3] = out["power_j"]
+            keys = (("power_j", "fuel_l", "co2_kg") if ch.predicts == "fuel" else
+                    ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
+            for key in keys:
+                q[:, j] = out[key]
+                j += 1
         return q
 
     def book(self, vidx: np.ndarray, eidx: np.ndarray, v: np.ndarray, dt: float,
              p_drive_w: np.ndarray, signals: dict | None = None, app=None) -> np.ndarray:
         """Book one step for vehicles ``vidx`` (each once) on edges ``eidx``; returns the
-        step's quantities (n, E, Q). ``app`` (n, E): 1 where an equation applies to the
-        vehicle, 0 where not (nothing booked, not even auxiliary power)."""
+        step's quantities (n, C) (:meth:`expand` → (n, E, Q)). ``app`` (n, E): 1 where an
+        equation applies to the vehicle, 0 where not (nothing booked, not even auxiliary
+        power)."""
         vidx = np.asarray(vidx, np.int64)
         if vidx.size:
             self._grow(int(vidx.max()) + 1)
@@ -112,18 +133,22 @@ class ChainLedger:
             signals = self._constant_signals(len(vidx))
         q = self.step_quantities(p_drive_w, v, dt, signals)
         if app is not None:
-            q *= np.asarray(app, float)[:, :, None]
-        self.veh[vidx] += q
+            q *= np.asarray(app, float)[:, self._ce]
+        self._veh[vidx] += q
         d = np.asarray(v, float) * dt
         self.veh_dist[vidx] += d
         self.veh_time[vidx] += dt
-        np.add.at(self.edge, eidx, q)
-        np.add.at(self.edge_dist, eidx, d)
+        eidx = np.asarray(eidx, np.int64)
+        ne = self._edge.shape[0]
+        qt = np.ascontiguousarray(q.T)
+        for j in range(qt.shape[0]):  # bincount per booked column: far cheaper than np.add.at
+            self._edge[:, j] += np.bincount(eidx, qt[j], minlength=ne)
+        self.edge_dist += np.bincount(eidx, d, minlength=ne)
         return q
 
     def snapshot(self, t: float) -> None:
         """Keep the cumulative edge totals at time ``t`` [s] (with :meth:`Ledger.snapshot`)."""
-        self.snapshots.append((float(t), self.edge.copy()))
+        self.snapshots.append((float(t), self.edge))
 
     def edge_attrs(self, q: np.ndarray) -> list[str]:
         """edgeData attributes of one edge's quantities ``q`` (E, Q) of an interval:
@@ -148,6 +173,15 @@ class ChainLedger:
         return out
 
     # ------------------------------------------------------------------ reports
+    def vehicle(self, i: int) -> dict[str, dict[str, float]]:
+        """Running totals of vehicle number ``i`` (``Accountant.stepper.vmap[id]``) during a
+        run: equation → {quantity: value} for the equations with a chain."""
+        self._grow(i + 1)
+        out: dict[str, dict[str, float]] = {}
+        for j, (e, k) in enumerate(self._cols):
+            out.setdefault(self.names[e], {})[QUANTITIES[k]] = float(self._veh[i, j])
+        return out
+
     def vehicle_totals(self, n: int) -> np.ndarray:
         """Totals of the first ``n`` vehicles, (n, E, Q)."""
         self._grow(n)
