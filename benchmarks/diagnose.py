@@ -6,7 +6,10 @@ columns (one planted A/C load and its flag, the rest distractors). Generation is
 timed; the timed part is what `sumo-drvpw diagnose LOG --vehicle prius3 --equation
 drvpw_prius3 --out DIR --no-figures` does (read the log, trace, write the report).
 
-    .venv/bin/python benchmarks/diagnose.py [--rows 1000000] [--rows 500000,2000000 --profile 20]
+    .venv/bin/python benchmarks/diagnose.py [--rows 1000000]
+
+Also runs the tracer without structural effects on the same log first and prints the ratio
+(structural effects cost: N× the tracer without them). [--rows 500000,2000000 --profile 20]
 
 With several sizes it prints the time ratio against the row ratio (linear: equal); with
 --profile the functions with the most own time, to find what grows faster than the rows.
@@ -81,6 +84,12 @@ def main() -> int:
 
                 prof = cProfile.Profile()
                 prof.enable()
+            # baseline in the same run: the tracer without structural effects (lag search,
+            # regimes, air density, accelerometer grade)
+            t0 = time.perf_counter()
+            run([path], "prius3", "drvpw_prius3", Path(tmp) / "out0", DiagnoseOptions(structural=False),
+                figures=False)
+            dt0 = time.perf_counter() - t0
             t0 = time.perf_counter()
             res = run([path], "prius3", "drvpw_prius3", Path(tmp) / "out", DiagnoseOptions(),
                       figures=False, progress=print)
@@ -95,6 +104,7 @@ def main() -> int:
         print(f"rows={rows} extra_columns_in_log={n_extra} findings={[f['term'] for f in r['findings']]} "
               f"rmse {r['baseline']['metrics']['rmse_w']:.1f} -> {r['final']['metrics']['rmse_w']:.1f} W")
         print(f"seconds={dt:.1f} rows_per_s={rows / dt:.0f} candidates_scored={res.n_candidates_scored}")
+        print(f"structural effects cost: {dt / dt0:.2f}x the tracer without them ({dt0:.1f} s, same run)")
     if len(times) > 1:
         (r0, t0), (r1, t1) = min(times.items()), max(times.items())
         print(f"time ratio {t1 / t0:.2f} for {r1 / r0:.2f}x the rows (linear: equal)")
