@@ -121,7 +121,11 @@ def test_block_validation_single_trip_and_report_files(tmp_path):
     res = run([path], "prius3", None, out, DiagnoseOptions(), figures=True)
     doc = json.loads((out / "trace.json").read_text())
     assert set(doc) == {"target", "n_samples", "validation", "baseline", "findings", "final"}
-    assert set(doc["baseline"]) == {"terms", "coefficients", "metrics"}
+    assert set(doc["baseline"]) == {"terms", "coefficients", "metrics", "trip_energy", "trip_net_energy"}
+    te = doc["final"]["trip_energy"]
+    assert set(te) == {"mean_abs_error", "max_abs_error", "trips"} and len(te["trips"]) == 1
+    # the A/C load found: the held-out traction energy moves towards the measured one
+    assert te["max_abs_error"] <= doc["baseline"]["trip_energy"]["max_abs_error"]
     assert set(doc["baseline"]["metrics"]) == {"rmse_w", "mae_w", "r2", "r2_light", "r2_heavy", "bias_w"}
     assert doc["validation"].startswith("5-fold cross-validation over contiguous")
     assert doc["findings"] and doc["findings"][0]["signals"] == ["ac_power_w"]

@@ -107,6 +107,10 @@ def _fmt(x, nd=4):
     return f"{x:.{nd}g}"
 
 
+def _pct(x):
+    return "–" if x is None or (isinstance(x, float) and not np.isfinite(x)) else f"{100 * x:+.2f} %"
+
+
 def _mrow(name, m):
     return (f"| {name} | {m['rmse_w']:.1f} | {m['mae_w']:.1f} | {_fmt(m['r2'])} | {_fmt(m['r2_light'])} | "
             f"{_fmt(m['r2_heavy'])} | {m['bias_w']:.1f} |")
@@ -133,6 +137,15 @@ def markdown(res, figs) -> str:
          _mrow("baseline", r["baseline"]["metrics"])]
     for i, f in enumerate(r["findings"], 1):
         L.append(_mrow(f"+ finding {i}: `{f['term']}`", f["metrics_after"]))
+    tb, tf = r["baseline"].get("trip_energy"), r["final"].get("trip_energy")
+    if tb and tf:
+        L += ["", "## Traction energy per trip (held-out predictions; predicted/measured − 1)", "",
+              "| trip | measured [kWh] | baseline | final |", "|---|---|---|---|"]
+        for t, v in tb["trips"].items():
+            e0, e1 = v["error"], tf["trips"][t]["error"]
+            L.append(f"| {t} | {v['measured_j'] / 3.6e6:.3f} | {_pct(e0)} | {_pct(e1)} |")
+        L.append(f"| mean abs. / worst | | {_pct(tb['mean_abs_error'])} / {_pct(tb['max_abs_error'])} | "
+                 f"{_pct(tf['mean_abs_error'])} / {_pct(tf['max_abs_error'])} |")
     L += ["", "## Findings", ""]
     if not r["findings"]:
         L.append("None: no candidate improved the held-out error significantly. The declared terms "

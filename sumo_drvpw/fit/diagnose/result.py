@@ -5,7 +5,9 @@ from __future__ import annotations
 import datetime as _dt
 from dataclasses import dataclass
 
-from sumo_drvpw.fit.compare import metrics as _metrics
+import numpy as np
+
+from sumo_drvpw.fit.compare import metrics as _metrics, trip_energy, trip_net_energy
 from sumo_drvpw.fit.diagnose.blocks import BlockModel
 from sumo_drvpw.fit.diagnose.candidates import Candidate
 from sumo_drvpw.fit.diagnose.options import METRIC_KEYS
@@ -65,6 +67,11 @@ def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrat
         "final": {"terms": list(final_terms),
                   "coefficients": final_terms, "metrics": pick_metrics(m_final)},
     }
+    # energy per trip of the held-out predictions, before and after (issue #11 §5)
+    trips = np.asarray(tr.trip_names)[tr.trip]
+    for key, pred in (("baseline", pred0), ("final", pred_final)):
+        report[key]["trip_energy"] = trip_energy(pred, y, tr.dt, trips)
+        report[key]["trip_net_energy"] = trip_net_energy(pred, y, tr.dt, trips)
     details = {"declared_equation": equation.name, "calibrated_on_the_spot": calibrated,
                "samples": {"rows": n_rows, "usable": n_usable, "analysis": n,
                            "trips": n_trips, "blocks": tr.n_blocks},
