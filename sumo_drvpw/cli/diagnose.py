@@ -107,8 +107,8 @@ def _fmt(x, nd=4):
     return f"{x:.{nd}g}"
 
 
-def _pct(x):
-    return "–" if x is None or (isinstance(x, float) and not np.isfinite(x)) else f"{100 * x:+.2f} %"
+def _pct(x, sign="+"):
+    return "–" if x is None or (isinstance(x, float) and not np.isfinite(x)) else f"{100 * x:{sign}.2f} %"
 
 
 def _mrow(name, m):
@@ -144,8 +144,8 @@ def markdown(res, figs) -> str:
         for t, v in tb["trips"].items():
             e0, e1 = v["error"], tf["trips"][t]["error"]
             L.append(f"| {t} | {v['measured_j'] / 3.6e6:.3f} | {_pct(e0)} | {_pct(e1)} |")
-        L.append(f"| mean abs. / worst | | {_pct(tb['mean_abs_error'])} / {_pct(tb['max_abs_error'])} | "
-                 f"{_pct(tf['mean_abs_error'])} / {_pct(tf['max_abs_error'])} |")
+        L.append(f"| mean abs. / worst abs. | | {_pct(tb['mean_abs_error'], '')} / {_pct(tb['max_abs_error'], '')} | "
+                 f"{_pct(tf['mean_abs_error'], '')} / {_pct(tf['max_abs_error'], '')} |")
     L += ["", "## Findings", ""]
     if not r["findings"]:
         L.append("None: no candidate improved the held-out error significantly. The declared terms "
