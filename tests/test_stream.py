@@ -270,9 +270,15 @@ def test_cli_streamed_equals_memory_engine(logs, tmp_path, capsys):
     assert "local engine:" in capsys.readouterr().err
     a, b = outs["memory"], outs["local"]
     assert list(a.terms) == list(b.terms)
+    # the same physical reading decides the same way (a constrained refit has no std_err)
+    assert a.provenance["physical"]["used"] == b.provenance["physical"]["used"]
+    assert set(a.std_err) == set(b.std_err)
     for t in a.terms:
         assert b.terms[t] == pytest.approx(a.terms[t], rel=RTOL)
+    for t in a.std_err:
         assert b.std_err[t] == pytest.approx(a.std_err[t], rel=RTOL)
+    assert b.speed_range_mps == pytest.approx(a.speed_range_mps, rel=RTOL)
+    assert b.accel_range_mps2 == pytest.approx(a.accel_range_mps2, rel=RTOL)
 
 
 def test_cli_compare_report_streamed(logs, tmp_path):
