@@ -67,12 +67,19 @@ def write_subset(df, trips, path, keep: bool, roles: dict | None = None):
 def corrected_measured(path, vehicle, lag_s: float, accel_grade: bool):
     """Measured power and inputs of a log with the measurement-side corrections applied:
     the power read ``lag_s`` later within trips; the grade fused from the accelerometer (fast
-    part) and the logged grade (slow part, free of the accelerometer's mounting pitch)."""
+    part) and the logged grade (slow part, free of the accelerometer's mounting pitch); ρ at
+    the logged altitude (standard atmosphere) when pressure is not logged."""
     from sumo_drvpw.data.measured import load_measured
-    from sumo_drvpw.fit.diagnose.structural import (accelerometer_sin_grade, fused_sin_grade,
-                                                    shift_within_trips)
+    from sumo_drvpw.fit.diagnose.structural import (P0_KPA, accelerometer_sin_grade, fused_sin_grade,
+                                                    pressure_at_altitude_kpa, shift_within_trips)
 
     m = load_measured([path], vehicle)
+    df = m.log.df
+    if "elevation_m" in df and "pressure_kpa" not in df and "ambient_c" in df:
+        # ρ from altitude and temperature: the reader assumed sea-level pressure
+        h = df["elevation_m"].to_numpy(float)
+        m.inputs.rho = np.where(np.isfinite(h), m.inputs.rho * pressure_at_altitude_kpa(h) / P0_KPA,
+                                m.inputs.rho)
     trip = m.log.df["trip_id"].to_numpy()
     codes = np.unique(trip, return_inverse=True)[1]
     t = m.log.df["time_s"].to_numpy(float)
@@ -156,11 +163,8 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
             write_outputs(res, out_dir / tag, figures=True)
             lag = float(res.equation.provenance.get("power_lag_s", 0.0))
             acc_grade = any(f["term"] == "[grade_accelerometer]" for f in res.report["findings"])
-            if lag or acc_grade:
-                m_corr = corrected_measured(train, vehicle, lag, acc_grade)
-                corr_eq, corr_phys = calibrate_physical(m_corr, f"{name}_corrected")
-            else:
-                corr_eq, corr_phys = None, None
+            m_corr = corrected_measured(train, vehicle, lag, acc_grade)
+            corr_eq, corr_phys = calibrate_physical(m_corr, f"{name}_corrected")
             # the equation for SUMO: declared physics (+ the conditions and loads the tracer
             # found) on the corrected data; a dynamometer equation keeps its road load
             extra = [f["term"] for f in res.report["findings"] if f.get("role") in ("condition", "load")]
@@ -178,7 +182,8 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
             held_raw = evaluate(m_test, eqs)
             m_test_corr = corrected_measured(test, vehicle, lag, acc_grade)
             held_corr = evaluate(m_test_corr, [e for e in (corr_eq, final_eq) if e is not None])
-            runs.append({"tag": tag, "held": list(held), "train_trips": int(df["trip_id"].nunique() - len(held)),
+            runs.append({"rho_alt": "elevation_m" in df and "pressure_kpa" not in df and "ambient_c" in df,
+                         "tag": tag, "held": list(held), "train_trips": int(df["trip_id"].nunique() - len(held)),
                          "res": res, "base_eq": base_eq, "base_phys": base_phys, "corr_eq": corr_eq,
                          "corr_phys": corr_phys, "lag": lag, "acc_grade": acc_grade,
                          "held_raw": held_raw, "held_corr": held_corr,
@@ -334,7 +339,8 @@ def render(cars, took) -> str:
                 L.append(row(eqname, doc, "as logged"))
             if run["held_corr"]:
                 fixes = [x for x in (f"lag {run['lag']:+.3g} s" if run["lag"] else "",
-                                     "fused accelerometer grade" if run["acc_grade"] else "") if x]
+                                     "fused accelerometer grade" if run["acc_grade"] else "",
+                                     "ρ at altitude" if run.get("rho_alt") else "") if x]
                 for eqname, doc in run["held_corr"].items():
                     L.append(row(eqname, doc, f"corrected ({', '.join(fixes)})" if fixes else "as logged"))
             L.append("")
