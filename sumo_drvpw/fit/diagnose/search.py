@@ -226,6 +226,8 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
                            "structural": structural_notes})
 
 
+#: shifts on each side of zero on the coarse grid of the lag search
+COARSE_LAGS = 20
 #: candidates tried per round when the best one does not replicate or is implausible
 MAX_TRIES = 5
 #: largest plausible |energy share| of one finding (a share beyond it is a proxy or a fit artefact)
@@ -312,19 +314,30 @@ def _timing_step(y_all, ana, x_eq, decl_vals, trip_codes_all, trip_names, t_all,
     lags = lag_range(dt_med, opt.max_lag_s)
     if len(lags) < 2:
         return y_all, ana, None, None
-    shifted = {int(k): shift_within_trips(y_all, trip_codes_all, int(k)) for k in lags}
+    # samples whose power is finite at every shift (one boolean pass per shift, none stored)
     common = ana.copy()
-    for v in shifted.values():
-        common &= np.isfinite(v)
+    for k in lags:
+        common &= np.isfinite(shift_within_trips(y_all, trip_codes_all, int(k)))
     if common.sum() < 50:
         return y_all, ana, None, None
     idx = np.flatnonzero(common)
     x = x_eq.take(idx)
-    tr0 = _declared_model(x, shifted[0][idx], dt_all[idx], t_all[idx], trip_codes_all[idx],
+    tr0 = _declared_model(x, y_all[idx], dt_all[idx], t_all[idx], trip_codes_all[idx],
                           trip_names, {}, opt, declared, decl_vals[idx])
-    res = timing(tr0, {k: v[idx] for k, v in shifted.items()}, dt_med, paired_test)
+    # coarse-to-fine: at most ~41 shifts on a coarse grid, then every shift around the best
+    big = int(lags[-1])
+    step = max(1, math.ceil(big / COARSE_LAGS))
+    tried = sorted(set(range(-big, big + 1, step)) | {0})
+    shifted = {k: shift_within_trips(y_all, trip_codes_all, k)[idx] for k in tried}
+    res = timing(tr0, shifted, dt_med, paired_test)
+    if step > 1:
+        fine = [k for k in range(res["lag_samples"] - step + 1, res["lag_samples"] + step)
+                if -big <= k <= big and k not in shifted]
+        shifted.update({k: shift_within_trips(y_all, trip_codes_all, k)[idx] for k in fine})
+        res = timing(tr0, shifted, dt_med, paired_test)
     note = {k: v for k, v in res.items() if k != "d"}
-    note["per_trip_lag_s"] = per_trip_lags(tr0, {k: v[idx] for k, v in shifted.items()}, dt_med)
+    note["per_trip_lag_s"] = per_trip_lags(tr0, shifted, dt_med)
+    note["shifts_tried"] = len(shifted)
     note["test"] = ("lag chosen per fold on the training folds, scored on held-out blocks; "
                     "d = SSE(lag 0) − SSE(chosen lag), the tracer's paired block test")
     accepted = res["lag_samples"] != 0 and res["p_value"] < opt.alpha and res["rmse_gain"] >= opt.min_gain
@@ -333,13 +346,13 @@ def _timing_step(y_all, ana, x_eq, decl_vals, trip_codes_all, trip_names, t_all,
         f"p = {res['p_value']:.3g} → {'applied' if accepted else 'not applied'}")
     if not accepted:
         return y_all, ana, None, note
-    y_new = shifted[res["lag_samples"]]
+    y_new = shift_within_trips(y_all, trip_codes_all, res["lag_samples"])
     fold = tr0.fold_of(False)
     before = tr0.heldout_pred(fold)
     tr1 = _declared_model(x, y_new[idx], dt_all[idx], t_all[idx], trip_codes_all[idx],
                           trip_names, {}, opt, declared, decl_vals[idx])
     after = tr1.heldout_pred(fold)
-    y0, y1 = shifted[0][idx], y_new[idx]
+    y0, y1 = shifted[0], y_new[idx]
     per_trip_lag = note["per_trip_lag_s"]
     same_sign = sum(1 for v in per_trip_lag.values() if np.sign(v) == np.sign(res["lag_s"]))
     finding = {
