@@ -170,7 +170,7 @@ _log_case("trip id empty", _set("trip_id", 3, np.nan), ("trip_id", "row 3"))
 _log_case("single sample", lambda df: df.iloc[:1], ("sample",))
 _log_case("two samples", lambda df: df.iloc[:2], ("sample",))
 _log_case("constant speed", lambda df: df.assign(speed_mps=15.0), ("speed",))
-_log_case("standstill only", lambda df: df.assign(speed_mps=0.0), ("candidate",))
+_log_case("standstill only", lambda df: df.assign(speed_mps=0.0), ("speed", "acc"))
 _log_case("one moving speed and standstill", lambda df: df.assign(speed_mps=np.where(np.arange(len(df)) % 400 < 200, 0.0, 15.0)),
           ("speed",))
 _log_case("constant speed parquet", lambda df: df.assign(speed_mps=15.0), ("speed",), fmt="parquet")

@@ -188,7 +188,7 @@ def test_kmh_heuristic_accepts_real_logs(shared_data, tmp_path):
     """No false alarm on the real logs (the threshold's basis): every imported BMW i3 trip
     and Prius Gen-2 log reads as m/s."""
     from sumo_drvpw.data.adapters import read
-    from sumo_drvpw.data.log import KMH_SUSPECT_ACCEL_MPS2, implied_acceleration
+    from sumo_drvpw.data.plausible import KMH_SUSPECT_ACCEL_MPS2, implied_acceleration
 
     for fmt, src in (("bmw-i3-tum", "bmw_i3_tum"), ("torquepro-prius2", "prius_gen2_torquepro")):
         df, _ = read(fmt, [shared_data / src])
@@ -203,7 +203,7 @@ def test_kmh_heuristic_accepts_real_logs(shared_data, tmp_path):
 
 def test_implied_acceleration_reference():
     """Constant 2 m/s² ramp sampled at 10 Hz: |Δv/Δt| over 1 s is exactly 2, never across trips."""
-    from sumo_drvpw.data.log import implied_acceleration
+    from sumo_drvpw.data.plausible import implied_acceleration
 
     t = np.r_[np.arange(0, 10, 0.1), np.arange(0, 10, 0.1)]
     v = np.r_[2.0 * np.arange(0, 10, 0.1), 30 - 2.0 * np.arange(0, 10, 0.1)]

@@ -18,6 +18,8 @@ from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.terms import Inputs
+from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_distinct_trips,  # noqa: F401
+                                       check_speed_unit, implied_acceleration)
 
 #: Canonical numeric columns the reader checks when present.
 NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "elevation_m",
@@ -33,10 +35,6 @@ DERIVED = ("trip_id", "time_s", "speed_mps", "accel_mps2", "grade_rad", "wind_mp
 SPEED_MAX_MPS = 100.0
 #: Speed units a log may declare (``ReadOptions.speed_unit``) → factor to m/s.
 SPEED_UNITS = {"m/s": 1.0, "km/h": 1 / 3.6, "mph": 0.44704}
-#: 99th percentile of |Δv/Δt| over ~1 s above which m/s speeds are implausible [m/s²]:
-#: real logs stay below 3.2 (BMW i3 trips 2.2 overall, 3.1 in the liveliest trip; Prius
-#: Gen-2 OBD 1.7; JLU dynamometer cycles 1.5); the same speeds in km/h give 3.6× that.
-KMH_SUSPECT_ACCEL_MPS2 = 4.5
 #: Plausible ranges of optional physical columns: (low, high, unit, hint when outside).
 RANGES = {
     "mass_kg": (1.0, 1.0e5, "kg", "a vehicle mass is > 0 and at most 100 t"),
@@ -279,82 +277,8 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
                 raise UserError(f"{p}: column '{c}' is {g[i]:g} at row {i}, beyond ±{lim:.3g} "
                                 f"({'rad' if c == 'grade_rad' else '%'}): not a road grade")
     if opt.speed_unit is None:
-        _check_speed_unit(v, t, trip, p)
+        check_speed_unit(v, t, trip, p)
     return n_clipped
-
-
-def implied_acceleration(v: np.ndarray, t: np.ndarray, trip: np.ndarray, horizon_s: float = 1.0) -> np.ndarray:
-    """|Δv/Δt| over about ``horizon_s`` within trips, for samples where the car moves [m/s²].
-
-    Parameters
-    ----------
-    v : speed [m/s]; t : time [s], increasing within a trip; trip : trip id per sample
-    horizon_s : time to the partner sample [s] (≥ 1 s damps quantisation noise)
-
-    Each sample is paired with the first sample at least ``horizon_s`` later in the same
-    trip; pairs more than 3·horizon apart (gaps) or both below 0.5 m/s are left out.
-    """
-    n = len(v)
-    if n < 2:
-        return np.zeros(0)
-    codes = pd.factorize(trip)[0]
-    key = codes * (np.nanmax(np.abs(t)) * 4 + 4 * horizon_s + 1.0) + t  # trips never overlap
-    j = np.searchsorted(key, key + horizon_s)
-    ok = j < n
-    i = np.flatnonzero(ok)
-    j = j[ok]
-    dt = t[j] - t[i]
-    good = (codes[j] == codes[i]) & (dt > 0) & (dt <= 3 * horizon_s) & (np.maximum(v[i], v[j]) > 0.5)
-    return np.abs((v[j] - v[i])[good] / dt[good])
-
-
-def _check_speed_unit(v: np.ndarray, t: np.ndarray, trip: np.ndarray, p: Path) -> None:
-    """Refuse m/s speeds whose implied accelerations only make sense in km/h."""
-    a = implied_acceleration(v, t, trip)
-    if len(a) < 50:
-        return
-    q = float(np.percentile(a, 99))
-    if q > KMH_SUSPECT_ACCEL_MPS2:
-        raise UserError(f"{p}: column 'speed_mps' implies accelerations of {q:.1f} m/s² (99th "
-                        f"percentile over 1 s; real driving stays below {KMH_SUSPECT_ACCEL_MPS2:g}), "
-                        f"{q / 3.6:.1f} m/s² if the speed is in km/h: is it km/h? declare the unit "
-                        "(speed unit km/h or m/s)")
-
-
-def check_distinct_trips(paths) -> None:
-    """No trip id in two files (a file without ``trip_id`` is the trip named by its stem).
-
-    Reads only the ``trip_id`` column; raises UserError naming the trip and both files.
-    """
-    seen: dict[str, Path] = {}
-    for p in expand_paths(paths):
-        ids = _trip_ids(p)
-        for tid in ids:
-            if tid in seen:
-                raise UserError(f"{p}: trip_id '{tid}' is also in {seen[tid]}; samples of one trip "
-                                "belong in one file, give each trip its own id")
-        for tid in ids:
-            seen[tid] = p
-
-
-def _trip_ids(p: Path) -> list[str]:
-    try:
-        if p.suffix.lower() == ".parquet":
-            import pyarrow.parquet as pq
-
-            if "trip_id" not in pq.read_schema(p).names:
-                return [p.stem]
-            col = pq.read_table(p, columns=["trip_id"]).column(0).to_pandas()
-        else:
-            head = pd.read_csv(p, nrows=0)
-            if "trip_id" not in head:
-                return [p.stem]
-            col = pd.read_csv(p, usecols=["trip_id"])["trip_id"]
-    except pd.errors.EmptyDataError:
-        return []
-    except (OSError, ValueError, pd.errors.ParserError) as e:
-        raise UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}") from None
-    return [str(x) for x in pd.unique(col.dropna().astype(str))]
 
 
 def _trip_starts(trip: np.ndarray) -> np.ndarray:
