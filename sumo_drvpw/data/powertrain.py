@@ -127,7 +127,7 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
     if all(c in df for c in POWER_SPLIT_COLUMNS):
         if vehicle is None or vehicle.powertrain_type != "power_split":
             raise UserError(f"{where}: the log has power-split signals ({', '.join(POWER_SPLIT_COLUMNS)}); "
-                            "give --vehicle with a power_split powertrain (e.g. prius3, prius2)")
+                            "give a vehicle with a power_split powertrain (e.g. prius3, prius2)")
         pt = vehicle.powertrain
         kr = float(pt.get("mg2_reduction", 1.0))
         kc = float(pt.get("counter_ratio", 1.0))
@@ -151,8 +151,8 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
             how = "motor torque × motor speed"
         else:
             if vehicle is None:
-                raise UserError(f"{where}: 'motor_torque_nm' without 'motor_speed_rpm' needs --vehicle "
-                                "(gear_ratio and wheel_radius_m)")
+                raise UserError(f"{where}: 'motor_torque_nm' without 'motor_speed_rpm' needs a vehicle "
+                                "(its gear_ratio and wheel_radius_m)")
             w = (df["speed_mps"].to_numpy(float) / vehicle.need("powertrain", "wheel_radius_m")
                  * vehicle.need("powertrain", "gear_ratio"))
             how = "motor torque × (speed / wheel radius × gear ratio)"

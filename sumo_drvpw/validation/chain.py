@@ -2,8 +2,7 @@
 
 Run::
 
-    .venv/bin/python -m sumo_drvpw.validation.chain [--data ../shared/data] \
-        [--out docs/energy-chain-validation.md]
+    .venv/bin/python -m sumo_drvpw.validation.chain [REPORT.md [DATA_FOLDER]]
 
 writes the Markdown report and ``<out>.json`` beside it. Every number is computed by the run.
 
@@ -33,7 +32,6 @@ Studies (each trip's prediction comes from a chain calibrated without that trip)
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import time
@@ -457,24 +455,24 @@ def run(data: Path, studies=None) -> dict:
 
 
 def main(argv=None) -> int:
+    """``python -m sumo_drvpw.validation.chain [REPORT.md [DATA_FOLDER]]`` (positional only:
+    library modules name no command-line options; defaults docs/energy-chain-validation.md
+    and $SUMO_DRVPW_DATA or ../shared/data). Exit 2 with one line when the data are absent."""
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.fileio import plain, write_json, write_text
     from sumo_drvpw.validation.data import resolve_data
 
-    ap = argparse.ArgumentParser(prog="python -m sumo_drvpw.validation.chain", description=__doc__.splitlines()[0])
-    ap.add_argument("--data", help="shared data folder (default $SUMO_DRVPW_DATA or ../shared/data)")
-    ap.add_argument("--out", default="docs/energy-chain-validation.md", help="Markdown report (JSON beside it)")
-    ap.add_argument("--study", action="append", choices=sorted(STUDIES), help="run only these (repeat)")
-    a = ap.parse_args(argv)
+    args = list(sys.argv[1:] if argv is None else argv)
+    out = Path(args[0] if args else "docs/energy-chain-validation.md")
     try:
-        data = resolve_data(a.data, {"bmw_i3_tum": 0, "jlu_bev_dyno": 0, "jlu_bev_road": 0,
-                                     "prius_gen2_torquepro": 0})
-        res = run(data, a.study)
+        data = resolve_data(args[1] if len(args) > 1 else None,
+                            {"bmw_i3_tum": 0, "jlu_bev_dyno": 0, "jlu_bev_road": 0,
+                             "prius_gen2_torquepro": 0})
+        res = run(data)
     except UserError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    out = Path(a.out)
-    cmd = "python -m sumo_drvpw.validation.chain" + (f" --out {a.out}" if argv is None else "")
+    cmd = "python -m sumo_drvpw.validation.chain" + (f" {out}" if args else "")
     write_json(out.with_suffix(".json"), plain(res))
     write_text(out, render(res, cmd))
     print(f"wrote {out}")
