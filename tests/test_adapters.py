@@ -429,7 +429,7 @@ def test_columns_wrong_separator_and_missing_mapping(tmp_path):
         read("columns", src, columns=m)
     with pytest.raises(UserError, match="needs a mapping file"):
         read("columns", src)
-    with pytest.raises(UserError, match="--columns mapping not found"):
+    with pytest.raises(UserError, match="column mapping not found"):
         read("columns", src, columns=tmp_path / "nope.toml")
 
 

@@ -36,7 +36,7 @@ def read(format: str, paths, columns=None):
         frames, reports, notes = mod.read(paths, columns)
     else:
         if columns is not None:
-            raise UserError(f"--columns is only for format 'columns', not '{format}'")
+            raise UserError(f"a column mapping is only for format 'columns', not '{format}'")
         frames, reports, notes = mod.read(paths)
     from sumo_drvpw.data.adapters._common import combine
 

@@ -50,7 +50,7 @@ SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 def load_mapping(path) -> dict:
     """Read and check a mapping TOML; every problem is a UserError naming the file and key."""
     p = Path(path)
-    doc = read_toml(p, "--columns mapping")
+    doc = read_toml(p, "column mapping")
     opts = doc.get("options", {})
     if not isinstance(opts, dict):
         raise UserError(f"{p}: [options] must be a table")
@@ -229,7 +229,7 @@ def _split_trips(df, path, rep):
 def read(paths, columns):
     """Read CSV/Parquet files through the mapping TOML ``columns``."""
     if columns is None:
-        raise UserError("format 'columns' needs a mapping file: --columns mapping.toml")
+        raise UserError("format 'columns' needs a mapping file (mapping.toml)")
     m = load_mapping(columns)
     frames, reports = read_each(expand_paths(paths, SUFFIXES, "CSV/Parquet"),
                                 lambda f: read_file(f, m))
