@@ -125,7 +125,11 @@ class _Terminated(KeyboardInterrupt):
     """SIGTERM, raised where Ctrl-C (SIGINT) would be: the run stops the same clean way."""
 
 
+_TERMINATED = []  # set when SIGTERM arrived: an interrupted command then exits 143, not 130
+
+
 def _on_sigterm(signum, frame):
+    _TERMINATED.append(signum)
     raise _Terminated()
 
 
@@ -155,7 +159,9 @@ def main(argv: list[str] | None = None) -> int:
             import numpy as np
 
             with np.errstate(all="ignore"):
-                return int(args._main(args) or 0)
+                rc = int(args._main(args) or 0)
+            # a command that caught the interrupt itself (run writes what it simulated)
+            return 128 + signal.SIGTERM if rc == 130 and _TERMINATED else rc
     except OutputExists as e:
         print(f"sumo-drvpw {args.command}: error: {e}; give --force to replace it", file=sys.stderr)
         return 2
@@ -176,6 +182,7 @@ def main(argv: list[str] | None = None) -> int:
         raise
     finally:
         fileio.CURRENT_COMMAND = None
+        _TERMINATED.clear()
         if prev_term is not None:
             signal.signal(signal.SIGTERM, prev_term)
 
