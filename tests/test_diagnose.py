@@ -121,7 +121,8 @@ def test_block_validation_single_trip_and_report_files(tmp_path):
     res = run([path], "prius3", None, out, DiagnoseOptions(), figures=True)
     doc = json.loads((out / "trace.json").read_text())
     assert set(doc) == {"target", "n_samples", "validation", "baseline", "findings", "final"}
-    assert set(doc["baseline"]) == {"terms", "coefficients", "metrics", "trip_energy", "trip_net_energy"}
+    assert set(doc["baseline"]) == {"terms", "coefficients", "metrics", "trip_energy", "trip_net_energy",
+                                    "physical", "implausible"}
     te = doc["final"]["trip_energy"]
     assert set(te) == {"mean_abs_error", "max_abs_error", "trips"} and len(te["trips"]) == 1
     # the A/C load found: the held-out traction energy moves towards the measured one
@@ -354,3 +355,13 @@ def test_fused_grade_keeps_the_fast_accelerometer_and_drops_its_mounting_pitch()
     err = lambda s: float(np.sqrt(np.mean((s[inner] - true[inner]) ** 2)))  # noqa: E731
     assert err(fused) < 0.3 * err(acc) and err(fused) < 0.3 * err(logged)
     assert abs(np.mean(fused[inner] - true[inner])) < 0.002
+
+
+def test_physical_reading_of_the_traced_equation(tmp_path):
+    """Each declared coefficient of the result is read physically (issue #11 §3): on the
+    planted A/C log the truth's coefficients read plausibly (mass factor ≈ 1, grade 1/η)."""
+    res, _ = _run(tmp_path, [E.AuxLoad()], max_findings=1)
+    phys = res.report["final"]["physical"]
+    assert set(phys) == {"acc", "grade", "aero", "roll"}
+    assert phys["acc"]["value"] == pytest.approx(load_equation(TRUTH).terms["acc"], rel=0.05)
+    assert res.report["final"]["implausible"] == []

@@ -188,9 +188,17 @@ def markdown(res, figs) -> str:
         for t in rd["top"][:6]:
             L.append(f"| `{t['term']}` | {100 * t['rmse_gain']:.2f} | {t['p_value_bonferroni']:.3g} |")
         L.append("")
-    L += ["## Final equation", "", "| term | coefficient |", "|---|---|"]
+    L += ["## Final equation", "", "| term | coefficient | physical reading |", "|---|---|---|"]
+    phys = r["final"].get("physical", {})
     for t, c in r["final"]["coefficients"].items():
-        L.append(f"| `{t}` | {c:.6g} |")
+        p = phys.get(t)
+        read = "" if p is None else (f"{p['reads_as']} = {p['value']:.4g} {p['unit']}".rstrip(" -")
+                                     + ("" if p["plausible"] else f" — implausible: {p['note']}"))
+        L.append(f"| `{t}` | {c:.6g} | {read} |")
+    if r["final"].get("implausible"):
+        L += ["", f"Implausible coefficients: {', '.join(r['final']['implausible'])}. The tracer refits the "
+              "declared terms without constraints; calibrate with physical constraints "
+              "(sumo_drvpw.fit.physical) before taking this equation into SUMO."]
     L += ["", "## Columns not offered", "", "| column | reason |", "|---|---|"]
     for s in d["signals_skipped"]:
         L.append(f"| {s['column']} | {s['reason']} |")

@@ -67,6 +67,14 @@ def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrat
         "final": {"terms": list(final_terms),
                   "coefficients": final_terms, "metrics": pick_metrics(m_final)},
     }
+    # physical reading of the coefficients, before and after (issue #11 §3)
+    from sumo_drvpw.fit.physical import implausible, physical_reading
+
+    rho = float(np.mean(tr.x.rho))
+    for key, coefs in (("baseline", report["baseline"]["coefficients"]), ("final", final_terms)):
+        reading = physical_reading({t: c for t, c in coefs.items() if isinstance(c, float)}, rho)
+        report[key]["physical"] = {t: r for t, r in reading.items() if r["plausible"] is not None}
+        report[key]["implausible"] = implausible(reading)
     # energy per trip of the held-out predictions, before and after (issue #11 §5)
     trips = np.asarray(tr.trip_names)[tr.trip]
     for key, pred in (("baseline", pred0), ("final", pred_final)):
