@@ -172,7 +172,8 @@ def test_bad_options_exit_2(long_log, tmp_path, capsys):
     assert cli_main(["calibrate", str(long_log), "--vehicle", "nosuchcar", "--out", str(tmp_path / "e.toml")]) == 2
     assert "nosuchcar" in capsys.readouterr().err
     assert cli_main(["calibrate", str(long_log), "--out", str(tmp_path / "e.toml")]) == 2
-    assert "--vehicle" in capsys.readouterr().err  # power-split signals need a vehicle
+    err = capsys.readouterr().err  # power-split signals need a vehicle: the message says so
+    assert "vehicle with a power_split powertrain" in err and "prius3" in err
 
 
 def _no_wind_inputs(rng, n):
