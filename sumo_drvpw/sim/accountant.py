@@ -179,7 +179,7 @@ class Accountant(_Listener):
         """Everything booked so far as a :class:`RunResult` (tables, summary, writer)."""
         self.close_trace()
         sc, led, net, st = self.scenario, self.ledger, self.net, self.stepper
-        end = float(self.conn.simulation.getTime())
+        end = st.now()
         summary_extra = {
             "scenario": str(sc.path) if sc.path else None, "begin_s": self.begin,
             "end_s": end, "step_length_s": st.dt, "step_method": st.step_method,

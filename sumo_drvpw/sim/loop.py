@@ -197,6 +197,14 @@ class Stepper:
         self.count_persons = (hasattr(resolve, "skip_person") and hasattr(conn, "person")
                               and hasattr(conn.simulation, "getDepartedPersonIDList"))
 
+    def now(self) -> float:
+        """Simulation time [s]; after an interrupted exchange with SUMO (a signal in the
+        middle of a call), the time of the last booked step."""
+        try:
+            return float(self.conn.simulation.getTime())
+        except Exception:  # traci/libsumo errors after an interrupted call
+            return float(self.last_t) if self.last_t is not None else float("nan")
+
     @property
     def step_method(self) -> str:
         return "ballistic" if self.ballistic else "euler"
@@ -410,7 +418,7 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
     finally:
         if bar is not None:
             bar.close()
-    return {"interrupted": interrupted, "end_time_s": float(conn.simulation.getTime()),
+    return {"interrupted": interrupted, "end_time_s": stepper.now(),
             "step_length_s": dt, "step_method": stepper.step_method}
 
 
