@@ -126,6 +126,13 @@ class DriveLog:
         return self.files[0] if len(self.files) == 1 else f"{len(self.files)} files"
 
 
+def exclusions(counts: dict) -> str:
+    """The non-zero exclusion counts of a read, as 'brake 12, nan grade_rad 1600' (for messages)."""
+    parts = [f"{k[len('excluded_'):].replace('_', ' ')} {int(v)}" for k, v in counts.items()
+             if k.startswith("excluded_") and k != "excluded_total" and isinstance(v, (int, np.integer)) and v]
+    return ", ".join(parts) or "none"
+
+
 def bundled_log(name: str = BUNDLED_LOG) -> Path:
     """Path of a drive log shipped in the package (``sumo_drvpw/data/builtin/logs/``)."""
     from importlib import resources

@@ -65,7 +65,10 @@ def load_measured(paths, vehicle: str | None = None, options: ReadOptions | None
     veh = load_vehicle(vehicle) if vehicle else None
     m = measure(read_log(paths, veh, options), veh, target)
     if not m.usable.any():
-        raise UserError(f"{m.log.describe()}: no usable samples (all excluded: {m.log.counts})")
+        from sumo_drvpw.data.log import exclusions
+
+        raise UserError(f"{m.log.describe()}: no usable sample among {len(m.log)} rows (excluded: "
+                        f"{exclusions(m.log.counts)}; any other row lacks a finite measured power or input)")
     return m
 
 
