@@ -250,6 +250,12 @@ def test_most_window_robust_slope(tmp_path):
     # tracked positions hold on a real network with the sublane model and 0.25 s steps
     assert s["position_source"] == "tracked" and s["position_mismatches"] == 0
     assert 0 < s["position_reads"] < 0.3 * s["samples"]
+    # the lanes with clipped slopes are named, most first, and their counts add up
+    lanes = s["network"]["slope_clipped_lanes"]
+    counts = list(lanes.values())
+    assert counts == sorted(counts, reverse=True) and sum(counts) <= s["slope_clipped_samples"]
+    if lanes:
+        assert any(next(iter(lanes)) in w for w in s["warnings"])
 
 
 # --- bad input: exit code 2, one line, no traceback ------------------------------------

@@ -207,6 +207,12 @@ class Accountant(_Listener):
             warnings.append("vehicles of vClasses no equation is made for were not booked: "
                             + ", ".join(f"{c} {n}" for c, n in
                                         sorted(self.resolver.skipped["by_vclass"].items())))
+        clipped = summary_extra["network"]["slope_clipped_lanes"]
+        if clipped:
+            warnings.append(f"{int(led.clipped)} vehicle-steps on slopes beyond "
+                            f"±{sc.slope_max:g} rad were clipped; most on lanes "
+                            + ", ".join(f"{k} ({n})" for k, n in list(clipped.items())[:3])
+                            + " (summary.json network.slope_clipped_lanes)")
         if st.missed_steps:
             warnings.append(f"{st.missed_steps} simulation steps were not booked: call "
                             "simulationStep() without a target time")
