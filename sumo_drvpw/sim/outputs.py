@@ -304,9 +304,10 @@ TERM_COLOURS = {"acc": "#1f77b4", "grade": "#8c564b", "aero": "#2ca02c", "roll":
                 "other": "#7f7f7f"}
 
 
-def share_figure(classes_tbl: pa.Table, path: Path) -> None:
+def share_figure(classes_tbl: pa.Table, path: Path, predicts: dict | None = None) -> None:
     """Stacked bars: traction energy [kWh] by term for each road class and equation, with
-    the share of each term printed and the energy per distance [Wh/km] above each bar."""
+    the energy per distance [Wh/km] above each bar and, under it, what the equation
+    predicts (wheel or powertrain output, ``predicts``: equation → label)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -323,7 +324,9 @@ def share_figure(classes_tbl: pa.Table, path: Path) -> None:
     if len(kwh):
         kwh.plot.bar(stacked=True, ax=ax, width=0.75,
                      color=[TERM_COLOURS[c] for c in kwh.columns])
-        ax.set_xticklabels([f"{c}\n{e}" for c, e in kwh.index], rotation=0, fontsize=7)
+        what = predicts or {}
+        ax.set_xticklabels([f"{c}\n{e}\n({what.get(e, 'wheel').replace('_', ' ')})"
+                            for c, e in kwh.index], rotation=0, fontsize=7)
         tot = kwh.sum(axis=1).to_numpy()
         for k, (idx, t) in enumerate(zip(kwh.index, tot)):
             w = whpkm.get(idx, np.nan)
@@ -485,7 +488,7 @@ def write_outputs(out_dir: Path, result: RunResult) -> dict[str, str]:
         files["edgedata"] = str(out_dir / "edgedata.xml")
     names = result.names
     if result.figures:
-        share_figure(ct, out_dir / "shares.png")
+        share_figure(ct, out_dir / "shares.png", dict(zip(names, result.predicts)))
         files["shares_figure"] = str(out_dir / "shares.png")
         if len(names) >= 2:
             pair = result.difference or names[:2]
