@@ -31,7 +31,7 @@ def implied_acceleration(v: np.ndarray, t: np.ndarray, trip: np.ndarray, horizon
     n = len(v)
     if n < 2:
         return np.zeros(0)
-    codes = pd.factorize(trip)[0]
+    codes = np.cumsum(np.r_[False, trip[1:] != trip[:-1]])  # contiguous runs: cheaper than factorize
     key = codes * (np.nanmax(np.abs(t)) * 4 + 4 * horizon_s + 1.0) + t  # trips never overlap
     j = np.searchsorted(key, key + horizon_s)
     ok = j < n
