@@ -75,7 +75,8 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, R_DRY_AIR, RHO_DEFAULT
+from sumo_drvpw.model.air import air_density
+from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, load_equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
@@ -430,7 +431,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         pk = _num(air.get("pressure_kpa", P_STD_KPA), where, "air.pressure_kpa", positive=True)
         if t + KELVIN <= 0:
             raise UserError(f"{where}: air.temperature_c below absolute zero: {t}")
-        rho = pk * 1000.0 / (R_DRY_AIR * (t + KELVIN))
+        rho = air_density(t, pk)
     else:
         rho = RHO_DEFAULT
 
