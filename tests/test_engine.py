@@ -19,7 +19,8 @@ from sumo_drvpw.data.stream import plan
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.calibrate import CANDIDATES
 from sumo_drvpw.fit.engine import run
-from sumo_drvpw.fit.stream import CalibrationStats, CompareStats, calibrate_from_stats
+from sumo_drvpw.fit.stream import CalibrationStats, calibrate_from_stats
+from sumo_drvpw.fit.stream_compare import CompareStats
 from sumo_drvpw.model.vehicles import load_vehicle
 
 pytest.importorskip("distributed", reason="Dask not installed: pip install 'sumo-drvpw[dask]'")

@@ -26,7 +26,8 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.calibrate import CANDIDATES, calibrate
 from sumo_drvpw.fit.compare import compare
 from sumo_drvpw.fit.engine import run
-from sumo_drvpw.fit.stream import (CalibrationStats, CompareStats, Moments, calibrate_from_stats,
+from sumo_drvpw.fit.stream_compare import CompareStats
+from sumo_drvpw.fit.stream import (CalibrationStats, Moments, calibrate_from_stats,
                                    ols_from_r)
 from sumo_drvpw.model.equations import load_equation
 from sumo_drvpw.model.vehicles import load_vehicle

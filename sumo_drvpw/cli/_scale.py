@@ -71,7 +71,8 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     """`calibrate` (driving power) through the streaming engines; same outputs."""
     from sumo_drvpw.cli import output_set
     from sumo_drvpw.data.measured import resolve_equations
-    from sumo_drvpw.fit.stream import CalibrationStats, CompareStats, calibrate_from_stats
+    from sumo_drvpw.fit.stream import CalibrationStats, calibrate_from_stats
+    from sumo_drvpw.fit.stream_compare import CompareStats
     from sumo_drvpw.model.equations import save_equation
     from sumo_drvpw.model.vehicles import load_vehicle
 
@@ -137,7 +138,7 @@ def compare_streamed(args, tmp: Path, title: str):
     """`compare` of driving power through the streaming engines: writes the report into
     ``tmp`` and returns the comparison (whose ``to_json`` covers every sample)."""
     from sumo_drvpw.data.measured import resolve_equations
-    from sumo_drvpw.fit.stream import CompareStats
+    from sumo_drvpw.fit.stream_compare import CompareStats
     from sumo_drvpw.model.vehicles import load_vehicle
     from sumo_drvpw.report.comparison import write_comparison_report
 

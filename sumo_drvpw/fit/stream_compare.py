@@ -1,0 +1,432 @@
+"""The statistics of `compare`, accumulated batch by batch (issue #14).
+
+Per equation: co-moments (Chan et al. 1979) of measured, predicted and category powers on
+all / light / heavy samples, Σ|e|, Σe², energies, per-trip energies, speed-bin and
+≥ 80 km/h sums, min/max of each category power, and a bounded reservoir sample (bottom-k
+of a deterministic random key per sample) for the percentiles and the figures: exact with
+at most ``RESERVOIR`` samples, else estimates from a uniform sample of that size. See
+:mod:`sumo_drvpw.fit.stream` for the calibration side and the merge rules.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fit.ols import Gram
+from sumo_drvpw.fit.stream import Moments, _add_counts
+from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS
+from sumo_drvpw.model.terms import CATEGORIES, parse_term
+
+#: Samples kept for percentiles and figures in compare.
+RESERVOIR = 250_000
+
+
+def _keys(trip: np.ndarray) -> np.ndarray:
+    """A deterministic uniform key in [0, 1) per sample from its trip id and position in
+    the trip, so the reservoir is the same whatever the batching or engine."""
+    out = np.empty(len(trip))
+    starts = np.flatnonzero(np.r_[True, trip[1:] != trip[:-1]]) if len(trip) else []
+    bounds = np.r_[starts, len(trip)]
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        seed = zlib.crc32(str(trip[a]).encode())
+        out[a:b] = np.random.default_rng(seed).random(b - a)
+    return out
+
+
+@dataclass
+class _Reservoir:
+    """Bottom-k sample by key: columns (dict name → array) of the k smallest keys."""
+
+    k: int
+    key: np.ndarray
+    cols: dict
+
+    def add(self, key: np.ndarray, cols: dict) -> "_Reservoir":
+        allk = np.r_[self.key, key]
+        allc = {c: np.r_[self.cols[c], cols[c]] if c in self.cols else cols[c] for c in cols}
+        if len(allk) > self.k:
+            keep = np.argpartition(allk, self.k - 1)[:self.k]
+            keep.sort()
+            allk = allk[keep]
+            allc = {c: v[keep] for c, v in allc.items()}
+        return _Reservoir(self.k, allk, allc)
+
+
+@dataclass
+class _EqStats:
+    """Per-equation sums of a comparison over the samples with a finite prediction."""
+
+    cats: list
+    mom: dict            # subset → Moments of [meas, pred] (all, light, heavy)
+    sse: dict            # subset → Σe²
+    se: dict             # subset → Σe
+    sae: float           # Σ|e|
+    ecat: Moments        # [e, category powers]
+    cmin: np.ndarray
+    cmax: np.ndarray
+    eref: Moments | None  # [e, reference category powers]
+    rmin: np.ndarray | None
+    rmax: np.ndarray | None
+    energy: np.ndarray   # Σ P_cat·Δt over samples with positive total
+    hs: np.ndarray       # n, Σe, Σe² at ≥ 80 km/h, then below
+    bins: np.ndarray     # (3, nbins): n, Σe, Σe² per 10 km/h speed bin
+    trip_e: dict         # trip → (E⁺meas, E⁺pred, E_net meas, E_net pred)
+
+    def merge(self, b: "_EqStats") -> "_EqStats":
+        if self.cats != b.cats:
+            raise UserError(f"compare: the categories of an equation differ between batches "
+                            f"({self.cats} and {b.cats})")
+        nb = max(self.bins.shape[1], b.bins.shape[1])
+        bins = np.zeros((3, nb))
+        bins[:, :self.bins.shape[1]] += self.bins
+        bins[:, :b.bins.shape[1]] += b.bins
+        return _EqStats(
+            self.cats, {k: self.mom[k].merge(b.mom[k]) for k in self.mom},
+            {k: self.sse[k] + b.sse[k] for k in self.sse}, {k: self.se[k] + b.se[k] for k in self.se},
+            self.sae + b.sae, self.ecat.merge(b.ecat),
+            np.minimum(self.cmin, b.cmin), np.maximum(self.cmax, b.cmax),
+            None if self.eref is None else self.eref.merge(b.eref),
+            None if self.rmin is None else np.minimum(self.rmin, b.rmin),
+            None if self.rmax is None else np.maximum(self.rmax, b.rmax),
+            self.energy + b.energy, self.hs + b.hs, bins, {**self.trip_e, **b.trip_e})
+
+
+def _minmax(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    if len(m) == 0:
+        return np.full(m.shape[1], np.inf), np.full(m.shape[1], -np.inf)
+    return m.min(axis=0), m.max(axis=0)
+
+
+def _categories(pw: dict) -> list:
+    """Categories compare() keeps: the four physical ones always, others when non-zero."""
+    return [c for c, p in pw.items() if c in CATEGORIES or np.any(p != 0.0)]
+
+
+class CompareStats:
+    """Mergeable statistics of :func:`sumo_drvpw.fit.compare.compare` over batches.
+
+    Parameters
+    ----------
+    equations : the equations compared (unique names)
+    reference : optional name of one of them (``error_reference_correlation``)
+    reservoir : samples kept for percentiles and figures [-]
+    """
+
+    def __init__(self, equations, reference: str | None = None, reservoir: int = RESERVOIR):
+        self.equations = list(equations)
+        self.reference = reference
+        self.k = int(reservoir)
+        self.n = 0
+        self.rows = 0
+        self.meas = Moments.empty(1)
+        self.meas_traction = 0.0
+        self.n_light = self.n_heavy = self.n_high = 0
+        self.eq: dict[str, _EqStats] = {}
+        self.ref_cats: list | None = None
+        self.res: _Reservoir | None = None
+        self.counts: dict = {}
+        self.trips: set = set()
+        self.source: str | None = None
+        self.vehicle = None
+        self.files: list = []
+
+    def columns(self) -> frozenset:
+        """Columns to read: the reader's canonical ones and the signals the equations name."""
+        from sumo_drvpw.data.stream import CANONICAL
+
+        return CANONICAL | {s for eq in self.equations for t in eq.terms
+                            for s in parse_term(t).signals}
+
+    def add(self, m) -> "CompareStats":
+        """Accumulate one batch: the usable samples of a Measured of whole trips."""
+        from sumo_drvpw.fit.compare import SPEED_BIN_MPS
+
+        self.rows += len(m.power_w)
+        self.counts = _add_counts(self.counts, m.counts)
+        self.source = self.source or m.source
+        self.vehicle = self.vehicle or m.vehicle
+        self.files += [f for f in m.log.files if f not in self.files]
+        idx = np.flatnonzero(np.asarray(m.usable, bool))
+        if len(idx) == 0:
+            return self
+        x = m.inputs.take(idx)
+        meas = np.asarray(m.power_w, float)[idx]
+        dt = m.log.df["dt_s"].to_numpy(float)[idx]
+        codes, uniq = pd.factorize(np.asarray(x.trip), sort=False)  # hashing, not sorting text
+        uniq = np.asarray(uniq).astype(str)
+        trip = np.asarray(x.trip)
+        if self.trips.intersection(uniq):
+            raise UserError(f"trip_id '{sorted(self.trips.intersection(uniq))[0]}' appears in "
+                            "more than one place; give each trip its own id")
+        self.trips.update(uniq)
+        v = np.asarray(x.v, float)
+        n = len(meas)
+        self.n += n
+        self.meas = self.meas.merge(Moments.of(meas[:, None]))
+        self.meas_traction += float(np.where(meas > 0.0, meas, 0.0) @ dt)
+        heavy_all = meas >= HEAVY_LOAD_W
+        self.n_heavy += int(heavy_all.sum())
+        self.n_light += int(n - heavy_all.sum())
+        self.n_high += int((v >= HIGH_SPEED_MPS).sum())
+        pw = {eq.name: eq.category_powers(x) for eq in self.equations}
+        if self.reference is not None and self.ref_cats is None:
+            self.ref_cats = _categories(pw[self.reference])
+        cols = {"meas": meas, "v": v, "dt": dt}
+        for eq in self.equations:
+            prev = self.eq.get(eq.name)
+            cats = prev.cats if prev is not None else _categories(pw[eq.name])
+            zero = np.zeros(n)
+            cw = {c: np.asarray(pw[eq.name].get(c, zero), float) for c in cats}
+            pred = np.sum(list(cw.values()), axis=0) if cw else zero
+            err = pred - meas
+            ok = np.isfinite(err)
+            e, mo, po, vo, dto = err[ok], meas[ok], pred[ok], v[ok], dt[ok]
+            hv = mo >= HEAVY_LOAD_W
+            cm = np.column_stack([cw[c][ok] for c in cats]) if cats else np.zeros((len(e), 0))
+            wgt = np.where(cm.sum(axis=1) > 0.0, dto, 0.0)
+            eref = rmin = rmax = None
+            if self.reference is not None:
+                rp = pw[self.reference]
+                rm = np.column_stack([np.asarray(rp.get(c, zero), float)[ok] for c in self.ref_cats]) \
+                    if self.ref_cats else np.zeros((len(e), 0))
+                eref = Moments.of(np.column_stack([e, rm]))
+                rmin, rmax = _minmax(rm)
+            hi = vo >= HIGH_SPEED_MPS
+            hs = np.array([hi.sum(), e[hi].sum(), e[hi] @ e[hi],
+                           (~hi).sum(), e[~hi].sum(), e[~hi] @ e[~hi]], float)
+            b = np.floor(np.maximum(vo, 0.0) / SPEED_BIN_MPS + 1e-9).astype(np.int64)
+            nb = int(b.max()) + 1 if len(b) else 0
+            bins = np.vstack([np.bincount(b, minlength=nb), np.bincount(b, e, nb),
+                              np.bincount(b, e * e, nb)]).astype(float)
+            pm = np.where(ok, pred, 0.0)
+            k = len(uniq)
+            sums = [np.bincount(codes, np.where(meas > 0.0, meas, 0.0) * dt, k),
+                    np.bincount(codes, np.where(pm > 0.0, pm, 0.0) * dt, k),
+                    np.bincount(codes, meas * dt, k), np.bincount(codes, pm * dt, k)]
+            cmin, cmax = _minmax(cm)
+            st = _EqStats(
+                cats, {"all": Moments.of(np.column_stack([mo, po])),
+                       "light": Moments.of(np.column_stack([mo[~hv], po[~hv]])),
+                       "heavy": Moments.of(np.column_stack([mo[hv], po[hv]]))},
+                {"all": float(e @ e), "light": float(e[~hv] @ e[~hv]), "heavy": float(e[hv] @ e[hv])},
+                {"all": float(e.sum()), "light": float(e[~hv].sum()), "heavy": float(e[hv].sum())},
+                float(np.abs(e).sum()), Moments.of(np.column_stack([e, cm])), cmin, cmax,
+                eref, rmin, rmax, cm.T @ wgt, hs, bins,
+                {str(t): tuple(float(s[i]) for s in sums) for i, t in enumerate(uniq)})
+            self.eq[eq.name] = st if prev is None else prev.merge(st)
+            cols[f"pred:{eq.name}"] = pred
+            cols[f"ok:{eq.name}"] = ok
+            for c in cats:
+                cols[f"cat:{eq.name}:{c}"] = cw[c]
+        batch = _Reservoir(self.k, np.zeros(0), {}).add(_keys(trip), cols)
+        self.res = batch if self.res is None else self.res.add(batch.key, batch.cols)
+        return self
+
+    def merge(self, o: "CompareStats") -> "CompareStats":
+        """Add another CompareStats (e.g. a Dask partition's) to this one."""
+        dup = self.trips & o.trips
+        if dup:
+            raise UserError(f"trip_id '{sorted(dup)[0]}' appears in more than one place; give "
+                            "each trip its own id")
+        self.trips |= o.trips
+        self.n += o.n
+        self.rows += o.rows
+        self.counts = _add_counts(self.counts, o.counts)
+        self.source = self.source or o.source
+        self.vehicle = self.vehicle or o.vehicle
+        self.files += [f for f in o.files if f not in self.files]
+        self.meas = self.meas.merge(o.meas)
+        self.meas_traction += o.meas_traction
+        self.n_light += o.n_light
+        self.n_heavy += o.n_heavy
+        self.n_high += o.n_high
+        self.ref_cats = self.ref_cats if self.ref_cats is not None else o.ref_cats
+        for name, b in o.eq.items():
+            self.eq[name] = b if name not in self.eq else self.eq[name].merge(b)
+        if o.res is not None:
+            self.res = o.res if self.res is None else self.res.add(o.res.key, o.res.cols)
+        return self
+
+    def comparison(self):
+        """A :class:`~sumo_drvpw.fit.compare.Comparison` for the report: its arrays are
+        the reservoir sample (figures, percentiles), its ``to_json`` reports the
+        statistics of every sample streamed."""
+        from sumo_drvpw.fit.compare import EquationResult
+
+        if self.n == 0 or self.res is None:
+            raise UserError(f"no usable samples (all excluded: {self.counts})")
+        order = np.argsort(self.res.key, kind="stable")
+        r = {c: v[order] for c, v in self.res.cols.items()}
+        comp = StreamedComparison(meas_w=r["meas"], speed_mps=r["v"], dt_s=r["dt"],
+                                  measured_traction_energy_j=self.meas_traction,
+                                  reference=self.reference)
+        comp.stats = self
+        for eq in self.equations:
+            s = self.eq[eq.name]
+            ok = r[f"ok:{eq.name}"]
+            e = (r[f"pred:{eq.name}"] - r["meas"])[ok]
+            energy = {c: float(s.energy[i]) for i, c in enumerate(s.cats)}
+            total = float(sum(energy.values()))
+            energy["total"] = total
+            share = {c: (energy[c] / total if total > 0.0 else math.nan) for c in s.cats}
+            comp.results[eq.name] = EquationResult(
+                equation=eq, pred_w=r[f"pred:{eq.name}"],
+                category_w={c: r[f"cat:{eq.name}:{c}"] for c in s.cats},
+                metrics=_metrics(s), speed_bins=_speed_bins(s, e, r["v"][ok]),
+                high_speed=_high_speed(s, e, r["v"][ok]),
+                error_term_correlation=_corr(s.ecat, s.cats, s.cmin, s.cmax),
+                energy_j=energy, energy_share=share,
+                traction_energy_ratio=(total / self.meas_traction if self.meas_traction > 0.0
+                                       else math.nan),
+                error_reference_correlation=(None if s.eref is None else
+                                             _corr(s.eref, self.ref_cats, s.rmin, s.rmax)))
+        return comp
+
+
+def _mean_rmse(n, s1, s2) -> tuple[float, float]:
+    return (s1 / n, math.sqrt(s2 / n)) if n else (math.nan, math.nan)
+
+
+def _speed_bins(s: _EqStats, e_sample, v_sample) -> list[dict]:
+    """:func:`sumo_drvpw.fit.compare.speed_bins` with exact n, mean and RMSE per bin and
+    percentiles from the reservoir sample."""
+    from sumo_drvpw.fit.compare import SPEED_BIN_MPS, _error_summary
+    from sumo_drvpw.model.constants import KMH
+
+    b = np.floor(np.maximum(v_sample, 0.0) / SPEED_BIN_MPS + 1e-9).astype(np.int64)
+    out = []
+    for k in range(s.bins.shape[1]):  # a handful of bins, not samples
+        lo, hi = k * SPEED_BIN_MPS, (k + 1) * SPEED_BIN_MPS
+        row = {"lo_kmh": lo / KMH, "hi_kmh": hi / KMH, "lo_mps": lo, "hi_mps": hi}
+        row.update(_error_summary(e_sample[b == k]))
+        n = int(s.bins[0, k])
+        row["n"] = n
+        row["mean_w"], row["rmse_w"] = _mean_rmse(n, s.bins[1, k], s.bins[2, k])
+        out.append(row)
+    return out
+
+
+def _high_speed(s: _EqStats, e_sample, v_sample) -> dict:
+    """:func:`sumo_drvpw.fit.compare.high_speed_summary`: counts, means and RMSE exact,
+    percentiles from the reservoir sample."""
+    from sumo_drvpw.fit.compare import high_speed_summary
+
+    out = high_speed_summary(e_sample, v_sample)
+    n_hi, s1, s2, n_lo, b1, b2 = s.hs
+    n = n_hi + n_lo
+    out["fraction"] = n_hi / n if n else math.nan
+    out["n"] = int(n_hi)
+    out["mean_w"], out["rmse_w"] = _mean_rmse(n_hi, s1, s2)
+    out["mean_below_w"], out["rmse_below_w"] = _mean_rmse(n_lo, b1, b2)
+    return out
+
+
+def _metrics(s: _EqStats) -> dict:
+    """:func:`sumo_drvpw.fit.compare.metrics` from sums (same keys and conventions)."""
+    from sumo_drvpw.fit.compare import MIN_SAMPLES
+
+    def r2(k):
+        m = s.mom[k]
+        sst = float(m.m2[0, 0])
+        return 1.0 - s.sse[k] / sst if m.n >= MIN_SAMPLES and sst > 0.0 else math.nan
+
+    def r2c(k):
+        m = s.mom[k]
+        den = float(m.m2[0, 0]) * float(m.m2[1, 1])
+        return float(m.m2[0, 1]) ** 2 / den if m.n >= MIN_SAMPLES and den > 0.0 else math.nan
+
+    def mr(k):
+        return _mean_rmse(s.mom[k].n, s.se[k], s.sse[k])
+
+    n = s.mom["all"].n
+    return {"n": n, "r2": r2("all"), "r2_light": r2("light"), "r2_heavy": r2("heavy"),
+            "rmse_w": mr("all")[1], "mae_w": s.sae / n if n else math.nan, "bias_w": mr("all")[0],
+            "n_light": s.mom["light"].n, "n_heavy": s.mom["heavy"].n,
+            "rmse_light_w": mr("light")[1], "rmse_heavy_w": mr("heavy")[1],
+            "bias_light_w": mr("light")[0], "bias_heavy_w": mr("heavy")[0],
+            "r2_corr": r2c("all"), "r2_corr_light": r2c("light"), "r2_corr_heavy": r2c("heavy")}
+
+
+def _corr(mom: Moments, cats: list, cmin: np.ndarray, cmax: np.ndarray) -> dict:
+    """:func:`sumo_drvpw.fit.compare.error_term_correlation` from the co-moments of
+    [error, category powers] (same conventions)."""
+    from sumo_drvpw.fit.compare import MIN_SAMPLES
+
+    n = mom.n
+    see = float(mom.m2[0, 0])
+    out, names, idx = {}, [], []
+    for i, c in enumerate(cats):
+        spp = float(mom.m2[i + 1, i + 1])
+        r = slope = math.nan
+        big = max(1.0, abs(float(cmin[i])), abs(float(cmax[i]))) if n else 1.0
+        if n >= MIN_SAMPLES and spp > 0.0 and float(cmax[i] - cmin[i]) > 1e-9 * big:
+            sep = float(mom.m2[0, i + 1])
+            slope = sep / spp
+            r = sep / math.sqrt(spp * see) if see > 0.0 else math.nan
+            names.append(c)
+            idx.append(i + 1)
+        out[c] = {"r": r, "slope": slope, "partial_slope": math.nan}
+    if names and n > len(names) + 1:
+        fit = Gram(mom.m2[np.ix_(idx, idx)], mom.m2[idx, 0], see, n, tuple(names)).fit(
+            list(range(len(names))))
+        if fit is not None:  # collinear category powers: no partial slope (NaN)
+            for c, v in zip(names, fit["beta"]):
+                out[c]["partial_slope"] = float(v)
+    return out
+
+
+def _trip_block(trip_e: dict, net: bool) -> dict:
+    """:func:`sumo_drvpw.fit.compare.trip_energy` (``net``: ``trip_net_energy``) from sums."""
+    trips, errs = {}, []
+    for t, (pm, pp, nm, npd) in trip_e.items():
+        em, ep = (nm, npd) if net else (pm, pp)
+        err = ep / em - 1.0 if em != 0.0 else math.nan
+        trips[t] = {"measured_j": em, "predicted_j": ep, "error": err}
+        if math.isfinite(err):
+            errs.append(abs(err))
+    return {"mean_abs_error": float(np.mean(errs)) if errs else math.nan,
+            "max_abs_error": float(np.max(errs)) if errs else math.nan, "trips": trips}
+
+
+def _streamed_comparison_class():
+    from sumo_drvpw.fileio import plain as _jsonable
+    from sumo_drvpw.fit.compare import Comparison
+
+    class StreamedComparison(Comparison):
+        """A Comparison whose arrays are a reservoir sample and whose ``to_json`` reports
+        the statistics of every sample streamed (``stats``, a :class:`CompareStats`)."""
+
+        stats = None
+
+        @property
+        def n_samples(self) -> int:
+            return int(self.meas_w.size)
+
+        def to_json(self, trips: bool = True) -> dict:
+            st = self.stats
+            doc = Comparison.to_json(self)
+            for name, d in doc["equations"].items():
+                if trips:
+                    s = st.eq[name]
+                    d["trip_energy"] = _jsonable(_trip_block(s.trip_e, net=False))
+                    d["trip_net_energy"] = _jsonable(_trip_block(s.trip_e, net=True))
+            doc["n_samples"] = st.n
+            doc["measured"] = _jsonable({
+                "traction_energy_j": st.meas_traction,
+                "mean_w": float(st.meas.mean[0]) if st.n else math.nan,
+                "n_light": st.n_light, "n_heavy": st.n_heavy, "n_high_speed": st.n_high})
+            doc["settings"]["percentiles"] = (
+                "exact" if st.n <= st.k else
+                f"estimated from a uniform random sample of {st.k} samples (figures too)")
+            return doc
+
+    return StreamedComparison
+
+
+StreamedComparison = _streamed_comparison_class()
