@@ -143,7 +143,7 @@ def fit_terms(m, terms, name: str, fixed: dict | None = None):
 
 def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
     """One car: per held-out group, calibrate + diagnose on the rest, evaluate held out."""
-    from sumo_drvpw.cli.diagnose import write_outputs
+    from sumo_drvpw.report.diagnose import write_outputs
     from sumo_drvpw.data.measured import load_measured
     from sumo_drvpw.fit.diagnose import DiagnoseOptions, diagnose
     from sumo_drvpw.model.equations import load_equation

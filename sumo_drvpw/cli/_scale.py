@@ -156,7 +156,7 @@ def compare_main(args) -> int | None:
     """`compare` through the streaming engines when it compares driving power (the
     default target); None when it compares battery or fuel power (read in memory)."""
     from sumo_drvpw.cli import output_set
-    from sumo_drvpw.cli.compare import _f
+    from sumo_drvpw.cli.compare import print_summary
 
     if getattr(args, "engine", "memory") == "memory":
         return None
@@ -174,8 +174,5 @@ def compare_main(args) -> int | None:
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
         comp = compare_streamed(args, tmp, "Equations against measured driving power")
     doc = comp.to_json(trips=False)
-    for name, r in doc["equations"].items():
-        print(f"{name:<24} n={r['n']:<8} R²={_f(r['r2'])}  R²<50kW={_f(r['r2_light'])}  "
-              f"R²≥50kW={_f(r['r2_heavy'])}  RMSE={r['rmse_w'] / 1000:.2f} kW  bias={r['bias_w'] / 1000:+.2f} kW")
-    print(f"wrote {Path(args.out) / 'report.md'}")
+    print_summary(doc, args.out)
     return 0

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from sumo_drvpw.cli import add_force, add_log_options, note_counts, output_set, read_options
 from sumo_drvpw.cli._scale import add_engine_arguments
+from sumo_drvpw.report.format import num
 
 
 def configure(p):
@@ -46,12 +47,14 @@ def main(args) -> int:
         what = {"wheel": "driving", "battery": "battery", "fuel": "fuel"}[target]
         write_comparison_report(comp, tmp, f"Equations against measured {what} power", m.context())
     doc = comp.to_json()
-    for name, r in doc["equations"].items():
-        print(f"{name:<24} n={r['n']:<8} R²={_f(r['r2'])}  R²<50kW={_f(r['r2_light'])}  "
-              f"R²≥50kW={_f(r['r2_heavy'])}  RMSE={r['rmse_w'] / 1000:.2f} kW  bias={r['bias_w'] / 1000:+.2f} kW")
-    print(f"wrote {Path(args.out) / 'report.md'}")
+    print_summary(doc, args.out)
     return 0
 
 
-def _f(x):
-    return "  n/a" if x is None or x != x else f"{x:.3f}"
+def print_summary(doc: dict, out) -> None:
+    """One line per equation of a comparison's report.json, then where the report is."""
+    for name, r in doc["equations"].items():
+        print(f"{name:<24} n={r['n']:<8} R²={num(r['r2'], 3)}  R²<50kW={num(r['r2_light'], 3)}  "
+              f"R²≥50kW={num(r['r2_heavy'], 3)}  RMSE={r['rmse_w'] / 1000:.2f} kW  bias={r['bias_w'] / 1000:+.2f} kW")
+    print(f"wrote {Path(out) / 'report.md'}")
+

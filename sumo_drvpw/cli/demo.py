@@ -14,6 +14,7 @@ from pathlib import Path
 
 from sumo_drvpw.cli import add_force, output_set
 from sumo_drvpw.fileio import repo_root, write_text
+from sumo_drvpw.report.format import num
 
 COMPARED = ["drvpw_prius3", "vsp_ldv1999", "vsp_prius3spec", "moves_passenger_car", "epa_prius3"]
 
@@ -84,9 +85,9 @@ def _demo(args, out: Path, final: Path, held_log: Path) -> None:
     lines += ["## Comparison on the bundled held-out log", "", "Full report: `report/report.md`", "",
               "| equation | R² < 50 kW | R² ≥ 50 kW | RMSE [kW] | bias [kW] |", "|---|---|---|---|---|"]
     for name, r in doc["equations"].items():
-        lines.append(f"| {name} | {_f(r['r2_light'])} | {_f(r['r2_heavy'])} | {r['rmse_w'] / 1e3:.2f} | "
+        lines.append(f"| {name} | {num(r['r2_light'], 3)} | {num(r['r2_heavy'], 3)} | {r['rmse_w'] / 1e3:.2f} | "
                      f"{r['bias_w'] / 1e3:+.2f} |")
-        print(f"    {name:<22} R²<50kW={_f(r['r2_light'])} R²≥50kW={_f(r['r2_heavy'])} "
+        print(f"    {name:<22} R²<50kW={num(r['r2_light'], 3)} R²≥50kW={num(r['r2_heavy'], 3)} "
               f"RMSE={r['rmse_w'] / 1e3:.2f} kW")
     lines.append("")
 
@@ -137,6 +138,3 @@ def _sumo_runs(out: Path, eq_path: Path, final: Path) -> list[str]:
         lines.append("")
     return lines
 
-
-def _f(x):
-    return "n/a" if x is None or x != x else f"{x:.3f}"
