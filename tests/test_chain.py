@@ -503,3 +503,38 @@ def test_real_prius2_fuel_chain_is_physical_and_soc_corrected(shared_data):
         assert abs(row["error"]) < 0.2
         # SOC correction: a trip that charged the battery (energy < 0) burnt fuel for it
         assert (row["measured_corrected_l"] < row["measured_l"]) == (row["battery_kwh"] < 0)
+
+
+def test_accountant_energy_reports_the_chain_during_the_run():
+    """`Accountant.energy(vehicle)` carries the chain's running battery/fuel totals; at the
+    end of the run they equal the vehicle's row of the chain table, converted from kWh/L."""
+    pytest.importorskip("libsumo")
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+    from sumo_drvpw.sim.chain import KWH
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    from pathlib import Path
+
+    sc = load_scenario(Path(__file__).resolve().parent.parent / "scenarios" / "city.toml", end=120)
+    conn = start_sumo(sc.sumo_args)
+    probe, during = None, []
+    try:
+        acc = Accountant(conn, equations=_chain_equations(), scenario=sc.path, figures=False)
+        conn.addStepListener(acc)
+        while conn.simulation.getTime() < 120 - 1e-9:
+            conn.simulationStep()
+            ids = conn.vehicle.getIDList()
+            probe = probe or (ids[0] if ids else None)
+            if probe in ids:
+                during.append(acc.energy(probe)["bev"]["chain"]["auxiliary_j"])
+        final = acc.energy(probe)
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    assert len(during) > 10 and np.all(np.diff(during) >= 0) and during[-1] > 0  # 500 W accrues
+    rows = res.ledger.chain.table(res.ledger.chain.vehicle_totals(res.ledger.n_veh),
+                                  res.ledger.chain.veh_dist[:res.ledger.n_veh], list(res.ledger.veh_ids))
+    bev = next(r for r in rows if r["key"] == probe and r["equation"] == "bev")
+    fuel = next(r for r in rows if r["key"] == probe and r["equation"] == "drvpw_prius3")
+    assert final["bev"]["chain"]["net_j"] == pytest.approx(bev["net_kwh"] * KWH, rel=1e-12)
+    assert final["drvpw_prius3"]["chain"]["fuel_l"] == pytest.approx(fuel["fuel_l"], rel=1e-12)

@@ -153,7 +153,9 @@ class Accountant(_Listener):
     # -- reading while the simulation runs ----------------------------------------------
     def energy(self, vehicle_id: str) -> dict[str, dict[str, float]]:
         """Energies of a vehicle so far [J]: equation → {acc, grade, aero, roll, other
-        (net per term), traction, recuperable, net}; only equations that apply to it."""
+        (net per term), traction, recuperable, net}; only equations that apply to it. An
+        equation with an energy chain adds ``"chain"``: {traction_j, recuperated_j,
+        auxiliary_j, net_j [J at the battery] or fuel_j [J], fuel_l [L], co2_kg [kg]}."""
         i = self.stepper.vmap.get(vehicle_id)
         if i is None:
             raise KeyError(f"vehicle '{vehicle_id}' has not been seen by the Accountant")
@@ -167,6 +169,11 @@ class Accountant(_Listener):
             d.update(traction=float(tr.sum()), recuperable=float(rc.sum()),
                      net=float(tr.sum() + rc.sum()))
             out[name] = d
+        chain = getattr(led, "chain", None)
+        if chain is not None:
+            for name, q in chain.vehicle(i).items():
+                if name in out:
+                    out[name]["chain"] = q
         return out
 
     # -- the end --------------------------------------------------------------------------
