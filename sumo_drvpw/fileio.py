@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import stat
 import tempfile
 from pathlib import Path
 from typing import Iterator
@@ -184,7 +185,11 @@ def check_output_path(out, inputs=(), kind: str = "folder") -> Path:
         if kind == "folder" and _is_within(ri, res):
             raise UserError(f"{out}: output folder holds the input {i}, and an output folder "
                             "is replaced whole; choose another output path")
-    if kind == "folder" and out.exists() and not out.is_dir():
+    try:  # one stat: a folder another run moves aside meanwhile is not "a file"
+        mode = out.stat().st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        mode = None
+    if kind == "folder" and mode is not None and not stat.S_ISDIR(mode):
         raise UserError(f"{out}: exists and is a file, not a folder; choose a folder path")
     if kind == "file" and out.is_dir():
         raise UserError(f"{out}: is a folder; give a file name")
@@ -239,7 +244,7 @@ def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
 
     out = Path(out_dir)
     check_output_path(out, inputs, "folder")
-    if out.is_dir() and any(out.iterdir()) and not force and not _is_output_set(out):
+    if not force and _foreign_folder(out):
         raise OutputExists(f"{out}: folder exists, is not empty and was not written by "
                            "sumo-drvpw (no manifest.json); it is left untouched")
     parent = out.parent if str(out.parent) else Path(".")
@@ -325,6 +330,26 @@ def _publish(tmp: Path, out: Path, parent: Path, olds: list, attempts: int = 20)
             if olds and not out.exists() and (olds[-1] / out.name).exists():
                 os.replace(olds[-1] / out.name, out)  # put the earlier set back
             raise
+
+
+def _foreign_folder(out: Path) -> bool:
+    """True when ``out`` is a non-empty folder without a sumo-drvpw manifest.json.
+
+    A set that a concurrent run moves aside while we look is not foreign: only a folder
+    still there (same inode) and still without a manifest counts.
+    """
+    try:
+        st = out.stat()
+        if not stat.S_ISDIR(st.st_mode) or not any(out.iterdir()):
+            return False
+    except (FileNotFoundError, NotADirectoryError):
+        return False
+    if _is_output_set(out):
+        return False
+    try:
+        return out.stat().st_ino == st.st_ino and not (out / MANIFEST).exists()
+    except FileNotFoundError:
+        return False
 
 
 def _is_output_set(folder: Path) -> bool:
