@@ -492,7 +492,6 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
         df["grade_rad"] = np.arctan(df["grade_pct"].to_numpy(float) / 100.0)
         counts["grade_source"] = "grade_pct column"
     elif "elevation_m" in df:
-        dist = np.zeros(len(df))
         step = v * np.r_[0.0, np.diff(t)]
         step[start] = 0.0
         dist = pd.Series(step).groupby(trip_codes, sort=False).cumsum().to_numpy()

@@ -123,6 +123,24 @@ def stepwise(g: Gram, p_enter: float = 0.10, p_remove: float = 0.15, max_steps: 
     return [g.names[j] for j in sel], trace
 
 
+def select_terms(g: Gram, p_enter: float, p_remove: float) -> tuple[list[str], list[dict], list[dict]]:
+    """Stepwise selection on the sufficient statistics ``g`` of the usable samples, with the
+    checks every calibration path shares: (selected terms, trace, dropped candidates
+    ``{"term", "reason"}``); UserError when a candidate is not finite or nothing enters."""
+    cands = g.names
+    if g.n <= len(cands):
+        raise UserError(f"too few usable samples ({g.n}) to calibrate {len(cands)} candidate terms")
+    if not np.all(np.isfinite(g.xtx)):
+        bad = [cands[j] for j in range(len(cands)) if not np.isfinite(g.xtx[j, j])]
+        raise UserError(f"candidate term(s) {bad} are not finite on the usable samples")
+    sel, trace = stepwise(g, p_enter, p_remove)
+    if not sel:
+        raise UserError("no candidate term entered the model at p-to-enter "
+                        f"{p_enter}: the measured power is not explained by {list(cands)}")
+    dropped = [{"term": t["term"], "reason": t["reason"]} for t in trace if t["action"] == "drop"]
+    return sel, trace, dropped
+
+
 @dataclass
 class CalibrationResult:
     """Outcome of a calibration: the fitted terms and their statistics (statsmodels)."""
@@ -235,17 +253,8 @@ def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = No
     counts = dict(counts or {})
     counts["excluded_nonfinite_power"] = int((~np.isfinite(y)).sum())
     n_use = int(use.sum())
-    if n_use <= len(candidates):
-        raise UserError(f"too few usable samples ({n_use}) to calibrate {len(candidates)} candidate terms")
     g = gram(x, y, candidates, use)
-    if not np.all(np.isfinite(g.xtx)):
-        bad = [candidates[j] for j in range(len(candidates)) if not np.isfinite(g.xtx[j, j])]
-        raise UserError(f"candidate term(s) {bad} are not finite on the usable samples")
-    sel, trace = stepwise(g, p_enter, p_remove)
-    dropped = [{"term": t["term"], "reason": t["reason"]} for t in trace if t["action"] == "drop"]
-    if not sel:
-        raise UserError("no candidate term entered the model at p-to-enter "
-                        f"{p_enter}: the measured power is not explained by {list(candidates)}")
+    sel, trace, dropped = select_terms(g, p_enter, p_remove)
     xs, ys = _design(sel, x, y, use)
     # hasconst=False: no intercept by design; it also skips statsmodels' constant detection,
     # which costs three extra SVDs of the design matrix

@@ -309,20 +309,11 @@ def calibrate_from_stats(st: CalibrationStats, p_enter: float = 0.10, p_remove: 
     reference_mass_kg : mean mass of the usable samples [kg] (default from ``st``)
     trips : optional subset of trip ids to fit on (e.g. a training fold)
     """
-    from sumo_drvpw.fit.calibrate import CalibrationResult, stepwise
+    from sumo_drvpw.fit.calibrate import CalibrationResult, select_terms
 
     cands = st.names
     g, r, mom = st.gram(trips)
-    if g.n <= len(cands):
-        raise UserError(f"too few usable samples ({g.n}) to calibrate {len(cands)} candidate terms")
-    if not np.all(np.isfinite(g.xtx)):
-        bad = [cands[j] for j in range(len(cands)) if not np.isfinite(g.xtx[j, j])]
-        raise UserError(f"candidate term(s) {bad} are not finite on the usable samples")
-    sel, trace = stepwise(g, p_enter, p_remove)
-    dropped = [{"term": t["term"], "reason": t["reason"]} for t in trace if t["action"] == "drop"]
-    if not sel:
-        raise UserError("no candidate term entered the model at p-to-enter "
-                        f"{p_enter}: the measured power is not explained by {list(cands)}")
+    sel, trace, dropped = select_terms(g, p_enter, p_remove)
     res = ols_from_r(r, [cands.index(s) for s in sel], g.n)
     res.model.data.xnames = list(sel)
     sst = float(mom.m2[0, 0])
