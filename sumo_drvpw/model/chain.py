@@ -10,6 +10,7 @@ chain turns it into what a user pays for::
     recuperation_efficiency = 0.75    # η_r (0, 1]
     recuperation_limit_w = 40000      # optional: braking power beyond it goes to the friction brakes [W]
     aux_power_w = 300                 # constant auxiliary power P_aux,0 ≥ 0 [W]
+    standstill_aux_w = 0              # optional: extra auxiliary power while standing (v < 0.1 m/s) ≥ 0 [W]
     [chain.loads]                     # logged loads: column → gain [W/W] ≥ 0
     heater_power_w = 1.0
     [chain.hvac]                      # optional temperature-dependent HVAC power
@@ -27,6 +28,7 @@ Battery (``predicts = "battery"``), battery power positive when discharging::
     P_trac = max(P, 0) / η_t(v, P)
     P_rec  = η_r(v, P) · max(min(P, 0), −P_lim)                    (≤ 0)
     P_aux  = P_aux,0 + Σ g_k·L_k + h_heat·max(T_set − T, 0) + h_cool·max(T − T_set, 0)
+             + P_stand·[v < v_stand]      (P_stand: ``standstill_aux_w``, v_stand = STANDSTILL_MPS)
     P_bat  = P_trac + P_rec + P_aux       (P_aux accrues at standstill too)
 
 ``powertrain_output`` is the same without auxiliaries (η are the transmission's).
@@ -63,10 +65,12 @@ from sumo_drvpw.model.constants import FUELS
 PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 #: keys of the [chain] table, besides sub-tables loads, hvac and efficiency tables
 KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
-        "aux_power_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
+        "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
         "engine_off_below_w", "engine_on_above_mps", "fuel", "battery_to_fuel",
         "std_err", "reading", "provenance", "metrics")
 HVAC_KEYS = ("column", "setpoint_c", "heating_w_per_k", "cooling_w_per_k")
+#: below this speed a vehicle stands: ``standstill_aux_w`` applies [m/s]
+STANDSTILL_MPS = 0.1
 
 
 @dataclass(eq=False)
@@ -165,6 +169,7 @@ class EnergyChain:
     recuperation_efficiency: Efficiency = 1.0
     recuperation_limit_w: float | None = None
     aux_power_w: float = 0.0
+    standstill_aux_w: float = 0.0
     loads: dict[str, float] = field(default_factory=dict)
     hvac: dict | None = None
     idle_fuel_power_w: float = 0.0
@@ -250,6 +255,8 @@ class EnergyChain:
         trac = pos / _eval(self.traction_efficiency, v, p)
         rec = _eval(self.recuperation_efficiency, v, p) * rec_mech
         aux = (self.auxiliary(n, signals) if self.predicts == "battery" else np.zeros(n))
+        if self.predicts == "battery" and self.standstill_aux_w:
+            aux = aux + self.standstill_aux_w * (v < STANDSTILL_MPS)
         return {"traction_w": trac, "recuperated_w": rec, "auxiliary_w": aux,
                 "friction_brake_w": neg - rec_mech, "power_w": trac + rec + aux}
 
@@ -288,6 +295,8 @@ class EnergyChain:
             d["recuperation_limit_w"] = float(self.recuperation_limit_w)
         if self.predicts in ("battery", "fuel"):
             d["aux_power_w"] = float(self.aux_power_w)
+            if self.predicts == "battery" and self.standstill_aux_w:
+                d["standstill_aux_w"] = float(self.standstill_aux_w)
             if self.loads:
                 d["loads"] = {k: float(g) for k, g in self.loads.items()}
             if self.hvac:
@@ -336,7 +345,7 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         kw["marginal_efficiency"] = _efficiency(doc["marginal_efficiency"], "marginal_efficiency", where)
         if isinstance(kw["marginal_efficiency"], Table):
             raise UserError(f"{where} [chain]: marginal_efficiency must be a number")
-    for k in ("recuperation_limit_w", "aux_power_w", "idle_fuel_power_w", "engine_off_below_w",
+    for k in ("recuperation_limit_w", "aux_power_w", "standstill_aux_w", "idle_fuel_power_w", "engine_off_below_w",
               "engine_on_above_mps", "battery_to_fuel"):
         if k in doc:
             kw[k] = _nonneg(doc[k], k, where)
