@@ -345,6 +345,36 @@ class BlockModel:
             pred += coef[:, j] * self.scaled(j)
         return pred * self.y_scale
 
+    def evaluate(self, fold) -> dict:
+        """Held-out prediction of the current model and what is reported of it: ``pred``
+        [W] per analysis sample, ``metrics`` (:func:`sumo_drvpw.fit.compare.metrics`),
+        ``trip_sse`` per trip code [W²], ``trip_energy`` and ``trip_net_energy``."""
+        from sumo_drvpw.fit.compare import metrics, trip_energy, trip_net_energy
+
+        pred = self.heldout_pred(fold)
+        trips = np.asarray(self.trip_names)[self.trip]
+        return {"pred": pred, "metrics": metrics(pred, self.y),
+                "trip_sse": np.bincount(self.trip, weights=(pred - self.y) ** 2, minlength=self.n_trips),
+                "trip_energy": trip_energy(pred, self.y, self.dt, trips),
+                "trip_net_energy": trip_net_energy(pred, self.y, self.dt, trips)}
+
+    def energy_shares(self) -> np.ndarray:
+        """Traction energy share of each model column with the full-data fit: Σ P_j·Δt over
+        samples with predicted power > 0, over the model's total traction energy [-]."""
+        powers = np.column_stack([self.column_power(j) for j in range(len(self.cols))])
+        total = powers.sum(axis=1)
+        wgt = np.where(total > 0, self.dt, 0.0)
+        e_tot = float(total @ wgt)
+        return powers.T @ wgt / e_tot if e_tot > 0 else np.full(len(self.cols), np.nan)
+
+    def trip_counts(self) -> np.ndarray:
+        """Analysis samples per trip code."""
+        return np.bincount(self.trip, minlength=self.n_trips)
+
+    def mean_rho(self) -> float:
+        """Mean air density over the analysis samples [kg/m³]."""
+        return float(np.mean(self.x.rho))
+
     def column_power(self, j: int) -> np.ndarray:
         """Power [W] of model column j with the full-data fit."""
         f = self.full_fit()
@@ -363,7 +393,7 @@ class BlockModel:
             k = self.y_scale / c.scale
             if c.cand.scatter:
                 sl = slice(c.offset, c.offset + self.n_trips)
-                present = np.bincount(self.trip, minlength=self.n_trips) > 0
+                present = self.trip_counts() > 0
                 co[c.cand.term] = {self.trip_names[i]: float(v) * k
                                    for i, v in enumerate(f["beta"][sl]) if present[i]}
                 se[c.cand.term] = {self.trip_names[i]: float(v) * k

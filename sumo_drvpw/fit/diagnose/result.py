@@ -7,7 +7,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sumo_drvpw.fit.compare import metrics as _metrics, trip_energy, trip_net_energy
 from sumo_drvpw.fit.diagnose.blocks import BlockModel
 from sumo_drvpw.fit.diagnose.candidates import Candidate
 from sumo_drvpw.fit.diagnose.options import METRIC_KEYS
@@ -31,17 +30,17 @@ def pick_metrics(m: dict) -> dict:
 
 
 def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrated: bool, opt,
-             findings, rounds, pred0, m_base, base_coefs, plot, y, n_rows: int, n_usable: int,
+             findings, rounds, ev0, base_coefs, plot, n_rows: int, n_usable: int,
              skipped, sig, n_candidates: int, n_trips: int, dropped, roles=None,
              extra=None) -> DiagnoseResult:
     """Final fit, report (``trace.json`` shape), details and the traced equation."""
     log = measured.log
-    n = len(y)
+    n = tr.n
     final_fold = tr.fold_of(False)
-    pred_final = tr.heldout_pred(final_fold) if findings else pred0
-    m_final = _metrics(pred_final, y)
+    ev_final = tr.evaluate(final_fold) if findings else ev0
+    m_final, m_base = ev_final["metrics"], ev0["metrics"]
     co, se = tr.coefficients()
-    plot["pred_final"] = pred_final
+    plot["pred_final"] = ev_final["pred"]
     final_terms = expand_terms(tr, co)
     lag = next((f for f in findings if f.get("kind") == "timing"), None)
     eq_se = expand_terms(tr, se, std=True)
@@ -70,16 +69,15 @@ def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrat
     # physical reading of the coefficients, before and after (issue #11 §3)
     from sumo_drvpw.fit.physical import implausible, physical_reading
 
-    rho = float(np.mean(tr.x.rho))
+    rho = tr.mean_rho()
     for key, coefs in (("baseline", report["baseline"]["coefficients"]), ("final", final_terms)):
         reading = physical_reading({t: c for t, c in coefs.items() if isinstance(c, float)}, rho)
         report[key]["physical"] = {t: r for t, r in reading.items() if r["plausible"] is not None}
         report[key]["implausible"] = implausible(reading)
     # energy per trip of the held-out predictions, before and after (issue #11 §5)
-    trips = np.asarray(tr.trip_names)[tr.trip]
-    for key, pred in (("baseline", pred0), ("final", pred_final)):
-        report[key]["trip_energy"] = trip_energy(pred, y, tr.dt, trips)
-        report[key]["trip_net_energy"] = trip_net_energy(pred, y, tr.dt, trips)
+    for key, ev in (("baseline", ev0), ("final", ev_final)):
+        report[key]["trip_energy"] = ev["trip_energy"]
+        report[key]["trip_net_energy"] = ev["trip_net_energy"]
     details = {"declared_equation": equation.name, "calibrated_on_the_spot": calibrated,
                "samples": {"rows": n_rows, "usable": n_usable, "analysis": n,
                            "trips": n_trips, "blocks": tr.n_blocks},

@@ -162,63 +162,15 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
     if dropped:
         say(f"{len(dropped)} candidate(s) dropped before scoring: identical to or spanned by earlier ones")
     base_fold = tr.fold_of(False)
-    pred0 = tr.heldout_pred(base_fold)
-    m_base = _metrics(pred0, y)
+    ev0 = tr.evaluate(base_fold)
     base_coefs, _ = tr.coefficients()
-    findings, rounds, rejected = [], [], []
-    if timing_finding is not None:
-        findings.append(timing_finding)
-    plot = {"y": y, "v": x.v, "pred_base": pred0, "signals": tr.signals, "findings": []}
-    in_model = set(declared)
-    for rnd in range(opt.max_findings):
-        pool = [c for c in cands if c.term not in in_model]
-        if not pool:
-            break
-        results = _score_all(tr, pool, opt)
-        if not results:
-            break
-        m_scored = len(results)
-        gains = [1.0 - math.sqrt(r[1] / r[3]) if r[3] > 0 else 0.0 for r in results]
-        # largest gain first; equal gains keep candidate order (stable), never rounding
-        order = np.argsort(-np.asarray(gains), kind="stable")
-        table = []
-        for i in order[:10]:
-            c, s, d, s0, _ = results[i]
-            p = paired_test(d)
-            table.append({"term": c.term, "effect": c.effect, "rmse_gain": gains[i],
-                          "p_value_bonferroni": min(1.0, p * m_scored)})
-        added = None
-        for pos, i in enumerate(order[:MAX_TRIES]):
-            cbest, sse_b, d_b, sse0_b, fold_b = results[int(i)]
-            p_adj = min(1.0, paired_test(d_b) * m_scored)
-            if not (p_adj < opt.alpha and gains[int(i)] >= opt.min_gain):
-                break
-            f, extra = _try_add(tr, cbest, fold_b, y, dt, roles, opt, p_adj)
-            if f is None:
-                in_model.add(cbest.term)          # not offered again
-                rejected.append(dict(extra, term=cbest.term, round=rnd + 1, rmse_gain=gains[int(i)],
-                                     p_value_bonferroni=p_adj))
-                say(f"round {rnd + 1}: {cbest.term} passes the block test but {extra['reason']}")
-                continue
-            added = (cbest, gains[int(i)], p_adj)
-            findings.append(f)
-            plot["findings"].append({"cand": cbest, "before": extra["before"], "after": extra["after"]})
-            break
-        best_i = int(order[0])
-        rounds.append({"round": rnd + 1, "candidates_scored": m_scored,
-                       "best": results[best_i][0].term, "rmse_gain": gains[best_i],
-                       "p_value_bonferroni": min(1.0, paired_test(results[best_i][2]) * m_scored),
-                       "accepted": added is not None, "added": added[0].term if added else None,
-                       "top": table})
-        say(f"round {rnd + 1}: {m_scored} candidates, best {results[best_i][0].term} gain "
-            f"{100 * gains[best_i]:.2f} % → {'added ' + added[0].term if added else 'stop'}")
-        if added is None:
-            break
-        in_model.add(added[0].term)
+    findings = [timing_finding] if timing_finding is not None else []
+    plot = {"y": y, "v": x.v, "pred_base": ev0["pred"], "signals": tr.signals, "findings": []}
+    rounds, rejected = search_rounds(tr, cands, declared, roles, opt, say, findings, plot)
 
     return assemble(tr=tr, measured=measured, equation=equation, declared=declared,
-                    calibrated=calibrated, opt=opt, findings=findings, rounds=rounds, pred0=pred0,
-                    m_base=m_base, base_coefs=base_coefs, plot=plot, y=y, n_rows=len(y_all),
+                    calibrated=calibrated, opt=opt, findings=findings, rounds=rounds, ev0=ev0,
+                    base_coefs=base_coefs, plot=plot, n_rows=len(y_all),
                     n_usable=int(usable.sum()), skipped=skipped, sig=sig, n_candidates=len(cands),
                     n_trips=n_trips, dropped=dropped,
                     roles={k: roles[k] for k in sig if k in roles},
@@ -244,11 +196,65 @@ def _declared_model(x, y, dt, t, trip_codes, trip_names, sig, opt, declared, dec
     return tr
 
 
-def _per_trip_sse(tr: BlockModel, pred: np.ndarray, y: np.ndarray) -> np.ndarray:
-    return np.bincount(tr.trip, weights=(pred - y) ** 2, minlength=tr.n_trips)
+def search_rounds(tr: BlockModel, cands: list[Candidate], declared, roles: dict, opt: DiagnoseOptions,
+                  say, findings: list, plot: dict) -> tuple[list, list]:
+    """The forward search on a block model: rounds of scoring, the test, replication.
+
+    Appends the findings to ``findings`` (and their held-out predictions to ``plot``, when
+    the model gives them per sample); returns (rounds, not replicated)."""
+    rounds, rejected = [], []
+    in_model = set(declared)
+    for rnd in range(opt.max_findings):
+        pool = [c for c in cands if c.term not in in_model]
+        if not pool:
+            break
+        results = _score_all(tr, pool, opt)
+        if not results:
+            break
+        m_scored = len(results)
+        gains = [1.0 - math.sqrt(r[1] / r[3]) if r[3] > 0 else 0.0 for r in results]
+        # largest gain first; equal gains keep candidate order (stable), never rounding
+        order = np.argsort(-np.asarray(gains), kind="stable")
+        table = []
+        for i in order[:10]:
+            c, s, d, s0, _ = results[i]
+            p = paired_test(d)
+            table.append({"term": c.term, "effect": c.effect, "rmse_gain": gains[i],
+                          "p_value_bonferroni": min(1.0, p * m_scored)})
+        added = None
+        for pos, i in enumerate(order[:MAX_TRIES]):
+            cbest, sse_b, d_b, sse0_b, fold_b = results[int(i)]
+            p_adj = min(1.0, paired_test(d_b) * m_scored)
+            if not (p_adj < opt.alpha and gains[int(i)] >= opt.min_gain):
+                break
+            f, extra = _try_add(tr, cbest, fold_b, roles, opt, p_adj)
+            if f is None:
+                in_model.add(cbest.term)          # not offered again
+                rejected.append(dict(extra, term=cbest.term, round=rnd + 1, rmse_gain=gains[int(i)],
+                                     p_value_bonferroni=p_adj))
+                say(f"round {rnd + 1}: {cbest.term} passes the block test but {extra['reason']}")
+                continue
+            added = (cbest, gains[int(i)], p_adj)
+            findings.append(f)
+            if extra["before"] is not None:
+                plot["findings"].append({"cand": cbest, "before": extra["before"], "after": extra["after"]})
+            break
+        best_i = int(order[0])
+        rounds.append({"round": rnd + 1, "candidates_scored": m_scored,
+                       "best": results[best_i][0].term, "rmse_gain": gains[best_i],
+                       "p_value_bonferroni": min(1.0, paired_test(results[best_i][2]) * m_scored),
+                       "accepted": added is not None, "added": added[0].term if added else None,
+                       "top": table})
+        say(f"round {rnd + 1}: {m_scored} candidates, best {results[best_i][0].term} gain "
+            f"{100 * gains[best_i]:.2f} % → {'added ' + added[0].term if added else 'stop'}")
+        if added is None:
+            break
+        in_model.add(added[0].term)
+
+    return rounds, rejected
 
 
-def _try_add(tr: BlockModel, cand: Candidate, fold, y, dt, roles, opt, p_adj):
+def _try_add(tr: BlockModel, cand: Candidate, fold, roles, opt, p_adj):
     """Add ``cand``; keep it only if it replicates on held-out trips and is plausible (§4).
 
     Replication: the held-out SSE of each trip before and after; with ≥ 3 trips the
@@ -256,7 +262,8 @@ def _try_add(tr: BlockModel, cand: Candidate, fold, y, dt, roles, opt, p_adj):
     ``MAX_ENERGY_SHARE``. Returns (finding dict, extras) or (None, {"reason", …}) after
     removing the column again.
     """
-    before = tr.heldout_pred(fold)
+    ev_b = tr.evaluate(fold)
+    before = ev_b["pred"]
     mass_terms = {}
     if cand.kind == "trip_mass":
         vals, mass_terms = tr.mass_part()
@@ -272,21 +279,18 @@ def _try_add(tr: BlockModel, cand: Candidate, fold, y, dt, roles, opt, p_adj):
                 break
     else:
         tr.add(cand)
-    after = tr.heldout_pred(tr.fold_of(False))
-    present = np.bincount(tr.trip, minlength=tr.n_trips) > 0
-    sse_b, sse_a = _per_trip_sse(tr, before, y)[present], _per_trip_sse(tr, after, y)[present]
+    ev_a = tr.evaluate(tr.fold_of(False))
+    after = ev_a["pred"]
+    counts = tr.trip_counts()
+    present = counts > 0
+    sse_b, sse_a = ev_b["trip_sse"][present], ev_a["trip_sse"][present]
     helped, n_tr = int((sse_a < sse_b).sum()), int(present.sum())
     co, se = tr.coefficients()
     j_new = len(tr.cols) - 1
-    powers = np.column_stack([tr.column_power(j) for j in range(len(tr.cols))])
-    total = powers.sum(axis=1)
-    wgt = np.where(total > 0, dt, 0.0)
-    e_tot = float(total @ wgt)
-    share = float(powers[:, j_new] @ wgt) / e_tot if e_tot > 0 else math.nan
+    share = float(tr.energy_shares()[j_new])
     names = [str(tr.trip_names[i]) for i in np.flatnonzero(present)]
     per_trip = {t: {"rmse_before_w": math.sqrt(b / max(c, 1)), "rmse_after_w": math.sqrt(a / max(c, 1))}
-                for t, b, a, c in zip(names, sse_b, sse_a,
-                                      np.bincount(tr.trip, minlength=tr.n_trips)[present])}
+                for t, b, a, c in zip(names, sse_b, sse_a, counts[present])}
     reason = None
     if n_tr >= 3 and helped * 2 <= n_tr:
         reason = f"did not replicate: lowered the held-out error on {helped} of {n_tr} trips"
@@ -302,10 +306,10 @@ def _try_add(tr: BlockModel, cand: Candidate, fold, y, dt, roles, opt, p_adj):
     finding = {
         "effect": effect, "role": role, "signals": list(cand.signals), "term": _term_label(cand, mass_terms),
         "coefficient": co[cand.term], "std_err": se[cand.term], "p_value": p_adj,
-        "energy_share": share, "metrics_before": _pick_metrics(_metrics(before, y)),
-        "metrics_after": _pick_metrics(_metrics(after, y)),
+        "energy_share": share, "metrics_before": _pick_metrics(ev_b["metrics"]),
+        "metrics_after": _pick_metrics(ev_a["metrics"]),
         "replication": {"helped_trips": helped, "trips": n_tr, "per_trip": per_trip}}
-    return finding, {"before": before, "after": after}
+    return finding, {"before": before, "after": after, "ev_after": ev_a}
 
 
 def _timing_step(y_all, ana, x_eq, decl_vals, trip_codes_all, trip_names, t_all, dt_all, declared, opt, say):
