@@ -7,6 +7,8 @@ SI inside: m, s, kg, rad, W, J. Units appear in names only where data leaves the
 G = 9.81
 #: Default air density at 20 °C, 101.325 kPa (also SUMO's Energy model) [kg/m³].
 RHO_DEFAULT = 1.2041
+#: Reference ambient temperature of the ``cold`` term factor, that of RHO_DEFAULT [°C].
+T_REF_C = 20.0
 #: Specific gas constant of dry air [J/(kg·K)].
 R_DRY_AIR = 287.058
 #: Standard sea-level pressure [kPa].

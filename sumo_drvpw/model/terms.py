@@ -16,6 +16,8 @@ factor             value                                unit        category
 ``m_v3``           m·v³                                 kg·m³/s³    aero
 ``v1``/``v2``/``v3``  v, v², v³                         (m/s)^k     roll/roll/aero
 ``one``            1                                    –           other
+``cold``           T_ref − T_ambient (T_ref 20 °C; 0 when  K           other
+                   the ambient temperature is unknown)
 ``v^k``            v to an integer power k (0…4)        (m/s)^k     v^3 aero, else roll
 ``[col]``          the log column ``col`` (``[col]^2`` squared)     other
 ``trip=ID``        1 on samples of trip ID, else 0      –           other
@@ -34,6 +36,14 @@ coefficient is C_d·A [m²] and air density enters. ``m_v1``/``m_v3`` carry VSP 
 mass-specific rolling and drag terms (Jiménez-Palacios 1999, Eq. 2 of the seed paper),
 which have no cos θ.
 
+``cold`` reads the ambient temperature [°C] from the signal ``ambient_c`` (a log's column;
+in SUMO the scenario's air temperature when the loop passes it) and is 0 without it, so an
+equation with ``roll*cold`` evaluates at the reference temperature where none is known.
+``roll*cold`` gives the temperature dependence of the rolling resistance,
+c_r(T) = c_r0·(1 + k·(T_ref − T)) with k ≈ 0.6–1 %/K for passenger-car tyres (ISO 28580
+temperature correction; Ejsmont et al. 2017): the ``roll`` coefficient is c_r0 and the
+``roll*cold`` coefficient c_r0·k.
+
 References
 ----------
 Pitanuwat, S. et al., "Development of Hybrid-Vehicle Energy-Consumption Model for
@@ -49,7 +59,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.constants import G, T_REF_C
 from sumo_drvpw.errors import UserError
 
 #: The four physical categories the product reports, in display order.
@@ -111,6 +121,16 @@ def _airspeed_term(x: Inputs) -> np.ndarray:
     return x.v * u * np.abs(u)
 
 
+def _cold(x: Inputs) -> np.ndarray:
+    """T_ref − T_ambient [K] from the signal ``ambient_c`` [°C]; 0 (reference) without it,
+    and where the temperature is not finite."""
+    t = x.signals.get("ambient_c") if x.signals else None
+    if t is None:
+        return np.zeros_like(np.asarray(x.v, dtype=float))
+    d = T_REF_C - np.asarray(t, dtype=float)
+    return np.where(np.isfinite(d), d, 0.0)
+
+
 #: Physics factors: name → (function of Inputs, category, power of m·g in it for Table-3
 #: conversion: 0 none, 1 mass only, 2 mass and g).
 PRIMITIVES: dict[str, tuple[Callable[[Inputs], np.ndarray], str, int]] = {
@@ -126,6 +146,7 @@ PRIMITIVES: dict[str, tuple[Callable[[Inputs], np.ndarray], str, int]] = {
     "v2": (lambda x: x.v ** 2, "roll", 0),
     "v3": (lambda x: x.v ** 3, "aero", 0),
     "one": (lambda x: np.ones_like(x.v, dtype=float), "other", 0),
+    "cold": (lambda x: _cold(x), "other", 0),
 }
 
 _VPOW = re.compile(r"^v\^([0-4])$")
