@@ -268,12 +268,12 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
                 raise UserError(f"{p}: column '{c}' is {x[i]:g} at row {i}, outside "
                                 f"[{lo:g}, {hi:g}] {unit}: {hint}")
     t = df["time_s"].to_numpy(float)
-    trip = df["trip_id"].to_numpy()
+    trip = trip_codes_of(df["trip_id"])  # integer codes: neighbour comparisons without strings
     same = trip[1:] == trip[:-1]
     back = same & (np.diff(t) <= 0)
     if back.any():
         i = int(np.flatnonzero(back)[0]) + 1
-        raise UserError(f"{p}: column 'time_s' does not increase within trip '{trip[i]}' at row {i} "
+        raise UserError(f"{p}: column 'time_s' does not increase within trip '{df['trip_id'].iloc[i]}' at row {i} "
                         f"({t[i - 1]:g} then {t[i]:g}); time must be strictly increasing")
     for c, lim in (("grade_rad", GRADE_MAX_RAD), ("grade_pct", 100 * np.tan(GRADE_MAX_RAD))):
         if c in df:
@@ -292,13 +292,42 @@ def _trip_starts(trip: np.ndarray) -> np.ndarray:
     return np.r_[True, trip[1:] != trip[:-1]]
 
 
+def trip_codes_of(trip: pd.Series) -> np.ndarray:
+    """Integer code per sample, equal for equal trip ids (a categorical column's own codes,
+    else ``pd.factorize``): comparisons of neighbours without Python strings."""
+    if isinstance(trip.dtype, pd.CategoricalDtype):
+        return trip.cat.codes.to_numpy()
+    return pd.factorize(trip)[0]
+
+
 def _per_trip_rolling_mean(x: np.ndarray, trip_codes: np.ndarray, window: int) -> np.ndarray:
-    """Centred moving average of width ``window`` samples that never crosses trips."""
+    """Centred moving average of width ``window`` samples that never crosses trips.
+
+    Same as pandas ``rolling(window, center=True, min_periods=1).mean()`` per trip (NaN
+    skipped), vectorized: window sums from per-trip cumulative sums (each trip's sums start
+    at its first sample, so a trip's values do not depend on the trips read with it)."""
     if window <= 1:
         return x
-    s = pd.Series(x)
-    return s.groupby(trip_codes, sort=False).transform(
-        lambda g: g.rolling(window, center=True, min_periods=1).mean()).to_numpy()
+    if window % 2 == 0:  # an even centred window: pandas' own alignment
+        s = pd.Series(x)
+        return s.groupby(trip_codes, sort=False).transform(
+            lambda g: g.rolling(window, center=True, min_periods=1).mean()).to_numpy()
+    n = len(x)
+    start = _trip_starts(trip_codes)
+    run = np.cumsum(start) - 1
+    first = np.flatnonzero(start)
+    last = np.r_[first[1:], n] - 1
+    i = np.arange(n)
+    h = window // 2
+    lo = np.maximum(i - h, first[run])
+    hi = np.minimum(i + h, last[run])
+    ok = np.isfinite(x)
+    cs = pd.Series(np.where(ok, x, 0.0)).groupby(run, sort=False).cumsum().to_numpy()
+    cnt = np.r_[0, np.cumsum(ok)]
+    below = np.where(lo > first[run], cs[np.maximum(lo - 1, 0)], 0.0)
+    c = cnt[hi + 1] - cnt[lo]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(c > 0, (cs[hi] - below) / np.maximum(c, 1), np.nan)
 
 
 def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s: float) -> np.ndarray:
@@ -438,7 +467,12 @@ def _prepare(df: pd.DataFrame, p: Path, default_trip: str,
         if tid.isna().any():
             i = int(np.flatnonzero(tid.isna().to_numpy())[0])
             raise UserError(f"{p}: column 'trip_id' is empty at row {i}")
-        df["trip_id"] = tid.astype(str)
+        if isinstance(tid.dtype, pd.CategoricalDtype):  # dictionary-encoded (streamed Parquet)
+            cats = tid.cat.categories
+            text = cats if pd.api.types.is_string_dtype(cats) else cats.astype(str)
+            df["trip_id"] = tid.cat.rename_categories(text) if text.is_unique else tid.astype(str)
+        else:
+            df["trip_id"] = tid.astype(str)
     if len(df) < 2:
         raise UserError(f"{p}: a single sample; a drive log needs at least 2 samples per file "
                         "(acceleration and time weights come from neighbouring samples)")
@@ -455,14 +489,16 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     if opt.speed_unit not in (None, "m/s"):
         counts["speed_unit"] = f"{opt.speed_unit} (converted to m/s)"
     # a trip that reappears after another trip (within a file, or across files)
-    dup = df["trip_id"].duplicated() & _trip_starts(df["trip_id"].to_numpy())
+    codes = trip_codes_of(df["trip_id"])
+    first = np.flatnonzero(_trip_starts(codes))
+    dup = pd.Series(codes[first]).duplicated().to_numpy()
     if dup.any():
-        i = int(np.flatnonzero(dup.to_numpy())[0])
+        i = int(first[np.flatnonzero(dup)[0]])
         where = files[0] if len(files) == 1 else f"{len(files)} files"
         raise UserError(f"{where}: trip_id '{df['trip_id'].iloc[i]}' appears in more than one "
                         f"place (again at row {i}); samples of a trip must be contiguous, give "
                         "each trip its own id")
-    trip_codes = pd.factorize(df["trip_id"])[0]
+    trip_codes = np.cumsum(_trip_starts(codes)) - 1  # contiguous trips: 0, 1, … in order
     counts["trips"] = int(trip_codes.max() + 1)
     t = df["time_s"].to_numpy(float)
     v = df["speed_mps"].to_numpy(float)
