@@ -11,7 +11,8 @@ from sumo_drvpw.errors import UserError
 #: --plant names: the one table of planted effects (sumo_drvpw.synth.effects.PLANTS), without
 #: log-power, which the synthetic log needs no plant for
 PLANT_NAMES = ("ac", "cold-tyres", "speed-quadratic", "trip-mass", "distractors", "pedal", "power-lag",
-               "recuperation-efficiency", "recuperation-limit", "altitude-air", "attenuated-grade")
+               "recuperation-efficiency", "recuperation-limit", "altitude-air", "attenuated-grade",
+               "battery-standstill-aux")
 
 
 def configure(p):

@@ -321,6 +321,52 @@ class LogPower(_Effect):
         return "LogPower: power_w column = driving power"
 
 
+class BatteryLog(_Effect):
+    """A battery log behind the driving power: battery V·I from a known energy chain, plus an
+    undeclared auxiliary load at standstill (issue #12 §3: what the road adds).
+
+    Logs ``battery_voltage_v`` (``voltage_v`` ± 2 % ripple) and ``battery_current_a`` with
+    P_bat = chain(P) + ``standstill_aux_w``·[v < 0.1 m/s] + N(0, ``noise_w``), P the driving
+    power so far (truth + process noise + earlier effects; put this effect last), chain:
+    η_t = ``traction_efficiency``, η_r = ``recuperation_efficiency``, constant
+    ``aux_power_w``. Adds no driving power; ``self.last_power_w`` is the planted standstill
+    power [W at the battery]. ``standstill_aux_w = 0`` plants nothing (the null case).
+    """
+
+    def __init__(self, standstill_aux_w: float = 450.0, traction_efficiency: float = 0.9,
+                 recuperation_efficiency: float = 0.8, aux_power_w: float = 300.0,
+                 voltage_v: float = 360.0, noise_w: float = 300.0):
+        super().__init__()
+        self.standstill_aux_w, self.aux_power_w, self.voltage_v = standstill_aux_w, aux_power_w, voltage_v
+        self.traction_efficiency, self.recuperation_efficiency = traction_efficiency, recuperation_efficiency
+        self.noise_w = noise_w
+        self.battery_w: dict = {}
+
+    def chain(self):
+        """The declared chain (without the planted standstill load)."""
+        from sumo_drvpw.model.chain import EnergyChain
+
+        return EnergyChain("battery", self.traction_efficiency, self.recuperation_efficiency,
+                           aux_power_w=self.aux_power_w)
+
+    def __call__(self, state, rng):
+        from sumo_drvpw.model.chain import STANDSTILL_MPS
+
+        v = np.asarray(state["v"], float)
+        p = np.asarray(state["power_w"], float)
+        plant = self.standstill_aux_w * (v < STANDSTILL_MPS)
+        pb = self.chain().evaluate(p, v)["power_w"] + plant + rng.normal(0.0, self.noise_w, v.size)
+        volt = self.voltage_v * (1.0 + 0.02 * np.sin(2 * np.pi * state["t"] / 600.0))
+        self.battery_w[str(state["trip"][0])] = pb
+        self._keep(state, plant)
+        return np.zeros(v.size), {"battery_voltage_v": volt, "battery_current_a": pb / volt}
+
+    def describe(self):
+        return (f"BatteryLog: battery V·I from a chain (η_t {self.traction_efficiency:g}, η_r "
+                f"{self.recuperation_efficiency:g}, aux {self.aux_power_w:g} W) + {self.standstill_aux_w:g} W "
+                "at standstill")
+
+
 def synth_trips(n_trips: int = 4, minutes: float = 10.0, seed: int = 0, effects=(), **kw):
     """Concatenate ``n_trips`` synthetic trips (seeds seed…seed+n−1, ids synth-1…).
 
@@ -343,7 +389,7 @@ def planted_power(effects, trip_ids) -> np.ndarray:
     for tid in pd.unique(np.asarray(trip_ids)):
         tot = None
         for e in effects:
-            if isinstance(e, LogPower):
+            if isinstance(e, (LogPower, BatteryLog)):
                 continue
             dp = e.power_w[str(tid)]
             tot = dp if tot is None else tot + dp
@@ -357,8 +403,9 @@ PLANTS = {"ac": AuxLoad, "cold-tyres": TermScaledBySignal, "speed-quadratic": Sp
           "trip-mass": PerTripMass, "distractors": Distractors, "pedal": Pedal,
           "power-lag": PowerLag, "recuperation-efficiency": RecuperationEfficiency,
           "recuperation-limit": RecuperationLimit, "altitude-air": AltitudeAir,
-          "attenuated-grade": AttenuatedGrade, "log-power": LogPower}
+          "attenuated-grade": AttenuatedGrade, "log-power": LogPower,
+          "battery-standstill-aux": BatteryLog}
 
 __all__ = ["AuxLoad", "TermScaledBySignal", "SpeedFunction", "PerTripMass", "Distractors",
            "Pedal", "PowerLag", "RecuperationEfficiency", "RecuperationLimit", "AltitudeAir",
-           "AttenuatedGrade", "LogPower", "synth_trips", "planted_power", "PLANTS", "G"]
+           "AttenuatedGrade", "LogPower", "BatteryLog", "synth_trips", "planted_power", "PLANTS", "G"]
