@@ -1,0 +1,159 @@
+"""The effects a road (or any new data) can add to an energy chain, as target-watt columns.
+
+Physical candidates of :func:`sumo_drvpw.fit.chain_linear.trace_chain` (its docstring
+lists them with their columns) and :func:`apply`, which writes a found effect into the
+equation or its chain and gives its physical reading, or refuses an implausible value.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.chain import STANDSTILL_MPS, Table
+from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.model.terms import term_matrix
+
+#: quantiles of the braking power at which a recuperation limit is profiled
+LIMIT_QUANTILES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98)
+#: HVAC set-point of the ``hvac`` candidate [°C] (the chain's default)
+HVAC_SETPOINT_C = 20.0
+#: plausible range of a grade coefficient found through the chain
+GRADE_RANGE = (0.5, 1.5)
+
+
+@dataclass
+class Cand:
+    """A candidate effect: variants (free columns n×k, fixed column or None, parameter)."""
+
+    name: str
+    effect: str
+    role: str
+    unit: str
+    variants: list = field(default_factory=list)
+
+
+def candidates(m, equation: Equation, p, idx) -> list[Cand]:
+    """Physical candidates for the chain of ``equation`` on the samples ``idx``."""
+    from sumo_drvpw.data.roles import of_log
+
+    from sumo_drvpw.fit.chain_linear import gains
+
+    ch = equation.chain
+    x = m.inputs.with_mass(equation.mass_kg) if equation.mass_kg else m.inputs
+    v = x.v[idx]
+    pp = p[idx]
+    gw, ga = gains(ch, pp, v)
+    out = []
+    if "grade" not in equation.terms and np.nanstd(x.theta[idx]) > 0:
+        g = term_matrix(["grade"], x.take(idx))[:, 0]
+        out.append(Cand("grade", "road grade m·g·v·sin θ through the chain (the declared road load has no grade "
+                        "term: calibrated where the road is flat, e.g. on a dynamometer)", "structural", "-",
+                        [(np.column_stack([gw * g]), None, None)]))
+    out.append(Cand("aux_power_w", "constant auxiliary power at the battery/engine the declared chain lacks",
+                    "structural", "W", [(np.column_stack([ga]), None, None)]))
+    if ch.predicts == "battery":
+        st = (v < STANDSTILL_MPS).astype(float)
+        if 0.01 < st.mean() < 0.99:
+            out.append(Cand("standstill_aux_w", "auxiliary power while standing (v < 0.1 m/s): HVAC, 12 V, "
+                            "pumps of a waiting car", "structural", "W", [(np.column_stack([st]), None, None)]))
+        eta_r = _eta(ch.recuperation_efficiency, v, pp)
+        lim0 = np.inf if ch.recuperation_limit_w is None else ch.recuperation_limit_w
+        brake = -pp[pp < 0]
+        if brake.size > 50:
+            qs = sorted({float(np.quantile(brake, q)) for q in LIMIT_QUANTILES if np.quantile(brake, q) < lim0})
+            var = [(None, eta_r * (np.maximum(pp, -L) - np.maximum(pp, -lim0)), L) for L in qs if L > 0]
+            if var:
+                out.append(Cand("recuperation_limit_w", "a recuperation limit: braking power beyond it goes to the "
+                                "friction brakes (profiled over quantiles of the braking power)", "structural", "W",
+                                var))
+        if not isinstance(ch.recuperation_efficiency, Table):
+            rec = eta_r * np.maximum(np.minimum(pp, 0.0), -lim0)
+            out.append(Cand("recuperation_efficiency", "recuperation efficiency differs from the declared chain's",
+                            "structural", "-", [(np.column_stack([rec]), None, None)]))
+    if not isinstance(ch.traction_efficiency, Table):
+        tra = gw * np.maximum(pp, 0.0)
+        out.append(Cand("traction_efficiency", "traction efficiency differs from the declared chain's",
+                        "structural", "-", [(np.column_stack([tra]), None, None)]))
+    sig = x.signals
+    roles = of_log(m.log)
+    if ch.hvac is None and "ambient_c" in sig:
+        t = np.asarray(sig["ambient_c"], float)[idx]
+        if np.all(np.isfinite(t)) and np.std(t) > 0:
+            c = [ga * np.maximum(HVAC_SETPOINT_C - t, 0.0), ga * np.maximum(t - HVAC_SETPOINT_C, 0.0)]
+            keep = [k for k in range(2) if np.any(c[k] > 0)]
+            out.append(Cand("hvac", f"heating/cooling power over the ambient temperature (set-point "
+                            f"{HVAC_SETPOINT_C:g} °C)", "condition", "W/K",
+                            [(np.column_stack([c[k] for k in keep]), None, tuple(keep))]))
+    for col, r in roles.items():
+        if r.get("role") != "load" or col in ch.loads or col not in sig:
+            continue
+        L = np.asarray(sig[col], float)[idx]
+        if np.all(np.isfinite(L)) and np.std(L) > 0:
+            out.append(Cand(f"loads.{col}", f"logged load '{col}' the declared chain lacks", "load", "W/W",
+                            [(np.column_stack([ga * L]), None, None)]))
+    return out
+
+
+def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | None, str]:
+    """The equation with finding ``name`` written in (a copy), and its physical reading;
+    (None, reason) when the value is implausible."""
+    eq = copy.deepcopy(equation)
+    ch = eq.chain
+    c = np.atleast_1d(np.asarray(coef, float))
+    if name == "grade":
+        if not GRADE_RANGE[0] <= c[0] <= GRADE_RANGE[1]:
+            return None, f"implausible grade coefficient {c[0]:.3g} (physics: 1)"
+        eq.terms = dict(eq.terms, grade=float(c[0]))
+        return eq, f"grade coefficient {c[0]:.3f} (1 = m·g·v·sin θ at the wheels)"
+    if name == "aux_power_w":
+        new = ch.aux_power_w + c[0]
+        if new < 0:
+            return None, f"auxiliary power would be negative ({new:.0f} W)"
+        ch.aux_power_w = float(new)
+        return eq, f"auxiliary power {c[0]:+.0f} W → {new:.0f} W"
+    if name == "standstill_aux_w":
+        new = ch.standstill_aux_w + c[0]
+        if new < 0:
+            return None, f"standstill auxiliary power would be negative ({new:.0f} W)"
+        ch.standstill_aux_w = float(new)
+        return eq, f"extra auxiliary power while standing {new:.0f} W"
+    if name == "recuperation_limit_w":
+        ch.recuperation_limit_w = float(param)
+        return eq, f"braking power beyond {param / 1000:.1f} kW goes to the friction brakes"
+    if name == "traction_efficiency":
+        new = ch.traction_efficiency / (1.0 + c[0]) if c[0] > -1 else math.inf
+        if not 0.5 <= new <= 1.0:
+            return None, f"implausible traction efficiency {new:.3g}"
+        ch.traction_efficiency = float(new)
+        return eq, f"traction efficiency {new:.3f}"
+    if name == "recuperation_efficiency":
+        new = ch.recuperation_efficiency * (1.0 + c[0])
+        if not 0.0 < new <= 1.0:
+            return None, f"implausible recuperation efficiency {new:.3g}"
+        ch.recuperation_efficiency = float(new)
+        return eq, f"recuperation efficiency {new:.3f}"
+    if name == "hvac":
+        h = {"column": "ambient_c", "setpoint_c": HVAC_SETPOINT_C, "heating_w_per_k": 0.0, "cooling_w_per_k": 0.0}
+        for k, val in zip(param, c):
+            h[("heating_w_per_k", "cooling_w_per_k")[k]] = float(val)
+        if h["heating_w_per_k"] < 0 or h["cooling_w_per_k"] < 0:
+            return None, f"negative HVAC gain (heating {h['heating_w_per_k']:.0f}, cooling {h['cooling_w_per_k']:.0f} W/K)"
+        ch.hvac = h
+        return eq, f"heating {h['heating_w_per_k']:.0f} W/K below, cooling {h['cooling_w_per_k']:.0f} W/K above {HVAC_SETPOINT_C:g} °C"
+    if name.startswith("loads."):
+        if c[0] < 0:
+            return None, f"negative load gain {c[0]:.3g}"
+        ch.loads = dict(ch.loads, **{name[6:]: float(c[0])})
+        return eq, f"{c[0]:.3f} W at the target per W logged"
+    raise UserError(f"unknown chain effect '{name}'")
+
+
+
+
+def _eta(e, v, p):
+    return e(v, p) if isinstance(e, Table) else np.full(np.shape(p), float(e))

@@ -1,0 +1,173 @@
+"""diagnose on battery and fuel targets (issue #12 §2–§3): the chain's linearisation, planted
+effects found through the chain (standstill auxiliary load, grade), nothing found when
+nothing is planted, the closed equation in compare, and the CLI's --target."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.data.log import from_frame
+from sumo_drvpw.data.measured import measure
+from sumo_drvpw.fit.chain_linear import ChainTraceOptions, linearised_columns, predict, trace_chain
+from sumo_drvpw.model.chain import EnergyChain, chain_from_dict
+from sumo_drvpw.model.equations import Equation, load_equation, save_equation
+from sumo_drvpw.model.terms import Inputs
+from sumo_drvpw.model.vehicles import load_vehicle
+from sumo_drvpw.synth.effects import PLANTS, BatteryLog, synth_trips
+from sumo_drvpw.synth.track import Noise
+
+QUIET = Noise(process_w=50.0, process_rel=0.002)   # a clean powertrain: the plant is the signal
+
+
+def _measured(plant_w, seed=3, trips=6, minutes=10.0):
+    b = BatteryLog(standstill_aux_w=plant_w, noise_w=100.0)
+    df, _ = synth_trips(n_trips=trips, minutes=minutes, seed=seed, effects=(b,), noise=QUIET)
+    veh = load_vehicle("prius3")
+    return measure(from_frame(df, veh, name="synth"), veh, "battery"), b, df
+
+
+@pytest.fixture(scope="module")
+def planted():
+    return _measured(450.0)
+
+
+@pytest.fixture(scope="module")
+def clean():
+    return _measured(0.0)
+
+
+def _declared(b, drop=()):
+    truth = load_equation("drvpw_prius3")
+    return Equation("declared", {k: v for k, v in truth.terms.items() if k not in drop}, truth.mass_kg,
+                    chain=b.chain())
+
+
+def test_standstill_aux_by_hand():
+    """P_bat = max(P,0)/η_t + η_r·min(P,0) + P_aux + P_stand·[v < 0.1]: 0 + 300 + 400 = 700 W
+    standing; 9000/0.9 + 300 = 10300 W; 0.8·(−1000) + 300 = −500 W; TOML round trip."""
+    c = chain_from_dict({"predicts": "battery", "traction_efficiency": 0.9, "recuperation_efficiency": 0.8,
+                         "aux_power_w": 300, "standstill_aux_w": 400})
+    out = c.evaluate(np.array([0.0, 9000.0, -1000.0]), np.array([0.0, 10.0, 5.0]))["power_w"]
+    np.testing.assert_allclose(out, [700.0, 10300.0, -500.0])
+    assert chain_from_dict(c.to_dict()) == c
+    assert "standstill_aux_w" not in EnergyChain().to_dict()
+
+
+@pytest.mark.parametrize("kind", ["battery", "battery_limit", "fuel"])
+def test_linearised_columns_sum_to_the_chain(kind):
+    """Σ columns + offset = the chain's prediction at the declared coefficients (any regime)."""
+    rng = np.random.default_rng(1)
+    n = 4000
+    v = np.abs(rng.normal(12, 8, n))
+    v[:300] = 0.0
+    x = Inputs(v, rng.normal(0, 1.2, n), rng.normal(0, 0.03, n), np.zeros(n), np.full(n, 1500.0),
+               np.full(n, 1.2), signals={"ambient_c": rng.normal(10, 8, n), "heater_w": rng.uniform(0, 2000, n)})
+    ch = {"battery": EnergyChain("battery", 0.9, 0.75, aux_power_w=250, standstill_aux_w=300,
+                                 loads={"heater_w": 0.95},
+                                 hvac={"column": "ambient_c", "setpoint_c": 20.0, "heating_w_per_k": 30.0,
+                                       "cooling_w_per_k": 10.0}),
+          "battery_limit": EnergyChain("battery", 0.92, 0.8, recuperation_limit_w=15000.0, aux_power_w=400),
+          "fuel": EnergyChain("fuel", 0.95, aux_power_w=500, idle_fuel_power_w=9000, marginal_efficiency=0.38,
+                              engine_off_below_w=3000, engine_on_above_mps=20.0)}[kind]
+    eq = Equation("e", {"acc": 1.05, "aero": 0.33, "roll": 0.012, "grade": 1.0}, chain=ch)
+    cols, off = linearised_columns(eq, x)
+    total = sum(cols.values()) + off
+    np.testing.assert_allclose(total, predict(eq, x), rtol=1e-12, atol=1e-6)
+    if kind == "battery_limit":
+        assert np.any(off < 0)       # some braking beyond the limit
+
+
+def test_planted_standstill_load_is_found(planted):
+    m, b, _ = planted
+    res = trace_chain(m, _declared(b))
+    names = [f["term"] for f in res.report["findings"]]
+    assert names[0] == "standstill_aux_w", names
+    f = res.report["findings"][0]
+    # the residual at standstill is the plant plus the chain of the standing process noise
+    # (the same trace on the clean log reads ≈ 36 W there): 450 W within 20 %
+    assert 0.8 * 450 <= f["coefficient"] <= 1.2 * 450
+    assert f["p_value"] < 0.05 and f["role"] == "structural"
+    assert res.equation.chain.standstill_aux_w == pytest.approx(f["coefficient"])
+    # the closed equation, exactly evaluated on held-out trips, lowers the per-trip error
+    before = res.report["baseline"]["trip_net_energy"]["mean_abs_error"]
+    after = res.report["final"]["trip_net_energy"]["mean_abs_error"]
+    assert after < before
+
+
+def test_nothing_planted_nothing_found(clean):
+    m, b, _ = clean
+    res = trace_chain(m, _declared(b))
+    assert res.report["findings"] == []
+    assert res.equation.chain == b.chain() and res.equation.terms == _declared(b).terms
+
+
+def test_missing_grade_is_found_through_the_chain(clean):
+    """A road load without grade (as from a dynamometer): grade is found with the truth's
+    coefficient, in battery watts through the chain's efficiencies."""
+    m, b, _ = clean
+    truth = load_equation("drvpw_prius3")
+    res = trace_chain(m, _declared(b, drop=("grade",)))
+    f = res.report["findings"][0]
+    assert f["term"] == "grade"
+    assert f["coefficient"] == pytest.approx(truth.terms["grade"], rel=0.02)
+    assert res.equation.terms["grade"] == pytest.approx(f["coefficient"])
+    assert res.report["final"]["metrics"]["rmse_w"] < 0.5 * res.report["baseline"]["metrics"]["rmse_w"]
+
+
+def test_trace_needs_a_chain_of_the_target(clean):
+    from sumo_drvpw.errors import UserError
+
+    m, b, _ = clean
+    with pytest.raises(UserError, match="no energy chain"):
+        trace_chain(m, load_equation("drvpw_prius3"))
+    with pytest.raises(UserError, match="predicts fuel"):
+        trace_chain(m, Equation("f", {"acc": 1.0}, chain=EnergyChain("fuel")))
+    with pytest.raises(UserError, match="validation"):
+        trace_chain(m, _declared(b), ChainTraceOptions(validation="x"))
+
+
+def test_plants_table_builds_the_battery_log():
+    assert isinstance(PLANTS["battery-standstill-aux"](), BatteryLog)
+
+
+def test_cli_diagnose_battery_from_the_equation(tmp_path, clean):
+    """The equation predicts battery → diagnose traces the battery target; the closed
+    equation goes into compare unchanged and predicts the battery energy better."""
+    m, b, df = clean
+    log = tmp_path / "log.parquet"
+    df.to_parquet(log)
+    decl = tmp_path / "declared.toml"
+    save_equation(_declared(b, drop=("grade",)), decl)
+    out = tmp_path / "trace"
+    assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--out", str(out),
+                     "--quiet"]) == 0
+    rep = json.loads((out / "trace.json").read_text())
+    assert rep["target"] == "battery" and rep["findings"][0]["term"] == "grade"
+    assert "grade" in (out / "trace.md").read_text()
+    closed = load_equation(str(out / "final_equation.toml"))
+    assert closed.chain.predicts == "battery" and "grade" in closed.terms
+    cmp_out = tmp_path / "cmp"
+    assert cli_main(["compare", str(log), "--vehicle", "prius3", "--equation", str(decl), "--equation",
+                     str(out / "final_equation.toml"), "--out", str(cmp_out)]) == 0
+    doc = json.loads((cmp_out / "report.json").read_text())
+    r2 = {k: v["r2"] for k, v in doc["equations"].items()}
+    assert r2[closed.name] > r2["declared"] + 0.05
+
+
+def test_cli_target_errors(tmp_path, clean, capsys):
+    _, b, df = clean
+    log = tmp_path / "log.parquet"
+    df.to_parquet(log)
+    out = tmp_path / "o"
+    assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", "drvpw_prius3",
+                     "--target", "battery", "--out", str(out)]) == 2
+    assert "no energy chain" in capsys.readouterr().err and not out.exists()
+    decl = tmp_path / "declared.toml"
+    save_equation(_declared(b), decl)
+    assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--target", "fuel", "--equation", str(decl),
+                     "--out", str(out)]) == 2
+    assert not out.exists()
