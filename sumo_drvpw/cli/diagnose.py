@@ -20,6 +20,10 @@ def configure(p):
     p.add_argument("--equation", help="declared equation, name or TOML file (default: calibrate one "
                                       "on the spot, stepwise on indt-var-1)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--target", choices=("wheel", "battery", "fuel"),
+                   help="trace driving power (wheel), battery V·I or fuel flow (default: what the equation's "
+                        "energy chain predicts, else wheel); battery/fuel start from the equation's chain and "
+                        "find what the data add to it (sumo_drvpw.fit.chain_linear)")
     p.add_argument("--validation", default="auto", choices=("auto", "trip", "blocks"),
                    help="held-out data: whole trips (needs ≥ 3), contiguous blocks within trips, or "
                         "auto (trips when ≥ 3, else blocks; default)")
@@ -94,6 +98,10 @@ def main(args) -> int:
     progress = None if args.quiet else (lambda s: print(s, file=sys.stderr))
     from sumo_drvpw.cli import output_set, read_options
 
+    target = _target(args)
+    if target != "wheel":  # issue #12 §3: the loop closed on an energy chain
+        return _chain_main(args, target, progress)
+
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
         res = run(args.logs, args.vehicle, args.equation, tmp, opt, figures=not args.no_figures,
                   progress=progress, read_options=read_options(args))
@@ -106,4 +114,44 @@ def main(args) -> int:
         print(f"  + {f['term']}: {f['effect']} (RMSE {f['metrics_before']['rmse_w']:.1f} → "
               f"{f['metrics_after']['rmse_w']:.1f} W{share})")
     print(f"final held-out RMSE {r['final']['metrics']['rmse_w']:.1f} W; wrote {Path(args.out) / 'trace.json'}")
+    return 0
+
+
+def _target(args) -> str:
+    """--target, else battery/fuel when the equation's chain predicts it, else wheel."""
+    if getattr(args, "target", None):
+        return args.target
+    if args.equation and args.equation != "vsp_spec":
+        from sumo_drvpw.model.equations import load_equation
+
+        pred = load_equation(args.equation).predicts
+        return pred if pred in ("battery", "fuel") else "wheel"
+    return "wheel"
+
+
+def _chain_main(args, target, progress) -> int:
+    from sumo_drvpw.cli import output_set, read_options
+    from sumo_drvpw.data.measured import load_measured
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.fit.chain_linear import ChainTraceOptions, check_chain_equation, trace_chain
+    from sumo_drvpw.model.equations import load_equation
+    from sumo_drvpw.report.chain_trace import write_chain_outputs
+
+    if not args.equation:
+        raise UserError(f"--target {target} needs --equation with an energy chain predicting {target}")
+    eq = load_equation(args.equation)
+    check_chain_equation(eq, target)
+    opt = ChainTraceOptions(block_s=args.block_s, folds=args.folds, alpha=args.alpha, min_gain=args.min_gain,
+                            max_findings=args.max_findings, validation=args.validation)
+    with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
+        m = load_measured(args.logs, args.vehicle, read_options(args), target=target)
+        res = trace_chain(m, eq, opt, progress=progress)
+        write_chain_outputs(res, tmp)
+    r = res.report
+    print(f"{target}: declared chain RMSE {r['baseline']['metrics']['rmse_w']:.1f} W, per-trip net energy "
+          f"{100 * r['baseline']['trip_net_energy']['mean_abs_error']:.1f} %; {len(r['findings'])} finding(s)")
+    for f in r["findings"]:
+        print(f"  + {f['term']}: {f['reading']} (held-out block energy error −{100 * f['energy_gain']:.1f} %)")
+    print(f"after (held out): RMSE {r['final']['metrics']['rmse_w']:.1f} W, per-trip net energy "
+          f"{100 * r['final']['trip_net_energy']['mean_abs_error']:.1f} %; wrote {Path(args.out) / 'trace.json'}")
     return 0
