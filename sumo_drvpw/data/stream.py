@@ -131,11 +131,24 @@ def plan(paths, part_rows: int | None = None) -> list[Part]:
     return parts
 
 
-def _chunks(part: Part, rows: int, columns=None) -> Iterator[pd.DataFrame]:
+def _text_trip_id(p: Path) -> list[str]:
+    """``["trip_id"]`` when a Parquet file stores it as text (read dictionary-encoded: a
+    pandas categorical, integer codes instead of one Python string per row), else []."""
+    import pyarrow as pa
+
+    f = _parquet_file(p)
+    names = f.schema_arrow.names
+    if "trip_id" not in names:
+        return []
+    typ = f.schema_arrow.field("trip_id").type
+    return ["trip_id"] if pa.types.is_string(typ) or pa.types.is_large_string(typ) else []
+
+
+def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> Iterator[pd.DataFrame]:
     p = Path(part.path)
     try:
         if _is_parquet(p):
-            f = _parquet_file(p)
+            f = _parquet_file(p, read_dictionary=_text_trip_id(p) if categorical else None)
             cols = None if columns is None else [c for c in f.schema_arrow.names if c in columns]
             groups, at = None, 0
             if part.start is not None:
@@ -152,6 +165,7 @@ def _chunks(part: Part, rows: int, columns=None) -> Iterator[pd.DataFrame]:
                         continue
                     b = b.slice(max(part.start - lo, 0), min(hi, part.stop) - max(lo, part.start))
                 yield b.to_pandas()
+                del b
         else:
             use = None if columns is None else (lambda c: c in columns)
             for df in pd.read_csv(p, chunksize=rows, low_memory=False, usecols=use):
@@ -162,24 +176,41 @@ def _chunks(part: Part, rows: int, columns=None) -> Iterator[pd.DataFrame]:
         raise UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}") from None
 
 
+def _concat(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
+    """Rows of ``a`` then ``b``; categorical trip ids stay categorical (union of categories)."""
+    ta, tb = a.get("trip_id"), b.get("trip_id")
+    if ta is None or tb is None or not (isinstance(ta.dtype, pd.CategoricalDtype)
+                                        and isinstance(tb.dtype, pd.CategoricalDtype)):
+        return pd.concat([a, b], ignore_index=True)
+    trip = pd.api.types.union_categoricals([ta, tb], ignore_order=True)
+    out = pd.concat([a.drop(columns="trip_id"), b.drop(columns="trip_id")], ignore_index=True)
+    out.insert(list(a.columns).index("trip_id"), "trip_id", trip)
+    return out
+
+
 def whole_trips(part: Part, rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRIP_ROWS,
-                columns=None) -> Iterator[tuple[pd.DataFrame, int]]:
+                columns=None, categorical: bool = False) -> Iterator[tuple[pd.DataFrame, int]]:
     """Raw frames of whole trips of a Part, each with the offset of its first row
     (``columns``: read only these, when present; None: all).
 
     The rows of the last trip of a chunk are carried into the next chunk until a new
     trip starts; a trip longer than ``max_trip_rows`` raises :class:`UserError`.
+    ``categorical``: a text ``trip_id`` of a Parquet file comes as a pandas categorical
+    (dictionary-encoded, no Python string per row; the reader keeps it so); False: as read.
     """
+    from sumo_drvpw.data.log import trip_codes_of
+
     carry: pd.DataFrame | None = None
     offset = 0
     seen_rows = 0
-    for df in _chunks(part, rows, columns):
+    for df in _chunks(part, rows, columns, categorical):
         seen_rows += len(df)
         if carry is not None and len(carry):
-            df = pd.concat([carry, df], ignore_index=True)
+            df = _concat(carry, df)
         if "trip_id" in df and len(df):
             # integer codes, not Python strings (the costly part of a text column)
-            codes = pd.factorize(df["trip_id"].astype(str))[0]
+            tid = df["trip_id"]
+            codes = trip_codes_of(tid if isinstance(tid.dtype, pd.CategoricalDtype) else tid.astype(str))
             other = np.flatnonzero(codes != codes[-1])
             cut = int(other[-1]) + 1 if len(other) else 0
         else:
@@ -224,7 +255,7 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
     from sumo_drvpw.data.measured import measure
 
     stem = Path(part.path).stem
-    for df, off in whole_trips(part, rows, max_trip_rows, columns):
+    for df, off in whole_trips(part, rows, max_trip_rows, columns, categorical=True):
         first = off + (part.start or 0)
         name = part.path if first == 0 else f"{part.path} (batch from row {first})"
         if "trip_id" not in df:

@@ -105,28 +105,30 @@ def calibration_mask(m, candidates) -> np.ndarray:
 
 def tall_r(a: np.ndarray) -> np.ndarray:
     """Upper triangular R with RᵀR = aᵀa of a tall matrix a (n × k), about as precise as
-    a Householder QR at the cost of two Gram products.
+    a Householder QR at the cost of two Gram products and one product by a k × k matrix.
 
     CholeskyQR2 on the column-scaled matrix (Fukaya et al. 2014, "CholeskyQR2: a simple
     and communication-avoiding algorithm for computing a tall-skinny QR factorization"):
-    R₁ = chol(SᵀS), Q₁ = S·R₁⁻¹, R₂ = chol(Q₁ᵀQ₁), R = R₂·R₁·D for S = a·D⁻¹. Columns
-    that are zero, or a multiple c·a_i of an earlier column (e.g. aero and v³ in still air
-    at one air density), get R's column c·R_i, which is exact: R = Qᵀa. Beyond a scaled
-    condition number of 1e7 (or when a Cholesky fails) Householder QR is used.
+    R₁ = chol(SᵀS), Q₁ = S·R₁⁻¹, R₂ = chol(Q₁ᵀQ₁), R = R₂·R₁·D for S = a·D⁻¹ (SᵀS is
+    taken as D⁻¹(aᵀa)D⁻¹ and Q₁ as a·(D⁻¹R₁⁻¹): no scaled copy of a). Columns that are
+    zero, or a multiple c·a_i of an earlier column (e.g. aero and v³ in still air at one
+    air density), get R's column c·R_i, which is exact: R = Qᵀa. Beyond a scaled condition
+    number of 1e7 (or when a Cholesky fails) Householder QR is used.
     """
     k = a.shape[1]
-    d = np.sqrt(np.einsum("ij,ij->j", a, a))
+    g0 = a.T @ a
+    d = np.sqrt(np.maximum(np.diag(g0), 0.0))
     safe = np.where(d > 0, d, 1.0)
-    s = a / safe
-    g = s.T @ s
+    g = g0 / np.outer(safe, safe)
     base = np.arange(k)          # column whose multiple each column is (itself if kept)
     coef = np.ones(k)
+    near = np.abs(g) > 1.0 - 1e-13
     for j in range(k):
         if d[j] == 0:
             base[j], coef[j] = -1, 0.0
             continue
-        for i in range(j):
-            if base[i] == i and abs(g[i, j]) > 1.0 - 1e-13:
+        for i in np.flatnonzero(near[:j, j]):
+            if base[i] == i:
                 base[j], coef[j] = i, np.sign(g[i, j]) * d[j] / d[i]
                 break
     keep = np.flatnonzero(base == np.arange(k))
@@ -136,10 +138,13 @@ def tall_r(a: np.ndarray) -> np.ndarray:
         r1 = np.linalg.cholesky(g[np.ix_(keep, keep)]).T
         if np.linalg.cond(r1) > 1e7:
             raise np.linalg.LinAlgError("ill-conditioned")
-        q = s[:, keep] @ np.linalg.inv(r1)
+        m = np.linalg.inv(r1) / safe[keep][:, None]        # D⁻¹R₁⁻¹ (rows of kept columns)
+        q = a @ m if len(keep) == k else a[:, keep] @ m
         rk = (np.linalg.cholesky(q.T @ q).T @ r1) * d[keep]
     except np.linalg.LinAlgError:
         rk = np.linalg.qr(a[:, keep], mode="r")
+    if len(keep) == k:
+        return rk
     r = np.zeros((len(keep), k))
     r[:, keep] = rk
     pos = {c: n for n, c in enumerate(keep)}
@@ -209,17 +214,23 @@ class CalibrationStats:
         self.ranges = _merge_ranges(self.ranges, tuple(
             (float(np.nanmin(a[idx])), float(np.nanmax(a[idx])))
             for a in (np.asarray(m.inputs.v, float), np.asarray(m.inputs.a, float))))
-        x = term_matrix(self.names, m.inputs.take(idx))
-        yu = y[idx]
-        trip = np.asarray(m.inputs.trip)[idx]
-        starts = np.flatnonzero(np.r_[True, trip[1:] != trip[:-1]])
-        for a, b in zip(starts, np.r_[starts[1:], len(idx)]):
-            xs, ys = x[a:b], yu[a:b]
-            t = str(trip[a])
+        k = len(self.names)
+        every = len(idx) == len(y)
+        xin = m.inputs if every else m.inputs.take(idx)
+        xy = np.empty((len(idx), k + 1))  # [X y]: a trip's rows are one contiguous view
+        xy[:, :k] = term_matrix(self.names, xin)
+        xy[:, k] = y if every else y[idx]
+        del xin
+        codes = _trip_codes(m)
+        codes = codes if every else codes[idx]
+        starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
+        ids = np.asarray(m.inputs.trip)[idx[starts]]
+        for t, a, b in zip(ids, starts, np.r_[starts[1:], len(idx)]):
+            t = str(t)
             if t in self.trips:
                 raise UserError(f"trip_id '{t}' appears in more than one place; give each "
                                 "trip its own id")
-            self.trips[t] = (tall_r(np.column_stack([xs, ys])), Moments.of(ys[:, None]))
+            self.trips[t] = (tall_r(xy[a:b]), Moments.of(xy[a:b, k:]))
         return self
 
     def merge(self, o: "CalibrationStats") -> "CalibrationStats":
@@ -255,6 +266,13 @@ class CalibrationStats:
         k = len(self.names)
         x, y = r[:, :k], r[:, k]
         return Gram(x.T @ x, x.T @ y, float(y @ y), mom.n, self.names), r, mom
+
+
+def _trip_codes(m) -> np.ndarray:
+    """Integer trip code per sample of a Measured batch (no Python strings)."""
+    from sumo_drvpw.data.log import trip_codes_of
+
+    return trip_codes_of(m.log.df["trip_id"])
 
 
 def _merge_ranges(a: tuple, b: tuple) -> tuple:
