@@ -94,13 +94,19 @@ class Accountant(_Listener):
         scenario's)
     scenario : optional scenario TOML (or parsed :class:`Scenario`) for the options
     trace_path : optional path of a per vehicle-step ``trace.parquet``
+    keep_vehicles : keep every vehicle's row in memory for the whole run (the old,
+        unbounded way); by default vehicles that left the simulation are written out in
+        batches of ``flush_vehicles`` (:mod:`sumo_drvpw.sim.spill`) into ``spill_dir``
+        (default: a temporary folder) and memory holds the running vehicles only
     overrides : scenario values to replace (see ``sumo_drvpw.sim.scenario.OVERRIDES``)
 
     Use it as a step listener (``conn.addStepListener(acc)``) or call :meth:`step` after
     each ``simulationStep()`` yourself.
     """
 
-    def __init__(self, conn, equations=None, scenario=None, trace_path=None, **overrides):
+    def __init__(self, conn, equations=None, scenario=None, trace_path=None,
+                 keep_vehicles: bool = False, spill_dir=None, flush_vehicles: int | None = None,
+                 **overrides):
         from sumo_drvpw.sim.run import VTypeResolver
 
         self._t0 = time.perf_counter()
@@ -126,6 +132,15 @@ class Accountant(_Listener):
         self.net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
         self.eqset = EquationSet(self.equations)
         self.ledger = Ledger(len(self.net.edge_ids), len(self.equations))
+        if not keep_vehicles:
+            from sumo_drvpw.sim.spill import VehicleSpill
+
+            self.ledger.spill = VehicleSpill(names, [e.predicts for e in self.equations],
+                                             spill_dir)
+            if flush_vehicles is not None:
+                if flush_vehicles < 1:
+                    raise UserError(f"Accountant: flush_vehicles must be ≥ 1, got {flush_vehicles}")
+                self.ledger.flush_vehicles = int(flush_vehicles)
         self.physics = Physics(wind_speed=sc.wind_speed, wind_from_deg=sc.wind_from_deg,
                                rho=sc.rho, slope_tol=sc.slope_tol,
                                slope_reference=sc.slope_reference,
@@ -158,6 +173,10 @@ class Accountant(_Listener):
         auxiliary_j, net_j [J at the battery] or fuel_j [J], fuel_l [L], co2_kg [kg]}."""
         i = self.stepper.vmap.get(vehicle_id)
         if i is None:
+            if self.ledger.flushed_vehicles:
+                raise KeyError(f"vehicle '{vehicle_id}' is not in the Accountant's memory: "
+                               "never seen, or it left the simulation and its totals were "
+                               "written out (result().vehicles has them)")
             raise KeyError(f"vehicle '{vehicle_id}' has not been seen by the Accountant")
         led = self.ledger
         out = {}
@@ -200,6 +219,7 @@ class Accountant(_Listener):
             "equation_sources": {e.name: (e.path or "<object>") for e in self.equations},
             "skipped": {k: dict(sorted(v.items())) for k, v in self.resolver.skipped.items()},
             "excluded_by_vehicles_vtypes": self.resolver.excluded,
+            "vehicles_in_memory_peak": int(led.peak_held),
             "assumptions": {"default_masses": dict(sorted(self.resolver.assumptions.items()))},
         }
         summary_extra.update(extra or {})

@@ -62,6 +62,8 @@ class ChainLedger:
         self.veh_time = np.zeros(capacity)
         #: cumulative edge totals at interval boundaries [(time [s], (edges, E, Q))]
         self.snapshots: list[tuple[float, np.ndarray]] = []
+        #: totals of vehicles flushed out of memory (Ledger.flush): class → [(E, Q), m]
+        self.flushed_class: dict[str, list] = {}
 
     @property
     def signals(self) -> set[str]:
@@ -182,6 +184,27 @@ class ChainLedger:
             out.setdefault(self.names[e], {})[QUANTITIES[k]] = float(self._veh[i, j])
         return out
 
+    def flush(self, gone: np.ndarray, labels: list[str], ids: list[str], spill) -> None:
+        """Vehicles ``gone`` (slots) leave memory: their totals are added to their class's
+        and their rows handed to ``spill.write_chain`` (``chain_vehicles.csv``)."""
+        self._grow(int(gone.max()) + 1)
+        tot = self.expand(self._veh[gone])
+        dist = self.veh_dist[gone]
+        for j, c in enumerate(labels):
+            acc = self.flushed_class.setdefault(c, [np.zeros((self.E, self.Q)), 0.0])
+            acc[0] += tot[j]
+            acc[1] += dist[j]
+        if spill is not None:
+            spill.write_chain(self.table(tot, dist, ids))
+
+    def compact(self, keep: np.ndarray, n: int) -> None:
+        """Move vehicles ``keep`` (slots, ascending) to the front, empty the rest up to ``n``."""
+        self._grow(n)
+        m = len(keep)
+        for arr in (self._veh, self.veh_dist, self.veh_time):
+            arr[:m] = arr[keep]
+            arr[m:n] = 0.0
+
     def vehicle_totals(self, n: int) -> np.ndarray:
         """Totals of the first ``n`` vehicles, (n, E, Q)."""
         self._grow(n)
@@ -215,12 +238,23 @@ class ChainLedger:
                 rows.append(r)
         return rows
 
-    def report(self, veh_ids: list[str], veh_classes: list[str], edge_ids: list[str]) -> dict:
-        """Per-vehicle, per-edge and per-class rows (see :meth:`table`)."""
+    def report(self, veh_ids: list[str], veh_classes: list[str], edge_ids: list[str],
+               class_order=None) -> dict:
+        """Per-vehicle, per-edge and per-class rows (see :meth:`table`); the vehicles held in
+        memory, the classes with the flushed vehicles' totals added (in ``class_order``)."""
         n = len(veh_ids)
         cls = self.class_totals(veh_classes)
         labels = np.asarray(veh_classes, dtype=object)
         cdist = np.array([self.veh_dist[:n][labels == c].sum() for c in cls])
+        if self.flushed_class:
+            dist = dict(zip(cls, cdist))
+            for c, (q, m) in self.flushed_class.items():
+                cls[c] = cls[c] + q if c in cls else q.copy()
+                dist[c] = dist.get(c, 0.0) + m
+            order = [c for c in (class_order or ()) if c in cls]
+            order += [c for c in cls if c not in order]
+            cls = {c: cls[c] for c in order}
+            cdist = np.array([dist[c] for c in order])
         return {"vehicles": self.table(self.vehicle_totals(n), self.veh_dist[:n], list(veh_ids)),
                 "edges": self.table(self.edge, self.edge_dist, list(edge_ids)),
                 "classes": self.table(np.stack(list(cls.values())) if cls else np.zeros((0, self.E, self.Q)),
@@ -235,10 +269,11 @@ def chain_ledger(equations, n_edges: int, signal_values: dict | None = None) -> 
     return ChainLedger([e.name for e in equations], chains, n_edges, signal_values=signal_values)
 
 
-def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]) -> dict:
+def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str],
+                  class_order=None) -> dict:
     """Per vehicle class and equation: battery kWh (traction, recuperated, auxiliary, net)
     and kWh/km, or fuel L, L/100 km and CO₂ kg, g/km; plus the run's totals."""
-    rep = chain.report(veh_ids, veh_classes, [])
+    rep = chain.report(veh_ids, veh_classes, [], class_order)
     return {"classes": rep["classes"],
             "quantities": "battery: traction/recuperated/auxiliary/net kWh (auxiliary accrues "
                           "while standing); fuel: litres (LHV, density of the chain's fuel), CO2 kg",
@@ -258,11 +293,16 @@ def write_chain_outputs(out_dir, result) -> dict[str, str]:
     chain = led.chain
     n = led.n_veh
     ids, classes = list(led.veh_ids[:n]), [c or "unknown" for c in led.veh_class[:n]]
-    rep = chain.report(ids, classes, list(result.net.edge_ids))
+    order = list(getattr(led, "class_seen", {}) or [])
+    rep = chain.report(ids, classes, list(result.net.edge_ids), order)
     files = {}
+    spill = getattr(led, "spill", None)
     for key, rows in rep.items():
         path = Path(out_dir) / f"chain_{key}.csv"
-        write_text(path, pd.DataFrame(rows).to_csv(index=False))
+        if key == "vehicles" and spill is not None and spill.has_chain_rows:
+            spill.write_chain_csv(path, rows)  # the flushed vehicles' rows, then the rest
+        else:
+            write_text(path, pd.DataFrame(rows).to_csv(index=False))
         files[f"chain_{key}"] = str(path)
-    result.summary["chain"] = chain_summary(chain, ids, classes)
+    result.summary["chain"] = chain_summary(chain, ids, classes, order)
     return files

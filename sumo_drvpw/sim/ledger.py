@@ -11,6 +11,13 @@ energy and distance it accumulated since entering its previous edge are added to
 edge, and the segments still open are added when the edge totals are read. Per step only
 the few vehicles that change edge touch the edge arrays, and the sums equal direct
 per-step booking up to rounding.
+
+Bounded memory: vehicles that left the simulation (:meth:`Ledger.retire`) keep their rows
+until :attr:`Ledger.flush_vehicles` of them are finished; then :meth:`Ledger.flush` closes
+their open edge segments, hands their rows to :attr:`Ledger.spill` (which streams them to
+``vehicles.parquet`` row groups, :mod:`sumo_drvpw.sim.spill`) and compacts the running
+vehicles to the front of the arrays. Memory then grows with the vehicles running at once,
+not with the trips of the run; edge and class totals are sums kept per edge.
 """
 
 from __future__ import annotations
@@ -121,6 +128,20 @@ class Ledger:
         self.lane_clipped = np.zeros(0, np.int64)
         #: battery/fuel accounts (sumo_drvpw.sim.chain.ChainLedger) when an equation has a chain
         self.chain = None
+        #: where finished vehicles' rows go (``write(ledger, slots)``, ``write_chain(rows)``:
+        #: :class:`sumo_drvpw.sim.spill.VehicleSpill`); None keeps every vehicle in memory
+        self.spill = None
+        #: finished vehicles held before they are flushed to :attr:`spill`
+        self.flush_vehicles = 4096
+        self.n_done = 0
+        #: vehicles written out by :meth:`flush` (all, and the accounted ones), their vTypes
+        self.flushed_vehicles = 0
+        self.flushed_kept = 0
+        self.flushed_types: set[str] = set()
+        #: most vehicles held in memory at once
+        self.peak_held = 0
+        #: vClass labels in the order vehicles of them were first registered
+        self.class_seen: dict[str, None] = {}
 
     def _edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Edge energies (edges, 2, E, C), distances, times and distances per equation
@@ -204,7 +225,15 @@ class Ledger:
         grow("veh_prev_speed", (cap,), float, np.nan)
         grow("veh_lane", (cap,), np.int64, -2)  # tracked lane (-2: never read)
         grow("veh_pos", (cap,), float, np.nan)  # tracked lane position [m]
+        grow("veh_done", (cap,), bool, False)  # left the simulation, not yet flushed
         self.capacity = cap
+
+    #: per-vehicle arrays and their empty value (what :meth:`flush` compacts)
+    _VEH_ARRAYS = (("_veh_energy", 0.0), ("_seg_energy", 0.0), ("_seg_dist", 0.0),
+                   ("_seg_time", 0.0), ("veh_dist", 0.0), ("veh_time", 0.0),
+                   ("veh_mass", np.nan), ("veh_app", 0.0), ("veh_keep", False),
+                   ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_lane", -2),
+                   ("veh_pos", np.nan), ("veh_done", False))
 
     def add_vehicle(self, vid: str, vtype: str, mass: float, app: np.ndarray,
                     keep: bool, vclass: str = "") -> int:
@@ -219,7 +248,88 @@ class Ledger:
         self.veh_app[i] = app
         self.veh_keep[i] = keep
         self.n_veh += 1
+        if self.n_veh > self.peak_held:
+            self.peak_held = self.n_veh
+        label = vclass or "unknown"
+        if label not in self.class_seen:
+            self.class_seen[label] = None
         return i
+
+    @property
+    def vehicles_total(self) -> int:
+        """Accounted vehicles of the run: held in memory plus flushed."""
+        return int(np.count_nonzero(self.veh_keep[:self.n_veh])) + self.flushed_kept
+
+    @property
+    def types_seen(self) -> set[str]:
+        """vTypes of every vehicle registered in the run."""
+        return set(self.veh_type[:self.n_veh]) | self.flushed_types
+
+    def retire(self, slots) -> None:
+        """Mark vehicles ``slots`` as gone (arrived, removed); flushed by :meth:`flush`."""
+        slots = np.asarray(slots, np.int64)
+        new = slots[~self.veh_done[slots]]
+        self.veh_done[new] = True
+        self.n_done += len(np.unique(new))
+
+    def unretire(self, i: int) -> None:
+        """A vehicle id used again before its row was flushed: it books on in the same row."""
+        if self.veh_done[i]:
+            self.veh_done[i] = False
+            self.n_done -= 1
+
+    def flush_due(self) -> bool:
+        return self.spill is not None and self.n_done >= self.flush_vehicles
+
+    def _close_segments(self, vo: np.ndarray) -> None:
+        """Add the open edge segments of vehicles ``vo`` (on an edge) to the closed totals."""
+        old = self.veh_prev_edge[vo]
+        np.add.at(self._edge_closed, old, self._veh_energy[vo] - self._seg_energy[vo])
+        d = self.veh_dist[vo] - self._seg_dist[vo]
+        np.add.at(self._edge_dist_closed, old, d)
+        np.add.at(self._edge_dist_eq_closed, old, d[:, None] * self.veh_app[vo])
+        np.add.at(self._edge_time_closed, old, self.veh_time[vo] - self._seg_time[vo])
+
+    def flush(self) -> np.ndarray | None:
+        """Write the finished vehicles to :attr:`spill` and drop them from memory.
+
+        Returns the slot map old → new (−1: flushed) for the caller's id → slot table, or
+        None when nothing was finished. Edge totals are unchanged (the open segments of the
+        leaving vehicles are closed first); the finished rows go out in slot order.
+        """
+        n = self.n_veh
+        done = self.veh_done[:n]
+        gone = np.flatnonzero(done)
+        if len(gone) == 0:
+            return None
+        on_edge = gone[self.veh_prev_edge[gone] >= 0]
+        if len(on_edge):
+            self._close_segments(on_edge)
+            self.veh_prev_edge[on_edge] = -1
+        self._edge_cache = None
+        if self.spill is not None:
+            self.spill.write(self, gone)
+        if self.chain is not None:
+            self.chain.flush(gone, [self.veh_class[i] or "unknown" for i in gone],
+                             [self.veh_ids[i] for i in gone], self.spill)
+        self.flushed_vehicles += len(gone)
+        self.flushed_kept += int(np.count_nonzero(self.veh_keep[gone]))
+        self.flushed_types.update(self.veh_type[i] for i in gone)
+        keep = np.flatnonzero(~done)
+        m = len(keep)
+        for name, fill in self._VEH_ARRAYS:
+            arr = getattr(self, name)
+            arr[:m] = arr[keep]
+            arr[m:n] = fill
+        for name in ("veh_ids", "veh_type", "veh_class"):
+            old = getattr(self, name)
+            setattr(self, name, [old[i] for i in keep])
+        if self.chain is not None:
+            self.chain.compact(keep, n)
+        remap = np.full(n, -1, np.int64)
+        remap[keep] = np.arange(m)
+        self.n_veh, self.n_done = m, 0
+        return remap
 
     def book(self, vidx: np.ndarray, eidx: np.ndarray, v: np.ndarray, dt: float,
              pc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -250,12 +360,7 @@ class Ledger:
             old = self.veh_prev_edge[vi]
             had = old >= 0
             if had.any():
-                vo = vi[had]
-                np.add.at(self._edge_closed, old[had], self._veh_energy[vo] - self._seg_energy[vo])
-                d = self.veh_dist[vo] - self._seg_dist[vo]
-                np.add.at(self._edge_dist_closed, old[had], d)
-                np.add.at(self._edge_dist_eq_closed, old[had], d[:, None] * self.veh_app[vo])
-                np.add.at(self._edge_time_closed, old[had], self.veh_time[vo] - self._seg_time[vo])
+                self._close_segments(vi[had])
             self._seg_energy[vi] = self._veh_energy[vi]
             self._seg_dist[vi] = self.veh_dist[vi]
             self._seg_time[vi] = self.veh_time[vi]

@@ -196,6 +196,9 @@ class Stepper:
         #: ``skip_person`` counts them by vClass and vType (one more call per step)
         self.count_persons = (hasattr(resolve, "skip_person") and hasattr(conn, "person")
                               and hasattr(conn.simulation, "getDepartedPersonIDList"))
+        #: vehicles that left the simulation (SUMO's arrived list) are retired from the
+        #: ledger, and flushed out of memory when it has a spill (bounded memory)
+        self.arrived = getattr(conn.simulation, "getArrivedIDList", None)
 
     def now(self) -> float:
         """Simulation time [s]; after an interrupted exchange with SUMO (a signal in the
@@ -221,6 +224,17 @@ class Stepper:
         self.reader.subscribe_existing([vid])
         return i
 
+    def flush(self) -> None:
+        """Write the finished vehicles out of the ledger (:meth:`Ledger.flush`) and renumber
+        the running ones."""
+        if self.trace is not None and hasattr(self.trace, "flush"):
+            self.trace.flush()  # its buffered rows name vehicles by their current numbers
+        remap = self.ledger.flush()
+        if remap is None:
+            return
+        self.vmap = {vid: int(remap[i]) for vid, i in self.vmap.items() if remap[i] >= 0}
+        self.prev_ids, self.prev_sel = None, None
+
     def lane_numbers(self, lane_ids: list[str]) -> np.ndarray:
         lane_index = self.lane_index
         try:
@@ -245,12 +259,20 @@ class Stepper:
         if self.count_persons:
             for pid in conn.simulation.getDepartedPersonIDList():
                 self.resolve.skip_person(conn.person.getTypeID(pid))
+        if self.arrived is not None:
+            gone = self.arrived()
+            if gone:
+                ledger.retire([vmap[v] for v in gone if v in vmap])
+                if ledger.flush_due():  # before the new ones come: memory ≤ running vehicles
+                    self.flush()
+                    vmap = self.vmap
         for vid in conn.simulation.getDepartedIDList():
             if vid not in vmap:
                 self.register(vid)
             else:  # an id used again (e.g. vehicle.add): its state starts afresh
                 ledger.veh_lane[vmap[vid]] = -2
                 ledger.veh_prev_speed[vmap[vid]] = np.nan
+                ledger.unretire(vmap[vid])
         if len(ids) == 0:
             return
         if ids == self.prev_ids:  # no arrival or departure: same vehicles, same order

@@ -56,11 +56,14 @@ def _whpkm(energy_j: np.ndarray, dist_m: np.ndarray) -> np.ndarray:
 
 
 def vehicles_table(ledger: Ledger, names: list[str],
-                   predicts: list[str] | None = None) -> pa.Table:
-    """Per vehicle × equation (only accounted vehicles and equations applied to them)."""
+                   predicts: list[str] | None = None, slots=None) -> pa.Table:
+    """Per vehicle × equation (only accounted vehicles and equations applied to them): the
+    vehicles held in memory, or only those of ``slots`` (ascending)."""
     n = ledger.n_veh
-    keep = ledger.veh_keep[:n]
-    vi, ei = np.nonzero(keep[:, None] & (ledger.veh_app[:n] > 0))
+    sel = np.arange(n) if slots is None else np.asarray(slots, np.int64)
+    keep = ledger.veh_keep[sel]
+    si, ei = np.nonzero(keep[:, None] & (ledger.veh_app[sel] > 0))
+    vi = sel[si]
     tr = ledger.veh_trac[vi, ei]
     rc = ledger.veh_recup[vi, ei]
     cols = {"vehicle": [ledger.veh_ids[i] for i in vi],
@@ -207,7 +210,8 @@ def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: boo
             rj[c]["total"] = float(rc[ki, e].sum())
         eqs[name] = {"energy_j": ej, "recuperable_energy_j": rj}
     out = {"steps": int(ledger.steps),
-           "vehicles": int(np.count_nonzero(ledger.veh_keep[:ledger.n_veh])),
+           "vehicles": ledger.vehicles_total if hasattr(ledger, "vehicles_total")
+           else int(np.count_nonzero(ledger.veh_keep[:ledger.n_veh])),
            "samples": int(ledger.samples),
            "slope_corrected_samples": int(ledger.corrected),
            "slope_clipped_samples": int(ledger.clipped),
@@ -409,8 +413,18 @@ class RunResult:
     def __contains__(self, key) -> bool:
         return key in self.summary
 
-    def vehicles_arrow(self) -> pa.Table:
+    @property
+    def _spill(self):
+        spill = getattr(self.ledger, "spill", None)
+        return spill if spill is not None and spill.has_rows else None
+
+    def _vehicles_all(self) -> pa.Table:
+        """Every vehicle's rows: those flushed during the run, then those held in memory."""
         t = vehicles_table(self.ledger, self.names, self.predicts)
+        return t if self._spill is None else self._spill.vehicles(t)
+
+    def vehicles_arrow(self) -> pa.Table:
+        t = self._vehicles_all()
         if self.sumo_device is None:
             return t
         df = t.to_pandas().merge(self.sumo_device, on="vehicle", how="left")
@@ -426,7 +440,7 @@ class RunResult:
         rows = []
         if self.sumo_device is None:
             return pd.DataFrame(rows)
-        v = vehicles_table(self.ledger, self.names, self.predicts).to_pandas().merge(
+        v = self._vehicles_all().to_pandas().merge(
             self.sumo_device, on="vehicle", how="inner")
         v = v[v.sumo_electricity_wh.abs() > 0]
         for eq, g in v.groupby("equation", sort=False):
@@ -472,7 +486,12 @@ def write_outputs(out_dir: Path, result: RunResult) -> dict[str, str]:
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = result.summary
     files = {}
-    write_parquet(out_dir / "vehicles.parquet", result.vehicles_arrow())
+    spill = result._spill
+    if spill is not None and result.sumo_device is None:  # row groups streamed, bounded memory
+        spill.write_vehicles(out_dir / "vehicles.parquet",
+                             vehicles_table(result.ledger, result.names, result.predicts))
+    else:
+        write_parquet(out_dir / "vehicles.parquet", result.vehicles_arrow())
     write_parquet(out_dir / "edges.parquet", result.edges_arrow())
     ct = result.classes_arrow()
     write_parquet(out_dir / "classes.parquet", ct)

@@ -179,7 +179,8 @@ def close_sumo(conn) -> None:
         pass
 
 
-def run_scenario(scenario_path, out_dir=None, **overrides):
+def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
+                 flush_vehicles: int | None = None, **overrides):
     """Run a scenario; returns its :class:`~sumo_drvpw.sim.outputs.RunResult` and writes
     its outputs into ``out_dir`` when given (``result["steps"]`` reads the summary).
 
@@ -187,6 +188,9 @@ def run_scenario(scenario_path, out_dir=None, **overrides):
     ----------
     scenario_path : scenario TOML file
     out_dir : output directory (created), or None to write nothing
+    keep_vehicles : keep every vehicle in memory (default: vehicles that left are
+        streamed out, :class:`~sumo_drvpw.sim.accountant.Accountant`)
+    flush_vehicles : finished vehicles held before they are written out (default 4096)
     overrides : replace scenario values: begin, end, step_length [s], connection, gui,
         options, equations (names, paths or Equation objects), trace, edgedata, figures,
         progress, difference, period
@@ -209,33 +213,47 @@ def run_scenario(scenario_path, out_dir=None, **overrides):
         tripinfo = Path(tmpdir.name) / "tripinfo.xml"
         args += ["--device.emissions.probability", "1", "--tripinfo-output", str(tripinfo),
                  "--tripinfo-output.write-unfinished", "true"]
+    from sumo_drvpw.sim.spill import SPILL_DIR
+
     conn = start_sumo(args, sc.connection, sc.gui)
     acc = None
     try:
-        acc = Accountant(conn, scenario=sc,
-                         trace_path=Path(out_dir) / "trace.parquet" if sc.trace else None)
         try:
-            info = step_until(conn, acc.stepper, end=sc.end, progress=sc.progress,
-                              period=sc.period)
-        except Exception as e:
-            if type(e).__name__ in ("TraCIException", "FatalTraCIError"):
-                raise UserError(f"SUMO failed during the run: {e}") from None
-            raise
-        acc.interrupted = info["interrupted"]
-        result = acc.result({"files": {"trace": "trace.parquet"}} if sc.trace else None)
-    finally:
-        if acc is not None:
-            acc.close_trace()
-        close_sumo(conn)
-    check_vtype_filter(sc, acc.ledger)
-    if tmpdir is not None:
-        try:
-            result.sumo_device = read_tripinfo_emissions(tripinfo)
+            acc = Accountant(conn, scenario=sc,
+                             trace_path=Path(out_dir) / "trace.parquet" if sc.trace else None,
+                             keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles,
+                             spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None)
+            try:
+                info = step_until(conn, acc.stepper, end=sc.end, progress=sc.progress,
+                                  period=sc.period)
+            except Exception as e:
+                if type(e).__name__ in ("TraCIException", "FatalTraCIError"):
+                    raise UserError(f"SUMO failed during the run: {e}") from None
+                raise
+            acc.interrupted = info["interrupted"]
+            result = acc.result({"files": {"trace": "trace.parquet"}} if sc.trace else None)
         finally:
-            tmpdir.cleanup()
-        result.summary["sumo_device"] = result.sumo_device_comparison().to_dict("records")
-    if out_dir is not None:
-        result.write(out_dir)
+            if acc is not None:
+                acc.close_trace()
+            close_sumo(conn)
+        check_vtype_filter(sc, acc.ledger)
+        if tmpdir is not None:
+            try:
+                result.sumo_device = read_tripinfo_emissions(tripinfo)
+            finally:
+                tmpdir.cleanup()
+            result.summary["sumo_device"] = result.sumo_device_comparison().to_dict("records")
+        spill = acc.ledger.spill
+        if out_dir is not None:
+            result.write(out_dir)
+            if spill is not None and spill.has_rows:  # read back from the outputs from now on
+                chain = Path(out_dir) / "chain_vehicles.csv"
+                spill.publish(Path(out_dir) / "vehicles.parquet",
+                              chain if chain.is_file() else None)
+    finally:  # the parts never stay in the output folder
+        spill = acc.ledger.spill if acc is not None else None
+        if spill is not None and out_dir is not None and spill.published is None:
+            spill.cleanup()
     return result
 
 
@@ -266,7 +284,7 @@ def check_vtype_filter(sc, ledger) -> None:
     would silently account nothing): UserError naming the missing ones."""
     if sc.vtype_filter is None:
         return
-    seen = set(ledger.veh_type)
+    seen = ledger.types_seen if hasattr(ledger, "types_seen") else set(ledger.veh_type)
     missing = [vt for vt in sc.vtype_filter if vt not in seen]
     if missing:
         raise UserError(f"{sc.path or '<scenario>'}: vehicles.vtypes names vType(s) "
