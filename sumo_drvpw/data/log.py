@@ -120,10 +120,20 @@ class DriveLog:
         return Inputs(v=df["speed_mps"].to_numpy(float), a=df["accel_mps2"].to_numpy(float),
                       theta=df["grade_rad"].to_numpy(float), wind=df["wind_mps"].to_numpy(float),
                       mass=mass, rho=df["air_density_kgm3"].to_numpy(float), signals=sig,
-                      trip=df["trip_id"].to_numpy())
+                      trip=_trip_array(df["trip_id"]))
 
     def describe(self) -> str:
         return self.files[0] if len(self.files) == 1 else f"{len(self.files)} files"
+
+
+def _trip_array(trip: pd.Series) -> np.ndarray:
+    """Trip ids as an object array; a categorical's rows point at its categories' strings
+    (one string per trip, not one per row)."""
+    if isinstance(trip.dtype, pd.CategoricalDtype):
+        cats = np.asarray(trip.cat.categories, dtype=object)
+        codes = trip.cat.codes.to_numpy()
+        return np.append(cats, np.nan)[codes] if (codes < 0).any() else cats[codes]
+    return trip.to_numpy()
 
 
 def exclusions(counts: dict) -> str:

@@ -81,9 +81,16 @@ def _trip_ids(p: Path) -> list[str]:
         if p.suffix.lower() == ".parquet":
             import pyarrow.parquet as pq
 
-            if "trip_id" not in pq.read_schema(p).names:
+            schema = pq.read_schema(p)
+            if "trip_id" not in schema.names:
                 return [p.stem]
-            col = pq.read_table(p, columns=["trip_id"]).column(0).to_pandas()
+            text = str(schema.field("trip_id").type) in ("string", "large_string")
+            # text ids dictionary-encoded: the distinct ids, not one Python string per row
+            col = pq.read_table(p, columns=["trip_id"],
+                                read_dictionary=["trip_id"] if text else None).column(0).to_pandas()
+            if isinstance(col.dtype, pd.CategoricalDtype):
+                codes = col.cat.codes.to_numpy()
+                return [str(x) for x in col.cat.categories[pd.unique(codes[codes >= 0])]]
         else:
             head = pd.read_csv(p, nrows=0)
             if "trip_id" not in head:
