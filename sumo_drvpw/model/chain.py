@@ -10,7 +10,9 @@ chain turns it into what a user pays for::
     recuperation_efficiency = 0.75    # η_r (0, 1]
     recuperation_limit_w = 40000      # optional: braking power beyond it goes to the friction brakes [W]
     aux_power_w = 300                 # constant auxiliary power P_aux,0 ≥ 0 [W]
-    standstill_aux_w = 0              # optional: extra auxiliary power while standing (v < 0.1 m/s) ≥ 0 [W]
+    standstill_aux_w = 0              # optional: auxiliary power while standing (v < 0.1 m/s) minus that while
+                                      #   moving [W]; aux_power_w + standstill_aux_w ≥ 0 (negative: drawn only
+                                      #   while moving, e.g. drivetrain no-load losses, cooling)
     [chain.loads]                     # logged loads: column → gain [W/W] ≥ 0
     heater_power_w = 1.0
     [chain.hvac]                      # optional temperature-dependent HVAC power
@@ -345,7 +347,12 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         kw["marginal_efficiency"] = _efficiency(doc["marginal_efficiency"], "marginal_efficiency", where)
         if isinstance(kw["marginal_efficiency"], Table):
             raise UserError(f"{where} [chain]: marginal_efficiency must be a number")
-    for k in ("recuperation_limit_w", "aux_power_w", "standstill_aux_w", "idle_fuel_power_w", "engine_off_below_w",
+    if "standstill_aux_w" in doc:
+        kw["standstill_aux_w"] = _number(doc["standstill_aux_w"], "standstill_aux_w", where)
+        if kw["standstill_aux_w"] + float(doc.get("aux_power_w", 0.0)) < 0:
+            raise UserError(f"{where} [chain]: aux_power_w + standstill_aux_w (auxiliary power while standing) "
+                            f"must be ≥ 0, got standstill_aux_w = {doc['standstill_aux_w']!r}")
+    for k in ("recuperation_limit_w", "aux_power_w", "idle_fuel_power_w", "engine_off_below_w",
               "engine_on_above_mps", "battery_to_fuel"):
         if k in doc:
             kw[k] = _nonneg(doc[k], k, where)
