@@ -55,6 +55,13 @@ def test_standstill_aux_by_hand():
     np.testing.assert_allclose(out, [700.0, 10300.0, -500.0])
     assert chain_from_dict(c.to_dict()) == c
     assert "standstill_aux_w" not in EnergyChain().to_dict()
+    # negative: less drawn standing than moving, never below zero in total
+    c = chain_from_dict({"aux_power_w": 900, "standstill_aux_w": -500})
+    np.testing.assert_allclose(c.evaluate(np.zeros(2), np.array([0.0, 5.0]))["power_w"], [400.0, 900.0])
+    from sumo_drvpw.errors import UserError
+
+    with pytest.raises(UserError, match="standstill_aux_w"):
+        chain_from_dict({"aux_power_w": 100, "standstill_aux_w": -500})
 
 
 @pytest.mark.parametrize("kind", ["battery", "battery_limit", "fuel"])

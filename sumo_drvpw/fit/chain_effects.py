@@ -118,9 +118,12 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
         return eq, f"auxiliary power {c[0]:+.0f} W → {new:.0f} W"
     if name == "standstill_aux_w":
         new = ch.standstill_aux_w + c[0]
-        if new < 0:
-            return None, f"standstill auxiliary power would be negative ({new:.0f} W)"
+        if ch.aux_power_w + new < 0:
+            return None, f"auxiliary power while standing would be negative ({ch.aux_power_w + new:.0f} W)"
         ch.standstill_aux_w = float(new)
+        if new < 0:
+            return eq, (f"auxiliary power while standing {ch.aux_power_w + new:.0f} W, {-new:.0f} W less than while "
+                        "moving (drawn only while moving: drivetrain no-load losses, cooling)")
         return eq, f"extra auxiliary power while standing {new:.0f} W"
     if name == "recuperation_limit_w":
         ch.recuperation_limit_w = float(param)

@@ -302,7 +302,8 @@ def check_chain_equation(equation: Equation, target: str) -> None:
         raise UserError(f"chain trace: target must be battery or fuel, got '{target}'")
 
 
-def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, progress=None) -> ChainTraceResult:
+def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, progress=None,
+                mask=None) -> ChainTraceResult:
     """Trace what a battery or fuel target adds to a declared equation with an energy chain.
 
     Parameters
@@ -312,6 +313,7 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
         baseline; findings are added on top)
     opt : :class:`ChainTraceOptions`
     progress : optional callable(str)
+    mask : optional boolean array: trace on these samples only (e.g. the training trips)
 
     Returns a :class:`ChainTraceResult`: ``report`` (baseline and final held-out metrics,
     findings with coefficient, unit and physical reading, per-trip net energy before and
@@ -330,6 +332,8 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
     pred0_all = ch.evaluate(p, m.inputs.v, signals=m.inputs.signals)["power_w"]
     dt_all = m.log.df["dt_s"].to_numpy(float)
     ok = m.usable & np.isfinite(y_all) & np.isfinite(pred0_all) & np.isfinite(p) & np.isfinite(dt_all)
+    if mask is not None:
+        ok &= np.asarray(mask, bool)
     idx = np.flatnonzero(ok)
     if idx.size < 50:
         raise UserError(f"{m.log.describe()}: only {idx.size} samples with finite measured {m.target} power, "
@@ -456,10 +460,11 @@ def _replication(bl, trip, trip_names, e_cur, e_c):
     return helped, int(present.sum()), per
 
 
-def _best_variant(w, Z, t, c) -> int:
+def _best_variant(w, Z, t, c, rows=slice(None)) -> int:
+    """The variant of a profiled candidate with the smallest weighted RSS on ``rows``."""
     if len(c.variants) == 1:
         return 0
-    rss = [_full_fit(w, Z, t - v[1])[2] for v in c.variants]
+    rss = [_full_fit(w[rows], Z[rows], (t - v[1])[rows])[2] for v in c.variants]
     return int(np.argmin(rss))
 
 
@@ -489,7 +494,7 @@ def _heldout_exact(m, equation, accepted, bl, idx, w, r, cands):
         tr = sfold != k
         Z, fx, acc = np.zeros((idx.size, 0)), np.zeros(idx.size), []
         for c, _, _ in accepted:
-            vi = _best_variant(w[tr], Z[tr], (r - fx)[tr], c) if len(c.variants) > 1 else 0
+            vi = _best_variant(w, Z, r - fx, c, tr)
             var = c.variants[vi]
             if var[0] is not None:
                 Z = np.column_stack([Z, var[0]])
@@ -538,3 +543,39 @@ def _report(m, equation, closed, bl, idx, y, pred0, held, w, trip_names, trip, f
                   "note": "each sample predicted by the closed equation (exact chain) of the fold that held it out"},
         "not_replicated": rejected, "rounds": rounds,
     }
+
+
+def close_loop_heldout(m, equation: Equation, opt: ChainTraceOptions | None = None, progress=None) -> dict:
+    """Leave-one-trip-out: trace on the other trips, predict the left-out trip with the closed
+    equation (exact chain); per trip net energy before (declared) and after.
+
+    Returns ``{"trips": {TRIP: {"measured_j", "before_j", "after_j", "before", "after",
+    "findings": {effect: value}}}, "mean_abs_error_before", "mean_abs_error_after",
+    "found_on": {effect: number of folds}}`` (errors = predicted/measured − 1).
+    """
+    say = progress or (lambda s: None)
+    check_chain_equation(equation, m.target)
+    trips = m.log.df["trip_id"].astype(str).to_numpy()
+    dt = m.log.df["dt_s"].to_numpy(float)
+    y = chain_target(m, equation.chain)
+    pred0 = predict(equation, m.inputs)
+    out, found = {}, {}
+    for t in dict.fromkeys(trips):
+        test = trips == t
+        res = trace_chain(m, equation, opt, mask=~test)
+        use = test & m.usable & np.isfinite(y)
+        pred1 = predict(res.equation, m.inputs)
+        e_m = float(np.sum((y * dt)[use]))
+        e0, e1 = float(np.sum((pred0 * dt)[use])), float(np.sum((pred1 * dt)[use]))
+        fnd = {f["term"]: (f["parameter"] if f["coefficient"] is None else f["coefficient"])
+               for f in res.report["findings"]}
+        for k in fnd:
+            found[k] = found.get(k, 0) + 1
+        out[t] = {"measured_j": e_m, "before_j": e0, "after_j": e1, "before": e0 / e_m - 1 if e_m else math.nan,
+                  "after": e1 / e_m - 1 if e_m else math.nan, "findings": fnd,
+                  "closed_chain": res.equation.chain.to_dict(), "closed_terms": dict(res.equation.terms)}
+        say(f"held out {t}: before {100 * out[t]['before']:+.1f} %, after {100 * out[t]['after']:+.1f} % "
+            f"({', '.join(fnd) or 'nothing found'})")
+    err = lambda k: float(np.nanmean([abs(r[k]) for r in out.values()]))  # noqa: E731
+    return {"trips": out, "mean_abs_error_before": err("before"), "mean_abs_error_after": err("after"),
+            "found_on": found}
