@@ -538,3 +538,90 @@ def test_accountant_energy_reports_the_chain_during_the_run():
     fuel = next(r for r in rows if r["key"] == probe and r["equation"] == "drvpw_prius3")
     assert final["bev"]["chain"]["net_j"] == pytest.approx(bev["net_kwh"] * KWH, rel=1e-12)
     assert final["drvpw_prius3"]["chain"]["fuel_l"] == pytest.approx(fuel["fuel_l"], rel=1e-12)
+
+
+# ------------------------------------------------------------------ recuperation limit, SUMO side by side
+
+def test_profile_recuperation_limit_recovers_a_planted_friction_blend():
+    """The motor recuperates max(P_wheel, −25 kW) (+ noise); the profile keeps a limit within
+    the grid's spacing of 25 kW. Without a planted limit none is kept (BIC)."""
+    from sumo_drvpw.fit.chain import profile_recuperation_limit
+
+    rng = np.random.default_rng(3)
+    p = -rng.gamma(2.0, 9000.0, 20_000)          # braking powers, many beyond 25 kW
+    y = np.maximum(p, -25_000.0) + rng.normal(0, 300.0, p.size)
+    r = profile_recuperation_limit(p, y, 0.1)
+    grid = [g["recuperation_limit_w"] for g in r["profile"] if g["recuperation_limit_w"] is not None]
+    assert r["recuperation_limit_w"] is not None
+    # the chosen limit is the grid point nearest 25 kW
+    assert r["recuperation_limit_w"] == min(grid, key=lambda g: abs(g - 25_000.0))
+    free = profile_recuperation_limit(p, p + rng.normal(0, 300.0, p.size), 0.1)
+    assert free["recuperation_limit_w"] is None
+    # traction samples are not braking samples: they do not count
+    assert profile_recuperation_limit(np.abs(p), np.abs(p), 0.1)["n"] == 0
+
+
+def test_chain_vtype_params_map_the_chain_onto_sumo_parameters():
+    """Hand mapping: η_t → propulsionEfficiency, η_r → recuperationEfficiency, P_aux,0 + the
+    extra load → constantPowerIntake, the limit → maximumRecuperationPower; the road load as
+    export.py maps it (aero c → A·C_d = 2c/ρ_SUMO); a log-only term is listed as missing."""
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.sim.export import RHO_SUMO, energy_model_params
+    from sumo_drvpw.validation.chain_sumo import chain_vtype_params
+
+    eq = Equation("x", {"acc": 1.1, "grade": 1.0, "aero": 0.3, "roll": 0.01, "[ambient_c]*v^2": -0.1})
+    ch = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.8,
+                     aux_power_w=500.0, recuperation_limit_w=40_000.0)
+    p, missing = chain_vtype_params(eq, ch, 1500.0, 2.0, extra_aux_w=250.0, at_motor_shaft=True)
+    assert p["propulsionEfficiency"] == 0.9 and p["recuperationEfficiency"] == 0.8
+    assert p["constantPowerIntake"] == pytest.approx(750.0)
+    assert p["maximumRecuperationPower"] == 40_000.0 and p["gearEfficiency"] == 1.0
+    assert p["airDragCoefficient"] * p["frontSurfaceArea"] == pytest.approx(2 * 0.3 / RHO_SUMO)
+    assert p["rotatingMass"] == pytest.approx(0.1 * 1500.0) and p["rollDragCoefficient"] == 0.01
+    assert any("[ambient_c]*v^2" in m for m in missing)
+    # the road load exactly as sim/export.py maps it
+    ref, _ = energy_model_params(eq, 1500.0, 2.0)
+    for k in ("mass", "frontSurfaceArea", "airDragCoefficient", "rollDragCoefficient", "rotatingMass"):
+        assert p[k] == pytest.approx(ref[k])
+
+
+def test_sumo_energy_model_books_the_chain_parameters(tmp_path):
+    """A real emissionsDrivingCycle run with the mapped parameters: 1000 W more constant
+    intake adds 1000 W × every second of the time line, the 50 standing seconds included
+    (in this tool SUMO 1.28's Energy model books the intake at standstill too)."""
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.validation.chain_sumo import chain_vtype_params, sumo_battery_kwh, sumo_tool
+
+    if sumo_tool("emissionsDrivingCycle") is None:
+        pytest.skip("SUMO's emissionsDrivingCycle is not installed")
+    t = np.arange(0.0, 200.0, 0.5)
+    v = np.clip(np.minimum(t, 150.0 - t) * 0.5, 0.0, 15.0)   # up, cruise, down, then 50 s standing
+    eq = Equation("x", {"acc": 1.1, "grade": 1.0, "aero": 0.3, "roll": 0.01})
+    out = {}
+    for aux in (0.0, 1000.0):
+        ch = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.8,
+                         aux_power_w=aux)
+        p, _ = chain_vtype_params(eq, ch, 1500.0, 2.0)
+        d = tmp_path / str(int(aux))
+        d.mkdir()
+        out[aux] = sumo_battery_kwh(t, v, np.zeros_like(t), d, p)["sumo_energy_chain"]["kwh"]
+    sec = pd.Series(v).groupby(np.floor(t).astype(int)).mean()
+    assert int((sec == 0).sum()) > 40    # the standing seconds exist
+    assert (out[1000.0] - out[0.0]) * 3.6e6 == pytest.approx(1000.0 * sec.size, rel=0.01)
+
+
+def test_sumo_phemlight5_petrol_class_burns_fuel_at_idle(tmp_path):
+    """PHEMlight5 PC_EU4_G through emissionsDrivingCycle: litres > 0 for a standing minute
+    (idle fuel), more when driving; litres = mg / 1e6 / density."""
+    from sumo_drvpw.validation.chain_sumo import sumo_fuel_l, sumo_tool
+
+    if sumo_tool("emissionsDrivingCycle") is None:
+        pytest.skip("SUMO's emissionsDrivingCycle is not installed")
+    t = np.arange(0.0, 60.0)
+    rho = FUELS["gasoline"]["density_kg_per_l"]
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    idle = sumo_fuel_l(t, np.zeros_like(t), np.zeros_like(t), tmp_path / "a", rho)["sumo_phemlight5_pc_eu4_g"]["l"]
+    drive = sumo_fuel_l(t, np.full_like(t, 15.0), np.zeros_like(t), tmp_path / "b", rho)["sumo_phemlight5_pc_eu4_g"]["l"]
+    assert 0.005 < idle < 0.05          # about 0.5–2 L/h idle for a petrol car
+    assert drive > 2 * idle

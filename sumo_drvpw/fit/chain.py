@@ -396,3 +396,46 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
         raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
     return calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
                              mask=use, limit=limit, fixed=fixed)
+
+
+def profile_recuperation_limit(p_wheel_w, p_recuperated_w, dt_s, mask=None,
+                               quantiles=LIMIT_QUANTILES) -> dict:
+    """Recuperation limit with friction-brake blending, from the wheel power a road-load
+    equation predicts and the power the motor actually recuperated (motor torque × speed).
+
+    When braking needs more than the machine takes back, the friction brakes take the rest:
+    the motor sees max(P_wheel, −P_lim) for P_wheel < 0. The limit is profiled over
+    quantiles of the braking power −min(P_wheel, 0) (and no limit), minimising the
+    duration-weighted RSS of max(P_wheel, −P_lim) − P_recuperated on the braking samples,
+    kept only when it lowers the BIC (n·ln(RSS/n) + k·ln n, k = 1 with a limit).
+
+    Parameters
+    ----------
+    p_wheel_w : driving power of the road-load equation [W]
+    p_recuperated_w : measured power at the machine, negative when recuperating [W]
+    dt_s : sample durations [s] (weights)
+    mask : samples to use (default all finite)
+
+    Returns {"recuperation_limit_w": float or None, "profile": [{limit, rss, bic}],
+    "n": braking samples}.
+    """
+    p = np.asarray(p_wheel_w, float)
+    y = np.asarray(p_recuperated_w, float)
+    w = np.broadcast_to(np.asarray(dt_s, float), p.shape)
+    ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w) & (p < 0)
+    if mask is not None:
+        ok &= np.asarray(mask, bool)
+    n = int(ok.sum())
+    if n < 20:
+        return {"recuperation_limit_w": None, "profile": [], "n": n}
+    brake = -p[ok]
+    grid = [None] + sorted({float(np.quantile(brake, q)) for q in quantiles})
+    best, profile = None, []
+    for lim in grid:
+        pred = p[ok] if lim is None else np.maximum(p[ok], -lim)
+        rss = float(w[ok] @ (pred - y[ok]) ** 2)
+        bic = _bic(rss, n, int(lim is not None))
+        profile.append({"recuperation_limit_w": lim, "rss": rss, "bic": bic})
+        if best is None or bic < best[0]:
+            best = (bic, lim)
+    return {"recuperation_limit_w": best[1], "profile": profile, "n": n}

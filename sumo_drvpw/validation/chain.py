@@ -19,7 +19,10 @@ Studies (each trip's prediction comes from a chain calibrated without that trip)
   the battery energy not delivered to the motor (E_bat − E_motor), which no heater can.
 * **JLU BEV**: chain calibrated on all dynamometer tests on the published dyno road load
   (A, B, C at 1919 kg, ``jlu_bev.toml``); then the six road trips: *before* with the dyno
-  chain (flat, and with grade from elevation), *after* closing the loop — road load plus
+  chain (flat, and with grade from elevation), *after* closing the loop with ``diagnose
+  --target battery``'s tracer (:func:`sumo_drvpw.fit.chain_linear.close_loop_heldout`,
+  leave-one-trip-out: what the road adds, searched on the other five trips); for contrast a
+  fixed-structure closure — road load plus
   grade, the dyno's efficiencies kept (same powertrain), and what the road adds fitted on
   the other five road trips (leave-one-trip-out): auxiliary power and a recuperation limit
   (kept when it lowers the BIC). Sensitivity: no limit; every parameter refitted.
@@ -82,11 +85,59 @@ def _params(fit) -> dict:
 
 # ------------------------------------------------------------------ BMW i3
 
-def i3_study(data: Path, candidates=("acc", "grade", "aero", "roll")) -> dict:
+#: the i3's road-load terms: DrvPw on the corrected data plus the condition term the loop's
+#: tracer found on every fold (docs/closing-the-loop.md): [ambient_c]·v², a speed-
+#: proportional force that falls with temperature (tyres and bearings warm, winter tyres)
+I3_ROAD_TERMS = ("acc", "grade", "aero", "roll", "[ambient_c]*v^2")
+#: logged loads of the i3, measured at the battery: additive with gain 1 (physics)
+I3_LOADS = ("heater_electric_w", "aircon_power_w")
+
+
+def corrected_inputs(log, x):
+    """A copy of ``x`` with the measurement-side corrections of the closed loop
+    (docs/closing-the-loop.md): grade fused from the accelerometer (fast part) and the
+    logged grade (slow part; :func:`sumo_drvpw.fit.diagnose.structural.fused_sin_grade`),
+    ρ at the logged altitude (standard atmosphere) when pressure is not logged. Returns
+    (inputs, finite-grade mask)."""
+    import copy
+
+    from sumo_drvpw.fit.diagnose.structural import (P0_KPA, accelerometer_sin_grade, fused_sin_grade,
+                                                    pressure_at_altitude_kpa)
+
+    df = log.df
+    x = copy.copy(x)
+    if "elevation_m" in df and "pressure_kpa" not in df:
+        h = df["elevation_m"].to_numpy(float)
+        x.rho = np.where(np.isfinite(h), x.rho * pressure_at_altitude_kpa(h) / P0_KPA, x.rho)
+    codes = np.unique(np.asarray(df["trip_id"]).astype(str), return_inverse=True)[1]
+    t = df["time_s"].to_numpy(float)
+    dt = float(np.median(np.diff(t)[np.diff(codes) == 0]))
+    if "imu_accel_mps2" in x.signals:
+        s_acc = accelerometer_sin_grade(x.signals["imu_accel_mps2"], x.a, codes, dt)
+        x.theta = np.arcsin(fused_sin_grade(s_acc, np.sin(x.theta), codes, dt))
+    return x, np.isfinite(x.theta)
+
+
+def _road_load(x, y, use, terms, name):
+    """Least squares of ``terms``; refitted under fit.physical's constraints when implausible.
+    Returns (Equation, free coefficients, constraint message or None)."""
+    from sumo_drvpw.fit.ols import gram
+    from sumo_drvpw.fit.physical import apply_physics, constrained_fit
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.model.terms import term_matrix
+
+    use = use & np.all(np.isfinite(term_matrix(terms, x)), axis=1) & np.isfinite(y)
+    free = constrained_fit(gram(x, np.where(use, y, 0.0), terms, use), {}).params
+    eq, msg = apply_physics(Equation(name, dict(free)), x, y, use)
+    return eq, dict(free), msg
+
+
+def i3_study(data: Path) -> dict:
     """2-fold held-out battery energy per trip of the TUM BMW i3 (see module docstring)."""
+    import copy
+
     from sumo_drvpw.data.measured import measure
-    from sumo_drvpw.fit.calibrate import CANDIDATES, calibrate
-    from sumo_drvpw.fit.chain import calibrate_on
+    from sumo_drvpw.fit.chain import calibrate_on, profile_recuperation_limit
 
     def add(df):
         df = df.copy()
@@ -97,34 +148,79 @@ def i3_study(data: Path, candidates=("acc", "grade", "aero", "roll")) -> dict:
 
     log, veh = _measured(data, "bmw_i3_tum", "bmw-i3-tum", "bmw_i3", add)
     mw, mb = measure(log, veh), measure(log, veh, "battery")
+    x, grade_ok = corrected_inputs(log, mw.inputs)
     trips = np.asarray(log.df["trip_id"]).astype(str)
     dt = log.df["dt_s"].to_numpy(float)
+    logged = log.df["heater_logged"].to_numpy(bool)
+    sig = mb.inputs.signals
     ids = list(dict.fromkeys(sorted(trips)))
     folds = {"A": set(ids[0::2]), "B": set(ids[1::2])}
-    loads = ["heater_electric_w", "aircon_power_w"]
-    pred = np.full(trips.size, np.nan)
-    pred_chain_only = np.full(trips.size, np.nan)  # chain on the measured motor power
-    pred_eq_fit = np.full(trips.size, np.nan)  # chain fitted on the equation's power
-    fits = {}
+    loads = list(I3_LOADS)
+    gain1 = {f"loads.{c}": 1.0 for c in loads}
+    variants = ("pipeline", "no_limit", "no_ambient_term", "as_logged", "loads_free",
+                "symmetric_efficiency", "chain_only")
+    pred = {k: np.full(trips.size, np.nan) for k in variants}
+    fits, sumo_params = {}, {}
     for name, fold in folds.items():
         train = np.isin(trips, sorted(fold))
-        res = calibrate(mw.inputs, mw.power_w, candidates, mask=mw.usable & train,
-                        reference_mass_kg=veh.mass_kg)
-        eq = res.to_equation(f"i3_fold{name}")
-        fit = calibrate_on(mb, loads=loads, mask=train, p_drive_w=mw.power_w)
-        p = fit.chain.evaluate(eq.power(mb.inputs), mb.inputs.v, signals=mb.inputs.signals)["power_w"]
-        pred[~train] = p[~train]
-        p = fit.chain.evaluate(mw.power_w, mb.inputs.v, signals=mb.inputs.signals)["power_w"]
-        pred_chain_only[~train] = p[~train]
-        fit_eq = calibrate_on(mb, eq, loads=loads, mask=train)
-        p = fit_eq.chain.evaluate(eq.power(mb.inputs), mb.inputs.v, signals=mb.inputs.signals)["power_w"]
-        pred_eq_fit[~train] = p[~train]
-        fits[name] = {"trips": sorted(fold), "road_load": dict(eq.terms), "chain": _params(fit),
-                      "r2": fit.r2, "rmse_w": fit.rmse_w}
-    rows = _trip_rows(pred, mb.power_w, dt, trips)
-    for r, a, b in zip(rows, _trip_rows(pred_chain_only, mb.power_w, dt, trips),
-                       _trip_rows(pred_eq_fit, mb.power_w, dt, trips)):
-        r["error_chain_only"], r["error_chain_fitted_on_equation"] = a["error"], b["error"]
+        use = mw.usable & grade_ok & train
+        eq, free, msg = _road_load(x, mw.power_w, use, I3_ROAD_TERMS, f"i3_fold{name}")
+        eq4, _, _ = _road_load(x, mw.power_w, use, I3_ROAD_TERMS[:4], f"i3_fold{name}_no_ambient")
+        eq_log, _, _ = _road_load(mw.inputs, mw.power_w, mw.usable & train, I3_ROAD_TERMS[:4],
+                                  f"i3_fold{name}_as_logged")
+        # the powertrain (motor shaft → battery) on the measured motor power, on trips whose
+        # heater load is known; the logged loads enter with gain 1
+        fit = calibrate_on(mb, loads=loads, mask=train & logged, p_drive_w=mw.power_w,
+                           fixed=gain1, limit=None)
+        fit_free = calibrate_on(mb, loads=loads, mask=train & logged, p_drive_w=mw.power_w, limit=None)
+        # friction-brake blending: the limit beyond which the equation's braking power is not
+        # recuperated, from the equation's power against the motor's
+        p_eq = eq.power(x)
+        lim = profile_recuperation_limit(p_eq, mw.power_w, dt, mask=use)
+        chain = copy.deepcopy(fit.chain)
+        chain.recuperation_limit_w = lim["recuperation_limit_w"]
+        test = ~train
+
+        def put(key, ch, p):
+            pred[key][test] = ch.evaluate(p, x.v, signals=sig)["power_w"][test]
+
+        put("pipeline", chain, p_eq)
+        put("no_limit", fit.chain, p_eq)
+        ch4 = copy.deepcopy(fit.chain)
+        ch4.recuperation_limit_w = profile_recuperation_limit(eq4.power(x), mw.power_w, dt,
+                                                              mask=use)["recuperation_limit_w"]
+        put("no_ambient_term", ch4, eq4.power(x))
+        chl = copy.deepcopy(fit.chain)
+        chl.recuperation_limit_w = profile_recuperation_limit(
+            eq_log.power(mw.inputs), mw.power_w, dt, mask=mw.usable & train)["recuperation_limit_w"]
+        pred["as_logged"][test] = chl.evaluate(eq_log.power(mw.inputs), x.v, signals=sig)["power_w"][test]
+        chf = copy.deepcopy(fit_free.chain)
+        chf.recuperation_limit_w = chain.recuperation_limit_w
+        put("loads_free", chf, p_eq)
+        fit_sym = calibrate_on(mb, loads=loads, mask=train & logged, p_drive_w=mw.power_w,
+                               fixed=dict(gain1, recuperation_efficiency=fit.chain.traction_efficiency),
+                               limit=None)
+        chs = copy.deepcopy(fit_sym.chain)
+        chs.recuperation_limit_w = chain.recuperation_limit_w
+        put("symmetric_efficiency", chs, p_eq)
+        put("chain_only", fit.chain, mw.power_w)
+        params = _params(fit)
+        params["recuperation_limit_w"] = {
+            "value": lim["recuperation_limit_w"], "std_err": None, "at_bound": False,
+            "reading": ("braking power of the road-load equation beyond "
+                        f"{lim['recuperation_limit_w'] / 1000:.1f} kW goes to the friction brakes "
+                        "(profiled by BIC on the motor's measured power)")
+            if lim["recuperation_limit_w"] is not None else "no limit kept (BIC)"}
+        eq.mass_kg = None
+        fits[name] = {"trips": sorted(fold), "road_load": dict(eq.terms), "road_load_free": free,
+                      "road_load_constrained": msg, "chain": params, "r2": fit.r2, "rmse_w": fit.rmse_w,
+                      "chain_loads_free": {k: p["value"] for k, p in fit_free.parameters.items()},
+                      "chain_symmetric": {k: p["value"] for k, p in fit_sym.parameters.items()}}
+        sumo_params[name] = (eq, chain)
+    rows = _trip_rows(pred["pipeline"], mb.power_w, dt, trips)
+    for k in variants[1:]:
+        for r, a in zip(rows, _trip_rows(pred[k], mb.power_w, dt, trips)):
+            r[f"error_{k}"] = a["error"]
     season = dict(zip(trips, np.asarray(log.df["season"]).astype(str)))
     ok = np.isfinite(mb.power_w) & np.isfinite(mw.power_w)
     for r in rows:
@@ -132,90 +228,60 @@ def i3_study(data: Path, candidates=("acc", "grade", "aero", "roll")) -> dict:
         gap = float((mb.power_w[s] - mw.power_w[s]) @ dt[s]) / KWH
         heat = float(log.df["heater_electric_w"].to_numpy(float)[s] @ dt[s]) / KWH
         can = float(np.nan_to_num(log.df["heater_power_w"].to_numpy(float)[s]) @ dt[s]) / KWH
-        logged = bool(log.df["heater_logged"].to_numpy(bool)[s].mean() > 0.5)
         r.update(season=season[r["trip"]], heater_kwh=heat, heater_can_kwh=can,
-                 battery_minus_motor_kwh=gap, flagged=not logged)
+                 battery_minus_motor_kwh=gap, flagged=not bool(logged[s].mean() > 0.5))
+    sumo = _i3_sumo(log, x, trips, rows, folds, sumo_params, veh)
+    out = {"rows": rows, "fits": fits, **sumo,
+           "mean_error": float(np.nanmean([r["error"] for r in rows])),
+           "mean_abs_error": _mean_abs(rows),
+           "mean_abs_error_unflagged": _mean_abs(rows, where=lambda r: not r["flagged"]),
+           "mean_abs_error_summer": _mean_abs(rows, where=lambda r: r["season"] == "summer"),
+           "mean_abs_error_winter": _mean_abs(rows, where=lambda r: r["season"] == "winter"),
+           "mean_error_summer": float(np.mean([r["error"] for r in rows if r["season"] == "summer"])),
+           "mean_error_winter": float(np.mean([r["error"] for r in rows if r["season"] == "winter"])),
+           "n_flagged": sum(r["flagged"] for r in rows), "road_terms": list(I3_ROAD_TERMS)}
+    for k in variants[1:]:
+        out[f"mean_abs_error_{k}"] = _mean_abs(rows, f"error_{k}")
+    return out
+
+
+def _i3_sumo(log, x, trips, rows, folds, sumo_params, veh) -> dict:
+    """Each trip through SUMO's electric models, shipped and with the parameters of the
+    fold that did not see the trip (chain_sumo.chain_vtype_params; the trip's mean logged
+    heater and A/C power added to the constant intake, as a SUMO user who knows it would)."""
     import tempfile
 
-    g = log.df.groupby("trip_id", sort=False)
+    from sumo_drvpw.validation.chain_sumo import ELECTRIC_MODELS, chain_vtype_params, sumo_battery_kwh
+
+    df = log.df
+    load = sum(df[c].to_numpy(float) for c in I3_LOADS)
+    area = veh.body.get("frontal_area_m2")
+    missing, vtypes = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for r in rows:
-            d = g.get_group(r["trip"])
-            sm = sumo_battery_kwh(d["time_s"].to_numpy(), d["speed_mps"].to_numpy(),
-                                  np.nan_to_num(d["grade_rad"].to_numpy()), Path(tmp))
-            for label, x in sm.items():
-                r[f"{label}_kwh"] = x["kwh"]
-                r[f"{label}_error"] = x["kwh"] / r["measured_kwh"] - 1.0
-                r[f"{label}_nan_steps"] = x["nan_steps"]
-    sumo_means = {label: {"mean_ratio": float(np.mean([1 + r[f"{label}_error"] for r in rows])),
-                          "mean_abs_error": _mean_abs(rows, f"{label}_error"),
-                          "mean_ratio_summer": float(np.mean([1 + r[f"{label}_error"] for r in rows
-                                                              if r["season"] == "summer"])),
-                          "mean_ratio_winter": float(np.mean([1 + r[f"{label}_error"] for r in rows
-                                                              if r["season"] == "winter"]))}
-                  for label in SUMO_MODELS if rows and f"{label}_error" in rows[0]}
-    return {"rows": rows, "fits": fits, "sumo_models": sumo_means,
-            "mean_abs_error": _mean_abs(rows),
-            "mean_abs_error_chain_only": _mean_abs(rows, "error_chain_only"),
-            "mean_abs_error_chain_fitted_on_equation": _mean_abs(rows, "error_chain_fitted_on_equation"),
-            "mean_abs_error_unflagged": _mean_abs(rows, where=lambda r: not r["flagged"]),
-            "mean_abs_error_summer": _mean_abs(rows, where=lambda r: r["season"] == "summer"),
-            "mean_abs_error_winter": _mean_abs(rows, where=lambda r: r["season"] == "winter"),
-            "mean_error": float(np.nanmean([r["error"] for r in rows])),
-            "n_flagged": sum(r["flagged"] for r in rows)}
-
-
-# ------------------------------------------------------------------ SUMO's own models
-
-#: SUMO models run side by side through emissionsDrivingCycle: label → (emission class,
-#: vType file under SUMO_HOME or None, vType id or None)
-SUMO_MODELS = {"sumo_mmpevem_i3": ("MMPEVEM", "data/emissions/MMPEVEM/BMW_i3.xml", "BMW_i3"),
-               "sumo_energy_default": ("Energy/unknown", None, None)}
-
-
-def _sumo_tool(name: str) -> str | None:
-    import shutil
-
-    exe = Path(sys.executable).parent / name
-    return str(exe) if exe.is_file() else shutil.which(name)
-
-
-def sumo_battery_kwh(t_s, v_mps, grade_rad, workdir: Path) -> dict:
-    """Battery energy [kWh] of one trip by SUMO's electric models (``SUMO_MODELS``) through
-    ``emissionsDrivingCycle``: the trip averaged to 1 s (speed, grade), acceleration
-    v(t) − v(t−1) per second, slope in degrees; steps a model returns NaN for (beyond its
-    power map) are left out and counted. Returns {label: {"kwh", "nan_steps"}}, or {} when
-    SUMO's tools are not installed."""
-    import subprocess
-
-    import pandas as pd
-
-    tool = _sumo_tool("emissionsDrivingCycle")
-    if tool is None:
-        return {}
-    try:
-        import sumo as _sumo
-
-        home = Path(_sumo.SUMO_HOME)
-    except ImportError:
-        return {}
-    sec = np.floor(np.asarray(t_s, float) - float(t_s[0])).astype(int)
-    df = pd.DataFrame({"s": sec, "v": v_mps, "g": grade_rad}).groupby("s").mean()
-    v = df["v"].to_numpy()
-    a = np.diff(v, prepend=v[0])
-    tl = workdir / "timeline.csv"
-    pd.DataFrame({"t": df.index.to_numpy(float), "v": v, "a": a,
-                  "slope": np.degrees(df["g"].to_numpy())}).to_csv(tl, sep=";", header=False, index=False)
-    out = {}
-    for label, (cls, vfile, vtype) in SUMO_MODELS.items():
-        o = workdir / f"{label}.csv"
-        cmd = [tool, "-t", str(tl), "-e", cls, "--have-slope", "-o", str(o)]
-        if vfile:
-            cmd += ["--additional-files", str(home / vfile), "--vtype", vtype]
-        subprocess.run(cmd, check=True, capture_output=True)
-        el = pd.read_csv(o, sep=";", header=None).iloc[:, -1].to_numpy(float)  # Wh per step
-        out[label] = {"kwh": float(np.nansum(el)) / 1000.0, "nan_steps": int(np.isnan(el).sum())}
-    return out
+            s = trips == r["trip"]
+            fold = next(k for k, f in folds.items() if r["trip"] not in f)  # the other fold's fit
+            eq, chain = sumo_params[fold]
+            p, miss = chain_vtype_params(eq, chain, float(np.mean(x.mass[s])), area,
+                                         extra_aux_w=float(np.mean(load[s])), at_motor_shaft=True)
+            missing[fold] = miss
+            vtypes.setdefault(fold, p)
+            sm = sumo_battery_kwh(df["time_s"].to_numpy()[s], x.v[s], x.theta[s], Path(tmp), p)
+            for label, v in sm.items():
+                r[f"{label}_kwh"] = v["kwh"]
+                r[f"{label}_error"] = v["kwh"] / r["measured_kwh"] - 1.0
+                r[f"{label}_nan_steps"] = v["nan_steps"]
+    means = {}
+    for label in ELECTRIC_MODELS:
+        if not rows or f"{label}_error" not in rows[0]:
+            continue
+        ratio = lambda where: float(np.mean([1 + r[f"{label}_error"] for r in rows if where(r)]))  # noqa: E731
+        means[label] = {"mean_ratio": ratio(lambda r: True),
+                        "mean_ratio_summer": ratio(lambda r: r["season"] == "summer"),
+                        "mean_ratio_winter": ratio(lambda r: r["season"] == "winter"),
+                        "mean_abs_error": _mean_abs(rows, f"{label}_error"),
+                        "nan_steps": int(sum(r[f"{label}_nan_steps"] for r in rows))}
+    return {"sumo_models": means, "sumo_chain_vtypes": vtypes, "sumo_chain_missing": missing}
 
 
 # ------------------------------------------------------------------ JLU BEV
@@ -261,6 +327,13 @@ def jlu_study(data: Path) -> dict:
             if k == "after":
                 loo[t] = {n: p["value"] for n, p in f.parameters.items() if not p.get("fixed")}
     after_rows = _trip_rows(preds["after"], ro.power_w, dt, trips)
+    # the loop closed by `diagnose --target battery` (fit.chain_linear): leave-one-trip-out,
+    # the tracer searches what the road adds to the dyno chain on the other five trips
+    from sumo_drvpw.fit.chain_linear import close_loop_heldout
+
+    declared = Equation("jlu_dyno_chain", dict(terms))
+    declared.chain = dfit.chain
+    traced = close_loop_heldout(ro, declared)
     sens = {k: _trip_rows(preds[k], ro.power_w, dt, trips) for k in ("after_no_limit", "after_all_refit")}
     g = rlog.df.groupby("trip_id", sort=False)
     info = {str(k): {"ambient_c": float(v["ambient_c"].mean()), "duration_s": float(v["time_s"].max() - v["time_s"].min()),
@@ -279,7 +352,11 @@ def jlu_study(data: Path) -> dict:
             "mean_abs_error_after_all_refit": _mean_abs(sens["after_all_refit"]),
             "trip_info": info,
             "mean_abs_error_before": _mean_abs(before), "mean_abs_error_before_grade": _mean_abs(before_g),
-            "mean_abs_error_after": _mean_abs(after_rows)}
+            "mean_abs_error_after": _mean_abs(after_rows),
+            "diagnose": {t: {k: r[k] for k in ("before", "after", "findings")} for t, r in traced["trips"].items()},
+            "diagnose_found_on": traced["found_on"],
+            "mean_abs_error_after_diagnose": traced["mean_abs_error_after"],
+            "mean_abs_error_before_diagnose": traced["mean_abs_error_before"]}
 
 
 # ------------------------------------------------------------------ Prius Gen 2
@@ -325,122 +402,25 @@ def prius2_study(data: Path) -> dict:
                      "measured_l_per_100km": 100.0 * raw_l / dist_km})
         fits[t] = {"road_load": dict(eq.terms), "chain": _params(fit), "r2": fit.r2,
                    "chain_fitted_on_equation": _params(fit_eq)}
+        # SUMO's PHEMlight5 petrol class along the same trip (its grade as logged)
+        import tempfile
+
+        from sumo_drvpw.validation.chain_sumo import sumo_fuel_l
+
+        s_all = trips == t
+        with tempfile.TemporaryDirectory() as tmp:
+            sm = sumo_fuel_l(log.df["time_s"].to_numpy()[s_all], mf.inputs.v[s_all],
+                             np.nan_to_num(mf.inputs.theta[s_all]), Path(tmp), fp["density_kg_per_l"])
+        for label, x in sm.items():
+            rows[-1][f"{label}_l"] = x["l"]
+            rows[-1][f"{label}_error"] = x["l"] / corr_l - 1.0
+            rows[-1][f"{label}_error_vs_raw"] = x["l"] / raw_l - 1.0
+            rows[-1][f"{label}_nan_steps"] = x["nan_steps"]
     return {"rows": rows, "fits": fits, "mean_abs_error": _mean_abs(rows),
             "mean_abs_error_chain_fitted_on_equation": _mean_abs(rows, "error_chain_fitted_on_equation")}
 
 
-# ------------------------------------------------------------------ report
-
-def _pct(x) -> str:
-    return "n/a" if x is None or not math.isfinite(x) else f"{100 * x:+.1f} %"
-
-
-def _param_table(params: dict) -> list[str]:
-    out = ["| parameter | value | std. error | reading |", "|---|---|---|---|"]
-    for k, p in params.items():
-        se = "fixed" if p.get("fixed") else "at bound" if p.get("at_bound") else (f"{p['std_err']:.3g}" if p.get("std_err") is not None else "–")
-        out.append(f"| {k} | {p['value']:.4g} | {se} | {p.get('reading', '')} |")
-    return out
-
-
-def render(res: dict, command: str) -> str:
-    """The Markdown report of :func:`run`."""
-    L = ["# Energy chain on real data (issue #12)", "",
-         f"Generated by `{command}` in {res['seconds']:.0f} s; every number below is computed by "
-         "that run. Method: `sumo_drvpw/validation/chain.py` (module docstring); the chain: "
-         "[energy-chain.md](energy-chain.md). Errors are predicted/measured − 1 of the net energy "
-         "per trip, each trip predicted by a chain calibrated without it.", ""]
-    i3 = res.get("bmw_i3")
-    if i3:
-        L += ["## BMW i3 (TUM): battery energy per held-out trip", "",
-              f"Mean |error| over {len(i3['rows'])} trips: **{_pct(i3['mean_abs_error'])[1:]}** "
-              f"(mean signed {_pct(i3['mean_error'])}); summer {_pct(i3['mean_abs_error_summer'])[1:]}, "
-              f"winter {_pct(i3['mean_abs_error_winter'])[1:]}; without the {i3['n_flagged']} flagged "
-              f"trips {_pct(i3['mean_abs_error_unflagged'])[1:]}. Target (issue #12): 5 %.", "",
-              f"Where the error comes from: the chain alone (fed the measured motor power) "
-              f"{_pct(i3['mean_abs_error_chain_only'])[1:]}; the chain fitted on the road-load "
-              f"equation's power (it then absorbs that equation's errors, and its parameters stop "
-              f"describing the powertrain) {_pct(i3['mean_abs_error_chain_fitted_on_equation'])[1:]}.", "",
-              "Flagged = the trip has no heater voltage and current, so its heater load is unknown "
-              "(its CAN heater power, shown for reference, can exceed E_bat − E_motor, which no "
-              "heater can).", ""]
-        if i3.get("sumo_models"):
-            L += ["Side by side with SUMO's own electric models (`emissionsDrivingCycle`, shipped "
-                  "parameters, the trip at 1 s with its grade; no heater or A/C load):", "",
-                  "| model | predicted/measured (mean) | summer | winter | mean abs error |",
-                  "|---|---|---|---|---|"]
-            for label, x in i3["sumo_models"].items():
-                L.append(f"| {label} | {x['mean_ratio']:.3f} | {x['mean_ratio_summer']:.3f} | "
-                         f"{x['mean_ratio_winter']:.3f} | {_pct(x['mean_abs_error'])[1:]} |")
-            ours = [1 + r["error"] for r in i3["rows"]]
-            L += [f"| energy chain (this project, held out) | {np.mean(ours):.3f} | "
-                  f"{np.mean([1 + r['error'] for r in i3['rows'] if r['season'] == 'summer']):.3f} | "
-                  f"{np.mean([1 + r['error'] for r in i3['rows'] if r['season'] == 'winter']):.3f} | "
-                  f"{_pct(i3['mean_abs_error'])[1:]} |", ""]
-        for name, f in i3["fits"].items():
-            L += [f"Fold {name} calibration ({len(f['trips'])} trips; R² = {f['r2']:.3f}); road load "
-                  + ", ".join(f"{k} = {v:.4g}" for k, v in f["road_load"].items()) + ":", ""]
-            L += _param_table(f["chain"]) + [""]
-        L += ["| trip | season | measured kWh | predicted kWh | error | chain alone | chain fitted on equation | heater V·I kWh | heater CAN kWh | E_bat − E_motor kWh | flagged |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
-        for r in i3["rows"]:
-            L.append(f"| {r['trip']} | {r['season']} | {r['measured_kwh']:.3f} | {r['predicted_kwh']:.3f} | "
-                     f"{_pct(r['error'])} | {_pct(r['error_chain_only'])} | "
-                     f"{_pct(r['error_chain_fitted_on_equation'])} | {r['heater_kwh']:.3f} | {r['heater_can_kwh']:.3f} | "
-                     f"{r['battery_minus_motor_kwh']:.3f} | {'no heater V·I' if r['flagged'] else ''} |")
-        L.append("")
-    j = res.get("jlu")
-    if j:
-        L += ["## JLU BEV: dynamometer chain on the road, then closing the loop", "",
-              f"Dyno calibration ({j['dyno_n']} samples, R² = {j['dyno_r2']:.3f}) on the published road "
-              "load " + ", ".join(f"{k} = {v:.4g}" for k, v in j["road_load_terms"].items()) + ":", ""]
-        L += _param_table(j["dyno_chain"]) + [""]
-        s = j["standstill_battery_w"]
-        L += [f"Mean battery power at standstill: dyno {s['dyno']:.0f} W, road {s['road']:.0f} W.", "",
-              f"Mean |error| per road trip: before (dyno chain, flat) **{_pct(j['mean_abs_error_before'])[1:]}**, "
-              f"before with grade {_pct(j['mean_abs_error_before_grade'])[1:]}, after closing the loop "
-              f"**{_pct(j['mean_abs_error_after'])[1:]}** (leave-one-trip-out: grade from elevation, "
-              "the dyno's efficiencies kept, what the road adds fitted on the other five trips — "
-              "auxiliary power and a recuperation limit kept by BIC). Target (issue #12): 8 %.", "",
-              f"Sensitivity (not selected on these numbers, which would select on the test trips): "
-              f"the same without a recuperation limit {_pct(j['mean_abs_error_after_no_limit'])[1:]}; "
-              f"every chain parameter refitted on the road {_pct(j['mean_abs_error_after_all_refit'])[1:]}.", "",
-              "| trip | ambient °C | standstill | net Δz m | measured kWh | before | before + grade | after (LOO) | no limit | all refit |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
-        for b, bg, a, a2, a3 in zip(j["before"], j["before_grade"], j["after"], j["after_no_limit"],
-                                    j["after_all_refit"]):
-            i = j["trip_info"][b["trip"]]
-            L.append(f"| {b['trip']} | {i['ambient_c']:.1f} | {100 * i['standstill_share']:.0f} % | "
-                     f"{i['net_elevation_m']:+.0f} | {b['measured_kwh']:.3f} | {_pct(b['error'])} | "
-                     f"{_pct(bg['error'])} | {_pct(a['error'])} | {_pct(a2['error'])} | {_pct(a3['error'])} |")
-        L += ["", "What the road adds, per left-out trip (efficiencies fixed at the dyno's):", "",
-              "| left out | " + " | ".join(next(iter(j["loo_parameters"].values()))) + " |",
-              "|---|" + "---|" * len(next(iter(j["loo_parameters"].values())))]
-        for t, p in j["loo_parameters"].items():
-            L.append(f"| {t} | " + " | ".join(f"{v:.4g}" for v in p.values()) + " |")
-        L.append("")
-    p = res.get("prius2")
-    if p:
-        L += ["## Prius Gen 2: fuel per held-out trip", "",
-              f"Mean |error| against SOC-corrected fuel: **{_pct(p['mean_abs_error'])[1:]}** (2 trips); "
-              f"with the chain fitted on the road-load equation's power instead of the measured "
-              f"P_PTdrv: {_pct(p['mean_abs_error_chain_fitted_on_equation'])[1:]}, with implausible "
-              "parameters (below).", "",
-              "| trip | km | measured L | L/100 km | battery kWh | corrected L | predicted L | error | error vs raw | chain on equation | CO₂ kg |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
-        for r in p["rows"]:
-            L.append(f"| {r['trip']} | {r['distance_km']:.1f} | {r['measured_l']:.3f} | "
-                     f"{r['measured_l_per_100km']:.2f} | {r['battery_kwh']:+.3f} | {r['measured_corrected_l']:.3f} | "
-                     f"{r['predicted_l']:.3f} | {_pct(r['error'])} | {_pct(r['error_vs_raw'])} | "
-                     f"{_pct(r['error_chain_fitted_on_equation'])} | {r['predicted_co2_kg']:.2f} |")
-        for t, f in p["fits"].items():
-            L += ["", f"Chain calibrated without {t} on the measured P_PTdrv (R² = {f['r2']:.3f}); "
-                  "road load " + ", ".join(f"{k} = {v:.4g}" for k, v in f["road_load"].items()) + ":", ""]
-            L += _param_table(f["chain"])
-            L += ["", "The same, fitted on the road-load equation's power:", ""]
-            L += _param_table(f["chain_fitted_on_equation"])
-        L.append("")
-    return "\n".join(L)
+from sumo_drvpw.validation.chain_render import render  # noqa: E402  (the report of run())
 
 
 STUDIES = {"bmw_i3": i3_study, "jlu": jlu_study, "prius2": prius2_study}
