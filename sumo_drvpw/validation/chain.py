@@ -19,8 +19,8 @@ Studies (each trip's prediction comes from a chain calibrated without that trip)
   the battery energy not delivered to the motor (E_bat − E_motor), which no heater can.
 * **JLU BEV**: chain calibrated on all dynamometer tests on the published dyno road load
   (A, B, C at 1919 kg, ``jlu_bev.toml``); then the six road trips: *before* with the dyno
-  chain (flat, and with grade from elevation), *after* closing the loop with ``diagnose
-  --target battery``'s tracer (:func:`sumo_drvpw.fit.chain_linear.close_loop_heldout`,
+  chain (flat, and with grade from elevation), *after* closing the loop with the battery-target
+  tracer of ``diagnose`` (:func:`sumo_drvpw.fit.chain_linear.close_loop_heldout`,
   leave-one-trip-out: what the road adds, searched on the other five trips); for contrast a
   fixed-structure closure — road load plus
   grade, the dyno's efficiencies kept (same powertrain), and what the road adds fitted on
@@ -327,7 +327,7 @@ def jlu_study(data: Path) -> dict:
             if k == "after":
                 loo[t] = {n: p["value"] for n, p in f.parameters.items() if not p.get("fixed")}
     after_rows = _trip_rows(preds["after"], ro.power_w, dt, trips)
-    # the loop closed by `diagnose --target battery` (fit.chain_linear): leave-one-trip-out,
+    # the loop closed by diagnose's battery-target tracer (fit.chain_linear): leave-one-trip-out,
     # the tracer searches what the road adds to the dyno chain on the other five trips
     from sumo_drvpw.fit.chain_linear import close_loop_heldout
 

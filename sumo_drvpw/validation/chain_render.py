@@ -41,7 +41,7 @@ def render(res: dict, command: str) -> str:
         L += [f"Mean battery power at standstill: dyno {s['dyno']:.0f} W, road {s['road']:.0f} W.", "",
               f"Mean |error| per road trip: before (dyno chain, flat) **{_pct(j['mean_abs_error_before'])[1:]}**, "
               f"before with grade {_pct(j['mean_abs_error_before_grade'])[1:]}; after closing the loop "
-              f"with `diagnose --target battery` (fit/chain_linear.py, leave-one-trip-out: the tracer "
+              f"with the battery-target tracer of `diagnose` (fit/chain_linear.py, leave-one-trip-out: the tracer "
               f"searches what the road adds to the dyno chain on the other five trips) "
               f"**{_pct(j['mean_abs_error_after_diagnose'])[1:]}**. Target (issue #12): 8 %. Found "
               "(folds of 6): " + ", ".join(f"{k} {v}" for k, v in j["diagnose_found_on"].items()) + ".", "",
