@@ -113,15 +113,17 @@ def test_nothing_planted_nothing_found(clean):
 
 
 def test_missing_grade_is_found_through_the_chain(clean):
-    """A road load without grade (as from a dynamometer): grade is found with the truth's
-    coefficient, in battery watts through the chain's efficiencies."""
+    """A road load without grade (as from a dynamometer): grade is found; written with its
+    physical coefficient 1, and a free coefficient on it reads the truth's (1.171 in
+    drvpw_prius3) through the chain's efficiencies."""
     m, b, _ = clean
     truth = load_equation("drvpw_prius3")
     res = trace_chain(m, _declared(b, drop=("grade",)))
     f = res.report["findings"][0]
     assert f["term"] == "grade"
-    assert f["coefficient"] == pytest.approx(truth.terms["grade"], rel=0.02)
-    assert res.equation.terms["grade"] == pytest.approx(f["coefficient"])
+    assert f["coefficient"] is None and f["parameter"] == 1.0
+    assert f["free_coefficient"] == pytest.approx(truth.terms["grade"], rel=0.02)
+    assert res.equation.terms["grade"] == 1.0
     assert res.report["final"]["metrics"]["rmse_w"] < 0.5 * res.report["baseline"]["metrics"]["rmse_w"]
 
 

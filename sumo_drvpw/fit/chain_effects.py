@@ -22,8 +22,6 @@ from sumo_drvpw.model.terms import term_matrix
 LIMIT_QUANTILES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98)
 #: HVAC set-point of the ``hvac`` candidate [°C] (the chain's default)
 HVAC_SETPOINT_C = 20.0
-#: plausible range of a grade coefficient found through the chain
-GRADE_RANGE = (0.5, 1.5)
 
 
 @dataclass
@@ -52,8 +50,9 @@ def candidates(m, equation: Equation, p, idx) -> list[Cand]:
     if "grade" not in equation.terms and np.nanstd(x.theta[idx]) > 0:
         g = term_matrix(["grade"], x.take(idx))[:, 0]
         out.append(Cand("grade", "road grade m·g·v·sin θ through the chain (the declared road load has no grade "
-                        "term: calibrated where the road is flat, e.g. on a dynamometer)", "structural", "-",
-                        [(np.column_stack([gw * g]), None, None)]))
+                        "term: calibrated where the road is flat, e.g. on a dynamometer); coefficient 1 (potential "
+                        "energy is exact at the wheels, the chain carries the efficiencies)", "structural", "-",
+                        [(None, gw * g, 1.0)]))
     out.append(Cand("aux_power_w", "constant auxiliary power at the battery/engine the declared chain lacks",
                     "structural", "W", [(np.column_stack([ga]), None, None)]))
     if ch.predicts == "battery":
@@ -106,10 +105,8 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
     ch = eq.chain
     c = np.atleast_1d(np.asarray(coef, float))
     if name == "grade":
-        if not GRADE_RANGE[0] <= c[0] <= GRADE_RANGE[1]:
-            return None, f"implausible grade coefficient {c[0]:.3g} (physics: 1)"
-        eq.terms = dict(eq.terms, grade=float(c[0]))
-        return eq, f"grade coefficient {c[0]:.3f} (1 = m·g·v·sin θ at the wheels)"
+        eq.terms = dict(eq.terms, grade=float(param))
+        return eq, f"grade term with coefficient {param:g} (m·g·v·sin θ at the wheels, through the chain)"
     if name == "aux_power_w":
         new = ch.aux_power_w + c[0]
         if new < 0:

@@ -22,7 +22,9 @@ loop starts from what was calibrated elsewhere, e.g. on a dynamometer).
 Candidate effects (each a column, or a family profiled over one parameter):
 
 * ``grade`` — m·g·v·sin θ through the chain (the declared road load has no grade term,
-  as one calibrated on a dynamometer); coefficient: the grade coefficient (physics: 1);
+  as one calibrated on a dynamometer) with coefficient 1, fixed (potential energy is exact
+  at the wheels; a free coefficient would absorb attenuated grade from coarse elevation and
+  under-book every climb in SUMO — what it would read is reported as ``free_coefficient``);
 * ``aux_power_w`` — a constant auxiliary power [W] (g_aux);
 * ``standstill_aux_w`` — auxiliary power only while standing (v < 0.1 m/s) [W]
   (battery chains: HVAC, 12 V and pumps of a car waiting at lights);
@@ -42,7 +44,7 @@ SSE_b(model + candidate), one-sided paired test (:func:`sumo_drvpw.fit.diagnose.
 Bonferroni-corrected over the candidates of the round, relative held-out RMSE gain ≥
 ``min_gain``; then the finding must lower the held-out error on more than half of the
 trips (≥ 3 trips) and be physically plausible (efficiencies in (0, 1], powers ≥ 0, grade
-coefficient 0.5–1.5). Samples are weighted by their duration; standing samples count
+total auxiliary power while standing ≥ 0). Samples are weighted by their duration; standing samples count
 (the battery draws auxiliary power there).
 
 The closed loop: each accepted finding is written into the equation (grade) or the chain
@@ -397,6 +399,8 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
                 in_model.add(c.name)
                 say(f"round {rnd + 1}: {c.name} passes the block test but {reading}")
                 continue
+            free_coef = (None if var[1] is None else   # what a free coefficient on the fixed column reads
+                         float(_full_fit(w, np.column_stack([Zcur, var[1]]), r - fixed)[0][-1]))
             contrib = (Znew[:, Zcur.shape[1]:] @ coef if var[0] is not None else 0.0) + (0.0 if var[1] is None else var[1])
             e_pred = float(np.sum(w * pred0))
             share = float(np.sum(w * contrib)) / e_pred if e_pred else math.nan
@@ -405,6 +409,7 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
                                                              [float(v) for v in coef])),
                  "std_err": (None if var[0] is None else [float(v) for v in se[Zcur.shape[1]:]]),
                  "parameter": (None if var[2] is None or c.name == "hvac" else var[2]),
+                 "free_coefficient": free_coef,
                  "reading": reading, "p_value": p_adj, "energy_gain": gain, "rmse_gain": _gain(sse_cur, sse_c),
                  "energy_share": share, "energy_j": float(np.sum(w * contrib)),
                  "metrics_before": {"rmse_w": math.sqrt(sse_cur.sum() / w.sum()),
