@@ -625,3 +625,34 @@ def test_sumo_phemlight5_petrol_class_burns_fuel_at_idle(tmp_path):
     drive = sumo_fuel_l(t, np.full_like(t, 15.0), np.zeros_like(t), tmp_path / "b", rho)["sumo_phemlight5_pc_eu4_g"]["l"]
     assert 0.005 < idle < 0.05          # about 0.5–2 L/h idle for a petrol car
     assert drive > 2 * idle
+
+
+def test_corrected_inputs_fuse_the_accelerometer_grade_and_take_rho_at_altitude():
+    """validation.chain.corrected_inputs: ρ × p(h)/p0 (standard atmosphere); the grade's fast
+    part from the accelerometer (a planted 20-s undulation the logged grade lacks is
+    recovered), its slow part from the logged grade (a 2° mounting pitch of the accelerometer
+    does not enter)."""
+    from types import SimpleNamespace
+
+    from sumo_drvpw.fit.diagnose.structural import P0_KPA, pressure_at_altitude_kpa
+    from sumo_drvpw.model.constants import G
+    from sumo_drvpw.model.terms import Inputs
+    from sumo_drvpw.validation.chain import corrected_inputs
+
+    t = np.arange(0.0, 600.0, 0.1)
+    n = t.size
+    sin_true = 0.04 * np.sin(2 * np.pi * t / 20.0)
+    a = 0.2 * np.sin(2 * np.pi * t / 50.0)
+    imu = a + G * (sin_true + np.sin(np.radians(2.0)))
+    h = np.full(n, 500.0)
+    df = pd.DataFrame({"trip_id": "T", "time_s": t, "elevation_m": h})
+    x = Inputs(np.full(n, 10.0), a, np.zeros(n), np.zeros(n), np.full(n, 1500.0), np.full(n, 1.2),
+               {"imu_accel_mps2": imu})
+    xc, ok = corrected_inputs(SimpleNamespace(df=df), x)
+    assert ok.all()
+    np.testing.assert_allclose(xc.rho, 1.2 * pressure_at_altitude_kpa(h) / P0_KPA)
+    assert xc.rho[0] < 1.2 * 0.95                      # ~6 % less air at 500 m
+    s = np.sin(xc.theta)[600:-600]                     # away from the trip's ends
+    assert np.corrcoef(s, sin_true[600:-600])[0, 1] > 0.95
+    assert abs(np.mean(s)) < 0.002                     # the pitch bias stays out
+    assert np.all(x.theta == 0.0) and np.all(x.rho == 1.2)   # the input is not modified

@@ -230,6 +230,18 @@ def i3_study(data: Path) -> dict:
         can = float(np.nan_to_num(log.df["heater_power_w"].to_numpy(float)[s]) @ dt[s]) / KWH
         r.update(season=season[r["trip"]], heater_kwh=heat, heater_can_kwh=can,
                  battery_minus_motor_kwh=gap, flagged=not bool(logged[s].mean() > 0.5))
+    # what the battery takes beyond the motor and the logged loads, by motor power (trips
+    # with heater V·I): constant = auxiliary power; rising = losses; falling below the
+    # auxiliary power while braking = the battery takes in more than the motor gives back
+    load = sum(log.df[c].to_numpy(float) for c in I3_LOADS)
+    gap_w = mb.power_w - load - mw.power_w
+    s = logged & np.isfinite(gap_w) & np.isfinite(mw.power_w)
+    edges = np.array([-40e3, -30e3, -20e3, -10e3, -2e3, 2e3, 10e3, 20e3, 30e3, 40e3, 60e3])
+    k = np.digitize(mw.power_w[s], edges)
+    bins = [{"from_w": float(edges[i - 1]), "to_w": float(edges[i]), "n": int((k == i).sum()),
+             "motor_w": float(np.mean(mw.power_w[s][k == i])),
+             "battery_minus_loads_minus_motor_w": float(np.mean(gap_w[s][k == i]))}
+            for i in range(1, edges.size) if (k == i).sum() > 100]
     sumo = _i3_sumo(log, x, trips, rows, folds, sumo_params, veh)
     out = {"rows": rows, "fits": fits, **sumo,
            "mean_error": float(np.nanmean([r["error"] for r in rows])),
@@ -239,7 +251,8 @@ def i3_study(data: Path) -> dict:
            "mean_abs_error_winter": _mean_abs(rows, where=lambda r: r["season"] == "winter"),
            "mean_error_summer": float(np.mean([r["error"] for r in rows if r["season"] == "summer"])),
            "mean_error_winter": float(np.mean([r["error"] for r in rows if r["season"] == "winter"])),
-           "n_flagged": sum(r["flagged"] for r in rows), "road_terms": list(I3_ROAD_TERMS)}
+           "n_flagged": sum(r["flagged"] for r in rows), "road_terms": list(I3_ROAD_TERMS),
+           "gap_by_motor_power": bins}
     for k in variants[1:]:
         out[f"mean_abs_error_{k}"] = _mean_abs(rows, f"error_{k}")
     return out

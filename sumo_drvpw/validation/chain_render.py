@@ -151,6 +151,13 @@ def _i3(i3: dict) -> list[str]:
 "electrical power (a measurement property, not a limit or blending effect, which act "
          "between the wheel and the motor and are modelled by the recuperation limit). Held at "
          "η_r = η_t instead, the held-out error is shown above.", "",
+         "| motor power bin [kW] | samples | mean motor power [kW] | battery − logged loads − motor [W] |",
+         "|---|---|---|---|"] + [
+        f"| {b['from_w'] / 1000:.0f} … {b['to_w'] / 1000:.0f} | {b['n']} | {b['motor_w'] / 1000:.1f} | "
+        f"{b['battery_minus_loads_minus_motor_w']:.0f} |" for b in i3.get("gap_by_motor_power", [])] + ["",
+         "(samples of the trips with heater V·I; a constant would be the auxiliary power, growth "
+         "with |P| the losses: they grow on traction, while on braking the column falls below the "
+         "standing value — the battery gains more than the motor's torque × speed gives back.)", "",
          "Flagged = the trip has no heater voltage and current, so its heater load is unknown "
          "(its CAN heater power, shown for reference, can exceed E_bat − E_motor, which no heater "
          "can).", ""]
