@@ -143,6 +143,9 @@ class _Sim:
     def getDepartedIDList(self):  # noqa: N802
         return self.r.departed
 
+    def getArrivedIDList(self):  # noqa: N802
+        return self.r.arrived
+
 
 class _Veh:
     def __init__(self, r):
@@ -209,7 +212,12 @@ class FcdReplay:
         self.ids: tuple = ()
         self.state: dict = {}
         self.departed: tuple = ()
+        self.arrived: tuple = ()
         self._seen: set = set()
+        # a vehicle arrives (leaves the ledger's memory) the step after its last row
+        step = np.searchsorted(times, t)
+        last = pd.Series(step).groupby(df["id"].to_numpy()).max() if n else pd.Series(dtype=int)
+        self._leaving = {int(k): tuple(g.index) for k, g in last.groupby(last)}
         self.simulation, self.vehicle, self.vehicletype = _Sim(self), _Veh(self), _VType()
 
     def simulationStep(self, time=0.0):  # noqa: N802
@@ -222,13 +230,15 @@ class FcdReplay:
         new = tuple(v for v in ids if v not in self._seen)
         self._seen.update(new)
         self.departed = new
+        self.arrived = self._leaving.get(self.k - 2, ())
 
     def close(self):
         pass
 
 
 def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
-                vtype_files=None, begin_s=None, **overrides):
+                vtype_files=None, begin_s=None, keep_vehicles: bool = False,
+                flush_vehicles: int | None = None, **overrides):
     """Book an FCD file as ``run`` books a live simulation; returns the RunResult and
     writes the outputs into ``out_dir`` when given.
 
@@ -240,12 +250,15 @@ def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
     equations : equations instead of the scenario's (names, paths, Equation objects)
     vtype_files : route/additional files with the vTypes (default: the scenario's)
     begin_s : ignore timesteps before this simulation time [s]
+    keep_vehicles, flush_vehicles : as for :func:`sumo_drvpw.sim.run.run_scenario` (a
+        vehicle leaves memory the step after its last row in the file)
     overrides : scenario values to replace (``sumo_drvpw.sim.scenario.OVERRIDES``)
     """
     from sumo_drvpw.sim.accountant import Accountant
     from sumo_drvpw.sim.loop import step_until
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.scenario import load_scenario
+    from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
 
     if scenario is None and net is None:
         raise UserError("FCD: give the network the FCD was recorded on, or a scenario")
@@ -282,19 +295,26 @@ def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     acc = Accountant(replay, scenario=sc,
-                     trace_path=Path(out_dir) / "trace.parquet" if sc.trace and out_dir else None)
-    end = sc.end
-    info = step_until(replay, acc.stepper, end=None, progress=False, period=sc.period) \
-        if end is None else _until(replay, acc, end, sc.period)
-    acc.interrupted = info["interrupted"]
-    extra = {"source": {"fcd": str(fcd_file), "rows": int(len(df)),
-                        "timesteps": int(len(replay.times))}}
-    if sc.trace and out_dir:
-        extra["files"] = {"trace": "trace.parquet"}
-    result = acc.result(extra)
-    check_vtype_filter(sc, acc.ledger)
-    if out_dir is not None:
-        result.write(out_dir)
+                     trace_path=Path(out_dir) / "trace.parquet" if sc.trace and out_dir else None,
+                     spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,
+                     keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles)
+    try:
+        end = sc.end
+        info = step_until(replay, acc.stepper, end=None, progress=False, period=sc.period) \
+            if end is None else _until(replay, acc, end, sc.period)
+        acc.interrupted = info["interrupted"]
+        extra = {"source": {"fcd": str(fcd_file), "rows": int(len(df)),
+                            "timesteps": int(len(replay.times))}}
+        if sc.trace and out_dir:
+            extra["files"] = {"trace": "trace.parquet"}
+        result = acc.result(extra)
+        check_vtype_filter(sc, acc.ledger)
+        if out_dir is not None:
+            write_published(result, out_dir)
+    finally:
+        acc.close_trace()
+        if out_dir is not None:
+            discard_parts(acc.ledger)
     return result
 
 

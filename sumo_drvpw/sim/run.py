@@ -213,7 +213,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         tripinfo = Path(tmpdir.name) / "tripinfo.xml"
         args += ["--device.emissions.probability", "1", "--tripinfo-output", str(tripinfo),
                  "--tripinfo-output.write-unfinished", "true"]
-    from sumo_drvpw.sim.spill import SPILL_DIR
+    from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
 
     conn = start_sumo(args, sc.connection, sc.gui)
     acc = None
@@ -243,17 +243,11 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             finally:
                 tmpdir.cleanup()
             result.summary["sumo_device"] = result.sumo_device_comparison().to_dict("records")
-        spill = acc.ledger.spill
         if out_dir is not None:
-            result.write(out_dir)
-            if spill is not None and spill.has_rows:  # read back from the outputs from now on
-                chain = Path(out_dir) / "chain_vehicles.csv"
-                spill.publish(Path(out_dir) / "vehicles.parquet",
-                              chain if chain.is_file() else None)
+            write_published(result, out_dir)
     finally:  # the parts never stay in the output folder
-        spill = acc.ledger.spill if acc is not None else None
-        if spill is not None and out_dir is not None and spill.published is None:
-            spill.cleanup()
+        if acc is not None and out_dir is not None:
+            discard_parts(acc.ledger)
     return result
 
 

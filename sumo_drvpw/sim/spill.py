@@ -159,3 +159,21 @@ class VehicleSpill:
             except OSError:
                 pass
         self._made, self.parts, self.chain_parts = None, [], []
+
+
+def write_published(result, out_dir) -> None:
+    """``result.write(out_dir)``; then the result's spilled rows are read from the written
+    ``vehicles.parquet`` (and ``chain_vehicles.csv``) and the parts are removed."""
+    out_dir = Path(out_dir)
+    result.write(out_dir)
+    spill = getattr(result.ledger, "spill", None)
+    if spill is not None and spill.has_rows:
+        chain = out_dir / "chain_vehicles.csv"
+        spill.publish(out_dir / "vehicles.parquet", chain if chain.is_file() else None)
+
+
+def discard_parts(ledger) -> None:
+    """Remove a ledger's spill parts unless they were published (a failed run's leftovers)."""
+    spill = getattr(ledger, "spill", None)
+    if spill is not None and spill.published is None:
+        spill.cleanup()
