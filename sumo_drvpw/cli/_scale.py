@@ -17,12 +17,14 @@ from sumo_drvpw.errors import UserError
 ENGINES = ("local", "dask", "memory")
 
 
-def add_engine_arguments(p) -> None:
-    """--engine, --scheduler, --workers."""
+def add_engine_arguments(p, engines=ENGINES, engine_help: str | None = None) -> None:
+    """--engine, --scheduler, --workers (``engines``/``engine_help``: a command's own choices,
+    e.g. ``run``'s local process pool or Dask)."""
     g = p.add_argument_group("scale (bounded memory, Dask)")
-    g.add_argument("--engine", choices=ENGINES, default="local",
-                   help="local: stream the logs trip by trip in bounded memory (default); dask: the "
-                        "same on a Dask cluster (pip install 'sumo-drvpw[dask]'); memory: read all at once")
+    g.add_argument("--engine", choices=engines, default="local",
+                   help=engine_help or
+                   "local: stream the logs trip by trip in bounded memory (default); dask: the "
+                   "same on a Dask cluster (pip install 'sumo-drvpw[dask]'); memory: read all at once")
     g.add_argument("--scheduler", metavar="ADDRESS",
                    help="Dask scheduler of an existing cluster, e.g. tcp://host:8786 "
                         "(--engine dask; default: a local cluster)")
