@@ -180,3 +180,56 @@ def test_cli_target_errors(tmp_path, clean, capsys):
     assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--target", "fuel", "--equation", str(decl),
                      "--out", str(out)]) == 2
     assert not out.exists()
+
+
+def test_closed_chain_books_standstill_auxiliary_in_sumo():
+    """A real SUMO run (city, 150 s) with a closed chain carrying standstill_aux_w < 0 (the
+    JLU road's form: more drawn moving than standing): auxiliary energy per vehicle =
+    1000 W × time in the network − 600 W × time standing (v < 0.1 m/s)."""
+    libsumo = pytest.importorskip("libsumo")
+    from pathlib import Path
+
+    from sumo_drvpw.sim.chain import QUANTITIES, ChainLedger
+
+    repo = Path(__file__).resolve().parent.parent
+    cfg = next((p for p in (repo / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.sumocfg",
+                            repo / "scenarios" / "city.sumocfg") if p.is_file()), None)
+    if cfg is None:
+        pytest.skip("city scenario not found")
+    eq = Equation("closed", {"acc": 1.0, "aero": 0.3, "roll": 0.01, "grade": 1.0},
+                  chain=EnergyChain("battery", 0.9, 0.85, aux_power_w=1000.0, standstill_aux_w=-600.0))
+    libsumo.start(["sumo", "-c", str(cfg), "--end", "150", "--no-step-log", "true", "--no-warnings", "true"])
+    try:
+        dt = libsumo.simulation.getDeltaT()
+        led = ChainLedger([eq.name], [eq.chain], n_edges=len(libsumo.edge.getIDList()))
+        vix, eix, prev = {}, {}, {}
+        t_in, t_stand = {}, {}
+        while libsumo.simulation.getTime() < 150:
+            libsumo.simulationStep()
+            ids = libsumo.vehicle.getIDList()
+            if not ids:
+                continue
+            for vid in ids:
+                vix.setdefault(vid, len(vix))
+            road = [libsumo.vehicle.getRoadID(x) for x in ids]
+            for r in road:
+                eix.setdefault(r, len(eix))
+            v = np.array([libsumo.vehicle.getSpeed(x) for x in ids])
+            n = len(ids)
+            a = (v - np.array([prev.get(x, 0.0) for x in ids])) / dt
+            x = Inputs(v, a, np.radians([libsumo.vehicle.getSlope(i) for i in ids]), np.zeros(n),
+                       np.full(n, 1600.0), np.full(n, 1.2))
+            vi = np.array([vix[i] for i in ids])
+            led.book(vi, np.array([eix[r] for r in road]), v, dt, eq.power(x)[:, None])
+            for i, s in zip(vi, v):
+                t_in[i] = t_in.get(i, 0.0) + dt
+                t_stand[i] = t_stand.get(i, 0.0) + dt * (s < 0.1)
+            prev = dict(zip(ids, v))
+    finally:
+        libsumo.close()
+    nv = len(vix)
+    stand = np.array([t_stand[i] for i in range(nv)])
+    assert nv > 20 and stand.sum() > 0
+    tot = led.vehicle_totals(nv)
+    aux = tot[:, 0, QUANTITIES.index("auxiliary_j")]
+    np.testing.assert_allclose(aux, 1000.0 * np.array([t_in[i] for i in range(nv)]) - 600.0 * stand, rtol=1e-12)

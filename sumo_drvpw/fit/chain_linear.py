@@ -433,9 +433,14 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
         in_model.add(added.name)
     closed, _ = _closed(equation, accepted, w, Zcur, r - fixed)
     closed.name = f"{equation.name}_closed" if accepted else equation.name
+    if accepted:  # the declared chain's fit statistics no longer describe what was changed
+        changed = {c.name for c, _, _ in accepted}
+        closed.chain.std_err = {k: v for k, v in closed.chain.std_err.items() if k not in changed}
+        closed.chain.metrics = {}
     closed.provenance = dict(getattr(equation, "provenance", {}) or {},
                              closed_loop={"declared": equation.name, "target": m.target,
-                                          "findings": [f["term"] for f in findings], "logs": list(m.log.files)})
+                                          "findings": [f"{f['term']}: {f['reading']}" for f in findings],
+                                          "logs": list(m.log.files)})
     # held-out, exact: each fold's closed equation predicts the samples it held out
     held = _heldout_exact(m, equation, accepted, bl, idx, w, r, cands)
     report = _report(m, equation, closed, bl, idx, y, pred0, held, w, trip_names, trip, findings, rounds,
