@@ -233,3 +233,33 @@ def test_closed_chain_books_standstill_auxiliary_in_sumo():
     tot = led.vehicle_totals(nv)
     aux = tot[:, 0, QUANTITIES.index("auxiliary_j")]
     np.testing.assert_allclose(aux, 1000.0 * np.array([t_in[i] for i in range(nv)]) - 600.0 * stand, rtol=1e-12)
+
+
+def test_fuel_target_finds_a_planted_engine_load(clean):
+    """Fuel: P_fuel = on·(P_idle + (max(P,0)/η_t + P_aux)/η_m) from the log's driving power;
+    with 1500 W more engine load than the declared chain has (an A/C compressor on the
+    engine), the trace finds aux_power_w ≈ +1500 W at the engine output (fuel W × η_m);
+    without it, nothing."""
+    from sumo_drvpw.model.constants import FUELS
+
+    _, b, df = clean
+    veh = load_vehicle("prius3")
+    truth = load_equation("drvpw_prius3")
+    declared = EnergyChain("fuel", 0.95, aux_power_w=300.0, idle_fuel_power_w=6000.0, marginal_efficiency=0.38,
+                           engine_off_below_w=2000.0)
+    x0 = measure(from_frame(df, veh, name="synth"), veh, "battery")
+    p = truth.power(x0.inputs)
+    rng = np.random.default_rng(5)
+    lhv = FUELS["gasoline"]["lhv_j_per_kg"]
+    found = {}
+    for plant in (0.0, 1500.0):
+        ch = EnergyChain("fuel", 0.95, aux_power_w=300.0 + plant, idle_fuel_power_w=6000.0,
+                         marginal_efficiency=0.38, engine_off_below_w=2000.0)
+        pf = ch.evaluate(p, x0.inputs.v)["power_w"] * (1.0 + rng.normal(0, 0.03, p.size)).clip(0.0)
+        d = df.drop(columns=["battery_voltage_v", "battery_current_a"]).assign(fuel_rate_gps=pf / lhv * 1000.0)
+        m = measure(from_frame(d, veh, name="synth-fuel"), veh, "fuel")
+        res = trace_chain(m, Equation("declared", dict(truth.terms), truth.mass_kg, chain=declared))
+        found[plant] = {f["term"]: f["coefficient"] for f in res.report["findings"]}
+    assert found[0.0] == {}
+    assert list(found[1500.0]) == ["aux_power_w"]
+    assert found[1500.0]["aux_power_w"] == pytest.approx(1500.0, rel=0.1)
