@@ -13,6 +13,11 @@ from pathlib import Path
 
 from sumo_drvpw.report.diagnose import write_outputs
 
+#: logs with more rows than this are traced streamed (``--stream auto``)
+STREAM_ROWS = 1_000_000
+#: a CSV log larger than this [bytes] counts as more than STREAM_ROWS rows
+STREAM_CSV_BYTES = 200_000_000
+
 
 def configure(p):
     p.add_argument("logs", nargs="+", metavar="LOG", help="drive logs (Parquet/CSV files or folders)")
@@ -45,6 +50,10 @@ def configure(p):
                         "such findings are labelled 'response of the target', not effects the model lacks")
     p.add_argument("--min-speed", type=float, default=0.1, help="leave out samples slower than this [m/s] (default 0.1)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.add_argument("--stream", choices=("auto", "yes", "no"), default="auto",
+                   help="read the logs batch by batch of whole trips in bounded memory (yes), all at once "
+                        f"(no), or auto: streamed above {STREAM_ROWS:,} rows (default); streamed runs "
+                        "screen columns on the first rows and draw no figures")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     from sumo_drvpw.cli import add_force, add_log_options
 
@@ -66,20 +75,73 @@ def options_from_args(args):
                         responses=args.responses)
 
 
-def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, progress=None, measured=None,
-        read_options=None):
-    """Load, trace and write every output; returns the DiagnoseResult."""
-    from sumo_drvpw.model.equations import load_equation
-    from sumo_drvpw.fit.diagnose import diagnose
-    from sumo_drvpw.data.measured import load_measured, resolve_equations
+def should_stream(logs, mode: str = "auto") -> bool:
+    """Stream the logs? ``yes``/``no``, or ``auto``: more than STREAM_ROWS rows (Parquet
+    metadata) or a CSV larger than STREAM_CSV_BYTES."""
+    if mode != "auto":
+        return mode == "yes"
+    from sumo_drvpw.data.stream import plan
 
-    m = measured if measured is not None else load_measured(logs, vehicle, read_options)
-    eq = None
-    if equation:
-        eq = resolve_equations([equation], m.vehicle)[0] if equation == "vsp_spec" else load_equation(equation)
-    res = diagnose(m, eq, opt, progress=progress)
-    write_outputs(res, out, figures=figures)
+    rows, csv_bytes = 0, 0
+    for part in plan(logs):
+        if part.path.lower().endswith(".csv"):
+            csv_bytes += Path(part.path).stat().st_size
+        rows += part.rows
+    return rows > STREAM_ROWS or csv_bytes > STREAM_CSV_BYTES
+
+
+def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, progress=None, measured=None,
+        read_options=None, stream: str = "no", target: str = "wheel"):
+    """Load, trace and write every output; returns the DiagnoseResult.
+
+    ``stream``: ``no`` (all logs in memory), ``yes`` (batches of whole trips, bounded
+    memory: :func:`sumo_drvpw.fit.diagnose.stream_run.diagnose_stream`) or ``auto``.
+    ``details["resources"]`` of the result holds rows, seconds and peak RSS [MB]."""
+    import time
+
+    from sumo_drvpw.data.measured import load_measured, resolve_equations
+    from sumo_drvpw.fit.diagnose import diagnose
+    from sumo_drvpw.fit.engine import _progress, peak_rss_mb
+    from sumo_drvpw.model.equations import load_equation
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    t0 = time.perf_counter()
+    if measured is None and should_stream(logs, stream):
+        from sumo_drvpw.data.stream import plan
+        from sumo_drvpw.fit.diagnose.stream_run import diagnose_stream
+
+        veh = load_vehicle(vehicle) if vehicle else None
+        eq = None
+        if equation:
+            eq = resolve_equations([equation], veh)[0] if equation == "vsp_spec" else load_equation(equation)
+        bar = _progress(sum(p.rows for p in plan(logs)) or None, "rows")
+        try:
+            res = diagnose_stream(logs, veh, eq, opt, read_options, target=target, progress=progress,
+                                  bar=bar.update)
+        finally:
+            bar.close()
+        write_outputs(res, out, figures=False)
+    else:
+        m = measured if measured is not None else load_measured(logs, vehicle, read_options, target=target)
+        eq = None
+        if equation:
+            eq = resolve_equations([equation], m.vehicle)[0] if equation == "vsp_spec" else load_equation(equation)
+        res = diagnose(m, eq, opt, progress=progress)
+        res.details["resources"] = {"rows": int(res.details["samples"]["rows"]), "streamed": False}
+        write_outputs(res, out, figures=figures)
+    r = res.details.setdefault("resources", {})
+    r.update(seconds=time.perf_counter() - t0, peak_rss_mb=peak_rss_mb())
     return res
+
+
+def resource_line(res) -> str:
+    """One line: rows, seconds, rows/s and peak RSS of a diagnose run."""
+    r = res.details.get("resources", {})
+    rows, secs = r.get("rows", 0), r.get("seconds", float("nan"))
+    how = (f"streamed, {r['passes']} passes over the prepared batches"
+           + (" (on disk)" if r.get("batches_on_disk") else "")) if "passes" in r else "in memory"
+    return (f"diagnose: {rows:,} rows in {secs:.1f} s ({rows / secs:,.0f} rows/s, {how}), "
+            f"peak RSS {r.get('peak_rss_mb', float('nan')):,.0f} MB")
 
 
 def main(args) -> int:
@@ -104,7 +166,7 @@ def main(args) -> int:
 
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
         res = run(args.logs, args.vehicle, args.equation, tmp, opt, figures=not args.no_figures,
-                  progress=progress, read_options=read_options(args))
+                  progress=progress, read_options=read_options(args), stream=args.stream)
     r = res.report
     print(f"baseline held-out RMSE {r['baseline']['metrics']['rmse_w']:.1f} W; "
           f"{len(r['findings'])} finding(s)")
@@ -114,6 +176,7 @@ def main(args) -> int:
         print(f"  + {f['term']}: {f['effect']} (RMSE {f['metrics_before']['rmse_w']:.1f} → "
               f"{f['metrics_after']['rmse_w']:.1f} W{share})")
     print(f"final held-out RMSE {r['final']['metrics']['rmse_w']:.1f} W; wrote {Path(args.out) / 'trace.json'}")
+    print(resource_line(res), file=sys.stderr)
     return 0
 
 

@@ -59,6 +59,23 @@ class BlockModel:
         self.block_of = np.cumsum(newb) - 1
         self.block_trip = trip_codes[self.starts]
         self.block_n = np.diff(np.r_[self.starts, self.n])
+        self._assign_folds(np.bincount(trip_codes, minlength=self.n_trips))
+        # sums of raw products per block, scaled afterwards: the streamed model adds the
+        # same block sums batch by batch, so both give the same numbers
+        raw_yy = _block_sums(y * y, self.starts)
+        self.y_scale = float(np.sqrt(raw_yy.sum() / self.n)) or 1.0
+        self.ys = y / self.y_scale
+        self.block_yy = raw_yy / (self.y_scale * self.y_scale)
+        self.cols: list[ModelColumn] = []
+        self._factor_cache: dict = {}
+        self.cand_cache: dict = {}   # term → (cand_z list per model column, cand_zz, cand_zy)
+        self.n_scored = 0
+
+    def _assign_folds(self, sizes: np.ndarray) -> None:
+        """Block folds (interleaved within each trip) and, with ≥ 3 trips, trip folds
+        balanced by samples (``sizes``: analysis samples per trip code); needs
+        ``block_trip``, ``n_blocks``, ``n_trips`` and ``opt``."""
+        opt = self.opt
         # block folds: interleaved within each trip
         k_b = opt.folds
         rank = np.zeros(self.n_blocks, dtype=np.int64)
@@ -66,13 +83,12 @@ class BlockModel:
         firstb = np.maximum.accumulate(np.where(bstart, np.arange(self.n_blocks), 0))
         rank = np.arange(self.n_blocks) - firstb
         self.fold_blocks = (rank % k_b).astype(np.int64)
-        n_trips_present = len(np.unique(trip_codes))
+        n_trips_present = int((sizes > 0).sum())
         if opt.validation == "trip" and n_trips_present < 3:
             raise UserError(f"validation by trip needs ≥ 3 trips, the data hold {n_trips_present}")
         self.by_trip = opt.validation == "trip" or (opt.validation == "auto" and n_trips_present >= 3)
         if self.by_trip:
             k_t = min(opt.folds, n_trips_present)
-            sizes = np.bincount(trip_codes, minlength=self.n_trips)
             order = np.argsort(-sizes, kind="stable")
             load = np.zeros(k_t)
             tfold = np.zeros(self.n_trips, dtype=np.int64)
@@ -92,13 +108,6 @@ class BlockModel:
             self.validation = (f"{k_b}-fold cross-validation over contiguous {opt.block_s:g}-s blocks within trips "
                                f"(block j of a trip in fold j mod {k_b}; {n_trips_present} trip(s)); "
                                f"test unit: held-out block")
-        self.y_scale = float(np.sqrt(np.mean(y * y))) or 1.0
-        self.ys = y / self.y_scale
-        self.block_yy = _block_sums(self.ys * self.ys, self.starts)
-        self.cols: list[ModelColumn] = []
-        self._factor_cache: dict = {}
-        self.cand_cache: dict = {}   # term → (cand_z list per model column, cand_zz, cand_zy)
-        self.n_scored = 0
 
     # ---- values
     def factor(self, f: str) -> np.ndarray:
@@ -158,18 +167,18 @@ class BlockModel:
 
     def add(self, cand: Candidate, values: np.ndarray | None = None, mass_terms=None) -> None:
         vals = self.values(cand) if values is None else values
-        scale = float(np.sqrt(np.mean(vals * vals)))
+        vv = _block_sums(vals * vals, self.starts)
+        scale = float(np.sqrt(vv.sum() / self.n))
         if not scale > 0 or not np.isfinite(scale):
             raise UserError(f"term '{cand.term}' is zero or not finite on the analysis samples")
         col = ModelColumn(cand, vals, scale, offset=self.n_coef, mass_terms=dict(mass_terms or {}))
-        z = vals / scale
         # stats of the new column against existing ones and itself
         q = len(self.cols)
         new_cross = np.empty((self.n_blocks, q + 1))
         for j, c in enumerate(self.cols):
-            new_cross[:, j] = _block_sums(z * (c.values / c.scale), self.starts)
-        new_cross[:, q] = _block_sums(z * z, self.starts)
-        hz_new = _block_sums(z * self.ys, self.starts)
+            new_cross[:, j] = _block_sums(vals * c.values, self.starts) / (scale * c.scale)
+        new_cross[:, q] = vv / (scale * scale)
+        hz_new = _block_sums(vals * self.y, self.starts) / (scale * self.y_scale)
         if q == 0:
             self.block_zz = new_cross[:, :, None].copy()
             self.block_zy = hz_new[:, None].copy()
@@ -240,6 +249,9 @@ class BlockModel:
                + np.einsum("bi,bij,bj->b", bz, self.block_zz, bz))
         return np.maximum(sse, 0.0), bz
 
+    def prefetch(self, cands: list[Candidate]) -> None:
+        """Gather the block statistics of many candidates at once (streamed model; here a no-op)."""
+
     def cand_stats(self, cands: list[Candidate], vals: np.ndarray | None = None):
         """Block stats of candidate columns: cand_z (B × m × q), cand_zz (B × m), cand_zy (B × m), scales."""
         m = len(cands)
@@ -255,23 +267,24 @@ class BlockModel:
                 cand_z[:, i], cand_zz[:, i], cand_zy[:, i], scales[i] = cached
                 continue
             v = self.values(cd) if vals is None else vals[:, i]
-            s = float(np.sqrt(np.mean(v * v)))
+            vv = _block_sums(v * v, self.starts)
+            s = float(np.sqrt(vv.sum() / self.n))
             if not (s > 0 and np.isfinite(s)):
                 s = np.nan
                 cand_z[:, i], cand_zz[:, i], cand_zy[:, i], scales[i] = 0.0, 0.0, 0.0, s
                 continue
-            z = v / s
             q0 = 0
             if cached is not None and np.isfinite(cached[3]):
                 q0 = cached[0].shape[1]
                 cand_z[:, i, :q0] = cached[0]
             for j in range(q0, q):
-                cand_z[:, i, j] = _block_sums(z * self.scaled(j), self.starts)
+                c = self.cols[j]
+                cand_z[:, i, j] = _block_sums(v * c.values, self.starts) / (s * c.scale)
             if cached is not None:
                 cand_zz[:, i], cand_zy[:, i] = cached[1], cached[2]
             else:
-                cand_zz[:, i] = _block_sums(z * z, self.starts)
-                cand_zy[:, i] = _block_sums(z * self.ys, self.starts)
+                cand_zz[:, i] = vv / (s * s)
+                cand_zy[:, i] = _block_sums(v * self.y, self.starts) / (s * self.y_scale)
             scales[i] = s
             if cd.kind != "trip_mass":
                 self.cand_cache[cd.term] = (cand_z[:, i].copy(), cand_zz[:, i].copy(), cand_zy[:, i].copy(), s)
@@ -404,6 +417,22 @@ class BlockModel:
         return co, se
 
     # ---- duplicate candidates
+    def _spanned_stats(self, cands, names, groups):
+        """Sums over the analysis samples for :meth:`drop_spanned`: the Gram of the signals
+        ``names``, of the model's scaled columns, and per group of candidates (key → (VᵀV,
+        ZᵀV)) for groups whose column has no earlier twin."""
+        q = len(self.cols)
+        g = None
+        if len(names) > 1:
+            s = np.column_stack([np.asarray(self.signals[k], float) for k in names])
+            g = s.T @ s
+        zm = np.column_stack([self.scaled(j) for j in range(q)]) if q else np.zeros((self.n, 0))
+        grams = {}
+        for key, ks in groups.items():
+            vals = np.column_stack([self.values(cands[k]) for k in ks])
+            grams[key] = (vals.T @ vals, zm.T @ vals)
+        return g, zm.T @ zm, grams
+
     def drop_spanned(self, cands: list[Candidate], tol: float = 1e-10) -> tuple[list, list[dict]]:
         """Drop candidates identical to, or numerically spanned by, earlier ones (issue #9 §1).
 
@@ -416,12 +445,16 @@ class BlockModel:
         Returns (kept candidates, dropped records ``{"term", "reason"}``).
         """
         dropped: list[dict] = []
-        # 1. columns proportional to an earlier column (one pass, s × s Gram)
+        groups: dict[str, list[int]] = {}
+        for k, c in enumerate(cands):
+            if c.scatter:
+                continue
+            groups.setdefault(c.signals[0] if c.signals else "", []).append(k)
         names = list(self.signals)
+        g, a, grams = self._spanned_stats(cands, names, groups)
+        # 1. columns proportional to an earlier column (s × s Gram)
         twin: dict[str, str] = {}
         if len(names) > 1:
-            s = np.column_stack([np.asarray(self.signals[k], float) for k in names])
-            g = s.T @ s
             d = np.sqrt(np.maximum(np.diag(g), 1e-300))
             cos = g / np.outer(d, d)
             for j in range(1, len(names)):
@@ -430,23 +463,14 @@ class BlockModel:
                         twin[names[j]] = names[i]
                         break
         # 2. within each column's forms and among the speed functions
-        groups: dict[str, list[int]] = {}
-        for k, c in enumerate(cands):
-            if c.scatter:
-                continue
-            groups.setdefault(c.signals[0] if c.signals else "", []).append(k)
         drop = {}
         q = len(self.cols)
-        zm = np.column_stack([self.scaled(j) for j in range(q)]) if q else np.zeros((self.n, 0))
-        a = zm.T @ zm
         for key, ks in groups.items():
             if key in twin:
                 for k in ks:
                     drop[k] = f"identical to the forms of column '{twin[key]}' (proportional values)"
                 continue
-            vals = np.column_stack([self.values(cands[k]) for k in ks])
-            cc = vals.T @ vals
-            cm = zm.T @ vals
+            cc, cm = grams[key]
             sol = np.linalg.lstsq(a, cm, rcond=None)[0] if q else np.zeros((0, len(ks)))
             r = cc - cm.T @ sol                       # Gram of the remainders after the model
             kept: list[int] = []

@@ -59,6 +59,7 @@ def _score_all(tr: BlockModel, pool: list[Candidate], opt: DiagnoseOptions) -> l
     """Held-out scores of every candidate in ``pool``, in candidate order:
     (cand, SSE with it, per-block d, SSE without, fold)."""
     results = {}
+    tr.prefetch([c for c in pool if not c.scatter])
     for scatter in (False, True):
         group = [c for c in pool if c.scatter == scatter]
         if not group:

@@ -102,7 +102,19 @@ def timing(tr, y_by_lag: dict[int, np.ndarray], dt_s: float, paired_test) -> dic
     Returns a dict with ``lag_samples``, ``lag_s`` (chosen on all data), ``fold_lags_s``,
     ``p_value``, ``rmse_gain`` and the per-block ``d``.
     """
-    lags = sorted(y_by_lag)
+    zmat = np.column_stack([tr.scaled(j) for j in range(len(tr.cols))])
+    zy_by_lag, yy_by_lag = {}, {}
+    for lag in sorted(y_by_lag):
+        ys = y_by_lag[lag] / tr.y_scale
+        zy_by_lag[lag] = np.add.reduceat(zmat * ys[:, None], tr.starts, axis=0)   # B × q
+        yy_by_lag[lag] = np.add.reduceat(ys * ys, tr.starts)
+    return timing_from_blocks(tr, zy_by_lag, yy_by_lag, dt_s, paired_test)
+
+
+def timing_from_blocks(tr, zy_by_lag: dict, yy_by_lag: dict, dt_s: float, paired_test) -> dict:
+    """:func:`timing` from per-block statistics: shift → Z_bᵀy_b (B × q) and y_bᵀy_b (B),
+    y read that many samples later and scaled by ``tr.y_scale``."""
+    lags = sorted(zy_by_lag)
     fold = tr.fold_of(False)
     k = int(fold.max()) + 1
     zz = tr.block_zz                                   # B × q × q
@@ -110,11 +122,8 @@ def timing(tr, y_by_lag: dict[int, np.ndarray], dt_s: float, paired_test) -> dic
     np.add.at(fold_zz, fold, zz)
     train_zz = fold_zz.sum(0)[None] - fold_zz           # K × q × q
     sse_train, sse_block = {}, {}
-    zmat = np.column_stack([tr.scaled(j) for j in range(len(tr.cols))])
     for lag in lags:
-        ys = y_by_lag[lag] / tr.y_scale
-        zy = np.add.reduceat(zmat * ys[:, None], tr.starts, axis=0)   # B × q
-        yy = np.add.reduceat(ys * ys, tr.starts)
+        zy, yy = zy_by_lag[lag], yy_by_lag[lag]
         fzy = np.zeros((k, zy.shape[1]))
         np.add.at(fzy, fold, zy)
         fyy = np.bincount(fold, weights=yy, minlength=k)
@@ -138,7 +147,7 @@ def timing(tr, y_by_lag: dict[int, np.ndarray], dt_s: float, paired_test) -> dic
     return {"lag_samples": int(lag_all), "lag_s": lag_all * dt_s,
             "fold_lags_s": [lags[i] * dt_s for i in best_fold],
             "p_value": paired_test(d) if lag_all != 0 else 1.0, "rmse_gain": gain, "d": d,
-            "rmse_by_lag_s": {f"{lag * dt_s:+.3g}": math.sqrt(max(s, 0.0) / len(tr.y)) * tr.y_scale
+            "rmse_by_lag_s": {f"{lag * dt_s:+.3g}": math.sqrt(max(s, 0.0) / tr.n) * tr.y_scale
                               for lag, s in zip(lags, all_sse)}}
 
 
@@ -146,25 +155,33 @@ def per_trip_lags(tr, y_by_lag: dict[int, np.ndarray], dt_s: float) -> dict[str,
     """Best lag of each trip alone [s] (declared terms refitted per trip; for the report)."""
     lags = sorted(y_by_lag)
     zmat = np.column_stack([tr.scaled(j) for j in range(len(tr.cols))])
-    out = {}
+    stats = {}
     # each trip's rows from one stable sort (a mask per trip made this O(trips × rows))
     order = np.argsort(tr.trip, kind="stable")
     codes = np.asarray(tr.trip)[order]
     bounds = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1], True])
     for lo, hi in zip(bounds[:-1], bounds[1:]):
         t, m = codes[lo], order[lo:hi]
-        if len(m) < 10 * zmat.shape[1]:
-            continue
         zt = zmat[m]
-        a = zt.T @ zt
+        ys = np.column_stack([y_by_lag[lag][m] / tr.y_scale for lag in lags])
+        stats[int(t)] = (len(m), zt.T @ zt, zt.T @ ys, (ys * ys).sum(0))
+    return per_trip_lags_from_stats(tr.trip_names, stats, lags, dt_s)
+
+
+def per_trip_lags_from_stats(trip_names, stats: dict, lags, dt_s: float) -> dict[str, float]:
+    """:func:`per_trip_lags` from per-trip sums: trip code → (n, ZᵀZ, Zᵀy per lag (q × L),
+    yᵀy per lag (L)), y scaled; trips with fewer than 10 samples per column are left out."""
+    out = {}
+    for t, (n, a, b_all, yy) in stats.items():
+        if n < 10 * a.shape[0]:
+            continue
         best, best_sse = 0, math.inf
-        for lag in lags:
-            yt = y_by_lag[lag][m] / tr.y_scale
-            b = zt.T @ yt
-            sse = float(yt @ yt - b @ np.linalg.lstsq(a, b, rcond=None)[0])
+        for i, lag in enumerate(lags):
+            b = b_all[:, i]
+            sse = float(yy[i] - b @ np.linalg.lstsq(a, b, rcond=None)[0])
             if sse < best_sse:
                 best, best_sse = lag, sse
-        out[str(tr.trip_names[t])] = best * dt_s
+        out[str(trip_names[t])] = best * dt_s
     return out
 
 

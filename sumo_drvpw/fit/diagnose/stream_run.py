@@ -1,0 +1,487 @@
+"""The residual tracer on logs of any length, in bounded memory (issue #14).
+
+:func:`diagnose_stream` is :func:`sumo_drvpw.fit.diagnose.diagnose` for logs that do not
+fit in memory. What differs is only where the sums come from:
+
+1. **first look, on a sample** — the first ``sample_rows`` rows (whole trips, reading
+   order): column screening and roles, two-valued columns, the sample interval of the lag
+   search, the calibration on the spot (no declared equation) and the recuperation
+   quantiles. With fewer rows than ``sample_rows`` the sample is all data.
+2. **one read of the logs** — batch by batch of whole trips
+   (:func:`~sumo_drvpw.fit.diagnose.source.read_batches`) into the arrays the tracer needs
+   (:class:`~sumo_drvpw.fit.diagnose.source.Batches`: in memory up to a budget, else in a
+   temporary folder).
+3. **passes** over the prepared batches for every statistic the search needs
+   (:class:`~sumo_drvpw.fit.diagnose.streamed.StreamModel`): the lag search, the declared
+   model, the candidates' block statistics (one pass per round), each finding's held-out
+   evaluation. Neighbour effects — the lag shift, blocks, regimes — are per trip, and a
+   batch holds whole trips, so they are exact.
+
+Not evaluated here (the in-memory tracer does): the accelerometer grade (per-sample
+smoothing of a second grade is left to the in-memory path; the report says so), and the
+figures (no per-sample predictions are kept). Results equal the in-memory tracer's to
+rounding when the sample is all data (tests/test_diagnose_stream.py).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.data.stream import BATCH_ROWS, plan
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fit.diagnose.candidates import Candidate, generate_candidates, screen_signals
+from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
+from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble, pick_metrics
+from sumo_drvpw.fit.diagnose.source import (CACHE_MB, INPUT_FIELDS, SAMPLE_ROWS, Batches, View,
+                                            concat_inputs, parquet_metadata, read_batches, shift_rows)
+from sumo_drvpw.fit.diagnose.streamed import StreamModel
+from sumo_drvpw.fit.diagnose.streamed import _Moments
+from sumo_drvpw.fit.diagnose.structural import (ACCELEROMETER_COLUMNS, FUSION_TAU_S, P0_KPA, RECUP_QUANTILES,
+                                                accelerometer_sin_grade, fused_sin_grade, lag_range,
+                                                per_trip_lags_from_stats, pressure_at_altitude_kpa,
+                                                timing_from_blocks)
+from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.terms import Inputs, parse_term, term_matrix
+
+
+@dataclass
+class Prepared:
+    """The prepared batches and what a view of them needs."""
+
+    batches: Batches
+    declared: list
+    kept: list                          # offered signals (columns of each batch's ``sig``)
+    trip_names: np.ndarray = None       # sorted trip ids of all rows
+    derived: dict = field(default_factory=dict)   # name → f(view, batch, sel) → values
+
+    @property
+    def signal_names(self):
+        return list(self.kept) + list(self.derived)
+
+    def views(self, common: bool, lag: int):
+        for d in self.batches:
+            sel = d["common"] if common else None
+
+            def s(a):
+                return a if sel is None else a[sel]
+            y = d["y"] if lag == 0 else shift_rows(d["yrow"], d["triprow"], lag)[d["idx"]]
+            gmap = np.searchsorted(self.trip_names, np.asarray(d["names"], dtype=object).astype(str))
+            x = Inputs(*(s(d[f]) for f in INPUT_FIELDS))
+            view = View(x, s(y), s(d["dt"]), s(d["t"]), gmap[s(d["tloc"])], s(d["decl"]), {})
+            for j, k in enumerate(self.kept):
+                view.signals[k] = s(d["sig"][:, j])
+            for name, fn in self.derived.items():
+                view.signals[name] = fn(view, d, sel)
+            view.extra["batch"] = d
+            yield view
+
+
+def _prepare(m, eq, declared, kept, opt, lags, elev: bool, acc_col) -> dict:
+    """The arrays of one batch (a Measured of whole trips) the tracer needs."""
+    y_all = np.asarray(m.power_w, float)
+    x_eq = m.inputs.with_mass(eq.mass_kg)
+    decl = term_matrix(declared, x_eq)
+    ana = np.asarray(m.usable, bool) & np.all(np.isfinite(decl), axis=1) & (x_eq.v >= opt.min_speed_mps)
+    sig = [np.asarray(m.inputs.signals[k], float) for k in kept]
+    for a in sig:
+        ana &= np.isfinite(a)
+    df = m.log.df
+    codes, names = pd.factorize(df["trip_id"].astype(str).to_numpy())
+    idx = np.flatnonzero(ana)
+    d = {"idx": idx, "y": y_all[idx], "dt": df["dt_s"].to_numpy(float)[idx],
+         "t": df["time_s"].to_numpy(float)[idx], "tloc": codes[idx].astype(np.int64),
+         "decl": np.ascontiguousarray(decl[idx]),
+         "sig": np.column_stack(sig)[idx] if sig else np.zeros((len(idx), 0)),
+         "names": [str(n) for n in names], "rows": len(y_all), "usable": int(np.sum(m.usable))}
+    for f in INPUT_FIELDS:
+        d[f] = np.asarray(getattr(x_eq, f), float)[idx].copy()
+    if len(lags) > 1:
+        d["yrow"], d["triprow"] = y_all, codes.astype(np.int32)
+        common = np.ones(len(idx), bool)
+        for k in lags:
+            common &= np.isfinite(shift_rows(y_all, codes, int(k))[idx])
+        d["common"] = common
+    if acc_col is not None:
+        d["imu"] = np.asarray(m.inputs.signals[acc_col], float)[idx]
+    if elev:
+        d["elev"] = df["elevation_m"].to_numpy(float)[idx] if "elevation_m" in df else np.full(len(idx), np.nan)
+    return d
+
+
+def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | None = None,
+                    read_options=None, target: str = "wheel", rows: int = BATCH_ROWS,
+                    sample_rows: int = SAMPLE_ROWS, cache_mb: float = CACHE_MB,
+                    progress=None, bar=None) -> DiagnoseResult:
+    """Trace the residual of ``equation`` on drive logs of any length (see module docstring).
+
+    Parameters
+    ----------
+    paths : drive log files or folders
+    vehicle : vehicle name or file (as ``load_measured``), or None
+    equation : the declared :class:`~sumo_drvpw.model.equations.Equation`, or None
+        (calibrated on the spot on the sample, stepwise on indt-var-1)
+    opt : :class:`DiagnoseOptions`
+    read_options : :class:`~sumo_drvpw.data.log.ReadOptions`
+    target : what the measured power is (``load_measured``'s ``target``)
+    rows : rows per chunk read [-]
+    sample_rows : rows of the first-look sample [-]
+    cache_mb : prepared batches kept in memory up to this size [MB], beyond on disk
+    progress : optional callable(str) for progress messages
+    bar : optional callable(rows) called per batch read (a progress bar)
+
+    Returns the :class:`DiagnoseResult`; ``details["resources"]`` holds rows, seconds,
+    passes and whether the batches were on disk.
+    """
+    from sumo_drvpw.data.roles import from_metadata, resolve
+    from sumo_drvpw.fit.calibrate import CANDIDATES
+    from sumo_drvpw.fit.physical import physical_calibration
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    t_start = time.perf_counter()
+    opt = opt or DiagnoseOptions()
+    opt.check()
+    say = progress or (lambda s: None)
+    veh = load_vehicle(vehicle) if isinstance(vehicle, str) else vehicle
+    gen = read_batches(paths, veh, read_options, target, rows)
+    sample, n_sample = [], 0
+    for m in gen:
+        sample.append(m)
+        n_sample += len(m.power_w)
+        if bar:
+            bar(len(m.power_w))
+        if n_sample >= sample_rows:
+            break
+    if not sample:
+        raise UserError("no drive log rows to trace")
+    first_log = sample[0].log
+    files = list(dict.fromkeys(p.path for p in plan(paths)))
+    y_s = np.concatenate([np.asarray(m.power_w, float) for m in sample])
+    x_s = concat_inputs([m.inputs for m in sample])
+    usable_s = np.concatenate([np.asarray(m.usable, bool) for m in sample])
+    trip_s = np.concatenate([m.log.df["trip_id"].astype(str).to_numpy() for m in sample])
+    t_s = np.concatenate([m.log.df["time_s"].to_numpy(float) for m in sample])
+    _, tcodes_s = np.unique(trip_s, return_inverse=True)
+    source = sample[0].source
+    calibrated = False
+    if equation is None:
+        equation, phys = physical_calibration(x_s, y_s, CANDIDATES["indt-var-1"], mask=usable_s,
+                                              reference_mass_kg=float(x_s.mass[usable_s].mean()))
+        equation.name = "calibrated_indt_var_1"
+        equation.provenance["logs"] = files
+        calibrated = True
+        say(f"calibrated on the spot on the first {n_sample:,} rows ({phys['used']}): "
+            f"{', '.join(equation.term_names)}")
+    declared = equation.term_names
+    for s in equation.signals:
+        if s not in x_s.signals:
+            raise UserError(f"equation '{equation.name}' needs the log column '{s}', which the data lack")
+    roles = resolve(first_log.extra_columns, from_metadata(parquet_metadata(paths)))
+    kept, skipped = screen_signals(dict(x_s.signals), y_s, x_s, tcodes_s, usable_s, opt, roles)
+    for name in list(kept):
+        if name in equation.signals:
+            skipped.append({"column": name, "reason": "already a factor of a declared term"})
+            kept.pop(name)
+    kept_names = list(kept)
+    dt_med = float(np.median(np.diff(t_s)[np.diff(tcodes_s) == 0])) if len(t_s) > 1 else 0.0
+    lags = lag_range(dt_med, opt.max_lag_s) if opt.structural and opt.max_lag_s > 0 else np.array([0])
+    cnt = sample[0].log.counts
+    elev = bool(opt.structural and "elevation_m" in first_log.df and "ambient_c" in first_log.df
+                and "pressure_kpa" not in first_log.df
+                and str(cnt.get("air_density_source", "")).startswith("ideal gas"))
+    acc_col = next((c for c in ACCELEROMETER_COLUMNS if c in x_s.signals), None) if opt.structural else None
+    dt_acc = float(np.median(np.diff(t_s))) if len(t_s) > 1 else 1.0
+    del x_s, y_s, usable_s, trip_s, t_s, tcodes_s
+    # one read of the logs into prepared batches
+    batches = Batches(cache_mb)
+    n_rows = n_usable = 0
+    names: set = set()
+    sample_idx = len(sample)
+    try:
+        def consume(m):
+            nonlocal n_rows, n_usable
+            d = _prepare(m, equation, declared, kept_names, opt, lags, elev, acc_col)
+            n_rows += d.pop("rows")
+            n_usable += d.pop("usable")
+            names.update(d["names"])
+            batches.append(d)
+        for m in sample:
+            consume(m)
+        sample.clear()
+        for m in gen:
+            consume(m)
+            if bar:
+                bar(len(m.power_w))
+            del m
+        if n_usable == 0:
+            raise UserError(f"{', '.join(files)}: no usable sample among {n_rows} rows")
+        prep = Prepared(batches, declared, kept_names, np.array(sorted(names)))
+        say(f"{n_rows:,} rows read in {len(batches)} batch(es)"
+            + (" (prepared arrays on disk)" if batches.on_disk else ""))
+        # two-valued columns, on the sample's analysis samples
+        binary = _binary(prep, sample_idx, sample_rows)
+        res = _trace(prep, equation, declared, opt, lags, dt_med, elev, (acc_col, dt_acc), binary, roles, say)
+        tr = res["tr"]
+        measured = _Measured(_Log(files), source)
+        out = assemble(tr=tr, measured=measured, equation=equation, declared=declared, calibrated=calibrated,
+                       opt=opt, findings=res["findings"], rounds=res["rounds"], ev0=res["ev0"],
+                       base_coefs=res["base_coefs"], plot={"findings": []}, n_rows=n_rows,
+                       n_usable=n_usable, skipped=skipped, sig=dict.fromkeys(kept_names),
+                       n_candidates=res["n_candidates"], n_trips=int((tr.trip_counts() > 0).sum()),
+                       dropped=res["dropped"], roles={k: roles[k] for k in kept_names if k in roles},
+                       extra=res["extra"])
+    finally:
+        on_disk = batches.on_disk
+        batches.close()
+    passes = res["passes"] + tr.passes
+    secs = time.perf_counter() - t_start
+    out.details["resources"] = {"rows": n_rows, "seconds": secs, "passes": passes,
+                                "batches_on_disk": on_disk, "sample_rows": n_sample}
+    return out
+
+
+@dataclass
+class _Log:
+    files: list
+
+
+@dataclass
+class _Measured:
+    log: _Log
+    source: str
+
+
+def _binary(prep: Prepared, n_batches: int, limit: int) -> set:
+    """Offered columns with at most two values on the sample's analysis samples."""
+    vals: dict = {k: set() for k in prep.kept}
+    seen = 0
+    for i, d in enumerate(prep.batches):
+        if i >= n_batches or seen >= limit:
+            break
+        seen += d["rows"] if "rows" in d else len(d["y"])
+        for j, k in enumerate(prep.kept):
+            if len(vals[k]) <= 2:
+                vals[k].update(np.unique(d["sig"][:, j]).tolist()[:3])
+    return {k for k, v in vals.items() if len(v) <= 2}
+
+
+def _declared(prep, opt, declared, common, lag) -> StreamModel:
+    tr = StreamModel(prep, opt, common=common, lag=lag)
+    if tr.n == 0:
+        return tr
+    for term in declared:
+        tr.add(Candidate(term, f"declared term {term}", tuple(parse_term(term).signals), "declared"))
+    return tr
+
+
+def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles, say) -> dict:
+    from sumo_drvpw.fit.diagnose.search import COARSE_LAGS, paired_test, search_rounds
+
+    passes = 0
+    timing_finding, lag_note = None, None
+    common, lag = False, 0
+    if len(lags) > 1:
+        tr0 = _declared(prep, opt, declared, True, 0)
+        if tr0.n >= 50:
+            timing_finding, lag_note, tr1 = _timing(tr0, prep, opt, lags, dt_med, say, paired_test,
+                                                    COARSE_LAGS)
+            passes += tr0.passes
+            if timing_finding is not None:
+                common, lag = True, timing_finding["_lag_samples"]
+                tr = tr1
+    if timing_finding is None:
+        tr = _declared(prep, opt, declared, False, 0)
+    else:
+        timing_finding.pop("_lag_samples")
+    if tr.n < 50:
+        raise UserError(f"only {tr.n} analysis samples (usable, with finite terms and signals); need at least 50")
+    n_trips = int((tr.trip_counts() > 0).sum())
+    say(f"{tr.n} analysis samples, {n_trips} trip(s), {tr.n_blocks} blocks, {len(prep.kept)} signal(s) offered")
+    cands = generate_candidates(dict.fromkeys(prep.kept), declared, n_trips, opt, binary)
+    notes = {}
+    if opt.structural:
+        s_cands, notes = _structural(tr, prep, declared, elev, acc)
+        cands = cands + s_cands
+        tr.signals = {k: None for k in prep.signal_names}
+    cands, dropped = tr.drop_spanned(cands)
+    if dropped:
+        say(f"{len(dropped)} candidate(s) dropped before scoring: identical to or spanned by earlier ones")
+    ev0 = tr.evaluate(tr.fold_of(False))
+    base_coefs, _ = tr.coefficients()
+    findings = [timing_finding] if timing_finding is not None else []
+    rounds, rejected = search_rounds(tr, cands, declared, roles, opt, say, findings, {"findings": []})
+    return {"tr": tr, "findings": findings, "rounds": rounds, "ev0": ev0, "base_coefs": base_coefs,
+            "dropped": dropped, "n_candidates": len(cands), "passes": passes,
+            "extra": {"not_replicated": rejected, "timing": lag_note, "structural": notes}}
+
+
+def _structural(tr: StreamModel, prep: Prepared, declared, elev: bool, acc):
+    """Regimes, air density from altitude, a missing grade term and the accelerometer grade
+    (as ``structural.structural_signals``; ``acc`` = (accelerometer column or None, its Δt [s]))."""
+    cands, notes = [], {}
+    f = tr.full_fit()
+    coef = [(float(f["beta"][c.offset]), c.scale, j) for j, c in enumerate(tr.cols)]
+    y_scale = tr.y_scale
+
+    def base_pred(view, d=None, sel=None):
+        pred = np.zeros(view.n)
+        for b, s, j in coef:
+            pred += b * (view.decl[:, j] / s) * y_scale
+        return pred
+    n_neg, neg_vals = 0, []
+    for view in tr._views(blocks=False):
+        pred = base_pred(view)
+        neg = pred < 0
+        n_neg += int(neg.sum())
+        neg_vals.append(-pred[neg])
+    if tr.n and n_neg / tr.n > 0.02:
+        negs = np.concatenate(neg_vals)
+        prep.derived["recuperation"] = lambda v, d, sel: np.where(base_pred(v) < 0, base_pred(v), 0.0)
+        cands.append(Candidate("[recuperation]", "recuperation on its own coefficient: "
+                               "drivetrain efficiency differs by direction (1 + c scales recuperation)",
+                               (), "structural"))
+        for q in RECUP_QUANTILES:
+            lim = float(np.quantile(negs, q))
+            if lim <= 0:
+                continue
+            name = f"recuperation_below_{lim / 1000:.3g}kW"
+            prep.derived[name] = (lambda lim: lambda v, d, sel: np.minimum(base_pred(v) + lim, 0.0))(lim)
+            cands.append(Candidate(f"[{name}]", f"a recuperation limit: beyond {lim / 1000:.3g} kW "
+                                   "of predicted recuperation, friction brakes take over", (), "structural"))
+    if elev:
+        lo, hi, s1, fin = math.inf, -math.inf, 0.0, True
+        for d in prep.batches:
+            h = d["elev"] if not tr.common else d["elev"][d["common"]]
+            fin &= bool(np.isfinite(h).all())
+            if len(h):
+                lo, hi = min(lo, float(h.min())), max(hi, float(h.max()))
+                s1 += float((pressure_at_altitude_kpa(h) / P0_KPA - 1.0).sum())
+        if fin and tr.n:
+            prep.derived["air_density_altitude"] = lambda v, d, sel: (
+                pressure_at_altitude_kpa(d["elev"] if sel is None else d["elev"][sel]) / P0_KPA - 1.0)
+            notes["air_density_altitude"] = {"mean_relative_error_of_rho": s1 / tr.n, "altitude_m": [lo, hi]}
+            for t in declared:
+                if parse_term(t).category == "aero" and not parse_term(t).signals:
+                    cands.append(Candidate(f"[air_density_altitude]*{t}",
+                                           f"air density from altitude: the log's ρ assumes sea-level "
+                                           f"pressure; {t} scaled by p(h)/p₀ − 1", (), "structural"))
+    if not any(parse_term(t).category == "grade" for t in declared) and tr.theta_ptp > 1e-4:
+        cands.append(Candidate("grade", "road grade: the declared equation has no grade term "
+                               "(calibrated where the road is flat, e.g. on a dynamometer)", (), "structural"))
+    acc_col, dt_acc = acc
+    grade_terms = [t for t in declared if parse_term(t).category == "grade" and not parse_term(t).signals]
+    if acc_col is not None and grade_terms and all(np.isfinite(d["imu"] if not tr.common else d["imu"][d["common"]]).all()
+                                                   for d in prep.batches):
+        def sin_acc(v, d, sel):
+            return accelerometer_sin_grade(d["imu"] if sel is None else d["imu"][sel], v.x.a, v.trip, dt_acc)
+        prep.derived["grade_accelerometer"] = lambda v, d, sel: (
+            v.x.mass * G * v.x.v * (sin_acc(v, d, sel) - np.sin(v.x.theta)))
+        cands.append(Candidate("[grade_accelerometer]", f"grade measured by the accelerometer "
+                               f"'{acc_col}' (reads dv/dt + g·sin θ) instead of the logged grade: "
+                               "m·g·v·(sin θ_acc − sin θ_log)", (), "structural"))
+        sums = {k: [0.0, _Moments()] for k in ("logged", "accelerometer", "fused")}
+        xy = np.zeros(5)
+        for view in tr._views(blocks=False):
+            d = view.extra["batch"]
+            sel = d["common"] if tr.common else None
+            sa, sl = sin_acc(view, d, sel), np.sin(view.x.theta)
+            fu = fused_sin_grade(sa, sl, view.trip, dt_acc)
+            for k, arr in (("logged", np.clip(sl, -1, 1)), ("accelerometer", sa), ("fused", fu)):
+                ang = np.arcsin(arr)
+                sums[k][0] += float(np.abs(ang).sum())
+                sums[k][1].add(ang)
+            xy += [sa.sum(), sl.sum(), sa @ sa, sl @ sl, sa @ sl]
+        n = tr.n
+        out = {k: {"mean_abs_deg": float(np.degrees(v[0] / n)),
+                   "sd_deg": float(np.degrees(math.sqrt(v[1].m2 / n)))} for k, v in sums.items()}
+        out["fused"]["crossover_s"] = FUSION_TAU_S
+        mx, my = xy[0] / n, xy[1] / n
+        vx, vy, cxy = xy[2] / n - mx * mx, xy[3] / n - my * my, xy[4] / n - mx * my
+        notes["grade_sources"] = {"accelerometer_column": acc_col, **out,
+                                  "corr": float(cxy / math.sqrt(vx * vy)) if vy > 0 and vx > 0 else math.nan}
+    return cands, notes
+
+
+def _timing(tr0: StreamModel, prep, opt, lags, dt_med, say, paired_test, coarse):
+    """The lag step of the in-memory tracer (``search._timing_step``) on block statistics."""
+    big = int(lags[-1])
+    step = max(1, math.ceil(big / coarse))
+    tried = sorted(set(range(-big, big + 1, step)) | {0})
+    zy, yy, trip_stats = {}, {}, {}
+    _lag_stats(tr0, tried, zy, yy, trip_stats)
+    res = timing_from_blocks(tr0, zy, yy, dt_med, paired_test)
+    if step > 1:
+        fine = [k for k in range(res["lag_samples"] - step + 1, res["lag_samples"] + step)
+                if -big <= k <= big and k not in zy]
+        if fine:
+            _lag_stats(tr0, fine, zy, yy, trip_stats)
+        res = timing_from_blocks(tr0, zy, yy, dt_med, paired_test)
+    all_lags = sorted(zy)
+    stats = {}
+    for t in sorted(trip_stats):
+        n, a, b, s = trip_stats[t]
+        stats[t] = (n, a, np.column_stack([b[k] for k in all_lags]), np.array([s[k] for k in all_lags]))
+    note = {k: v for k, v in res.items() if k != "d"}
+    note["per_trip_lag_s"] = per_trip_lags_from_stats(tr0.trip_names, stats, all_lags, dt_med)
+    note["shifts_tried"] = len(all_lags)
+    note["test"] = ("lag chosen per fold on the training folds, scored on held-out blocks; "
+                    "d = SSE(lag 0) − SSE(chosen lag), the tracer's paired block test")
+    accepted = res["lag_samples"] != 0 and res["p_value"] < opt.alpha and res["rmse_gain"] >= opt.min_gain
+    note["accepted"] = bool(accepted)
+    say(f"timing: best lag {res['lag_s']:+.3g} s, held-out gain {100 * res['rmse_gain']:.2f} %, "
+        f"p = {res['p_value']:.3g} → {'applied' if accepted else 'not applied'}")
+    if not accepted:
+        return None, note, None
+    fold = tr0.fold_of(False)
+    before = tr0.evaluate(fold)
+    tr1 = _declared(prep, opt, tr0.declared, True, res["lag_samples"])
+    after = tr1.evaluate(fold)
+    per_trip_lag = note["per_trip_lag_s"]
+    same_sign = sum(1 for v in per_trip_lag.values() if np.sign(v) == np.sign(res["lag_s"]))
+    finding = {
+        "effect": (f"timing: the power signal is read {res['lag_s']:+.3g} s later relative to speed "
+                   f"({'power late, speed leads' if res['lag_s'] > 0 else 'speed lags the power'}); "
+                   "corrected in the data, not absorbed by coefficients"),
+        "role": "structural", "kind": "timing", "signals": [], "term": f"lag {res['lag_s']:+.3g} s",
+        "coefficient": res["lag_s"], "std_err": float(np.std(res["fold_lags_s"])),
+        "p_value": res["p_value"], "energy_share": None,
+        "metrics_before": pick_metrics(before["metrics"]), "metrics_after": pick_metrics(after["metrics"]),
+        "replication": {"helped_trips": same_sign, "trips": len(per_trip_lag),
+                        "per_trip": {k: {"lag_s": v} for k, v in per_trip_lag.items()},
+                        "fold_lags_s": res["fold_lags_s"]},
+        "_lag_samples": res["lag_samples"]}
+    return finding, note, tr1
+
+
+def _lag_stats(tr0: StreamModel, lags, zy: dict, yy: dict, trip_stats: dict) -> None:
+    """One pass: per block Zᵀy_ℓ and y_ℓᵀy_ℓ, per trip ZᵀZ, Zᵀy_ℓ and y_ℓᵀy_ℓ for each
+    shift ℓ (y_ℓ the power read ℓ samples later within the trip, scaled by y_scale)."""
+    for k in lags:
+        zy[k] = np.zeros((tr0.n_blocks, len(tr0.cols)))
+        yy[k] = np.zeros(tr0.n_blocks)
+    for view in tr0._views():
+        d = view.extra["batch"]
+        st, off = view.extra["starts"], view.extra["off"]
+        sl = slice(off, off + len(st))
+        z = tr0._zmat(view)
+        tc = view.trip
+        tb = np.flatnonzero(np.r_[True, tc[1:] != tc[:-1]])
+        te = np.r_[tb[1:], view.n]
+        for i, t in enumerate(tc[tb].tolist()):
+            if t not in trip_stats:
+                zt = z[tb[i]:te[i]]
+                trip_stats[t] = (len(zt), zt.T @ zt, {}, {})
+        for k in lags:
+            ys = shift_rows(d["yrow"], d["triprow"], int(k))[d["idx"]][d["common"]] / tr0.y_scale
+            zys = z * ys[:, None]
+            zy[k][sl] = np.add.reduceat(zys, st, axis=0)
+            yy[k][sl] = np.add.reduceat(ys * ys, st)
+            tzy = np.add.reduceat(zys, tb, axis=0)
+            tyy = np.add.reduceat(ys * ys, tb)
+            for i, t in enumerate(tc[tb].tolist()):
+                trip_stats[t][2][k] = tzy[i]
+                trip_stats[t][3][k] = tyy[i]

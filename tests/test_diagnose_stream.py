@@ -1,0 +1,147 @@
+"""The streamed residual tracer (fit/diagnose/stream_run.py) equals the in-memory one (#14).
+
+Synthetic logs of the virtual test track (truth drvpw_prius3) with planted effects, split
+over three files, read in small chunks so every trip lands in its own batch and every
+statistic is gathered over many batches. With fewer rows than the first-look sample the
+screening sees the same samples, so every number of the report must equal the in-memory
+tracer's: coefficients, standard errors, metrics, p-values, trip energies, per-trip lags
+to 1e-9 relative; the relative RMSE gains (one minus the square root of a ratio of two
+nearly equal held-out SSEs) to 1e-9 absolute.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import sumo_drvpw.synth.effects as E
+from sumo_drvpw.data.measured import load_measured
+from sumo_drvpw.fit.diagnose import DiagnoseOptions, diagnose
+from sumo_drvpw.fit.diagnose.stream_run import diagnose_stream
+from sumo_drvpw.model.equations import load_equation
+from sumo_drvpw.synth.track import Noise
+
+NOISE = Noise(process_w=200.0, process_rel=0.01)
+DETAILS = ("samples", "signals_offered", "signals_skipped", "candidates_dropped", "rounds", "timing",
+           "not_replicated", "candidates_scored", "final_std_err", "structural", "candidates_per_round")
+
+
+def _logs(tmp_path, effects, n_trips=6, seed=11):
+    df, _ = E.synth_trips(n_trips, 8.0, seed=seed, effects=list(effects) + [E.LogPower()], noise=NOISE)
+    df["noise_0"] = np.random.default_rng(0).normal(0, 1, len(df))
+    trips = df["trip_id"].unique()
+    cuts = np.array_split(np.arange(len(trips)), 3)
+    paths = []
+    for i, c in enumerate(cuts):
+        p = tmp_path / f"log{i}.parquet"
+        df[df["trip_id"].isin(trips[c])].to_parquet(p)
+        paths.append(p)
+    return paths
+
+
+def _compare(a, b, path=""):
+    """Differences between two JSON-like documents beyond the tolerances (list of str)."""
+    bad = []
+    if isinstance(a, dict):
+        if set(a) != set(b):
+            return [f"{path}: keys {sorted(set(a) ^ set(b))}"]
+        for k in a:
+            bad += _compare(a[k], b[k], f"{path}/{k}")
+    elif isinstance(a, (list, tuple)):
+        if len(a) != len(b):
+            return [f"{path}: length {len(a)} != {len(b)}"]
+        for i, (u, v) in enumerate(zip(a, b)):
+            bad += _compare(u, v, f"{path}[{i}]")
+    elif isinstance(a, float) or isinstance(b, float):
+        if math.isnan(a) and math.isnan(b):
+            return []
+        if path.endswith("rmse_gain"):
+            ok = abs(a - b) <= 1e-9
+        else:
+            ok = abs(a - b) <= 1e-9 * max(abs(a), abs(b))
+        if not ok:
+            bad.append(f"{path}: {a!r} != {b!r}")
+    elif a != b:
+        bad.append(f"{path}: {a!r} != {b!r}")
+    return bad
+
+
+def _both(tmp_path, effects, opt, rows=2500, cache_mb=768.0, **kw):
+    paths = _logs(tmp_path, effects, **kw)
+    eq = load_equation("drvpw_prius3")
+    mem = diagnose(load_measured(paths, "prius3"), eq, DiagnoseOptions(**opt))
+    st = diagnose_stream(paths, "prius3", eq, DiagnoseOptions(**opt), rows=rows, cache_mb=cache_mb)
+    return mem, st
+
+
+def _assert_equal(mem, st):
+    bad = _compare(mem.report, st.report, "report")
+    bad += _compare({k: mem.details.get(k) for k in DETAILS}, {k: st.details.get(k) for k in DETAILS},
+                    "details")
+    bad += _compare(mem.equation.terms, st.equation.terms, "equation")
+    assert not bad, "\n".join(bad[:20])
+
+
+def test_streamed_equals_in_memory_planted_load_many_batches(tmp_path):
+    mem, st = _both(tmp_path, [E.AuxLoad(), E.Distractors()], {})
+    assert [f["term"] for f in mem.report["findings"]] == ["[ac_power_w]"]
+    _assert_equal(mem, st)
+    r = st.details["resources"]
+    assert r["passes"] > 3 and r["sample_rows"] == r["rows"] and not r["batches_on_disk"]
+
+
+def test_streamed_equals_in_memory_batches_on_disk(tmp_path):
+    # a cache of 0.2 MB: all but the first prepared batch go to the temporary folder
+    mem, st = _both(tmp_path, [E.TermScaledBySignal(), E.Distractors()], {"max_findings": 2}, cache_mb=0.2)
+    assert st.details["resources"]["batches_on_disk"]
+    assert any("tyre_temp_c" in f["signals"] for f in mem.report["findings"])
+    _assert_equal(mem, st)
+
+
+def test_streamed_equals_in_memory_lag_and_per_trip_mass(tmp_path):
+    # a power lag (the lag step: shifted powers per trip, on samples finite at every
+    # shift) and a per-trip mass (per-trip columns, the composite rebuilt from refits)
+    mem, st = _both(tmp_path, [E.PowerLag(1.5), E.PerTripMass()], {"max_findings": 3})
+    terms = [f["term"] for f in mem.report["findings"]]
+    assert terms[0].startswith("lag +1.5") and any(t.startswith("trip=ID*(") for t in terms), terms
+    _assert_equal(mem, st)
+
+
+def test_streamed_finds_nothing_when_nothing_is_planted(tmp_path):
+    mem, st = _both(tmp_path, [E.Distractors()], {}, seed=5)
+    assert st.report["findings"] == [] and mem.report["findings"] == []
+    _assert_equal(mem, st)
+
+
+def test_cli_streams_above_the_row_limit_and_prints_resources(tmp_path, capsys, monkeypatch):
+    import json
+
+    from sumo_drvpw.cli import main
+    from sumo_drvpw.cli import diagnose as cli
+
+    paths = _logs(tmp_path, [E.AuxLoad()], n_trips=3)
+    assert not cli.should_stream(paths)
+    monkeypatch.setattr(cli, "STREAM_ROWS", 1000)
+    assert cli.should_stream(paths) and not cli.should_stream(paths, "no")
+    out = tmp_path / "out"
+    rc = main(["diagnose", *map(str, paths), "--vehicle", "prius3", "--equation", "drvpw_prius3",
+               "--out", str(out), "--quiet"])
+    assert rc == 0
+    err = capsys.readouterr().err
+    assert "streamed" in err and "rows/s" in err and "peak RSS" in err
+    details = json.loads((out / "trace_details.json").read_text())
+    assert details["resources"]["passes"] > 0
+    assert json.loads((out / "trace.json").read_text())["findings"][0]["term"] == "[ac_power_w]"
+    assert not list(out.glob("*.png"))      # streamed runs draw no figures
+
+
+def test_streamed_bad_input_is_a_user_error(tmp_path):
+    from sumo_drvpw.errors import UserError
+
+    paths = _logs(tmp_path, [], n_trips=3)
+    with pytest.raises(UserError, match="needs the log column 'no_such_col'"):
+        from sumo_drvpw.model.equations import Equation
+
+        diagnose_stream(paths, "prius3", Equation("x", {"acc": 1.0, "[no_such_col]": 1.0}), DiagnoseOptions())
