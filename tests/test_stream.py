@@ -345,3 +345,58 @@ def test_signal_candidates_are_read_and_other_extra_columns_are_not(logs):
         assert got.params[t] == pytest.approx(ref.params[t], rel=RTOL)
     batch = next(whole_trips(Part(str(logs["parquet"])), rows=20_000, columns=make().columns()))[0]
     assert "engine_on" in batch and "heading_deg" not in batch and "speed_mps" in batch
+
+
+def test_prefetched_keeps_order_raises_the_producers_error_and_stops_early():
+    """The read-ahead thread of the local engine: items in order, a producer's error
+    (e.g. a bad batch's UserError) raised in the consumer, and no thread left behind when
+    the consumer stops early."""
+    import threading
+
+    from sumo_drvpw.fit.engine import prefetched
+
+    assert list(prefetched(iter(range(50)))) == list(range(50))
+
+    def bad():
+        yield 1
+        raise UserError("x.parquet: column 'speed_mps' is 300 at row 7")
+
+    got = []
+    with pytest.raises(UserError, match="row 7"):
+        for v in prefetched(bad()):
+            got.append(v)
+    assert got == [1]
+
+    made = []
+
+    def endless():
+        i = 0
+        while True:
+            made.append(i)
+            yield i
+            i += 1
+
+    it = prefetched(endless())
+    assert [next(it) for _ in range(3)] == [0, 1, 2]
+    it.close()
+    assert not any(t.name == "sumo-drvpw-prefetch" and t.is_alive() for t in threading.enumerate())
+    assert len(made) <= 3 + 2  # one item queued, one in production: bounded read-ahead
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.integers(1, 40), min_size=1, max_size=10), st.integers(1, 60))
+def test_whole_trips_categorical_ids_are_the_same_trips(tmp_path_factory, lengths, rows):
+    """Dictionary-encoded trip ids (what the streamed reader uses): categorical frames
+    whose ids, rows and cuts equal the text read, across chunk and row-group boundaries."""
+    d = tmp_path_factory.mktemp("wtc")
+    trip = np.repeat([f"t{i}" for i in range(len(lengths))], lengths)
+    df = pd.DataFrame({"time_s": np.arange(len(trip), dtype=float), "trip_id": trip})
+    p = d / "x.parquet"
+    df.to_parquet(p, row_group_size=9)
+    cat = list(whole_trips(Part(str(p)), rows=rows, categorical=True))
+    assert all(isinstance(b["trip_id"].dtype, pd.CategoricalDtype) for b, _ in cat)
+    back = pd.concat([b.astype({"trip_id": str}) for b, _ in cat], ignore_index=True)
+    pd.testing.assert_frame_equal(back, df, check_dtype=False)
+    seen = [set(b.trip_id) for b, _ in cat]
+    assert sum(len(s) for s in seen) == len(lengths)  # each trip in exactly one batch
+    assert [o for _, o in cat] == list(np.cumsum([0] + [len(b) for b, _ in cat[:-1]]))
