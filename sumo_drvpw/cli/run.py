@@ -3,7 +3,8 @@
 One scenario: its outputs in DIR. Several (``run a.toml b.toml --jobs 2``): one SUMO per
 process, each scenario's outputs in ``DIR/<scenario name>/`` and all of them side by side in
 ``DIR/runs.csv`` (per scenario, equation and road class: traction energy [kWh] and
-energy per distance [Wh/km]). A scenario is a TOML file or a built-in name (``city``,
+energy per distance [Wh/km]). ``--engine dask`` runs each scenario as one task on a Dask
+cluster (``--scheduler ADDRESS``, else a local cluster of ``--workers N`` processes). A scenario is a TOML file or a built-in name (``city``,
 ``highway``: ``sumo_drvpw/sim/builtin/scenarios``).
 """
 
@@ -13,6 +14,7 @@ import argparse
 import sys
 
 from sumo_drvpw.cli import add_force, output_set
+from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -34,6 +36,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="edgeData interval [s] (default: the scenario's, else the whole run)")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_engine_arguments(parser, ("local", "dask"),
+                         "local: this machine, --jobs processes (default); dask: one task per "
+                         "scenario, one SUMO per task, on a Dask cluster (pip install "
+                         "'sumo-drvpw[dask]'; the workers write into --out: on a cluster of "
+                         "other machines a shared filesystem)")
     add_force(parser)
 
 
@@ -63,6 +70,13 @@ def _run_one(scenario: str, out: str, overrides: dict) -> dict:
     from sumo_drvpw.sim.scenario import scenario_path
 
     return run_scenario(scenario_path(scenario), out, **overrides).summary
+
+
+def _run_many(args, scen: list[str], outs: list, overrides: dict) -> list[dict]:
+    from sumo_drvpw.sim.run import run_scenarios
+
+    return run_scenarios(scen, outs, overrides, engine=args.engine, jobs=args.jobs,
+                         scheduler=args.scheduler, workers=args.workers)
 
 
 def _print_summary(s: dict, out, label: str = "") -> None:
@@ -117,13 +131,21 @@ def main(args: argparse.Namespace) -> int:
 
     if args.jobs < 1:
         raise UserError(f"--jobs must be ≥ 1, got {args.jobs}")
+    check_engine_arguments(args)
+    dask = args.engine == "dask"
+    if dask and args.jobs != 1:
+        raise UserError("--jobs goes with --engine local; with --engine dask the cluster's "
+                        "workers (--workers N) run the scenarios")
+    if dask and args.gui:
+        raise UserError("--gui watches a run on this machine (not with --engine dask)")
     overrides = _overrides(args)
     scen = list(args.scenario)
     inputs = [s for s in scen if Path(s).exists()]
     meta: dict = {}
     if len(scen) == 1:
         with output_set(args, args.out, inputs, meta=meta) as tmp:
-            s = _run_one(scen[0], str(tmp), overrides)
+            s = _run_many(args, scen, [tmp], overrides)[0] if dask else \
+                _run_one(scen[0], str(tmp), overrides)
             meta["interrupted"] = bool(s.get("interrupted"))
         _print_summary(s, args.out)
         if s.get("interrupted"):
@@ -134,21 +156,7 @@ def main(args: argparse.Namespace) -> int:
         raise UserError("--gui watches one scenario at a time")
     names = _names(scen)
     with output_set(args, args.out, inputs, meta=meta) as tmp:
-        summaries: dict[str, dict] = {}
-        if args.jobs == 1:
-            for n, s in zip(names, scen):
-                summaries[n] = _run_one(s, str(tmp / n), overrides)
-        else:
-            import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor
-
-            # spawn: each worker imports libsumo afresh (one simulation per process)
-            with ProcessPoolExecutor(max_workers=args.jobs,
-                                     mp_context=mp.get_context("spawn")) as pool:
-                futs = {n: pool.submit(_run_one, s, str(tmp / n), overrides)
-                        for n, s in zip(names, scen)}
-                for n, f in futs.items():
-                    summaries[n] = f.result()
+        summaries = dict(zip(names, _run_many(args, scen, [tmp / n for n in names], overrides)))
         write_text(tmp / "runs.csv", _combined(summaries).to_csv(index=False))
         meta["scenarios"] = dict(zip(names, scen))
     for n, s in summaries.items():

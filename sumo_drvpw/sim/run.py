@@ -284,3 +284,98 @@ def check_vtype_filter(sc, ledger) -> None:
         raise UserError(f"{sc.path or '<scenario>'}: vehicles.vtypes names vType(s) "
                         f"{', '.join(missing)} that no vehicle of the run had "
                         f"(seen: {', '.join(sorted(seen)) or 'none'})")
+
+
+#: One SUMO per process: libsumo is a process-wide singleton, so tasks of a Dask worker
+#: with several threads take turns (run N at once with N single-threaded workers).
+_ONE_SUMO = None
+
+
+def _sweep_task(scenario: str, out: str, overrides: dict, keep_vehicles: bool = False) -> dict:
+    """One scenario, one SUMO, in this process (a pool or Dask worker); returns the summary."""
+    import threading
+
+    global _ONE_SUMO
+    if _ONE_SUMO is None:
+        _ONE_SUMO = threading.Lock()
+    with _ONE_SUMO:
+        return run_scenario(scenario, out, keep_vehicles=keep_vehicles, **overrides).summary
+
+
+def run_scenarios(scenarios: list, out_dirs: list, overrides: dict | None = None,
+                  engine: str = "local", jobs: int = 1, scheduler: str | None = None,
+                  workers: int | None = None) -> list[dict]:
+    """Run several scenarios (a sweep of scenarios or seeds), one SUMO process each; returns
+    their summaries in the order given.
+
+    Parameters
+    ----------
+    scenarios : scenario TOML files or built-in names
+    out_dirs : one output folder per scenario (with ``dask`` on a cluster of other machines:
+        on a filesystem the workers share)
+    overrides : scenario values to replace in every run (as :func:`run_scenario`)
+    engine : ``local`` (this machine: ``jobs`` processes) or ``dask`` (one task per
+        scenario on a Dask cluster: ``scheduler`` address, else a local cluster of
+        ``workers`` single-threaded processes)
+    """
+    from sumo_drvpw.sim.scenario import scenario_path
+
+    overrides = dict(overrides or {})
+    paths = [str(scenario_path(s).resolve()) for s in scenarios]
+    outs = [str(Path(o).resolve()) for o in out_dirs]
+    if engine == "local":
+        if jobs <= 1:
+            return [_sweep_task(s, o, overrides) for s, o in zip(paths, outs)]
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        # spawn: each worker imports libsumo afresh (one simulation per process)
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
+            futs = [pool.submit(_sweep_task, s, o, overrides) for s, o in zip(paths, outs)]
+            return [f.result() for f in futs]
+    if engine != "dask":
+        raise UserError(f"engine '{engine}' unknown for SUMO runs; choose local or dask")
+    with dask_client(scheduler, workers) as client:
+        futs = [client.submit(_sweep_task, s, o, overrides, pure=False, key=f"sumo-run-{k}-{Path(s).stem}")
+                for k, (s, o) in enumerate(zip(paths, outs))]
+        out = []
+        for f in futs:  # in the order given; a failed run raises its error here
+            out.append(f.result())
+            f.release()
+        return out
+
+
+def dask_client(scheduler: str | None = None, workers: int | None = None):
+    """A Dask client as a context manager: of the scheduler at ``scheduler``, else of a local
+    cluster of ``workers`` single-threaded processes (closed on exit). UserError without
+    Dask or when the scheduler cannot be reached. (The cluster set-up of
+    :mod:`sumo_drvpw.fit.engine`, for SUMO runs.)"""
+    from contextlib import contextmanager
+
+    from sumo_drvpw.fit.engine import CONNECT_TIMEOUT_S
+
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise UserError("the dask engine needs Dask: pip install 'sumo-drvpw[dask]'") from None
+
+    @contextmanager
+    def ctx():
+        cluster = None
+        if scheduler is None:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0")
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+            except (OSError, TimeoutError) as e:
+                raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
+        try:
+            yield client
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+    return ctx()
