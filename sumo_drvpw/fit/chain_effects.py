@@ -120,7 +120,8 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
         ch.standstill_aux_w = float(new)
         if new < 0:
             return eq, (f"auxiliary power while standing {ch.aux_power_w + new:.0f} W, {-new:.0f} W less than while "
-                        "moving (drawn only while moving: drivetrain no-load losses, cooling)")
+                        "moving (drawn only while moving: drivetrain no-load losses, cooling, or road load the "
+                        "declared equation lacks)")
         return eq, f"extra auxiliary power while standing {new:.0f} W"
     if name == "recuperation_limit_w":
         ch.recuperation_limit_w = float(param)

@@ -393,6 +393,8 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
             beta, se, _ = _full_fit(w, Znew, r - fx)
             coef = np.zeros(0) if var[0] is None else beta[Zcur.shape[1]:]
             trial, reading = _closed(equation, accepted + [(c, vi, coef)], w, Znew, r - fx)
+            if trial is not None:
+                reading = reading[0]
             if trial is None:
                 rejected.append({"effect": c.name, "round": rnd + 1, "rmse_gain": gain, "p_value_bonferroni": p_adj,
                                  "reason": reading})
@@ -431,7 +433,12 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
         if added is None:
             break
         in_model.add(added.name)
-    closed, _ = _closed(equation, accepted, w, Zcur, r - fixed)
+    closed, (_, final) = _closed(equation, accepted, w, Zcur, r - fixed)
+    for f, (reading, co) in zip(findings, final):   # the final joint fit's values
+        f["reading_when_found"], f["coefficient_when_found"] = f["reading"], f["coefficient"]
+        f["reading"] = reading
+        if f["coefficient"] is not None:
+            f["coefficient"] = float(co[0]) if co.size == 1 else [float(v) for v in co]
     closed.name = f"{equation.name}_closed" if accepted else equation.name
     if accepted:  # the declared chain's fit statistics no longer describe what was changed
         changed = {c.name for c, _, _ in accepted}
@@ -486,13 +493,13 @@ def _closed(equation, accepted, w, Z, t):
         var = c.variants[vi]
         k = 0 if var[0] is None else var[0].shape[1]
         eq, reading = apply(eq, c.name, beta[j:j + k], var[2])
-        j += k
         if eq is None:
             return None, reading
-        readings.append(reading)
+        readings.append((reading, beta[j:j + k]))
+        j += k
     if not accepted:
         eq = copy.deepcopy(equation)
-    return eq, (readings[-1] if readings else "")
+    return eq, (readings[-1][0] if readings else "", readings)
 
 
 def _heldout_exact(m, equation, accepted, bl, idx, w, r, cands):

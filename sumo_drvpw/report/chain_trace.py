@@ -46,6 +46,9 @@ def markdown(r: dict) -> str:
          f"- linearisation: {r['linearisation']}",
          f"- candidates: {', '.join(c['effect'] for c in r['candidates'])}", "",
          "## Findings", ""]
+    L.append("Coefficients and readings from the final joint fit of every finding; gain, p and energy share "
+             "as the finding was accepted (its coefficient then: trace.json `coefficient_when_found`).")
+    L.append("")
     if not r["findings"]:
         L.append("None: the declared chain lacks nothing these data can show.")
     else:
@@ -72,6 +75,6 @@ def markdown(r: dict) -> str:
                  f"{y.get('predicted_j', float('nan')) / KWH:.3f} | {_pct(y.get('error'))} |")
     L += ["", f"## Closed equation `{r['closed_equation']}` (final_equation.toml)", "",
           f"- road load: {', '.join(f'{k} {coef(v)}' for k, v in r['closed_terms'].items())}",
-          f"- chain: {', '.join(f'{k} {v}' for k, v in r['closed_chain'].items() if not isinstance(v, dict))}",
+          f"- chain: {', '.join(f'{k} {v if isinstance(v, str) else coef(v)}' for k, v in r['closed_chain'].items() if not isinstance(v, dict))}",
           "", "It drops into `compare` (same target) and SUMO runs unchanged.", ""]
     return "\n".join(L)
