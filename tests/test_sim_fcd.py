@@ -151,3 +151,32 @@ def test_export_vtype_agrees_with_sumos_emissions_device(tmp_path, capsys, dt):
     assert v.sumo_electricity_wh.notna().all()  # beside ours in vehicles.parquet
     assert res["assumptions"]["default_masses"] == {}  # mass from the exported vType
     assert (v.mass_kg == 1700.0).all()
+
+
+def test_fcd_partitioned_parquet_equals_one_file(live, tmp_path, capsys):
+    """Partitioned Parquet FCD (a folder, or a glob of parts) books exactly what the one
+    file books; a pattern matching nothing is one line, exit 2."""
+    import pyarrow.parquet as pq
+
+    d, _ = live
+    tbl = pq.read_table(d / "fcd.parquet")
+    parts = tmp_path / "fcd"
+    parts.mkdir()
+    cut = [0, tbl.num_rows // 3, 2 * tbl.num_rows // 3, tbl.num_rows]
+    for k in range(3):  # time-ordered parts, as a writer rolling files over would leave them
+        pq.write_table(tbl.slice(cut[k], cut[k + 1] - cut[k]), parts / f"part-{k}.parquet")
+    one = process_fcd(d / "fcd.parquet", scenario=CITY, equations=[PHYS], end=200, figures=False)
+    key = ["vehicle", "equation"]
+    a = one.vehicles.sort_values(key).reset_index(drop=True)
+    for spec in (parts, parts / "part-*.parquet"):
+        res = process_fcd(spec, scenario=CITY, equations=[PHYS], end=200, figures=False)
+        b = res.vehicles.sort_values(key).reset_index(drop=True)
+        pd.testing.assert_frame_equal(a, b, check_exact=True)
+        assert res["samples"] == one["samples"] and len(b) > 40
+    code = cli_main(["fcd", str(tmp_path / "nothing-*.parquet"), "--scenario", str(CITY),
+                     "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "matches no file" in err and len(err.splitlines()) == 1
+    code = cli_main(["fcd", str(parts), "--scenario", str(CITY), "--equation", "vsp_ldv1999",
+                     "--end", "100", "--no-figures", "--out", str(tmp_path / "cli")])
+    assert code == 0 and (tmp_path / "cli" / "vehicles.parquet").is_file()

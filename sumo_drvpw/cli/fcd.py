@@ -1,5 +1,7 @@
 """``sumo-drvpw fcd FCD_FILE --net NET [--scenario S.toml] --out DIR``: book a finished SUMO
-run from its FCD output (XML, .xml.gz, Parquet, CSV) and write what ``run`` writes."""
+run from its FCD output (XML, .xml.gz, Parquet, CSV, or partitioned Parquet: a folder or a
+glob of parts) and write what ``run`` writes. The replay holds the FCD columns in memory
+(the ledger only the vehicles present); it runs on this machine (no ``--engine``)."""
 
 from __future__ import annotations
 
@@ -10,7 +12,8 @@ from sumo_drvpw.cli import add_force, output_set
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("fcd", metavar="FCD_FILE",
-                        help="SUMO --fcd-output file (.xml, .xml.gz, .parquet, .csv); "
+                        help="SUMO --fcd-output file (.xml, .xml.gz, .parquet, .csv), or "
+                             "partitioned Parquet FCD: a folder or a quoted glob ('fcd/*.parquet'); "
                              "--precision 6 keeps speeds exact")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--net", metavar="NET", help="the network the FCD was recorded on "

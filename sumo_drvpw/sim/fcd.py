@@ -72,22 +72,61 @@ def _xml_rows(path: Path) -> pd.DataFrame:
     return df
 
 
+def fcd_parts(spec) -> list[Path]:
+    """The Parquet files of a partitioned FCD: a folder (its ``*.parquet``, recursively) or
+    a glob pattern (``fcd/part-*.parquet``), sorted by name; [] when ``spec`` is neither."""
+    import glob
+
+    p = Path(spec)
+    if p.is_dir():
+        files = sorted(f for f in p.rglob("*.parquet") if f.is_file())
+        if not files:
+            raise UserError(f"FCD folder {p}: no .parquet files in it")
+        return files
+    if any(c in str(spec) for c in "*?[") and not p.exists():
+        files = sorted(Path(f) for f in glob.glob(str(spec), recursive=True) if Path(f).is_file())
+        if not files:
+            raise UserError(f"FCD pattern {spec}: matches no file")
+        bad = [f for f in files if not f.name.lower().endswith(".parquet")]
+        if bad:
+            raise UserError(f"FCD pattern {spec}: {bad[0]} is not a .parquet file (a pattern "
+                            "reads partitioned Parquet FCD only)")
+        return files
+    return []
+
+
+def _read_parquet_fcd(files: list[Path], label) -> pd.DataFrame:
+    """The FCD columns (only those) of one or several Parquet files, in file order."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    wanted = set(FCD_COLUMNS.values())
+    tables = []
+    for f in files:
+        try:
+            names = pq.read_schema(f).names
+            tables.append(pq.read_table(f, columns=[c for c in names if c in wanted]))
+        except Exception as e:  # pyarrow raises several error types for bad files
+            raise UserError(f"FCD file {f}: cannot read Parquet: {e}") from None
+    try:
+        tbl = pa.concat_tables(tables, promote_options="default")
+    except (pa.ArrowInvalid, pa.ArrowTypeError) as e:
+        raise UserError(f"FCD {label}: the parts' columns do not agree: {e}") from None
+    return tbl.to_pandas()
+
+
 def read_fcd(path) -> pd.DataFrame:
     """FCD rows (time, id, type, speed, lane, pos, [angle, slope, accel]) sorted by time;
     ``df.attrs["times"]``: every timestep of the file, vehicles or not. UserError names
-    the file and the missing column."""
+    the file and the missing column. ``path``: a file, or partitioned Parquet FCD (a folder
+    or a glob pattern of ``.parquet`` files, read as one, only the FCD columns)."""
+    parts = fcd_parts(path)
     path = Path(path)
-    if not path.is_file():
+    if not parts and not path.is_file():
         raise UserError(f"FCD file not found: {path}")
     name = path.name.lower()
-    if name.endswith(".parquet"):
-        import pyarrow.parquet as pq
-
-        try:
-            tbl = pq.read_table(path)
-        except Exception as e:  # pyarrow raises several error types for bad files
-            raise UserError(f"FCD file {path}: cannot read Parquet: {e}") from None
-        raw = tbl.to_pandas()
+    if parts or name.endswith(".parquet"):
+        raw = _read_parquet_fcd(parts or [path], path)
     elif name.endswith(".csv") or name.endswith(".csv.gz"):
         try:
             raw = pd.read_csv(path, sep=None, engine="python")
