@@ -165,6 +165,12 @@ def test_cli_diagnose_battery_from_the_equation(tmp_path, clean):
     doc = json.loads((cmp_out / "report.json").read_text())
     r2 = {k: v["r2"] for k, v in doc["equations"].items()}
     assert r2[closed.name] > r2["declared"] + 0.05
+    # told otherwise: --target wheel traces the driving power with the residual tracer
+    wheel = tmp_path / "wheel"
+    assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--target", "wheel",
+                     "--out", str(wheel), "--quiet", "--no-figures", "--max-findings", "1"]) == 0
+    w = json.loads((wheel / "trace.json").read_text())
+    assert "declared_chain" not in w and "battery" not in str(w["target"]).lower()
 
 
 def test_cli_target_errors(tmp_path, clean, capsys):
