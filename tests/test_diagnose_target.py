@@ -297,3 +297,38 @@ def test_jlu_road_from_the_dyno_chain(shared_data):
     before = res.report["baseline"]["trip_net_energy"]["mean_abs_error"]
     after = res.report["final"]["trip_net_energy"]["mean_abs_error"]
     assert after < before
+
+
+def _with_battery_plant(df, extra_w):
+    d = df.copy()
+    d["battery_current_a"] = d["battery_current_a"] + extra_w / d["battery_voltage_v"]
+    return d
+
+
+def test_planted_recuperation_limit_is_found(clean):
+    """Battery from the chain with a 15 kW recuperation limit the declared chain lacks: the
+    limit is found (profiled over quantiles of the braking power: within 20 %)."""
+    m, b, df = clean
+    veh = load_vehicle("prius3")
+    p = load_equation("drvpw_prius3").power(m.inputs)
+    lim = 15000.0
+    d = _with_battery_plant(df, b.recuperation_efficiency * (np.maximum(p, -lim) - p))
+    res = trace_chain(measure(from_frame(d, veh, name="limit"), veh, "battery"), _declared(b))
+    f = res.report["findings"][0]
+    assert f["term"] == "recuperation_limit_w" and f["parameter"] == pytest.approx(lim, rel=0.2)
+    assert res.equation.chain.recuperation_limit_w == f["parameter"]
+
+
+def test_planted_heating_over_ambient_temperature_is_found(clean):
+    """Trips at −5 … 25 °C with 40 W/K of heating below 20 °C at the battery: the HVAC
+    effect is found with its heating gain (±10 %) and written into the chain."""
+    _, b, df = clean
+    veh = load_vehicle("prius3")
+    temps = dict(zip(df["trip_id"].unique(), [-5.0, 0.0, 5.0, 10.0, 15.0, 25.0]))
+    d = df.assign(ambient_c=df["trip_id"].map(temps))
+    d = _with_battery_plant(d, 40.0 * np.maximum(20.0 - d["ambient_c"].to_numpy(), 0.0))
+    res = trace_chain(measure(from_frame(d, veh, name="hvac"), veh, "battery"), _declared(b))
+    f = res.report["findings"][0]
+    assert f["term"] == "hvac" and f["role"] == "condition"
+    assert f["coefficient"][0] == pytest.approx(40.0, rel=0.1)
+    assert res.equation.chain.hvac["heating_w_per_k"] == pytest.approx(f["coefficient"][0])
