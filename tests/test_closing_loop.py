@@ -52,3 +52,73 @@ def test_ledger_fast_path_books_the_cold_terms_as_the_evaluator(amb):
     if amb is None:   # no temperature: the equation at the reference temperature
         ref = Equation("a0", {k: c for k, c in eqs[0].terms.items() if "cold" not in k})
         np.testing.assert_allclose(eqs[0].power(x), ref.power(x), rtol=1e-12)
+
+
+# ------------------------------------------- physical candidates chosen on whole trips
+
+def _trips(k_cr=0.0, recup_scale=1.0, n_trips=12, n=1500, seed=7):
+    """Synthetic trips at different ambient temperatures; truth at the motor shaft:
+    1.1·m·v·a + m·g·v·sin θ + 0.35·v³ + c_r(T)·m·g·v·cos θ, c_r(T) = 0.012·(1 + k·(20 − T)),
+    recuperation × ``recup_scale``; noise 400 W."""
+    rng = np.random.default_rng(seed)
+    parts = []
+    for i in range(n_trips):
+        v = np.clip(14 + 8 * np.sin(np.arange(n) / 90.0 + i) + np.cumsum(rng.normal(0, 0.1, n)), 0.5, 33)
+        a = np.gradient(v, 0.5)
+        th = 0.03 * np.sin(np.arange(n) / (80.0 + 10 * i) + i)
+        t_amb = -5.0 + 35.0 * i / (n_trips - 1)
+        parts.append((v, a, th, np.full(n, t_amb), np.full(n, f"T{i:02d}")))
+    v, a, th, amb, trip = (np.concatenate(z) for z in zip(*parts))
+    m = np.full(v.size, 1500.0)
+    x = Inputs(v, a, th, np.zeros(v.size), m, np.full(v.size, 1.2), {"ambient_c": amb}, trip)
+    cr = 0.012 * (1.0 + k_cr * (T_REF_C - amb))
+    p = 1.1 * m * v * a + m * G * v * np.sin(th) + 0.35 * v ** 3 + cr * m * G * v * np.cos(th)
+    p = np.where(p < 0, recup_scale * p, p) + rng.normal(0, 400.0, v.size)
+    return x, p, np.ones(v.size, bool), np.full(v.size, 0.5), trip
+
+
+BASE = ["acc", "aero", "roll", "grade"]
+
+
+def test_planted_cr_temperature_is_found_with_its_k():
+    from sumo_drvpw.fit.physical import select_physical
+
+    sel = select_physical(*_trips(k_cr=0.01), BASE, candidates=("rho(T)", "c_r(T)", "cold drag"))
+    assert sel["chosen"] == ["c_r(T)"]
+    step = next(s for s in sel["steps"] if s["accepted"])
+    assert step["reading"]["value"] == pytest.approx(0.01, rel=0.15)   # planted k 1 %/K
+    assert sel["cv"]["mean_abs_error"] < sel["base_cv"]["mean_abs_error"]
+
+
+def test_nothing_planted_nothing_found():
+    from sumo_drvpw.fit.physical import select_physical
+
+    sel = select_physical(*_trips(), BASE)
+    assert sel["chosen"] == [], sel["steps"]
+
+
+def test_planted_recuperation_regime_is_found_and_scale_recovered():
+    from sumo_drvpw.fit.physical import regime_fit, select_physical
+
+    x, p, use, dt, trip = _trips(recup_scale=0.7)
+    sel = select_physical(x, p, use, dt, trip, BASE, candidates=("regime", "c_r(T)"))
+    assert sel["chosen"] == ["regime"]
+    b, r = regime_fit(term_matrix(BASE, x), p, True)
+    assert 1 + r == pytest.approx(0.7, abs=0.03)
+    assert dict(zip(BASE, b))["acc"] == pytest.approx(1.1, rel=0.03)
+
+
+def test_trip_cv_energy_is_the_compare_definition():
+    # one fold's held-out trip energy equals trip_energy of the same prediction (no other mask)
+    from sumo_drvpw.fit.compare import trip_energy
+    from sumo_drvpw.fit.physical import regime_fit, regime_power, trip_cv
+
+    x, p, use, dt, trip = _trips(n_trips=4, n=800)
+    cv = trip_cv(x, p, use, dt, trip, BASE, k=4)
+    X = term_matrix(BASE, x)
+    test = trip == "T00"
+    b, r = regime_fit(X[~test], p[~test], False)
+    want = trip_energy(regime_power(X[test], b, r), p[test], dt[test], trip[test])["trips"]["T00"]
+    assert cv["errors"]["T00"] == pytest.approx(want["error"], rel=1e-9)
+    # measured side by hand: Σ max(P, 0)·Δt
+    assert want["measured_j"] == pytest.approx(float(np.sum(np.maximum(p[test], 0)) * 0.5))

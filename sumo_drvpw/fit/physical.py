@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import cholesky, solve_triangular
 from scipy.optimize import lsq_linear
+from scipy.stats import wilcoxon
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.ols import Gram, gram
@@ -275,3 +276,179 @@ def apply_physics_gram(eq, g: Gram | None, rho_kgm3: float = RHO_DEFAULT,
 def constraints_of(candidates_spec) -> dict | None:
     """Constraints declared in a candidate TOML file, or None (a set name or a list)."""
     return read_constraints(candidates_spec) if str(candidates_spec).endswith(".toml") else None
+
+
+# ------------------------------------------------- physical candidates, chosen on whole trips
+
+#: Physical candidates of the closed loop (issue #11 §2–§4) in forms SUMO can evaluate:
+#: name → (what it means, terms replaced {old: new}, terms added). ``regime`` is a fit
+#: option, not a term: recuperation on its own coefficient (1 + r scales predicted
+#: recuperation), so that braking samples do not bend the traction coefficients.
+PHYSICAL_CANDIDATES = {
+    "rho(T)": ("air density from temperature and altitude in the aero term (coefficient C_d·A)",
+               {"aero": "aero_rho"}, ()),
+    "c_r(T)": ("rolling resistance rising in the cold, c_r0·(1 + k·(T_ref − T))", {}, ("roll*cold",)),
+    "cold drag": ("drivetrain (gear oil, bearing grease) drag ∝ v rising in the cold", {}, ("cold*v^2",)),
+    "regime": ("recuperation on its own coefficient (drivetrain efficiency differs by direction)", {}, ()),
+}
+#: plausible tyre temperature coefficient k of c_r(T) [1/K]: ISO 28580 corrects with 0.008/K;
+#: up to 0.03/K leaves room for bearings and the drivetrain share of the ``roll`` term
+K_CR_MAX = 0.03
+#: significance of a candidate's gain over whole trips: one-sided Wilcoxon signed-rank test
+#: of the per-trip absolute traction-energy errors before and after
+ALPHA = 0.05
+#: smallest material gain in the mean absolute trip traction-energy error (0.1 percentage
+#: point; the product's trip-energy errors are read in whole percent)
+MIN_GAIN = 0.001
+
+
+def regime_fit(X: np.ndarray, y: np.ndarray, regime: bool, iters: int = 12) -> tuple[np.ndarray, float]:
+    """Least squares of y on X; with ``regime``, P̂ = Xβ where Xβ ≥ 0 and (1 + r)·Xβ where it
+    is negative (alternating least squares for β and r). Returns (β, r); r = 0 without regime."""
+    s = np.sqrt(np.maximum(np.einsum("ij,ij->j", X, X), 1e-300))   # column scaling
+    Xs = X / s
+
+    def solve(w):  # weighted normal equations of the scaled columns
+        return np.linalg.solve((Xs * (w * w)[:, None]).T @ Xs, Xs.T @ (w * y)) / s
+    b = solve(np.ones(len(y)))
+    r = 0.0
+    if not regime:
+        return b, r
+    for _ in range(iters):
+        p = X @ b
+        neg = p < 0.0
+        den = float(np.sum(p[neg] ** 2))
+        r = float(np.sum(p[neg] * (y[neg] - p[neg])) / den) if den > 0 else 0.0
+        b = solve(np.where(neg, 1.0 + r, 1.0))
+    return b, r
+
+
+def regime_power(X: np.ndarray, b: np.ndarray, r: float) -> np.ndarray:
+    """P̂ = Xβ, its negative part scaled by (1 + r) [W]."""
+    p = X @ b
+    return np.where(p < 0.0, (1.0 + r) * p, p)
+
+
+def _terms_of(base: list[str], chosen: list[str]) -> tuple[list[str], bool]:
+    terms = list(base)
+    for c in chosen:
+        _, repl, add = PHYSICAL_CANDIDATES[c]
+        terms = [repl.get(t, t) for t in terms] + [t for t in add if t not in terms]
+    return terms, "regime" in chosen
+
+
+def trip_cv(x, y, use, dt, trip, terms, regime=False, k: int = 5) -> dict:
+    """Trip-grouped k-fold cross-validation of ``terms``: fold j holds out every k-th trip in
+    name order from the j-th; per held-out trip the traction-energy error (Σ max(P, 0)·Δt,
+    predicted/measured − 1, :func:`sumo_drvpw.fit.compare.trip_energy`) and the pooled RMSE."""
+    from sumo_drvpw.fit.compare import trip_energy
+    from sumo_drvpw.model.terms import term_matrix
+
+    X = term_matrix(terms, x)
+    ok = np.asarray(use, bool) & np.all(np.isfinite(X), axis=1) & np.isfinite(y)
+    names = sorted(set(np.asarray(trip)[ok].tolist()))
+    k = max(2, min(k, len(names)))
+    errs, sse, n = {}, 0.0, 0
+    for j in range(k):
+        test = np.isin(trip, names[j::k]) & ok
+        train = ok & ~test
+        b, r = regime_fit(X[train], y[train], regime)
+        p = regime_power(X[test], b, r)
+        errs.update({t: v["error"] for t, v in trip_energy(p, y[test], dt[test], trip[test])["trips"].items()})
+        sse += float(np.sum((y[test] - p) ** 2))
+        n += int(test.sum())
+    a = np.abs(np.array([e for e in errs.values() if np.isfinite(e)]))
+    return {"errors": errs, "mean_abs_error": float(a.mean()), "max_abs_error": float(a.max()),
+            "rmse_w": math.sqrt(sse / max(n, 1)), "folds": k}
+
+
+def candidate_reading(name: str, params: dict[str, float], r: float, rho_kgm3: float) -> dict:
+    """Physical reading of a candidate's coefficient and whether it is plausible."""
+    if name == "rho(T)":
+        c = params.get("aero_rho", math.nan)
+        return {"reads_as": "C_d·A", "value": c, "unit": "m²", "plausible": bool(c >= CDA_MIN)}
+    if name == "c_r(T)":
+        k = params["roll*cold"] / params["roll"] if params.get("roll") else math.nan
+        return {"reads_as": "k of c_r(T) = c_r0·(1 + k·(T_ref − T))", "value": k, "unit": "1/K",
+                "plausible": bool(0.0 <= k <= K_CR_MAX)}
+    if name == "cold drag":
+        c = params["cold*v^2"]
+        return {"reads_as": "extra drag force per K below T_ref and per m/s", "value": c, "unit": "N·s/(m·K)",
+                "plausible": bool(c >= 0.0)}
+    if name == "regime":
+        return {"reads_as": "recuperation scale 1 + r (≈ η² with friction braking)", "value": 1.0 + r,
+                "unit": "-", "plausible": bool(0.0 < 1.0 + r <= 1.0)}
+    raise KeyError(name)
+
+
+def select_physical(x, y, use, dt, trip, base_terms, candidates=tuple(PHYSICAL_CANDIDATES),
+                    k: int = 5) -> dict:
+    """Forward selection of physical candidates on whole training trips.
+
+    A candidate is added when, with those chosen before, it lowers the trip-grouped k-fold
+    cross-validated mean absolute trip traction-energy error (:func:`trip_cv`) by at least
+    :data:`MIN_GAIN`, lowers the
+    error on more than half of the trips, significantly (one-sided Wilcoxon signed-rank test
+    of the per-trip absolute errors, p < :data:`ALPHA`), and its coefficient fitted on all
+    trips reads plausibly (:func:`candidate_reading`); the best such candidate enters first.
+
+    Parameters
+    ----------
+    x, y, use, dt, trip : inputs, measured power [W], usable mask, sample duration [s] and
+        trip id per sample (the training trips only)
+    base_terms : the declared terms (e.g. acc, aero, roll, grade)
+
+    Returns ``{"chosen", "terms", "regime", "steps": [{candidate, cv, helped, trips, reading,
+    accepted, why}], "base_cv"}``.
+    """
+    from sumo_drvpw.model.terms import term_matrix
+
+    y = np.asarray(y, float)
+    chosen: list[str] = []
+    cur = trip_cv(x, y, use, dt, trip, base_terms, k=k)
+    out = {"base_cv": cur, "steps": [], "chosen": chosen}
+    rho = float(np.nanmean(np.asarray(x.rho, float)[use]))
+    left = [c for c in candidates]
+    while left:
+        trials = []
+        for c in left:
+            terms, regime = _terms_of(base_terms, chosen + [c])
+            cv = trip_cv(x, y, use, dt, trip, terms, regime, k=k)
+            common = [t for t in cv["errors"]
+                      if np.isfinite(cv["errors"][t]) and np.isfinite(cur["errors"].get(t, np.nan))]
+            d = np.array([abs(cur["errors"][t]) - abs(cv["errors"][t]) for t in common])
+            helped = int((d > 0).sum())
+            pval = float(wilcoxon(d, alternative="greater").pvalue) if np.any(d != 0) else 1.0
+            trials.append((cv["mean_abs_error"], c, cv, (helped, pval), terms, regime))
+        trials.sort(key=lambda z: z[0])
+        step_done = False
+        for mean, c, cv, (helped, pval), terms, regime in trials:
+            X = term_matrix(terms, x)
+            ok = np.asarray(use, bool) & np.all(np.isfinite(X), axis=1) & np.isfinite(y)
+            b, r = regime_fit(X[ok], y[ok], regime)
+            reading = candidate_reading(c, dict(zip(terms, b)), r, rho)
+            n = len(cv["errors"])
+            why = []
+            if mean > cur["mean_abs_error"] - MIN_GAIN:
+                why.append("does not lower the cross-validated trip-energy error by "
+                           f"{100 * MIN_GAIN:g} percentage point")
+            if helped * 2 <= n:
+                why.append(f"helps on only {helped} of {n} trips")
+            if pval >= ALPHA:
+                why.append(f"gain over trips not significant (Wilcoxon p = {pval:.2g})")
+            if not reading["plausible"]:
+                why.append(f"implausible {reading['reads_as']} = {reading['value']:.4g}")
+            step = {"candidate": c, "cv": cv, "helped": helped, "trips": n, "p_value": pval, "reading": reading,
+                    "accepted": not why, "why": "; ".join(why), "after": list(chosen)}
+            out["steps"].append(step)
+            if not why:
+                chosen.append(c)
+                left.remove(c)
+                cur = cv
+                step_done = True
+                break
+        if not step_done:
+            break
+    out["terms"], out["regime"] = _terms_of(base_terms, chosen)
+    out["cv"] = cur
+    return out
