@@ -122,3 +122,23 @@ def test_trip_cv_energy_is_the_compare_definition():
     assert cv["errors"]["T00"] == pytest.approx(want["error"], rel=1e-9)
     # measured side by hand: Σ max(P, 0)·Δt
     assert want["measured_j"] == pytest.approx(float(np.sum(np.maximum(p[test], 0)) * 0.5))
+
+
+def test_closed_loop_form_runs_in_sumo_at_the_reference_temperature(tmp_path):
+    """An equation with the temperature terms the closed loop carries runs in a real SUMO
+    run (log-only [ambient_c] terms are refused there); without an air temperature passed to
+    the loop, 'cold' is 0 and it books what the same equation without them books."""
+    from pathlib import Path
+
+    from sumo_drvpw.sim import run_scenario
+
+    city = Path(__file__).resolve().parent.parent / "scenarios" / "city.toml"
+    base = {"acc": 1.27, "grade": 1.05, "aero": 0.33, "roll": 0.015}
+    closed = Equation("closed", dict(base, **{"cold*v^2": 0.17, "roll*cold": 2e-4}))
+    ref = Equation("ref", base)
+    s = run_scenario(city, tmp_path / "o", end=120, equations=[closed, ref], figures=False)
+    assert s["samples"] > 0
+    e_c, e_r = s["equations"]["closed"]["energy_j"]["city"], s["equations"]["ref"]["energy_j"]["city"]
+    assert sum(abs(v) for v in e_r.values()) > 0
+    for cat, val in e_r.items():
+        assert e_c[cat] == pytest.approx(val, rel=1e-12, abs=1e-9)
