@@ -61,9 +61,22 @@ class Moments:
         x = np.asarray(x, float)
         if len(x) == 0:
             return cls.empty(x.shape[1])
-        mu = x.mean(axis=0)
-        c = x - mu
-        return cls(len(x), mu, c.T @ c)
+        return cls._of_t(np.array(x.T, order="C", copy=True))  # centred in place: a copy
+
+    @classmethod
+    def of_columns(cls, cols) -> "Moments":
+        """Moments of d variables given as d arrays of n samples each (no n × d copy)."""
+        if len(cols[0]) == 0:
+            return cls.empty(len(cols))
+        return cls._of_t(np.vstack([np.asarray(c, float) for c in cols]))
+
+    @classmethod
+    def _of_t(cls, xt: np.ndarray) -> "Moments":
+        """From a d × n array (a copy, centred in place): each mean a contiguous
+        (pairwise) sum, the co-moments one product."""
+        mu = xt.mean(axis=1)
+        xt -= mu[:, None]
+        return cls(xt.shape[1], mu, xt @ xt.T)
 
     def merge(self, o: "Moments") -> "Moments":
         """Pairwise update (Chan et al. 1979): M2 = M2a + M2b + δδᵀ·na·nb/n."""

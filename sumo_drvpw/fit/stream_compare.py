@@ -15,11 +15,10 @@ import zlib
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.ols import Gram
-from sumo_drvpw.fit.stream import Moments, _add_counts
+from sumo_drvpw.fit.stream import Moments, _add_counts, _trip_codes
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS
 from sumo_drvpw.model.terms import CATEGORIES, parse_term
 
@@ -27,14 +26,16 @@ from sumo_drvpw.model.terms import CATEGORIES, parse_term
 RESERVOIR = 250_000
 
 
-def _keys(trip: np.ndarray) -> np.ndarray:
+def _keys(ids, starts: np.ndarray, n: int) -> np.ndarray:
     """A deterministic uniform key in [0, 1) per sample from its trip id and position in
-    the trip, so the reservoir is the same whatever the batching or engine."""
-    out = np.empty(len(trip))
-    starts = np.flatnonzero(np.r_[True, trip[1:] != trip[:-1]]) if len(trip) else []
-    bounds = np.r_[starts, len(trip)]
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        seed = zlib.crc32(str(trip[a]).encode())
+    the trip, so the reservoir is the same whatever the batching or engine.
+
+    ``ids``: the trip id of each run of samples; ``starts``: the first row of each run;
+    ``n``: rows."""
+    out = np.empty(n)
+    bounds = np.r_[starts, n]
+    for t, a, b in zip(ids, bounds[:-1], bounds[1:]):
+        seed = zlib.crc32(str(t).encode())
         out[a:b] = np.random.default_rng(seed).random(b - a)
     return out
 
@@ -97,10 +98,11 @@ class _EqStats:
             self.energy + b.energy, self.hs + b.hs, bins, {**self.trip_e, **b.trip_e})
 
 
-def _minmax(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    if len(m) == 0:
-        return np.full(m.shape[1], np.inf), np.full(m.shape[1], -np.inf)
-    return m.min(axis=0), m.max(axis=0)
+def _minmax(cols: list) -> tuple[np.ndarray, np.ndarray]:
+    """Per column (min, max); +inf/−inf for columns without samples."""
+    lo = [c.min() if len(c) else np.inf for c in cols]
+    hi = [c.max() if len(c) else -np.inf for c in cols]
+    return np.array(lo, float), np.array(hi, float)
 
 
 def _categories(pw: dict) -> list:
@@ -152,15 +154,22 @@ class CompareStats:
         self.source = self.source or m.source
         self.vehicle = self.vehicle or m.vehicle
         self.files += [f for f in m.log.files if f not in self.files]
-        idx = np.flatnonzero(np.asarray(m.usable, bool))
+        usable = np.asarray(m.usable, bool)
+        every = bool(usable.all())
+        idx = np.flatnonzero(usable)
         if len(idx) == 0:
             return self
-        x = m.inputs.take(idx)
-        meas = np.asarray(m.power_w, float)[idx]
-        dt = m.log.df["dt_s"].to_numpy(float)[idx]
-        codes, uniq = pd.factorize(np.asarray(x.trip), sort=False)  # hashing, not sorting text
-        uniq = np.asarray(uniq).astype(str)
-        trip = np.asarray(x.trip)
+        x = m.inputs if every else m.inputs.take(idx)
+        meas = np.asarray(m.power_w, float)
+        dt = m.log.df["dt_s"].to_numpy(float)
+        if not every:
+            meas, dt = meas[idx], dt[idx]
+        # trips by integer codes (contiguous runs), ids once per trip: no string per row
+        tc = _trip_codes(m)
+        tc = tc if every else tc[idx]
+        starts = np.flatnonzero(np.r_[True, tc[1:] != tc[:-1]])
+        codes = np.cumsum(np.r_[True, tc[1:] != tc[:-1]]) - 1
+        uniq = np.asarray(x.trip)[starts].astype(str)
         if self.trips.intersection(uniq):
             raise UserError(f"trip_id '{sorted(self.trips.intersection(uniq))[0]}' appears in "
                             "more than one place; give each trip its own id")
@@ -168,7 +177,7 @@ class CompareStats:
         v = np.asarray(x.v, float)
         n = len(meas)
         self.n += n
-        self.meas = self.meas.merge(Moments.of(meas[:, None]))
+        self.meas = self.meas.merge(Moments.of_columns([meas]))
         self.meas_traction += float(np.where(meas > 0.0, meas, 0.0) @ dt)
         heavy_all = meas >= HEAVY_LOAD_W
         self.n_heavy += int(heavy_all.sum())
@@ -177,7 +186,13 @@ class CompareStats:
         pw = {eq.name: eq.category_powers(x) for eq in self.equations}
         if self.reference is not None and self.ref_cats is None:
             self.ref_cats = _categories(pw[self.reference])
-        cols = {"meas": meas, "v": v, "dt": dt}
+        # the reservoir: only samples whose key is below the k-th smallest so far can enter
+        key = _keys(uniq, starts, n)
+        if self.res is not None and len(self.res.key) >= self.k:
+            enter = np.flatnonzero(key < self.res.key.max())
+        else:
+            enter = np.arange(n)
+        cols = {"meas": meas[enter], "v": v[enter], "dt": dt[enter]}
         for eq in self.equations:
             prev = self.eq.get(eq.name)
             cats = prev.cats if prev is not None else _categories(pw[eq.name])
@@ -186,20 +201,21 @@ class CompareStats:
             pred = np.sum(list(cw.values()), axis=0) if cw else zero
             err = pred - meas
             ok = np.isfinite(err)
-            e, mo, po, vo, dto = err[ok], meas[ok], pred[ok], v[ok], dt[ok]
+            sel = slice(None) if ok.all() else ok  # views when every prediction is finite
+            e, mo, po, vo, dto = err[sel], meas[sel], pred[sel], v[sel], dt[sel]
             hv = mo >= HEAVY_LOAD_W
-            cm = np.column_stack([cw[c][ok] for c in cats]) if cats else np.zeros((len(e), 0))
-            wgt = np.where(cm.sum(axis=1) > 0.0, dto, 0.0)
+            cm = [cw[c][sel] for c in cats]
+            # Σ of the categories is the prediction (same sum, same order)
+            wgt = np.where(po > 0.0, dto, 0.0) if cats else np.zeros(len(e))
             eref = rmin = rmax = None
             if self.reference is not None:
                 rp = pw[self.reference]
-                rm = np.column_stack([np.asarray(rp.get(c, zero), float)[ok] for c in self.ref_cats]) \
-                    if self.ref_cats else np.zeros((len(e), 0))
-                eref = Moments.of(np.column_stack([e, rm]))
+                rm = [np.asarray(rp.get(c, zero), float)[sel] for c in self.ref_cats]
+                eref = Moments.of_columns([e] + rm)
                 rmin, rmax = _minmax(rm)
             hi = vo >= HIGH_SPEED_MPS
-            hs = np.array([hi.sum(), e[hi].sum(), e[hi] @ e[hi],
-                           (~hi).sum(), e[~hi].sum(), e[~hi] @ e[~hi]], float)
+            ehi, elo = e[hi], e[~hi]
+            hs = np.array([len(ehi), ehi.sum(), ehi @ ehi, len(elo), elo.sum(), elo @ elo], float)
             b = np.floor(np.maximum(vo, 0.0) / SPEED_BIN_MPS + 1e-9).astype(np.int64)
             nb = int(b.max()) + 1 if len(b) else 0
             bins = np.vstack([np.bincount(b, minlength=nb), np.bincount(b, e, nb),
@@ -210,22 +226,23 @@ class CompareStats:
                     np.bincount(codes, np.where(pm > 0.0, pm, 0.0) * dt, k),
                     np.bincount(codes, meas * dt, k), np.bincount(codes, pm * dt, k)]
             cmin, cmax = _minmax(cm)
+            el, eh = e[~hv], e[hv]
             st = _EqStats(
-                cats, {"all": Moments.of(np.column_stack([mo, po])),
-                       "light": Moments.of(np.column_stack([mo[~hv], po[~hv]])),
-                       "heavy": Moments.of(np.column_stack([mo[hv], po[hv]]))},
-                {"all": float(e @ e), "light": float(e[~hv] @ e[~hv]), "heavy": float(e[hv] @ e[hv])},
-                {"all": float(e.sum()), "light": float(e[~hv].sum()), "heavy": float(e[hv].sum())},
-                float(np.abs(e).sum()), Moments.of(np.column_stack([e, cm])), cmin, cmax,
-                eref, rmin, rmax, cm.T @ wgt, hs, bins,
+                cats, {"all": Moments.of_columns([mo, po]),
+                       "light": Moments.of_columns([mo[~hv], po[~hv]]),
+                       "heavy": Moments.of_columns([mo[hv], po[hv]])},
+                {"all": float(e @ e), "light": float(el @ el), "heavy": float(eh @ eh)},
+                {"all": float(e.sum()), "light": float(el.sum()), "heavy": float(eh.sum())},
+                float(np.abs(e).sum()), Moments.of_columns([e] + cm), cmin, cmax,
+                eref, rmin, rmax, np.array([c @ wgt for c in cm]), hs, bins,
                 {str(t): tuple(float(s[i]) for s in sums) for i, t in enumerate(uniq)})
             self.eq[eq.name] = st if prev is None else prev.merge(st)
-            cols[f"pred:{eq.name}"] = pred
-            cols[f"ok:{eq.name}"] = ok
+            cols[f"pred:{eq.name}"] = pred[enter]
+            cols[f"ok:{eq.name}"] = ok[enter]
             for c in cats:
-                cols[f"cat:{eq.name}:{c}"] = cw[c]
-        batch = _Reservoir(self.k, np.zeros(0), {}).add(_keys(trip), cols)
-        self.res = batch if self.res is None else self.res.add(batch.key, batch.cols)
+                cols[f"cat:{eq.name}:{c}"] = cw[c][enter]
+        key = key[enter]
+        self.res = (_Reservoir(self.k, np.zeros(0), {}) if self.res is None else self.res).add(key, cols)
         return self
 
     def merge(self, o: "CompareStats") -> "CompareStats":
