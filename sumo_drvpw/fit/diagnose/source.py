@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -31,9 +31,9 @@ from sumo_drvpw.data.stream import BATCH_ROWS, plan, whole_trips
 from sumo_drvpw.model.terms import Inputs, parse_term
 
 #: rows of the first-look sample (screening, two-valued columns, quantiles)
-SAMPLE_ROWS = 1_000_000
+SAMPLE_ROWS = 500_000
 #: prepared batches kept in memory up to this size [MB]; beyond, in a temporary folder
-CACHE_MB = 768
+CACHE_MB = 200
 INPUT_FIELDS = ("v", "a", "theta", "wind", "mass", "rho")
 
 
@@ -76,7 +76,11 @@ def concat_inputs(xs: list[Inputs]) -> Inputs:
 
 
 class Batches:
-    """Prepared batches (dicts of arrays), in memory up to ``cache_mb``, else on disk."""
+    """Prepared batches (dicts of arrays), in memory up to ``cache_mb``, else on disk.
+
+    A 1-D array holding one value (a fixed mass, air density, sample interval) is kept as
+    that value and given back as a read-only broadcast view. On disk each array is a raw
+    ``.npy`` file (no compression, no checksum: a pass reads at disk-cache speed)."""
 
     def __init__(self, cache_mb: float = CACHE_MB):
         self.cache_bytes = cache_mb * 1e6
@@ -84,7 +88,24 @@ class Batches:
         self._items: list = []
         self._dir: Path | None = None
 
+    @staticmethod
+    def _pack(d: dict) -> dict:
+        out = {}
+        for k, v in d.items():
+            if (isinstance(v, np.ndarray) and v.ndim == 1 and v.dtype.kind == "f" and len(v) > 1
+                    and v[0] == v[-1] and np.all(v == v[0])):
+                out[k] = ("const", float(v[0]), len(v))
+            else:
+                out[k] = v
+        return out
+
+    @staticmethod
+    def _unpack(d: dict) -> dict:
+        return {k: (np.broadcast_to(v[1], (v[2],)) if isinstance(v, tuple) and v and v[0] == "const" else v)
+                for k, v in d.items()}
+
     def append(self, d: dict) -> None:
+        d = self._pack(d)
         size = sum(v.nbytes for v in d.values() if isinstance(v, np.ndarray))
         self.nbytes += size
         if self.nbytes <= self.cache_bytes:
@@ -92,9 +113,16 @@ class Batches:
             return
         if self._dir is None:
             self._dir = Path(tempfile.mkdtemp(prefix="sumo_drvpw_diagnose_"))
-        f = self._dir / f"b{len(self._items):06d}.npz"
-        np.savez(f, **{k: v for k, v in d.items() if isinstance(v, np.ndarray)})
-        self._items.append((f, {k: v for k, v in d.items() if not isinstance(v, np.ndarray)}))
+        i = len(self._items)
+        files, rest = {}, {}
+        for k, v in d.items():
+            if isinstance(v, np.ndarray):
+                f = self._dir / f"b{i:06d}_{k}.npy"
+                np.save(f, v, allow_pickle=False)
+                files[k] = f
+            else:
+                rest[k] = v
+        self._items.append((files, rest))
 
     def __len__(self):
         return len(self._items)
@@ -102,12 +130,12 @@ class Batches:
     def __iter__(self):
         for it in self._items:
             if isinstance(it, dict):
-                yield it
+                yield self._unpack(it)
             else:
-                with np.load(it[0]) as z:
-                    d = {k: z[k] for k in z.files}
-                d.update(it[1])
-                yield d
+                files, rest = it
+                d = {k: np.load(f, allow_pickle=False) for k, f in files.items()}
+                d.update(rest)
+                yield self._unpack(d)
 
     @property
     def on_disk(self) -> bool:
@@ -120,23 +148,56 @@ class Batches:
         self._items = []
 
 
-@dataclass
 class View:
-    """The analysis samples of one batch as the tracer sees them in a pass."""
+    """The analysis samples of one prepared batch as the tracer sees them in a pass: the
+    arrays are selected (``sel``: the samples of the lag search) and shifted (``lag``)
+    when first asked for, so a pass pays only for what it reads."""
 
-    x: Inputs                 # model inputs with the equation's mass
-    y: np.ndarray             # measured power [W] (lag applied)
-    dt: np.ndarray
-    t: np.ndarray
-    trip: np.ndarray          # global trip code
-    decl: np.ndarray          # declared term values (n × q0)
-    signals: dict             # offered signals and derived structural signals
-    block: np.ndarray | None = None   # global block index
-    extra: dict = field(default_factory=dict)
+    def __init__(self, d: dict, sel, lag: int, gmap: np.ndarray):
+        self.d, self.sel, self.lag, self._gmap = d, sel, lag, gmap
+        self.extra: dict = {}
+        self.signals: dict = {}
 
-    @property
-    def n(self):
-        return len(self.y)
+    def _s(self, a):
+        return a if self.sel is None else a[self.sel]
+
+    @cached_property
+    def n(self) -> int:
+        return int(len(self.d["y"]) if self.sel is None else np.count_nonzero(self.sel))
+
+    @cached_property
+    def y(self) -> np.ndarray:
+        """Measured power [W], read ``lag`` samples later within the trip."""
+        d = self.d
+        if self.lag == 0:
+            return self._s(d["y"])
+        # a shift is applied on the common samples only, where it stays in the trip
+        y = np.full(len(d["idx"]), np.nan)
+        y[d["common"]] = d["yrow"][d["idx"][d["common"]] + self.lag]
+        return self._s(y)
+
+    @cached_property
+    def x(self) -> Inputs:
+        """Model inputs with the equation's mass."""
+        return Inputs(*(self._s(self.d[f]) for f in INPUT_FIELDS))
+
+    @cached_property
+    def dt(self) -> np.ndarray:
+        return self._s(self.d["dt"])
+
+    @cached_property
+    def t(self) -> np.ndarray:
+        return self._s(self.d["t"])
+
+    @cached_property
+    def trip(self) -> np.ndarray:
+        """Global trip code per sample."""
+        return self._gmap[self._s(self.d["tloc"])]
+
+    @cached_property
+    def decl(self) -> np.ndarray:
+        """Declared term values (n × q0)."""
+        return self._s(self.d["decl"])
 
 
 def shift_rows(y: np.ndarray, trip: np.ndarray, lag: int) -> np.ndarray:

@@ -38,7 +38,7 @@ from sumo_drvpw.fit.diagnose.candidates import Candidate, generate_candidates, s
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
 from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble, pick_metrics
 from sumo_drvpw.fit.diagnose.source import (CACHE_MB, INPUT_FIELDS, SAMPLE_ROWS, Batches, View,
-                                            concat_inputs, parquet_metadata, read_batches, shift_rows)
+                                            concat_inputs, parquet_metadata, read_batches)
 from sumo_drvpw.fit.diagnose.streamed import StreamModel
 from sumo_drvpw.fit.diagnose.streamed import _Moments
 from sumo_drvpw.fit.diagnose.structural import (ACCELEROMETER_COLUMNS, FUSION_TAU_S, P0_KPA, RECUP_QUANTILES,
@@ -66,19 +66,36 @@ class Prepared:
     def views(self, common: bool, lag: int):
         for d in self.batches:
             sel = d["common"] if common else None
-
-            def s(a):
-                return a if sel is None else a[sel]
-            y = d["y"] if lag == 0 else shift_rows(d["yrow"], d["triprow"], lag)[d["idx"]]
-            gmap = np.searchsorted(self.trip_names, np.asarray(d["names"], dtype=object).astype(str))
-            x = Inputs(*(s(d[f]) for f in INPUT_FIELDS))
-            view = View(x, s(y), s(d["dt"]), s(d["t"]), gmap[s(d["tloc"])], s(d["decl"]), {})
-            for j, k in enumerate(self.kept):
-                view.signals[k] = s(d["sig"][:, j])
-            for name, fn in self.derived.items():
-                view.signals[name] = fn(view, d, sel)
+            gmap = np.searchsorted(self.trip_names, np.asarray(d["names"], dtype=str))
+            view = View(d, sel, lag, gmap)
+            view.signals = _Signals(view, d, sel, self.kept, self.derived)
             view.extra["batch"] = d
             yield view
+
+
+class _Signals(dict):
+    """A view's signals, each computed when first asked for (derived ones cost a pass)."""
+
+    def __init__(self, view, d, sel, kept, derived):
+        super().__init__()
+        self._args = (view, d, sel)
+        self._kept = {k: j for j, k in enumerate(kept)}
+        self._derived = derived
+
+    def __missing__(self, key):
+        view, d, sel = self._args
+        if key in self._kept:
+            col = d["sig"][:, self._kept[key]]
+            val = col if sel is None else col[sel]
+        elif key in self._derived:
+            val = self._derived[key](view, d, sel)
+        else:
+            raise KeyError(key)
+        self[key] = val
+        return val
+
+    def __contains__(self, key):
+        return dict.__contains__(self, key) or key in self._kept or key in self._derived
 
 
 def _prepare(m, eq, declared, kept, opt, lags, elev: bool, acc_col) -> dict:
@@ -102,15 +119,28 @@ def _prepare(m, eq, declared, kept, opt, lags, elev: bool, acc_col) -> dict:
         d[f] = np.asarray(getattr(x_eq, f), float)[idx].copy()
     if len(lags) > 1:
         d["yrow"], d["triprow"] = y_all, codes.astype(np.int32)
-        common = np.ones(len(idx), bool)
-        for k in lags:
-            common &= np.isfinite(shift_rows(y_all, codes, int(k))[idx])
-        d["common"] = common
+        d["common"] = _finite_at_every_shift(y_all, codes, int(lags[-1]))[idx]
     if acc_col is not None:
         d["imu"] = np.asarray(m.inputs.signals[acc_col], float)[idx]
     if elev:
         d["elev"] = df["elevation_m"].to_numpy(float)[idx] if "elevation_m" in df else np.full(len(idx), np.nan)
     return d
+
+
+def _finite_at_every_shift(y: np.ndarray, trip: np.ndarray, big: int) -> np.ndarray:
+    """Rows whose power read k rows later is finite and in the same trip for every shift
+    |k| ≤ ``big`` (``shift_within_trips`` finite for all k), in one pass: the window
+    i − big … i + big lies inside the row's trip and holds no non-finite power."""
+    n = len(y)
+    start = np.r_[True, trip[1:] != trip[:-1]]
+    first = np.maximum.accumulate(np.where(start, np.arange(n), 0))
+    end = np.r_[trip[1:] != trip[:-1], True]
+    last = np.minimum.accumulate(np.where(end, np.arange(n), n)[::-1])[::-1]
+    pos = np.arange(n)
+    inside = (pos - big >= first) & (pos + big <= last)
+    bad = np.r_[0, np.cumsum(~np.isfinite(y))]
+    lo, hi = np.clip(pos - big, 0, n), np.clip(pos + big + 1, 0, n)
+    return inside & (bad[hi] - bad[lo] == 0)
 
 
 def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | None = None,
@@ -165,7 +195,10 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     usable_s = np.concatenate([np.asarray(m.usable, bool) for m in sample])
     trip_s = np.concatenate([m.log.df["trip_id"].astype(str).to_numpy() for m in sample])
     t_s = np.concatenate([m.log.df["time_s"].to_numpy(float) for m in sample])
-    _, tcodes_s = np.unique(trip_s, return_inverse=True)
+    codes_s, uniq_s = pd.factorize(trip_s)
+    rank = np.empty(len(uniq_s), np.int64)
+    rank[np.argsort(np.asarray(uniq_s, dtype=str), kind="stable")] = np.arange(len(uniq_s))
+    tcodes_s = rank[codes_s]           # as np.unique(trip_s, return_inverse=True)
     source = sample[0].source
     calibrated = False
     if equation is None:
@@ -209,9 +242,8 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
             n_usable += d.pop("usable")
             names.update(d["names"])
             batches.append(d)
-        for m in sample:
-            consume(m)
-        sample.clear()
+        while sample:                      # each sample batch freed once prepared
+            consume(sample.pop(0))
         for m in gen:
             consume(m)
             if bar:
@@ -220,7 +252,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
         if n_usable == 0:
             raise UserError(f"{', '.join(files)}: no usable sample among {n_rows} rows")
         prep = Prepared(batches, declared, kept_names, np.array(sorted(names)))
-        say(f"{n_rows:,} rows read in {len(batches)} batch(es)"
+        say(f"{n_rows:,} rows read in {len(batches)} batch(es) in {time.perf_counter() - t_start:.1f} s"
             + (" (prepared arrays on disk)" if batches.on_disk else ""))
         # two-valued columns, on the sample's analysis samples
         binary = _binary(prep, sample_idx, sample_rows)
@@ -270,12 +302,9 @@ def _binary(prep: Prepared, n_batches: int, limit: int) -> set:
 
 
 def _declared(prep, opt, declared, common, lag) -> StreamModel:
-    tr = StreamModel(prep, opt, common=common, lag=lag)
-    if tr.n == 0:
-        return tr
-    for term in declared:
-        tr.add(Candidate(term, f"declared term {term}", tuple(parse_term(term).signals), "declared"))
-    return tr
+    cols = [Candidate(term, f"declared term {term}", tuple(parse_term(term).signals), "declared")
+            for term in declared]
+    return StreamModel(prep, opt, common=common, lag=lag, columns=cols)   # layout and terms: one pass
 
 
 def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles, say) -> dict:
@@ -328,10 +357,12 @@ def _structural(tr: StreamModel, prep: Prepared, declared, elev: bool, acc):
     y_scale = tr.y_scale
 
     def base_pred(view, d=None, sel=None):
-        pred = np.zeros(view.n)
-        for b, s, j in coef:
-            pred += b * (view.decl[:, j] / s) * y_scale
-        return pred
+        if "base_pred" not in view.extra:
+            pred = np.zeros(view.n)
+            for b, s, j in coef:
+                pred += b * (view.decl[:, j] / s) * y_scale
+            view.extra["base_pred"] = pred
+        return view.extra["base_pred"]
     n_neg, neg_vals = 0, []
     for view in tr._views(blocks=False):
         pred = base_pred(view)
@@ -463,25 +494,32 @@ def _lag_stats(tr0: StreamModel, lags, zy: dict, yy: dict, trip_stats: dict) -> 
     for k in lags:
         zy[k] = np.zeros((tr0.n_blocks, len(tr0.cols)))
         yy[k] = np.zeros(tr0.n_blocks)
+    scales = [c.scale for c in tr0.cols]
     for view in tr0._views():
         d = view.extra["batch"]
         st, off = view.extra["starts"], view.extra["off"]
         sl = slice(off, off + len(st))
-        z = tr0._zmat(view)
+        z = [r / sc for r, sc in zip(tr0._raw(view), scales)]   # as BlockModel.scaled
         tc = view.trip
         tb = np.flatnonzero(np.r_[True, tc[1:] != tc[:-1]])
         te = np.r_[tb[1:], view.n]
+        zm = None
         for i, t in enumerate(tc[tb].tolist()):
             if t not in trip_stats:
-                zt = z[tb[i]:te[i]]
+                zm = np.column_stack(z) if zm is None else zm
+                zt = zm[tb[i]:te[i]]
                 trip_stats[t] = (len(zt), zt.T @ zt, {}, {})
+        rows = d["idx"][d["common"]]
         for k in lags:
-            ys = shift_rows(d["yrow"], d["triprow"], int(k))[d["idx"]][d["common"]] / tr0.y_scale
-            zys = z * ys[:, None]
-            zy[k][sl] = np.add.reduceat(zys, st, axis=0)
-            yy[k][sl] = np.add.reduceat(ys * ys, st)
-            tzy = np.add.reduceat(zys, tb, axis=0)
-            tyy = np.add.reduceat(ys * ys, tb)
+            ys = d["yrow"][rows + int(k)] / tr0.y_scale
+            yy2 = ys * ys
+            yy[k][sl] = np.add.reduceat(yy2, st)
+            tyy = np.add.reduceat(yy2, tb)
+            tzy = np.empty((len(tb), len(z)))
+            for j, zj in enumerate(z):
+                p = zj * ys
+                zy[k][sl, j] = np.add.reduceat(p, st)
+                tzy[:, j] = np.add.reduceat(p, tb)
             for i, t in enumerate(tc[tb].tolist()):
                 trip_stats[t][2][k] = tzy[i]
                 trip_stats[t][3][k] = tyy[i]

@@ -110,8 +110,11 @@ class StreamModel(BlockModel):
     lag : shift of the measured power [samples] (0: none)
     """
 
-    def __init__(self, prep, opt: DiagnoseOptions, common: bool = False, lag: int = 0):
+    def __init__(self, prep, opt: DiagnoseOptions, common: bool = False, lag: int = 0,
+                 columns: list[Candidate] = ()):
         self.prep, self.opt, self.common, self.lag = prep, opt, common, lag
+        columns = list(columns)
+        sums = []      # per view: the sums of add_all for ``columns``, gathered in the layout pass
         self.declared = list(prep.declared)
         self.trip_names = list(prep.trip_names)
         self.n_trips = len(self.trip_names)
@@ -146,6 +149,8 @@ class StreamModel(BlockModel):
             rho += float(view.x.rho.sum())
             th_min, th_max = min(th_min, float(view.x.theta.min())), max(th_max, float(view.x.theta.max()))
             first.extend(tc[np.r_[True, tc[1:] != tc[:-1]]].tolist())
+            if columns:
+                sums.append(self._column_sums(view, st, columns))
         self.n = n
         self._starts, self._offs = starts, offs
         self.block_trip = np.concatenate(btrip) if btrip else np.zeros(0, np.int64)
@@ -160,6 +165,8 @@ class StreamModel(BlockModel):
         raw_yy = np.concatenate(byy)
         self.y_scale = float(np.sqrt(raw_yy.sum() / n)) or 1.0
         self.block_yy = raw_yy / (self.y_scale * self.y_scale)
+        if columns:
+            self._add_from_sums(columns, *(np.concatenate([s[k] for s in sums]) for k in range(4)))
 
     # ---- passes
     def _views(self, blocks: bool = True):
@@ -228,11 +235,47 @@ class StreamModel(BlockModel):
         scale = float(np.sqrt(vv.sum() / self.n))
         if not scale > 0 or not np.isfinite(scale):
             raise UserError(f"term '{cand.term}' is zero or not finite on the analysis samples")
+        self._append(cand, scale, mass_terms, vv[:, 0] / (scale * scale), vz[0] / (scale * self._scales()),
+                     vy[:, 0] / (scale * self.y_scale))
+
+    def _column_sums(self, view, st, cands):
+        """Block sums of one view for :meth:`add_all`: Σv², Σv·y, Σv·x_j (model columns),
+        Σv_i·v_j (j < i) of the raw values v of ``cands``."""
+        m, q0 = len(cands), len(self.cols)
+        nb = len(st)
+        vv, vy = np.zeros((nb, m)), np.zeros((nb, m))
+        old, new = np.zeros((nb, m, q0)), np.zeros((nb, m, m))
+        raw = self._raw(view)
+        vals = [cand_values(view, c, self.declared) for c in cands]
+        for i, v in enumerate(vals):
+            vv[:, i] = _rs(v * v, st)
+            vy[:, i] = _rs(v * view.y, st)
+            for j in range(q0):
+                old[:, i, j] = _rs(v * raw[j], st)
+            for j in range(i):
+                new[:, i, j] = _rs(v * vals[j], st)
+        return vv, vy, old, new
+
+    def add_all(self, cands: list[Candidate]) -> None:
+        """:meth:`add` each of ``cands`` in order, all in one pass (the same sums: the
+        products x_i·x_j of the raw values per block, scaled afterwards)."""
+        if not cands:
+            return
+        sums = [self._column_sums(view, view.extra["starts"], cands) for view in self._views()]
+        self._add_from_sums(cands, *(np.concatenate([s[k] for s in sums]) for k in range(4)))
+
+    def _add_from_sums(self, cands, vv, vy, old, new) -> None:
+        for i, cand in enumerate(cands):
+            scale = float(np.sqrt(vv[:, i].sum() / self.n))
+            if not scale > 0 or not np.isfinite(scale):
+                raise UserError(f"term '{cand.term}' is zero or not finite on the analysis samples")
+            raw_cross = np.concatenate([old[:, i, :], new[:, i, :i]], axis=1)
+            self._append(cand, scale, None, vv[:, i] / (scale * scale),
+                         raw_cross / (scale * self._scales()), vy[:, i] / (scale * self.y_scale))
+
+    def _append(self, cand, scale, mass_terms, zz_new, cross, hz_new) -> None:
         col = ModelColumn(cand, None, scale, offset=self.n_coef, mass_terms=dict(mass_terms or {}))
         q = len(self.cols)
-        zz_new = vv[:, 0] / (scale * scale)
-        cross = vz[0] / (scale * self._scales())
-        hz_new = vy[:, 0] / (scale * self.y_scale)
         if q == 0:
             self.block_zz = zz_new[:, None, None].copy()
             self.block_zy = hz_new[:, None].copy()

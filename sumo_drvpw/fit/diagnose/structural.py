@@ -102,11 +102,12 @@ def timing(tr, y_by_lag: dict[int, np.ndarray], dt_s: float, paired_test) -> dic
     Returns a dict with ``lag_samples``, ``lag_s`` (chosen on all data), ``fold_lags_s``,
     ``p_value``, ``rmse_gain`` and the per-block ``d``.
     """
-    zmat = np.column_stack([tr.scaled(j) for j in range(len(tr.cols))])
+    z = [tr.scaled(j) for j in range(len(tr.cols))]
     zy_by_lag, yy_by_lag = {}, {}
     for lag in sorted(y_by_lag):
         ys = y_by_lag[lag] / tr.y_scale
-        zy_by_lag[lag] = np.add.reduceat(zmat * ys[:, None], tr.starts, axis=0)   # B × q
+        # per column (1-D sums: faster than one 2-D reduceat, and what the streamed model adds)
+        zy_by_lag[lag] = np.column_stack([np.add.reduceat(zj * ys, tr.starts) for zj in z])  # B × q
         yy_by_lag[lag] = np.add.reduceat(ys * ys, tr.starts)
     return timing_from_blocks(tr, zy_by_lag, yy_by_lag, dt_s, paired_test)
 
