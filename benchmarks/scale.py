@@ -7,7 +7,9 @@ derives acceleration itself). The generator holds one chunk of whole trips (~1 M
 at a time; files of at most ``--file-rows`` rows, row groups of about 1 M rows, in a
 temporary folder under ``--tmp`` that is deleted afterwards.
 
-Each size is run through the CLI in a child process; time is wall-clock, peak RSS is the
+Each size is run through the CLI in a child process; time is wall-clock (the median of
+``--repeat`` runs), CPU time is user + system of the child (on a shared machine the fairer
+figure: wall time grows with other people's load), peak RSS is the
 child's own (``os.wait4`` rusage; with ``--engine dask`` the worker processes are not in
 it and are reported separately by Dask's own memory limits, not here).
 
@@ -94,8 +96,16 @@ def generate(folder: Path, rows: int, file_rows: int, seed: int = 0) -> int:
     return total_trips * per_trip
 
 
-def _timed(argv):
-    """Run and measure through os.wait4 (rusage of this one child)."""
+def _timed(argv, repeat: int = 1):
+    """Median over ``repeat`` runs of (wall [s], peak RSS [MB], engine line, CPU [s], load)."""
+    runs = sorted((_timed_once(argv) for _ in range(repeat)), key=lambda r: r[0])
+    return runs[len(runs) // 2]
+
+
+def _timed_once(argv):
+    """Run and measure through os.wait4 (rusage of this one child): wall time, peak RSS,
+    the engine's summary line, CPU time (user + system) and the 1-min load before."""
+    load = os.getloadavg()[0]
     t0 = time.perf_counter()
     with open(os.devnull, "w") as devnull, tempfile.TemporaryFile("w+") as err:
         proc = subprocess.Popen(EXE + argv, stdout=devnull, stderr=err)
@@ -107,7 +117,7 @@ def _timed(argv):
     if proc.returncode != 0:
         raise SystemExit(f"sumo-drvpw {' '.join(argv)} failed ({proc.returncode}):\n{tail[-2000:]}")
     lines = [ln for ln in tail.splitlines() if "engine:" in ln]
-    return wall, ru.ru_maxrss / 1024.0, (lines[-1] if lines else "")
+    return wall, ru.ru_maxrss / 1024.0, (lines[-1] if lines else ""), ru.ru_utime + ru.ru_stime, load
 
 
 def _coefs(path: Path) -> dict:
@@ -124,6 +134,8 @@ def main() -> int:
     ap.add_argument("--tmp", default=tempfile.gettempdir(), help="where the logs are generated")
     ap.add_argument("--commands", default="calibrate,compare,diagnose",
                     help="which commands to run (comma list)")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="runs per command and size; the median wall time's run is reported")
     args = ap.parse_args()
     sizes = [int(float(s)) for s in args.sizes.split(",")]
     results = {}
@@ -144,10 +156,11 @@ def main() -> int:
             cmds = args.commands.split(",")
             if "calibrate" in cmds:
                 r["calibrate"] = _timed(["calibrate", str(logs), "--candidates", "indt-var-2",
-                                         "--out", str(cal)])
+                                         "--out", str(cal)], args.repeat)
             if "compare" in cmds:
                 r["compare"] = _timed(["compare", str(logs), "--equation", "drvpw_prius3",
-                                       "--equation", "vsp_ldv1999", "--out", str(d / "cmp")])
+                                       "--equation", "vsp_ldv1999", "--out", str(d / "cmp")],
+                                      args.repeat)
             if "diagnose" in cmds and rows <= args.diagnose_max:
                 r["diagnose"] = _timed(["diagnose", str(logs), "--equation", "drvpw_prius3",
                                         "--out", str(d / "diag"), "--no-figures", "--quiet"])
@@ -163,8 +176,9 @@ def main() -> int:
                 if cmd == "dask_equal":
                     print(f"  dask coefficients equal to local: {val[0]} (max relative difference {val[1]:.1e})")
                     continue
-                wall, peak, line = val
-                print(f"  {cmd:<18} {wall:8.1f} s  {rows / wall / 1e6:6.2f} M rows/s  peak RSS {peak:7.0f} MB",
+                wall, peak, line, cpu, load = val
+                print(f"  {cmd:<18} {wall:8.1f} s  {rows / wall / 1e6:6.2f} M rows/s  peak RSS {peak:7.0f} MB"
+                      f"  CPU {cpu:6.1f} s ({rows / cpu / 1e6:5.2f} M rows per CPU-s)  load {load:.1f}",
                       flush=True)
             results[rows] = r
         finally:
