@@ -324,8 +324,13 @@ def _per_trip_rolling_mean(x: np.ndarray, trip_codes: np.ndarray, window: int) -
             lambda g: g.rolling(window, center=True, min_periods=1).mean()).to_numpy()
     n = len(x)
     start = _trip_starts(trip_codes)
-    run = np.cumsum(start) - 1
     first = np.flatnonzero(start)
+    if len(first) <= 2000:  # trip by trip: each trip's arrays stay in cache
+        out = np.empty(n)
+        for a, b in zip(first, np.r_[first[1:], n]):
+            out[a:b] = _rolling_mean_one(x[a:b], window)
+        return out
+    run = np.cumsum(start) - 1
     last = np.r_[first[1:], n] - 1
     i = np.arange(n)
     h = window // 2
@@ -338,6 +343,22 @@ def _per_trip_rolling_mean(x: np.ndarray, trip_codes: np.ndarray, window: int) -
     c = cnt[hi + 1] - cnt[lo]
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(c > 0, (cs[hi] - below) / np.maximum(c, 1), np.nan)
+
+
+def _rolling_mean_one(x: np.ndarray, window: int) -> np.ndarray:
+    """Centred mean of odd width ``window`` over one trip, NaN skipped (min_periods=1)."""
+    n, h = len(x), window // 2
+    ok = np.isfinite(x)
+    cs = np.zeros(n + 1)
+    np.cumsum(np.where(ok, x, 0.0), out=cs[1:])
+    cnt = np.zeros(n + 1, np.int64)
+    np.cumsum(ok, out=cnt[1:])
+    i = np.arange(n)
+    lo = np.maximum(i - h, 0)
+    hi = np.minimum(i + h + 1, n)
+    c = cnt[hi] - cnt[lo]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(c > 0, (cs[hi] - cs[lo]) / np.maximum(c, 1), np.nan)
 
 
 def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s: float) -> np.ndarray:
