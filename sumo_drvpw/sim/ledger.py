@@ -132,7 +132,7 @@ class Ledger:
         #: :class:`sumo_drvpw.sim.spill.VehicleSpill`); None keeps every vehicle in memory
         self.spill = None
         #: finished vehicles held before they are flushed to :attr:`spill`
-        self.flush_vehicles = 4096
+        self.flush_vehicles = 1024
         self.n_done = 0
         #: vehicles written out by :meth:`flush` (all, and the accounted ones), their vTypes
         self.flushed_vehicles = 0

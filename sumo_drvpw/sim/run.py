@@ -190,7 +190,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     out_dir : output directory (created), or None to write nothing
     keep_vehicles : keep every vehicle in memory (default: vehicles that left are
         streamed out, :class:`~sumo_drvpw.sim.accountant.Accountant`)
-    flush_vehicles : finished vehicles held before they are written out (default 4096)
+    flush_vehicles : finished vehicles held before they are written out (default 1024)
     overrides : replace scenario values: begin, end, step_length [s], connection, gui,
         options, equations (names, paths or Equation objects), trace, edgedata, figures,
         progress, difference, period
