@@ -42,9 +42,9 @@ from sumo_drvpw.fit.diagnose.source import (CACHE_MB, INPUT_FIELDS, SAMPLE_ROWS,
 from sumo_drvpw.fit.diagnose.streamed import StreamModel
 from sumo_drvpw.fit.diagnose.streamed import _Moments
 from sumo_drvpw.fit.diagnose.structural import (ACCELEROMETER_COLUMNS, FUSION_TAU_S, P0_KPA, RECUP_QUANTILES,
-                                                accelerometer_sin_grade, fused_sin_grade, lag_range,
+                                                accelerometer_sin_grade, block_lag_sums, fused_sin_grade, lag_range,
                                                 per_trip_lags_from_stats, pressure_at_altitude_kpa,
-                                                timing_from_blocks)
+                                                scale_lag_sums, timing_from_blocks)
 from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.terms import Inputs, parse_term, term_matrix
 
@@ -301,10 +301,10 @@ def _binary(prep: Prepared, n_batches: int, limit: int) -> set:
     return {k for k, v in vals.items() if len(v) <= 2}
 
 
-def _declared(prep, opt, declared, common, lag) -> StreamModel:
+def _declared(prep, opt, declared, common, lag, hook=None) -> StreamModel:
     cols = [Candidate(term, f"declared term {term}", tuple(parse_term(term).signals), "declared")
             for term in declared]
-    return StreamModel(prep, opt, common=common, lag=lag, columns=cols)   # layout and terms: one pass
+    return StreamModel(prep, opt, common=common, lag=lag, columns=cols, hook=hook)  # one pass
 
 
 def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles, say) -> dict:
@@ -314,9 +314,10 @@ def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles
     timing_finding, lag_note = None, None
     common, lag = False, 0
     if len(lags) > 1:
-        tr0 = _declared(prep, opt, declared, True, 0)
+        hook = _LagSums(np.asarray(lags, dtype=np.int64))
+        tr0 = _declared(prep, opt, declared, True, 0, hook)    # layout, terms and lag sums: one pass
         if tr0.n >= 50:
-            timing_finding, lag_note, tr1 = _timing(tr0, prep, opt, lags, dt_med, say, paired_test,
+            timing_finding, lag_note, tr1 = _timing(tr0, hook, prep, opt, lags, dt_med, say, paired_test,
                                                     COARSE_LAGS)
             passes += tr0.passes
             if timing_finding is not None:
@@ -437,27 +438,55 @@ def _structural(tr: StreamModel, prep: Prepared, declared, elev: bool, acc):
     return cands, notes
 
 
-def _timing(tr0: StreamModel, prep, opt, lags, dt_med, say, paired_test, coarse):
+class _LagSums:
+    """Raw sums of the lag search for every shift of ``lags``, gathered in the layout pass
+    of the timing model: per block and per trip Σ x_j·y_ℓ and Σ y_ℓ², per trip XᵀX."""
+
+    def __init__(self, lags: np.ndarray):
+        self.lags = lags
+        self.bzy, self.byy, self.trips = [], [], {}
+
+    def __call__(self, view, st) -> None:
+        d = view.extra["batch"]
+        x = [view.decl[:, j] for j in range(view.decl.shape[1])]
+        rows = d["idx"][d["common"]]
+        ys = d["yrow"][rows[:, None] + self.lags[None, :]]                   # n × L, raw power
+        zy, yy = block_lag_sums(x, ys, st)
+        self.bzy.append(zy)
+        self.byy.append(yy)
+        tc = view.trip
+        tb = np.flatnonzero(np.r_[True, tc[1:] != tc[:-1]])
+        te = np.r_[tb[1:], view.n]
+        tzy, tyy = block_lag_sums(x, ys, tb)
+        xm = np.column_stack(x)
+        for i, t in enumerate(tc[tb].tolist()):
+            self.trips[t] = (int(te[i] - tb[i]), xm[tb[i]:te[i]].T @ xm[tb[i]:te[i]], tzy[i], tyy[i])
+
+    def select(self, tr0, lags):
+        """Scaled block sums (as ``structural.timing``) for the shifts ``lags``."""
+        pos = np.searchsorted(self.lags, lags)
+        zy, yy = scale_lag_sums(tr0, np.concatenate(self.bzy)[:, :, pos], np.concatenate(self.byy)[:, pos])
+        return ({k: zy[:, :, i] for i, k in enumerate(lags)}, {k: yy[:, i] for i, k in enumerate(lags)})
+
+    def trip_stats(self, lags) -> dict:
+        pos = np.searchsorted(self.lags, lags)
+        return {t: (n, a, zy[:, pos], yy[pos]) for t, (n, a, zy, yy) in self.trips.items()}
+
+
+def _timing(tr0: StreamModel, sums: _LagSums, prep, opt, lags, dt_med, say, paired_test, coarse):
     """The lag step of the in-memory tracer (``search._timing_step``) on block statistics."""
     big = int(lags[-1])
     step = max(1, math.ceil(big / coarse))
     tried = sorted(set(range(-big, big + 1, step)) | {0})
-    zy, yy, trip_stats = {}, {}, {}
-    _lag_stats(tr0, tried, zy, yy, trip_stats)
-    res = timing_from_blocks(tr0, zy, yy, dt_med, paired_test)
+    res = timing_from_blocks(tr0, *sums.select(tr0, tried), dt_med, paired_test)
     if step > 1:
         fine = [k for k in range(res["lag_samples"] - step + 1, res["lag_samples"] + step)
-                if -big <= k <= big and k not in zy]
-        if fine:
-            _lag_stats(tr0, fine, zy, yy, trip_stats)
-        res = timing_from_blocks(tr0, zy, yy, dt_med, paired_test)
-    all_lags = sorted(zy)
-    stats = {}
-    for t in sorted(trip_stats):
-        n, a, b, s = trip_stats[t]
-        stats[t] = (n, a, np.column_stack([b[k] for k in all_lags]), np.array([s[k] for k in all_lags]))
+                if -big <= k <= big and k not in tried]
+        tried = sorted(set(tried) | set(fine))
+        res = timing_from_blocks(tr0, *sums.select(tr0, tried), dt_med, paired_test)
+    all_lags = tried
     note = {k: v for k, v in res.items() if k != "d"}
-    note["per_trip_lag_s"] = per_trip_lags_from_stats(tr0.trip_names, stats, all_lags, dt_med)
+    note["per_trip_lag_s"] = per_trip_lags_from_stats(tr0, sums.trip_stats(all_lags), all_lags, dt_med)
     note["shifts_tried"] = len(all_lags)
     note["test"] = ("lag chosen per fold on the training folds, scored on held-out blocks; "
                     "d = SSE(lag 0) − SSE(chosen lag), the tracer's paired block test")
@@ -486,40 +515,3 @@ def _timing(tr0: StreamModel, prep, opt, lags, dt_med, say, paired_test, coarse)
                         "fold_lags_s": res["fold_lags_s"]},
         "_lag_samples": res["lag_samples"]}
     return finding, note, tr1
-
-
-def _lag_stats(tr0: StreamModel, lags, zy: dict, yy: dict, trip_stats: dict) -> None:
-    """One pass: per block Zᵀy_ℓ and y_ℓᵀy_ℓ, per trip ZᵀZ, Zᵀy_ℓ and y_ℓᵀy_ℓ for each
-    shift ℓ (y_ℓ the power read ℓ samples later within the trip, scaled by y_scale)."""
-    for k in lags:
-        zy[k] = np.zeros((tr0.n_blocks, len(tr0.cols)))
-        yy[k] = np.zeros(tr0.n_blocks)
-    scales = [c.scale for c in tr0.cols]
-    for view in tr0._views():
-        d = view.extra["batch"]
-        st, off = view.extra["starts"], view.extra["off"]
-        sl = slice(off, off + len(st))
-        z = [r / sc for r, sc in zip(tr0._raw(view), scales)]   # as BlockModel.scaled
-        tc = view.trip
-        tb = np.flatnonzero(np.r_[True, tc[1:] != tc[:-1]])
-        te = np.r_[tb[1:], view.n]
-        zm = None
-        for i, t in enumerate(tc[tb].tolist()):
-            if t not in trip_stats:
-                zm = np.column_stack(z) if zm is None else zm
-                zt = zm[tb[i]:te[i]]
-                trip_stats[t] = (len(zt), zt.T @ zt, {}, {})
-        rows = d["idx"][d["common"]]
-        for k in lags:
-            ys = d["yrow"][rows + int(k)] / tr0.y_scale
-            yy2 = ys * ys
-            yy[k][sl] = np.add.reduceat(yy2, st)
-            tyy = np.add.reduceat(yy2, tb)
-            tzy = np.empty((len(tb), len(z)))
-            for j, zj in enumerate(z):
-                p = zj * ys
-                zy[k][sl, j] = np.add.reduceat(p, st)
-                tzy[:, j] = np.add.reduceat(p, tb)
-            for i, t in enumerate(tc[tb].tolist()):
-                trip_stats[t][2][k] = tzy[i]
-                trip_stats[t][3][k] = tyy[i]

@@ -108,10 +108,12 @@ class StreamModel(BlockModel):
     common : analysis samples restricted to those whose power is finite at every shift
         of the lag search (as the in-memory lag step)
     lag : shift of the measured power [samples] (0: none)
+    columns : model columns added in the layout pass (:meth:`add_all`)
+    hook : called as hook(view, block starts) for every view of the layout pass
     """
 
     def __init__(self, prep, opt: DiagnoseOptions, common: bool = False, lag: int = 0,
-                 columns: list[Candidate] = ()):
+                 columns: list[Candidate] = (), hook=None):
         self.prep, self.opt, self.common, self.lag = prep, opt, common, lag
         columns = list(columns)
         sums = []      # per view: the sums of add_all for ``columns``, gathered in the layout pass
@@ -151,6 +153,8 @@ class StreamModel(BlockModel):
             first.extend(tc[np.r_[True, tc[1:] != tc[:-1]]].tolist())
             if columns:
                 sums.append(self._column_sums(view, st, columns))
+            if hook is not None:
+                hook(view, st)
         self.n = n
         self._starts, self._offs = starts, offs
         self.block_trip = np.concatenate(btrip) if btrip else np.zeros(0, np.int64)

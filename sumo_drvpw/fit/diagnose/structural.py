@@ -102,14 +102,43 @@ def timing(tr, y_by_lag: dict[int, np.ndarray], dt_s: float, paired_test) -> dic
     Returns a dict with ``lag_samples``, ``lag_s`` (chosen on all data), ``fold_lags_s``,
     ``p_value``, ``rmse_gain`` and the per-block ``d``.
     """
-    z = [tr.scaled(j) for j in range(len(tr.cols))]
-    zy_by_lag, yy_by_lag = {}, {}
-    for lag in sorted(y_by_lag):
-        ys = y_by_lag[lag] / tr.y_scale
-        # per column (1-D sums: faster than one 2-D reduceat, and what the streamed model adds)
-        zy_by_lag[lag] = np.column_stack([np.add.reduceat(zj * ys, tr.starts) for zj in z])  # B × q
-        yy_by_lag[lag] = np.add.reduceat(ys * ys, tr.starts)
-    return timing_from_blocks(tr, zy_by_lag, yy_by_lag, dt_s, paired_test)
+    lags = sorted(y_by_lag)
+    raw_zy, raw_yy = block_lag_sums([c.values for c in tr.cols],
+                                    np.column_stack([y_by_lag[lag] for lag in lags]), tr.starts)
+    zy, yy = scale_lag_sums(tr, raw_zy, raw_yy)
+    return timing_from_blocks(tr, {lag: zy[:, :, i] for i, lag in enumerate(lags)},
+                              {lag: yy[:, i] for i, lag in enumerate(lags)}, dt_s, paired_test)
+
+
+def scale_lag_sums(tr, raw_zy: np.ndarray, raw_yy: np.ndarray):
+    """Sums of raw values (:func:`block_lag_sums`) → sums of the model's scaled columns and
+    the scaled power (÷ column scale × ``y_scale``; ÷ ``y_scale``²)."""
+    s = np.array([c.scale for c in tr.cols])
+    return raw_zy / (s[None, :, None] * tr.y_scale), raw_yy / (tr.y_scale * tr.y_scale)
+
+
+def block_lag_sums(z: list, ys: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sums per contiguous segment (block or trip) for the lag search.
+
+    Parameters
+    ----------
+    z : model columns, one array of n values each
+    ys : scaled power read ℓ samples later, one column per shift (n × L)
+    starts : first sample of each segment
+
+    Returns Σ z_j·y_ℓ (S × q × L) and Σ y_ℓ² (S × L): one product of a sparse segment
+    indicator (weighted by z_j) with ys per column — a sum in sample order per segment,
+    whatever the batch the segment came in (so the streamed tracer adds the same numbers).
+    """
+    from scipy import sparse
+
+    n = ys.shape[0]
+    shape = (len(starts), n)
+    ptr, idx = np.r_[starts, n], np.arange(n)
+    yy = sparse.csr_matrix((np.ones(n), idx, ptr), shape=shape) @ (ys * ys)
+    zy = np.stack([sparse.csr_matrix((np.asarray(zj, float), idx, ptr), shape=shape) @ ys for zj in z],
+                  axis=1) if z else np.zeros((len(starts), 0, ys.shape[1]))
+    return zy, yy
 
 
 def timing_from_blocks(tr, zy_by_lag: dict, yy_by_lag: dict, dt_s: float, paired_test) -> dict:
@@ -155,34 +184,34 @@ def timing_from_blocks(tr, zy_by_lag: dict, yy_by_lag: dict, dt_s: float, paired
 def per_trip_lags(tr, y_by_lag: dict[int, np.ndarray], dt_s: float) -> dict[str, float]:
     """Best lag of each trip alone [s] (declared terms refitted per trip; for the report)."""
     lags = sorted(y_by_lag)
-    zmat = np.column_stack([tr.scaled(j) for j in range(len(tr.cols))])
-    stats = {}
     # each trip's rows from one stable sort (a mask per trip made this O(trips × rows))
     order = np.argsort(tr.trip, kind="stable")
     codes = np.asarray(tr.trip)[order]
-    bounds = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1], True])
-    for lo, hi in zip(bounds[:-1], bounds[1:]):
-        t, m = codes[lo], order[lo:hi]
-        zt = zmat[m]
-        ys = np.column_stack([y_by_lag[lag][m] / tr.y_scale for lag in lags])
-        stats[int(t)] = (len(m), zt.T @ zt, zt.T @ ys, (ys * ys).sum(0))
-    return per_trip_lags_from_stats(tr.trip_names, stats, lags, dt_s)
+    bounds = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
+    x = [np.asarray(c.values, float)[order] for c in tr.cols]
+    zy, yy = block_lag_sums(x, np.column_stack([y_by_lag[lag][order] for lag in lags]), bounds)
+    ends = np.r_[bounds[1:], len(order)]
+    xm = np.column_stack(x)
+    stats = {int(codes[lo]): (hi - lo, xm[lo:hi].T @ xm[lo:hi], zy[i], yy[i])
+             for i, (lo, hi) in enumerate(zip(bounds, ends))}
+    return per_trip_lags_from_stats(tr, stats, lags, dt_s)
 
 
-def per_trip_lags_from_stats(trip_names, stats: dict, lags, dt_s: float) -> dict[str, float]:
-    """:func:`per_trip_lags` from per-trip sums: trip code → (n, ZᵀZ, Zᵀy per lag (q × L),
-    yᵀy per lag (L)), y scaled; trips with fewer than 10 samples per column are left out."""
+def per_trip_lags_from_stats(tr, stats: dict, lags, dt_s: float) -> dict[str, float]:
+    """:func:`per_trip_lags` from per-trip sums of raw values: trip code → (n, XᵀX,
+    Xᵀy per lag (q × L), yᵀy per lag (L)); trips with fewer than 10 samples per column
+    are left out. One least-squares solve per trip for all lags."""
+    s = np.array([c.scale for c in tr.cols])
     out = {}
-    for t, (n, a, b_all, yy) in stats.items():
+    for t in sorted(stats):
+        n, a, b_all, yy = stats[t]
         if n < 10 * a.shape[0]:
             continue
-        best, best_sse = 0, math.inf
-        for i, lag in enumerate(lags):
-            b = b_all[:, i]
-            sse = float(yy[i] - b @ np.linalg.lstsq(a, b, rcond=None)[0])
-            if sse < best_sse:
-                best, best_sse = lag, sse
-        out[str(trip_names[t])] = best * dt_s
+        a = a / np.outer(s, s)
+        b_all = b_all / (s[:, None] * tr.y_scale)
+        sol = np.linalg.lstsq(a, b_all, rcond=None)[0]
+        sse = yy / (tr.y_scale * tr.y_scale) - np.einsum("ql,ql->l", b_all, sol)
+        out[str(tr.trip_names[t])] = lags[int(np.argmin(sse))] * dt_s
     return out
 
 
