@@ -24,6 +24,7 @@ import resource
 import sys
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import partial
 
@@ -193,7 +194,11 @@ def run(paths, make, vehicle=None, options=None, engine: str = "local",
     return acc, RunInfo(nrows, time.perf_counter() - t0, peak_rss_mb(), len(parts), engine)
 
 
-def _run_dask(parts, make, vehicle, options, scheduler, workers, rows):
+@contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None):
+    """A Dask client (context manager): of the scheduler at ``scheduler``, else of a local
+    cluster of ``workers`` single-threaded processes; closed on exit. UserError without Dask
+    or when the scheduler cannot be reached. Used by the log engines and SUMO sweeps."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
@@ -209,20 +214,29 @@ def _run_dask(parts, make, vehicle, options, scheduler, workers, rows):
         except (OSError, TimeoutError) as e:
             raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
     try:
-        fn = partial(part_stats, make=make, vehicle=vehicle, options=options, rows=rows)
-        futures = client.map(fn, parts, pure=False)
-        bar = _progress(len(parts), "part")
-        acc = None
-        try:
-            for f in futures:  # in Part order: the same sums, in the same order, as local
-                st = f.result()
-                f.release()
-                acc = st if acc is None else acc.merge(st)
-                bar.update(1)
-        finally:
-            bar.close()
-        return acc
+        yield client
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _run_dask(parts, make, vehicle, options, scheduler, workers, rows):
+    with dask_client(scheduler, workers) as client:
+        return _reduce_on(client, parts, make, vehicle, options, rows)
+
+
+def _reduce_on(client, parts, make, vehicle, options, rows):
+    fn = partial(part_stats, make=make, vehicle=vehicle, options=options, rows=rows)
+    futures = client.map(fn, parts, pure=False)
+    bar = _progress(len(parts), "part")
+    acc = None
+    try:
+        for f in futures:  # in Part order: the same sums, in the same order, as local
+            st = f.result()
+            f.release()
+            acc = st if acc is None else acc.merge(st)
+            bar.update(1)
+    finally:
+        bar.close()
+    return acc

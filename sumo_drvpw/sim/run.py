@@ -335,6 +335,8 @@ def run_scenarios(scenarios: list, out_dirs: list, overrides: dict | None = None
             return [f.result() for f in futs]
     if engine != "dask":
         raise UserError(f"engine '{engine}' unknown for SUMO runs; choose local or dask")
+    from sumo_drvpw.fit.engine import dask_client  # the cluster set-up of the log engines
+
     with dask_client(scheduler, workers) as client:
         futs = [client.submit(_sweep_task, s, o, overrides, pure=False, key=f"sumo-run-{k}-{Path(s).stem}")
                 for k, (s, o) in enumerate(zip(paths, outs))]
@@ -343,39 +345,3 @@ def run_scenarios(scenarios: list, out_dirs: list, overrides: dict | None = None
             out.append(f.result())
             f.release()
         return out
-
-
-def dask_client(scheduler: str | None = None, workers: int | None = None):
-    """A Dask client as a context manager: of the scheduler at ``scheduler``, else of a local
-    cluster of ``workers`` single-threaded processes (closed on exit). UserError without
-    Dask or when the scheduler cannot be reached. (The cluster set-up of
-    :mod:`sumo_drvpw.fit.engine`, for SUMO runs.)"""
-    from contextlib import contextmanager
-
-    from sumo_drvpw.fit.engine import CONNECT_TIMEOUT_S
-
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise UserError("the dask engine needs Dask: pip install 'sumo-drvpw[dask]'") from None
-
-    @contextmanager
-    def ctx():
-        cluster = None
-        if scheduler is None:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=":0")
-            client = Client(cluster)
-        else:
-            try:
-                client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
-            except (OSError, TimeoutError) as e:
-                raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
-        try:
-            yield client
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
-
-    return ctx()
