@@ -19,6 +19,10 @@ outputs) come from a scenario file when given (``scenario=``), else the defaults
 :mod:`sumo_drvpw.sim.scenario`. Step one step at a time (``simulationStep()`` without a
 target time): a listener is called once per call, so a call that jumps several steps
 cannot be booked step by step; such jumps are counted in ``summary["missed_steps"]``.
+
+Memory is bounded: vehicles that left the simulation are written out in batches
+(:mod:`sumo_drvpw.sim.spill`) and ``energy(id)`` of one already written out raises
+``KeyError`` saying so (``keep_vehicles=True`` keeps every vehicle, as before).
 """
 
 from __future__ import annotations
