@@ -229,21 +229,31 @@ class CalibrationStats:
             for a in (np.asarray(m.inputs.v, float), np.asarray(m.inputs.a, float))))
         k = len(self.names)
         every = len(idx) == len(y)
-        xin = m.inputs if every else m.inputs.take(idx)
-        xy = np.empty((len(idx), k + 1))  # [X y]: a trip's rows are one contiguous view
-        xy[:, :k] = term_matrix(self.names, xin)
-        xy[:, k] = y if every else y[idx]
-        del xin
         codes = _trip_codes(m)
         codes = codes if every else codes[idx]
         starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
+        ends = np.r_[starts[1:], len(idx)]
         ids = np.asarray(m.inputs.trip)[idx[starts]]
-        for t, a, b in zip(ids, starts, np.r_[starts[1:], len(idx)]):
-            t = str(t)
-            if t in self.trips:
-                raise UserError(f"trip_id '{t}' appears in more than one place; give each "
-                                "trip its own id")
-            self.trips[t] = (tall_r(xy[a:b]), Moments.of(xy[a:b, k:]))
+        x = _light_inputs(m.inputs, self.names)
+        # blocks of whole trips of about BLOCK_ROWS: the design is built per block and
+        # factored per trip while it is in cache (the batch's arrays are not)
+        lo = 0
+        while lo < len(starts):
+            hi = lo + 1
+            while hi < len(starts) and ends[hi - 1] - starts[lo] < BLOCK_ROWS:
+                hi += 1
+            a0, b0 = int(starts[lo]), int(ends[hi - 1])
+            rows = slice(a0, b0) if every else idx[a0:b0]
+            xy = np.empty((b0 - a0, k + 1))  # [X y]: a trip's rows are one contiguous view
+            xy[:, :k] = term_matrix(self.names, x.take(rows))
+            xy[:, k] = y[rows]
+            for t, a, b in zip(ids[lo:hi], starts[lo:hi] - a0, ends[lo:hi] - a0):
+                t = str(t)
+                if t in self.trips:
+                    raise UserError(f"trip_id '{t}' appears in more than one place; give each "
+                                    "trip its own id")
+                self.trips[t] = (tall_r(xy[a:b]), Moments.of(xy[a:b, k:]))
+            lo = hi
         return self
 
     def merge(self, o: "CalibrationStats") -> "CalibrationStats":
@@ -279,6 +289,22 @@ class CalibrationStats:
         k = len(self.names)
         x, y = r[:, :k], r[:, k]
         return Gram(x.T @ x, x.T @ y, float(y @ y), mom.n, self.names), r, mom
+
+
+#: Rows of the design built at a time in calibrate's accumulation (whole trips; ~1 MB).
+BLOCK_ROWS = 16_384
+
+
+def _light_inputs(x, names):
+    """The inputs the terms ``names`` read: the signals they name, trip ids only when a
+    term names a trip (so taking rows copies nothing else)."""
+    from sumo_drvpw.model.terms import Inputs
+
+    sig = {s for t in names for s in parse_term(t).signals}
+    trip = any(f.startswith("trip=") for t in names for f in parse_term(t).factors)
+    return Inputs(x.v, x.a, x.theta, x.wind, x.mass, x.rho,
+                  {s: v for s, v in x.signals.items() if s in sig},
+                  x.trip if trip else None, x.v_acc)
 
 
 def _trip_codes(m) -> np.ndarray:
