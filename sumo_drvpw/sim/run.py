@@ -321,8 +321,8 @@ def run_scenarios(scenarios: list, out_dirs: list, overrides: dict | None = None
     from sumo_drvpw.sim.scenario import scenario_path
 
     overrides = dict(overrides or {})
-    paths = [str(scenario_path(s).resolve()) for s in scenarios]
-    outs = [str(Path(o).resolve()) for o in out_dirs]
+    paths = [str(scenario_path(s)) for s in scenarios]
+    outs = [str(o) for o in out_dirs]
     if engine == "local":
         if jobs <= 1:
             return [_sweep_task(s, o, overrides) for s, o in zip(paths, outs)]
@@ -335,6 +335,9 @@ def run_scenarios(scenarios: list, out_dirs: list, overrides: dict | None = None
             return [f.result() for f in futs]
     if engine != "dask":
         raise UserError(f"engine '{engine}' unknown for SUMO runs; choose local or dask")
+    # absolute: a worker's working folder is not ours
+    paths = [str(Path(s).resolve()) for s in paths]
+    outs = [str(Path(o).resolve()) for o in outs]
     from sumo_drvpw.fit.engine import dask_client  # the cluster set-up of the log engines
 
     with dask_client(scheduler, workers) as client:
