@@ -142,3 +142,26 @@ def test_closed_loop_form_runs_in_sumo_at_the_reference_temperature(tmp_path):
     assert sum(abs(v) for v in e_r.values()) > 0
     for cat, val in e_r.items():
         assert e_c[cat] == pytest.approx(val, rel=1e-12, abs=1e-9)
+
+
+def _script():
+    import importlib.util
+    from pathlib import Path
+
+    p = Path(__file__).resolve().parent.parent / "scripts" / "closing_the_loop.py"
+    spec = importlib.util.spec_from_file_location("closing_the_loop", p)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_split_rule_second_split_is_fixed_up_front_and_differs():
+    mod = _script()
+    trips = [f"Trip{s}{i:02d}" for s in "AB" for i in range(1, 26)]
+    a, b = mod.split_trips(trips, second=True)
+    t = sorted(trips)
+    assert a == t[4::5] and b == t[2::5] and len(a) == len(b) == 10
+    assert not set(a) & set(b)
+    assert mod.split_trips(trips) == [a]                          # one split unless asked
+    assert mod.split_trips(["x", "y"], second=True) == [["x"], ["y"]]
+    assert mod.split_trips([f"t{i}" for i in range(6)], second=True) == [["t2", "t5"]]
