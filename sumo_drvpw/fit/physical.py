@@ -37,6 +37,13 @@ Constraints are declared in a candidate TOML file beside ``terms``::
     acc = { min = 1.0, max = 1.3 }
 
 :data:`DEFAULT_CONSTRAINTS` apply when none are declared.
+
+Physical candidates (:data:`PHYSICAL_CANDIDATES`, :func:`select_physical`): effects whose
+form SUMO can evaluate — air density from temperature and altitude in the aero term
+(``aero`` → ``aero_rho``), c_r(T) (``roll*cold``), cold drivetrain drag (``cold*v^2``) and
+recuperation on its own coefficient (:func:`regime_fit`) — are chosen forward on whole
+trips by trip-grouped cross-validation of the per-trip traction energy, each kept only when
+its gain is material, replicates over most trips and its coefficient reads plausibly.
 """
 
 from __future__ import annotations
