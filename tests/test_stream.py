@@ -255,7 +255,13 @@ def test_a_trip_in_two_files_is_refused(tmp_path):
     df = _trips_frame()
     df.iloc[:100].to_parquet(tmp_path / "x1.parquet")
     df.iloc[100:200].to_parquet(tmp_path / "x2.parquet")
-    with pytest.raises(UserError, match="trip_id 'a' appears in more than one place"):
+    with pytest.raises(UserError, match=r"x2.parquet: trip_id 'a' is also in .*x1.parquet"):
+        run([tmp_path], partial(CalibrationStats, ("acc",)), load_vehicle("prius3"))
+    # also when the trip has no usable sample in the first file (the accumulator never saw it)
+    bad = df.iloc[:100].copy()
+    bad["brake"] = True
+    bad.to_parquet(tmp_path / "x1.parquet")
+    with pytest.raises(UserError, match=r"x2.parquet: trip_id 'a' is also in .*x1.parquet"):
         run([tmp_path], partial(CalibrationStats, ("acc",)), load_vehicle("prius3"))
 
 

@@ -53,9 +53,12 @@ def _run(args, make, vehicle):
     from sumo_drvpw.fit.engine import run
 
     from sumo_drvpw.cli import read_options
-    from sumo_drvpw.data.log import check_distinct_trips
+    from sumo_drvpw.data.log import expand_paths
+    from sumo_drvpw.data.plausible import _check_header
 
-    check_distinct_trips(args.logs)  # the in-memory reader checks this while reading
+    for p in expand_paths(args.logs):  # a column named twice (the reader's column selection hides it)
+        _check_header(p)
+    # trip ids in two files: checked by the engine on the ids it reads (no extra pass)
     return run(args.logs, make, vehicle, options=read_options(args), engine=args.engine,
                scheduler=args.scheduler, workers=args.workers)
 

@@ -28,6 +28,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import partial
 
+import numpy as np
+
 from sumo_drvpw.data.stream import BATCH_ROWS, PART_ROWS, Part, iter_measured, plan
 from sumo_drvpw.errors import UserError
 
@@ -61,8 +63,10 @@ def peak_rss_mb() -> float:
     return r / (1024.0 * 1024.0) if sys.platform == "darwin" else r / 1024.0
 
 
-def part_stats(part: Part, make, vehicle=None, options=None, rows: int = BATCH_ROWS, tick=None):
-    """The statistics of one Part: ``make()`` (an empty accumulator) + every batch.
+def part_stats(part: Part, make, vehicle=None, options=None, rows: int = BATCH_ROWS, tick=None,
+               ids: list | None = None):
+    """The statistics of one Part: ``make()`` (an empty accumulator) + every batch
+    (``ids``: when a list, the Part's trip ids are appended to it in reading order).
 
     BLAS runs single-threaded here: the work is many small products per trip, for which
     OpenBLAS threads cost 10–30× on a busy machine (measured: a 14,400 × 9 QR 90 ms with
@@ -75,12 +79,41 @@ def part_stats(part: Part, make, vehicle=None, options=None, rows: int = BATCH_R
         cols = st.columns() if hasattr(st, "columns") else None
         batches = iter_measured(part, vehicle, options, rows, columns=cols)
         for m in (prefetched(batches) if PREFETCH else batches):
+            if ids is not None:
+                ids += _trip_ids(m)
             st.add(m)
             n = len(m.power_w)
             del m  # freed before the next batch is read
             if tick is not None:
                 tick(n)
     return st
+
+
+def _trip_ids(m) -> list[str]:
+    """The trip ids of a batch, once per trip, in order."""
+    from sumo_drvpw.data.log import trip_codes_of
+
+    col = m.log.df["trip_id"]
+    codes = trip_codes_of(col)
+    starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
+    return [str(t) for t in col.iloc[starts]]
+
+
+def _part_stats_ids(part: Part, **kw):
+    """(statistics, trip ids) of a Part: the unit of work of the engines."""
+    ids: list = []
+    return part_stats(part, ids=ids, **kw), ids
+
+
+def _check_one_file(part: Part, ids: list, seen: dict) -> None:
+    """No trip id in two files: the check the in-memory reader makes, on the ids each
+    Part read (same message as :func:`sumo_drvpw.data.plausible.check_distinct_trips`)."""
+    for tid in ids:
+        if seen.get(tid, part.path) != part.path:
+            raise UserError(f"{part.path}: trip_id '{tid}' is also in {seen[tid]}; samples of one "
+                            "trip belong in one file, give each trip its own id")
+    for tid in ids:
+        seen.setdefault(tid, part.path)
 
 
 def prefetched(items, depth: int = 1):
@@ -180,11 +213,13 @@ def run(paths, make, vehicle=None, options=None, engine: str = "local",
         parts = plan(paths, PART_ROWS if engine == "dask" else None)
     total = sum(p.rows for p in parts) or None
     if engine == "local":
-        acc = None
+        acc, seen = None, {}
         bar = _progress(total, "rows")
         try:
             for p in parts:
-                st = part_stats(p, make, vehicle, options, rows, tick=bar.update)
+                st, ids = _part_stats_ids(p, make=make, vehicle=vehicle, options=options,
+                                          rows=rows, tick=bar.update)
+                _check_one_file(p, ids, seen)
                 acc = st if acc is None else acc.merge(st)
         finally:
             bar.close()
@@ -227,14 +262,15 @@ def _run_dask(parts, make, vehicle, options, scheduler, workers, rows):
 
 
 def _reduce_on(client, parts, make, vehicle, options, rows):
-    fn = partial(part_stats, make=make, vehicle=vehicle, options=options, rows=rows)
+    fn = partial(_part_stats_ids, make=make, vehicle=vehicle, options=options, rows=rows)
     futures = client.map(fn, parts, pure=False)
     bar = _progress(len(parts), "part")
-    acc = None
+    acc, seen = None, {}
     try:
-        for f in futures:  # in Part order: the same sums, in the same order, as local
-            st = f.result()
+        for p, f in zip(parts, futures):  # in Part order: the same sums, in the same order, as local
+            st, ids = f.result()
             f.release()
+            _check_one_file(p, ids, seen)
             acc = st if acc is None else acc.merge(st)
             bar.update(1)
     finally:
