@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import time
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -78,7 +79,9 @@ class _Signals(dict):
 
     def __init__(self, view, d, sel, kept, derived):
         super().__init__()
-        self._args = (view, d, sel)
+        # a weak reference: a cycle view ↔ signals would keep each batch's arrays alive
+        # until the cyclic garbage collector runs (seen: +400 MB at 10 M rows)
+        self._args = (weakref.proxy(view), d, sel)
         self._kept = {k: j for j, k in enumerate(kept)}
         self._derived = derived
 
@@ -127,6 +130,11 @@ def _prepare(m, eq, declared, kept, opt, lags, elev: bool, acc_col) -> dict:
     return d
 
 
+#: rows per chunk read [-]: half the calibrate/compare chunk (the prepared batches and the
+#: per-block statistics share the memory budget)
+READ_ROWS = BATCH_ROWS // 2
+
+
 def _finite_at_every_shift(y: np.ndarray, trip: np.ndarray, big: int) -> np.ndarray:
     """Rows whose power read k rows later is finite and in the same trip for every shift
     |k| ≤ ``big`` (``shift_within_trips`` finite for all k), in one pass: the window
@@ -144,7 +152,7 @@ def _finite_at_every_shift(y: np.ndarray, trip: np.ndarray, big: int) -> np.ndar
 
 
 def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | None = None,
-                    read_options=None, target: str = "wheel", rows: int = BATCH_ROWS,
+                    read_options=None, target: str = "wheel", rows: int = READ_ROWS,
                     sample_rows: int = SAMPLE_ROWS, cache_mb: float = CACHE_MB,
                     progress=None, bar=None) -> DiagnoseResult:
     """Trace the residual of ``equation`` on drive logs of any length (see module docstring).
@@ -177,7 +185,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     opt.check()
     say = progress or (lambda s: None)
     veh = load_vehicle(vehicle) if isinstance(vehicle, str) else vehicle
-    gen = read_batches(paths, veh, read_options, target, rows)
+    gen = read_batches(paths, veh, read_options, target, rows)   # diagnose reads READ_ROWS at a time
     sample, n_sample = [], 0
     for m in gen:
         sample.append(m)
@@ -252,7 +260,8 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
         if n_usable == 0:
             raise UserError(f"{', '.join(files)}: no usable sample among {n_rows} rows")
         prep = Prepared(batches, declared, kept_names, np.array(sorted(names)))
-        say(f"{n_rows:,} rows read in {len(batches)} batch(es) in {time.perf_counter() - t_start:.1f} s"
+        say(f"{n_rows:,} rows read in {len(batches)} batch(es) in {time.perf_counter() - t_start:.1f} s, "
+            f"peak RSS {_peak_mb():,.0f} MB"
             + (" (prepared arrays on disk)" if batches.on_disk else ""))
         # two-valued columns, on the sample's analysis samples
         binary = _binary(prep, sample_idx, sample_rows)
@@ -274,6 +283,12 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     out.details["resources"] = {"rows": n_rows, "seconds": secs, "passes": passes,
                                 "batches_on_disk": on_disk, "sample_rows": n_sample}
     return out
+
+
+def _peak_mb() -> float:
+    from sumo_drvpw.fit.engine import peak_rss_mb
+
+    return peak_rss_mb()
 
 
 @dataclass
@@ -330,7 +345,8 @@ def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles
     if tr.n < 50:
         raise UserError(f"only {tr.n} analysis samples (usable, with finite terms and signals); need at least 50")
     n_trips = int((tr.trip_counts() > 0).sum())
-    say(f"{tr.n} analysis samples, {n_trips} trip(s), {tr.n_blocks} blocks, {len(prep.kept)} signal(s) offered")
+    say(f"{tr.n} analysis samples, {n_trips} trip(s), {tr.n_blocks} blocks, {len(prep.kept)} signal(s) offered "
+        f"(peak RSS so far {_peak_mb():,.0f} MB)")
     cands = generate_candidates(dict.fromkeys(prep.kept), declared, n_trips, opt, binary)
     notes = {}
     if opt.structural:
@@ -442,25 +458,39 @@ class _LagSums:
     """Raw sums of the lag search for every shift of ``lags``, gathered in the layout pass
     of the timing model: per block and per trip Σ x_j·y_ℓ and Σ y_ℓ², per trip XᵀX."""
 
+    #: rows of shifted powers held at once (whole trips)
+    CHUNK = 65_536
+
     def __init__(self, lags: np.ndarray):
         self.lags = lags
         self.bzy, self.byy, self.trips = [], [], {}
 
     def __call__(self, view, st) -> None:
         d = view.extra["batch"]
-        x = [view.decl[:, j] for j in range(view.decl.shape[1])]
-        rows = d["idx"][d["common"]]
-        ys = d["yrow"][rows[:, None] + self.lags[None, :]]                   # n × L, raw power
-        zy, yy = block_lag_sums(x, ys, st)
-        self.bzy.append(zy)
-        self.byy.append(yy)
+        rows_all = d["idx"][d["common"]]
+        decl = view.decl
         tc = view.trip
         tb = np.flatnonzero(np.r_[True, tc[1:] != tc[:-1]])
         te = np.r_[tb[1:], view.n]
-        tzy, tyy = block_lag_sums(x, ys, tb)
-        xm = np.column_stack(x)
-        for i, t in enumerate(tc[tb].tolist()):
-            self.trips[t] = (int(te[i] - tb[i]), xm[tb[i]:te[i]].T @ xm[tb[i]:te[i]], tzy[i], tyy[i])
+        # whole trips at a time, about CHUNK rows: the n × L matrix of shifted powers stays small
+        lo = 0
+        while lo < len(tb):
+            hi = lo + 1
+            while hi < len(tb) and te[hi] - tb[lo] <= self.CHUNK:
+                hi += 1
+            a, b = int(tb[lo]), int(te[hi - 1])
+            x = [decl[a:b, j] for j in range(decl.shape[1])]
+            ys = d["yrow"][rows_all[a:b, None] + self.lags[None, :]]            # n × L, raw power
+            sb = st[(st >= a) & (st < b)] - a
+            zy, yy = block_lag_sums(x, ys, sb)
+            self.bzy.append(zy)
+            self.byy.append(yy)
+            tzy, tyy = block_lag_sums(x, ys, tb[lo:hi] - a)
+            xm = np.column_stack(x)
+            for i in range(lo, hi):
+                r0, r1 = int(tb[i]) - a, int(te[i]) - a
+                self.trips[int(tc[tb[i]])] = (r1 - r0, xm[r0:r1].T @ xm[r0:r1], tzy[i - lo], tyy[i - lo])
+            lo = hi
 
     def select(self, tr0, lags):
         """Scaled block sums (as ``structural.timing``) for the shifts ``lags``."""
