@@ -157,7 +157,7 @@ def i3_study(data: Path) -> dict:
     folds = {"A": set(ids[0::2]), "B": set(ids[1::2])}
     loads = list(I3_LOADS)
     gain1 = {f"loads.{c}": 1.0 for c in loads}
-    variants = ("pipeline", "no_limit", "no_ambient_term", "as_logged", "loads_free",
+    variants = ("pipeline", "no_limit", "no_ambient_term", "cold_form", "as_logged", "loads_free",
                 "symmetric_efficiency", "chain_only")
     pred = {k: np.full(trips.size, np.nan) for k in variants}
     fits, sumo_params = {}, {}
@@ -190,6 +190,13 @@ def i3_study(data: Path) -> dict:
         ch4.recuperation_limit_w = profile_recuperation_limit(eq4.power(x), mw.power_w, dt,
                                                               mask=use)["recuperation_limit_w"]
         put("no_ambient_term", ch4, eq4.power(x))
+        # the temperature term in a form the SUMO plug-in evaluates (model/terms 'cold' =
+        # 20 °C − T, 0 without a temperature): a drag ∝ v rising in the cold
+        eqc, _, _ = _road_load(x, mw.power_w, use, I3_ROAD_TERMS[:4] + ("cold*v^2",), f"i3_fold{name}_cold")
+        chc = copy.deepcopy(fit.chain)
+        chc.recuperation_limit_w = profile_recuperation_limit(eqc.power(x), mw.power_w, dt,
+                                                              mask=use)["recuperation_limit_w"]
+        put("cold_form", chc, eqc.power(x))
         chl = copy.deepcopy(fit.chain)
         chl.recuperation_limit_w = profile_recuperation_limit(
             eq_log.power(mw.inputs), mw.power_w, dt, mask=mw.usable & train)["recuperation_limit_w"]
@@ -214,6 +221,7 @@ def i3_study(data: Path) -> dict:
         eq.mass_kg = None
         fits[name] = {"trips": sorted(fold), "road_load": dict(eq.terms), "road_load_free": free,
                       "road_load_constrained": msg, "chain": params, "r2": fit.r2, "rmse_w": fit.rmse_w,
+                      "road_load_cold_form": dict(eqc.terms),
                       "chain_loads_free": {k: p["value"] for k, p in fit_free.parameters.items()},
                       "chain_symmetric": {k: p["value"] for k, p in fit_sym.parameters.items()}}
         sumo_params[name] = (eq, chain)

@@ -132,6 +132,10 @@ def _i3(i3: dict) -> list[str]:
          f"| the chain alone, fed the measured motor power | {_pct(i3['mean_abs_error_chain_only'])[1:]} |",
          f"| without the recuperation limit | {_pct(i3['mean_abs_error_no_limit'])[1:]} |",
          f"| without the `[ambient_c]*v^2` term | {_pct(i3['mean_abs_error_no_ambient_term'])[1:]} |",
+         f"| the temperature term as `cold*v^2` (cold = 20 °C − T: the form the SUMO plug-in "
+         f"evaluates; coefficients " + "; ".join(
+             f"fold {n}: " + ", ".join(f"`{k}` {v:.4g}" for k, v in f["road_load_cold_form"].items())
+             for n, f in i3["fits"].items()) + f") | {_pct(i3['mean_abs_error_cold_form'])[1:]} |",
          f"| road load on the data as logged (no fused grade, no ρ at altitude; no ambient term) | "
          f"{_pct(i3['mean_abs_error_as_logged'])[1:]} |",
          f"| load gains fitted freely instead of 1 | {_pct(i3['mean_abs_error_loads_free'])[1:]} |",
