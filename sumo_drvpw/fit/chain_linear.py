@@ -71,11 +71,10 @@ import numpy as np
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import chain_target
 from sumo_drvpw.fit.compare import metrics as _metrics, trip_net_energy
-from sumo_drvpw.model.chain import STANDSTILL_MPS, EnergyChain, Table
+from sumo_drvpw.model.chain import STANDSTILL_MPS, EnergyChain
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import term_matrix
-
-from sumo_drvpw.fit.chain_effects import apply, candidates as _candidates
+from sumo_drvpw.fit.chain_effects import _eta as _eff, apply, candidates as _candidates
 
 METRIC_KEYS = ("rmse_w", "mae_w", "r2", "bias_w")
 
@@ -114,10 +113,6 @@ class ChainTraceResult:
 
 
 # ------------------------------------------------------------------ linearisation
-
-def _eff(e, v, p):
-    return e(v, p) if isinstance(e, Table) else np.full(np.shape(p), float(e))
-
 
 def predict(equation: Equation, inputs, signals=None) -> np.ndarray:
     """The equation's target power [W] (its chain applied to its driving power)."""
@@ -220,7 +215,11 @@ class _Blocks:
         """Per-block weighted ZᵀZ (B×q×q), Zᵀt (B×q), tᵀt (B)."""
         w = self.w
         nb, q = self.n_blocks, Z.shape[1]
-        zz = self.sums((w[:, None, None] * Z[:, :, None] * Z[:, None, :]).reshape(len(t), -1)).reshape(nb, q, q)
+        zz = np.empty((nb, q, q))
+        for i in range(q):  # column pairs: memory O(n), not O(n·q²)
+            wz = w * Z[:, i]
+            for j in range(i, q):
+                zz[:, i, j] = zz[:, j, i] = self.sums(wz * Z[:, j])
         return zz, self.sums(w[:, None] * Z * t[:, None]), self.sums(w * t * t)
 
     def energy(self, Z, t):
