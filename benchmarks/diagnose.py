@@ -6,7 +6,7 @@ columns (one planted A/C load and its flag, the rest distractors). Generation is
 timed; the timed part is what `sumo-drvpw diagnose LOG --vehicle prius3 --equation
 drvpw_prius3 --out DIR --no-figures` does (read the log, trace, write the report).
 
-    .venv/bin/python benchmarks/diagnose.py [--rows 1000000]
+    .venv/bin/python benchmarks/diagnose.py [--rows 1000000] [--stream yes]
 
 Also runs the tracer without structural effects on the same log first and prints the ratio
 (structural effects cost: N× the tracer without them). [--rows 500000,2000000 --profile 20]
@@ -65,6 +65,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rows", default="1000000",
                     help="rows, or a comma list of sizes to see how time grows (e.g. 500000,2000000)")
+    ap.add_argument("--stream", choices=("no", "yes"), default="no",
+                    help="trace in memory (no, default) or streamed in bounded memory (yes): "
+                         "sumo_drvpw.fit.diagnose.stream_run, the same numbers")
     ap.add_argument("--profile", type=int, default=0, metavar="N",
                     help="also print the N functions with the most own time (cProfile) per size")
     a = ap.parse_args()
@@ -88,11 +91,11 @@ def main() -> int:
             # regimes, air density, accelerometer grade)
             t0 = time.perf_counter()
             run([path], "prius3", "drvpw_prius3", Path(tmp) / "out0", DiagnoseOptions(structural=False),
-                figures=False)
+                figures=False, stream=a.stream)
             dt0 = time.perf_counter() - t0
             t0 = time.perf_counter()
             res = run([path], "prius3", "drvpw_prius3", Path(tmp) / "out", DiagnoseOptions(),
-                      figures=False, progress=print)
+                      figures=False, progress=print, stream=a.stream)
             dt = time.perf_counter() - t0
             if prof is not None:
                 import pstats
@@ -105,6 +108,9 @@ def main() -> int:
               f"rmse {r['baseline']['metrics']['rmse_w']:.1f} -> {r['final']['metrics']['rmse_w']:.1f} W")
         print(f"seconds={dt:.1f} rows_per_s={rows / dt:.0f} candidates_scored={res.n_candidates_scored}")
         print(f"structural effects cost: {dt / dt0:.2f}x the tracer without them ({dt0:.1f} s, same run)")
+        from sumo_drvpw.cli.diagnose import resource_line
+
+        print(resource_line(res), "(peak RSS of this process: both runs and the generator)")
     if len(times) > 1:
         (r0, t0), (r1, t1) = min(times.items()), max(times.items())
         print(f"time ratio {t1 / t0:.2f} for {r1 / r0:.2f}x the rows (linear: equal)")

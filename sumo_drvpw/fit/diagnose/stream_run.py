@@ -329,8 +329,10 @@ def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles
     timing_finding, lag_note = None, None
     common, lag = False, 0
     if len(lags) > 1:
-        hook = _LagSums(np.asarray(lags, dtype=np.int64))
-        tr0 = _declared(prep, opt, declared, True, 0, hook)    # layout, terms and lag sums: one pass
+        big = int(lags[-1])
+        step = max(1, math.ceil(big / COARSE_LAGS))
+        hook = _LagSums(np.array(sorted(set(range(-big, big + 1, step)) | {0}), dtype=np.int64))
+        tr0 = _declared(prep, opt, declared, True, 0, hook)    # layout, terms, coarse lag sums: one pass
         if tr0.n >= 50:
             timing_finding, lag_note, tr1 = _timing(tr0, hook, prep, opt, lags, dt_med, say, paired_test,
                                                     COARSE_LAGS)
@@ -492,6 +494,16 @@ class _LagSums:
                 self.trips[int(tc[tb[i]])] = (r1 - r0, xm[r0:r1].T @ xm[r0:r1], tzy[i - lo], tyy[i - lo])
             lo = hi
 
+    def absorb(self, other: "_LagSums") -> None:
+        """Take in the sums of more shifts (gathered in another pass over the same views)."""
+        lags = np.r_[self.lags, other.lags]
+        order = np.argsort(lags, kind="stable")
+        self.bzy = [np.concatenate([np.concatenate(self.bzy), np.concatenate(other.bzy)], axis=2)[:, :, order]]
+        self.byy = [np.concatenate([np.concatenate(self.byy), np.concatenate(other.byy)], axis=1)[:, order]]
+        self.trips = {t: (n, a, np.concatenate([zy, other.trips[t][2]], axis=1)[:, order],
+                          np.r_[yy, other.trips[t][3]][order]) for t, (n, a, zy, yy) in self.trips.items()}
+        self.lags = lags[order]
+
     def select(self, tr0, lags):
         """Scaled block sums (as ``structural.timing``) for the shifts ``lags``."""
         pos = np.searchsorted(self.lags, lags)
@@ -512,6 +524,11 @@ def _timing(tr0: StreamModel, sums: _LagSums, prep, opt, lags, dt_med, say, pair
     if step > 1:
         fine = [k for k in range(res["lag_samples"] - step + 1, res["lag_samples"] + step)
                 if -big <= k <= big and k not in tried]
+        if fine:  # one more pass for the shifts around the best coarse one
+            more = _LagSums(np.array(sorted(fine), dtype=np.int64))
+            for view in tr0._views():
+                more(view, view.extra["starts"])
+            sums.absorb(more)
         tried = sorted(set(tried) | set(fine))
         res = timing_from_blocks(tr0, *sums.select(tr0, tried), dt_med, paired_test)
     all_lags = tried
