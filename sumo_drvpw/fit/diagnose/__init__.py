@@ -74,6 +74,15 @@ the model lacks". Structural effects (:mod:`sumo_drvpw.fit.diagnose.structural`)
 power–speed lag is tested first and corrected in the data; recuperation regimes, air
 density from altitude, a missing grade term and the accelerometer grade are candidates.
 
+Logs of any length (issue #14): :func:`~sumo_drvpw.fit.diagnose.stream_run.diagnose_stream`
+runs the same search in bounded memory — the logs are read once in batches of whole trips
+(:mod:`~sumo_drvpw.fit.diagnose.source`), every statistic above is a sum gathered in a pass
+over the prepared batches (:class:`~sumo_drvpw.fit.diagnose.streamed.StreamModel`), and the
+block statistics are the same sums as in memory, so the report is the same to rounding
+(tests/test_diagnose_stream.py). Column screening, two-valued columns, the sample interval
+of the lag search and the recuperation quantiles come from the first 500,000 rows; no
+figures are drawn.
+
 Reported numbers: coefficients and their standard errors come from an OLS fit on all
 analysis samples (classical standard errors; autocorrelated residuals make them
 optimistic), ``p_value`` is the Bonferroni-corrected held-out test p-value; metrics
