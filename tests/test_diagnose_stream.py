@@ -145,3 +145,13 @@ def test_streamed_bad_input_is_a_user_error(tmp_path):
         from sumo_drvpw.model.equations import Equation
 
         diagnose_stream(paths, "prius3", Equation("x", {"acc": 1.0, "[no_such_col]": 1.0}), DiagnoseOptions())
+
+
+def test_streamed_equals_in_memory_calibrated_on_the_spot(tmp_path):
+    # no declared equation: both calibrate indt-var-1 on the spot (the streamed tracer on its
+    # first-look sample, here all rows), then trace
+    paths = _logs(tmp_path, [E.AuxLoad()], n_trips=4)
+    mem = diagnose(load_measured(paths, "prius3"), None, DiagnoseOptions(structural=False))
+    st = diagnose_stream(paths, "prius3", None, DiagnoseOptions(structural=False), rows=3000)
+    assert mem.details["calibrated_on_the_spot"] and st.details["calibrated_on_the_spot"]
+    _assert_equal(mem, st)

@@ -59,6 +59,7 @@ class Prepared:
     kept: list                          # offered signals (columns of each batch's ``sig``)
     trip_names: np.ndarray = None       # sorted trip ids of all rows
     derived: dict = field(default_factory=dict)   # name → f(view, batch, sel) → values
+    sample_batches: int = 0                       # the first-look sample's batches
 
     @property
     def signal_names(self):
@@ -66,12 +67,16 @@ class Prepared:
 
     def views(self, common: bool, lag: int):
         for d in self.batches:
-            sel = d["common"] if common else None
-            gmap = np.searchsorted(self.trip_names, np.asarray(d["names"], dtype=str))
-            view = View(d, sel, lag, gmap)
-            view.signals = _Signals(view, d, sel, self.kept, self.derived)
-            view.extra["batch"] = d
-            yield view
+            yield self.view(d, common, lag)
+
+    def view(self, d: dict, common: bool, lag: int) -> View:
+        """The view of one prepared batch (``common``: the lag search's samples only)."""
+        sel = d["common"] if common else None
+        gmap = np.searchsorted(self.trip_names, np.asarray(d["names"], dtype=str))
+        view = View(d, sel, lag, gmap)
+        view.signals = _Signals(view, d, sel, self.kept, self.derived)
+        view.extra["batch"] = d
+        return view
 
 
 class _Signals(dict):
@@ -260,6 +265,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
         if n_usable == 0:
             raise UserError(f"{', '.join(files)}: no usable sample among {n_rows} rows")
         prep = Prepared(batches, declared, kept_names, np.array(sorted(names)))
+        prep.sample_batches = sample_idx
         say(f"{n_rows:,} rows read in {len(batches)} batch(es) in {time.perf_counter() - t_start:.1f} s, "
             f"peak RSS {_peak_mb():,.0f} MB"
             + (" (prepared arrays on disk)" if batches.on_disk else ""))
@@ -316,10 +322,10 @@ def _binary(prep: Prepared, n_batches: int, limit: int) -> set:
     return {k for k, v in vals.items() if len(v) <= 2}
 
 
-def _declared(prep, opt, declared, common, lag, hook=None) -> StreamModel:
+def _declared(prep, opt, declared, common, lag, hook=None, defer=False) -> StreamModel:
     cols = [Candidate(term, f"declared term {term}", tuple(parse_term(term).signals), "declared")
             for term in declared]
-    return StreamModel(prep, opt, common=common, lag=lag, columns=cols, hook=hook)  # one pass
+    return StreamModel(prep, opt, common=common, lag=lag, columns=cols, hook=hook, defer=defer)  # one pass
 
 
 def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles, say) -> dict:
@@ -332,7 +338,17 @@ def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles
         big = int(lags[-1])
         step = max(1, math.ceil(big / COARSE_LAGS))
         hook = _LagSums(np.array(sorted(set(range(-big, big + 1, step)) | {0}), dtype=np.int64))
-        tr0 = _declared(prep, opt, declared, True, 0, hook)    # layout, terms, coarse lag sums: one pass
+        # one pass: the timing model (common samples: layout, terms, coarse lag sums) and the
+        # model without a lag (all analysis samples: layout, terms)
+        tr0 = _declared(prep, opt, declared, True, 0, hook, defer=True)
+        trm = _declared(prep, opt, declared, False, 0, defer=True)
+        for d in prep.batches:
+            tr0.layout_step(prep.view(d, True, 0))
+            trm.layout_step(prep.view(d, False, 0))
+        tr0.layout_end()
+        trm.layout_end()
+        tr0.passes += 1
+        tr = trm
         if tr0.n >= 50:
             timing_finding, lag_note, tr1 = _timing(tr0, hook, prep, opt, lags, dt_med, say, paired_test,
                                                     COARSE_LAGS)
@@ -340,9 +356,9 @@ def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles
             if timing_finding is not None:
                 common, lag = True, timing_finding["_lag_samples"]
                 tr = tr1
-    if timing_finding is None:
+    if len(lags) <= 1:
         tr = _declared(prep, opt, declared, False, 0)
-    else:
+    if timing_finding is not None:
         timing_finding.pop("_lag_samples")
     if tr.n < 50:
         raise UserError(f"only {tr.n} analysis samples (usable, with finite terms and signals); need at least 50")
@@ -382,13 +398,18 @@ def _structural(tr: StreamModel, prep: Prepared, declared, elev: bool, acc):
                 pred += b * (view.decl[:, j] / s) * y_scale
             view.extra["base_pred"] = pred
         return view.extra["base_pred"]
-    n_neg, neg_vals = 0, []
-    for view in tr._views(blocks=False):
+    # the regimes' share and quantiles on the first-look sample's batches (all data when
+    # the sample is): a partial pass
+    n_neg, n_seen, neg_vals = 0, 0, []
+    for i, view in enumerate(tr._views(blocks=False)):
+        if i >= prep.sample_batches:
+            break
         pred = base_pred(view)
         neg = pred < 0
         n_neg += int(neg.sum())
+        n_seen += view.n
         neg_vals.append(-pred[neg])
-    if tr.n and n_neg / tr.n > 0.02:
+    if n_seen and n_neg / n_seen > 0.02:
         negs = np.concatenate(neg_vals)
         prep.derived["recuperation"] = lambda v, d, sel: np.where(base_pred(v) < 0, base_pred(v), 0.0)
         cands.append(Candidate("[recuperation]", "recuperation on its own coefficient: "

@@ -110,13 +110,14 @@ class StreamModel(BlockModel):
     lag : shift of the measured power [samples] (0: none)
     columns : model columns added in the layout pass (:meth:`add_all`)
     hook : called as hook(view, block starts) for every view of the layout pass
+    defer : the layout pass is run by the caller (``layout_step`` per view of
+        ``prep.views(common, lag)``, then ``layout_end``), e.g. for two models in one pass
     """
 
     def __init__(self, prep, opt: DiagnoseOptions, common: bool = False, lag: int = 0,
-                 columns: list[Candidate] = (), hook=None):
+                 columns: list[Candidate] = (), hook=None, defer: bool = False):
         self.prep, self.opt, self.common, self.lag = prep, opt, common, lag
         columns = list(columns)
-        sums = []      # per view: the sums of add_all for ``columns``, gathered in the layout pass
         self.declared = list(prep.declared)
         self.trip_names = list(prep.trip_names)
         self.n_trips = len(self.trip_names)
@@ -126,47 +127,62 @@ class StreamModel(BlockModel):
         self._factor_cache, self.cand_cache = {}, {}
         self.n_scored = 0
         self.passes = 0
-        starts, offs, btrip, byy, sizes = [], [], [], [], np.zeros(self.n_trips, np.int64)
-        nb = 0
-        n, rho, th_min, th_max, first = 0, 0.0, math.inf, -math.inf, []
-        for view in self._views(blocks=False):
-            tc, t = view.trip, view.t
-            nv = view.n
-            if nv == 0:
-                starts.append(np.zeros(0, np.int64))
-                offs.append(nb)
-                continue
-            tstart = np.r_[True, tc[1:] != tc[:-1]]
-            firsti = np.maximum.accumulate(np.where(tstart, np.arange(nv), 0))
-            bidx = np.floor((t - t[firsti]) / opt.block_s).astype(np.int64)
-            newb = np.r_[True, (tc[1:] != tc[:-1]) | (bidx[1:] != bidx[:-1])]
-            st = np.flatnonzero(newb)
-            offs.append(nb)
-            starts.append(st)
-            nb += len(st)
-            btrip.append(tc[st])
-            byy.append(_rs(view.y * view.y, st))
-            sizes += np.bincount(tc, minlength=self.n_trips)
-            n += nv
-            rho += float(view.x.rho.sum())
-            th_min, th_max = min(th_min, float(view.x.theta.min())), max(th_max, float(view.x.theta.max()))
-            first.extend(tc[np.r_[True, tc[1:] != tc[:-1]]].tolist())
-            if columns:
-                sums.append(self._column_sums(view, st, columns))
-            if hook is not None:
-                hook(view, st)
+        self._version = 0
+        self._lay = {"starts": [], "offs": [], "btrip": [], "byy": [], "sums": [], "first": [],
+                     "sizes": np.zeros(self.n_trips, np.int64), "nb": 0, "n": 0, "rho": 0.0,
+                     "th": [math.inf, -math.inf], "columns": columns, "hook": hook}
+        if not defer:
+            self.passes += 1
+            for view in prep.views(common, lag):
+                self.layout_step(view)
+            self.layout_end()
+
+    def layout_step(self, view) -> None:
+        """The layout pass, one view: blocks, their yᵀy, trip sizes (and the columns' sums)."""
+        L, opt = self._lay, self.opt
+        tc, t = view.trip, view.t
+        nv = view.n
+        if nv == 0:
+            L["starts"].append(np.zeros(0, np.int64))
+            L["offs"].append(L["nb"])
+            return
+        tstart = np.r_[True, tc[1:] != tc[:-1]]
+        firsti = np.maximum.accumulate(np.where(tstart, np.arange(nv), 0))
+        bidx = np.floor((t - t[firsti]) / opt.block_s).astype(np.int64)
+        newb = np.r_[True, (tc[1:] != tc[:-1]) | (bidx[1:] != bidx[:-1])]
+        st = np.flatnonzero(newb)
+        L["offs"].append(L["nb"])
+        L["starts"].append(st)
+        L["nb"] += len(st)
+        L["btrip"].append(tc[st])
+        L["byy"].append(_rs(view.y * view.y, st))
+        L["sizes"] += np.bincount(tc, minlength=self.n_trips)
+        L["n"] += nv
+        L["rho"] += float(view.x.rho.sum())
+        L["th"] = [min(L["th"][0], float(view.x.theta.min())), max(L["th"][1], float(view.x.theta.max()))]
+        L["first"].extend(tc[tstart].tolist())
+        if L["columns"]:
+            L["sums"].append(self._column_sums(view, st, L["columns"]))
+        if L["hook"] is not None:
+            L["hook"](view, st)
+
+    def layout_end(self) -> None:
+        L = self._lay
+        n = L["n"]
         self.n = n
-        self._starts, self._offs = starts, offs
-        self.block_trip = np.concatenate(btrip) if btrip else np.zeros(0, np.int64)
+        self._starts, self._offs = L["starts"], L["offs"]
+        self.block_trip = np.concatenate(L["btrip"]) if L["btrip"] else np.zeros(0, np.int64)
         self.n_blocks = len(self.block_trip)
-        self._sizes = sizes
-        self.trip_order = first_appearance(first)
-        self._rho_mean = rho / n if n else math.nan
-        self.theta_ptp = th_max - th_min if n else 0.0
+        self._sizes = L["sizes"]
+        self.trip_order = first_appearance(L["first"])
+        self._rho_mean = L["rho"] / n if n else math.nan
+        self.theta_ptp = L["th"][1] - L["th"][0] if n else 0.0
+        columns, sums = L["columns"], L["sums"]
+        del self._lay
         if n == 0:
             return
-        self._assign_folds(sizes)
-        raw_yy = np.concatenate(byy)
+        self._assign_folds(self._sizes)
+        raw_yy = np.concatenate(L["byy"])
         self.y_scale = float(np.sqrt(raw_yy.sum() / n)) or 1.0
         self.block_yy = raw_yy / (self.y_scale * self.y_scale)
         if columns:
@@ -185,8 +201,12 @@ class StreamModel(BlockModel):
             yield view
 
     def _raw(self, view: View) -> list:
-        """Raw values of the model columns on a view (one array per column)."""
-        return [cand_values(view, c.cand, self.declared, c.mass_terms) for c in self.cols]
+        """Raw values of the model columns on a view (one array per column; computed once
+        per view and model state, as several tasks of one pass ask for them)."""
+        key = ("raw", self._version)
+        if key not in view.extra:
+            view.extra[key] = [cand_values(view, c.cand, self.declared, c.mass_terms) for c in self.cols]
+        return view.extra[key]
 
     def _zmat(self, view: View) -> np.ndarray:
         """Scaled model columns on a view (n × q), as ``BlockModel.scaled``."""
@@ -197,23 +217,15 @@ class StreamModel(BlockModel):
     def _block_cross(self, specs, q0s=None):
         """Per-block raw sums of candidate values v: (Σv², [Σv·x_j for j ≥ q0], Σv·y), with
         x_j the model columns' raw values — the in-memory model's sums, block by block."""
-        q = len(self.cols)
-        m = len(specs)
-        q0s = q0s or [0] * m
-        vv = np.zeros((self.n_blocks, m))
-        vy = np.zeros((self.n_blocks, m))
-        vz = [np.zeros((self.n_blocks, q - q0)) for q0 in q0s]
+        task = _Cross(self, specs, q0s)
+        self._gather([task])
+        return task.result()
+
+    def _gather(self, tasks) -> None:
+        """One pass over the views feeding every task (``step(view)``)."""
         for view in self._views():
-            st, off = view.extra["starts"], view.extra["off"]
-            sl = slice(off, off + len(st))
-            raw = self._raw(view)
-            for i, (cand, mt) in enumerate(specs):
-                v = cand_values(view, cand, self.declared, mt)
-                vv[sl, i] = _rs(v * v, st)
-                vy[sl, i] = _rs(v * view.y, st)
-                for j in range(q0s[i], q):
-                    vz[i][sl, j - q0s[i]] = _rs(v * raw[j], st)
-        return vv, vz, vy
+            for t in tasks:
+                t.step(view)
 
     def _scales(self, q0: int = 0) -> np.ndarray:
         return np.array([c.scale for c in self.cols[q0:]])
@@ -293,25 +305,27 @@ class StreamModel(BlockModel):
             self.block_zy = np.column_stack([self.block_zy, hz_new])
         self.cols.append(col)
         self._full = None
+        self._version += 1
 
     def prefetch(self, cands: list[Candidate]) -> None:
         """Block statistics of many candidates in one pass (as far as the cache allows)."""
-        q = len(self.cols)
-        todo = [c for c in cands if c.kind != "trip_mass"
-                and not (c.term in self.cand_cache and self.cand_cache[c.term][0].shape[1] == q)]
-        per = self.n_blocks * (q + 2) * 8
-        room = max(int(CACHE_BYTES // max(per, 1)) - len(self.cand_cache), 0)
-        todo = todo[:room]
+        todo = self._prefetch_todo(cands)
         if todo:
             self._fill(todo)
 
-    def _fill(self, cands):
-        q = len(self.cols)
+    def _fill_plan(self, cands) -> list:
         q0s = []
         for c in cands:
             cached = self.cand_cache.get(c.term)
             q0s.append(cached[0].shape[1] if cached is not None and np.isfinite(cached[3]) else 0)
-        vv, vz, vy = self._block_cross([(c, None) for c in cands], q0s)
+        return q0s
+
+    def _fill(self, cands):
+        q0s = self._fill_plan(cands)
+        self._fill_store(cands, q0s, *self._block_cross([(c, None) for c in cands], q0s))
+
+    def _fill_store(self, cands, q0s, vv, vz, vy) -> None:
+        q = len(self.cols)
         for i, c in enumerate(cands):
             cached = self.cand_cache.get(c.term) if q0s[i] else None
             if cached is not None:
@@ -324,7 +338,16 @@ class StreamModel(BlockModel):
                 self.cand_cache[c.term] = (np.zeros((self.n_blocks, q)), np.zeros(self.n_blocks),
                                            np.zeros(self.n_blocks), np.nan)
                 continue
-            self.cand_cache[c.term] = (vz[i] / (s * self._scales()), vv[:, i] / (s * s), vy[:, i] / (s * self.y_scale), s)
+            self.cand_cache[c.term] = (vz[i] / (s * self._scales()), vv[:, i] / (s * s),
+                                       vy[:, i] / (s * self.y_scale), s)
+
+    def _prefetch_todo(self, cands) -> list:
+        q = len(self.cols)
+        todo = [c for c in cands if c.kind != "trip_mass" and not c.scatter
+                and not (c.term in self.cand_cache and self.cand_cache[c.term][0].shape[1] == q)]
+        per = self.n_blocks * (q + 2) * 8
+        room = max(int(CACHE_BYTES // max(per, 1)) - len(self.cand_cache), 0)
+        return todo[:room]
 
     def cand_stats(self, cands: list[Candidate], vals=None):
         m, q = len(cands), len(self.cols)
@@ -361,22 +384,27 @@ class StreamModel(BlockModel):
         return cand_z, cand_zz, cand_zy, scales
 
     def _spanned_stats(self, cands, names, groups):
-        q = len(self.cols)
-        g = np.zeros((len(names), len(names))) if len(names) > 1 else None
-        a = np.zeros((q, q))
-        grams = {key: (np.zeros((len(ks), len(ks))), np.zeros((q, len(ks)))) for key, ks in groups.items()}
-        for view in self._views():
-            if g is not None:
-                s = np.column_stack([np.asarray(view.signals[k], float) for k in names])
-                g += s.T @ s
-            z = self._zmat(view)
-            a += z.T @ z
-            for key, ks in groups.items():
-                vals = np.column_stack([cand_values(view, cands[k], self.declared) for k in ks])
-                cc, cm = grams[key]
-                cc += vals.T @ vals
-                cm += z.T @ vals
-        return g, a, grams
+        """The sums of :meth:`BlockModel.drop_spanned`; in the same pass the block statistics
+        of the candidates (:meth:`prefetch`) and the current model's held-out evaluation on
+        its own folds (:meth:`evaluate`), which the search asks for next."""
+        span = _Spanned(self, cands, names, groups)
+        todo = self._prefetch_todo(cands)
+        q0s = self._fill_plan(todo)
+        cross = _Cross(self, [(c, None) for c in todo], q0s)
+        fold = self.fold_of(False)
+        ev = _Eval(self, fold)
+        self._gather([span, cross, ev] if todo else [span, ev])
+        if todo:
+            self._fill_store(todo, q0s, *cross.result())
+        self._ev_cache = (self._key(fold), ev.result())
+        return span.result()
+
+    def _key(self, fold):
+        return (self._version, fold.tobytes())
+
+    def drop_last(self) -> None:
+        super().drop_last()
+        self._version += 1
 
     # ---- what is reported
     def _coef_per_sample(self, bz, view):
@@ -385,30 +413,12 @@ class StreamModel(BlockModel):
         return bz[blk]
 
     def evaluate(self, fold) -> dict:
-        _, bz = self.heldout_model(fold)
-        ms = _MetricSums()
-        k = self.n_trips
-        sse, em, ep, nm, npred = (np.zeros(k) for _ in range(5))
-        for view in self._views():
-            z = self._zmat(view)
-            coef = self._coef_per_sample(bz, view)
-            pred = np.zeros(view.n)
-            for j in range(z.shape[1]):
-                pred += coef[:, j] * z[:, j]
-            pred = pred * self.y_scale
-            y, dt, tc = view.y, view.dt, view.trip
-            ms.add(pred, y)
-            sse += np.bincount(tc, weights=(pred - y) ** 2, minlength=k)
-            ok = np.isfinite(pred) & np.isfinite(y)
-            ep += np.bincount(tc, weights=np.where(ok & (pred > 0), pred, 0.0) * dt, minlength=k)
-            em += np.bincount(tc, weights=np.where(ok & (y > 0), y, 0.0) * dt, minlength=k)
-            npred += np.bincount(tc, weights=np.where(ok, pred, 0.0) * dt, minlength=k)
-            nm += np.bincount(tc, weights=np.where(ok, y, 0.0) * dt, minlength=k)
-        order = np.asarray(self.trip_order, dtype=np.int64)
-        names = [self.trip_names[i] for i in order]
-        return {"pred": None, "metrics": ms.result(), "trip_sse": sse,
-                "trip_energy": _trip_energy_doc(names, em[order], ep[order]),
-                "trip_net_energy": _trip_energy_doc(names, nm[order], npred[order])}
+        cached = getattr(self, "_ev_cache", None)
+        if cached is not None and cached[0] == self._key(fold):
+            return cached[1]
+        task = _Eval(self, fold)
+        self._gather([task])
+        return task.result()
 
     def energy_shares(self) -> np.ndarray:
         beta = self.full_fit()["beta"]
@@ -437,3 +447,94 @@ class StreamModel(BlockModel):
 
     def heldout_pred(self, fold):  # pragma: no cover
         raise NotImplementedError("the streamed block model keeps no per-sample predictions")
+
+
+class _Cross:
+    """Pass task: per-block raw sums of candidate values (see ``StreamModel._block_cross``)."""
+
+    def __init__(self, tr: StreamModel, specs, q0s=None):
+        self.tr, self.specs = tr, specs
+        q, m = len(tr.cols), len(specs)
+        self.q0s = q0s or [0] * m
+        self.vv = np.zeros((tr.n_blocks, m))
+        self.vy = np.zeros((tr.n_blocks, m))
+        self.vz = [np.zeros((tr.n_blocks, q - q0)) for q0 in self.q0s]
+
+    def step(self, view) -> None:
+        tr = self.tr
+        q = len(tr.cols)
+        st, off = view.extra["starts"], view.extra["off"]
+        sl = slice(off, off + len(st))
+        raw = tr._raw(view)
+        for i, (cand, mt) in enumerate(self.specs):
+            v = cand_values(view, cand, tr.declared, mt)
+            self.vv[sl, i] = _rs(v * v, st)
+            self.vy[sl, i] = _rs(v * view.y, st)
+            for j in range(self.q0s[i], q):
+                self.vz[i][sl, j - self.q0s[i]] = _rs(v * raw[j], st)
+
+    def result(self):
+        return self.vv, self.vz, self.vy
+
+
+class _Spanned:
+    """Pass task: the sums of ``BlockModel.drop_spanned``."""
+
+    def __init__(self, tr: StreamModel, cands, names, groups):
+        q = len(tr.cols)
+        self.tr, self.cands, self.names, self.groups = tr, cands, names, groups
+        self.g = np.zeros((len(names), len(names))) if len(names) > 1 else None
+        self.a = np.zeros((q, q))
+        self.grams = {key: (np.zeros((len(ks), len(ks))), np.zeros((q, len(ks)))) for key, ks in groups.items()}
+
+    def step(self, view) -> None:
+        tr = self.tr
+        if self.g is not None:
+            s = np.column_stack([np.asarray(view.signals[k], float) for k in self.names])
+            self.g += s.T @ s
+        z = tr._zmat(view)
+        self.a += z.T @ z
+        for key, ks in self.groups.items():
+            vals = np.column_stack([cand_values(view, self.cands[k], tr.declared) for k in ks])
+            cc, cm = self.grams[key]
+            cc += vals.T @ vals
+            cm += z.T @ vals
+
+    def result(self):
+        return self.g, self.a, self.grams
+
+
+class _Eval:
+    """Pass task: the held-out evaluation of ``StreamModel.evaluate``."""
+
+    def __init__(self, tr: StreamModel, fold):
+        self.tr = tr
+        _, self.bz = tr.heldout_model(fold)
+        self.ms = _MetricSums()
+        k = tr.n_trips
+        self.sse, self.em, self.ep, self.nm, self.npred = (np.zeros(k) for _ in range(5))
+
+    def step(self, view) -> None:
+        tr, k = self.tr, self.tr.n_trips
+        z = tr._zmat(view)
+        coef = tr._coef_per_sample(self.bz, view)
+        pred = np.zeros(view.n)
+        for j in range(z.shape[1]):
+            pred += coef[:, j] * z[:, j]
+        pred = pred * tr.y_scale
+        y, dt, tc = view.y, view.dt, view.trip
+        self.ms.add(pred, y)
+        self.sse += np.bincount(tc, weights=(pred - y) ** 2, minlength=k)
+        ok = np.isfinite(pred) & np.isfinite(y)
+        self.ep += np.bincount(tc, weights=np.where(ok & (pred > 0), pred, 0.0) * dt, minlength=k)
+        self.em += np.bincount(tc, weights=np.where(ok & (y > 0), y, 0.0) * dt, minlength=k)
+        self.npred += np.bincount(tc, weights=np.where(ok, pred, 0.0) * dt, minlength=k)
+        self.nm += np.bincount(tc, weights=np.where(ok, y, 0.0) * dt, minlength=k)
+
+    def result(self) -> dict:
+        tr = self.tr
+        order = np.asarray(tr.trip_order, dtype=np.int64)
+        names = [tr.trip_names[i] for i in order]
+        return {"pred": None, "metrics": self.ms.result(), "trip_sse": self.sse,
+                "trip_energy": _trip_energy_doc(names, self.em[order], self.ep[order]),
+                "trip_net_energy": _trip_energy_doc(names, self.nm[order], self.npred[order])}
