@@ -18,6 +18,9 @@ from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.terms import Inputs
+from sumo_drvpw.data.trips import (per_trip_rolling_mean as _per_trip_rolling_mean,  # noqa: F401
+                                   trip_array as _trip_array, trip_codes_of,
+                                   trip_starts as _trip_starts)
 from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_distinct_trips,  # noqa: F401
                                        check_speed_unit, implied_acceleration)
 
@@ -124,16 +127,6 @@ class DriveLog:
 
     def describe(self) -> str:
         return self.files[0] if len(self.files) == 1 else f"{len(self.files)} files"
-
-
-def _trip_array(trip: pd.Series) -> np.ndarray:
-    """Trip ids as an object array; a categorical's rows point at its categories' strings
-    (one string per trip, not one per row)."""
-    if isinstance(trip.dtype, pd.CategoricalDtype):
-        cats = np.asarray(trip.cat.categories, dtype=object)
-        codes = trip.cat.codes.to_numpy()
-        return np.append(cats, np.nan)[codes] if (codes < 0).any() else cats[codes]
-    return trip.to_numpy()
 
 
 def exclusions(counts: dict) -> str:
@@ -296,69 +289,6 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
     if opt.speed_unit is None:
         check_speed_unit(v, t, trip, p)
     return n_clipped
-
-
-def _trip_starts(trip: np.ndarray) -> np.ndarray:
-    return np.r_[True, trip[1:] != trip[:-1]]
-
-
-def trip_codes_of(trip: pd.Series) -> np.ndarray:
-    """Integer code per sample, equal for equal trip ids (a categorical column's own codes,
-    else ``pd.factorize``): comparisons of neighbours without Python strings."""
-    if isinstance(trip.dtype, pd.CategoricalDtype):
-        return trip.cat.codes.to_numpy()
-    return pd.factorize(trip)[0]
-
-
-def _per_trip_rolling_mean(x: np.ndarray, trip_codes: np.ndarray, window: int) -> np.ndarray:
-    """Centred moving average of width ``window`` samples that never crosses trips.
-
-    Same as pandas ``rolling(window, center=True, min_periods=1).mean()`` per trip (NaN
-    skipped), vectorized: window sums from per-trip cumulative sums (each trip's sums start
-    at its first sample, so a trip's values do not depend on the trips read with it)."""
-    if window <= 1:
-        return x
-    if window % 2 == 0:  # an even centred window: pandas' own alignment
-        s = pd.Series(x)
-        return s.groupby(trip_codes, sort=False).transform(
-            lambda g: g.rolling(window, center=True, min_periods=1).mean()).to_numpy()
-    n = len(x)
-    start = _trip_starts(trip_codes)
-    first = np.flatnonzero(start)
-    if len(first) <= 2000:  # trip by trip: each trip's arrays stay in cache
-        out = np.empty(n)
-        for a, b in zip(first, np.r_[first[1:], n]):
-            out[a:b] = _rolling_mean_one(x[a:b], window)
-        return out
-    run = np.cumsum(start) - 1
-    last = np.r_[first[1:], n] - 1
-    i = np.arange(n)
-    h = window // 2
-    lo = np.maximum(i - h, first[run])
-    hi = np.minimum(i + h, last[run])
-    ok = np.isfinite(x)
-    cs = pd.Series(np.where(ok, x, 0.0)).groupby(run, sort=False).cumsum().to_numpy()
-    cnt = np.r_[0, np.cumsum(ok)]
-    below = np.where(lo > first[run], cs[np.maximum(lo - 1, 0)], 0.0)
-    c = cnt[hi + 1] - cnt[lo]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(c > 0, (cs[hi] - below) / np.maximum(c, 1), np.nan)
-
-
-def _rolling_mean_one(x: np.ndarray, window: int) -> np.ndarray:
-    """Centred mean of odd width ``window`` over one trip, NaN skipped (min_periods=1)."""
-    n, h = len(x), window // 2
-    ok = np.isfinite(x)
-    cs = np.zeros(n + 1)
-    np.cumsum(np.where(ok, x, 0.0), out=cs[1:])
-    cnt = np.zeros(n + 1, np.int64)
-    np.cumsum(ok, out=cnt[1:])
-    i = np.arange(n)
-    lo = np.maximum(i - h, 0)
-    hi = np.minimum(i + h + 1, n)
-    c = cnt[hi] - cnt[lo]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(c > 0, (cs[hi] - cs[lo]) / np.maximum(c, 1), np.nan)
 
 
 def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s: float) -> np.ndarray:

@@ -198,7 +198,7 @@ def whole_trips(part: Part, rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRI
     ``categorical``: a text ``trip_id`` of a Parquet file comes as a pandas categorical
     (dictionary-encoded, no Python string per row; the reader keeps it so); False: as read.
     """
-    from sumo_drvpw.data.log import trip_codes_of
+    from sumo_drvpw.data.trips import trip_codes_of
 
     carry: pd.DataFrame | None = None
     offset = 0

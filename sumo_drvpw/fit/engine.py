@@ -91,7 +91,7 @@ def part_stats(part: Part, make, vehicle=None, options=None, rows: int = BATCH_R
 
 def _trip_ids(m) -> list[str]:
     """The trip ids of a batch, once per trip, in order."""
-    from sumo_drvpw.data.log import trip_codes_of
+    from sumo_drvpw.data.trips import trip_codes_of
 
     col = m.log.df["trip_id"]
     codes = trip_codes_of(col)

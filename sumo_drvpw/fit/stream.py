@@ -309,7 +309,7 @@ def _light_inputs(x, names):
 
 def _trip_codes(m) -> np.ndarray:
     """Integer trip code per sample of a Measured batch (no Python strings)."""
-    from sumo_drvpw.data.log import trip_codes_of
+    from sumo_drvpw.data.trips import trip_codes_of
 
     return trip_codes_of(m.log.df["trip_id"])
 
