@@ -165,3 +165,30 @@ def test_split_rule_second_split_is_fixed_up_front_and_differs():
     assert mod.split_trips(trips) == [a]                          # one split unless asked
     assert mod.split_trips(["x", "y"], second=True) == [["x"], ["y"]]
     assert mod.split_trips([f"t{i}" for i in range(6)], second=True) == [["t2", "t5"]]
+
+
+def test_sumo_books_the_cold_terms_at_the_scenario_air_temperature(tmp_path):
+    """With air.temperature_c = 0 °C in the scenario, the loop passes ambient_c = 0 to the
+    equations: 'roll + k·roll*cold' books exactly what 'roll·(1 + 20 K·k)' books (c_r(T) at
+    20 K below the reference), and the chain ledger is given the same temperature."""
+    from pathlib import Path
+
+    from sumo_drvpw.sim import run_scenario
+
+    import sumo_drvpw.sim as sim
+
+    src = Path(sim.__file__).parent / "builtin" / "scenarios" / "city.toml"
+    text = src.read_text().replace("temperature_c = 20.0", "temperature_c = 0.0").replace(
+        'config = "city.sumocfg"', f'config = "{(src.parent / "city.sumocfg").as_posix()}"')
+    assert "temperature_c = 0.0" in text and str(src.parent) in text
+    sc = tmp_path / "city.toml"
+    sc.write_text(text)
+    base = {"acc": 1.27, "grade": 1.05, "aero": 0.33}
+    k = 0.01
+    cold = Equation("cold", dict(base, roll=0.015, **{"roll*cold": 0.015 * k}))
+    warm = Equation("warm", dict(base, roll=0.015 * (1 + (T_REF_C - 0.0) * k)))
+    ref = Equation("ref", dict(base, roll=0.015))
+    s = run_scenario(sc, tmp_path / "o", end=120, equations=[cold, warm, ref], figures=False)
+    tot = {n: sum(s["equations"][n]["energy_j"]["city"].values()) for n in ("cold", "warm", "ref")}
+    assert tot["cold"] == pytest.approx(tot["warm"], rel=1e-9)
+    assert tot["cold"] > tot["ref"] * 1.001   # the cold term did book something

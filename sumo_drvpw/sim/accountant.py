@@ -146,7 +146,8 @@ class Accountant(_Listener):
                     raise UserError(f"Accountant: flush_vehicles must be ≥ 1, got {flush_vehicles}")
                 self.ledger.flush_vehicles = int(flush_vehicles)
         self.physics = Physics(wind_speed=sc.wind_speed, wind_from_deg=sc.wind_from_deg,
-                               rho=sc.rho, slope_tol=sc.slope_tol,
+                               rho=sc.rho, ambient_c=sc.air_temperature_c,
+                               slope_tol=sc.slope_tol,
                                slope_reference=sc.slope_reference,
                                acceleration=sc.acceleration, heading=sc.wind_heading,
                                positions=sc.positions)

@@ -39,6 +39,9 @@ class Physics:
     wind_speed: float = 0.0
     wind_from_deg: float = 0.0
     rho: float = 1.2041
+    #: ambient air temperature [°C] given to the equations (``cold`` factor) and the
+    #: chains (HVAC) as the signal ``ambient_c``; None: unknown (``cold`` = 0, reference)
+    ambient_c: float | None = None
     slope_tol: float = 0.01
     #: "getslope": compare the robust slope with SUMO's getSlope (one more getter per
     #: vehicle); "geometry": with the same front-to-back slope taken from the lane shape
@@ -150,7 +153,9 @@ class Stepper:
         if ledger.chain is None:  # battery/fuel accounts when an equation has a chain (#12)
             from sumo_drvpw.sim.chain import chain_ledger
 
-            ledger.chain = chain_ledger(eqset.equations, ledger.n_edges)
+            ledger.chain = chain_ledger(
+                eqset.equations, ledger.n_edges,
+                None if physics.ambient_c is None else {"ambient_c": physics.ambient_c})
         self.physics, self.resolve, self.trace = physics, resolve, trace
         self.use_subscriptions = use_subscriptions
         self.dt = float(conn.simulation.getDeltaT())
@@ -359,7 +364,8 @@ class Stepper:
         v_mean = v - 0.5 * dt * a
         if self.ballistic:
             v = v_mean
-        x = Inputs(v, a, theta, wind, ledger.veh_mass[vidx], np.full(m, physics.rho),
+        sig = {} if physics.ambient_c is None else {"ambient_c": np.full(m, physics.ambient_c)}
+        x = Inputs(v, a, theta, wind, ledger.veh_mass[vidx], np.full(m, physics.rho), sig,
                    v_acc=v_mean)
         pc = self.eqset.category_powers(x, None if self.every_equation_applies
                                         else ledger.veh_app[vidx])

@@ -157,6 +157,9 @@ class Scenario:
     wind_from_deg: float
     rho: float
     road_class: RoadClassRule
+    #: air temperature [°C] when the scenario gives air.temperature_c (the equations'
+    #: ``cold`` factor and the chains' HVAC read it as ``ambient_c``); None: not given
+    air_temperature_c: float | None = None
     slope_window: float = 20.0
     slope_max: float = 0.25
     slope_tol: float = 0.01
@@ -422,6 +425,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         raise UserError(f"{where}: wind.speed_mps must be ≥ 0, got {ws}")
 
     air = doc.get("air", {})
+    t_air = None
     if "density_kgm3" in air:
         if "temperature_c" in air:
             raise UserError(f"{where}: give air.density_kgm3 or air.temperature_c, not both")
@@ -432,6 +436,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         if t + KELVIN <= 0:
             raise UserError(f"{where}: air.temperature_c below absolute zero: {t}")
         rho = air_density(t, pk)
+        t_air = t
     else:
         rho = RHO_DEFAULT
 
@@ -464,7 +469,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         connection=connection, gui=bool(sumo.get("gui", False)), equations=equations,
         vtype_filter=vfilter, vtype_data=vdata, vclass_data=cdata,
         default_masses=_bool(veh.get("default_masses", True), where, "vehicles.default_masses"),
-        wind_speed=ws, wind_from_deg=wd, rho=rho,
+        wind_speed=ws, wind_from_deg=wd, rho=rho, air_temperature_c=t_air,
         road_class=rule,
         slope_window=_num(sl.get("window_m", 20.0), where, "slope.window_m", True),
         slope_max=_num(sl.get("max_rad", 0.25), where, "slope.max_rad", True),
