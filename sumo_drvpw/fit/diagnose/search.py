@@ -66,7 +66,9 @@ def _score_all(tr: BlockModel, pool: list[Candidate], opt: DiagnoseOptions) -> l
             continue
         fold = tr.fold_of(scatter)
         sse0, _ = tr.heldout_model(fold)
-        step = 1 if scatter else opt.batch
+        # candidates per scoring call: opt.batch, fewer when the blocks are many (the
+        # B × m × q statistics and their indices; each candidate is scored alone either way)
+        step = 1 if scatter else max(1, min(opt.batch, SCORE_CELLS // max(tr.n_blocks * (len(tr.cols) + 1), 1)))
         for lo in range(0, len(group), step):
             sub = group[lo:lo + step]
             sse, valid = tr.score(sub, scatter, fold)
@@ -181,6 +183,8 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
 
 #: shifts on each side of zero on the coarse grid of the lag search
 COARSE_LAGS = 20
+#: block × candidate × column cells per scoring call (memory of the batched scoring)
+SCORE_CELLS = 4_000_000
 #: candidates tried per round when the best one does not replicate or is implausible
 MAX_TRIES = 5
 #: largest plausible |energy share| of one finding (a share beyond it is a proxy or a fit artefact)

@@ -45,7 +45,7 @@ from sumo_drvpw.fit.diagnose.streamed import _Moments
 from sumo_drvpw.fit.diagnose.structural import (ACCELEROMETER_COLUMNS, FUSION_TAU_S, P0_KPA, RECUP_QUANTILES,
                                                 accelerometer_sin_grade, block_lag_sums, fused_sin_grade, lag_range,
                                                 per_trip_lags_from_stats, pressure_at_altitude_kpa,
-                                                scale_lag_sums, timing_from_blocks)
+                                                timing_from_blocks)
 from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.terms import Inputs, parse_term, term_matrix
 
@@ -516,11 +516,12 @@ class _LagSums:
             lo = hi
 
     def absorb(self, other: "_LagSums") -> None:
-        """Take in the sums of more shifts (gathered in another pass over the same views)."""
+        """Take in the sums of more shifts (gathered in another pass over the same views,
+        cut into the same chunks)."""
         lags = np.r_[self.lags, other.lags]
         order = np.argsort(lags, kind="stable")
-        self.bzy = [np.concatenate([np.concatenate(self.bzy), np.concatenate(other.bzy)], axis=2)[:, :, order]]
-        self.byy = [np.concatenate([np.concatenate(self.byy), np.concatenate(other.byy)], axis=1)[:, order]]
+        self.bzy = [np.concatenate([a, b], axis=2)[:, :, order] for a, b in zip(self.bzy, other.bzy)]
+        self.byy = [np.concatenate([a, b], axis=1)[:, order] for a, b in zip(self.byy, other.byy)]
         self.trips = {t: (n, a, np.concatenate([zy, other.trips[t][2]], axis=1)[:, order],
                           np.r_[yy, other.trips[t][3]][order]) for t, (n, a, zy, yy) in self.trips.items()}
         self.lags = lags[order]
@@ -528,7 +529,11 @@ class _LagSums:
     def select(self, tr0, lags):
         """Scaled block sums (as ``structural.timing``) for the shifts ``lags``."""
         pos = np.searchsorted(self.lags, lags)
-        zy, yy = scale_lag_sums(tr0, np.concatenate(self.bzy)[:, :, pos], np.concatenate(self.byy)[:, pos])
+        s = np.array([c.scale for c in tr0.cols])
+        zy = np.concatenate([z[:, :, pos] for z in self.bzy])
+        zy /= s[None, :, None] * tr0.y_scale          # as scale_lag_sums, in place
+        yy = np.concatenate([y[:, pos] for y in self.byy])
+        yy /= tr0.y_scale * tr0.y_scale
         return ({k: zy[:, :, i] for i, k in enumerate(lags)}, {k: yy[:, i] for i, k in enumerate(lags)})
 
     def trip_stats(self, lags) -> dict:
