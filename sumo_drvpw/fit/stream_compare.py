@@ -49,8 +49,9 @@ class _Reservoir:
     cols: dict
 
     def add(self, key: np.ndarray, cols: dict) -> "_Reservoir":
-        allk = np.r_[self.key, key]
-        allc = {c: np.r_[self.cols[c], cols[c]] if c in self.cols else cols[c] for c in cols}
+        allk = np.concatenate([self.key, key])
+        allc = {c: np.concatenate([self.cols[c], cols[c]]) if c in self.cols else cols[c]
+                for c in cols}
         if len(allk) > self.k:
             keep = np.argpartition(allk, self.k - 1)[:self.k]
             keep.sort()
@@ -167,8 +168,11 @@ class CompareStats:
         # trips by integer codes (contiguous runs), ids once per trip: no string per row
         tc = _trip_codes(m)
         tc = tc if every else tc[idx]
-        starts = np.flatnonzero(np.r_[True, tc[1:] != tc[:-1]])
-        codes = np.cumsum(np.r_[True, tc[1:] != tc[:-1]]) - 1
+        first = np.empty(len(tc), bool)
+        first[0] = True
+        np.not_equal(tc[1:], tc[:-1], out=first[1:])
+        starts = np.flatnonzero(first)
+        codes = np.cumsum(first) - 1
         uniq = np.asarray(x.trip)[starts].astype(str)
         if self.trips.intersection(uniq):
             raise UserError(f"trip_id '{sorted(self.trips.intersection(uniq))[0]}' appears in "
