@@ -445,6 +445,8 @@ from sumo_drvpw.validation.chain_render import render  # noqa: E402  (the report
 
 
 STUDIES = {"bmw_i3": i3_study, "jlu": jlu_study, "prius2": prius2_study}
+#: the data-set folders the studies read (for :func:`~sumo_drvpw.validation.data.resolve_data`)
+FOLDERS = ("bmw_i3_tum", "jlu_bev_dyno", "jlu_bev_road", "prius_gen2_torquepro")
 
 
 def run(data: Path, studies=None) -> dict:
@@ -466,9 +468,7 @@ def main(argv=None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     out = Path(args[0] if args else "docs/energy-chain-validation.md")
     try:
-        data = resolve_data(args[1] if len(args) > 1 else None,
-                            {"bmw_i3_tum": 0, "jlu_bev_dyno": 0, "jlu_bev_road": 0,
-                             "prius_gen2_torquepro": 0})
+        data = resolve_data(args[1] if len(args) > 1 else None, FOLDERS)
         res = run(data)
     except UserError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -254,7 +254,21 @@ def render(s: dict, rel: str, sections) -> str:
     for key, fn, _ in sections:
         L += fn(s[key], rel)
     L += all_equations_section(s["all_equations"])
+    if "energy_chain" in s:
+        L += energy_chain_section(s["energy_chain"], s["run"]["command"])
     return "\n".join(L) + "\n"
+
+
+def energy_chain_section(res: dict, command: str) -> list[str]:
+    """The energy-chain study (battery and fuel per held-out trip, SUMO's models side by
+    side) as the report's last section: its own report, headings one level down."""
+    from sumo_drvpw.validation.chain_render import render as chain_report
+
+    lines = chain_report(res, command).splitlines()
+    out = ["## Energy at the battery and the tank (issue #12)", ""]
+    for ln in lines[1:]:   # its title is replaced by the heading above
+        out.append("#" + ln if ln.startswith("#") else ln)
+    return out + [""]
 
 
 def _speed_table(evs: dict, what: str) -> list[str]:

@@ -60,7 +60,8 @@ def report_path(out: Path) -> Path:
     return out.parent / f"{out.name}.md"
 
 
-def run_validation(data: Path, out: Path, command: str = "", studies=None) -> dict:
+def run_validation(data: Path, out: Path, command: str = "", studies=None,
+                   chain: bool = False) -> dict:
     """Run every study, write figures, ``summary.json`` and ``<out>.md``; return the summary.
 
     Parameters
@@ -69,6 +70,9 @@ def run_validation(data: Path, out: Path, command: str = "", studies=None) -> di
     out : folder for figures and ``summary.json``; the report is ``<out>.md``
     command : the command line, quoted in the report
     studies : the studies to run (default ``STUDIES``)
+    chain : also the energy-chain study (:mod:`sumo_drvpw.validation.chain`: battery and
+        fuel energy per held-out trip beside SUMO's own models, issue #12; 1–4 min
+        more), under ``energy_chain`` in the summary and as the report's last section
     """
     from sumo_drvpw.fileio import plain, write_json, write_text
 
@@ -96,6 +100,12 @@ def run_validation(data: Path, out: Path, command: str = "", studies=None) -> di
     t = time.perf_counter()
     table = all_equations.study({k: datasets[k] for k in results}, results)
     timing["all_equations"] = time.perf_counter() - t
+    if chain:
+        from sumo_drvpw.validation import chain as chain_study
+
+        t = time.perf_counter()
+        sections["energy_chain"] = chain_study.run(data)
+        timing["energy_chain"] = time.perf_counter() - t
     summary = {"run": {"command": command, "data": str(data), "seconds": None,
                        "section_seconds": timing},
                **sections,
