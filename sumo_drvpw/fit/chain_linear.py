@@ -71,6 +71,7 @@ import numpy as np
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import chain_target
 from sumo_drvpw.fit.compare import metrics as _metrics, trip_net_energy
+from sumo_drvpw.fit.diagnose.options import check_validation
 from sumo_drvpw.model.chain import STANDSTILL_MPS, EnergyChain
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import term_matrix
@@ -91,14 +92,7 @@ class ChainTraceOptions:
     validation: str = "auto"   # auto | trip | blocks
 
     def check(self):
-        if self.validation not in ("auto", "trip", "blocks"):
-            raise UserError(f"diagnose option validation must be auto, trip or blocks, got '{self.validation}'")
-        if not self.block_s > 0:
-            raise UserError(f"diagnose option block_s must be > 0 s, got {self.block_s}")
-        if self.folds < 2:
-            raise UserError(f"diagnose option folds must be ≥ 2, got {self.folds}")
-        if not 0 < self.alpha < 1:
-            raise UserError(f"diagnose option alpha must be between 0 and 1, got {self.alpha}")
+        check_validation(self)
 
 
 @dataclass

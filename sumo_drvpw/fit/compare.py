@@ -293,6 +293,12 @@ def _trip_energy(pred_w, meas_w, dt_s, trip, net: bool) -> dict:
     k = len(names)
     e_meas = np.bincount(codes, weights=mm * dt, minlength=k)
     e_pred = np.bincount(codes, weights=pm * dt, minlength=k)
+    return trip_energy_doc(names, e_meas, e_pred)
+
+
+def trip_energy_doc(names, e_meas, e_pred) -> dict:
+    """The per-trip energy document from per-trip sums [J]: error = predicted/measured − 1
+    (NaN where nothing was measured), mean and max |error| over the finite ones."""
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         err = np.where(e_meas != 0.0, e_pred / e_meas - 1.0, np.nan)
     trips = {str(t): {"measured_j": float(em), "predicted_j": float(ep), "error": float(er)}

@@ -42,15 +42,7 @@ class DiagnoseOptions:
 
     def check(self):
         """Raise :class:`UserError` naming the first setting out of range."""
-        if self.validation not in ("auto", "trip", "blocks"):
-            raise UserError(f"diagnose option validation must be auto, trip or blocks, "
-                            f"got '{self.validation}'")
-        if not self.block_s > 0:
-            raise UserError(f"diagnose option block_s must be > 0 s, got {self.block_s}")
-        if self.folds < 2:
-            raise UserError(f"diagnose option folds must be ≥ 2, got {self.folds}")
-        if not 0 < self.alpha < 1:
-            raise UserError(f"diagnose option alpha must be between 0 and 1, got {self.alpha}")
+        check_validation(self)
         if not 0 <= self.min_gain < 1:
             raise UserError(f"diagnose option min_gain must be in [0, 1), got {self.min_gain}")
         if self.max_findings < 0:
@@ -59,3 +51,17 @@ class DiagnoseOptions:
             raise UserError(f"diagnose option max_nan must be in [0, 1], got {self.max_nan}")
         if not 0 <= self.max_lag_s <= 30:
             raise UserError(f"diagnose option max_lag_s must be in [0, 30] s, got {self.max_lag_s}")
+
+
+def check_validation(opt) -> None:
+    """Raise :class:`UserError` naming the first held-out setting out of range (validation,
+    block_s, folds, alpha), for the tracer's and the chain trace's options alike."""
+    if opt.validation not in ("auto", "trip", "blocks"):
+        raise UserError(f"diagnose option validation must be auto, trip or blocks, "
+                        f"got '{opt.validation}'")
+    if not opt.block_s > 0:
+        raise UserError(f"diagnose option block_s must be > 0 s, got {opt.block_s}")
+    if opt.folds < 2:
+        raise UserError(f"diagnose option folds must be ≥ 2, got {opt.folds}")
+    if not 0 < opt.alpha < 1:
+        raise UserError(f"diagnose option alpha must be between 0 and 1, got {opt.alpha}")

@@ -120,3 +120,20 @@ def expand_terms(tr: BlockModel, co: dict, std: bool = False) -> dict:
         else:
             out[c.cand.term] = val
     return out
+
+
+def lag_finding(res: dict, per_trip_lag: dict, metrics_before: dict, metrics_after: dict) -> dict:
+    """The finding of an accepted lag (``res`` from the lag search: lag_s, p_value,
+    fold_lags_s), in memory and streamed alike; per_trip_lag: trip → lag [s]."""
+    same_sign = sum(1 for v in per_trip_lag.values() if np.sign(v) == np.sign(res["lag_s"]))
+    return {
+        "effect": (f"timing: the power signal is read {res['lag_s']:+.3g} s later relative to speed "
+                   f"({'power late, speed leads' if res['lag_s'] > 0 else 'speed lags the power'}); "
+                   "corrected in the data, not absorbed by coefficients"),
+        "role": "structural", "kind": "timing", "signals": [], "term": f"lag {res['lag_s']:+.3g} s",
+        "coefficient": res["lag_s"], "std_err": float(np.std(res["fold_lags_s"])),
+        "p_value": res["p_value"], "energy_share": None,
+        "metrics_before": metrics_before, "metrics_after": metrics_after,
+        "replication": {"helped_trips": same_sign, "trips": len(per_trip_lag),
+                        "per_trip": {k: {"lag_s": v} for k, v in per_trip_lag.items()},
+                        "fold_lags_s": res["fold_lags_s"]}}

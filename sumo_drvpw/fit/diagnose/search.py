@@ -18,6 +18,7 @@ from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
 from sumo_drvpw.fit.diagnose.structural import (lag_range, per_trip_lags, shift_within_trips,
                                                 structural_signals, timing)
 from sumo_drvpw.fit.diagnose.result import (DiagnoseResult, assemble, pick_metrics as _pick_metrics,
+                                           lag_finding,
                                             term_label as _term_label)
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import parse_term, term_matrix
@@ -362,18 +363,6 @@ def _timing_step(y_all, ana, x_eq, decl_vals, trip_codes_all, trip_names, t_all,
                           trip_names, {}, opt, declared, decl_vals[idx])
     after = tr1.heldout_pred(fold)
     y0, y1 = shifted[0], y_new[idx]
-    per_trip_lag = note["per_trip_lag_s"]
-    same_sign = sum(1 for v in per_trip_lag.values() if np.sign(v) == np.sign(res["lag_s"]))
-    finding = {
-        "effect": (f"timing: the power signal is read {res['lag_s']:+.3g} s later relative to speed "
-                   f"({'power late, speed leads' if res['lag_s'] > 0 else 'speed lags the power'}); "
-                   "corrected in the data, not absorbed by coefficients"),
-        "role": "structural", "kind": "timing", "signals": [], "term": f"lag {res['lag_s']:+.3g} s",
-        "coefficient": res["lag_s"], "std_err": float(np.std(res["fold_lags_s"])),
-        "p_value": res["p_value"], "energy_share": None,
-        "metrics_before": _pick_metrics(_metrics(before, y0)),
-        "metrics_after": _pick_metrics(_metrics(after, y1)),
-        "replication": {"helped_trips": same_sign, "trips": len(per_trip_lag),
-                        "per_trip": {k: {"lag_s": v} for k, v in per_trip_lag.items()},
-                        "fold_lags_s": res["fold_lags_s"]}}
+    finding = lag_finding(res, note["per_trip_lag_s"], _pick_metrics(_metrics(before, y0)),
+                          _pick_metrics(_metrics(after, y1)))
     return y_new, common, finding, note

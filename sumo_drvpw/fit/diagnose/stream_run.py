@@ -37,7 +37,7 @@ from sumo_drvpw.data.stream import BATCH_ROWS, plan
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.diagnose.candidates import Candidate, generate_candidates, screen_signals
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
-from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble, pick_metrics
+from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble, pick_metrics, lag_finding
 from sumo_drvpw.fit.diagnose.source import (CACHE_MB, INPUT_FIELDS, SAMPLE_ROWS, Batches, View,
                                             concat_inputs, parquet_metadata, read_batches)
 from sumo_drvpw.fit.diagnose.streamed import StreamModel
@@ -47,7 +47,7 @@ from sumo_drvpw.fit.diagnose.structural import (ACCELEROMETER_COLUMNS, FUSION_TA
                                                 per_trip_lags_from_stats, pressure_at_altitude_kpa,
                                                 timing_from_blocks)
 from sumo_drvpw.model.constants import G
-from sumo_drvpw.model.terms import Inputs, parse_term, term_matrix
+from sumo_drvpw.model.terms import parse_term, term_matrix
 
 
 @dataclass
@@ -333,7 +333,6 @@ def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles
 
     passes = 0
     timing_finding, lag_note = None, None
-    common, lag = False, 0
     if len(lags) > 1:
         big = int(lags[-1])
         step = max(1, math.ceil(big / COARSE_LAGS))
@@ -354,12 +353,9 @@ def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles
                                                     COARSE_LAGS)
             passes += tr0.passes
             if timing_finding is not None:
-                common, lag = True, timing_finding["_lag_samples"]
                 tr = tr1
     if len(lags) <= 1:
         tr = _declared(prep, opt, declared, False, 0)
-    if timing_finding is not None:
-        timing_finding.pop("_lag_samples")
     if tr.n < 50:
         raise UserError(f"only {tr.n} analysis samples (usable, with finite terms and signals); need at least 50")
     n_trips = int((tr.trip_counts() > 0).sum())
@@ -573,18 +569,6 @@ def _timing(tr0: StreamModel, sums: _LagSums, prep, opt, lags, dt_med, say, pair
     before = tr0.evaluate(fold)
     tr1 = _declared(prep, opt, tr0.declared, True, res["lag_samples"])
     after = tr1.evaluate(fold)
-    per_trip_lag = note["per_trip_lag_s"]
-    same_sign = sum(1 for v in per_trip_lag.values() if np.sign(v) == np.sign(res["lag_s"]))
-    finding = {
-        "effect": (f"timing: the power signal is read {res['lag_s']:+.3g} s later relative to speed "
-                   f"({'power late, speed leads' if res['lag_s'] > 0 else 'speed lags the power'}); "
-                   "corrected in the data, not absorbed by coefficients"),
-        "role": "structural", "kind": "timing", "signals": [], "term": f"lag {res['lag_s']:+.3g} s",
-        "coefficient": res["lag_s"], "std_err": float(np.std(res["fold_lags_s"])),
-        "p_value": res["p_value"], "energy_share": None,
-        "metrics_before": pick_metrics(before["metrics"]), "metrics_after": pick_metrics(after["metrics"]),
-        "replication": {"helped_trips": same_sign, "trips": len(per_trip_lag),
-                        "per_trip": {k: {"lag_s": v} for k, v in per_trip_lag.items()},
-                        "fold_lags_s": res["fold_lags_s"]},
-        "_lag_samples": res["lag_samples"]}
+    finding = lag_finding(res, note["per_trip_lag_s"], pick_metrics(before["metrics"]),
+                          pick_metrics(after["metrics"]))
     return finding, note, tr1

@@ -27,7 +27,7 @@ from sumo_drvpw.fit.diagnose.source import View, cand_values, first_appearance
 #: bytes of candidate block statistics kept between rounds (beyond: recomputed per round)
 CACHE_BYTES = 400e6
 #: measured power at and above which a sample is "heavy" (as fit.compare)
-from sumo_drvpw.fit.compare import HEAVY_LOAD_W, MIN_SAMPLES  # noqa: E402
+from sumo_drvpw.fit.compare import HEAVY_LOAD_W, MIN_SAMPLES, trip_energy_doc  # noqa: E402
 
 
 def _rs(m, starts):
@@ -84,17 +84,6 @@ class _MetricSums:
         return {"n": n, "r2": r2(a), "r2_light": r2(self.parts["light"]), "r2_heavy": r2(self.parts["heavy"]),
                 "rmse_w": math.sqrt(a["se"] / n) if n else math.nan,
                 "mae_w": a["sa"] / n if n else math.nan, "bias_w": a["s"] / n if n else math.nan}
-
-
-def _trip_energy_doc(names, e_meas, e_pred) -> dict:
-    """The document of :func:`sumo_drvpw.fit.compare.trip_energy` from per-trip sums."""
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        err = np.where(e_meas != 0.0, e_pred / e_meas - 1.0, np.nan)
-    trips = {str(t): {"measured_j": float(em), "predicted_j": float(ep), "error": float(er)}
-             for t, em, ep, er in zip(names, e_meas, e_pred, err)}
-    fin = np.abs(err[np.isfinite(err)])
-    return {"mean_abs_error": float(fin.mean()) if fin.size else math.nan,
-            "max_abs_error": float(fin.max()) if fin.size else math.nan, "trips": trips}
 
 
 class StreamModel(BlockModel):
@@ -536,5 +525,5 @@ class _Eval:
         order = np.asarray(tr.trip_order, dtype=np.int64)
         names = [tr.trip_names[i] for i in order]
         return {"pred": None, "metrics": self.ms.result(), "trip_sse": self.sse,
-                "trip_energy": _trip_energy_doc(names, self.em[order], self.ep[order]),
-                "trip_net_energy": _trip_energy_doc(names, self.nm[order], self.npred[order])}
+                "trip_energy": trip_energy_doc(names, self.em[order], self.ep[order]),
+                "trip_net_energy": trip_energy_doc(names, self.nm[order], self.npred[order])}
