@@ -397,6 +397,35 @@ def planted_power(effects, trip_ids) -> np.ndarray:
     return np.concatenate(parts)
 
 
+def plant_dropout(df: pd.DataFrame, trip: str, start_s: float, duration_s: float,
+                  mode: str = "hold") -> np.ndarray:
+    """A logger dropout planted in a synthetic log, in place: within ``trip`` from
+    ``start_s`` for ``duration_s`` every numeric column except time holds its value at the
+    start (``mode="hold"``, a frozen logger) or runs in a straight line to its value at the
+    end (``"linear"``, a gap filled by interpolation). Returns the mask of the planted rows
+    (the rows strictly inside the window; the row at the start, and in linear mode at the
+    end, keeps its real value)."""
+    if mode not in ("hold", "linear"):
+        raise ValueError(f"mode must be 'hold' or 'linear', got {mode!r}")
+    t = df["time_s"].to_numpy(float)
+    i = np.flatnonzero(df["trip_id"].to_numpy() == trip)
+    t0 = t[i][0] + start_s
+    a = i[np.searchsorted(t[i], t0)]
+    b = i[np.searchsorted(t[i], t0 + duration_s)]
+    cols = [c for c in df.columns if c != "time_s" and pd.api.types.is_float_dtype(df[c])]
+    for c in cols:
+        x = df[c].to_numpy(float).copy()
+        if mode == "hold":
+            x[a + 1:b + 1] = x[a]
+        else:
+            w = (t[a:b + 1] - t[a]) / (t[b] - t[a])
+            x[a:b + 1] = x[a] + w * (x[b] - x[a])
+        df[c] = x
+    mask = np.zeros(len(df), bool)
+    mask[a + 1:b + (1 if mode == "hold" else 0)] = True
+    return mask
+
+
 #: The one table of planted effects: name (as ``synth --plant`` takes it) → class; every
 #: class builds with its defaults.
 PLANTS = {"ac": AuxLoad, "cold-tyres": TermScaledBySignal, "speed-quadratic": SpeedFunction,
@@ -408,4 +437,5 @@ PLANTS = {"ac": AuxLoad, "cold-tyres": TermScaledBySignal, "speed-quadratic": Sp
 
 __all__ = ["AuxLoad", "TermScaledBySignal", "SpeedFunction", "PerTripMass", "Distractors",
            "Pedal", "PowerLag", "RecuperationEfficiency", "RecuperationLimit", "AltitudeAir",
-           "AttenuatedGrade", "LogPower", "BatteryLog", "synth_trips", "planted_power", "PLANTS", "G"]
+           "AttenuatedGrade", "LogPower", "BatteryLog", "synth_trips", "planted_power", "plant_dropout", "PLANTS",
+           "G"]
