@@ -52,6 +52,9 @@ HOLD_EVERY = 5
 TAU_GRID_S = (30.0, 60.0, 120.0, 300.0, 600.0)
 #: fewest training trips for trip-grouped cross-validation of choices (tau, physical terms)
 MIN_CV_TRIPS = 5
+#: take logger dropouts (held or linearly filled inputs) out of the usable samples of every
+#: log, training and held out alike, for every equation (fit.input_checks.dropout_mask)
+CHECK_DROPOUTS = True
 
 
 def _log(msg):
@@ -81,6 +84,59 @@ def write_subset(df, trips, path, keep: bool, roles: dict | None = None):
     return path
 
 
+def load_checked(path, vehicle):
+    """load_measured with the logger-dropout check (fit.input_checks.dropout_mask, inputs
+    only: speed and a longitudinal accelerometer exactly linear in time for ≥ 5 s, and the
+    grade-smoothing distance around it) taken out of the usable samples. Returns the
+    Measured; ``m.dropouts`` = trip → seconds taken out."""
+    from sumo_drvpw.data.measured import load_measured
+    from sumo_drvpw.fit.diagnose.structural import ACCELEROMETER_COLUMNS
+    from sumo_drvpw.fit.input_checks import dropout_mask, dropout_report
+
+    m = load_measured([path], vehicle)
+    df = m.log.df
+    acc = [c for c in ACCELEROMETER_COLUMNS if c in df]
+    m.dropouts = None
+    if acc:
+        codes = np.unique(df["trip_id"].to_numpy(), return_inverse=True)[1]
+        drop = dropout_mask(df["time_s"].to_numpy(float), [df["speed_mps"].to_numpy(float),
+                                                           df[acc[0]].to_numpy(float)],
+                            codes, df["speed_mps"].to_numpy(float), margin_m=m.log.options.grade_window_m)
+        m.dropouts = dropout_report(drop & m.usable, df["trip_id"].to_numpy(), df["dt_s"].to_numpy(float))
+        m.usable = m.usable & ~drop
+    return m
+
+
+def _offsets(m):
+    from sumo_drvpw.fit.input_checks import accelerometer_offsets
+
+    df = m.log.df
+    return accelerometer_offsets(df["imu_accel_mps2"], m.inputs.a, df["speed_mps"], df["elevation_m"],
+                                 df["dt_s"], df["trip_id"], m.usable)
+
+
+def input_checks(m_train, eq, held) -> dict:
+    """Plausibility of the declared inputs (fit.input_checks): per training trip the inertial
+    mass seen in the measured power (relative to the declared mass × the calibrated mass
+    factor ``acc``: a check of the declared mass, never substituted); per trip (training and,
+    added later, held out: inputs only) the accelerometer offset from standstill and from the
+    elevation; dropouts taken out."""
+    from sumo_drvpw.fit.input_checks import inertial_mass
+
+    df = m_train.log.df
+    out = {"dropouts_train": getattr(m_train, "dropouts", None), "offsets": {}, "mass": {}}
+    acc = float(eq.terms.get("acc", np.nan))
+    if "mass_kg" in df and np.isfinite(acc):
+        im = inertial_mass(m_train.power_w, m_train.inputs, m_train.usable, df["trip_id"].to_numpy())
+        for t, r in im.items():
+            r["vs_declared"] = r["ratio"] / acc - 1.0
+        out["mass"] = im
+        out["acc"] = acc
+    if "imu_accel_mps2" in df and "elevation_m" in df:
+        out["offsets"] = _offsets(m_train)
+    return out
+
+
 def corrected_measured(path, vehicle, lag_s: float, accel_grade: bool, tau_s: float | None = None):
     """Measured power and inputs of a log with the measurement-side corrections applied:
     the power read ``lag_s`` later within trips; the grade fused from the accelerometer (fast
@@ -90,7 +146,7 @@ def corrected_measured(path, vehicle, lag_s: float, accel_grade: bool, tau_s: fl
     from sumo_drvpw.fit.diagnose.structural import (FUSION_TAU_S, P0_KPA, accelerometer_sin_grade, fused_sin_grade,
                                                     pressure_at_altitude_kpa, shift_within_trips)
 
-    m = load_measured([path], vehicle)
+    m = load_checked(path, vehicle) if CHECK_DROPOUTS else load_measured([path], vehicle)
     df = m.log.df
     if "elevation_m" in df and "pressure_kpa" not in df and "ambient_c" in df:
         # ρ from altitude and temperature: the reader assumed sea-level pressure
@@ -228,8 +284,9 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
             train = write_subset(df, held, Path(tmp) / "train.parquet", keep=False, roles=roles)
             test = write_subset(df, held, Path(tmp) / "test.parquet", keep=True, roles=roles)
             t0 = time.perf_counter()
-            m_train = load_measured([train], vehicle)
+            m_train = load_checked(train, vehicle) if CHECK_DROPOUTS else load_measured([train], vehicle)
             base_eq, base_phys = calibrate_physical(m_train, f"{name}_calibrated")
+            checks = input_checks(m_train, base_eq, held)
             decl = declared if declared is not None else base_eq
             res = diagnose(m_train, decl, DiagnoseOptions(), progress=lambda s: _log(f"[{tag}] {s}"))
             write_outputs(res, out_dir / tag, figures=True)
@@ -259,7 +316,7 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
                               "reading": physical_reading(final_eq.terms, rho)}
             else:
                 final_eq, final_info = fit_terms(m_fit, list(base_eq.terms) + extra, f"{name}_closed")
-            m_test = load_measured([test], vehicle)
+            m_test = load_checked(test, vehicle) if CHECK_DROPOUTS else load_measured([test], vehicle)
             eqs = [base_eq, load_equation("vsp_ldv1999")]
             if declared is not None:
                 eqs.insert(0, declared)
@@ -276,7 +333,10 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
                          "took_s": time.perf_counter() - t0, "declared": declared,
                          "final_eq": final_eq, "final_info": final_info, "extra": extra,
                          "tau": tau, "tau_s": tau_s, "sel": sel, "rscale": rscale,
-                         "held_regime": held_regime})
+                         "held_regime": held_regime, "checks": checks})
+            checks["dropouts_held"] = getattr(m_test, "dropouts", None)
+            if "imu_accel_mps2" in m_test.log.df:
+                checks["offsets"].update(_offsets(m_test))
     return {"name": name, "vehicle": vehicle, "note": note, "runs": runs}
 
 
@@ -327,6 +387,52 @@ def _reading(phys):
         parts.append(f"{t}: {x['reads_as']} = {x['value']:.4g}{' ' + x['unit'] if x['unit'] not in ('', '-') else ''}"
                      + ("" if x["plausible"] else " (implausible)"))
     return "; ".join(parts)
+
+
+def _render_checks(run) -> list[str]:
+    """The input checks of one run (fit.input_checks), as Markdown lines."""
+    c = run.get("checks") or {}
+    L = []
+    dtr, dho = c.get("dropouts_train"), c.get("dropouts_held")
+    if dtr is not None or dho is not None:
+        both = dict(dtr or {}, **(dho or {}))
+        L.append("- input check, logger dropouts (speed and accelerometer exactly linear in time for "
+                 "≥ 5 s — held or linearly filled — plus the 100-m grade window around; taken out of the "
+                 "usable samples of training and held-out trips for every equation): "
+                 + (", ".join(f"{t} {s:.0f} s" + (" (held out)" if t in (dho or {}) else "")
+                              for t, s in sorted(both.items())) or "none"))
+    mass = c.get("mass") or {}
+    if mass:
+        far = {t: r for t, r in mass.items() if abs(r["vs_declared"]) > 0.10}
+        vals = np.array([r["vs_declared"] for r in mass.values()])
+        loaded = {t: r for t, r in mass.items() if r["declared_kg"] > min(x["declared_kg"] for x in mass.values())}
+        L.append(f"- input check, declared mass (training trips; per-trip least squares of P on m·a·v, v, v³, "
+                 f"m·g·sin θ·v for 2–20 m/s, relative to the declared mass × the calibrated acc {c['acc']:.3g}; "
+                 f"reported, never substituted): median {100 * np.median(vals):+.1f} %, spread (IQR) "
+                 f"{100 * (np.percentile(vals, 75) - np.percentile(vals, 25)):.1f} points; beyond ±10 %: "
+                 + (", ".join(f"{t} {100 * r['vs_declared']:+.1f} % (declared {r['declared_kg']:.0f} kg)"
+                              for t, r in sorted(far.items())) or "none")
+                 + ("; trips with added load: " + ", ".join(
+                     f"{t} {r['declared_kg']:.0f} kg → {100 * r['vs_declared']:+.1f} %" for t, r in sorted(loaded.items()))
+                    if loaded else ""))
+    off = c.get("offsets") or {}
+    if off:
+        held = set(run["held"])
+        oe = np.array([r["offset_elevation"] for r in off.values()], float)
+        ost = np.array([r["offset_standstill"] for r in off.values()], float)
+        far = [t for t, r in off.items() if abs(r["offset_elevation"] - np.nanmedian(oe)) > 0.05]
+        L.append(f"- input check, accelerometer offset per trip (inputs only, all trips of this split): from the "
+                 f"elevation (Σ sin θ·ds = Δh) median {np.nanmedian(oe):+.3f} m/s² (IQR "
+                 f"{np.nanpercentile(oe, 25):+.3f} … {np.nanpercentile(oe, 75):+.3f}); from standstill samples median "
+                 f"{np.nanmedian(ost):+.3f} m/s² (IQR {np.nanpercentile(ost, 25):+.3f} … "
+                 f"{np.nanpercentile(ost, 75):+.3f}: the car also stands on slopes); elevation-based offset more "
+                 f"than 0.05 m/s² from the median: "
+                 + (", ".join(f"{t}{' (held out)' if t in held else ''} {off[t]['offset_elevation']:+.3f} m/s² "
+                              f"(Δh logged {off[t]['dh_m']:+.0f} m, accelerometer {off[t]['dh_accelerometer_m']:+.0f} m)"
+                              for t in sorted(far)) or "none")
+                 + ". The fused grade takes the slow part from the elevation, so such an offset does not "
+                 "reach the equation.")
+    return L
 
 
 def render(cars, took) -> str:
@@ -450,6 +556,7 @@ def render(cars, took) -> str:
                      + (f" (road load kept from the dynamometer: aero, roll)" if run["declared"] is not None else "")
                      + (f"; findings carried: {', '.join(run['extra'])}" if run["extra"] and not sel else "")
                      + (f"; physical candidates carried: {', '.join(sel['chosen']) or 'none'}" if sel else ""))
+            L += _render_checks(run)
             L += ["", "**Held out** (trips never used above):", "",
                   "| equation | data | R² | mean abs. trip traction-energy error | worst | per trip |",
                   "|---|---|---|---|---|---|"]
