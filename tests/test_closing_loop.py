@@ -286,3 +286,27 @@ def test_inertial_mass_finds_a_planted_undeclared_load():
     assert r["A"]["ratio"] == pytest.approx(1.15, rel=0.01)
     assert r["B"]["ratio"] / r["A"]["ratio"] == pytest.approx(1460.0 / 1300.0, rel=0.01)
     assert r["B"]["declared_kg"] == 1300.0
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.015])
+def test_accelerometer_grade_offset_fixed_by_elevation(offset):
+    from sumo_drvpw.fit.input_checks import offset_corrected_sin_grade
+
+    # two trips over a hill; the accelerometer carries its mounting pitch (sin 0.015 ≈ 0.86°)
+    # on trip 2 only; the elevation is the integral of the true grade
+    rng = np.random.default_rng(2)
+    n = 3000
+    codes = np.repeat([0, 1], n)
+    v = np.tile(rng.uniform(5, 20, n), 2)
+    dt = np.full(2 * n, 0.1)
+    s_true = np.tile(0.03 * np.sin(np.linspace(0, 3 * np.pi, n)), 2)
+    h = np.concatenate([520.0 + np.cumsum(s_true[codes == k] * v[codes == k] * 0.1) for k in (0, 1)])
+    s_acc = s_true + np.where(codes == 1, offset, 0.0)
+    got = offset_corrected_sin_grade(s_acc, v, dt, codes, h)
+    # Δh counts the steps after a trip's first sample, the sum includes it: exact here because
+    # the true grade is 0 at each trip's start (sin 0); the offset is removed, the hill kept
+    assert s_true[0] == 0.0 and s_true[n] == 0.0
+    np.testing.assert_allclose(got, s_true, atol=1e-12)
+    for k in (0, 1):
+        i = codes == k
+        assert np.sum(got[i] * v[i] * 0.1) == pytest.approx(h[i][-1] - h[i][0], abs=1e-9)

@@ -163,3 +163,29 @@ def inertial_mass(power_w, x, usable, trip, v_min: float = 2.0, v_max: float = 2
         b = np.linalg.lstsq(X, p[i], rcond=None)[0]
         out[str(t)] = {"declared_kg": md, "inertial_kg": float(b[0] * md), "ratio": float(b[0])}
     return out
+
+
+def offset_corrected_sin_grade(sin_acc, speed_mps, dt_s, trip_codes, elevation_m, usable=None) -> np.ndarray:
+    """Accelerometer grade with its per-trip offset removed: sin θ_acc − c, with c per trip
+    such that Σ (sin θ_acc − c)·ds = Δh (elevation at the trip's last usable sample minus at
+    its first). An input correction: the mounting pitch is one constant per trip, the
+    elevation fixes it; no low-pass of the logged grade. [sin θ, -]"""
+    s = np.asarray(sin_acc, float)
+    v = np.asarray(speed_mps, float)
+    dt = np.asarray(dt_s, float)
+    h = np.asarray(elevation_m, float)
+    codes = np.asarray(trip_codes)
+    u = np.ones(len(s), bool) if usable is None else np.asarray(usable, bool)
+    out = s.copy()
+    for c in np.unique(codes):
+        i = np.flatnonzero(codes == c)
+        ok = u[i] & np.isfinite(s[i]) & np.isfinite(v[i]) & np.isfinite(h[i])
+        if not ok.any():
+            continue
+        ds = np.where(ok, v[i] * dt[i], 0.0)
+        dist = ds.sum()
+        if dist <= 0:
+            continue
+        hh = h[i][ok]
+        out[i] = s[i] - (float(np.sum(np.where(ok, s[i], 0.0) * ds)) - (hh[-1] - hh[0])) / dist
+    return np.clip(out, -0.3, 0.3)
