@@ -155,3 +155,12 @@ def test_streamed_equals_in_memory_calibrated_on_the_spot(tmp_path):
     st = diagnose_stream(paths, "prius3", None, DiagnoseOptions(structural=False), rows=3000)
     assert mem.details["calibrated_on_the_spot"] and st.details["calibrated_on_the_spot"]
     _assert_equal(mem, st)
+
+
+def test_streamed_lag_on_block_folds_equals_in_memory(tmp_path):
+    # validation over blocks (folds by block rank within each trip, gathered per chunk of
+    # whole trips and carried over between batches) instead of over trips
+    mem, st = _both(tmp_path, [E.PowerLag(1.5)], {"validation": "blocks", "max_findings": 1}, n_trips=4)
+    assert mem.report["findings"][0]["term"].startswith("lag +1.5")
+    assert st.report["validation"].startswith("5-fold cross-validation over contiguous 60-s blocks")
+    _assert_equal(mem, st)

@@ -37,15 +37,15 @@ from sumo_drvpw.data.stream import BATCH_ROWS, plan
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.diagnose.candidates import Candidate, generate_candidates, screen_signals
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
-from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble, pick_metrics, lag_finding
+from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble
 from sumo_drvpw.fit.diagnose.source import (CACHE_MB, INPUT_FIELDS, SAMPLE_ROWS, Batches, View,
                                             concat_inputs, parquet_metadata, read_batches)
+from sumo_drvpw.fit.diagnose.stream_lag import LagSums, coarse_lags, timing_step
 from sumo_drvpw.fit.diagnose.streamed import StreamModel
 from sumo_drvpw.fit.diagnose.streamed import _Moments
 from sumo_drvpw.fit.diagnose.structural import (ACCELEROMETER_COLUMNS, FUSION_TAU_S, P0_KPA, RECUP_QUANTILES,
-                                                accelerometer_sin_grade, block_lag_sums, fused_sin_grade, lag_range,
-                                                per_trip_lags_from_stats, pressure_at_altitude_kpa,
-                                                timing_from_blocks)
+                                                accelerometer_sin_grade, fused_sin_grade, lag_range,
+                                                pressure_at_altitude_kpa)
 from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.terms import parse_term, term_matrix
 
@@ -334,9 +334,7 @@ def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles
     passes = 0
     timing_finding, lag_note = None, None
     if len(lags) > 1:
-        big = int(lags[-1])
-        step = max(1, math.ceil(big / COARSE_LAGS))
-        hook = _LagSums(np.array(sorted(set(range(-big, big + 1, step)) | {0}), dtype=np.int64))
+        hook = LagSums(np.array(coarse_lags(lags, COARSE_LAGS), dtype=np.int64), opt.folds)
         # one pass: the timing model (common samples: layout, terms, coarse lag sums) and the
         # model without a lag (all analysis samples: layout, terms)
         tr0 = _declared(prep, opt, declared, True, 0, hook, defer=True)
@@ -349,11 +347,13 @@ def _trace(prep, equation, declared, opt, lags, dt_med, elev, acc, binary, roles
         tr0.passes += 1
         tr = trm
         if tr0.n >= 50:
-            timing_finding, lag_note, tr1 = _timing(tr0, hook, prep, opt, lags, dt_med, say, paired_test,
-                                                    COARSE_LAGS)
+            timing_finding, lag_note, tr1 = timing_step(
+                tr0, hook, lambda lag: _declared(prep, opt, declared, True, lag), opt, lags, dt_med, say,
+                paired_test, COARSE_LAGS)
             passes += tr0.passes
             if timing_finding is not None:
                 tr = tr1
+        del tr0, hook                      # the timing model's block statistics are not needed again
     if len(lags) <= 1:
         tr = _declared(prep, opt, declared, False, 0)
     if tr.n < 50:
@@ -471,104 +471,3 @@ def _structural(tr: StreamModel, prep: Prepared, declared, elev: bool, acc):
         notes["grade_sources"] = {"accelerometer_column": acc_col, **out,
                                   "corr": float(cxy / math.sqrt(vx * vy)) if vy > 0 and vx > 0 else math.nan}
     return cands, notes
-
-
-class _LagSums:
-    """Raw sums of the lag search for every shift of ``lags``, gathered in the layout pass
-    of the timing model: per block and per trip Σ x_j·y_ℓ and Σ y_ℓ², per trip XᵀX."""
-
-    #: rows of shifted powers held at once (whole trips)
-    CHUNK = 65_536
-
-    def __init__(self, lags: np.ndarray):
-        self.lags = lags
-        self.bzy, self.byy, self.trips = [], [], {}
-
-    def __call__(self, view, st) -> None:
-        d = view.extra["batch"]
-        rows_all = d["idx"][d["common"]]
-        decl = view.decl
-        tc = view.trip
-        tb = np.flatnonzero(np.r_[True, tc[1:] != tc[:-1]])
-        te = np.r_[tb[1:], view.n]
-        # whole trips at a time, about CHUNK rows: the n × L matrix of shifted powers stays small
-        lo = 0
-        while lo < len(tb):
-            hi = lo + 1
-            while hi < len(tb) and te[hi] - tb[lo] <= self.CHUNK:
-                hi += 1
-            a, b = int(tb[lo]), int(te[hi - 1])
-            x = [decl[a:b, j] for j in range(decl.shape[1])]
-            ys = d["yrow"][rows_all[a:b, None] + self.lags[None, :]]            # n × L, raw power
-            sb = st[(st >= a) & (st < b)] - a
-            zy, yy = block_lag_sums(x, ys, sb)
-            self.bzy.append(zy)
-            self.byy.append(yy)
-            tzy, tyy = block_lag_sums(x, ys, tb[lo:hi] - a)
-            xm = np.column_stack(x)
-            for i in range(lo, hi):
-                r0, r1 = int(tb[i]) - a, int(te[i]) - a
-                self.trips[int(tc[tb[i]])] = (r1 - r0, xm[r0:r1].T @ xm[r0:r1], tzy[i - lo], tyy[i - lo])
-            lo = hi
-
-    def absorb(self, other: "_LagSums") -> None:
-        """Take in the sums of more shifts (gathered in another pass over the same views,
-        cut into the same chunks)."""
-        lags = np.r_[self.lags, other.lags]
-        order = np.argsort(lags, kind="stable")
-        self.bzy = [np.concatenate([a, b], axis=2)[:, :, order] for a, b in zip(self.bzy, other.bzy)]
-        self.byy = [np.concatenate([a, b], axis=1)[:, order] for a, b in zip(self.byy, other.byy)]
-        self.trips = {t: (n, a, np.concatenate([zy, other.trips[t][2]], axis=1)[:, order],
-                          np.r_[yy, other.trips[t][3]][order]) for t, (n, a, zy, yy) in self.trips.items()}
-        self.lags = lags[order]
-
-    def select(self, tr0, lags):
-        """Scaled block sums (as ``structural.timing``) for the shifts ``lags``."""
-        pos = np.searchsorted(self.lags, lags)
-        s = np.array([c.scale for c in tr0.cols])
-        zy = np.concatenate([z[:, :, pos] for z in self.bzy])
-        zy /= s[None, :, None] * tr0.y_scale          # as scale_lag_sums, in place
-        yy = np.concatenate([y[:, pos] for y in self.byy])
-        yy /= tr0.y_scale * tr0.y_scale
-        return ({k: zy[:, :, i] for i, k in enumerate(lags)}, {k: yy[:, i] for i, k in enumerate(lags)})
-
-    def trip_stats(self, lags) -> dict:
-        pos = np.searchsorted(self.lags, lags)
-        return {t: (n, a, zy[:, pos], yy[pos]) for t, (n, a, zy, yy) in self.trips.items()}
-
-
-def _timing(tr0: StreamModel, sums: _LagSums, prep, opt, lags, dt_med, say, paired_test, coarse):
-    """The lag step of the in-memory tracer (``search._timing_step``) on block statistics."""
-    big = int(lags[-1])
-    step = max(1, math.ceil(big / coarse))
-    tried = sorted(set(range(-big, big + 1, step)) | {0})
-    res = timing_from_blocks(tr0, *sums.select(tr0, tried), dt_med, paired_test)
-    if step > 1:
-        fine = [k for k in range(res["lag_samples"] - step + 1, res["lag_samples"] + step)
-                if -big <= k <= big and k not in tried]
-        if fine:  # one more pass for the shifts around the best coarse one
-            more = _LagSums(np.array(sorted(fine), dtype=np.int64))
-            for view in tr0._views():
-                more(view, view.extra["starts"])
-            sums.absorb(more)
-        tried = sorted(set(tried) | set(fine))
-        res = timing_from_blocks(tr0, *sums.select(tr0, tried), dt_med, paired_test)
-    all_lags = tried
-    note = {k: v for k, v in res.items() if k != "d"}
-    note["per_trip_lag_s"] = per_trip_lags_from_stats(tr0, sums.trip_stats(all_lags), all_lags, dt_med)
-    note["shifts_tried"] = len(all_lags)
-    note["test"] = ("lag chosen per fold on the training folds, scored on held-out blocks; "
-                    "d = SSE(lag 0) − SSE(chosen lag), the tracer's paired block test")
-    accepted = res["lag_samples"] != 0 and res["p_value"] < opt.alpha and res["rmse_gain"] >= opt.min_gain
-    note["accepted"] = bool(accepted)
-    say(f"timing: best lag {res['lag_s']:+.3g} s, held-out gain {100 * res['rmse_gain']:.2f} %, "
-        f"p = {res['p_value']:.3g} → {'applied' if accepted else 'not applied'}")
-    if not accepted:
-        return None, note, None
-    fold = tr0.fold_of(False)
-    before = tr0.evaluate(fold)
-    tr1 = _declared(prep, opt, tr0.declared, True, res["lag_samples"])
-    after = tr1.evaluate(fold)
-    finding = lag_finding(res, note["per_trip_lag_s"], pick_metrics(before["metrics"]),
-                          pick_metrics(after["metrics"]))
-    return finding, note, tr1
