@@ -49,12 +49,16 @@ CMD = ".venv/bin/python scripts/closing_the_loop.py --data ../shared/data --out 
 HOLD_EVERY = 5
 #: crossovers of the grade fusion tried, each by trip-grouped cross-validation on the
 #: training trips only (criterion: mean absolute trip traction-energy error)
-TAU_GRID_S = (30.0, 60.0, 120.0, 300.0, 600.0)
+#: (inf: no logged grade at all, the accelerometer with one offset per trip fixed by the
+#: elevation, Σ sin θ·ds = Δh: fit.input_checks.offset_corrected_sin_grade)
+TAU_GRID_S = (30.0, 60.0, 120.0, 300.0, 600.0, math.inf)
 #: fewest training trips for trip-grouped cross-validation of choices (tau, physical terms)
 MIN_CV_TRIPS = 5
 #: take logger dropouts (held or linearly filled inputs) out of the usable samples of every
 #: log, training and held out alike, for every equation (fit.input_checks.dropout_mask)
 CHECK_DROPOUTS = True
+#: largest gap between logged and accelerometer elevation along a trip reported as a finding [m]
+ELEVATION_GAP_M = 40.0
 
 
 def _log(msg):
@@ -115,6 +119,30 @@ def _offsets(m):
                                  df["dt_s"], df["trip_id"], m.usable)
 
 
+def _trip_inputs(m) -> dict:
+    """Per trip, what its inputs say (no power): weather, mean ambient, declared mass,
+    net elevation change, distance and share of standstill."""
+    df = m.log.df
+    out = {}
+    for t, i in df.groupby("trip_id", sort=True).indices.items():
+        u = m.usable[i]
+        r = {}
+        if "weather" in df:
+            r["weather"] = str(df["weather"].iloc[i[0]])
+        if "ambient_c" in df:
+            r["ambient_c"] = float(np.nanmean(df["ambient_c"].to_numpy(float)[i][u]))
+        r["mass_kg"] = float(np.nanmedian(m.inputs.mass[i][u]))
+        if "elevation_m" in df:
+            h = df["elevation_m"].to_numpy(float)[i][u]
+            h = h[np.isfinite(h)]
+            r["dh_m"] = float(h[-1] - h[0]) if len(h) else math.nan
+        v = m.inputs.v[i][u]
+        r["distance_km"] = float(np.sum(v * df["dt_s"].to_numpy(float)[i][u])) / 1000.0
+        r["standstill"] = float(np.mean(v < 0.1))
+        out[str(t)] = r
+    return out
+
+
 def input_checks(m_train, eq, held) -> dict:
     """Plausibility of the declared inputs (fit.input_checks): per training trip the inertial
     mass seen in the measured power (relative to the declared mass × the calibrated mass
@@ -162,8 +190,16 @@ def corrected_measured(path, vehicle, lag_s: float, accel_grade: bool, tau_s: fl
         m.usable = m.usable & np.isfinite(m.power_w)
     if accel_grade and "imu_accel_mps2" in m.inputs.signals:
         s_acc = accelerometer_sin_grade(m.inputs.signals["imu_accel_mps2"], m.inputs.a, codes, dt)
-        m.inputs.theta = np.arcsin(fused_sin_grade(s_acc, np.sin(m.inputs.theta), codes, dt,
-                                                   FUSION_TAU_S if tau_s is None else tau_s))
+        if tau_s is not None and math.isinf(tau_s):
+            from sumo_drvpw.fit.input_checks import offset_corrected_sin_grade
+
+            # the accelerometer alone, its per-trip offset fixed by the elevation
+            m.inputs.theta = np.arcsin(offset_corrected_sin_grade(
+                s_acc, m.inputs.v, df["dt_s"].to_numpy(float), codes, df["elevation_m"].to_numpy(float),
+                m.usable & np.isfinite(m.power_w)))
+        else:
+            m.inputs.theta = np.arcsin(fused_sin_grade(s_acc, np.sin(m.inputs.theta), codes, dt,
+                                                       FUSION_TAU_S if tau_s is None else tau_s))
         m.usable = m.usable & np.isfinite(m.inputs.theta)
     return m
 
@@ -335,6 +371,7 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
                          "tau": tau, "tau_s": tau_s, "sel": sel, "rscale": rscale,
                          "held_regime": held_regime, "checks": checks})
             checks["dropouts_held"] = getattr(m_test, "dropouts", None)
+            checks["held_inputs"] = _trip_inputs(m_test)
             if "imu_accel_mps2" in m_test.log.df:
                 checks["offsets"].update(_offsets(m_test))
     return {"name": name, "vehicle": vehicle, "note": note, "runs": runs}
@@ -372,6 +409,10 @@ def _pct(x):
 
 def _abs_pct(x):
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{100 * x:.1f} %"
+
+
+def _tau(t):
+    return "per-trip offset (∞)" if math.isinf(t) else f"{t:g} s"
 
 
 def _terms(eq):
@@ -432,6 +473,13 @@ def _render_checks(run) -> list[str]:
                               for t in sorted(far)) or "none")
                  + ". The fused grade takes the slow part from the elevation, so such an offset does not "
                  "reach the equation.")
+        gaps = {t: r["max_gap_m"] for t, r in off.items() if np.isfinite(r.get("max_gap_m", np.nan))}
+        far = sorted((t for t, g in gaps.items() if g > ELEVATION_GAP_M), key=lambda t: -gaps[t])
+        L.append(f"- input check, logged elevation against the accelerometer's integral (its per-trip offset fixed "
+                 f"by Δh): median largest gap along a trip {np.median(list(gaps.values())):.0f} m; beyond "
+                 f"{ELEVATION_GAP_M:g} m (elevation settling or drifting — the fused grade's slow part is then "
+                 f"wrong there): " + (", ".join(f"{t}{' (held out)' if t in held else ''} {gaps[t]:.0f} m"
+                                                for t in far) or "none"))
     return L
 
 
@@ -515,10 +563,10 @@ def render(cars, took) -> str:
                 L.append(f"- timing: best lag {tm['lag_s']:+.3g} s (p = {tm['p_value']:.2g}, gain "
                          f"{100 * tm['rmse_gain']:.1f} %) → {'corrected in the data' if tm['accepted'] else 'not applied'}")
             if run.get("tau"):
-                cvs = ", ".join(f"{t:g} s {100 * c['mean_abs_error']:.1f} %" for t, c in run["tau"]["cv"].items())
+                cvs = ", ".join(f"{_tau(t)} {100 * c['mean_abs_error']:.1f} %" for t, c in run["tau"]["cv"].items())
                 L.append(f"- fusion crossover chosen on the training trips (trip-grouped 5-fold cross-validation, "
                          f"mean abs. trip traction-energy error of the calibrated equation): {cvs} → "
-                         f"**{run['tau_s']:g} s** (the tracer's own test used {FUSION_TAU:g} s)")
+                         f"**{_tau(run['tau_s'])}** (the tracer's own test used {FUSION_TAU:g} s)")
             gs = d.get("structural", {}).get("grade_sources")
             if gs:
                 L.append(f"- grade from each source: logged s.d. {gs['logged']['sd_deg']:.2f}°, accelerometer "
@@ -573,7 +621,7 @@ def render(cars, took) -> str:
                                      "fused accelerometer grade" if run["acc_grade"] else "",
                                      "ρ at altitude" if run.get("rho_alt") else "") if x]
                 if run.get("tau_s") is not None:
-                    fixes = [f"fused accelerometer grade, crossover {run['tau_s']:g} s" if "fused" in x else x
+                    fixes = [f"fused accelerometer grade, crossover {_tau(run['tau_s'])}" if "fused" in x else x
                              for x in fixes]
                 for eqname, doc in run["held_corr"].items():
                     L.append(row(eqname, doc, f"corrected ({', '.join(fixes)})" if fixes else "as logged"))
@@ -589,6 +637,18 @@ def render(cars, took) -> str:
                 L += ["", f"Held-out trips of `{run['final_eq'].name}` beyond 6 %: {', '.join(far) or 'none'}. "
                       "A net-energy error of the same size says the gap is not in the split between traction "
                       "and recuperation."]
+                hi = (run.get("checks") or {}).get("held_inputs") or {}
+                bad = [k for k, v in fdoc["trip_energy"]["trips"].items()
+                       if v["error"] is not None and math.isfinite(v["error"]) and abs(v["error"]) > 0.06]
+                if bad and hi:
+                    L.append("Their inputs (no power): " + "; ".join(
+                        f"{k}: " + ", ".join(x for x in (
+                            f"{hi[k]['weather']}" if "weather" in hi[k] else "",
+                            f"{hi[k]['ambient_c']:.1f} °C" if "ambient_c" in hi[k] else "",
+                            f"{hi[k]['mass_kg']:.0f} kg declared",
+                            f"Δh {hi[k]['dh_m']:+.0f} m" if "dh_m" in hi[k] else "",
+                            f"{hi[k]['distance_km']:.1f} km, {100 * hi[k]['standstill']:.0f} % standstill") if x)
+                        for k in bad if k in hi) + ".")
             L.append("")
     L += ["## What this shows, and what it does not", "",
           "- Findings are kept only when they pass the held-out block test, lower the held-out error on most "

@@ -269,6 +269,11 @@ def test_accelerometer_offsets_hand_calculation():
     assert r["offset_elevation"] == pytest.approx(o, abs=1e-12)
     assert r["offset_standstill"] == pytest.approx(G * s + o)   # the stop's slope is in it
     assert r["standstill_s"] == pytest.approx(10.0)
+    assert r["max_gap_m"] < 0.25                      # the two agree (up to one step of 0.2 m)
+    # a GPS elevation that starts 30 m high and settles within the first 100 m of travel
+    h2 = h + np.where(np.cumsum(v * dt) < 100.0, 30.0, 0.0)
+    r2 = accelerometer_offsets(imu, np.zeros_like(v), v, h2, np.full(v.size, dt), np.full(v.size, "T"))["T"]
+    assert r2["max_gap_m"] > 25.0
 
 
 def test_inertial_mass_finds_a_planted_undeclared_load():

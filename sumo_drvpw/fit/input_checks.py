@@ -109,7 +109,9 @@ def accelerometer_offsets(imu_mps2, accel_mps2, speed_mps, elevation_m, dt_s, tr
     elevation, and the elevation change each implies.
 
     Returns trip → {"offset_standstill", "offset_elevation", "standstill_s", "dh_m",
-    "dh_accelerometer_m", "distance_m"}: ``offset_elevation`` = g·(Σ s·ds − Δh)/Σ ds with
+    "dh_accelerometer_m", "distance_m", "max_gap_m"}: ``max_gap_m`` the largest distance
+    along the trip between the logged elevation and the accelerometer's integral with that
+    offset removed; ``offset_elevation`` = g·(Σ s·ds − Δh)/Σ ds with
     s = (reading − dv/dt)/g; ``offset_standstill`` = median reading at standstill held for at
     least ``min_stand_s`` (it also holds the slope of where the car stood).
     """
@@ -136,7 +138,14 @@ def accelerometer_offsets(imu_mps2, accel_mps2, speed_mps, elevation_m, dt_s, tr
         dh = float(hh[-1] - hh[0]) if len(hh) else np.nan
         s = np.where(ok, (imu[i] - a[i]) / G, 0.0)
         dh_acc = float(np.sum(s * ds))
-        out[str(t)] = {"offset_standstill": float(np.median(imu[i][held])) if held.any() else np.nan,
+        # the logged elevation against the accelerometer's, its offset fixed by the elevation:
+        # the largest gap along the trip [m] (GPS elevation settling or drifting shows here)
+        c = (dh_acc - dh) / dist if dist > 0 else 0.0
+        hi = np.where(np.isfinite(h[i]) & ok, h[i], np.nan)
+        first = hi[np.isfinite(hi)][0] if np.isfinite(hi).any() else np.nan
+        gap = (hi - first) - np.cumsum((s - c) * ds)
+        out[str(t)] = {"max_gap_m": float(np.nanmax(np.abs(gap))) if np.isfinite(gap).any() else np.nan,
+                       "offset_standstill": float(np.median(imu[i][held])) if held.any() else np.nan,
                        "standstill_s": float(np.sum(dt[i][held])),
                        "offset_elevation": G * (dh_acc - dh) / dist if dist > 0 else np.nan,
                        "dh_m": dh, "dh_accelerometer_m": dh_acc, "distance_m": dist}
