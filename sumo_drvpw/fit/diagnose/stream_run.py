@@ -190,7 +190,10 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     opt.check()
     say = progress or (lambda s: None)
     veh = load_vehicle(vehicle) if isinstance(vehicle, str) else vehicle
-    gen = read_batches(paths, veh, read_options, target, rows)   # diagnose reads READ_ROWS at a time
+    from sumo_drvpw.fit.engine import prefetched
+
+    # diagnose reads READ_ROWS at a time; the next batch is read while one is prepared
+    gen = prefetched(read_batches(paths, veh, read_options, target, rows))
     sample, n_sample = [], 0
     for m in gen:
         sample.append(m)
