@@ -8,7 +8,7 @@ reduced to the arrays the tracer needs (model inputs with the equation's mass, m
 power, declared term values, offered signals, the rows' power and trip for the lag
 search) and kept as :class:`Batches`: in memory up to ``cache_mb``, beyond that in a
 temporary folder (NumPy files, deleted at the end). Every later pass of the tracer reads
-these prepared arrays, not the logs.
+these prepared arrays (those it uses), not the logs.
 
 A first look at the data — column screening, which columns are two-valued, the sample
 interval of the lag search, the calibration on the spot (without a declared equation),
@@ -133,9 +133,7 @@ class Batches:
                 yield self._unpack(it)
             else:
                 files, rest = it
-                d = {k: np.load(f, allow_pickle=False) for k, f in files.items()}
-                d.update(rest)
-                yield self._unpack(d)
+                yield _OnDisk(files, self._unpack(rest))
 
     @property
     def on_disk(self) -> bool:
@@ -146,6 +144,24 @@ class Batches:
             shutil.rmtree(self._dir, ignore_errors=True)
             self._dir = None
         self._items = []
+
+
+class _OnDisk(dict):
+    """A prepared batch in the temporary folder: each array read when a pass first asks
+    for it (a pass that needs three of a batch's arrays reads those three)."""
+
+    def __init__(self, files: dict, rest: dict):
+        super().__init__(rest)
+        self._files = files
+
+    def __missing__(self, key):
+        if key not in self._files:
+            raise KeyError(key)
+        val = self[key] = np.load(self._files[key], allow_pickle=False)
+        return val
+
+    def __contains__(self, key):
+        return dict.__contains__(self, key) or key in self._files
 
 
 class View:
