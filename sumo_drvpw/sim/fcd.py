@@ -16,154 +16,30 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
   or ``[sumo]`` of the scenario); without them every vType is a ``passenger`` car with the
   class's default mass (listed in ``summary.json`` ``assumptions``);
 - persons (``<person>``) are not vehicles and are ignored.
+
+Bounded memory (#14): the file is read in blocks of ``chunk_rows`` rows
+(:mod:`sumo_drvpw.sim.fcd_read`: XML iterparse, Parquet record batches, CSV chunks) and
+replayed timestep by timestep (:class:`FcdStream`; a timestep cut by a block boundary is
+joined first), so memory holds one block plus the running vehicles whatever the file's
+length; the ledger writes finished vehicles out (:mod:`sumo_drvpw.sim.spill`). A vehicle
+arrives the step after a timestep without it (SUMO's FCD does not tell an arrival from a
+teleport: a vehicle back after a gap books on in its row, its acceleration starting at 0,
+or in a second row once flushed). ``chunk_rows=None`` reads the whole file first
+(:class:`FcdReplay`: the reference the streamed replay equals exactly on gap-free FCD).
+The rows must be in time order (SUMO writes them so). Split by vehicle on Dask:
+:mod:`sumo_drvpw.sim.fcd_dask`.
 """
 
 from __future__ import annotations
 
-import gzip
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from sumo_drvpw.errors import UserError
-
-#: our name → SUMO's tabular FCD column (``<element>_<attribute>``)
-FCD_COLUMNS = {"time": "timestep_time", "id": "vehicle_id", "type": "vehicle_type",
-               "speed": "vehicle_speed", "lane": "vehicle_lane", "pos": "vehicle_pos",
-               "angle": "vehicle_angle", "slope": "vehicle_slope",
-               "accel": "vehicle_acceleration"}
-_REQUIRED = ("time", "id", "type", "speed", "lane", "pos")
-_XML_ATTRS = {"id": "id", "type": "type", "speed": "speed", "lane": "lane", "pos": "pos",
-              "angle": "angle", "slope": "slope", "accel": "acceleration"}
-
-
-def _xml_rows(path: Path) -> pd.DataFrame:
-    with open(path, "rb") as f:
-        gz = f.read(2) == b"\x1f\x8b"
-    cols: dict[str, list] = {k: [] for k in ("time", *_XML_ATTRS)}
-    times: list[float] = []
-    try:
-        with (gzip.open(path, "rb") if gz else open(path, "rb")) as fh:
-            t = None
-            for ev, el in ET.iterparse(fh, events=("start", "end")):
-                tag = el.tag
-                if ev == "start":
-                    if tag == "timestep":
-                        t = float(el.attrib["time"])
-                        times.append(t)
-                    continue
-                if tag == "vehicle" and t is not None:
-                    a = el.attrib
-                    cols["time"].append(t)
-                    for k, xk in _XML_ATTRS.items():
-                        cols[k].append(a.get(xk))
-                    el.clear()
-                elif tag == "timestep":
-                    el.clear()
-    except ET.ParseError as e:
-        raise UserError(f"FCD file {path}: not valid XML: {e}") from None
-    except (KeyError, ValueError) as e:
-        raise UserError(f"FCD file {path}: a <timestep> without a valid time: {e}") from None
-    df = pd.DataFrame({k: v for k, v in cols.items() if any(x is not None for x in v)
-                       or k in _REQUIRED})
-    df.attrs["times"] = np.asarray(times, float)
-    return df
-
-
-def fcd_parts(spec) -> list[Path]:
-    """The Parquet files of a partitioned FCD: a folder (its ``*.parquet``, recursively) or
-    a glob pattern (``fcd/part-*.parquet``), sorted by name; [] when ``spec`` is neither."""
-    import glob
-
-    p = Path(spec)
-    if p.is_dir():
-        files = sorted(f for f in p.rglob("*.parquet") if f.is_file())
-        if not files:
-            raise UserError(f"FCD folder {p}: no .parquet files in it")
-        return files
-    if any(c in str(spec) for c in "*?[") and not p.exists():
-        files = sorted(Path(f) for f in glob.glob(str(spec), recursive=True) if Path(f).is_file())
-        if not files:
-            raise UserError(f"FCD pattern {spec}: matches no file")
-        bad = [f for f in files if not f.name.lower().endswith(".parquet")]
-        if bad:
-            raise UserError(f"FCD pattern {spec}: {bad[0]} is not a .parquet file (a pattern "
-                            "reads partitioned Parquet FCD only)")
-        return files
-    return []
-
-
-def _read_parquet_fcd(files: list[Path], label) -> pd.DataFrame:
-    """The FCD columns (only those) of one or several Parquet files, in file order."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    wanted = set(FCD_COLUMNS.values())
-    tables = []
-    for f in files:
-        try:
-            names = pq.read_schema(f).names
-            tables.append(pq.read_table(f, columns=[c for c in names if c in wanted]))
-        except Exception as e:  # pyarrow raises several error types for bad files
-            raise UserError(f"FCD file {f}: cannot read Parquet: {e}") from None
-    try:
-        tbl = pa.concat_tables(tables, promote_options="default")
-    except (pa.ArrowInvalid, pa.ArrowTypeError) as e:
-        raise UserError(f"FCD {label}: the parts' columns do not agree: {e}") from None
-    return tbl.to_pandas()
-
-
-def read_fcd(path) -> pd.DataFrame:
-    """FCD rows (time, id, type, speed, lane, pos, [angle, slope, accel]) sorted by time;
-    ``df.attrs["times"]``: every timestep of the file, vehicles or not. UserError names
-    the file and the missing column. ``path``: a file, or partitioned Parquet FCD (a folder
-    or a glob pattern of ``.parquet`` files, read as one, only the FCD columns)."""
-    parts = fcd_parts(path)
-    path = Path(path)
-    if not parts and not path.is_file():
-        raise UserError(f"FCD file not found: {path}")
-    name = path.name.lower()
-    if parts or name.endswith(".parquet"):
-        raw = _read_parquet_fcd(parts or [path], path)
-    elif name.endswith(".csv") or name.endswith(".csv.gz"):
-        try:
-            raw = pd.read_csv(path, sep=None, engine="python")
-        except Exception as e:
-            raise UserError(f"FCD file {path}: cannot read CSV: {e}") from None
-    else:
-        df = _xml_rows(path)
-        raw = None
-    if raw is not None:
-        missing = [FCD_COLUMNS[k] for k in _REQUIRED if FCD_COLUMNS[k] not in raw.columns]
-        if missing:
-            raise UserError(f"FCD file {path}: no column {missing[0]} (SUMO's tabular FCD "
-                            f"has {', '.join(FCD_COLUMNS[k] for k in _REQUIRED)})")
-        times = np.unique(pd.to_numeric(raw[FCD_COLUMNS["time"]], errors="coerce").dropna())
-        df = pd.DataFrame({k: raw[c] for k, c in FCD_COLUMNS.items() if c in raw.columns})
-        df.attrs["times"] = times
-    times = df.attrs.get("times", np.zeros(0))
-    df = df[df["id"].notna() & (df["id"].astype(str) != "")].copy()
-    for k in ("time", "speed", "pos", "angle", "slope", "accel"):
-        if k in df.columns:
-            vals = pd.to_numeric(df[k], errors="coerce")
-            bad = vals.isna() & df[k].notna()
-            if bad.any():
-                i = int(np.flatnonzero(bad.to_numpy())[0])
-                raise UserError(f"FCD file {path}: column {k}: not a number at vehicle row "
-                                f"{i + 1}: {df[k].iloc[i]!r}")
-            df[k] = vals.astype(float)
-    for k in ("speed", "pos"):
-        if df[k].isna().any():
-            i = int(np.flatnonzero(df[k].isna().to_numpy())[0])
-            raise UserError(f"FCD file {path}: column {k} missing at vehicle row {i + 1} "
-                            f"(vehicle {df['id'].iloc[i]!r})")
-    for k in ("id", "type", "lane"):
-        df[k] = df[k].astype(str)
-    df = df.sort_values("time", kind="stable").reset_index(drop=True)
-    df.attrs["times"] = times
-    return df
+from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
+                                     iter_fcd_blocks, read_fcd)
 
 
 class _Sim:
@@ -177,7 +53,7 @@ class _Sim:
         return self.r.dt
 
     def getMinExpectedNumber(self):  # noqa: N802
-        return len(self.r.times) - self.r.k
+        return self.r.remaining()
 
     def getDepartedIDList(self):  # noqa: N802
         return self.r.departed
@@ -259,6 +135,9 @@ class FcdReplay:
         self._leaving = {int(k): tuple(g.index) for k, g in last.groupby(last)}
         self.simulation, self.vehicle, self.vehicletype = _Sim(self), _Veh(self), _VType()
 
+    def remaining(self) -> int:
+        return len(self.times) - self.k
+
     def simulationStep(self, time=0.0):  # noqa: N802
         a, b = self._rows[self.k]
         self.t = float(self.times[self.k]) + self.dt
@@ -275,29 +154,144 @@ class FcdReplay:
         pass
 
 
-def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
-                vtype_files=None, begin_s=None, keep_vehicles: bool = False,
-                flush_vehicles: int | None = None, **overrides):
-    """Book an FCD file as ``run`` books a live simulation; returns the RunResult and
-    writes the outputs into ``out_dir`` when given.
+class _Step:
+    """One timestep of a stream: its time and its rows' columns."""
 
-    Parameters
-    ----------
-    fcd_file : SUMO FCD output (XML, .xml.gz, .parquet, .csv)
-    net : the network the FCD was recorded on (default: the scenario's)
-    scenario : optional scenario TOML (options, vTypes, equations)
-    equations : equations instead of the scenario's (names, paths, Equation objects)
-    vtype_files : route/additional files with the vTypes (default: the scenario's)
-    begin_s : ignore timesteps before this simulation time [s]
-    keep_vehicles, flush_vehicles : as for :func:`sumo_drvpw.sim.run.run_scenario` (a
-        vehicle leaves memory the step after its last row in the file)
-    overrides : scenario values to replace (``sumo_drvpw.sim.scenario.OVERRIDES``)
-    """
-    from sumo_drvpw.sim.accountant import Accountant
-    from sumo_drvpw.sim.loop import step_until
-    from sumo_drvpw.sim.run import check_vtype_filter
+    __slots__ = ("t", "cols")
+
+    def __init__(self, t: float, cols: dict):
+        self.t, self.cols = t, cols
+
+
+def _cut(cols: dict, a: int, b: int) -> dict:
+    return {k: v[a:b] for k, v in cols.items()}
+
+
+def _join(pieces: list[dict]) -> dict:
+    if len(pieces) == 1:
+        return pieces[0]
+    keys = dict.fromkeys(k for p in pieces for k in p)
+    return {k: np.concatenate([p[k] if k in p else np.full(len(p["time"]), np.nan)
+                               for p in pieces]) for k in keys}
+
+
+def timesteps(blocks, begin_s: float | None = None, keep=None, label=""):
+    """Whole timesteps (:class:`_Step`) from blocks (:func:`iter_fcd_blocks`), in time
+    order: the rows of a timestep cut by a block boundary are joined first. ``keep``:
+    optional function ids → boolean mask of the rows to keep (every timestep is still
+    given, empty or not). UserError when a time comes before the one before it."""
+    pending: _Step | None = None
+    pieces: list[dict] = []
+    last = -np.inf
+    for blk in blocks:
+        cols = blk.cols
+        t = cols["time"]
+        if len(t):
+            back = np.flatnonzero(np.diff(t) < 0)
+            if len(back) or t[0] < last:
+                i = int(back[0]) + 1 if len(back) else 0
+                prev = t[i - 1] if i else last
+                raise UserError(f"FCD {label}: time {t[i]:g} after {prev:g} at vehicle row "
+                                f"{blk.first_row + i + 1}: the rows must be in time order "
+                                "(as SUMO writes them)")
+            last = float(t[-1])
+        if keep is not None and len(t):
+            m = keep(cols["id"])
+            if not m.all():
+                cols = {k: v[m] for k, v in cols.items()}
+                t = cols["time"]
+        lo = np.searchsorted(t, blk.times, side="left")
+        hi = np.searchsorted(t, blk.times, side="right")
+        for u, a, b in zip(blk.times, lo, hi):
+            u = float(u)
+            if begin_s is not None and u < begin_s - 1e-9:
+                continue
+            if pending is not None and u == pending.t:
+                pieces.append(_cut(cols, a, b))
+                continue
+            if pending is not None:
+                pending.cols = _join(pieces)
+                yield pending
+            pending, pieces = _Step(u, None), [_cut(cols, a, b)]
+    if pending is not None:
+        pending.cols = _join(pieces)
+        yield pending
+
+
+class FcdStream(FcdReplay):
+    """The replay of :class:`FcdReplay` fed timestep by timestep from a stream of
+    :class:`_Step` (:func:`timesteps`): memory holds the current block and the running
+    vehicles, not the file. A vehicle arrives (leaves the ledger's memory) the step after
+    a timestep without it; ``dt`` None: the first two timesteps' distance (a shorter one
+    later is a UserError: give the scenario's ``step_length``); ``end_s``: replay the
+    timesteps t with t + Δt ≤ end (as the live loop stops at end)."""
+
+    def __init__(self, steps, dt: float | None = None, end_s: float | None = None, label=""):
+        self._steps = iter(steps)
+        self._ahead = [s for s in (next(self._steps, None), next(self._steps, None)) if s]
+        self._label, self._end = label, end_s
+        self._dt_checked = dt is None
+        if dt is None:
+            if len(self._ahead) < 2:
+                raise UserError(f"FCD file {label}: fewer than two timesteps, cannot tell the "
+                                "step length")
+            dt = float(np.round(self._ahead[1].t - self._ahead[0].t, 6))
+            if dt <= 1e-9:
+                raise UserError(f"FCD file {label}: two timesteps at {self._ahead[0].t:g}")
+        self.dt = float(dt)
+        self.k, self.rows = 0, 0
+        self.t = self._ahead[0].t if self._ahead else 0.0
+        self.ids: tuple = ()
+        self.state: dict = {}
+        self.types: dict = {}
+        self.departed: tuple = ()
+        self.arrived: tuple = ()
+        self._prev: tuple = ()
+        self._prev_set: set = set()
+        self.simulation, self.vehicle, self.vehicletype = _Sim(self), _Veh(self), _VType()
+
+    def remaining(self) -> int:
+        if not self._ahead:
+            return 0
+        if self._end is not None and self._ahead[0].t + self.dt > self._end + 1e-9:
+            return 0
+        return 1
+
+    def simulationStep(self, time=0.0):  # noqa: N802
+        st = self._ahead.pop(0)
+        nxt = next(self._steps, None)
+        if nxt is not None:
+            self._ahead.append(nxt)
+        if self._dt_checked and self._ahead:
+            d = self._ahead[0].t - st.t
+            if 1e-9 < d < self.dt - 1e-6:
+                raise UserError(f"FCD file {self._label}: timesteps {self.dt:g} s apart at "
+                                f"first, {d:g} s at t = {st.t:g}: give the step length "
+                                "(sumo.step_length of the scenario)")
+        self.t = st.t + self.dt
+        self.k += 1
+        c = st.cols
+        ids = tuple(c["id"])
+        n = len(ids)
+        self.rows += n
+        cols = [c["speed"], c["accel"] if "accel" in c else np.full(n, np.nan),
+                c["angle"] if "angle" in c else np.zeros(n), c["lane"], c["pos"],
+                c["slope"] if "slope" in c else np.zeros(n)]
+        self.ids = ids
+        self.state = dict(zip(ids, zip(*cols))) if n else {}
+        self.types = dict(zip(ids, c["type"]))
+        now = set(ids)
+        self.departed = tuple(v for v in ids if v not in self._prev_set)
+        self.arrived = tuple(v for v in self._prev if v not in now)
+        self._prev, self._prev_set = ids, now
+
+
+def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, **overrides):
+    """The scenario an FCD replay books with: the scenario file's (or defaults around
+    ``net``), equations and vType files replaced when given, positions read every step."""
+    import dataclasses
+
     from sumo_drvpw.sim.scenario import load_scenario
-    from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
 
     if scenario is None and net is None:
         raise UserError("FCD: give the network the FCD was recorded on, or a scenario")
@@ -310,8 +304,6 @@ def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
             raise UserError("FCD: give the equations, or a scenario that names them")
         sc = load_scenario(doc={"equations": overrides.pop("equations"),
                                 "sumo": {"net": str(net)}}, **overrides)
-    import dataclasses
-
     changes = {"positions": "getter"}
     if net is not None:
         p = Path(net)
@@ -319,18 +311,74 @@ def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
             raise UserError(f"SUMO network not found: {p}")
         changes["net_file"] = p.resolve()
     if vtype_files:
-        files = [Path(f) for f in vtype_files]
+        files = [Path(f).resolve() for f in vtype_files]
         for f in files:
             if not f.is_file():
                 raise UserError(f"vType file not found: {f}")
         changes["route_files"] = files
-    sc = dataclasses.replace(sc, **changes)
-    df = read_fcd(fcd_file)
-    if begin_s is not None:
-        times = df.attrs["times"]
-        df = df[df["time"] >= begin_s - 1e-9].copy()
-        df.attrs["times"] = times[times >= begin_s - 1e-9]
-    replay = FcdReplay(df, dt=sc.step_length)
+    return dataclasses.replace(sc, **changes)
+
+
+def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
+                vtype_files=None, begin_s=None, keep_vehicles: bool = False,
+                flush_vehicles: int | None = None, chunk_rows: int | None = CHUNK_ROWS,
+                **overrides):
+    """Book an FCD file as ``run`` books a live simulation; returns the RunResult and
+    writes the outputs into ``out_dir`` when given.
+
+    Parameters
+    ----------
+    fcd_file : SUMO FCD output (XML, .xml.gz, .parquet, .csv), or partitioned Parquet FCD
+        (a folder or a glob pattern of parts)
+    net : the network the FCD was recorded on (default: the scenario's)
+    scenario : optional scenario TOML (options, vTypes, equations)
+    equations : equations instead of the scenario's (names, paths, Equation objects)
+    vtype_files : route/additional files with the vTypes (default: the scenario's)
+    begin_s : ignore timesteps before this simulation time [s]
+    keep_vehicles, flush_vehicles : as for :func:`sumo_drvpw.sim.run.run_scenario` (a
+        vehicle leaves memory the step after its last row in the file)
+    chunk_rows : rows read at a time (the file streamed in bounded memory); None reads
+        the whole file first (:func:`read_fcd`, :class:`FcdReplay`: the reference path)
+    overrides : scenario values to replace (``sumo_drvpw.sim.scenario.OVERRIDES``)
+
+    Streamed, ``summary["source"]["rows"]`` counts the rows of the replayed timesteps (in
+    memory: every row from ``begin_s`` on). For many vehicles on several processes or
+    machines see :func:`sumo_drvpw.sim.fcd_dask.process_fcd_dask`.
+    """
+    sc = fcd_scenario(net, scenario, equations, vtype_files, **overrides)
+    return replay_fcd(sc, fcd_file, out_dir, begin_s=begin_s, keep_vehicles=keep_vehicles,
+                      flush_vehicles=flush_vehicles, chunk_rows=chunk_rows)
+
+
+def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = False,
+               flush_vehicles: int | None = None, chunk_rows: int | None = CHUNK_ROWS,
+               keep=None, publish: bool = True):
+    """:func:`process_fcd` with a prepared scenario (:func:`fcd_scenario`). ``keep``:
+    optional function vehicle ids → boolean mask of the vehicles to book (a Dask task's
+    share); ``publish``: write the outputs into ``out_dir`` (else only the spill parts of
+    the vehicles are left there, for :mod:`sumo_drvpw.sim.fcd_dask` to join)."""
+    from sumo_drvpw.sim.accountant import Accountant
+    from sumo_drvpw.sim.loop import step_until
+    from sumo_drvpw.sim.run import check_vtype_filter
+    from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
+
+    if chunk_rows is None:
+        df = read_fcd(fcd_file)
+        if keep is not None and len(df):
+            times = df.attrs["times"]
+            df = df[keep(df["id"].to_numpy(object))].copy()
+            df.attrs["times"] = times
+        if begin_s is not None:
+            times = df.attrs["times"]
+            df = df[df["time"] >= begin_s - 1e-9].copy()
+            df.attrs["times"] = times[times >= begin_s - 1e-9]
+        replay = FcdReplay(df, dt=sc.step_length)
+        if sc.end is not None:
+            n = int(np.searchsorted(replay.times + replay.dt, sc.end + 1e-9, side="right"))
+            replay.times, replay._rows = replay.times[:n], replay._rows[:n]
+    else:
+        steps = timesteps(iter_fcd_blocks(fcd_file, chunk_rows), begin_s, keep, fcd_file)
+        replay = FcdStream(steps, dt=sc.step_length, end_s=sc.end, label=fcd_file)
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     acc = Accountant(replay, scenario=sc,
@@ -338,30 +386,22 @@ def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
                      spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,
                      keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles)
     try:
-        end = sc.end
-        info = step_until(replay, acc.stepper, end=None, progress=False, period=sc.period) \
-            if end is None else _until(replay, acc, end, sc.period)
+        info = step_until(replay, acc.stepper, end=None, progress=False, period=sc.period)
         acc.interrupted = info["interrupted"]
-        extra = {"source": {"fcd": str(fcd_file), "rows": int(len(df)),
-                            "timesteps": int(len(replay.times))}}
+        rows = replay.rows if chunk_rows is not None else len(df)
+        extra = {"source": {"fcd": str(fcd_file), "rows": int(rows),
+                            "timesteps": int(replay.k)}}
         if sc.trace and out_dir:
             extra["files"] = {"trace": "trace.parquet"}
+        if not publish:
+            acc.close_trace()
+            return acc, extra
         result = acc.result(extra)
         check_vtype_filter(sc, acc.ledger)
         if out_dir is not None:
             write_published(result, out_dir)
     finally:
         acc.close_trace()
-        if out_dir is not None:
+        if out_dir is not None and publish:
             discard_parts(acc.ledger)
     return result
-
-
-def _until(replay: FcdReplay, acc, end: float, period):
-    """Replay the timesteps before ``end`` [s] (as the live loop stops at end)."""
-    from sumo_drvpw.sim.loop import step_until
-
-    n = int(np.searchsorted(replay.times + replay.dt, end + 1e-9, side="right"))
-    replay.times = replay.times[:n]
-    replay._rows = replay._rows[:n]
-    return step_until(replay, acc.stepper, end=None, progress=False, period=period)

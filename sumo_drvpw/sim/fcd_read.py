@@ -1,0 +1,264 @@
+"""SUMO FCD files read in time-ordered blocks of rows (bounded memory), or whole.
+
+``iter_fcd_blocks(path, chunk_rows)`` yields :class:`Block` objects: the timesteps the
+block covers (every ``<timestep>`` of an XML file, vehicles or not; the distinct row
+times of a tabular file) and its rows as NumPy columns (time, id, type, speed, lane, pos,
+and angle, slope, accel when the file has them), checked and converted as
+:func:`read_fcd` always did. Memory is one block: XML is parsed with ``iterparse`` and cut
+after a ``</timestep>`` once ``chunk_rows`` rows are collected; Parquet is read record
+batch by record batch (only the FCD columns), the parts of a partitioned FCD one after
+the other in the order of their first time; CSV ``chunk_rows`` lines at a time. A tabular
+block may end inside a timestep: the replay (:mod:`sumo_drvpw.sim.fcd`) joins the rows of
+a timestep before it books it. Rows must come in time order (SUMO writes them so); a
+time earlier than the one before is a UserError naming the file and the row.
+
+``read_fcd(path)`` is every block joined: one DataFrame (the in-memory path).
+"""
+
+from __future__ import annotations
+
+import gzip
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.errors import UserError
+
+#: our name → SUMO's tabular FCD column (``<element>_<attribute>``)
+FCD_COLUMNS = {"time": "timestep_time", "id": "vehicle_id", "type": "vehicle_type",
+               "speed": "vehicle_speed", "lane": "vehicle_lane", "pos": "vehicle_pos",
+               "angle": "vehicle_angle", "slope": "vehicle_slope",
+               "accel": "vehicle_acceleration"}
+_REQUIRED = ("time", "id", "type", "speed", "lane", "pos")
+_OPTIONAL = ("angle", "slope", "accel")
+_XML_ATTRS = {"id": "id", "type": "type", "speed": "speed", "lane": "lane", "pos": "pos",
+              "angle": "angle", "slope": "slope", "accel": "acceleration"}
+#: rows per block of the streamed replay (a few tens of MB of columns)
+CHUNK_ROWS = 200_000
+
+
+@dataclass
+class Block:
+    """Rows of consecutive timesteps. ``times``: the timesteps the block covers, ascending
+    (XML: also those without vehicles); ``cols``: name → array of the rows (``id``,
+    ``type``, ``lane`` object arrays of str; the rest float; optional ones absent when the
+    file lacks them); ``first_row``: the number of rows before this block."""
+
+    times: np.ndarray
+    cols: dict
+    first_row: int
+
+    def __len__(self) -> int:
+        return len(self.cols["time"])
+
+
+def fcd_parts(spec) -> list[Path]:
+    """The Parquet files of a partitioned FCD: a folder (its ``*.parquet``, recursively) or
+    a glob pattern (``fcd/part-*.parquet``), sorted by name; [] when ``spec`` is neither."""
+    import glob
+
+    p = Path(spec)
+    if p.is_dir():
+        files = sorted(f for f in p.rglob("*.parquet") if f.is_file())
+        if not files:
+            raise UserError(f"FCD folder {p}: no .parquet files in it")
+        return files
+    if any(c in str(spec) for c in "*?[") and not p.exists():
+        files = sorted(Path(f) for f in glob.glob(str(spec), recursive=True) if Path(f).is_file())
+        if not files:
+            raise UserError(f"FCD pattern {spec}: matches no file")
+        bad = [f for f in files if not f.name.lower().endswith(".parquet")]
+        if bad:
+            raise UserError(f"FCD pattern {spec}: {bad[0]} is not a .parquet file (a pattern "
+                            "reads partitioned Parquet FCD only)")
+        return files
+    return []
+
+
+def _normalise(df: pd.DataFrame, label, first_row: int) -> dict:
+    """Checked columns of raw rows (our names): rows without an id dropped, numbers
+    parsed (UserError naming the column and the row, counted over the whole file)."""
+    df = df[df["id"].notna() & (df["id"].astype(str) != "")]
+    out = {}
+    for k in ("time", "speed", "pos", *_OPTIONAL):
+        if k not in df.columns:
+            continue
+        vals = pd.to_numeric(df[k], errors="coerce")
+        bad = vals.isna() & df[k].notna()
+        if bad.any():
+            i = int(np.flatnonzero(bad.to_numpy())[0])
+            raise UserError(f"FCD file {label}: column {k}: not a number at vehicle row "
+                            f"{first_row + i + 1}: {df[k].iloc[i]!r}")
+        out[k] = vals.to_numpy(float)
+    for k in ("speed", "pos"):
+        miss = np.isnan(out[k])
+        if miss.any():
+            i = int(np.flatnonzero(miss)[0])
+            raise UserError(f"FCD file {label}: column {k} missing at vehicle row "
+                            f"{first_row + i + 1} (vehicle {df['id'].iloc[i]!r})")
+    for k in ("id", "type", "lane"):
+        out[k] = df[k].astype(str).to_numpy(object)
+    return out
+
+
+def _xml_blocks(path: Path, chunk_rows: int):
+    with open(path, "rb") as f:
+        gz = f.read(2) == b"\x1f\x8b"
+    keys = ("time", *_XML_ATTRS)
+    present = dict.fromkeys(_OPTIONAL, False)
+
+    def block(cols, times, first):
+        for k in _OPTIONAL:
+            present[k] = present[k] or any(x is not None for x in cols[k])
+        df = pd.DataFrame({k: v for k, v in cols.items() if k in _REQUIRED or present[k]})
+        return Block(np.asarray(times, float), _normalise(df, path, first), first)
+
+    cols: dict[str, list] = {k: [] for k in keys}
+    times: list[float] = []
+    done = 0
+    try:
+        with (gzip.open(path, "rb") if gz else open(path, "rb")) as fh:
+            t = None
+            for ev, el in ET.iterparse(fh, events=("start", "end")):
+                tag = el.tag
+                if ev == "start":
+                    if tag == "timestep":
+                        t = float(el.attrib["time"])
+                        times.append(t)
+                    continue
+                if tag == "vehicle" and t is not None:
+                    a = el.attrib
+                    cols["time"].append(t)
+                    for k, xk in _XML_ATTRS.items():
+                        cols[k].append(a.get(xk))
+                    el.clear()
+                elif tag == "timestep":
+                    el.clear()
+                    if len(cols["time"]) >= chunk_rows:
+                        b = block(cols, times, done)
+                        done += len(cols["time"])
+                        cols, times = {k: [] for k in keys}, []
+                        yield b
+    except ET.ParseError as e:
+        raise UserError(f"FCD file {path}: not valid XML: {e}") from None
+    except (KeyError, ValueError) as e:
+        raise UserError(f"FCD file {path}: a <timestep> without a valid time: {e}") from None
+    if times or cols["time"]:
+        yield block(cols, times, done)
+
+
+def _tabular_block(raw: pd.DataFrame, label, first: int) -> Block:
+    missing = [FCD_COLUMNS[k] for k in _REQUIRED if FCD_COLUMNS[k] not in raw.columns]
+    if missing:
+        raise UserError(f"FCD file {label}: no column {missing[0]} (SUMO's tabular FCD "
+                        f"has {', '.join(FCD_COLUMNS[k] for k in _REQUIRED)})")
+    times = np.unique(pd.to_numeric(raw[FCD_COLUMNS["time"]], errors="coerce").dropna())
+    df = pd.DataFrame({k: raw[c] for k, c in FCD_COLUMNS.items() if c in raw.columns})
+    return Block(times.astype(float), _normalise(df, label, first), first)
+
+
+def _first_time(f: Path) -> float:
+    """The first row's time of a Parquet part (its statistics, else its first batch)."""
+    import pyarrow.parquet as pq
+
+    pf = pq.ParquetFile(f)
+    names = pf.schema_arrow.names
+    col = FCD_COLUMNS["time"]
+    if col not in names or pf.metadata.num_rows == 0:
+        return float("inf")
+    rg = pf.metadata.row_group(0).column(names.index(col)).statistics
+    if rg is not None and rg.has_min_max:
+        return float(rg.min)
+    batch = next(pf.iter_batches(batch_size=1, columns=[col]))
+    return float(batch.column(0)[0].as_py())
+
+
+def _parquet_blocks(files: list[Path], label, chunk_rows: int):
+    import pyarrow.parquet as pq
+
+    wanted = set(FCD_COLUMNS.values())
+    if len(files) > 1:  # the parts in time order (names sort part-10 before part-2)
+        try:
+            files = sorted(files, key=lambda f: (_first_time(f), str(f)))
+        except Exception as e:  # pyarrow raises several error types for bad files
+            raise UserError(f"FCD {label}: cannot read Parquet: {e}") from None
+    first, schema = 0, None
+    for f in files:
+        try:
+            pf = pq.ParquetFile(f)
+            names = [c for c in pf.schema_arrow.names if c in wanted]
+            types = {c: pf.schema_arrow.field(c).type for c in names}
+        except Exception as e:
+            raise UserError(f"FCD file {f}: cannot read Parquet: {e}") from None
+        if schema is None:
+            schema = types
+        bad = [c for c in names if c in schema and types[c] != schema[c]
+               and not (pd.api.types.is_numeric_dtype(types[c].to_pandas_dtype())
+                        and pd.api.types.is_numeric_dtype(schema[c].to_pandas_dtype()))]
+        if bad:
+            raise UserError(f"FCD {label}: the parts' columns do not agree: {bad[0]} is "
+                            f"{schema[bad[0]]} in the first part, {types[bad[0]]} in {f}")
+        try:
+            batches = pf.iter_batches(batch_size=chunk_rows, columns=names)
+            for rb in batches:
+                b = _tabular_block(rb.to_pandas(), f, first)
+                first += rb.num_rows
+                yield b
+        except UserError:
+            raise
+        except Exception as e:
+            raise UserError(f"FCD file {f}: cannot read Parquet: {e}") from None
+
+
+def _csv_blocks(path: Path, chunk_rows: int):
+    first = 0
+    text = {FCD_COLUMNS[k]: str for k in ("id", "type", "lane")}
+    try:
+        reader = pd.read_csv(path, sep=None, engine="python", chunksize=chunk_rows, dtype=text)
+        for raw in reader:
+            b = _tabular_block(raw, path, first)
+            first += len(raw)
+            yield b
+    except UserError:
+        raise
+    except Exception as e:
+        raise UserError(f"FCD file {path}: cannot read CSV: {e}") from None
+
+
+def iter_fcd_blocks(path, chunk_rows: int = CHUNK_ROWS):
+    """Blocks of about ``chunk_rows`` rows of an FCD file (XML, ``.xml.gz``, Parquet, CSV)
+    or of partitioned Parquet FCD (a folder or a glob pattern), in time order."""
+    if chunk_rows < 1:
+        raise UserError(f"FCD: chunk_rows must be ≥ 1, got {chunk_rows}")
+    parts = fcd_parts(path)
+    p = Path(path)
+    if not parts and not p.is_file():
+        raise UserError(f"FCD file not found: {p}")
+    name = p.name.lower()
+    if parts or name.endswith(".parquet"):
+        return _parquet_blocks(parts or [p], p, chunk_rows)
+    if name.endswith(".csv") or name.endswith(".csv.gz"):
+        return _csv_blocks(p, chunk_rows)
+    return _xml_blocks(p, chunk_rows)
+
+
+def read_fcd(path, chunk_rows: int = CHUNK_ROWS) -> pd.DataFrame:
+    """FCD rows (time, id, type, speed, lane, pos, [angle, slope, accel]) sorted by time;
+    ``df.attrs["times"]``: every timestep of the file, vehicles or not. UserError names
+    the file and the missing column. ``path``: a file, or partitioned Parquet FCD (a folder
+    or a glob pattern of ``.parquet`` files, read as one, only the FCD columns). Holds the
+    whole file: for long files replay it streamed (:func:`sumo_drvpw.sim.fcd.process_fcd`)."""
+    blocks = list(iter_fcd_blocks(path, chunk_rows))
+    keys = [k for k in FCD_COLUMNS if any(k in b.cols for b in blocks)]
+    df = pd.DataFrame({k: np.concatenate([b.cols[k] if k in b.cols else
+                                          np.full(len(b), np.nan) for b in blocks])
+                       if blocks else np.zeros(0) for k in keys})
+    for k in ("id", "type", "lane"):
+        df[k] = df[k].astype(str) if len(df) else df.get(k, pd.Series(dtype=object))
+    times = np.unique(np.concatenate([b.times for b in blocks])) if blocks else np.zeros(0)
+    df = df.sort_values("time", kind="stable").reset_index(drop=True)
+    df.attrs["times"] = times
+    return df
