@@ -164,3 +164,52 @@ def test_streamed_lag_on_block_folds_equals_in_memory(tmp_path):
     assert mem.report["findings"][0]["term"].startswith("lag +1.5")
     assert st.report["validation"].startswith("5-fold cross-validation over contiguous 60-s blocks")
     _assert_equal(mem, st)
+
+
+def _held_bytes(obj) -> int:
+    """Bytes of the NumPy arrays reachable through dicts, lists and tuples."""
+    if isinstance(obj, np.ndarray):
+        return obj.nbytes
+    if isinstance(obj, dict):
+        return sum(_held_bytes(v) for v in obj.values())
+    if isinstance(obj, (list, tuple)):
+        return sum(_held_bytes(v) for v in obj)
+    return 0
+
+
+def test_lag_search_memory_does_not_grow_with_rows(tmp_path, monkeypatch):
+    # the same trips read 4 times (copies of the files, same trip ids): the lag search keeps
+    # per-trip and per-fold sums only — the same arrays of the same sizes, 4 × the sums —
+    # and nothing per block or per row (issue #14: memory flat in rows)
+    import shutil
+
+    from sumo_drvpw.fit.diagnose import stream_run
+
+    seen = []
+
+    class Spy(stream_run.LagSums):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            seen.append(self)
+
+    monkeypatch.setattr(stream_run, "LagSums", Spy)
+    paths = _logs(tmp_path, [E.PowerLag(1.5)], n_trips=3)
+    copies = []
+    for r in range(3):
+        for p in paths:
+            copies.append(tmp_path / f"copy{r}_{p.name}")
+            shutil.copy(p, copies[-1])
+    eq, opt = load_equation("drvpw_prius3"), DiagnoseOptions(max_findings=1)
+    diagnose_stream(paths, "prius3", eq, opt, rows=2500)
+    diagnose_stream(paths + copies, "prius3", eq, opt, rows=2500)
+    one, four = seen
+
+    def arrays(s):
+        return [s.fzy, s.fyy] + [a for t in sorted(s.trips) for a in s.trips[t][1:]]
+
+    assert list(one.lags) == list(four.lags) and sorted(one.trips) == sorted(four.trips)
+    assert [a.shape for a in arrays(one)] == [a.shape for a in arrays(four)]
+    assert _held_bytes(vars(one)) == _held_bytes(vars(four)) > 0    # every array it holds
+    for a, b in zip(arrays(one), arrays(four)):
+        np.testing.assert_allclose(b, 4 * a, rtol=1e-12, atol=0)
+    assert [four.trips[t][0] for t in sorted(four.trips)] == [4 * one.trips[t][0] for t in sorted(one.trips)]
