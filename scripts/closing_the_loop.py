@@ -27,6 +27,10 @@ once in turn. The i3 is run on a second split fixed by the same rule from anothe
    tracer's log-only findings (``[ambient_c]*…``) are reported, not carried: SUMO cannot
    evaluate a log column.
 
+Before any of this, every log (training and held out) passes the input checks of
+:mod:`sumo_drvpw.fit.input_checks` (inputs only): logger dropouts leave the usable samples;
+declared mass, accelerometer offset and elevation are checked and reported per trip.
+
 The held-out trips then give R² and per-trip traction energy errors (Σ max(P, 0)·Δt,
 predicted/measured − 1) before and after, against VSP LDV 1999 as a reference. The JLU
 car: an equation calibrated on the dynamometer is taken onto the road, and the loop is
@@ -154,7 +158,8 @@ def input_checks(m_train, eq, held) -> dict:
     df = m_train.log.df
     out = {"dropouts_train": getattr(m_train, "dropouts", None), "offsets": {}, "mass": {}}
     acc = float(eq.terms.get("acc", np.nan))
-    if "mass_kg" in df and np.isfinite(acc):
+    # a comparison across trips: with fewer than 3 training trips it only restates the fit
+    if "mass_kg" in df and np.isfinite(acc) and df["trip_id"].nunique() >= 3:
         im = inertial_mass(m_train.power_w, m_train.inputs, m_train.usable, df["trip_id"].to_numpy())
         for t, r in im.items():
             r["vs_declared"] = r["ratio"] / acc - 1.0
@@ -675,6 +680,18 @@ def render(cars, took) -> str:
           "- The temperature effect replicates on both i3 splits but its form does not separate: `cold drag` "
           "(v²·(T_ref − T)) and `c_r(T)` (m·g·v·(T_ref − T)) are nearly collinear on these trips; the cross-"
           "validation picks one and then rejects the other.",
+          "- Input checks (`sumo_drvpw/fit/input_checks.py`) read inputs only, never a held-out target: a "
+          "logger dropout (speed and accelerometer exactly linear in time for ≥ 5 s within the logged digits: a "
+          "held or linearly filled stretch; a real accelerometer never draws a straight line for seconds) is taken "
+          "out of the usable samples of training and held-out logs alike, for every equation, with the 100-m grade "
+          "window around it (the elevation jumps where the log resumes). The power logged across such a stretch "
+          "is filled the same way, so it is not a measurement. The inertial mass of each training trip is a check "
+          "of the declared mass (reported, never substituted); the accelerometer's per-trip offset and the "
+          "elevation's agreement with the accelerometer are reported per trip.",
+          "- Conditions read from the trip notes are reported beside each remaining miss. A wet road raises "
+          "rolling resistance: it would make a rainy trip need more energy than predicted, so a rainy trip "
+          "predicted too high is not explained by rain. The remaining misses are not explained by the inputs "
+          "checked here (declared mass, dropouts, accelerometer offset, net elevation).",
           "- In SUMO the `cold` factor reads the signal `ambient_c`; a run that does not pass the air "
           "temperature evaluates the equation at the reference 20 °C (the factor is 0).", ""]
     return "\n".join(L) + "\n"
