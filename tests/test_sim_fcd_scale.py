@@ -4,6 +4,7 @@ and `--engine dask` (vehicles split into buckets, one task each) equals the loca
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,20 @@ CITY = REPO / "scenarios" / "city.toml"
 PHYS = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01})
 VSP = Equation("vsp", {"acc": 1.1, "grade": 1.0, "m_v1": 0.132, "m_v3": 0.000302})
 KEY = ["vehicle", "equation"]
+BEV = """[equation]
+name = "bev"
+[terms]
+acc = 1.05
+grade = 1.0
+roll = 0.009
+aero_rho = 0.6
+[chain]
+predicts = "battery"
+traction_efficiency = 0.9
+recuperation_efficiency = 0.7
+recuperation_limit_w = 20000.0
+aux_power_w = 500.0
+"""
 
 
 @pytest.fixture(scope="module")
@@ -98,3 +113,74 @@ def test_rows_out_of_time_order_name_the_row():
     b2 = _block([1.0], [(1.0, "b")], first=2)
     with pytest.raises(UserError, match=r"time 1 after 2 at vehicle row 3"):
         list(timesteps([b1, b2], label="x.parquet"))
+
+
+def _leaves(doc, path=()) -> dict:
+    """A JSON document's leaves: path → value."""
+    if isinstance(doc, dict):
+        return {k: v for key, x in doc.items() for k, v in _leaves(x, path + (key,)).items()}
+    if isinstance(doc, list):
+        return {k: v for i, x in enumerate(doc) for k, v in _leaves(x, path + (i,)).items()}
+    return {path: doc}
+
+
+def _numbers_equal(a: pd.DataFrame, b: pd.DataFrame, rtol: float = 1e-9) -> None:
+    assert list(a.columns) == list(b.columns) and len(a) == len(b) > 0
+    num = a.select_dtypes("number").columns
+    pd.testing.assert_frame_equal(a.drop(columns=num), b.drop(columns=num))
+    np.testing.assert_allclose(b[num].to_numpy(float), a[num].to_numpy(float), rtol=rtol,
+                               atol=1e-9)
+
+
+@pytest.mark.sumo
+def test_fcd_on_dask_equals_local(fcd, tmp_path, capsys):
+    """`fcd --engine dask --workers 2 --buckets 3`: three vehicle buckets on a local
+    2-worker cluster book per-vehicle, per-edge and per-class tables and the summary's
+    energies equal to the local engine's (1e-9 relative: only the order of additions
+    differs); with a battery chain (its vehicle, edge and class tables and summary too) and
+    edgeData intervals of 50 s."""
+    pytest.importorskip("distributed")
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.sim.fcd_dask import BUCKET_DIR, bucket_of
+
+    (tmp_path / "bev.toml").write_text(BEV, encoding="utf-8")
+    base = ["fcd", str(fcd / "fcd.xml.gz"), "--scenario", str(CITY), "--end", "200",
+            "--equation", str(tmp_path / "bev.toml"), "--equation", "vsp_ldv1999",
+            "--period", "50", "--no-figures"]
+    assert cli_main(base + ["--out", str(tmp_path / "local")]) == 0
+    assert cli_main(base + ["--engine", "dask", "--workers", "2", "--buckets", "3",
+                            "--out", str(tmp_path / "dask")]) == 0
+    a, b = tmp_path / "local", tmp_path / "dask"
+    va = pd.read_parquet(a / "vehicles.parquet").sort_values(KEY).reset_index(drop=True)
+    vb = pd.read_parquet(b / "vehicles.parquet").sort_values(KEY).reset_index(drop=True)
+    _numbers_equal(va, vb)
+    assert set(bucket_of(va.vehicle.unique(), 3)) == {0, 1, 2}  # every bucket booked some
+    for name in ("edges.parquet", "classes.parquet"):
+        _numbers_equal(pd.read_parquet(a / name), pd.read_parquet(b / name))
+    sa, sb = (json.loads((d / "summary.json").read_text()) for d in (a, b))
+    for k in ("steps", "samples", "vehicles", "classes", "slope_corrected_samples", "end_s"):
+        assert sb[k] == sa[k]
+    for eq, d in sa["equations"].items():
+        for cls, e in d["energy_j"].items():
+            for t, x in e.items():
+                assert sb["equations"][eq]["energy_j"][cls][t] == pytest.approx(x, rel=1e-9)
+    for name in ("chain_vehicles.csv", "chain_edges.csv", "chain_classes.csv"):
+        x, y = pd.read_csv(a / name), pd.read_csv(b / name)
+        key = list(x.columns[:2])
+        _numbers_equal(x.sort_values(key).reset_index(drop=True),
+                       y.sort_values(key).reset_index(drop=True))
+    assert sb["chain"].keys() == sa["chain"].keys() and sa["chain"]
+    la, lb = _leaves(sa["chain"]), _leaves(sb["chain"])
+    assert la.keys() == lb.keys() and len(la) > 4
+    for k, x in la.items():
+        assert lb[k] == (pytest.approx(x, rel=1e-9, abs=1e-9) if isinstance(x, float) else x), k
+    assert sb["source"]["buckets"] == 3 and sb["source"]["rows"] == sa["source"]["rows"]
+    assert not (b / BUCKET_DIR).exists()
+    ea, eb = ((d / "edgedata.xml").read_text() for d in (a, b))
+    assert ea.count("<interval ") == eb.count("<interval ") == 4
+    na, nb = (np.array(re.findall(r'="(-?[0-9.]+(?:e[-+]?[0-9]+)?)"', e), float) for e in (ea, eb))
+    np.testing.assert_allclose(nb, na, rtol=1e-5, atol=2e-6)  # printed to 6 decimals
+    code = cli_main(base + ["--buckets", "2", "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "--buckets goes with --engine dask" in err
+    assert not (tmp_path / "x").exists()

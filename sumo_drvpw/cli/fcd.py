@@ -1,13 +1,17 @@
 """``sumo-drvpw fcd FCD_FILE --net NET [--scenario S.toml] --out DIR``: book a finished SUMO
 run from its FCD output (XML, .xml.gz, Parquet, CSV, or partitioned Parquet: a folder or a
-glob of parts) and write what ``run`` writes. The replay holds the FCD columns in memory
-(the ledger only the vehicles present); it runs on this machine (no ``--engine``)."""
+glob of parts) and write what ``run`` writes. The file is streamed in blocks of rows (memory:
+one block and the vehicles running, whatever the file's length). ``--engine dask`` splits the
+vehicles into buckets (``--buckets``, default one per worker), one task each on a Dask
+cluster (``--scheduler ADDRESS``, else a local cluster of ``--workers N`` processes); the
+results are the local engine's summed."""
 
 from __future__ import annotations
 
 import argparse
 
 from sumo_drvpw.cli import add_force, output_set
+from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -28,6 +32,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--end", type=float, help="stop at this simulation time [s]")
     parser.add_argument("--period", type=float, metavar="S", help="edgeData interval [s]")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
+    add_engine_arguments(parser, ("local", "dask"),
+                         "local: stream the FCD on this machine in bounded memory (default); "
+                         "dask: the vehicles split into buckets, one task each on a Dask cluster "
+                         "(each task streams the whole file; pip install 'sumo-drvpw[dask]'; the "
+                         "workers write into --out: on a cluster of other machines a shared "
+                         "filesystem)")
+    parser.add_argument("--buckets", type=int, metavar="K",
+                        help="--engine dask: vehicle buckets, one task each (default: one per "
+                             "worker)")
     add_force(parser)
 
 
@@ -39,6 +52,11 @@ def main(args: argparse.Namespace) -> int:
         raise UserError("give --net (the network of the FCD) or --scenario")
     if args.scenario is None and not args.equation:
         raise UserError("give --equation NAME (repeatable) or --scenario")
+    check_engine_arguments(args)
+    if args.buckets is not None and args.engine != "dask":
+        raise UserError(f"--buckets goes with --engine dask (got --engine {args.engine})")
+    if args.buckets is not None and args.buckets < 1:
+        raise UserError(f"--buckets must be at least 1, got {args.buckets}")
     overrides = {}
     if args.end is not None:
         overrides["end"] = args.end
@@ -47,9 +65,17 @@ def main(args: argparse.Namespace) -> int:
     if args.no_figures:
         overrides["figures"] = False
     with output_set(args, args.out, [args.fcd, args.net, args.scenario, args.vtypes]) as tmp:
-        res = process_fcd(args.fcd, net=args.net, scenario=args.scenario, out_dir=tmp,
-                          equations=args.equation, vtype_files=args.vtypes,
-                          begin_s=args.begin, **overrides)
+        if args.engine == "dask":
+            from sumo_drvpw.sim.fcd_dask import process_fcd_dask
+
+            res = process_fcd_dask(args.fcd, tmp, net=args.net, scenario=args.scenario,
+                                   equations=args.equation, vtype_files=args.vtypes,
+                                   begin_s=args.begin, buckets=args.buckets,
+                                   scheduler=args.scheduler, workers=args.workers, **overrides)
+        else:
+            res = process_fcd(args.fcd, net=args.net, scenario=args.scenario, out_dir=tmp,
+                              equations=args.equation, vtype_files=args.vtypes,
+                              begin_s=args.begin, **overrides)
     from sumo_drvpw.cli.run import _print_summary
 
     _print_summary(res.summary, args.out)

@@ -36,8 +36,12 @@ _REQUIRED = ("time", "id", "type", "speed", "lane", "pos")
 _OPTIONAL = ("angle", "slope", "accel")
 _XML_ATTRS = {"id": "id", "type": "type", "speed": "speed", "lane": "lane", "pos": "pos",
               "angle": "angle", "slope": "slope", "accel": "acceleration"}
-#: rows per block of the streamed replay (a few tens of MB of columns)
-CHUNK_ROWS = 200_000
+#: rows per block of the streamed replay (about 15 MB of columns; larger blocks read no
+#: faster: the replay's per-timestep work dominates)
+CHUNK_ROWS = 50_000
+#: bytes read at a time from a Parquet column chunk (SUMO writes one row group: without
+#: it the whole compressed column chunks are held while they are decoded)
+PARQUET_BUFFER = 1 << 20
 
 
 @dataclass
@@ -188,7 +192,7 @@ def _parquet_blocks(files: list[Path], label, chunk_rows: int):
     first, schema = 0, None
     for f in files:
         try:
-            pf = pq.ParquetFile(f)
+            pf = pq.ParquetFile(f, buffer_size=PARQUET_BUFFER, pre_buffer=False)
             names = [c for c in pf.schema_arrow.names if c in wanted]
             types = {c: pf.schema_arrow.field(c).type for c in names}
         except Exception as e:

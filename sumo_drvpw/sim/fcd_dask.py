@@ -1,0 +1,180 @@
+"""`fcd` on a Dask cluster (#14): the vehicles split into buckets, one task per bucket.
+
+A vehicle's energies depend on its own rows only, so the work splits by vehicle exactly:
+vehicle ids are hashed (:func:`bucket_of`, the same in every process) into ``buckets``
+buckets; each task streams the whole FCD (:mod:`sumo_drvpw.sim.fcd_read`, bounded memory),
+books only its bucket's vehicles through the same replay and ledger as the local engine
+(every timestep is stepped, so steps, edgeData intervals and end time agree), writes its
+vehicles' rows as Parquet parts into the output folder and returns its ledger's sums. The
+driver adds them up (:func:`merge_ledgers`: edge, interval, class and chain totals summed,
+counters summed) and writes what ``fcd`` writes; ``vehicles.parquet`` joins the tasks'
+parts (rows grouped by bucket). Results equal the local engine's up to the order of
+floating-point additions (tests: 1e-9 relative).
+
+Each task reads the whole file: the cluster's reading work is ``buckets`` × the file, the
+booking work is split. Parts and outputs are written into ``out_dir``: on a cluster of
+other machines it must be on a filesystem the workers share. Not on Dask: a per
+vehicle-step trace (``outputs.trace``). ``vehicles_in_memory_peak`` is the most one task
+held at once.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.fcd_read import CHUNK_ROWS
+
+#: folder of the tasks' parts inside the output folder (removed after writing)
+BUCKET_DIR = ".drvpw-fcd-buckets"
+
+
+def bucket_of(ids, buckets: int) -> np.ndarray:
+    """Bucket number of each vehicle id: pandas' fixed-key hash of the string, modulo
+    ``buckets`` (the same on every machine and in every process)."""
+    h = pd.util.hash_array(np.asarray(ids, dtype=object).astype(str).astype(object))
+    return (h % np.uint64(buckets)).astype(np.int64)
+
+
+def _in_bucket(ids, b: int, buckets: int) -> np.ndarray:
+    return bucket_of(ids, buckets) == b
+
+
+def bucket_task(sc, fcd_file: str, part_dir: str, b: int, buckets: int, begin_s=None,
+                chunk_rows: int = CHUNK_ROWS, flush_vehicles: int | None = None) -> dict:
+    """Book bucket ``b`` of ``buckets`` of an FCD (runs on a worker): every vehicle ends
+    up flushed into Parquet parts under ``part_dir``; returns the ledger (without its
+    spill), the parts and what the summary needs from the replay."""
+    from sumo_drvpw.sim.fcd import replay_fcd
+
+    acc, extra = replay_fcd(sc, fcd_file, part_dir, begin_s=begin_s,
+                            flush_vehicles=flush_vehicles, chunk_rows=chunk_rows,
+                            keep=partial(_in_bucket, b=b, buckets=buckets), publish=False)
+    led = acc.ledger
+    if led.n_veh:  # the vehicles running at the end go out too: the ledger keeps sums only
+        led.retire(np.arange(led.n_veh))
+        acc.stepper.flush()
+    spill = led.spill
+    if spill._finalizer is not None:
+        spill._finalizer.detach()  # the driver joins the parts, then removes them
+    parts = {"parts": [str(p) for p in spill.parts], "chain_parts": [str(p) for p in spill.chain_parts],
+             "chain_columns": spill.chain_columns, "rows": spill.rows}
+    led.spill = None
+    r = acc.resolver
+    return {"ledger": led, "spill": parts, "extra": extra, "begin": acc.begin,
+            "end": acc.stepper.now(), "dt": acc.stepper.dt, "missed_steps": acc.stepper.missed_steps,
+            "interrupted": acc.interrupted, "skipped": r.skipped, "excluded": r.excluded,
+            "assumptions": r.assumptions}
+
+
+def merge_ledgers(ledgers: list):
+    """One ledger holding the sums of several ledgers of the same run that booked disjoint
+    vehicles, all flushed (no vehicle in memory): the first one, added to in place."""
+    out = ledgers[0]
+    for led in ledgers[1:]:
+        if led.steps != out.steps or len(led.snapshots) != len(out.snapshots):
+            raise RuntimeError("fcd buckets stepped different timesteps")
+        for name in ("_edge_closed", "_edge_dist_closed", "_edge_time_closed",
+                     "_edge_dist_eq_closed", "edge_count", "edge_entered", "out_of_range",
+                     "lane_clipped"):
+            setattr(out, name, getattr(out, name) + getattr(led, name))
+        for name in ("samples", "corrected", "clipped", "position_reads", "position_mismatches",
+                     "flushed_vehicles", "flushed_kept"):
+            setattr(out, name, getattr(out, name) + getattr(led, name))
+        out.snapshots = [(s[0],) + tuple(x + y for x, y in zip(s[1:], o[1:]))
+                         for s, o in zip(out.snapshots, led.snapshots)]
+        out.flushed_types |= led.flushed_types
+        out.peak_held = max(out.peak_held, led.peak_held)
+        for c in led.class_seen:
+            out.class_seen.setdefault(c, None)
+        if out.chain is not None:
+            a, b = out.chain, led.chain
+            a._edge = a._edge + b._edge
+            a.edge_dist = a.edge_dist + b.edge_dist
+            a.snapshots = [(s[0], s[1] + o[1]) for s, o in zip(a.snapshots, b.snapshots)]
+            for c, (q, m) in b.flushed_class.items():
+                acc = a.flushed_class.setdefault(c, [np.zeros((a.E, a.Q)), 0.0])
+                acc[0] = acc[0] + q
+                acc[1] += m
+            a.assumed_zero |= b.assumed_zero
+    out._edge_cache = None
+    return out
+
+
+def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
+                     vtype_files=None, begin_s=None, buckets: int | None = None,
+                     scheduler: str | None = None, workers: int | None = None,
+                     chunk_rows: int = CHUNK_ROWS, flush_vehicles: int | None = None,
+                     **overrides):
+    """:func:`sumo_drvpw.sim.fcd.process_fcd` on a Dask cluster: ``buckets`` tasks (default:
+    the cluster's worker count) of one vehicle bucket each; ``scheduler``: the address of an
+    existing cluster, else a local cluster of ``workers`` processes. Writes the outputs into
+    ``out_dir`` (required: the workers write their parts there) and returns the RunResult."""
+    from sumo_drvpw.fit.engine import dask_client
+    from sumo_drvpw.sim.accountant import Accountant
+    from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario
+    from sumo_drvpw.sim.fcd_read import fcd_parts
+    from sumo_drvpw.sim.run import check_vtype_filter
+    from sumo_drvpw.sim.spill import VehicleSpill, write_published
+
+    sc = fcd_scenario(net, scenario, equations, vtype_files, **overrides)
+    if sc.trace:
+        raise UserError("FCD on Dask: no per vehicle-step trace (outputs.trace); replay "
+                        "locally for a trace")
+    if buckets is not None and buckets < 1:
+        raise UserError(f"FCD on Dask: buckets must be ≥ 1, got {buckets}")
+    spec = str(fcd_file)
+    if not fcd_parts(spec) and not Path(spec).is_file():
+        raise UserError(f"FCD file not found: {spec}")
+    spec = os.path.abspath(spec)  # a worker's working folder is not ours
+    out = Path(out_dir).resolve()
+    root = out / BUCKET_DIR
+    root.mkdir(parents=True, exist_ok=True)
+    try:
+        with dask_client(scheduler, workers) as client:
+            k = buckets or max(1, len(client.scheduler_info().get("workers", {})))
+            futs = [client.submit(bucket_task, sc, spec, str(root / f"b{b:04d}"), b, k, begin_s,
+                                  chunk_rows, flush_vehicles, pure=False, key=f"fcd-bucket-{b}-of-{k}")
+                    for b in range(k)]
+            done = []
+            for f in futs:  # in bucket order; a failed task raises its error here
+                done.append(f.result())
+                f.release()
+        # the driver's own accountant (no rows) carries the scenario, network and resolver
+        first = done[0]
+        replay = FcdStream(iter(()), dt=first["dt"], label=spec)
+        acc = Accountant(replay, scenario=sc, keep_vehicles=True)
+        led = merge_ledgers([d["ledger"] for d in done])
+        spill = VehicleSpill(acc.names, [e.predicts for e in acc.equations], None)
+        for d in done:
+            spill.parts += [Path(p) for p in d["spill"]["parts"]]
+            spill.chain_parts += [Path(p) for p in d["spill"]["chain_parts"]]
+            spill.chain_columns = spill.chain_columns or d["spill"]["chain_columns"]
+            spill.rows += d["spill"]["rows"]
+        led.spill = spill
+        acc.ledger = acc.stepper.ledger = led
+        acc.begin, replay.t = first["begin"], first["end"]
+        acc.stepper.missed_steps = first["missed_steps"]
+        acc.interrupted = any(d["interrupted"] for d in done)
+        r = acc.resolver
+        r.excluded = sum(d["excluded"] for d in done)
+        for d in done:
+            r.assumptions.update(d["assumptions"])
+            for key, counts in d["skipped"].items():
+                for name, n in counts.items():
+                    r.skipped[key][name] = r.skipped[key].get(name, 0) + n
+        extra = dict(first["extra"])
+        extra["source"] = dict(extra["source"], rows=sum(d["extra"]["source"]["rows"] for d in done),
+                               engine="dask", buckets=k)
+        result = acc.result(extra)
+        check_vtype_filter(sc, led)
+        write_published(result, out)
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    return result
