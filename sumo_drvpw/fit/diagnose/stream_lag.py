@@ -91,10 +91,13 @@ class LagSums:
             ys = _shifted(view, a, b, self.lags)
             sb = st[b0:b1] - a
             zy, yy = block_lag_sums(x, ys, sb)                     # per block, this chunk only
-            bf = self._ranks(tc[st[b0:b1]]) % self.folds
+            btrip = tc[st[b0:b1]]
+            bf = self._ranks(btrip) % self.folds
             np.add.at(self.fzy, bf, zy)
             np.add.at(self.fyy, bf, yy)
-            tzy, tyy = block_lag_sums(x, ys, tb[lo:hi] - a)
+            # per trip: the sums of its blocks (a block lies within one trip)
+            first = np.flatnonzero(np.r_[True, btrip[1:] != btrip[:-1]])
+            tzy, tyy = np.add.reduceat(zy, first, axis=0), np.add.reduceat(yy, first, axis=0)
             xm = np.column_stack(x)
             for i in range(lo, hi):
                 r0, r1 = int(tb[i]) - a, int(te[i]) - a
