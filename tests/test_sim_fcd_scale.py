@@ -58,13 +58,15 @@ def _tables(res):
 
 
 @pytest.mark.sumo
-@pytest.mark.parametrize("name", ["fcd.xml.gz", "fcd.parquet"])
+@pytest.mark.parametrize("name", ["fcd.xml.gz", "fcd.parquet", "fcd.csv"])
 def test_streamed_fcd_equals_the_whole_file(fcd, tmp_path, name):
     """Blocks of 7 rows (Parquet: block boundaries inside timesteps and inside every
     vehicle's trip) book exactly what the whole file read at once books: per-vehicle,
     per-edge and per-class tables and the summary's energies, bit for bit; with flushes of
     2 finished vehicles, so the arrivals must come at the same steps too."""
     path = fcd / name
+    if name == "fcd.csv":  # SUMO's tabular CSV, from the Parquet output's rows
+        pd.read_parquet(fcd / "fcd.parquet").to_csv(path, sep=";", index=False)
     if name.endswith(".parquet"):  # the test's premise: a timestep is cut by a block boundary
         blocks = list(iter_fcd_blocks(path, 7))
         cut = sum(a.cols["time"][-1] == b.cols["time"][0] for a, b in zip(blocks, blocks[1:]))
@@ -106,6 +108,31 @@ def test_timesteps_are_never_split_and_keep_empty_ones():
     only_a = list(timesteps([b1, b2], keep=lambda ids: ids == "a"))
     assert [list(s.cols["id"]) for s in only_a] == [["a"], ["a"], [], ["a"]]
     assert [s.t for s in timesteps([b1, b2], begin_s=1.0)] == [1.0, 2.0, 3.0]
+
+
+def test_the_stream_reads_no_further_ahead_than_two_timesteps():
+    """Memory does not grow with the file: with one block per timestep, when the replay
+    has booked timestep k it has pulled at most the blocks up to k + 2 (the next timestep,
+    and the block that shows it complete)."""
+    from sumo_drvpw.sim.fcd import FcdStream
+
+    pulled = []
+
+    def blocks():
+        for k in range(50):
+            pulled.append(k)
+            yield _block([float(k)], [(float(k), f"v{k // 10}"), (float(k), "w")], first=2 * k)
+
+    replay = FcdStream(timesteps(blocks()), dt=1.0)
+    for k in range(50):
+        replay.simulationStep()
+        assert len(pulled) <= k + 3
+        assert replay.ids == (f"v{k // 10}", "w") and replay.t == k + 1.0
+        if k and k % 10 == 0:  # v(k/10 − 1) left: arrived the step after its last row
+            assert replay.arrived == (f"v{k // 10 - 1}",) and replay.departed == (f"v{k // 10}",)
+        elif k:
+            assert replay.arrived == () == replay.departed
+    assert replay.remaining() == 0 and replay.rows == 100
 
 
 def test_rows_out_of_time_order_name_the_row():

@@ -259,9 +259,10 @@ class FcdStream(FcdReplay):
 
     def simulationStep(self, time=0.0):  # noqa: N802
         st = self._ahead.pop(0)
-        nxt = next(self._steps, None)
-        if nxt is not None:
-            self._ahead.append(nxt)
+        if not self._ahead:  # one timestep ahead (two at the start, for the step length)
+            nxt = next(self._steps, None)
+            if nxt is not None:
+                self._ahead.append(nxt)
         if self._dt_checked and self._ahead:
             d = self._ahead[0].t - st.t
             if 1e-9 < d < self.dt - 1e-6:
