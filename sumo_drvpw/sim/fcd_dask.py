@@ -142,15 +142,17 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
             futs = [client.submit(bucket_task, sc, spec, str(root / f"b{b:04d}"), b, k, begin_s,
                                   chunk_rows, flush_vehicles, pure=False, key=f"fcd-bucket-{b}-of-{k}")
                     for b in range(k)]
-            done = []
+            done, led = [], None
             for f in futs:  # in bucket order; a failed task raises its error here
-                done.append(f.result())
+                d = f.result()
                 f.release()
+                one = d.pop("ledger")  # added up at once: one ledger's sums held, not K
+                led = one if led is None else merge_ledgers([led, one])
+                done.append(d)
         # the driver's own accountant (no rows) carries the scenario, network and resolver
         first = done[0]
         replay = FcdStream(iter(()), dt=first["dt"], label=spec)
         acc = Accountant(replay, scenario=sc, keep_vehicles=True)
-        led = merge_ledgers([d["ledger"] for d in done])
         spill = VehicleSpill(acc.names, [e.predicts for e in acc.equations], None)
         for d in done:
             spill.parts += [Path(p) for p in d["spill"]["parts"]]
