@@ -211,3 +211,23 @@ def test_fcd_on_dask_equals_local(fcd, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and "--buckets goes with --engine dask" in err
     assert not (tmp_path / "x").exists()
+
+
+def test_vehicle_buckets_are_the_same_in_every_process():
+    """Dask tasks on other processes must agree on each vehicle's bucket: the hash is not
+    Python's per-process salted hash(); ids repeated over rows get their id's bucket."""
+    import os
+    import subprocess
+    import sys
+
+    from sumo_drvpw.sim.fcd_dask import bucket_of
+
+    ids = [f"flow{k}.{j}" for k in range(20) for j in range(10)]
+    here = bucket_of(ids, 7).tolist()
+    code = ("import sys, json; from sumo_drvpw.sim.fcd_dask import bucket_of; "
+            "print(json.dumps(bucket_of(json.loads(sys.argv[1]), 7).tolist()))")
+    out = subprocess.run([sys.executable, "-c", code, json.dumps(ids)], capture_output=True,
+                         text=True, check=True, env=dict(os.environ, PYTHONHASHSEED="123"))
+    assert json.loads(out.stdout) == here and set(here) == set(range(7))
+    rows = np.array(ids * 3, object)
+    assert bucket_of(rows, 7).tolist() == here * 3

@@ -38,8 +38,10 @@ BUCKET_DIR = ".drvpw-fcd-buckets"
 def bucket_of(ids, buckets: int) -> np.ndarray:
     """Bucket number of each vehicle id: pandas' fixed-key hash of the string, modulo
     ``buckets`` (the same on every machine and in every process)."""
-    h = pd.util.hash_array(np.asarray(ids, dtype=object).astype(str).astype(object))
-    return (h % np.uint64(buckets)).astype(np.int64)
+    ids = np.asarray(ids, dtype=object)  # the readers' ids are str already
+    codes, uniq = pd.factorize(ids)  # a vehicle has many rows: hash each id once
+    h = pd.util.hash_array(np.asarray([str(u) for u in uniq], dtype=object), categorize=False)
+    return (h % np.uint64(buckets)).astype(np.int64)[codes]
 
 
 def _in_bucket(ids, b: int, buckets: int) -> np.ndarray:
