@@ -256,12 +256,12 @@ def read_fcd(path, chunk_rows: int = CHUNK_ROWS) -> pd.DataFrame:
     or a glob pattern of ``.parquet`` files, read as one, only the FCD columns). Holds the
     whole file: for long files replay it streamed (:func:`sumo_drvpw.sim.fcd.process_fcd`)."""
     blocks = list(iter_fcd_blocks(path, chunk_rows))
-    keys = [k for k in FCD_COLUMNS if any(k in b.cols for b in blocks)]
+    keys = [k for k in FCD_COLUMNS if k in _REQUIRED or any(k in b.cols for b in blocks)]
     df = pd.DataFrame({k: np.concatenate([b.cols[k] if k in b.cols else
                                           np.full(len(b), np.nan) for b in blocks])
                        if blocks else np.zeros(0) for k in keys})
     for k in ("id", "type", "lane"):
-        df[k] = df[k].astype(str) if len(df) else df.get(k, pd.Series(dtype=object))
+        df[k] = df[k].astype(str).astype(object)
     times = np.unique(np.concatenate([b.times for b in blocks])) if blocks else np.zeros(0)
     df = df.sort_values("time", kind="stable").reset_index(drop=True)
     df.attrs["times"] = times
