@@ -116,7 +116,7 @@ def _timed_once(argv):
         tail = err.read()
     if proc.returncode != 0:
         raise SystemExit(f"sumo-drvpw {' '.join(argv)} failed ({proc.returncode}):\n{tail[-2000:]}")
-    lines = [ln for ln in tail.splitlines() if "engine:" in ln]
+    lines = [ln for ln in tail.splitlines() if "engine:" in ln or ln.startswith("diagnose:")]
     return wall, ru.ru_maxrss / 1024.0, (lines[-1] if lines else ""), ru.ru_utime + ru.ru_stime, load
 
 
@@ -180,6 +180,8 @@ def main() -> int:
                 print(f"  {cmd:<18} {wall:8.1f} s  {rows / wall / 1e6:6.2f} M rows/s  peak RSS {peak:7.0f} MB"
                       f"  CPU {cpu:6.1f} s ({rows / cpu / 1e6:5.2f} M rows per CPU-s)  load {load:.1f}",
                       flush=True)
+                if cmd == "diagnose" and line:       # the tracer's own line: streamed, passes, on disk
+                    print(f"    {line}", flush=True)
             results[rows] = r
         finally:
             shutil.rmtree(top, ignore_errors=True)
