@@ -40,6 +40,9 @@ def configure(p):
     g.add_argument("--hvac", metavar="COLUMN[:SETPOINT_C]",
                    help="fit heating and cooling power per K of COLUMN (ambient °C) from the set-point "
                         "(default 20)")
+    g.add_argument("--efficiency", choices=("constant", "power", "speed-power"), default="constant",
+                   help="battery chain: traction and recuperation efficiency as constants (default) "
+                        "or tables over |power| (and speed), fitted on a piecewise-linear basis")
 
 
 def main(args) -> int:
@@ -47,6 +50,8 @@ def main(args) -> int:
         return main_chain(args)
     if getattr(args, "equation", None) or getattr(args, "load", None) or getattr(args, "hvac", None):
         raise UserError("--equation, --load and --hvac go with --target battery or fuel")
+    if getattr(args, "efficiency", "constant") != "constant":
+        raise UserError(f"--efficiency {args.efficiency} goes with --target battery")
     from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
     from sumo_drvpw.model.equations import save_equation
     from sumo_drvpw.data.measured import load_measured
@@ -62,6 +67,10 @@ def main(args) -> int:
     out = Path(args.out)
     if out.suffix != ".toml":
         raise UserError(f"--out {out}: an equation file ends in .toml")
+    efficiency = getattr(args, "efficiency", "constant")
+    if efficiency != "constant" and args.target != "battery":
+        raise UserError(f"--efficiency {efficiency} goes with --target battery (a fuel chain's "
+                        "efficiency is its Willans line)")
     inputs = existing_paths(args.logs, args.vehicle, args.candidates, args.compare_with)
     check_output_path(out, inputs, "file")
     if args.report:
@@ -168,6 +177,10 @@ def main_chain(args) -> int:
     out = Path(args.out)
     if out.suffix != ".toml":
         raise UserError(f"--out {out}: an equation file ends in .toml")
+    efficiency = getattr(args, "efficiency", "constant")
+    if efficiency != "constant" and args.target != "battery":
+        raise UserError(f"--efficiency {efficiency} goes with --target battery (a fuel chain's "
+                        "efficiency is its Willans line)")
     inputs = existing_paths(args.logs, args.vehicle, args.equation)
     check_output_path(out, inputs, "file")
     hvac = None
@@ -203,10 +216,10 @@ def main_chain(args) -> int:
             p_in, chain_input = mw.power_w, f"measured driving power ({mw.source})"
     except UserError:
         pass
-    fit = calibrate_on(m, eq, loads=args.load, hvac=hvac, p_drive_w=p_in)
+    fit = calibrate_on(m, eq, loads=args.load, hvac=hvac, p_drive_w=p_in, efficiency=efficiency)
     eq.name = args.name or out.stem
     eq.chain = fit.chain
-    eq.chain.provenance = {"logs": m.log.files, "target": m.source, "road_load": road,
+    eq.chain.provenance = {**fit.chain.provenance, "logs": m.log.files, "target": m.source, "road_load": road,
                            "chain_input": chain_input,
                            "vehicle": m.vehicle.path if m.vehicle else None}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}

@@ -153,7 +153,8 @@ def _reading(name: str, val: float) -> str:
 
 def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = None, *,
                       loads=(), hvac: dict | None = None, mask=None, limit="profile",
-                      predicts: str = "battery", fixed: dict | None = None) -> ChainFit:
+                      predicts: str = "battery", fixed: dict | None = None,
+                      efficiency: str = "constant") -> ChainFit:
     """Calibrate a battery (or powertrain-output) chain on measured power.
 
     Parameters
@@ -171,6 +172,8 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     predicts : "battery" or "powertrain_output" (no auxiliary power)
     fixed : parameters held at given values (e.g. the dynamometer's efficiencies when a road
         calibration should find only what the road adds), name → value; reported as fixed
+    efficiency : "constant", or "power" / "speed-power": η_t and η_r as tables over |P|
+        (and speed), fitted on a hat-function basis (fit/chain_map.py)
     """
     p = np.asarray(p_drive_w, float)
     n = p.size
@@ -204,6 +207,18 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
             ok &= np.isfinite(c)
     if mask is not None:
         ok &= np.asarray(mask, bool)
+    emap = None
+    if efficiency != "constant":
+        from sumo_drvpw.fit import chain_map
+
+        bt, br = chain_map.fit_columns(efficiency, p, v, ok)
+        emap = (bt, br)
+        cols[0] = np.maximum(p, 0.0)[:, None] * bt.matrix(p, v)
+        names = ([f"traction_efficiency#{j}" for j in range(bt.size)]
+                 + [f"recuperation_efficiency#{j}" for j in range(br.size)] + names[2:])
+        lb = [1.0] * bt.size + [ETA_MIN] * br.size + lb[2:]
+        ub = [1.0 / ETA_MIN] * bt.size + [1.0] * br.size + ub[2:]
+        hr = br.matrix(p, v)
     if ok.sum() < len(names) + 2:
         raise UserError(f"energy chain: only {int(ok.sum())} usable samples for {len(names)} parameters")
     neg = np.minimum(p, 0.0)
@@ -219,6 +234,8 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     def design(lim):
         c = list(cols)
         c[1] = neg if lim is None else np.maximum(neg, -lim)
+        if emap is not None:
+            c[1] = c[1][:, None] * hr
         return np.column_stack(c)[ok]
 
     fixed = dict(fixed or {})
@@ -250,7 +267,15 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
         beta[j] = val
     params = {}
     kw = {"predicts": predicts, "loads": {}, "hvac": None}
+    if emap is not None:
+        nt, nr = emap[0].size, emap[1].size
+        params.update(chain_map.knot_parameters("traction_efficiency", emap[0], beta[:nt], se[:nt],
+                                                active[:nt], True))
+        params.update(chain_map.knot_parameters("recuperation_efficiency", emap[1], beta[nt:nt + nr],
+                                                se[nt:nt + nr], active[nt:nt + nr], False))
     for j, name in enumerate(names):
+        if "#" in name:
+            continue
         val, s = float(beta[j]), float(se[j])
         if name in fixed:
             val = float(fixed[name])
@@ -273,8 +298,15 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
         params["recuperation_limit_w"] = {"value": lim, "std_err": None, "at_bound": False,
                                           "how": "profiled (BIC) over quantiles of the braking power"}
     for name, p_ in params.items():
-        p_["reading"] = _reading(name, p_["value"])
-    chain = EnergyChain(**kw)
+        if "reading" not in p_:
+            p_["reading"] = _reading(name, p_["value"])
+    if emap is not None:
+        chain = chain_map.map_chain(kw, emap[0], emap[1], beta[:nt], beta[nt:nt + nr])
+        chain.provenance = {"efficiency_map": efficiency,
+                            "fitted_knots_power_w": {"traction": emap[0].power.tolist(),
+                                                     "recuperation": emap[1].power.tolist()}}
+    else:
+        chain = EnergyChain(**kw)
     pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
     r2, rmse, ratio = _stats(pred, y[ok], w[ok])
     chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
@@ -373,7 +405,8 @@ def chain_target(m, chain: EnergyChain) -> np.ndarray:
 
 
 def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engine_off="profile",
-                 mask=None, p_drive_w=None, fixed: dict | None = None) -> ChainFit:
+                 mask=None, p_drive_w=None, fixed: dict | None = None,
+                 efficiency: str = "constant") -> ChainFit:
     """Calibrate the chain of ``m.target`` on a :class:`~sumo_drvpw.data.measured.Measured`;
     fit on ``m.usable`` (and ``mask``).
 
@@ -395,7 +428,7 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     if m.target != "battery":
         raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
     return calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
-                             mask=use, limit=limit, fixed=fixed)
+                             mask=use, limit=limit, fixed=fixed, efficiency=efficiency)
 
 
 def profile_recuperation_limit(p_wheel_w, p_recuperated_w, dt_s, mask=None,
