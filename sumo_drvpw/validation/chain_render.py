@@ -121,7 +121,10 @@ def _i3(i3: dict) -> list[str]:
          "power, heater V·I and A/C power as battery-side loads with gain 1) on the measured motor "
          "power of the trips whose heater load is logged; the recuperation limit (friction-brake "
          "blending) from the equation's braking power against the motor's.", "",
-         f"Mean |error| over {len(rows)} trips: **{_pct(i3['mean_abs_error'])[1:]}** (mean signed "
+         *_i3_kfold_head(i3),
+         ("2-fold (odd/even trips; each fold's trips predicted by the other fold's calibration), "
+          "mean |error|" if i3.get("kfold") else "Mean |error|")
+         + f" over {len(rows)} trips: **{_pct(i3['mean_abs_error'])[1:]}** (mean signed "
          f"{_pct(i3['mean_error'])}); summer {_pct(i3['mean_abs_error_summer'])[1:]} (signed "
          f"{_pct(i3['mean_error_summer'])}), winter {_pct(i3['mean_abs_error_winter'])[1:]} (signed "
          f"{_pct(i3['mean_error_winter'])}); the {len(rows) - i3['n_flagged']} trips with the heater's "
@@ -140,7 +143,11 @@ def _i3(i3: dict) -> list[str]:
          f"{_pct(i3['mean_abs_error_as_logged'])[1:]} |",
          f"| load gains fitted freely instead of 1 | {_pct(i3['mean_abs_error_loads_free'])[1:]} |",
          f"| η_r held equal to η_t (a symmetric machine) | {_pct(i3['mean_abs_error_symmetric_efficiency'])[1:]} |",
+         *([f"| η_t, η_r as tables over the motor power (fit/chain_map.py) | {_pct(i3['mean_abs_error_efficiency_map'])[1:]} |",
+            f"| the chain alone with the tables, fed the measured motor power | {_pct(i3['mean_abs_error_chain_only_map'])[1:]} |"]
+           if "mean_abs_error_efficiency_map" in i3 else []),
          "",
+         *_i3_kfold_table(i3),
          "Reading: the logged loads are measured at the battery, so they enter with gain 1; fitted "
          "freely on the trips whose heater V·I is logged the gains come out "
          + "; ".join(f"fold {n}: " + ", ".join(f"{k[6:]} {v:.3f}" for k, v in f["chain_loads_free"].items()
@@ -202,6 +209,9 @@ def _i3(i3: dict) -> list[str]:
               + (f" ({f['road_load_constrained']})" if f.get("road_load_constrained") else
                  " (free least squares, physically plausible)") + ":", ""]
         L += _param_table(f["chain"]) + [""]
+        if f.get("chain_map"):
+            L += [f"Fold {name}, the chain with η_t, η_r as tables over the motor power (per knot: "
+                  "η, its standard error, the loss at the knot):", ""] + _param_table(f["chain_map"]) + [""]
     L += ["| trip | season | measured kWh | predicted kWh | error | chain alone | no limit | no ambient term | as logged | heater V·I kWh | heater CAN kWh | E_bat − E_motor kWh | flagged |",
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -215,6 +225,52 @@ def _i3(i3: dict) -> list[str]:
               "|---|" + "---|" * len(i3["sumo_models"])]
         for r in rows:
             L.append(f"| {r['trip']} | " + " | ".join(_pct(r[f"{k}_error"]) for k in i3["sumo_models"]) + " |")
+    return L + [""]
+
+
+def _selection(sel: dict) -> str:
+    return (f"{sel['choice']} (the map lower on {sel['map_better_on']} of {sel['k']} inner folds: "
+            + ", ".join(f"{_pct(e['constant'])[1:]} → {_pct(e['power'])[1:]}" for e in sel["inner_folds"]) + ")")
+
+
+def _i3_kfold_head(i3: dict) -> list[str]:
+    """The headline: trip-grouped k-fold (the protocol of docs/closing-the-loop.md's 40/10
+    splits), the efficiency chosen per fold by training-side CV. Absent in older summaries."""
+    k = i3.get("kfold")
+    if not k:
+        return []
+    return [f"Headline — {k['k']}-fold cross-validation grouped by trip (each trip predicted by a "
+            f"calibration on the other {round(len(k['rows']) * (k['k'] - 1) / k['k'])} trips; the "
+            "standard held-out protocol of the project, docs/closing-the-loop.md's 40/10 splits, chosen "
+            "as the headline before the run), with the efficiency (constant or tables over |P|) chosen "
+            "per fold by an inner trip-grouped 5-fold CV on that fold's training trips only (tables "
+            "only when they lower the inner error on every inner fold): mean |error| over "
+            f"{len(k['rows'])} trips **{_pct(k['mean_abs_error_selected'])[1:]}**; on the trips with "
+            f"the heater's V·I logged {_pct(k['mean_abs_error_selected_unflagged'])[1:]}. Target "
+            "(issue #12): 5 %.", ""]
+
+
+def _i3_kfold_table(i3: dict) -> list[str]:
+    k = i3.get("kfold")
+    if not k:
+        return []
+    L = [f"Both protocols side by side (mean |error| per held-out trip; the 2-fold trains on 25 "
+         f"trips, the {k['k']}-fold on {round(len(k['rows']) * (k['k'] - 1) / k['k'])}):", "",
+         f"| variant | 2-fold | {k['k']}-fold | {k['k']}-fold, heater V·I logged |", "|---|---|---|---|",
+         f"| pipeline, constant η | {_pct(i3['mean_abs_error'])[1:]} | {_pct(k['mean_abs_error'])[1:]} | "
+         f"{_pct(k['mean_abs_error_unflagged'])[1:]} |",
+         f"| pipeline, η tables over |P| | {_pct(i3.get('mean_abs_error_efficiency_map'))[1:]} | "
+         f"{_pct(k['mean_abs_error_efficiency_map'])[1:]} | {_pct(k['mean_abs_error_efficiency_map_unflagged'])[1:]} |",
+         f"| pipeline, η chosen by training-side CV | – | {_pct(k['mean_abs_error_selected'])[1:]} | "
+         f"{_pct(k['mean_abs_error_selected_unflagged'])[1:]} |",
+         f"| chain alone (measured motor power), constant η | {_pct(i3['mean_abs_error_chain_only'])[1:]} | "
+         f"{_pct(k['mean_abs_error_chain_only'])[1:]} | {_pct(k['mean_abs_error_chain_only_unflagged'])[1:]} |",
+         f"| chain alone, η tables | {_pct(i3.get('mean_abs_error_chain_only_map'))[1:]} | "
+         f"{_pct(k['mean_abs_error_chain_only_map'])[1:]} | {_pct(k['mean_abs_error_chain_only_map_unflagged'])[1:]} |",
+         "", "Training-side choice of the efficiency (inner mean |error| constant → tables per inner fold):", ""]
+    L += [f"- 2-fold, fold {n}: " + _selection(f["map_selection"]) for n, f in i3["fits"].items()
+          if f.get("map_selection")]
+    L += [f"- {k['k']}-fold, fold {j + 1}: " + _selection(sel) for j, sel in enumerate(k["selection"])]
     return L + [""]
 
 
