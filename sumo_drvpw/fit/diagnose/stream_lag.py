@@ -2,8 +2,9 @@
 
 The in-memory lag step (``search._timing_step``, :func:`structural.timing`) works on
 per-block sums Z_bᵀy_ℓ and y_ℓᵀy_ℓ for every shift ℓ. Kept for all blocks and shifts
-they grow with the rows (at 8 Hz, 60-s blocks and 27 shifts ≈ 2 KB per block, 0.4 GB
-at 100 M rows). What the step reads of them is less:
+they grow with the rows (8 Hz, 60-s blocks, 4 declared terms, 27 shifts: 135 numbers,
+≈ 1.1 KB per block, ≈ 180 MB at 100 M rows and as much again while a selection of them
+is scaled). What the step reads of them is less:
 
 * the lag chosen per fold (and on all data) compares *training* SSEs, i.e. sums over the
   blocks of a fold: per fold Σ Z_bᵀy_ℓ and Σ y_ℓᵀy_ℓ (K × q × L). They are gathered per
