@@ -34,6 +34,19 @@ def _rs(m, starts):
     return np.add.reduceat(m, starts, axis=0)
 
 
+def _concat_parts(sums: list) -> list:
+    """The per-view tuples of block sums joined component by component; each view's part
+    is let go once joined (``sums`` is emptied: not a second copy of all blocks at once)."""
+    parts = [list(p) for p in sums]
+    sums.clear()
+    out = []
+    for k in range(len(parts[0]) if parts else 0):
+        out.append(np.concatenate([p[k] for p in parts]))
+        for p in parts:
+            p[k] = None
+    return out
+
+
 class _Moments:
     """Count, mean and centred sum of squares, merged batch by batch (Chan et al. 1979)."""
 
@@ -175,7 +188,7 @@ class StreamModel(BlockModel):
         self.y_scale = float(np.sqrt(raw_yy.sum() / n)) or 1.0
         self.block_yy = raw_yy / (self.y_scale * self.y_scale)
         if columns:
-            self._add_from_sums(columns, *(np.concatenate([s[k] for s in sums]) for k in range(4)))
+            self._add_from_sums(columns, *_concat_parts(sums))
 
     # ---- passes
     def _views(self, blocks: bool = True):
@@ -267,7 +280,7 @@ class StreamModel(BlockModel):
         if not cands:
             return
         sums = [self._column_sums(view, view.extra["starts"], cands) for view in self._views()]
-        self._add_from_sums(cands, *(np.concatenate([s[k] for s in sums]) for k in range(4)))
+        self._add_from_sums(cands, *_concat_parts(sums))
 
     def _add_from_sums(self, cands, vv, vy, old, new) -> None:
         for i, cand in enumerate(cands):
