@@ -96,18 +96,13 @@ def load_checked(path, vehicle):
     grade-smoothing distance around it) taken out of the usable samples. Returns the
     Measured; ``m.dropouts`` = trip → seconds taken out."""
     from sumo_drvpw.data.measured import load_measured
-    from sumo_drvpw.fit.diagnose.structural import ACCELEROMETER_COLUMNS
-    from sumo_drvpw.fit.input_checks import dropout_mask, dropout_report
+    from sumo_drvpw.fit.input_checks import dropout_report, log_dropouts
 
     m = load_measured([path], vehicle)
     df = m.log.df
-    acc = [c for c in ACCELEROMETER_COLUMNS if c in df]
+    drop = log_dropouts(m.log)
     m.dropouts = None
-    if acc:
-        codes = np.unique(df["trip_id"].to_numpy(), return_inverse=True)[1]
-        drop = dropout_mask(df["time_s"].to_numpy(float), [df["speed_mps"].to_numpy(float),
-                                                           df[acc[0]].to_numpy(float)],
-                            codes, df["speed_mps"].to_numpy(float), margin_m=m.log.options.grade_window_m)
+    if drop is not None:
         m.dropouts = dropout_report(drop & m.usable, df["trip_id"].to_numpy(), df["dt_s"].to_numpy(float))
         m.usable = m.usable & ~drop
     return m

@@ -656,3 +656,16 @@ def test_corrected_inputs_fuse_the_accelerometer_grade_and_take_rho_at_altitude(
     assert np.corrcoef(s, sin_true[600:-600])[0, 1] > 0.95
     assert abs(np.mean(s)) < 0.002                     # the pitch bias stays out
     assert np.all(x.theta == 0.0) and np.all(x.rho == 1.2)   # the input is not modified
+
+
+def test_sumo_cycle_steps_of_a_dropout_are_not_booked():
+    """validation.chain_sumo._kept_steps: the 1-s steps of emissionsDrivingCycle's output whose
+    second holds a sample left out of the measured energy (a logger dropout) are not booked;
+    nothing is dropped without a mask."""
+    from sumo_drvpw.validation.chain_sumo import _kept_steps
+
+    t = 100.0 + np.arange(0, 10, 0.25)                 # 10 s at 4 Hz, starting at t = 100 s
+    drop = (t >= 103.0) & (t < 105.5)                  # seconds 3, 4 and 5 touched
+    keep = _kept_steps(t, 10, drop)
+    assert list(np.flatnonzero(~keep)) == [3, 4, 5]
+    assert _kept_steps(t, 10, None).all() and _kept_steps(t, 10, np.zeros(t.size, bool)).all()

@@ -315,3 +315,22 @@ def test_accelerometer_grade_offset_fixed_by_elevation(offset):
     for k in (0, 1):
         i = codes == k
         assert np.sum(got[i] * v[i] * 0.1) == pytest.approx(h[i][-1] - h[i][0], abs=1e-9)
+
+
+def test_log_dropouts_reads_a_drive_log_and_needs_an_accelerometer():
+    """fit.input_checks.log_dropouts (used by the closing loop and the i3 chain validation):
+    the planted hold of a read log is marked, widened by the log's grade-smoothing distance;
+    without an accelerometer column nothing is marked (a steady cruise is no dropout)."""
+    from sumo_drvpw.data.log import from_frame
+    from sumo_drvpw.fit.input_checks import log_dropouts
+    from sumo_drvpw.model.vehicles import load_vehicle
+    from sumo_drvpw.synth.effects import plant_dropout
+
+    df = _dropout_log()
+    planted = plant_dropout(df, "synth-2", 70.0, 30.0, "hold")
+    log = from_frame(df, load_vehicle("prius3"), name="planted")
+    drop = log_dropouts(log)
+    expect = _mask(df.reset_index(drop=True), margin_m=log.options.grade_window_m)
+    assert np.array_equal(drop, expect) and np.all(drop[planted]) and drop.sum() > planted.sum()
+    assert log_dropouts(from_frame(df.drop(columns=["imu_accel_mps2"]), load_vehicle("prius3"),
+                                   name="no-imu")) is None

@@ -95,6 +95,24 @@ def dropout_mask(time_s, signals, trip_codes, speed_mps=None, min_run_s: float =
     return out
 
 
+def log_dropouts(log) -> np.ndarray | None:
+    """:func:`dropout_mask` of a read drive log (``data.log.DriveLog``): speed and its
+    longitudinal accelerometer exactly linear in time for ≥ ``DROPOUT_MIN_S``, widened by the
+    log's grade-smoothing distance (the elevation jump at a gap's end becomes a steep grade
+    there). ``None`` when the log has no accelerometer column: with speed alone a steady
+    cruise could not be told from a held value, so nothing is marked."""
+    from sumo_drvpw.fit.diagnose.structural import ACCELEROMETER_COLUMNS
+
+    df = log.df
+    acc = [c for c in ACCELEROMETER_COLUMNS if c in df]
+    if not acc:
+        return None
+    codes = np.unique(np.asarray(df["trip_id"]).astype(str), return_inverse=True)[1]
+    v = df["speed_mps"].to_numpy(float)
+    return dropout_mask(df["time_s"].to_numpy(float), [v, df[acc[0]].to_numpy(float)], codes, v,
+                        margin_m=log.options.grade_window_m)
+
+
 def dropout_report(mask, trip, dt_s) -> dict:
     """trip → seconds marked by :func:`dropout_mask` (trips with none left out)."""
     mask = np.asarray(mask, bool)

@@ -13,6 +13,9 @@ Studies (each trip's prediction comes from a chain calibrated without that trip)
   2-fold: trips alternately in fold A/B, calibrate on one fold, predict the other. The
   chain is fitted on the measured motor power (so it describes the powertrain, not the
   road-load equation's errors) and predicts from the road-load equation's power.
+  Logger dropouts (speed and accelerometer held or linearly filled for ≥ 5 s:
+  :func:`sumo_drvpw.fit.input_checks.log_dropouts`, inputs only) are left out of every fit
+  and of every per-trip energy, measured, predicted and SUMO's alike.
   The heater load is the heater's own electrical power V·I. Trips A03–A21 lack heater V
   and I: their heater load is unknown (0 in the fit) and they are *flagged*; their "Heating
   Power CAN" is no substitute — in summer trips it reads up to 5 kW on average, more than
@@ -143,6 +146,7 @@ def i3_study(data: Path) -> dict:
 
     from sumo_drvpw.data.measured import measure
     from sumo_drvpw.fit.chain import calibrate_on, profile_recuperation_limit
+    from sumo_drvpw.fit.input_checks import dropout_report, log_dropouts
 
     def add(df):
         df = df.copy()
@@ -153,6 +157,13 @@ def i3_study(data: Path) -> dict:
 
     log, veh = _measured(data, "bmw_i3_tum", "bmw-i3-tum", "bmw_i3", add)
     mw, mb = measure(log, veh), measure(log, veh, "battery")
+    # logger dropouts (held or linearly filled speed and accelerometer, inputs only; the rule
+    # of docs/closing-the-loop.md, fit.input_checks) are no measurement: out of every fit and
+    # of the per-trip energies, measured and predicted alike, on every trip
+    drop = log_dropouts(log)
+    drop = np.zeros(len(log.df), bool) if drop is None else drop
+    mw.usable, mb.usable = mw.usable & ~drop, mb.usable & ~drop
+    mb.power_w = np.where(drop, np.nan, mb.power_w)
     x, grade_ok = corrected_inputs(log, mw.inputs)
     trips = np.asarray(log.df["trip_id"]).astype(str)
     dt = log.df["dt_s"].to_numpy(float)
@@ -264,7 +275,7 @@ def i3_study(data: Path) -> dict:
              "motor_w": float(np.mean(mw.power_w[s][k == i])),
              "battery_minus_loads_minus_motor_w": float(np.mean(gap_w[s][k == i]))}
             for i in range(1, edges.size) if (k == i).sum() > 100]
-    sumo = _i3_sumo(log, x, trips, rows, folds, sumo_params, veh)
+    sumo = _i3_sumo(log, x, trips, rows, folds, sumo_params, veh, drop)
     out = {"rows": rows, "fits": fits, **sumo,
            "mean_error": float(np.nanmean([r["error"] for r in rows])),
            "mean_abs_error": _mean_abs(rows),
@@ -274,7 +285,8 @@ def i3_study(data: Path) -> dict:
            "mean_error_summer": float(np.mean([r["error"] for r in rows if r["season"] == "summer"])),
            "mean_error_winter": float(np.mean([r["error"] for r in rows if r["season"] == "winter"])),
            "n_flagged": sum(r["flagged"] for r in rows), "road_terms": list(I3_ROAD_TERMS),
-           "gap_by_motor_power": bins}
+           "gap_by_motor_power": bins,
+           "dropouts_s": dropout_report(drop, trips, dt)}
     for k in variants[1:]:
         out[f"mean_abs_error_{k}"] = _mean_abs(rows, f"error_{k}")
     out["kfold"] = _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, I3_KFOLD)
@@ -356,10 +368,11 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k) -> d
     return out
 
 
-def _i3_sumo(log, x, trips, rows, folds, sumo_params, veh) -> dict:
+def _i3_sumo(log, x, trips, rows, folds, sumo_params, veh, drop) -> dict:
     """Each trip through SUMO's electric models, shipped and with the parameters of the
     fold that did not see the trip (chain_sumo.chain_vtype_params; the trip's mean logged
-    heater and A/C power added to the constant intake, as a SUMO user who knows it would)."""
+    heater and A/C power added to the constant intake, as a SUMO user who knows it would);
+    the seconds of a logger dropout are booked neither by SUMO nor in the measured energy."""
     import tempfile
 
     from sumo_drvpw.validation.chain_sumo import ELECTRIC_MODELS, chain_vtype_params, sumo_battery_kwh
@@ -377,7 +390,8 @@ def _i3_sumo(log, x, trips, rows, folds, sumo_params, veh) -> dict:
                                          extra_aux_w=float(np.mean(load[s])), at_motor_shaft=True)
             missing[fold] = miss
             vtypes.setdefault(fold, p)
-            sm = sumo_battery_kwh(df["time_s"].to_numpy()[s], x.v[s], x.theta[s], Path(tmp), p)
+            sm = sumo_battery_kwh(df["time_s"].to_numpy()[s], x.v[s], x.theta[s], Path(tmp), p,
+                                  drop=drop[s])
             for label, v in sm.items():
                 r[f"{label}_kwh"] = v["kwh"]
                 r[f"{label}_error"] = v["kwh"] / r["measured_kwh"] - 1.0

@@ -109,6 +109,18 @@ def _mean(rows, key, season=None) -> float:
     return float(np.mean([1 + r[key] for r in rows if season is None or r["season"] == season]))
 
 
+def _i3_dropouts(i3: dict) -> list[str]:
+    """The logger dropouts taken out (fit.input_checks; inputs only), when any."""
+    d = i3.get("dropouts_s")
+    if not d:
+        return []
+    return ["Logger dropouts — speed and accelerometer exactly linear in time for ≥ 5 s (held or "
+            "linearly filled, with the grade-smoothing distance around them; `fit/input_checks.py`, "
+            "the rule of docs/closing-the-loop.md, from the inputs only) — are no measurement and "
+            "are left out of every fit and of the per-trip energies, measured and predicted alike: "
+            + ", ".join(f"{t} {s:.0f} s" for t, s in sorted(d.items())) + ".", ""]
+
+
 def _i3(i3: dict) -> list[str]:
     """The BMW i3 section."""
     rows = i3["rows"]
@@ -121,6 +133,7 @@ def _i3(i3: dict) -> list[str]:
          "power, heater V·I and A/C power as battery-side loads with gain 1) on the measured motor "
          "power of the trips whose heater load is logged; the recuperation limit (friction-brake "
          "blending) from the equation's braking power against the motor's.", "",
+         *_i3_dropouts(i3),
          *_i3_kfold_head(i3),
          ("2-fold (odd/even trips; each fold's trips predicted by the other fold's calibration), "
           "mean |error|" if i3.get("kfold") else "Mean |error|")

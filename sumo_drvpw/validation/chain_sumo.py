@@ -163,11 +163,24 @@ def _run(cmd: list[str], out: Path, column: int):
     return pd.read_csv(out, sep=";", header=None).iloc[:, column].to_numpy(float)
 
 
-def sumo_battery_kwh(t_s, v_mps, grade_rad, workdir: Path, chain_params: dict | None = None) -> dict:
+def _kept_steps(t_s, n: int, drop) -> np.ndarray:
+    """Which of the timeline's ``n`` 1-s steps to book: all, or those whose second holds no
+    sample marked in ``drop`` (e.g. a logger dropout left out of the measured energy too)."""
+    keep = np.ones(n, bool)
+    if drop is not None and np.any(drop):
+        t = np.asarray(t_s, float)
+        sec = np.floor(t[np.asarray(drop, bool)] - float(t[0])).astype(int)
+        keep[sec[(sec >= 0) & (sec < n)]] = False
+    return keep
+
+
+def sumo_battery_kwh(t_s, v_mps, grade_rad, workdir: Path, chain_params: dict | None = None,
+                     drop=None) -> dict:
     """Battery energy [kWh] of one trip by SUMO's electric models (:data:`ELECTRIC_MODELS`);
     a model marked for the chain's parameters runs only when ``chain_params`` (from
-    :func:`chain_vtype_params`) is given. Returns {label: {"kwh", "nan_steps"}}, or {} when
-    SUMO's tools are not installed."""
+    :func:`chain_vtype_params`) is given; the seconds holding a sample marked in ``drop``
+    are not booked. Returns {label: {"kwh", "nan_steps"}}, or {} when SUMO's tools are not
+    installed."""
     tool, home = sumo_tool("emissionsDrivingCycle"), sumo_home()
     if tool is None or home is None:
         return {}
@@ -187,6 +200,7 @@ def sumo_battery_kwh(t_s, v_mps, grade_rad, workdir: Path, chain_params: dict | 
         elif vfile:
             cmd += ["--additional-files", str(home / vfile), "--vtype", vtype]
         el = _run(cmd, o, -1)  # Wh per 1-s step
+        el = el[_kept_steps(t_s, el.size, drop)]
         out[label] = {"kwh": float(np.nansum(el)) / 1000.0, "nan_steps": int(np.isnan(el).sum())}
     return out
 
