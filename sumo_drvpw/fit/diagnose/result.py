@@ -122,6 +122,22 @@ def expand_terms(tr: BlockModel, co: dict, std: bool = False) -> dict:
     return out
 
 
+def lag_decision(res: dict, per_trip_lag: dict, shifts_tried: int, opt, say) -> tuple[dict, bool]:
+    """The timing search's note and whether its lag is applied (a non-zero lag, significant
+    on the paired block test, with at least ``opt.min_gain`` held-out gain); said in one
+    line. One place for the in-memory and the streamed tracer."""
+    note = {k: v for k, v in res.items() if k != "d"}
+    note["per_trip_lag_s"] = per_trip_lag
+    note["shifts_tried"] = shifts_tried
+    note["test"] = ("lag chosen per fold on the training folds, scored on held-out blocks; "
+                    "d = SSE(lag 0) − SSE(chosen lag), the tracer's paired block test")
+    accepted = bool(res["lag_samples"] != 0 and res["p_value"] < opt.alpha and res["rmse_gain"] >= opt.min_gain)
+    note["accepted"] = accepted
+    say(f"timing: best lag {res['lag_s']:+.3g} s, held-out gain {100 * res['rmse_gain']:.2f} %, "
+        f"p = {res['p_value']:.3g} → {'applied' if accepted else 'not applied'}")
+    return note, accepted
+
+
 def lag_finding(res: dict, per_trip_lag: dict, metrics_before: dict, metrics_after: dict) -> dict:
     """The finding of an accepted lag (``res`` from the lag search: lag_s, p_value,
     fold_lags_s), in memory and streamed alike; per_trip_lag: trip → lag [s]."""

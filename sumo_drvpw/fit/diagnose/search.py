@@ -18,7 +18,7 @@ from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
 from sumo_drvpw.fit.diagnose.structural import (lag_range, per_trip_lags, shift_within_trips,
                                                 structural_signals, timing)
 from sumo_drvpw.fit.diagnose.result import (DiagnoseResult, assemble, pick_metrics as _pick_metrics,
-                                           lag_finding,
+                                            lag_decision, lag_finding,
                                             term_label as _term_label)
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import parse_term, term_matrix
@@ -345,15 +345,7 @@ def _timing_step(y_all, ana, x_eq, decl_vals, trip_codes_all, trip_names, t_all,
                 if -big <= k <= big and k not in shifted]
         shifted.update({k: shift_within_trips(y_all, trip_codes_all, k)[idx] for k in fine})
         res = timing(tr0, shifted, dt_med, paired_test)
-    note = {k: v for k, v in res.items() if k != "d"}
-    note["per_trip_lag_s"] = per_trip_lags(tr0, shifted, dt_med)
-    note["shifts_tried"] = len(shifted)
-    note["test"] = ("lag chosen per fold on the training folds, scored on held-out blocks; "
-                    "d = SSE(lag 0) − SSE(chosen lag), the tracer's paired block test")
-    accepted = res["lag_samples"] != 0 and res["p_value"] < opt.alpha and res["rmse_gain"] >= opt.min_gain
-    note["accepted"] = bool(accepted)
-    say(f"timing: best lag {res['lag_s']:+.3g} s, held-out gain {100 * res['rmse_gain']:.2f} %, "
-        f"p = {res['p_value']:.3g} → {'applied' if accepted else 'not applied'}")
+    note, accepted = lag_decision(res, per_trip_lags(tr0, shifted, dt_med), len(shifted), opt, say)
     if not accepted:
         return y_all, ana, None, note
     y_new = shift_within_trips(y_all, trip_codes_all, res["lag_samples"])

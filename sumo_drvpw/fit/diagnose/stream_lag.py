@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from sumo_drvpw.fit.diagnose.result import lag_finding, pick_metrics
+from sumo_drvpw.fit.diagnose.result import lag_decision, lag_finding, pick_metrics
 from sumo_drvpw.fit.diagnose.structural import block_lag_sums, per_trip_lags_from_stats
 
 #: rows of shifted powers held at once (whole trips)
@@ -237,15 +237,8 @@ def timing_step(tr0, sums: LagSums, declared_model, opt, lags, dt_med, say, pair
             sums.absorb(more)
         tried = sorted(set(tried) | set(fine))
     res = timing_streamed(tr0, sums, tried, dt_med, paired_test)
-    note = {k: v for k, v in res.items() if k != "d"}
-    note["per_trip_lag_s"] = per_trip_lags_from_stats(tr0, sums.trip_stats(tried), tried, dt_med)
-    note["shifts_tried"] = len(tried)
-    note["test"] = ("lag chosen per fold on the training folds, scored on held-out blocks; "
-                    "d = SSE(lag 0) − SSE(chosen lag), the tracer's paired block test")
-    accepted = res["lag_samples"] != 0 and res["p_value"] < opt.alpha and res["rmse_gain"] >= opt.min_gain
-    note["accepted"] = bool(accepted)
-    say(f"timing: best lag {res['lag_s']:+.3g} s, held-out gain {100 * res['rmse_gain']:.2f} %, "
-        f"p = {res['p_value']:.3g} → {'applied' if accepted else 'not applied'}")
+    note, accepted = lag_decision(res, per_trip_lags_from_stats(tr0, sums.trip_stats(tried), tried, dt_med),
+                                  len(tried), opt, say)
     if not accepted:
         return None, note, None
     fold = tr0.fold_of(False)
