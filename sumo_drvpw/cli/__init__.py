@@ -96,15 +96,78 @@ def add_log_options(p) -> None:
                         "accelerations only make sense in km/h are refused; m/s = trust the log)")
     g.add_argument("--negative-speed-tolerance", type=float, default=0.1, metavar="M_S",
                    help="speeds in [-M_S, 0) are standstill noise, clipped to 0 and counted (default 0.1)")
+    g = p.add_argument_group(
+        "measurement corrections (default: none, or what the --equation files declare in [measurement])")
+    g.add_argument("--power-lag", type=float, metavar="S",
+                   help="the power signal's lag behind the speed signal [s] (diagnose's timing finding): "
+                        "the power is read S later within each trip")
+    g.add_argument("--grade-source", metavar="logged|fused[:TAU_S]|accelerometer",
+                   help="grade from the elevation (logged), fused with a longitudinal accelerometer "
+                        "(accelerometer above the crossover TAU_S, default 60 s, elevation below), or the "
+                        "accelerometer alone with its per-trip offset fixed by the elevation change")
+    g.add_argument("--air-density", choices=("logged", "altitude"),
+                   help="altitude = pressure of the standard atmosphere at the logged elevation when "
+                        "pressure is not logged (default: logged, i.e. sea level without pressure)")
 
 
-def read_options(args):
-    """:class:`sumo_drvpw.data.log.ReadOptions` from the options of :func:`add_log_options`."""
+def measurement_options(args, equations=()):
+    """The measurement corrections of a command (:class:`sumo_drvpw.model.measurement.Measurement`
+    or None): from --power-lag, --grade-source and --air-density when any is given, else the
+    ``[measurement]`` the equation files among ``equations`` declare (all the same, or an
+    error naming them). Prints a note when corrections come from the equations."""
+    from sumo_drvpw.model.measurement import GRADE_SOURCES, measurement_from_dict
+
+    lag, grade, rho = (getattr(args, k, None) for k in ("power_lag", "grade_source", "air_density"))
+    if lag is not None or grade is not None or rho is not None:
+        doc = {}
+        if lag is not None:
+            doc["power_lag_s"] = lag
+        if grade is not None:
+            src, _, tau = str(grade).partition(":")
+            if src not in GRADE_SOURCES or (tau and src != "fused"):
+                raise UserError(f"--grade-source {grade}: use one of logged, fused[:TAU_S], accelerometer")
+            doc["grade"] = src
+            if tau:
+                try:
+                    doc["fusion_tau_s"] = float(tau)
+                except ValueError:
+                    raise UserError(f"--grade-source {grade}: the crossover after ':' must be a number "
+                                    "of seconds") from None
+        if rho is not None:
+            doc["air_density"] = rho
+        try:
+            return measurement_from_dict(doc, "command line")
+        except UserError as e:
+            raise UserError(f"--power-lag / --grade-source: {e}") from None
+    from sumo_drvpw.model.equations import load_equation
+
+    found = {}
+    for spec in equations or ():
+        if spec == "vsp_spec":
+            continue
+        eq = load_equation(spec)
+        if eq.measurement is not None and not eq.measurement.identity:
+            found[spec] = eq.measurement
+    if not found:
+        return None
+    if len(set(found.values())) > 1:
+        raise UserError("--equation: the equations were calibrated on differently corrected logs "
+                        f"({'; '.join(f'{k}: {v.describe()}' for k, v in found.items())}); give "
+                        "--power-lag / --grade-source / --air-density to choose one")
+    meas = next(iter(found.values()))
+    print(f"note: logs corrected as the [measurement] of {', '.join(found)} declares: {meas.describe()}")
+    return meas
+
+
+def read_options(args, equations=()):
+    """:class:`sumo_drvpw.data.log.ReadOptions` from the options of :func:`add_log_options`
+    (measurement corrections: :func:`measurement_options`)."""
     from sumo_drvpw.data.log import ReadOptions, check_options
 
     tol = getattr(args, "negative_speed_tolerance", None)
     opt = ReadOptions(speed_unit=getattr(args, "speed_unit", None),
-                      negative_speed_tolerance_mps=0.1 if tol is None else tol)
+                      negative_speed_tolerance_mps=0.1 if tol is None else tol,
+                      measurement=measurement_options(args, equations))
     try:
         return check_options(opt)
     except UserError as e:

@@ -59,7 +59,9 @@ def _run(args, make, vehicle):
     for p in expand_paths(args.logs):  # a column named twice (the reader's column selection hides it)
         _check_header(p)
     # trip ids in two files: checked by the engine on the ids it reads (no extra pass)
-    return run(args.logs, make, vehicle, options=read_options(args), engine=args.engine,
+    eqs = getattr(args, "equation", None)
+    eqs = [eqs] if isinstance(eqs, str) else (eqs or ())
+    return run(args.logs, make, vehicle, options=read_options(args, eqs), engine=args.engine,
                scheduler=args.scheduler, workers=args.workers)
 
 
@@ -111,6 +113,10 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
                                   constraints=constraints_of(args.candidates))
     if note:
         print(note)
+    from sumo_drvpw.cli import measurement_options
+    from sumo_drvpw.cli.calibrate import declare_measurement
+
+    declare_measurement(eq, measurement_options(args))
     lines = [info.line()]
     if args.report:
         specs = args.compare_with or (["vsp_ldv1999"] + (["vsp_spec"] if veh is not None and veh.body else []))

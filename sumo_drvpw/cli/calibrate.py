@@ -104,6 +104,7 @@ def main(args) -> int:
     eq, note = apply_physics(eq, m.inputs, m.power_w, m.usable, constraints_of(args.candidates))
     if note:
         print(note)
+    declare_measurement(eq, m.log.options.measurement)
     if args.report:  # report and equation together: the equation is written last
         with output_set(args, args.report, inputs) as tmp:
             write_calibration_report(m, eq, res, tmp, args.compare_with)
@@ -113,6 +114,14 @@ def main(args) -> int:
         save_equation(eq, out)
     print(f"wrote {out}")
     return 0
+
+
+def declare_measurement(eq, meas) -> None:
+    """Write the corrections the logs were read with into the equation (``[measurement]``),
+    so that comparisons on new logs read them the same way; say so."""
+    if meas is not None and not meas.identity:
+        eq.measurement = meas
+        print(f"measurement corrections (kept in the equation's [measurement]): {meas.describe()}")
 
 
 #: speeds above this count as moving for the identifiability check [m/s]
@@ -190,14 +199,15 @@ def main_chain(args) -> int:
             hvac = {"column": col, "setpoint_c": float(sp) if sp else 20.0}
         except ValueError:
             raise UserError(f"--hvac {args.hvac}: the set-point after ':' must be a number (°C)") from None
-    m = load_measured(args.logs, args.vehicle, read_options(args), target=args.target)
+    ro = read_options(args, [args.equation] if args.equation else ())
+    m = load_measured(args.logs, args.vehicle, ro, target=args.target)
     if args.equation:
         eq = resolve_equations([args.equation], m.vehicle)[0]
         road = f"road-load equation {eq.name} ({eq.path or 'built in'})"
     else:
         from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
 
-        mw = load_measured(args.logs, args.vehicle, read_options(args))
+        mw = load_measured(args.logs, args.vehicle, ro)
         res = calibrate(mw.inputs, mw.power_w, resolve_candidates(args.candidates), mask=mw.usable,
                         p_enter=args.p_enter, p_remove=args.p_remove, counts=mw.counts,
                         reference_mass_kg=float(mw.inputs.mass[mw.usable].mean()))
@@ -211,7 +221,7 @@ def main_chain(args) -> int:
 
     p_in, chain_input = None, f"driving power of {eq.name}"
     try:
-        mw = _lm(args.logs, args.vehicle)
+        mw = _lm(args.logs, args.vehicle, ro)
         if not mw.source.startswith("battery"):
             p_in, chain_input = mw.power_w, f"measured driving power ({mw.source})"
     except UserError:
@@ -223,6 +233,7 @@ def main_chain(args) -> int:
                            "chain_input": chain_input,
                            "vehicle": m.vehicle.path if m.vehicle else None}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
+    declare_measurement(eq, ro.measurement)
     print(fit.summary())
     if args.report:
         with output_set(args, args.report, inputs) as tmp:

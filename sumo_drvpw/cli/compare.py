@@ -38,7 +38,7 @@ def main(args) -> int:
 
             pred = {load_equation(s).predicts for s in args.equation if s != "vsp_spec"}
             target = pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
-        m = load_measured(args.logs, args.vehicle, read_options(args), target=target)
+        m = load_measured(args.logs, args.vehicle, read_options(args, args.equation), target=target)
         note_counts(m.counts)
         eqs = resolve_equations(args.equation, m.vehicle)
         u = m.usable

@@ -166,7 +166,8 @@ def main(args) -> int:
 
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
         res = run(args.logs, args.vehicle, args.equation, tmp, opt, figures=not args.no_figures,
-                  progress=progress, read_options=read_options(args), stream=args.stream)
+                  progress=progress, read_options=read_options(args, [args.equation] if args.equation else ()),
+                  stream=args.stream)
     r = res.report
     print(f"baseline held-out RMSE {r['baseline']['metrics']['rmse_w']:.1f} W; "
           f"{len(r['findings'])} finding(s)")
@@ -207,7 +208,7 @@ def _chain_main(args, target, progress) -> int:
     opt = ChainTraceOptions(block_s=args.block_s, folds=args.folds, alpha=args.alpha, min_gain=args.min_gain,
                             max_findings=args.max_findings, validation=args.validation)
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
-        m = load_measured(args.logs, args.vehicle, read_options(args), target=target)
+        m = load_measured(args.logs, args.vehicle, read_options(args, [args.equation]), target=target)
         res = trace_chain(m, eq, opt, progress=progress)
         write_chain_outputs(res, tmp)
     r = res.report

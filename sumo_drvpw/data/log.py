@@ -72,6 +72,10 @@ class ReadOptions:
     #: unit of ``speed_mps`` as logged: None = m/s, checked against implausible implied
     #: accelerations (km/h mistaken for m/s); "m/s" = trust; "km/h" or "mph" = convert
     speed_unit: str | None = None
+    #: measurement corrections applied when power and inputs are computed
+    #: (:class:`sumo_drvpw.model.measurement.Measurement`: power lag, grade source, air
+    #: density; :mod:`sumo_drvpw.data.corrections`); None = the log as read
+    measurement: object | None = None
 
 
 @dataclass

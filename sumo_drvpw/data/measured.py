@@ -33,6 +33,8 @@ class Measured:
     target: str = "wheel"
     #: for the fuel target: the hybrid battery's V·I [W] when logged (SOC correction), else None
     battery_w: np.ndarray | None = None
+    #: measurement corrections applied (model.measurement.Measurement; None: the log as read)
+    measurement: object | None = None
 
     @property
     def counts(self) -> dict:
@@ -41,6 +43,8 @@ class Measured:
         c["target"] = self.target
         c["excluded_nonfinite_power"] = int((~np.isfinite(self.power_w)).sum())
         c["usable"] = int(self.usable.sum())
+        if self.measurement is not None and not self.measurement.identity:
+            c["measurement"] = self.measurement.to_dict()
         return c
 
     def context(self) -> dict:
@@ -59,6 +63,8 @@ def load_measured(paths, vehicle: str | None = None, options: ReadOptions | None
 
     ``target``: ``wheel`` (default) the measured driving power; ``battery`` the battery's
     V·I; ``fuel`` the fuel power ṁ·LHV (with the hybrid battery's V·I in ``battery_w``).
+    Measurement corrections (power lag, grade source, air density) come with ``options``
+    (``ReadOptions.measurement``; :mod:`sumo_drvpw.data.corrections`).
     """
     if target not in TARGETS:
         raise UserError(f"target must be one of {', '.join(TARGETS)}, got {target!r}")
@@ -74,7 +80,9 @@ def load_measured(paths, vehicle: str | None = None, options: ReadOptions | None
 
 def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measured:
     """Measured power, inputs and usable mask of a read log (the streaming reader calls
-    this per batch of whole trips, so it sees the same samples as :func:`load_measured`)."""
+    this per batch of whole trips, so it sees the same samples as :func:`load_measured`),
+    with the measurement corrections of its reading options applied
+    (``log.options.measurement``; None: the log as read)."""
     from sumo_drvpw.data.powertrain import measured_battery_power, measured_fuel_power
 
     battery_w = None
@@ -90,7 +98,19 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measur
     usable = ~log.excluded & np.isfinite(p)
     for arr in (x.v, x.a, x.theta, x.wind, x.mass, x.rho):
         usable &= np.isfinite(arr)
-    return Measured(log, veh, p, source, x, usable, target, battery_w)
+    measurement = log.options.measurement
+    if measurement is not None and not measurement.identity:
+        from sumo_drvpw.data.corrections import apply_measurement
+
+        p, x, usable = apply_measurement(log, x, p, usable, measurement)
+        if battery_w is not None and measurement.power_lag_s:
+            from sumo_drvpw.data.corrections import median_dt, shift_within_trips
+            from sumo_drvpw.data.trips import trip_codes_of
+
+            codes = trip_codes_of(log.df["trip_id"])
+            lag = int(round(measurement.power_lag_s / median_dt(log.df["time_s"].to_numpy(float), codes)))
+            battery_w = np.nan_to_num(shift_within_trips(battery_w, codes, lag), nan=0.0)
+    return Measured(log, veh, p, source, x, usable, target, battery_w, measurement)
 
 
 def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:

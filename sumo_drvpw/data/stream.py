@@ -254,6 +254,10 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
     """
     from sumo_drvpw.data.measured import measure
 
+    if columns is not None and options is not None and options.measurement is not None:
+        from sumo_drvpw.data.corrections import needed_columns
+
+        columns = set(columns) | needed_columns(options.measurement)
     stem = Path(part.path).stem
     for df, off in whole_trips(part, rows, max_trip_rows, columns, categorical=True):
         first = off + (part.start or 0)

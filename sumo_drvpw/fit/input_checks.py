@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from sumo_drvpw.data.corrections import offset_corrected_sin_grade  # noqa: F401  (re-exported)
 from sumo_drvpw.model.constants import G
 
 #: shortest run of exactly linear speed and accelerometer samples read as a dropout [s]
@@ -101,7 +102,7 @@ def log_dropouts(log) -> np.ndarray | None:
     log's grade-smoothing distance (the elevation jump at a gap's end becomes a steep grade
     there). ``None`` when the log has no accelerometer column: with speed alone a steady
     cruise could not be told from a held value, so nothing is marked."""
-    from sumo_drvpw.fit.diagnose.structural import ACCELEROMETER_COLUMNS
+    from sumo_drvpw.data.corrections import ACCELEROMETER_COLUMNS
 
     df = log.df
     acc = [c for c in ACCELEROMETER_COLUMNS if c in df]
@@ -192,27 +193,3 @@ def inertial_mass(power_w, x, usable, trip, v_min: float = 2.0, v_max: float = 2
     return out
 
 
-def offset_corrected_sin_grade(sin_acc, speed_mps, dt_s, trip_codes, elevation_m, usable=None) -> np.ndarray:
-    """Accelerometer grade with its per-trip offset removed: sin θ_acc − c, with c per trip
-    such that Σ (sin θ_acc − c)·ds = Δh (elevation at the trip's last usable sample minus at
-    its first). An input correction: the mounting pitch is one constant per trip, the
-    elevation fixes it; no low-pass of the logged grade. [sin θ, -]"""
-    s = np.asarray(sin_acc, float)
-    v = np.asarray(speed_mps, float)
-    dt = np.asarray(dt_s, float)
-    h = np.asarray(elevation_m, float)
-    codes = np.asarray(trip_codes)
-    u = np.ones(len(s), bool) if usable is None else np.asarray(usable, bool)
-    out = s.copy()
-    for c in np.unique(codes):
-        i = np.flatnonzero(codes == c)
-        ok = u[i] & np.isfinite(s[i]) & np.isfinite(v[i]) & np.isfinite(h[i])
-        if not ok.any():
-            continue
-        ds = np.where(ok, v[i] * dt[i], 0.0)
-        dist = ds.sum()
-        if dist <= 0:
-            continue
-        hh = h[i][ok]
-        out[i] = s[i] - (float(np.sum(np.where(ok, s[i], 0.0) * ds)) - (hh[-1] - hh[0])) / dist
-    return np.clip(out, -0.3, 0.3)

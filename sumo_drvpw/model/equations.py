@@ -23,6 +23,9 @@ File format (all tables but ``[equation]`` and one of ``[terms]``/``[beta]`` opt
     [provenance]  # free-form: log, vehicle, date, settings of a calibration
     [metrics]     # free-form fit statistics
     [chain]       # optional energy chain after the road-load terms (sumo_drvpw.model.chain)
+    [measurement] # optional: corrections of the logs it was calibrated on (power lag, grade
+                  # source, air density; sumo_drvpw.model.measurement), applied to every log it
+                  # is later compared on; not used in SUMO, where inputs are clean
 
 Built-in equations live in ``sumo_drvpw/model/builtin/equations/*.toml``; a name that is not a file
 path is looked up there. A loaded equation's name must match ``NAME_PATTERN`` (it becomes
@@ -98,6 +101,9 @@ class Equation:
     #: validity range of the data behind the equation: speed [m/s], acceleration [m/s²]
     speed_range_mps: tuple[float, float] | None = None
     accel_range_mps2: tuple[float, float] | None = None
+    #: corrections of the calibration logs (``[measurement]``,
+    #: :class:`sumo_drvpw.model.measurement.Measurement`), None when none was declared
+    measurement: object | None = None
 
     @property
     def predicts(self) -> str:
@@ -175,6 +181,8 @@ class Equation:
                 doc[key] = val
         if self.chain is not None:
             doc["chain"] = self.chain.to_dict()
+        if self.measurement is not None:
+            doc["measurement"] = self.measurement.to_dict()
         return doc
 
 
@@ -253,7 +261,7 @@ def _mass(meta: dict, key: str, where: str) -> float | None:
 def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
     """Build an :class:`Equation` from a parsed TOML document; errors name ``where``."""
     known = {"equation", "terms", "beta", "std_err", "p_values", "provenance", "metrics", "paper",
-             "chain"}
+             "chain", "measurement"}
     unknown = set(doc) - known
     if unknown:
         raise UserError(f"{where}: unknown table(s) {sorted(unknown)} (known: {sorted(known)})")
@@ -309,6 +317,11 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
         from sumo_drvpw.model.chain import chain_from_dict
 
         chain = chain_from_dict(doc["chain"], where)
+    measurement = None
+    if "measurement" in doc:
+        from sumo_drvpw.model.measurement import measurement_from_dict
+
+        measurement = measurement_from_dict(doc["measurement"], where)
     try:
         return Equation(
             name=name, terms=terms, vclasses=tuple(vcl), terms_predict=pred, **ranges,
@@ -316,7 +329,7 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
             description=str(meta.get("description", "")), source=str(meta.get("source", "")),
             std_err=std, p_values=_floats(doc.get("p_values", {}), f"{where} [p_values]"),
             provenance=dict(doc.get("provenance", {})), metrics=dict(doc.get("metrics", {})),
-            path=None if where.startswith("<") else where, chain=chain)
+            path=None if where.startswith("<") else where, chain=chain, measurement=measurement)
     except UserError as e:
         raise UserError(f"{where}: {e}") from None
 

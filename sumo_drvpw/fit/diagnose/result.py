@@ -29,6 +29,20 @@ def pick_metrics(m: dict) -> dict:
     return {k: m[k] for k in METRIC_KEYS}
 
 
+def _measurement(log, lag_s: float):
+    """The corrections the traced equation's logs need: those they were read with
+    (``log.options.measurement``) plus the power lag the tracer found and applied in the
+    data (issue #11 §3: measurement effects are corrected in the data, and the equation
+    says how, so that later comparisons read new logs the same way). None when none."""
+    from dataclasses import replace
+
+    from sumo_drvpw.model.measurement import Measurement
+
+    base = getattr(getattr(log, "options", None), "measurement", None) or Measurement()
+    meas = replace(base, power_lag_s=float(base.power_lag_s + lag_s))
+    return None if meas.identity else meas
+
+
 def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrated: bool, opt,
              findings, rounds, ev0, base_coefs, plot, n_rows: int, n_usable: int,
              skipped, sig, n_candidates: int, n_trips: int, dropped, roles=None,
@@ -55,7 +69,8 @@ def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrat
     final_eq = Equation(name=f"{equation.name}_traced", terms=dict(final_terms), mass_kg=equation.mass_kg,
                         description=f"{equation.name} refitted with the effects found by the residual tracer",
                         source="sumo-drvpw diagnose", std_err=eq_se, provenance=prov,
-                        metrics={"heldout": pick_metrics(m_final), "n": n})
+                        metrics={"heldout": pick_metrics(m_final), "n": n},
+                        measurement=_measurement(log, lag["coefficient"] if lag else 0.0))
     report = {
         "target": f"measured driving power [W] ({measured.source})",
         "n_samples": n,

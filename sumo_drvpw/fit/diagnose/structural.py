@@ -38,46 +38,19 @@ import math
 
 import numpy as np
 
+# the log corrections and air physics the tracer shares (data/corrections.py, model/air.py),
+# re-exported for the tracer's modules
+from sumo_drvpw.data.corrections import (ACC_GRADE_WINDOW_S, ACCELEROMETER_COLUMNS,  # noqa: F401
+                                         accelerometer_sin_grade, fused_sin_grade, shift_within_trips)
 from sumo_drvpw.fit.diagnose.candidates import Candidate
+from sumo_drvpw.model.air import pressure_at_altitude_kpa  # noqa: F401
 from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.constants import P_STD_KPA as P0_KPA  # noqa: F401
+from sumo_drvpw.model.measurement import FUSION_TAU_S  # noqa: F401
 from sumo_drvpw.model.terms import parse_term
 
-#: ISO 2533 standard atmosphere: lapse rate [K/m], sea-level temperature [K], molar mass of
-#: dry air [kg/mol], universal gas constant [J/(mol·K)], sea-level pressure [kPa]
-LAPSE_K_PER_M = 0.0065
-T0_K = 288.15
-M_AIR = 0.0289644
-R_UNIVERSAL = 8.31446
-P0_KPA = 101.325
-#: smoothing of the accelerometer grade [s]
-ACC_GRADE_WINDOW_S = 5.0
-#: crossover of the complementary grade fusion [s]: above it the logged (elevation) grade,
-#: below it the accelerometer; well above the ~10 s the 100 m elevation smoothing spans at
-#: town speeds, well below a trip (an accelerometer's mounting pitch biases its slow part)
-FUSION_TAU_S = 60.0
-#: names of a longitudinal accelerometer column (reads dv/dt + g·sin θ)
-ACCELEROMETER_COLUMNS = ("imu_accel_mps2", "accel_long_mps2", "longitudinal_accel_mps2")
 #: recuperation levels of the brake-limit candidates: quantiles of predicted recuperation
 RECUP_QUANTILES = (0.5, 0.75, 0.9)
-
-
-def pressure_at_altitude_kpa(h_m) -> np.ndarray:
-    """Standard-atmosphere pressure at altitude h [m] → [kPa] (ISO 2533, troposphere)."""
-    h = np.asarray(h_m, dtype=float)
-    return P0_KPA * (1.0 - LAPSE_K_PER_M * h / T0_K) ** (G * M_AIR / (R_UNIVERSAL * LAPSE_K_PER_M))
-
-
-def shift_within_trips(y: np.ndarray, trip_codes: np.ndarray, lag: int) -> np.ndarray:
-    """y(i + lag) where sample i + lag is in the same trip, else NaN."""
-    n = len(y)
-    out = np.full(n, np.nan)
-    if lag == 0:
-        return np.asarray(y, float).copy()
-    src = np.arange(n) + lag
-    ok = (src >= 0) & (src < n)
-    ok[ok] &= trip_codes[src[ok]] == trip_codes[ok]
-    out[ok] = y[src[ok]]
-    return out
 
 
 def lag_range(dt_s: float, max_lag_s: float) -> np.ndarray:
@@ -213,43 +186,6 @@ def per_trip_lags_from_stats(tr, stats: dict, lags, dt_s: float) -> dict[str, fl
         sse = yy / (tr.y_scale * tr.y_scale) - np.einsum("ql,ql->l", b_all, sol)
         out[str(tr.trip_names[t])] = lags[int(np.argmin(sse))] * dt_s
     return out
-
-
-def accelerometer_sin_grade(imu_mps2, accel_mps2, trip_codes, dt_s: float,
-                            window_s: float = ACC_GRADE_WINDOW_S) -> np.ndarray:
-    """sin θ from a longitudinal accelerometer: (a_imu − dv/dt)/g, a centred moving mean of
-    ``window_s`` within trips, clipped to ±0.3 (17°).
-
-    Parameters
-    ----------
-    imu_mps2 : accelerometer reading, dv/dt + g·sin θ [m/s²]
-    accel_mps2 : dv/dt from the speed signal [m/s²]
-    trip_codes : trip code per sample (contiguous trips)
-    dt_s : sample interval [s]
-    """
-    import pandas as pd
-
-    win = max(1, int(round(window_s / max(dt_s, 1e-3))))
-    s = pd.Series((np.asarray(imu_mps2, float) - np.asarray(accel_mps2, float)) / G)
-    sm = s.groupby(np.asarray(trip_codes)).transform(
-        lambda z: z.rolling(win, center=True, min_periods=1).mean()).to_numpy()
-    return np.clip(sm, -0.3, 0.3)
-
-
-def fused_sin_grade(sin_acc, sin_log, trip_codes, dt_s: float, tau_s: float = FUSION_TAU_S) -> np.ndarray:
-    """Complementary fusion of two grades: sin θ = LP(sin θ_log) + (sin θ_acc − LP(sin θ_acc)),
-    LP a centred moving mean of ``tau_s`` within trips. The logged grade (from elevation) is
-    unbiased over long distances but smoothed; the accelerometer is sharp but carries its
-    mounting pitch as a bias. [sin θ, -]"""
-    import pandas as pd
-
-    win = max(1, int(round(tau_s / max(dt_s, 1e-3))))
-    codes = np.asarray(trip_codes)
-
-    def lp(x):
-        return pd.Series(np.asarray(x, float)).groupby(codes).transform(
-            lambda z: z.rolling(win, center=True, min_periods=1).mean()).to_numpy()
-    return np.clip(lp(sin_log) + np.asarray(sin_acc, float) - lp(sin_acc), -0.3, 0.3)
 
 
 def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_df,

@@ -1,0 +1,182 @@
+"""Measurement corrections applied to a read log: timing, grade, air density.
+
+What the corrections are and how an equation declares them: :mod:`sumo_drvpw.model.measurement`.
+This module does the signal processing, trip by trip (nothing crosses a trip boundary):
+
+* **timing** — the power read ``power_lag_s`` later, y'(i) = y(i + ℓ) with ℓ = lag/Δt whole
+  samples inside the trip, NaN (not usable) where i + ℓ leaves it;
+* **grade from a longitudinal accelerometer**, which reads dv/dt + g·sin θ:
+  sin θ_acc = (a_imu − dv/dt)/g over a centred 5-s mean (:func:`accelerometer_sin_grade`);
+  ``fused``: sin θ = LP(sin θ_log) + sin θ_acc − LP(sin θ_acc), LP a centred mean over the
+  crossover — the elevation's grade is unbiased over distance but smoothed, the
+  accelerometer sharp but biased by its mounting pitch (:func:`fused_sin_grade`);
+  ``accelerometer``: sin θ_acc minus one offset per trip fixed by Σ sin θ·ds = Δh
+  (:func:`offset_corrected_sin_grade`);
+* **air density at altitude** — ρ·p(h)/p₀ with the standard-atmosphere pressure at the
+  logged elevation (:func:`sumo_drvpw.model.air.pressure_at_altitude_kpa`), where pressure is
+  not logged (the reader then assumed sea level).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sumo_drvpw.data.trips import per_trip_rolling_mean, trip_codes_of
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.air import pressure_at_altitude_kpa
+from sumo_drvpw.model.constants import G, P_STD_KPA
+from sumo_drvpw.model.measurement import FUSION_TAU_S, Measurement
+
+#: smoothing of the accelerometer grade [s]
+ACC_GRADE_WINDOW_S = 5.0
+#: names of a longitudinal accelerometer column (reads dv/dt + g·sin θ)
+ACCELEROMETER_COLUMNS = ("imu_accel_mps2", "accel_long_mps2", "longitudinal_accel_mps2")
+#: largest |sin θ| a corrected grade may take (17°)
+MAX_SIN_GRADE = 0.3
+
+
+def shift_within_trips(y: np.ndarray, trip_codes: np.ndarray, lag: int) -> np.ndarray:
+    """y(i + lag) where sample i + lag is in the same trip, else NaN."""
+    n = len(y)
+    out = np.full(n, np.nan)
+    if lag == 0:
+        return np.asarray(y, float).copy()
+    src = np.arange(n) + lag
+    ok = (src >= 0) & (src < n)
+    ok[ok] &= trip_codes[src[ok]] == trip_codes[ok]
+    out[ok] = y[src[ok]]
+    return out
+
+
+def _window(seconds: float, dt_s: float) -> int:
+    return max(1, int(round(seconds / max(dt_s, 1e-3))))
+
+
+def accelerometer_sin_grade(imu_mps2, accel_mps2, trip_codes, dt_s: float,
+                            window_s: float = ACC_GRADE_WINDOW_S) -> np.ndarray:
+    """sin θ from a longitudinal accelerometer: (a_imu − dv/dt)/g, a centred moving mean of
+    ``window_s`` within trips, clipped to ±0.3 (17°).
+
+    Parameters
+    ----------
+    imu_mps2 : accelerometer reading, dv/dt + g·sin θ [m/s²]
+    accel_mps2 : dv/dt from the speed signal [m/s²]
+    trip_codes : trip code per sample (contiguous trips)
+    dt_s : sample interval [s]
+    """
+    s = (np.asarray(imu_mps2, float) - np.asarray(accel_mps2, float)) / G
+    sm = per_trip_rolling_mean(s, np.asarray(trip_codes), _window(window_s, dt_s))
+    return np.clip(sm, -MAX_SIN_GRADE, MAX_SIN_GRADE)
+
+
+def fused_sin_grade(sin_acc, sin_log, trip_codes, dt_s: float, tau_s: float = FUSION_TAU_S) -> np.ndarray:
+    """Complementary fusion of two grades: sin θ = LP(sin θ_log) + (sin θ_acc − LP(sin θ_acc)),
+    LP a centred moving mean of ``tau_s`` within trips. The logged grade (from elevation) is
+    unbiased over long distances but smoothed; the accelerometer is sharp but carries its
+    mounting pitch as a bias. [sin θ, -]"""
+    codes = np.asarray(trip_codes)
+    w = _window(tau_s, dt_s)
+    sa = np.asarray(sin_acc, float)
+    out = per_trip_rolling_mean(np.asarray(sin_log, float), codes, w) + sa - per_trip_rolling_mean(sa, codes, w)
+    return np.clip(out, -MAX_SIN_GRADE, MAX_SIN_GRADE)
+
+
+def offset_corrected_sin_grade(sin_acc, speed_mps, dt_s, trip_codes, elevation_m, usable=None) -> np.ndarray:
+    """Accelerometer grade with its per-trip offset removed: sin θ_acc − c, with c per trip
+    such that Σ (sin θ_acc − c)·ds = Δh (elevation at the trip's last usable sample minus at
+    its first). An input correction: the mounting pitch is one constant per trip, the
+    elevation fixes it; no low-pass of the logged grade. [sin θ, -]"""
+    s = np.asarray(sin_acc, float)
+    v = np.asarray(speed_mps, float)
+    dt = np.asarray(dt_s, float)
+    h = np.asarray(elevation_m, float)
+    codes = np.asarray(trip_codes)
+    u = np.ones(len(s), bool) if usable is None else np.asarray(usable, bool)
+    out = s.copy()
+    for c in np.unique(codes):
+        i = np.flatnonzero(codes == c)
+        ok = u[i] & np.isfinite(s[i]) & np.isfinite(v[i]) & np.isfinite(h[i])
+        if not ok.any():
+            continue
+        ds = np.where(ok, v[i] * dt[i], 0.0)
+        dist = ds.sum()
+        if dist <= 0:
+            continue
+        hh = h[i][ok]
+        out[i] = s[i] - (float(np.sum(np.where(ok, s[i], 0.0) * ds)) - (hh[-1] - hh[0])) / dist
+    return np.clip(out, -MAX_SIN_GRADE, MAX_SIN_GRADE)
+
+
+def accelerometer_column(columns) -> str | None:
+    """The first longitudinal-accelerometer column among ``columns``, or None."""
+    return next((c for c in ACCELEROMETER_COLUMNS if c in columns), None)
+
+
+def needed_columns(meas: Measurement | None) -> set[str]:
+    """Log columns the corrections of ``meas`` read beyond the canonical inputs (a reader that
+    selects columns adds these)."""
+    if meas is None or meas.identity:
+        return set()
+    cols = set()
+    if meas.grade != "logged":
+        cols |= set(ACCELEROMETER_COLUMNS) | {"elevation_m"}
+    if meas.air_density == "altitude":
+        cols |= {"elevation_m", "pressure_kpa"}
+    return cols
+
+
+def median_dt(time_s: np.ndarray, trip_codes: np.ndarray) -> float:
+    """Median sample interval within trips [s] (NaN with fewer than two samples in a trip)."""
+    d = np.diff(np.asarray(time_s, float))
+    d = d[np.diff(trip_codes) == 0]
+    return float(np.median(d)) if d.size else float("nan")
+
+
+def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Measurement | None):
+    """The corrections of ``meas`` applied to a read log's inputs and measured power.
+
+    Parameters
+    ----------
+    log : the :class:`sumo_drvpw.data.log.DriveLog` (trip ids, time, elevation, columns)
+    x : its :class:`sumo_drvpw.model.terms.Inputs` (``theta`` and ``rho`` are replaced)
+    power_w : measured power [W] (shifted by the lag)
+    usable : usable-sample mask (narrowed where a correction has no value)
+
+    Returns ``(power_w, x, usable)``; the log itself is never modified. A correction the log
+    cannot carry (no accelerometer column, no elevation) is a :class:`UserError` naming the
+    log and the column.
+    """
+    if meas is None or meas.identity:
+        return power_w, x, usable
+    df = log.df
+    codes = trip_codes_of(df["trip_id"])
+    dt = median_dt(df["time_s"].to_numpy(float), codes)
+    usable = np.asarray(usable, bool).copy()
+    if meas.power_lag_s:
+        if not np.isfinite(dt) or dt <= 0:
+            raise UserError(f"{log.describe()}: a power lag needs at least two samples per trip to "
+                            "know the sample interval")
+        power_w = shift_within_trips(np.asarray(power_w, float), codes, int(round(meas.power_lag_s / dt)))
+        usable &= np.isfinite(power_w)
+    if meas.air_density == "altitude" and "pressure_kpa" not in df:
+        if "elevation_m" not in df:
+            raise UserError(f"{log.describe()}: air density at altitude needs column 'elevation_m'")
+        h = df["elevation_m"].to_numpy(float)
+        x.rho = np.where(np.isfinite(h), x.rho * pressure_at_altitude_kpa(h) / P_STD_KPA, x.rho)
+    if meas.grade != "logged":
+        col = accelerometer_column(df.columns)
+        if col is None:
+            raise UserError(f"{log.describe()}: grade '{meas.grade}' needs a longitudinal accelerometer "
+                            f"column (one of {', '.join(ACCELEROMETER_COLUMNS)})")
+        s_acc = accelerometer_sin_grade(df[col].to_numpy(float), x.a, codes, dt)
+        if meas.grade == "accelerometer":
+            if "elevation_m" not in df:
+                raise UserError(f"{log.describe()}: grade 'accelerometer' needs column 'elevation_m' "
+                                "(its per-trip offset is fixed by the elevation change)")
+            s = offset_corrected_sin_grade(s_acc, x.v, df["dt_s"].to_numpy(float), codes,
+                                           df["elevation_m"].to_numpy(float), usable & np.isfinite(power_w))
+        else:
+            s = fused_sin_grade(s_acc, np.sin(x.theta), codes, dt, meas.fusion_tau_s)
+        x.theta = np.arcsin(s)
+        usable &= np.isfinite(x.theta)
+    return power_w, x, usable

@@ -1,0 +1,106 @@
+"""Measurement corrections as data: how a log was corrected before an equation was fitted.
+
+An equation that goes into SUMO describes the vehicle, not the logger (issue #11 §3): a lag
+between the power and the speed signal, a grade attenuated by coarse or smoothed
+elevation, air density at sea-level pressure where the car drove at altitude — these are
+corrected in the data, not absorbed by coefficients. The corrections a calibration used
+are part of the equation, as its ``[measurement]`` table, so that every later comparison
+on new logs reads them the same way (in SUMO, inputs are clean: the table is not used
+there)::
+
+    [measurement]
+    power_lag_s = -1.4     # the power signal's lag behind the speed signal [s]; the power
+                           # is read that much later (diagnose's "timing" finding)
+    grade = "fused"        # "logged" (elevation), "fused" (accelerometer above the
+                           # crossover, logged grade below it) or "accelerometer" (alone,
+                           # its per-trip offset fixed by the elevation)
+    fusion_tau_s = 300     # crossover of the fusion [s]
+    air_density = "altitude"  # "logged" or "altitude": pressure of the standard
+                           # atmosphere at the logged elevation when pressure is not logged
+
+The correction itself (signal processing on a log) is :mod:`sumo_drvpw.data.corrections`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+from sumo_drvpw.errors import UserError
+
+#: where the grade comes from
+GRADE_SOURCES = ("logged", "fused", "accelerometer")
+#: where the air density comes from
+AIR_DENSITY_SOURCES = ("logged", "altitude")
+#: default crossover of the grade fusion [s]: well above the ~10 s that 100 m of elevation
+#: smoothing spans at town speeds, well below a trip (an accelerometer's mounting pitch
+#: biases its slow part)
+FUSION_TAU_S = 60.0
+#: longest lag a correction may declare [s] (a lag of minutes is no signal timing)
+MAX_LAG_S = 60.0
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """Corrections applied to a log before a model sees it (see the module docstring).
+
+    The default is no correction: the log as read.
+    """
+
+    power_lag_s: float = 0.0
+    grade: str = "logged"
+    fusion_tau_s: float = FUSION_TAU_S
+    air_density: str = "logged"
+
+    @property
+    def identity(self) -> bool:
+        """True when nothing is corrected."""
+        return self.power_lag_s == 0.0 and self.grade == "logged" and self.air_density == "logged"
+
+    def to_dict(self) -> dict:
+        """The ``[measurement]`` table (every key, so the file says what was done)."""
+        return asdict(self)
+
+    def describe(self) -> str:
+        """One line for reports."""
+        if self.identity:
+            return "none (the log as read)"
+        parts = []
+        if self.power_lag_s:
+            parts.append(f"power re-timed by {self.power_lag_s:+g} s (the power signal's lag behind speed)")
+        if self.grade == "fused":
+            parts.append(f"grade fused: accelerometer above {self.fusion_tau_s:g} s, logged grade below")
+        elif self.grade == "accelerometer":
+            parts.append("grade from the accelerometer, its per-trip offset fixed by the elevation")
+        if self.air_density == "altitude":
+            parts.append("air density at the logged altitude (standard atmosphere)")
+        return "; ".join(parts)
+
+
+def measurement_from_dict(doc, where: str) -> Measurement:
+    """A :class:`Measurement` from a ``[measurement]`` table; errors name ``where`` and the key."""
+    if not isinstance(doc, dict):
+        raise UserError(f"{where} [measurement]: must be a table")
+    known = ("power_lag_s", "grade", "fusion_tau_s", "air_density")
+    bad = sorted(set(doc) - set(known))
+    if bad:
+        raise UserError(f"{where} [measurement]: unknown key {bad[0]!r} (known: {', '.join(known)})")
+    kw = {}
+    for key in ("power_lag_s", "fusion_tau_s"):
+        if key in doc:
+            v = doc[key]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise UserError(f"{where} [measurement] {key}: must be a finite number, got {v!r}")
+            kw[key] = float(v)
+    if abs(kw.get("power_lag_s", 0.0)) > MAX_LAG_S:
+        raise UserError(f"{where} [measurement] power_lag_s: {kw['power_lag_s']:g} s is beyond "
+                        f"±{MAX_LAG_S:g} s (a lag of minutes is no signal timing)")
+    if "fusion_tau_s" in kw and not kw["fusion_tau_s"] > 0:
+        raise UserError(f"{where} [measurement] fusion_tau_s: must be > 0, got {kw['fusion_tau_s']:g}")
+    for key, allowed in (("grade", GRADE_SOURCES), ("air_density", AIR_DENSITY_SOURCES)):
+        if key in doc:
+            if doc[key] not in allowed:
+                raise UserError(f"{where} [measurement] {key}: must be one of {', '.join(allowed)}, "
+                                f"got {doc[key]!r}")
+            kw[key] = str(doc[key])
+    return Measurement(**kw)

@@ -1,0 +1,218 @@
+"""Measurement corrections as data (issue #11 §3): declared by an equation's [measurement],
+applied to logs by data/corrections.py, written by calibrate and diagnose, read back by
+compare — planted effects recovered, round trips, bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import sumo_drvpw.synth.effects as E
+from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.data.corrections import fused_sin_grade, shift_within_trips
+from sumo_drvpw.data.log import ReadOptions
+from sumo_drvpw.data.measured import load_measured
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.equations import equation_from_dict, load_equation
+from sumo_drvpw.model.measurement import Measurement, measurement_from_dict
+from sumo_drvpw.synth.track import Noise
+
+NOISE = Noise(process_w=200.0, process_rel=0.01)
+TRUTH = "drvpw_prius3"
+LAG_S = 1.5
+#: the logged grade is the true one smoothed over this [s] (coarse elevation); the fusion's
+#: crossover must lie above it to give the accelerometer the band the smoothing removed
+SMOOTH_S = 60.0
+TAU_S = 240.0
+
+
+@pytest.fixture(scope="module")
+def planted(tmp_path_factory):
+    """4 synthetic trips whose power lags speed by 1.5 s and whose logged grade is smoothed
+    over 60 s, with a true accelerometer column (synth.effects)."""
+    df, _ = E.synth_trips(4, 8.0, seed=21, noise=NOISE,
+                          effects=[E.AttenuatedGrade(1.0, SMOOTH_S), E.PowerLag(LAG_S), E.LogPower()])
+    path = tmp_path_factory.mktemp("meas") / "log.parquet"
+    df.to_parquet(path)
+    return path
+
+
+def _terms(path):
+    from sumo_drvpw.fileio import read_toml
+
+    return read_toml(path, "equation")
+
+
+# ------------------------------------------------------------------ the declaration
+
+
+@settings(max_examples=40, deadline=None)
+@given(lag=st.floats(-60, 60, allow_nan=False), tau=st.floats(0.5, 3600),
+       grade=st.sampled_from(["logged", "fused", "accelerometer"]), rho=st.sampled_from(["logged", "altitude"]))
+def test_measurement_round_trips_through_the_equation_file(lag, tau, grade, rho):
+    doc = {"equation": {"name": "e"}, "terms": {"acc": 1.0},
+           "measurement": {"power_lag_s": lag, "grade": grade, "fusion_tau_s": tau, "air_density": rho}}
+    eq = equation_from_dict(doc)
+    again = equation_from_dict(eq.to_dict())
+    assert again.measurement == eq.measurement
+    assert eq.measurement.power_lag_s == lag and eq.measurement.grade == grade
+    assert eq.measurement.identity == (lag == 0 and grade == "logged" and rho == "logged")
+
+
+@pytest.mark.parametrize("table, key", [({"grade": "gps"}, "grade"), ({"power_lag_s": "1"}, "power_lag_s"),
+                                        ({"power_lag_s": 120.0}, "power_lag_s"), ({"fusion_tau_s": 0}, "fusion_tau_s"),
+                                        ({"air_density": "sea"}, "air_density"), ({"lag": 1.0}, "lag"),
+                                        ({"power_lag_s": math.nan}, "power_lag_s")])
+def test_bad_measurement_table_names_the_key(table, key):
+    with pytest.raises(UserError, match=f"f.toml \\[measurement\\].*{key}"):
+        measurement_from_dict(table, "f.toml")
+
+
+# ------------------------------------------------------------------ the corrections
+
+
+def test_shift_and_fusion_stay_inside_trips():
+    codes = np.repeat([0, 1], 5)
+    y = np.arange(10.0)
+    s = shift_within_trips(y, codes, 2)
+    # y(i + 2) inside the trip, NaN where that leaves it (hand calculation)
+    np.testing.assert_array_equal(s[:3], [2, 3, 4])
+    assert np.isnan(s[3:5]).all() and np.isnan(s[8:]).all()
+    # fusion: a constant logged grade and an accelerometer with a constant offset (mounting
+    # pitch) give the logged grade: the offset is in the accelerometer's slow part only
+    acc = np.full(10, 0.05)
+    fused = fused_sin_grade(acc + 0.02, np.full(10, 0.05), codes, 1.0, tau_s=3.0)
+    np.testing.assert_allclose(fused, 0.05, atol=1e-12)
+
+
+def test_planted_lag_and_smoothed_grade_recovered_by_the_corrections(planted):
+    truth = load_equation(TRUTH).terms
+    terms = ["acc", "grade", "aero", "roll"]
+    from sumo_drvpw.model.terms import term_matrix
+
+    def fit(meas):
+        m = load_measured([planted], "prius3", ReadOptions(measurement=meas))
+        X = term_matrix(terms, m.inputs)
+        X = np.column_stack([X[t] for t in terms]) if isinstance(X, dict) else np.asarray(X)
+        b = np.linalg.lstsq(X[m.usable], m.power_w[m.usable], rcond=None)[0]
+        return dict(zip(terms, b)), m
+
+    raw, _ = fit(None)
+    fixed, m = fit(Measurement(power_lag_s=LAG_S, grade="fused", fusion_tau_s=TAU_S))
+    assert m.counts["measurement"]["grade"] == "fused"
+    for t in ("acc", "grade", "aero"):
+        assert fixed[t] == pytest.approx(truth[t], rel=0.05), (t, fixed[t], truth[t])
+    # as read, the lag and the smoothed grade bend the coefficients well away from the truth
+    assert abs(raw["acc"] / truth["acc"] - 1) > 0.05
+
+
+# ------------------------------------------------------------------ the commands
+
+
+def test_calibrate_writes_the_corrections_and_compare_reads_them_back(planted, tmp_path, capsys):
+    eq = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(planted), "--vehicle", "prius3", "--out", str(eq),
+                     "--power-lag", str(LAG_S), "--grade-source", f"fused:{TAU_S:g}"]) == 0
+    doc = _terms(eq)
+    assert doc["measurement"] == {"power_lag_s": LAG_S, "grade": "fused", "fusion_tau_s": TAU_S,
+                                  "air_density": "logged"}
+    assert doc["terms"]["acc"] == pytest.approx(load_equation(TRUTH).terms["acc"], rel=0.05)
+    capsys.readouterr()
+    # compare without flags reads the log as the equation declares, and says so
+    assert cli_main(["compare", str(planted), "--vehicle", "prius3", "--equation", str(eq),
+                     "--out", str(tmp_path / "auto")]) == 0
+    assert "[measurement] of" in capsys.readouterr().out
+    # the same with the flags given by hand, and worse on the log as read
+    assert cli_main(["compare", str(planted), "--vehicle", "prius3", "--equation", str(eq), "--power-lag",
+                     str(LAG_S), "--grade-source", f"fused:{TAU_S:g}", "--out", str(tmp_path / "hand")]) == 0
+    assert cli_main(["compare", str(planted), "--vehicle", "prius3", "--equation", str(eq), "--power-lag", "0",
+                     "--out", str(tmp_path / "raw")]) == 0
+    r = {k: json.loads((tmp_path / k / "report.json").read_text())["equations"]["eq"]["r2"]
+         for k in ("auto", "hand", "raw")}
+    assert r["auto"] == pytest.approx(r["hand"], rel=1e-12)
+    assert r["auto"] > 0.99 > r["raw"]
+
+
+def test_streamed_and_in_memory_calibration_apply_the_same_corrections(planted, tmp_path):
+    out = {}
+    for engine in ("local", "memory"):
+        p = tmp_path / f"{engine}.toml"
+        assert cli_main(["calibrate", str(planted), "--vehicle", "prius3", "--out", str(p), "--engine", engine,
+                         "--power-lag", str(LAG_S), "--grade-source", f"fused:{TAU_S:g}"]) == 0
+        out[engine] = _terms(p)
+    for t, c in out["memory"]["terms"].items():
+        assert out["local"]["terms"][t] == pytest.approx(c, rel=1e-9)
+    assert out["local"]["measurement"] == out["memory"]["measurement"]
+
+
+def test_diagnose_writes_the_lag_it_found_on_top_of_the_one_read(planted):
+    from sumo_drvpw.fit.diagnose import DiagnoseOptions, diagnose
+
+    # read with 1.0 s of the 1.5 s corrected: the tracer finds the rest, and the traced
+    # equation declares the whole lag its logs need
+    m = load_measured([planted], "prius3", ReadOptions(measurement=Measurement(power_lag_s=1.0)))
+    res = diagnose(m, load_equation(TRUTH), DiagnoseOptions(max_findings=1))
+    lag = [f for f in res.report["findings"] if f.get("kind") == "timing"]
+    assert lag and lag[0]["coefficient"] == pytest.approx(0.5, abs=0.125)
+    assert res.equation.measurement.power_lag_s == pytest.approx(LAG_S, abs=0.125)
+    again = equation_from_dict(res.equation.to_dict())
+    assert again.measurement == res.equation.measurement
+
+
+def test_bad_corrections_are_one_line_exit_2(planted, tmp_path, capsys):
+    import pandas as pd
+
+    no_acc = tmp_path / "noacc.parquet"
+    pd.read_parquet(planted).drop(columns=["imu_accel_mps2"]).to_parquet(no_acc)
+    cases = [
+        (["calibrate", str(no_acc), "--vehicle", "prius3", "--grade-source", "fused", "--out",
+          str(tmp_path / "a.toml")], "imu_accel_mps2"),
+        (["calibrate", str(planted), "--vehicle", "prius3", "--grade-source", "gps", "--out",
+          str(tmp_path / "b.toml")], "--grade-source gps"),
+        (["calibrate", str(planted), "--vehicle", "prius3", "--grade-source", "fused:x", "--out",
+          str(tmp_path / "c.toml")], "--grade-source fused:x"),
+        (["calibrate", str(planted), "--vehicle", "prius3", "--power-lag", "600", "--out",
+          str(tmp_path / "d.toml")], "power_lag_s"),
+    ]
+    for argv, needle in cases:
+        assert cli_main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert needle in err and len(err.splitlines()) == 1 and "Traceback" not in err
+    # two equations calibrated on differently corrected logs: choose, do not guess
+    e1, e2 = tmp_path / "e1.toml", tmp_path / "e2.toml"
+    for p, lag in ((e1, "1.5"), (e2, "1.0")):
+        assert cli_main(["calibrate", str(planted), "--vehicle", "prius3", "--power-lag", lag, "--out", str(p)]) == 0
+    capsys.readouterr()
+    assert cli_main(["compare", str(planted), "--vehicle", "prius3", "--equation", str(e1), "--equation",
+                     str(e2), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "differently corrected" in err and "--power-lag" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_air_density_at_altitude_restores_the_aero_coefficient(tmp_path):
+    df, _ = E.synth_trips(6, 6.0, seed=5, noise=NOISE, effects=[E.AltitudeAir(), E.LogPower()])
+    path = tmp_path / "alt.parquet"
+    df.drop(columns=["pressure_kpa"]).to_parquet(path)
+    from sumo_drvpw.model.air import air_density
+
+    # the truth's aero term v·(v − w)² has no ρ; at the synthetic log's own air (its ambient
+    # temperature and 100.8 kPa, synth.track) it is ½·ρ·C_d·A, so C_d·A = 2·aero/ρ
+    rho_state = air_density(float(df["ambient_c"].mean()), float(df["pressure_kpa"].mean()))
+    cda = 2.0 * load_equation(TRUTH).terms["aero"] / rho_state
+    got = {}
+    for rho in ("logged", "altitude"):
+        eq = tmp_path / f"{rho}.toml"
+        assert cli_main(["calibrate", str(path), "--vehicle", "prius3", "--candidates", "acc,grade,aero_rho,roll",
+                         "--air-density", rho, "--out", str(eq)]) == 0
+        got[rho] = _terms(eq)["terms"]["aero_rho"]
+    # sea-level ρ where the car drove at up to 1500 m: C_d·A absorbs the thinner air; at
+    # the altitude's pressure it is the vehicle's again (the ρ-free ``aero`` term cannot
+    # tell: use aero_rho where the air density varies)
+    assert abs(got["altitude"] / cda - 1) < abs(got["logged"] / cda - 1)
+    assert abs(got["altitude"] / cda - 1) < 0.03
