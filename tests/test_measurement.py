@@ -53,21 +53,24 @@ def _terms(path):
 
 @settings(max_examples=40, deadline=None)
 @given(lag=st.floats(-60, 60, allow_nan=False), tau=st.floats(0.5, 3600),
-       grade=st.sampled_from(["logged", "fused", "accelerometer"]), rho=st.sampled_from(["logged", "altitude"]))
-def test_measurement_round_trips_through_the_equation_file(lag, tau, grade, rho):
+       grade=st.sampled_from(["logged", "fused", "accelerometer"]), rho=st.sampled_from(["logged", "altitude"]),
+       drop=st.booleans())
+def test_measurement_round_trips_through_the_equation_file(lag, tau, grade, rho, drop):
     doc = {"equation": {"name": "e"}, "terms": {"acc": 1.0},
-           "measurement": {"power_lag_s": lag, "grade": grade, "fusion_tau_s": tau, "air_density": rho}}
+           "measurement": {"power_lag_s": lag, "grade": grade, "fusion_tau_s": tau, "air_density": rho,
+                           "exclude_dropouts": drop}}
     eq = equation_from_dict(doc)
     again = equation_from_dict(eq.to_dict())
     assert again.measurement == eq.measurement
     assert eq.measurement.power_lag_s == lag and eq.measurement.grade == grade
-    assert eq.measurement.identity == (lag == 0 and grade == "logged" and rho == "logged")
+    assert eq.measurement.identity == (lag == 0 and grade == "logged" and rho == "logged" and not drop)
 
 
 @pytest.mark.parametrize("table, key", [({"grade": "gps"}, "grade"), ({"power_lag_s": "1"}, "power_lag_s"),
                                         ({"power_lag_s": 120.0}, "power_lag_s"), ({"fusion_tau_s": 0}, "fusion_tau_s"),
                                         ({"air_density": "sea"}, "air_density"), ({"lag": 1.0}, "lag"),
-                                        ({"power_lag_s": math.nan}, "power_lag_s")])
+                                        ({"power_lag_s": math.nan}, "power_lag_s"),
+                                        ({"exclude_dropouts": 1}, "exclude_dropouts")])
 def test_bad_measurement_table_names_the_key(table, key):
     with pytest.raises(UserError, match=f"f.toml \\[measurement\\].*{key}"):
         measurement_from_dict(table, "f.toml")
@@ -120,7 +123,7 @@ def test_calibrate_writes_the_corrections_and_compare_reads_them_back(planted, t
                      "--power-lag", str(LAG_S), "--grade-source", f"fused:{TAU_S:g}"]) == 0
     doc = _terms(eq)
     assert doc["measurement"] == {"power_lag_s": LAG_S, "grade": "fused", "fusion_tau_s": TAU_S,
-                                  "air_density": "logged"}
+                                  "air_density": "logged", "exclude_dropouts": False}
     assert doc["terms"]["acc"] == pytest.approx(load_equation(TRUTH).terms["acc"], rel=0.05)
     capsys.readouterr()
     # compare without flags reads the log as the equation declares, and says so
@@ -216,3 +219,25 @@ def test_air_density_at_altitude_restores_the_aero_coefficient(tmp_path):
     # tell: use aero_rho where the air density varies)
     assert abs(got["altitude"] / cda - 1) < abs(got["logged"] / cda - 1)
     assert abs(got["altitude"] / cda - 1) < 0.03
+
+
+def test_exclude_dropouts_leaves_out_a_planted_logger_hold(tmp_path, capsys):
+    df, _ = E.synth_trips(2, 6.0, seed=9, noise=NOISE, effects=[E.LogPower()])
+    planted_rows = E.plant_dropout(df, "synth-2", 60.0, 45.0, mode="hold")
+    path = tmp_path / "drop.parquet"
+    df.to_parquet(path)
+    m0 = load_measured([path], "prius3")
+    m1 = load_measured([path], "prius3", ReadOptions(measurement=Measurement(exclude_dropouts=True)))
+    assert not m1.usable[planted_rows].any() and m0.usable[planted_rows].all()
+    assert m1.counts["excluded_dropouts"] >= planted_rows.sum()
+    assert m1.counts["measurement"]["exclude_dropouts"] is True
+    # outside the hold and its grade-smoothing margin nothing else is taken out
+    assert (m0.usable & ~m1.usable).sum() == m1.counts["excluded_dropouts"]
+    assert m1.counts["excluded_dropouts"] < planted_rows.sum() + 2 * 200
+    # and a log without an accelerometer cannot say: one line naming the columns, exit 2
+    no_acc = tmp_path / "noacc.parquet"
+    df.drop(columns=["imu_accel_mps2"]).to_parquet(no_acc)
+    assert cli_main(["calibrate", str(no_acc), "--vehicle", "prius3", "--exclude-dropouts", "--out",
+                     str(tmp_path / "e.toml")]) == 2
+    err = capsys.readouterr().err
+    assert "imu_accel_mps2" in err and len(err.strip().splitlines()) == 1

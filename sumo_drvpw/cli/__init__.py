@@ -97,7 +97,8 @@ def add_log_options(p) -> None:
     g.add_argument("--negative-speed-tolerance", type=float, default=0.1, metavar="M_S",
                    help="speeds in [-M_S, 0) are standstill noise, clipped to 0 and counted (default 0.1)")
     g = p.add_argument_group(
-        "measurement corrections (default: none, or what the --equation files declare in [measurement])")
+        "measurement corrections (default: none, or what the --equation files declare in [measurement]; "
+        "given here, they replace that)")
     g.add_argument("--power-lag", type=float, metavar="S",
                    help="the power signal's lag behind the speed signal [s] (diagnose's timing finding): "
                         "the power is read S later within each trip")
@@ -108,6 +109,9 @@ def add_log_options(p) -> None:
     g.add_argument("--air-density", choices=("logged", "altitude"),
                    help="altitude = pressure of the standard atmosphere at the logged elevation when "
                         "pressure is not logged (default: logged, i.e. sea level without pressure)")
+    g.add_argument("--exclude-dropouts", action="store_true", default=None,
+                   help="leave out logger dropouts: speed and a longitudinal accelerometer held or "
+                        "linearly filled for seconds (inputs only)")
 
 
 def measurement_options(args, equations=()):
@@ -117,9 +121,11 @@ def measurement_options(args, equations=()):
     error naming them). Prints a note when corrections come from the equations."""
     from sumo_drvpw.model.measurement import GRADE_SOURCES, measurement_from_dict
 
-    lag, grade, rho = (getattr(args, k, None) for k in ("power_lag", "grade_source", "air_density"))
-    if lag is not None or grade is not None or rho is not None:
-        doc = {}
+    lag, grade, rho, drop = (getattr(args, k, None) for k in ("power_lag", "grade_source", "air_density",
+                                                              "exclude_dropouts"))
+    if lag is not None or grade is not None or rho is not None or drop:
+        # given on the command line, they replace what the equations declare
+        doc = {"exclude_dropouts": True} if drop else {}
         if lag is not None:
             doc["power_lag_s"] = lag
         if grade is not None:

@@ -14,7 +14,8 @@ This module does the signal processing, trip by trip (nothing crosses a trip bou
   (:func:`offset_corrected_sin_grade`);
 * **air density at altitude** — ρ·p(h)/p₀ with the standard-atmosphere pressure at the
   logged elevation (:func:`sumo_drvpw.model.air.pressure_at_altitude_kpa`), where pressure is
-  not logged (the reader then assumed sea level).
+  not logged (the reader then assumed sea level);
+* **logger dropouts** left out of the usable samples (:mod:`sumo_drvpw.data.dropouts`).
 """
 
 from __future__ import annotations
@@ -118,7 +119,7 @@ def needed_columns(meas: Measurement | None) -> set[str]:
     if meas is None or meas.identity:
         return set()
     cols = set()
-    if meas.grade != "logged":
+    if meas.grade != "logged" or meas.exclude_dropouts:
         cols |= set(ACCELEROMETER_COLUMNS) | {"elevation_m"}
     if meas.air_density == "altitude":
         cols |= {"elevation_m", "pressure_kpa"}
@@ -163,6 +164,16 @@ def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Mea
             raise UserError(f"{log.describe()}: air density at altitude needs column 'elevation_m'")
         h = df["elevation_m"].to_numpy(float)
         x.rho = np.where(np.isfinite(h), x.rho * pressure_at_altitude_kpa(h) / P_STD_KPA, x.rho)
+    if meas.exclude_dropouts:
+        from sumo_drvpw.data.dropouts import log_dropouts
+
+        drop = log_dropouts(log)
+        if drop is None:
+            raise UserError(f"{log.describe()}: leaving out logger dropouts needs a longitudinal "
+                            f"accelerometer column (one of {', '.join(ACCELEROMETER_COLUMNS)}): with "
+                            "speed alone a steady cruise cannot be told from a held value")
+        log.counts["excluded_dropouts"] = int(drop.sum())
+        usable &= ~drop
     if meas.grade != "logged":
         col = accelerometer_column(df.columns)
         if col is None:

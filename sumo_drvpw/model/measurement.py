@@ -17,6 +17,9 @@ there)::
     fusion_tau_s = 300     # crossover of the fusion [s]
     air_density = "altitude"  # "logged" or "altitude": pressure of the standard
                            # atmosphere at the logged elevation when pressure is not logged
+    exclude_dropouts = true  # leave out logger dropouts: speed and a longitudinal
+                           # accelerometer held or linearly filled for seconds
+                           # (sumo_drvpw.data.dropouts; inputs only)
 
 The correction itself (signal processing on a log) is :mod:`sumo_drvpw.data.corrections`.
 """
@@ -51,11 +54,13 @@ class Measurement:
     grade: str = "logged"
     fusion_tau_s: float = FUSION_TAU_S
     air_density: str = "logged"
+    exclude_dropouts: bool = False
 
     @property
     def identity(self) -> bool:
         """True when nothing is corrected."""
-        return self.power_lag_s == 0.0 and self.grade == "logged" and self.air_density == "logged"
+        return (self.power_lag_s == 0.0 and self.grade == "logged" and self.air_density == "logged"
+                and not self.exclude_dropouts)
 
     def to_dict(self) -> dict:
         """The ``[measurement]`` table (every key, so the file says what was done)."""
@@ -74,6 +79,8 @@ class Measurement:
             parts.append("grade from the accelerometer, its per-trip offset fixed by the elevation")
         if self.air_density == "altitude":
             parts.append("air density at the logged altitude (standard atmosphere)")
+        if self.exclude_dropouts:
+            parts.append("logger dropouts (speed and accelerometer held or linearly filled) left out")
         return "; ".join(parts)
 
 
@@ -81,7 +88,7 @@ def measurement_from_dict(doc, where: str) -> Measurement:
     """A :class:`Measurement` from a ``[measurement]`` table; errors name ``where`` and the key."""
     if not isinstance(doc, dict):
         raise UserError(f"{where} [measurement]: must be a table")
-    known = ("power_lag_s", "grade", "fusion_tau_s", "air_density")
+    known = ("power_lag_s", "grade", "fusion_tau_s", "air_density", "exclude_dropouts")
     bad = sorted(set(doc) - set(known))
     if bad:
         raise UserError(f"{where} [measurement]: unknown key {bad[0]!r} (known: {', '.join(known)})")
@@ -103,4 +110,9 @@ def measurement_from_dict(doc, where: str) -> Measurement:
                 raise UserError(f"{where} [measurement] {key}: must be one of {', '.join(allowed)}, "
                                 f"got {doc[key]!r}")
             kw[key] = str(doc[key])
+    if "exclude_dropouts" in doc:
+        if not isinstance(doc["exclude_dropouts"], bool):
+            raise UserError(f"{where} [measurement] exclude_dropouts: must be true or false, "
+                            f"got {doc['exclude_dropouts']!r}")
+        kw["exclude_dropouts"] = doc["exclude_dropouts"]
     return Measurement(**kw)
