@@ -406,3 +406,30 @@ def test_whole_trips_categorical_ids_are_the_same_trips(tmp_path_factory, length
     seen = [set(b.trip_id) for b, _ in cat]
     assert sum(len(s) for s in seen) == len(lengths)  # each trip in exactly one batch
     assert [o for _, o in cat] == list(np.cumsum([0] + [len(b) for b, _ in cat[:-1]]))
+
+
+def test_streamed_calibration_reads_the_ambient_temperature_of_cold_terms(tmp_path):
+    """A ``cold`` factor reads ``ambient_c`` without naming it as a ``[col]`` signal; the
+    streamed reader selects columns, so it must still read it (regression: the streamed
+    calibration dropped ``cold*v^2`` as "zero on these data")."""
+    import sumo_drvpw.synth.effects as E
+    from sumo_drvpw.model.terms import parse_term
+
+    assert parse_term("cold*v^2").columns == ("ambient_c",) and parse_term("cold*v^2").signals == ()
+    df, _ = E.synth_trips(3, 5.0, seed=4, effects=[E.LogPower()])
+    # trips at different temperatures, and a drag that rises in the cold (planted)
+    amb = np.repeat([-5.0, 10.0, 25.0], len(df) // 3 + 1)[:len(df)]
+    df["ambient_c"] = amb
+    df["power_w"] = df["power_w"] + 0.2 * (20.0 - amb) * df["speed_mps"] ** 2
+    path = tmp_path / "cold.parquet"
+    df.to_parquet(path)
+    got = {}
+    for engine in ("local", "memory"):
+        eq = tmp_path / f"{engine}.toml"
+        assert cli_main(["calibrate", str(path), "--vehicle", "prius3", "--candidates", "acc,grade,aero,roll,cold*v^2",
+                         "--engine", engine, "--out", str(eq)]) == 0
+        from sumo_drvpw.fileio import read_toml
+
+        got[engine] = read_toml(eq, "equation")["terms"]
+    assert got["local"]["cold*v^2"] == pytest.approx(got["memory"]["cold*v^2"], rel=1e-9)
+    assert got["local"]["cold*v^2"] == pytest.approx(0.2, rel=0.1)

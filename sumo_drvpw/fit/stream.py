@@ -198,7 +198,7 @@ class CalibrationStats:
         """Columns to read: the reader's canonical ones and the signals the candidates name."""
         from sumo_drvpw.data.stream import CANONICAL
 
-        return CANONICAL | {s for t in self.names for s in parse_term(t).signals}
+        return CANONICAL | {s for t in self.names for s in parse_term(t).columns}
 
     def add(self, m) -> "CalibrationStats":
         """Accumulate one batch (a :class:`~sumo_drvpw.data.measured.Measured` of whole trips)."""
@@ -300,7 +300,7 @@ def _light_inputs(x, names):
     term names a trip (so taking rows copies nothing else)."""
     from sumo_drvpw.model.terms import Inputs
 
-    sig = {s for t in names for s in parse_term(t).signals}
+    sig = {s for t in names for s in parse_term(t).columns}
     trip = any(f.startswith("trip=") for t in names for f in parse_term(t).factors)
     return Inputs(x.v, x.a, x.theta, x.wind, x.mass, x.rho,
                   {s: v for s, v in x.signals.items() if s in sig},

@@ -144,7 +144,7 @@ class CompareStats:
         from sumo_drvpw.data.stream import CANONICAL
 
         return CANONICAL | {s for eq in self.equations for t in eq.terms
-                            for s in parse_term(t).signals}
+                            for s in parse_term(t).columns}
 
     def add(self, m) -> "CompareStats":
         """Accumulate one batch: the usable samples of a Measured of whole trips."""

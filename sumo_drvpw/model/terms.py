@@ -173,6 +173,14 @@ class Term:
                 out.append(m.group(1))
         return tuple(out)
 
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """Every log column the term's value depends on: its ``[col]`` signals, and
+        ``ambient_c`` for the ``cold`` factor (which is 0 without it, so it is not required
+        as a signal is; a reader that selects columns must still read it)."""
+        extra = ("ambient_c",) if "cold" in self.factors else ()
+        return self.signals + tuple(c for c in extra if c not in self.signals)
+
     def evaluate(self, x: Inputs) -> np.ndarray:
         """Value of the term for every sample (unit: see the module table)."""
         val = None
