@@ -90,22 +90,38 @@ def write_subset(df, trips, path, keep: bool, roles: dict | None = None):
     return path
 
 
-def load_checked(path, vehicle):
-    """load_measured with the logger-dropout check (fit.input_checks.dropout_mask, inputs
-    only: speed and a longitudinal accelerometer exactly linear in time for ≥ 5 s, and the
-    grade-smoothing distance around it) taken out of the usable samples. Returns the
-    Measured; ``m.dropouts`` = trip → seconds taken out."""
-    from sumo_drvpw.data.measured import load_measured
-    from sumo_drvpw.fit.input_checks import dropout_report, log_dropouts
+def _has_accelerometer(path) -> bool:
+    import pyarrow.parquet as pq
 
-    m = load_measured([path], vehicle)
-    df = m.log.df
-    drop = log_dropouts(m.log)
+    from sumo_drvpw.data.corrections import ACCELEROMETER_COLUMNS
+
+    return any(c in pq.read_schema(path).names for c in ACCELEROMETER_COLUMNS)
+
+
+def _load(path, vehicle, meas):
+    """load_measured with the measurement corrections ``meas`` (data/corrections.py, as any
+    command reads a log whose equation declares them); ``m.dropouts`` = trip → seconds of
+    logger dropouts taken out (None without the check)."""
+    from sumo_drvpw.data.dropouts import dropout_report, log_dropouts
+    from sumo_drvpw.data.log import ReadOptions
+    from sumo_drvpw.data.measured import load_measured
+
+    m = load_measured([path], vehicle, ReadOptions(measurement=meas))
     m.dropouts = None
-    if drop is not None:
-        m.dropouts = dropout_report(drop & m.usable, df["trip_id"].to_numpy(), df["dt_s"].to_numpy(float))
-        m.usable = m.usable & ~drop
+    if meas is not None and meas.exclude_dropouts:
+        df = m.log.df
+        drop = log_dropouts(m.log)
+        m.dropouts = dropout_report(drop, df["trip_id"].to_numpy(), df["dt_s"].to_numpy(float))
     return m
+
+
+def load_checked(path, vehicle):
+    """load_measured with the logger-dropout check (data.dropouts: speed and a longitudinal
+    accelerometer exactly linear in time for ≥ 5 s, and the grade-smoothing distance around
+    it; inputs only) taken out of the usable samples — ``[measurement] exclude_dropouts``."""
+    from sumo_drvpw.model.measurement import Measurement
+
+    return _load(path, vehicle, Measurement(exclude_dropouts=_has_accelerometer(path)))
 
 
 def _offsets(m):
@@ -163,43 +179,33 @@ def input_checks(m_train, eq, held) -> dict:
     return out
 
 
+def measurement_of(path, lag_s: float, accel_grade: bool, tau_s: float | None = None):
+    """The corrections of a log (:class:`sumo_drvpw.model.measurement.Measurement`): the power
+    read ``lag_s`` later within trips; the grade fused from the accelerometer (fast part) and
+    the logged grade (slow part, free of the accelerometer's mounting pitch), or with
+    ``tau_s`` = ∞ the accelerometer alone with its per-trip offset fixed by the elevation;
+    ρ at the logged altitude (standard atmosphere) when pressure is not logged; logger
+    dropouts left out (CHECK_DROPOUTS). The closed-loop equations carry it as their
+    ``[measurement]``, so `sumo-drvpw compare` reads new logs the same way."""
+    import pyarrow.parquet as pq
+
+    from sumo_drvpw.model.measurement import FUSION_TAU_S, Measurement
+
+    cols = set(pq.read_schema(path).names)
+    acc = _has_accelerometer(path)
+    grade = "logged"
+    if accel_grade and acc:
+        grade = "accelerometer" if tau_s is not None and math.isinf(tau_s) else "fused"
+    return Measurement(
+        power_lag_s=float(lag_s), grade=grade,
+        fusion_tau_s=FUSION_TAU_S if tau_s is None or math.isinf(tau_s) else float(tau_s),
+        air_density="altitude" if {"elevation_m", "ambient_c"} <= cols and "pressure_kpa" not in cols else "logged",
+        exclude_dropouts=CHECK_DROPOUTS and acc)
+
+
 def corrected_measured(path, vehicle, lag_s: float, accel_grade: bool, tau_s: float | None = None):
-    """Measured power and inputs of a log with the measurement-side corrections applied:
-    the power read ``lag_s`` later within trips; the grade fused from the accelerometer (fast
-    part) and the logged grade (slow part, free of the accelerometer's mounting pitch); ρ at
-    the logged altitude (standard atmosphere) when pressure is not logged."""
-    from sumo_drvpw.data.measured import load_measured
-    from sumo_drvpw.fit.diagnose.structural import (FUSION_TAU_S, P0_KPA, accelerometer_sin_grade, fused_sin_grade,
-                                                    pressure_at_altitude_kpa, shift_within_trips)
-
-    m = load_checked(path, vehicle) if CHECK_DROPOUTS else load_measured([path], vehicle)
-    df = m.log.df
-    if "elevation_m" in df and "pressure_kpa" not in df and "ambient_c" in df:
-        # ρ from altitude and temperature: the reader assumed sea-level pressure
-        h = df["elevation_m"].to_numpy(float)
-        m.inputs.rho = np.where(np.isfinite(h), m.inputs.rho * pressure_at_altitude_kpa(h) / P0_KPA,
-                                m.inputs.rho)
-    trip = m.log.df["trip_id"].to_numpy()
-    codes = np.unique(trip, return_inverse=True)[1]
-    t = m.log.df["time_s"].to_numpy(float)
-    dt = float(np.median(np.diff(t)[np.diff(codes) == 0]))
-    if lag_s:
-        m.power_w = shift_within_trips(np.asarray(m.power_w, float), codes, int(round(lag_s / dt)))
-        m.usable = m.usable & np.isfinite(m.power_w)
-    if accel_grade and "imu_accel_mps2" in m.inputs.signals:
-        s_acc = accelerometer_sin_grade(m.inputs.signals["imu_accel_mps2"], m.inputs.a, codes, dt)
-        if tau_s is not None and math.isinf(tau_s):
-            from sumo_drvpw.fit.input_checks import offset_corrected_sin_grade
-
-            # the accelerometer alone, its per-trip offset fixed by the elevation
-            m.inputs.theta = np.arcsin(offset_corrected_sin_grade(
-                s_acc, m.inputs.v, df["dt_s"].to_numpy(float), codes, df["elevation_m"].to_numpy(float),
-                m.usable & np.isfinite(m.power_w)))
-        else:
-            m.inputs.theta = np.arcsin(fused_sin_grade(s_acc, np.sin(m.inputs.theta), codes, dt,
-                                                       FUSION_TAU_S if tau_s is None else tau_s))
-        m.usable = m.usable & np.isfinite(m.inputs.theta)
-    return m
+    """Measured power and inputs of a log with the corrections of :func:`measurement_of`."""
+    return _load(path, vehicle, measurement_of(path, lag_s, accel_grade, tau_s))
 
 
 def evaluate(m, equations) -> dict:
@@ -305,7 +311,6 @@ def regime_eval(m, eq, scale):
 def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
     """One car: per held-out group, calibrate + diagnose on the rest, evaluate held out."""
     from sumo_drvpw.report.diagnose import write_outputs
-    from sumo_drvpw.data.measured import load_measured
     from sumo_drvpw.fit.diagnose import DiagnoseOptions, diagnose
     from sumo_drvpw.model.equations import load_equation
 
@@ -318,7 +323,7 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
             train = write_subset(df, held, Path(tmp) / "train.parquet", keep=False, roles=roles)
             test = write_subset(df, held, Path(tmp) / "test.parquet", keep=True, roles=roles)
             t0 = time.perf_counter()
-            m_train = load_checked(train, vehicle) if CHECK_DROPOUTS else load_measured([train], vehicle)
+            m_train = load_checked(train, vehicle) if CHECK_DROPOUTS else _load(train, vehicle, None)
             base_eq, base_phys = calibrate_physical(m_train, f"{name}_calibrated")
             checks = input_checks(m_train, base_eq, held)
             decl = declared if declared is not None else base_eq
@@ -350,11 +355,21 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
                               "reading": physical_reading(final_eq.terms, rho)}
             else:
                 final_eq, final_info = fit_terms(m_fit, list(base_eq.terms) + extra, f"{name}_closed")
-            m_test = load_checked(test, vehicle) if CHECK_DROPOUTS else load_measured([test], vehicle)
+            m_test = load_checked(test, vehicle) if CHECK_DROPOUTS else _load(test, vehicle, None)
             eqs = [base_eq, load_equation("vsp_ldv1999")]
             if declared is not None:
                 eqs.insert(0, declared)
             held_raw = evaluate(m_test, eqs)
+            # the closed-loop equations declare the corrections their logs need: compare
+            # (and anyone's later run of it) reads new logs the same way
+            corr_eq.measurement = final_eq.measurement = m_corr.measurement
+            from sumo_drvpw.model.equations import save_equation
+
+            final_eq.description = (f"{name}: the loop closed on {n_train} training trips "
+                                    f"(scripts/closing_the_loop.py); held out: {', '.join(held)}")
+            final_eq.provenance.update({"method": "scripts/closing_the_loop.py", "held_out": list(held),
+                                        "vehicle": vehicle})
+            save_equation(final_eq, out_dir / tag / "closed_equation.toml")
             m_test_corr = corrected_measured(test, vehicle, lag, acc_grade, tau_s)
             held_corr = evaluate(m_test_corr, [e for e in (corr_eq, final_eq) if e is not None])
             held_regime = (regime_eval(m_test_corr, final_eq, 1.0 + rscale)
@@ -367,7 +382,7 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
                          "took_s": time.perf_counter() - t0, "declared": declared,
                          "final_eq": final_eq, "final_info": final_info, "extra": extra,
                          "tau": tau, "tau_s": tau_s, "sel": sel, "rscale": rscale,
-                         "held_regime": held_regime, "checks": checks})
+                         "held_regime": held_regime, "checks": checks, "vehicle": vehicle})
             checks["dropouts_held"] = getattr(m_test, "dropouts", None)
             checks["held_inputs"] = _trip_inputs(m_test)
             if "imu_accel_mps2" in m_test.log.df:

@@ -217,6 +217,12 @@ def render(cars, took, cmd: str) -> str:
                      + (f" (road load kept from the dynamometer: aero, roll)" if run["declared"] is not None else "")
                      + (f"; findings carried: {', '.join(run['extra'])}" if run["extra"] and not sel else "")
                      + (f"; physical candidates carried: {', '.join(sel['chosen']) or 'none'}" if sel else ""))
+            meas = run["final_eq"].measurement
+            L.append(f"- written as [closed_equation.toml](closing-the-loop/{run['tag']}/closed_equation.toml) with its "
+                     f"`[measurement]` ({meas.describe() if meas is not None else 'none'}): "
+                     f"`sumo-drvpw compare NEW_LOGS --vehicle {run.get('vehicle', 'VEHICLE')} --equation "
+                     f"docs/closing-the-loop/{run['tag']}/closed_equation.toml --out DIR` reads new logs with the "
+                     "same corrections; in SUMO the [measurement] is not used (inputs are clean)")
             L += _render_checks(run)
             L += ["", "**Held out** (trips never used above):", "",
                   "| equation | data | R² | mean abs. trip traction-energy error | worst | per trip |",

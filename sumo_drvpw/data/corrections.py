@@ -172,7 +172,7 @@ def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Mea
             raise UserError(f"{log.describe()}: leaving out logger dropouts needs a longitudinal "
                             f"accelerometer column (one of {', '.join(ACCELEROMETER_COLUMNS)}): with "
                             "speed alone a steady cruise cannot be told from a held value")
-        log.counts["excluded_dropouts"] = int(drop.sum())
+        log.counts["excluded_dropouts"] = int((drop & usable).sum())  # usable samples taken out
         usable &= ~drop
     if meas.grade != "logged":
         col = accelerometer_column(df.columns)
