@@ -142,6 +142,18 @@ def render(cars, took, cmd: str) -> str:
             dp = car["dyno_phys"]
             L += [f"Dynamometer calibration ({dp['used']}): {_terms(car['runs'][0]['declared'])}. "
                   f"Reading: {_reading(dp)}.", ""]
+        fa = car.get("all_trips")
+        if fa:
+            eq = fa["equation"]
+            L += [f"**Deliverable, fitted on all {fa['trips']} trips** (the same pipeline, nothing held out: its "
+                  "held-out quality is that of the splits below): "
+                  f"[closed_equation.toml](closing-the-loop/{fa['tag']}/closed_equation.toml) — {_terms(eq)}; "
+                  f"tracer findings {', '.join(fa['findings']) or 'none'}; physical candidates "
+                  f"{', '.join(fa['sel']['chosen']) or 'none'}; corrections: {eq.measurement.describe() if eq.measurement else 'none'}. "
+                  "On new logs of this car: "
+                  f"`sumo-drvpw compare NEW_LOGS --vehicle {car['vehicle']} --equation "
+                  f"docs/closing-the-loop/{fa['tag']}/closed_equation.toml --out DIR` (the corrections are applied "
+                  "as the file declares).", ""]
         for run in car["runs"]:
             res, r, d = run["res"], run["res"].report, run["res"].details
             bp = run["base_phys"]
