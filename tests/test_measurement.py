@@ -241,3 +241,16 @@ def test_exclude_dropouts_leaves_out_a_planted_logger_hold(tmp_path, capsys):
                      str(tmp_path / "e.toml")]) == 2
     err = capsys.readouterr().err
     assert "imu_accel_mps2" in err and len(err.strip().splitlines()) == 1
+
+
+def test_calibrate_hints_the_accelerometer_grade_when_the_grade_is_implausible(tmp_path, capsys):
+    df, _ = E.synth_trips(3, 6.0, seed=3, noise=NOISE, effects=[E.AttenuatedGrade(0.4, 30.0), E.LogPower()])
+    path, no_acc = tmp_path / "g.parquet", tmp_path / "g_noacc.parquet"
+    df.to_parquet(path)
+    df.drop(columns=["imu_accel_mps2"]).to_parquet(no_acc)
+    for log, engine, hinted in ((path, "local", True), (path, "memory", True), (no_acc, "local", False)):
+        assert cli_main(["calibrate", str(log), "--vehicle", "prius3", "--engine", engine,
+                         "--out", str(tmp_path / "e.toml")]) == 0
+        out = capsys.readouterr().out
+        assert "implausible" in out and "grade" in out
+        assert ("hint:" in out and "--grade-source fused" in out) == hinted, out

@@ -113,6 +113,10 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
                                   constraints=constraints_of(args.candidates))
     if note:
         print(note)
+        from sumo_drvpw.cli import measurement_options
+        from sumo_drvpw.cli.calibrate import hint_grade_source, log_columns
+
+        hint_grade_source(note, log_columns(args.logs), measurement_options(args))
     from sumo_drvpw.cli import measurement_options
     from sumo_drvpw.cli.calibrate import declare_measurement
 

@@ -104,6 +104,7 @@ def main(args) -> int:
     eq, note = apply_physics(eq, m.inputs, m.power_w, m.usable, constraints_of(args.candidates))
     if note:
         print(note)
+        hint_grade_source(note, m.log.df.columns, m.log.options.measurement)
     declare_measurement(eq, m.log.options.measurement)
     if args.report:  # report and equation together: the equation is written last
         with output_set(args, args.report, inputs) as tmp:
@@ -114,6 +115,34 @@ def main(args) -> int:
         save_equation(eq, out)
     print(f"wrote {out}")
     return 0
+
+
+def log_columns(paths) -> set[str]:
+    """Column names of the logs (their headers only)."""
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    from sumo_drvpw.data.log import expand_paths
+
+    cols = set()
+    for p in expand_paths(paths):
+        try:
+            cols |= set(pq.read_schema(p).names) if str(p).endswith(".parquet") else \
+                set(pd.read_csv(p, nrows=0).columns)
+        except Exception:  # a header we cannot read here was read (or refused) by the reader
+            continue
+    return cols
+
+
+def hint_grade_source(note: str, columns, meas) -> None:
+    """When the grade was found attenuated and the log has a longitudinal accelerometer,
+    say how to correct the grade in the data instead of constraining its coefficient."""
+    from sumo_drvpw.data.corrections import accelerometer_column
+
+    col = accelerometer_column(columns)
+    if "grade" in note and col and (meas is None or meas.grade == "logged"):
+        print(f"hint: the log has a longitudinal accelerometer ({col}); --grade-source fused:300 corrects "
+              "the grade in the data (diagnose says whether the accelerometer's grade fits better)")
 
 
 def declare_measurement(eq, meas) -> None:
