@@ -254,3 +254,13 @@ def test_calibrate_hints_the_accelerometer_grade_when_the_grade_is_implausible(t
         out = capsys.readouterr().out
         assert "implausible" in out and "grade" in out
         assert ("hint:" in out and "--grade-source fused" in out) == hinted, out
+
+
+def test_diagnose_names_the_calibrate_flags_that_correct_its_measurement_findings(planted, tmp_path, capsys):
+    assert cli_main(["diagnose", str(planted), "--vehicle", "prius3", "--equation", TRUTH, "--no-figures",
+                     "--max-findings", "2", "--out", str(tmp_path / "d")]) == 0
+    out = capsys.readouterr().out
+    line = next(ln for ln in out.splitlines() if "sumo-drvpw calibrate" in ln)
+    assert "--power-lag 1.5" in line and "--grade-source fused:60" in line
+    eq = _terms(tmp_path / "d" / "final_equation.toml")
+    assert eq["measurement"]["power_lag_s"] == pytest.approx(LAG_S, abs=0.125)

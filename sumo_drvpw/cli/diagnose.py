@@ -177,8 +177,33 @@ def main(args) -> int:
         print(f"  + {f['term']}: {f['effect']} (RMSE {f['metrics_before']['rmse_w']:.1f} → "
               f"{f['metrics_after']['rmse_w']:.1f} W{share})")
     print(f"final held-out RMSE {r['final']['metrics']['rmse_w']:.1f} W; wrote {Path(args.out) / 'trace.json'}")
+    fix = correction_flags(r["findings"], res.equation.measurement)
+    if fix:
+        print("measurement-side findings belong in the data, not in coefficients: calibrate the equation for "
+              f"SUMO with  sumo-drvpw calibrate {' '.join(map(str, args.logs))} {fix} --out EQ.toml  "
+              "(the equation keeps them in its [measurement]; compare reads new logs the same way)")
     print(resource_line(res), file=sys.stderr)
     return 0
+
+
+def correction_flags(findings, measurement) -> str:
+    """The calibrate options that correct, in the data, the measurement-side findings of a
+    trace: the power lag (the traced equation's whole [measurement] lag), the accelerometer
+    grade, the air density at altitude. '' when there are none."""
+    terms = [f["term"] for f in findings]
+    flags = []
+    lag = measurement.power_lag_s if measurement is not None else 0.0
+    if any(f.get("kind") == "timing" for f in findings) and lag:
+        flags.append(f"--power-lag {lag:g}")
+    if "[grade_accelerometer]" in terms:
+        from sumo_drvpw.model.measurement import FUSION_TAU_S
+
+        flags.append(f"--grade-source fused:{FUSION_TAU_S:g}")
+    if any(t.startswith("[air_density_altitude]") for t in terms):
+        flags.append("--air-density altitude")
+    if flags and measurement is not None and measurement.exclude_dropouts:
+        flags.append("--exclude-dropouts")
+    return " ".join(flags)
 
 
 def _target(args) -> str:
