@@ -334,3 +334,42 @@ def test_log_dropouts_reads_a_drive_log_and_needs_an_accelerometer():
     assert np.array_equal(drop, expect) and np.all(drop[planted]) and drop.sum() > planted.sum()
     assert log_dropouts(from_frame(df.drop(columns=["imu_accel_mps2"]), load_vehicle("prius3"),
                                    name="no-imu")) is None
+
+
+@pytest.mark.parametrize("run", ["i3", "i3_split2"])
+def test_the_documented_closed_equation_reproduces_its_held_out_figures_through_compare(shared_data, tmp_path,
+                                                                                       run, capsys):
+    """docs/closing-the-loop/<run>/closed_equation.toml carries the corrections of its logs as
+    [measurement]: `sumo-drvpw compare` on the held-out trips, with no flag, reads them the same
+    way and reproduces the report's held-out row (R², per-trip traction-energy errors)."""
+    import json
+    import re
+    from pathlib import Path
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.cli.import_ import write_log
+    from sumo_drvpw.data.adapters import read
+    from sumo_drvpw.fileio import read_toml
+
+    docs = Path(__file__).resolve().parent.parent / "docs"
+    eq_path = docs / "closing-the-loop" / run / "closed_equation.toml"
+    doc = read_toml(eq_path, "equation")
+    assert doc["measurement"]["grade"] == "fused" and doc["measurement"]["exclude_dropouts"] is True
+    held = doc["provenance"]["held_out"]
+    df, rep = read("bmw-i3-tum", shared_data / "bmw_i3_tum")
+    sub = df[df["trip_id"].isin(held)].reset_index(drop=True)
+    log = tmp_path / "held.parquet"
+    write_log(sub, {"roles": {c: r for c, r in rep.get("roles", {}).items() if c in sub.columns}}, log)
+    assert cli_main(["compare", str(log), "--vehicle", "bmw_i3", "--equation", str(eq_path),
+                     "--out", str(tmp_path / "c")]) == 0
+    assert "[measurement] of" in capsys.readouterr().out
+    got = json.loads((tmp_path / "c" / "report.json").read_text())["equations"][doc["equation"]["name"]]
+    md = (docs / "closing-the-loop.md").read_text()
+    section = md.split(f"### {run}: held out")[1]
+    row = next(ln for ln in section.splitlines() if ln.startswith(f"| `{doc['equation']['name']}` |"))
+    cells = [c.strip() for c in row.split("|")]
+    assert got["r2"] == pytest.approx(float(cells[3]), abs=6e-4)
+    per = dict(re.findall(r"(Trip\w+) ([+-]\d+\.\d) %", cells[6]))
+    assert set(per) == set(held)
+    for t, e in per.items():
+        assert 100 * got["trip_energy"]["trips"][t]["error"] == pytest.approx(float(e), abs=0.051)
