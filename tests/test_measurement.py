@@ -264,3 +264,11 @@ def test_diagnose_names_the_calibrate_flags_that_correct_its_measurement_finding
     assert "--power-lag 1.5" in line and "--grade-source fused:60" in line
     eq = _terms(tmp_path / "d" / "final_equation.toml")
     assert eq["measurement"]["power_lag_s"] == pytest.approx(LAG_S, abs=0.125)
+
+
+@pytest.mark.parametrize("stream", ["no", "yes"])
+def test_diagnose_in_memory_and_streamed_declare_the_whole_lag(planted, tmp_path, stream):
+    out = tmp_path / stream
+    assert cli_main(["diagnose", str(planted), "--vehicle", "prius3", "--equation", TRUTH, "--power-lag", "1.0",
+                     "--stream", stream, "--no-figures", "--max-findings", "1", "--out", str(out)]) == 0
+    assert _terms(out / "final_equation.toml")["measurement"]["power_lag_s"] == pytest.approx(LAG_S, abs=0.125)
