@@ -627,30 +627,38 @@ def test_sumo_phemlight5_petrol_class_burns_fuel_at_idle(tmp_path):
     assert drive > 2 * idle
 
 
-def test_corrected_inputs_fuse_the_accelerometer_grade_and_take_rho_at_altitude():
-    """validation.chain.corrected_inputs: ρ × p(h)/p0 (standard atmosphere); the grade's fast
-    part from the accelerometer (a planted 20-s undulation the logged grade lacks is
-    recovered), its slow part from the logged grade (a 2° mounting pitch of the accelerometer
-    does not enter)."""
+def test_i3_study_reads_with_the_library_corrections_fused_grade_and_rho_at_altitude():
+    """validation.chain_i3.I3_MEASUREMENT through the library's reader corrections
+    (data.corrections.apply_measurement, as `calibrate --grade-source fused:60 --air-density
+    altitude --exclude-dropouts`): ρ × p(h)/p0 (standard atmosphere); the grade's fast part
+    from the accelerometer (a planted 20-s undulation the logged grade lacks is recovered),
+    its slow part from the logged grade (a 2° mounting pitch of the accelerometer does not
+    enter); nothing held by the logger, so nothing is left out."""
+    import copy
     from types import SimpleNamespace
 
-    from sumo_drvpw.fit.diagnose.structural import P0_KPA, pressure_at_altitude_kpa
-    from sumo_drvpw.model.constants import G
+    from sumo_drvpw.data.corrections import apply_measurement
+    from sumo_drvpw.data.log import ReadOptions
+    from sumo_drvpw.model.air import pressure_at_altitude_kpa
+    from sumo_drvpw.model.constants import G, P_STD_KPA
     from sumo_drvpw.model.terms import Inputs
-    from sumo_drvpw.validation.chain import corrected_inputs
+    from sumo_drvpw.validation.chain_i3 import I3_MEASUREMENT
 
     t = np.arange(0.0, 600.0, 0.1)
     n = t.size
     sin_true = 0.04 * np.sin(2 * np.pi * t / 20.0)
     a = 0.2 * np.sin(2 * np.pi * t / 50.0)
+    v = 10.0 + 0.2 * 50.0 / (2 * np.pi) * (1 - np.cos(2 * np.pi * t / 50.0))
     imu = a + G * (sin_true + np.sin(np.radians(2.0)))
     h = np.full(n, 500.0)
-    df = pd.DataFrame({"trip_id": "T", "time_s": t, "elevation_m": h})
-    x = Inputs(np.full(n, 10.0), a, np.zeros(n), np.zeros(n), np.full(n, 1500.0), np.full(n, 1.2),
+    df = pd.DataFrame({"trip_id": "T", "time_s": t, "elevation_m": h, "speed_mps": v,
+                       "imu_accel_mps2": imu})
+    log = SimpleNamespace(df=df, counts={}, options=ReadOptions(), describe=lambda: "T")
+    x = Inputs(v, a, np.zeros(n), np.zeros(n), np.full(n, 1500.0), np.full(n, 1.2),
                {"imu_accel_mps2": imu})
-    xc, ok = corrected_inputs(SimpleNamespace(df=df), x)
-    assert ok.all()
-    np.testing.assert_allclose(xc.rho, 1.2 * pressure_at_altitude_kpa(h) / P0_KPA)
+    p, xc, ok = apply_measurement(log, copy.copy(x), np.ones(n), np.ones(n, bool), I3_MEASUREMENT)
+    assert ok.all() and log.counts["excluded_dropouts"] == 0
+    np.testing.assert_allclose(xc.rho, 1.2 * pressure_at_altitude_kpa(h) / P_STD_KPA)
     assert xc.rho[0] < 1.2 * 0.95                      # ~6 % less air at 500 m
     s = np.sin(xc.theta)[600:-600]                     # away from the trip's ends
     assert np.corrcoef(s, sin_true[600:-600])[0, 1] > 0.95
