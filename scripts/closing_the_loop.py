@@ -422,6 +422,7 @@ def final_fit(name, df, vehicle, out_dir, roles=None) -> dict | None:
         tau_s = None if tau is None else tau["tau_s"]
         m_corr = corrected_measured(path, vehicle, lag, acc_grade, tau_s)
         eq, sel, rscale = physical_stage(m_corr, list(base_eq.terms), f"{name}_closed")
+        floor = repeat_floor(m_corr, eq, sel, df)
     eq.measurement = m_corr.measurement
     eq.description = (f"{name}: the loop closed on all {len(trips)} trips (scripts/closing_the_loop.py); "
                       "its held-out quality is that of the splits in docs/closing-the-loop.md")
@@ -429,11 +430,34 @@ def final_fit(name, df, vehicle, out_dir, roles=None) -> dict | None:
     save_equation(eq, out_dir / tag / "closed_equation.toml")
     out = {"tag": tag, "trips": len(trips), "equation": eq, "lag": lag, "tau": tau, "sel": sel,
            "rscale": rscale, "findings": [f["term"] for f in res.report["findings"]],
-           "took_s": time.perf_counter() - t0}
+           "took_s": time.perf_counter() - t0, "floor": floor}
     write_json(out_dir / tag / "summary.json", {
         "trips": trips, "lag_s": lag, "fusion_tau_s": tau_s, "tracer_findings": out["findings"],
         "physical_candidates": list(sel["chosen"]), "terms": eq.terms,
-        "measurement": eq.measurement.to_dict() if eq.measurement else None})
+        "measurement": eq.measurement.to_dict() if eq.measurement else None,
+        "repeat_trips": floor})
+    return out
+
+
+def repeat_floor(m, eq, sel, df) -> dict | None:
+    """How low the per-trip error can go on these logs (:mod:`sumo_drvpw.fit.repeats`): the
+    closed-loop structure in trip-grouped 5-fold cross-validation over all trips (each trip
+    predicted by coefficients fitted without it; the structure itself was chosen on all
+    trips), and the scatter between repeat trips (same route, started within the hour) that
+    no logged input explains. None without route and start columns."""
+    from sumo_drvpw.fit.physical import trip_cv
+    from sumo_drvpw.fit.repeats import repeat_pairs, repeat_scatter
+
+    if not {"route", "trip_start"} <= set(df.columns):
+        return None
+    first = df.groupby("trip_id", sort=True)[["route", "trip_start"]].first()
+    pairs = repeat_pairs(first["trip_start"].to_dict(), first["route"].to_dict())
+    cv = trip_cv(*_cv_args(m), list(eq.terms), regime=bool(sel["regime"]))
+    k = max(1, len(first) // HOLD_EVERY)
+    out = repeat_scatter(cv["errors"], pairs, k=k)
+    out.update(cv_mean_abs_error=cv["mean_abs_error"], cv_max_abs_error=cv["max_abs_error"],
+               cv_folds=cv["folds"], cv_errors=cv["errors"],
+               starts={t: str(v) for t, v in first["trip_start"].items()})
     return out
 
 

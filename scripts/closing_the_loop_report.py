@@ -96,6 +96,34 @@ def _render_checks(run) -> list[str]:
     return L
 
 
+def _render_floor(fl) -> list[str]:
+    """How low the per-trip error can go: the scatter between repeat trips (fit.repeats)."""
+    if not fl or not fl.get("n_pairs"):
+        return []
+    k = fl["k"]
+    L = ["**How low can the per-trip error go on these logs?** Repeat trips — the same route, started "
+         "within the hour — share car, driver, season and the day's weather; what their held-out errors still "
+         "differ by is scatter the logged inputs do not carry (wind on a one-way leg, traffic, warm-up "
+         "history). Errors: the deliverable's structure in trip-grouped "
+         f"{fl['cv_folds']}-fold cross-validation over all trips (coefficients fitted without the trip; the "
+         "structure itself was chosen on all trips): mean "
+         f"{100 * fl['cv_mean_abs_error']:.1f} %, worst {100 * fl['cv_max_abs_error']:.1f} %. Method: "
+         "`sumo_drvpw/fit/repeats.py`.", "",
+         "| repeat pair (starts) | error | error | difference |", "|---|---|---|---|"]
+    st = fl.get("starts", {})
+    for p in fl["pairs"]:
+        L.append(f"| {p['a']} ({st.get(p['a'], '?')[:16]}) – {p['b']} ({st.get(p['b'], '?')[:16]}) | "
+                 f"{_pct(p['error_a'])} | {_pct(p['error_b'])} | {100 * p['difference']:+.1f} points |")
+    pa = fl["p_all_within"]
+    L += ["", f"Scatter per trip from {fl['n_pairs']} pairs: σ = sqrt(Σd²/2n) = **{100 * fl['sigma']:.1f} %**. A model "
+          f"whose only error were this scatter would score, on {k} held-out trips, a mean |error| of about "
+          f"{100 * fl['mean_abs_floor']:.1f} % and a worst of {100 * fl['worst_of_k_median']:.1f} % (median); all "
+          f"{k} within 6 % with probability {100 * pa.get(0.06, float('nan')):.0f} %, within 3 % with "
+          f"{100 * pa.get(0.03, float('nan')):.0f} %. (Normal scatter, independent between the pair's trips; "
+          "a floor for models of the logged inputs, not of the car.)", ""]
+    return L
+
+
 def render(cars, took, cmd: str) -> str:
     from sumo_drvpw.fit.diagnose.structural import FUSION_TAU_S
     from sumo_drvpw.fit.physical import PHYSICAL_CANDIDATES
@@ -154,6 +182,7 @@ def render(cars, took, cmd: str) -> str:
                   f"`sumo-drvpw compare NEW_LOGS --vehicle {car['vehicle']} --equation "
                   f"docs/closing-the-loop/{fa['tag']}/closed_equation.toml --out DIR` (the corrections are applied "
                   "as the file declares).", ""]
+            L += _render_floor(fa.get("floor"))
         for run in car["runs"]:
             res, r, d = run["res"], run["res"].report, run["res"].details
             bp = run["base_phys"]
