@@ -98,6 +98,14 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measur
     usable = ~log.excluded & np.isfinite(p)
     for arr in (x.v, x.a, x.theta, x.wind, x.mass, x.rho):
         usable &= np.isfinite(arr)
+    if target == "battery" and not _has_engine(log, veh):
+        # energy into the battery while the car stands is a charger, not driving
+        from sumo_drvpw.data.charging import charging_mask
+        from sumo_drvpw.data.trips import trip_codes_of
+
+        chg = charging_mask(p, x.v, log.df["time_s"].to_numpy(float), trip_codes_of(log.df["trip_id"]))
+        log.counts["excluded_charging"] = int((chg & usable).sum())
+        usable &= ~chg
     measurement = log.options.measurement
     if measurement is not None and not measurement.identity:
         from sumo_drvpw.data.corrections import apply_measurement
@@ -111,6 +119,14 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measur
             lag = int(round(measurement.power_lag_s / median_dt(log.df["time_s"].to_numpy(float), codes)))
             battery_w = np.nan_to_num(shift_within_trips(battery_w, codes, lag), nan=0.0)
     return Measured(log, veh, p, source, x, usable, target, battery_w, measurement)
+
+
+def _has_engine(log: DriveLog, veh: Vehicle | None) -> bool:
+    """Whether an engine may charge the battery at standstill: a power-split vehicle, or a
+    log with fuel flow (then energy into the battery at standstill is no charger's)."""
+    from sumo_drvpw.data.powertrain import fuel_column
+
+    return (veh is not None and veh.powertrain_type == "power_split") or fuel_column(log.df) is not None
 
 
 def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:

@@ -1,0 +1,66 @@
+"""External charging inside a drive log: energy into the traction battery while the car stands.
+
+A battery-electric car that stands still cannot recuperate: its wheels deliver nothing, and
+its auxiliaries (12 V net, heater, A/C, pumps) *draw* power. A standstill stretch whose
+battery power (positive when discharging) stays below −``CHARGE_MIN_W`` is a charger
+feeding the battery — a fast-charging stop inside a logged trip, or a log that runs on
+while the car is plugged in. Those samples are no driving: they would teach a chain fit a
+negative auxiliary power and turn a trip's net battery energy into a charge. They are left
+out of the usable samples (of fits and of per-trip energies, measured and predicted alike)
+and counted as ``excluded_charging``.
+
+The rule reads the battery power, the target itself, but only where physics rules out every
+driving explanation (no motion, power flowing in). It applies to the ``battery`` target of
+cars without an engine: in a hybrid the engine may charge the battery at standstill, which
+is part of its fuel story (:func:`sumo_drvpw.data.measured.measure` does not apply it when
+the vehicle is a power-split hybrid or the log has a fuel-flow column).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+#: battery power below −this at standstill is a charger [W]: a household socket delivers
+#: 1.4–2.3 kW (Mode 2, 6–10 A at 230 V), wallboxes and DC chargers more; a car at
+#: standstill draws power, it does not return it
+CHARGE_MIN_W = 1000.0
+#: shortest standstill stretch read as charging [s] (a charger session, not a transient)
+CHARGE_MIN_S = 30.0
+#: speed below which the car stands [m/s] (the drive-log spec's standstill tolerance)
+STANDSTILL_MPS = 0.1
+
+
+def charging_mask(battery_w, speed_mps, time_s, trip_codes, min_w: float = CHARGE_MIN_W,
+                  min_s: float = CHARGE_MIN_S) -> np.ndarray:
+    """True on the samples of standstill stretches that are external charging.
+
+    Parameters
+    ----------
+    battery_w : battery power per sample [W], positive when discharging (NaN: unknown)
+    speed_mps : speed [m/s]; NaN counts as not standing
+    time_s : time [s]; trip_codes : trip code per sample (a stretch never crosses a trip)
+    min_w : the median battery power of the stretch must be below −min_w
+    min_s : the stretch must last at least min_s (first to last sample)
+
+    A stretch is a run of contiguous samples of one trip with speed < 0.1 m/s; it is
+    charging when it lasts ``min_s`` and its median finite battery power is below −``min_w``
+    (the median, so that a plug-in transient or a logger spike does not decide).
+    """
+    p = np.asarray(battery_w, float)
+    v = np.asarray(speed_mps, float)
+    t = np.asarray(time_s, float)
+    codes = np.asarray(trip_codes)
+    n = p.size
+    if n == 0:
+        return np.zeros(0, bool)
+    stand = np.isfinite(v) & (v < STANDSTILL_MPS)
+    new = np.r_[True, (stand[1:] != stand[:-1]) | (codes[1:] != codes[:-1])]
+    seg = np.cumsum(new) - 1
+    frame = pd.DataFrame({"seg": seg[stand], "t": t[stand], "p": p[stand]})
+    if frame.empty:
+        return np.zeros(n, bool)
+    g = frame.groupby("seg", sort=False)
+    stats = pd.DataFrame({"span": g["t"].max() - g["t"].min(), "median": g["p"].median()})
+    charging = stats.index[(stats["span"] >= min_s) & (stats["median"] < -min_w)]
+    return stand & np.isin(seg, charging.to_numpy())
