@@ -222,6 +222,11 @@ def i3_study(data: Path) -> dict:
     return out
 
 
+#: the HVAC term of the chain a SUMO study can evaluate (no heater or A/C log there): heating
+#: and cooling power proportional to the ambient temperature's distance from the set-point
+#: (model.chain's [chain.hvac]; 20 °C, the default of `calibrate --hvac ambient_c`, not tuned)
+I3_HVAC = {"column": "ambient_c", "setpoint_c": 20.0}
+
 #: folds of the i3's trip-grouped cross-validation beside the 2-fold (each trip predicted by a
 #: calibration on the other 40 trips: the 40/10 splits of docs/closing-the-loop.md)
 I3_KFOLD = 5
@@ -260,10 +265,10 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k) -> d
 
     from sumo_drvpw.fit.chain import calibrate_on, profile_recuperation_limit
 
-    keys = ("pipeline", "efficiency_map", "chain_only", "chain_only_map", "selected")
+    keys = ("pipeline", "efficiency_map", "chain_only", "chain_only_map", "selected", "hvac_only")
     pred = {kk: np.full(trips.size, np.nan) for kk in keys}
     sig = mb.inputs.signals
-    choices = []
+    choices, hvac_fits = [], []
     for j in range(k):
         test = np.isin(trips, ids[j::k])
         train = ~test
@@ -282,12 +287,21 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k) -> d
             pred[b][test] = fit.chain.evaluate(mw.power_w, x.v, signals=sig)["power_w"][test]
             if kind == sel["choice"]:
                 pred["selected"][test] = pred[a][test]
+        # the chain as a SUMO study has it: no heater or A/C log, HVAC power over the ambient
+        # temperature instead (I3_HVAC), fitted on every training trip (the measured battery
+        # power holds whatever the heater drew, logged or not)
+        fit_h = calibrate_on(mb, loads=[], hvac=dict(I3_HVAC), mask=train, p_drive_w=mw.power_w, limit=None)
+        ch = copy.deepcopy(fit_h.chain)
+        ch.recuperation_limit_w = lim
+        pred["hvac_only"][test] = ch.evaluate(p_eq, x.v, signals=sig)["power_w"][test]
+        hvac_fits.append({k: p["value"] for k, p in fit_h.parameters.items()})
     rows = trip_rows(pred["pipeline"], mb.power_w, dt, trips)
     for kk in keys[1:]:
         for r, a in zip(rows, trip_rows(pred[kk], mb.power_w, dt, trips)):
             r[f"error_{kk}"] = a["error"]
     flagged = {t: not bool(logged[trips == t].mean() > 0.5) for t in ids}
-    out = {"k": k, "rows": rows, "selection": choices, "mean_abs_error": mean_abs(rows),
+    out = {"k": k, "rows": rows, "selection": choices, "hvac_fits": hvac_fits, "hvac": dict(I3_HVAC),
+           "mean_abs_error": mean_abs(rows),
            "mean_abs_error_unflagged": mean_abs(rows, where=lambda r: not flagged[r["trip"]]),
            "mean_abs_error_flagged": mean_abs(rows, where=lambda r: flagged[r["trip"]])}
     for kk in keys[1:]:

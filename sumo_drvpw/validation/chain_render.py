@@ -149,8 +149,8 @@ def _i3(i3: dict) -> list[str]:
          f"| the chain alone, fed the measured motor power | {_pct(i3['mean_abs_error_chain_only'])[1:]} |",
          f"| without the recuperation limit | {_pct(i3['mean_abs_error_no_limit'])[1:]} |",
          f"| without the `[ambient_c]*v^2` term | {_pct(i3['mean_abs_error_no_ambient_term'])[1:]} |",
-         f"| the temperature term as `cold*v^2` (cold = 20 °C − T: the form the SUMO plug-in "
-         f"evaluates; coefficients " + "; ".join(
+         "| the temperature term as `cold*v^2` (cold = 20 °C − T: the form the SUMO plug-in "
+         "evaluates; coefficients " + "; ".join(
              f"fold {n}: " + ", ".join(f"`{k}` {v:.4g}" for k, v in f["road_load_cold_form"].items())
              for n, f in i3["fits"].items()) + f") | {_pct(i3['mean_abs_error_cold_form'])[1:]} |",
          f"| road load on the data as logged (no fused grade, no ρ at altitude; no ambient term) | "
@@ -281,6 +281,15 @@ def _i3_kfold_table(i3: dict) -> list[str]:
          f"{_pct(k['mean_abs_error_chain_only'])[1:]} | {_pct(k['mean_abs_error_chain_only_unflagged'])[1:]} |",
          f"| chain alone, η tables | {_pct(i3.get('mean_abs_error_chain_only_map'))[1:]} | "
          f"{_pct(k['mean_abs_error_chain_only_map'])[1:]} | {_pct(k['mean_abs_error_chain_only_map_unflagged'])[1:]} |",
+         f"| chain as a SUMO study has it: no heater or A/C log, HVAC over the ambient temperature "
+         f"(set-point {k['hvac']['setpoint_c']:g} °C; fitted on every training trip) | – | "
+         f"{_pct(k['mean_abs_error_hvac_only'])[1:]} | {_pct(k['mean_abs_error_hvac_only_unflagged'])[1:]} |",
+         "", "The SUMO-study chain's parameters per fold (heating and cooling W per K from the set-point, "
+         "constant auxiliary W): " + "; ".join(
+             f"{h.get('hvac.heating_w_per_k', float('nan')):.0f} / {h.get('hvac.cooling_w_per_k', float('nan')):.0f} / "
+             f"{h.get('aux_power_w', float('nan')):.0f}" for h in k["hvac_fits"])
+         + ". Without the heater's own log the per-trip battery energy is this much less certain: "
+         "cabin heating depends on set-point, pre-conditioning and warm-up, not on the ambient temperature alone.",
          "", "Training-side choice of the efficiency (inner mean |error| constant → tables per inner fold):", ""]
     L += [f"- 2-fold, fold {n}: " + _selection(f["map_selection"]) for n, f in i3["fits"].items()
           if f.get("map_selection")]
