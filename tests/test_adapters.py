@@ -378,6 +378,20 @@ def test_bmw_without_overview_still_reads(tmp_path):
     df, rep = read("bmw-i3-tum", p)
     assert df["speed_mps"].tolist() == [10, 10]
     assert any("overview" in n for n in rep["files"][0]["notes"])
+    # no heater voltage and current in the file: its electrical power is unknown, not 0
+    assert df["heater_electric_w"].isna().all()
+    assert any("heater_electric_w unknown" in n for n in rep["files"][0]["notes"])
+
+
+def test_bmw_heater_electric_power_is_voltage_times_current(tmp_path):
+    """heater_electric_w = Heater Voltage × Heater Current (a battery-side load, role 'load'),
+    the column `calibrate --target battery --load heater_electric_w` documents; NaN where a
+    row lacks either."""
+    head = BMW_HEADER.rstrip("\n") + ";Heater Voltage [V];Heater Current [A]\n"
+    p = write(tmp_path, "TripZ02.csv", head + "0;36;500;10;390;-1;380;5\n0.1;36;500;10;390;-1;;5\n")
+    df, rep = read("bmw-i3-tum", p)
+    assert df["heater_electric_w"].iloc[0] == 1900.0 and math.isnan(df["heater_electric_w"].iloc[1])
+    assert rep["roles"]["heater_electric_w"] == "load"
 
 
 @pytest.mark.parametrize("text,match", [

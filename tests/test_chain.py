@@ -53,6 +53,16 @@ def test_hvac_term_by_hand():
     np.testing.assert_allclose(out["auxiliary_w"], [2000.0, 0.0, 500.0])
 
 
+def test_hvac_with_an_unknown_temperature_books_no_hvac():
+    """NaN temperature is unknown: no HVAC (as the term grammar's 'cold'), not the heating of
+    0 °C (which would book 21 K × 100 W/K = 2.1 kW here)."""
+    ch = EnergyChain(predicts="battery", aux_power_w=300.0,
+                     hvac={"column": "ambient_c", "setpoint_c": 21.0, "heating_w_per_k": 100.0,
+                           "cooling_w_per_k": 50.0})
+    out = ch.evaluate(np.zeros(2), np.zeros(2), signals={"ambient_c": np.array([np.nan, 11.0])})
+    np.testing.assert_allclose(out["auxiliary_w"], [300.0, 1300.0])
+
+
 def test_efficiency_table_interpolates_over_speed_and_power():
     ch = chain_from_dict({"predicts": "battery", "traction_efficiency": {
         "speed_mps": [0.0, 20.0], "power_w": [0.0, 40_000.0], "values": [[0.6, 0.8], [0.8, 0.9]]}})
@@ -162,6 +172,25 @@ def test_calibration_recovers_a_planted_battery_chain_within_2_percent():
         se = fit.parameters[k]["std_err"]
         assert se is not None and abs(fit.parameters[k]["value"] - truth) < 4 * se + 1e-9
     assert "reading" in fit.parameters["traction_efficiency"]
+
+
+def test_samples_with_an_unknown_load_stay_out_of_the_fit():
+    """A load logged on part of the data only (the i3's heater V·I is missing on 16 trips):
+    where it is NaN the battery power still holds the heater's draw, so those samples are
+    left out and counted — read as 0 they would bias the auxiliary power (negative control)."""
+    rng, v, p, heater, temp, dt = _drive()
+    plant = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.75,
+                        aux_power_w=500.0, loads={"heater_w": 1.0})
+    meas = plant.evaluate(p, v, signals={"heater_w": heater})["power_w"] + rng.normal(0, 200.0, p.size)
+    logged = heater.copy()
+    logged[: p.size // 2] = np.nan          # the first half: heater running, not logged
+    fit = calibrate_battery(p, v, meas, dt, {"heater_w": logged}, loads=["heater_w"], limit=None)
+    assert fit.unknown_input_samples == p.size // 2 and fit.n == p.size - p.size // 2
+    assert fit.chain.aux_power_w == pytest.approx(500.0, rel=0.03)
+    assert "unknown" in fit.summary()
+    zero = calibrate_battery(p, v, meas, dt, {"heater_w": np.nan_to_num(logged)}, loads=["heater_w"],
+                             limit=None)
+    assert zero.unknown_input_samples == 0 and zero.chain.aux_power_w > 700.0   # the bias avoided
 
 
 def test_calibration_finds_a_planted_recuperation_limit():

@@ -55,10 +55,16 @@ class ChainFit:
     rmse_w: float = math.nan
     energy_ratio: float = math.nan
     profile: list = field(default_factory=list)
+    #: samples left out because a declared load or the HVAC temperature is unknown (NaN) there
+    unknown_input_samples: int = 0
 
     def summary(self) -> str:
         lines = [f"energy chain ({self.chain.predicts}): n={self.n}  R²={self.r2:.4f}  "
                  f"RMSE={self.rmse_w / 1000:.3f} kW  predicted/measured energy={self.energy_ratio:.4f}"]
+        if self.unknown_input_samples:
+            lines.append(f"  ({self.unknown_input_samples} samples left out of the fit: a declared load or "
+                         "the HVAC temperature is unknown (NaN) there, so their battery power holds an "
+                         "unknown load)")
         for k, p in self.parameters.items():
             se = p.get("std_err")
             se_s = "at bound" if p.get("at_bound") else (f"± {se:.4g}" if se is not None else "")
@@ -66,11 +72,15 @@ class ChainFit:
         return "\n".join(lines)
 
 
-def _col(signals: dict, name: str, n: int) -> np.ndarray:
+def _col(signals: dict, name: str, n: int, known: np.ndarray | None = None) -> np.ndarray:
+    """Column ``name`` as floats, NaN read as 0; with ``known``, its NaN samples are
+    cleared in that mask (an unknown load is not a zero load when fitting)."""
     if name not in signals:
         raise UserError(f"energy chain: the log has no column '{name}' (available: "
                         f"{', '.join(sorted(signals)) or 'none'})")
-    x = np.asarray(signals[name], float)
+    x = np.broadcast_to(np.asarray(signals[name], float), (n,))
+    if known is not None:
+        known &= np.isfinite(x)
     return np.nan_to_num(x, nan=0.0)
 
 
@@ -184,18 +194,19 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     cols = [np.maximum(p, 0.0), None]
     names = ["traction_efficiency", "recuperation_efficiency"]
     lb, ub = [1.0, ETA_MIN], [1.0 / ETA_MIN, 1.0]
+    known = np.ones(n, bool)  # declared loads and HVAC temperature known
     if predicts == "battery":
         cols.append(np.ones(n))
         names.append("aux_power_w")
         lb.append(0.0)
         ub.append(np.inf)
         for c in loads:
-            cols.append(_col(sig, c, n))
+            cols.append(_col(sig, c, n, known))
             names.append(f"loads.{c}")
             lb.append(0.0)
             ub.append(np.inf)
         if hvac:
-            t = _col(sig, hvac.get("column", "ambient_c"), n)
+            t = _col(sig, hvac.get("column", "ambient_c"), n, known)
             ts = float(hvac.get("setpoint_c", 20.0))
             cols += [np.maximum(ts - t, 0.0), np.maximum(t - ts, 0.0)]
             names += ["hvac.heating_w_per_k", "hvac.cooling_w_per_k"]
@@ -207,6 +218,8 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
             ok &= np.isfinite(c)
     if mask is not None:
         ok &= np.asarray(mask, bool)
+    unknown = int((ok & ~known).sum())
+    ok &= known
     emap = None
     if efficiency != "constant":
         from sumo_drvpw.fit import chain_map
@@ -311,7 +324,7 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     r2, rmse, ratio = _stats(pred, y[ok], w[ok])
     chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
     chain.metrics = {"n": int(ok.sum()), "r2": r2, "rmse_w": rmse, "energy_ratio": ratio}
-    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile)
+    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile, unknown)
 
 
 def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict | None = None, *,

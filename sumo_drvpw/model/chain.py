@@ -205,8 +205,10 @@ class EnergyChain:
         for col, gain in self.loads.items():
             p = p + gain * _signal(sig, col, n)
         if self.hvac:
-            t = _signal(sig, self.hvac.get("column", "ambient_c"), n)
             ts = float(self.hvac.get("setpoint_c", 20.0))
+            # an unknown temperature books no HVAC (as the term grammar's 'cold' does), not
+            # the heating of 0 °C
+            t = _signal(sig, self.hvac.get("column", "ambient_c"), n, missing=ts)
             p = p + float(self.hvac.get("heating_w_per_k", 0.0)) * np.maximum(ts - t, 0.0)
             p = p + float(self.hvac.get("cooling_w_per_k", 0.0)) * np.maximum(t - ts, 0.0)
         return p
@@ -321,12 +323,14 @@ def _eval(eff: Efficiency, v, p) -> np.ndarray | float:
     return eff(v, p) if isinstance(eff, Table) else eff
 
 
-def _signal(sig: dict, col: str, n: int) -> np.ndarray:
+def _signal(sig: dict, col: str, n: int, missing: float = 0.0) -> np.ndarray:
+    """Column ``col`` of ``sig`` as n floats; NaN (unknown) reads as ``missing``."""
     if col not in sig:
         raise UserError(f"energy chain needs the log column '{col}', which the data do not have "
                         f"(available: {', '.join(sorted(sig)) or 'none'})")
     x = np.asarray(sig[col], float)
-    return np.nan_to_num(x, nan=0.0) if x.shape == (n,) else np.broadcast_to(x, (n,))
+    x = x if x.shape == (n,) else np.broadcast_to(x, (n,))
+    return np.where(np.isfinite(x), x, missing)
 
 
 def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:

@@ -15,6 +15,8 @@ Mapping (everything else is kept as ``snake_name_<unit suffix>`` in SI):
 - Battery Current [A] → ``battery_current_a`` with the sign flipped (logged negative when
   discharging; canonical: positive when discharging, as declared in bmw_i3.toml).
 - Heating Power CAN [kW] → ``heater_power_w``; AirCon Power [kW] → ``aircon_power_w``;
+  ``heater_electric_w`` = Heater Voltage × Heater Current (the heater's electrical power at
+  the battery; NaN in files without them, e.g. TripA03–A21);
   Ambient Temperature [°C] → ``ambient_c``; Cabin Temperature Sensor → ``cabin_temp_c``.
 - overview.csv joined per trip: ``route``, ``weather``, ``season`` (summer/winter),
   ``winter`` (bool), ``cabin_setpoint_c``, ``added_mass_kg`` (from notes like '+70 kg'),
@@ -72,6 +74,7 @@ ROLES = {
     "throttle_pct": "response", "regen_braking_signal": "response", "battery_temp_c": "response",
     "battery_temp_max_c": "response", "soc_pct": "response", "soc_displayed_pct": "response",
     "soc_min_pct": "response", "soc_max_pct": "response", "heater_power_w": "load",
+    "heater_electric_w": "load",
     "heater_power_lin_w": "load", "heater_power_requested_w": "load", "aircon_power_w": "load",
     "heater_voltage_v": "response", "heater_current_a": "response", "heater_signal": "response",
     "ambient_c": "condition", "ambient_sensor_c": "condition", "cabin_temp_c": "condition",
@@ -115,6 +118,14 @@ def read_file(path: Path, overview: pd.DataFrame | None, vehicle) -> tuple[pd.Da
         df["motor_speed_rpm"] = df["speed_mps"] / radius * ratio / RPM
         rep["notes"].append(f"motor_speed_rpm from speed: gear {ratio}, wheel radius {radius} m "
                             f"({vehicle.path})")
+    # the heater's own electrical power, a battery-side load (`calibrate --target battery
+    # --load heater_electric_w`); unknown (NaN) where the file lacks heater voltage or current:
+    # an unknown load is not a zero load (the chain fit leaves such samples out)
+    if {"heater_voltage_v", "heater_current_a"} <= set(df.columns):
+        df["heater_electric_w"] = df["heater_voltage_v"] * df["heater_current_a"]
+    else:
+        df["heater_electric_w"] = np.nan
+        rep["notes"].append("no heater voltage and current: heater_electric_w unknown (NaN)")
     df.insert(0, "trip_id", trip)
     df = _join_overview(df, trip, overview, vehicle, rep)
     return df.reset_index(drop=True), rep
