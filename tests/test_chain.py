@@ -706,3 +706,49 @@ def test_sumo_cycle_steps_of_a_dropout_are_not_booked():
     keep = _kept_steps(t, 10, drop)
     assert list(np.flatnonzero(~keep)) == [3, 4, 5]
     assert _kept_steps(t, 10, None).all() and _kept_steps(t, 10, np.zeros(t.size, bool)).all()
+
+
+# ------------------------------------------------------------------ published road load
+
+def test_roadload_spec_is_the_vehicle_files_a_b_c_by_hand():
+    """'roadload_spec': F = A + B·v + C·v² of the vehicle file ([road_load], e.g. the JLU
+    dynamometer's A 179.4 N, B 1.008 N/(m/s), C 0.30456 N/(m/s)²) plus m·a."""
+    from sumo_drvpw.data.measured import resolve_equations
+    from sumo_drvpw.model.terms import Inputs
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    veh = load_vehicle("jlu_bev")
+    eq = resolve_equations(["roadload_spec"], veh)[0]
+    x = Inputs(np.array([10.0, 20.0]), np.array([0.0, 1.0]), np.zeros(2), np.zeros(2),
+               np.full(2, 1919.0), np.full(2, 1.2), {})
+    # 10 m/s cruise: (179.4 + 10.08 + 30.456)·10 = 2199.36 W; 20 m/s at 1 m/s²: + 1919·20
+    want = [2199.36, (179.4 + 1.008 * 20 + 0.30456 * 400) * 20 + 1919.0 * 20]
+    np.testing.assert_allclose(eq.power(x), want, rtol=1e-12)
+    with pytest.raises(UserError, match=r"\[road_load\] lacks 'a_n'"):
+        resolve_equations(["roadload_spec"], load_vehicle("prius3"))
+    with pytest.raises(UserError, match="needs a vehicle"):
+        resolve_equations(["roadload_spec"])
+
+
+def test_cli_dyno_chain_on_the_published_road_load(tmp_path, capsys):
+    """`calibrate --target battery --equation roadload_spec` on a log with battery V·I only
+    (a dynamometer): the planted chain (η_t 0.9, η_r 0.7, 500 W, heater gain 1) is recovered
+    on the vehicle's A + B·v + C·v²; a negative coefficient in the vehicle file is exit 2."""
+    from sumo_drvpw.cli import main as cli_main
+
+    log, _ = _planted_battery_log(tmp_path)       # its road load: acc 1, v1 150, v3 0.35
+    veh = tmp_path / "dyno_car.toml"
+    veh.write_text('[vehicle]\nname = "dyno_car"\nmass_kg = 1500\n[powertrain]\ntype = "battery"\n'
+                   '[road_load]\na_n = 150.0\nb_n_per_mps = 0.0\nc_n_per_mps2 = 0.35\n')
+    eq = tmp_path / "chain.toml"
+    assert cli_main(["calibrate", str(log), "--vehicle", str(veh), "--target", "battery",
+                     "--equation", "roadload_spec", "--load", "heater_power_w", "--out", str(eq)]) == 0
+    ch = load_equation(eq).chain
+    assert ch.traction_efficiency == pytest.approx(0.9, rel=0.02)
+    assert ch.aux_power_w == pytest.approx(500.0, rel=0.02)
+    assert load_equation(eq).terms == {"acc": 1.0, "v1": 150.0, "v2": 0.0, "v3": 0.35}
+    veh.write_text(veh.read_text().replace("c_n_per_mps2 = 0.35", "c_n_per_mps2 = -0.35"))
+    capsys.readouterr()
+    assert cli_main(["calibrate", str(log), "--vehicle", str(veh), "--target", "battery",
+                     "--equation", "roadload_spec", "--out", str(tmp_path / "bad.toml")]) == 2
+    assert "road_load.c_n_per_mps2 = -0.35" in capsys.readouterr().err

@@ -145,11 +145,11 @@ def measurement_options(args, equations=()):
             return measurement_from_dict(doc, "command line")
         except UserError as e:
             raise UserError(f"--power-lag / --grade-source: {e}") from None
-    from sumo_drvpw.model.equations import load_equation
+    from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
 
     found = {}
     for spec in equations or ():
-        if spec == "vsp_spec":
+        if spec in SPEC_EQUATIONS:
             continue
         eq = load_equation(spec)
         if eq.measurement is not None and not eq.measurement.identity:

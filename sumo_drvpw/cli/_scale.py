@@ -177,9 +177,9 @@ def compare_main(args) -> int | None:
         return None
     target = getattr(args, "target", None)
     if target is None:
-        from sumo_drvpw.model.equations import load_equation
+        from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
 
-        pred = {getattr(load_equation(s), "predicts", "wheel") for s in args.equation if s != "vsp_spec"}
+        pred = {getattr(load_equation(s), "predicts", "wheel") for s in args.equation if s not in SPEC_EQUATIONS}
         target = pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
     if target != "wheel":
         if args.engine == "dask":

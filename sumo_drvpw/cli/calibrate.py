@@ -33,8 +33,9 @@ def configure(p):
                    help="what to calibrate on: driving power (default), battery V·I, or fuel flow; "
                         "battery/fuel fit the energy chain on top of the road-load equation")
     g.add_argument("--equation", metavar="NAME|FILE",
-                   help="road-load equation under the chain (default: calibrate one stepwise on the "
-                        "log's measured driving power first)")
+                   help="road-load equation under the chain: a name, a TOML file, or 'roadload_spec' "
+                        "(the vehicle's published road load A + B·v + C·v², e.g. a dynamometer's) "
+                        "(default: calibrate one stepwise on the log's measured driving power first)")
     g.add_argument("--load", action="append", default=[], metavar="COLUMN",
                    help="logged auxiliary load in W (e.g. heater_power_w); repeat")
     g.add_argument("--hvac", metavar="COLUMN[:SETPOINT_C]",

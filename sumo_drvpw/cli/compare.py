@@ -13,7 +13,7 @@ def configure(p):
     p.add_argument("logs", nargs="+", metavar="LOG", help="drive logs (Parquet/CSV files or folders)")
     p.add_argument("--vehicle", help="vehicle name or TOML file (optional when the log has power_w and mass_kg)")
     p.add_argument("--equation", action="append", required=True, metavar="NAME|FILE",
-                   help="equation to compare (repeat); 'vsp_spec' = VSP from the vehicle's specs")
+                   help="equation to compare (repeat); 'vsp_spec' = VSP from the vehicle's specs, 'roadload_spec' = its published road load A + B·v + C·v²")
     p.add_argument("--out", required=True, metavar="DIR", help="report folder (written whole, or not at all)")
     p.add_argument("--target", choices=("wheel", "battery", "fuel"),
                    help="compare driving power (wheel), battery V·I or fuel flow (default: what the "
@@ -34,9 +34,9 @@ def main(args) -> int:
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
         target = getattr(args, "target", None)
         if target is None:
-            from sumo_drvpw.model.equations import load_equation
+            from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
 
-            pred = {load_equation(s).predicts for s in args.equation if s != "vsp_spec"}
+            pred = {load_equation(s).predicts for s in args.equation if s not in SPEC_EQUATIONS}
             target = pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
         m = load_measured(args.logs, args.vehicle, read_options(args, args.equation), target=target)
         note_counts(m.counts)

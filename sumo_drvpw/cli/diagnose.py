@@ -102,7 +102,7 @@ def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, prog
     from sumo_drvpw.data.measured import load_measured, resolve_equations
     from sumo_drvpw.fit.diagnose import diagnose
     from sumo_drvpw.fit.engine import _progress, peak_rss_mb
-    from sumo_drvpw.model.equations import load_equation
+    from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
     from sumo_drvpw.model.vehicles import load_vehicle
 
     t0 = time.perf_counter()
@@ -113,7 +113,7 @@ def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, prog
         veh = load_vehicle(vehicle) if vehicle else None
         eq = None
         if equation:
-            eq = resolve_equations([equation], veh)[0] if equation == "vsp_spec" else load_equation(equation)
+            eq = resolve_equations([equation], veh)[0] if equation in SPEC_EQUATIONS else load_equation(equation)
         bar = _progress(sum(p.rows for p in plan(logs)) or None, "rows")
         try:
             res = diagnose_stream(logs, veh, eq, opt, read_options, target=target, progress=progress,
@@ -125,7 +125,7 @@ def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, prog
         m = measured if measured is not None else load_measured(logs, vehicle, read_options, target=target)
         eq = None
         if equation:
-            eq = resolve_equations([equation], m.vehicle)[0] if equation == "vsp_spec" else load_equation(equation)
+            eq = resolve_equations([equation], m.vehicle)[0] if equation in SPEC_EQUATIONS else load_equation(equation)
         res = diagnose(m, eq, opt, progress=progress)
         res.details["resources"] = {"rows": int(res.details["samples"]["rows"]), "streamed": False}
         write_outputs(res, out, figures=figures)
@@ -210,7 +210,9 @@ def _target(args) -> str:
     """--target, else battery/fuel when the equation's chain predicts it, else wheel."""
     if getattr(args, "target", None):
         return args.target
-    if args.equation and args.equation != "vsp_spec":
+    from sumo_drvpw.model.equations import SPEC_EQUATIONS
+
+    if args.equation and args.equation not in SPEC_EQUATIONS:
         from sumo_drvpw.model.equations import load_equation
 
         pred = load_equation(args.equation).predicts

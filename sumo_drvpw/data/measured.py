@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sumo_drvpw.model.equations import Equation, load_equation, vsp_from_specs
+from sumo_drvpw.model.equations import SPEC_EQUATIONS, Equation, load_equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.data.log import DriveLog, ReadOptions, read_log
 from sumo_drvpw.data.powertrain import measured_power
@@ -130,13 +130,15 @@ def _has_engine(log: DriveLog, veh: Vehicle | None) -> bool:
 
 
 def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:
-    """Equations by name or file; ``vsp_spec`` means VSP from the vehicle's body specs."""
+    """Equations by name or file; ``vsp_spec`` means VSP from the vehicle's body specs,
+    ``roadload_spec`` the vehicle's published road load A + B·v + C·v²
+    (:data:`sumo_drvpw.model.equations.SPEC_EQUATIONS`)."""
     out = []
     for s in specs:
-        if s == "vsp_spec":
+        if s in SPEC_EQUATIONS:
             if vehicle is None:
-                raise UserError("equation vsp_spec needs a vehicle: VSP is built from its body specs")
-            out.append(vsp_from_specs(vehicle))
+                raise UserError(f"equation {s} needs a vehicle (--vehicle): it is built from the vehicle file")
+            out.append(SPEC_EQUATIONS[s](vehicle))
         else:
             out.append(load_equation(s))
     names = [e.name for e in out]

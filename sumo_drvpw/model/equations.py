@@ -375,3 +375,29 @@ def vsp_from_specs(vehicle) -> Equation:
                     terms={"acc": 1.0 + eps, "grade": 1.0, "m_v1": G * cr, "aero_rho": cd * area},
                     description=f"VSP with the physical specs of {vehicle.name} (seed paper Eq. 1)",
                     source=f"vehicle file {vehicle.path}")
+
+
+def roadload_from_specs(vehicle) -> Equation:
+    """The vehicle's published road load as an equation: F = A + B·v + C·v² (coast-down or
+    chassis-dynamometer target coefficients) plus the inertial force m·a.
+
+    P = m·v·a + A·v + B·v² + C·v³: in this basis acc = 1, v1 = A, v2 = B, v3 = C. No grade
+    term (a dynamometer has none; `diagnose` on road logs finds it) and no rotating mass
+    beyond what the test mass carries.
+
+    Parameters
+    ----------
+    vehicle : :class:`sumo_drvpw.model.vehicles.Vehicle` with [road_load] a_n, b_n_per_mps,
+        c_n_per_mps2
+    """
+    a = vehicle.need("road_load", "a_n")
+    b = vehicle.need("road_load", "b_n_per_mps")
+    c = vehicle.need("road_load", "c_n_per_mps2")
+    return Equation(name=f"roadload_{vehicle.name}",
+                    terms={"acc": 1.0, "v1": a, "v2": b, "v3": c},
+                    description=f"published road load of {vehicle.name} (A + B·v + C·v², plus m·a)",
+                    source=f"vehicle file {vehicle.path} [road_load]")
+
+
+#: equations built from the vehicle file instead of read from one: name → builder
+SPEC_EQUATIONS = {"vsp_spec": vsp_from_specs, "roadload_spec": roadload_from_specs}

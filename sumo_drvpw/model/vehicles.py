@@ -63,6 +63,9 @@ class Vehicle:
     battery: dict = field(default_factory=dict)
     sources: dict = field(default_factory=dict)
     path: str | None = None
+    #: published road-load coefficients F = A + B·v + C·v² (coast-down or dynamometer target):
+    #: a_n [N], b_n_per_mps [N/(m/s)], c_n_per_mps2 [N/(m/s)²]; empty when not published
+    road_load: dict = field(default_factory=dict)
 
     @property
     def powertrain_type(self) -> str:
@@ -97,6 +100,9 @@ NUMBER_RANGES = {
     "powertrain.final_drive": (0.0, 50.0),
     "powertrain.gear_ratio": (0.0, 50.0),
     "powertrain.wheel_radius_m": (0.05, 2.0),
+    "road_load.a_n": (-1e-12, 1.0e5),            # A, B, C ≥ 0
+    "road_load.b_n_per_mps": (-1e-12, 1.0e4),
+    "road_load.c_n_per_mps2": (-1e-12, 1.0e3),
 }
 #: rotational inertias [kg·m²]: 0 ≤ J ≤ this
 INERTIA_MAX_KGM2 = 1.0e3
@@ -112,7 +118,7 @@ def check_numbers(doc: dict, p) -> None:
     def num(v):
         return isinstance(v, (int, float)) and not isinstance(v, bool)
 
-    for table in ("vehicle", "body", "powertrain"):
+    for table in ("vehicle", "body", "powertrain", "road_load"):
         t = doc.get(table, {})
         if not isinstance(t, dict):
             raise UserError(f"{p}: [{table}] must be a table")
@@ -157,7 +163,7 @@ def load_vehicle(spec: str | Path) -> Vehicle:
     v = Vehicle(name=str(meta.get("name", p.stem)), mass_kg=float(meta["mass_kg"]),
                 description=str(meta.get("description", "")), body=doc.get("body", {}),
                 powertrain=doc.get("powertrain", {}), battery=doc.get("battery", {}),
-                sources=doc.get("sources", {}), path=str(p))
+                sources=doc.get("sources", {}), path=str(p), road_load=doc.get("road_load", {}))
     if v.powertrain_type not in POWERTRAIN_TYPES:
         raise UserError(f"{p}: powertrain.type '{v.powertrain_type}' is not one of "
                         f"{', '.join(POWERTRAIN_TYPES)}")

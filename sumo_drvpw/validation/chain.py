@@ -48,13 +48,11 @@ def jlu_study(data: Path) -> dict:
     from sumo_drvpw.fit.chain import calibrate_on
     from sumo_drvpw.model.equations import Equation
 
-    dlog, veh = read_shared(data, "jlu_bev_dyno", "jlu-dyno", "jlu_bev")
-    rl = {}
-    from sumo_drvpw.fileio import read_toml
+    from sumo_drvpw.model.equations import roadload_from_specs
 
-    rl = read_toml(veh.path, "vehicle file")["road_load"]
-    terms = {"acc": 1.0, "v1": float(rl["a_n"]), "v2": float(rl["b_n_per_mps"]),
-             "v3": float(rl["c_n_per_mps2"])}
+    dlog, veh = read_shared(data, "jlu_bev_dyno", "jlu-dyno", "jlu_bev")
+    # the published dyno road load, as `--equation roadload_spec` builds it
+    terms = dict(roadload_from_specs(veh).terms)
     flat = Equation("jlu_dyno_roadload", dict(terms))
     graded = Equation("jlu_dyno_roadload_grade", dict(terms, grade=1.0))
     dy = measure(dlog, veh, "battery")
