@@ -137,7 +137,7 @@ def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:
     for s in specs:
         if s in SPEC_EQUATIONS:
             if vehicle is None:
-                raise UserError(f"equation {s} needs a vehicle (--vehicle): it is built from the vehicle file")
+                raise UserError(f"equation {s} needs a vehicle: it is built from the vehicle file")
             out.append(SPEC_EQUATIONS[s](vehicle))
         else:
             out.append(load_equation(s))
