@@ -752,3 +752,48 @@ def test_cli_dyno_chain_on_the_published_road_load(tmp_path, capsys):
     assert cli_main(["calibrate", str(log), "--vehicle", str(veh), "--target", "battery",
                      "--equation", "roadload_spec", "--out", str(tmp_path / "bad.toml")]) == 2
     assert "road_load.c_n_per_mps2 = -0.35" in capsys.readouterr().err
+
+
+def test_i3_battery_equation_for_sumo_studies_runs_in_sumo(tmp_path):
+    """docs/energy-chain/bmw_i3_battery.toml — calibrated on the TUM i3 trips by
+    `python -m sumo_drvpw.validation.chain` in the form a SUMO study can run (cold drag,
+    HVAC over the ambient temperature) — in a real SUMO run of the city scenario at the i3's
+    mass: per-class kWh/km within what an i3 draws in town (about 0.13–0.20 kWh/km at the
+    battery in real driving; 0.08–0.40 allowed for a 150-s city excerpt); at 20 °C (the
+    set-point) the auxiliary energy is the constant power × time in the network, at 0 °C it
+    adds heating_w_per_k × 20 K × that time, exactly; vehicle and class totals agree."""
+    pytest.importorskip("libsumo")
+    from pathlib import Path
+
+    import pandas as pd_
+
+    from sumo_drvpw.model.vehicles import load_vehicle
+    from sumo_drvpw.sim import run_scenario
+
+    repo = Path(__file__).resolve().parent.parent
+    eq_path = repo / "docs" / "energy-chain" / "bmw_i3_battery.toml"
+    ch = load_equation(eq_path).chain
+    assert ch.predicts == "battery" and ch.hvac["setpoint_c"] == 20.0
+    assert 0.0 < ch.recuperation_efficiency < 1.0          # no lossless generator in SUMO
+    cfg = repo / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.sumocfg"
+    mass = load_vehicle("bmw_i3").mass_kg
+    aux, t_in = {}, {}
+    for temp in (0.0, 20.0):
+        sc = tmp_path / f"i3_{temp:g}.toml"
+        sc.write_text(f'equations = ["{eq_path}"]\n[sumo]\nconfig = "{cfg}"\nbegin = 0\nend = 150\n'
+                      f'[vtypes.prius3]\nmass_kg = {mass}\n'
+                      f'[air]\ntemperature_c = {temp}\n[outputs]\nfigures = false\nedgedata = false\n')
+        out = tmp_path / f"out{temp:g}"
+        res = run_scenario(sc, out)
+        cls = [r for r in res.summary["chain"]["classes"] if r["equation"] == "bmw_i3_battery"]
+        assert cls and all(0.08 < r["net_kwh_per_km"] < 0.40 for r in cls), cls
+        veh = pd_.read_csv(out / "chain_vehicles.csv")
+        classes = pd_.read_csv(out / "chain_classes.csv")
+        assert veh["net_kwh"].sum() == pytest.approx(classes["net_kwh"].sum(), rel=1e-9)
+        aux[temp] = veh["auxiliary_kwh"].sum()
+        led = res.ledger
+        t_in[temp] = float(np.sum(led.chain.veh_time[:led.n_veh]))
+    assert t_in[0.0] == pytest.approx(t_in[20.0], rel=1e-12)       # the same traffic
+    assert aux[20.0] == pytest.approx(ch.aux_power_w * t_in[20.0] / 3.6e6, rel=1e-9)
+    heat = ch.hvac["heating_w_per_k"] * 20.0 * t_in[0.0] / 3.6e6
+    assert aux[0.0] - aux[20.0] == pytest.approx(heat, rel=1e-9)

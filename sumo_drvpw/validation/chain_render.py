@@ -282,7 +282,7 @@ def _i3_kfold_table(i3: dict) -> list[str]:
          f"| chain alone, η tables | {_pct(i3.get('mean_abs_error_chain_only_map'))[1:]} | "
          f"{_pct(k['mean_abs_error_chain_only_map'])[1:]} | {_pct(k['mean_abs_error_chain_only_map_unflagged'])[1:]} |",
          f"| chain as a SUMO study has it: no heater or A/C log, HVAC over the ambient temperature "
-         f"(set-point {k['hvac']['setpoint_c']:g} °C; fitted on every training trip) | – | "
+         f"(set-point {k['hvac']['setpoint_c']:g} °C; η_r held at the free fit's η_t; fitted on every training trip) | – | "
          f"{_pct(k['mean_abs_error_hvac_only'])[1:]} | {_pct(k['mean_abs_error_hvac_only_unflagged'])[1:]} |",
          "", "The SUMO-study chain's parameters per fold (heating and cooling W per K from the set-point, "
          "constant auxiliary W): " + "; ".join(
@@ -290,11 +290,30 @@ def _i3_kfold_table(i3: dict) -> list[str]:
              f"{h.get('aux_power_w', float('nan')):.0f}" for h in k["hvac_fits"])
          + ". Without the heater's own log the per-trip battery energy is this much less certain: "
          "cabin heating depends on set-point, pre-conditioning and warm-up, not on the ambient temperature alone.",
+         *_deliverable(i3.get("deliverable")),
          "", "Training-side choice of the efficiency (inner mean |error| constant → tables per inner fold):", ""]
     L += [f"- 2-fold, fold {n}: " + _selection(f["map_selection"]) for n, f in i3["fits"].items()
           if f.get("map_selection")]
     L += [f"- {k['k']}-fold, fold {j + 1}: " + _selection(sel) for j, sel in enumerate(k["selection"])]
     return L + [""]
+
+
+def _deliverable(dv) -> list[str]:
+    """The i3 battery equation for SUMO studies (fitted on every trip) in one paragraph."""
+    if not dv:
+        return []
+    ch = dv["chain"]
+    lim = dv.get("recuperation_limit_w")
+    return ["", f"**For SUMO studies**: `docs/energy-chain/{dv['file']}` (written by `python -m "
+            "sumo_drvpw.validation.chain`), this form fitted on every trip — road load "
+            + ", ".join(f"`{k}` {v:.4g}" for k, v in dv["road_load"].items())
+            + f"; η_t {ch.get('traction_efficiency', float('nan')):.3f}, η_r "
+            f"{ch.get('recuperation_efficiency', float('nan')):.3f}, constant {ch.get('aux_power_w', float('nan')):.0f} W, "
+            f"heating {ch.get('hvac.heating_w_per_k', float('nan')):.0f} W/K and cooling "
+            f"{ch.get('hvac.cooling_w_per_k', float('nan')):.0f} W/K from 20 °C"
+            + (f", recuperation limit {lim / 1000:.1f} kW" if lim else ", no recuperation limit kept")
+            + ". In a scenario: `[vtypes.<id>] equations = [\"docs/energy-chain/" + dv["file"] + "\"]` and "
+            "`[air] temperature_c` (the HVAC's ambient temperature); its held-out quality is the row above."]
 
 
 def _flag_mean(rows) -> float:
