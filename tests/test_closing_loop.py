@@ -56,14 +56,33 @@ def test_ledger_fast_path_books_the_cold_terms_as_the_evaluator(amb):
 
 # ------------------------------------------- physical candidates chosen on whole trips
 
-def _trips(k_cr=0.0, recup_scale=1.0, n_trips=12, n=1500, seed=7):
+def test_ledger_books_the_inertia_by_direction_in_the_acc_category():
+    """acc_pos = m·v_acc·max(a, 0): the SUMO ledger books it under 'acc' as the evaluator
+    does, with the step's kinetic-energy speed v_acc when the loop gives one; over a step
+    that speeds up it adds c·ΔKE/Δt, over one that slows down nothing."""
+    n = 300
+    x = _inputs(n, seed=5)
+    x.v_acc = x.v + 0.1
+    eq = Equation("dir", {"acc": 1.04, "acc_pos": 0.26, "roll": 0.014})
+    pc = EquationSet([eq]).category_powers(x)
+    k = LEDGER_CATEGORIES.index("acc")
+    want = x.mass * x.v_acc * (1.04 * x.a + 0.26 * np.maximum(x.a, 0.0))
+    np.testing.assert_allclose(pc[:, 0, k], want, rtol=1e-12)
+    np.testing.assert_allclose(pc[:, 0].sum(1), eq.power(x), rtol=1e-12, atol=1e-9)
+    assert category_of("acc_pos") == "acc"
+
+
+def _trips(k_cr=0.0, recup_scale=1.0, n_trips=12, n=1500, seed=7, acc_up=None):
     """Synthetic trips at different ambient temperatures; truth at the motor shaft:
     1.1·m·v·a + m·g·v·sin θ + 0.35·v³ + c_r(T)·m·g·v·cos θ, c_r(T) = 0.012·(1 + k·(20 − T)),
-    recuperation × ``recup_scale``; noise 400 W."""
+    recuperation × ``recup_scale``; noise 400 W. With ``acc_up`` the inertial factor is
+    ``acc_up`` while speeding up (1.1 while slowing down), and the trips differ in how much
+    they speed up and slow down (stop-and-go to steady)."""
     rng = np.random.default_rng(seed)
     parts = []
     for i in range(n_trips):
-        v = np.clip(14 + 8 * np.sin(np.arange(n) / 90.0 + i) + np.cumsum(rng.normal(0, 0.1, n)), 0.5, 33)
+        amp, per = (8.0, 90.0) if acc_up is None else (2.0 + 9.0 * (i % 4) / 3.0, 40.0 + 25.0 * (i % 3))
+        v = np.clip(14 + amp * np.sin(np.arange(n) / per + i) + np.cumsum(rng.normal(0, 0.1, n)), 0.5, 33)
         a = np.gradient(v, 0.5)
         th = 0.03 * np.sin(np.arange(n) / (80.0 + 10 * i) + i)
         t_amb = -5.0 + 35.0 * i / (n_trips - 1)
@@ -72,7 +91,8 @@ def _trips(k_cr=0.0, recup_scale=1.0, n_trips=12, n=1500, seed=7):
     m = np.full(v.size, 1500.0)
     x = Inputs(v, a, th, np.zeros(v.size), m, np.full(v.size, 1.2), {"ambient_c": amb}, trip)
     cr = 0.012 * (1.0 + k_cr * (T_REF_C - amb))
-    p = 1.1 * m * v * a + m * G * v * np.sin(th) + 0.35 * v ** 3 + cr * m * G * v * np.cos(th)
+    c_acc = 1.1 if acc_up is None else np.where(a > 0, acc_up, 1.1)
+    p = c_acc * m * v * a + m * G * v * np.sin(th) + 0.35 * v ** 3 + cr * m * G * v * np.cos(th)
     p = np.where(p < 0, recup_scale * p, p) + rng.normal(0, 400.0, v.size)
     return x, p, np.ones(v.size, bool), np.full(v.size, 0.5), trip
 
@@ -106,6 +126,28 @@ def test_planted_recuperation_regime_is_found_and_scale_recovered():
     b, r = regime_fit(term_matrix(BASE, x), p, True)
     assert 1 + r == pytest.approx(0.7, abs=0.03)
     assert dict(zip(BASE, b))["acc"] == pytest.approx(1.1, rel=0.03)
+
+
+def test_planted_inertia_by_direction_is_found_with_its_efficiency():
+    """The drivetrain delivers kinetic energy at 1/η and returns it at η: inertial factor
+    1.1/0.9² = 1.358 while speeding up, 1.1 while slowing down. The candidate is kept and
+    reads η = sqrt(1.1/1.358) = 0.9; the acc_pos term evaluates m·v·max(a, 0)."""
+    from sumo_drvpw.fit.physical import select_physical
+
+    x, p, use, dt, trip = _trips(acc_up=1.1 / 0.81)
+    sel = select_physical(x, p, use, dt, trip, BASE, candidates=("inertia by direction", "c_r(T)", "regime"))
+    assert sel["chosen"][0] == "inertia by direction", sel["steps"]
+    step = next(s for s in sel["steps"] if s["accepted"])
+    assert step["reading"]["value"] == pytest.approx(0.9, abs=0.02)
+    assert "acc_pos" in sel["terms"]
+    np.testing.assert_array_equal(term_matrix(["acc_pos"], x)[:, 0], x.mass * x.v * np.maximum(x.a, 0.0))
+
+
+def test_inertia_by_direction_is_not_found_when_the_drivetrain_is_symmetric():
+    from sumo_drvpw.fit.physical import select_physical
+
+    sel = select_physical(*_trips(acc_up=1.1), BASE, candidates=("inertia by direction",))
+    assert sel["chosen"] == [], sel["steps"]
 
 
 def test_trip_cv_energy_is_the_compare_definition():

@@ -70,6 +70,11 @@ DEFAULT_CONSTRAINTS = {"grade": {"min": 1.0, "max": 1.3}, "aero": {"min": 0.0},
                        "aero_rho": {"min": 0.0}, "roll": {"min": 0.0}, "acc": {"min": 1.0}}
 
 
+#: the inertia-by-direction candidate reads as (c_acc + c_acc_pos)/c_acc = 1/η²: η below
+#: this (ratio above 1/η²) is not a drivetrain
+ETA_INERTIA_MIN = 0.8
+
+
 def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> dict[str, dict]:
     """Physical reading of each coefficient and whether it is plausible.
 
@@ -90,6 +95,14 @@ def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> 
                       "plausible": ok, "note": "" if ok else (
                           "below 1: a lag between power and speed or a smoothed speed absorbed"
                           if c < PLAUSIBLE["acc"][0] else "above 1.4: more rotating mass than a car has")}
+        elif t == "acc_pos" and "acc" in terms:
+            ratio = (float(terms["acc"]) + c) / float(terms["acc"]) if float(terms["acc"]) else math.nan
+            eta = 1.0 / math.sqrt(ratio) if ratio > 0 else math.nan
+            ok = ETA_INERTIA_MIN <= eta <= 1.0
+            out[t] = {"coefficient": c, "reads_as": "η of the inertial power, (c_acc + c_acc_pos)/c_acc = 1/η²",
+                      "value": eta, "unit": "-", "plausible": ok, "note": "" if ok else (
+                          "above 1: the car would return more kinetic energy than it takes" if not eta <= 1.0
+                          else f"below {ETA_INERTIA_MIN:g}: more loss than a drivetrain's")}
         elif t == "grade":
             ok = PLAUSIBLE["grade"][0] <= c <= PLAUSIBLE["grade"][1]
             out[t] = {"coefficient": c, "reads_as": "1/η: share of m·g·v·sin θ (1 at the wheels)", "value": c,
@@ -297,6 +310,8 @@ PHYSICAL_CANDIDATES = {
     "c_r(T)": ("rolling resistance rising in the cold, c_r0·(1 + k·(T_ref − T))", {}, ("roll*cold",)),
     "cold drag": ("drivetrain (gear oil, bearing grease) drag ∝ v rising in the cold", {}, ("cold*v^2",)),
     "regime": ("recuperation on its own coefficient (drivetrain efficiency differs by direction)", {}, ()),
+    "inertia by direction": ("inertial power on its own coefficient while speeding up: the drivetrain "
+                             "delivers kinetic energy at 1/η and returns it at η", {}, ("acc_pos",)),
 }
 #: plausible tyre temperature coefficient k of c_r(T) [1/K]: ISO 28580 corrects with 0.008/K;
 #: up to 0.03/K leaves room for bearings and the drivetrain share of the ``roll`` term
@@ -382,6 +397,12 @@ def candidate_reading(name: str, params: dict[str, float], r: float, rho_kgm3: f
         c = params["cold*v^2"]
         return {"reads_as": "extra drag force per K below T_ref and per m/s", "value": c, "unit": "N·s/(m·K)",
                 "plausible": bool(c >= 0.0)}
+    if name == "inertia by direction":
+        a, ap = params.get("acc", math.nan), params.get("acc_pos", math.nan)
+        ratio = (a + ap) / a if a and math.isfinite(a) else math.nan
+        eta = 1.0 / math.sqrt(ratio) if ratio > 0 else math.nan
+        return {"reads_as": "η of the inertial power, (c_acc + c_acc_pos)/c_acc = 1/η²", "value": eta,
+                "unit": "-", "plausible": bool(ETA_INERTIA_MIN <= eta <= 1.0)}
     if name == "regime":
         return {"reads_as": "recuperation scale 1 + r (≈ η² with friction braking)", "value": 1.0 + r,
                 "unit": "-", "plausible": bool(0.0 < 1.0 + r <= 1.0)}

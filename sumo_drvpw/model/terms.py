@@ -7,6 +7,8 @@ is written as a product of factors joined by ``*``:
 factor             value                                unit        category
 =================  ==================================  ==========  =========
 ``acc``            m·v·a                                W           acc
+``acc_pos``        m·v·max(a, 0): inertial power while      W           acc
+                   speeding up only
 ``grade``          m·g·v·sin θ                          W           grade
 ``aero``           v·(v − v_w)·|v − v_w|                m³/s³       aero
 ``aero_rho``       ½·ρ·v·(v − v_w)·|v − v_w|            W/m²        aero
@@ -39,6 +41,10 @@ which have no cos θ.
 ``cold`` reads the ambient temperature [°C] from the signal ``ambient_c`` (a log's column;
 in SUMO the scenario's air temperature when the loop passes it) and is 0 without it, so an
 equation with ``roll*cold`` evaluates at the reference temperature where none is known.
+``acc`` + ``acc_pos`` give the inertial power different coefficients while the car
+speeds up (c_acc + c_acc_pos) and slows down (c_acc): the drivetrain delivers kinetic
+energy at 1/η and returns it at η, so at the motor shaft (c_acc + c_acc_pos)/c_acc ≈ 1/η².
+
 ``roll*cold`` gives the temperature dependence of the rolling resistance,
 c_r(T) = c_r0·(1 + k·(T_ref − T)) with k ≈ 0.6–1 %/K for passenger-car tyres (ISO 28580
 temperature correction; Ejsmont et al. 2017): the ``roll`` coefficient is c_r0 and the
@@ -135,6 +141,7 @@ def _cold(x: Inputs) -> np.ndarray:
 #: conversion: 0 none, 1 mass only, 2 mass and g).
 PRIMITIVES: dict[str, tuple[Callable[[Inputs], np.ndarray], str, int]] = {
     "acc": (lambda x: x.mass * (x.v if x.v_acc is None else x.v_acc) * x.a, "acc", 1),
+    "acc_pos": (lambda x: x.mass * (x.v if x.v_acc is None else x.v_acc) * np.maximum(x.a, 0.0), "acc", 1),
     "grade": (lambda x: x.mass * G * x.v * np.sin(x.theta), "grade", 2),
     "aero": (_airspeed_term, "aero", 0),
     "aero_rho": (lambda x: 0.5 * x.rho * _airspeed_term(x), "aero", 0),
