@@ -320,6 +320,13 @@ def render(cars, took, cmd: str) -> str:
           "Traction energy needs only the traction-side coefficients: when the recuperation regime is kept, "
           "its fit keeps braking samples from bending them, and the positive part of the equation is the same "
           "with or without the recuperation scale (the row '× recuperation scale' differs in R² only).",
+          "- The inertial power by direction (`acc_pos`, η ≈ 0.9 where kept) was found this session from the "
+          "per-trip errors of a cross-validation over all 50 i3 trips (they fell with the trip's positive kinetic "
+          "energy per km), then put through the same training-only selection as every candidate: kept on split 2 "
+          "and on all trips, not on split 1. Part of it may be a measurement property rather than the "
+          "drivetrain: the i3's logged regenerative torque under-reads the electrical power (the battery chain's "
+          "η_r runs to its bound 1, docs/energy-chain-validation.md), which lowers the measured power while "
+          "slowing down; an η of 0.9 for inertial power is at the low end of what gear and tyres lose.",
           "- The tracer refits declared coefficients without constraints inside its folds; the physical "
           "constraints act on the calibration.",
           "- The fusion crossover is chosen inside the training trips (grid and criterion fixed in the script: "
