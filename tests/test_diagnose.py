@@ -277,6 +277,15 @@ def test_recuperation_efficiency_found(tmp_path):
     assert f[0]["replication"]["helped_trips"] >= 3
 
 
+def test_inertia_by_direction_found(tmp_path):
+    """Planted 0.25·m·v·max(a, 0): the tracer names acc_pos (structural) with its size."""
+    res = _structural(tmp_path, [E.InertiaByDirection(0.25)], max_findings=2)
+    f = res.report["findings"]
+    assert f and f[0]["term"] == "acc_pos" and f[0]["role"] == "structural", [x["term"] for x in f]
+    assert f[0]["coefficient"] == pytest.approx(0.25, rel=0.15)
+    assert f[0]["replication"]["helped_trips"] >= 3
+
+
 def test_recuperation_limit_found(tmp_path):
     res = _structural(tmp_path, [E.RecuperationLimit(8000.0)], max_findings=2)
     f = res.report["findings"]

@@ -241,6 +241,23 @@ class RecuperationEfficiency(_Effect):
         return f"RecuperationEfficiency: recuperation × {self.factor:g}"
 
 
+class InertiaByDirection(_Effect):
+    """Regimes: the drivetrain delivers kinetic energy at 1/η and returns it at η, so while
+    the car speeds up the inertial power costs more: planted power [W] = k·m·v·max(a, 0)
+    (the ``acc_pos`` term; k 0.25 reads with acc 1.05 as η ≈ 0.9)."""
+
+    def __init__(self, k: float = 0.25):
+        super().__init__()
+        self.k = k
+
+    def __call__(self, state, rng):
+        m, v, a = (np.asarray(state[c], float) for c in ("mass", "v", "a"))
+        return self._keep(state, self.k * m * v * np.maximum(a, 0.0)), {}
+
+    def describe(self):
+        return f"InertiaByDirection: + {self.k:g}·m·v·max(a, 0) while speeding up"
+
+
 class RecuperationLimit(_Effect):
     """Regimes: beyond ``limit_w`` of recuperation friction brakes take over, unflagged:
     planted power [W] = max(P, −limit) − P (measured power stops following the model)."""

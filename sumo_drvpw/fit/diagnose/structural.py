@@ -19,6 +19,9 @@ Model-side structure is offered as candidates (their own kind, role ``structural
   1 + c); ``[recuperation_below_<X>kW]``: min(P̂ + X, 0), the part of predicted
   recuperation beyond X kW that friction brakes take over (c ≈ −1 when measured power
   stops following the model there);
+* **inertia by direction** — ``acc_pos`` (m·v·max(a, 0)) when the declared equation has
+  ``acc``: the drivetrain delivers kinetic energy at 1/η and returns it at η, so the
+  inertial power takes a larger coefficient while the car speeds up;
 * **air density** — ``[air_density_altitude]*TERM`` for each declared aero term, when the
   log has elevation and ambient temperature but no pressure (the reader then assumes
   101.325 kPa): the relative error of ρ, p(h)/p₀ − 1 with the standard-atmosphere
@@ -188,6 +191,17 @@ def per_trip_lags_from_stats(tr, stats: dict, lags, dt_s: float) -> dict[str, fl
     return out
 
 
+#: the inertia-by-direction candidate (term ``acc_pos``) and its plain-language name
+INERTIA_EFFECT = ("inertial power on its own coefficient while speeding up: the drivetrain delivers "
+                  "kinetic energy at 1/η and returns it at η")
+
+
+def inertia_candidate(declared) -> list[Candidate]:
+    """``acc_pos`` when the declared equation has ``acc`` and not yet ``acc_pos``."""
+    return [Candidate("acc_pos", INERTIA_EFFECT, (), "structural")] \
+        if "acc" in declared and "acc_pos" not in declared else []
+
+
 def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_df,
                        counts: dict) -> tuple[dict, list[Candidate], dict]:
     """Derived columns and candidates of the model-side structural effects.
@@ -232,6 +246,7 @@ def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_d
     if not any(parse_term(t).category == "grade" for t in declared) and np.ptp(tr.x.theta) > 1e-4:
         cands.append(Candidate("grade", "road grade: the declared equation has no grade term "
                                "(calibrated where the road is flat, e.g. on a dynamometer)", (), "structural"))
+    cands += inertia_candidate(declared)
     # grade from a longitudinal accelerometer
     acc_col = next((c for c in ACCELEROMETER_COLUMNS if c in x_all_signals), None)
     grade_terms = [t for t in declared if parse_term(t).category == "grade" and not parse_term(t).signals]
