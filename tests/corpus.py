@@ -178,6 +178,11 @@ _log_case("every sample braking", lambda df: df.assign(brake=True), ("usable",))
 _log_case("empty file", lambda df: "", ("empty",))
 _log_case("header only", lambda df: "time_s,speed_mps,power_w,mass_kg\n", ("empty",))
 _log_case("binary garbage csv", lambda df: bytes(range(256)) * 8, ("log.csv",))
+_log_case("binary garbage csv compare", lambda df: bytes(range(256)) * 8, ("log.csv",), cmd="compare")
+# a vendor CSV in Latin-1 (the TUM i3 files: '°C' in the header) given without the importer
+_LATIN1 = "Time [s];Velocity [km/h];Ambient Temperature [\u00b0C]\n0;0;20\n0.1;1;20\n".encode("latin-1")
+_log_case("latin-1 vendor csv", lambda df: _LATIN1, ("log.csv", "UTF-8", "0xb0"))
+_log_case("latin-1 vendor csv compare", lambda df: _LATIN1, ("log.csv", "UTF-8", "0xb0"), cmd="compare")
 _log_case("garbage parquet", lambda df: b"PAR1" + b"\0" * 100, ("log.parquet",), fmt="parquet")
 _log_case("constant speed compare", lambda df: df.assign(speed_mps=15.0), ("wrote",), cmd="compare",
           expect="accept")

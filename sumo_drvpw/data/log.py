@@ -157,6 +157,22 @@ def expand_paths(paths) -> list[Path]:
     return _expand_paths(paths, (".parquet", ".csv"), "drive log", check_files=True)
 
 
+def vendor_hint() -> str:
+    """Where a file that is no canonical drive log should go: an adapter of the import command."""
+    from sumo_drvpw.data.adapters import FORMATS
+
+    return f"vendor logs are converted by the import command first (formats: {', '.join(FORMATS)})"
+
+
+def read_error(p: Path, e: Exception) -> UserError:
+    """The one-line error of a table that cannot be read (text that is not UTF-8 named with
+    its first offending byte, as a canonical CSV drive log is UTF-8)."""
+    if isinstance(e, UnicodeDecodeError):
+        return UserError(f"{p}: not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset {e.start}); "
+                         f"a canonical CSV drive log is UTF-8; {vendor_hint()}")
+    return UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}")
+
+
 def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
     meta = {}
     try:
@@ -173,7 +189,7 @@ def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
     except pd.errors.EmptyDataError:
         raise UserError(f"{p}: empty file (no header, no rows)") from None
     except (OSError, ValueError, pd.errors.ParserError) as e:
-        raise UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}") from None
+        raise read_error(p, e) from None
     if len(df) == 0:
         raise UserError(f"{p}: empty table (header only, no samples)")
     return df, meta
@@ -229,7 +245,8 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
     for c in REQUIRED:
         if c not in df:
             raise UserError(f"{p}: missing required column '{c}' (columns: "
-                            f"{', '.join(map(str, df.columns[:12]))}{'…' if df.shape[1] > 12 else ''})")
+                            f"{', '.join(map(str, df.columns[:12]))}{'…' if df.shape[1] > 12 else ''}); "
+                            f"{vendor_hint()}")
     for c in NUMERIC:
         if c in df and pd.api.types.is_bool_dtype(df[c]):
             raise UserError(f"{p}: column '{c}' is boolean (True/False), not a number in "

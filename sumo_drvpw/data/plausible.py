@@ -99,7 +99,9 @@ def _trip_ids(p: Path) -> list[str]:
     except pd.errors.EmptyDataError:
         return []
     except (OSError, ValueError, pd.errors.ParserError) as e:
-        raise UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}") from None
+        from sumo_drvpw.data.log import read_error
+
+        raise read_error(p, e) from None
     return [str(x) for x in pd.unique(col.dropna().astype(str))]
 
 

@@ -32,7 +32,7 @@ from typing import Iterator
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.log import DERIVED, FLAGS, NUMERIC, ReadOptions, expand_paths, from_frame
+from sumo_drvpw.data.log import DERIVED, FLAGS, NUMERIC, ReadOptions, expand_paths, from_frame, read_error
 from sumo_drvpw.errors import UserError
 
 #: Columns the reader and measured power use; calibrate and compare read these plus the
@@ -172,8 +172,8 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
                 yield df
     except pd.errors.EmptyDataError:
         raise UserError(f"{p}: empty file (no header, no rows)") from None
-    except (OSError, pd.errors.ParserError) as e:
-        raise UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}") from None
+    except (OSError, ValueError, pd.errors.ParserError) as e:
+        raise read_error(p, e) from None
 
 
 def _concat(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
