@@ -797,3 +797,37 @@ def test_i3_battery_equation_for_sumo_studies_runs_in_sumo(tmp_path):
     assert aux[20.0] == pytest.approx(ch.aux_power_w * t_in[20.0] / 3.6e6, rel=1e-9)
     heat = ch.hvac["heating_w_per_k"] * 20.0 * t_in[0.0] / 3.6e6
     assert aux[0.0] - aux[20.0] == pytest.approx(heat, rel=1e-9)
+
+
+def test_cli_chain_road_load_obeys_the_physical_constraints(tmp_path, capsys):
+    """`calibrate --target battery` without --equation calibrates the road load under the
+    chain as `calibrate` does, physics included: on a log whose grade is attenuated (the
+    logger's grade carries noise as large as the grade itself, as coarse elevation gives) the
+    free grade coefficient reads about 0.5 and the constrained fit (grade = 1) is used and
+    said (the free fit was written before)."""
+    import pandas as pd
+
+    from sumo_drvpw.cli import main
+
+    rng = np.random.default_rng(3)
+    n = 12000
+    t = np.arange(n) * 0.5
+    v = np.clip(14 + 9 * np.sin(t / 45) + 3 * np.sin(t / 7) + rng.normal(0, 0.05, n), 0, None)
+    a = np.gradient(v, t)
+    theta = 0.04 * np.sin(t / 130) + 0.02 * np.sin(t / 31)
+    m = 1500.0
+    p = 1.05 * m * v * a + m * 9.81 * v * np.sin(theta) + 0.35 * v ** 3 + 0.012 * m * 9.81 * v
+    batt = np.where(p > 0, p / 0.92, p * 0.92) + 600.0
+    df = pd.DataFrame({"time_s": t, "speed_mps": v, "mass_kg": m, "power_w": p + rng.normal(0, 200, n),
+                       "grade_rad": theta + rng.normal(0, theta.std(), n), "battery_voltage_v": 350.0,
+                       "battery_current_a": batt / 350.0})
+    f = tmp_path / "log.csv"
+    df.to_csv(f, index=False)
+    out = tmp_path / "ev.toml"
+    assert main(["calibrate", str(f), "--target", "battery", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "physically constrained fit used" in said and "grade" in said
+    eq = load_equation(out)
+    assert eq.terms["grade"] == pytest.approx(1.0)
+    assert "physically constrained" in eq.chain.provenance["road_load"]
+    assert eq.chain.traction_efficiency == pytest.approx(0.92, abs=0.01)

@@ -244,7 +244,15 @@ def main_chain(args) -> int:
         eq = res.to_equation(args.name or out.stem, provenance={
             "logs": mw.log.files, "power_source": mw.source, "candidates_spec": args.candidates})
         print(res.summary())
-        road = f"road-load equation calibrated stepwise on {mw.source}"
+        # the road load under the chain obeys the same physics as `calibrate` (issue #11 §3)
+        from sumo_drvpw.fit.physical import apply_physics, constraints_of
+
+        eq, note = apply_physics(eq, mw.inputs, mw.power_w, mw.usable, constraints_of(args.candidates))
+        if note:
+            print(note)
+            hint_grade_source(note, mw.log.df.columns, mw.log.options.measurement)
+        road = f"road-load equation calibrated stepwise on {mw.source}" + (
+            " (physically constrained: the free fit was implausible)" if note else "")
     # the chain's input: the log's measured driving power when it has one (the chain then
     # describes the powertrain, not the road-load equation's errors), else the equation's
     from sumo_drvpw.data.measured import load_measured as _lm
