@@ -831,3 +831,39 @@ def test_cli_chain_road_load_obeys_the_physical_constraints(tmp_path, capsys):
     assert eq.terms["grade"] == pytest.approx(1.0)
     assert "physically constrained" in eq.chain.provenance["road_load"]
     assert eq.chain.traction_efficiency == pytest.approx(0.92, abs=0.01)
+
+
+def test_compare_says_where_a_chain_load_is_unknown(tmp_path, capsys):
+    """A declared load unknown (NaN) on one trip: compare predicts there without it (no
+    draw) and says so — in report.json (samples, trip, how it is read), report.md and on
+    the console — instead of booking an unknown load as a zero one unremarked."""
+    import json
+
+    from sumo_drvpw.cli import main as cli_main
+
+    log, road = _planted_battery_log(tmp_path)
+    eq = tmp_path / "chain.toml"
+    assert cli_main(["calibrate", str(log), "--target", "battery", "--equation", str(road),
+                     "--load", "heater_power_w", "--out", str(eq)]) == 0
+    df = pd.read_csv(log)
+    t2 = (df["trip_id"] == "T2").to_numpy()
+    df.loc[t2, "heater_power_w"] = np.nan            # the heater not logged on trip T2
+    part = tmp_path / "part.csv"
+    df.to_csv(part, index=False)
+    capsys.readouterr()
+    out = tmp_path / "cmp"
+    assert cli_main(["compare", str(part), "--equation", str(eq), "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    rep = json.loads((out / "report.json").read_text())["equations"]["chain"]
+    u = rep["chain_unknown_inputs"]["heater_power_w"]
+    assert u["trips"] == ["T2"] and u["read_as"] == "no load"
+    assert 0 < u["samples"] <= int(t2.sum())
+    assert "'heater_power_w' unknown (NaN)" in said and "T2" in said
+    assert "'heater_power_w' unknown (NaN)" in (out / "report.md").read_text()
+    # read as no load: trip T2's net battery energy is under-predicted by the heater's
+    errs = rep["trip_net_energy"]["trips"]
+    assert abs(errs["T1"]["error"]) < 0.01 and errs["T2"]["error"] < -0.05
+    # a log with the load known everywhere: nothing to say
+    assert cli_main(["compare", str(log), "--equation", str(eq), "--out", str(tmp_path / "c2")]) == 0
+    assert "chain_unknown_inputs" not in json.loads((tmp_path / "c2" / "report.json").read_text())[
+        "equations"]["chain"]

@@ -361,6 +361,9 @@ class EquationResult:
     energy_share: dict
     traction_energy_ratio: float
     error_reference_correlation: dict | None = None
+    #: chain inputs unknown (NaN) on some samples: column → {"samples", "trips"}
+    #: (:func:`chain_unknown_inputs`)
+    unknown_inputs: dict = field(default_factory=dict)
 
     @property
     def name(self) -> str:
@@ -430,6 +433,8 @@ class Comparison:
             d["error_term_correlation"] = r.error_term_correlation
             if r.error_reference_correlation is not None:
                 d["error_reference_correlation"] = r.error_reference_correlation
+            if r.unknown_inputs:
+                d["chain_unknown_inputs"] = r.unknown_inputs
             d["energy_share"] = r.energy_share
             d["energy_j"] = r.energy_j
             d["measured_traction_energy_j"] = self.measured_traction_energy_j
@@ -485,6 +490,27 @@ def _chain_prediction(eq: Equation, p_drive, inputs: Inputs, dt, target: str, ba
     if target == "fuel" and battery_w is not None:
         pred = pred - ch.battery_fuel_factor * np.asarray(battery_w, float)
     return pred
+
+
+def chain_unknown_inputs(chain, signals: dict | None, n: int, trip=None) -> dict:
+    """The chain's inputs (declared loads, HVAC temperature) that are unknown (NaN) on some
+    samples: ``{column: {"samples": n, "read_as": …, "trips": [ids]}}`` (trips only when known).
+
+    The evaluator reads an unknown load as no draw and an unknown temperature as the
+    set-point (no HVAC): the prediction there lacks what they drew, so a report says where.
+    """
+    out = {}
+    for col in sorted(chain.signals) if chain is not None else ():
+        x = np.asarray((signals or {}).get(col, np.nan), float)
+        bad = np.broadcast_to(~np.isfinite(x), (n,))
+        if not bad.any():
+            continue
+        hvac = bool(chain.hvac) and col == chain.hvac.get("column", "ambient_c") and col not in chain.loads
+        d = {"samples": int(bad.sum()), "read_as": "the set-point (no HVAC)" if hvac else "no load"}
+        if trip is not None:
+            d["trips"] = [str(t) for t in np.unique(np.asarray(trip)[bad])]
+        out[col] = d
+    return out
 
 
 def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
@@ -596,5 +622,6 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
             traction_energy_ratio=(energy["total"] / meas_traction if meas_traction > 0.0
                                    else math.nan),
             error_reference_correlation=ref_corr,
+            unknown_inputs=chain_unknown_inputs(eq.chain, inputs.signals, n, trip) if target != "wheel" else {},
         )
     return comp

@@ -82,6 +82,15 @@ def _ctx_lines(context: dict, depth: int = 0) -> list[str]:
     return out
 
 
+def unknown_input_note(name: str, col: str, u: dict, n: int) -> str:
+    """One sentence: an equation's chain input unknown on some samples, and what that means."""
+    trips = u.get("trips") or []
+    where = (f" ({len(trips)} trip(s): {', '.join(trips[:8])}{'…' if len(trips) > 8 else ''})"
+             if trips else "")
+    return (f"{name}: chain input '{col}' unknown (NaN) on {u['samples']} of {n} samples{where}; "
+            f"read as {u.get('read_as', 'no load')} there, so the prediction lacks what it drew")
+
+
 def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> str:
     """The Markdown text of the report (see :func:`write_comparison_report`)."""
     eqs = doc["equations"]
@@ -105,6 +114,9 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
     if len(heavy_ranked) > 1:
         r2w, nmw = heavy_ranked[-1]
         lines.append(f"Weakest at heavy load: **{nmw}** (R² = {num(r2w, 3)}).")
+    for nm, d in eqs.items():
+        for col, u in (d.get("chain_unknown_inputs") or {}).items():
+            lines.append(unknown_input_note(nm, col, u, n) + ".")
     lines.append("")
 
     lines += ["## Goodness of fit (cf. paper Table 3)", "",
