@@ -108,11 +108,11 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
         eq.terms = dict(eq.terms, grade=float(param))
         return eq, f"grade term with coefficient {param:g} (m·g·v·sin θ at the wheels, through the chain)"
     if name == "aux_power_w":
-        new = ch.aux_power_w + c[0]
+        old, new = ch.aux_power_w, ch.aux_power_w + c[0]
         if new < 0:
             return None, f"auxiliary power would be negative ({new:.0f} W)"
         ch.aux_power_w = float(new)
-        return eq, f"auxiliary power {c[0]:+.0f} W → {new:.0f} W"
+        return eq, f"auxiliary power {old:.0f} W → {new:.0f} W ({c[0]:+.0f} W)"
     if name == "standstill_aux_w":
         new = ch.standstill_aux_w + c[0]
         if ch.aux_power_w + new < 0:
