@@ -361,8 +361,8 @@ class EquationResult:
     energy_share: dict
     traction_energy_ratio: float
     error_reference_correlation: dict | None = None
-    #: chain inputs unknown (NaN) on some samples: column → {"samples", "trips"}
-    #: (:func:`chain_unknown_inputs`)
+    #: chain inputs unknown (NaN) on some samples: column → {"samples", "read_as", "trips"}
+    #: (:meth:`sumo_drvpw.model.chain.EnergyChain.unknown_inputs`)
     unknown_inputs: dict = field(default_factory=dict)
 
     @property
@@ -480,39 +480,6 @@ def _dt_array(dt_s, n: int) -> np.ndarray:
     return dt
 
 
-def _chain_prediction(eq: Equation, p_drive, inputs: Inputs, dt, target: str, battery_w):
-    """An equation's battery or fuel power [W] through its energy chain (model/chain.py)."""
-    ch = eq.chain
-    if ch is None or ch.predicts != target:
-        raise UserError(f"compare: equation '{eq.name}' ({eq.path or 'built in'}) has no energy "
-                        f"chain predicting '{target}' (it predicts '{eq.predicts}')")
-    pred = ch.evaluate(p_drive, inputs.v, signals=inputs.signals)["power_w"]
-    if target == "fuel" and battery_w is not None:
-        pred = pred - ch.battery_fuel_factor * np.asarray(battery_w, float)
-    return pred
-
-
-def chain_unknown_inputs(chain, signals: dict | None, n: int, trip=None) -> dict:
-    """The chain's inputs (declared loads, HVAC temperature) that are unknown (NaN) on some
-    samples: ``{column: {"samples": n, "read_as": …, "trips": [ids]}}`` (trips only when known).
-
-    The evaluator reads an unknown load as no draw and an unknown temperature as the
-    set-point (no HVAC): the prediction there lacks what they drew, so a report says where.
-    """
-    out = {}
-    for col in sorted(chain.signals) if chain is not None else ():
-        x = np.asarray((signals or {}).get(col, np.nan), float)
-        bad = np.broadcast_to(~np.isfinite(x), (n,))
-        if not bad.any():
-            continue
-        hvac = bool(chain.hvac) and col == chain.hvac.get("column", "ambient_c") and col not in chain.loads
-        d = {"samples": int(bad.sum()), "read_as": "the set-point (no HVAC)" if hvac else "no load"}
-        if trip is not None:
-            d["trips"] = [str(t) for t in np.unique(np.asarray(trip)[bad])]
-        out[col] = d
-    return out
-
-
 def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
             reference: str | None = None, trip=None, target: str = "wheel",
             battery_w=None) -> Comparison:
@@ -599,7 +566,10 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
         cats = {c: p for c, p in cats.items() if c in CATEGORIES or np.any(p != 0.0)}
         pred = np.sum(list(cats.values()), axis=0) if cats else np.zeros(n)
         if target != "wheel":
-            pred = _chain_prediction(eq, pred, inputs, dt, target, battery_w)
+            if eq.chain is None or eq.chain.predicts != target:
+                raise UserError(f"compare: equation '{eq.name}' ({eq.path or 'built in'}) has no energy "
+                                f"chain predicting '{target}' (it predicts '{eq.predicts}')")
+            pred = eq.chain.target_power(pred, inputs.v, inputs.signals, battery_w)
         err = pred - meas
         ok = np.isfinite(err)
         allok = bool(ok.all())
@@ -622,6 +592,6 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
             traction_energy_ratio=(energy["total"] / meas_traction if meas_traction > 0.0
                                    else math.nan),
             error_reference_correlation=ref_corr,
-            unknown_inputs=chain_unknown_inputs(eq.chain, inputs.signals, n, trip) if target != "wheel" else {},
+            unknown_inputs=eq.chain.unknown_inputs(inputs.signals, n, trip) if target != "wheel" else {},
         )
     return comp

@@ -193,6 +193,36 @@ class EnergyChain:
             s.add(self.hvac.get("column", "ambient_c"))
         return s
 
+    def target_power(self, p_drive_w, v_mps, signals: dict | None = None, battery_w=None) -> np.ndarray:
+        """The chain's prediction in the form its measurement takes [W]: battery power, or
+        fuel power less k·P_bat when the hybrid battery's V·I ``battery_w`` is given (so a
+        state-of-charge swing is not a fuel error; k = :attr:`battery_fuel_factor`)."""
+        pred = self.evaluate(p_drive_w, v_mps, signals=signals)["power_w"]
+        if self.predicts == "fuel" and battery_w is not None:
+            pred = pred - self.battery_fuel_factor * np.asarray(battery_w, float)
+        return pred
+
+    def unknown_inputs(self, signals: dict | None, n: int, trip=None) -> dict:
+        """The chain's inputs (declared loads, HVAC temperature) that are unknown (NaN) on
+        some of ``n`` samples: ``{column: {"samples", "read_as", "trips"}}`` (trips only
+        when ``trip`` is given).
+
+        :meth:`evaluate` reads an unknown load as no draw and an unknown temperature as the
+        set-point (no HVAC): the prediction there lacks what they drew, so a report says where.
+        """
+        out = {}
+        for col in sorted(self.signals):
+            x = np.asarray((signals or {}).get(col, np.nan), float)
+            bad = np.broadcast_to(~np.isfinite(x), (n,))
+            if not bad.any():
+                continue
+            hvac = bool(self.hvac) and col == self.hvac.get("column", "ambient_c") and col not in self.loads
+            d = {"samples": int(bad.sum()), "read_as": "the set-point (no HVAC)" if hvac else "no load"}
+            if trip is not None:
+                d["trips"] = [str(t) for t in np.unique(np.asarray(trip)[bad])]
+            out[col] = d
+        return out
+
     @property
     def fuel_props(self) -> dict:
         return FUELS[self.fuel]
