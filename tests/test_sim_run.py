@@ -363,3 +363,49 @@ def test_heading_from_lane_geometry_agrees_with_getangle(tmp_path):
     assert abs(a - c) > 0.05 * c
     assert abs(g - a) < 0.1 * abs(a - c)
     assert g == pytest.approx(a, rel=0.01)
+
+
+def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_path, capsys):
+    """`run X.sumocfg`: a SUMO config given as it is runs with the class equations
+    (CONFIG_EQUATIONS: every motor vehicle by an equation made for its vClass); the outputs
+    the config sets (log, tripinfo) go into OUT/sumo/, not beside the config; an output an
+    additional file declares (SUMO writes it beside that file) is named in a warning."""
+    import shutil
+
+    from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+    builtin = REPO / "sumo_drvpw" / "sim" / "builtin"
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    for f in ("city.rou.xml", "prius3.vtype.xml"):
+        shutil.copy(builtin / "scenarios" / f, sc / f)
+    (sc / "ed.add.xml").write_text('<additional><edgeData id="e1" file="ed_out.xml"/></additional>\n')
+    cfg = sc / "c.sumocfg"
+    cfg.write_text(f"""<configuration>
+    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="city.rou.xml"/>
+           <additional-files value="prius3.vtype.xml,ed.add.xml"/></input>
+    <output><tripinfo-output value="ti.xml"/></output>
+    <time><begin value="0"/><end value="120"/><step-length value="0.5"/></time>
+    <report><log value="sim.log.txt"/><no-warnings value="true"/></report>
+</configuration>
+""")
+    before = sorted(p.name for p in sc.iterdir())
+    out = tmp_path / "o"
+    code, err = _cli([cfg, "--out", out, "--no-figures", "--no-progress"], capsys)
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary["equations"]) == list(CONFIG_EQUATIONS) and summary["vehicles"] > 0
+    assert (out / "sumo" / "ti.xml").is_file() and (out / "sumo" / "sim.log.txt").is_file()
+    assert ET.parse(out / "sumo" / "ti.xml").getroot().find("tripinfo") is not None
+    after = sorted(p.name for p in sc.iterdir())
+    assert after == sorted(before + ["ed_out.xml"])   # no log, no tripinfo beside the config
+    assert "sumo/" in err and "ed.add.xml: edgeData 'e1' → ed_out.xml" in err
+    # the cars are booked by the car equations; the truck and bus equations book nothing
+    cars = summary["equations"]["vsp_ldv1999"]["distance_m"]
+    assert sum(cars.values()) > 0
+    assert sum(summary["equations"]["moves_transit_bus"]["distance_m"].values()) == 0
+    # with --equation the config runs with those instead
+    code, err = _cli([cfg, "--out", tmp_path / "o2", "--equation", "drvpw_prius3", "--no-figures",
+                      "--no-progress"], capsys)
+    assert code == 0, err
+    assert list(json.loads((tmp_path / "o2" / "summary.json").read_text())["equations"]) == ["drvpw_prius3"]

@@ -19,7 +19,8 @@ from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenario", nargs="+",
-                        help="scenario TOML file(s) or built-in name(s) (docs/scenario.md)")
+                        help="scenario TOML file(s), SUMO config(s) as they are (X.sumocfg: every vehicle by "
+                             "the built-in equations made for its vClass), or built-in name(s) (docs/scenario.md)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="run up to N scenarios at once, one SUMO process each (default 1)")
@@ -88,10 +89,16 @@ def _print_summary(s: dict, out, label: str = "") -> None:
     if skipped:
         print("  not booked (no equation for the vClass): "
               + ", ".join(f"{c} {n}" for c, n in skipped.items()))
+    idle = []
     for name, eq in s["equations"].items():
+        if not any(d > 0 for d in eq.get("distance_m", {}).values()) and eq.get("vclasses"):
+            idle.append(name)  # made for classes no vehicle of this run had
+            continue
         parts = ", ".join(f"{c} {d['total'] / 3.6e6:.3f} kWh" for c, d in eq["energy_j"].items()
                           if d["total"] > 0)
         print(f"  {name} ({eq.get('predicts', 'wheel')}): traction {parts or '0'}")
+    if idle:
+        print(f"  no vehicle of their classes: {', '.join(idle)}")
 
 
 def _names(scenarios: list[str]) -> list[str]:
@@ -99,7 +106,7 @@ def _names(scenarios: list[str]) -> list[str]:
 
     out, used = [], {}
     for s in scenarios:
-        stem = Path(s).stem if s.endswith(".toml") else s
+        stem = Path(s).stem if s.endswith((".toml", ".sumocfg")) else s
         used[stem] = used.get(stem, 0) + 1
         out.append(stem if used[stem] == 1 else f"{stem}_{used[stem]}")
     return out

@@ -205,6 +205,19 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     args = list(sc.sumo_args)
+    # the config's own outputs go into this run's output folder, not beside the scenario
+    redirect = {k: v for k, v in sc.config_outputs.items()
+                if not (sc.sumo_device and k == "tripinfo-output")}
+    scratch = None
+    if redirect:
+        if out_dir is not None:
+            sumo_dir = Path(out_dir) / SUMO_OUTPUT_DIR
+        else:
+            import tempfile
+
+            scratch = tempfile.TemporaryDirectory(prefix="drvpw-sumo-outputs-")
+            sumo_dir = Path(scratch.name)
+        args += sumo_output_args(redirect, sumo_dir)
     tmpdir = None
     if sc.sumo_device:  # SUMO's own model beside ours: its tripinfo, read after the run
         import tempfile
@@ -243,12 +256,39 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             finally:
                 tmpdir.cleanup()
             result.summary["sumo_device"] = result.sumo_device_comparison().to_dict("records")
+        notes = []
+        if redirect and out_dir is not None:
+            notes.append(f"SUMO outputs the config sets were written into {SUMO_OUTPUT_DIR}/: "
+                         + ", ".join(f"{k} ({Path(v).name})" for k, v in redirect.items()))
+        if sc.additional_outputs:
+            notes.append("outputs declared in additional files were written by SUMO beside those "
+                         "files: " + "; ".join(sc.additional_outputs))
+        if notes:
+            result.summary["warnings"] = list(result.summary.get("warnings", [])) + notes
         if out_dir is not None:
             write_published(result, out_dir)
     finally:  # the parts never stay in the output folder
         if acc is not None and out_dir is not None:
             discard_parts(acc.ledger)
+        if scratch is not None:
+            scratch.cleanup()
     return result
+
+
+#: subfolder of a run's output folder for the outputs its SUMO config sets
+SUMO_OUTPUT_DIR = "sumo"
+
+
+def sumo_output_args(outputs: dict[str, str], folder: Path) -> list[str]:
+    """Command-line options sending each output a SUMO config sets (option → file(s) as
+    written there) into ``folder`` under its own file name (the command line overrides
+    the config; ``folder`` is created)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    args = []
+    for key, val in outputs.items():
+        names = [Path(v.strip()).name for v in val.split(",") if v.strip()]
+        args += [f"--{key}", ",".join(str(folder / n) for n in names)]
+    return args
 
 
 def read_tripinfo_emissions(path: Path):

@@ -108,6 +108,43 @@ OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equ
              "slope_reference", "wind_heading", "positions", "period", "sumo_device"}
 
 
+#: the equations of a scenario given as a bare SUMO config (``run X.sumocfg``): every motor
+#: vehicle class has one made for it — cars by VSP (LDV 1999), the seed paper's DrvPw and
+#: MOVES's passenger car; trucks, buses and motorcycles by their MOVES source type
+CONFIG_EQUATIONS = ("vsp_ldv1999", "drvpw_prius3", "moves_passenger_car", "moves_motorcycle",
+                    "moves_light_commercial_truck", "moves_single_unit_truck",
+                    "moves_combination_truck", "moves_transit_bus", "moves_intercity_bus")
+#: SUMO options that name an output file but do not end in "-output"
+_OUTPUT_OPTIONS = {"log", "message-log", "error-log", "summary", "netstate-dump", "ndump",
+                   "save-state.files", "save-configuration", "save-template"}
+#: additional-file elements whose ``file`` attribute is an output SUMO writes (relative to
+#: the additional file)
+_OUTPUT_ELEMENTS = {"edgeData", "laneData", "e1Detector", "inductionLoop", "e2Detector",
+                    "laneAreaDetector", "e3Detector", "entryExitDetector", "instantInductionLoop",
+                    "routeProbe", "vTypeProbe", "edgeRelations", "tazRelations", "meanData"}
+
+
+def is_output_option(key: str) -> bool:
+    """Whether a SUMO option names an output file (``tripinfo-output``, ``log`` …)."""
+    return key.endswith("-output") or key in _OUTPUT_OPTIONS
+
+
+def additional_outputs(paths) -> list[str]:
+    """Outputs the additional files declare (``edgeData id='x' file='y'`` …), as
+    'FILE: element id → output' lines; SUMO writes them beside the additional file."""
+    found = []
+    for p in paths:
+        try:
+            for _, el in ET.iterparse(p, events=("end",)):
+                tag = el.tag.split("}")[-1]
+                if tag in _OUTPUT_ELEMENTS and el.get("file"):
+                    found.append(f"{p}: {tag} '{el.get('id', '')}' → {el.get('file')}")
+                el.clear()
+        except (ET.ParseError, OSError):
+            continue  # SUMO reports an unreadable additional file itself
+    return found
+
+
 @dataclass
 class RoadClassRule:
     """How an edge gets its road class: edge id map > type map > highway types/speed > city."""
@@ -180,6 +217,11 @@ class Scenario:
     period: float | None = None
     #: also run SUMO's emissions device and put its per-vehicle totals beside ours
     sumo_device: bool = False
+    #: output options the SUMO config sets (option → file as written there); a run
+    #: redirects them into its output folder's ``sumo/`` (run.sumo_output_args)
+    config_outputs: dict[str, str] = field(default_factory=dict)
+    #: outputs declared in additional files, which SUMO writes beside those files
+    additional_outputs: list[str] = field(default_factory=list)
 
 
 def _where(path) -> str:
@@ -316,7 +358,12 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         if path is None:
             raise UserError("no scenario given")
         p = Path(path)
-        doc = read_toml(p, "scenario file")
+        if p.suffix == ".sumocfg":  # a bare SUMO config: every vehicle by its class's equations
+            if not p.is_file():
+                raise UserError(f"{p}: no such SUMO config")
+            doc = {"sumo": {"config": p.name}, "equations": list(CONFIG_EQUATIONS)}
+        else:
+            doc = read_toml(p, "scenario file")
         base = p.resolve().parent
         path = p
     bad = set(overrides) - OVERRIDES
@@ -346,6 +393,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             raise UserError(f"{where}: SUMO config not found: {cfg}")
         net, files, cfgvals = _config_files(cfg)
         args = ["-c", str(cfg)]
+        adds = [(cfg.parent / f.strip()).resolve()
+                for f in cfgvals.get("additional-files", "").split(",") if f.strip()]
     elif "net" in sumo:
         net = rel(sumo["net"]).resolve()
         routes = [rel(r).resolve() for r in _strlist(sumo.get("routes", []), where, "sumo.routes")]
@@ -464,6 +513,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             raise UserError(f"{where}: outputs.difference must name two of the scenario's "
                             f"equations ({', '.join(names)}), got {diff}")
     return Scenario(
+        config_outputs={k: v for k, v in cfgvals.items() if is_output_option(k) and v.strip()},
+        additional_outputs=additional_outputs(adds),
         path=Path(path) if path else None, sumo_args=args, route_files=files, net_file=net,
         begin=times.get("begin"), end=times.get("end"), step_length=times.get("step_length"),
         connection=connection, gui=bool(sumo.get("gui", False)), equations=equations,
