@@ -272,3 +272,23 @@ def test_diagnose_in_memory_and_streamed_declare_the_whole_lag(planted, tmp_path
     assert cli_main(["diagnose", str(planted), "--vehicle", "prius3", "--equation", TRUTH, "--power-lag", "1.0",
                      "--stream", stream, "--no-figures", "--max-findings", "1", "--out", str(out)]) == 0
     assert _terms(out / "final_equation.toml")["measurement"]["power_lag_s"] == pytest.approx(LAG_S, abs=0.125)
+
+
+def test_calibrate_hints_the_power_lag_when_acc_reads_below_one(tmp_path, capsys):
+    """A planted 1.5-s lag of the power behind the speed pulls the acc coefficient below 1:
+    calibrate says a lag is the usual cause and how to correct it in the data; given
+    --power-lag, or on a log without a lag, it does not."""
+    df, _ = E.synth_trips(3, 6.0, seed=5, noise=NOISE, effects=[E.PowerLag(1.5), E.LogPower()])
+    path = tmp_path / "lag.parquet"
+    df.to_parquet(path)
+    assert cli_main(["calibrate", str(path), "--vehicle", "prius3", "--out", str(tmp_path / "e.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "acc = " in out and "hint:" in out and "--power-lag" in out, out
+    assert cli_main(["calibrate", str(path), "--vehicle", "prius3", "--power-lag", "1.5",
+                     "--out", str(tmp_path / "f.toml")]) == 0
+    assert "--power-lag S" not in capsys.readouterr().out
+    clean, _ = E.synth_trips(3, 6.0, seed=5, noise=NOISE, effects=[E.LogPower()])
+    clean.to_parquet(tmp_path / "clean.parquet")
+    assert cli_main(["calibrate", str(tmp_path / "clean.parquet"), "--vehicle", "prius3",
+                     "--out", str(tmp_path / "g.toml")]) == 0
+    assert "--power-lag" not in capsys.readouterr().out

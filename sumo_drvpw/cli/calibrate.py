@@ -136,14 +136,18 @@ def log_columns(paths) -> set[str]:
 
 
 def hint_grade_source(note: str, columns, meas) -> None:
-    """When the grade was found attenuated and the log has a longitudinal accelerometer,
-    say how to correct the grade in the data instead of constraining its coefficient."""
+    """When the grade was found attenuated and the log has a longitudinal accelerometer, or
+    the acc coefficient below 1 (a lag), say how to correct the data instead of constraining
+    the coefficient."""
     from sumo_drvpw.data.corrections import accelerometer_column
 
     col = accelerometer_column(columns)
     if "grade" in note and col and (meas is None or meas.grade == "logged"):
         print(f"hint: the log has a longitudinal accelerometer ({col}); --grade-source fused:300 corrects "
               "the grade in the data (diagnose says whether the accelerometer's grade fits better)")
+    if "acc = " in note and "lag" in note and (meas is None or meas.power_lag_s == 0.0):
+        print("hint: an acc coefficient below 1 is often a lag between the power and the speed signal; "
+              "diagnose measures it (its timing finding, in seconds) and --power-lag S corrects it in the data")
 
 
 def declare_measurement(eq, meas) -> None:
