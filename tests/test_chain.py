@@ -867,3 +867,19 @@ def test_compare_says_where_a_chain_load_is_unknown(tmp_path, capsys):
     assert cli_main(["compare", str(log), "--equation", str(eq), "--out", str(tmp_path / "c2")]) == 0
     assert "chain_unknown_inputs" not in json.loads((tmp_path / "c2" / "report.json").read_text())[
         "equations"]["chain"]
+
+
+def test_fuel_chain_says_when_its_engine_off_is_not_identified_at_city_speeds():
+    """A fuel chain calibrated on highway driving only (as the shared Prius Gen-2 logs are)
+    cannot know whether the engine runs at city speeds: its engine-off reading says so; the
+    same chain calibrated on mixed driving does not."""
+    rng = np.random.default_rng(11)
+    n = 8000
+    dt = np.full(n, 0.5)
+    for v0, flagged in ((27.0, True), (12.0, False)):
+        v = np.clip(v0 + 6 * np.sin(np.arange(n) / 60.0) + rng.normal(0, 0.3, n), 0, None)
+        a = np.gradient(v, 0.5)
+        p = 1400 * v * a + 0.35 * v ** 3 + 150 * v
+        fuel = np.where(p > 5_000.0, 4_000.0 + np.maximum(p, 0) / 0.36, 0.0)
+        reading = calibrate_fuel(p, v, fuel, dt).parameters["engine_off_below_w"]["reading"]
+        assert ("NOT IDENTIFIED at city speeds" in reading) == flagged, (v0, reading)

@@ -11,10 +11,12 @@ cluster (``--scheduler ADDRESS``, else a local cluster of ``--workers N`` proces
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from sumo_drvpw.cli import add_force, output_set
 from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
+from sumo_drvpw.errors import UserError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -35,6 +37,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="also write trace.parquet (per vehicle-step power per term)")
     parser.add_argument("--period", type=float, metavar="S",
                         help="edgeData interval [s] (default: the scenario's, else the whole run)")
+    parser.add_argument("--air-temperature", type=float, metavar="C",
+                        help="air temperature [°C], replacing the scenario's [air] (ρ from it at the "
+                             "scenario's pressure, else 101.325 kPa); the equations' cold terms and "
+                             "the energy chains' HVAC read it")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_engine_arguments(parser, ("local", "dask"),
@@ -50,6 +56,11 @@ def _overrides(args) -> dict:
     for key in ("begin", "end", "period"):
         if getattr(args, key) is not None:
             o[key] = getattr(args, key)
+    t = getattr(args, "air_temperature", None)
+    if t is not None:
+        if not math.isfinite(t) or t <= -273.15:
+            raise UserError(f"--air-temperature {t}: a finite temperature above absolute zero (°C)")
+        o["air_temperature_c"] = t
     if args.equation:
         o["equations"] = args.equation
     if args.traci or args.gui:
@@ -96,9 +107,20 @@ def _print_summary(s: dict, out, label: str = "") -> None:
             continue
         parts = ", ".join(f"{c} {d['total'] / 3.6e6:.3f} kWh" for c, d in eq["energy_j"].items()
                           if d["total"] > 0)
-        print(f"  {name} ({eq.get('predicts', 'wheel')}): traction {parts or '0'}")
+        pred = eq.get("predicts", "wheel")
+        also = "" if pred == "wheel" else f"; its chain predicts {pred.replace('_', ' ')}"
+        print(f"  {name}: driving (wheel) traction {parts or '0'}{also}")
     if idle:
         print(f"  no vehicle of their classes: {', '.join(idle)}")
+    for r in (s.get("chain") or {}).get("classes", []):  # battery kWh or fuel L per class
+        if not r.get("distance_km"):
+            continue
+        if "fuel_l" in r:
+            print(f"  {r['equation']} fuel, {r['key']}: {r['fuel_l']:.2f} L, "
+                  f"{r['fuel_l_per_100km']:.2f} L/100 km, CO₂ {r['co2_kg']:.1f} kg")
+        else:
+            print(f"  {r['equation']} battery, {r['key']}: net {r['net_kwh']:.2f} kWh "
+                  f"({r['net_kwh_per_km']:.3f} kWh/km; auxiliary {r['auxiliary_kwh']:.2f} kWh)")
 
 
 def _names(scenarios: list[str]) -> list[str]:

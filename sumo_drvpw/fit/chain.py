@@ -42,6 +42,10 @@ LIMIT_QUANTILES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995)
 ENGINE_OFF_GRID_W = (0.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 8000.0, 10000.0, 12000.0, 15000.0)
 #: speeds above which the engine always runs, tried for the fuel chain [m/s] (None: no such speed)
 ENGINE_ON_SPEED_GRID_MPS = (None, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 17.0, 20.0)
+#: a fuel chain's engine on/off is identified at city speeds only when at least this share
+#: of the calibration time lies below CITY_SPEED_MPS (50 km/h, the urban limit)
+CITY_SPEED_MPS = 50.0 / 3.6
+CITY_SHARE_MIN = 0.1
 
 
 @dataclass
@@ -392,6 +396,13 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
                                          "at_bound": False, "how": "profiled (BIC) over a grid"}
     for name, p_ in params.items():
         p_["reading"] = _reading(name, p_["value"])
+    low = float(w[ok & (v < CITY_SPEED_MPS)].sum() / max(w[ok].sum(), 1e-12))
+    if low < CITY_SHARE_MIN:  # the engine's on/off at city speeds is not in the data
+        params["engine_off_below_w"]["reading"] += (
+            f"; NOT IDENTIFIED at city speeds: {low:.0%} of the calibration time is below "
+            f"{CITY_SPEED_MPS * 3.6:.0f} km/h, so where a SUMO study drives slower the engine's "
+            "on/off is extrapolated (a hybrid that runs electric at low power there would use less fuel "
+            "than this chain books)")
     chain = EnergyChain(predicts="fuel", idle_fuel_power_w=float(beta[0]), marginal_efficiency=eta,
                         engine_off_below_w=off, engine_on_above_mps=engine_on_above_mps,
                         loads=gains, fuel=fuel)

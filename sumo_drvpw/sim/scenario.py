@@ -105,7 +105,8 @@ _VTYPE_KEYS = {"mass_kg", "equations"}
 #: keyword overrides accepted by run_scenario (and the CLI)
 OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
              "trace", "edgedata", "figures", "progress", "difference", "acceleration",
-             "slope_reference", "wind_heading", "positions", "period", "sumo_device"}
+             "slope_reference", "wind_heading", "positions", "period", "sumo_device",
+             "air_temperature_c"}
 
 
 #: the equations of a scenario given as a bare SUMO config (``run X.sumocfg``): every motor
@@ -473,7 +474,10 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     if ws < 0:
         raise UserError(f"{where}: wind.speed_mps must be ≥ 0, got {ws}")
 
-    air = doc.get("air", {})
+    air = dict(doc.get("air", {}))
+    if overrides.get("air_temperature_c") is not None:  # the density follows the temperature
+        air.pop("density_kgm3", None)
+        air["temperature_c"] = overrides["air_temperature_c"]
     t_air = None
     if "density_kgm3" in air:
         if "temperature_c" in air:
