@@ -409,3 +409,24 @@ def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_
                       "--no-progress"], capsys)
     assert code == 0, err
     assert list(json.loads((tmp_path / "o2" / "summary.json").read_text())["equations"]) == ["drvpw_prius3"]
+
+
+def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path, capsys):
+    """--air-temperature C replaces the scenario's [air]: ρ follows it, and the i3 battery
+    equation's HVAC (heating below its 20 °C set-point) and cold drag book more at 0 °C than
+    at 20 °C on the same run; a temperature that is no number is refused (exit 2)."""
+    eq = REPO / "docs" / "energy-chain" / "bmw_i3_battery.toml"
+    per_km, rho = {}, {}
+    for t in (20, 0):
+        out = tmp_path / f"o{t}"
+        code, err = _cli(["city", "--equation", eq, "--air-temperature", t, "--end", 200,
+                          "--out", out, "--no-figures", "--no-progress"], capsys)
+        assert code == 0, err
+        s = json.loads((out / "summary.json").read_text())
+        row = next(r for r in s["chain"]["classes"] if r["key"] == "passenger")
+        per_km[t], rho[t] = row["net_kwh_per_km"], s["air_density_kgm3"]
+    assert rho[0] == pytest.approx(101325 / (287.058 * 273.15), rel=1e-3)
+    assert rho[20] == pytest.approx(101325 / (287.058 * 293.15), rel=1e-3)
+    assert per_km[0] > 1.1 * per_km[20] > 0
+    code, err = _cli(["city", "--air-temperature", "nan", "--out", tmp_path / "x"], capsys)
+    assert code == 2 and "--air-temperature" in err and not (tmp_path / "x").exists()
