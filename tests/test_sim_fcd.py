@@ -180,3 +180,22 @@ def test_fcd_partitioned_parquet_equals_one_file(live, tmp_path, capsys):
     code = cli_main(["fcd", str(parts), "--scenario", str(CITY), "--equation", "vsp_ldv1999",
                      "--end", "100", "--no-figures", "--out", str(tmp_path / "cli")])
     assert code == 0 and (tmp_path / "cli" / "vehicles.parquet").is_file()
+
+
+def test_fcd_without_equations_books_every_class(live, tmp_path, capsys):
+    """fcd with neither --equation nor --scenario books every vehicle by the built-in
+    equations of its vClass, as `run X.sumocfg` does; the car equations book the cars
+    exactly as when named."""
+    from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+    d, res = live
+    base = ["fcd", str(d / "fcd.xml.gz"), "--net", str(NETS / "city.net.xml"), "--vtypes",
+            str(REPO / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "prius3.vtype.xml"),
+            "--end", "200", "--no-figures"]
+    assert cli_main([*base, "--out", str(tmp_path / "all")]) == 0
+    assert "built-in equations made for its vClass" in capsys.readouterr().out
+    s = json.loads((tmp_path / "all" / "summary.json").read_text())
+    assert list(s["equations"]) == list(CONFIG_EQUATIONS) and s["vehicles"] == res["vehicles"]
+    assert cli_main([*base, "--equation", "vsp_ldv1999", "--out", str(tmp_path / "one")]) == 0
+    one = json.loads((tmp_path / "one" / "summary.json").read_text())
+    assert s["equations"]["vsp_ldv1999"]["energy_j"] == one["equations"]["vsp_ldv1999"]["energy_j"]

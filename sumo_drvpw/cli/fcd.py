@@ -22,12 +22,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--net", metavar="NET", help="the network the FCD was recorded on "
                         "(default: the scenario's)")
-    parser.add_argument("--scenario", metavar="S.toml",
-                        help="scenario for equations, vTypes (masses, vClasses) and options")
+    parser.add_argument("--scenario", metavar="S.toml|X.sumocfg",
+                        help="scenario (or the run's SUMO config) for equations, vTypes (masses, "
+                             "vClasses) and options")
     parser.add_argument("--vtypes", action="append", metavar="FILE",
                         help="route/additional file(s) with the vTypes (default: the scenario's)")
     parser.add_argument("--equation", action="append", metavar="NAME_OR_FILE",
-                        help="evaluate these equations instead of the scenario's (repeatable)")
+                        help="evaluate these equations instead of the scenario's (repeatable; "
+                             "default without a scenario: the built-in equations of every vClass)")
     parser.add_argument("--begin", type=float, help="ignore timesteps before this [s]")
     parser.add_argument("--end", type=float, help="stop at this simulation time [s]")
     parser.add_argument("--period", type=float, metavar="S", help="edgeData interval [s]")
@@ -50,8 +52,12 @@ def main(args: argparse.Namespace) -> int:
 
     if args.scenario is None and args.net is None:
         raise UserError("give --net (the network of the FCD) or --scenario")
-    if args.scenario is None and not args.equation:
-        raise UserError("give --equation NAME (repeatable) or --scenario")
+    if args.scenario is None and not args.equation:  # as `run X.sumocfg` does
+        from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+        args.equation = list(CONFIG_EQUATIONS)
+        print("note: no --equation or --scenario: every vehicle by the built-in equations made for its "
+              "vClass (vClasses from --vtypes, else every vehicle a passenger car)")
     check_engine_arguments(args)
     if args.buckets is not None and args.engine != "dask":
         raise UserError(f"--buckets goes with --engine dask (got --engine {args.engine})")
