@@ -206,8 +206,10 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     args = list(sc.sumo_args)
     # the config's own outputs go into this run's output folder, not beside the scenario
+    # (unless the scenario's options or the emissions comparison set them already)
+    given = {a[2:] for a in args if a.startswith("--")}
     redirect = {k: v for k, v in sc.config_outputs.items()
-                if not (sc.sumo_device and k == "tripinfo-output")}
+                if k not in given and not (sc.sumo_device and k == "tripinfo-output")}
     scratch = None
     if redirect:
         if out_dir is not None:
@@ -260,6 +262,9 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         if redirect and out_dir is not None:
             notes.append(f"SUMO outputs the config sets were written into {SUMO_OUTPUT_DIR}/: "
                          + ", ".join(f"{k} ({Path(v).name})" for k, v in redirect.items()))
+        if sc.sumo_device and "tripinfo-output" in sc.config_outputs and "tripinfo-output" not in given:
+            notes.append("the config's tripinfo-output was replaced by the emissions comparison's "
+                         "(outputs.sumo_device) and not kept")
         if sc.additional_outputs:
             notes.append("outputs declared in additional files were written by SUMO beside those "
                          "files: " + "; ".join(sc.additional_outputs))
@@ -287,7 +292,7 @@ def sumo_output_args(outputs: dict[str, str], folder: Path) -> list[str]:
     args = []
     for key, val in outputs.items():
         names = [Path(v.strip()).name for v in val.split(",") if v.strip()]
-        args += [f"--{key}", ",".join(str(folder / n) for n in names)]
+        args += [f"--{key}", ",".join(str(folder.resolve() / n) for n in names)]
     return args
 
 
