@@ -332,3 +332,25 @@ def test_planted_heating_over_ambient_temperature_is_found(clean):
     assert f["term"] == "hvac" and f["role"] == "condition"
     assert f["coefficient"][0] == pytest.approx(40.0, rel=0.1)
     assert res.equation.chain.hvac["heating_w_per_k"] == pytest.approx(f["coefficient"][0])
+
+
+def test_trace_reports_a_declared_load_unknown_on_some_trips(clean):
+    """A declared chain load that the log has on some trips only (NaN on the others): the
+    trace says which trips and how it reads them (as no load), as compare does."""
+    m, b, df = clean
+    decl = _declared(b)
+    decl.chain.loads = {"heater_w": 1.0}
+    trips = np.asarray(df["trip_id"]).astype(str)
+    first = trips[0]
+    heater = np.where(trips == first, np.nan, 0.0)
+    m.inputs.signals["heater_w"] = heater
+    try:
+        res = trace_chain(m, decl)
+    finally:
+        del m.inputs.signals["heater_w"]
+    u = res.report["chain_unknown_inputs"]["heater_w"]
+    assert u["trips"] == [first] and u["read_as"] == "no load"
+    assert 0 < u["samples"] <= int((trips == first).sum())
+    from sumo_drvpw.report.chain_trace import markdown
+
+    assert "'heater_w' unknown (NaN)" in markdown(res.report)

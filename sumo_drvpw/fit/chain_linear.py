@@ -538,6 +538,8 @@ def _report(m, equation, closed, bl, idx, y, pred0, held, w, trip_names, trip, f
         "declared_chain": equation.chain.to_dict(), "closed_chain": closed.chain.to_dict(),
         "declared_terms": dict(equation.terms), "closed_terms": dict(closed.terms),
         "n_samples": int(idx.size), "trips": [str(s) for s in trip_names],
+        "chain_unknown_inputs": equation.chain.unknown_inputs(
+            {k: np.asarray(v)[idx] if np.ndim(v) else v for k, v in m.inputs.signals.items()}, idx.size, trips),
         "validation": bl.how,
         "test": (f"held-out {bl.block_s:g}-s blocks: one-sided paired test of d_b = e_b(model)² − "
                  "e_b(model + effect)², e_b the block's energy error Σ w·(P_meas − P_pred) [J], Bonferroni over "
