@@ -108,7 +108,7 @@ def _print_summary(s: dict, out, label: str = "") -> None:
         parts = ", ".join(f"{c} {d['total'] / 3.6e6:.3f} kWh" for c, d in eq["energy_j"].items()
                           if d["total"] > 0)
         pred = eq.get("predicts", "wheel")
-        also = "" if pred == "wheel" else f"; its chain predicts {pred.replace('_', ' ')}"
+        also = "" if pred == "wheel" else f"; the equation predicts: {pred.replace('_', ' ')}"
         print(f"  {name}: driving (wheel) traction {parts or '0'}{also}")
     if idle:
         print(f"  no vehicle of their classes: {', '.join(idle)}")
