@@ -107,9 +107,9 @@ def _print_summary(s: dict, out, label: str = "") -> None:
             continue
         parts = ", ".join(f"{c} {d['total'] / 3.6e6:.3f} kWh" for c, d in eq["energy_j"].items()
                           if d["total"] > 0)
-        pred = eq.get("predicts", "wheel")
-        also = "" if pred == "wheel" else f"; the equation predicts: {pred.replace('_', ' ')}"
-        print(f"  {name}: driving (wheel) traction {parts or '0'}{also}")
+        also = {"wheel": "", "powertrain_output": " (at the powertrain output)",
+                "battery": "; its battery energy per class below", "fuel": "; its fuel per class below"}
+        print(f"  {name}: traction of its terms {parts or '0'}{also.get(eq.get('predicts', 'wheel'), '')}")
     if idle:
         print(f"  no vehicle of their classes: {', '.join(idle)}")
     for r in (s.get("chain") or {}).get("classes", []):  # battery kWh or fuel L per class
