@@ -409,6 +409,9 @@ def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_
                       "--no-progress"], capsys)
     assert code == 0, err
     assert list(json.loads((tmp_path / "o2" / "summary.json").read_text())["equations"]) == ["drvpw_prius3"]
+    # a config that is not there: one line naming it, exit 2, nothing written
+    code, err = _cli(["nothere.sumocfg", "--out", tmp_path / "o3"], capsys)
+    assert code == 2 and "nothere.sumocfg: no such SUMO config" in err and not (tmp_path / "o3").exists()
 
 
 def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path, capsys):

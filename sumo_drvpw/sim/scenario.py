@@ -314,7 +314,7 @@ def scenario_path(spec) -> Path:
     """A scenario file path, or a built-in scenario's when ``spec`` is a built-in name and
     no such file exists."""
     p = Path(spec)
-    if p.exists() or p.suffix == ".toml" or any(c in str(spec) for c in "/\\"):
+    if p.exists() or p.suffix in (".toml", ".sumocfg") or any(c in str(spec) for c in "/\\"):
         return p
     return bundled_scenario(str(spec))
 
