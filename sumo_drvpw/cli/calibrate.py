@@ -100,12 +100,7 @@ def main(args) -> int:
         "logs": m.log.files, "vehicle": m.vehicle.path if m.vehicle else None,
         "power_source": m.source, "candidates_spec": args.candidates})
     print(res.summary())
-    from sumo_drvpw.fit.physical import apply_physics, constraints_of  # issue #11 §3
-
-    eq, note = apply_physics(eq, m.inputs, m.power_w, m.usable, constraints_of(args.candidates))
-    if note:
-        print(note)
-        hint_grade_source(note, m.log.df.columns, m.log.options.measurement)
+    eq, _ = physical(eq, m, args.candidates)
     declare_measurement(eq, m.log.options.measurement)
     if args.report:  # report and equation together: the equation is written last
         with output_set(args, args.report, inputs) as tmp:
@@ -133,6 +128,18 @@ def log_columns(paths) -> set[str]:
         except Exception:  # a header we cannot read here was read (or refused) by the reader
             continue
     return cols
+
+
+def physical(eq, m, candidates):
+    """The equation, physically constrained where its free fit is implausible (issue #11 §3),
+    and the note saying so ('' when plausible); the note and its hints are printed."""
+    from sumo_drvpw.fit.physical import apply_physics, constraints_of
+
+    eq, note = apply_physics(eq, m.inputs, m.power_w, m.usable, constraints_of(candidates))
+    if note:
+        print(note)
+        hint_grade_source(note, m.log.df.columns, m.log.options.measurement)
+    return eq, note
 
 
 def hint_grade_source(note: str, columns, meas) -> None:
@@ -248,13 +255,7 @@ def main_chain(args) -> int:
         eq = res.to_equation(args.name or out.stem, provenance={
             "logs": mw.log.files, "power_source": mw.source, "candidates_spec": args.candidates})
         print(res.summary())
-        # the road load under the chain obeys the same physics as `calibrate` (issue #11 §3)
-        from sumo_drvpw.fit.physical import apply_physics, constraints_of
-
-        eq, note = apply_physics(eq, mw.inputs, mw.power_w, mw.usable, constraints_of(args.candidates))
-        if note:
-            print(note)
-            hint_grade_source(note, mw.log.df.columns, mw.log.options.measurement)
+        eq, note = physical(eq, mw, args.candidates)  # the same physics as `calibrate`
         road = f"road-load equation calibrated stepwise on {mw.source}" + (
             " (physically constrained: the free fit was implausible)" if note else "")
     # the chain's input: the log's measured driving power when it has one (the chain then

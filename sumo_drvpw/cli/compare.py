@@ -47,11 +47,11 @@ def main(args) -> int:
         what = {"wheel": "driving", "battery": "battery", "fuel": "fuel"}[target]
         write_comparison_report(comp, tmp, f"Equations against measured {what} power", m.context())
     doc = comp.to_json()
-    from sumo_drvpw.report.comparison import unknown_input_note
+    from sumo_drvpw.report.comparison import unknown_input_lines
 
     for name, r in doc["equations"].items():
-        for col, u in (r.get("chain_unknown_inputs") or {}).items():
-            print("note: " + unknown_input_note(name, col, u, r["n"]))
+        for x in unknown_input_lines(name, r.get("chain_unknown_inputs"), r["n"]):
+            print("note: " + x)
     print_summary(doc, args.out)
     return 0
 

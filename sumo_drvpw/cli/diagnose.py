@@ -239,10 +239,10 @@ def _chain_main(args, target, progress) -> int:
         res = trace_chain(m, eq, opt, progress=progress)
         write_chain_outputs(res, tmp)
     r = res.report
-    from sumo_drvpw.report.comparison import unknown_input_note
+    from sumo_drvpw.report.comparison import unknown_input_lines
 
-    for col, u in (r.get("chain_unknown_inputs") or {}).items():
-        print("note: " + unknown_input_note(r["declared_equation"], col, u, r["n_samples"]))
+    for x in unknown_input_lines(r["declared_equation"], r.get("chain_unknown_inputs"), r["n_samples"]):
+        print("note: " + x)
     print(f"{target}: declared chain RMSE {r['baseline']['metrics']['rmse_w']:.1f} W, per-trip net energy "
           f"{100 * r['baseline']['trip_net_energy']['mean_abs_error']:.1f} %; {len(r['findings'])} finding(s)")
     for f in r["findings"]:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sumo_drvpw.report.comparison import unknown_input_note
+from sumo_drvpw.report.comparison import unknown_input_lines
 from sumo_drvpw.report.format import coef, num
 
 KWH = 3.6e6
@@ -46,8 +46,8 @@ def markdown(r: dict) -> str:
          f"- validation: {r['validation']}", f"- test: {r['test']}",
          f"- linearisation: {r['linearisation']}",
          f"- candidates: {', '.join(c['effect'] for c in r['candidates'])}"]
-    for col, u in (r.get("chain_unknown_inputs") or {}).items():
-        L.append("- " + unknown_input_note(r["declared_equation"], col, u, r["n_samples"]))
+    L += ["- " + x for x in unknown_input_lines(r["declared_equation"], r.get("chain_unknown_inputs"),
+                                                 r["n_samples"])]
     L += ["", "## Findings", ""]
     L.append("Coefficients and readings from the final joint fit of every finding; gain, p and energy share "
              "as the finding was accepted (its coefficient then: trace.json `coefficient_when_found`).")

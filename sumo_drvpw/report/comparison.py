@@ -91,6 +91,11 @@ def unknown_input_note(name: str, col: str, u: dict, n: int) -> str:
             f"read as {u.get('read_as', 'no load')} there, so the prediction lacks what it drew")
 
 
+def unknown_input_lines(name: str, unknown: dict | None, n: int) -> list[str]:
+    """:func:`unknown_input_note` for each of an equation's unknown chain inputs."""
+    return [unknown_input_note(name, col, u, n) for col, u in (unknown or {}).items()]
+
+
 def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> str:
     """The Markdown text of the report (see :func:`write_comparison_report`)."""
     eqs = doc["equations"]
@@ -115,8 +120,7 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
         r2w, nmw = heavy_ranked[-1]
         lines.append(f"Weakest at heavy load: **{nmw}** (R² = {num(r2w, 3)}).")
     for nm, d in eqs.items():
-        for col, u in (d.get("chain_unknown_inputs") or {}).items():
-            lines.append(unknown_input_note(nm, col, u, n) + ".")
+        lines += [x + "." for x in unknown_input_lines(nm, d.get("chain_unknown_inputs"), n)]
     lines.append("")
 
     lines += ["## Goodness of fit (cf. paper Table 3)", "",

@@ -44,7 +44,7 @@ from sumo_drvpw.fit.diagnose.stream_lag import LagSums, coarse_lags, timing_step
 from sumo_drvpw.fit.diagnose.streamed import StreamModel
 from sumo_drvpw.fit.diagnose.streamed import _Moments
 from sumo_drvpw.fit.diagnose.structural import (ACCELEROMETER_COLUMNS, FUSION_TAU_S, P0_KPA, RECUP_QUANTILES,
-                                                accelerometer_sin_grade, fused_sin_grade, inertia_candidate, lag_range,
+                                                accelerometer_sin_grade, fused_sin_grade, lag_range, model_side_candidates,
                                                 pressure_at_altitude_kpa)
 from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.terms import parse_term, term_matrix
@@ -453,10 +453,7 @@ def _structural(tr: StreamModel, prep: Prepared, declared, elev: bool, acc):
                     cands.append(Candidate(f"[air_density_altitude]*{t}",
                                            f"air density from altitude: the log's ρ assumes sea-level "
                                            f"pressure; {t} scaled by p(h)/p₀ − 1", (), "structural"))
-    if not any(parse_term(t).category == "grade" for t in declared) and tr.theta_ptp > 1e-4:
-        cands.append(Candidate("grade", "road grade: the declared equation has no grade term "
-                               "(calibrated where the road is flat, e.g. on a dynamometer)", (), "structural"))
-    cands += inertia_candidate(declared)
+    cands += model_side_candidates(declared, tr.theta_ptp)
     acc_col, dt_acc = acc
     grade_terms = [t for t in declared if parse_term(t).category == "grade" and not parse_term(t).signals]
     if acc_col is not None and grade_terms and all(np.isfinite(d["imu"] if not tr.common else d["imu"][d["common"]]).all()

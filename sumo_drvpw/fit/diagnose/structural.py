@@ -196,10 +196,18 @@ INERTIA_EFFECT = ("inertial power on its own coefficient while speeding up: the 
                   "kinetic energy at 1/η and returns it at η")
 
 
-def inertia_candidate(declared) -> list[Candidate]:
-    """``acc_pos`` when the declared equation has ``acc`` and not yet ``acc_pos``."""
-    return [Candidate("acc_pos", INERTIA_EFFECT, (), "structural")] \
-        if "acc" in declared and "acc_pos" not in declared else []
+def model_side_candidates(declared, theta_ptp: float) -> list[Candidate]:
+    """Structure the declared equation lacks, named by no column: a grade term (when the
+    grade varies, ``theta_ptp`` its range [rad]) and inertia by direction (``acc_pos`` when
+    the equation has ``acc`` and not yet ``acc_pos``); the in-memory and streamed tracers
+    both offer these."""
+    cands = []
+    if not any(parse_term(t).category == "grade" for t in declared) and theta_ptp > 1e-4:
+        cands.append(Candidate("grade", "road grade: the declared equation has no grade term "
+                               "(calibrated where the road is flat, e.g. on a dynamometer)", (), "structural"))
+    if "acc" in declared and "acc_pos" not in declared:
+        cands.append(Candidate("acc_pos", INERTIA_EFFECT, (), "structural"))
+    return cands
 
 
 def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_df,
@@ -243,10 +251,7 @@ def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_d
                                            f"air density from altitude: the log's ρ assumes sea-level "
                                            f"pressure; {t} scaled by p(h)/p₀ − 1", (), "structural"))
     # a missing grade term (an equation calibrated where the road is flat: a dynamometer)
-    if not any(parse_term(t).category == "grade" for t in declared) and np.ptp(tr.x.theta) > 1e-4:
-        cands.append(Candidate("grade", "road grade: the declared equation has no grade term "
-                               "(calibrated where the road is flat, e.g. on a dynamometer)", (), "structural"))
-    cands += inertia_candidate(declared)
+    cands += model_side_candidates(declared, float(np.ptp(tr.x.theta)))
     # grade from a longitudinal accelerometer
     acc_col = next((c for c in ACCELEROMETER_COLUMNS if c in x_all_signals), None)
     grade_terms = [t for t in declared if parse_term(t).category == "grade" and not parse_term(t).signals]
