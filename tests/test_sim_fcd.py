@@ -199,3 +199,43 @@ def test_fcd_without_equations_books_every_class(live, tmp_path, capsys):
     assert cli_main([*base, "--equation", "vsp_ldv1999", "--out", str(tmp_path / "one")]) == 0
     one = json.loads((tmp_path / "one" / "summary.json").read_text())
     assert s["equations"]["vsp_ldv1999"]["energy_j"] == one["equations"]["vsp_ldv1999"]["energy_j"]
+
+
+def test_fcd_with_human_readable_time_reads_as_seconds(tmp_path, capsys):
+    """A run with SUMO's --human-readable-time writes its FCD times as "hh:mm:ss.ss" (XML
+    attribute, CSV and Parquet string column); they read as the same seconds as a run
+    without it, and book the same energy (before: "a <timestep> without a valid time")."""
+    import subprocess
+
+    import sumolib
+
+    cfg = REPO / "scenarios" / "city.sumocfg"
+    runs = {}
+    for name, extra in (("num.xml", []), ("hr.xml", ["--human-readable-time"]),
+                        ("hr.csv", ["--human-readable-time"]),
+                        ("hr.parquet", ["--human-readable-time"])):
+        subprocess.run([sumolib.checkBinary("sumo"), "-c", str(cfg), "-e", "100",
+                        "--fcd-output", str(tmp_path / name), "--precision", "6",
+                        "--no-step-log", "--no-warnings", *extra], check=True,
+                       capture_output=True)
+        runs[name] = read_fcd(tmp_path / name)
+    assert "00:00:" in (tmp_path / "hr.xml").read_text()[:4000]
+    ref = runs["num.xml"][["time", "id", "speed", "pos"]].reset_index(drop=True)
+    assert len(ref) > 500 and ref.time.max() > 90
+    for name in ("hr.xml", "hr.csv", "hr.parquet"):
+        got = runs[name][["time", "id", "speed", "pos"]].reset_index(drop=True)
+        pd.testing.assert_frame_equal(got, ref, check_dtype=False, rtol=1e-5, atol=1e-6)
+    tot = {}
+    for name in ("num.xml", "hr.xml"):
+        res = process_fcd(tmp_path / name, scenario=CITY, equations=[PHYS], figures=False)
+        tot[name] = res["equations"]["phys"]["energy_j"]["city"]["total"]
+    assert tot["hr.xml"] == pytest.approx(tot["num.xml"], rel=1e-9) and tot["num.xml"] > 0
+    # a time that is neither seconds nor h:m:s: one line naming the file, exit 2
+    import re
+
+    (tmp_path / "bad.xml").write_text(re.sub(r'time="00:00:01[.0-9]*"', 'time="00:00:xx"',
+                                             (tmp_path / "hr.xml").read_text(), count=1))
+    code = cli_main(["fcd", str(tmp_path / "bad.xml"), "--scenario", str(CITY),
+                     "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "bad.xml" in err and "'00:00:xx'" in err and len(err.splitlines()) == 1

@@ -414,6 +414,51 @@ def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_
     assert code == 2 and "nothere.sumocfg: no such SUMO config" in err and not (tmp_path / "o3").exists()
 
 
+def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
+    """A SUMO config may give its times as SUMO reads them, "h:m:s" (SUMO's string2time;
+    e.g. the fokr_bs_demo game config shipped with SUMO, begin "15:0:0"), and --begin/--end
+    take the same; SUMO gives vClass vip a passenger car's defaults, so the car equations
+    book it (before: not booked, counted as skipped)."""
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    (sc / "r.rou.xml").write_text("""<routes>
+    <vType id="vipcar" vClass="vip" mass="1600"/>
+    <vType id="car" vClass="passenger" mass="1600"/>
+    <vehicle id="v" type="vipcar" depart="36000" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
+    <vehicle id="p" type="car" depart="36000" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
+</routes>
+""")
+    cfg = sc / "c.sumocfg"
+    cfg.write_text(f"""<configuration>
+    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
+    <time><begin value="10:00:00"/><end value="0:10:02:00"/><step-length value="0.5"/></time>
+    <report><no-warnings value="true"/></report>
+</configuration>
+""")
+    out = tmp_path / "o"
+    code, err = _cli([cfg, "--out", out, "--no-figures", "--no-progress"], capsys)
+    assert code == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    assert (s["begin_s"], s["end_s"]) == (36000.0, 36120.0) and s["steps"] == 240
+    assert s["vehicles"] == 2 and not s["skipped"]["by_vclass"]
+    # the vip car and the passenger car, same mass and route: both booked by the car equations
+    veh = pd.read_parquet(out / "vehicles.parquet").set_index(["vehicle", "equation"])
+    for eq in ("vsp_ldv1999", "drvpw_prius3", "moves_passenger_car"):
+        v, p = veh.loc[("v", eq)], veh.loc[("p", eq)]
+        assert v["vclass"] == "vip" and v["distance_m"] > 400 and v["traction_total_j"] > 0
+        assert v["distance_m"] == pytest.approx(p["distance_m"], rel=0.05)
+    # --end as clock time overrides the config's
+    code, err = _cli([cfg, "--out", tmp_path / "o2", "--end", "10:01:00", "--no-figures",
+                      "--no-progress"], capsys)
+    assert code == 0, err
+    assert json.loads((tmp_path / "o2" / "summary.json").read_text())["end_s"] == 36060.0
+    # a time SUMO would not read: one line naming the config and the key, exit 2
+    cfg.write_text(cfg.read_text().replace("10:00:00", "ten o'clock"))
+    code, err = _cli([cfg, "--out", tmp_path / "o3"], capsys)
+    assert code == 2 and "c.sumocfg: 'begin' must be a time" in err
+    assert not (tmp_path / "o3").exists()
+
+
 def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path, capsys):
     """--air-temperature C replaces the scenario's [air]: ρ follows it, and the i3 battery
     equation's HVAC (heating below its 20 °C set-point) and cold drag book more at 0 °C than

@@ -72,6 +72,25 @@ def test_missing_config_and_broken_config(tmp_path):
         load_scenario(_write(tmp_path, 'equations = ["x"]\n[sumo]\nconfig = "bad.sumocfg"\n'))
 
 
+@pytest.mark.parametrize("value,seconds", [
+    (3600, 3600.0), (12.5, 12.5), ('"3600"', 3600.0), ('"7:00:00"', 25200.0),
+    ('"1:2:0:5"', 93605.0), ('"0:0:1.5"', 1.5)])
+def test_times_in_seconds_or_sumo_clock_format(tmp_path, value, seconds):
+    """sumo.begin/end as a number or as SUMO reads a time (seconds, h:m:s, d:h:m:s)."""
+    cfg = (SCEN / "city.sumocfg").as_posix()
+    text = f'equations = ["x"]\n[sumo]\nconfig = "{cfg}"\nbegin = {value}\nend = 99999999\n'
+    sc = load_scenario(_write(tmp_path, text), equations=EQ)
+    assert sc.begin == seconds
+
+
+@pytest.mark.parametrize("value", ['"7 am"', '"7:00"', "true", '"1:2:3:4:5"'])
+def test_bad_times_are_named(tmp_path, value):
+    cfg = (SCEN / "city.sumocfg").as_posix()
+    text = f'equations = ["x"]\n[sumo]\nconfig = "{cfg}"\nbegin = {value}\n'
+    with pytest.raises(UserError, match=r"'sumo\.begin' must be a"):
+        load_scenario(_write(tmp_path, text), equations=EQ)
+
+
 def test_unknown_equation_is_named(tmp_path):
     text = f'equations = ["no_such_equation"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
     with pytest.raises(UserError, match="no_such_equation"):

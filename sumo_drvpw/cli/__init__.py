@@ -57,6 +57,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def sumo_time_arg(text: str) -> float:
+    """argparse type of a SUMO time option: seconds or SUMO's h:m:s / d:h:m:s."""
+    from sumo_drvpw.sim.scenario import sumo_time
+    try:
+        return sumo_time(text, "", "time")
+    except UserError:
+        raise argparse.ArgumentTypeError(f"not a time in seconds or h:m:s: {text!r}") from None
+
+
 def add_force(p) -> None:
     """The ``--force`` option of a command that writes an output folder."""
     p.add_argument("--force", action="store_true",

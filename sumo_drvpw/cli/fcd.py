@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from sumo_drvpw.cli import add_force, output_set
+from sumo_drvpw.cli import add_force, output_set, sumo_time_arg
 from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 
 
@@ -30,8 +30,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--equation", action="append", metavar="NAME_OR_FILE",
                         help="evaluate these equations instead of the scenario's (repeatable; "
                              "default without a scenario: the built-in equations of every vClass)")
-    parser.add_argument("--begin", type=float, help="ignore timesteps before this [s]")
-    parser.add_argument("--end", type=float, help="stop at this simulation time [s]")
+    parser.add_argument("--begin", type=sumo_time_arg, help="ignore timesteps before this [s, or h:m:s]")
+    parser.add_argument("--end", type=sumo_time_arg, help="stop at this simulation time [s, or h:m:s]")
     parser.add_argument("--period", type=float, metavar="S", help="edgeData interval [s]")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     add_engine_arguments(parser, ("local", "dask"),

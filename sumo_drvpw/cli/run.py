@@ -14,7 +14,7 @@ import argparse
 import math
 import sys
 
-from sumo_drvpw.cli import add_force, output_set
+from sumo_drvpw.cli import add_force, output_set, sumo_time_arg
 from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 from sumo_drvpw.errors import UserError
 
@@ -26,8 +26,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="run up to N scenarios at once, one SUMO process each (default 1)")
-    parser.add_argument("--begin", type=float, help="override sumo.begin [s]")
-    parser.add_argument("--end", type=float, help="override sumo.end [s]")
+    parser.add_argument("--begin", type=sumo_time_arg, help="override sumo.begin [s, or h:m:s]")
+    parser.add_argument("--end", type=sumo_time_arg, help="override sumo.end [s, or h:m:s]")
     parser.add_argument("--equation", action="append", metavar="NAME_OR_FILE",
                         help="evaluate these equations instead of the scenario's (repeatable)")
     parser.add_argument("--traci", action="store_true",

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.scenario import sumo_seconds
 
 #: our name → SUMO's tabular FCD column (``<element>_<attribute>``)
 FCD_COLUMNS = {"time": "timestep_time", "id": "vehicle_id", "type": "vehicle_type",
@@ -130,7 +131,7 @@ def _xml_blocks(path: Path, chunk_rows: int):
                 tag = el.tag
                 if ev == "start":
                     if tag == "timestep":
-                        t = float(el.attrib["time"])
+                        t = _seconds(el.attrib["time"])
                         times.append(t)
                     continue
                 if tag == "vehicle" and t is not None:
@@ -159,6 +160,7 @@ def _tabular_block(raw: pd.DataFrame, label, first: int) -> Block:
     if missing:
         raise UserError(f"FCD file {label}: no column {missing[0]} (SUMO's tabular FCD "
                         f"has {', '.join(FCD_COLUMNS[k] for k in _REQUIRED)})")
+    raw = raw.assign(**{FCD_COLUMNS["time"]: _time_column(raw[FCD_COLUMNS["time"]])})
     times = np.unique(pd.to_numeric(raw[FCD_COLUMNS["time"]], errors="coerce").dropna())
     df = pd.DataFrame({k: raw[c] for k, c in FCD_COLUMNS.items() if c in raw.columns})
     return Block(times.astype(float), _normalise(df, label, first), first)
@@ -174,10 +176,36 @@ def _first_time(f: Path) -> float:
     if col not in names or pf.metadata.num_rows == 0:
         return float("inf")
     rg = pf.metadata.row_group(0).column(names.index(col)).statistics
-    if rg is not None and rg.has_min_max:
+    if rg is not None and rg.has_min_max and not isinstance(rg.min, (str, bytes)):
         return float(rg.min)
+    # no statistics, or clock-time strings (their minimum sorts as text: the first row)
     batch = next(pf.iter_batches(batch_size=1, columns=[col]))
-    return float(batch.column(0)[0].as_py())
+    return _seconds(str(batch.column(0)[0].as_py()))
+
+
+def _seconds(text: str) -> float:
+    """A time attribute of SUMO's output: seconds, or "h:m:s" / "d:h:m:s" when the run
+    had --human-readable-time; ValueError otherwise."""
+    try:
+        return float(text)
+    except ValueError:
+        t = sumo_seconds(text)
+        if t is None:
+            raise ValueError(f"not a time in seconds or h:m:s: {text!r}") from None
+        return t
+
+
+def _time_column(col: pd.Series) -> pd.Series:
+    """A tabular FCD's time column in seconds (clock-time strings of --human-readable-time
+    converted once per distinct value; anything else left for the number check)."""
+    if pd.api.types.is_numeric_dtype(col):
+        return col
+    text = col.astype("string")
+    clock = text.str.contains(":", na=False)
+    if not clock.any():
+        return col
+    values = {u: sumo_seconds(u) for u in text[clock].unique()}
+    return col.where(~clock, text[clock].map(lambda u: values[u] if values[u] is not None else u))
 
 
 def _parquet_blocks(files: list[Path], label, chunk_rows: int):

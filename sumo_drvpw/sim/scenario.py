@@ -8,7 +8,7 @@ the scenario file)::
     [sumo]
     config = "city.sumocfg"         # a SUMO config, or: net = "x.net.xml", routes = [..]
     # net = "..."; routes = ["..."]; additional = ["..."]
-    begin = 0                       # [s] (default: the config's)
+    begin = 0                       # [s], or SUMO's "h:m:s" (default: the config's)
     end = 600                       # [s] (default: the config's)
     step_length = 0.5               # [s] (default: the config's)
     connection = "libsumo"          # or "traci" (e.g. with gui = true to watch in sumo-gui)
@@ -237,6 +237,29 @@ def _num(v, where: str, key: str, positive: bool = False) -> float:
     return float(v)
 
 
+def sumo_seconds(text: str) -> float | None:
+    """A time as SUMO writes and reads one, in seconds: "3600", "12.5", or clock time
+    "h:m:s" / "d:h:m:s" ("7:00:00" = 25200; what --human-readable-time writes; sumolib's
+    parseTime); None when it is neither."""
+    from sumolib.miscutils import parseTime
+    try:  # SUMO reads "h:m:s" and "d:h:m:s", nothing with fewer or more fields
+        t = parseTime(text.strip()) if text.count(":") in (0, 2, 3) else None
+    except (ValueError, IndexError):
+        return None
+    return t if t is None or math.isfinite(t) else None
+
+
+def sumo_time(v, where: str, key: str, positive: bool = False) -> float:
+    """A SUMO time value [s]: a number, or a string as SUMO reads one (:func:`sumo_seconds`)."""
+    if isinstance(v, str):
+        t = sumo_seconds(v)
+        if t is None:
+            raise UserError(f"{where}: '{key}' must be a time in seconds or h:m:s (SUMO's "
+                            f"format), got {v!r}")
+        v = t
+    return _num(v, where, key, positive)
+
+
 def _check_table(val, allowed: set[str], where: str, name: str) -> None:
     """``val`` must be a table whose keys are all in ``allowed``; errors name the key."""
     if not isinstance(val, dict):
@@ -417,14 +440,11 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     times = {}
     for k in ("begin", "end", "step_length"):
         if k in sumo:
-            times[k] = _num(sumo[k], where, f"sumo.{k}", positive=(k == "step_length"))
+            times[k] = sumo_time(sumo[k], where, f"sumo.{k}", positive=(k == "step_length"))
             args += [f"--{k.replace('_', '-')}", repr(times[k])]
         elif k.replace("_", "-") in cfgvals:
-            try:
-                times[k] = float(cfgvals[k.replace("_", "-")])
-            except ValueError:
-                raise UserError(f"SUMO config: bad {k} value {cfgvals[k.replace('_', '-')]!r}") \
-                    from None
+            times[k] = sumo_time(cfgvals[k.replace("_", "-")], f"SUMO config {cfg}",
+                                 k.replace("_", "-"), positive=(k == "step_length"))
     if "begin" in times and "end" in times and times["end"] <= times["begin"]:
         raise UserError(f"{where}: sumo.end ({times['end']}) must be after sumo.begin "
                         f"({times['begin']})")

@@ -23,6 +23,7 @@ from sumo_drvpw.errors import UserError
 #: gives a mass; every use is listed in summary.json ``assumptions``.
 DEFAULT_MASS_KG = {
     "passenger": 1478.8, "private": 1478.8, "taxi": 1478.8, "hov": 1478.8,  # (21)
+    "vip": 1478.8,                                                          # (21)
     "evehicle": 1478.8, "emergency": 1478.8, "authority": 1478.8,           # (21)
     "motorcycle": 285.0, "moped": 285.0,                                    # (11)
     "delivery": 2059.7,                                                     # (32)
@@ -34,7 +35,7 @@ DEFAULT_MASS_KG = {
 #: MOVES source type behind each default mass (for the summary's assumptions).
 DEFAULT_MASS_SOURCE = {
     **{c: "MOVES source type 21 (passenger car) source mass" for c in (
-        "passenger", "private", "taxi", "hov", "evehicle", "emergency", "authority")},
+        "passenger", "private", "taxi", "hov", "vip", "evehicle", "emergency", "authority")},
     "motorcycle": "MOVES source type 11 (motorcycle) source mass",
     "moped": "MOVES source type 11 (motorcycle) source mass",
     "delivery": "MOVES source type 32 (light commercial truck) source mass",
