@@ -476,5 +476,40 @@ def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path,
     assert rho[0] == pytest.approx(101325 / (287.058 * 273.15), rel=1e-3)
     assert rho[20] == pytest.approx(101325 / (287.058 * 293.15), rel=1e-3)
     assert per_km[0] > 1.1 * per_km[20] > 0
+    # no temperature given: the HVAC reads the default air's 20 °C, as ρ (1.2041) and the
+    # cold drag do, and the run says so (before: the HVAC read 0 °C, winter heating, silently)
+    # (the bare SUMO config: the city scenario file itself says 20 °C)
+    bare = {}
+    for t in (None, 20):
+        out = tmp_path / f"bare{t}"
+        code, err = _cli([REPO / "scenarios" / "city.sumocfg", "--equation", eq, "--end", 200,
+                          "--out", out, "--no-figures", "--no-progress",
+                          *(["--air-temperature", t] if t is not None else [])], capsys)
+        assert code == 0, err
+        s = json.loads((out / "summary.json").read_text())
+        row = next(r for r in s["chain"]["classes"] if r["key"] == "passenger")
+        bare[t] = row["net_kwh_per_km"]
+        assert s["chain"]["hvac_air_temperature_c"] == 20
+        assert s["chain"]["hvac_air_temperature_assumed"] == (t is None)
+        assert ("no air temperature given" in err) == (t is None)
+        assert ("no air temperature given" in " ".join(s["warnings"])) == (t is None)
+    assert bare[None] == pytest.approx(bare[20], rel=1e-9) and bare[20] > 0
+    # an HVAC column named otherwise by its calibration reads the run's air temperature too;
+    # a logged load (no SUMO signal) books 0 and the run says so
+    renamed = tmp_path / "renamed.toml"
+    renamed.write_text(eq.read_text(encoding="utf-8").replace(
+        '[chain.hvac]\ncolumn = "ambient_c"',
+        '[chain.loads]\nheater_w = 1.0\n\n[chain.hvac]\ncolumn = "t_outside"'), encoding="utf-8")
+    assert "heater_w" in renamed.read_text() and "t_outside" in renamed.read_text()
+    out = tmp_path / "orenamed"
+    code, err = _cli(["city", "--equation", renamed, "--air-temperature", 0, "--end", 200,
+                      "--out", out, "--no-figures", "--no-progress"], capsys)
+    assert code == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    row = next(r for r in s["chain"]["classes"] if r["key"] == "passenger")
+    assert row["net_kwh_per_km"] == pytest.approx(per_km[0], rel=1e-9)
+    assert not s["chain"]["hvac_air_temperature_assumed"] and "no air temperature" not in err
+    assert s["chain"]["signals_assumed_zero"] == ["heater_w"]
+    assert "chain loads SUMO has no signal for were taken as 0: heater_w" in err
     code, err = _cli(["city", "--air-temperature", "nan", "--out", tmp_path / "x"], capsys)
     assert code == 2 and "--air-temperature" in err and not (tmp_path / "x").exists()

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.chain import chain_warnings
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
 from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network
@@ -248,6 +249,7 @@ class Accountant(_Listener):
         if st.missed_steps:
             warnings.append(f"{st.missed_steps} simulation steps were not booked: call "
                             "simulationStep() without a target time")
+        warnings += chain_warnings(led.chain)
         summary_extra["warnings"] = warnings + list(summary_extra.get("warnings", []))
         summary = summary_dict(led, net, self.names, self.eqset.uses_other, summary_extra)
         classes = list(net.classes)

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.model.chain import EnergyChain
+from sumo_drvpw.model.constants import T_REF_C
 
 #: Quantities booked per vehicle/edge and equation, in this order (units in the names).
 QUANTITIES = ("traction_j", "recuperated_j", "auxiliary_j", "net_j", "fuel_j", "fuel_l", "co2_kg")
@@ -41,13 +42,21 @@ class ChainLedger:
     def __init__(self, names: list[str], chains: list[EnergyChain | None], n_edges: int,
                  capacity: int = 1024, signal_values: dict | None = None):
         #: constant values of the chains' signals (loads, ambient temperature) in SUMO,
-        #: which has no such columns; a signal not given is taken as 0 and listed in
+        #: which has no such columns; a load not given is taken as 0 and listed in
         #: :attr:`assumed_zero` (a logged heater or A/C load then adds nothing)
         self.signal_values = dict(signal_values or {})
         self.assumed_zero: set[str] = set()
         self.names = list(names)
         self.chains = list(chains)
         self.active = [i for i, c in enumerate(self.chains) if c is not None and c.predicts != "wheel"]
+        #: the chains' HVAC temperature columns (whatever a calibration named them): in SUMO
+        #: each reads the run's air temperature, ``signal_values["ambient_c"]``; when the run
+        #: gives none, the default air's T_REF_C (20 °C, that of ρ = 1.2041 kg/m³ and of the
+        #: ``cold`` term's reference) and :attr:`air_temperature_assumed` says so
+        self.hvac_columns = {self.chains[i].hvac.get("column", "ambient_c")
+                             for i in self.active if self.chains[i].hvac}
+        self.air_temperature_c = float(self.signal_values.get("ambient_c", T_REF_C))
+        self.air_temperature_assumed = bool(self.hvac_columns) and "ambient_c" not in self.signal_values
         self.E, self.Q = len(self.names), len(QUANTITIES)
         #: (equation, quantity) columns a chain books: battery 0–3, fuel 4–6
         self._cols = [(e, k) for e in self.active
@@ -169,9 +178,13 @@ class ChainLedger:
     def _constant_signals(self, n: int) -> dict:
         out = {}
         for s in self.signals:
-            if s not in self.signal_values:
+            if s in self.signal_values:
+                out[s] = np.full(n, float(self.signal_values[s]))
+            elif s in self.hvac_columns:
+                out[s] = np.full(n, self.air_temperature_c)
+            else:
                 self.assumed_zero.add(s)
-            out[s] = np.full(n, float(self.signal_values.get(s, 0.0)))
+                out[s] = np.zeros(n)
         return out
 
     # ------------------------------------------------------------------ reports
@@ -278,7 +291,26 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
             "quantities": "battery: traction/recuperated/auxiliary/net kWh (auxiliary accrues "
                           "while standing); fuel: litres (LHV, density of the chain's fuel), CO2 kg",
             "signals_assumed_zero": sorted(chain.assumed_zero),
-            "signal_values": chain.signal_values}
+            "signal_values": chain.signal_values,
+            "hvac_air_temperature_c": chain.air_temperature_c if chain.hvac_columns else None,
+            "hvac_air_temperature_assumed": chain.air_temperature_assumed}
+
+
+def chain_warnings(chain: ChainLedger | None) -> list[str]:
+    """What a run's battery/fuel accounts assumed that the scenario did not say."""
+    if chain is None:
+        return []
+    out = []
+    if chain.air_temperature_assumed:
+        out.append(f"no air temperature given: the energy chains' HVAC read {T_REF_C:g} °C (the "
+                   "default air, as the air density and the cold terms do); give the season's "
+                   "air temperature (the scenario's [air] temperature_c, or the run command's "
+                   "air-temperature option)")
+    if chain.assumed_zero:
+        out.append("chain loads SUMO has no signal for were taken as 0: "
+                   + ", ".join(sorted(chain.assumed_zero))
+                   + " (give them as constants, or use a chain without logged loads in SUMO)")
+    return out
 
 
 def write_chain_outputs(out_dir, result) -> dict[str, str]:
