@@ -884,3 +884,72 @@ def test_fuel_chain_says_when_its_engine_off_is_not_identified_at_city_speeds():
         fuel = np.where(p > 5_000.0, 4_000.0 + np.maximum(p, 0) / 0.36, 0.0)
         reading = calibrate_fuel(p, v, fuel, dt).parameters["engine_off_below_w"]["reading"]
         assert ("NOT IDENTIFIED at city speeds" in reading) == flagged, (v0, reading)
+
+
+def test_config_with_sumos_emissions_device_puts_its_energy_beside_the_chains(tmp_path):
+    """A SUMO config that enables the emissions device (and writes tripinfo) gets SUMO's
+    per-vehicle electricity and fuel beside the chains' without being asked: the battery
+    chain's kWh against SUMO's electricity (Energy-model EVs), the fuel chain's litres
+    against SUMO's fuel (HBEFA petrol cars, mg at the chain fuel's density); the config's
+    tripinfo stays, in OUT/sumo/; vehicles flushed during the run are in the comparison
+    (flush_vehicles=2); outputs.sumo_device = false turns it off."""
+    pytest.importorskip("libsumo")
+    import pandas as pd_
+
+    from pathlib import Path
+
+    from sumo_drvpw.model.constants import FUELS
+    from sumo_drvpw.sim import run_scenario
+    from sumo_drvpw.sim.run import read_tripinfo_emissions
+
+    repo = Path(__file__).resolve().parent.parent
+    net = repo / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"
+    (tmp_path / "r.rou.xml").write_text("""<routes>
+    <vType id="ev" vClass="passenger" emissionClass="Energy/unknown" mass="1600"/>
+    <vType id="petrol" vClass="passenger" emissionClass="HBEFA4/PC_petrol_Euro-4" mass="1400"/>
+    <flow id="e" type="ev" begin="0" end="60" period="10" departSpeed="0"><route edges="c00c10 c10c20 c20c30"/></flow>
+    <flow id="p" type="petrol" begin="0" end="60" period="10" departSpeed="0"><route edges="c00c10 c10c20 c20c30"/></flow>
+</routes>
+""")
+    (tmp_path / "c.sumocfg").write_text(f"""<configuration>
+    <input><net-file value="{net}"/><route-files value="r.rou.xml"/></input>
+    <output><tripinfo-output value="ti.xml"/></output>
+    <emissions><device.emissions.probability value="1"/></emissions>
+    <time><begin value="0"/><end value="400"/><step-length value="0.5"/></time>
+    <report><no-warnings value="true"/></report>
+</configuration>
+""")
+    fuel_eq, bev = _chain_equations()
+    (tmp_path / "s.toml").write_text('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\n'
+                                     '[outputs]\nfigures = false\n')
+    out = tmp_path / "o"
+    res = run_scenario(tmp_path / "s.toml", out, equations=[fuel_eq, bev], flush_vehicles=2)
+    assert (out / "sumo" / "ti.xml").is_file() and not (tmp_path / "ti.xml").exists()
+    assert not any("replaced" in w for w in res.summary["warnings"])
+    dev = read_tripinfo_emissions(out / "sumo" / "ti.xml")
+    ev_ids = set(dev.vehicle[dev.vehicle.str.startswith("e")])
+    petrol = set(dev.vehicle[dev.vehicle.str.startswith("p")])
+    assert len(ev_ids) >= 5 and len(petrol) >= 5
+    cmp = pd_.read_csv(out / "sumo_device.csv").set_index("equation")
+    chain = pd_.read_csv(out / "chain_vehicles.csv", dtype={"key": str})
+    assert set(chain.key) >= ev_ids | petrol          # flushed and held vehicles alike
+    b = cmp.loc["bev"]
+    assert b["quantity"].startswith("battery kWh") and b["vehicles"] == len(ev_ids)
+    ours = chain[(chain.equation == "bev") & chain.key.isin(ev_ids)].net_kwh.sum()
+    sumo = dev[dev.vehicle.isin(ev_ids)].sumo_electricity_wh.sum() / 1e3
+    assert b["ours"] == pytest.approx(ours, rel=1e-9) and b["sumo"] == pytest.approx(sumo, rel=1e-9)
+    assert 0.3 < b["ratio"] < 3.0
+    f = cmp.loc["drvpw_prius3"]
+    assert f["quantity"].startswith("fuel L") and f["vehicles"] == len(petrol)
+    ours = chain[(chain.equation == "drvpw_prius3") & chain.key.isin(petrol)].fuel_l.sum()
+    sumo = dev[dev.vehicle.isin(petrol)].sumo_fuel_mg.sum() / 1e6 / FUELS["gasoline"]["density_kg_per_l"]
+    assert f["ours"] == pytest.approx(ours, rel=1e-9) and f["sumo"] == pytest.approx(sumo, rel=1e-9)
+    assert 0.2 < f["ratio"] < 5.0
+    v = pd_.read_parquet(out / "vehicles.parquet")
+    assert "sumo_electricity_wh" in v and v.vehicle.isin(ev_ids | petrol).all()
+    # asked not to: no comparison, the config's tripinfo still kept
+    (tmp_path / "s.toml").write_text('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\n'
+                                     '[outputs]\nfigures = false\nsumo_device = false\n')
+    run_scenario(tmp_path / "s.toml", tmp_path / "o2", equations=[fuel_eq, bev])
+    assert not (tmp_path / "o2" / "sumo_device.csv").exists()
+    assert (tmp_path / "o2" / "sumo" / "ti.xml").is_file()

@@ -432,23 +432,64 @@ class RunResult:
                 for c in df.columns}
         return table_with_units(cols)
 
-    def sumo_device_comparison(self):
-        """Per equation: the plug-in's net energy and SUMO's emissions-device electricity
-        [kWh] over the vehicles SUMO reports electricity for (its Energy-model vTypes)."""
+    def chain_vehicles(self):
+        """Every vehicle's energy-chain rows (battery kWh or fuel L per equation; those
+        flushed during the run, then those held in memory) as a DataFrame, or None."""
         import pandas as pd
+
+        ch = getattr(self.ledger, "chain", None)
+        if ch is None:
+            return None
+        n = self.ledger.n_veh
+        df = pd.DataFrame(ch.table(ch.vehicle_totals(n), ch.veh_dist[:n],
+                                   list(self.ledger.veh_ids[:n])))
+        spill = getattr(self.ledger, "spill", None)
+        if spill is not None and spill.chain_parts:
+            parts = [pd.read_csv(p, header=None, names=spill.chain_columns,
+                                 dtype={"key": str}) for p in spill.chain_parts]
+            df = pd.concat([*parts, df], ignore_index=True)
+        return df.rename(columns={"key": "vehicle"})
+
+    def sumo_device_comparison(self):
+        """Per equation, over the vehicles SUMO's emissions device reports for, what the
+        plug-in books beside what SUMO's own model books: an equation with a battery chain
+        its battery kWh against SUMO's electricity; with a fuel chain its litres against
+        SUMO's fuel (mg, in litres at the chain fuel's density); an equation without a chain
+        its net driving energy at the wheel against SUMO's electricity."""
+        import pandas as pd
+
+        from sumo_drvpw.model.constants import FUELS
 
         rows = []
         if self.sumo_device is None:
             return pd.DataFrame(rows)
-        v = self._vehicles_all().to_pandas().merge(
-            self.sumo_device, on="vehicle", how="inner")
-        v = v[v.sumo_electricity_wh.abs() > 0]
+        dev = self.sumo_device
+        v = self._vehicles_all().to_pandas()[["vehicle", "equation", "net_total_j"]]
+        v = v.merge(dev, on="vehicle", how="inner")
+        cv = self.chain_vehicles()
+        if cv is not None:
+            cols = [c for c in ("vehicle", "equation", "net_kwh", "fuel_l") if c in cv.columns]
+            v = v.merge(cv[cols], on=["vehicle", "equation"], how="left")
+        ch = getattr(self.ledger, "chain", None)
+        chains = {} if ch is None else {ch.names[i]: ch.chains[i] for i in ch.active}
         for eq, g in v.groupby("equation", sort=False):
-            ours = g.net_total_j.sum() / 3.6e6
-            sumo = g.sumo_electricity_wh.sum() / 1e3
-            rows.append({"equation": eq, "vehicles": int(len(g)), "net_kwh": ours,
-                         "sumo_electricity_kwh": sumo,
-                         "ratio": ours / sumo if sumo else float("nan")})
+            c = chains.get(eq)
+            if c is not None and c.predicts == "fuel":
+                g = g[g.sumo_fuel_mg.abs() > 0]
+                dens = FUELS[c.fuel]["density_kg_per_l"]
+                ours, sumo = g.fuel_l.sum(), g.sumo_fuel_mg.sum() / 1e6 / dens
+                q = f"fuel L (chain; SUMO's fuel mass at {dens:g} kg/L)"
+            else:
+                g = g[g.sumo_electricity_wh.abs() > 0]
+                sumo = g.sumo_electricity_wh.sum() / 1e3
+                if c is not None:
+                    ours, q = g.net_kwh.sum(), "battery kWh (chain)"
+                else:
+                    ours, q = g.net_total_j.sum() / 3.6e6, "net driving energy kWh (no chain)"
+            if len(g):
+                rows.append({"equation": eq, "quantity": q, "vehicles": int(len(g)),
+                             "ours": float(ours), "sumo": float(sumo),
+                             "ratio": float(ours / sumo) if sumo else float("nan")})
         return pd.DataFrame(rows)
 
     def edges_arrow(self) -> pa.Table:

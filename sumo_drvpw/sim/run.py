@@ -208,8 +208,13 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     # the config's own outputs go into this run's output folder, not beside the scenario
     # (unless the scenario's options or the emissions comparison set them already)
     given = {a[2:] for a in args if a.startswith("--")}
+    # the emissions comparison reads the config's own tripinfo (in OUT/sumo/) when it writes
+    # one; otherwise a tripinfo of its own, in a temporary folder
+    ti_cfg = sc.config_outputs.get("tripinfo-output", "")
+    keep_ti = (sc.sumo_device and out_dir is not None and "tripinfo-output" not in given
+               and bool(ti_cfg.strip()) and "," not in ti_cfg)
     redirect = {k: v for k, v in sc.config_outputs.items()
-                if k not in given and not (sc.sumo_device and k == "tripinfo-output")}
+                if k not in given and not (sc.sumo_device and k == "tripinfo-output" and not keep_ti)}
     scratch = None
     if redirect:
         if out_dir is not None:
@@ -220,14 +225,19 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             scratch = tempfile.TemporaryDirectory(prefix="drvpw-sumo-outputs-")
             sumo_dir = Path(scratch.name)
         args += sumo_output_args(redirect, sumo_dir)
-    tmpdir = None
+    tmpdir, tripinfo = None, None
     if sc.sumo_device:  # SUMO's own model beside ours: its tripinfo, read after the run
-        import tempfile
+        if not sc.sumo_device_in_config:
+            args += ["--device.emissions.probability", "1"]
+        if keep_ti:
+            tripinfo = sumo_dir / Path(ti_cfg.strip()).name
+        else:
+            import tempfile
 
-        tmpdir = tempfile.TemporaryDirectory(prefix="drvpw-tripinfo-")
-        tripinfo = Path(tmpdir.name) / "tripinfo.xml"
-        args += ["--device.emissions.probability", "1", "--tripinfo-output", str(tripinfo),
-                 "--tripinfo-output.write-unfinished", "true"]
+            tmpdir = tempfile.TemporaryDirectory(prefix="drvpw-tripinfo-")
+            tripinfo = Path(tmpdir.name) / "tripinfo.xml"
+            args += ["--tripinfo-output", str(tripinfo), "--tripinfo-output.write-unfinished",
+                     "true"]
     from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
 
     conn = start_sumo(args, sc.connection, sc.gui)
@@ -252,17 +262,19 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
                 acc.close_trace()
             close_sumo(conn)
         check_vtype_filter(sc, acc.ledger)
-        if tmpdir is not None:
+        if tripinfo is not None:
             try:
                 result.sumo_device = read_tripinfo_emissions(tripinfo)
             finally:
-                tmpdir.cleanup()
+                if tmpdir is not None:
+                    tmpdir.cleanup()
             result.summary["sumo_device"] = result.sumo_device_comparison().to_dict("records")
         notes = []
         if redirect and out_dir is not None:
             notes.append(f"SUMO outputs the config sets were written into {SUMO_OUTPUT_DIR}/: "
                          + ", ".join(f"{k} ({Path(v).name})" for k, v in redirect.items()))
-        if sc.sumo_device and "tripinfo-output" in sc.config_outputs and "tripinfo-output" not in given:
+        if (sc.sumo_device and not keep_ti and "tripinfo-output" in sc.config_outputs
+                and "tripinfo-output" not in given):
             notes.append("the config's tripinfo-output was replaced by the emissions comparison's "
                          "(outputs.sumo_device) and not kept")
         if sc.additional_outputs:

@@ -218,6 +218,10 @@ class Scenario:
     period: float | None = None
     #: also run SUMO's emissions device and put its per-vehicle totals beside ours
     sumo_device: bool = False
+    #: the SUMO config itself enables the emissions device (device.emissions.probability
+    #: > 0 or .explicit): its per-vehicle totals go beside ours unless outputs.sumo_device
+    #: = false, and the run leaves the config's device settings as they are
+    sumo_device_in_config: bool = False
     #: output options the SUMO config sets (option → file as written there); a run
     #: redirects them into its output folder's ``sumo/`` (run.sumo_output_args)
     config_outputs: dict[str, str] = field(default_factory=dict)
@@ -235,6 +239,16 @@ def _num(v, where: str, key: str, positive: bool = False) -> float:
     if positive and v <= 0:
         raise UserError(f"{where}: '{key}' must be > 0, got {v!r}")
     return float(v)
+
+
+def device_in_config(cfgvals: dict[str, str]) -> bool:
+    """Whether a SUMO config's options enable the emissions device for some vehicles."""
+    try:
+        if float(cfgvals.get("device.emissions.probability", "0") or 0) > 0:
+            return True
+    except ValueError:
+        pass
+    return bool(cfgvals.get("device.emissions.explicit", "").strip())
 
 
 def sumo_seconds(text: str) -> float | None:
@@ -560,6 +574,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         trace=bool(out.get("trace", False)), edgedata=bool(out.get("edgedata", True)),
         figures=bool(out.get("figures", True)), difference=diff,
         progress=bool(out.get("progress", True)),
-        sumo_device=_bool(out.get("sumo_device", False), where, "outputs.sumo_device"),
+        sumo_device=_bool(out.get("sumo_device", device_in_config(cfgvals)), where,
+                          "outputs.sumo_device"),
+        sumo_device_in_config=device_in_config(cfgvals),
         period=None if out.get("period") is None else _num(out["period"], where,
                                                              "outputs.period", positive=True))
