@@ -459,6 +459,55 @@ def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
     assert not (tmp_path / "o3").exists()
 
 
+def test_parked_vehicles_are_off_the_lane_and_draw_no_auxiliary_power(tmp_path):
+    """A vehicle at a parking stop is off the lane (SUMO: no lane; engine off): it books no
+    time and no auxiliary energy while parked, with tracked positions as with positions read
+    every step (before: tracked positions kept it on its lane until the next full read, up
+    to 25 steps of standing and auxiliary power); a vehicle at a stop on the lane (not
+    parking) stands and draws its auxiliary power for the whole stop."""
+    import pandas as pd_
+
+    (tmp_path / "r.rou.xml").write_text("""<routes>
+    <vType id="car" vClass="passenger" mass="1600"/>
+    <vehicle id="starts_parked" type="car" depart="0" departPos="stop">
+        <route edges="c00c10 c10c20"/><stop lane="c00c10_0" endPos="60" duration="200" parking="true"/>
+    </vehicle>
+    <vehicle id="parks" type="car" depart="0" departSpeed="0">
+        <route edges="c00c10 c10c20"/><stop lane="c00c10_0" endPos="80" duration="200" parking="true"/>
+    </vehicle>
+    <vehicle id="waits" type="car" depart="0" departSpeed="0">
+        <route edges="c00c10 c10c20"/><stop lane="c00c10_0" endPos="40" duration="200"/>
+    </vehicle>
+</routes>
+""")
+    (tmp_path / "c.sumocfg").write_text(f"""<configuration>
+    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
+    <time><begin value="0"/><end value="500"/><step-length value="0.5"/></time>
+    <report><no-warnings value="true"/></report>
+</configuration>
+""")
+    eq = REPO / "docs" / "energy-chain" / "bmw_i3_battery.toml"
+    aux_w = 910.103036059679   # the file's constant auxiliary power; 20 °C: no HVAC
+    got = {}
+    for positions in ("getter", "tracked"):
+        (tmp_path / f"{positions}.toml").write_text(
+            f'equations = ["{eq}"]\n[sumo]\nconfig = "c.sumocfg"\npositions = "{positions}"\n'
+            '[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n')
+        run_scenario(tmp_path / f"{positions}.toml", tmp_path / positions)
+        c = pd_.read_csv(tmp_path / positions / "chain_vehicles.csv").set_index("key")
+        v = pd_.read_parquet(tmp_path / positions / "vehicles.parquet").set_index("vehicle")
+        got[positions] = (v["time_s"], c["auxiliary_kwh"])
+        # auxiliary energy = constant power × time booked, for every vehicle
+        np.testing.assert_allclose(c["auxiliary_kwh"], aux_w * v.loc[c.index, "time_s"] / 3.6e6,
+                                   rtol=1e-9)
+    for k in (0, 1):
+        pd_.testing.assert_series_equal(got["tracked"][k].sort_index(), got["getter"][k].sort_index(),
+                                        rtol=1e-9)
+    t = got["tracked"][0]
+    assert t["starts_parked"] < 120 and t["parks"] < 120     # driving only, not the 200 s parked
+    assert t["waits"] > 200 + 30                            # the stop on the lane, and the drive
+
+
 def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path, capsys):
     """--air-temperature C replaces the scenario's [air]: ρ follows it, and the i3 battery
     equation's HVAC (heating below its 20 °C set-point) and cold drag book more at 0 °C than

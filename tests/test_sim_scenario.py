@@ -91,6 +91,24 @@ def test_bad_times_are_named(tmp_path, value):
         load_scenario(_write(tmp_path, text), equations=EQ)
 
 
+def test_mesoscopic_simulation_is_refused_naming_the_option(tmp_path):
+    """SUMO's mesosim moves vehicles queue by queue (libsumo: no lane, speeds constant per
+    segment, no acceleration): no driving power follows; before, such a run booked nothing
+    and said 'no vehicle of their classes'. The config's option and sumo.options are named."""
+    cfg = tmp_path / "m.sumocfg"
+    cfg.write_text((SCEN / "city.sumocfg").read_text().replace(
+        "<processing>", '<processing>\n        <mesosim value="true"/>').replace(
+        "../sumo_drvpw", str(REPO / "sumo_drvpw")))
+    with pytest.raises(UserError, match=r"m\.sumocfg: mesosim: .*microscopically"):
+        load_scenario(cfg, equations=EQ)
+    text = (f'equations = ["x"]\n[sumo]\nconfig = "{(SCEN / "city.sumocfg").as_posix()}"\n'
+            'options = ["--mesosim", "true"]\n')
+    with pytest.raises(UserError, match=r"s\.toml: mesosim"):
+        load_scenario(_write(tmp_path, text), equations=EQ)
+    ok = text.replace('"--mesosim", "true"', '"--mesosim", "false"')
+    assert load_scenario(_write(tmp_path, ok, "ok.toml"), equations=EQ).net_file.is_file()
+
+
 def test_unknown_equation_is_named(tmp_path):
     text = f'equations = ["no_such_equation"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
     with pytest.raises(UserError, match="no_such_equation"):

@@ -54,7 +54,8 @@ class Physics:
     heading: str = "geometry"
     #: "tracked": lane and position are read when a vehicle is first seen, when its
     #: position advanced by v·Δt (SUMO's Euler update) reaches the end of its edge (the
-    #: shortest lane of the edge), after a teleport, and for every vehicle each
+    #: shortest lane of the edge), when a teleport starts or ends or it starts parking (off
+    #: the lane: not booked), and for every vehicle each
     #: ``resync_steps`` steps; otherwise they follow from the speed. A lane change keeps
     #: edge and position, so until the next read the tracked lane may be a neighbour of
     #: the same edge (same slope profile unless the lanes' shapes differ); a different
@@ -180,7 +181,14 @@ class Stepper:
         if self.tracking:
             # lanes -1 (no lane) and -2 (never read): an end of −∞, so they are always read
             self.lane_end = np.append(net.lane_end - 1e-6, [-np.inf, -np.inf])
-            self.teleported = getattr(conn.simulation, "getEndingTeleportIDList", lambda: ())
+            # vehicles whose lane changed without their reaching a lane end: teleports
+            # that ended or started, and parking that started (off the lane: not booked,
+            # no auxiliary power); they are read again in the step the event happened
+            sim = conn.simulation
+            events = [getattr(sim, name) for name in (
+                "getEndingTeleportIDList", "getStartingTeleportIDList",
+                "getParkingStartingVehiclesIDList") if hasattr(sim, name)]
+            self.lane_events = lambda: [v for f in events for v in f()]
             self.resync = max(1, int(physics.resync_steps))
             # a lane change keeps the position and the edge (internal ones included), so
             # only a different edge or position is a disagreement; lanes -1, -2 belong to none
@@ -307,7 +315,7 @@ class Stepper:
             trusted = pos < self.lane_end[lane]
             full = ledger.steps % self.resync == 0
             stale = np.ones(n, bool) if full else ~trusted
-            gone = self.teleported()
+            gone = self.lane_events()
             if gone:
                 stale[np.isin(vidx, [vmap[x] for x in gone if x in vmap])] = True
             k = np.flatnonzero(stale)

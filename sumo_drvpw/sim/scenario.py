@@ -18,8 +18,8 @@ the scenario file)::
                                     # SUMO's own definition of getAcceleration, so the
                                     # same numbers; or "getter" (vehicle.getAcceleration)
     positions = "tracked"           # lane and position read only when a car is first
-                                    # seen, reaches the end of its edge, ends a teleport,
-                                    # and every 25 steps (checked, disagreements counted
+                                    # seen, reaches the end of its edge, starts or ends
+                                    # a teleport, starts parking, and every 25 steps (checked, disagreements counted
                                     # in summary.json); in between x += v·Δt, SUMO's Euler
                                     # update. Or "getter": both read every step.
 
@@ -463,6 +463,16 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         raise UserError(f"{where}: sumo.end ({times['end']}) must be after sumo.begin "
                         f"({times['begin']})")
     args += [str(o) for o in _strlist(sumo.get("options", []), where, "sumo.options")]
+    meso = cfgvals.get("mesosim", "false").strip().lower() in ("true", "1", "yes", "on", "x")
+    src = f"SUMO config {cfg}" if meso else where
+    if "--mesosim" in args:
+        i = args.index("--mesosim")
+        meso = i + 1 >= len(args) or args[i + 1].lower() not in ("false", "0", "no", "off")
+        src = where
+    if meso:
+        raise UserError(f"{src}: mesosim: the mesoscopic simulation moves vehicles queue by "
+                        "queue, without lanes or accelerations, so no driving power follows "
+                        "from it; run the scenario microscopically (mesosim false)")
     connection = str(sumo.get("connection", "libsumo"))
     if connection not in ("libsumo", "traci"):
         raise UserError(f"{where}: sumo.connection must be 'libsumo' or 'traci', got "
