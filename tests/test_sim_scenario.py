@@ -215,6 +215,39 @@ def test_read_vtypes_mass_precedence(tmp_path):
         read_vtypes([bad])
 
 
+def test_read_vtypes_sumo_loading_and_deprecated_vehicle_mass(tmp_path):
+    """As SUMO's emission models take it (EnergyParams::getTotalMass): mass + loading; the
+    deprecated vehicleMass param is the mass (libsumo's getMass says so too); drvpw.mass is
+    the whole mass (no loading added); a loading without a mass is kept for the class mass."""
+    f = _write(tmp_path, """<routes>
+      <vType id="truck" vClass="truck" mass="12000"><param key="loading" value="8000"/></vType>
+      <vType id="old" emissionClass="Energy/unknown"><param key="vehicleMass" value="2000"/></vType>
+      <vType id="both" mass="1500"><param key="vehicleMass" value="2000"/></vType>
+      <vType id="own" mass="1500"><param key="loading" value="300"/>
+         <param key="drvpw.mass" value="1650"/></vType>
+      <vType id="load_only" vClass="delivery"><param key="loading" value="500"/></vType>
+    </routes>""", "r.rou.xml")
+    vt = read_vtypes([f])
+    assert vt["truck"].mass_kg == 20000 and vt["truck"].loading_kg == 8000
+    assert vt["old"].mass_kg == 2000
+    assert vt["both"].mass_kg == 1500                  # the attribute wins, as in SUMO
+    assert vt["own"].mass_kg == 1650
+    assert vt["load_only"].mass_kg is None and vt["load_only"].loading_kg == 500
+    sc = load_scenario(doc={"equations": ["vsp_ldv1999"], "sumo": {"net": str(
+        NETS / "highway.net.xml")}})
+    from sumo_drvpw.sim.run import VTypeResolver
+    from sumo_drvpw.sim.vtypes import DEFAULT_MASS_KG
+
+    res = VTypeResolver(sc, vt, [Equation("lcv", {"roll": 0.01}, vclasses=("delivery",))])
+    assert res("load_only", "v")[0] == DEFAULT_MASS_KG["delivery"] + 500
+    assert "loading 500" in res.assumptions["load_only"]["source"]
+    for key, val in (("loading", "-5"), ("vehicleMass", "0"), ("loading", "lots")):
+        bad = _write(tmp_path, f'<routes><vType id="x"><param key="{key}" '
+                               f'value="{val}"/></vType></routes>', "bad.rou.xml")
+        with pytest.raises(UserError, match=rf"vType 'x': param {key}.*{val}"):
+            read_vtypes([bad])
+
+
 @pytest.mark.parametrize("table,key,value", [
     ("sumo", "step_length", "nan"), ("sumo", "step_length", "0"), ("sumo", "end", "inf"),
     ("sumo", "begin", '"early"'), ("vtypes.car", "mass_kg", "-5"),

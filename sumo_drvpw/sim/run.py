@@ -28,8 +28,9 @@ class VTypeResolver:
     Equations: scenario ``vtypes.<id>.equations`` > param ``drvpw.equation`` > scenario
     ``vclasses.<vClass>.equations`` > every equation whose ``vclasses`` contain the vClass.
     A vType with none is not accounted and counted in :attr:`skipped` (by vClass and vType).
-    Mass: scenario ``vtypes.<id>.mass_kg`` > param ``drvpw.mass`` > ``mass`` attribute
-    written in the route/additional files > scenario ``vclasses.<vClass>.mass_kg`` > the
+    Mass: scenario ``vtypes.<id>.mass_kg`` > param ``drvpw.mass`` > ``mass`` attribute (or
+    SUMO's deprecated ``vehicleMass`` param) plus the ``loading`` param, written in the
+    route/additional files > scenario ``vclasses.<vClass>.mass_kg`` (plus loading) > the
     built-in default of the vClass (:data:`sumo_drvpw.sim.vtypes.DEFAULT_MASS_KG`, listed
     in :attr:`assumptions`) unless ``vehicles.default_masses = false``; none → UserError.
     """
@@ -114,12 +115,15 @@ class VTypeResolver:
                     mass = float(p)
                 except ValueError:
                     raise UserError(f"vType '{vt}': drvpw.mass is not a number: {p!r}") from None
-        if mass is None:
-            mass = cdata.get("mass_kg")
+        # a class mass for a vType that gives none: plus the vType's SUMO loading (payload)
+        loading = info.loading_kg if info is not None else 0.0
+        if mass is None and cdata.get("mass_kg") is not None:
+            mass = cdata["mass_kg"] + loading
         if mass is None and getattr(sc, "default_masses", True) and vclass in DEFAULT_MASS_KG:
-            mass = DEFAULT_MASS_KG[vclass]
+            mass = DEFAULT_MASS_KG[vclass] + loading
             self.assumptions[vt] = {"vclass": vclass, "mass_kg": mass,
-                                    "source": DEFAULT_MASS_SOURCE[vclass]}
+                                    "source": DEFAULT_MASS_SOURCE[vclass]
+                                    + (f" + loading {loading:g} kg" if loading else "")}
         if mass is None:
             where = f" (defined in {info.source})" if info is not None else \
                 " (not defined in the route/additional files: SUMO's default type?)"

@@ -57,6 +57,10 @@ class VTypeInfo:
     equation: str | None
     source: str
     vclass: str | None = None
+    #: SUMO's ``loading`` param [kg], the payload its emission models add to the mass;
+    #: included in :attr:`mass_kg` when that comes from SUMO's mass, added by the run to a
+    #: class mass when the vType gives none
+    loading_kg: float = 0.0
 
 
 def _open(path: Path):
@@ -68,7 +72,9 @@ def _open(path: Path):
 def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
     """Read every ``<vType>`` of the given route/additional files.
 
-    Mass precedence: param ``drvpw.mass`` > attribute ``mass``.
+    Mass: param ``drvpw.mass`` (the plug-in's: the vehicle's whole mass) > attribute ``mass``
+    (else the deprecated param ``vehicleMass``, which SUMO reads as the mass) plus param
+    ``loading``, the payload SUMO's emission models add to it (EnergyParams::getTotalMass).
     """
     out: dict[str, VTypeInfo] = {}
     for path in files:
@@ -86,19 +92,28 @@ def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
                     params = {p.attrib.get("key"): p.attrib.get("value")
                               for p in el if p.tag.split("}")[-1] == "param"}
                     where = f"{path}: vType '{vid}'"
-                    mass = None
-                    for key, val in (("mass", el.attrib.get("mass")),
-                                     ("drvpw.mass", params.get("drvpw.mass"))):
+
+                    def number(key, val, positive=True):
                         if val is None:
-                            continue
+                            return None
                         try:
-                            mass = float(val)
+                            x = float(val)
                         except ValueError:
                             raise UserError(f"{where}: {key} is not a number: {val!r}") from None
-                        if not mass > 0:
-                            raise UserError(f"{where}: {key} must be > 0, got {val!r}")
+                        if not (x > 0 if positive else x >= 0):
+                            raise UserError(f"{where}: {key} must be {'>' if positive else '≥'} 0, "
+                                            f"got {val!r}")
+                        return x
+
+                    sumo_mass = number("mass", el.attrib.get("mass"))
+                    if sumo_mass is None:
+                        sumo_mass = number("param vehicleMass", params.get("vehicleMass"))
+                    loading = number("param loading", params.get("loading"), positive=False) or 0.0
+                    mass = number("drvpw.mass", params.get("drvpw.mass"))
+                    if mass is None and sumo_mass is not None:
+                        mass = sumo_mass + loading
                     out[vid] = VTypeInfo(vid, mass, params.get("drvpw.equation") or None,
-                                         str(path), el.attrib.get("vClass"))
+                                         str(path), el.attrib.get("vClass"), loading)
                     el.clear()
         except ET.ParseError as e:
             raise UserError(f"{path}: not valid XML: {e}") from None
