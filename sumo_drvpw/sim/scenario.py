@@ -19,9 +19,10 @@ the scenario file)::
                                     # same numbers; or "getter" (vehicle.getAcceleration)
     positions = "tracked"           # lane and position read only when a car is first
                                     # seen, reaches the end of its edge, starts or ends
-                                    # a teleport, starts parking, and every 25 steps (checked, disagreements counted
-                                    # in summary.json); in between x += v·Δt, SUMO's Euler
-                                    # update. Or "getter": both read every step.
+                                    # a teleport, starts parking, and every 25 steps
+                                    # (checked, disagreements counted in summary.json);
+                                    # in between x += v·Δt, SUMO's Euler update. Or
+                                    # "getter": both read every step.
 
     [vehicles]
     vtypes = ["prius3"]             # vTypes to account (default: all vehicles)
