@@ -418,13 +418,15 @@ def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
     """A SUMO config may give its times as SUMO reads them, "h:m:s" (SUMO's string2time;
     e.g. the fokr_bs_demo game config shipped with SUMO, begin "15:0:0"), and --begin/--end
     take the same; SUMO gives vClass vip a passenger car's defaults, so the car equations
-    book it (before: not booked, counted as skipped)."""
+    book it (before: not booked, counted as skipped), and vClass emergency a van's."""
     sc = tmp_path / "sc"
     sc.mkdir()
     (sc / "r.rou.xml").write_text("""<routes>
     <vType id="vipcar" vClass="vip" mass="1600"/>
     <vType id="car" vClass="passenger" mass="1600"/>
+    <vType id="ambulance" vClass="emergency"/>
     <vehicle id="v" type="vipcar" depart="36000" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
+    <vehicle id="e" type="ambulance" depart="36000" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
     <vehicle id="p" type="car" depart="36000" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
 </routes>
 """)
@@ -440,13 +442,18 @@ def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
     assert code == 0, err
     s = json.loads((out / "summary.json").read_text())
     assert (s["begin_s"], s["end_s"]) == (36000.0, 36120.0) and s["steps"] == 240
-    assert s["vehicles"] == 2 and not s["skipped"]["by_vclass"]
+    assert s["vehicles"] == 3 and not s["skipped"]["by_vclass"]
     # the vip car and the passenger car, same mass and route: both booked by the car equations
     veh = pd.read_parquet(out / "vehicles.parquet").set_index(["vehicle", "equation"])
     for eq in ("vsp_ldv1999", "drvpw_prius3", "moves_passenger_car"):
         v, p = veh.loc[("v", eq)], veh.loc[("p", eq)]
         assert v["vclass"] == "vip" and v["distance_m"] > 400 and v["traction_total_j"] > 0
         assert v["distance_m"] == pytest.approx(p["distance_m"], rel=0.05)
+    # vClass emergency: SUMO's default is a light commercial van (6.5 m, an LCV emission
+    # class), so the MOVES light-commercial-truck equation books it, at that class's mass
+    amb = veh.xs("e", level="vehicle")
+    assert list(amb.index) == ["moves_light_commercial_truck"]
+    assert amb.iloc[0]["mass_kg"] == 2059.7 and amb.iloc[0]["traction_total_j"] > 0
     # --end as clock time overrides the config's
     code, err = _cli([cfg, "--out", tmp_path / "o2", "--end", "10:01:00", "--no-figures",
                       "--no-progress"], capsys)

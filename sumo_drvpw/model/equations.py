@@ -51,8 +51,7 @@ from sumo_drvpw.model.terms import CATEGORIES, Inputs, parse_term, term_matrix
 #: so that names are safe in column names, file names and XML attribute names.
 NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_.-]{0,63}$"
 #: SUMO vClasses an equation is for when it does not say (``vclasses``): the car classes.
-DEFAULT_VCLASSES = ("passenger", "private", "taxi", "hov", "vip", "evehicle", "emergency",
-                    "authority")
+DEFAULT_VCLASSES = ("passenger", "private", "taxi", "hov", "vip", "evehicle", "authority")
 #: What an equation's terms can predict (``predicts``).
 PREDICTS = ("wheel", "powertrain_output")
 

@@ -24,9 +24,9 @@ from sumo_drvpw.errors import UserError
 DEFAULT_MASS_KG = {
     "passenger": 1478.8, "private": 1478.8, "taxi": 1478.8, "hov": 1478.8,  # (21)
     "vip": 1478.8,                                                          # (21)
-    "evehicle": 1478.8, "emergency": 1478.8, "authority": 1478.8,           # (21)
+    "evehicle": 1478.8, "authority": 1478.8,                                # (21)
     "motorcycle": 285.0, "moped": 285.0,                                    # (11)
-    "delivery": 2059.7,                                                     # (32)
+    "delivery": 2059.7, "emergency": 2059.7,                                # (32)
     "bus": 16556.0,                                                         # (42)
     "coach": 19593.0,                                                       # (41)
     "truck": 8538.9, "army": 8538.9,                                        # (52)
@@ -35,10 +35,11 @@ DEFAULT_MASS_KG = {
 #: MOVES source type behind each default mass (for the summary's assumptions).
 DEFAULT_MASS_SOURCE = {
     **{c: "MOVES source type 21 (passenger car) source mass" for c in (
-        "passenger", "private", "taxi", "hov", "vip", "evehicle", "emergency", "authority")},
+        "passenger", "private", "taxi", "hov", "vip", "evehicle", "authority")},
     "motorcycle": "MOVES source type 11 (motorcycle) source mass",
     "moped": "MOVES source type 11 (motorcycle) source mass",
     "delivery": "MOVES source type 32 (light commercial truck) source mass",
+    "emergency": "MOVES source type 32 (light commercial truck) source mass",
     "bus": "MOVES source type 42 (transit bus) source mass",
     "coach": "MOVES source type 41 (intercity bus) source mass",
     "truck": "MOVES source type 52 (single unit short-haul truck) source mass",
