@@ -947,6 +947,12 @@ def test_config_with_sumos_emissions_device_puts_its_energy_beside_the_chains(tm
     assert 0.2 < f["ratio"] < 5.0
     v = pd_.read_parquet(out / "vehicles.parquet")
     assert "sumo_electricity_wh" in v and v.vehicle.isin(ev_ids | petrol).all()
+    # the same tripinfo gzipped reads alike (a config may name it ti.xml.gz)
+    import gzip
+
+    with gzip.open(tmp_path / "ti.xml.gz", "wb") as g:
+        g.write((out / "sumo" / "ti.xml").read_bytes())
+    pd_.testing.assert_frame_equal(read_tripinfo_emissions(tmp_path / "ti.xml.gz"), dev)
     # asked not to: no comparison, the config's tripinfo still kept
     (tmp_path / "s.toml").write_text('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\n'
                                      '[outputs]\nfigures = false\nsumo_device = false\n')

@@ -314,24 +314,38 @@ def sumo_output_args(outputs: dict[str, str], folder: Path) -> list[str]:
 
 def read_tripinfo_emissions(path: Path):
     """Per vehicle SUMO's emissions-device totals from a tripinfo file: DataFrame vehicle,
-    sumo_electricity_wh (Energy model) and sumo_fuel_mg (fuel models)."""
+    sumo_electricity_wh (Energy model) and sumo_fuel_mg (fuel models); plain or gzipped
+    (a config's tripinfo-output named *.gz)."""
+    import gzip
     import xml.etree.ElementTree as ET
 
     import pandas as pd
 
-    rows = []
     try:
-        for _, el in ET.iterparse(path, events=("end",)):
-            if el.tag == "tripinfo":
-                em = el.find("emissions")
-                if em is not None:
-                    rows.append({"vehicle": el.get("id"),
-                                 "sumo_electricity_wh": float(em.get("electricity_abs", "nan")),
-                                 "sumo_fuel_mg": float(em.get("fuel_abs", "nan"))})
-                el.clear()
-    except (ET.ParseError, OSError) as e:
+        with open(path, "rb") as f:
+            gz = f.read(2) == b"\x1f\x8b"
+        src = gzip.open(path, "rb") if gz else open(path, "rb")
+        with src:
+            rows = _tripinfo_rows(src)
+    except (ET.ParseError, OSError, EOFError) as e:
         raise UserError(f"SUMO tripinfo {path}: cannot read: {e}") from None
     return pd.DataFrame(rows, columns=["vehicle", "sumo_electricity_wh", "sumo_fuel_mg"])
+
+
+def _tripinfo_rows(src) -> list[dict]:
+    """The emissions-device totals of each <tripinfo> of an open tripinfo file."""
+    import xml.etree.ElementTree as ET
+
+    rows = []
+    for _, el in ET.iterparse(src, events=("end",)):
+        if el.tag == "tripinfo":
+            em = el.find("emissions")
+            if em is not None:
+                rows.append({"vehicle": el.get("id"),
+                             "sumo_electricity_wh": float(em.get("electricity_abs", "nan")),
+                             "sumo_fuel_mg": float(em.get("fuel_abs", "nan"))})
+            el.clear()
+    return rows
 
 
 def check_vtype_filter(sc, ledger) -> None:
