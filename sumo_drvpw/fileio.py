@@ -104,6 +104,16 @@ def write_figure(path, fig) -> None:
     plt.close(fig)
 
 
+def open_maybe_gzip(path):
+    """A file opened for binary reading, decompressed when it is gzipped (by its magic
+    bytes, not its name: SUMO writes *.gz outputs, and users rename files)."""
+    import gzip
+
+    with open(path, "rb") as f:
+        magic = f.read(2)
+    return gzip.open(path, "rb") if magic == b"\x1f\x8b" else open(path, "rb")
+
+
 def repo_root() -> Path:
     """The project checkout this package runs from (editable install)."""
     return Path(__file__).resolve().parent.parent

@@ -59,11 +59,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def sumo_time_arg(text: str) -> float:
     """argparse type of a SUMO time option: seconds or SUMO's h:m:s / d:h:m:s."""
-    from sumo_drvpw.sim.scenario import sumo_time
-    try:
-        return sumo_time(text, "", "time")
-    except UserError:
-        raise argparse.ArgumentTypeError(f"not a time in seconds or h:m:s: {text!r}") from None
+    from sumo_drvpw.sim.scenario import sumo_seconds
+
+    t = sumo_seconds(text)
+    if t is None:
+        raise argparse.ArgumentTypeError(f"not a time in seconds or h:m:s: {text!r}")
+    return t
 
 
 def add_force(p) -> None:

@@ -17,7 +17,6 @@ time earlier than the one before is a UserError naming the file and the row.
 
 from __future__ import annotations
 
-import gzip
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.sim.scenario import sumo_seconds
 
 #: our name → SUMO's tabular FCD column (``<element>_<attribute>``)
@@ -110,8 +110,6 @@ def _normalise(df: pd.DataFrame, label, first_row: int) -> dict:
 
 
 def _xml_blocks(path: Path, chunk_rows: int):
-    with open(path, "rb") as f:
-        gz = f.read(2) == b"\x1f\x8b"
     keys = ("time", *_XML_ATTRS)
     present = dict.fromkeys(_OPTIONAL, False)
 
@@ -125,7 +123,7 @@ def _xml_blocks(path: Path, chunk_rows: int):
     times: list[float] = []
     done = 0
     try:
-        with (gzip.open(path, "rb") if gz else open(path, "rb")) as fh:
+        with open_maybe_gzip(path) as fh:
             t = None
             for ev, el in ET.iterparse(fh, events=("start", "end")):
                 tag = el.tag

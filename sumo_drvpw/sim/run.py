@@ -213,12 +213,12 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     # (unless the scenario's options or the emissions comparison set them already)
     given = {a[2:] for a in args if a.startswith("--")}
     # the emissions comparison reads the config's own tripinfo (in OUT/sumo/) when it writes
-    # one; otherwise a tripinfo of its own, in a temporary folder
-    ti_cfg = sc.config_outputs.get("tripinfo-output", "")
-    keep_ti = (sc.sumo_device and out_dir is not None and "tripinfo-output" not in given
-               and bool(ti_cfg.strip()) and "," not in ti_cfg)
+    # one file; otherwise a tripinfo of its own, in a temporary folder, replacing the config's
+    ti_cfg = "" if "tripinfo-output" in given else sc.config_outputs.get("tripinfo-output", "").strip()
+    keep_ti = bool(sc.sumo_device and out_dir is not None and ti_cfg and "," not in ti_cfg)
+    drop_ti = bool(sc.sumo_device and ti_cfg and not keep_ti)
     redirect = {k: v for k, v in sc.config_outputs.items()
-                if k not in given and not (sc.sumo_device and k == "tripinfo-output" and not keep_ti)}
+                if k not in given and not (drop_ti and k == "tripinfo-output")}
     scratch = None
     if redirect:
         if out_dir is not None:
@@ -234,7 +234,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         if not sc.sumo_device_in_config:
             args += ["--device.emissions.probability", "1"]
         if keep_ti:
-            tripinfo = sumo_dir / Path(ti_cfg.strip()).name
+            tripinfo = sumo_dir / Path(ti_cfg).name
         else:
             import tempfile
 
@@ -277,8 +277,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         if redirect and out_dir is not None:
             notes.append(f"SUMO outputs the config sets were written into {SUMO_OUTPUT_DIR}/: "
                          + ", ".join(f"{k} ({Path(v).name})" for k, v in redirect.items()))
-        if (sc.sumo_device and not keep_ti and "tripinfo-output" in sc.config_outputs
-                and "tripinfo-output" not in given):
+        if drop_ti:
             notes.append("the config's tripinfo-output was replaced by the emissions comparison's "
                          "(outputs.sumo_device) and not kept")
         if sc.additional_outputs:
@@ -316,36 +315,26 @@ def read_tripinfo_emissions(path: Path):
     """Per vehicle SUMO's emissions-device totals from a tripinfo file: DataFrame vehicle,
     sumo_electricity_wh (Energy model) and sumo_fuel_mg (fuel models); plain or gzipped
     (a config's tripinfo-output named *.gz)."""
-    import gzip
     import xml.etree.ElementTree as ET
 
     import pandas as pd
 
+    from sumo_drvpw.fileio import open_maybe_gzip
+
+    rows = []
     try:
-        with open(path, "rb") as f:
-            gz = f.read(2) == b"\x1f\x8b"
-        src = gzip.open(path, "rb") if gz else open(path, "rb")
-        with src:
-            rows = _tripinfo_rows(src)
+        with open_maybe_gzip(path) as src:
+            for _, el in ET.iterparse(src, events=("end",)):
+                if el.tag == "tripinfo":
+                    em = el.find("emissions")
+                    if em is not None:
+                        rows.append({"vehicle": el.get("id"),
+                                     "sumo_electricity_wh": float(em.get("electricity_abs", "nan")),
+                                     "sumo_fuel_mg": float(em.get("fuel_abs", "nan"))})
+                    el.clear()
     except (ET.ParseError, OSError, EOFError) as e:
         raise UserError(f"SUMO tripinfo {path}: cannot read: {e}") from None
     return pd.DataFrame(rows, columns=["vehicle", "sumo_electricity_wh", "sumo_fuel_mg"])
-
-
-def _tripinfo_rows(src) -> list[dict]:
-    """The emissions-device totals of each <tripinfo> of an open tripinfo file."""
-    import xml.etree.ElementTree as ET
-
-    rows = []
-    for _, el in ET.iterparse(src, events=("end",)):
-        if el.tag == "tripinfo":
-            em = el.find("emissions")
-            if em is not None:
-                rows.append({"vehicle": el.get("id"),
-                             "sumo_electricity_wh": float(em.get("electricity_abs", "nan")),
-                             "sumo_fuel_mg": float(em.get("fuel_abs", "nan"))})
-            el.clear()
-    return rows
 
 
 def check_vtype_filter(sc, ledger) -> None:

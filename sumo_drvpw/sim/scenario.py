@@ -561,6 +561,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         if len(diff) != 2 or any(d not in names for d in diff):
             raise UserError(f"{where}: outputs.difference must name two of the scenario's "
                             f"equations ({', '.join(names)}), got {diff}")
+    device_on = device_in_config(cfgvals)
     return Scenario(
         config_outputs={k: v for k, v in cfgvals.items() if is_output_option(k) and v.strip()},
         additional_outputs=additional_outputs(adds),
@@ -585,8 +586,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         trace=bool(out.get("trace", False)), edgedata=bool(out.get("edgedata", True)),
         figures=bool(out.get("figures", True)), difference=diff,
         progress=bool(out.get("progress", True)),
-        sumo_device=_bool(out.get("sumo_device", device_in_config(cfgvals)), where,
-                          "outputs.sumo_device"),
-        sumo_device_in_config=device_in_config(cfgvals),
+        sumo_device=_bool(out.get("sumo_device", device_on), where, "outputs.sumo_device"),
+        sumo_device_in_config=device_on,
         period=None if out.get("period") is None else _num(out["period"], where,
                                                              "outputs.period", positive=True))

@@ -9,12 +9,12 @@ read instead.
 
 from __future__ import annotations
 
-import gzip
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.fileio import open_maybe_gzip
 
 
 #: Default mass per SUMO vClass [kg] for vTypes that give none: the MOVES source mass of
@@ -64,10 +64,18 @@ class VTypeInfo:
     loading_kg: float = 0.0
 
 
-def _open(path: Path):
-    with open(path, "rb") as f:
-        magic = f.read(2)
-    return gzip.open(path, "rb") if magic == b"\x1f\x8b" else open(path, "rb")
+def _mass(where: str, key: str, val: str | None, zero: bool = False) -> float | None:
+    """A mass [kg] from a vType attribute or param (None when absent); > 0 (≥ 0 with
+    ``zero``), else a UserError naming the vType and the key."""
+    if val is None:
+        return None
+    try:
+        x = float(val)
+    except ValueError:
+        raise UserError(f"{where}: {key} is not a number: {val!r}") from None
+    if not (x >= 0 if zero else x > 0):
+        raise UserError(f"{where}: {key} must be {'≥' if zero else '>'} 0, got {val!r}")
+    return x
 
 
 def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
@@ -80,7 +88,7 @@ def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
     out: dict[str, VTypeInfo] = {}
     for path in files:
         try:
-            with _open(path) as fh:
+            with open_maybe_gzip(path) as fh:
                 for _, el in ET.iterparse(fh, events=("end",)):
                     tag = el.tag.split("}")[-1]
                     if tag != "vType":
@@ -93,24 +101,11 @@ def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
                     params = {p.attrib.get("key"): p.attrib.get("value")
                               for p in el if p.tag.split("}")[-1] == "param"}
                     where = f"{path}: vType '{vid}'"
-
-                    def number(key, val, positive=True):
-                        if val is None:
-                            return None
-                        try:
-                            x = float(val)
-                        except ValueError:
-                            raise UserError(f"{where}: {key} is not a number: {val!r}") from None
-                        if not (x > 0 if positive else x >= 0):
-                            raise UserError(f"{where}: {key} must be {'>' if positive else '≥'} 0, "
-                                            f"got {val!r}")
-                        return x
-
-                    sumo_mass = number("mass", el.attrib.get("mass"))
+                    sumo_mass = _mass(where, "mass", el.attrib.get("mass"))
                     if sumo_mass is None:
-                        sumo_mass = number("param vehicleMass", params.get("vehicleMass"))
-                    loading = number("param loading", params.get("loading"), positive=False) or 0.0
-                    mass = number("drvpw.mass", params.get("drvpw.mass"))
+                        sumo_mass = _mass(where, "param vehicleMass", params.get("vehicleMass"))
+                    loading = _mass(where, "param loading", params.get("loading"), zero=True) or 0.0
+                    mass = _mass(where, "drvpw.mass", params.get("drvpw.mass"))
                     if mass is None and sumo_mass is not None:
                         mass = sumo_mass + loading
                     out[vid] = VTypeInfo(vid, mass, params.get("drvpw.equation") or None,
