@@ -96,7 +96,9 @@ def _solve(x: np.ndarray, y: np.ndarray, w: np.ndarray, lb, ub):
     scale[scale == 0] = 1.0
     res = lsq_linear(xs / scale, ys, bounds=(np.asarray(lb) * scale, np.asarray(ub) * scale),
                      method="bvls", lsmr_tol="auto")
-    beta = res.x / scale
+    # the solver's bounds hold on the scaled problem up to rounding: a parameter at its bound
+    # (auxiliary power 0, η_r 1) may come back 1e-14 beyond it; the bounds are physics
+    beta = np.clip(res.x / scale, lb, ub)
     r = ys - xs @ beta
     rss = float(r @ r)
     return beta, rss, res.active_mask, xs
