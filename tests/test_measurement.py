@@ -8,6 +8,7 @@ import json
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -292,3 +293,95 @@ def test_calibrate_hints_the_power_lag_when_acc_reads_below_one(tmp_path, capsys
     assert cli_main(["calibrate", str(tmp_path / "clean.parquet"), "--vehicle", "prius3",
                      "--out", str(tmp_path / "g.toml")]) == 0
     assert "--power-lag" not in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------ the logger's accelerometer offset
+
+#: planted mounting pitch of the logger [m/s²] (about 0.9°)
+MOUNT_MPS2 = 0.15
+#: planted per-trip error of the logged elevation change [m] (GPS elevation settling):
+#: a ramp along each trip, as large as the true elevation range of a trip
+ELEV_DRIFT_M = (-30.0, 25.0, -15.0, 35.0, -25.0, 10.0, 0.0)
+
+
+@pytest.fixture(scope="module")
+def mounted(tmp_path_factory):
+    """7 synthetic trips whose accelerometer carries a mounting offset and whose logged
+    elevation drifts by a different amount on each trip; no grade column (the grade is read
+    from the elevation)."""
+    df, _ = E.synth_trips(len(ELEV_DRIFT_M), 6.0, seed=40, noise=NOISE, effects=[E.LogPower()])
+    ramp = np.zeros(len(df))
+    for tid, drift in zip(pd.unique(df["trip_id"]), ELEV_DRIFT_M):
+        i = np.flatnonzero(df["trip_id"].to_numpy() == tid)
+        ramp[i] = drift * np.linspace(0.0, 1.0, len(i))
+    df = df.drop(columns=["grade_rad"]).rename(columns={"gps_elevation_m": "elevation_m"})
+    df["elevation_m"] = df["elevation_m"] + ramp
+    df["imu_accel_mps2"] = df["imu_accel_mps2"] + MOUNT_MPS2
+    path = tmp_path_factory.mktemp("mount") / "log.parquet"
+    df.to_parquet(path)
+    return path
+
+
+def test_logger_offset_recovered_and_its_grade_beats_the_per_trip_offsets(mounted):
+    from sumo_drvpw.data.corrections import driven_path, logger_offset_mps2
+    from sumo_drvpw.fit.compare import trip_energy
+    from sumo_drvpw.fit.input_checks import accelerometer_offsets
+
+    m = load_measured([mounted], "prius3")
+    df = m.log.df
+    per = accelerometer_offsets(df["imu_accel_mps2"], m.inputs.a, df["speed_mps"], df["elevation_m"],
+                                df["dt_s"], df["trip_id"], driven_path(m.log, m.inputs.v))
+    offs = [d["offset_elevation"] for d in per.values()]
+    # each trip's elevation error moves its own offset (≥ 0.01 m/s² on some trips) ...
+    assert max(abs(o - MOUNT_MPS2) for o in offs) > 0.01
+    est = logger_offset_mps2(offs, [d["distance_m"] for d in per.values()])
+    # ... the median over trips keeps the mounting pitch
+    assert est == pytest.approx(MOUNT_MPS2, abs=0.005)
+    truth = load_equation(TRUTH)
+
+    def trip_errors(meas):
+        mm = load_measured([mounted], "prius3", ReadOptions(measurement=meas))
+        u = mm.usable & np.isfinite(np.sin(mm.inputs.theta))
+        te = trip_energy(truth.power(mm.inputs)[u], mm.power_w[u], mm.log.df["dt_s"].to_numpy()[u],
+                         mm.log.df["trip_id"].to_numpy()[u])
+        return np.array([abs(t["error"]) for t in te["trips"].values()])
+
+    fixed = trip_errors(Measurement(grade="accelerometer", accelerometer_offset_mps2=est))
+    per_trip = trip_errors(Measurement(grade="accelerometer"))
+    logged = trip_errors(None)
+    # the true equation on the logger-offset grade books every trip's energy as measured;
+    # the per-trip offsets carry each trip's elevation error into its grade
+    assert fixed.max() < 0.01, fixed
+    assert per_trip.max() > 2 * fixed.max() and per_trip.mean() > fixed.mean()
+    assert logged.mean() > fixed.mean()
+
+
+def test_accelerometer_offset_declared_round_trips_and_bad_values_name_the_key(tmp_path):
+    doc = {"equation": {"name": "e"}, "terms": {"acc": 1.0},
+           "measurement": {"grade": "accelerometer", "accelerometer_offset_mps2": 0.12}}
+    eq = equation_from_dict(doc)
+    assert equation_from_dict(eq.to_dict()).measurement == eq.measurement
+    assert "fixed offset of +0.12 m/s²" in eq.measurement.describe()
+    # unset, the key is left out of the file (TOML has no null)
+    assert "accelerometer_offset_mps2" not in Measurement(grade="accelerometer").to_dict()
+    for table in ({"grade": "fused", "accelerometer_offset_mps2": 0.1},
+                  {"grade": "accelerometer", "accelerometer_offset_mps2": 3.0},
+                  {"grade": "accelerometer", "accelerometer_offset_mps2": "0.1"}):
+        with pytest.raises(UserError, match="f.toml \\[measurement\\] accelerometer_offset_mps2"):
+            measurement_from_dict(table, "f.toml")
+
+
+def test_grade_source_option_takes_the_logger_offset(mounted, tmp_path, capsys):
+    out = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(mounted), "--vehicle", "prius3", "--out", str(out),
+                     "--grade-source", f"accelerometer:{MOUNT_MPS2}"]) == 0
+    doc = _terms(out)
+    assert doc["measurement"]["grade"] == "accelerometer"
+    assert doc["measurement"]["accelerometer_offset_mps2"] == MOUNT_MPS2
+    assert doc["terms"]["grade"] == pytest.approx(load_equation(TRUTH).terms["grade"], rel=0.05)
+    capsys.readouterr()
+    for bad in ("logged:3", "accelerometer:x"):
+        assert cli_main(["compare", str(mounted), "--vehicle", "prius3", "--equation", str(out),
+                         "--grade-source", bad, "--out", str(tmp_path / "r")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"--grade-source {bad}" in err

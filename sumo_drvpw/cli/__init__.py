@@ -112,10 +112,11 @@ def add_log_options(p) -> None:
     g.add_argument("--power-lag", type=float, metavar="S",
                    help="the power signal's lag behind the speed signal [s] (diagnose's timing finding): "
                         "the power is read S later within each trip")
-    g.add_argument("--grade-source", metavar="logged|fused[:TAU_S]|accelerometer",
+    g.add_argument("--grade-source", metavar="logged|fused[:TAU_S]|accelerometer[:OFFSET_MPS2]",
                    help="grade from the elevation (logged), fused with a longitudinal accelerometer "
                         "(accelerometer above the crossover TAU_S, default 60 s, elevation below), or the "
-                        "accelerometer alone with its per-trip offset fixed by the elevation change")
+                        "accelerometer alone: its per-trip offset fixed by the elevation change, or with "
+                        ":OFFSET_MPS2 less the logger's own fixed offset (no elevation used)")
     g.add_argument("--air-density", choices=("logged", "altitude"),
                    help="altitude = pressure of the standard atmosphere at the logged elevation when "
                         "pressure is not logged (default: logged, i.e. sea level without pressure)")
@@ -139,16 +140,19 @@ def measurement_options(args, equations=()):
         if lag is not None:
             doc["power_lag_s"] = lag
         if grade is not None:
-            src, _, tau = str(grade).partition(":")
-            if src not in GRADE_SOURCES or (tau and src != "fused"):
-                raise UserError(f"--grade-source {grade}: use one of logged, fused[:TAU_S], accelerometer")
+            src, _, num = str(grade).partition(":")
+            if src not in GRADE_SOURCES or (num and src == "logged"):
+                raise UserError(f"--grade-source {grade}: use one of logged, fused[:TAU_S], "
+                                "accelerometer[:OFFSET_MPS2]")
             doc["grade"] = src
-            if tau:
+            if num:
+                key, what = (("fusion_tau_s", "the crossover after ':' must be a number of seconds")
+                             if src == "fused" else
+                             ("accelerometer_offset_mps2", "the offset after ':' must be a number in m/s²"))
                 try:
-                    doc["fusion_tau_s"] = float(tau)
+                    doc[key] = float(num)
                 except ValueError:
-                    raise UserError(f"--grade-source {grade}: the crossover after ':' must be a number "
-                                    "of seconds") from None
+                    raise UserError(f"--grade-source {grade}: {what}") from None
         if rho is not None:
             doc["air_density"] = rho
         try:

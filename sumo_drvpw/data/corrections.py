@@ -11,7 +11,9 @@ This module does the signal processing, trip by trip (nothing crosses a trip bou
   crossover — the elevation's grade is unbiased over distance but smoothed, the
   accelerometer sharp but biased by its mounting pitch (:func:`fused_sin_grade`);
   ``accelerometer``: sin θ_acc minus one offset per trip fixed by Σ sin θ·ds = Δh
-  (:func:`offset_corrected_sin_grade`);
+  (:func:`offset_corrected_sin_grade`), or, with ``accelerometer_offset_mps2``, minus the
+  logger's own fixed offset (its mounting pitch; :func:`logger_offset_mps2` estimates it
+  from many trips) and no elevation at all;
 * **air density at altitude** — ρ·p(h)/p₀ with the standard-atmosphere pressure at the
   logged elevation (:func:`sumo_drvpw.model.air.pressure_at_altitude_kpa`), where pressure is
   not logged (the reader then assumed sea level);
@@ -19,6 +21,8 @@ This module does the signal processing, trip by trip (nothing crosses a trip bou
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -34,6 +38,9 @@ ACC_GRADE_WINDOW_S = 5.0
 ACCELEROMETER_COLUMNS = ("imu_accel_mps2", "accel_long_mps2", "longitudinal_accel_mps2")
 #: largest |sin θ| a corrected grade may take (17°)
 MAX_SIN_GRADE = 0.3
+#: shortest trip whose elevation change fixes an offset for the logger's estimate [m]: over
+#: 1 km a 10-m elevation error is a 0.1 m/s² offset error, over 10 km 0.01
+MIN_OFFSET_DISTANCE_M = 1000.0
 
 
 def shift_within_trips(y: np.ndarray, trip_codes: np.ndarray, lag: int) -> np.ndarray:
@@ -84,9 +91,11 @@ def fused_sin_grade(sin_acc, sin_log, trip_codes, dt_s: float, tau_s: float = FU
 
 def offset_corrected_sin_grade(sin_acc, speed_mps, dt_s, trip_codes, elevation_m, usable=None) -> np.ndarray:
     """Accelerometer grade with its per-trip offset removed: sin θ_acc − c, with c per trip
-    such that Σ (sin θ_acc − c)·ds = Δh (elevation at the trip's last usable sample minus at
-    its first). An input correction: the mounting pitch is one constant per trip, the
-    elevation fixes it; no low-pass of the logged grade. [sin θ, -]"""
+    such that Σ (sin θ_acc − c)·ds = Δh (elevation at the trip's last sample in ``usable``
+    minus at its first). An input correction: the mounting pitch is one constant per trip, the
+    elevation fixes it; no low-pass of the logged grade. ``usable`` must mark the whole
+    driven path (braking included: leaving part of the path out biases c by the elevation
+    change along it). [sin θ, -]"""
     s = np.asarray(sin_acc, float)
     v = np.asarray(speed_mps, float)
     dt = np.asarray(dt_s, float)
@@ -106,6 +115,36 @@ def offset_corrected_sin_grade(sin_acc, speed_mps, dt_s, trip_codes, elevation_m
         hh = h[i][ok]
         out[i] = s[i] - (float(np.sum(np.where(ok, s[i], 0.0) * ds)) - (hh[-1] - hh[0])) / dist
     return np.clip(out, -MAX_SIN_GRADE, MAX_SIN_GRADE)
+
+
+def driven_path(log, speed_mps) -> np.ndarray:
+    """The samples whose speed is a measurement of the path the car drove: finite, and not
+    a logger dropout (:func:`sumo_drvpw.data.dropouts.log_dropouts`, where the log has an
+    accelerometer). An elevation change is matched against the grade over all of them —
+    braking and other samples left out of a power fit included."""
+    from sumo_drvpw.data.dropouts import log_dropouts
+
+    path = np.isfinite(np.asarray(speed_mps, float))
+    drop = log_dropouts(log)
+    return path if drop is None else path & ~drop
+
+
+def logger_offset_mps2(per_trip_offsets, distances_m, min_distance_m: float = MIN_OFFSET_DISTANCE_M) -> float:
+    """The logger's own accelerometer offset [m/s²]: the median over trips of the per-trip
+    offsets that each trip's elevation change implies (g·(Σ sin θ_acc·ds − Δh)/Σ ds,
+    :func:`sumo_drvpw.fit.input_checks.accelerometer_offsets`), over trips of at least
+    ``min_distance_m``.
+
+    A logger fixed in the car has one mounting pitch; what the per-trip offsets scatter by is
+    the error of each trip's logged elevation change (GPS elevation settling, coarse or
+    interpolated points) spread over its distance. The median over many trips keeps the
+    mounting pitch and drops those errors; a single trip's elevation then no longer enters
+    its grade. NaN when no trip is long enough.
+    """
+    off = np.asarray(per_trip_offsets, float)
+    dist = np.asarray(distances_m, float)
+    ok = np.isfinite(off) & np.isfinite(dist) & (dist >= min_distance_m)
+    return float(np.median(off[ok])) if ok.any() else math.nan
 
 
 def accelerometer_column(columns) -> str | None:
@@ -179,13 +218,18 @@ def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Mea
         if col is None:
             raise UserError(f"{log.describe()}: grade '{meas.grade}' needs a longitudinal accelerometer "
                             f"column (one of {', '.join(ACCELEROMETER_COLUMNS)})")
-        s_acc = accelerometer_sin_grade(df[col].to_numpy(float), x.a, codes, dt)
-        if meas.grade == "accelerometer":
+        imu = df[col].to_numpy(float)
+        if meas.grade == "accelerometer" and meas.accelerometer_offset_mps2 is not None:
+            imu = imu - meas.accelerometer_offset_mps2
+        s_acc = accelerometer_sin_grade(imu, x.a, codes, dt)
+        if meas.grade == "accelerometer" and meas.accelerometer_offset_mps2 is not None:
+            s = s_acc
+        elif meas.grade == "accelerometer":
             if "elevation_m" not in df:
                 raise UserError(f"{log.describe()}: grade 'accelerometer' needs column 'elevation_m' "
                                 "(its per-trip offset is fixed by the elevation change)")
             s = offset_corrected_sin_grade(s_acc, x.v, df["dt_s"].to_numpy(float), codes,
-                                           df["elevation_m"].to_numpy(float), usable & np.isfinite(power_w))
+                                           df["elevation_m"].to_numpy(float), driven_path(log, x.v))
         else:
             s = fused_sin_grade(s_acc, np.sin(x.theta), codes, dt, meas.fusion_tau_s)
         x.theta = np.arcsin(s)

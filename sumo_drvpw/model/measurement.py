@@ -15,6 +15,9 @@ there)::
                            # crossover, logged grade below it) or "accelerometer" (alone,
                            # its per-trip offset fixed by the elevation)
     fusion_tau_s = 300     # crossover of the fusion [s]
+    accelerometer_offset_mps2 = 0.004  # with grade = "accelerometer": the logger's own
+                           # offset (its mounting pitch), one constant for every trip,
+                           # instead of a per-trip offset fixed by each trip's elevation
     air_density = "altitude"  # "logged" or "altitude": pressure of the standard
                            # atmosphere at the logged elevation when pressure is not logged
     exclude_dropouts = true  # leave out logger dropouts: speed and a longitudinal
@@ -41,6 +44,9 @@ AIR_DENSITY_SOURCES = ("logged", "altitude")
 FUSION_TAU_S = 60.0
 #: longest lag a correction may declare [s] (a lag of minutes is no signal timing)
 MAX_LAG_S = 60.0
+#: largest accelerometer offset a correction may declare [m/s²]: g·sin 10°, a logger
+#: mounted 10° off level (more is a wrong axis or unit, not a mounting pitch)
+MAX_ACC_OFFSET_MPS2 = 1.7
 
 
 @dataclass(frozen=True)
@@ -55,6 +61,9 @@ class Measurement:
     fusion_tau_s: float = FUSION_TAU_S
     air_density: str = "logged"
     exclude_dropouts: bool = False
+    #: with grade "accelerometer": the logger's fixed offset [m/s²] (None: one offset per
+    #: trip, fixed by the trip's elevation change)
+    accelerometer_offset_mps2: float | None = None
 
     @property
     def identity(self) -> bool:
@@ -63,8 +72,9 @@ class Measurement:
                 and not self.exclude_dropouts)
 
     def to_dict(self) -> dict:
-        """The ``[measurement]`` table (every key, so the file says what was done)."""
-        return asdict(self)
+        """The ``[measurement]`` table (every key that has a value, so the file says what was
+        done; TOML has no null, so an unset accelerometer offset is left out)."""
+        return {k: v for k, v in asdict(self).items() if v is not None}
 
     def describe(self) -> str:
         """One line for reports."""
@@ -75,6 +85,9 @@ class Measurement:
             parts.append(f"power re-timed by {self.power_lag_s:+g} s (the power signal's lag behind speed)")
         if self.grade == "fused":
             parts.append(f"grade fused: accelerometer above {self.fusion_tau_s:g} s, logged grade below")
+        elif self.grade == "accelerometer" and self.accelerometer_offset_mps2 is not None:
+            parts.append(f"grade from the accelerometer, less the logger's fixed offset of "
+                         f"{self.accelerometer_offset_mps2:+.4g} m/s² (no logged elevation used)")
         elif self.grade == "accelerometer":
             parts.append("grade from the accelerometer, its per-trip offset fixed by the elevation")
         if self.air_density == "altitude":
@@ -88,12 +101,13 @@ def measurement_from_dict(doc, where: str) -> Measurement:
     """A :class:`Measurement` from a ``[measurement]`` table; errors name ``where`` and the key."""
     if not isinstance(doc, dict):
         raise UserError(f"{where} [measurement]: must be a table")
-    known = ("power_lag_s", "grade", "fusion_tau_s", "air_density", "exclude_dropouts")
+    known = ("power_lag_s", "grade", "fusion_tau_s", "air_density", "exclude_dropouts",
+             "accelerometer_offset_mps2")
     bad = sorted(set(doc) - set(known))
     if bad:
         raise UserError(f"{where} [measurement]: unknown key {bad[0]!r} (known: {', '.join(known)})")
     kw = {}
-    for key in ("power_lag_s", "fusion_tau_s"):
+    for key in ("power_lag_s", "fusion_tau_s", "accelerometer_offset_mps2"):
         if key in doc:
             v = doc[key]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
@@ -115,4 +129,12 @@ def measurement_from_dict(doc, where: str) -> Measurement:
             raise UserError(f"{where} [measurement] exclude_dropouts: must be true or false, "
                             f"got {doc['exclude_dropouts']!r}")
         kw["exclude_dropouts"] = doc["exclude_dropouts"]
+    if "accelerometer_offset_mps2" in kw:
+        if kw.get("grade") != "accelerometer":
+            raise UserError(f"{where} [measurement] accelerometer_offset_mps2: only with grade = "
+                            f"\"accelerometer\" (got grade {kw.get('grade', 'logged')!r})")
+        if abs(kw["accelerometer_offset_mps2"]) > MAX_ACC_OFFSET_MPS2:
+            raise UserError(f"{where} [measurement] accelerometer_offset_mps2: "
+                            f"{kw['accelerometer_offset_mps2']:g} m/s² is beyond ±{MAX_ACC_OFFSET_MPS2:g} "
+                            "(a mounting pitch of more than 10°)")
     return Measurement(**kw)
