@@ -415,3 +415,32 @@ def test_the_documented_closed_equation_reproduces_its_held_out_figures_through_
     assert set(per) == set(held)
     for t, e in per.items():
         assert 100 * got["trip_energy"]["trips"][t]["error"] == pytest.approx(float(e), abs=0.051)
+
+
+def test_grade_options_of_the_script_declare_what_they_read(tmp_path):
+    """Each grade option of the script's grid becomes the [measurement] a closed-loop
+    equation declares: fused crossovers, per-trip offsets (∞), the logger's offset."""
+    import math
+
+    import sumo_drvpw.synth.effects as E
+
+    mod = _script()
+    df, _ = E.synth_trips(2, 2.0, seed=5, effects=[E.LogPower()])
+    path = tmp_path / "log.parquet"
+    df.drop(columns=["gps_elevation_m"]).to_parquet(path)
+    # no elevation: no logger offset can be estimated, and the option is not offered
+    assert math.isnan(_script().logger_offset(_script().load_checked(path, "prius3"))["offset_mps2"])
+    df.drop(columns=["grade_rad"]).rename(columns={"gps_elevation_m": "elevation_m"}).to_parquet(path)
+    assert mod.LOGGER_OFFSET in mod.TAU_GRID_S and math.inf in mod.TAU_GRID_S
+    m = mod.measurement_of(path, 0.0, True, 120.0)
+    assert (m.grade, m.fusion_tau_s, m.accelerometer_offset_mps2) == ("fused", 120.0, None)
+    m = mod.measurement_of(path, 0.0, True, math.inf)
+    assert (m.grade, m.accelerometer_offset_mps2) == ("accelerometer", None)
+    m = mod.measurement_of(path, 0.0, True, mod.LOGGER_OFFSET, 0.03)
+    assert (m.grade, m.accelerometer_offset_mps2) == ("accelerometer", 0.03)
+    assert "fixed offset of +0.03 m/s²" in m.describe()
+    # without the tracer's accelerometer finding the grade stays as logged
+    assert mod.measurement_of(path, 0.0, False, mod.LOGGER_OFFSET, 0.03).grade == "logged"
+    # the logger offset of the script is the median of the trips' own (inputs only)
+    off = mod.logger_offset(mod.load_checked(path, "prius3"))
+    assert off["trips"] == 2 and abs(off["offset_mps2"]) < 0.05
