@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.data.paths import expand_paths as _expand_paths
+from sumo_drvpw.data.resolution import accel_window
 from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.errors import UserError
@@ -59,12 +60,16 @@ class ReadOptions:
     Parameters
     ----------
     accel_window_s : width of the centred moving average applied to the central-
-        difference acceleration [s]
+        difference acceleration [s]; the least width: a log whose speed is logged in coarse
+        steps gets a wider one (:func:`sumo_drvpw.data.resolution.accel_window`)
+    accel_noise_mps2 : the largest noise the speed's resolution may put into the derived
+        acceleration [m/s²] (it sets the widening)
     grade_window_m : distance over which elevation is smoothed before differentiating [m]
     accel_outlier_mps2 : |a| above this is an outlier, left out of calibration [m/s²]
     """
 
     accel_window_s: float = 0.5
+    accel_noise_mps2: float = 0.05
     grade_window_m: float = 100.0
     accel_outlier_mps2: float = 8.0
     #: speeds in [−tolerance, 0) are standstill sensor noise: clipped to 0 and counted [m/s]
@@ -504,8 +509,13 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     df["dt_s"] = dt
 
     if "accel_mps2" not in df:
-        df["accel_mps2"] = derivative(v, t, trip_codes, opt.accel_window_s)
-        counts["accel_source"] = f"derived: central difference of speed, {opt.accel_window_s:g} s moving average"
+        win, q = accel_window(opt, v, trip_codes)
+        counts["accel_window_s"] = win
+        df["accel_mps2"] = derivative(v, t, trip_codes, win)
+        counts["accel_source"] = f"derived: central difference of speed, {win:.3g} s moving average" + (
+            f" (widened from {opt.accel_window_s:g} s: the speed is logged in steps of {q:.3g} m/s, whose "
+            f"rounding would put more than {opt.accel_noise_mps2:g} m/s² of noise into the acceleration)"
+            if win > opt.accel_window_s else "")
     else:
         counts["accel_source"] = "accel_mps2 column"
 

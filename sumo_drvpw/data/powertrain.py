@@ -108,8 +108,9 @@ POWER_SPLIT_COLUMNS = ("ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm", "mg2_s
 def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np.ndarray, str]:
     """The measured driving power of a :class:`~sumo_drvpw.data.log.DriveLog` [W] and its source.
 
-    Shaft accelerations use the same smoothed derivative as the log's acceleration
-    (``log.options.accel_window_s``, or ``window_s`` [s] when given).
+    Shaft accelerations use the same smoothed derivative as the log's acceleration (its
+    window ``log.counts["accel_window_s"]``, else ``log.options.accel_window_s``, or
+    ``window_s`` [s] when given).
 
     Exactly one source is used, in the spec's order: ``power_w``; the power-split signals
     (needs a ``power_split`` vehicle); motor torque and speed (speed from vehicle speed,
@@ -123,7 +124,8 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
         return df["power_w"].to_numpy(float), "direct (power_w)"
     trip_codes = np.asarray(df["trip_id"].factorize()[0])
     t = df["time_s"].to_numpy(float)
-    win = log.options.accel_window_s if window_s is None else window_s
+    # the vehicle's acceleration window (widened for a coarsely logged speed) for the shafts too
+    win = log.counts.get("accel_window_s", log.options.accel_window_s) if window_s is None else window_s
     if all(c in df for c in POWER_SPLIT_COLUMNS):
         if vehicle is None or vehicle.powertrain_type != "power_split":
             raise UserError(f"{where}: the log has power-split signals ({', '.join(POWER_SPLIT_COLUMNS)}); "

@@ -17,9 +17,11 @@ rows of a Parquet file that starts and ends at trip boundaries): the unit of wor
 engines in :mod:`sumo_drvpw.fit.engine`.
 
 Difference from the in-memory reader, on purpose: the moving-average width of the derived
-acceleration is ``accel_window_s`` over the *batch's* median sample interval (the
-in-memory reader takes the median over all logs). Both agree whenever trips are sampled at
-one rate; with mixed rates the per-batch width is the closer one to each trip's own rate.
+acceleration is ``accel_window_s`` (widened for the speed's resolution,
+:func:`sumo_drvpw.data.resolution.accel_window`) over the *batch's* median sample interval, the
+resolution read from the batch (the in-memory reader reads both over all logs). Both agree
+whenever trips are sampled at one rate and resolution; with mixed ones the per-batch width
+is the closer one to each trip's own.
 Row numbers in error messages count from the start of the batch named in the message.
 """
 
