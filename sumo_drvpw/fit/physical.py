@@ -195,10 +195,11 @@ def constrained_fit(g: Gram, constraints: dict[str, dict]) -> ConstrainedFit:
             raise UserError(f"constrained fit: the terms {[names[j] for j in free]} are collinear "
                             "on these data") from None
         rhs = solve_triangular(low, b / s, lower=True)
-        lo = np.array([constraints.get(names[j], {}).get("min", -np.inf) for j in free]) * s
-        hi = np.array([constraints.get(names[j], {}).get("max", np.inf) for j in free]) * s
-        res = lsq_linear(low.T, rhs, bounds=(lo, hi), method="bvls", tol=1e-12)
-        beta[free] = res.x / s
+        lo = np.array([constraints.get(names[j], {}).get("min", -np.inf) for j in free], float)
+        hi = np.array([constraints.get(names[j], {}).get("max", np.inf) for j in free], float)
+        res = lsq_linear(low.T, rhs, bounds=(lo * s, hi * s), method="bvls", tol=1e-12)
+        # bounds hold on the scaled problem up to rounding; unscaled, keep them exactly
+        beta[free] = np.clip(res.x / s, lo, hi)
     rss = float(g.yty - 2.0 * beta @ g.xty + beta @ g.xtx @ beta)
     active = [names[j] for j in fixed]
     for j in free:
