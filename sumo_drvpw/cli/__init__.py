@@ -216,6 +216,27 @@ def _on_sigterm(signum, frame):
     raise _Terminated()
 
 
+_INTERRUPTED = []  # set when SIGINT arrived
+
+
+def _on_sigint(signum, frame):
+    _INTERRUPTED.append(signum)
+    raise KeyboardInterrupt()
+
+
+def _stopped_by_signal() -> int | None:
+    """Exit code of a run a signal stopped (143 SIGTERM, 130 SIGINT), else None. A signal's
+    exception raised inside a library's C code (matplotlib drawing a path, say) can come out
+    as that library's own error; the record of the signal says what happened."""
+    if _TERMINATED:
+        print("sumo-drvpw: terminated (SIGTERM); no partial output written", file=sys.stderr)
+        return 128 + signal.SIGTERM
+    if _INTERRUPTED:
+        print("sumo-drvpw: interrupted; no partial output written", file=sys.stderr)
+        return 130
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     from sumo_drvpw import fileio
 
@@ -227,9 +248,11 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     fileio.CURRENT_COMMAND = ["sumo-drvpw", *argv]
-    prev_term = None
+    prev_term = prev_int = None
     try:  # only the main thread may install handlers (tests may call main elsewhere)
         prev_term = signal.signal(signal.SIGTERM, _on_sigterm)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            prev_int = signal.signal(signal.SIGINT, _on_sigint)
     except ValueError:
         pass
     try:
@@ -258,16 +281,27 @@ def main(argv: list[str] | None = None) -> int:
         print("sumo-drvpw: interrupted; no partial output written", file=sys.stderr)
         return 130
     except OSError as e:
+        rc = _stopped_by_signal()
+        if rc is not None:
+            return rc
         if e.errno in (errno.ENOSPC, errno.EDQUOT):
             print(f"sumo-drvpw {args.command}: error: disk full (no space left on the device) "
                   f"while writing {e.filename or 'the output'}", file=sys.stderr)
             return 2
         raise
+    except Exception:
+        rc = _stopped_by_signal()
+        if rc is not None:
+            return rc
+        raise
     finally:
         fileio.CURRENT_COMMAND = None
         _TERMINATED.clear()
+        _INTERRUPTED.clear()
         if prev_term is not None:
             signal.signal(signal.SIGTERM, prev_term)
+        if prev_int is not None:
+            signal.signal(signal.SIGINT, prev_int)
 
 
 if __name__ == "__main__":
