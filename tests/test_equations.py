@@ -40,6 +40,24 @@ def test_basis_by_hand():
     assert (vals["trip=t1"], vals["trip=t2"]) == (1.0, 0.0)
 
 
+def test_moving_is_one_while_the_vehicle_moves():
+    """``moving``: 1 at v ≥ 0.1 m/s (the standstill threshold of the chain and the spec),
+    0 standing; category other; ``v^0 − moving`` is the standing-only constant; SUMO's
+    Energy-model export books it as constantPowerIntake (which SUMO books while moving)."""
+    from sumo_drvpw.sim.export import energy_model_params
+
+    v = np.array([0.0, 0.05, 0.0999, 0.1, 3.0, 40.0])
+    n = v.size
+    x = Inputs(v, np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, 1500.0), np.full(n, 1.2))
+    m = term_matrix(["moving", "v^0", "moving*v^1"], x)
+    assert_allclose(m[:, 0], [0, 0, 0, 1, 1, 1])
+    assert_allclose(m[:, 1] - m[:, 0], [1, 1, 1, 0, 0, 0])
+    assert_allclose(m[:, 2], v * (v >= 0.1))
+    assert category_of("moving") == "other" and category_of("moving*v^1") == "roll"
+    params, missing = energy_model_params(Equation("e", {"acc": 1.0, "roll": 0.01, "moving": 900.0}), 1500.0, 2.0)
+    assert params["constantPowerIntake"] == 900.0 and not missing
+
+
 def test_tailwind_faster_than_car_pushes():
     x = one(v=5.0, wind=8.0)
     assert term_matrix(["aero"], x)[0, 0] == pytest.approx(-5 * 9)

@@ -99,3 +99,20 @@ def test_step_length_and_no_elevation_reported(tmp_path):
     assert any("no elevation" in w for w in s["warnings"])
     doc = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert doc["network"]["has_elevation"] is False
+
+
+def test_standing_and_moving_constants_in_a_sumo_run(tmp_path):
+    """A real SUMO run (the bundled city, 150 s, traffic lights): ``v^0`` books its power for
+    every second a vehicle is in the network, ``moving`` only while it moves, their difference
+    only while it stands — which vehicles at red lights do."""
+    import sumo_drvpw.sim as sim
+
+    city = Path(sim.__file__).parent / "builtin" / "scenarios" / "city.toml"
+    eqs = [Equation("always", {"v^0": 1000.0}), Equation("moving", {"moving": 1000.0}),
+           Equation("standing", {"v^0": 1000.0, "moving": -1000.0})]
+    res = run_scenario(city, tmp_path / "o", end=150, equations=eqs, figures=False)
+    tot = {e.name: res.summary["equations"][e.name]["energy_j"]["city"]["total"] for e in eqs}
+    led = res.ledger
+    assert tot["always"] == pytest.approx(1000.0 * float(np.sum(led.veh_time[:led.n_veh])), rel=1e-9)
+    assert tot["standing"] == pytest.approx(tot["always"] - tot["moving"], rel=1e-9)
+    assert 0 < tot["standing"] < tot["moving"] < tot["always"]

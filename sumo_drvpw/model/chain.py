@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.constants import FUELS
+from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS  # noqa: F401 (STANDSTILL_MPS: also imported from here)
 
 PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 #: keys of the [chain] table, besides sub-tables loads, hvac and efficiency tables
@@ -71,8 +71,6 @@ KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperat
         "engine_off_below_w", "engine_on_above_mps", "fuel", "battery_to_fuel",
         "std_err", "reading", "provenance", "metrics")
 HVAC_KEYS = ("column", "setpoint_c", "heating_w_per_k", "cooling_w_per_k")
-#: below this speed a vehicle stands: ``standstill_aux_w`` applies [m/s]
-STANDSTILL_MPS = 0.1
 
 
 @dataclass(eq=False)

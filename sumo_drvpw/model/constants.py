@@ -26,6 +26,10 @@ MILE = 1609.344         # mile → m
 GAL = 3.785411784e-3    # US gallon → m³
 HP = 745.69987158227022  # mechanical horsepower → W
 
+#: below this speed a vehicle stands [m/s]: the chain's ``standstill_aux_w`` applies, the
+#: term ``moving`` is 0 (the drive-log spec's standstill tolerance)
+STANDSTILL_MPS = 0.1
+
 #: Boundary between light and heavy load in the seed paper's Table 3 [W].
 HEAVY_LOAD_W = 50_000.0
 #: Speed above which the seed paper's Fig. 8 shows VSP underprediction [m/s].

@@ -20,6 +20,8 @@ factor             value                                unit        category
 ``one``            1                                    –           other
 ``cold``           T_ref − T_ambient (T_ref 20 °C; 0 when  K           other
                    the ambient temperature is unknown)
+``moving``         1 while the vehicle moves (v ≥ 0.1 m/s),  –           other
+                   0 while it stands
 ``v^k``            v to an integer power k (0…4)        (m/s)^k     v^3 aero, else roll
 ``[col]``          the log column ``col`` (``[col]^2`` squared)     other
 ``trip=ID``        1 on samples of trip ID, else 0      –           other
@@ -45,6 +47,12 @@ equation with ``roll*cold`` evaluates at the reference temperature where none is
 speeds up (c_acc + c_acc_pos) and slows down (c_acc): the drivetrain delivers kinetic
 energy at 1/η and returns it at η, so at the motor shaft (c_acc + c_acc_pos)/c_acc ≈ 1/η².
 
+``v^0`` and ``moving`` split a constant power in two: ``v^0`` draws all the time (the
+auxiliaries a car draws standing too: 12 V net, control, pumps), ``moving`` only while the
+vehicle moves (powertrain losses that do not scale with the load: inverter switching,
+magnetising, coolant pumps running with the drive). On a dynamometer the car hardly
+stands, so only a road log separates them.
+
 ``roll*cold`` gives the temperature dependence of the rolling resistance,
 c_r(T) = c_r0·(1 + k·(T_ref − T)) with k ≈ 0.6–1 %/K for passenger-car tyres (ISO 28580
 temperature correction; Ejsmont et al. 2017): the ``roll`` coefficient is c_r0 and the
@@ -65,7 +73,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from sumo_drvpw.model.constants import G, T_REF_C
+from sumo_drvpw.model.constants import G, STANDSTILL_MPS, T_REF_C
 from sumo_drvpw.errors import UserError
 
 #: The four physical categories the product reports, in display order.
@@ -154,6 +162,7 @@ PRIMITIVES: dict[str, tuple[Callable[[Inputs], np.ndarray], str, int]] = {
     "v3": (lambda x: x.v ** 3, "aero", 0),
     "one": (lambda x: np.ones_like(x.v, dtype=float), "other", 0),
     "cold": (lambda x: _cold(x), "other", 0),
+    "moving": (lambda x: (np.asarray(x.v, float) >= STANDSTILL_MPS).astype(float), "other", 0),
 }
 
 _VPOW = re.compile(r"^v\^([0-4])$")

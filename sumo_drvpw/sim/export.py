@@ -91,7 +91,9 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
             cr += c / G
         elif f in ("v1", "v^1"):
             cr += c / (G * m)
-        elif f in ("one", "v^0"):
+        elif f in ("one", "v^0", "moving"):
+            # constantPowerIntake: SUMO's Energy model books it while the vehicle moves, which
+            # is exactly `moving`; a `v^0` drawn standing too is short by the standing time
             const += c
         else:
             missing.append(f"{t} (no Energy-model counterpart)")
