@@ -412,7 +412,7 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
             m_fit = m_corr
             sel, rscale = None, 0.0
             if declared is not None:
-                base_terms = list(declared.terms) + ["grade", "v^0"]
+                base_terms = list(declared.terms) + ["grade", "v^0", "moving"]
                 keep = {t: c for t, c in declared.terms.items() if t in ("aero", "roll")}
                 final_eq, final_info = fit_terms(m_fit, base_terms + extra, f"{name}_closed", keep)
             elif physical:
@@ -554,6 +554,49 @@ def jlu(data: Path, out_dir: Path):
                      note="declared: the equation calibrated on the 46 dynamometer tests",
                      roles=road_rep.get("roles"))
     out["dyno_phys"] = dyno_phys
+    with tempfile.TemporaryDirectory() as tmp:
+        path = write_subset(road, sorted(road["trip_id"].unique()), Path(tmp) / "road.parquet", keep=True,
+                            roles=road_rep.get("roles"))
+        m = corrected_measured(path, "jlu_bev", out["runs"][0]["lag"], False)
+        out["moving_check"] = moving_check(m, dyno_eq)
+    return out
+
+
+def moving_check(m, dyno_eq) -> dict:
+    """Leave-one-trip-out over every road trip: the dyno's road load (aero, roll) and grade 1
+    kept, acc and the constant power fitted, the constant drawn all the time (``v^0``) or split
+    into a standing part (``v^0``) and a part drawn only while moving (``moving``). Per held-out
+    trip the traction-energy error (as everywhere in this report)."""
+    from sumo_drvpw.fit.compare import trip_energy
+    from sumo_drvpw.model.terms import term_matrix
+
+    keep = {t: c for t, c in dyno_eq.terms.items() if t in ("aero", "roll")}
+    keep["grade"] = 1.0
+    fixed_w = term_matrix(list(keep), m.inputs) @ np.array(list(keep.values()))
+    trip = m.log.df["trip_id"].to_numpy().astype(str)
+    dt = m.log.df["dt_s"].to_numpy(float)
+    out = {}
+    for name, terms in (("constant", ["acc", "v^0"]), ("split", ["acc", "v^0", "moving"])):
+        X = term_matrix(terms, m.inputs)
+        ok = m.usable & np.all(np.isfinite(X), axis=1) & np.isfinite(fixed_w) & np.isfinite(m.power_w)
+        errs = {}
+        for t in sorted(set(trip[ok])):
+            tr, te = ok & (trip != t), ok & (trip == t)
+            b = np.linalg.lstsq(X[tr], (m.power_w - fixed_w)[tr], rcond=None)[0]
+            e = trip_energy(X[te] @ b + fixed_w[te], m.power_w[te], dt[te], trip[te])
+            errs[t] = e["trips"][t]["error"]
+        b = np.linalg.lstsq(X[ok], (m.power_w - fixed_w)[ok], rcond=None)[0]
+        out[name] = {"errors": errs, "mean_abs_error": float(np.mean(np.abs(list(errs.values())))),
+                     "coefficients": dict(zip(terms, map(float, b)))}
+    a, b = out["constant"]["errors"], out["split"]["errors"]
+    out["helped"] = sum(abs(b[t]) < abs(a[t]) for t in a)
+    out["standing_share"] = {t: float(np.mean(m.inputs.v[trip == t] < 0.1)) for t in sorted(set(trip))}
+    # the power measured while standing: no road load acts there, so it is the standing
+    # constant itself, measured rather than fitted
+    st = (m.inputs.v < 0.1) & np.isfinite(m.power_w)
+    out["standing_measured_w"] = float(np.mean(m.power_w[st])) if st.any() else math.nan
+    per = [float(np.mean(m.power_w[st & (trip == t)])) for t in sorted(set(trip)) if (st & (trip == t)).any()]
+    out["standing_measured_range_w"] = [min(per), max(per)] if per else [math.nan, math.nan]
     return out
 
 
