@@ -34,7 +34,9 @@ declared mass, accelerometer offset and elevation are checked and reported per t
 (The Markdown is rendered by scripts/closing_the_loop_report.py.) The held-out trips then give R² and per-trip traction energy errors (Σ max(P, 0)·Δt,
 predicted/measured − 1) before and after, against VSP LDV 1999 as a reference. The JLU
 car: an equation calibrated on the dynamometer is taken onto the road, and the loop is
-closed on road trips (grade, auxiliaries and temperature the dyno could not see).
+closed on road trips (grade, auxiliaries and temperature the dyno could not see; the constant
+power split into a standing part ``v^0`` and a part drawn while moving, ``moving``, checked by
+leave-one-trip-out over all road trips and against the power measured while standing).
 """
 
 from __future__ import annotations
@@ -204,7 +206,8 @@ def measurement_of(path, lag_s: float, accel_grade: bool, tau_s=None, offset_mps
 
     cols = set(pq.read_schema(path).names)
     acc = _has_accelerometer(path)
-    grade, fused, offset = "logged", isinstance(tau_s, float) and math.isfinite(tau_s), None
+    fused = isinstance(tau_s, (int, float)) and not isinstance(tau_s, bool) and math.isfinite(tau_s)
+    grade, offset = "logged", None
     if accel_grade and acc:
         grade = "accelerometer" if tau_s is not None and not fused else "fused"
         if tau_s == LOGGER_OFFSET:

@@ -434,6 +434,7 @@ def test_grade_options_of_the_script_declare_what_they_read(tmp_path):
     assert mod.LOGGER_OFFSET in mod.TAU_GRID_S and math.inf in mod.TAU_GRID_S
     m = mod.measurement_of(path, 0.0, True, 120.0)
     assert (m.grade, m.fusion_tau_s, m.accelerometer_offset_mps2) == ("fused", 120.0, None)
+    assert mod.measurement_of(path, 0.0, True, 60).grade == "fused"       # a crossover given as int
     m = mod.measurement_of(path, 0.0, True, math.inf)
     assert (m.grade, m.accelerometer_offset_mps2) == ("accelerometer", None)
     m = mod.measurement_of(path, 0.0, True, mod.LOGGER_OFFSET, 0.03)
@@ -444,3 +445,30 @@ def test_grade_options_of_the_script_declare_what_they_read(tmp_path):
     # the logger offset of the script is the median of the trips' own (inputs only)
     off = mod.logger_offset(mod.load_checked(path, "prius3"))
     assert off["trips"] == 2 and abs(off["offset_mps2"]) < 0.05
+
+
+def test_moving_check_separates_a_planted_standing_and_moving_constant(tmp_path):
+    """scripts/closing_the_loop.moving_check on synthetic trips whose power is a known road
+    load + 400 W drawn all the time + 1000 W more while moving: the split recovers both,
+    the power measured standing is the 400 W, and one constant alone lands in between."""
+    import sumo_drvpw.synth.effects as E
+    from sumo_drvpw.data.measured import load_measured
+    from sumo_drvpw.model.equations import Equation
+
+    mod = _script()
+    df, _ = E.synth_trips(3, 6.0, seed=8, effects=[E.LogPower()])
+    path = tmp_path / "log.parquet"
+    df.to_parquet(path)
+    road = Equation("d", {"acc": 1.0, "aero": 0.35, "roll": 0.01, "grade": 1.0})
+    m = load_measured([path], "prius3")
+    assert 0.02 < float(np.mean(m.inputs.v < 0.1)) < 0.6          # the trips do stand
+    moving = (m.inputs.v >= 0.1).astype(float)
+    df["power_w"] = road.power(m.inputs) + 400.0 + 1000.0 * moving
+    df.to_parquet(path)
+    r = mod.moving_check(load_measured([path], "prius3"), road)
+    sp, c = r["split"]["coefficients"], r["constant"]["coefficients"]
+    assert sp["v^0"] == pytest.approx(400.0, abs=5.0) and sp["moving"] == pytest.approx(1000.0, abs=5.0)
+    assert sp["acc"] == pytest.approx(1.0, abs=0.01)
+    assert r["standing_measured_w"] == pytest.approx(400.0, abs=15.0)   # road load at v < 0.1 m/s is small, not 0
+    assert 400.0 < c["v^0"] < 1400.0
+    assert r["split"]["mean_abs_error"] < 0.001 < r["constant"]["mean_abs_error"]

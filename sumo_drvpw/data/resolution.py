@@ -20,13 +20,13 @@ REPEAT_SHARE = 0.05
 def speed_resolution(v: np.ndarray, trip_codes: np.ndarray) -> float:
     """The step in which a log's speed is logged [m/s], 0 when it is not logged in steps.
 
-    q = the 10th percentile of the nonzero changes between consecutive samples within trips;
-    the speed counts as logged in steps of q when at least QUANTISED_SHARE of those changes
-    are whole multiples of q, at least two different multiples occur and at least
+    q = the 10th percentile of the nonzero changes between consecutive samples within trips.
+    The speed counts as logged in steps of q when at least QUANTISED_SHARE of those changes
+    are whole multiples of q, at least two different multiples occur, and at least
     REPEAT_SHARE of all changes within trips are zero (a value logged in steps repeats while
-    the true speed moves within one step; an OBD speed in
-    whole km/h: 0.278 m/s; a CAN speed in fine steps gives a small q; a smoothly varying
-    float speed, or a ramp of equal steps, is no quantised speed: 0).
+    the true speed moves within one step). An OBD speed in whole km/h gives 0.278 m/s, a CAN
+    speed in fine steps a small q; a smoothly varying float speed, or a ramp of equal steps,
+    is no quantised speed: 0.
     """
     v = np.asarray(v, float)
     if v.size < 3:

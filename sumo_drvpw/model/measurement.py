@@ -15,9 +15,9 @@ there)::
                            # crossover, logged grade below it) or "accelerometer" (alone,
                            # its per-trip offset fixed by the elevation)
     fusion_tau_s = 300     # crossover of the fusion [s]
-    accelerometer_offset_mps2 = 0.004  # with grade = "accelerometer": the logger's own
-                           # offset (its mounting pitch), one constant for every trip,
-                           # instead of a per-trip offset fixed by each trip's elevation
+    # accelerometer_offset_mps2 = 0.004  (only with grade = "accelerometer"): the logger's
+                           # own offset (its mounting pitch) [m/s²], one constant for every
+                           # trip, instead of a per-trip offset fixed by each trip's elevation
     air_density = "altitude"  # "logged" or "altitude": pressure of the standard
                            # atmosphere at the logged elevation when pressure is not logged
     exclude_dropouts = true  # leave out logger dropouts: speed and a longitudinal
