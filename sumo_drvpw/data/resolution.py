@@ -41,7 +41,8 @@ def speed_resolution(v: np.ndarray, trip_codes: np.ndarray) -> float:
     q = float(np.percentile(d, 10))
     k = d / q
     near = np.abs(k - np.round(k)) <= MULTIPLE_TOL
-    if near.mean() < QUANTISED_SHARE or np.unique(np.round(k[near])).size < 2:
+    mult = np.round(k[near])
+    if near.mean() < QUANTISED_SHARE or mult.size == 0 or mult.min() == mult.max():   # O(n), no sort
         return 0.0
     return q
 
