@@ -224,17 +224,20 @@ def _on_sigint(signum, frame):
     raise KeyboardInterrupt()
 
 
-def _stopped_by_signal() -> int | None:
-    """Exit code of a run a signal stopped (143 SIGTERM, 130 SIGINT), else None. A signal's
-    exception raised inside a library's C code (matplotlib drawing a path, say) can come out
-    as that library's own error; the record of the signal says what happened."""
-    if _TERMINATED:
+def _signal_exit(terminated: bool) -> int:
+    """The one line and exit code of a run a signal stopped: 143 (SIGTERM) or 130 (SIGINT)."""
+    if terminated:
         print("sumo-drvpw: terminated (SIGTERM); no partial output written", file=sys.stderr)
         return 128 + signal.SIGTERM
-    if _INTERRUPTED:
-        print("sumo-drvpw: interrupted; no partial output written", file=sys.stderr)
-        return 130
-    return None
+    print("sumo-drvpw: interrupted; no partial output written", file=sys.stderr)
+    return 130
+
+
+def _stopped_by_signal() -> int | None:
+    """Exit code of a run a signal stopped, else None. A signal's exception raised inside a
+    library's C code (matplotlib drawing a path, say) can come out as that library's own
+    error; the record of the signal says what happened."""
+    return _signal_exit(bool(_TERMINATED)) if _TERMINATED or _INTERRUPTED else None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -274,12 +277,8 @@ def main(argv: list[str] | None = None) -> int:
     except UserError as e:
         print(f"sumo-drvpw {args.command}: error: {e}", file=sys.stderr)
         return 2
-    except _Terminated:
-        print("sumo-drvpw: terminated (SIGTERM); no partial output written", file=sys.stderr)
-        return 128 + signal.SIGTERM
-    except KeyboardInterrupt:
-        print("sumo-drvpw: interrupted; no partial output written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:  # SIGINT, or SIGTERM as _Terminated
+        return _signal_exit(isinstance(e, _Terminated))
     except OSError as e:
         rc = _stopped_by_signal()
         if rc is not None:
