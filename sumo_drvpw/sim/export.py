@@ -92,8 +92,9 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
         elif f in ("v1", "v^1"):
             cr += c / (G * m)
         elif f in ("one", "v^0", "moving"):
-            # constantPowerIntake: SUMO's Energy model books it while the vehicle moves, which
-            # is exactly `moving`; a `v^0` drawn standing too is short by the standing time
+            # constantPowerIntake: SUMO's emissions device books 0 in a step that ends at v = 0
+            # (tests/test_sim_run.py), so it is drawn while moving, which is exactly `moving`;
+            # a `v^0` drawn standing too is short there by the standing time
             const += c
         else:
             missing.append(f"{t} (no Energy-model counterpart)")
