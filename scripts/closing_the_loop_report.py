@@ -386,7 +386,7 @@ def render(cars, took, cmd: str) -> str:
           "after a 5-fold cross-validation over all 50 i3 trips (held-out trips included) compared grade "
           "sources: the i3's logged elevation is coarse (whole metres, often straight lines between sparse "
           "points), disagrees between consecutive trips that start where the last one ended (TripA17 ends at "
-          "586 m, TripA18 starts 11 min later at 549 m), and one trip (TripA04) logs a constant elevation; a "
+          "586 m, TripA18 starts seconds later at 549 m), and one trip (TripA04) logs a constant elevation; a "
           "fusion in time does not keep a trip's elevation change (its slow part is weighted by time, the "
           "grade power by distance), and a per-trip offset carries each trip's elevation error into its "
           "grade. An offset fixed for the logger reads no elevation. Trip energy is the criterion because it "
