@@ -202,6 +202,16 @@ def note_counts(counts: dict) -> None:
         print(f"note: {n} speed sample(s) in [-{tol:g}, 0) m/s clipped to 0 (standstill sensor noise)")
     if counts.get("speed_unit"):
         print(f"note: speed_mps read in {counts['speed_unit']}")
+    if "widened" in str(counts.get("accel_source", "")):
+        print(f"note: acceleration {counts['accel_source'][len('derived: '):]}")
+    n = int(counts.get("grade_elevation_gap_trips", 0) or 0)
+    if n:
+        gaps = sorted((counts.get("grade_elevation_gap_m") or {}).items(), key=lambda tg: -abs(tg[1]))[:10]
+        listed = ", ".join(f"{t} {g:+.0f} m" for t, g in gaps)
+        print(f"note: on {n} trip(s) the corrected grade integrates to an elevation change more than 20 m "
+              f"away from the logged one ({listed}{', …' if n > len(gaps) else ''}): "
+              "their grade energy (m·g × that gap) is uncertain; a shorter --grade-source fused:TAU_S keeps "
+              "closer to the elevation")
 
 
 class _Terminated(KeyboardInterrupt):

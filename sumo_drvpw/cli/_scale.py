@@ -161,6 +161,9 @@ def compare_streamed(args, tmp: Path, title: str):
     veh = load_vehicle(args.vehicle) if args.vehicle else None
     eqs = resolve_equations(args.equation, veh)
     cs, info = _run(args, partial(CompareStats, eqs, None), veh)
+    from sumo_drvpw.cli import note_counts
+
+    note_counts(cs.counts)
     comp = cs.comparison()
     write_comparison_report(comp, tmp, title, _context(cs, veh, cs.n))
     print(info.line(), file=sys.stderr)

@@ -38,6 +38,11 @@ ACC_GRADE_WINDOW_S = 5.0
 ACCELEROMETER_COLUMNS = ("imu_accel_mps2", "accel_long_mps2", "longitudinal_accel_mps2")
 #: largest |sin θ| a corrected grade may take (17°)
 MAX_SIN_GRADE = 0.3
+#: a corrected grade whose integral over a trip misses the logged elevation change by more
+#: than this is reported [m] (20 m of a 1.5-t car: 0.08 kWh of grade energy)
+GRADE_GAP_NOTE_M = 20.0
+#: trips listed by name in that report (the largest gaps)
+GAP_LISTED = 10
 #: shortest trip whose elevation change fixes an offset for the logger's estimate [m]: over
 #: 1 km a 10-m elevation error is a 0.1 m/s² offset error, over 10 km 0.01
 MIN_OFFSET_DISTANCE_M = 1000.0
@@ -234,4 +239,33 @@ def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Mea
             s = fused_sin_grade(s_acc, np.sin(x.theta), codes, dt, meas.fusion_tau_s)
         x.theta = np.arcsin(s)
         usable &= np.isfinite(x.theta)
+        if "elevation_m" in df and "dt_s" in df:
+            gaps = grade_elevation_gaps(s, x.v, df["dt_s"].to_numpy(float), df["trip_id"].to_numpy(),
+                                        df["elevation_m"].to_numpy(float), driven_path(log, x.v))
+            far = sorted((t for t, g in gaps.items() if abs(g) > GRADE_GAP_NOTE_M), key=lambda t: -abs(gaps[t]))
+            log.counts["grade_elevation_gap_trips"] = len(far)
+            if far:
+                log.counts["grade_elevation_gap_m"] = {t: round(gaps[t], 1) for t in far[:GAP_LISTED]}
     return power_w, x, usable
+
+
+def grade_elevation_gaps(sin_grade, speed_mps, dt_s, trip, elevation_m, path) -> dict:
+    """Per trip: the elevation change the grade integrates to, Σ v·sin θ·Δt over the driven
+    ``path``, minus the logged one (elevation at the path's last sample minus at its first)
+    [m]. A grade consistent with the elevation gives 0; m·g·gap is the grade energy the two
+    disagree by (a fusion in time weights its slow part by time, the grade power by
+    distance, so it need not keep a trip's elevation change)."""
+    s = np.asarray(sin_grade, float)
+    v = np.asarray(speed_mps, float)
+    dt = np.asarray(dt_s, float)
+    h = np.asarray(elevation_m, float)
+    trip = np.asarray(trip).astype(str)
+    ok = np.asarray(path, bool) & np.isfinite(s) & np.isfinite(v) & np.isfinite(dt)
+    out = {}
+    for t in np.unique(trip):
+        i = np.flatnonzero((trip == t) & ok & np.isfinite(h))
+        if i.size < 2:
+            continue
+        j = np.flatnonzero((trip == t) & ok)
+        out[str(t)] = float(np.sum(v[j] * s[j] * dt[j]) - (h[i[-1]] - h[i[0]]))
+    return out

@@ -91,12 +91,15 @@ class Moments:
 
 
 def _add_counts(a: dict, b: dict) -> dict:
-    """Counts of two batches: numbers add, texts are kept (first seen)."""
+    """Counts of two batches: numbers add, per-trip tables merge (batches hold whole trips),
+    texts are kept (first seen)."""
     out = dict(a)
     for k, v in b.items():
         if k in out and isinstance(v, (int, np.integer)) and not isinstance(v, bool) \
                 and isinstance(out[k], (int, np.integer)):
             out[k] = int(out[k]) + int(v)
+        elif isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = {**out[k], **v}
         elif k == "accel_outlier_limit_mps2" or k not in out:
             out.setdefault(k, v)
     return out
