@@ -447,6 +447,11 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
             # the held-out trips read with the training trips' choices (the logger offset too)
             m_test_corr = corrected_measured(test, vehicle, lag, acc_grade, tau_s, off)
             held_corr = evaluate(m_test_corr, [e for e in (corr_eq, final_eq) if e is not None])
+            # the corrected grade against each held-out trip's logged elevation change (inputs only)
+            checks["grade_gaps_held"] = {
+                "trips": int(m_test_corr.log.counts.get("grade_elevation_gap_trips", 0) or 0),
+                "gaps": dict(m_test_corr.log.counts.get("grade_elevation_gap_m") or {}),
+                "checked": m_test_corr.measurement is not None and m_test_corr.measurement.grade != "logged"}
             held_regime = (regime_eval(m_test_corr, final_eq, 1.0 + rscale)
                            if sel is not None and sel["regime"] else None)
             runs.append({"rho_alt": "elevation_m" in df and "pressure_kpa" not in df and "ambient_c" in df,

@@ -359,6 +359,13 @@ def render(cars, took, cmd: str) -> str:
                             f"Δh {hi[k]['dh_m']:+.0f} m" if "dh_m" in hi[k] else "",
                             f"{hi[k]['distance_km']:.1f} km, {100 * hi[k]['standstill']:.0f} % standstill") if x)
                         for k in bad if k in hi) + ".")
+                gg = (run.get("checks") or {}).get("grade_gaps_held") or {}
+                if gg.get("checked"):
+                    gaps = sorted(gg["gaps"].items(), key=lambda kv: -abs(kv[1]))
+                    L.append("Corrected grade against the logged elevation change (held-out trips, inputs only; "
+                             "Σ v·sin θ·Δt − Δh, m·g × it is grade energy the two disagree by): more than 20 m "
+                             f"on {gg['trips']} of {len(run['held'])} trips"
+                             + (": " + ", ".join(f"{k} {g:+.0f} m" for k, g in gaps) if gaps else "") + ".")
             L.append("")
     L += ["## What this shows, and what it does not", "",
           "- Findings are kept only when they pass the held-out block test, lower the held-out error on most "
