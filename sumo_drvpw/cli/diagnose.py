@@ -123,6 +123,10 @@ def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, prog
         write_outputs(res, out, figures=False)
     else:
         m = measured if measured is not None else load_measured(logs, vehicle, read_options, target=target)
+        if measured is None:
+            from sumo_drvpw.cli import note_counts
+
+            note_counts(m.counts)
         eq = None
         if equation:
             eq = resolve_equations([equation], m.vehicle)[0] if equation in SPEC_EQUATIONS else load_equation(equation)
@@ -236,6 +240,9 @@ def _chain_main(args, target, progress) -> int:
                             max_findings=args.max_findings, validation=args.validation)
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
         m = load_measured(args.logs, args.vehicle, read_options(args, [args.equation]), target=target)
+        from sumo_drvpw.cli import note_counts
+
+        note_counts(m.counts)
         res = trace_chain(m, eq, opt, progress=progress)
         write_chain_outputs(res, tmp)
     r = res.report
