@@ -576,6 +576,7 @@ def moving_check(m, dyno_eq) -> dict:
     into a standing part (``v^0``) and a part drawn only while moving (``moving``). Per held-out
     trip the traction-energy error (as everywhere in this report)."""
     from sumo_drvpw.fit.compare import trip_energy
+    from sumo_drvpw.model.constants import STANDSTILL_MPS
     from sumo_drvpw.model.terms import term_matrix
 
     keep = {t: c for t, c in dyno_eq.terms.items() if t in ("aero", "roll")}
@@ -598,10 +599,10 @@ def moving_check(m, dyno_eq) -> dict:
                      "coefficients": dict(zip(terms, map(float, b)))}
     a, b = out["constant"]["errors"], out["split"]["errors"]
     out["helped"] = sum(abs(b[t]) < abs(a[t]) for t in a)
-    out["standing_share"] = {t: float(np.mean(m.inputs.v[trip == t] < 0.1)) for t in sorted(set(trip))}
+    out["standing_share"] = {t: float(np.mean(m.inputs.v[trip == t] < STANDSTILL_MPS)) for t in sorted(set(trip))}
     # the power measured while standing: no road load acts there, so it is the standing
     # constant itself, measured rather than fitted
-    st = (m.inputs.v < 0.1) & np.isfinite(m.power_w)
+    st = (m.inputs.v < STANDSTILL_MPS) & np.isfinite(m.power_w)
     out["standing_measured_w"] = float(np.mean(m.power_w[st])) if st.any() else math.nan
     per = [float(np.mean(m.power_w[st & (trip == t)])) for t in sorted(set(trip)) if (st & (trip == t)).any()]
     out["standing_measured_range_w"] = [min(per), max(per)] if per else [math.nan, math.nan]

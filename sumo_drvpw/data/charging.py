@@ -21,14 +21,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from sumo_drvpw.model.constants import STANDSTILL_MPS  # the car stands below it [m/s]
+
 #: battery power below −this at standstill is a charger [W]: a household socket delivers
 #: 1.4–2.3 kW (Mode 2, 6–10 A at 230 V), wallboxes and DC chargers more; a car at
 #: standstill draws power, it does not return it
 CHARGE_MIN_W = 1000.0
 #: shortest standstill stretch read as charging [s] (a charger session, not a transient)
 CHARGE_MIN_S = 30.0
-#: speed below which the car stands [m/s] (the drive-log spec's standstill tolerance)
-STANDSTILL_MPS = 0.1
 
 
 def charging_mask(battery_w, speed_mps, time_s, trip_codes, min_w: float = CHARGE_MIN_W,

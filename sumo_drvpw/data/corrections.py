@@ -129,8 +129,11 @@ def driven_path(log, speed_mps) -> np.ndarray:
     braking and other samples left out of a power fit included."""
     from sumo_drvpw.data.dropouts import log_dropouts
 
+    return _path(speed_mps, log_dropouts(log))
+
+
+def _path(speed_mps, drop) -> np.ndarray:
     path = np.isfinite(np.asarray(speed_mps, float))
-    drop = log_dropouts(log)
     return path if drop is None else path & ~drop
 
 
@@ -208,10 +211,12 @@ def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Mea
             raise UserError(f"{log.describe()}: air density at altitude needs column 'elevation_m'")
         h = df["elevation_m"].to_numpy(float)
         x.rho = np.where(np.isfinite(h), x.rho * pressure_at_altitude_kpa(h) / P_STD_KPA, x.rho)
-    if meas.exclude_dropouts:
+    drop = None  # logger dropouts, found once: left out (exclude_dropouts) and off the driven path
+    if meas.exclude_dropouts or meas.grade != "logged":
         from sumo_drvpw.data.dropouts import log_dropouts
 
         drop = log_dropouts(log)
+    if meas.exclude_dropouts:
         if drop is None:
             raise UserError(f"{log.describe()}: leaving out logger dropouts needs a longitudinal "
                             f"accelerometer column (one of {', '.join(ACCELEROMETER_COLUMNS)}): with "
@@ -223,6 +228,7 @@ def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Mea
         if col is None:
             raise UserError(f"{log.describe()}: grade '{meas.grade}' needs a longitudinal accelerometer "
                             f"column (one of {', '.join(ACCELEROMETER_COLUMNS)})")
+        path = _path(x.v, drop)
         imu = df[col].to_numpy(float)
         if meas.grade == "accelerometer" and meas.accelerometer_offset_mps2 is not None:
             imu = imu - meas.accelerometer_offset_mps2
@@ -234,14 +240,14 @@ def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Mea
                 raise UserError(f"{log.describe()}: grade 'accelerometer' needs column 'elevation_m' "
                                 "(its per-trip offset is fixed by the elevation change)")
             s = offset_corrected_sin_grade(s_acc, x.v, df["dt_s"].to_numpy(float), codes,
-                                           df["elevation_m"].to_numpy(float), driven_path(log, x.v))
+                                           df["elevation_m"].to_numpy(float), path)
         else:
             s = fused_sin_grade(s_acc, np.sin(x.theta), codes, dt, meas.fusion_tau_s)
         x.theta = np.arcsin(s)
         usable &= np.isfinite(x.theta)
         if "elevation_m" in df and "dt_s" in df:
             gaps = grade_elevation_gaps(s, x.v, df["dt_s"].to_numpy(float), df["trip_id"].to_numpy(),
-                                        df["elevation_m"].to_numpy(float), driven_path(log, x.v))
+                                        df["elevation_m"].to_numpy(float), path)
             far = sorted((t for t, g in gaps.items() if abs(g) > GRADE_GAP_NOTE_M), key=lambda t: -abs(gaps[t]))
             log.counts["grade_elevation_gap_trips"] = len(far)
             if far:

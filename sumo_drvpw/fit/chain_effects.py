@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.chain import STANDSTILL_MPS, Table
+from sumo_drvpw.model.chain import Table
+from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import term_matrix
 

@@ -72,7 +72,8 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import chain_target
 from sumo_drvpw.fit.compare import metrics as _metrics, trip_net_energy
 from sumo_drvpw.fit.diagnose.options import check_validation
-from sumo_drvpw.model.chain import STANDSTILL_MPS, EnergyChain
+from sumo_drvpw.model.chain import EnergyChain
+from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import term_matrix
 from sumo_drvpw.fit.chain_effects import _eta as _eff, apply, candidates as _candidates

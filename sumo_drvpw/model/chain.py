@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS  # noqa: F401 (STANDSTILL_MPS: also imported from here)
+from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
 
 PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 #: keys of the [chain] table, besides sub-tables loads, hvac and efficiency tables

@@ -367,7 +367,7 @@ class BatteryLog(_Effect):
                            aux_power_w=self.aux_power_w)
 
     def __call__(self, state, rng):
-        from sumo_drvpw.model.chain import STANDSTILL_MPS
+        from sumo_drvpw.model.constants import STANDSTILL_MPS
 
         v = np.asarray(state["v"], float)
         p = np.asarray(state["power_w"], float)
