@@ -14,7 +14,7 @@ from sumo_drvpw.model.constants import R_DRY_AIR
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.loop import tailwind
-from sumo_drvpw.sim.network import BIN_M, lane_profile, load_network
+from sumo_drvpw.sim.network import BIN_M, PARKED_MAX_OFFSET_M, lane_profile, load_network, off_lane
 from sumo_drvpw.sim.scenario import RoadClassRule, load_scenario
 from sumo_drvpw.sim.vtypes import read_vtypes
 
@@ -179,6 +179,58 @@ def test_lane_profile_constant_grade(grade, length_h, window):
     length3 = math.hypot(length_h, z1)
     th, cl = lane_profile(shape, length3, window, 0.25)
     np.testing.assert_allclose(th, math.atan(grade), atol=1e-9)
+
+
+_HIGHWAY: list = []
+
+
+def _highway():
+    if not _HIGHWAY:
+        import sumolib
+
+        _HIGHWAY.append(load_network(NETS / "highway.net.xml", RoadClassRule()))
+        _HIGHWAY.append(sumolib.net.readNet(str(NETS / "highway.net.xml"), withInternal=True))
+    return _HIGHWAY
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 10_000), st.floats(0.0, 1.0), st.floats(-60.0, 60.0))
+def test_off_lane_is_beside_the_lane(k, frac, d):
+    """A point d metres across a lane from its centre line at SUMO position pos (placed with
+    sumolib's geometry, the positions scaled to the shape's length as SUMO does) is off the
+    lane exactly when |d| exceeds half the lane's width (+ 0.1 m) and is within 50 m: the
+    FCD test for a parked vehicle (sumo_drvpw.sim.fcd.ParkedTest). Margins of 0.3 m around
+    the thresholds leave room for the 2-m bins on curved lanes."""
+    from sumolib.geomhelper import polyLength, positionAtShapeOffset
+
+    net, snet = _highway()
+    lanes = [ln for e in snet.getEdges() for ln in e.getLanes()]
+    ln = lanes[k % len(lanes)]
+    shape = [p[:2] for p in ln.getShape()]
+    length = polyLength(shape)
+    if length < 1.0:
+        return
+    off = frac * (length - 0.1)
+    pos = off * ln.getLength() / length
+    x0, y0 = positionAtShapeOffset(shape, off)
+    x1, y1 = positionAtShapeOffset(shape, off + 0.05)
+    h = math.atan2(y1 - y0, x1 - x0)
+    px, py = x0 - d * math.sin(h), y0 + d * math.cos(h)   # d to the left of the heading
+    got = off_lane(net, np.array([net.lane_index[ln.getID()]]), np.array([pos]),
+                   np.array([px]), np.array([py]))[0]
+    half = 0.5 * ln.getWidth() + 0.1
+    if abs(d) < half - 0.3 or abs(d) > PARKED_MAX_OFFSET_M + 0.3:
+        assert not got
+    elif half + 0.3 < abs(d) < PARKED_MAX_OFFSET_M - 0.3:
+        assert got
+
+
+def test_off_lane_without_coordinates_or_lane():
+    net, _ = _highway()
+    lane = net.lane_index["e12_0"]
+    far = np.array([1e9])
+    assert not off_lane(net, np.array([lane]), np.array([10.0]), np.array([np.nan]), far)[0]
+    assert not off_lane(net, np.array([-1]), np.array([10.0]), far, far)[0]
 
 
 @settings(max_examples=50, deadline=None)

@@ -103,6 +103,8 @@ class Accountant(_Listener):
         unbounded way); by default vehicles that left the simulation are written out in
         batches of ``flush_vehicles`` (:mod:`sumo_drvpw.sim.spill`) into ``spill_dir``
         (default: a temporary folder) and memory holds the running vehicles only
+    net : the scenario's network (:func:`~sumo_drvpw.sim.network.load_network`), when
+        already loaded (default: loaded from the scenario)
     overrides : scenario values to replace (see ``sumo_drvpw.sim.scenario.OVERRIDES``)
 
     Use it as a step listener (``conn.addStepListener(acc)``) or call :meth:`step` after
@@ -111,7 +113,7 @@ class Accountant(_Listener):
 
     def __init__(self, conn, equations=None, scenario=None, trace_path=None,
                  keep_vehicles: bool = False, spill_dir=None, flush_vehicles: int | None = None,
-                 **overrides):
+                 net=None, **overrides):
         from sumo_drvpw.sim.run import VTypeResolver
 
         self._t0 = time.perf_counter()
@@ -134,7 +136,8 @@ class Accountant(_Listener):
                 self.equations.append(eq)
                 names.append(eq.name)
         self.names = names
-        self.net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
+        self.net = net if net is not None else load_network(
+            sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
         self.eqset = EquationSet(self.equations)
         self.ledger = Ledger(len(self.net.edge_ids), len(self.equations))
         if not keep_vehicles:

@@ -15,7 +15,12 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
 - vTypes' masses and vClasses come from the scenario's route/additional files (``--vtypes``
   or ``[sumo]`` of the scenario); without them every vType is a ``passenger`` car with the
   class's default mass (listed in ``summary.json`` ``assumptions``);
-- persons (``<person>``) are not vehicles and are ignored.
+- persons (``<person>``) are not vehicles and are ignored;
+- a parked vehicle (SUMO writes it with its lane, at speed 0, at the parking space's x, y)
+  is told from a standing one by its x, y beside the lane (:class:`ParkedTest`) and, as in
+  the live loop, not booked (``summary.json`` ``source.parked_rows``); FCD without x, y
+  (``--fcd-output.attributes`` without them, or ``.geo``/``.utm`` coordinates) books it
+  as standing.
 
 Bounded memory (#14): the file is read in blocks of ``chunk_rows`` rows
 (:mod:`sumo_drvpw.sim.fcd_read`: XML iterparse, Parquet record batches, CSV chunks) and
@@ -91,6 +96,57 @@ class _VType:
         return ""
 
 
+class ParkedTest:
+    """Which FCD rows show a parked vehicle: standing (below ``STANDSTILL_MPS``) beside its
+    lane (:func:`~sumo_drvpw.sim.network.off_lane`). SUMO's FCD writes a parked vehicle
+    with its lane, at speed 0, at the parking space's x, y; libsumo gives it no lane, and
+    the live loop books nothing for it (engine off; SUMO's emission output leaves it out
+    too). Applied once per block of rows (:meth:`mark`), not per timestep."""
+
+    def __init__(self, net):
+        self.net = net
+
+    def __call__(self, cols: dict) -> np.ndarray:
+        """Rows (``speed``, ``lane``, ``pos``, ``x``, ``y``) → off their lane, standing."""
+        from sumo_drvpw.model.constants import STANDSTILL_MPS
+        from sumo_drvpw.sim.network import off_lane
+
+        off = np.asarray(cols["speed"], float) < STANDSTILL_MPS
+        if "x" not in cols or "y" not in cols:
+            return np.zeros(len(off), bool)
+        k = np.flatnonzero(off)  # only a standing vehicle can be parked
+        if len(k):
+            codes, uniq = pd.factorize(np.asarray(cols["lane"], object)[k])
+            idx = self.net.lane_index
+            lane = np.array([idx.get(u, -1) for u in uniq], np.int64)[codes]
+            off[k] = off_lane(self.net, lane, np.asarray(cols["pos"], float)[k],
+                              np.asarray(cols["x"], float)[k], np.asarray(cols["y"], float)[k])
+        return off
+
+    def mark(self, blocks):
+        """The blocks (:func:`iter_fcd_blocks`) with a column ``off``: this test's rows."""
+        for b in blocks:
+            b.cols["off"] = self(b.cols)
+            yield b
+
+
+def _unpark(lanes, ids, off, nxt_ids, nxt_off) -> tuple[np.ndarray, int]:
+    """The lanes of a timestep's rows with "" for the parked vehicles, and their number:
+    off the lane (``off``) and still off it in the next timestep (``nxt_*``; None: none).
+    libsumo's getLaneID reads "" from the step a vehicle parks to the one before it drives
+    off; in the step it leaves it is on its lane again, where FCD still shows it at the
+    parking space."""
+    if not off.any():
+        return lanes, 0
+    off = off.copy()
+    if nxt_ids is not None and len(nxt_ids):
+        back = set(np.asarray(nxt_ids, object)[~nxt_off])
+        off &= ~np.fromiter((v in back for v in ids), bool, len(ids))
+    lanes = np.array(lanes, dtype=object)
+    lanes[off] = ""
+    return lanes, int(np.count_nonzero(off))
+
+
 class FcdReplay:
     """A connection whose ``simulationStep`` moves to the next FCD timestep and whose
     getters answer from the file (the subset of the libsumo API the Stepper uses)."""
@@ -119,6 +175,9 @@ class FcdReplay:
                 df["slope"].to_numpy(float) if "slope" in df else np.zeros(n)]
         self._ids = df["id"].to_numpy(object)
         self._cols = cols
+        #: rows of parked vehicles (:class:`ParkedTest`, column ``off``), when marked
+        self._off = df["off"].to_numpy(bool) if "off" in df else None
+        self.parked_rows = 0
         self.types = dict(zip(df["id"], df["type"]))
         self.k = 0
         # FCD time t is the state after SUMO executed step t; a live loop reads that state
@@ -144,7 +203,13 @@ class FcdReplay:
         self.k += 1
         ids = tuple(self._ids[a:b])
         self.ids = ids
-        self.state = dict(zip(ids, zip(*(c[a:b] for c in self._cols)))) if ids else {}
+        cols = [c[a:b] for c in self._cols]
+        if self._off is not None and ids:
+            c, d = self._rows[self.k] if self.k < len(self._rows) else (b, b)
+            cols[3], n = _unpark(cols[3], self._ids[a:b], self._off[a:b],
+                                 self._ids[c:d] if d > c else None, self._off[c:d])
+            self.parked_rows += n
+        self.state = dict(zip(ids, zip(*cols))) if ids else {}
         new = tuple(v for v in ids if v not in self._seen)
         self._seen.update(new)
         self.departed = new
@@ -248,6 +313,7 @@ class FcdStream(FcdReplay):
         self.arrived: tuple = ()
         self._prev: tuple = ()
         self._prev_set: set = set()
+        self.parked_rows = 0
         self.simulation, self.vehicle, self.vehicletype = _Sim(self), _Veh(self), _VType()
 
     def remaining(self) -> int:
@@ -275,8 +341,14 @@ class FcdStream(FcdReplay):
         ids = tuple(c["id"])
         n = len(ids)
         self.rows += n
+        lanes = c["lane"]
+        if "off" in c and n:  # parked vehicles (ParkedTest.mark)
+            nxt = self._ahead[0].cols if self._ahead else None
+            lanes, k = _unpark(lanes, c["id"], c["off"], nxt["id"] if nxt else None,
+                               nxt["off"] if nxt else None)
+            self.parked_rows += k
         cols = [c["speed"], c["accel"] if "accel" in c else np.full(n, np.nan),
-                c["angle"] if "angle" in c else np.zeros(n), c["lane"], c["pos"],
+                c["angle"] if "angle" in c else np.zeros(n), lanes, c["pos"],
                 c["slope"] if "slope" in c else np.zeros(n)]
         self.ids = ids
         self.state = dict(zip(ids, zip(*cols))) if n else {}
@@ -360,11 +432,15 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     the vehicles are left there, for :mod:`sumo_drvpw.sim.fcd_dask` to join)."""
     from sumo_drvpw.sim.accountant import Accountant
     from sumo_drvpw.sim.loop import step_until
+    from sumo_drvpw.sim.network import load_network
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
 
+    net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
+    parked = ParkedTest(net)
     if chunk_rows is None:
         df = read_fcd(fcd_file)
+        df["off"] = parked({k: df[k].to_numpy() for k in df.columns})
         if keep is not None and len(df):
             times = df.attrs["times"]
             df = df[keep(df["id"].to_numpy(object))].copy()
@@ -378,20 +454,21 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
             n = int(np.searchsorted(replay.times + replay.dt, sc.end + 1e-9, side="right"))
             replay.times, replay._rows = replay.times[:n], replay._rows[:n]
     else:
-        steps = timesteps(iter_fcd_blocks(fcd_file, chunk_rows), begin_s, keep, fcd_file)
+        steps = timesteps(parked.mark(iter_fcd_blocks(fcd_file, chunk_rows)), begin_s, keep,
+                          fcd_file)
         replay = FcdStream(steps, dt=sc.step_length, end_s=sc.end, label=fcd_file)
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     acc = Accountant(replay, scenario=sc,
                      trace_path=Path(out_dir) / "trace.parquet" if sc.trace and out_dir else None,
                      spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,
-                     keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles)
+                     keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles, net=net)
     try:
         info = step_until(replay, acc.stepper, end=None, progress=False, period=sc.period)
         acc.interrupted = info["interrupted"]
         rows = replay.rows if chunk_rows is not None else len(df)
         extra = {"source": {"fcd": str(fcd_file), "rows": int(rows),
-                            "timesteps": int(replay.k)}}
+                            "timesteps": int(replay.k), "parked_rows": int(replay.parked_rows)}}
         if sc.trace and out_dir:
             extra["files"] = {"trace": "trace.parquet"}
         if not publish:

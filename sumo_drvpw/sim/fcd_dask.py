@@ -175,6 +175,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
                     r.skipped[key][name] = r.skipped[key].get(name, 0) + n
         extra = dict(first["extra"])
         extra["source"] = dict(extra["source"], rows=sum(d["extra"]["source"]["rows"] for d in done),
+                               parked_rows=sum(d["extra"]["source"]["parked_rows"] for d in done),
                                engine="dask", buckets=k)
         result = acc.result(extra)
         check_vtype_filter(sc, led)

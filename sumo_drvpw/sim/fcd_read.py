@@ -32,11 +32,12 @@ from sumo_drvpw.sim.scenario import sumo_seconds
 FCD_COLUMNS = {"time": "timestep_time", "id": "vehicle_id", "type": "vehicle_type",
                "speed": "vehicle_speed", "lane": "vehicle_lane", "pos": "vehicle_pos",
                "angle": "vehicle_angle", "slope": "vehicle_slope",
-               "accel": "vehicle_acceleration"}
+               "accel": "vehicle_acceleration", "x": "vehicle_x", "y": "vehicle_y"}
 _REQUIRED = ("time", "id", "type", "speed", "lane", "pos")
-_OPTIONAL = ("angle", "slope", "accel")
+#: optional columns; x, y tell a parked vehicle (beside its lane) from a standing one
+_OPTIONAL = ("angle", "slope", "accel", "x", "y")
 _XML_ATTRS = {"id": "id", "type": "type", "speed": "speed", "lane": "lane", "pos": "pos",
-              "angle": "angle", "slope": "slope", "accel": "acceleration"}
+              "angle": "angle", "slope": "slope", "accel": "acceleration", "x": "x", "y": "y"}
 #: rows per block of the streamed replay (about 15 MB of columns; larger blocks read no
 #: faster: the replay's per-timestep work dominates)
 CHUNK_ROWS = 50_000
@@ -276,7 +277,7 @@ def iter_fcd_blocks(path, chunk_rows: int = CHUNK_ROWS):
 
 
 def read_fcd(path, chunk_rows: int = CHUNK_ROWS) -> pd.DataFrame:
-    """FCD rows (time, id, type, speed, lane, pos, [angle, slope, accel]) sorted by time;
+    """FCD rows (time, id, type, speed, lane, pos, [angle, slope, accel, x, y]) sorted by time;
     ``df.attrs["times"]``: every timestep of the file, vehicles or not. UserError names
     the file and the missing column. ``path``: a file, or partitioned Parquet FCD (a folder
     or a glob pattern of ``.parquet`` files, read as one, only the FCD columns). Holds the

@@ -73,6 +73,11 @@ class Network:
     has_elevation: bool = True
     #: share of the lane length whose shape carries a non-zero z [-]
     z_share: float = 1.0
+    #: per bin: the lane centre line's x, y at the bin centre [m]; per lane: width [m]
+    #: (to tell a parked vehicle in FCD from a standing one: :func:`off_lane`)
+    centre_x: np.ndarray | None = None
+    centre_y: np.ndarray | None = None
+    lane_width: np.ndarray | None = None
 
     def bin_index(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Index into the per-bin arrays (``profile``, ``clipped``, ``raw``,
@@ -138,21 +143,54 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float,
     return np.clip(theta, -max_rad, max_rad), clipped
 
 
-def lane_heading(shape, length: float) -> np.ndarray:
+def lane_heading(shape, length: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lane direction per ``BIN_M`` bin [deg clockwise from north]: the heading of the
     shape segment under each bin centre (what ``vehicle.getAngle`` reports for a car
-    following the lane; it differs only while a car changes lanes)."""
+    following the lane; it differs only while a car changes lanes); and the bin centres'
+    x, y on the lane's centre line [m] (positions scaled from SUMO's lane length to the
+    shape's length, as SUMO places a vehicle)."""
     p = np.asarray(shape, dtype=float)[:, :2]
     nb = max(1, int(np.ceil(max(length, 1e-9) / BIN_M)))
     if len(p) < 2:
-        return np.zeros(nb)
+        q = p[0] if len(p) else np.zeros(2)
+        return np.zeros(nb), np.full(nb, q[0]), np.full(nb, q[1])
     d = np.diff(p, axis=0)
     seg = np.hypot(d[:, 0], d[:, 1])
     s = np.concatenate([[0.0], np.cumsum(seg)])
     ang = np.degrees(np.arctan2(d[:, 0], d[:, 1])) % 360.0
     centre = np.minimum((np.arange(nb) + 0.5) * BIN_M * (s[-1] / max(length, 1e-9)), s[-1])
     k = np.clip(np.searchsorted(s, centre, side="right") - 1, 0, len(seg) - 1)
-    return ang[k]
+    f = (centre - s[k]) / np.maximum(seg[k], 1e-12)
+    return ang[k], p[k, 0] + f * d[k, 0], p[k, 1] + f * d[k, 1]
+
+
+#: a vehicle standing farther than this beyond its lane's edge is no longer on the lane:
+#: SUMO has parked it beside (a parking stop, a parkingArea) [m]
+PARKED_BEYOND_EDGE_M = 0.1
+#: … unless it is farther than this from the lane: its x, y are not the network's
+#: (``--fcd-output.geo``/``.utm``) or an explicit parking space far away [m]
+PARKED_MAX_OFFSET_M = 50.0
+
+
+def off_lane(net: Network, lane: np.ndarray, pos: np.ndarray, x: np.ndarray,
+             y: np.ndarray) -> np.ndarray:
+    """Whether points (x, y) [m] lie beside their lanes (lane numbers ``lane``, SUMO
+    position ``pos``): farther from the lane's centre line than half its width plus
+    ``PARKED_BEYOND_EDGE_M``, and nearer than ``PARKED_MAX_OFFSET_M``. A vehicle on its
+    lane has its front centre within the lane (the sublane model included); SUMO draws a
+    parked one beside it, at the parking space. Lanes < 0 and missing x, y: False."""
+    lane = np.asarray(lane, np.int64)
+    out = np.zeros(len(lane), bool)
+    ok = (lane >= 0) & np.isfinite(x) & np.isfinite(y) & np.isfinite(pos)
+    if net.centre_x is None or not ok.any():
+        return out
+    i = net.bin_index(lane[ok], np.asarray(pos, float)[ok])
+    h = np.radians(net.heading_deg[i])
+    dx, dy = np.asarray(x, float)[ok] - net.centre_x[i], np.asarray(y, float)[ok] - net.centre_y[i]
+    lateral = np.abs(dx * np.cos(h) - dy * np.sin(h))  # across the heading (0° = north)
+    out[ok] = ((lateral > 0.5 * net.lane_width[lane[ok]] + PARKED_BEYOND_EDGE_M)
+               & (lateral <= PARKED_MAX_OFFSET_M))
+    return out
 
 
 def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
@@ -191,7 +229,7 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     for i in np.flatnonzero(lane_edge < 0):
         inc = lanes[i].getIncoming() if hasattr(lanes[i], "getIncoming") else []
         lane_edge[i] = eidx.get(inc[0].getEdge().getID(), 0) if inc else 0
-    profs, clips, raws, heads = [], [], [], []
+    profs, clips, raws, heads, cxs, cys = [], [], [], [], [], []
     z_len = 0.0
     for ln in lanes:
         shape = ln.getShape3D()
@@ -201,7 +239,10 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         profs.append(th)
         clips.append(cl)
         raws.append(lane_profile(shape, ln.getLength(), RAW_LENGTH_M, np.inf, behind=True)[0])
-        heads.append(lane_heading(shape, ln.getLength()))
+        h, cx, cy = lane_heading(shape, ln.getLength())
+        heads.append(h)
+        cxs.append(cx)
+        cys.append(cy)
     lane_length = np.array([ln.getLength() for ln in lanes], float)
     with_lanes = [e for e in net.getEdges() if e.getLanes()]  # lanes are listed edge by edge
     lane_end = np.concatenate(
@@ -224,5 +265,7 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         lane_offset=off, lane_nbins=nb, profile=np.concatenate(profs),
         clipped=np.concatenate(clips), classes=all_classes, raw=np.concatenate(raws),
         heading_deg=np.concatenate(heads), lane_ids=[ln.getID() for ln in lanes],
+        centre_x=np.concatenate(cxs), centre_y=np.concatenate(cys),
+        lane_width=np.array([ln.getWidth() for ln in lanes], float),
         has_elevation=z_len > 0.0,
         z_share=float(z_len / max(float(lane_length.sum()), 1e-9)))
