@@ -569,3 +569,52 @@ def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path,
     assert "chain loads SUMO has no signal for were taken as 0: heater_w" in err
     code, err = _cli(["city", "--air-temperature", "nan", "--out", tmp_path / "x"], capsys)
     assert code == 2 and "--air-temperature" in err and not (tmp_path / "x").exists()
+
+
+def test_riding_persons_add_their_mass_while_they_ride(tmp_path):
+    """SUMO's emission models add the vTypes' masses of the persons and containers a
+    vehicle carries (EnergyParams::getTotalMass); so does the plug-in, from the stop where
+    they board to the stop where they leave. 20 persons of 80 kg board a 10 t bus at a
+    stop on c00c01 and leave it at one on c02c03: on c01c02 every mass term (acceleration,
+    grade, rolling; net over traction and recuperation) is 11 600 / 10 000 of the run that
+    leaves them out (vehicles.transportable_mass = false), aero equal; on c03c04, after
+    they left, everything equal. SUMO moves the bus alike in both runs."""
+    (tmp_path / "bs.add.xml").write_text(
+        '<additional><busStop id="bs1" lane="c00c01_0" startPos="20" endPos="50"/>'
+        '<busStop id="bs2" lane="c02c03_0" startPos="100" endPos="130"/></additional>\n')
+    persons = "\n".join(
+        f'    <person id="p{i}" depart="0" type="ped"><walk edges="c00c01" busStop="bs1"/>'
+        '<ride busStop="bs2" lines="L1"/></person>' for i in range(20))
+    routes = f"""<routes>
+    <vType id="bus" vClass="bus" mass="10000" personCapacity="60"/>
+    <vType id="ped" vClass="pedestrian" mass="80"/>
+    <vehicle id="b" type="bus" depart="0" departSpeed="0" line="L1">
+        <route edges="c00c01 c01c02 c02c03 c03c04"/>
+        <stop busStop="bs1" duration="90"/><stop busStop="bs2" duration="60"/>
+    </vehicle>
+{persons}
+</routes>
+"""
+    runs = {}
+    for on in (True, False):
+        d = tmp_path / str(on)
+        d.mkdir()
+        sc = _scenario(d, routes, net=NETS / "city.net.xml", end=400, equations=('"phys"',),
+                       extra=f"additional = [\"{tmp_path / 'bs.add.xml'}\"]\n"
+                             f"[vehicles]\ntransportable_mass = {str(on).lower()}\n")
+        bus = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01},
+                       vclasses=("bus",))
+        runs[on] = run_scenario(sc, d / "out", equations=[bus], figures=False)
+    on, off = runs[True], runs[False]
+    assert on["transportables"] == {"samples": on["transportables"]["samples"], "max_kg": 1600.0}
+    assert on["transportables"]["samples"] > 100 and off["transportables"]["samples"] == 0
+    e_on, e_off = on.edges.set_index("edge"), off.edges.set_index("edge")
+    for c in ("distance_m",):
+        np.testing.assert_allclose(e_on[c], e_off[c], rtol=1e-12)
+    for term in ("acc", "grade", "roll", "aero"):
+        net_on = e_on[f"traction_{term}_j"] + e_on[f"recup_{term}_j"]
+        net_off = e_off[f"traction_{term}_j"] + e_off[f"recup_{term}_j"]
+        ratio = 1.0 if term == "aero" else 11600.0 / 10000.0
+        assert abs(net_off["c01c02"]) > 1e3
+        np.testing.assert_allclose(net_on["c01c02"], ratio * net_off["c01c02"], rtol=1e-9)
+        np.testing.assert_allclose(net_on["c03c04"], net_off["c03c04"], rtol=1e-9)

@@ -154,7 +154,8 @@ class Accountant(_Listener):
                                slope_tol=sc.slope_tol,
                                slope_reference=sc.slope_reference,
                                acceleration=sc.acceleration, heading=sc.wind_heading,
-                               positions=sc.positions)
+                               positions=sc.positions,
+                               transportable_mass=sc.transportable_mass)
         self.resolver = VTypeResolver(sc, self.file_vtypes, self.equations, conn)
         self.trace = None
         if trace_path is not None:

@@ -124,6 +124,9 @@ class Ledger:
         #: lane/position reads of tracked positions, and resync reads that disagreed
         self.position_reads = 0
         self.position_mismatches = 0
+        #: vehicle-steps booked with riding persons, and the most they weighed
+        self.load_samples = 0
+        self.load_max_kg = 0.0
         #: vehicle-steps on a clipped slope, per lane number (sized by the loop)
         self.lane_clipped = np.zeros(0, np.int64)
         #: battery/fuel accounts (sumo_drvpw.sim.chain.ChainLedger) when an equation has a chain
@@ -219,6 +222,7 @@ class Ledger:
         grow("veh_dist", (cap,))
         grow("veh_time", (cap,))
         grow("veh_mass", (cap,), float, np.nan)
+        grow("veh_load", (cap,), float, 0.0)  # riding persons [kg]
         grow("veh_app", (cap, E))
         grow("veh_keep", (cap,), bool, False)
         grow("veh_prev_edge", (cap,), np.int64, -1)
@@ -231,7 +235,8 @@ class Ledger:
     #: per-vehicle arrays and their empty value (what :meth:`flush` compacts)
     _VEH_ARRAYS = (("_veh_energy", 0.0), ("_seg_energy", 0.0), ("_seg_dist", 0.0),
                    ("_seg_time", 0.0), ("veh_dist", 0.0), ("veh_time", 0.0),
-                   ("veh_mass", np.nan), ("veh_app", 0.0), ("veh_keep", False),
+                   ("veh_mass", np.nan), ("veh_load", 0.0), ("veh_app", 0.0),
+                   ("veh_keep", False),
                    ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_lane", -2),
                    ("veh_pos", np.nan), ("veh_done", False))
 
@@ -245,6 +250,7 @@ class Ledger:
         self.veh_type.append(vtype)
         self.veh_class.append(vclass)
         self.veh_mass[i] = mass
+        self.veh_load[i] = 0.0
         self.veh_app[i] = app
         self.veh_keep[i] = keep
         self.n_veh += 1

@@ -64,6 +64,10 @@ class Physics:
     #: traci or ``--step-method.ballistic`` the loop reads every step whatever this says.
     positions: str = "tracked"
     resync_steps: int = 25
+    #: persons riding in a vehicle add their vTypes' masses while they ride (SUMO's
+    #: EnergyParams::getTotalMass); read at a vehicle's departure and when one of its
+    #: stops ends — boarding and alighting happen at stops, standing
+    transportable_mass: bool = True
 
 
 def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
@@ -212,6 +216,14 @@ class Stepper:
         #: vehicles that left the simulation (SUMO's arrived list) are retired from the
         #: ledger, and flushed out of memory when it has a spill (bounded memory)
         self.arrived = getattr(conn.simulation, "getArrivedIDList", None)
+        #: riding persons (Physics.transportable_mass): their mass is read when a vehicle
+        #: departs and when a stop of it ends, while any are in the network (TraCI has no
+        #: containers' vehicle, FCD no riders' vehicle: neither is booked)
+        self.stop_ending = getattr(conn.simulation, "getStopEndingVehiclesIDList", None)
+        self.riders = (physics.transportable_mass and self.stop_ending is not None
+                       and hasattr(conn.vehicle, "getPersonIDList") and hasattr(conn, "person"))
+        self.any_load = False
+        self._type_mass: dict[str, float] = {}
 
     def now(self) -> float:
         """Simulation time [s]; after an interrupted exchange with SUMO (a signal in the
@@ -236,6 +248,29 @@ class Stepper:
             self.every_equation_applies = False
         self.reader.subscribe_existing([vid])
         return i
+
+    def load_kg(self, vid: str) -> float:
+        """Mass of the persons riding in vehicle ``vid`` [kg]: the sum of their vTypes'
+        masses, as SUMO's emission models add them."""
+        conn, kg = self.conn, 0.0
+        for r in conn.vehicle.getPersonIDList(vid):
+            vt = conn.person.getTypeID(r)
+            m = self._type_mass.get(vt)
+            if m is None:
+                m = self._type_mass[vt] = float(conn.vehicletype.getMass(vt))
+            kg += m
+        return kg
+
+    def update_loads(self, vids) -> None:
+        """Read the riders' mass of the vehicles ``vids`` (those booked) into the ledger."""
+        ledger, vmap = self.ledger, self.vmap
+        for vid in vids:
+            i = vmap.get(vid)
+            if i is not None and ledger.veh_keep[i]:
+                kg = self.load_kg(vid)
+                ledger.veh_load[i] = kg
+                if kg > 0.0:
+                    self.any_load = True
 
     def flush(self) -> None:
         """Write the finished vehicles out of the ledger (:meth:`Ledger.flush`) and renumber
@@ -279,13 +314,18 @@ class Stepper:
                 if ledger.flush_due():  # before the new ones come: memory ≤ running vehicles
                     self.flush()
                     vmap = self.vmap
-        for vid in conn.simulation.getDepartedIDList():
+        departed = conn.simulation.getDepartedIDList()
+        for vid in departed:
             if vid not in vmap:
                 self.register(vid)
             else:  # an id used again (e.g. vehicle.add): its state starts afresh
                 ledger.veh_lane[vmap[vid]] = -2
                 ledger.veh_prev_speed[vmap[vid]] = np.nan
+                ledger.veh_load[vmap[vid]] = 0.0
                 ledger.unretire(vmap[vid])
+        if self.riders and (self.any_load or conn.person.getIDCount()):
+            self.update_loads(departed)
+            self.update_loads(self.stop_ending())
         if len(ids) == 0:
             return
         if ids == self.prev_ids:  # no arrival or departure: same vehicles, same order
@@ -373,8 +413,15 @@ class Stepper:
         if self.ballistic:
             v = v_mean
         sig = {} if physics.ambient_c is None else {"ambient_c": np.full(m, physics.ambient_c)}
-        x = Inputs(v, a, theta, wind, ledger.veh_mass[vidx], np.full(m, physics.rho), sig,
-                   v_acc=v_mean)
+        mass = ledger.veh_mass[vidx]
+        if self.any_load:  # riding persons (SUMO's getTotalMass)
+            load = ledger.veh_load[vidx]
+            riding = load > 0.0
+            if riding.any():
+                mass = mass + load
+                ledger.load_samples += int(np.count_nonzero(riding))
+                ledger.load_max_kg = max(ledger.load_max_kg, float(load.max()))
+        x = Inputs(v, a, theta, wind, mass, np.full(m, physics.rho), sig, v_acc=v_mean)
         pc = self.eqset.category_powers(x, None if self.every_equation_applies
                                         else ledger.veh_app[vidx])
         for k, vr, ar in self.ranges:  # vehicle-steps outside an equation's validity range

@@ -217,6 +217,8 @@ def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: boo
            "slope_clipped_samples": int(ledger.clipped),
            "position_reads": int(ledger.position_reads),
            "position_mismatches": int(ledger.position_mismatches),
+           "transportables": {"samples": int(getattr(ledger, "load_samples", 0)),
+                              "max_kg": float(getattr(ledger, "load_max_kg", 0.0))},
            "internal_edges": "energy on internal junction lanes is booked on the edge "
                              "they lead to",
            "energy_definition": "energy_j: Σ term power × Δt over vehicle-steps with total "

@@ -92,7 +92,7 @@ _SCHEMA: dict[str, set[str] | None] = {
     "equations": None,
     "sumo": {"config", "net", "routes", "additional", "begin", "end", "step_length",
              "connection", "gui", "options", "acceleration", "positions"},
-    "vehicles": {"vtypes", "default_masses"},
+    "vehicles": {"vtypes", "default_masses", "transportable_mass"},
     "vtypes": None,  # table of vType id → {mass_kg, equations}
     "vclasses": None,  # table of SUMO vClass → {mass_kg, equations}
     "wind": {"speed_mps", "from_deg", "heading"},
@@ -215,6 +215,9 @@ class Scenario:
     vclass_data: dict[str, dict] = field(default_factory=dict)
     #: vTypes without a mass take their vClass's built-in default mass (else: error)
     default_masses: bool = True
+    #: persons riding in a vehicle add their vTypes' masses while they ride, as in SUMO's
+    #: emission models (EnergyParams::getTotalMass); live runs only
+    transportable_mass: bool = True
     #: edgeData interval [s] (None: one interval for the whole run)
     period: float | None = None
     #: also run SUMO's emissions device and put its per-vehicle totals beside ours
@@ -570,6 +573,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         connection=connection, gui=bool(sumo.get("gui", False)), equations=equations,
         vtype_filter=vfilter, vtype_data=vdata, vclass_data=cdata,
         default_masses=_bool(veh.get("default_masses", True), where, "vehicles.default_masses"),
+        transportable_mass=_bool(veh.get("transportable_mass", True), where,
+                                 "vehicles.transportable_mass"),
         wind_speed=ws, wind_from_deg=wd, rho=rho, air_temperature_c=t_air,
         road_class=rule,
         slope_window=_num(sl.get("window_m", 20.0), where, "slope.window_m", True),
