@@ -368,8 +368,10 @@ def test_heading_from_lane_geometry_agrees_with_getangle(tmp_path):
 def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_path, capsys):
     """`run X.sumocfg`: a SUMO config given as it is runs with the class equations
     (CONFIG_EQUATIONS: every motor vehicle by an equation made for its vClass); the outputs
-    the config sets (log, tripinfo) go into OUT/sumo/, not beside the config; an output an
-    additional file declares (SUMO writes it beside that file) is named in a warning."""
+    the config sets (log, tripinfo) go into OUT/sumo/, not beside the config; so does an
+    output an additional file declares (SUMO writes it beside that file: the run loads a
+    copy whose other relative paths, here an <include href>, point at the originals), named
+    in a warning. Nothing is written into the scenario's folder."""
     import shutil
 
     from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
@@ -379,7 +381,10 @@ def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_
     sc.mkdir()
     for f in ("city.rou.xml", "prius3.vtype.xml"):
         shutil.copy(builtin / "scenarios" / f, sc / f)
-    (sc / "ed.add.xml").write_text('<additional><edgeData id="e1" file="ed_out.xml"/></additional>\n')
+    (sc / "ed.add.xml").write_text('<additional><edgeData id="e1" file="ed_out.xml"/>'
+                                   '<include href="more.add.xml"/></additional>\n')
+    (sc / "more.add.xml").write_text('<additional><edgeData id="e2" file="ed2_out.xml" '
+                                     'begin="0" end="60"/></additional>\n')
     cfg = sc / "c.sumocfg"
     cfg.write_text(f"""<configuration>
     <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="city.rou.xml"/>
@@ -398,8 +403,11 @@ def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_
     assert (out / "sumo" / "ti.xml").is_file() and (out / "sumo" / "sim.log.txt").is_file()
     assert ET.parse(out / "sumo" / "ti.xml").getroot().find("tripinfo") is not None
     after = sorted(p.name for p in sc.iterdir())
-    assert after == sorted(before + ["ed_out.xml"])   # no log, no tripinfo beside the config
-    assert "sumo/" in err and "ed.add.xml: edgeData 'e1' → ed_out.xml" in err
+    assert after == before   # no log, no tripinfo, no edgeData beside the config
+    assert (sc / "ed.add.xml").read_text().count("ed_out.xml") == 1   # not rewritten
+    assert ET.parse(out / "sumo" / "ed_out.xml").getroot().find("interval/edge") is not None
+    assert "written into sumo/" in err and "ed.add.xml: ed_out.xml" in err
+    assert "more.add.xml: ed2_out.xml" in err and (out / "sumo" / "ed2_out.xml").is_file()
     # the cars are booked by the car equations; the truck and bus equations book nothing
     cars = summary["equations"]["vsp_ldv1999"]["distance_m"]
     assert sum(cars.values()) > 0

@@ -220,15 +220,25 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     redirect = {k: v for k, v in sc.config_outputs.items()
                 if k not in given and not (drop_ti and k == "tripinfo-output")}
     scratch = None
-    if redirect:
+    import tempfile
+
+    copies = tempfile.TemporaryDirectory(prefix="drvpw-additional-")
+    if redirect or sc.additional_outputs:
         if out_dir is not None:
             sumo_dir = Path(out_dir) / SUMO_OUTPUT_DIR
         else:
-            import tempfile
-
             scratch = tempfile.TemporaryDirectory(prefix="drvpw-sumo-outputs-")
             sumo_dir = Path(scratch.name)
-        args += sumo_output_args(redirect, sumo_dir)
+        if redirect:
+            args += sumo_output_args(redirect, sumo_dir)
+    # outputs declared in additional files: into the same folder, through copies of those
+    # files (SUMO writes them beside the file that declares them: the scenario's folder)
+    add_args, moved = ([], []) if "additional-files" in given or not sc.additional_outputs \
+        else redirect_additional_outputs(sc.additional_files, sumo_dir, Path(copies.name))
+    if add_args and "-a" in args:  # a scenario's sumo.additional: loaded as the copies
+        i = args.index("-a")
+        del args[i:i + 2]
+    args += add_args
     tmpdir, tripinfo = None, None
     if sc.sumo_device:  # SUMO's own model beside ours: its tripinfo, read after the run
         if not sc.sumo_device_in_config:
@@ -236,8 +246,6 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         if keep_ti:
             tripinfo = sumo_dir / Path(ti_cfg).name
         else:
-            import tempfile
-
             tmpdir = tempfile.TemporaryDirectory(prefix="drvpw-tripinfo-")
             tripinfo = Path(tmpdir.name) / "tripinfo.xml"
             args += ["--tripinfo-output", str(tripinfo), "--tripinfo-output.write-unfinished",
@@ -280,7 +288,15 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         if drop_ti:
             notes.append("the config's tripinfo-output was replaced by the emissions comparison's "
                          "(outputs.sumo_device) and not kept")
-        if sc.additional_outputs:
+        if moved and out_dir is not None:
+            by_file: dict[str, list[str]] = {}
+            for line in moved:
+                f, _, rest = line.partition(": ")
+                by_file.setdefault(f, []).append(rest.rpartition(" → ")[2])
+            notes.append(f"outputs declared in additional files were written into "
+                         f"{SUMO_OUTPUT_DIR}/: " + "; ".join(
+                             f"{f}: {', '.join(names)}" for f, names in by_file.items()))
+        elif sc.additional_outputs and not moved:
             notes.append("outputs declared in additional files were written by SUMO beside those "
                          "files: " + "; ".join(sc.additional_outputs))
         if notes:
@@ -292,6 +308,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             discard_parts(acc.ledger)
         if scratch is not None:
             scratch.cleanup()
+        copies.cleanup()
     return result
 
 
@@ -309,6 +326,76 @@ def sumo_output_args(outputs: dict[str, str], folder: Path) -> list[str]:
         names = [Path(v.strip()).name for v in val.split(",") if v.strip()]
         args += [f"--{key}", ",".join(str(folder.resolve() / n) for n in names)]
     return args
+
+
+#: attributes of additional-file elements that name an input file, relative to that file
+_INPUT_PATH_ATTRIBUTES = ("file", "href", "edgesFile", "imgFile")
+
+
+def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
+                                ) -> tuple[list[str], list[str]]:
+    """Copies of the additional files that declare outputs (``edgeData file=…``, detectors
+    …; themselves or in a file they ``<include href>``), written into ``work``, whose
+    outputs go into ``folder`` under their own file names (a name two declarations share
+    gets the declaring file's name before it) and whose other relative paths (inputs such
+    as a rerouter's ``file``) point at the original files. Returns the command-line options
+    loading the copies instead of the originals (``--additional-files``; none when nothing
+    is declared) and the outputs moved, as 'FILE: element id → output' lines. The
+    originals are not touched."""
+    import xml.etree.ElementTree as ET
+
+    from sumo_drvpw.fileio import open_maybe_gzip
+    from sumo_drvpw.sim.scenario import output_attribute
+
+    moved: list[str] = []
+    used: set[str] = set()
+    copies: dict[Path, Path] = {}
+
+    def load(add: Path, depth: int) -> Path:
+        """The file SUMO should load for ``add``: a copy when outputs are declared in it
+        or in what it includes, else the original."""
+        add = add.resolve()
+        if add in copies:
+            return copies[add]
+        try:
+            with open_maybe_gzip(add) as src:
+                tree = ET.parse(src)
+        except (ET.ParseError, OSError):
+            return add  # SUMO reports an unreadable additional file itself
+        changed = False
+        for el in tree.iter():
+            tag = el.tag.split("}")[-1]
+            key = output_attribute(tag)
+            if key and el.get(key):
+                name = Path(el.get(key)).name
+                if name in used:
+                    name = f"{add.name.split('.')[0]}.{name}"
+                used.add(name)
+                moved.append(f"{add}: {tag} '{el.get('id', '')}' → {name}")
+                el.set(key, str(folder.resolve() / name))
+                changed = True
+            elif tag == "include" and el.get("href") and depth < 10:
+                target = add.parent / el.get("href")
+                got = load(target, depth + 1)
+                changed |= got != target.resolve()
+                el.set("href", str(got))
+            else:  # inputs by relative path (a rerouter's file, …): to the original's folder
+                for key in _INPUT_PATH_ATTRIBUTES:
+                    val = el.get(key)
+                    if val and not Path(val).is_absolute():
+                        el.set(key, str((add.parent / val).resolve()))
+        if not changed:
+            return add
+        folder.mkdir(parents=True, exist_ok=True)
+        copy = work / f"{len(copies)}.{add.name.removesuffix('.gz')}"
+        tree.write(copy, encoding="utf-8", xml_declaration=True)
+        copies[add] = copy
+        return copy
+
+    loaded = [str(load(Path(a), 0)) for a in adds]
+    if not moved:
+        return [], []
+    return ["--additional-files", ",".join(loaded)], moved
 
 
 def read_tripinfo_emissions(path: Path):

@@ -80,6 +80,7 @@ from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, load_equation
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.model.terms import parse_term
 
@@ -124,6 +125,14 @@ _OUTPUT_OPTIONS = {"log", "message-log", "error-log", "summary", "netstate-dump"
 _OUTPUT_ELEMENTS = {"edgeData", "laneData", "e1Detector", "inductionLoop", "e2Detector",
                     "laneAreaDetector", "e3Detector", "entryExitDetector", "instantInductionLoop",
                     "routeProbe", "vTypeProbe", "edgeRelations", "tazRelations", "meanData"}
+#: … and elements naming their output in another attribute
+_OUTPUT_ATTRS = {"calibrator": "output", "timedEvent": "dest"}
+
+
+def output_attribute(tag: str) -> str | None:
+    """The attribute of an additional-file element (tag without namespace) that names an
+    output file SUMO writes, or None."""
+    return "file" if tag in _OUTPUT_ELEMENTS else _OUTPUT_ATTRS.get(tag)
 
 
 def is_output_option(key: str) -> bool:
@@ -131,17 +140,22 @@ def is_output_option(key: str) -> bool:
     return key.endswith("-output") or key in _OUTPUT_OPTIONS
 
 
-def additional_outputs(paths) -> list[str]:
-    """Outputs the additional files declare (``edgeData id='x' file='y'`` …), as
-    'FILE: element id → output' lines; SUMO writes them beside the additional file."""
+def additional_outputs(paths, depth: int = 0) -> list[str]:
+    """Outputs the additional files declare (``edgeData id='x' file='y'`` …), theirs and
+    those of the files they ``<include href>``, as 'FILE: element id → output' lines; SUMO
+    writes them beside the file that declares them."""
     found = []
     for p in paths:
         try:
-            for _, el in ET.iterparse(p, events=("end",)):
-                tag = el.tag.split("}")[-1]
-                if tag in _OUTPUT_ELEMENTS and el.get("file"):
-                    found.append(f"{p}: {tag} '{el.get('id', '')}' → {el.get('file')}")
-                el.clear()
+            with open_maybe_gzip(p) as src:
+                for _, el in ET.iterparse(src, events=("end",)):
+                    tag = el.tag.split("}")[-1]
+                    key = output_attribute(tag)
+                    if key and el.get(key):
+                        found.append(f"{p}: {tag} '{el.get('id', '')}' → {el.get(key)}")
+                    elif tag == "include" and el.get("href") and depth < 10:
+                        found += additional_outputs([Path(p).parent / el.get("href")], depth + 1)
+                    el.clear()
         except (ET.ParseError, OSError):
             continue  # SUMO reports an unreadable additional file itself
     return found
@@ -229,8 +243,11 @@ class Scenario:
     #: output options the SUMO config sets (option → file as written there); a run
     #: redirects them into its output folder's ``sumo/`` (run.sumo_output_args)
     config_outputs: dict[str, str] = field(default_factory=dict)
-    #: outputs declared in additional files, which SUMO writes beside those files
+    #: outputs declared in additional files, which SUMO writes beside those files unless
+    #: a run redirects them (run.redirect_additional_outputs)
     additional_outputs: list[str] = field(default_factory=list)
+    #: the additional files SUMO loads (absolute; a config's or ``sumo.additional``)
+    additional_files: list[Path] = field(default_factory=list)
 
 
 def _where(path) -> str:
@@ -567,7 +584,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     device_on = device_in_config(cfgvals)
     return Scenario(
         config_outputs={k: v for k, v in cfgvals.items() if is_output_option(k) and v.strip()},
-        additional_outputs=additional_outputs(adds),
+        additional_outputs=additional_outputs(adds), additional_files=list(adds),
         path=Path(path) if path else None, sumo_args=args, route_files=files, net_file=net,
         begin=times.get("begin"), end=times.get("end"), step_length=times.get("step_length"),
         connection=connection, gui=bool(sumo.get("gui", False)), equations=equations,
