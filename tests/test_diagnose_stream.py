@@ -122,6 +122,18 @@ def test_cli_streams_above_the_row_limit_and_prints_resources(tmp_path, capsys, 
     from sumo_drvpw.cli import diagnose as cli
 
     paths = _logs(tmp_path, [E.AuxLoad()], n_trips=3)
+    # standstill noise the reader clips (its note is printed, streamed as in memory)
+    import pyarrow.parquet as pq
+
+    t = pq.read_table(paths[-1])
+    meta = t.schema.metadata
+    df = t.to_pandas()
+    stand = df.index[df["speed_mps"] == 0][:7]
+    df.loc[stand, "speed_mps"] = -0.05
+    import pyarrow as pa
+
+    pq.write_table(pa.Table.from_pandas(df, preserve_index=False).replace_schema_metadata(
+        {**(meta or {}), **(pa.Table.from_pandas(df).schema.metadata or {})}), paths[-1])
     assert not cli.should_stream(paths)
     monkeypatch.setattr(cli, "STREAM_ROWS", 1000)
     assert cli.should_stream(paths) and not cli.should_stream(paths, "no")
@@ -129,8 +141,10 @@ def test_cli_streams_above_the_row_limit_and_prints_resources(tmp_path, capsys, 
     rc = main(["diagnose", *map(str, paths), "--vehicle", "prius3", "--equation", "drvpw_prius3",
                "--out", str(out), "--quiet"])
     assert rc == 0
-    err = capsys.readouterr().err
+    cap = capsys.readouterr()
+    err = cap.err
     assert "streamed" in err and "rows/s" in err and "peak RSS" in err
+    assert "note: 7 speed sample(s) in [-0.1, 0) m/s clipped to 0" in cap.out
     details = json.loads((out / "trace_details.json").read_text())
     assert details["resources"]["passes"] > 0
     assert json.loads((out / "trace.json").read_text())["findings"][0]["term"] == "[ac_power_w]"

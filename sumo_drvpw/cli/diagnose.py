@@ -120,6 +120,9 @@ def run(logs, vehicle=None, equation=None, out=".", opt=None, figures=True, prog
                                   bar=bar.update)
         finally:
             bar.close()
+        from sumo_drvpw.cli import note_counts
+
+        note_counts(res.details.get("reader_counts", {}))
         write_outputs(res, out, figures=False)
     else:
         m = measured if measured is not None else load_measured(logs, vehicle, read_options, target=target)

@@ -38,6 +38,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.diagnose.candidates import Candidate, generate_candidates, screen_signals
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
 from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble
+from sumo_drvpw.fit.stream import _add_counts
 from sumo_drvpw.fit.diagnose.source import (CACHE_MB, INPUT_FIELDS, SAMPLE_ROWS, Batches, View,
                                             concat_inputs, parquet_metadata, read_batches)
 from sumo_drvpw.fit.diagnose.stream_lag import LagSums, coarse_lags, timing_step
@@ -263,8 +264,11 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     names: set = set()
     sample_idx = len(sample)
     try:
+        reader_counts: dict = {}
+
         def consume(m):
-            nonlocal n_rows, n_usable
+            nonlocal n_rows, n_usable, reader_counts
+            reader_counts = _add_counts(reader_counts, m.counts)
             d = _prepare(m, equation, declared, kept_names, opt, lags, elev, acc_col)
             n_rows += d.pop("rows")
             n_usable += d.pop("usable")
@@ -301,6 +305,8 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
         batches.close()
     passes = res["passes"] + tr.passes
     secs = time.perf_counter() - t_start
+    #: what the log reader changed or assumed, summed over the batches (cli.note_counts)
+    out.details["reader_counts"] = reader_counts
     out.details["resources"] = {"rows": n_rows, "seconds": secs, "passes": passes,
                                 "batches_on_disk": on_disk, "sample_rows": n_sample}
     return out
