@@ -474,6 +474,43 @@ def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
     assert not (tmp_path / "o3").exists()
 
 
+
+#: the i3 battery equation (a chain with a constant auxiliary power) for parking tests
+I3_BATTERY = REPO / "docs" / "energy-chain" / "bmw_i3_battery.toml"
+
+
+def parking_scenario(folder: Path, end: float = 500, stop_s: float = 200) -> None:
+    """c.sumocfg on the city network: a car that starts parked beside its lane, one that
+    parks there after driving, one that stops on its lane (not parked) and one that parks in
+    a parkingArea (pa.add.xml), each for ``stop_s``; step 0.5 s."""
+    (folder / "pa.add.xml").write_text(
+        '<additional><parkingArea id="pa1" lane="c10c20_0" startPos="20" endPos="80" '
+        'roadsideCapacity="5"/></additional>\n')
+    (folder / "r.rou.xml").write_text(f"""<routes>
+    <vType id="car" vClass="passenger" mass="1600"/>
+    <vehicle id="starts_parked" type="car" depart="0" departPos="stop">
+        <route edges="c00c10 c10c20"/><stop lane="c00c10_0" endPos="60" duration="{stop_s}" parking="true"/>
+    </vehicle>
+    <vehicle id="parks" type="car" depart="0" departSpeed="0">
+        <route edges="c00c10 c10c20"/><stop lane="c00c10_0" endPos="80" duration="{stop_s}" parking="true"/>
+    </vehicle>
+    <vehicle id="waits" type="car" depart="0" departSpeed="0">
+        <route edges="c00c10 c10c20"/><stop lane="c00c10_0" endPos="40" duration="{stop_s}"/>
+    </vehicle>
+    <vehicle id="area" type="car" depart="3" departSpeed="0">
+        <route edges="c00c10 c10c20"/><stop parkingArea="pa1" duration="{stop_s}"/>
+    </vehicle>
+</routes>
+""")
+    (folder / "c.sumocfg").write_text(f"""<configuration>
+    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/>
+        <additional-files value="pa.add.xml"/></input>
+    <time><begin value="0"/><end value="{end}"/><step-length value="0.5"/></time>
+    <report><no-warnings value="true"/></report>
+</configuration>
+""")
+
+
 def test_parked_vehicles_are_off_the_lane_and_draw_no_auxiliary_power(tmp_path):
     """A vehicle at a parking stop is off the lane (SUMO: no lane; engine off): it books no
     time and no auxiliary energy while parked, with tracked positions as with positions read
@@ -482,26 +519,8 @@ def test_parked_vehicles_are_off_the_lane_and_draw_no_auxiliary_power(tmp_path):
     parking) stands and draws its auxiliary power for the whole stop."""
     import pandas as pd_
 
-    (tmp_path / "r.rou.xml").write_text("""<routes>
-    <vType id="car" vClass="passenger" mass="1600"/>
-    <vehicle id="starts_parked" type="car" depart="0" departPos="stop">
-        <route edges="c00c10 c10c20"/><stop lane="c00c10_0" endPos="60" duration="200" parking="true"/>
-    </vehicle>
-    <vehicle id="parks" type="car" depart="0" departSpeed="0">
-        <route edges="c00c10 c10c20"/><stop lane="c00c10_0" endPos="80" duration="200" parking="true"/>
-    </vehicle>
-    <vehicle id="waits" type="car" depart="0" departSpeed="0">
-        <route edges="c00c10 c10c20"/><stop lane="c00c10_0" endPos="40" duration="200"/>
-    </vehicle>
-</routes>
-""")
-    (tmp_path / "c.sumocfg").write_text(f"""<configuration>
-    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
-    <time><begin value="0"/><end value="500"/><step-length value="0.5"/></time>
-    <report><no-warnings value="true"/></report>
-</configuration>
-""")
-    eq = REPO / "docs" / "energy-chain" / "bmw_i3_battery.toml"
+    parking_scenario(tmp_path)
+    eq = I3_BATTERY
     aux_w = 910.103036059679   # the file's constant auxiliary power; 20 °C: no HVAC
     got = {}
     for positions in ("getter", "tracked"):

@@ -5,7 +5,7 @@
 :mod:`sumo_drvpw.sim.outputs` into ``out_dir``. Modules: ``scenario`` (config), ``vtypes``
 (mass and drvpw.* params from the route files), ``network`` (edge table, classes, robust
 slopes), ``ledger`` (vectorized evaluation and accumulation), ``loop`` (the stepping loop,
-connection passed in), ``outputs``.
+connection passed in), ``outputs``, ``sumo_outputs`` (SUMO's own outputs into ``OUT/sumo/``).
 """
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, redirect_additional_outputs,
+                                         sumo_output_args)
 
 __all__ = ["run_scenario", "start_sumo", "close_sumo", "VTypeResolver"]
 
@@ -310,92 +312,6 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             scratch.cleanup()
         copies.cleanup()
     return result
-
-
-#: subfolder of a run's output folder for the outputs its SUMO config sets
-SUMO_OUTPUT_DIR = "sumo"
-
-
-def sumo_output_args(outputs: dict[str, str], folder: Path) -> list[str]:
-    """Command-line options sending each output a SUMO config sets (option → file(s) as
-    written there) into ``folder`` under its own file name (the command line overrides
-    the config; ``folder`` is created)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    args = []
-    for key, val in outputs.items():
-        names = [Path(v.strip()).name for v in val.split(",") if v.strip()]
-        args += [f"--{key}", ",".join(str(folder.resolve() / n) for n in names)]
-    return args
-
-
-#: attributes of additional-file elements that name an input file, relative to that file
-_INPUT_PATH_ATTRIBUTES = ("file", "href", "edgesFile", "imgFile")
-
-
-def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
-                                ) -> tuple[list[str], list[str]]:
-    """Copies of the additional files that declare outputs (``edgeData file=…``, detectors
-    …; themselves or in a file they ``<include href>``), written into ``work``, whose
-    outputs go into ``folder`` under their own file names (a name two declarations share
-    gets the declaring file's name before it) and whose other relative paths (inputs such
-    as a rerouter's ``file``) point at the original files. Returns the command-line options
-    loading the copies instead of the originals (``--additional-files``; none when nothing
-    is declared) and the outputs moved, as 'FILE: element id → output' lines. The
-    originals are not touched."""
-    import xml.etree.ElementTree as ET
-
-    from sumo_drvpw.fileio import open_maybe_gzip
-    from sumo_drvpw.sim.scenario import output_attribute
-
-    moved: list[str] = []
-    used: set[str] = set()
-    copies: dict[Path, Path] = {}
-
-    def load(add: Path, depth: int) -> Path:
-        """The file SUMO should load for ``add``: a copy when outputs are declared in it
-        or in what it includes, else the original."""
-        add = add.resolve()
-        if add in copies:
-            return copies[add]
-        try:
-            with open_maybe_gzip(add) as src:
-                tree = ET.parse(src)
-        except (ET.ParseError, OSError):
-            return add  # SUMO reports an unreadable additional file itself
-        changed = False
-        for el in tree.iter():
-            tag = el.tag.split("}")[-1]
-            key = output_attribute(tag)
-            if key and el.get(key):
-                name = Path(el.get(key)).name
-                if name in used:
-                    name = f"{add.name.split('.')[0]}.{name}"
-                used.add(name)
-                moved.append(f"{add}: {tag} '{el.get('id', '')}' → {name}")
-                el.set(key, str(folder.resolve() / name))
-                changed = True
-            elif tag == "include" and el.get("href") and depth < 10:
-                target = add.parent / el.get("href")
-                got = load(target, depth + 1)
-                changed |= got != target.resolve()
-                el.set("href", str(got))
-            else:  # inputs by relative path (a rerouter's file, …): to the original's folder
-                for key in _INPUT_PATH_ATTRIBUTES:
-                    val = el.get(key)
-                    if val and not Path(val).is_absolute():
-                        el.set(key, str((add.parent / val).resolve()))
-        if not changed:
-            return add
-        folder.mkdir(parents=True, exist_ok=True)
-        copy = work / f"{len(copies)}.{add.name.removesuffix('.gz')}"
-        tree.write(copy, encoding="utf-8", xml_declaration=True)
-        copies[add] = copy
-        return copy
-
-    loaded = [str(load(Path(a), 0)) for a in adds]
-    if not moved:
-        return [], []
-    return ["--additional-files", ",".join(loaded)], moved
 
 
 def read_tripinfo_emissions(path: Path):

@@ -80,7 +80,7 @@ from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, load_equation
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.fileio import open_maybe_gzip
+from sumo_drvpw.sim.sumo_outputs import additional_outputs, is_output_option
 from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.model.terms import parse_term
 
@@ -117,50 +117,6 @@ OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equ
 CONFIG_EQUATIONS = ("vsp_ldv1999", "drvpw_prius3", "moves_passenger_car", "moves_motorcycle",
                     "moves_light_commercial_truck", "moves_single_unit_truck",
                     "moves_combination_truck", "moves_transit_bus", "moves_intercity_bus")
-#: SUMO options that name an output file but do not end in "-output"
-_OUTPUT_OPTIONS = {"log", "message-log", "error-log", "summary", "netstate-dump", "ndump",
-                   "save-state.files", "save-configuration", "save-template"}
-#: additional-file elements whose ``file`` attribute is an output SUMO writes (relative to
-#: the additional file)
-_OUTPUT_ELEMENTS = {"edgeData", "laneData", "e1Detector", "inductionLoop", "e2Detector",
-                    "laneAreaDetector", "e3Detector", "entryExitDetector", "instantInductionLoop",
-                    "routeProbe", "vTypeProbe", "edgeRelations", "tazRelations", "meanData"}
-#: … and elements naming their output in another attribute
-_OUTPUT_ATTRS = {"calibrator": "output", "timedEvent": "dest"}
-
-
-def output_attribute(tag: str) -> str | None:
-    """The attribute of an additional-file element (tag without namespace) that names an
-    output file SUMO writes, or None."""
-    return "file" if tag in _OUTPUT_ELEMENTS else _OUTPUT_ATTRS.get(tag)
-
-
-def is_output_option(key: str) -> bool:
-    """Whether a SUMO option names an output file (``tripinfo-output``, ``log`` …)."""
-    return key.endswith("-output") or key in _OUTPUT_OPTIONS
-
-
-def additional_outputs(paths, depth: int = 0) -> list[str]:
-    """Outputs the additional files declare (``edgeData id='x' file='y'`` …), theirs and
-    those of the files they ``<include href>``, as 'FILE: element id → output' lines; SUMO
-    writes them beside the file that declares them."""
-    found = []
-    for p in paths:
-        try:
-            with open_maybe_gzip(p) as src:
-                for _, el in ET.iterparse(src, events=("end",)):
-                    tag = el.tag.split("}")[-1]
-                    key = output_attribute(tag)
-                    if key and el.get(key):
-                        found.append(f"{p}: {tag} '{el.get('id', '')}' → {el.get(key)}")
-                    elif tag == "include" and el.get("href") and depth < 10:
-                        found += additional_outputs([Path(p).parent / el.get("href")], depth + 1)
-                    el.clear()
-        except (ET.ParseError, OSError):
-            continue  # SUMO reports an unreadable additional file itself
-    return found
-
-
 @dataclass
 class RoadClassRule:
     """How an edge gets its road class: edge id map > type map > highway types/speed > city."""
@@ -241,10 +197,10 @@ class Scenario:
     #: = false, and the run leaves the config's device settings as they are
     sumo_device_in_config: bool = False
     #: output options the SUMO config sets (option → file as written there); a run
-    #: redirects them into its output folder's ``sumo/`` (run.sumo_output_args)
+    #: redirects them into its output folder's ``sumo/`` (sim.sumo_outputs.sumo_output_args)
     config_outputs: dict[str, str] = field(default_factory=dict)
     #: outputs declared in additional files, which SUMO writes beside those files unless
-    #: a run redirects them (run.redirect_additional_outputs)
+    #: a run redirects them (sim.sumo_outputs.redirect_additional_outputs)
     additional_outputs: list[str] = field(default_factory=list)
     #: the additional files SUMO loads (absolute; a config's or ``sumo.additional``)
     additional_files: list[Path] = field(default_factory=list)

@@ -1,0 +1,134 @@
+"""SUMO's own outputs of a run: the output options a SUMO config sets and the outputs its
+additional files declare, sent into the run's output folder (``OUT/sumo/``) instead of
+beside the scenario's files (inputs are never modified; a read-only scenario runs too)."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from sumo_drvpw.fileio import open_maybe_gzip
+
+#: SUMO options that name an output file but do not end in "-output"
+_OUTPUT_OPTIONS = {"log", "message-log", "error-log", "summary", "netstate-dump", "ndump",
+                   "save-state.files", "save-configuration", "save-template"}
+#: additional-file elements whose ``file`` attribute is an output SUMO writes (relative to
+#: the additional file)
+_OUTPUT_ELEMENTS = {"edgeData", "laneData", "e1Detector", "inductionLoop", "e2Detector",
+                    "laneAreaDetector", "e3Detector", "entryExitDetector", "instantInductionLoop",
+                    "routeProbe", "vTypeProbe", "edgeRelations", "tazRelations", "meanData"}
+#: … and elements naming their output in another attribute
+_OUTPUT_ATTRS = {"calibrator": "output", "timedEvent": "dest"}
+
+
+def output_attribute(tag: str) -> str | None:
+    """The attribute of an additional-file element (tag without namespace) that names an
+    output file SUMO writes, or None."""
+    return "file" if tag in _OUTPUT_ELEMENTS else _OUTPUT_ATTRS.get(tag)
+
+
+def is_output_option(key: str) -> bool:
+    """Whether a SUMO option names an output file (``tripinfo-output``, ``log`` …)."""
+    return key.endswith("-output") or key in _OUTPUT_OPTIONS
+
+
+def additional_outputs(paths, depth: int = 0) -> list[str]:
+    """Outputs the additional files declare (``edgeData id='x' file='y'`` …), theirs and
+    those of the files they ``<include href>``, as 'FILE: element id → output' lines; SUMO
+    writes them beside the file that declares them."""
+    found = []
+    for p in paths:
+        try:
+            with open_maybe_gzip(p) as src:
+                for _, el in ET.iterparse(src, events=("end",)):
+                    tag = el.tag.split("}")[-1]
+                    key = output_attribute(tag)
+                    if key and el.get(key):
+                        found.append(f"{p}: {tag} '{el.get('id', '')}' → {el.get(key)}")
+                    elif tag == "include" and el.get("href") and depth < 10:
+                        found += additional_outputs([Path(p).parent / el.get("href")], depth + 1)
+                    el.clear()
+        except (ET.ParseError, OSError):
+            continue  # SUMO reports an unreadable additional file itself
+    return found
+
+
+#: subfolder of a run's output folder for the outputs its SUMO config sets
+SUMO_OUTPUT_DIR = "sumo"
+
+
+def sumo_output_args(outputs: dict[str, str], folder: Path) -> list[str]:
+    """Command-line options sending each output a SUMO config sets (option → file(s) as
+    written there) into ``folder`` under its own file name (the command line overrides
+    the config; ``folder`` is created)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    args = []
+    for key, val in outputs.items():
+        names = [Path(v.strip()).name for v in val.split(",") if v.strip()]
+        args += [f"--{key}", ",".join(str(folder.resolve() / n) for n in names)]
+    return args
+
+
+#: attributes of additional-file elements that name an input file, relative to that file
+_INPUT_PATH_ATTRIBUTES = ("file", "href", "edgesFile", "imgFile")
+
+
+def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
+                                ) -> tuple[list[str], list[str]]:
+    """Copies of the additional files that declare outputs (``edgeData file=…``, detectors
+    …; themselves or in a file they ``<include href>``), written into ``work``, whose
+    outputs go into ``folder`` under their own file names (a name two declarations share
+    gets the declaring file's name before it) and whose other relative paths (inputs such
+    as a rerouter's ``file``) point at the original files. Returns the command-line options
+    loading the copies instead of the originals (``--additional-files``; none when nothing
+    is declared) and the outputs moved, as 'FILE: element id → output' lines. The
+    originals are not touched."""
+    moved: list[str] = []
+    used: set[str] = set()
+    copies: dict[Path, Path] = {}
+
+    def load(add: Path, depth: int) -> Path:
+        """The file SUMO should load for ``add``: a copy when outputs are declared in it
+        or in what it includes, else the original."""
+        add = add.resolve()
+        if add in copies:
+            return copies[add]
+        try:
+            with open_maybe_gzip(add) as src:
+                tree = ET.parse(src)
+        except (ET.ParseError, OSError):
+            return add  # SUMO reports an unreadable additional file itself
+        changed = False
+        for el in tree.iter():
+            tag = el.tag.split("}")[-1]
+            key = output_attribute(tag)
+            if key and el.get(key):
+                name = Path(el.get(key)).name
+                if name in used:
+                    name = f"{add.name.split('.')[0]}.{name}"
+                used.add(name)
+                moved.append(f"{add}: {tag} '{el.get('id', '')}' → {name}")
+                el.set(key, str(folder.resolve() / name))
+                changed = True
+            elif tag == "include" and el.get("href") and depth < 10:
+                target = add.parent / el.get("href")
+                got = load(target, depth + 1)
+                changed |= got != target.resolve()
+                el.set("href", str(got))
+            else:  # inputs by relative path (a rerouter's file, …): to the original's folder
+                for key in _INPUT_PATH_ATTRIBUTES:
+                    val = el.get(key)
+                    if val and not Path(val).is_absolute():
+                        el.set(key, str((add.parent / val).resolve()))
+        if not changed:
+            return add
+        folder.mkdir(parents=True, exist_ok=True)
+        copy = work / f"{len(copies)}.{add.name.removesuffix('.gz')}"
+        tree.write(copy, encoding="utf-8", xml_declaration=True)
+        copies[add] = copy
+        return copy
+
+    loaded = [str(load(Path(a), 0)) for a in adds]
+    if not moved:
+        return [], []
+    return ["--additional-files", ",".join(loaded)], moved
