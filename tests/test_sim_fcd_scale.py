@@ -231,3 +231,32 @@ def test_vehicle_buckets_are_the_same_in_every_process():
     assert json.loads(out.stdout) == here and set(here) == set(range(7))
     rows = np.array(ids * 3, object)
     assert bucket_of(rows, 7).tolist() == here * 3
+
+
+def test_fcd_on_dask_books_riders_as_local(tmp_path):
+    """Riding persons on Dask: every bucket keeps every person's rows (a person is matched
+    to the vehicle at its x, y and speed, whichever bucket that vehicle is in), one bucket
+    counts them as skipped: energies, the riders' statistics and the skipped persons equal
+    the local engine's."""
+    pytest.importorskip("distributed")
+    from test_sim_run import bus_riders_scenario
+
+    from sumo_drvpw.cli import main as cli_main
+
+    sc = bus_riders_scenario(tmp_path)
+    run_scenario(sc, None, equations=["vsp_ldv1999"], figures=False,
+                 options=["--fcd-output", str(tmp_path / "fcd.parquet")])
+    (tmp_path / "bus.toml").write_text('[equation]\nname = "phys"\nvclasses = ["bus"]\n[terms]\n'
+                                       'acc = 1.0\ngrade = 1.0\naero_rho = 0.5575\nroll = 0.01\n')
+    base = ["fcd", str(tmp_path / "fcd.parquet"), "--scenario", str(sc), "--equation",
+            str(tmp_path / "bus.toml"), "--no-figures"]
+    assert cli_main(base + ["--out", str(tmp_path / "local")]) == 0
+    assert cli_main(base + ["--engine", "dask", "--workers", "2", "--buckets", "3",
+                            "--out", str(tmp_path / "dask")]) == 0
+    sa, sb = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("local", "dask"))
+    assert sa["transportables"]["max_kg"] == 1600.0
+    assert sb["transportables"] == sa["transportables"] and sb["skipped"] == sa["skipped"]
+    assert sa["skipped"]["by_vclass"] == {"pedestrian": 20}
+    assert sb["source"]["riding_person_rows"] == sa["source"]["riding_person_rows"] > 0
+    for t, x in sa["equations"]["phys"]["energy_j"]["city"].items():
+        assert sb["equations"]["phys"]["energy_j"]["city"][t] == pytest.approx(x, rel=1e-9)

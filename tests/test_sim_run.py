@@ -598,15 +598,16 @@ def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path,
     assert code == 2 and "--air-temperature" in err and not (tmp_path / "x").exists()
 
 
-def test_riding_persons_add_their_mass_while_they_ride(tmp_path):
-    """SUMO's emission models add the vTypes' masses of the persons and containers a
-    vehicle carries (EnergyParams::getTotalMass); so does the plug-in, from the stop where
-    they board to the stop where they leave. 20 persons of 80 kg board a 10 t bus at a
-    stop on c00c01 and leave it at one on c02c03: on c01c02 every mass term (acceleration,
-    grade, rolling; net over traction and recuperation) is 11 600 / 10 000 of the run that
-    leaves them out (vehicles.transportable_mass = false), aero equal; on c03c04, after
-    they left, everything equal. SUMO moves the bus alike in both runs."""
-    (tmp_path / "bs.add.xml").write_text(
+
+#: PHYS made for buses
+BUS_PHYS = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01},
+                    vclasses=("bus",))
+
+
+def bus_riders_scenario(folder: Path, transportable_mass: bool = True) -> Path:
+    """A scenario (s.toml) on the city network: 20 persons of 80 kg walk to a stop on
+    c00c01, ride a 10 t bus (line L1) to a stop on c02c03 and leave it there."""
+    (folder / "bs.add.xml").write_text(
         '<additional><busStop id="bs1" lane="c00c01_0" startPos="20" endPos="50"/>'
         '<busStop id="bs2" lane="c02c03_0" startPos="100" endPos="130"/></additional>\n')
     persons = "\n".join(
@@ -622,17 +623,47 @@ def test_riding_persons_add_their_mass_while_they_ride(tmp_path):
 {persons}
 </routes>
 """
+    return _scenario(folder, routes, net=NETS / "city.net.xml", end=400, equations=('"phys"',),
+                     extra=f"additional = [\"{folder / 'bs.add.xml'}\"]\n"
+                           f"[vehicles]\ntransportable_mass = {str(transportable_mass).lower()}\n")
+
+
+def test_riding_persons_add_their_mass_while_they_ride(tmp_path):
+    """SUMO's emission models add the vTypes' masses of the persons and containers a
+    vehicle carries (EnergyParams::getTotalMass); so does the plug-in, from the stop where
+    they board to the stop where they leave. 20 persons of 80 kg board a 10 t bus at a
+    stop on c00c01 and leave it at one on c02c03: on c01c02 every mass term (acceleration,
+    grade, rolling; net over traction and recuperation) is 11 600 / 10 000 of the run that
+    leaves them out (vehicles.transportable_mass = false), aero equal; on c03c04, after
+    they left, everything equal. SUMO moves the bus alike in both runs. SUMO's FCD of the
+    run books the same riders (fcd: a person at a vehicle's x, y and speed rides in it)."""
+    from sumo_drvpw.sim.fcd import process_fcd
+
     runs = {}
+    bus = BUS_PHYS
     for on in (True, False):
         d = tmp_path / str(on)
         d.mkdir()
-        sc = _scenario(d, routes, net=NETS / "city.net.xml", end=400, equations=('"phys"',),
-                       extra=f"additional = [\"{tmp_path / 'bs.add.xml'}\"]\n"
-                             f"[vehicles]\ntransportable_mass = {str(on).lower()}\n")
-        bus = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01},
-                       vclasses=("bus",))
-        runs[on] = run_scenario(sc, d / "out", equations=[bus], figures=False)
+        sc = bus_riders_scenario(d, transportable_mass=on)
+        fcd = ["--fcd-output", str(tmp_path / "fcd.xml"), "--precision", "6"] if on else []
+        runs[on] = run_scenario(sc, d / "out", equations=[bus], figures=False, options=fcd)
+        if on:
+            scen = sc
+            run_scenario(sc, None, equations=[bus], figures=False,
+                         options=["--fcd-output", str(tmp_path / "fcd.parquet")])
     on, off = runs[True], runs[False]
+    # the same from SUMO's FCD: a person at the bus's x, y and speed rides in it (XML with
+    # 6 decimals; Parquet, where SUMO writes persons as rows without a lane)
+    for name in ("fcd.xml", "fcd.parquet"):
+        f = process_fcd(tmp_path / name, scenario=scen, equations=[bus], figures=False)
+        # (riders counted from boarding to leaving, not to the stop's end: standing, 0 W)
+        assert f["transportables"]["max_kg"] == 1600.0 and f["transportables"]["samples"] > 100
+        assert f["skipped"] == on["skipped"]  # 20 persons of vClass pedestrian, as live
+        for term in ("acc", "grade", "roll"):
+            e_f, e_on = f.edges.set_index("edge"), on.edges.set_index("edge")
+            np.testing.assert_allclose(
+                e_f[f"traction_{term}_j"] + e_f[f"recup_{term}_j"],
+                e_on[f"traction_{term}_j"] + e_on[f"recup_{term}_j"], rtol=1e-3, atol=1.0)
     assert on["transportables"] == {"samples": on["transportables"]["samples"], "max_kg": 1600.0}
     assert on["transportables"]["samples"] > 100 and off["transportables"]["samples"] == 0
     e_on, e_off = on.edges.set_index("edge"), off.edges.set_index("edge")

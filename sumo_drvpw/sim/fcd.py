@@ -15,7 +15,10 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
 - vTypes' masses and vClasses come from the scenario's route/additional files (``--vtypes``
   or ``[sumo]`` of the scenario); without them every vType is a ``passenger`` car with the
   class's default mass (listed in ``summary.json`` ``assumptions``);
-- persons (``<person>``) are not vehicles and are ignored;
+- persons (``<person>``; in SUMO's tabular FCD rows without a lane) are not vehicles: they
+  are counted in ``skipped`` as the live loop counts them, and a person whose x, y and
+  speed equal a vehicle's rides in it, adding its vType's mass (route files; else SUMO's
+  70 kg) as in the live loop (``summary.json`` ``source.riding_person_rows``);
 - a parked vehicle (SUMO writes it with its lane, at speed 0, at the parking space's x, y)
   is told from a standing one by its x, y beside the lane (:class:`ParkedTest`) and, as in
   the live loop, not booked (``summary.json`` ``source.parked_rows``); FCD without x, y
@@ -66,6 +69,23 @@ class _Sim:
     def getArrivedIDList(self):  # noqa: N802
         return self.r.arrived
 
+    def getStopEndingVehiclesIDList(self):  # noqa: N802 (here: the vehicles whose riders changed)
+        return self.r.load_changed
+
+    def getDepartedPersonIDList(self):  # noqa: N802
+        return self.r.departed_persons if self.r.count_persons else ()
+
+
+class _Person:
+    def __init__(self, r):
+        self.r = r
+
+    def getIDCount(self):  # noqa: N802
+        return self.r.person_count
+
+    def getTypeID(self, pid):  # noqa: N802
+        return self.r.person_types[pid]
+
 
 class _Veh:
     def __init__(self, r):
@@ -76,6 +96,9 @@ class _Veh:
 
     def getTypeID(self, vid):  # noqa: N802
         return self.r.types[vid]
+
+    def getPersonIDList(self, vid):  # noqa: N802 (persons at the vehicle's x, y and speed)
+        return self.r.riders.get(vid, ())
 
     def _col(self, k):
         return lambda vid: self.r.state[vid][k]
@@ -89,11 +112,95 @@ class _Veh:
 
 
 class _VType:
+    def __init__(self, r):
+        self.r = r
+
     def getVehicleClass(self, vt):  # noqa: N802 (not in FCD: the route files say)
         return ""
 
     def getParameter(self, vt, key):  # noqa: N802
         return ""
+
+    def getMass(self, vt):  # noqa: N802 (a person type's: the route files', else SUMO's 70 kg)
+        return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
+
+
+#: SUMO's default mass of a person's vType [kg] (libsumo vehicletype.getMass of a
+#: pedestrian type without a mass)
+DEFAULT_PERSON_MASS_KG = 70.0
+
+
+class _Rows:
+    """What the FCD replays share: a timestep's rows → the vehicles' columns, with parked
+    vehicles off their lane (:func:`_unpark`) and the persons riding in each vehicle. SUMO's
+    FCD writes riding persons at their vehicle's x, y and speed, without naming the vehicle:
+    a person whose x, y and speed equal one vehicle's rides in it (as the live loop reads
+    with vehicle.getPersonIDList; their vTypes' masses from the route files)."""
+
+    def _init_rows(self):
+        self.parked_rows = 0
+        self.riders: dict = {}
+        self.person_types: dict = {}
+        self.person_count = 0
+        self.departed_persons: tuple = ()
+        self.load_changed: tuple = ()
+        self.rider_rows = 0
+        #: vType → mass [kg] of the route files (set by replay_fcd)
+        self.type_mass: dict = {}
+        self.count_persons = True
+        self.person, self.vehicletype = _Person(self), _VType(self)
+
+    def _vehicles(self, c: dict, nxt: dict | None) -> dict:
+        """The vehicles' rows of timestep ``c`` (next timestep ``nxt``, None at the end)."""
+        person = c.get("person")
+        if person is not None and person.any():
+            veh = ~person
+            self._ride({k: v[person] for k, v in c.items()}, {k: v[veh] for k, v in c.items()})
+            c = {k: v[veh] for k, v in c.items()}
+        elif self.riders or self.person_count:
+            self._ride(None, c)
+        if "off" in c and len(c["id"]):  # parked vehicles (ParkedTest.mark)
+            if nxt is not None and "person" in nxt and nxt["person"].any():
+                keep = ~nxt["person"]
+                nxt = {"id": nxt["id"][keep], "off": nxt["off"][keep]}
+            lanes, n = _unpark(c["lane"], c["id"], c["off"], nxt["id"] if nxt else None,
+                               nxt["off"] if nxt else None)
+            c = dict(c, lane=lanes)
+            self.parked_rows += n
+        return c
+
+    def _ride(self, p: dict | None, v: dict) -> None:
+        """Riders per vehicle from the persons' rows ``p`` and the vehicles' rows ``v``."""
+        riders: dict = {}
+        if p is not None:
+            self.person_count = len(p["id"])
+            new = [q for q in p["id"] if q not in self.person_types]
+            self.person_types.update(zip(p["id"], p["type"]))
+            self.departed_persons = tuple(new)
+            if "x" in p and "y" in p and len(v["id"]):
+                at = dict(zip(zip(v["x"], v["y"], v["speed"]), v["id"]))
+                for q, key in zip(p["id"], zip(p["x"], p["y"], p["speed"])):
+                    vid = at.get(key)
+                    if vid is not None:
+                        riders.setdefault(vid, []).append(q)
+        else:
+            self.person_count, self.departed_persons = 0, ()
+        old = self.riders
+        # persons board and leave while the vehicle stands; the live loop reads its riders
+        # when the stop ends (as it drives off): a standing vehicle keeps the riders it had
+        # (SUMO lets them leave as the vehicle creeps into the stop, braked with them aboard)
+        from sumo_drvpw.model.constants import STANDSTILL_MPS
+
+        for vid, speed in zip(v["id"], v["speed"]):
+            if speed < STANDSTILL_MPS:
+                if vid in old:
+                    riders[vid] = old[vid]
+                else:
+                    riders.pop(vid, None)
+        self.load_changed = tuple(vid for vid in set(old) | set(riders)
+                                  if old.get(vid) != riders.get(vid))
+        self.riders = riders
+        self.rider_rows += sum(len(r) for r in riders.values())
 
 
 class ParkedTest:
@@ -147,7 +254,7 @@ def _unpark(lanes, ids, off, nxt_ids, nxt_off) -> tuple[np.ndarray, int]:
     return lanes, int(np.count_nonzero(off))
 
 
-class FcdReplay:
+class FcdReplay(_Rows):
     """A connection whose ``simulationStep`` moves to the next FCD timestep and whose
     getters answer from the file (the subset of the libsumo API the Stepper uses)."""
 
@@ -168,17 +275,14 @@ class FcdReplay:
         ends = np.searchsorted(t, times, side="right")
         self._rows = list(zip(starts, ends))
         n = len(df)
-        cols = [df["speed"].to_numpy(float),
-                df["accel"].to_numpy(float) if "accel" in df else np.full(n, np.nan),
-                df["angle"].to_numpy(float) if "angle" in df else np.zeros(n),
-                df["lane"].to_numpy(object), df["pos"].to_numpy(float),
-                df["slope"].to_numpy(float) if "slope" in df else np.zeros(n)]
-        self._ids = df["id"].to_numpy(object)
-        self._cols = cols
-        #: rows of parked vehicles (:class:`ParkedTest`, column ``off``), when marked
-        self._off = df["off"].to_numpy(bool) if "off" in df else None
-        self.parked_rows = 0
-        self.types = dict(zip(df["id"], df["type"]))
+        self._all = {k: df[k].to_numpy() for k in df.columns}
+        if "person" not in self._all:
+            self._all["person"] = np.zeros(n, bool)
+        person = self._all["person"].astype(bool)
+        self._all["person"] = person
+        self._init_rows()
+        veh = df[~person]
+        self.types = dict(zip(veh["id"], veh["type"]))
         self.k = 0
         # FCD time t is the state after SUMO executed step t; a live loop reads that state
         # after simulationStep() with getTime() = t + Δt: the replay labels steps alike
@@ -189,10 +293,11 @@ class FcdReplay:
         self.arrived: tuple = ()
         self._seen: set = set()
         # a vehicle arrives (leaves the ledger's memory) the step after its last row
-        step = np.searchsorted(times, t)
-        last = pd.Series(step).groupby(df["id"].to_numpy()).max() if n else pd.Series(dtype=int)
+        step = np.searchsorted(times, t[~person])
+        last = (pd.Series(step).groupby(veh["id"].to_numpy()).max() if len(veh)
+                else pd.Series(dtype=int))
         self._leaving = {int(k): tuple(g.index) for k, g in last.groupby(last)}
-        self.simulation, self.vehicle, self.vehicletype = _Sim(self), _Veh(self), _VType()
+        self.simulation, self.vehicle = _Sim(self), _Veh(self)
 
     def remaining(self) -> int:
         return len(self.times) - self.k
@@ -201,15 +306,12 @@ class FcdReplay:
         a, b = self._rows[self.k]
         self.t = float(self.times[self.k]) + self.dt
         self.k += 1
-        ids = tuple(self._ids[a:b])
+        c, d = self._rows[self.k] if self.k < len(self._rows) else (b, b)
+        nxt = {k: v[c:d] for k, v in self._all.items()} if d > c else None
+        cols = self._vehicles({k: v[a:b] for k, v in self._all.items()}, nxt)
+        ids = tuple(cols["id"])
         self.ids = ids
-        cols = [c[a:b] for c in self._cols]
-        if self._off is not None and ids:
-            c, d = self._rows[self.k] if self.k < len(self._rows) else (b, b)
-            cols[3], n = _unpark(cols[3], self._ids[a:b], self._off[a:b],
-                                 self._ids[c:d] if d > c else None, self._off[c:d])
-            self.parked_rows += n
-        self.state = dict(zip(ids, zip(*cols))) if ids else {}
+        self.state = dict(zip(ids, zip(*_state_columns(cols)))) if ids else {}
         new = tuple(v for v in ids if v not in self._seen)
         self._seen.update(new)
         self.departed = new
@@ -217,6 +319,15 @@ class FcdReplay:
 
     def close(self):
         pass
+
+
+def _state_columns(c: dict) -> list:
+    """The getters' columns in the order of ``_Veh``: speed, acceleration, angle, lane,
+    position, slope."""
+    n = len(c["id"])
+    return [c["speed"], c["accel"] if "accel" in c else np.full(n, np.nan),
+            c["angle"] if "angle" in c else np.zeros(n), c["lane"], c["pos"],
+            c["slope"] if "slope" in c else np.zeros(n)]
 
 
 class _Step:
@@ -262,6 +373,8 @@ def timesteps(blocks, begin_s: float | None = None, keep=None, label=""):
             last = float(t[-1])
         if keep is not None and len(t):
             m = keep(cols["id"])
+            if "person" in cols:  # persons stay: they are matched to the vehicles they ride
+                m = m | cols["person"]
             if not m.all():
                 cols = {k: v[m] for k, v in cols.items()}
                 t = cols["time"]
@@ -313,8 +426,8 @@ class FcdStream(FcdReplay):
         self.arrived: tuple = ()
         self._prev: tuple = ()
         self._prev_set: set = set()
-        self.parked_rows = 0
-        self.simulation, self.vehicle, self.vehicletype = _Sim(self), _Veh(self), _VType()
+        self._init_rows()
+        self.simulation, self.vehicle = _Sim(self), _Veh(self)
 
     def remaining(self) -> int:
         if not self._ahead:
@@ -337,21 +450,12 @@ class FcdStream(FcdReplay):
                                 "(sumo.step_length of the scenario)")
         self.t = st.t + self.dt
         self.k += 1
-        c = st.cols
+        self.rows += len(st.cols["id"])
+        c = self._vehicles(st.cols, self._ahead[0].cols if self._ahead else None)
         ids = tuple(c["id"])
         n = len(ids)
-        self.rows += n
-        lanes = c["lane"]
-        if "off" in c and n:  # parked vehicles (ParkedTest.mark)
-            nxt = self._ahead[0].cols if self._ahead else None
-            lanes, k = _unpark(lanes, c["id"], c["off"], nxt["id"] if nxt else None,
-                               nxt["off"] if nxt else None)
-            self.parked_rows += k
-        cols = [c["speed"], c["accel"] if "accel" in c else np.full(n, np.nan),
-                c["angle"] if "angle" in c else np.zeros(n), lanes, c["pos"],
-                c["slope"] if "slope" in c else np.zeros(n)]
         self.ids = ids
-        self.state = dict(zip(ids, zip(*cols))) if n else {}
+        self.state = dict(zip(ids, zip(*_state_columns(c)))) if n else {}
         self.types = dict(zip(ids, c["type"]))
         now = set(ids)
         self.departed = tuple(v for v in ids if v not in self._prev_set)
@@ -425,11 +529,14 @@ def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
 
 def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = False,
                flush_vehicles: int | None = None, chunk_rows: int | None = CHUNK_ROWS,
-               keep=None, publish: bool = True):
+               keep=None, publish: bool = True, count_persons: bool = True):
     """:func:`process_fcd` with a prepared scenario (:func:`fcd_scenario`). ``keep``:
     optional function vehicle ids → boolean mask of the vehicles to book (a Dask task's
-    share); ``publish``: write the outputs into ``out_dir`` (else only the spill parts of
-    the vehicles are left there, for :mod:`sumo_drvpw.sim.fcd_dask` to join)."""
+    share; every person's rows are kept, to be matched to the vehicle it rides);
+    ``publish``: write the outputs into ``out_dir`` (else only the spill parts of the
+    vehicles are left there, for :mod:`sumo_drvpw.sim.fcd_dask` to join);
+    ``count_persons``: count the persons in ``summary.json`` ``skipped`` (one Dask task
+    does)."""
     from sumo_drvpw.sim.accountant import Accountant
     from sumo_drvpw.sim.loop import step_until
     from sumo_drvpw.sim.network import load_network
@@ -443,7 +550,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         df["off"] = parked({k: df[k].to_numpy() for k in df.columns})
         if keep is not None and len(df):
             times = df.attrs["times"]
-            df = df[keep(df["id"].to_numpy(object))].copy()
+            df = df[keep(df["id"].to_numpy(object)) | df["person"].to_numpy(bool)].copy()
             df.attrs["times"] = times
         if begin_s is not None:
             times = df.attrs["times"]
@@ -463,12 +570,15 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                      trace_path=Path(out_dir) / "trace.parquet" if sc.trace and out_dir else None,
                      spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,
                      keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles, net=net)
+    replay.type_mass = {vt: i.mass_kg for vt, i in acc.file_vtypes.items() if i.mass_kg}
+    replay.count_persons = count_persons
     try:
         info = step_until(replay, acc.stepper, end=None, progress=False, period=sc.period)
         acc.interrupted = info["interrupted"]
         rows = replay.rows if chunk_rows is not None else len(df)
         extra = {"source": {"fcd": str(fcd_file), "rows": int(rows),
-                            "timesteps": int(replay.k), "parked_rows": int(replay.parked_rows)}}
+                            "timesteps": int(replay.k), "parked_rows": int(replay.parked_rows),
+                            "riding_person_rows": int(replay.rider_rows)}}
         if sc.trace and out_dir:
             extra["files"] = {"trace": "trace.parquet"}
         if not publish:

@@ -57,7 +57,8 @@ def bucket_task(sc, fcd_file: str, part_dir: str, b: int, buckets: int, begin_s=
 
     acc, extra = replay_fcd(sc, fcd_file, part_dir, begin_s=begin_s,
                             flush_vehicles=flush_vehicles, chunk_rows=chunk_rows,
-                            keep=partial(_in_bucket, b=b, buckets=buckets), publish=False)
+                            keep=partial(_in_bucket, b=b, buckets=buckets), publish=False,
+                            count_persons=b == 0)
     led = acc.ledger
     if led.n_veh:  # the vehicles running at the end go out too: the ledger keeps sums only
         led.retire(np.arange(led.n_veh))
@@ -87,8 +88,9 @@ def merge_ledgers(ledgers: list):
                      "lane_clipped"):
             setattr(out, name, getattr(out, name) + getattr(led, name))
         for name in ("samples", "corrected", "clipped", "position_reads", "position_mismatches",
-                     "flushed_vehicles", "flushed_kept"):
+                     "flushed_vehicles", "flushed_kept", "load_samples"):
             setattr(out, name, getattr(out, name) + getattr(led, name))
+        out.load_max_kg = max(out.load_max_kg, led.load_max_kg)
         out.snapshots = [(s[0],) + tuple(x + y for x, y in zip(s[1:], o[1:]))
                          for s, o in zip(out.snapshots, led.snapshots)]
         out.flushed_types |= led.flushed_types
@@ -176,6 +178,8 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
         extra = dict(first["extra"])
         extra["source"] = dict(extra["source"], rows=sum(d["extra"]["source"]["rows"] for d in done),
                                parked_rows=sum(d["extra"]["source"]["parked_rows"] for d in done),
+                               riding_person_rows=sum(d["extra"]["source"]["riding_person_rows"]
+                                                      for d in done),
                                engine="dask", buckets=k)
         result = acc.result(extra)
         check_vtype_filter(sc, led)

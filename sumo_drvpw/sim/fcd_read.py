@@ -105,19 +105,24 @@ def _normalise(df: pd.DataFrame, label, first_row: int) -> dict:
             i = int(np.flatnonzero(miss)[0])
             raise UserError(f"FCD file {label}: column {k} missing at vehicle row "
                             f"{first_row + i + 1} (vehicle {df['id'].iloc[i]!r})")
+    person = (df["person"].to_numpy(bool) if "person" in df.columns
+              else np.zeros(len(df), bool))
     for k in ("id", "type", "lane"):
         out[k] = df[k].astype(str).to_numpy(object)
+    out["lane"][person] = ""  # persons walk on edges, not lanes (and ride in vehicles)
+    out["person"] = person
     return out
 
 
 def _xml_blocks(path: Path, chunk_rows: int):
-    keys = ("time", *_XML_ATTRS)
+    keys = ("time", "person", *_XML_ATTRS)
     present = dict.fromkeys(_OPTIONAL, False)
 
     def block(cols, times, first):
         for k in _OPTIONAL:
             present[k] = present[k] or any(x is not None for x in cols[k])
-        df = pd.DataFrame({k: v for k, v in cols.items() if k in _REQUIRED or present[k]})
+        df = pd.DataFrame({k: v for k, v in cols.items()
+                           if k in _REQUIRED or k == "person" or present[k]})
         return Block(np.asarray(times, float), _normalise(df, path, first), first)
 
     cols: dict[str, list] = {k: [] for k in keys}
@@ -133,9 +138,10 @@ def _xml_blocks(path: Path, chunk_rows: int):
                         t = _seconds(el.attrib["time"])
                         times.append(t)
                     continue
-                if tag == "vehicle" and t is not None:
+                if (tag == "vehicle" or tag == "person") and t is not None:
                     a = el.attrib
                     cols["time"].append(t)
+                    cols["person"].append(tag == "person")
                     for k, xk in _XML_ATTRS.items():
                         cols[k].append(a.get(xk))
                     el.clear()
@@ -162,6 +168,9 @@ def _tabular_block(raw: pd.DataFrame, label, first: int) -> Block:
     raw = raw.assign(**{FCD_COLUMNS["time"]: _time_column(raw[FCD_COLUMNS["time"]])})
     times = np.unique(pd.to_numeric(raw[FCD_COLUMNS["time"]], errors="coerce").dropna())
     df = pd.DataFrame({k: raw[c] for k, c in FCD_COLUMNS.items() if c in raw.columns})
+    # SUMO's tabular FCD writes persons in the vehicles' columns, with an edge and no lane
+    lane = raw[FCD_COLUMNS["lane"]]
+    df["person"] = (lane.isna() | (lane.astype(str) == "")).to_numpy()
     return Block(times.astype(float), _normalise(df, label, first), first)
 
 
@@ -277,7 +286,8 @@ def iter_fcd_blocks(path, chunk_rows: int = CHUNK_ROWS):
 
 
 def read_fcd(path, chunk_rows: int = CHUNK_ROWS) -> pd.DataFrame:
-    """FCD rows (time, id, type, speed, lane, pos, [angle, slope, accel, x, y]) sorted by time;
+    """FCD rows (time, id, type, speed, lane, pos, person, [angle, slope, accel, x, y]) sorted
+    by time (``person``: a person's row, SUMO's ``<person>``; its lane "");
     ``df.attrs["times"]``: every timestep of the file, vehicles or not. UserError names
     the file and the missing column. ``path``: a file, or partitioned Parquet FCD (a folder
     or a glob pattern of ``.parquet`` files, read as one, only the FCD columns). Holds the
@@ -287,6 +297,8 @@ def read_fcd(path, chunk_rows: int = CHUNK_ROWS) -> pd.DataFrame:
     df = pd.DataFrame({k: np.concatenate([b.cols[k] if k in b.cols else
                                           np.full(len(b), np.nan) for b in blocks])
                        if blocks else np.zeros(0) for k in keys})
+    df["person"] = (np.concatenate([b.cols["person"] for b in blocks]) if blocks
+                    else np.zeros(0, bool))
     for k in ("id", "type", "lane"):
         df[k] = df[k].astype(str).astype(object)
     times = np.unique(np.concatenate([b.times for b in blocks])) if blocks else np.zeros(0)

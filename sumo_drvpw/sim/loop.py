@@ -218,7 +218,7 @@ class Stepper:
         self.arrived = getattr(conn.simulation, "getArrivedIDList", None)
         #: riding persons (Physics.transportable_mass): their mass is read when a vehicle
         #: departs and when a stop of it ends, while any are in the network (TraCI has no
-        #: containers' vehicle, FCD no riders' vehicle: neither is booked)
+        #: containers' vehicle: they are not booked; the FCD replay answers these getters)
         self.stop_ending = getattr(conn.simulation, "getStopEndingVehiclesIDList", None)
         self.riders = (physics.transportable_mass and self.stop_ending is not None
                        and hasattr(conn.vehicle, "getPersonIDList") and hasattr(conn, "person"))

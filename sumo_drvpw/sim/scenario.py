@@ -186,7 +186,7 @@ class Scenario:
     #: vTypes without a mass take their vClass's built-in default mass (else: error)
     default_masses: bool = True
     #: persons riding in a vehicle add their vTypes' masses while they ride, as in SUMO's
-    #: emission models (EnergyParams::getTotalMass); live runs only
+    #: emission models (EnergyParams::getTotalMass)
     transportable_mass: bool = True
     #: edgeData interval [s] (None: one interval for the whole run)
     period: float | None = None
