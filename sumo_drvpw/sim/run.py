@@ -224,7 +224,10 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     scratch = None
     import tempfile
 
-    copies = tempfile.TemporaryDirectory(prefix="drvpw-additional-")
+    # outputs declared in additional files: into the same folder, through copies of those
+    # files (SUMO writes them beside the file that declares them: the scenario's folder)
+    copies = (tempfile.TemporaryDirectory(prefix="drvpw-additional-")
+              if sc.additional_outputs and "additional-files" not in given else None)
     if redirect or sc.additional_outputs:
         if out_dir is not None:
             sumo_dir = Path(out_dir) / SUMO_OUTPUT_DIR
@@ -233,10 +236,8 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             sumo_dir = Path(scratch.name)
         if redirect:
             args += sumo_output_args(redirect, sumo_dir)
-    # outputs declared in additional files: into the same folder, through copies of those
-    # files (SUMO writes them beside the file that declares them: the scenario's folder)
-    add_args, moved = ([], []) if "additional-files" in given or not sc.additional_outputs \
-        else redirect_additional_outputs(sc.additional_files, sumo_dir, Path(copies.name))
+    add_args, moved = ([], []) if copies is None else redirect_additional_outputs(
+        sc.additional_files, sumo_dir, Path(copies.name))
     if add_args and "-a" in args:  # a scenario's sumo.additional: loaded as the copies
         i = args.index("-a")
         del args[i:i + 2]
@@ -310,7 +311,8 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             discard_parts(acc.ledger)
         if scratch is not None:
             scratch.cleanup()
-        copies.cleanup()
+        if copies is not None:
+            copies.cleanup()
     return result
 
 
