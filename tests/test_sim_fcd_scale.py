@@ -135,6 +135,33 @@ def test_the_stream_reads_no_further_ahead_than_two_timesteps():
     assert replay.remaining() == 0 and replay.rows == 100
 
 
+def test_person_rows_are_not_vehicles_and_may_lack_speed_and_position(tmp_path):
+    """SUMO's XML FCD writes persons as <person> (speed and position optional); its tabular
+    FCD writes them in the vehicles' columns without a lane. Both are read as persons: not
+    vehicles of the replay, no error for a missing speed; a vehicle lacking one still is."""
+    from sumo_drvpw.sim.fcd import FcdStream
+
+    (tmp_path / "f.xml").write_text(
+        '<fcd-export><timestep time="0.00"><vehicle id="v" x="8.3" y="-1.6" speed="0" '
+        'pos="5.1" lane="l_0" type="car"/><person id="q" x="1" y="2" type="ped" edge="l"/>'
+        '</timestep><timestep time="1.00"><vehicle id="v" x="9.3" y="-1.6" speed="1" '
+        'pos="6.1" lane="l_0" type="car"/></timestep></fcd-export>\n')
+    pd.DataFrame({"timestep_time": [0.0, 0.0, 1.0], "vehicle_id": ["v", "q", "v"],
+                  "vehicle_type": ["car", "ped", "car"], "vehicle_speed": [0.0, 1.2, 1.0],
+                  "vehicle_pos": [5.1, 3.0, 6.1], "vehicle_lane": ["l_0", None, "l_0"]}
+                 ).to_parquet(tmp_path / "f.parquet")
+    for name in ("f.xml", "f.parquet"):
+        steps = list(timesteps(iter_fcd_blocks(tmp_path / name)))
+        assert list(steps[0].cols["person"]) == [False, True]
+        replay = FcdStream(iter(steps), dt=1.0)
+        replay.simulationStep()
+        assert replay.ids == ("v",) and replay.person_count == 1
+        assert replay.simulation.getDepartedPersonIDList() == ("q",)
+    (tmp_path / "bad.xml").write_text((tmp_path / "f.xml").read_text().replace(' speed="1"', ""))
+    with pytest.raises(UserError, match="column speed missing at vehicle row 3"):
+        list(iter_fcd_blocks(tmp_path / "bad.xml"))
+
+
 def test_rows_out_of_time_order_name_the_row():
     b1 = _block([0.0, 2.0], [(0.0, "a"), (2.0, "a")])
     b2 = _block([1.0], [(1.0, "b")], first=2)

@@ -99,14 +99,14 @@ def _normalise(df: pd.DataFrame, label, first_row: int) -> dict:
             raise UserError(f"FCD file {label}: column {k}: not a number at vehicle row "
                             f"{first_row + i + 1}: {df[k].iloc[i]!r}")
         out[k] = vals.to_numpy(float)
+    person = (df["person"].to_numpy(bool) if "person" in df.columns
+              else np.zeros(len(df), bool))
     for k in ("speed", "pos"):
-        miss = np.isnan(out[k])
+        miss = np.isnan(out[k]) & ~person  # a person's row may lack them: it rides nowhere
         if miss.any():
             i = int(np.flatnonzero(miss)[0])
             raise UserError(f"FCD file {label}: column {k} missing at vehicle row "
                             f"{first_row + i + 1} (vehicle {df['id'].iloc[i]!r})")
-    person = (df["person"].to_numpy(bool) if "person" in df.columns
-              else np.zeros(len(df), bool))
     for k in ("id", "type", "lane"):
         out[k] = df[k].astype(str).to_numpy(object)
     out["lane"][person] = ""  # persons walk on edges, not lanes (and ride in vehicles)
