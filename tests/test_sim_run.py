@@ -676,3 +676,52 @@ def test_riding_persons_add_their_mass_while_they_ride(tmp_path):
         assert abs(net_off["c01c02"]) > 1e3
         np.testing.assert_allclose(net_on["c01c02"], ratio * net_off["c01c02"], rtol=1e-9)
         np.testing.assert_allclose(net_on["c03c04"], net_off["c03c04"], rtol=1e-9)
+
+
+def test_a_bus_parked_at_its_stop_dwells_there_booked_standing(tmp_path):
+    """SUMO parks a bus that stops at a busStop with parking="true" (a bus bay: the
+    Hamburg scenario's buses do at every stop) off the lane, as it parks a car. The bus
+    dwells there in service: booked standing on the stop's lane for the whole dwell (time,
+    the chain's auxiliary power), so its booked time is its whole trip (SUMO's tripinfo
+    duration); a car parked beside its lane books nothing while parked. Tracked positions
+    and positions read every step agree, and so does the run's FCD (the bus beside its
+    lane, at one of the scenario's bus stops)."""
+    import pandas as pd_
+
+    from sumo_drvpw.sim.fcd import process_fcd
+
+    (tmp_path / "bs.add.xml").write_text(
+        '<additional><busStop id="bs1" lane="c00c01_0" startPos="20" endPos="50"/></additional>\n')
+    routes = """<routes>
+    <vType id="bus" vClass="bus" mass="10000"/>
+    <vType id="car" vClass="passenger" mass="1600"/>
+    <vehicle id="bus" type="bus" depart="0" departSpeed="0">
+        <route edges="c00c01 c01c02 c02c03"/><stop busStop="bs1" duration="60" parking="true"/>
+    </vehicle>
+    <vehicle id="car" type="car" depart="0" departSpeed="0">
+        <route edges="c00c10 c10c20"/><stop lane="c00c10_0" endPos="80" duration="60" parking="true"/>
+    </vehicle>
+</routes>
+"""
+    got = {}
+    for positions in ("tracked", "getter"):
+        d = tmp_path / positions
+        d.mkdir()
+        sc = _scenario(d, routes, net=NETS / "city.net.xml", end=300, equations=(f'"{I3_BATTERY}"',),
+                       extra=f"additional = [\"{tmp_path / 'bs.add.xml'}\"]\npositions = \"{positions}\"\n"
+                             '[vclasses.bus]\nequations = ["bmw_i3_battery"]\n[air]\ntemperature_c = 20.0\n')
+        run_scenario(sc, d / "out", figures=False,
+                     options=["--tripinfo-output", str(d / "ti.xml"), "--fcd-output",
+                              str(d / "fcd.xml"), "--precision", "6"])
+        v = pd_.read_parquet(d / "out" / "vehicles.parquet").set_index("vehicle")["time_s"]
+        # from the run's FCD alike: the bus at its stop (the scenario's busStop) dwells there
+        f = process_fcd(d / "fcd.xml", scenario=sc, figures=False).vehicles
+        pd_.testing.assert_series_equal(f.set_index("vehicle")["time_s"].sort_index(),
+                                        v.sort_index())
+        c = pd_.read_csv(d / "out" / "chain_vehicles.csv").set_index("key")["auxiliary_kwh"]
+        np.testing.assert_allclose(c, 910.103036059679 * v[c.index] / 3.6e6, rtol=1e-9)
+        trips = {t.get("id"): float(t.get("duration")) for t in ET.parse(d / "ti.xml").getroot()}
+        assert v["bus"] == pytest.approx(trips["bus"], abs=0.5)       # the dwell included
+        assert v["car"] < trips["car"] - 59                            # parked: not booked
+        got[positions] = v.sort_index()
+    pd_.testing.assert_series_equal(got["tracked"], got["getter"])

@@ -70,6 +70,12 @@ class Physics:
     transportable_mass: bool = True
 
 
+#: vehicle.getStopState bit: the vehicle stops at a bus (or train) stop (TraCI's stop
+#: state: 1 stopped, 2 parking, 4/8 triggered, 16 at a busStop, 32 containerStop, 64
+#: chargingStation, 128 parkingArea)
+STOP_AT_BUS_STOP = 16
+
+
 def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
     """Wind component along the heading, tailwind positive [m/s].
 
@@ -224,6 +230,17 @@ class Stepper:
                        and hasattr(conn.vehicle, "getPersonIDList") and hasattr(conn, "person"))
         self.any_load = False
         self._type_mass: dict[str, float] = {}
+        #: a vehicle SUMO parks at a bus stop (a bus bay: ``parking="true"`` at a busStop)
+        #: dwells there in service: booked standing on the stop's lane (time, auxiliary
+        #: power) as at a stop on the lane; other parked vehicles are off (engine off)
+        sim = conn.simulation
+        self.parking_starts = getattr(sim, "getParkingStartingVehiclesIDList", None)
+        self.parking_ends = getattr(sim, "getParkingEndingVehiclesIDList", None)
+        self.dwell_check = (self.parking_starts is not None and self.parking_ends is not None
+                            and hasattr(conn.vehicle, "getStopState")
+                            and hasattr(conn.vehicle, "getStops"))
+        #: vehicle id → (lane number, lane position) of its bus-stop dwell
+        self.dwell: dict[str, tuple[int, float]] = {}
 
     def now(self) -> float:
         """Simulation time [s]; after an interrupted exchange with SUMO (a signal in the
@@ -272,6 +289,20 @@ class Stepper:
                 if kg > 0.0:
                     self.any_load = True
 
+    def update_dwell(self) -> None:
+        """Bus-stop dwells that started (stop state 'at a bus stop', its lane and the
+        vehicle's position there) or ended in the step just made."""
+        conn, vmap = self.conn, self.vmap
+        for vid in self.parking_starts():
+            if vid in vmap and int(conn.vehicle.getStopState(vid)) & STOP_AT_BUS_STOP:
+                stops = conn.vehicle.getStops(vid, 1)
+                lane = self.lane_index.get(stops[0].lane, -1) if stops else -1
+                if lane >= 0:
+                    pos = float(conn.vehicle.getLanePosition(vid))
+                    self.dwell[vid] = (lane, min(max(pos, 0.0), float(self.net.lane_length[lane])))
+        for vid in self.parking_ends():
+            self.dwell.pop(vid, None)
+
     def flush(self) -> None:
         """Write the finished vehicles out of the ledger (:meth:`Ledger.flush`) and renumber
         the running ones."""
@@ -311,6 +342,8 @@ class Stepper:
             gone = self.arrived()
             if gone:
                 ledger.retire([vmap[v] for v in gone if v in vmap])
+                for v in gone:
+                    self.dwell.pop(v, None)
                 if ledger.flush_due():  # before the new ones come: memory ≤ running vehicles
                     self.flush()
                     vmap = self.vmap
@@ -326,6 +359,8 @@ class Stepper:
         if self.riders and (self.any_load or conn.person.getIDCount()):
             self.update_loads(departed)
             self.update_loads(self.stop_ending())
+        if self.dwell_check:
+            self.update_dwell()
         if len(ids) == 0:
             return
         if ids == self.prev_ids:  # no arrival or departure: same vehicles, same order
@@ -385,7 +420,13 @@ class Stepper:
         if raw is not None:
             raw = np.radians(raw)
         on_lane = lane >= 0
-        if not on_lane.all():  # teleporting: no lane, not booked
+        if self.dwell and not on_lane.all():  # dwelling at a bus stop off the lane: standing
+            for j in np.flatnonzero(~on_lane):
+                d = self.dwell.get(kids[j])
+                if d is not None:
+                    lane[j], pos[j] = d
+            on_lane = lane >= 0
+        if not on_lane.all():  # teleporting, parked: no lane, not booked
             vidx, lane, v, a, angle, pos = (
                 x[on_lane] for x in (vidx, lane, v, a, angle, pos))
             if raw is not None:

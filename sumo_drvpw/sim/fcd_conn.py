@@ -1,0 +1,248 @@
+"""What an FCD replay answers in place of SUMO (:mod:`sumo_drvpw.sim.fcd`): the subset of
+the libsumo API the loop reads (time, vehicles, getters, departures and arrivals, riders)
+and what SUMO's FCD rows say beyond the vehicles' own columns — parked vehicles (beside
+their lane: :class:`ParkedTest`), buses dwelling at their stops (:func:`bus_stops`), and
+persons riding in vehicles (at the vehicle's x, y and speed: :class:`_Rows`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+class _Sim:
+    def __init__(self, r):
+        self.r = r
+
+    def getTime(self):  # noqa: N802 (SUMO's names)
+        return self.r.t
+
+    def getDeltaT(self):  # noqa: N802
+        return self.r.dt
+
+    def getMinExpectedNumber(self):  # noqa: N802
+        return self.r.remaining()
+
+    def getDepartedIDList(self):  # noqa: N802
+        return self.r.departed
+
+    def getArrivedIDList(self):  # noqa: N802
+        return self.r.arrived
+
+    def getStopEndingVehiclesIDList(self):  # noqa: N802 (here: the vehicles whose riders changed)
+        return self.r.load_changed
+
+    def getDepartedPersonIDList(self):  # noqa: N802
+        return self.r.departed_persons if self.r.count_persons else ()
+
+
+class _Person:
+    def __init__(self, r):
+        self.r = r
+
+    def getIDCount(self):  # noqa: N802
+        return self.r.person_count
+
+    def getTypeID(self, pid):  # noqa: N802
+        return self.r.person_types[pid]
+
+
+class _Veh:
+    def __init__(self, r):
+        self.r = r
+
+    def getIDList(self):  # noqa: N802
+        return self.r.ids
+
+    def getTypeID(self, vid):  # noqa: N802
+        return self.r.types[vid]
+
+    def getPersonIDList(self, vid):  # noqa: N802 (persons at the vehicle's x, y and speed)
+        return self.r.riders.get(vid, ())
+
+    def _col(self, k):
+        return lambda vid: self.r.state[vid][k]
+
+    def __getattr__(self, name):
+        k = {"getSpeed": 0, "getAcceleration": 1, "getAngle": 2, "getLaneID": 3,
+             "getLanePosition": 4, "getSlope": 5}.get(name)
+        if k is None:
+            raise AttributeError(name)
+        return self._col(k)
+
+
+class _VType:
+    def __init__(self, r):
+        self.r = r
+
+    def getVehicleClass(self, vt):  # noqa: N802 (not in FCD: the route files say)
+        return ""
+
+    def getParameter(self, vt, key):  # noqa: N802
+        return ""
+
+    def getMass(self, vt):  # noqa: N802 (a person type's: the route files', else SUMO's 70 kg)
+        return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
+
+
+#: SUMO's default mass of a person's vType [kg] (libsumo vehicletype.getMass of a
+#: pedestrian type without a mass)
+DEFAULT_PERSON_MASS_KG = 70.0
+
+
+class _Rows:
+    """What the FCD replays share: a timestep's rows → the vehicles' columns, with parked
+    vehicles off their lane (:func:`_unpark`) and the persons riding in each vehicle. SUMO's
+    FCD writes riding persons at their vehicle's x, y and speed, without naming the vehicle:
+    a person whose x, y and speed equal one vehicle's rides in it (as the live loop reads
+    with vehicle.getPersonIDList; their vTypes' masses from the route files)."""
+
+    def _init_rows(self):
+        self.parked_rows = 0
+        self.riders: dict = {}
+        self.person_types: dict = {}
+        self.person_count = 0
+        self.departed_persons: tuple = ()
+        self.load_changed: tuple = ()
+        self.rider_rows = 0
+        #: vType → mass [kg] of the route files (set by replay_fcd)
+        self.type_mass: dict = {}
+        self.count_persons = True
+        self.person, self.vehicletype = _Person(self), _VType(self)
+
+    def _vehicles(self, c: dict, nxt: dict | None) -> dict:
+        """The vehicles' rows of timestep ``c`` (next timestep ``nxt``, None at the end)."""
+        person = c.get("person")
+        if person is not None and person.any():
+            veh = ~person
+            self._ride({k: v[person] for k, v in c.items()}, {k: v[veh] for k, v in c.items()})
+            c = {k: v[veh] for k, v in c.items()}
+        elif self.riders or self.person_count:
+            self._ride(None, c)
+        if "off" in c and len(c["id"]):  # parked vehicles (ParkedTest.mark)
+            if nxt is not None and "person" in nxt and nxt["person"].any():
+                keep = ~nxt["person"]
+                nxt = {"id": nxt["id"][keep], "off": nxt["off"][keep]}
+            lanes, n = _unpark(c["lane"], c["id"], c["off"], nxt["id"] if nxt else None,
+                               nxt["off"] if nxt else None)
+            c = dict(c, lane=lanes)
+            self.parked_rows += n
+        return c
+
+    def _ride(self, p: dict | None, v: dict) -> None:
+        """Riders per vehicle from the persons' rows ``p`` and the vehicles' rows ``v``."""
+        riders: dict = {}
+        if p is not None:
+            self.person_count = len(p["id"])
+            new = [q for q in p["id"] if q not in self.person_types]
+            self.person_types.update(zip(p["id"], p["type"]))
+            self.departed_persons = tuple(new)
+            if "x" in p and "y" in p and len(v["id"]):
+                at = dict(zip(zip(v["x"], v["y"], v["speed"]), v["id"]))
+                for q, key in zip(p["id"], zip(p["x"], p["y"], p["speed"])):
+                    vid = at.get(key)
+                    if vid is not None:
+                        riders.setdefault(vid, []).append(q)
+        else:
+            self.person_count, self.departed_persons = 0, ()
+        old = self.riders
+        # persons board and leave while the vehicle stands; the live loop reads its riders
+        # when the stop ends (as it drives off): a standing vehicle keeps the riders it had
+        # (SUMO lets them leave as the vehicle creeps into the stop, braked with them aboard)
+        from sumo_drvpw.model.constants import STANDSTILL_MPS
+
+        for vid, speed in zip(v["id"], v["speed"]):
+            if speed < STANDSTILL_MPS:
+                if vid in old:
+                    riders[vid] = old[vid]
+                else:
+                    riders.pop(vid, None)
+        self.load_changed = tuple(vid for vid in set(old) | set(riders)
+                                  if old.get(vid) != riders.get(vid))
+        self.riders = riders
+        self.rider_rows += sum(len(r) for r in riders.values())
+
+
+class ParkedTest:
+    """Which FCD rows show a parked vehicle: standing (below ``STANDSTILL_MPS``) beside its
+    lane (:func:`~sumo_drvpw.sim.network.off_lane`). SUMO's FCD writes a parked vehicle
+    with its lane, at speed 0, at the parking space's x, y; libsumo gives it no lane, and
+    the live loop books nothing for it (engine off; SUMO's emission output leaves it out
+    too). Applied once per block of rows (:meth:`mark`), not per timestep. A bus parked at
+    one of ``bus_stops`` (lane id → [(start, end)] positions, :func:`bus_stops`) dwells
+    there in service and stays on its lane (booked standing), as in the live loop."""
+
+    def __init__(self, net, bus_stops: dict | None = None):
+        self.net = net
+        self.bus_stops = bus_stops or {}
+
+    def __call__(self, cols: dict) -> np.ndarray:
+        """Rows (``speed``, ``lane``, ``pos``, ``x``, ``y``) → off their lane, standing."""
+        from sumo_drvpw.model.constants import STANDSTILL_MPS
+        from sumo_drvpw.sim.network import off_lane
+
+        off = np.asarray(cols["speed"], float) < STANDSTILL_MPS
+        if "x" not in cols or "y" not in cols:
+            return np.zeros(len(off), bool)
+        k = np.flatnonzero(off)  # only a standing vehicle can be parked
+        if len(k):
+            codes, uniq = pd.factorize(np.asarray(cols["lane"], object)[k])
+            idx = self.net.lane_index
+            lane = np.array([idx.get(u, -1) for u in uniq], np.int64)[codes]
+            off[k] = off_lane(self.net, lane, np.asarray(cols["pos"], float)[k],
+                              np.asarray(cols["x"], float)[k], np.asarray(cols["y"], float)[k])
+        if self.bus_stops and off.any():  # dwelling at a bus stop: standing, not parked
+            lanes, pos = np.asarray(cols["lane"], object), np.asarray(cols["pos"], float)
+            for i in np.flatnonzero(off):
+                if any(a - 1.0 <= pos[i] <= b + 1.0 for a, b in self.bus_stops.get(lanes[i], ())):
+                    off[i] = False
+        return off
+
+    def mark(self, blocks):
+        """The blocks (:func:`iter_fcd_blocks`) with a column ``off``: this test's rows."""
+        for b in blocks:
+            b.cols["off"] = self(b.cols)
+            yield b
+
+
+def bus_stops(files) -> dict[str, list[tuple[float, float]]]:
+    """Bus and train stops of SUMO additional files: lane id → [(startPos, endPos)]
+    [m] (SUMO's defaults: 0 and the lane's end; negative positions count from the end, read
+    as 0 / the end here). Unreadable files are left to SUMO."""
+    import xml.etree.ElementTree as ET
+
+    from sumo_drvpw.fileio import open_maybe_gzip
+
+    out: dict[str, list[tuple[float, float]]] = {}
+    for f in files:
+        try:
+            with open_maybe_gzip(f) as src:
+                for _, el in ET.iterparse(src, events=("end",)):
+                    if el.tag in ("busStop", "trainStop") and el.get("lane"):
+                        try:
+                            a = float(el.get("startPos", 0.0))
+                            b = float(el.get("endPos", np.inf))
+                        except ValueError:
+                            continue
+                        out.setdefault(el.get("lane"), []).append(
+                            (max(a, 0.0), b if b >= 0 else np.inf))
+                    el.clear()
+        except (ET.ParseError, OSError):
+            continue
+    return out
+
+
+def _unpark(lanes, ids, off, nxt_ids, nxt_off) -> tuple[np.ndarray, int]:
+    """The lanes of a timestep's rows with "" for the parked vehicles, and their number:
+    off the lane (``off``) and still off it in the next timestep (``nxt_*``; None: none).
+    libsumo's getLaneID reads "" from the step a vehicle parks to the one before it drives
+    off; in the step it leaves it is on its lane again, where FCD still shows it at the
+    parking space."""
+    if not off.any():
+        return lanes, 0
+    off = off.copy()
+    if nxt_ids is not None and len(nxt_ids):
+        back = set(np.asarray(nxt_ids, object)[~nxt_off])
+        off &= ~np.fromiter((v in back for v in ids), bool, len(ids))
+    lanes = np.array(lanes, dtype=object)
+    lanes[off] = ""
+    return lanes, int(np.count_nonzero(off))
