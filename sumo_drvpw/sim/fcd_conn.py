@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+
 class _Sim:
     def __init__(self, r):
         self.r = r
@@ -131,11 +132,11 @@ class _Rows:
     def _ride(self, p: dict | None, v: dict) -> None:
         """Riders per vehicle from the persons' rows ``p`` and the vehicles' rows ``v``."""
         riders: dict = {}
-        if p is not None:
+        if p is not None:  # memory: the persons of this timestep (as for the vehicles)
             self.person_count = len(p["id"])
-            new = [q for q in p["id"] if q not in self.person_types]
-            self.person_types.update(zip(p["id"], p["type"]))
-            self.departed_persons = tuple(new)
+            before = self.person_types
+            self.person_types = dict(zip(p["id"], p["type"]))
+            self.departed_persons = tuple(q for q in self.person_types if q not in before)
             if "x" in p and "y" in p and len(v["id"]):
                 at = dict(zip(zip(v["x"], v["y"], v["speed"]), v["id"]))
                 for q, key in zip(p["id"], zip(p["x"], p["y"], p["speed"])):
@@ -143,7 +144,7 @@ class _Rows:
                     if vid is not None:
                         riders.setdefault(vid, []).append(q)
         else:
-            self.person_count, self.departed_persons = 0, ()
+            self.person_count, self.departed_persons, self.person_types = 0, (), {}
         old = self.riders
         # persons board and leave while the vehicle stands; the live loop reads its riders
         # when the stop ends (as it drives off): a standing vehicle keeps the riders it had
