@@ -74,6 +74,8 @@ class Physics:
 #: state: 1 stopped, 2 parking, 4/8 triggered, 16 at a busStop, 32 containerStop, 64
 #: chargingStation, 128 parkingArea)
 STOP_AT_BUS_STOP = 16
+#: vehicle.getStopState bit: the vehicle is parking (off the lane)
+STOP_PARKING = 2
 
 
 def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
@@ -230,15 +232,16 @@ class Stepper:
                        and hasattr(conn.vehicle, "getPersonIDList") and hasattr(conn, "person"))
         self.any_load = False
         self._type_mass: dict[str, float] = {}
-        #: a vehicle SUMO parks at a bus stop (a bus bay: ``parking="true"`` at a busStop)
-        #: dwells there in service: booked standing on the stop's lane (time, auxiliary
-        #: power) as at a stop on the lane; other parked vehicles are off (engine off)
-        sim = conn.simulation
-        self.parking_starts = getattr(sim, "getParkingStartingVehiclesIDList", None)
-        self.parking_ends = getattr(sim, "getParkingEndingVehiclesIDList", None)
-        self.dwell_check = (self.parking_starts is not None and self.parking_ends is not None
-                            and hasattr(conn.vehicle, "getStopState")
-                            and hasattr(conn.vehicle, "getStops"))
+        #: parked vehicles (SUMO takes them off the lane: engine off, not booked) are told
+        #: once, when a read finds them without a lane (stop state 'parking'), and are not
+        #: read again until their parking ends (getParkingEndingVehiclesIDList): a parked
+        #: fleet costs no getter calls. A vehicle parked at a bus stop (a bus bay:
+        #: ``parking="true"`` at a busStop) dwells there in service: booked standing on the
+        #: stop's lane (time, auxiliary power), as at a stop on the lane.
+        self.parking_ends = getattr(conn.simulation, "getParkingEndingVehiclesIDList", None)
+        self.parking_known = (self.parking_ends is not None
+                              and hasattr(conn.vehicle, "getStopState")
+                              and hasattr(conn.vehicle, "getStops"))
         #: vehicle id → (lane number, lane position) of its bus-stop dwell
         self.dwell: dict[str, tuple[int, float]] = {}
 
@@ -289,19 +292,36 @@ class Stepper:
                 if kg > 0.0:
                     self.any_load = True
 
-    def update_dwell(self) -> None:
-        """Bus-stop dwells that started (stop state 'at a bus stop', its lane and the
-        vehicle's position there) or ended in the step just made."""
-        conn, vmap = self.conn, self.vmap
-        for vid in self.parking_starts():
-            if vid in vmap and int(conn.vehicle.getStopState(vid)) & STOP_AT_BUS_STOP:
-                stops = conn.vehicle.getStops(vid, 1)
-                lane = self.lane_index.get(stops[0].lane, -1) if stops else -1
-                if lane >= 0:
-                    pos = float(conn.vehicle.getLanePosition(vid))
-                    self.dwell[vid] = (lane, min(max(pos, 0.0), float(self.net.lane_length[lane])))
+    def parking_started(self, vid: str, i: int) -> bool:
+        """Vehicle ``vid`` (slot ``i``), just read without a lane: parked (not read until its
+        parking ends), dwelling at a bus stop (booked standing there), or neither (a
+        teleport: read again next step). True when it dwells."""
+        st = int(self.conn.vehicle.getStopState(vid))
+        if not st & STOP_PARKING:
+            return False
+        if st & STOP_AT_BUS_STOP:
+            stops = self.conn.vehicle.getStops(vid, 1)
+            lane = self.lane_index.get(stops[0].lane, -1) if stops else -1
+            if lane >= 0:
+                pos = float(self.conn.vehicle.getLanePosition(vid))
+                self.dwell[vid] = (lane, min(max(pos, 0.0), float(self.net.lane_length[lane])))
+                return True
+        self.ledger.veh_parked[i] = True
+        self.prev_ids = None  # the selection of vehicles read changes
+        return False
+
+    def parking_ended(self) -> None:
+        """Vehicles whose parking ended in the step just made: read and booked again, from
+        standstill."""
+        ledger, vmap = self.ledger, self.vmap
         for vid in self.parking_ends():
             self.dwell.pop(vid, None)
+            i = vmap.get(vid)
+            if i is not None and ledger.veh_parked[i]:
+                ledger.veh_parked[i] = False
+                ledger.veh_lane[i] = -2
+                ledger.veh_prev_speed[i] = 0.0
+                self.prev_ids = None
 
     def flush(self) -> None:
         """Write the finished vehicles out of the ledger (:meth:`Ledger.flush`) and renumber
@@ -355,12 +375,13 @@ class Stepper:
                 ledger.veh_lane[vmap[vid]] = -2
                 ledger.veh_prev_speed[vmap[vid]] = np.nan
                 ledger.veh_load[vmap[vid]] = 0.0
+                ledger.veh_parked[vmap[vid]] = False
                 ledger.unretire(vmap[vid])
         if self.riders and (self.any_load or conn.person.getIDCount()):
             self.update_loads(departed)
             self.update_loads(self.stop_ending())
-        if self.dwell_check:
-            self.update_dwell()
+        if self.parking_known:
+            self.parking_ended()
         if len(ids) == 0:
             return
         if ids == self.prev_ids:  # no arrival or departure: same vehicles, same order
@@ -372,10 +393,10 @@ class Stepper:
             except KeyError:
                 vidx = np.fromiter((vmap[v] if v in vmap else self.register(v) for v in ids),
                                    np.int64, n_all)
-            kept = ledger.veh_keep[vidx]
+            kept = ledger.veh_keep[vidx] & ~ledger.veh_parked[vidx]
             if kept.all():
                 kids = ids
-            else:  # only the vehicles accounted for are read
+            else:  # only the vehicles accounted for and not parked are read
                 sel = np.flatnonzero(kept)
                 vidx, kids = vidx[sel], [ids[i] for i in sel]
             self.prev_ids, self.prev_sel = ids, (vidx, kids)
@@ -420,10 +441,12 @@ class Stepper:
         if raw is not None:
             raw = np.radians(raw)
         on_lane = lane >= 0
-        if self.dwell and not on_lane.all():  # dwelling at a bus stop off the lane: standing
+        if self.parking_known and not on_lane.all():  # parked, dwelling, or teleporting
             for j in np.flatnonzero(~on_lane):
                 d = self.dwell.get(kids[j])
-                if d is not None:
+                if d is None and self.parking_started(kids[j], int(vidx[j])):
+                    d = self.dwell[kids[j]]
+                if d is not None:  # dwelling at a bus stop off the lane: standing there
                     lane[j], pos[j] = d
             on_lane = lane >= 0
         if not on_lane.all():  # teleporting, parked: no lane, not booked
