@@ -6,8 +6,14 @@ persons riding in vehicles (at the vehicle's x, y and speed: :class:`_Rows`)."""
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
+
 import numpy as np
 import pandas as pd
+
+from sumo_drvpw.fileio import open_maybe_gzip
+from sumo_drvpw.model.constants import STANDSTILL_MPS
+from sumo_drvpw.sim.network import off_lane
 
 
 class _Sim:
@@ -149,14 +155,12 @@ class _Rows:
         # persons board and leave while the vehicle stands; the live loop reads its riders
         # when the stop ends (as it drives off): a standing vehicle keeps the riders it had
         # (SUMO lets them leave as the vehicle creeps into the stop, braked with them aboard)
-        from sumo_drvpw.model.constants import STANDSTILL_MPS
-
-        for vid, speed in zip(v["id"], v["speed"]):
-            if speed < STANDSTILL_MPS:
-                if vid in old:
-                    riders[vid] = old[vid]
-                else:
-                    riders.pop(vid, None)
+        standing = set(np.asarray(v["id"], object)[np.asarray(v["speed"], float) < STANDSTILL_MPS])
+        for vid in (set(old) | set(riders)) & standing:
+            if vid in old:
+                riders[vid] = old[vid]
+            else:
+                riders.pop(vid, None)
         self.load_changed = tuple(vid for vid in set(old) | set(riders)
                                   if old.get(vid) != riders.get(vid))
         self.riders = riders
@@ -178,9 +182,6 @@ class ParkedTest:
 
     def __call__(self, cols: dict) -> np.ndarray:
         """Rows (``speed``, ``lane``, ``pos``, ``x``, ``y``) → off their lane, standing."""
-        from sumo_drvpw.model.constants import STANDSTILL_MPS
-        from sumo_drvpw.sim.network import off_lane
-
         off = np.asarray(cols["speed"], float) < STANDSTILL_MPS
         if "x" not in cols or "y" not in cols:
             return np.zeros(len(off), bool)
@@ -193,7 +194,8 @@ class ParkedTest:
                               np.asarray(cols["x"], float)[k], np.asarray(cols["y"], float)[k])
         if self.bus_stops and off.any():  # dwelling at a bus stop: standing, not parked
             lanes, pos = np.asarray(cols["lane"], object), np.asarray(cols["pos"], float)
-            for i in np.flatnonzero(off):
+            k = np.flatnonzero(off)
+            for i in k[np.isin(lanes[k], list(self.bus_stops))]:  # parked on a stop's lane
                 if any(a - 1.0 <= pos[i] <= b + 1.0 for a, b in self.bus_stops.get(lanes[i], ())):
                     off[i] = False
         return off
@@ -209,10 +211,6 @@ def bus_stops(files) -> dict[str, list[tuple[float, float]]]:
     """Bus and train stops of SUMO additional files: lane id → [(startPos, endPos)]
     [m] (SUMO's defaults: 0 and the lane's end; negative positions count from the end, read
     as 0 / the end here). Unreadable files are left to SUMO."""
-    import xml.etree.ElementTree as ET
-
-    from sumo_drvpw.fileio import open_maybe_gzip
-
     out: dict[str, list[tuple[float, float]]] = {}
     for f in files:
         try:

@@ -236,7 +236,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             sumo_dir = Path(scratch.name)
         if redirect:
             args += sumo_output_args(redirect, sumo_dir)
-    add_args, moved = ([], []) if copies is None else redirect_additional_outputs(
+    add_args, moved = ([], {}) if copies is None else redirect_additional_outputs(
         sc.additional_files, sumo_dir, Path(copies.name))
     if add_args and "-a" in args:  # a scenario's sumo.additional: loaded as the copies
         i = args.index("-a")
@@ -292,13 +292,9 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             notes.append("the config's tripinfo-output was replaced by the emissions comparison's "
                          "(outputs.sumo_device) and not kept")
         if moved and out_dir is not None:
-            by_file: dict[str, list[str]] = {}
-            for line in moved:
-                f, _, rest = line.partition(": ")
-                by_file.setdefault(f, []).append(rest.rpartition(" → ")[2])
             notes.append(f"outputs declared in additional files were written into "
                          f"{SUMO_OUTPUT_DIR}/: " + "; ".join(
-                             f"{f}: {', '.join(names)}" for f, names in by_file.items()))
+                             f"{f}: {', '.join(names)}" for f, names in moved.items()))
         elif sc.additional_outputs and not moved:
             notes.append("outputs declared in additional files were written by SUMO beside those "
                          "files: " + "; ".join(sc.additional_outputs))

@@ -74,16 +74,16 @@ _INPUT_PATH_ATTRIBUTES = ("file", "href", "edgesFile", "imgFile")
 
 
 def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
-                                ) -> tuple[list[str], list[str]]:
+                                ) -> tuple[list[str], dict[str, list[str]]]:
     """Copies of the additional files that declare outputs (``edgeData file=…``, detectors
     …; themselves or in a file they ``<include href>``), written into ``work``, whose
     outputs go into ``folder`` under their own file names (a name two declarations share
     gets the declaring file's name before it) and whose other relative paths (inputs such
     as a rerouter's ``file``) point at the original files. Returns the command-line options
     loading the copies instead of the originals (``--additional-files``; none when nothing
-    is declared) and the outputs moved, as 'FILE: element id → output' lines. The
+    is declared) and the outputs moved, per declaring file (its output names). The
     originals are not touched."""
-    moved: list[str] = []
+    moved: dict[str, list[str]] = {}
     used: set[str] = set()
     copies: dict[Path, Path] = {}
 
@@ -107,7 +107,7 @@ def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
                 if name in used:
                     name = f"{add.name.split('.')[0]}.{name}"
                 used.add(name)
-                moved.append(f"{add}: {tag} '{el.get('id', '')}' → {name}")
+                moved.setdefault(str(add), []).append(name)
                 el.set(key, str(folder.resolve() / name))
                 changed = True
             elif tag == "include" and el.get("href") and depth < 10:
@@ -130,5 +130,5 @@ def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
 
     loaded = [str(load(Path(a), 0)) for a in adds]
     if not moved:
-        return [], []
+        return [], {}
     return ["--additional-files", ",".join(loaded)], moved
