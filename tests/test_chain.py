@@ -658,7 +658,7 @@ def test_sumo_phemlight5_petrol_class_burns_fuel_at_idle(tmp_path):
 
 def test_i3_study_reads_with_the_library_corrections_fused_grade_and_rho_at_altitude():
     """validation.chain_i3.I3_MEASUREMENT through the library's reader corrections
-    (data.corrections.apply_measurement, as `calibrate --grade-source fused:60 --air-density
+    (data.corrections.apply_measurement, as `calibrate --grade-source fused --air-density
     altitude --exclude-dropouts`): ρ × p(h)/p0 (standard atmosphere); the grade's fast part
     from the accelerometer (a planted 20-s undulation the logged grade lacks is recovered),
     its slow part from the logged grade (a 2° mounting pitch of the accelerometer does not

@@ -435,6 +435,9 @@ def test_grade_options_of_the_script_declare_what_they_read(tmp_path):
     m = mod.measurement_of(path, 0.0, True, 120.0)
     assert (m.grade, m.fusion_tau_s, m.accelerometer_offset_mps2) == ("fused", 120.0, None)
     assert mod.measurement_of(path, 0.0, True, 60).grade == "fused"       # a crossover given as int
+    m = mod.measurement_of(path, 0.0, True, "1000 m")                     # a crossover over distance
+    assert (m.grade, m.fusion_tau_s, m.fusion_distance_m) == ("fused", None, 1000.0)
+    assert any(mod.distance_crossover_m(t) for t in mod.TAU_GRID_S)
     m = mod.measurement_of(path, 0.0, True, math.inf)
     assert (m.grade, m.accelerometer_offset_mps2) == ("accelerometer", None)
     m = mod.measurement_of(path, 0.0, True, mod.LOGGER_OFFSET, 0.03)

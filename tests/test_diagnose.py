@@ -351,7 +351,7 @@ def test_fused_grade_keeps_the_fast_accelerometer_and_drops_its_mounting_pitch()
     accelerometer is sharp but biased by its mounting pitch (0.02 rad here)."""
     import pandas as pd
 
-    from sumo_drvpw.fit.diagnose.structural import fused_sin_grade
+    from sumo_drvpw.data.corrections import fused_sin_grade
 
     dt, n = 0.1, 30000
     t = np.arange(n) * dt

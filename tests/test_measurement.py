@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 
 import sumo_drvpw.synth.effects as E
 from sumo_drvpw.cli import main as cli_main
-from sumo_drvpw.data.corrections import fused_sin_grade, shift_within_trips
+from sumo_drvpw.data.corrections import (distance_mean, fused_sin_grade, fused_sin_grade_distance,
+                                         grade_elevation_gaps, shift_within_trips)
 from sumo_drvpw.data.log import ReadOptions
 from sumo_drvpw.data.measured import load_measured
 from sumo_drvpw.errors import UserError
@@ -92,6 +93,89 @@ def test_shift_and_fusion_stay_inside_trips():
     acc = np.full(10, 0.05)
     fused = fused_sin_grade(acc + 0.02, np.full(10, 0.05), codes, 1.0, tau_s=3.0)
     np.testing.assert_allclose(fused, 0.05, atol=1e-12)
+
+
+def _stop_and_go(n_cycles=40, drive_s=60.0, stand_s=60.0, dt=0.1, v_cruise=12.0):
+    """Speed [m/s] of a stop-and-go trip: ramps of 6 s to and from v_cruise, standing between."""
+    ramp = np.linspace(0.0, v_cruise, int(6.0 / dt))
+    cyc = np.r_[ramp, np.full(int((drive_s - 12.0) / dt), v_cruise), ramp[::-1], np.zeros(int(stand_s / dt))]
+    return np.tile(cyc, n_cycles)
+
+
+def test_distance_fusion_keeps_the_elevation_change_where_a_fusion_in_time_drifts():
+    """Planted: a hilly road driven stop-and-go; the logged grade is the true one smoothed
+    over 100 m of road (coarse elevation); the accelerometer reads the true grade plus its
+    mounting pitch (0.02) plus a pitch while the car stands (0.05 m/s² / g: it stands
+    nose-down on its brakes), an error that follows the driving state, not the road. Over
+    distance the fusion keeps the trip's elevation change (its slow part weights each sample
+    by the road it drove; standing samples weigh nothing); in time the standing pitch leaks
+    into the driven samples' slow part and the grade integrates tens of metres off."""
+    dt = 0.1
+    v = _stop_and_go()
+    d = np.cumsum(v * dt) - v * dt / 2
+    slope = lambda x: (0.02 * np.cos(2 * np.pi * x / 3000.0)            # noqa: E731
+                       + 0.03 * np.cos(2 * np.pi * x / 400.0))          # dh/dx of a road
+    true = slope(d)
+    grid = np.arange(-200.0, d[-1] + 200.0, 1.0)                        # elevation smoothed over 100 m
+    smooth = np.convolve(slope(grid), np.ones(101) / 101, mode="same")
+    logged = np.interp(d, grid, smooth)
+    acc = true + 0.02 + np.where(v < 0.1, 0.05 / 9.81, 0.0)
+    codes = np.zeros(v.size, int)
+    h = np.interp(d, grid, np.cumsum(slope(grid)))                      # the logged elevation
+    dist = fused_sin_grade_distance(acc, logged, v, dt, codes, 1000.0)
+    timed = fused_sin_grade(acc, logged, codes, dt, tau_s=300.0)
+    trip, path = np.zeros(v.size, str), np.ones(v.size, bool)
+    gap = lambda s: grade_elevation_gaps(s, v, np.full(v.size, dt), trip, h, path)[""]  # noqa: E731
+    assert abs(gap(dist)) < 3.0 < 15.0 < abs(gap(timed))
+    moving = v > 0.1
+    err = lambda s: float(np.sqrt(np.mean((s - true)[moving] ** 2)))  # noqa: E731
+    assert err(dist) < 0.3 * min(err(logged), err(acc))
+    assert err(dist) < err(timed)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), length=st.floats(20.0, 2000.0), stand=st.integers(1, 50))
+def test_distance_mean_ignores_standing_samples_and_never_crosses_trips(seed, length, stand):
+    """Properties of data.corrections.distance_mean: a constant stays that constant;
+    standing samples inserted anywhere change nothing at the moving samples (they carry no
+    weight) and take the mean of where the car stands; two trips never mix."""
+    rng = np.random.default_rng(seed)
+    n = 200
+    v = rng.uniform(0.5, 30.0, n)
+    x = rng.normal(size=n)
+    codes = np.r_[np.zeros(n // 2, int), np.ones(n - n // 2, int)]
+    np.testing.assert_allclose(distance_mean(np.full(n, 0.7), v, 0.5, codes, length), 0.7, rtol=1e-12)
+    base = distance_mean(x, v, 0.5, codes, length)
+    at = int(rng.integers(1, n // 2))
+    v2 = np.insert(v, at, np.zeros(stand))
+    x2 = np.insert(x, at, rng.normal(size=stand) * 100.0)
+    c2 = np.insert(codes, at, np.zeros(stand, int))
+    got = distance_mean(x2, v2, 0.5, c2, length)
+    keep = np.ones(v2.size, bool)
+    keep[at:at + stand] = False
+    np.testing.assert_allclose(got[keep], base, rtol=1e-9, atol=1e-12)
+    assert np.all(np.isfinite(got[~keep]))
+    second = distance_mean(np.r_[x[: n // 2], x[n // 2:] + 1e6], v, 0.5, codes, length)
+    np.testing.assert_allclose(second[: n // 2], base[: n // 2], rtol=1e-9)
+    # a mounting pitch (a constant offset of the accelerometer) drops out of the fusion
+    np.testing.assert_allclose(fused_sin_grade_distance(x * 0.01 + 0.02, x * 0.01, v, 0.5, codes, length),
+                               np.clip(x * 0.01, -0.3, 0.3), atol=1e-9)
+
+
+@pytest.mark.parametrize("given_, key, value", [("fused:1000m", "fusion_distance_m", 1000.0),
+                                                ("fused:60s", "fusion_tau_s", 60.0),
+                                                ("fused:60", "fusion_tau_s", 60.0),
+                                                ("fused", "fusion_tau_s", 60.0)])
+def test_grade_source_crossover_over_distance_or_in_time(planted, tmp_path, given_, key, value):
+    eq = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(planted), "--vehicle", "prius3", "--out", str(eq),
+                     "--grade-source", given_]) == 0
+    meas = _terms(eq)["measurement"]
+    assert meas["grade"] == "fused" and meas[key] == value
+    other = ({"fusion_tau_s", "fusion_distance_m"} - {key}).pop()
+    assert other not in meas                  # one crossover, in time or over distance
+    with pytest.raises(UserError, match="fusion_distance_m"):
+        measurement_from_dict({"grade": "fused", "fusion_tau_s": 60, "fusion_distance_m": 500}, "f.toml")
 
 
 def test_planted_lag_and_smoothed_grade_recovered_by_the_corrections(planted):
@@ -180,6 +264,8 @@ def test_bad_corrections_are_one_line_exit_2(planted, tmp_path, capsys):
           str(tmp_path / "b.toml")], "--grade-source gps"),
         (["calibrate", str(planted), "--vehicle", "prius3", "--grade-source", "fused:x", "--out",
           str(tmp_path / "c.toml")], "--grade-source fused:x"),
+        (["calibrate", str(planted), "--vehicle", "prius3", "--grade-source", "fused:-5m", "--out",
+          str(tmp_path / "c2.toml")], "fusion_distance_m"),
         (["calibrate", str(planted), "--vehicle", "prius3", "--power-lag", "600", "--out",
           str(tmp_path / "d.toml")], "power_lag_s"),
     ]
@@ -262,7 +348,7 @@ def test_diagnose_names_the_calibrate_flags_that_correct_its_measurement_finding
                      "--max-findings", "2", "--out", str(tmp_path / "d")]) == 0
     out = capsys.readouterr().out
     line = next(ln for ln in out.splitlines() if "sumo-drvpw calibrate" in ln)
-    assert "--power-lag 1.5" in line and "--grade-source fused:60" in line
+    assert "--power-lag 1.5" in line and "--grade-source fused " in line + " "
     eq = _terms(tmp_path / "d" / "final_equation.toml")
     assert eq["measurement"]["power_lag_s"] == pytest.approx(LAG_S, abs=0.125)
 

@@ -112,9 +112,10 @@ def add_log_options(p) -> None:
     g.add_argument("--power-lag", type=float, metavar="S",
                    help="the power signal's lag behind the speed signal [s] (diagnose's timing finding): "
                         "the power is read S later within each trip")
-    g.add_argument("--grade-source", metavar="logged|fused[:TAU_S]|accelerometer[:OFFSET_MPS2]",
+    g.add_argument("--grade-source", metavar="logged|fused[:LENGTHm|:TAU_Ss]|accelerometer[:OFFSET_MPS2]",
                    help="grade from the elevation (logged), fused with a longitudinal accelerometer "
-                        "(accelerometer above the crossover TAU_S, default 60 s, elevation below), or the "
+                        "(accelerometer above the crossover, elevation below; in time, default 60s, or "
+                        "over driven distance, e.g. :1000m, which keeps each trip's elevation change), or the "
                         "accelerometer alone: its per-trip offset fixed by the elevation change, or with "
                         ":OFFSET_MPS2 less the logger's own fixed offset (no elevation used)")
     g.add_argument("--air-density", choices=("logged", "altitude"),
@@ -142,13 +143,18 @@ def measurement_options(args, equations=()):
         if grade is not None:
             src, _, num = str(grade).partition(":")
             if src not in GRADE_SOURCES or (num and src == "logged"):
-                raise UserError(f"--grade-source {grade}: use one of logged, fused[:TAU_S], "
+                raise UserError(f"--grade-source {grade}: use one of logged, fused[:LENGTHm|:TAU_Ss], "
                                 "accelerometer[:OFFSET_MPS2]")
             doc["grade"] = src
             if num:
-                key, what = (("fusion_tau_s", "the crossover after ':' must be a number of seconds")
+                key, what = (("fusion_tau_s", "the crossover after ':' must be a distance in metres "
+                              "(e.g. 1000m) or a time in seconds (e.g. 60s; a bare number is seconds)")
                              if src == "fused" else
                              ("accelerometer_offset_mps2", "the offset after ':' must be a number in m/s²"))
+                if src == "fused" and num.strip().lower().endswith("m"):
+                    key, num = "fusion_distance_m", num.strip()[:-1]
+                elif src == "fused" and num.strip().lower().endswith("s"):
+                    num = num.strip()[:-1]
                 try:
                     doc[key] = float(num)
                 except ValueError:
@@ -210,8 +216,8 @@ def note_counts(counts: dict) -> None:
         listed = ", ".join(f"{t} {g:+.0f} m" for t, g in gaps)
         print(f"note: on {n} trip(s) the corrected grade integrates to an elevation change more than 20 m "
               f"away from the logged one ({listed}{', …' if n > len(gaps) else ''}): "
-              "their grade energy (m·g × that gap) is uncertain; a shorter --grade-source fused:TAU_S keeps "
-              "closer to the elevation")
+              "their grade energy (m·g × that gap) is uncertain; a shorter --grade-source fused:TAU_Ss "
+              "keeps closer to the elevation, a fusion over driven distance (fused:1000m) keeps it")
 
 
 class _Terminated(KeyboardInterrupt):

@@ -203,9 +203,7 @@ def correction_flags(findings, measurement) -> str:
     if any(f.get("kind") == "timing" for f in findings) and lag:
         flags.append(f"--power-lag {lag:g}")
     if "[grade_accelerometer]" in terms:
-        from sumo_drvpw.model.measurement import FUSION_TAU_S
-
-        flags.append(f"--grade-source fused:{FUSION_TAU_S:g}")
+        flags.append("--grade-source fused")
     if any(t.startswith("[air_density_altitude]") for t in terms):
         flags.append("--air-density altitude")
     if flags and measurement is not None and measurement.exclude_dropouts:

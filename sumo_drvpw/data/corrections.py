@@ -9,7 +9,12 @@ This module does the signal processing, trip by trip (nothing crosses a trip bou
   sin θ_acc = (a_imu − dv/dt)/g over a centred 5-s mean (:func:`accelerometer_sin_grade`);
   ``fused``: sin θ = LP(sin θ_log) + sin θ_acc − LP(sin θ_acc), LP a centred mean over the
   crossover — the elevation's grade is unbiased over distance but smoothed, the
-  accelerometer sharp but biased by its mounting pitch (:func:`fused_sin_grade`);
+  accelerometer sharp but biased by its mounting pitch. The crossover is a time
+  (:func:`fused_sin_grade`, the default), which weights standing and slow samples by time
+  and lets the grade's integral drift from the elevation (tens of metres on long trips), or
+  a distance (:func:`fused_sin_grade_distance`): LP weights each sample by the distance it
+  drove, so the fused grade integrates over the trip, Σ sin θ·ds, to the logged elevation
+  change (the grade energy m·g·Δh);
   ``accelerometer``: sin θ_acc minus one offset per trip fixed by Σ sin θ·ds = Δh
   (:func:`offset_corrected_sin_grade`), or, with ``accelerometer_offset_mps2``, minus the
   logger's own fixed offset (its mounting pitch; :func:`logger_offset_mps2` estimates it
@@ -30,7 +35,7 @@ from sumo_drvpw.data.trips import per_trip_rolling_mean, trip_codes_of
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.air import pressure_at_altitude_kpa
 from sumo_drvpw.model.constants import G, P_STD_KPA
-from sumo_drvpw.model.measurement import FUSION_TAU_S, Measurement
+from sumo_drvpw.model.measurement import FUSION_DISTANCE_M, FUSION_TAU_S, Measurement
 
 #: smoothing of the accelerometer grade [s]
 ACC_GRADE_WINDOW_S = 5.0
@@ -91,6 +96,54 @@ def fused_sin_grade(sin_acc, sin_log, trip_codes, dt_s: float, tau_s: float = FU
     w = _window(tau_s, dt_s)
     sa = np.asarray(sin_acc, float)
     out = per_trip_rolling_mean(np.asarray(sin_log, float), codes, w) + sa - per_trip_rolling_mean(sa, codes, w)
+    return np.clip(out, -MAX_SIN_GRADE, MAX_SIN_GRADE)
+
+
+def distance_mean(x, speed_mps, dt_s, trip_codes, length_m: float) -> np.ndarray:
+    """Centred moving mean of ``x`` over ``length_m`` of driven distance, within trips.
+
+    Each sample stands at the middle of the distance it drove, d = Σ v·Δt − v·Δt/2, and
+    is weighted by that distance v·Δt: the mean at a sample is Σ x·ds / Σ ds over the
+    samples within ±length_m/2 of it (so standing samples carry no weight and take the
+    mean of where the car stands). NaN values and speeds carry no weight; where the window
+    has none at all (a trip that never moves) the value itself is kept.
+
+    Parameters
+    ----------
+    x : values per sample
+    speed_mps : speed per sample [m/s]
+    dt_s : sample duration [s], per sample or one number
+    trip_codes : trip code per sample (contiguous trips; windows never cross them)
+    length_m : window [m]
+    """
+    x = np.asarray(x, float)
+    v = np.asarray(speed_mps, float)
+    ds = np.where(np.isfinite(v) & (v > 0), v, 0.0) * np.broadcast_to(np.asarray(dt_s, float), v.shape)
+    ds = np.where(np.isfinite(ds), ds, 0.0)
+    codes = np.asarray(trip_codes)
+    start = np.r_[True, codes[1:] != codes[:-1]] if len(codes) else np.zeros(0, bool)
+    # one monotone axis for every trip, each trip set length_m + 1 m beyond the last
+    d = np.cumsum(ds) - ds / 2 + np.cumsum(start) * (float(length_m) + 1.0)
+    w = np.where(np.isfinite(x), ds, 0.0)
+    cs = np.r_[0.0, np.cumsum(np.where(w > 0, x, 0.0) * w)]
+    cw = np.r_[0.0, np.cumsum(w)]
+    lo = np.searchsorted(d, d - length_m / 2, "left")
+    hi = np.searchsorted(d, d + length_m / 2, "right")
+    den = cw[hi] - cw[lo]
+    return np.where(den > 0, (cs[hi] - cs[lo]) / np.where(den > 0, den, 1.0), x)
+
+
+def fused_sin_grade_distance(sin_acc, sin_log, speed_mps, dt_s, trip_codes,
+                             length_m: float = FUSION_DISTANCE_M) -> np.ndarray:
+    """Complementary fusion of two grades over distance: sin θ = LP(sin θ_log) + (sin θ_acc −
+    LP(sin θ_acc)), LP the distance-weighted centred mean over ``length_m`` within trips
+    (:func:`distance_mean`). Grade is a property of the road's position, and its energy is
+    m·g·Σ sin θ·ds: the slow part, from the elevation, keeps the trip's elevation change,
+    the fast part, from the accelerometer, integrates to about nothing over any window of
+    ``length_m``, and the accelerometer's mounting pitch (a constant) drops out. [sin θ, -]"""
+    sa = np.asarray(sin_acc, float)
+    out = (distance_mean(sin_log, speed_mps, dt_s, trip_codes, length_m)
+           + sa - distance_mean(sa, speed_mps, dt_s, trip_codes, length_m))
     return np.clip(out, -MAX_SIN_GRADE, MAX_SIN_GRADE)
 
 
@@ -241,8 +294,12 @@ def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Mea
                                 "(its per-trip offset is fixed by the elevation change)")
             s = offset_corrected_sin_grade(s_acc, x.v, df["dt_s"].to_numpy(float), codes,
                                            df["elevation_m"].to_numpy(float), path)
+        elif meas.fusion_distance_m is None:
+            s = fused_sin_grade(s_acc, np.sin(x.theta), codes, dt, meas.fusion_seconds)
         else:
-            s = fused_sin_grade(s_acc, np.sin(x.theta), codes, dt, meas.fusion_tau_s)
+            s = fused_sin_grade_distance(s_acc, np.sin(x.theta), x.v,
+                                         df["dt_s"].to_numpy(float) if "dt_s" in df else dt, codes,
+                                         meas.fusion_distance_m)
         x.theta = np.arcsin(s)
         usable &= np.isfinite(x.theta)
         if "elevation_m" in df and "dt_s" in df:

@@ -14,7 +14,11 @@ there)::
     grade = "fused"        # "logged" (elevation), "fused" (accelerometer above the
                            # crossover, logged grade below it) or "accelerometer" (alone,
                            # its per-trip offset fixed by the elevation)
-    fusion_tau_s = 300     # crossover of the fusion [s]
+    fusion_tau_s = 60      # crossover of the fusion in time [s] (default 60); its slow part
+                           # weights standing samples too, so the grade's integral can drift
+                           # from the elevation by tens of metres on long trips
+    # fusion_distance_m = 1000  # or a crossover over driven distance [m]: the fused grade
+                           # keeps each trip's logged elevation change
     # accelerometer_offset_mps2 = 0.004  (only with grade = "accelerometer"): the logger's
                            # own offset (its mounting pitch) [m/s²], one constant for every
                            # trip, instead of a per-trip offset fixed by each trip's elevation
@@ -38,10 +42,16 @@ from sumo_drvpw.errors import UserError
 GRADE_SOURCES = ("logged", "fused", "accelerometer")
 #: where the air density comes from
 AIR_DENSITY_SOURCES = ("logged", "altitude")
-#: default crossover of the grade fusion [s]: well above the ~10 s that 100 m of elevation
+#: default crossover of the grade fusion [s] (in time): well above the ~10 s that 100 m of elevation
 #: smoothing spans at town speeds, well below a trip (an accelerometer's mounting pitch
 #: biases its slow part)
 FUSION_TAU_S = 60.0
+#: a crossover of the grade fusion over driven distance [m] (``fused:1000m``; not the
+#: default): well above the ~100 m over which logged elevation is smoothed (a whole-metre
+#: step in 1000 m is 0.06° of grade), well below a trip. On the shared i3 logs it keeps every
+#: trip's elevation change, but raises the free grade coefficient to 1.12–1.26
+#: (docs/closing-the-loop.md), so the fusion in time stays the default
+FUSION_DISTANCE_M = 1000.0
 #: longest lag a correction may declare [s] (a lag of minutes is no signal timing)
 MAX_LAG_S = 60.0
 #: largest accelerometer offset a correction may declare [m/s²]: g·sin 10°, a logger
@@ -58,12 +68,30 @@ class Measurement:
 
     power_lag_s: float = 0.0
     grade: str = "logged"
-    fusion_tau_s: float = FUSION_TAU_S
+    #: with grade "fused": the crossover in time [s] (None: FUSION_TAU_S, unless
+    #: fusion_distance_m is given)
+    fusion_tau_s: float | None = None
     air_density: str = "logged"
     exclude_dropouts: bool = False
     #: with grade "accelerometer": the logger's fixed offset [m/s²] (None: one offset per
     #: trip, fixed by the trip's elevation change)
     accelerometer_offset_mps2: float | None = None
+    #: with grade "fused": the crossover over driven distance [m] instead (None: in time)
+    fusion_distance_m: float | None = None
+
+    def __post_init__(self):
+        if self.fusion_tau_s is not None and self.fusion_distance_m is not None:
+            raise UserError("[measurement]: give fusion_tau_s or fusion_distance_m, not both")
+
+    @property
+    def fusion_seconds(self) -> float:
+        """The fusion's crossover in time [s] (when it is not over distance)."""
+        return FUSION_TAU_S if self.fusion_tau_s is None else float(self.fusion_tau_s)
+
+    @property
+    def fusion_text(self) -> str:
+        """The crossover as a reader says it: "60 s" or "1000 m"."""
+        return f"{self.fusion_distance_m:g} m" if self.fusion_distance_m is not None else f"{self.fusion_seconds:g} s"
 
     @property
     def identity(self) -> bool:
@@ -73,8 +101,12 @@ class Measurement:
 
     def to_dict(self) -> dict:
         """The ``[measurement]`` table (every key that has a value, so the file says what was
-        done; TOML has no null, so an unset accelerometer offset is left out)."""
-        return {k: v for k, v in asdict(self).items() if v is not None}
+        done; TOML has no null, so an unset accelerometer offset is left out; a fused grade
+        names its crossover, in time or over distance)."""
+        doc = {k: v for k, v in asdict(self).items() if v is not None}
+        if self.grade == "fused" and self.fusion_distance_m is None:
+            doc["fusion_tau_s"] = self.fusion_seconds
+        return doc
 
     def describe(self) -> str:
         """One line for reports."""
@@ -84,7 +116,9 @@ class Measurement:
         if self.power_lag_s:
             parts.append(f"power re-timed by {self.power_lag_s:+g} s (the power signal's lag behind speed)")
         if self.grade == "fused":
-            parts.append(f"grade fused: accelerometer above {self.fusion_tau_s:g} s, logged grade below")
+            parts.append(f"grade fused: accelerometer above {self.fusion_text}, logged grade below"
+                         + ("" if self.fusion_distance_m is None else " (over driven distance: the grade keeps "
+                            "each trip's logged elevation change)"))
         elif self.grade == "accelerometer" and self.accelerometer_offset_mps2 is not None:
             parts.append(f"grade from the accelerometer, less the logger's fixed offset of "
                          f"{self.accelerometer_offset_mps2:+.4g} m/s² (no logged elevation used)")
@@ -101,13 +135,13 @@ def measurement_from_dict(doc, where: str) -> Measurement:
     """A :class:`Measurement` from a ``[measurement]`` table; errors name ``where`` and the key."""
     if not isinstance(doc, dict):
         raise UserError(f"{where} [measurement]: must be a table")
-    known = ("power_lag_s", "grade", "fusion_tau_s", "air_density", "exclude_dropouts",
+    known = ("power_lag_s", "grade", "fusion_tau_s", "fusion_distance_m", "air_density", "exclude_dropouts",
              "accelerometer_offset_mps2")
     bad = sorted(set(doc) - set(known))
     if bad:
         raise UserError(f"{where} [measurement]: unknown key {bad[0]!r} (known: {', '.join(known)})")
     kw = {}
-    for key in ("power_lag_s", "fusion_tau_s", "accelerometer_offset_mps2"):
+    for key in ("power_lag_s", "fusion_tau_s", "fusion_distance_m", "accelerometer_offset_mps2"):
         if key in doc:
             v = doc[key]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
@@ -116,8 +150,12 @@ def measurement_from_dict(doc, where: str) -> Measurement:
     if abs(kw.get("power_lag_s", 0.0)) > MAX_LAG_S:
         raise UserError(f"{where} [measurement] power_lag_s: {kw['power_lag_s']:g} s is beyond "
                         f"±{MAX_LAG_S:g} s (a lag of minutes is no signal timing)")
-    if "fusion_tau_s" in kw and not kw["fusion_tau_s"] > 0:
-        raise UserError(f"{where} [measurement] fusion_tau_s: must be > 0, got {kw['fusion_tau_s']:g}")
+    for key in ("fusion_tau_s", "fusion_distance_m"):
+        if key in kw and not kw[key] > 0:
+            raise UserError(f"{where} [measurement] {key}: must be > 0, got {kw[key]:g}")
+    if "fusion_tau_s" in kw and "fusion_distance_m" in kw:
+        raise UserError(f"{where} [measurement] fusion_distance_m: give it or fusion_tau_s, not both "
+                        "(a crossover over distance or in time)")
     for key, allowed in (("grade", GRADE_SOURCES), ("air_density", AIR_DENSITY_SOURCES)):
         if key in doc:
             if doc[key] not in allowed:
