@@ -17,8 +17,8 @@ once in turn. The i3 is run on a second split fixed by the same rule from anothe
    tracer finds that the accelerometer carries grade the logged grade lacks, the grade is
    fused: accelerometer above a crossover, logged grade below it, which removes the
    accelerometer's mounting-pitch bias), and the equation is recalibrated on it. The
-   crossover is chosen from TAU_GRID_S by trip-grouped 5-fold cross-validation on the
-   training trips (mean absolute trip traction-energy error);
+   crossover (over driven distance, or in time) is chosen from TAU_GRID_S by trip-grouped
+   5-fold cross-validation on the training trips (mean absolute trip traction-energy error);
 4. with at least 5 training trips, physical candidates in forms SUMO can evaluate
    (``fit.physical.PHYSICAL_CANDIDATES``: ρ(T, altitude) in the aero term, c_r(T),
    cold drivetrain drag, recuperation on its own coefficient, inertial power by direction) are chosen forward by the
@@ -60,8 +60,19 @@ HOLD_EVERY = 5
 #: and LOGGER_OFFSET: no logged grade either, the accelerometer less one offset for the logger,
 #: the median over the training trips of what each trip's elevation change implies
 #: (data.corrections.logger_offset_mps2: one mounting pitch; per-trip elevation errors drop out)
+#: Crossovers over driven distance are strings "<L> m" (the fusion's slow part weights each
+#: sample by the road it drove, so the fused grade keeps each trip's logged elevation change:
+#: data.corrections.fused_sin_grade_distance); numbers are crossovers in time [s] (their slow
+#: part weights standing samples too, and the grade's integral drifts from the elevation).
 LOGGER_OFFSET = "logger offset"
-TAU_GRID_S = (30.0, 60.0, 120.0, 300.0, 600.0, math.inf, LOGGER_OFFSET)
+TAU_GRID_S = (60.0, 300.0, "250 m", "500 m", "1000 m", "2000 m", "4000 m", math.inf, LOGGER_OFFSET)
+
+
+def distance_crossover_m(tau) -> float | None:
+    """The crossover [m] of a grid entry "<L> m" (a fusion over driven distance), else None."""
+    if isinstance(tau, str) and tau.endswith(" m"):
+        return float(tau[:-2])
+    return None
 #: choose the grade source a second time with the closed-loop terms (``--recheck-grade``);
 #: off by default: on the shared i3 data it picks the logger offset, whose free grade
 #: coefficient (1.12–1.14) leaves the ±10 % band around 1 and whose held-out trip errors are
@@ -194,19 +205,22 @@ def input_checks(m_train, eq, held) -> dict:
 def measurement_of(path, lag_s: float, accel_grade: bool, tau_s=None, offset_mps2: float | None = None):
     """The corrections of a log (:class:`sumo_drvpw.model.measurement.Measurement`): the power
     read ``lag_s`` later within trips; the grade fused from the accelerometer (fast part) and
-    the logged grade (slow part, free of the accelerometer's mounting pitch), or with
-    ``tau_s`` = ∞ the accelerometer alone with its per-trip offset fixed by the elevation, or
+    the logged grade (slow part, free of the accelerometer's mounting pitch; ``tau_s`` a
+    crossover in time [s] or over driven distance, "<L> m"), or with ``tau_s`` = ∞ the
+    accelerometer alone with its per-trip offset fixed by the elevation, or
     with ``tau_s`` = LOGGER_OFFSET the accelerometer less the logger's offset ``offset_mps2``;
     ρ at the logged altitude (standard atmosphere) when pressure is not logged; logger
     dropouts left out (CHECK_DROPOUTS). The closed-loop equations carry it as their
     ``[measurement]``, so `sumo-drvpw compare` reads new logs the same way."""
     import pyarrow.parquet as pq
 
-    from sumo_drvpw.model.measurement import FUSION_TAU_S, Measurement
+    from sumo_drvpw.model.measurement import Measurement
 
     cols = set(pq.read_schema(path).names)
     acc = _has_accelerometer(path)
-    fused = isinstance(tau_s, (int, float)) and not isinstance(tau_s, bool) and math.isfinite(tau_s)
+    dist_m = distance_crossover_m(tau_s)
+    timed = isinstance(tau_s, (int, float)) and not isinstance(tau_s, bool) and math.isfinite(tau_s)
+    fused = timed or dist_m is not None
     grade, offset = "logged", None
     if accel_grade and acc:
         grade = "accelerometer" if tau_s is not None and not fused else "fused"
@@ -214,7 +228,7 @@ def measurement_of(path, lag_s: float, accel_grade: bool, tau_s=None, offset_mps
             offset = float(offset_mps2)
     return Measurement(
         power_lag_s=float(lag_s), grade=grade, accelerometer_offset_mps2=offset,
-        fusion_tau_s=float(tau_s) if fused else FUSION_TAU_S,
+        fusion_tau_s=float(tau_s) if timed else None, fusion_distance_m=dist_m,
         air_density="altitude" if {"elevation_m", "ambient_c"} <= cols and "pressure_kpa" not in cols else "logged",
         exclude_dropouts=CHECK_DROPOUTS and acc)
 
