@@ -66,13 +66,6 @@ HOLD_EVERY = 5
 #: part weights standing samples too, and the grade's integral drifts from the elevation).
 LOGGER_OFFSET = "logger offset"
 TAU_GRID_S = (60.0, 300.0, "250 m", "500 m", "1000 m", "2000 m", "4000 m", math.inf, LOGGER_OFFSET)
-
-
-def distance_crossover_m(tau) -> float | None:
-    """The crossover [m] of a grid entry "<L> m" (a fusion over driven distance), else None."""
-    if isinstance(tau, str) and tau.endswith(" m"):
-        return float(tau[:-2])
-    return None
 #: choose the grade source a second time with the closed-loop terms (``--recheck-grade``);
 #: off by default: on the shared i3 data it picks the logger offset, whose free grade
 #: coefficient (1.12–1.14) leaves the ±10 % band around 1 and whose held-out trip errors are
@@ -83,6 +76,13 @@ MIN_CV_TRIPS = 5
 #: take logger dropouts (held or linearly filled inputs) out of the usable samples of every
 #: log, training and held out alike, for every equation (fit.input_checks.dropout_mask)
 CHECK_DROPOUTS = True
+
+
+def distance_crossover_m(tau) -> float | None:
+    """The crossover [m] of a grid entry "<L> m" (a fusion over driven distance), else None."""
+    if isinstance(tau, str) and tau.endswith(" m"):
+        return float(tau[:-2])
+    return None
 
 
 def _log(msg):
