@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from sumo_drvpw.data.trips import per_trip_rolling_mean, trip_codes_of
+from sumo_drvpw.data.trips import per_trip_rolling_mean, trip_codes_of, trip_starts
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.air import pressure_at_altitude_kpa
 from sumo_drvpw.model.constants import G, P_STD_KPA
@@ -121,7 +121,7 @@ def distance_mean(x, speed_mps, dt_s, trip_codes, length_m: float) -> np.ndarray
     ds = np.where(np.isfinite(v) & (v > 0), v, 0.0) * np.broadcast_to(np.asarray(dt_s, float), v.shape)
     ds = np.where(np.isfinite(ds), ds, 0.0)
     codes = np.asarray(trip_codes)
-    start = np.r_[True, codes[1:] != codes[:-1]] if len(codes) else np.zeros(0, bool)
+    start = trip_starts(codes) if len(codes) else np.zeros(0, bool)
     # one monotone axis for every trip, each trip set length_m + 1 m beyond the last
     d = np.cumsum(ds) - ds / 2 + np.cumsum(start) * (float(length_m) + 1.0)
     w = np.where(np.isfinite(x), ds, 0.0)
