@@ -422,6 +422,45 @@ def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_
     assert code == 2 and "nothere.sumocfg: no such SUMO config" in err and not (tmp_path / "o3").exists()
 
 
+def test_detectors_sharing_an_output_file_still_write_one_file(tmp_path, capsys):
+    """Detectors declaring the same output file write one file in SUMO (the Bologna
+    scenarios' 66 loops all write e1_output.xml); redirected into OUT/sumo/ they still do
+    (before: the first wrote e1_output.xml and the other 65 a second, renamed file). A
+    different file of the same name, declared in another folder, gets its declaring
+    file's name before it."""
+    import shutil
+
+    builtin = REPO / "sumo_drvpw" / "sim" / "builtin"
+    sc = tmp_path / "sc"
+    (sc / "sub").mkdir(parents=True)
+    for f in ("city.rou.xml", "prius3.vtype.xml"):
+        shutil.copy(builtin / "scenarios" / f, sc / f)
+    loops = "".join(f'<inductionLoop id="L{i}" lane="{lane}" pos="10" period="60" file="loops.xml"/>'
+                    for i, lane in enumerate(("c00c10_0", "c01c00_0", "c00c01_0")))
+    (sc / "det.add.xml").write_text(f"<additional>{loops}</additional>\n")
+    (sc / "sub" / "det.add.xml").write_text(
+        '<additional><inductionLoop id="S" lane="c01c02_0" pos="5" period="60" '
+        'file="loops.xml"/></additional>\n')
+    cfg = sc / "c.sumocfg"
+    cfg.write_text(f"""<configuration>
+    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="city.rou.xml"/>
+           <additional-files value="prius3.vtype.xml,det.add.xml,sub/det.add.xml"/></input>
+    <time><begin value="0"/><end value="120"/><step-length value="0.5"/></time>
+    <report><no-warnings value="true"/></report>
+</configuration>
+""")
+    out = tmp_path / "o"
+    code, err = _cli([cfg, "--out", out, "--no-figures", "--no-progress"], capsys)
+    assert code == 0, err
+    ids = {i.get("id") for i in ET.parse(out / "sumo" / "loops.xml").getroot().iter("interval")}
+    assert ids == {"L0", "L1", "L2"}                       # one file, every loop of it
+    other = {i.get("id") for i in ET.parse(out / "sumo" / "det.loops.xml").getroot().iter("interval")}
+    assert other == {"S"}
+    assert sorted(p.name for p in (out / "sumo").iterdir()) == ["det.loops.xml", "loops.xml"]
+    assert "det.add.xml: loops.xml;" in err and err.count("loops.xml") == 2
+    assert not (sc / "loops.xml").exists() and not (sc / "sub" / "loops.xml").exists()
+
+
 def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
     """A SUMO config may give its times as SUMO reads them, "h:m:s" (SUMO's string2time;
     e.g. the fokr_bs_demo game config shipped with SUMO, begin "15:0:0"), and --begin/--end

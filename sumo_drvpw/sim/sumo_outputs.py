@@ -77,14 +77,16 @@ def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
                                 ) -> tuple[list[str], dict[str, list[str]]]:
     """Copies of the additional files that declare outputs (``edgeData file=…``, detectors
     …; themselves or in a file they ``<include href>``), written into ``work``, whose
-    outputs go into ``folder`` under their own file names (a name two declarations share
-    gets the declaring file's name before it) and whose other relative paths (inputs such
+    outputs go into ``folder`` under their own file names (declarations of the same file
+    write one file, as SUMO's do; two different files of the same name: the second gets
+    the declaring file's name before it) and whose other relative paths (inputs such
     as a rerouter's ``file``) point at the original files. Returns the command-line options
     loading the copies instead of the originals (``--additional-files``; none when nothing
     is declared) and the outputs moved, per declaring file (its output names). The
     originals are not touched."""
     moved: dict[str, list[str]] = {}
     used: set[str] = set()
+    names: dict[Path, str] = {}  # output file as declared (resolved) → its name in ``folder``
     copies: dict[Path, Path] = {}
 
     def load(add: Path, depth: int) -> Path:
@@ -103,11 +105,19 @@ def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
             tag = el.tag.split("}")[-1]
             key = output_attribute(tag)
             if key and el.get(key):
-                name = Path(el.get(key)).name
-                if name in used:
-                    name = f"{add.name.split('.')[0]}.{name}"
-                used.add(name)
-                moved.setdefault(str(add), []).append(name)
+                orig = (add.parent / el.get(key)).resolve()
+                name = names.get(orig)
+                if name is None:  # a file several declarations share stays one file
+                    name = base = Path(el.get(key)).name
+                    k = 1
+                    while name in used:
+                        name = f"{add.name.split('.')[0]}.{base}" if k == 1 else \
+                            f"{add.name.split('.')[0]}.{k}.{base}"
+                        k += 1
+                    used.add(name)
+                    names[orig] = name
+                if name not in moved.get(str(add), []):
+                    moved.setdefault(str(add), []).append(name)
                 el.set(key, str(folder.resolve() / name))
                 changed = True
             elif tag == "include" and el.get("href") and depth < 10:
