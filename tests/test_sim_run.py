@@ -461,6 +461,73 @@ def test_detectors_sharing_an_output_file_still_write_one_file(tmp_path, capsys)
     assert not (sc / "loops.xml").exists() and not (sc / "sub" / "loops.xml").exists()
 
 
+def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(tmp_path, capsys):
+    """vClass ignoring/custom1/custom2 says what a vehicle may use, not what it is: real
+    scenarios give it to cars that ignore lane permissions (Bologna: emissionClass
+    HBEFA2/P_7_7) and to "restricted" vans and trucks (DLR's Brunswick, custom1 with
+    HBEFA3/LDV_D_EU4, custom2 with HBEFA3/HDV_D_EU4). Such a vType is booked as the vehicle
+    its emissionClass (else its guiShape) names: that class's equations and default mass,
+    listed in a warning and in summary.json; one whose attributes name no vehicle is not
+    booked, and the warning says how to book it; a scenario's vclasses.<vClass> wins."""
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    (sc / "r.rou.xml").write_text("""<routes>
+    <vType id="car_ign" vClass="ignoring" emissionClass="HBEFA2/P_7_7" guiShape="delivery"/>
+    <vType id="car" vClass="passenger" mass="1478.8"/>
+    <vType id="van_c1" vClass="custom1" emissionClass="HBEFA3/LDV_D_EU4"/>
+    <vType id="truck_c2" vClass="custom2" emissionClass="HBEFA4/RT_le7.5t_Euro-VI_A-C"/>
+    <vType id="coach_c2" vClass="custom2" guiShape="bus/overland" mass="15000"/>
+    <vType id="ev_c1" vClass="custom1" emissionClass="Energy/unknown"/>
+    <vehicle id="i" type="car_ign" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
+    <vehicle id="p" type="car" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
+    <vehicle id="d" type="van_c1" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
+    <vehicle id="t" type="truck_c2" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
+    <vehicle id="c" type="coach_c2" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
+    <vehicle id="e" type="ev_c1" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
+</routes>
+""")
+    cfg = sc / "c.sumocfg"
+    cfg.write_text(f"""<configuration>
+    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
+    <time><begin value="0"/><end value="120"/><step-length value="0.5"/></time>
+    <report><no-warnings value="true"/></report>
+</configuration>
+""")
+    out = tmp_path / "o"
+    code, err = _cli([cfg, "--out", out, "--no-figures", "--no-progress"], capsys)
+    assert code == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    booked = s["assumptions"]["booked_as"]
+    assert {k: v["booked_as"] for k, v in booked.items()} == {
+        "car_ign": "passenger", "van_c1": "delivery", "truck_c2": "truck", "coach_c2": "coach"}
+    assert booked["car_ign"]["from"] == "emissionClass HBEFA2/P_7_7"      # before its shape
+    assert booked["coach_c2"]["from"] == "guiShape bus/overland"
+    assert s["skipped"]["by_vtype"] == {"ev_c1": 1}
+    veh = pd.read_parquet(out / "vehicles.parquet")
+    eqs = veh.groupby("vehicle")["equation"].apply(set).to_dict()
+    assert eqs["i"] == eqs["p"] == {"vsp_ldv1999", "drvpw_prius3", "moves_passenger_car"}
+    assert eqs["d"] == {"moves_light_commercial_truck"} and eqs["t"] == {"moves_single_unit_truck"}
+    assert eqs["c"] == {"moves_intercity_bus"} and "e" not in eqs
+    mass = veh.groupby("vehicle")["mass_kg"].first()
+    assert (mass["i"], mass["d"], mass["t"], mass["c"]) == (1478.8, 2059.7, 8538.9, 15000.0)
+    assert veh.set_index(["vehicle", "equation"]).loc[("i", "vsp_ldv1999"), "vclass"] == "ignoring"
+    tr = veh.set_index(["vehicle", "equation"])["traction_total_j"]
+    assert all(tr[(v, e)] > 0 for v, e in (("i", "vsp_ldv1999"), ("d", "moves_light_commercial_truck"),
+                                           ("t", "moves_single_unit_truck")))
+    assert "ignoring → passenger: car_ign (emissionClass HBEFA2/P_7_7)" in err
+    assert "custom1 1" in err and "vclasses.custom1.equations" in err
+    # a scenario file's vclasses.custom1 books the one the attributes could not name
+    (sc / "s.toml").write_text(
+        'equations = ["moves_light_commercial_truck", "vsp_ldv1999"]\n[sumo]\nconfig = "c.sumocfg"\n'
+        '[vclasses.custom1]\nequations = ["moves_light_commercial_truck"]\nmass_kg = 2500\n')
+    code, err = _cli([sc / "s.toml", "--out", tmp_path / "o2", "--no-figures", "--no-progress"], capsys)
+    assert code == 0, err
+    s2 = json.loads((tmp_path / "o2" / "summary.json").read_text())
+    assert not s2["skipped"]["by_vtype"].get("ev_c1") and "van_c1" not in s2["assumptions"]["booked_as"]
+    v2 = pd.read_parquet(tmp_path / "o2" / "vehicles.parquet").groupby("vehicle")["mass_kg"].first()
+    assert v2["e"] == v2["d"] == 2500.0
+
+
 def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
     """A SUMO config may give its times as SUMO reads them, "h:m:s" (SUMO's string2time;
     e.g. the fokr_bs_demo game config shipped with SUMO, begin "15:0:0"), and --begin/--end

@@ -39,7 +39,7 @@ from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.outputs import RunResult, TraceWriter, summary_dict
 from sumo_drvpw.sim.scenario import Scenario, load_scenario, resolve_equation
-from sumo_drvpw.sim.vtypes import read_vtypes
+from sumo_drvpw.sim.vtypes import GENERIC_VCLASSES, read_vtypes
 
 __all__ = ["Accountant", "RunResult"]
 
@@ -230,7 +230,8 @@ class Accountant(_Listener):
             "skipped": {k: dict(sorted(v.items())) for k, v in self.resolver.skipped.items()},
             "excluded_by_vehicles_vtypes": self.resolver.excluded,
             "vehicles_in_memory_peak": int(led.peak_held),
-            "assumptions": {"default_masses": dict(sorted(self.resolver.assumptions.items()))},
+            "assumptions": {"default_masses": dict(sorted(self.resolver.assumptions.items())),
+                            "booked_as": dict(sorted(self.resolver.booked_as.items()))},
         }
         summary_extra.update(extra or {})
         warnings = network_warnings(net)
@@ -240,10 +241,17 @@ class Accountant(_Listener):
                 for vt, a in sorted(self.resolver.assumptions.items()))
                 + " (summary.json assumptions; set vtypes.<id>.mass_kg or "
                 "vclasses.<vClass>.mass_kg to override)")
+        if self.resolver.booked_as:
+            warnings.append(booked_as_warning(self.resolver.booked_as))
         if self.resolver.skipped["by_vclass"]:
+            skipped = self.resolver.skipped["by_vclass"]
+            generic = sorted(c for c in skipped if c in GENERIC_VCLASSES)
             warnings.append("vehicles of vClasses no equation is made for were not booked: "
-                            + ", ".join(f"{c} {n}" for c, n in
-                                        sorted(self.resolver.skipped["by_vclass"].items())))
+                            + ", ".join(f"{c} {n}" for c, n in sorted(skipped.items()))
+                            + (f" (vClass {', '.join(generic)} says what a vehicle may use, not "
+                               "what it is, and their vTypes' emissionClass and guiShape name no "
+                               f"vehicle: set vclasses.{generic[0]}.equations and mass_kg in a "
+                               "scenario file)" if generic else ""))
         clipped = summary_extra["network"]["slope_clipped_lanes"]
         if clipped:
             warnings.append(f"{int(led.clipped)} vehicle-steps on slopes beyond "
@@ -290,3 +298,16 @@ def network_warnings(net) -> list[str]:
     return [f"network {net.path.name} has no elevation (no z in any lane shape): every slope "
             "is 0, so the grade term is 0; build it with elevation (netconvert "
             "--heightmap.geotiffs / OSM ele) for hilly areas"]
+
+
+def booked_as_warning(booked_as: dict[str, dict]) -> str:
+    """One line: the generic-vClass vTypes booked as the vehicle their emissionClass or
+    guiShape names, grouped by vClass → vehicle (up to three vType ids each)."""
+    groups: dict[tuple[str, str], list[str]] = {}
+    for vt, b in sorted(booked_as.items()):
+        groups.setdefault((b["vclass"], b["booked_as"]), []).append(f"{vt} ({b['from']})")
+    parts = [f"{c} → {body}: " + ", ".join(v[:3]) + (f" and {len(v) - 3} more" if len(v) > 3 else "")
+             for (c, body), v in sorted(groups.items())]
+    return ("vTypes of a vClass that names no vehicle were booked as the vehicle their "
+            "emissionClass or guiShape names: " + "; ".join(parts)
+            + " (summary.json assumptions.booked_as; vclasses.<vClass>.equations chooses instead)")

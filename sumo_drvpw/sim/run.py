@@ -29,6 +29,11 @@ class VTypeResolver:
     the files > ``passenger`` (SUMO's default).
     Equations: scenario ``vtypes.<id>.equations`` > param ``drvpw.equation`` > scenario
     ``vclasses.<vClass>.equations`` > every equation whose ``vclasses`` contain the vClass.
+    A vType of a generic vClass (``ignoring``, ``custom1``, ``custom2``:
+    :data:`sumo_drvpw.sim.vtypes.GENERIC_VCLASSES`) that none of these gives an equation is
+    booked as the road vehicle its ``emissionClass`` or ``guiShape`` names
+    (:func:`sumo_drvpw.sim.vtypes.body_vclass`; its class's equations, ``vclasses.<that>``
+    settings and default mass), listed in :attr:`booked_as`.
     A vType with none is not accounted and counted in :attr:`skipped` (by vClass and vType).
     Mass: scenario ``vtypes.<id>.mass_kg`` > param ``drvpw.mass`` > ``mass`` attribute (or
     SUMO's deprecated ``vehicleMass`` param) plus the ``loading`` param, written in the
@@ -50,6 +55,9 @@ class VTypeResolver:
         self.excluded = 0
         #: vType → {"vclass", "mass_kg", "source"} for masses taken from class defaults
         self.assumptions: dict[str, dict] = {}
+        #: vType → {"vclass", "booked_as", "from"}: generic-vClass vTypes booked as the
+        #: vehicle their emissionClass or guiShape names
+        self.booked_as: dict[str, dict] = {}
 
     def _param(self, vt: str, key: str) -> str:
         if self.conn is None:
@@ -68,6 +76,10 @@ class VTypeResolver:
             except Exception:
                 pass
         return (info.vclass if info is not None and info.vclass else None) or "passenger"
+
+    def _made_for(self, vclass: str) -> list[str]:
+        """The equations made for a vClass (plain names: any)."""
+        return [n for n in self.names if self.vclasses[n] is None or vclass in self.vclasses[n]]
 
     def __call__(self, vt: str, vid: str):
         out = self.cache.get(vt)
@@ -88,13 +100,15 @@ class VTypeResolver:
             self.skipped[key][k] = self.skipped[key].get(k, 0) + 1
 
     def _resolve(self, vt: str, vid: str):
-        from sumo_drvpw.sim.vtypes import DEFAULT_MASS_KG, DEFAULT_MASS_SOURCE
+        from sumo_drvpw.sim.vtypes import (DEFAULT_MASS_KG, DEFAULT_MASS_SOURCE, GENERIC_VCLASSES,
+                                           body_vclass)
 
         sc = self.sc
         data = sc.vtype_data.get(vt, {})
         info = self.files.get(vt)
         vclass = self._vclass(vt, info)
-        cdata = getattr(sc, "vclass_data", {}).get(vclass, {})
+        sc_classes = getattr(sc, "vclass_data", {})
+        cdata = sc_classes.get(vclass, {})
         if sc.vtype_filter is not None and vt not in sc.vtype_filter:
             return (np.nan, np.zeros(len(self.names)), False, vclass, "filter")
         eq = data.get("equations")
@@ -102,11 +116,23 @@ class VTypeResolver:
             one = (info.equation if info is not None else None) or self._param(vt, "drvpw.equation")
             eq = [one] if one else cdata.get("equations")
         if eq is None:
-            eq = [n for n in self.names
-                  if self.vclasses[n] is None or vclass in self.vclasses[n]]
+            eq = self._made_for(vclass)
         app = np.array([1.0 if n in eq else 0.0 for n in self.names])
+        # a generic vClass says what the vehicle may use, not what it is: its emission
+        # class or shape may name the vehicle (its equations, class settings, default mass)
+        named = body_vclass(info.emission_class, info.gui_shape) \
+            if vclass in GENERIC_VCLASSES and info is not None else None
+        body = named[0] if named is not None else vclass
+        if not app.any() and named is not None and data.get("equations") is None \
+                and cdata.get("equations") is None:
+            eq = sc_classes.get(body, {}).get("equations") or self._made_for(body)
+            app = np.array([1.0 if n in eq else 0.0 for n in self.names])
+            if app.any():
+                self.booked_as[vt] = {"vclass": vclass, "booked_as": body, "from": named[1]}
         if not app.any():
             return (np.nan, app, False, vclass, "vclass")
+        if named is not None and cdata.get("mass_kg") is None:
+            cdata = sc_classes.get(body, {})
         mass = data.get("mass_kg")
         if mass is None and info is not None:
             mass = info.mass_kg
@@ -121,10 +147,10 @@ class VTypeResolver:
         loading = info.loading_kg if info is not None else 0.0
         if mass is None and cdata.get("mass_kg") is not None:
             mass = cdata["mass_kg"] + loading
-        if mass is None and getattr(sc, "default_masses", True) and vclass in DEFAULT_MASS_KG:
-            mass = DEFAULT_MASS_KG[vclass] + loading
-            self.assumptions[vt] = {"vclass": vclass, "mass_kg": mass,
-                                    "source": DEFAULT_MASS_SOURCE[vclass]
+        if mass is None and getattr(sc, "default_masses", True) and body in DEFAULT_MASS_KG:
+            mass = DEFAULT_MASS_KG[body] + loading
+            self.assumptions[vt] = {"vclass": body, "mass_kg": mass,
+                                    "source": DEFAULT_MASS_SOURCE[body]
                                     + (f" + loading {loading:g} kg" if loading else "")}
         if mass is None:
             where = f" (defined in {info.source})" if info is not None else \

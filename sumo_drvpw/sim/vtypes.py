@@ -48,6 +48,53 @@ DEFAULT_MASS_SOURCE = {
 }
 
 
+#: vClasses that say what a vehicle may use, not what it is: SUMO's ``ignoring`` (ignores
+#: lane permissions) and the user-defined ``custom1``/``custom2`` (e.g. the DLR scenarios'
+#: "restricted" delivery vans and trucks). A vType of these classes is booked as the road
+#: vehicle its own ``emissionClass`` or ``guiShape`` names (:func:`body_vclass`).
+GENERIC_VCLASSES = ("ignoring", "custom1", "custom2")
+
+#: Emission-class name prefixes (after the model, e.g. ``HBEFA3/``) → the vClass whose
+#: vehicle they describe, longest prefix first: HBEFA 2 (``P_``, ``LDV``, ``HDV``), HBEFA 3
+#: (``PC``, ``LDV``, ``HDV``, ``Bus``, ``Coach``, ``MC``, ``Moped``), HBEFA 4 (``PC``,
+#: ``LCV``, ``RT`` rigid truck, ``TT`` tractor-trailer, ``UBus``, ``Coach``, ``MC``,
+#: ``Moped``) and PHEMlight (``PC``, ``LCV``, ``HDV_RB``/``HDV_RT`` rigid, ``HDV_TT``
+#: tractor-trailer, ``Bus``, ``Coach``, ``MC``) as SUMO's emission-model pages list them.
+#: Classes that name no body (``Energy/…``, ``MMPEVEM/…``, ``zero``) are not here.
+EMISSION_CLASS_BODY = (
+    ("hdv_tt", "trailer"), ("hdv_rb", "truck"), ("hdv_rt", "truck"), ("ubus", "bus"),
+    ("coach", "coach"), ("moped", "moped"), ("bus", "bus"), ("ldv", "delivery"),
+    ("lcv", "delivery"), ("hdv", "truck"), ("rt_", "truck"), ("tt_", "trailer"),
+    ("pc", "passenger"), ("pkw", "passenger"), ("p_", "passenger"), ("mc_", "motorcycle"),
+    ("mc", "motorcycle"),
+)
+#: SUMO ``guiShape`` values (its vehicle shapes) → the vClass whose vehicle they draw
+GUI_SHAPE_BODY = {
+    "passenger": "passenger", "passenger/sedan": "passenger",
+    "passenger/hatchback": "passenger", "passenger/wagon": "passenger",
+    "passenger/van": "passenger", "taxi": "passenger", "police": "passenger",
+    "evehicle": "passenger", "delivery": "delivery", "emergency": "emergency",
+    "firebrigade": "truck", "truck": "truck", "truck/semitrailer": "trailer",
+    "truck/trailer": "trailer", "bus": "bus", "bus/city": "bus", "bus/flexible": "bus",
+    "bus/trolley": "bus", "bus/overland": "coach", "bus/coach": "coach",
+    "motorcycle": "motorcycle", "moped": "moped", "scooter": "moped",
+}
+
+
+def body_vclass(emission_class: str | None, gui_shape: str | None) -> tuple[str, str] | None:
+    """The road vClass whose vehicle a vType's ``emissionClass`` (first: it is what the
+    modeller chose for energy) or else its ``guiShape`` names, with the attribute it came
+    from; None when neither names one (e.g. ``Energy/unknown``, no shape)."""
+    if emission_class:
+        name = emission_class.split("/", 1)[-1].strip().lower()
+        for prefix, vclass in EMISSION_CLASS_BODY:
+            if name.startswith(prefix):
+                return vclass, f"emissionClass {emission_class}"
+    if gui_shape and gui_shape.strip().lower() in GUI_SHAPE_BODY:
+        return GUI_SHAPE_BODY[gui_shape.strip().lower()], f"guiShape {gui_shape}"
+    return None
+
+
 @dataclass
 class VTypeInfo:
     """What the files say about one vType: mass [kg] (None: not given), equation, source,
@@ -62,6 +109,9 @@ class VTypeInfo:
     #: included in :attr:`mass_kg` when that comes from SUMO's mass, added by the run to a
     #: class mass when the vType gives none
     loading_kg: float = 0.0
+    #: the ``emissionClass`` and ``guiShape`` attributes as written (None: not given)
+    emission_class: str | None = None
+    gui_shape: str | None = None
 
 
 def _mass(where: str, key: str, val: str | None, zero: bool = False) -> float | None:
@@ -109,7 +159,9 @@ def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
                     if mass is None and sumo_mass is not None:
                         mass = sumo_mass + loading
                     out[vid] = VTypeInfo(vid, mass, params.get("drvpw.equation") or None,
-                                         str(path), el.attrib.get("vClass"), loading)
+                                         str(path), el.attrib.get("vClass"), loading,
+                                         el.attrib.get("emissionClass") or None,
+                                         el.attrib.get("guiShape") or None)
                     el.clear()
         except ET.ParseError as e:
             raise UserError(f"{path}: not valid XML: {e}") from None
