@@ -68,6 +68,37 @@ def test_every_name_in_the_doc_exists():
     assert not missing, f"docs/architecture.md names what does not exist: {missing}"
 
 
+def _user_docs() -> list[Path]:
+    return [PKG.parent / "README.md"] + sorted((PKG.parent / "docs").glob("*.md"))
+
+
+def test_the_docs_import_and_cite_what_exists():
+    """Every `from sumo_drvpw… import …` / `import sumo_drvpw…` line in the README and
+    docs/*.md imports, and every `sumo_drvpw/….py` path they cite exists (a regrouping
+    left `sumo_drvpw.adapters` and `sumo_drvpw/constants.py` in them)."""
+    import importlib
+
+    broken = []
+    for doc in _user_docs():
+        text = doc.read_text(encoding="utf-8")
+        for line in re.findall(r"^\s*((?:from sumo_drvpw[\w.]* import [\w, ]+)|(?:import sumo_drvpw[\w.]*))",
+                               text, re.M):
+            mod, _, names = line.replace("from ", "", 1).partition(" import ")
+            if line.startswith("import "):
+                mod, names = line.split()[1], ""
+            try:
+                m = importlib.import_module(mod)
+                for n in filter(None, (x.strip() for x in names.split(","))):
+                    if not hasattr(m, n):
+                        importlib.import_module(f"{mod}.{n}")
+            except ImportError:
+                broken.append(f"{doc.name}: {line.strip()}")
+        for path in re.findall(r"`(sumo_drvpw/[\w/]+\.py)", text):
+            if not (PKG.parent / path).exists():
+                broken.append(f"{doc.name}: {path}")
+    assert not broken, f"the docs cite what does not exist: {broken}"
+
+
 def test_every_package_is_in_the_doc():
     named = _doc_names()
     absent = [p for p in _packages() if p not in named]
