@@ -23,6 +23,11 @@ def configure(parser) -> None:
                         help="canonical drive log to write (Parquet)")
     parser.add_argument("--columns", metavar="mapping.toml",
                         help="column mapping (format 'columns' only)")
+    parser.add_argument("--wind", metavar="SPEED@FROM",
+                        help="the day's wind (e.g. a weather station's record): speed [m/s] and the "
+                             "direction it blows from [° clockwise from north], e.g. 4.2@210; writes "
+                             "wind_mps (along each sample's heading, tailwind positive) so a calibration "
+                             "sees the air speed. Import the trips of one wind together")
 
 
 def format_report(report: dict) -> str:
@@ -72,10 +77,24 @@ def main(args) -> int:
     from sumo_drvpw.fileio import check_output_path
 
     check_output_path(out, existing_paths(args.src, args.columns), "file")  # never onto an input
+    wind = None
+    if args.wind is not None:
+        from sumo_drvpw.data.wind import parse_wind
+
+        wind = parse_wind(args.wind, "--wind")
     df, report = read(args.format, args.src, columns=args.columns)
     if len(df) < 2:  # a drive log needs two samples (sumo_drvpw.data.log)
         raise UserError(f"{', '.join(map(str, args.src))}: {len(df)} sample(s) kept of "
                         f"{report['rows_read']} read; nothing sensible to import")
+    if wind is not None:
+        from sumo_drvpw.data.wind import add_wind
+
+        df, report["wind"] = add_wind(df, *wind, where=", ".join(map(str, args.src)))
+        w = report["wind"]
+        report["notes"].append(
+            f"wind {w['speed_mps']:g} m/s from {w['from_deg']:g}° written as wind_mps along the heading "
+            f"({w['heading_source']}; {w['samples_with_heading']} of {w['samples']} samples have one, "
+            "the others are taken as still air)")
     report["out"] = str(out)
     write_log(df, report, out)
     print(format_report(report))
