@@ -73,6 +73,10 @@ TAU_GRID_S = (60.0, 300.0, "250 m", "500 m", "1000 m", "2000 m", "4000 m", math.
 RECHECK_GRADE = False
 #: fewest training trips for trip-grouped cross-validation of choices (tau, physical terms)
 MIN_CV_TRIPS = 5
+#: cars whose trips are one day's drives in different directions (an out-and-back pair):
+#: their logs imply one steady wind (wind_check). Not the i3 (no heading) nor the JLU car
+#: (trips of different days: no common wind)
+WIND_CHECK = ("prius2",)
 #: take logger dropouts (held or linearly filled inputs) out of the usable samples of every
 #: log, training and held out alike, for every equation (fit.input_checks.dropout_mask)
 CHECK_DROPOUTS = True
@@ -484,6 +488,71 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
     return {"name": name, "vehicle": vehicle, "note": note, "runs": runs}
 
 
+def wind_check(name, df, vehicle, car, roles=None) -> dict | None:
+    """A steady wind over trips of one day driven in different directions (fit.wind): the
+    wind the car's trips imply together with the road load of its closed-loop equation
+    (coefficients held as the first fold's constrained fit held them), the drag with and
+    without it, each trip's traction-energy error with and without it (both trips in the
+    fit: a diagnosis, not a held-out result), and each fold again on logs that carry that
+    wind (``import --wind``; the wind came from both trips, so this shows what a weather
+    record of the day would do, not a held-out result). None without a heading or runs."""
+    from sumo_drvpw.data.wind import HEADING_COLUMNS, add_wind, heading_of
+    from sumo_drvpw.fit.physical import physical_reading
+    from sumo_drvpw.fit.wind import estimate_wind
+    from sumo_drvpw.model.equations import Equation
+
+    runs = car.get("runs") or []
+    if not runs or not (set(HEADING_COLUMNS) & set(df.columns)):
+        return None
+    lag = float(np.mean([r["lag"] for r in runs]))
+    eq0 = runs[0]["final_eq"]
+    terms = list(eq0.terms)
+    fixed = {t: 1.0 for t in ("acc", "grade") if eq0.terms.get(t) == 1.0}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = write_subset(df, [], Path(tmp) / "all.parquet", keep=False, roles=roles)
+        m = corrected_measured(path, vehicle, lag, False)
+        heading, source = heading_of(m.log.df)
+        x, y, use, dt, trip = _cv_args(m)
+        w = estimate_wind(x, y, use, heading, terms, fixed)
+        rho = float(np.mean(x.rho[use]))
+        from sumo_drvpw.fit.compare import trip_energy
+        from sumo_drvpw.model.terms import term_matrix
+        still = Equation("still", w["terms_still_air"]).power(x)
+        calm = Equation("calm", w["terms"]).power(x)
+        x_wind = x.take(np.arange(len(y)))
+        from sumo_drvpw.data.wind import tailwind_mps
+        x_wind.wind = tailwind_mps(heading, w["speed_mps"], w["from_deg"])
+        windy = Equation("windy", w["terms"]).power(x_wind)
+        per = {}
+        for label, p in (("still air", still), ("with the wind", windy), ("calm", calm)):
+            te = trip_energy(p[use], y[use], dt[use], trip[use])["trips"]
+            per[label] = {t: v["error"] for t, v in te.items()}
+        # each fold again on logs that carry the wind (constrained as the fold's fit was)
+        windy_df, _ = add_wind(df, w["speed_mps"], w["from_deg"])
+        folds = {}
+        for r in runs:
+            held = r["held"]
+            train = write_subset(windy_df, held, Path(tmp) / "wtrain.parquet", keep=False, roles=roles)
+            test = write_subset(windy_df, held, Path(tmp) / "wtest.parquet", keep=True, roles=roles)
+            keep = {t: v for t, v in r["final_eq"].terms.items() if t in fixed}
+            eq, info = fit_terms(corrected_measured(train, vehicle, r["lag"], False), terms,
+                                 f"{name}_wind", keep)
+            got = evaluate(corrected_measured(test, vehicle, r["lag"], False), [eq])[eq.name]
+            folds[r["tag"]] = {"errors": {t: v["error"] for t, v in got["trip_energy"]["trips"].items()},
+                               "terms": eq.terms,
+                               "reading": physical_reading(eq.terms, rho)}
+    read = lambda t: physical_reading(t, rho).get("aero", {}).get("value", math.nan)  # noqa: E731
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    body = load_vehicle(vehicle).body or {}
+    published = (body["drag_coefficient"] * body["frontal_area_m2"]
+                 if {"drag_coefficient", "frontal_area_m2"} <= set(body) else None)
+    return {"wind": w, "heading_source": source, "lag_s": lag, "fixed": fixed, "rho": rho,
+            "cda_published": published,
+            "cda_still": read(w["terms_still_air"]), "cda_wind": read(w["terms"]),
+            "trips": per, "folds": folds}
+
+
 #: fewest trips for a deliverable fitted on all of them (beside the held-out splits)
 MIN_ALL_TRIPS = 10
 
@@ -652,6 +721,7 @@ def main() -> int:
             continue
         df, rep = read(fmt, data / folder)
         car = close_loop(key, df, vehicle, out / "closing-the-loop", note=note, roles=rep.get("roles"))
+        car["wind"] = wind_check(key, df, vehicle, car, roles=rep.get("roles")) if key in WIND_CHECK else None
         car["all_trips"] = final_fit(key, df, vehicle, out / "closing-the-loop", roles=rep.get("roles"))
         cars.append(car)
     if not only or "jlu" in only:
