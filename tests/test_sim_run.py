@@ -461,6 +461,27 @@ def test_detectors_sharing_an_output_file_still_write_one_file(tmp_path, capsys)
     assert not (sc / "loops.xml").exists() and not (sc / "sub" / "loops.xml").exists()
 
 
+def _city_config(folder: Path, routes: str, begin: str = "0", end: str = "120") -> Path:
+    """A SUMO config on the built-in city network with the route file ``routes`` (written
+    as r.rou.xml), 0.5-s steps, SUMO's warnings off; returns its path."""
+    (folder / "r.rou.xml").write_text(routes)
+    cfg = folder / "c.sumocfg"
+    cfg.write_text(f"""<configuration>
+    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
+    <time><begin value="{begin}"/><end value="{end}"/><step-length value="0.5"/></time>
+    <report><no-warnings value="true"/></report>
+</configuration>
+""")
+    return cfg
+
+
+def _run_summary(cfg: Path, out: Path, capsys) -> tuple[dict, str]:
+    """Run a config with the CLI (no figures); its summary.json and stderr."""
+    code, err = _cli([cfg, "--out", out, "--no-figures", "--no-progress"], capsys)
+    assert code == 0, err
+    return json.loads((out / "summary.json").read_text()), err
+
+
 def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(tmp_path, capsys):
     """vClass ignoring/custom1/custom2 says what a vehicle may use, not what it is: real
     scenarios give it to cars that ignore lane permissions (Bologna: emissionClass
@@ -471,7 +492,7 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     booked, and the warning says how to book it; a scenario's vclasses.<vClass> wins."""
     sc = tmp_path / "sc"
     sc.mkdir()
-    (sc / "r.rou.xml").write_text("""<routes>
+    cfg = _city_config(sc, """<routes>
     <vType id="car_ign" vClass="ignoring" emissionClass="HBEFA2/P_7_7" guiShape="delivery"/>
     <vType id="car" vClass="passenger" mass="1478.8"/>
     <vType id="van_c1" vClass="custom1" emissionClass="HBEFA3/LDV_D_EU4"/>
@@ -486,17 +507,8 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     <vehicle id="e" type="ev_c1" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
 </routes>
 """)
-    cfg = sc / "c.sumocfg"
-    cfg.write_text(f"""<configuration>
-    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
-    <time><begin value="0"/><end value="120"/><step-length value="0.5"/></time>
-    <report><no-warnings value="true"/></report>
-</configuration>
-""")
     out = tmp_path / "o"
-    code, err = _cli([cfg, "--out", out, "--no-figures", "--no-progress"], capsys)
-    assert code == 0, err
-    s = json.loads((out / "summary.json").read_text())
+    s, err = _run_summary(cfg, out, capsys)
     booked = s["assumptions"]["booked_as"]
     assert {k: v["booked_as"] for k, v in booked.items()} == {
         "car_ign": "passenger", "van_c1": "delivery", "truck_c2": "truck", "coach_c2": "coach"}
@@ -535,7 +547,7 @@ def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
     book it (before: not booked, counted as skipped), and vClass emergency a van's."""
     sc = tmp_path / "sc"
     sc.mkdir()
-    (sc / "r.rou.xml").write_text("""<routes>
+    cfg = _city_config(sc, """<routes>
     <vType id="vipcar" vClass="vip" mass="1600"/>
     <vType id="car" vClass="passenger" mass="1600"/>
     <vType id="ambulance" vClass="emergency"/>
@@ -543,18 +555,9 @@ def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
     <vehicle id="e" type="ambulance" depart="36000" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
     <vehicle id="p" type="car" depart="36000" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
 </routes>
-""")
-    cfg = sc / "c.sumocfg"
-    cfg.write_text(f"""<configuration>
-    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
-    <time><begin value="10:00:00"/><end value="0:10:02:00"/><step-length value="0.5"/></time>
-    <report><no-warnings value="true"/></report>
-</configuration>
-""")
+""", begin="10:00:00", end="0:10:02:00")
     out = tmp_path / "o"
-    code, err = _cli([cfg, "--out", out, "--no-figures", "--no-progress"], capsys)
-    assert code == 0, err
-    s = json.loads((out / "summary.json").read_text())
+    s, err = _run_summary(cfg, out, capsys)
     assert (s["begin_s"], s["end_s"]) == (36000.0, 36120.0) and s["steps"] == 240
     assert s["vehicles"] == 3 and not s["skipped"]["by_vclass"]
     # the vip car and the passenger car, same mass and route: both booked by the car equations
