@@ -547,8 +547,10 @@ def wind_check(name, df, vehicle, car, roles=None) -> dict | None:
     body = load_vehicle(vehicle).body or {}
     published = (body["drag_coefficient"] * body["frontal_area_m2"]
                  if {"drag_coefficient", "frontal_area_m2"} <= set(body) else None)
+    times = ({t: [str(g.iloc[0]), str(g.iloc[-1])] for t, g in df.groupby("trip_id")["gps_time"]}
+             if "gps_time" in df else {})
     return {"wind": w, "heading_source": source, "lag_s": lag, "fixed": fixed, "rho": rho,
-            "cda_published": published,
+            "cda_published": published, "times": times,
             "cda_still": read(w["terms_still_air"]), "cda_wind": read(w["terms"]),
             "trips": per, "folds": folds}
 

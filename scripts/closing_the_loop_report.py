@@ -154,7 +154,10 @@ def _render_wind(w, car) -> list[str]:
             for run in car.get("runs", []) for tag in [run["tag"]]}
     return [
         "**Direction check: a steady wind** (`fit/wind.py`; both trips in one fit, so a diagnosis, not a "
-        "held-out result). The trips were driven in opposite directions on one day, and the folds below "
+        "held-out result). The trips were driven in opposite directions on one day"
+        + (" (" + "; ".join(f"{t} {a} – {b}" for t, (a, b) in sorted(w["times"].items(), key=lambda i: i[1][0]))
+           + ", the logs' GPS time)" if w.get("times") else "")
+        + ", and the folds below "
         "err by the same size in opposite directions: the signature of a wind along the road, which a "
         "calibration on one direction puts into its aero coefficient. Fitted with the road load "
         f"(power re-timed by {w['lag_s']:+.2f} s; held: {fixed}; heading from {w['heading_source']}; "

@@ -55,7 +55,7 @@ DEFAULT_MASS_SOURCE = {
 GENERIC_VCLASSES = ("ignoring", "custom1", "custom2")
 
 #: Emission-class name prefixes (after the model, e.g. ``HBEFA3/``) → the vClass whose
-#: vehicle they describe, longest prefix first: HBEFA 2 (``P_``, ``LDV``, ``HDV``), HBEFA 3
+#: vehicle they describe, a specific prefix before a general one: HBEFA 2 (``P_``, ``LDV``, ``HDV``), HBEFA 3
 #: (``PC``, ``LDV``, ``HDV``, ``Bus``, ``Coach``, ``MC``, ``Moped``), HBEFA 4 (``PC``,
 #: ``LCV``, ``RT`` rigid truck, ``TT`` tractor-trailer, ``UBus``, ``Coach``, ``MC``,
 #: ``Moped``) and PHEMlight (``PC``, ``LCV``, ``HDV_RB``/``HDV_RT`` rigid, ``HDV_TT``
