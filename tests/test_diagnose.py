@@ -170,6 +170,30 @@ def test_leaky_columns_are_not_offered():
     assert kept == {}
 
 
+def test_positions_and_headings_are_not_offered_unless_included_by_name():
+    """A heading whose cosine carries a planted wind (P += 2·c·v³/v·W·cos h) and the map
+    coordinates are proxies of where and which way the car drove: left out with a reason;
+    offered only when the include option names them."""
+    rng = np.random.default_rng(1)
+    n = 5000
+    v = rng.uniform(5, 30, n)
+    a = rng.normal(0, 0.5, n)
+    h = np.cumsum(rng.normal(0, 2, n)) % 360
+    y = 1500 * v * a + 0.4 * v ** 3 * (1 + 2 * 3.0 * np.cos(np.radians(h)) / v) + rng.normal(0, 300, n)
+    from sumo_drvpw.model.terms import Inputs
+
+    x = Inputs(v, a, np.zeros(n), np.zeros(n), np.full(n, 1500.0), np.full(n, 1.2))
+    sig = {"bearing_deg": h, "heading_deg": h, "latitude_deg": 48 + np.cumsum(rng.normal(0, 1e-5, n)),
+           "gps_longitude_deg": 11 + np.cumsum(rng.normal(0, 1e-5, n)), "ambient_c": rng.normal(10, 3, n)}
+    kept, skipped = screen_signals(sig, y, x, np.zeros(n, int), np.ones(n, bool), DiagnoseOptions())
+    assert list(kept) == ["ambient_c"]
+    reasons = {s["column"]: s["reason"] for s in skipped}
+    assert all(reasons[c].startswith("a position or direction") for c in sig if c != "ambient_c")
+    kept, _ = screen_signals(sig, y, x, np.zeros(n, int), np.ones(n, bool),
+                             DiagnoseOptions(include=("bearing_deg", "ambient_c")))
+    assert sorted(kept) == ["ambient_c", "bearing_deg"]
+
+
 def test_bad_options_are_user_errors_naming_the_option_not_a_flag():
     with pytest.raises(UserError, match="option validation") as e:
         DiagnoseOptions(validation="random").check()

@@ -25,7 +25,11 @@ Column screening (leakage and junk)
 A column is not offered when it (in this order): is one of the spec's measured-power
 source columns (``power_w``, motor/MG1/MG2/engine torque and speed, battery voltage
 and current — the target or a component of it, whichever source was used); matches
-``exclude`` or misses ``include`` (glob patterns); has more than ``max_nan`` NaN among
+``exclude`` or misses ``include`` (glob patterns); is a position or a direction
+(``POSITION_PATTERNS``: latitude, longitude, bearing, heading — where and which way the
+car drove, a proxy of the road, its grade or the day's wind; offered only when ``include``
+names it; a wind is estimated from the heading by ``sumo_drvpw.fit.wind``); has more than
+``max_nan`` NaN among
 usable samples; is constant; is id-like (monotone within every trip with > 50 %
 distinct values: a clock, counter or odometer); is derived from the model inputs
 (R² ≥ ``derived_r2`` of an OLS on 1, v, a, sin θ, wind — e.g. a GPS speed or an IMU

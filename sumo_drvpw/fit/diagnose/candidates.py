@@ -26,6 +26,13 @@ class Candidate:
     scatter: bool = False     # one coefficient per trip
 
 
+#: Column-name patterns of a position or a direction: where the car drove (map coordinates)
+#: or which way (a heading in degrees, circular: 359° sits next to 1°). As candidates they
+#: are proxies of the road, its grade or the day's wind, not effects a SUMO vehicle carries;
+#: a wind is found from the heading by sumo_drvpw.fit.wind and given to the logs.
+POSITION_PATTERNS = ("*latitude*", "*longitude*", "lat_deg", "lon_deg", "*bearing*", "*heading*")
+
+
 def _vname(k: int) -> str:
     return {0: "", 1: " × v (a force proportional to it)", 2: " × v²",
             3: " × v³ (drag-like)"}[k]
@@ -80,6 +87,12 @@ def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarr
             continue
         if opt.exclude and _glob_any(name, opt.exclude):
             skipped.append({"column": name, "reason": "excluded (exclude)"})
+            continue
+        if _glob_any(name, POSITION_PATTERNS) and not (opt.include and _glob_any(name, opt.include)):
+            skipped.append({"column": name, "reason": "a position or direction (map coordinate or heading): "
+                                                      "a proxy of where and which way the car drove (road, "
+                                                      "grade, wind), not an effect a vehicle carries "
+                                                      "(offered only when included by name)"})
             continue
         s = arr[u]
         fin = np.isfinite(s)
