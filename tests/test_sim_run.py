@@ -487,7 +487,8 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     scenarios give it to cars that ignore lane permissions (Bologna: emissionClass
     HBEFA2/P_7_7) and to "restricted" vans and trucks (DLR's Brunswick, custom1 with
     HBEFA3/LDV_D_EU4, custom2 with HBEFA3/HDV_D_EU4). Such a vType is booked as the vehicle
-    its emissionClass (else its guiShape) names: that class's equations and default mass,
+    its emissionClass (else its guiShape, else a word of its id) names: that class's
+    equations and default mass,
     listed in a warning and in summary.json; one whose attributes name no vehicle is not
     booked, and the warning says how to book it; a scenario's vclasses.<vClass> wins."""
     sc = tmp_path / "sc"
@@ -499,27 +500,32 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     <vType id="truck_c2" vClass="custom2" emissionClass="HBEFA4/RT_le7.5t_Euro-VI_A-C"/>
     <vType id="coach_c2" vClass="custom2" guiShape="bus/overland" mass="15000"/>
     <vType id="ev_c1" vClass="custom1" emissionClass="Energy/unknown"/>
+    <vType id="restricted_delivery_ev" vClass="custom1" emissionClass="Energy/unknown"/>
     <vehicle id="i" type="car_ign" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
     <vehicle id="p" type="car" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
     <vehicle id="d" type="van_c1" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
     <vehicle id="t" type="truck_c2" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
     <vehicle id="c" type="coach_c2" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
     <vehicle id="e" type="ev_c1" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
+    <vehicle id="r" type="restricted_delivery_ev" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
 </routes>
 """)
     out = tmp_path / "o"
     s, err = _run_summary(cfg, out, capsys)
     booked = s["assumptions"]["booked_as"]
     assert {k: v["booked_as"] for k, v in booked.items()} == {
-        "car_ign": "passenger", "van_c1": "delivery", "truck_c2": "truck", "coach_c2": "coach"}
+        "car_ign": "passenger", "van_c1": "delivery", "truck_c2": "truck", "coach_c2": "coach",
+        "restricted_delivery_ev": "delivery"}
     assert booked["car_ign"]["from"] == "emissionClass HBEFA2/P_7_7"      # before its shape
     assert booked["coach_c2"]["from"] == "guiShape bus/overland"
+    assert booked["restricted_delivery_ev"]["from"] == "the word 'delivery' in its id"
     assert s["skipped"]["by_vtype"] == {"ev_c1": 1}
     veh = pd.read_parquet(out / "vehicles.parquet")
     eqs = veh.groupby("vehicle")["equation"].apply(set).to_dict()
     assert eqs["i"] == eqs["p"] == {"vsp_ldv1999", "drvpw_prius3", "moves_passenger_car"}
     assert eqs["d"] == {"moves_light_commercial_truck"} and eqs["t"] == {"moves_single_unit_truck"}
     assert eqs["c"] == {"moves_intercity_bus"} and "e" not in eqs
+    assert eqs["r"] == {"moves_light_commercial_truck"}
     mass = veh.groupby("vehicle")["mass_kg"].first()
     assert (mass["i"], mass["d"], mass["t"], mass["c"]) == (1478.8, 2059.7, 8538.9, 15000.0)
     assert veh.set_index(["vehicle", "equation"]).loc[("i", "vsp_ldv1999"), "vclass"] == "ignoring"

@@ -249,7 +249,7 @@ class Accountant(_Listener):
             warnings.append("vehicles of vClasses no equation is made for were not booked: "
                             + ", ".join(f"{c} {n}" for c, n in sorted(skipped.items()))
                             + (f" (vClass {', '.join(generic)} says what a vehicle may use, not "
-                               "what it is, and their vTypes' emissionClass and guiShape name no "
+                               "what it is, and their vTypes' emissionClass, guiShape and id name no "
                                f"vehicle: set vclasses.{generic[0]}.equations and mass_kg in a "
                                "scenario file)" if generic else ""))
         clipped = summary_extra["network"]["slope_clipped_lanes"]
@@ -302,12 +302,12 @@ def network_warnings(net) -> list[str]:
 
 def booked_as_warning(booked_as: dict[str, dict]) -> str:
     """One line: the generic-vClass vTypes booked as the vehicle their emissionClass or
-    guiShape names, grouped by vClass → vehicle (up to three vType ids each)."""
+    guiShape (or id) names, grouped by vClass → vehicle (up to three vType ids each)."""
     groups: dict[tuple[str, str], list[str]] = {}
     for vt, b in sorted(booked_as.items()):
         groups.setdefault((b["vclass"], b["booked_as"]), []).append(f"{vt} ({b['from']})")
     parts = [f"{c} → {body}: " + ", ".join(v[:3]) + (f" and {len(v) - 3} more" if len(v) > 3 else "")
              for (c, body), v in sorted(groups.items())]
     return ("vTypes of a vClass that names no vehicle were booked as the vehicle their "
-            "emissionClass or guiShape names: " + "; ".join(parts)
+            "emissionClass, guiShape or id names: " + "; ".join(parts)
             + " (summary.json assumptions.booked_as; vclasses.<vClass>.equations chooses instead)")

@@ -31,7 +31,7 @@ class VTypeResolver:
     ``vclasses.<vClass>.equations`` > every equation whose ``vclasses`` contain the vClass.
     A vType of a generic vClass (``ignoring``, ``custom1``, ``custom2``:
     :data:`sumo_drvpw.sim.vtypes.GENERIC_VCLASSES`) that none of these gives an equation is
-    booked as the road vehicle its ``emissionClass`` or ``guiShape`` names
+    booked as the road vehicle its ``emissionClass``, ``guiShape`` or id names
     (:func:`sumo_drvpw.sim.vtypes.body_vclass`; its class's equations, ``vclasses.<that>``
     settings and default mass), listed in :attr:`booked_as`.
     A vType with none is not accounted and counted in :attr:`skipped` (by vClass and vType).
@@ -56,7 +56,7 @@ class VTypeResolver:
         #: vType → {"vclass", "mass_kg", "source"} for masses taken from class defaults
         self.assumptions: dict[str, dict] = {}
         #: vType → {"vclass", "booked_as", "from"}: generic-vClass vTypes booked as the
-        #: vehicle their emissionClass or guiShape names
+        #: vehicle their emissionClass, guiShape or id names
         self.booked_as: dict[str, dict] = {}
 
     def _param(self, vt: str, key: str) -> str:
@@ -120,7 +120,7 @@ class VTypeResolver:
         app = np.array([1.0 if n in eq else 0.0 for n in self.names])
         # a generic vClass says what the vehicle may use, not what it is: its emission
         # class or shape may name the vehicle (its equations, class settings, default mass)
-        named = body_vclass(info.emission_class, info.gui_shape) \
+        named = body_vclass(info.emission_class, info.gui_shape, vt) \
             if vclass in GENERIC_VCLASSES and info is not None else None
         body = named[0] if named is not None else vclass
         if not app.any() and named is not None and data.get("equations") is None \

@@ -9,6 +9,7 @@ read instead.
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,7 +52,7 @@ DEFAULT_MASS_SOURCE = {
 #: vClasses that say what a vehicle may use, not what it is: SUMO's ``ignoring`` (ignores
 #: lane permissions) and the user-defined ``custom1``/``custom2`` (e.g. the DLR scenarios'
 #: "restricted" delivery vans and trucks). A vType of these classes is booked as the road
-#: vehicle its own ``emissionClass`` or ``guiShape`` names (:func:`body_vclass`).
+#: vehicle its own ``emissionClass``, ``guiShape`` or id names (:func:`body_vclass`).
 GENERIC_VCLASSES = ("ignoring", "custom1", "custom2")
 
 #: Emission-class name prefixes (after the model, e.g. ``HBEFA3/``) → the vClass whose
@@ -81,10 +82,23 @@ GUI_SHAPE_BODY = {
 }
 
 
-def body_vclass(emission_class: str | None, gui_shape: str | None) -> tuple[str, str] | None:
+#: Whole words of a vType id → the vClass whose vehicle they name (the last hint: DLR's
+#: "restricted_delivery_3.5t_evehicle" is vClass custom1 with emissionClass Energy/unknown)
+ID_WORD_BODY = {
+    "passenger": "passenger", "car": "passenger", "pkw": "passenger", "taxi": "passenger",
+    "delivery": "delivery", "van": "delivery", "lcv": "delivery", "ldv": "delivery",
+    "truck": "truck", "lkw": "truck", "hgv": "truck", "trailer": "trailer",
+    "semitrailer": "trailer", "bus": "bus", "coach": "coach", "motorcycle": "motorcycle",
+    "moped": "moped",
+}
+
+
+def body_vclass(emission_class: str | None, gui_shape: str | None,
+                vtype_id: str | None = None) -> tuple[str, str] | None:
     """The road vClass whose vehicle a vType's ``emissionClass`` (first: it is what the
-    modeller chose for energy) or else its ``guiShape`` names, with the attribute it came
-    from; None when neither names one (e.g. ``Energy/unknown``, no shape)."""
+    modeller chose for energy), else its ``guiShape``, else the words of its id name (only
+    when they name one vehicle), with where it came from; None when none names one (e.g.
+    ``Energy/unknown``, no shape, an id like "type1")."""
     if emission_class:
         name = emission_class.split("/", 1)[-1].strip().lower()
         for prefix, vclass in EMISSION_CLASS_BODY:
@@ -92,6 +106,11 @@ def body_vclass(emission_class: str | None, gui_shape: str | None) -> tuple[str,
                 return vclass, f"emissionClass {emission_class}"
     if gui_shape and gui_shape.strip().lower() in GUI_SHAPE_BODY:
         return GUI_SHAPE_BODY[gui_shape.strip().lower()], f"guiShape {gui_shape}"
+    if vtype_id:
+        words = {w for w in re.split(r"[^a-z]+", vtype_id.lower()) if w in ID_WORD_BODY}
+        named = {ID_WORD_BODY[w] for w in words}
+        if len(named) == 1:
+            return named.pop(), f"the word {sorted(words)[0]!r} in its id"
     return None
 
 
