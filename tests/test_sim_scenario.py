@@ -336,3 +336,30 @@ def test_equation_names_must_be_safe(tmp_path):
         load_scenario(SCEN / "city.toml", equations=[Equation("1st", {"acc": 1.0})])
     ok = load_scenario(SCEN / "city.toml", equations=[Equation("my-fit.v2_x", {"acc": 1.0})])
     assert ok.equations[0].name == "my-fit.v2_x"
+
+
+@pytest.mark.parametrize("emission_class, shape, vtype_id, body", [
+    ("HBEFA2/P_7_7", None, None, "passenger"), ("HBEFA3/PC_G_EU4", None, None, "passenger"),
+    ("HBEFA3/LDV_D_EU4", None, None, "delivery"), ("HBEFA3/HDV_D_EU4", None, None, "truck"),
+    ("HBEFA3/Bus", None, None, "bus"), ("HBEFA3/Coach", None, None, "coach"),
+    ("HBEFA4/PC_petrol_Euro-4", None, None, "passenger"),
+    ("HBEFA4/LCV_diesel_N1-III_Euro-6ab", None, None, "delivery"),
+    ("HBEFA4/RT_le7.5t_Euro-VI_A-C", None, None, "truck"),
+    ("HBEFA4/TT_AT_gt34-40t_Euro-VI_A-C", None, None, "trailer"),
+    ("HBEFA4/UBus_Std_gt15-18t_Euro-VI_A-C", None, None, "bus"),
+    ("HBEFA4/MC_4S_gt250cc_Euro-5", None, None, "motorcycle"),
+    ("HBEFA4/Moped_le50cc_Euro-5", None, None, "moped"),
+    ("PHEMlight/HDV_TT_D_EU6", None, None, "trailer"), ("PHEMlight5/PC_EU6_D", None, None, "passenger"),
+    ("HBEFA2/P_7_7", "delivery", None, "passenger"),          # the emission class before the shape
+    ("Energy/unknown", "bus/overland", None, "coach"), (None, "truck/semitrailer", None, "trailer"),
+    ("Energy/unknown", None, "restricted_delivery_3.5t_evehicle", "delivery"),
+    ("zero", "unknown", "car_truck_mix", None), ("MMPEVEM", None, "type1", None), (None, None, None, None),
+])
+def test_body_vclass_reads_sumo_emission_classes_shapes_and_id_words(emission_class, shape, vtype_id, body):
+    """The vehicle a generic-vClass vType is booked as (sim/vtypes.body_vclass): the SUMO
+    emission-class families of HBEFA 2/3/4 and PHEMlight, else the guiShape, else one
+    vehicle named by the words of the id; None when nothing names one."""
+    from sumo_drvpw.sim.vtypes import body_vclass
+
+    got = body_vclass(emission_class, shape, vtype_id)
+    assert (got[0] if got else None) == body
