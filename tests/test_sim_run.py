@@ -490,7 +490,8 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     its emissionClass (else its guiShape, else a word of its id) names: that class's
     equations and default mass,
     listed in a warning and in summary.json; one whose attributes name no vehicle is not
-    booked, and the warning says how to book it; a scenario's vclasses.<vClass> wins."""
+    booked, and the warning says how to book it; a scenario's vclasses.<vClass> wins. A
+    sedan put in vClass bus for the bus lanes (Bologna's acosta_persontrips) is a car."""
     sc = tmp_path / "sc"
     sc.mkdir()
     cfg = _city_config(sc, """<routes>
@@ -501,6 +502,8 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     <vType id="coach_c2" vClass="custom2" guiShape="bus/overland" mass="15000"/>
     <vType id="ev_c1" vClass="custom1" emissionClass="Energy/unknown"/>
     <vType id="restricted_delivery_ev" vClass="custom1" emissionClass="Energy/unknown"/>
+    <vType id="lane_sedan" vClass="bus" emissionClass="HBEFA2/P_7_7" guiShape="passenger/sedan" length="5"/>
+    <vType id="coach_hdv" vClass="bus" emissionClass="HBEFA3/HDV_D_EU4"/>
     <vehicle id="i" type="car_ign" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
     <vehicle id="p" type="car" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
     <vehicle id="d" type="van_c1" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
@@ -508,6 +511,8 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     <vehicle id="c" type="coach_c2" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
     <vehicle id="e" type="ev_c1" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
     <vehicle id="r" type="restricted_delivery_ev" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
+    <vehicle id="s" type="lane_sedan" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
+    <vehicle id="h" type="coach_hdv" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
 </routes>
 """)
     out = tmp_path / "o"
@@ -515,7 +520,7 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     booked = s["assumptions"]["booked_as"]
     assert {k: v["booked_as"] for k, v in booked.items()} == {
         "car_ign": "passenger", "van_c1": "delivery", "truck_c2": "truck", "coach_c2": "coach",
-        "restricted_delivery_ev": "delivery"}
+        "restricted_delivery_ev": "delivery", "lane_sedan": "passenger"}
     assert booked["car_ign"]["from"] == "emissionClass HBEFA2/P_7_7"      # before its shape
     assert booked["coach_c2"]["from"] == "guiShape bus/overland"
     assert booked["restricted_delivery_ev"]["from"] == "the word 'delivery' in its id"
@@ -526,8 +531,12 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     assert eqs["d"] == {"moves_light_commercial_truck"} and eqs["t"] == {"moves_single_unit_truck"}
     assert eqs["c"] == {"moves_intercity_bus"} and "e" not in eqs
     assert eqs["r"] == {"moves_light_commercial_truck"}
+    # a sedan in vClass bus (for the bus lanes) is a car; a bus with a heavy-duty class a bus
+    assert eqs["s"] == eqs["p"] and eqs["h"] == {"moves_transit_bus"}
+    assert "vClass bus (a heavy one) only grants its lanes" in booked["lane_sedan"]["from"]
     mass = veh.groupby("vehicle")["mass_kg"].first()
     assert (mass["i"], mass["d"], mass["t"], mass["c"]) == (1478.8, 2059.7, 8538.9, 15000.0)
+    assert (mass["s"], mass["h"]) == (1478.8, 16556.0)
     assert veh.set_index(["vehicle", "equation"]).loc[("i", "vsp_ldv1999"), "vclass"] == "ignoring"
     tr = veh.set_index(["vehicle", "equation"])["traction_total_j"]
     assert all(tr[(v, e)] > 0 for v, e in (("i", "vsp_ldv1999"), ("d", "moves_light_commercial_truck"),

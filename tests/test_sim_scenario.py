@@ -353,6 +353,8 @@ def test_equation_names_must_be_safe(tmp_path):
     ("HBEFA2/P_7_7", "delivery", None, "passenger"),          # the emission class before the shape
     ("Energy/unknown", "bus/overland", None, "coach"), (None, "truck/semitrailer", None, "trailer"),
     ("Energy/unknown", None, "restricted_delivery_3.5t_evehicle", "delivery"),
+    ("HBEFA3/HDV_D_EU4", None, "restricted_trailer", "trailer"),   # heavy duty: the id says which
+    ("HBEFA3/HDV_D_EU4", None, "restricted_truck_12t", "truck"), ("HBEFA3/LDV_D_EU4", None, "bus_x", "delivery"),
     ("zero", "unknown", "car_truck_mix", None), ("MMPEVEM", None, "type1", None), (None, None, None, None),
 ])
 def test_body_vclass_reads_sumo_emission_classes_shapes_and_id_words(emission_class, shape, vtype_id, body):
@@ -362,4 +364,18 @@ def test_body_vclass_reads_sumo_emission_classes_shapes_and_id_words(emission_cl
     from sumo_drvpw.sim.vtypes import body_vclass
 
     got = body_vclass(emission_class, shape, vtype_id)
+    assert (got[0] if got else None) == body
+
+
+@pytest.mark.parametrize("vclass, emission_class, body", [
+    ("bus", "HBEFA2/P_7_7", "passenger"),          # a sedan in vClass bus (bus lanes)
+    ("passenger", "HBEFA3/HDV_D_EU4", "truck"),    # a heavy vehicle in a car class
+    ("bus", "HBEFA3/HDV_D_EU4", None),             # heavy and heavy: the vClass says it
+    ("bus", "HBEFA2/HDV_6_2", None), ("delivery", "HBEFA3/PC_G_EU4", None),  # light and light
+    ("passenger", "Energy/unknown", None), ("bus", None, None),
+])
+def test_vehicle_body_books_a_light_heavy_mismatch_by_the_emission_class(vclass, emission_class, body):
+    from sumo_drvpw.sim.vtypes import VTypeInfo, vehicle_body
+
+    got = vehicle_body(vclass, VTypeInfo("t", None, None, "f", vclass, 0.0, emission_class), "t")
     assert (got[0] if got else None) == body

@@ -301,13 +301,14 @@ def network_warnings(net) -> list[str]:
 
 
 def booked_as_warning(booked_as: dict[str, dict]) -> str:
-    """One line: the generic-vClass vTypes booked as the vehicle their emissionClass or
-    guiShape (or id) names, grouped by vClass → vehicle (up to three vType ids each)."""
+    """One line: the vTypes booked as the vehicle their emissionClass, guiShape or id names
+    rather than by their vClass (sim/vtypes.vehicle_body), grouped by vClass → vehicle (up
+    to three vType ids each)."""
     groups: dict[tuple[str, str], list[str]] = {}
     for vt, b in sorted(booked_as.items()):
         groups.setdefault((b["vclass"], b["booked_as"]), []).append(f"{vt} ({b['from']})")
     parts = [f"{c} → {body}: " + ", ".join(v[:3]) + (f" and {len(v) - 3} more" if len(v) > 3 else "")
              for (c, body), v in sorted(groups.items())]
-    return ("vTypes of a vClass that names no vehicle were booked as the vehicle their "
-            "emissionClass, guiShape or id names: " + "; ".join(parts)
+    return ("vTypes whose vClass does not say what vehicle they are were booked as the one "
+            "their emissionClass, guiShape or id names: " + "; ".join(parts)
             + " (summary.json assumptions.booked_as; vclasses.<vClass>.equations chooses instead)")

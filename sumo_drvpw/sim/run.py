@@ -31,9 +31,11 @@ class VTypeResolver:
     ``vclasses.<vClass>.equations`` > every equation whose ``vclasses`` contain the vClass.
     A vType of a generic vClass (``ignoring``, ``custom1``, ``custom2``:
     :data:`sumo_drvpw.sim.vtypes.GENERIC_VCLASSES`) that none of these gives an equation is
-    booked as the road vehicle its ``emissionClass``, ``guiShape`` or id names
-    (:func:`sumo_drvpw.sim.vtypes.body_vclass`; its class's equations, ``vclasses.<that>``
-    settings and default mass), listed in :attr:`booked_as`.
+    booked as the road vehicle its ``emissionClass``, ``guiShape`` or id names; so is a vType
+    of a light vClass whose written ``emissionClass`` names a heavy vehicle, or the reverse
+    (a sedan in vClass bus for the bus lanes) unless the scenario or the vType names its
+    equations (:func:`sumo_drvpw.sim.vtypes.vehicle_body`; that vehicle's class equations,
+    ``vclasses.<that>`` settings and default mass), listed in :attr:`booked_as`.
     A vType with none is not accounted and counted in :attr:`skipped` (by vClass and vType).
     Mass: scenario ``vtypes.<id>.mass_kg`` > param ``drvpw.mass`` > ``mass`` attribute (or
     SUMO's deprecated ``vehicleMass`` param) plus the ``loading`` param, written in the
@@ -55,8 +57,8 @@ class VTypeResolver:
         self.excluded = 0
         #: vType → {"vclass", "mass_kg", "source"} for masses taken from class defaults
         self.assumptions: dict[str, dict] = {}
-        #: vType → {"vclass", "booked_as", "from"}: generic-vClass vTypes booked as the
-        #: vehicle their emissionClass, guiShape or id names
+        #: vType → {"vclass", "booked_as", "from"}: vTypes booked as the vehicle their
+        #: emissionClass, guiShape or id names, not by their vClass
         self.booked_as: dict[str, dict] = {}
 
     def _param(self, vt: str, key: str) -> str:
@@ -101,7 +103,7 @@ class VTypeResolver:
 
     def _resolve(self, vt: str, vid: str):
         from sumo_drvpw.sim.vtypes import (DEFAULT_MASS_KG, DEFAULT_MASS_SOURCE, GENERIC_VCLASSES,
-                                           body_vclass)
+                                           vehicle_body)
 
         sc = self.sc
         data = sc.vtype_data.get(vt, {})
@@ -115,23 +117,25 @@ class VTypeResolver:
         if eq is None:
             one = (info.equation if info is not None else None) or self._param(vt, "drvpw.equation")
             eq = [one] if one else cdata.get("equations")
+        explicit = eq is not None
         if eq is None:
             eq = self._made_for(vclass)
         app = np.array([1.0 if n in eq else 0.0 for n in self.names])
-        # a generic vClass says what the vehicle may use, not what it is: its emission
-        # class or shape may name the vehicle (its equations, class settings, default mass)
-        named = body_vclass(info.emission_class, info.gui_shape, vt) \
-            if vclass in GENERIC_VCLASSES and info is not None else None
+        # a vClass may say what the vehicle may use, not what it is (generic classes; a car in
+        # vClass bus for the bus lanes): then its emission class, shape or id names the
+        # vehicle (its equations, class settings, default mass)
+        named = vehicle_body(vclass, info, vt)
         body = named[0] if named is not None else vclass
-        if not app.any() and named is not None and data.get("equations") is None \
-                and cdata.get("equations") is None:
+        if named is not None and not explicit and (vclass not in GENERIC_VCLASSES or not app.any()):
             eq = sc_classes.get(body, {}).get("equations") or self._made_for(body)
             app = np.array([1.0 if n in eq else 0.0 for n in self.names])
             if app.any():
                 self.booked_as[vt] = {"vclass": vclass, "booked_as": body, "from": named[1]}
         if not app.any():
             return (np.nan, app, False, vclass, "vclass")
-        if named is not None and cdata.get("mass_kg") is None:
+        if vt not in self.booked_as and vclass not in GENERIC_VCLASSES:
+            body = vclass   # its own equations, so its own class's mass
+        if body != vclass and cdata.get("mass_kg") is None:
             cdata = sc_classes.get(body, {})
         mass = data.get("mass_kg")
         if mass is None and info is not None:

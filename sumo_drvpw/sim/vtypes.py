@@ -96,21 +96,54 @@ ID_WORD_BODY = {
 def body_vclass(emission_class: str | None, gui_shape: str | None,
                 vtype_id: str | None = None) -> tuple[str, str] | None:
     """The road vClass whose vehicle a vType's ``emissionClass`` (first: it is what the
-    modeller chose for energy), else its ``guiShape``, else the words of its id name (only
+    modeller chose for energy; a generic heavy-duty ``HDV`` class with an id that says
+    trailer, bus or coach: that), else its ``guiShape``, else the words of its id name (only
     when they name one vehicle), with where it came from; None when none names one (e.g.
     ``Energy/unknown``, no shape, an id like "type1")."""
-    if emission_class:
-        name = emission_class.split("/", 1)[-1].strip().lower()
-        for prefix, vclass in EMISSION_CLASS_BODY:
-            if name.startswith(prefix):
-                return vclass, f"emissionClass {emission_class}"
-    if gui_shape and gui_shape.strip().lower() in GUI_SHAPE_BODY:
-        return GUI_SHAPE_BODY[gui_shape.strip().lower()], f"guiShape {gui_shape}"
+    by_id = None
     if vtype_id:
         words = {w for w in re.split(r"[^a-z]+", vtype_id.lower()) if w in ID_WORD_BODY}
         named = {ID_WORD_BODY[w] for w in words}
         if len(named) == 1:
-            return named.pop(), f"the word {sorted(words)[0]!r} in its id"
+            by_id = named.pop(), f"the word {sorted(words)[0]!r} in its id"
+    if emission_class:
+        name = emission_class.split("/", 1)[-1].strip().lower()
+        for prefix, vclass in EMISSION_CLASS_BODY:
+            if name.startswith(prefix):
+                if prefix == "hdv" and by_id is not None and by_id[0] in ("trailer", "bus", "coach"):
+                    # a generic heavy-duty class (HBEFA 2/3 HDV): the id may say which
+                    return by_id[0], f"emissionClass {emission_class} (heavy duty) and {by_id[1]}"
+                return vclass, f"emissionClass {emission_class}"
+    if gui_shape and gui_shape.strip().lower() in GUI_SHAPE_BODY:
+        return GUI_SHAPE_BODY[gui_shape.strip().lower()], f"guiShape {gui_shape}"
+    return by_id
+
+
+#: Light and heavy road vehicles: a vType whose vClass is in one and whose written
+#: emissionClass names a vehicle of the other has its vClass for lane permissions (Bologna's
+#: acosta_persontrips: 5-m sedans with emissionClass HBEFA2/P_7_7 in vClass bus, for the
+#: bus lanes); its energy is the emission class's vehicle, as in SUMO's emission models.
+LIGHT_VCLASSES = ("passenger", "private", "taxi", "hov", "vip", "evehicle", "authority",
+                  "delivery", "emergency", "motorcycle", "moped")
+HEAVY_VCLASSES = ("truck", "army", "trailer", "bus", "coach")
+
+
+def vehicle_body(vclass: str, info: "VTypeInfo | None", vtype_id: str) -> tuple[str, str] | None:
+    """The road vehicle a vType is booked as when its vClass does not say it (None: the
+    vClass does), with why: for a generic vClass (:data:`GENERIC_VCLASSES`) what
+    :func:`body_vclass` reads; for a light or heavy vClass whose written emissionClass
+    names a vehicle of the other weight, that vehicle."""
+    if info is None:
+        return None
+    if vclass in GENERIC_VCLASSES:
+        return body_vclass(info.emission_class, info.gui_shape, vtype_id)
+    ec = body_vclass(info.emission_class, None)
+    if ec is None:
+        return None
+    light = {c: True for c in LIGHT_VCLASSES} | {c: False for c in HEAVY_VCLASSES}
+    if vclass in light and ec[0] in light and light[vclass] != light[ec[0]]:
+        return ec[0], (f"{ec[1]}: a {'light' if light[ec[0]] else 'heavy'} vehicle, while vClass "
+                       f"{vclass} (a {'light' if light[vclass] else 'heavy'} one) only grants its lanes")
     return None
 
 
