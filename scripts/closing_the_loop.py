@@ -496,7 +496,8 @@ def wind_check(name, df, vehicle, car, roles=None) -> dict | None:
     fit: a diagnosis, not a held-out result), and each fold again on logs that carry that
     wind (``import --wind``; the wind came from both trips, so this shows what a weather
     record of the day would do, not a held-out result). None without a heading or runs."""
-    from sumo_drvpw.data.wind import HEADING_COLUMNS, add_wind, heading_of
+    from sumo_drvpw.data.wind import HEADING_COLUMNS, add_wind, heading_of, tailwind_mps
+    from sumo_drvpw.fit.compare import trip_energy
     from sumo_drvpw.fit.physical import physical_reading
     from sumo_drvpw.fit.wind import estimate_wind
     from sumo_drvpw.model.equations import Equation
@@ -515,12 +516,9 @@ def wind_check(name, df, vehicle, car, roles=None) -> dict | None:
         x, y, use, dt, trip = _cv_args(m)
         w = estimate_wind(x, y, use, heading, terms, fixed)
         rho = float(np.mean(x.rho[use]))
-        from sumo_drvpw.fit.compare import trip_energy
-        from sumo_drvpw.model.terms import term_matrix
         still = Equation("still", w["terms_still_air"]).power(x)
         calm = Equation("calm", w["terms"]).power(x)
         x_wind = x.take(np.arange(len(y)))
-        from sumo_drvpw.data.wind import tailwind_mps
         x_wind.wind = tailwind_mps(heading, w["speed_mps"], w["from_deg"])
         windy = Equation("windy", w["terms"]).power(x_wind)
         per = {}
