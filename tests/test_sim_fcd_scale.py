@@ -162,6 +162,24 @@ def test_person_rows_are_not_vehicles_and_may_lack_speed_and_position(tmp_path):
         list(iter_fcd_blocks(tmp_path / "bad.xml"))
 
 
+def test_a_person_of_an_undeclared_type_is_counted_as_a_pedestrian():
+    """An FCD replay knows no vClass (the route files say it); a person whose type no file
+    declares (SUMO's DEFAULT_PEDTYPE) is a pedestrian, SUMO's default for persons — before,
+    Bologna's 1799 walkers were reported as unbooked 'passenger' vehicles. A vehicle of an
+    undeclared type stays a passenger car, SUMO's default for vehicles."""
+    from types import SimpleNamespace
+
+    from sumo_drvpw.sim.run import VTypeResolver
+    from sumo_drvpw.sim.vtypes import VTypeInfo
+
+    conn = SimpleNamespace(vehicletype=SimpleNamespace(getVehicleClass=lambda vt: ""))
+    r = VTypeResolver(None, {"walker": VTypeInfo("walker", None, None, "f", "pedestrian")}, [], conn)
+    for vt in ("DEFAULT_PEDTYPE", "DEFAULT_PEDTYPE", "walker"):
+        r.skip_person(vt)
+    assert r.skipped["by_vclass"] == {"pedestrian": 3}
+    assert r._vclass("DEFAULT_VEHTYPE", None) == "passenger"
+
+
 def test_rows_out_of_time_order_name_the_row():
     b1 = _block([0.0, 2.0], [(0.0, "a"), (2.0, "a")])
     b2 = _block([1.0], [(1.0, "b")], first=2)

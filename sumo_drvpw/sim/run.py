@@ -69,7 +69,9 @@ class VTypeResolver:
         except Exception:
             return ""
 
-    def _vclass(self, vt: str, info) -> str:
+    def _vclass(self, vt: str, info, default: str = "passenger") -> str:
+        """SUMO's vClass of a vType, else the files', else SUMO's default for a vehicle
+        (passenger) or, with ``default``, for a person (pedestrian)."""
         if self.conn is not None:
             try:
                 vc = self.conn.vehicletype.getVehicleClass(vt)
@@ -77,7 +79,7 @@ class VTypeResolver:
                     return str(vc)
             except Exception:
                 pass
-        return (info.vclass if info is not None and info.vclass else None) or "passenger"
+        return (info.vclass if info is not None and info.vclass else None) or default
 
     def _made_for(self, vclass: str) -> list[str]:
         """The equations made for a vClass (plain names: any)."""
@@ -96,8 +98,10 @@ class VTypeResolver:
         return out[:4]
 
     def skip_person(self, vt: str) -> None:
-        """Count a departing person (vType ``vt``) as skipped: persons are not booked."""
-        vclass = self._vclass(vt, self.files.get(vt))
+        """Count a departing person (vType ``vt``) as skipped: persons are not booked (a
+        person type nobody declared, e.g. SUMO's DEFAULT_PEDTYPE in an FCD replay, is a
+        pedestrian, SUMO's default for persons)."""
+        vclass = self._vclass(vt, self.files.get(vt), default="pedestrian")
         for key, k in (("by_vclass", vclass), ("by_vtype", vt)):
             self.skipped[key][k] = self.skipped[key].get(k, 0) + 1
 
