@@ -501,6 +501,7 @@ def wind_check(name, df, vehicle, car, roles=None) -> dict | None:
     from sumo_drvpw.fit.physical import physical_reading
     from sumo_drvpw.fit.wind import estimate_wind
     from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.model.vehicles import load_vehicle
 
     runs = car.get("runs") or []
     if not runs or not (set(HEADING_COLUMNS) & set(df.columns)):
@@ -540,8 +541,6 @@ def wind_check(name, df, vehicle, car, roles=None) -> dict | None:
                                "terms": eq.terms,
                                "reading": physical_reading(eq.terms, rho)}
     read = lambda t: physical_reading(t, rho).get("aero", {}).get("value", math.nan)  # noqa: E731
-    from sumo_drvpw.model.vehicles import load_vehicle
-
     body = load_vehicle(vehicle).body or {}
     published = (body["drag_coefficient"] * body["frontal_area_m2"]
                  if {"drag_coefficient", "frontal_area_m2"} <= set(body) else None)
