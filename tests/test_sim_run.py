@@ -461,10 +461,18 @@ def test_detectors_sharing_an_output_file_still_write_one_file(tmp_path, capsys)
     assert not (sc / "loops.xml").exists() and not (sc / "sub" / "loops.xml").exists()
 
 
-def _city_config(folder: Path, routes: str, begin: str = "0", end: str = "120") -> Path:
-    """A SUMO config on the built-in city network with the route file ``routes`` (written
-    as r.rou.xml), 0.5-s steps, SUMO's warnings off; returns its path."""
-    (folder / "r.rou.xml").write_text(routes)
+#: the two routes of the built-in city network the vClass tests drive
+WEST, EAST = "c00c10 c10c20", "c40c30 c30c20"
+
+
+def _city_config(folder: Path, vtypes: str, vehicles, depart: str = "0", begin: str = "0",
+                 end: str = "120") -> Path:
+    """A SUMO config on the built-in city network: a route file (r.rou.xml) with the
+    ``vtypes`` XML and one vehicle per (id, vType, edges) of ``vehicles``, all departing at
+    ``depart`` from rest; 0.5-s steps, SUMO's warnings off. Returns its path."""
+    veh = "".join(f'    <vehicle id="{i}" type="{t}" depart="{depart}" departSpeed="0">'
+                  f'<route edges="{e}"/></vehicle>\n' for i, t, e in vehicles)
+    (folder / "r.rou.xml").write_text(f"<routes>\n{vtypes}{veh}</routes>\n")
     cfg = folder / "c.sumocfg"
     cfg.write_text(f"""<configuration>
     <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
@@ -494,7 +502,7 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     sedan put in vClass bus for the bus lanes (Bologna's acosta_persontrips) is a car."""
     sc = tmp_path / "sc"
     sc.mkdir()
-    cfg = _city_config(sc, """<routes>
+    cfg = _city_config(sc, """\
     <vType id="car_ign" vClass="ignoring" emissionClass="HBEFA2/P_7_7" guiShape="delivery"/>
     <vType id="car" vClass="passenger" mass="1478.8"/>
     <vType id="van_c1" vClass="custom1" emissionClass="HBEFA3/LDV_D_EU4"/>
@@ -504,17 +512,9 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     <vType id="restricted_delivery_ev" vClass="custom1" emissionClass="Energy/unknown"/>
     <vType id="lane_sedan" vClass="bus" emissionClass="HBEFA2/P_7_7" guiShape="passenger/sedan" length="5"/>
     <vType id="coach_hdv" vClass="bus" emissionClass="HBEFA3/HDV_D_EU4"/>
-    <vehicle id="i" type="car_ign" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
-    <vehicle id="p" type="car" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
-    <vehicle id="d" type="van_c1" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
-    <vehicle id="t" type="truck_c2" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
-    <vehicle id="c" type="coach_c2" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
-    <vehicle id="e" type="ev_c1" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
-    <vehicle id="r" type="restricted_delivery_ev" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
-    <vehicle id="s" type="lane_sedan" depart="0" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
-    <vehicle id="h" type="coach_hdv" depart="0" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
-</routes>
-""")
+""", [("i", "car_ign", WEST), ("p", "car", WEST), ("d", "van_c1", EAST), ("t", "truck_c2", EAST),
+          ("c", "coach_c2", WEST), ("e", "ev_c1", EAST), ("r", "restricted_delivery_ev", WEST),
+          ("s", "lane_sedan", EAST), ("h", "coach_hdv", WEST)])
     out = tmp_path / "o"
     s, err = _run_summary(cfg, out, capsys)
     booked = s["assumptions"]["booked_as"]
@@ -562,15 +562,12 @@ def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
     book it (before: not booked, counted as skipped), and vClass emergency a van's."""
     sc = tmp_path / "sc"
     sc.mkdir()
-    cfg = _city_config(sc, """<routes>
+    cfg = _city_config(sc, """\
     <vType id="vipcar" vClass="vip" mass="1600"/>
     <vType id="car" vClass="passenger" mass="1600"/>
     <vType id="ambulance" vClass="emergency"/>
-    <vehicle id="v" type="vipcar" depart="36000" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
-    <vehicle id="e" type="ambulance" depart="36000" departSpeed="0"><route edges="c40c30 c30c20"/></vehicle>
-    <vehicle id="p" type="car" depart="36000" departSpeed="0"><route edges="c00c10 c10c20"/></vehicle>
-</routes>
-""", begin="10:00:00", end="0:10:02:00")
+""", [("v", "vipcar", WEST), ("e", "ambulance", EAST), ("p", "car", WEST)], depart="36000",
+                       begin="10:00:00", end="0:10:02:00")
     out = tmp_path / "o"
     s, err = _run_summary(cfg, out, capsys)
     assert (s["begin_s"], s["end_s"]) == (36000.0, 36120.0) and s["steps"] == 240

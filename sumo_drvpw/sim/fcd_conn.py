@@ -16,10 +16,14 @@ from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.sim.network import off_lane
 
 
-class _Sim:
+class _Domain:
+    """A TraCI domain of the replay: its getters read the replay ``r``."""
+
     def __init__(self, r):
         self.r = r
 
+
+class _Sim(_Domain):
     def getTime(self):  # noqa: N802 (SUMO's names)
         return self.r.t
 
@@ -42,10 +46,7 @@ class _Sim:
         return self.r.departed_persons if self.r.count_persons else ()
 
 
-class _Person:
-    def __init__(self, r):
-        self.r = r
-
+class _Person(_Domain):
     def getIDCount(self):  # noqa: N802
         return self.r.person_count
 
@@ -53,10 +54,7 @@ class _Person:
         return self.r.person_types[pid]
 
 
-class _Veh:
-    def __init__(self, r):
-        self.r = r
-
+class _Veh(_Domain):
     def getIDList(self):  # noqa: N802
         return self.r.ids
 
@@ -77,10 +75,7 @@ class _Veh:
         return self._col(k)
 
 
-class _VType:
-    def __init__(self, r):
-        self.r = r
-
+class _VType(_Domain):
     def getVehicleClass(self, vt):  # noqa: N802 (not in FCD: the route files say)
         return ""
 
