@@ -21,6 +21,7 @@ from typing import Callable
 
 import numpy as np
 
+from sumo_drvpw.data.wind import tailwind_mps
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network
@@ -87,11 +88,12 @@ def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray
     speed : wind speed [m/s]
     from_deg : direction the wind blows from [deg clockwise from north]
 
-    The wind moves towards from_deg + 180°, so v_w = w·cos(h − from − 180°) = −w·cos(h − from).
+    The wind moves towards from_deg + 180°, so v_w = w·cos(h − from − 180°) = −w·cos(h − from)
+    (:func:`sumo_drvpw.data.wind.tailwind_mps`, the same a drive log's wind is written with).
     """
     if speed == 0.0:
         return np.zeros(len(angle_deg))
-    return -speed * np.cos(np.radians(np.asarray(angle_deg, float) - from_deg))
+    return tailwind_mps(angle_deg, speed, from_deg)
 
 
 class _Reader:
