@@ -22,6 +22,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from sumo_drvpw.data.trips import trip_codes_of, trip_starts
 from sumo_drvpw.errors import UserError
 
 #: columns that give the heading [° clockwise from north] directly, first found wins
@@ -73,9 +74,9 @@ def heading_from_positions(lat_deg, lon_deg, speed_mps, trip_ids,
     lon = np.asarray(lon_deg, float)
     v = np.asarray(speed_mps, float)
     out = np.full(lat.shape, np.nan)
-    trips = pd.Series(np.asarray(trip_ids)).astype(str).to_numpy()
-    starts = np.flatnonzero(np.r_[True, trips[1:] != trips[:-1]])
-    for a, b in zip(starts, np.r_[starts[1:], len(trips)]):
+    codes = trip_codes_of(pd.Series(np.asarray(trip_ids)))
+    starts = np.flatnonzero(trip_starts(codes))
+    for a, b in zip(starts, np.r_[starts[1:], len(codes)]):
         la, lo = lat[a:b], lon[a:b]
         ok = np.isfinite(la) & np.isfinite(lo)
         if ok.sum() < 2:

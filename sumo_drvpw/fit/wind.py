@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from sumo_drvpw.fit.ols import ols
 from sumo_drvpw.model.terms import parse_term, term_matrix
 
 #: below this speed [m/s] samples do not inform the wind (X_aero/v is tiny, the heading noisy)
@@ -52,11 +53,8 @@ def estimate_wind(x, y, mask, heading_deg, terms, fixed: dict | None = None) -> 
     yy = y[use] - sum(X[use, terms.index(t)] * c for t, c in fixed.items())
     A = X[use][:, [terms.index(t) for t in free]]
 
-    def solve(M):
-        s = np.maximum(np.linalg.norm(M, axis=0), 1e-300)
-        return np.linalg.lstsq(M / s, yy, rcond=None)[0] / s
-    b_still = solve(A)
-    b = solve(np.column_stack([A, W]))
+    b_still = ols(A, yy).beta
+    b = ols(np.column_stack([A, W]), yy).beta
     coef = dict(fixed, **{t: float(c) for t, c in zip(free, b[:len(free)])})
     c_aero = coef[aero[0]]
     north, east = (float(b[len(free)]) / c_aero, float(b[len(free) + 1]) / c_aero) if c_aero > 0 \
