@@ -57,8 +57,8 @@ _u("time", 1e-3, 0.0, "ms")
 _u("time", 1e-6, 0.0, "us")
 _u("time", 60.0, 0.0, "min")
 _u("time", 3600.0, 0.0, "h", "hr")
-_u("temperature", 1.0, 0.0, "°c", "degc", "c", "celsius")
-_u("temperature", 5.0 / 9.0, -32.0 * 5.0 / 9.0, "°f", "degf", "f", "fahrenheit")
+_u("temperature", 1.0, 0.0, "°c", "\u2103", "degc", "c", "celsius")  # U+2103 ℃: Car Scanner's spelling
+_u("temperature", 5.0 / 9.0, -32.0 * 5.0 / 9.0, "°f", "\u2109", "degf", "f", "fahrenheit")
 _u("temperature", 1.0, -KELVIN, "k", "kelvin")
 _u("rotational_speed", 1.0, 0.0, "rpm", "1/min", "min-1")
 _u("rotational_speed", 1.0 / RPM, 0.0, "rad/s")
@@ -224,13 +224,81 @@ def drop(df: pd.DataFrame, mask, reason: str, report: dict) -> pd.DataFrame:
     return df
 
 
+#: a channel logged on its own rows is interpolated across gaps up to this many of its median
+#: sampling intervals; a longer gap (the logger paused the channel) stays missing
+ALIGN_MAX_GAP_INTERVALS = 3.0
+
+
+def align_channels(df: pd.DataFrame, report: dict) -> pd.DataFrame:
+    """Put the channels of an asynchronous log onto its speed samples.
+
+    Loggers that poll one value per row (OBD apps such as Car Scanner, CAN-bus exports)
+    leave every other column empty on a speed row. A numeric channel logged mostly on
+    rows without speed is asynchronous: its value at each speed sample is interpolated
+    linearly in time between its own two neighbouring samples, where they are at most
+    :data:`ALIGN_MAX_GAP_INTERVALS` of the channel's median sampling interval apart (else
+    it stays missing); a value logged on the speed row itself is kept. Channels logged
+    on the speed rows (a synchronous log) are not touched. The report's notes say which
+    channels were aligned and how much of each stayed missing. Call per trip.
+    """
+    t = pd.to_numeric(df["time_s"], errors="coerce").to_numpy(float)
+    speed_row = np.isfinite(t) & df["speed_mps"].notna().to_numpy()
+    other = np.isfinite(t) & ~speed_row
+    if not other.any() or not speed_row.any():
+        return df
+    aligned, still = [], []
+    out = df.copy()
+    ts = t[speed_row]
+    for c in df.columns:
+        if c in ("time_s", "speed_mps", "trip_id") or not pd.api.types.is_numeric_dtype(df[c]):
+            continue
+        x = df[c].to_numpy(float)
+        own = np.isfinite(t) & np.isfinite(x)
+        if not own.any() or (own & speed_row).sum() >= 0.5 * own.sum():
+            continue
+        order = np.argsort(t[own], kind="stable")
+        tc, xc = t[own][order], x[own][order]
+        keep = np.concatenate([np.diff(tc) > 0, [True]])  # repeated times: the last value
+        tc, xc = tc[keep], xc[keep]
+        col = x[speed_row].copy()
+        todo = ~np.isfinite(col)
+        if len(tc) >= 2:
+            step = np.diff(tc)
+            hi = np.clip(np.searchsorted(tc, ts, side="left"), 1, len(tc) - 1)
+            exact = tc[np.minimum(np.searchsorted(tc, ts), len(tc) - 1)] == ts
+            inside = (ts >= tc[0]) & (ts <= tc[-1])
+            ok = inside & (exact | (tc[hi] - tc[hi - 1] <= ALIGN_MAX_GAP_INTERVALS * np.median(step)))
+            val = np.where(ok, np.interp(ts, tc, xc), np.nan)
+        else:
+            val = np.where(ts == tc[0], xc[0], np.nan)
+        col[todo] = val[todo]
+        new = np.full(len(df), np.nan)
+        new[speed_row] = col
+        out[c] = new
+        aligned.append(c)
+        miss = float(np.mean(~np.isfinite(col)))
+        if miss > 0:
+            still.append(f"{c} {100 * miss:.2g} %")
+    if aligned:
+        report["notes"].append(
+            f"asynchronous log: {int(other.sum())} rows carry no speed; {len(aligned)} channel(s) "
+            f"logged on their own rows are interpolated onto the {int(speed_row.sum())} speed samples "
+            f"(linear in time, across gaps up to {ALIGN_MAX_GAP_INTERVALS:g}× the channel's median "
+            "sampling interval)" + (f"; still missing: {', '.join(still)}" if still else ""))
+        out = drop(out, other, "rows without speed (their channels put onto the speed samples)", report)
+    return out
+
+
 def clean_time_and_speed(df: pd.DataFrame, path, report: dict) -> pd.DataFrame:
     """Drop NaN time/speed and samples whose time does not increase; check speed is plausible.
 
+    An asynchronous log's channels are first put onto its speed samples
+    (:func:`align_channels`), so dropping the rows without speed loses no channel.
     A sample whose time equals the latest kept time is a 'duplicate timestamp' (the first
     one is kept); one whose time is earlier is 'time going backwards'. Speed must be in
     [0, 100] m/s after conversion, else a UserError names file and row (wrong unit).
     """
+    df = align_channels(df, report)
     df = drop(df, df["time_s"].isna(), "NaN time", report)
     df = drop(df, df["speed_mps"].isna(), "NaN speed", report)
     t = df["time_s"].to_numpy(float)

@@ -184,6 +184,10 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
         if e is None:
             if not m["keep_unmapped"]:
                 continue
+            if label.startswith("Unnamed: ") and s.astype(str).str.strip().isin(na + ("",)).all():
+                rep["notes"].append(f"column {label!r} has no header and no value (a trailing "
+                                    "separator): left out")
+                continue
             name, f, o = generic_name(label, rep["notes"])
             try:
                 out[name] = numeric(s, path, label, na) * f + o
@@ -200,7 +204,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
                 i = int(np.flatnonzero(bad.to_numpy())[0])
                 raise UserError(f"{path}: column '{label}' data row {i} holds {s.iloc[i]!r}: "
                                 "not a date/time")
-            out["time_s"] = (t - t.min()).dt.total_seconds()
+            out["time_s"] = _seconds(t, m["time_format"], rep)
         else:
             out[e["name"]] = numeric(s, path, label, na) * e["factor"] + e["offset"]
     names = unique_names(list(out))
@@ -210,6 +214,30 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     df = clean_time_and_speed(df, path, rep)
     df.insert(0, "trip_id", path.stem)
     return df.reset_index(drop=True), rep
+
+
+_DATE_DIRECTIVES = ("%d", "%j", "%m", "%b", "%B", "%y", "%Y", "%U", "%W", "%G", "%V", "%x", "%c", "%s")
+
+
+def _seconds(t: pd.Series, time_format, rep: dict) -> pd.Series:
+    """Seconds since the first timestamp. A time of day without a date (``%H:%M:%S.%f``,
+    as phone OBD apps log it) that steps back by more than 12 h has passed midnight: the
+    day is carried on instead of the samples reading as time going backwards."""
+    s = (t - t.min()).dt.total_seconds()
+    if time_format is None or any(d in str(time_format) for d in _DATE_DIRECTIVES):
+        return s
+    x = s.to_numpy(float)
+    ok = np.isfinite(x)
+    step = np.zeros_like(x)
+    xs = x[ok]
+    back = np.concatenate([[False], np.diff(xs) < -43200.0])
+    if not back.any():
+        return s
+    step[ok] = 86400.0 * np.cumsum(back)
+    rep["notes"].append(f"time of day without a date passes midnight {int(back.sum())} time(s): "
+                        "the day is carried on")
+    x = x + step
+    return pd.Series(x - np.nanmin(x), index=s.index)
 
 
 def _split_trips(df, path, rep):
