@@ -598,6 +598,32 @@ def _(d):
     return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
 
 
+_CS = ('time,"Vehicle speed (km/h)","Battery DC Current (A)","Battery DC Voltage (V)",\n'
+       + "".join(f"07:00:{i // 3:02d}.{(i % 3) * 300:03d},"
+                 + ("{},,,\n".format(i % 40), ",{},,\n".format(20 + i % 5), ",,400,\n")[i % 3]
+                 for i in range(150)))
+
+
+@case("vendor-truncated", "car-scanner csv cut mid-row", ("truncated", "asynchronous"), expect="accept")
+def _(d):
+    s = text(d, "drive.csv", _CS[:-4])
+    return ["import", "car-scanner", str(s), "--out", str(d / "out.parquet")]
+
+
+@case("vendor-truncated", "car-scanner csv without a speed", ("drive.csv", "speed"))
+def _(d):
+    s = text(d, "drive.csv", _CS.replace("Vehicle speed", "Engine RPM"))
+    return ["import", "car-scanner", str(s), "--out", str(d / "out.parquet")]
+
+
+@case("vendor-truncated", "car-scanner csv with a bad time", ("drive.csv", "row 4", "7:00"))
+def _(d):
+    lines = _CS.splitlines(keepends=True)
+    lines[5] = "7:00" + lines[5][8:]
+    s = text(d, "drive.csv", "".join(lines))
+    return ["import", "car-scanner", str(s), "--out", str(d / "out.parquet")]
+
+
 # --- numpy warnings never reach the terminal -------------------------------------------
 
 @case("warnings", "all-NaN optional column", ("wrote",), expect="accept")

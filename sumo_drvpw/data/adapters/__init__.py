@@ -19,6 +19,7 @@ FORMATS = {
     "torquepro-prius2": "sumo_drvpw.data.adapters.torquepro_prius2",
     "jlu-dyno": "sumo_drvpw.data.adapters.jlu_dyno",
     "jlu-road": "sumo_drvpw.data.adapters.jlu_road",
+    "car-scanner": "sumo_drvpw.data.adapters.car_scanner",
     "columns": "sumo_drvpw.data.adapters.columns",
 }
 

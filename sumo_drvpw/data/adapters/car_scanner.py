@@ -1,0 +1,247 @@
+"""Adapter for Car Scanner ELM OBD2 (phone OBD app) CSV exports (``car-scanner``).
+
+Car Scanner polls one value at a time and writes it with its own timestamp, in either of
+its two CSV layouts:
+
+- **long**: ``"SECONDS";"PID";"VALUE";"UNITS";"LATITUDE";"LONGTITUDE";`` — one row per
+  value, ``SECONDS`` the time of day in seconds, the phone's position on each row;
+- **wide**: ``time,"Vehicle speed (km/h)","Battery DC Current (A)",…`` — one column per
+  value (``PID (unit)``), ``time`` the time of day (``HH:MM:SS.fff``), and on each row
+  only the value polled then (the other cells empty).
+
+Either way the channels are asynchronous: each is interpolated onto the speed samples
+(:func:`sumo_drvpw.data.adapters._common.align_channels`), and the import report says so.
+A time of day that steps back by more than 12 h has passed midnight. trip_id = file stem.
+
+Mapping (PID names as Car Scanner writes them; every other value is kept as
+``snake_name_<unit suffix>`` in SI):
+
+- ``Vehicle speed`` → ``speed_mps`` (the OBD wheel speed); without it ``Speed (GPS)``,
+  which is otherwise kept as ``gps_speed_mps``. The import report names the source.
+- ``Altitude (GPS)`` → ``elevation_m`` (the reader smooths it over distance for the grade);
+  the position columns → ``latitude_deg``, ``longitude_deg``.
+- The ambient temperature (one PID naming ambient/outside temperature) → ``ambient_c``.
+- The traction battery's current and voltage (one PID each naming the battery or HV and a
+  current in A or a voltage in V; cell, minimum/maximum, 12 V and module values are not
+  it) → ``battery_current_a``, ``battery_voltage_v``. Car Scanner keeps the sign the car's
+  controller uses, which differs between makes; the canonical sign is positive when
+  discharging, so the current is flipped when V·I is clearly negative while the car
+  accelerates (median below −1 kW over at least 20 such samples), and the report says which
+  sign was found. Where no single PID fits, the values stay extras and the report lists
+  the candidates (the ``columns`` format then maps them by name).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.data.adapters._common import (clean_time_and_speed, expand_paths, generic_name, lookup_unit,
+                                              new_report, read_csv_strict, read_each, unique_names)
+from sumo_drvpw.errors import UserError
+
+FORMAT = "car-scanner"
+SUFFIXES = (".csv",)
+LONG_HEADER = ("SECONDS", "PID", "VALUE", "UNITS")
+
+#: roles of the fixed columns this adapter writes (drive-log spec "Roles")
+ROLES = {"ambient_c": "condition", "latitude_deg": "condition", "longitude_deg": "condition",
+         "gps_speed_mps": "response"}
+
+_NOT_TRACTION = re.compile(r"cell|min|max|12 ?v|module|aux|obd|control|charg|capacity|isolation", re.I)
+
+
+def _sep_of(path: Path) -> tuple[str, bool]:
+    """(separator, long layout?) from the header line."""
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            head = f.readline()
+    except UnicodeDecodeError as e:
+        raise UserError(f"{path}: not UTF-8 text: {e}") from None
+    if not head.strip():
+        raise UserError(f"{path}: file is empty")
+    sep = ";" if head.count(";") > head.count(",") else ","
+    first = [c.strip().strip('"').upper() for c in head.split(sep)[:4]]
+    return sep, tuple(first) == LONG_HEADER
+
+
+def _time_of_day(values: np.ndarray) -> np.ndarray:
+    """Seconds since the first sample from times of day [s]; a step back by more than 12 h
+    passes midnight and carries the day on."""
+    t = np.asarray(values, float)
+    ok = np.isfinite(t)
+    back = np.zeros(len(t))
+    tt = t[ok]
+    back[ok] = 86400.0 * np.cumsum(np.concatenate([[False], np.diff(tt) < -43200.0]))
+    t = t + back
+    return t - np.nanmin(t) if ok.any() else t
+
+
+def _long(path: Path, sep: str, rep: dict) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Long layout → (time of day [s], {"PID (unit)": values on their own rows, NaN elsewhere})."""
+    raw = read_csv_strict(path, sep=sep, dtype=str, keep_default_na=False, na_filter=False,
+                          encoding="utf-8-sig")
+    raw.columns = [str(c).strip().strip('"').upper() for c in raw.columns]
+    t = pd.to_numeric(raw["SECONDS"].str.strip(), errors="coerce").to_numpy(float)
+    bad = ~np.isfinite(t)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"{path}: column 'SECONDS' data row {i} holds {raw['SECONDS'].iloc[i]!r}: not a number")
+    pid = raw["PID"].str.strip()
+    unit = raw["UNITS"].str.strip()
+    val = pd.to_numeric(raw["VALUE"].str.strip().str.replace(",", ".", regex=False), errors="coerce").to_numpy(float)
+    labels = (pid + np.where(unit != "", " (" + unit + ")", "")).to_numpy(str)
+    chans: dict[str, np.ndarray] = {}
+    text = []
+    for lab in pd.unique(labels):
+        rows = labels == lab
+        if not np.isfinite(val[rows]).any():
+            text.append(str(lab))
+            continue
+        x = np.full(len(raw), np.nan)
+        x[rows] = val[rows]
+        chans[str(lab)] = x
+    if text:
+        rep["notes"].append(f"{len(text)} PID(s) without a numeric value left out: {', '.join(text[:5])}"
+                            + (" …" if len(text) > 5 else ""))
+    for col, name in (("LATITUDE", "Latitude (deg)"), ("LONGTITUDE", "Longitude (deg)"),
+                      ("LONGITUDE", "Longitude (deg)")):
+        if col in raw:
+            x = pd.to_numeric(raw[col].str.strip(), errors="coerce").to_numpy(float, copy=True)
+            x[x == 0] = np.nan  # no fix is written as 0
+            if np.isfinite(x).any():
+                chans[name] = x
+    return t, chans
+
+
+def _wide(path: Path, sep: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Wide layout → (time of day [s], {"PID (unit)": column})."""
+    raw = read_csv_strict(path, sep=sep, dtype=str, keep_default_na=False, na_filter=False,
+                          encoding="utf-8-sig")
+    raw.columns = [str(c).strip() for c in raw.columns]
+    tcol = raw.columns[0]
+    if tcol.lower() not in ("time", "seconds"):
+        raise UserError(f"{path}: first column is {tcol!r}, expected 'time' (Car Scanner's wide CSV) "
+                        "or the long layout's \"SECONDS\";\"PID\";\"VALUE\";\"UNITS\" header")
+    s = raw[tcol].str.strip()
+    num = pd.to_numeric(s, errors="coerce")
+    if num.notna().all():
+        t = num.to_numpy(float)
+    else:
+        parsed = pd.to_datetime(s, format="%H:%M:%S.%f", errors="coerce")
+        parsed = parsed.fillna(pd.to_datetime(s, format="%H:%M:%S", errors="coerce"))
+        bad = parsed.isna().to_numpy()
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise UserError(f"{path}: column {tcol!r} data row {i} holds {s.iloc[i]!r}, expected a time "
+                            "of day like '07:13:32.604'")
+        t = ((parsed - parsed.dt.normalize()).dt.total_seconds()).to_numpy(float)
+    chans = {}
+    for c in raw.columns[1:]:
+        cells = raw[c].str.strip().str.replace(",", ".", regex=False) if sep != "," else raw[c].str.strip()
+        x = pd.to_numeric(cells, errors="coerce")
+        if c.startswith("Unnamed: ") and not (cells != "").any():
+            continue  # the trailing separator of every row
+        junk = x.isna() & (cells != "")
+        if junk.any():
+            i = int(np.flatnonzero(junk.to_numpy())[0])
+            raise UserError(f"{path}: column {c!r} data row {i} holds {raw[c].iloc[i]!r}: not a number")
+        chans[c] = x.to_numpy(float)
+    return t, chans
+
+
+def _unit_dim(label: str) -> str | None:
+    from sumo_drvpw.data.adapters._common import split_header
+
+    u = lookup_unit(split_header(label)[1])
+    return u[0] if u else None
+
+
+def _one(labels, pattern: str, dim: str, exclude=_NOT_TRACTION) -> tuple[str | None, list[str]]:
+    """The one label whose PID matches ``pattern`` with a unit of dimension ``dim``."""
+    from sumo_drvpw.data.adapters._common import split_header
+
+    hits = [lab for lab in labels if re.search(pattern, split_header(lab)[0], re.I)
+            and _unit_dim(lab) == dim and not (exclude and exclude.search(split_header(lab)[0]))]
+    return (hits[0] if len(hits) == 1 else None), hits
+
+
+def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
+    """One Car Scanner CSV (long or wide layout) → canonical frame and report."""
+    sep, long = _sep_of(path)
+    rep = new_report(path, path.stem, 0)
+    t, chans = _long(path, sep, rep) if long else _wide(path, sep)
+    rep["rows_read"] = int(len(t))
+    labels = list(chans)
+    named: dict[str, str] = {}
+    speed, _ = _one(labels, r"^vehicle speed$|^speed \(obd\)$", "speed", exclude=None)
+    gps, _ = _one(labels, r"^speed \(gps\)$", "speed", exclude=None)
+    if speed is None and gps is None:
+        raise UserError(f"{path}: no speed: neither 'Vehicle speed' nor 'Speed (GPS)' is logged "
+                        f"(found {', '.join(labels[:6])}{' …' if len(labels) > 6 else ''})")
+    named[speed or gps] = "speed_mps"
+    rep["notes"].append(f"speed from {speed or gps!r}")
+    if speed and gps:
+        named[gps] = "gps_speed_mps"
+    for pattern, dim, name in ((r"^altitude \(gps\)$|^gps altitude$", "length", "elevation_m"),
+                               (r"ambient|outside|outdoor", "temperature", "ambient_c")):
+        lab, hits = _one(labels, pattern, dim, exclude=None)
+        if lab:
+            named[lab] = name
+        elif len(hits) > 1:
+            rep["notes"].append(f"{name}: {len(hits)} candidates ({', '.join(hits)}), none mapped")
+    for pattern, dim, name in ((r"batt|hv|traction", "current", "battery_current_a"),
+                               (r"batt|hv|traction", "voltage", "battery_voltage_v")):
+        lab, hits = _one(labels, pattern, dim)
+        if lab:
+            named[lab] = name
+        elif hits:
+            rep["notes"].append(f"{name}: {len(hits)} candidates ({', '.join(hits)}), none mapped: "
+                                "use the 'columns' format to name one")
+    cols = {"time_s": _time_of_day(t)}
+    for lab, x in chans.items():
+        if lab in named:
+            name = named[lab]
+            _, f, o = generic_name(lab)
+        elif lab in ("Latitude (deg)", "Longitude (deg)"):
+            name, f, o = lab.split()[0].lower() + "_deg", 1.0, 0.0
+        else:
+            name, f, o = generic_name(lab, rep["notes"])
+        cols[name] = x * f + o
+    names = unique_names(list(cols))
+    df = pd.DataFrame(dict(zip(names, cols.values())))
+    df = clean_time_and_speed(df, path, rep)
+    if "battery_current_a" in df and "battery_voltage_v" in df:
+        _discharge_positive(df, rep)
+    df.insert(0, "trip_id", path.stem)
+    return df.reset_index(drop=True), rep
+
+
+def _discharge_positive(df: pd.DataFrame, rep: dict) -> None:
+    """Flip the current when the battery clearly charges while the car accelerates."""
+    v = df["speed_mps"].to_numpy(float)
+    t = df["time_s"].to_numpy(float)
+    a = np.gradient(v, t) if len(v) > 2 else np.zeros_like(v)
+    p = (df["battery_voltage_v"] * df["battery_current_a"]).to_numpy(float)
+    pull = (v > 3.0) & (a > 0.5) & np.isfinite(p)
+    if pull.sum() < 20:
+        rep["notes"].append(f"battery current kept as logged: only {int(pull.sum())} samples accelerate "
+                            "(> 0.5 m/s² above 3 m/s) to check its sign on")
+        return
+    med = float(np.median(p[pull]))
+    if med < -1000.0:
+        df["battery_current_a"] = -df["battery_current_a"]
+        rep["notes"].append(f"battery current logged negative when discharging (median V·I {med / 1000:.1f} kW "
+                            "while accelerating): sign flipped to the canonical positive-discharging")
+    else:
+        rep["notes"].append(f"battery current positive when discharging as logged (median V·I "
+                            f"{med / 1000:.1f} kW while accelerating)")
+
+
+def read(paths):
+    """Read Car Scanner CSV exports (files or folders of .csv)."""
+    frames, reports = read_each(expand_paths(paths, SUFFIXES, "Car Scanner CSV"), read_file)
+    return frames, reports, []
