@@ -454,7 +454,8 @@ def test_unknown_format_and_missing_path(tmp_path):
         read("jlu-dyno", tmp_path / "missing")
     with pytest.raises(UserError, match="folder holds no"):
         read("jlu-dyno", tmp_path)
-    assert set(FORMATS) == {"bmw-i3-tum", "torquepro-prius2", "jlu-dyno", "jlu-road", "car-scanner", "columns"}
+    assert set(FORMATS) == {"bmw-i3-tum", "torquepro", "torquepro-prius2", "jlu-dyno", "jlu-road", "car-scanner",
+                            "columns"}
 
 
 # ---------------------------------------------------------------- time cleaning property

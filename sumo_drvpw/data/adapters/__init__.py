@@ -16,6 +16,7 @@ from sumo_drvpw.errors import UserError
 #: format name → module (each has read(paths) → (frames, reports, notes); columns also takes the mapping)
 FORMATS = {
     "bmw-i3-tum": "sumo_drvpw.data.adapters.bmw_i3_tum",
+    "torquepro": "sumo_drvpw.data.adapters.torquepro_prius2",
     "torquepro-prius2": "sumo_drvpw.data.adapters.torquepro_prius2",
     "jlu-dyno": "sumo_drvpw.data.adapters.jlu_dyno",
     "jlu-road": "sumo_drvpw.data.adapters.jlu_road",

@@ -1,4 +1,5 @@
-"""Adapter for Torque Pro (phone OBD app) logs of a 2nd-generation Prius (``torquepro-prius2``).
+"""Adapter for Torque Pro (phone OBD app) logs (``torquepro``; ``torquepro-prius2`` is the
+same reader, named for the 2nd-generation Prius logs it was written for).
 
 Source: repository denjiv/PETS (``From_CdA_Act.json``, ``To_CdA_Act.json``): a JSON list of
 records, one per sample (≈1.4 Hz, irregular), numbers sometimes as strings, ``"-"`` while
@@ -17,6 +18,11 @@ Mapping (everything else kept as ``snake_name_<unit suffix>`` in SI):
   (``phone_ax_mps2`` …; include gravity), G(calibrated) and Acceleration Sensor(Total)(g)
   in g → m/s².
 
+Torque writes each value in the unit its user chose: a label of the table above in another
+unit (``Speed (OBD)(km/h)``, ``GPS Altitude(m)``, ``Ambient air temp(°C)``) maps to the same
+column, converted from the unit in its brackets. A header row repeated inside a CSV (Torque
+starts a new logging session in the same file) is dropped and counted.
+
 Samples before the OBD link is up (any powertrain field ``-``) are dropped and counted as
 'link not up (-)'; later ``-`` cells become NaN (counted per column in the notes).
 """
@@ -31,7 +37,8 @@ import pandas as pd
 
 from sumo_drvpw.model.constants import FT, G, MPH
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.data.adapters._common import clean_time_and_speed, drop, generic_name, new_report, numeric, unique_names
+from sumo_drvpw.data.adapters._common import (DIMENSIONS, clean_time_and_speed, drop, generic_name, lookup_unit,
+                                              new_report, numeric, split_header, unique_names)
 
 FORMAT = "torquepro-prius2"
 SUFFIXES = (".json", ".csv")
@@ -90,7 +97,36 @@ ROLES = {
     "gps_latitude_deg": "condition", "gps_longitude_deg": "condition",
     "altitude_phone_m": "condition",
 }
-REQUIRED = (TIME, "Speed (OBD)(mph)")
+SPEED = "Speed (OBD)(mph)"
+
+
+def _by_base() -> dict[str, str]:
+    """Label without its unit → column name, for the labels whose bracket holds a unit."""
+    out = {}
+    for label, (name, _, _) in NAMES.items():
+        base, unit = split_header(label)
+        u = lookup_unit(unit)
+        if unit and u is not None and name.endswith("_" + DIMENSIONS[u[0]]):
+            out[base] = name
+    return out
+
+
+#: "Speed (OBD)" → speed_mps, … (the unit comes from the log's own label)
+BY_BASE = _by_base()
+
+
+def _mapping(label: str, notes: list) -> tuple[str, float, float]:
+    """(name, factor, offset) of a Torque label: the table, the table's label in another
+    unit, or a generic extra."""
+    if label in NAMES:
+        return NAMES[label]
+    base, unit = split_header(label)
+    name = BY_BASE.get(base)
+    u = lookup_unit(unit) if name else None
+    if u is not None and name.endswith("_" + DIMENSIONS[u[0]]):
+        _, f, o = u
+        return name, f, o
+    return generic_name(label, notes)
 #: powertrain fields whose first complete row marks the OBD link as up
 LINK = ("Engine RPM(rpm)", "MG1 Revolution(RPM)", "MG1 Torque(Nm)", "MG2 Revolution(RPM)",
         "MG2 Torque(Nm)", "HV Battery Current(Amp)", "Power Resource VB(Volt)")
@@ -125,9 +161,14 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     rep = new_report(path, trip, len(raw))
     labels = [str(c).strip() for c in raw.columns]
     raw.columns = labels
-    for k in REQUIRED:
-        if k not in labels:
-            raise UserError(f"{path}: missing column '{k}'; found {', '.join(labels[:6])} …")
+    speed = [lab for lab in labels if lab != TIME and _mapping(lab, [])[0] == "speed_mps"]
+    for k, ok in ((TIME, TIME in labels), (SPEED, bool(speed))):
+        if not ok:
+            raise UserError(f"{path}: missing column '{k}' (or the OBD speed in another unit); "
+                            f"found {', '.join(labels[:6])} …")
+    again = raw[TIME].astype(str).str.strip() == TIME
+    if again.any():  # a new logging session in the same CSV repeats the header
+        raw = drop(raw, again.to_numpy(), "repeated header (a new logging session)", rep)
     t = pd.to_datetime(raw[TIME].astype(str).str.strip(), format=TIME_FORMAT, errors="coerce")
     bad = t.isna() & raw[TIME].notna()
     if bad.any():
@@ -142,7 +183,7 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
         if label in TEXT:
             cols[TEXT[label]] = raw[label].astype(str)
             continue
-        name, f, o = NAMES.get(label) or generic_name(label, rep["notes"])
+        name, f, o = _mapping(label, rep["notes"])
         s = raw[label]
         n_dash = int(s.map(lambda x: isinstance(x, str) and x.strip() == "-").sum())
         if n_dash:
@@ -153,7 +194,7 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     if "altitude_phone_m" in df and "elevation_m" in df:
         df["elevation_m"] = df["elevation_m"].fillna(df["altitude_phone_m"])
     # samples before the OBD link is up: leading rows with any powertrain field '-'
-    link = [NAMES[k][0] for k in LINK if k in labels]
+    link = sorted({_mapping(k, [])[0] for k in labels} & {NAMES[k][0] for k in LINK})
     if link:
         complete = df[link].notna().all(axis=1).to_numpy()
         first = int(np.argmax(complete)) if complete.any() else len(df)

@@ -1,0 +1,96 @@
+"""Torque Pro logs in the units their users chose (``torquepro``).
+
+Torque writes each value in the unit set in the app: the shared Prius log is in mph, ft and
+°F, a metric user's in km/h, m and °C. Before, a log whose OBD speed was not in mph was
+refused ("missing column 'Speed (OBD)(mph)'"), and its other metric labels became extras.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.data.adapters import read
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.constants import FT, MPH
+
+HEAD = ["GPS Time", "Device Time", "Speed (OBD)(km/h)", "GPS Altitude(m)", "Ambient air temp(°C)",
+        "Engine RPM(rpm)", "Fuel flow rate/hour(l/hr)"]
+
+
+def metric_csv(path, n=40, repeat_header_at=None):
+    rows = [", ".join(HEAD)]
+    for i in range(n):
+        if i == repeat_header_at:
+            rows.append(", ".join(HEAD))
+        t = pd.Timestamp("2024-05-04 10:00:00") + pd.Timedelta(seconds=0.7 * i)
+        dev = t.strftime("%d-%b-%Y %H:%M:%S.") + f"{t.microsecond // 1000:03d}"
+        rows.append(f"-, {dev}, {min(3.6 * i, 90.0):.1f}, {300 + 0.5 * i:.1f}, 18.5, {800 + 40 * i}, 1.2")
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    return path
+
+
+def test_metric_units_map_to_the_same_columns(tmp_path):
+    df, rep = read("torquepro", metric_csv(tmp_path / "trip.csv"))
+    assert len(df) == 40
+    np.testing.assert_allclose(df["speed_mps"], np.minimum(np.arange(40.0), 25.0), atol=1e-9)
+    np.testing.assert_allclose(df["elevation_m"], 300 + 0.5 * np.arange(40.0))
+    np.testing.assert_allclose(df["ambient_c"], 18.5)
+    np.testing.assert_allclose(df["ice_speed_rpm"], 800 + 40 * np.arange(40.0))
+    np.testing.assert_allclose(df["time_s"], 0.7 * np.arange(40.0), atol=1e-3)
+    np.testing.assert_allclose(df["fuel_flow_rate_hour_lph"], 1.2)  # "l/hr", the fuel target's column
+    assert rep["roles"].get("ambient_c") == "condition"
+
+
+def test_a_repeated_header_is_dropped_and_counted(tmp_path):
+    df, rep = read("torquepro", metric_csv(tmp_path / "trip.csv", repeat_header_at=20))
+    assert len(df) == 40
+    assert rep["dropped"] == {"repeated header (a new logging session)": 1}
+
+
+def test_no_obd_speed_in_any_unit_is_refused(tmp_path):
+    p = metric_csv(tmp_path / "trip.csv")
+    p.write_text(p.read_text(encoding="utf-8").replace("Speed (OBD)(km/h)", "Speed (GPS)(km/h)"),
+                 encoding="utf-8")
+    with pytest.raises(UserError, match=r"trip.csv: missing column 'Speed \(OBD\)\(mph\)' \(or the OBD speed"):
+        read("torquepro", p)
+
+
+@pytest.mark.shared_data
+def test_shared_prius_log_in_metric_units_reads_the_same(shared_data, tmp_path):
+    """The shared Prius log (mph, ft, °F) written again in km/h, m and °C as a metric user's
+    Torque would: the same canonical values."""
+    import json
+
+    src = shared_data / "prius_gen2_torquepro" / "From_CdA_Act.json"
+    recs = json.loads(src.read_text(encoding="utf-8"))
+    ref, _ = read("torquepro-prius2", src)
+
+    def conv(x, f, o=0.0):
+        try:
+            return f"{float(x) * f + o:.6f}"
+        except (TypeError, ValueError):
+            return x
+
+    out = []
+    for r in recs:
+        r = dict(r)
+        r["Speed (OBD)(km/h)"] = conv(r.pop("Speed (OBD)(mph)"), MPH / (1 / 3.6))
+        r["GPS Altitude(m)"] = conv(r.pop("GPS Altitude(ft)"), FT)
+        r["Ambient air temp(°C)"] = conv(r.pop("Ambient air temp(°F)"), 5 / 9, -32 * 5 / 9)
+        out.append(r)
+    p = tmp_path / "metric.json"
+    p.write_text(json.dumps(out), encoding="utf-8")
+    df, _ = read("torquepro", p)
+    assert list(df.columns) == list(ref.columns)
+    for c in ("speed_mps", "elevation_m", "ambient_c", "battery_current_a", "time_s"):
+        np.testing.assert_allclose(df[c], ref[c], rtol=1e-6, atol=1e-6, err_msg=c)
+
+
+def test_cli_format_name(tmp_path, capsys):
+    out = tmp_path / "log.parquet"
+    assert cli_main(["import", "torquepro", str(metric_csv(tmp_path / "trip.csv")), "--out", str(out)]) == 0
+    assert "import torquepro" in capsys.readouterr().out
+    assert len(pd.read_parquet(out)) == 40
