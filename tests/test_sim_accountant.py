@@ -152,6 +152,28 @@ def test_vclasses_each_get_their_equation_or_are_skipped(tmp_path):
     assert np.isfinite(v.traction_whpkm).all()
 
 
+def test_persons_of_a_redeclared_default_pedestrian_type_are_pedestrians(tmp_path):
+    """SUMO's rail game (tools/game/rail/test.sumocfg in the eclipse-sumo wheel) redeclares
+    DEFAULT_PEDTYPE without a vClass, which SUMO reads as passenger: its 65 walkers were
+    counted as 'passenger 65' vehicles not booked. A person is a pedestrian, never booked,
+    and no warning is given for it."""
+    (tmp_path / "r.rou.xml").write_text("""<routes>
+  <vType id="car" vClass="passenger" mass="1500" sigma="0"/>
+  <vType id="DEFAULT_PEDTYPE" width="2" length="2"/>
+  <flow id="c" type="car" from="c00c10" to="c34c44" begin="0" end="30" period="10"/>
+  <personFlow id="g" begin="0" end="40" period="10"><walk from="c00c10" to="c10c20"/></personFlow>
+</routes>""", encoding="utf-8")
+    (tmp_path / "s.toml").write_text(
+        'equations = ["vsp_ldv1999"]\n'
+        f'[sumo]\nnet = "{NETS / "city.net.xml"}"\nroutes = ["r.rou.xml"]\n'
+        'end = 100\noptions = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n',
+        encoding="utf-8")
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    assert res["skipped"] == {"by_vclass": {"pedestrian": 4}, "by_vtype": {"DEFAULT_PEDTYPE": 4}}
+    assert not any("not booked" in w for w in res["warnings"])
+    assert set(res.vehicles.vclass) == {"passenger"} and len(res.vehicles) == 3
+
+
 def test_out_of_range_vehicle_steps_counted(tmp_path):
     """An equation's recorded validity range: vehicle-steps outside it are counted."""
     mixed = "\n".join(ln for ln in MIXED.splitlines() if "<person" not in ln)

@@ -243,8 +243,9 @@ class Accountant(_Listener):
                 "vclasses.<vClass>.mass_kg to override)")
         if self.resolver.booked_as:
             warnings.append(booked_as_warning(self.resolver.booked_as))
-        if self.resolver.skipped["by_vclass"]:
-            skipped = self.resolver.skipped["by_vclass"]
+        # persons (counted as pedestrians) are never booked: no warning for them
+        skipped = {c: n for c, n in self.resolver.skipped["by_vclass"].items() if c != "pedestrian"}
+        if skipped:
             generic = sorted(c for c in skipped if c in GENERIC_VCLASSES)
             warnings.append("vehicles of vClasses no equation is made for were not booked: "
                             + ", ".join(f"{c} {n}" for c, n in sorted(skipped.items()))

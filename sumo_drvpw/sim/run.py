@@ -98,11 +98,11 @@ class VTypeResolver:
         return out[:4]
 
     def skip_person(self, vt: str) -> None:
-        """Count a departing person (vType ``vt``) as skipped: persons are not booked (a
-        person type nobody declared, e.g. SUMO's DEFAULT_PEDTYPE in an FCD replay, is a
-        pedestrian, SUMO's default for persons)."""
-        vclass = self._vclass(vt, self.files.get(vt), default="pedestrian")
-        for key, k in (("by_vclass", vclass), ("by_vtype", vt)):
+        """Count a departing person (vType ``vt``) as skipped: persons are not booked, and
+        a person is a pedestrian whatever its vType's vClass says (a type nobody declared,
+        e.g. SUMO's DEFAULT_PEDTYPE in an FCD replay, or one redeclared without a vClass,
+        which SUMO reads as passenger)."""
+        for key, k in (("by_vclass", "pedestrian"), ("by_vtype", vt)):
             self.skipped[key][k] = self.skipped[key].get(k, 0) + 1
 
     def _resolve(self, vt: str, vid: str):
