@@ -512,15 +512,16 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     <vType id="restricted_delivery_ev" vClass="custom1" emissionClass="Energy/unknown"/>
     <vType id="lane_sedan" vClass="bus" emissionClass="HBEFA2/P_7_7" guiShape="passenger/sedan" length="5"/>
     <vType id="coach_hdv" vClass="bus" emissionClass="HBEFA3/HDV_D_EU4"/>
+    <vType id="drt_small" vClass="bus" length="6" personCapacity="5"/>
 """, [("i", "car_ign", WEST), ("p", "car", WEST), ("d", "van_c1", EAST), ("t", "truck_c2", EAST),
           ("c", "coach_c2", WEST), ("e", "ev_c1", EAST), ("r", "restricted_delivery_ev", WEST),
-          ("s", "lane_sedan", EAST), ("h", "coach_hdv", WEST)])
+          ("s", "lane_sedan", EAST), ("h", "coach_hdv", WEST), ("m", "drt_small", EAST)])
     out = tmp_path / "o"
     s, err = _run_summary(cfg, out, capsys)
     booked = s["assumptions"]["booked_as"]
     assert {k: v["booked_as"] for k, v in booked.items()} == {
         "car_ign": "passenger", "van_c1": "delivery", "truck_c2": "truck", "coach_c2": "coach",
-        "restricted_delivery_ev": "delivery", "lane_sedan": "passenger"}
+        "restricted_delivery_ev": "delivery", "lane_sedan": "passenger", "drt_small": "delivery"}
     assert booked["car_ign"]["from"] == "emissionClass HBEFA2/P_7_7"      # before its shape
     assert booked["coach_c2"]["from"] == "guiShape bus/overland"
     assert booked["restricted_delivery_ev"]["from"] == "the word 'delivery' in its id"
@@ -537,6 +538,9 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     mass = veh.groupby("vehicle")["mass_kg"].first()
     assert (mass["i"], mass["d"], mass["t"], mass["c"]) == (1478.8, 2059.7, 8538.9, 15000.0)
     assert (mass["s"], mass["h"]) == (1478.8, 16556.0)
+    # a 6-m, 5-person shuttle in vClass bus (SUMO's DRT game) is a van, not a 16.6-t bus
+    assert eqs["m"] == {"moves_light_commercial_truck"} and mass["m"] == 2059.7
+    assert booked["drt_small"]["from"].startswith("length 6 m: a van or minibus")
     assert veh.set_index(["vehicle", "equation"]).loc[("i", "vsp_ldv1999"), "vclass"] == "ignoring"
     tr = veh.set_index(["vehicle", "equation"])["traction_total_j"]
     assert all(tr[(v, e)] > 0 for v, e in (("i", "vsp_ldv1999"), ("d", "moves_light_commercial_truck"),

@@ -379,3 +379,22 @@ def test_vehicle_body_books_a_light_heavy_mismatch_by_the_emission_class(vclass,
 
     got = vehicle_body(vclass, VTypeInfo("t", None, None, "f", vclass, 0.0, emission_class), "t")
     assert (got[0] if got else None) == body
+
+
+@pytest.mark.parametrize("vclass, length, capacity, emission_class, body", [
+    ("bus", 6.0, 5, None, "delivery"),             # SUMO's DRT game shuttle: a van
+    ("bus", 8.0, 9, None, "delivery"),             # its 9-person 8-m shuttle: a minibus
+    ("bus", 8.0, 30, None, None),                  # a midibus with 30 places stays a bus
+    ("bus", 12.0, 5, None, None), ("bus", None, 5, None, None),  # long (or SUMO's 12 m): a bus
+    ("coach", 7.0, None, None, "delivery"),
+    ("truck", 6.0, None, None, "delivery"), ("truck", 7.1, None, None, None),  # SUMO's truck: 7.1 m
+    ("trailer", 6.0, None, None, None),            # no length rule for articulated classes
+    ("bus", 6.0, 5, "HBEFA3/Bus", None),           # the modeller's emission class wins
+    ("passenger", 3.0, 2, None, None),
+])
+def test_vehicle_body_books_a_short_bus_or_truck_as_a_van(vclass, length, capacity, emission_class, body):
+    from sumo_drvpw.sim.vtypes import VTypeInfo, vehicle_body
+
+    info = VTypeInfo("t", None, None, "f", vclass, 0.0, emission_class, None, length, capacity)
+    got = vehicle_body(vclass, info, "t")
+    assert (got[0] if got else None) == body

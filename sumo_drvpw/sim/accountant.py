@@ -302,8 +302,8 @@ def network_warnings(net) -> list[str]:
 
 
 def booked_as_warning(booked_as: dict[str, dict]) -> str:
-    """One line: the vTypes booked as the vehicle their emissionClass, guiShape or id names
-    rather than by their vClass (sim/vtypes.vehicle_body), grouped by vClass → vehicle (up
+    """One line: the vTypes booked as the vehicle their emissionClass, guiShape, id or
+    length names rather than by their vClass (sim/vtypes.vehicle_body), grouped by vClass → vehicle (up
     to three vType ids each)."""
     groups: dict[tuple[str, str], list[str]] = {}
     for vt, b in sorted(booked_as.items()):
@@ -311,5 +311,5 @@ def booked_as_warning(booked_as: dict[str, dict]) -> str:
     parts = [f"{c} → {body}: " + ", ".join(v[:3]) + (f" and {len(v) - 3} more" if len(v) > 3 else "")
              for (c, body), v in sorted(groups.items())]
     return ("vTypes whose vClass does not say what vehicle they are were booked as the one "
-            "their emissionClass, guiShape or id names: " + "; ".join(parts)
+            "their emissionClass, guiShape, id or length names: " + "; ".join(parts)
             + " (summary.json assumptions.booked_as; vclasses.<vClass>.equations chooses instead)")

@@ -58,7 +58,7 @@ class VTypeResolver:
         #: vType → {"vclass", "mass_kg", "source"} for masses taken from class defaults
         self.assumptions: dict[str, dict] = {}
         #: vType → {"vclass", "booked_as", "from"}: vTypes booked as the vehicle their
-        #: emissionClass, guiShape or id names, not by their vClass
+        #: emissionClass, guiShape, id or length names, not by their vClass
         self.booked_as: dict[str, dict] = {}
 
     def _param(self, vt: str, key: str) -> str:

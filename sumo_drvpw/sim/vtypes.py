@@ -128,17 +128,38 @@ LIGHT_VCLASSES = ("passenger", "private", "taxi", "hov", "vip", "evehicle", "aut
 HEAVY_VCLASSES = ("truck", "army", "trailer", "bus", "coach")
 
 
+#: Heavy vClasses → the longest written vType length [m] that is a van or minibus, not
+#: that vehicle: SUMO's default lengths are bus 12 m, coach 14 m, truck 7.1 m, delivery
+#: 6.5 m (SUMO vehicle-type defaults); a demand-responsive shuttle written as vClass bus
+#: for the bus lanes, 6 m long with 5 seats (SUMO's DRT game), is a van.
+VAN_LENGTH_M = {"bus": 7.5, "coach": 7.5, "truck": 6.5, "army": 6.5}
+#: a bus or coach of at most this many passengers (a minibus that drives on a car licence
+#: in the EU: up to 8 passenger seats) and at most :data:`MINIBUS_LENGTH_M` long is a van
+#: too (the DRT game's 8-m, 9-person shuttle)
+MINIBUS_CAPACITY = 9
+MINIBUS_LENGTH_M = 9.0
+
+
 def vehicle_body(vclass: str, info: "VTypeInfo | None", vtype_id: str) -> tuple[str, str] | None:
     """The road vehicle a vType is booked as when its vClass does not say it (None: the
     vClass does), with why: for a generic vClass (:data:`GENERIC_VCLASSES`) what
     :func:`body_vclass` reads; for a light or heavy vClass whose written emissionClass
-    names a vehicle of the other weight, that vehicle."""
+    names a vehicle of the other weight, that vehicle; for a bus, coach or truck written
+    no longer than a van (:data:`VAN_LENGTH_M`) and with no emissionClass naming a
+    vehicle, a van (delivery)."""
     if info is None:
         return None
     if vclass in GENERIC_VCLASSES:
         return body_vclass(info.emission_class, info.gui_shape, vtype_id)
     ec = body_vclass(info.emission_class, None)
     if ec is None:
+        L, cap = info.length_m, info.person_capacity
+        if L is not None and L <= VAN_LENGTH_M.get(vclass, 0.0):
+            return "delivery", (f"length {L:g} m: a van or minibus (a {vclass} is longer; "
+                                f"SUMO's default {vclass} is {SUMO_DEFAULT_LENGTH_M[vclass]:g} m)")
+        if (vclass in ("bus", "coach") and L is not None and L <= MINIBUS_LENGTH_M
+                and cap is not None and cap <= MINIBUS_CAPACITY):
+            return "delivery", f"length {L:g} m and personCapacity {cap}: a minibus, not a {vclass}"
         return None
     light = {c: True for c in LIGHT_VCLASSES} | {c: False for c in HEAVY_VCLASSES}
     if vclass in light and ec[0] in light and light[vclass] != light[ec[0]]:
@@ -164,6 +185,32 @@ class VTypeInfo:
     #: the ``emissionClass`` and ``guiShape`` attributes as written (None: not given)
     emission_class: str | None = None
     gui_shape: str | None = None
+    #: the ``length`` attribute as written [m] (None: not given, SUMO's class default)
+    length_m: float | None = None
+    #: the ``personCapacity`` attribute as written (None: not given)
+    person_capacity: int | None = None
+
+
+#: SUMO's default vType lengths of the heavy classes [m] (for the booking note)
+SUMO_DEFAULT_LENGTH_M = {"bus": 12.0, "coach": 14.0, "truck": 7.1, "army": 7.1}
+
+
+def _length(val: str | None) -> float | None:
+    """A written vType length [m]; None when absent or not a positive number (SUMO itself
+    refuses a bad one)."""
+    try:
+        x = float(val) if val is not None else None
+    except ValueError:
+        return None
+    return x if x is not None and x > 0 else None
+
+
+def _capacity(val: str | None) -> int | None:
+    try:
+        x = int(val) if val is not None else None
+    except ValueError:
+        return None
+    return x if x is not None and x >= 0 else None
 
 
 def _mass(where: str, key: str, val: str | None, zero: bool = False) -> float | None:
@@ -213,7 +260,9 @@ def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
                     out[vid] = VTypeInfo(vid, mass, params.get("drvpw.equation") or None,
                                          str(path), el.attrib.get("vClass"), loading,
                                          el.attrib.get("emissionClass") or None,
-                                         el.attrib.get("guiShape") or None)
+                                         el.attrib.get("guiShape") or None,
+                                         _length(el.attrib.get("length")),
+                                         _capacity(el.attrib.get("personCapacity")))
                     el.clear()
         except ET.ParseError as e:
             raise UserError(f"{path}: not valid XML: {e}") from None
