@@ -619,10 +619,13 @@ def repeat_floor(m, eq, sel, df) -> dict | None:
     first = df.groupby("trip_id", sort=True)[["route", "trip_start"]].first()
     pairs = repeat_pairs(first["trip_start"].to_dict(), first["route"].to_dict())
     cv = trip_cv(*_cv_args(m), list(eq.terms), regime=bool(sel["regime"]))
+    fit_all = trip_cv(*_cv_args(m), list(eq.terms), regime=bool(sel["regime"]), k=1)
     k = max(1, len(first) // HOLD_EVERY)
     out = repeat_scatter(cv["errors"], pairs, k=k)
     out.update(cv_mean_abs_error=cv["mean_abs_error"], cv_max_abs_error=cv["max_abs_error"],
                cv_folds=cv["folds"], cv_errors=cv["errors"],
+               in_sample_mean_abs_error=fit_all["mean_abs_error"],
+               in_sample_max_abs_error=fit_all["max_abs_error"], in_sample_errors=fit_all["errors"],
                starts={t: str(v) for t, v in first["trip_start"].items()})
     return out
 

@@ -166,6 +166,25 @@ def test_trip_cv_energy_is_the_compare_definition():
     assert want["measured_j"] == pytest.approx(float(np.sum(np.maximum(p[test], 0)) * 0.5))
 
 
+def test_trip_cv_k1_is_the_in_sample_fit():
+    """k = 1: one fit on every trip, each trip's error in sample (the same definition), and
+    never worse than the held-out errors on average."""
+    from sumo_drvpw.fit.compare import trip_energy
+    from sumo_drvpw.fit.physical import regime_fit, regime_power, trip_cv
+
+    x, p, use, dt, trip = _trips(n_trips=6, n=600)
+    rng = np.random.default_rng(3)
+    p = p * np.repeat(1 + 0.05 * rng.standard_normal(6), 600)  # a per-trip scatter no input carries
+    fit_all = trip_cv(x, p, use, dt, trip, BASE, k=1)
+    X = term_matrix(BASE, x)
+    b, r = regime_fit(X, p, False)
+    want = trip_energy(regime_power(X, b, r), p, dt, trip)["trips"]
+    assert fit_all["folds"] == 1 and set(fit_all["errors"]) == set(want)
+    for t, v in want.items():
+        assert fit_all["errors"][t] == pytest.approx(v["error"], rel=1e-9)
+    assert fit_all["mean_abs_error"] <= trip_cv(x, p, use, dt, trip, BASE, k=3)["mean_abs_error"]
+
+
 def test_closed_loop_form_runs_in_sumo_at_the_reference_temperature(tmp_path):
     """An equation with the temperature terms the closed loop carries runs in a real SUMO
     run (log-only [ambient_c] terms are refused there); without an air temperature passed to

@@ -363,18 +363,20 @@ def _terms_of(base: list[str], chosen: list[str]) -> tuple[list[str], bool]:
 def trip_cv(x, y, use, dt, trip, terms, regime=False, k: int = 5) -> dict:
     """Trip-grouped k-fold cross-validation of ``terms``: fold j holds out every k-th trip in
     name order from the j-th; per held-out trip the traction-energy error (Σ max(P, 0)·Δt,
-    predicted/measured − 1, :func:`sumo_drvpw.fit.compare.trip_energy`) and the pooled RMSE."""
+    predicted/measured − 1, :func:`sumo_drvpw.fit.compare.trip_energy`) and the pooled RMSE.
+    ``k = 1``: one fit on every trip and its in-sample errors (what no held-out protocol can
+    beat)."""
     from sumo_drvpw.fit.compare import trip_energy
     from sumo_drvpw.model.terms import term_matrix
 
     X = term_matrix(terms, x)
     ok = np.asarray(use, bool) & np.all(np.isfinite(X), axis=1) & np.isfinite(y)
     names = sorted(set(np.asarray(trip)[ok].tolist()))
-    k = max(2, min(k, len(names)))
+    k = 1 if k == 1 else max(2, min(k, len(names)))
     errs, sse, n = {}, 0.0, 0
     for j in range(k):
         test = np.isin(trip, names[j::k]) & ok
-        train = ok & ~test
+        train = ok & ~test if k > 1 else ok  # k = 1: fitted on every trip, errors in sample
         b, r = regime_fit(X[train], y[train], regime)
         p = regime_power(X[test], b, r)
         errs.update({t: v["error"] for t, v in trip_energy(p, y[test], dt[test], trip[test])["trips"].items()})
