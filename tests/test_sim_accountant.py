@@ -122,17 +122,22 @@ MIXED = """<routes>
 </routes>"""
 
 
+def _run_routes(folder, routes: str, equations: list[str], end: float):
+    """A city-network scenario of these routes and equations, run (no SUMO warnings)."""
+    (folder / "r.rou.xml").write_text(routes, encoding="utf-8")
+    (folder / "s.toml").write_text(
+        f"equations = {json.dumps(equations)}\n"
+        f'[sumo]\nnet = "{NETS / "city.net.xml"}"\nroutes = ["r.rou.xml"]\n'
+        f'end = {end}\noptions = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n',
+        encoding="utf-8")
+    return run_scenario(folder / "s.toml", folder / "o")
+
+
 def test_vclasses_each_get_their_equation_or_are_skipped(tmp_path):
     """Cars get the car equations, trailers the MOVES combination-truck one (with its
     MOVES source mass as the assumed mass), bicycles and pedestrians are skipped and
     counted."""
-    (tmp_path / "r.rou.xml").write_text(MIXED, encoding="utf-8")
-    (tmp_path / "s.toml").write_text(
-        'equations = ["vsp_ldv1999", "drvpw_prius3", "moves_combination_truck"]\n'
-        f'[sumo]\nnet = "{NETS / "city.net.xml"}"\nroutes = ["r.rou.xml"]\n'
-        'end = 200\noptions = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n',
-        encoding="utf-8")
-    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    res = _run_routes(tmp_path, MIXED, ["vsp_ldv1999", "drvpw_prius3", "moves_combination_truck"], 200)
     v = res.vehicles
     by = v.groupby("vclass").equation.unique().to_dict()
     assert sorted(by["passenger"]) == ["drvpw_prius3", "vsp_ldv1999"]
@@ -157,18 +162,12 @@ def test_persons_of_a_redeclared_default_pedestrian_type_are_pedestrians(tmp_pat
     DEFAULT_PEDTYPE without a vClass, which SUMO reads as passenger: its 65 walkers were
     counted as 'passenger 65' vehicles not booked. A person is a pedestrian, never booked,
     and no warning is given for it."""
-    (tmp_path / "r.rou.xml").write_text("""<routes>
+    res = _run_routes(tmp_path, """<routes>
   <vType id="car" vClass="passenger" mass="1500" sigma="0"/>
   <vType id="DEFAULT_PEDTYPE" width="2" length="2"/>
   <flow id="c" type="car" from="c00c10" to="c34c44" begin="0" end="30" period="10"/>
   <personFlow id="g" begin="0" end="40" period="10"><walk from="c00c10" to="c10c20"/></personFlow>
-</routes>""", encoding="utf-8")
-    (tmp_path / "s.toml").write_text(
-        'equations = ["vsp_ldv1999"]\n'
-        f'[sumo]\nnet = "{NETS / "city.net.xml"}"\nroutes = ["r.rou.xml"]\n'
-        'end = 100\noptions = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n',
-        encoding="utf-8")
-    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+</routes>""", ["vsp_ldv1999"], 100)
     assert res["skipped"] == {"by_vclass": {"pedestrian": 4}, "by_vtype": {"DEFAULT_PEDTYPE": 4}}
     assert not any("not booked" in w for w in res["warnings"])
     assert set(res.vehicles.vclass) == {"passenger"} and len(res.vehicles) == 3
