@@ -229,15 +229,50 @@ def drop(df: pd.DataFrame, mask, reason: str, report: dict) -> pd.DataFrame:
 ALIGN_MAX_GAP_INTERVALS = 3.0
 
 
+def interp_onto(ts: np.ndarray, tc: np.ndarray, xc: np.ndarray) -> np.ndarray:
+    """One channel's own samples (times ``tc``, values ``xc``; any order, a repeated time
+    keeps its last value) at the times ``ts``: linear in time between its two neighbouring
+    samples where these are at most :data:`ALIGN_MAX_GAP_INTERVALS` of its median sampling
+    interval apart (a sample at the very time is taken as it is); NaN elsewhere (a gap the
+    logger left, or outside the channel's time span)."""
+    ok = np.isfinite(tc) & np.isfinite(xc)
+    order = np.argsort(tc[ok], kind="stable")
+    tc, xc = tc[ok][order], xc[ok][order]
+    if len(tc) == 0:
+        return np.full(len(ts), np.nan)
+    keep = np.concatenate([np.diff(tc) > 0, [True]])
+    tc, xc = tc[keep], xc[keep]
+    if len(tc) < 2:
+        return np.where(ts == tc[0], xc[0], np.nan)
+    hi = np.clip(np.searchsorted(tc, ts, side="left"), 1, len(tc) - 1)
+    exact = tc[np.minimum(np.searchsorted(tc, ts), len(tc) - 1)] == ts
+    inside = (ts >= tc[0]) & (ts <= tc[-1])
+    ok = inside & (exact | (tc[hi] - tc[hi - 1] <= ALIGN_MAX_GAP_INTERVALS * np.median(np.diff(tc))))
+    return np.where(ok, np.interp(ts, tc, xc), np.nan)
+
+
+def aligned_note(n_other: int, n_speed: int, aligned: dict[str, np.ndarray], report: dict) -> None:
+    """The import note of an asynchronous log whose channels ``aligned`` (name → values at
+    the speed samples) were put onto its ``n_speed`` speed samples, and the count of the
+    ``n_other`` rows without speed under their drop reason."""
+    still = [f"{c} {100 * m:.2g} %" for c, x in aligned.items() if (m := float(np.mean(~np.isfinite(x)))) > 0]
+    report["notes"].append(
+        f"asynchronous log: {n_other} rows carry no speed; {len(aligned)} channel(s) logged on their "
+        f"own rows are interpolated onto the {n_speed} speed samples (linear in time, across gaps up to "
+        f"{ALIGN_MAX_GAP_INTERVALS:g}× the channel's median sampling interval)"
+        + (f"; still missing: {', '.join(still)}" if still else ""))
+    if n_other:
+        reason = "rows without speed (their channels put onto the speed samples)"
+        report["dropped"][reason] = report["dropped"].get(reason, 0) + int(n_other)
+
+
 def align_channels(df: pd.DataFrame, report: dict) -> pd.DataFrame:
     """Put the channels of an asynchronous log onto its speed samples.
 
     Loggers that poll one value per row (OBD apps such as Car Scanner, CAN-bus exports)
     leave every other column empty on a speed row. A numeric channel logged mostly on
     rows without speed is asynchronous: its value at each speed sample is interpolated
-    linearly in time between its own two neighbouring samples, where they are at most
-    :data:`ALIGN_MAX_GAP_INTERVALS` of the channel's median sampling interval apart (else
-    it stays missing); a value logged on the speed row itself is kept. Channels logged
+    (:func:`interp_onto`); a value logged on the speed row itself is kept. Channels logged
     on the speed rows (a synchronous log) are not touched. The report's notes say which
     channels were aligned and how much of each stayed missing. Call per trip.
     """
@@ -246,8 +281,7 @@ def align_channels(df: pd.DataFrame, report: dict) -> pd.DataFrame:
     other = np.isfinite(t) & ~speed_row
     if not other.any() or not speed_row.any():
         return df
-    aligned, still = [], []
-    out = df.copy()
+    aligned: dict[str, np.ndarray] = {}
     ts = t[speed_row]
     for c in df.columns:
         if c in ("time_s", "speed_mps", "trip_id") or not pd.api.types.is_numeric_dtype(df[c]):
@@ -256,36 +290,16 @@ def align_channels(df: pd.DataFrame, report: dict) -> pd.DataFrame:
         own = np.isfinite(t) & np.isfinite(x)
         if not own.any() or (own & speed_row).sum() >= 0.5 * own.sum():
             continue
-        order = np.argsort(t[own], kind="stable")
-        tc, xc = t[own][order], x[own][order]
-        keep = np.concatenate([np.diff(tc) > 0, [True]])  # repeated times: the last value
-        tc, xc = tc[keep], xc[keep]
         col = x[speed_row].copy()
         todo = ~np.isfinite(col)
-        if len(tc) >= 2:
-            step = np.diff(tc)
-            hi = np.clip(np.searchsorted(tc, ts, side="left"), 1, len(tc) - 1)
-            exact = tc[np.minimum(np.searchsorted(tc, ts), len(tc) - 1)] == ts
-            inside = (ts >= tc[0]) & (ts <= tc[-1])
-            ok = inside & (exact | (tc[hi] - tc[hi - 1] <= ALIGN_MAX_GAP_INTERVALS * np.median(step)))
-            val = np.where(ok, np.interp(ts, tc, xc), np.nan)
-        else:
-            val = np.where(ts == tc[0], xc[0], np.nan)
-        col[todo] = val[todo]
-        new = np.full(len(df), np.nan)
-        new[speed_row] = col
-        out[c] = new
-        aligned.append(c)
-        miss = float(np.mean(~np.isfinite(col)))
-        if miss > 0:
-            still.append(f"{c} {100 * miss:.2g} %")
-    if aligned:
-        report["notes"].append(
-            f"asynchronous log: {int(other.sum())} rows carry no speed; {len(aligned)} channel(s) "
-            f"logged on their own rows are interpolated onto the {int(speed_row.sum())} speed samples "
-            f"(linear in time, across gaps up to {ALIGN_MAX_GAP_INTERVALS:g}× the channel's median "
-            "sampling interval)" + (f"; still missing: {', '.join(still)}" if still else ""))
-        out = drop(out, other, "rows without speed (their channels put onto the speed samples)", report)
+        col[todo] = interp_onto(ts[todo], t[own], x[own])
+        aligned[c] = col
+    if not aligned:
+        return df
+    out = df.loc[~other].copy()
+    for c, col in aligned.items():
+        out[c] = col
+    aligned_note(int(other.sum()), int(speed_row.sum()), aligned, report)
     return out
 
 

@@ -39,8 +39,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.adapters._common import (clean_time_and_speed, expand_paths, generic_name, lookup_unit,
-                                              new_report, read_csv_strict, read_each, unique_names)
+from sumo_drvpw.data.adapters._common import (aligned_note, clean_time_and_speed, expand_paths, generic_name,
+                                              interp_onto, lookup_unit, new_report, read_csv_strict, read_each,
+                                              unique_names)
 from sumo_drvpw.errors import UserError
 
 FORMAT = "car-scanner"
@@ -69,56 +70,64 @@ def _sep_of(path: Path) -> tuple[str, bool]:
 
 
 def _time_of_day(values: np.ndarray) -> np.ndarray:
-    """Seconds since the first sample from times of day [s]; a step back by more than 12 h
-    passes midnight and carries the day on."""
+    """Seconds since the first sample from times of day [s] in file order; a step back by
+    more than 12 h passes midnight and carries the day on."""
     t = np.asarray(values, float)
     ok = np.isfinite(t)
     back = np.zeros(len(t))
-    tt = t[ok]
-    back[ok] = 86400.0 * np.cumsum(np.concatenate([[False], np.diff(tt) < -43200.0]))
+    back[ok] = 86400.0 * np.cumsum(np.concatenate([[False], np.diff(t[ok]) < -43200.0]))
     t = t + back
     return t - np.nanmin(t) if ok.any() else t
 
 
-def _long(path: Path, sep: str, rep: dict) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Long layout → (time of day [s], {"PID (unit)": values on their own rows, NaN elsewhere})."""
-    raw = read_csv_strict(path, sep=sep, dtype=str, keep_default_na=False, na_filter=False,
-                          encoding="utf-8-sig")
+#: a channel: its own sample times [s since the first row] and values
+Channel = tuple[np.ndarray, np.ndarray]
+
+
+def _long(path: Path, sep: str, rep: dict) -> tuple[int, dict[str, Channel]]:
+    """Long layout → (rows, {"PID (unit)": its own samples}); the position columns are
+    channels of every row."""
+    raw = read_csv_strict(path, sep=sep, keep_default_na=False, na_values=[""], encoding="utf-8-sig",
+                          dtype={"PID": "category", "UNITS": "category"}, low_memory=False)
     raw.columns = [str(c).strip().strip('"').upper() for c in raw.columns]
-    t = pd.to_numeric(raw["SECONDS"].str.strip(), errors="coerce").to_numpy(float)
+    t = pd.to_numeric(raw["SECONDS"], errors="coerce").to_numpy(float)
     bad = ~np.isfinite(t)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise UserError(f"{path}: column 'SECONDS' data row {i} holds {raw['SECONDS'].iloc[i]!r}: not a number")
-    pid = raw["PID"].str.strip()
-    unit = raw["UNITS"].str.strip()
-    val = pd.to_numeric(raw["VALUE"].str.strip().str.replace(",", ".", regex=False), errors="coerce").to_numpy(float)
-    labels = (pid + np.where(unit != "", " (" + unit + ")", "")).to_numpy(str)
-    chans: dict[str, np.ndarray] = {}
+    t = _time_of_day(t)
+    val = raw["VALUE"]
+    if not pd.api.types.is_numeric_dtype(val):
+        val = pd.to_numeric(val.astype(str).str.strip().str.replace(",", ".", regex=False), errors="coerce")
+    val = val.to_numpy(float)
+    pid = raw["PID"].astype(str).str.strip()
+    unit = raw["UNITS"].astype(str).str.strip().replace("nan", "")
+    codes, labels = pd.factorize(pid + np.where(unit != "", " (" + unit + ")", ""))
+    order = np.argsort(codes, kind="stable")
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(codes, minlength=len(labels)))])
+    chans: dict[str, Channel] = {}
     text = []
-    for lab in pd.unique(labels):
-        rows = labels == lab
+    for k, lab in enumerate(labels):
+        rows = order[bounds[k]:bounds[k + 1]]
         if not np.isfinite(val[rows]).any():
             text.append(str(lab))
             continue
-        x = np.full(len(raw), np.nan)
-        x[rows] = val[rows]
-        chans[str(lab)] = x
+        chans[str(lab)] = (t[rows], val[rows])
     if text:
         rep["notes"].append(f"{len(text)} PID(s) without a numeric value left out: {', '.join(text[:5])}"
                             + (" …" if len(text) > 5 else ""))
     for col, name in (("LATITUDE", "Latitude (deg)"), ("LONGTITUDE", "Longitude (deg)"),
                       ("LONGITUDE", "Longitude (deg)")):
         if col in raw:
-            x = pd.to_numeric(raw[col].str.strip(), errors="coerce").to_numpy(float, copy=True)
+            x = pd.to_numeric(raw[col], errors="coerce").to_numpy(float, copy=True)
             x[x == 0] = np.nan  # no fix is written as 0
             if np.isfinite(x).any():
-                chans[name] = x
-    return t, chans
+                chans[name] = (t, x)
+    return len(raw), chans
 
 
-def _wide(path: Path, sep: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Wide layout → (time of day [s], {"PID (unit)": column})."""
+def _wide(path: Path, sep: str) -> tuple[int, dict[str, Channel]]:
+    """Wide layout → (rows, {"PID (unit)": its own samples: the rows where it has a value})."""
     raw = read_csv_strict(path, sep=sep, dtype=str, keep_default_na=False, na_filter=False,
                           encoding="utf-8-sig")
     raw.columns = [str(c).strip() for c in raw.columns]
@@ -139,18 +148,21 @@ def _wide(path: Path, sep: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
             raise UserError(f"{path}: column {tcol!r} data row {i} holds {s.iloc[i]!r}, expected a time "
                             "of day like '07:13:32.604'")
         t = ((parsed - parsed.dt.normalize()).dt.total_seconds()).to_numpy(float)
-    chans = {}
+    t = _time_of_day(t)
+    chans: dict[str, Channel] = {}
     for c in raw.columns[1:]:
         cells = raw[c].str.strip().str.replace(",", ".", regex=False) if sep != "," else raw[c].str.strip()
-        x = pd.to_numeric(cells, errors="coerce")
         if c.startswith("Unnamed: ") and not (cells != "").any():
             continue  # the trailing separator of every row
+        x = pd.to_numeric(cells, errors="coerce")
         junk = x.isna() & (cells != "")
         if junk.any():
             i = int(np.flatnonzero(junk.to_numpy())[0])
             raise UserError(f"{path}: column {c!r} data row {i} holds {raw[c].iloc[i]!r}: not a number")
-        chans[c] = x.to_numpy(float)
-    return t, chans
+        x = x.to_numpy(float)
+        own = np.isfinite(x)
+        chans[c] = (t[own], x[own])
+    return len(raw), chans
 
 
 def _unit_dim(label: str) -> str | None:
@@ -170,11 +182,12 @@ def _one(labels, pattern: str, dim: str, exclude=_NOT_TRACTION) -> tuple[str | N
 
 
 def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
-    """One Car Scanner CSV (long or wide layout) → canonical frame and report."""
+    """One Car Scanner CSV (long or wide layout) → canonical frame and report: one sample per
+    speed value, every other channel interpolated onto it."""
     sep, long = _sep_of(path)
     rep = new_report(path, path.stem, 0)
-    t, chans = _long(path, sep, rep) if long else _wide(path, sep)
-    rep["rows_read"] = int(len(t))
+    rows, chans = _long(path, sep, rep) if long else _wide(path, sep)
+    rep["rows_read"] = int(rows)
     labels = list(chans)
     named: dict[str, str] = {}
     speed, _ = _one(labels, r"^vehicle speed$|^speed \(obd\)$", "speed", exclude=None)
@@ -201,8 +214,12 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
         elif hits:
             rep["notes"].append(f"{name}: {len(hits)} candidates ({', '.join(hits)}), none mapped: "
                                 "use the 'columns' format to name one")
-    cols = {"time_s": _time_of_day(t)}
-    for lab, x in chans.items():
+    ts, vs = chans[speed or gps]
+    _, f, o = generic_name(speed or gps)
+    names, values = ["time_s", "speed_mps"], [ts, vs * f + o]
+    for lab, (tc, xc) in chans.items():
+        if lab == (speed or gps):
+            continue
         if lab in named:
             name = named[lab]
             _, f, o = generic_name(lab)
@@ -210,9 +227,12 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
             name, f, o = lab.split()[0].lower() + "_deg", 1.0, 0.0
         else:
             name, f, o = generic_name(lab, rep["notes"])
-        cols[name] = x * f + o
-    names = unique_names(list(cols))
-    df = pd.DataFrame(dict(zip(names, cols.values())))
+        names.append(name)
+        values.append(interp_onto(ts, tc, xc) * f + o)
+    names = unique_names(names)
+    df = pd.DataFrame(dict(zip(names, values)))
+    if len(names) > 2:
+        aligned_note(rows - len(ts), len(ts), dict(zip(names[2:], values[2:])), rep)
     df = clean_time_and_speed(df, path, rep)
     if "battery_current_a" in df and "battery_voltage_v" in df:
         _discharge_positive(df, rep)
