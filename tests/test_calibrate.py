@@ -235,3 +235,22 @@ def test_results_object_stays_usable():
     ref = sm.OLS(y, term_matrix(res.terms, x)).fit()
     assert r.aic == pytest.approx(ref.aic, rel=1e-9) and r.bic == pytest.approx(ref.bic, rel=1e-9)
     assert r.condition_number == pytest.approx(ref.condition_number, rel=1e-6)
+
+
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_a_log_without_grade_says_a_flat_road_is_assumed(tmp_path, capsys, engine):
+    """Battery-only OBD-app logs often carry no elevation (the Car Scanner e-208 exports):
+    calibrate and compare say that each trip's climb is then missing; a log with an
+    elevation column does not get the note."""
+    from corpus import base_log
+
+    flat = tmp_path / "flat.parquet"
+    base_log().to_parquet(flat)
+    hilly = tmp_path / "hilly.parquet"
+    base_log().assign(elevation_m=lambda d: 300 + 0.01 * d["speed_mps"].cumsum()).to_parquet(hilly)
+    for log, said in ((flat, True), (hilly, False)):
+        eq = tmp_path / f"{log.stem}.toml"
+        assert cli_main(["calibrate", str(log), "--out", str(eq), "--engine", engine]) == 0
+        assert cli_main(["compare", str(log), "--equation", str(eq), "--out", str(tmp_path / log.stem)]) == 0
+        out = capsys.readouterr().out
+        assert out.count("a flat road is assumed") == (2 if said else 0), out

@@ -210,6 +210,11 @@ def note_counts(counts: dict) -> None:
         print(f"note: speed_mps read in {counts['speed_unit']}")
     if "widened" in str(counts.get("accel_source", "")):
         print(f"note: acceleration {counts['accel_source'][len('derived: '):]}")
+    grade_by = str((counts.get("measurement") or {}).get("grade", ""))
+    if str(counts.get("grade_source", "")).startswith("none") and grade_by != "accelerometer":
+        print("note: the logs carry no grade (no grade_rad, grade_pct or elevation_m column): a flat road "
+              "is assumed, so a trip that climbs or descends Δh misses m·g·Δh (1.5 t over 100 m: "
+              "0.41 kWh); log the elevation (e.g. GPS altitude) where the routes are not flat")
     n = int(counts.get("grade_elevation_gap_trips", 0) or 0)
     if n:
         gaps = sorted((counts.get("grade_elevation_gap_m") or {}).items(), key=lambda tg: -abs(tg[1]))[:10]

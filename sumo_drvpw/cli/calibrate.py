@@ -242,6 +242,7 @@ def main_chain(args) -> int:
             raise UserError(f"--hvac {args.hvac}: the set-point after ':' must be a number (°C)") from None
     ro = read_options(args, [args.equation] if args.equation else ())
     m = load_measured(args.logs, args.vehicle, ro, target=args.target)
+    note_counts(m.counts)
     if args.equation:
         eq = resolve_equations([args.equation], m.vehicle)[0]
         road = f"road-load equation {eq.name} ({eq.path or 'built in'})"
