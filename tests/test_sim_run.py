@@ -853,3 +853,41 @@ def test_a_bus_parked_at_its_stop_dwells_there_booked_standing(tmp_path):
         assert v["car"] < trips["car"] - 59                            # parked: not booked
         got[positions] = v.sort_index()
     pd_.testing.assert_series_equal(got["tracked"], got["getter"])
+
+
+def _sumo_game() -> Path | None:
+    """SUMO's game scenarios, shipped in the eclipse-sumo wheel (tools/game)."""
+    try:
+        import sumo
+    except ImportError:
+        return None
+    p = Path(sumo.SUMO_HOME) / "tools" / "game"
+    return p if p.is_dir() else None
+
+
+@pytest.mark.parametrize("config, booked, skipped", [
+    # demand-responsive shuttles written as vClass bus: 6 m / 5 places and 8 m / 9 places
+    ("DRT_demo.sumocfg", {"drt_small": "delivery", "drt_large": "delivery"}, {"pedestrian"}),
+    # walkers of a DEFAULT_PEDTYPE redeclared without a vClass; trains not booked
+    ("rail/test.sumocfg", {}, {"pedestrian", "rail"}),
+])
+def test_sumo_game_scenarios_as_shipped(tmp_path, capsys, config, booked, skipped):
+    """Real public scenarios run as they are, from the installed SUMO (read only): the
+    shuttles are vans, the walkers pedestrians, and only vehicles are warned about."""
+    game = _sumo_game()
+    if game is None or not (game / config).is_file():
+        pytest.skip("SUMO's game scenarios not found in the installed eclipse-sumo")
+    before = sorted((p.name, p.stat().st_mtime_ns) for p in (game / config).parent.iterdir())
+    out = tmp_path / "o"
+    code, err = _cli([game / config, "--out", out, "--end", "300", "--no-figures", "--no-progress"], capsys)
+    assert code == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    assert {k: v["booked_as"] for k, v in s["assumptions"]["booked_as"].items()} == booked
+    assert set(s["skipped"]["by_vclass"]) == skipped
+    warned = [w for w in s["warnings"] if "not booked" in w]
+    assert all("pedestrian" not in w and "passenger" not in w for w in warned), warned
+    assert sorted((p.name, p.stat().st_mtime_ns) for p in (game / config).parent.iterdir()) == before
+    if booked:
+        veh = pd.read_parquet(out / "vehicles.parquet")
+        assert set(veh["equation"]) == {"moves_light_commercial_truck"}
+        assert (veh["mass_kg"] == 2059.7).all() and (veh["traction_total_j"] > 0).all()
