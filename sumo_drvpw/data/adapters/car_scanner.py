@@ -9,8 +9,9 @@ its two CSV layouts:
   value (``PID (unit)``), ``time`` the time of day (``HH:MM:SS.fff``), and on each row
   only the value polled then (the other cells empty).
 
-Either way the channels are asynchronous: each is interpolated onto the speed samples
-(:func:`sumo_drvpw.data.adapters._common.align_channels`), and the import report says so.
+Either way the channels are asynchronous: each is kept as its own samples and interpolated
+onto the speed samples (:func:`sumo_drvpw.data.adapters._common.interp_onto`, as
+``align_channels`` does for other asynchronous logs), and the import report says so.
 A time of day that steps back by more than 12 h has passed midnight. trip_id = file stem.
 
 Mapping (PID names as Car Scanner writes them; every other value is kept as
@@ -41,7 +42,7 @@ import pandas as pd
 
 from sumo_drvpw.data.adapters._common import (aligned_note, clean_time_and_speed, expand_paths, generic_name,
                                               interp_onto, lookup_unit, new_report, read_csv_strict, read_each,
-                                              unique_names)
+                                              split_header, unique_names)
 from sumo_drvpw.errors import UserError
 
 FORMAT = "car-scanner"
@@ -100,8 +101,8 @@ def _long(path: Path, sep: str, rep: dict) -> tuple[int, dict[str, Channel]]:
     if not pd.api.types.is_numeric_dtype(val):
         val = pd.to_numeric(val.astype(str).str.strip().str.replace(",", ".", regex=False), errors="coerce")
     val = val.to_numpy(float)
-    pid = raw["PID"].astype(str).str.strip()
-    unit = raw["UNITS"].astype(str).str.strip().replace("nan", "")
+    pid = raw["PID"].astype("string").fillna("").str.strip()
+    unit = raw["UNITS"].astype("string").fillna("").str.strip()
     codes, labels = pd.factorize(pid + np.where(unit != "", " (" + unit + ")", ""))
     order = np.argsort(codes, kind="stable")
     bounds = np.concatenate([[0], np.cumsum(np.bincount(codes, minlength=len(labels)))])
@@ -166,16 +167,12 @@ def _wide(path: Path, sep: str) -> tuple[int, dict[str, Channel]]:
 
 
 def _unit_dim(label: str) -> str | None:
-    from sumo_drvpw.data.adapters._common import split_header
-
     u = lookup_unit(split_header(label)[1])
     return u[0] if u else None
 
 
 def _one(labels, pattern: str, dim: str, exclude=_NOT_TRACTION) -> tuple[str | None, list[str]]:
     """The one label whose PID matches ``pattern`` with a unit of dimension ``dim``."""
-    from sumo_drvpw.data.adapters._common import split_header
-
     hits = [lab for lab in labels if re.search(pattern, split_header(lab)[0], re.I)
             and _unit_dim(lab) == dim and not (exclude and exclude.search(split_header(lab)[0]))]
     return (hits[0] if len(hits) == 1 else None), hits
