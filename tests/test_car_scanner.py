@@ -93,7 +93,8 @@ def test_gps_speed_when_the_obd_speed_is_not_logged(tmp_path):
     ("time,\"Engine RPM (rpm)\"\n07:00:00.000,800\n07:00:01.000,900\n", "no speed"),
     ("time,\"Vehicle speed (km/h)\"\n07:00:00.000,10\nnoon,12\n", "data row 1 holds 'noon'"),
     ("when,\"Vehicle speed (km/h)\"\n07:00:00.000,10\n07:00:01.000,12\n", "first column is 'when'"),
-    ("time,\"Vehicle speed (km/h)\"\n07:00:00.000,10\n07:00:01.000,fast\n", r"'Vehicle speed \(km/h\)' data row 1 holds 'fast'"),
+    ("time,\"Vehicle speed (km/h)\"\n07:00:00.000,10\n07:00:01.000,fast\n",
+     r"'Vehicle speed \(km/h\)' data row 1 holds 'fast'"),
     ('"SECONDS";"PID";"VALUE";"UNITS";\n"x";"Vehicle speed";"10";"km/h";\n', "column 'SECONDS' data row 0"),
     ("", "empty"),
 ])

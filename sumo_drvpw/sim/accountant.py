@@ -303,8 +303,8 @@ def network_warnings(net) -> list[str]:
 
 def booked_as_warning(booked_as: dict[str, dict]) -> str:
     """One line: the vTypes booked as the vehicle their emissionClass, guiShape, id or
-    length names rather than by their vClass (sim/vtypes.vehicle_body), grouped by vClass → vehicle (up
-    to three vType ids each)."""
+    length names rather than by their vClass (sim/vtypes.vehicle_body), grouped by vClass →
+    vehicle (up to three vType ids each)."""
     groups: dict[tuple[str, str], list[str]] = {}
     for vt, b in sorted(booked_as.items()):
         groups.setdefault((b["vclass"], b["booked_as"]), []).append(f"{vt} ({b['from']})")
