@@ -17,7 +17,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import FT, MPH
 
 HEAD = ["GPS Time", "Device Time", "Speed (OBD)(km/h)", "GPS Altitude(m)", "Ambient air temp(°C)",
-        "Engine RPM(rpm)", "Fuel flow rate/hour(l/hr)"]
+        "Engine RPM(rpm)", "Fuel flow rate/hour(l/hr)", "Cost per mile/km (Instant)($/km)"]
 
 
 def metric_csv(path, n=40, repeat_header_at=None):
@@ -27,7 +27,8 @@ def metric_csv(path, n=40, repeat_header_at=None):
             rows.append(", ".join(HEAD))
         t = pd.Timestamp("2024-05-04 10:00:00") + pd.Timedelta(seconds=0.7 * i)
         dev = t.strftime("%d-%b-%Y %H:%M:%S.") + f"{t.microsecond // 1000:03d}"
-        rows.append(f"-, {dev}, {min(3.6 * i, 90.0):.1f}, {300 + 0.5 * i:.1f}, 18.5, {800 + 40 * i}, 1.2")
+        cost = "∞" if i == 0 else f"{1.2 / (3.6 * i):.4f}"  # Torque's cost per km at standstill
+        rows.append(f"-, {dev}, {min(3.6 * i, 90.0):.1f}, {300 + 0.5 * i:.1f}, 18.5, {800 + 40 * i}, 1.2, {cost}")
     path.write_text("\n".join(rows) + "\n", encoding="utf-8")
     return path
 
@@ -42,6 +43,12 @@ def test_metric_units_map_to_the_same_columns(tmp_path):
     np.testing.assert_allclose(df["time_s"], 0.7 * np.arange(40.0), atol=1e-3)
     np.testing.assert_allclose(df["fuel_flow_rate_hour_lph"], 1.2)  # "l/hr", the fuel target's column
     assert rep["roles"].get("ambient_c") == "condition"
+    # '∞' (a real metric trackLog.csv writes it at standstill) is no reading, not a bad file
+    cost = df["cost_per_mile_km_instant_km"].to_numpy()
+    assert np.isnan(cost[0]) and np.isfinite(cost[1:]).all()
+    assert "'∞' cells (no finite reading) read as NaN: cost_per_mile_km_instant_km 1" in " ".join(
+        rep["files"][0]["notes"])
+    assert not any("battery_current_a" in n for n in rep["notes"])  # no battery logged
 
 
 def test_a_repeated_header_is_dropped_and_counted(tmp_path):

@@ -126,7 +126,8 @@ def generic_name(label: str, notes: list | None = None) -> tuple[str, float, flo
     if u is None:
         if notes is not None:
             notes.append(f"column '{label}': unit '{unit}' unknown, kept unconverted")
-        return f"{snake(name)}_{snake(unit)}", 1.0, 0.0
+        plain = re.sub(r"[^0-9a-zA-Z]+", "", unit)  # 'λ', '$': no name suffix to make of them
+        return (f"{snake(name)}_{snake(unit)}" if plain else snake(name)), 1.0, 0.0
     dim, f, o = u
     suffix = DIMENSIONS[dim]
     if dim == "angle":  # angles from loggers are positions (lat/lon, bearing): keep degrees

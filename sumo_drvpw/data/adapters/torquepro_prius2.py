@@ -98,6 +98,9 @@ ROLES = {
     "altitude_phone_m": "condition",
 }
 SPEED = "Speed (OBD)(mph)"
+#: what Torque writes for a value without a finite reading (its cost and economy PIDs at
+#: standstill: per km of no distance): read as missing and counted
+INFINITE = ("∞", "-∞", "Infinity", "-Infinity")
 
 
 def _by_base() -> dict[str, str]:
@@ -176,7 +179,7 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
         raise UserError(f"{path}: column '{TIME}' data row {i} holds {raw[TIME].iloc[i]!r}, "
                         f"expected like '25-Mar-2017 11:46:29.523'")
     cols = {"time_s": (t - t.min()).dt.total_seconds()}
-    dash = {}
+    dash, infinite = {}, {}
     for label in labels:
         if label == TIME:
             continue
@@ -188,7 +191,10 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
         n_dash = int(s.map(lambda x: isinstance(x, str) and x.strip() == "-").sum())
         if n_dash:
             dash[name] = n_dash
-        cols[name] = numeric(s, path, label) * f + o
+        n_inf = int(s.map(lambda x: isinstance(x, str) and x.strip() in INFINITE).sum())
+        if n_inf:
+            infinite[name] = n_inf
+        cols[name] = numeric(s, path, label, ("-", "") + INFINITE) * f + o
     names = unique_names(list(cols))
     df = pd.DataFrame(dict(zip(names, cols.values())), index=raw.index)
     if "altitude_phone_m" in df and "elevation_m" in df:
@@ -200,6 +206,9 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
         first = int(np.argmax(complete)) if complete.any() else len(df)
         df = drop(df, np.arange(len(df)) < first, "link not up (-)", rep)
     df = clean_time_and_speed(df, path, rep)
+    if infinite:
+        rep["notes"].append("'∞' cells (no finite reading) read as NaN: "
+                            + ", ".join(f"{k} {n}" for k, n in infinite.items()))
     left = {k: int(df[k].isna().sum()) for k in dash if k in df and df[k].isna().any()}
     if left:
         rep["notes"].append("'-' cells kept as NaN after the link is up: "
@@ -213,4 +222,5 @@ def read(paths):
     from sumo_drvpw.data.adapters._common import expand_paths, read_each
 
     frames, reports = read_each(expand_paths(paths, SUFFIXES, "Torque Pro log"), read_file)
-    return frames, reports, ["battery_current_a as logged (positive when discharging)"]
+    battery = any("battery_current_a" in f for f in frames)
+    return frames, reports, ["battery_current_a as logged (positive when discharging)"] if battery else []
