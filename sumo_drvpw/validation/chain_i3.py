@@ -219,6 +219,7 @@ def i3_study(data: Path) -> dict:
     for k in variants[1:]:
         out[f"mean_abs_error_{k}"] = mean_abs(rows, f"error_{k}")
     out["kfold"] = _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, I3_KFOLD)
+    out["kfold"]["in_sample"] = _i3_in_sample(x, mw, mb, grade_ok, logged, trips, dt, loads, gain1)
     eq_all, doc = i3_sumo_equation(x, mw, mb, grade_ok, dt, ids)
     out["deliverable"] = dict(doc, equation=eq_all.to_dict())
     return out
@@ -364,6 +365,27 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k) -> d
         out[f"mean_abs_error_{kk}_unflagged"] = mean_abs(rows, f"error_{kk}",
                                                           where=lambda r: not flagged[r["trip"]])
     return out
+
+
+def _i3_in_sample(x, mw, mb, grade_ok, logged, trips, dt, loads, gain1) -> dict:
+    """The pipeline (constant η) fitted on every trip and scored on those trips: what no
+    held-out protocol can beat on average."""
+    import copy
+
+    from sumo_drvpw.fit.chain import calibrate_on, profile_recuperation_limit
+
+    use = mw.usable & grade_ok
+    eq, _, _ = _road_load(x, mw.power_w, use, I3_ROAD_TERMS, "i3_all_trips")
+    p_eq = eq.power(x)
+    fit = calibrate_on(mb, loads=loads, mask=logged, p_drive_w=mw.power_w, fixed=gain1, limit=None)
+    ch = copy.deepcopy(fit.chain)
+    ch.recuperation_limit_w = profile_recuperation_limit(p_eq, mw.power_w, dt, mask=use)["recuperation_limit_w"]
+    rows = trip_rows(ch.evaluate(p_eq, x.v, signals=mb.inputs.signals)["power_w"], mb.power_w, dt, trips)
+    flagged = {t: not bool(logged[trips == t].mean() > 0.5) for t in set(trips.tolist())}
+    return {"mean_abs_error": mean_abs(rows),
+            "mean_abs_error_unflagged": mean_abs(rows, where=lambda r: not flagged[r["trip"]]),
+            "mean_abs_error_flagged": mean_abs(rows, where=lambda r: flagged[r["trip"]]),
+            "errors": {r["trip"]: r["error"] for r in rows}}
 
 
 def _i3_sumo(log, x, trips, rows, folds, sumo_params, veh, drop) -> dict:
