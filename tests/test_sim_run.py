@@ -891,3 +891,21 @@ def test_sumo_game_scenarios_as_shipped(tmp_path, capsys, config, booked, skippe
         veh = pd.read_parquet(out / "vehicles.parquet")
         assert set(veh["equation"]) == {"moves_light_commercial_truck"}
         assert (veh["mass_kg"] == 2059.7).all() and (veh["traction_total_j"] > 0).all()
+
+
+def test_a_config_written_for_traci_scripts_does_not_wait_for_a_client(tmp_path):
+    """sumo-rl's OW-traci.sumocfg sets <remote-port value="8813"/>: SUMO started in-process
+    with it waited for a TraCI client forever (the run hung at 0 % CPU). libsumo needs no
+    port: the run now tells SUMO none (--remote-port 0) and finishes. In a subprocess with a
+    timeout, so that a regression fails instead of hanging the suite."""
+    import subprocess
+    import sys
+
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    cfg = _city_config(sc, '    <vType id="car" vClass="passenger" mass="1500"/>\n', [("p", "car", WEST)])
+    cfg.write_text(cfg.read_text().replace("</configuration>", '    <remote-port value="8813"/>\n</configuration>'))
+    r = subprocess.run([sys.executable, "-m", "sumo_drvpw", "run", str(cfg), "--out", str(tmp_path / "o"),
+                        "--no-figures", "--no-progress"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["vehicles"] == 1
