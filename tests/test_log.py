@@ -192,6 +192,33 @@ def test_accel_outliers_reported_and_excluded(tmp_path):
     assert log.excluded[99] or log.excluded[101]
 
 
+def test_an_elevation_glitch_is_no_road_grade(tmp_path, capsys):
+    """A phone's GPS altitude that jumps 150 m while the fix settles (a real metric Torque
+    trackLog.csv: 224 → 48 m in 3 s at 25 km/h) puts grades of 100 % and more into the
+    smoothing window; no road is steeper than 35 %: those samples are left out and counted,
+    the rest keep their grade, and calibrate says so."""
+    n = 600
+    df = _log(n, hz=2.0).assign(speed_mps=10.0, power_w=3000.0, mass_kg=1500.0)
+    dist = 10.0 * np.arange(n) / 2.0
+    z = 100.0 + 0.02 * dist                          # a steady 2 % climb
+    z[:300] += 150.0                                 # the fix settles by 150 m at 1.5 km
+    df["elevation_m"] = z
+    log = read_log([_write(tmp_path, df)])
+    steep = np.abs(np.tan(log.df["grade_rad"].to_numpy())) > 0.35
+    assert 5 <= log.counts["excluded_grade_outlier"] == steep.sum() <= 25  # within the 100-m window
+    assert log.excluded[steep].all() and not log.excluded[~steep].any()
+    far = np.abs(dist - 1500.0) > 100.0
+    assert_allclose(np.tan(log.df["grade_rad"].to_numpy()[far][10:-10]), 0.02, atol=2e-4)
+    t = df["time_s"].to_numpy()
+    v = 10.0 + 4.0 * np.sin(t / 15.0)                # the CLI needs a varying speed
+    a = np.gradient(v, t)
+    sin_th = np.gradient(z, np.cumsum(v) / 2.0)
+    df2 = df.assign(speed_mps=v, power_w=1500.0 * v * (a + 9.81 * np.clip(sin_th, -0.1, 0.1) + 0.1))
+    assert cli_main(["calibrate", str(_write(tmp_path, df2, "g.csv")), "--out", str(tmp_path / "e.toml"),
+                     "--candidates", "acc,grade,roll"]) == 0
+    assert "grade steeper than 35 % left out" in capsys.readouterr().out
+
+
 def test_folder_of_files_one_trip_each(tmp_path):
     d = tmp_path / "logs"
     d.mkdir()

@@ -215,6 +215,12 @@ def note_counts(counts: dict) -> None:
         print("note: the logs carry no grade (no grade_rad, grade_pct or elevation_m column): a flat road "
               "is assumed, so a trip that climbs or descends Δh misses m·g·Δh (1.5 t over 100 m: "
               "0.41 kWh); log the elevation (e.g. GPS altitude) where the routes are not flat")
+    n = int(counts.get("excluded_grade_outlier", 0) or 0)
+    if n:
+        lim = float(counts.get("grade_outlier_limit", 0.35))
+        print(f"note: {n} sample(s) with a grade steeper than {100 * lim:.0f} % left out: no road is that "
+              f"steep; an elevation glitch (GPS altitude settling or jumping) put it there "
+              f"(source: {counts.get('grade_source', '?')})")
     n = int(counts.get("grade_elevation_gap_trips", 0) or 0)
     if n:
         gaps = sorted((counts.get("grade_elevation_gap_m") or {}).items(), key=lambda tg: -abs(tg[1]))[:10]

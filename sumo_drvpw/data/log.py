@@ -66,12 +66,16 @@ class ReadOptions:
         acceleration [m/s²] (it sets the widening)
     grade_window_m : distance over which elevation is smoothed before differentiating [m]
     accel_outlier_mps2 : |a| above this is an outlier, left out of calibration [m/s²]
+    grade_outlier : |tan θ| above this is no road grade but an elevation glitch (a phone's
+        GPS altitude settling or jumping), left out of calibration [-]
     """
 
     accel_window_s: float = 0.5
     accel_noise_mps2: float = 0.05
     grade_window_m: float = 100.0
     accel_outlier_mps2: float = 8.0
+    #: 35 %: steeper than the steepest public streets (Baldwin Street, Ffordd Pen Llech)
+    grade_outlier: float = 0.35
     #: speeds in [−tolerance, 0) are standstill sensor noise: clipped to 0 and counted [m/s]
     negative_speed_tolerance_mps: float = 0.1
     #: unit of ``speed_mps`` as logged: None = m/s, checked against implausible implied
@@ -575,6 +579,10 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     counts["excluded_accel_outlier"] = int((out & ~excluded).sum())
     counts["accel_outlier_limit_mps2"] = opt.accel_outlier_mps2
     excluded |= out
+    steep = np.abs(np.tan(df["grade_rad"].to_numpy(float))) > opt.grade_outlier
+    counts["excluded_grade_outlier"] = int((steep & ~excluded).sum())
+    counts["grade_outlier_limit"] = opt.grade_outlier
+    excluded |= steep
     for c in ("accel_mps2", "grade_rad", "wind_mps", "air_density_kgm3", "mass_kg"):
         if c in df:
             nan = df[c].isna().to_numpy()
