@@ -191,7 +191,8 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     gps, _ = _one(labels, r"^speed \(gps\)$", "speed", exclude=None)
     if speed is None and gps is None:
         raise UserError(f"{path}: no speed: neither 'Vehicle speed' nor 'Speed (GPS)' is logged "
-                        f"(found {', '.join(labels[:6])}{' …' if len(labels) > 6 else ''})")
+                        f"(found {', '.join(labels[:6])}{' …' if len(labels) > 6 else ''}); a speed "
+                        "under another name (another app language): map it with the 'columns' format")
     named[speed or gps] = "speed_mps"
     rep["notes"].append(f"speed from {speed or gps!r}")
     if speed and gps:
