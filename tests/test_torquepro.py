@@ -101,3 +101,25 @@ def test_cli_format_name(tmp_path, capsys):
     assert cli_main(["import", "torquepro", str(metric_csv(tmp_path / "trip.csv")), "--out", str(out)]) == 0
     assert "import torquepro" in capsys.readouterr().out
     assert len(pd.read_parquet(out)) == 40
+
+
+def test_import_notes_are_folded_and_shortened_on_the_terminal_only(tmp_path, capsys):
+    """A real Torque log has dozens of PIDs in units not known here and a '-' note naming
+    180 columns: the import says one note for the units, shortens long notes on the
+    terminal, and keeps every note whole in the log's import report."""
+    from sumo_drvpw.cli.import_ import NOTE_CHARS, read_report
+
+    p = metric_csv(tmp_path / "trip.csv")
+    text = p.read_text(encoding="utf-8").splitlines()
+    extra = [f"PID {i}(furlong/fortnight)" for i in range(60)]
+    text = [text[0] + ", " + ", ".join(extra)] + [r + ", " + ", ".join(["-"] * 59 + ["1"]) for r in text[1:]]
+    p.write_text("\n".join(text) + "\n", encoding="utf-8")
+    out = tmp_path / "log.parquet"
+    assert cli_main(["import", "torquepro", str(p), "--out", str(out)]) == 0
+    shown = capsys.readouterr().out
+    notes = read_report(out)["files"][0]["notes"]
+    folded = [n for n in notes if "with a unit not known here" in n]
+    assert len(folded) == 1 and folded[0].startswith("61 columns") and "PID 59(furlong/fortnight)" in folded[0]
+    assert max(len(n) for n in notes) > NOTE_CHARS + 100
+    assert all(len(line) < NOTE_CHARS + 80 for line in shown.splitlines()), shown
+    assert "characters more" in shown and "read_report(LOG)" in shown

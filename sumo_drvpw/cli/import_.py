@@ -30,16 +30,39 @@ def configure(parser) -> None:
                              "sees the air speed. Import the trips of one wind together")
 
 
+#: the terminal shows at most this many notes per file and this many characters per note;
+#: the import report stored with the log (read_report) holds them whole
+NOTES_SHOWN = 8
+NOTE_CHARS = 400
+
+
+def _notes(notes: list[str]) -> list[str]:
+    out = []
+    for n in notes[:NOTES_SHOWN]:
+        cut = len(n) - NOTE_CHARS
+        out.append(f"      note: {n[:NOTE_CHARS]} … ({cut} characters more)" if cut > 40 else f"      note: {n}")
+    if len(notes) > NOTES_SHOWN:
+        out.append(f"      note: … and {len(notes) - NOTES_SHOWN} more notes")
+    return out
+
+
 def format_report(report: dict) -> str:
-    """Human-readable kept/dropped table: one line per file, then the totals."""
+    """Human-readable kept/dropped table: one line per file, then the totals (long notes
+    shortened: the report stored with the log, :func:`read_report`, has them whole)."""
     lines = [f"import {report['format']}: {len(report['files'])} file(s)"]
+    shortened = False
     for r in report["files"]:
         d = ", ".join(f"{k} {n}" for k, n in r["dropped"].items()) or "none"
         lines.append(f"  {Path(r['file']).name}: read {r['rows_read']}, kept {r['kept']}, dropped: {d}")
-        lines += [f"      note: {n}" for n in r["notes"]]
+        shown = _notes(r["notes"])
+        shortened |= shown != [f"      note: {n}" for n in r["notes"]]
+        lines += shown
     d = ", ".join(f"{k} {n}" for k, n in report["dropped"].items()) or "none"
     lines.append(f"total: read {report['rows_read']}, kept {report['kept']}, dropped: {d}")
     lines += [f"note: {n}" for n in report["notes"]]
+    if shortened:
+        lines.append("note: notes shortened here; the log's import report has them whole "
+                     "(sumo_drvpw.cli.import_.read_report(LOG))")
     return "\n".join(lines)
 
 

@@ -44,7 +44,7 @@ def _u(dimension: str, factor: float, offset: float, *names: str) -> None:
         UNITS[n.lower()] = (dimension, factor, offset)
 
 
-_u("speed", 1.0, 0.0, "m/s", "mps", "meters-second", "m s-1")
+_u("speed", 1.0, 0.0, "m/s", "mps", "meters-second", "meters/second", "m s-1")
 _u("speed", KMH, 0.0, "km/h", "kmh", "kph", "km/hr")
 _u("speed", MPH, 0.0, "mph", "mi/h")
 _u("speed", FT, 0.0, "ft/s", "fps")
@@ -94,7 +94,7 @@ _u("energy", 3.6e6, 0.0, "kwh")
 _u("volume_flow", 1.0, 0.0, "l/h", "lph", "l/hr", "l-hr")
 _u("volume_flow", GAL * 1000.0, 0.0, "gal/h", "gal-hr", "gal/hr", "gph")
 _u("density", 1.0, 0.0, "kg/m3", "kg/m^3", "kg/m³")
-_u("dimensionless", 1.0, 0.0, "", "-", "1", "bool", "text")
+_u("dimensionless", 1.0, 0.0, "", "-", "1", "bool", "text", ":1", "lambda", "λ")  # ratios (Torque's AFR, λ)
 
 
 def lookup_unit(unit: str):
@@ -343,10 +343,25 @@ def order_columns(df: pd.DataFrame) -> pd.DataFrame:
     return df[first + [c for c in df.columns if c not in first]]
 
 
+_UNKNOWN_UNIT = re.compile(r"^column '(?P<col>.*)': unit '(?P<unit>.*)' unknown, kept unconverted$")
+
+
+def _fold_unit_notes(notes: list[str]) -> list[str]:
+    """One note for all of a file's columns whose unit is unknown (a Torque log has dozens)."""
+    hits = [m for m in map(_UNKNOWN_UNIT.match, notes) if m]
+    if len(hits) < 2:
+        return notes
+    rest = [n for n in notes if not _UNKNOWN_UNIT.match(n)]
+    return [f"{len(hits)} columns with a unit not known here, kept unconverted: "
+            + ", ".join(m["col"] for m in hits)] + rest
+
+
 def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=()) -> tuple:
     """Concatenate per-file frames and build the import report (totals + per file)."""
     if not frames:
         raise UserError(f"{fmt}: no input files")
+    for r in reports:
+        r["notes"] = _fold_unit_notes(r["notes"])
     ids = [r["trip_id"] for r in reports]
     dup = sorted({i for i in ids if ids.count(i) > 1})
     if dup:
