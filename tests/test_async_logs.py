@@ -144,3 +144,27 @@ def test_aligned_values_are_linear_interpolation(jitter, slope, offset, seed):
     gap = np.diff(tx).max() <= ALIGN_MAX_GAP_INTERVALS * np.median(np.diff(tx))
     if gap:
         np.testing.assert_allclose(x[inside], offset + slope * ts[inside], rtol=1e-9, atol=1e-9)
+
+
+def test_columns_aligns_within_each_trip_of_a_file(tmp_path):
+    """A file of two trips (its own trip column), each asynchronous: a channel is put onto
+    the speed samples of its own trip, never bridged from the other trip's samples."""
+    lines = ["trip,t,v,i"]
+    for trip, base in (("a", 0.0), ("b", 30.0)):  # b starts where a ends: bridging would show
+        for k in range(60):
+            t = base + 0.5 * k
+            lines.append(f"{trip},{t},{10 + k % 5}," if k % 2 == 0 else f"{trip},{t},,{base + t}")
+    src = tmp_path / "two.csv"
+    src.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    m = tmp_path / "map.toml"
+    m.write_text('[columns.trip]\nname = "trip_id"\n[columns.t]\nname = "time_s"\nunit = "s"\n'
+                 '[columns.v]\nname = "speed_mps"\nunit = "m/s"\n[columns.i]\nname = "battery_current_a"\n'
+                 'unit = "A"\n', encoding="utf-8")
+    df, rep = read("columns", src, columns=m)
+    assert sorted(df["trip_id"].unique()) == ["a", "b"] and len(df) == 60
+    for trip, base in (("a", 0.0), ("b", 30.0)):  # b starts where a ends: bridging would show
+        g = df[df["trip_id"] == trip]
+        ok = g["battery_current_a"].notna().to_numpy()
+        assert ok[1:-1].all() and not ok[0]          # before its first sample: missing
+        t = g["time_s"].to_numpy()                  # the file's own seconds
+        np.testing.assert_allclose(g["battery_current_a"].to_numpy()[ok], (base + t)[ok])

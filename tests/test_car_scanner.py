@@ -122,3 +122,20 @@ def test_cli_import_then_battery_energy(tmp_path, capsys):
     tt = np.linspace(t[ok][0], t[ok][-1], 100_001)
     exact = np.trapezoid(400.0 * current_a(tt), tt)
     assert e == pytest.approx(exact, rel=1e-6)
+
+
+def test_long_layout_with_decimal_commas_reads_as_with_points(tmp_path):
+    """A phone set to a language that writes decimal commas: the long layout's values read
+    the same."""
+    rows = polls(60.0)
+    a = long_csv(tmp_path / "points.csv", rows)
+    text = a.read_text(encoding="utf-8").splitlines()
+    commas = [text[0]] + [";".join(c.replace(".", ",") if i in (0, 2) else c for i, c in enumerate(r.split(";")))
+                          for r in text[1:]]
+    b = tmp_path / "commas.csv"
+    b.write_text("\n".join(commas) + "\n", encoding="utf-8")
+    assert all("," in r.split(";")[0] for r in commas[1:]) and any("," in r.split(";")[2] for r in commas[1:])
+    x, _ = read("car-scanner", a)
+    y, _ = read("car-scanner", b)
+    for c in ("time_s", "speed_mps", "battery_current_a"):
+        np.testing.assert_allclose(y[c], x[c], rtol=1e-9, err_msg=c)

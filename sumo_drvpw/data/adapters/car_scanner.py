@@ -85,22 +85,27 @@ def _time_of_day(values: np.ndarray) -> np.ndarray:
 Channel = tuple[np.ndarray, np.ndarray]
 
 
+def _number(col: pd.Series) -> pd.Series:
+    """Numbers of a long-layout column; a decimal comma (a phone set to such a language)
+    reads as a point; anything else not a number is NaN."""
+    if pd.api.types.is_numeric_dtype(col):
+        return col.astype(float)
+    return pd.to_numeric(col.astype("string").str.strip().str.replace(",", ".", regex=False), errors="coerce")
+
+
 def _long(path: Path, sep: str, rep: dict) -> tuple[int, dict[str, Channel]]:
     """Long layout → (rows, {"PID (unit)": its own samples}); the position columns are
     channels of every row."""
     raw = read_csv_strict(path, sep=sep, keep_default_na=False, na_values=[""], encoding="utf-8-sig",
                           dtype={"PID": "category", "UNITS": "category"}, low_memory=False)
     raw.columns = [str(c).strip().strip('"').upper() for c in raw.columns]
-    t = pd.to_numeric(raw["SECONDS"], errors="coerce").to_numpy(float)
+    t = _number(raw["SECONDS"]).to_numpy(float)
     bad = ~np.isfinite(t)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise UserError(f"{path}: column 'SECONDS' data row {i} holds {raw['SECONDS'].iloc[i]!r}: not a number")
     t = _time_of_day(t)
-    val = raw["VALUE"]
-    if not pd.api.types.is_numeric_dtype(val):
-        val = pd.to_numeric(val.astype(str).str.strip().str.replace(",", ".", regex=False), errors="coerce")
-    val = val.to_numpy(float)
+    val = _number(raw["VALUE"]).to_numpy(float)
     pid = raw["PID"].astype("string").fillna("").str.strip()
     unit = raw["UNITS"].astype("string").fillna("").str.strip()
     codes, labels = pd.factorize(pid + np.where(unit != "", " (" + unit + ")", ""))
@@ -120,7 +125,7 @@ def _long(path: Path, sep: str, rep: dict) -> tuple[int, dict[str, Channel]]:
     for col, name in (("LATITUDE", "Latitude (deg)"), ("LONGTITUDE", "Longitude (deg)"),
                       ("LONGITUDE", "Longitude (deg)")):
         if col in raw:
-            x = pd.to_numeric(raw[col], errors="coerce").to_numpy(float, copy=True)
+            x = _number(raw[col]).to_numpy(float, copy=True)
             x[x == 0] = np.nan  # no fix is written as 0
             if np.isfinite(x).any():
                 chans[name] = (t, x)
