@@ -139,3 +139,17 @@ def test_long_layout_with_decimal_commas_reads_as_with_points(tmp_path):
     y, _ = read("car-scanner", b)
     for c in ("time_s", "speed_mps", "battery_current_a"):
         np.testing.assert_allclose(y[c], x[c], rtol=1e-9, err_msg=c)
+
+
+def test_wide_layout_with_dates_in_the_time_column(tmp_path):
+    """Some exports write the date with the time: the same log, the same seconds."""
+    rows = polls(60.0)
+    a = wide_csv(tmp_path / "tod.csv", rows)
+    lines = a.read_text(encoding="utf-8").splitlines()
+    dated = [lines[0]] + ["2023-12-04 " + r for r in lines[1:]]
+    b = tmp_path / "dated.csv"
+    b.write_text("\n".join(dated) + "\n", encoding="utf-8")
+    x, _ = read("car-scanner", a)
+    y, _ = read("car-scanner", b)
+    for c in ("time_s", "speed_mps", "battery_current_a"):
+        np.testing.assert_allclose(y[c], x[c], rtol=1e-9, atol=1e-9, err_msg=c)

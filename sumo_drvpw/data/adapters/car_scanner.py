@@ -148,12 +148,17 @@ def _wide(path: Path, sep: str) -> tuple[int, dict[str, Channel]]:
     else:
         parsed = pd.to_datetime(s, format="%H:%M:%S.%f", errors="coerce")
         parsed = parsed.fillna(pd.to_datetime(s, format="%H:%M:%S", errors="coerce"))
+        if parsed.isna().all():  # a date with the time ('2023-12-04 07:13:32.604')
+            parsed = pd.to_datetime(s, format="ISO8601", errors="coerce")
+            base = parsed.min()
+        else:
+            base = None
         bad = parsed.isna().to_numpy()
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise UserError(f"{path}: column {tcol!r} data row {i} holds {s.iloc[i]!r}, expected a time "
-                            "of day like '07:13:32.604'")
-        t = ((parsed - parsed.dt.normalize()).dt.total_seconds()).to_numpy(float)
+                            "of day like '07:13:32.604' (or a date and time)")
+        t = ((parsed - (parsed.dt.normalize() if base is None else base)).dt.total_seconds()).to_numpy(float)
     t = _time_of_day(t)
     chans: dict[str, Channel] = {}
     for c in raw.columns[1:]:
