@@ -288,6 +288,19 @@ def test_fuel_target_from_volume_flow_and_missing_columns(tmp_path):
         load("battery")
 
 
+def test_fuel_target_from_an_app_computed_flow_and_an_ambiguous_pair(tmp_path):
+    """Car Scanner's 'Calculated instant fuel rate (L/h)' (from the MAF) is a fuel flow
+    too; of two, the one named 'fuel…' is used; two of the same standing say which."""
+    g = FUELS["gasoline"]
+    want = 2.4 * g["density_kg_per_l"] / 3600 * g["lhv_j_per_kg"]
+    np.testing.assert_allclose(_log(tmp_path, calculated_instant_fuel_rate_lph=2.4)("fuel").power_w, want)
+    both = _log(tmp_path, calculated_instant_fuel_rate_lph=9.9, fuel_flow_rate_hour_lph=2.4)("fuel")
+    np.testing.assert_allclose(both.power_w, want)
+    with pytest.raises(UserError, match="several could be: calculated_instant_fuel_rate_lph, "
+                                        "estimated_fuel_flow_lph"):
+        _log(tmp_path, calculated_instant_fuel_rate_lph=2.4, estimated_fuel_flow_lph=2.5)("fuel")
+
+
 # ------------------------------------------------------------------ command line
 
 def _planted_battery_log(tmp_path):

@@ -189,13 +189,23 @@ def measured_battery_power(log, vehicle=None) -> tuple[np.ndarray, str]:
 FUEL_COLUMNS = ("fuel_rate_gps", "fuel_rate_lph")
 
 
+def fuel_flow_candidates(df) -> list[str]:
+    """Extra columns that read as a fuel volume flow: named with 'fuel', ending in ``_lph``
+    (what adapters make of a vendor's L/h or gal/h flow: Torque's 'Fuel flow rate/hour',
+    Car Scanner's 'Calculated instant fuel rate')."""
+    return [str(c) for c in df.columns if str(c).endswith("_lph") and "fuel" in str(c)]
+
+
 def fuel_column(df) -> str | None:
-    """The fuel-flow column of a log: ``fuel_rate_gps``, ``fuel_rate_lph``, or the one
-    extra column named ``fuel…_lph`` (what adapters make of a vendor's L/h or gal/h flow)."""
+    """The fuel-flow column of a log: ``fuel_rate_gps``, ``fuel_rate_lph``, else the one
+    fuel volume flow among the extras (:func:`fuel_flow_candidates`; of several, the one
+    whose name starts with 'fuel'); None when there is none or no single one."""
     for c in FUEL_COLUMNS:
         if c in df:
             return c
-    cands = [c for c in df.columns if str(c).startswith("fuel") and str(c).endswith("_lph")]
+    cands = fuel_flow_candidates(df)
+    if len(cands) > 1:
+        cands = [c for c in cands if c.startswith("fuel")]
     return cands[0] if len(cands) == 1 else None
 
 
@@ -212,8 +222,11 @@ def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.
     df = log.df
     col = fuel_column(df)
     if col is None:
+        several = fuel_flow_candidates(df)
         raise UserError(f"{log.describe()}: the fuel target needs a fuel-flow column "
-                        f"({', '.join(FUEL_COLUMNS)}, or one 'fuel…_lph' column)")
+                        f"({', '.join(FUEL_COLUMNS)}, or one '…fuel…_lph' column)"
+                        + (f"; several could be: {', '.join(several)} — name the one to use "
+                           "fuel_rate_lph (import columns mapping)" if len(several) > 1 else ""))
     name = fuel or (vehicle.powertrain.get("fuel", "gasoline") if vehicle is not None else "gasoline")
     if name not in FUELS:
         raise UserError(f"fuel '{name}' is not one of {', '.join(FUELS)}")
