@@ -293,3 +293,15 @@ def test_coarse_obd_speed_gets_a_wider_window_and_the_inertia_back(tmp_path):
     assert "widened from 0.5 s" in counts["accel_source"] and counts["accel_window_s"] > 2.0
     assert narrow_counts["accel_window_s"] == 0.5
     assert abs(wide - 1) < 0.06 and abs(narrow - 1) > 2 * abs(wide - 1), (wide, narrow)
+
+
+def test_trips_of_one_sample_each_read_without_numpy_warnings(tmp_path):
+    """Found by the reader's fuzz test (seed 25): a log whose every trip holds one sample
+    has no interval inside a trip; the median of none warned ('Mean of empty slice')."""
+    import warnings
+
+    df = pd.DataFrame({"trip_id": ["a", "b", "c"], "time_s": [0.0, 0.0, 0.0], "speed_mps": [1.0, 2.0, 3.0]})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        log = read_log([_write(tmp_path, df)])
+    assert len(log.df) == 3 and "time_gaps" not in log.counts

@@ -506,7 +506,8 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     dtb = np.r_[0.0, dtf[:-1]]
     dt = 0.5 * (dtf + dtb)
     gaps = np.r_[np.diff(t), 0.0]
-    med = float(np.median(gaps[~np.r_[start[1:], True]])) if len(df) > 1 else 0.0
+    within = gaps[~np.r_[start[1:], True]]  # intervals inside trips (none: one-sample trips)
+    med = float(np.median(within)) if within.size else 0.0
     if med > 0:
         big = (dtf > 5 * med)
         counts["time_gaps"] = int(big.sum())
