@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.data.adapters import read
@@ -153,3 +155,80 @@ def test_wide_layout_with_dates_in_the_time_column(tmp_path):
     y, _ = read("car-scanner", b)
     for c in ("time_s", "speed_mps", "battery_current_a"):
         np.testing.assert_allclose(y[c], x[c], rtol=1e-9, atol=1e-9, err_msg=c)
+
+
+CELLS = ["", "0", "1.5", "12,5", "-3", "nan", "inf", "∞", "1e400", "abc", "72"]
+TIMES = ["07:00:00.000", "07:00:00.500", "07:00:01.000", "06:59:59.000", "23:59:59.900", "00:00:00.100",
+         "7:00", "", "noon"]
+FUZZ_PIDS = ["Vehicle speed (km/h)", "Speed (GPS) (km/h)", "Battery DC Current (A)", "Battery DC Voltage (V)",
+             "Ambient temperature (\u2103)", "Cell (V)"]
+
+
+@st.composite
+def scanner_files(draw):
+    pids = draw(st.lists(st.sampled_from(FUZZ_PIDS), min_size=1, max_size=5, unique=True))
+    n = draw(st.integers(min_value=0, max_value=30))
+    long = draw(st.booleans())
+    rows = []
+    for k in range(n):
+        t = draw(st.sampled_from(TIMES)) if draw(st.integers(0, 4)) == 0 else f"07:00:{k // 2:02d}.{(k % 2) * 500:03d}"
+        pid = draw(st.sampled_from(pids))
+        rows.append((t, pid, draw(st.sampled_from(CELLS))))
+    if long:
+        lines = ['"SECONDS";"PID";"VALUE";"UNITS";"LATITUDE";"LONGTITUDE";']
+        for t, pid, v in rows:
+            sec = t if draw(st.booleans()) else f"{25200 + rows.index((t, pid, v)) * 0.5:.3f}"
+            name, unit = pid.rsplit(" (", 1)
+            lines.append(f'"{sec}";"{name}";"{v}";"{unit[:-1]}";"49.2";"{draw(st.sampled_from(["18.7", "0", ""]))}";')
+    else:
+        lines = ["time," + ",".join(f'"{p}"' for p in pids)]
+        lines += [t + "," + ",".join(v if p == pid else "" for p in pids) for t, pid, v in rows]
+    return "\n".join(lines) + ("\n" if draw(st.booleans()) else "")
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(text=scanner_files())
+def test_random_car_scanner_files_give_a_log_or_one_line(tmp_path, text):
+    """Any file in either layout, with bad times, bad cells, missing PIDs: a drive log with
+    increasing time and plausible speed, or one UserError line naming the file — never
+    another exception and never a numpy warning."""
+    import warnings
+
+    p = tmp_path / "fuzz.csv"
+    p.write_text(text, encoding="utf-8")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        try:
+            df, _ = read("car-scanner", p)
+        except UserError as e:
+            assert "\n" not in str(e) and "fuzz.csv" in str(e)
+            return
+    t = df["time_s"].to_numpy(float)
+    v = df["speed_mps"].to_numpy(float)
+    assert np.all(np.diff(t) > 0) and np.all(np.isfinite(v)) and np.all((v >= 0) & (v <= 100))
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(text=scanner_files())
+def test_random_asynchronous_files_through_a_mapping(tmp_path, text):
+    """The same files through the generic format (its channel alignment): a log or one
+    UserError line, never another exception, never a numpy warning."""
+    import warnings
+
+    if not text.startswith("time,") or "Vehicle speed" not in text.splitlines()[0]:
+        return
+    p = tmp_path / "fuzz.csv"
+    p.write_text(text, encoding="utf-8")
+    m = tmp_path / "map.toml"
+    m.write_text('[options]\ntime_format = "%H:%M:%S.%f"\n[columns.time]\nname = "time_s"\nunit = "datetime"\n'
+                 '[columns."Vehicle speed (km/h)"]\nname = "speed_mps"\nunit = "km/h"\n', encoding="utf-8")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        try:
+            df, _ = read("columns", p, columns=m)
+        except UserError as e:
+            assert "\n" not in str(e)
+            return
+    assert np.all(np.diff(df["time_s"].to_numpy(float)) > 0)

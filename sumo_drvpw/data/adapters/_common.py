@@ -256,7 +256,8 @@ def aligned_note(n_other: int, n_speed: int, aligned: dict[str, np.ndarray], rep
     """The import note of an asynchronous log whose channels ``aligned`` (name → values at
     the speed samples) were put onto its ``n_speed`` speed samples, and the count of the
     ``n_other`` rows without speed under their drop reason."""
-    still = [f"{c} {100 * m:.2g} %" for c, x in aligned.items() if (m := float(np.mean(~np.isfinite(x)))) > 0]
+    still = [f"{c} {100 * m:.2g} %" for c, x in aligned.items()
+             if x.size and (m := float(np.mean(~np.isfinite(x)))) > 0]
     report["notes"].append(
         f"asynchronous log: {n_other} rows carry no speed; {len(aligned)} channel(s) logged on their "
         f"own rows are interpolated onto the {n_speed} speed samples (linear in time, across gaps up to "

@@ -195,7 +195,7 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     rep = new_report(path, path.stem, 0)
     rows, chans = _long(path, sep, rep) if long else _wide(path, sep)
     rep["rows_read"] = int(rows)
-    labels = list(chans)
+    labels = [lab for lab, (tc, _) in chans.items() if len(tc)]  # a PID with no value is not logged
     named: dict[str, str] = {}
     speed, _ = _one(labels, r"^vehicle speed$|^speed \(obd\)$", "speed", exclude=None)
     gps, _ = _one(labels, r"^speed \(gps\)$", "speed", exclude=None)
@@ -226,7 +226,7 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     _, f, o = generic_name(speed or gps)
     names, values = ["time_s", "speed_mps"], [ts, vs * f + o]
     for lab, (tc, xc) in chans.items():
-        if lab == (speed or gps):
+        if lab == (speed or gps) or lab not in labels:
             continue
         if lab in named:
             name = named[lab]
