@@ -225,6 +225,18 @@ def drop(df: pd.DataFrame, mask, reason: str, report: dict) -> pd.DataFrame:
     return df
 
 
+def carry_midnight(seconds) -> tuple[np.ndarray, int]:
+    """Times of day [s] in file order with the day carried on where they step back by more
+    than 12 h (past midnight; a log of time of day only, as phone OBD apps write it), and
+    how many times that happened. NaN stays NaN."""
+    t = np.asarray(seconds, float)
+    ok = np.isfinite(t)
+    back = np.concatenate([[False], np.diff(t[ok]) < -43200.0])
+    days = np.zeros(len(t))
+    days[ok] = 86400.0 * np.cumsum(back)
+    return t + days, int(back.sum())
+
+
 #: a channel logged on its own rows is interpolated across gaps up to this many of its median
 #: sampling intervals; a longer gap (the logger paused the channel) stays missing
 ALIGN_MAX_GAP_INTERVALS = 3.0

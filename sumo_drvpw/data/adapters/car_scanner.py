@@ -40,9 +40,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.adapters._common import (aligned_note, clean_time_and_speed, expand_paths, generic_name,
-                                              interp_onto, lookup_unit, new_report, read_csv_strict, read_each,
-                                              split_header, unique_names)
+from sumo_drvpw.data.adapters._common import (aligned_note, carry_midnight, clean_time_and_speed, expand_paths,
+                                              generic_name, interp_onto, lookup_unit, new_report, read_csv_strict,
+                                              read_each, split_header, unique_names)
 from sumo_drvpw.errors import UserError
 
 FORMAT = "car-scanner"
@@ -71,14 +71,10 @@ def _sep_of(path: Path) -> tuple[str, bool]:
 
 
 def _time_of_day(values: np.ndarray) -> np.ndarray:
-    """Seconds since the first sample from times of day [s] in file order; a step back by
-    more than 12 h passes midnight and carries the day on."""
-    t = np.asarray(values, float)
-    ok = np.isfinite(t)
-    back = np.zeros(len(t))
-    back[ok] = 86400.0 * np.cumsum(np.concatenate([[False], np.diff(t[ok]) < -43200.0]))
-    t = t + back
-    return t - np.nanmin(t) if ok.any() else t
+    """Seconds since the first sample from times of day [s] in file order, the day carried
+    on past midnight (:func:`carry_midnight`)."""
+    t, _ = carry_midnight(values)
+    return t - np.nanmin(t) if np.isfinite(t).any() else t
 
 
 #: a channel: its own sample times [s since the first row] and values

@@ -37,8 +37,9 @@ import pandas as pd
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
-from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, clean_time_and_speed, expand_paths, generic_name,
-                      lookup_unit, new_report, numeric, read_csv_strict, read_each, unique_names)
+from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midnight, clean_time_and_speed,
+                      expand_paths, generic_name, lookup_unit, new_report, numeric, read_csv_strict,
+                      read_each, unique_names)
 
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
@@ -222,21 +223,15 @@ _DATE_DIRECTIVES = ("%d", "%j", "%m", "%b", "%B", "%y", "%Y", "%U", "%W", "%G", 
 def _seconds(t: pd.Series, time_format, rep: dict) -> pd.Series:
     """Seconds since the first timestamp. A time of day without a date (``%H:%M:%S.%f``,
     as phone OBD apps log it) that steps back by more than 12 h has passed midnight: the
-    day is carried on instead of the samples reading as time going backwards."""
+    day is carried on (:func:`carry_midnight`) instead of the samples reading as time going
+    backwards."""
     s = (t - t.min()).dt.total_seconds()
     if time_format is None or any(d in str(time_format) for d in _DATE_DIRECTIVES):
         return s
-    x = s.to_numpy(float)
-    ok = np.isfinite(x)
-    step = np.zeros_like(x)
-    xs = x[ok]
-    back = np.concatenate([[False], np.diff(xs) < -43200.0])
-    if not back.any():
+    x, n = carry_midnight(s.to_numpy(float))
+    if not n:
         return s
-    step[ok] = 86400.0 * np.cumsum(back)
-    rep["notes"].append(f"time of day without a date passes midnight {int(back.sum())} time(s): "
-                        "the day is carried on")
-    x = x + step
+    rep["notes"].append(f"time of day without a date passes midnight {n} time(s): the day is carried on")
     return pd.Series(x - np.nanmin(x), index=s.index)
 
 
