@@ -66,8 +66,6 @@ def _road_load(x, y, use, terms, name):
 
 def i3_study(data: Path) -> dict:
     """2-fold held-out battery energy per trip of the TUM BMW i3 (see module docstring)."""
-    import copy
-
     from sumo_drvpw.data.measured import measure
     from sumo_drvpw.fit.chain import calibrate_on, profile_recuperation_limit
     from sumo_drvpw.data.dropouts import dropout_report, log_dropouts
@@ -121,8 +119,7 @@ def i3_study(data: Path) -> dict:
         # recuperated, from the equation's power against the motor's
         p_eq = eq.power(x)
         lim = profile_recuperation_limit(p_eq, mw.power_w, dt, mask=use)
-        chain = copy.deepcopy(fit.chain)
-        chain.recuperation_limit_w = lim["recuperation_limit_w"]
+        chain = _limited(fit.chain, lim["recuperation_limit_w"])
         test = ~train
 
         def put(key, ch, p):
@@ -130,37 +127,28 @@ def i3_study(data: Path) -> dict:
 
         put("pipeline", chain, p_eq)
         put("no_limit", fit.chain, p_eq)
-        ch4 = copy.deepcopy(fit.chain)
-        ch4.recuperation_limit_w = profile_recuperation_limit(eq4.power(x), mw.power_w, dt,
-                                                              mask=use)["recuperation_limit_w"]
+        ch4 = _limited(fit.chain, _limit_w(eq4.power(x), mw.power_w, dt, use))
         put("no_ambient_term", ch4, eq4.power(x))
         # the temperature term in a form the SUMO plug-in evaluates (model/terms 'cold' =
         # 20 °C − T, 0 without a temperature): a drag ∝ v rising in the cold
         eqc, _, _ = _road_load(x, mw.power_w, use, I3_ROAD_TERMS[:4] + ("cold*v^2",), f"i3_fold{name}_cold")
-        chc = copy.deepcopy(fit.chain)
-        chc.recuperation_limit_w = profile_recuperation_limit(eqc.power(x), mw.power_w, dt,
-                                                              mask=use)["recuperation_limit_w"]
+        chc = _limited(fit.chain, _limit_w(eqc.power(x), mw.power_w, dt, use))
         put("cold_form", chc, eqc.power(x))
-        chl = copy.deepcopy(fit.chain)
-        chl.recuperation_limit_w = profile_recuperation_limit(
-            eq_log.power(mw_logged.inputs), mw_logged.power_w, dt,
-            mask=mw_logged.usable & train)["recuperation_limit_w"]
+        chl = _limited(fit.chain, _limit_w(eq_log.power(mw_logged.inputs), mw_logged.power_w, dt,
+                                           mw_logged.usable & train))
         pred["as_logged"][test] = chl.evaluate(eq_log.power(mw_logged.inputs), x.v, signals=sig)["power_w"][test]
-        chf = copy.deepcopy(fit_free.chain)
-        chf.recuperation_limit_w = chain.recuperation_limit_w
+        chf = _limited(fit_free.chain, chain.recuperation_limit_w)
         put("loads_free", chf, p_eq)
         fit_sym = calibrate_on(mb, loads=loads, mask=train & logged, p_drive_w=mw.power_w,
                                fixed=dict(gain1, recuperation_efficiency=fit.chain.traction_efficiency),
                                limit=None)
-        chs = copy.deepcopy(fit_sym.chain)
-        chs.recuperation_limit_w = chain.recuperation_limit_w
+        chs = _limited(fit_sym.chain, chain.recuperation_limit_w)
         put("symmetric_efficiency", chs, p_eq)
         put("chain_only", fit.chain, mw.power_w)
         # η_t, η_r as tables over |P| (fit/chain_map.py), same loads and limit
         fit_map = calibrate_on(mb, loads=loads, mask=train & logged, p_drive_w=mw.power_w,
                                fixed=gain1, limit=None, efficiency="power")
-        chm = copy.deepcopy(fit_map.chain)
-        chm.recuperation_limit_w = chain.recuperation_limit_w
+        chm = _limited(fit_map.chain, chain.recuperation_limit_w)
         put("efficiency_map", chm, p_eq)
         put("chain_only_map", fit_map.chain, mw.power_w)
         params = params_of(fit)
@@ -251,16 +239,10 @@ def i3_sumo_equation(x, mw, mb, grade_ok, dt, ids):
     ``[measurement]`` (:data:`I3_MEASUREMENT`) makes `compare` read new i3 logs as it was
     fitted. Nothing is held out here: its held-out quality is the 5-fold's ``hvac_only``
     variant. Returns (Equation, summary dict for the report)."""
-    import copy
-
-    from sumo_drvpw.fit.chain import profile_recuperation_limit
-
     use = mw.usable & grade_ok
     eq, free, msg = _road_load(x, mw.power_w, use, I3_ROAD_TERMS[:4] + ("cold*v^2",), "bmw_i3_battery")
     fit = sumo_study_chain(mb, mw, np.ones(mw.power_w.size, bool))
-    chain = copy.deepcopy(fit.chain)
-    chain.recuperation_limit_w = profile_recuperation_limit(eq.power(x), mw.power_w, dt,
-                                                            mask=use)["recuperation_limit_w"]
+    chain = _limited(fit.chain, _limit_w(eq.power(x), mw.power_w, dt, use))
     chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     chain.provenance = {"method": "sumo_drvpw/validation/chain_i3.py i3_sumo_equation",
                         "data": "TUM BMW i3, all trips", "trips": len(ids),
@@ -317,9 +299,7 @@ def select_efficiency(mb, mw, loads, gain1, trips, train, dt, k=5) -> dict:
 def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k) -> dict:
     """The pipeline (road load, chain with constant η or the |P| map, recuperation limit) in
     trip-grouped k-fold cross-validation: fold j = every k-th trip from the j-th."""
-    import copy
-
-    from sumo_drvpw.fit.chain import calibrate_on, profile_recuperation_limit
+    from sumo_drvpw.fit.chain import calibrate_on
 
     keys = ("pipeline", "efficiency_map", "chain_only", "chain_only_map", "selected", "hvac_only")
     pred = {kk: np.full(trips.size, np.nan) for kk in keys}
@@ -331,14 +311,13 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k) -> d
         use = mw.usable & grade_ok & train
         eq, _, _ = _road_load(x, mw.power_w, use, I3_ROAD_TERMS, f"i3_kfold{j}")
         p_eq = eq.power(x)
-        lim = profile_recuperation_limit(p_eq, mw.power_w, dt, mask=use)["recuperation_limit_w"]
+        lim = _limit_w(p_eq, mw.power_w, dt, use)
         sel = select_efficiency(mb, mw, loads, gain1, trips, train & logged, dt)
         choices.append(sel)
         for kind, a, b in (("constant", "pipeline", "chain_only"), ("power", "efficiency_map", "chain_only_map")):
             fit = calibrate_on(mb, loads=loads, mask=train & logged, p_drive_w=mw.power_w, fixed=gain1,
                                limit=None, efficiency=kind)
-            ch = copy.deepcopy(fit.chain)
-            ch.recuperation_limit_w = lim
+            ch = _limited(fit.chain, lim)
             pred[a][test] = ch.evaluate(p_eq, x.v, signals=sig)["power_w"][test]
             pred[b][test] = fit.chain.evaluate(mw.power_w, x.v, signals=sig)["power_w"][test]
             if kind == sel["choice"]:
@@ -347,15 +326,14 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k) -> d
         # temperature instead (I3_HVAC), fitted on every training trip (the measured battery
         # power holds whatever the heater drew, logged or not)
         fit_h = sumo_study_chain(mb, mw, train)
-        ch = copy.deepcopy(fit_h.chain)
-        ch.recuperation_limit_w = lim
+        ch = _limited(fit_h.chain, lim)
         pred["hvac_only"][test] = ch.evaluate(p_eq, x.v, signals=sig)["power_w"][test]
         hvac_fits.append({k: p["value"] for k, p in fit_h.parameters.items()})
     rows = trip_rows(pred["pipeline"], mb.power_w, dt, trips)
     for kk in keys[1:]:
         for r, a in zip(rows, trip_rows(pred[kk], mb.power_w, dt, trips)):
             r[f"error_{kk}"] = a["error"]
-    flagged = {t: not bool(logged[trips == t].mean() > 0.5) for t in ids}
+    flagged = _flagged(logged, trips, ids)
     out = {"k": k, "rows": rows, "selection": choices, "hvac_fits": hvac_fits, "hvac": dict(I3_HVAC),
            "mean_abs_error": mean_abs(rows),
            "mean_abs_error_unflagged": mean_abs(rows, where=lambda r: not flagged[r["trip"]]),
@@ -367,21 +345,40 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k) -> d
     return out
 
 
+def _limit_w(p_eq, p_meas, dt, mask):
+    """The recuperation limit [W] profiled from an equation's power against the measured
+    motor power (fit.chain.profile_recuperation_limit); None when none is kept."""
+    from sumo_drvpw.fit.chain import profile_recuperation_limit
+
+    return profile_recuperation_limit(p_eq, p_meas, dt, mask=mask)["recuperation_limit_w"]
+
+
+def _limited(chain, limit_w):
+    """A copy of ``chain`` with its recuperation limit [W] (None: no limit)."""
+    import copy
+
+    out = copy.deepcopy(chain)
+    out.recuperation_limit_w = limit_w
+    return out
+
+
+def _flagged(logged, trips, ids) -> dict[str, bool]:
+    """Trip → whether the heater's V·I is missing on most of it (its heater load unknown)."""
+    return {t: not bool(logged[trips == t].mean() > 0.5) for t in ids}
+
+
 def _i3_in_sample(x, mw, mb, grade_ok, logged, trips, dt, loads, gain1) -> dict:
     """The pipeline (constant η) fitted on every trip and scored on those trips: what no
     held-out protocol can beat on average."""
-    import copy
-
-    from sumo_drvpw.fit.chain import calibrate_on, profile_recuperation_limit
+    from sumo_drvpw.fit.chain import calibrate_on
 
     use = mw.usable & grade_ok
     eq, _, _ = _road_load(x, mw.power_w, use, I3_ROAD_TERMS, "i3_all_trips")
     p_eq = eq.power(x)
     fit = calibrate_on(mb, loads=loads, mask=logged, p_drive_w=mw.power_w, fixed=gain1, limit=None)
-    ch = copy.deepcopy(fit.chain)
-    ch.recuperation_limit_w = profile_recuperation_limit(p_eq, mw.power_w, dt, mask=use)["recuperation_limit_w"]
+    ch = _limited(fit.chain, _limit_w(p_eq, mw.power_w, dt, use))
     rows = trip_rows(ch.evaluate(p_eq, x.v, signals=mb.inputs.signals)["power_w"], mb.power_w, dt, trips)
-    flagged = {t: not bool(logged[trips == t].mean() > 0.5) for t in set(trips.tolist())}
+    flagged = _flagged(logged, trips, set(trips.tolist()))
     return {"mean_abs_error": mean_abs(rows),
             "mean_abs_error_unflagged": mean_abs(rows, where=lambda r: not flagged[r["trip"]]),
             "mean_abs_error_flagged": mean_abs(rows, where=lambda r: flagged[r["trip"]]),
