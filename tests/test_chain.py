@@ -434,8 +434,6 @@ def test_sumo_run_chain_accounts_balance():
     """A real SUMO run (city scenario, 150 s): chain energy per vehicle = Σ over its steps;
     vehicle, edge and class totals agree; auxiliary energy accrues while standing."""
     libsumo = pytest.importorskip("libsumo")
-    from pathlib import Path
-
     from sumo_drvpw.model.terms import Inputs
     from sumo_drvpw.sim.chain import QUANTITIES, ChainLedger
 
@@ -972,3 +970,39 @@ def test_config_with_sumos_emissions_device_puts_its_energy_beside_the_chains(tm
     run_scenario(tmp_path / "s.toml", tmp_path / "o2", equations=[fuel_eq, bev])
     assert not (tmp_path / "o2" / "sumo_device.csv").exists()
     assert (tmp_path / "o2" / "sumo" / "ti.xml").is_file()
+
+
+def test_engine_off_minus_inf_round_trips_and_bad_values_are_refused(tmp_path):
+    from sumo_drvpw.model.equations import load_equation, save_equation
+
+    text = ('[equation]\nname = "c"\n[terms]\nacc = 1.0\n[chain]\npredicts = "fuel"\n'
+            'idle_fuel_power_w = 8000.0\nmarginal_efficiency = 0.35\nengine_off_below_w = {}\n')
+    (tmp_path / "c.toml").write_text(text.format("-inf"))
+    eq = load_equation(tmp_path / "c.toml")
+    out = eq.chain.evaluate(np.array([-5000.0, 0.0, 7000.0]), np.array([10.0, 0.0, 10.0]), dt_s=1.0)
+    assert out["engine_on"].all()  # braking and standing: the engine idles
+    assert out["power_w"] == pytest.approx([8000.0, 8000.0, 8000.0 + 7000.0 / 0.35])
+    save_equation(eq, tmp_path / "c2.toml")
+    assert load_equation(tmp_path / "c2.toml").chain.engine_off_below_w == -np.inf
+    for bad in ("inf", "nan", '"never"'):
+        (tmp_path / "b.toml").write_text(text.format(bad))
+        with pytest.raises(UserError, match="engine_off_below_w"):
+            load_equation(tmp_path / "b.toml")
+
+
+def test_fuel_calibration_finds_a_conventional_engine():
+    """A planted engine that runs throughout (fuel at idle, at stops and while braking):
+    the profiled engine-off threshold is -inf and the line is recovered."""
+    from sumo_drvpw.fit.chain import calibrate_fuel
+
+    rng = np.random.default_rng(3)
+    n = 4000
+    v = np.clip(12 + 8 * np.sin(np.arange(n) / 40) + rng.normal(0, 1, n), 0, None)
+    v[::97] = 0.0
+    p = 400 * v + 0.4 * v ** 3 + 1500 * v * rng.normal(0, 0.4, n)
+    fuel = 9000.0 + np.maximum(p, 0) / 0.36
+    fit = calibrate_fuel(p, v, fuel, 1.0, engine_on_above_mps=None)
+    assert fit.chain.engine_off_below_w == -np.inf
+    assert fit.chain.marginal_efficiency == pytest.approx(0.36, rel=1e-6)
+    assert fit.chain.idle_fuel_power_w == pytest.approx(9000.0, rel=1e-6)
+    assert "always on" in fit.parameters["engine_off_below_w"]["reading"]

@@ -39,7 +39,7 @@ ETA_MIN = 1e-3
 #: quantiles of the observed braking power |min(P, 0)| tried as recuperation limits
 LIMIT_QUANTILES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995)
 #: engine-off thresholds tried for the fuel chain [W]
-ENGINE_OFF_GRID_W = (0.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 8000.0, 10000.0, 12000.0, 15000.0)
+ENGINE_OFF_GRID_W = (-np.inf, 0.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 8000.0, 10000.0, 12000.0, 15000.0)
 #: speeds above which the engine always runs, tried for the fuel chain [m/s] (None: no such speed)
 ENGINE_ON_SPEED_GRID_MPS = (None, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 17.0, 20.0)
 #: a fuel chain's engine on/off is identified at city speeds only when at least this share
@@ -161,6 +161,8 @@ def _reading(name: str, val: float) -> str:
     if name == "idle_fuel_power_w":
         return f"fuel power with the engine on at zero output {val / 1000:.2f} kW (friction, pumping, warm-up, auxiliaries)"
     if name == "engine_off_below_w":
+        if val == -np.inf:
+            return "engine always on (a conventional engine: idles at stops and while braking)"
         return f"engine off below {val / 1000:.1f} kW of driving power"
     if name == "engine_on_above_mps":
         return f"engine always on above {val * 3.6:.0f} km/h"

@@ -44,7 +44,8 @@ Fuel (``predicts = "fuel"``), a Willans line with engine-off (power-split hybrid
     fuel rate [L/s] = P_fuel / (LHV · ρ_fuel);  CO₂ [kg/s] = P_fuel / LHV · c_CO₂
 
 with ``idle_fuel_power_w`` (P_idle,fuel ≥ 0), ``marginal_efficiency`` (η_m, (0, 1]),
-``engine_off_below_w`` (P_off), optional ``engine_on_above_mps`` (v_on) and ``fuel``
+``engine_off_below_w`` (P_off; ``-inf``: a conventional engine that runs the whole trip,
+idling at stops), optional ``engine_on_above_mps`` (v_on) and ``fuel``
 (a key of :data:`sumo_drvpw.model.constants.FUELS`). Measured fuel is corrected for
 the hybrid battery's energy change before it is compared (``battery_to_fuel``: fuel
 energy per unit of battery energy, default 1/η_m; see :func:`corrected_fuel_power`).
@@ -384,7 +385,12 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         if kw["standstill_aux_w"] + float(doc.get("aux_power_w", 0.0)) < 0:
             raise UserError(f"{where} [chain]: aux_power_w + standstill_aux_w (auxiliary power while standing) "
                             f"must be ≥ 0, got standstill_aux_w = {doc['standstill_aux_w']!r}")
-    for k in ("recuperation_limit_w", "aux_power_w", "idle_fuel_power_w", "engine_off_below_w",
+    if "engine_off_below_w" in doc:  # any number: -inf keeps a conventional engine running
+        kw["engine_off_below_w"] = _number(doc["engine_off_below_w"], "engine_off_below_w", where)
+        if np.isnan(kw["engine_off_below_w"]) or kw["engine_off_below_w"] == np.inf:
+            raise UserError(f"{where} [chain]: 'engine_off_below_w' must be a number below +inf "
+                            f"(-inf: the engine never stops), got {doc['engine_off_below_w']!r}")
+    for k in ("recuperation_limit_w", "aux_power_w", "idle_fuel_power_w",
               "engine_on_above_mps", "battery_to_fuel"):
         if k in doc:
             kw[k] = _nonneg(doc[k], k, where)
