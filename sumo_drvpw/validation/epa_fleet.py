@@ -1,0 +1,516 @@
+"""Petrol cars' fuel from their road load: a Willans chain calibrated on the US EPA Test Car List.
+
+Run::
+
+    .venv/bin/python -m sumo_drvpw.validation.epa_fleet [REPORT.md [DATA_FOLDER]]
+
+writes the Markdown report (default ``docs/epa-fleet.md``), ``<out>.json`` beside it and the
+built-in equations ``epa_gasoline_car`` and ``epa_gasoline_light_truck``
+(``sumo_drvpw/model/builtin/equations/``). Every number is computed by the run.
+
+**Data.** The Test Car List (``epa_test_car_list/*tstcar.csv``, one row per certification
+test) gives, for every tested car configuration, the road load the chassis dynamometer
+simulated — F = A + B·v + C·v² at the equivalent test weight (ETW) — and the fuel economy
+it measured: per bag of the FTP-75, for the highway test (HWFET) and for US06. The speed
+schedules are standard (``cycles/``). So every test is a known wheel-power trace with a
+measured fuel energy: data for the tank end of the energy chain, from cars nobody here
+tested, thousands of them.
+
+**Model** (docs/energy-chain.md, ``predicts = "fuel"``), a conventional engine running for
+the whole test (``engine_off_below_w = -inf``)::
+
+    P_fuel = P_idle + max(P, 0)/η,     P_idle = p_L · D
+
+η is the marginal efficiency fuel → wheels (the Willans slope, transmission included); the
+fuel power with the engine running and no output scales with the displacement D [L]
+(friction and pumping work per cycle scale with the swept volume). Per test
+E_fuel = p_L·D·T + E⁺/η, with E⁺ = Σ max(P, 0)·Δt from the term basis (terms ``roll`` =
+A/(m·g), ``v2`` = B, ``aero`` = C, ``acc``) and T the test's duration, fitted by weighted
+least squares (statsmodels WLS, weight 1/E_fuel²: each test counts by its relative error).
+
+**Selection** (fixed before any fit, from the file's own columns): certification petrol
+(``Tier 2 Cert Gasoline``), measured (not analytically derived) tests, configurations with
+a positive displacement, ETW, A and C and a road-load force > 0 up to 130 km/h; hybrids and
+plug-ins left out (a configuration with a 4-bag FTP, a charge-depleting or electricity
+test, or 'hybrid'/'plug-in' in its model name). Tests: FTP bag 2 (stabilised; UDDS
+505–1369 s) and bag 3 (hot start; UDDS 0–505 s), HWFET, US06. Bag 1 (cold start) is not
+on the Willans line; its excess over bag 3 — the same schedule, hot — is reported as the
+fuel of a cold start. SC03 (A/C on) and cold-CO tests are left out.
+
+**Held out.** The newest model year is predicted by the fit on the older ones (other cars,
+later technology), and the oldest by the fit on the newer ones. The built-ins are fitted
+on every model year; their held-out quality is that of these splits. A class default
+(medians of the class's road load per kg, ETW and displacement) is what a SUMO study
+without the car's own data gets; its error on the held-out cars is reported beside the
+error with each car's own road load.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.constants import FUELS, G, LB, LBF, MILE, MPH
+
+DATASET = "epa_test_car_list"
+CYCLES = "cycles"
+#: US gallon [L]
+GALLON_L = 3.785411784
+FUEL = "gasoline"
+#: test fuel of the certification tests used
+TEST_FUEL = "Tier 2 Cert Gasoline"
+#: FTP procedures (their FE Bag 1–3 are the FTP-75's bags)
+FTP = ("Federal fuel 2-day exhaust (w/can load)", "Federal fuel 3-day exhaust",
+       "CVS 75 and later (w/o can. load)")
+HWFET = "HWFE"
+US06 = "US06"
+#: the tests on the Willans line: name → (schedule file, first s, last s)
+TESTS = {"ftp_bag3": ("udds", 0, 505), "ftp_bag2": ("udds", 505, 1369),
+         "hwfet": ("hwfet", 0, None), "us06": ("us06", 0, None)}
+#: the cold start: FTP bag 1 on the schedule of bag 3
+COLD = "ftp_bag1"
+#: model-name words of hybrids and plug-ins
+HYBRID_WORDS = re.compile(r"\b(?:hybrid|plug-in|phev|hev|e-hybrid|energi)\b", re.I)
+#: road load must push back at every speed up to this [m/s]
+MAX_CHECK_MPS = 130 / 3.6
+#: EPA 'Vehicle Type' → built-in class
+CLASSES = {"Car": "car", "Truck": "light_truck"}
+#: built-in equations written by :func:`main`: class → (name, SUMO vClasses, what it is)
+BUILTINS = {
+    "car": ("epa_gasoline_car", ("passenger", "private", "taxi", "hov", "vip", "authority"),
+            "petrol passenger car"),
+    "light_truck": ("epa_gasoline_light_truck", ("delivery",),
+                    "petrol light truck (pick-up, SUV, van: EPA 'Truck')"),
+}
+#: plausible marginal efficiency fuel → wheels of a petrol car
+ETA_PLAUSIBLE = (0.25, 0.45)
+
+
+# ---------------------------------------------------------------------- data
+def read_lists(folder: Path) -> pd.DataFrame:
+    """Every ``*tstcar.csv`` of ``folder``: one row per test, the columns used, in SI.
+
+    Columns: ``model_year``, ``config`` (model year / test vehicle ID / configuration),
+    ``make``, ``model``, ``vehicle_type``, ``displacement_l``, ``etw_kg``, ``a_n``,
+    ``b_n_per_mps``, ``c_n_per_mps2``, ``procedure``, ``fuel``, ``derived``, ``fe_mpg``,
+    ``fe_bag1..4`` [mpg]. UserError (naming the file and column) when one is missing.
+    """
+    files = sorted(Path(folder).glob("*tstcar.csv"))
+    if not files:
+        raise UserError(f"{folder}: no EPA Test Car List file (*tstcar.csv)")
+    cols = {"Model Year": "model_year", "Test Vehicle ID": "vehicle_id",
+            "Test Veh Configuration #": "config_no", "Represented Test Veh Make": "make",
+            "Represented Test Veh Model": "model", "Vehicle Type": "vehicle_type",
+            "Test Veh Displacement (L)": "displacement_l",
+            "Equivalent Test Weight (lbs.)": "etw_lb", "Test Procedure Description": "procedure",
+            "Test Fuel Type Description": "fuel", "Analytically Derived FE?": "derived",
+            "RND_ADJ_FE": "fe_mpg", "FE Bag 1": "fe_bag1", "FE Bag 2": "fe_bag2",
+            "FE Bag 3": "fe_bag3", "FE Bag 4": "fe_bag4", "Target Coef A (lbf)": "a_lbf",
+            "Target Coef B (lbf/mph)": "b_lbf_per_mph", "Target Coef C (lbf/mph**2)": "c_lbf_per_mph2"}
+    parts = []
+    for f in files:
+        d = pd.read_csv(f, encoding="utf-8-sig", low_memory=False)  # MY2019's file ends lines in CR
+        d.columns = [str(c).strip() for c in d.columns]
+        missing = [c for c in cols if c not in d.columns]
+        if missing:
+            raise UserError(f"{f}: column '{missing[0]}' not found (an EPA Test Car List has it)")
+        d = d[list(cols)].rename(columns=cols)
+        parts.append(d)
+    d = pd.concat(parts, ignore_index=True)
+    num = ["model_year", "displacement_l", "etw_lb", "fe_mpg", "fe_bag1", "fe_bag2", "fe_bag3",
+           "fe_bag4", "a_lbf", "b_lbf_per_mph", "c_lbf_per_mph2"]
+    for c in num:
+        d[c] = pd.to_numeric(d[c], errors="coerce")
+    for c in ("make", "model", "vehicle_type", "procedure", "fuel", "derived"):
+        d[c] = d[c].astype(str).str.strip()
+    d["config"] = (d["model_year"].astype("Int64").astype(str) + "/" + d["vehicle_id"].astype(str).str.strip()
+                   + "/" + d["config_no"].astype(str).str.strip())
+    d["etw_kg"] = d.pop("etw_lb") * LB
+    d["a_n"] = d.pop("a_lbf") * LBF
+    d["b_n_per_mps"] = d.pop("b_lbf_per_mph") * LBF / MPH
+    d["c_n_per_mps2"] = d.pop("c_lbf_per_mph2") * LBF / MPH ** 2
+    return d.drop(columns=["vehicle_id", "config_no"])
+
+
+def select(d: pd.DataFrame) -> tuple[pd.DataFrame, dict]:
+    """The conventional petrol configurations' measured tests, and the counts left out."""
+    proc = d["procedure"]
+    hybrid = (d["fe_bag4"].notna() & proc.isin(FTP)) | proc.str.startswith("Charge Depleting") \
+        | d["fuel"].eq("Electricity") | d["model"].str.contains(HYBRID_WORDS)
+    bad = set(d.loc[hybrid, "config"])
+    v = np.linspace(0.0, MAX_CHECK_MPS, 27)
+    f = d["a_n"].to_numpy()[:, None] + d["b_n_per_mps"].to_numpy()[:, None] * v \
+        + d["c_n_per_mps2"].to_numpy()[:, None] * v ** 2
+    physical = ((d["displacement_l"] > 0) & (d["etw_kg"] > 0) & (d["a_n"] > 0) & (d["c_n_per_mps2"] > 0)
+                & np.all(f > 0, axis=1))
+    keep = d["fuel"].eq(TEST_FUEL) & d["derived"].eq("No")
+    counts = {"tests": int(len(d)), "configurations": int(d["config"].nunique()),
+              "hybrid, plug-in or electric configurations left out": len(bad),
+              "tests of other fuels or analytically derived": int((~keep).sum()),
+              "tests without a physical road load or displacement": int((keep & ~physical).sum())}
+    out = d[keep & physical & ~d["config"].isin(bad)]
+    return out, counts
+
+
+def schedules(folder: Path) -> dict[str, np.ndarray]:
+    """Speed [m/s] per second of each test of :data:`TESTS` (FASTSim cycle files)."""
+    out = {}
+    for name, (file, t0, t1) in TESTS.items():
+        p = Path(folder) / f"{file}.csv"
+        try:
+            c = pd.read_csv(p)
+            v = c["cycMps"].to_numpy(float)
+        except (OSError, KeyError, ValueError) as e:
+            raise UserError(f"{p}: cannot read the speed column 'cycMps' ({e})") from None
+        out[name] = v[t0:None if t1 is None else t1 + 1]
+    return out
+
+
+def observations(tests: pd.DataFrame, speeds: dict[str, np.ndarray]) -> pd.DataFrame:
+    """One row per (configuration, test on the Willans line): measured fuel energy
+    ``fuel_j`` (FE → litres → J at the fuel's LHV and density), wheel traction energy
+    ``traction_j`` (E⁺ from the term basis), duration ``t_s``, distance ``dist_m``; and the
+    cold-start rows (``test`` = :data:`COLD`) for the excess of bag 1 over bag 3."""
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.model.terms import Inputs
+
+    which = {"ftp_bag3": (tests["procedure"].isin(FTP), "fe_bag3"),
+             "ftp_bag2": (tests["procedure"].isin(FTP), "fe_bag2"),
+             COLD: (tests["procedure"].isin(FTP), "fe_bag1"),
+             "hwfet": (tests["procedure"].eq(HWFET), "fe_mpg"),
+             "us06": (tests["procedure"].eq(US06), "fe_mpg")}
+    fp = FUELS[FUEL]
+    rows = []
+    for test, (mask, col) in which.items():
+        t = tests[mask & (tests[col] > 0)]
+        if t.empty:
+            continue
+        v = speeds["ftp_bag3" if test == COLD else test]
+        vm = 0.5 * (v[1:] + v[:-1])  # per 1-s step: mean speed, exact kinetic-energy change
+        dv = np.diff(v)
+        dist = float(vm.sum())
+        e_pos = np.empty(len(t))
+        for i, r in enumerate(t[["etw_kg", "a_n", "b_n_per_mps", "c_n_per_mps2"]].itertuples(index=False)):
+            m = float(r.etw_kg)
+            eq = Equation(name="epa_test", terms={"roll": r.a_n / (m * G), "v2": r.b_n_per_mps,
+                                                  "aero": r.c_n_per_mps2, "acc": 1.0})
+            z = np.zeros_like(vm)
+            x = Inputs(v=vm, a=dv, theta=z, wind=z, mass=np.full_like(vm, m), rho=np.ones_like(vm), v_acc=vm)
+            e_pos[i] = np.maximum(eq.power(x), 0.0).sum()
+        litres = dist / MILE / t[col].to_numpy(float) * GALLON_L
+        rows.append(pd.DataFrame({
+            "config": t["config"].to_numpy(), "model_year": t["model_year"].to_numpy(int),
+            "make": t["make"].to_numpy(), "model": t["model"].to_numpy(),
+            "vehicle_type": t["vehicle_type"].to_numpy(), "displacement_l": t["displacement_l"].to_numpy(float),
+            "etw_kg": t["etw_kg"].to_numpy(float), "a_n": t["a_n"].to_numpy(float),
+            "b_n_per_mps": t["b_n_per_mps"].to_numpy(float), "c_n_per_mps2": t["c_n_per_mps2"].to_numpy(float),
+            "test": test, "fuel_l": litres, "fuel_j": litres * fp["density_kg_per_l"] * fp["lhv_j_per_kg"],
+            "traction_j": e_pos, "t_s": float(len(vm)), "dist_m": dist}))
+    return pd.concat(rows, ignore_index=True)
+
+
+# ---------------------------------------------------------------------- fit
+def fit(obs: pd.DataFrame) -> dict:
+    """Fleet Willans line on the observations' Willans tests: ``p_idle_w_per_l`` (p_L) and
+    ``eta`` (η) with standard errors (statsmodels WLS, weights 1/E_fuel²)."""
+    import statsmodels.api as sm
+
+    o = obs[obs["test"].isin(TESTS)]
+    if len(o) < 3:
+        raise UserError("EPA fleet fit: fewer than 3 tests on the Willans line")
+    x = np.column_stack([o["displacement_l"] * o["t_s"], o["traction_j"]])
+    y = o["fuel_j"].to_numpy(float)
+    res = sm.WLS(y, x, weights=1.0 / y ** 2).fit()
+    p_l, inv_eta = (float(b) for b in res.params)
+    se = np.asarray(res.bse, float)
+    return {"p_idle_w_per_l": p_l, "p_idle_w_per_l_se": float(se[0]), "eta": 1.0 / inv_eta,
+            "eta_se": float(se[1]) / inv_eta ** 2, "n_tests": int(len(o)),
+            "n_configurations": int(o["config"].nunique())}
+
+
+def chain_for(params: dict, displacement_l: float):
+    """The fuel chain of a car of displacement ``displacement_l`` [L] under fit ``params``."""
+    from sumo_drvpw.model.chain import EnergyChain
+
+    return EnergyChain(predicts="fuel", traction_efficiency=1.0, marginal_efficiency=params["eta"],
+                       idle_fuel_power_w=params["p_idle_w_per_l"] * displacement_l,
+                       engine_off_below_w=-np.inf, fuel=FUEL)
+
+
+def predict(obs: pd.DataFrame, params: dict, speeds: dict[str, np.ndarray], default: dict | None = None,
+            mass_from_car: bool = True) -> np.ndarray:
+    """Predicted fuel energy [J] of each observation through the evaluator
+    (:meth:`EnergyChain.evaluate` on the term basis), with each car's own road load and
+    displacement, or with the class ``default`` (per class: road load per kg, ETW,
+    displacement; the car's ETW kept as the mass when ``mass_from_car``)."""
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.model.terms import Inputs
+
+    out = np.empty(len(obs))
+    for i, r in enumerate(obs.itertuples(index=False)):
+        if default is None:
+            m, a_per_kg, b, c, disp = r.etw_kg, r.a_n / r.etw_kg, r.b_n_per_mps, r.c_n_per_mps2, r.displacement_l
+        else:
+            dfl = default[CLASSES[r.vehicle_type]]
+            m = r.etw_kg if mass_from_car else dfl["etw_kg"]
+            a_per_kg, b, c, disp = dfl["a_n_per_kg"], dfl["b_n_per_mps"], dfl["c_n_per_mps2"], dfl["displacement_l"]
+        v = speeds["ftp_bag3" if r.test == COLD else r.test]
+        vm, dv = 0.5 * (v[1:] + v[:-1]), np.diff(v)
+        z = np.zeros_like(vm)
+        x = Inputs(v=vm, a=dv, theta=z, wind=z, mass=np.full_like(vm, m), rho=np.ones_like(vm), v_acc=vm)
+        eq = Equation(name="epa", terms={"roll": a_per_kg / G, "v2": b, "aero": c, "acc": 1.0})
+        out[i] = chain_for(params, disp).evaluate(eq.power(x), vm, dt_s=1.0)["power_j"].sum()
+    return out
+
+
+def class_defaults(obs: pd.DataFrame) -> dict:
+    """Per class of :data:`CLASSES`: medians over its configurations of the road load per kg
+    (A/m), B, C, ETW and displacement, and the number of configurations."""
+    out = {}
+    cars = obs.drop_duplicates("config")
+    for vt, cls in CLASSES.items():
+        c = cars[cars["vehicle_type"] == vt]
+        if c.empty:
+            continue
+        out[cls] = {"a_n_per_kg": float((c["a_n"] / c["etw_kg"]).median()),
+                    "b_n_per_mps": float(c["b_n_per_mps"].median()),
+                    "c_n_per_mps2": float(c["c_n_per_mps2"].median()),
+                    "etw_kg": float(c["etw_kg"].median()), "displacement_l": float(c["displacement_l"].median()),
+                    "configurations": int(len(c))}
+    return out
+
+
+def _errors(obs: pd.DataFrame, pred: np.ndarray) -> dict:
+    """Mean signed and mean absolute error (predicted/measured − 1) per test and per class."""
+    e = pred / obs["fuel_j"].to_numpy(float) - 1.0
+    out = {"all": _stat(e)}
+    for t in TESTS:
+        m = (obs["test"] == t).to_numpy()
+        if m.any():
+            out[t] = _stat(e[m])
+    for vt, cls in CLASSES.items():
+        m = (obs["vehicle_type"] == vt).to_numpy()
+        if m.any():
+            out[cls] = _stat(e[m])
+    return out
+
+
+def _stat(e: np.ndarray) -> dict:
+    return {"n": int(e.size), "mean": float(e.mean()), "mean_abs": float(np.abs(e).mean()),
+            "p90_abs": float(np.quantile(np.abs(e), 0.9))}
+
+
+def split(obs: pd.DataFrame, test_years, speeds) -> dict:
+    """Fit on the model years not in ``test_years``; errors on ``test_years`` with each
+    car's own road load, and with the class defaults of the training cars."""
+    test_years = tuple(int(y) for y in test_years)
+    w = obs[obs["test"].isin(TESTS)]
+    tr, te = w[~w["model_year"].isin(test_years)], w[w["model_year"].isin(test_years)]
+    params = fit(tr)
+    dfl = class_defaults(tr)
+    own = _errors(te, predict(te, params, speeds))
+    tec = te[te["vehicle_type"].isin(CLASSES)]
+    return {"train_years": sorted(int(y) for y in tr["model_year"].unique()), "test_years": list(test_years),
+            "fit": params, "own_road_load": own,
+            "class_default_car_mass": _errors(tec, predict(tec, params, speeds, dfl)),
+            "class_default": _errors(tec, predict(tec, params, speeds, dfl, mass_from_car=False)),
+            "test_configurations": int(te["config"].nunique())}
+
+
+def cold_start(obs: pd.DataFrame) -> dict:
+    """Fuel of a cold start per class: FTP bag 1 less bag 3 of the same test [mL]
+    (medians and quartiles over configurations)."""
+    o = obs[obs["test"].isin((COLD, "ftp_bag3"))].copy()
+    o["row"] = o.groupby(["config", "test"]).cumcount()
+    wide = o.pivot_table(index=["config", "row", "vehicle_type"], columns="test", values="fuel_l").dropna()
+    ex = (wide[COLD] - wide["ftp_bag3"]).groupby(level="config").median() * 1000.0
+    vt = wide.reset_index().drop_duplicates("config").set_index("config")["vehicle_type"]
+    out = {}
+    for t, cls in CLASSES.items():
+        x = ex[vt.reindex(ex.index) == t]
+        if len(x):
+            out[cls] = {"median_ml": float(x.median()), "q25_ml": float(x.quantile(0.25)),
+                        "q75_ml": float(x.quantile(0.75)), "configurations": int(len(x))}
+    return out
+
+
+def study(data: Path) -> dict:
+    """The whole study on the shared data folder ``data``."""
+    t0 = time.perf_counter()
+    d, counts = select(read_lists(Path(data) / DATASET))
+    speeds = schedules(Path(data) / CYCLES)
+    obs = observations(d, speeds)
+    years = sorted(int(y) for y in obs["model_year"].unique())
+    if len(years) < 2:
+        raise UserError(f"{Path(data) / DATASET}: the held-out splits need two model years, found {years}")
+    res = {"counts": counts, "years": years,
+           "tests_used": {t: int((obs["test"] == t).sum()) for t in list(TESTS) + [COLD]},
+           "configurations_used": int(obs.loc[obs["test"].isin(TESTS), "config"].nunique()),
+           "splits": {"newest held out": split(obs, [years[-1]], speeds),
+                      "oldest held out": split(obs, [years[0]], speeds)},
+           "fit_all": fit(obs), "defaults": class_defaults(obs[obs["test"].isin(TESTS)]),
+           "cold_start": cold_start(obs)}
+    res["equations"] = {cls: builtin_equation(cls, res) for cls in res["defaults"] if cls in BUILTINS}
+    res["seconds"] = time.perf_counter() - t0
+    return res
+
+
+# ---------------------------------------------------------------------- built-ins
+def builtin_equation(cls: str, res: dict) -> dict:
+    """The built-in equation document (TOML as a dict) of class ``cls`` from a study."""
+    name, vclasses, what = BUILTINS[cls]
+    p, dfl = res["fit_all"], res["defaults"][cls]
+    hold = res["splits"]["newest held out"]
+    own, dd = hold["own_road_load"], hold["class_default_car_mass"]
+    years = f"{res['years'][0]}–{res['years'][-1]}"
+    cold = res["cold_start"].get(cls, {})
+    return {
+        "equation": {
+            "name": name, "vclasses": list(vclasses),
+            "description": (f"{what}: median road load of {dfl['configurations']} EPA-certified "
+                            f"configurations (model years {years}) and a Willans fuel line fitted on their "
+                            "certification tests; the mass comes from the vType"),
+            "source": ("US EPA Test Car List (data.gov), model years " + ", ".join(map(str, res["years"]))
+                       + "; fitted by python -m sumo_drvpw.validation.epa_fleet (docs/epa-fleet.md)"),
+        },
+        "terms": {"roll": round(dfl["a_n_per_kg"] / G, 6), "v2": round(dfl["b_n_per_mps"], 4),
+                  "aero": round(dfl["c_n_per_mps2"], 5), "acc": 1.0, "grade": 1.0},
+        "chain": {
+            "predicts": "fuel", "traction_efficiency": 1.0,
+            "marginal_efficiency": round(p["eta"], 4),
+            "idle_fuel_power_w": round(p["p_idle_w_per_l"] * dfl["displacement_l"], 1),
+            "engine_off_below_w": -np.inf, "aux_power_w": 0.0, "fuel": FUEL,
+            "reading": {
+                "marginal_efficiency": "fuel → wheels at the margin (Willans slope, transmission included)",
+                "idle_fuel_power_w": (f"{p['p_idle_w_per_l']:.0f} W of fuel per litre of displacement × the "
+                                      f"class median {dfl['displacement_l']:.1f} L: fuel with the engine running "
+                                      "and no output (friction, pumping); for a known engine scale it by its "
+                                      "displacement"),
+                "engine_off_below_w": "-inf: a conventional engine runs the whole trip (idles at stops)",
+                "aux_power_w": ("0: certification tests run without A/C; add the car's auxiliary draw "
+                                "(W at the engine output) for real-world fuel"),
+            },
+            "provenance": {
+                "held_out": (f"model year {hold['test_years'][0]} predicted by the fit on "
+                             f"{', '.join(map(str, hold['train_years']))}: fuel per test mean |error| "
+                             f"{own['all']['mean_abs']:.1%} with each car's road load and displacement, "
+                             f"{dd['all']['mean_abs']:.1%} with this class default (the car's ETW as mass)"),
+                "cold_start_ml": round(cold.get("median_ml", float("nan")), 1),
+                "cold_start_note": "extra fuel of a cold start (FTP bag 1 − bag 3, median); not in the chain",
+                "etw_kg_median": round(dfl["etw_kg"], 1), "displacement_l_median": dfl["displacement_l"],
+                "road_load_a_n_per_kg": dfl["a_n_per_kg"], "road_load_b_n_per_mps": dfl["b_n_per_mps"],
+                "road_load_c_n_per_mps2": dfl["c_n_per_mps2"],
+            },
+        },
+    }
+
+
+# ---------------------------------------------------------------------- report
+def _pct(x: float) -> str:
+    return f"{x:+.1%}".replace("%", " %")
+
+
+def _apct(x: float) -> str:
+    return f"{x:.1%}".replace("%", " %")
+
+
+def render(res: dict, cmd: str) -> str:
+    """The Markdown report of a study."""
+    L = ["# Petrol cars' fuel from their road load: the EPA Test Car List", "",
+         f"Generated by `{cmd}` in {res['seconds']:.0f} s; every number below is computed by that run. "
+         "Method: `sumo_drvpw/validation/epa_fleet.py` (module docstring); the chain: "
+         "[energy-chain.md](energy-chain.md).", "",
+         "Each certification test of the US EPA Test Car List is a standard speed schedule driven on a "
+         "chassis dynamometer set to the car's road load (A + B·v + C·v² at its equivalent test weight), with "
+         "the fuel it used. The term basis turns the schedule into wheel power; the Willans line "
+         "P_fuel = p_L·D + max(P, 0)/η (engine running the whole test, idle fuel per litre of displacement D) "
+         "turns that into fuel. Model years "
+         + ", ".join(map(str, res["years"])) + f"; {res['configurations_used']} conventional petrol "
+         "configurations; tests used: " + ", ".join(f"{k} {v}" for k, v in res["tests_used"].items()) + ".", "",
+         "Left out: " + "; ".join(f"{k} {v}" for k, v in res["counts"].items() if k not in ("tests", "configurations"))
+         + f" (of {res['counts']['tests']} tests, {res['counts']['configurations']} configurations).", ""]
+    f = res["fit_all"]
+    L += ["## Fit on every model year", "",
+          f"- η (fuel → wheels at the margin) **{f['eta']:.3f}** ± {f['eta_se']:.3f}"
+          f"{'' if ETA_PLAUSIBLE[0] <= f['eta'] <= ETA_PLAUSIBLE[1] else ' — IMPLAUSIBLE'}: "
+          "a petrol engine's Willans slope (about 0.38–0.42 at the crankshaft) times the transmission's efficiency;",
+          f"- idle fuel power **{f['p_idle_w_per_l']:.0f} W per litre** ± {f['p_idle_w_per_l_se']:.0f} "
+          f"of displacement ({f['p_idle_w_per_l'] * 3600 / (FUELS[FUEL]['lhv_j_per_kg'] * FUELS[FUEL]['density_kg_per_l']):.2f} "
+          "L/h per litre: a 2-litre engine running without output burns about twice that);",
+          f"- {f['n_tests']} tests of {f['n_configurations']} configurations.", "",
+          "## Held out: other model years", "",
+          "Fuel per test, predicted/measured − 1 (mean signed / mean |error| / 90th percentile of |error|):", "",
+          "| held out | fitted on | η | p_L [W/L] | test | with the car's road load | class default, car's ETW | class default, class ETW |",
+          "|---|---|---|---|---|---|---|---|"]
+    for name, s in res["splits"].items():
+        for t in ["all"] + list(TESTS) + list(CLASSES.values()):
+            if t not in s["own_road_load"]:
+                continue
+            cells = []
+            for k in ("own_road_load", "class_default_car_mass", "class_default"):
+                e = s[k].get(t)
+                cells.append("–" if e is None else f"{_pct(e['mean'])} / {_apct(e['mean_abs'])} / {_apct(e['p90_abs'])}")
+            head = (f"{name}: {', '.join(map(str, s['test_years']))} ({s['test_configurations']} configurations)",
+                    ", ".join(map(str, s["train_years"])), f"{s['fit']['eta']:.3f}", f"{s['fit']['p_idle_w_per_l']:.0f}") \
+                if t == "all" else ("", "", "", "")
+            L.append(f"| {' | '.join(head)} | {t} ({s['own_road_load'][t]['n']}) | {' | '.join(cells)} |")
+    L += ["", "Reading: with each car's own road load and displacement the line predicts the fuel of cars it never "
+          "saw; what is left is the engine and calibration of each car (and the highway test's low engine speed "
+          "in top gear, which a line through the idle fuel overstates). A class default knows nothing of the "
+          "car but its class (and, in SUMO, the vType's mass): its error is the spread of the fleet, the "
+          "uncertainty a SUMO study without per-car data carries for one vehicle (a fleet's total averages much "
+          "of it out).", "",
+          "## Class defaults: the built-in equations", "",
+          "| class | built-in | configurations | median ETW [kg] | A/m [N/kg] | B [N/(m/s)] | C [N/(m/s)²] | displacement [L] | idle fuel [W] | cold start [mL, median (IQR)] |",
+          "|---|---|---|---|---|---|---|---|---|---|"]
+    for cls, dfl in res["defaults"].items():
+        eq = res["equations"].get(cls)
+        cold = res["cold_start"].get(cls, {})
+        L.append(f"| {cls} | `{eq['equation']['name'] if eq else '–'}` | {dfl['configurations']} | {dfl['etw_kg']:.0f} | "
+                 f"{dfl['a_n_per_kg']:.4f} | {dfl['b_n_per_mps']:.3f} | {dfl['c_n_per_mps2']:.4f} | "
+                 f"{dfl['displacement_l']:.1f} | {f['p_idle_w_per_l'] * dfl['displacement_l']:.0f} | "
+                 f"{cold.get('median_ml', float('nan')):.0f} ({cold.get('q25_ml', float('nan')):.0f}–"
+                 f"{cold.get('q75_ml', float('nan')):.0f}) |")
+    L += ["", "In a SUMO study: name `epa_gasoline_car` (or `epa_gasoline_light_truck`) as an equation of the run "
+          "— in the scenario's `equations`, or `vclasses.<vClass>.equations`, or as the run's equation on the "
+          "command line (README) — and the run reports litres and CO₂ per vehicle, edge and class for the "
+          "vClasses the equation is made for, the mass from the vType. "
+          "What they leave out: the cold start (column above; add it per trip), the A/C and other auxiliaries "
+          "(certification runs without them: `aux_power_w` is 0), and stop-start (the engine idles at every "
+          "stop). Diesel cars, hybrids and heavy vehicles are not in these data.", ""]
+    return "\n".join(L)
+
+
+def main(argv=None) -> int:
+    """``python -m sumo_drvpw.validation.epa_fleet [REPORT.md [DATA_FOLDER]]`` (defaults
+    docs/epa-fleet.md and $SUMO_DRVPW_DATA or ../shared/data); also writes the built-in
+    equations. Exit 2 with one line when the data are absent or unreadable."""
+    from sumo_drvpw.fileio import plain, write_json, write_text
+    from sumo_drvpw.model.equations import BUILTIN_DIR, equation_from_dict, save_equation
+    from sumo_drvpw.validation.data import resolve_data
+
+    args = list(sys.argv[1:] if argv is None else argv)
+    out = Path(args[0] if args else "docs/epa-fleet.md")
+    try:
+        data = resolve_data(args[1] if len(args) > 1 else None, (DATASET, CYCLES))
+        res = study(data)
+    except UserError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    cmd = "python -m sumo_drvpw.validation.epa_fleet" + (f" {out}" if args else "")
+    for doc in res["equations"].values():
+        save_equation(equation_from_dict(doc), BUILTIN_DIR / f"{doc['equation']['name']}.toml")
+    write_json(out.with_suffix(".json"), plain(res))
+    write_text(out, render(res, cmd))
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
