@@ -425,7 +425,7 @@ def test_run_scenario_reports_battery_and_fuel_per_class(tmp_path, scenario):
         assert xml_sum == pytest.approx(c[c["equation"] == eq][col].sum(), rel=1e-4, abs=1e-5)
     led = res.ledger
     bev_rows = tabs["vehicles"][tabs["vehicles"]["equation"] == "bev"]
-    t_in = dict(zip(led.veh_ids, led.chain.veh_time[:led.n_veh]))
+    t_in = dict(zip(led.veh_ids, led.chain.veh_time[:led.n_veh, led.chain.booked("bev")]))
     np.testing.assert_allclose(bev_rows["auxiliary_kwh"], 500.0 * bev_rows["key"].map(t_in) / 3.6e6,
                                rtol=1e-9)
 
@@ -489,7 +489,7 @@ def test_sumo_run_chain_accounts_balance():
     np.testing.assert_allclose(sum(cls.values()), tot.sum(axis=0), rtol=1e-9, atol=1e-6)
     # battery: auxiliary = 500 W × time in the network, standing included; net = sum of parts
     k = {q: j for j, q in enumerate(QUANTITIES)}
-    np.testing.assert_allclose(tot[:, 1, k["auxiliary_j"]], 500.0 * led.veh_time[:nv], rtol=1e-12)
+    np.testing.assert_allclose(tot[:, 1, k["auxiliary_j"]], 500.0 * led.veh_time[:nv, led.booked("bev")], rtol=1e-12)
     np.testing.assert_allclose(tot[:, 1, k["traction_j"]] + tot[:, 1, k["recuperated_j"]]
                                + tot[:, 1, k["auxiliary_j"]], tot[:, 1, k["net_j"]], rtol=1e-9, atol=1e-6)
     # fuel: litres and CO₂ from the fuel energy through the fuel's constants

@@ -105,7 +105,8 @@ def test_finished_vehicles_leave_memory_and_totals_are_unchanged(tmp_path):
     pd.testing.assert_frame_equal(ca, cb, check_exact=True)
     kc = pd.read_csv(tmp_path / "ref" / "chain_classes.csv")
     kb = pd.read_csv(tmp_path / "bounded" / "chain_classes.csv")
-    assert list(kc.key) == list(kb.key) == ["passenger", "passenger", "delivery", "delivery"]
+    # the chains are made for cars: the vans' class has no rows (nothing booked there)
+    assert list(kc.key) == list(kb.key) == ["passenger", "passenger"]
     np.testing.assert_allclose(kb.select_dtypes("number"), kc.select_dtypes("number"), rtol=1e-11)
     for col in ("net_kwh", "fuel_l"):
         np.testing.assert_allclose(cb[col].sum(), kb[col].sum(), rtol=1e-10)

@@ -65,10 +65,14 @@ class ChainLedger:
         self._ck = np.array([k for _, k in self._cols], np.int64)
         # compact storage: only the booked columns, (rows, C); veh/edge expand on read
         self._edge = np.zeros((n_edges, len(self._cols)))
-        self.edge_dist = np.zeros(n_edges)
+        #: distance [m] and time [s] booked per row and active chain equation (``active``
+        #: order): only where the equation applies to the vehicle, so that a chain's per-km
+        #: figures count the vehicles it books (petrol litres over petrol cars' kilometres)
+        self.A = len(self.active)
+        self.edge_dist = np.zeros((n_edges, self.A))
         self._veh = np.zeros((capacity, len(self._cols)))
-        self.veh_dist = np.zeros(capacity)
-        self.veh_time = np.zeros(capacity)
+        self.veh_dist = np.zeros((capacity, self.A))
+        self.veh_time = np.zeros((capacity, self.A))
         #: cumulative edge totals at interval boundaries [(time [s], (edges, E, Q))]
         self.snapshots: list[tuple[float, np.ndarray]] = []
         #: totals of vehicles flushed out of memory (Ledger.flush): class → [(E, Q), m]
@@ -91,6 +95,10 @@ class ChainLedger:
         """Running totals per vehicle, equation and quantity, (capacity, E, Q)."""
         return self.expand(self._veh)
 
+    def booked(self, name: str) -> int:
+        """Column of equation ``name`` in :attr:`veh_dist`, :attr:`veh_time`, :attr:`edge_dist`."""
+        return self.active.index(self.names.index(name))
+
     @property
     def edge(self) -> np.ndarray:
         """Totals per edge, equation and quantity, (edges, E, Q)."""
@@ -102,8 +110,8 @@ class ChainLedger:
             return
         new = max(n, 2 * cap)
         self._veh = np.concatenate([self._veh, np.zeros((new - cap, self._veh.shape[1]))])
-        self.veh_dist = np.concatenate([self.veh_dist, np.zeros(new - cap)])
-        self.veh_time = np.concatenate([self.veh_time, np.zeros(new - cap)])
+        self.veh_dist = np.concatenate([self.veh_dist, np.zeros((new - cap, self.A))])
+        self.veh_time = np.concatenate([self.veh_time, np.zeros((new - cap, self.A))])
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
                         signals: dict | None = None) -> np.ndarray:
@@ -145,16 +153,20 @@ class ChainLedger:
         q = self.step_quantities(p_drive_w, v, dt, signals)
         if app is not None:
             q *= np.asarray(app, float)[:, self._ce]
+            a = np.asarray(app, float)[:, self.active]
+        else:
+            a = np.ones((len(vidx), self.A))
         self._veh[vidx] += q
         d = np.asarray(v, float) * dt
-        self.veh_dist[vidx] += d
-        self.veh_time[vidx] += dt
+        self.veh_dist[vidx] += d[:, None] * a
+        self.veh_time[vidx] += dt * a
         eidx = np.asarray(eidx, np.int64)
         ne = self._edge.shape[0]
         qt = np.ascontiguousarray(q.T)
         for j in range(qt.shape[0]):  # bincount per booked column: far cheaper than np.add.at
             self._edge[:, j] += np.bincount(eidx, qt[j], minlength=ne)
-        self.edge_dist += np.bincount(eidx, d, minlength=ne)
+        for j in range(self.A):
+            self.edge_dist[:, j] += np.bincount(eidx, d * a[:, j], minlength=ne)
         return q
 
     def snapshot(self, t: float) -> None:
@@ -204,7 +216,7 @@ class ChainLedger:
         tot = self.expand(self._veh[gone])
         dist = self.veh_dist[gone]
         for j, c in enumerate(labels):
-            acc = self.flushed_class.setdefault(c, [np.zeros((self.E, self.Q)), 0.0])
+            acc = self.flushed_class.setdefault(c, [np.zeros((self.E, self.Q)), np.zeros(self.A)])
             acc[0] += tot[j]
             acc[1] += dist[j]
         if spill is not None:
@@ -233,12 +245,16 @@ class ChainLedger:
 
     def table(self, totals: np.ndarray, dist_m: np.ndarray, keys: list[str]) -> list[dict]:
         """Rows {key, equation, distance_km, traction_kwh, …, fuel_l, co2_kg, per-km values}
-        for every key and every equation with a chain."""
+        for every key and every equation with a chain that booked something there
+        (``dist_m``: (keys, active equations), the distance each booked)."""
         rows = []
+        dist_m = np.asarray(dist_m, float).reshape(-1, self.A)[:len(keys)]
         for i, k in enumerate(keys):
-            km = float(dist_m[i]) / 1000.0
-            for e in self.active:
+            for j, e in enumerate(self.active):
                 t = totals[i, e]
+                km = float(dist_m[i, j]) / 1000.0
+                if km == 0 and not np.any(t):
+                    continue  # the equation does not book this vehicle (or none on this edge)
                 r = {"key": k, "equation": self.names[e], "distance_km": km}
                 if self.chains[e].predicts == "fuel":
                     r.update(fuel_l=t[5], co2_kg=t[6], fuel_kwh=t[4] / KWH)
@@ -258,7 +274,7 @@ class ChainLedger:
         n = len(veh_ids)
         cls = self.class_totals(veh_classes)
         labels = np.asarray(veh_classes, dtype=object)
-        cdist = np.array([self.veh_dist[:n][labels == c].sum() for c in cls])
+        cdist = np.array([self.veh_dist[:n][labels == c].sum(axis=0) for c in cls]).reshape(len(cls), self.A)
         if self.flushed_class:
             dist = dict(zip(cls, cdist))
             for c, (q, m) in self.flushed_class.items():
@@ -267,7 +283,7 @@ class ChainLedger:
             order = [c for c in (class_order or ()) if c in cls]
             order += [c for c in cls if c not in order]
             cls = {c: cls[c] for c in order}
-            cdist = np.array([dist[c] for c in order])
+            cdist = np.array([dist[c] for c in order]).reshape(len(order), self.A)
         return {"vehicles": self.table(self.vehicle_totals(n), self.veh_dist[:n], list(veh_ids)),
                 "edges": self.table(self.edge, self.edge_dist, list(edge_ids)),
                 "classes": self.table(np.stack(list(cls.values())) if cls else np.zeros((0, self.E, self.Q)),

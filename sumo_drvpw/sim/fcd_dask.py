@@ -103,7 +103,7 @@ def merge_ledgers(ledgers: list):
             a.edge_dist = a.edge_dist + b.edge_dist
             a.snapshots = [(s[0], s[1] + o[1]) for s, o in zip(a.snapshots, b.snapshots)]
             for c, (q, m) in b.flushed_class.items():
-                acc = a.flushed_class.setdefault(c, [np.zeros((a.E, a.Q)), 0.0])
+                acc = a.flushed_class.setdefault(c, [np.zeros((a.E, a.Q)), np.zeros(a.A)])
                 acc[0] = acc[0] + q
                 acc[1] += m
             a.assumed_zero |= b.assumed_zero
