@@ -170,19 +170,22 @@ def test_missing_column_is_one_line(tmp_path):
 
 
 @pytest.mark.skipif(not (SHARED / "epa_test_car_list").is_dir(), reason="shared data not present")
-def test_builtins_are_what_the_study_writes_on_the_shared_lists():
+@pytest.mark.parametrize("fuel", ["gasoline", "diesel"])
+def test_builtins_are_what_the_study_writes_on_the_shared_lists(fuel):
     """The built-in equations come from the real lists: regenerating gives the same
     numbers; the line is physical and predicts held-out model years within 10 %."""
     from sumo_drvpw.model.equations import load_equation
 
-    res = ef.study(SHARED)
+    res = ef.study(SHARED, fuel)
     f = res["fit_all"]
     assert ef.ETA_PLAUSIBLE[0] <= f["eta"] <= ef.ETA_PLAUSIBLE[1]
-    assert 2000 < f["p_idle_w_per_l"] < 8000  # 0.2–0.9 L/h of petrol per litre of displacement
+    assert 2000 < f["p_idle_w_per_l"] < 8000  # 0.2–0.9 L/h of fuel per litre of displacement
     for s in res["splits"].values():
         assert s["own_road_load"]["all"]["mean_abs"] < 0.10
+    assert set(res["equations"]) == {"car", "light_truck"}
     for cls, doc in res["equations"].items():
         eq = load_equation(doc["equation"]["name"])
+        assert eq.name == f"epa_{fuel}_{cls}" and eq.chain.fuel == fuel
         assert eq.terms == pytest.approx(doc["terms"])
         assert eq.chain.marginal_efficiency == pytest.approx(doc["chain"]["marginal_efficiency"])
         assert eq.chain.idle_fuel_power_w == pytest.approx(doc["chain"]["idle_fuel_power_w"])

@@ -528,10 +528,19 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     assert s["skipped"]["by_vtype"] == {"ev_c1": 1}
     veh = pd.read_parquet(out / "vehicles.parquet")
     eqs = veh.groupby("vehicle")["equation"].apply(set).to_dict()
-    assert eqs["i"] == eqs["p"] == {"vsp_ldv1999", "drvpw_prius3", "moves_passenger_car"}
-    assert eqs["d"] == {"moves_light_commercial_truck"} and eqs["t"] == {"moves_single_unit_truck"}
+    # cars: petrol by SUMO's default (P_7_7 names no fuel we read); the van's LDV_D diesel;
+    # the electric van (Energy/unknown) by no fuel chain
+    assert eqs["i"] == eqs["p"] == {"vsp_ldv1999", "drvpw_prius3", "moves_passenger_car", "epa_gasoline_car"}
+    assert eqs["d"] == {"moves_light_commercial_truck", "epa_diesel_light_truck"}
+    assert eqs["t"] == {"moves_single_unit_truck"}
     assert eqs["c"] == {"moves_intercity_bus"} and "e" not in eqs
     assert eqs["r"] == {"moves_light_commercial_truck"}
+    carriers = s["assumptions"]["energy_carrier"]
+    assert carriers["restricted_delivery_ev"]["carrier"] == "electricity"
+    assert set(carriers["restricted_delivery_ev"]["not_booked_by"]) == {"epa_gasoline_light_truck",
+                                                                       "epa_diesel_light_truck"}
+    assert carriers["car"] == {"emission_class": "HBEFA4/PC_petrol_Euro-4", "carrier": "gasoline",
+                               "from": "SUMO's default (none written)", "not_booked_by": ["epa_diesel_car"]}
     # a sedan in vClass bus (for the bus lanes) is a car; a bus with a heavy-duty class a bus
     assert eqs["s"] == eqs["p"] and eqs["h"] == {"moves_transit_bus"}
     assert "vClass bus (a heavy one) only grants its lanes" in booked["lane_sedan"]["from"]
@@ -539,7 +548,7 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     assert (mass["i"], mass["d"], mass["t"], mass["c"]) == (1478.8, 2059.7, 8538.9, 15000.0)
     assert (mass["s"], mass["h"]) == (1478.8, 16556.0)
     # a 6-m, 5-person shuttle in vClass bus (SUMO's DRT game) is a van, not a 16.6-t bus
-    assert eqs["m"] == {"moves_light_commercial_truck"} and mass["m"] == 2059.7
+    assert eqs["m"] == {"moves_light_commercial_truck", "epa_diesel_light_truck"} and mass["m"] == 2059.7
     assert booked["drt_small"]["from"].startswith("length 6 m: a van or minibus")
     assert veh.set_index(["vehicle", "equation"]).loc[("i", "vsp_ldv1999"), "vclass"] == "ignoring"
     tr = veh.set_index(["vehicle", "equation"])["traction_total_j"]
@@ -583,9 +592,10 @@ def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
         assert v["vclass"] == "vip" and v["distance_m"] > 400 and v["traction_total_j"] > 0
         assert v["distance_m"] == pytest.approx(p["distance_m"], rel=0.05)
     # vClass emergency: SUMO's default is a light commercial van (6.5 m, an LCV emission
-    # class), so the MOVES light-commercial-truck equation books it, at that class's mass
+    # class, a diesel one), so the MOVES light-commercial-truck equation and the EPA diesel
+    # light truck's fuel chain book it, at that class's mass
     amb = veh.xs("e", level="vehicle")
-    assert list(amb.index) == ["moves_light_commercial_truck"]
+    assert sorted(amb.index) == ["epa_diesel_light_truck", "moves_light_commercial_truck"]
     assert amb.iloc[0]["mass_kg"] == 2059.7 and amb.iloc[0]["traction_total_j"] > 0
     # --end as clock time overrides the config's
     code, err = _cli([cfg, "--out", tmp_path / "o2", "--end", "10:01:00", "--no-figures",
@@ -889,7 +899,7 @@ def test_sumo_game_scenarios_as_shipped(tmp_path, capsys, config, booked, skippe
     assert sorted((p.name, p.stat().st_mtime_ns) for p in (game / config).parent.iterdir()) == before
     if booked:
         veh = pd.read_parquet(out / "vehicles.parquet")
-        assert set(veh["equation"]) == {"moves_light_commercial_truck"}
+        assert set(veh["equation"]) == {"moves_light_commercial_truck", "epa_diesel_light_truck"}
         assert (veh["mass_kg"] == 2059.7).all() and (veh["traction_total_j"] > 0).all()
 
 
@@ -909,3 +919,81 @@ def test_a_config_written_for_traci_scripts_does_not_wait_for_a_client(tmp_path)
                         "--no-figures", "--no-progress"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "o" / "summary.json").read_text())["vehicles"] == 1
+
+
+@pytest.mark.parametrize("ec, carrier", [
+    ("HBEFA4/PC_petrol_Euro-4", "gasoline"), ("HBEFA3/PC_G_EU4", "gasoline"), ("PHEMlight/PC_G_EU4", "gasoline"),
+    ("HBEFA4/PC_diesel_Euro-6", "diesel"), ("HBEFA3/PC_D_EU6", "diesel"), ("HBEFA4/LCV_diesel_N1-III_Euro-6ab", "diesel"),
+    ("HBEFA4/RT_le7.5t_Euro-VI_A-C", "diesel"), ("HBEFA4/UBus_Std_gt15-18t_Euro-VI_A-C", "diesel"),
+    ("HBEFA3/HDV", "diesel"), ("HBEFA3/Bus", "diesel"), ("Energy/unknown", "electricity"),
+    ("MMPEVEM/unknown", "electricity"), ("Zero/default", "electricity"), ("HBEFA3/zero", "electricity"),
+    ("HBEFA4/PC_BEV", "electricity"), ("HBEFA4/UBus_Electric_Std_gt15-18t", "electricity"),
+    ("HBEFA4/UBus_CNG_Std", "gas"), ("HBEFA4/PC_CNG_petrol_Euro-6_", "gas"), ("HBEFA4/MC_4S_gt250cc_preEuro", "gasoline"),
+    ("HBEFA4/UBus_Std_gt15-18t_Ethanol_Euro-VI", "ethanol"), ("HBEFA4/RigidTruck_FCEV_le7_5t", "hydrogen"),
+    ("HBEFA4/PC_PHEV_diesel_Euro-6d_", "diesel"), ("HBEFA4/Coach_BEV_Midi", "electricity"),
+    ("HBEFA2/P_7_7", None), ("", None), (None, None)])
+def test_energy_carrier_of_sumo_emission_classes(ec, carrier):
+    """The carrier a SUMO emissionClass names (names as SUMO's emission-model pages and its
+    defaults, vehicletype.getEmissionClass, give them)."""
+    from sumo_drvpw.sim.vtypes import energy_carrier
+
+    assert energy_carrier(ec) == carrier
+
+
+def test_chains_book_the_vehicles_of_their_energy_carrier(tmp_path, capsys):
+    """Equations a user chose — a petrol, a diesel and a battery chain for cars: a car whose
+    emissionClass is written is booked by the chain of its carrier only (and a chain's
+    L/100 km counts only its cars' kilometres); a car that writes none by all three, as
+    alternatives; vtypes.<id>.equations overrides; a chain every vehicle of which writes
+    another carrier books nobody, and the run says why."""
+    from sumo_drvpw.model.equations import load_equation
+
+    i3 = REPO / "docs" / "energy-chain" / "bmw_i3_battery.toml"
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    cfg = _city_config(sc, """\
+    <vType id="petrol" vClass="passenger" mass="1400" emissionClass="HBEFA3/PC_G_EU4"/>
+    <vType id="diesel" vClass="passenger" mass="1400" emissionClass="HBEFA4/PC_diesel_Euro-6ab"/>
+    <vType id="ev" vClass="passenger" mass="1400" emissionClass="Energy/unknown"/>
+    <vType id="plain" vClass="passenger" mass="1400"/>
+    <vType id="ev_forced" vClass="passenger" mass="1400" emissionClass="Energy/unknown"/>
+""", [("p", "petrol", WEST), ("q", "petrol", EAST), ("d", "diesel", EAST), ("e", "ev", WEST),
+          ("n", "plain", WEST), ("f", "ev_forced", EAST)])
+    scen = sc / "s.toml"
+    scen.write_text(f'equations = ["epa_gasoline_car", "epa_diesel_car", "{i3}", "vsp_ldv1999"]\n'
+                    '[sumo]\nconfig = "c.sumocfg"\n[vtypes.ev_forced]\nequations = ["epa_gasoline_car"]\n'
+                    '[outputs]\nfigures = false\n')
+    out = tmp_path / "o"
+    s, err = _run_summary(scen, out, capsys)
+    veh = pd.read_parquet(out / "vehicles.parquet")
+    eqs = veh.groupby("vehicle")["equation"].apply(set).to_dict()
+    assert eqs["p"] == eqs["q"] == {"epa_gasoline_car", "vsp_ldv1999"}
+    assert eqs["d"] == {"epa_diesel_car", "vsp_ldv1999"}
+    assert eqs["e"] == {"bmw_i3_battery", "vsp_ldv1999"}
+    assert eqs["n"] == {"epa_gasoline_car", "epa_diesel_car", "bmw_i3_battery", "vsp_ldv1999"}
+    assert eqs["f"] == {"epa_gasoline_car"}  # the scenario's choice wins
+    car = s["assumptions"]["energy_carrier"]
+    assert car["petrol"] == {"emission_class": "HBEFA3/PC_G_EU4", "from": "written", "carrier": "gasoline",
+                             "not_booked_by": ["epa_diesel_car", "bmw_i3_battery"]}
+    assert "plain" not in car and "ev_forced" not in car
+    # the chain tables: a row per vehicle an equation books; per-km over its own vehicles
+    ch = pd.read_csv(out / "chain_vehicles.csv", dtype={"key": str})
+    assert set(ch[ch.equation == "epa_gasoline_car"].key) == {"p", "q", "n", "f"}
+    assert set(ch[ch.equation == "bmw_i3_battery"].key) == {"e", "n"}
+    cls = pd.read_csv(out / "chain_classes.csv").set_index("equation")
+    g = ch[ch.equation == "epa_gasoline_car"]
+    assert cls.loc["epa_gasoline_car", "distance_km"] == pytest.approx(g.distance_km.sum(), rel=1e-9)
+    assert cls.loc["epa_gasoline_car", "fuel_l_per_100km"] == pytest.approx(
+        100 * g.fuel_l.sum() / g.distance_km.sum(), rel=1e-9)
+    d = veh.set_index(["vehicle", "equation"])["distance_m"]
+    assert g.set_index("key").distance_km.to_dict() == pytest.approx(
+        {k: d[(k, "epa_gasoline_car")] / 1000 for k in g.key})
+    assert not any("emissionClass names" in w for w in s["warnings"])  # every chain booked someone
+    # a diesel chain on petrol cars only: it books nobody, and says why
+    scen.write_text('equations = ["epa_diesel_car", "vsp_ldv1999"]\n[sumo]\nconfig = "c.sumocfg"\n'
+                    '[vehicles]\nvtypes = ["petrol"]\n[outputs]\nfigures = false\n')
+    s, err = _run_summary(scen, tmp_path / "o2", capsys)
+    w = [x for x in s["warnings"] if "emissionClass names their fuel" in x]
+    assert len(w) == 1 and "epa_diesel_car not for gasoline: petrol (HBEFA3/PC_G_EU4)" in w[0]
+    assert "epa_diesel_car" in err
+    assert load_equation("epa_diesel_car").chain.fuel == "diesel"

@@ -111,7 +111,7 @@ def _print_summary(s: dict, out, label: str = "") -> None:
                 "battery": "; its battery energy per class below", "fuel": "; its fuel per class below"}
         print(f"  {name}: traction of its terms {parts or '0'}{also.get(eq.get('predicts', 'wheel'), '')}")
     if idle:
-        print(f"  no vehicle of their classes: {', '.join(idle)}")
+        print(f"  booked no vehicle (none of their vClasses, or of their fuel): {', '.join(idle)}")
     for r in (s.get("chain") or {}).get("classes", []):  # battery kWh or fuel L per class
         if not r.get("distance_km"):
             continue

@@ -231,7 +231,8 @@ class Accountant(_Listener):
             "excluded_by_vehicles_vtypes": self.resolver.excluded,
             "vehicles_in_memory_peak": int(led.peak_held),
             "assumptions": {"default_masses": dict(sorted(self.resolver.assumptions.items())),
-                            "booked_as": dict(sorted(self.resolver.booked_as.items()))},
+                            "booked_as": dict(sorted(self.resolver.booked_as.items())),
+                            "energy_carrier": dict(sorted(self.resolver.carriers.items()))},
         }
         summary_extra.update(extra or {})
         warnings = network_warnings(net)
@@ -276,6 +277,15 @@ class Accountant(_Listener):
                 "speed_range_mps": list(eq.speed_range_mps) if eq.speed_range_mps else None,
                 "accel_range_mps2": list(eq.accel_range_mps2) if eq.accel_range_mps2 else None,
                 "out_of_range_samples": int(led.out_of_range[e])})
+        # chains that booked nobody because every vType they were made for writes another
+        # carrier (SUMO's defaults choosing among the plug-in's own chains is no news)
+        idle = [e.name for e in self.equations
+                if not any(summary["equations"][e.name]["distance_m"].values())
+                and any(e.name in c["not_booked_by"] for c in self.resolver.carriers.values()
+                        if c["from"] == "written")]
+        by_carrier = self.resolver.skipped.get("by_carrier", {})
+        if idle or by_carrier:
+            summary["warnings"].append(carrier_warning(self.resolver.carriers, by_carrier, idle))
         return RunResult(ledger=led, net=net, names=self.names,
                          predicts=[e.predicts for e in self.equations], summary=summary,
                          begin=self.begin, end=end, edgedata=sc.edgedata, figures=sc.figures,
@@ -299,6 +309,25 @@ def network_warnings(net) -> list[str]:
     return [f"network {net.path.name} has no elevation (no z in any lane shape): every slope "
             "is 0, so the grade term is 0; build it with elevation (netconvert "
             "--heightmap.geotiffs / OSM ele) for hilly areas"]
+
+
+def carrier_warning(carriers: dict[str, dict], skipped: dict[str, int], idle: list[str]) -> str:
+    """One line, for a run where a chain equation booked no vehicle (``idle``) or vehicles
+    were left with no equation (``skipped``: vClass → count) because their emissionClass
+    names another energy carrier: the vTypes each chain left out, grouped by carrier →
+    equations, up to three vType ids each."""
+    groups: dict[tuple[str, tuple], list[str]] = {}
+    for vt, c in sorted(carriers.items()):
+        eqs = tuple(e for e in c["not_booked_by"] if e in idle) if not skipped else tuple(c["not_booked_by"])
+        if eqs:
+            groups.setdefault((c["carrier"], eqs), []).append(f"{vt} ({c['emission_class']})")
+    parts = [f"{', '.join(eqs)} not for {carrier}: " + ", ".join(v[:3])
+             + (f" and {len(v) - 3} more" if len(v) > 3 else "") for (carrier, eqs), v in sorted(groups.items())]
+    left = (" — vehicles with no equation left were not booked: " + ", ".join(
+        f"{c} {n}" for c, n in sorted(skipped.items()))) if skipped else ""
+    return ("chain equations book only vehicles whose emissionClass names their fuel or the battery: "
+            + "; ".join(parts) + left
+            + " (summary.json assumptions.energy_carrier; vtypes.<id>.equations chooses instead)")
 
 
 def booked_as_warning(booked_as: dict[str, dict]) -> str:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.vtypes import energy_carrier, equation_carrier
 from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, redirect_additional_outputs,
                                          sumo_output_args)
 
@@ -37,6 +38,15 @@ class VTypeResolver:
     equations (:func:`sumo_drvpw.sim.vtypes.vehicle_body`; that vehicle's class equations,
     ``vclasses.<that>`` settings and default mass), listed in :attr:`booked_as`.
     A vType with none is not accounted and counted in :attr:`skipped` (by vClass and vType).
+    Energy carrier: unless the scenario or the vType names its equations, an equation whose
+    chain books a fuel or the battery books only vehicles whose written emissionClass names
+    that carrier or none (:func:`sumo_drvpw.sim.vtypes.energy_carrier`): a petrol chain
+    does not book an electric or a diesel car. A vType that writes none is booked by every
+    chain made for its vClass (alternatives a user chose), except with the scenario's
+    ``default_carrier`` (the plug-in's own equations) where chains of several carriers
+    apply: then by SUMO's default emissionClass (petrol car, diesel van). The chains left
+    out per vType are in :attr:`carriers`, vehicles with no equation left in
+    :attr:`skipped` ``by_carrier``.
     Mass: scenario ``vtypes.<id>.mass_kg`` > param ``drvpw.mass`` > ``mass`` attribute (or
     SUMO's deprecated ``vehicleMass`` param) plus the ``loading`` param, written in the
     route/additional files > scenario ``vclasses.<vClass>.mass_kg`` (plus loading) > the
@@ -50,9 +60,16 @@ class VTypeResolver:
         #: equation name → vClasses it is made for (names given as plain strings: any)
         self.vclasses = {(e if isinstance(e, str) else e.name):
                          (None if isinstance(e, str) else set(e.vclasses)) for e in equations}
+        #: equation name → energy carrier its chain books (None: driving power only)
+        self.carrier_of = {(e if isinstance(e, str) else e.name):
+                           (None if isinstance(e, str) else equation_carrier(e)) for e in equations}
         self.cache: dict[str, tuple] = {}
-        #: vehicles not accounted because no equation is made for their vClass
+        #: vehicles not accounted because no equation is made for their vClass (by_vclass,
+        #: by_vtype) or none books their energy carrier (by_carrier, when any: vClass → count)
         self.skipped: dict[str, dict[str, int]] = {"by_vclass": {}, "by_vtype": {}}
+        #: vType → {"emission_class", "from", "carrier", "not_booked_by"}: chain equations
+        #: made for the vType's vClass that book another energy carrier
+        self.carriers: dict[str, dict] = {}
         #: vehicles left out by ``vehicles.vtypes``
         self.excluded = 0
         #: vType → {"vclass", "mass_kg", "source"} for masses taken from class defaults
@@ -85,6 +102,47 @@ class VTypeResolver:
         """The equations made for a vClass (plain names: any)."""
         return [n for n in self.names if self.vclasses[n] is None or vclass in self.vclasses[n]]
 
+    def _default_emission_class(self, vt: str, vclass: str, written: bool = False) -> tuple[str, str]:
+        """SUMO's default emissionClass for the vType (SUMO's own when it writes none and the
+        run has a connection, else SUMO's default for the vClass), and where it came from."""
+        from sumo_drvpw.sim.vtypes import SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER
+
+        if self.conn is not None and not written:
+            try:
+                ec = self.conn.vehicletype.getEmissionClass(vt)
+                if ec:
+                    return str(ec), "SUMO's default (none written)"
+            except Exception:
+                pass
+        return (SUMO_DEFAULT_EMISSION_CLASS.get(vclass, SUMO_DEFAULT_EMISSION_CLASS_OTHER),
+                f"SUMO's default for vClass {vclass} ("
+                + ("the written one names no fuel" if written else "none written") + ")")
+
+    def _by_carrier(self, vt: str, info, vclass: str, app: np.ndarray) -> np.ndarray:
+        """``app`` without the chain equations of another energy carrier than the vType's:
+        its written emissionClass's; where that names none (or none is written) and chains
+        of several carriers apply, SUMO's default one's when the scenario says
+        ``default_carrier``."""
+        present = {self.carrier_of[n] for n, a in zip(self.names, app) if a} - {None}
+        if not present:
+            return app
+        ec = info.emission_class if info is not None else None
+        carrier, src = energy_carrier(ec), "written"
+        if carrier is None:  # none written, or a name of no known carrier
+            if len(present) < 2 or not getattr(self.sc, "default_carrier", False):
+                return app
+            ec, src = self._default_emission_class(vt, vclass, written=ec is not None)
+            carrier = energy_carrier(ec)
+            if carrier is None:
+                return app
+        wrong = [i for i, n in enumerate(self.names) if app[i] and self.carrier_of[n] not in (None, carrier)]
+        if wrong:
+            app = app.copy()
+            app[wrong] = 0.0
+            self.carriers[vt] = {"emission_class": ec, "from": src, "carrier": carrier,
+                                 "not_booked_by": [self.names[i] for i in wrong]}
+        return app
+
     def __call__(self, vt: str, vid: str):
         out = self.cache.get(vt)
         if out is None:
@@ -92,6 +150,10 @@ class VTypeResolver:
         if not out[2]:
             if out[4] == "filter":
                 self.excluded += 1
+            elif out[4] == "carrier":
+                for key, k in (("by_carrier", out[3]), ("by_vtype", vt)):
+                    d = self.skipped.setdefault(key, {})
+                    d[k] = d.get(k, 0) + 1
             else:
                 for key, k in (("by_vclass", out[3]), ("by_vtype", vt)):
                     self.skipped[key][k] = self.skipped[key].get(k, 0) + 1
@@ -137,6 +199,10 @@ class VTypeResolver:
                 self.booked_as[vt] = {"vclass": vclass, "booked_as": body, "from": named[1]}
         if not app.any():
             return (np.nan, app, False, vclass, "vclass")
+        if not explicit:
+            app = self._by_carrier(vt, info, body, app)
+            if not app.any():
+                return (np.nan, app, False, vclass, "carrier")
         if vt not in self.booked_as and vclass not in GENERIC_VCLASSES:
             body = vclass   # its own equations, so its own class's mass
         if body != vclass and cdata.get("mass_kg") is None:

@@ -93,7 +93,7 @@ _SCHEMA: dict[str, set[str] | None] = {
     "equations": None,
     "sumo": {"config", "net", "routes", "additional", "begin", "end", "step_length",
              "connection", "gui", "options", "acceleration", "positions"},
-    "vehicles": {"vtypes", "default_masses", "transportable_mass"},
+    "vehicles": {"vtypes", "default_masses", "transportable_mass", "default_carrier"},
     "vtypes": None,  # table of vType id → {mass_kg, equations}
     "vclasses": None,  # table of SUMO vClass → {mass_kg, equations}
     "wind": {"speed_mps", "from_deg", "heading"},
@@ -113,10 +113,14 @@ OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equ
 
 #: the equations of a scenario given as a bare SUMO config (``run X.sumocfg``): every motor
 #: vehicle class has one made for it — cars by VSP (LDV 1999), the seed paper's DrvPw and
-#: MOVES's passenger car; trucks, buses and motorcycles by their MOVES source type
+#: MOVES's passenger car; trucks, buses and motorcycles by their MOVES source type — and
+#: cars and vans also by the EPA fleet's petrol and diesel fuel chains, each vehicle by the
+#: fuel of its emissionClass (SUMO's default where it writes none: ``default_carrier``)
 CONFIG_EQUATIONS = ("vsp_ldv1999", "drvpw_prius3", "moves_passenger_car", "moves_motorcycle",
                     "moves_light_commercial_truck", "moves_single_unit_truck",
-                    "moves_combination_truck", "moves_transit_bus", "moves_intercity_bus")
+                    "moves_combination_truck", "moves_transit_bus", "moves_intercity_bus",
+                    "epa_gasoline_car", "epa_diesel_car", "epa_gasoline_light_truck",
+                    "epa_diesel_light_truck")
 @dataclass
 class RoadClassRule:
     """How an edge gets its road class: edge id map > type map > highway types/speed > city."""
@@ -185,6 +189,12 @@ class Scenario:
     vclass_data: dict[str, dict] = field(default_factory=dict)
     #: vTypes without a mass take their vClass's built-in default mass (else: error)
     default_masses: bool = True
+    #: where a vType writes no emissionClass and chain equations of different energy carriers
+    #: are made for its vClass, book it by the one of SUMO's default emissionClass for the
+    #: vClass (petrol car, diesel van, truck and bus); else every such chain books it, as
+    #: alternatives. Default: on for the plug-in's own equations (a bare SUMO config), off
+    #: for equations a user chose. A written emissionClass always decides.
+    default_carrier: bool = False
     #: persons riding in a vehicle add their vTypes' masses while they ride, as in SUMO's
     #: emission models (EnergyParams::getTotalMass)
     transportable_mass: bool = True
@@ -546,6 +556,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         connection=connection, gui=bool(sumo.get("gui", False)), equations=equations,
         vtype_filter=vfilter, vtype_data=vdata, vclass_data=cdata,
         default_masses=_bool(veh.get("default_masses", True), where, "vehicles.default_masses"),
+        default_carrier=_bool(veh.get("default_carrier", names == list(CONFIG_EQUATIONS)), where,
+                              "vehicles.default_carrier"),
         transportable_mass=_bool(veh.get("transportable_mass", True), where,
                                  "vehicles.transportable_mass"),
         wind_speed=ws, wind_from_deg=wd, rho=rho, air_temperature_c=t_air,

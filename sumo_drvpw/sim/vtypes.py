@@ -269,3 +269,70 @@ def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
         except OSError as e:
             raise UserError(f"{path}: cannot read: {e}") from None
     return out
+
+
+# ---------------------------------------------------------------------- energy carrier
+#: SUMO's own emissionClass of a vType that sets none, per vClass (SUMO 1.28,
+#: ``vehicletype.getEmissionClass``); any other vClass: ``HBEFA4/PC_petrol_Euro-4``
+SUMO_DEFAULT_EMISSION_CLASS = {
+    "delivery": "HBEFA4/LCV_diesel_N1-III_Euro-6ab", "emergency": "HBEFA4/LCV_diesel_N1-III_Euro-6ab",
+    "truck": "HBEFA4/RT_le7.5t_Euro-VI_A-C", "trailer": "HBEFA4/TT_AT_gt34-40t_Euro-VI_A-C",
+    "bus": "HBEFA4/UBus_Std_gt15-18t_Euro-VI_A-C", "coach": "HBEFA4/Coach_3-Axes_gt18t_Euro-VI_A-C",
+    "motorcycle": "HBEFA4/MC_4S_gt250cc_preEuro", "moped": "HBEFA4/Moped_le50cc_Euro-2",
+    "evehicle": "Zero/default", "bicycle": "Zero/default", "pedestrian": "Zero/default",
+}
+SUMO_DEFAULT_EMISSION_CLASS_OTHER = "HBEFA4/PC_petrol_Euro-4"
+#: words of an emission-class name → energy carrier, first match wins (electricity before
+#: the fuels: HBEFA 4's ``PC_BEV``, ``UBus_Electric_…``; gas before petrol and diesel)
+CARRIER_WORDS = (
+    ("electricity", {"bev", "electric", "ev", "zero"}),
+    ("hydrogen", {"fcev", "h2", "hydrogen"}),
+    ("gas", {"cng", "lng", "lpg", "gas"}),
+    ("ethanol", {"ethanol", "e85"}),
+    ("diesel", {"d", "diesel"}),
+    ("gasoline", {"g", "petrol", "gasoline", "benzin"}),
+)
+#: emission-class models that are electric whatever the name (SUMO's Energy and MMPEVEM
+#: models, and Zero: no exhaust)
+ELECTRIC_MODELS = ("energy", "mmpevem", "zero")
+#: heavy-duty HBEFA/PHEMlight names without a fuel word are diesel (HBEFA's default for
+#: trucks and buses: ``HBEFA4/RT_le7.5t_Euro-VI_A-C``, ``HBEFA3/Bus``, ``HBEFA3/HDV``)
+DIESEL_BODIES = ("hdv", "hgv", "rt", "rigidtruck", "tt", "ubus", "bus", "coach", "lcv", "ldv")
+#: and motorcycle and moped names are petrol (``HBEFA4/MC_4S_gt250cc_preEuro``)
+PETROL_BODIES = ("mc", "moped")
+
+
+def energy_carrier(emission_class: str | None) -> str | None:
+    """The energy carrier a SUMO emissionClass names: ``electricity``, ``gasoline``,
+    ``diesel``, ``gas``, ``ethanol``, ``hydrogen``, or None when it names none (no class, or a name of
+    no known pattern). Read from the model (``Energy/…``, ``MMPEVEM/…``, ``Zero/…``:
+    electricity) and the words of the name (``PC_petrol_Euro-4``, ``PC_G_EU4``: gasoline;
+    ``LCV_diesel_…``, ``PC_D_EU6``: diesel; ``PC_BEV``: electricity); a heavy-duty name
+    without a fuel word is diesel."""
+    if not emission_class:
+        return None
+    model, _, name = emission_class.strip().partition("/")
+    if not name:
+        model, name = "", model
+    if model.strip().lower() in ELECTRIC_MODELS:
+        return "electricity"
+    words = [w for w in re.split(r"[^a-z0-9]+", name.lower()) if w]
+    for carrier, keys in CARRIER_WORDS:
+        if any(w in keys for w in words):
+            return carrier
+    if words and words[0] in DIESEL_BODIES:
+        return "diesel"
+    if words and words[0] in PETROL_BODIES:
+        return "gasoline"
+    return None
+
+
+def equation_carrier(eq) -> str | None:
+    """What an equation's chain books: its fuel (``gasoline``, ``diesel``), ``electricity``
+    for a battery chain; None for driving power (no chain, or wheel / powertrain output)."""
+    ch = getattr(eq, "chain", None)
+    if ch is None:
+        return None
+    if ch.predicts == "fuel":
+        return ch.fuel
+    return "electricity" if ch.predicts == "battery" else None

@@ -62,9 +62,10 @@ DATASET = "epa_test_car_list"
 CYCLES = "cycles"
 #: US gallon [L]
 GALLON_L = 3.785411784
-FUEL = "gasoline"
-#: test fuel of the certification tests used
-TEST_FUEL = "Tier 2 Cert Gasoline"
+#: the fuels studied → the certification test fuel of their tests
+TEST_FUELS = {"gasoline": "Tier 2 Cert Gasoline", "diesel": "Federal Cert Diesel 7-15 PPM Sulfur"}
+#: words for the fuels in descriptions
+FUEL_WORDS = {"gasoline": "petrol", "diesel": "diesel"}
 #: FTP procedures (their FE Bag 1–3 are the FTP-75's bags)
 FTP = ("Federal fuel 2-day exhaust (w/can load)", "Federal fuel 3-day exhaust",
        "CVS 75 and later (w/o can. load)")
@@ -81,15 +82,14 @@ HYBRID_WORDS = re.compile(r"\b(?:hybrid|plug-in|phev|hev|e-hybrid|energi)\b", re
 MAX_CHECK_MPS = 130 / 3.6
 #: EPA 'Vehicle Type' → built-in class
 CLASSES = {"Car": "car", "Truck": "light_truck"}
-#: built-in equations written by :func:`main`: class → (name, SUMO vClasses, what it is)
+#: built-in equations ``epa_<fuel>_<class>`` written by :func:`main`: class → (SUMO vClasses,
+#: what it is); the SUMO run books each vehicle by the one of its emissionClass's fuel
 BUILTINS = {
-    "car": ("epa_gasoline_car", ("passenger", "private", "taxi", "hov", "vip", "authority"),
-            "petrol passenger car"),
-    "light_truck": ("epa_gasoline_light_truck", ("delivery",),
-                    "petrol light truck (pick-up, SUV, van: EPA 'Truck')"),
+    "car": (("passenger", "private", "taxi", "hov", "vip", "authority"), "passenger car"),
+    "light_truck": (("delivery", "emergency"), "light truck (pick-up, SUV, van: EPA 'Truck')"),
 }
-#: plausible marginal efficiency fuel → wheels of a petrol car
-ETA_PLAUSIBLE = (0.25, 0.45)
+#: plausible marginal efficiency fuel → wheels (petrol about 0.35, diesel about 0.4)
+ETA_PLAUSIBLE = (0.25, 0.5)
 
 
 # ---------------------------------------------------------------------- data
@@ -138,8 +138,9 @@ def read_lists(folder: Path) -> pd.DataFrame:
     return d.drop(columns=["vehicle_id", "config_no"])
 
 
-def select(d: pd.DataFrame) -> tuple[pd.DataFrame, dict]:
-    """The conventional petrol configurations' measured tests, and the counts left out."""
+def select(d: pd.DataFrame, fuel: str = "gasoline") -> tuple[pd.DataFrame, dict]:
+    """The conventional configurations' measured tests on ``fuel``'s certification test
+    fuel, and the counts left out."""
     proc = d["procedure"]
     hybrid = (d["fe_bag4"].notna() & proc.isin(FTP)) | proc.str.startswith("Charge Depleting") \
         | d["fuel"].eq("Electricity") | d["model"].str.contains(HYBRID_WORDS)
@@ -149,7 +150,7 @@ def select(d: pd.DataFrame) -> tuple[pd.DataFrame, dict]:
         + d["c_n_per_mps2"].to_numpy()[:, None] * v ** 2
     physical = ((d["displacement_l"] > 0) & (d["etw_kg"] > 0) & (d["a_n"] > 0) & (d["c_n_per_mps2"] > 0)
                 & np.all(f > 0, axis=1))
-    keep = d["fuel"].eq(TEST_FUEL) & d["derived"].eq("No")
+    keep = d["fuel"].eq(TEST_FUELS[fuel]) & d["derived"].eq("No")
     counts = {"tests": int(len(d)), "configurations": int(d["config"].nunique()),
               "hybrid, plug-in or electric configurations left out": len(bad),
               "tests of other fuels or analytically derived": int((~keep).sum()),
@@ -172,7 +173,7 @@ def schedules(folder: Path) -> dict[str, np.ndarray]:
     return out
 
 
-def observations(tests: pd.DataFrame, speeds: dict[str, np.ndarray]) -> pd.DataFrame:
+def observations(tests: pd.DataFrame, speeds: dict[str, np.ndarray], fuel: str = "gasoline") -> pd.DataFrame:
     """One row per (configuration, test on the Willans line): measured fuel energy
     ``fuel_j`` (FE → litres → J at the fuel's LHV and density), wheel traction energy
     ``traction_j`` (E⁺ from the term basis), duration ``t_s``, distance ``dist_m``; and the
@@ -185,7 +186,7 @@ def observations(tests: pd.DataFrame, speeds: dict[str, np.ndarray]) -> pd.DataF
              COLD: (tests["procedure"].isin(FTP), "fe_bag1"),
              "hwfet": (tests["procedure"].eq(HWFET), "fe_mpg"),
              "us06": (tests["procedure"].eq(US06), "fe_mpg")}
-    fp = FUELS[FUEL]
+    fp = FUELS[fuel]
     rows = []
     for test, (mask, col) in which.items():
         t = tests[mask & (tests[col] > 0)]
@@ -234,17 +235,17 @@ def fit(obs: pd.DataFrame) -> dict:
             "n_configurations": int(o["config"].nunique())}
 
 
-def chain_for(params: dict, displacement_l: float):
+def chain_for(params: dict, displacement_l: float, fuel: str = "gasoline"):
     """The fuel chain of a car of displacement ``displacement_l`` [L] under fit ``params``."""
     from sumo_drvpw.model.chain import EnergyChain
 
     return EnergyChain(predicts="fuel", traction_efficiency=1.0, marginal_efficiency=params["eta"],
                        idle_fuel_power_w=params["p_idle_w_per_l"] * displacement_l,
-                       engine_off_below_w=-np.inf, fuel=FUEL)
+                       engine_off_below_w=-np.inf, fuel=fuel)
 
 
 def predict(obs: pd.DataFrame, params: dict, speeds: dict[str, np.ndarray], default: dict | None = None,
-            mass_from_car: bool = True) -> np.ndarray:
+            mass_from_car: bool = True, fuel: str = "gasoline") -> np.ndarray:
     """Predicted fuel energy [J] of each observation through the evaluator
     (:meth:`EnergyChain.evaluate` on the term basis), with each car's own road load and
     displacement, or with the class ``default`` (per class: road load per kg, ETW,
@@ -265,7 +266,7 @@ def predict(obs: pd.DataFrame, params: dict, speeds: dict[str, np.ndarray], defa
         z = np.zeros_like(vm)
         x = Inputs(v=vm, a=dv, theta=z, wind=z, mass=np.full_like(vm, m), rho=np.ones_like(vm), v_acc=vm)
         eq = Equation(name="epa", terms={"roll": a_per_kg / G, "v2": b, "aero": c, "acc": 1.0})
-        out[i] = chain_for(params, disp).evaluate(eq.power(x), vm, dt_s=1.0)["power_j"].sum()
+        out[i] = chain_for(params, disp, fuel).evaluate(eq.power(x), vm, dt_s=1.0)["power_j"].sum()
     return out
 
 
@@ -306,7 +307,7 @@ def _stat(e: np.ndarray) -> dict:
             "p90_abs": float(np.quantile(np.abs(e), 0.9))}
 
 
-def split(obs: pd.DataFrame, test_years, speeds) -> dict:
+def split(obs: pd.DataFrame, test_years, speeds, fuel: str = "gasoline") -> dict:
     """Fit on the model years not in ``test_years``; errors on ``test_years`` with each
     car's own road load, and with the class defaults of the training cars."""
     test_years = tuple(int(y) for y in test_years)
@@ -314,12 +315,12 @@ def split(obs: pd.DataFrame, test_years, speeds) -> dict:
     tr, te = w[~w["model_year"].isin(test_years)], w[w["model_year"].isin(test_years)]
     params = fit(tr)
     dfl = class_defaults(tr)
-    own = _errors(te, predict(te, params, speeds))
+    own = _errors(te, predict(te, params, speeds, fuel=fuel))
     tec = te[te["vehicle_type"].isin(CLASSES)]
     return {"train_years": sorted(int(y) for y in tr["model_year"].unique()), "test_years": list(test_years),
             "fit": params, "own_road_load": own,
-            "class_default_car_mass": _errors(tec, predict(tec, params, speeds, dfl)),
-            "class_default": _errors(tec, predict(tec, params, speeds, dfl, mass_from_car=False)),
+            "class_default_car_mass": _errors(tec, predict(tec, params, speeds, dfl, fuel=fuel)),
+            "class_default": _errors(tec, predict(tec, params, speeds, dfl, mass_from_car=False, fuel=fuel)),
             "test_configurations": int(te["config"].nunique())}
 
 
@@ -340,20 +341,23 @@ def cold_start(obs: pd.DataFrame) -> dict:
     return out
 
 
-def study(data: Path) -> dict:
-    """The whole study on the shared data folder ``data``."""
+def study(data: Path, fuel: str = "gasoline", lists: pd.DataFrame | None = None) -> dict:
+    """The whole study of ``fuel`` on the shared data folder ``data`` (``lists``: the
+    already read Test Car List, else read from the folder)."""
     t0 = time.perf_counter()
-    d, counts = select(read_lists(Path(data) / DATASET))
+    d, counts = select(read_lists(Path(data) / DATASET) if lists is None else lists, fuel)
     speeds = schedules(Path(data) / CYCLES)
-    obs = observations(d, speeds)
+    if d.empty:
+        raise UserError(f"{Path(data) / DATASET}: no conventional configuration tested on {TEST_FUELS[fuel]}")
+    obs = observations(d, speeds, fuel)
     years = sorted(int(y) for y in obs["model_year"].unique())
     if len(years) < 2:
         raise UserError(f"{Path(data) / DATASET}: the held-out splits need two model years, found {years}")
-    res = {"counts": counts, "years": years,
+    res = {"fuel": fuel, "counts": counts, "years": years,
            "tests_used": {t: int((obs["test"] == t).sum()) for t in list(TESTS) + [COLD]},
            "configurations_used": int(obs.loc[obs["test"].isin(TESTS), "config"].nunique()),
-           "splits": {"newest held out": split(obs, [years[-1]], speeds),
-                      "oldest held out": split(obs, [years[0]], speeds)},
+           "splits": {"newest held out": split(obs, [years[-1]], speeds, fuel),
+                      "oldest held out": split(obs, [years[0]], speeds, fuel)},
            "fit_all": fit(obs), "defaults": class_defaults(obs[obs["test"].isin(TESTS)]),
            "cold_start": cold_start(obs)}
     res["equations"] = {cls: builtin_equation(cls, res) for cls in res["defaults"] if cls in BUILTINS}
@@ -364,7 +368,9 @@ def study(data: Path) -> dict:
 # ---------------------------------------------------------------------- built-ins
 def builtin_equation(cls: str, res: dict) -> dict:
     """The built-in equation document (TOML as a dict) of class ``cls`` from a study."""
-    name, vclasses, what = BUILTINS[cls]
+    vclasses, what = BUILTINS[cls]
+    fuel = res["fuel"]
+    name, what = f"epa_{fuel}_{cls}", f"{FUEL_WORDS[fuel]} {what}"
     p, dfl = res["fit_all"], res["defaults"][cls]
     hold = res["splits"]["newest held out"]
     own, dd = hold["own_road_load"], hold["class_default_car_mass"]
@@ -385,7 +391,7 @@ def builtin_equation(cls: str, res: dict) -> dict:
             "predicts": "fuel", "traction_efficiency": 1.0,
             "marginal_efficiency": round(p["eta"], 4),
             "idle_fuel_power_w": round(p["p_idle_w_per_l"] * dfl["displacement_l"], 1),
-            "engine_off_below_w": -np.inf, "aux_power_w": 0.0, "fuel": FUEL,
+            "engine_off_below_w": -np.inf, "aux_power_w": 0.0, "fuel": fuel,
             "reading": {
                 "marginal_efficiency": "fuel → wheels at the margin (Willans slope, transmission included)",
                 "idle_fuel_power_w": (f"{p['p_idle_w_per_l']:.0f} W of fuel per litre of displacement × the "
@@ -420,34 +426,56 @@ def _apct(x: float) -> str:
     return f"{x:.1%}".replace("%", " %")
 
 
-def render(res: dict, cmd: str) -> str:
-    """The Markdown report of a study."""
-    L = ["# Petrol cars' fuel from their road load: the EPA Test Car List", "",
-         f"Generated by `{cmd}` in {res['seconds']:.0f} s; every number below is computed by that run. "
+def render(results: dict, cmd: str, seconds: float) -> str:
+    """The Markdown report of the studies ``results`` (fuel → :func:`study` result)."""
+    L = ["# Petrol and diesel cars' fuel from their road load: the EPA Test Car List", "",
+         f"Generated by `{cmd}` in {seconds:.0f} s; every number below is computed by that run. "
          "Method: `sumo_drvpw/validation/epa_fleet.py` (module docstring); the chain: "
          "[energy-chain.md](energy-chain.md).", "",
          "Each certification test of the US EPA Test Car List is a standard speed schedule driven on a "
          "chassis dynamometer set to the car's road load (A + B·v + C·v² at its equivalent test weight), with "
          "the fuel it used. The term basis turns the schedule into wheel power; the Willans line "
          "P_fuel = p_L·D + max(P, 0)/η (engine running the whole test, idle fuel per litre of displacement D) "
-         "turns that into fuel. Model years "
-         + ", ".join(map(str, res["years"])) + f"; {res['configurations_used']} conventional petrol "
-         "configurations; tests used: " + ", ".join(f"{k} {v}" for k, v in res["tests_used"].items()) + ".", "",
-         "Left out: " + "; ".join(f"{k} {v}" for k, v in res["counts"].items() if k not in ("tests", "configurations"))
-         + f" (of {res['counts']['tests']} tests, {res['counts']['configurations']} configurations).", ""]
+         "turns that into fuel. Selection, tests and model: the module docstring.", ""]
+    for fuel, res in results.items():
+        L += _render_fuel(res)
+    L += ["## In a SUMO study", "",
+          "Name the built-ins (`epa_gasoline_car`, `epa_diesel_car`, `epa_gasoline_light_truck`, "
+          "`epa_diesel_light_truck`) as equations of the run — in the scenario's `equations`, or "
+          "`vclasses.<vClass>.equations`, or as the run's equations on the command line (README); a bare SUMO "
+          "config runs them all. Each vehicle is booked by the chain of the fuel its vType's emissionClass "
+          "names (SUMO's default for a car is petrol, for a van, truck or bus diesel; "
+          "[scenario.md](scenario.md)); the run reports litres and CO₂ per vehicle, edge and class, the mass "
+          "from the vType. What they leave out: the cold start (column above; add it per trip), the A/C and "
+          "other auxiliaries (certification runs without them: `aux_power_w` is 0), and stop-start (the engine "
+          "idles at every stop). Hybrids and heavy vehicles are not in these data.", ""]
+    return "\n".join(L)
+
+
+def _render_fuel(res: dict) -> list[str]:
+    """The report's section of one fuel."""
+    fuel, word = res["fuel"], FUEL_WORDS[res["fuel"]]
+    fp = FUELS[fuel]
     f = res["fit_all"]
-    L += ["## Fit on every model year", "",
-          f"- η (fuel → wheels at the margin) **{f['eta']:.3f}** ± {f['eta_se']:.3f}"
-          f"{'' if ETA_PLAUSIBLE[0] <= f['eta'] <= ETA_PLAUSIBLE[1] else ' — IMPLAUSIBLE'}: "
-          "a petrol engine's Willans slope (about 0.38–0.42 at the crankshaft) times the transmission's efficiency;",
-          f"- idle fuel power **{f['p_idle_w_per_l']:.0f} W per litre** ± {f['p_idle_w_per_l_se']:.0f} "
-          f"of displacement ({f['p_idle_w_per_l'] * 3600 / (FUELS[FUEL]['lhv_j_per_kg'] * FUELS[FUEL]['density_kg_per_l']):.2f} "
-          "L/h per litre: a 2-litre engine running without output burns about twice that);",
-          f"- {f['n_tests']} tests of {f['n_configurations']} configurations.", "",
-          "## Held out: other model years", "",
-          "Fuel per test, predicted/measured − 1 (mean signed / mean |error| / 90th percentile of |error|):", "",
-          "| held out | fitted on | η | p_L [W/L] | test | with the car's road load | class default, car's ETW | class default, class ETW |",
-          "|---|---|---|---|---|---|---|---|"]
+    L = [f"## {word.capitalize()} ({TEST_FUELS[fuel]})", "",
+         "Model years " + ", ".join(map(str, res["years"])) + f"; {res['configurations_used']} conventional "
+         f"{word} configurations; tests used: " + ", ".join(f"{k} {v}" for k, v in res["tests_used"].items())
+         + ". Left out: " + "; ".join(f"{k} {v}" for k, v in res["counts"].items()
+                                      if k not in ("tests", "configurations"))
+         + f" (of {res['counts']['tests']} tests, {res['counts']['configurations']} configurations).", "",
+         "Fit on every model year:", "",
+         f"- η (fuel → wheels at the margin) **{f['eta']:.3f}** ± {f['eta_se']:.3f}"
+         f"{'' if ETA_PLAUSIBLE[0] <= f['eta'] <= ETA_PLAUSIBLE[1] else ' — IMPLAUSIBLE'}: "
+         "the engine's Willans slope (petrol about 0.38–0.42 at the crankshaft, diesel about 0.42–0.46) "
+         "times the transmission's efficiency;",
+         f"- idle fuel power **{f['p_idle_w_per_l']:.0f} W per litre** ± {f['p_idle_w_per_l_se']:.0f} "
+         f"of displacement ({f['p_idle_w_per_l'] * 3600 / (fp['lhv_j_per_kg'] * fp['density_kg_per_l']):.2f} "
+         "L/h per litre: a 2-litre engine running without output burns about twice that);",
+         f"- {f['n_tests']} tests of {f['n_configurations']} configurations.", "",
+         "Held out, other model years — fuel per test, predicted/measured − 1 (mean signed / mean |error| / "
+         "90th percentile of |error|):", "",
+         "| held out | fitted on | η | p_L [W/L] | test | with the car's road load | class default, car's ETW | class default, class ETW |",
+         "|---|---|---|---|---|---|---|---|"]
     for name, s in res["splits"].items():
         for t in ["all"] + list(TESTS) + list(CLASSES.values()):
             if t not in s["own_road_load"]:
@@ -461,12 +489,12 @@ def render(res: dict, cmd: str) -> str:
                 if t == "all" else ("", "", "", "")
             L.append(f"| {' | '.join(head)} | {t} ({s['own_road_load'][t]['n']}) | {' | '.join(cells)} |")
     L += ["", "Reading: with each car's own road load and displacement the line predicts the fuel of cars it never "
-          "saw; what is left is the engine and calibration of each car (and the highway test's low engine speed "
-          "in top gear, which a line through the idle fuel overstates). A class default knows nothing of the "
-          "car but its class (and, in SUMO, the vType's mass): its error is the spread of the fleet, the "
-          "uncertainty a SUMO study without per-car data carries for one vehicle (a fleet's total averages much "
-          "of it out).", "",
-          "## Class defaults: the built-in equations", "",
+          "saw; what is left is the engine and calibration of each car (older engines use more than a line "
+          "fitted on newer ones says, and the reverse), and the highway test's low engine speed in top gear, "
+          "which a line through the idle fuel overstates. A class default knows nothing of the car but its "
+          "class (and, in SUMO, the vType's mass): its error is the spread of the fleet, the uncertainty a SUMO "
+          "study without per-car data carries for one vehicle (a fleet's total averages much of it out).", "",
+          "Class defaults, the built-in equations:", "",
           "| class | built-in | configurations | median ETW [kg] | A/m [N/kg] | B [N/(m/s)] | C [N/(m/s)²] | displacement [L] | idle fuel [W] | cold start [mL, median (IQR)] |",
           "|---|---|---|---|---|---|---|---|---|---|"]
     for cls, dfl in res["defaults"].items():
@@ -477,37 +505,33 @@ def render(res: dict, cmd: str) -> str:
                  f"{dfl['displacement_l']:.1f} | {f['p_idle_w_per_l'] * dfl['displacement_l']:.0f} | "
                  f"{cold.get('median_ml', float('nan')):.0f} ({cold.get('q25_ml', float('nan')):.0f}–"
                  f"{cold.get('q75_ml', float('nan')):.0f}) |")
-    L += ["", "In a SUMO study: name `epa_gasoline_car` (or `epa_gasoline_light_truck`) as an equation of the run "
-          "— in the scenario's `equations`, or `vclasses.<vClass>.equations`, or as the run's equation on the "
-          "command line (README) — and the run reports litres and CO₂ per vehicle, edge and class for the "
-          "vClasses the equation is made for, the mass from the vType. "
-          "What they leave out: the cold start (column above; add it per trip), the A/C and other auxiliaries "
-          "(certification runs without them: `aux_power_w` is 0), and stop-start (the engine idles at every "
-          "stop). Diesel cars, hybrids and heavy vehicles are not in these data.", ""]
-    return "\n".join(L)
+    return L + [""]
 
 
 def main(argv=None) -> int:
     """``python -m sumo_drvpw.validation.epa_fleet [REPORT.md [DATA_FOLDER]]`` (defaults
-    docs/epa-fleet.md and $SUMO_DRVPW_DATA or ../shared/data); also writes the built-in
-    equations. Exit 2 with one line when the data are absent or unreadable."""
+    docs/epa-fleet.md and $SUMO_DRVPW_DATA or ../shared/data): both fuels; also writes the
+    built-in equations. Exit 2 with one line when the data are absent or unreadable."""
     from sumo_drvpw.fileio import plain, write_json, write_text
     from sumo_drvpw.model.equations import BUILTIN_DIR, equation_from_dict, save_equation
     from sumo_drvpw.validation.data import resolve_data
 
     args = list(sys.argv[1:] if argv is None else argv)
     out = Path(args[0] if args else "docs/epa-fleet.md")
+    t0 = time.perf_counter()
     try:
         data = resolve_data(args[1] if len(args) > 1 else None, (DATASET, CYCLES))
-        res = study(data)
+        lists = read_lists(Path(data) / DATASET)
+        results = {fuel: study(data, fuel, lists) for fuel in TEST_FUELS}
     except UserError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     cmd = "python -m sumo_drvpw.validation.epa_fleet" + (f" {out}" if args else "")
-    for doc in res["equations"].values():
-        save_equation(equation_from_dict(doc), BUILTIN_DIR / f"{doc['equation']['name']}.toml")
-    write_json(out.with_suffix(".json"), plain(res))
-    write_text(out, render(res, cmd))
+    for res in results.values():
+        for doc in res["equations"].values():
+            save_equation(equation_from_dict(doc), BUILTIN_DIR / f"{doc['equation']['name']}.toml")
+    write_json(out.with_suffix(".json"), plain(results))
+    write_text(out, render(results, cmd, time.perf_counter() - t0))
     print(f"wrote {out}")
     return 0
 
