@@ -425,7 +425,7 @@ def test_run_scenario_reports_battery_and_fuel_per_class(tmp_path, scenario):
         assert xml_sum == pytest.approx(c[c["equation"] == eq][col].sum(), rel=1e-4, abs=1e-5)
     led = res.ledger
     bev_rows = tabs["vehicles"][tabs["vehicles"]["equation"] == "bev"]
-    t_in = dict(zip(led.veh_ids, led.chain.veh_time[:led.n_veh, led.chain.booked("bev")]))
+    t_in = dict(zip(led.veh_ids, led.chain.vehicle_time(led.n_veh)[:, led.chain.booked("bev")]))
     np.testing.assert_allclose(bev_rows["auxiliary_kwh"], 500.0 * bev_rows["key"].map(t_in) / 3.6e6,
                                rtol=1e-9)
 
@@ -489,7 +489,7 @@ def test_sumo_run_chain_accounts_balance():
     np.testing.assert_allclose(sum(cls.values()), tot.sum(axis=0), rtol=1e-9, atol=1e-6)
     # battery: auxiliary = 500 W × time in the network, standing included; net = sum of parts
     k = {q: j for j, q in enumerate(QUANTITIES)}
-    np.testing.assert_allclose(tot[:, 1, k["auxiliary_j"]], 500.0 * led.veh_time[:nv, led.booked("bev")], rtol=1e-12)
+    np.testing.assert_allclose(tot[:, 1, k["auxiliary_j"]], 500.0 * led.vehicle_time(nv)[:, led.booked("bev")], rtol=1e-12)
     np.testing.assert_allclose(tot[:, 1, k["traction_j"]] + tot[:, 1, k["recuperated_j"]]
                                + tot[:, 1, k["auxiliary_j"]], tot[:, 1, k["net_j"]], rtol=1e-9, atol=1e-6)
     # fuel: litres and CO₂ from the fuel energy through the fuel's constants
@@ -573,7 +573,7 @@ def test_accountant_energy_reports_the_chain_during_the_run():
         close_sumo(conn)
     assert len(during) > 10 and np.all(np.diff(during) >= 0) and during[-1] > 0  # 500 W accrues
     rows = res.ledger.chain.table(res.ledger.chain.vehicle_totals(res.ledger.n_veh),
-                                  res.ledger.chain.veh_dist[:res.ledger.n_veh], list(res.ledger.veh_ids))
+                                  res.ledger.chain.vehicle_dist(res.ledger.n_veh), list(res.ledger.veh_ids))
     bev = next(r for r in rows if r["key"] == probe and r["equation"] == "bev")
     fuel = next(r for r in rows if r["key"] == probe and r["equation"] == "drvpw_prius3")
     assert final["bev"]["chain"]["net_j"] == pytest.approx(bev["net_kwh"] * KWH, rel=1e-12)

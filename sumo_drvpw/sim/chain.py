@@ -65,14 +65,17 @@ class ChainLedger:
         self._ck = np.array([k for _, k in self._cols], np.int64)
         # compact storage: only the booked columns, (rows, C); veh/edge expand on read
         self._edge = np.zeros((n_edges, len(self._cols)))
-        #: distance [m] and time [s] booked per row and active chain equation (``active``
-        #: order): only where the equation applies to the vehicle, so that a chain's per-km
-        #: figures count the vehicles it books (petrol litres over petrol cars' kilometres)
+        #: distance [m] booked per edge and active chain equation (``active`` order): only by
+        #: vehicles the equation applies to, so that a chain's per-km figures count the
+        #: vehicles it books (petrol litres over petrol cars' kilometres)
         self.A = len(self.active)
         self.edge_dist = np.zeros((n_edges, self.A))
         self._veh = np.zeros((capacity, len(self._cols)))
-        self.veh_dist = np.zeros((capacity, self.A))
-        self.veh_time = np.zeros((capacity, self.A))
+        #: per vehicle row: distance [m] and time [s] in the network, and which active chain
+        #: equations apply to it (:meth:`vehicle_dist`, :meth:`vehicle_time` per equation)
+        self.veh_dist = np.zeros(capacity)
+        self.veh_time = np.zeros(capacity)
+        self._app = np.zeros((capacity, self.A), bool)
         #: cumulative edge totals at interval boundaries [(time [s], (edges, E, Q))]
         self.snapshots: list[tuple[float, np.ndarray]] = []
         #: totals of vehicles flushed out of memory (Ledger.flush): class → [(E, Q), m]
@@ -96,8 +99,20 @@ class ChainLedger:
         return self.expand(self._veh)
 
     def booked(self, name: str) -> int:
-        """Column of equation ``name`` in :attr:`veh_dist`, :attr:`veh_time`, :attr:`edge_dist`."""
+        """Column of equation ``name`` in :meth:`vehicle_dist`, :meth:`vehicle_time`, :attr:`edge_dist`."""
         return self.active.index(self.names.index(name))
+
+    def vehicle_dist(self, n: int) -> np.ndarray:
+        """Distance [m] each of the first ``n`` vehicle rows drove under each active chain
+        equation (0 where it does not apply), (n, A)."""
+        self._grow(n)
+        return self.veh_dist[:n, None] * self._app[:n]
+
+    def vehicle_time(self, n: int) -> np.ndarray:
+        """Time [s] each of the first ``n`` vehicle rows was booked by each active chain
+        equation, (n, A)."""
+        self._grow(n)
+        return self.veh_time[:n, None] * self._app[:n]
 
     @property
     def edge(self) -> np.ndarray:
@@ -110,8 +125,9 @@ class ChainLedger:
             return
         new = max(n, 2 * cap)
         self._veh = np.concatenate([self._veh, np.zeros((new - cap, self._veh.shape[1]))])
-        self.veh_dist = np.concatenate([self.veh_dist, np.zeros((new - cap, self.A))])
-        self.veh_time = np.concatenate([self.veh_time, np.zeros((new - cap, self.A))])
+        self.veh_dist = np.concatenate([self.veh_dist, np.zeros(new - cap)])
+        self.veh_time = np.concatenate([self.veh_time, np.zeros(new - cap)])
+        self._app = np.concatenate([self._app, np.zeros((new - cap, self.A), bool)])
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
                         signals: dict | None = None) -> np.ndarray:
@@ -158,15 +174,19 @@ class ChainLedger:
             a = np.ones((len(vidx), self.A))
         self._veh[vidx] += q
         d = np.asarray(v, float) * dt
-        self.veh_dist[vidx] += d[:, None] * a
-        self.veh_time[vidx] += dt * a
+        self.veh_dist[vidx] += d
+        self.veh_time[vidx] += dt
+        self._app[vidx] = a > 0
         eidx = np.asarray(eidx, np.int64)
         ne = self._edge.shape[0]
-        qt = np.ascontiguousarray(q.T)
-        for j in range(qt.shape[0]):  # bincount per booked column: far cheaper than np.add.at
-            self._edge[:, j] += np.bincount(eidx, qt[j], minlength=ne)
-        for j in range(self.A):
-            self.edge_dist[:, j] += np.bincount(eidx, d * a[:, j], minlength=ne)
+        w = np.ascontiguousarray(np.concatenate([q, d[:, None] * a], axis=1).T)
+        c = q.shape[1]
+        for j in range(w.shape[0]):  # a bincount per column: far cheaper than np.add.at
+            col = np.bincount(eidx, w[j], minlength=ne)
+            if j < c:
+                self._edge[:, j] += col
+            else:
+                self.edge_dist[:, j - c] += col
         return q
 
     def snapshot(self, t: float) -> None:
@@ -214,7 +234,7 @@ class ChainLedger:
         and their rows handed to ``spill.write_chain`` (``chain_vehicles.csv``)."""
         self._grow(int(gone.max()) + 1)
         tot = self.expand(self._veh[gone])
-        dist = self.veh_dist[gone]
+        dist = self.veh_dist[gone, None] * self._app[gone]
         for j, c in enumerate(labels):
             acc = self.flushed_class.setdefault(c, [np.zeros((self.E, self.Q)), np.zeros(self.A)])
             acc[0] += tot[j]
@@ -226,7 +246,7 @@ class ChainLedger:
         """Move vehicles ``keep`` (slots, ascending) to the front, empty the rest up to ``n``."""
         self._grow(n)
         m = len(keep)
-        for arr in (self._veh, self.veh_dist, self.veh_time):
+        for arr in (self._veh, self.veh_dist, self.veh_time, self._app):
             arr[:m] = arr[keep]
             arr[m:n] = 0.0
 
@@ -274,7 +294,8 @@ class ChainLedger:
         n = len(veh_ids)
         cls = self.class_totals(veh_classes)
         labels = np.asarray(veh_classes, dtype=object)
-        cdist = np.array([self.veh_dist[:n][labels == c].sum(axis=0) for c in cls]).reshape(len(cls), self.A)
+        vdist = self.vehicle_dist(n)
+        cdist = np.array([vdist[labels == c].sum(axis=0) for c in cls]).reshape(len(cls), self.A)
         if self.flushed_class:
             dist = dict(zip(cls, cdist))
             for c, (q, m) in self.flushed_class.items():
@@ -284,7 +305,7 @@ class ChainLedger:
             order += [c for c in cls if c not in order]
             cls = {c: cls[c] for c in order}
             cdist = np.array([dist[c] for c in order]).reshape(len(order), self.A)
-        return {"vehicles": self.table(self.vehicle_totals(n), self.veh_dist[:n], list(veh_ids)),
+        return {"vehicles": self.table(self.vehicle_totals(n), vdist, list(veh_ids)),
                 "edges": self.table(self.edge, self.edge_dist, list(edge_ids)),
                 "classes": self.table(np.stack(list(cls.values())) if cls else np.zeros((0, self.E, self.Q)),
                                       cdist, list(cls))}

@@ -443,7 +443,7 @@ class RunResult:
         if ch is None:
             return None
         n = self.ledger.n_veh
-        df = pd.DataFrame(ch.table(ch.vehicle_totals(n), ch.veh_dist[:n],
+        df = pd.DataFrame(ch.table(ch.vehicle_totals(n), ch.vehicle_dist(n),
                                    list(self.ledger.veh_ids[:n])))
         spill = getattr(self.ledger, "spill", None)
         if spill is not None and spill.chain_parts:
