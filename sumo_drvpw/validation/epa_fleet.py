@@ -178,9 +178,6 @@ def observations(tests: pd.DataFrame, speeds: dict[str, np.ndarray], fuel: str =
     ``fuel_j`` (FE → litres → J at the fuel's LHV and density), wheel traction energy
     ``traction_j`` (E⁺ from the term basis), duration ``t_s``, distance ``dist_m``; and the
     cold-start rows (``test`` = :data:`COLD`) for the excess of bag 1 over bag 3."""
-    from sumo_drvpw.model.equations import Equation
-    from sumo_drvpw.model.terms import Inputs
-
     which = {"ftp_bag3": (tests["procedure"].isin(FTP), "fe_bag3"),
              "ftp_bag2": (tests["procedure"].isin(FTP), "fe_bag2"),
              COLD: (tests["procedure"].isin(FTP), "fe_bag1"),
@@ -193,17 +190,10 @@ def observations(tests: pd.DataFrame, speeds: dict[str, np.ndarray], fuel: str =
         if t.empty:
             continue
         v = speeds["ftp_bag3" if test == COLD else test]
-        vm = 0.5 * (v[1:] + v[:-1])  # per 1-s step: mean speed, exact kinetic-energy change
-        dv = np.diff(v)
-        dist = float(vm.sum())
-        e_pos = np.empty(len(t))
-        for i, r in enumerate(t[["etw_kg", "a_n", "b_n_per_mps", "c_n_per_mps2"]].itertuples(index=False)):
-            m = float(r.etw_kg)
-            eq = Equation(name="epa_test", terms={"roll": r.a_n / (m * G), "v2": r.b_n_per_mps,
-                                                  "aero": r.c_n_per_mps2, "acc": 1.0})
-            z = np.zeros_like(vm)
-            x = Inputs(v=vm, a=dv, theta=z, wind=z, mass=np.full_like(vm, m), rho=np.ones_like(vm), v_acc=vm)
-            e_pos[i] = np.maximum(eq.power(x), 0.0).sum()
+        dist = float(0.5 * (v[1:] + v[:-1]).sum())
+        e_pos = np.array([np.maximum(wheel_power(v, r.etw_kg, r.a_n / r.etw_kg, r.b_n_per_mps,
+                                                 r.c_n_per_mps2)[1], 0.0).sum()
+                          for r in t[["etw_kg", "a_n", "b_n_per_mps", "c_n_per_mps2"]].itertuples(index=False)])
         litres = dist / MILE / t[col].to_numpy(float) * GALLON_L
         rows.append(pd.DataFrame({
             "config": t["config"].to_numpy(), "model_year": t["model_year"].to_numpy(int),
@@ -212,8 +202,24 @@ def observations(tests: pd.DataFrame, speeds: dict[str, np.ndarray], fuel: str =
             "etw_kg": t["etw_kg"].to_numpy(float), "a_n": t["a_n"].to_numpy(float),
             "b_n_per_mps": t["b_n_per_mps"].to_numpy(float), "c_n_per_mps2": t["c_n_per_mps2"].to_numpy(float),
             "test": test, "fuel_l": litres, "fuel_j": litres * fp["density_kg_per_l"] * fp["lhv_j_per_kg"],
-            "traction_j": e_pos, "t_s": float(len(vm)), "dist_m": dist}))
+            "traction_j": e_pos, "t_s": float(len(v) - 1), "dist_m": dist}))
     return pd.concat(rows, ignore_index=True)
+
+
+def wheel_power(v: np.ndarray, mass_kg: float, a_n_per_kg: float, b_n_per_mps: float,
+                c_n_per_mps2: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean speed [m/s] and wheel power [W] of each 1-s step of schedule ``v`` for the road
+    load F = A + B·v + C·v² (A = ``a_n_per_kg`` × mass) and inertia of ``mass_kg``, by the
+    term basis (``roll`` = A/(m·g), ``v2`` = B, ``aero`` = C, ``acc``): the step's mean
+    speed, and m·v̄·Δv, the step's exact kinetic-energy change."""
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.model.terms import Inputs
+
+    vm, dv = 0.5 * (v[1:] + v[:-1]), np.diff(v)
+    z = np.zeros_like(vm)
+    x = Inputs(v=vm, a=dv, theta=z, wind=z, mass=np.full_like(vm, float(mass_kg)), rho=np.ones_like(vm), v_acc=vm)
+    eq = Equation(name="epa", terms={"roll": a_n_per_kg / G, "v2": b_n_per_mps, "aero": c_n_per_mps2, "acc": 1.0})
+    return vm, eq.power(x)
 
 
 # ---------------------------------------------------------------------- fit
@@ -250,9 +256,6 @@ def predict(obs: pd.DataFrame, params: dict, speeds: dict[str, np.ndarray], defa
     (:meth:`EnergyChain.evaluate` on the term basis), with each car's own road load and
     displacement, or with the class ``default`` (per class: road load per kg, ETW,
     displacement; the car's ETW kept as the mass when ``mass_from_car``)."""
-    from sumo_drvpw.model.equations import Equation
-    from sumo_drvpw.model.terms import Inputs
-
     out = np.empty(len(obs))
     for i, r in enumerate(obs.itertuples(index=False)):
         if default is None:
@@ -261,12 +264,8 @@ def predict(obs: pd.DataFrame, params: dict, speeds: dict[str, np.ndarray], defa
             dfl = default[CLASSES[r.vehicle_type]]
             m = r.etw_kg if mass_from_car else dfl["etw_kg"]
             a_per_kg, b, c, disp = dfl["a_n_per_kg"], dfl["b_n_per_mps"], dfl["c_n_per_mps2"], dfl["displacement_l"]
-        v = speeds["ftp_bag3" if r.test == COLD else r.test]
-        vm, dv = 0.5 * (v[1:] + v[:-1]), np.diff(v)
-        z = np.zeros_like(vm)
-        x = Inputs(v=vm, a=dv, theta=z, wind=z, mass=np.full_like(vm, m), rho=np.ones_like(vm), v_acc=vm)
-        eq = Equation(name="epa", terms={"roll": a_per_kg / G, "v2": b, "aero": c, "acc": 1.0})
-        out[i] = chain_for(params, disp, fuel).evaluate(eq.power(x), vm, dt_s=1.0)["power_j"].sum()
+        vm, p = wheel_power(speeds["ftp_bag3" if r.test == COLD else r.test], m, a_per_kg, b, c)
+        out[i] = chain_for(params, disp, fuel).evaluate(p, vm, dt_s=1.0)["power_j"].sum()
     return out
 
 
