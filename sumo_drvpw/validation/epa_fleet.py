@@ -465,8 +465,8 @@ def _render_fuel(res: dict) -> list[str]:
          "Fit on every model year:", "",
          f"- η (fuel → wheels at the margin) **{f['eta']:.3f}** ± {f['eta_se']:.3f}"
          f"{'' if ETA_PLAUSIBLE[0] <= f['eta'] <= ETA_PLAUSIBLE[1] else ' — IMPLAUSIBLE'}: "
-         "the engine's Willans slope (petrol about 0.38–0.42 at the crankshaft, diesel about 0.42–0.46) "
-         "times the transmission's efficiency;",
+         "the engine's Willans slope at the crankshaft (typically about 0.4 for petrol, 0.45 for diesel; "
+         "the line's form: Rizzoni, Guzzella & Baumann 1999) times the transmission's efficiency;",
          f"- idle fuel power **{f['p_idle_w_per_l']:.0f} W per litre** ± {f['p_idle_w_per_l_se']:.0f} "
          f"of displacement ({f['p_idle_w_per_l'] * 3600 / (fp['lhv_j_per_kg'] * fp['density_kg_per_l']):.2f} "
          "L/h per litre: a 2-litre engine running without output burns about twice that);",
