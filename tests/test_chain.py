@@ -301,6 +301,69 @@ def test_fuel_target_from_an_app_computed_flow_and_an_ambiguous_pair(tmp_path):
         _log(tmp_path, calculated_instant_fuel_rate_lph=2.4, estimated_fuel_flow_lph=2.5)("fuel")
 
 
+def test_fuel_target_from_a_petrol_engines_mass_air_flow(tmp_path):
+    """No fuel flow logged, but the mass air flow (OBD PID 0x10) with the fuel trims of two
+    banks and the commanded λ: ṁ_f = MAF / AFR_st × (1 + mean over banks of (short + long)
+    / 100) / λ — by hand; a diesel's air flow gives no fuel; AFR_st from the carbon
+    fraction behind the CO₂ factor (14.59, textbooks 14.6–14.7)."""
+    from sumo_drvpw.model.constants import AFR_STOICH_GASOLINE
+
+    assert AFR_STOICH_GASOLINE == pytest.approx(14.59, abs=0.01)
+    g = FUELS["gasoline"]
+    load = _log(tmp_path, mass_air_flow_rate_gps=20.0, fuel_trim_bank_1_short_term_pct=4.0,
+                fuel_trim_bank_1_long_term_pct=-2.0, short_term_fuel_trim_bank_2_pct=6.0,
+                long_term_fuel_trim_bank_2_pct=0.0, commanded_equivalence_ratio=0.9)
+    m = load("fuel")
+    want = 20.0e-3 / AFR_STOICH_GASOLINE * (1 + (2.0 + 6.0) / 2 / 100) / 0.9 * g["lhv_j_per_kg"]
+    np.testing.assert_allclose(m.power_w, want, rtol=1e-12)
+    assert m.source.startswith("ESTIMATE: fuel from the mass air flow mass_air_flow_rate_gps")
+    # a logged fuel flow wins over the estimate
+    np.testing.assert_allclose(_log(tmp_path, mass_air_flow_rate_gps=20.0, fuel_rate_gps=1.0)("fuel").power_w,
+                               1e-3 * g["lhv_j_per_kg"])
+    from sumo_drvpw.data.powertrain import measured_fuel_power
+
+    log = _log(tmp_path, mass_air_flow_rate_gps=20.0)("fuel").log
+    with pytest.raises(UserError, match="'mass_air_flow_rate_gps' is an air flow, and a diesel engine's fuel"):
+        measured_fuel_power(log, fuel="diesel")
+
+
+def test_cli_calibrates_a_conventional_engine_from_its_air_flow(tmp_path, capsys):
+    """A petrol car's OBD log with only its mass air flow and fuel trims: a planted Willans
+    line with the engine running throughout (idle 9 kW of fuel, η 0.33) is recovered by
+    calibrate --target fuel through the air-flow estimate, engine always on."""
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.data.log import from_frame
+    from sumo_drvpw.model.constants import AFR_STOICH_GASOLINE
+
+    rng = np.random.default_rng(11)
+    frames = []
+    for trip in ("T1", "T2"):
+        n = 5000
+        t = np.arange(n) * 0.2
+        v = np.clip(11 + 9 * np.sin(t / 30.0) + rng.normal(0, 0.05, n), 0, None)
+        v[:200] = 0.0
+        frames.append(pd.DataFrame({"trip_id": trip, "time_s": t, "speed_mps": v, "mass_kg": 1400.0}))
+    df = pd.concat(frames, ignore_index=True)
+    road = tmp_path / "road.toml"
+    road.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 160.0\nv3 = 0.4\n')
+    x = from_frame(df).inputs()
+    plant = EnergyChain(predicts="fuel", idle_fuel_power_w=9000.0, marginal_efficiency=0.33,
+                        engine_off_below_w=-np.inf)
+    kgps = plant.evaluate(load_equation(road).power(x), x.v)["power_w"] / FUELS["gasoline"]["lhv_j_per_kg"]
+    trim = rng.normal(0, 3, len(df))
+    df["fuel_trim_bank_1_short_term_pct"] = trim
+    df["maf_gps"] = kgps * 1000 * AFR_STOICH_GASOLINE / (1 + trim / 100)
+    log = tmp_path / "obd.csv"
+    df.to_csv(log, index=False)
+    out = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(log), "--target", "fuel", "--equation", str(road),
+                     "--out", str(out)]) == 0
+    ch = load_equation(out).chain
+    assert ch.engine_off_below_w == -np.inf
+    assert ch.marginal_efficiency == pytest.approx(0.33, rel=1e-3)
+    assert ch.idle_fuel_power_w == pytest.approx(9000.0, rel=1e-3)
+
+
 # ------------------------------------------------------------------ command line
 
 def _planted_battery_log(tmp_path):

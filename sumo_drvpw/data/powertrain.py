@@ -37,6 +37,8 @@ inertia). Both agree with the printed form at steady state.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from sumo_drvpw.model.constants import RPM
@@ -215,26 +217,91 @@ def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.
     P_fuel = ṁ·LHV with ṁ [kg/s] from ``fuel_rate_gps`` / 1000, or from a volume flow [L/h]
     × density / 3600. The fuel is ``fuel`` if given, else the vehicle file's
     ``powertrain.fuel``, else gasoline; its LHV and density are in
-    :data:`sumo_drvpw.model.constants.FUELS`.
+    :data:`sumo_drvpw.model.constants.FUELS`. A petrol car's log without a fuel flow but
+    with its mass air flow (:func:`air_flow_column`) gives an estimate: ṁ = MAF / AFR_st
+    × (1 + fuel trims) / commanded λ (:func:`fuel_from_air_flow`).
     """
     from sumo_drvpw.model.constants import FUELS
 
     df = log.df
-    col = fuel_column(df)
-    if col is None:
-        several = fuel_flow_candidates(df)
-        raise UserError(f"{log.describe()}: the fuel target needs a fuel-flow column "
-                        f"({', '.join(FUEL_COLUMNS)}, or one '…fuel…_lph' column)"
-                        + (f"; several could be: {', '.join(several)} — name the one to use "
-                           "fuel_rate_lph (import columns mapping)" if len(several) > 1 else ""))
     name = fuel or (vehicle.powertrain.get("fuel", "gasoline") if vehicle is not None else "gasoline")
     if name not in FUELS:
         raise UserError(f"fuel '{name}' is not one of {', '.join(FUELS)}")
     fp = FUELS[name]
+    col = fuel_column(df)
+    if col is None:
+        air = air_flow_column(df)
+        if air is not None and name == "gasoline":
+            kgps, how = fuel_from_air_flow(log, air)
+            return kgps * fp["lhv_j_per_kg"], how
+        several = fuel_flow_candidates(df)
+        raise UserError(f"{log.describe()}: the fuel target needs a fuel-flow column "
+                        f"({', '.join(FUEL_COLUMNS)}, or one '…fuel…_lph' column"
+                        + (", or for a petrol engine its mass air flow '…air…_gps'" if air is None else "")
+                        + ")"
+                        + (f"; several could be: {', '.join(several)} — name the one to use "
+                           "fuel_rate_lph (import columns mapping)" if len(several) > 1 else "")
+                        + (f"; '{air}' is an air flow, and a {name} engine's fuel is not its air "
+                           "over a fixed ratio (a diesel runs lean)" if air is not None else ""))
     x = df[col].to_numpy(float)
     kgps = x / 1000.0 if col == "fuel_rate_gps" else x * fp["density_kg_per_l"] / 3600.0
+    _no_negative(log, col, x)
+    return kgps * fp["lhv_j_per_kg"], f"fuel flow {col} × LHV of {name}"
+
+
+def _no_negative(log, col: str, x: np.ndarray) -> None:
     bad = np.isfinite(x) & (x < 0)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise UserError(f"{log.describe()}: column '{col}' is negative at row {i} ({x[i]!r})")
-    return kgps * fp["lhv_j_per_kg"], f"fuel flow {col} × LHV of {name}"
+
+
+def air_flow_column(df) -> str | None:
+    """An engine's mass air flow among a log's extras [g/s]: a column ending in ``_gps``
+    named for air or MAF (what the adapters make of OBD PID 0x10, e.g. Torque's
+    'Mass Air Flow Rate(g/s)', VED's 'MAF[g/sec]'); None when there is none or no single one."""
+    c = [str(n) for n in df.columns if str(n).endswith("_gps") and str(n) != "fuel_rate_gps"
+         and ("air" in str(n) or str(n).startswith("maf"))]
+    return c[0] if len(c) == 1 else None
+
+
+#: a bank's fuel trims: '…fuel_trim…bank_N…' in %, short and long term
+_TRIM = re.compile(r"(?=.*fuel_trim)(?=.*(short|long))(?=.*bank_?(\d))")
+
+
+def fuel_from_air_flow(log, air: str) -> tuple[np.ndarray, str]:
+    """A petrol engine's fuel mass flow [kg/s] from its mass air flow ``air`` [g/s], and
+    how: ṁ_f = ṁ_air / AFR_st × (1 + mean over banks of (short + long term fuel trim) / 100)
+    / λ_cmd, with AFR_st of petrol (:data:`~sumo_drvpw.model.constants.AFR_STOICH_GASOLINE`),
+    the fuel-trim columns ('…fuel_trim…short|long…bank_N…_pct'; a missing value counts 0)
+    and the commanded equivalence ratio λ_cmd ('…commanded…equivalence_ratio…' or
+    '…commanded…lambda…', used where in [0.5, 1.5], else 1) when logged. An estimate: exact
+    in closed loop; in deceleration fuel cut the injectors are off while air still flows,
+    which this books as fuel unless the log's λ_cmd says so."""
+    from sumo_drvpw.model.constants import AFR_STOICH_GASOLINE
+
+    df = log.df
+    x = df[air].to_numpy(float)
+    _no_negative(log, air, x)
+    banks: dict[str, np.ndarray] = {}
+    trims = []
+    for c in df.columns:
+        m = _TRIM.search(str(c))
+        if m and str(c).endswith("_pct"):
+            t = np.nan_to_num(df[c].to_numpy(float))
+            banks[m.group(2)] = banks.get(m.group(2), 0.0) + t
+            trims.append(str(c))
+    factor = 1.0 + (np.mean(list(banks.values()), axis=0) / 100.0 if banks else 0.0)
+    lam = [str(c) for c in df.columns if "command" in str(c)
+           and ("equivalence_ratio" in str(c) or "lambda" in str(c))]
+    how = f"ESTIMATE: fuel from the mass air flow {air} / {AFR_STOICH_GASOLINE:.2f} (stoichiometric petrol)"
+    if trims:
+        how += f" × (1 + fuel trims {', '.join(sorted(trims))})"
+    if len(lam) == 1:
+        lv = df[lam[0]].to_numpy(float)
+        lv = np.where(np.isfinite(lv) & (lv >= 0.5) & (lv <= 1.5), lv, 1.0)
+        factor = factor / lv
+        how += f" / commanded λ {lam[0]}"
+    how += " × LHV of gasoline (deceleration fuel cut reads as air: an overestimate there)"
+    return x / 1000.0 / AFR_STOICH_GASOLINE * factor, how
+

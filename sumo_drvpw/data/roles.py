@@ -35,7 +35,8 @@ NAME_RULES: tuple[tuple[str, str], ...] = (
     (r"(heater|heating|hvac|a_?c|aircon|aux|compressor|ptc)_?(power)?_(w|kw)$", "load"),
     (r"torque|(^|_)current|_a$|voltage|_v$|pedal|throttle|(^|_)soc|state_of_charge|(^|_)rpm"
      r"|_rpm$|engine_load|(^|_)load_pct|fuel|regen|(^|_)tot_|total_|cumul|odometer|counter"
-     r"|energy_(wh|kwh|j)$|_(wh|kwh)$|gear|(^|_)maf|lambda|injector|power_(w|kw)$", "response"),
+     r"|energy_(wh|kwh|j)$|_(wh|kwh)$|gear|(^|_)maf|air_flow|lambda|equivalence_ratio|injector"
+     r"|power_(w|kw)$", "response"),
 )
 
 

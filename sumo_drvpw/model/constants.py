@@ -43,3 +43,8 @@ FUELS = {
     "gasoline": {"lhv_j_per_kg": 43.2e6, "density_kg_per_l": 0.745, "co2_kg_per_kg": 3.169},
     "diesel": {"lhv_j_per_kg": 43.1e6, "density_kg_per_l": 0.832, "co2_kg_per_kg": 3.158},
 }
+#: Stoichiometric air/fuel mass ratio of E0 petrol [kg air per kg fuel], from the same carbon
+#: mass fraction 0.865 (the rest hydrogen): O₂ for C → CO₂ and H → H₂O, over the mass
+#: fraction of O₂ in dry air 0.2314: 14.59 (textbooks: 14.6–14.7). A petrol engine's
+#: mass air flow over it is its fuel flow at λ = 1.
+AFR_STOICH_GASOLINE = (0.865 / 12.011 + (1 - 0.865) / 1.008 / 4) * 31.998 / 0.2314

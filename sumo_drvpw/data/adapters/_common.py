@@ -31,11 +31,11 @@ DIMENSIONS = {
     "speed": "mps", "length": "m", "time": "s", "temperature": "c", "rotational_speed": "rpm",
     "power": "w", "force": "n", "torque": "nm", "mass": "kg", "acceleration": "mps2",
     "pressure": "kpa", "voltage": "v", "current": "a", "percent": "pct", "angle": "rad",
-    "energy": "j", "volume_flow": "lph", "density": "kgm3", "dimensionless": "",
+    "energy": "j", "volume_flow": "lph", "density": "kgm3", "mass_flow": "gps", "dimensionless": "",
 }
 
 #: unit spelling → (dimension, factor, offset): value_canonical = value · factor + offset.
-#: Canonical units: m/s, m, s, °C, rpm, W, N, N·m, kg, m/s², kPa, V, A, %, rad, J, l/h, kg/m³.
+#: Canonical units: m/s, m, s, °C, rpm, W, N, N·m, kg, m/s², kPa, V, A, %, rad, J, l/h, kg/m³, g/s.
 UNITS: dict[str, tuple[str, float, float]] = {}
 
 
@@ -94,6 +94,9 @@ _u("energy", 3.6e6, 0.0, "kwh")
 _u("volume_flow", 1.0, 0.0, "l/h", "lph", "l/hr", "l-hr")
 _u("volume_flow", GAL * 1000.0, 0.0, "gal/h", "gal-hr", "gal/hr", "gph")
 _u("density", 1.0, 0.0, "kg/m3", "kg/m^3", "kg/m³")
+_u("mass_flow", 1.0, 0.0, "g/s", "g/sec", "gps")  # a mass air flow (OBD PID 0x10 MAF, g/s)
+_u("mass_flow", 1000.0 / 3600.0, 0.0, "kg/h", "kg/hr")
+_u("mass_flow", LB * 1000.0 / 60.0, 0.0, "lb/min")
 _u("dimensionless", 1.0, 0.0, "", "-", "1", "bool", "text", ":1", "lambda", "λ")  # ratios (Torque's AFR, λ)
 
 

@@ -22,7 +22,7 @@ Mapping file::
 
 ``time_s`` and ``speed_mps`` must be mapped. Units: m/s km/h mph ft/s · m km ft mi ·
 s ms min h · °C °F K · rpm rad/s · W kW hp · N kN lbf · Nm lbf·ft · kg t lb · m/s² g ·
-kPa Pa hPa bar psi · V mV · A mA · % · rad deg · J kJ Wh kWh · l/h gal/h · "" (none).
+kPa Pa hPa bar psi · V mV · A mA · % · rad deg · J kJ Wh kWh · l/h gal/h · g/s kg/h lb/min · "" (none).
 Temperatures go to °C (``_c``), rotational speeds to rpm (``_rpm``), angles to rad
 (``_rad``) unless the name ends in ``_deg``.
 """
