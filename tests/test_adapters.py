@@ -507,3 +507,46 @@ def test_cli_real_prius(tmp_path, capsys):
     rep = read_report(out)
     assert {Path(r["file"]).name for r in rep["files"]} == {"From_CdA_Act.json", "To_CdA_Act.json"}
     assert rep["kept"] == len(df)
+
+
+def test_ved_layout_through_the_documented_mapping(tmp_path):
+    """A file with the Vehicle Energy Dataset's header (gsoh/VED README: 22 columns, one CSV
+    per week, rows of several trips, values missing where a PID was not logged) imports
+    through the mapping docs/adapters.md gives; the car logs no fuel rate (its column is
+    empty), so the fuel target is the mass-air-flow estimate with the trims."""
+    import re as _re
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.data.measured import load_measured
+    from sumo_drvpw.model.constants import AFR_STOICH_GASOLINE, FUELS
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "adapters.md").read_text(encoding="utf-8")
+    block = doc.split("### Example: the Vehicle Energy Dataset (VED)", 1)[1]
+    mapping = _re.search(r"```toml\n(.*?)```", block, _re.S).group(1)
+    (tmp_path / "ved.toml").write_text(mapping, encoding="utf-8")
+    header = ["DayNum", "VehId", "Trip", "Timestamp(ms)", "Latitude[deg]", "Longitude[deg]",
+              "Vehicle Speed[km/h]", "MAF[g/sec]", "Engine RPM[RPM]", "Absolute Load[%]", "OAT[DegC]",
+              "Fuel Rate[L/hr]", "Air Conditioning Power[kW]", "Air Conditioning Power[Watts]",
+              "Heater Power[Watts]", "HV Battery Current[A]", "HV Battery SOC[%]", "HV Battery Voltage[V]",
+              "Short Term Fuel Trim Bank 1[%]", "Short Term Fuel Trim Bank 2[%]",
+              "Long Term Fuel Trim Bank 1[%]", "Long Term Fuel Trim Bank 2[%]"]
+    rows = []
+    for trip in (706, 707):
+        for k in range(60):
+            rows.append({"DayNum": 1.2, "VehId": 8, "Trip": trip, "Timestamp(ms)": 1000 * k,
+                         "Vehicle Speed[km/h]": min(2.0 * k, 60.0), "MAF[g/sec]": 2.0 + 0.2 * k,
+                         "OAT[DegC]": 12.0, "Short Term Fuel Trim Bank 1[%]": 2.0,
+                         "Long Term Fuel Trim Bank 1[%]": -4.0, "Engine RPM[RPM]": 900 + 20 * k})
+    pd.DataFrame(rows).reindex(columns=header).to_csv(tmp_path / "VED_171101_week.csv", index=False)
+    out = tmp_path / "ved.parquet"
+    assert cli_main(["import", "columns", str(tmp_path / "VED_171101_week.csv"), "--columns",
+                     str(tmp_path / "ved.toml"), "--out", str(out)]) == 0
+    df = pd.read_parquet(out)
+    assert sorted(df["trip_id"].unique()) == ["706", "707"] and len(df) == 120
+    assert {"maf_gps", "ambient_c", "fuel_rate_lph", "short_term_fuel_trim_bank_1_pct"} <= set(df.columns)
+    df["mass_kg"] = 1500.0
+    df.to_parquet(tmp_path / "ved_mass.parquet")
+    m = load_measured([tmp_path / "ved_mass.parquet"], None, target="fuel")
+    assert m.source.startswith("ESTIMATE: fuel from the mass air flow maf_gps")
+    want = df["maf_gps"].to_numpy() / 1000 / AFR_STOICH_GASOLINE * (1 - 0.02) * FUELS["gasoline"]["lhv_j_per_kg"]
+    np.testing.assert_allclose(m.power_w, want, rtol=1e-12)

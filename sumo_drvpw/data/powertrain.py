@@ -194,8 +194,14 @@ FUEL_COLUMNS = ("fuel_rate_gps", "fuel_rate_lph")
 def fuel_flow_candidates(df) -> list[str]:
     """Extra columns that read as a fuel volume flow: named with 'fuel', ending in ``_lph``
     (what adapters make of a vendor's L/h or gal/h flow: Torque's 'Fuel flow rate/hour',
-    Car Scanner's 'Calculated instant fuel rate')."""
-    return [str(c) for c in df.columns if str(c).endswith("_lph") and "fuel" in str(c)]
+    Car Scanner's 'Calculated instant fuel rate'), with at least one value."""
+    return [str(c) for c in df.columns if str(c).endswith("_lph") and "fuel" in str(c) and _logged(df, c)]
+
+
+def _logged(df, col) -> bool:
+    """Whether column ``col`` holds any value (a file's column for a PID the car never
+    answered is empty: no fuel flow, not a fuel flow of NaN)."""
+    return bool(df[col].notna().any())
 
 
 def fuel_column(df) -> str | None:
@@ -203,7 +209,7 @@ def fuel_column(df) -> str | None:
     fuel volume flow among the extras (:func:`fuel_flow_candidates`; of several, the one
     whose name starts with 'fuel'); None when there is none or no single one."""
     for c in FUEL_COLUMNS:
-        if c in df:
+        if c in df and _logged(df, c):
             return c
     cands = fuel_flow_candidates(df)
     if len(cands) > 1:
@@ -261,7 +267,7 @@ def air_flow_column(df) -> str | None:
     named for air or MAF (what the adapters make of OBD PID 0x10, e.g. Torque's
     'Mass Air Flow Rate(g/s)', VED's 'MAF[g/sec]'); None when there is none or no single one."""
     c = [str(n) for n in df.columns if str(n).endswith("_gps") and str(n) != "fuel_rate_gps"
-         and ("air" in str(n) or str(n).startswith("maf"))]
+         and ("air" in str(n) or str(n).startswith("maf")) and _logged(df, n)]
     return c[0] if len(c) == 1 else None
 
 
@@ -287,7 +293,7 @@ def fuel_from_air_flow(log, air: str) -> tuple[np.ndarray, str]:
     trims = []
     for c in df.columns:
         m = _TRIM.search(str(c))
-        if m and str(c).endswith("_pct"):
+        if m and str(c).endswith("_pct") and _logged(df, c):  # an inline engine has one bank
             t = np.nan_to_num(df[c].to_numpy(float))
             banks[m.group(2)] = banks.get(m.group(2), 0.0) + t
             trims.append(str(c))
