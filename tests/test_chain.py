@@ -325,6 +325,8 @@ def test_fuel_target_from_a_petrol_engines_mass_air_flow(tmp_path):
     log = _log(tmp_path, mass_air_flow_rate_gps=20.0)("fuel").log
     with pytest.raises(UserError, match="'mass_air_flow_rate_gps' is an air flow, and a diesel engine's fuel"):
         measured_fuel_power(log, fuel="diesel")
+    with pytest.raises(UserError, match="several air flows: mass_air_flow_rate_gps, mass_air_flow_sensor_a_gps"):
+        _log(tmp_path, mass_air_flow_rate_gps=20.0, mass_air_flow_sensor_a_gps=20.5)("fuel")
 
 
 def test_cli_calibrates_a_conventional_engine_from_its_air_flow(tmp_path, capsys):

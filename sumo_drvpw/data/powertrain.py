@@ -241,10 +241,13 @@ def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.
             kgps, how = fuel_from_air_flow(log, air)
             return kgps * fp["lhv_j_per_kg"], how
         several = fuel_flow_candidates(df)
+        airs = air_flow_candidates(df)
         raise UserError(f"{log.describe()}: the fuel target needs a fuel-flow column "
                         f"({', '.join(FUEL_COLUMNS)}, or one '…fuel…_lph' column"
                         + (", or for a petrol engine its mass air flow '…air…_gps'" if air is None else "")
                         + ")"
+                        + (f"; several air flows: {', '.join(airs)} — map the one to use as maf_gps "
+                           "and leave the others out" if len(airs) > 1 else "")
                         + (f"; several could be: {', '.join(several)} — name the one to use "
                            "fuel_rate_lph (import columns mapping)" if len(several) > 1 else "")
                         + (f"; '{air}' is an air flow, and a {name} engine's fuel is not its air "
@@ -262,12 +265,17 @@ def _no_negative(log, col: str, x: np.ndarray) -> None:
         raise UserError(f"{log.describe()}: column '{col}' is negative at row {i} ({x[i]!r})")
 
 
+def air_flow_candidates(df) -> list[str]:
+    """Logged extras that read as an engine's mass air flow [g/s]: ending in ``_gps``, named
+    for air or MAF (what the adapters make of OBD PID 0x10, e.g. Torque's 'Mass Air Flow
+    Rate(g/s)', VED's 'MAF[g/sec]')."""
+    return [str(n) for n in df.columns if str(n).endswith("_gps") and str(n) != "fuel_rate_gps"
+            and ("air" in str(n) or str(n).startswith("maf")) and _logged(df, n)]
+
+
 def air_flow_column(df) -> str | None:
-    """An engine's mass air flow among a log's extras [g/s]: a column ending in ``_gps``
-    named for air or MAF (what the adapters make of OBD PID 0x10, e.g. Torque's
-    'Mass Air Flow Rate(g/s)', VED's 'MAF[g/sec]'); None when there is none or no single one."""
-    c = [str(n) for n in df.columns if str(n).endswith("_gps") and str(n) != "fuel_rate_gps"
-         and ("air" in str(n) or str(n).startswith("maf")) and _logged(df, n)]
+    """The one mass air flow of a log (:func:`air_flow_candidates`), or None."""
+    c = air_flow_candidates(df)
     return c[0] if len(c) == 1 else None
 
 
