@@ -1,12 +1,13 @@
-"""Petrol cars' fuel from their road load: a Willans chain calibrated on the US EPA Test Car List.
+"""Petrol and diesel cars' fuel from their road load: Willans chains calibrated on the US EPA Test Car List.
 
 Run::
 
     .venv/bin/python -m sumo_drvpw.validation.epa_fleet [REPORT.md [DATA_FOLDER]]
 
 writes the Markdown report (default ``docs/epa-fleet.md``), ``<out>.json`` beside it and the
-built-in equations ``epa_gasoline_car`` and ``epa_gasoline_light_truck``
-(``sumo_drvpw/model/builtin/equations/``). Every number is computed by the run.
+built-in equations ``epa_<fuel>_car`` and ``epa_<fuel>_light_truck`` for petrol
+(``gasoline``) and diesel (``sumo_drvpw/model/builtin/equations/``). Every number is
+computed by the run.
 
 **Data.** The Test Car List (``epa_test_car_list/*tstcar.csv``, one row per certification
 test) gives, for every tested car configuration, the road load the chassis dynamometer
@@ -28,8 +29,9 @@ E_fuel = p_L·D·T + E⁺/η, with E⁺ = Σ max(P, 0)·Δt from the term basis 
 A/(m·g), ``v2`` = B, ``aero`` = C, ``acc``) and T the test's duration, fitted by weighted
 least squares (statsmodels WLS, weight 1/E_fuel²: each test counts by its relative error).
 
-**Selection** (fixed before any fit, from the file's own columns): certification petrol
-(``Tier 2 Cert Gasoline``), measured (not analytically derived) tests, configurations with
+**Selection** (fixed before any fit, from the file's own columns), per fuel: its
+certification test fuel (:data:`TEST_FUELS`: ``Tier 2 Cert Gasoline``, ``Federal Cert
+Diesel 7-15 PPM Sulfur``), measured (not analytically derived) tests, configurations with
 a positive displacement, ETW, A and C and a road-load force > 0 up to 130 km/h; hybrids and
 plug-ins left out (a configuration with a 4-bag FTP, a charge-depleting or electricity
 test, or 'hybrid'/'plug-in' in its model name). Tests: FTP bag 2 (stabilised; UDDS
