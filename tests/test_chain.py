@@ -1071,3 +1071,19 @@ def test_fuel_calibration_finds_a_conventional_engine():
     assert fit.chain.marginal_efficiency == pytest.approx(0.36, rel=1e-6)
     assert fit.chain.idle_fuel_power_w == pytest.approx(9000.0, rel=1e-6)
     assert "always on" in fit.parameters["engine_off_below_w"]["reading"]
+
+
+def test_builtin_i3_battery_is_the_validations_deliverable():
+    """The built-in bmw_i3_battery (a bare SUMO config's electric cars) is the file the chain
+    validation writes for SUMO studies (docs/energy-chain/bmw_i3_battery.toml): the same
+    document, so the figures of docs/energy-chain-validation.md are its figures."""
+    import tomllib
+    from pathlib import Path
+
+    from sumo_drvpw.model.equations import BUILTIN_DIR
+
+    docs = Path(__file__).resolve().parents[1] / "docs" / "energy-chain" / "bmw_i3_battery.toml"
+    with open(docs, "rb") as a, open(BUILTIN_DIR / "bmw_i3_battery.toml", "rb") as b:
+        assert tomllib.load(a) == tomllib.load(b)
+    eq = load_equation("bmw_i3_battery")
+    assert eq.predicts == "battery" and "evehicle" in eq.vclasses and eq.chain.hvac["setpoint_c"] == 20.0

@@ -540,7 +540,8 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     assert set(carriers["restricted_delivery_ev"]["not_booked_by"]) == {"epa_gasoline_light_truck",
                                                                        "epa_diesel_light_truck"}
     assert carriers["car"] == {"emission_class": "HBEFA4/PC_petrol_Euro-4", "carrier": "gasoline",
-                               "from": "SUMO's default (none written)", "not_booked_by": ["epa_diesel_car"]}
+                               "from": "SUMO's default (none written)",
+                               "not_booked_by": ["epa_diesel_car", "bmw_i3_battery"]}
     # a sedan in vClass bus (for the bus lanes) is a car; a bus with a heavy-duty class a bus
     assert eqs["s"] == eqs["p"] and eqs["h"] == {"moves_transit_bus"}
     assert "vClass bus (a heavy one) only grants its lanes" in booked["lane_sedan"]["from"]
@@ -997,3 +998,31 @@ def test_chains_book_the_vehicles_of_their_energy_carrier(tmp_path, capsys):
     assert len(w) == 1 and "epa_diesel_car not for gasoline: petrol (HBEFA3/PC_G_EU4)" in w[0]
     assert "epa_diesel_car" in err
     assert load_equation("epa_diesel_car").chain.fuel == "diesel"
+
+
+def test_bare_config_books_electric_cars_in_kwh_and_petrol_cars_in_litres(tmp_path, capsys):
+    """A bare SUMO config: an evehicle (SUMO's default class Zero/default) and a car written
+    Energy/unknown are booked by the i3's battery chain and by no fuel chain; a car that
+    writes no class (SUMO's default petrol) by the petrol chain and not the battery's; the
+    battery chain's HVAC reads the default air and the run says so only because it booked."""
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    cfg = _city_config(sc, """\
+    <vType id="ev" vClass="evehicle" mass="1400"/>
+    <vType id="ev_written" vClass="passenger" mass="1400" emissionClass="Energy/unknown"/>
+    <vType id="car" vClass="passenger" mass="1400"/>
+""", [("e", "ev", WEST), ("w", "ev_written", EAST), ("c", "car", WEST)])
+    s, err = _run_summary(cfg, tmp_path / "o", capsys)
+    veh = pd.read_parquet(tmp_path / "o" / "vehicles.parquet")
+    eqs = veh.groupby("vehicle")["equation"].apply(set).to_dict()
+    wheel = {"vsp_ldv1999", "drvpw_prius3", "moves_passenger_car"}
+    assert eqs["e"] == eqs["w"] == wheel | {"bmw_i3_battery"}
+    assert eqs["c"] == wheel | {"epa_gasoline_car"}
+    cls = {(r["key"], r["equation"]) for r in s["chain"]["classes"]}
+    assert cls == {("evehicle", "bmw_i3_battery"), ("passenger", "bmw_i3_battery"),
+                   ("passenger", "epa_gasoline_car")}
+    assert s["chain"]["hvac_air_temperature_assumed"] and "no air temperature given" in err
+    # without electric cars the battery chain books nobody and nothing is said of its air
+    cfg2 = _city_config(sc, '    <vType id="car" vClass="passenger" mass="1400"/>\n', [("c", "car", WEST)])
+    s, err = _run_summary(cfg2, tmp_path / "o2", capsys)
+    assert not s["chain"]["hvac_air_temperature_assumed"] and "no air temperature" not in err

@@ -56,7 +56,7 @@ class ChainLedger:
         self.hvac_columns = {self.chains[i].hvac.get("column", "ambient_c")
                              for i in self.active if self.chains[i].hvac}
         self.air_temperature_c = float(self.signal_values.get("ambient_c", T_REF_C))
-        self.air_temperature_assumed = bool(self.hvac_columns) and "ambient_c" not in self.signal_values
+        self._hvac_active = [j for j, e in enumerate(self.active) if self.chains[e].hvac]
         self.E, self.Q = len(self.names), len(QUANTITIES)
         #: (equation, quantity) columns a chain books: battery 0–3, fuel 4–6
         self._cols = [(e, k) for e in self.active
@@ -76,6 +76,8 @@ class ChainLedger:
         self.veh_dist = np.zeros(capacity)
         self.veh_time = np.zeros(capacity)
         self._app = np.zeros((capacity, self.A), bool)
+        #: which active chain equations booked any vehicle so far
+        self.booked_any = np.zeros(self.A, bool)
         #: cumulative edge totals at interval boundaries [(time [s], (edges, E, Q))]
         self.snapshots: list[tuple[float, np.ndarray]] = []
         #: totals of vehicles flushed out of memory (Ledger.flush): class → [(E, Q), m]
@@ -97,6 +99,11 @@ class ChainLedger:
     def veh(self) -> np.ndarray:
         """Running totals per vehicle, equation and quantity, (capacity, E, Q)."""
         return self.expand(self._veh)
+
+    @property
+    def air_temperature_assumed(self) -> bool:
+        """A chain with HVAC booked a vehicle and the run gave no air temperature."""
+        return bool(self.booked_any[self._hvac_active].any()) and "ambient_c" not in self.signal_values
 
     def booked(self, name: str) -> int:
         """Column of equation ``name`` in :meth:`vehicle_dist`, :meth:`vehicle_time`, :attr:`edge_dist`."""
@@ -177,6 +184,7 @@ class ChainLedger:
         self.veh_dist[vidx] += d
         self.veh_time[vidx] += dt
         self._app[vidx] = a > 0
+        self.booked_any |= (a > 0).any(axis=0)
         eidx = np.asarray(eidx, np.int64)
         ne = self._edge.shape[0]
         w = np.ascontiguousarray(np.concatenate([q, d[:, None] * a], axis=1).T)

@@ -208,10 +208,11 @@ def main(argv=None) -> int:
         return 2
     cmd = "python -m sumo_drvpw.validation.chain" + (f" {out}" if args else "")
     dv = (res.get("bmw_i3") or {}).get("deliverable")
-    if dv:  # the i3 battery equation for SUMO studies, beside the report
-        from sumo_drvpw.model.equations import equation_from_dict, save_equation
+    if dv:  # the i3 battery equation for SUMO studies, beside the report and as a built-in
+        from sumo_drvpw.model.equations import BUILTIN_DIR, equation_from_dict, save_equation
 
         save_equation(equation_from_dict(dv["equation"]), out.parent / "energy-chain" / dv["file"])
+        save_equation(equation_from_dict(dv["equation"]), BUILTIN_DIR / dv["file"])
     write_json(out.with_suffix(".json"), plain(res))
     write_text(out, render(res, cmd))
     print(f"wrote {out}")

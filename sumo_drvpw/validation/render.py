@@ -238,6 +238,9 @@ def all_equations_section(table: dict) -> list[str]:
     for key, d in table.items():
         L += [f"### {key} ({d['n']} samples, target {d['target']}, mean mass {num(d['mass_kg_mean'], 0)} kg)", ""]
         L += _metrics_table(d["equations"])
+        if d.get("in_sample_builtins"):
+            L += ["", "Not scored here, fitted on these trips: "
+                  + ", ".join(f"`{n}`" for n in d["in_sample_builtins"]) + "."]
         L.append("")
     return L
 
