@@ -371,7 +371,8 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     vgrid = (ENGINE_ON_SPEED_GRID_MPS if engine_on_above_mps == "profile" else (engine_on_above_mps,))
     best, profile = None, []
     for off in grid:
-        for von in vgrid:
+        # an engine that never stops (off = -inf) is on at any speed: one fit, no speed threshold
+        for von in (vgrid if off > -np.inf else (None,)):
             tmpl = EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von)
             on = tmpl.engine_on(p, v).astype(float)
             x = np.column_stack([on, on * np.maximum(p, 0.0) - pb] + [on * c for c in lcols])[ok]

@@ -175,8 +175,9 @@ class ChainLedger:
             signals = self._constant_signals(len(vidx))
         q = self.step_quantities(p_drive_w, v, dt, signals)
         if app is not None:
-            q *= np.asarray(app, float)[:, self._ce]
-            a = np.asarray(app, float)[:, self.active]
+            app = np.asarray(app, float)
+            q *= app[:, self._ce]
+            a = app[:, self.active]
         else:
             a = np.ones((len(vidx), self.A))
         self._veh[vidx] += q

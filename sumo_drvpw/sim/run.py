@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.sim.vtypes import energy_carrier, equation_carrier
+from sumo_drvpw.sim.vtypes import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER,
+                                   energy_carrier, equation_carrier)
 from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, redirect_additional_outputs,
                                          sumo_output_args)
 
@@ -105,8 +106,6 @@ class VTypeResolver:
     def _default_emission_class(self, vt: str, vclass: str, written: bool = False) -> tuple[str, str]:
         """SUMO's default emissionClass for the vType (SUMO's own when it writes none and the
         run has a connection, else SUMO's default for the vClass), and where it came from."""
-        from sumo_drvpw.sim.vtypes import SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER
-
         if self.conn is not None and not written:
             try:
                 ec = self.conn.vehicletype.getEmissionClass(vt)

@@ -438,7 +438,7 @@ def render(results: dict, cmd: str, seconds: float) -> str:
          "the fuel it used. The term basis turns the schedule into wheel power; the Willans line "
          "P_fuel = p_L·D + max(P, 0)/η (engine running the whole test, idle fuel per litre of displacement D) "
          "turns that into fuel. Selection, tests and model: the module docstring.", ""]
-    for fuel, res in results.items():
+    for res in results.values():
         L += _render_fuel(res)
     L += ["## In a SUMO study", "",
           "Name the built-ins (`epa_gasoline_car`, `epa_diesel_car`, `epa_gasoline_light_truck`, "
