@@ -89,6 +89,30 @@ def test_fuel_willans_line_with_engine_off_by_hand():
     assert g["density_kg_per_l"] * g["co2_kg_per_kg"] == pytest.approx(8.887 / 3.785411784, rel=0.01)
 
 
+def test_cold_start_is_a_fixed_volume_per_start_by_hand(tmp_path):
+    """A cold start's fuel, energy and CO₂ follow from its litres through the fuel's
+    constants; the per-sample evaluation is unchanged (a cold start is per trip, not a
+    power); the key round-trips through the equation file; a battery chain has none."""
+    import dataclasses
+
+    ch = EnergyChain(predicts="fuel", idle_fuel_power_w=4_000.0, marginal_efficiency=0.35,
+                     engine_off_below_w=-np.inf, fuel="diesel", cold_start_fuel_l=0.05)
+    d = FUELS["diesel"]
+    cs = ch.cold_start()
+    assert cs["fuel_l"] == 0.05
+    assert cs["fuel_j"] == pytest.approx(0.05 * d["density_kg_per_l"] * d["lhv_j_per_kg"], rel=1e-12)
+    assert cs["co2_kg"] == pytest.approx(0.05 * d["density_kg_per_l"] * d["co2_kg_per_kg"], rel=1e-12)
+    p, v = np.array([0.0, 8_000.0, -3_000.0]), np.array([0.0, 12.0, 9.0])
+    warm = dataclasses.replace(ch, cold_start_fuel_l=0.0)
+    np.testing.assert_array_equal(ch.evaluate(p, v, 1.0)["fuel_l"], warm.evaluate(p, v, 1.0)["fuel_l"])
+    assert warm.cold_start() == {"fuel_l": 0.0, "fuel_j": 0.0, "co2_kg": 0.0}
+    assert EnergyChain(predicts="battery").cold_start()["fuel_l"] == 0.0
+    eq = equation_from_dict({"equation": {"name": "d"}, "terms": {"acc": 1.0}, "chain": ch.to_dict()})
+    save_equation(eq, tmp_path / "d.toml")
+    assert load_equation(tmp_path / "d.toml").chain == ch
+    assert "cold_start_fuel_l" not in warm.to_dict()
+
+
 def test_soc_correction_removes_a_battery_swing():
     # a trip that drained 1 MJ from the battery burnt 1 MJ·k less fuel: corrected fuel adds it back
     fuel = np.full(10, 20_000.0)
@@ -118,6 +142,9 @@ def test_chain_round_trips_through_the_equation_file(tmp_path):
     ({"traction_efficiency": 1.2}, "'traction_efficiency' must be in (0, 1]"),
     ({"recuperation_efficiency": 0.0}, "must be in (0, 1]"),
     ({"aux_power_w": -5.0}, "'aux_power_w' must be ≥ 0"),
+    ({"aux_power_w": float("inf")}, "'aux_power_w' must be ≥ 0 and finite, got inf"),
+    ({"predicts": "battery", "cold_start_fuel_l": 0.05}, "only for predicts = \"fuel\""),
+    ({"predicts": "fuel", "cold_start_fuel_l": -0.05}, "'cold_start_fuel_l' must be ≥ 0"),
     ({"loads": {"heater_power_w": -1.0}}, "loads.heater_power_w"),
     ({"fuel": "kerosene"}, "fuel must be one of"),
     ({"efficiency": 0.9}, "unknown key(s) ['efficiency']"),
@@ -493,6 +520,48 @@ def test_run_scenario_reports_battery_and_fuel_per_class(tmp_path, scenario):
     t_in = dict(zip(led.veh_ids, led.chain.vehicle_time(led.n_veh)[:, led.chain.booked("bev")]))
     np.testing.assert_allclose(bev_rows["auxiliary_kwh"], 500.0 * bev_rows["key"].map(t_in) / 3.6e6,
                                rtol=1e-9)
+
+
+def test_cold_starts_are_booked_once_per_departing_vehicle(tmp_path):
+    """A real SUMO run (city, 150 s) with and without ``cold_start``: every vehicle the fuel
+    chain books burns exactly its cold_start_fuel_l more, reported as cold_start_l; the
+    battery chain's accounts are unchanged; vehicle, edge, class and edgeData totals agree;
+    off, no cold-start column appears."""
+    pytest.importorskip("libsumo")
+    import dataclasses
+    import xml.etree.ElementTree as ET
+
+    from sumo_drvpw.sim import run_scenario
+
+    cfg = _city_sumocfg()
+    eqs = _chain_equations()
+    eqs[0].chain = dataclasses.replace(eqs[0].chain, cold_start_fuel_l=0.07)
+    path = cfg.with_suffix(".toml")
+    tabs, summ = {}, {}
+    for on in (False, True):
+        res = run_scenario(path, tmp_path / str(on), equations=eqs, end=150.0, figures=False,
+                           edgedata=True, cold_start=on)
+        summ[on] = res.summary["chain"]["cold_start"]
+        tabs[on] = {k: pd.read_csv(tmp_path / str(on) / f"chain_{k}.csv") for k in ("vehicles", "edges", "classes")}
+    fuel = {on: tabs[on]["vehicles"].query("equation == 'drvpw_prius3'").set_index("key") for on in tabs}
+    assert len(fuel[True]) > 20 and fuel[True].index.equals(fuel[False].index)
+    np.testing.assert_allclose(fuel[True]["fuel_l"] - fuel[False]["fuel_l"], 0.07, rtol=1e-9)
+    np.testing.assert_allclose(fuel[True]["cold_start_l"], 0.07, rtol=1e-12)
+    g = FUELS["gasoline"]
+    np.testing.assert_allclose(fuel[True]["co2_kg"] - fuel[False]["co2_kg"],
+                               0.07 * g["density_kg_per_l"] * g["co2_kg_per_kg"], rtol=1e-9)
+    bev = {on: tabs[on]["vehicles"].query("equation == 'bev'").reset_index(drop=True) for on in tabs}
+    pd.testing.assert_frame_equal(bev[True].drop(columns="cold_start_l"), bev[False])
+    assert "cold_start_l" not in tabs[False]["vehicles"] and bev[True]["cold_start_l"].isna().all()
+    for col in ("fuel_l", "cold_start_l"):
+        tot = [t[col].sum() for t in tabs[True].values()]
+        np.testing.assert_allclose(tot, tot[0], rtol=1e-9)
+    assert summ[True] == {**summ[True], "booked": True, "vehicles": len(fuel[True])}
+    assert summ[True]["fuel_l_per_start"] == {"drvpw_prius3": 0.07}
+    assert summ[False]["booked"] is False and summ[False]["vehicles"] == 0
+    root = ET.parse(tmp_path / "True" / "edgedata.xml").getroot()
+    xml_sum = sum(float(e.get("drvpw_prius3_cold_start_l", 0.0)) for e in root.iter("edge"))
+    assert xml_sum == pytest.approx(0.07 * len(fuel[True]), rel=1e-5)
 
 
 def test_sumo_run_chain_accounts_balance():

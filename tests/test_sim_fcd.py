@@ -65,6 +65,31 @@ def test_fcd_equals_the_live_run(live, tmp_path, name):
     assert json.loads((tmp_path / "o" / "summary.json").read_text())["source"]["fcd"]
 
 
+def test_fcd_cold_starts_only_for_vehicles_departing_in_the_replay(live, tmp_path):
+    """With cold starts on, every vehicle of the FCD gets one; replayed from a --begin
+    after the file's start, the vehicles already on the road at the first replayed step
+    get none (they did not depart), the later ones do; streamed and whole file alike."""
+    from sumo_drvpw.model.equations import load_equation
+
+    d, _ = live
+    rows = read_fcd(d / "fcd.xml.gz")
+    first = rows[~rows["person"]].groupby("id")["time"].min()
+    t0 = float(rows.loc[rows["time"] >= 100.0, "time"].min())
+    eq = load_equation("epa_gasoline_car")
+    for begin, expect in ((None, set(first.index)), (100.0, set(first[first > t0].index))):
+        for chunk in (None, 50):
+            out = tmp_path / f"{begin}_{chunk}"
+            res = process_fcd(d / "fcd.xml.gz", scenario=CITY, out_dir=out, equations=[eq], end=200,
+                              figures=False, cold_start=True, begin_s=begin, chunk_rows=chunk)
+            veh = pd.read_csv(out / "chain_vehicles.csv")
+            started = set(veh.loc[veh["cold_start_l"] > 0, "key"])
+            assert started == expect and len(expect) > 10
+            assert res.summary["chain"]["cold_start"]["vehicles"] == len(expect)
+            np.testing.assert_allclose(veh.loc[veh["cold_start_l"] > 0, "cold_start_l"],
+                                       eq.chain.cold_start_fuel_l)
+    assert 0 < len(first[first > t0]) < len(first)
+
+
 def test_fcd_formats_read_alike(live, tmp_path):
     """XML and SUMO's tabular CSV carry the same rows; a missing column is named."""
     d, _ = live

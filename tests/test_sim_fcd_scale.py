@@ -209,8 +209,8 @@ def test_fcd_on_dask_equals_local(fcd, tmp_path, capsys):
     """`fcd --engine dask --workers 2 --buckets 3`: three vehicle buckets on a local
     2-worker cluster book per-vehicle, per-edge and per-class tables and the summary's
     energies equal to the local engine's (1e-9 relative: only the order of additions
-    differs); with a battery chain (its vehicle, edge and class tables and summary too) and
-    edgeData intervals of 50 s."""
+    differs); with a battery chain and a fuel chain booking cold starts (their vehicle, edge
+    and class tables and summary too) and edgeData intervals of 50 s."""
     pytest.importorskip("distributed")
     from sumo_drvpw.cli import main as cli_main
     from sumo_drvpw.sim.fcd_dask import BUCKET_DIR, bucket_of
@@ -218,8 +218,10 @@ def test_fcd_on_dask_equals_local(fcd, tmp_path, capsys):
     (tmp_path / "bev.toml").write_text(BEV, encoding="utf-8")
     base = ["fcd", str(fcd / "fcd.xml.gz"), "--scenario", str(CITY), "--end", "200",
             "--equation", str(tmp_path / "bev.toml"), "--equation", "vsp_ldv1999",
-            "--period", "50", "--no-figures"]
+            "--equation", "epa_gasoline_car", "--cold-start", "--period", "50", "--no-figures"]
     assert cli_main(base + ["--out", str(tmp_path / "local")]) == 0
+    out = capsys.readouterr().out
+    assert "epa_gasoline_car fuel, passenger: " in out and "(cold starts " in out
     assert cli_main(base + ["--engine", "dask", "--workers", "2", "--buckets", "3",
                             "--out", str(tmp_path / "dask")]) == 0
     a, b = tmp_path / "local", tmp_path / "dask"
@@ -242,6 +244,7 @@ def test_fcd_on_dask_equals_local(fcd, tmp_path, capsys):
         _numbers_equal(x.sort_values(key).reset_index(drop=True),
                        y.sort_values(key).reset_index(drop=True))
     assert sb["chain"].keys() == sa["chain"].keys() and sa["chain"]
+    assert sb["chain"]["cold_start"]["vehicles"] == sa["chain"]["cold_start"]["vehicles"] == sa["vehicles"]
     la, lb = _leaves(sa["chain"]), _leaves(sb["chain"])
     assert la.keys() == lb.keys() and len(la) > 4
     for k, x in la.items():

@@ -33,6 +33,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--begin", type=sumo_time_arg, help="ignore timesteps before this [s, or h:m:s]")
     parser.add_argument("--end", type=sumo_time_arg, help="stop at this simulation time [s, or h:m:s]")
     parser.add_argument("--period", type=float, metavar="S", help="edgeData interval [s]")
+    parser.add_argument("--cold-start", action="store_true",
+                        help="every vehicle departing in the FCD starts a cold engine: fuel chains add their "
+                             "cold_start_fuel_l at its departure (the scenario's [vehicles] cold_start; "
+                             "default: trips start warm)")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     add_engine_arguments(parser, ("local", "dask"),
                          "local: stream the FCD on this machine in bounded memory (default); "
@@ -70,6 +74,8 @@ def main(args: argparse.Namespace) -> int:
         overrides["period"] = args.period
     if args.no_figures:
         overrides["figures"] = False
+    if args.cold_start:
+        overrides["cold_start"] = True
     with output_set(args, args.out, [args.fcd, args.net, args.scenario, args.vtypes]) as tmp:
         if args.engine == "dask":
             from sumo_drvpw.sim.fcd_dask import process_fcd_dask

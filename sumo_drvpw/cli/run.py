@@ -41,6 +41,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="air temperature [°C], replacing the scenario's [air] (ρ from it at the "
                              "scenario's pressure, else 101.325 kPa); the equations' cold terms and "
                              "the energy chains' HVAC read it")
+    parser.add_argument("--cold-start", action="store_true",
+                        help="every vehicle departing during the run starts a cold engine: fuel chains add their "
+                             "cold_start_fuel_l at its departure (the scenario's [vehicles] cold_start; "
+                             "default: trips start warm)")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_engine_arguments(parser, ("local", "dask"),
@@ -61,6 +65,8 @@ def _overrides(args) -> dict:
         if not math.isfinite(t) or t <= -273.15:
             raise UserError(f"--air-temperature {t}: a finite temperature above absolute zero (°C)")
         o["air_temperature_c"] = t
+    if getattr(args, "cold_start", False):
+        o["cold_start"] = True
     if args.equation:
         o["equations"] = args.equation
     if args.traci or args.gui:
@@ -116,7 +122,8 @@ def _print_summary(s: dict, out, label: str = "") -> None:
         if not r.get("distance_km"):
             continue
         if "fuel_l" in r:
-            print(f"  {r['equation']} fuel, {r['key']}: {r['fuel_l']:.2f} L, "
+            cold = f" (cold starts {r['cold_start_l']:.2f} L)" if "cold_start_l" in r else ""
+            print(f"  {r['equation']} fuel, {r['key']}: {r['fuel_l']:.2f} L{cold}, "
                   f"{r['fuel_l_per_100km']:.2f} L/100 km, CO₂ {r['co2_kg']:.1f} kg")
         else:
             print(f"  {r['equation']} battery, {r['key']}: net {r['net_kwh']:.2f} kWh "

@@ -7,8 +7,14 @@ step) and is booked in quantities a user pays for::
 
     traction_j, recuperated_j (≤ 0), auxiliary_j, net_j    battery chains [J]
     fuel_j (LHV), fuel_l [L], co2_kg [kg]                    fuel chains
+    cold_start_l [L]                                         fuel chains: the part of fuel_l
+                                                             that cold starts took
 
 Auxiliary power accrues at every step a vehicle is in the network, standing or driving.
+With ``cold_start`` (the scenario's ``[vehicles] cold_start``) a fuel chain's
+``cold_start_fuel_l`` is booked once per vehicle that departs while the run accounts, at
+its first booked step (its departure edge); vehicles already on the road when accounting
+starts (a user's TraCI script attaching mid-run) get none.
 Vehicles' running totals take one
 scatter-add per step; edges take one ``np.add.at`` per step; class totals are sums of
 the vehicle totals, so vehicle, edge and class totals agree by construction (tests check
@@ -25,7 +31,10 @@ from sumo_drvpw.model.chain import EnergyChain
 from sumo_drvpw.model.constants import T_REF_C
 
 #: Quantities booked per vehicle/edge and equation, in this order (units in the names).
-QUANTITIES = ("traction_j", "recuperated_j", "auxiliary_j", "net_j", "fuel_j", "fuel_l", "co2_kg")
+QUANTITIES = ("traction_j", "recuperated_j", "auxiliary_j", "net_j", "fuel_j", "fuel_l", "co2_kg",
+              "cold_start_l")
+#: quantity columns a fuel chain books (QUANTITIES indices), and a battery chain
+FUEL_COLS, BATTERY_COLS = (4, 5, 6, 7), (0, 1, 2, 3)
 KWH = 3.6e6
 
 
@@ -37,10 +46,11 @@ class ChainLedger:
     names : equation names, in the order of the driving powers given to :meth:`book`
     chains : each equation's chain, or None (that equation books nothing here)
     n_edges : number of edges
+    cold_start : book each fuel chain's cold start at a vehicle's departure (:meth:`start`)
     """
 
     def __init__(self, names: list[str], chains: list[EnergyChain | None], n_edges: int,
-                 capacity: int = 1024, signal_values: dict | None = None):
+                 capacity: int = 1024, signal_values: dict | None = None, cold_start: bool = False):
         #: constant values of the chains' signals (loads, ambient temperature) in SUMO,
         #: which has no such columns; a load not given is taken as 0 and listed in
         #: :attr:`assumed_zero` (a logged heater or A/C load then adds nothing)
@@ -58,9 +68,9 @@ class ChainLedger:
         self.air_temperature_c = float(self.signal_values.get("ambient_c", T_REF_C))
         self._hvac_active = [j for j, e in enumerate(self.active) if self.chains[e].hvac]
         self.E, self.Q = len(self.names), len(QUANTITIES)
-        #: (equation, quantity) columns a chain books: battery 0–3, fuel 4–6
+        #: (equation, quantity) columns a chain books: battery 0–3, fuel 4–7
         self._cols = [(e, k) for e in self.active
-                      for k in ((4, 5, 6) if self.chains[e].predicts == "fuel" else (0, 1, 2, 3))]
+                      for k in (FUEL_COLS if self.chains[e].predicts == "fuel" else BATTERY_COLS)]
         self._ce = np.array([e for e, _ in self._cols], np.int64)
         self._ck = np.array([k for _, k in self._cols], np.int64)
         # compact storage: only the booked columns, (rows, C); veh/edge expand on read
@@ -82,6 +92,17 @@ class ChainLedger:
         self.snapshots: list[tuple[float, np.ndarray]] = []
         #: totals of vehicles flushed out of memory (Ledger.flush): class → [(E, Q), m]
         self.flushed_class: dict[str, list] = {}
+        #: cold starts are booked (the run says trips start cold)
+        self.cold_start = bool(cold_start)
+        #: one cold start's quantities per booked column, (C,)
+        self._cs = np.zeros(len(self._cols))
+        for j, (e, k) in enumerate(self._cols):
+            cs = self.chains[e].cold_start()
+            self._cs[j] = {4: cs["fuel_j"], 5: cs["fuel_l"], 6: cs["co2_kg"], 7: cs["fuel_l"]}.get(k, 0.0)
+        #: vehicle rows that departed and whose cold start is not booked yet
+        self._starting = np.zeros(capacity, bool)
+        #: vehicles whose departure was booked as a cold start (by any chain that has one)
+        self.cold_starts = 0
 
     @property
     def signals(self) -> set[str]:
@@ -135,6 +156,17 @@ class ChainLedger:
         self.veh_dist = np.concatenate([self.veh_dist, np.zeros(new - cap)])
         self.veh_time = np.concatenate([self.veh_time, np.zeros(new - cap)])
         self._app = np.concatenate([self._app, np.zeros((new - cap, self.A), bool)])
+        self._starting = np.concatenate([self._starting, np.zeros(new - cap, bool)])
+
+    def start(self, vidx) -> None:
+        """Vehicle rows ``vidx`` departed this step: with :attr:`cold_start`, their next
+        booked step books each fuel chain's cold start (nothing otherwise)."""
+        if not self.cold_start or not self._cs.any():
+            return
+        vidx = np.asarray(vidx, np.int64)
+        if vidx.size:
+            self._grow(int(vidx.max()) + 1)
+            self._starting[vidx] = True
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
                         signals: dict | None = None) -> np.ndarray:
@@ -150,15 +182,16 @@ class ChainLedger:
         """
         p = np.asarray(p_drive_w, float)
         n = p.shape[0]
-        q = np.empty((n, len(self._cols)))
+        q = np.zeros((n, len(self._cols)))
         j = 0
         for e in self.active:
             ch = self.chains[e]
             out = ch.evaluate(p[:, e], v, dt, signals)
-            keys = (("power_j", "fuel_l", "co2_kg") if ch.predicts == "fuel" else
+            keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
                     ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
             for key in keys:
-                q[:, j] = out[key]
+                if key is not None:  # cold_start_l: booked at departures only (book)
+                    q[:, j] = out[key]
                 j += 1
         return q
 
@@ -174,6 +207,14 @@ class ChainLedger:
         if signals is None:
             signals = self._constant_signals(len(vidx))
         q = self.step_quantities(p_drive_w, v, dt, signals)
+        if self.cold_start:
+            s = self._starting[vidx]
+            if s.any():
+                q[s] += self._cs
+                self._starting[vidx[s]] = False
+                a_cs = np.ones(int(s.sum()), bool) if app is None else \
+                    (np.asarray(app, float)[s][:, self._ce] * (self._cs > 0) > 0).any(axis=1)
+                self.cold_starts += int(a_cs.sum())
         if app is not None:
             app = np.asarray(app, float)
             q *= app[:, self._ce]
@@ -211,6 +252,8 @@ class ChainLedger:
             n = self.names[e]
             if self.chains[e].predicts == "fuel":
                 out += [f'{n}_fuel_l="{q[e, 5]:.6f}"', f'{n}_co2_kg="{q[e, 6]:.6f}"']
+                if self.cold_start:
+                    out.append(f'{n}_cold_start_l="{q[e, 7]:.6f}"')
             else:
                 out += [f'{n}_battery_{k}_kwh="{q[e, j] / KWH:.6f}"'
                         for j, k in enumerate(("traction", "recuperated", "auxiliary", "net"))]
@@ -255,7 +298,7 @@ class ChainLedger:
         """Move vehicles ``keep`` (slots, ascending) to the front, empty the rest up to ``n``."""
         self._grow(n)
         m = len(keep)
-        for arr in (self._veh, self.veh_dist, self.veh_time, self._app):
+        for arr in (self._veh, self.veh_dist, self.veh_time, self._app, self._starting):
             arr[:m] = arr[keep]
             arr[m:n] = 0.0
 
@@ -287,6 +330,8 @@ class ChainLedger:
                 r = {"key": k, "equation": self.names[e], "distance_km": km}
                 if self.chains[e].predicts == "fuel":
                     r.update(fuel_l=t[5], co2_kg=t[6], fuel_kwh=t[4] / KWH)
+                    if self.cold_start:
+                        r["cold_start_l"] = t[7]
                     r["fuel_l_per_100km"] = 100.0 * t[5] / km if km > 0 else np.nan
                     r["co2_g_per_km"] = 1000.0 * t[6] / km if km > 0 else np.nan
                 else:
@@ -320,12 +365,14 @@ class ChainLedger:
                                       cdist, list(cls))}
 
 
-def chain_ledger(equations, n_edges: int, signal_values: dict | None = None) -> ChainLedger | None:
+def chain_ledger(equations, n_edges: int, signal_values: dict | None = None,
+                 cold_start: bool = False) -> ChainLedger | None:
     """A :class:`ChainLedger` for the equations that carry a battery or fuel chain, or None."""
     chains = [getattr(e, "chain", None) for e in equations]
     if not any(c is not None and c.predicts != "wheel" for c in chains):
         return None
-    return ChainLedger([e.name for e in equations], chains, n_edges, signal_values=signal_values)
+    return ChainLedger([e.name for e in equations], chains, n_edges, signal_values=signal_values,
+                       cold_start=cold_start)
 
 
 def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str],
@@ -333,9 +380,21 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
     """Per vehicle class and equation: battery kWh (traction, recuperated, auxiliary, net)
     and kWh/km, or fuel L, L/100 km and CO₂ kg, g/km; plus the run's totals."""
     rep = chain.report(veh_ids, veh_classes, [], class_order)
+    per_start = {chain.names[e]: chain.chains[e].cold_start_fuel_l for e in chain.active
+                 if chain.chains[e].predicts == "fuel"}
     return {"classes": rep["classes"],
             "quantities": "battery: traction/recuperated/auxiliary/net kWh (auxiliary accrues "
-                          "while standing); fuel: litres (LHV, density of the chain's fuel), CO2 kg",
+                          "while standing); fuel: litres (LHV, density of the chain's fuel), CO2 kg"
+                          + ("; cold_start_l: the part of the litres that cold starts took"
+                             if chain.cold_start else ""),
+            "cold_start": {"booked": chain.cold_start, "vehicles": chain.cold_starts,
+                           "fuel_l_per_start": per_start,
+                           "rule": "the chain's cold_start_fuel_l once per vehicle departing during "
+                                   "the run, at its departure edge ([vehicles] cold_start, or the run command's cold-start option)"
+                                   if chain.cold_start else
+                                   "not booked: every trip taken as starting warm (through traffic, "
+                                   "or engines already warm); [vehicles] cold_start = true or "
+                                   "the run command's cold-start option books it"} if per_start else None,
             "signals_assumed_zero": sorted(chain.assumed_zero),
             "signal_values": chain.signal_values,
             "hvac_air_temperature_c": chain.air_temperature_c if chain.hvac_columns else None,

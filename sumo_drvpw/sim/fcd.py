@@ -148,11 +148,12 @@ def _join(pieces: list[dict]) -> dict:
                                for p in pieces]) for k in keys}
 
 
-def timesteps(blocks, begin_s: float | None = None, keep=None, label=""):
+def timesteps(blocks, begin_s: float | None = None, keep=None, label="", info: dict | None = None):
     """Whole timesteps (:class:`_Step`) from blocks (:func:`iter_fcd_blocks`), in time
     order: the rows of a timestep cut by a block boundary are joined first. ``keep``:
     optional function ids → boolean mask of the rows to keep (every timestep is still
-    given, empty or not). UserError when a time comes before the one before it."""
+    given, empty or not). UserError when a time comes before the one before it. ``info``:
+    ``info["skipped"]`` is set True when a timestep before ``begin_s`` was left out."""
     pending: _Step | None = None
     pieces: list[dict] = []
     last = -np.inf
@@ -180,6 +181,8 @@ def timesteps(blocks, begin_s: float | None = None, keep=None, label=""):
         for u, a, b in zip(blk.times, lo, hi):
             u = float(u)
             if begin_s is not None and u < begin_s - 1e-9:
+                if info is not None:
+                    info["skipped"] = True
                 continue
             if pending is not None and u == pending.t:
                 pieces.append(_cut(cols, a, b))
@@ -349,8 +352,10 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
             times = df.attrs["times"]
             df = df[keep(df["id"].to_numpy(object)) | df["person"].to_numpy(bool)].copy()
             df.attrs["times"] = times
+        replay_info = {}
         if begin_s is not None:
             times = df.attrs["times"]
+            replay_info["skipped"] = bool((times < begin_s - 1e-9).any())
             df = df[df["time"] >= begin_s - 1e-9].copy()
             df.attrs["times"] = times[times >= begin_s - 1e-9]
         replay = FcdReplay(df, dt=sc.step_length)
@@ -358,8 +363,9 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
             n = int(np.searchsorted(replay.times + replay.dt, sc.end + 1e-9, side="right"))
             replay.times, replay._rows = replay.times[:n], replay._rows[:n]
     else:
+        replay_info = {}
         steps = timesteps(parked.mark(iter_fcd_blocks(fcd_file, chunk_rows)), begin_s, keep,
-                          fcd_file)
+                          fcd_file, replay_info)
         replay = FcdStream(steps, dt=sc.step_length, end_s=sc.end, label=fcd_file)
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
@@ -368,6 +374,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                      spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,
                      keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles, net=net)
     replay.type_mass = {vt: i.mass_kg for vt, i in acc.file_vtypes.items() if i.mass_kg}
+    acc.stepper.replay_info = replay_info  # a --begin after the file's start: no cold starts then
     replay.count_persons = count_persons
     try:
         info = step_until(replay, acc.stepper, end=None, progress=False, period=sc.period)

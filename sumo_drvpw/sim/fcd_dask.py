@@ -102,6 +102,7 @@ def merge_ledgers(ledgers: list):
             a._edge = a._edge + b._edge
             a.edge_dist = a.edge_dist + b.edge_dist
             a.booked_any = a.booked_any | b.booked_any
+            a.cold_starts += b.cold_starts
             a.snapshots = [(s[0], s[1] + o[1]) for s, o in zip(a.snapshots, b.snapshots)]
             for c, (q, m) in b.flushed_class.items():
                 acc = a.flushed_class.setdefault(c, [np.zeros((a.E, a.Q)), np.zeros(a.A)])

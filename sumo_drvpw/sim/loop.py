@@ -43,6 +43,8 @@ class Physics:
     #: ambient air temperature [°C] given to the equations (``cold`` factor) and the
     #: chains (HVAC) as the signal ``ambient_c``; None: unknown (``cold`` = 0, reference)
     ambient_c: float | None = None
+    #: fuel chains book their cold start at each vehicle's departure (sim/chain.py)
+    cold_start: bool = False
     slope_tol: float = 0.01
     #: "getslope": compare the robust slope with SUMO's getSlope (one more getter per
     #: vehicle); "geometry": with the same front-to-back slope taken from the lane shape
@@ -170,7 +172,8 @@ class Stepper:
 
             ledger.chain = chain_ledger(
                 eqset.equations, ledger.n_edges,
-                None if physics.ambient_c is None else {"ambient_c": physics.ambient_c})
+                None if physics.ambient_c is None else {"ambient_c": physics.ambient_c},
+                cold_start=physics.cold_start)
         self.physics, self.resolve, self.trace = physics, resolve, trace
         self.use_subscriptions = use_subscriptions
         self.dt = float(conn.simulation.getDeltaT())
@@ -219,6 +222,9 @@ class Stepper:
         #: ``simulationStep(t)`` jumping several steps) are counted in ``missed_steps``
         self.last_t: float | None = None
         self.missed_steps = 0
+        #: an FCD replay that starts after the file's first timestep sets ``skipped``: the
+        #: vehicles of its first step were on the road already, not departing (cold starts)
+        self.replay_info: dict = {}
         #: persons (pedestrians, also riding) are never booked; a resolver with
         #: ``skip_person`` counts them by vClass and vType (one more call per step)
         self.count_persons = (hasattr(resolve, "skip_person") and hasattr(conn, "person")
@@ -370,15 +376,19 @@ class Stepper:
                     self.flush()
                     vmap = self.vmap
         departed = conn.simulation.getDepartedIDList()
+        starts = []  # vehicles seen for the first time as departing: trips that start
         for vid in departed:
             if vid not in vmap:
-                self.register(vid)
+                starts.append(self.register(vid))
             else:  # an id used again (e.g. vehicle.add): its state starts afresh
                 ledger.veh_lane[vmap[vid]] = -2
                 ledger.veh_prev_speed[vmap[vid]] = np.nan
                 ledger.veh_load[vmap[vid]] = 0.0
                 ledger.veh_parked[vmap[vid]] = False
                 ledger.unretire(vmap[vid])
+        if starts and ledger.chain is not None and ledger.chain.cold_start \
+                and not (ledger.steps == 1 and self.replay_info.get("skipped")):
+            ledger.chain.start(starts)
         if self.riders and (self.any_load or conn.person.getIDCount()):
             self.update_loads(departed)
             self.update_loads(self.stop_ending())

@@ -93,7 +93,7 @@ _SCHEMA: dict[str, set[str] | None] = {
     "equations": None,
     "sumo": {"config", "net", "routes", "additional", "begin", "end", "step_length",
              "connection", "gui", "options", "acceleration", "positions"},
-    "vehicles": {"vtypes", "default_masses", "transportable_mass", "default_carrier"},
+    "vehicles": {"vtypes", "default_masses", "transportable_mass", "default_carrier", "cold_start"},
     "vtypes": None,  # table of vType id → {mass_kg, equations}
     "vclasses": None,  # table of SUMO vClass → {mass_kg, equations}
     "wind": {"speed_mps", "from_deg", "heading"},
@@ -108,7 +108,7 @@ _VTYPE_KEYS = {"mass_kg", "equations"}
 OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
              "trace", "edgedata", "figures", "progress", "difference", "acceleration",
              "slope_reference", "wind_heading", "positions", "period", "sumo_device",
-             "air_temperature_c"}
+             "air_temperature_c", "cold_start"}
 
 
 #: the equations of a scenario given as a bare SUMO config (``run X.sumocfg``): every motor
@@ -196,6 +196,9 @@ class Scenario:
     #: alternatives. Default: on for the plug-in's own equations (a bare SUMO config), off
     #: for equations a user chose. A written emissionClass always decides.
     default_carrier: bool = False
+    #: every vehicle departing during the run starts a cold engine: fuel chains book their
+    #: ``cold_start_fuel_l`` at its departure (off: trips start warm, e.g. through traffic)
+    cold_start: bool = False
     #: persons riding in a vehicle add their vTypes' masses while they ride, as in SUMO's
     #: emission models (EnergyParams::getTotalMass)
     transportable_mass: bool = True
@@ -559,6 +562,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         default_masses=_bool(veh.get("default_masses", True), where, "vehicles.default_masses"),
         default_carrier=_bool(veh.get("default_carrier", names == list(CONFIG_EQUATIONS)), where,
                               "vehicles.default_carrier"),
+        cold_start=_bool(overrides.get("cold_start", veh.get("cold_start", False)), where,
+                         "vehicles.cold_start"),
         transportable_mass=_bool(veh.get("transportable_mass", True), where,
                                  "vehicles.transportable_mass"),
         wind_speed=ws, wind_from_deg=wd, rho=rho, air_temperature_c=t_air,

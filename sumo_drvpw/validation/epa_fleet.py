@@ -393,6 +393,7 @@ def builtin_equation(cls: str, res: dict) -> dict:
             "marginal_efficiency": round(p["eta"], 4),
             "idle_fuel_power_w": round(p["p_idle_w_per_l"] * dfl["displacement_l"], 1),
             "engine_off_below_w": -np.inf, "aux_power_w": 0.0, "fuel": fuel,
+            "cold_start_fuel_l": round(cold.get("median_ml", 0.0) / 1000.0, 4),
             "reading": {
                 "marginal_efficiency": "fuel → wheels at the margin (Willans slope, transmission included)",
                 "idle_fuel_power_w": (f"{p['p_idle_w_per_l']:.0f} W of fuel per litre of displacement × the "
@@ -402,14 +403,17 @@ def builtin_equation(cls: str, res: dict) -> dict:
                 "engine_off_below_w": "-inf: a conventional engine runs the whole trip (idles at stops)",
                 "aux_power_w": ("0: certification tests run without A/C; add the car's auxiliary draw "
                                 "(W at the engine output) for real-world fuel"),
+                "cold_start_fuel_l": (f"extra fuel of one cold start: FTP bag 1 − bag 3 of the same test, median "
+                                      f"of {cold.get('configurations', 0)} configurations (IQR "
+                                      f"{cold.get('q25_ml', float('nan')):.0f}–{cold.get('q75_ml', float('nan')):.0f} mL), "
+                                      "at the test's 20–30 °C (colder starts take more); booked in SUMO only "
+                                      "where the run says trips start cold ([vehicles] cold_start)"),
             },
             "provenance": {
                 "held_out": (f"model year {hold['test_years'][0]} predicted by the fit on "
                              f"{', '.join(map(str, hold['train_years']))}: fuel per test mean |error| "
                              f"{own['all']['mean_abs']:.1%} with each car's road load and displacement, "
                              f"{dd['all']['mean_abs']:.1%} with this class default (the car's ETW as mass)"),
-                "cold_start_ml": round(cold.get("median_ml", float("nan")), 1),
-                "cold_start_note": "extra fuel of a cold start (FTP bag 1 − bag 3, median); not in the chain",
                 "etw_kg_median": round(dfl["etw_kg"], 1), "displacement_l_median": dfl["displacement_l"],
                 "road_load_a_n_per_kg": dfl["a_n_per_kg"], "road_load_b_n_per_mps": dfl["b_n_per_mps"],
                 "road_load_c_n_per_mps2": dfl["c_n_per_mps2"],
@@ -447,7 +451,9 @@ def render(results: dict, cmd: str, seconds: float) -> str:
           "config runs them all. Each vehicle is booked by the chain of the fuel its vType's emissionClass "
           "names (SUMO's default for a car is petrol, for a van, truck or bus diesel; "
           "[scenario.md](scenario.md)); the run reports litres and CO₂ per vehicle, edge and class, the mass "
-          "from the vType. What they leave out: the cold start (column above; add it per trip), the A/C and "
+          "from the vType. The cold start (column above, the chains' `cold_start_fuel_l`) is booked at each "
+          "vehicle's departure only where the run says trips start cold (`[vehicles] cold_start`, or the run command's "
+          "cold-start option: a study of trips from home, not of through traffic). What they leave out: the A/C and "
           "other auxiliaries (certification runs without them: `aux_power_w` is 0), and stop-start (the engine "
           "idles at every stop). Hybrids and heavy vehicles are not in these data.", ""]
     return "\n".join(L)
