@@ -167,6 +167,10 @@ def test_missing_column_is_one_line(tmp_path):
                         str(tmp_path)], capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
     assert not (tmp_path / "r.md").exists()
+    # a file that is no CSV (binary bytes, an unterminated quote): one line naming it
+    (tmp_path / "epa_test_car_list" / "20tstcar.csv").write_bytes(b'Model Year,"Test\n2020,\xff\xfe')
+    with pytest.raises(UserError, match=r"20tstcar.csv: not a readable CSV file"):
+        ef.read_lists(tmp_path / "epa_test_car_list")
 
 
 @pytest.mark.skipif(not (SHARED / "epa_test_car_list").is_dir(), reason="shared data not present")
@@ -190,6 +194,8 @@ def test_builtins_are_what_the_study_writes_on_the_shared_lists(fuel):
         assert eq.chain.marginal_efficiency == pytest.approx(doc["chain"]["marginal_efficiency"])
         assert eq.chain.idle_fuel_power_w == pytest.approx(doc["chain"]["idle_fuel_power_w"])
         assert eq.chain.engine_off_below_w == -np.inf and eq.predicts == "fuel"
+        assert eq.chain.cold_start_fuel_l == pytest.approx(res["cold_start"][cls]["median_ml"] / 1000, abs=1e-4)
+        assert 0.02 < eq.chain.cold_start_fuel_l < 0.2  # tens of mL per start
 
 
 def test_sumo_run_books_idle_fuel_while_standing(tmp_path):

@@ -117,7 +117,10 @@ def read_lists(folder: Path) -> pd.DataFrame:
             "Target Coef B (lbf/mph)": "b_lbf_per_mph", "Target Coef C (lbf/mph**2)": "c_lbf_per_mph2"}
     parts = []
     for f in files:
-        d = pd.read_csv(f, encoding="utf-8-sig", low_memory=False)  # MY2019's file ends lines in CR
+        try:  # MY2019's file ends lines in CR
+            d = pd.read_csv(f, encoding="utf-8-sig", low_memory=False)
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as e:
+            raise UserError(f"{f}: not a readable CSV file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
         d.columns = [str(c).strip() for c in d.columns]
         missing = [c for c in cols if c not in d.columns]
         if missing:
