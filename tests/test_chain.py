@@ -111,6 +111,13 @@ def test_cold_start_is_a_fixed_volume_per_start_by_hand(tmp_path):
     save_equation(eq, tmp_path / "d.toml")
     assert load_equation(tmp_path / "d.toml").chain == ch
     assert "cold_start_fuel_l" not in warm.to_dict()
+    # colder: V_ref + s·(T_ref − T); warmer than the reference: V_ref
+    cold = dataclasses.replace(ch, cold_start_fuel_l_per_k=0.003, cold_start_ref_c=23.9)
+    assert cold.cold_start(-6.1)["fuel_l"] == pytest.approx(0.05 + 0.003 * 30.0, rel=1e-12)
+    assert cold.cold_start(30.0)["fuel_l"] == cold.cold_start(None)["fuel_l"] == 0.05
+    assert cold.cold_start(-6.1)["fuel_j"] == pytest.approx(0.14 * d["density_kg_per_l"] * d["lhv_j_per_kg"])
+    eq = equation_from_dict({"equation": {"name": "c"}, "terms": {"acc": 1.0}, "chain": cold.to_dict()})
+    assert eq.chain == cold and cold.to_dict()["cold_start_ref_c"] == 23.9
 
 
 def test_soc_correction_removes_a_battery_swing():
@@ -145,6 +152,8 @@ def test_chain_round_trips_through_the_equation_file(tmp_path):
     ({"aux_power_w": float("inf")}, "'aux_power_w' must be ≥ 0 and finite, got inf"),
     ({"predicts": "battery", "cold_start_fuel_l": 0.05}, "only for predicts = \"fuel\""),
     ({"predicts": "fuel", "cold_start_fuel_l": -0.05}, "'cold_start_fuel_l' must be ≥ 0"),
+    ({"predicts": "fuel", "cold_start_fuel_l_per_k": -1e-3}, "'cold_start_fuel_l_per_k' must be ≥ 0"),
+    ({"predicts": "fuel", "cold_start_ref_c": 297.0}, "'cold_start_ref_c' must be an air temperature"),
     ({"loads": {"heater_power_w": -1.0}}, "loads.heater_power_w"),
     ({"fuel": "kerosene"}, "fuel must be one of"),
     ({"efficiency": 0.9}, "unknown key(s) ['efficiency']"),
@@ -562,6 +571,14 @@ def test_cold_starts_are_booked_once_per_departing_vehicle(tmp_path):
     root = ET.parse(tmp_path / "True" / "edgedata.xml").getroot()
     xml_sum = sum(float(e.get("drvpw_prius3_cold_start_l", 0.0)) for e in root.iter("edge"))
     assert xml_sum == pytest.approx(0.07 * len(fuel[True]), rel=1e-5)
+    # in the cold: the run's air temperature sets each start's litres (V_ref + s·(T_ref − T))
+    eqs[0].chain = dataclasses.replace(eqs[0].chain, cold_start_fuel_l_per_k=0.003, cold_start_ref_c=23.9)
+    res = run_scenario(path, tmp_path / "cold", equations=eqs, end=150.0, figures=False, edgedata=False,
+                       cold_start=True, air_temperature_c=-6.1)
+    veh = pd.read_csv(tmp_path / "cold" / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
+    np.testing.assert_allclose(veh["cold_start_l"], 0.07 + 0.003 * 30.0, rtol=1e-12)
+    assert res.summary["chain"]["cold_start"]["fuel_l_per_start"]["drvpw_prius3"] == pytest.approx(0.16)
+    assert not any("no air temperature" in w for w in res.summary["warnings"])
 
 
 def test_sumo_run_chain_accounts_balance():

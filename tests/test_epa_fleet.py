@@ -88,7 +88,11 @@ def _write_lists(folder: Path, speeds: dict, n: int = 40, seed: int = 1) -> list
             rows.append(base | {"Test Procedure Description": "HWFE", "RND_ADJ_FE": _mpg(speeds["hwfet"], *car)})
             if i % 3 == 0:
                 rows.append(base | {"Test Procedure Description": "US06", "RND_ADJ_FE": _mpg(speeds["us06"], *car)})
-            cars.append({"year": year, "type": typ, "car": car})
+            if typ == "Car" and i < 30:  # the FTP at −6.7 °C on winter fuel: bag 1 at half the economy
+                rows.append(base | {"Test Procedure Description": "Cold CO", "RND_ADJ_FE": stab * 0.9,
+                                    "Test Fuel Type Description": "Cold CO Regular (Tier 2)",
+                                    "FE Bag 1": hot * 0.5, "FE Bag 2": stab * 0.9, "FE Bag 3": hot * 0.95})
+            cars.append({"year": year, "type": typ, "car": car, "name": f"M{i}"})
         hyb = dict(rows[0]) | {"Represented Test Veh Model": "Hybrid thing", "Test Vehicle ID": f"H{year}"}
         rows.append(hyb | {"FE Bag 4": 50.0, "FE Bag 2": 60.0, "FE Bag 3": 55.0, "FE Bag 1": 45.0})
         rows.append(dict(rows[1]) | {"Test Vehicle ID": f"H{year}", "Represented Test Veh Model": "Hybrid thing",
@@ -133,6 +137,30 @@ def test_cold_start_excess_by_hand(planted):
     ex = [(_litres(speeds["ftp_bag3"], *c["car"])[0] / 0.8 - _litres(speeds["ftp_bag3"], *c["car"])[0]) * 1000
           for c in cars if c["type"] == "Car"]
     assert res["cold_start"]["car"]["median_ml"] == pytest.approx(np.median(ex), rel=1e-6)
+
+
+def test_cold_start_in_the_cold_by_hand(planted):
+    """Cold CO rows planted for 30 cars (bag 1 at 0.5, bag 2 at 0.9, bag 3 at 0.95 of the
+    warm economies): the cold start at −6.7 °C, its difference to the FTP's, the slope per
+    kelvin and the bag-2 ratio, by hand; the built-in carries the slope (≥ 20 pairs); no
+    Cold CO row for the light trucks: none paired, no slope."""
+    root, res, cars = planted
+    speeds = ef.schedules(root / "cycles")
+    paired = [c for c in cars if c["type"] == "Car"]
+    paired = [c for c in paired if int(c["name"][1:]) < 30]
+    l3 = np.array([_litres(speeds["ftp_bag3"], *c["car"])[0] for c in paired])
+    cold, warm = (l3 / 0.5 - l3 / 0.95) * 1000, (l3 / 0.8 - l3) * 1000
+    cc = res["cold_start_cold"]["car"]
+    assert cc["configurations"] == len(paired) == 30
+    assert cc["cold_ml"] == pytest.approx(np.median(cold), rel=1e-6)
+    assert cc["warm_ml"] == pytest.approx(np.median(warm), rel=1e-6)
+    assert cc["difference_ml"] == pytest.approx(np.median(cold - warm), rel=1e-6)
+    assert cc["ml_per_k"] == pytest.approx(np.median(cold - warm) / (ef.FTP_AIR_C - ef.COLD_CO_AIR_C), rel=1e-6)
+    assert cc["bag2_ratio"] == pytest.approx(1 / 0.9, rel=1e-6)
+    ch = res["equations"]["car"]["chain"]
+    assert ch["cold_start_fuel_l_per_k"] == pytest.approx(cc["ml_per_k"] / 1000, abs=1e-6)
+    assert "light_truck" not in res["cold_start_cold"]
+    assert res["equations"]["light_truck"]["chain"]["cold_start_fuel_l_per_k"] == 0.0
 
 
 def test_class_default_is_the_median_car(planted):
@@ -196,6 +224,13 @@ def test_builtins_are_what_the_study_writes_on_the_shared_lists(fuel):
         assert eq.chain.engine_off_below_w == -np.inf and eq.predicts == "fuel"
         assert eq.chain.cold_start_fuel_l == pytest.approx(res["cold_start"][cls]["median_ml"] / 1000, abs=1e-4)
         assert 0.02 < eq.chain.cold_start_fuel_l < 0.2  # tens of mL per start
+        cc = res["cold_start_cold"].get(cls, {})
+        if cc.get("configurations", 0) >= ef.MIN_COLD_PAIRS:  # petrol: cars and light trucks
+            assert eq.chain.cold_start_fuel_l_per_k == pytest.approx(cc["ml_per_k"] / 1000, abs=1e-6)
+            assert 0.5e-3 < eq.chain.cold_start_fuel_l_per_k < 20e-3  # a cold start doubles or triples by −7 °C
+            assert eq.chain.cold_start_ref_c == ef.FTP_AIR_C
+        else:
+            assert eq.chain.cold_start_fuel_l_per_k == 0.0
 
 
 def test_sumo_run_books_idle_fuel_while_standing(tmp_path):

@@ -69,6 +69,7 @@ def test_fcd_cold_starts_only_for_vehicles_departing_in_the_replay(live, tmp_pat
     """With cold starts on, every vehicle of the FCD gets one; replayed from a --begin
     after the file's start, the vehicles already on the road at the first replayed step
     get none (they did not depart), the later ones do; streamed and whole file alike."""
+    from sumo_drvpw.model.constants import T_REF_C
     from sumo_drvpw.model.equations import load_equation
 
     d, _ = live
@@ -85,8 +86,8 @@ def test_fcd_cold_starts_only_for_vehicles_departing_in_the_replay(live, tmp_pat
             started = set(veh.loc[veh["cold_start_l"] > 0, "key"])
             assert started == expect and len(expect) > 10
             assert res.summary["chain"]["cold_start"]["vehicles"] == len(expect)
-            np.testing.assert_allclose(veh.loc[veh["cold_start_l"] > 0, "cold_start_l"],
-                                       eq.chain.cold_start_fuel_l)
+            np.testing.assert_allclose(veh.loc[veh["cold_start_l"] > 0, "cold_start_l"],  # no air
+                                       eq.chain.cold_start(T_REF_C)["fuel_l"])  # temperature: 20 °C
     assert 0 < len(first[first > t0]) < len(first)
 
 

@@ -48,10 +48,16 @@ with ``idle_fuel_power_w`` (P_idle,fuel ≥ 0), ``marginal_efficiency`` (η_m, (
 idling at stops), optional ``engine_on_above_mps`` (v_on) and ``fuel``
 (a key of :data:`sumo_drvpw.model.constants.FUELS`). ``cold_start_fuel_l`` (≥ 0, default 0)
 is the extra fuel of one start of a cold engine [L] (warm-up enrichment, catalyst
-heating, cold oil): a per-trip quantity, not a power, booked once at a trip's start
-where the trip is known to start cold — in SUMO at a vehicle's departure when the run
-says so (``[vehicles] cold_start``); a log does not say whether its engine started
-cold, so calibration and log comparisons leave it out (:meth:`EnergyChain.cold_start`).
+heating, cold oil) at the air temperature ``cold_start_ref_c`` (default 23.9 °C, the
+FTP's 75 °F), plus ``cold_start_fuel_l_per_k`` (≥ 0) for every kelvin colder::
+
+    V_cold(T) = V_ref + s · max(T_ref − T, 0)      [L per start]
+
+a per-trip quantity, not a power, booked once at a trip's start where the trip is known
+to start cold — in SUMO at a vehicle's departure when the run says so (``[vehicles]
+cold_start``), at the run's air temperature; a log does not say whether its engine
+started cold, so calibration and log comparisons leave it out
+(:meth:`EnergyChain.cold_start`).
 Measured fuel is corrected for
 the hybrid battery's energy change before it is compared (``battery_to_fuel``: fuel
 energy per unit of battery energy, default 1/η_m; see :func:`corrected_fuel_power`).
@@ -76,7 +82,7 @@ PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
         "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
         "engine_off_below_w", "engine_on_above_mps", "fuel", "battery_to_fuel",
-        "cold_start_fuel_l", "std_err", "reading", "provenance", "metrics")
+        "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "std_err", "reading", "provenance", "metrics")
 HVAC_KEYS = ("column", "setpoint_c", "heating_w_per_k", "cooling_w_per_k")
 
 
@@ -188,6 +194,8 @@ class EnergyChain:
     fuel: str = "gasoline"
     battery_to_fuel: float | None = None
     cold_start_fuel_l: float = 0.0
+    cold_start_fuel_l_per_k: float = 0.0
+    cold_start_ref_c: float = 23.9
     std_err: dict = field(default_factory=dict)
     reading: dict = field(default_factory=dict)
     provenance: dict = field(default_factory=dict)
@@ -318,14 +326,18 @@ class EnergyChain:
         return {"engine_on": on, "engine_w": np.where(on, eng, 0.0), "power_w": pf,
                 "fuel_lps": kgps / fp["density_kg_per_l"], "co2_kgps": kgps * fp["co2_kg_per_kg"]}
 
-    def cold_start(self) -> dict:
-        """The extra fuel of one cold start: ``fuel_l`` [L], ``fuel_j`` [J, LHV],
-        ``co2_kg`` [kg] (all 0 for a chain that is not a fuel chain or has none)."""
-        if self.predicts != "fuel" or not self.cold_start_fuel_l:
+    def cold_start(self, air_c: float | None = None) -> dict:
+        """The extra fuel of one cold start at air temperature ``air_c`` [°C] (None: the
+        reference ``cold_start_ref_c``): ``fuel_l`` [L], ``fuel_j`` [J, LHV], ``co2_kg``
+        [kg] (all 0 for a chain that is not a fuel chain or has none)."""
+        if self.predicts != "fuel" or not (self.cold_start_fuel_l or self.cold_start_fuel_l_per_k):
             return {"fuel_l": 0.0, "fuel_j": 0.0, "co2_kg": 0.0}
+        litres = self.cold_start_fuel_l
+        if air_c is not None and np.isfinite(air_c):
+            litres += self.cold_start_fuel_l_per_k * max(self.cold_start_ref_c - float(air_c), 0.0)
         fp = self.fuel_props
-        kg = self.cold_start_fuel_l * fp["density_kg_per_l"]
-        return {"fuel_l": float(self.cold_start_fuel_l), "fuel_j": kg * fp["lhv_j_per_kg"],
+        kg = litres * fp["density_kg_per_l"]
+        return {"fuel_l": float(litres), "fuel_j": kg * fp["lhv_j_per_kg"],
                 "co2_kg": kg * fp["co2_kg_per_kg"]}
 
     @property
@@ -361,8 +373,11 @@ class EnergyChain:
                 d["engine_on_above_mps"] = float(self.engine_on_above_mps)
             if self.battery_to_fuel is not None:
                 d["battery_to_fuel"] = float(self.battery_to_fuel)
-            if self.cold_start_fuel_l:
+            if self.cold_start_fuel_l or self.cold_start_fuel_l_per_k:
                 d["cold_start_fuel_l"] = float(self.cold_start_fuel_l)
+            if self.cold_start_fuel_l_per_k:
+                d.update(cold_start_fuel_l_per_k=float(self.cold_start_fuel_l_per_k),
+                         cold_start_ref_c=float(self.cold_start_ref_c))
         for k in ("std_err", "reading", "provenance", "metrics"):
             if getattr(self, k):
                 d[k] = getattr(self, k)
@@ -412,12 +427,18 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
             raise UserError(f"{where} [chain]: 'engine_off_below_w' must be a number below +inf "
                             f"(-inf: the engine never stops), got {doc['engine_off_below_w']!r}")
     for k in ("recuperation_limit_w", "aux_power_w", "idle_fuel_power_w",
-              "engine_on_above_mps", "battery_to_fuel", "cold_start_fuel_l"):
+              "engine_on_above_mps", "battery_to_fuel", "cold_start_fuel_l", "cold_start_fuel_l_per_k"):
         if k in doc:
             kw[k] = _nonneg(doc[k], k, where, inf=k in ("recuperation_limit_w", "engine_on_above_mps"))
-    if kw.get("cold_start_fuel_l") and pred != "fuel":
-        raise UserError(f"{where} [chain]: 'cold_start_fuel_l' is the fuel of a cold start: only for "
-                        f"predicts = \"fuel\", got predicts = {pred!r}")
+    if "cold_start_ref_c" in doc:
+        kw["cold_start_ref_c"] = _number(doc["cold_start_ref_c"], "cold_start_ref_c", where)
+        if not -60.0 <= kw["cold_start_ref_c"] <= 60.0:
+            raise UserError(f"{where} [chain]: 'cold_start_ref_c' must be an air temperature in "
+                            f"-60 … 60 °C, got {doc['cold_start_ref_c']!r}")
+    for k in ("cold_start_fuel_l", "cold_start_fuel_l_per_k"):
+        if kw.get(k) and pred != "fuel":
+            raise UserError(f"{where} [chain]: '{k}' is the fuel of a cold start: only for "
+                            f"predicts = \"fuel\", got predicts = {pred!r}")
     loads = doc.get("loads", {})
     if not isinstance(loads, dict):
         raise UserError(f"{where} [chain.loads]: must be a table column → gain")

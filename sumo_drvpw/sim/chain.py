@@ -94,10 +94,10 @@ class ChainLedger:
         self.flushed_class: dict[str, list] = {}
         #: cold starts are booked (the run says trips start cold)
         self.cold_start = bool(cold_start)
-        #: one cold start's quantities per booked column, (C,)
+        #: one cold start's quantities per booked column at the run's air temperature, (C,)
         self._cs = np.zeros(len(self._cols))
         for j, (e, k) in enumerate(self._cols):
-            cs = self.chains[e].cold_start()
+            cs = self.chains[e].cold_start(self.air_temperature_c)
             self._cs[j] = {4: cs["fuel_j"], 5: cs["fuel_l"], 6: cs["co2_kg"], 7: cs["fuel_l"]}.get(k, 0.0)
         #: vehicle rows that departed and whose cold start is not booked yet
         self._starting = np.zeros(capacity, bool)
@@ -123,8 +123,13 @@ class ChainLedger:
 
     @property
     def air_temperature_assumed(self) -> bool:
-        """A chain with HVAC booked a vehicle and the run gave no air temperature."""
-        return bool(self.booked_any[self._hvac_active].any()) and "ambient_c" not in self.signal_values
+        """A chain with HVAC, or a booked cold start that depends on the temperature, booked
+        a vehicle and the run gave no air temperature."""
+        if "ambient_c" in self.signal_values:
+            return False
+        cold = [j for j, e in enumerate(self.active)
+                if self.cold_start and self.chains[e].predicts == "fuel" and self.chains[e].cold_start_fuel_l_per_k]
+        return bool(self.booked_any[self._hvac_active + cold].any())
 
     def booked(self, name: str) -> int:
         """Column of equation ``name`` in :meth:`vehicle_dist`, :meth:`vehicle_time`, :attr:`edge_dist`."""
@@ -380,15 +385,15 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
     """Per vehicle class and equation: battery kWh (traction, recuperated, auxiliary, net)
     and kWh/km, or fuel L, L/100 km and CO₂ kg, g/km; plus the run's totals."""
     rep = chain.report(veh_ids, veh_classes, [], class_order)
-    per_start = {chain.names[e]: chain.chains[e].cold_start_fuel_l for e in chain.active
-                 if chain.chains[e].predicts == "fuel"}
+    per_start = {chain.names[e]: chain.chains[e].cold_start(chain.air_temperature_c)["fuel_l"]
+                 for e in chain.active if chain.chains[e].predicts == "fuel"}
     return {"classes": rep["classes"],
             "quantities": "battery: traction/recuperated/auxiliary/net kWh (auxiliary accrues "
                           "while standing); fuel: litres (LHV, density of the chain's fuel), CO2 kg"
                           + ("; cold_start_l: the part of the litres that cold starts took"
                              if chain.cold_start else ""),
             "cold_start": {"booked": chain.cold_start, "vehicles": chain.cold_starts,
-                           "fuel_l_per_start": per_start,
+                           "fuel_l_per_start": per_start, "air_temperature_c": chain.air_temperature_c,
                            "rule": "the chain's cold_start_fuel_l once per vehicle departing during "
                                    "the run, at its departure edge ([vehicles] cold_start, or the run command's cold-start option)"
                                    if chain.cold_start else
@@ -407,7 +412,7 @@ def chain_warnings(chain: ChainLedger | None) -> list[str]:
         return []
     out = []
     if chain.air_temperature_assumed:
-        out.append(f"no air temperature given: the energy chains' HVAC read {T_REF_C:g} °C (the "
+        out.append(f"no air temperature given: the energy chains' HVAC and cold starts read {T_REF_C:g} °C (the "
                    "default air, as the air density and the cold terms do); give the season's "
                    "air temperature (the scenario's [air] temperature_c, or the run command's "
                    "air-temperature option)")

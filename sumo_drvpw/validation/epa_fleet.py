@@ -36,8 +36,15 @@ a positive displacement, ETW, A and C and a road-load force > 0 up to 130 km/h; 
 plug-ins left out (a configuration with a 4-bag FTP, a charge-depleting or electricity
 test, or 'hybrid'/'plug-in' in its model name). Tests: FTP bag 2 (stabilised; UDDS
 505–1369 s) and bag 3 (hot start; UDDS 0–505 s), HWFET, US06. Bag 1 (cold start) is not
-on the Willans line; its excess over bag 3 — the same schedule, hot — is reported as the
-fuel of a cold start. SC03 (A/C on) and cold-CO tests are left out.
+on the Willans line; its excess over bag 3 — the same schedule, hot — is the fuel of a
+cold start. The Cold CO test (the FTP at 20 °F, −6.7 °C; winter-grade test fuels) of the
+same configurations gives the cold start in the cold: the chains' temperature slope is the
+median over configurations tested both ways of (excess at −6.7 °C − excess on the FTP)
+/ 30.6 K, written only where at least :data:`MIN_COLD_PAIRS` configurations pair (fewer:
+reported, slope 0). Its bag 2 against the FTP's (warm running in the cold) is reported,
+not modelled; the winter-grade fuels hold a few per cent less energy per litre than the
+certification fuel, part of that ratio (litres are compared as measured). SC03 (A/C on)
+is left out.
 
 **Held out.** The newest model year is predicted by the fit on the older ones (other cars,
 later technology), and the oldest by the fit on the newer ones. The built-ins are fitted
@@ -78,6 +85,11 @@ TESTS = {"ftp_bag3": ("udds", 0, 505), "ftp_bag2": ("udds", 505, 1369),
          "hwfet": ("hwfet", 0, None), "us06": ("us06", 0, None)}
 #: the cold start: FTP bag 1 on the schedule of bag 3
 COLD = "ftp_bag1"
+#: the FTP's nominal air temperature (75 °F; 68–86 °F allowed) and the Cold CO test's (20 °F) [°C]
+FTP_AIR_C, COLD_CO_AIR_C = 23.9, -6.7
+COLD_CO = "Cold CO"
+#: configurations with both a Cold CO and an FTP test needed for a cold-start slope
+MIN_COLD_PAIRS = 20
 #: model-name words of hybrids and plug-ins
 HYBRID_WORDS = re.compile(r"\b(?:hybrid|plug-in|phev|hev|e-hybrid|energi)\b", re.I)
 #: road load must push back at every speed up to this [m/s]
@@ -328,14 +340,56 @@ def split(obs: pd.DataFrame, test_years, speeds, fuel: str = "gasoline") -> dict
             "test_configurations": int(te["config"].nunique())}
 
 
-def cold_start(obs: pd.DataFrame) -> dict:
-    """Fuel of a cold start per class: FTP bag 1 less bag 3 of the same test [mL]
-    (medians and quartiles over configurations)."""
+def _cold_excess(obs: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
+    """Per configuration: the cold start (bag 1 − bag 3 of the same test, median over its
+    tests) [mL], and its EPA vehicle type."""
     o = obs[obs["test"].isin((COLD, "ftp_bag3"))].copy()
     o["row"] = o.groupby(["config", "test"]).cumcount()
     wide = o.pivot_table(index=["config", "row", "vehicle_type"], columns="test", values="fuel_l").dropna()
     ex = (wide[COLD] - wide["ftp_bag3"]).groupby(level="config").median() * 1000.0
     vt = wide.reset_index().drop_duplicates("config").set_index("config")["vehicle_type"]
+    return ex, vt
+
+
+def cold_start_in_the_cold(lists: pd.DataFrame, obs: pd.DataFrame, speeds: dict, fuel: str = "gasoline") -> dict:
+    """Per class: the cold start at −6.7 °C (Cold CO test, bag 1 − bag 3 [mL]) of the
+    configurations that also have an FTP cold start in ``obs``, the median difference,
+    its slope per kelvin between the two tests' temperatures, and the Cold CO bag 2 over
+    the FTP bag 2 (warm running in the cold); medians over paired configurations."""
+    c = lists[lists["procedure"].eq(COLD_CO) & lists["derived"].eq("No")
+              & (lists[["fe_bag1", "fe_bag2", "fe_bag3"]] > 0).all(axis=1)]
+    diesel = c["fuel"].str.contains("diesel", case=False)
+    c = c[diesel if fuel == "diesel" else ~diesel]
+    v = speeds["ftp_bag3"]
+    dist = float(0.5 * (v[1:] + v[:-1]).sum())  # bags 1 and 3 (and the UDDS's bag 2 below)
+    v2 = speeds["ftp_bag2"]
+    dist2 = float(0.5 * (v2[1:] + v2[:-1]).sum())
+
+    def litres(fe, d=dist):
+        return d / MILE / fe * GALLON_L
+    cold = pd.DataFrame({"config": c["config"], "cs_ml": 1000.0 * (litres(c["fe_bag1"]) - litres(c["fe_bag3"])),
+                         "bag2_l": litres(c["fe_bag2"], dist2)}).groupby("config").median()
+    warm_cs, vt = _cold_excess(obs)
+    warm_b2 = obs[obs["test"] == "ftp_bag2"].groupby("config")["fuel_l"].median()
+    pair = cold.join(pd.DataFrame({"warm_ml": warm_cs, "warm_bag2_l": warm_b2, "vt": vt}), how="inner").dropna()
+    out = {}
+    for t, cls in CLASSES.items():
+        g = pair[pair["vt"] == t]
+        if g.empty:
+            continue
+        diff = g["cs_ml"] - g["warm_ml"]
+        out[cls] = {"configurations": int(len(g)), "cold_ml": float(g["cs_ml"].median()),
+                    "warm_ml": float(g["warm_ml"].median()), "difference_ml": float(diff.median()),
+                    "difference_q25_ml": float(diff.quantile(0.25)), "difference_q75_ml": float(diff.quantile(0.75)),
+                    "ml_per_k": float(diff.median()) / (FTP_AIR_C - COLD_CO_AIR_C),
+                    "bag2_ratio": float((g["bag2_l"] / g["warm_bag2_l"]).median())}
+    return out
+
+
+def cold_start(obs: pd.DataFrame) -> dict:
+    """Fuel of a cold start per class: FTP bag 1 less bag 3 of the same test [mL]
+    (medians and quartiles over configurations)."""
+    ex, vt = _cold_excess(obs)
     out = {}
     for t, cls in CLASSES.items():
         x = ex[vt.reindex(ex.index) == t]
@@ -363,7 +417,9 @@ def study(data: Path, fuel: str = "gasoline", lists: pd.DataFrame | None = None)
            "splits": {"newest held out": split(obs, [years[-1]], speeds, fuel),
                       "oldest held out": split(obs, [years[0]], speeds, fuel)},
            "fit_all": fit(obs), "defaults": class_defaults(obs[obs["test"].isin(TESTS)]),
-           "cold_start": cold_start(obs)}
+           "cold_start": cold_start(obs),
+           "cold_start_cold": cold_start_in_the_cold(read_lists(Path(data) / DATASET) if lists is None else lists,
+                                                     obs, speeds, fuel)}
     res["equations"] = {cls: builtin_equation(cls, res) for cls in res["defaults"] if cls in BUILTINS}
     res["seconds"] = time.perf_counter() - t0
     return res
@@ -380,6 +436,8 @@ def builtin_equation(cls: str, res: dict) -> dict:
     own, dd = hold["own_road_load"], hold["class_default_car_mass"]
     years = f"{res['years'][0]}–{res['years'][-1]}"
     cold = res["cold_start"].get(cls, {})
+    cc = res.get("cold_start_cold", {}).get(cls, {})
+    slope = cc.get("ml_per_k", 0.0) / 1000.0 if cc.get("configurations", 0) >= MIN_COLD_PAIRS else 0.0
     return {
         "equation": {
             "name": name, "vclasses": list(vclasses),
@@ -397,6 +455,7 @@ def builtin_equation(cls: str, res: dict) -> dict:
             "idle_fuel_power_w": round(p["p_idle_w_per_l"] * dfl["displacement_l"], 1),
             "engine_off_below_w": -np.inf, "aux_power_w": 0.0, "fuel": fuel,
             "cold_start_fuel_l": round(cold.get("median_ml", 0.0) / 1000.0, 4),
+            "cold_start_fuel_l_per_k": round(max(slope, 0.0), 6), "cold_start_ref_c": FTP_AIR_C,
             "reading": {
                 "marginal_efficiency": "fuel → wheels at the margin (Willans slope, transmission included)",
                 "idle_fuel_power_w": (f"{p['p_idle_w_per_l']:.0f} W of fuel per litre of displacement × the "
@@ -409,8 +468,16 @@ def builtin_equation(cls: str, res: dict) -> dict:
                 "cold_start_fuel_l": (f"extra fuel of one cold start: FTP bag 1 − bag 3 of the same test, median "
                                       f"of {cold.get('configurations', 0)} configurations (IQR "
                                       f"{cold.get('q25_ml', float('nan')):.0f}–{cold.get('q75_ml', float('nan')):.0f} mL), "
-                                      "at the test's 20–30 °C (colder starts take more); booked in SUMO only "
+                                      f"at the FTP's {FTP_AIR_C} °C; booked in SUMO only "
                                       "where the run says trips start cold ([vehicles] cold_start)"),
+                "cold_start_fuel_l_per_k": (
+                    f"more per kelvin colder than {FTP_AIR_C} °C: the Cold CO test (FTP at {COLD_CO_AIR_C} °C) of "
+                    f"{cc.get('configurations', 0)} configurations also FTP-tested, median cold start "
+                    f"{cc.get('cold_ml', float('nan')):.0f} mL against {cc.get('warm_ml', float('nan')):.0f} mL; "
+                    "linear between the two temperatures, extrapolated below"
+                    if slope > 0 else
+                    f"0: {cc.get('configurations', 0)} configurations with a Cold CO test pair with an FTP "
+                    f"(fewer than {MIN_COLD_PAIRS}); colder starts take more, not modelled"),
             },
             "provenance": {
                 "held_out": (f"model year {hold['test_years'][0]} predicted by the fit on "
@@ -425,99 +492,6 @@ def builtin_equation(cls: str, res: dict) -> dict:
     }
 
 
-# ---------------------------------------------------------------------- report
-def _pct(x: float) -> str:
-    return f"{x:+.1%}".replace("%", " %")
-
-
-def _apct(x: float) -> str:
-    return f"{x:.1%}".replace("%", " %")
-
-
-def render(results: dict, cmd: str, seconds: float) -> str:
-    """The Markdown report of the studies ``results`` (fuel → :func:`study` result)."""
-    L = ["# Petrol and diesel cars' fuel from their road load: the EPA Test Car List", "",
-         f"Generated by `{cmd}` in {seconds:.0f} s; every number below is computed by that run. "
-         "Method: `sumo_drvpw/validation/epa_fleet.py` (module docstring); the chain: "
-         "[energy-chain.md](energy-chain.md).", "",
-         "Each certification test of the US EPA Test Car List is a standard speed schedule driven on a "
-         "chassis dynamometer set to the car's road load (A + B·v + C·v² at its equivalent test weight), with "
-         "the fuel it used. The term basis turns the schedule into wheel power; the Willans line "
-         "P_fuel = p_L·D + max(P, 0)/η (engine running the whole test, idle fuel per litre of displacement D) "
-         "turns that into fuel. Selection, tests and model: the module docstring.", ""]
-    for res in results.values():
-        L += _render_fuel(res)
-    L += ["## In a SUMO study", "",
-          "Name the built-ins (`epa_gasoline_car`, `epa_diesel_car`, `epa_gasoline_light_truck`, "
-          "`epa_diesel_light_truck`) as equations of the run — in the scenario's `equations`, or "
-          "`vclasses.<vClass>.equations`, or as the run's equations on the command line (README); a bare SUMO "
-          "config runs them all. Each vehicle is booked by the chain of the fuel its vType's emissionClass "
-          "names (SUMO's default for a car is petrol, for a van, truck or bus diesel; "
-          "[scenario.md](scenario.md)); the run reports litres and CO₂ per vehicle, edge and class, the mass "
-          "from the vType. The cold start (column above, the chains' `cold_start_fuel_l`) is booked at each "
-          "vehicle's departure only where the run says trips start cold (`[vehicles] cold_start`, or the run command's "
-          "cold-start option: a study of trips from home, not of through traffic). What they leave out: the A/C and "
-          "other auxiliaries (certification runs without them: `aux_power_w` is 0), and stop-start (the engine "
-          "idles at every stop). Hybrids and heavy vehicles are not in these data.", ""]
-    return "\n".join(L)
-
-
-def _render_fuel(res: dict) -> list[str]:
-    """The report's section of one fuel."""
-    fuel, word = res["fuel"], FUEL_WORDS[res["fuel"]]
-    fp = FUELS[fuel]
-    f = res["fit_all"]
-    L = [f"## {word.capitalize()} ({TEST_FUELS[fuel]})", "",
-         "Model years " + ", ".join(map(str, res["years"])) + f"; {res['configurations_used']} conventional "
-         f"{word} configurations; tests used: " + ", ".join(f"{k} {v}" for k, v in res["tests_used"].items())
-         + ". Left out: " + "; ".join(f"{k} {v}" for k, v in res["counts"].items()
-                                      if k not in ("tests", "configurations"))
-         + f" (of {res['counts']['tests']} tests, {res['counts']['configurations']} configurations).", "",
-         "Fit on every model year:", "",
-         f"- η (fuel → wheels at the margin) **{f['eta']:.3f}** ± {f['eta_se']:.3f}"
-         f"{'' if ETA_PLAUSIBLE[0] <= f['eta'] <= ETA_PLAUSIBLE[1] else ' — IMPLAUSIBLE'}: "
-         "the engine's Willans slope at the crankshaft (typically about 0.4 for petrol, 0.45 for diesel; "
-         "the line's form: Rizzoni, Guzzella & Baumann 1999) times the transmission's efficiency;",
-         f"- idle fuel power **{f['p_idle_w_per_l']:.0f} W per litre** ± {f['p_idle_w_per_l_se']:.0f} "
-         f"of displacement ({f['p_idle_w_per_l'] * 3600 / (fp['lhv_j_per_kg'] * fp['density_kg_per_l']):.2f} "
-         "L/h per litre: a 2-litre engine running without output burns about twice that);",
-         f"- {f['n_tests']} tests of {f['n_configurations']} configurations.", "",
-         "Held out, other model years — fuel per test, predicted/measured − 1 (mean signed / mean |error| / "
-         "90th percentile of |error|):", "",
-         "| held out | fitted on | η | p_L [W/L] | test | with the car's road load | class default, car's ETW | class default, class ETW |",
-         "|---|---|---|---|---|---|---|---|"]
-    for name, s in res["splits"].items():
-        for t in ["all"] + list(TESTS) + list(CLASSES.values()):
-            if t not in s["own_road_load"]:
-                continue
-            cells = []
-            for k in ("own_road_load", "class_default_car_mass", "class_default"):
-                e = s[k].get(t)
-                cells.append("–" if e is None else f"{_pct(e['mean'])} / {_apct(e['mean_abs'])} / {_apct(e['p90_abs'])}")
-            head = (f"{name}: {', '.join(map(str, s['test_years']))} ({s['test_configurations']} configurations)",
-                    ", ".join(map(str, s["train_years"])), f"{s['fit']['eta']:.3f}", f"{s['fit']['p_idle_w_per_l']:.0f}") \
-                if t == "all" else ("", "", "", "")
-            L.append(f"| {' | '.join(head)} | {t} ({s['own_road_load'][t]['n']}) | {' | '.join(cells)} |")
-    L += ["", "Reading: with each car's own road load and displacement the line predicts the fuel of cars it never "
-          "saw; what is left is the engine and calibration of each car (older engines use more than a line "
-          "fitted on newer ones says, and the reverse), and the highway test's low engine speed in top gear, "
-          "which a line through the idle fuel overstates. A class default knows nothing of the car but its "
-          "class (and, in SUMO, the vType's mass): its error is the spread of the fleet, the uncertainty a SUMO "
-          "study without per-car data carries for one vehicle (a fleet's total averages much of it out).", "",
-          "Class defaults, the built-in equations:", "",
-          "| class | built-in | configurations | median ETW [kg] | A/m [N/kg] | B [N/(m/s)] | C [N/(m/s)²] | displacement [L] | idle fuel [W] | cold start [mL, median (IQR)] |",
-          "|---|---|---|---|---|---|---|---|---|---|"]
-    for cls, dfl in res["defaults"].items():
-        eq = res["equations"].get(cls)
-        cold = res["cold_start"].get(cls, {})
-        L.append(f"| {cls} | `{eq['equation']['name'] if eq else '–'}` | {dfl['configurations']} | {dfl['etw_kg']:.0f} | "
-                 f"{dfl['a_n_per_kg']:.4f} | {dfl['b_n_per_mps']:.3f} | {dfl['c_n_per_mps2']:.4f} | "
-                 f"{dfl['displacement_l']:.1f} | {f['p_idle_w_per_l'] * dfl['displacement_l']:.0f} | "
-                 f"{cold.get('median_ml', float('nan')):.0f} ({cold.get('q25_ml', float('nan')):.0f}–"
-                 f"{cold.get('q75_ml', float('nan')):.0f}) |")
-    return L + [""]
-
-
 def main(argv=None) -> int:
     """``python -m sumo_drvpw.validation.epa_fleet [REPORT.md [DATA_FOLDER]]`` (defaults
     docs/epa-fleet.md and $SUMO_DRVPW_DATA or ../shared/data): both fuels; also writes the
@@ -525,6 +499,7 @@ def main(argv=None) -> int:
     from sumo_drvpw.fileio import plain, write_json, write_text
     from sumo_drvpw.model.equations import BUILTIN_DIR, equation_from_dict, save_equation
     from sumo_drvpw.validation.data import resolve_data
+    from sumo_drvpw.validation.epa_fleet_report import render
 
     args = list(sys.argv[1:] if argv is None else argv)
     out = Path(args[0] if args else "docs/epa-fleet.md")
