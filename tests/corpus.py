@@ -189,6 +189,12 @@ _log_case("constant speed compare", lambda df: df.assign(speed_mps=15.0), ("wrot
 _log_case("tiny negative speeds", lambda df: df.assign(speed_mps=np.where(df.speed_mps < 0.05, -0.001, df.speed_mps)),
           ("clipped",), expect="accept")
 _log_case("negative speed at the noise limit", _set("speed_mps", 0, -0.1), ("clipped",), expect="accept")
+_log_case("time as timestamps parquet", lambda df: df.assign(time_s=pd.to_datetime(df.time_s, unit="s")),
+          ("time_s", "timestamps"), fmt="parquet")
+_log_case("time in milliseconds", lambda df: df.assign(time_s=df.time_s * 1000), ("time_s", "milliseconds"))
+_log_case("semicolon separated", lambda df: df.to_csv(index=False, sep=";"), ("log.csv", "semicolons"))
+_log_case("tab separated compare", lambda df: df.to_csv(index=False, sep="\t"), ("log.csv", "tabs"),
+          cmd="compare")
 
 
 @case("drive-log", "same trip id in two files", ("trip_id", "t1"))
@@ -268,6 +274,12 @@ def _eq_case(name, body, needles, head=EQ_HEAD):
 
 _eq_case("coefficient text", '[terms]\nacc = "one"\n', ("acc",))
 _eq_case("coefficient nan", "[terms]\nacc = nan\naero = 0.3\n", ("acc", "nan"))
+_eq_case("chain hvac set-point inf", '[terms]\nacc = 1.0\n[chain]\npredicts = "battery"\n[chain.hvac]\n'
+         'setpoint_c = inf\nheating_w_per_k = 100.0\n', ("setpoint_c", "inf"))
+_eq_case("chain hvac set-point absurd", '[terms]\nacc = 1.0\n[chain]\npredicts = "battery"\n[chain.hvac]\n'
+         'setpoint_c = 1e300\n', ("setpoint_c", "1e+300"))
+_eq_case("chain auxiliary power inf", '[terms]\nacc = 1.0\n[chain]\npredicts = "battery"\naux_power_w = inf\n',
+         ("aux_power_w", "inf"))
 _eq_case("coefficient inf", "[terms]\nacc = 1.0\naero = inf\n", ("aero", "inf"))
 _eq_case("coefficient -inf", "[terms]\nacc = 1.0\nroll = -inf\n", ("roll", "inf"))
 _eq_case("coefficient boolean", "[terms]\nacc = true\n", ("acc",))
@@ -477,6 +489,24 @@ def _(d):
     return ["synth", "--minutes", "1", "--out", str(d / "s.parquet")]
 
 
+@case("out-path", "export-vtype --out onto its equation file", ("eq.toml", "input"))
+def _(d):
+    eq = text(d, "eq.toml", DRVPW.read_text(encoding="utf-8"))
+    return ["export-vtype", str(eq), "--vehicle", "prius3", "--id", "p3", "--out", str(eq)]
+
+
+@case("out-path", "export-vtype --out onto its vehicle file", ("car.toml", "input"))
+def _(d):
+    v = text(d, "car.toml", PRIUS3.read_text(encoding="utf-8"))
+    return ["export-vtype", "drvpw_prius3", "--vehicle", str(v), "--id", "p3", "--out", str(v)]
+
+
+@case("out-path", "export-vtype --out is a folder", ("vt", "folder"))
+def _(d):
+    (d / "vt").mkdir()
+    return ["export-vtype", "drvpw_prius3", "--vehicle", "prius3", "--id", "p3", "--out", str(d / "vt")]
+
+
 @case("out-path", "demo --out is a file", ("note.txt", "file"))
 def _(d):
     text(d, "note.txt", "keep me")
@@ -513,6 +543,22 @@ def _(d):
 @case("options", "synth minutes nan", ("--minutes",))
 def _(d):
     return ["synth", "--minutes", "nan", "--out", str(d / "s.parquet")]
+
+
+@case("options", "synth minutes beyond a week", ("--minutes", "10080"))
+def _(d):
+    return ["synth", "--minutes", "1e7", "--out", str(d / "s.parquet")]
+
+
+@case("options", "export-vtype mass inf", ("--mass", "inf"))
+def _(d):
+    return ["export-vtype", "drvpw_prius3", "--vehicle", "prius3", "--id", "p3", "--mass", "inf",
+            "--out", str(d / "vt.add.xml")]
+
+
+@case("options", "export-vtype empty id", ("--id",))
+def _(d):
+    return ["export-vtype", "drvpw_prius3", "--vehicle", "prius3", "--id", "", "--out", str(d / "vt.add.xml")]
 
 
 @case("options", "synth trips zero", ("--trips",))

@@ -24,6 +24,15 @@ def main(args: argparse.Namespace) -> int:
     from sumo_drvpw.model.equations import load_equation
     from sumo_drvpw.sim.export import energy_vtype_xml
 
+    from pathlib import Path
+
+    from sumo_drvpw.fileio import check_output_path
+
+    check_output_path(args.out, [p for p in (args.equation, args.vehicle) if p and Path(p).exists()],
+                      kind="file")
+    if not args.id.strip() or any(c in args.id for c in '<>&"') or args.id != args.id.strip():
+        raise UserError(f"--id {args.id!r}: a vType id is a non-empty name without spaces at its ends "
+                        "or the characters < > & \"")
     eq = load_equation(args.equation)
     mass, area = args.mass, None
     if args.vehicle:
@@ -32,8 +41,8 @@ def main(args: argparse.Namespace) -> int:
         v = load_vehicle(args.vehicle)
         mass = mass if mass is not None else v.mass_kg
         area = v.body.get("frontal_area_m2")
-    if mass is not None and not mass > 0:
-        raise UserError(f"--mass must be > 0, got {mass}")
+    if mass is not None and not 0 < mass < float("inf"):
+        raise UserError(f"--mass must be a finite number > 0 [kg], got {mass}")
     xml, missing = energy_vtype_xml(eq, args.id, mass, area, args.vclass)
     write_text(args.out, xml)
     print(f"wrote vType '{args.id}' (Energy/unknown) from equation '{eq.name}' to {args.out}")

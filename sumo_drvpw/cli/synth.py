@@ -26,13 +26,22 @@ def configure(p):
                    help=f"undeclared effects to plant: {', '.join(PLANT_NAMES)} (comma list)")
 
 
+#: the longest synthetic drive one command writes [min] (a week: 4.8 M samples at 8 Hz,
+#: about a GB in memory while generated) and the most trips
+MAX_MINUTES, MAX_TRIPS = 7 * 24 * 60, 10_000
+
+
 def main(args) -> int:
     from sumo_drvpw.synth.track import SynthOptions, synthesize, write_synth
 
-    if not args.minutes > 0:
-        raise UserError(f"--minutes must be > 0, got {args.minutes}")
-    if args.trips < 1:
-        raise UserError(f"--trips must be >= 1, got {args.trips}")
+    if not 0 < args.minutes <= MAX_MINUTES:
+        raise UserError(f"--minutes must be > 0 and at most {MAX_MINUTES:g} (a week of driving per trip), "
+                        f"got {args.minutes}")
+    if not 1 <= args.trips <= MAX_TRIPS:
+        raise UserError(f"--trips must be from 1 to {MAX_TRIPS}, got {args.trips}")
+    if args.minutes * args.trips > MAX_MINUTES:
+        raise UserError(f"--minutes × --trips must be at most {MAX_MINUTES:g} minutes of driving (8 Hz: "
+                        f"{MAX_MINUTES * 480:,.0f} samples), got {args.minutes * args.trips:g}")
     if not str(args.out).lower().endswith((".parquet", ".csv")):
         raise UserError(f"--out {args.out}: give a .parquet or .csv file name")
     names = [s.strip() for s in args.plant.split(",") if s.strip()]

@@ -32,6 +32,9 @@ NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "eleva
            "mg2_speed_rpm", "mg2_torque_nm", "motor_torque_nm", "motor_speed_rpm",
            "battery_voltage_v", "battery_current_a")
 REQUIRED = ("time_s", "speed_mps")
+#: the longest median sampling step of a drive log within a trip [s]: beyond it the
+#: time is taken for milliseconds (or the log is too sparse for driving power)
+MAX_MEDIAN_STEP_S = 30.0
 FLAGS = ("brake", "reverse")
 #: Columns the reader derives; every other column is an extra signal.
 DERIVED = ("trip_id", "time_s", "speed_mps", "accel_mps2", "grade_rad", "wind_mps",
@@ -182,6 +185,23 @@ def read_error(p: Path, e: Exception) -> UserError:
     return UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}")
 
 
+def check_csv_delimiter(p: Path) -> None:
+    """UserError when a CSV's header is one field that holds ';', a tab or '|': the file is
+    separated by another character than the canonical drive log's comma."""
+    try:
+        with open(p, "rb") as fh:
+            head = fh.readline(4096).decode("utf-8-sig").rstrip("\r\n")
+    except (OSError, UnicodeDecodeError):
+        return  # the reader names it (not UTF-8: with its first offending byte)
+    if "," in head or not head:
+        return
+    for sep, name in ((";", "semicolons"), ("\t", "tabs"), ("|", "'|'")):
+        if sep in head:
+            raise UserError(f"{p}: the header {head[:60]!r} is separated by {name}; a canonical CSV "
+                            "drive log separates columns by commas (convert it, or map it with the "
+                            "import command's columns format)")
+
+
 def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
     meta = {}
     try:
@@ -194,6 +214,7 @@ def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
                     meta[k.decode()] = v.decode()
             df = table.to_pandas()
         else:
+            check_csv_delimiter(p)
             df = pd.read_csv(p, low_memory=False)
     except pd.errors.EmptyDataError:
         raise UserError(f"{p}: empty file (no header, no rows)") from None
@@ -206,6 +227,10 @@ def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
 
 def _check_numeric(df: pd.DataFrame, p: Path) -> None:
     for c in NUMERIC:
+        if c in df and (pd.api.types.is_datetime64_any_dtype(df[c]) or pd.api.types.is_timedelta64_dtype(df[c])):
+            raise UserError(f"{p}: column '{c}' holds {'timestamps' if c == 'time_s' else 'times'} "
+                            f"({df[c].dtype}), not numbers; the drive-log schema wants "
+                            f"{'seconds (e.g. since the trip start)' if c == 'time_s' else 'numbers in SI units'}")
         if c not in df or pd.api.types.is_numeric_dtype(df[c]):
             continue
         conv = pd.to_numeric(df[c], errors="coerce")
@@ -308,6 +333,12 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
         i = int(np.flatnonzero(back)[0]) + 1
         raise UserError(f"{p}: column 'time_s' does not increase within trip '{df['trip_id'].iloc[i]}' at row {i} "
                         f"({t[i - 1]:g} then {t[i]:g}); time must be strictly increasing")
+    if same.any():
+        step = float(np.median(np.diff(t)[same]))
+        if step > MAX_MEDIAN_STEP_S:
+            raise UserError(f"{p}: column 'time_s' steps by {step:g} (median within a trip), more than "
+                            f"{MAX_MEDIAN_STEP_S:g} s: is it in milliseconds? The drive-log schema wants "
+                            "seconds, and driving power needs samples seconds apart at most")
     for c, lim in (("grade_rad", GRADE_MAX_RAD), ("grade_pct", 100 * np.tan(GRADE_MAX_RAD))):
         if c in df:
             g = df[c].to_numpy(float)

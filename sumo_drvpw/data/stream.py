@@ -34,7 +34,8 @@ from typing import Iterator
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.log import DERIVED, FLAGS, NUMERIC, ReadOptions, expand_paths, from_frame, read_error
+from sumo_drvpw.data.log import (DERIVED, FLAGS, NUMERIC, ReadOptions, check_csv_delimiter, expand_paths,
+                                 from_frame, read_error)
 from sumo_drvpw.errors import UserError
 
 #: Columns the reader and measured power use; calibrate and compare read these plus the
@@ -169,6 +170,7 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
                 yield b.to_pandas()
                 del b
         else:
+            check_csv_delimiter(p)
             use = None if columns is None else (lambda c: c in columns)
             for df in pd.read_csv(p, chunksize=rows, low_memory=False, usecols=use):
                 yield df

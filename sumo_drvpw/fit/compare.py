@@ -60,8 +60,10 @@ def _r2_corr(pred: np.ndarray, meas: np.ndarray) -> float:
     if len(meas) < MIN_SAMPLES:
         return math.nan
     pc, mc = pred - pred.mean(), meas - meas.mean()
-    den = float(pc @ pc) * float(mc @ mc)
-    return float(pc @ mc) ** 2 / den if den > 0.0 else math.nan
+    with np.errstate(over="ignore", invalid="ignore"):  # absurd predictions: NaN, not an OverflowError
+        den = np.float64(pc @ pc) * np.float64(mc @ mc)
+        r2 = np.float64(pc @ mc) ** 2 / den if den > 0.0 else math.nan
+    return float(r2) if np.isfinite(r2) else math.nan
 
 
 def _rmse(err: np.ndarray) -> float:

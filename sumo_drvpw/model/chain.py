@@ -157,15 +157,19 @@ def _efficiency(val, key: str, where: str) -> Efficiency:
     return x
 
 
-def _number(val, key: str, where: str) -> float:
+def _number(val, key: str, where: str, finite: bool = True) -> float:
+    """A number (finite unless ``finite`` is False; NaN never)."""
     if isinstance(val, bool) or not isinstance(val, (int, float)):
         raise UserError(f"{where} [chain]: '{key}' must be a number, got {val!r}")
-    return float(val)
+    x = float(val)
+    if np.isnan(x) or (finite and not np.isfinite(x)):
+        raise UserError(f"{where} [chain]: '{key}' must be a finite number, got {val!r}")
+    return x
 
 
 def _nonneg(val, key: str, where: str, inf: bool = False) -> float:
     """A number ≥ 0; +inf only where ``inf`` (a limit or threshold never reached)."""
-    x = _number(val, key, where)
+    x = _number(val, key, where, finite=False)
     if not x >= 0 or (x == np.inf and not inf):
         raise UserError(f"{where} [chain]: '{key}' must be ≥ 0{'' if inf else ' and finite'}, "
                         f"got {val!r}")
@@ -422,7 +426,7 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
             raise UserError(f"{where} [chain]: aux_power_w + standstill_aux_w (auxiliary power while standing) "
                             f"must be ≥ 0, got standstill_aux_w = {doc['standstill_aux_w']!r}")
     if "engine_off_below_w" in doc:  # any number: -inf keeps a conventional engine running
-        kw["engine_off_below_w"] = _number(doc["engine_off_below_w"], "engine_off_below_w", where)
+        kw["engine_off_below_w"] = _number(doc["engine_off_below_w"], "engine_off_below_w", where, finite=False)
         if np.isnan(kw["engine_off_below_w"]) or kw["engine_off_below_w"] == np.inf:
             raise UserError(f"{where} [chain]: 'engine_off_below_w' must be a number below +inf "
                             f"(-inf: the engine never stops), got {doc['engine_off_below_w']!r}")
@@ -452,6 +456,9 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
             raise UserError(f"{where} [chain.hvac]: unknown key(s) {sorted(bad)} (known: {', '.join(HVAC_KEYS)})")
         hv = {"column": str(h.get("column", "ambient_c")),
               "setpoint_c": _number(h.get("setpoint_c", 20.0), "hvac.setpoint_c", where)}
+        if not -60.0 <= hv["setpoint_c"] <= 60.0:
+            raise UserError(f"{where} [chain.hvac]: 'setpoint_c' must be a cabin temperature in -60 … 60 °C, "
+                            f"got {h['setpoint_c']!r}")
         for k in ("heating_w_per_k", "cooling_w_per_k"):
             hv[k] = _nonneg(h.get(k, 0.0), f"hvac.{k}", where)
         kw["hvac"] = hv
