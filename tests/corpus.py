@@ -561,6 +561,22 @@ def _(d):
     return ["export-vtype", "drvpw_prius3", "--vehicle", "prius3", "--id", "", "--out", str(d / "vt.add.xml")]
 
 
+@case("options", "calibrate name not an equation name", ("--name", "a/b"))
+def _(d):
+    return _cal(write(d, "log.parquet", base_log()), d, "--name", "a/b")
+
+
+@case("options", "candidates empty", ("candidates", "''"))
+def _(d):
+    return _cal(write(d, "log.parquet", base_log()), d, "--candidates", "")
+
+
+@case("options", "diagnose min speed nan", ("--min-speed", "nan"))
+def _(d):
+    return ["diagnose", str(write(d, "log.parquet", base_log())), "--equation", "drvpw_prius3",
+            "--min-speed", "nan", "--out", str(d / "diag")]
+
+
 @case("options", "synth trips zero", ("--trips",))
 def _(d):
     return ["synth", "--trips", "0", "--out", str(d / "s.parquet")]

@@ -46,7 +46,21 @@ def configure(p):
                         "or tables over |power| (and speed), fitted on a piecewise-linear basis")
 
 
+def _check_name(args) -> None:
+    """The equation's name (``--name``, else the output file's stem) as an equation file
+    allows it: refused before any work, not by the next command that reads the file."""
+    import re
+
+    from sumo_drvpw.model.equations import NAME_PATTERN
+
+    name = args.name if args.name is not None else Path(args.out).stem
+    if not re.match(NAME_PATTERN, name):
+        raise UserError(f"{'--name' if args.name is not None else '--out'} {name!r}: an equation name "
+                        "is a letter, then letters, digits, '_', '.', '-' (at most 64 characters)")
+
+
 def main(args) -> int:
+    _check_name(args)
     if getattr(args, "target", "wheel") != "wheel":
         return main_chain(args)
     if getattr(args, "equation", None) or getattr(args, "load", None) or getattr(args, "hvac", None):
@@ -240,6 +254,9 @@ def main_chain(args) -> int:
             hvac = {"column": col, "setpoint_c": float(sp) if sp else 20.0}
         except ValueError:
             raise UserError(f"--hvac {args.hvac}: the set-point after ':' must be a number (°C)") from None
+        if not col or not -60.0 <= hvac["setpoint_c"] <= 60.0:
+            raise UserError(f"--hvac {args.hvac}: give COLUMN[:SETPOINT_C] with a cabin set-point in "
+                            "-60 … 60 °C")
     ro = read_options(args, [args.equation] if args.equation else ())
     m = load_measured(args.logs, args.vehicle, ro, target=args.target)
     note_counts(m.counts)

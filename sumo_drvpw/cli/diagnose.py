@@ -163,6 +163,7 @@ def main(args) -> int:
         msg = str(e)
         for field in ("validation", "block_s", "folds", "alpha", "min_gain", "max_findings", "max_nan"):
             msg = msg.replace(f"diagnose option {field} ", f"--{field.replace('_', '-')} ")
+        msg = msg.replace("diagnose option min_speed_mps ", "--min-speed ")
         raise UserError(msg) from None
     progress = None if args.quiet else (lambda s: print(s, file=sys.stderr))
     from sumo_drvpw.cli import output_set, read_options

@@ -287,6 +287,9 @@ def resolve_candidates(spec: str) -> tuple[str, ...]:
     """Candidate terms from a set name (indt-var-1, indt-var-2), a TOML file, or a comma list."""
     if spec in CANDIDATES:
         return CANDIDATES[spec]
+    if not spec.strip(" ,"):
+        raise UserError(f"candidates {spec!r}: give a set ({', '.join(CANDIDATES)}), a TOML file "
+                        "or a comma list of terms")
     from pathlib import Path
 
     p = Path(spec)

@@ -51,6 +51,8 @@ class DiagnoseOptions:
             raise UserError(f"diagnose option max_nan must be in [0, 1], got {self.max_nan}")
         if not 0 <= self.max_lag_s <= 30:
             raise UserError(f"diagnose option max_lag_s must be in [0, 30] s, got {self.max_lag_s}")
+        if not 0 <= self.min_speed_mps <= 50:
+            raise UserError(f"diagnose option min_speed_mps must be in [0, 50] m/s, got {self.min_speed_mps}")
 
 
 def check_validation(opt) -> None:
