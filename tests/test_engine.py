@@ -118,3 +118,19 @@ def test_unreachable_scheduler_is_a_user_error(fleet, monkeypatch):
     with pytest.raises(UserError, match="cannot reach the Dask scheduler"):
         run([fleet], partial(CalibrationStats, ("acc",)), load_vehicle("prius3"), engine="dask",
             scheduler="tcp://127.0.0.1:9")
+
+
+def test_bad_input_in_a_dask_task_is_one_line(fleet, tmp_path, capfd):
+    """A bad log read by a Dask worker comes back as the task's result, not a task failure:
+    the user sees the one line naming it, and no worker's "Compute Failed" block."""
+    df = pd.read_parquet(bundled_log())
+    df.loc[40, "time_s"] = df["time_s"].iloc[10]  # time goes back at row 40
+    bad = tmp_path / "bad.parquet"
+    df.to_parquet(bad)
+    code = cli_main(["calibrate", str(fleet), str(bad), "--vehicle", "prius3", "--engine", "dask",
+                     "--workers", "1", "--out", str(tmp_path / "eq.toml")])
+    err = capfd.readouterr().err
+    lines = [x for x in err.splitlines() if x.strip()]
+    assert code == 2 and "Compute Failed" not in err and "Traceback" not in err
+    assert [x for x in lines if "error:" in x] == lines[-1:] and "bad.parquet" in lines[-1] and "time_s" in lines[-1]
+    assert not (tmp_path / "eq.toml").exists()

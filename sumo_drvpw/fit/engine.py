@@ -256,19 +256,42 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
             cluster.close()
 
 
+class Refused:
+    """A task's UserError carried back as its result (:func:`guarded`): a bad input is the
+    user's, not a task failure, so a Dask worker logs no "Compute Failed" block for it."""
+
+    def __init__(self, message: str):
+        self.message = message
+
+
+def guarded(fn, *args, **kwargs):
+    """``fn(*args, **kwargs)``, with a UserError returned as :class:`Refused`."""
+    try:
+        return fn(*args, **kwargs)
+    except UserError as e:
+        return Refused(str(e))
+
+
+def unguarded(result):
+    """A task's result; a :class:`Refused` raises its UserError here, in the driver."""
+    if isinstance(result, Refused):
+        raise UserError(result.message)
+    return result
+
+
 def _run_dask(parts, make, vehicle, options, scheduler, workers, rows):
     with dask_client(scheduler, workers) as client:
         return _reduce_on(client, parts, make, vehicle, options, rows)
 
 
 def _reduce_on(client, parts, make, vehicle, options, rows):
-    fn = partial(_part_stats_ids, make=make, vehicle=vehicle, options=options, rows=rows)
+    fn = partial(guarded, partial(_part_stats_ids, make=make, vehicle=vehicle, options=options, rows=rows))
     futures = client.map(fn, parts, pure=False)
     bar = _progress(len(parts), "part")
     acc, seen = None, {}
     try:
         for p, f in zip(parts, futures):  # in Part order: the same sums, in the same order, as local
-            st, ids = f.result()
+            st, ids = unguarded(f.result())
             f.release()
             _check_one_file(p, ids, seen)
             acc = st if acc is None else acc.merge(st)

@@ -507,13 +507,14 @@ def run_scenarios(scenarios: list, out_dirs: list, overrides: dict | None = None
     # absolute: a worker's working folder is not ours
     paths = [str(Path(s).resolve()) for s in paths]
     outs = [str(Path(o).resolve()) for o in outs]
-    from sumo_drvpw.fit.engine import dask_client  # the cluster set-up of the log engines
+    from sumo_drvpw.fit.engine import dask_client, guarded, unguarded  # as the log engines
 
     with dask_client(scheduler, workers) as client:
-        futs = [client.submit(_sweep_task, s, o, overrides, pure=False, key=f"sumo-run-{k}-{Path(s).stem}")
+        futs = [client.submit(guarded, _sweep_task, s, o, overrides, pure=False,
+                              key=f"sumo-run-{k}-{Path(s).stem}")
                 for k, (s, o) in enumerate(zip(paths, outs))]
         out = []
         for f in futs:  # in the order given; a failed run raises its error here
-            out.append(f.result())
+            out.append(unguarded(f.result()))
             f.release()
         return out
