@@ -211,3 +211,14 @@ def test_implied_acceleration_reference():
     a = implied_acceleration(v, t, trip)
     assert len(a) > 150
     np.testing.assert_allclose(a, 2.0, rtol=1e-9)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the display check is for X11/Wayland")
+def test_gui_without_a_display_is_one_line(tmp_path, capsys, monkeypatch):
+    """`run --gui` where no display is set: one line at once, not a minute of sumo-gui's
+    'unable to open display' lines."""
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    code = cli_main(["run", "city", "--end", "30", "--gui", "--no-figures", "--out", str(tmp_path / "g")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.count("\n") == 0 and "DISPLAY" in err and not (tmp_path / "g").exists()

@@ -11,6 +11,7 @@ connection passed in), ``outputs``, ``sumo_outputs`` (SUMO's own outputs into ``
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -251,6 +252,10 @@ def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
     import sumolib
 
     _sumo_env()
+    if gui and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                         or os.environ.get("WAYLAND_DISPLAY")):
+        raise UserError("sumo.gui: no display to show sumo-gui on (DISPLAY is not set); run without "
+                        "the GUI, or where a display is")
     binary = sumolib.checkBinary("sumo-gui" if gui else "sumo")
     cmd = [binary, *args, "--no-step-log", "true"]
     if connection == "libsumo":
