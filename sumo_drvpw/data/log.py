@@ -22,8 +22,9 @@ from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.data.trips import (per_trip_rolling_mean as _per_trip_rolling_mean,  # noqa: F401
                                    trip_array as _trip_array, trip_codes_of,
                                    trip_starts as _trip_starts)
-from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_distinct_trips,  # noqa: F401
-                                       check_speed_unit, implied_acceleration)
+from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_csv_delimiter,  # noqa: F401
+                                       check_distinct_trips, check_speed_unit, check_time_step,
+                                       implied_acceleration)
 
 #: Canonical numeric columns the reader checks when present.
 NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "elevation_m",
@@ -32,9 +33,6 @@ NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "eleva
            "mg2_speed_rpm", "mg2_torque_nm", "motor_torque_nm", "motor_speed_rpm",
            "battery_voltage_v", "battery_current_a")
 REQUIRED = ("time_s", "speed_mps")
-#: the longest median sampling step of a drive log within a trip [s]: beyond it the
-#: time is taken for milliseconds (or the log is too sparse for driving power)
-MAX_MEDIAN_STEP_S = 30.0
 FLAGS = ("brake", "reverse")
 #: Columns the reader derives; every other column is an extra signal.
 DERIVED = ("trip_id", "time_s", "speed_mps", "accel_mps2", "grade_rad", "wind_mps",
@@ -185,23 +183,6 @@ def read_error(p: Path, e: Exception) -> UserError:
     return UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}")
 
 
-def check_csv_delimiter(p: Path) -> None:
-    """UserError when a CSV's header is one field that holds ';', a tab or '|': the file is
-    separated by another character than the canonical drive log's comma."""
-    try:
-        with open(p, "rb") as fh:
-            head = fh.readline(4096).decode("utf-8-sig").rstrip("\r\n")
-    except (OSError, UnicodeDecodeError):
-        return  # the reader names it (not UTF-8: with its first offending byte)
-    if "," in head or not head:
-        return
-    for sep, name in ((";", "semicolons"), ("\t", "tabs"), ("|", "'|'")):
-        if sep in head:
-            raise UserError(f"{p}: the header {head[:60]!r} is separated by {name}; a canonical CSV "
-                            "drive log separates columns by commas (convert it, or map it with the "
-                            "import command's columns format)")
-
-
 def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
     meta = {}
     try:
@@ -228,9 +209,8 @@ def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
 def _check_numeric(df: pd.DataFrame, p: Path) -> None:
     for c in NUMERIC:
         if c in df and (pd.api.types.is_datetime64_any_dtype(df[c]) or pd.api.types.is_timedelta64_dtype(df[c])):
-            raise UserError(f"{p}: column '{c}' holds {'timestamps' if c == 'time_s' else 'times'} "
-                            f"({df[c].dtype}), not numbers; the drive-log schema wants "
-                            f"{'seconds (e.g. since the trip start)' if c == 'time_s' else 'numbers in SI units'}")
+            raise UserError(f"{p}: column '{c}' holds timestamps ({df[c].dtype}), not numbers; the "
+                            "drive-log schema wants numbers in SI units (time_s: seconds, e.g. since the trip start)")
         if c not in df or pd.api.types.is_numeric_dtype(df[c]):
             continue
         conv = pd.to_numeric(df[c], errors="coerce")
@@ -333,12 +313,7 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
         i = int(np.flatnonzero(back)[0]) + 1
         raise UserError(f"{p}: column 'time_s' does not increase within trip '{df['trip_id'].iloc[i]}' at row {i} "
                         f"({t[i - 1]:g} then {t[i]:g}); time must be strictly increasing")
-    if same.any():
-        step = float(np.median(np.diff(t)[same]))
-        if step > MAX_MEDIAN_STEP_S:
-            raise UserError(f"{p}: column 'time_s' steps by {step:g} (median within a trip), more than "
-                            f"{MAX_MEDIAN_STEP_S:g} s: is it in milliseconds? The drive-log schema wants "
-                            "seconds, and driving power needs samples seconds apart at most")
+    check_time_step(t, same, p)
     for c, lim in (("grade_rad", GRADE_MAX_RAD), ("grade_pct", 100 * np.tan(GRADE_MAX_RAD))):
         if c in df:
             g = df[c].to_numpy(float)

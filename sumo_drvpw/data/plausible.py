@@ -15,6 +15,9 @@ from sumo_drvpw.errors import UserError
 #: real logs stay below 3.2 (BMW i3 trips 2.2 overall, 3.1 in the liveliest trip; Prius
 #: Gen-2 OBD 1.7; JLU dynamometer cycles 1.5); the same speeds in km/h give 3.6× that.
 KMH_SUSPECT_ACCEL_MPS2 = 4.5
+#: the longest median sampling step of a drive log within a trip [s]: beyond it the
+#: time is taken for milliseconds (or the log is too sparse for driving power)
+MAX_MEDIAN_STEP_S = 30.0
 
 
 def implied_acceleration(v: np.ndarray, t: np.ndarray, trip: np.ndarray, horizon_s: float = 1.0) -> np.ndarray:
@@ -122,3 +125,31 @@ def _check_header(p: Path) -> None:
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise UserError(f"{p}: column '{dup[0]}' appears twice; give each column once")
+
+
+def check_csv_delimiter(p: Path) -> None:
+    """UserError when a CSV's header is one field that holds ';', a tab or '|': the file is
+    separated by another character than the canonical drive log's comma."""
+    try:
+        with open(p, "rb") as fh:
+            head = fh.readline(4096).decode("utf-8-sig").rstrip("\r\n")
+    except (OSError, UnicodeDecodeError):
+        return  # the reader names it (not UTF-8: with its first offending byte)
+    if "," in head or not head:
+        return
+    for sep, name in ((";", "semicolons"), ("\t", "tabs"), ("|", "'|'")):
+        if sep in head:
+            raise UserError(f"{p}: the header {head[:60]!r} is separated by {name}; a canonical CSV "
+                            "drive log separates columns by commas (convert it, or map it with the "
+                            "import command's columns format)")
+
+
+def check_time_step(t: np.ndarray, same: np.ndarray, p: Path) -> None:
+    """UserError when the median step of ``time_s`` within trips (``same``: sample i+1 in
+    the trip of sample i) exceeds :data:`MAX_MEDIAN_STEP_S`: milliseconds, not seconds."""
+    if same.any():
+        step = float(np.median(np.diff(t)[same]))
+        if step > MAX_MEDIAN_STEP_S:
+            raise UserError(f"{p}: column 'time_s' steps by {step:g} (median within a trip), more than "
+                            f"{MAX_MEDIAN_STEP_S:g} s: is it in milliseconds? The drive-log schema wants "
+                            "seconds, and driving power needs samples seconds apart at most")

@@ -34,8 +34,8 @@ from typing import Iterator
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.log import (DERIVED, FLAGS, NUMERIC, ReadOptions, check_csv_delimiter, expand_paths,
-                                 from_frame, read_error)
+from sumo_drvpw.data.log import DERIVED, FLAGS, NUMERIC, ReadOptions, expand_paths, from_frame, read_error
+from sumo_drvpw.data.plausible import check_csv_delimiter
 from sumo_drvpw.errors import UserError
 
 #: Columns the reader and measured power use; calibrate and compare read these plus the
