@@ -67,6 +67,12 @@ def main(args: argparse.Namespace) -> int:
         raise UserError(f"--buckets goes with --engine dask (got --engine {args.engine})")
     if args.buckets is not None and args.buckets < 1:
         raise UserError(f"--buckets must be at least 1, got {args.buckets}")
+    if args.end is not None:  # as `run` refuses an empty time window
+        if args.begin is not None and args.end <= args.begin:
+            raise UserError(f"--end {args.end:g} must be after --begin {args.begin:g}")
+        if args.begin is None and args.end <= 0:
+            raise UserError(f"--end {args.end:g} must be after the start of the run (0; for "
+                            "FCD recorded from an earlier time give --begin)")
     overrides = {}
     if args.end is not None:
         overrides["end"] = args.end

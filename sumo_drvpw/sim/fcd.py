@@ -23,7 +23,10 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
   is told from a standing one by its x, y beside the lane (:class:`ParkedTest`) and, as in
   the live loop, not booked (``summary.json`` ``source.parked_rows``); FCD without x, y
   (``--fcd-output.attributes`` without them, or ``.geo``/``.utm`` coordinates) books it
-  as standing.
+  as standing;
+- a vehicle row on a lane the network lacks is not booked (as the live loop books no
+  vehicle without a lane); ``summary.json`` ``warnings`` counts them, and FCD none of
+  whose vehicle rows is on a lane of the network is refused (:func:`lane_warnings`).
 
 Bounded memory (#14): the file is read in blocks of ``chunk_rows`` rows
 (:mod:`sumo_drvpw.sim.fcd_read`: XML iterparse, Parquet record batches, CSV chunks) and
@@ -348,6 +351,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     if chunk_rows is None:
         df = read_fcd(fcd_file)
         df["off"] = parked({k: df[k].to_numpy() for k in df.columns})
+        df["lane_ok"] = parked.lane_ok({"lane": df["lane"].to_numpy()})
         if keep is not None and len(df):
             times = df.attrs["times"]
             df = df[keep(df["id"].to_numpy(object)) | df["person"].to_numpy(bool)].copy()
@@ -379,6 +383,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     try:
         info = step_until(replay, acc.stepper, end=None, progress=False, period=sc.period)
         acc.interrupted = info["interrupted"]
+        acc.fcd_lanes = (replay.unknown_rows, replay.lane_rows, replay.first_unknown)
         rows = replay.rows if chunk_rows is not None else len(df)
         extra = {"source": {"fcd": str(fcd_file), "rows": int(rows),
                             "timesteps": int(replay.k), "parked_rows": int(replay.parked_rows),
@@ -388,6 +393,9 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         if not publish:
             acc.close_trace()
             return acc, extra
+        warn = lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes)
+        if warn:
+            extra["warnings"] = warn
         result = acc.result(extra)
         check_vtype_filter(sc, acc.ledger)
         if out_dir is not None:
@@ -397,3 +405,20 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         if out_dir is not None and publish:
             discard_parts(acc.ledger)
     return result
+
+
+def lane_warnings(fcd_file, net_file, unknown: int, known: int, first) -> list[str]:
+    """What a replay's vehicle rows on lanes the network lacks (``unknown`` of them;
+    ``known`` on its lanes; ``first``: the first one's (lane, time)) call for: a UserError
+    when none is on one of its lanes (the FCD of another network), else a warning (the
+    rows are not booked, as the live loop books no vehicle without a lane)."""
+    if not unknown:
+        return []
+    lane, t = first
+    if not known:
+        raise UserError(f"FCD {fcd_file}: none of its vehicles' lanes is in the network "
+                        f"{net_file} (the first: lane {lane!r} at t = {t:g} s): recorded on "
+                        "another network?")
+    return [f"{unknown} FCD row{'s' if unknown > 1 else ''} of vehicles on lanes the network {Path(net_file).name} lacks "
+            f"{'were' if unknown > 1 else 'was'} not booked (the first: lane {lane!r} at t = {t:g} s); recorded on another "
+            "version of the network?"]

@@ -109,6 +109,9 @@ class _Rows:
         #: vType → mass [kg] of the route files (set by replay_fcd)
         self.type_mass: dict = {}
         self.count_persons = True
+        #: vehicle rows on a lane of the network, on a lane it lacks, and the first of
+        #: those (lane, time) (with the column ``lane_ok`` of ParkedTest.mark)
+        self.lane_rows, self.unknown_rows, self.first_unknown = 0, 0, None
         self.person, self.vehicletype = _Person(self), _VType(self)
 
     def _vehicles(self, c: dict, nxt: dict | None) -> dict:
@@ -120,6 +123,15 @@ class _Rows:
             c = {k: v[veh] for k, v in c.items()}
         elif self.riders or self.person_count:
             self._ride(None, c)
+        ok = c.get("lane_ok")
+        if ok is not None and len(ok):
+            self.lane_rows += int(np.count_nonzero(ok > 0))
+            bad = ok < 0
+            if bad.any():
+                self.unknown_rows += int(np.count_nonzero(bad))
+                if self.first_unknown is None:
+                    j = int(np.argmax(bad))
+                    self.first_unknown = (str(c["lane"][j]), float(c["time"][j]))
         if "off" in c and len(c["id"]):  # parked vehicles (ParkedTest.mark)
             if nxt is not None and "person" in nxt and nxt["person"].any():
                 keep = ~nxt["person"]
@@ -195,10 +207,20 @@ class ParkedTest:
                     off[i] = False
         return off
 
+    def lane_ok(self, cols: dict) -> np.ndarray:
+        """Rows' lanes (``lane``) → 1 a lane of the network, 0 none (a person; ""), −1 a
+        lane the network lacks (int8)."""
+        codes, uniq = pd.factorize(np.asarray(cols["lane"], object))
+        idx = self.net.lane_index
+        st = np.array([1 if u in idx else (0 if u == "" else -1) for u in uniq] + [0], np.int8)
+        return st[codes]  # code −1 (no value): the 0 appended
+
     def mark(self, blocks):
-        """The blocks (:func:`iter_fcd_blocks`) with a column ``off``: this test's rows."""
+        """The blocks (:func:`iter_fcd_blocks`) with the columns ``off`` (this test's rows)
+        and ``lane_ok`` (:meth:`lane_ok`)."""
         for b in blocks:
             b.cols["off"] = self(b.cols)
+            b.cols["lane_ok"] = self.lane_ok(b.cols)
             yield b
 
 

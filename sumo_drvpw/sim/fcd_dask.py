@@ -73,7 +73,7 @@ def bucket_task(sc, fcd_file: str, part_dir: str, b: int, buckets: int, begin_s=
     return {"ledger": led, "spill": parts, "extra": extra, "begin": acc.begin,
             "end": acc.stepper.now(), "dt": acc.stepper.dt, "missed_steps": acc.stepper.missed_steps,
             "interrupted": acc.interrupted, "skipped": r.skipped, "excluded": r.excluded,
-            "assumptions": r.assumptions}
+            "assumptions": r.assumptions, "lanes": acc.fcd_lanes}
 
 
 def merge_ledgers(ledgers: list):
@@ -122,9 +122,9 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     the cluster's worker count) of one vehicle bucket each; ``scheduler``: the address of an
     existing cluster, else a local cluster of ``workers`` processes. Writes the outputs into
     ``out_dir`` (required: the workers write their parts there) and returns the RunResult."""
-    from sumo_drvpw.fit.engine import dask_client
+    from sumo_drvpw.fit.engine import dask_client, guarded, unguarded
     from sumo_drvpw.sim.accountant import Accountant
-    from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario
+    from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario, lane_warnings
     from sumo_drvpw.sim.fcd_read import fcd_parts
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import VehicleSpill, write_published
@@ -145,16 +145,20 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     try:
         with dask_client(scheduler, workers) as client:
             k = buckets or max(1, len(client.scheduler_info().get("workers", {})))
-            futs = [client.submit(bucket_task, sc, spec, str(root / f"b{b:04d}"), b, k, begin_s,
+            futs = [client.submit(guarded, bucket_task, sc, spec, str(root / f"b{b:04d}"), b, k, begin_s,
                                   chunk_rows, flush_vehicles, pure=False, key=f"fcd-bucket-{b}-of-{k}")
                     for b in range(k)]
             done, led = [], None
             for f in futs:  # in bucket order; a failed task raises its error here
-                d = f.result()
+                d = unguarded(f.result())  # a bad input: its one-line UserError
                 f.release()
                 one = d.pop("ledger")  # added up at once: one ledger's sums held, not K
                 led = one if led is None else merge_ledgers([led, one])
                 done.append(d)
+        firsts = [d["lanes"][2] for d in done if d["lanes"][2] is not None]
+        warn = lane_warnings(spec, sc.net_file, sum(d["lanes"][0] for d in done),
+                             sum(d["lanes"][1] for d in done),
+                             min(firsts, key=lambda x: x[1]) if firsts else None)
         # the driver's own accountant (no rows) carries the scenario, network and resolver
         first = done[0]
         replay = FcdStream(iter(()), dt=first["dt"], label=spec)
@@ -183,6 +187,8 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
                                riding_person_rows=sum(d["extra"]["source"]["riding_person_rows"]
                                                       for d in done),
                                engine="dask", buckets=k)
+        if warn:
+            extra["warnings"] = warn
         result = acc.result(extra)
         check_vtype_filter(sc, led)
         write_published(result, out)

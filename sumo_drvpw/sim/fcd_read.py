@@ -10,7 +10,10 @@ batch by record batch (only the FCD columns), the parts of a partitioned FCD one
 the other in the order of their first time; CSV ``chunk_rows`` lines at a time. A tabular
 block may end inside a timestep: the replay (:mod:`sumo_drvpw.sim.fcd`) joins the rows of
 a timestep before it books it. Rows must come in time order (SUMO writes them so); a
-time earlier than the one before is a UserError naming the file and the row.
+time earlier than the one before is a UserError naming the file and the row; so are a
+vehicle without type or lane, a speed not finite or above ``SPEED_MAX_MPS`` (the drive
+logs' bound), a number column of dates or time spans, and a file that cannot be read
+(a truncated ``.gz``). Rows are counted in the file read (a part of a partitioned FCD).
 
 ``read_fcd(path)`` is every block joined: one DataFrame (the in-memory path).
 """
@@ -18,12 +21,14 @@ time earlier than the one before is a UserError naming the file and the row.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from sumo_drvpw.data.log import SPEED_MAX_MPS
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.sim.scenario import sumo_seconds
@@ -38,6 +43,9 @@ _REQUIRED = ("time", "id", "type", "speed", "lane", "pos")
 _OPTIONAL = ("angle", "slope", "accel", "x", "y")
 _XML_ATTRS = {"id": "id", "type": "type", "speed": "speed", "lane": "lane", "pos": "pos",
               "angle": "angle", "slope": "slope", "accel": "acceleration", "x": "x", "y": "y"}
+#: our name → what the messages call it in an XML / a tabular file
+_XML_NAMES = {k: f"attribute {a}" for k, a in _XML_ATTRS.items()}
+_TABULAR_NAMES = {k: f"column {c}" for k, c in FCD_COLUMNS.items()}
 #: rows per block of the streamed replay (about 15 MB of columns; larger blocks read no
 #: faster: the replay's per-timestep work dominates)
 CHUNK_ROWS = 50_000
@@ -84,10 +92,19 @@ def fcd_parts(spec) -> list[Path]:
     return []
 
 
-def _normalise(df: pd.DataFrame, label, first_row: int) -> dict:
+def _normalise(df: pd.DataFrame, label, first_row: int, names: dict | None = None) -> dict:
     """Checked columns of raw rows (our names): rows without an id dropped, numbers
-    parsed (UserError naming the column and the row, counted over the whole file)."""
-    df = df[df["id"].notna() & (df["id"].astype(str) != "")]
+    parsed (UserError naming the column and the row, counted over the whole file; a
+    missing type or lane of a vehicle, a speed not finite or above ``SPEED_MAX_MPS``).
+    ``names``: our name → the file's (XML attribute, tabular column), for the messages."""
+    names = {k: f"column {k}" for k in FCD_COLUMNS} | (names or {})
+    has_id = (df["id"].notna() & (df["id"].astype(str) != "")).to_numpy()
+    rows = np.flatnonzero(has_id)  # the kept rows' positions in the block
+
+    def row(i: int) -> int:  # the file's row of kept row i
+        return first_row + int(rows[i]) + 1
+
+    df = df[has_id]
     out = {}
     for k in ("time", "speed", "pos", *_OPTIONAL):
         if k not in df.columns:
@@ -96,8 +113,8 @@ def _normalise(df: pd.DataFrame, label, first_row: int) -> dict:
         bad = vals.isna() & df[k].notna()
         if bad.any():
             i = int(np.flatnonzero(bad.to_numpy())[0])
-            raise UserError(f"FCD file {label}: column {k}: not a number at vehicle row "
-                            f"{first_row + i + 1}: {df[k].iloc[i]!r}")
+            raise UserError(f"FCD file {label}: {names[k]}: not a number at vehicle row "
+                            f"{row(i)}: {df[k].iloc[i]!r}")
         out[k] = vals.to_numpy(float)
     person = (df["person"].to_numpy(bool) if "person" in df.columns
               else np.zeros(len(df), bool))
@@ -106,12 +123,31 @@ def _normalise(df: pd.DataFrame, label, first_row: int) -> dict:
         if miss.any():
             i = int(np.flatnonzero(miss)[0])
             raise UserError(f"FCD file {label}: column {k} missing at vehicle row "
-                            f"{first_row + i + 1} (vehicle {df['id'].iloc[i]!r})")
+                            f"{row(i)} (vehicle {df['id'].iloc[i]!r})")
+    v = out["speed"]
+    bad = np.isinf(v) | (v > SPEED_MAX_MPS)  # NaN: a person's missing speed (checked above)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"FCD file {label}: {names['speed']} is {v[i]:g} at vehicle "
+                        f"row {row(i)} (vehicle {df['id'].iloc[i]!r}): not a speed (finite, at "
+                        f"most {SPEED_MAX_MPS:g} m/s)")
+    for k in ("type", "lane"):  # SUMO writes both for every vehicle (a person has no lane)
+        miss = df[k].isna().to_numpy() & ~person
+        if miss.any():
+            i = int(np.flatnonzero(miss)[0])
+            raise UserError(f"FCD file {label}: {names[k]} missing at vehicle row {row(i)} "
+                            f"(vehicle {df['id'].iloc[i]!r}); SUMO writes it for every vehicle")
     for k in ("id", "type", "lane"):
         out[k] = df[k].astype(str).to_numpy(object)
     out["lane"][person] = ""  # persons walk on edges, not lanes (and ride in vehicles)
     out["person"] = person
     return out
+
+
+def _temporal(dtype) -> bool:
+    """A date, time span or truth column (pandas' numbers, but not SUMO's)."""
+    return (pd.api.types.is_datetime64_any_dtype(dtype) or pd.api.types.is_timedelta64_dtype(dtype)
+            or pd.api.types.is_bool_dtype(dtype))
 
 
 def _xml_blocks(path: Path, chunk_rows: int):
@@ -123,7 +159,7 @@ def _xml_blocks(path: Path, chunk_rows: int):
             present[k] = present[k] or any(x is not None for x in cols[k])
         df = pd.DataFrame({k: v for k, v in cols.items()
                            if k in _REQUIRED or k == "person" or present[k]})
-        return Block(np.asarray(times, float), _normalise(df, path, first), first)
+        return Block(np.asarray(times, float), _normalise(df, path, first, _XML_NAMES), first)
 
     cols: dict[str, list] = {k: [] for k in keys}
     times: list[float] = []
@@ -156,22 +192,39 @@ def _xml_blocks(path: Path, chunk_rows: int):
         raise UserError(f"FCD file {path}: not valid XML: {e}") from None
     except (KeyError, ValueError) as e:
         raise UserError(f"FCD file {path}: a <timestep> without a valid time: {e}") from None
+    except (EOFError, OSError, zlib.error) as e:  # gzip.BadGzipFile is an OSError
+        raise UserError(f"FCD file {path}: cannot read it (truncated or corrupt?): {e}") from None
     if times or cols["time"]:
         yield block(cols, times, done)
 
 
-def _tabular_block(raw: pd.DataFrame, label, first: int) -> Block:
+def _tabular_block(raw: pd.DataFrame, label, first: int, row0: int | None = None) -> Block:
+    """A block of a tabular file's rows; ``first``: rows before it (of every part read),
+    ``row0``: rows before it in the file ``label`` (default ``first``), for the messages."""
     missing = [FCD_COLUMNS[k] for k in _REQUIRED if FCD_COLUMNS[k] not in raw.columns]
     if missing:
         raise UserError(f"FCD file {label}: no column {missing[0]} (SUMO's tabular FCD "
                         f"has {', '.join(FCD_COLUMNS[k] for k in _REQUIRED)})")
+    _check_types({c: raw[c].dtype for c in raw.columns}, label)
     raw = raw.assign(**{FCD_COLUMNS["time"]: _time_column(raw[FCD_COLUMNS["time"]])})
     times = np.unique(pd.to_numeric(raw[FCD_COLUMNS["time"]], errors="coerce").dropna())
     df = pd.DataFrame({k: raw[c] for k, c in FCD_COLUMNS.items() if c in raw.columns})
     # SUMO's tabular FCD writes persons in the vehicles' columns, with an edge and no lane
     lane = raw[FCD_COLUMNS["lane"]]
     df["person"] = (lane.isna() | (lane.astype(str) == "")).to_numpy()
-    return Block(times.astype(float), _normalise(df, label, first), first)
+    return Block(times.astype(float),
+                 _normalise(df, label, first if row0 is None else row0, _TABULAR_NAMES), first)
+
+
+def _check_types(dtypes: dict, label) -> None:
+    """UserError for a numeric column of a tabular FCD (column name → pandas dtype) that
+    holds dates, time spans or truth values (SUMO writes seconds, metres, m/s)."""
+    for k in ("time", "speed", "pos", *_OPTIONAL):
+        c = FCD_COLUMNS[k]
+        if c in dtypes and _temporal(dtypes[c]):
+            raise UserError(f"FCD file {label}: column {c} holds {dtypes[c]} values, not "
+                            "numbers (SUMO writes times in seconds, speeds in m/s, positions "
+                            "in m)")
 
 
 def _first_time(f: Path) -> float:
@@ -183,6 +236,7 @@ def _first_time(f: Path) -> float:
     col = FCD_COLUMNS["time"]
     if col not in names or pf.metadata.num_rows == 0:
         return float("inf")
+    _check_arrow_types(pf.schema_arrow, f)
     rg = pf.metadata.row_group(0).column(names.index(col)).statistics
     if rg is not None and rg.has_min_max and not isinstance(rg.min, (str, bytes)):
         return float(rg.min)
@@ -216,6 +270,20 @@ def _time_column(col: pd.Series) -> pd.Series:
     return col.where(~clock, text[clock].map(lambda u: values[u] if values[u] is not None else u))
 
 
+def _check_arrow_types(schema, label) -> None:
+    """:func:`_check_types` on a Parquet file's schema (dates, times of day, time spans,
+    truth values in a numeric column)."""
+    import pyarrow as pa
+
+    for k in ("time", "speed", "pos", *_OPTIONAL):
+        c = FCD_COLUMNS[k]
+        if c in schema.names:
+            t = schema.field(c).type
+            if pa.types.is_temporal(t) or pa.types.is_boolean(t):
+                raise UserError(f"FCD file {label}: column {c} holds {t} values, not numbers "
+                                "(SUMO writes times in seconds, speeds in m/s, positions in m)")
+
+
 def _parquet_blocks(files: list[Path], label, chunk_rows: int):
     import pyarrow.parquet as pq
 
@@ -223,6 +291,8 @@ def _parquet_blocks(files: list[Path], label, chunk_rows: int):
     if len(files) > 1:  # the parts in time order (names sort part-10 before part-2)
         try:
             files = sorted(files, key=lambda f: (_first_time(f), str(f)))
+        except UserError:
+            raise
         except Exception as e:  # pyarrow raises several error types for bad files
             raise UserError(f"FCD {label}: cannot read Parquet: {e}") from None
     first, schema = 0, None
@@ -233,6 +303,7 @@ def _parquet_blocks(files: list[Path], label, chunk_rows: int):
             types = {c: pf.schema_arrow.field(c).type for c in names}
         except Exception as e:
             raise UserError(f"FCD file {f}: cannot read Parquet: {e}") from None
+        _check_arrow_types(pf.schema_arrow, f)
         if schema is None:
             schema = types
         bad = [c for c in names if c in schema and types[c] != schema[c]
@@ -243,9 +314,11 @@ def _parquet_blocks(files: list[Path], label, chunk_rows: int):
                             f"{schema[bad[0]]} in the first part, {types[bad[0]]} in {f}")
         try:
             batches = pf.iter_batches(batch_size=chunk_rows, columns=names)
+            row0 = 0  # rows before the batch in this part
             for rb in batches:
-                b = _tabular_block(rb.to_pandas(), f, first)
+                b = _tabular_block(rb.to_pandas(), f, first, row0)
                 first += rb.num_rows
+                row0 += rb.num_rows
                 yield b
         except UserError:
             raise

@@ -203,6 +203,8 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     except Exception as e:  # sumolib raises assorted SAX/IO errors
         raise UserError(f"SUMO network {path}: cannot read: {e}") from None
     edges = [e for e in net.getEdges() if e.getFunction() != "internal"]
+    if not edges or not any(e.getLanes() for e in edges):
+        raise UserError(f"SUMO network {path}: not a SUMO network (no edges with lanes in it)")
     edge_ids = [e.getID() for e in edges]
     eidx = {e: i for i, e in enumerate(edge_ids)}
     types = [e.getType() or "" for e in edges]
