@@ -54,6 +54,37 @@ NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_.-]{0,63}$"
 DEFAULT_VCLASSES = ("passenger", "private", "taxi", "hov", "vip", "evehicle", "authority")
 #: What an equation's terms can predict (``predicts``).
 PREDICTS = ("wheel", "powertrain_output")
+#: SUMO's vehicle classes (sumo.dlr.de/docs/Definition_of_Vehicles,_Vehicle_Types,_and_Routes;
+#: SUMO 1.28 accepts each), and its deprecated names with the class SUMO reads them as
+SUMO_VCLASSES = ("ignoring", "private", "emergency", "authority", "army", "vip", "pedestrian",
+                 "passenger", "hov", "taxi", "bus", "coach", "delivery", "truck", "trailer",
+                 "motorcycle", "moped", "bicycle", "evehicle", "tram", "rail_urban", "rail",
+                 "rail_electric", "rail_fast", "ship", "container", "cable_car", "subway",
+                 "aircraft", "wheelchair", "scooter", "drone", "custom1", "custom2")
+DEPRECATED_VCLASSES = {"public_emergency": "emergency", "public_authority": "authority",
+                       "public_army": "army", "public_transport": "bus", "transport": "truck",
+                       "lightrail": "tram", "cityrail": "rail_urban", "rail_slow": "rail"}
+#: the keys of an equation file's ``[equation]`` table
+EQUATION_KEYS = ("name", "description", "source", "mass_kg", "reference_mass_kg", "vclasses",
+                 "predicts", "speed_range_mps", "accel_range_mps2")
+
+
+def check_vclass(name, where: str, key: str) -> str:
+    """``name`` if it is a SUMO vClass, else a UserError naming ``where``, ``key`` and it
+    (a vehicle's class comes from SUMO, so any other name would never match one)."""
+    if name in SUMO_VCLASSES:
+        return name
+    if name in DEPRECATED_VCLASSES:
+        raise UserError(f"{where}: {key} names {name!r}, SUMO's deprecated name of vClass "
+                        f"'{DEPRECATED_VCLASSES[name]}' (as which SUMO reports such vehicles): "
+                        f"write '{DEPRECATED_VCLASSES[name]}'")
+    import difflib
+
+    close = difflib.get_close_matches(str(name), SUMO_VCLASSES, n=2)
+    hint = f"did you mean {' or '.join(close)}? " if close else ""
+    raise UserError(f"{where}: {key} names {name!r}, which is not a SUMO vClass ({hint}SUMO's "
+                    f"{len(SUMO_VCLASSES)} vClasses include passenger, taxi, delivery, truck, "
+                    "trailer, bus, coach, motorcycle, evehicle, custom1)")
 
 #: built-in equations: package data (importlib.resources; a regular install unpacks them)
 BUILTIN_DIR = Path(str(resources.files("sumo_drvpw.model") / "builtin" / "equations"))
@@ -268,6 +299,13 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
     meta = doc.get("equation")
     if not isinstance(meta, dict) or "name" not in meta:
         raise UserError(f"{where}: missing [equation] table with a 'name'")
+    bad = [k for k in meta if k not in EQUATION_KEYS]
+    if bad:
+        raise UserError(f"{where} [equation]: unknown key {bad[0]!r} "
+                        f"(known: {', '.join(EQUATION_KEYS)})")
+    for key in ("name", "description", "source"):
+        if key in meta and not isinstance(meta[key], str):
+            raise UserError(f"{where}: equation.{key} must be a string, got {meta[key]!r}")
     ref = _mass(meta, "reference_mass_kg", where)
     _mass(meta, "mass_kg", where)
     if "beta" in doc and "terms" in doc:
@@ -292,11 +330,13 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
         raise UserError(f"{where}: equation.name {name!r} is not allowed: use a letter, then "
                         "letters, digits, '_', '.', '-' (at most 64 characters)")
     vcl = meta.get("vclasses", list(DEFAULT_VCLASSES))
-    if isinstance(vcl, str):
+    if isinstance(vcl, str):  # one class; each name is checked below, so "a, b" is refused
         vcl = [vcl]
     if not isinstance(vcl, list) or not all(isinstance(v, str) and v for v in vcl):
         raise UserError(f"{where}: equation.vclasses must be a list of SUMO vClass names, "
-                        f"got {vcl!r}")
+                        f"e.g. [\"passenger\"], got {vcl!r}")
+    for v in vcl:
+        check_vclass(v, where, "equation.vclasses")
     pred = meta.get("predicts", "wheel")
     if pred not in PREDICTS:
         raise UserError(f"{where}: equation.predicts must be one of {', '.join(PREDICTS)}, "

@@ -1,67 +1,10 @@
 """Scenario files (TOML): which SUMO run, which equations, which vehicles, wind, air, classes.
 
-Schema (every table optional except ``[sumo]`` and ``equations``; paths are relative to
-the scenario file)::
-
-    equations = ["vsp_ldv1999", "drvpw_prius3", "my_fit.toml"]   # built-in names or files
-
-    [sumo]
-    config = "city.sumocfg"         # a SUMO config, or: net = "x.net.xml", routes = [..]
-    # net = "..."; routes = ["..."]; additional = ["..."]
-    begin = 0                       # [s], or SUMO's "h:m:s" (default: the config's)
-    end = 600                       # [s] (default: the config's)
-    step_length = 0.5               # [s] (default: the config's)
-    connection = "libsumo"          # or "traci" (e.g. with gui = true to watch in sumo-gui)
-    gui = false
-    options = ["--seed", "7"]       # extra SUMO command-line options
-    acceleration = "speed_difference"   # (v_t − v_t−1)/Δt from the speeds read anyway:
-                                    # SUMO's own definition of getAcceleration, so the
-                                    # same numbers; or "getter" (vehicle.getAcceleration)
-    positions = "tracked"           # lane and position read only when a car is first
-                                    # seen, reaches the end of its edge, starts or ends
-                                    # a teleport, starts parking, and every 25 steps
-                                    # (checked, disagreements counted in summary.json);
-                                    # in between x += v·Δt, SUMO's Euler update. Or
-                                    # "getter": both read every step.
-
-    [vehicles]
-    vtypes = ["prius3"]             # vTypes to account (default: all vehicles)
-
-    [vtypes.prius3]                 # per-vType vehicle data (optional)
-    mass_kg = 1625                  # overrides the vType's mass / drvpw.mass param [kg]
-    equations = ["drvpw_prius3"]    # the equations applied to it (default: all)
-
-    [wind]                          # absent: no wind
-    speed_mps = 4.0
-    from_deg = 270                  # direction the wind blows FROM, clockwise from north
-    heading = "geometry"            # the lane's direction at the car's position, or
-                                    # "getangle": vehicle.getAngle (differs while a car
-                                    # changes lanes or turns; one more getter per car)
-
-    [air]                           # one of:
-    density_kgm3 = 1.2041
-    # temperature_c = 20; pressure_kpa = 101.325   (ρ = p / (R_dry · T))
-
-    [road_class]
-    highway_min_speed_kmh = 80      # lane speed limit ≥ this → highway
-    highway_types = ["highway.motorway", "highway.motorway_link", "highway.trunk",
-                     "highway.trunk_link"]
-    types = { "highway.primary" = "arterial" }   # edge type → class (wins over the above)
-    edges = { "e12" = "highway" }                 # edge id → class (wins over everything)
-
-    [slope]
-    window_m = 20.0                 # distance window of the robust lane slope [m]
-    max_rad = 0.25                  # plausible |θ| limit [rad]
-    tolerance_rad = 0.01            # |θ_getSlope − θ_robust| above this counts as corrected
-    reference = "geometry"          # the front-to-back (5 m) slope of the lane shape, as
-                                    # getSlope computes it; or "getslope" to call it
-
-    [outputs]
-    trace = false                   # per vehicle-step trace.parquet
-    edgedata = true                 # SUMO edgeData-style XML
-    figures = true
-    difference = ["vsp_ldv1999", "drvpw_prius3"]   # equations of the difference map
-    progress = true                 # tqdm progress bar (only on a TTY)
+The schema, with every key's meaning, unit and default, is docs/scenario.md ("Schema");
+``_SCHEMA`` below lists the keys. Every table is optional except ``[sumo]`` and
+``equations``; paths are relative to the scenario file. Every value is checked for its
+type (booleans true/false, numbers finite, lists TOML arrays, tables TOML tables, vClass
+names SUMO's): bad input is a UserError naming the file and the key.
 
 Vehicle mass (see :mod:`sumo_drvpw.sim.vtypes`): scenario ``mass_kg`` > vType param
 ``drvpw.mass`` > vType ``mass`` attribute written in the route/additional files. A vType
@@ -78,7 +21,7 @@ from pathlib import Path
 
 from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
-from sumo_drvpw.model.equations import NAME_PATTERN, Equation, load_equation
+from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_vclass, load_equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import additional_outputs, is_output_option
 from sumo_drvpw.fileio import read_toml
@@ -287,12 +230,30 @@ def _choice(v, allowed: tuple[str, ...], where: str, key: str) -> str:
     return str(v)
 
 
-def _strlist(v, where: str, key: str) -> list[str]:
-    if isinstance(v, str):
-        v = [v]
-    if not isinstance(v, list) or not all(isinstance(x, (str, Equation)) for x in v):
-        raise UserError(f"{where}: '{key}' must be a list of strings, got {v!r}")
+def _strlist(v, where: str, key: str, example: str = '["..."]') -> list[str]:
+    """A TOML array of strings (a bare string is refused: "a b" or "a,b" would be one item;
+    ``equations`` may also hold Equation objects)."""
+    kinds = (str, Equation) if key == "equations" else str
+    if not isinstance(v, (list, tuple)) or not all(isinstance(x, kinds) for x in v):
+        raise UserError(f"{where}: '{key}' must be a list of strings, e.g. {example}, got {v!r}")
     return list(v)
+
+
+def _strmap(v, where: str, key: str) -> dict[str, str]:
+    """A TOML table of name = road class (a non-empty string)."""
+    if not isinstance(v, dict):
+        raise UserError(f"{where}: '{key}' must be a table of name = road class, e.g. "
+                        f'{{ "highway.primary" = "arterial" }}, got {v!r}')
+    for k, c in v.items():
+        if not isinstance(c, str) or not c.strip():
+            raise UserError(f"{where}: '{key}.{k}' must be a road class name (a string), got {c!r}")
+    return {str(k): c for k, c in v.items()}
+
+
+def _path(v, where: str, key: str) -> str:
+    if not isinstance(v, str) or not v.strip():
+        raise UserError(f"{where}: '{key}' must be a file path (a string), got {v!r}")
+    return v
 
 
 def resolve_equation(spec, base: Path | None, where: str) -> Equation:
@@ -310,13 +271,14 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
             eq = load_equation(p)
         else:
             eq = load_equation(spec)
+    src = eq.path or where  # the equation file the term is written in, else the scenario
     for t in eq.term_names:
         term = parse_term(t)
         if term.signals:
-            raise UserError(f"{where}: equation '{eq.name}' cannot run in SUMO: term '{t}' needs "
+            raise UserError(f"{src}: equation '{eq.name}' cannot run in SUMO: term '{t}' needs "
                             f"the log-only signal '{term.signals[0]}'")
         if any(f.startswith("trip=") for f in term.factors):
-            raise UserError(f"{where}: equation '{eq.name}' cannot run in SUMO: term '{t}' "
+            raise UserError(f"{src}: equation '{eq.name}' cannot run in SUMO: term '{t}' "
                             "needs trip ids of a drive log")
     return eq
 
@@ -403,10 +365,14 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             raise UserError(f"{where}: unknown key '{key}' (known: {', '.join(_SCHEMA)})")
         if _SCHEMA[key] is not None:
             _check_table(val, _SCHEMA[key], where, key)
-    for vt, d in doc.get("vtypes", {}).items():
-        _check_table(d, _VTYPE_KEYS, where, f"vtypes.{vt}")
-    for vc, d in doc.get("vclasses", {}).items():
-        _check_table(d, _VTYPE_KEYS, where, f"vclasses.{vc}")
+    for table in ("vtypes", "vclasses"):
+        if not isinstance(doc.get(table, {}), dict):
+            raise UserError(f"{where}: '{table}' must be tables [{table}.<name>], got "
+                            f"{doc[table]!r}")
+        for name, d in doc.get(table, {}).items():
+            _check_table(d, _VTYPE_KEYS, where, f"{table}.{name}")
+            if table == "vclasses":
+                check_vclass(name, where, f"[vclasses.{name}]")
     rel = (lambda s: (base / s) if base is not None and not Path(s).is_absolute() else Path(s))
 
     sumo = dict(doc.get("sumo", {}))
@@ -415,9 +381,10 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         if k in overrides:
             sumo[k] = overrides[k]
     if "config" in sumo:
-        if "net" in sumo or "routes" in sumo:
-            raise UserError(f"{where}: give either sumo.config or sumo.net + sumo.routes")
-        cfg = rel(sumo["config"])
+        if "net" in sumo or "routes" in sumo or "additional" in sumo:
+            raise UserError(f"{where}: give either sumo.config or sumo.net + sumo.routes "
+                            "(+ sumo.additional)")
+        cfg = rel(_path(sumo["config"], where, "sumo.config"))
         if not cfg.is_file():
             raise UserError(f"{where}: SUMO config not found: {cfg}")
         net, files, cfgvals = _config_files(cfg)
@@ -425,10 +392,11 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         adds = [(cfg.parent / f.strip()).resolve()
                 for f in cfgvals.get("additional-files", "").split(",") if f.strip()]
     elif "net" in sumo:
-        net = rel(sumo["net"]).resolve()
-        routes = [rel(r).resolve() for r in _strlist(sumo.get("routes", []), where, "sumo.routes")]
-        adds = [rel(r).resolve() for r in _strlist(sumo.get("additional", []), where,
-                                                    "sumo.additional")]
+        net = rel(_path(sumo["net"], where, "sumo.net")).resolve()
+        routes = [rel(_path(r, where, "sumo.routes")).resolve()
+                  for r in _strlist(sumo.get("routes", []), where, "sumo.routes")]
+        adds = [rel(_path(r, where, "sumo.additional")).resolve()
+                for r in _strlist(sumo.get("additional", []), where, "sumo.additional")]
         files, cfgvals = routes + adds, {}
         args = ["-n", str(net)]
         if routes:
@@ -453,7 +421,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     if "begin" in times and "end" in times and times["end"] <= times["begin"]:
         raise UserError(f"{where}: sumo.end ({times['end']}) must be after sumo.begin "
                         f"({times['begin']})")
-    args += [str(o) for o in _strlist(sumo.get("options", []), where, "sumo.options")]
+    args += _strlist(sumo.get("options", []), where, "sumo.options",
+                     '["--time-to-teleport", "120"]')
     meso = cfgvals.get("mesosim", "false").strip().lower() in ("true", "1", "yes", "on", "x")
     src = f"SUMO config {cfg}" if meso else where
     if "--mesosim" in args:
@@ -464,16 +433,14 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         raise UserError(f"{src}: mesosim: the mesoscopic simulation moves vehicles queue by "
                         "queue, without lanes or accelerations, so no driving power follows "
                         "from it; run the scenario microscopically (mesosim false)")
-    connection = str(sumo.get("connection", "libsumo"))
-    if connection not in ("libsumo", "traci"):
-        raise UserError(f"{where}: sumo.connection must be 'libsumo' or 'traci', got "
-                        f"{connection!r}")
+    connection = _choice(sumo.get("connection", "libsumo"), ("libsumo", "traci"), where,
+                         "sumo.connection")
 
     eq_specs = overrides.get("equations", doc.get("equations"))
     if not eq_specs:
         raise UserError(f"{where}: 'equations' must name at least one equation")
     equations = [resolve_equation(s, base, where)
-                 for s in _strlist(eq_specs, where, "equations")]
+                 for s in _strlist(eq_specs, where, "equations", '["vsp_ldv1999"]')]
     names = [e.name for e in equations]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
@@ -514,6 +481,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         air.pop("density_kgm3", None)
         air["temperature_c"] = overrides["air_temperature_c"]
     t_air = None
+    if "pressure_kpa" in air and "temperature_c" not in air:
+        raise UserError(f"{where}: air.pressure_kpa goes with air.temperature_c (the density "
+                        "follows from both)")
     if "density_kgm3" in air:
         if "temperature_c" in air:
             raise UserError(f"{where}: give air.density_kgm3 or air.temperature_c, not both")
@@ -533,9 +503,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         highway_min_speed_mps=_num(rc.get("highway_min_speed_kmh", DEFAULT_HIGHWAY_MIN_SPEED_KMH),
                                    where, "road_class.highway_min_speed_kmh", True) / 3.6,
         highway_types=tuple(_strlist(rc.get("highway_types", list(DEFAULT_HIGHWAY_TYPES)),
-                                     where, "road_class.highway_types")),
-        types={str(k): str(v) for k, v in dict(rc.get("types", {})).items()},
-        edges={str(k): str(v) for k, v in dict(rc.get("edges", {})).items()})
+                                     where, "road_class.highway_types", '["highway.motorway"]')),
+        types=_strmap(rc.get("types", {}), where, "road_class.types"),
+        edges=_strmap(rc.get("edges", {}), where, "road_class.edges"))
 
     sl = doc.get("slope", {})
     out = dict(doc.get("outputs", {}))
@@ -543,11 +513,12 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         if k in overrides:
             out[k] = overrides[k]
     diff = out.get("difference")
+    if diff is not None:
+        diff = _strlist(diff, where, "outputs.difference", '["vsp_ldv1999", "drvpw_prius3"]')
     if diff is not None and "equations" in overrides and "difference" not in overrides \
             and any(d not in names for d in diff):
         diff = None  # the file's pair is gone with its equations: use the first two
     if diff is not None:
-        diff = _strlist(diff, where, "outputs.difference")
         if len(diff) != 2 or any(d not in names for d in diff):
             raise UserError(f"{where}: outputs.difference must name two of the scenario's "
                             f"equations ({', '.join(names)}), got {diff}")
@@ -557,7 +528,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         additional_outputs=additional_outputs(adds), additional_files=list(adds),
         path=Path(path) if path else None, sumo_args=args, route_files=files, net_file=net,
         begin=times.get("begin"), end=times.get("end"), step_length=times.get("step_length"),
-        connection=connection, gui=bool(sumo.get("gui", False)), equations=equations,
+        connection=connection, gui=_bool(sumo.get("gui", False), where, "sumo.gui"),
+        equations=equations,
         vtype_filter=vfilter, vtype_data=vdata, vclass_data=cdata,
         default_masses=_bool(veh.get("default_masses", True), where, "vehicles.default_masses"),
         default_carrier=_bool(veh.get("default_carrier", names == list(CONFIG_EQUATIONS)), where,
@@ -579,9 +551,10 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                           "sumo.positions"),
         wind_heading=_choice(overrides.get("wind_heading", wind.get("heading", "geometry")),
                              ("getangle", "geometry"), where, "wind.heading"),
-        trace=bool(out.get("trace", False)), edgedata=bool(out.get("edgedata", True)),
-        figures=bool(out.get("figures", True)), difference=diff,
-        progress=bool(out.get("progress", True)),
+        trace=_bool(out.get("trace", False), where, "outputs.trace"),
+        edgedata=_bool(out.get("edgedata", True), where, "outputs.edgedata"),
+        figures=_bool(out.get("figures", True), where, "outputs.figures"), difference=diff,
+        progress=_bool(out.get("progress", True), where, "outputs.progress"),
         sumo_device=_bool(out.get("sumo_device", device_on), where, "outputs.sumo_device"),
         sumo_device_in_config=device_on,
         period=None if out.get("period") is None else _num(out["period"], where,

@@ -9,8 +9,10 @@ read instead.
 
 from __future__ import annotations
 
+import gzip
 import re
 import xml.etree.ElementTree as ET
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -266,6 +268,9 @@ def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
                     el.clear()
         except ET.ParseError as e:
             raise UserError(f"{path}: not valid XML: {e}") from None
+        except (EOFError, gzip.BadGzipFile, zlib.error) as e:  # a truncated or corrupt .gz
+            raise UserError(f"{path}: not a readable gzip file (truncated or corrupt?): "
+                            f"{e}") from None
         except OSError as e:
             raise UserError(f"{path}: cannot read: {e}") from None
     return out
