@@ -556,6 +556,12 @@ def _(d):
             "--out", str(d / "vt.add.xml")]
 
 
+@case("options", "export-vtype unknown vclass", ("--vclass", "spaceship"))
+def _(d):
+    return ["export-vtype", "drvpw_prius3", "--vehicle", "prius3", "--id", "p3", "--vclass", "spaceship",
+            "--out", str(d / "vt.add.xml")]
+
+
 @case("options", "export-vtype empty id", ("--id",))
 def _(d):
     return ["export-vtype", "drvpw_prius3", "--vehicle", "prius3", "--id", "", "--out", str(d / "vt.add.xml")]

@@ -222,3 +222,18 @@ def test_gui_without_a_display_is_one_line(tmp_path, capsys, monkeypatch):
     code = cli_main(["run", "city", "--end", "30", "--gui", "--no-figures", "--out", str(tmp_path / "g")])
     err = capsys.readouterr().err.strip()
     assert code == 2 and err.count("\n") == 0 and "DISPLAY" in err and not (tmp_path / "g").exists()
+
+
+def test_sumo_refusing_an_option_is_one_line(tmp_path):
+    """SUMO's own error lines (written by in-process SUMO to the process's stderr) come in
+    the one line of ours, not before it (a child process: the file descriptors are real)."""
+    cfg = (corpus.REPO / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.sumocfg").as_posix()
+    sc = tmp_path / "s.toml"
+    sc.write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{cfg}"\nend = 30\n'
+                  'options = ["--no-such-sumo-option", "1"]\n', encoding="utf-8")
+    r = subprocess.run([sys.executable, "-m", "sumo_drvpw", "run", str(sc), "--no-figures",
+                        "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=300)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "SUMO failed to start" in lines[0] and "--no-such-sumo-option" in lines[0]
+    assert not (tmp_path / "o").exists()

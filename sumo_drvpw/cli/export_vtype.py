@@ -33,6 +33,10 @@ def main(args: argparse.Namespace) -> int:
     if not args.id.strip() or any(c in args.id for c in '<>&"') or args.id != args.id.strip():
         raise UserError(f"--id {args.id!r}: a vType id is a non-empty name without spaces at its ends "
                         "or the characters < > & \"")
+    if args.vclass is not None:
+        from sumo_drvpw.model.equations import check_vclass
+
+        check_vclass(args.vclass, "export-vtype", "--vclass")
     eq = load_equation(args.equation)
     mass, area = args.mass, None
     if args.vehicle:

@@ -10,6 +10,7 @@ connection passed in), ``outputs``, ``sumo_outputs`` (SUMO's own outputs into ``
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from pathlib import Path
@@ -246,6 +247,34 @@ def _sumo_env() -> None:
             pass
 
 
+@contextlib.contextmanager
+def _sumo_output():
+    """Capture what in-process SUMO (libsumo) writes to the process's stdout and stderr
+    while it starts: yields (stdout lines, stderr lines), filled on exit."""
+    import tempfile
+
+    got: tuple[list[str], list[str]] = ([], [])
+    sys.stdout.flush()
+    sys.stderr.flush()
+    try:
+        saved = [os.dup(1), os.dup(2)]
+    except OSError:  # no descriptors to redirect: leave them as they are
+        yield got
+        return
+    caps = [tempfile.TemporaryFile(mode="w+b"), tempfile.TemporaryFile(mode="w+b")]
+    try:
+        for fd, cap in zip((1, 2), caps):
+            os.dup2(cap.fileno(), fd)
+        yield got
+    finally:
+        for fd, keep, cap, lines in zip((1, 2), saved, caps, got):
+            os.dup2(keep, fd)
+            os.close(keep)
+            cap.seek(0)
+            lines += cap.read().decode("utf-8", "replace").splitlines(keepends=True)
+            cap.close()
+
+
 def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
                label: str = "drvpw"):
     """Start SUMO with command-line ``args``; returns the connection. UserError on failure."""
@@ -268,14 +297,21 @@ def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
             # 8813): SUMO would then wait for a client that never comes; in-process, none is needed
             cmd += ["--remote-port", "0"]
 
-        try:
-            libsumo.start(cmd)
-        except Exception as e:  # libsumo.TraCIException / FatalTraCIError
+        with _sumo_output() as (told, said):
             try:
-                libsumo.close()
-            except Exception:
-                pass
-            raise UserError(f"SUMO failed to start ({' '.join(args)}): {e}") from None
+                libsumo.start(cmd)
+                failed = None
+            except Exception as e:  # libsumo.TraCIException / FatalTraCIError
+                failed = e
+                try:
+                    libsumo.close()
+                except Exception:
+                    pass
+        if failed is not None:  # SUMO's own error lines, in the one line of ours
+            why = "; ".join(x.strip() for x in said if x.strip().startswith("Error")) or str(failed)
+            raise UserError(f"SUMO failed to start ({' '.join(args)}): {why}") from None
+        sys.stdout.write("".join(told))  # started: what SUMO wrote goes on as it wrote it
+        sys.stderr.write("".join(said))
         return libsumo
     import traci
 

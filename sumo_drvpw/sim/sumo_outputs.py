@@ -5,6 +5,7 @@ beside the scenario's files (inputs are never modified; a read-only scenario run
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+import zlib
 from pathlib import Path
 
 from sumo_drvpw.fileio import open_maybe_gzip
@@ -48,7 +49,7 @@ def additional_outputs(paths, depth: int = 0) -> list[str]:
                     elif tag == "include" and el.get("href") and depth < 10:
                         found += additional_outputs([Path(p).parent / el.get("href")], depth + 1)
                     el.clear()
-        except (ET.ParseError, OSError):
+        except (ET.ParseError, OSError, EOFError, zlib.error):  # a truncated .gz among them
             continue  # SUMO reports an unreadable additional file itself
     return found
 
