@@ -125,12 +125,14 @@ def _normalise(df: pd.DataFrame, label, first_row: int, names: dict | None = Non
             raise UserError(f"FCD file {label}: column {k} missing at vehicle row "
                             f"{row(i)} (vehicle {df['id'].iloc[i]!r})")
     v = out["speed"]
-    bad = np.isinf(v) | (v > SPEED_MAX_MPS)  # NaN: a person's missing speed (checked above)
+    # NaN: a person's missing speed (checked above); SUMO writes no negative speed (a
+    # rounded −0.00 aside)
+    bad = np.isinf(v) | (v > SPEED_MAX_MPS) | (v < -0.01)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise UserError(f"FCD file {label}: {names['speed']} is {v[i]:g} at vehicle "
-                        f"row {row(i)} (vehicle {df['id'].iloc[i]!r}): not a speed (finite, at "
-                        f"most {SPEED_MAX_MPS:g} m/s)")
+                        f"row {row(i)} (vehicle {df['id'].iloc[i]!r}): not a speed (finite, 0 to "
+                        f"{SPEED_MAX_MPS:g} m/s)")
     for k in ("type", "lane"):  # SUMO writes both for every vehicle (a person has no lane)
         miss = df[k].isna().to_numpy() & ~person
         if miss.any():
