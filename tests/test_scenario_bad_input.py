@@ -112,7 +112,7 @@ def test_string_and_number_booleans_are_refused(tmp_path, table, key, value):
 
 @pytest.mark.parametrize("text,needles", [
     (HEAD + 'options = "--seed 7"\n', ("'sumo.options'", "'--seed 7'", "must be a list of strings")),
-    (HEAD + 'options = ["--seed", 7]\n', ("'sumo.options'",)),
+    (HEAD + 'options = ["--seed", true]\n', ("'sumo.options'",)),
     (HEAD.replace('["vsp_ldv1999", "drvpw_prius3"]', '"vsp_ldv1999"'),
      ("'equations'", "'vsp_ldv1999'")),
     (HEAD + '[vehicles]\nvtypes = "prius3"\n', ("'vehicles.vtypes'", "'prius3'")),
@@ -148,6 +148,8 @@ def test_real_booleans_and_lists_still_read(tmp_path):
                'edgedata = false\nfigures = false\nprogress = false\n')
     sc = load_scenario(p)
     assert (sc.trace, sc.edgedata, sc.figures, sc.progress) == (True, False, False, False)
+    # a number among the SUMO options is written as SUMO reads it
+    assert load_scenario(_write(tmp_path, HEAD + 'options = ["--seed", 7]\n')).sumo_args[-2:] == ["--seed", "7"]
     assert sc.sumo_args[-2:] == ["--seed", "7"]
 
 

@@ -421,8 +421,10 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     if "begin" in times and "end" in times and times["end"] <= times["begin"]:
         raise UserError(f"{where}: sumo.end ({times['end']}) must be after sumo.begin "
                         f"({times['begin']})")
-    args += _strlist(sumo.get("options", []), where, "sumo.options",
-                     '["--time-to-teleport", "120"]')
+    opts = sumo.get("options", [])  # numbers as SUMO reads them: ["--seed", 7] is "--seed 7"
+    if isinstance(opts, list):
+        opts = [str(o) if isinstance(o, (int, float)) and not isinstance(o, bool) else o for o in opts]
+    args += _strlist(opts, where, "sumo.options", '["--time-to-teleport", "120"]')
     meso = cfgvals.get("mesosim", "false").strip().lower() in ("true", "1", "yes", "on", "x")
     src = f"SUMO config {cfg}" if meso else where
     if "--mesosim" in args:
