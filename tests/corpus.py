@@ -278,6 +278,8 @@ _eq_case("chain hvac set-point inf", '[terms]\nacc = 1.0\n[chain]\npredicts = "b
          'setpoint_c = inf\nheating_w_per_k = 100.0\n', ("setpoint_c", "inf"))
 _eq_case("chain hvac set-point absurd", '[terms]\nacc = 1.0\n[chain]\npredicts = "battery"\n[chain.hvac]\n'
          'setpoint_c = 1e300\n', ("setpoint_c", "1e+300"))
+_eq_case("chain hvac column a number", '[terms]\nacc = 1.0\n[chain]\npredicts = "battery"\n[chain.hvac]\n'
+         'column = 42\n', ("column", "42"))
 _eq_case("chain auxiliary power inf", '[terms]\nacc = 1.0\n[chain]\npredicts = "battery"\naux_power_w = inf\n',
          ("aux_power_w", "inf"))
 _eq_case("coefficient inf", "[terms]\nacc = 1.0\naero = inf\n", ("aero", "inf"))
@@ -554,6 +556,16 @@ def _(d):
 def _(d):
     return ["export-vtype", "drvpw_prius3", "--vehicle", "prius3", "--id", "p3", "--mass", "inf",
             "--out", str(d / "vt.add.xml")]
+
+
+@case("options", "run end before the start", ("--end", "-5"))
+def _(d):
+    return ["run", "city", "--end", "-5", "--no-figures", "--out", str(d / "r")]
+
+
+@case("options", "run period nan", ("--period", "nan"))
+def _(d):
+    return ["run", "city", "--end", "30", "--period", "nan", "--no-figures", "--out", str(d / "r")]
 
 
 @case("options", "export-vtype unknown vclass", ("--vclass", "spaceship"))

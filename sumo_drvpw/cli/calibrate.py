@@ -53,6 +53,9 @@ def _check_name(args) -> None:
 
     from sumo_drvpw.model.equations import NAME_PATTERN
 
+    if not str(args.candidates).strip(" ,"):  # before the paths: '' would read as the folder '.'
+        raise UserError(f"--candidates {args.candidates!r}: give a set (indt-var-1, indt-var-2), a TOML "
+                        "file or a comma list of terms")
     name = args.name if args.name is not None else Path(args.out).stem
     if not re.match(NAME_PATTERN, name):
         raise UserError(f"{'--name' if args.name is not None else '--out'} {name!r}: an equation name "

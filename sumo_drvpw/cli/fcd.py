@@ -77,6 +77,8 @@ def main(args: argparse.Namespace) -> int:
     if args.end is not None:
         overrides["end"] = args.end
     if args.period is not None:
+        if not 0 < args.period < float("inf"):
+            raise UserError(f"--period {args.period:g}: an edgeData interval is a finite number of seconds > 0")
         overrides["period"] = args.period
     if args.no_figures:
         overrides["figures"] = False

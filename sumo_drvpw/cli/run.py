@@ -60,6 +60,11 @@ def _overrides(args) -> dict:
     for key in ("begin", "end", "period"):
         if getattr(args, key) is not None:
             o[key] = getattr(args, key)
+    if args.end is not None and not (args.end > (args.begin if args.begin is not None else 0.0)):
+        raise UserError(f"--end {args.end:g} must be after " + (f"--begin {args.begin:g}" if args.begin is not None
+                                                               else "the start (0 s)"))
+    if args.period is not None and not 0 < args.period < math.inf:
+        raise UserError(f"--period {args.period:g}: an edgeData interval is a finite number of seconds > 0")
     t = getattr(args, "air_temperature", None)
     if t is not None:
         if not math.isfinite(t) or t <= -273.15:

@@ -454,6 +454,9 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         bad = set(h) - set(HVAC_KEYS)
         if bad:
             raise UserError(f"{where} [chain.hvac]: unknown key(s) {sorted(bad)} (known: {', '.join(HVAC_KEYS)})")
+        if not isinstance(h.get("column", "ambient_c"), str) or not str(h.get("column", "ambient_c")).strip():
+            raise UserError(f"{where} [chain.hvac]: 'column' must be a log column name (a string), "
+                            f"got {h['column']!r}")
         hv = {"column": str(h.get("column", "ambient_c")),
               "setpoint_c": _number(h.get("setpoint_c", 20.0), "hvac.setpoint_c", where)}
         if not -60.0 <= hv["setpoint_c"] <= 60.0:
