@@ -189,6 +189,10 @@ _log_case("constant speed compare", lambda df: df.assign(speed_mps=15.0), ("wrot
 _log_case("tiny negative speeds", lambda df: df.assign(speed_mps=np.where(df.speed_mps < 0.05, -0.001, df.speed_mps)),
           ("clipped",), expect="accept")
 _log_case("negative speed at the noise limit", _set("speed_mps", 0, -0.1), ("clipped",), expect="accept")
+_log_case("acceleration all outliers", lambda df: df.assign(accel_mps2=50.0),
+          ("log.csv", "no usable sample", "|acceleration| > 8"))
+_log_case("acceleration all outliers compare", lambda df: df.assign(accel_mps2=50.0),
+          ("log.csv", "no usable sample", "|acceleration| > 8"), cmd="compare")
 _log_case("time as timestamps parquet", lambda df: df.assign(time_s=pd.to_datetime(df.time_s, unit="s")),
           ("time_s", "timestamps"), fmt="parquet")
 _log_case("time in milliseconds", lambda df: df.assign(time_s=df.time_s * 1000), ("time_s", "milliseconds"))

@@ -89,8 +89,11 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
 
     st, info = _run(args, partial(CalibrationStats, tuple(cands), moving_mps=MOVING_MPS), veh)
     if st.mass_n == 0:
-        raise UserError(f"{', '.join(map(str, args.logs))}: no usable samples "
-                        f"(all excluded: {st.counts})")
+        from sumo_drvpw.data.log import exclusions
+
+        raise UserError(f"{', '.join(map(str, args.logs))}: no usable sample among {st.counts.get('rows', 0)} "
+                        f"rows (excluded: {exclusions(st.counts)}; any other row lacks a finite measured "
+                        "power or input)")
     from sumo_drvpw.cli import note_counts
     from sumo_drvpw.cli.calibrate import check_identified
 
@@ -164,7 +167,10 @@ def compare_streamed(args, tmp: Path, title: str):
     from sumo_drvpw.cli import note_counts
 
     note_counts(cs.counts)
-    comp = cs.comparison()
+    try:
+        comp = cs.comparison()
+    except UserError as e:  # no usable sample: name the logs
+        raise UserError(f"{', '.join(map(str, args.logs))}: {e}") from None
     write_comparison_report(comp, tmp, title, _context(cs, veh, cs.n))
     print(info.line(), file=sys.stderr)
     return comp

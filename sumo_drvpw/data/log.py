@@ -24,7 +24,7 @@ from sumo_drvpw.data.trips import (per_trip_rolling_mean as _per_trip_rolling_me
                                    trip_starts as _trip_starts)
 from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_csv_delimiter,  # noqa: F401
                                        check_distinct_trips, check_speed_unit, check_time_step,
-                                       implied_acceleration)
+                                       exclusions, implied_acceleration)
 
 #: Canonical numeric columns the reader checks when present.
 NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "elevation_m",
@@ -141,13 +141,6 @@ class DriveLog:
 
     def describe(self) -> str:
         return self.files[0] if len(self.files) == 1 else f"{len(self.files)} files"
-
-
-def exclusions(counts: dict) -> str:
-    """The non-zero exclusion counts of a read, as 'brake 12, nan grade_rad 1600' (for messages)."""
-    parts = [f"{k[len('excluded_'):].replace('_', ' ')} {int(v)}" for k, v in counts.items()
-             if k.startswith("excluded_") and k != "excluded_total" and isinstance(v, (int, np.integer)) and v]
-    return ", ".join(parts) or "none"
 
 
 def bundled_log(name: str = BUNDLED_LOG) -> Path:

@@ -153,3 +153,26 @@ def check_time_step(t: np.ndarray, same: np.ndarray, p: Path) -> None:
             raise UserError(f"{p}: column 'time_s' steps by {step:g} (median within a trip), more than "
                             f"{MAX_MEDIAN_STEP_S:g} s: is it in milliseconds? The drive-log schema wants "
                             "seconds, and driving power needs samples seconds apart at most")
+
+
+def exclusions(counts: dict) -> str:
+    """The non-zero exclusion counts of a read, for messages, naming the column or the
+    rule: 'braking 12, grade_rad NaN 1600, |acceleration| > 8 m/s² (accel_mps2 column) 3'."""
+    parts = []
+    for k, v in counts.items():
+        if not (k.startswith("excluded_") and k != "excluded_total" and isinstance(v, (int, np.integer)) and v):
+            continue
+        what = k[len("excluded_"):]
+        if what.startswith("nan_"):
+            label = f"{what[4:]} NaN"
+        elif what == "accel_outlier":
+            label = (f"|acceleration| > {counts.get('accel_outlier_limit_mps2', '?')} m/s² "
+                     f"({counts.get('accel_source', 'acceleration')})")
+        elif what == "grade_outlier":
+            label = f"|grade| > {counts.get('grade_outlier_limit', '?')} rad ({counts.get('grade_source', 'grade')})"
+        elif what == "brake":
+            label = "braking"
+        else:
+            label = what.replace("_", " ")
+        parts.append(f"{label} {int(v)}")
+    return ", ".join(parts) or "none"

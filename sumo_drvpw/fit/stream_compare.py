@@ -281,7 +281,10 @@ class CompareStats:
         from sumo_drvpw.fit.compare import EquationResult
 
         if self.n == 0 or self.res is None:
-            raise UserError(f"no usable samples (all excluded: {self.counts})")
+            from sumo_drvpw.data.log import exclusions
+
+            raise UserError(f"no usable sample among {self.counts.get('rows', 0)} rows (excluded: "
+                            f"{exclusions(self.counts)}; any other row lacks a finite measured power or input)")
         order = np.argsort(self.res.key, kind="stable")
         r = {c: v[order] for c, v in self.res.cols.items()}
         comp = StreamedComparison(meas_w=r["meas"], speed_mps=r["v"], dt_s=r["dt"],
