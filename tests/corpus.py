@@ -201,6 +201,11 @@ _log_case("tab separated compare", lambda df: df.to_csv(index=False, sep="\t"), 
           cmd="compare")
 
 
+@case("drive-log", "diagnose on two samples", ("log.csv", "sample"))
+def _(d):
+    return ["diagnose", str(write(d, "log.csv", base_log().iloc[:2])), "--no-figures", "--out", str(d / "diag")]
+
+
 @case("drive-log", "same trip id in two files", ("trip_id", "t1"))
 def _(d):
     a = write(d, "a.csv", base_log())

@@ -172,10 +172,16 @@ def main(args) -> int:
     if target != "wheel":  # issue #12 §3: the loop closed on an energy chain
         return _chain_main(args, target, progress)
 
-    with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
-        res = run(args.logs, args.vehicle, args.equation, tmp, opt, figures=not args.no_figures,
-                  progress=progress, read_options=read_options(args, [args.equation] if args.equation else ()),
-                  stream=args.stream)
+    try:
+        with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
+            res = run(args.logs, args.vehicle, args.equation, tmp, opt, figures=not args.no_figures,
+                      progress=progress, read_options=read_options(args, [args.equation] if args.equation else ()),
+                      stream=args.stream)
+    except UserError as e:  # a message about the data that names none of the inputs: name the logs
+        named = [str(x) for x in (*args.logs, args.vehicle, args.equation) if x]
+        if any(n in str(e) for n in named) or str(e).startswith("--"):
+            raise
+        raise UserError(f"{', '.join(map(str, args.logs))}: {e}") from None
     r = res.report
     print(f"baseline held-out RMSE {r['baseline']['metrics']['rmse_w']:.1f} W; "
           f"{len(r['findings'])} finding(s)")
