@@ -42,6 +42,18 @@ def _glob_any(name: str, patterns) -> bool:
     return any(fnmatch.fnmatchcase(name, p) for p in patterns)
 
 
+def check_include(columns, opt: DiagnoseOptions) -> None:
+    """UserError when an ``include`` pattern matches none of the logs' extra ``columns``
+    (a misspelt name would leave nothing to find, and the trace would say 0 findings)."""
+    for pat in opt.include or ():
+        if not any(fnmatch.fnmatchcase(n, pat) for n in columns):
+            from sumo_drvpw.errors import UserError
+
+            cols = sorted(columns)
+            raise UserError(f"diagnose option include: {pat!r} matches no column of the logs (their "
+                            f"extra columns: {', '.join(cols[:12]) or 'none'}{', …' if len(cols) > 12 else ''})")
+
+
 def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarray,
                    usable: np.ndarray, opt: DiagnoseOptions,
                    roles: dict | None = None) -> tuple[dict, list[dict]]:
@@ -50,8 +62,10 @@ def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarr
     ``roles``: column → ``{"role", "source"}`` (:func:`sumo_drvpw.data.roles.resolve`);
     a ``response`` column is left out unless ``opt.responses``; conditions, loads and
     columns of unknown role go through the screens below. Returns (name → float array
-    over all samples, list of {column, reason} skipped).
+    over all samples, list of {column, reason} skipped). UserError when an ``include``
+    pattern matches no column of the logs (a misspelt name would leave nothing to find).
     """
+    check_include(signals, opt)
     kept, skipped = {}, []
     u = usable
     v, a, th, w = x.v[u], x.a[u], x.theta[u], x.wind[u]

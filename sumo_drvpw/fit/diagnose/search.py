@@ -13,7 +13,7 @@ from sumo_drvpw.fit.calibrate import CANDIDATES
 from sumo_drvpw.fit.physical import physical_calibration
 from sumo_drvpw.fit.compare import metrics as _metrics
 from sumo_drvpw.fit.diagnose.blocks import BlockModel
-from sumo_drvpw.fit.diagnose.candidates import Candidate, generate_candidates, screen_signals
+from sumo_drvpw.fit.diagnose.candidates import Candidate, check_include, generate_candidates, screen_signals
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
 from sumo_drvpw.fit.diagnose.structural import (lag_range, per_trip_lags, shift_within_trips,
                                                 structural_signals, timing)
@@ -103,6 +103,7 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
     t_all = log.df["time_s"].to_numpy(float)
     dt_all = log.df["dt_s"].to_numpy(float)
 
+    check_include(x_all.signals, opt)  # before any work
     # declared equation
     calibrated = False
     if equation is None:

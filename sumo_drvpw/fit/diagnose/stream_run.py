@@ -35,7 +35,7 @@ import pandas as pd
 
 from sumo_drvpw.data.stream import BATCH_ROWS, plan
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.fit.diagnose.candidates import Candidate, generate_candidates, screen_signals
+from sumo_drvpw.fit.diagnose.candidates import Candidate, check_include, generate_candidates, screen_signals
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
 from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble
 from sumo_drvpw.fit.stream import _add_counts
@@ -229,6 +229,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     rank[np.argsort(np.asarray(uniq_s, dtype=str), kind="stable")] = np.arange(len(uniq_s))
     tcodes_s = rank[codes_s]           # as np.unique(trip_s, return_inverse=True)
     source = sample[0].source
+    check_include(x_s.signals, opt)  # before any work
     calibrated = False
     if equation is None:
         equation, phys = physical_calibration(x_s, y_s, CANDIDATES["indt-var-1"], mask=usable_s,
