@@ -571,6 +571,12 @@ def test_cold_starts_are_booked_once_per_departing_vehicle(tmp_path):
     root = ET.parse(tmp_path / "True" / "edgedata.xml").getroot()
     xml_sum = sum(float(e.get("drvpw_prius3_cold_start_l", 0.0)) for e in root.iter("edge"))
     assert xml_sum == pytest.approx(0.07 * len(fuel[True]), rel=1e-5)
+    # a share of the departures starts cold: that share of the litres, at every departure
+    half = run_scenario(path, tmp_path / "half", equations=eqs, end=150.0, figures=False, edgedata=False,
+                        cold_start=0.5)
+    veh = pd.read_csv(tmp_path / "half" / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
+    np.testing.assert_allclose(veh["cold_start_l"], 0.035, rtol=1e-12)
+    assert half.summary["chain"]["cold_start"]["share"] == 0.5
     # in the cold: the run's air temperature sets each start's litres (V_ref + s·(T_ref − T))
     eqs[0].chain = dataclasses.replace(eqs[0].chain, cold_start_fuel_l_per_k=0.003, cold_start_ref_c=23.9)
     res = run_scenario(path, tmp_path / "cold", equations=eqs, end=150.0, figures=False, edgedata=False,

@@ -103,7 +103,7 @@ def test_road_class_tables_still_read(tmp_path):
     ("outputs", "figures", "1"), ("outputs", "progress", '"no"'),
     ("outputs", "sumo_device", "0"), ("sumo", "gui", '"yes"'),
     ("vehicles", "default_masses", '"no"'), ("vehicles", "transportable_mass", '"false"'),
-    ("vehicles", "default_carrier", "1"), ("vehicles", "cold_start", '"yes"'),
+    ("vehicles", "default_carrier", "1"),
 ])
 def test_string_and_number_booleans_are_refused(tmp_path, table, key, value):
     text = HEAD + (f"{key} = {value}\n" if table == "sumo" else f"[{table}]\n{key} = {value}\n")
@@ -141,6 +141,17 @@ def test_difference_of_the_wrong_type_with_equations_replaced(tmp_path):
     """The file's pair is checked before the run's --equation drops it (was a TypeError)."""
     _refused(_write(tmp_path, HEAD + "[outputs]\ndifference = 3\n"), "'outputs.difference'",
              equations=["vsp_ldv1999"])
+
+
+@pytest.mark.parametrize("value,share", [("true", 1.0), ("false", 0.0), ("0.3", 0.3), ("1", 1.0)])
+def test_cold_start_is_a_switch_or_a_share(tmp_path, value, share):
+    assert load_scenario(_write(tmp_path, HEAD + f"[vehicles]\ncold_start = {value}\n")).cold_start == share
+
+
+@pytest.mark.parametrize("value", ['"yes"', "1.5", "-0.1", "nan"])
+def test_cold_start_beyond_a_share_is_refused(tmp_path, value):
+    _refused(_write(tmp_path, HEAD + f"[vehicles]\ncold_start = {value}\n"),
+             "'vehicles.cold_start' must be true, false or a share from 0 to 1", value.strip('"'))
 
 
 def test_real_booleans_and_lists_still_read(tmp_path):

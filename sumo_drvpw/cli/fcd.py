@@ -37,6 +37,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="every vehicle departing in the FCD starts a cold engine: fuel chains add their "
                              "cold_start_fuel_l at its departure (the scenario's [vehicles] cold_start; "
                              "default: trips start warm)")
+    parser.add_argument("--cold-start-share", type=float, metavar="SHARE",
+                        help="only this share (0-1) of the departing vehicles starts cold: fuel chains add "
+                             "that share of their cold start at each departure (a fleet's expected fuel)")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     add_engine_arguments(parser, ("local", "dask"),
                          "local: stream the FCD on this machine in bounded memory (default); "
@@ -82,8 +85,12 @@ def main(args: argparse.Namespace) -> int:
         overrides["period"] = args.period
     if args.no_figures:
         overrides["figures"] = False
-    if args.cold_start:
-        overrides["cold_start"] = True
+    if args.cold_start_share is not None:
+        if not 0.0 <= args.cold_start_share <= 1.0:
+            raise UserError(f"--cold-start-share {args.cold_start_share:g}: a share of the vehicles, from 0 to 1")
+        overrides["cold_start"] = args.cold_start_share
+    elif args.cold_start:
+        overrides["cold_start"] = 1.0
     with output_set(args, args.out, [args.fcd, args.net, args.scenario, args.vtypes]) as tmp:
         if args.engine == "dask":
             from sumo_drvpw.sim.fcd_dask import process_fcd_dask

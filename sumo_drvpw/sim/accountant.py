@@ -151,7 +151,7 @@ class Accountant(_Listener):
                 self.ledger.flush_vehicles = int(flush_vehicles)
         self.physics = Physics(wind_speed=sc.wind_speed, wind_from_deg=sc.wind_from_deg,
                                rho=sc.rho, ambient_c=sc.air_temperature_c,
-                               cold_start=getattr(sc, "cold_start", False),
+                               cold_start=float(getattr(sc, "cold_start", 0.0)),
                                slope_tol=sc.slope_tol,
                                slope_reference=sc.slope_reference,
                                acceleration=sc.acceleration, heading=sc.wind_heading,

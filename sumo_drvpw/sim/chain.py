@@ -46,11 +46,13 @@ class ChainLedger:
     names : equation names, in the order of the driving powers given to :meth:`book`
     chains : each equation's chain, or None (that equation books nothing here)
     n_edges : number of edges
-    cold_start : book each fuel chain's cold start at a vehicle's departure (:meth:`start`)
+    cold_start : the share of departing vehicles that start a cold engine (0 … 1; True: 1):
+        each fuel chain books that share of its cold start at a vehicle's departure
+        (:meth:`start`), the expected fuel of a fleet of which that share starts cold
     """
 
     def __init__(self, names: list[str], chains: list[EnergyChain | None], n_edges: int,
-                 capacity: int = 1024, signal_values: dict | None = None, cold_start: bool = False):
+                 capacity: int = 1024, signal_values: dict | None = None, cold_start: float = 0.0):
         #: constant values of the chains' signals (loads, ambient temperature) in SUMO,
         #: which has no such columns; a load not given is taken as 0 and listed in
         #: :attr:`assumed_zero` (a logged heater or A/C load then adds nothing)
@@ -92,16 +94,18 @@ class ChainLedger:
         self.snapshots: list[tuple[float, np.ndarray]] = []
         #: totals of vehicles flushed out of memory (Ledger.flush): class → [(E, Q), m]
         self.flushed_class: dict[str, list] = {}
-        #: cold starts are booked (the run says trips start cold)
-        self.cold_start = bool(cold_start)
+        #: share of the departing vehicles whose cold start is booked (0: none)
+        self.cold_start = float(cold_start)
         #: one cold start's quantities per booked column at the run's air temperature, (C,)
         self._cs = np.zeros(len(self._cols))
         for j, (e, k) in enumerate(self._cols):
             cs = self.chains[e].cold_start(self.air_temperature_c)
-            self._cs[j] = {4: cs["fuel_j"], 5: cs["fuel_l"], 6: cs["co2_kg"], 7: cs["fuel_l"]}.get(k, 0.0)
+            self._cs[j] = self.cold_start * {4: cs["fuel_j"], 5: cs["fuel_l"], 6: cs["co2_kg"],
+                                             7: cs["fuel_l"]}.get(k, 0.0)
         #: vehicle rows that departed and whose cold start is not booked yet
         self._starting = np.zeros(capacity, bool)
-        #: vehicles whose departure was booked as a cold start (by any chain that has one)
+        #: vehicles whose departure was booked (with the share of a cold start) by a chain
+        #: that has one
         self.cold_starts = 0
 
     @property
@@ -371,7 +375,7 @@ class ChainLedger:
 
 
 def chain_ledger(equations, n_edges: int, signal_values: dict | None = None,
-                 cold_start: bool = False) -> ChainLedger | None:
+                 cold_start: float = 0.0) -> ChainLedger | None:
     """A :class:`ChainLedger` for the equations that carry a battery or fuel chain, or None."""
     chains = [getattr(e, "chain", None) for e in equations]
     if not any(c is not None and c.predicts != "wheel" for c in chains):
@@ -392,10 +396,12 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
                           "while standing); fuel: litres (LHV, density of the chain's fuel), CO2 kg"
                           + ("; cold_start_l: the part of the litres that cold starts took"
                              if chain.cold_start else ""),
-            "cold_start": {"booked": chain.cold_start, "vehicles": chain.cold_starts,
+            "cold_start": {"booked": chain.cold_start > 0, "share": chain.cold_start,
+                           "vehicles": chain.cold_starts,
                            "fuel_l_per_start": per_start, "air_temperature_c": chain.air_temperature_c,
                            "rule": "the chain's cold_start_fuel_l once per vehicle departing during "
-                                   "the run, at its departure edge ([vehicles] cold_start, or the run command's cold-start option)"
+                                   "the run, times the share, at its departure edge ([vehicles] cold_start, or "
+                                   "the run command's cold-start option)"
                                    if chain.cold_start else
                                    "not booked: every trip taken as starting warm (through traffic, "
                                    "or engines already warm); [vehicles] cold_start = true or "

@@ -43,8 +43,8 @@ class Physics:
     #: ambient air temperature [°C] given to the equations (``cold`` factor) and the
     #: chains (HVAC) as the signal ``ambient_c``; None: unknown (``cold`` = 0, reference)
     ambient_c: float | None = None
-    #: fuel chains book their cold start at each vehicle's departure (sim/chain.py)
-    cold_start: bool = False
+    #: share of departing vehicles whose cold start fuel chains book (sim/chain.py)
+    cold_start: float = 0.0
     slope_tol: float = 0.01
     #: "getslope": compare the robust slope with SUMO's getSlope (one more getter per
     #: vehicle); "geometry": with the same front-to-back slope taken from the lane shape

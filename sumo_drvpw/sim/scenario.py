@@ -141,7 +141,9 @@ class Scenario:
     default_carrier: bool = False
     #: every vehicle departing during the run starts a cold engine: fuel chains book their
     #: ``cold_start_fuel_l`` at its departure (off: trips start warm, e.g. through traffic)
-    cold_start: bool = False
+    #: share of the trips departing during the run that start a cold engine, 0 … 1 (true:
+    #: 1, false: 0): fuel chains book that share of their cold start at each departure
+    cold_start: float = 0.0
     #: persons riding in a vehicle add their vTypes' masses while they ride, as in SUMO's
     #: emission models (EnergyParams::getTotalMass)
     transportable_mass: bool = True
@@ -222,6 +224,15 @@ def _bool(v, where: str, key: str) -> bool:
     if not isinstance(v, bool):
         raise UserError(f"{where}: '{key}' must be true or false, got {v!r}")
     return v
+
+
+def _share(v, where: str, key: str) -> float:
+    """true / false, or a share in [0, 1] (a fraction of the vehicles)."""
+    if isinstance(v, bool):
+        return 1.0 if v else 0.0
+    if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
+        raise UserError(f"{where}: '{key}' must be true, false or a share from 0 to 1, got {v!r}")
+    return float(v)
 
 
 def _choice(v, allowed: tuple[str, ...], where: str, key: str) -> str:
@@ -536,8 +547,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         default_masses=_bool(veh.get("default_masses", True), where, "vehicles.default_masses"),
         default_carrier=_bool(veh.get("default_carrier", names == list(CONFIG_EQUATIONS)), where,
                               "vehicles.default_carrier"),
-        cold_start=_bool(overrides.get("cold_start", veh.get("cold_start", False)), where,
-                         "vehicles.cold_start"),
+        cold_start=_share(overrides.get("cold_start", veh.get("cold_start", False)), where,
+                          "vehicles.cold_start"),
         transportable_mass=_bool(veh.get("transportable_mass", True), where,
                                  "vehicles.transportable_mass"),
         wind_speed=ws, wind_from_deg=wd, rho=rho, air_temperature_c=t_air,
