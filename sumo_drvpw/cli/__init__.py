@@ -73,6 +73,30 @@ def add_force(p) -> None:
                    help="replace an existing output folder even if sumo-drvpw did not write it")
 
 
+def add_cold_start(p, during: str) -> None:
+    """The ``--cold-start`` and ``--cold-start-share`` options of ``run`` and ``fcd``."""
+    p.add_argument("--cold-start", action="store_true",
+                   help=f"every vehicle departing {during} starts a cold engine: fuel chains add their "
+                        "cold_start_fuel_l at its departure (the scenario's [vehicles] cold_start; "
+                        "default: trips start warm)")
+    p.add_argument("--cold-start-share", type=float, metavar="SHARE",
+                   help="only this share (0-1) of the departing vehicles starts cold: fuel chains add "
+                        "that share of their cold start at each departure (a fleet's expected fuel)")
+
+
+def cold_start_override(args, overrides: dict) -> None:
+    """Put the cold-start options into the scenario ``overrides`` (``cold_start``: a share)."""
+    from sumo_drvpw.errors import UserError
+
+    share = getattr(args, "cold_start_share", None)
+    if share is not None:
+        if not 0.0 <= share <= 1.0:
+            raise UserError(f"--cold-start-share {share:g}: a share of the vehicles, from 0 to 1")
+        overrides["cold_start"] = share
+    elif getattr(args, "cold_start", False):
+        overrides["cold_start"] = 1.0
+
+
 def existing_paths(*groups) -> list[str]:
     """The arguments that name existing files or folders (inputs an output must avoid);
     each group is a path, a list of paths or None (names like ``prius3`` are skipped)."""

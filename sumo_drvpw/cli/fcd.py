@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from sumo_drvpw.cli import add_force, output_set, sumo_time_arg
+from sumo_drvpw.cli import add_cold_start, add_force, cold_start_override, output_set, sumo_time_arg
 from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 
 
@@ -33,13 +33,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--begin", type=sumo_time_arg, help="ignore timesteps before this [s, or h:m:s]")
     parser.add_argument("--end", type=sumo_time_arg, help="stop at this simulation time [s, or h:m:s]")
     parser.add_argument("--period", type=float, metavar="S", help="edgeData interval [s]")
-    parser.add_argument("--cold-start", action="store_true",
-                        help="every vehicle departing in the FCD starts a cold engine: fuel chains add their "
-                             "cold_start_fuel_l at its departure (the scenario's [vehicles] cold_start; "
-                             "default: trips start warm)")
-    parser.add_argument("--cold-start-share", type=float, metavar="SHARE",
-                        help="only this share (0-1) of the departing vehicles starts cold: fuel chains add "
-                             "that share of their cold start at each departure (a fleet's expected fuel)")
+    add_cold_start(parser, "in the FCD")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     add_engine_arguments(parser, ("local", "dask"),
                          "local: stream the FCD on this machine in bounded memory (default); "
@@ -85,12 +79,7 @@ def main(args: argparse.Namespace) -> int:
         overrides["period"] = args.period
     if args.no_figures:
         overrides["figures"] = False
-    if args.cold_start_share is not None:
-        if not 0.0 <= args.cold_start_share <= 1.0:
-            raise UserError(f"--cold-start-share {args.cold_start_share:g}: a share of the vehicles, from 0 to 1")
-        overrides["cold_start"] = args.cold_start_share
-    elif args.cold_start:
-        overrides["cold_start"] = 1.0
+    cold_start_override(args, overrides)
     with output_set(args, args.out, [args.fcd, args.net, args.scenario, args.vtypes]) as tmp:
         if args.engine == "dask":
             from sumo_drvpw.sim.fcd_dask import process_fcd_dask

@@ -14,7 +14,7 @@ import argparse
 import math
 import sys
 
-from sumo_drvpw.cli import add_force, output_set, sumo_time_arg
+from sumo_drvpw.cli import add_cold_start, add_force, cold_start_override, output_set, sumo_time_arg
 from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 from sumo_drvpw.errors import UserError
 
@@ -41,13 +41,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="air temperature [°C], replacing the scenario's [air] (ρ from it at the "
                              "scenario's pressure, else 101.325 kPa); the equations' cold terms and "
                              "the energy chains' HVAC read it")
-    parser.add_argument("--cold-start", action="store_true",
-                        help="every vehicle departing during the run starts a cold engine: fuel chains add their "
-                             "cold_start_fuel_l at its departure (the scenario's [vehicles] cold_start; "
-                             "default: trips start warm)")
-    parser.add_argument("--cold-start-share", type=float, metavar="SHARE",
-                        help="only this share (0-1) of the departing vehicles starts cold: fuel chains add "
-                             "that share of their cold start at each departure (a fleet's expected fuel)")
+    add_cold_start(parser, "during the run")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_engine_arguments(parser, ("local", "dask"),
@@ -73,12 +67,7 @@ def _overrides(args) -> dict:
         if not math.isfinite(t) or t <= -273.15:
             raise UserError(f"--air-temperature {t}: a finite temperature above absolute zero (°C)")
         o["air_temperature_c"] = t
-    if getattr(args, "cold_start_share", None) is not None:
-        if not 0.0 <= args.cold_start_share <= 1.0:
-            raise UserError(f"--cold-start-share {args.cold_start_share:g}: a share of the vehicles, from 0 to 1")
-        o["cold_start"] = args.cold_start_share
-    elif getattr(args, "cold_start", False):
-        o["cold_start"] = 1.0
+    cold_start_override(args, o)
     if args.equation:
         o["equations"] = args.equation
     if args.traci or args.gui:
