@@ -237,3 +237,17 @@ def test_sumo_refusing_an_option_is_one_line(tmp_path):
     assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
     assert "SUMO failed to start" in lines[0] and "--no-such-sumo-option" in lines[0]
     assert not (tmp_path / "o").exists()
+
+
+def test_a_route_files_bad_vtype_mass_is_named_before_sumo_starts(tmp_path, capsys):
+    """SUMO refuses a negative vType mass without naming the file or the vType; the run
+    reads the route files' vTypes first and names both."""
+    net = corpus.REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"
+    (tmp_path / "r.rou.xml").write_text('<routes><vType id="heavy" mass="-100"/></routes>\n', encoding="utf-8")
+    sc = tmp_path / "s.toml"
+    sc.write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{net.as_posix()}"\nroutes = ["r.rou.xml"]\n'
+                  'end = 30\n', encoding="utf-8")
+    code = cli_main(["run", str(sc), "--no-figures", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.count("\n") == 0 and "r.rou.xml" in err and "vType 'heavy'" in err and "-100" in err
+    assert not (tmp_path / "o").exists()

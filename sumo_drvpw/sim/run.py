@@ -19,7 +19,7 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.vtypes import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER,
-                                   energy_carrier, equation_carrier)
+                                   energy_carrier, equation_carrier, read_vtypes)
 from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, redirect_additional_outputs,
                                          sumo_output_args)
 
@@ -400,6 +400,9 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
                      "true"]
     from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
 
+    # the route files' vTypes before SUMO reads them: a bad mass is named with its file and
+    # vType here (SUMO's own refusal names neither); the Accountant reuses what was read
+    read_vtypes([f for f in sc.route_files if Path(f).is_file()])
     conn = start_sumo(args, sc.connection, sc.gui)
     acc = None
     try:
