@@ -54,10 +54,10 @@ def _run(args, make, vehicle):
 
     from sumo_drvpw.cli import read_options
     from sumo_drvpw.data.log import expand_paths
-    from sumo_drvpw.data.plausible import _check_header
+    from sumo_drvpw.data.plausible import check_header
 
     for p in expand_paths(args.logs):  # a column named twice (the reader's column selection hides it)
-        _check_header(p)
+        check_header(p)
     # trip ids in two files: checked by the engine on the ids it reads (no extra pass)
     eqs = getattr(args, "equation", None)
     eqs = [eqs] if isinstance(eqs, str) else (eqs or ())

@@ -22,7 +22,7 @@ from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.data.trips import (per_trip_rolling_mean as _per_trip_rolling_mean,  # noqa: F401
                                    trip_array as _trip_array, trip_codes_of,
                                    trip_starts as _trip_starts)
-from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_csv_delimiter,  # noqa: F401
+from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_header,  # noqa: F401
                                        check_distinct_trips, check_speed_unit, check_time_step,
                                        exclusions, implied_acceleration)
 
@@ -188,7 +188,7 @@ def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
                     meta[k.decode()] = v.decode()
             df = table.to_pandas()
         else:
-            check_csv_delimiter(p)
+            check_header(p)
             df = pd.read_csv(p, low_memory=False)
     except pd.errors.EmptyDataError:
         raise UserError(f"{p}: empty file (no header, no rows)") from None

@@ -69,7 +69,7 @@ def check_distinct_trips(paths) -> None:
 
     seen: dict[str, Path] = {}
     for p in expand_paths(paths):
-        _check_header(p)
+        check_header(p)
         ids = _trip_ids(p)
         for tid in ids:
             if tid in seen:
@@ -108,8 +108,11 @@ def _trip_ids(p: Path) -> list[str]:
     return [str(x) for x in pd.unique(col.dropna().astype(str))]
 
 
-def _check_header(p: Path) -> None:
-    """A column named twice in a CSV header or a Parquet schema is a UserError."""
+def check_header(p: Path) -> None:
+    """The header of a CSV log or the schema of a Parquet one, as a UserError naming it: a
+    CSV separated by ';', tabs or '|' (one field holding them; the canonical drive log
+    separates by commas), or a column named twice. A CSV header that is not UTF-8 is left to
+    the reader, which names its first offending byte."""
     try:
         if p.suffix.lower() == ".parquet":
             import pyarrow.parquet as pq
@@ -118,30 +121,20 @@ def _check_header(p: Path) -> None:
         else:
             import csv
 
-            with open(p, newline="", encoding="utf-8", errors="replace") as f:
-                names = next(csv.reader(f), [])
-    except (OSError, ValueError):
+            with open(p, "rb") as fh:
+                head = fh.readline(1 << 20).decode("utf-8-sig").rstrip("\r\n")
+            names = next(csv.reader([head]), [])
+            if len(names) == 1:
+                for sep, word in ((";", "semicolons"), ("\t", "tabs"), ("|", "'|'")):
+                    if sep in head:
+                        raise UserError(f"{p}: the header {head[:60]!r} is separated by {word}; a canonical "
+                                        "CSV drive log separates columns by commas (convert it, or map it "
+                                        "with the import command's columns format and its options.sep)")
+    except (OSError, ValueError):  # UnicodeDecodeError among them
         return  # unreadable files are named by the reader itself
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise UserError(f"{p}: column '{dup[0]}' appears twice; give each column once")
-
-
-def check_csv_delimiter(p: Path) -> None:
-    """UserError when a CSV's header is one field that holds ';', a tab or '|': the file is
-    separated by another character than the canonical drive log's comma."""
-    try:
-        with open(p, "rb") as fh:
-            head = fh.readline(4096).decode("utf-8-sig").rstrip("\r\n")
-    except (OSError, UnicodeDecodeError):
-        return  # the reader names it (not UTF-8: with its first offending byte)
-    if "," in head or not head:
-        return
-    for sep, name in ((";", "semicolons"), ("\t", "tabs"), ("|", "'|'")):
-        if sep in head:
-            raise UserError(f"{p}: the header {head[:60]!r} is separated by {name}; a canonical CSV "
-                            "drive log separates columns by commas (convert it, or map it with the "
-                            "import command's columns format)")
 
 
 def check_time_step(t: np.ndarray, same: np.ndarray, p: Path) -> None:

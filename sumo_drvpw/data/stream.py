@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.data.log import DERIVED, FLAGS, NUMERIC, ReadOptions, expand_paths, from_frame, read_error
-from sumo_drvpw.data.plausible import check_csv_delimiter
+from sumo_drvpw.data.plausible import check_header
 from sumo_drvpw.errors import UserError
 
 #: Columns the reader and measured power use; calibrate and compare read these plus the
@@ -170,7 +170,7 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
                 yield b.to_pandas()
                 del b
         else:
-            check_csv_delimiter(p)
+            check_header(p)
             use = None if columns is None else (lambda c: c in columns)
             for df in pd.read_csv(p, chunksize=rows, low_memory=False, usecols=use):
                 yield df

@@ -105,6 +105,8 @@ class Accountant(_Listener):
         (default: a temporary folder) and memory holds the running vehicles only
     net : the scenario's network (:func:`~sumo_drvpw.sim.network.load_network`), when
         already loaded (default: loaded from the scenario)
+    vtypes : the route files' vTypes (:func:`~sumo_drvpw.sim.vtypes.read_vtypes`), when
+        already read (default: read from the scenario's route files, else SUMO's options)
     overrides : scenario values to replace (see ``sumo_drvpw.sim.scenario.OVERRIDES``)
 
     Use it as a step listener (``conn.addStepListener(acc)``) or call :meth:`step` after
@@ -113,7 +115,7 @@ class Accountant(_Listener):
 
     def __init__(self, conn, equations=None, scenario=None, trace_path=None,
                  keep_vehicles: bool = False, spill_dir=None, flush_vehicles: int | None = None,
-                 net=None, **overrides):
+                 net=None, vtypes=None, **overrides):
         from sumo_drvpw.sim.run import VTypeResolver
 
         self._t0 = time.perf_counter()
@@ -121,7 +123,8 @@ class Accountant(_Listener):
         sc = self.scenario = scenario_for(conn, equations, scenario, **overrides)
         files = list(sc.route_files) or (_option_files(conn, "route-files")
                                           + _option_files(conn, "additional-files"))
-        self.file_vtypes = read_vtypes([f for f in files if f.is_file()])
+        self.file_vtypes = (vtypes if vtypes is not None   # already read by the caller
+                            else read_vtypes([f for f in files if f.is_file()]))
         self.equations = list(sc.equations)
         names = [e.name for e in self.equations]
         for info in self.file_vtypes.values():  # vTypes naming an equation the scenario lacks

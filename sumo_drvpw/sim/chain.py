@@ -221,9 +221,9 @@ class ChainLedger:
             if s.any():
                 q[s] += self._cs
                 self._starting[vidx[s]] = False
-                a_cs = np.ones(int(s.sum()), bool) if app is None else \
-                    (np.asarray(app, float)[s][:, self._ce] * (self._cs > 0) > 0).any(axis=1)
-                self.cold_starts += int(a_cs.sum())
+                # a departure counts when a chain with a cold start books the vehicle
+                self.cold_starts += int(s.sum()) if app is None else \
+                    int((np.asarray(app)[s][:, self._ce[self._cs > 0]] > 0).any(axis=1).sum())
         if app is not None:
             app = np.asarray(app, float)
             q *= app[:, self._ce]

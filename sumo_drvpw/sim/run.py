@@ -401,13 +401,13 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
 
     # the route files' vTypes before SUMO reads them: a bad mass is named with its file and
-    # vType here (SUMO's own refusal names neither); the Accountant reuses what was read
-    read_vtypes([f for f in sc.route_files if Path(f).is_file()])
+    # vType here (SUMO's own refusal names neither); the Accountant books with them
+    vtypes = read_vtypes([f for f in sc.route_files if Path(f).is_file()]) if sc.route_files else None
     conn = start_sumo(args, sc.connection, sc.gui)
     acc = None
     try:
         try:
-            acc = Accountant(conn, scenario=sc,
+            acc = Accountant(conn, scenario=sc, vtypes=vtypes,
                              trace_path=Path(out_dir) / "trace.parquet" if sc.trace else None,
                              keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles,
                              spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None)

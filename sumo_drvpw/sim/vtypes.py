@@ -229,25 +229,13 @@ def _mass(where: str, key: str, val: str | None, zero: bool = False) -> float | 
     return x
 
 
-#: the vTypes of the files last read (:func:`read_vtypes`), by (path, mtime, size) of each
-_READ: dict[tuple, dict] = {}
-
-
 def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
     """Read every ``<vType>`` of the given route/additional files.
 
     Mass: param ``drvpw.mass`` (the plug-in's: the vehicle's whole mass) > attribute ``mass``
     (else the deprecated param ``vehicleMass``, which SUMO reads as the mass) plus param
     ``loading``, the payload SUMO's emission models add to it (EnergyParams::getTotalMass).
-    The files' vTypes are kept for the next call with the same unchanged files (a run
-    checks them before SUMO starts, its Accountant reads them after).
     """
-    try:
-        key = tuple((str(Path(p).resolve()), Path(p).stat().st_mtime_ns, Path(p).stat().st_size) for p in files)
-    except OSError:
-        key = None
-    if key is not None and key in _READ:
-        return dict(_READ[key])
     out: dict[str, VTypeInfo] = {}
     for path in files:
         try:
@@ -285,9 +273,6 @@ def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
                             f"{e}") from None
         except OSError as e:
             raise UserError(f"{path}: cannot read: {e}") from None
-    if key is not None:
-        _READ.clear()  # the last run's files only
-        _READ[key] = dict(out)
     return out
 
 

@@ -403,7 +403,8 @@ def study(data: Path, fuel: str = "gasoline", lists: pd.DataFrame | None = None)
     """The whole study of ``fuel`` on the shared data folder ``data`` (``lists``: the
     already read Test Car List, else read from the folder)."""
     t0 = time.perf_counter()
-    d, counts = select(read_lists(Path(data) / DATASET) if lists is None else lists, fuel)
+    lists = read_lists(Path(data) / DATASET) if lists is None else lists
+    d, counts = select(lists, fuel)
     speeds = schedules(Path(data) / CYCLES)
     if d.empty:
         raise UserError(f"{Path(data) / DATASET}: no conventional configuration tested on {TEST_FUELS[fuel]}")
@@ -418,8 +419,7 @@ def study(data: Path, fuel: str = "gasoline", lists: pd.DataFrame | None = None)
                       "oldest held out": split(obs, [years[0]], speeds, fuel)},
            "fit_all": fit(obs), "defaults": class_defaults(obs[obs["test"].isin(TESTS)]),
            "cold_start": cold_start(obs),
-           "cold_start_cold": cold_start_in_the_cold(read_lists(Path(data) / DATASET) if lists is None else lists,
-                                                     obs, speeds, fuel)}
+           "cold_start_cold": cold_start_in_the_cold(lists, obs, speeds, fuel)}
     res["equations"] = {cls: builtin_equation(cls, res) for cls in res["defaults"] if cls in BUILTINS}
     res["seconds"] = time.perf_counter() - t0
     return res
