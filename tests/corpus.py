@@ -197,6 +197,15 @@ _log_case("time as timestamps parquet", lambda df: df.assign(time_s=pd.to_dateti
           ("time_s", "timestamps"), fmt="parquet")
 _log_case("time in milliseconds", lambda df: df.assign(time_s=df.time_s * 1000), ("time_s", "milliseconds"))
 _log_case("semicolon separated", lambda df: df.to_csv(index=False, sep=";"), ("log.csv", "semicolons"))
+
+def _extra_fields(df):  # row 100 (file line 102) has two fields more than the header
+    lines = df.to_csv(index=False).splitlines()
+    lines[101] += ",999,888"
+    return "\n".join(lines) + "\n"
+
+
+_log_case("row longer than the header", _extra_fields, ("log.csv", "line 102", "saw 7"))
+_log_case("row longer than the header compare", _extra_fields, ("log.csv", "line 102"), cmd="compare")
 _log_case("tab separated compare", lambda df: df.to_csv(index=False, sep="\t"), ("log.csv", "tabs"),
           cmd="compare")
 

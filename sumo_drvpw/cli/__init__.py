@@ -323,10 +323,11 @@ def main(argv: list[str] | None = None) -> int:
             # a command that caught the interrupt itself (run writes what it simulated)
             return 128 + signal.SIGTERM if rc == 130 and _TERMINATED else rc
     except OutputExists as e:
-        print(f"sumo-drvpw {args.command}: error: {e}; give --force to replace it", file=sys.stderr)
+        print(f"sumo-drvpw {args.command}: error: {_one_line(e)}; give --force to replace it",
+              file=sys.stderr)
         return 2
     except UserError as e:
-        print(f"sumo-drvpw {args.command}: error: {e}", file=sys.stderr)
+        print(f"sumo-drvpw {args.command}: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:  # SIGINT, or SIGTERM as _Terminated
         return _signal_exit(isinstance(e, _Terminated))
@@ -352,6 +353,11 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGTERM, prev_term)
         if prev_int is not None:
             signal.signal(signal.SIGINT, prev_int)
+
+
+def _one_line(e: Exception) -> str:
+    """An error's text on one line (a library's message may end in or hold line breaks)."""
+    return "; ".join(x.strip() for x in str(e).splitlines() if x.strip())
 
 
 if __name__ == "__main__":

@@ -171,9 +171,10 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
                 del b
         else:
             check_header(p)
-            use = None if columns is None else (lambda c: c in columns)
-            for df in pd.read_csv(p, chunksize=rows, low_memory=False, usecols=use):
-                yield df
+            # every column read, then the wanted kept: with usecols, pandas drops the extra
+            # fields of a row longer than the header silently (the memory engine refuses it)
+            for df in pd.read_csv(p, chunksize=rows, low_memory=False):
+                yield df if columns is None else df[[c for c in df.columns if c in columns]]
     except pd.errors.EmptyDataError:
         raise UserError(f"{p}: empty file (no header, no rows)") from None
     except (OSError, ValueError, pd.errors.ParserError) as e:
