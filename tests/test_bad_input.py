@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -222,6 +223,56 @@ def test_gui_without_a_display_is_one_line(tmp_path, capsys, monkeypatch):
     code = cli_main(["run", "city", "--end", "30", "--gui", "--no-figures", "--out", str(tmp_path / "g")])
     err = capsys.readouterr().err.strip()
     assert code == 2 and err.count("\n") == 0 and "DISPLAY" in err and not (tmp_path / "g").exists()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the display check is for X11/Wayland")
+def test_gui_on_an_unreachable_display_is_one_line_at_once(tmp_path, capsys, monkeypatch):
+    """`run --gui` with DISPLAY naming a display no X server serves: one line, at once (sumo-gui
+    itself retries for about a minute); a display that answers passes the check."""
+    import socket
+    import time
+
+    from sumo_drvpw.sim.run import _display_reachable
+
+    n = next(i for i in range(90, 200) if not Path(f"/tmp/.X11-unix/X{i}").exists())
+    monkeypatch.setenv("DISPLAY", f":{n}")
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    t0 = time.perf_counter()
+    code = cli_main(["run", "city", "--end", "30", "--gui", "--no-figures", "--out", str(tmp_path / "g")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.count("\n") == 0 and f"DISPLAY=':{n}'" in err, err
+    assert time.perf_counter() - t0 < 20 and not (tmp_path / "g").exists()
+    with socket.socket() as srv:  # something listening on an X port: reachable
+        srv.bind(("127.0.0.1", 0))
+        srv.listen()
+        port = srv.getsockname()[1]
+        if port >= 6000:
+            assert _display_reachable(f"127.0.0.1:{port - 6000}")
+    assert not _display_reachable("127.0.0.1:x")
+
+
+def test_a_broken_network_file_is_named_when_sumo_refuses_it(tmp_path):
+    """A net file cut off mid-way: SUMO says 'input ended before all started tags were ended',
+    naming no file; the one line adds the file and the line where it breaks."""
+    src = corpus.REPO / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.sumocfg"
+    net = tmp_path / "cut.net.xml"
+    cfg_text = src.read_text(encoding="utf-8")
+    import re
+
+    net_rel = re.search(r'<net-file value="([^"]+)"', cfg_text).group(1)
+    whole = (src.parent / net_rel).read_text(encoding="utf-8").splitlines(keepends=True)
+    net.write_text("".join(whole[: len(whole) // 2]), encoding="utf-8")
+    cfg = tmp_path / "cut.sumocfg"
+    cfg.write_text(re.sub(r'value="([^"]+\.xml)"', lambda m: 'value="' + (
+        net.as_posix() if m.group(1) == net_rel else (src.parent / m.group(1)).resolve().as_posix()) + '"',
+        cfg_text), encoding="utf-8")
+    r = subprocess.run([sys.executable, "-m", "sumo_drvpw", "run", str(cfg), "--end", "30", "--no-figures",
+                        "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=300)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "SUMO failed to start" in lines[0] and f"{net}: not valid XML" in lines[0], lines[0]
+    assert f"line {len(whole) // 2 + 1}," in lines[0], lines[0]
+    assert not (tmp_path / "o").exists()
 
 
 def test_sumo_refusing_an_option_is_one_line(tmp_path):

@@ -281,10 +281,14 @@ def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
     import sumolib
 
     _sumo_env()
-    if gui and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
-                                                         or os.environ.get("WAYLAND_DISPLAY")):
-        raise UserError("sumo.gui: no display to show sumo-gui on (DISPLAY is not set); run without "
-                        "the GUI, or where a display is")
+    if gui and sys.platform.startswith("linux") and not os.environ.get("WAYLAND_DISPLAY"):
+        display = os.environ.get("DISPLAY")
+        if not display:
+            raise UserError("sumo.gui: no display to show sumo-gui on (DISPLAY is not set); run "
+                            "without the GUI, or where a display is")
+        if not _display_reachable(display):  # sumo-gui would retry for a minute, then fail
+            raise UserError(f"sumo.gui: cannot reach the display DISPLAY={display!r} (no X server "
+                            "answers there); run without the GUI, or where a display is")
     binary = sumolib.checkBinary("sumo-gui" if gui else "sumo")
     cmd = [binary, *args, "--no-step-log", "true"]
     if connection == "libsumo":
@@ -309,7 +313,8 @@ def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
                     pass
         if failed is not None:  # SUMO's own error lines, in the one line of ours
             why = "; ".join(x.strip() for x in said if x.strip().startswith("Error")) or str(failed)
-            raise UserError(f"SUMO failed to start ({' '.join(args)}): {why}") from None
+            raise UserError(f"SUMO failed to start ({' '.join(args)}): {why}{_malformed(args)}"
+                            ) from None
         sys.stdout.write("".join(told))  # started: what SUMO wrote goes on as it wrote it
         sys.stderr.write("".join(said))
         return libsumo
@@ -318,8 +323,73 @@ def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
     try:
         traci.start(cmd, label=label, stdout=open(os.devnull, "w"))
     except Exception as e:  # traci.exceptions.FatalTraCIError, OSError
-        raise UserError(f"SUMO failed to start ({' '.join(args)}): {e}") from None
+        raise UserError(f"SUMO failed to start ({' '.join(args)}): {e}{_malformed(args)}"
+                        ) from None
     return traci.getConnection(label)
+
+
+def _display_reachable(display: str, timeout_s: float = 2.0) -> bool:
+    """Whether an X server answers at ``display`` ("[host]:N[.S]"): its Unix socket (also
+    Linux's abstract one) for a local display, TCP port 6000 + N for a remote one."""
+    import socket
+
+    host, _, num = display.rpartition(":")
+    try:
+        n = int(num.split(".")[0])
+    except ValueError:
+        return False
+    if host in ("", "unix"):
+        for path in (f"/tmp/.X11-unix/X{n}", f"\0/tmp/.X11-unix/X{n}"):
+            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+                s.settimeout(timeout_s)
+                try:
+                    s.connect(path)
+                    return True
+                except OSError:
+                    continue
+        return False
+    try:
+        socket.create_connection((host, 6000 + n), timeout=timeout_s).close()
+        return True
+    except OSError:
+        return False
+
+
+def _malformed(args: list[str]) -> str:
+    """After SUMO refused to start: '; FILE: not valid XML: ...' for the first of its input
+    files (config, net, routes, additional) that is not well-formed, else ''. SUMO's own
+    message for a broken net ('input ended before all started tags were ended') names no file."""
+    import xml.parsers.expat
+
+    from sumo_drvpw.fileio import open_maybe_gzip
+    from sumo_drvpw.sim.scenario import _config_files
+
+    files: list[Path] = []
+    it = iter(args)
+    for a in it:
+        val = next(it, "") if a in ("-c", "--configuration-file", "-n", "--net-file", "-r",
+                                    "--route-files", "-a", "--additional-files") else None
+        if val is None:
+            continue
+        if a in ("-c", "--configuration-file"):
+            files.append(Path(val))
+            try:
+                net, more, _ = _config_files(Path(val))
+            except UserError as e:
+                return f"; {e}"
+            files += [net, *more]
+        else:
+            files += [Path(f.strip()) for f in val.split(",") if f.strip()]
+    for f in files:
+        parser = xml.parsers.expat.ParserCreate()
+        try:
+            with open_maybe_gzip(f) as fh:
+                parser.ParseFile(fh)
+        except xml.parsers.expat.ExpatError as e:
+            return f"; {f}: not valid XML: {e}"
+        except (OSError, EOFError, ValueError):
+            continue
+    return ""
 
 
 def close_sumo(conn) -> None:
