@@ -9,6 +9,8 @@ line. Real: the shared lists; the built-in equations must be what the study writ
 
 from __future__ import annotations
 
+import copy
+
 import subprocess
 import sys
 from pathlib import Path
@@ -157,10 +159,25 @@ def test_cold_start_in_the_cold_by_hand(planted):
     assert cc["difference_ml"] == pytest.approx(np.median(cold - warm), rel=1e-6)
     assert cc["ml_per_k"] == pytest.approx(np.median(cold - warm) / (ef.FTP_AIR_C - ef.COLD_CO_AIR_C), rel=1e-6)
     assert cc["bag2_ratio"] == pytest.approx(1 / 0.9, rel=1e-6)
+    rel = (cold - warm) / warm / (ef.FTP_AIR_C - ef.COLD_CO_AIR_C)
+    assert cc["relative_per_k"] == pytest.approx(np.median(rel), rel=1e-6)
     ch = res["equations"]["car"]["chain"]
     assert ch["cold_start_fuel_l_per_k"] == pytest.approx(cc["ml_per_k"] / 1000, abs=1e-6)
     assert "light_truck" not in res["cold_start_cold"]
     assert res["equations"]["light_truck"]["chain"]["cold_start_fuel_l_per_k"] == 0.0
+    # the light trucks, unpaired, take the cars' relative slope times their own cold start
+    both = {"gasoline": copy.deepcopy(res)}
+    ef.transfer_cold_slopes(both)
+    lt = both["gasoline"]
+    want = np.median(rel) * lt["cold_start"]["light_truck"]["median_ml"] / 1000
+    assert lt["equations"]["light_truck"]["chain"]["cold_start_fuel_l_per_k"] == pytest.approx(want, abs=1e-6)
+    assert lt["cold_start_cold"]["light_truck"]["transferred"]["pairs"] == 30
+    assert lt["equations"]["car"] == res["equations"]["car"]  # enough pairs of its own: unchanged
+    # fewer than MIN_COLD_PAIRS pairs in all: nothing to pool, nothing transferred
+    few = copy.deepcopy(res)
+    few["cold_start_cold"]["car"]["relative_per_k_pairs"] = few["cold_start_cold"]["car"]["relative_per_k_pairs"][:19]
+    ef.transfer_cold_slopes({"gasoline": few})
+    assert few["equations"]["light_truck"]["chain"]["cold_start_fuel_l_per_k"] == 0.0
 
 
 def test_class_default_is_the_median_car(planted):
@@ -201,14 +218,24 @@ def test_missing_column_is_one_line(tmp_path):
         ef.read_lists(tmp_path / "epa_test_car_list")
 
 
+@pytest.fixture(scope="module")
+def shared_studies():
+    if not (SHARED / ef.DATASET).is_dir():
+        pytest.skip("shared EPA data not found")
+    lists = ef.read_lists(SHARED / ef.DATASET)
+    results = {fuel: ef.study(SHARED, fuel, lists) for fuel in ef.TEST_FUELS}
+    ef.transfer_cold_slopes(results)
+    return results
+
+
 @pytest.mark.skipif(not (SHARED / "epa_test_car_list").is_dir(), reason="shared data not present")
 @pytest.mark.parametrize("fuel", ["gasoline", "diesel"])
-def test_builtins_are_what_the_study_writes_on_the_shared_lists(fuel):
+def test_builtins_are_what_the_study_writes_on_the_shared_lists(fuel, shared_studies):
     """The built-in equations come from the real lists: regenerating gives the same
     numbers; the line is physical and predicts held-out model years within 10 %."""
     from sumo_drvpw.model.equations import load_equation
 
-    res = ef.study(SHARED, fuel)
+    res = shared_studies[fuel]
     f = res["fit_all"]
     assert ef.ETA_PLAUSIBLE[0] <= f["eta"] <= ef.ETA_PLAUSIBLE[1]
     assert 2000 < f["p_idle_w_per_l"] < 8000  # 0.2–0.9 L/h of fuel per litre of displacement
@@ -229,8 +256,13 @@ def test_builtins_are_what_the_study_writes_on_the_shared_lists(fuel):
             assert eq.chain.cold_start_fuel_l_per_k == pytest.approx(cc["ml_per_k"] / 1000, abs=1e-6)
             assert 0.5e-3 < eq.chain.cold_start_fuel_l_per_k < 20e-3  # a cold start doubles or triples by −7 °C
             assert eq.chain.cold_start_ref_c == ef.FTP_AIR_C
-        else:
-            assert eq.chain.cold_start_fuel_l_per_k == 0.0
+        else:  # the diesels: the relative slope pooled over every pair, times their own cold start
+            pool = [x for r in shared_studies.values() for c in r["cold_start_cold"].values()
+                    for x in c.get("relative_per_k_pairs", [])]
+            assert len(pool) >= ef.MIN_COLD_PAIRS
+            want = np.median(pool) * res["cold_start"][cls]["median_ml"] / 1000
+            assert eq.chain.cold_start_fuel_l_per_k == pytest.approx(want, abs=1e-6)
+            assert 0.01 < np.median(pool) < 0.1  # 1–10 % of the cold start per kelvin
 
 
 def test_sumo_run_books_idle_fuel_while_standing(tmp_path):

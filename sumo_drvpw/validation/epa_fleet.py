@@ -40,8 +40,13 @@ on the Willans line; its excess over bag 3 — the same schedule, hot — is the
 cold start. The Cold CO test (the FTP at 20 °F, −6.7 °C; winter-grade test fuels) of the
 same configurations gives the cold start in the cold: the chains' temperature slope is the
 median over configurations tested both ways of (excess at −6.7 °C − excess on the FTP)
-/ 30.6 K, written only where at least :data:`MIN_COLD_PAIRS` configurations pair (fewer:
-reported, slope 0). Its bag 2 against the FTP's (warm running in the cold) is reported,
+/ 30.6 K, written where at least :data:`MIN_COLD_PAIRS` configurations pair. A class with
+fewer (the diesels: 3 cars, 6 light trucks) takes the relative slope — per kelvin, as a
+share of the FTP cold start — pooled over every paired configuration of both fuels and
+both bodies (the median), times its own FTP cold start (:func:`transfer_cold_slopes`; its
+own few pairs are reported beside it as a check); with fewer than :data:`MIN_COLD_PAIRS`
+pairs in all, its slope is 0.
+Its bag 2 against the FTP's (warm running in the cold) is reported,
 not modelled; the winter-grade fuels hold a few per cent less energy per litre than the
 certification fuel, part of that ratio (litres are compared as measured). SC03 (A/C on)
 is left out.
@@ -382,8 +387,47 @@ def cold_start_in_the_cold(lists: pd.DataFrame, obs: pd.DataFrame, speeds: dict,
                     "warm_ml": float(g["warm_ml"].median()), "difference_ml": float(diff.median()),
                     "difference_q25_ml": float(diff.quantile(0.25)), "difference_q75_ml": float(diff.quantile(0.75)),
                     "ml_per_k": float(diff.median()) / (FTP_AIR_C - COLD_CO_AIR_C),
+                    "relative_per_k": float((diff / g["warm_ml"]).median()) / (FTP_AIR_C - COLD_CO_AIR_C),
+                    "relative_per_k_pairs": [round(float(x), 7) for x in
+                                             diff / g["warm_ml"] / (FTP_AIR_C - COLD_CO_AIR_C)],
                     "bag2_ratio": float((g["bag2_l"] / g["warm_bag2_l"]).median())}
     return out
+
+
+def transfer_cold_slopes(results: dict) -> None:
+    """For each fuel's class with fewer than :data:`MIN_COLD_PAIRS` paired configurations:
+    the relative slope pooled over every paired configuration of ``results`` (fuel →
+    :func:`study`; both fuels, both bodies), times the class's own FTP cold start, as
+    ``cold_start_cold[cls]["transferred"]``; the built-in equations are rebuilt with it.
+
+    The assumption: a cold start grows by the same share of itself per kelvin colder,
+    whatever the engine (the warm-up's heat and friction scale with its own cold start).
+    The class's own few pairs stay in the report beside it as a check.
+    """
+    pool = [x for r in results.values() for c in r.get("cold_start_cold", {}).values()
+            for x in c.get("relative_per_k_pairs", [])]
+    if len(pool) < MIN_COLD_PAIRS:
+        return
+    rel = float(np.median(pool))
+    for res in results.values():
+        cc = res.setdefault("cold_start_cold", {})
+        for cls in res["cold_start"]:
+            if cc.get(cls, {}).get("configurations", 0) >= MIN_COLD_PAIRS:
+                continue
+            cc.setdefault(cls, {"configurations": 0})["transferred"] = {
+                "from": "every paired configuration of both fuels", "pairs": len(pool),
+                "relative_per_k": rel, "ml_per_k": rel * res["cold_start"][cls]["median_ml"]}
+        res["equations"] = {c: builtin_equation(c, res) for c in res["equations"]}
+
+
+def cold_slope(cc: dict) -> tuple[float, str]:
+    """The slope [mL/K] a built-in carries, and where it comes from ("own", "transferred",
+    or "none")."""
+    if cc.get("configurations", 0) >= MIN_COLD_PAIRS:
+        return cc["ml_per_k"], "own"
+    if "transferred" in cc:
+        return cc["transferred"]["ml_per_k"], "transferred"
+    return 0.0, "none"
 
 
 def cold_start(obs: pd.DataFrame) -> dict:
@@ -437,7 +481,8 @@ def builtin_equation(cls: str, res: dict) -> dict:
     years = f"{res['years'][0]}–{res['years'][-1]}"
     cold = res["cold_start"].get(cls, {})
     cc = res.get("cold_start_cold", {}).get(cls, {})
-    slope = cc.get("ml_per_k", 0.0) / 1000.0 if cc.get("configurations", 0) >= MIN_COLD_PAIRS else 0.0
+    slope_ml, slope_from = cold_slope(cc)
+    slope = slope_ml / 1000.0
     return {
         "equation": {
             "name": name, "vclasses": list(vclasses),
@@ -475,7 +520,13 @@ def builtin_equation(cls: str, res: dict) -> dict:
                     f"{cc.get('configurations', 0)} configurations also FTP-tested, median cold start "
                     f"{cc.get('cold_ml', float('nan')):.0f} mL against {cc.get('warm_ml', float('nan')):.0f} mL; "
                     "linear between the two temperatures, extrapolated below"
-                    if slope > 0 else
+                    if slope_from == "own" else
+                    (f"more per kelvin colder than {FTP_AIR_C} °C: {cc['transferred']['relative_per_k']:.2%} of the "
+                     f"FTP cold start per kelvin, the median relative slope of {cc['transferred']['pairs']} "
+                     "configurations of both fuels with a Cold CO test and an FTP; this class's "
+                     f"own {cc.get('configurations', 0)} pairs are too few (fewer than {MIN_COLD_PAIRS})"
+                     + (f" and give {cc['relative_per_k']:.2%}" if cc.get("configurations") else ""))
+                    if slope_from == "transferred" else
                     f"0: {cc.get('configurations', 0)} configurations with a Cold CO test pair with an FTP "
                     f"(fewer than {MIN_COLD_PAIRS}); colder starts take more, not modelled"),
             },
@@ -508,6 +559,7 @@ def main(argv=None) -> int:
         data = resolve_data(args[1] if len(args) > 1 else None, (DATASET, CYCLES))
         lists = read_lists(Path(data) / DATASET)
         results = {fuel: study(data, fuel, lists) for fuel in TEST_FUELS}
+        transfer_cold_slopes(results)
     except UserError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

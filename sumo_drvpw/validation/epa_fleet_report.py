@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from sumo_drvpw.model.constants import FUELS
 from sumo_drvpw.validation.epa_fleet import (CLASSES, COLD_CO_AIR_C, ETA_PLAUSIBLE, FTP_AIR_C, FUEL_WORDS,
-                                             MIN_COLD_PAIRS, TEST_FUELS, TESTS)
+                                             MIN_COLD_PAIRS, TEST_FUELS, TESTS, cold_slope)
 
 
 def _pct(x: float) -> str:
@@ -101,13 +101,22 @@ def _render_fuel(res: dict) -> list[str]:
     if cc:
         L += ["", f"The cold start in the cold: configurations with both a Cold CO test (FTP at {COLD_CO_AIR_C} °C) "
               f"and an FTP (≈ {FTP_AIR_C} °C), medians over them; the slope goes into the built-in where at least "
-              f"{MIN_COLD_PAIRS} pair (`cold_start_fuel_l_per_k`). Bag 2 in the cold over bag 2 on the FTP: warm "
-              "running in the cold, reported, not modelled.", "",
-              "| class | paired configurations | cold start at −6.7 °C [mL] | on the FTP [mL] | difference [mL, median (IQR)] | slope [mL/K] | in the built-in | bag 2 cold / FTP |",
-              "|---|---|---|---|---|---|---|---|"]
+              f"{MIN_COLD_PAIRS} pair (`cold_start_fuel_l_per_k`); a class with fewer takes the relative slope (per K, "
+              "as a share of the FTP cold start) pooled over the paired configurations of both fuels and bodies, times "
+              "its own FTP cold start (the assumption: a cold start grows by the same share of itself per kelvin, "
+              "whatever the engine). "
+              "Bag 2 in the cold over bag 2 on the FTP: warm running in the cold, reported, not modelled.", "",
+              "| class | paired configurations | cold start at −6.7 °C [mL] | on the FTP [mL] | difference [mL, median (IQR)] | slope [mL/K] | relative slope [%/K] | in the built-in [mL/K] | bag 2 cold / FTP |",
+              "|---|---|---|---|---|---|---|---|---|"]
         for cls, c in cc.items():
-            used = c["configurations"] >= MIN_COLD_PAIRS
+            slope, src = cold_slope(c)
+            used = {"own": f"{slope:.2f} (own)", "none": "0 (too few pairs)"}.get(src) or (
+                f"{slope:.2f} ({c['transferred']['relative_per_k']:.2%}/K of {res['cold_start'][cls]['median_ml']:.0f} mL, "
+                f"pooled over {c['transferred']['pairs']} pairs)")
+            if not c.get("configurations"):
+                L.append(f"| {cls} | 0 | – | – | – | – | – | {used} | – |")
+                continue
             L.append(f"| {cls} | {c['configurations']} | {c['cold_ml']:.0f} | {c['warm_ml']:.0f} | "
                      f"{c['difference_ml']:.0f} ({c['difference_q25_ml']:.0f}–{c['difference_q75_ml']:.0f}) | "
-                     f"{c['ml_per_k']:.2f} | {'yes' if used else 'no (too few)'} | {c['bag2_ratio']:.3f} |")
+                     f"{c['ml_per_k']:.2f} | {100 * c['relative_per_k']:.2f} | {used} | {c['bag2_ratio']:.3f} |")
     return L + [""]
