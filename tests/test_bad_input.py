@@ -232,7 +232,7 @@ def test_gui_on_an_unreachable_display_is_one_line_at_once(tmp_path, capsys, mon
     import socket
     import time
 
-    from sumo_drvpw.sim.run import _display_reachable
+    from sumo_drvpw.sim.sumo_start import _display_reachable
 
     n = next(i for i in range(90, 200) if not Path(f"/tmp/.X11-unix/X{i}").exists())
     monkeypatch.setenv("DISPLAY", f":{n}")

@@ -1,0 +1,177 @@
+"""Starting and closing SUMO for a run: in process (libsumo) or as a TraCI server, with
+SUMO's own start-up errors in one line of ours (the first malformed input file named), and
+sumo-gui refused at once where no display answers."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from pathlib import Path
+
+from sumo_drvpw.errors import UserError
+
+__all__ = ["start_sumo", "close_sumo"]
+
+
+def _sumo_env() -> None:
+    if not os.environ.get("SUMO_HOME"):
+        try:
+            import sumo
+
+            os.environ["SUMO_HOME"] = sumo.SUMO_HOME
+        except ImportError:
+            pass
+
+
+@contextlib.contextmanager
+def _sumo_output():
+    """Capture what in-process SUMO (libsumo) writes to the process's stdout and stderr
+    while it starts: yields (stdout lines, stderr lines), filled on exit."""
+    import tempfile
+
+    got: tuple[list[str], list[str]] = ([], [])
+    sys.stdout.flush()
+    sys.stderr.flush()
+    try:
+        saved = [os.dup(1), os.dup(2)]
+    except OSError:  # no descriptors to redirect: leave them as they are
+        yield got
+        return
+    caps = [tempfile.TemporaryFile(mode="w+b"), tempfile.TemporaryFile(mode="w+b")]
+    try:
+        for fd, cap in zip((1, 2), caps):
+            os.dup2(cap.fileno(), fd)
+        yield got
+    finally:
+        for fd, keep, cap, lines in zip((1, 2), saved, caps, got):
+            os.dup2(keep, fd)
+            os.close(keep)
+            cap.seek(0)
+            lines += cap.read().decode("utf-8", "replace").splitlines(keepends=True)
+            cap.close()
+
+
+def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
+               label: str = "drvpw"):
+    """Start SUMO with command-line ``args``; returns the connection. UserError on failure."""
+    import sumolib
+
+    _sumo_env()
+    if gui and sys.platform.startswith("linux") and not os.environ.get("WAYLAND_DISPLAY"):
+        display = os.environ.get("DISPLAY")
+        if not display:
+            raise UserError("sumo.gui: no display to show sumo-gui on (DISPLAY is not set); run "
+                            "without the GUI, or where a display is")
+        if not _display_reachable(display):  # sumo-gui would retry for a minute, then fail
+            raise UserError(f"sumo.gui: cannot reach the display DISPLAY={display!r} (no X server "
+                            "answers there); run without the GUI, or where a display is")
+    binary = sumolib.checkBinary("sumo-gui" if gui else "sumo")
+    cmd = [binary, *args, "--no-step-log", "true"]
+    if connection == "libsumo":
+        if gui:
+            raise UserError("sumo.gui needs connection = 'traci'")
+        import libsumo
+
+        if "--remote-port" not in args:
+            # a config written for TraCI scripts may set remote-port (sumo-rl's OW-traci.sumocfg:
+            # 8813): SUMO would then wait for a client that never comes; in-process, none is needed
+            cmd += ["--remote-port", "0"]
+
+        with _sumo_output() as (told, said):
+            try:
+                libsumo.start(cmd)
+                failed = None
+            except Exception as e:  # libsumo.TraCIException / FatalTraCIError
+                failed = e
+                try:
+                    libsumo.close()
+                except Exception:
+                    pass
+        if failed is not None:  # SUMO's own error lines, in the one line of ours
+            why = "; ".join(x.strip() for x in said if x.strip().startswith("Error")) or str(failed)
+            raise UserError(f"SUMO failed to start ({' '.join(args)}): {why}{_malformed(args)}"
+                            ) from None
+        sys.stdout.write("".join(told))  # started: what SUMO wrote goes on as it wrote it
+        sys.stderr.write("".join(said))
+        return libsumo
+    import traci
+
+    try:
+        traci.start(cmd, label=label, stdout=open(os.devnull, "w"))
+    except Exception as e:  # traci.exceptions.FatalTraCIError, OSError
+        raise UserError(f"SUMO failed to start ({' '.join(args)}): {e}{_malformed(args)}"
+                        ) from None
+    return traci.getConnection(label)
+
+
+def _display_reachable(display: str, timeout_s: float = 2.0) -> bool:
+    """Whether an X server answers at ``display`` ("[host]:N[.S]"): its Unix socket (also
+    Linux's abstract one) for a local display, TCP port 6000 + N for a remote one."""
+    import socket
+
+    host, _, num = display.rpartition(":")
+    try:
+        n = int(num.split(".")[0])
+    except ValueError:
+        return False
+    if host in ("", "unix"):
+        for path in (f"/tmp/.X11-unix/X{n}", f"\0/tmp/.X11-unix/X{n}"):
+            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+                s.settimeout(timeout_s)
+                try:
+                    s.connect(path)
+                    return True
+                except OSError:
+                    continue
+        return False
+    try:
+        socket.create_connection((host, 6000 + n), timeout=timeout_s).close()
+        return True
+    except OSError:
+        return False
+
+
+def _malformed(args: list[str]) -> str:
+    """After SUMO refused to start: '; FILE: not valid XML: ...' for the first of its input
+    files (config, net, routes, additional) that is not well-formed, else ''. SUMO's own
+    message for a broken net ('input ended before all started tags were ended') names no file."""
+    import xml.parsers.expat
+
+    from sumo_drvpw.fileio import open_maybe_gzip
+    from sumo_drvpw.sim.scenario import _config_files
+
+    files: list[Path] = []
+    it = iter(args)
+    for a in it:
+        val = next(it, "") if a in ("-c", "--configuration-file", "-n", "--net-file", "-r",
+                                    "--route-files", "-a", "--additional-files") else None
+        if val is None:
+            continue
+        if a in ("-c", "--configuration-file"):
+            files.append(Path(val))
+            try:
+                net, more, _ = _config_files(Path(val))
+            except UserError as e:
+                return f"; {e}"
+            files += [net, *more]
+        else:
+            files += [Path(f.strip()) for f in val.split(",") if f.strip()]
+    for f in files:
+        parser = xml.parsers.expat.ParserCreate()
+        try:
+            with open_maybe_gzip(f) as fh:
+                parser.ParseFile(fh)
+        except xml.parsers.expat.ExpatError as e:
+            return f"; {f}: not valid XML: {e}"
+        except (OSError, EOFError, ValueError):
+            continue
+    return ""
+
+
+def close_sumo(conn) -> None:
+    """Close a connection, ignoring errors of an already closed one."""
+    try:
+        conn.close()
+    except Exception:
+        pass
