@@ -587,6 +587,49 @@ def test_cold_starts_are_booked_once_per_departing_vehicle(tmp_path):
     assert not any("no air temperature" in w for w in res.summary["warnings"])
 
 
+def test_cold_start_shares_by_vtype_and_vclass(tmp_path):
+    """A real SUMO run (city network, two vTypes of one vClass, 150 s): a vType's own
+    ``cold_start`` replaces the run's (through traffic 0, the rest cold), a vClass's share
+    applies where the run's is off; the summary counts the departures and their shares;
+    vehicle and class totals agree."""
+    pytest.importorskip("libsumo")
+    import dataclasses
+
+    from sumo_drvpw.sim import run_scenario
+
+    b = _city_sumocfg().parent
+    net = (b.parent / "networks" / "city.net.xml").resolve()
+    rou = tmp_path / "two.rou.xml"
+    rou.write_text('<routes>\n'
+                   '  <flow id="local" type="prius3" from="c00c10" to="c34c44" begin="0" end="100" period="10"/>\n'
+                   '  <flow id="through" type="prius3_hw" from="c40c30" to="c04c14" begin="0" end="100" period="10"/>\n'
+                   '</routes>\n', encoding="utf-8")
+    eqs = _chain_equations()
+    eqs[0].chain = dataclasses.replace(eqs[0].chain, cold_start_fuel_l=0.07)
+
+    def run(name, extra):
+        sc = tmp_path / f"{name}.toml"
+        sc.write_text(f'equations = ["drvpw_prius3"]\n[sumo]\nnet = "{net.as_posix()}"\n'
+                      f'routes = ["{rou.as_posix()}"]\nadditional = ["{(b / "prius3.vtype.xml").as_posix()}"]\n'
+                      f'end = 150\n{extra}', encoding="utf-8")
+        res = run_scenario(sc, tmp_path / name, equations=eqs, figures=False, edgedata=False)
+        veh = pd.read_csv(tmp_path / name / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
+        cls = pd.read_csv(tmp_path / name / "chain_classes.csv").query("equation == 'drvpw_prius3'")
+        assert veh["cold_start_l"].sum() == pytest.approx(cls["cold_start_l"].sum(), rel=1e-9)
+        return veh.assign(through=veh["key"].str.startswith("through")), res.summary["chain"]["cold_start"]
+
+    veh, summ = run("by_vtype", "[vehicles]\ncold_start = true\n[vtypes.prius3_hw]\ncold_start = 0\n")
+    assert veh["through"].sum() >= 5 and (~veh["through"]).sum() >= 5
+    np.testing.assert_allclose(veh.loc[~veh["through"], "cold_start_l"], 0.07, rtol=1e-12)
+    assert (veh.loc[veh["through"], "cold_start_l"] == 0).all()
+    assert summ["vehicles"] == (~veh["through"]).sum() == summ["expected_cold_starts"]
+    assert summ["share_by_vtype"] == {"prius3_hw": 0.0} and summ["booked"] is True
+    veh, summ = run("by_vclass", "[vclasses.passenger]\ncold_start = 0.5\n")  # the run's share: off
+    np.testing.assert_allclose(veh["cold_start_l"], 0.035, rtol=1e-12)
+    assert summ["vehicles"] == len(veh) and summ["expected_cold_starts"] == pytest.approx(0.5 * len(veh))
+    assert summ["share"] == 0.0 and summ["share_by_vclass"] == {"passenger": 0.5}
+
+
 def test_sumo_run_chain_accounts_balance():
     """A real SUMO run (city scenario, 150 s): chain energy per vehicle = Σ over its steps;
     vehicle, edge and class totals agree; auxiliary energy accrues while standing."""

@@ -132,6 +132,8 @@ def test_string_and_number_booleans_are_refused(tmp_path, table, key, value):
     ('vtypes = ["prius3"]\n' + HEAD, ("'vtypes'", "['prius3']")),
     ('vclasses = "bus"\n' + HEAD, ("'vclasses'", "'bus'")),
     (HEAD + '[vtypes.prius3]\nmass_kg = "1625"\n', ("'vtypes.prius3.mass_kg'", "'1625'")),
+    (HEAD + '[vtypes.prius3]\ncold_start = 1.5\n', ("'vtypes.prius3.cold_start'", "1.5", "share from 0 to 1")),
+    (HEAD + '[vclasses.passenger]\ncold_start = "yes"\n', ("'vclasses.passenger.cold_start'", "'yes'")),
 ])
 def test_values_of_the_wrong_type_are_named(tmp_path, text, needles):
     _refused(_write(tmp_path, text), *needles)

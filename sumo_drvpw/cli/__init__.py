@@ -81,7 +81,8 @@ def add_cold_start(p, during: str) -> None:
                         "default: trips start warm)")
     p.add_argument("--cold-start-share", type=float, metavar="SHARE",
                    help="only this share (0-1) of the departing vehicles starts cold: fuel chains add "
-                        "that share of their cold start at each departure (a fleet's expected fuel)")
+                        "that share of their cold start at each departure (a fleet's expected fuel); "
+                        "a vType's or vClass's own cold_start in the scenario wins over either option")
 
 
 def cold_start_override(args, overrides: dict) -> None:

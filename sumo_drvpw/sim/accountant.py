@@ -38,7 +38,7 @@ from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
 from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.outputs import RunResult, TraceWriter, summary_dict
-from sumo_drvpw.sim.scenario import Scenario, load_scenario, resolve_equation
+from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
 from sumo_drvpw.sim.vtypes import GENERIC_VCLASSES, read_vtypes
 
 __all__ = ["Accountant", "RunResult"]
@@ -155,6 +155,8 @@ class Accountant(_Listener):
         self.physics = Physics(wind_speed=sc.wind_speed, wind_from_deg=sc.wind_from_deg,
                                rho=sc.rho, ambient_c=sc.air_temperature_c,
                                cold_start=float(getattr(sc, "cold_start", 0.0)),
+                               cold_start_vtypes=cold_start_shares(getattr(sc, "vtype_data", {})),
+                               cold_start_vclasses=cold_start_shares(getattr(sc, "vclass_data", {})),
                                slope_tol=sc.slope_tol,
                                slope_reference=sc.slope_reference,
                                acceleration=sc.acceleration, heading=sc.wind_heading,

@@ -11,10 +11,12 @@ step) and is booked in quantities a user pays for::
                                                              that cold starts took
 
 Auxiliary power accrues at every step a vehicle is in the network, standing or driving.
-With ``cold_start`` (the scenario's ``[vehicles] cold_start``) a fuel chain's
-``cold_start_fuel_l`` is booked once per vehicle that departs while the run accounts, at
-its first booked step (its departure edge); vehicles already on the road when accounting
-starts (a user's TraCI script attaching mid-run) get none.
+With ``cold_start`` (the scenario's ``[vehicles] cold_start``, a share of the trips, or
+``[vtypes.<id>] cold_start`` / ``[vclasses.<vClass>] cold_start`` for some vehicles) a fuel
+chain's ``cold_start_fuel_l`` times the vehicle's share is booked once per vehicle that
+departs while the run accounts, at its first booked step (its departure edge); vehicles
+already on the road when accounting starts (a user's TraCI script attaching mid-run) get
+none.
 Vehicles' running totals take one
 scatter-add per step; edges take one ``np.add.at`` per step; class totals are sums of
 the vehicle totals, so vehicle, edge and class totals agree by construction (tests check
@@ -49,10 +51,13 @@ class ChainLedger:
     cold_start : the share of departing vehicles that start a cold engine (0 … 1; True: 1):
         each fuel chain books that share of its cold start at a vehicle's departure
         (:meth:`start`), the expected fuel of a fleet of which that share starts cold
+    cold_start_vtypes, cold_start_vclasses : shares for vehicles of these vTypes / vClasses,
+        in place of ``cold_start`` (vType first; :meth:`share_of`)
     """
 
     def __init__(self, names: list[str], chains: list[EnergyChain | None], n_edges: int,
-                 capacity: int = 1024, signal_values: dict | None = None, cold_start: float = 0.0):
+                 capacity: int = 1024, signal_values: dict | None = None, cold_start: float = 0.0,
+                 cold_start_vtypes: dict | None = None, cold_start_vclasses: dict | None = None):
         #: constant values of the chains' signals (loads, ambient temperature) in SUMO,
         #: which has no such columns; a load not given is taken as 0 and listed in
         #: :attr:`assumed_zero` (a logged heater or A/C load then adds nothing)
@@ -94,19 +99,25 @@ class ChainLedger:
         self.snapshots: list[tuple[float, np.ndarray]] = []
         #: totals of vehicles flushed out of memory (Ledger.flush): class → [(E, Q), m]
         self.flushed_class: dict[str, list] = {}
-        #: share of the departing vehicles whose cold start is booked (0: none)
+        #: share of the departing vehicles whose cold start is booked (0: none), for vehicles
+        #: whose vType or vClass has no share of its own
         self.cold_start = float(cold_start)
+        self.cold_start_vtypes = {str(k): float(v) for k, v in (cold_start_vtypes or {}).items()}
+        self.cold_start_vclasses = {str(k): float(v) for k, v in (cold_start_vclasses or {}).items()}
+        #: any vehicle may start cold: cold starts are booked and reported (``cold_start_l``)
+        self.cold_start_on = self.cold_start > 0 or any(
+            v > 0 for v in (*self.cold_start_vtypes.values(), *self.cold_start_vclasses.values()))
         #: one cold start's quantities per booked column at the run's air temperature, (C,)
         self._cs = np.zeros(len(self._cols))
         for j, (e, k) in enumerate(self._cols):
             cs = self.chains[e].cold_start(self.air_temperature_c)
-            self._cs[j] = self.cold_start * {4: cs["fuel_j"], 5: cs["fuel_l"], 6: cs["co2_kg"],
-                                             7: cs["fuel_l"]}.get(k, 0.0)
-        #: vehicle rows that departed and whose cold start is not booked yet
-        self._starting = np.zeros(capacity, bool)
-        #: vehicles whose departure was booked (with the share of a cold start) by a chain
-        #: that has one
+            self._cs[j] = {4: cs["fuel_j"], 5: cs["fuel_l"], 6: cs["co2_kg"], 7: cs["fuel_l"]}.get(k, 0.0)
+        #: per vehicle row: the share of a cold start still to book at its first booked step
+        self._starting = np.zeros(capacity)
+        #: vehicles whose departure was booked (with its share of a cold start, > 0) by a
+        #: chain that has one, and the sum of their shares (the expected cold starts)
         self.cold_starts = 0
+        self.cold_starts_expected = 0.0
 
     @property
     def signals(self) -> set[str]:
@@ -132,7 +143,7 @@ class ChainLedger:
         if "ambient_c" in self.signal_values:
             return False
         cold = [j for j, e in enumerate(self.active)
-                if self.cold_start and self.chains[e].predicts == "fuel" and self.chains[e].cold_start_fuel_l_per_k]
+                if self.cold_start_on and self.chains[e].predicts == "fuel" and self.chains[e].cold_start_fuel_l_per_k]
         return bool(self.booked_any[self._hvac_active + cold].any())
 
     def booked(self, name: str) -> int:
@@ -165,17 +176,24 @@ class ChainLedger:
         self.veh_dist = np.concatenate([self.veh_dist, np.zeros(new - cap)])
         self.veh_time = np.concatenate([self.veh_time, np.zeros(new - cap)])
         self._app = np.concatenate([self._app, np.zeros((new - cap, self.A), bool)])
-        self._starting = np.concatenate([self._starting, np.zeros(new - cap, bool)])
+        self._starting = np.concatenate([self._starting, np.zeros(new - cap)])
 
-    def start(self, vidx) -> None:
-        """Vehicle rows ``vidx`` departed this step: with :attr:`cold_start`, their next
-        booked step books each fuel chain's cold start (nothing otherwise)."""
-        if not self.cold_start or not self._cs.any():
+    def share_of(self, vtype: str, vclass: str) -> float:
+        """The share of a cold start a vehicle of this vType and vClass books at departure:
+        its vType's, else its vClass's, else the run's :attr:`cold_start`."""
+        if vtype in self.cold_start_vtypes:
+            return self.cold_start_vtypes[vtype]
+        return self.cold_start_vclasses.get(vclass, self.cold_start)
+
+    def start(self, vidx, shares=None) -> None:
+        """Vehicle rows ``vidx`` departed this step: their next booked step books each fuel
+        chain's cold start times ``shares`` (one per vehicle; default :attr:`cold_start`)."""
+        if not self.cold_start_on or not self._cs.any():
             return
         vidx = np.asarray(vidx, np.int64)
         if vidx.size:
             self._grow(int(vidx.max()) + 1)
-            self._starting[vidx] = True
+            self._starting[vidx] = self.cold_start if shares is None else np.asarray(shares, float)
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
                         signals: dict | None = None) -> np.ndarray:
@@ -216,14 +234,17 @@ class ChainLedger:
         if signals is None:
             signals = self._constant_signals(len(vidx))
         q = self.step_quantities(p_drive_w, v, dt, signals)
-        if self.cold_start:
-            s = self._starting[vidx]
+        if self.cold_start_on:
+            share = self._starting[vidx]
+            s = share > 0
             if s.any():
-                q[s] += self._cs
-                self._starting[vidx[s]] = False
+                q[s] += share[s, None] * self._cs
+                self._starting[vidx[s]] = 0.0
                 # a departure counts when a chain with a cold start books the vehicle
-                self.cold_starts += int(s.sum()) if app is None else \
-                    int((np.asarray(app)[s][:, self._ce[self._cs > 0]] > 0).any(axis=1).sum())
+                hit = np.ones(int(s.sum()), bool) if app is None else \
+                    (np.asarray(app)[s][:, self._ce[self._cs > 0]] > 0).any(axis=1)
+                self.cold_starts += int(hit.sum())
+                self.cold_starts_expected += float(share[s][hit].sum())
         if app is not None:
             app = np.asarray(app, float)
             q *= app[:, self._ce]
@@ -261,7 +282,7 @@ class ChainLedger:
             n = self.names[e]
             if self.chains[e].predicts == "fuel":
                 out += [f'{n}_fuel_l="{q[e, 5]:.6f}"', f'{n}_co2_kg="{q[e, 6]:.6f}"']
-                if self.cold_start:
+                if self.cold_start_on:
                     out.append(f'{n}_cold_start_l="{q[e, 7]:.6f}"')
             else:
                 out += [f'{n}_battery_{k}_kwh="{q[e, j] / KWH:.6f}"'
@@ -339,7 +360,7 @@ class ChainLedger:
                 r = {"key": k, "equation": self.names[e], "distance_km": km}
                 if self.chains[e].predicts == "fuel":
                     r.update(fuel_l=t[5], co2_kg=t[6], fuel_kwh=t[4] / KWH)
-                    if self.cold_start:
+                    if self.cold_start_on:
                         r["cold_start_l"] = t[7]
                     r["fuel_l_per_100km"] = 100.0 * t[5] / km if km > 0 else np.nan
                     r["co2_g_per_km"] = 1000.0 * t[6] / km if km > 0 else np.nan
@@ -375,13 +396,15 @@ class ChainLedger:
 
 
 def chain_ledger(equations, n_edges: int, signal_values: dict | None = None,
-                 cold_start: float = 0.0) -> ChainLedger | None:
+                 cold_start: float = 0.0, cold_start_vtypes: dict | None = None,
+                 cold_start_vclasses: dict | None = None) -> ChainLedger | None:
     """A :class:`ChainLedger` for the equations that carry a battery or fuel chain, or None."""
     chains = [getattr(e, "chain", None) for e in equations]
     if not any(c is not None and c.predicts != "wheel" for c in chains):
         return None
     return ChainLedger([e.name for e in equations], chains, n_edges, signal_values=signal_values,
-                       cold_start=cold_start)
+                       cold_start=cold_start, cold_start_vtypes=cold_start_vtypes,
+                       cold_start_vclasses=cold_start_vclasses)
 
 
 def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str],
@@ -395,14 +418,18 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
             "quantities": "battery: traction/recuperated/auxiliary/net kWh (auxiliary accrues "
                           "while standing); fuel: litres (LHV, density of the chain's fuel), CO2 kg"
                           + ("; cold_start_l: the part of the litres that cold starts took"
-                             if chain.cold_start else ""),
-            "cold_start": {"booked": chain.cold_start > 0, "share": chain.cold_start,
+                             if chain.cold_start_on else ""),
+            "cold_start": {"booked": chain.cold_start_on, "share": chain.cold_start,
+                           **({"share_by_vtype": chain.cold_start_vtypes} if chain.cold_start_vtypes else {}),
+                           **({"share_by_vclass": chain.cold_start_vclasses} if chain.cold_start_vclasses else {}),
                            "vehicles": chain.cold_starts,
+                           "expected_cold_starts": round(chain.cold_starts_expected, 9),
                            "fuel_l_per_start": per_start, "air_temperature_c": chain.air_temperature_c,
                            "rule": "the chain's cold_start_fuel_l once per vehicle departing during "
-                                   "the run, times the share, at its departure edge ([vehicles] cold_start, or "
-                                   "the run command's cold-start option)"
-                                   if chain.cold_start else
+                                   "the run, times its share (its vType's, else its vClass's, else the run's), "
+                                   "at its departure edge ([vehicles] cold_start, [vtypes.<id>] / "
+                                   "[vclasses.<vClass>] cold_start, or the run command's cold-start option)"
+                                   if chain.cold_start_on else
                                    "not booked: every trip taken as starting warm (through traffic, "
                                    "or engines already warm); [vehicles] cold_start = true or "
                                    "the run command's cold-start option books it"} if per_start else None,

@@ -103,6 +103,7 @@ def merge_ledgers(ledgers: list):
             a.edge_dist = a.edge_dist + b.edge_dist
             a.booked_any = a.booked_any | b.booked_any
             a.cold_starts += b.cold_starts
+            a.cold_starts_expected += b.cold_starts_expected
             a.snapshots = [(s[0], s[1] + o[1]) for s, o in zip(a.snapshots, b.snapshots)]
             for c, (q, m) in b.flushed_class.items():
                 acc = a.flushed_class.setdefault(c, [np.zeros((a.E, a.Q)), np.zeros(a.A)])

@@ -43,8 +43,11 @@ class Physics:
     #: ambient air temperature [°C] given to the equations (``cold`` factor) and the
     #: chains (HVAC) as the signal ``ambient_c``; None: unknown (``cold`` = 0, reference)
     ambient_c: float | None = None
-    #: share of departing vehicles whose cold start fuel chains book (sim/chain.py)
+    #: share of departing vehicles whose cold start fuel chains book (sim/chain.py), and
+    #: the shares of vTypes and vClasses that have their own (vType first)
     cold_start: float = 0.0
+    cold_start_vtypes: dict | None = None
+    cold_start_vclasses: dict | None = None
     slope_tol: float = 0.01
     #: "getslope": compare the robust slope with SUMO's getSlope (one more getter per
     #: vehicle); "geometry": with the same front-to-back slope taken from the lane shape
@@ -173,7 +176,8 @@ class Stepper:
             ledger.chain = chain_ledger(
                 eqset.equations, ledger.n_edges,
                 None if physics.ambient_c is None else {"ambient_c": physics.ambient_c},
-                cold_start=physics.cold_start)
+                cold_start=physics.cold_start, cold_start_vtypes=physics.cold_start_vtypes,
+                cold_start_vclasses=physics.cold_start_vclasses)
         self.physics, self.resolve, self.trace = physics, resolve, trace
         self.use_subscriptions = use_subscriptions
         self.dt = float(conn.simulation.getDeltaT())
@@ -386,9 +390,10 @@ class Stepper:
                 ledger.veh_load[vmap[vid]] = 0.0
                 ledger.veh_parked[vmap[vid]] = False
                 ledger.unretire(vmap[vid])
-        if starts and ledger.chain is not None and ledger.chain.cold_start \
+        if starts and ledger.chain is not None and ledger.chain.cold_start_on \
                 and not (ledger.steps == 1 and self.replay_info.get("skipped")):
-            ledger.chain.start(starts)
+            ch = ledger.chain
+            ledger.chain.start(starts, [ch.share_of(ledger.veh_type[i], ledger.veh_class[i]) for i in starts])
         if self.riders and (self.any_load or conn.person.getIDCount()):
             self.update_loads(departed)
             self.update_loads(self.stop_ending())

@@ -37,8 +37,8 @@ _SCHEMA: dict[str, set[str] | None] = {
     "sumo": {"config", "net", "routes", "additional", "begin", "end", "step_length",
              "connection", "gui", "options", "acceleration", "positions"},
     "vehicles": {"vtypes", "default_masses", "transportable_mass", "default_carrier", "cold_start"},
-    "vtypes": None,  # table of vType id → {mass_kg, equations}
-    "vclasses": None,  # table of SUMO vClass → {mass_kg, equations}
+    "vtypes": None,  # table of vType id → {mass_kg, equations, cold_start}
+    "vclasses": None,  # table of SUMO vClass → {mass_kg, equations, cold_start}
     "wind": {"speed_mps", "from_deg", "heading"},
     "air": {"density_kgm3", "temperature_c", "pressure_kpa"},
     "road_class": {"highway_min_speed_kmh", "highway_types", "types", "edges"},
@@ -46,7 +46,7 @@ _SCHEMA: dict[str, set[str] | None] = {
     "outputs": {"trace", "edgedata", "figures", "difference", "progress", "period",
                 "sumo_device"},
 }
-_VTYPE_KEYS = {"mass_kg", "equations"}
+_VTYPE_KEYS = {"mass_kg", "equations", "cold_start"}
 #: keyword overrides accepted by run_scenario (and the CLI)
 OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
              "trace", "edgedata", "figures", "progress", "difference", "acceleration",
@@ -139,10 +139,10 @@ class Scenario:
     #: alternatives. Default: on for the plug-in's own equations (a bare SUMO config), off
     #: for equations a user chose. A written emissionClass always decides.
     default_carrier: bool = False
-    #: every vehicle departing during the run starts a cold engine: fuel chains book their
-    #: ``cold_start_fuel_l`` at its departure (off: trips start warm, e.g. through traffic)
     #: share of the trips departing during the run that start a cold engine, 0 … 1 (true:
-    #: 1, false: 0): fuel chains book that share of their cold start at each departure
+    #: 1, false: 0): fuel chains book that share of their ``cold_start_fuel_l`` at each
+    #: departure (0: trips start warm, e.g. through traffic); a vType's or vClass's own
+    #: ``cold_start`` (``vtype_data``, ``vclass_data``) replaces it for its vehicles
     cold_start: float = 0.0
     #: persons riding in a vehicle add their vTypes' masses while they ride, as in SUMO's
     #: emission models (EnergyParams::getTotalMass)
@@ -233,6 +233,12 @@ def _share(v, where: str, key: str) -> float:
     if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
         raise UserError(f"{where}: '{key}' must be true, false or a share from 0 to 1, got {v!r}")
     return float(v)
+
+
+def cold_start_shares(data: dict[str, dict]) -> dict[str, float]:
+    """vType (or vClass) → its own cold-start share, from ``Scenario.vtype_data`` (or
+    ``vclass_data``): those that give one."""
+    return {k: d["cold_start"] for k, d in (data or {}).items() if "cold_start" in d}
 
 
 def _choice(v, allowed: tuple[str, ...], where: str, key: str) -> str:
@@ -475,6 +481,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                         raise UserError(f"{where}: {table}.{vt}.equations names '{e}', which is "
                                         f"not among the scenario's equations ({', '.join(names)})")
                 entry["equations"] = eqs
+            if "cold_start" in d:
+                entry["cold_start"] = _share(d["cold_start"], where, f"{table}.{vt}.cold_start")
             out[str(vt)] = entry
         return out
 
