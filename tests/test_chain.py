@@ -607,10 +607,10 @@ def test_cold_start_shares_by_vtype_and_vclass(tmp_path):
     eqs = _chain_equations()
     eqs[0].chain = dataclasses.replace(eqs[0].chain, cold_start_fuel_l=0.07)
 
-    def run(name, extra):
+    def run(name, extra, add=b / "prius3.vtype.xml"):
         sc = tmp_path / f"{name}.toml"
         sc.write_text(f'equations = ["drvpw_prius3"]\n[sumo]\nnet = "{net.as_posix()}"\n'
-                      f'routes = ["{rou.as_posix()}"]\nadditional = ["{(b / "prius3.vtype.xml").as_posix()}"]\n'
+                      f'routes = ["{rou.as_posix()}"]\nadditional = ["{add.as_posix()}"]\n'
                       f'end = 150\n{extra}', encoding="utf-8")
         res = run_scenario(sc, tmp_path / name, equations=eqs, figures=False, edgedata=False)
         veh = pd.read_csv(tmp_path / name / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
@@ -628,6 +628,22 @@ def test_cold_start_shares_by_vtype_and_vclass(tmp_path):
     np.testing.assert_allclose(veh["cold_start_l"], 0.035, rtol=1e-12)
     assert summ["vehicles"] == len(veh) and summ["expected_cold_starts"] == pytest.approx(0.5 * len(veh))
     assert summ["share"] == 0.0 and summ["share_by_vclass"] == {"passenger": 0.5}
+    # the vType's own param in the route files; the scenario's [vtypes] wins over it
+    add = tmp_path / "types.add.xml"
+    add.write_text((b / "prius3.vtype.xml").read_text(encoding="utf-8").replace(
+        'speedFactor="normc(0.85,0.06,0.72,1.0)"/>',
+        'speedFactor="normc(0.85,0.06,0.72,1.0)"><param key="drvpw.cold_start" value="0.25"/></vType>'),
+        encoding="utf-8")
+    veh, summ = run("by_param", "[vehicles]\ncold_start = true\n", add)
+    np.testing.assert_allclose(veh.loc[veh["through"], "cold_start_l"], 0.0175, rtol=1e-12)
+    np.testing.assert_allclose(veh.loc[~veh["through"], "cold_start_l"], 0.07, rtol=1e-12)
+    assert summ["share_by_vtype"] == {"prius3_hw": 0.25}
+    veh, _ = run("param_and_scenario", "[vtypes.prius3_hw]\ncold_start = 1\n", add)
+    np.testing.assert_allclose(veh.loc[veh["through"], "cold_start_l"], 0.07, rtol=1e-12)
+    assert (veh.loc[~veh["through"], "cold_start_l"] == 0).all()  # the run's share: off
+    add.write_text(add.read_text(encoding="utf-8").replace('value="0.25"', 'value="often"'), encoding="utf-8")
+    with pytest.raises(UserError, match=r"types.add.xml: vType 'prius3_hw': drvpw.cold_start .*'often'"):
+        run("bad_param", "", add)
 
 
 def test_sumo_run_chain_accounts_balance():

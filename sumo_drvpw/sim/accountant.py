@@ -155,7 +155,10 @@ class Accountant(_Listener):
         self.physics = Physics(wind_speed=sc.wind_speed, wind_from_deg=sc.wind_from_deg,
                                rho=sc.rho, ambient_c=sc.air_temperature_c,
                                cold_start=float(getattr(sc, "cold_start", 0.0)),
-                               cold_start_vtypes=cold_start_shares(getattr(sc, "vtype_data", {})),
+                               cold_start_vtypes={  # the scenario's win over the vTypes' params
+                                   **{vt: i.cold_start for vt, i in self.file_vtypes.items()
+                                      if i.cold_start is not None},
+                                   **cold_start_shares(getattr(sc, "vtype_data", {}))},
                                cold_start_vclasses=cold_start_shares(getattr(sc, "vclass_data", {})),
                                slope_tol=sc.slope_tol,
                                slope_reference=sc.slope_reference,

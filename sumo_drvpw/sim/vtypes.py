@@ -191,6 +191,9 @@ class VTypeInfo:
     length_m: float | None = None
     #: the ``personCapacity`` attribute as written (None: not given)
     person_capacity: int | None = None
+    #: param ``drvpw.cold_start``: the share of its trips that start a cold engine (None:
+    #: not given; the scenario's vType, vClass or run-wide share applies)
+    cold_start: float | None = None
 
 
 #: SUMO's default vType lengths of the heavy classes [m] (for the booking note)
@@ -229,6 +232,22 @@ def _mass(where: str, key: str, val: str | None, zero: bool = False) -> float | 
     return x
 
 
+def _cold_share(where: str, val: str | None) -> float | None:
+    """Param ``drvpw.cold_start``: true/false or a share 0–1."""
+    if val is None:
+        return None
+    s = val.strip().lower()
+    if s in ("true", "false"):
+        return 1.0 if s == "true" else 0.0
+    try:
+        x = float(s)
+    except ValueError:
+        x = float("nan")
+    if not 0.0 <= x <= 1.0:
+        raise UserError(f"{where}: drvpw.cold_start must be true, false or a share from 0 to 1, got {val!r}")
+    return x
+
+
 def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
     """Read every ``<vType>`` of the given route/additional files.
 
@@ -264,7 +283,8 @@ def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
                                          el.attrib.get("emissionClass") or None,
                                          el.attrib.get("guiShape") or None,
                                          _length(el.attrib.get("length")),
-                                         _capacity(el.attrib.get("personCapacity")))
+                                         _capacity(el.attrib.get("personCapacity")),
+                                         _cold_share(where, params.get("drvpw.cold_start")))
                     el.clear()
         except ET.ParseError as e:
             raise UserError(f"{path}: not valid XML: {e}") from None
