@@ -105,7 +105,7 @@ def test_cold_start_is_a_fixed_volume_per_start_by_hand(tmp_path):
     p, v = np.array([0.0, 8_000.0, -3_000.0]), np.array([0.0, 12.0, 9.0])
     warm = dataclasses.replace(ch, cold_start_fuel_l=0.0)
     np.testing.assert_array_equal(ch.evaluate(p, v, 1.0)["fuel_l"], warm.evaluate(p, v, 1.0)["fuel_l"])
-    assert warm.cold_start() == {"fuel_l": 0.0, "fuel_j": 0.0, "co2_kg": 0.0}
+    assert warm.cold_start() == {"fuel_l": 0.0, "fuel_j": 0.0, "co2_kg": 0.0, "battery_j": 0.0}
     assert EnergyChain(predicts="battery").cold_start()["fuel_l"] == 0.0
     eq = equation_from_dict({"equation": {"name": "d"}, "terms": {"acc": 1.0}, "chain": ch.to_dict()})
     save_equation(eq, tmp_path / "d.toml")
@@ -208,6 +208,33 @@ def test_calibration_recovers_a_planted_battery_chain_within_2_percent():
         se = fit.parameters[k]["std_err"]
         assert se is not None and abs(fit.parameters[k]["value"] - truth) < 4 * se + 1e-9
     assert "reading" in fit.parameters["traction_efficiency"]
+
+
+def test_calibration_recovers_a_planted_cabin_warm_up():
+    """Trips of 20 min whose cabins start at different temperatures: the battery power holds
+    steady heating over the ambient temperature plus a warm-up W·(T_set − T_cab,0)⁺·e^(−t/τ)/τ.
+    With that rate as a regressor the fit recovers W and the steady heating within 2 %, and the
+    chain books W·ΔT at a cold start; without it the steady heating absorbs part of it."""
+    rng = np.random.default_rng(4)
+    trips, per, tau, w_true = 40, 1200, 300.0, 120e3
+    t = np.tile(np.arange(per, dtype=float), trips)
+    amb = np.repeat(rng.uniform(-5, 15, trips), per)
+    cab0 = np.where(np.repeat(rng.random(trips) < 0.6, per), amb, 20.0)  # 40 % start with a warm cabin
+    v = np.clip(10 + 5 * np.sin(t / 60.0) + rng.normal(0, 0.5, t.size), 0, None)
+    p = 400.0 * v + 0.4 * v ** 3 + rng.normal(0, 2000.0, t.size)
+    rate = np.maximum(20.0 - cab0, 0.0) * np.exp(-t / tau) / tau
+    plant = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.7, aux_power_w=300.0,
+                        hvac={"column": "ambient_c", "setpoint_c": 20.0, "heating_w_per_k": 80.0,
+                              "cooling_w_per_k": 0.0})
+    meas = plant.evaluate(p, v, signals={"ambient_c": amb})["power_w"] + w_true * rate + rng.normal(0, 200.0, t.size)
+    hv = {"column": "ambient_c", "setpoint_c": 20.0}
+    fit = calibrate_battery(p, v, meas, 1.0, {"ambient_c": amb}, hvac=hv, limit=None, warmup_rate=rate)
+    assert fit.chain.hvac["warmup_j_per_k"] == pytest.approx(w_true, rel=0.02)
+    assert fit.chain.hvac["heating_w_per_k"] == pytest.approx(80.0, rel=0.02)
+    assert fit.chain.cold_start(5.0)["battery_j"] == pytest.approx(15.0 * fit.chain.hvac["warmup_j_per_k"])
+    assert fit.chain.cold_start(None)["battery_j"] == 0.0 and "kJ per K" in fit.parameters["hvac.warmup_j_per_k"]["reading"]
+    without = calibrate_battery(p, v, meas, 1.0, {"ambient_c": amb}, hvac=hv, limit=None)
+    assert without.chain.hvac["heating_w_per_k"] > 85.0 and "warmup_j_per_k" not in without.chain.hvac
 
 
 def test_samples_with_an_unknown_load_stay_out_of_the_fit():
@@ -644,6 +671,43 @@ def test_cold_start_shares_by_vtype_and_vclass(tmp_path):
     add.write_text(add.read_text(encoding="utf-8").replace('value="0.25"', 'value="often"'), encoding="utf-8")
     with pytest.raises(UserError, match=r"types.add.xml: vType 'prius3_hw': drvpw.cold_start .*'often'"):
         run("bad_param", "", add)
+
+
+def test_cabin_warm_up_is_booked_at_cold_departures(tmp_path):
+    """A battery chain's cabin warm-up (``[chain.hvac] warmup_j_per_k``): a real SUMO run
+    (city, 150 s, air at 0 °C) with cold starts on and off. Each booked vehicle's auxiliary
+    and net energy grow by exactly warmup × (20 − 0) K; traction and recuperation do not
+    change; a share books that share; the summary gives the kWh per start; the TOML round
+    trip keeps the key, and a fuel chain may not carry it."""
+    pytest.importorskip("libsumo")
+    import dataclasses
+
+    from sumo_drvpw.sim import run_scenario
+
+    path = _city_sumocfg().with_suffix(".toml")
+    eqs = _chain_equations()
+    hv = {"column": "ambient_c", "setpoint_c": 20.0, "heating_w_per_k": 100.0, "cooling_w_per_k": 0.0,
+          "warmup_j_per_k": 60000.0}
+    eqs[1].chain = dataclasses.replace(eqs[1].chain, hvac=hv)
+    assert chain_from_dict(eqs[1].chain.to_dict()).hvac == hv
+    with pytest.raises(UserError, match="warmup_j_per_k.*only for predicts"):
+        chain_from_dict({"predicts": "fuel", "hvac": hv})
+    veh, summ = {}, {}
+    for share in (0.0, 1.0, 0.5):
+        res = run_scenario(path, tmp_path / str(share), equations=eqs, end=150.0, figures=False, edgedata=False,
+                           cold_start=share, air_temperature_c=0.0)
+        summ[share] = res.summary["chain"]["cold_start"]
+        veh[share] = pd.read_csv(tmp_path / str(share) / "chain_vehicles.csv").query(
+            "equation == 'bev'").set_index("key")
+    per_start = 60000.0 * 20.0 / 3.6e6
+    assert len(veh[1.0]) > 20 and veh[1.0].index.equals(veh[0.0].index)
+    for share in (1.0, 0.5):
+        for col in ("auxiliary_kwh", "net_kwh"):
+            np.testing.assert_allclose(veh[share][col] - veh[0.0][col], share * per_start, rtol=1e-9)
+        for col in ("traction_kwh", "recuperated_kwh"):
+            np.testing.assert_allclose(veh[share][col], veh[0.0][col], rtol=1e-12)
+    assert summ[1.0]["battery_kwh_per_start"] == {"bev": pytest.approx(per_start)}
+    assert summ[1.0]["vehicles"] == len(veh[1.0]) and summ[0.0]["booked"] is False
 
 
 def test_sumo_run_chain_accounts_balance():

@@ -153,6 +153,9 @@ def _reading(name: str, val: float) -> str:
         s = f"{val:.3f} W at the battery per W logged"
         return s + ("; far from 1: the logged load is not electrical power at the battery"
                     if not 0.7 <= val <= 1.3 else "")
+    if name == "hvac.warmup_j_per_k":
+        return (f"cabin warm-up at a cold start {val / 1000:.0f} kJ per K below the set-point "
+                f"({val * 15 / 3.6e6:.2f} kWh from 15 K below)")
     if name.startswith("hvac."):
         return f"{val:.0f} W per K from the set-point"
     if name == "marginal_efficiency":
@@ -172,7 +175,7 @@ def _reading(name: str, val: float) -> str:
 def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = None, *,
                       loads=(), hvac: dict | None = None, mask=None, limit="profile",
                       predicts: str = "battery", fixed: dict | None = None,
-                      efficiency: str = "constant") -> ChainFit:
+                      efficiency: str = "constant", warmup_rate=None) -> ChainFit:
     """Calibrate a battery (or powertrain-output) chain on measured power.
 
     Parameters
@@ -192,6 +195,10 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
         calibration should find only what the road adds), name → value; reported as fixed
     efficiency : "constant", or "power" / "speed-power": η_t and η_r as tables over |P|
         (and speed), fitted on a hat-function basis (fit/chain_map.py)
+    warmup_rate : with ``hvac``: per sample, the rate [K/s] at which a cold cabin's warm-up
+        is spread over the trip's start (e.g. (T_set − T_cabin,0)⁺·e^(−t/τ)/τ); its
+        coefficient is the chain's ``hvac.warmup_j_per_k`` [J/K] ≥ 0, booked in SUMO once
+        per cold departure (:meth:`EnergyChain.cold_start`), not by :meth:`EnergyChain.evaluate`
     """
     p = np.asarray(p_drive_w, float)
     n = p.size
@@ -220,6 +227,11 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
             names += ["hvac.heating_w_per_k", "hvac.cooling_w_per_k"]
             lb += [0.0, 0.0]
             ub += [np.inf, np.inf]
+            if warmup_rate is not None:
+                cols.append(np.broadcast_to(np.asarray(warmup_rate, float), (n,)))
+                names.append("hvac.warmup_j_per_k")
+                lb.append(0.0)
+                ub.append(np.inf)
     ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w)
     for c in cols:
         if c is not None:
@@ -435,7 +447,7 @@ def chain_target(m, chain: EnergyChain) -> np.ndarray:
 
 def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engine_off="profile",
                  mask=None, p_drive_w=None, fixed: dict | None = None,
-                 efficiency: str = "constant") -> ChainFit:
+                 efficiency: str = "constant", warmup_rate=None) -> ChainFit:
     """Calibrate the chain of ``m.target`` on a :class:`~sumo_drvpw.data.measured.Measured`;
     fit on ``m.usable`` (and ``mask``).
 
@@ -457,7 +469,8 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     if m.target != "battery":
         raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
     return calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
-                             mask=use, limit=limit, fixed=fixed, efficiency=efficiency)
+                             mask=use, limit=limit, fixed=fixed, efficiency=efficiency,
+                             warmup_rate=warmup_rate)
 
 
 def profile_recuperation_limit(p_wheel_w, p_recuperated_w, dt_s, mask=None,

@@ -20,6 +20,9 @@ chain turns it into what a user pays for::
     setpoint_c = 20.0
     heating_w_per_k = 150.0           # P = h_heat·max(T_set − T, 0) + h_cool·max(T − T_set, 0)
     cooling_w_per_k = 50.0
+    warmup_j_per_k = 60000.0          # optional: heat to bring a cold cabin to T_set at a
+                                      #   cold start [J per K below T_set], booked once per
+                                      #   departure that starts cold (like a fuel cold start)
     [chain.traction_efficiency]       # a table instead of a constant (linear interpolation,
     speed_mps = [0, 10, 30]           #   held constant beyond the ends): axes speed_mps and/or
     power_w = [0, 20000, 60000]       #   power_w (|P|), values shaped (len(speed), len(power))
@@ -83,7 +86,7 @@ KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperat
         "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
         "engine_off_below_w", "engine_on_above_mps", "fuel", "battery_to_fuel",
         "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "std_err", "reading", "provenance", "metrics")
-HVAC_KEYS = ("column", "setpoint_c", "heating_w_per_k", "cooling_w_per_k")
+HVAC_KEYS = ("column", "setpoint_c", "heating_w_per_k", "cooling_w_per_k", "warmup_j_per_k")
 
 
 @dataclass(eq=False)
@@ -331,18 +334,25 @@ class EnergyChain:
                 "fuel_lps": kgps / fp["density_kg_per_l"], "co2_kgps": kgps * fp["co2_kg_per_kg"]}
 
     def cold_start(self, air_c: float | None = None) -> dict:
-        """The extra fuel of one cold start at air temperature ``air_c`` [°C] (None: the
-        reference ``cold_start_ref_c``): ``fuel_l`` [L], ``fuel_j`` [J, LHV], ``co2_kg``
-        [kg] (all 0 for a chain that is not a fuel chain or has none)."""
+        """The extra energy of one cold start at air temperature ``air_c`` [°C]: for a fuel
+        chain ``fuel_l`` [L], ``fuel_j`` [J, LHV], ``co2_kg`` [kg] (None: at the reference
+        ``cold_start_ref_c``); for a battery chain with ``[chain.hvac] warmup_j_per_k``,
+        ``battery_j`` [J] = warmup · max(T_set − T, 0), the cabin's warm-up (None or an unknown
+        temperature: none). Zeros where the chain has none."""
+        if self.predicts == "battery" and self.hvac and self.hvac.get("warmup_j_per_k"):
+            t = np.nan if air_c is None else float(air_c)
+            dt = max(float(self.hvac.get("setpoint_c", 20.0)) - t, 0.0) if np.isfinite(t) else 0.0
+            return {"fuel_l": 0.0, "fuel_j": 0.0, "co2_kg": 0.0,
+                    "battery_j": float(self.hvac["warmup_j_per_k"]) * dt}
         if self.predicts != "fuel" or not (self.cold_start_fuel_l or self.cold_start_fuel_l_per_k):
-            return {"fuel_l": 0.0, "fuel_j": 0.0, "co2_kg": 0.0}
+            return {"fuel_l": 0.0, "fuel_j": 0.0, "co2_kg": 0.0, "battery_j": 0.0}
         litres = self.cold_start_fuel_l
         if air_c is not None and np.isfinite(air_c):
             litres += self.cold_start_fuel_l_per_k * max(self.cold_start_ref_c - float(air_c), 0.0)
         fp = self.fuel_props
         kg = litres * fp["density_kg_per_l"]
         return {"fuel_l": float(litres), "fuel_j": kg * fp["lhv_j_per_kg"],
-                "co2_kg": kg * fp["co2_kg_per_kg"]}
+                "co2_kg": kg * fp["co2_kg_per_kg"], "battery_j": 0.0}
 
     @property
     def battery_fuel_factor(self) -> float:
@@ -464,6 +474,11 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
                             f"got {h['setpoint_c']!r}")
         for k in ("heating_w_per_k", "cooling_w_per_k"):
             hv[k] = _nonneg(h.get(k, 0.0), f"hvac.{k}", where)
+        if "warmup_j_per_k" in h:
+            if pred != "battery":
+                raise UserError(f"{where} [chain.hvac]: 'warmup_j_per_k' is the battery energy of a "
+                                f"cabin's warm-up: only for predicts = \"battery\", got predicts = {pred!r}")
+            hv["warmup_j_per_k"] = _nonneg(h["warmup_j_per_k"], "hvac.warmup_j_per_k", where)
         kw["hvac"] = hv
     if "fuel" in doc:
         if doc["fuel"] not in FUELS:

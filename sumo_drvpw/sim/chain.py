@@ -13,10 +13,11 @@ step) and is booked in quantities a user pays for::
 Auxiliary power accrues at every step a vehicle is in the network, standing or driving.
 With ``cold_start`` (the scenario's ``[vehicles] cold_start``, a share of the trips, or
 ``[vtypes.<id>] cold_start`` / ``[vclasses.<vClass>] cold_start`` for some vehicles) a fuel
-chain's ``cold_start_fuel_l`` times the vehicle's share is booked once per vehicle that
-departs while the run accounts, at its first booked step (its departure edge); vehicles
-already on the road when accounting starts (a user's TraCI script attaching mid-run) get
-none.
+chain's ``cold_start_fuel_l`` — and a battery chain's cabin warm-up, ``[chain.hvac]
+warmup_j_per_k`` × (T_set − T)⁺, as auxiliary energy — times the vehicle's share is booked
+once per vehicle that departs while the run accounts, at its first booked step (its
+departure edge); vehicles already on the road when accounting starts (a user's TraCI
+script attaching mid-run) get none.
 Vehicles' running totals take one
 scatter-add per step; edges take one ``np.add.at`` per step; class totals are sums of
 the vehicle totals, so vehicle, edge and class totals agree by construction (tests check
@@ -111,7 +112,8 @@ class ChainLedger:
         self._cs = np.zeros(len(self._cols))
         for j, (e, k) in enumerate(self._cols):
             cs = self.chains[e].cold_start(self.air_temperature_c)
-            self._cs[j] = {4: cs["fuel_j"], 5: cs["fuel_l"], 6: cs["co2_kg"], 7: cs["fuel_l"]}.get(k, 0.0)
+            self._cs[j] = {2: cs["battery_j"], 3: cs["battery_j"], 4: cs["fuel_j"], 5: cs["fuel_l"],
+                           6: cs["co2_kg"], 7: cs["fuel_l"]}.get(k, 0.0)
         #: per vehicle row: the share of a cold start still to book at its first booked step
         self._starting = np.zeros(capacity)
         #: vehicles whose departure was booked (with its share of a cold start, > 0) by a
@@ -414,6 +416,9 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
     rep = chain.report(veh_ids, veh_classes, [], class_order)
     per_start = {chain.names[e]: chain.chains[e].cold_start(chain.air_temperature_c)["fuel_l"]
                  for e in chain.active if chain.chains[e].predicts == "fuel"}
+    warmup = {chain.names[e]: chain.chains[e].cold_start(chain.air_temperature_c)["battery_j"] / KWH
+              for e in chain.active if chain.chains[e].predicts == "battery"
+              and (chain.chains[e].hvac or {}).get("warmup_j_per_k")}
     return {"classes": rep["classes"],
             "quantities": "battery: traction/recuperated/auxiliary/net kWh (auxiliary accrues "
                           "while standing); fuel: litres (LHV, density of the chain's fuel), CO2 kg"
@@ -424,15 +429,17 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
                            **({"share_by_vclass": chain.cold_start_vclasses} if chain.cold_start_vclasses else {}),
                            "vehicles": chain.cold_starts,
                            "expected_cold_starts": round(chain.cold_starts_expected, 9),
-                           "fuel_l_per_start": per_start, "air_temperature_c": chain.air_temperature_c,
-                           "rule": "the chain's cold_start_fuel_l once per vehicle departing during "
-                                   "the run, times its share (its vType's, else its vClass's, else the run's), "
+                           **({"fuel_l_per_start": per_start} if per_start else {}),
+                           **({"battery_kwh_per_start": warmup} if warmup else {}),
+                           "air_temperature_c": chain.air_temperature_c,
+                           "rule": "the chain's cold_start_fuel_l (a battery chain: its cabin warm-up) once per "
+                                   "vehicle departing during the run, times its share (its vType's, else its vClass's, else the run's), "
                                    "at its departure edge ([vehicles] cold_start, [vtypes.<id>] / "
                                    "[vclasses.<vClass>] cold_start, or the run command's cold-start option)"
                                    if chain.cold_start_on else
                                    "not booked: every trip taken as starting warm (through traffic, "
                                    "or engines already warm); [vehicles] cold_start = true or "
-                                   "the run command's cold-start option books it"} if per_start else None,
+                                   "the run command's cold-start option books it"} if per_start or warmup else None,
             "signals_assumed_zero": sorted(chain.assumed_zero),
             "signal_values": chain.signal_values,
             "hvac_air_temperature_c": chain.air_temperature_c if chain.hvac_columns else None,
