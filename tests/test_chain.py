@@ -1045,6 +1045,29 @@ def test_cli_dyno_chain_on_the_published_road_load(tmp_path, capsys):
     assert "road_load.c_n_per_mps2 = -0.35" in capsys.readouterr().err
 
 
+def test_i3_cabin_start_and_warm_up_rate_by_hand():
+    """validation.chain_i3: a trip's cabin start temperature is its sensor's first 10 s, or
+    the air temperature where the sensor reads its 10 °C floor (a cold-soaked cabin); the
+    warm-up rate integrates to (T_set − T_start)⁺ over each trip exactly, decaying with τ."""
+    import types
+
+    from sumo_drvpw.validation.chain_i3 import WARMUP_TAU_S, cabin_start_c, warmup_rate
+
+    t = np.r_[np.arange(0, 900, 0.5), np.arange(0, 600, 0.5)]
+    trips = np.array(["a"] * 1800 + ["b"] * 1200)
+    cab = np.where(trips == "a", 10.0, 21.5)
+    amb = np.where(trips == "a", 2.0, 4.0)
+    log = types.SimpleNamespace(df=pd.DataFrame({"time_s": t, "dt_s": 0.5}))
+    mb = types.SimpleNamespace(inputs=types.SimpleNamespace(signals={"cabin_temp_c": cab, "ambient_c": amb}))
+    start = cabin_start_c(log, mb, trips)
+    assert start == {"a": 2.0, "b": 21.5}
+    rate = warmup_rate(log, trips, start, 20.0)
+    assert float(rate[trips == "a"] @ np.full(1800, 0.5)) == pytest.approx(18.0, rel=1e-12)
+    assert not rate[trips == "b"].any()
+    a = rate[trips == "a"]
+    assert a[600] / a[0] == pytest.approx(np.exp(-300.0 / WARMUP_TAU_S), rel=1e-12)  # t = 300 s
+
+
 def test_i3_battery_equation_for_sumo_studies_runs_in_sumo(tmp_path):
     """docs/energy-chain/bmw_i3_battery.toml — calibrated on the TUM i3 trips by
     `python -m sumo_drvpw.validation.chain` in the form a SUMO study can run (cold drag,
