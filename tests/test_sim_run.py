@@ -20,7 +20,7 @@ import pytest
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.model.constants import G
-from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.model.equations import Equation, load_equation
 from sumo_drvpw.sim import close_sumo, run_scenario, start_sumo
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
 from sumo_drvpw.sim.loop import Physics, run_loop
@@ -658,7 +658,7 @@ def test_parked_vehicles_are_off_the_lane_and_draw_no_auxiliary_power(tmp_path):
 
     parking_scenario(tmp_path)
     eq = I3_BATTERY
-    aux_w = 910.103036059679   # the file's constant auxiliary power; 20 °C: no HVAC
+    aux_w = load_equation(I3_BATTERY).chain.aux_power_w   # the file's constant auxiliary power; 20 °C: no HVAC
     got = {}
     for positions in ("getter", "tracked"):
         (tmp_path / f"{positions}.toml").write_text(
@@ -858,7 +858,7 @@ def test_a_bus_parked_at_its_stop_dwells_there_booked_standing(tmp_path):
         pd_.testing.assert_series_equal(f.set_index("vehicle")["time_s"].sort_index(),
                                         v.sort_index())
         c = pd_.read_csv(d / "out" / "chain_vehicles.csv").set_index("key")["auxiliary_kwh"]
-        np.testing.assert_allclose(c, 910.103036059679 * v[c.index] / 3.6e6, rtol=1e-9)
+        np.testing.assert_allclose(c, load_equation(I3_BATTERY).chain.aux_power_w * v[c.index] / 3.6e6, rtol=1e-9)
         trips = {t.get("id"): float(t.get("duration")) for t in ET.parse(d / "ti.xml").getroot()}
         assert v["bus"] == pytest.approx(trips["bus"], abs=0.5)       # the dwell included
         assert v["car"] < trips["car"] - 59                            # parked: not booked

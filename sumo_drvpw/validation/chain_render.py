@@ -331,7 +331,7 @@ def _deliverable(dv) -> list[str]:
             f"heating {ch.get('hvac.heating_w_per_k', float('nan')):.0f} W/K and cooling "
             f"{ch.get('hvac.cooling_w_per_k', float('nan')):.0f} W/K from 20 °C"
             + (f", cabin warm-up {ch['hvac.warmup_j_per_k'] / 1000:.0f} kJ/K at a cold start (booked only where "
-               "the run says trips start cold: `[vehicles] cold_start`, a vType's `cold_start` or `--cold-start`)"
+               "the run says trips start cold: `[vehicles] cold_start`, a vType's `cold_start` or the run command's cold-start option)"
                if ch.get("hvac.warmup_j_per_k") else "")
             + (f", recuperation limit {lim / 1000:.1f} kW" if lim else ", no recuperation limit kept")
             + ". In a scenario: `[vtypes.<id>] equations = [\"docs/energy-chain/" + dv["file"] + "\"]` and "
