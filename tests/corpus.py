@@ -221,6 +221,12 @@ def _(d):
             "--no-figures", "--out", str(d / "diag")]
 
 
+@case("options", "diagnose exclude matching no column", ("--exclude", "nosuchcol"))
+def _(d):
+    return ["diagnose", str(write(d, "log.csv", base_log().assign(ambient_c=20.0))), "--exclude", "nosuchcol",
+            "--no-figures", "--out", str(d / "diag")]
+
+
 @case("drive-log", "same trip id in two files", ("trip_id", "t1"))
 def _(d):
     a = write(d, "a.csv", base_log())

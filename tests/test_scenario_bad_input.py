@@ -132,6 +132,9 @@ def test_string_and_number_booleans_are_refused(tmp_path, table, key, value):
     ('vtypes = ["prius3"]\n' + HEAD, ("'vtypes'", "['prius3']")),
     ('vclasses = "bus"\n' + HEAD, ("'vclasses'", "'bus'")),
     (HEAD + '[vtypes.prius3]\nmass_kg = "1625"\n', ("'vtypes.prius3.mass_kg'", "'1625'")),
+    (HEAD + '[air]\ndensity_kgm3 = 1e6\n', ("'air.density_kgm3'", "1e+06", "0.6 … 1.6")),
+    (HEAD + '[air]\ntemperature_c = 80.0\n', ("'air.temperature_c'", "80")),
+    (HEAD + '[air]\ntemperature_c = 10.0\npressure_kpa = 101325\n', ("'air.pressure_kpa'", "101325")),
     (HEAD + '[vtypes.prius3]\ncold_start = 1.5\n', ("'vtypes.prius3.cold_start'", "1.5", "share from 0 to 1")),
     (HEAD + '[vclasses.passenger]\ncold_start = "yes"\n', ("'vclasses.passenger.cold_start'", "'yes'")),
 ])

@@ -181,6 +181,8 @@ def main(args) -> int:
         named = [str(x) for x in (*args.logs, args.vehicle, args.equation) if x]
         if str(e).startswith("diagnose option include: "):  # the user typed --signals
             raise UserError(str(e).replace("diagnose option include: ", "--signals: ", 1)) from None
+        if str(e).startswith("diagnose option exclude: "):
+            raise UserError(str(e).replace("diagnose option exclude: ", "--exclude: ", 1)) from None
         if any(n in str(e) for n in named) or str(e).startswith("--"):
             raise
         raise UserError(f"{', '.join(map(str, args.logs))}: {e}") from None

@@ -64,8 +64,11 @@ def _overrides(args) -> dict:
         raise UserError(f"--period {args.period:g}: an edgeData interval is a finite number of seconds > 0")
     t = getattr(args, "air_temperature", None)
     if t is not None:
-        if not math.isfinite(t) or t <= -273.15:
-            raise UserError(f"--air-temperature {t}: a finite temperature above absolute zero (°C)")
+        from sumo_drvpw.sim.scenario import AIR_RANGES
+
+        lo, hi = AIR_RANGES["temperature_c"]
+        if not lo <= t <= hi:
+            raise UserError(f"--air-temperature {t:g}: an air temperature in {lo:g} … {hi:g} °C")
         o["air_temperature_c"] = t
     cold_start_override(args, o)
     if args.equation:

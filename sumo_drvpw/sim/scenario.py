@@ -241,6 +241,18 @@ def cold_start_shares(data: dict[str, dict]) -> dict[str, float]:
     return {k: d["cold_start"] for k, d in (data or {}).items() if "cold_start" in d}
 
 
+#: the air a road vehicle drives in (a value outside is a typo or a unit slip, e.g. Fahrenheit or
+#: Pa): temperature [°C] as the chains' set-points allow, density [kg/m³] from a 5000-m pass
+#: in summer to −50 °C at sea level, pressure [kPa] from 5000 m to the highest sea-level record
+AIR_RANGES = {"temperature_c": (-60.0, 60.0), "density_kgm3": (0.6, 1.6), "pressure_kpa": (50.0, 110.0)}
+
+
+def _in_range(x: float, lo_hi: tuple[float, float], where: str, key: str) -> None:
+    if not lo_hi[0] <= x <= lo_hi[1]:
+        raise UserError(f"{where}: '{key}' = {x:g} is not the air a vehicle drives in "
+                        f"({lo_hi[0]:g} … {lo_hi[1]:g})")
+
+
 def _choice(v, allowed: tuple[str, ...], where: str, key: str) -> str:
     if v not in allowed:
         raise UserError(f"{where}: '{key}' must be one of {', '.join(allowed)}, got {v!r}")
@@ -509,11 +521,14 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         if "temperature_c" in air:
             raise UserError(f"{where}: give air.density_kgm3 or air.temperature_c, not both")
         rho = _num(air["density_kgm3"], where, "air.density_kgm3", positive=True)
+        _in_range(rho, AIR_RANGES["density_kgm3"], where, "air.density_kgm3")
     elif "temperature_c" in air:
         t = _num(air["temperature_c"], where, "air.temperature_c")
         pk = _num(air.get("pressure_kpa", P_STD_KPA), where, "air.pressure_kpa", positive=True)
         if t + KELVIN <= 0:
             raise UserError(f"{where}: air.temperature_c below absolute zero: {t}")
+        _in_range(t, AIR_RANGES["temperature_c"], where, "air.temperature_c")
+        _in_range(pk, AIR_RANGES["pressure_kpa"], where, "air.pressure_kpa")
         rho = air_density(t, pk)
         t_air = t
     else:

@@ -43,15 +43,18 @@ def _glob_any(name: str, patterns) -> bool:
 
 
 def check_include(columns, opt: DiagnoseOptions) -> None:
-    """UserError when an ``include`` pattern matches none of the logs' extra ``columns``
-    (a misspelt name would leave nothing to find, and the trace would say 0 findings)."""
-    for pat in opt.include or ():
-        if not any(fnmatch.fnmatchcase(n, pat) for n in columns):
-            from sumo_drvpw.errors import UserError
+    """UserError when an ``include`` or ``exclude`` pattern matches none of the logs' extra
+    ``columns`` (a misspelt name would leave nothing to find, and the trace would say 0
+    findings; or leave in the column it meant to keep out)."""
+    for key in ("include", "exclude"):
+        for pat in getattr(opt, key) or ():
+            if not any(fnmatch.fnmatchcase(n, pat) for n in columns):
+                from sumo_drvpw.errors import UserError
 
-            cols = sorted(columns)
-            raise UserError(f"diagnose option include: {pat!r} matches no column of the logs (their "
-                            f"extra columns: {', '.join(cols[:12]) or 'none'}{', …' if len(cols) > 12 else ''})")
+                cols = sorted(columns)
+                raise UserError(f"diagnose option {key}: {pat!r} matches no column of the logs (their "
+                                f"extra columns: {', '.join(cols[:12]) or 'none'}"
+                                f"{', …' if len(cols) > 12 else ''})")
 
 
 def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarray,
