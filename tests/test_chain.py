@@ -710,6 +710,46 @@ def test_cabin_warm_up_is_booked_at_cold_departures(tmp_path):
     assert summ[1.0]["vehicles"] == len(veh[1.0]) and summ[0.0]["booked"] is False
 
 
+@settings(max_examples=40, deadline=None)
+@given(shares=st.lists(st.sampled_from([0.0, 0.25, 0.5, 1.0]), min_size=1, max_size=12),
+       air=st.floats(-30.0, 40.0), steps=st.integers(1, 4), seed=st.integers(0, 2 ** 16))
+def test_cold_start_shares_book_share_times_one_start(shares, air, steps, seed):
+    """ChainLedger without SUMO: vehicles departing with any shares book, over any steps on
+    any edges, exactly share × one cold start — litres for the fuel chain, the cabin's
+    warm-up for the battery chain (auxiliary and net) — once; vehicle and edge totals agree;
+    the counts are the vehicles with a share > 0 and the sum of the shares."""
+    from sumo_drvpw.sim.chain import ChainLedger
+
+    fuel = EnergyChain(predicts="fuel", idle_fuel_power_w=4000.0, marginal_efficiency=0.35,
+                       engine_off_below_w=-np.inf, cold_start_fuel_l=0.06, cold_start_fuel_l_per_k=0.003)
+    bat = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.7, aux_power_w=300.0,
+                      hvac={"column": "ambient_c", "setpoint_c": 20.0, "heating_w_per_k": 50.0,
+                            "cooling_w_per_k": 0.0, "warmup_j_per_k": 80e3})
+    n, n_edges = len(shares), 5
+
+    def run(on):
+        led = ChainLedger(["f", "b"], [fuel, bat], n_edges, signal_values={"ambient_c": air},
+                          cold_start=1.0 if on else 0.0)
+        if on:
+            led.start(np.arange(n), shares)
+        r = np.random.default_rng(seed)
+        for _ in range(steps):
+            led.book(np.arange(n), r.integers(0, n_edges, n), r.uniform(0, 20, n), 0.5,
+                     r.normal(0, 2e4, (n, 2)))
+        return led
+    on, off = run(True), run(False)
+    d = on.vehicle_totals(n) - off.vehicle_totals(n)
+    sh = np.asarray(shares)
+    np.testing.assert_allclose(d[:, 0, 7], sh * fuel.cold_start(air)["fuel_l"], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(d[:, 0, 5], d[:, 0, 7], rtol=1e-9, atol=1e-15)
+    warm = sh * bat.cold_start(air)["battery_j"]
+    for q in (2, 3):
+        np.testing.assert_allclose(d[:, 1, q], warm, rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(d[:, 1, :2], 0.0, atol=1e-6)
+    np.testing.assert_allclose(on.edge.sum(axis=0), on.vehicle_totals(n).sum(axis=0), rtol=1e-9, atol=1e-6)
+    assert on.cold_starts == int((sh > 0).sum()) and on.cold_starts_expected == pytest.approx(sh.sum())
+
+
 def test_sumo_run_chain_accounts_balance():
     """A real SUMO run (city scenario, 150 s): chain energy per vehicle = Σ over its steps;
     vehicle, edge and class totals agree; auxiliary energy accrues while standing."""
