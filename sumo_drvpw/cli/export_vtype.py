@@ -14,6 +14,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="vehicle mass [kg] (instead of the vehicle file's)")
     parser.add_argument("--id", required=True, metavar="ID", help="vType id to write")
     parser.add_argument("--vclass", metavar="VCLASS", help="SUMO vClass of the vType")
+    parser.add_argument("--air-temperature", type=float, metavar="C",
+                        help="air temperature [°C] of the runs: a battery chain's HVAC power at it joins "
+                             "constantPowerIntake (SUMO's Energy model has no temperature)")
     parser.add_argument("--out", required=True, metavar="FILE.add.xml",
                         help="additional file to write")
 
@@ -47,7 +50,14 @@ def main(args: argparse.Namespace) -> int:
         area = v.body.get("frontal_area_m2")
     if mass is not None and not 0 < mass < float("inf"):
         raise UserError(f"--mass must be a finite number > 0 [kg], got {mass}")
-    xml, missing = energy_vtype_xml(eq, args.id, mass, area, args.vclass)
+    t = args.air_temperature
+    if t is not None:
+        from sumo_drvpw.sim.scenario import AIR_RANGES
+
+        lo, hi = AIR_RANGES["temperature_c"]
+        if not lo <= t <= hi:
+            raise UserError(f"--air-temperature {t:g}: an air temperature in {lo:g} … {hi:g} °C")
+    xml, missing = energy_vtype_xml(eq, args.id, mass, area, args.vclass, t)
     write_text(args.out, xml)
     print(f"wrote vType '{args.id}' (Energy/unknown) from equation '{eq.name}' to {args.out}")
     for m in missing:

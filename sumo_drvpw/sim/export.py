@@ -25,11 +25,20 @@ one           c                                             constantPowerIntake 
 Anything else (``v2``, ``roll_v2``, products, log columns) has no counterpart: it is left
 out and listed. ``frontSurfaceArea`` is the vehicle's frontal area when known (then
 ``airDragCoefficient`` = A·C_d / A), else 1 m² (then ``airDragCoefficient`` carries A·C_d).
+
+An equation with a battery (or powertrain-output) chain brings its chain
+(:func:`chain_energy_params`): ``propulsionEfficiency`` = η_t, ``recuperationEfficiency`` =
+η_r, ``constantPowerIntake`` += P_aux,0, plus its HVAC at a given air temperature; what the
+Energy model has no counterpart for (efficiency tables, a recuperation limit, logged loads,
+a standing draw, the cabin's warm-up at cold starts) is listed. Without a chain the
+efficiencies are 1: the vType books the driving energy at the wheels.
 """
 
 from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
+
+import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import G, RHO_DEFAULT
@@ -40,8 +49,49 @@ from sumo_drvpw.model.terms import parse_term
 RHO_SUMO = RHO_DEFAULT
 
 
+def chain_energy_params(chain, air_c: float | None = None) -> tuple[dict, list[str]]:
+    """SUMO Energy-model values of a battery or powertrain-output chain: ({param: value},
+    [what the model cannot express, with why]). ``air_c``: the run's air temperature [°C],
+    at which the chain's HVAC power joins ``constantPowerIntake`` (None: left out, listed)."""
+    p: dict = {}
+    missing: list[str] = []
+    if chain.predicts == "fuel":
+        return p, ["the fuel chain (SUMO's Energy model is electric)"]
+    for key, attr in (("propulsionEfficiency", "traction_efficiency"),
+                      ("recuperationEfficiency", "recuperation_efficiency")):
+        v = getattr(chain, attr)
+        if isinstance(v, (int, float)):
+            p[key] = float(v)
+        else:
+            p[key] = float(np.mean(v.values))
+            missing.append(f"{attr} is a table (SUMO takes a constant: its mean {p[key]:.4g} written)")
+    aux = float(chain.aux_power_w) if chain.predicts == "battery" else 0.0
+    if chain.predicts == "battery":
+        h = chain.hvac or {}
+        if h and air_c is None:
+            missing.append("the HVAC power over the air temperature (give the air temperature to add it "
+                           "to constantPowerIntake)")
+        elif h:
+            ts = float(h.get("setpoint_c", 20.0))
+            aux += (float(h.get("heating_w_per_k", 0.0)) * max(ts - air_c, 0.0)
+                    + float(h.get("cooling_w_per_k", 0.0)) * max(air_c - ts, 0.0))
+        if h.get("warmup_j_per_k"):
+            missing.append("the cabin's warm-up at cold starts (a per-trip energy; the plug-in books it)")
+        if chain.loads:
+            missing.append(f"logged loads {', '.join(chain.loads)} (no signal in SUMO)")
+        if chain.standstill_aux_w:
+            missing.append(f"the standing draw {chain.standstill_aux_w:g} W (SUMO's device books "
+                           "constantPowerIntake only while moving)")
+    if chain.recuperation_limit_w is not None:
+        missing.append(f"the recuperation limit {chain.recuperation_limit_w / 1000:.1f} kW (the Energy model "
+                       "recuperates without one)")
+    p["constantPowerIntake"] = aux
+    return p, missing
+
+
 def energy_model_params(eq: Equation, mass_kg: float | None = None,
-                        frontal_area_m2: float | None = None) -> tuple[dict, list[str]]:
+                        frontal_area_m2: float | None = None,
+                        air_c: float | None = None) -> tuple[dict, list[str]]:
     """SUMO Energy-model vType values for ``eq``: ({attribute/param: value}, [terms or
     factors it cannot express, with why]).
 
@@ -50,6 +100,7 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
     eq : the equation
     mass_kg : vehicle mass [kg] (needed unless the equation fixes one)
     frontal_area_m2 : frontal area A [m²] to split A·C_d (default 1 m²)
+    air_c : air temperature [°C] for a battery chain's HVAC (:func:`chain_energy_params`)
     """
     m = eq.mass_kg if eq.mass_kg is not None else mass_kg
     if m is None or not m > 0:
@@ -106,14 +157,20 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
               "rollDragCoefficient": cr, "rotatingMass": rot, "constantPowerIntake": const,
               "radialDragCoefficient": 0.0, "propulsionEfficiency": 1.0,
               "recuperationEfficiency": 1.0}
+    chain = getattr(eq, "chain", None)
+    if chain is not None and chain.predicts != "wheel":
+        cp, cm = chain_energy_params(chain, air_c)
+        params.update({k: v for k, v in cp.items() if k != "constantPowerIntake"})
+        params["constantPowerIntake"] += cp.get("constantPowerIntake", 0.0)
+        missing += cm
     return params, missing
 
 
 def energy_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
                      frontal_area_m2: float | None = None,
-                     vclass: str | None = None) -> tuple[str, list[str]]:
+                     vclass: str | None = None, air_c: float | None = None) -> tuple[str, list[str]]:
     """An additional file with one Energy-model vType for ``eq``; returns (XML, missing)."""
-    params, missing = energy_model_params(eq, mass_kg, frontal_area_m2)
+    params, missing = energy_model_params(eq, mass_kg, frontal_area_m2, air_c)
     attrs = (f"id={quoteattr(vtype_id)} emissionClass=\"Energy/unknown\" "
              f"mass=\"{params['mass']:.6g}\"")
     if vclass:

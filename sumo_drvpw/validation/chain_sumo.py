@@ -84,6 +84,7 @@ def chain_vtype_params(eq, chain, mass_kg: float, frontal_area_m2: float | None 
     Returns ({parameter: value}, [what SUMO cannot express, with why])."""
     from sumo_drvpw.fit.physical import physical_reading
     from sumo_drvpw.model.constants import RHO_DEFAULT
+    from sumo_drvpw.sim.export import chain_energy_params
 
     m = float(mass_kg)
     reading = physical_reading(eq.terms, RHO_DEFAULT)
@@ -105,14 +106,11 @@ def chain_vtype_params(eq, chain, mass_kg: float, frontal_area_m2: float | None 
     area = float(frontal_area_m2) if frontal_area_m2 else 1.0
     p = {"mass": m, "frontSurfaceArea": area, "airDragCoefficient": max(cda, 0.0) / area,
          "rollDragCoefficient": max(cr, 0.0), "rotatingMass": rot, "radialDragCoefficient": 0.0}
-    for k in ("traction_efficiency", "recuperation_efficiency"):
-        if not isinstance(getattr(chain, k), (int, float)):
-            missing.append(f"{k} is a table (SUMO takes a constant)")
-    p["propulsionEfficiency"] = float(chain.traction_efficiency) \
-        if isinstance(chain.traction_efficiency, (int, float)) else 1.0
-    p["recuperationEfficiency"] = float(chain.recuperation_efficiency) \
-        if isinstance(chain.recuperation_efficiency, (int, float)) else 1.0
-    p["constantPowerIntake"] = float(chain.aux_power_w) + float(extra_aux_w)
+    # η_t, η_r and the constant auxiliary power as export-vtype maps them (one mapping)
+    cp, cm = chain_energy_params(chain)
+    missing += [m for m in cm if " is a table " in m]
+    p.update(cp)
+    p["constantPowerIntake"] += float(extra_aux_w)
     if chain.recuperation_limit_w is not None:
         p["maximumRecuperationPower"] = float(chain.recuperation_limit_w)
     if at_motor_shaft:
