@@ -38,55 +38,15 @@ from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
-import numpy as np
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.chain import chain_energy_params
 from sumo_drvpw.model.constants import G, RHO_DEFAULT
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import parse_term
 
 #: SUMO's fixed air density in the Energy model [kg/m³] (HelpersEnergy.cpp)
 RHO_SUMO = RHO_DEFAULT
-
-
-def chain_energy_params(chain, air_c: float | None = None) -> tuple[dict, list[str]]:
-    """SUMO Energy-model values of a battery or powertrain-output chain: ({param: value},
-    [what the model cannot express, with why]). ``air_c``: the run's air temperature [°C],
-    at which the chain's HVAC power joins ``constantPowerIntake`` (None: left out, listed)."""
-    p: dict = {}
-    missing: list[str] = []
-    if chain.predicts == "fuel":
-        return p, ["the fuel chain (SUMO's Energy model is electric)"]
-    for key, attr in (("propulsionEfficiency", "traction_efficiency"),
-                      ("recuperationEfficiency", "recuperation_efficiency")):
-        v = getattr(chain, attr)
-        if isinstance(v, (int, float)):
-            p[key] = float(v)
-        else:
-            p[key] = float(np.mean(v.values))
-            missing.append(f"{attr} is a table (SUMO takes a constant: its mean {p[key]:.4g} written)")
-    aux = float(chain.aux_power_w) if chain.predicts == "battery" else 0.0
-    if chain.predicts == "battery":
-        h = chain.hvac or {}
-        if h and air_c is None:
-            missing.append("the HVAC power over the air temperature (give the air temperature to add it "
-                           "to constantPowerIntake)")
-        elif h:
-            ts = float(h.get("setpoint_c", 20.0))
-            aux += (float(h.get("heating_w_per_k", 0.0)) * max(ts - air_c, 0.0)
-                    + float(h.get("cooling_w_per_k", 0.0)) * max(air_c - ts, 0.0))
-        if h.get("warmup_j_per_k"):
-            missing.append("the cabin's warm-up at cold starts (a per-trip energy; the plug-in books it)")
-        if chain.loads:
-            missing.append(f"logged loads {', '.join(chain.loads)} (no signal in SUMO)")
-        if chain.standstill_aux_w:
-            missing.append(f"the standing draw {chain.standstill_aux_w:g} W (SUMO's device books "
-                           "constantPowerIntake only while moving)")
-    if chain.recuperation_limit_w is not None:
-        missing.append(f"the recuperation limit {chain.recuperation_limit_w / 1000:.1f} kW (the Energy model "
-                       "recuperates without one)")
-    p["constantPowerIntake"] = aux
-    return p, missing
 
 
 def energy_model_params(eq: Equation, mass_kg: float | None = None,
