@@ -38,7 +38,6 @@ from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
-
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.chain import chain_energy_params
 from sumo_drvpw.model.constants import G, RHO_DEFAULT

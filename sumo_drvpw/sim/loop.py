@@ -393,7 +393,7 @@ class Stepper:
         if starts and ledger.chain is not None and ledger.chain.cold_start_on \
                 and not (ledger.steps == 1 and self.replay_info.get("skipped")):
             ch = ledger.chain
-            ledger.chain.start(starts, [ch.share_of(ledger.veh_type[i], ledger.veh_class[i]) for i in starts])
+            ch.start(starts, [ch.share_of(ledger.veh_type[i], ledger.veh_class[i]) for i in starts])
         if self.riders and (self.any_load or conn.person.getIDCount()):
             self.update_loads(departed)
             self.update_loads(self.stop_ending())
