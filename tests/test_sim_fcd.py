@@ -148,12 +148,28 @@ EXPORT_ROUTES = """<routes>
 </routes>"""
 
 
+def _run_exported(tmp_path, name: str, sumo_extra: str = "", tables: str = ""):
+    """A 300-s highway run of equation file ``name``.toml with the exported vType ev.add.xml
+    and SUMO's emissions device; returns (result, the sumo_device.csv row of the equation)."""
+    from sumo_drvpw.fileio import write_text
+
+    write_text(tmp_path / "r.rou.xml", EXPORT_ROUTES.format(vt="ev"))
+    net = NETS / "highway.net.xml"
+    write_text(tmp_path / "s.toml",
+               f'equations = ["{name}.toml"]\n[sumo]\nnet = "{net}"\nroutes = ["r.rou.xml"]\n'
+               f'additional = ["ev.add.xml"]\nend = 300\n{sumo_extra}'
+               f'options = ["--no-warnings", "true"]\n{tables}'
+               '[outputs]\nsumo_device = true\nfigures = false\n')
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    cmp = pd.read_csv(tmp_path / "o" / "sumo_device.csv")
+    return res, cmp[cmp.equation == name].iloc[0]
+
+
 @pytest.mark.parametrize("dt", [1.0, 0.2])
 def test_export_vtype_agrees_with_sumos_emissions_device(tmp_path, capsys, dt):
     """export-vtype writes an Energy-model vType from an equation; SUMO's emissions device
     with it (outputs.sumo_device) and the plug-in agree within 3 % on net energy. The
     equation has a rotating-mass share (acc 1.08), drag, rolling and a constant load."""
-    from sumo_drvpw.fileio import write_text
     from sumo_drvpw.model.equations import save_equation
 
     eq = Equation("ev_fit", {"acc": 1.08, "grade": 1.0, "aero_rho": 0.62, "m_v1": 0.0098 * 9.81,
@@ -162,16 +178,7 @@ def test_export_vtype_agrees_with_sumos_emissions_device(tmp_path, capsys, dt):
     code = cli_main(["export-vtype", str(tmp_path / "ev_fit.toml"), "--mass", "1700",
                      "--id", "ev", "--out", str(tmp_path / "ev.add.xml")])
     assert code == 0 and "not expressible" not in capsys.readouterr().out
-    write_text(tmp_path / "r.rou.xml", EXPORT_ROUTES.format(vt="ev"))
-    net = NETS / "highway.net.xml"
-    write_text(tmp_path / "s.toml",
-               f'equations = ["ev_fit.toml"]\n[sumo]\nnet = "{net}"\nroutes = ["r.rou.xml"]\n'
-               f'additional = ["ev.add.xml"]\nend = 300\nstep_length = {dt}\n'
-               'options = ["--no-warnings", "true"]\n'
-               '[outputs]\nsumo_device = true\nfigures = false\n')
-    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
-    cmp = pd.read_csv(tmp_path / "o" / "sumo_device.csv")
-    row = cmp[cmp.equation == "ev_fit"].iloc[0]
+    res, row = _run_exported(tmp_path, "ev_fit", f"step_length = {dt}\n")
     assert row.vehicles >= 10
     assert row.ratio == pytest.approx(1.0, abs=0.03)
     v = res.vehicles
@@ -187,7 +194,6 @@ def test_export_vtype_carries_a_battery_chain(tmp_path, capsys):
     within 3 % of the plug-in's chain kWh on a highway run at 0 °C (before, the vType had
     efficiencies 1 and booked the energy at the wheels). SUMO books constantPowerIntake
     only while moving, the plug-in standing too: at 1400 W that is most of the gap."""
-    from sumo_drvpw.fileio import write_text
     from sumo_drvpw.model.chain import chain_from_dict
     from sumo_drvpw.model.equations import save_equation
 
@@ -210,15 +216,7 @@ def test_export_vtype_carries_a_battery_chain(tmp_path, capsys):
     for key, val in (("propulsionEfficiency", "0.88"), ("recuperationEfficiency", "0.7"),
                      ("constantPowerIntake", "1400")):   # 400 W + 50 W/K × 20 K
         assert f'<param key="{key}" value="{val}"/>' in xml
-    write_text(tmp_path / "r.rou.xml", EXPORT_ROUTES.format(vt="ev"))
-    net = NETS / "highway.net.xml"
-    write_text(tmp_path / "s.toml",
-               f'equations = ["ev_chain.toml"]\n[sumo]\nnet = "{net}"\nroutes = ["r.rou.xml"]\n'
-               f'additional = ["ev.add.xml"]\nend = 300\n'
-               'options = ["--no-warnings", "true"]\n[air]\ntemperature_c = 0.0\n'
-               '[outputs]\nsumo_device = true\nfigures = false\n')
-    run_scenario(tmp_path / "s.toml", tmp_path / "o")
-    row = pd.read_csv(tmp_path / "o" / "sumo_device.csv").query("equation == 'ev_chain'").iloc[0]
+    _, row = _run_exported(tmp_path, "ev_chain", "", "[air]\ntemperature_c = 0.0\n")
     assert row.vehicles >= 10 and row.quantity == "battery kWh (chain)"
     assert row.ratio == pytest.approx(1.0, abs=0.03)
 
