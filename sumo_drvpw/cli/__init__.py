@@ -98,6 +98,26 @@ def cold_start_override(args, overrides: dict) -> None:
         overrides["cold_start"] = 1.0
 
 
+def check_air_temperature(t: float | None) -> None:
+    """``--air-temperature`` (``run``, ``export-vtype``): an air a vehicle drives in."""
+    if t is None:
+        return
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.sim.scenario import AIR_RANGES
+
+    lo, hi = AIR_RANGES["temperature_c"]
+    if not lo <= t <= hi:
+        raise UserError(f"--air-temperature {t:g}: an air temperature in {lo:g} … {hi:g} °C")
+
+
+def check_period(period: float | None) -> None:
+    """``--period`` (``run``, ``fcd``): an edgeData interval."""
+    if period is not None and not 0 < period < float("inf"):
+        from sumo_drvpw.errors import UserError
+
+        raise UserError(f"--period {period:g}: an edgeData interval is a finite number of seconds > 0")
+
+
 def existing_paths(*groups) -> list[str]:
     """The arguments that name existing files or folders (inputs an output must avoid);
     each group is a path, a list of paths or None (names like ``prius3`` are skipped)."""

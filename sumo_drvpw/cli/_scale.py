@@ -53,11 +53,8 @@ def _run(args, make, vehicle):
     from sumo_drvpw.fit.engine import run
 
     from sumo_drvpw.cli import read_options
-    from sumo_drvpw.data.log import expand_paths
-    from sumo_drvpw.data.plausible import check_header
 
-    for p in expand_paths(args.logs):  # a column named twice (the reader's column selection hides it)
-        check_header(p)
+    # a column named twice: the reader checks each file's header as it reads it
     # trip ids in two files: checked by the engine on the ids it reads (no extra pass)
     eqs = getattr(args, "equation", None)
     eqs = [eqs] if isinstance(eqs, str) else (eqs or ())

@@ -179,10 +179,9 @@ def main(args) -> int:
                       stream=args.stream)
     except UserError as e:  # a message about the data that names none of the inputs: name the logs
         named = [str(x) for x in (*args.logs, args.vehicle, args.equation) if x]
-        if str(e).startswith("diagnose option include: "):  # the user typed --signals
-            raise UserError(str(e).replace("diagnose option include: ", "--signals: ", 1)) from None
-        if str(e).startswith("diagnose option exclude: "):
-            raise UserError(str(e).replace("diagnose option exclude: ", "--exclude: ", 1)) from None
+        for opt_name, flag in (("include", "--signals"), ("exclude", "--exclude")):  # as the user typed it
+            if str(e).startswith(f"diagnose option {opt_name}: "):
+                raise UserError(str(e).replace(f"diagnose option {opt_name}: ", f"{flag}: ", 1)) from None
         if any(n in str(e) for n in named) or str(e).startswith("--"):
             raise
         raise UserError(f"{', '.join(map(str, args.logs))}: {e}") from None

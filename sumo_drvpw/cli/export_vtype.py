@@ -50,14 +50,10 @@ def main(args: argparse.Namespace) -> int:
         area = v.body.get("frontal_area_m2")
     if mass is not None and not 0 < mass < float("inf"):
         raise UserError(f"--mass must be a finite number > 0 [kg], got {mass}")
-    t = args.air_temperature
-    if t is not None:
-        from sumo_drvpw.sim.scenario import AIR_RANGES
+    from sumo_drvpw.cli import check_air_temperature
 
-        lo, hi = AIR_RANGES["temperature_c"]
-        if not lo <= t <= hi:
-            raise UserError(f"--air-temperature {t:g}: an air temperature in {lo:g} … {hi:g} °C")
-    xml, missing = energy_vtype_xml(eq, args.id, mass, area, args.vclass, t)
+    check_air_temperature(args.air_temperature)
+    xml, missing = energy_vtype_xml(eq, args.id, mass, area, args.vclass, args.air_temperature)
     write_text(args.out, xml)
     print(f"wrote vType '{args.id}' (Energy/unknown) from equation '{eq.name}' to {args.out}")
     for m in missing:

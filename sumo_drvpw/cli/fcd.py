@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import argparse
 
-from sumo_drvpw.cli import add_cold_start, add_force, cold_start_override, output_set, sumo_time_arg
+from sumo_drvpw.cli import (add_cold_start, add_force, check_period, cold_start_override, output_set,
+                            sumo_time_arg)
 from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 
 
@@ -73,9 +74,8 @@ def main(args: argparse.Namespace) -> int:
     overrides = {}
     if args.end is not None:
         overrides["end"] = args.end
+    check_period(args.period)
     if args.period is not None:
-        if not 0 < args.period < float("inf"):
-            raise UserError(f"--period {args.period:g}: an edgeData interval is a finite number of seconds > 0")
         overrides["period"] = args.period
     if args.no_figures:
         overrides["figures"] = False

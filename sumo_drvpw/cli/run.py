@@ -11,10 +11,10 @@ cluster (``--scheduler ADDRESS``, else a local cluster of ``--workers N`` proces
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 
-from sumo_drvpw.cli import add_cold_start, add_force, cold_start_override, output_set, sumo_time_arg
+from sumo_drvpw.cli import (add_cold_start, add_force, check_air_temperature, check_period,
+                            cold_start_override, output_set, sumo_time_arg)
 from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 from sumo_drvpw.errors import UserError
 
@@ -60,15 +60,10 @@ def _overrides(args) -> dict:
     if args.end is not None and not (args.end > (args.begin if args.begin is not None else 0.0)):
         raise UserError(f"--end {args.end:g} must be after " + (f"--begin {args.begin:g}" if args.begin is not None
                                                                else "the start (0 s)"))
-    if args.period is not None and not 0 < args.period < math.inf:
-        raise UserError(f"--period {args.period:g}: an edgeData interval is a finite number of seconds > 0")
+    check_period(args.period)
     t = getattr(args, "air_temperature", None)
+    check_air_temperature(t)
     if t is not None:
-        from sumo_drvpw.sim.scenario import AIR_RANGES
-
-        lo, hi = AIR_RANGES["temperature_c"]
-        if not lo <= t <= hi:
-            raise UserError(f"--air-temperature {t:g}: an air temperature in {lo:g} … {hi:g} °C")
         o["air_temperature_c"] = t
     cold_start_override(args, o)
     if args.equation:

@@ -150,6 +150,7 @@ def _text_trip_id(p: Path) -> list[str]:
 def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> Iterator[pd.DataFrame]:
     p = Path(part.path)
     try:
+        check_header(p)  # a column named twice, a CSV not separated by commas
         if _is_parquet(p):
             f = _parquet_file(p, read_dictionary=_text_trip_id(p) if categorical else None)
             cols = None if columns is None else [c for c in f.schema_arrow.names if c in columns]
@@ -170,7 +171,6 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
                 yield b.to_pandas()
                 del b
         else:
-            check_header(p)
             # every column read, then the wanted kept: with usecols, pandas drops the extra
             # fields of a row longer than the header silently (the memory engine refuses it)
             for df in pd.read_csv(p, chunksize=rows, low_memory=False):

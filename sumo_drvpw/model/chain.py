@@ -415,16 +415,17 @@ def chain_energy_params(chain, air_c: float | None = None) -> tuple[dict, list[s
         else:
             p[key] = float(np.mean(v.values))
             missing.append(f"{attr} is a table (SUMO takes a constant: its mean {p[key]:.4g} written)")
-    aux = float(chain.aux_power_w) if chain.predicts == "battery" else 0.0
+    aux = 0.0
     if chain.predicts == "battery":
         h = chain.hvac or {}
         if h and air_c is None:
             missing.append("the HVAC power over the air temperature (give the air temperature to add it "
                            "to constantPowerIntake)")
-        elif h:
-            ts = float(h.get("setpoint_c", 20.0))
-            aux += (float(h.get("heating_w_per_k", 0.0)) * max(ts - air_c, 0.0)
-                    + float(h.get("cooling_w_per_k", 0.0)) * max(air_c - ts, 0.0))
+        # the constant power, plus the HVAC's at air_c (unknown: none), logged loads as 0
+        sig = {c: np.zeros(1) for c in chain.loads}
+        if h:
+            sig[h.get("column", "ambient_c")] = np.array([np.nan if air_c is None else float(air_c)])
+        aux = float(chain.auxiliary(1, sig)[0])
         if h.get("warmup_j_per_k"):
             missing.append("the cabin's warm-up at cold starts (a per-trip energy; the plug-in books it)")
         if chain.loads:

@@ -207,7 +207,7 @@ def _tabular_block(raw: pd.DataFrame, label, first: int, row0: int | None = None
     if missing:
         raise UserError(f"FCD file {label}: no column {missing[0]} (SUMO's tabular FCD "
                         f"has {', '.join(FCD_COLUMNS[k] for k in _REQUIRED)})")
-    _check_types({c: raw[c].dtype for c in raw.columns}, label)
+    _check_types({c: raw[c].dtype for c in raw.columns}, label, _temporal)
     raw = raw.assign(**{FCD_COLUMNS["time"]: _time_column(raw[FCD_COLUMNS["time"]])})
     times = np.unique(pd.to_numeric(raw[FCD_COLUMNS["time"]], errors="coerce").dropna())
     df = pd.DataFrame({k: raw[c] for k, c in FCD_COLUMNS.items() if c in raw.columns})
@@ -218,13 +218,14 @@ def _tabular_block(raw: pd.DataFrame, label, first: int, row0: int | None = None
                  _normalise(df, label, first if row0 is None else row0, _TABULAR_NAMES), first)
 
 
-def _check_types(dtypes: dict, label) -> None:
-    """UserError for a numeric column of a tabular FCD (column name → pandas dtype) that
-    holds dates, time spans or truth values (SUMO writes seconds, metres, m/s)."""
+def _check_types(types: dict, label, wrong) -> None:
+    """UserError for a numeric column of a tabular FCD (column name → its pandas dtype or
+    Arrow type) whose type is ``wrong`` (dates, time spans, truth values: SUMO writes
+    seconds, metres, m/s)."""
     for k in ("time", "speed", "pos", *_OPTIONAL):
         c = FCD_COLUMNS[k]
-        if c in dtypes and _temporal(dtypes[c]):
-            raise UserError(f"FCD file {label}: column {c} holds {dtypes[c]} values, not "
+        if c in types and wrong(types[c]):
+            raise UserError(f"FCD file {label}: column {c} holds {types[c]} values, not "
                             "numbers (SUMO writes times in seconds, speeds in m/s, positions "
                             "in m)")
 
@@ -277,13 +278,8 @@ def _check_arrow_types(schema, label) -> None:
     truth values in a numeric column)."""
     import pyarrow as pa
 
-    for k in ("time", "speed", "pos", *_OPTIONAL):
-        c = FCD_COLUMNS[k]
-        if c in schema.names:
-            t = schema.field(c).type
-            if pa.types.is_temporal(t) or pa.types.is_boolean(t):
-                raise UserError(f"FCD file {label}: column {c} holds {t} values, not numbers "
-                                "(SUMO writes times in seconds, speeds in m/s, positions in m)")
+    _check_types({f.name: f.type for f in schema}, label,
+                 lambda t: pa.types.is_temporal(t) or pa.types.is_boolean(t))
 
 
 def _parquet_blocks(files: list[Path], label, chunk_rows: int):

@@ -195,6 +195,16 @@ def schedules(folder: Path) -> dict[str, np.ndarray]:
     return out
 
 
+def _distance_m(v: np.ndarray) -> float:
+    """Distance [m] of a 1-s speed schedule (trapezoids)."""
+    return float(0.5 * (v[1:] + v[:-1]).sum())
+
+
+def _litres(dist_m: float, mpg):
+    """Litres over ``dist_m`` at a fuel economy of ``mpg`` (US miles per gallon)."""
+    return dist_m / MILE / mpg * GALLON_L
+
+
 def observations(tests: pd.DataFrame, speeds: dict[str, np.ndarray], fuel: str = "gasoline") -> pd.DataFrame:
     """One row per (configuration, test on the Willans line): measured fuel energy
     ``fuel_j`` (FE → litres → J at the fuel's LHV and density), wheel traction energy
@@ -212,11 +222,11 @@ def observations(tests: pd.DataFrame, speeds: dict[str, np.ndarray], fuel: str =
         if t.empty:
             continue
         v = speeds["ftp_bag3" if test == COLD else test]
-        dist = float(0.5 * (v[1:] + v[:-1]).sum())
+        dist = _distance_m(v)
         e_pos = np.array([np.maximum(wheel_power(v, r.etw_kg, r.a_n / r.etw_kg, r.b_n_per_mps,
                                                  r.c_n_per_mps2)[1], 0.0).sum()
                           for r in t[["etw_kg", "a_n", "b_n_per_mps", "c_n_per_mps2"]].itertuples(index=False)])
-        litres = dist / MILE / t[col].to_numpy(float) * GALLON_L
+        litres = _litres(dist, t[col].to_numpy(float))
         rows.append(pd.DataFrame({
             "config": t["config"].to_numpy(), "model_year": t["model_year"].to_numpy(int),
             "make": t["make"].to_numpy(), "model": t["model"].to_numpy(),
@@ -365,15 +375,11 @@ def cold_start_in_the_cold(lists: pd.DataFrame, obs: pd.DataFrame, speeds: dict,
               & (lists[["fe_bag1", "fe_bag2", "fe_bag3"]] > 0).all(axis=1)]
     diesel = c["fuel"].str.contains("diesel", case=False)
     c = c[diesel if fuel == "diesel" else ~diesel]
-    v = speeds["ftp_bag3"]
-    dist = float(0.5 * (v[1:] + v[:-1]).sum())  # bags 1 and 3 (and the UDDS's bag 2 below)
-    v2 = speeds["ftp_bag2"]
-    dist2 = float(0.5 * (v2[1:] + v2[:-1]).sum())
-
-    def litres(fe, d=dist):
-        return d / MILE / fe * GALLON_L
-    cold = pd.DataFrame({"config": c["config"], "cs_ml": 1000.0 * (litres(c["fe_bag1"]) - litres(c["fe_bag3"])),
-                         "bag2_l": litres(c["fe_bag2"], dist2)}).groupby("config").median()
+    dist = _distance_m(speeds["ftp_bag3"])  # bags 1 and 3
+    cold = pd.DataFrame({"config": c["config"],
+                         "cs_ml": 1000.0 * (_litres(dist, c["fe_bag1"]) - _litres(dist, c["fe_bag3"])),
+                         "bag2_l": _litres(_distance_m(speeds["ftp_bag2"]), c["fe_bag2"])}
+                        ).groupby("config").median()
     warm_cs, vt = _cold_excess(obs)
     warm_b2 = obs[obs["test"] == "ftp_bag2"].groupby("config")["fuel_l"].median()
     pair = cold.join(pd.DataFrame({"warm_ml": warm_cs, "warm_bag2_l": warm_b2, "vt": vt}), how="inner").dropna()

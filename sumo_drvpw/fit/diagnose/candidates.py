@@ -65,10 +65,9 @@ def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarr
     ``roles``: column → ``{"role", "source"}`` (:func:`sumo_drvpw.data.roles.resolve`);
     a ``response`` column is left out unless ``opt.responses``; conditions, loads and
     columns of unknown role go through the screens below. Returns (name → float array
-    over all samples, list of {column, reason} skipped). UserError when an ``include``
-    pattern matches no column of the logs (a misspelt name would leave nothing to find).
+    over all samples, list of {column, reason} skipped). The callers check the ``include``
+    and ``exclude`` patterns first (:func:`check_include`, before any work).
     """
-    check_include(signals, opt)
     kept, skipped = {}, []
     u = usable
     v, a, th, w = x.v[u], x.a[u], x.theta[u], x.wind[u]
