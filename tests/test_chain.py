@@ -673,6 +673,60 @@ def test_cold_start_shares_by_vtype_and_vclass(tmp_path):
         run("bad_param", "", add)
 
 
+def test_cold_start_shares_of_single_vehicles_and_flows(tmp_path):
+    """A real SUMO run (city, 150 s) whose route file gives single vehicles and a flow their
+    own ``drvpw.cold_start`` param: each books its own share, over the vType's and the run's;
+    a flow's share reaches every vehicle ``<flow>.<n>``; vehicles without one keep their
+    vType's. Replayed from the run's FCD with the same route files, every vehicle books the
+    same litres. A bad value is refused with its file and vehicle."""
+    pytest.importorskip("libsumo")
+    import dataclasses
+
+    from sumo_drvpw.sim import run_scenario
+    from sumo_drvpw.sim.fcd import process_fcd
+
+    b = _city_sumocfg().parent
+    net = (b.parent / "networks" / "city.net.xml").resolve()
+    rou = tmp_path / "own.rou.xml"
+    rou.write_text('<routes>\n'  # sorted by departure, as SUMO reads them
+                   '  <flow id="local" type="prius3" from="c00c10" to="c34c44" begin="0" end="100" period="10">'
+                   '<param key="drvpw.cold_start" value="0.5"/></flow>\n'
+                   '  <flow id="through" type="prius3_hw" from="c40c30" to="c04c14" begin="0" end="100" period="10"/>\n'
+                   '  <vehicle id="home.a" type="prius3" depart="0"><route edges="c00c10 c10c20"/>'
+                   '<param key="drvpw.cold_start" value="true"/></vehicle>\n'
+                   '  <trip id="errand" type="prius3" depart="5" from="c10c20" to="c20c30">'
+                   '<param key="drvpw.cold_start" value="0.4"/></trip>\n'
+                   '</routes>\n', encoding="utf-8")
+    eqs = _chain_equations()
+    eqs[0].chain = dataclasses.replace(eqs[0].chain, cold_start_fuel_l=0.07)
+    sc = tmp_path / "own.toml"
+    sc.write_text(f'equations = ["drvpw_prius3"]\n[sumo]\nnet = "{net.as_posix()}"\n'
+                  f'routes = ["{rou.as_posix()}"]\nadditional = ["{(b / "prius3.vtype.xml").as_posix()}"]\n'
+                  'end = 150\n[vtypes.prius3]\ncold_start = 0\n[vtypes.prius3_hw]\ncold_start = 0.25\n',
+                  encoding="utf-8")
+    res = run_scenario(sc, tmp_path / "live", equations=eqs, figures=False, edgedata=False,
+                       options=["--fcd-output", str(tmp_path / "fcd.xml"), "--precision", "6"])
+    veh = pd.read_csv(tmp_path / "live" / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
+    litres = veh.set_index("key")["cold_start_l"]
+    expect = {k: 0.07 * (1.0 if k == "home.a" else 0.4 if k == "errand" else
+                         0.5 if k.startswith("local.") else 0.25) for k in litres.index}
+    assert {"home.a", "errand"} <= set(litres.index)
+    assert sum(k.startswith("local.") for k in litres.index) >= 5
+    assert sum(k.startswith("through.") for k in litres.index) >= 5
+    np.testing.assert_allclose(litres, pd.Series(expect)[litres.index], rtol=1e-12)
+    summ = res.summary["chain"]["cold_start"]
+    assert summ["own_share_vehicles"] == 2 and summ["own_share_flows"] == 1
+    assert summ["expected_cold_starts"] == pytest.approx(sum(expect.values()) / 0.07)
+    # the FCD replay reads the same route files: the same shares, vehicle by vehicle
+    process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "fcd", equations=eqs, end=150,
+                figures=False)
+    rep = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
+    pd.testing.assert_series_equal(rep.set_index("key")["cold_start_l"].sort_index(), litres.sort_index())
+    rou.write_text(rou.read_text(encoding="utf-8").replace('value="0.4"', 'value="1.5"'), encoding="utf-8")
+    with pytest.raises(UserError, match=r"own.rou.xml: trip 'errand': drvpw.cold_start .*'1.5'"):
+        run_scenario(sc, tmp_path / "bad", equations=eqs, figures=False, edgedata=False)
+
+
 def test_cabin_warm_up_is_booked_at_cold_departures(tmp_path):
     """A battery chain's cabin warm-up (``[chain.hvac] warmup_j_per_k``): a real SUMO run
     (city, 150 s, air at 0 °C) with cold starts on and off. Each booked vehicle's auxiliary

@@ -160,6 +160,8 @@ class Accountant(_Listener):
                                       if i.cold_start is not None},
                                    **cold_start_shares(getattr(sc, "vtype_data", {}))},
                                cold_start_vclasses=cold_start_shares(getattr(sc, "vclass_data", {})),
+                               cold_start_vehicles=getattr(self.file_vtypes, "vehicle_cold_start", None),
+                               cold_start_flows=getattr(self.file_vtypes, "flow_cold_start", None),
                                slope_tol=sc.slope_tol,
                                slope_reference=sc.slope_reference,
                                acceleration=sc.acceleration, heading=sc.wind_heading,

@@ -12,7 +12,8 @@ step) and is booked in quantities a user pays for::
 
 Auxiliary power accrues at every step a vehicle is in the network, standing or driving.
 With ``cold_start`` (the scenario's ``[vehicles] cold_start``, a share of the trips, or
-``[vtypes.<id>] cold_start`` / ``[vclasses.<vClass>] cold_start`` for some vehicles) a fuel
+``[vtypes.<id>] cold_start`` / ``[vclasses.<vClass>] cold_start`` for some vehicles, or a
+vehicle's, trip's or flow's own ``drvpw.cold_start`` param in the route files) a fuel
 chain's ``cold_start_fuel_l`` — and a battery chain's cabin warm-up, ``[chain.hvac]
 warmup_j_per_k`` × (T_set − T)⁺, as auxiliary energy — times the vehicle's share is booked
 once per vehicle that departs while the run accounts, at its first booked step (its
@@ -54,11 +55,15 @@ class ChainLedger:
         (:meth:`start`), the expected fuel of a fleet of which that share starts cold
     cold_start_vtypes, cold_start_vclasses : shares for vehicles of these vTypes / vClasses,
         in place of ``cold_start`` (vType first; :meth:`share_of`)
+    cold_start_vehicles, cold_start_flows : shares of single vehicles (vehicle id → share)
+        and of a flow's vehicles (flow id → share, for ids ``<flow>.<n>``), the route
+        files' own ``drvpw.cold_start`` params: these win over every other share
     """
 
     def __init__(self, names: list[str], chains: list[EnergyChain | None], n_edges: int,
                  capacity: int = 1024, signal_values: dict | None = None, cold_start: float = 0.0,
-                 cold_start_vtypes: dict | None = None, cold_start_vclasses: dict | None = None):
+                 cold_start_vtypes: dict | None = None, cold_start_vclasses: dict | None = None,
+                 cold_start_vehicles: dict | None = None, cold_start_flows: dict | None = None):
         #: constant values of the chains' signals (loads, ambient temperature) in SUMO,
         #: which has no such columns; a load not given is taken as 0 and listed in
         #: :attr:`assumed_zero` (a logged heater or A/C load then adds nothing)
@@ -105,9 +110,12 @@ class ChainLedger:
         self.cold_start = float(cold_start)
         self.cold_start_vtypes = {str(k): float(v) for k, v in (cold_start_vtypes or {}).items()}
         self.cold_start_vclasses = {str(k): float(v) for k, v in (cold_start_vclasses or {}).items()}
+        self.cold_start_vehicles = {str(k): float(v) for k, v in (cold_start_vehicles or {}).items()}
+        self.cold_start_flows = {str(k): float(v) for k, v in (cold_start_flows or {}).items()}
         #: any vehicle may start cold: cold starts are booked and reported (``cold_start_l``)
         self.cold_start_on = self.cold_start > 0 or any(
-            v > 0 for v in (*self.cold_start_vtypes.values(), *self.cold_start_vclasses.values()))
+            v > 0 for d in (self.cold_start_vtypes, self.cold_start_vclasses, self.cold_start_vehicles,
+                            self.cold_start_flows) for v in d.values())
         #: one cold start's quantities per booked column at the run's air temperature, (C,)
         self._cs = np.zeros(len(self._cols))
         for j, (e, k) in enumerate(self._cols):
@@ -180,12 +188,24 @@ class ChainLedger:
         self._app = np.concatenate([self._app, np.zeros((new - cap, self.A), bool)])
         self._starting = np.concatenate([self._starting, np.zeros(new - cap)])
 
-    def share_of(self, vtype: str, vclass: str) -> float:
+    def share_of(self, vtype: str, vclass: str, vid: str | None = None) -> float:
         """The share of a cold start a vehicle of this vType and vClass books at departure:
-        its vType's, else its vClass's, else the run's :attr:`cold_start`."""
+        its own (vehicle ``vid``'s, else its flow's: the route files' param), else its
+        vType's, else its vClass's, else the run's :attr:`cold_start`."""
+        if vid is not None and (self.cold_start_vehicles or self.cold_start_flows):
+            if vid in self.cold_start_vehicles:
+                return self.cold_start_vehicles[vid]
+            flow, dot, n = vid.rpartition(".")
+            if dot and n.isdigit() and flow in self.cold_start_flows:
+                return self.cold_start_flows[flow]
         if vtype in self.cold_start_vtypes:
             return self.cold_start_vtypes[vtype]
         return self.cold_start_vclasses.get(vclass, self.cold_start)
+
+    def depart(self, vidx, ids, veh_type, veh_class) -> None:
+        """Vehicle rows ``vidx`` (ids ``ids``) departed this step: :meth:`start` with each
+        one's :meth:`share_of` (its vType and vClass from the row arrays given)."""
+        self.start(vidx, [self.share_of(veh_type[i], veh_class[i], vid) for i, vid in zip(vidx, ids)])
 
     def start(self, vidx, shares=None) -> None:
         """Vehicle rows ``vidx`` departed this step: their next booked step books each fuel
@@ -398,15 +418,14 @@ class ChainLedger:
 
 
 def chain_ledger(equations, n_edges: int, signal_values: dict | None = None,
-                 cold_start: float = 0.0, cold_start_vtypes: dict | None = None,
-                 cold_start_vclasses: dict | None = None) -> ChainLedger | None:
-    """A :class:`ChainLedger` for the equations that carry a battery or fuel chain, or None."""
+                 **cold_start) -> ChainLedger | None:
+    """A :class:`ChainLedger` for the equations that carry a battery or fuel chain, or None;
+    ``cold_start``: its cold-start keywords (``cold_start``, ``cold_start_vtypes``, …)."""
     chains = [getattr(e, "chain", None) for e in equations]
     if not any(c is not None and c.predicts != "wheel" for c in chains):
         return None
     return ChainLedger([e.name for e in equations], chains, n_edges, signal_values=signal_values,
-                       cold_start=cold_start, cold_start_vtypes=cold_start_vtypes,
-                       cold_start_vclasses=cold_start_vclasses)
+                       **cold_start)
 
 
 def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str],
@@ -427,6 +446,8 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
             "cold_start": {"booked": chain.cold_start_on, "share": chain.cold_start,
                            **({"share_by_vtype": chain.cold_start_vtypes} if chain.cold_start_vtypes else {}),
                            **({"share_by_vclass": chain.cold_start_vclasses} if chain.cold_start_vclasses else {}),
+                           **({"own_share_vehicles": len(chain.cold_start_vehicles)} if chain.cold_start_vehicles else {}),
+                           **({"own_share_flows": len(chain.cold_start_flows)} if chain.cold_start_flows else {}),
                            "vehicles": chain.cold_starts,
                            "expected_cold_starts": round(chain.cold_starts_expected, 9),
                            **({"fuel_l_per_start": per_start} if per_start else {}),

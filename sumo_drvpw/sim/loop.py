@@ -44,10 +44,12 @@ class Physics:
     #: chains (HVAC) as the signal ``ambient_c``; None: unknown (``cold`` = 0, reference)
     ambient_c: float | None = None
     #: share of departing vehicles whose cold start fuel chains book (sim/chain.py), and
-    #: the shares of vTypes and vClasses that have their own (vType first)
+    #: the shares of vehicles, flows, vTypes and vClasses with their own (in this order)
     cold_start: float = 0.0
     cold_start_vtypes: dict | None = None
     cold_start_vclasses: dict | None = None
+    cold_start_vehicles: dict | None = None  # vehicle id → share (the route files' params)
+    cold_start_flows: dict | None = None     # flow id → share of its vehicles
     slope_tol: float = 0.01
     #: "getslope": compare the robust slope with SUMO's getSlope (one more getter per
     #: vehicle); "geometry": with the same front-to-back slope taken from the lane shape
@@ -177,7 +179,8 @@ class Stepper:
                 eqset.equations, ledger.n_edges,
                 None if physics.ambient_c is None else {"ambient_c": physics.ambient_c},
                 cold_start=physics.cold_start, cold_start_vtypes=physics.cold_start_vtypes,
-                cold_start_vclasses=physics.cold_start_vclasses)
+                cold_start_vclasses=physics.cold_start_vclasses,
+                cold_start_vehicles=physics.cold_start_vehicles, cold_start_flows=physics.cold_start_flows)
         self.physics, self.resolve, self.trace = physics, resolve, trace
         self.use_subscriptions = use_subscriptions
         self.dt = float(conn.simulation.getDeltaT())
@@ -380,10 +383,11 @@ class Stepper:
                     self.flush()
                     vmap = self.vmap
         departed = conn.simulation.getDepartedIDList()
-        starts = []  # vehicles seen for the first time as departing: trips that start
+        starts, start_ids = [], []  # vehicles first seen departing: trips that start
         for vid in departed:
             if vid not in vmap:
                 starts.append(self.register(vid))
+                start_ids.append(vid)
             else:  # an id used again (e.g. vehicle.add): its state starts afresh
                 ledger.veh_lane[vmap[vid]] = -2
                 ledger.veh_prev_speed[vmap[vid]] = np.nan
@@ -392,8 +396,7 @@ class Stepper:
                 ledger.unretire(vmap[vid])
         if starts and ledger.chain is not None and ledger.chain.cold_start_on \
                 and not (ledger.steps == 1 and self.replay_info.get("skipped")):
-            ch = ledger.chain
-            ch.start(starts, [ch.share_of(ledger.veh_type[i], ledger.veh_class[i]) for i in starts])
+            ledger.chain.depart(starts, start_ids, ledger.veh_type, ledger.veh_class)
         if self.riders and (self.any_load or conn.person.getIDCount()):
             self.update_loads(departed)
             self.update_loads(self.stop_ending())

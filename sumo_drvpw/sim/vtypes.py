@@ -248,19 +248,51 @@ def _cold_share(where: str, val: str | None) -> float | None:
     return x
 
 
-def read_vtypes(files: list[Path]) -> dict[str, VTypeInfo]:
-    """Read every ``<vType>`` of the given route/additional files.
+def _vehicle_share(out: FileVTypes, path: Path, tag: str, el) -> None:
+    """A ``<vehicle>``/``<trip>``/``<flow>`` element's own ``drvpw.cold_start`` into ``out``."""
+    for p in el:
+        if p.tag.split("}")[-1] == "param" and p.attrib.get("key") == "drvpw.cold_start":
+            vid = el.attrib.get("id")
+            if vid is not None:
+                share = _cold_share(f"{path}: {tag} '{vid}'", p.attrib.get("value", ""))
+                getattr(out, VEHICLE_TAGS[tag])[vid] = share
+
+
+class FileVTypes(dict):
+    """vType id → :class:`VTypeInfo` of the route/additional files (:func:`read_vtypes`),
+    plus the cold-start shares the files give single vehicles: ``vehicle_cold_start``
+    (``<vehicle>`` / ``<trip>`` id → share) and ``flow_cold_start`` (``<flow>`` id → share,
+    for its vehicles ``<flow id>.<n>``, as SUMO names them and copies the flow's params)."""
+
+    def __init__(self, *args, **kw):
+        super().__init__(*args, **kw)
+        self.vehicle_cold_start: dict[str, float] = {}
+        self.flow_cold_start: dict[str, float] = {}
+
+
+#: the route files' elements that define vehicles (and may carry a vehicle's own params)
+VEHICLE_TAGS = {"vehicle": "vehicle_cold_start", "trip": "vehicle_cold_start", "flow": "flow_cold_start"}
+
+
+def read_vtypes(files: list[Path]) -> FileVTypes:
+    """Read every ``<vType>`` of the given route/additional files, and the param
+    ``drvpw.cold_start`` of their ``<vehicle>``, ``<trip>`` and ``<flow>`` elements
+    (:class:`FileVTypes`).
 
     Mass: param ``drvpw.mass`` (the plug-in's: the vehicle's whole mass) > attribute ``mass``
     (else the deprecated param ``vehicleMass``, which SUMO reads as the mass) plus param
     ``loading``, the payload SUMO's emission models add to it (EnergyParams::getTotalMass).
     """
-    out: dict[str, VTypeInfo] = {}
+    out = FileVTypes()
     for path in files:
         try:
             with open_maybe_gzip(path) as fh:
                 for _, el in ET.iterparse(fh, events=("end",)):
                     tag = el.tag.split("}")[-1]
+                    if tag in VEHICLE_TAGS:
+                        _vehicle_share(out, path, tag, el)
+                        el.clear()
+                        continue
                     if tag != "vType":
                         if tag not in ("param",):
                             el.clear()
