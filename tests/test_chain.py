@@ -120,6 +120,33 @@ def test_cold_start_is_a_fixed_volume_per_start_by_hand(tmp_path):
     assert eq.chain == cold and cold.to_dict()["cold_start_ref_c"] == 23.9
 
 
+def test_warm_running_fuel_factor_by_hand(tmp_path):
+    """``running_fuel_per_k``: the fuel power (idle and load) times 1 + r·(T_ref − T)⁺ at
+    the air temperature ``ambient_c``; none above the reference, where the temperature is
+    unknown (NaN) or not logged; the chain reads the column and names it when unknown; the
+    key round-trips and only a fuel chain may carry it."""
+    import dataclasses
+
+    warm = EnergyChain(predicts="fuel", idle_fuel_power_w=4_000.0, marginal_efficiency=0.35,
+                       engine_off_below_w=-np.inf, fuel="gasoline")
+    ch = dataclasses.replace(warm, running_fuel_per_k=0.003, cold_start_ref_c=23.9)
+    p, v = np.array([0.0, 8_000.0, 8_000.0, 8_000.0]), np.array([0.0, 12.0, 12.0, 12.0])
+    t = {"ambient_c": np.array([-6.1, -6.1, 30.0, np.nan])}
+    base = warm.evaluate(p, v, 1.0)["power_w"]
+    np.testing.assert_allclose(base, [4_000.0, 4_000.0 + 8_000.0 / 0.35, 4_000.0 + 8_000.0 / 0.35,
+                                      4_000.0 + 8_000.0 / 0.35])
+    np.testing.assert_allclose(ch.evaluate(p, v, 1.0, t)["power_w"], base * [1.09, 1.09, 1.0, 1.0], rtol=1e-12)
+    np.testing.assert_allclose(ch.evaluate(p, v, 1.0, t)["fuel_l"], warm.evaluate(p, v, 1.0)["fuel_l"]
+                               * [1.09, 1.09, 1.0, 1.0], rtol=1e-12)
+    np.testing.assert_array_equal(ch.evaluate(p, v, 1.0)["power_w"], base)  # no temperature column
+    assert ch.signals == {"ambient_c"} and warm.signals == set()
+    assert ch.unknown_inputs(t, 4)["ambient_c"]["read_as"].startswith("the reference temperature")
+    eq = equation_from_dict({"equation": {"name": "w"}, "terms": {"acc": 1.0}, "chain": ch.to_dict()})
+    save_equation(eq, tmp_path / "w.toml")
+    assert load_equation(tmp_path / "w.toml").chain == ch and ch.to_dict()["cold_start_ref_c"] == 23.9
+    assert "running_fuel_per_k" not in warm.to_dict()
+
+
 def test_soc_correction_removes_a_battery_swing():
     # a trip that drained 1 MJ from the battery burnt 1 MJ·k less fuel: corrected fuel adds it back
     fuel = np.full(10, 20_000.0)
@@ -154,6 +181,9 @@ def test_chain_round_trips_through_the_equation_file(tmp_path):
     ({"predicts": "fuel", "cold_start_fuel_l": -0.05}, "'cold_start_fuel_l' must be ≥ 0"),
     ({"predicts": "fuel", "cold_start_fuel_l_per_k": -1e-3}, "'cold_start_fuel_l_per_k' must be ≥ 0"),
     ({"predicts": "fuel", "cold_start_ref_c": 297.0}, "'cold_start_ref_c' must be an air temperature"),
+    ({"predicts": "battery", "running_fuel_per_k": 0.003}, "only for predicts = \"fuel\""),
+    ({"predicts": "fuel", "running_fuel_per_k": 0.3}, "'running_fuel_per_k' is a share of the fuel per kelvin"),
+    ({"predicts": "fuel", "running_fuel_per_k": -0.003}, "'running_fuel_per_k' must be ≥ 0"),
     ({"loads": {"heater_power_w": -1.0}}, "loads.heater_power_w"),
     ({"fuel": "kerosene"}, "fuel must be one of"),
     ({"efficiency": 0.9}, "unknown key(s) ['efficiency']"),
@@ -612,6 +642,28 @@ def test_cold_starts_are_booked_once_per_departing_vehicle(tmp_path):
     np.testing.assert_allclose(veh["cold_start_l"], 0.07 + 0.003 * 30.0, rtol=1e-12)
     assert res.summary["chain"]["cold_start"]["fuel_l_per_start"]["drvpw_prius3"] == pytest.approx(0.16)
     assert not any("no air temperature" in w for w in res.summary["warnings"])
+    # a warm engine in the cold: every step's fuel × (1 + r·30 K), the cold starts unchanged
+    eqs[0].chain = dataclasses.replace(eqs[0].chain, running_fuel_per_k=0.002)
+    res = run_scenario(path, tmp_path / "cold_run", equations=eqs, end=150.0, figures=False, edgedata=False,
+                       cold_start=True, air_temperature_c=-6.1)
+    run = pd.read_csv(tmp_path / "cold_run" / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
+    assert run["key"].tolist() == veh["key"].tolist()
+    np.testing.assert_allclose(run["fuel_l"] - run["cold_start_l"], (veh["fuel_l"] - veh["cold_start_l"]) * 1.06,
+                               rtol=1e-9)
+    np.testing.assert_allclose(run["cold_start_l"], veh["cold_start_l"], rtol=1e-12)
+    assert res.summary["chain"]["warm_running"]["drvpw_prius3"]["factor"] == pytest.approx(1.06)
+    # the city scenario's own air (20 °C): 3.9 K below the reference; a run that gives no air
+    # temperature reads the default air's 20 °C, as the HVAC and cold starts do, and says so
+    res = run_scenario(path, tmp_path / "city_air", equations=eqs, end=150.0, figures=False, edgedata=False)
+    assert res.summary["chain"]["warm_running"]["drvpw_prius3"]["factor"] == pytest.approx(1 + 0.002 * 3.9)
+    from sumo_drvpw.sim.chain import chain_ledger
+    led = chain_ledger(eqs, 3)
+    q = led.book(np.array([0]), np.array([1]), np.array([10.0]), 1.0, np.array([[5_000.0, 5_000.0]]))
+    q_warm = chain_ledger([dataclasses.replace(eqs[0], chain=dataclasses.replace(eqs[0].chain, running_fuel_per_k=0.0)),
+                           eqs[1]], 3).book(np.array([0]), np.array([1]), np.array([10.0]), 1.0,
+                                            np.array([[5_000.0, 5_000.0]]))
+    np.testing.assert_allclose(q[0, :3], q_warm[0, :3] * (1 + 0.002 * 3.9), rtol=1e-12)  # fuel_j, fuel_l, co2
+    assert led.air_temperature_assumed
 
 
 def test_cold_start_shares_by_vtype_and_vclass(tmp_path):

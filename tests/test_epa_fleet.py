@@ -159,6 +159,13 @@ def test_cold_start_in_the_cold_by_hand(planted):
     assert cc["difference_ml"] == pytest.approx(np.median(cold - warm), rel=1e-6)
     assert cc["ml_per_k"] == pytest.approx(np.median(cold - warm) / (ef.FTP_AIR_C - ef.COLD_CO_AIR_C), rel=1e-6)
     assert cc["bag2_ratio"] == pytest.approx(1 / 0.9, rel=1e-6)
+    # bag 3 at 0.95 of the economy: 1/0.95 − 1 more fuel over the 30.6 K, the built-in's factor
+    span = ef.FTP_AIR_C - ef.COLD_CO_AIR_C
+    assert cc["bag3_ratio"] == pytest.approx(1 / 0.95, rel=1e-6)
+    assert cc["running_per_k"] == pytest.approx((1 / 0.95 - 1) / span, rel=1e-6)
+    assert res["equations"]["car"]["chain"]["running_fuel_per_k"] == pytest.approx((1 / 0.95 - 1) / span, abs=1e-6)
+    held = cc["running_held_out"]  # 15 pairs of the older year: too few to hold one out
+    assert held is None and cc["running_records_left_out"] == 0
     rel = (cold - warm) / warm / (ef.FTP_AIR_C - ef.COLD_CO_AIR_C)
     assert cc["relative_per_k"] == pytest.approx(np.median(rel), rel=1e-6)
     ch = res["equations"]["car"]["chain"]
@@ -172,6 +179,8 @@ def test_cold_start_in_the_cold_by_hand(planted):
     want = np.median(rel) * lt["cold_start"]["light_truck"]["median_ml"] / 1000
     assert lt["equations"]["light_truck"]["chain"]["cold_start_fuel_l_per_k"] == pytest.approx(want, abs=1e-6)
     assert lt["cold_start_cold"]["light_truck"]["transferred"]["pairs"] == 30
+    assert lt["equations"]["light_truck"]["chain"]["running_fuel_per_k"] == pytest.approx((1 / 0.95 - 1) / span,
+                                                                                          abs=1e-6)
     assert lt["equations"]["car"] == res["equations"]["car"]  # enough pairs of its own: unchanged
     # fewer than MIN_COLD_PAIRS pairs in all: nothing to pool, nothing transferred
     few = copy.deepcopy(res)
@@ -263,12 +272,18 @@ def test_builtins_are_what_the_study_writes_on_the_shared_lists(fuel, shared_stu
             want = np.median(pool) * res["cold_start"][cls]["median_ml"] / 1000
             assert eq.chain.cold_start_fuel_l_per_k == pytest.approx(want, abs=1e-6)
             assert 0.01 < np.median(pool) < 0.1  # 1–10 % of the cold start per kelvin
+        # a warm engine in the cold: a few % more fuel at −6.7 °C (bag 3 over bag 3), held out by year
+        assert 0.001 < eq.chain.running_fuel_per_k < 0.006
+        if cc.get("running_held_out"):
+            h = cc["running_held_out"]
+            assert h["mean_abs_error_with"] < h["mean_abs_error_without"] and h["test_pairs"] >= 20
 
 
 def test_sumo_run_books_idle_fuel_while_standing(tmp_path):
     """A real SUMO run (city, 300 s) with the built-in petrol car: per vehicle, the fuel
     energy is exactly P_idle × its time in the network + its traction energy / η (engine
-    running throughout, η_t = 1, no auxiliaries), and the class total is the vehicles' sum."""
+    running throughout, η_t = 1, no auxiliaries), times the warm-running factor at the city
+    scenario's 20 °C (1 + r · 3.9 K), and the class total is the vehicles' sum."""
     pytest.importorskip("libsumo")
     from sumo_drvpw.cli import main as cli_main
     from sumo_drvpw.model.equations import load_equation
@@ -281,6 +296,8 @@ def test_sumo_run_books_idle_fuel_while_standing(tmp_path):
     fuel = pd.read_csv(out / "chain_vehicles.csv", dtype={"key": str}).set_index("key")
     assert len(veh) > 10 and set(fuel.index) == set(veh.index)
     expect = ch.idle_fuel_power_w * veh["time_s"] + veh["traction_total_j"] / ch.marginal_efficiency
+    expect = expect * (1.0 + ch.running_fuel_per_k * (ch.cold_start_ref_c - 20.0))
+    assert ch.running_fuel_per_k > 0
     assert np.allclose(fuel["fuel_kwh"].reindex(veh.index) * 3.6e6, expect, rtol=1e-9)
     assert (veh["time_s"] > 0).all() and (fuel["fuel_l"] > 0).all()
     cls = pd.read_csv(out / "chain_classes.csv").set_index("key")

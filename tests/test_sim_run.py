@@ -1004,7 +1004,8 @@ def test_bare_config_books_electric_cars_in_kwh_and_petrol_cars_in_litres(tmp_pa
     """A bare SUMO config: an evehicle (SUMO's default class Zero/default) and a car written
     Energy/unknown are booked by the i3's battery chain and by no fuel chain; a car that
     writes no class (SUMO's default petrol) by the petrol chain and not the battery's; the
-    battery chain's HVAC reads the default air and the run says so only because it booked."""
+    battery chain's HVAC and the petrol chain's warm-running fuel read the default air, and
+    the run says so."""
     sc = tmp_path / "sc"
     sc.mkdir()
     cfg = _city_config(sc, """\
@@ -1022,7 +1023,9 @@ def test_bare_config_books_electric_cars_in_kwh_and_petrol_cars_in_litres(tmp_pa
     assert cls == {("evehicle", "bmw_i3_battery"), ("passenger", "bmw_i3_battery"),
                    ("passenger", "epa_gasoline_car")}
     assert s["chain"]["hvac_air_temperature_assumed"] and "no air temperature given" in err
-    # without electric cars the battery chain books nobody and nothing is said of its air
+    # without electric cars the battery chain books nobody; the petrol chain's warm-running
+    # fuel read the default air (20 °C: 3.9 K below the certification's), and the run says so
     cfg2 = _city_config(sc, '    <vType id="car" vClass="passenger" mass="1400"/>\n', [("c", "car", WEST)])
     s, err = _run_summary(cfg2, tmp_path / "o2", capsys)
-    assert not s["chain"]["hvac_air_temperature_assumed"] and "no air temperature" not in err
+    assert s["chain"]["hvac_air_temperature_assumed"] and "warm-running fuel read 20 °C" in err
+    assert s["chain"]["warm_running"]["epa_gasoline_car"]["factor"] > 1.0

@@ -60,7 +60,15 @@ a per-trip quantity, not a power, booked once at a trip's start where the trip i
 to start cold — in SUMO at a vehicle's departure when the run says so (``[vehicles]
 cold_start``), at the run's air temperature; a log does not say whether its engine
 started cold, so calibration and log comparisons leave it out
-(:meth:`EnergyChain.cold_start`).
+(:meth:`EnergyChain.cold_start`). ``running_fuel_per_k`` (≥ 0, default 0) is the warm
+engine's extra fuel in the cold, a share of the fuel power per kelvin below
+``cold_start_ref_c`` (denser oil in the driveline, cooler tyres and engine)::
+
+    P_fuel(T) = P_fuel · (1 + r · max(T_ref − T, 0))
+
+with T the air temperature ``ambient_c`` (the HVAC's column when the chain has one): the
+log's where it has one (unknown: no factor), in SUMO the run's air temperature (none
+given: the default air's 20 °C, as for the HVAC and cold starts, and the run says so).
 Measured fuel is corrected for
 the hybrid battery's energy change before it is compared (``battery_to_fuel``: fuel
 energy per unit of battery energy, default 1/η_m; see :func:`corrected_fuel_power`).
@@ -85,7 +93,11 @@ PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
         "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
         "engine_off_below_w", "engine_on_above_mps", "fuel", "battery_to_fuel",
-        "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "std_err", "reading", "provenance", "metrics")
+        "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "running_fuel_per_k",
+        "std_err", "reading", "provenance", "metrics")
+#: the largest plausible warm-running fuel increase per kelvin (5 %/K: +150 % at −6.7 °C
+#: against the FTP's 23.9 °C, far beyond the ≈ 9 % certification pairs show)
+RUNNING_FUEL_PER_K_MAX = 0.05
 HVAC_KEYS = ("column", "setpoint_c", "heating_w_per_k", "cooling_w_per_k", "warmup_j_per_k")
 
 
@@ -203,17 +215,24 @@ class EnergyChain:
     cold_start_fuel_l: float = 0.0
     cold_start_fuel_l_per_k: float = 0.0
     cold_start_ref_c: float = 23.9
+    running_fuel_per_k: float = 0.0
     std_err: dict = field(default_factory=dict)
     reading: dict = field(default_factory=dict)
     provenance: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
 
     @property
+    def temperature_column(self) -> str:
+        """The air-temperature column the chain reads (HVAC, warm-running fuel factor)."""
+        return str((self.hvac or {}).get("column", "ambient_c"))
+
+    @property
     def signals(self) -> set[str]:
-        """Log columns the chain reads (loads and the HVAC temperature)."""
+        """Log columns the chain reads (loads, and the temperature of the HVAC or of the
+        warm-running fuel factor)."""
         s = set(self.loads)
-        if self.hvac:
-            s.add(self.hvac.get("column", "ambient_c"))
+        if self.hvac or self.running_fuel_per_k:
+            s.add(self.temperature_column)
         return s
 
     def target_power(self, p_drive_w, v_mps, signals: dict | None = None, battery_w=None) -> np.ndarray:
@@ -239,8 +258,10 @@ class EnergyChain:
             bad = np.broadcast_to(~np.isfinite(x), (n,))
             if not bad.any():
                 continue
-            hvac = bool(self.hvac) and col == self.hvac.get("column", "ambient_c") and col not in self.loads
-            d = {"samples": int(bad.sum()), "read_as": "the set-point (no HVAC)" if hvac else "no load"}
+            temp = col == self.temperature_column and col not in self.loads
+            d = {"samples": int(bad.sum()),
+                 "read_as": ("no load" if not temp else "the set-point (no HVAC)" if self.hvac
+                             else "the reference temperature (no warm-running factor)")}
             if trip is not None:
                 d["trips"] = [str(t) for t in np.unique(np.asarray(trip)[bad])]
             out[col] = d
@@ -328,10 +349,20 @@ class EnergyChain:
         on = self.engine_on(p, v)
         eng = np.maximum(p, 0.0) / _eval(self.traction_efficiency, v, p) + self.auxiliary(n, signals)
         pf = np.where(on, self.idle_fuel_power_w + eng / self.marginal_efficiency, 0.0)
+        if self.running_fuel_per_k:
+            pf = pf * self.running_factor(n, signals)
         fp = self.fuel_props
         kgps = pf / fp["lhv_j_per_kg"]
         return {"engine_on": on, "engine_w": np.where(on, eng, 0.0), "power_w": pf,
                 "fuel_lps": kgps / fp["density_kg_per_l"], "co2_kgps": kgps * fp["co2_kg_per_kg"]}
+
+    def running_factor(self, n: int, signals: dict | None = None) -> np.ndarray:
+        """1 + r · max(T_ref − T, 0) per sample (``running_fuel_per_k``); 1 where the air
+        temperature is unknown (no column, NaN)."""
+        t = np.asarray((signals or {}).get(self.temperature_column, np.nan), float)
+        t = np.broadcast_to(t, (n,))
+        d = np.where(np.isfinite(t), np.maximum(self.cold_start_ref_c - t, 0.0), 0.0)
+        return 1.0 + self.running_fuel_per_k * d
 
     def cold_start(self, air_c: float | None = None) -> dict:
         """The extra energy of one cold start at air temperature ``air_c`` [°C]: for a fuel
@@ -390,8 +421,11 @@ class EnergyChain:
             if self.cold_start_fuel_l or self.cold_start_fuel_l_per_k:
                 d["cold_start_fuel_l"] = float(self.cold_start_fuel_l)
             if self.cold_start_fuel_l_per_k:
-                d.update(cold_start_fuel_l_per_k=float(self.cold_start_fuel_l_per_k),
-                         cold_start_ref_c=float(self.cold_start_ref_c))
+                d["cold_start_fuel_l_per_k"] = float(self.cold_start_fuel_l_per_k)
+            if self.running_fuel_per_k:
+                d["running_fuel_per_k"] = float(self.running_fuel_per_k)
+            if self.cold_start_fuel_l_per_k or self.running_fuel_per_k:
+                d["cold_start_ref_c"] = float(self.cold_start_ref_c)
         for k in ("std_err", "reading", "provenance", "metrics"):
             if getattr(self, k):
                 d[k] = getattr(self, k)
@@ -491,9 +525,14 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         if not -60.0 <= kw["cold_start_ref_c"] <= 60.0:
             raise UserError(f"{where} [chain]: 'cold_start_ref_c' must be an air temperature in "
                             f"-60 … 60 °C, got {doc['cold_start_ref_c']!r}")
-    for k in ("cold_start_fuel_l", "cold_start_fuel_l_per_k"):
+    if "running_fuel_per_k" in doc:
+        kw["running_fuel_per_k"] = _nonneg(doc["running_fuel_per_k"], "running_fuel_per_k", where)
+        if kw["running_fuel_per_k"] > RUNNING_FUEL_PER_K_MAX:
+            raise UserError(f"{where} [chain]: 'running_fuel_per_k' is a share of the fuel per kelvin, "
+                            f"at most {RUNNING_FUEL_PER_K_MAX} (5 %/K), got {doc['running_fuel_per_k']!r}")
+    for k in ("cold_start_fuel_l", "cold_start_fuel_l_per_k", "running_fuel_per_k"):
         if kw.get(k) and pred != "fuel":
-            raise UserError(f"{where} [chain]: '{k}' is the fuel of a cold start: only for "
+            raise UserError(f"{where} [chain]: '{k}' is fuel in the cold: only for "
                             f"predicts = \"fuel\", got predicts = {pred!r}")
     loads = doc.get("loads", {})
     if not isinstance(loads, dict):

@@ -78,6 +78,10 @@ class ChainLedger:
         #: ``cold`` term's reference) and :attr:`air_temperature_assumed` says so
         self.hvac_columns = {self.chains[i].hvac.get("column", "ambient_c")
                              for i in self.active if self.chains[i].hvac}
+        #: the same for the temperature of warm-running fuel factors (running_fuel_per_k)
+        self.running_columns = {self.chains[i].temperature_column for i in self.active
+                                if self.chains[i].running_fuel_per_k}
+        self._running_active = [j for j, e in enumerate(self.active) if self.chains[e].running_fuel_per_k]
         self.air_temperature_c = float(self.signal_values.get("ambient_c", T_REF_C))
         self._hvac_active = [j for j, e in enumerate(self.active) if self.chains[e].hvac]
         self.E, self.Q = len(self.names), len(QUANTITIES)
@@ -148,13 +152,13 @@ class ChainLedger:
 
     @property
     def air_temperature_assumed(self) -> bool:
-        """A chain with HVAC, or a booked cold start that depends on the temperature, booked
-        a vehicle and the run gave no air temperature."""
+        """A chain with HVAC or a warm-running fuel factor, or a booked cold start that depends
+        on the temperature, booked a vehicle and the run gave no air temperature."""
         if "ambient_c" in self.signal_values:
             return False
         cold = [j for j, e in enumerate(self.active)
                 if self.cold_start_on and self.chains[e].predicts == "fuel" and self.chains[e].cold_start_fuel_l_per_k]
-        return bool(self.booked_any[self._hvac_active + cold].any())
+        return bool(self.booked_any[self._hvac_active + self._running_active + cold].any())
 
     def booked(self, name: str) -> int:
         """Column of equation ``name`` in :meth:`vehicle_dist`, :meth:`vehicle_time`, :attr:`edge_dist`."""
@@ -316,7 +320,7 @@ class ChainLedger:
         for s in self.signals:
             if s in self.signal_values:
                 out[s] = np.full(n, float(self.signal_values[s]))
-            elif s in self.hvac_columns:
+            elif s in self.hvac_columns or s in self.running_columns:
                 out[s] = np.full(n, self.air_temperature_c)
             else:
                 self.assumed_zero.add(s)
@@ -454,7 +458,8 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
                            **({"battery_kwh_per_start": warmup} if warmup else {}),
                            "air_temperature_c": chain.air_temperature_c,
                            "rule": "the chain's cold_start_fuel_l (a battery chain: its cabin warm-up) once per "
-                                   "vehicle departing during the run, times its share (its vType's, else its vClass's, else the run's), "
+                                   "vehicle departing during the run, times its share (its own param, else its vType's, else its "
+                                   "vClass's, else the run's), "
                                    "at its departure edge ([vehicles] cold_start, [vtypes.<id>] / "
                                    "[vclasses.<vClass>] cold_start, or the run command's cold-start option)"
                                    if chain.cold_start_on else
@@ -463,6 +468,10 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
                                    "the run command's cold-start option books it"} if per_start or warmup else None,
             "signals_assumed_zero": sorted(chain.assumed_zero),
             "signal_values": chain.signal_values,
+            **({"warm_running": {chain.names[e]: {
+                "per_k": chain.chains[e].running_fuel_per_k, "ref_c": chain.chains[e].cold_start_ref_c,
+                "factor": float(chain.chains[e].running_factor(1, chain._constant_signals(1))[0])}
+                for e in chain.active if chain.chains[e].running_fuel_per_k}} if chain.running_columns else {}),
             "hvac_air_temperature_c": chain.air_temperature_c if chain.hvac_columns else None,
             "hvac_air_temperature_assumed": chain.air_temperature_assumed}
 
@@ -473,7 +482,8 @@ def chain_warnings(chain: ChainLedger | None) -> list[str]:
         return []
     out = []
     if chain.air_temperature_assumed:
-        out.append(f"no air temperature given: the energy chains' HVAC and cold starts read {T_REF_C:g} °C (the "
+        out.append(f"no air temperature given: the energy chains' HVAC, cold starts and warm-running fuel read "
+                   f"{T_REF_C:g} °C (the "
                    "default air, as the air density and the cold terms do); give the season's "
                    "air temperature (the scenario's [air] temperature_c, or the run command's "
                    "air-temperature option)")

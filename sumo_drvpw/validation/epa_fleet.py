@@ -95,6 +95,8 @@ FTP_AIR_C, COLD_CO_AIR_C = 23.9, -6.7
 COLD_CO = "Cold CO"
 #: configurations with both a Cold CO and an FTP test needed for a cold-start slope
 MIN_COLD_PAIRS = 20
+#: a Cold CO bag over the FTP's on the same schedule outside this range is a record error
+RECORD_RATIO = (0.5, 2.0)
 #: model-name words of hybrids and plug-ins
 HYBRID_WORDS = re.compile(r"\b(?:hybrid|plug-in|phev|hev|e-hybrid|energi)\b", re.I)
 #: road load must push back at every speed up to this [m/s]
@@ -355,51 +357,6 @@ def split(obs: pd.DataFrame, test_years, speeds, fuel: str = "gasoline") -> dict
             "test_configurations": int(te["config"].nunique())}
 
 
-def _cold_excess(obs: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
-    """Per configuration: the cold start (bag 1 − bag 3 of the same test, median over its
-    tests) [mL], and its EPA vehicle type."""
-    o = obs[obs["test"].isin((COLD, "ftp_bag3"))].copy()
-    o["row"] = o.groupby(["config", "test"]).cumcount()
-    wide = o.pivot_table(index=["config", "row", "vehicle_type"], columns="test", values="fuel_l").dropna()
-    ex = (wide[COLD] - wide["ftp_bag3"]).groupby(level="config").median() * 1000.0
-    vt = wide.reset_index().drop_duplicates("config").set_index("config")["vehicle_type"]
-    return ex, vt
-
-
-def cold_start_in_the_cold(lists: pd.DataFrame, obs: pd.DataFrame, speeds: dict, fuel: str = "gasoline") -> dict:
-    """Per class: the cold start at −6.7 °C (Cold CO test, bag 1 − bag 3 [mL]) of the
-    configurations that also have an FTP cold start in ``obs``, the median difference,
-    its slope per kelvin between the two tests' temperatures, and the Cold CO bag 2 over
-    the FTP bag 2 (warm running in the cold); medians over paired configurations."""
-    c = lists[lists["procedure"].eq(COLD_CO) & lists["derived"].eq("No")
-              & (lists[["fe_bag1", "fe_bag2", "fe_bag3"]] > 0).all(axis=1)]
-    diesel = c["fuel"].str.contains("diesel", case=False)
-    c = c[diesel if fuel == "diesel" else ~diesel]
-    dist = _distance_m(speeds["ftp_bag3"])  # bags 1 and 3
-    cold = pd.DataFrame({"config": c["config"],
-                         "cs_ml": 1000.0 * (_litres(dist, c["fe_bag1"]) - _litres(dist, c["fe_bag3"])),
-                         "bag2_l": _litres(_distance_m(speeds["ftp_bag2"]), c["fe_bag2"])}
-                        ).groupby("config").median()
-    warm_cs, vt = _cold_excess(obs)
-    warm_b2 = obs[obs["test"] == "ftp_bag2"].groupby("config")["fuel_l"].median()
-    pair = cold.join(pd.DataFrame({"warm_ml": warm_cs, "warm_bag2_l": warm_b2, "vt": vt}), how="inner").dropna()
-    out = {}
-    for t, cls in CLASSES.items():
-        g = pair[pair["vt"] == t]
-        if g.empty:
-            continue
-        diff = g["cs_ml"] - g["warm_ml"]
-        out[cls] = {"configurations": int(len(g)), "cold_ml": float(g["cs_ml"].median()),
-                    "warm_ml": float(g["warm_ml"].median()), "difference_ml": float(diff.median()),
-                    "difference_q25_ml": float(diff.quantile(0.25)), "difference_q75_ml": float(diff.quantile(0.75)),
-                    "ml_per_k": float(diff.median()) / (FTP_AIR_C - COLD_CO_AIR_C),
-                    "relative_per_k": float((diff / g["warm_ml"]).median()) / (FTP_AIR_C - COLD_CO_AIR_C),
-                    "relative_per_k_pairs": [round(float(x), 7) for x in
-                                             diff / g["warm_ml"] / (FTP_AIR_C - COLD_CO_AIR_C)],
-                    "bag2_ratio": float((g["bag2_l"] / g["warm_bag2_l"]).median())}
-    return out
-
-
 def transfer_cold_slopes(results: dict) -> None:
     """For each fuel's class with fewer than :data:`MIN_COLD_PAIRS` paired configurations:
     the relative slope pooled over every paired configuration of ``results`` (fuel →
@@ -412,6 +369,8 @@ def transfer_cold_slopes(results: dict) -> None:
     """
     pool = [x for r in results.values() for c in r.get("cold_start_cold", {}).values()
             for x in c.get("relative_per_k_pairs", [])]
+    run = [x for r in results.values() for c in r.get("cold_start_cold", {}).values()
+           for x in c.get("running_per_k_pairs", [])]
     if len(pool) < MIN_COLD_PAIRS:
         return
     rel = float(np.median(pool))
@@ -422,36 +381,17 @@ def transfer_cold_slopes(results: dict) -> None:
                 continue
             cc.setdefault(cls, {"configurations": 0})["transferred"] = {
                 "from": "every paired configuration of both fuels", "pairs": len(pool),
-                "relative_per_k": rel, "ml_per_k": rel * res["cold_start"][cls]["median_ml"]}
+                "relative_per_k": rel, "ml_per_k": rel * res["cold_start"][cls]["median_ml"],
+                **({"running_per_k": float(np.median(run)), "running_pairs": len(run)}
+                   if len(run) >= MIN_COLD_PAIRS else {})}
         res["equations"] = {c: builtin_equation(c, res) for c in res["equations"]}
-
-
-def cold_slope(cc: dict) -> tuple[float, str]:
-    """The slope [mL/K] a built-in carries, and where it comes from ("own", "transferred",
-    or "none")."""
-    if cc.get("configurations", 0) >= MIN_COLD_PAIRS:
-        return cc["ml_per_k"], "own"
-    if "transferred" in cc:
-        return cc["transferred"]["ml_per_k"], "transferred"
-    return 0.0, "none"
-
-
-def cold_start(obs: pd.DataFrame) -> dict:
-    """Fuel of a cold start per class: FTP bag 1 less bag 3 of the same test [mL]
-    (medians and quartiles over configurations)."""
-    ex, vt = _cold_excess(obs)
-    out = {}
-    for t, cls in CLASSES.items():
-        x = ex[vt.reindex(ex.index) == t]
-        if len(x):
-            out[cls] = {"median_ml": float(x.median()), "q25_ml": float(x.quantile(0.25)),
-                        "q75_ml": float(x.quantile(0.75)), "configurations": int(len(x))}
-    return out
 
 
 def study(data: Path, fuel: str = "gasoline", lists: pd.DataFrame | None = None) -> dict:
     """The whole study of ``fuel`` on the shared data folder ``data`` (``lists``: the
     already read Test Car List, else read from the folder)."""
+    from sumo_drvpw.validation.epa_cold import cold_start, cold_start_in_the_cold
+
     t0 = time.perf_counter()
     lists = read_lists(Path(data) / DATASET) if lists is None else lists
     d, counts = select(lists, fuel)
@@ -478,6 +418,8 @@ def study(data: Path, fuel: str = "gasoline", lists: pd.DataFrame | None = None)
 # ---------------------------------------------------------------------- built-ins
 def builtin_equation(cls: str, res: dict) -> dict:
     """The built-in equation document (TOML as a dict) of class ``cls`` from a study."""
+    from sumo_drvpw.validation.epa_cold import cold_slope, running_slope
+
     vclasses, what = BUILTINS[cls]
     fuel = res["fuel"]
     name, what = f"epa_{fuel}_{cls}", f"{FUEL_WORDS[fuel]} {what}"
@@ -489,6 +431,7 @@ def builtin_equation(cls: str, res: dict) -> dict:
     cc = res.get("cold_start_cold", {}).get(cls, {})
     slope_ml, slope_from = cold_slope(cc)
     slope = slope_ml / 1000.0
+    run, run_from = running_slope(cc)
     return {
         "equation": {
             "name": name, "vclasses": list(vclasses),
@@ -507,6 +450,7 @@ def builtin_equation(cls: str, res: dict) -> dict:
             "engine_off_below_w": -np.inf, "aux_power_w": 0.0, "fuel": fuel,
             "cold_start_fuel_l": round(cold.get("median_ml", 0.0) / 1000.0, 4),
             "cold_start_fuel_l_per_k": round(max(slope, 0.0), 6), "cold_start_ref_c": FTP_AIR_C,
+            "running_fuel_per_k": round(run, 6),
             "reading": {
                 "marginal_efficiency": "fuel → wheels at the margin (Willans slope, transmission included)",
                 "idle_fuel_power_w": (f"{p['p_idle_w_per_l']:.0f} W of fuel per litre of displacement × the "
@@ -535,6 +479,20 @@ def builtin_equation(cls: str, res: dict) -> dict:
                     if slope_from == "transferred" else
                     f"0: {cc.get('configurations', 0)} configurations with a Cold CO test pair with an FTP "
                     f"(fewer than {MIN_COLD_PAIRS}); colder starts take more, not modelled"),
+                "running_fuel_per_k": (
+                    f"a warm engine's extra fuel per kelvin colder than {FTP_AIR_C} °C, as a share: the Cold CO "
+                    f"test's bag 3 (hot start after a 10-min soak, at {COLD_CO_AIR_C} °C) over the FTP's bag 3, "
+                    f"median ×{cc.get('bag3_ratio', float('nan')):.3f} over {cc.get('configurations', 0)} "
+                    "configurations, linear between the two temperatures (driveline oil, tyres, engine "
+                    "friction; the dynamometer's road load and so the air density are those of the FTP); "
+                    "applied at a SUMO run's air temperature ([air] temperature_c; none given: 20 °C, and the run says so)"
+                    if run_from == "own" else
+                    (f"a warm engine's extra fuel per kelvin colder than {FTP_AIR_C} °C: the median over "
+                     f"{cc['transferred'].get('running_pairs', 0)} configurations of both fuels with a Cold CO test "
+                     f"and an FTP (bag 3 over bag 3); this class's own {cc.get('configurations', 0)} pairs are "
+                     f"too few (fewer than {MIN_COLD_PAIRS})")
+                    if run_from == "transferred" else
+                    "0: too few configurations with a Cold CO test and an FTP; not modelled"),
             },
             "provenance": {
                 "held_out": (f"model year {hold['test_years'][0]} predicted by the fit on "

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from sumo_drvpw.model.constants import FUELS
 from sumo_drvpw.validation.epa_fleet import (CLASSES, COLD_CO_AIR_C, ETA_PLAUSIBLE, FTP_AIR_C, FUEL_WORDS,
-                                             MIN_COLD_PAIRS, TEST_FUELS, TESTS, cold_slope)
+                                             MIN_COLD_PAIRS, TEST_FUELS, TESTS)
+from sumo_drvpw.validation.epa_cold import cold_slope, running_slope
 
 
 def _pct(x: float) -> str:
@@ -105,18 +106,39 @@ def _render_fuel(res: dict) -> list[str]:
               "as a share of the FTP cold start) pooled over the paired configurations of both fuels and bodies, times "
               "its own FTP cold start (the assumption: a cold start grows by the same share of itself per kelvin, "
               "whatever the engine). "
-              "Bag 2 in the cold over bag 2 on the FTP: warm running in the cold, reported, not modelled.", "",
-              "| class | paired configurations | cold start at −6.7 °C [mL] | on the FTP [mL] | difference [mL, median (IQR)] | slope [mL/K] | relative slope [%/K] | in the built-in [mL/K] | bag 2 cold / FTP |",
-              "|---|---|---|---|---|---|---|---|---|"]
+              "Bag 3 in the cold over bag 3 on the FTP (the same schedule, started hot after the same 10-min soak): "
+              "a warm engine's fuel in the cold, as a share per kelvin (`running_fuel_per_k`, own where at least "
+              f"{MIN_COLD_PAIRS} pairs, else pooled over both fuels' pairs). Bag 2 in the cold over bag 2 on the FTP "
+              "(505–1369 s after the cold start, still warming up): reported; what it exceeds bag 3's share by is "
+              "not booked. A bag-3 pair whose fuel differs by more than half or twice is a record error and left out "
+              "of the factor (counted below the table).", "",
+              "| class | paired configurations | cold start at −6.7 °C [mL] | on the FTP [mL] | difference [mL, median (IQR)] | slope [mL/K] | relative slope [%/K] | in the built-in [mL/K] | bag 2 cold / FTP | bag 3 cold / FTP, median (IQR) | warm running in the built-in [%/K] |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
         for cls, c in cc.items():
             slope, src = cold_slope(c)
             used = {"own": f"{slope:.2f} (own)", "none": "0 (too few pairs)"}.get(src) or (
                 f"{slope:.2f} ({c['transferred']['relative_per_k']:.2%}/K of {res['cold_start'][cls]['median_ml']:.0f} mL, "
                 f"pooled over {c['transferred']['pairs']} pairs)")
+            run, rsrc = running_slope(c)
+            run_used = {"own": f"{100 * run:.3f} (own)", "none": "0 (too few pairs)"}.get(rsrc) or (
+                f"{100 * run:.3f} (pooled over {c['transferred'].get('running_pairs', 0)} pairs)")
             if not c.get("configurations"):
-                L.append(f"| {cls} | 0 | – | – | – | – | – | {used} | – |")
+                L.append(f"| {cls} | 0 | – | – | – | – | – | {used} | – | – | {run_used} |")
                 continue
             L.append(f"| {cls} | {c['configurations']} | {c['cold_ml']:.0f} | {c['warm_ml']:.0f} | "
                      f"{c['difference_ml']:.0f} ({c['difference_q25_ml']:.0f}–{c['difference_q75_ml']:.0f}) | "
-                     f"{c['ml_per_k']:.2f} | {100 * c['relative_per_k']:.2f} | {used} | {c['bag2_ratio']:.3f} |")
+                     f"{c['ml_per_k']:.2f} | {100 * c['relative_per_k']:.2f} | {used} | {c['bag2_ratio']:.3f} | "
+                     f"{c['bag3_ratio']:.3f} ({c['bag3_ratio_q25']:.3f}–{c['bag3_ratio_q75']:.3f}) | {run_used} |")
+        bad = {cls: c["running_records_left_out"] for cls, c in cc.items() if c.get("running_records_left_out")}
+        if bad:
+            L += ["", "Bag-3 pairs left out as record errors: " + ", ".join(f"{cls} {n}" for cls, n in bad.items()) + "."]
+        held = [(cls, c["running_held_out"]) for cls, c in cc.items() if c.get("running_held_out")]
+        if held:
+            L += ["", "The warm-running factor held out by model year (the newest year's pairs predicted by the "
+                  "median factor of the older years' pairs; the Cold CO bag 3 from the FTP bag 3, predicted/measured "
+                  "− 1):", ""]
+            L += [f"- {cls}: model year {h['test_year']} ({h['test_pairs']} pairs) by {h['train_pairs']} pairs of "
+                  f"{', '.join(map(str, h['train_years']))} ({100 * h['running_per_k']:.3f} %/K): mean |error| "
+                  f"{h['mean_abs_error_without']:.1%} without the factor (mean {h['mean_error_without']:+.1%}), "
+                  f"{h['mean_abs_error_with']:.1%} with it (mean {h['mean_error_with']:+.1%})" for cls, h in held]
     return L + [""]
