@@ -118,7 +118,7 @@ def test_block_validation_single_trip_and_report_files(tmp_path):
     path = tmp_path / "one.parquet"
     df.to_parquet(path)
     out = tmp_path / "out"
-    res = run([path], "prius3", None, out, DiagnoseOptions(), figures=True)
+    run([path], "prius3", None, out, DiagnoseOptions(), figures=True)
     doc = json.loads((out / "trace.json").read_text())
     assert set(doc) == {"target", "n_samples", "validation", "baseline", "findings", "final"}
     assert set(doc["baseline"]) == {"terms", "coefficients", "metrics", "trip_energy", "trip_net_energy",

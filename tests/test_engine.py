@@ -5,10 +5,8 @@ pickled across processes, as on a cluster); skipped when Dask is not installed
 (``pip install 'sumo-drvpw[dask]'``).
 """
 
-import json
 from functools import partial
 
-import numpy as np
 import pandas as pd
 import pytest
 

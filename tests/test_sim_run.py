@@ -952,7 +952,7 @@ def test_chains_book_the_vehicles_of_their_energy_carrier(tmp_path, capsys):
     i3 = REPO / "docs" / "energy-chain" / "bmw_i3_battery.toml"
     sc = tmp_path / "sc"
     sc.mkdir()
-    cfg = _city_config(sc, """\
+    _city_config(sc, """\
     <vType id="petrol" vClass="passenger" mass="1400" emissionClass="HBEFA3/PC_G_EU4"/>
     <vType id="diesel" vClass="passenger" mass="1400" emissionClass="HBEFA4/PC_diesel_Euro-6ab"/>
     <vType id="ev" vClass="passenger" mass="1400" emissionClass="Energy/unknown"/>
