@@ -28,6 +28,8 @@ fuel power with the engine running and no output scales with the displacement D 
 E_fuel = p_L·D·T + E⁺/η, with E⁺ = Σ max(P, 0)·Δt from the term basis (terms ``roll`` =
 A/(m·g), ``v2`` = B, ``aero`` = C, ``acc``) and T the test's duration, fitted by weighted
 least squares (statsmodels WLS, weight 1/E_fuel²: each test counts by its relative error).
+The built-ins write the aerodynamic term as ``aero_rho`` = C_d·A = 2·C/ρ_ref
+(:data:`COASTDOWN_RHO`), so that in a run it follows the run's air density.
 
 **Selection** (fixed before any fit, from the file's own columns), per fuel: its
 certification test fuel (:data:`TEST_FUELS`: ``Tier 2 Cert Gasoline``, ``Federal Cert
@@ -46,10 +48,13 @@ share of the FTP cold start — pooled over every paired configuration of both f
 both bodies (the median), times its own FTP cold start (:func:`transfer_cold_slopes`; its
 own few pairs are reported beside it as a check); with fewer than :data:`MIN_COLD_PAIRS`
 pairs in all, its slope is 0.
-Its bag 2 against the FTP's (warm running in the cold) is reported,
-not modelled; the winter-grade fuels hold a few per cent less energy per litre than the
-certification fuel, part of that ratio (litres are compared as measured). SC03 (A/C on)
-is left out.
+Its bag 3 against the FTP's bag 3 (the same schedule, started hot after the same soak)
+is a warm engine's extra fuel in the cold, the chains' ``running_fuel_per_k`` (per kelvin,
+as a share; :mod:`sumo_drvpw.validation.epa_cold`, held out by model year); its bag 2
+against the FTP's (still warming up) is reported. The winter-grade test fuels hold a little
+less energy per litre than the certification fuel: part of these ratios (litres are
+compared as measured), so the factor is an upper bound of the energy's. SC03 (A/C on) is
+left out.
 
 **Held out.** The newest model year is predicted by the fit on the older ones (other cars,
 later technology), and the oldest by the fit on the newer ones. The built-ins are fitted
@@ -109,6 +114,10 @@ BUILTINS = {
     "car": (("passenger", "private", "taxi", "hov", "vip", "authority"), "passenger car"),
     "light_truck": (("delivery", "emergency"), "light truck (pick-up, SUV, van: EPA 'Truck')"),
 }
+#: the air density the target coefficients are corrected to [kg/m³]: 40 CFR 1066.310's
+#: reference (SAE J2263: 20 °C, 98.21 kPa, no wind); the built-ins' aerodynamic term is
+#: C_d·A = 2·C/ρ_ref, so that a run's air (season, altitude) scales it
+COASTDOWN_RHO = 1.17
 #: plausible marginal efficiency fuel → wheels (petrol about 0.35, diesel about 0.4)
 ETA_PLAUSIBLE = (0.25, 0.5)
 
@@ -442,7 +451,15 @@ def builtin_equation(cls: str, res: dict) -> dict:
                        + "; fitted by python -m sumo_drvpw.validation.epa_fleet (docs/epa-fleet.md)"),
         },
         "terms": {"roll": round(dfl["a_n_per_kg"] / G, 6), "v2": round(dfl["b_n_per_mps"], 4),
-                  "aero": round(dfl["c_n_per_mps2"], 5), "acc": 1.0, "grade": 1.0},
+                  "aero_rho": round(2.0 * dfl["c_n_per_mps2"] / COASTDOWN_RHO, 5), "acc": 1.0, "grade": 1.0},
+        "provenance": {
+            "aero_rho": (f"C_d·A = 2·C/ρ_ref [m²]: the class's median target coefficient C = "
+                         f"{dfl['c_n_per_mps2']:.4f} N/(m/s)², corrected by the coastdown procedure to "
+                         f"ρ_ref = {COASTDOWN_RHO} kg/m³ (40 CFR 1066.310; SAE J2263: 20 °C, 98.21 kPa); in a run "
+                         "the aerodynamic force follows the run's air density (1.2041 kg/m³ by default: ×1.029)"),
+            "roll": "A/(m·g): the target coefficient A per kg of test weight (tyres, driveline)",
+            "v2": "B [N/(m/s)]: the target coefficient B (tyres, driveline; speed-proportional)",
+        },
         "chain": {
             "predicts": "fuel", "traction_efficiency": 1.0,
             "marginal_efficiency": round(p["eta"], 4),
@@ -484,7 +501,9 @@ def builtin_equation(cls: str, res: dict) -> dict:
                     f"test's bag 3 (hot start after a 10-min soak, at {COLD_CO_AIR_C} °C) over the FTP's bag 3, "
                     f"median ×{cc.get('bag3_ratio', float('nan')):.3f} over {cc.get('configurations', 0)} "
                     "configurations, linear between the two temperatures (driveline oil, tyres, engine "
-                    "friction; the dynamometer's road load and so the air density are those of the FTP); "
+                    "friction; the dynamometer's road load and so the air density are those of the FTP; "
+                    "litres as measured, on the test's winter-grade fuel with a little less energy per litre: "
+                    "an upper bound); "
                     "applied at a SUMO run's air temperature ([air] temperature_c; none given: 20 °C, and the run says so)"
                     if run_from == "own" else
                     (f"a warm engine's extra fuel per kelvin colder than {FTP_AIR_C} °C: the median over "

@@ -39,7 +39,11 @@ def render(results: dict, cmd: str, seconds: float) -> str:
           "[scenario.md](scenario.md)); the run reports litres and CO₂ per vehicle, edge and class, the mass "
           "from the vType. The cold start (column above, the chains' `cold_start_fuel_l`) is booked at each "
           "vehicle's departure only where the run says trips start cold (`[vehicles] cold_start`, or the run command's "
-          "cold-start option: a study of trips from home, not of through traffic). What they leave out: the A/C and "
+          "cold-start option: a study of trips from home, not of through traffic). The run's air temperature "
+          "(`[air] temperature_c`, or the run command's air-temperature option; none given: 20 °C, and the run "
+          "says so) sets the cold start's size and the warm engine's extra fuel in the cold (`running_fuel_per_k`), "
+          "and the run's air density the aerodynamic force (`aero_rho`, C_d·A = 2C/1.17 kg/m³, the coastdown's "
+          "reference density). What they leave out: the A/C and "
           "other auxiliaries (certification runs without them: `aux_power_w` is 0), and stop-start (the engine "
           "idles at every stop). Hybrids and heavy vehicles are not in these data.", ""]
     return "\n".join(L)
