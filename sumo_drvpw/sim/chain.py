@@ -160,6 +160,18 @@ class ChainLedger:
                 if self.cold_start_on and self.chains[e].predicts == "fuel" and self.chains[e].cold_start_fuel_l_per_k]
         return bool(self.booked_any[self._hvac_active + self._running_active + cold].any())
 
+    def warm_running(self) -> dict:
+        """Per chain with a warm-running fuel factor: its share per kelvin, reference and the
+        factor at the run's air temperature (:meth:`EnergyChain.running_factor`)."""
+        out = {}
+        for e in self.active:
+            ch = self.chains[e]
+            if ch.running_fuel_per_k:
+                t = float(self.signal_values.get(ch.temperature_column, self.air_temperature_c))
+                out[self.names[e]] = {"per_k": ch.running_fuel_per_k, "ref_c": ch.cold_start_ref_c,
+                                      "factor": float(ch.running_factor(1, {ch.temperature_column: t})[0])}
+        return out
+
     def booked(self, name: str) -> int:
         """Column of equation ``name`` in :meth:`vehicle_dist`, :meth:`vehicle_time`, :attr:`edge_dist`."""
         return self.active.index(self.names.index(name))
@@ -468,10 +480,7 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
                                    "the run command's cold-start option books it"} if per_start or warmup else None,
             "signals_assumed_zero": sorted(chain.assumed_zero),
             "signal_values": chain.signal_values,
-            **({"warm_running": {chain.names[e]: {
-                "per_k": chain.chains[e].running_fuel_per_k, "ref_c": chain.chains[e].cold_start_ref_c,
-                "factor": float(chain.chains[e].running_factor(1, chain._constant_signals(1))[0])}
-                for e in chain.active if chain.chains[e].running_fuel_per_k}} if chain.running_columns else {}),
+            **({"warm_running": chain.warm_running()} if chain.running_columns else {}),
             "hvac_air_temperature_c": chain.air_temperature_c if chain.hvac_columns else None,
             "hvac_air_temperature_assumed": chain.air_temperature_assumed}
 
