@@ -169,7 +169,7 @@ class ChainLedger:
             if ch.running_fuel_per_k:
                 t = float(self.signal_values.get(ch.temperature_column, self.air_temperature_c))
                 out[self.names[e]] = {"per_k": ch.running_fuel_per_k, "ref_c": ch.cold_start_ref_c,
-                                      "factor": float(ch.running_factor(1, {ch.temperature_column: t})[0])}
+                                      "factor": round(float(ch.running_factor(1, {ch.temperature_column: t})[0]), 9)}
         return out
 
     def booked(self, name: str) -> int:
