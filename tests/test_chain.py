@@ -1471,3 +1471,39 @@ def test_builtin_i3_battery_is_the_validations_deliverable():
         assert tomllib.load(a) == tomllib.load(b)
     eq = load_equation("bmw_i3_battery")
     assert eq.predicts == "battery" and "evehicle" in eq.vclasses and eq.chain.hvac["setpoint_c"] == 20.0
+
+
+def test_i3_logged_load_deliverable_through_the_cli(shared_data, tmp_path, capsys):
+    """docs/energy-chain/bmw_i3_battery_logged.toml (python -m sumo_drvpw.validation.chain):
+    a battery chain with the heater and A/C logs at gain 1 and the closed loop's
+    [measurement]; imported and compared through the CLI on three shared trips (summer with
+    the heater's V·I, summer without, winter), it reproduces per trip the battery-energy
+    errors the validation wrote for the pipeline fitted on every trip, and says which trip
+    lacks the heater's log."""
+    import json
+    from pathlib import Path
+
+    from sumo_drvpw.cli import main as cli_main
+
+    repo = Path(__file__).resolve().parent.parent
+    eq_file = repo / "docs" / "energy-chain" / "bmw_i3_battery_logged.toml"
+    eq = load_equation(eq_file)
+    assert eq.predicts == "battery" and eq.chain.loads == {"heater_electric_w": 1.0, "aircon_power_w": 1.0}
+    assert eq.measurement is not None and eq.measurement.grade == "fused"
+    ref = json.loads((repo / "docs" / "energy-chain-validation.json").read_text(encoding="utf-8"))
+    ref = ref["bmw_i3"]["kfold"]["in_sample"]["errors"]
+    trips = ["TripA23", "TripA13", "TripB17"]
+    src = [str(shared_data / "bmw_i3_tum" / f"{t}.csv") for t in trips]
+    assert cli_main(["import", "bmw-i3-tum", *src, "--out", str(tmp_path / "i3.parquet")]) == 0
+    capsys.readouterr()
+    assert cli_main(["compare", str(tmp_path / "i3.parquet"), "--vehicle", "bmw_i3", "--equation", str(eq_file),
+                     "--out", str(tmp_path / "cmp")]) == 0
+    said = capsys.readouterr()
+    said = said.out + said.err
+    note = next(line for line in said.splitlines() if "'heater_electric_w' unknown" in line)
+    assert "TripA13" in note and "TripA23" not in note and "TripB17" not in note
+    rep = json.loads((tmp_path / "cmp" / "report.json").read_text(encoding="utf-8"))
+    got = rep["equations"]["bmw_i3_battery_logged"]["trip_net_energy"]["trips"]
+    for t in trips:
+        assert got[t]["error"] == pytest.approx(ref[t], abs=1e-6), t
+    assert abs(ref["TripA13"]) > 0.2  # the trip without heater V·I: its heater is missing

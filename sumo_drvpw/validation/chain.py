@@ -207,12 +207,15 @@ def main(argv=None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     cmd = "python -m sumo_drvpw.validation.chain" + (f" {out}" if args else "")
+    from sumo_drvpw.model.equations import BUILTIN_DIR, equation_from_dict, save_equation
+
     dv = (res.get("bmw_i3") or {}).get("deliverable")
     if dv:  # the i3 battery equation for SUMO studies, beside the report and as a built-in
-        from sumo_drvpw.model.equations import BUILTIN_DIR, equation_from_dict, save_equation
-
         save_equation(equation_from_dict(dv["equation"]), out.parent / "energy-chain" / dv["file"])
         save_equation(equation_from_dict(dv["equation"]), BUILTIN_DIR / dv["file"])
+    dl = (res.get("bmw_i3") or {}).get("deliverable_logged")
+    if dl:  # the i3 battery equation for new logs with the heater and A/C logged
+        save_equation(equation_from_dict(dl["equation"]), out.parent / "energy-chain" / dl["file"])
     write_json(out.with_suffix(".json"), plain(res))
     write_text(out, render(res, cmd))
     print(f"wrote {out}")

@@ -310,6 +310,7 @@ def _i3_kfold_table(i3: dict) -> list[str]:
          "cabin heating depends on set-point, pre-conditioning and warm-up, not on the ambient temperature alone.",
          *_warmup(k),
          *_deliverable(i3.get("deliverable")),
+         *_deliverable_logged(i3.get("deliverable_logged"), k),
          "", "Training-side choice of the efficiency (inner mean |error| constant → tables per inner fold):", ""]
     L += [f"- 2-fold, fold {n}: " + _selection(f["map_selection"]) for n, f in i3["fits"].items()
           if f.get("map_selection")]
@@ -336,6 +337,26 @@ def _deliverable(dv) -> list[str]:
             + (f", recuperation limit {lim / 1000:.1f} kW" if lim else ", no recuperation limit kept")
             + ". In a scenario: `[vtypes.<id>] equations = [\"docs/energy-chain/" + dv["file"] + "\"]` and "
             "`[air] temperature_c` (the HVAC's ambient temperature); its held-out quality is the rows above (the warm-up booked as the run's cold-start share says)."]
+
+
+def _deliverable_logged(dv, k) -> list[str]:
+    """The i3 battery equation for new logs with the heater and A/C logged, in one paragraph."""
+    if not dv:
+        return []
+    ch = dv["chain"]
+    lim = dv.get("recuperation_limit_w")
+    return ["", f"**For new logs of this car** (heater V·I and A/C power logged): `docs/energy-chain/{dv['file']}`, "
+            "the pipeline above fitted on every trip — road load "
+            + ", ".join(f"`{t}` {v:.4g}" for t, v in dv["road_load"].items())
+            + f"; η_t {ch.get('traction_efficiency', float('nan')):.3f}, η_r "
+            f"{ch.get('recuperation_efficiency', float('nan')):.3f} (the logger's regenerative torque under-reads: "
+            f"not for SUMO), constant {ch.get('aux_power_w', float('nan')):.0f} W, heater and A/C at gain 1"
+            + (f", recuperation limit {lim / 1000:.1f} kW" if lim else "")
+            + "; with the closed loop's `[measurement]`. Compared with new logs (`sumo-drvpw compare`, vehicle "
+            "`bmw_i3`, this equation file) it reports the battery energy per trip (`trip_net_energy`); "
+            f"its held-out quality is the {k['k']}-fold pipeline's: {_pct(k['mean_abs_error'])[1:]} over all trips, "
+            f"{_pct(k['mean_abs_error_unflagged'])[1:]} on those with the heater's V·I logged (a trip without it is "
+            "predicted without its heater)."]
 
 
 def _warmup(k) -> list[str]:
