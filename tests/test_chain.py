@@ -1507,3 +1507,30 @@ def test_i3_logged_load_deliverable_through_the_cli(shared_data, tmp_path, capsy
     for t in trips:
         assert got[t]["error"] == pytest.approx(ref[t], abs=1e-6), t
     assert abs(ref["TripA13"]) > 0.2  # the trip without heater V·I: its heater is missing
+
+
+def test_jlu_road_deliverable_through_the_cli(shared_data, tmp_path):
+    """docs/energy-chain/jlu_bev_road_battery.toml: the dyno chain with what the road adds
+    (diagnose's battery tracer on all six shared road trips); imported and compared through
+    the CLI on two of the trips, it reproduces their committed in-sample battery-energy
+    errors."""
+    import json
+    from pathlib import Path
+
+    from sumo_drvpw.cli import main as cli_main
+
+    repo = Path(__file__).resolve().parent.parent
+    eq_file = repo / "docs" / "energy-chain" / "jlu_bev_road_battery.toml"
+    eq = load_equation(eq_file)
+    assert eq.predicts == "battery" and eq.terms["grade"] == 1.0
+    ref = json.loads((repo / "docs" / "energy-chain-validation.json").read_text(encoding="utf-8"))
+    ref = ref["jlu"]["deliverable"]["in_sample"]
+    trips = ["001", "021"]
+    src = [str(shared_data / "jlu_bev_road" / f"{t}.parquet") for t in trips]
+    assert cli_main(["import", "jlu-road", *src, "--out", str(tmp_path / "jlu.parquet")]) == 0
+    assert cli_main(["compare", str(tmp_path / "jlu.parquet"), "--vehicle", "jlu_bev", "--equation", str(eq_file),
+                     "--out", str(tmp_path / "cmp")]) == 0
+    rep = json.loads((tmp_path / "cmp" / "report.json").read_text(encoding="utf-8"))
+    got = rep["equations"]["jlu_bev_road_battery"]["trip_net_energy"]["trips"]
+    for t in trips:
+        assert got[t]["error"] == pytest.approx(ref[t], abs=1e-6), t

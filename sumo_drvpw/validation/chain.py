@@ -88,6 +88,7 @@ def jlu_study(data: Path) -> dict:
     declared = Equation("jlu_dyno_chain", dict(terms))
     declared.chain = dfit.chain
     traced = close_loop_heldout(ro, declared)
+    deliverable = jlu_road_equation(ro, declared, trips, dt)
     sens = {k: trip_rows(preds[k], ro.power_w, dt, trips) for k in ("after_no_limit", "after_all_refit")}
     g = rlog.df.groupby("trip_id", sort=False)
     info = {str(k): {"ambient_c": float(v["ambient_c"].mean()), "duration_s": float(v["time_s"].max() - v["time_s"].min()),
@@ -110,7 +111,35 @@ def jlu_study(data: Path) -> dict:
             "diagnose": {t: {k: r[k] for k in ("before", "after", "findings")} for t, r in traced["trips"].items()},
             "diagnose_found_on": traced["found_on"],
             "mean_abs_error_after_diagnose": traced["mean_abs_error_after"],
-            "mean_abs_error_before_diagnose": traced["mean_abs_error_before"]}
+            "mean_abs_error_before_diagnose": traced["mean_abs_error_before"],
+            "deliverable": deliverable}
+
+
+#: file name of the JLU car's road battery equation (docs/energy-chain/)
+JLU_DELIVERABLE = "jlu_bev_road_battery.toml"
+
+
+def jlu_road_equation(ro, declared, trips, dt) -> dict:
+    """The loop closed on every shared road trip: diagnose's battery-target tracer
+    (:func:`sumo_drvpw.fit.chain_linear.trace_chain`) adds to the dyno chain what the road
+    needs, as an equation file for new road logs of this car. Its held-out quality is the
+    leave-one-trip-out result; in sample, its per-trip errors (``in_sample``)."""
+    from sumo_drvpw.fit.chain_linear import predict, trace_chain
+
+    res = trace_chain(ro, declared)
+    eq = res.equation
+    eq.name = "jlu_bev_road_battery"
+    eq.description = ("JLU BEV battery energy on the road: the published road load and the chain calibrated on the "
+                      "chassis dynamometer, closed on the 6 shared road trips by diagnose's battery-target tracer "
+                      "(docs/energy-chain-validation.md: leave-one-trip-out error of this procedure)")
+    eq.provenance = {"method": "python -m sumo_drvpw.validation.chain (fit.chain_linear.trace_chain)",
+                     "dyno": "jlu_bev_dyno", "road_trips": sorted(set(trips.tolist())),
+                     "findings": [f["term"] for f in res.report["findings"]], "vehicle": "jlu_bev"}
+    rows = trip_rows(predict(eq, ro.inputs), ro.power_w, dt, trips)
+    return {"file": JLU_DELIVERABLE, "findings": {f["term"]: (f["parameter"] if f["coefficient"] is None
+                                                             else f["coefficient"]) for f in res.report["findings"]},
+            "in_sample": {r["trip"]: r["error"] for r in rows}, "mean_abs_error_in_sample": mean_abs(rows),
+            "equation": eq.to_dict()}
 
 
 # ------------------------------------------------------------------ Prius Gen 2
@@ -213,9 +242,9 @@ def main(argv=None) -> int:
     if dv:  # the i3 battery equation for SUMO studies, beside the report and as a built-in
         save_equation(equation_from_dict(dv["equation"]), out.parent / "energy-chain" / dv["file"])
         save_equation(equation_from_dict(dv["equation"]), BUILTIN_DIR / dv["file"])
-    dl = (res.get("bmw_i3") or {}).get("deliverable_logged")
-    if dl:  # the i3 battery equation for new logs with the heater and A/C logged
-        save_equation(equation_from_dict(dl["equation"]), out.parent / "energy-chain" / dl["file"])
+    for dl in ((res.get("bmw_i3") or {}).get("deliverable_logged"), (res.get("jlu") or {}).get("deliverable")):
+        if dl:  # equations for new logs: the i3 with heater and A/C logged, the JLU car on the road
+            save_equation(equation_from_dict(dl["equation"]), out.parent / "energy-chain" / dl["file"])
     write_json(out.with_suffix(".json"), plain(res))
     write_text(out, render(res, cmd))
     print(f"wrote {out}")

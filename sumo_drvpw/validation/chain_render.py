@@ -62,6 +62,17 @@ def render(res: dict, command: str) -> str:
                      f"{i['net_elevation_m']:+.0f} | {b['measured_kwh']:.3f} | {_pct(b['error'])} | "
                      f"{_pct(bg['error'])} | {_pct(d['after'])} | {_found(d['findings'])} | "
                      f"{_pct(a['error'])} | {_pct(a2['error'])} | {_pct(a3['error'])} |")
+        dv = j.get("deliverable")
+        if dv:
+            L += ["", f"**For new road logs of this car**: `docs/energy-chain/{dv['file']}`, the loop closed the same "
+                  "way on all six road trips (found: " + _found(dv["findings"]) + "). Compared with "
+                  "new logs (`sumo-drvpw compare`, vehicle `jlu_bev`, this equation file) it reports the battery "
+                  "energy per trip; its held-out quality is the leave-one-trip-out column above "
+                  f"({_pct(j['mean_abs_error_after_diagnose'])[1:]}); on the six trips themselves "
+                  f"{_pct(dv['mean_abs_error_in_sample'])[1:]}"
+                  + (f" — {', '.join(only)} was found only with all six trips, in no leave-one-out fold: it lowers "
+                     "the samples' error, not necessarily the trips' energy error" if (only := [
+                         k for k in dv["findings"] if k not in j["diagnose_found_on"]]) else "") + "."]
         L += ["", "What the road adds, per left-out trip (efficiencies fixed at the dyno's):", "",
               "| left out | " + " | ".join(next(iter(j["loo_parameters"].values()))) + " |",
               "|---|" + "---|" * len(next(iter(j["loo_parameters"].values())))]
