@@ -1534,3 +1534,29 @@ def test_jlu_road_deliverable_through_the_cli(shared_data, tmp_path):
     got = rep["equations"]["jlu_bev_road_battery"]["trip_net_energy"]["trips"]
     for t in trips:
         assert got[t]["error"] == pytest.approx(ref[t], abs=1e-6), t
+
+
+def test_prius2_fuel_deliverable_through_the_cli(shared_data, tmp_path):
+    """docs/energy-chain/prius2_fuel.toml (both shared trips): imported and compared through
+    the CLI, each trip's fuel error (the battery's energy change taken off the prediction)
+    is the committed in-sample one."""
+    import json
+    from pathlib import Path
+
+    from sumo_drvpw.cli import main as cli_main
+
+    repo = Path(__file__).resolve().parent.parent
+    eq_file = repo / "docs" / "energy-chain" / "prius2_fuel.toml"
+    eq = load_equation(eq_file)
+    assert eq.predicts == "fuel" and 0.25 < eq.chain.marginal_efficiency < 0.5
+    ref = json.loads((repo / "docs" / "energy-chain-validation.json").read_text(encoding="utf-8"))
+    ref = ref["prius2"]["deliverable"]["in_sample"]
+    assert cli_main(["import", "torquepro-prius2", str(shared_data / "prius_gen2_torquepro"),
+                     "--out", str(tmp_path / "p2.parquet")]) == 0
+    assert cli_main(["compare", str(tmp_path / "p2.parquet"), "--vehicle", "prius2", "--equation", str(eq_file),
+                     "--out", str(tmp_path / "cmp")]) == 0
+    rep = json.loads((tmp_path / "cmp" / "report.json").read_text(encoding="utf-8"))
+    got = rep["equations"]["prius2_fuel"]["trip_net_energy"]["trips"]
+    assert set(got) == set(ref) == {"From_CdA_Act", "To_CdA_Act"}
+    for t in ref:
+        assert got[t]["error"] == pytest.approx(ref[t], abs=1e-6), t

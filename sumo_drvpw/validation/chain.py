@@ -200,7 +200,40 @@ def prius2_study(data: Path) -> dict:
             rows[-1][f"{label}_error_vs_raw"] = x["l"] / raw_l - 1.0
             rows[-1][f"{label}_nan_steps"] = x["nan_steps"]
     return {"rows": rows, "fits": fits, "mean_abs_error": mean_abs(rows),
-            "mean_abs_error_chain_fitted_on_equation": mean_abs(rows, "error_chain_fitted_on_equation")}
+            "mean_abs_error_chain_fitted_on_equation": mean_abs(rows, "error_chain_fitted_on_equation"),
+            "deliverable": prius2_fuel_equation(mw, mf, veh, trips, dt)}
+
+
+#: file name of the Prius Gen 2 fuel equation (docs/energy-chain/)
+PRIUS2_DELIVERABLE = "prius2_fuel.toml"
+
+
+def prius2_fuel_equation(mw, mf, veh, trips, dt) -> dict:
+    """The study's pipeline fitted on both trips (road load by the stepwise DrvPw
+    calibration, the Willans chain with engine-off on the measured driving power), as an
+    equation file for new logs of this car; its held-out quality is the per-trip rows (each
+    trip predicted without it); ``in_sample``: both trips' fuel errors as ``compare`` scores
+    them (the battery's energy change taken off the prediction, not added to the fuel)."""
+    from sumo_drvpw.fit.calibrate import CANDIDATES, calibrate
+    from sumo_drvpw.fit.chain import calibrate_on
+
+    res = calibrate(mw.inputs, mw.power_w, CANDIDATES["indt-var-1"], mask=mw.usable, reference_mass_kg=veh.mass_kg)
+    eq = res.to_equation("prius2_fuel")
+    fit = calibrate_on(mf, p_drive_w=mw.power_w)
+    eq.chain = fit.chain
+    eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
+    eq.description = ("Prius Gen 2 fuel (TorquePro OBD logs, 2 trips): DrvPw road load and a Willans chain with "
+                      "engine-off, fitted on the measured power-split driving power; fuel compared after the "
+                      "hybrid battery's energy change (docs/energy-chain-validation.md: each trip predicted "
+                      "without it). Two mostly-highway trips: a hint, not a validation")
+    eq.provenance = dict(eq.provenance or {}, method="python -m sumo_drvpw.validation.chain",
+                         trips=sorted(set(trips.tolist())), vehicle="prius2")
+    # as `compare` scores a fuel chain: the prediction less k × the hybrid battery's power
+    # against the fuel as measured (EnergyChain.target_power)
+    pred = fit.chain.target_power(eq.power(mf.inputs), mf.inputs.v, mf.inputs.signals, mf.battery_w)
+    rows = trip_rows(np.where(mf.usable, pred, np.nan), mf.power_w, dt, trips)
+    return {"file": PRIUS2_DELIVERABLE, "in_sample": {r["trip"]: r["error"] for r in rows},
+            "mean_abs_error_in_sample": mean_abs(rows), "equation": eq.to_dict()}
 
 
 from sumo_drvpw.validation.chain_render import render  # noqa: E402  (the report of run())
@@ -242,8 +275,10 @@ def main(argv=None) -> int:
     if dv:  # the i3 battery equation for SUMO studies, beside the report and as a built-in
         save_equation(equation_from_dict(dv["equation"]), out.parent / "energy-chain" / dv["file"])
         save_equation(equation_from_dict(dv["equation"]), BUILTIN_DIR / dv["file"])
-    for dl in ((res.get("bmw_i3") or {}).get("deliverable_logged"), (res.get("jlu") or {}).get("deliverable")):
-        if dl:  # equations for new logs: the i3 with heater and A/C logged, the JLU car on the road
+    for dl in ((res.get("bmw_i3") or {}).get("deliverable_logged"), (res.get("jlu") or {}).get("deliverable"),
+               (res.get("prius2") or {}).get("deliverable")):
+        if dl:  # equations for new logs: the i3 with heater and A/C logged, the JLU car on the road,
+            # the Prius Gen 2's fuel
             save_equation(equation_from_dict(dl["equation"]), out.parent / "energy-chain" / dl["file"])
     write_json(out.with_suffix(".json"), plain(res))
     write_text(out, render(res, cmd))

@@ -94,6 +94,14 @@ def render(res: dict, command: str) -> str:
                      f"{r['predicted_l']:.3f} | {_pct(r['error'])} | {_pct(r['error_vs_raw'])} | "
                      f"{_pct(r['error_chain_fitted_on_equation'])} | {r['predicted_co2_kg']:.2f} |")
         L += _prius_sumo(p["rows"])
+        dv = p.get("deliverable")
+        if dv:
+            L += ["", f"**For new logs of this car**: `docs/energy-chain/{dv['file']}`, the same pipeline fitted on "
+                  "both trips. Compared with new logs (`sumo-drvpw compare`, vehicle `prius2`, this equation file) it "
+                  "reports the fuel per trip, scored with the battery's energy change taken off the prediction; its "
+                  "held-out quality is the rows above (two trips: a hint, not a validation); on the two trips "
+                  f"themselves {_pct(dv['mean_abs_error_in_sample'])[1:]} ("
+                  + ", ".join(f"{t} {_pct(e)}" for t, e in dv["in_sample"].items()) + ")."]
         for t, f in p["fits"].items():
             L += ["", f"Chain calibrated without {t} on the measured P_PTdrv (R² = {f['r2']:.3f}); "
                   "road load " + ", ".join(f"{k} = {v:.4g}" for k, v in f["road_load"].items()) + ":", ""]
