@@ -337,6 +337,14 @@ def _i3_kfold_table(i3: dict) -> list[str]:
     return L + [""]
 
 
+def _road_and_eta(dv) -> str:
+    """"road load `acc` 1.18, …; η_t 0.929, η_r 0.935" of a deliverable's summary."""
+    ch = dv["chain"]
+    return ("road load " + ", ".join(f"`{k}` {v:.4g}" for k, v in dv["road_load"].items())
+            + f"; η_t {ch.get('traction_efficiency', float('nan')):.3f}, η_r "
+            f"{ch.get('recuperation_efficiency', float('nan')):.3f}")
+
+
 def _deliverable(dv) -> list[str]:
     """The i3 battery equation for SUMO studies (fitted on every trip) in one paragraph."""
     if not dv:
@@ -344,10 +352,8 @@ def _deliverable(dv) -> list[str]:
     ch = dv["chain"]
     lim = dv.get("recuperation_limit_w")
     return ["", f"**For SUMO studies**: `docs/energy-chain/{dv['file']}` (written by `python -m "
-            "sumo_drvpw.validation.chain`), this form fitted on every trip — road load "
-            + ", ".join(f"`{k}` {v:.4g}" for k, v in dv["road_load"].items())
-            + f"; η_t {ch.get('traction_efficiency', float('nan')):.3f}, η_r "
-            f"{ch.get('recuperation_efficiency', float('nan')):.3f}, constant {ch.get('aux_power_w', float('nan')):.0f} W, "
+            "sumo_drvpw.validation.chain`), this form fitted on every trip — " + _road_and_eta(dv)
+            + f", constant {ch.get('aux_power_w', float('nan')):.0f} W, "
             f"heating {ch.get('hvac.heating_w_per_k', float('nan')):.0f} W/K and cooling "
             f"{ch.get('hvac.cooling_w_per_k', float('nan')):.0f} W/K from 20 °C"
             + (f", cabin warm-up {ch['hvac.warmup_j_per_k'] / 1000:.0f} kJ/K at a cold start (booked only where "
@@ -365,10 +371,8 @@ def _deliverable_logged(dv, k) -> list[str]:
     ch = dv["chain"]
     lim = dv.get("recuperation_limit_w")
     return ["", f"**For new logs of this car** (heater V·I and A/C power logged): `docs/energy-chain/{dv['file']}`, "
-            "the pipeline above fitted on every trip — road load "
-            + ", ".join(f"`{t}` {v:.4g}" for t, v in dv["road_load"].items())
-            + f"; η_t {ch.get('traction_efficiency', float('nan')):.3f}, η_r "
-            f"{ch.get('recuperation_efficiency', float('nan')):.3f} (the logger's regenerative torque under-reads: "
+            "the pipeline above fitted on every trip — " + _road_and_eta(dv)
+            + " (the logger's regenerative torque under-reads: "
             f"not for SUMO), constant {ch.get('aux_power_w', float('nan')):.0f} W, heater and A/C at gain 1"
             + (f", recuperation limit {lim / 1000:.1f} kW" if lim else "")
             + "; with the closed loop's `[measurement]`. Compared with new logs (`sumo-drvpw compare`, vehicle "
