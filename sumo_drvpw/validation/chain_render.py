@@ -328,8 +328,7 @@ def _i3_kfold_table(i3: dict) -> list[str]:
          + ". Without the heater's own log the per-trip battery energy is this much less certain: "
          "cabin heating depends on set-point, pre-conditioning and warm-up, not on the ambient temperature alone.",
          *_warmup(k),
-         *_deliverable(i3.get("deliverable")),
-         *_deliverable_logged(i3.get("deliverable_logged"), k),
+         *_deliverables(i3.get("deliverable"), i3.get("deliverable_logged"), k),
          "", "Training-side choice of the efficiency (inner mean |error| constant → tables per inner fold):", ""]
     L += [f"- 2-fold, fold {n}: " + _selection(f["map_selection"]) for n, f in i3["fits"].items()
           if f.get("map_selection")]
@@ -345,41 +344,39 @@ def _road_and_eta(dv) -> str:
             f"{ch.get('recuperation_efficiency', float('nan')):.3f}")
 
 
-def _deliverable(dv) -> list[str]:
-    """The i3 battery equation for SUMO studies (fitted on every trip) in one paragraph."""
-    if not dv:
-        return []
-    ch = dv["chain"]
-    lim = dv.get("recuperation_limit_w")
-    return ["", f"**For SUMO studies**: `docs/energy-chain/{dv['file']}` (written by `python -m "
-            "sumo_drvpw.validation.chain`), this form fitted on every trip — " + _road_and_eta(dv)
-            + f", constant {ch.get('aux_power_w', float('nan')):.0f} W, "
-            f"heating {ch.get('hvac.heating_w_per_k', float('nan')):.0f} W/K and cooling "
-            f"{ch.get('hvac.cooling_w_per_k', float('nan')):.0f} W/K from 20 °C"
-            + (f", cabin warm-up {ch['hvac.warmup_j_per_k'] / 1000:.0f} kJ/K at a cold start (booked only where "
-               "the run says trips start cold: `[vehicles] cold_start`, a vType's `cold_start` or the run command's cold-start option)"
-               if ch.get("hvac.warmup_j_per_k") else "")
-            + (f", recuperation limit {lim / 1000:.1f} kW" if lim else ", no recuperation limit kept")
-            + ". In a scenario: `[vtypes.<id>] equations = [\"docs/energy-chain/" + dv["file"] + "\"]` and "
-            "`[air] temperature_c` (the HVAC's ambient temperature); its held-out quality is the rows above (the warm-up booked as the run's cold-start share says)."]
-
-
-def _deliverable_logged(dv, k) -> list[str]:
-    """The i3 battery equation for new logs with the heater and A/C logged, in one paragraph."""
-    if not dv:
-        return []
-    ch = dv["chain"]
-    lim = dv.get("recuperation_limit_w")
-    return ["", f"**For new logs of this car** (heater V·I and A/C power logged): `docs/energy-chain/{dv['file']}`, "
-            "the pipeline above fitted on every trip — " + _road_and_eta(dv)
-            + " (the logger's regenerative torque under-reads: "
-            f"not for SUMO), constant {ch.get('aux_power_w', float('nan')):.0f} W, heater and A/C at gain 1"
-            + (f", recuperation limit {lim / 1000:.1f} kW" if lim else "")
-            + "; with the closed loop's `[measurement]`. Compared with new logs (`sumo-drvpw compare`, vehicle "
-            "`bmw_i3`, this equation file) it reports the battery energy per trip (`trip_net_energy`); "
-            f"its held-out quality is the {k['k']}-fold pipeline's: {_pct(k['mean_abs_error'])[1:]} over all trips, "
-            f"{_pct(k['mean_abs_error_unflagged'])[1:]} on those with the heater's V·I logged (a trip without it is "
-            "predicted without its heater)."]
+def _deliverables(dv, dl, k) -> list[str]:
+    """The i3 battery equations fitted on every trip, a paragraph each: ``dv`` for SUMO
+    studies, ``dl`` for new logs with the heater and A/C logged (``k``: the k-fold results)."""
+    out = []
+    for d in (dv, dl):
+        if not d:
+            continue
+        ch, lim = d["chain"], d.get("recuperation_limit_w")
+        if d is dv:
+            out += ["", f"**For SUMO studies**: `docs/energy-chain/{d['file']}` (written by `python -m "
+                    "sumo_drvpw.validation.chain`), this form fitted on every trip — " + _road_and_eta(d)
+                    + f", constant {ch.get('aux_power_w', float('nan')):.0f} W, "
+                    f"heating {ch.get('hvac.heating_w_per_k', float('nan')):.0f} W/K and cooling "
+                    f"{ch.get('hvac.cooling_w_per_k', float('nan')):.0f} W/K from 20 °C"
+                    + (f", cabin warm-up {ch['hvac.warmup_j_per_k'] / 1000:.0f} kJ/K at a cold start (booked only "
+                       "where the run says trips start cold: `[vehicles] cold_start`, a vType's `cold_start` or the "
+                       "run command's cold-start option)" if ch.get("hvac.warmup_j_per_k") else "")
+                    + (f", recuperation limit {lim / 1000:.1f} kW" if lim else ", no recuperation limit kept")
+                    + ". In a scenario: `[vtypes.<id>] equations = [\"docs/energy-chain/" + d["file"] + "\"]` and "
+                    "`[air] temperature_c` (the HVAC's ambient temperature); its held-out quality is the rows above "
+                    "(the warm-up booked as the run's cold-start share says)."]
+        else:
+            out += ["", "**For new logs of this car** (heater V·I and A/C power logged): "
+                    f"`docs/energy-chain/{d['file']}`, the pipeline above fitted on every trip — " + _road_and_eta(d)
+                    + " (the logger's regenerative torque under-reads: "
+                    f"not for SUMO), constant {ch.get('aux_power_w', float('nan')):.0f} W, heater and A/C at gain 1"
+                    + (f", recuperation limit {lim / 1000:.1f} kW" if lim else "")
+                    + "; with the closed loop's `[measurement]`. Compared with new logs (`sumo-drvpw compare`, "
+                    "vehicle `bmw_i3`, this equation file) it reports the battery energy per trip "
+                    f"(`trip_net_energy`); its held-out quality is the {k['k']}-fold pipeline's: "
+                    f"{_pct(k['mean_abs_error'])[1:]} over all trips, {_pct(k['mean_abs_error_unflagged'])[1:]} on "
+                    "those with the heater's V·I logged (a trip without it is predicted without its heater)."]
+    return out
 
 
 def _warmup(k) -> list[str]:
