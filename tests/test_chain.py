@@ -856,6 +856,40 @@ def test_cold_start_shares_book_share_times_one_start(shares, air, steps, seed):
     assert on.cold_starts == int((sh > 0).sum()) and on.cold_starts_expected == pytest.approx(sh.sum())
 
 
+@settings(max_examples=60, deadline=None)
+@given(own=st.dictionaries(st.sampled_from(["a", "b.1", "f.2"]), st.sampled_from([0.0, 0.3, 1.0]), max_size=3),
+       flows=st.dictionaries(st.sampled_from(["f", "g", "b"]), st.sampled_from([0.0, 0.6, 1.0]), max_size=3),
+       vtypes=st.dictionaries(st.sampled_from(["car", "van"]), st.sampled_from([0.0, 0.2]), max_size=2),
+       vclasses=st.dictionaries(st.sampled_from(["passenger", "delivery"]), st.sampled_from([0.0, 0.7]),
+                                max_size=2),
+       run_share=st.sampled_from([0.0, 0.4, 1.0]),
+       vid=st.sampled_from(["a", "b.1", "f.2", "f.x", "g.10", "h", "g"]),
+       vtype=st.sampled_from(["car", "van", "bus"]), vclass=st.sampled_from(["passenger", "delivery", "bus"]))
+def test_a_vehicles_share_is_its_most_specific_one(own, flows, vtypes, vclasses, run_share, vid, vtype, vclass):
+    """ChainLedger.share_of: the vehicle's own param, else its flow's (ids ``<flow>.<n>``,
+    n digits only), else its vType's, else its vClass's, else the run's share; cold starts
+    are on exactly when any of these is above 0."""
+    from sumo_drvpw.sim.chain import ChainLedger
+
+    fuel = EnergyChain(predicts="fuel", idle_fuel_power_w=4000.0, marginal_efficiency=0.35,
+                       engine_off_below_w=-np.inf, cold_start_fuel_l=0.06)
+    led = ChainLedger(["f"], [fuel], 2, cold_start=run_share, cold_start_vtypes=vtypes,
+                      cold_start_vclasses=vclasses, cold_start_vehicles=own, cold_start_flows=flows)
+    head, _, tail = vid.rpartition(".")
+    if vid in own:
+        want = own[vid]
+    elif head and tail.isdigit() and head in flows:
+        want = flows[head]
+    elif vtype in vtypes:
+        want = vtypes[vtype]
+    else:
+        want = vclasses.get(vclass, run_share)
+    assert led.share_of(vtype, vclass, vid) == want
+    assert led.share_of(vtype, vclass) == (vtypes[vtype] if vtype in vtypes else vclasses.get(vclass, run_share))
+    every = [run_share, *own.values(), *flows.values(), *vtypes.values(), *vclasses.values()]
+    assert led.cold_start_on == any(x > 0 for x in every)
+
+
 def test_sumo_run_chain_accounts_balance():
     """A real SUMO run (city scenario, 150 s): chain energy per vehicle = Σ over its steps;
     vehicle, edge and class totals agree; auxiliary energy accrues while standing."""
