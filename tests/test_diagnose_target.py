@@ -64,9 +64,10 @@ def test_standstill_aux_by_hand():
         chain_from_dict({"aux_power_w": 100, "standstill_aux_w": -500})
 
 
-@pytest.mark.parametrize("kind", ["battery", "battery_limit", "fuel"])
+@pytest.mark.parametrize("kind", ["battery", "battery_limit", "fuel", "fuel_cold"])
 def test_linearised_columns_sum_to_the_chain(kind):
-    """Σ columns + offset = the chain's prediction at the declared coefficients (any regime)."""
+    """Σ columns + offset = the chain's prediction at the declared coefficients (any regime;
+    a fuel chain with a warm-running factor too, at each sample's air temperature)."""
     rng = np.random.default_rng(1)
     n = 4000
     v = np.abs(rng.normal(12, 8, n))
@@ -79,7 +80,9 @@ def test_linearised_columns_sum_to_the_chain(kind):
                                        "cooling_w_per_k": 10.0}),
           "battery_limit": EnergyChain("battery", 0.92, 0.8, recuperation_limit_w=15000.0, aux_power_w=400),
           "fuel": EnergyChain("fuel", 0.95, aux_power_w=500, idle_fuel_power_w=9000, marginal_efficiency=0.38,
-                              engine_off_below_w=3000, engine_on_above_mps=20.0)}[kind]
+                              engine_off_below_w=3000, engine_on_above_mps=20.0),
+          "fuel_cold": EnergyChain("fuel", 0.95, aux_power_w=500, idle_fuel_power_w=9000, marginal_efficiency=0.38,
+                                   engine_off_below_w=-np.inf, running_fuel_per_k=0.003)}[kind]
     eq = Equation("e", {"acc": 1.05, "aero": 0.33, "roll": 0.012, "grade": 1.0}, chain=ch)
     cols, off = linearised_columns(eq, x)
     total = sum(cols.values()) + off

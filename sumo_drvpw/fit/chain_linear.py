@@ -118,13 +118,14 @@ def predict(equation: Equation, inputs, signals=None) -> np.ndarray:
     return equation.chain.evaluate(p, inputs.v, signals=inputs.signals if signals is None else signals)["power_w"]
 
 
-def gains(chain: EnergyChain, p_w, v_mps) -> tuple[np.ndarray, np.ndarray]:
+def gains(chain: EnergyChain, p_w, v_mps, signals=None) -> tuple[np.ndarray, np.ndarray]:
     """(g_wheel, g_aux): the target's change per W of driving power and per W of
-    auxiliary load at driving power ``p_w`` [W] and speed ``v_mps`` [m/s] (module docstring)."""
+    auxiliary load at driving power ``p_w`` [W] and speed ``v_mps`` [m/s] (module docstring);
+    a fuel chain's warm-running factor at the air temperature of ``signals`` included."""
     p = np.asarray(p_w, float)
     v = np.broadcast_to(np.asarray(v_mps, float), p.shape)
     if chain.predicts == "fuel":
-        on = chain.engine_on(p, v).astype(float)
+        on = chain.engine_on(p, v).astype(float) * chain.running_factor(p.size, signals)
         gw = on * (p > 0) / (_eff(chain.traction_efficiency, v, p) * chain.marginal_efficiency)
         return gw, on / chain.marginal_efficiency
     lim = np.inf if chain.recuperation_limit_w is None else chain.recuperation_limit_w
@@ -145,7 +146,7 @@ def linearised_columns(equation: Equation, inputs) -> tuple[dict, np.ndarray]:
     ch = equation.chain
     x = inputs.with_mass(equation.mass_kg) if equation.mass_kg else inputs
     p = equation.power(x)
-    gw, ga = gains(ch, p, inputs.v)
+    gw, ga = gains(ch, p, inputs.v, inputs.signals)
     names = equation.term_names
     tm = term_matrix(names, x)
     cols = {t: gw * tm[:, j] * equation.terms[t] for j, t in enumerate(names)}
@@ -153,7 +154,7 @@ def linearised_columns(equation: Equation, inputs) -> tuple[dict, np.ndarray]:
     if ch.predicts == "fuel":
         aux = ch.auxiliary(n, inputs.signals)
         cols["aux"] = ga * aux
-        cols["idle_fuel_power_w"] = ch.engine_on(p, inputs.v) * ch.idle_fuel_power_w
+        cols["idle_fuel_power_w"] = ch.engine_on(p, inputs.v) * ch.idle_fuel_power_w * ch.running_factor(n, inputs.signals)
         return cols, np.zeros(n)
     aux = ch.auxiliary(n, inputs.signals) + ch.standstill_aux_w * (inputs.v < STANDSTILL_MPS)
     cols["aux"] = ga * aux
