@@ -1594,3 +1594,45 @@ def test_prius2_fuel_deliverable_through_the_cli(shared_data, tmp_path):
     assert set(got) == set(ref) == {"From_CdA_Act", "To_CdA_Act"}
     for t in ref:
         assert got[t]["error"] == pytest.approx(ref[t], abs=1e-6), t
+
+
+def test_a_traci_script_says_which_added_vehicle_starts_cold(tmp_path):
+    """Accountant.set_cold_start in a user's own libsumo loop: a vehicle the script adds
+    (vehicle.add) and says starts cold books one cold start (0.07 L), the scenario's own
+    vehicles none (the run's share is 0); saying it after the departure, a share outside
+    0–1, or for a run without an energy chain is a ValueError."""
+    pytest.importorskip("libsumo")
+    import dataclasses
+    from pathlib import Path
+
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    city = Path(__file__).resolve().parent.parent / "scenarios" / "city.toml"
+    eqs = _chain_equations()
+    eqs[0].chain = dataclasses.replace(eqs[0].chain, cold_start_fuel_l=0.07)
+    sc = load_scenario(city, end=120)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, equations=eqs[:1], scenario=city)
+        conn.addStepListener(acc)
+        conn.route.add("r_added", ["c00c10", "c10c20"])
+        conn.vehicle.add("added", "r_added", typeID="prius3", depart="now")
+        acc.set_cold_start("added", True)
+        with pytest.raises(ValueError, match="0–1"):
+            acc.set_cold_start("later", 1.5)
+        while conn.simulation.getTime() < 120 - 1e-9:
+            conn.simulationStep()
+        with pytest.raises(ValueError, match="departed already"):
+            acc.set_cold_start("added", 0.5)
+        res = acc.result()
+        bare = Accountant(conn, equations=["vsp_ldv1999"], scenario=city)
+        with pytest.raises(ValueError, match="no energy chain"):
+            bare.set_cold_start("x", 1.0)
+    finally:
+        close_sumo(conn)
+    res.write(tmp_path / "o")
+    veh = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").query("equation == 'drvpw_prius3'").set_index("key")
+    assert len(veh) > 5 and veh.loc["added", "cold_start_l"] == pytest.approx(0.07, rel=1e-12)
+    assert (veh.drop(index="added")["cold_start_l"] == 0).all()
+    assert res.summary["chain"]["cold_start"]["vehicles"] == 1

@@ -216,6 +216,30 @@ class Accountant(_Listener):
                     out[name]["chain"] = q
         return out
 
+    def set_cold_start(self, vehicle_id: str, share) -> None:
+        """Say that vehicle ``vehicle_id`` (e.g. one this script adds with
+        ``vehicle.add``) starts cold with this share (True/False or 0–1): at its departure
+        the energy chains book ``share`` × their cold start, as for a route file's
+        ``drvpw.cold_start`` param, which this overrides. Call it before the vehicle departs.
+        ValueError when the share is not one, the vehicle has departed already, or no
+        equation of the run books fuel or battery energy."""
+        if isinstance(share, bool):
+            share = 1.0 if share else 0.0
+        try:
+            share = float(share)
+        except (TypeError, ValueError):
+            share = float("nan")
+        if not 0.0 <= share <= 1.0:
+            raise ValueError(f"set_cold_start: the share must be true, false or 0–1, got {share!r}")
+        chain = getattr(self.ledger, "chain", None)
+        if chain is None:
+            raise ValueError("set_cold_start: no equation of this run books fuel or battery energy (no energy chain)")
+        if vehicle_id in self.stepper.vmap:
+            raise ValueError(f"set_cold_start: vehicle '{vehicle_id}' has departed already; its departure booked its "
+                             "cold start (say it before it departs)")
+        chain.cold_start_vehicles[str(vehicle_id)] = share
+        chain.cold_start_on = chain.cold_start_on or share > 0
+
     # -- the end --------------------------------------------------------------------------
     def close_trace(self) -> None:
         if self.trace is not None:
