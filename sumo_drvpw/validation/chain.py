@@ -225,7 +225,11 @@ def prius2_fuel_equation(mw, mf, veh, trips, dt) -> dict:
     eq.description = ("Prius Gen 2 fuel (TorquePro OBD logs, 2 trips): DrvPw road load and a Willans chain with "
                       "engine-off, fitted on the measured power-split driving power; fuel compared after the "
                       "hybrid battery's energy change (docs/energy-chain-validation.md: each trip predicted "
-                      "without it). Two mostly-highway trips: a hint, not a validation")
+                      "without it). Two mostly-highway trips: a hint, not a validation. For new logs of this car "
+                      "and logger, not for SUMO: its acc and grade coefficients ("
+                      f"{eq.terms.get('acc', float('nan')):.2f}, {eq.terms.get('grade', float('nan')):.2f}; physics: "
+                      "about 1) absorb the logger's lag between power and speed and its smoothed grade "
+                      "(docs/closing-the-loop.md corrects them in the data)")
     eq.provenance = dict(eq.provenance or {}, method="python -m sumo_drvpw.validation.chain",
                          trips=sorted(set(trips.tolist())), vehicle="prius2")
     # as `compare` scores a fuel chain: the prediction less k × the hybrid battery's power

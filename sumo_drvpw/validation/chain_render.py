@@ -97,7 +97,10 @@ def render(res: dict, command: str) -> str:
         dv = p.get("deliverable")
         if dv:
             L += ["", f"**For new logs of this car**: `docs/energy-chain/{dv['file']}`, the same pipeline fitted on "
-                  "both trips. Compared with new logs (`sumo-drvpw compare`, vehicle `prius2`, this equation file) it "
+                  "both trips, for new logs of this car and logger (not for SUMO: its `acc` and `grade` coefficients, "
+                  f"{dv['equation']['terms'].get('acc', float('nan')):.2f} and "
+                  f"{dv['equation']['terms'].get('grade', float('nan')):.2f}, absorb the logger's lag and smoothed "
+                  "grade). Compared with new logs (`sumo-drvpw compare`, vehicle `prius2`, this equation file) it "
                   "reports the fuel per trip, scored with the battery's energy change taken off the prediction; its "
                   "held-out quality is the rows above (two trips: a hint, not a validation); on the two trips "
                   f"themselves {_pct(dv['mean_abs_error_in_sample'])[1:]} ("
