@@ -40,7 +40,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--air-temperature", type=float, metavar="C",
                         help="air temperature [°C], replacing the scenario's [air] (ρ from it at the "
                              "scenario's pressure, else 101.325 kPa); the equations' cold terms and "
-                             "the energy chains' HVAC read it")
+                             "the energy chains' HVAC, cold starts and warm-engine fuel read it")
     add_cold_start(parser, "during the run")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
