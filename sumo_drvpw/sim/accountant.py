@@ -237,8 +237,7 @@ class Accountant(_Listener):
         if vehicle_id in self.stepper.vmap:
             raise ValueError(f"set_cold_start: vehicle '{vehicle_id}' has departed already; its departure booked its "
                              "cold start (say it before it departs)")
-        chain.cold_start_vehicles[str(vehicle_id)] = share
-        chain.cold_start_on = chain.cold_start_on or share > 0
+        chain.set_vehicle_share(vehicle_id, share)
 
     # -- the end --------------------------------------------------------------------------
     def close_trace(self) -> None:

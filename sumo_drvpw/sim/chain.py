@@ -218,6 +218,12 @@ class ChainLedger:
             return self.cold_start_vtypes[vtype]
         return self.cold_start_vclasses.get(vclass, self.cold_start)
 
+    def set_vehicle_share(self, vid: str, share: float) -> None:
+        """Vehicle ``vid``'s own cold-start share (0–1, checked by the caller), as a route
+        file's param gives one; cold starts are booked from now on if it is above 0."""
+        self.cold_start_vehicles[str(vid)] = float(share)
+        self.cold_start_on = self.cold_start_on or share > 0
+
     def depart(self, vidx, ids, veh_type, veh_class) -> None:
         """Vehicle rows ``vidx`` (ids ``ids``) departed this step: :meth:`start` with each
         one's :meth:`share_of` (its vType and vClass from the row arrays given)."""
@@ -433,10 +439,15 @@ class ChainLedger:
                                       cdist, list(cls))}
 
 
+#: ChainLedger's cold-start keywords (the same names as the loop's Physics fields)
+COLD_START_KEYWORDS = ("cold_start", "cold_start_vtypes", "cold_start_vclasses", "cold_start_vehicles",
+                       "cold_start_flows")
+
+
 def chain_ledger(equations, n_edges: int, signal_values: dict | None = None,
                  **cold_start) -> ChainLedger | None:
     """A :class:`ChainLedger` for the equations that carry a battery or fuel chain, or None;
-    ``cold_start``: its cold-start keywords (``cold_start``, ``cold_start_vtypes``, …)."""
+    ``cold_start``: its cold-start keywords (:data:`COLD_START_KEYWORDS`)."""
     chains = [getattr(e, "chain", None) for e in equations]
     if not any(c is not None and c.predicts != "wheel" for c in chains):
         return None

@@ -173,14 +173,12 @@ class Stepper:
                  trace=None, use_subscriptions: bool = False):
         self.conn, self.net, self.eqset, self.ledger = conn, net, eqset, ledger
         if ledger.chain is None:  # battery/fuel accounts when an equation has a chain (#12)
-            from sumo_drvpw.sim.chain import chain_ledger
+            from sumo_drvpw.sim.chain import COLD_START_KEYWORDS, chain_ledger
 
             ledger.chain = chain_ledger(
                 eqset.equations, ledger.n_edges,
                 None if physics.ambient_c is None else {"ambient_c": physics.ambient_c},
-                cold_start=physics.cold_start, cold_start_vtypes=physics.cold_start_vtypes,
-                cold_start_vclasses=physics.cold_start_vclasses,
-                cold_start_vehicles=physics.cold_start_vehicles, cold_start_flows=physics.cold_start_flows)
+                **{k: getattr(physics, k) for k in COLD_START_KEYWORDS})
         self.physics, self.resolve, self.trace = physics, resolve, trace
         self.use_subscriptions = use_subscriptions
         self.dt = float(conn.simulation.getDeltaT())
