@@ -118,6 +118,11 @@ def test_fcd_without_lanes_is_refused(fcd, tmp_path, capsys):
     bad = tmp_path / "no_lane.xml"
     bad.write_text(re.sub(r' lane="[^"]*"', "", text))
     _refused(capsys, tmp_path, bad, str(bad), "attribute lane", "vehicle row 1")
+    # a mesoscopic run writes the edge instead of the lane: the message says why that FCD
+    # carries no driving power (it said only that SUMO writes a lane for every vehicle)
+    meso = tmp_path / "meso.xml"
+    meso.write_text(re.sub(r' lane="([^"]*)_\d+"', r' edge="\1"', text))
+    _refused(capsys, tmp_path, meso, str(meso), "attribute lane", "mesoscopic")
 
 
 def test_a_net_that_is_no_network_is_named(tmp_path, capsys):

@@ -927,7 +927,8 @@ def test_a_config_written_for_traci_scripts_does_not_wait_for_a_client(tmp_path)
     ("HBEFA4/PC_diesel_Euro-6", "diesel"), ("HBEFA3/PC_D_EU6", "diesel"), ("HBEFA4/LCV_diesel_N1-III_Euro-6ab", "diesel"),
     ("HBEFA4/RT_le7.5t_Euro-VI_A-C", "diesel"), ("HBEFA4/UBus_Std_gt15-18t_Euro-VI_A-C", "diesel"),
     ("HBEFA3/HDV", "diesel"), ("HBEFA3/Bus", "diesel"), ("Energy/unknown", "electricity"),
-    ("MMPEVEM/unknown", "electricity"), ("Zero/default", "electricity"), ("HBEFA3/zero", "electricity"),
+    ("MMPEVEM/unknown", "electricity"), ("MMPEVEM", "electricity"), ("Energy", "electricity"),
+    ("Zero/default", "electricity"), ("HBEFA3/zero", "electricity"),
     ("HBEFA4/PC_BEV", "electricity"), ("HBEFA4/UBus_Electric_Std_gt15-18t", "electricity"),
     ("HBEFA4/UBus_CNG_Std", "gas"), ("HBEFA4/PC_CNG_petrol_Euro-6_", "gas"), ("HBEFA4/MC_4S_gt250cc_preEuro", "gasoline"),
     ("HBEFA4/UBus_Std_gt15-18t_Ethanol_Euro-VI", "ethanol"), ("HBEFA4/RigidTruck_FCEV_le7_5t", "hydrogen"),
@@ -935,7 +936,8 @@ def test_a_config_written_for_traci_scripts_does_not_wait_for_a_client(tmp_path)
     ("HBEFA2/P_7_7", None), ("", None), (None, None)])
 def test_energy_carrier_of_sumo_emission_classes(ec, carrier):
     """The carrier a SUMO emissionClass names (names as SUMO's emission-model pages and its
-    defaults, vehicletype.getEmissionClass, give them)."""
+    defaults, vehicletype.getEmissionClass, give them; the bare "MMPEVEM" is what every file
+    SUMO ships in data/emissions/MMPEVEM writes, and was booked as a petrol car)."""
     from sumo_drvpw.sim.vtypes import energy_carrier
 
     assert energy_carrier(ec) == carrier

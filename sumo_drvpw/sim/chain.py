@@ -415,6 +415,16 @@ class ChainLedger:
                 rows.append(r)
         return rows
 
+    def columns(self) -> list[str]:
+        """The columns of :meth:`table`'s rows (the header of a table without rows)."""
+        fuel = ["fuel_l", "co2_kg", "fuel_kwh", *(["cold_start_l"] if self.cold_start_on else []),
+                "fuel_l_per_100km", "co2_g_per_km"]
+        battery = ["traction_kwh", "recuperated_kwh", "auxiliary_kwh", "net_kwh", "net_kwh_per_km"]
+        cols = ["key", "equation", "distance_km"]
+        for e in self.active:
+            cols += fuel if self.chains[e].predicts == "fuel" else battery
+        return list(dict.fromkeys(cols))
+
     def report(self, veh_ids: list[str], veh_classes: list[str], edge_ids: list[str],
                class_order=None) -> dict:
         """Per-vehicle, per-edge and per-class rows (see :meth:`table`); the vehicles held in
@@ -535,7 +545,8 @@ def write_chain_outputs(out_dir, result) -> dict[str, str]:
         if key == "vehicles" and spill is not None and spill.has_chain_rows:
             spill.write_chain_csv(path, rows)  # the flushed vehicles' rows, then the rest
         else:
-            write_text(path, pd.DataFrame(rows).to_csv(index=False))
+            write_text(path, pd.DataFrame(rows, columns=None if rows else chain.columns())
+                       .to_csv(index=False))
         files[f"chain_{key}"] = str(path)
     result.summary["chain"] = chain_summary(chain, ids, classes, order)
     return files

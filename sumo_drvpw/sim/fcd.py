@@ -348,6 +348,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
 
     net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
     parked = ParkedTest(net, bus_stops(sc.additional_files))
+    method = step_method(sc, fcd_file)
     if chunk_rows is None:
         df = read_fcd(fcd_file)
         df["off"] = parked({k: df[k].to_numpy() for k in df.columns})
@@ -373,6 +374,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         replay = FcdStream(steps, dt=sc.step_length, end_s=sc.end, label=fcd_file)
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
+    replay.options = {"step-method.ballistic": str(method == "ballistic").lower()}
     acc = Accountant(replay, scenario=sc,
                      trace_path=Path(out_dir) / "trace.parquet" if sc.trace and out_dir else None,
                      spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,
@@ -405,6 +407,36 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         if out_dir is not None and publish:
             discard_parts(acc.ledger)
     return result
+
+
+#: SUMO's words for true and false in a boolean option
+_TRUE, _FALSE = ("true", "1", "yes", "on", "x"), ("false", "0", "no", "off")
+
+
+def step_method(sc, fcd_file) -> str:
+    """How the recording moved its vehicles, "ballistic" or "euler" (the step's distance:
+    the mean of the step's two speeds × Δt, or the new speed × Δt): the FCD file's own
+    header says (SUMO writes the run's options that differ from its defaults, so without
+    ``step-method.ballistic`` it was Euler); without one, the scenario's SUMO options and
+    then its config; else SUMO's default, Euler."""
+    from sumo_drvpw.sim.fcd_read import header_options
+    from sumo_drvpw.sim.scenario import _config_files
+
+    key = "step-method.ballistic"
+    head = header_options(fcd_file)
+    val = None if head is None else head.get(key, "false")
+    if val is None:
+        args = list(sc.sumo_args)
+        for i, a in enumerate(args):  # the last one wins, as in SUMO
+            if a == "-c" and i + 1 < len(args) and Path(args[i + 1]).is_file():
+                val = _config_files(Path(args[i + 1]))[2].get(key, val)
+        for i, a in enumerate(args):
+            if a == f"--{key}":  # a flag, or followed by its value
+                nxt = args[i + 1].lower() if i + 1 < len(args) else ""
+                val = nxt if nxt in _TRUE + _FALSE else "true"
+            elif a.startswith(f"--{key}="):
+                val = a.split("=", 1)[1]
+    return "ballistic" if (val or "false").strip().lower() in _TRUE else "euler"
 
 
 def lane_warnings(fcd_file, net_file, unknown: int, known: int, first) -> list[str]:

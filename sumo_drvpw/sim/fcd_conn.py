@@ -7,6 +7,7 @@ persons riding in vehicles (at the vehicle's x, y and speed: :class:`_Rows`)."""
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -44,6 +45,9 @@ class _Sim(_Domain):
 
     def getDepartedPersonIDList(self):  # noqa: N802
         return self.r.departed_persons if self.r.count_persons else ()
+
+    def getOption(self, key):  # noqa: N802 (the recording's, where the replay knows it)
+        return self.r.options[key]
 
 
 class _Person(_Domain):
@@ -224,16 +228,21 @@ class ParkedTest:
             yield b
 
 
-def bus_stops(files) -> dict[str, list[tuple[float, float]]]:
-    """Bus and train stops of SUMO additional files: lane id → [(startPos, endPos)]
-    [m] (SUMO's defaults: 0 and the lane's end; negative positions count from the end, read
-    as 0 / the end here). Unreadable files are left to SUMO."""
+def bus_stops(files, depth: int = 0) -> dict[str, list[tuple[float, float]]]:
+    """Bus and train stops of SUMO additional files (and of the files they ``<include
+    href>``): lane id → [(startPos, endPos)] [m] (SUMO's defaults: 0 and the lane's end;
+    negative positions count from the end, read as 0 / the end here). Unreadable files are
+    left to SUMO."""
     out: dict[str, list[tuple[float, float]]] = {}
     for f in files:
         try:
             with open_maybe_gzip(f) as src:
                 for _, el in ET.iterparse(src, events=("end",)):
-                    if el.tag in ("busStop", "trainStop") and el.get("lane"):
+                    if el.tag == "include" and el.get("href") and depth < 10:
+                        for lane, spans in bus_stops([Path(f).parent / el.get("href")],
+                                                     depth + 1).items():
+                            out.setdefault(lane, []).extend(spans)
+                    elif el.tag in ("busStop", "trainStop") and el.get("lane"):
                         try:
                             a = float(el.get("startPos", 0.0))
                             b = float(el.get("endPos", np.inf))

@@ -137,8 +137,12 @@ def _normalise(df: pd.DataFrame, label, first_row: int, names: dict | None = Non
         miss = df[k].isna().to_numpy() & ~person
         if miss.any():
             i = int(np.flatnonzero(miss)[0])
+            meso = (" of a microscopic simulation (a mesoscopic one writes the edge: it "
+                    "moves vehicles queue by queue, without lanes or accelerations, so no "
+                    "driving power follows from its FCD)") if k == "lane" else ""
             raise UserError(f"FCD file {label}: {names[k]} missing at vehicle row {row(i)} "
-                            f"(vehicle {df['id'].iloc[i]!r}); SUMO writes it for every vehicle")
+                            f"(vehicle {df['id'].iloc[i]!r}); SUMO writes it for every "
+                            f"vehicle{meso}")
     for k in ("id", "type", "lane"):
         out[k] = df[k].astype(str).to_numpy(object)
     out["lane"][person] = ""  # persons walk on edges, not lanes (and ride in vehicles)
@@ -337,6 +341,28 @@ def _csv_blocks(path: Path, chunk_rows: int):
         raise
     except Exception as e:
         raise UserError(f"FCD file {path}: cannot read CSV: {e}") from None
+
+
+def header_options(path) -> dict[str, str] | None:
+    """The options SUMO wrote into the comment at the head of an XML FCD output (those of
+    the run that recorded it which differ from SUMO's defaults: option → value); None when
+    the file has no such header (Parquet, CSV, a folder or pattern of parts, or XML written
+    by another tool)."""
+    import re
+
+    p = Path(path)
+    name = p.name.lower()
+    if fcd_parts(path) or not p.is_file() or name.endswith((".parquet", ".csv", ".csv.gz")):
+        return None
+    try:
+        with open_maybe_gzip(p) as fh:
+            head = fh.read(65536).decode("utf-8", "replace")
+    except (EOFError, OSError, zlib.error):
+        return None  # the reader says what is wrong with the file
+    m = re.search(r"<!--\s*generated on.*?by Eclipse SUMO(.*?)-->", head, re.S)
+    if m is None:
+        return None
+    return dict(re.findall(r"<([\w.:-]+) value=\"([^\"]*)\"\s*/>", m.group(1)))
 
 
 def iter_fcd_blocks(path, chunk_rows: int = CHUNK_ROWS):

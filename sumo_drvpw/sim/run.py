@@ -17,7 +17,8 @@ import numpy as np
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_start import close_sumo, start_sumo
 from sumo_drvpw.sim.vtypes import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER,
-                                   energy_carrier, equation_carrier, read_vtypes)
+                                   SUMO_DEFAULT_VTYPES, energy_carrier, equation_carrier,
+                                   read_vtypes)
 from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, redirect_additional_outputs,
                                          sumo_output_args)
 
@@ -88,8 +89,9 @@ class VTypeResolver:
             return ""
 
     def _vclass(self, vt: str, info, default: str = "passenger") -> str:
-        """SUMO's vClass of a vType, else the files', else SUMO's default for a vehicle
-        (passenger) or, with ``default``, for a person (pedestrian)."""
+        """SUMO's vClass of a vType, else the files', else that of SUMO's own type of this
+        id (DEFAULT_BIKETYPE: bicycle …) when no file declares it, else SUMO's default for a
+        vehicle (passenger) or, with ``default``, for a person (pedestrian)."""
         if self.conn is not None:
             try:
                 vc = self.conn.vehicletype.getVehicleClass(vt)
@@ -97,6 +99,8 @@ class VTypeResolver:
                     return str(vc)
             except Exception:
                 pass
+        if info is None and vt in SUMO_DEFAULT_VTYPES:
+            return SUMO_DEFAULT_VTYPES[vt]
         return (info.vclass if info is not None and info.vclass else None) or default
 
     def _made_for(self, vclass: str) -> list[str]:

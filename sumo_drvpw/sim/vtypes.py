@@ -197,6 +197,12 @@ class VTypeInfo:
 
 
 #: SUMO's default vType lengths of the heavy classes [m] (for the booking note)
+#: the vTypes SUMO declares itself, and their vClasses (SUMO 1.28,
+#: ``vehicletype.getVehicleClass``): what an FCD replay, which has no SUMO to ask, reads
+#: for a vehicle of such a type that no file redeclares
+SUMO_DEFAULT_VTYPES = {"DEFAULT_VEHTYPE": "passenger", "DEFAULT_PEDTYPE": "pedestrian",
+                       "DEFAULT_BIKETYPE": "bicycle", "DEFAULT_TAXITYPE": "taxi",
+                       "DEFAULT_RAILTYPE": "rail", "DEFAULT_CONTAINERTYPE": "container"}
 SUMO_DEFAULT_LENGTH_M = {"bus": 12.0, "coach": 14.0, "truck": 7.1, "army": 7.1}
 
 
@@ -285,47 +291,69 @@ def read_vtypes(files: list[Path]) -> FileVTypes:
     """
     out = FileVTypes()
     for path in files:
-        try:
-            with open_maybe_gzip(path) as fh:
-                for _, el in ET.iterparse(fh, events=("end",)):
-                    tag = el.tag.split("}")[-1]
-                    if tag in VEHICLE_TAGS:
-                        _vehicle_share(out, path, tag, el)
-                        el.clear()
-                        continue
-                    if tag != "vType":
-                        if tag not in ("param",):
-                            el.clear()
-                        continue
-                    vid = el.attrib.get("id")
-                    if vid is None:
-                        continue
-                    params = {p.attrib.get("key"): p.attrib.get("value")
-                              for p in el if p.tag.split("}")[-1] == "param"}
-                    where = f"{path}: vType '{vid}'"
-                    sumo_mass = _mass(where, "mass", el.attrib.get("mass"))
-                    if sumo_mass is None:
-                        sumo_mass = _mass(where, "param vehicleMass", params.get("vehicleMass"))
-                    loading = _mass(where, "param loading", params.get("loading"), zero=True) or 0.0
-                    mass = _mass(where, "drvpw.mass", params.get("drvpw.mass"))
-                    if mass is None and sumo_mass is not None:
-                        mass = sumo_mass + loading
-                    out[vid] = VTypeInfo(vid, mass, params.get("drvpw.equation") or None,
-                                         str(path), el.attrib.get("vClass"), loading,
-                                         el.attrib.get("emissionClass") or None,
-                                         el.attrib.get("guiShape") or None,
-                                         _length(el.attrib.get("length")),
-                                         _capacity(el.attrib.get("personCapacity")),
-                                         _cold_share(where, params.get("drvpw.cold_start")))
-                    el.clear()
-        except ET.ParseError as e:
-            raise UserError(f"{path}: not valid XML: {e}") from None
-        except (EOFError, gzip.BadGzipFile, zlib.error) as e:  # a truncated or corrupt .gz
-            raise UserError(f"{path}: not a readable gzip file (truncated or corrupt?): "
-                            f"{e}") from None
-        except OSError as e:
-            raise UserError(f"{path}: cannot read: {e}") from None
+        _read_vtypes(Path(path), out, 0)
     return out
+
+
+#: how deep ``<include href>`` is followed (SUMO's own XML loader has no limit; a cycle
+#: would have none either)
+INCLUDE_DEPTH = 10
+
+
+def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
+    """:func:`read_vtypes` of one file, and of the files it ``<include href>``s (relative
+    to it, as SUMO resolves them), in document order."""
+    try:
+        with open_maybe_gzip(path) as fh:
+            for _, el in ET.iterparse(fh, events=("end",)):
+                tag = el.tag.split("}")[-1]
+                if tag == "include" and el.attrib.get("href"):
+                    inc = path.parent / el.attrib["href"]
+                    if depth >= INCLUDE_DEPTH:
+                        raise UserError(f"{path}: <include href={el.attrib['href']!r}> "
+                                        f"nested more than {INCLUDE_DEPTH} deep (a cycle?)")
+                    if not inc.is_file():
+                        raise UserError(f"{path}: <include href={el.attrib['href']!r}>: "
+                                        f"no such file {inc}")
+                    _read_vtypes(inc, out, depth + 1)
+                    el.clear()
+                    continue
+                if tag in VEHICLE_TAGS:
+                    _vehicle_share(out, path, tag, el)
+                    el.clear()
+                    continue
+                if tag != "vType":
+                    if tag not in ("param",):
+                        el.clear()
+                    continue
+                vid = el.attrib.get("id")
+                if vid is None:
+                    continue
+                params = {p.attrib.get("key"): p.attrib.get("value")
+                          for p in el if p.tag.split("}")[-1] == "param"}
+                where = f"{path}: vType '{vid}'"
+                sumo_mass = _mass(where, "mass", el.attrib.get("mass"))
+                if sumo_mass is None:
+                    sumo_mass = _mass(where, "param vehicleMass", params.get("vehicleMass"))
+                loading = _mass(where, "param loading", params.get("loading"), zero=True) or 0.0
+                mass = _mass(where, "drvpw.mass", params.get("drvpw.mass"))
+                if mass is None and sumo_mass is not None:
+                    mass = sumo_mass + loading
+                out[vid] = VTypeInfo(vid, mass, params.get("drvpw.equation") or None,
+                                     str(path), el.attrib.get("vClass"), loading,
+                                     el.attrib.get("emissionClass") or None,
+                                     el.attrib.get("guiShape") or None,
+                                     _length(el.attrib.get("length")),
+                                     _capacity(el.attrib.get("personCapacity")),
+                                     _cold_share(where, params.get("drvpw.cold_start")))
+                el.clear()
+    except ET.ParseError as e:
+        raise UserError(f"{path}: not valid XML: {e}") from None
+    except (EOFError, gzip.BadGzipFile, zlib.error) as e:  # a truncated or corrupt .gz
+        raise UserError(f"{path}: not a readable gzip file (truncated or corrupt?): "
+                        f"{e}") from None
+    except OSError as e:
+        raise UserError(f"{path}: cannot read: {e}") from None
 
 
 # ---------------------------------------------------------------------- energy carrier
@@ -362,15 +390,16 @@ PETROL_BODIES = ("mc", "moped")
 def energy_carrier(emission_class: str | None) -> str | None:
     """The energy carrier a SUMO emissionClass names: ``electricity``, ``gasoline``,
     ``diesel``, ``gas``, ``ethanol``, ``hydrogen``, or None when it names none (no class, or a name of
-    no known pattern). Read from the model (``Energy/…``, ``MMPEVEM/…``, ``Zero/…``:
+    no known pattern). Read from the model (``Energy/…``, ``MMPEVEM/…``, ``Zero/…``, or
+    the bare model name, as SUMO's shipped ``data/emissions/MMPEVEM`` files write it:
     electricity) and the words of the name (``PC_petrol_Euro-4``, ``PC_G_EU4``: gasoline;
     ``LCV_diesel_…``, ``PC_D_EU6``: diesel; ``PC_BEV``: electricity); a heavy-duty name
     without a fuel word is diesel."""
     if not emission_class:
         return None
     model, _, name = emission_class.strip().partition("/")
-    if not name:
-        model, name = "", model
+    if not name:  # a bare name: SUMO's own MMPEVEM files write emissionClass="MMPEVEM"
+        model, name = ("", model) if model.strip().lower() not in ELECTRIC_MODELS else (model, "")
     if model.strip().lower() in ELECTRIC_MODELS:
         return "electricity"
     words = [w for w in re.split(r"[^a-z0-9]+", name.lower()) if w]
