@@ -429,6 +429,13 @@ _map_case("unknown option", "[options]\nspeed = 1\n" + MAP_OK, ("speed",))
 _map_case("speed not mapped", '[columns."t"]\nname = "time_s"\n', ("speed_mps",))
 _map_case("mapping not utf-8", ("# Geschwindigkeit \xfc\n" + MAP_OK).encode("latin-1"), ())
 _map_case("mapping toml syntax", MAP_OK + "[[[", ("TOML",))
+# a fuzz run's findings (2026-11-26): accepted before, one silently wrong (hours read as ms)
+_map_case("name is a number", MAP_OK + '[columns."x"]\nname = 5\n', ("columns.x.name", "5"))
+_map_case("unknown top-level table", MAP_OK + "[extras]\nfoo = 1\n", ("extras",))
+_map_case("keep_unmapped a text", '[options]\nkeep_unmapped = "yes"\n' + MAP_OK, ("keep_unmapped", "yes"))
+_map_case("time_format without dates", '[options]\ntime_format = "%H"\n' + MAP_OK, ("time_format",))
+_map_case("time unit given twice, differently", '[options]\ntime_unit = "ms"\n'
+          + MAP_OK.replace('unit = "s"', 'unit = "h"'), ("columns.t.unit", "'h'", "'ms'"))
 
 
 @case("toml-mapping", "wrong encoding for the data", ("src.csv", "utf-16"))
@@ -531,6 +538,40 @@ def _(d):
 def _(d):
     v = text(d, "car.toml", PRIUS3.read_text(encoding="utf-8"))
     return ["export-vtype", "drvpw_prius3", "--vehicle", str(v), "--id", "p3", "--out", str(v)]
+
+
+@case("options", "export-vtype --id SUMO refuses", ("--id", "'a b'"))
+def _(d):  # SUMO 1.28: "Invalid vType id 'a b'. Contains invalid characters"
+    return ["export-vtype", "drvpw_prius3", "--vehicle", "prius3", "--id", "a b",
+            "--out", str(d / "vt.add.xml")]
+
+
+def _battery_log(**cols) -> pd.DataFrame:
+    df = base_log().drop(columns="power_w")
+    return df.assign(**{"battery_voltage_v": 350.0, "battery_current_a": df["speed_mps"] * 2.0,
+                        **cols})
+
+
+@case("drive-log", "battery chain on a voltage logged as 0", ("log.parquet", "0 on every"))
+def _(d):  # exited 0 with R² NaN and both efficiencies at their bounds
+    log = write(d, "log.parquet", _battery_log(battery_voltage_v=0.0))
+    return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--equation", "roadload_spec")
+
+
+@case("drive-log", "battery chain on a load column of text", ("log.parquet", "heater", "not numeric"))
+def _(d):  # said the log had no column 'heater'
+    log = write(d, "log.parquet", _battery_log(heater="x"))
+    return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--equation", "roadload_spec",
+                "--load", "heater")
+
+
+@case("vendor-truncated", "import a vendor value that overflows to inf",
+      ("src.csv", "battery_current_a", "inf"))
+def _(d):  # was written into the canonical log as inf
+    rows = "".join(f"{i / 8},{20 + i % 7},{'1e999' if i == 40 else 5}\n" for i in range(80))
+    s = text(d, "src.csv", "t,v,i\n" + rows)
+    m = text(d, "map.toml", MAP_OK + '[columns."i"]\nname = "battery_current_a"\nunit = "A"\n')
+    return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
 
 
 @case("out-path", "export-vtype --out is a folder", ("vt", "folder"))

@@ -125,6 +125,25 @@ def test_fcd_without_lanes_is_refused(fcd, tmp_path, capsys):
     _refused(capsys, tmp_path, meso, str(meso), "attribute lane", "mesoscopic")
 
 
+@pytest.mark.sumo
+def test_a_row_without_time_or_a_vehicle_twice_in_a_step_is_refused(fcd, tmp_path, capsys):
+    """A fuzz run's findings: a tabular row with an empty timestep_time was dropped without
+    a word (its distance lost), and a vehicle written twice in one timestep was booked
+    twice; both are refused, naming the row."""
+    path, text = fcd
+    df = _tabular(path)
+    df.loc[500, "timestep_time"] = np.nan
+    df.to_csv(tmp_path / "no_time.csv", index=False)
+    _refused(capsys, tmp_path, tmp_path / "no_time.csv", "column timestep_time", "row 501")
+    df = _tabular(path)
+    df = pd.concat([df.iloc[:501], df.iloc[500:501], df.iloc[501:]], ignore_index=True)
+    df.to_csv(tmp_path / "twice.csv", index=False)
+    _refused(capsys, tmp_path, tmp_path / "twice.csv", "appears twice", "row 502")
+    bad = tmp_path / "twice.xml"
+    bad.write_text(_edit_row(text, 4, lambda r: r + r))
+    _refused(capsys, tmp_path, bad, "appears twice", "vehicle row 6")
+
+
 def test_a_net_that_is_no_network_is_named(tmp_path, capsys):
     """Finding 4: ``--net`` given a file with no edges (here: an FCD file) was a
     ValueError."""

@@ -33,9 +33,11 @@ def main(args: argparse.Namespace) -> int:
 
     check_output_path(args.out, [p for p in (args.equation, args.vehicle) if p and Path(p).exists()],
                       kind="file")
-    if not args.id.strip() or any(c in args.id for c in '<>&"') or args.id != args.id.strip():
-        raise UserError(f"--id {args.id!r}: a vType id is a non-empty name without spaces at its ends "
-                        "or the characters < > & \"")
+    bad = [c for c in args.id if c.isspace() or c in "<>&\"|;,'\\"]
+    if not args.id or bad:  # SUMO 1.28 refuses a vType id with these ("invalid characters")
+        raise UserError(f"--id {args.id!r}: a vType id is a non-empty name without spaces or "
+                        f"the characters < > & \" | ; , ' \\ (SUMO refuses them)"
+                        + (f"; it holds {bad[0]!r}" if bad else ""))
     if args.vclass is not None:
         from sumo_drvpw.model.equations import check_vclass
 

@@ -462,6 +462,7 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     dt = m.log.df["dt_s"].to_numpy(float)
     use = m.usable if mask is None else (m.usable & mask)
     sig = m.inputs.signals
+    _check_chain_inputs(m, use, loads)
     if m.target == "fuel":
         fuel = m.vehicle.powertrain.get("fuel", "gasoline") if m.vehicle is not None else "gasoline"
         return calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads,
@@ -471,6 +472,28 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     return calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
                              mask=use, limit=limit, fixed=fixed, efficiency=efficiency,
                              warmup_rate=warmup_rate)
+
+
+def _check_chain_inputs(m, use: np.ndarray, loads) -> None:
+    """UserError, naming the log and the column, where a chain cannot be calibrated: a
+    measured battery or fuel power that never departs from 0 (a voltage logged as 0, a
+    fuel flow never filled: the fit would return efficiencies at their bounds and an R² of
+    NaN), or a load column without a number on the usable samples."""
+    where = m.log.describe()
+    y = np.asarray(m.power_w, float)[use]
+    if use.any() and not np.any(np.nan_to_num(y) != 0):
+        raise UserError(f"{where}: the measured {m.target} power ({m.source}) is 0 on every "
+                        f"one of the {int(use.sum())} usable samples: nothing to calibrate a "
+                        "chain on (a voltage, current or fuel flow logged as 0?)")
+    for c in loads:
+        col = m.inputs.signals.get(c)
+        if col is None and c in m.log.df.columns:
+            first = m.log.df[c].dropna()
+            raise UserError(f"{where}: load column '{c}' is not numeric (first value "
+                            f"{first.iloc[0] if len(first) else None!r}): a load is power in W")
+        if col is not None and not np.isfinite(np.asarray(col, float)[use]).any():
+            raise UserError(f"{where}: load column '{c}' has no number on the "
+                            f"{int(use.sum())} usable samples")
 
 
 def profile_recuperation_limit(p_wheel_w, p_recuperated_w, dt_s, mask=None,

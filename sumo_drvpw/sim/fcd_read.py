@@ -143,8 +143,19 @@ def _normalise(df: pd.DataFrame, label, first_row: int, names: dict | None = Non
             raise UserError(f"FCD file {label}: {names[k]} missing at vehicle row {row(i)} "
                             f"(vehicle {df['id'].iloc[i]!r}); SUMO writes it for every "
                             f"vehicle{meso}")
+    miss = np.isnan(out["time"])  # a row of the tabular FCD without its timestep's time
+    if miss.any():
+        i = int(np.flatnonzero(miss)[0])
+        raise UserError(f"FCD file {label}: {names['time']} missing at row {row(i)} "
+                        f"({'person' if person[i] else 'vehicle'} {df['id'].iloc[i]!r})")
     for k in ("id", "type", "lane"):
         out[k] = df[k].astype(str).to_numpy(object)
+    twice = pd.DataFrame({"t": out["time"], "id": out["id"]})[~person].duplicated().to_numpy()
+    if twice.any():  # SUMO writes a vehicle once per timestep
+        i = int(np.flatnonzero(~person)[np.flatnonzero(twice)[0]])
+        raise UserError(f"FCD file {label}: vehicle {out['id'][i]!r} appears twice at time "
+                        f"{out['time'][i]:g} (vehicle row {row(i)}); SUMO writes each vehicle "
+                        "once per timestep")
     out["lane"][person] = ""  # persons walk on edges, not lanes (and ride in vehicles)
     out["person"] = person
     return out

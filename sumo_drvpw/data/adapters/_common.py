@@ -383,6 +383,8 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
     if dup:
         raise UserError(f"{fmt}: trip_id {dup[0]!r} comes from more than one file: "
                         + ", ".join(r["file"] for r in reports if r["trip_id"] == dup[0]))
+    for f, r in zip(frames, reports):
+        _refuse_infinite(f, r)
     df = pd.concat(frames, ignore_index=True, sort=False)
     df = order_columns(df)
     dropped: dict[str, int] = {}
@@ -393,6 +395,21 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
               "kept": int(len(df)), "dropped": dropped, "notes": list(notes),
               "columns": list(df.columns)}
     return df, report
+
+
+def _refuse_infinite(df: pd.DataFrame, report: dict) -> None:
+    """A vendor value read as ±inf (an overflowing "1e999", a logger's "inf") is no
+    measurement, and downstream it would pass for one (a time of inf even reorders a trip):
+    UserError naming the file, the column and the first such sample."""
+    for c in df.columns:
+        if not pd.api.types.is_float_dtype(df[c]):
+            continue
+        bad = np.isinf(df[c].to_numpy(float))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise UserError(f"{report.get('file', report.get('trip_id'))}: column {c} is "
+                            f"{df[c].iloc[i]} at sample {i + 1} of those kept: not a finite "
+                            "number; fix or drop that value in the vendor file")
 
 
 def read_each(files, read_one) -> tuple[list, list]:

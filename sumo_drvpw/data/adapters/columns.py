@@ -52,12 +52,20 @@ def load_mapping(path) -> dict:
     """Read and check a mapping TOML; every problem is a UserError naming the file and key."""
     p = Path(path)
     doc = read_toml(p, "column mapping")
+    for k in doc:
+        if k not in ("options", "columns"):
+            raise UserError(f"{p}: unknown key '{k}' (a mapping has [options] and "
+                            "[columns.\"<source label>\"])")
     opts = doc.get("options", {})
     if not isinstance(opts, dict):
         raise UserError(f"{p}: [options] must be a table")
     for k in opts:
         if k not in OPTIONS:
             raise UserError(f"{p}: unknown option 'options.{k}' (known: {', '.join(sorted(OPTIONS))})")
+    if "keep_unmapped" in opts and not isinstance(opts["keep_unmapped"], bool):
+        raise UserError(f"{p}: options.keep_unmapped must be true or false, got "
+                        f"{opts['keep_unmapped']!r}")
+
     cols = doc.get("columns")
     if not isinstance(cols, dict) or not cols:
         raise UserError(f"{p}: no [columns.\"<source label>\"] table")
@@ -70,7 +78,13 @@ def load_mapping(path) -> dict:
         for k in e:
             if k not in ENTRY:
                 raise UserError(f"{p}: {key}.{k} is not one of {', '.join(sorted(ENTRY))}")
-        name = str(e["name"])
+        for k in ("name", "unit", "role"):
+            if k in e and not isinstance(e[k], str):
+                raise UserError(f"{p}: {key}.{k} must be a text, got {e[k]!r}")
+        name = e["name"]
+        if name == "time_s" and "unit" in e and "time_unit" in opts and e["unit"] != time_unit:
+            raise UserError(f"{p}: {key}.unit {e['unit']!r} and options.time_unit "
+                            f"{time_unit!r} disagree on the time column's unit: give one")
         unit = str(e.get("unit", time_unit if name == "time_s" else ""))
         scale = e.get("scale", 1.0)
         if not isinstance(scale, (int, float)) or isinstance(scale, bool) or not math.isfinite(scale):
@@ -81,6 +95,9 @@ def load_mapping(path) -> dict:
 
             entries[label]["role"] = check_role(str(e["role"]), f"{p}: {key}.role")
     names = [e["name"] for e in entries.values()]
+    if "time_format" in opts and not any(e["kind"] == "datetime" for e in entries.values()):
+        raise UserError(f"{p}: options.time_format is for timestamps: it goes with a time "
+                        "column read as dates (options.time_unit or its unit = \"datetime\")")
     for need in ("time_s", "speed_mps"):
         if need not in names:
             raise UserError(f"{p}: no source column is mapped to '{need}' (required)")
