@@ -135,7 +135,7 @@ def read_toml(path, what: str) -> dict:
     if not p.is_file():
         raise UserError(f"{what} not found: {p}")
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a byte-order mark (Notepad, Excel) is no TOML
     except UnicodeDecodeError as e:
         raise UserError(f"{p}: not a valid TOML {what}: not UTF-8 text (byte {e.start}); "
                         "save it as UTF-8") from None

@@ -388,6 +388,18 @@ for _k, _v in (("mass_kg", "0"), ("mass_kg", "-1625"), ("mass_kg", "nan"), ("mas
     _veh_case(f"{_k} = {_v}", _k, _v)
 
 
+@case("toml-vehicle", "misspelt key in [body]", ("car.toml", "body.drag_coeficient"))
+def _(d):  # was read as no drag coefficient at all
+    v = text(d, "car.toml", PRIUS3.read_text(encoding="utf-8").replace("drag_coefficient",
+                                                                      "drag_coeficient"))
+    return _cmp(write(d, "log.parquet", base_log().drop(columns="mass_kg")), d,
+                "--vehicle", str(v), "--equation", "drvpw_prius3")
+
+
+_eq_case("std_err of no term", "[terms]\nacc = 1.0\n[std_err]\nacc = 0.01\naero = 0.1\n",
+         ("[std_err]", "aero"))
+
+
 @case("toml-vehicle", "unknown vehicle name", ("no_such_car",))
 def _(d):
     return _cmp(write(d, "log.parquet", base_log()), d, "--vehicle", "no_such_car", "--equation", "drvpw_prius3")
@@ -571,6 +583,30 @@ def _(d):  # was written into the canonical log as inf
     rows = "".join(f"{i / 8},{20 + i % 7},{'1e999' if i == 40 else 5}\n" for i in range(80))
     s = text(d, "src.csv", "t,v,i\n" + rows)
     m = text(d, "map.toml", MAP_OK + '[columns."i"]\nname = "battery_current_a"\nunit = "A"\n')
+    return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
+
+
+@case("vendor-truncated", "import where every time goes backwards", ("src.csv", "time going backwards"))
+def _(d):  # said only "1 sample(s) kept of 80 read", not why
+    s = text(d, "src.csv", "t,v\n" + "".join(f"{(80 - i) / 8},{20 + i % 7}\n" for i in range(80)))
+    m = text(d, "map.toml", MAP_OK)
+    return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
+
+
+@case("toml-equation", "equation file with a UTF-8 byte-order mark", ("wrote",), expect="accept")
+def _(d):  # was "Invalid statement (at line 1, column 1)": Notepad and Excel write the mark
+    eq = d / "eq.toml"
+    eq.write_bytes(b"\xef\xbb\xbf" + DRVPW.read_bytes())
+    return _cmp(write(d, "log.parquet", base_log()), d, "--equation", str(eq))
+
+
+@case("toml-mapping", "mapping and CSV with UTF-8 byte-order marks", ("wrote",), expect="accept")
+def _(d):  # the CSV's first label read as "\ufefft" (bmw-i3-tum: "ï»¿Time [s]") and was missing
+    s = d / "src.csv"
+    s.write_bytes(b"\xef\xbb\xbf" + ("t,v\n" + "".join(f"{i / 8},{20 + i % 7}\n"
+                                                       for i in range(80))).encode())
+    m = d / "map.toml"
+    m.write_bytes(b"\xef\xbb\xbf" + MAP_OK.encode())
     return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
 
 

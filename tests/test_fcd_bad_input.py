@@ -144,6 +144,41 @@ def test_a_row_without_time_or_a_vehicle_twice_in_a_step_is_refused(fcd, tmp_pat
     _refused(capsys, tmp_path, bad, "appears twice", "vehicle row 6")
 
 
+@pytest.mark.sumo
+def test_a_tabular_fcd_with_a_byte_order_mark_is_read(fcd, tmp_path, capsys):
+    """A CSV saved by Excel starts with a UTF-8 byte-order mark: its first column read as
+    '\ufefftimestep_time' and the file was refused for lacking timestep_time. It is read,
+    and books what the XML books."""
+    path, _ = fcd
+    csv = tmp_path / "bom.csv"
+    csv.write_bytes(b"\xef\xbb\xbf" + _tabular(path).to_csv(index=False).encode())
+    runs = []
+    for f, out in ((path, "x"), (csv, "c")):
+        code = cli_main(["fcd", str(f), "--net", str(CITY_NET), "--equation", "vsp_ldv1999",
+                         "--no-figures", "--out", str(tmp_path / out)])
+        assert code == 0, capsys.readouterr().err
+        runs.append(json.loads((tmp_path / out / "summary.json").read_text()))
+    assert runs[1]["vehicles"] == runs[0]["vehicles"] > 0
+    assert runs[1]["equations"] == runs[0]["equations"]
+
+
+@pytest.mark.sumo
+def test_a_gap_in_the_fcd_is_named_as_one(fcd, tmp_path, capsys):
+    """Timesteps missing from an FCD (a gap, or FCD written every n-th step) are not booked;
+    the warning said to call simulationStep() without a target time — advice for a TraCI
+    script, not for a file. It now names the gap."""
+    path, _ = fcd
+    df = _tabular(path)
+    t = df["timestep_time"]
+    df[(t < 10) | (t > 20)].to_csv(tmp_path / "gap.csv", index=False)
+    code = cli_main(["fcd", str(tmp_path / "gap.csv"), "--net", str(CITY_NET), "--equation",
+                     "vsp_ldv1999", "--no-figures", "--out", str(tmp_path / "o")])
+    assert code == 0, capsys.readouterr().err
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    w = [x for x in s["warnings"] if "timesteps of 0.5 s are missing" in x]
+    assert s["missed_steps"] == 21 and len(w) == 1 and "simulationStep" not in w[0]
+
+
 def test_a_net_that_is_no_network_is_named(tmp_path, capsys):
     """Finding 4: ``--net`` given a file with no edges (here: an FCD file) was a
     ValueError."""

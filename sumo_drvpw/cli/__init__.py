@@ -296,12 +296,15 @@ def _on_sigint(signum, frame):
     raise KeyboardInterrupt()
 
 
-def _signal_exit(terminated: bool) -> int:
-    """The one line and exit code of a run a signal stopped: 143 (SIGTERM) or 130 (SIGINT)."""
+def _signal_exit(terminated: bool, finished: bool = False) -> int:
+    """The one line and exit code of a run a signal stopped: 143 (SIGTERM) or 130 (SIGINT);
+    ``finished``: the command completed its output all the same (the signal's exception
+    was swallowed inside a library), so what it wrote is whole."""
+    what = "its output was completed" if finished else "no partial output written"
     if terminated:
-        print("sumo-drvpw: terminated (SIGTERM); no partial output written", file=sys.stderr)
+        print(f"sumo-drvpw: terminated (SIGTERM); {what}", file=sys.stderr)
         return 128 + signal.SIGTERM
-    print("sumo-drvpw: interrupted; no partial output written", file=sys.stderr)
+    print(f"sumo-drvpw: interrupted; {what}", file=sys.stderr)
     return 130
 
 
@@ -342,7 +345,11 @@ def main(argv: list[str] | None = None) -> int:
             with np.errstate(all="ignore"):
                 rc = int(args._main(args) or 0)
             # a command that caught the interrupt itself (run writes what it simulated)
-            return 128 + signal.SIGTERM if rc == 130 and _TERMINATED else rc
+            if rc == 130 and _TERMINATED:
+                return 128 + signal.SIGTERM
+            if rc == 0 and (_TERMINATED or _INTERRUPTED):  # a library swallowed the signal
+                return _signal_exit(bool(_TERMINATED), finished=True)
+            return rc
     except OutputExists as e:
         print(f"sumo-drvpw {args.command}: error: {_one_line(e)}; give --force to replace it",
               file=sys.stderr)

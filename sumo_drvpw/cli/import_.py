@@ -107,8 +107,10 @@ def main(args) -> int:
         wind = parse_wind(args.wind, "--wind")
     df, report = read(args.format, args.src, columns=args.columns)
     if len(df) < 2:  # a drive log needs two samples (sumo_drvpw.data.log)
+        why = ", ".join(f"{k} {n}" for k, n in report["dropped"].items() if n)
         raise UserError(f"{', '.join(map(str, args.src))}: {len(df)} sample(s) kept of "
-                        f"{report['rows_read']} read; nothing sensible to import")
+                        f"{report['rows_read']} read"
+                        + (f" (dropped: {why})" if why else "") + "; nothing sensible to import")
     if wind is not None:
         from sumo_drvpw.data.wind import add_wind
 

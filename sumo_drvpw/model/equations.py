@@ -321,6 +321,11 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
         std = _floats(doc.get("std_err", {}), f"{where} [std_err]")
     else:
         raise UserError(f"{where}: missing [terms] (or [beta]) table")
+    for table, vals in (("std_err", std), ("p_values", doc.get("p_values", {}))):
+        stray = [k for k in vals if k not in terms]
+        if stray:  # a standard error of no coefficient: a misspelt term name
+            raise UserError(f"{where}: [{table}] '{stray[0]}' is not among the terms "
+                            f"({', '.join(terms)})")
     neg = [k for k, v in std.items() if v < 0]
     if neg:
         raise UserError(f"{where}: [std_err] '{neg[0]}' is {std[neg[0]]:g}; a standard error is >= 0")

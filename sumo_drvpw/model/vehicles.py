@@ -124,6 +124,9 @@ def check_numbers(doc: dict, p) -> None:
             raise UserError(f"{p}: [{table}] must be a table")
         for k, v in t.items():
             key = f"{table}.{k}"
+            if table == "body" and key not in NUMBER_RANGES:  # a misspelt key would go unread
+                known = ", ".join(n.split(".", 1)[1] for n in NUMBER_RANGES if n.startswith("body."))
+                raise UserError(f"{p}: unknown key {key!r} (known: {known})")
             if isinstance(v, dict):
                 for k2, v2 in v.items():
                     if not num(v2) or not math.isfinite(v2) or (

@@ -294,7 +294,11 @@ class Accountant(_Listener):
                             f"±{sc.slope_max:g} rad were clipped; most on lanes "
                             + ", ".join(f"{k} ({n})" for k, n in list(clipped.items())[:3])
                             + " (summary.json network.slope_clipped_lanes)")
-        if st.missed_steps:
+        if st.missed_steps and getattr(self.conn, "is_replay", False):
+            warnings.append(f"{st.missed_steps} timesteps of {st.dt:g} s are missing between "
+                            "the FCD's timesteps and were not booked (a gap in the recording, or "
+                            "FCD written every n-th step: record it every step)")
+        elif st.missed_steps:
             warnings.append(f"{st.missed_steps} simulation steps were not booked: call "
                             "simulationStep() without a target time")
         warnings += chain_warnings(led.chain)

@@ -102,6 +102,9 @@ class _Rows:
     a person whose x, y and speed equal one vehicle's rides in it (as the live loop reads
     with vehicle.getPersonIDList; their vTypes' masses from the route files)."""
 
+    #: an FCD replay, not SUMO (the Accountant's messages say so)
+    is_replay = True
+
     def _init_rows(self):
         self.parked_rows = 0
         self.riders: dict = {}

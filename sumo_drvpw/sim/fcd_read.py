@@ -343,7 +343,8 @@ def _csv_blocks(path: Path, chunk_rows: int):
     first = 0
     text = {FCD_COLUMNS[k]: str for k in ("id", "type", "lane")}
     try:
-        reader = pd.read_csv(path, sep=None, engine="python", chunksize=chunk_rows, dtype=text)
+        reader = pd.read_csv(path, sep=None, engine="python", chunksize=chunk_rows, dtype=text,
+                             encoding="utf-8-sig")  # a byte-order mark (Excel) is no header
         for raw in reader:
             b = _tabular_block(raw, path, first)
             first += len(raw)

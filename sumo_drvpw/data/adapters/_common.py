@@ -177,6 +177,11 @@ def read_csv_strict(path: Path, **kw) -> pd.DataFrame:
                         f"{kw.get('encoding', 'utf-8')}): {str(e).splitlines()[0]}") from None
     if len(df) == 0:
         raise UserError(f"{path}: no data rows")
+    if len(df.columns) and isinstance(df.columns[0], str):
+        first = df.columns[0]  # a UTF-8 byte-order mark (Excel writes one), as any encoding read it
+        for bom in ("\ufeff", "\xef\xbb\xbf"):
+            first = first.removeprefix(bom)
+        df = df.rename(columns={df.columns[0]: first})
     if _cut_mid_row(Path(path), kw.get("sep", ","), str(kw.get("encoding") or "utf-8")):
         df = df.iloc[:-1]
         if len(df) < 2:

@@ -141,7 +141,7 @@ def _load(path: Path) -> pd.DataFrame:
         from sumo_drvpw.data.adapters._common import read_csv_strict
         return read_csv_strict(path, sep=",", dtype=str, skipinitialspace=True)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark is no JSON
     except UnicodeDecodeError as e:
         raise UserError(f"{path}: not UTF-8 text: {e}") from None
     if not text.strip():
