@@ -207,9 +207,8 @@ class Stepper:
             # that ended or started, and parking that started (off the lane: not booked,
             # no auxiliary power); they are read again in the step the event happened
             sim = conn.simulation
-            events = [getattr(sim, name) for name in (
-                "getEndingTeleportIDList", "getStartingTeleportIDList",
-                "getParkingStartingVehiclesIDList") if hasattr(sim, name)]
+            events = [getattr(sim, name) for name in ("getEndingTeleportIDList", "getStartingTeleportIDList",
+                                                      "getParkingStartingVehiclesIDList") if hasattr(sim, name)]
             self.lane_events = lambda: [v for f in events for v in f()]
             self.resync = max(1, int(physics.resync_steps))
             # a lane change keeps the position and the edge (internal ones included), so
@@ -237,6 +236,7 @@ class Stepper:
         #: vehicles that left the simulation (SUMO's arrived list) are retired from the
         #: ledger, and flushed out of memory when it has a spill (bounded memory)
         self.arrived = getattr(conn.simulation, "getArrivedIDList", None)
+        self.is_replay = bool(getattr(conn, "is_replay", False))  # an FCD replay
         #: riding persons (Physics.transportable_mass): their mass is read when a vehicle
         #: departs and when a stop of it ends, while any are in the network (TraCI has no
         #: containers' vehicle: they are not booked; the FCD replay answers these getters)
@@ -386,6 +386,8 @@ class Stepper:
             if vid not in vmap:
                 starts.append(self.register(vid))
                 start_ids.append(vid)
+            elif self.is_replay:  # back after a teleport (no FCD rows): the same trip, its
+                ledger.unretire(vmap[vid])  # speed kept (the jump booked), as the live run does
             else:  # an id used again (e.g. vehicle.add): its state starts afresh
                 ledger.veh_lane[vmap[vid]] = -2
                 ledger.veh_prev_speed[vmap[vid]] = np.nan
