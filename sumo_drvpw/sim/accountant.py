@@ -39,6 +39,7 @@ from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.outputs import RunResult, TraceWriter, summary_dict
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
+from sumo_drvpw.sim.sumo_start import scenario_option
 from sumo_drvpw.sim.vtypes import GENERIC_VCLASSES, read_vtypes
 
 __all__ = ["Accountant", "RunResult"]
@@ -166,7 +167,10 @@ class Accountant(_Listener):
                                slope_reference=sc.slope_reference,
                                acceleration=sc.acceleration, heading=sc.wind_heading,
                                positions=sc.positions,
-                               transportable_mass=sc.transportable_mass)
+                               transportable_mass=sc.transportable_mass,
+                               # a replay's own options say how its recording moved
+                               ballistic_given=None if getattr(conn, "is_replay", False)
+                               else scenario_option(sc, "step-method.ballistic"))
         self.resolver = VTypeResolver(sc, self.file_vtypes, self.equations, conn)
         self.trace = None
         if trace_path is not None:

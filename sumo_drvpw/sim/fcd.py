@@ -409,34 +409,20 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     return result
 
 
-#: SUMO's words for true and false in a boolean option
-_TRUE, _FALSE = ("true", "1", "yes", "on", "x"), ("false", "0", "no", "off")
-
-
 def step_method(sc, fcd_file) -> str:
     """How the recording moved its vehicles, "ballistic" or "euler" (the step's distance:
-    the mean of the step's two speeds × Δt, or the new speed × Δt): the FCD file's own
-    header says (SUMO writes the run's options that differ from its defaults, so without
-    ``step-method.ballistic`` it was Euler); without one, the scenario's SUMO options and
-    then its config; else SUMO's default, Euler."""
+    the mean of the step's two speeds × Δt, or the new speed × Δt), by SUMO's rule
+    (:func:`sumo_drvpw.sim.sumo_start.ballistic_update`) on the options of the FCD file's
+    own header (SUMO writes those of the run that differ from its defaults); without a
+    header, on the scenario's SUMO options and config; else SUMO's default, Euler."""
     from sumo_drvpw.sim.fcd_read import header_options
-    from sumo_drvpw.sim.scenario import _config_files
+    from sumo_drvpw.sim.sumo_start import ballistic_update, scenario_option
 
-    key = "step-method.ballistic"
+    keys = ("step-method.ballistic", "default.action-step-length")
     head = header_options(fcd_file)
-    val = None if head is None else head.get(key, "false")
-    if val is None:
-        args = list(sc.sumo_args)
-        for i, a in enumerate(args):  # the last one wins, as in SUMO
-            if a == "-c" and i + 1 < len(args) and Path(args[i + 1]).is_file():
-                val = _config_files(Path(args[i + 1]))[2].get(key, val)
-        for i, a in enumerate(args):
-            if a == f"--{key}":  # a flag, or followed by its value
-                nxt = args[i + 1].lower() if i + 1 < len(args) else ""
-                val = nxt if nxt in _TRUE + _FALSE else "true"
-            elif a.startswith(f"--{key}="):
-                val = a.split("=", 1)[1]
-    return "ballistic" if (val or "false").strip().lower() in _TRUE else "euler"
+    given = ([head.get(k) for k in keys] if head is not None
+             else [scenario_option(sc, k) for k in keys])
+    return "ballistic" if ballistic_update(*given) else "euler"
 
 
 def lane_warnings(fcd_file, net_file, unknown: int, known: int, first) -> list[str]:

@@ -25,6 +25,7 @@ from sumo_drvpw.data.wind import tailwind_mps
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network
+from sumo_drvpw.sim.sumo_start import step_method
 
 # traci variable ids (traci.constants), fixed by the TraCI protocol
 _VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE = 0x40, 0x72, 0x43
@@ -72,6 +73,7 @@ class Physics:
     #: traci or ``--step-method.ballistic`` the loop reads every step whatever this says.
     positions: str = "tracked"
     resync_steps: int = 25
+    ballistic_given: str | None = None  # step-method.ballistic as the scenario gives it
     #: persons riding in a vehicle add their vTypes' masses while they ride (SUMO's
     #: EnergyParams::getTotalMass); read at a vehicle's departure and when one of its
     #: stops ends — boarding and alighting happen at stops, standing
@@ -195,7 +197,7 @@ class Stepper:
                                physics.wind_speed != 0.0 and physics.heading == "getangle",
                                True, True, read_slope))
         self.heading_from_lane = physics.wind_speed != 0.0 and physics.heading == "geometry"
-        method = _step_method(conn)
+        method = step_method(conn, physics.ballistic_given)
         self.ballistic = method == "ballistic"
         self.tracking = (physics.positions == "tracked" and not use_subscriptions
                          and method == "euler" and net.lane_end is not None
@@ -587,14 +589,3 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
             bar.close()
     return {"interrupted": interrupted, "end_time_s": stepper.now(),
             "step_length_s": dt, "step_method": stepper.step_method}
-
-
-def _step_method(conn) -> str | None:
-    """SUMO's position update: "euler" (x += v_t·Δt, which position tracking relies on),
-    "ballistic" (x += ½(v_t−1 + v_t)·Δt), or None when the connection cannot say (the
-    terms then take v_t, as under Euler, and positions are read every step)."""
-    try:
-        val = str(conn.simulation.getOption("step-method.ballistic")).lower()
-    except Exception:  # a fake connection or an old SUMO without getOption
-        return None
-    return "euler" if val in ("false", "0") else "ballistic"

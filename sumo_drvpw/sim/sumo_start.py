@@ -11,7 +11,7 @@ from pathlib import Path
 
 from sumo_drvpw.errors import UserError
 
-__all__ = ["start_sumo", "close_sumo"]
+__all__ = ["start_sumo", "close_sumo", "step_method", "scenario_option"]
 
 
 def _sumo_env() -> None:
@@ -175,3 +175,63 @@ def close_sumo(conn) -> None:
         conn.close()
     except Exception:
         pass
+
+
+# ---------------------------------------------------------------- SUMO's position update
+#: SUMO's words for true in a boolean option
+_TRUE = ("true", "1", "yes", "on", "x")
+
+
+def ballistic_update(given: str | None, action_step: str | None) -> bool:
+    """SUMO's rule for its position update (MSFrame::setMSGlobals, SUMO 1.28): ballistic
+    when ``step-method.ballistic`` is given true, or when it is not given (``given`` None)
+    and ``default.action-step-length`` is (> 0): SUMO then switches to the ballistic update
+    ("Integration method was set to 'ballistic' …") while its option still reads false."""
+    if given is not None:
+        return given.strip().lower() in _TRUE
+    try:
+        return action_step is not None and float(action_step) > 0
+    except ValueError:
+        return False
+
+
+def step_method(conn, given: str | None = None) -> str | None:
+    """The update a running SUMO moves vehicles by: "euler" (x += v_t·Δt, which position
+    tracking relies on), "ballistic" (x += ½(v_t−1 + v_t)·Δt), or None when the connection
+    cannot say (the terms then take v_t, as under Euler, and positions are read every
+    step). ``given``: the value of ``step-method.ballistic`` the scenario's options or
+    config give, if any (:func:`scenario_option`; SUMO's getOption cannot tell a given
+    false from the default)."""
+    try:
+        get = conn.simulation.getOption
+        val = str(get("step-method.ballistic")).strip().lower()
+    except Exception:  # a fake connection or an old SUMO without getOption
+        return None
+    if val in _TRUE:
+        return "ballistic"
+    try:
+        action = str(get("default.action-step-length"))
+    except Exception:
+        action = None
+    return "ballistic" if ballistic_update(given, action) else "euler"
+
+
+def scenario_option(sc, key: str) -> str | None:
+    """The value a scenario gives a SUMO option: its SUMO options (``--key value``, a bare
+    ``--key`` flag: true, ``--key=value``; the last one wins, as in SUMO), else its
+    config's ``<key value=…/>``; None when neither gives it."""
+    from sumo_drvpw.sim.scenario import _config_files
+
+    args = list(getattr(sc, "sumo_args", ()))
+    val = None
+    for i, a in enumerate(args):
+        if a == "-c" and i + 1 < len(args) and Path(args[i + 1]).is_file():
+            val = _config_files(Path(args[i + 1]))[2].get(key, val)
+    for i, a in enumerate(args):
+        if a == f"--{key}":
+            nxt = args[i + 1] if i + 1 < len(args) else ""
+            val = nxt if nxt.lower() in _TRUE + ("false", "0", "no", "off") or (
+                nxt and not nxt.startswith("-")) else "true"
+        elif a.startswith(f"--{key}="):
+            val = a.split("=", 1)[1]
+    return val
