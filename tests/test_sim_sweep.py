@@ -70,3 +70,20 @@ def test_engine_dask_without_dask_is_one_line(tmp_path, capsys, monkeypatch):
     assert not (tmp_path / "o").exists()
     code = cli_main(["run", "city", "--workers", "2", "--out", str(tmp_path / "o")])
     assert code == 2 and "--workers goes with --engine dask" in capsys.readouterr().err
+
+
+def test_a_bad_scenario_in_a_sweep_is_refused_before_any_runs(tmp_path, capsys, monkeypatch):
+    """A sweep of a good and a bad scenario (--end before the second's begin) ran the good
+    one to the end, then refused the bad one and discarded everything: every scenario is
+    now checked first, so the refusal costs no simulation."""
+    import sumo_drvpw.sim.run as run_mod
+
+    good = _scenarios(tmp_path)[0]
+    bad = tmp_path / "late.toml"
+    bad.write_text(Path(good).read_text().replace("end = 90", "begin = 3600"), encoding="utf-8")
+    ran = []
+    monkeypatch.setattr(run_mod, "_sweep_task", lambda *a, **k: ran.append(a) or {})
+    code = cli_main(["run", good, str(bad), "--end", "60", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and "late.toml" in err and "sumo.end" in err, err
+    assert ran == [] and not (tmp_path / "o").exists()

@@ -440,11 +440,13 @@ def run_scenarios(scenarios: list, out_dirs: list, overrides: dict | None = None
         scenario on a Dask cluster: ``scheduler`` address, else a local cluster of
         ``workers`` single-threaded processes)
     """
-    from sumo_drvpw.sim.scenario import scenario_path
+    from sumo_drvpw.sim.scenario import load_scenario, scenario_path
 
     overrides = dict(overrides or {})
     paths = [str(scenario_path(s)) for s in scenarios]
     outs = [str(o) for o in out_dirs]
+    for s in paths:  # every scenario checked before any runs: a bad one costs no good run
+        load_scenario(s, **overrides)
     if engine == "local":
         if jobs <= 1:
             return [_sweep_task(s, o, overrides) for s, o in zip(paths, outs)]
