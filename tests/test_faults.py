@@ -287,6 +287,9 @@ def test_signal_during_run(tmp_path, sig, delay):
         assert code in (130, -signal.SIGINT), (code, err)
     if out.exists():
         assert _assert_whole(out)["interrupted"] is True
+        # the end is the last step booked whole (it read one step past what was booked)
+        s = json.loads((out / "summary.json").read_text())
+        assert s["end_s"] == pytest.approx(s["begin_s"] + s["steps"] * s["step_length_s"])
 
 
 # ------------------------------------------------------------------ disk full

@@ -15,6 +15,7 @@ getSlope). Everything after reading is vectorized over the vehicles of the step.
 
 from __future__ import annotations
 
+import signal
 import sys
 from dataclasses import dataclass
 from typing import Callable
@@ -539,6 +540,9 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
     return step_until(conn, stepper, end, progress)
 
 
+_STOP, _MASK = {signal.SIGINT, signal.SIGTERM}, hasattr(signal, "pthread_sigmask")
+
+
 def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool = False,
                period: float | None = None) -> dict:
     """Call ``simulationStep`` and book each step until ``end`` [s] (None: until
@@ -546,8 +550,7 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
 
     Parameters
     ----------
-    conn : the connection the stepper reads
-    stepper : the :class:`Stepper`
+    conn, stepper : the connection the :class:`Stepper` reads, and the stepper
     end : simulation end time [s]
     progress : tqdm progress bar on a TTY
     period : edgeData interval [s]: edge totals are kept at each multiple of it
@@ -575,11 +578,17 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
                 break
             if end is None and conn.simulation.getMinExpectedNumber() <= 0:
                 break
-            conn.simulationStep()
-            stepper.after_step()
-            if next_cut is not None and conn.simulation.getTime() >= next_cut - 1e-9:
-                ledger.snapshot(next_cut)
-                next_cut += period
+            # a step and its booking are one: a signal waits for both (none booked in part)
+            old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP) if _MASK else None
+            try:
+                conn.simulationStep()
+                stepper.after_step()
+                if next_cut is not None and conn.simulation.getTime() >= next_cut - 1e-9:
+                    ledger.snapshot(next_cut)
+                    next_cut += period
+            finally:
+                if old is not None:
+                    signal.pthread_sigmask(signal.SIG_SETMASK, old)
             if bar is not None and ledger.steps % 50 == 0:
                 bar.update(50)
     except KeyboardInterrupt:
