@@ -15,7 +15,6 @@ getSlope). Everything after reading is vectorized over the vehicles of the step.
 
 from __future__ import annotations
 
-import signal
 import sys
 from dataclasses import dataclass
 from typing import Callable
@@ -26,7 +25,7 @@ from sumo_drvpw.data.wind import tailwind_mps
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network
-from sumo_drvpw.sim.sumo_start import step_method
+from sumo_drvpw.sim.sumo_start import signals_deferred, step_method
 
 # traci variable ids (traci.constants), fixed by the TraCI protocol
 _VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE = 0x40, 0x72, 0x43
@@ -210,8 +209,9 @@ class Stepper:
             # that ended or started, and parking that started (off the lane: not booked,
             # no auxiliary power); they are read again in the step the event happened
             sim = conn.simulation
-            events = [getattr(sim, name) for name in ("getEndingTeleportIDList", "getStartingTeleportIDList",
-                                                      "getParkingStartingVehiclesIDList") if hasattr(sim, name)]
+            events = [getattr(sim, name) for name in (
+                "getEndingTeleportIDList", "getStartingTeleportIDList",
+                "getParkingStartingVehiclesIDList") if hasattr(sim, name)]
             self.lane_events = lambda: [v for f in events for v in f()]
             self.resync = max(1, int(physics.resync_steps))
             # a lane change keeps the position and the edge (internal ones included), so
@@ -540,9 +540,6 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
     return step_until(conn, stepper, end, progress)
 
 
-_STOP, _MASK = {signal.SIGINT, signal.SIGTERM}, hasattr(signal, "pthread_sigmask")
-
-
 def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool = False,
                period: float | None = None) -> dict:
     """Call ``simulationStep`` and book each step until ``end`` [s] (None: until
@@ -578,17 +575,12 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
                 break
             if end is None and conn.simulation.getMinExpectedNumber() <= 0:
                 break
-            # a step and its booking are one: a signal waits for both (none booked in part)
-            old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP) if _MASK else None
-            try:
+            with signals_deferred():  # a step and its booking are one: none booked in part
                 conn.simulationStep()
                 stepper.after_step()
                 if next_cut is not None and conn.simulation.getTime() >= next_cut - 1e-9:
                     ledger.snapshot(next_cut)
                     next_cut += period
-            finally:
-                if old is not None:
-                    signal.pthread_sigmask(signal.SIG_SETMASK, old)
             if bar is not None and ledger.steps % 50 == 0:
                 bar.update(50)
     except KeyboardInterrupt:

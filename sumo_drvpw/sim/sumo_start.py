@@ -11,7 +11,7 @@ from pathlib import Path
 
 from sumo_drvpw.errors import UserError
 
-__all__ = ["start_sumo", "close_sumo", "step_method", "scenario_option"]
+__all__ = ["start_sumo", "close_sumo", "step_method", "scenario_option", "signals_deferred"]
 
 
 def _sumo_env() -> None:
@@ -235,3 +235,20 @@ def scenario_option(sc, key: str) -> str | None:
         elif a.startswith(f"--{key}="):
             val = a.split("=", 1)[1]
     return val
+
+
+@contextlib.contextmanager
+def signals_deferred():
+    """Ctrl-C and SIGTERM held back while the block runs (a SUMO step and its booking: else
+    SUMO's time could run a step past what was booked, or a step be booked in part), then
+    delivered; where the platform cannot block signals, the block runs as it is."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
