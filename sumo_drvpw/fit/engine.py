@@ -240,8 +240,12 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         raise UserError("the dask engine needs Dask: pip install 'sumo-drvpw[dask]'") from None
     cluster = None
     if scheduler is None:
+        import logging
+
+        # the cluster's own logs are for Dask's developers: a refusal that stops the
+        # driver early left tracebacks of closed connections above our one line
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=":0")
+                               dashboard_address=":0", silence_logs=logging.CRITICAL)
         client = Client(cluster)
     else:
         try:

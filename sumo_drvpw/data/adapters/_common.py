@@ -215,6 +215,12 @@ def new_report(path: Path, trip_id: str, rows: int) -> dict:
     """Per-file report: rows read, kept, dropped per reason, notes (a cut-short file says so)."""
     rep = {"file": str(path), "trip_id": trip_id, "rows_read": int(rows), "kept": 0,
            "dropped": {}, "notes": []}
+    return note_truncated(rep, path)
+
+
+def note_truncated(rep: dict, path: Path) -> dict:
+    """Put into a file's report that :func:`read_csv_strict` dropped its cut last row (an
+    adapter that starts its report before it reads the file calls this after reading)."""
     cut = TRUNCATED.pop(str(path), 0)
     if cut:
         rep["rows_read"] += cut

@@ -41,8 +41,8 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.data.adapters._common import (aligned_note, carry_midnight, clean_time_and_speed, expand_paths,
-                                              generic_name, interp_onto, lookup_unit, new_report, read_csv_strict,
-                                              read_each, split_header, unique_names)
+                                              generic_name, interp_onto, lookup_unit, new_report, note_truncated,
+                                              read_csv_strict, read_each, split_header, unique_names)
 from sumo_drvpw.errors import UserError
 
 FORMAT = "car-scanner"
@@ -191,6 +191,7 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     rep = new_report(path, path.stem, 0)
     rows, chans = _long(path, sep, rep) if long else _wide(path, sep)
     rep["rows_read"] = int(rows)
+    note_truncated(rep, path)  # the report began before the file was read
     labels = [lab for lab, (tc, _) in chans.items() if len(tc)]  # a PID with no value is not logged
     named: dict[str, str] = {}
     speed, _ = _one(labels, r"^vehicle speed$|^speed \(obd\)$", "speed", exclude=None)
