@@ -42,7 +42,9 @@ def main():
         y[sl] = truth.power(x.take(sl)) + rng.normal(0, 1500, sl.stop - sl.start)
     data_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     times = []
+    res = None
     for _ in range(args.repeat):
+        res = None  # one calibration's memory at a time: the last result (its data) let go
         t0 = time.perf_counter()
         res = calibrate(x, y, CANDIDATES[args.candidates])
         times.append(time.perf_counter() - t0)

@@ -398,3 +398,23 @@ def test_vehicle_body_books_a_short_bus_or_truck_as_a_van(vclass, length, capaci
     info = VTypeInfo("t", None, None, "f", vclass, 0.0, emission_class, None, length, capacity)
     got = vehicle_body(vclass, info, "t")
     assert (got[0] if got else None) == body
+
+
+def test_vtype_equations_may_name_an_equation_file(tmp_path):
+    """docs/validation.md tells users `[vtypes.<id>] equations = ["docs/energy-chain/
+    bmw_i3_battery.toml"]`; that was refused ("not among the scenario's equations") even
+    with the file listed at the top. A file of one of the scenario's equations now names it;
+    a file the scenario does not list is refused, saying to list it."""
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    repo = Path(__file__).resolve().parent.parent
+    eq = repo / "docs" / "energy-chain" / "bmw_i3_battery.toml"
+    net = repo / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"
+    p = tmp_path / "s.toml"
+    p.write_text(f'equations = ["vsp_ldv1999", "{eq}"]\n[sumo]\nnet = "{net}"\n'
+                 f'[vtypes.car]\nequations = ["{eq}"]\n', encoding="utf-8")
+    assert load_scenario(p).vtype_data["car"]["equations"] == ["bmw_i3_battery"]
+    p.write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{net}"\n'
+                 f'[vtypes.car]\nequations = ["{eq}"]\n', encoding="utf-8")
+    with pytest.raises(UserError, match="bmw_i3_battery.*list it there"):
+        load_scenario(p)

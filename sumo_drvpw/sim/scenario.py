@@ -488,10 +488,13 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                                         positive=True)
             if "equations" in d:
                 eqs = _strlist(d["equations"], where, f"{table}.{vt}.equations")
+                # a name, or a file of one of the scenario's equations (named by its name)
+                eqs = [e if e in names or not e.endswith(".toml") else
+                       resolve_equation(e, base, f"{where}: {table}.{vt}.equations").name for e in eqs]
                 for e in eqs:
                     if e not in names:
-                        raise UserError(f"{where}: {table}.{vt}.equations names '{e}', which is "
-                                        f"not among the scenario's equations ({', '.join(names)})")
+                        raise UserError(f"{where}: {table}.{vt}.equations names '{e}', which is not "
+                                        f"among the scenario's equations ({', '.join(names)}): list it there")
                 entry["equations"] = eqs
             if "cold_start" in d:
                 entry["cold_start"] = _share(d["cold_start"], where, f"{table}.{vt}.cold_start")

@@ -365,8 +365,8 @@ def _deliverables(dv, dl, k) -> list[str]:
                        "where the run says trips start cold: `[vehicles] cold_start`, a vType's `cold_start` or the "
                        "run command's cold-start option)" if ch.get("hvac.warmup_j_per_k") else "")
                     + (f", recuperation limit {lim / 1000:.1f} kW" if lim else ", no recuperation limit kept")
-                    + ". In a scenario: `[vtypes.<id>] equations = [\"docs/energy-chain/" + d["file"] + "\"]` and "
-                    "`[air] temperature_c` (the HVAC's ambient temperature); its held-out quality is the rows above "
+                    + ". In a scenario: `equations = [\"docs/energy-chain/" + d["file"] + "\", …]`, the same "
+                    "file in `[vtypes.<id>] equations` for the vTypes it books, and `[air] temperature_c` (the HVAC's ambient temperature); its held-out quality is the rows above "
                     "(the warm-up booked as the run's cold-start share says)."]
         else:
             out += ["", "**For new logs of this car** (heater V·I and A/C power logged): "
