@@ -232,3 +232,23 @@ def test_random_asynchronous_files_through_a_mapping(tmp_path, text):
             assert "\n" not in str(e)
             return
     assert np.all(np.diff(df["time_s"].to_numpy(float)) > 0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(["Speed", " Speed", "Speed ", "RPM", "Engine load", "", None]),
+                          st.sampled_from(["km/h", "km/h ", "", None, "rpm", "%"])), min_size=1, max_size=60))
+def test_pid_labels_from_category_codes_equal_the_row_strings(rows):
+    """The long layout's "PID (unit)" labels come from the categories' codes (one label per
+    distinct pair: the import of a 1.38 M-row log went from 1.48 to 0.98 s); they equal
+    the labels built row by row from the stripped strings, codes and order of first
+    appearance included, with blanks and missing values and PIDs equal after stripping."""
+    from sumo_drvpw.data.adapters.car_scanner import _pid_labels
+
+    pid = pd.Series([r[0] for r in rows], dtype=object).astype("category")
+    unit = pd.Series([r[1] for r in rows], dtype=object).astype("category")
+    codes, labels = _pid_labels(pid, unit)
+    p = pid.astype("string").fillna("").str.strip()
+    u = unit.astype("string").fillna("").str.strip()
+    ref_codes, ref_labels = pd.factorize(p + np.where(u != "", " (" + u + ")", ""))
+    assert list(labels) == list(ref_labels)
+    np.testing.assert_array_equal(codes, ref_codes)

@@ -181,7 +181,8 @@ def read_csv_strict(path: Path, **kw) -> pd.DataFrame:
         first = df.columns[0]  # a UTF-8 byte-order mark (Excel writes one), as any encoding read it
         for bom in ("\ufeff", "\xef\xbb\xbf"):
             first = first.removeprefix(bom)
-        df = df.rename(columns={df.columns[0]: first})
+        if first != df.columns[0]:  # relabelled in place: a rename would copy the table
+            df.columns = [first, *df.columns[1:]]
     if _cut_mid_row(Path(path), kw.get("sep", ","), str(kw.get("encoding") or "utf-8")):
         df = df.iloc[:-1]
         if len(df) < 2:

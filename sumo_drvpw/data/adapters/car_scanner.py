@@ -102,9 +102,7 @@ def _long(path: Path, sep: str, rep: dict) -> tuple[int, dict[str, Channel]]:
         raise UserError(f"{path}: column 'SECONDS' data row {i} holds {raw['SECONDS'].iloc[i]!r}: not a number")
     t = _time_of_day(t)
     val = _number(raw["VALUE"]).to_numpy(float)
-    pid = raw["PID"].astype("string").fillna("").str.strip()
-    unit = raw["UNITS"].astype("string").fillna("").str.strip()
-    codes, labels = pd.factorize(pid + np.where(unit != "", " (" + unit + ")", ""))
+    codes, labels = _pid_labels(raw["PID"], raw["UNITS"])
     order = np.argsort(codes, kind="stable")
     bounds = np.concatenate([[0], np.cumsum(np.bincount(codes, minlength=len(labels)))])
     chans: dict[str, Channel] = {}
@@ -126,6 +124,24 @@ def _long(path: Path, sep: str, rep: dict) -> tuple[int, dict[str, Channel]]:
             if np.isfinite(x).any():
                 chans[name] = (t, x)
     return len(raw), chans
+
+
+def _pid_labels(pid: pd.Series, unit: pd.Series) -> tuple[np.ndarray, list[str]]:
+    """Per row the code of its "PID (unit)" label, and the labels in order of first
+    appearance (stripped; no unit: the PID alone). Built from the categories' codes — a
+    label per distinct (PID, unit) pair, not one string per row of a million-row log."""
+    def parts(col: pd.Series) -> tuple[np.ndarray, list[str]]:
+        col = col if isinstance(col.dtype, pd.CategoricalDtype) else col.astype("category")
+        return (col.cat.codes.to_numpy(np.int64),
+                [str(c).strip() for c in col.cat.categories] + [""])  # code −1: missing
+
+    pc, pnames = parts(pid)
+    uc, unames = parts(unit)
+    pair, first = pd.factorize(pc * len(unames) + uc % len(unames))
+    text = [pnames[k // len(unames)] + (f" ({u})" if (u := unames[k % len(unames)]) else "")
+            for k in first]
+    merged, labels = pd.factorize(np.asarray(text, dtype=object))  # equal after stripping
+    return merged[pair], list(labels)
 
 
 def _wide(path: Path, sep: str) -> tuple[int, dict[str, Channel]]:
