@@ -122,11 +122,15 @@ def _print_summary(s: dict, out, label: str = "") -> None:
             continue
         if "fuel_l" in r:
             cold = f" (cold starts {r['cold_start_l']:.2f} L)" if "cold_start_l" in r else ""
-            print(f"  {r['equation']} fuel, {r['key']}: {r['fuel_l']:.2f} L{cold}, "
-                  f"{r['fuel_l_per_100km']:.2f} L/100 km, CO₂ {r['co2_kg']:.1f} kg")
+            # the distance beside the per-km figure: a class that barely moved (a shuttle
+            # idling at its stop) reads 1,000 L/100 km, which is true but not a consumption
+            print(f"  {r['equation']} fuel, {r['key']}: {r['fuel_l']:.2f} L{cold} over "
+                  f"{r['distance_km']:.3g} km, {r['fuel_l_per_100km']:.2f} L/100 km, "
+                  f"CO₂ {r['co2_kg']:.1f} kg")
         else:
-            print(f"  {r['equation']} battery, {r['key']}: net {r['net_kwh']:.2f} kWh "
-                  f"({r['net_kwh_per_km']:.3f} kWh/km; auxiliary {r['auxiliary_kwh']:.2f} kWh)")
+            print(f"  {r['equation']} battery, {r['key']}: net {r['net_kwh']:.2f} kWh over "
+                  f"{r['distance_km']:.3g} km ({r['net_kwh_per_km']:.3f} kWh/km; auxiliary "
+                  f"{r['auxiliary_kwh']:.2f} kWh)")
 
 
 def _names(scenarios: list[str]) -> list[str]:
