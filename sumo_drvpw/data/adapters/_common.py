@@ -325,9 +325,12 @@ def align_channels(df: pd.DataFrame, report: dict) -> pd.DataFrame:
         aligned[c] = col
     if not aligned:
         return df
-    out = df.loc[~other].copy()
+    out = df.loc[~other].copy()  # the speed rows, and rows without a time (dropped later)
+    on_speed = speed_row[~other]
     for c, col in aligned.items():
-        out[c] = col
+        full = out[c].to_numpy(float, copy=True)
+        full[on_speed] = col
+        out[c] = full
     aligned_note(int(other.sum()), int(speed_row.sum()), aligned, report)
     return out
 
