@@ -217,3 +217,69 @@ def test_accountant_with_equations_only_finds_net_and_vtypes(tmp_path):
     assert res["assumptions"]["default_masses"] == {}  # prius3.vtype.xml gives 1625 kg
     assert (res.vehicles.mass_kg == 1625.0).all()
     assert any("not booked" in w for w in res["warnings"])
+
+
+def test_accountant_misuse_in_a_user_script_is_one_clear_error(tmp_path):
+    """Found by running the Accountant inside user scripts: a result taken mid-run and read
+    after more steps showed the later tables under the earlier summary (edges 257 MJ, its
+    summary 118 MJ); a simulation.load() went on booking both runs into one ledger (1.23×
+    the energy); equations="vsp_ldv1999" was read letter by letter; write() onto a file was
+    a FileExistsError. Each is now one UserError, or (the single name) accepted."""
+    from sumo_drvpw.errors import UserError
+
+    sc = load_scenario(CITY, end=60)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, equations="vsp_ldv1999")  # one name, not a list
+        assert [e.name for e in acc.equations] == ["vsp_ldv1999"]
+        for _ in range(40):
+            conn.simulationStep()
+            acc.step()
+        early = acc.result()
+        n = len(early.vehicles)  # readable while the run has not moved on
+        (tmp_path / "file").write_text("x")
+        with pytest.raises(UserError, match="is a file"):
+            early.write(tmp_path / "file")
+        conn.simulationStep()
+        acc.step()
+        with pytest.raises(UserError, match="taken after 40 steps.*result\\(\\) again"):
+            early.edges
+        with pytest.raises(UserError, match="result\\(\\) again"):
+            early.write(tmp_path / "stale")
+        assert not (tmp_path / "stale").exists()
+        assert len(acc.result().vehicles) >= n  # a new result reads the ledger as it is
+        conn.load(sc.sumo_args)  # a new run from t = begin
+        conn.simulationStep()
+        with pytest.raises(UserError, match="time went back from 20.5 s to 0.5 s"):
+            acc.step()
+    finally:
+        close_sumo(conn)
+
+
+def test_a_listener_leaves_when_a_new_run_begins(tmp_path):
+    """libsumo keeps its step listeners across close() and start(): an Accountant added as
+    a listener went on booking every later run of the process into its ledger. At the
+    first step of a new run (time goes back) it now leaves the listeners; its result keeps
+    the run it booked and says where it stopped."""
+    sc = load_scenario(CITY, end=60)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, equations=[PHYS], scenario=CITY)
+        conn.addStepListener(acc)
+        while conn.simulation.getTime() < 30 - 1e-9:
+            conn.simulationStep()
+        booked = acc.result()
+        steps, energy = booked["steps"], booked["equations"]["phys"]["energy_j"]
+    finally:
+        close_sumo(conn)
+    conn = start_sumo(sc.sumo_args)  # a second run in the same process
+    try:
+        for _ in range(4):
+            conn.simulationStep()
+    finally:
+        close_sumo(conn)
+    res = acc.result()
+    assert res["steps"] == steps and res["equations"]["phys"]["energy_j"] == energy
+    assert acc.left_new_run == (30.0, 0.5)
+    assert any("new run began (simulation time went back from 30 s to 0.5 s)" in w
+               for w in res["warnings"])

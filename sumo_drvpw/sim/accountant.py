@@ -84,7 +84,8 @@ def scenario_for(conn, equations, scenario=None, **overrides) -> Scenario:
         raise UserError("Accountant: give equations=[...] or scenario=...")
     nets = _option_files(conn, "net-file")
     if not nets:
-        raise UserError("Accountant: SUMO does not say its net-file (getOption); give "
+        raise UserError("Accountant: SUMO does not say its net-file (getOption): is it started "
+                        "(libsumo.start / traci.start) before the Accountant? Else give "
                         "scenario=... with [sumo] net")
     doc = {"equations": list(equations), "sumo": {"net": str(nets[0])}}
     return load_scenario(doc=doc, **overrides)
@@ -121,6 +122,9 @@ class Accountant(_Listener):
 
         self._t0 = time.perf_counter()
         self.conn = conn
+        self.left_new_run: tuple[float, float] | None = None  # (last booked time, new time)
+        if isinstance(equations, (str, Path)) or hasattr(equations, "terms"):
+            equations = [equations]  # one equation, not a list of them (a str: not its letters)
         sc = self.scenario = scenario_for(conn, equations, scenario, **overrides)
         files = list(sc.route_files) or (_option_files(conn, "route-files")
                                           + _option_files(conn, "additional-files"))
@@ -183,8 +187,18 @@ class Accountant(_Listener):
 
     # -- the step listener protocol (traci.StepListener) ---------------------------------
     def step(self, t=0) -> bool:
-        """Book the step SUMO just made; returns True (stay active)."""
-        self.stepper.after_step()
+        """Book the step SUMO just made; returns True (stay active). A step of a new run —
+        time went back: a load(), or a libsumo session started after this one's close
+        (libsumo keeps its step listeners across close and start) — ends the booking: as a
+        step listener the Accountant leaves (returns False; its result says so), called by
+        hand it raises a UserError (:meth:`Stepper.after_step`)."""
+        st = self.stepper
+        if getattr(self, "_ID", None) is not None and st.last_t is not None:  # a listener
+            t_now = self.conn.simulation.getTime()
+            if t_now < st.last_t - 1e-9:
+                self.left_new_run = (st.last_t, t_now)
+                return False
+        st.after_step()
         return True
 
     def cleanUp(self) -> None:  # noqa: N802 (traci's name)
@@ -305,6 +319,10 @@ class Accountant(_Listener):
         elif st.missed_steps:
             warnings.append(f"{st.missed_steps} simulation steps were not booked: call "
                             "simulationStep() without a target time")
+        if self.left_new_run:
+            warnings.append("a new run began (simulation time went back from {:g} s to {:g} s): this "
+                            "Accountant stopped booking there and left the step listeners; "
+                            "start a new one for the new run".format(*self.left_new_run))
         warnings += chain_warnings(led.chain)
         summary_extra["warnings"] = warnings + list(summary_extra.get("warnings", []))
         summary = summary_dict(led, net, self.names, self.eqset.uses_other, summary_extra)

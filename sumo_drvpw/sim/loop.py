@@ -22,6 +22,7 @@ from typing import Callable
 import numpy as np
 
 from sumo_drvpw.data.wind import tailwind_mps
+from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network
@@ -362,8 +363,12 @@ class Stepper:
         """Read the state SUMO reached in the step just made and book its energies."""
         conn, ledger, net, physics, dt = self.conn, self.ledger, self.net, self.physics, self.dt
         vmap = self.vmap
-        ledger.steps += 1
         t_now = conn.simulation.getTime()
+        if self.last_t is not None and t_now < self.last_t - 1e-9:  # a load() began a new run
+            raise UserError(f"Accountant: simulation time went back from {self.last_t:g} s to "
+                            f"{t_now:g} s (traci.load / simulation.load?): an Accountant books one "
+                            "run; take its result() before the load and start a new one after it")
+        ledger.steps += 1
         if self.last_t is not None and t_now - self.last_t > 1.5 * dt:
             self.missed_steps += int(round((t_now - self.last_t) / dt)) - 1
         self.last_t = t_now

@@ -15,6 +15,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import atomic_path, write_figure, write_json, write_parquet, write_text
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, Ledger
 from sumo_drvpw.sim.network import Network
@@ -405,6 +406,15 @@ class RunResult:
             edgedata, figures, difference, period
         #: SUMO's emissions-device totals per vehicle (outputs.sumo_device), or None
         self.sumo_device = None
+        self._steps = getattr(ledger, "steps", None)  # what the summary was taken at
+
+    def _check_current(self) -> None:
+        """UserError when the run stepped on after this result was taken (an Accountant in
+        a user's loop): the tables read the ledger, which has moved, the summary not."""
+        if self._steps is not None and self.ledger.steps != self._steps:
+            raise UserError(f"this result was taken after {self._steps} steps (t = {self.end:g} s) "
+                            f"and the run has booked {self.ledger.steps - self._steps} more since: "
+                            "its tables would not match its summary; take Accountant.result() again")
 
     def __getitem__(self, key):
         return self.summary[key]
@@ -422,6 +432,7 @@ class RunResult:
 
     def _vehicles_all(self) -> pa.Table:
         """Every vehicle's rows: those flushed during the run, then those held in memory."""
+        self._check_current()
         t = vehicles_table(self.ledger, self.names, self.predicts)
         return t if self._spill is None else self._spill.vehicles(t)
 
@@ -439,6 +450,7 @@ class RunResult:
         flushed during the run, then those held in memory) as a DataFrame, or None."""
         import pandas as pd
 
+        self._check_current()
         ch = getattr(self.ledger, "chain", None)
         if ch is None:
             return None
@@ -495,9 +507,11 @@ class RunResult:
         return pd.DataFrame(rows)
 
     def edges_arrow(self) -> pa.Table:
+        self._check_current()
         return edges_table(self.ledger, self.net, self.names)
 
     def classes_arrow(self) -> pa.Table:
+        self._check_current()
         return classes_table(self.ledger, self.net, self.names)
 
     @property
@@ -516,6 +530,7 @@ class RunResult:
         return self.classes_arrow().to_pandas()
 
     def edgedata_xml(self) -> str:
+        self._check_current()
         return edgedata_xml(self.ledger, self.net, self.names, self.begin, self.end)
 
     def write(self, out_dir) -> dict[str, str]:
@@ -525,7 +540,10 @@ class RunResult:
 
 def write_outputs(out_dir: Path, result: RunResult) -> dict[str, str]:
     """Write every table/figure atomically into ``out_dir``; returns name → path."""
+    result._check_current()
     out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"{out_dir}: is a file; give a folder to write the run's outputs into")
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = result.summary
     files = {}
