@@ -230,8 +230,7 @@ def scenario_option(sc, key: str) -> str | None:
     for i, a in enumerate(args):
         if a == f"--{key}":
             nxt = args[i + 1] if i + 1 < len(args) else ""
-            val = nxt if nxt.lower() in _TRUE + ("false", "0", "no", "off") or (
-                nxt and not nxt.startswith("-")) else "true"
+            val = nxt if nxt and not nxt.startswith("-") else "true"  # a bare flag: true
         elif a.startswith(f"--{key}="):
             val = a.split("=", 1)[1]
     return val
