@@ -46,8 +46,8 @@ def candidates(m, equation: Equation, p, idx) -> list[Cand]:
     x = m.inputs.with_mass(equation.mass_kg) if equation.mass_kg else m.inputs
     v = x.v[idx]
     pp = p[idx]
-    gw, ga = gains(ch, pp, v, None if m.inputs.signals is None else
-                   {k: np.asarray(a)[idx] for k, a in m.inputs.signals.items() if k == ch.temperature_column})
+    col, sig = ch.temperature_column, m.inputs.signals or {}
+    gw, ga = gains(ch, pp, v, {col: np.asarray(sig[col])[idx]} if col in sig else None)
     out = []
     if "grade" not in equation.terms and np.nanstd(x.theta[idx]) > 0:
         g = term_matrix(["grade"], x.take(idx))[:, 0]

@@ -282,7 +282,7 @@ class EnergyChain:
             ts = float(self.hvac.get("setpoint_c", 20.0))
             # an unknown temperature books no HVAC (as the term grammar's 'cold' does), not
             # the heating of 0 °C
-            t = _signal(sig, self.hvac.get("column", "ambient_c"), n, missing=ts)
+            t = _signal(sig, self.temperature_column, n, missing=ts)
             p = p + float(self.hvac.get("heating_w_per_k", 0.0)) * np.maximum(ts - t, 0.0)
             p = p + float(self.hvac.get("cooling_w_per_k", 0.0)) * np.maximum(t - ts, 0.0)
         return p

@@ -39,7 +39,7 @@ from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.outputs import RunResult, TraceWriter, summary_dict
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
-from sumo_drvpw.sim.sumo_start import scenario_option
+from sumo_drvpw.sim.sumo_start import NewRun, scenario_option
 from sumo_drvpw.sim.vtypes import GENERIC_VCLASSES, read_vtypes
 
 __all__ = ["Accountant", "RunResult"]
@@ -191,14 +191,14 @@ class Accountant(_Listener):
         time went back: a load(), or a libsumo session started after this one's close
         (libsumo keeps its step listeners across close and start) — ends the booking: as a
         step listener the Accountant leaves (returns False; its result says so), called by
-        hand it raises a UserError (:meth:`Stepper.after_step`)."""
-        st = self.stepper
-        if getattr(self, "_ID", None) is not None and st.last_t is not None:  # a listener
-            t_now = self.conn.simulation.getTime()
-            if t_now < st.last_t - 1e-9:
-                self.left_new_run = (st.last_t, t_now)
-                return False
-        st.after_step()
+        hand it raises (:class:`~sumo_drvpw.sim.sumo_start.NewRun`, a UserError)."""
+        try:
+            self.stepper.after_step()
+        except NewRun as e:
+            if getattr(self, "_ID", None) is None:  # not a step listener: the script's error
+                raise
+            self.left_new_run = (e.last_t, e.t_now)
+            return False
         return True
 
     def cleanUp(self) -> None:  # noqa: N802 (traci's name)

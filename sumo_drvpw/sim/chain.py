@@ -76,7 +76,7 @@ class ChainLedger:
         #: each reads the run's air temperature, ``signal_values["ambient_c"]``; when the run
         #: gives none, the default air's T_REF_C (20 °C, that of ρ = 1.2041 kg/m³ and of the
         #: ``cold`` term's reference) and :attr:`air_temperature_assumed` says so
-        self.hvac_columns = {self.chains[i].hvac.get("column", "ambient_c")
+        self.hvac_columns = {self.chains[i].temperature_column
                              for i in self.active if self.chains[i].hvac}
         #: the same for the temperature of warm-running fuel factors (running_fuel_per_k)
         self.running_columns = {self.chains[i].temperature_column for i in self.active

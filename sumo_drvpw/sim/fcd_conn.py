@@ -15,6 +15,7 @@ import pandas as pd
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.sim.network import off_lane
+from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
 
 class _Domain:
@@ -241,7 +242,7 @@ def bus_stops(files, depth: int = 0) -> dict[str, list[tuple[float, float]]]:
         try:
             with open_maybe_gzip(f) as src:
                 for _, el in ET.iterparse(src, events=("end",)):
-                    if el.tag == "include" and el.get("href") and depth < 10:
+                    if el.tag == "include" and el.get("href") and depth < INCLUDE_DEPTH:
                         for lane, spans in bus_stops([Path(f).parent / el.get("href")],
                                                      depth + 1).items():
                             out.setdefault(lane, []).extend(spans)

@@ -22,11 +22,10 @@ from typing import Callable
 import numpy as np
 
 from sumo_drvpw.data.wind import tailwind_mps
-from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network
-from sumo_drvpw.sim.sumo_start import signals_deferred, step_method
+from sumo_drvpw.sim.sumo_start import NewRun, signals_deferred, step_method
 
 # traci variable ids (traci.constants), fixed by the TraCI protocol
 _VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE = 0x40, 0x72, 0x43
@@ -365,9 +364,7 @@ class Stepper:
         vmap = self.vmap
         t_now = conn.simulation.getTime()
         if self.last_t is not None and t_now < self.last_t - 1e-9:  # a load() began a new run
-            raise UserError(f"Accountant: simulation time went back from {self.last_t:g} s to "
-                            f"{t_now:g} s (traci.load / simulation.load?): an Accountant books one "
-                            "run; take its result() before the load and start a new one after it")
+            raise NewRun(self.last_t, t_now)
         ledger.steps += 1
         if self.last_t is not None and t_now - self.last_t > 1.5 * dt:
             self.missed_steps += int(round((t_now - self.last_t) / dt)) - 1

@@ -10,6 +10,10 @@ from pathlib import Path
 
 from sumo_drvpw.fileio import open_maybe_gzip
 
+#: how deep ``<include href>`` is followed in SUMO's XML inputs (SUMO's own loader has no
+#: limit; a cycle would have none either)
+INCLUDE_DEPTH = 10
+
 #: SUMO options that name an output file but do not end in "-output"
 _OUTPUT_OPTIONS = {"log", "message-log", "error-log", "summary", "netstate-dump", "ndump",
                    "save-state.files", "save-configuration", "save-template"}
@@ -46,7 +50,7 @@ def additional_outputs(paths, depth: int = 0) -> list[str]:
                     key = output_attribute(tag)
                     if key and el.get(key):
                         found.append(f"{p}: {tag} '{el.get('id', '')}' → {el.get(key)}")
-                    elif tag == "include" and el.get("href") and depth < 10:
+                    elif tag == "include" and el.get("href") and depth < INCLUDE_DEPTH:
                         found += additional_outputs([Path(p).parent / el.get("href")], depth + 1)
                     el.clear()
         except (ET.ParseError, OSError, EOFError, zlib.error):  # a truncated .gz among them
@@ -121,7 +125,7 @@ def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
                     moved.setdefault(str(add), []).append(name)
                 el.set(key, str(folder.resolve() / name))
                 changed = True
-            elif tag == "include" and el.get("href") and depth < 10:
+            elif tag == "include" and el.get("href") and depth < INCLUDE_DEPTH:
                 target = add.parent / el.get("href")
                 got = load(target, depth + 1)
                 changed |= got != target.resolve()

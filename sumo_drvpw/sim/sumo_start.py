@@ -11,7 +11,19 @@ from pathlib import Path
 
 from sumo_drvpw.errors import UserError
 
-__all__ = ["start_sumo", "close_sumo", "step_method", "scenario_option", "signals_deferred"]
+__all__ = ["start_sumo", "close_sumo", "step_method", "scenario_option", "signals_deferred",
+           "NewRun"]
+
+
+class NewRun(UserError):
+    """SUMO's time went back from ``last_t`` to ``t_now`` [s]: a new run began (a load(), or
+    a libsumo session started after the close of the one booked)."""
+
+    def __init__(self, last_t: float, t_now: float):
+        self.last_t, self.t_now = last_t, t_now
+        super().__init__(f"Accountant: simulation time went back from {last_t:g} s to {t_now:g} s "
+                         "(traci.load / simulation.load?): an Accountant books one run; take its "
+                         "result() before the load and start a new one after it")
 
 
 def _sumo_env() -> None:

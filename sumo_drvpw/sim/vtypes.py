@@ -18,6 +18,7 @@ from pathlib import Path
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
+from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
 
 #: Default mass per SUMO vClass [kg] for vTypes that give none: the MOVES source mass of
@@ -293,11 +294,6 @@ def read_vtypes(files: list[Path]) -> FileVTypes:
     for path in files:
         _read_vtypes(Path(path), out, 0)
     return out
-
-
-#: how deep ``<include href>`` is followed (SUMO's own XML loader has no limit; a cycle
-#: would have none either)
-INCLUDE_DEPTH = 10
 
 
 def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
