@@ -122,16 +122,18 @@ def test_loop_books_hand_calculated_energies():
     b_steps = [(10.0, -1.0, 0.0), (9.0, -1.0, 0.0)]
     ia, ib = led.veh_ids.index("a"), led.veh_ids.index("b")
     ea = sum(p_phys(v, a, th, 2.0) * 0.5 for v, a, th in a_steps)
-    np.testing.assert_allclose(led.veh_trac[ia, 0].sum(), ea, rtol=1e-12)
+    # (a's second step takes the profile's rise over the 20 m it moved on e12: the 4 % within
+    # 1e-8, what spreading the profile's end effects over the lane leaves)
+    np.testing.assert_allclose(led.veh_trac[ia, 0].sum(), ea, rtol=1e-8)
     eb = [p_phys(v, a, th, 2.0) * 0.5 for v, a, th in b_steps]
     assert all(e < 0 for e in eb)  # braking: recuperable
     np.testing.assert_allclose(led.veh_recup[ib, 0].sum(), sum(eb), rtol=1e-12)
     assert led.veh_trac[ib].sum() == 0.0
     np.testing.assert_allclose(led.veh_trac[ia, 1].sum(),
-                               sum(p_fixed(v, a, th) * 0.5 for v, a, th in a_steps), rtol=1e-12)
+                               sum(p_fixed(v, a, th) * 0.5 for v, a, th in a_steps), rtol=1e-8)
     # per category: grade of a on e12
     g = LEDGER_CATEGORIES.index("grade")
-    np.testing.assert_allclose(led.veh_trac[ia, 0, g], 2 * 1500 * G * 20 * math.sin(GRADE) * 0.5)
+    np.testing.assert_allclose(led.veh_trac[ia, 0, g], 2 * 1500 * G * 20 * math.sin(GRADE) * 0.5, rtol=1e-8)
     # edges: a's last step is on e23 (via the internal lane), b on e01; p and t not booked
     e12, e23, e01 = (NET.edge_ids.index(e) for e in ("e12", "e23", "e01"))
     np.testing.assert_allclose(led.edge_trac[e23, 0].sum(), p_phys(21.0, 0.0, 0.0, 2.0) * 0.5)

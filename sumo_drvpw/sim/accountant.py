@@ -309,7 +309,8 @@ class Accountant(_Listener):
         clipped = summary_extra["network"]["slope_clipped_lanes"]
         if clipped:
             warnings.append(f"{int(led.clipped)} vehicle-steps on slopes beyond "
-                            f"±{sc.slope_max:g} rad were clipped; most on lanes "
+                            f"±{sc.slope_max:g} rad were clipped (the rise cut off is spread over the "
+                            "lane, so climbs stay exact); most on lanes "
                             + ", ".join(f"{k} ({n})" for k, n in list(clipped.items())[:3])
                             + " (summary.json network.slope_clipped_lanes)")
         if st.missed_steps and getattr(self.conn, "is_replay", False):

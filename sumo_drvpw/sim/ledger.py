@@ -229,6 +229,7 @@ class Ledger:
         grow("veh_prev_speed", (cap,), float, np.nan)
         grow("veh_lane", (cap,), np.int64, -2)  # tracked lane (-2: never read)
         grow("veh_pos", (cap,), float, np.nan)  # tracked lane position [m]
+        grow("veh_at", (cap, 3), float, np.nan)  # last step's lane, position, profile z
         grow("veh_done", (cap,), bool, False)  # left the simulation, not yet flushed
         grow("veh_parked", (cap,), bool, False)  # parked off the lane: not read, not booked
         self.capacity = cap
@@ -239,7 +240,7 @@ class Ledger:
                    ("veh_mass", np.nan), ("veh_load", 0.0), ("veh_app", 0.0),
                    ("veh_keep", False),
                    ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_lane", -2),
-                   ("veh_pos", np.nan), ("veh_done", False), ("veh_parked", False))
+                   ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_parked", False))
 
     def add_vehicle(self, vid: str, vtype: str, mass: float, app: np.ndarray,
                     keep: bool, vclass: str = "") -> int:
@@ -253,6 +254,7 @@ class Ledger:
         self.veh_mass[i] = mass
         self.veh_load[i] = 0.0
         self.veh_parked[i] = False
+        self.veh_at[i] = np.nan
         self.veh_app[i] = app
         self.veh_keep[i] = keep
         self.n_veh += 1

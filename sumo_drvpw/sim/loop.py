@@ -337,6 +337,7 @@ class Stepper:
                 ledger.veh_parked[i] = False
                 ledger.veh_lane[i] = -2
                 ledger.veh_prev_speed[i] = 0.0
+                ledger.veh_at[i, 2] = np.nan
                 self.prev_ids = None
 
     def flush(self) -> None:
@@ -393,7 +394,9 @@ class Stepper:
                 start_ids.append(vid)
             elif self.is_replay:  # back after a teleport (no FCD rows): the same trip, its
                 ledger.unretire(vmap[vid])  # speed kept (the jump booked), as the live run does
+                ledger.veh_at[vmap[vid], 2] = np.nan  # (the live run saw it off the lane)
             else:  # an id used again (e.g. vehicle.add): its state starts afresh
+                ledger.veh_at[vmap[vid], 2] = np.nan
                 ledger.veh_lane[vmap[vid]] = -2
                 ledger.veh_prev_speed[vmap[vid]] = np.nan
                 ledger.veh_load[vmap[vid]] = 0.0
@@ -475,6 +478,7 @@ class Stepper:
                     lane[j], pos[j] = d
             on_lane = lane >= 0
         if not on_lane.all():  # teleporting, parked: no lane, not booked
+            ledger.veh_at[vidx[~on_lane], 2] = np.nan  # (its next step starts its rise afresh)
             vidx, lane, v, a, angle, pos = (
                 x[on_lane] for x in (vidx, lane, v, a, angle, pos))
             if raw is not None:
@@ -501,6 +505,8 @@ class Stepper:
         v_mean = v - 0.5 * dt * a
         if self.ballistic:
             v = v_mean
+        if net.z_node is not None:  # the step's grade: m·g·Δz exactly
+            theta, ledger.veh_at[vidx] = net.step_grade(lane, pos, v * dt, ledger.veh_at[vidx], theta)
         sig = {} if physics.ambient_c is None else {"ambient_c": np.full(m, physics.ambient_c)}
         mass = ledger.veh_mass[vidx]
         if self.any_load:  # riding persons (SUMO's getTotalMass)

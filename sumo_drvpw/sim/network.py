@@ -8,7 +8,11 @@ Robust slope: SUMO's ``getSlope`` comes from the vehicle's front and back positi
 is noisy on real networks (MoST: ±80° on short stretches). Each lane's 3D shape is
 resampled every ``BIN_M`` metres; the slope at a point is the rise over a centred window
 of ``window`` metres of horizontal distance (shrunk at the lane ends, the whole lane if
-shorter), θ = atan(Δz/Δs), clipped to ±``max_rad``.
+shorter), θ = atan(Δz/Δs), clipped to ±``max_rad`` — and what clipping takes off is
+spread over the lane's other bins, so that the profile still climbs the lane's rise
+(:func:`lane_profile`). The loop books a vehicle's grade from the profile's elevation at
+the step's start and end (:meth:`Network.elevation`), so m·g·Δz over a route is exact,
+clipped or not.
 """
 
 from __future__ import annotations
@@ -59,6 +63,12 @@ class Network:
     profile: np.ndarray
     clipped: np.ndarray
     classes: list[str]
+    #: per lane, nb + 1 values: the elevation the profile climbs to at each bin edge [m]
+    #: (from the shape's first z to its last: :func:`lane_profile`); lane ``k``'s start at
+    #: ``lane_offset[k] + k``
+    z_node: np.ndarray | None = None
+    #: the slope limit the profile keeps [rad]
+    max_rad: float = 0.25
     raw: np.ndarray | None = None
     heading_deg: np.ndarray | None = None
     #: per lane: the shortest lane length of its edge [m]; a car whose position stays
@@ -95,6 +105,40 @@ class Network:
         SUMO's getSlope computes from a vehicle's front and back positions."""
         return self.raw[self.bin_index(lane, pos)]
 
+    def elevation(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """Elevation [m] of the robust profile at lane numbers ``lane``, positions ``pos``
+        [m] (linear within a bin): its differences along a vehicle's path are the rise the
+        profile's slopes integrate to, across lanes and junctions alike."""
+        b = np.minimum((np.maximum(pos, 0.0) * (1.0 / BIN_M)).astype(np.int64), self.lane_nbins[lane] - 1)
+        frac = np.clip((pos - b * BIN_M) / np.maximum(np.minimum(self.lane_length[lane] - b * BIN_M, BIN_M), 1e-9),
+                       0.0, 1.0)
+        i = self.lane_offset[lane] + lane + b
+        return self.z_node[i] + frac * (self.z_node[i + 1] - self.z_node[i])
+
+    def step_grade(self, lane, pos, ds, last, theta) -> tuple[np.ndarray, np.ndarray]:
+        """The grade of each vehicle's step, and where it is now.
+
+        θ with sin θ = Δz/Δs: Δz the rise of the profile (:meth:`elevation`) from where the
+        vehicle was at its last step to lane numbers ``lane``, positions ``pos`` [m], across
+        lanes and junctions; Δs the distance moved, pos − last pos on the same lane, else
+        ``ds`` (v·Δt [m]). So m·g·v·sin θ·Δt = m·g·Δz wherever SUMO moved the vehicle by
+        v·Δt, and a route's potential energy is booked exactly. ``theta`` (the slope at the
+        position) where the step's start is unknown (first step, after a teleport or a
+        parking: NaN elevation), Δs shorter than 1 cm, or the rise steeper than the profile
+        allows (a jump: moveTo, a gap in the network's elevation).
+
+        ``last`` : (n, 3) rows [lane, pos, z] of each vehicle's last step. Returns (θ, the
+        rows of this step)."""
+        z = self.elevation(lane, pos)
+        same = last[:, 0] == lane
+        ds = np.where(same & (pos >= last[:, 1]), pos - last[:, 1], ds)
+        dz = z - last[:, 2]
+        ok = np.isfinite(dz) & (ds >= 0.01)
+        ok[ok] = np.abs(dz[ok]) <= ds[ok] * np.tan(self.max_rad) + 0.01 * np.minimum(ds[ok], 1.0)  # (+ FCD's cm)
+        if ok.any():
+            theta = np.where(ok, np.arcsin(np.clip(dz / np.where(ok, ds, 1.0), -1.0, 1.0)), theta)
+        return theta, np.column_stack([lane, pos, z])
+
     def slope(self, lane: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Robust slope [rad] and clipped flag at lane numbers ``lane``, positions ``pos`` [m]."""
         i = self.bin_index(lane, pos)
@@ -102,8 +146,9 @@ class Network:
 
 
 def lane_profile(shape3d, length: float, window: float, max_rad: float,
-                 behind: bool = False):
-    """Robust slope profile of one lane: (θ per bin [rad], clipped flags).
+                 behind: bool = False, nodes: bool = False):
+    """Robust slope profile of one lane: (θ per bin [rad], clipped flags[, z at the bin
+    edges [m] with ``nodes``]).
 
     Parameters
     ----------
@@ -111,10 +156,18 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float,
     length : SUMO lane length [m] (positions along the lane are in this scale)
     window : distance window [m]
     max_rad : clip limit [rad]
+
+    The clipped profile keeps the lane's rise: what clipping takes off the steepest bins
+    (an elevation spike, a step between two shapes) is spread over the bins with room below
+    the limit, in proportion to that room (:func:`conserve_rise`), so the profile climbs from
+    the shape's first z to its last one — potential energy is conserved over any route, as
+    in SUMO's network, whatever is clipped. (A lane steeper on average than the limit keeps
+    the limit everywhere, and its ``clipped`` flags say so.) ``nodes``: the elevation the
+    profile climbs to at each bin edge, nb + 1 values from the shape's first z.
     """
     p = np.asarray(shape3d, dtype=float)
     if p.ndim != 2 or len(p) < 2:
-        return np.zeros(1), np.zeros(1, bool)
+        return (np.zeros(1), np.zeros(1, bool)) + ((np.zeros(2),) if nodes else ())
     if p.shape[1] < 3:
         p = np.column_stack([p, np.zeros(len(p))])
     seg_h = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
@@ -124,10 +177,10 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float,
     total_h, total_3 = s_h[-1], s_3[-1]
     nb = max(1, int(np.ceil(max(length, 1e-9) / BIN_M)))
     if total_h <= 1e-6:
-        return np.zeros(nb), np.zeros(nb, bool)
+        return (np.zeros(nb), np.zeros(nb, bool)) + ((np.full(nb + 1, p[0, 2]),) if nodes else ())
+    scale = total_3 / max(length, 1e-9)  # SUMO position → along-shape distance
     # bin centres in SUMO position scale → along-shape → horizontal distance
-    centre = (np.arange(nb) + 0.5) * BIN_M * (total_3 / max(length, 1e-9))
-    centre = np.minimum(centre, total_3)
+    centre = np.minimum((np.arange(nb) + 0.5) * BIN_M * scale, total_3)
     sh = np.interp(centre, s_3, s_h)
     w = min(window, total_h)
     if behind:  # [s − w, s]: a vehicle's back and front
@@ -138,9 +191,36 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float,
         hi = lo + w
     z_lo = np.interp(lo, s_h, p[:, 2])
     z_hi = np.interp(hi, s_h, p[:, 2])
-    theta = np.arctan2(z_hi - z_lo, np.maximum(hi - lo, 1e-9))
-    clipped = np.abs(theta) > max_rad
-    return np.clip(theta, -max_rad, max_rad), clipped
+    tan = (z_hi - z_lo) / np.maximum(hi - lo, 1e-9)
+    clipped = np.abs(tan) > np.tan(max_rad) if np.isfinite(max_rad) else np.zeros(nb, bool)
+    if not np.isfinite(max_rad):
+        return (np.arctan(tan), clipped) + ((None,) if nodes else ())
+    # horizontal length of each bin (edges at 0, BIN_M, …, length in SUMO positions)
+    edges = np.minimum(np.arange(nb + 1) * BIN_M, length) * scale
+    edges[-1] = total_3
+    wid = np.diff(np.interp(edges, s_3, s_h))
+    tan = conserve_rise(np.clip(tan, -np.tan(max_rad), np.tan(max_rad)), wid,
+                        float(p[-1, 2] - p[0, 2]), float(np.tan(max_rad)))
+    out = (np.arctan(tan), clipped)
+    if nodes:
+        out += (p[0, 2] + np.concatenate([[0.0], np.cumsum(tan * wid)]),)
+    return out
+
+
+def conserve_rise(tan: np.ndarray, width: np.ndarray, rise: float, limit: float) -> np.ndarray:
+    """Gradients ``tan`` (|tan| ≤ ``limit``) over bins of horizontal ``width`` [m], changed
+    so that Σ tan·width = ``rise`` [m] with |tan| ≤ ``limit`` still: the missing rise goes
+    to every bin in proportion to its room below the limit in that direction (the flattest
+    bins take the most). Where the room is too small (the lane's mean gradient beyond the
+    limit) every bin gets the limit."""
+    gap = rise - float(np.dot(tan, width))
+    if gap == 0.0:
+        return tan
+    room = (limit - tan) if gap > 0 else (limit + tan)
+    cap = float(np.dot(room, width))
+    if cap <= abs(gap):
+        return np.full_like(tan, limit if gap > 0 else -limit)
+    return tan + np.sign(gap) * (abs(gap) / cap) * room
 
 
 def lane_heading(shape, length: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -231,15 +311,16 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     for i in np.flatnonzero(lane_edge < 0):
         inc = lanes[i].getIncoming() if hasattr(lanes[i], "getIncoming") else []
         lane_edge[i] = eidx.get(inc[0].getEdge().getID(), 0) if inc else 0
-    profs, clips, raws, heads, cxs, cys = [], [], [], [], [], []
+    profs, clips, raws, heads, cxs, cys, znodes = [], [], [], [], [], [], []
     z_len = 0.0
     for ln in lanes:
         shape = ln.getShape3D()
         if any(len(p) > 2 and p[2] != 0.0 for p in shape):
             z_len += ln.getLength()
-        th, cl = lane_profile(shape, ln.getLength(), window, max_rad)
+        th, cl, zn = lane_profile(shape, ln.getLength(), window, max_rad, nodes=True)
         profs.append(th)
         clips.append(cl)
+        znodes.append(zn)
         raws.append(lane_profile(shape, ln.getLength(), RAW_LENGTH_M, np.inf, behind=True)[0])
         h, cx, cy = lane_heading(shape, ln.getLength())
         heads.append(h)
@@ -264,10 +345,10 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         edge_shapes=[np.asarray(e.getLanes()[0].getShape(), float)[:, :2] for e in edges],
         lane_index=lane_index, lane_edge=lane_edge,
         lane_length=lane_length, lane_end=lane_end, lane_own_edge=lane_own_edge,
-        lane_offset=off, lane_nbins=nb, profile=np.concatenate(profs),
+        lane_offset=off, lane_nbins=nb, profile=np.concatenate(profs), z_node=np.concatenate(znodes),
         clipped=np.concatenate(clips), classes=all_classes, raw=np.concatenate(raws),
         heading_deg=np.concatenate(heads), lane_ids=[ln.getID() for ln in lanes],
         centre_x=np.concatenate(cxs), centre_y=np.concatenate(cys),
-        lane_width=np.array([ln.getWidth() for ln in lanes], float),
+        lane_width=np.array([ln.getWidth() for ln in lanes], float), max_rad=float(max_rad),
         has_elevation=z_len > 0.0,
         z_share=float(z_len / max(float(lane_length.sum()), 1e-9)))
