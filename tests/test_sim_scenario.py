@@ -412,21 +412,25 @@ def test_vehicle_body_books_a_light_heavy_mismatch_by_the_emission_class(vclass,
     assert (got[0] if got else None) == body
 
 
-@pytest.mark.parametrize("vclass, length, capacity, emission_class, body", [
-    ("bus", 6.0, 5, None, "delivery"),             # SUMO's DRT game shuttle: a van
-    ("bus", 8.0, 9, None, "delivery"),             # its 9-person 8-m shuttle: a minibus
-    ("bus", 8.0, 30, None, None),                  # a midibus with 30 places stays a bus
-    ("bus", 12.0, 5, None, None), ("bus", None, 5, None, None),  # long (or SUMO's 12 m): a bus
-    ("coach", 7.0, None, None, "delivery"),
-    ("truck", 6.0, None, None, "delivery"), ("truck", 7.1, None, None, None),  # SUMO's truck: 7.1 m
-    ("trailer", 6.0, None, None, None),            # no length rule for articulated classes
-    ("bus", 6.0, 5, "HBEFA3/Bus", None),           # the modeller's emission class wins
-    ("passenger", 3.0, 2, None, None),
+@pytest.mark.parametrize("vclass, length, capacity, emission_class, body, mass", [
+    ("bus", 6.0, 5, None, "delivery", None),             # SUMO's DRT game shuttle: a van
+    ("bus", 8.0, 9, None, "delivery", None),             # its 9-person 8-m shuttle: a minibus
+    ("bus", 8.0, 30, None, None, None),                  # a midibus with 30 places stays a bus
+    ("bus", 12.0, 5, None, None, None), ("bus", None, 5, None, None, None),  # long (or SUMO's 12 m): a bus
+    ("coach", 7.0, None, None, "delivery", None),
+    ("truck", 6.0, None, None, "delivery", None), ("truck", 7.1, None, None, None, None),  # SUMO's truck: 7.1 m
+    ("trailer", 6.0, None, None, None, None),            # no length rule for articulated classes
+    ("bus", 6.0, 5, "HBEFA3/Bus", None, None),           # the modeller's emission class wins
+    ("passenger", 3.0, 2, None, None, None),
+    # a declared mass above a van's 3.5 t says heavy, whatever the length: a 6-m, 7.5-t rigid
+    # truck stays a truck (it was booked as a van: 7.5 L/100 km at 50 km/h)
+    ("truck", 6.0, None, None, None, 7500.0), ("bus", 7.0, 20, None, None, 9000.0),
+    ("truck", 6.0, None, None, "delivery", 3500.0),
 ])
-def test_vehicle_body_books_a_short_bus_or_truck_as_a_van(vclass, length, capacity, emission_class, body):
+def test_vehicle_body_books_a_short_bus_or_truck_as_a_van(vclass, length, capacity, emission_class, body, mass):
     from sumo_drvpw.sim.vtypes import VTypeInfo, vehicle_body
 
-    info = VTypeInfo("t", None, None, "f", vclass, 0.0, emission_class, None, length, capacity)
+    info = VTypeInfo("t", mass, None, "f", vclass, 0.0, emission_class, None, length, capacity)
     got = vehicle_body(vclass, info, "t")
     assert (got[0] if got else None) == body
 

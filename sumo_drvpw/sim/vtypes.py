@@ -141,6 +141,9 @@ VAN_LENGTH_M = {"bus": 7.5, "coach": 7.5, "truck": 6.5, "army": 6.5}
 #: too (the DRT game's 8-m, 9-person shuttle)
 MINIBUS_CAPACITY = 9
 MINIBUS_LENGTH_M = 9.0
+#: a van weighs at most this [kg] (EU categories N1 and M1, the car-licence limit): a short
+#: bus, coach or truck whose vType declares a larger mass stays heavy (a 6-m, 7.5-t rigid truck)
+VAN_MAX_MASS_KG = 3500.0
 
 
 def vehicle_body(vclass: str, info: "VTypeInfo | None", vtype_id: str) -> tuple[str, str] | None:
@@ -149,13 +152,15 @@ def vehicle_body(vclass: str, info: "VTypeInfo | None", vtype_id: str) -> tuple[
     :func:`body_vclass` reads; for a light or heavy vClass whose written emissionClass
     names a vehicle of the other weight, that vehicle; for a bus, coach or truck written
     no longer than a van (:data:`VAN_LENGTH_M`) and with no emissionClass naming a
-    vehicle, a van (delivery)."""
+    vehicle nor a mass above a van's (:data:`VAN_MAX_MASS_KG`), a van (delivery)."""
     if info is None:
         return None
     if vclass in GENERIC_VCLASSES:
         return body_vclass(info.emission_class, info.gui_shape, vtype_id)
     ec = body_vclass(info.emission_class, None)
     if ec is None:
+        if info.mass_kg is not None and info.mass_kg > VAN_MAX_MASS_KG:
+            return None  # its mass says heavy, whatever its length
         L, cap = info.length_m, info.person_capacity
         if L is not None and L <= VAN_LENGTH_M.get(vclass, 0.0):
             return "delivery", (f"length {L:g} m: a van or minibus (a {vclass} is longer; "
