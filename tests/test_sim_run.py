@@ -998,12 +998,16 @@ def test_chains_book_the_vehicles_of_their_energy_carrier(tmp_path, capsys):
     assert g.set_index("key").distance_km.to_dict() == pytest.approx(
         {k: d[(k, "epa_gasoline_car")] / 1000 for k in g.key})
     assert not any("emissionClass names" in w for w in s["warnings"])  # every chain booked someone
+    assert not any("no battery or fuel chain applies" in w for w in s["warnings"])  # every car has one
     # a diesel chain on petrol cars only: it books nobody, and says why
     scen.write_text('equations = ["epa_diesel_car", "vsp_ldv1999"]\n[sumo]\nconfig = "c.sumocfg"\n'
                     '[vehicles]\nvtypes = ["petrol"]\n[outputs]\nfigures = false\n')
     s, err = _run_summary(scen, tmp_path / "o2", capsys)
     w = [x for x in s["warnings"] if "emissionClass names their fuel" in x]
     assert len(w) == 1 and "epa_diesel_car not for gasoline: petrol (HBEFA3/PC_G_EU4)" in w[0]
+    # and the CO2 totals leave those cars out: said with their count and vClass
+    w = [x for x in s["warnings"] if "no battery or fuel chain applies to" in x]
+    assert len(w) == 1 and "to 2 passenger vehicle(s)" in w[0]
     assert "epa_diesel_car" in err
     assert load_equation("epa_diesel_car").chain.fuel == "diesel"
 

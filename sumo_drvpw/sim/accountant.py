@@ -324,7 +324,7 @@ class Accountant(_Listener):
             warnings.append("a new run began (simulation time went back from {:g} s to {:g} s): this "
                             "Accountant stopped booking there and left the step listeners; "
                             "start a new one for the new run".format(*self.left_new_run))
-        warnings += chain_warnings(led.chain)
+        warnings += chain_warnings(led.chain, led.chainless)
         summary_extra["warnings"] = warnings + list(summary_extra.get("warnings", []))
         summary = summary_dict(led, net, self.names, self.eqset.uses_other, summary_extra)
         classes = list(net.classes)

@@ -506,11 +506,18 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
             "hvac_air_temperature_assumed": chain.air_temperature_assumed}
 
 
-def chain_warnings(chain: ChainLedger | None) -> list[str]:
-    """What a run's battery/fuel accounts assumed that the scenario did not say."""
+def chain_warnings(chain: ChainLedger | None, chainless: dict | None = None) -> list[str]:
+    """What a run's battery/fuel accounts assumed that the scenario did not say, and the
+    vClasses they leave out (``chainless``: vClass → vehicles no chain applies to)."""
     if chain is None:
         return []
     out = []
+    if chainless:
+        out.append("no battery or fuel chain applies to "
+                   + ", ".join(f"{n} {c}" for c, n in sorted(chainless.items(), key=lambda x: -x[1]))
+                   + " vehicle(s): their driving energy is booked, but the kWh, litres and CO2 totals "
+                   "leave them out (give them an equation with a chain: [vclasses.<vClass>] or "
+                   "[vtypes.<id>] equations)")
     if chain.air_temperature_assumed:
         out.append(f"no air temperature given: the energy chains' HVAC, cold starts and warm-running fuel read "
                    f"{T_REF_C:g} °C (the "

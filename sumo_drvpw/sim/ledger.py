@@ -131,6 +131,9 @@ class Ledger:
         self.lane_clipped = np.zeros(0, np.int64)
         #: battery/fuel accounts (sumo_drvpw.sim.chain.ChainLedger) when an equation has a chain
         self.chain = None
+        #: vClass → accounted vehicles no battery or fuel chain of the run applies to (their
+        #: driving energy is booked; their kWh, litres and CO₂ are not)
+        self.chainless: dict[str, int] = {}
         #: where finished vehicles' rows go (``write(ledger, slots)``, ``write_chain(rows)``:
         #: :class:`sumo_drvpw.sim.spill.VehicleSpill`); None keeps every vehicle in memory
         self.spill = None
@@ -257,6 +260,8 @@ class Ledger:
         self.veh_at[i] = np.nan
         self.veh_app[i] = app
         self.veh_keep[i] = keep
+        if keep and self.chain is not None and self.chain.active and not np.any(np.asarray(app)[self.chain.active]):
+            self.chainless[vclass or "unknown"] = self.chainless.get(vclass or "unknown", 0) + 1
         self.n_veh += 1
         if self.n_veh > self.peak_held:
             self.peak_held = self.n_veh
