@@ -510,6 +510,16 @@ def test_cli_calibrate_battery_then_compare_uses_the_chain(tmp_path, capsys):
     assert set(trips) == {"T1", "T2"}
     for t in trips.values():  # the planted chain is recovered: per-trip battery energy within 1 %
         assert abs(t["error"]) < 0.01
+    # the report's traction ratio is the battery's too (it was the terms' wheel traction over
+    # the measured battery traction: 0.75 on i3 logs); the terms' total stays under energy_j
+    te = rep["trip_energy"]["trips"]
+    p_bat = sum(t["predicted_j"] for t in te.values())
+    assert rep["predicted_traction_energy_j"] == pytest.approx(p_bat, rel=1e-9)
+    assert rep["traction_energy_ratio"] == pytest.approx(p_bat / rep["measured_traction_energy_j"], rel=1e-9)
+    assert abs(rep["traction_energy_ratio"] - 1.0) < 0.01
+    assert rep["energy_j"]["total"] < 0.95 * p_bat  # the wheel needs less than the battery gives
+    md = (out / "report.md").read_text()
+    assert f"{p_bat / 3.6e6:.3f}" in md and "the target's (the chain's battery or fuel power)" in md
     # a driving-power comparison of a log without a driving-power source is refused (exit 2)
     assert cli_main(["compare", str(log), "--equation", str(eq), "--target", "fuel",
                      "--out", str(tmp_path / "f")]) == 2

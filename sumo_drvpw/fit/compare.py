@@ -366,6 +366,9 @@ class EquationResult:
     #: chain inputs unknown (NaN) on some samples: column → {"samples", "read_as", "trips"}
     #: (:meth:`sumo_drvpw.model.chain.EnergyChain.unknown_inputs`)
     unknown_inputs: dict = field(default_factory=dict)
+    #: predicted traction energy of the compared target, Σ max(P̂, 0)·Δt [J] (at the
+    #: wheel the terms' total; for a battery or fuel target the chain's, not the terms')
+    predicted_traction_j: float = math.nan
 
     @property
     def name(self) -> str:
@@ -440,6 +443,8 @@ class Comparison:
             d["energy_share"] = r.energy_share
             d["energy_j"] = r.energy_j
             d["measured_traction_energy_j"] = self.measured_traction_energy_j
+            d["predicted_traction_energy_j"] = (r.energy_j.get("total", math.nan)
+                                                if math.isnan(r.predicted_traction_j) else r.predicted_traction_j)
             d["traction_energy_ratio"] = r.traction_energy_ratio
             if self.trip is not None:
                 d["trip_energy"] = trip_energy(r.pred_w, self.meas_w, self.dt_s, self.trip)
@@ -578,6 +583,9 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
         e, vv = (err, v) if allok else (err[ok], v[ok])
         cats_ok = cats if allok else {c: p[ok] for c, p in cats.items()}
         energy, share = energy_shares(cats_ok, dt if allok else dt[ok])
+        # the traction of what is compared: the terms' at the wheel, the chain's otherwise
+        p_trac = (energy["total"] if target == "wheel" else
+                  float(np.where(pred[ok] > 0.0, pred[ok], 0.0) @ (dt if allok else dt[ok])))
         ref_corr = None
         if reference is not None:
             rc = cat_powers[reference]
@@ -591,9 +599,9 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
             high_speed=high_speed_summary(e, vv),
             error_term_correlation=error_term_correlation(e, cats_ok),
             energy_j=energy, energy_share=share,
-            traction_energy_ratio=(energy["total"] / meas_traction if meas_traction > 0.0
-                                   else math.nan),
+            traction_energy_ratio=(p_trac / meas_traction if meas_traction > 0.0 else math.nan),
             error_reference_correlation=ref_corr,
             unknown_inputs=eq.chain.unknown_inputs(inputs.signals, n, trip) if target != "wheel" else {},
+            predicted_traction_j=p_trac,
         )
     return comp

@@ -183,14 +183,17 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
     lines += ["## Energy share of each term (cf. paper Fig. 10)", "",
               "Share of the predicted traction energy (samples where the equation's total "
               "power is positive). A negative share is energy the term returns during "
-              "traction, e.g. downhill grade.", "",
+              "traction, e.g. downhill grade."
+              + (" With a battery or fuel target the shares are the road-load terms' at the wheel, while "
+                 "predicted and measured traction are the target's (the chain's battery or fuel power)."
+                 if any(d.get("predicts") in ("battery", "fuel") for d in eqs.values()) else ""), "",
               "| Equation | " + " | ".join(f"{c} [%]" for c in scats)
               + " | Predicted traction [kWh] | Measured traction [kWh] | Predicted / measured |",
               "|---|" + "---|" * (len(scats) + 3)]
     for nm, d in eqs.items():
         cells = [num(d["energy_share"].get(c), 1, 100.0) for c in scats]
         lines.append(f"| {nm} | " + " | ".join(cells)
-                     + f" | {num(d['energy_j']['total'], 3, _KWH)}"
+                     + f" | {num(d.get('predicted_traction_energy_j', d['energy_j']['total']), 3, _KWH)}"
                      f" | {num(meas['traction_energy_j'], 3, _KWH)}"
                      f" | {num(d['traction_energy_ratio'], 3)} |")
     lines.append("")
