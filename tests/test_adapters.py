@@ -550,3 +550,15 @@ def test_ved_layout_through_the_documented_mapping(tmp_path):
     assert m.source.startswith("ESTIMATE: fuel from the mass air flow maf_gps")
     want = df["maf_gps"].to_numpy() / 1000 / AFR_STOICH_GASOLINE * (1 - 0.02) * FUELS["gasoline"]["lhv_j_per_kg"]
     np.testing.assert_allclose(m.power_w, want, rtol=1e-12)
+
+
+@pytest.mark.parametrize("unit, factor", [
+    ("g", 9.80665),            # the unit g: standard gravity by definition (3rd CGPM, 1901), not the models' 9.81
+    ("mph", 0.44704), ("km/h", 1 / 3.6), ("ft", 0.3048), ("lb", 0.45359237),  # exact by definition
+    ("lbf", 4.4482216152605), ("hp", 745.69987158227022),
+    ("rad/s", 60 / (2 * math.pi)),  # shaft speeds are canonical in rpm
+])
+def test_unit_factors_are_the_definitions(unit, factor):
+    from sumo_drvpw.data.adapters._common import lookup_unit
+
+    assert lookup_unit(unit)[1] == pytest.approx(factor, rel=1e-12)

@@ -25,6 +25,7 @@ RPM = 2.0 * 3.141592653589793 / 60.0  # rpm → rad/s
 MILE = 1609.344         # mile → m
 GAL = 3.785411784e-3    # US gallon → m³
 HP = 745.69987158227022  # mechanical horsepower → W
+G_UNIT = 9.80665         # the unit g (standard gravity, by definition: 3rd CGPM 1901) → m/s²
 
 #: below this speed a vehicle stands [m/s]: the chain's ``standstill_aux_w`` applies, the
 #: term ``moving`` is 0 (the drive-log spec's standstill tolerance)

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.data.paths import expand_paths  # noqa: F401  (re-exported for the adapters)
-from sumo_drvpw.model.constants import FT, G, GAL, HP, KELVIN, KMH, LB, LBF, MILE, MPH, RPM
+from sumo_drvpw.model.constants import FT, G_UNIT, GAL, HP, KELVIN, KMH, LB, LBF, MILE, MPH, RPM
 from sumo_drvpw.errors import UserError
 
 #: Canonical columns in the order of the spec; everything else is an extra column.
@@ -74,7 +74,7 @@ _u("mass", 1.0, 0.0, "kg")
 _u("mass", 1000.0, 0.0, "t")
 _u("mass", LB, 0.0, "lb", "lbs")
 _u("acceleration", 1.0, 0.0, "m/s^2", "m/s²", "m/s2", "mps2")
-_u("acceleration", G, 0.0, "g")
+_u("acceleration", G_UNIT, 0.0, "g")  # a sensor in g: 9.80665 by definition
 _u("pressure", 1.0, 0.0, "kpa")
 _u("pressure", 1e-3, 0.0, "pa")
 _u("pressure", 0.1, 0.0, "hpa", "mbar")
