@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 import statsmodels.api as sm
 from hypothesis import given, settings
@@ -254,3 +255,25 @@ def test_a_log_without_grade_says_a_flat_road_is_assumed(tmp_path, capsys, engin
         assert cli_main(["compare", str(log), "--equation", str(eq), "--out", str(tmp_path / log.stem)]) == 0
         out = capsys.readouterr().out
         assert out.count("a flat road is assumed") == (2 if said else 0), out
+
+
+@pytest.mark.parametrize("engine", [[], ["--engine", "memory"]])
+def test_report_with_a_vehicle_that_lacks_specs_skips_vsp_from_specs(tmp_path, capsys, engine):
+    """Found by the metamorphic sweep: `calibrate --report` with the built-in bmw_i3 (no
+    [body] rolling_coefficient) ran the whole fit, then refused (exit 2, nothing written)
+    because the report's default comparison, VSP from the car's specs, needs it. The report
+    now leaves that comparison out and says why."""
+    from sumo_drvpw.cli import main as cli_main
+
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 600.0, 0.5)
+    v = 12 + 8 * np.sin(t / 30) + rng.normal(0, 0.05, len(t))
+    a = np.gradient(v, t)
+    p = 1.1 * 1270 * v * a + 0.35 * v ** 3 + 0.012 * 1270 * 9.81 * v + rng.normal(0, 300, len(t))
+    f = tmp_path / "log.csv"
+    pd.DataFrame({"trip_id": "T", "time_s": t, "speed_mps": v, "power_w": p}).to_csv(f, index=False)
+    out, rep = tmp_path / "eq.toml", tmp_path / "rep"
+    assert cli_main(["calibrate", str(f), "--vehicle", "bmw_i3", "--out", str(out), "--report", str(rep)]
+                    + engine) == 0
+    md = (rep / "report.md").read_text()
+    assert "not compared" in md and "body.rolling_coefficient" in md and "vsp_ldv1999" in md

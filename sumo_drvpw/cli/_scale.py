@@ -123,11 +123,15 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     declare_measurement(eq, measurement_options(args))
     lines = [info.line()]
     if args.report:
-        specs = args.compare_with or (["vsp_ldv1999"] + (["vsp_spec"] if veh is not None and veh.body else []))
+        from sumo_drvpw.cli.calibrate import report_specs
+
+        specs, skipped = report_specs(veh, args.compare_with)
         eqs = [eq] + [e for e in resolve_equations(specs, veh) if e.name != eq.name]
         with output_set(args, args.report, inputs) as tmp:
             cs, info2 = _run(args, partial(CompareStats, eqs, eq.name), veh)
             ctx = _context(st, veh, res.n)
+            if skipped:
+                ctx["not compared"] = skipped
             ctx["calibration"] = {
                 "equation": eq.name, "terms": eq.terms, "std_err": eq.std_err,
                 "p_values": eq.p_values, "r2": res.r2, "n": res.n, "selection_trace": res.trace,

@@ -210,18 +210,38 @@ def check_identified(res, where: str) -> None:
                         "a log with varying speed")
 
 
+#: the [body] values VSP from a vehicle's specs needs (model.equations.vsp_from_specs)
+SPEC_KEYS = ("drag_coefficient", "frontal_area_m2", "rolling_coefficient")
+
+
+def report_specs(vehicle, compare_with=None) -> tuple[list[str], str | None]:
+    """The equations a calibration report compares with (``--compare-with``, else VSP LDV
+    1999 and VSP from the vehicle's specs when its file gives them), and why the latter is
+    left out when the file gives only some (None otherwise)."""
+    if compare_with:
+        return list(compare_with), None
+    body = vehicle.body if vehicle is not None else None
+    lacks = [k for k in SPEC_KEYS if k not in (body or {})]
+    if body and not lacks:
+        return ["vsp_ldv1999", "vsp_spec"], None
+    return ["vsp_ldv1999"], (f"VSP from the vehicle's specs: {vehicle.path or vehicle.name} lacks "
+                             + ", ".join(f"body.{k}" for k in lacks) if body else None)
+
+
 def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
     """Compare the calibrated equation with classic ones on the calibration samples."""
     from sumo_drvpw.fit.compare import compare
     from sumo_drvpw.report.comparison import write_comparison_report
     from sumo_drvpw.data.measured import resolve_equations
 
-    specs = compare_with or (["vsp_ldv1999"] + (["vsp_spec"] if m.vehicle is not None and m.vehicle.body else []))
+    specs, skipped = report_specs(m.vehicle, compare_with)
     eqs = [eq] + [e for e in resolve_equations(specs, m.vehicle) if e.name != eq.name]
     u = m.usable
     comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],
                    reference=eq.name)
     ctx = m.context()
+    if skipped:
+        ctx["not compared"] = skipped
     ctx["calibration"] = {"equation": eq.name, "terms": eq.terms, "std_err": eq.std_err,
                           "p_values": eq.p_values, "r2": res.r2, "n": res.n,
                           "selection_trace": res.trace, "settings": res.settings,
