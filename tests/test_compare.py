@@ -348,3 +348,18 @@ def test_report_files_and_keys(tmp_path):
         assert p.is_file() and p.stat().st_size > 1000, fname
         assert p.read_bytes()[:8] == PNG_MAGIC, fname
         assert f"]({fname})" in md
+
+
+def test_two_files_of_one_equation_name_are_refused_naming_both(tmp_path):
+    """Found by the metamorphic sweep: a copy of an equation file under another file name was
+    refused as "the same equation name given twice: ['eq_base']", naming neither file."""
+    from sumo_drvpw.data.measured import resolve_equations
+
+    body = '[equation]\nname = "eq_base"\n[terms]\nacc = 1.0\nv3 = 0.35\n'
+    a, b = tmp_path / "a.toml", tmp_path / "copy.toml"
+    a.write_text(body)
+    b.write_text(body)
+    with pytest.raises(UserError) as e:
+        resolve_equations([str(a), str(b)])
+    msg = str(e.value)
+    assert str(a) in msg and str(b) in msg and "'eq_base'" in msg

@@ -144,5 +144,8 @@ def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:
     names = [e.name for e in out]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise UserError(f"equations: the same equation name given twice: {dup}")
+        given = [str(s) for s, n in zip(specs, names) if n == dup[0]]
+        raise UserError(f"equations: {' and '.join(given)} are both named '{dup[0]}' (the [equation] "
+                        "name, else the file's stem): results are keyed by name, so give each its own "
+                        "[equation] name")
     return out
