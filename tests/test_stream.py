@@ -433,3 +433,21 @@ def test_streamed_calibration_reads_the_ambient_temperature_of_cold_terms(tmp_pa
         got[engine] = read_toml(eq, "equation")["terms"]
     assert got["local"]["cold*v^2"] == pytest.approx(got["memory"]["cold*v^2"], rel=1e-9)
     assert got["local"]["cold*v^2"] == pytest.approx(0.2, rel=0.1)
+
+
+@pytest.mark.parametrize("command", ["calibrate", "compare"])
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_streamed_repeated_trip_id_names_the_file(tmp_path, capsys, command, suffix):
+    """Found by the metamorphic sweep: the streamed engines refused a trip id met again
+    after another trip without naming the file (the in-memory reader names it)."""
+    t = np.arange(0.0, 120.0, 0.5)
+    v = 10 + 3 * np.sin(t / 10)
+    df = pd.DataFrame({"trip_id": "T7", "time_s": t, "speed_mps": v, "power_w": 300 * v, "mass_kg": 1400.0})
+    f = tmp_path / f"log{suffix}"
+    both = pd.concat([df, df.assign(trip_id="T8"), df], ignore_index=True)
+    both.to_csv(f, index=False) if suffix == ".csv" else both.to_parquet(f)
+    args = (["calibrate", str(f), "--out", str(tmp_path / "e.toml")] if command == "calibrate" else
+            ["compare", str(f), "--equation", "vsp_ldv1999", "--out", str(tmp_path / "o")])
+    assert cli_main(args) == 2
+    err = capsys.readouterr().err
+    assert f"{f}: trip_id 'T7' appears in more than one place" in err and "Traceback" not in err

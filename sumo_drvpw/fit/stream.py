@@ -170,6 +170,14 @@ def tall_r(a: np.ndarray) -> np.ndarray:
     return r
 
 
+def trip_twice(trip: str, first: str, again: str) -> UserError:
+    """The refusal of a trip id met in two places (two files, or two places of one), naming
+    where."""
+    where = first if first == again else f"{first} and {again}"
+    return UserError(f"{where}: trip_id '{trip}' appears in more than one place; samples of a trip "
+                     "must be contiguous, give each trip its own id")
+
+
 @dataclass
 class CalibrationStats:
     """Mergeable sufficient statistics of the stepwise calibration.
@@ -196,6 +204,8 @@ class CalibrationStats:
     moving_mps: float = 0.5
     #: (min, max) of speed [m/s] and acceleration [m/s²] over the used samples
     ranges: tuple = ((math.inf, -math.inf), (math.inf, -math.inf))
+    #: trip → the file(s) of the batch it came in (to name both places of a repeated id)
+    trip_files: dict = field(default_factory=dict)
 
     def columns(self) -> frozenset:
         """Columns to read: the reader's canonical ones and the signals the candidates name."""
@@ -250,20 +260,20 @@ class CalibrationStats:
             xy = np.empty((b0 - a0, k + 1))  # [X y]: a trip's rows are one contiguous view
             xy[:, :k] = term_matrix(self.names, x.take(rows))
             xy[:, k] = y[rows]
+            here = ", ".join(map(str, m.log.files))
             for t, a, b in zip(ids[lo:hi], starts[lo:hi] - a0, ends[lo:hi] - a0):
                 t = str(t)
                 if t in self.trips:
-                    raise UserError(f"trip_id '{t}' appears in more than one place; give each "
-                                    "trip its own id")
+                    raise trip_twice(t, self.trip_files.get(t, here), here)
                 self.trips[t] = (tall_r(xy[a:b]), Moments.of(xy[a:b, k:]))
+                self.trip_files[t] = here
             lo = hi
         return self
 
     def merge(self, o: "CalibrationStats") -> "CalibrationStats":
-        dup = set(self.trips) & set(o.trips)
+        dup = sorted(set(self.trips) & set(o.trips))
         if dup:
-            raise UserError(f"trip_id '{sorted(dup)[0]}' appears in more than one place; give "
-                            "each trip its own id")
+            raise trip_twice(dup[0], self.trip_files.get(dup[0], "?"), o.trip_files.get(dup[0], "?"))
         out = CalibrationStats(self.names, {**self.trips, **o.trips}, self.mass_sum + o.mass_sum,
                                self.mass_n + o.mass_n, _add_counts(self.counts, o.counts),
                                self.rows + o.rows, self.source or o.source,
@@ -271,7 +281,7 @@ class CalibrationStats:
                                self.files + [f for f in o.files if f not in self.files],
                                self.rho_sum + o.rho_sum,
                                frozenset(list(self.speeds | o.speeds)[:2]), self.moving_mps,
-                               _merge_ranges(self.ranges, o.ranges))
+                               _merge_ranges(self.ranges, o.ranges), {**self.trip_files, **o.trip_files})
         return out
 
     def factor(self, trips=None) -> tuple[np.ndarray, Moments]:

@@ -18,7 +18,7 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.ols import Gram
-from sumo_drvpw.fit.stream import Moments, _add_counts, _trip_codes
+from sumo_drvpw.fit.stream import Moments, _add_counts, _trip_codes, trip_twice
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS
 from sumo_drvpw.model.terms import CATEGORIES, parse_term
 
@@ -134,7 +134,7 @@ class CompareStats:
         self.ref_cats: list | None = None
         self.res: _Reservoir | None = None
         self.counts: dict = {}
-        self.trips: set = set()
+        self.trips: dict = {}  # trip → the file(s) of the batch it came in
         self.source: str | None = None
         self.vehicle = None
         self.files: list = []
@@ -174,10 +174,11 @@ class CompareStats:
         starts = np.flatnonzero(first)
         codes = np.cumsum(first) - 1
         uniq = np.asarray(x.trip)[starts].astype(str)
-        if self.trips.intersection(uniq):
-            raise UserError(f"trip_id '{sorted(self.trips.intersection(uniq))[0]}' appears in "
-                            "more than one place; give each trip its own id")
-        self.trips.update(uniq)
+        here = ", ".join(map(str, m.log.files))
+        dup = sorted(set(self.trips).intersection(uniq))
+        if dup:
+            raise trip_twice(dup[0], self.trips[dup[0]], here)
+        self.trips.update(dict.fromkeys(uniq, here))
         v = np.asarray(x.v, float)
         n = len(meas)
         self.n += n
@@ -251,11 +252,10 @@ class CompareStats:
 
     def merge(self, o: "CompareStats") -> "CompareStats":
         """Add another CompareStats (e.g. a Dask partition's) to this one."""
-        dup = self.trips & o.trips
+        dup = sorted(set(self.trips) & set(o.trips))
         if dup:
-            raise UserError(f"trip_id '{sorted(dup)[0]}' appears in more than one place; give "
-                            "each trip its own id")
-        self.trips |= o.trips
+            raise trip_twice(dup[0], self.trips[dup[0]], o.trips[dup[0]])
+        self.trips.update(o.trips)
         self.n += o.n
         self.rows += o.rows
         self.counts = _add_counts(self.counts, o.counts)
