@@ -115,3 +115,37 @@ def test_calibrate_cli_uses_the_constrained_fit_when_implausible(tmp_path, capsy
     eq = load_equation(out)
     assert eq.terms["grade"] == 2.5 and eq.terms["acc"] == pytest.approx(1.05, rel=0.02)
     assert eq.provenance["physical"]["unconstrained"]["grade"] < 0.6
+
+
+@pytest.mark.parametrize("engine", [[], ["--engine", "memory"]])
+def test_the_equation_files_r2_is_that_of_its_constrained_coefficients(tmp_path, engine):
+    """Found by the metamorphic sweep: an equation calibrated under the physical constraints
+    carried the free fit's R² in its [metrics] (0.937353 where compare, evaluating the file's
+    coefficients on the same samples, gives 0.937222)."""
+    import json
+
+    import pandas as pd
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.equations import load_equation
+
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 1800.0, 0.5)
+    v = 14 + 8 * np.sin(t / 45) + 3 * np.sin(t / 11)
+    a = np.gradient(v, t)
+    theta = 0.04 * np.sin(t / 120)
+    m = 1500.0
+    p = (1.08 * m * v * a + m * 9.81 * v * np.sin(theta) + 0.32 * v ** 3 + 0.011 * m * 9.81 * v
+         + rng.normal(0, 800, len(t)))
+    f = tmp_path / "log.csv"   # the logged grade half the true one: the free grade reads ≈ 2
+    pd.DataFrame({"trip_id": "T", "time_s": t, "speed_mps": v, "grade_rad": 0.5 * theta, "power_w": p,
+                  "mass_kg": m}).to_csv(f, index=False)
+    out = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(f), "--out", str(out)] + engine) == 0
+    eq = load_equation(out)
+    assert eq.provenance["physical"]["used"] == "constrained", eq.terms
+    assert eq.terms["grade"] == pytest.approx(1.3), eq.terms  # (the free fit reads ≈ 2: at its bound)
+    assert cli_main(["compare", str(f), "--equation", str(out), "--out", str(tmp_path / "c")]) == 0
+    r2 = json.loads((tmp_path / "c" / "report.json").read_text())["equations"][eq.name]["r2"]
+    assert eq.metrics["r2"] == pytest.approx(r2, abs=1e-9)
+    assert eq.metrics["r2_unconstrained"] > eq.metrics["r2"]

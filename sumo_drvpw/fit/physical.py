@@ -210,6 +210,22 @@ def constrained_fit(g: Gram, constraints: dict[str, dict]) -> ConstrainedFit:
                           {t: constraints[t] for t in names if t in constraints})
 
 
+def _refit_metrics(eq, g: Gram, free: dict[str, float], rss: float) -> None:
+    """``eq.metrics`` of the constrained coefficients now in ``eq.terms``: R² (centred, its
+    total sum of squares from the free fit's R² and residual on the same samples ``g``) and
+    the uncentred one; the free fit's R² kept as ``r2_unconstrained``."""
+    r2 = eq.metrics.get("r2")
+    b = np.array([free[t] for t in g.names])
+    rss_free = float(g.yty - 2.0 * b @ g.xty + b @ g.xtx @ b)
+    if r2 is None or not np.isfinite(r2) or r2 >= 1.0:
+        return
+    sst = rss_free / (1.0 - r2)
+    eq.metrics["r2_unconstrained"] = r2
+    eq.metrics["r2"] = 1.0 - rss / sst if sst > 0 else math.nan
+    if g.yty > 0:
+        eq.metrics["r2_uncentered"] = 1.0 - rss / float(g.yty)
+
+
 def physical_calibration(x, y, candidates, mask=None, constraints: dict | None = None,
                          force: bool = False, **kw):
     """Calibrate stepwise; when the fit is implausible (or ``force``), refit the selected
@@ -246,6 +262,7 @@ def physical_calibration(x, y, candidates, mask=None, constraints: dict | None =
     rep["used"] = "constrained"
     rep["why"] = ("unconstrained fit implausible: " + ", ".join(f"{t} ({reading[t]['note']})" for t in bad)
                   if bad else "constrained fit requested")
+    _refit_metrics(eq, g, dict(res.params), fit.rss)
     eq.terms = dict(fit.params)
     eq.std_err = {}
     eq.p_values = {}
@@ -288,6 +305,7 @@ def apply_physics_gram(eq, g: Gram | None, rho_kgm3: float = RHO_DEFAULT,
     eq.provenance["physical"] = {"used": "constrained", "why": why, "constraints": fit.constraints,
                                  "active": fit.active, "unconstrained": dict(eq.terms),
                                  "reading": physical_reading(fit.params, rho_kgm3)}
+    _refit_metrics(eq, sub, dict(eq.terms), fit.rss)
     eq.terms = dict(fit.params)
     eq.std_err, eq.p_values = {}, {}
     return eq, (f"physically constrained fit used: the free fit is implausible: {why}; "
