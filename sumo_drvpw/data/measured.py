@@ -145,7 +145,9 @@ def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         given = [str(s) for s, n in zip(specs, names) if n == dup[0]]
+        if len(set(given)) == 1:
+            raise UserError(f"equations: {given[0]} given twice")
         raise UserError(f"equations: {' and '.join(given)} are both named '{dup[0]}' (the [equation] "
-                        "name, else the file's stem): results are keyed by name, so give each its own "
-                        "[equation] name")
+                        "name, else the file's stem), given twice: results are keyed by name, so give "
+                        "each its own [equation] name")
     return out

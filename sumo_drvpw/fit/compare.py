@@ -366,8 +366,7 @@ class EquationResult:
     #: chain inputs unknown (NaN) on some samples: column → {"samples", "read_as", "trips"}
     #: (:meth:`sumo_drvpw.model.chain.EnergyChain.unknown_inputs`)
     unknown_inputs: dict = field(default_factory=dict)
-    #: predicted traction energy of the compared target, Σ max(P̂, 0)·Δt [J] (at the
-    #: wheel the terms' total; for a battery or fuel target the chain's, not the terms')
+    #: Σ max(P̂, 0)·Δt of the compared target [J] (a battery or fuel target: the chain's)
     predicted_traction_j: float = math.nan
 
     @property
@@ -406,8 +405,7 @@ class Comparison:
     trip: np.ndarray | None = None
 
     @property
-    def n_samples(self) -> int:
-        """Number of samples compared."""
+    def n_samples(self) -> int:  # number of samples compared
         return int(self.meas_w.size)
 
     def error_w(self, name: str) -> np.ndarray:
@@ -433,23 +431,19 @@ class Comparison:
                 d["std_err"] = dict(r.equation.std_err)
             if r.equation.mass_kg is not None:
                 d["mass_kg"] = r.equation.mass_kg
-            d["speed_bins"] = r.speed_bins
-            d["high_speed"] = r.high_speed
-            d["error_term_correlation"] = r.error_term_correlation
+            d.update(speed_bins=r.speed_bins, high_speed=r.high_speed, error_term_correlation=r.error_term_correlation)
             if r.error_reference_correlation is not None:
                 d["error_reference_correlation"] = r.error_reference_correlation
             if r.unknown_inputs:
                 d["chain_unknown_inputs"] = r.unknown_inputs
-            d["energy_share"] = r.energy_share
-            d["energy_j"] = r.energy_j
-            d["measured_traction_energy_j"] = self.measured_traction_energy_j
-            d["predicted_traction_energy_j"] = (r.energy_j.get("total", math.nan)
-                                                if math.isnan(r.predicted_traction_j) else r.predicted_traction_j)
-            d["traction_energy_ratio"] = r.traction_energy_ratio
+            d.update(energy_share=r.energy_share, energy_j=r.energy_j,
+                     measured_traction_energy_j=self.measured_traction_energy_j,
+                     predicted_traction_energy_j=(r.energy_j.get("total", math.nan) if math.isnan(
+                         r.predicted_traction_j) else r.predicted_traction_j),
+                     traction_energy_ratio=r.traction_energy_ratio)
             if self.trip is not None:
                 d["trip_energy"] = trip_energy(r.pred_w, self.meas_w, self.dt_s, self.trip)
-                d["trip_net_energy"] = trip_net_energy(r.pred_w, self.meas_w, self.dt_s,
-                                                       self.trip)
+                d["trip_net_energy"] = trip_net_energy(r.pred_w, self.meas_w, self.dt_s, self.trip)
             eqs[name] = d
         return plain({
             "equations": eqs,
@@ -584,8 +578,7 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
         cats_ok = cats if allok else {c: p[ok] for c, p in cats.items()}
         energy, share = energy_shares(cats_ok, dt if allok else dt[ok])
         # the traction of what is compared: the terms' at the wheel, the chain's otherwise
-        p_trac = (energy["total"] if target == "wheel" else
-                  float(np.where(pred[ok] > 0.0, pred[ok], 0.0) @ (dt if allok else dt[ok])))
+        p_trac = energy["total"] if target == "wheel" else float(np.maximum(pred[ok], 0.0) @ dt[ok])
         ref_corr = None
         if reference is not None:
             rc = cat_powers[reference]
