@@ -305,3 +305,60 @@ def test_trips_of_one_sample_each_read_without_numpy_warnings(tmp_path):
         warnings.simplefilter("error")
         log = read_log([_write(tmp_path, df)])
     assert len(log.df) == 3 and "time_gaps" not in log.counts
+
+
+# ------------------------------------------- each trip on its own: rate, resolution, gaps
+
+def _drive(trip, hz, n_s=120.0, seed=0, quantum=None):
+    """A trip of smooth stop-and-go driving sampled at ``hz``; speed in steps of ``quantum``."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, n_s, 1.0 / hz)
+    v = 12.0 + 6.0 * np.sin(2 * np.pi * t / 40.0 + rng.uniform(0, 6)) + 2.0 * np.sin(2 * np.pi * t / 7.0)
+    if quantum:
+        v = np.round(v / quantum) * quantum
+    return pd.DataFrame({"trip_id": trip, "time_s": t, "speed_mps": v, "power_w": 1e3 * v})
+
+
+@pytest.mark.parametrize("order", ["alone_first", "other_first"])
+def test_a_trip_reads_the_same_whatever_trips_share_its_log(tmp_path, order):
+    """Found by the metamorphic sweep: the acceleration's window was set by the median step
+    and the speed resolution of the whole log, so a 1-Hz trip read with 10-Hz trips (or a
+    whole-km/h trip with fine ones) was differentiated on another trip's window (predicted
+    trip energy −11 % … +8 %). Now each trip by its own step and resolution."""
+    slow = _drive("slow", 1.0, seed=1)
+    coarse = _drive("coarse", 5.0, seed=2, quantum=1 / 3.6)   # whole km/h at 5 Hz
+    fast = _drive("fast", 10.0, seed=3)
+    parts = [slow, coarse, fast] if order == "alone_first" else [fast, coarse, slow]
+    both = read_log([_write(tmp_path, pd.concat(parts, ignore_index=True))])
+    for one in (slow, coarse, fast):
+        alone = read_log([_write(tmp_path, one, f"{one.trip_id[0]}.csv")])
+        got = both.df[both.df.trip_id == one.trip_id[0]]
+        assert_allclose(got["accel_mps2"].to_numpy(), alone.df["accel_mps2"].to_numpy(), rtol=0, atol=1e-12)
+        assert_allclose(got["dt_s"].to_numpy(), alone.df["dt_s"].to_numpy(), rtol=0, atol=1e-12)
+    # the whole-km/h trip keeps its widened window; the others the least one
+    assert read_log([_write(tmp_path, coarse, "c.csv")]).counts["accel_window_s"] > 2.0
+    assert "each trip's own" in both.counts["accel_source"] and "on 1 of 3 trips" in both.counts["accel_source"]
+
+
+@pytest.mark.parametrize("pause_s", [20.0, 600.0, 3600.0])
+def test_a_logging_pause_adds_no_energy(tmp_path, pause_s):
+    """Found by the metamorphic sweep: a logger that pauses while the car drives (a phone's
+    17-s pause in the Prius logs; here 20 s to an hour) stretched the two neighbouring
+    samples' power over the pause, +40 % … +743 % of a trip's traction energy. An interval
+    over 5 median steps and 2 s now weighs nothing and no derivative reaches across it:
+    the trip's energy is that of its samples, whatever the pause."""
+    base = _drive("T", 10.0, n_s=300.0, seed=4)
+    k = 1500  # mid-trip, moving
+    paused = base.copy()
+    paused.loc[k:, "time_s"] += pause_s
+    a = read_log([_write(tmp_path, base, "a.csv")])
+    b = read_log([_write(tmp_path, paused, "b.csv")])
+    e_a = float((a.df.power_w * a.df.dt_s).sum())
+    e_b = float((b.df.power_w * b.df.dt_s).sum())
+    step = 0.1 * float(base.power_w.max())  # the one 0.1-s interval the pause replaced
+    assert abs(e_b - e_a) <= step
+    assert b.counts["time_gaps"] == 1 and b.counts["time_gaps_s"] == pytest.approx(pause_s + 0.1, abs=1e-6)
+    # the acceleration away from the pause is untouched, and near it no jump reaches across
+    far = np.abs(np.arange(len(base)) - k) > 10
+    assert_allclose(b.df.accel_mps2.to_numpy()[far], a.df.accel_mps2.to_numpy()[far], atol=1e-9)
+    assert np.abs(b.df.accel_mps2).max() <= np.abs(a.df.accel_mps2).max() + 0.5

@@ -19,8 +19,9 @@ from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.terms import Inputs
-from sumo_drvpw.data.trips import (per_trip_rolling_mean as _per_trip_rolling_mean,  # noqa: F401
-                                   trip_array as _trip_array, trip_codes_of,
+from sumo_drvpw.data.trips import (derivative, grade_from_elevation,  # noqa: F401  (re-exported)
+                                   per_trip_rolling_mean as _per_trip_rolling_mean,
+                                   run_median_step, trip_array as _trip_array, trip_codes_of,
                                    trip_starts as _trip_starts)
 from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_header,  # noqa: F401
                                        check_distinct_trips, check_speed_unit, check_time_step,
@@ -88,6 +89,11 @@ class ReadOptions:
     measurement: object | None = None
 
 
+#: a logging gap: an interval within a trip longer than this many of the trip's median
+#: steps and than GAP_MIN_S [s] (a 1-Hz hiccup of 2 s is no gap; a phone's 17-s pause is)
+GAP_STEPS, GAP_MIN_S = 5.0, 2.0
+
+
 @dataclass
 class DriveLog:
     """A validated canonical drive log with derived columns.
@@ -104,9 +110,22 @@ class DriveLog:
     excluded: np.ndarray | None = None
     metadata: dict = field(default_factory=dict)
     options: ReadOptions = field(default_factory=ReadOptions)
+    #: (stretch code per sample, moving-average width per stretch [s]) of the derived
+    #: acceleration: stretches are trips cut at logging gaps (:meth:`derivative`)
+    deriv: tuple | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.df)
+
+    def derivative(self, y: np.ndarray, window_s: float | None = None) -> np.ndarray:
+        """dy/dt of a per-sample signal as the reader derives the acceleration: the same
+        stretches and each trip's window (``window_s`` [s]: one width instead)."""
+        t = self.df["time_s"].to_numpy(float)
+        if self.deriv is None:
+            codes = trip_codes_of(self.df["trip_id"])
+            return derivative(y, t, codes, self.options.accel_window_s if window_s is None else window_s)
+        seg, win = self.deriv
+        return derivative(y, t, seg, win if window_s is None else window_s)
 
     @property
     def extra_columns(self) -> list[str]:
@@ -320,79 +339,6 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
     return n_clipped
 
 
-def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s: float) -> np.ndarray:
-    """Smoothed time derivative within trips: central difference, then a centred mean.
-
-    Parameters
-    ----------
-    y : signal [any unit]
-    t : time [s], strictly increasing within a trip
-    trip_codes : integer trip code per sample (samples of a trip are contiguous)
-    window_s : width of the moving average [s]
-
-    Returns dy/dt [unit/s]; one-sided differences at trip ends, 0 for one-sample trips.
-    """
-    n = len(y)
-    d = np.zeros(n)
-    if n < 2:
-        return d
-    start = _trip_starts(trip_codes)
-    end = np.r_[start[1:], True]
-    # central differences by slices; one-sided ones only at trip ends (few samples)
-    dy, dt = np.empty(n), np.empty(n)
-    np.subtract(y[2:], y[:-2], out=dy[1:-1])
-    np.subtract(t[2:], t[:-2], out=dt[1:-1])
-    b = np.flatnonzero(start | end)
-    lo = np.where(start[b], b, b - 1)
-    hi = np.where(end[b], b, b + 1)
-    dy[b] = y[hi] - y[lo]
-    dt[b] = t[hi] - t[lo]
-    ok = dt > 0
-    np.divide(dy, dt, out=d, where=ok)
-    med_dt = float(np.median(np.diff(t)[~start[1:]])) if (~start[1:]).any() else 1.0
-    window = min(window_s / med_dt, n) if med_dt > 0 else 1  # never wider than the log
-    # an odd width keeps the centred mean centred (an even one shifts by half a sample)
-    window = max(int(round(window)), 1) | 1
-    return _per_trip_rolling_mean(d, trip_codes, window)
-
-
-def grade_from_elevation(z: np.ndarray, dist: np.ndarray, trip_codes: np.ndarray,
-                         window_m: float) -> np.ndarray:
-    """Grade angle from elevation smoothed over distance, within trips.
-
-    For each trip the elevation is interpolated onto a 1 m distance grid, averaged over
-    ``window_m`` (centred), differentiated, and read back at each sample's distance.
-    Coarse elevation (whole metres) then gives a grade resolution of about 1/window_m.
-
-    Parameters
-    ----------
-    z : elevation [m]; dist : distance travelled since trip start [m]
-    trip_codes : integer trip code per sample; window_m : smoothing distance [m]
-
-    Returns θ [rad] = atan(dz/ds).
-    """
-    theta = np.zeros(len(z))
-    starts = np.flatnonzero(_trip_starts(trip_codes))
-    bounds = np.r_[starts, len(z)]
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        s, zz = dist[a:b], z[a:b]
-        ok = np.isfinite(zz)
-        if ok.sum() < 2 or s[-1] - s[0] < 2:
-            continue
-        su, first = np.unique(s[ok], return_index=True)
-        zu = zz[ok][first]
-        grid = np.arange(su[0], su[-1] + 1.0, 1.0)
-        zg = np.interp(grid, su, zu)
-        w = max(int(round(window_m)), 1)
-        if w > 1 and len(zg) > w:
-            kernel = np.ones(w) / w
-            pad = np.pad(zg, (w // 2, w - 1 - w // 2), mode="edge")
-            zg = np.convolve(pad, kernel, mode="valid")
-        slope = np.gradient(zg, grid) if len(grid) > 1 else np.zeros_like(grid)
-        theta[a:b] = np.arctan(np.interp(s, grid, slope))
-    return theta
-
-
 def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLog:
     """Read canonical drive logs, validate them and derive the model inputs.
 
@@ -499,29 +445,38 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     v = df["speed_mps"].to_numpy(float)
     start = _trip_starts(trip_codes)
 
-    # time weight per sample: half the interval to each neighbour within the trip
+    # time weight per sample: half the interval to each neighbour within the trip; an interval
+    # longer than GAP_STEPS of the trip's own median step and GAP_MIN_S is a logging gap: no
+    # samples, no weight (the neighbours' power is not stretched over it)
     dtf = np.r_[np.diff(t), 0.0]
     dtf[np.r_[start[1:], True]] = 0.0
-    dtb = np.r_[0.0, dtf[:-1]]
-    dt = 0.5 * (dtf + dtb)
-    gaps = np.r_[np.diff(t), 0.0]
-    within = gaps[~np.r_[start[1:], True]]  # intervals inside trips (none: one-sample trips)
-    med = float(np.median(within)) if within.size else 0.0
-    if med > 0:
-        big = (dtf > 5 * med)
-        counts["time_gaps"] = int(big.sum())
-    df["dt_s"] = dt
+    med = run_median_step(t, trip_codes)
+    gap = dtf > np.maximum(GAP_STEPS * np.nan_to_num(med, nan=np.inf), GAP_MIN_S)[trip_codes]
+    if np.isfinite(med).any():
+        counts["time_gaps"] = int(gap.sum())
+    if gap.any():
+        counts["time_gaps_s"] = round(float(dtf[gap].sum()), 3)
+        dtf[gap] = 0.0
+    df["dt_s"] = 0.5 * (dtf + np.r_[0.0, dtf[:-1]])
+    # stretches between gaps: derivatives never reach across one
+    seg = np.cumsum(start | np.r_[False, gap[:-1]]) - 1
 
     if "accel_mps2" not in df:
         win, q = accel_window(opt, v, trip_codes)
-        counts["accel_window_s"] = win
-        df["accel_mps2"] = derivative(v, t, trip_codes, win)
-        counts["accel_source"] = f"derived: central difference of speed, {win:.3g} s moving average" + (
-            f" (widened from {opt.accel_window_s:g} s: the speed is logged in steps of {q:.3g} m/s, whose "
-            f"rounding would put more than {opt.accel_noise_mps2:g} m/s² of noise into the acceleration)"
-            if win > opt.accel_window_s else "")
+        wide = win > opt.accel_window_s
+        counts["accel_window_s"] = float(win.max())
+        win_seg = win[trip_codes[_trip_starts(seg)]]
+        df["accel_mps2"] = derivative(v, t, seg, win_seg)
+        deriv = (seg, win_seg)
+        counts["accel_source"] = "derived: central difference of speed, " + (
+            f"{win[0]:.3g} s moving average" if (win == win[0]).all() else
+            f"{win.min():.3g}–{win.max():.3g} s moving average (each trip's own)") + (
+            f" (widened from {opt.accel_window_s:g} s" + ("" if wide.all() else f" on {int(wide.sum())} of {len(win)} trips")
+            + f": the speed is logged in steps of {q[wide].max():.3g} m/s, whose rounding would put more than "
+            f"{opt.accel_noise_mps2:g} m/s² of noise into the acceleration)" if wide.any() else "")
     else:
         counts["accel_source"] = "accel_mps2 column"
+        deriv = (seg, np.full(int(seg[-1]) + 1, opt.accel_window_s))
 
     if "grade_rad" in df:
         counts["grade_source"] = "grade_rad column"
@@ -590,4 +545,4 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
             excluded |= nan
     counts["excluded_total"] = int(excluded.sum())
     return DriveLog(df=df, files=list(files), counts=counts, excluded=excluded,
-                    metadata=meta, options=opt)
+                    metadata=meta, options=opt, deriv=deriv)

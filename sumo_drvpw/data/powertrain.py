@@ -110,24 +110,18 @@ POWER_SPLIT_COLUMNS = ("ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm", "mg2_s
 def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np.ndarray, str]:
     """The measured driving power of a :class:`~sumo_drvpw.data.log.DriveLog` [W] and its source.
 
-    Shaft accelerations use the same smoothed derivative as the log's acceleration (its
-    window ``log.counts["accel_window_s"]``, else ``log.options.accel_window_s``, or
-    ``window_s`` [s] when given).
+    Shaft accelerations use the same smoothed derivative as the log's acceleration
+    (:meth:`~sumo_drvpw.data.log.DriveLog.derivative`: each trip's window, never across a
+    logging gap; ``window_s`` [s]: one width instead).
 
     Exactly one source is used, in the spec's order: ``power_w``; the power-split signals
     (needs a ``power_split`` vehicle); motor torque and speed (speed from vehicle speed,
     gear ratio and wheel radius when ``motor_speed_rpm`` is absent); battery V·I.
     """
-    from sumo_drvpw.data.log import derivative
-
     df = log.df
     where = log.describe()
     if "power_w" in df:
         return df["power_w"].to_numpy(float), "direct (power_w)"
-    trip_codes = np.asarray(df["trip_id"].factorize()[0])
-    t = df["time_s"].to_numpy(float)
-    # the vehicle's acceleration window (widened for a coarsely logged speed) for the shafts too
-    win = log.counts.get("accel_window_s", log.options.accel_window_s) if window_s is None else window_s
     if all(c in df for c in POWER_SPLIT_COLUMNS):
         if vehicle is None or vehicle.powertrain_type != "power_split":
             raise UserError(f"{where}: the log has power-split signals ({', '.join(POWER_SPLIT_COLUMNS)}); "
@@ -141,9 +135,9 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
         mg2 = df["mg2_speed_rpm"].to_numpy(float) * RPM
         wh = mg2 / (kr * kc * kf)
         out = power_split_power(
-            ice, derivative(ice, t, trip_codes, win), mg1, derivative(mg1, t, trip_codes, win),
+            ice, log.derivative(ice, window_s), mg1, log.derivative(mg1, window_s),
             df["mg1_torque_nm"].to_numpy(float), mg2, df["mg2_torque_nm"].to_numpy(float),
-            derivative(wh, t, trip_codes, win),
+            log.derivative(wh, window_s),
             sun_teeth=vehicle.need("powertrain", "sun_teeth"),
             ring_teeth=vehicle.need("powertrain", "ring_teeth"),
             mg2_reduction=kr, counter_ratio=kc, final_drive=kf,

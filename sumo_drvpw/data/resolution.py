@@ -47,9 +47,11 @@ def speed_resolution(v: np.ndarray, trip_codes: np.ndarray) -> float:
     return q
 
 
-def accel_window(opt, v: np.ndarray, trip_codes: np.ndarray) -> tuple[float, float]:
-    """(width of the acceleration's moving average [s], the speed's resolution [m/s]) for
-    reading options ``opt`` (:class:`sumo_drvpw.data.log.ReadOptions`).
+def accel_window(opt, v: np.ndarray, trip_codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(width of the acceleration's moving average [s], the speed's resolution [m/s]), each
+    per trip (runs of equal ``trip_codes``, in order), for reading options ``opt``
+    (:class:`sumo_drvpw.data.log.ReadOptions`): each trip by its own speed, so a trip's
+    acceleration does not depend on the trips read with it.
 
     A speed logged in steps of q carries a rounding error of s.d. q/√12 on every sample; the
     derived acceleration, a difference over the window T, then carries q/(√6·T). Physics of
@@ -58,6 +60,9 @@ def accel_window(opt, v: np.ndarray, trip_codes: np.ndarray) -> tuple[float, flo
     0.4), so the window is widened until that noise is below ``opt.accel_noise_mps2``:
     T = max(``opt.accel_window_s``, q/(√6·noise)). Speeds logged finely keep the least width.
     """
-    q = speed_resolution(v, trip_codes)
-    need = q / (np.sqrt(6.0) * opt.accel_noise_mps2) if opt.accel_noise_mps2 > 0 else 0.0
-    return float(max(opt.accel_window_s, need)), q
+    v = np.asarray(v, float)
+    codes = np.asarray(trip_codes)
+    first = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]]) if len(codes) else np.zeros(0, np.int64)
+    q = np.array([speed_resolution(v[a:b], codes[a:b]) for a, b in zip(first, np.r_[first[1:], len(v)])])
+    need = q / (np.sqrt(6.0) * opt.accel_noise_mps2) if opt.accel_noise_mps2 > 0 else np.zeros_like(q)
+    return np.maximum(opt.accel_window_s, need), q

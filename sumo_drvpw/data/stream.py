@@ -16,12 +16,9 @@ A :class:`Part` is a piece of the input that holds whole trips (a file, or a ran
 rows of a Parquet file that starts and ends at trip boundaries): the unit of work of the
 engines in :mod:`sumo_drvpw.fit.engine`.
 
-Difference from the in-memory reader, on purpose: the moving-average width of the derived
-acceleration is ``accel_window_s`` (widened for the speed's resolution,
-:func:`sumo_drvpw.data.resolution.accel_window`) over the *batch's* median sample interval, the
-resolution read from the batch (the in-memory reader reads both over all logs). Both agree
-whenever trips are sampled at one rate and resolution; with mixed ones the per-batch width
-is the closer one to each trip's own.
+The derived acceleration and the time weights of a trip are its own (its median step, the
+resolution of its speed, its logging gaps: :func:`sumo_drvpw.data.log.read_log`), so a
+batch gives the same numbers as the in-memory reader, whatever trips share the batch.
 Row numbers in error messages count from the start of the batch named in the message.
 """
 

@@ -1,5 +1,6 @@
 """Per-trip helpers of the drive-log reader: integer trip codes (no Python string per row),
-trip ids as arrays, and the centred moving average that never crosses a trip.
+trip ids as arrays, the centred moving average that never crosses a trip, and the signals
+derived within trips (time derivative, grade from elevation).
 
 Samples of a trip are contiguous (the reader checks it); a categorical ``trip_id`` (the
 streamed reader's dictionary-encoded ids) is used through its integer codes.
@@ -59,6 +60,35 @@ def per_trip_rolling_mean(x: np.ndarray, trip_codes: np.ndarray, window: int) ->
         return np.where(c > 0, (cs[hi] - below) / np.maximum(c, 1), np.nan)
 
 
+def run_median_step(t: np.ndarray, trip_codes: np.ndarray) -> np.ndarray:
+    """Median interval between consecutive samples of each run of equal codes [s], per run
+    (0, 1, … in order; NaN for a one-sample run): each trip's own sampling, whatever else
+    the log holds."""
+    start = trip_starts(trip_codes)
+    run = np.cumsum(start) - 1
+    out = np.full(int(run[-1]) + 1 if len(run) else 0, np.nan)
+    within = ~start[1:]
+    if within.any():
+        med = pd.Series(np.diff(t)[within]).groupby(run[1:][within]).median()
+        out[med.index.to_numpy()] = med.to_numpy()
+    return out
+
+
+def rolling_mean_by_run(x: np.ndarray, trip_codes: np.ndarray, window: np.ndarray) -> np.ndarray:
+    """:func:`per_trip_rolling_mean` with each run of equal codes on its own width
+    (``window[k]`` samples for run k in order)."""
+    run = np.cumsum(trip_starts(trip_codes)) - 1
+    w = np.asarray(window, np.int64)[run]
+    widths = np.unique(w)
+    if len(widths) == 1:
+        return per_trip_rolling_mean(x, trip_codes, int(widths[0]))
+    out = np.empty(len(x))
+    for k in widths:
+        m = w == k
+        out[m] = per_trip_rolling_mean(x[m], run[m], int(k))
+    return out
+
+
 def _rolling_mean_one(x: np.ndarray, window: int) -> np.ndarray:
     """Centred mean of odd width ``window`` over one trip, NaN skipped (min_periods=1)."""
     n, h = len(x), window // 2
@@ -83,3 +113,81 @@ def trip_array(trip: pd.Series) -> np.ndarray:
         codes = trip.cat.codes.to_numpy()
         return np.append(cats, np.nan)[codes] if (codes < 0).any() else cats[codes]
     return trip.to_numpy()
+
+
+def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s) -> np.ndarray:
+    """Smoothed time derivative within trips: central difference, then a centred mean.
+
+    Parameters
+    ----------
+    y : signal [any unit]
+    t : time [s], strictly increasing within a trip
+    trip_codes : integer code per sample (samples of a trip, or of a stretch between two
+        logging gaps, are contiguous; each run of equal codes is differentiated on its own)
+    window_s : width of the moving average [s], one for all, or one per run (in order); in
+        samples at each run's own median interval, so a trip's derivative does not depend on
+        the trips read with it
+
+    Returns dy/dt [unit/s]; one-sided differences at trip ends, 0 for one-sample trips.
+    """
+    n = len(y)
+    d = np.zeros(n)
+    if n < 2:
+        return d
+    start = trip_starts(trip_codes)
+    end = np.r_[start[1:], True]
+    # central differences by slices; one-sided ones only at trip ends (few samples)
+    dy, dt = np.empty(n), np.empty(n)
+    np.subtract(y[2:], y[:-2], out=dy[1:-1])
+    np.subtract(t[2:], t[:-2], out=dt[1:-1])
+    b = np.flatnonzero(start | end)
+    lo = np.where(start[b], b, b - 1)
+    hi = np.where(end[b], b, b + 1)
+    dy[b] = y[hi] - y[lo]
+    dt[b] = t[hi] - t[lo]
+    ok = dt > 0
+    np.divide(dy, dt, out=d, where=ok)
+    med = run_median_step(t, trip_codes)
+    runs = np.flatnonzero(start)
+    length = np.diff(np.r_[runs, n])
+    win = np.broadcast_to(np.asarray(window_s, float), med.shape)
+    width = np.where(med > 0, np.minimum(win / np.where(med > 0, med, 1.0), length), 1.0)
+    # an odd width keeps the centred mean centred (an even one shifts by half a sample)
+    return rolling_mean_by_run(d, trip_codes, np.maximum(np.round(width), 1).astype(np.int64) | 1)
+
+
+def grade_from_elevation(z: np.ndarray, dist: np.ndarray, trip_codes: np.ndarray,
+                         window_m: float) -> np.ndarray:
+    """Grade angle from elevation smoothed over distance, within trips.
+
+    For each trip the elevation is interpolated onto a 1 m distance grid, averaged over
+    ``window_m`` (centred), differentiated, and read back at each sample's distance.
+    Coarse elevation (whole metres) then gives a grade resolution of about 1/window_m.
+
+    Parameters
+    ----------
+    z : elevation [m]; dist : distance travelled since trip start [m]
+    trip_codes : integer trip code per sample; window_m : smoothing distance [m]
+
+    Returns θ [rad] = atan(dz/ds).
+    """
+    theta = np.zeros(len(z))
+    starts = np.flatnonzero(trip_starts(trip_codes))
+    bounds = np.r_[starts, len(z)]
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        s, zz = dist[a:b], z[a:b]
+        ok = np.isfinite(zz)
+        if ok.sum() < 2 or s[-1] - s[0] < 2:
+            continue
+        su, first = np.unique(s[ok], return_index=True)
+        zu = zz[ok][first]
+        grid = np.arange(su[0], su[-1] + 1.0, 1.0)
+        zg = np.interp(grid, su, zu)
+        w = max(int(round(window_m)), 1)
+        if w > 1 and len(zg) > w:
+            kernel = np.ones(w) / w
+            pad = np.pad(zg, (w // 2, w - 1 - w // 2), mode="edge")
+            zg = np.convolve(pad, kernel, mode="valid")
+        slope = np.gradient(zg, grid) if len(grid) > 1 else np.zeros_like(grid)
+        theta[a:b] = np.arctan(np.interp(s, grid, slope))
+    return theta
