@@ -232,8 +232,12 @@ def search_rounds(tr: BlockModel, cands: list[Candidate], declared, roles: dict,
         for pos, i in enumerate(order[:MAX_TRIES]):
             cbest, sse_b, d_b, sse0_b, fold_b = results[int(i)]
             p_adj = min(1.0, paired_test(d_b) * m_scored)
-            if not (p_adj < opt.alpha and gains[int(i)] >= opt.min_gain):
-                break
+            if gains[int(i)] < opt.min_gain:
+                break  # (gains fall down the order)
+            if not p_adj < opt.alpha:
+                # a large gain carried by a few blocks fails the test; the next candidate may
+                # pass it (the Bonferroni factor already counts every candidate scored)
+                continue
             f, extra = _try_add(tr, cbest, fold_b, roles, opt, p_adj)
             if f is None:
                 in_model.add(cbest.term)          # not offered again
