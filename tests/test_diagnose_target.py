@@ -357,3 +357,39 @@ def test_trace_reports_a_declared_load_unknown_on_some_trips(clean):
     from sumo_drvpw.report.chain_trace import markdown
 
     assert "'heater_w' unknown (NaN)" in markdown(res.report)
+
+
+def test_chain_trace_honours_the_column_options_and_says_what_it_left_out():
+    """Found by the second metamorphic sweep: `diagnose --target battery` ignored --exclude,
+    --signals and NaN screening (a planted 0–1.5 kW pump load excluded by name was still a
+    finding; one of unknown role named by --signals was never offered; one with 1 % NaN
+    vanished without a word, and the auxiliary power absorbed it)."""
+    import json as _json
+
+    from sumo_drvpw.data.roles import META_KEY
+
+    b = BatteryLog(standstill_aux_w=0.0, noise_w=100.0)
+    df, _ = synth_trips(n_trips=6, minutes=10.0, seed=3, effects=(b,), noise=QUIET)
+    rng = np.random.default_rng(1)
+    levels = rng.choice([0.0, 600.0, 1500.0], size=len(df) // 400 + 1)
+    df["pump_w"] = np.repeat(levels, 400)[:len(df)]           # switching every 50 s
+    df["battery_current_a"] += df["pump_w"] / df["battery_voltage_v"]
+    veh = load_vehicle("prius3")
+
+    def trace(roles, **opt):
+        m = measure(from_frame(df, veh, name="synth"), veh, "battery")
+        m.log.metadata = {META_KEY: _json.dumps(roles)}
+        r = trace_chain(m, _declared(b), ChainTraceOptions(**opt)).report
+        return [f["term"] for f in r["findings"]], r["columns_left_out"]
+
+    found, left = trace({"pump_w": "load"})
+    assert "loads.pump_w" in found and left == {}
+    found, left = trace({"pump_w": "load"}, exclude=("pump*",))
+    assert "loads.pump_w" not in found and left == {"pump_w": "excluded (exclude option)"}
+    found, left = trace({})                                   # unknown role: not a load
+    assert "loads.pump_w" not in found
+    found, left = trace({}, include=("pump*",))                # named: offered
+    assert "loads.pump_w" in found
+    df.loc[df.index[::100], "pump_w"] = np.nan                 # 1 % without a number: said so
+    found, left = trace({"pump_w": "load"})
+    assert "loads.pump_w" not in found and "no number on 1.0% of the samples" in left["pump_w"]

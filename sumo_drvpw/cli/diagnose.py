@@ -248,7 +248,8 @@ def _chain_main(args, target, progress) -> int:
     eq = load_equation(args.equation)
     check_chain_equation(eq, target)
     opt = ChainTraceOptions(block_s=args.block_s, folds=args.folds, alpha=args.alpha, min_gain=args.min_gain,
-                            max_findings=args.max_findings, validation=args.validation)
+                            max_findings=args.max_findings, validation=args.validation,
+                            include=_globs(args.signals), exclude=_globs(args.exclude))
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
         m = load_measured(args.logs, args.vehicle, read_options(args, [args.equation]), target=target)
         from sumo_drvpw.cli import note_counts

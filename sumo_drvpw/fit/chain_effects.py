@@ -8,6 +8,7 @@ equation or its chain and gives its physical reading, or refuses an implausible 
 from __future__ import annotations
 
 import copy
+import fnmatch
 import math
 from dataclasses import dataclass, field
 
@@ -36,8 +37,10 @@ class Cand:
     variants: list = field(default_factory=list)
 
 
-def candidates(m, equation: Equation, p, idx) -> list[Cand]:
-    """Physical candidates for the chain of ``equation`` on the samples ``idx``."""
+def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = None) -> list[Cand]:
+    """Physical candidates for the chain of ``equation`` on the samples ``idx``; logged loads:
+    columns of role load, or named by ``opt.include`` (a column of unknown role too), less
+    those ``opt.exclude`` names; those left out, and why, go into ``left_out``."""
     from sumo_drvpw.data.roles import of_log
 
     from sumo_drvpw.fit.chain_linear import gains
@@ -90,11 +93,23 @@ def candidates(m, equation: Equation, p, idx) -> list[Cand]:
             out.append(Cand("hvac", f"heating/cooling power over the ambient temperature (set-point "
                             f"{HVAC_SETPOINT_C:g} °C)", "condition", "W/K",
                             [(np.column_stack([c[k] for k in keep]), None, tuple(keep))]))
-    for col, r in roles.items():
-        if r.get("role") != "load" or col in ch.loads or col not in sig:
+    inc, exc = tuple(getattr(opt, "include", ()) or ()), tuple(getattr(opt, "exclude", ()) or ())
+    left_out = {} if left_out is None else left_out
+    for col in sig:
+        named = any(fnmatch.fnmatchcase(col, g) for g in inc)
+        if col in ch.loads or not (named or roles.get(col, {}).get("role") == "load"):
             continue
         L = np.asarray(sig[col], float)[idx]
-        if np.all(np.isfinite(L)) and np.std(L) > 0:
+        if any(fnmatch.fnmatchcase(col, g) for g in exc):
+            left_out[col] = "excluded (exclude option)"
+        elif inc and not named:
+            left_out[col] = "not among the offered columns (signals option)"
+        elif not np.all(np.isfinite(L)):
+            left_out[col] = (f"no number on {np.mean(~np.isfinite(L)):.1%} of the samples: a load of the chain "
+                             "needs one on every sample")
+        elif np.std(L) == 0:
+            left_out[col] = "constant (the auxiliary power carries a constant load)"
+        else:
             out.append(Cand(f"loads.{col}", f"logged load '{col}' the declared chain lacks", "load", "W/W",
                             [(np.column_stack([ga * L]), None, None)]))
     return out

@@ -91,6 +91,8 @@ class ChainTraceOptions:
     min_gain: float = 0.01
     max_findings: int = 6
     validation: str = "auto"   # auto | trip | blocks
+    include: tuple = ()  # glob patterns: offer only these columns as loads (unknown role too)
+    exclude: tuple = ()  # never these
 
     def check(self):
         check_validation(self)
@@ -340,7 +342,7 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
     y, pred0, w = y_all[idx], pred0_all[idx], dt_all[idx]
     r = y - pred0
     bl = _Blocks(r, w, trip, t, opt)
-    cands = _candidates(m, equation, p, idx)
+    cands = _candidates(m, equation, p, idx, opt, left_out := {})  # (columns not offered, and why)
     say(f"{idx.size} samples, {len(trip_names)} trip(s), {bl.n_blocks} blocks; {len(cands)} candidate effects; "
         f"validation: {bl.how}")
     # the model: accepted free columns (list of n×k) and accepted fixed columns
@@ -372,8 +374,10 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
         added = None
         for gain, c, sse_c, e_c in scored[:5]:
             p_adj = min(1.0, paired_test(e_cur ** 2 - e_c ** 2) * m_scored)
-            if not (p_adj < opt.alpha and gain >= opt.min_gain):
-                break
+            if gain < opt.min_gain:
+                break  # (gains fall down the order)
+            if not p_adj < opt.alpha:
+                continue  # the next candidate may pass (Bonferroni counts every one scored)
             helped, n_tr, per_trip = _replication(bl, trip, trip_names, e_cur, e_c)
             if n_tr >= 3 and helped * 2 <= n_tr:
                 rejected.append({"effect": c.name, "round": rnd + 1, "rmse_gain": gain, "p_value_bonferroni": p_adj,
@@ -447,6 +451,7 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
     held = _heldout_exact(m, equation, accepted, bl, idx, w, r, cands)
     report = _report(m, equation, closed, bl, idx, y, pred0, held, w, trip_names, trip, findings, rounds,
                      rejected, (sse_base, e_base), (sse_cur, e_cur), cands)
+    report["columns_left_out"] = left_out
     return ChainTraceResult(report, closed, equation, held, ok)
 
 
