@@ -1646,3 +1646,27 @@ def test_a_traci_script_says_which_added_vehicle_starts_cold(tmp_path):
     assert len(veh) > 5 and veh.loc["added", "cold_start_l"] == pytest.approx(0.07, rel=1e-12)
     assert (veh.drop(index="added")["cold_start_l"] == 0).all()
     assert res.summary["chain"]["cold_start"]["vehicles"] == 1
+
+
+def test_a_flipped_battery_current_is_refused_not_fitted(tmp_path, capsys):
+    """Found by the second metamorphic sweep: JLU and i3 logs with the current's sign flipped
+    calibrated to η_t = 1, η_r = 0.001, auxiliary 0 W, R² −2.87, and exit 0. The battery power
+    must rise with the driving power; falling, the log is refused, asking about the sign."""
+    import pandas as pd
+
+    from sumo_drvpw.cli import main as cli_main
+
+    log, road = _planted_battery_log(tmp_path)
+    df = pd.read_csv(log)
+    df["battery_current_a"] = -df["battery_current_a"]
+    flipped = tmp_path / "flipped.csv"
+    df.to_csv(flipped, index=False)
+    out = tmp_path / "chain.toml"
+    assert cli_main(["calibrate", str(flipped), "--target", "battery", "--equation", str(road),
+                     "--load", "heater_power_w", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "is the current's sign flipped?" in err and "flipped.csv" in err and "current_positive" in err
+    assert not out.exists()
+    # the log as logged still calibrates
+    assert cli_main(["calibrate", str(log), "--target", "battery", "--equation", str(road),
+                     "--load", "heater_power_w", "--out", str(out)]) == 0

@@ -445,6 +445,10 @@ def chain_target(m, chain: EnergyChain) -> np.ndarray:
     return m.power_w
 
 
+#: driving powers beyond this [W] test the battery current's sign (_check_chain_inputs)
+SIGN_CHECK_W = 1000.0
+
+
 def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engine_off="profile",
                  mask=None, p_drive_w=None, fixed: dict | None = None,
                  efficiency: str = "constant", warmup_rate=None) -> ChainFit:
@@ -462,7 +466,7 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     dt = m.log.df["dt_s"].to_numpy(float)
     use = m.usable if mask is None else (m.usable & mask)
     sig = m.inputs.signals
-    _check_chain_inputs(m, use, loads)
+    _check_chain_inputs(m, use, loads, p)
     if m.target == "fuel":
         fuel = m.vehicle.powertrain.get("fuel", "gasoline") if m.vehicle is not None else "gasoline"
         return calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads,
@@ -474,17 +478,30 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
                              warmup_rate=warmup_rate)
 
 
-def _check_chain_inputs(m, use: np.ndarray, loads) -> None:
+def _check_chain_inputs(m, use: np.ndarray, loads, p_drive=None) -> None:
     """UserError, naming the log and the column, where a chain cannot be calibrated: a
     measured battery or fuel power that never departs from 0 (a voltage logged as 0, a
     fuel flow never filled: the fit would return efficiencies at their bounds and an R² of
-    NaN), or a load column without a number on the usable samples."""
+    NaN), a battery power that falls where the driving power ``p_drive`` rises (the
+    current's sign flipped: the fit returned η_r = 0.001 and R² −2.9, exit 0), or a load
+    column without a number on the usable samples."""
     where = m.log.describe()
     y = np.asarray(m.power_w, float)[use]
     if use.any() and not np.any(np.nan_to_num(y) != 0):
         raise UserError(f"{where}: the measured {m.target} power ({m.source}) is 0 on every "
                         f"one of the {int(use.sum())} usable samples: nothing to calibrate a "
                         "chain on (a voltage, current or fuel flow logged as 0?)")
+    if m.target == "battery" and p_drive is not None:
+        pd_ = np.asarray(p_drive, float)[use]
+        ok = np.isfinite(pd_) & np.isfinite(y) & (np.abs(pd_) > SIGN_CHECK_W)
+        if ok.sum() >= 50 and np.std(y[ok]) > 0 and np.std(pd_[ok]) > 0:
+            r = float(np.corrcoef(pd_[ok], y[ok])[0, 1])
+            if r < 0:
+                raise UserError(f"{where}: the measured battery power ({m.source}) falls where the driving "
+                                f"power rises (correlation r = {r:.2f} over {int(ok.sum())} samples beyond "
+                                f"±{SIGN_CHECK_W / 1000:g} kW): is the current's sign flipped? The vehicle "
+                                "file's [battery] current_positive says which sign discharges "
+                                "(\"discharge\" or \"charge\")")
     for c in loads:
         col = m.inputs.signals.get(c)
         if col is None and c in m.log.df.columns:
