@@ -374,10 +374,9 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
         added = None
         for gain, c, sse_c, e_c in scored[:5]:
             p_adj = min(1.0, paired_test(e_cur ** 2 - e_c ** 2) * m_scored)
-            if gain < opt.min_gain:
-                break  # (gains fall down the order)
-            if not p_adj < opt.alpha:
-                continue  # the next candidate may pass (Bonferroni counts every one scored)
+            if not (p_adj < opt.alpha and gain >= opt.min_gain):
+                break  # (not the wheel tracer's rule: the chain's noise leaves a ~36 W standing bias a
+                # next candidate would pass the test on, tests/test_diagnose_target.py)
             helped, n_tr, per_trip = _replication(bl, trip, trip_names, e_cur, e_c)
             if n_tr >= 3 and helped * 2 <= n_tr:
                 rejected.append({"effect": c.name, "round": rnd + 1, "rmse_gain": gain, "p_value_bonferroni": p_adj,
