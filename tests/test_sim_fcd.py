@@ -349,3 +349,31 @@ def test_fcd_leaves_parked_vehicles_out_as_the_live_run_does(tmp_path):
     t, _ = booked(tmp_path / "noxy")
     assert res["source"]["parked_rows"] == 0
     np.testing.assert_allclose(t.drop("waits") - live_t.drop("waits"), 100.0, atol=2.0)
+
+
+def test_export_vtype_writes_a_table_efficiency_as_the_constant_of_its_energy():
+    """Found by the second metamorphic sweep: a chain with efficiency tables over |power| was
+    exported with the plain mean of the table's cells (η_t 0.864, η_r 0.592 where the constant
+    fit gave 0.912, 0.816: +12.6 % battery energy). The constant is now the one that books the
+    table's energy on the bundled test-track drive: the same traction and recuperation there."""
+    import numpy as np
+
+    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.sim.export import _bundled_drive, energy_model_params
+
+    eq = Equation("ev_table", {"acc": 1.05, "grade": 1.0, "aero_rho": 0.6, "m_v1": 0.009 * 9.81})
+    eq.chain = chain_from_dict({"predicts": "battery", "aux_power_w": 300.0,
+                                "traction_efficiency": {"power_w": [0.0, 5e3, 20e3, 80e3],
+                                                        "values": [0.45, 0.86, 0.93, 0.90]},
+                                "recuperation_efficiency": {"power_w": [0.0, 5e3, 20e3, 80e3],
+                                                            "values": [0.30, 0.75, 0.85, 0.80]}})
+    params, missing = energy_model_params(eq, 1500.0)
+    v, p, dt = _bundled_drive(eq, 1500.0)
+    t_tab = eq.chain.traction_efficiency(v, p)
+    r_tab = eq.chain.recuperation_efficiency(v, p)
+    e_trac = np.sum(np.maximum(p, 0) / t_tab * dt)            # the table's battery traction
+    e_rec = np.sum(r_tab * np.minimum(p, 0) * dt)             # and recuperation
+    np.testing.assert_allclose(np.sum(np.maximum(p, 0) * dt) / params["propulsionEfficiency"], e_trac, rtol=1e-12)
+    np.testing.assert_allclose(params["recuperationEfficiency"] * np.sum(np.minimum(p, 0) * dt), e_rec, rtol=1e-12)
+    assert params["propulsionEfficiency"] > np.mean([0.45, 0.86, 0.93, 0.90])   # not the cells' mean
+    assert any("the table's traction energy on the drive" in m for m in missing)

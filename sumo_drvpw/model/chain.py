@@ -432,11 +432,13 @@ class EnergyChain:
         return d
 
 
-def chain_energy_params(chain, air_c: float | None = None) -> tuple[dict, list[str]]:
+def chain_energy_params(chain, air_c: float | None = None, drive=None) -> tuple[dict, list[str]]:
     """SUMO Energy-model values of a battery or powertrain-output chain (for ``sim.export``
     and ``validation.chain_sumo``): ({param: value}, [what the model cannot express, with
     why]). ``air_c``: the run's air temperature [°C], at which the chain's HVAC power joins
-    ``constantPowerIntake`` (None: left out, listed)."""
+    ``constantPowerIntake`` (None: left out, listed). A table efficiency becomes the constant
+    booking its energy on ``drive`` = (v [m/s], driving power [W], Δt [s]): traction
+    Σ P⁺Δt / Σ (P⁺/η)Δt, recuperation Σ η·P⁻Δt / Σ P⁻Δt (no drive: the cells' mean)."""
     p: dict = {}
     missing: list[str] = []
     if chain.predicts == "fuel":
@@ -446,9 +448,19 @@ def chain_energy_params(chain, air_c: float | None = None) -> tuple[dict, list[s
         v = getattr(chain, attr)
         if isinstance(v, (int, float)):
             p[key] = float(v)
-        else:
-            p[key] = float(np.mean(v.values))
-            missing.append(f"{attr} is a table (SUMO takes a constant: its mean {p[key]:.4g} written)")
+            continue
+        how = "its cells' mean"
+        p[key] = float(np.mean(v.values))
+        if drive is not None:
+            sp, pw, dt = (np.asarray(a, float) for a in drive)
+            eta = np.asarray(v(sp, pw), float)
+            if attr == "traction_efficiency" and np.sum(np.maximum(pw, 0) * dt) > 0:
+                p[key] = float(np.sum(np.maximum(pw, 0) * dt) / np.sum(np.maximum(pw, 0) / eta * dt))
+                how = "the table's traction energy on the drive"
+            elif attr == "recuperation_efficiency" and np.sum(np.minimum(pw, 0) * dt) < 0:
+                p[key] = float(np.sum(eta * np.minimum(pw, 0) * dt) / np.sum(np.minimum(pw, 0) * dt))
+                how = "the table's recuperation on the drive"
+        missing.append(f"{attr} is a table (SUMO takes a constant: {p[key]:.4g} written, {how})")
     aux = 0.0
     if chain.predicts == "battery":
         h = chain.hvac or {}

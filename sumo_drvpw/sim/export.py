@@ -38,6 +38,8 @@ from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
+import numpy as np
+
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.chain import chain_energy_params
 from sumo_drvpw.model.constants import G, RHO_DEFAULT
@@ -46,6 +48,27 @@ from sumo_drvpw.model.terms import parse_term
 
 #: SUMO's fixed air density in the Energy model [kg/m³] (HelpersEnergy.cpp)
 RHO_SUMO = RHO_DEFAULT
+
+
+def _has_table(chain) -> bool:
+    return not all(isinstance(getattr(chain, a), (int, float)) for a in ("traction_efficiency",
+                                                                       "recuperation_efficiency"))
+
+
+def _bundled_drive(eq: Equation, mass_kg: float):
+    """(v, driving power, Δt) of ``eq`` at ``mass_kg`` on the bundled 8-Hz test-track drive
+    (city, rural and motorway speeds): the drive a table efficiency is weighed on; None where
+    the equation needs a signal that log lacks."""
+    from sumo_drvpw.data.log import bundled_log, read_log
+
+    log = read_log([bundled_log()])
+    x = log.inputs(mass_kg).with_mass(mass_kg)
+    try:
+        p = eq.power(x)
+    except (UserError, KeyError):
+        return None
+    ok = np.isfinite(p)
+    return x.v[ok], p[ok], log.df["dt_s"].to_numpy(float)[ok]
 
 
 def energy_model_params(eq: Equation, mass_kg: float | None = None,
@@ -118,7 +141,7 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
               "recuperationEfficiency": 1.0}
     chain = getattr(eq, "chain", None)
     if chain is not None and chain.predicts != "wheel":
-        cp, cm = chain_energy_params(chain, air_c)
+        cp, cm = chain_energy_params(chain, air_c, _bundled_drive(eq, m) if _has_table(chain) else None)
         params.update({k: v for k, v in cp.items() if k != "constantPowerIntake"})
         params["constantPowerIntake"] += cp.get("constantPowerIntake", 0.0)
         missing += cm
