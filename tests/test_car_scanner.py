@@ -60,6 +60,27 @@ def test_current_logged_negative_when_discharging_is_flipped(tmp_path):
     assert "sign flipped" in " ".join(rep["files"][0]["notes"])
 
 
+def test_a_short_file_takes_the_current_sign_of_the_import(tmp_path):
+    """Found by the second metamorphic sweep: the sign was decided file by file, so a trip
+    exported in two files, the second an 87-s tail with 7 accelerating samples, kept that
+    tail as logged (negative while discharging) beside a flipped first file: one log, two
+    conventions. A file too short to tell takes the sign of the import's other files."""
+    rows = [(tod, pid, -val if pid == PIDS[1] else val) for tod, pid, val in polls()]
+    d = tmp_path / "trip"
+    d.mkdir()
+    wide_csv(d / "a_main.csv", rows)
+    tail = [(tod, pid, -val if pid == PIDS[1] else val) for tod, pid, val in polls(seconds=20.0)]
+    wide_csv(d / "b_tail.csv", [(tod + 400.0, pid, val) for tod, pid, val in tail])  # accelerating 0.8 m/s² from 0
+    alone, rep_alone = read("car-scanner", d / "b_tail.csv")
+    assert "kept as logged" in " ".join(rep_alone["files"][0]["notes"])
+    df, rep = read("car-scanner", d)
+    for f in rep["files"]:
+        assert "sign flipped" in " ".join(f["notes"]), f["notes"]
+    t = df[df.trip_id == "b_tail"]
+    ok = t["battery_current_a"].notna().to_numpy()
+    assert ok.any() and (t["battery_current_a"][ok] > 0).all()   # discharging: positive, as canonical
+
+
 def test_a_long_gap_stays_missing(tmp_path):
     """A channel the app stopped polling for 20 s is not bridged (its median interval is
     about 1.35 s; the limit is 3 of them)."""

@@ -255,24 +255,34 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     if len(names) > 2:
         aligned_note(rows - len(ts), len(ts), dict(zip(names[2:], values[2:])), rep)
     df = clean_time_and_speed(df, path, rep)
-    if "battery_current_a" in df and "battery_voltage_v" in df:
-        _discharge_positive(df, rep)
     df.insert(0, "trip_id", path.stem)
     return df.reset_index(drop=True), rep
 
 
-def _discharge_positive(df: pd.DataFrame, rep: dict) -> None:
-    """Flip the current when the battery clearly charges while the car accelerates."""
+def _pulling_power(df: pd.DataFrame) -> np.ndarray:
+    """Battery V·I [W] on the samples where the car accelerates (> 0.5 m/s² above 3 m/s)."""
     v = df["speed_mps"].to_numpy(float)
     t = df["time_s"].to_numpy(float)
     a = np.gradient(v, t) if len(v) > 2 else np.zeros_like(v)
     p = (df["battery_voltage_v"] * df["battery_current_a"]).to_numpy(float)
-    pull = (v > 3.0) & (a > 0.5) & np.isfinite(p)
-    if pull.sum() < 20:
-        rep["notes"].append(f"battery current kept as logged: only {int(pull.sum())} samples accelerate "
+    return p[(v > 3.0) & (a > 0.5) & np.isfinite(p)]
+
+
+def _discharge_positive(df: pd.DataFrame, rep: dict, pooled: np.ndarray | None = None) -> None:
+    """Flip the current when the battery clearly charges while the car accelerates; a file
+    with too few such samples takes the sign the other files of the import show (``pooled``:
+    their accelerating V·I), as one app logs one car's current one way."""
+    own = _pulling_power(df)
+    p, whose = own, "its"
+    if len(own) < 20 and pooled is not None and len(pooled) >= 20:
+        p, whose = pooled, f"the other files' (its own {len(own)})"
+    if len(p) < 20:
+        rep["notes"].append(f"battery current kept as logged: only {len(p)} samples accelerate "
                             "(> 0.5 m/s² above 3 m/s) to check its sign on")
         return
-    med = float(np.median(p[pull]))
+    med = float(np.median(p))
+    if whose != "its":
+        rep["notes"].append(f"battery current's sign from {whose} accelerating samples")
     if med < -1000.0:
         df["battery_current_a"] = -df["battery_current_a"]
         rep["notes"].append(f"battery current logged negative when discharging (median V·I {med / 1000:.1f} kW "
@@ -285,4 +295,9 @@ def _discharge_positive(df: pd.DataFrame, rep: dict) -> None:
 def read(paths):
     """Read Car Scanner CSV exports (files or folders of .csv)."""
     frames, reports = read_each(expand_paths(paths, SUFFIXES, "Car Scanner CSV"), read_file)
+    has = [i for i, df in enumerate(frames) if "battery_current_a" in df and "battery_voltage_v" in df]
+    pull = {i: _pulling_power(frames[i]) for i in has}  # the sign decided over the whole import
+    for i in has:
+        others = [pull[j] for j in has if j != i and len(pull[j]) >= 20]
+        _discharge_positive(frames[i], reports[i], np.concatenate(others) if others else None)
     return frames, reports, []
