@@ -562,3 +562,30 @@ def test_unit_factors_are_the_definitions(unit, factor):
     from sumo_drvpw.data.adapters._common import lookup_unit
 
     assert lookup_unit(unit)[1] == pytest.approx(factor, rel=1e-12)
+
+
+def _tum(path, speed_label, heat_label, speed, heat):
+    rows = ["Time [s];" + speed_label + ";Motor Torque [Nm];Battery Voltage [V];Battery Current [A];" + heat_label]
+    for i in range(30):
+        rows.append(f"{i * 0.1:.1f};{speed + 0.01 * i:.4f};50;380;-20;{heat}")
+    path.write_bytes(("\n".join(rows) + "\n").encode("latin-1"))
+    return path
+
+
+def test_bmw_tum_reads_the_unit_its_header_writes(tmp_path):
+    """Found by the second metamorphic sweep: the TUM reader keyed known columns on the name
+    alone, with the data set's units (km/h, kW): a file writing 'Velocity [m/s]' imported 3.6×
+    too slow and 'Heating Power CAN [W]' ×1000 (an 840-kW heater), without a note. The unit
+    a header writes now converts; one of another quantity is refused."""
+    ref, _ = read("bmw-i3-tum", _tum(tmp_path / "TripX1.csv", "Velocity [km/h]", "Heating Power CAN [kW]", 36.0, 0.84))
+    d2 = tmp_path / "b"
+    d2.mkdir()
+    si, _ = read("bmw-i3-tum", _tum(d2 / "TripX1.csv", "Velocity [m/s]", "Heating Power CAN [W]", 10.0, 840.0))
+    np.testing.assert_allclose(si["speed_mps"].to_numpy()[:1], ref["speed_mps"].to_numpy()[:1], rtol=1e-12)
+    np.testing.assert_allclose(si["heater_power_w"], ref["heater_power_w"], rtol=1e-12)
+    assert ref["heater_power_w"].iloc[0] == pytest.approx(840.0)
+    np.testing.assert_allclose(si["battery_current_a"], 20.0)    # the data set's sign flip kept
+    d3 = tmp_path / "c"
+    d3.mkdir()
+    with pytest.raises(UserError, match=r"Velocity \[kW\].*not a speed"):
+        read("bmw-i3-tum", _tum(d3 / "TripX1.csv", "Velocity [kW]", "Heating Power CAN [kW]", 36.0, 0.84))

@@ -34,7 +34,7 @@ import pandas as pd
 from sumo_drvpw.model.constants import KMH, RPM
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.data.adapters._common import generic_name, new_report, numeric, read_csv_strict, snake, split_header
-from sumo_drvpw.data.adapters._common import clean_time_and_speed, unique_names
+from sumo_drvpw.data.adapters._common import DIMENSIONS, clean_time_and_speed, lookup_unit, unique_names
 
 FORMAT = "bmw-i3-tum"
 SUFFIXES = (".csv",)
@@ -87,6 +87,22 @@ ROLES = {
 WINTER_MONTHS = (11, 12, 1, 2, 3)
 
 
+def _header_unit(label: str, name: str, factor: float, path) -> tuple[float, float]:
+    """(factor, offset) of a known column from the unit its header writes (the TUM files'
+    own: km/h, kW, …; another unit of the same quantity converts as written, e.g. a speed in
+    [m/s]); no unit, or one this reader does not know: the TUM unit. A unit of another
+    quantity (a speed in [kW]) is refused, naming the file and column."""
+    unit = split_header(label)[1]
+    u = lookup_unit(unit) if unit else None
+    dim = next((d for d, suf in DIMENSIONS.items() if suf and name.endswith("_" + suf)), None)
+    if u is None or dim is None or (dim == "percent" and u[0] == "dimensionless"):
+        return factor, 0.0
+    if u[0] != dim:
+        raise UserError(f"{path}: column '{label}': unit '{unit}' is not a {dim.replace('_', ' ')} "
+                        f"(this reader writes it as {name})")
+    return (-u[1] if factor < 0 else u[1]), u[2]
+
+
 def read_file(path: Path, overview: pd.DataFrame | None, vehicle) -> tuple[pd.DataFrame, dict]:
     """One TUM trip CSV → canonical frame and its report (trip_id = file stem)."""
     trip = path.stem
@@ -103,7 +119,7 @@ def read_file(path: Path, overview: pd.DataFrame | None, vehicle) -> tuple[pd.Da
     for label, key, src in zip(labels, keys, raw.columns):
         if key in NAMES:
             name, factor = NAMES[key]
-            offset = 0.0
+            factor, offset = _header_unit(label, name, factor, path)
         else:
             name, factor, offset = generic_name(label, rep["notes"])
         names.append(name)
