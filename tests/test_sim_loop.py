@@ -118,12 +118,13 @@ def test_loop_books_hand_calculated_energies():
     def p_fixed(v, a, th):
         return 1000.0 * (v - 0.25 * a) * a + 1000.0 * G * v * math.sin(th)
 
-    a_steps = [(20.0, 0.0, GRADE), (20.0, 0.5, GRADE), (21.0, 0.0, 0.0)]
+    # a's second step moved 20 m in 0.5 s at 20 m/s (the script is no Euler update): it books
+    # the 0.8 m it rose, m·g·Δz, as sin θ = Δz/(v·Δt) = 2·sin(grade) (Network.step_grade)
+    a_steps = [(20.0, 0.0, GRADE), (20.0, 0.5, math.asin(2 * math.sin(GRADE))), (21.0, 0.0, 0.0)]
     b_steps = [(10.0, -1.0, 0.0), (9.0, -1.0, 0.0)]
     ia, ib = led.veh_ids.index("a"), led.veh_ids.index("b")
     ea = sum(p_phys(v, a, th, 2.0) * 0.5 for v, a, th in a_steps)
-    # (a's second step takes the profile's rise over the 20 m it moved on e12: the 4 % within
-    # 1e-8, what spreading the profile's end effects over the lane leaves)
+    # (the profile's rise: the 4 % within 1e-8, what spreading its end effects over the lane leaves)
     np.testing.assert_allclose(led.veh_trac[ia, 0].sum(), ea, rtol=1e-8)
     eb = [p_phys(v, a, th, 2.0) * 0.5 for v, a, th in b_steps]
     assert all(e < 0 for e in eb)  # braking: recuperable
@@ -133,7 +134,7 @@ def test_loop_books_hand_calculated_energies():
                                sum(p_fixed(v, a, th) * 0.5 for v, a, th in a_steps), rtol=1e-8)
     # per category: grade of a on e12
     g = LEDGER_CATEGORIES.index("grade")
-    np.testing.assert_allclose(led.veh_trac[ia, 0, g], 2 * 1500 * G * 20 * math.sin(GRADE) * 0.5, rtol=1e-8)
+    np.testing.assert_allclose(led.veh_trac[ia, 0, g], 3 * 1500 * G * 20 * math.sin(GRADE) * 0.5, rtol=1e-7)
     # edges: a's last step is on e23 (via the internal lane), b on e01; p and t not booked
     e12, e23, e01 = (NET.edge_ids.index(e) for e in ("e12", "e23", "e01"))
     np.testing.assert_allclose(led.edge_trac[e23, 0].sum(), p_phys(21.0, 0.0, 0.0, 2.0) * 0.5)

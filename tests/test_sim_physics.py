@@ -116,3 +116,55 @@ def test_standing_and_moving_constants_in_a_sumo_run(tmp_path):
     assert tot["always"] == pytest.approx(1000.0 * float(np.sum(led.veh_time[:led.n_veh])), rel=1e-9)
     assert tot["standing"] == pytest.approx(tot["always"] - tot["moving"], rel=1e-9)
     assert 0 < tot["standing"] < tot["moving"] < tot["always"]
+
+
+@pytest.mark.parametrize("step", [1.0, 0.1])
+def test_a_closed_loop_books_no_net_climb_on_odd_lanes(tmp_path, step):
+    """Found by the review of the step-grade change: a lane whose `length` (250 m) is shorter
+    than its shape (503 m, falling 40 m) had every step taken for a jump and booked −20 m per
+    lap; an edge falling 3 m over 1 m (an elevation step, steeper than [slope] max_rad on
+    average) left a step at its end, booked or not as the step length fell (2.7–5.4 m). Two
+    laps of a loop with both now book no net climb, live and replayed from the FCD."""
+    import subprocess
+
+    import pandas as pd
+    import sumolib
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.constants import G
+    from sumo_drvpw.sim.run import run_scenario
+
+    (tmp_path / "n.nod.xml").write_text(
+        '<nodes><node id="n0" x="0" y="0" z="0"/><node id="n1" x="500" y="0" z="0"/>'
+        '<node id="n2" x="500" y="500" z="40"/><node id="n3" x="0" y="500" z="40"/>'
+        '<node id="n4" x="0" y="499" z="37"/></nodes>')
+    (tmp_path / "n.edg.xml").write_text(
+        '<edges><edge id="a" from="n0" to="n1" numLanes="1" speed="15"/>'
+        '<edge id="b" from="n1" to="n2" numLanes="1" speed="15" shape="500,0,0 500,100,0 500,350,40 500,500,40"/>'
+        '<edge id="c" from="n2" to="n3" numLanes="1" speed="15"/>'
+        '<edge id="s" from="n3" to="n4" numLanes="1" speed="15"/>'
+        '<edge id="d" from="n4" to="n0" numLanes="1" speed="15" length="250" shape="0,499,37 0,400,37 0,150,0 0,0,0"/>'
+        '</edges>')
+    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml",
+                    "--no-warnings"], check=True, capture_output=True, cwd=tmp_path)
+    (tmp_path / "n.rou.xml").write_text(
+        '<routes><vType id="car" mass="1500" sigma="0" maxSpeed="15"/><vType id="slow" mass="1500" sigma="0" '
+        'maxSpeed="5"/><route id="loop" edges="a b c s d a b c s d a"/>'
+        '<vehicle id="fast" type="car" route="loop" depart="0" departPos="100" arrivalPos="100"/>'
+        '<vehicle id="slow" type="slow" route="loop" depart="0" departPos="50" arrivalPos="50"/></routes>')
+    (tmp_path / "n.sumocfg").write_text(
+        '<configuration><input><net-file value="n.net.xml"/><route-files value="n.rou.xml"/></input>'
+        '<output><fcd-output value="fcd.xml"/></output></configuration>')
+    (tmp_path / "g.toml").write_text('[equation]\nname = "g"\n[terms]\ngrade = 1.0\n')
+    (tmp_path / "s.toml").write_text(f'equations = ["g.toml"]\n[sumo]\nconfig = "n.sumocfg"\nstep_length = {step}\n'
+                                     '[outputs]\nfigures = false\n')
+    run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    for out in ("o", "r"):
+        if out == "r":
+            assert cli_main(["fcd", str(tmp_path / "o" / "sumo" / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
+                             "--out", str(tmp_path / "r")]) == 0
+        veh = pd.read_parquet(tmp_path / out / "vehicles.parquet").set_index("vehicle")
+        net_grade = (veh.traction_grade_j + veh.recup_grade_j) / (1500 * G)   # booked climb [m]
+        assert set(net_grade.index) == {"fast", "slow"}
+        np.testing.assert_allclose(net_grade.to_numpy(), 0.0, atol=0.05)
+        assert (veh.traction_grade_j / (1500 * G) > 70).all()   # two climbs of 40 m each

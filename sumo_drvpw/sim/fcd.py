@@ -91,7 +91,9 @@ class FcdReplay(_Rows):
         self.state: dict = {}
         self.departed: tuple = ()
         self.arrived: tuple = ()
+        self.back: tuple = ()
         self._seen: set = set()
+        self._prev_set: set = set()
         # a vehicle arrives (leaves the ledger's memory) the step after its last row
         step = np.searchsorted(times, t[~person])
         last = (pd.Series(step).groupby(veh["id"].to_numpy()).max() if len(veh)
@@ -113,6 +115,9 @@ class FcdReplay(_Rows):
         self.ids = ids
         self.state = dict(zip(ids, zip(*_state_columns(cols)))) if ids else {}
         new = tuple(v for v in ids if v not in self._seen)
+        # back after steps without a row (a teleport, as SUMO writes it): SUMO's ending teleports
+        self.back = tuple(v for v in ids if v not in self._prev_set and v in self._seen)
+        self._prev_set = set(ids)
         self._seen.update(new)
         self.departed = new
         self.arrived = self._leaving.get(self.k - 2, ())

@@ -41,6 +41,9 @@ class _Sim(_Domain):
     def getArrivedIDList(self):  # noqa: N802
         return self.r.arrived
 
+    def getEndingTeleportIDList(self):  # noqa: N802 (a vehicle back after steps without a row)
+        return getattr(self.r, "back", ())
+
     def getStopEndingVehiclesIDList(self):  # noqa: N802 (here: the vehicles whose riders changed)
         return self.r.load_changed
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -24,7 +25,7 @@ import numpy as np
 from sumo_drvpw.data.wind import tailwind_mps
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
-from sumo_drvpw.sim.network import Network
+from sumo_drvpw.sim.network import Network, lane_numbers
 from sumo_drvpw.sim.sumo_start import NewRun, signals_deferred, step_method
 
 # traci variable ids (traci.constants), fixed by the TraCI protocol
@@ -188,6 +189,9 @@ class Stepper:
             ledger.lane_clipped = np.zeros(len(net.lane_edge), np.int64)
         self.vmap: dict[str, int] = {}
         self.lane_index = dict(net.lane_index)
+        self.lane_numbers = partial(lane_numbers, self.lane_index)
+        #: vehicles whose teleport ended this step: their next step's rise starts afresh
+        self.teleport_ends = getattr(conn.simulation, "getEndingTeleportIDList", lambda: ())
         self.lane_index[""] = -1
         self.lane_edge_ext = np.append(net.lane_edge, -1)  # lane -1 → edge -1
         read_accel = physics.acceleration == "getter"
@@ -351,14 +355,6 @@ class Stepper:
         self.vmap = {vid: int(remap[i]) for vid, i in self.vmap.items() if remap[i] >= 0}
         self.prev_ids, self.prev_sel = None, None
 
-    def lane_numbers(self, lane_ids: list[str]) -> np.ndarray:
-        lane_index = self.lane_index
-        try:
-            return np.fromiter(map(lane_index.__getitem__, lane_ids), np.int64, len(lane_ids))
-        except KeyError:  # a lane the net file lacks (should not happen): no lane
-            return np.fromiter((lane_index.get(x, -1) for x in lane_ids), np.int64,
-                               len(lane_ids))
-
     def after_step(self) -> None:
         """Read the state SUMO reached in the step just made and book its energies."""
         conn, ledger, net, physics, dt = self.conn, self.ledger, self.net, self.physics, self.dt
@@ -387,6 +383,8 @@ class Stepper:
                     self.flush()
                     vmap = self.vmap
         departed = conn.simulation.getDepartedIDList()
+        ends = np.array([vmap[v] for v in self.teleport_ends() if v in vmap], np.int64)  # teleports ended
+        ledger.veh_at[ends, 2] = np.nan  # (a replay: back after steps without a row): the rise starts afresh
         starts, start_ids = [], []  # vehicles first seen departing: trips that start
         for vid in departed:
             if vid not in vmap:

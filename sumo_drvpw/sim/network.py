@@ -69,6 +69,9 @@ class Network:
     z_node: np.ndarray | None = None
     #: the slope limit the profile keeps [rad]
     max_rad: float = 0.25
+    #: per lane: the steepest rise of its profile per metre of SUMO position [-] (the slope
+    #: limit, more where the lane's length is shorter than its shape or it is an elevation step)
+    lane_steep: np.ndarray | None = None
     raw: np.ndarray | None = None
     heading_deg: np.ndarray | None = None
     #: per lane: the shortest lane length of its edge [m]; a car whose position stays
@@ -120,22 +123,24 @@ class Network:
 
         θ with sin θ = Δz/Δs: Δz the rise of the profile (:meth:`elevation`) from where the
         vehicle was at its last step to lane numbers ``lane``, positions ``pos`` [m], across
-        lanes and junctions; Δs the distance moved, pos − last pos on the same lane, else
-        ``ds`` (v·Δt [m]). So m·g·v·sin θ·Δt = m·g·Δz wherever SUMO moved the vehicle by
-        v·Δt, and a route's potential energy is booked exactly. ``theta`` (the slope at the
-        position) where the step's start is unknown (first step, after a teleport or a
-        parking: NaN elevation), Δs shorter than 1 cm, or the rise steeper than the profile
-        allows (a jump: moveTo, a gap in the network's elevation).
+        lanes and junctions; Δs = ``ds``, the distance the step books (v·Δt [m]). So
+        m·g·v·sin θ·Δt = m·g·Δz and a route's potential energy is booked exactly. ``theta``
+        (the slope at the position) where the step's start is unknown (first step, after a
+        teleport or a parking: NaN elevation), Δs shorter than 1 cm, or the rise steeper than
+        the profile allows over the road covered (a jump: moveTo with positions read).
 
         ``last`` : (n, 3) rows [lane, pos, z] of each vehicle's last step. Returns (θ, the
         rows of this step)."""
         z = self.elevation(lane, pos)
-        same = last[:, 0] == lane
-        ds = np.where(same & (pos >= last[:, 1]), pos - last[:, 1], ds)
         dz = z - last[:, 2]
+        prev = np.where(np.isfinite(last[:, 0]), last[:, 0], lane).astype(np.int64)
+        # a jump rises faster than the profile lets a vehicle climb over the road it covered
+        # (pos difference on one lane — FCD written less often than the step — or v·Δt)
+        road = np.maximum(ds, np.where(last[:, 0] == lane, pos - last[:, 1], 0.0))
+        steep = np.maximum(self.lane_steep[lane], self.lane_steep[prev])
         ok = np.isfinite(dz) & (ds >= 0.01)
-        ok[ok] = np.abs(dz[ok]) <= ds[ok] * np.tan(self.max_rad) + 0.01 * np.minimum(ds[ok], 1.0)  # (+ FCD's cm)
-        if ok.any():
+        ok[ok] = np.abs(dz[ok]) <= road[ok] * steep[ok] + 0.01 * np.minimum(road[ok], 1.0)  # (+ FCD's cm)
+        if ok.any():  # sin θ = Δz/(v·Δt): m·g·v·sin θ·Δt = m·g·Δz
             theta = np.where(ok, np.arcsin(np.clip(dz / np.where(ok, ds, 1.0), -1.0, 1.0)), theta)
         return theta, np.column_stack([lane, pos, z])
 
@@ -143,6 +148,14 @@ class Network:
         """Robust slope [rad] and clipped flag at lane numbers ``lane``, positions ``pos`` [m]."""
         i = self.bin_index(lane, pos)
         return self.profile[i], self.clipped[i]
+
+
+def lane_numbers(lane_index: dict, lane_ids) -> np.ndarray:
+    """Lane numbers of SUMO lane ids (-1 for a lane the network lacks)."""
+    try:
+        return np.fromiter(map(lane_index.__getitem__, lane_ids), np.int64, len(lane_ids))
+    except KeyError:  # a lane the net file lacks (should not happen): no lane
+        return np.fromiter((lane_index.get(x, -1) for x in lane_ids), np.int64, len(lane_ids))
 
 
 def lane_profile(shape3d, length: float, window: float, max_rad: float,
@@ -212,14 +225,15 @@ def conserve_rise(tan: np.ndarray, width: np.ndarray, rise: float, limit: float)
     so that Σ tan·width = ``rise`` [m] with |tan| ≤ ``limit`` still: the missing rise goes
     to every bin in proportion to its room below the limit in that direction (the flattest
     bins take the most). Where the room is too small (the lane's mean gradient beyond the
-    limit) every bin gets the limit."""
+    limit: a step in the network's elevation) every bin gets the lane's mean gradient, so the
+    rise is kept there too (a route's potential energy is the network's)."""
     gap = rise - float(np.dot(tan, width))
     if gap == 0.0:
         return tan
     room = (limit - tan) if gap > 0 else (limit + tan)
     cap = float(np.dot(room, width))
-    if cap <= abs(gap):
-        return np.full_like(tan, limit if gap > 0 else -limit)
+    if cap <= abs(gap):  # steeper on average than the limit (an elevation step): its mean gradient
+        return np.full_like(tan, rise / max(float(width.sum()), 1e-9))
     return tan + np.sign(gap) * (abs(gap) / cap) * room
 
 
@@ -278,6 +292,8 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     """Read a SUMO network with sumolib and build the edge/lane table (see module doc)."""
     import sumolib
 
+    if not 0 < max_rad <= 1.5:  # (tan θ of the profile: 90° is a wall)
+        raise UserError(f"[slope] max_rad must be above 0 and at most 1.5 rad (86°), got {max_rad:g}")
     try:
         net = sumolib.net.readNet(str(path), withInternal=True)
     except Exception as e:  # sumolib raises assorted SAX/IO errors
@@ -311,7 +327,7 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     for i in np.flatnonzero(lane_edge < 0):
         inc = lanes[i].getIncoming() if hasattr(lanes[i], "getIncoming") else []
         lane_edge[i] = eidx.get(inc[0].getEdge().getID(), 0) if inc else 0
-    profs, clips, raws, heads, cxs, cys, znodes = [], [], [], [], [], [], []
+    profs, clips, raws, heads, cxs, cys, znodes, steep = [], [], [], [], [], [], [], []
     z_len = 0.0
     for ln in lanes:
         shape = ln.getShape3D()
@@ -321,6 +337,8 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         profs.append(th)
         clips.append(cl)
         znodes.append(zn)
+        pos_w = np.diff(np.minimum(np.arange(len(zn)) * BIN_M, max(ln.getLength(), 1e-9)))
+        steep.append(float(np.max(np.abs(np.diff(zn)) / np.maximum(pos_w, 1e-9))))
         raws.append(lane_profile(shape, ln.getLength(), RAW_LENGTH_M, np.inf, behind=True)[0])
         h, cx, cy = lane_heading(shape, ln.getLength())
         heads.append(h)
@@ -350,5 +368,6 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         heading_deg=np.concatenate(heads), lane_ids=[ln.getID() for ln in lanes],
         centre_x=np.concatenate(cxs), centre_y=np.concatenate(cys),
         lane_width=np.array([ln.getWidth() for ln in lanes], float), max_rad=float(max_rad),
+        lane_steep=np.maximum(np.array(steep, float), np.tan(max_rad)),
         has_elevation=z_len > 0.0,
         z_share=float(z_len / max(float(lane_length.sum()), 1e-9)))
