@@ -174,9 +174,10 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float,
     (an elevation spike, a step between two shapes) is spread over the bins with room below
     the limit, in proportion to that room (:func:`conserve_rise`), so the profile climbs from
     the shape's first z to its last one — potential energy is conserved over any route, as
-    in SUMO's network, whatever is clipped. (A lane steeper on average than the limit keeps
-    the limit everywhere, and its ``clipped`` flags say so.) ``nodes``: the elevation the
-    profile climbs to at each bin edge, nb + 1 values from the shape's first z.
+    in SUMO's network, whatever is clipped. (A lane steeper on average than the limit, an
+    elevation step, takes its mean gradient everywhere, and its ``clipped`` flags say so.)
+    ``nodes``: the elevation the profile climbs to at each bin edge, nb + 1 values from the
+    shape's first z.
     """
     p = np.asarray(shape3d, dtype=float)
     if p.ndim != 2 or len(p) < 2:
