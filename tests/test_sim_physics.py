@@ -168,3 +168,35 @@ def test_a_closed_loop_books_no_net_climb_on_odd_lanes(tmp_path, step):
         assert set(net_grade.index) == {"fast", "slow"}
         np.testing.assert_allclose(net_grade.to_numpy(), 0.0, atol=0.05)
         assert (veh.traction_grade_j / (1500 * G) > 70).all()   # two climbs of 40 m each
+
+
+def test_an_output_the_scenario_options_name_relatively_goes_into_the_run_folder(tmp_path, monkeypatch):
+    """Found by the review of the step-grade change: `options = ["--fcd-output", "fcd.xml"]` in a
+    scenario wrote fcd.xml into the working directory, outside the run's output set (the
+    config's own outputs go into OUT/sumo/). A relative output path of the options now goes
+    there too; an absolute one is kept."""
+    import subprocess
+
+    import sumolib
+
+    from sumo_drvpw.sim.run import run_scenario
+
+    (tmp_path / "f.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="300" y="0"/></nodes>')
+    (tmp_path / "f.edg.xml").write_text('<edges><edge id="ab" from="a" to="b" numLanes="1" speed="20"/></edges>')
+    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "f.nod.xml", "-e", "f.edg.xml", "-o", "f.net.xml",
+                    "--no-warnings"], check=True, capture_output=True, cwd=tmp_path)
+    (tmp_path / "r.rou.xml").write_text('<routes><vType id="car" mass="1500"/><vehicle id="v" type="car" '
+                                        'depart="0"><route edges="ab"/></vehicle></routes>')
+    (tmp_path / "c.sumocfg").write_text('<configuration><input><net-file value="f.net.xml"/>'
+                                        '<route-files value="r.rou.xml"/></input></configuration>')
+    kept = tmp_path / "abs" / "summary.xml"
+    kept.parent.mkdir()
+    (tmp_path / "s.toml").write_text(
+        'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "c.sumocfg"\n'
+        f'options = ["--fcd-output", "fcd.xml", "--summary-output", "{kept}"]\n[outputs]\nfigures = false\n')
+    cwd = tmp_path / "elsewhere"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    assert (tmp_path / "o" / "sumo" / "fcd.xml").stat().st_size > 0
+    assert not (cwd / "fcd.xml").exists() and kept.stat().st_size > 0

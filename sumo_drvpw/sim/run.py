@@ -19,7 +19,7 @@ from sumo_drvpw.sim.sumo_start import close_sumo, start_sumo
 from sumo_drvpw.sim.vtypes import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER,
                                    SUMO_DEFAULT_VTYPES, energy_carrier, equation_carrier,
                                    read_vtypes)
-from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, redirect_additional_outputs,
+from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, is_output_option, redirect_additional_outputs,
                                          sumo_output_args)
 
 __all__ = ["run_scenario", "start_sumo", "close_sumo", "VTypeResolver"]
@@ -268,6 +268,14 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     # the config's own outputs go into this run's output folder, not beside the scenario
     # (unless the scenario's options or the emissions comparison set them already)
     given = {a[2:] for a in args if a.startswith("--")}
+    if out_dir is not None:  # an output the scenario's options name by a relative path: into OUT/sumo/
+        for i in range(len(args) - 1):
+            files = [f.strip() for f in args[i + 1].split(",") if f.strip()]
+            if (args[i].startswith("--") and is_output_option(args[i][2:]) and files
+                    and not any(Path(f).is_absolute() for f in files)):
+                where = Path(out_dir).resolve() / SUMO_OUTPUT_DIR
+                where.mkdir(parents=True, exist_ok=True)
+                args[i + 1] = ",".join(str(where / Path(f).name) for f in files)
     # the emissions comparison reads the config's own tripinfo (in OUT/sumo/) when it writes
     # one file; otherwise a tripinfo of its own, in a temporary folder, replacing the config's
     ti_cfg = "" if "tripinfo-output" in given else sc.config_outputs.get("tripinfo-output", "").strip()
