@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from sumo_drvpw.data.trips import trip_starts
+
 
 #: a speed is read as logged in steps of q when this share of its nonzero changes are whole
 #: multiples of q (within MULTIPLE_TOL of one) and they take at least two different multiples
@@ -62,7 +64,7 @@ def accel_window(opt, v: np.ndarray, trip_codes: np.ndarray) -> tuple[np.ndarray
     """
     v = np.asarray(v, float)
     codes = np.asarray(trip_codes)
-    first = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]]) if len(codes) else np.zeros(0, np.int64)
+    first = np.flatnonzero(trip_starts(codes)) if len(codes) else np.zeros(0, np.int64)
     q = np.array([speed_resolution(v[a:b], codes[a:b]) for a, b in zip(first, np.r_[first[1:], len(v)])])
     need = q / (np.sqrt(6.0) * opt.accel_noise_mps2) if opt.accel_noise_mps2 > 0 else np.zeros_like(q)
     return np.maximum(opt.accel_window_s, need), q

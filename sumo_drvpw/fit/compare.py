@@ -438,8 +438,7 @@ class Comparison:
                 d["chain_unknown_inputs"] = r.unknown_inputs
             d.update(energy_share=r.energy_share, energy_j=r.energy_j,
                      measured_traction_energy_j=self.measured_traction_energy_j,
-                     predicted_traction_energy_j=(r.energy_j.get("total", math.nan) if math.isnan(
-                         r.predicted_traction_j) else r.predicted_traction_j),
+                     predicted_traction_energy_j=r.predicted_traction_j,
                      traction_energy_ratio=r.traction_energy_ratio)
             if self.trip is not None:
                 d["trip_energy"] = trip_energy(r.pred_w, self.meas_w, self.dt_s, self.trip)

@@ -307,7 +307,7 @@ class CompareStats:
                 error_term_correlation=_corr(s.ecat, s.cats, s.cmin, s.cmax),
                 energy_j=energy, energy_share=share,
                 traction_energy_ratio=(total / self.meas_traction if self.meas_traction > 0.0
-                                       else math.nan),
+                                       else math.nan), predicted_traction_j=total,
                 error_reference_correlation=(None if s.eref is None else
                                              _corr(s.eref, self.ref_cats, s.rmin, s.rmax)))
         return comp

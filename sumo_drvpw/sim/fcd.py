@@ -93,12 +93,15 @@ class FcdReplay(_Rows):
         self.arrived: tuple = ()
         self.back: tuple = ()
         self._seen: set = set()
-        self._prev_set: set = set()
         # a vehicle arrives (leaves the ledger's memory) the step after its last row
         step = np.searchsorted(times, t[~person])
-        last = (pd.Series(step).groupby(veh["id"].to_numpy()).max() if len(veh)
-                else pd.Series(dtype=int))
+        vid = veh["id"].to_numpy()
+        last = (pd.Series(step).groupby(vid).max() if len(veh) else pd.Series(dtype=int))
         self._leaving = {int(k): tuple(g.index) for k, g in last.groupby(last)}
+        # and is back after steps without its row (a teleport, as SUMO writes it): SUMO's
+        # ending teleports of that step
+        gap = (pd.Series(step).groupby(vid).diff() > 1).to_numpy() if len(veh) else np.zeros(0, bool)
+        self._back = {int(k): tuple(g) for k, g in pd.Series(vid[gap]).groupby(step[gap])}
         self.simulation, self.vehicle = _Sim(self), _Veh(self)
 
     def remaining(self) -> int:
@@ -115,9 +118,7 @@ class FcdReplay(_Rows):
         self.ids = ids
         self.state = dict(zip(ids, zip(*_state_columns(cols)))) if ids else {}
         new = tuple(v for v in ids if v not in self._seen)
-        # back after steps without a row (a teleport, as SUMO writes it): SUMO's ending teleports
-        self.back = tuple(v for v in ids if v not in self._prev_set and v in self._seen)
-        self._prev_set = set(ids)
+        self.back = self._back.get(self.k - 1, ())
         self._seen.update(new)
         self.departed = new
         self.arrived = self._leaving.get(self.k - 2, ())

@@ -273,9 +273,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             files = [f.strip() for f in args[i + 1].split(",") if f.strip()]
             if (args[i].startswith("--") and is_output_option(args[i][2:]) and files
                     and not any(Path(f).is_absolute() for f in files)):
-                where = Path(out_dir).resolve() / SUMO_OUTPUT_DIR
-                where.mkdir(parents=True, exist_ok=True)
-                args[i + 1] = ",".join(str(where / Path(f).name) for f in files)
+                args[i + 1] = sumo_output_args({args[i][2:]: args[i + 1]}, Path(out_dir) / SUMO_OUTPUT_DIR)[1]
     # the emissions comparison reads the config's own tripinfo (in OUT/sumo/) when it writes
     # one file; otherwise a tripinfo of its own, in a temporary folder, replacing the config's
     ti_cfg = "" if "tripinfo-output" in given else sc.config_outputs.get("tripinfo-output", "").strip()

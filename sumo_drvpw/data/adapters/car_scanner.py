@@ -270,8 +270,8 @@ def _pulling_power(df: pd.DataFrame) -> np.ndarray:
 
 def _discharge_positive(df: pd.DataFrame, rep: dict, pooled: np.ndarray | None = None) -> None:
     """Flip the current when the battery clearly charges while the car accelerates; a file
-    with too few such samples takes the sign the other files of the import show (``pooled``:
-    their accelerating V·I), as one app logs one car's current one way."""
+    with too few such samples takes the sign the import's other files show (``pooled``: the
+    accelerating V·I of those with enough), as one app logs one car's current one way."""
     own = _pulling_power(df)
     p, whose = own, "its"
     if len(own) < 20 and pooled is not None and len(pooled) >= 20:
@@ -296,8 +296,9 @@ def read(paths):
     """Read Car Scanner CSV exports (files or folders of .csv)."""
     frames, reports = read_each(expand_paths(paths, SUFFIXES, "Car Scanner CSV"), read_file)
     has = [i for i, df in enumerate(frames) if "battery_current_a" in df and "battery_voltage_v" in df]
-    pull = {i: _pulling_power(frames[i]) for i in has}  # the sign decided over the whole import
+    # the sign decided over the whole import: a file too short to tell takes the files' that can
+    pool = [p for p in (_pulling_power(frames[i]) for i in has) if len(p) >= 20]
+    pooled = np.concatenate(pool) if pool else None
     for i in has:
-        others = [pull[j] for j in has if j != i and len(pull[j]) >= 20]
-        _discharge_positive(frames[i], reports[i], np.concatenate(others) if others else None)
+        _discharge_positive(frames[i], reports[i], pooled)
     return frames, reports, []
