@@ -296,6 +296,16 @@ def _on_sigint(signum, frame):
     raise KeyboardInterrupt()
 
 
+def _quiet_signal_hook(prev):
+    """sys.unraisablehook that drops a signal's exception raised where Python cannot
+    propagate it (a garbage collector's weakref callback printed "Exception ignored in …" and a
+    traceback above the one line): the record of the signal decides the exit all the same."""
+    def hook(unraisable):
+        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
+            prev(unraisable)
+    return hook
+
+
 def _signal_exit(terminated: bool, finished: bool = False) -> int:
     """The one line and exit code of a run a signal stopped: 143 (SIGTERM) or 130 (SIGINT);
     ``finished``: the command completed its output all the same (the signal's exception
@@ -327,6 +337,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     fileio.CURRENT_COMMAND = ["sumo-drvpw", *argv]
     prev_term = prev_int = None
+    prev_hook, sys.unraisablehook = sys.unraisablehook, _quiet_signal_hook(sys.unraisablehook)
     try:  # only the main thread may install handlers (tests may call main elsewhere)
         prev_term = signal.signal(signal.SIGTERM, _on_sigterm)
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
@@ -377,6 +388,7 @@ def main(argv: list[str] | None = None) -> int:
         fileio.CURRENT_COMMAND = None
         _TERMINATED.clear()
         _INTERRUPTED.clear()
+        sys.unraisablehook = prev_hook
         if prev_term is not None:
             signal.signal(signal.SIGTERM, prev_term)
         if prev_int is not None:
