@@ -80,6 +80,25 @@ def test_term_changed_by_signal_found(tmp_path):
     assert res.report["final"]["metrics"]["rmse_w"] < 1.03 * floor
 
 
+def test_condition_share_does_not_depend_on_the_zero_of_its_unit(tmp_path):
+    # the same planted tyre-temperature effect logged in °C and in K: one finding, one
+    # energy share (taken about the data's mean: a unit's zero is no physical reference)
+    df, _ = E.synth_trips(4, 8.0, seed=11, effects=[E.TermScaledBySignal(), E.LogPower()], noise=NOISE)
+    shares = []
+    for unit, off in (("c", 0.0), ("k", 273.15)):
+        d = df.rename(columns={"tyre_temp_c": f"tyre_temp_{unit}"})
+        d[f"tyre_temp_{unit}"] = d[f"tyre_temp_{unit}"] + off
+        path = tmp_path / f"log_{unit}.parquet"
+        d.to_parquet(path)
+        res = diagnose(load_measured([path], "prius3"), load_equation(TRUTH), DiagnoseOptions())
+        f = res.report["findings"]
+        assert len(f) == 1 and f[0]["signals"] == [f"tyre_temp_{unit}"], f
+        shares.append(f[0]["energy_share"])
+    # measured from 0 °C the share would be that of 20 °C of the effect, from 0 K 290 K
+    assert shares[1] == pytest.approx(shares[0], rel=1e-3, abs=1e-4)
+    assert abs(shares[0]) < 0.2
+
+
 def test_per_trip_mass_found(tmp_path):
     res, floor = _run(tmp_path, [E.PerTripMass(), E.Distractors()])
     f = res.report["findings"]

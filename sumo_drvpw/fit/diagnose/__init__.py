@@ -92,7 +92,9 @@ analysis samples (classical standard errors; autocorrelated residuals make them
 optimistic), ``p_value`` is the Bonferroni-corrected held-out test p-value; metrics
 (``compare.metrics``) are on the concatenated held-out predictions; the energy share of
 a term is its traction energy (Σ P_term·Δt over samples with predicted power > 0) over
-the model's total traction energy.
+the model's total traction energy; for a logged column other than a load the column is
+taken about its mean over the analysis samples (a condition's zero, °C or K, is a unit's
+convention: the effect is the departure from the data's conditions).
 """
 
 from __future__ import annotations

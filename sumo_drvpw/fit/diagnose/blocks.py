@@ -371,12 +371,23 @@ class BlockModel:
                 "trip_energy": trip_energy(pred, self.y, self.dt, trips),
                 "trip_net_energy": trip_net_energy(pred, self.y, self.dt, trips)}
 
-    def energy_shares(self) -> np.ndarray:
+    def energy_shares(self, centre_last: tuple[str, list[str]] | None = None) -> np.ndarray:
         """Traction energy share of each model column with the full-data fit: Σ P_j·Δt over
-        samples with predicted power > 0, over the model's total traction energy [-]."""
+        samples with predicted power > 0, over the model's total traction energy [-].
+        ``centre_last`` (signal factor, basis factors; ``candidates.signal_split``): the
+        last column's share is taken with its signal centred at its mean."""
         powers = np.column_stack([self.column_power(j) for j in range(len(self.cols))])
         total = powers.sum(axis=1)
         wgt = np.where(total > 0, self.dt, 0.0)
+        if centre_last is not None:
+            sig, basis = centre_last
+            base = np.ones(self.n)
+            for f in basis:
+                base = base * self.factor(f)
+            j = len(self.cols) - 1
+            # the column's power over its values, times the mean signal's part of them
+            coef = float(self.full_fit()["beta"][self.cols[j].offset]) * self.y_scale / self.cols[j].scale
+            powers[:, j] -= coef * float(np.mean(self.factor(sig))) * base
         e_tot = float(total @ wgt)
         return powers.T @ wgt / e_tot if e_tot > 0 else np.full(len(self.cols), np.nan)
 

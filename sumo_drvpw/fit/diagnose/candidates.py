@@ -26,6 +26,26 @@ class Candidate:
     scatter: bool = False     # one coefficient per trip
 
 
+#: Candidate kinds built on a logged column: a signal times a basis (v^k or a declared term).
+SIGNAL_KINDS = ("signal", "signal_x_term", "signal_sq")
+
+
+def signal_split(cand: Candidate, role: str | None) -> tuple[str, list[str]] | None:
+    """(signal factor, basis factors) of a candidate whose energy share is reported about
+    the data's mean of its signal, or None.
+
+    A condition's zero is a convention of its unit (°C or K, °F): the share of "[T]*v"
+    measured from T = 0 would hold a share of the rolling term as large as the mean T.
+    The effect a condition adds is its departure from the conditions of the data, so its
+    share is taken with the signal centred at its mean over the analysis samples. A load
+    (W) has a physical zero and keeps its share as it is.
+    """
+    if cand.kind not in SIGNAL_KINDS or role == "load":
+        return None
+    parts = cand.term.split("*", 1)
+    return parts[0], parts[1:]
+
+
 #: Column-name patterns of a position or a direction: where the car drove (map coordinates)
 #: or which way (a heading in degrees, circular: 359° sits next to 1°). As candidates they
 #: are proxies of the road, its grade or the day's wind, not effects a SUMO vehicle carries;

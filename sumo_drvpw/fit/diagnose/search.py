@@ -13,7 +13,8 @@ from sumo_drvpw.fit.calibrate import CANDIDATES
 from sumo_drvpw.fit.physical import physical_calibration
 from sumo_drvpw.fit.compare import metrics as _metrics
 from sumo_drvpw.fit.diagnose.blocks import BlockModel
-from sumo_drvpw.fit.diagnose.candidates import Candidate, check_include, generate_candidates, screen_signals
+from sumo_drvpw.fit.diagnose.candidates import (Candidate, check_include, generate_candidates, screen_signals,
+                                               signal_split)
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
 from sumo_drvpw.fit.diagnose.structural import (lag_range, per_trip_lags, shift_within_trips,
                                                 structural_signals, timing)
@@ -270,7 +271,8 @@ def _try_add(tr: BlockModel, cand: Candidate, fold, roles, opt, p_adj):
 
     Replication: the held-out SSE of each trip before and after; with ≥ 3 trips the
     finding must lower it on more than half of them. Plausibility: |energy share| ≤
-    ``MAX_ENERGY_SHARE``. Returns (finding dict, extras) or (None, {"reason", …}) after
+    ``MAX_ENERGY_SHARE``, a logged column's share taken about its mean
+    (``candidates.signal_split``: the zero of °C or K is no physical reference). Returns (finding dict, extras) or (None, {"reason", …}) after
     removing the column again.
     """
     ev_b = tr.evaluate(fold)
@@ -298,7 +300,7 @@ def _try_add(tr: BlockModel, cand: Candidate, fold, roles, opt, p_adj):
     helped, n_tr = int((sse_a < sse_b).sum()), int(present.sum())
     co, se = tr.coefficients()
     j_new = len(tr.cols) - 1
-    share = float(tr.energy_shares()[j_new])
+    share = float(tr.energy_shares(signal_split(cand, _role_of(cand, roles)))[j_new])
     names = [str(tr.trip_names[i]) for i in np.flatnonzero(present)]
     per_trip = {t: {"rmse_before_w": math.sqrt(b / max(c, 1)), "rmse_after_w": math.sqrt(a / max(c, 1))}
                 for t, b, a, c in zip(names, sse_b, sse_a, counts[present])}

@@ -22,7 +22,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.diagnose.blocks import BlockModel, ModelColumn
 from sumo_drvpw.fit.diagnose.candidates import Candidate
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
-from sumo_drvpw.fit.diagnose.source import View, cand_values, first_appearance
+from sumo_drvpw.fit.diagnose.source import View, cand_values, factor, first_appearance
 
 #: bytes of candidate block statistics kept between rounds (beyond: recomputed per round)
 CACHE_BYTES = 400e6
@@ -422,9 +422,16 @@ class StreamModel(BlockModel):
         self._gather([task])
         return task.result()
 
-    def energy_shares(self) -> np.ndarray:
+    def energy_shares(self, centre_last: tuple[str, list[str]] | None = None) -> np.ndarray:
         beta = self.full_fit()["beta"]
         q = len(self.cols)
+        mean_sig = 0.0
+        if centre_last is not None:  # the signal's mean over the analysis samples: one pass more
+            tot, n = 0.0, 0
+            for view in self._views():
+                tot += float(np.sum(factor(view, centre_last[0], self.declared)))
+                n += view.n
+            mean_sig = tot / max(n, 1)
         acc, e_tot = np.zeros(q), 0.0
         for view in self._views():
             z = self._zmat(view)
@@ -434,6 +441,12 @@ class StreamModel(BlockModel):
                 powers[:, j] = coef * z[:, j] * self.y_scale
             total = powers.sum(axis=1)
             wgt = np.where(total > 0, view.dt, 0.0)
+            if centre_last is not None:
+                base = np.ones(view.n)
+                for f in centre_last[1]:
+                    base = base * factor(view, f, self.declared)
+                c = self.cols[-1]
+                powers[:, -1] -= beta[c.offset] * self.y_scale / c.scale * mean_sig * base
             acc += powers.T @ wgt
             e_tot += float(total @ wgt)
         return acc / e_tot if e_tot > 0 else np.full(q, np.nan)
