@@ -35,6 +35,13 @@ class Cand:
     role: str
     unit: str
     variants: list = field(default_factory=list)
+    #: for a fixed column profiled over its parameter: parameter → column, refined between
+    #: the grid's points by :func:`best_variant` (the grid is the first ``grid`` variants)
+    profile: object = None
+    grid: int = 0
+
+    def __post_init__(self):
+        self.grid = self.grid or len(self.variants)
 
 
 def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = None) -> list[Cand]:
@@ -70,11 +77,12 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
         brake = -pp[pp < 0]
         if brake.size > 50:
             qs = sorted({float(np.quantile(brake, q)) for q in LIMIT_QUANTILES if np.quantile(brake, q) < lim0})
-            var = [(None, eta_r * (np.maximum(pp, -L) - np.maximum(pp, -lim0)), L) for L in qs if L > 0]
+            col = lambda L: eta_r * (np.maximum(pp, -L) - np.maximum(pp, -lim0))  # noqa: E731
+            var = [(None, col(L), L) for L in qs if L > 0]
             if var:
                 out.append(Cand("recuperation_limit_w", "a recuperation limit: braking power beyond it goes to the "
-                                "friction brakes (profiled over quantiles of the braking power)", "structural", "W",
-                                var))
+                                "friction brakes (profiled over quantiles of the braking power, refined between "
+                                "them)", "structural", "W", var, profile=(col, float(min(brake.max(), lim0)))))
         if not isinstance(ch.recuperation_efficiency, Table):
             rec = eta_r * np.maximum(np.minimum(pp, 0.0), -lim0)
             out.append(Cand("recuperation_efficiency", "recuperation efficiency differs from the declared chain's",
@@ -175,3 +183,35 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
 
 def _eta(e, v, p):
     return e(v, p) if isinstance(e, Table) else np.full(np.shape(p), float(e))
+
+
+def best_variant(w, Z, t, c: Cand, rows=slice(None)) -> int:
+    """The variant of a candidate with the smallest weighted RSS of t − fixed ~ Z on ``rows``.
+
+    A candidate with a ``profile`` is refined: the best grid point's parameter is searched
+    between its neighbours (bounded scalar search, to 0.5 % of it; a parameter's RSS is
+    continuous in it), and a better parameter is appended as a variant of its own.
+    """
+    from scipy.optimize import minimize_scalar
+
+    from sumo_drvpw.fit.chain_linear import _full_fit
+
+    if len(c.variants) == 1 and c.profile is None:
+        return 0
+    rss = lambda col: _full_fit(w[rows], Z[rows], (t - col)[rows])[2]  # noqa: E731
+    grid = c.variants[:c.grid]
+    scores = [rss(v[1]) for v in grid]
+    i = int(np.argmin(scores))
+    if c.profile is None:
+        return i
+    col, top = c.profile
+    lo = grid[i - 1][2] if i > 0 else 0.5 * grid[0][2]
+    hi = grid[i + 1][2] if i + 1 < len(grid) else top
+    if not hi > lo:
+        return i
+    res = minimize_scalar(lambda L: rss(col(L)), bounds=(lo, hi), method="bounded",
+                          options={"xatol": 0.005 * grid[i][2]})
+    if not res.fun < scores[i]:
+        return i
+    c.variants.append((None, col(float(res.x)), float(res.x)))
+    return len(c.variants) - 1

@@ -76,7 +76,7 @@ from sumo_drvpw.model.chain import EnergyChain
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import term_matrix
-from sumo_drvpw.fit.chain_effects import _eta as _eff, apply, candidates as _candidates
+from sumo_drvpw.fit.chain_effects import _eta as _eff, apply, best_variant, candidates as _candidates
 
 METRIC_KEYS = ("rmse_w", "mae_w", "r2", "bias_w")
 
@@ -360,7 +360,7 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
         scored = []
         for c in pool:
             if c.variants[0][0] is None:       # a fixed column profiled over its parameter
-                sse_c, e_c, _, _ = _heldout(bl, Zcur, [r - fixed - v[1] for v in c.variants])
+                sse_c, e_c, _, _ = _heldout(bl, Zcur, [r - fixed - v[1] for v in c.variants[:c.grid]])
             else:
                 sse_c, e_c, _, _ = _heldout(bl, np.column_stack([Zcur, c.variants[0][0]]), [r - fixed])
             e0, e1 = float(np.sum(e_cur ** 2)), float(np.sum(e_c ** 2))
@@ -384,7 +384,7 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
                 in_model.add(c.name)
                 continue
             # full-data fit of the model with the candidate (variant chosen on all samples)
-            vi = _best_variant(w, Zcur, r - fixed, c)
+            vi = best_variant(w, Zcur, r - fixed, c)
             var = c.variants[vi]
             Znew = Zcur if var[0] is None else np.column_stack([Zcur, var[0]])
             fx = fixed + (0.0 if var[1] is None else var[1])
@@ -476,12 +476,6 @@ def _replication(bl, trip, trip_names, e_cur, e_c):
     return helped, int(present.sum()), per
 
 
-def _best_variant(w, Z, t, c, rows=slice(None)) -> int:
-    """The variant of a profiled candidate with the smallest weighted RSS on ``rows``."""
-    if len(c.variants) == 1:
-        return 0
-    rss = [_full_fit(w[rows], Z[rows], (t - v[1])[rows])[2] for v in c.variants]
-    return int(np.argmin(rss))
 
 
 def _closed(equation, accepted, w, Z, t):
@@ -510,7 +504,7 @@ def _heldout_exact(m, equation, accepted, bl, idx, w, r, cands):
         tr = sfold != k
         Z, fx, acc = np.zeros((idx.size, 0)), np.zeros(idx.size), []
         for c, _, _ in accepted:
-            vi = _best_variant(w, Z, r - fx, c, tr)
+            vi = best_variant(w, Z, r - fx, c, tr)
             var = c.variants[vi]
             if var[0] is not None:
                 Z = np.column_stack([Z, var[0]])
@@ -554,7 +548,7 @@ def _report(m, equation, closed, bl, idx, y, pred0, held, w, trip_names, trip, f
         "linearisation": "columns in the target's watts: road-load changes × g_wheel (1/η_t traction, η_r "
                          "recuperation, 0 beyond the limit), auxiliary loads × g_aux; baseline = the declared "
                          "chain unchanged",
-        "candidates": [{"effect": c.name, "role": c.role, "unit": c.unit, "variants": len(c.variants)} for c in cands],
+        "candidates": [{"effect": c.name, "role": c.role, "unit": c.unit, "variants": c.grid} for c in cands],
         "baseline": {"metrics": base, "trip_net_energy": before},
         "findings": findings,
         "final": {"metrics": fin, "trip_net_energy": after,
