@@ -1041,3 +1041,33 @@ def test_bare_config_books_electric_cars_in_kwh_and_petrol_cars_in_litres(tmp_pa
     s, err = _run_summary(cfg2, tmp_path / "o2", capsys)
     assert s["chain"]["hvac_air_temperature_assumed"] and "warm-running fuel read 20 °C" in err
     assert s["chain"]["warm_running"]["epa_gasoline_car"]["factor"] > 1.0
+
+
+def test_a_long_planned_stop_switches_the_vehicle_off_as_sumo_does(tmp_path):
+    """SUMO switches a vehicle off at a planned stop longer than its vType's
+    shutOffStopDuration (default 300 s; EnergyParams::isOff). Two cars stop 600 s on the
+    lane: the one of a vType with the default books only its driving (auxiliary energy =
+    P_aux × the time it drove, less the stop's 600 s), the one whose vType says 1000 s keeps
+    its auxiliaries on through the stop (booked time = SUMO's tripinfo duration), and a
+    120-s stop is booked standing. summary.json counts the stops switched off."""
+    routes = """<routes>
+    <vType id="std" vClass="passenger" mass="1500"/>
+    <vType id="on" vClass="passenger" mass="1500"><param key="shutOffStopDuration" value="1000"/></vType>
+    <route id="r" edges="c00c01 c01c02 c02c03"/>
+    <vehicle id="off" type="std" route="r" depart="0" departSpeed="0"><stop lane="c01c02_0" endPos="60" duration="600"/></vehicle>
+    <vehicle id="kept" type="on" route="r" depart="5" departSpeed="0"><stop lane="c01c02_0" endPos="40" duration="600"/></vehicle>
+    <vehicle id="short" type="std" route="r" depart="10" departSpeed="0"><stop lane="c01c02_0" endPos="20" duration="120"/></vehicle>
+</routes>
+"""
+    sc = _scenario(tmp_path, routes, net=NETS / "city.net.xml", end=1000, equations=(f'"{I3_BATTERY}"',),
+                   extra='[air]\ntemperature_c = 20.0\n')
+    s = run_scenario(sc, tmp_path / "out", figures=False, options=["--tripinfo-output", str(tmp_path / "ti.xml")])
+    v = pd.read_parquet(tmp_path / "out" / "vehicles.parquet").set_index("vehicle")["time_s"]
+    trips = {t.get("id"): float(t.get("duration")) for t in ET.parse(tmp_path / "ti.xml").getroot()}
+    assert v["off"] == pytest.approx(trips["off"] - 600, abs=1.0)   # the stop not booked
+    assert v["kept"] == pytest.approx(trips["kept"], abs=0.5)        # standing there, booked
+    assert v["short"] == pytest.approx(trips["short"], abs=0.5)
+    c = pd.read_csv(tmp_path / "out" / "chain_vehicles.csv").set_index("key")["auxiliary_kwh"]
+    np.testing.assert_allclose(c, load_equation(I3_BATTERY).chain.aux_power_w * v[c.index] / 3.6e6, rtol=1e-9)
+    so = s.summary["shut_off_at_long_stops"]
+    assert so["stops"] == 1 and so["vehicle_s"] == pytest.approx(600, abs=1.0)

@@ -26,6 +26,7 @@ from sumo_drvpw.data.wind import tailwind_mps
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network, lane_numbers
+from sumo_drvpw.sim.shutoff import ShutOff
 from sumo_drvpw.sim.sumo_start import NewRun, signals_deferred, step_method
 
 # traci variable ids (traci.constants), fixed by the TraCI protocol
@@ -90,17 +91,9 @@ STOP_PARKING = 2
 
 
 def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
-    """Wind component along the heading, tailwind positive [m/s].
-
-    Parameters
-    ----------
-    angle_deg : vehicle heading, SUMO angle [deg clockwise from north]
-    speed : wind speed [m/s]
-    from_deg : direction the wind blows from [deg clockwise from north]
-
-    The wind moves towards from_deg + 180°, so v_w = w·cos(h − from − 180°) = −w·cos(h − from)
-    (:func:`sumo_drvpw.data.wind.tailwind_mps`, the same a drive log's wind is written with).
-    """
+    """Wind along the heading ``angle_deg`` (SUMO's, deg clockwise from north), tailwind
+    positive [m/s], of a wind of ``speed`` [m/s] blowing from ``from_deg``
+    (:func:`sumo_drvpw.data.wind.tailwind_mps`, as a drive log's wind is written)."""
     if speed == 0.0:
         return np.zeros(len(angle_deg))
     return tailwind_mps(angle_deg, speed, from_deg)
@@ -264,6 +257,8 @@ class Stepper:
                               and hasattr(conn.vehicle, "getStops"))
         #: vehicle id → (lane number, lane position) of its bus-stop dwell
         self.dwell: dict[str, tuple[int, float]] = {}
+        so = ShutOff(conn)  # long planned stops switch vehicles off, as in SUMO
+        self.shutoff = so if so.available else None
 
     def now(self) -> float:
         """Simulation time [s]; after an interrupted exchange with SUMO (a signal in the
@@ -379,6 +374,8 @@ class Stepper:
                 ledger.retire([vmap[v] for v in gone if v in vmap])
                 for v in gone:
                     self.dwell.pop(v, None)
+                if self.shutoff is not None:
+                    self.shutoff.arrived(gone)
                 if ledger.flush_due():  # before the new ones come: memory ≤ running vehicles
                     self.flush()
                     vmap = self.vmap
@@ -408,6 +405,8 @@ class Stepper:
             self.update_loads(self.stop_ending())
         if self.parking_known:
             self.parking_ended()
+        if self.shutoff is not None:
+            self.shutoff.step(self)
         if len(ids) == 0:
             return
         if ids == self.prev_ids:  # no arrival or departure: same vehicles, same order

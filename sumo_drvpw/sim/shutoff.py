@@ -1,0 +1,122 @@
+"""Engine off at long planned stops, as SUMO's own emission models switch it off.
+
+SUMO treats a vehicle at a planned stop whose duration is longer than its vType's
+parameter ``shutOffStopDuration`` (default 300 s) as switched off from the stop's start
+(``EnergyParams::isOff``; the electric models too since SUMO 1.24): a delivery van
+unloading for ten minutes or a bus laying over at its terminus. Such a vehicle is not
+booked while it stands there, as a parked one is not: no auxiliary power, no idle fuel,
+no standing time. The step in which it comes to rest at the stop is booked as usual;
+booking resumes in the step the stop ends, from standstill. A vType
+keeps its engine on at every stop with a large ``shutOffStopDuration``.
+
+The planned duration is the stop's ``duration``, or until its ``until`` when that is
+later (TraCI's StopData, read once when the stop starts). SUMO's ``shutOffAutoDuration``
+(start-stop at unplanned halts) is not followed: a vehicle halted in traffic keeps its
+auxiliaries. An FCD replay sees no stops (the FCD has no stop attributes) and books a long
+stop standing; only a live run (libsumo, traci, the Accountant) switches it off.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: SUMO's default ``shutOffStopDuration`` [s] (EnergyParams.cpp, DEFAULT_VEH_SHUT_OFF_STOP)
+SHUT_OFF_STOP_S = 300.0
+
+
+def planned_duration_s(stop) -> float:
+    """Planned duration of a stop that has just started [s]: ``duration``, or the time to
+    ``until`` from its arrival when that is longer; −1 when neither is set."""
+    d = float(getattr(stop, "duration", -1.0))
+    until, arrival = float(getattr(stop, "until", -1.0)), float(getattr(stop, "arrival", -1.0))
+    if until >= 0 and arrival >= 0:
+        d = max(d, until - arrival)
+    return d
+
+
+class ShutOff:
+    """Which vehicles stand switched off at a long planned stop (see the module docstring).
+
+    :meth:`step` is called once per booked step, before the vehicles are read: a vehicle
+    whose long stop has started is switched off (not read, not booked:
+    ``Ledger.veh_parked``) from the step after the one in which it came to rest; a stop
+    that ended in this step switches it on again.
+    """
+
+    def __init__(self, conn):
+        sim = conn.simulation
+        self.conn = conn
+        self.starting = getattr(sim, "getStopStartingVehiclesIDList", None)
+        self.ending = getattr(sim, "getStopEndingVehiclesIDList", None)
+        self.available = (self.starting is not None and self.ending is not None
+                          and hasattr(conn.vehicle, "getStops") and hasattr(conn, "vehicletype")
+                          and hasattr(conn.vehicletype, "getParameter")
+                          and not getattr(conn, "is_replay", False))
+        self.limit_s: dict[str, float] = {}   # vType → its shutOffStopDuration [s]
+        self.off: set[str] = set()
+        self.waiting: set[str] = set()        # at a long stop, not yet at rest
+        self.pending: list[str] = []          # came to rest at a long stop in the last step
+        self.stops = 0                        # stops at which a vehicle was switched off
+        self.vehicle_s = 0.0                  # time vehicles stood switched off [s]
+
+    def limit_of(self, vtype: str) -> float:
+        lim = self.limit_s.get(vtype)
+        if lim is None:
+            raw = self.conn.vehicletype.getParameter(vtype, "shutOffStopDuration")
+            try:
+                lim = float(raw) if raw not in ("", None) else SHUT_OFF_STOP_S
+            except ValueError:
+                lim = SHUT_OFF_STOP_S
+            self.limit_s[vtype] = lim
+        return lim
+
+    def step(self, stepper) -> None:
+        """Switch off the vehicles that came to rest at a long stop in the last step; switch
+        on those whose stop ended in this one."""
+        ledger, vmap, conn = stepper.ledger, stepper.vmap, self.conn
+        self.vehicle_s += len(self.off) * stepper.dt
+        for vid in self.pending:
+            i = vmap.get(vid)
+            if i is None or not ledger.veh_keep[i] or ledger.veh_parked[i]:
+                continue
+            ledger.veh_parked[i] = True
+            stepper.dwell.pop(vid, None)
+            self.off.add(vid)
+            self.stops += 1
+            stepper.prev_ids = None  # the selection of vehicles read changes
+        self.pending = []
+        for vid in self.ending():
+            self.waiting.discard(vid)
+            if vid in self.off:
+                self.off.discard(vid)
+                i = vmap.get(vid)
+                if i is not None and ledger.veh_parked[i]:
+                    ledger.veh_parked[i] = False
+                    ledger.veh_lane[i] = -2          # read its lane and position again
+                    ledger.veh_prev_speed[i] = 0.0   # from standstill
+                    ledger.veh_at[i, 2] = np.nan
+                    stepper.prev_ids = None
+        for vid in self.starting():
+            i = vmap.get(vid)
+            if i is None or not ledger.veh_keep[i]:
+                continue
+            stops = conn.vehicle.getStops(vid, 1)
+            if stops and planned_duration_s(stops[0]) > self.limit_of(ledger.veh_type[i]):
+                self.waiting.add(vid)
+        # off from the step after the one in which it came to rest (that one is booked: a
+        # stop can start while the vehicle still creeps, and its last kinetic energy counts)
+        for vid in [v for v in self.waiting if float(conn.vehicle.getSpeed(v)) == 0.0]:
+            self.waiting.discard(vid)
+            self.pending.append(vid)
+
+    def arrived(self, vids) -> None:
+        """Vehicles that left the simulation."""
+        self.off.difference_update(vids)
+        self.waiting.difference_update(vids)
+
+    def summary(self) -> dict:
+        return {"stops": self.stops, "vehicle_s": self.vehicle_s,
+                "rule": "a planned stop longer than its vType's shutOffStopDuration (default "
+                        f"{SHUT_OFF_STOP_S:g} s) switches the vehicle off from its start, as SUMO's "
+                        "emission models do: not booked while it stands there (no auxiliary power, "
+                        "no idle fuel)"}
