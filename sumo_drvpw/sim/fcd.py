@@ -355,6 +355,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
     parked = ParkedTest(net, bus_stops(sc.additional_files))
     method = step_method(sc, fcd_file)
+    dt, dt_warning = row_interval(sc, fcd_file)
     if chunk_rows is None:
         df = read_fcd(fcd_file)
         df["off"] = parked({k: df[k].to_numpy() for k in df.columns})
@@ -369,7 +370,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
             replay_info["skipped"] = bool((times < begin_s - 1e-9).any())
             df = df[df["time"] >= begin_s - 1e-9].copy()
             df.attrs["times"] = times[times >= begin_s - 1e-9]
-        replay = FcdReplay(df, dt=sc.step_length)
+        replay = FcdReplay(df, dt=dt)
         if sc.end is not None:
             n = int(np.searchsorted(replay.times + replay.dt, sc.end + 1e-9, side="right"))
             replay.times, replay._rows = replay.times[:n], replay._rows[:n]
@@ -377,7 +378,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         replay_info = {}
         steps = timesteps(parked.mark(iter_fcd_blocks(fcd_file, chunk_rows)), begin_s, keep,
                           fcd_file, replay_info)
-        replay = FcdStream(steps, dt=sc.step_length, end_s=sc.end, label=fcd_file)
+        replay = FcdStream(steps, dt=dt, end_s=sc.end, label=fcd_file)
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     replay.options = {"step-method.ballistic": str(method == "ballistic").lower()}
@@ -401,7 +402,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         if not publish:
             acc.close_trace()
             return acc, extra
-        warn = lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes)
+        warn = lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning
         if warn:
             extra["warnings"] = warn
         result = acc.result(extra)
@@ -429,6 +430,33 @@ def step_method(sc, fcd_file) -> str:
     given = ([head.get(k) for k in keys] if head is not None
              else [scenario_option(sc, k) for k in keys])
     return "ballistic" if ballistic_update(*given) else "euler"
+
+
+def row_interval(sc, fcd_file) -> tuple[float | None, list[str]]:
+    """The time between an FCD file's timesteps [s] — the Δt each row is booked over (SUMO
+    moved the car v·Δt in it) — and a warning when the scenario says otherwise.
+
+    An XML FCD's header names the recording's step length and ``device.fcd.period`` when
+    they differ from SUMO's defaults (1 s, every step): the rows are max(step, period)
+    apart, whatever the scenario's or config's ``step_length`` (a run given another step
+    length on the command line, or FCD written every few steps). Without a header, the
+    scenario's step length; without one either, None (the file's first two timesteps)."""
+    from sumo_drvpw.sim.fcd_read import header_options
+
+    head = header_options(fcd_file)
+    if head is None:
+        return sc.step_length, []
+    try:
+        step = float(head.get("step-length", 1.0))
+        period = float(head.get("device.fcd.period", 0.0) or 0.0)
+    except ValueError:
+        return sc.step_length, []
+    dt = max(step, period) if step > 0 else sc.step_length
+    if sc.step_length is None or dt is None or abs(dt - sc.step_length) <= 1e-9:
+        return dt, []
+    why = f"step-length {step:g} s" + (f", device.fcd.period {period:g} s" if period > step else "")
+    return dt, [f"FCD {Path(fcd_file).name}: its rows are {dt:g} s apart (its header: {why}); each is booked "
+                f"over {dt:g} s, not the scenario's step length of {sc.step_length:g} s"]
 
 
 def lane_warnings(fcd_file, net_file, unknown: int, known: int, first) -> list[str]:
