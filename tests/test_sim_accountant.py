@@ -256,6 +256,20 @@ def test_accountant_misuse_in_a_user_script_is_one_clear_error(tmp_path):
         close_sumo(conn)
 
 
+def test_accountant_refuses_a_mesoscopic_simulation():
+    """run and fcd refuse --mesosim; an Accountant in a user's mesoscopic session booked
+    every vehicle at 0 m and 0 J with no warning (found by a sweep). It is one UserError."""
+    from sumo_drvpw.errors import UserError
+
+    sc = load_scenario(CITY, end=60)
+    conn = start_sumo(list(sc.sumo_args) + ["--mesosim", "true"])
+    try:
+        with pytest.raises(UserError, match="mesoscopic"):
+            Accountant(conn, equations=["vsp_ldv1999"])
+    finally:
+        close_sumo(conn)
+
+
 def test_a_listener_leaves_when_a_new_run_begins(tmp_path):
     """libsumo keeps its step listeners across close() and start(): an Accountant added as
     a listener went on booking every later run of the process into its ledger. At the

@@ -57,12 +57,16 @@ ENERGY_BOOKING = ("acc term: coefficient × m·v̄·a with v̄ = (v_t + v_t−1)
                   "(Euler update: v_t; ballistic: v̄)")
 
 
-def _option_files(conn, key: str) -> list[Path]:
+def _option(conn, key: str) -> str:
+    """SUMO's value of option ``key`` ("" when the connection cannot say)."""
     try:
-        val = str(conn.simulation.getOption(key))
-    except Exception:  # a fake connection or an old SUMO
-        return []
-    return [Path(f.strip()) for f in val.split(",") if f.strip()]
+        return str(conn.simulation.getOption(key)).strip()
+    except Exception:  # a fake connection, an FCD replay or an old SUMO
+        return ""
+
+
+def _option_files(conn, key: str) -> list[Path]:
+    return [Path(f.strip()) for f in _option(conn, key).split(",") if f.strip()]
 
 
 def scenario_for(conn, equations, scenario=None, **overrides) -> Scenario:
@@ -122,6 +126,10 @@ class Accountant(_Listener):
 
         self._t0 = time.perf_counter()
         self.conn = conn
+        if _option(conn, "mesosim").lower() == "true":
+            raise UserError("Accountant: SUMO runs mesoscopic (option mesosim true): it moves vehicles queue by "
+                            "queue, without lanes or accelerations, so no driving power follows from it; run "
+                            "SUMO microscopically")
         self.left_new_run: tuple[float, float] | None = None  # (last booked time, new time)
         if isinstance(equations, (str, Path)) or hasattr(equations, "terms"):
             equations = [equations]  # one equation, not a list of them (a str: not its letters)
