@@ -939,6 +939,10 @@ def test_a_config_written_for_traci_scripts_does_not_wait_for_a_client(tmp_path)
     ("HBEFA4/UBus_CNG_Std", "gas"), ("HBEFA4/PC_CNG_petrol_Euro-6_", "gas"), ("HBEFA4/MC_4S_gt250cc_preEuro", "gasoline"),
     ("HBEFA4/UBus_Std_gt15-18t_Ethanol_Euro-VI", "ethanol"), ("HBEFA4/RigidTruck_FCEV_le7_5t", "hydrogen"),
     ("HBEFA4/PC_PHEV_diesel_Euro-6d_", "diesel"), ("HBEFA4/Coach_BEV_Midi", "electricity"),
+    # a plug-in hybrid's electric mode (SUMO's electricity, no fuel), a fuel-cell car: were
+    # booked as petrol cars (found by a sweep)
+    ("HBEFA4/PC_PHEV_petrol_Euro-6d_(El)", "electricity"), ("HBEFA4/LCV_PHEV_diesel_N1-III_Euro-6d_(El)", "electricity"),
+    ("HBEFA4/PC_FuelCell", "hydrogen"),
     ("HBEFA2/P_7_7", None), ("", None), (None, None)])
 def test_energy_carrier_of_sumo_emission_classes(ec, carrier):
     """The carrier a SUMO emissionClass names (names as SUMO's emission-model pages and its

@@ -371,8 +371,9 @@ SUMO_DEFAULT_EMISSION_CLASS_OTHER = "HBEFA4/PC_petrol_Euro-4"
 #: words of an emission-class name → energy carrier, first match wins (electricity before
 #: the fuels: HBEFA 4's ``PC_BEV``, ``UBus_Electric_…``; gas before petrol and diesel)
 CARRIER_WORDS = (
-    ("electricity", {"bev", "electric", "ev", "zero"}),
-    ("hydrogen", {"fcev", "h2", "hydrogen"}),
+    # "el": HBEFA4's electric mode of a plug-in hybrid (``PC_PHEV_petrol_Euro-6d_(El)``)
+    ("electricity", {"bev", "electric", "ev", "zero", "el"}),
+    ("hydrogen", {"fcev", "h2", "hydrogen", "fuelcell"}),
     ("gas", {"cng", "lng", "lpg", "gas"}),
     ("ethanol", {"ethanol", "e85"}),
     ("diesel", {"d", "diesel"}),
@@ -394,8 +395,9 @@ def energy_carrier(emission_class: str | None) -> str | None:
     no known pattern). Read from the model (``Energy/…``, ``MMPEVEM/…``, ``Zero/…``, or
     the bare model name, as SUMO's shipped ``data/emissions/MMPEVEM`` files write it:
     electricity) and the words of the name (``PC_petrol_Euro-4``, ``PC_G_EU4``: gasoline;
-    ``LCV_diesel_…``, ``PC_D_EU6``: diesel; ``PC_BEV``: electricity); a heavy-duty name
-    without a fuel word is diesel."""
+    ``LCV_diesel_…``, ``PC_D_EU6``: diesel; ``PC_BEV``, a plug-in hybrid's electric mode
+    ``PC_PHEV_petrol_Euro-6d_(El)``: electricity; ``PC_FuelCell``: hydrogen); a heavy-duty
+    name without a fuel word is diesel."""
     if not emission_class:
         return None
     model, _, name = emission_class.strip().partition("/")
