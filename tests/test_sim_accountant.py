@@ -270,6 +270,38 @@ def test_accountant_refuses_a_mesoscopic_simulation():
         close_sumo(conn)
 
 
+def test_an_id_used_again_is_a_new_trip_with_its_own_vtype():
+    """A user's script removes a car and adds a heavier vehicle under the same id: two trips,
+    each on its own row with its own vType and mass (it booked on in the first row, at the
+    first car's mass, unless that row happened to be flushed in between; found by a sweep)."""
+    sc = load_scenario(CITY, end=60)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, equations=["vsp_ldv1999"])
+        for _ in range(30):
+            conn.simulationStep()
+            acc.step()
+        vid = conn.vehicle.getIDList()[0]
+        edges, vt = conn.vehicle.getRoute(vid), conn.vehicle.getTypeID(vid)
+        conn.vehicle.remove(vid)
+        conn.simulationStep()
+        acc.step()
+        conn.vehicletype.copy(vt, "heavy")
+        conn.vehicletype.setMass("heavy", 5000.0)
+        conn.route.add("again", edges)
+        conn.vehicle.add(vid, "again", typeID="heavy", departSpeed="0")
+        for _ in range(30):
+            conn.simulationStep()
+            acc.step()
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    rows = res.vehicles[res.vehicles.vehicle == vid]
+    assert list(rows.vtype) == [vt, "heavy"]
+    assert list(rows.mass_kg) == [1625.0, 5000.0]
+    assert (rows.time_s > 0).all() and rows.time_s.iloc[0] <= 15.5
+
+
 def test_a_listener_leaves_when_a_new_run_begins(tmp_path):
     """libsumo keeps its step listeners across close() and start(): an Accountant added as
     a listener went on booking every later run of the process into its ledger. At the

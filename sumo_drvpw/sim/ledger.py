@@ -288,7 +288,8 @@ class Ledger:
         self.n_done += len(np.unique(new))
 
     def unretire(self, i: int) -> None:
-        """A vehicle id used again before its row was flushed: it books on in the same row."""
+        """A vehicle back in an FCD replay after steps without its rows (a teleport): it
+        books on in the same row."""
         if self.veh_done[i]:
             self.veh_done[i] = False
             self.n_done -= 1

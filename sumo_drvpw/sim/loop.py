@@ -384,19 +384,15 @@ class Stepper:
         ledger.veh_at[ends, 2] = np.nan  # (a replay: back after steps without a row): the rise starts afresh
         starts, start_ids = [], []  # vehicles first seen departing: trips that start
         for vid in departed:
-            if vid not in vmap:
-                starts.append(self.register(vid))
-                start_ids.append(vid)
-            elif self.is_replay:  # back after a teleport (no FCD rows): the same trip, its
-                ledger.unretire(vmap[vid])  # speed kept (the jump booked), as the live run does
+            if self.is_replay and vid in vmap:  # back after a teleport (no FCD rows): the same
+                ledger.unretire(vmap[vid])  # trip, its speed kept (the jump booked), as live
                 ledger.veh_at[vmap[vid], 2] = np.nan  # (the live run saw it off the lane)
-            else:  # an id used again (e.g. vehicle.add): its state starts afresh
-                ledger.veh_at[vmap[vid], 2] = np.nan
-                ledger.veh_lane[vmap[vid]] = -2
-                ledger.veh_prev_speed[vmap[vid]] = np.nan
-                ledger.veh_load[vmap[vid]] = 0.0
-                ledger.veh_parked[vmap[vid]] = False
-                ledger.unretire(vmap[vid])
+                continue
+            if vid in vmap:  # an id used again (vehicle.add after it left): a new trip, its
+                ledger.retire([vmap[vid]])  # own row, vType and mass (the old row is done)
+                self.prev_ids = None
+            starts.append(self.register(vid))
+            start_ids.append(vid)
         if starts and ledger.chain is not None and ledger.chain.cold_start_on \
                 and not (ledger.steps == 1 and self.replay_info.get("skipped")):
             ledger.chain.depart(starts, start_ids, ledger.veh_type, ledger.veh_class)

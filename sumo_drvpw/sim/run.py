@@ -51,7 +51,8 @@ class VTypeResolver:
     :attr:`skipped` ``by_carrier``.
     Mass: scenario ``vtypes.<id>.mass_kg`` > param ``drvpw.mass`` > ``mass`` attribute (or
     SUMO's deprecated ``vehicleMass`` param) plus the ``loading`` param, written in the
-    route/additional files > scenario ``vclasses.<vClass>.mass_kg`` (plus loading) > the
+    route/additional files > for a vType no file declares and no SUMO default type (made
+    during a live run by TraCI), SUMO's ``vehicletype.getMass`` > scenario ``vclasses.<vClass>.mass_kg`` (plus loading) > the
     built-in default of the vClass (:data:`sumo_drvpw.sim.vtypes.DEFAULT_MASS_KG`, listed
     in :attr:`assumptions`) unless ``vehicles.default_masses = false``; none → UserError.
     """
@@ -87,6 +88,17 @@ class VTypeResolver:
             return self.conn.vehicletype.getParameter(vt, key) or ""
         except Exception:
             return ""
+
+    def _sumo_mass(self, vt: str) -> float | None:
+        """SUMO's mass of a vType no file declares (made by a TraCI script: a copy, a
+        vehicle's own type after setMass), from a live run; None otherwise."""
+        if self.conn is None or getattr(self.conn, "is_replay", False):
+            return None
+        try:
+            m = float(self.conn.vehicletype.getMass(vt))
+        except Exception:
+            return None
+        return m if m > 0 and np.isfinite(m) else None
 
     def _vclass(self, vt: str, info, default: str = "passenger") -> str:
         """SUMO's vClass of a vType, else the files', else that of SUMO's own type of this
@@ -220,6 +232,8 @@ class VTypeResolver:
                     mass = float(p)
                 except ValueError:
                     raise UserError(f"vType '{vt}': drvpw.mass is not a number: {p!r}") from None
+        if mass is None and info is None and vt not in SUMO_DEFAULT_VTYPES:
+            mass = self._sumo_mass(vt)  # a vType made during the run (TraCI copy, setMass)
         # a class mass for a vType that gives none: plus the vType's SUMO loading (payload)
         loading = info.loading_kg if info is not None else 0.0
         if mass is None and cdata.get("mass_kg") is not None:
