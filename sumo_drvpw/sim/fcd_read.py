@@ -44,6 +44,9 @@ _OPTIONAL = ("angle", "slope", "accel", "x", "y")
 _XML_ATTRS = {"id": "id", "type": "type", "speed": "speed", "lane": "lane", "pos": "pos",
               "angle": "angle", "slope": "slope", "accel": "acceleration", "x": "x", "y": "y"}
 #: our name → what the messages call it in an XML / a tabular file
+#: what a row missing one of the replay's attributes tells the user to do
+ATTRIBUTES_HINT = ("; an FCD recorded with --fcd-output.attributes needs speed, lane, pos and type "
+                   "among them (and x, y to tell parked vehicles)")
 _XML_NAMES = {k: f"attribute {a}" for k, a in _XML_ATTRS.items()}
 _TABULAR_NAMES = {k: f"column {c}" for k, c in FCD_COLUMNS.items()}
 #: rows per block of the streamed replay (about 15 MB of columns; larger blocks read no
@@ -123,7 +126,7 @@ def _normalise(df: pd.DataFrame, label, first_row: int, names: dict | None = Non
         if miss.any():
             i = int(np.flatnonzero(miss)[0])
             raise UserError(f"FCD file {label}: column {k} missing at vehicle row "
-                            f"{row(i)} (vehicle {df['id'].iloc[i]!r})")
+                            f"{row(i)} (vehicle {df['id'].iloc[i]!r}){ATTRIBUTES_HINT}")
     v = out["speed"]
     # NaN: a person's missing speed (checked above); SUMO writes no negative speed (a
     # rounded −0.00 aside)
@@ -142,7 +145,7 @@ def _normalise(df: pd.DataFrame, label, first_row: int, names: dict | None = Non
                     "driving power follows from its FCD)") if k == "lane" else ""
             raise UserError(f"FCD file {label}: {names[k]} missing at vehicle row {row(i)} "
                             f"(vehicle {df['id'].iloc[i]!r}); SUMO writes it for every "
-                            f"vehicle{meso}")
+                            f"vehicle{meso}{ATTRIBUTES_HINT}")
     miss = np.isnan(out["time"])  # a row of the tabular FCD without its timestep's time
     if miss.any():
         i = int(np.flatnonzero(miss)[0])
