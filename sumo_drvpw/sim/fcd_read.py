@@ -43,10 +43,10 @@ _REQUIRED = ("time", "id", "type", "speed", "lane", "pos")
 _OPTIONAL = ("angle", "slope", "accel", "x", "y")
 _XML_ATTRS = {"id": "id", "type": "type", "speed": "speed", "lane": "lane", "pos": "pos",
               "angle": "angle", "slope": "slope", "accel": "acceleration", "x": "x", "y": "y"}
-#: our name → what the messages call it in an XML / a tabular file
 #: what a row missing one of the replay's attributes tells the user to do
 ATTRIBUTES_HINT = ("; an FCD recorded with --fcd-output.attributes needs speed, lane, pos and type "
                    "among them (and x, y to tell parked vehicles)")
+#: our name → what the messages call it in an XML / a tabular file
 _XML_NAMES = {k: f"attribute {a}" for k, a in _XML_ATTRS.items()}
 _TABULAR_NAMES = {k: f"column {c}" for k, c in FCD_COLUMNS.items()}
 #: rows per block of the streamed replay (about 15 MB of columns; larger blocks read no
