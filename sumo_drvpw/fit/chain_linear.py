@@ -476,8 +476,6 @@ def _replication(bl, trip, trip_names, e_cur, e_c):
     return helped, int(present.sum()), per
 
 
-
-
 def _closed(equation, accepted, w, Z, t):
     """The equation with every accepted finding written in, from a full-data fit of Z on t."""
     beta, _, _ = _full_fit(w, Z, t)

@@ -52,9 +52,10 @@ class VTypeResolver:
     Mass: scenario ``vtypes.<id>.mass_kg`` > param ``drvpw.mass`` > ``mass`` attribute (or
     SUMO's deprecated ``vehicleMass`` param) plus the ``loading`` param, written in the
     route/additional files > for a vType no file declares and no SUMO default type (made
-    during a live run by TraCI), SUMO's ``vehicletype.getMass`` > scenario ``vclasses.<vClass>.mass_kg`` (plus loading) > the
-    built-in default of the vClass (:data:`sumo_drvpw.sim.vtypes.DEFAULT_MASS_KG`, listed
-    in :attr:`assumptions`) unless ``vehicles.default_masses = false``; none → UserError.
+    during a live run by TraCI), SUMO's ``vehicletype.getMass`` > scenario
+    ``vclasses.<vClass>.mass_kg`` (plus loading) > the built-in default of the vClass
+    (:data:`sumo_drvpw.sim.vtypes.DEFAULT_MASS_KG`, listed in :attr:`assumptions`) unless
+    ``vehicles.default_masses = false``; none → UserError.
     """
 
     def __init__(self, scenario, file_vtypes: dict, equations: list, conn=None):

@@ -272,8 +272,8 @@ def _try_add(tr: BlockModel, cand: Candidate, fold, roles, opt, p_adj):
     Replication: the held-out SSE of each trip before and after; with ≥ 3 trips the
     finding must lower it on more than half of them. Plausibility: |energy share| ≤
     ``MAX_ENERGY_SHARE``, a logged column's share taken about its mean
-    (``candidates.signal_split``: the zero of °C or K is no physical reference). Returns (finding dict, extras) or (None, {"reason", …}) after
-    removing the column again.
+    (``candidates.signal_split``: the zero of °C or K is no physical reference). Returns
+    (finding dict, extras) or (None, {"reason", …}) after removing the column again.
     """
     ev_b = tr.evaluate(fold)
     before = ev_b["pred"]
