@@ -1075,3 +1075,38 @@ def test_a_long_planned_stop_switches_the_vehicle_off_as_sumo_does(tmp_path):
     np.testing.assert_allclose(c, load_equation(I3_BATTERY).chain.aux_power_w * v[c.index] / 3.6e6, rtol=1e-9)
     so = s.summary["shut_off_at_long_stops"]
     assert so["stops"] == 1 and so["vehicle_s"] == pytest.approx(600, abs=1.0)
+
+
+def test_a_start_stop_vtype_books_no_fuel_once_it_has_stood_longer_than_its_shut_off(tmp_path):
+    """SUMO's vType parameter shutOffAutoDuration (a start-stop system): once a vehicle has
+    stood longer than it, its engine is off (EnergyParams::isEngineOff) until it moves. The
+    same petrol cars through the city's traffic lights, once without it and once with 2 s:
+    the same trips; the fuel differs by the chain's idle fuel rate (P_idle + P_aux/η_m at
+    P = 0) over the time the engines stood switched off (summary.json)."""
+    from sumo_drvpw.model.constants import FUELS
+
+    routes = """<routes>
+    <vType id="car" vClass="passenger" mass="1500" emissionClass="HBEFA4/PC_petrol_Euro-6ab">{param}</vType>
+    <route id="r" edges="c00c01 c01c11 c11c21 c21c22 c22c23"/>
+    <flow id="f" type="car" route="r" begin="0" end="200" period="10" departSpeed="0"/>
+</routes>
+"""
+    out = {}
+    for name, param in (("plain", ""), ("startstop", '<param key="shutOffAutoDuration" value="2"/>')):
+        d = tmp_path / name
+        d.mkdir()
+        sc = _scenario(d, routes.format(param=param), net=NETS / "city.net.xml", end=400, step=1.0,
+                       equations=('"epa_gasoline_car"',), extra='[air]\ntemperature_c = 20.0\n')
+        s = run_scenario(sc, d / "out", figures=False)
+        c = pd.read_csv(d / "out" / "chain_vehicles.csv").set_index("key").sort_index()
+        v = pd.read_parquet(d / "out" / "vehicles.parquet").set_index("vehicle").sort_index()
+        out[name] = (s, c, v)
+    (s0, c0, v0), (s1, c1, v1) = out["plain"], out["startstop"]
+    pd.testing.assert_series_equal(v0["distance_m"], v1["distance_m"])
+    off_s = s1.summary["shut_off_at_long_stops"]["start_stop_vehicle_s"]
+    assert off_s > 20 and s0.summary["shut_off_at_long_stops"]["start_stop_vehicle_s"] == 0
+    ch = load_equation("epa_gasoline_car").chain
+    idle = ch.evaluate(np.zeros(1), np.zeros(1), 1.0, {"ambient_c": np.full(1, 20.0)})["fuel_l"][0]
+    assert idle > 0 and ch.fuel in FUELS
+    # (to 0.1 %: a car creeping below 0.1 m/s stands, with a little power beyond idle)
+    assert c0["fuel_l"].sum() - c1["fuel_l"].sum() == pytest.approx(idle * off_s, rel=1e-3)

@@ -240,7 +240,7 @@ class ChainLedger:
             self._starting[vidx] = self.cold_start if shares is None else np.asarray(shares, float)
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
-                        signals: dict | None = None) -> np.ndarray:
+                        signals: dict | None = None, engine_off=None) -> np.ndarray:
         """Chain quantities of one step, (n vehicles, C booked columns) (:meth:`expand`
         gives (n, E, Q)).
 
@@ -250,6 +250,8 @@ class ChainLedger:
         v : speed [m/s], (n,)
         dt : step length [s]
         signals : column → (n,) arrays for the chains' loads and HVAC temperature
+        engine_off : optional (n,) bool: engines switched off by a start-stop system
+            (SUMO's shutOffAutoDuration, :mod:`sumo_drvpw.sim.shutoff`): no fuel there
         """
         p = np.asarray(p_drive_w, float)
         n = p.shape[0]
@@ -263,21 +265,23 @@ class ChainLedger:
             for key in keys:
                 if key is not None:  # cold_start_l: booked at departures only (book)
                     q[:, j] = out[key]
+                    if engine_off is not None and ch.predicts == "fuel":
+                        q[engine_off, j] = 0.0
                 j += 1
         return q
 
     def book(self, vidx: np.ndarray, eidx: np.ndarray, v: np.ndarray, dt: float,
-             p_drive_w: np.ndarray, signals: dict | None = None, app=None) -> np.ndarray:
+             p_drive_w: np.ndarray, signals: dict | None = None, app=None, engine_off=None) -> np.ndarray:
         """Book one step for vehicles ``vidx`` (each once) on edges ``eidx``; returns the
         step's quantities (n, C) (:meth:`expand` → (n, E, Q)). ``app`` (n, E): 1 where an
         equation applies to the vehicle, 0 where not (nothing booked, not even auxiliary
-        power)."""
+        power); ``engine_off`` (n,): no fuel (:meth:`step_quantities`)."""
         vidx = np.asarray(vidx, np.int64)
         if vidx.size:
             self._grow(int(vidx.max()) + 1)
         if signals is None:
             signals = self._constant_signals(len(vidx))
-        q = self.step_quantities(p_drive_w, v, dt, signals)
+        q = self.step_quantities(p_drive_w, v, dt, signals, engine_off)
         if self.cold_start_on:
             share = self._starting[vidx]
             s = share > 0

@@ -235,6 +235,8 @@ class Ledger:
         grow("veh_at", (cap, 3), float, np.nan)  # last step's lane, position, profile z
         grow("veh_done", (cap,), bool, False)  # left the simulation, not yet flushed
         grow("veh_parked", (cap,), bool, False)  # parked off the lane: not read, not booked
+        grow("veh_stand", (cap,), float, 0.0)  # standing since [s] (sim/shutoff.py)
+        grow("veh_auto_off", (cap,), float, np.inf)  # its vType's shutOffAutoDuration [s]
         self.capacity = cap
 
     #: per-vehicle arrays and their empty value (what :meth:`flush` compacts)
@@ -243,7 +245,8 @@ class Ledger:
                    ("veh_mass", np.nan), ("veh_load", 0.0), ("veh_app", 0.0),
                    ("veh_keep", False),
                    ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_lane", -2),
-                   ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_parked", False))
+                   ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_parked", False),
+                   ("veh_stand", 0.0), ("veh_auto_off", np.inf))
 
     def add_vehicle(self, vid: str, vtype: str, mass: float, app: np.ndarray,
                     keep: bool, vclass: str = "") -> int:
@@ -258,6 +261,8 @@ class Ledger:
         self.veh_load[i] = 0.0
         self.veh_parked[i] = False
         self.veh_at[i] = np.nan
+        self.veh_stand[i] = 0.0
+        self.veh_auto_off[i] = np.inf
         self.veh_app[i] = app
         self.veh_keep[i] = keep
         if keep and self.chain is not None and self.chain.active and not np.any(np.asarray(app)[self.chain.active]):

@@ -279,6 +279,8 @@ class Stepper:
         mass, app, keep = res[:3]
         i = ledger.add_vehicle(vid, vt, mass, app, keep, res[3] if len(res) > 3 else "")
         self.vmap[vid] = i
+        if self.shutoff is not None:
+            self.shutoff.registered(ledger, i, vt)
         if keep and not np.all(ledger.veh_app[i] == 1.0):
             self.every_equation_applies = False
         self.reader.subscribe_existing([vid])
@@ -524,7 +526,8 @@ class Stepper:
         eidx = self.lane_edge_ext[lane]
         ledger.book(vidx, eidx, v, dt, pc)
         if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
-            ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx])
+            off = None if self.shutoff is None else self.shutoff.auto_off(ledger, vidx, v, dt)
+            ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx], engine_off=off)
         if self.trace is not None:
             self.trace.write(t_now, vidx, eidx, v, a, theta, wind, pc)
 

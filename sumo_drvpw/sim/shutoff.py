@@ -10,15 +10,26 @@ booking resumes in the step the stop ends, from standstill. A vType
 keeps its engine on at every stop with a large ``shutOffStopDuration``.
 
 The planned duration is the stop's ``duration``, or until its ``until`` when that is
-later (TraCI's StopData, read once when the stop starts). SUMO's ``shutOffAutoDuration``
-(start-stop at unplanned halts) is not followed: a vehicle halted in traffic keeps its
-auxiliaries. An FCD replay sees no stops (the FCD has no stop attributes) and books a long
-stop standing; only a live run (libsumo, traci, the Accountant) switches it off.
+later (TraCI's StopData, read once when the stop starts).
+
+A start-stop system: a vType's ``shutOffAutoDuration`` (SUMO's default: never) switches
+the engine off once the vehicle has stood longer than that (SUMO's waiting time,
+``EnergyParams::isEngineOff``): from then until it moves, its fuel chains book no fuel.
+SUMO's electric models do not switch off in traffic (``isOff`` reads the planned stop
+only), and neither do battery chains here: the auxiliaries of a car halted in traffic keep
+running. (The standing time counts from the last step the vehicle moved, as SUMO's
+waiting time, but also at a planned stop shorter than ``shutOffStopDuration``, where SUMO
+does not count it.)
+
+An FCD replay sees no stops and no vType parameters: it books both standing; only a live
+run (libsumo, traci, the Accountant) switches vehicles off.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from sumo_drvpw.model.constants import STANDSTILL_MPS
 
 #: SUMO's default ``shutOffStopDuration`` [s] (EnergyParams.cpp, DEFAULT_VEH_SHUT_OFF_STOP)
 SHUT_OFF_STOP_S = 300.0
@@ -53,22 +64,47 @@ class ShutOff:
                           and hasattr(conn.vehicletype, "getParameter")
                           and not getattr(conn, "is_replay", False))
         self.limit_s: dict[str, float] = {}   # vType → its shutOffStopDuration [s]
+        self.auto_s: dict[str, float] = {}    # vType → its shutOffAutoDuration [s]
+        self.any_auto = False                 # a vehicle of a vType with a finite one
+        self.auto_vehicle_s = 0.0             # time engines stood switched off in traffic [s]
         self.off: set[str] = set()
         self.waiting: set[str] = set()        # at a long stop, not yet at rest
         self.pending: list[str] = []          # came to rest at a long stop in the last step
         self.stops = 0                        # stops at which a vehicle was switched off
         self.vehicle_s = 0.0                  # time vehicles stood switched off [s]
 
-    def limit_of(self, vtype: str) -> float:
-        lim = self.limit_s.get(vtype)
+    def _param(self, cache: dict, vtype: str, key: str, default: float) -> float:
+        lim = cache.get(vtype)
         if lim is None:
-            raw = self.conn.vehicletype.getParameter(vtype, "shutOffStopDuration")
+            raw = self.conn.vehicletype.getParameter(vtype, key)
             try:
-                lim = float(raw) if raw not in ("", None) else SHUT_OFF_STOP_S
-            except ValueError:
-                lim = SHUT_OFF_STOP_S
-            self.limit_s[vtype] = lim
+                lim = float(raw) if raw not in ("", None) else default
+            except ValueError:  # SUMO itself refuses a vType whose value is no number
+                lim = default
+            cache[vtype] = lim
         return lim
+
+    def limit_of(self, vtype: str) -> float:
+        """The vType's ``shutOffStopDuration`` [s]."""
+        return self._param(self.limit_s, vtype, "shutOffStopDuration", SHUT_OFF_STOP_S)
+
+    def registered(self, ledger, i: int, vtype: str) -> None:
+        """A vehicle just registered in slot ``i``: its vType's ``shutOffAutoDuration``."""
+        lim = self._param(self.auto_s, vtype, "shutOffAutoDuration", np.inf)
+        ledger.veh_auto_off[i] = lim
+        self.any_auto |= bool(np.isfinite(lim))
+
+    def auto_off(self, ledger, vidx, v, dt: float):
+        """Engines a start-stop system has switched off in this step: (n,) bool over
+        ``vidx``, or None when none is (and no vType of the run has one)."""
+        if not self.any_auto:
+            return None
+        stand = np.where(np.asarray(v) < STANDSTILL_MPS, ledger.veh_stand[vidx] + dt, 0.0)
+        ledger.veh_stand[vidx] = stand
+        off = stand > ledger.veh_auto_off[vidx]
+        n = int(np.count_nonzero(off))
+        self.auto_vehicle_s += n * dt
+        return off if n else None
 
     def step(self, stepper) -> None:
         """Switch off the vehicles that came to rest at a long stop in the last step; switch
@@ -119,4 +155,7 @@ class ShutOff:
                 "rule": "a planned stop longer than its vType's shutOffStopDuration (default "
                         f"{SHUT_OFF_STOP_S:g} s) switches the vehicle off from its start, as SUMO's "
                         "emission models do: not booked while it stands there (no auxiliary power, "
-                        "no idle fuel)"}
+                        "no idle fuel)",
+                "start_stop_vehicle_s": self.auto_vehicle_s,
+                "start_stop_rule": "a vType's shutOffAutoDuration: its engine off once it has stood longer, "
+                                   "no fuel until it moves (battery chains keep their auxiliaries)"}
