@@ -1047,7 +1047,8 @@ def test_bare_config_books_electric_cars_in_kwh_and_petrol_cars_in_litres(tmp_pa
     assert s["chain"]["warm_running"]["epa_gasoline_car"]["factor"] > 1.0
 
 
-def test_a_long_planned_stop_switches_the_vehicle_off_as_sumo_does(tmp_path):
+@pytest.mark.parametrize("connection", ["libsumo", "traci"])
+def test_a_long_planned_stop_switches_the_vehicle_off_as_sumo_does(tmp_path, connection):
     """SUMO switches a vehicle off at a planned stop longer than its vType's
     shutOffStopDuration (default 300 s; EnergyParams::isOff). Two cars stop 600 s on the
     lane: the one of a vType with the default books only its driving (auxiliary energy =
@@ -1065,7 +1066,8 @@ def test_a_long_planned_stop_switches_the_vehicle_off_as_sumo_does(tmp_path):
 """
     sc = _scenario(tmp_path, routes, net=NETS / "city.net.xml", end=1000, equations=(f'"{I3_BATTERY}"',),
                    extra='[air]\ntemperature_c = 20.0\n')
-    s = run_scenario(sc, tmp_path / "out", figures=False, options=["--tripinfo-output", str(tmp_path / "ti.xml")])
+    s = run_scenario(sc, tmp_path / "out", figures=False, connection=connection,
+                     options=["--tripinfo-output", str(tmp_path / "ti.xml")])
     v = pd.read_parquet(tmp_path / "out" / "vehicles.parquet").set_index("vehicle")["time_s"]
     trips = {t.get("id"): float(t.get("duration")) for t in ET.parse(tmp_path / "ti.xml").getroot()}
     assert v["off"] == pytest.approx(trips["off"] - 600, abs=1.0)   # the stop not booked
