@@ -302,6 +302,36 @@ def test_an_id_used_again_is_a_new_trip_with_its_own_vtype():
     assert (rows.time_s > 0).all() and rows.time_s.iloc[0] <= 15.5
 
 
+def test_a_vtype_changed_during_a_trip_books_on_with_its_new_mass():
+    """vehicle.setMass during a trip (SUMO gives the vehicle a type of its own,
+    'prius3@<id>'): the vehicle books on at the new mass from the next vType check
+    (every TYPE_CHECK_STEPS steps) — it kept the departure's 1625 kg (found by a sweep).
+    Its row shows the new vType and mass, and more inertial energy than without."""
+    from sumo_drvpw.sim.loop import TYPE_CHECK_STEPS
+
+    rows = {}
+    for heavy in (False, True):
+        sc = load_scenario(CITY, end=60)
+        conn = start_sumo(sc.sumo_args)
+        try:
+            acc = Accountant(conn, equations=["vsp_ldv1999"])
+            for k in range(100):
+                conn.simulationStep()
+                acc.step()
+                if k == 20:
+                    vid = sorted(conn.vehicle.getIDList())[0]
+                    if heavy:
+                        conn.vehicle.setMass(vid, 5000.0)
+            res = acc.result()
+        finally:
+            close_sumo(conn)
+        rows[heavy] = res.vehicles.set_index("vehicle").loc[vid]
+        assert res["vtype_changes"] == (1 if heavy else 0)
+    assert rows[False].mass_kg == 1625.0 and rows[True].mass_kg == 5000.0
+    assert rows[True].vtype == f"prius3@{vid}" and TYPE_CHECK_STEPS <= 50
+    assert rows[True].traction_acc_j > 1.5 * rows[False].traction_acc_j
+
+
 def test_a_listener_leaves_when_a_new_run_begins(tmp_path):
     """libsumo keeps its step listeners across close() and start(): an Accountant added as
     a listener went on booking every later run of the process into its ledger. At the

@@ -280,6 +280,7 @@ class Accountant(_Listener):
             "scenario": str(sc.path) if sc.path else None, "begin_s": self.begin,
             "end_s": end, "step_length_s": st.dt, "step_method": st.step_method,
             "missed_steps": st.missed_steps, "energy_booking": ENERGY_BOOKING,
+            "vtype_changes": st.retyped,
             "shut_off_at_long_stops": st.shutoff.summary() if st.shutoff is not None else None,
             "network": network_info(net, led), "interrupted": self.interrupted,
             "wall_time_s": time.perf_counter() - self._t0, "connection": sc.connection,

@@ -26,14 +26,9 @@ from sumo_drvpw.data.wind import tailwind_mps
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network, lane_numbers
+from sumo_drvpw.sim.reader import Reader
 from sumo_drvpw.sim.shutoff import ShutOff
 from sumo_drvpw.sim.sumo_start import NewRun, signals_deferred, step_method
-
-# traci variable ids (traci.constants), fixed by the TraCI protocol
-_VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE = 0x40, 0x72, 0x43
-_VAR_LANE_ID, _VAR_LANEPOSITION, _VAR_SLOPE = 0x51, 0x56, 0x36
-_TRACI_VARS = (_VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE, _VAR_LANE_ID, _VAR_LANEPOSITION, _VAR_SLOPE)
-
 
 @dataclass
 class Physics:
@@ -88,6 +83,9 @@ class Physics:
 STOP_AT_BUS_STOP = 16
 #: vehicle.getStopState bit: the vehicle is parking (off the lane)
 STOP_PARKING = 2
+#: every this many steps the running vehicles' vTypes are read again (a script's setType,
+#: setMass): a change books from then on
+TYPE_CHECK_STEPS = 25
 
 
 def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
@@ -97,54 +95,6 @@ def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray
     if speed == 0.0:
         return np.zeros(len(angle_deg))
     return tailwind_mps(angle_deg, speed, from_deg)
-
-
-class _Reader:
-    """Reads the per-vehicle state of a step as lists (getters or traci subscriptions)."""
-
-    def __init__(self, conn, use_subscriptions: bool, need: tuple[bool, ...] = (True,) * 6):
-        self.conn = conn
-        self.subs = use_subscriptions
-        self.need = need  # speed, accel, angle, lane, position, slope
-
-        V = conn.vehicle
-        self.getters = [V.getSpeed, V.getAcceleration, V.getAngle, V.getLaneID,
-                        V.getLanePosition, V.getSlope]
-        if getattr(conn, "__name__", "") == "libsumo":
-            # the compiled functions behind libsumo's Python wrappers: same calls,
-            # ~25 % less per-call overhead (measured: 0.27 vs 0.36 ms per 1000 getSpeed calls)
-            try:
-                from libsumo import _libsumo as raw
-
-                self.getters = [getattr(raw, "vehicle_" + g.__name__) for g in self.getters]
-            except (ImportError, AttributeError):
-                pass
-
-    def read(self, ids, skip_lanes: bool = False):
-        """(speed, accel, angle, lane, position, slope) of ``ids``: float arrays, a list
-        of lane ids, or None for what is not needed (and lane/position if skip_lanes)."""
-        if not self.subs:
-            n = len(ids)
-            return tuple(
-                None if not need or (skip_lanes and k in (3, 4))
-                else list(map(g, ids)) if k == 3 else np.fromiter(map(g, ids), float, n)
-                for k, (g, need) in enumerate(zip(self.getters, self.need)))
-        V = self.conn.vehicle
-        res = V.getAllSubscriptionResults()
-        rows = [res.get(vid) for vid in ids]
-        missing = [vid for vid, r in zip(ids, rows) if not r]
-        if missing:  # vehicles present before our first step (e.g. a loaded state)
-            for vid in missing:
-                V.subscribe(vid, _TRACI_VARS)
-            res = V.getAllSubscriptionResults()
-            rows = [res[vid] for vid in ids]
-        cols = [[r[k] for r in rows] for k in _TRACI_VARS]
-        return tuple(c if k == 3 else np.asarray(c, float) for k, c in enumerate(cols))
-
-    def subscribe_existing(self, ids):
-        if self.subs:
-            for vid in ids:
-                self.conn.vehicle.subscribe(vid, _TRACI_VARS)
 
 
 class Stepper:
@@ -189,7 +139,7 @@ class Stepper:
         self.lane_edge_ext = np.append(net.lane_edge, -1)  # lane -1 → edge -1
         read_accel = physics.acceleration == "getter"
         read_slope = physics.slope_reference == "getslope"
-        self.reader = _Reader(conn, use_subscriptions,
+        self.reader = Reader(conn, use_subscriptions,
                               (True, read_accel,
                                physics.wind_speed != 0.0 and physics.heading == "getangle",
                                True, True, read_slope))
@@ -257,6 +207,7 @@ class Stepper:
                               and hasattr(conn.vehicle, "getStops"))
         #: vehicle id → (lane number, lane position) of its bus-stop dwell
         self.dwell: dict[str, tuple[int, float]] = {}
+        self.retyped = 0  # vehicles whose vType changed during their trip (check_types)
         so = ShutOff(conn)  # long planned stops switch vehicles off, as in SUMO
         self.shutoff = so if so.available else None
 
@@ -340,6 +291,28 @@ class Stepper:
                 ledger.veh_prev_speed[i] = 0.0
                 ledger.veh_at[i, 2] = np.nan
                 self.prev_ids = None
+
+    def check_types(self, kids, vidx) -> None:
+        """vTypes changed during a trip (``vehicle.setType``; ``setMass`` and the other
+        vType setters give the vehicle a type of its own, ``<type>@<id>``): the vehicle
+        books on with its new vType's mass, class and equations (``retyped`` counts)."""
+        ledger, get = self.ledger, self.conn.vehicle.getTypeID
+        types = ledger.veh_type
+        for vid, i in zip(kids, vidx.tolist()):
+            vt = get(vid)
+            if vt == types[i]:
+                continue
+            res = self.resolve(vt, vid)
+            types[i] = vt
+            ledger.veh_mass[i], ledger.veh_app[i], ledger.veh_keep[i] = res[0], res[1], res[2]
+            if len(res) > 3:
+                ledger.veh_class[i] = res[3]
+            if self.shutoff is not None:
+                self.shutoff.registered(ledger, i, vt)
+            if res[2] and not np.all(res[1] == 1.0):
+                self.every_equation_applies = False
+            self.retyped += 1
+            self.prev_ids = None  # (a vType no equation books is read no more)
 
     def flush(self) -> None:
         """Write the finished vehicles out of the ledger (:meth:`Ledger.flush`) and renumber
@@ -426,6 +399,8 @@ class Stepper:
         n = len(kids)
         if n == 0:
             return
+        if ledger.steps % TYPE_CHECK_STEPS == 0 and not self.is_replay:
+            self.check_types(kids, vidx)
         tracking = self.tracking
         v, a, angle, ln, pos, raw = self.reader.read(kids, skip_lanes=tracking)
         if tracking:
