@@ -351,6 +351,35 @@ name = "trip_id"
     assert list(df["trip_id"]) == ["a", "a", "b"]
 
 
+def test_columns_iso_times_with_changing_utc_offsets_and_fractions(tmp_path):
+    """ISO 8601 timestamps as loggers write them: a file holding a summer (+02:00) and a
+    winter (+01:00) trip, a trip across the end of daylight saving (02:59:59+02:00 is
+    followed by 02:00:00+01:00), and Python's isoformat (no fraction on whole seconds)
+    mixed with fractions. Each trip's clock runs on (read in UTC); they were a traceback
+    ("Mixed timezones detected") or an error on a valid cell (found by a sweep)."""
+    m = write(tmp_path, "map.toml", """
+[options]
+time_unit = "datetime"
+[columns.t]
+name = "time_s"
+[columns.v]
+name = "speed_mps"
+unit = "m/s"
+[columns.trip]
+name = "trip_id"
+""")
+    src = write(tmp_path, "x.csv", "t,v,trip\n"
+                "2019-07-01T12:00:00+02:00,10,summer\n2019-07-01T12:00:00.500000+02:00,10,summer\n"
+                "2019-10-27T02:59:59.500000+02:00,10,dst\n2019-10-27T02:00:00+01:00,10,dst\n"
+                "2019-10-27T02:00:00.500000+01:00,10,dst\n"
+                "2019-12-01T08:00:00+01:00,5,winter\n2019-12-01T08:00:01+01:00,5,winter\n")
+    df, rep = read("columns", src, columns=m)
+    assert_canonical(df, rep)
+    got = {t: list(np.diff(g["time_s"])) for t, g in df.groupby("trip_id", sort=False)}
+    assert got == {"summer": [0.5], "dst": [0.5, 0.5], "winter": [1.0]}
+    assert df["time_s"].iloc[0] == 0.0
+
+
 # ---------------------------------------------------------------- broken input → UserError
 
 BMW_HEADER = ("Time [s];Velocity [km/h];Elevation [m];Motor Torque [Nm];"

@@ -161,7 +161,7 @@ def _wide(path: Path, sep: str) -> tuple[int, dict[str, Channel]]:
         parsed = pd.to_datetime(s, format="%H:%M:%S.%f", errors="coerce")
         parsed = parsed.fillna(pd.to_datetime(s, format="%H:%M:%S", errors="coerce"))
         if parsed.isna().all():  # a date with the time ('2023-12-04 07:13:32.604')
-            parsed = pd.to_datetime(s, format="ISO8601", errors="coerce")
+            parsed = pd.to_datetime(s, format="ISO8601", errors="coerce", utc=True)  # offsets: one clock
             base = parsed.min()
         else:
             base = None

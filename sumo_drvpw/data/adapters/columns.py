@@ -216,7 +216,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
             out[e["name"]] = raw[label].astype(str).str.strip()
         elif e["kind"] == "datetime":
             s = raw[label]
-            t = pd.to_datetime(s, format=m["time_format"], errors="coerce")
+            t = to_datetimes(s, m["time_format"])
             bad = t.isna() & ~s.astype(str).str.strip().isin(na)
             if bad.any():
                 i = int(np.flatnonzero(bad.to_numpy())[0])
@@ -234,6 +234,26 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     return df.reset_index(drop=True), rep
 
 
+def to_datetimes(s: pd.Series, time_format) -> pd.Series:
+    """Timestamps as datetimes (NaT where a cell is none), in UTC where they carry a UTC
+    offset: a file holding a summer (+02:00) and a winter (+01:00) trip, or a trip across a
+    daylight-saving change, stays on one clock. Without a ``time_format``, ISO 8601 (with or
+    without fractions of a second, with or without an offset) is tried first, then the
+    format pandas infers from the first cell; the reading that leaves fewer cells unread
+    wins."""
+    if time_format is not None:
+        return pd.to_datetime(s, format=time_format, errors="coerce", utc=True)
+    best = None
+    for fmt in ("ISO8601", None):
+        try:
+            t = pd.to_datetime(s, format=fmt, errors="coerce", utc=True)
+        except (ValueError, TypeError):  # a format pandas cannot infer from the first cell
+            continue
+        if best is None or t.isna().sum() < best.isna().sum():
+            best = t
+    return best if best is not None else pd.Series(pd.NaT, index=s.index, dtype="datetime64[ns, UTC]")
+
+
 _DATE_DIRECTIVES = ("%d", "%j", "%m", "%b", "%B", "%y", "%Y", "%U", "%W", "%G", "%V", "%x", "%c", "%s")
 
 
@@ -243,7 +263,8 @@ def _seconds(t: pd.Series, time_format, rep: dict) -> pd.Series:
     day is carried on (:func:`carry_midnight`) instead of the samples reading as time going
     backwards."""
     s = (t - t.min()).dt.total_seconds()
-    if time_format is None or any(d in str(time_format) for d in _DATE_DIRECTIVES):
+    if time_format is None or str(time_format).upper() == "ISO8601" \
+            or any(d in str(time_format) for d in _DATE_DIRECTIVES):
         return s
     x, n = carry_midnight(s.to_numpy(float))
     if not n:
