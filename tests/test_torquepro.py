@@ -51,6 +51,27 @@ def test_metric_units_map_to_the_same_columns(tmp_path):
     assert not any("battery_current_a" in n for n in rep["notes"])  # no battery logged
 
 
+def test_a_powertrain_field_that_never_answers_does_not_hold_the_link_down(tmp_path):
+    """An EV has no engine speed: Torque writes '-' in every row of 'Engine RPM(rpm)'. The
+    whole log was refused ("no sample left after dropping {'link not up (-)': …}", found by
+    a sweep); the field now stays NaN and is named, and a field that starts answering
+    later still marks the link as up from then on."""
+    p = metric_csv(tmp_path / "ev.csv")
+    lines = p.read_text(encoding="utf-8").splitlines()
+    rows = [lines[0]] + [", ".join(c if k != 5 else "-" for k, c in enumerate(r.split(", "))) for r in lines[1:]]
+    p.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    df, rep = read("torquepro", p)
+    assert len(df) == 40 and df["ice_speed_rpm"].isna().all()
+    assert "no value in the whole log (the car does not answer it): ice_speed_rpm" in " ".join(rep["files"][0]["notes"])
+    late = metric_csv(tmp_path / "late.csv")
+    lines = late.read_text(encoding="utf-8").splitlines()
+    rows = [lines[0]] + [", ".join(c if (k != 5 or i >= 3) else "-" for k, c in enumerate(r.split(", ")))
+                         for i, r in enumerate(lines[1:])]
+    late.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    df, rep = read("torquepro", late)
+    assert len(df) == 37 and rep["dropped"] == {"link not up (-)": 3}
+
+
 def test_a_repeated_header_is_dropped_and_counted(tmp_path):
     df, rep = read("torquepro", metric_csv(tmp_path / "trip.csv", repeat_header_at=20))
     assert len(df) == 40

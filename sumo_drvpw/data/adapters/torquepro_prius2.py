@@ -24,7 +24,9 @@ column, converted from the unit in its brackets. A header row repeated inside a 
 starts a new logging session in the same file) is dropped and counted.
 
 Samples before the OBD link is up (any powertrain field ``-``) are dropped and counted as
-'link not up (-)'; later ``-`` cells become NaN (counted per column in the notes).
+'link not up (-)'; later ``-`` cells become NaN (counted per column in the notes). A
+powertrain field that never answers in the whole log (an EV's engine speed, a PID the car
+does not support) does not hold the link down: it stays NaN and is named in the notes.
 """
 
 from __future__ import annotations
@@ -201,6 +203,12 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
         df["elevation_m"] = df["elevation_m"].fillna(df["altitude_phone_m"])
     # samples before the OBD link is up: leading rows with any powertrain field '-'
     link = sorted({_mapping(k, [])[0] for k in labels} & {NAMES[k][0] for k in LINK})
+    # (a field that never answers — no engine speed on an EV, a PID the car lacks — says
+    # nothing of the link: it stays NaN and is named in the notes)
+    silent = [k for k in link if df[k].isna().all()]
+    if silent:
+        rep["notes"].append("no value in the whole log (the car does not answer it): " + ", ".join(silent))
+        link = [k for k in link if k not in silent]
     if link:
         complete = df[link].notna().all(axis=1).to_numpy()
         first = int(np.argmax(complete)) if complete.any() else len(df)
