@@ -99,6 +99,20 @@ def test_condition_share_does_not_depend_on_the_zero_of_its_unit(tmp_path):
     assert abs(shares[0]) < 0.2
 
 
+def test_a_log_shorter_than_two_blocks_is_refused(tmp_path):
+    """A single 54-s trip is one 60-s block: every fold's training set was empty, the
+    held-out predictions all 0 (trip energy −100 %) and the trace concluded that nothing
+    was missing (found by a sweep). It is a UserError; with 20-s blocks it runs."""
+    df, _ = E.synth_trips(1, 0.9, seed=3, effects=[E.LogPower()], noise=NOISE)
+    path = tmp_path / "short.parquet"
+    df.to_parquet(path)
+    m = load_measured([path], "prius3")
+    with pytest.raises(UserError, match="too short to hold any part out"):
+        diagnose(m, load_equation(TRUTH), DiagnoseOptions())
+    res = diagnose(m, load_equation(TRUTH), DiagnoseOptions(block_s=20.0, folds=2))
+    assert res.report["baseline"]["metrics"]["r2"] > 0.9
+
+
 def test_per_trip_mass_found(tmp_path):
     res, floor = _run(tmp_path, [E.PerTripMass(), E.Distractors()])
     f = res.report["findings"]

@@ -83,6 +83,10 @@ class BlockModel:
         firstb = np.maximum.accumulate(np.where(bstart, np.arange(self.n_blocks), 0))
         rank = np.arange(self.n_blocks) - firstb
         self.fold_blocks = (rank % k_b).astype(np.int64)
+        if len(np.unique(self.fold_blocks)) < 2:  # every block in one fold: none to train on
+            raise UserError(f"no trip's usable samples span more than one block of {opt.block_s:g} s "
+                            f"({self.n_blocks} block(s) in all): too short to hold any part out (held-out "
+                            "validation needs a trip of ≥ 2 blocks: a longer log, or a shorter block length)")
         n_trips_present = int((sizes > 0).sum())
         if opt.validation == "trip" and n_trips_present < 3:
             raise UserError(f"validation by trip needs ≥ 3 trips, the data hold {n_trips_present}")
