@@ -1670,3 +1670,15 @@ def test_a_flipped_battery_current_is_refused_not_fitted(tmp_path, capsys):
     # the log as logged still calibrates
     assert cli_main(["calibrate", str(log), "--target", "battery", "--equation", str(road),
                      "--load", "heater_power_w", "--out", str(out)]) == 0
+    # compare and diagnose read the same target: they booked +200…+400 % per trip and took
+    # driving for charging, exit 0 (found by a sweep on unseen logs); now the same refusal
+    for cmd in (["compare", str(flipped), "--equation", str(out), "--target", "battery", "--out",
+                 str(tmp_path / "cmp")],
+                ["diagnose", str(flipped), "--equation", str(out), "--target", "battery", "--out",
+                 str(tmp_path / "dg")]):
+        assert cli_main(cmd) == 2
+        err = capsys.readouterr().err
+        assert "is the current's sign flipped?" in err and "flipped.csv" in err, err
+        assert not (tmp_path / cmd[-1]).exists()
+    assert cli_main(["compare", str(log), "--equation", str(out), "--target", "battery", "--out",
+                     str(tmp_path / "cmp")]) == 0
