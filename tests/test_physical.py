@@ -117,6 +117,30 @@ def test_calibrate_cli_uses_the_constrained_fit_when_implausible(tmp_path, capsy
     assert eq.provenance["physical"]["unconstrained"]["grade"] < 0.6
 
 
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_a_power_in_kw_is_refused_not_constrained_into_an_equation(tmp_path, capsys, engine):
+    """A log whose power_w holds kW: the free fit reads acc = 0.001; the constrained fit
+    then wrote acc = 1 and grade = 1 beside aero and roll in kW (R² −593,406 in the file,
+    'plausible', exit 0; found by a sweep on unseen logs). No constraint makes it physical:
+    calibrate refuses in one line naming the log and the likely unit. In W it calibrates."""
+    import pandas as pd
+
+    from sumo_drvpw.cli import main
+
+    x, y = _drive()
+    t = np.arange(len(y)) * 1.0
+    df = pd.DataFrame({"time_s": t, "speed_mps": x.v, "accel_mps2": x.a, "grade_rad": x.theta,
+                       "mass_kg": x.mass, "power_w": y / 1000.0})
+    df.to_parquet(tmp_path / "kw.parquet")
+    out = tmp_path / "eq.toml"
+    assert main(["calibrate", str(tmp_path / "kw.parquet"), "--out", str(out), "--engine", engine]) == 2
+    err = capsys.readouterr().err
+    assert "kw.parquet: the free fit's acc coefficient is 0.00" in err and "in kW it reads 0.001" in err, err
+    assert not out.exists()
+    df.assign(power_w=y).to_parquet(tmp_path / "w.parquet")
+    assert main(["calibrate", str(tmp_path / "w.parquet"), "--out", str(out), "--engine", engine]) == 0
+
+
 @pytest.mark.parametrize("engine", [[], ["--engine", "memory"]])
 def test_the_equation_files_r2_is_that_of_its_constrained_coefficients(tmp_path, engine):
     """Found by the metamorphic sweep: an equation calibrated under the physical constraints

@@ -95,8 +95,8 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     from sumo_drvpw.cli.calibrate import check_identified
 
     note_counts(st.counts)
+    where = st.files[0] if len(st.files) == 1 else f"{len(st.files)} files"
     if len(st.speeds) < 2:  # the in-memory path's identifiability check, from streamed sums
-        where = st.files[0] if len(st.files) == 1 else f"{len(st.files)} files"
         raise UserError(f"{where}: speed takes {len(st.speeds)} distinct value(s) above "
                         f"{MOVING_MPS:g} m/s on the usable samples; {', '.join(cands)} cannot be "
                         "identified (they need the speed to vary); calibrate on a log with varying speed")
@@ -109,8 +109,11 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     print(res.summary())
     from sumo_drvpw.fit.physical import apply_physics_gram, constraints_of  # issue #11 §3
 
-    eq, note = apply_physics_gram(eq, st.gram()[0], st.rho_sum / st.mass_n,
-                                  constraints=constraints_of(args.candidates))
+    try:
+        eq, note = apply_physics_gram(eq, st.gram()[0], st.rho_sum / st.mass_n,
+                                      constraints=constraints_of(args.candidates))
+    except UserError as e:  # about the data: name them
+        raise UserError(f"{where}: {e}") from None
     if note:
         print(note)
         from sumo_drvpw.cli import measurement_options

@@ -150,9 +150,13 @@ def log_columns(paths) -> set[str]:
 def physical(eq, m, candidates):
     """The equation, physically constrained where its free fit is implausible (issue #11 §3),
     and the note saying so ('' when plausible); the note and its hints are printed."""
+    from sumo_drvpw.errors import UserError
     from sumo_drvpw.fit.physical import apply_physics, constraints_of
 
-    eq, note = apply_physics(eq, m.inputs, m.power_w, m.usable, constraints_of(candidates))
+    try:
+        eq, note = apply_physics(eq, m.inputs, m.power_w, m.usable, constraints_of(candidates))
+    except UserError as e:  # about the data: name them
+        raise UserError(f"{m.log.describe()}: {e}") from None
     if note:
         print(note)
         hint_grade_source(note, m.log.df.columns, m.log.options.measurement)

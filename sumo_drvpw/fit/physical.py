@@ -126,6 +126,25 @@ def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> 
     return out
 
 
+#: a free acc coefficient outside this range is no mass factor: the power, the mass or the
+#: speed is in another unit (a power in kW reads 0.001)
+ACC_SCALE_SANE = (0.2, 5.0)
+
+
+def check_scale(terms: dict[str, float]) -> None:
+    """UserError when the free fit's ``acc`` coefficient is no mass factor (outside
+    ``ACC_SCALE_SANE``): the measured power is that many times m·v·a, where a vehicle's is
+    1–1.4 times it. No constraint makes such a fit physical (a power logged in kW was
+    written with acc = 1 beside aero and roll in kW: R² −593,406, found by a sweep)."""
+    c = terms.get("acc")
+    if c is None or ACC_SCALE_SANE[0] <= float(c) <= ACC_SCALE_SANE[1]:
+        return
+    raise UserError(f"the free fit's acc coefficient is {float(c):.4g}: the measured power reads {float(c):.3g} × "
+                    "m·v·a, where a vehicle's is 1–1.4 × (its rotating mass): is the power in another unit "
+                    "(in kW it reads 0.001), the vehicle's mass wrong by that factor, or the speed in "
+                    "another unit?")
+
+
 def implausible(reading: dict[str, dict]) -> list[str]:
     """Terms whose reading is implausible, in term order."""
     return [t for t, r in reading.items() if r["plausible"] is False]
@@ -243,6 +262,7 @@ def physical_calibration(x, y, candidates, mask=None, constraints: dict | None =
     from sumo_drvpw.fit.calibrate import calibrate
 
     res = calibrate(x, y, candidates, mask=mask, **kw)
+    check_scale(dict(res.params))
     use = res.results.model.exog.shape[0] if res.results is not None else None
     m = np.isfinite(np.asarray(y, float)) if mask is None else (np.asarray(mask, bool) & np.isfinite(y))
     rho = float(np.nanmean(np.asarray(x.rho, float)[m]))
@@ -293,6 +313,7 @@ def apply_physics_gram(eq, g: Gram | None, rho_kgm3: float = RHO_DEFAULT,
                        constraints: dict | None = None):
     """:func:`apply_physics` from sufficient statistics ``g`` (any superset of the
     equation's terms, e.g. a streamed calibration's); ``rho_kgm3`` reads the aero term."""
+    check_scale(eq.terms)
     reading = physical_reading(eq.terms, rho_kgm3)
     bad = implausible(reading)
     if not bad:
