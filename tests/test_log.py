@@ -219,6 +219,38 @@ def test_an_elevation_glitch_is_no_road_grade(tmp_path, capsys):
     assert "grade steeper than 35 % left out" in capsys.readouterr().out
 
 
+def test_missing_elevation_is_said_not_read_silently_as_a_flat_road(tmp_path, capsys):
+    """Found by a sweep on unseen logs: an elevation column of NaN throughout was read as a
+    flat road with grade_source 'elevation_m …' and no note; a trip of a folder whose file
+    has no elevation was booked flat, unsaid; 300 s without a GPS fix were held flat,
+    uncounted. Now: no values is no grade (the no-grade note), a trip without it is listed
+    (grade_flat_trips), the samples without it are counted; calibrate says each."""
+    base = _log(400, hz=2.0).assign(speed_mps=10.0, power_w=3000.0, mass_kg=1500.0)
+    log = read_log([_write(tmp_path, base.assign(elevation_m=np.nan), "nan.csv")])
+    assert log.counts["grade_source"].startswith("none (elevation_m holds no value")
+    assert (log.df["grade_rad"] == 0).all()
+    d = tmp_path / "logs"
+    d.mkdir()
+    _write(d, base.assign(elevation_m=100.0 + 0.01 * np.arange(400)), "a.csv")
+    _write(d, base, "b.csv")                                  # this trip logged no elevation
+    nofix = base.assign(elevation_m=100.0 + 0.01 * np.arange(400))
+    nofix.loc[:59, "elevation_m"] = np.nan                    # the first 30 s without a fix
+    _write(d, nofix, "c.csv")
+    log = read_log([d])
+    assert log.counts["grade_flat_trips"] == ["b"] and log.counts["elevation_missing_samples"] == 60
+    assert log.counts["grade_source"].startswith("elevation_m")
+    v = 10.0 + 4.0 * np.sin(base["time_s"].to_numpy() / 15.0)  # the CLI needs a varying speed
+    for f in ("a.csv", "b.csv", "c.csv"):
+        df = pd.read_csv(d / f)
+        df.assign(speed_mps=v, power_w=1500.0 * v * (np.gradient(v, df["time_s"]) + 0.1)).to_csv(d / f, index=False)
+    for engine in ("memory", "local"):
+        assert cli_main(["calibrate", str(d), "--out", str(tmp_path / "e.toml"), "--candidates", "acc,roll",
+                         "--engine", engine]) == 0
+        out = capsys.readouterr().out
+        assert "1 trip(s) without elevation read as a flat road (b)" in out, out
+        assert "60 sample(s) without elevation" in out
+
+
 def test_folder_of_files_one_trip_each(tmp_path):
     d = tmp_path / "logs"
     d.mkdir()

@@ -257,9 +257,17 @@ def note_counts(counts: dict) -> None:
         print(f"note: acceleration {counts['accel_source'][len('derived: '):]}")
     grade_by = str((counts.get("measurement") or {}).get("grade", ""))
     if str(counts.get("grade_source", "")).startswith("none") and grade_by != "accelerometer":
-        print("note: the logs carry no grade (no grade_rad, grade_pct or elevation_m column): a flat road "
+        print("note: the logs carry no grade (no grade_rad, grade_pct or elevation_m values): a flat road "
               "is assumed, so a trip that climbs or descends Δh misses m·g·Δh (1.5 t over 100 m: "
               "0.41 kWh); log the elevation (e.g. GPS altitude) where the routes are not flat")
+    flat = counts.get("grade_flat_trips") or []
+    if flat and not str(counts.get("grade_source", "")).startswith("none"):
+        print(f"note: {len(flat)} trip(s) without elevation read as a flat road ({', '.join(flat[:10])}"
+              f"{', …' if len(flat) > 10 else ''}): their climbs and descents are not in their energy")
+    n = int(counts.get("elevation_missing_samples", 0) or 0)
+    if n:
+        print(f"note: {n} sample(s) without elevation (no GPS fix?): the elevation is bridged between the "
+              "samples that have it, and held flat before the first and after the last")
     n = int(counts.get("excluded_grade_outlier", 0) or 0)
     if n:
         lim = float(counts.get("grade_outlier_limit", 0.35))

@@ -233,6 +233,14 @@ def median_dt(time_s: np.ndarray, trip_codes: np.ndarray) -> float:
     return float(np.median(d)) if d.size else float("nan")
 
 
+def has_values(df, col: str) -> bool:
+    """Column ``col`` is in ``df`` with at least one finite value (an elevation logged as NaN
+    throughout, a GPS without a fix, is no elevation)."""
+    import pandas as pd
+
+    return col in df and bool(np.isfinite(pd.to_numeric(df[col], errors="coerce").to_numpy(float)).any())
+
+
 def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Measurement | None):
     """The corrections of ``meas`` applied to a read log's inputs and measured power.
 
@@ -260,8 +268,9 @@ def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Mea
         power_w = shift_within_trips(np.asarray(power_w, float), codes, int(round(meas.power_lag_s / dt)))
         usable &= np.isfinite(power_w)
     if meas.air_density == "altitude" and "pressure_kpa" not in df:
-        if "elevation_m" not in df:
-            raise UserError(f"{log.describe()}: air density at altitude needs column 'elevation_m'")
+        if not has_values(df, "elevation_m"):
+            raise UserError(f"{log.describe()}: air density at altitude needs column 'elevation_m' "
+                            "(with values)")
         h = df["elevation_m"].to_numpy(float)
         x.rho = np.where(np.isfinite(h), x.rho * pressure_at_altitude_kpa(h) / P_STD_KPA, x.rho)
     drop = None  # logger dropouts, found once: left out (exclude_dropouts) and off the driven path
@@ -289,9 +298,9 @@ def apply_measurement(log, x, power_w: np.ndarray, usable: np.ndarray, meas: Mea
         if meas.grade == "accelerometer" and meas.accelerometer_offset_mps2 is not None:
             s = s_acc
         elif meas.grade == "accelerometer":
-            if "elevation_m" not in df:
+            if not has_values(df, "elevation_m"):
                 raise UserError(f"{log.describe()}: grade 'accelerometer' needs column 'elevation_m' "
-                                "(its per-trip offset is fixed by the elevation change)")
+                                "with values (its per-trip offset is fixed by the elevation change)")
             s = offset_corrected_sin_grade(s_acc, x.v, df["dt_s"].to_numpy(float), codes,
                                            df["elevation_m"].to_numpy(float), path)
         elif meas.fusion_distance_m is None:

@@ -483,17 +483,26 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     elif "grade_pct" in df:
         df["grade_rad"] = np.arctan(df["grade_pct"].to_numpy(float) / 100.0)
         counts["grade_source"] = "grade_pct column"
-    elif "elevation_m" in df:
+    elif "elevation_m" in df and np.isfinite(df["elevation_m"].to_numpy(float)).any():
         step = v * np.r_[0.0, np.diff(t)]
         step[start] = 0.0
         dist = pd.Series(step).groupby(trip_codes, sort=False).cumsum().to_numpy()
-        df["grade_rad"] = grade_from_elevation(df["elevation_m"].to_numpy(float), dist,
-                                               trip_codes, opt.grade_window_m)
+        z = df["elevation_m"].to_numpy(float)
+        df["grade_rad"] = grade_from_elevation(z, dist, trip_codes, opt.grade_window_m)
         counts["grade_source"] = (f"elevation_m over distance: 1 m grid, {opt.grade_window_m:g} m "
                                   "moving average, gradient")
+        # a trip without elevation is read flat, a stretch without it (no GPS fix) is bridged
+        # or held: both said (no grade energy there)
+        n_fin = pd.Series(np.isfinite(z)).groupby(trip_codes).transform("sum").to_numpy()
+        flat = df["trip_id"].to_numpy()[start & (n_fin < 2)]
+        if len(flat):
+            counts["grade_flat_trips"] = [str(x) for x in flat]
+        counts["elevation_missing_samples"] = int((~np.isfinite(z) & (n_fin >= 2)).sum())
     else:
         df["grade_rad"] = 0.0
-        counts["grade_source"] = "none (flat road assumed)"
+        counts["grade_source"] = ("none (elevation_m holds no value: flat road assumed)" if "elevation_m" in df
+                                  else "none (flat road assumed)")
+        counts["grade_flat_trips"] = [str(x) for x in df["trip_id"].to_numpy()[start]]
 
     if "wind_mps" in df:
         counts["wind_source"] = "wind_mps column"

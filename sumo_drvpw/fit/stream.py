@@ -91,8 +91,9 @@ class Moments:
 
 
 def _add_counts(a: dict, b: dict) -> dict:
-    """Counts of two batches: numbers add, per-trip tables merge (batches hold whole trips),
-    texts are kept (first seen)."""
+    """Counts of two batches: numbers add, per-trip tables merge and lists join (batches
+    hold whole trips), texts are kept (first seen; a grade source other than none wins:
+    one batch without elevation does not make the logs carry none)."""
     out = dict(a)
     for k, v in b.items():
         if k in out and isinstance(v, (int, np.integer)) and not isinstance(v, bool) \
@@ -100,6 +101,10 @@ def _add_counts(a: dict, b: dict) -> dict:
             out[k] = int(out[k]) + int(v)
         elif isinstance(v, dict) and isinstance(out.get(k), dict):
             out[k] = {**out[k], **v}
+        elif isinstance(v, list) and isinstance(out.get(k), list):
+            out[k] = out[k] + [x for x in v if x not in out[k]]
+        elif k == "grade_source" and str(out.get(k, "")).startswith("none") and not str(v).startswith("none"):
+            out[k] = v
         elif k == "accel_outlier_limit_mps2" or k not in out:
             out.setdefault(k, v)
     return out
