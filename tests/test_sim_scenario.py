@@ -468,3 +468,16 @@ def test_slope_limit_beyond_a_wall_is_refused(max_rad):
 
     with pytest.raises(UserError, match=r"\[slope\] max_rad must be above 0 and at most 1.5"):
         load_network(NETS / "highway.net.xml", RoadClassRule(), max_rad=max_rad)
+
+
+@pytest.mark.parametrize("max_rad", [1.6, 2.0])
+def test_slope_limit_beyond_a_wall_in_a_scenario_names_the_file(tmp_path, max_rad):
+    """The same refusal from a scenario file names the file and its key (it named neither;
+    found by a sweep of the docs' promises)."""
+    from sumo_drvpw.errors import UserError
+
+    p = tmp_path / "s.toml"
+    p.write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NETS / "highway.net.xml"}"\n'
+                 f'[slope]\nmax_rad = {max_rad}\n', encoding="utf-8")
+    with pytest.raises(UserError, match=r"s.toml: 'slope.max_rad' must be > 0 and at most 1.5, got"):
+        load_scenario(p)

@@ -374,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     except UserError as e:
-        print(f"sumo-drvpw {args.command}: error: {_one_line(e)}", file=sys.stderr)
+        print(f"sumo-drvpw {args.command}: error: {_as_typed(_one_line(e), args)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:  # SIGINT, or SIGTERM as _Terminated
         return _signal_exit(isinstance(e, _Terminated))
@@ -401,6 +401,20 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGTERM, prev_term)
         if prev_int is not None:
             signal.signal(signal.SIGINT, prev_int)
+
+
+#: what a library message calls an option (it names no flags) → the flag the user types,
+#: for the commands that have it (argparse attribute)
+_FLAGS = (("speed_unit", "declare the unit (speed unit km/h or m/s)",
+           "declare the unit (--speed-unit km/h, or --speed-unit m/s to keep it)"),)
+
+
+def _as_typed(msg: str, args) -> str:
+    """A library message with its option names as the user types them on this command."""
+    for attr, said, typed in _FLAGS:
+        if hasattr(args, attr):
+            msg = msg.replace(said, typed)
+    return msg
 
 
 def _one_line(e: Exception) -> str:

@@ -196,8 +196,9 @@ def main(args) -> int:
     print(f"final held-out RMSE {r['final']['metrics']['rmse_w']:.1f} W; wrote {Path(args.out) / 'trace.json'}")
     fix = correction_flags(r["findings"], res.equation.measurement)
     if fix:
+        veh = f" --vehicle {args.vehicle}" if args.vehicle else ""
         print("measurement-side findings belong in the data, not in coefficients: calibrate the equation for "
-              f"SUMO with  sumo-drvpw calibrate {' '.join(map(str, args.logs))} {fix} --out EQ.toml  "
+              f"SUMO with  sumo-drvpw calibrate {' '.join(map(str, args.logs))}{veh} {fix} --out EQ.toml  "
               "(the equation keeps them in its [measurement]; compare reads new logs the same way)")
     print(resource_line(res), file=sys.stderr)
     return 0

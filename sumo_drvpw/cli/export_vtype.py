@@ -52,6 +52,9 @@ def main(args: argparse.Namespace) -> int:
         area = v.body.get("frontal_area_m2")
     if mass is not None and not 0 < mass < float("inf"):
         raise UserError(f"--mass must be a finite number > 0 [kg], got {mass}")
+    if mass is None and eq.mass_kg is None:
+        raise UserError(f"equation '{eq.name}' has no fixed mass: give the vehicle (--vehicle NAME_OR_FILE, "
+                        "whose mass_kg it takes) or its mass (--mass KG)")
     from sumo_drvpw.cli import check_air_temperature
 
     check_air_temperature(args.air_temperature)

@@ -13,10 +13,10 @@ def configure(p):
     p.add_argument("--out", default="validation-out", metavar="DIR",
                    help="folder for figures and summary.json, written whole or not at all; the "
                         "report is <DIR>.md beside it (default validation-out → validation-out.md; "
-                        "the repository's docs are regenerated with --out docs/validation)")
+                        "the repository's docs are regenerated with --out docs/validation --force --chain)")
     p.add_argument("--chain", action="store_true",
                    help="also the energy-chain study: battery and fuel energy per held-out trip "
-                        "beside SUMO's Energy model, MMPEVEM and PHEMlight5 (about 1–4 min more)")
+                        "beside SUMO's Energy model, MMPEVEM and PHEMlight5 (about 1–2 min more)")
     add_force(p)
 
 

@@ -144,8 +144,7 @@ class Scenario:
     #: departure (0: trips start warm, e.g. through traffic); a vType's or vClass's own
     #: ``cold_start`` (``vtype_data``, ``vclass_data``) replaces it for its vehicles
     cold_start: float = 0.0
-    #: persons riding in a vehicle add their vTypes' masses while they ride, as in SUMO's
-    #: emission models (EnergyParams::getTotalMass)
+    #: riding persons add their vTypes' masses, as in SUMO (EnergyParams::getTotalMass)
     transportable_mass: bool = True
     #: edgeData interval [s] (None: one interval for the whole run)
     period: float | None = None
@@ -169,11 +168,11 @@ def _where(path) -> str:
     return str(path) if path else "<scenario>"
 
 
-def _num(v, where: str, key: str, positive: bool = False) -> float:
+def _num(v, where: str, key: str, positive: bool = False, most: float = math.inf) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise UserError(f"{where}: '{key}' must be a number, got {v!r}")
-    if positive and v <= 0:
-        raise UserError(f"{where}: '{key}' must be > 0, got {v!r}")
+    if (positive and v <= 0) or v > most:
+        raise UserError(f"{where}: '{key}' must be > 0{f' and at most {most:g}' * (most < math.inf)}, got {v!r}")
     return float(v)
 
 
@@ -448,8 +447,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             times[k] = sumo_time(cfgvals[k.replace("_", "-")], f"SUMO config {cfg}",
                                  k.replace("_", "-"), positive=(k == "step_length"))
     if "begin" in times and "end" in times and times["end"] <= times["begin"]:
-        raise UserError(f"{where}: sumo.end ({times['end']}) must be after sumo.begin "
-                        f"({times['begin']})")
+        raise UserError(f"{where}: the end, {times['end']:g} s, is not after the begin, {times['begin']:g} s ("
+                        + ("sumo.begin" if "begin" in sumo else f"SUMO config {cfg}") + "); both are simulation "
+                        f"times: to run N s from the begin, end at {times['begin']:g} + N")
     opts = sumo.get("options", [])  # numbers as SUMO reads them: ["--seed", 7] is "--seed 7"
     if isinstance(opts, list):
         opts = [str(o) if isinstance(o, (int, float)) and not isinstance(o, bool) else o for o in opts]
@@ -580,7 +580,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         wind_speed=ws, wind_from_deg=wd, rho=rho, air_temperature_c=t_air,
         road_class=rule,
         slope_window=_num(sl.get("window_m", 20.0), where, "slope.window_m", True),
-        slope_max=_num(sl.get("max_rad", 0.25), where, "slope.max_rad", True),
+        slope_max=_num(sl.get("max_rad", 0.25), where, "slope.max_rad", True, 1.5),  # (86°: a wall at 90°)
         slope_tol=_num(sl.get("tolerance_rad", 0.01), where, "slope.tolerance_rad", True),
         slope_reference=_choice(overrides.get("slope_reference", sl.get("reference", "geometry")),
                                 ("getslope", "geometry"), where, "slope.reference"),
