@@ -177,8 +177,8 @@ def test_signal_during_calibrate(tmp_path, sig):
     argv = ["calibrate", str(log), "--vehicle", "prius3", "--out", str(tmp_path / "eq.toml"),
             "--report", str(tmp_path / "rep")]
     code, out, err = _signal_during(argv, tmp_path, sig, after_s=4.0)
-    if code == 0:  # the machine was faster than the signal: then the set must be whole
-        _assert_whole(tmp_path / "rep")
+    if code == 0 or "its output was completed" in err:  # the machine was faster than the
+        _assert_whole(tmp_path / "rep")                  # signal: then the set must be whole
         pytest.skip("calibration finished before the signal")
     assert code == 128 + sig, (code, err)
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err

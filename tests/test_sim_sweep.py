@@ -85,5 +85,5 @@ def test_a_bad_scenario_in_a_sweep_is_refused_before_any_runs(tmp_path, capsys, 
     monkeypatch.setattr(run_mod, "_sweep_task", lambda *a, **k: ran.append(a) or {})
     code = cli_main(["run", good, str(bad), "--end", "60", "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err
-    assert code == 2 and "late.toml" in err and "sumo.end" in err, err
+    assert code == 2 and "late.toml" in err and "the run's end (60 s) is not after sumo.begin (3600 s)" in err, err
     assert ran == [] and not (tmp_path / "o").exists()

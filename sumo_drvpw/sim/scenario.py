@@ -447,9 +447,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             times[k] = sumo_time(cfgvals[k.replace("_", "-")], f"SUMO config {cfg}",
                                  k.replace("_", "-"), positive=(k == "step_length"))
     if "begin" in times and "end" in times and times["end"] <= times["begin"]:
-        raise UserError(f"{where}: the end, {times['end']:g} s, is not after the begin, {times['begin']:g} s ("
-                        + ("sumo.begin" if "begin" in sumo else f"SUMO config {cfg}") + "); both are simulation "
-                        f"times: to run N s from the begin, end at {times['begin']:g} + N")
+        src = lambda k: f"the run's {k}" if k in overrides else f"sumo.{k}" if k in sumo else f"the {k} of SUMO config {cfg}"  # noqa: E731
+        raise UserError(f"{where}: {src('end')} ({times['end']:g} s) is not after {src('begin')} ({times['begin']:g} s); "
+                        f"both are simulation times: to run N s from the begin, end at {times['begin']:g} + N")
     opts = sumo.get("options", [])  # numbers as SUMO reads them: ["--seed", 7] is "--seed 7"
     if isinstance(opts, list):
         opts = [str(o) if isinstance(o, (int, float)) and not isinstance(o, bool) else o for o in opts]
