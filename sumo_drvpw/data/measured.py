@@ -137,17 +137,25 @@ def check_battery_sign(log: DriveLog, x: Inputs, p_battery, usable, source: str)
     from sumo_drvpw.model.constants import G
 
     proxy = np.asarray(x.mass * x.v * (x.a + G * np.sin(x.theta)), float)
-    y = np.asarray(p_battery, float)
-    ok = usable & np.isfinite(proxy) & np.isfinite(y) & (np.abs(proxy) > SIGN_TEST_W)
-    if ok.sum() < 50 or np.std(y[ok]) == 0 or np.std(proxy[ok]) == 0:
+    refuse_falling_battery(log.describe(), source, proxy, p_battery, usable, SIGN_TEST_W,
+                           "the inertial and grade power m·v·(a + g·sin θ)")
+
+
+def refuse_falling_battery(where: str, source: str, drive, p_battery, mask, threshold_w: float,
+                           rises: str) -> None:
+    """UserError when the battery power ``p_battery`` correlates negatively with the power
+    ``drive`` on the samples of ``mask`` where |drive| > ``threshold_w`` (≥ 50 of them):
+    a current whose sign is flipped."""
+    d, y = np.asarray(drive, float), np.asarray(p_battery, float)
+    ok = np.asarray(mask, bool) & np.isfinite(d) & np.isfinite(y) & (np.abs(d) > threshold_w)
+    if ok.sum() < 50 or np.std(y[ok]) == 0 or np.std(d[ok]) == 0:
         return
-    r = float(np.corrcoef(proxy[ok], y[ok])[0, 1])
+    r = float(np.corrcoef(d[ok], y[ok])[0, 1])
     if r < 0:
-        raise UserError(f"{log.describe()}: the measured battery power ({source}) falls where the car speeds "
-                        f"up or climbs (correlation r = {r:.2f} with m·v·(a + g·sin θ) over {int(ok.sum())} "
-                        f"samples beyond ±{SIGN_TEST_W / 1000:g} kW): is the current's sign flipped? The vehicle "
-                        "file's [battery] current_positive says which sign discharges (\"discharge\" or "
-                        "\"charge\")")
+        raise UserError(f"{where}: the measured battery power ({source}) falls where {rises} rises (correlation "
+                        f"r = {r:.2f} over {int(ok.sum())} samples beyond ±{threshold_w / 1000:g} kW): is the "
+                        "current's sign flipped? The vehicle file's [battery] current_positive says which sign "
+                        "discharges (\"discharge\" or \"charge\")")
 
 
 def _has_engine(log: DriveLog, veh: Vehicle | None) -> bool:

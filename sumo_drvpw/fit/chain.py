@@ -492,16 +492,10 @@ def _check_chain_inputs(m, use: np.ndarray, loads, p_drive=None) -> None:
                         f"one of the {int(use.sum())} usable samples: nothing to calibrate a "
                         "chain on (a voltage, current or fuel flow logged as 0?)")
     if m.target == "battery" and p_drive is not None:
-        pd_ = np.asarray(p_drive, float)[use]
-        ok = np.isfinite(pd_) & np.isfinite(y) & (np.abs(pd_) > SIGN_CHECK_W)
-        if ok.sum() >= 50 and np.std(y[ok]) > 0 and np.std(pd_[ok]) > 0:
-            r = float(np.corrcoef(pd_[ok], y[ok])[0, 1])
-            if r < 0:
-                raise UserError(f"{where}: the measured battery power ({m.source}) falls where the driving "
-                                f"power rises (correlation r = {r:.2f} over {int(ok.sum())} samples beyond "
-                                f"±{SIGN_CHECK_W / 1000:g} kW): is the current's sign flipped? The vehicle "
-                                "file's [battery] current_positive says which sign discharges "
-                                "(\"discharge\" or \"charge\")")
+        from sumo_drvpw.data.measured import refuse_falling_battery
+
+        refuse_falling_battery(where, m.source, np.asarray(p_drive, float)[use], y, np.ones(len(y), bool),
+                               SIGN_CHECK_W, "the driving power")
     for c in loads:
         col = m.inputs.signals.get(c)
         if col is None and c in m.log.df.columns:
