@@ -84,7 +84,7 @@ STOP_AT_BUS_STOP = 16
 #: vehicle.getStopState bit: the vehicle is parking (off the lane)
 STOP_PARKING = 2
 #: every this many steps the running vehicles' vTypes are read again (a script's setType,
-#: setMass): a change books from then on
+#: setMass): a change books from then on (over traci, each read a round trip: 10× as many)
 TYPE_CHECK_STEPS = 25
 
 
@@ -208,6 +208,7 @@ class Stepper:
         #: vehicle id → (lane number, lane position) of its bus-stop dwell
         self.dwell: dict[str, tuple[int, float]] = {}
         self.retyped = 0  # vehicles whose vType changed during their trip (check_types)
+        self.seen_type: dict[str, str] = {}  # vehicle id → its last vType id seen there
         so = ShutOff(conn)  # long planned stops switch vehicles off, as in SUMO
         self.shutoff = so if so.available else None
 
@@ -230,8 +231,9 @@ class Stepper:
         mass, app, keep = res[:3]
         i = ledger.add_vehicle(vid, vt, mass, app, keep, res[3] if len(res) > 3 else "")
         self.vmap[vid] = i
+        self.seen_type.pop(vid, None)
         if self.shutoff is not None:
-            self.shutoff.registered(ledger, i, vt)
+            self.shutoff.registered(ledger, i, vt, vid)
         if keep and not np.all(ledger.veh_app[i] == 1.0):
             self.every_equation_applies = False
         self.reader.subscribe_existing([vid])
@@ -293,14 +295,25 @@ class Stepper:
                 self.prev_ids = None
 
     def check_types(self, kids, vidx) -> None:
-        """vTypes changed during a trip (``vehicle.setType``; ``setMass`` and the other
-        vType setters give the vehicle a type of its own, ``<type>@<id>``): the vehicle
-        books on with its new vType's mass, class and equations (``retyped`` counts)."""
-        ledger, get = self.ledger, self.conn.vehicle.getTypeID
-        types = ledger.veh_type
+        """vTypes changed during a trip: ``vehicle.setType`` books on with the new vType's
+        mass, class and equations; ``setMass`` and the other vType setters give the vehicle
+        a type of its own, ``<type>@<id>``, which keeps its type's resolution (scenario
+        settings, equations, filter) and takes only a mass SUMO now gives otherwise
+        (``retyped`` counts both)."""
+        ledger, get, seen = self.ledger, self.conn.vehicle.getTypeID, self.seen_type
+        types, tget = ledger.veh_type, getattr(self.conn, "vehicletype", None)
         for vid, i in zip(kids, vidx.tolist()):
             vt = get(vid)
-            if vt == types[i]:
+            if vt == seen.get(vid, types[i]):
+                continue
+            seen[vid] = vt
+            if vt == f"{types[i]}@{vid}":  # its own copy: only a mass set by the script counts
+                if tget is None:
+                    continue
+                m = float(tget.getMass(vt))
+                if m > 0 and m != float(tget.getMass(types[i])):
+                    ledger.veh_mass[i] = m
+                    self.retyped += 1
                 continue
             res = self.resolve(vt, vid)
             types[i] = vt
@@ -308,7 +321,7 @@ class Stepper:
             if len(res) > 3:
                 ledger.veh_class[i] = res[3]
             if self.shutoff is not None:
-                self.shutoff.registered(ledger, i, vt)
+                self.shutoff.registered(ledger, i, vt, vid)
             if res[2] and not np.all(res[1] == 1.0):
                 self.every_equation_applies = False
             self.retyped += 1
@@ -349,6 +362,7 @@ class Stepper:
                 ledger.retire([vmap[v] for v in gone if v in vmap])
                 for v in gone:
                     self.dwell.pop(v, None)
+                    self.seen_type.pop(v, None)
                 if self.shutoff is not None:
                     self.shutoff.arrived(gone)
                 if ledger.flush_due():  # before the new ones come: memory ≤ running vehicles
@@ -377,7 +391,7 @@ class Stepper:
         if self.parking_known:
             self.parking_ended()
         if self.shutoff is not None:
-            self.shutoff.step(self)
+            self.shutoff.step(self, ids)
         if len(ids) == 0:
             return
         if ids == self.prev_ids:  # no arrival or departure: same vehicles, same order
@@ -399,7 +413,7 @@ class Stepper:
         n = len(kids)
         if n == 0:
             return
-        if ledger.steps % TYPE_CHECK_STEPS == 0 and not self.is_replay:
+        if ledger.steps % (TYPE_CHECK_STEPS * (10 if self.reader.subs else 1)) == 0 and not self.is_replay:
             self.check_types(kids, vidx)
         tracking = self.tracking
         v, a, angle, ln, pos, raw = self.reader.read(kids, skip_lanes=tracking)

@@ -88,8 +88,10 @@ class ShutOff:
         """The vType's ``shutOffStopDuration`` [s]."""
         return self._param(self.limit_s, vtype, "shutOffStopDuration", SHUT_OFF_STOP_S)
 
-    def registered(self, ledger, i: int, vtype: str) -> None:
-        """A vehicle just registered in slot ``i``: its vType's ``shutOffAutoDuration``."""
+    def registered(self, ledger, i: int, vtype: str, vid: str) -> None:
+        """A vehicle just registered in slot ``i``: its vType's ``shutOffAutoDuration``; an
+        id used again starts with nothing of its earlier trip's stops."""
+        self.arrived((vid,))
         lim = self._param(self.auto_s, vtype, "shutOffAutoDuration", np.inf)
         ledger.veh_auto_off[i] = lim
         self.any_auto |= bool(np.isfinite(lim))
@@ -106,14 +108,18 @@ class ShutOff:
         self.auto_vehicle_s += n * dt
         return off if n else None
 
-    def step(self, stepper) -> None:
+    def step(self, stepper, ids) -> None:
         """Switch off the vehicles that came to rest at a long stop in the last step; switch
-        on those whose stop ended in this one."""
+        on those whose stop ended in this one. ``ids``: the vehicles in the simulation (one
+        a script removed between steps is in no arrived list: it is forgotten here)."""
         ledger, vmap, conn = stepper.ledger, stepper.vmap, self.conn
+        if self.pending or self.off or self.waiting:
+            present = set(ids)
+            self.arrived([v for v in (*self.pending, *self.off, *self.waiting) if v not in present])
         self.vehicle_s += len(self.off) * stepper.dt
         for vid in self.pending:
             i = vmap.get(vid)
-            if i is None or not ledger.veh_keep[i] or ledger.veh_parked[i]:
+            if i is None or not ledger.veh_keep[i] or ledger.veh_parked[i] or ledger.veh_done[i]:
                 continue
             ledger.veh_parked[i] = True
             stepper.dwell.pop(vid, None)
@@ -146,9 +152,12 @@ class ShutOff:
             self.pending.append(vid)
 
     def arrived(self, vids) -> None:
-        """Vehicles that left the simulation."""
-        self.off.difference_update(vids)
-        self.waiting.difference_update(vids)
+        """Vehicles that left the simulation (arrived, or removed by a script): nothing of
+        their stops is kept (an id added again is a new trip)."""
+        gone = set(vids)
+        self.off -= gone
+        self.waiting -= gone
+        self.pending = [v for v in self.pending if v not in gone]
 
     def summary(self) -> dict:
         return {"stops": self.stops, "vehicle_s": self.vehicle_s,
