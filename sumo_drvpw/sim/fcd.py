@@ -354,8 +354,11 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
 
     net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
     parked = ParkedTest(net, bus_stops(sc.additional_files))
-    method = step_method(sc, fcd_file)
-    dt, dt_warning = row_interval(sc, fcd_file)
+    from sumo_drvpw.sim.fcd_read import header_options
+
+    head = header_options(fcd_file)  # the recording's options (None: no SUMO header)
+    method = step_method(sc, head)
+    dt, dt_warning = row_interval(sc, fcd_file, head)
     if chunk_rows is None:
         df = read_fcd(fcd_file)
         df["off"] = parked({k: df[k].to_numpy() for k in df.columns})
@@ -416,23 +419,22 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     return result
 
 
-def step_method(sc, fcd_file) -> str:
+def step_method(sc, head: dict | None) -> str:
     """How the recording moved its vehicles, "ballistic" or "euler" (the step's distance:
     the mean of the step's two speeds × Δt, or the new speed × Δt), by SUMO's rule
     (:func:`sumo_drvpw.sim.sumo_start.ballistic_update`) on the options of the FCD file's
-    own header (SUMO writes those of the run that differ from its defaults); without a
-    header, on the scenario's SUMO options and config; else SUMO's default, Euler."""
-    from sumo_drvpw.sim.fcd_read import header_options
+    own header ``head`` (:func:`~sumo_drvpw.sim.fcd_read.header_options`: SUMO writes those
+    of the run that differ from its defaults); without a header, on the scenario's SUMO
+    options and config; else SUMO's default, Euler."""
     from sumo_drvpw.sim.sumo_start import ballistic_update, scenario_option
 
     keys = ("step-method.ballistic", "default.action-step-length")
-    head = header_options(fcd_file)
     given = ([head.get(k) for k in keys] if head is not None
              else [scenario_option(sc, k) for k in keys])
     return "ballistic" if ballistic_update(*given) else "euler"
 
 
-def row_interval(sc, fcd_file) -> tuple[float | None, list[str]]:
+def row_interval(sc, fcd_file, head: dict | None) -> tuple[float | None, list[str]]:
     """The time between an FCD file's timesteps [s] — the Δt each row is booked over (SUMO
     moved the car v·Δt in it) — and a warning when the scenario says otherwise.
 
@@ -440,10 +442,8 @@ def row_interval(sc, fcd_file) -> tuple[float | None, list[str]]:
     they differ from SUMO's defaults (1 s, every step): the rows are max(step, period)
     apart, whatever the scenario's or config's ``step_length`` (a run given another step
     length on the command line, or FCD written every few steps). Without a header, the
-    scenario's step length; without one either, None (the file's first two timesteps)."""
-    from sumo_drvpw.sim.fcd_read import header_options
-
-    head = header_options(fcd_file)
+    scenario's step length; without one either, None (the file's first two timesteps).
+    ``head``: the file's header options, as :func:`step_method` takes them."""
     if head is None:
         return sc.step_length, []
     try:

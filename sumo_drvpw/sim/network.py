@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.sim.scenario import RoadClassRule
+from sumo_drvpw.sim.scenario import MAX_RAD_LIMIT, RoadClassRule
 
 #: Resolution of the lane slope profiles [m].
 BIN_M = 2.0
@@ -293,8 +293,8 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     """Read a SUMO network with sumolib and build the edge/lane table (see module doc)."""
     import sumolib
 
-    if not 0 < max_rad <= 1.5:  # (tan θ of the profile: 90° is a wall)
-        raise UserError(f"[slope] max_rad must be above 0 and at most 1.5 rad (86°), got {max_rad:g}")
+    if not 0 < max_rad <= MAX_RAD_LIMIT:
+        raise UserError(f"[slope] max_rad must be above 0 and at most {MAX_RAD_LIMIT:g} rad (86°), got {max_rad:g}")
     try:
         net = sumolib.net.readNet(str(path), withInternal=True)
     except Exception as e:  # sumolib raises assorted SAX/IO errors

@@ -47,6 +47,7 @@ _SCHEMA: dict[str, set[str] | None] = {
                 "sumo_device"},
 }
 _VTYPE_KEYS = {"mass_kg", "equations", "cold_start"}
+MAX_RAD_LIMIT = 1.5  #: the steepest [slope] max_rad [rad] (tan θ of the profile: 90° is a wall)
 #: keyword overrides accepted by run_scenario (and the CLI)
 OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
              "trace", "edgedata", "figures", "progress", "difference", "acceleration",
@@ -580,7 +581,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         wind_speed=ws, wind_from_deg=wd, rho=rho, air_temperature_c=t_air,
         road_class=rule,
         slope_window=_num(sl.get("window_m", 20.0), where, "slope.window_m", True),
-        slope_max=_num(sl.get("max_rad", 0.25), where, "slope.max_rad", True, 1.5),  # (86°: a wall at 90°)
+        slope_max=_num(sl.get("max_rad", 0.25), where, "slope.max_rad", True, MAX_RAD_LIMIT),
         slope_tol=_num(sl.get("tolerance_rad", 0.01), where, "slope.tolerance_rad", True),
         slope_reference=_choice(overrides.get("slope_reference", sl.get("reference", "geometry")),
                                 ("getslope", "geometry"), where, "slope.reference"),
@@ -594,7 +595,6 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         edgedata=_bool(out.get("edgedata", True), where, "outputs.edgedata"),
         figures=_bool(out.get("figures", True), where, "outputs.figures"), difference=diff,
         progress=_bool(out.get("progress", True), where, "outputs.progress"),
-        sumo_device=_bool(out.get("sumo_device", device_on), where, "outputs.sumo_device"),
-        sumo_device_in_config=device_on,
+        sumo_device=_bool(out.get("sumo_device", device_on), where, "outputs.sumo_device"), sumo_device_in_config=device_on,
         period=None if out.get("period") is None else _num(out["period"], where,
                                                              "outputs.period", positive=True))

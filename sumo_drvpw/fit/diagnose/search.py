@@ -300,7 +300,8 @@ def _try_add(tr: BlockModel, cand: Candidate, fold, roles, opt, p_adj):
     helped, n_tr = int((sse_a < sse_b).sum()), int(present.sum())
     co, se = tr.coefficients()
     j_new = len(tr.cols) - 1
-    share = float(tr.energy_shares(signal_split(cand, _role_of(cand, roles)))[j_new])
+    role = _role_of(cand, roles)
+    share = float(tr.energy_shares(signal_split(cand, role))[j_new])
     names = [str(tr.trip_names[i]) for i in np.flatnonzero(present)]
     per_trip = {t: {"rmse_before_w": math.sqrt(b / max(c, 1)), "rmse_after_w": math.sqrt(a / max(c, 1))}
                 for t, b, a, c in zip(names, sse_b, sse_a, counts[present])}
@@ -312,7 +313,6 @@ def _try_add(tr: BlockModel, cand: Candidate, fold, roles, opt, p_adj):
     if reason is not None:
         tr.drop_last()
         return None, {"reason": reason, "helped_trips": helped, "trips": n_tr, "energy_share": share}
-    role = _role_of(cand, roles)
     effect = cand.effect
     if role == "response":
         effect = f"response of the target — not an effect the model lacks ({effect})"
