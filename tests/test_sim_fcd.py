@@ -137,9 +137,29 @@ def test_run_builtin_name_and_parallel_runs(tmp_path, capsys):
         r = runs[(runs.scenario == n) & (runs.equation == "drvpw_prius3")]
         np.testing.assert_allclose(r.traction_kwh.sum(), sum(v["total"] for v in tot.values())
                                    / 3.6e6, rtol=1e-9)
+        # vehicles: those the equation booked in that scenario (its rows of vehicles.parquet)
+        booked = pd.read_parquet(tmp_path / "runs" / n / "vehicles.parquet", columns=["equation"])
+        assert (r.vehicles == int((booked.equation == "drvpw_prius3").sum())).all()
+        assert (r.scenario_vehicles == s["vehicles"]).all()
     assert (runs.traction_whpkm.dropna() > 0).all()
     code = cli_main(["run", "no_such_builtin", "--out", str(tmp_path / "x")])
     assert code == 2 and "city" in capsys.readouterr().err
+
+
+def test_runs_table_counts_each_equations_vehicles(tmp_path):
+    """runs.csv: ``vehicles`` are those the equation booked (its rows of vehicles.parquet),
+    ``scenario_vehicles`` all the scenario accounted: a car and a truck equation differ."""
+    from sumo_drvpw.cli.run import _combined
+
+    d = tmp_path / "s"
+    d.mkdir()
+    pd.DataFrame({"vehicle": ["c1", "c2", "t1"], "equation": ["car", "car", "truck"]}).to_parquet(
+        d / "vehicles.parquet")
+    cls = {"city": {"total": 3.6e6}}
+    eq = {"energy_j": cls, "recuperable_energy_j": cls, "distance_m": {"city": 1000.0}}
+    t = _combined({"s": {"vehicles": 3, "equations": {"car": eq, "truck": eq, "bus": eq}}}, {"s": d})
+    assert t.set_index("equation").vehicles.to_dict() == {"car": 2, "truck": 1, "bus": 0}
+    assert (t.scenario_vehicles == 3).all()
 
 
 EXPORT_ROUTES = """<routes>

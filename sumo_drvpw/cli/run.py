@@ -3,7 +3,7 @@
 One scenario: its outputs in DIR. Several (``run a.toml b.toml --jobs 2``): one SUMO per
 process, each scenario's outputs in ``DIR/<scenario name>/`` and all of them side by side in
 ``DIR/runs.csv`` (per scenario, equation and road class: traction energy [kWh] and
-energy per distance [Wh/km]). ``--engine dask`` runs each scenario as one task on a Dask
+energy per distance [Wh/km], the vehicles the equation booked and those of the scenario). ``--engine dask`` runs each scenario as one task on a Dask
 cluster (``--scheduler ADDRESS``, else a local cluster of ``--workers N`` processes). A scenario is a TOML file or a built-in name (``city``,
 ``highway``: ``sumo_drvpw/sim/builtin/scenarios``).
 """
@@ -144,17 +144,32 @@ def _names(scenarios: list[str]) -> list[str]:
     return out
 
 
-def _combined(summaries: dict[str, dict]):
-    """One row per scenario × equation × road class: traction energy and Wh/km."""
+def _equation_vehicles(out_dir) -> dict[str, int]:
+    """Vehicles each equation booked in one scenario's outputs (its rows of vehicles.parquet)."""
+    import pyarrow.parquet as pq
+
+    path = out_dir / "vehicles.parquet"
+    if not path.is_file():
+        return {}
+    col = pq.read_table(path, columns=["equation"]).column("equation").to_pylist()
+    return {e: col.count(e) for e in set(col)}
+
+
+def _combined(summaries: dict[str, dict], out_dirs: dict):
+    """One row per scenario × equation × road class: traction energy and Wh/km; ``vehicles``
+    the vehicles the equation booked in that scenario (on any road class), and
+    ``scenario_vehicles`` all the scenario accounted."""
     import pandas as pd
 
     rows = []
     for scen, s in summaries.items():
+        booked = _equation_vehicles(out_dirs[scen])
         for eq, d in s["equations"].items():
             for cls, e in d["energy_j"].items():
                 m = d.get("distance_m", {}).get(cls, 0.0)
                 rows.append({"scenario": scen, "equation": eq, "predicts": d.get("predicts"),
-                             "class": cls, "vehicles": s["vehicles"],
+                             "class": cls, "vehicles": booked.get(eq, 0),
+                             "scenario_vehicles": s["vehicles"],
                              "traction_kwh": e["total"] / 3.6e6,
                              "recuperable_kwh": d["recuperable_energy_j"][cls]["total"] / 3.6e6,
                              "distance_km": m / 1000.0,
@@ -196,7 +211,7 @@ def main(args: argparse.Namespace) -> int:
     names = _names(scen)
     with output_set(args, args.out, inputs, meta=meta) as tmp:
         summaries = dict(zip(names, _run_many(args, scen, [tmp / n for n in names], overrides)))
-        write_text(tmp / "runs.csv", _combined(summaries).to_csv(index=False))
+        write_text(tmp / "runs.csv", _combined(summaries, {n: tmp / n for n in names}).to_csv(index=False))
         meta["scenarios"] = dict(zip(names, scen))
     for n, s in summaries.items():
         _print_summary(s, Path(args.out) / n, f"[{n}] ")
