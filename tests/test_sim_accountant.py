@@ -302,6 +302,33 @@ def test_an_id_used_again_is_a_new_trip_with_its_own_vtype():
     assert (rows.time_s > 0).all() and rows.time_s.iloc[0] <= 15.5
 
 
+def test_a_car_removed_between_steps_is_retired_at_once():
+    """A script's vehicle.remove between steps: SUMO lists the car as arrived at once, in the
+    list the listener had read already, so it is in no arrived list the Accountant sees. The
+    ledger now finds it gone (unknown to SUMO) and retires its row in the next step; it was
+    held as running until the end (found by a sweep). A teleport-free run: nothing else goes."""
+    sc = load_scenario(CITY, end=60)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, equations=["vsp_ldv1999"])
+        for _ in range(30):
+            conn.simulationStep()
+            acc.step()
+        ids = conn.vehicle.getIDList()
+        done = acc.ledger.veh_done.copy()
+        conn.vehicle.remove(ids[0])
+        conn.simulationStep()
+        acc.step()
+        slot = acc.stepper.vmap[ids[0]]
+        assert acc.ledger.veh_done[slot]
+        still = [acc.stepper.vmap[v] for v in ids[1:] if v in conn.vehicle.getIDList()]
+        assert not acc.ledger.veh_done[still].any() and not done[slot]
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    assert ids[0] in set(res.vehicles.vehicle)
+
+
 def test_a_vtype_changed_during_a_trip_books_on_with_its_new_mass():
     """vehicle.setMass during a trip (SUMO gives the vehicle a type of its own,
     'prius3@<id>'): the vehicle books on at the new mass from the next vType check

@@ -186,6 +186,7 @@ class Stepper:
         #: vehicles that left the simulation (SUMO's arrived list) are retired from the
         #: ledger, and flushed out of memory when it has a spill (bounded memory)
         self.arrived = getattr(conn.simulation, "getArrivedIDList", None)
+        self.last_ids = None  # the id list of the last step (vehicles removed between steps)
         self.is_replay = bool(getattr(conn, "is_replay", False))  # an FCD replay
         #: riding persons (Physics.transportable_mass): their mass is read when a vehicle
         #: departs and when a stop of it ends, while any are in the network (TraCI has no
@@ -356,8 +357,12 @@ class Stepper:
         if self.count_persons:
             for pid in conn.simulation.getDepartedPersonIDList():
                 self.resolve.skip_person(conn.person.getTypeID(pid))
+        departed = conn.simulation.getDepartedIDList()
         if self.arrived is not None:
             gone = self.arrived()
+            if not self.is_replay:  # and those a script removed between steps
+                gone = list(gone) + self.reader.removed(self.last_ids, ids, gone, departed)
+            self.last_ids = ids
             if gone:
                 ledger.retire([vmap[v] for v in gone if v in vmap])
                 for v in gone:
@@ -368,7 +373,6 @@ class Stepper:
                 if ledger.flush_due():  # before the new ones come: memory ≤ running vehicles
                     self.flush()
                     vmap = self.vmap
-        departed = conn.simulation.getDepartedIDList()
         ends = np.array([vmap[v] for v in self.teleport_ends() if v in vmap], np.int64)  # teleports ended
         ledger.veh_at[ends, 2] = np.nan  # (a replay: back after steps without a row): the rise starts afresh
         starts, start_ids = [], []  # vehicles first seen departing: trips that start

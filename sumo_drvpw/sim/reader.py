@@ -54,6 +54,26 @@ class Reader:
         cols = [[r[k] for r in rows] for k in _TRACI_VARS]
         return tuple(c if k == 3 else np.asarray(c, float) for k, c in enumerate(cols))
 
+    def removed(self, last_ids, ids, gone, departed) -> list:
+        """Vehicles of the last step that are gone without being in this step's arrived list
+        ``gone``: removed by a script between steps (SUMO lists a vehicle removed through TraCI
+        as arrived at once, in the list a step listener has already read). Looked for only when
+        the counts say a vehicle left unseen; a teleporting vehicle also leaves the id list but
+        SUMO still knows it, a removed one it does not."""
+        if last_ids is None or len(ids) == len(last_ids) - len(gone) + len(departed):
+            return []
+        now = set(ids).union(gone)
+        out = []
+        for vid in last_ids:
+            if vid not in now:
+                try:
+                    self.conn.vehicle.getTypeID(vid)
+                except Exception as e:  # TraCIException: "Vehicle '…' is not known"
+                    if type(e).__name__ == "FatalTraCIError":  # the connection itself failed
+                        raise
+                    out.append(vid)
+        return out
+
     def subscribe_existing(self, ids):
         if self.subs:
             for vid in ids:
