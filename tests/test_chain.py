@@ -11,7 +11,7 @@ from hypothesis import given, settings, strategies as st
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import calibrate_battery, calibrate_fuel
 from sumo_drvpw.model.chain import EnergyChain, chain_from_dict, corrected_fuel_power
-from sumo_drvpw.model.constants import FUELS
+from sumo_drvpw.model.constants import CABIN_WARMUP_TAU_S, FUEL_COLD_START_TAU_S, FUELS
 from sumo_drvpw.model.equations import equation_from_dict, load_equation, save_equation
 
 
@@ -600,9 +600,11 @@ def test_run_scenario_reports_battery_and_fuel_per_class(tmp_path, scenario):
 
 def test_cold_starts_are_booked_once_per_departing_vehicle(tmp_path):
     """A real SUMO run (city, 150 s) with and without ``cold_start``: every vehicle the fuel
-    chain books burns exactly its cold_start_fuel_l more, reported as cold_start_l; the
-    battery chain's accounts are unchanged; vehicle, edge, class and edgeData totals agree;
-    off, no cold-start column appears."""
+    chain books burns its cold_start_fuel_l more as it decays over the first minutes, V ·
+    (1 − e^(−T/τ)) for T seconds booked (a short trip takes part of a warm-up, not all of it:
+    a 66-s hop booked a whole one, found by a sweep), reported as cold_start_l; the battery
+    chain's accounts are unchanged; vehicle, edge, class and edgeData totals agree; off, no
+    cold-start column appears."""
     pytest.importorskip("libsumo")
     import dataclasses
     import xml.etree.ElementTree as ET
@@ -621,11 +623,14 @@ def test_cold_starts_are_booked_once_per_departing_vehicle(tmp_path):
         tabs[on] = {k: pd.read_csv(tmp_path / str(on) / f"chain_{k}.csv") for k in ("vehicles", "edges", "classes")}
     fuel = {on: tabs[on]["vehicles"].query("equation == 'drvpw_prius3'").set_index("key") for on in tabs}
     assert len(fuel[True]) > 20 and fuel[True].index.equals(fuel[False].index)
-    np.testing.assert_allclose(fuel[True]["fuel_l"] - fuel[False]["fuel_l"], 0.07, rtol=1e-9)
-    np.testing.assert_allclose(fuel[True]["cold_start_l"], 0.07, rtol=1e-12)
+    booked_s = res.vehicles.query("equation == 'drvpw_prius3'").set_index("vehicle")["time_s"]
+    share = 1.0 - np.exp(-fuel[True].index.map(booked_s).to_numpy(float) / FUEL_COLD_START_TAU_S)
+    assert share.min() < 0.5 < share.max()  # trips cut by the run's end and short ones
+    np.testing.assert_allclose(fuel[True]["fuel_l"] - fuel[False]["fuel_l"], 0.07 * share, rtol=1e-9)
+    np.testing.assert_allclose(fuel[True]["cold_start_l"], 0.07 * share, rtol=1e-12)
     g = FUELS["gasoline"]
     np.testing.assert_allclose(fuel[True]["co2_kg"] - fuel[False]["co2_kg"],
-                               0.07 * g["density_kg_per_l"] * g["co2_kg_per_kg"], rtol=1e-9)
+                               0.07 * share * g["density_kg_per_l"] * g["co2_kg_per_kg"], rtol=1e-9)
     bev = {on: tabs[on]["vehicles"].query("equation == 'bev'").reset_index(drop=True) for on in tabs}
     pd.testing.assert_frame_equal(bev[True].drop(columns="cold_start_l"), bev[False])
     assert "cold_start_l" not in tabs[False]["vehicles"] and bev[True]["cold_start_l"].isna().all()
@@ -637,19 +642,19 @@ def test_cold_starts_are_booked_once_per_departing_vehicle(tmp_path):
     assert summ[False]["booked"] is False and summ[False]["vehicles"] == 0
     root = ET.parse(tmp_path / "True" / "edgedata.xml").getroot()
     xml_sum = sum(float(e.get("drvpw_prius3_cold_start_l", 0.0)) for e in root.iter("edge"))
-    assert xml_sum == pytest.approx(0.07 * len(fuel[True]), rel=1e-5)
+    assert xml_sum == pytest.approx(0.07 * share.sum(), rel=1e-5)
     # a share of the departures starts cold: that share of the litres, at every departure
     half = run_scenario(path, tmp_path / "half", equations=eqs, end=150.0, figures=False, edgedata=False,
                         cold_start=0.5)
     veh = pd.read_csv(tmp_path / "half" / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
-    np.testing.assert_allclose(veh["cold_start_l"], 0.035, rtol=1e-12)
+    np.testing.assert_allclose(veh["cold_start_l"], 0.035 * share, rtol=1e-12)
     assert half.summary["chain"]["cold_start"]["share"] == 0.5
     # in the cold: the run's air temperature sets each start's litres (V_ref + s·(T_ref − T))
     eqs[0].chain = dataclasses.replace(eqs[0].chain, cold_start_fuel_l_per_k=0.003, cold_start_ref_c=23.9)
     res = run_scenario(path, tmp_path / "cold", equations=eqs, end=150.0, figures=False, edgedata=False,
                        cold_start=True, air_temperature_c=-6.1)
     veh = pd.read_csv(tmp_path / "cold" / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
-    np.testing.assert_allclose(veh["cold_start_l"], 0.07 + 0.003 * 30.0, rtol=1e-12)
+    np.testing.assert_allclose(veh["cold_start_l"], (0.07 + 0.003 * 30.0) * share, rtol=1e-12)
     assert res.summary["chain"]["cold_start"]["fuel_l_per_start"]["drvpw_prius3"] == pytest.approx(0.16)
     assert not any("no air temperature" in w for w in res.summary["warnings"])
     # a warm engine in the cold: every step's fuel × (1 + r·30 K), the cold starts unchanged
@@ -674,6 +679,13 @@ def test_cold_starts_are_booked_once_per_departing_vehicle(tmp_path):
                                             np.array([[5_000.0, 5_000.0]]))
     np.testing.assert_allclose(q[0, :3], q_warm[0, :3] * (1 + 0.002 * 3.9), rtol=1e-12)  # fuel_j, fuel_l, co2
     assert led.air_temperature_assumed
+
+
+def _warm_part(res, keys) -> np.ndarray:
+    """The part of a whole cold start each vehicle ``keys`` books over its T seconds booked
+    under drvpw_prius3 in run ``res``: 1 − e^(−T/τ) (sim/chain.py)."""
+    t = res.vehicles.query("equation == 'drvpw_prius3'").set_index("vehicle")["time_s"]
+    return 1.0 - np.exp(-pd.Index(keys).map(t).to_numpy(float) / FUEL_COLD_START_TAU_S)
 
 
 def test_cold_start_shares_by_vtype_and_vclass(tmp_path):
@@ -705,6 +717,8 @@ def test_cold_start_shares_by_vtype_and_vclass(tmp_path):
         veh = pd.read_csv(tmp_path / name / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
         cls = pd.read_csv(tmp_path / name / "chain_classes.csv").query("equation == 'drvpw_prius3'")
         assert veh["cold_start_l"].sum() == pytest.approx(cls["cold_start_l"].sum(), rel=1e-9)
+        # per whole cold start: each vehicle booked the part 1 − e^(−T/τ) of its T seconds
+        veh["cold_start_l"] /= _warm_part(res, veh["key"])
         return veh.assign(through=veh["key"].str.startswith("through")), res.summary["chain"]["cold_start"]
 
     veh, summ = run("by_vtype", "[vehicles]\ncold_start = true\n[vtypes.prius3_hw]\ncold_start = 0\n")
@@ -770,15 +784,16 @@ def test_cold_start_shares_of_single_vehicles_and_flows(tmp_path):
                        options=["--fcd-output", str(tmp_path / "fcd.xml"), "--precision", "6"])
     veh = pd.read_csv(tmp_path / "live" / "chain_vehicles.csv").query("equation == 'drvpw_prius3'")
     litres = veh.set_index("key")["cold_start_l"]
-    expect = {k: 0.07 * (1.0 if k == "home.a" else 0.4 if k == "errand" else
-                         0.5 if k.startswith("local.") else 0.25) for k in litres.index}
+    part = pd.Series(_warm_part(res, litres.index), index=litres.index)
+    expect = {k: 0.07 * part[k] * (1.0 if k == "home.a" else 0.4 if k == "errand" else
+                                   0.5 if k.startswith("local.") else 0.25) for k in litres.index}
     assert {"home.a", "errand"} <= set(litres.index)
     assert sum(k.startswith("local.") for k in litres.index) >= 5
     assert sum(k.startswith("through.") for k in litres.index) >= 5
     np.testing.assert_allclose(litres, pd.Series(expect)[litres.index], rtol=1e-12)
     summ = res.summary["chain"]["cold_start"]
     assert summ["own_share_vehicles"] == 2 and summ["own_share_flows"] == 1
-    assert summ["expected_cold_starts"] == pytest.approx(sum(expect.values()) / 0.07)
+    assert summ["expected_cold_starts"] == pytest.approx(sum(expect[k] / part[k] for k in expect) / 0.07)
     # the FCD replay reads the same route files: the same shares, vehicle by vehicle
     process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "fcd", equations=eqs, end=150,
                 figures=False)
@@ -792,7 +807,8 @@ def test_cold_start_shares_of_single_vehicles_and_flows(tmp_path):
 def test_cabin_warm_up_is_booked_at_cold_departures(tmp_path):
     """A battery chain's cabin warm-up (``[chain.hvac] warmup_j_per_k``): a real SUMO run
     (city, 150 s, air at 0 °C) with cold starts on and off. Each booked vehicle's auxiliary
-    and net energy grow by exactly warmup × (20 − 0) K; traction and recuperation do not
+    and net energy grow by warmup × (20 − 0) K × (1 − e^(−T/300 s)) over its T seconds (the
+    warm-up as it decays: a 66-s hop booked a whole one, 32 kW, found by a sweep); traction and recuperation do not
     change; a share books that share; the summary gives the kWh per start; the TOML round
     trip keeps the key, and a fuel chain may not carry it."""
     pytest.importorskip("libsumo")
@@ -817,9 +833,12 @@ def test_cabin_warm_up_is_booked_at_cold_departures(tmp_path):
             "equation == 'bev'").set_index("key")
     per_start = 60000.0 * 20.0 / 3.6e6
     assert len(veh[1.0]) > 20 and veh[1.0].index.equals(veh[0.0].index)
+    t = res.vehicles.query("equation == 'bev'").set_index("vehicle")["time_s"]
+    part = 1.0 - np.exp(-veh[1.0].index.map(t).to_numpy(float) / CABIN_WARMUP_TAU_S)
+    assert part.min() < 0.3 and part.max() < 0.5  # 150 s: no trip takes half its warm-up
     for share in (1.0, 0.5):
         for col in ("auxiliary_kwh", "net_kwh"):
-            np.testing.assert_allclose(veh[share][col] - veh[0.0][col], share * per_start, rtol=1e-9)
+            np.testing.assert_allclose(veh[share][col] - veh[0.0][col], share * per_start * part, rtol=1e-9)
         for col in ("traction_kwh", "recuperated_kwh"):
             np.testing.assert_allclose(veh[share][col], veh[0.0][col], rtol=1e-12)
     assert summ[1.0]["battery_kwh_per_start"] == {"bev": pytest.approx(per_start)}
@@ -831,9 +850,10 @@ def test_cabin_warm_up_is_booked_at_cold_departures(tmp_path):
        air=st.floats(-30.0, 40.0), steps=st.integers(1, 4), seed=st.integers(0, 2 ** 16))
 def test_cold_start_shares_book_share_times_one_start(shares, air, steps, seed):
     """ChainLedger without SUMO: vehicles departing with any shares book, over any steps on
-    any edges, exactly share × one cold start — litres for the fuel chain, the cabin's
-    warm-up for the battery chain (auxiliary and net) — once; vehicle and edge totals agree;
-    the counts are the vehicles with a share > 0 and the sum of the shares."""
+    any edges, share × one cold start × (1 − e^(−T/τ)) for T seconds booked — litres for the
+    fuel chain (τ = 505/3 s), the cabin's warm-up for the battery chain (auxiliary and net,
+    τ = 300 s) — and, once the trip is long, the whole share × one cold start; vehicle and
+    edge totals agree; the counts are the vehicles with a share > 0 and the sum of the shares."""
     from sumo_drvpw.sim.chain import ChainLedger
 
     fuel = EnergyChain(predicts="fuel", idle_fuel_power_w=4000.0, marginal_efficiency=0.35,
@@ -853,17 +873,26 @@ def test_cold_start_shares_book_share_times_one_start(shares, air, steps, seed):
             led.book(np.arange(n), r.integers(0, n_edges, n), r.uniform(0, 20, n), 0.5,
                      r.normal(0, 2e4, (n, 2)))
         return led
+
+    def check(on, off, t_s):
+        d = on.vehicle_totals(n) - off.vehicle_totals(n)
+        sh = np.asarray(shares)
+        part_f, part_b = (1.0 - np.exp(-t_s / tau) for tau in (FUEL_COLD_START_TAU_S, CABIN_WARMUP_TAU_S))
+        np.testing.assert_allclose(d[:, 0, 7], sh * fuel.cold_start(air)["fuel_l"] * part_f, rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(d[:, 0, 5], d[:, 0, 7], rtol=1e-9, atol=1e-15)
+        warm = sh * bat.cold_start(air)["battery_j"] * part_b
+        for q in (2, 3):
+            np.testing.assert_allclose(d[:, 1, q], warm, rtol=1e-8, atol=1e-6)  # a difference of MJ
+        np.testing.assert_allclose(d[:, 1, :2], 0.0, atol=1e-6)
+        np.testing.assert_allclose(on.edge.sum(axis=0), on.vehicle_totals(n).sum(axis=0), rtol=1e-9, atol=1e-6)
+        assert on.cold_starts == int((sh > 0).sum()) and on.cold_starts_expected == pytest.approx(sh.sum())
+
     on, off = run(True), run(False)
-    d = on.vehicle_totals(n) - off.vehicle_totals(n)
-    sh = np.asarray(shares)
-    np.testing.assert_allclose(d[:, 0, 7], sh * fuel.cold_start(air)["fuel_l"], rtol=1e-9, atol=1e-15)
-    np.testing.assert_allclose(d[:, 0, 5], d[:, 0, 7], rtol=1e-9, atol=1e-15)
-    warm = sh * bat.cold_start(air)["battery_j"]
-    for q in (2, 3):
-        np.testing.assert_allclose(d[:, 1, q], warm, rtol=1e-9, atol=1e-6)
-    np.testing.assert_allclose(d[:, 1, :2], 0.0, atol=1e-6)
-    np.testing.assert_allclose(on.edge.sum(axis=0), on.vehicle_totals(n).sum(axis=0), rtol=1e-9, atol=1e-6)
-    assert on.cold_starts == int((sh > 0).sum()) and on.cold_starts_expected == pytest.approx(sh.sum())
+    check(on, off, 0.5 * steps)
+    for led in (on, off):  # then a long stretch at rest: the whole cold start, and no more
+        for _ in range(2):
+            led.book(np.arange(n), np.zeros(n, np.int64), np.zeros(n), 10 * CABIN_WARMUP_TAU_S, np.zeros((n, 2)))
+    check(on, off, np.inf)
 
 
 @settings(max_examples=60, deadline=None)
@@ -1238,7 +1267,8 @@ def test_cli_dyno_chain_on_the_published_road_load(tmp_path, capsys):
 def test_i3_cabin_start_and_warm_up_rate_by_hand():
     """validation.chain_i3: a trip's cabin start temperature is its sensor's first 10 s, or
     the air temperature where the sensor reads its 10 °C floor (a cold-soaked cabin); the
-    warm-up rate integrates to (T_set − T_start)⁺ over each trip exactly, decaying with τ."""
+    warm-up rate decays with τ and integrates over a trip of T seconds to
+    (T_set − T_start)⁺ · (1 − e^(−T/τ)), as a SUMO run books it."""
     import types
 
     from sumo_drvpw.validation.chain_i3 import WARMUP_TAU_S, cabin_start_c, warmup_rate
@@ -1252,7 +1282,8 @@ def test_i3_cabin_start_and_warm_up_rate_by_hand():
     start = cabin_start_c(log, mb, trips)
     assert start == {"a": 2.0, "b": 21.5}
     rate = warmup_rate(log, trips, start, 20.0)
-    assert float(rate[trips == "a"] @ np.full(1800, 0.5)) == pytest.approx(18.0, rel=1e-12)
+    assert float(rate[trips == "a"] @ np.full(1800, 0.5)) == pytest.approx(
+        18.0 * (1.0 - np.exp(-900.0 / WARMUP_TAU_S)), rel=1e-12)
     assert not rate[trips == "b"].any()
     a = rate[trips == "a"]
     assert a[600] / a[0] == pytest.approx(np.exp(-300.0 / WARMUP_TAU_S), rel=1e-12)  # t = 300 s
@@ -1643,7 +1674,8 @@ def test_a_traci_script_says_which_added_vehicle_starts_cold(tmp_path):
         close_sumo(conn)
     res.write(tmp_path / "o")
     veh = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").query("equation == 'drvpw_prius3'").set_index("key")
-    assert len(veh) > 5 and veh.loc["added", "cold_start_l"] == pytest.approx(0.07, rel=1e-12)
+    assert len(veh) > 5 and veh.loc["added", "cold_start_l"] == pytest.approx(
+        0.07 * _warm_part(res, ["added"])[0], rel=1e-12)
     assert (veh.drop(index="added")["cold_start_l"] == 0).all()
     assert res.summary["chain"]["cold_start"]["vehicles"] == 1
 

@@ -56,9 +56,9 @@ FTP's 75 °F), plus ``cold_start_fuel_l_per_k`` (≥ 0) for every kelvin colder:
 
     V_cold(T) = V_ref + s · max(T_ref − T, 0)      [L per start]
 
-a per-trip quantity, not a power, booked once at a trip's start where the trip is known
-to start cold — in SUMO at a vehicle's departure when the run says so (``[vehicles]
-cold_start``), at the run's air temperature; a log does not say whether its engine
+a per-trip quantity booked where a trip is known to start cold — in SUMO from a vehicle's
+departure when the run says so (``[vehicles] cold_start``), at the run's air temperature,
+as a rate decaying with FUEL_COLD_START_TAU_S (constants.py); a log does not say whether its engine
 started cold, so calibration and log comparisons leave it out
 (:meth:`EnergyChain.cold_start`). ``running_fuel_per_k`` (≥ 0, default 0) is the warm
 engine's extra fuel in the cold, a share of the fuel power per kelvin below

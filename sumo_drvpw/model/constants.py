@@ -31,6 +31,16 @@ G_UNIT = 9.80665         # the unit g (standard gravity, by definition: 3rd CGPM
 #: term ``moving`` is 0 (the drive-log spec's standstill tolerance)
 STANDSTILL_MPS = 0.1
 
+#: How a cold start's extra energy spreads over a trip: a rate decaying as e^(−t/τ) from
+#: the departure [s], so a trip of T seconds takes the share 1 − e^(−T/τ) of it. A fuel
+#: chain's ``cold_start_fuel_l`` is measured as FTP bag 1 − bag 3, both 505 s long: τ =
+#: 505 s / 3 puts 95 % of it inside the bag that measured it. A battery chain's cabin
+#: warm-up: τ = 300 s, as it was calibrated (sumo_drvpw.validation.chain_i3; the i3's heater
+#: V·I falls back to its steady level within 5–10 min), a 5–7 kW heater's first minutes.
+FTP_BAG1_S = 505.0
+FUEL_COLD_START_TAU_S = FTP_BAG1_S / 3.0
+CABIN_WARMUP_TAU_S = 300.0
+
 #: Boundary between light and heavy load in the seed paper's Table 3 [W].
 HEAVY_LOAD_W = 50_000.0
 #: Speed above which the seed paper's Fig. 8 shows VSP underprediction [m/s].

@@ -16,9 +16,12 @@ With ``cold_start`` (the scenario's ``[vehicles] cold_start``, a share of the tr
 vehicle's, trip's or flow's own ``drvpw.cold_start`` param in the route files) a fuel
 chain's ``cold_start_fuel_l`` — and a battery chain's cabin warm-up, ``[chain.hvac]
 warmup_j_per_k`` × (T_set − T)⁺, as auxiliary energy — times the vehicle's share is booked
-once per vehicle that departs while the run accounts, at its first booked step (its
-departure edge); vehicles already on the road when accounting starts (a user's TraCI
-script attaching mid-run) get none.
+for each vehicle that departs while the run accounts, spread over its first minutes as a
+rate decaying from its departure, share · V · (e^(−t/τ) − e^(−(t+Δt)/τ)) in the step from t
+to t + Δt of its booked time (τ: constants.FUEL_COLD_START_TAU_S, CABIN_WARMUP_TAU_S), on
+the edges it drives then: a trip of T seconds takes V · (1 − e^(−T/τ)), a trip much longer
+than τ the whole cold start, a 60-s hop not the energy of a whole warm-up. Vehicles already
+on the road when accounting starts (a user's TraCI script attaching mid-run) get none.
 Vehicles' running totals take one
 scatter-add per step; edges take one ``np.add.at`` per step; class totals are sums of
 the vehicle totals, so vehicle, edge and class totals agree by construction (tests check
@@ -32,8 +35,10 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.model.chain import EnergyChain
-from sumo_drvpw.model.constants import T_REF_C
+from sumo_drvpw.model.constants import CABIN_WARMUP_TAU_S, FUEL_COLD_START_TAU_S, T_REF_C
 
+#: a cold start is booked until this many decay times after the departure (e^−20: all of it)
+COLD_DONE = 20.0
 #: Quantities booked per vehicle/edge and equation, in this order (units in the names).
 QUANTITIES = ("traction_j", "recuperated_j", "auxiliary_j", "net_j", "fuel_j", "fuel_l", "co2_kg",
               "cold_start_l")
@@ -126,8 +131,14 @@ class ChainLedger:
             cs = self.chains[e].cold_start(self.air_temperature_c)
             self._cs[j] = {2: cs["battery_j"], 3: cs["battery_j"], 4: cs["fuel_j"], 5: cs["fuel_l"],
                            6: cs["co2_kg"], 7: cs["fuel_l"]}.get(k, 0.0)
-        #: per vehicle row: the share of a cold start still to book at its first booked step
+        #: the decay time of each booked column's cold start [s], (C,)
+        self._tau = np.array([FUEL_COLD_START_TAU_S if self.chains[e].predicts == "fuel"
+                              else CABIN_WARMUP_TAU_S for e, _ in self._cols])
+        #: per vehicle row: its share of a cold start while that is being booked (0: none
+        #: or done), the time booked since it began [s], and whether it is yet to be counted
         self._starting = np.zeros(capacity)
+        self._cold_age = np.zeros(capacity)
+        self._cold_new = np.zeros(capacity, bool)
         #: vehicles whose departure was booked (with its share of a cold start, > 0) by a
         #: chain that has one, and the sum of their shares (the expected cold starts)
         self.cold_starts = 0
@@ -203,6 +214,8 @@ class ChainLedger:
         self.veh_time = np.concatenate([self.veh_time, np.zeros(new - cap)])
         self._app = np.concatenate([self._app, np.zeros((new - cap, self.A), bool)])
         self._starting = np.concatenate([self._starting, np.zeros(new - cap)])
+        self._cold_age = np.concatenate([self._cold_age, np.zeros(new - cap)])
+        self._cold_new = np.concatenate([self._cold_new, np.zeros(new - cap, bool)])
 
     def share_of(self, vtype: str, vclass: str, vid: str | None = None) -> float:
         """The share of a cold start a vehicle of this vType and vClass books at departure:
@@ -230,14 +243,17 @@ class ChainLedger:
         self.start(vidx, [self.share_of(veh_type[i], veh_class[i], vid) for i, vid in zip(vidx, ids)])
 
     def start(self, vidx, shares=None) -> None:
-        """Vehicle rows ``vidx`` departed this step: their next booked step books each fuel
-        chain's cold start times ``shares`` (one per vehicle; default :attr:`cold_start`)."""
+        """Vehicle rows ``vidx`` departed this step: from their next booked step on, each
+        chain's cold start times ``shares`` (one per vehicle; default :attr:`cold_start`) is
+        booked as it decays (:meth:`book`)."""
         if not self.cold_start_on or not self._cs.any():
             return
         vidx = np.asarray(vidx, np.int64)
         if vidx.size:
             self._grow(int(vidx.max()) + 1)
             self._starting[vidx] = self.cold_start if shares is None else np.asarray(shares, float)
+            self._cold_age[vidx] = 0.0
+            self._cold_new[vidx] = True
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
                         signals: dict | None = None, engine_off=None) -> np.ndarray:
@@ -286,11 +302,17 @@ class ChainLedger:
             share = self._starting[vidx]
             s = share > 0
             if s.any():
-                q[s] += share[s, None] * self._cs
-                self._starting[vidx[s]] = 0.0
+                vs = vidx[s]
+                age = self._cold_age[vs, None]
+                part = np.exp(-age / self._tau) - np.exp(-(age + dt) / self._tau)
+                q[s] += share[s, None] * self._cs * part
+                self._cold_age[vs] += dt
+                self._starting[vs[self._cold_age[vs] > COLD_DONE * self._tau.max()]] = 0.0
                 # a departure counts when a chain with a cold start books the vehicle
-                hit = np.ones(int(s.sum()), bool) if app is None else \
+                new = self._cold_new[vs]
+                hit = new if app is None else new & \
                     (np.asarray(app)[s][:, self._ce[self._cs > 0]] > 0).any(axis=1)
+                self._cold_new[vs] = False
                 self.cold_starts += int(hit.sum())
                 self.cold_starts_expected += float(share[s][hit].sum())
         if app is not None:
@@ -376,7 +398,8 @@ class ChainLedger:
         """Move vehicles ``keep`` (slots, ascending) to the front, empty the rest up to ``n``."""
         self._grow(n)
         m = len(keep)
-        for arr in (self._veh, self.veh_dist, self.veh_time, self._app, self._starting):
+        for arr in (self._veh, self.veh_dist, self.veh_time, self._app, self._starting,
+                    self._cold_age, self._cold_new):
             arr[:m] = arr[keep]
             arr[m:n] = 0.0
 
@@ -494,10 +517,13 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
                            **({"fuel_l_per_start": per_start} if per_start else {}),
                            **({"battery_kwh_per_start": warmup} if warmup else {}),
                            "air_temperature_c": chain.air_temperature_c,
-                           "rule": "the chain's cold_start_fuel_l (a battery chain: its cabin warm-up) once per "
+                           "rule": "the chain's cold_start_fuel_l (a battery chain: its cabin warm-up) for each "
                                    "vehicle departing during the run, times its share (its own param, else its vType's, else its "
                                    "vClass's, else the run's), "
-                                   "at its departure edge ([vehicles] cold_start, [vtypes.<id>] / "
+                                   "as it decays from the departure, e^(-t/tau) (tau: fuel "
+                                   f"{FUEL_COLD_START_TAU_S:.0f} s, cabin {CABIN_WARMUP_TAU_S:.0f} s), on the edges "
+                                   "driven then: a trip of T seconds takes 1 - e^(-T/tau) of it "
+                                   "([vehicles] cold_start, [vtypes.<id>] / "
                                    "[vclasses.<vClass>] cold_start, or the run command's cold-start option)"
                                    if chain.cold_start_on else
                                    "not booked: every trip taken as starting warm (through traffic, "

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sumo_drvpw.model.constants import CABIN_WARMUP_TAU_S
 from sumo_drvpw.model.measurement import Measurement
 from sumo_drvpw.validation.chain_common import KWH, mean_abs, params_of, read_shared, trip_rows
 
@@ -226,8 +227,9 @@ I3_DELIVERABLE = "bmw_i3_battery.toml"
 
 #: the cabin warm-up's time constant [s] (the rate regressor of :func:`warmup_rate`): a few
 #: minutes, as a ~5 kW heater warms a small car's cabin; fixed, not fitted (a disclosure: the
-#: i3's heater V·I, seen before it was written, falls back to its steady level within 5–10 min)
-WARMUP_TAU_S = 300.0
+#: i3's heater V·I, seen before it was written, falls back to its steady level within 5–10 min);
+#: the same constant spreads the warm-up in a SUMO run (sumo_drvpw.sim.chain)
+WARMUP_TAU_S = CABIN_WARMUP_TAU_S
 #: the i3's cabin temperature sensor reads no lower than 10 °C (a floor in the logs): a start
 #: at or below it is a cabin at the air temperature (cold-soaked)
 CABIN_SENSOR_FLOOR_C = 10.05
@@ -250,17 +252,19 @@ def cabin_start_c(log, mb, trips) -> dict[str, float]:
 
 
 def warmup_rate(log, trips, start_c: dict, setpoint_c: float) -> np.ndarray:
-    """Per sample [K/s]: (T_set − T_start)⁺ · e^(−t/τ)/τ, t from the trip's first sample,
-    scaled so that each trip's integral is (T_set − T_start)⁺ exactly (what SUMO books at a
-    cold departure: ``warmup_j_per_k`` × that)."""
+    """Per sample [K/s]: (T_set − T_start)⁺ · (e^(−t/τ) − e^(−(t+Δt)/τ))/Δt, t from the trip's
+    first sample: the warm-up as it decays, a trip of T seconds taking (T_set − T_start)⁺ ·
+    (1 − e^(−T/τ)) — what SUMO books from a cold departure (``warmup_j_per_k`` × that,
+    :mod:`sumo_drvpw.sim.chain`)."""
     t = log.df["time_s"].to_numpy(float)
     dt = log.df["dt_s"].to_numpy(float)
     out = np.zeros(t.size)
     for trip, t_start in start_c.items():
         s = trips == trip
         ts = t[s] - t[s].min()
-        shape = np.exp(-ts / WARMUP_TAU_S) / WARMUP_TAU_S
-        out[s] = max(setpoint_c - t_start, 0.0) * shape / float(shape @ dt[s])
+        part = np.exp(-ts / WARMUP_TAU_S) - np.exp(-(ts + dt[s]) / WARMUP_TAU_S)
+        out[s] = max(setpoint_c - t_start, 0.0) * np.divide(part, dt[s], out=np.zeros(part.size),
+                                                           where=dt[s] > 0)
     return out
 
 
