@@ -1494,6 +1494,14 @@ def test_config_with_sumos_emissions_device_puts_its_energy_beside_the_chains(tm
     run_scenario(tmp_path / "s.toml", tmp_path / "o2", equations=[fuel_eq, bev])
     assert not (tmp_path / "o2" / "sumo_device.csv").exists()
     assert (tmp_path / "o2" / "sumo" / "ti.xml").is_file()
+    # a window no vehicle drives in: an empty comparison with its header (a traceback,
+    # KeyError 'vehicle', and a 1-byte file before; found by a sweep)
+    (tmp_path / "s.toml").write_text('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\n'
+                                     '[outputs]\nfigures = false\n')
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o3", equations=[fuel_eq, bev], begin=300, end=400)
+    assert res.summary["vehicles"] == 0
+    empty = pd_.read_csv(tmp_path / "o3" / "sumo_device.csv")
+    assert len(empty) == 0 and list(empty.columns) == ["equation", "quantity", "vehicles", "ours", "sumo", "ratio"]
 
 
 def test_engine_off_minus_inf_round_trips_and_bad_values_are_refused(tmp_path):

@@ -475,13 +475,14 @@ class RunResult:
         from sumo_drvpw.model.constants import FUELS
 
         rows = []
+        header = ["equation", "quantity", "vehicles", "ours", "sumo", "ratio"]
         if self.sumo_device is None:
-            return pd.DataFrame(rows)
+            return pd.DataFrame(rows, columns=header)
         dev = self.sumo_device
         v = self._vehicles_all().to_pandas()[["vehicle", "equation", "net_total_j"]]
         v = v.merge(dev, on="vehicle", how="inner")
         cv = self.chain_vehicles()
-        if cv is not None:
+        if cv is not None and {"vehicle", "equation"} <= set(cv.columns):  # (none: no vehicle)
             cols = [c for c in ("vehicle", "equation", "net_kwh", "fuel_l") if c in cv.columns]
             v = v.merge(cv[cols], on=["vehicle", "equation"], how="left")
         ch = getattr(self.ledger, "chain", None)
@@ -504,7 +505,7 @@ class RunResult:
                 rows.append({"equation": eq, "quantity": q, "vehicles": int(len(g)),
                              "ours": float(ours), "sumo": float(sumo),
                              "ratio": float(ours / sumo) if sumo else float("nan")})
-        return pd.DataFrame(rows)
+        return pd.DataFrame(rows, columns=header)
 
     def edges_arrow(self) -> pa.Table:
         self._check_current()
