@@ -76,6 +76,11 @@ def test_edgedata_intervals_parsed_by_sumolib(tmp_path):
     intervals = list(sumolib.xml.parse(str(tmp_path / "o" / "edgedata.xml"), "interval"))
     assert [(float(i.begin), float(i.end)) for i in intervals] == \
         [(0.0, 100.0), (100.0, 200.0), (200.0, 300.0)]
+    # from a later begin: SUMO's own edgeData intervals run from the begin (they ran from
+    # multiples of the period: 50–100, 100–200, …; found by a sweep)
+    run_scenario(CITY, tmp_path / "late", begin=50, end=300, equations=[PHYS], figures=False, period=100.0)
+    late = list(sumolib.xml.parse(str(tmp_path / "late" / "edgedata.xml"), "interval"))
+    assert [(float(i.begin), float(i.end)) for i in late] == [(50.0, 150.0), (150.0, 250.0), (250.0, 300.0)]
     edges = res.edges
     veh = res.vehicles
     for name in ("phys", "vsp"):

@@ -564,7 +564,7 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
     next_cut = None
     if period:
         t0 = conn.simulation.getTime()
-        next_cut = (np.floor(t0 / period + 1e-9) + 1) * period
+        next_cut = t0 + period  # SUMO's meandata intervals run from the run's begin
     try:
         while True:
             t = conn.simulation.getTime()
