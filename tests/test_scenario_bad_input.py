@@ -270,6 +270,27 @@ def test_log_only_term_of_an_equation_file_names_that_file(tmp_path, capsys):
     assert err.split("error: ", 1)[1].startswith(str(p))
 
 
+def test_unknown_equation_name_says_where_it_was_written(tmp_path, capsys):
+    """A misspelt equation name in a route file's vType param, in a scenario's list, or given
+    to the run: the message names the file and vType or key (it named none; found by a
+    sweep)."""
+    net = BUILTIN / "networks" / "city.net.xml"
+    rou = _write(tmp_path, '<routes><vType id="t" vClass="passenger"><param key="drvpw.equation" '
+                 'value="vsp_ldv199"/></vType><vehicle id="v" type="t" depart="0">'
+                 '<route edges="c00c10 c10c20"/></vehicle></routes>', "typo.rou.xml")
+    cfg = _write(tmp_path, f'<configuration><input><net-file value="{net}"/><route-files value="{rou}"/>'
+                 '</input></configuration>', "typo.sumocfg")
+    _cli_refused(capsys, ["run", str(cfg), "--end", "10", "--no-figures"], tmp_path / "o1",
+                 str(rou), "vType 't'", "'vsp_ldv199'")
+    sc = _write(tmp_path, 'equations = ["vsp_ldv1999", "moves_pasenger_car"]\n[sumo]\n'
+                f'config = "{cfg}"\n', "s.toml")
+    _cli_refused(capsys, ["run", str(sc), "--end", "10", "--no-figures"], tmp_path / "o2",
+                 f"{sc}: equations", "'moves_pasenger_car'")
+    err = _cli_refused(capsys, ["run", "city", "--equation", "nosuch", "--end", "10", "--no-figures"],
+                       tmp_path / "o3", "the equations given to the run", "'nosuch'")
+    assert "city.toml" not in err
+
+
 # --- 6. a truncated .gz among the SUMO inputs ---------------------------------------------
 
 def _truncated_gz(path: Path, text: str) -> Path:

@@ -295,20 +295,19 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
                             "then letters, digits, '_', '.', '-' (at most 64 characters)")
     else:
         p = Path(spec)
-        if base is not None and not p.is_absolute() and (base / p).exists():
-            p = base / p
-            eq = load_equation(p)
-        else:
-            eq = load_equation(spec)
+        try:
+            eq = load_equation(base / p if base and not p.is_absolute() and (base / p).exists() else spec)
+        except UserError as e:
+            if str(e).startswith("unknown equation"):  # say where the name was written
+                raise UserError(f"{where}: {e}") from None
+            raise
     src = eq.path or where  # the equation file the term is written in, else the scenario
     for t in eq.term_names:
         term = parse_term(t)
-        if term.signals:
-            raise UserError(f"{src}: equation '{eq.name}' cannot run in SUMO: term '{t}' needs "
-                            f"the log-only signal '{term.signals[0]}'")
-        if any(f.startswith("trip=") for f in term.factors):
-            raise UserError(f"{src}: equation '{eq.name}' cannot run in SUMO: term '{t}' "
-                            "needs trip ids of a drive log")
+        why = (f"the log-only signal '{term.signals[0]}'" if term.signals else "trip ids of a drive log"
+               if any(f.startswith("trip=") for f in term.factors) else None)
+        if why:
+            raise UserError(f"{src}: equation '{eq.name}' cannot run in SUMO: term '{t}' needs {why}")
     return eq
 
 
@@ -471,7 +470,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     eq_specs = overrides.get("equations", doc.get("equations"))
     if not eq_specs:
         raise UserError(f"{where}: 'equations' must name at least one equation")
-    equations = [resolve_equation(s, base, where)
+    eq_where = "the equations given to the run" if "equations" in overrides else f"{where}: equations"
+    equations = [resolve_equation(s, base, eq_where)
                  for s in _strlist(eq_specs, where, "equations", '["vsp_ldv1999"]')]
     names = [e.name for e in equations]
     dup = {n for n in names if names.count(n) > 1}
