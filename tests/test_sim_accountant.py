@@ -304,6 +304,9 @@ def test_an_id_used_again_is_a_new_trip_with_its_own_vtype():
     rows = res.vehicles[res.vehicles.vehicle == vid]
     assert list(rows.vtype) == [vt, "heavy"]
     assert list(rows.mass_kg) == [1625.0, 5000.0]
+    # a vType in no file read takes SUMO's mass, and the run says so
+    assert res.summary["assumptions"]["sumo_masses"] == {"heavy": {"vclass": "passenger", "mass_kg": 5000.0}}
+    assert any("heavy (passenger, 5000 kg)" in w for w in res.summary["warnings"])
     assert (rows.time_s > 0).all() and rows.time_s.iloc[0] <= 15.5
 
 

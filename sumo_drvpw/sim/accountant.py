@@ -293,6 +293,7 @@ class Accountant(_Listener):
             "excluded_by_vehicles_vtypes": self.resolver.excluded,
             "vehicles_in_memory_peak": int(led.peak_held),
             "assumptions": {"default_masses": dict(sorted(self.resolver.assumptions.items())),
+                            "sumo_masses": dict(sorted(self.resolver.sumo_masses.items())),
                             "booked_as": dict(sorted(self.resolver.booked_as.items())),
                             "energy_carrier": dict(sorted(self.resolver.carriers.items()))},
         }
@@ -304,6 +305,13 @@ class Accountant(_Listener):
                 for vt, a in sorted(self.resolver.assumptions.items()))
                 + " (summary.json assumptions; set vtypes.<id>.mass_kg or "
                 "vclasses.<vClass>.mass_kg to override)")
+        if self.resolver.sumo_masses:
+            warnings.append("vTypes in none of the route/additional files read took SUMO's mass "
+                            "(made by TraCI, or loaded through options the plug-in does not read; "
+                            "SUMO's default unless the vType gives one): " + ", ".join(
+                                f"{vt} ({a['vclass']}, {a['mass_kg']:g} kg)"
+                                for vt, a in sorted(self.resolver.sumo_masses.items()))
+                            + " (summary.json assumptions.sumo_masses; set vtypes.<id>.mass_kg)")
         if self.resolver.booked_as:
             warnings.append(booked_as_warning(self.resolver.booked_as))
         # persons (counted as pedestrians) are never booked: no warning for them

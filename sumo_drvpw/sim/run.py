@@ -78,6 +78,9 @@ class VTypeResolver:
         self.excluded = 0
         #: vType → {"vclass", "mass_kg", "source"} for masses taken from class defaults
         self.assumptions: dict[str, dict] = {}
+        #: vType → {"vclass", "mass_kg"}: vTypes in no file read, at SUMO's mass (made during
+        #: the run by TraCI, or loaded through SUMO options the plug-in does not read)
+        self.sumo_masses: dict[str, dict] = {}
         #: vType → {"vclass", "booked_as", "from"}: vTypes booked as the vehicle their
         #: emissionClass, guiShape, id or length names, not by their vClass
         self.booked_as: dict[str, dict] = {}
@@ -235,6 +238,8 @@ class VTypeResolver:
                     raise UserError(f"vType '{vt}': drvpw.mass is not a number: {p!r}") from None
         if mass is None and info is None and vt not in SUMO_DEFAULT_VTYPES:
             mass = self._sumo_mass(vt)  # a vType made during the run (TraCI copy, setMass)
+            if mass is not None:  # or loaded from a file the plug-in did not read: said
+                self.sumo_masses[vt] = {"vclass": vclass, "mass_kg": mass}
         # a class mass for a vType that gives none: plus the vType's SUMO loading (payload)
         loading = info.loading_kg if info is not None else 0.0
         if mass is None and cdata.get("mass_kg") is not None:
