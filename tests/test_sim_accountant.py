@@ -439,3 +439,15 @@ def test_a_car_removed_at_its_long_stop_leaves_nothing_switched_off(tmp_path, ag
     assert so["stops"] == 0 and so["vehicle_s"] == 0.0
     rows = res.vehicles[res.vehicles.vehicle == "a"]
     assert len(rows) == (2 if again else 1) and (rows.distance_m > 100).all()
+
+
+def test_scenario_vtype_settings_no_vehicle_had_are_said(tmp_path):
+    """[vtypes.<id>] for an id no vehicle of the run has (a typo, a vTypeDistribution's id)
+    is a warning naming it; before, its mass was silently not used (found by a sweep)."""
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{CITY.parent / "city.sumocfg"}"\nend = 30\n'
+        '[vtypes.prius3]\nmass_kg = 1600\n[vtypes.prius_3]\nmass_kg = 1700\n', encoding="utf-8")
+    res = run_scenario(tmp_path / "s.toml", None, figures=False)
+    hit = [w for w in res.summary["warnings"] if "matched no vehicle" in w]
+    assert len(hit) == 1 and "[vtypes.prius_3]" in hit[0] and "[vtypes.prius3]" not in hit[0]
+    assert len(res.vehicles) > 0 and (res.vehicles.mass_kg == 1600.0).all()

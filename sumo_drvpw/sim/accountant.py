@@ -305,6 +305,11 @@ class Accountant(_Listener):
                 for vt, a in sorted(self.resolver.assumptions.items()))
                 + " (summary.json assumptions; set vtypes.<id>.mass_kg or "
                 "vclasses.<vClass>.mass_kg to override)")
+        unused = sorted(set(getattr(sc, "vtype_data", {})) - set(self.resolver.cache))
+        if unused:  # a typo, or a vTypeDistribution's id (its vehicles have the members' vTypes)
+            warnings.append(f"{sc.path or 'the scenario'}: " + ", ".join(f"[vtypes.{v}]" for v in unused)
+                            + " matched no vehicle's vType in this run, so its settings were not used "
+                            "(a vTypeDistribution's vehicles take its members' vType ids)")
         if self.resolver.sumo_masses:
             warnings.append("vTypes in none of the route/additional files read took SUMO's mass "
                             "(made by TraCI, or loaded through options the plug-in does not read; "
