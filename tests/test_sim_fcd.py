@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 
 from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.fcd import process_fcd, read_fcd
@@ -106,6 +107,13 @@ def test_fcd_formats_read_alike(live, tmp_path):
     c = read_fcd(csv)
     pd.testing.assert_frame_equal(c[["time", "id", "speed", "pos"]].reset_index(drop=True),
                                   x[["time", "id", "speed", "pos"]].reset_index(drop=True))
+    # a vehicle row cut short (no speed, lane, edge): refused with its row, not read as a
+    # person (SUMO's tabular persons: an edge and no lane) and dropped (found by a sweep)
+    t = pd.read_csv(csv, sep=";").assign(vehicle_edge="")
+    t.loc[t.index[40], ["vehicle_speed", "vehicle_pos", "vehicle_lane", "vehicle_slope"]] = np.nan
+    t.to_csv(tmp_path / "cut.csv", sep=";", index=False)
+    with pytest.raises(UserError, match=r"cut.csv: column speed missing at vehicle row 41 "):
+        read_fcd(tmp_path / "cut.csv")
     pd.read_csv(csv, sep=";").drop(columns=["vehicle_lane"]).to_csv(csv, sep=";", index=False)
     code = cli_main(["fcd", str(csv), "--scenario", str(CITY), "--out", str(tmp_path / "x")])
     assert code == 2 and not (tmp_path / "x").exists()

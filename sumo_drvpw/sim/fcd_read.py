@@ -230,8 +230,13 @@ def _tabular_block(raw: pd.DataFrame, label, first: int, row0: int | None = None
     times = np.unique(pd.to_numeric(raw[FCD_COLUMNS["time"]], errors="coerce").dropna())
     df = pd.DataFrame({k: raw[c] for k, c in FCD_COLUMNS.items() if c in raw.columns})
     # SUMO's tabular FCD writes persons in the vehicles' columns, with an edge and no lane
-    lane = raw[FCD_COLUMNS["lane"]]
-    df["person"] = (lane.isna() | (lane.astype(str) == "")).to_numpy()
+    # (a row with neither is a damaged vehicle row: refused below, not read as a person)
+    def empty(c):
+        return (c.isna() | (c.astype(str) == "")).to_numpy()
+    person = empty(raw[FCD_COLUMNS["lane"]])
+    if "vehicle_edge" in raw.columns:
+        person = person & ~empty(raw["vehicle_edge"])
+    df["person"] = person
     return Block(times.astype(float),
                  _normalise(df, label, first if row0 is None else row0, _TABULAR_NAMES), first)
 
