@@ -394,3 +394,25 @@ def test_a_logging_pause_adds_no_energy(tmp_path, pause_s):
     far = np.abs(np.arange(len(base)) - k) > 10
     assert_allclose(b.df.accel_mps2.to_numpy()[far], a.df.accel_mps2.to_numpy()[far], atol=1e-9)
     assert np.abs(b.df.accel_mps2).max() <= np.abs(a.df.accel_mps2).max() + 0.5
+
+
+def test_a_folder_whose_files_differ_in_optional_columns_keeps_every_row(tmp_path):
+    """Two loggers in one folder, one writing mass_kg and accel_mps2 and the other not: the
+    other file's trips take the vehicle's mass and the derived acceleration, as when read
+    alone. They were NaN after the concatenation and all its rows left out (the in-memory
+    path of compare, diagnose and every chain target; found by a sweep)."""
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    veh = load_vehicle("prius3")
+    d = tmp_path / "logs"
+    d.mkdir()
+    _write(d, _log(trip_id="a", mass_kg=1700.0, accel_mps2=0.5), "a.csv")
+    _write(d, _log(trip_id="b").assign(speed_mps=lambda x: 10 + np.sin(x.time_s)), "b.csv")
+    log = read_log(d, veh)
+    alone = read_log(d / "b.csv", veh)
+    b = (log.df["trip_id"] == "b").to_numpy()
+    assert not log.excluded.any() and b.sum() == 200
+    assert_allclose(log.df["accel_mps2"].to_numpy()[b], alone.df["accel_mps2"].to_numpy(), rtol=1e-12)
+    assert (log.df["accel_mps2"].to_numpy()[~b] == 0.5).all()
+    assert (log.df["mass_kg"].to_numpy()[b] == veh.mass_kg).all() and (log.df["mass_kg"].to_numpy()[~b] == 1700).all()
+    assert log.counts["accel_derived_rows"] == log.counts["mass_from_vehicle_rows"] == 200

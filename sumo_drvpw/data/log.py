@@ -421,6 +421,13 @@ def _prepare(df: pd.DataFrame, p: Path, default_trip: str,
     return df, clipped
 
 
+def _trips_without(col: pd.Series, trip_codes: np.ndarray) -> np.ndarray:
+    """Rows of the trips in which the column holds no value at all (in a folder of logs, the
+    trips of a file without it), as a bool mask."""
+    has = np.bincount(trip_codes, weights=col.notna().to_numpy(float)) > 0
+    return ~has[trip_codes]
+
+
 def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOptions,
             clipped: int = 0) -> DriveLog:
     """Derived inputs, exclusion mask and counts of validated, concatenated tables."""
@@ -461,12 +468,19 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     # stretches between gaps: derivatives never reach across one
     seg = np.cumsum(start | np.r_[False, gap[:-1]]) - 1
 
-    if "accel_mps2" not in df:
+    # a file of a folder without the column: its trips' acceleration is derived (NaN there)
+    lacking = None if "accel_mps2" not in df else _trips_without(df["accel_mps2"], trip_codes)
+    if lacking is None or lacking.any():
         win, q = accel_window(opt, v, trip_codes)
         wide = win > opt.accel_window_s
         counts["accel_window_s"] = float(win.max())
         win_seg = win[trip_codes[_trip_starts(seg)]]
-        df["accel_mps2"] = derivative(v, t, seg, win_seg)
+        derived = derivative(v, t, seg, win_seg)
+        if lacking is None:
+            df["accel_mps2"] = derived
+        else:
+            df["accel_mps2"] = np.where(lacking, derived, df["accel_mps2"].to_numpy(float))
+            counts["accel_derived_rows"] = int(lacking.sum())
         deriv = (seg, win_seg)
         counts["accel_source"] = "derived: central difference of speed, " + (
             f"{win[0]:.3g} s moving average" if (win == win[0]).all() else
@@ -529,6 +543,11 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
 
     if "mass_kg" not in df and vehicle is not None:
         df["mass_kg"] = float(vehicle.mass_kg)
+    elif vehicle is not None:  # a file of a folder without the column: the vehicle's mass
+        lacking = _trips_without(df["mass_kg"], trip_codes)
+        if lacking.any():
+            df["mass_kg"] = np.where(lacking, float(vehicle.mass_kg), df["mass_kg"].to_numpy(float))
+            counts["mass_from_vehicle_rows"] = int(lacking.sum())
     for c in FLAGS:
         if c not in df:
             df[c] = False
