@@ -227,3 +227,23 @@ def test_lag_search_memory_does_not_grow_with_rows(tmp_path, monkeypatch):
     for a, b in zip(arrays(one), arrays(four)):
         np.testing.assert_allclose(b, 4 * a, rtol=1e-12, atol=0)
     assert [four.trips[t][0] for t in sorted(four.trips)] == [4 * one.trips[t][0] for t in sorted(one.trips)]
+
+
+def test_a_declared_term_zero_on_the_logs_is_held_at_its_coefficient(tmp_path):
+    """Logs with no grade (no grade or elevation column: a flat road, said by the reader)
+    and an equation with a grade term: diagnose ran into "term 'grade' is zero" and refused
+    (found by a sweep). The term is now held at its declared coefficient, not fitted, back in
+    the final equation (it serves SUMO's hills) and reported; in memory and streamed alike."""
+    import pandas as pd
+
+    paths = _logs(tmp_path, [], n_trips=4)
+    for p in paths:
+        pd.read_parquet(p).drop(columns=["grade_rad", "gps_elevation_m"]).to_parquet(p)
+    eq = load_equation("drvpw_prius3")
+    mem = diagnose(load_measured(paths, "prius3"), eq, DiagnoseOptions())
+    st = diagnose_stream(paths, "prius3", eq, DiagnoseOptions(), rows=2500)
+    _assert_equal(mem, st)
+    assert mem.report["held_terms"]["grade"]["coefficient"] == eq.terms["grade"]
+    assert mem.equation.terms["grade"] == eq.terms["grade"] and set(eq.terms) <= set(mem.equation.terms)
+    assert mem.report["baseline"]["terms"][0] == "grade"
+    assert mem.equation.terms["acc"] != eq.terms["acc"]  # the others refitted

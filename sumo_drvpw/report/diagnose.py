@@ -56,7 +56,9 @@ def markdown(res, figs) -> str:
          f"blocks {d['samples']['blocks']})",
          f"- validation: {r['validation']}", f"- test: {d['test']}",
          f"- declared equation {'calibrated on the spot (stepwise, indt-var-1)' if d['calibrated_on_the_spot'] else 'given'}; "
-         "its terms are kept and their coefficients refitted on each training fold",
+         "its terms are kept and their coefficients refitted on each training fold"
+         + "".join(f"; `{t}` is 0 on every analysis sample: held at its declared coefficient {h['coefficient']:.4g}, "
+                   "not fitted" for t, h in r.get("held_terms", {}).items()),
          f"- signals offered ({len(d['signals_offered'])}): "
          + (", ".join(f"{c} ({d.get('signal_roles', {}).get(c, {}).get('role', 'unknown')})"
                       for c in d["signals_offered"]) or "none"),

@@ -24,6 +24,34 @@ class DiagnoseResult:
     n_candidates_scored: int
 
 
+def zero_terms(equation: Equation, decl_vals: np.ndarray, rows: np.ndarray):
+    """Declared terms that are 0 on every analysis sample (``grade`` on logs with no grade):
+    nothing in the data fits them. Returns (held term names, the equation without them)."""
+    held = [t for j, t in enumerate(equation.term_names) if not np.any(decl_vals[rows, j])]
+    if not held or len(held) == len(equation.term_names):
+        return [], equation
+    from dataclasses import replace
+
+    return held, replace(equation, terms={t: c for t, c in equation.terms.items() if t not in held})
+
+
+def restore_held(res: DiagnoseResult, equation: Equation, held: list) -> DiagnoseResult:
+    """The terms :func:`zero_terms` held out, back in the baseline and the final equation
+    at their declared coefficients (a grade term serves SUMO's hills), and said."""
+    if not held:
+        return res
+    dec = {t: float(equation.terms[t]) for t in held}
+    fin = res.equation
+    fin.terms = {**{t: c for t, c in equation.terms.items() if t in dec}, **fin.terms}
+    for key in ("baseline", "final"):
+        res.report[key]["coefficients"] = {**dec, **res.report[key]["coefficients"]}
+        res.report[key]["terms"] = held + [t for t in res.report[key]["terms"] if t not in dec]
+    res.report["held_terms"] = {t: {"coefficient": c, "why": "0 on every analysis sample (the logs "
+                                    "carry no grade or no such input): not fitted, kept at the "
+                                    "declared coefficient"} for t, c in dec.items()}
+    return res
+
+
 def pick_metrics(m: dict) -> dict:
     """The metrics the report carries (``METRIC_KEYS``)."""
     return {k: m[k] for k in METRIC_KEYS}

@@ -19,7 +19,7 @@ from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
 from sumo_drvpw.fit.diagnose.structural import (lag_range, per_trip_lags, shift_within_trips,
                                                 structural_signals, timing)
 from sumo_drvpw.fit.diagnose.result import (DiagnoseResult, assemble, pick_metrics as _pick_metrics,
-                                            lag_decision, lag_finding,
+                                            restore_held, zero_terms, lag_decision, lag_finding,
                                             term_label as _term_label)
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import parse_term, term_matrix
@@ -134,6 +134,13 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
     ana = usable & np.all(np.isfinite(decl_vals), axis=1) & (x_eq.v >= opt.min_speed_mps)
     for name, arr in kept.items():
         ana &= np.isfinite(arr)
+    declared_eq = equation
+    held, equation = zero_terms(equation, decl_vals, ana)
+    if held:
+        say(f"declared term(s) {', '.join(held)} 0 on every analysis sample: kept at their declared "
+            "coefficients, not fitted")
+        decl_vals = decl_vals[:, [j for j, t in enumerate(declared) if t not in held]]
+        declared = equation.term_names
     # timing (measurement side): a power–speed lag is corrected in the data before the search
     timing_finding, lag_note = None, None
     if opt.structural and opt.max_lag_s > 0:
@@ -174,14 +181,14 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
     plot = {"y": y, "v": x.v, "pred_base": ev0["pred"], "signals": tr.signals, "findings": []}
     rounds, rejected = search_rounds(tr, cands, declared, roles, opt, say, findings, plot)
 
-    return assemble(tr=tr, measured=measured, equation=equation, declared=declared,
+    return restore_held(assemble(tr=tr, measured=measured, equation=equation, declared=declared,
                     calibrated=calibrated, opt=opt, findings=findings, rounds=rounds, ev0=ev0,
                     base_coefs=base_coefs, plot=plot, n_rows=len(y_all),
                     n_usable=int(usable.sum()), skipped=skipped, sig=sig, n_candidates=len(cands),
                     n_trips=n_trips, dropped=dropped,
                     roles={k: roles[k] for k in sig if k in roles},
                     extra={"not_replicated": rejected, "timing": lag_note,
-                           "structural": structural_notes})
+                           "structural": structural_notes}), declared_eq, held)
 
 
 #: shifts on each side of zero on the coarse grid of the lag search

@@ -37,7 +37,7 @@ from sumo_drvpw.data.stream import BATCH_ROWS, plan
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.diagnose.candidates import Candidate, check_include, generate_candidates, screen_signals
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
-from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble
+from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble, restore_held, zero_terms
 from sumo_drvpw.fit.stream import _add_counts
 from sumo_drvpw.fit.diagnose.source import (CACHE_MB, INPUT_FIELDS, SAMPLE_ROWS, Batches, View,
                                             concat_inputs, parquet_metadata, read_batches)
@@ -243,6 +243,14 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     for s in equation.signals:
         if s not in x_s.signals:
             raise UserError(f"equation '{equation.name}' needs the log column '{s}', which the data lack")
+    declared_eq = equation  # terms 0 on the first rows' analysis samples are held (result.zero_terms)
+    decl_s = term_matrix(declared, x_s.with_mass(equation.mass_kg))
+    held, equation = zero_terms(equation, decl_s, usable_s & np.all(np.isfinite(decl_s), axis=1)
+                                & (x_s.v >= opt.min_speed_mps))
+    if held:
+        say(f"declared term(s) {', '.join(held)} 0 on every analysis sample of the first rows: kept at "
+            "their declared coefficients, not fitted")
+        declared = equation.term_names
     roles = resolve(first_log.extra_columns, from_metadata(parquet_metadata(paths)))
     kept, skipped = screen_signals(dict(x_s.signals), y_s, x_s, tcodes_s, usable_s, opt, roles)
     for name in list(kept):
@@ -301,6 +309,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
                        n_candidates=res["n_candidates"], n_trips=int((tr.trip_counts() > 0).sum()),
                        dropped=res["dropped"], roles={k: roles[k] for k in kept_names if k in roles},
                        extra=res["extra"])
+        out = restore_held(out, declared_eq, held)
     finally:
         on_disk = batches.on_disk
         batches.close()
