@@ -292,6 +292,34 @@ def test_signal_during_run(tmp_path, sig, delay):
         assert s["end_s"] == pytest.approx(s["begin_s"] + s["steps"] * s["step_length_s"])
 
 
+@pytest.mark.sumo
+def test_interrupt_during_fcd_writes_the_replayed_part_marked(tmp_path, monkeypatch, capsys):
+    """An FCD replay stopped mid-way (Ctrl-C in its 51st step) writes the replayed part marked
+    ``interrupted: true`` in its manifest and summary, exits 130 and says so; it exited 0
+    (or 130 saying "its output was completed") with the manifest's interrupted false (found
+    by a sweep)."""
+    from sumo_drvpw.sim import run_scenario
+    from sumo_drvpw.sim.loop import Stepper
+
+    city = REPO / "scenarios" / "city.toml"
+    fcd = tmp_path / "fcd.xml"
+    run_scenario(city, None, end=120, figures=False, options=["--fcd-output", str(fcd)])
+    step = Stepper.after_step
+
+    def after_step(self):
+        if self.ledger.steps == 50:
+            raise KeyboardInterrupt()
+        step(self)
+    monkeypatch.setattr(Stepper, "after_step", after_step)
+    out = tmp_path / "replay"
+    code = cli_main(["fcd", str(fcd), "--scenario", str(city), "--out", str(out), "--no-figures"])
+    o = capsys.readouterr()
+    assert code == 130 and "interrupted" in o.out and "completed" not in o.err, (o.out, o.err)
+    assert _assert_whole(out)["interrupted"] is True and _hidden(tmp_path) == []
+    s = json.loads((out / "summary.json").read_text())
+    assert s["interrupted"] is True and s["steps"] == 50  # booked whole; the 51st was stopped
+
+
 # ------------------------------------------------------------------ disk full
 
 @pytest.fixture

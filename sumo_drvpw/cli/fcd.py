@@ -80,7 +80,8 @@ def main(args: argparse.Namespace) -> int:
     if args.no_figures:
         overrides["figures"] = False
     cold_start_override(args, overrides)
-    with output_set(args, args.out, [args.fcd, args.net, args.scenario, args.vtypes]) as tmp:
+    meta: dict = {}
+    with output_set(args, args.out, [args.fcd, args.net, args.scenario, args.vtypes], meta=meta) as tmp:
         if args.engine == "dask":
             from sumo_drvpw.sim.fcd_dask import process_fcd_dask
 
@@ -92,7 +93,11 @@ def main(args: argparse.Namespace) -> int:
             res = process_fcd(args.fcd, net=args.net, scenario=args.scenario, out_dir=tmp,
                               equations=args.equation, vtype_files=args.vtypes,
                               begin_s=args.begin, **overrides)
+        meta["interrupted"] = bool(res.summary.get("interrupted"))
     from sumo_drvpw.cli.run import _print_summary
 
     _print_summary(res.summary, args.out)
+    if meta["interrupted"]:  # as run: the replayed part is written, marked interrupted
+        print("interrupted: outputs cover the replayed part")
+        return 130
     return 0
