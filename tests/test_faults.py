@@ -320,6 +320,46 @@ def test_interrupt_during_fcd_writes_the_replayed_part_marked(tmp_path, monkeypa
     assert s["interrupted"] is True and s["steps"] == 50  # booked whole; the 51st was stopped
 
 
+@pytest.mark.sumo
+def test_interrupt_during_a_sweep_stops_it_there(tmp_path, monkeypatch, capsys):
+    """`run city highway` (one after the other) stopped in the first scenario's 50th step:
+    that part is written, the second scenario is not run, the manifest says interrupted and
+    the command exits 130; the sweep ran on to its end and called itself whole (found by a
+    sweep)."""
+    from sumo_drvpw.sim.loop import Stepper
+
+    step = Stepper.after_step
+
+    def after_step(self):
+        if self.ledger.steps == 50:
+            raise KeyboardInterrupt()
+        step(self)
+    monkeypatch.setattr(Stepper, "after_step", after_step)
+    out = tmp_path / "sweep"
+    code = cli_main(["run", "city", "highway", "--end", "200", "--no-figures", "--out", str(out)])
+    o = capsys.readouterr()
+    assert code == 130 and "not run: highway" in o.out, (o.out, o.err)
+    assert _assert_whole(out)["interrupted"] is True and _hidden(tmp_path) == []
+    assert json.loads((out / "city" / "summary.json").read_text())["interrupted"] is True
+    assert not (out / "highway").exists()
+    assert set(pd.read_csv(out / "runs.csv").scenario) == {"city"}
+
+
+@pytest.mark.sumo
+def test_sigterm_during_a_parallel_sweep_stops_its_workers(tmp_path):
+    """`run city highway --jobs 2` to 1,000,000 s (a minute or more of stepping), SIGTERM
+    once it steps: the workers are stopped at once and the command exits 143 with no output
+    set; the workers ran on to the end before (found by a sweep)."""
+    out = tmp_path / "sweep"
+    t0 = time.monotonic()
+    code, o, err, sent = _signal_once_writing(
+        ["run", "city", "highway", "--jobs", "2", "--end", "1000000", "--no-figures", "--out", str(out)],
+        tmp_path, signal.SIGTERM, delay_s=3.0, timeout=300)
+    assert sent and code == 143, (code, err)
+    assert time.monotonic() - t0 < 25 and "Traceback" not in err, (time.monotonic() - t0, err)
+    assert not out.exists() and _hidden(tmp_path) == []
+
+
 # ------------------------------------------------------------------ disk full
 
 @pytest.fixture

@@ -213,7 +213,13 @@ def main(args: argparse.Namespace) -> int:
         summaries = dict(zip(names, _run_many(args, scen, [tmp / n for n in names], overrides)))
         write_text(tmp / "runs.csv", _combined(summaries, {n: tmp / n for n in names}).to_csv(index=False))
         meta["scenarios"] = dict(zip(names, scen))
+        meta["interrupted"] = any(s.get("interrupted") for s in summaries.values())
     for n, s in summaries.items():
         _print_summary(s, Path(args.out) / n, f"[{n}] ")
     print(f"all runs side by side: {Path(args.out) / 'runs.csv'}")
+    if meta["interrupted"]:  # one after the other: the sweep ended in the interrupted scenario
+        left = [n for n in names if n not in summaries]
+        print(f"interrupted: outputs cover the simulated part of [{list(summaries)[-1]}]"
+              + (f"; not run: {', '.join(left)}" if left else ""))
+        return 130
     return 0

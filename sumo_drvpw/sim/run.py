@@ -439,6 +439,12 @@ def check_vtype_filter(sc, ledger) -> None:
 _ONE_SUMO = None
 
 
+def _ignore_sigint() -> None:
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _sweep_task(scenario: str, out: str, overrides: dict, keep_vehicles: bool = False) -> dict:
     """One scenario, one SUMO, in this process (a pool or Dask worker); returns the summary."""
     import threading
@@ -474,15 +480,26 @@ def run_scenarios(scenarios: list, out_dirs: list, overrides: dict | None = None
     for s in paths:  # every scenario checked before any runs: a bad one costs no good run
         load_scenario(s, **overrides)
     if engine == "local":
-        if jobs <= 1:
-            return [_sweep_task(s, o, overrides) for s, o in zip(paths, outs)]
+        if jobs <= 1:  # one after the other; an interrupted one (Ctrl-C) ends the sweep there
+            done = []
+            for s, o in zip(paths, outs):
+                done.append(_sweep_task(s, o, overrides))
+                if done[-1].get("interrupted"):
+                    break
+            return done
         import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
 
-        # spawn: each worker imports libsumo afresh (one simulation per process)
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
-            futs = [pool.submit(_sweep_task, s, o, overrides) for s, o in zip(paths, outs)]
-            return [f.result() for f in futs]
+        # spawn: each worker imports libsumo afresh (one simulation per process); the workers
+        # leave Ctrl-C to this process, which stops them all at once (terminate) on a signal
+        pool = mp.get_context("spawn").Pool(jobs, initializer=_ignore_sigint)
+        try:
+            res = [pool.apply_async(_sweep_task, (s, o, overrides)) for s, o in zip(paths, outs)]
+            out = [r.get() for r in res]
+            pool.close()
+            return out
+        finally:
+            pool.terminate()
+            pool.join()
     if engine != "dask":
         raise UserError(f"engine '{engine}' unknown for SUMO runs; choose local or dask")
     # absolute: a worker's working folder is not ours
