@@ -93,7 +93,19 @@ def test_linearised_columns_sum_to_the_chain(kind):
 
 def test_planted_standstill_load_is_found(planted):
     m, b, _ = planted
-    res = trace_chain(m, _declared(b))
+    declared = _declared(b)
+    keys = ("aux_power_w", "standstill_aux_w", "traction_efficiency")
+    declared.chain.std_err = {k: 0.01 for k in keys}
+    declared.chain.reading = {k: f"declared {k}" for k in keys}
+    res = trace_chain(m, declared)
+    # what the loop set carries no longer the declared fit's standard error and reading
+    # ("290 W" beside an aux_power_w of 1286 W; found by a sweep); the rest keeps them
+    closed = res.equation.chain
+    changed = [k for k in keys if getattr(closed, k) != getattr(declared.chain, k)]
+    assert "standstill_aux_w" in changed
+    for k in keys:
+        assert (k in closed.std_err) == (k not in changed)
+        assert closed.reading[k].startswith("set by diagnose's closed loop" if k in changed else "declared")
     names = [f["term"] for f in res.report["findings"]]
     assert names[0] == "standstill_aux_w", names
     f = res.report["findings"][0]

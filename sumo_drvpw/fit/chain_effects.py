@@ -215,3 +215,27 @@ def best_variant(w, Z, t, c: Cand, rows=slice(None)) -> int:
         return i
     c.variants.append((None, col(float(res.x)), float(res.x)))
     return len(c.variants) - 1
+
+
+def _flat(d: dict, pre: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict) and k not in ("std_err", "reading", "provenance", "metrics"):
+            out.update(_flat(v, f"{pre}{k}."))
+        elif not isinstance(v, dict):
+            out[pre + k] = v
+    return out
+
+
+def mark_changed(declared, closed, findings: list) -> None:
+    """The closed chain's fit statistics and readings of the parameters the closed loop set
+    (changed or new against the declared chain, ``hvac.<key>`` and ``loads.<column>``
+    included): the declared fit's standard errors dropped, each reading replaced by what the
+    loop found (they described the declared values: "290 W" beside an aux_power_w of 1286)."""
+    a, b = _flat(declared.to_dict()), _flat(closed.to_dict())
+    changed = sorted(k for k, v in b.items() if a.get(k) != v and k != "predicts")
+    closed.std_err = {k: v for k, v in closed.std_err.items() if k not in changed}
+    found = "; ".join(findings) or "the closed loop"
+    closed.reading = {**{k: v for k, v in closed.reading.items() if k not in changed},
+                      **{k: f"set by diagnose's closed loop ({found})" for k in changed}}
+    closed.metrics = {}

@@ -76,7 +76,7 @@ from sumo_drvpw.model.chain import EnergyChain
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import term_matrix
-from sumo_drvpw.fit.chain_effects import _eta as _eff, apply, best_variant, candidates as _candidates
+from sumo_drvpw.fit.chain_effects import _eta as _eff, apply, best_variant, candidates as _candidates, mark_changed
 
 METRIC_KEYS = ("rmse_w", "mae_w", "r2", "bias_w")
 
@@ -439,9 +439,7 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
             f["coefficient"] = float(co[0]) if co.size == 1 else [float(v) for v in co]
     closed.name = f"{equation.name}_closed" if accepted else equation.name
     if accepted:  # the declared chain's fit statistics no longer describe what was changed
-        changed = {c.name for c, _, _ in accepted}
-        closed.chain.std_err = {k: v for k, v in closed.chain.std_err.items() if k not in changed}
-        closed.chain.metrics = {}
+        mark_changed(equation.chain, closed.chain, [f"{f['term']}: {f['reading']}" for f in findings])
     closed.provenance = dict(getattr(equation, "provenance", {}) or {},
                              closed_loop={"declared": equation.name, "target": m.target,
                                           "findings": [f"{f['term']}: {f['reading']}" for f in findings],
