@@ -577,6 +577,13 @@ def _(d):  # said the log had no column 'heater'
                 "--load", "heater")
 
 
+@case("options", "battery chain with --engine dask", ("--engine dask", "--target battery"))
+def _(d):  # was accepted and ran in memory, the option silently ignored (compare refused it)
+    log = write(d, "log.parquet", _battery_log())
+    return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--equation", "roadload_spec",
+                "--engine", "dask")
+
+
 @case("vendor-truncated", "import a vendor value that overflows to inf",
       ("src.csv", "battery_current_a", "inf"))
 def _(d):  # was written into the canonical log as inf

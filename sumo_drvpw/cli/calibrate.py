@@ -65,6 +65,9 @@ def _check_name(args) -> None:
 def main(args) -> int:
     _check_name(args)
     if getattr(args, "target", "wheel") != "wheel":
+        if getattr(args, "engine", "local") == "dask":  # as compare: chains are fitted in memory
+            raise UserError(f"--engine dask calibrates driving power only (this is --target {args.target}); "
+                            "the chain is fitted in memory: leave --engine out")
         return main_chain(args)
     if getattr(args, "equation", None) or getattr(args, "load", None) or getattr(args, "hvac", None):
         raise UserError("--equation, --load and --hvac go with --target battery or fuel")
