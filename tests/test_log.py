@@ -50,7 +50,7 @@ def test_speed_in_kmh(tmp_path, capsys):
     df = _log()
     df.loc[57, "speed_mps"] = 130.0
     p = _write(tmp_path, df)
-    _expect_exit2(tmp_path, capsys, p, "speed_mps", "row 57", "km/h")
+    _expect_exit2(tmp_path, capsys, p, "speed_mps", "row 57", "--speed-unit km/h")  # the flag, as typed
 
 
 def test_time_going_backwards(tmp_path, capsys):

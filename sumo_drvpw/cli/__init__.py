@@ -406,7 +406,8 @@ def main(argv: list[str] | None = None) -> int:
 #: what a library message calls an option (it names no flags) → the flag the user types,
 #: for the commands that have it (argparse attribute)
 _FLAGS = (("speed_unit", "declare the unit (speed unit km/h or m/s)",
-           "declare the unit (--speed-unit km/h, or --speed-unit m/s to keep it)"),)
+           "declare the unit (--speed-unit km/h, or --speed-unit m/s to keep it)"),
+          ("speed_unit", "read it with speed unit km/h", "read it with --speed-unit km/h"))
 
 
 def _as_typed(msg: str, args) -> str:

@@ -297,7 +297,8 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
     if (v > SPEED_MAX_MPS).any():
         i = int(np.flatnonzero(v > SPEED_MAX_MPS)[0])
         raise UserError(f"{p}: column 'speed_mps' is {v[i]:g} at row {i}, above {SPEED_MAX_MPS:g} m/s: "
-                        "is the speed in km/h? convert to m/s (divide by 3.6)")
+                        "is the speed in km/h? read it with speed unit km/h, or convert it to m/s "
+                        "(divide by 3.6)")
     tol = opt.negative_speed_tolerance_mps
     if (v < -tol).any():
         i = int(np.flatnonzero(v < -tol)[0])
