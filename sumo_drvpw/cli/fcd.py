@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import argparse
 
-from sumo_drvpw.cli import (add_cold_start, add_force, check_period, cold_start_override, output_set,
-                            sumo_time_arg)
+from sumo_drvpw.cli import (add_cold_start, add_force, check_air_temperature, check_period,
+                            cold_start_override, output_set, sumo_time_arg)
 from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 
 
@@ -34,6 +34,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--begin", type=sumo_time_arg, help="ignore timesteps before this [s, or h:m:s]")
     parser.add_argument("--end", type=sumo_time_arg, help="stop at this simulation time [s, or h:m:s]")
     parser.add_argument("--period", type=float, metavar="S", help="edgeData interval [s]")
+    parser.add_argument("--air-temperature", type=float, metavar="C",
+                        help="air temperature [°C] of the recorded run, replacing the scenario's [air] "
+                             "(as run's option: the cold terms, HVAC, cold starts, warm-engine fuel)")
     add_cold_start(parser, "in the FCD")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     add_engine_arguments(parser, ("local", "dask"),
@@ -77,6 +80,9 @@ def main(args: argparse.Namespace) -> int:
     check_period(args.period)
     if args.period is not None:
         overrides["period"] = args.period
+    check_air_temperature(args.air_temperature)
+    if args.air_temperature is not None:
+        overrides["air_temperature_c"] = args.air_temperature
     if args.no_figures:
         overrides["figures"] = False
     cold_start_override(args, overrides)
