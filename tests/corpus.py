@@ -584,6 +584,12 @@ def _(d):  # was accepted and ran in memory, the option silently ignored (compar
                 "--engine", "dask")
 
 
+@case("options", "compare --workers without --engine dask", ("--workers", "--engine dask"))
+def _(d):  # was accepted and ignored with --engine memory (calibrate refused it)
+    return _cmp(write(d, "log.parquet", base_log()), d, "--equation", "vsp_ldv1999", "--engine", "memory",
+                "--workers", "2")
+
+
 @case("vendor-truncated", "import a vendor value that overflows to inf",
       ("src.csv", "battery_current_a", "inf"))
 def _(d):  # was written into the canonical log as inf

@@ -27,8 +27,9 @@ def main(args) -> int:
     from sumo_drvpw.fit.compare import compare
     from sumo_drvpw.report.comparison import write_comparison_report
     from sumo_drvpw.data.measured import load_measured, resolve_equations
-    from sumo_drvpw.cli._scale import compare_main
+    from sumo_drvpw.cli._scale import check_engine_arguments, compare_main
 
+    check_engine_arguments(args)  # --workers, --scheduler only with --engine dask
     if compare_main(args) is not None:  # driving power, streamed in bounded memory (issue #14)
         return 0
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
