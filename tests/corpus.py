@@ -577,6 +577,12 @@ def _(d):  # said the log had no column 'heater'
                 "--load", "heater")
 
 
+@case("drive-log", "battery chain on a load column the log lacks", ("log.parquet", "no load column 'heater'"))
+def _(d):  # was said only after the whole road-load fit (found by a sweep)
+    log = write(d, "log.parquet", _battery_log())
+    return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--load", "heater")
+
+
 @case("options", "battery chain with --engine dask", ("--engine dask", "--target battery"))
 def _(d):  # was accepted and ran in memory, the option silently ignored (compare refused it)
     log = write(d, "log.parquet", _battery_log())

@@ -264,7 +264,7 @@ def main_chain(args) -> int:
     """``calibrate --target battery|fuel``: the energy chain on top of a road-load equation."""
     from sumo_drvpw.data.measured import load_measured, resolve_equations
     from sumo_drvpw.fileio import check_output_path
-    from sumo_drvpw.fit.chain import calibrate_on
+    from sumo_drvpw.fit.chain import calibrate_on, check_load_columns
     from sumo_drvpw.fit.compare import compare
     from sumo_drvpw.model.equations import save_equation
 
@@ -290,6 +290,7 @@ def main_chain(args) -> int:
     ro = read_options(args, [args.equation] if args.equation else ())
     m = load_measured(args.logs, args.vehicle, ro, target=args.target)
     note_counts(m.counts)
+    check_load_columns(m, args.load)  # before the road-load fit
     if args.equation:
         eq = resolve_equations([args.equation], m.vehicle)[0]
         road = f"road-load equation {eq.name} ({eq.path or 'built in'})"

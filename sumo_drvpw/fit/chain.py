@@ -496,13 +496,24 @@ def _check_chain_inputs(m, use: np.ndarray, loads, p_drive=None) -> None:
 
         refuse_falling_battery(where, m.source, np.asarray(p_drive, float)[use], y, np.ones(len(y), bool),
                                SIGN_CHECK_W, "the driving power")
-    for c in loads:
+    check_load_columns(m, loads, use)
+
+
+def check_load_columns(m, loads, use=None) -> None:
+    """UserError naming the log and the column: a load column that is missing, not numeric,
+    or without a number on the usable samples ``use`` (default: the log's usable samples) —
+    checked before anything is fitted."""
+    where, use = m.log.describe(), (m.usable if use is None else use)
+    for c in loads or ():
         col = m.inputs.signals.get(c)
         if col is None and c in m.log.df.columns:
             first = m.log.df[c].dropna()
             raise UserError(f"{where}: load column '{c}' is not numeric (first value "
                             f"{first.iloc[0] if len(first) else None!r}): a load is power in W")
-        if col is not None and not np.isfinite(np.asarray(col, float)[use]).any():
+        if col is None:
+            raise UserError(f"{where}: no load column '{c}' (extra columns: "
+                            f"{', '.join(sorted(m.inputs.signals)) or 'none'})")
+        if not np.isfinite(np.asarray(col, float)[use]).any():
             raise UserError(f"{where}: load column '{c}' has no number on the "
                             f"{int(use.sum())} usable samples")
 
