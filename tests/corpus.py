@@ -583,6 +583,12 @@ def _(d):  # was said only after the whole road-load fit (found by a sweep)
     return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--load", "heater")
 
 
+@case("options", "battery chain with an HVAC column the log lacks", ("--hvac cabin_c:21", "no column 'cabin_c'"))
+def _(d):  # was said only after the whole road-load fit
+    log = write(d, "log.parquet", _battery_log())
+    return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--hvac", "cabin_c:21")
+
+
 @case("options", "battery chain with --engine dask", ("--engine dask", "--target battery"))
 def _(d):  # was accepted and ran in memory, the option silently ignored (compare refused it)
     log = write(d, "log.parquet", _battery_log())

@@ -291,6 +291,9 @@ def main_chain(args) -> int:
     m = load_measured(args.logs, args.vehicle, ro, target=args.target)
     note_counts(m.counts)
     check_load_columns(m, args.load)  # before the road-load fit
+    if hvac and hvac["column"] not in m.inputs.signals:
+        raise UserError(f"--hvac {args.hvac}: {m.log.describe()} has no column '{hvac['column']}' "
+                        f"(extra columns: {', '.join(sorted(m.inputs.signals)) or 'none'})")
     if args.equation:
         eq = resolve_equations([args.equation], m.vehicle)[0]
         road = f"road-load equation {eq.name} ({eq.path or 'built in'})"
