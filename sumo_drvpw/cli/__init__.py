@@ -77,11 +77,11 @@ def add_cold_start(p, during: str) -> None:
     """The ``--cold-start`` and ``--cold-start-share`` options of ``run`` and ``fcd``."""
     p.add_argument("--cold-start", action="store_true",
                    help=f"every vehicle departing {during} starts a cold engine: fuel chains add their "
-                        "cold_start_fuel_l at its departure (the scenario's [vehicles] cold_start; "
-                        "default: trips start warm)")
+                        "cold_start_fuel_l over its first minutes, as it decays from the departure "
+                        "(the scenario's [vehicles] cold_start; default: trips start warm)")
     p.add_argument("--cold-start-share", type=float, metavar="SHARE",
                    help="only this share (0-1) of the departing vehicles starts cold: fuel chains add "
-                        "that share of their cold start at each departure (a fleet's expected fuel); "
+                        "that share of their cold start to each trip (a fleet's expected fuel); "
                         "a vType's or vClass's own cold_start in the scenario wins over either option")
 
 

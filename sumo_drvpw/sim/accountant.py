@@ -244,8 +244,8 @@ class Accountant(_Listener):
 
     def set_cold_start(self, vehicle_id: str, share) -> None:
         """Say that vehicle ``vehicle_id`` (e.g. one this script adds with
-        ``vehicle.add``) starts cold with this share (True/False or 0–1): at its departure
-        the energy chains book ``share`` × their cold start, as for a route file's
+        ``vehicle.add``) starts cold with this share (True/False or 0–1): from its departure
+        the energy chains book ``share`` × their cold start as it decays, as for a route file's
         ``drvpw.cold_start`` param, which this overrides. Call it before the vehicle departs.
         ValueError when the share is not one, the vehicle has departed already, or no
         equation of the run books fuel or battery energy."""

@@ -56,8 +56,9 @@ class ChainLedger:
     chains : each equation's chain, or None (that equation books nothing here)
     n_edges : number of edges
     cold_start : the share of departing vehicles that start a cold engine (0 … 1; True: 1):
-        each fuel chain books that share of its cold start at a vehicle's departure
-        (:meth:`start`), the expected fuel of a fleet of which that share starts cold
+        each fuel chain books that share of its cold start from a vehicle's departure, as it
+        decays (:meth:`start`, :meth:`book`), the expected fuel of a fleet of which that share
+        starts cold
     cold_start_vtypes, cold_start_vclasses : shares for vehicles of these vTypes / vClasses,
         in place of ``cold_start`` (vType first; :meth:`share_of`)
     cold_start_vehicles, cold_start_flows : shares of single vehicles (vehicle id → share)
@@ -218,7 +219,7 @@ class ChainLedger:
         self._cold_new = np.concatenate([self._cold_new, np.zeros(new - cap, bool)])
 
     def share_of(self, vtype: str, vclass: str, vid: str | None = None) -> float:
-        """The share of a cold start a vehicle of this vType and vClass books at departure:
+        """The share of a cold start a vehicle of this vType and vClass books from its departure:
         its own (vehicle ``vid``'s, else its flow's: the route files' param), else its
         vType's, else its vClass's, else the run's :attr:`cold_start`."""
         if vid is not None and (self.cold_start_vehicles or self.cold_start_flows):
