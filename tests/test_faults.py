@@ -292,6 +292,19 @@ def test_signal_during_run(tmp_path, sig, delay):
         assert s["end_s"] == pytest.approx(s["begin_s"] + s["steps"] * s["step_length_s"])
 
 
+def _ctrl_c_in_step(monkeypatch, k: int) -> None:
+    """Ctrl-C (a KeyboardInterrupt) as the loop starts its k-th step: k − 1 steps booked."""
+    from sumo_drvpw.sim.loop import Stepper
+
+    step = Stepper.after_step
+
+    def after_step(self):
+        if self.ledger.steps == k - 1:
+            raise KeyboardInterrupt()
+        step(self)
+    monkeypatch.setattr(Stepper, "after_step", after_step)
+
+
 @pytest.mark.sumo
 def test_interrupt_during_fcd_writes_the_replayed_part_marked(tmp_path, monkeypatch, capsys):
     """An FCD replay stopped mid-way (Ctrl-C in its 51st step) writes the replayed part marked
@@ -299,18 +312,11 @@ def test_interrupt_during_fcd_writes_the_replayed_part_marked(tmp_path, monkeypa
     (or 130 saying "its output was completed") with the manifest's interrupted false (found
     by a sweep)."""
     from sumo_drvpw.sim import run_scenario
-    from sumo_drvpw.sim.loop import Stepper
 
     city = REPO / "scenarios" / "city.toml"
     fcd = tmp_path / "fcd.xml"
     run_scenario(city, None, end=120, figures=False, options=["--fcd-output", str(fcd)])
-    step = Stepper.after_step
-
-    def after_step(self):
-        if self.ledger.steps == 50:
-            raise KeyboardInterrupt()
-        step(self)
-    monkeypatch.setattr(Stepper, "after_step", after_step)
+    _ctrl_c_in_step(monkeypatch, 51)
     out = tmp_path / "replay"
     code = cli_main(["fcd", str(fcd), "--scenario", str(city), "--out", str(out), "--no-figures"])
     o = capsys.readouterr()
@@ -326,15 +332,7 @@ def test_interrupt_during_a_sweep_stops_it_there(tmp_path, monkeypatch, capsys):
     that part is written, the second scenario is not run, the manifest says interrupted and
     the command exits 130; the sweep ran on to its end and called itself whole (found by a
     sweep)."""
-    from sumo_drvpw.sim.loop import Stepper
-
-    step = Stepper.after_step
-
-    def after_step(self):
-        if self.ledger.steps == 50:
-            raise KeyboardInterrupt()
-        step(self)
-    monkeypatch.setattr(Stepper, "after_step", after_step)
+    _ctrl_c_in_step(monkeypatch, 51)
     out = tmp_path / "sweep"
     code = cli_main(["run", "city", "highway", "--end", "200", "--no-figures", "--out", str(out)])
     o = capsys.readouterr()

@@ -275,17 +275,27 @@ def test_accountant_refuses_a_mesoscopic_simulation():
         close_sumo(conn)
 
 
+def _city_accounted(steps: int):
+    """The city scenario in libsumo with an Accountant (vsp_ldv1999) after ``steps`` steps:
+    (connection, accountant); the caller closes the connection."""
+    conn = start_sumo(load_scenario(CITY, end=60).sumo_args)
+    try:
+        acc = Accountant(conn, equations=["vsp_ldv1999"])
+        for _ in range(steps):
+            conn.simulationStep()
+            acc.step()
+    except BaseException:
+        close_sumo(conn)
+        raise
+    return conn, acc
+
+
 def test_an_id_used_again_is_a_new_trip_with_its_own_vtype():
     """A user's script removes a car and adds a heavier vehicle under the same id: two trips,
     each on its own row with its own vType and mass (it booked on in the first row, at the
     first car's mass, unless that row happened to be flushed in between; found by a sweep)."""
-    sc = load_scenario(CITY, end=60)
-    conn = start_sumo(sc.sumo_args)
+    conn, acc = _city_accounted(30)
     try:
-        acc = Accountant(conn, equations=["vsp_ldv1999"])
-        for _ in range(30):
-            conn.simulationStep()
-            acc.step()
         vid = conn.vehicle.getIDList()[0]
         edges, vt = conn.vehicle.getRoute(vid), conn.vehicle.getTypeID(vid)
         conn.vehicle.remove(vid)
@@ -315,13 +325,8 @@ def test_a_car_removed_between_steps_is_retired_at_once():
     list the listener had read already, so it is in no arrived list the Accountant sees. The
     ledger now finds it gone (unknown to SUMO) and retires its row in the next step; it was
     held as running until the end (found by a sweep). A teleport-free run: nothing else goes."""
-    sc = load_scenario(CITY, end=60)
-    conn = start_sumo(sc.sumo_args)
+    conn, acc = _city_accounted(30)
     try:
-        acc = Accountant(conn, equations=["vsp_ldv1999"])
-        for _ in range(30):
-            conn.simulationStep()
-            acc.step()
         ids = conn.vehicle.getIDList()
         done = acc.ledger.veh_done.copy()
         conn.vehicle.remove(ids[0])
