@@ -416,3 +416,13 @@ def test_a_folder_whose_files_differ_in_optional_columns_keeps_every_row(tmp_pat
     assert (log.df["accel_mps2"].to_numpy()[~b] == 0.5).all()
     assert (log.df["mass_kg"].to_numpy()[b] == veh.mass_kg).all() and (log.df["mass_kg"].to_numpy()[~b] == 1700).all()
     assert log.counts["accel_derived_rows"] == log.counts["mass_from_vehicle_rows"] == 200
+    # grade: a file with grade_rad, one with only elevation, one with neither (read flat)
+    _write(d, _log(trip_id="a", mass_kg=1700.0, accel_mps2=0.5, grade_rad=0.02), "a.csv")
+    _write(d, _log(trip_id="b", elevation_m=np.arange(200) * 0.05), "b.csv")
+    _write(d, _log(trip_id="c"), "c.csv")
+    log = read_log(d, veh)
+    g = log.df.groupby("trip_id")["grade_rad"]
+    assert not log.excluded.any() and (g.min()["a"], g.max()["c"]) == (0.02, 0.0)
+    assert_allclose(log.df["grade_rad"].to_numpy()[(log.df["trip_id"] == "b").to_numpy()],
+                    read_log(d / "b.csv", veh).df["grade_rad"].to_numpy(), rtol=1e-12)
+    assert log.counts["grade_flat_trips"] == ["c"] and log.counts["grade_filled_rows"] == 400

@@ -493,17 +493,24 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
         counts["accel_source"] = "accel_mps2 column"
         deriv = (seg, np.full(int(seg[-1]) + 1, opt.accel_window_s))
 
-    if "grade_rad" in df:
-        counts["grade_source"] = "grade_rad column"
-    elif "grade_pct" in df:
-        df["grade_rad"] = np.arctan(df["grade_pct"].to_numpy(float) / 100.0)
-        counts["grade_source"] = "grade_pct column"
-    elif "elevation_m" in df and np.isfinite(df["elevation_m"].to_numpy(float)).any():
+    def elevation_grade():
         step = v * np.r_[0.0, np.diff(t)]
         step[start] = 0.0
         dist = pd.Series(step).groupby(trip_codes, sort=False).cumsum().to_numpy()
+        return grade_from_elevation(df["elevation_m"].to_numpy(float), dist, trip_codes, opt.grade_window_m)
+
+    has_z = "elevation_m" in df and np.isfinite(df["elevation_m"].to_numpy(float)).any()
+    lacking = None
+    if "grade_rad" in df:
+        counts["grade_source"] = "grade_rad column"
+        lacking = _trips_without(df["grade_rad"], trip_codes)
+    elif "grade_pct" in df:
+        df["grade_rad"] = np.arctan(df["grade_pct"].to_numpy(float) / 100.0)
+        counts["grade_source"] = "grade_pct column"
+        lacking = _trips_without(df["grade_pct"], trip_codes)
+    elif has_z:
         z = df["elevation_m"].to_numpy(float)
-        df["grade_rad"] = grade_from_elevation(z, dist, trip_codes, opt.grade_window_m)
+        df["grade_rad"] = elevation_grade()
         counts["grade_source"] = (f"elevation_m over distance: 1 m grid, {opt.grade_window_m:g} m "
                                   "moving average, gradient")
         # a trip without elevation is read flat, a stretch without it (no GPS fix) is bridged
@@ -518,6 +525,16 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
         counts["grade_source"] = ("none (elevation_m holds no value: flat road assumed)" if "elevation_m" in df
                                   else "none (flat road assumed)")
         counts["grade_flat_trips"] = [str(x) for x in df["trip_id"].to_numpy()[start]]
+    if lacking is not None and lacking.any():  # a file of a folder without the column: its
+        # trips' grade from their elevation, else flat, as the file read alone (NaN: left out)
+        fill = np.nan_to_num(elevation_grade()) if has_z else np.zeros(len(df))
+        df["grade_rad"] = np.where(lacking, fill, df["grade_rad"].to_numpy(float))
+        counts["grade_filled_rows"] = int(lacking.sum())
+        zs = df["elevation_m"].to_numpy(float) if has_z else np.full(len(df), np.nan)
+        no_z = np.bincount(trip_codes, weights=np.isfinite(zs).astype(float)) < 2
+        flat = df["trip_id"].to_numpy()[start & lacking & no_z[trip_codes]]
+        if len(flat):
+            counts["grade_flat_trips"] = [str(x) for x in flat]
 
     if "wind_mps" in df:
         counts["wind_source"] = "wind_mps column"

@@ -107,7 +107,11 @@ class _Signals(dict):
         return dict.__contains__(self, key) or key in self._kept or key in self._derived
 
 
-def _prepare(m, eq, declared, kept, opt, lags, elev: bool, acc_col) -> dict:
+class _HeldNotZero(Exception):
+    """A term held as 0 on the first-look sample is ≠ 0 in a later batch."""
+
+
+def _prepare(m, eq, declared, kept, opt, lags, elev: bool, acc_col, held=()) -> dict:
     """The arrays of one batch (a Measured of whole trips) the tracer needs."""
     y_all = np.asarray(m.power_w, float)
     x_eq = m.inputs.with_mass(eq.mass_kg)
@@ -116,6 +120,8 @@ def _prepare(m, eq, declared, kept, opt, lags, elev: bool, acc_col) -> dict:
     sig = [np.asarray(m.inputs.signals[k], float) for k in kept]
     for a in sig:
         ana &= np.isfinite(a)
+    if held and np.any(np.nan_to_num(term_matrix(list(held), x_eq)[ana]) != 0):
+        raise _HeldNotZero()
     df = m.log.df
     codes, names = _trip_codes(df["trip_id"])
     idx = np.flatnonzero(ana)
@@ -173,7 +179,7 @@ def _finite_at_every_shift(y: np.ndarray, trip: np.ndarray, big: int) -> np.ndar
 def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | None = None,
                     read_options=None, target: str = "wheel", rows: int = READ_ROWS,
                     sample_rows: int = SAMPLE_ROWS, cache_mb: float = CACHE_MB,
-                    progress=None, bar=None) -> DiagnoseResult:
+                    progress=None, bar=None, hold: bool = True) -> DiagnoseResult:
     """Trace the residual of ``equation`` on drive logs of any length (see module docstring).
 
     Parameters
@@ -190,6 +196,8 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     cache_mb : prepared batches kept in memory up to this size [MB], beyond on disk
     progress : optional callable(str) for progress messages
     bar : optional callable(rows) called per batch read (a progress bar)
+    hold : hold declared terms that are 0 on every analysis sample of the first-look sample
+        (result.zero_terms); when a later batch has them ≠ 0 the trace starts again without
 
     Returns the :class:`DiagnoseResult`; ``details["resources"]`` holds rows, seconds,
     passes and whether the batches were on disk.
@@ -243,14 +251,6 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     for s in equation.signals:
         if s not in x_s.signals:
             raise UserError(f"equation '{equation.name}' needs the log column '{s}', which the data lack")
-    declared_eq = equation  # terms 0 on the first rows' analysis samples are held (result.zero_terms)
-    decl_s = term_matrix(declared, x_s.with_mass(equation.mass_kg))
-    held, equation = zero_terms(equation, decl_s, usable_s & np.all(np.isfinite(decl_s), axis=1)
-                                & (x_s.v >= opt.min_speed_mps))
-    if held:
-        say(f"declared term(s) {', '.join(held)} 0 on every analysis sample of the first rows: kept at "
-            "their declared coefficients, not fitted")
-        declared = equation.term_names
     roles = resolve(first_log.extra_columns, from_metadata(parquet_metadata(paths)))
     kept, skipped = screen_signals(dict(x_s.signals), y_s, x_s, tcodes_s, usable_s, opt, roles)
     for name in list(kept):
@@ -258,6 +258,16 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
             skipped.append({"column": name, "reason": "already a factor of a declared term"})
             kept.pop(name)
     kept_names = list(kept)
+    declared_eq = equation  # terms 0 on the first rows' analysis samples are held (result.zero_terms)
+    decl_s = term_matrix(declared, x_s.with_mass(equation.mass_kg))
+    ana_s = usable_s & np.all(np.isfinite(decl_s), axis=1) & (x_s.v >= opt.min_speed_mps)
+    for name in kept_names:
+        ana_s &= np.isfinite(np.asarray(x_s.signals[name], float))
+    held, equation = zero_terms(equation, decl_s, ana_s) if hold and not calibrated else ([], equation)
+    if held:
+        say(f"declared term(s) {', '.join(held)} 0 on every analysis sample of the first rows: kept at "
+            "their declared coefficients, not fitted")
+        declared = equation.term_names
     dt_med = float(np.median(np.diff(t_s)[np.diff(tcodes_s) == 0])) if len(t_s) > 1 else 0.0
     lags = lag_range(dt_med, opt.max_lag_s) if opt.structural and opt.max_lag_s > 0 else np.array([0])
     cnt = sample[0].log.counts
@@ -278,7 +288,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
         def consume(m):
             nonlocal n_rows, n_usable, reader_counts
             reader_counts = _add_counts(reader_counts, m.counts)
-            d = _prepare(m, equation, declared, kept_names, opt, lags, elev, acc_col)
+            d = _prepare(m, equation, declared, kept_names, opt, lags, elev, acc_col, held)
             n_rows += d.pop("rows")
             n_usable += d.pop("usable")
             names.update(d["names"])
@@ -310,6 +320,10 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
                        dropped=res["dropped"], roles={k: roles[k] for k in kept_names if k in roles},
                        extra=res["extra"])
         out = restore_held(out, declared_eq, held)
+    except _HeldNotZero:  # ≠ 0 after the first rows (a folder of flat and hilly logs): no hold
+        say(f"declared term(s) {', '.join(held)} ≠ 0 beyond the first rows: read again, fitting them")
+        return diagnose_stream(paths, vehicle, declared_eq, opt, read_options, target, rows, sample_rows,
+                               cache_mb, progress, bar, hold=False)
     finally:
         on_disk = batches.on_disk
         batches.close()
