@@ -358,6 +358,38 @@ def test_sigterm_during_a_parallel_sweep_stops_its_workers(tmp_path):
     assert not out.exists() and _hidden(tmp_path) == []
 
 
+def _children(pid: int) -> list[int]:
+    """Process ids of ``pid``'s children (Linux /proc)."""
+    out = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        kids = task / "children"
+        if kids.exists():
+            out += [int(x) for x in kids.read_text().split()]
+    return out
+
+
+@pytest.mark.sumo
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
+def test_a_sweep_worker_that_dies_is_an_error_not_a_wait(tmp_path):
+    """`run city highway --jobs 2` whose worker is killed (out of memory, a SUMO crash): one
+    line, exit 2, nothing written, at once; a review found the sweep waiting for good."""
+    out = tmp_path / "sweep"
+    proc = subprocess.Popen([sys.executable, "-m", "sumo_drvpw", "run", "city", "highway", "--jobs", "2",
+                             "--end", "1000000", "--no-figures", "--out", str(out)], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.monotonic()
+    workers = []
+    while time.monotonic() - t0 < 60 and proc.poll() is None and len(workers) < 2:
+        workers = [c for c in _children(proc.pid)
+                   if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes()]
+        time.sleep(0.2)
+    time.sleep(3.0)  # both stepping
+    os.kill(workers[0], signal.SIGKILL)
+    o, err = proc.communicate(timeout=60)
+    assert proc.returncode == 2 and "ended abruptly" in err and "Traceback" not in err, err
+    assert not out.exists() and _hidden(tmp_path) == []
+
+
 # ------------------------------------------------------------------ disk full
 
 @pytest.fixture

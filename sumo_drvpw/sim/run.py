@@ -488,18 +488,28 @@ def run_scenarios(scenarios: list, out_dirs: list, overrides: dict | None = None
                     break
             return done
         import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
 
         # spawn: each worker imports libsumo afresh (one simulation per process); the workers
-        # leave Ctrl-C to this process, which stops them all at once (terminate) on a signal
-        pool = mp.get_context("spawn").Pool(jobs, initializer=_ignore_sigint)
+        # leave Ctrl-C to this process, which stops them all at once on a signal (a worker
+        # that dies breaks the pool: an error, not a wait)
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"),
+                                   initializer=_ignore_sigint)
+        from concurrent.futures.process import BrokenProcessPool
+
         try:
-            res = [pool.apply_async(_sweep_task, (s, o, overrides)) for s, o in zip(paths, outs)]
-            out = [r.get() for r in res]
-            pool.close()
-            return out
+            futs = [pool.submit(_sweep_task, s, o, overrides) for s, o in zip(paths, outs)]
+            return [f.result() for f in futs]
+        except BrokenProcessPool:
+            raise UserError("a worker process of the sweep ended abruptly (killed, out of memory, or "
+                            "SUMO crashed); nothing was written: run the scenarios one at a time to "
+                            "see which") from None
+        except BaseException:
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
+            raise
         finally:
-            pool.terminate()
-            pool.join()
+            pool.shutdown(wait=True, cancel_futures=True)
     if engine != "dask":
         raise UserError(f"engine '{engine}' unknown for SUMO runs; choose local or dask")
     # absolute: a worker's working folder is not ours
