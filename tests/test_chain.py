@@ -1722,3 +1722,26 @@ def test_a_flipped_battery_current_is_refused_not_fitted(tmp_path, capsys):
         assert not (tmp_path / cmd[-1]).exists()
     assert cli_main(["compare", str(log), "--equation", str(out), "--target", "battery", "--out",
                      str(tmp_path / "cmp")]) == 0
+
+
+def test_no_cold_start_fuel_while_a_start_stop_engine_is_off():
+    """A start-stop system's engine off (sim/shutoff.py): no fuel, the cold start's decaying
+    part included (it was booked on top of the zeroed fuel: 0.021 L in 60 s switched off;
+    found by a review); the battery chain's cabin warm-up goes on (its auxiliaries run)."""
+    from sumo_drvpw.sim.chain import ChainLedger
+
+    fuel = EnergyChain(predicts="fuel", idle_fuel_power_w=4000.0, marginal_efficiency=0.35, cold_start_fuel_l=0.07,
+                       engine_off_below_w=-np.inf)  # a conventional engine: idles when on
+    bat = EnergyChain(predicts="battery", aux_power_w=300.0, hvac={"column": "ambient_c", "setpoint_c": 20.0,
+                                                                   "heating_w_per_k": 0.0, "cooling_w_per_k": 0.0,
+                                                                   "warmup_j_per_k": 80e3})
+    led = ChainLedger(["f", "b"], [fuel, bat], 2, cold_start=1.0, signal_values={"ambient_c": 0.0})
+    led.start(np.arange(2))
+    off = np.array([True, False])
+    for _ in range(60):
+        led.book(np.arange(2), np.zeros(2, np.int64), np.zeros(2), 1.0, np.zeros((2, 2)), engine_off=off)
+    tot = led.vehicle_totals(2)
+    part = 1.0 - np.exp(-60.0 / FUEL_COLD_START_TAU_S)
+    assert tot[0, 0, 5] == 0.0 and tot[1, 0, 5] == pytest.approx(4000.0 * 60 / 43.2e6 / 0.745 + 0.07 * part)
+    warm = 80e3 * 20.0 * (1.0 - np.exp(-60.0 / CABIN_WARMUP_TAU_S))
+    assert tot[0, 1, 2] == pytest.approx(300.0 * 60 + warm) == tot[1, 1, 2]

@@ -132,9 +132,9 @@ class ChainLedger:
             cs = self.chains[e].cold_start(self.air_temperature_c)
             self._cs[j] = {2: cs["battery_j"], 3: cs["battery_j"], 4: cs["fuel_j"], 5: cs["fuel_l"],
                            6: cs["co2_kg"], 7: cs["fuel_l"]}.get(k, 0.0)
-        #: the decay time of each booked column's cold start [s], (C,)
-        self._tau = np.array([FUEL_COLD_START_TAU_S if self.chains[e].predicts == "fuel"
-                              else CABIN_WARMUP_TAU_S for e, _ in self._cols])
+        #: the booked columns of fuel chains, and the decay time of each one's cold start [s], (C,)
+        self._fuel_cols = np.array([self.chains[e].predicts == "fuel" for e, _ in self._cols], bool)
+        self._tau = np.where(self._fuel_cols, FUEL_COLD_START_TAU_S, CABIN_WARMUP_TAU_S)
         #: per vehicle row: its share of a cold start while that is being booked (0: none
         #: or done), the time booked since it began [s], and whether it is yet to be counted
         self._starting = np.zeros(capacity)
@@ -306,6 +306,8 @@ class ChainLedger:
                 vs = vidx[s]
                 age = self._cold_age[vs, None]
                 part = np.exp(-age / self._tau) - np.exp(-(age + dt) / self._tau)
+                if engine_off is not None:  # a start-stop system's engine off: no fuel, warm-up or not
+                    part[np.ix_(np.asarray(engine_off, bool)[s], self._fuel_cols)] = 0.0
                 q[s] += share[s, None] * self._cs * part
                 self._cold_age[vs] += dt
                 self._starting[vs[self._cold_age[vs] > COLD_DONE * self._tau.max()]] = 0.0
