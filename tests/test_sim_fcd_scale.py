@@ -216,7 +216,12 @@ def test_fcd_on_dask_equals_local(fcd, tmp_path, capsys):
     from sumo_drvpw.sim.fcd_dask import BUCKET_DIR, bucket_of
 
     (tmp_path / "bev.toml").write_text(BEV, encoding="utf-8")
-    base = ["fcd", str(fcd / "fcd.xml.gz"), "--scenario", str(CITY), "--end", "200",
+    # the city scenario with a [vtypes.prius3] table: no bucket may call it unmatched
+    sc = tmp_path / "city.toml"
+    sc.write_text(CITY.read_text(encoding="utf-8").replace(
+        'config = "city.sumocfg"', f'config = "{(CITY.parent / "city.sumocfg").as_posix()}"')
+        + "\n[vtypes.prius3]\nmass_kg = 1625.0\n", encoding="utf-8")
+    base = ["fcd", str(fcd / "fcd.xml.gz"), "--scenario", str(sc), "--end", "200",
             "--equation", str(tmp_path / "bev.toml"), "--equation", "vsp_ldv1999",
             "--equation", "epa_gasoline_car", "--cold-start", "--period", "50", "--no-figures"]
     assert cli_main(base + ["--out", str(tmp_path / "local")]) == 0
@@ -250,6 +255,7 @@ def test_fcd_on_dask_equals_local(fcd, tmp_path, capsys):
     for k, x in la.items():
         assert lb[k] == (pytest.approx(x, rel=1e-9, abs=1e-9) if isinstance(x, float) else x), k
     assert sb["source"]["buckets"] == 3 and sb["source"]["rows"] == sa["source"]["rows"]
+    assert sb["warnings"] == sa["warnings"] and not any("matched no vehicle" in w for w in sb["warnings"])
     assert not (b / BUCKET_DIR).exists()
     ea, eb = ((d / "edgedata.xml").read_text() for d in (a, b))
     assert ea.count("<interval ") == eb.count("<interval ") == 4

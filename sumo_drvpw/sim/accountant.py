@@ -305,7 +305,7 @@ class Accountant(_Listener):
                 for vt, a in sorted(self.resolver.assumptions.items()))
                 + " (summary.json assumptions; set vtypes.<id>.mass_kg or "
                 "vclasses.<vClass>.mass_kg to override)")
-        unused = sorted(set(getattr(sc, "vtype_data", {})) - set(self.resolver.cache))
+        unused = sorted(set(getattr(sc, "vtype_data", {})) - set(self.resolver.cache) - self.resolver.seen)
         if unused:  # a typo, or a vTypeDistribution's id (its vehicles have the members' vTypes)
             warnings.append(f"{sc.path or 'the scenario'}: " + ", ".join(f"[vtypes.{v}]" for v in unused)
                             + " matched no vehicle's vType in this run, so its settings were not used "

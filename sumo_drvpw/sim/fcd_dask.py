@@ -73,7 +73,8 @@ def bucket_task(sc, fcd_file: str, part_dir: str, b: int, buckets: int, begin_s=
     return {"ledger": led, "spill": parts, "extra": extra, "begin": acc.begin,
             "end": acc.stepper.now(), "dt": acc.stepper.dt, "missed_steps": acc.stepper.missed_steps,
             "interrupted": acc.interrupted, "skipped": r.skipped, "excluded": r.excluded,
-            "assumptions": r.assumptions, "lanes": acc.fcd_lanes}
+            "assumptions": r.assumptions, "sumo_masses": r.sumo_masses, "seen_vtypes": list(r.cache),
+            "lanes": acc.fcd_lanes}
 
 
 def merge_ledgers(ledgers: list):
@@ -179,6 +180,8 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
         r.excluded = sum(d["excluded"] for d in done)
         for d in done:
             r.assumptions.update(d["assumptions"])
+            r.sumo_masses.update(d["sumo_masses"])
+            r.seen.update(d["seen_vtypes"])  # the vTypes the buckets resolved
             for key, counts in d["skipped"].items():
                 for name, n in counts.items():
                     r.skipped[key][name] = r.skipped[key].get(name, 0) + n

@@ -68,6 +68,8 @@ class VTypeResolver:
         self.carrier_of = {(e if isinstance(e, str) else e.name):
                            (None if isinstance(e, str) else equation_carrier(e)) for e in equations}
         self.cache: dict[str, tuple] = {}
+        #: vTypes resolved by other resolvers of the same run (Dask buckets of an FCD replay)
+        self.seen: set[str] = set()
         #: vehicles not accounted because no equation is made for their vClass (by_vclass,
         #: by_vtype) or none books their energy carrier (by_carrier, when any: vClass → count)
         self.skipped: dict[str, dict[str, int]] = {"by_vclass": {}, "by_vtype": {}}
