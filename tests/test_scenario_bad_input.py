@@ -289,6 +289,9 @@ def test_unknown_equation_name_says_where_it_was_written(tmp_path, capsys):
     err = _cli_refused(capsys, ["run", "city", "--equation", "nosuch", "--end", "10", "--no-figures"],
                        tmp_path / "o3", "the equations given to the run", "'nosuch'")
     assert "city.toml" not in err
+    fcd = _write(tmp_path, '<fcd-export><timestep time="0.00"/></fcd-export>', "fcd.xml")
+    _cli_refused(capsys, ["fcd", str(fcd), "--net", str(net), "--equation", "nosuch"], tmp_path / "o4",
+                 "the equations given to the run", "'nosuch'")
 
 
 # --- 6. a truncated .gz among the SUMO inputs ---------------------------------------------

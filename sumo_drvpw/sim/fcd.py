@@ -288,8 +288,7 @@ def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, **ov
     else:
         if "equations" not in overrides:
             raise UserError("FCD: give the equations, or a scenario that names them")
-        sc = load_scenario(doc={"equations": overrides.pop("equations"),
-                                "sumo": {"net": str(net)}}, **overrides)
+        sc = load_scenario(doc={"sumo": {"net": str(net)}}, **overrides)  # equations: the run's own
     changes = {"positions": "getter"}
     if net is not None:
         p = Path(net)
