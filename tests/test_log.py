@@ -51,6 +51,13 @@ def test_speed_in_kmh(tmp_path, capsys):
     df.loc[57, "speed_mps"] = 130.0
     p = _write(tmp_path, df)
     _expect_exit2(tmp_path, capsys, p, "speed_mps", "row 57", "--speed-unit km/h")  # the flag, as typed
+    # with the unit declared, the value as the file has it, and no advice to declare it
+    df.loc[57, "speed_mps"] = 400.0
+    p = _write(tmp_path, df, "kmh.csv")
+    code = cli_main(["calibrate", str(p), "--vehicle", "prius3", "--speed-unit", "km/h",
+                     "--out", str(tmp_path / "e.toml")])
+    err = capsys.readouterr().err
+    assert code == 2 and "is 400 km/h (111.111 m/s) at row 57" in err and "--speed-unit" not in err, err
 
 
 def test_time_going_backwards(tmp_path, capsys):

@@ -296,6 +296,9 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
     v = df["speed_mps"].to_numpy(float)
     if (v > SPEED_MAX_MPS).any():
         i = int(np.flatnonzero(v > SPEED_MAX_MPS)[0])
+        if opt.speed_unit not in (None, "m/s"):  # the unit is declared already: the value is wrong
+            raise UserError(f"{p}: column 'speed_mps' is {v[i] / SPEED_UNITS[opt.speed_unit]:g} {opt.speed_unit} "
+                            f"({v[i]:g} m/s) at row {i}, above {SPEED_MAX_MPS:g} m/s: no road vehicle's speed")
         raise UserError(f"{p}: column 'speed_mps' is {v[i]:g} at row {i}, above {SPEED_MAX_MPS:g} m/s: "
                         "is the speed in km/h? read it with speed unit km/h, or convert it to m/s "
                         "(divide by 3.6)")
