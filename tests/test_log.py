@@ -423,6 +423,7 @@ def test_a_folder_whose_files_differ_in_optional_columns_keeps_every_row(tmp_pat
     assert (log.df["accel_mps2"].to_numpy()[~b] == 0.5).all()
     assert (log.df["mass_kg"].to_numpy()[b] == veh.mass_kg).all() and (log.df["mass_kg"].to_numpy()[~b] == 1700).all()
     assert log.counts["accel_derived_rows"] == log.counts["mass_from_vehicle_rows"] == 200
+    assert log.counts["accel_source"].startswith("accel_mps2 column; derived") and "200 rows" in log.counts["accel_source"]
     # grade: a file with grade_rad, one with only elevation, one with neither (read flat)
     _write(d, _log(trip_id="a", mass_kg=1700.0, accel_mps2=0.5, grade_rad=0.02), "a.csv")
     _write(d, _log(trip_id="b", elevation_m=np.arange(200) * 0.05), "b.csv")

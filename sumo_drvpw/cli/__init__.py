@@ -254,7 +254,14 @@ def note_counts(counts: dict) -> None:
     if counts.get("speed_unit"):
         print(f"note: speed_mps read in {counts['speed_unit']}")
     if "widened" in str(counts.get("accel_source", "")):
-        print(f"note: acceleration {counts['accel_source'][len('derived: '):]}")
+        print(f"note: acceleration {counts['accel_source'].split('derived: ', 1)[-1]}")
+    parts = [f"{counts[k]} row(s) {what}" for k, what in (
+        ("accel_derived_rows", "without accel_mps2 took the acceleration derived from the speed"),
+        ("mass_from_vehicle_rows", "without mass_kg took the vehicle's mass"),
+        ("grade_filled_rows", "without a grade column took their elevation's grade, else a flat road"))
+        if counts.get(k)]
+    if parts:  # a folder of logs whose files differ in optional columns
+        print("note: files without a column the others have: " + "; ".join(parts))
     grade_by = str((counts.get("measurement") or {}).get("grade", ""))
     if str(counts.get("grade_source", "")).startswith("none") and grade_by != "accelerometer":
         print("note: the logs carry no grade (no grade_rad, grade_pct or elevation_m values): a flat road "

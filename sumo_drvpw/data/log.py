@@ -495,6 +495,9 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     else:
         counts["accel_source"] = "accel_mps2 column"
         deriv = (seg, np.full(int(seg[-1]) + 1, opt.accel_window_s))
+    if lacking is not None and lacking.any():  # the files without it are the exception
+        counts["accel_source"] = ("accel_mps2 column; " + counts["accel_source"]
+                                  + f" for the {int(lacking.sum())} rows of files without it")
 
     def elevation_grade():
         step = v * np.r_[0.0, np.diff(t)]
