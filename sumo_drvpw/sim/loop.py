@@ -547,7 +547,8 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
     conn, stepper : the connection the :class:`Stepper` reads, and the stepper
     end : simulation end time [s]
     progress : tqdm progress bar on a TTY
-    period : edgeData interval [s]: edge totals are kept at each multiple of it
+    period : edgeData interval [s]: edge totals are kept every ``period`` from the first step's
+        time (the run's begin), as SUMO's own edgeData intervals
 
     Returns ``{"interrupted": bool, "end_time_s": t, "step_length_s": Δt,
     "step_method": "euler"|"ballistic"}``; Ctrl-C stops the loop cleanly so that every
