@@ -258,10 +258,10 @@ def note_counts(counts: dict) -> None:
     parts = [f"{counts[k]} row(s) {what}" for k, what in (
         ("accel_derived_rows", "without accel_mps2 took the acceleration derived from the speed"),
         ("mass_from_vehicle_rows", "without mass_kg took the vehicle's mass"),
-        ("grade_filled_rows", "without a grade column took their elevation's grade, else a flat road"))
+        ("grade_filled_rows", "without grade_rad or grade_pct took their elevation's grade, else a flat road"))
         if counts.get(k)]
-    if parts:  # a folder of logs whose files differ in optional columns
-        print("note: files without a column the others have: " + "; ".join(parts))
+    if parts:  # trips with no value in a column (in a folder: files without it), as read alone
+        print("note: trips with no value in a column, read as a file without it: " + "; ".join(parts))
     grade_by = str((counts.get("measurement") or {}).get("grade", ""))
     if str(counts.get("grade_source", "")).startswith("none") and grade_by != "accelerometer":
         print("note: the logs carry no grade (no grade_rad, grade_pct or elevation_m values): a flat road "
