@@ -328,19 +328,15 @@ unit = "V"
         np.testing.assert_allclose(a[c], b[c])
 
 
+def _datetime_map(tmp_path, speed_unit: str, options: str = ""):
+    """A columns mapping: datetime time t, speed v in ``speed_unit``, trip column."""
+    return write(tmp_path, "map.toml", '[options]\ntime_unit = "datetime"\n' + options
+                 + '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\n'
+                 f'unit = "{speed_unit}"\n[columns.trip]\nname = "trip_id"\n')
+
+
 def test_columns_datetime_time_and_trip_column(tmp_path):
-    m = write(tmp_path, "map.toml", """
-[options]
-time_unit = "datetime"
-time_format = "%Y-%m-%d %H:%M:%S"
-[columns.t]
-name = "time_s"
-[columns.v]
-name = "speed_mps"
-unit = "mph"
-[columns.trip]
-name = "trip_id"
-""")
+    m = _datetime_map(tmp_path, "mph", 'time_format = "%Y-%m-%d %H:%M:%S"\n')
     src = write(tmp_path, "x.csv", "t,v,trip\n2024-01-01 10:00:00,10,a\n2024-01-01 10:00:02,20,a\n"
                 "2024-01-01 10:00:03,0,b\n2024-01-01 10:00:03,5,b\n")
     df, rep = read("columns", src, columns=m)
@@ -357,17 +353,7 @@ def test_columns_iso_times_with_changing_utc_offsets_and_fractions(tmp_path):
     followed by 02:00:00+01:00), and Python's isoformat (no fraction on whole seconds)
     mixed with fractions. Each trip's clock runs on (read in UTC); they were a traceback
     ("Mixed timezones detected") or an error on a valid cell (found by a sweep)."""
-    m = write(tmp_path, "map.toml", """
-[options]
-time_unit = "datetime"
-[columns.t]
-name = "time_s"
-[columns.v]
-name = "speed_mps"
-unit = "m/s"
-[columns.trip]
-name = "trip_id"
-""")
+    m = _datetime_map(tmp_path, "m/s")
     src = write(tmp_path, "x.csv", "t,v,trip\n"
                 "2019-07-01T12:00:00+02:00,10,summer\n2019-07-01T12:00:00.500000+02:00,10,summer\n"
                 "2019-10-27T02:59:59.500000+02:00,10,dst\n2019-10-27T02:00:00+01:00,10,dst\n"

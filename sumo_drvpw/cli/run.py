@@ -151,8 +151,8 @@ def _equation_vehicles(out_dir) -> dict[str, int]:
     path = out_dir / "vehicles.parquet"
     if not path.is_file():
         return {}
-    col = pq.read_table(path, columns=["equation"]).column("equation").to_pylist()
-    return {e: col.count(e) for e in set(col)}
+    counts = pq.read_table(path, columns=["equation"]).column("equation").value_counts()
+    return {str(c["values"]): int(c["counts"]) for c in counts.to_pylist()}
 
 
 def _combined(summaries: dict[str, dict], out_dirs: dict):

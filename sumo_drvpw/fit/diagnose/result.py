@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import datetime as _dt
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -30,8 +30,6 @@ def zero_terms(equation: Equation, decl_vals: np.ndarray, rows: np.ndarray):
     held = [t for j, t in enumerate(equation.term_names) if not np.any(decl_vals[rows, j])]
     if not held or len(held) == len(equation.term_names):
         return [], equation
-    from dataclasses import replace
-
     return held, replace(equation, terms={t: c for t, c in equation.terms.items() if t not in held})
 
 
@@ -62,8 +60,6 @@ def _measurement(log, lag_s: float):
     (``log.options.measurement``) plus the power lag the tracer found and applied in the
     data (issue #11 §3: measurement effects are corrected in the data, and the equation
     says how, so that later comparisons read new logs the same way). None when none."""
-    from dataclasses import replace
-
     from sumo_drvpw.model.measurement import Measurement
 
     base = getattr(getattr(log, "options", None), "measurement", None) or Measurement()
