@@ -5,6 +5,9 @@ pickled across processes, as on a cluster); skipped when Dask is not installed
 (``pip install 'sumo-drvpw[dask]'``).
 """
 
+import os
+import signal
+import time
 from functools import partial
 
 import pandas as pd
@@ -132,3 +135,21 @@ def test_bad_input_in_a_dask_task_is_one_line(fleet, tmp_path, capfd):
     assert code == 2 and "Compute Failed" not in err and "Traceback" not in err
     assert [x for x in lines if "error:" in x] == lines[-1:] and "bad.parquet" in lines[-1] and "time_s" in lines[-1]
     assert not (tmp_path / "eq.toml").exists()
+
+
+@pytest.mark.skipif(not hasattr(signal, "pthread_sigmask"), reason="no signal masks here")
+def test_local_cluster_workers_leave_ctrl_c_to_the_driver(capfd):
+    """Ctrl-C in a terminal reaches the whole process group. The local cluster's workers
+    start with SIGINT blocked, so they neither die with a KeyboardInterrupt traceback above
+    the driver's one line nor get restarted; the driver's own mask is as it was."""
+    from sumo_drvpw.fit.engine import dask_client
+
+    with dask_client(workers=2) as client:
+        before = client.run(os.getpid)
+        for pid in before.values():
+            os.kill(pid, signal.SIGINT)
+        time.sleep(2.0)  # a worker that took it has died (and its nanny started another)
+        after = client.run(os.getpid)
+    assert after == before
+    assert "KeyboardInterrupt" not in capfd.readouterr().err
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, [])

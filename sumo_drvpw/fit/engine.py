@@ -242,11 +242,17 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
     if scheduler is None:
         import logging
 
-        # the cluster's own logs are for Dask's developers: a refusal that stops the
-        # driver early left tracebacks of closed connections above our one line
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", silence_logs=logging.CRITICAL)
-        client = Client(cluster)
+        try:
+            with _sigint_held_from_workers():
+                # the cluster's own logs are for Dask's developers: a refusal that stops
+                # the driver early left tracebacks of closed connections above our line
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=":0", silence_logs=logging.CRITICAL)
+            client = Client(cluster)
+        except BaseException:  # Ctrl-C while the cluster started: no cluster left behind
+            if cluster is not None:
+                cluster.close()
+            raise
     else:
         try:
             client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
@@ -258,6 +264,32 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+@contextmanager
+def _sigint_held_from_workers():
+    """SIGINT blocked in this thread while a local cluster starts, then restored (a Ctrl-C
+    meanwhile is delivered then). The threads Dask starts here (its event loop, and the
+    threads that spawn the worker processes) keep the mask, and so do the worker processes
+    (a blocked signal stays blocked across fork and exec): Ctrl-C in a terminal reaches
+    the whole process group, and each worker died with a KeyboardInterrupt traceback above
+    the driver's one line, while the driver, interrupted too, closes the cluster anyway.
+    SIGTERM is left as it is."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    from multiprocessing import resource_tracker
+
+    # started here, not by Dask inside the block: starting it unblocks SIGINT in the
+    # thread that starts it (multiprocessing/resource_tracker.py), Dask's event loop
+    resource_tracker.ensure_running()
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 class Refused:
