@@ -538,8 +538,10 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     # the electric van (Energy/unknown) by no fuel chain
     assert eqs["i"] == eqs["p"] == {"vsp_ldv1999", "drvpw_prius3", "moves_passenger_car", "epa_gasoline_car"}
     assert eqs["d"] == {"moves_light_commercial_truck", "epa_diesel_light_truck"}
-    assert eqs["t"] == {"moves_single_unit_truck"}
-    assert eqs["c"] == {"moves_intercity_bus"} and "e" not in eqs
+    # trucks and buses: their MOVES type's road load and its diesel chain (HBEFA4/RT_…: diesel;
+    # the coach writes no class: SUMO's default diesel)
+    assert eqs["t"] == {"moves_single_unit_truck", "moves_single_unit_truck_diesel"}
+    assert eqs["c"] == {"moves_intercity_bus", "moves_intercity_bus_diesel"} and "e" not in eqs
     assert eqs["r"] == {"moves_light_commercial_truck"}
     carriers = s["assumptions"]["energy_carrier"]
     assert carriers["restricted_delivery_ev"]["carrier"] == "electricity"
@@ -549,7 +551,7 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
                                "from": "SUMO's default (none written)",
                                "not_booked_by": ["epa_diesel_car", "bmw_i3_battery"]}
     # a sedan in vClass bus (for the bus lanes) is a car; a bus with a heavy-duty class a bus
-    assert eqs["s"] == eqs["p"] and eqs["h"] == {"moves_transit_bus"}
+    assert eqs["s"] == eqs["p"] and eqs["h"] == {"moves_transit_bus", "moves_transit_bus_diesel"}
     assert "vClass bus (a heavy one) only grants its lanes" in booked["lane_sedan"]["from"]
     mass = veh.groupby("vehicle")["mass_kg"].first()
     assert (mass["i"], mass["d"], mass["t"], mass["c"]) == (1478.8, 2059.7, 8538.9, 15000.0)

@@ -1,0 +1,166 @@
+"""The heavy-duty diesel fuel chains (sumo_drvpw/validation/hdv_fuel.py, docs/hdv-fuel.md).
+
+By hand: each built-in books P_fuel = P_idle + (max(P, 0)/η_d + P_aux)/η_e at a few (P, v),
+with the sourced numbers written out here (idle in US gal/h, 10 kW of accessories, the
+engine's 0.45, the driveline's 0.85 or 0.80) on the road load of its MOVES type. A bare SUMO
+config books trucks and buses in litres (the warning that no chain applies is gone), an
+electric bus is not booked by the diesel chain, and per vehicle the litres are the hand
+formula over its booked time and traction. The committed report is what the module
+computes (shared cycles; skipped without them).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sumo_drvpw.model.equations import load_equation
+
+REPO = Path(__file__).resolve().parents[1]
+NETS = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks"
+DATA = Path(os.environ.get("SUMO_DRVPW_DATA") or REPO.parent / "shared" / "data")
+LHV, RHO = 43.1e6, 0.832            # diesel [J/kg], [kg/L] (docs/sources.md, Fuels)
+GAL_H = 3.785411784 / 3600 * RHO * LHV   # W of fuel per US gal/h
+
+#: name → (MOVES base, vClasses, idle gal/h, driveline η_d)
+HAND = {
+    "moves_single_unit_truck_diesel": ("moves_single_unit_truck", ("truck", "army"), (0.59 + 0.84) / 2, 0.85),
+    "moves_combination_truck_diesel": ("moves_combination_truck", ("trailer",), 0.49, 0.80),
+    "moves_transit_bus_diesel": ("moves_transit_bus", ("bus",), 0.97, 0.85),
+    "moves_intercity_bus_diesel": ("moves_intercity_bus", ("coach",), 0.49, 0.80),
+}
+
+
+@pytest.mark.parametrize("name", sorted(HAND))
+def test_builtin_books_fuel_by_hand(name):
+    base, vclasses, gal_h, eta_d = HAND[name]
+    eq, mv = load_equation(name), load_equation(base)
+    assert eq.terms == mv.terms and tuple(eq.vclasses) == vclasses
+    ch = eq.chain
+    assert ch.predicts == "fuel" and ch.fuel == "diesel" and ch.engine_off_below_w == -np.inf
+    p = np.array([-40000.0, 0.0, 30000.0, 150000.0])
+    v = np.array([8.0, 0.0, 10.0, 22.0])
+    got = ch.evaluate(p, v, dt_s=2.0)
+    idle = gal_h * GAL_H
+    want_w = idle + (np.maximum(p, 0.0) / eta_d + 10000.0) / 0.45
+    assert got["power_w"] == pytest.approx(want_w, rel=1e-4)
+    assert got["fuel_l"] == pytest.approx(want_w * 2.0 / LHV / RHO, rel=1e-4)
+    assert got["co2_kg"] == pytest.approx(want_w * 2.0 / LHV * 3.158, rel=1e-3)
+    # standing: the measured idle plus the accessories, e.g. 0.97 gal/h + 10 kW/0.45 for a bus
+    assert got["fuel_l"][1] / 2.0 * 3600 == pytest.approx((gal_h * 3.785411784 + 10000 / 0.45 * 3600 / LHV / RHO),
+                                                          rel=1e-4)
+    # the road load is the MOVES type's: 1000·C·v³ + (1000·A/M)·m·v at 10 m/s, flat, steady
+    from sumo_drvpw.model.terms import Inputs
+    one = np.ones(1)
+    x = Inputs(v=10 * one, a=0 * one, theta=0 * one, wind=0 * one, mass=mv.provenance["source_mass_t"] * 1000 * one,
+               rho=1.2041 * one)
+    a_kw, c_kw = mv.provenance["rolling_term_A_kW_s_per_m"], mv.provenance["drag_term_C_kW_s3_per_m3"]
+    assert eq.power(x)[0] == pytest.approx(1000 * a_kw * 10 + 1000 * c_kw * 1000, rel=1e-6)
+
+
+def test_builtins_are_what_the_module_writes():
+    """The four TOML files are :func:`builtin_doc` exactly, with a reading and a source for
+    every chain parameter."""
+    from sumo_drvpw.model.equations import equation_from_dict
+    from sumo_drvpw.validation import hdv_fuel as h
+
+    assert set(h.CHAINS) == set(HAND)
+    for name in h.CHAINS:
+        want = equation_from_dict(h.builtin_doc(name), f"<{name}>").to_dict()
+        assert load_equation(name).to_dict() == want, f"{name}: regenerate with python -m sumo_drvpw.validation.hdv_fuel"
+        reading = load_equation(name).chain.reading
+        for key in ("traction_efficiency", "marginal_efficiency", "idle_fuel_power_w", "aux_power_w"):
+            assert "[" in reading[key] or "ESTIMATE" in reading[key], (name, key)
+
+
+def _config(folder: Path) -> Path:
+    vtypes = """\
+    <vType id="lkw" vClass="truck" guiShape="truck"/>
+    <vType id="semi" vClass="trailer"/>
+    <vType id="bus" vClass="bus"/>
+    <vType id="ebus" vClass="bus" emissionClass="Energy/unknown"/>
+    <vType id="coach" vClass="coach"/>
+    <vType id="car" vClass="passenger" mass="1400"/>
+"""
+    west, east = "c00c10 c10c20", "c40c30 c30c20"
+    veh = [("t", "lkw", west), ("s", "semi", east), ("b", "bus", west), ("e", "ebus", east),
+           ("c", "coach", west), ("p", "car", east)]
+    rows = "".join(f'    <vehicle id="{i}" type="{t}" depart="0" departSpeed="0"><route edges="{e}"/></vehicle>\n'
+                   for i, t, e in veh)
+    (folder / "r.rou.xml").write_text(f"<routes>\n{vtypes}{rows}</routes>\n")
+    cfg = folder / "c.sumocfg"
+    cfg.write_text(f"""<configuration>
+    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
+    <time><begin value="0"/><end value="150"/><step-length value="0.5"/></time>
+    <report><no-warnings value="true"/></report>
+</configuration>
+""")
+    return cfg
+
+
+def test_bare_config_books_trucks_and_buses_in_litres(tmp_path, capsys):
+    """A bare SUMO config (the Hamburg case in small: trucks and buses that write no
+    emissionClass, SUMO's default diesel): each is booked by its MOVES type's diesel chain,
+    per vehicle exactly P_idle·T + E_traction/(η_d·η_e) + P_aux·T/η_e; an electric bus
+    (Energy/unknown) is not booked by the diesel chain, and it alone is in the warning."""
+    pytest.importorskip("libsumo")
+    from sumo_drvpw.cli import main as cli_main
+
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    out = tmp_path / "o"
+    code = cli_main(["run", str(_config(sc)), "--out", str(out), "--no-figures", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    veh = pd.read_parquet(out / "vehicles.parquet")
+    fuel = pd.read_csv(out / "chain_vehicles.csv", dtype={"key": str})
+    booked = dict(zip(fuel["key"], fuel["equation"]))
+    assert booked["t"] == "moves_single_unit_truck_diesel" and booked["s"] == "moves_combination_truck_diesel"
+    assert booked["b"] == "moves_transit_bus_diesel" and booked["c"] == "moves_intercity_bus_diesel"
+    assert booked["p"] == "epa_gasoline_car" and "e" not in booked
+    for vid, name in booked.items():
+        if name not in HAND:
+            continue
+        _, _, gal_h, eta_d = HAND[name]
+        r = veh[(veh.vehicle == vid) & (veh.equation == name)].iloc[0]
+        want = gal_h * GAL_H * r.time_s + r.traction_total_j / (eta_d * 0.45) + 10000.0 * r.time_s / 0.45
+        got = fuel[(fuel.key == vid) & (fuel.equation == name)].iloc[0]
+        assert got.fuel_kwh * 3.6e6 == pytest.approx(want, rel=1e-6) and got.fuel_l > 0
+    cls = pd.read_csv(out / "chain_classes.csv").set_index("key")
+    assert {"truck", "trailer", "bus", "coach"} <= set(cls.index)
+    assert cls.loc["bus", "fuel_l"] == pytest.approx(fuel[fuel.key == "b"].fuel_l.sum(), rel=1e-9)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["assumptions"]["energy_carrier"]["ebus"]["carrier"] == "electricity"
+    assert "moves_transit_bus_diesel" in summary["assumptions"]["energy_carrier"]["ebus"]["not_booked_by"]
+    assert "no battery or fuel chain applies to 1 bus vehicle(s)" in err and "truck" not in err.split(
+        "no battery or fuel chain applies to")[1].split("vehicle(s)")[0]
+
+
+HAVE_CYCLES = (DATA / "cycles").is_dir()
+
+
+@pytest.mark.shared_data
+@pytest.mark.skipif(not HAVE_CYCLES, reason=f"shared cycles not found at {DATA}")
+def test_committed_report_is_regenerated():
+    """docs/hdv-fuel.json's check is what the module computes now (ours exactly, SUMO's
+    tool to 1e-6), and docs/hdv-fuel.md is the rendering of docs/hdv-fuel.json."""
+    from sumo_drvpw.validation import hdv_fuel as h
+    from sumo_drvpw.validation.hdv_fuel_report import render
+
+    committed = json.loads((REPO / "docs" / "hdv-fuel.json").read_text(encoding="utf-8"))
+    assert (REPO / "docs" / "hdv-fuel.md").read_text(encoding="utf-8") == render(committed), (
+        "docs/hdv-fuel.md is not the rendering of docs/hdv-fuel.json: regenerate with "
+        "python -m sumo_drvpw.validation.hdv_fuel docs/hdv-fuel.md")
+    fresh = json.loads(json.dumps(h.check(DATA)))
+    for name, r in committed["check"].items():
+        for cyc, row in r["cycles"].items():
+            for who, val in row.items():
+                got = fresh[name]["cycles"][cyc][who]
+                if val is None or got is None:   # SUMO's tool absent on one side
+                    continue
+                assert got["l_per_100km"] == pytest.approx(val["l_per_100km"], rel=1e-6), (name, cyc, who)
