@@ -262,9 +262,13 @@ def main(argv=None) -> int:
     and $SUMO_DRVPW_DATA or ../shared/data). Exit 2 with one line when the data are absent."""
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.fileio import plain, write_json, write_text
-    from sumo_drvpw.validation.data import resolve_data
+    from sumo_drvpw.validation.data import positional, resolve_data
 
-    args = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = positional(sys.argv[1:] if argv is None else argv, "REPORT.md [DATA_FOLDER]")
+    except UserError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     out = Path(args[0] if args else "docs/energy-chain-validation.md")
     try:
         data = resolve_data(args[1] if len(args) > 1 else None, FOLDERS)

@@ -27,6 +27,17 @@ DATASETS = {
 }
 
 
+def positional(argv, usage: str) -> list[str]:
+    """The arguments of a ``python -m sumo_drvpw.validation.X`` report generator, which are
+    positional only (``usage``: e.g. "REPORT.md [DATA_FOLDER]"); a dashed one is refused
+    (a help request was written to a report named after it)."""
+    args = [str(a) for a in argv]
+    for a in args:
+        if a.startswith("-"):
+            raise UserError(f"the arguments are positional, {usage}; got {a!r}")
+    return args
+
+
 def resolve_data(folder=None, datasets=DATASETS) -> Path:
     """The data folder: ``folder`` if given, else $SUMO_DRVPW_DATA, else <repo>/../shared/data.
 

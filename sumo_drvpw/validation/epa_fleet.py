@@ -532,10 +532,14 @@ def main(argv=None) -> int:
     built-in equations. Exit 2 with one line when the data are absent or unreadable."""
     from sumo_drvpw.fileio import plain, write_json, write_text
     from sumo_drvpw.model.equations import BUILTIN_DIR, equation_from_dict, save_equation
-    from sumo_drvpw.validation.data import resolve_data
+    from sumo_drvpw.validation.data import positional, resolve_data
     from sumo_drvpw.validation.epa_fleet_report import render
 
-    args = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = positional(sys.argv[1:] if argv is None else argv, "REPORT.md [DATA_FOLDER]")
+    except UserError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     out = Path(args[0] if args else "docs/epa-fleet.md")
     t0 = time.perf_counter()
     try:
