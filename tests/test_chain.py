@@ -89,6 +89,31 @@ def test_fuel_willans_line_with_engine_off_by_hand():
     assert g["density_kg_per_l"] * g["co2_kg_per_kg"] == pytest.approx(8.887 / 3.785411784, rel=0.01)
 
 
+def test_overrun_fuel_cut_off_by_hand(tmp_path):
+    """fuel_cut_below_w: rolling with a driving power below it, the injection is cut (no
+    fuel, aux included); standing, the engine idles whatever the power; a hybrid's engine-off
+    and forced-on rules apply first. Round-trips through the file; refused on a battery chain."""
+    ch = EnergyChain(predicts="fuel", idle_fuel_power_w=4_000.0, marginal_efficiency=0.4,
+                     engine_off_below_w=-np.inf, aux_power_w=2_000.0, fuel_cut_below_w=0.0, fuel="diesel")
+    p = np.array([-3_000.0, -3_000.0, 0.0, 10_000.0, -1.0])
+    v = np.array([10.0, 0.0, 10.0, 10.0, 0.05])   # the last: below STANDSTILL_MPS (0.1 m/s), standing
+    out = ch.evaluate(p, v, dt_s=1.0)
+    np.testing.assert_array_equal(out["engine_on"], [False, True, True, True, True])
+    # fuelled: 4 kW idle + (max(P, 0) + 2 kW aux)/0.4
+    np.testing.assert_allclose(out["power_w"], [0.0, 9_000.0, 9_000.0, 34_000.0, 9_000.0])
+    hyb = EnergyChain(predicts="fuel", idle_fuel_power_w=4_000.0, marginal_efficiency=0.4,
+                      engine_off_below_w=3_000.0, engine_on_above_mps=19.0, fuel_cut_below_w=0.0)
+    np.testing.assert_array_equal(hyb.engine_on(np.array([-5_000.0, 1_000.0, 5_000.0]),
+                                                np.array([25.0, 25.0, 5.0])), [False, True, True])
+    eq = equation_from_dict({"equation": {"name": "c"}, "terms": {"acc": 1.0}, "chain": ch.to_dict()})
+    save_equation(eq, tmp_path / "c.toml")
+    assert load_equation(tmp_path / "c.toml").chain == ch and ch.to_dict()["fuel_cut_below_w"] == 0.0
+    assert "fuel_cut_below_w" not in EnergyChain(predicts="fuel").to_dict()
+    with pytest.raises(UserError, match="'fuel_cut_below_w' cuts an engine's fuel: only for predicts"):
+        equation_from_dict({"equation": {"name": "b"}, "terms": {"acc": 1.0},
+                            "chain": {"predicts": "battery", "fuel_cut_below_w": 0.0}}, "b.toml")
+
+
 def test_cold_start_is_a_fixed_volume_per_start_by_hand(tmp_path):
     """A cold start's fuel, energy and CO₂ follow from its litres through the fuel's
     constants; the per-sample evaluation is unchanged (a cold start is per trip, not a

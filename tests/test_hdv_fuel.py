@@ -1,6 +1,7 @@
 """The heavy-duty diesel fuel chains (sumo_drvpw/validation/hdv_fuel.py, docs/hdv-fuel.md).
 
 By hand: each built-in books P_fuel = P_idle + (max(P, 0)/η_d + P_aux)/η_e at a few (P, v),
+and nothing while rolling with P < 0 (overrun fuel cut-off),
 with the sourced numbers written out here (idle in US gal/h, 10 kW of accessories, the
 engine's 0.45, the driveline's 0.85 or 0.80) on the road load of its MOVES type. A bare SUMO
 config books trucks and buses in litres (the warning that no chain applies is gone), an
@@ -43,11 +44,14 @@ def test_builtin_books_fuel_by_hand(name):
     assert eq.terms == mv.terms and tuple(eq.vclasses) == vclasses
     ch = eq.chain
     assert ch.predicts == "fuel" and ch.fuel == "diesel" and ch.engine_off_below_w == -np.inf
-    p = np.array([-40000.0, 0.0, 30000.0, 150000.0])
-    v = np.array([8.0, 0.0, 10.0, 22.0])
+    p = np.array([-40000.0, 0.0, 30000.0, 150000.0, -5000.0])
+    v = np.array([8.0, 0.0, 10.0, 22.0, 0.0])
     got = ch.evaluate(p, v, dt_s=2.0)
     idle = gal_h * GAL_H
-    want_w = idle + (np.maximum(p, 0.0) / eta_d + 10000.0) / 0.45
+    # overrun (rolling at P < 0, the first sample): injection cut, no fuel; standing: idles
+    fuelled = np.array([0.0, 1.0, 1.0, 1.0, 1.0])
+    want_w = fuelled * (idle + (np.maximum(p, 0.0) / eta_d + 10000.0) / 0.45)
+    assert ch.fuel_cut_below_w == 0.0 and got["power_w"][0] == 0.0
     assert got["power_w"] == pytest.approx(want_w, rel=1e-4)
     assert got["fuel_l"] == pytest.approx(want_w * 2.0 / LHV / RHO, rel=1e-4)
     assert got["co2_kg"] == pytest.approx(want_w * 2.0 / LHV * 3.158, rel=1e-3)
@@ -106,7 +110,8 @@ def _config(folder: Path) -> Path:
 def test_bare_config_books_trucks_and_buses_in_litres(tmp_path, capsys):
     """A bare SUMO config (the Hamburg case in small: trucks and buses that write no
     emissionClass, SUMO's default diesel): each is booked by its MOVES type's diesel chain,
-    per vehicle exactly P_idle·T + E_traction/(η_d·η_e) + P_aux·T/η_e; an electric bus
+    per vehicle exactly P_idle·T_f + E_traction/(η_d·η_e) + P_aux·T_f/η_e, T_f the booked time
+    not rolling in overrun (from the run's trace); an electric bus
     (Energy/unknown) is not booked by the diesel chain, and it alone is in the warning."""
     pytest.importorskip("libsumo")
     from sumo_drvpw.cli import main as cli_main
@@ -114,7 +119,7 @@ def test_bare_config_books_trucks_and_buses_in_litres(tmp_path, capsys):
     sc = tmp_path / "sc"
     sc.mkdir()
     out = tmp_path / "o"
-    code = cli_main(["run", str(_config(sc)), "--out", str(out), "--no-figures", "--no-progress"])
+    code = cli_main(["run", str(_config(sc)), "--out", str(out), "--no-figures", "--no-progress", "--trace"])
     err = capsys.readouterr().err
     assert code == 0, err
     veh = pd.read_parquet(out / "vehicles.parquet")
@@ -123,14 +128,23 @@ def test_bare_config_books_trucks_and_buses_in_litres(tmp_path, capsys):
     assert booked["t"] == "moves_single_unit_truck_diesel" and booked["s"] == "moves_combination_truck_diesel"
     assert booked["b"] == "moves_transit_bus_diesel" and booked["c"] == "moves_intercity_bus_diesel"
     assert booked["p"] == "epa_gasoline_car" and "e" not in booked
+    trace = pd.read_parquet(out / "trace.parquet")
+    cut = 0
     for vid, name in booked.items():
         if name not in HAND:
             continue
         _, _, gal_h, eta_d = HAND[name]
         r = veh[(veh.vehicle == vid) & (veh.equation == name)].iloc[0]
-        want = gal_h * GAL_H * r.time_s + r.traction_total_j / (eta_d * 0.45) + 10000.0 * r.time_s / 0.45
+        t = trace[(trace.vehicle == vid) & (trace.equation == name)]
+        p, dt = t.p_total_w.to_numpy(), 0.5  # the config's step length
+        assert (np.maximum(p, 0) * dt).sum() == pytest.approx(r.traction_total_j, rel=1e-9)
+        fuelled = (p >= 0) | (t.speed_mps.to_numpy() <= 0.1)   # not rolling in overrun
+        cut += int((~fuelled).sum())
+        want = ((gal_h * GAL_H + 10000.0 / 0.45) * dt * fuelled.sum()
+                + r.traction_total_j / (eta_d * 0.45))
         got = fuel[(fuel.key == vid) & (fuel.equation == name)].iloc[0]
         assert got.fuel_kwh * 3.6e6 == pytest.approx(want, rel=1e-6) and got.fuel_l > 0
+    assert cut > 0  # the heavy vehicles did roll in overrun: the cut was exercised
     cls = pd.read_csv(out / "chain_classes.csv").set_index("key")
     assert {"truck", "trailer", "bus", "coach"} <= set(cls.index)
     assert cls.loc["bus", "fuel_l"] == pytest.approx(fuel[fuel.key == "b"].fuel_l.sum(), rel=1e-9)

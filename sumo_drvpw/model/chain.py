@@ -42,13 +42,16 @@ Battery (``predicts = "battery"``), battery power positive when discharging::
 Fuel (``predicts = "fuel"``), a Willans line with engine-off (power-split hybrid)::
 
     P_eng  = max(P, 0) / η_t + P_aux                      (engine output demand) [W]
-    on     = P > P_off  or  v > v_on                      (engine on)
+    on     = (P > P_off  or  v > v_on)  and not (v > v_0 and P < P_cut)     (engine fuelled)
     P_fuel = on · (P_idle,fuel + P_eng / η_m)             [W of fuel, lower heating value]
     fuel rate [L/s] = P_fuel / (LHV · ρ_fuel);  CO₂ [kg/s] = P_fuel / LHV · c_CO₂
 
 with ``idle_fuel_power_w`` (P_idle,fuel ≥ 0), ``marginal_efficiency`` (η_m, (0, 1]),
 ``engine_off_below_w`` (P_off; ``-inf``: a conventional engine that runs the whole trip,
-idling at stops), optional ``engine_on_above_mps`` (v_on) and ``fuel``
+idling at stops), optional ``engine_on_above_mps`` (v_on), optional ``fuel_cut_below_w``
+(P_cut: overrun fuel cut-off — while the vehicle moves (v above STANDSTILL_MPS, v_0), a
+driving power below P_cut, typically 0, means the wheels turn the engine and its injection
+is cut: no fuel; standing, it idles; declared, not fitted by calibration) and ``fuel``
 (a key of :data:`sumo_drvpw.model.constants.FUELS`). ``cold_start_fuel_l`` (≥ 0, default 0)
 is the extra fuel of one start of a cold engine [L] (warm-up enrichment, catalyst
 heating, cold oil) at the air temperature ``cold_start_ref_c`` (default 23.9 °C, the
@@ -92,7 +95,7 @@ PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 #: keys of the [chain] table, besides sub-tables loads, hvac and efficiency tables
 KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
         "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
-        "engine_off_below_w", "engine_on_above_mps", "fuel", "battery_to_fuel",
+        "engine_off_below_w", "engine_on_above_mps", "fuel_cut_below_w", "fuel", "battery_to_fuel",
         "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "running_fuel_per_k",
         "std_err", "reading", "provenance", "metrics")
 #: the largest plausible warm-running fuel increase per kelvin (5 %/K: +150 % at −6.7 °C
@@ -210,6 +213,7 @@ class EnergyChain:
     marginal_efficiency: float = 1.0
     engine_off_below_w: float = 0.0
     engine_on_above_mps: float | None = None
+    fuel_cut_below_w: float | None = None
     fuel: str = "gasoline"
     battery_to_fuel: float | None = None
     cold_start_fuel_l: float = 0.0
@@ -339,10 +343,12 @@ class EnergyChain:
                 "friction_brake_w": neg - rec_mech, "power_w": trac + rec + aux}
 
     def engine_on(self, p, v) -> np.ndarray:
-        """Engine state: on when P > P_off or v > v_on."""
+        """Engine fuelled: when P > P_off or v > v_on, but not in overrun (moving, P < P_cut)."""
         on = np.asarray(p, float) > self.engine_off_below_w
         if self.engine_on_above_mps is not None:
             on |= np.asarray(v, float) > self.engine_on_above_mps
+        if self.fuel_cut_below_w is not None:
+            on &= ~((np.asarray(p, float) < self.fuel_cut_below_w) & (np.asarray(v, float) > STANDSTILL_MPS))
         return on
 
     def _fuel(self, p, v, n, signals) -> dict:
@@ -414,8 +420,9 @@ class EnergyChain:
             d.update(idle_fuel_power_w=float(self.idle_fuel_power_w),
                      marginal_efficiency=float(self.marginal_efficiency),
                      engine_off_below_w=float(self.engine_off_below_w), fuel=self.fuel)
-            if self.engine_on_above_mps is not None:
-                d["engine_on_above_mps"] = float(self.engine_on_above_mps)
+            for k in ("engine_on_above_mps", "fuel_cut_below_w"):
+                if getattr(self, k) is not None:
+                    d[k] = float(getattr(self, k))
             if self.battery_to_fuel is not None:
                 d["battery_to_fuel"] = float(self.battery_to_fuel)
             if self.cold_start_fuel_l or self.cold_start_fuel_l_per_k:
@@ -430,60 +437,6 @@ class EnergyChain:
             if getattr(self, k):
                 d[k] = getattr(self, k)
         return d
-
-
-def chain_energy_params(chain, air_c: float | None = None, drive=None) -> tuple[dict, list[str]]:
-    """SUMO Energy-model values of a battery or powertrain-output chain (for ``sim.export``
-    and ``validation.chain_sumo``): ({param: value}, [what the model cannot express, with
-    why]). ``air_c``: the run's air temperature [°C], at which the chain's HVAC power joins
-    ``constantPowerIntake`` (None: left out, listed). A table efficiency becomes the constant
-    booking its energy on ``drive`` = (v [m/s], driving power [W], Δt [s]): traction
-    Σ P⁺Δt / Σ (P⁺/η)Δt, recuperation Σ η·P⁻Δt / Σ P⁻Δt (no drive: the cells' mean)."""
-    p: dict = {}
-    missing: list[str] = []
-    if chain.predicts == "fuel":
-        return p, ["the fuel chain (SUMO's Energy model is electric)"]
-    for key, attr in (("propulsionEfficiency", "traction_efficiency"),
-                      ("recuperationEfficiency", "recuperation_efficiency")):
-        v = getattr(chain, attr)
-        if isinstance(v, (int, float)):
-            p[key] = float(v)
-            continue
-        how = "its cells' mean"
-        p[key] = float(np.mean(v.values))
-        if drive is not None:
-            sp, pw, dt = (np.asarray(a, float) for a in drive)
-            eta = np.asarray(v(sp, pw), float)
-            if attr == "traction_efficiency" and np.sum(np.maximum(pw, 0) * dt) > 0:
-                p[key] = float(np.sum(np.maximum(pw, 0) * dt) / np.sum(np.maximum(pw, 0) / eta * dt))
-                how = "the table's traction energy on the drive"
-            elif attr == "recuperation_efficiency" and np.sum(np.minimum(pw, 0) * dt) < 0:
-                p[key] = float(np.sum(eta * np.minimum(pw, 0) * dt) / np.sum(np.minimum(pw, 0) * dt))
-                how = "the table's recuperation on the drive"
-        missing.append(f"{attr} is a table (SUMO takes a constant: {p[key]:.4g} written, {how})")
-    aux = 0.0
-    if chain.predicts == "battery":
-        h = chain.hvac or {}
-        if h and air_c is None:
-            missing.append("the HVAC power over the air temperature (give the air temperature to add it "
-                           "to constantPowerIntake)")
-        # the constant power, plus the HVAC's at air_c (unknown: none), logged loads as 0
-        sig = {c: np.zeros(1) for c in chain.loads}
-        if h:
-            sig[h.get("column", "ambient_c")] = np.array([np.nan if air_c is None else float(air_c)])
-        aux = float(chain.auxiliary(1, sig)[0])
-        if h.get("warmup_j_per_k"):
-            missing.append("the cabin's warm-up at cold starts (a per-trip energy; the plug-in books it)")
-        if chain.loads:
-            missing.append(f"logged loads {', '.join(chain.loads)} (no signal in SUMO)")
-        if chain.standstill_aux_w:
-            missing.append(f"the standing draw {chain.standstill_aux_w:g} W (SUMO's device books "
-                           "constantPowerIntake only while moving)")
-    if chain.recuperation_limit_w is not None:
-        missing.append(f"the recuperation limit {chain.recuperation_limit_w / 1000:.1f} kW (the Energy model "
-                       "recuperates without one)")
-    p["constantPowerIntake"] = aux
-    return p, missing
 
 
 def _eval(eff: Efficiency, v, p) -> np.ndarray | float:
@@ -528,6 +481,11 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         if np.isnan(kw["engine_off_below_w"]) or kw["engine_off_below_w"] == np.inf:
             raise UserError(f"{where} [chain]: 'engine_off_below_w' must be a number below +inf "
                             f"(-inf: the engine never stops), got {doc['engine_off_below_w']!r}")
+    if "fuel_cut_below_w" in doc:
+        kw["fuel_cut_below_w"] = _number(doc["fuel_cut_below_w"], "fuel_cut_below_w", where)
+        if pred != "fuel":
+            raise UserError(f"{where} [chain]: 'fuel_cut_below_w' cuts an engine's fuel: only for "
+                            f"predicts = \"fuel\", got predicts = {pred!r}")
     for k in ("recuperation_limit_w", "aux_power_w", "idle_fuel_power_w",
               "engine_on_above_mps", "battery_to_fuel", "cold_start_fuel_l", "cold_start_fuel_l_per_k"):
         if k in doc:

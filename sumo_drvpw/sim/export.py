@@ -41,7 +41,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.chain import chain_energy_params
+from sumo_drvpw.model.chain_sumo import chain_energy_params
 from sumo_drvpw.model.constants import G, RHO_DEFAULT
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import parse_term

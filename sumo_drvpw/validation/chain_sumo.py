@@ -84,7 +84,7 @@ def chain_vtype_params(eq, chain, mass_kg: float, frontal_area_m2: float | None 
     Returns ({parameter: value}, [what SUMO cannot express, with why])."""
     from sumo_drvpw.fit.physical import physical_reading
     from sumo_drvpw.model.constants import RHO_DEFAULT
-    from sumo_drvpw.model.chain import chain_energy_params
+    from sumo_drvpw.model.chain_sumo import chain_energy_params
 
     m = float(mass_kg)
     reading = physical_reading(eq.terms, RHO_DEFAULT)

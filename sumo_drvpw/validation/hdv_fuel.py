@@ -11,9 +11,10 @@ writes the built-in equations ``moves_single_unit_truck_diesel``,
 
 **The chains are not fitted.** Each is the MOVES road load of its source type (the terms of
 ``moves_<type>.toml``, docs/sources.md [MOVES-ST]) with a conventional diesel engine's
-Willans line (docs/energy-chain.md, ``predicts = "fuel"``, engine running the whole trip)::
+Willans line (docs/energy-chain.md, ``predicts = "fuel"``, engine running the whole trip, its
+injection cut in overrun: no fuel while the vehicle rolls with P < 0)::
 
-    P_fuel = P_idle + (max(P, 0)/η_d + P_aux)/η_e
+    P_fuel = P_idle + (max(P, 0)/η_d + P_aux)/η_e      (P ≥ 0 or standing; else 0)
 
 η_d (``traction_efficiency``) is the driveline wheel ← engine, η_e (``marginal_efficiency``)
 the engine's Willans slope, so fuel → wheel at the margin is η_e·η_d and an auxiliary load
@@ -79,6 +80,10 @@ SOURCES = {
                 "HBEFA4/RT_le7.5t_Euro-VI_A-C, trailer 13000 kg HBEFA4/TT_AT_gt34-40t_Euro-VI_A-C, bus 12000 kg "
                 "HBEFA4/UBus_Std_gt15-18t_Euro-VI_A-C, coach 25000 kg HBEFA4/Coach_3-Axes_gt18t_Euro-VI_A-C; "
                 "HelpersHBEFA4.h: fuel = f(v, a) per class, no mass or slope, zero while coasting",
+    "MB-DFCO": "Mercedes-Benz service information GF07.10-P-1014OGR and GF07.10-D-1014TSA, 'Overrun Mode Fuel "
+               "Shutoff, Function' (CDI common-rail diesels OM642, OM651): with the accelerator released and the "
+               "vehicle rolling in gear the control unit switches the injectors off (engine braking, less fuel); "
+               "they inject again when the pedal is pressed or the engine speed falls toward idle",
     "DOE626": "US DOE Vehicle Technologies Office, Fact #626 (7 Jun 2010), 'Fuel Economy of Light and Heavy "
               "Vehicles', from National Academy of Sciences (2010) Technologies and Approaches to Reducing the "
               "Fuel Consumption of Medium- and Heavy-Duty Vehicles, pp. 2-2, 2-3: fuel economy ranges by class",
@@ -198,7 +203,7 @@ def builtin_doc(name: str) -> dict:
     doc["chain"] = {
         "predicts": "fuel", "fuel": FUEL, "traction_efficiency": c["driveline"],
         "marginal_efficiency": ENGINE_WILLANS, "idle_fuel_power_w": round(idle_w, 1),
-        "aux_power_w": c["aux_w"], "engine_off_below_w": -np.inf,
+        "aux_power_w": c["aux_w"], "engine_off_below_w": -np.inf, "fuel_cut_below_w": 0.0,
         "reading": {
             "traction_efficiency": c["driveline_reading"],
             "marginal_efficiency": ENGINE_READING + f"; fuel → wheel at the margin "
@@ -207,6 +212,11 @@ def builtin_doc(name: str) -> dict:
                                  "model/constants.py FUELS)",
             "aux_power_w": c["aux_reading"],
             "engine_off_below_w": "-inf: the engine runs the whole trip and idles at stops (no stop-start)",
+            "fuel_cut_below_w": "0: overrun fuel cut-off [MB-DFCO] — while the vehicle rolls with a negative "
+                                "driving power (coasting down, braking) the wheels turn the engine and its "
+                                "injection is cut, so no idle fuel is burnt then; its accessories run on the "
+                                "vehicle's kinetic energy. Standing, it idles. (The injection resumes near idle "
+                                "speed, just before a stop: the cut is slightly long here.)",
             "cold_start_fuel_l": "0: no heavy-duty cold-start measurement was read; not booked",
             "running_fuel_per_k": "0: no heavy-duty warm-running temperature factor was read",
         },
@@ -214,7 +224,8 @@ def builtin_doc(name: str) -> dict:
                        round(ENGINE_WILLANS * c["driveline"], 6),
                        "sources": "docs/sources.md 'Heavy-duty diesel chains'; " + "; ".join(
                            f"[{k}]" for k in SOURCES if f"[{k}]" in " ".join(
-                               (c["driveline_reading"], c["idle_reading"], c["aux_reading"], ENGINE_READING)))},
+                               (c["driveline_reading"], c["idle_reading"], c["aux_reading"], ENGINE_READING,
+                                "[MB-DFCO]")))},
     }
     return doc
 
@@ -340,10 +351,14 @@ def main(argv=None) -> int:
     """``python -m sumo_drvpw.validation.hdv_fuel [REPORT.md [DATA_FOLDER [HAMBURG_RUN]]]``:
     writes the built-ins, the report and its JSON. Exit 2 with one line on bad input."""
     from sumo_drvpw.fileio import plain, write_json, write_text
-    from sumo_drvpw.validation.data import resolve_data
+    from sumo_drvpw.validation.data import positional, resolve_data
     from sumo_drvpw.validation.hdv_fuel_report import render
 
-    args = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = positional(sys.argv[1:] if argv is None else argv, "REPORT.md [DATA_FOLDER [HAMBURG_RUN]]")
+    except UserError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     out = Path(args[0] if args else "docs/hdv-fuel.md")
     t0 = time.perf_counter()
     try:

@@ -27,7 +27,8 @@ def render(res: dict) -> str:
          "'Heavy-duty diesel chains'.", "",
          "Each built-in is its MOVES source type's road load (the terms of `moves_<type>.toml`, mass from the "
          "vType) with a diesel engine's Willans line, set from published physics and not fitted to anything: "
-         "P_fuel = P_idle + (max(P, 0)/η_d + P_aux)/η_e, engine running the whole trip.", "",
+         "P_fuel = P_idle + (max(P, 0)/η_d + P_aux)/η_e, engine running the whole trip; in overrun (rolling "
+         "with P < 0) its injection is cut and it burns no fuel ([MB-DFCO], `fuel_cut_below_w` = 0).", "",
          "## The parameters", "",
          "| built-in | vClasses | η_e engine | η_d driveline | fuel → wheel | idle [gal/h] | idle fuel [W] "
          "| P_aux [W] |", "|---|---|---|---|---|---|---|---|"]
@@ -89,11 +90,12 @@ def render(res: dict) -> str:
 
 #: the physical reading of the check (the numbers it refers to are in the tables above)
 READING = (
-    "Where ours exceeds SUMO's class, three physical differences push the same way. (1) Standing: the "
+    "Where ours exceeds SUMO's class, two physical differences push the same way. (1) Standing: the "
     "no-load idle rates of [DOE861] plus a 10 kW accessory load drawn also while standing give more fuel per "
     "hour at a stop than HBEFA's class (compare the 'Standing' lines); on the city schedules, with long "
-    "stops, that share is large. (2) Braking and coasting: HBEFA books no fuel while coasting; our engine "
-    "idles through every deceleration. (3) Mass: SUMO's HBEFA classes are their own vehicles (e.g. a rigid "
+    "stops, that share is large. (Braking and coasting are booked alike: no fuel in overrun, in HBEFA and "
+    "here by the fuel cut-off [MB-DFCO]; the first version of these chains idled through every deceleration "
+    "and stood 5–17 % higher on this check's udds and wltc_3b rows.) (2) Mass: SUMO's HBEFA classes are their own vehicles (e.g. a rigid "
     "truck ≤ 7.5 t gross for vClass truck), ours carry the MOVES source mass (8.5 t in running order for a "
     "single-unit truck) — the nearer HBEFA class shows how much of the truck's gap is size. On the highway "
     "schedule, where stops and braking are rare, the engine and driveline efficiencies dominate: a gap there "
