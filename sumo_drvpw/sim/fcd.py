@@ -24,6 +24,11 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
   the live loop, not booked (``summary.json`` ``source.parked_rows``); FCD without x, y
   (``--fcd-output.attributes`` without them, or ``.geo``/``.utm`` coordinates) books it
   as standing;
+- vehicles are switched off at long planned stops and by start-stop systems as in the live
+  run (:mod:`sumo_drvpw.sim.shutoff`): the vTypes' shut-off params from the route files,
+  the stops from the route files' ``<stop>`` elements matched to where each vehicle stands
+  (:mod:`sumo_drvpw.sim.fcd_stops`; stops a run added are booked standing, and counted in
+  ``summary.json`` ``shut_off_at_long_stops.replay``);
 - a vehicle row on a lane the network lacks is not booked (as the live loop books no
   vehicle without a lane); ``summary.json`` ``warnings`` counts them, and FCD none of
   whose vehicle rows is on a lane of the network is refused (:func:`lane_warnings`).
@@ -52,6 +57,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
+from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
 
 
 class FcdReplay(_Rows):
@@ -389,6 +395,12 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                      spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,
                      keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles, net=net)
     replay.type_mass = {vt: i.mass_kg for vt, i in acc.file_vtypes.items() if i.mass_kg}
+    # long planned stops and start-stop systems as in the live run (sim/shutoff.py): the
+    # vTypes' shut-off params and the vehicles' stops from the route and additional files
+    replay.type_params = {vt: i.shut_off for vt, i in acc.file_vtypes.items() if i.shut_off}
+    declared = read_declared_stops(list(dict.fromkeys([*sc.route_files, *sc.additional_files])))
+    if declared:
+        replay.stops = StopTracker(declared, net)
     acc.stepper.replay_info = replay_info  # a --begin after the file's start: no cold starts then
     replay.count_persons = count_persons
     try:

@@ -2,7 +2,10 @@
 the libsumo API the loop reads (time, vehicles, getters, departures and arrivals, riders)
 and what SUMO's FCD rows say beyond the vehicles' own columns — parked vehicles (beside
 their lane: :class:`ParkedTest`), buses dwelling at their stops (:func:`bus_stops`), and
-persons riding in vehicles (at the vehicle's x, y and speed: :class:`_Rows`)."""
+persons riding in vehicles (at the vehicle's x, y and speed: :class:`_Rows`) —, with what
+the route files add: their vTypes' shut-off params and their vehicles' planned stops
+(:mod:`sumo_drvpw.sim.fcd_stops`), so that :class:`~sumo_drvpw.sim.shutoff.ShutOff`
+switches vehicles off as in a live run."""
 
 from __future__ import annotations
 
@@ -44,8 +47,12 @@ class _Sim(_Domain):
     def getEndingTeleportIDList(self):  # noqa: N802 (a vehicle back after steps without a row)
         return getattr(self.r, "back", ())
 
-    def getStopEndingVehiclesIDList(self):  # noqa: N802 (here: the vehicles whose riders changed)
-        return self.r.load_changed
+    def getStopEndingVehiclesIDList(self):  # noqa: N802 (and the vehicles whose riders changed)
+        stops = self.r.stops
+        return self.r.load_changed + stops.ending if stops is not None else self.r.load_changed
+
+    def getStopStartingVehiclesIDList(self):  # noqa: N802 (the route files' stops: fcd_stops)
+        return self.r.stops.starting if self.r.stops is not None else ()
 
     def getDepartedPersonIDList(self):  # noqa: N802
         return self.r.departed_persons if self.r.count_persons else ()
@@ -72,6 +79,10 @@ class _Veh(_Domain):
     def getPersonIDList(self, vid):  # noqa: N802 (persons at the vehicle's x, y and speed)
         return self.r.riders.get(vid, ())
 
+    def getStops(self, vid, limit=0):  # noqa: N802 (the declared stop it is at: fcd_stops)
+        cur = self.r.stops.data.get(vid) if self.r.stops is not None else None
+        return [cur] if cur is not None else []
+
     def _col(self, k):
         return lambda vid: self.r.state[vid][k]
 
@@ -87,8 +98,8 @@ class _VType(_Domain):
     def getVehicleClass(self, vt):  # noqa: N802 (not in FCD: the route files say)
         return ""
 
-    def getParameter(self, vt, key):  # noqa: N802
-        return ""
+    def getParameter(self, vt, key):  # noqa: N802 (SUMO's shut-off params of the route files)
+        return (self.r.type_params.get(vt) or {}).get(key, "")
 
     def getMass(self, vt):  # noqa: N802 (a person type's: the route files', else SUMO's 70 kg)
         return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
@@ -119,6 +130,11 @@ class _Rows:
         self.rider_rows = 0
         #: vType → mass [kg] of the route files (set by replay_fcd)
         self.type_mass: dict = {}
+        #: vType → its shut-off params as the route files write them (set by replay_fcd)
+        self.type_params: dict = {}
+        #: the route files' stops matched to where vehicles stand (fcd_stops.StopTracker;
+        #: set by replay_fcd, None: no file declares a stop)
+        self.stops = None
         self.count_persons = True
         #: vehicle rows on a lane of the network, on a lane it lacks, and the first of
         #: those (lane, time) (with the column ``lane_ok`` of ParkedTest.mark)
@@ -134,6 +150,9 @@ class _Rows:
             c = {k: v[veh] for k, v in c.items()}
         elif self.riders or self.person_count:
             self._ride(None, c)
+        if self.stops is not None:  # (lanes as written: a parked vehicle serves its stop too)
+            self.stops.forget(self.arrived)
+            self.stops.step(self.t - self.dt, c["id"], c["lane"], c["pos"], c["speed"], c.get("off"))
         ok = c.get("lane_ok")
         if ok is not None and len(ok):
             self.lane_rows += int(np.count_nonzero(ok > 0))

@@ -21,8 +21,17 @@ running. (The standing time counts from the last step the vehicle moved, as SUMO
 waiting time, but also at a planned stop shorter than ``shutOffStopDuration``, where SUMO
 does not count it.)
 
-An FCD replay sees no stops and no vType parameters: it books both standing; only a live
-run (libsumo, traci, the Accountant) switches vehicles off.
+An FCD replay (:mod:`sumo_drvpw.sim.fcd`) switches vehicles off by the same rules, with
+what the run's files say in place of SUMO: the vTypes' ``shutOffStopDuration`` and
+``shutOffAutoDuration`` from ``<param>`` children of the route files' vTypes
+(:mod:`sumo_drvpw.sim.vtypes`; a value that is no number is SUMO's default, as SUMO 1.28
+reads it, warning "Invalid conversion from string to double"), the standing time from the FCD's speeds (as live: start-stop
+fuel equal to the live run's, tests/test_sim_fcd_shutoff.py); and, as an FCD holds no
+stops, the stops the route files declare for each vehicle, matched to where it stands
+(:mod:`sumo_drvpw.sim.fcd_stops`, which answers SUMO's stop getters for the replay). Stops
+the files do not hold — added while the run ran (TraCI, rerouters, taxis, parking
+reroutes), or of a vehicle whose route is drawn from a ``routeDistribution`` — are booked
+standing there; ``summary.json`` ``shut_off_at_long_stops.replay`` counts them.
 """
 
 from __future__ import annotations
@@ -33,6 +42,10 @@ from sumo_drvpw.model.constants import STANDSTILL_MPS
 
 #: SUMO's default ``shutOffStopDuration`` [s] (EnergyParams.cpp, DEFAULT_VEH_SHUT_OFF_STOP)
 SHUT_OFF_STOP_S = 300.0
+#: the vType params of SUMO's emission models that switch a vehicle off (EnergyParams.cpp:
+#: SUMO_ATTR_SHUT_OFF_STOP, SUMO_ATTR_SHUT_OFF_AUTO)
+STOP_PARAM, AUTO_PARAM = "shutOffStopDuration", "shutOffAutoDuration"
+SHUT_OFF_PARAMS = (STOP_PARAM, AUTO_PARAM)
 
 
 def planned_duration_s(stop) -> float:
@@ -61,8 +74,9 @@ class ShutOff:
         self.ending = getattr(sim, "getStopEndingVehiclesIDList", None)
         self.available = (self.starting is not None and self.ending is not None
                           and hasattr(conn.vehicle, "getStops") and hasattr(conn, "vehicletype")
-                          and hasattr(conn.vehicletype, "getParameter")
-                          and not getattr(conn, "is_replay", False))
+                          and hasattr(conn.vehicletype, "getParameter"))
+        #: an FCD replay (sim/fcd_conn.py): its stops are the route files' (sim/fcd_stops.py)
+        self.replay = bool(getattr(conn, "is_replay", False))
         self.limit_s: dict[str, float] = {}   # vType → its shutOffStopDuration [s]
         self.auto_s: dict[str, float] = {}    # vType → its shutOffAutoDuration [s]
         self.any_auto = False                 # a vehicle of a vType with a finite one
@@ -86,13 +100,13 @@ class ShutOff:
 
     def limit_of(self, vtype: str) -> float:
         """The vType's ``shutOffStopDuration`` [s]."""
-        return self._param(self.limit_s, vtype, "shutOffStopDuration", SHUT_OFF_STOP_S)
+        return self._param(self.limit_s, vtype, STOP_PARAM, SHUT_OFF_STOP_S)
 
     def registered(self, ledger, i: int, vtype: str, vid: str) -> None:
         """A vehicle just registered in slot ``i``: its vType's ``shutOffAutoDuration``; an
         id used again starts with nothing of its earlier trip's stops."""
         self.arrived((vid,))
-        lim = self._param(self.auto_s, vtype, "shutOffAutoDuration", np.inf)
+        lim = self._param(self.auto_s, vtype, AUTO_PARAM, np.inf)
         ledger.veh_auto_off[i] = lim
         self.any_auto |= bool(np.isfinite(lim))
 
@@ -167,4 +181,19 @@ class ShutOff:
                         "no idle fuel)",
                 "start_stop_vehicle_s": self.auto_vehicle_s,
                 "start_stop_rule": "a vType's shutOffAutoDuration: its engine off once it has stood longer, "
-                                   "no fuel until it moves (battery chains keep their auxiliaries)"}
+                                   "no fuel until it moves (battery chains keep their auxiliaries)",
+                **({"replay": self.replay_summary()} if self.replay else {})}
+
+    def replay_summary(self) -> dict:
+        """What an FCD replay knows of the stops and params (sim/fcd_stops.py)."""
+        stops = getattr(self.conn, "stops", None)
+        out = stops.report() if stops is not None else {"vehicles_with_declared_stops": 0}
+        out["rule"] = (
+            "an FCD holds no stops: the long stops are those the route files declare for the vehicle "
+            "(lane, edge, busStop, containerStop, chargingStation, parkingArea; duration, until), matched "
+            "where it stands at most 0.1 m/s fast, in their order, ending when it drives off or at the "
+            "planned end; stops added while the run ran (TraCI, rerouters, taxis), those of a vehicle whose "
+            "route is drawn from a routeDistribution or repeats, and a stop made long only by an until the "
+            "replay cannot shift (a flow without a numeric period) are booked standing; the shut-off params "
+            "are the route files' vTypes' (a vType made by TraCI has none)")
+        return out

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
+from sumo_drvpw.sim.shutoff import SHUT_OFF_PARAMS
 from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
 
@@ -200,6 +201,10 @@ class VTypeInfo:
     #: param ``drvpw.cold_start``: the share of its trips that start a cold engine (None:
     #: not given; the scenario's vType, vClass or run-wide share applies)
     cold_start: float | None = None
+    #: SUMO's emission-model params that switch a vehicle off (``shutOffStopDuration``,
+    #: ``shutOffAutoDuration``: :data:`SHUT_OFF_PARAMS`) as written: what an FCD replay's
+    #: vehicletype.getParameter answers (:mod:`sumo_drvpw.sim.shutoff` reads them as SUMO)
+    shut_off: dict | None = None
 
 
 #: SUMO's default vType lengths of the heavy classes [m] (for the booking note)
@@ -346,7 +351,8 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                                      el.attrib.get("guiShape") or None,
                                      _length(el.attrib.get("length")),
                                      _capacity(el.attrib.get("personCapacity")),
-                                     _cold_share(where, params.get("drvpw.cold_start")))
+                                     _cold_share(where, params.get("drvpw.cold_start")),
+                                     {k: params[k] for k in SHUT_OFF_PARAMS if params.get(k) is not None})
                 el.clear()
     except ET.ParseError as e:
         raise UserError(f"{path}: not valid XML: {e}") from None

@@ -1,0 +1,376 @@
+"""Planned stops in an FCD replay: the ``<stop>``s the route files declare, matched to where
+a vehicle of the FCD stands, so that :class:`~sumo_drvpw.sim.shutoff.ShutOff` switches it
+off at a long one as in a live run (:mod:`sumo_drvpw.sim.fcd_conn` answers SUMO's stop
+getters from :class:`StopTracker`).
+
+SUMO's FCD holds no stops. The route files do: ``<stop>`` elements of a ``<vehicle>``,
+``<trip>`` or ``<flow>`` and of the ``<route>`` it drives (on a ``lane``, an ``edge``, a
+``busStop``/``trainStop``, ``containerStop``, ``chargingStation`` or ``parkingArea``, the
+stopping places' lanes and positions from the additional files), with their ``duration``
+and ``until``. A vehicle's stops are its route's and then its own (SUMO adds them so,
+``MSBaseVehicle::addStops``), ordered along the route when it has both; a flow's vehicles
+``<flow id>.<n>`` take the flow's stops, a ``period`` flow's ``until`` shifted by n periods
+(SUMO 1.28: ``f.1`` of a 30-s flow stops until 230 where the flow says 200).
+
+A stop starts where SUMO's does (``MSVehicle::processNextStop``): the vehicle, on the
+stop's lane (any lane of its edge for an ``edge`` stop), at most 0.1 m/s fast (SUMO's
+halting speed), with its front between the stop's ``startPos`` and ``endPos`` (SUMO's
+defaults: ``endPos`` the lane's end, ``startPos`` 0.2 m before it; a stopping place's
+from 0 to the lane's end; negative positions from the lane's end; ±0.1 m here). SUMO
+starts the stop of a vehicle queued inside a stop's range too (SUMO 1.28: a car whose
+front stands at 52.5 m of a stop from 10 to 60 m behind one at 60 m). Only the first
+declared stop not yet served that matches is taken, and the ones before it count as
+passed: a stop is never matched out of its order, nor twice. It ends in the row the
+vehicle drives off from rest, or at its planned end (the later of arrival + ``duration``
+and ``until``; SUMO ends it in that row), whichever comes first: from then the vehicle is
+booked standing again. A vehicle that drives off before a planned end was not at its
+stop after all (SUMO holds it there): the stop is open to be matched again, and counted
+(``stops_left_before_their_end``).
+
+What the replay cannot place is booked standing, as the run would book a short stop:
+stops added while the run ran (TraCI, rerouters, taxis, parking reroutes), the stops of
+vehicles whose route is drawn from a ``routeDistribution`` (which member's stops is not
+in the FCD) or repeats (``repeat``), a ``period`` that is not a number (``exp(…)``, a
+``probability`` flow) where ``until`` alone makes the stop long, and stops on a stopping
+place of none of the files read. :meth:`StopTracker.report` counts them.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fileio import open_maybe_gzip
+from sumo_drvpw.model.constants import STANDSTILL_MPS
+from sumo_drvpw.sim.scenario import sumo_seconds
+from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
+
+#: SUMO's default stop length on a lane [m]: ``startPos`` = ``endPos`` − 2·POSITION_EPS
+#: (SUMOVehicleParserHelper::parseStop; POSITION_EPS = 0.1 m)
+MIN_STOP_LENGTH_M = 0.2
+#: how far a standing vehicle's front may be outside a stop's range and still be at it [m]:
+#: SUMO's POSITION_EPS (it halts within that of ``endPos``: 59.995 m for 60 m, SUMO 1.28)
+STOP_TOLERANCE_M = 0.1
+#: the stopping places a ``<stop>`` may name (the attribute is the element's name; a
+#: ``trainStop`` is named by ``busStop``)
+STOPPING_PLACES = ("busStop", "trainStop", "containerStop", "chargingStation", "parkingArea")
+VEHICLE_ELEMENTS = ("vehicle", "trip", "flow")
+
+
+def _num(val, where: str, key: str, time: bool = False) -> float | None:
+    """A stop's number as written (None: not given); a time may be "h:m:s" as SUMO reads it.
+    A value SUMO would refuse is a UserError naming the file, element and key."""
+    if val is None or val == "":
+        return None
+    try:
+        return float(val)
+    except ValueError:
+        t = sumo_seconds(val) if time else None
+        if t is None:
+            raise UserError(f"{where}: {key} is not a number: {val!r}") from None
+        return t
+
+
+class _Stop:
+    """One declared stop: where (``lane`` or ``edge``, or a stopping place ``place``), its
+    positions as written, and its planned ``duration`` and ``until`` [s] (None: not given)."""
+
+    __slots__ = ("lane", "edge", "place", "start", "end", "duration", "until")
+
+    def __init__(self, el, where: str):
+        a = el.attrib
+        self.lane, self.edge = a.get("lane"), a.get("edge")
+        self.place = next((a[k] for k in ("busStop", "containerStop", "chargingStation",
+                                          "parkingArea", "trainStop") if a.get(k)), None)
+        self.start = _num(a.get("startPos"), where, "startPos")
+        self.end = _num(a.get("endPos"), where, "endPos")
+        self.duration = _num(a.get("duration"), where, "duration", time=True)
+        self.until = _num(a.get("until"), where, "until", time=True)
+
+
+def _is_stop(el) -> bool:
+    """A ``<stop>`` at which the vehicle halts (a waypoint, ``speed`` > 0, passes)."""
+    try:
+        return float(el.get("speed", 0) or 0) <= 0
+    except ValueError:
+        return True
+
+
+class DeclaredStops:
+    """The stops of the route files (:func:`read_declared_stops`): vehicle id → its stops
+    in order, flow id → its vehicles' stops and period, stopping place id → (lane,
+    startPos, endPos), and the vehicles whose stops cannot be known (id → why)."""
+
+    def __init__(self):
+        self.vehicles: dict[str, list[_Stop]] = {}
+        self.flows: dict[str, tuple[list[_Stop], float | None]] = {}
+        self.places: dict[str, tuple[str, float | None, float | None]] = {}
+        self.unknown: dict[str, str] = {}         # vehicle or flow id → why
+        self._routes: dict[str, tuple[list[str], list[_Stop], bool]] = {}
+        self._dists: set[str] = set()             # routeDistributions with a member's stops
+
+    def __bool__(self) -> bool:
+        return bool(self.vehicles or self.flows or self.unknown)
+
+    def stops_of(self, vid: str) -> tuple[list[_Stop] | None, float, str | None]:
+        """A vehicle's stops (None: none declared), the shift of their ``until`` [s] (a
+        flow's n periods; NaN: not known) and why they cannot be known (None: they can)."""
+        if vid in self.vehicles:
+            return self.vehicles[vid], 0.0, None
+        if vid in self.unknown:
+            return None, 0.0, self.unknown[vid]
+        flow, _, n = vid.rpartition(".")
+        if flow and n.isdigit():
+            if flow in self.flows:
+                stops, period = self.flows[flow]
+                return stops, (int(n) * period if period is not None else np.nan), None
+            if flow in self.unknown:
+                return None, 0.0, self.unknown[flow]
+        return None, 0.0, None
+
+    def _route(self, el, where: str) -> tuple[list[str], list[_Stop], bool]:
+        edges = (el.get("edges") or "").split()
+        stops = [_Stop(s, where) for s in el if s.tag == "stop" and _is_stop(s)]
+        return edges, stops, bool(el.get("repeat") not in (None, "", "0"))
+
+    def _distribution(self, el, where: str) -> bool:
+        """A ``<routeDistribution>``: its members are routes of their own; a vehicle that
+        draws from it has stops that cannot be known when a member has any (True)."""
+        stops = False
+        for r in el:
+            if r.tag != "route":
+                continue
+            if r.get("id"):
+                self._routes[r.get("id")] = self._route(r, f"{where}: route '{r.get('id')}'")
+            member = self._routes.get(r.get("refId") or r.get("id") or "")
+            stops |= bool(member and member[1]) or any(s.tag == "stop" for s in r)
+        if stops and el.get("id"):
+            self._dists.add(el.get("id"))
+        return stops
+
+    def _vehicle(self, el, tag: str, where: str) -> None:
+        vid = el.get("id")
+        if vid is None:
+            return
+        where = f"{where}: {tag} '{vid}'"
+        own = [_Stop(s, where) for s in el if s.tag == "stop" and _is_stop(s)]
+        inner = next((r for r in el if r.tag == "route"), None)
+        ref = el.get("route")
+        if inner is not None:
+            edges, rstops, repeat = self._route(inner, where)
+        elif ref in self._routes:
+            edges, rstops, repeat = self._routes[ref]
+        else:
+            edges, rstops, repeat = [], [], False
+            dist = next((r for r in el if r.tag == "routeDistribution"), None)
+            if ref in self._dists or (dist is not None and self._distribution(dist, where)):
+                self.unknown[vid] = "its route is drawn from a routeDistribution with stops"
+                return
+        if not (own or rstops):
+            return
+        if repeat:  # SUMO serves the stops again each round, their until shifted by its cycle
+            self.unknown[vid] = "its route repeats"
+            return
+        stops = _ordered(rstops, own, edges, self.places)
+        if tag == "flow":
+            period = el.get("period")
+            try:
+                period = float(period) if period is not None else None
+            except ValueError:
+                period = None  # exp(…), or a flow by probability: its vehicles' offsets unknown
+            self.flows[vid] = (stops, period)
+        else:
+            self.vehicles[vid] = stops
+
+
+def _edge_of(s: _Stop, places: dict) -> str | None:
+    lane = s.lane or (places.get(s.place, (None,))[0] if s.place else None)
+    return s.edge or (lane.rpartition("_")[0] if lane else None)
+
+
+def _ordered(rstops: list, own: list, edges: list, places: dict) -> list:
+    """A route's stops and a vehicle's own, in the order SUMO serves them: along the route
+    (a stop on an edge the route lacks, or a route without edges: as declared)."""
+    if not (rstops and own) or not edges:
+        return rstops + own
+    first = {}
+    for i, e in enumerate(edges):
+        first.setdefault(e, i)
+    keyed = [(first.get(_edge_of(s, places), len(edges)), s.end if s.end is not None else np.inf, k, s)
+             for k, s in enumerate(rstops + own)]
+    return [s for *_, s in sorted(keyed, key=lambda x: x[:3])]
+
+
+def read_declared_stops(files, depth: int = 0, out: DeclaredStops | None = None) -> DeclaredStops:
+    """The stops of SUMO route/additional ``files`` (and of the files they ``<include>``),
+    in load order; a bad number is a UserError naming the file, element and key."""
+    out = DeclaredStops() if out is None else out
+    for f in files:
+        path = Path(f)
+        try:
+            with open_maybe_gzip(path) as src:
+                level = 0
+                for ev, el in ET.iterparse(src, events=("start", "end")):
+                    if ev == "start":
+                        level += 1
+                        continue
+                    level -= 1
+                    tag = el.tag.split("}")[-1]
+                    if tag in STOPPING_PLACES and el.get("id") and el.get("lane"):
+                        where = f"{path}: {tag} '{el.get('id')}'"
+                        out.places[el.get("id")] = (el.get("lane"), _num(el.get("startPos"), where, "startPos"),
+                                                    _num(el.get("endPos"), where, "endPos"))
+                    if level != 1:  # inside a vehicle, route or distribution: read at its end
+                        continue
+                    if tag == "include" and el.get("href") and depth < INCLUDE_DEPTH:
+                        read_declared_stops([path.parent / el.get("href")], depth + 1, out)
+                    elif tag == "route" and el.get("id"):
+                        out._routes[el.get("id")] = out._route(el, f"{path}: route '{el.get('id')}'")
+                    elif tag == "routeDistribution" and el.get("id"):
+                        out._distribution(el, str(path))
+                    elif tag in VEHICLE_ELEMENTS:
+                        out._vehicle(el, tag, str(path))
+                    el.clear()
+        except (ET.ParseError, OSError):
+            continue  # the vTypes' reader names a file SUMO cannot read either
+    return out
+
+
+class StopTracker:
+    """Which vehicles of the replay reach, and leave, a declared stop in each timestep.
+
+    :meth:`step` takes a timestep's vehicle rows and sets ``starting`` (the vehicles whose
+    stop started: SUMO's getStopStartingVehiclesIDList), ``ending`` (whose stop ended) and
+    ``data`` (vehicle id → the stop it is at, as TraCI's StopData: ``duration``, ``until``,
+    ``arrival``). Vehicles left (:meth:`forget`) are dropped."""
+
+    def __init__(self, declared: DeclaredStops, net):
+        self.declared, self.net = declared, net
+        self.state: dict[str, list] = {}     # vehicle id → [stops, next index, shift, current]
+        self.starting: tuple = ()
+        self.ending: tuple = ()
+        self.data: dict[str, SimpleNamespace] = {}
+        self.matched = 0
+        self.vehicles = 0
+        self.not_known: dict[str, int] = {}  # why → vehicles
+        self.unplaced = 0                    # stops on a stopping place no file declares
+        self.until_unknown = 0               # stops reached whose until could not be shifted
+        self.left_early = 0                  # "stops" driven off before their planned end
+
+    def _state(self, vid: str):
+        st = self.state.get(vid)
+        if st is None:
+            stops, shift, why = self.declared.stops_of(vid)
+            if why is not None:
+                self.not_known[why] = self.not_known.get(why, 0) + 1
+            if stops:
+                self.vehicles += 1
+            st = self.state[vid] = [stops or [], 0, shift, None]
+        return st
+
+    def _span(self, s: _Stop, lane: str) -> tuple[float, float] | None:
+        """The stop's [startPos, endPos] on ``lane`` [m], or None when it is not there."""
+        place = None
+        if s.place is not None:
+            place = self.declared.places.get(s.place)
+            if place is None:
+                return None
+            if place[0] != lane:
+                return None
+            a, b = place[1], place[2]
+        elif s.lane is not None:
+            if s.lane != lane:
+                return None
+            a, b = s.start, s.end
+        elif s.edge is not None:
+            if lane.rpartition("_")[0] != s.edge:
+                return None
+            a, b = s.start, s.end
+        else:
+            return None
+        i = self.net.lane_index.get(lane)
+        if i is None:
+            return None
+        length = float(self.net.lane_length[i])
+        b = length if b is None else (b + length if b < 0 else b)
+        if a is None:
+            a = 0.0 if place is not None else max(0.0, b - MIN_STOP_LENGTH_M)
+        elif a < 0:
+            a += length
+        return a, b
+
+    def step(self, t: float, ids, lanes, pos, speed, parked=None) -> None:
+        """Timestep ``t`` [s] (the FCD's time) with its vehicle rows: ids, lanes (as SUMO
+        wrote them, parked vehicles' too), positions [m], speeds [m/s], and which rows are
+        parked (off the lane; their stop is served, not booked)."""
+        starting, ending = [], []
+        speed = np.asarray(speed, float)
+        if self.data:  # the vehicles at a stop: does it end in this row?
+            rows = dict(zip(ids, range(len(ids))))
+            for vid, cur in list(self.data.items()):
+                j = rows.get(vid)
+                if j is None:
+                    continue
+                if t >= cur.end_t - 1e-6 or (cur.at_rest and speed[j] > 0.0):
+                    st = self.state[vid]
+                    if t < cur.end_t - 1e-6 and np.isfinite(cur.end_t):  # not its stop after all
+                        st[1] = cur.index
+                        self.left_early += 1
+                    st[3] = None
+                    del self.data[vid]
+                    ending.append(vid)
+                elif speed[j] == 0.0:
+                    cur.at_rest = True
+        for j in np.flatnonzero(speed <= STANDSTILL_MPS):
+            vid = ids[j]
+            st = self.state.get(vid) or self._state(vid)
+            stops, nxt = st[0], st[1]
+            if st[3] is not None or nxt >= len(stops):
+                continue
+            for k in range(nxt, len(stops)):
+                s = stops[k]
+                if s.place is not None and s.place not in self.declared.places:
+                    continue
+                span = self._span(s, lanes[j])
+                if span is None or not (span[0] - STOP_TOLERANCE_M <= pos[j] <= span[1] + STOP_TOLERANCE_M):
+                    continue
+                st[1] = k + 1
+                self.matched += 1
+                if parked is not None and parked[j]:
+                    break  # parked there: not booked anyway
+                until = -1.0 if s.until is None else s.until + st[2]
+                if until != until:  # NaN: a flow whose period is no number
+                    self.until_unknown += 1
+                    until = -1.0
+                dur = -1.0 if s.duration is None else s.duration
+                # SUMO ends it at the later of arrival + duration and until; neither
+                # given: when the vehicle drives off
+                ends = [x for x, given in ((t + dur, dur >= 0), (until, until >= 0)) if given]
+                end_t = max(ends) if ends else np.inf
+                cur = SimpleNamespace(duration=dur, until=until, arrival=t, end_t=end_t,
+                                      at_rest=speed[j] == 0.0, index=k)
+                st[3] = cur
+                self.data[vid] = cur
+                starting.append(vid)
+                break
+        self.starting, self.ending = tuple(starting), tuple(ending)
+
+    def forget(self, vids) -> None:
+        for v in vids:
+            self.state.pop(v, None)
+            self.data.pop(v, None)
+
+    def report(self) -> dict:
+        """What the replay matched and what it could not know (summary.json)."""
+        d = self.declared
+        lists = [*d.vehicles.values(), *(f[0] for f in d.flows.values())]
+        places = sum(1 for stops in lists for s in stops if s.place is not None and s.place not in d.places)
+        return {"vehicles_with_declared_stops": self.vehicles, "stops_reached": self.matched,
+                "vehicles_whose_stops_are_not_known": dict(sorted(self.not_known.items())),
+                "declared_stops_on_unknown_stopping_places": places,
+                "stops_whose_until_is_not_known": self.until_unknown,
+                "stops_left_before_their_end": self.left_early}
