@@ -451,3 +451,21 @@ def test_streamed_repeated_trip_id_names_the_file(tmp_path, capsys, command, suf
     assert cli_main(args) == 2
     err = capsys.readouterr().err
     assert f"{f}: trip_id 'T7' appears in more than one place" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("ext", ["parquet", "csv"])
+def test_a_missing_required_column_names_the_files_own_columns(tmp_path, capsys, ext):
+    """The streamed reader reads only the columns a run needs; a file without 'time_s' was
+    refused listing those ("columns: trip_id" for a vendor file of 15 columns). It names
+    the file's own columns, as the in-memory reader does."""
+    df = pd.DataFrame({"Time": [0.0, 0.1, 0.2], "DAActualSpeed": [1.0, 1.1, 1.2], "REESSCurrent": [3.0, 3.0, 3.0]})
+    p = tmp_path / f"vendor.{ext}"
+    df.to_parquet(p) if ext == "parquet" else df.to_csv(p, index=False)
+    for engine in ("local", "memory"):
+        code = cli_main(["calibrate", str(p), "--vehicle", "prius3", "--out", str(tmp_path / "eq.toml"),
+                         "--engine", engine])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1, err
+        # (the in-memory reader lists the trip_id it adds first)
+        assert "missing required column 'time_s' (columns: " in err[0], err
+        assert "Time, DAActualSpeed, REESSCurrent)" in err[0], err

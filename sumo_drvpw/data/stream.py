@@ -31,7 +31,8 @@ from typing import Iterator
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.log import DERIVED, FLAGS, NUMERIC, ReadOptions, expand_paths, from_frame, read_error
+from sumo_drvpw.data.log import (DERIVED, FLAGS, NUMERIC, REQUIRED, ReadOptions, _validate, expand_paths,
+                                 from_frame, read_error)
 from sumo_drvpw.data.plausible import check_header
 from sumo_drvpw.errors import UserError
 
@@ -150,6 +151,7 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
         check_header(p)  # a column named twice, a CSV not separated by commas
         if _is_parquet(p):
             f = _parquet_file(p, read_dictionary=_text_trip_id(p) if categorical else None)
+            _require(p, f.schema_arrow.names)
             cols = None if columns is None else [c for c in f.schema_arrow.names if c in columns]
             groups, at = None, 0
             if part.start is not None:
@@ -171,11 +173,20 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
             # every column read, then the wanted kept: with usecols, pandas drops the extra
             # fields of a row longer than the header silently (the memory engine refuses it)
             for df in pd.read_csv(p, chunksize=rows, low_memory=False):
+                _require(p, df.columns)
                 yield df if columns is None else df[[c for c in df.columns if c in columns]]
     except pd.errors.EmptyDataError:
         raise UserError(f"{p}: empty file (no header, no rows)") from None
     except (OSError, ValueError, pd.errors.ParserError) as e:
         raise read_error(p, e) from None
+
+
+def _require(p: Path, names) -> None:
+    """A file without a required column is refused as the whole-file reader refuses it,
+    naming the file's own columns (a batch holds only the columns a run reads: the message
+    listed those)."""
+    if any(c not in names for c in REQUIRED):
+        _validate(pd.DataFrame(columns=list(names)), p)
 
 
 def _concat(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
