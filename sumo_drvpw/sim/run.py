@@ -19,8 +19,9 @@ from sumo_drvpw.sim.sumo_start import close_sumo, start_sumo
 from sumo_drvpw.sim.vtypes import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER,
                                    SUMO_DEFAULT_VTYPES, energy_carrier, equation_carrier,
                                    read_vtypes)
-from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, is_output_option, redirect_additional_outputs,
-                                         sumo_output_args)
+from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, is_output_option, naming_leaves_folder,
+                                         output_naming, prepare_output_folder,
+                                         redirect_additional_outputs, sumo_output_args, written_file)
 
 __all__ = ["run_scenario", "start_sumo", "close_sumo", "VTypeResolver"]
 
@@ -284,6 +285,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     sc = load_scenario(scenario_path, **overrides)
     if sc.trace and out_dir is None:
         raise UserError("outputs.trace needs an output directory")
+    naming = _output_naming(sc)
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     args = list(sc.sumo_args)
@@ -320,6 +322,8 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             args += sumo_output_args(redirect, sumo_dir)
     add_args, moved = ([], {}) if copies is None else redirect_additional_outputs(
         sc.additional_files, sumo_dir, Path(copies.name))
+    for f in [sumo_dir / n for names in moved.values() for n in names]:
+        prepare_output_folder(f, naming)  # a prefix's folder part: SUMO does not create it
     if add_args and "-a" in args:  # a scenario's sumo.additional: loaded as the copies
         i = args.index("-a")
         del args[i:i + 2]
@@ -335,6 +339,13 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             tripinfo = Path(tmpdir.name) / "tripinfo.xml"
             args += ["--tripinfo-output", str(tripinfo), "--tripinfo-output.write-unfinished",
                      "true"]
+    ours = {Path(d).resolve() for d in (scratch and scratch.name, tmpdir and tmpdir.name,
+                                         out_dir is not None and Path(out_dir) / SUMO_OUTPUT_DIR) if d}
+    for i in range(len(args) - 1):  # outputs sent into those folders: a prefix's folder part
+        if args[i].startswith("--") and is_output_option(args[i][2:]):
+            for f in args[i + 1].split(","):
+                if f.strip() and Path(f.strip()).resolve().parent in ours:
+                    prepare_output_folder(Path(f.strip()).resolve(), naming)
     from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
 
     # the route files' vTypes before SUMO reads them: a bad mass is named with its file and
@@ -362,24 +373,29 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
                 acc.close_trace()
             close_sumo(conn)
         check_vtype_filter(sc, acc.ledger)
-        if tripinfo is not None:
+        if tripinfo is not None:  # as SUMO named it (output-prefix, output-suffix)
             try:
-                result.sumo_device = read_tripinfo_emissions(tripinfo)
+                result.sumo_device = read_tripinfo_emissions(written_file(tripinfo, naming))
             finally:
                 if tmpdir is not None:
                     tmpdir.cleanup()
             result.summary["sumo_device"] = result.sumo_device_comparison().to_dict("records")
         notes = []
+        def written(names: list[str]) -> str:  # as SUMO named them, in OUT/sumo/
+            return ", ".join(written_file(sumo_dir / n, naming).relative_to(sumo_dir).as_posix()
+                             for n in names)
+
         if redirect and out_dir is not None:
             notes.append(f"SUMO outputs the config sets were written into {SUMO_OUTPUT_DIR}/: "
-                         + ", ".join(f"{k} ({Path(v).name})" for k, v in redirect.items()))
+                         + ", ".join(f"{k} ({written([Path(f.strip()).name for f in v.split(',') if f.strip()])})"
+                                     for k, v in redirect.items()))
         if drop_ti:
             notes.append("the config's tripinfo-output was replaced by the emissions comparison's "
                          "(outputs.sumo_device) and not kept")
         if moved and out_dir is not None:
             notes.append(f"outputs declared in additional files were written into "
                          f"{SUMO_OUTPUT_DIR}/: " + "; ".join(
-                             f"{f}: {', '.join(names)}" for f, names in moved.items()))
+                             f"{f}: {written(names)}" for f, names in moved.items()))
         elif sc.additional_outputs and not moved:
             notes.append("outputs declared in additional files were written by SUMO beside those "
                          "files: " + "; ".join(sc.additional_outputs))
@@ -395,6 +411,24 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         if copies is not None:
             copies.cleanup()
     return result
+
+
+def _output_naming(sc) -> dict[str, str]:
+    """The output-prefix and output-suffix SUMO takes in this run (its options', else its
+    config's); UserError when one would put the run's outputs outside OUT/sumo/."""
+    from sumo_drvpw.sim.sumo_start import scenario_option
+
+    naming = output_naming(lambda k: scenario_option(sc, k))
+    key = naming_leaves_folder(naming)
+    if key is not None:
+        args = list(sc.sumo_args)
+        where = (f"{sc.path or '<scenario>'}: sumo.options" if any(
+            a == f"--{key}" or a.startswith(f"--{key}=") for a in args)
+            else f"SUMO config {args[args.index('-c') + 1]}")
+        raise UserError(f"{where}: {key} '{naming[key]}' leads out of the folder the run's SUMO "
+                        f"outputs are written into ({SUMO_OUTPUT_DIR}/, '..'); give one without "
+                        "'..' (a folder part names a folder inside it)")
+    return naming
 
 
 def read_tripinfo_emissions(path: Path):

@@ -147,3 +147,87 @@ def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
     if not moved:
         return [], {}
     return ["--additional-files", ",".join(loaded)], moved
+
+
+# ------------------------------------------------- SUMO's output-prefix and output-suffix
+#: the options that rename every output file SUMO writes (SUMO 1.28)
+NAMING_OPTIONS = ("output-prefix", "output-suffix")
+#: what SUMO puts for the first "TIME" in either: the time its options were loaded
+#: (OutputDevice::getDevice: OptionsIO::getLoadTime, strftime "%Y-%m-%d-%H-%M-%S")
+_STAMP_GLOB = "-".join(["[0-9]" * 4] + ["[0-9]" * 2] * 5)
+#: an extension SUMO's output-suffix goes before has at most this many characters
+_SUFFIX_EXT_MAX = 4
+
+
+def output_naming(option) -> dict[str, str]:
+    """The output-prefix and output-suffix a run's SUMO takes (``option``: key → the value
+    the scenario's options or its config give, or None; sumo_start.scenario_option);
+    only those that are set and not empty."""
+    return {k: v for k in NAMING_OPTIONS if (v := option(k))}
+
+
+def sumo_file_name(path: str, naming: dict[str, str], stamp: str = "TIME") -> str:
+    """The file SUMO writes for an output it is told to write to ``path``, given
+    ``output_naming``; its first "TIME" (in either) becomes ``stamp``.
+
+    The prefix goes before the path's last component, as SUMO does it
+    (OutputDevice::getDevice → FileHelpers::prependToLastPathComponent, eclipse-sumo/sumo
+    src/utils/iodevices/OutputDevice.cpp, utils/common/FileHelpers.cpp): "run1_" turns
+    ``d/ti.xml`` into ``d/run1_ti.xml``, and a prefix with a folder part ("res/run1_")
+    names a folder below the output's (``d/res/run1_ti.xml``), which SUMO does not create.
+    The suffix then goes before the extensions of up to four characters each that end the
+    (prefixed) last component ("_S": ``ti.xml.gz`` → ``ti_S.xml.gz``, ``a.longpart.xml`` →
+    ``a.longpart_S.xml``, with prefix "P.1_" ``a.b.xml`` → ``P_S.1_a.b.xml``), at its end
+    when there is none (``ns.parquet`` → ``ns.parquet_S``) — as SUMO 1.28 writes them
+    (tests/test_sim_sumo_names.py runs it)."""
+    def split(p: str) -> tuple[str, str]:
+        cut = max(p.rfind("/"), p.rfind("\\")) + 1
+        return p[:cut], p[cut:]
+
+    head, name = split(path)
+    head, name = split(head + naming.get("output-prefix", "").replace("TIME", stamp, 1) + name)
+    suffix = naming.get("output-suffix", "").replace("TIME", stamp, 1)
+    if suffix:
+        stem = name
+        while "." in stem and len(stem.rsplit(".", 1)[1]) <= _SUFFIX_EXT_MAX:
+            stem = stem.rsplit(".", 1)[0]
+        name = stem + suffix + name[len(stem):]
+    return head + name
+
+
+def naming_leaves_folder(naming: dict[str, str]) -> str | None:
+    """The first of output-prefix and output-suffix whose folder part leads out of the
+    folder an output is written into (``../``: SUMO would write the run's outputs outside
+    ``OUT/sumo/``), or None. An absolute prefix stays inside: SUMO puts it after the
+    output's folder (``d/`` + ``/x/`` = ``d//x/``)."""
+    import posixpath
+
+    for key, val in naming.items():
+        probe = posixpath.normpath("d/" + sumo_file_name("x", {key: val}).replace("\\", "/"))
+        if not probe.startswith("d/"):
+            return key
+    return None
+
+
+def prepare_output_folder(path: Path, naming: dict[str, str]) -> None:
+    """Create the folder SUMO writes the output ``path`` into (a prefix's folder part
+    names one below ``path``'s, which SUMO does not create); one named by "TIME" is left
+    to SUMO."""
+    target = Path(sumo_file_name(str(path), naming))
+    if target.parent == Path(sumo_file_name(str(path), naming, "\0")).parent:
+        target.parent.mkdir(parents=True, exist_ok=True)
+
+
+def written_file(path: Path, naming: dict[str, str]) -> Path:
+    """The file SUMO wrote for an output it was told to write to ``path`` (its name as
+    :func:`sumo_file_name` has it; "TIME" matched against what is there, the newest if
+    several); the name with "TIME" in it when nothing was written."""
+    import glob
+
+    target = Path(sumo_file_name(str(path), naming))
+    mark = "\0"
+    if sumo_file_name(str(path), naming, mark) == str(target):  # no TIME in either
+        return target
+    pattern = glob.escape(sumo_file_name(str(path), naming, mark)).replace(mark, _STAMP_GLOB)
+    found = sorted(glob.glob(pattern))
+    return Path(found[-1]) if found else target

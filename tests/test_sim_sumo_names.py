@@ -1,0 +1,143 @@
+"""SUMO's output-prefix and output-suffix in a run: the config's outputs land in OUT/sumo/
+under the names SUMO gives them (and are named so in the run's notes), the run's own
+tripinfo (the emissions comparison) is found under its prefixed name, and a prefix leading
+out of OUT/sumo/ is refused. Real SUMO runs."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from sumo_drvpw.cli import main as cli_main
+
+pytest.importorskip("libsumo")
+
+REPO = Path(__file__).resolve().parent.parent
+BUILTIN = REPO / "sumo_drvpw" / "sim" / "builtin"
+DEVICE = '<emissions><device.emissions.probability value="1"/></emissions>'
+
+
+def _scenario(tmp_path: Path, output: str, more: str = "") -> Path:
+    """The built-in city routes in a folder of their own, with a config setting ``output``
+    (and ``more``) and an additional file declaring an edgeData output."""
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    for f in ("city.rou.xml", "prius3.vtype.xml"):
+        shutil.copy(BUILTIN / "scenarios" / f, sc / f)
+    (sc / "ed.add.xml").write_text('<additional><edgeData id="e1" file="ed_out.xml"/></additional>\n')
+    cfg = sc / "c.sumocfg"
+    cfg.write_text(f"""<configuration>
+    <input><net-file value="{BUILTIN / 'networks' / 'city.net.xml'}"/><route-files value="city.rou.xml"/>
+           <additional-files value="prius3.vtype.xml,ed.add.xml"/></input>
+    <output>{output}</output>
+    {more}
+    <time><begin value="0"/><end value="120"/><step-length value="0.5"/></time>
+    <report><no-warnings value="true"/></report>
+</configuration>
+""")
+    return cfg
+
+
+def _cli(args, capsys):
+    code = cli_main(["run", *map(str, args), "--no-figures", "--no-progress"])
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return code, err
+
+
+def _files(folder: Path) -> list[str]:
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+
+
+def test_output_prefix_names_the_outputs_and_the_comparison_reads_its_tripinfo(tmp_path, capsys):
+    """output-prefix "run1_" with the config's tripinfo (which the emissions comparison
+    reads back), log and an edgeData an additional file declares: before, the run failed
+    ("SUMO tripinfo …/sumo/ti.xml: cannot read", exit 2) since SUMO wrote run1_ti.xml; and
+    without the comparison its notes named ti.xml, sim.log.txt and ed_out.xml, files that
+    are not there."""
+    cfg = _scenario(tmp_path, '<tripinfo-output value="ti.xml"/><output-prefix value="run1_"/>'
+                    '<log value="sim.log.txt"/>', DEVICE)
+    before = _files(cfg.parent)
+    out = tmp_path / "o"
+    code, err = _cli([cfg, "--out", out], capsys)
+    assert code == 0, err
+    assert _files(out / "sumo") == ["run1_ed_out.xml", "run1_sim.log.txt", "run1_ti.xml"]
+    assert "tripinfo-output (run1_ti.xml)" in err and "log (run1_sim.log.txt)" in err
+    assert "ed.add.xml: run1_ed_out.xml" in err and "(ti.xml)" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["sumo_device"] and summary["sumo_device"][0]["vehicles"] > 0
+    ids = {t.get("id") for t in ET.parse(out / "sumo" / "run1_ti.xml").getroot().iter("tripinfo")}
+    assert summary["sumo_device"][0]["vehicles"] <= len(ids)
+    assert _files(cfg.parent) == before      # inputs untouched, nothing written beside them
+
+
+def test_prefix_with_folder_and_time_and_a_suffix_with_the_runs_own_tripinfo(tmp_path, capsys):
+    """A prefix with a folder part and SUMO's TIME placeholder, and a suffix: the outputs
+    land in OUT/sumo/res/ (the folder SUMO would need, made for it) as
+    <load time>_sum_S.xml …, named so in the notes; the emissions comparison's own
+    tripinfo (the config writes none) is found under the same renaming. Before: SUMO
+    refused to start ("Could not build output file …/sumo/res/…")."""
+    cfg = _scenario(tmp_path, '<summary value="sum.xml"/><output-prefix value="res/TIME_"/>'
+                    '<output-suffix value="_S"/>', DEVICE)
+    out = tmp_path / "o"
+    code, err = _cli([cfg, "--out", out], capsys)
+    assert code == 0, err
+    files = _files(out / "sumo")
+    assert len(files) == 2 and all(f.startswith("res/") for f in files), files
+    summ = next(f for f in files if f.endswith("_sum_S.xml"))
+    stamp = summ[len("res/"):-len("_sum_S.xml")]
+    assert len(stamp) == 19 and stamp[4] == "-" and "res/" + stamp + "_ed_out_S.xml" in files
+    assert f"summary ({summ})" in err and f"ed.add.xml: res/{stamp}_ed_out_S.xml" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["sumo_device"] and summary["sumo_device"][0]["vehicles"] > 0
+
+
+def test_a_prefix_leading_out_of_the_sumo_folder_is_refused(tmp_path, capsys):
+    """"../x_" would have SUMO write the config's outputs beside OUT/sumo/ (among the run's
+    own files) and its tripinfo outside the run's temporary folder: one line naming the
+    config, the option and its value, exit 2, nothing written."""
+    cfg = _scenario(tmp_path, '<tripinfo-output value="ti.xml"/><output-prefix value="../x_"/>')
+    out = tmp_path / "o"
+    code, err = _cli([cfg, "--out", out], capsys)
+    assert code == 2 and err.count("\n") == 1, err
+    assert f"SUMO config {cfg}: output-prefix '../x_'" in err
+    assert not out.exists() and not (tmp_path / "x_ti.xml").exists()
+    from sumo_drvpw.sim.sumo_outputs import naming_leaves_folder
+
+    assert naming_leaves_folder({"output-prefix": "/abs/x_"}) is None   # SUMO: d//abs/x_…
+    assert naming_leaves_folder({"output-prefix": "a/../../x_"}) == "output-prefix"
+
+
+@pytest.mark.parametrize("naming", [
+    {"output-prefix": "P.1_", "output-suffix": "_S"},
+    {"output-suffix": "_TIME.x"},
+    {"output-prefix": "TIME_", "output-suffix": "_S"}])
+def test_sumo_file_name_is_what_sumo_writes(tmp_path, naming):
+    """The names :func:`sumo_file_name` gives are those SUMO 1.28 writes (the suffix's
+    place — before extensions of up to four characters — is SUMO's behaviour, not read
+    from its source)."""
+    from sumo_drvpw.sim.sumo_outputs import sumo_file_name
+
+    sumo_bin = Path(__import__("sumo").SUMO_HOME) / "bin" / "sumo"
+    outputs = {"tripinfo-output": "a.b.xml", "summary-output": "s.abcde",
+               "fcd-output": "f.longpart.xml.gz", "vehroute-output": ".y.log", "log": "lg"}
+    args = [str(sumo_bin), "-n", str(BUILTIN / "networks" / "city.net.xml"),
+            "-r", str(BUILTIN / "scenarios" / "city.rou.xml"),
+            "-a", str(BUILTIN / "scenarios" / "prius3.vtype.xml"), "--end", "5", "--no-step-log"]
+    for k, v in outputs.items():
+        args += [f"--{k}", v]
+    for k, v in naming.items():
+        args += [f"--{k}", v]
+    subprocess.run(args, cwd=tmp_path, check=True, capture_output=True)
+    written = sorted(p.name for p in tmp_path.iterdir())
+    if any("TIME" in v for v in naming.values()):
+        stamp = next(n for n in written if n[:2] == "20" or "_20" in n)
+        stamp = stamp[stamp.index("20"):stamp.index("20") + 19]
+    else:
+        stamp = "TIME"
+    assert written == sorted(sumo_file_name(v, naming, stamp) for v in outputs.values())
