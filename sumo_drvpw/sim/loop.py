@@ -358,10 +358,11 @@ class Stepper:
             for pid in conn.simulation.getDepartedPersonIDList():
                 self.resolve.skip_person(conn.person.getTypeID(pid))
         departed = conn.simulation.getDepartedIDList()
+        back = self.teleport_ends()
         if self.arrived is not None:
             gone = self.arrived()
             if not self.is_replay:  # and those a script removed between steps
-                gone = list(gone) + self.reader.removed(self.last_ids, ids, gone, departed)
+                gone = list(gone) + self.reader.removed(self.last_ids, ids, gone, departed, back)
             self.last_ids = ids
             if gone:
                 ledger.retire([vmap[v] for v in gone if v in vmap])
@@ -373,7 +374,7 @@ class Stepper:
                 if ledger.flush_due():  # before the new ones come: memory ≤ running vehicles
                     self.flush()
                     vmap = self.vmap
-        ends = np.array([vmap[v] for v in self.teleport_ends() if v in vmap], np.int64)  # teleports ended
+        ends = np.array([vmap[v] for v in back if v in vmap], np.int64)  # teleports ended
         ledger.veh_at[ends, 2] = np.nan  # (a replay: back after steps without a row): the rise starts afresh
         starts, start_ids = [], []  # vehicles first seen departing: trips that start
         for vid in departed:

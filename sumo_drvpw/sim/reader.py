@@ -1,6 +1,6 @@
 """Reading the per-vehicle state of a step from SUMO: plain getters mapped over the id list
-(libsumo: the cheapest way, design.md) or a subscription per vehicle (traci: each getter
-is a socket round trip)."""
+(libsumo: the cheapest way, design.md) or, through traci (each getter a socket round trip),
+one context subscription on the simulation that returns every vehicle's variables."""
 
 from __future__ import annotations
 
@@ -10,6 +10,14 @@ import numpy as np
 _VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE = 0x40, 0x72, 0x43
 _VAR_LANE_ID, _VAR_LANEPOSITION, _VAR_SLOPE = 0x51, 0x56, 0x36
 _TRACI_VARS = (_VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE, _VAR_LANE_ID, _VAR_LANEPOSITION, _VAR_SLOPE)
+_CMD_GET_VEHICLE_VARIABLE = 0xa4
+#: the context subscription's range [m]: the whole network around the simulation's "" (SUMO
+#: collects the vehicles on the lanes within it every step, so a vehicle a script removed is
+#: simply not among them; a subscription per vehicle made SUMO answer each of its variables
+#: with an error, and the traci client print one, in the step after the removal: SUMO drops a
+#: vehicle's subscriptions only when the vehicle arrives in that step,
+#: TraCIServer::postProcessSimulationStep)
+_EVERYWHERE_M = 1e9
 
 
 class Reader:
@@ -19,6 +27,7 @@ class Reader:
         self.conn = conn
         self.subs = use_subscriptions
         self.need = need  # speed, accel, angle, lane, position, slope
+        self.subscribed = False
 
         V = conn.vehicle
         self.getters = [V.getSpeed, V.getAcceleration, V.getAngle, V.getLaneID,
@@ -42,39 +51,50 @@ class Reader:
                 None if not need or (skip_lanes and k in (3, 4))
                 else list(map(g, ids)) if k == 3 else np.fromiter(map(g, ids), float, n)
                 for k, (g, need) in enumerate(zip(self.getters, self.need)))
-        V = self.conn.vehicle
-        res = V.getAllSubscriptionResults()
+        res = self.conn.simulation.getContextSubscriptionResults("") or {}
         rows = [res.get(vid) for vid in ids]
-        missing = [vid for vid, r in zip(ids, rows) if not r]
-        if missing:  # vehicles present before our first step (e.g. a loaded state)
-            for vid in missing:
-                V.subscribe(vid, _TRACI_VARS)
-            res = V.getAllSubscriptionResults()
-            rows = [res[vid] for vid in ids]
+        for j, r in enumerate(rows):
+            if not r:  # a vehicle on no lane SUMO collects from: its getters, this step only
+                rows[j] = {k: g(ids[j]) for k, g in zip(_TRACI_VARS, self.getters)}
         cols = [[r[k] for r in rows] for k in _TRACI_VARS]
         return tuple(c if k == 3 else np.asarray(c, float) for k, c in enumerate(cols))
 
-    def removed(self, last_ids, ids, gone, departed) -> list:
+    def removed(self, last_ids, ids, gone, departed, back=()) -> list:
         """Vehicles of the last step that are gone without being in this step's arrived list
         ``gone``: removed by a script between steps (SUMO lists a vehicle removed through TraCI
         as arrived at once, in the list a step listener has already read). Looked for only when
-        the counts say a vehicle left unseen; a teleporting vehicle also leaves the id list but
-        SUMO still knows it, a removed one it does not."""
-        if last_ids is None or len(ids) == len(last_ids) - len(gone) + len(departed):
+        the counts say a vehicle left unseen — the counts take the vehicles back from a
+        teleport this step (``back``, getEndingTeleportIDList), which are in no departed list:
+        else a removal in the step a teleport ends went unseen. A teleporting vehicle also
+        leaves the id list but SUMO still has it loaded, a removed one it has not: one
+        getLoadedIDList then (no getter on a vehicle that is gone: through traci SUMO prints
+        an error line for each)."""
+        if last_ids is None:
+            return []
+        came = sum(1 for v in back if v not in last_ids) if back else 0
+        if len(ids) == len(last_ids) - len(gone) + len(departed) + came:
             return []
         now = set(ids).union(gone)
+        lost = [vid for vid in last_ids if vid not in now]
+        if not lost:
+            return []
+        loaded = getattr(self.conn.vehicle, "getLoadedIDList", None)
+        if loaded is not None:
+            known = set(loaded())
+            return [vid for vid in lost if vid not in known]
         out = []
-        for vid in last_ids:
-            if vid not in now:
-                try:
-                    self.conn.vehicle.getTypeID(vid)
-                except Exception as e:  # TraCIException: "Vehicle '…' is not known"
-                    if type(e).__name__ == "FatalTraCIError":  # the connection itself failed
-                        raise
-                    out.append(vid)
+        for vid in lost:  # a connection without getLoadedIDList: ask for each
+            try:
+                self.conn.vehicle.getTypeID(vid)
+            except Exception as e:  # TraCIException: "Vehicle '…' is not known"
+                if type(e).__name__ == "FatalTraCIError":  # the connection itself failed
+                    raise
+                out.append(vid)
         return out
 
     def subscribe_existing(self, ids):
-        if self.subs:
-            for vid in ids:
-                self.conn.vehicle.subscribe(vid, _TRACI_VARS)
+        """Through traci: the one context subscription, made at the first call."""
+        if self.subs and not self.subscribed:
+            self.conn.simulation.subscribeContext("", _CMD_GET_VEHICLE_VARIABLE, _EVERYWHERE_M,
+                                                  _TRACI_VARS)
+            self.subscribed = True
