@@ -141,3 +141,16 @@ def test_sumo_file_name_is_what_sumo_writes(tmp_path, naming):
     else:
         stamp = "TIME"
     assert written == sorted(sumo_file_name(v, naming, stamp) for v in outputs.values())
+
+
+def test_written_file_finds_the_stamp_or_an_unprefixed_file(tmp_path):
+    """written_file: "TIME" matched against the files there; a file SUMO opened without
+    the prefix (its save-configuration, measured) found under its own name."""
+    from sumo_drvpw.sim.sumo_outputs import written_file
+
+    (tmp_path / "r_2026-01-02-03-04-05_ti.xml").write_text("x")
+    assert written_file(tmp_path / "ti.xml", {"output-prefix": "r_TIME_"}).name == \
+        "r_2026-01-02-03-04-05_ti.xml"
+    (tmp_path / "c.sumocfg").write_text("x")
+    assert written_file(tmp_path / "c.sumocfg", {"output-prefix": "P_"}).name == "c.sumocfg"
+    assert written_file(tmp_path / "none.xml", {"output-prefix": "P_"}).name == "P_none.xml"

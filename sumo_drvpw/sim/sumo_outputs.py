@@ -219,15 +219,17 @@ def prepare_output_folder(path: Path, naming: dict[str, str]) -> None:
 
 
 def written_file(path: Path, naming: dict[str, str]) -> Path:
-    """The file SUMO wrote for an output it was told to write to ``path`` (its name as
-    :func:`sumo_file_name` has it; "TIME" matched against what is there, the newest if
-    several); the name with "TIME" in it when nothing was written."""
+    """The file SUMO wrote for an output it was told to write to ``path``: its name as
+    :func:`sumo_file_name` has it ("TIME" matched against what is there, the newest if
+    several), or ``path`` itself when only that is there (SUMO opens some files without
+    the prefix: OutputDevice::getDevice's usePrefix); the renamed name when neither is."""
     import glob
 
     target = Path(sumo_file_name(str(path), naming))
     mark = "\0"
-    if sumo_file_name(str(path), naming, mark) == str(target):  # no TIME in either
-        return target
-    pattern = glob.escape(sumo_file_name(str(path), naming, mark)).replace(mark, _STAMP_GLOB)
-    found = sorted(glob.glob(pattern))
-    return Path(found[-1]) if found else target
+    if sumo_file_name(str(path), naming, mark) != str(target):  # TIME in either
+        pattern = glob.escape(sumo_file_name(str(path), naming, mark)).replace(mark, _STAMP_GLOB)
+        found = sorted(glob.glob(pattern))
+        if found:
+            return Path(found[-1])
+    return path if not target.exists() and path.exists() else target
