@@ -119,6 +119,15 @@ def repo_root() -> Path:
     return Path(__file__).resolve().parent.parent
 
 
+def folder_given(p: Path, what: str, suffixes: tuple[str, ...]) -> str:
+    """The message for a folder given where a file is read: its files of those suffixes
+    (the first few), or that it has none."""
+    names = sorted(f.name for f in p.iterdir() if f.is_file() and f.suffix in suffixes)
+    listed = ", ".join(names[:6]) + (", …" if len(names) > 6 else "")
+    return (f"{p} is a folder; the {what} is a file in it" + (f": {listed}" if names else
+            f", and it has no {' or '.join('*' + x for x in suffixes)} file"))
+
+
 def read_toml(path, what: str) -> dict:
     """Parse a TOML file; a missing or invalid file is a UserError naming it.
 
@@ -132,6 +141,8 @@ def read_toml(path, what: str) -> dict:
     from sumo_drvpw.errors import UserError
 
     p = Path(path)
+    if p.is_dir():
+        raise UserError(folder_given(p, what, (".toml",)))
     if not p.is_file():
         raise UserError(f"{what} not found: {p}")
     try:

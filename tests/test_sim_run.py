@@ -277,6 +277,16 @@ def test_cli_bad_inputs(tmp_path, capsys):
     out = tmp_path / "o"
     code, err = _cli([tmp_path / "missing.toml", "--out", out], capsys)
     assert code == 2 and "scenario file not found" in err
+    # a scenario's folder (it was "scenario file not found" though the folder exists): its
+    # SUMO configs and scenario files named; a folder as an equation file: it has none
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    for f in ("run.sumocfg", "b.toml", "notes.txt"):
+        (sc / f).write_text("")
+    code, err = _cli([sc, "--out", out], capsys)
+    assert code == 2 and err.strip().endswith(f"{sc} is a folder; the scenario is a file in it: b.toml, run.sumocfg")
+    code, err = _cli(["city", "--equation", tmp_path / "sc" / "..", "--out", out], capsys)
+    assert code == 2 and "is a folder; the equation file is a file in it, and it has no *.toml file" in err
     bad_key = tmp_path / "k.toml"
     bad_key.write_text('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\nbegn = 0\n')
     code, err = _cli([bad_key, "--out", out], capsys)

@@ -24,7 +24,7 @@ from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_vclass, load_equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import additional_outputs, is_output_option
-from sumo_drvpw.fileio import read_toml
+from sumo_drvpw.fileio import folder_given, read_toml
 from sumo_drvpw.model.terms import parse_term
 
 DEFAULT_HIGHWAY_TYPES = ("highway.motorway", "highway.motorway_link", "highway.trunk",
@@ -329,9 +329,10 @@ def bundled_scenario(name: str) -> Path:
 
 
 def scenario_path(spec) -> Path:
-    """A scenario file path, or a built-in scenario's when ``spec`` is a built-in name and
-    no such file exists."""
+    """A scenario file path, or a built-in scenario's when ``spec`` names one and no file."""
     p = Path(spec)
+    if p.is_dir():  # a scenario folder: name its SUMO configs and scenario files
+        raise UserError(folder_given(p, "scenario", (".sumocfg", ".toml")))
     if p.exists() or p.suffix in (".toml", ".sumocfg") or any(c in str(spec) for c in "/\\"):
         return p
     return bundled_scenario(str(spec))
@@ -546,7 +547,6 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                                      where, "road_class.highway_types", '["highway.motorway"]')),
         types=_strmap(rc.get("types", {}), where, "road_class.types"),
         edges=_strmap(rc.get("edges", {}), where, "road_class.edges"))
-
     sl = doc.get("slope", {})
     out = dict(doc.get("outputs", {}))
     for k in ("trace", "edgedata", "figures", "progress", "difference", "period", "sumo_device"):
