@@ -751,6 +751,8 @@ def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path,
     assert not s["chain"]["hvac_air_temperature_assumed"] and "no air temperature" not in err
     assert s["chain"]["signals_assumed_zero"] == ["heater_w"]
     assert "chain loads SUMO has no signal for were taken as 0: heater_w" in err
+    # no option gives a logged load a value in SUMO: the warning says what to use instead
+    assert "give them as constants" not in err and "[chain.hvac]" in err
     code, err = _cli(["city", "--air-temperature", "nan", "--out", tmp_path / "x"], capsys)
     assert code == 2 and "--air-temperature" in err and not (tmp_path / "x").exists()
 

@@ -560,7 +560,8 @@ def chain_warnings(chain: ChainLedger | None, chainless: dict | None = None) -> 
     if chain.assumed_zero:
         out.append("chain loads SUMO has no signal for were taken as 0: "
                    + ", ".join(sorted(chain.assumed_zero))
-                   + " (give them as constants, or use a chain without logged loads in SUMO)")
+                   + " (a logged load has no counterpart in SUMO: for a SUMO study use a chain whose "
+                   "heating and cooling follow the air temperature, [chain.hvac], as bmw_i3_battery's do)")
     return out
 
 
