@@ -1287,6 +1287,14 @@ def test_cli_dyno_chain_on_the_published_road_load(tmp_path, capsys):
     assert cli_main(["calibrate", str(log), "--vehicle", str(veh), "--target", "battery",
                      "--equation", "roadload_spec", "--out", str(tmp_path / "bad.toml")]) == 2
     assert "road_load.c_n_per_mps2 = -0.35" in capsys.readouterr().err
+    # without --equation the road load was fitted on the battery power itself (the chain's
+    # own target; on the JLU road trips η_t 0.974, IMPLAUSIBLE): refused, one line
+    veh.write_text(veh.read_text().replace("c_n_per_mps2 = -0.35", "c_n_per_mps2 = 0.35"))
+    assert cli_main(["calibrate", str(log), "--vehicle", str(veh), "--target", "battery",
+                     "--out", str(tmp_path / "none.toml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "logs no driving power" in err[0] and "--equation" in err[0], err
+    assert not (tmp_path / "none.toml").exists()
 
 
 def test_i3_cabin_start_and_warm_up_rate_by_hand():

@@ -301,6 +301,12 @@ def main_chain(args) -> int:
         from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
 
         mw = load_measured(args.logs, args.vehicle, ro)
+        if mw.source.startswith("battery"):  # the road load would be fitted on the chain's own target
+            raise UserError(f"--target {args.target}: {mw.log.describe()} logs no driving power (power_w, motor "
+                            "torque, the power-split signals), only battery V·I, so the road load cannot be "
+                            "told apart from the chain's losses; give its road load with --equation (e.g. "
+                            "roadload_spec, the vehicle's published A + B·v + C·v², or an equation calibrated "
+                            "on logs with a driving power)")
         res = calibrate(mw.inputs, mw.power_w, resolve_candidates(args.candidates), mask=mw.usable,
                         p_enter=args.p_enter, p_remove=args.p_remove, counts=mw.counts,
                         reference_mass_kg=float(mw.inputs.mass[mw.usable].mean()))
