@@ -178,3 +178,21 @@ def test_committed_report_is_regenerated():
                 if val is None or got is None:   # SUMO's tool absent on one side
                     continue
                 assert got["l_per_100km"] == pytest.approx(val["l_per_100km"], rel=1e-6), (name, cyc, who)
+
+
+def test_equation_option_replacing_the_class_equations_says_so(tmp_path, capsys):
+    """--equation replaces a bare config's class equations: the trucks and buses it leaves
+    unbooked are named with that reason (a newcomer saw them dropped silently)."""
+    pytest.importorskip("libsumo")
+    from sumo_drvpw.cli import main as cli_main
+
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    cfg = _config(sc)
+    assert cli_main(["run", str(cfg), "--out", str(tmp_path / "a"), "--no-figures", "--no-progress",
+                     "--end", "20", "--equation", "vsp_ldv1999"]) == 0
+    out = capsys.readouterr().out
+    assert "not booked (no equation for the vClass)" in out and "--equation replaced the scenario's" in out
+    assert cli_main(["run", str(cfg), "--out", str(tmp_path / "b"), "--no-figures", "--no-progress",
+                     "--end", "20"]) == 0
+    assert "--equation replaced" not in capsys.readouterr().out

@@ -57,6 +57,7 @@ def main(args: argparse.Namespace) -> int:
 
     if args.scenario is None and args.net is None:
         raise UserError("give --net (the network of the FCD) or --scenario")
+    replaced = bool(args.equation)  # the user's equations replace the scenario's
     if args.scenario is None and not args.equation:  # as `run X.sumocfg` does
         from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
 
@@ -102,7 +103,7 @@ def main(args: argparse.Namespace) -> int:
         meta["interrupted"] = bool(res.summary.get("interrupted"))
     from sumo_drvpw.cli.run import _print_summary
 
-    _print_summary(res.summary, args.out)
+    _print_summary(res.summary, args.out, replaced=replaced)
     if meta["interrupted"]:  # as run: the replayed part is written, marked interrupted
         print("interrupted: outputs cover the replayed part")
         return 130

@@ -96,7 +96,9 @@ def _run_many(args, scen: list[str], outs: list, overrides: dict) -> list[dict]:
                          scheduler=args.scheduler, workers=args.workers)
 
 
-def _print_summary(s: dict, out, label: str = "") -> None:
+def _print_summary(s: dict, out, label: str = "", replaced: bool = False) -> None:
+    """``replaced``: --equation replaced the scenario's equations (a vClass then unbooked
+    had one in the scenario or among a bare config's class equations)."""
     for w in s.get("warnings", []):
         print(f"warning: {label}{w}", file=sys.stderr)
     print(f"{label}{s['steps']} steps, {s['vehicles']} vehicles, "
@@ -104,7 +106,9 @@ def _print_summary(s: dict, out, label: str = "") -> None:
     skipped = s.get("skipped", {}).get("by_vclass", {})
     if skipped:
         print("  not booked (no equation for the vClass): "
-              + ", ".join(f"{c} {n}" for c, n in skipped.items()))
+              + ", ".join(f"{c} {n}" for c, n in skipped.items())
+              + (" — --equation replaced the scenario's equations: repeat it with one made for these"
+                 " vClasses (e.g. moves_single_unit_truck, moves_transit_bus)" if replaced else ""))
     idle = []
     for name, eq in s["equations"].items():
         if not any(d > 0 for d in eq.get("distance_m", {}).values()) and eq.get("vclasses"):
@@ -201,7 +205,7 @@ def main(args: argparse.Namespace) -> int:
             s = _run_many(args, scen, [tmp], overrides)[0] if dask else \
                 _run_one(scen[0], str(tmp), overrides)
             meta["interrupted"] = bool(s.get("interrupted"))
-        _print_summary(s, args.out)
+        _print_summary(s, args.out, replaced=bool(args.equation))
         if s.get("interrupted"):
             print("interrupted: outputs cover the simulated part")
             return 130
@@ -215,7 +219,7 @@ def main(args: argparse.Namespace) -> int:
         meta["scenarios"] = dict(zip(names, scen))
         meta["interrupted"] = any(s.get("interrupted") for s in summaries.values())
     for n, s in summaries.items():
-        _print_summary(s, Path(args.out) / n, f"[{n}] ")
+        _print_summary(s, Path(args.out) / n, f"[{n}] ", replaced=bool(args.equation))
     print(f"all runs side by side: {Path(args.out) / 'runs.csv'}")
     if meta["interrupted"]:  # one after the other: the sweep ended in the interrupted scenario
         left = [n for n in names if n not in summaries]
