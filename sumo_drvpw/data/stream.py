@@ -151,7 +151,6 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
         check_header(p)  # a column named twice, a CSV not separated by commas
         if _is_parquet(p):
             f = _parquet_file(p, read_dictionary=_text_trip_id(p) if categorical else None)
-            _require(p, f.schema_arrow.names)
             cols = None if columns is None else [c for c in f.schema_arrow.names if c in columns]
             groups, at = None, 0
             if part.start is not None:
@@ -173,7 +172,6 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
             # every column read, then the wanted kept: with usecols, pandas drops the extra
             # fields of a row longer than the header silently (the memory engine refuses it)
             for df in pd.read_csv(p, chunksize=rows, low_memory=False):
-                _require(p, df.columns)
                 yield df if columns is None else df[[c for c in df.columns if c in columns]]
     except pd.errors.EmptyDataError:
         raise UserError(f"{p}: empty file (no header, no rows)") from None
@@ -181,12 +179,19 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
         raise read_error(p, e) from None
 
 
-def _require(p: Path, names) -> None:
-    """A file without a required column is refused as the whole-file reader refuses it,
-    naming the file's own columns (a batch holds only the columns a run reads: the message
-    listed those)."""
+def check_required(path) -> None:
+    """A drive log without a required column is refused before its batches are read, as
+    the whole-file reader refuses it, naming the file's own columns (a batch holds only the
+    columns a run reads: the message listed those). An unreadable header is left to the
+    reading."""
+    p = Path(path)
+    try:
+        names = (_parquet_file(p).schema_arrow.names if _is_parquet(p)
+                 else list(pd.read_csv(p, nrows=0).columns))
+    except (UserError, OSError, ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
+        return
     if any(c not in names for c in REQUIRED):
-        _validate(pd.DataFrame(columns=list(names)), p)
+        _validate(pd.DataFrame(columns=names), p)
 
 
 def _concat(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
@@ -272,6 +277,7 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
 
         columns = set(columns) | needed_columns(options.measurement)
     stem = Path(part.path).stem
+    check_required(part.path)
     for df, off in whole_trips(part, rows, max_trip_rows, columns, categorical=True):
         first = off + (part.start or 0)
         name = part.path if first == 0 else f"{part.path} (batch from row {first})"
