@@ -160,3 +160,48 @@ def test_declared_stops_are_read_in_sumos_order_and_a_bad_one_is_named(tmp_path,
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1, err
     assert "r.rou.xml" in err and "vehicle 'v'" in err and "duration" in err and "'long'" in err
+
+
+def test_a_stop_on_a_route_of_an_additional_file_is_matched(tmp_path):
+    """SUMO loads the additional files before the route files: a bus line's route with its
+    stop defined in the .add.xml serves the route file's vehicle. The replay read the route
+    file first, found no route 'line' and booked the 600-s stop standing (7x the live
+    run's auxiliary energy, unsaid)."""
+    (tmp_path / "l.add.xml").write_text(
+        '<additional><busStop id="bs1" lane="c01c02_0" startPos="30" endPos="70"/>\n'
+        '<route id="line" edges="c00c01 c01c02 c02c03"><stop busStop="bs1" duration="600"/></route>'
+        "</additional>\n")
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="ev" vClass="passenger" mass="1500" emissionClass="Energy/unknown"/>\n'
+        '<vehicle id="bus" type="ev" route="line" depart="0" departSpeed="0"/></routes>\n')
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["{I3_BATTERY}"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n'
+        'additional = ["l.add.xml"]\nbegin = 0\nend = 900\nstep_length = 1.0\n'
+        'options = ["--no-warnings", "true"]\n[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n')
+    run_scenario(tmp_path / "s.toml", tmp_path / "live", options=["--fcd-output", str(tmp_path / "fcd.xml"),
+                                                                 "--precision", "6"])
+    process_fcd(tmp_path / "fcd.xml", scenario=tmp_path / "s.toml", out_dir=tmp_path / "o")
+    (lc, lt, ls), (rc, rt, rs) = _booked(tmp_path / "live"), _booked(tmp_path / "o")
+    assert ls["stops"] == rs["stops"] == 1 and rs["replay"]["vehicles_with_declared_stops"] == 1
+    assert rt["bus"] == pytest.approx(lt["bus"], rel=1e-9) and lt["bus"] < 300
+    np.testing.assert_allclose(rc["auxiliary_kwh"], lc["auxiliary_kwh"], rtol=1e-6)
+
+
+def test_fcd_on_dask_reports_the_buckets_switch_offs(recorded, tmp_path):
+    """fcd --engine dask: each bucket switches its own vehicles off; summary.json added them
+    up nowhere (the driver's accountant, which read no rows, reported 0 stops and no
+    declared stops) while the energies included them. Now the same as the serial replay."""
+    pytest.importorskip("distributed")
+    from sumo_drvpw.sim.fcd_dask import process_fcd_dask
+
+    d = recorded
+    process_fcd(d / "fcd.xml", scenario=d / "s.toml", out_dir=tmp_path / "o")
+    process_fcd_dask(d / "fcd.xml", tmp_path / "od", scenario=d / "s.toml", buckets=3, workers=1)
+    (rc, rt, rs), (dc, dtm, ds) = _booked(tmp_path / "o"), _booked(tmp_path / "od")
+    pd.testing.assert_series_equal(dtm, rt, rtol=1e-9)
+    assert rs["stops"] == 4 and ds["stops"] == rs["stops"]
+    assert ds["vehicle_s"] == pytest.approx(rs["vehicle_s"]) and rs["vehicle_s"] > 1000
+    assert ds["start_stop_vehicle_s"] == pytest.approx(rs["start_stop_vehicle_s"])
+    for k in ("vehicles_with_declared_stops", "stops_reached", "declared_stops_on_unknown_stopping_places",
+              "vehicles_whose_stops_are_not_known"):
+        assert ds["replay"][k] == rs["replay"][k], k

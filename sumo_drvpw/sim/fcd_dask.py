@@ -20,6 +20,7 @@ held at once.
 
 from __future__ import annotations
 
+import copy
 import os
 import shutil
 from functools import partial
@@ -74,7 +75,33 @@ def bucket_task(sc, fcd_file: str, part_dir: str, b: int, buckets: int, begin_s=
             "end": acc.stepper.now(), "dt": acc.stepper.dt, "missed_steps": acc.stepper.missed_steps,
             "interrupted": acc.interrupted, "skipped": r.skipped, "excluded": r.excluded,
             "assumptions": r.assumptions, "sumo_masses": r.sumo_masses, "seen_vtypes": list(r.cache),
-            "lanes": acc.fcd_lanes}
+            "lanes": acc.fcd_lanes,
+            "shutoff": acc.stepper.shutoff.summary() if acc.stepper.shutoff is not None else None}
+
+
+#: keys of the shut-off summary read from the files, the same in every bucket (not added up)
+_FROM_FILES = {"declared_stops_on_unknown_stopping_places"}
+
+
+def merge_shutoff(summaries: list) -> dict | None:
+    """The buckets' shut-off summaries (sim/shutoff.py ``summary``) as one: counts and
+    seconds added up (each bucket switched its own vehicles off), rules and what the files
+    say taken once."""
+    done = [s for s in summaries if s]
+    if not done:
+        return None
+    out = copy.deepcopy(done[0])
+
+    def add(a: dict, b: dict) -> None:
+        for k, v in b.items():
+            if isinstance(v, dict):
+                add(a.setdefault(k, {}), v)
+            elif isinstance(v, (int, float)) and not isinstance(v, bool) and k not in _FROM_FILES:
+                a[k] = a.get(k, 0) + v
+
+    for s in done[1:]:
+        add(out, s)
+    return out
 
 
 def merge_ledgers(ledgers: list):
@@ -194,6 +221,8 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
         if warn:
             extra["warnings"] = warn
         result = acc.result(extra)
+        # the driver's accountant read no rows: the switch-offs are the buckets'
+        result.summary["shut_off_at_long_stops"] = merge_shutoff([d["shutoff"] for d in done])
         check_vtype_filter(sc, led)
         write_published(result, out)
     finally:

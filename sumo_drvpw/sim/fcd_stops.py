@@ -25,7 +25,10 @@ vehicle drives off from rest, or at its planned end (the later of arrival + ``du
 and ``until``; SUMO ends it in that row), whichever comes first: from then the vehicle is
 booked standing again. A vehicle that drives off before a planned end was not at its
 stop after all (SUMO holds it there): the stop is open to be matched again, and counted
-(``stops_left_before_their_end``).
+(``stops_left_before_their_end``). At a stopping place SUMO starts the stop of a vehicle
+creeping up a queue inside its range only when the vehicle reaches its stopping position,
+a few steps after its first row at 0.1 m/s or slower, where the replay starts it: a stop
+with a ``duration`` then ends that much earlier here (booked standing).
 
 What the replay cannot place is booked standing, as the run would book a short stop:
 stops added while the run ran (TraCI, rerouters, taxis, parking reroutes), the stops of

@@ -4,7 +4,8 @@ The connection is passed in: the ``libsumo`` module, a ``traci`` connection, or 
 object with the same ``simulationStep``/``simulation``/``vehicle`` API (tests use a
 fake). With libsumo, plain getters mapped over the id list are the cheapest way to read
 (design.md: ≈1.15× a bare step vs 1.4–1.7× for subscriptions, which build Python dicts);
-with traci each getter is a socket round trip, so a subscription per vehicle is used.
+with traci each getter is a socket round trip, so one context subscription on the
+simulation reads every vehicle (sim/reader.py).
 
 Per step and vehicle: speed [m/s]; by default the rest follows from it and the network
 (see :class:`Physics`): acceleration as (v_t − v_t−1)/Δt, lane and position tracked under
