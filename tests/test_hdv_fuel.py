@@ -192,7 +192,7 @@ def test_equation_option_replacing_the_class_equations_says_so(tmp_path, capsys)
     assert cli_main(["run", str(cfg), "--out", str(tmp_path / "a"), "--no-figures", "--no-progress",
                      "--end", "20", "--equation", "vsp_ldv1999"]) == 0
     out = capsys.readouterr().out
-    assert "not booked (no equation for the vClass)" in out and "--equation replaced the scenario's" in out
+    assert "not booked (no equation for the vClass)" in out and "with --equation only the equations given are applied" in out
     assert cli_main(["run", str(cfg), "--out", str(tmp_path / "b"), "--no-figures", "--no-progress",
                      "--end", "20"]) == 0
-    assert "--equation replaced" not in capsys.readouterr().out
+    assert "with --equation only" not in capsys.readouterr().out

@@ -107,8 +107,8 @@ def _print_summary(s: dict, out, label: str = "", replaced: bool = False) -> Non
     if skipped:
         print("  not booked (no equation for the vClass): "
               + ", ".join(f"{c} {n}" for c, n in skipped.items())
-              + (" — --equation replaced the scenario's equations: repeat it with one made for these"
-                 " vClasses (e.g. moves_single_unit_truck, moves_transit_bus)" if replaced else ""))
+              + (" — with --equation only the equations given are applied: repeat it with one made for"
+                 " these vClasses (e.g. moves_single_unit_truck, moves_transit_bus)" if replaced else ""))
     idle = []
     for name, eq in s["equations"].items():
         if not any(d > 0 for d in eq.get("distance_m", {}).values()) and eq.get("vclasses"):
