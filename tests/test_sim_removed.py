@@ -94,3 +94,32 @@ def test_a_removal_in_the_step_a_teleport_ends_is_seen():
         assert not acc.ledger.veh_done[acc.stepper.vmap[back]]
     finally:
         close_sumo(conn)
+
+
+def test_a_script_dropping_the_context_subscription_is_warned():
+    """Through traci the plug-in reads every vehicle from one context subscription on the
+    simulation. A script that unsubscribes the simulation's context drops it: every vehicle
+    is then read by getters, correct but a call each; the run now says so instead of only
+    slowing down. (A script's own subscribeContext with a small range, tried too, left every
+    vehicle in the results: SUMO keeps the larger.)"""
+    conn = start_sumo(load_scenario(CITY, end=200).sumo_args, "traci")
+    try:
+        acc = Accountant(conn, equations=["vsp_ldv1999"])
+        for _ in range(20):
+            conn.simulationStep()
+            acc.step()
+        assert acc.stepper.reader.subscribed and acc.stepper.reader.fallback_reads == 0
+        conn.simulation.subscribeContext("", 0xa4, 1.0, [0x40])  # the script's own, 1 m around ""
+        for _ in range(50):
+            conn.simulationStep()
+            acc.step()
+        assert acc.stepper.reader.fallback_reads == 0
+        conn.simulation.unsubscribeContext("", 0xa4, 1.0)
+        for _ in range(100):
+            conn.simulationStep()
+            acc.step()
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    assert acc.stepper.reader.fallback_reads > 100
+    assert any("missing from the plug-in's traci context subscription" in w for w in res.summary["warnings"])

@@ -299,6 +299,12 @@ class Accountant(_Listener):
         }
         summary_extra.update(extra or {})
         warnings = network_warnings(net)
+        rd = st.reader
+        if rd.subs and rd.fallback_reads > max(100, 0.01 * led.samples):  # traci: one call per getter
+            warnings.append(f"{rd.fallback_reads} vehicle-steps were missing from the plug-in's traci "
+                            "context subscription and were read by getters, a call each (slow): did the "
+                            "script change the simulation domain's context subscription (subscribeContext "
+                            "or unsubscribeContext on traci.simulation)?")
         if self.resolver.assumptions:
             warnings.append("vTypes without a mass took their vClass's default mass: " + ", ".join(
                 f"{vt} ({a['vclass']}, {a['mass_kg']:g} kg)"

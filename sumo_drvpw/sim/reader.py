@@ -28,6 +28,7 @@ class Reader:
         self.subs = use_subscriptions
         self.need = need  # speed, accel, angle, lane, position, slope
         self.subscribed = False
+        self.fallback_reads = 0  # vehicle-steps read by getters: missing from the subscription
 
         V = conn.vehicle
         self.getters = [V.getSpeed, V.getAcceleration, V.getAngle, V.getLaneID,
@@ -56,6 +57,7 @@ class Reader:
         for j, r in enumerate(rows):
             if not r:  # a vehicle on no lane SUMO collects from: its getters, this step only
                 rows[j] = {k: g(ids[j]) for k, g in zip(_TRACI_VARS, self.getters)}
+                self.fallback_reads += 1
         cols = [[r[k] for r in rows] for k in _TRACI_VARS]
         return tuple(c if k == 3 else np.asarray(c, float) for k, c in enumerate(cols))
 
@@ -80,8 +82,13 @@ class Reader:
             return []
         loaded = getattr(self.conn.vehicle, "getLoadedIDList", None)
         if loaded is not None:
-            known = set(loaded())
-            return [vid for vid in lost if vid not in known]
+            try:
+                known = set(loaded())
+            except Exception as e:  # a SUMO server older than the client: ask for each
+                if type(e).__name__ == "FatalTraCIError":
+                    raise
+            else:
+                return [vid for vid in lost if vid not in known]
         out = []
         for vid in lost:  # a connection without getLoadedIDList: ask for each
             try:
