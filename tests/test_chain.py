@@ -348,6 +348,17 @@ def test_calibration_recovers_a_planted_fuel_chain_with_soc_swings():
     corrected = calibrate_fuel(p, v, fuel_c, dt, battery_w=charge).chain.marginal_efficiency
     naive = calibrate_fuel(p, v, fuel_c, dt, battery_w=None).chain.marginal_efficiency
     assert corrected == pytest.approx(0.36, rel=0.01) and naive == pytest.approx(0.30, rel=0.01)
+    # a conventional engine with overrun fuel cut-off: declared, it is kept and the line
+    # recovered; left out, the unfuelled overrun samples pull the idle fuel down
+    cut = EnergyChain(predicts="fuel", idle_fuel_power_w=4_000.0, marginal_efficiency=0.36,
+                      engine_off_below_w=-np.inf, fuel_cut_below_w=0.0)
+    fuel_cut = cut.evaluate(p, v)["power_w"] + rng.normal(0, 200.0, p.size) * cut.engine_on(p, v)
+    kept = calibrate_fuel(p, v, fuel_cut, dt, engine_off=-np.inf, fuel_cut_below_w=0.0)
+    assert kept.chain.fuel_cut_below_w == 0.0
+    assert kept.chain.idle_fuel_power_w == pytest.approx(4_000.0, rel=0.02)
+    assert kept.chain.marginal_efficiency == pytest.approx(0.36, rel=0.02)
+    blind = calibrate_fuel(p, v, fuel_cut, dt, engine_off=-np.inf)
+    assert blind.chain.fuel_cut_below_w is None and blind.chain.idle_fuel_power_w < 3_500.0
 
 
 @settings(max_examples=25, deadline=None)

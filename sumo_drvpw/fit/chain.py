@@ -349,7 +349,7 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
 
 def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict | None = None, *,
                    loads=(), mask=None, engine_off="profile", fuel: str = "gasoline",
-                   engine_on_above_mps="profile") -> ChainFit:
+                   engine_on_above_mps="profile", fuel_cut_below_w: float | None = None) -> ChainFit:
     """Calibrate a Willans-line fuel chain with engine-off and battery (SOC) correction.
 
     Parameters
@@ -364,6 +364,8 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     fuel : key of :data:`sumo_drvpw.model.constants.FUELS`
     engine_on_above_mps : speed above which the engine always runs [m/s]: "profile" (grid
         :data:`ENGINE_ON_SPEED_GRID_MPS` jointly with the threshold, by BIC), None or a number
+    fuel_cut_below_w : a declared overrun fuel cut-off (model/chain.py), kept: those samples
+        are unfuelled in the fit and the chain keeps it; None: none
     """
     p = np.asarray(p_drive_w, float)
     n = p.size
@@ -385,7 +387,8 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     for off in grid:
         # an engine that never stops (off = -inf) is on at any speed: one fit, no speed threshold
         for von in (vgrid if off > -np.inf else (None,)):
-            tmpl = EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von)
+            tmpl = EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von,
+                               fuel_cut_below_w=fuel_cut_below_w)
             on = tmpl.engine_on(p, v).astype(float)
             x = np.column_stack([on, on * np.maximum(p, 0.0) - pb] + [on * c for c in lcols])[ok]
             beta, rss, active, xs = _solve(x, y[ok], w[ok], lb, ub)
@@ -422,7 +425,7 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
             "than this chain books)")
     chain = EnergyChain(predicts="fuel", idle_fuel_power_w=float(beta[0]), marginal_efficiency=eta,
                         engine_off_below_w=off, engine_on_above_mps=engine_on_above_mps,
-                        loads=gains, fuel=fuel)
+                        fuel_cut_below_w=fuel_cut_below_w, loads=gains, fuel=fuel)
     pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
     target = corrected_fuel_power(y, pb, chain.battery_fuel_factor)[ok]
     r2, rmse, ratio = _stats(pred, target, w[ok])
@@ -469,8 +472,9 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     _check_chain_inputs(m, use, loads, p)
     if m.target == "fuel":
         fuel = m.vehicle.powertrain.get("fuel", "gasoline") if m.vehicle is not None else "gasoline"
+        cut = getattr(getattr(equation, "chain", None), "fuel_cut_below_w", None)  # declared: kept
         return calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads,
-                              mask=use, engine_off=engine_off, fuel=fuel)
+                              mask=use, engine_off=engine_off, fuel=fuel, fuel_cut_below_w=cut)
     if m.target != "battery":
         raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
     return calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,

@@ -51,7 +51,7 @@ with ``idle_fuel_power_w`` (P_idle,fuel ≥ 0), ``marginal_efficiency`` (η_m, (
 idling at stops), optional ``engine_on_above_mps`` (v_on), optional ``fuel_cut_below_w``
 (P_cut: overrun fuel cut-off — while the vehicle moves (v above STANDSTILL_MPS, v_0), a
 driving power below P_cut, typically 0, means the wheels turn the engine and its injection
-is cut: no fuel; standing, it idles; declared, not fitted by calibration) and ``fuel``
+is cut: no fuel; standing, it idles; declared, kept, not fitted by calibration) and ``fuel``
 (a key of :data:`sumo_drvpw.model.constants.FUELS`). ``cold_start_fuel_l`` (≥ 0, default 0)
 is the extra fuel of one start of a cold engine [L] (warm-up enrichment, catalyst
 heating, cold oil) at the air temperature ``cold_start_ref_c`` (default 23.9 °C, the
