@@ -23,7 +23,6 @@ import pytest
 from sumo_drvpw.model.equations import load_equation
 
 REPO = Path(__file__).resolve().parents[1]
-NETS = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks"
 DATA = Path(os.environ.get("SUMO_DRVPW_DATA") or REPO.parent / "shared" / "data")
 LHV, RHO = 43.1e6, 0.832            # diesel [J/kg], [kg/L] (docs/sources.md, Fuels)
 GAL_H = 3.785411784 / 3600 * RHO * LHV   # W of fuel per US gal/h
@@ -83,6 +82,10 @@ def test_builtins_are_what_the_module_writes():
 
 
 def _config(folder: Path) -> Path:
+    """The mixed-class bare config: trucks, buses, a coach, an electric bus and a car that
+    write no emissionClass but the electric bus (test_sim_run's city config helper)."""
+    from tests.test_sim_run import EAST, WEST, _city_config
+
     vtypes = """\
     <vType id="lkw" vClass="truck" guiShape="truck"/>
     <vType id="semi" vClass="trailer"/>
@@ -91,20 +94,9 @@ def _config(folder: Path) -> Path:
     <vType id="coach" vClass="coach"/>
     <vType id="car" vClass="passenger" mass="1400"/>
 """
-    west, east = "c00c10 c10c20", "c40c30 c30c20"
-    veh = [("t", "lkw", west), ("s", "semi", east), ("b", "bus", west), ("e", "ebus", east),
-           ("c", "coach", west), ("p", "car", east)]
-    rows = "".join(f'    <vehicle id="{i}" type="{t}" depart="0" departSpeed="0"><route edges="{e}"/></vehicle>\n'
-                   for i, t, e in veh)
-    (folder / "r.rou.xml").write_text(f"<routes>\n{vtypes}{rows}</routes>\n")
-    cfg = folder / "c.sumocfg"
-    cfg.write_text(f"""<configuration>
-    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
-    <time><begin value="0"/><end value="150"/><step-length value="0.5"/></time>
-    <report><no-warnings value="true"/></report>
-</configuration>
-""")
-    return cfg
+    veh = [("t", "lkw", WEST), ("s", "semi", EAST), ("b", "bus", WEST), ("e", "ebus", EAST),
+           ("c", "coach", WEST), ("p", "car", EAST)]
+    return _city_config(folder, vtypes, veh, end="150")
 
 
 def test_bare_config_books_trucks_and_buses_in_litres(tmp_path, capsys):

@@ -266,11 +266,7 @@ def main(argv=None) -> int:
 
     try:
         args = positional(sys.argv[1:] if argv is None else argv, "REPORT.md [DATA_FOLDER]")
-    except UserError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    out = Path(args[0] if args else "docs/energy-chain-validation.md")
-    try:
+        out = Path(args[0] if args else "docs/energy-chain-validation.md")
         data = resolve_data(args[1] if len(args) > 1 else None, FOLDERS)
         res = run(data)
     except UserError as e:

@@ -535,14 +535,10 @@ def main(argv=None) -> int:
     from sumo_drvpw.validation.data import positional, resolve_data
     from sumo_drvpw.validation.epa_fleet_report import render
 
-    try:
-        args = positional(sys.argv[1:] if argv is None else argv, "REPORT.md [DATA_FOLDER]")
-    except UserError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    out = Path(args[0] if args else "docs/epa-fleet.md")
     t0 = time.perf_counter()
     try:
+        args = positional(sys.argv[1:] if argv is None else argv, "REPORT.md [DATA_FOLDER]")
+        out = Path(args[0] if args else "docs/epa-fleet.md")
         data = resolve_data(args[1] if len(args) > 1 else None, (DATASET, CYCLES))
         lists = read_lists(Path(data) / DATASET)
         results = {fuel: study(data, fuel, lists) for fuel in TEST_FUELS}

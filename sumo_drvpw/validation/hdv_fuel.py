@@ -357,14 +357,10 @@ def main(argv=None) -> int:
     from sumo_drvpw.validation.data import positional, resolve_data
     from sumo_drvpw.validation.hdv_fuel_report import render
 
-    try:
-        args = positional(sys.argv[1:] if argv is None else argv, "REPORT.md [DATA_FOLDER [HAMBURG_RUN]]")
-    except UserError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    out = Path(args[0] if args else "docs/hdv-fuel.md")
     t0 = time.perf_counter()
     try:
+        args = positional(sys.argv[1:] if argv is None else argv, "REPORT.md [DATA_FOLDER [HAMBURG_RUN]]")
+        out = Path(args[0] if args else "docs/hdv-fuel.md")
         data = resolve_data(args[1] if len(args) > 1 else None, (CYCLES,))
         res = {"check": check(data)}
         if len(args) > 2:
