@@ -185,6 +185,7 @@ def check_required(path) -> None:
     columns a run reads: the message listed those). An unreadable header is left to the
     reading."""
     p = Path(path)
+    check_header(p)  # a column named twice, a CSV not separated by commas: said as such
     try:
         names = (_parquet_file(p).schema_arrow.names if _is_parquet(p)
                  else list(pd.read_csv(p, nrows=0).columns))
