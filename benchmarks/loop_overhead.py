@@ -1,7 +1,11 @@
 """Loop overhead of the plug-in: bare libsumo stepping vs the plug-in with four equations.
 
 Usage: .venv/bin/python benchmarks/loop_overhead.py [--sizes 1000 5000] [--steps 200]
-       [--repeats 3]
+       [--repeats 3] [--connection libsumo|traci]
+
+``--connection traci`` runs SUMO as a server and every variant through the traci client
+(the plug-in inside a user's TraCI script): each getter is a socket round trip, so the
+plug-in reads every vehicle from one context subscription on the simulation.
 
 Scenario (generated into a temporary directory, same for every variant): a 12 × 12
 traffic-light grid (netgenerate, 300 m blocks, 2 lanes) with N cars each circling a
@@ -102,13 +106,16 @@ def build_routes(work: Path, n: int, seed: int = 1) -> Path:
 
 
 def _start(net, routes, extra):
-    import libsumo
     import sumolib
 
-    libsumo.start([sumolib.checkBinary("sumo"), "-n", str(net), "-r", str(routes),
-                   "--no-step-log", "true", "--no-warnings", "true", "--step-length", "0.5",
-                   "--time-to-teleport", "-1", "--seed", "1", *extra])
-    return libsumo
+    conn = __import__(_start.connection)  # libsumo, or the traci client of a SUMO server
+    conn.start([sumolib.checkBinary("sumo"), "-n", str(net), "-r", str(routes),
+                "--no-step-log", "true", "--no-warnings", "true", "--step-length", "0.5",
+                "--time-to-teleport", "-1", "--seed", "1", *extra])
+    return conn
+
+
+_start.connection = "libsumo"
 
 
 def warm_up(net, routes, state: Path, warm_s: float) -> int:
@@ -161,7 +168,8 @@ def timed(variant: str, net, routes, state, steps: int, eqs) -> float:
                                               heading="getangle", positions="getter"),
                        "plugin_getangle": dict(heading="getangle")}.get(variant, {})
             phys = Physics(wind_speed=3.0, wind_from_deg=270.0, **getters)
-            run_loop(conn, table, eqset, led, phys, _Resolver(app), end=end)
+            run_loop(conn, table, eqset, led, phys, _Resolver(app), end=end,
+                     use_subscriptions=_start.connection == "traci")
             dt = time.perf_counter() - t0
             assert led.samples > 0
             timed.reads[variant] = (led.position_reads / led.samples, led.position_mismatches)
@@ -185,7 +193,9 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--warm", type=float, default=120.0, help="warm-up [s] before the state")
+    ap.add_argument("--connection", choices=("libsumo", "traci"), default="libsumo")
     args = ap.parse_args(argv)
+    _start.connection = args.connection
     import sumo
 
     os.environ.setdefault("SUMO_HOME", sumo.SUMO_HOME)
@@ -211,7 +221,7 @@ def main(argv=None) -> int:
             print(f"N={n} (running at state: {running}) steps={args.steps}: " + ", ".join(
                 f"{k} {v:.3f} s ({1e3 * v / args.steps:.2f} ms/step)" for k, v in med.items()),
                 flush=True)
-    print(f"equations: {', '.join(e.name for e in eqs)}")
+    print(f"connection: {args.connection}; equations: {', '.join(e.name for e in eqs)}")
     for n, (running, med) in results.items():
         print(f"ratios N={n}: plugin/bare={med['plugin'] / med['bare']:.3f} "
               f"plugin_getangle/bare={med['plugin_getangle'] / med['bare']:.3f} "
