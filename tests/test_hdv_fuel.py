@@ -188,3 +188,16 @@ def test_equation_option_replacing_the_class_equations_says_so(tmp_path, capsys)
     assert cli_main(["run", str(cfg), "--out", str(tmp_path / "b"), "--no-figures", "--no-progress",
                      "--end", "20"]) == 0
     assert "with --equation only" not in capsys.readouterr().out
+
+
+def test_a_failing_sumo_tool_is_one_line(tmp_path):
+    """The check runs SUMO's emissionsDrivingCycle; a class that SUMO lacks (or any failure
+    of the tool) was a CalledProcessError traceback: now one line with SUMO's own error."""
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.validation.chain_sumo import sumo_tool
+    from sumo_drvpw.validation.hdv_fuel import sumo_l_per_100km
+
+    if sumo_tool("emissionsDrivingCycle") is None:
+        pytest.skip("SUMO's emissionsDrivingCycle not found")
+    with pytest.raises(UserError, match=r"emissionsDrivingCycle with HBEFA4/NoSuchClass: exit \d+: Error"):
+        sumo_l_per_100km("HBEFA4/NoSuchClass", np.linspace(0.0, 10.0, 20), tmp_path)

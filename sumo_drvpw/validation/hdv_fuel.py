@@ -290,7 +290,11 @@ def sumo_l_per_100km(cls: str, v: np.ndarray, workdir: Path) -> dict | None:
     tl, out = workdir / "timeline.csv", workdir / "out.csv"
     a = np.diff(v, prepend=v[0])
     np.savetxt(tl, np.column_stack([np.arange(v.size), v, a]), delimiter=";", fmt="%.6f")
-    subprocess.run([tool, "-t", str(tl), "-e", cls, "-o", str(out)], check=True, capture_output=True)
+    done = subprocess.run([tool, "-t", str(tl), "-e", cls, "-o", str(out)], capture_output=True, text=True)
+    if done.returncode != 0:  # an emission class this SUMO lacks, a tool that fails: one line
+        said = (done.stderr or done.stdout).strip().splitlines() or ["no message"]
+        first = next((x for x in said if x.startswith("Error")), said[-1])
+        raise UserError(f"SUMO's emissionsDrivingCycle with {cls}: exit {done.returncode}: {first}")
     mg = np.loadtxt(out, delimiter=";", ndmin=2)[:, 9]
     km = float(np.sum(0.5 * (v[1:] + v[:-1]))) / 1000.0
     litres = float(np.nansum(mg)) * 1e-6 / FUELS[FUEL]["density_kg_per_l"]
