@@ -119,6 +119,24 @@ def repo_root() -> Path:
     return Path(__file__).resolve().parent.parent
 
 
+@contextlib.contextmanager
+def signals_blocked(*signums):
+    """``signums`` held back in this thread while the block runs, then delivered; threads
+    started meanwhile keep them blocked, and so do the processes those start (a blocked
+    signal stays blocked across fork and exec). Where the platform cannot block signals, the
+    block runs as it is."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, set(signums))
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def folder_given(p: Path, what: str, suffixes: tuple[str, ...]) -> str:
     """The message for a folder given where a file is read: its files of those suffixes
     (the first few), or that it has none."""
@@ -302,19 +320,16 @@ def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
             if e.errno in _NO_SPACE:
                 raise UserError(no_space_message(out, e)) from None
             raise
-        # publish: no signal may split the moves
-        blocked = {signal.SIGINT, signal.SIGTERM}
-        old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, blocked)
-        olds = []
-        try:
-            _publish(tmp, out, parent, olds)
-            for c in companions:
-                os.replace(stage / c, parent / c)
-            done = True
-        finally:
-            for o in olds:  # earlier sets moved aside
-                shutil.rmtree(o, ignore_errors=True)
-            signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        with signals_blocked(signal.SIGINT, signal.SIGTERM):  # publish: no signal may split the moves
+            olds = []
+            try:
+                _publish(tmp, out, parent, olds)
+                for c in companions:
+                    os.replace(stage / c, parent / c)
+                done = True
+            finally:
+                for o in olds:  # earlier sets moved aside
+                    shutil.rmtree(o, ignore_errors=True)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
         if not done:

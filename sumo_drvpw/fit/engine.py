@@ -32,6 +32,7 @@ import numpy as np
 
 from sumo_drvpw.data.stream import BATCH_ROWS, PART_ROWS, Part, iter_measured, plan
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.fileio import signals_blocked
 
 ENGINES = ("local", "dask")
 #: Read the next batch in a thread while this one is added (2 cores: ~1.5× the rows/s).
@@ -277,19 +278,14 @@ def _sigint_held_from_workers():
     SIGTERM is left as it is."""
     import signal
 
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    from multiprocessing import resource_tracker
+    if hasattr(signal, "pthread_sigmask"):  # (where signals can be blocked: POSIX)
+        from multiprocessing import resource_tracker
 
-    # started here, not by Dask inside the block: starting it unblocks SIGINT in the
-    # thread that starts it (multiprocessing/resource_tracker.py), Dask's event loop
-    resource_tracker.ensure_running()
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    try:
+        # started here, not by Dask inside the block: starting it unblocks SIGINT in the
+        # thread that starts it (multiprocessing/resource_tracker.py), Dask's event loop
+        resource_tracker.ensure_running()
+    with signals_blocked(signal.SIGINT):
         yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 class Refused:

@@ -87,8 +87,7 @@ class _Stop:
     def __init__(self, el, where: str):
         a = el.attrib
         self.lane, self.edge = a.get("lane"), a.get("edge")
-        self.place = next((a[k] for k in ("busStop", "containerStop", "chargingStation",
-                                          "parkingArea", "trainStop") if a.get(k)), None)
+        self.place = next((a[k] for k in STOPPING_PLACES if a.get(k)), None)
         self.start = _num(a.get("startPos"), where, "startPos")
         self.end = _num(a.get("endPos"), where, "endPos")
         self.duration = _num(a.get("duration"), where, "duration", time=True)

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.fileio import signals_blocked
 
 __all__ = ["start_sumo", "close_sumo", "step_method", "scenario_option", "signals_deferred",
            "NewRun"]
@@ -248,18 +249,10 @@ def scenario_option(sc, key: str) -> str | None:
     return val
 
 
-@contextlib.contextmanager
 def signals_deferred():
     """Ctrl-C and SIGTERM held back while the block runs (a SUMO step and its booking: else
     SUMO's time could run a step past what was booked, or a step be booked in part), then
-    delivered; where the platform cannot block signals, the block runs as it is."""
+    delivered (:func:`sumo_drvpw.fileio.signals_blocked`)."""
     import signal
 
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+    return signals_blocked(signal.SIGINT, signal.SIGTERM)
