@@ -443,3 +443,24 @@ def test_fcd_air_temperature_replays_a_winter_run(tmp_path):
     assert cold == pytest.approx(live, rel=1e-3) and warm < 0.95 * live
     assert run.summary["vehicles"] > 5
     assert cli_main(kw + ["--air-temperature", "500", "--out", str(tmp_path / "bad")]) == 2
+
+
+def test_fcd_books_a_teleport_without_a_gap_as_the_live_run(tmp_path):
+    """SUMO's short teleports (`--time-to-teleport 5` in the hilly city: a car stuck at a
+    junction reappears on the next edge in the same step) leave no gap in the FCD: the car's
+    row moves from one edge's end to the next edge's start faster than it drove. The live
+    run books no rise for the jump (SUMO says the teleport ended: the rise starts afresh);
+    the replay must do the same. Before, it booked m·g·Δz of the jump (2026-11-27 rehearsal,
+    300 s: per vehicle up to 9 kJ of grade energy, net 0.12 % off the live run)."""
+    fcd = tmp_path / "fcd.xml"
+    live = run_scenario(CITY, None, end=200, equations=[PHYS], figures=False,
+                        options=["--fcd-output", str(fcd), "--precision", "6",
+                                 "--time-to-teleport", "5"])
+    f = process_fcd(fcd, scenario=CITY, out_dir=tmp_path / "o", equations=[PHYS], end=200,
+                    figures=False)
+    a = live.vehicles.set_index("vehicle").sort_index()
+    b = f.vehicles.set_index("vehicle").sort_index()
+    assert (a.index == b.index).all() and len(a) > 40
+    grade = [c for c in COLS if "grade" in c] + ["recup_grade_j"]
+    for c in grade + ["net_total_j", "distance_m", "time_s"]:
+        np.testing.assert_allclose(b[c], a[c], rtol=1e-6, atol=1.0, err_msg=c)

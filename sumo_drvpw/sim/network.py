@@ -29,6 +29,10 @@ from sumo_drvpw.sim.scenario import MAX_RAD_LIMIT, RoadClassRule
 BIN_M = 2.0
 #: Front-to-back distance of the raw (getSlope-like) geometric slope: a car length [m].
 RAW_LENGTH_M = 5.0
+#: a vehicle found on another edge farther along than the step moved it by more than this
+#: [m] jumped there (a teleport): its rise starts afresh (:meth:`Network.step_grade`);
+#: FCD's positions and speeds to 2 decimals, SUMO's lane lengths, lie well within it
+JUMP_TOL_M = 0.5
 
 
 @dataclass
@@ -140,6 +144,23 @@ class Network:
         steep = np.maximum(self.lane_steep[lane], self.lane_steep[prev])
         ok = np.isfinite(dz) & (ds >= 0.01)
         ok[ok] = np.abs(dz[ok]) <= road[ok] * steep[ok] + 0.01 * np.minimum(road[ok], 1.0)  # (+ FCD's cm)
+        if self.lane_own_edge is not None and ok.any():
+            # a jump to another edge (a teleport SUMO starts and ends in one step, which FCD
+            # shows without a gap; the live run hears of it): the road from the last position
+            # to its lane's end and on to this position, or the straight line between them
+            # (a junction crossed in between: its lane is longer than that line), is longer
+            # than the step covered (the line: bins of BIN_M, a lane change in the step)
+            k = np.flatnonzero(ok & (self.lane_own_edge[prev] != self.lane_own_edge[lane]))
+            if len(k):
+                lp, p0, ln, p1 = prev[k], last[k, 1], lane[k], pos[k]
+                along = self.lane_length[lp] - p0 + p1
+                jump = along > road[k] + JUMP_TOL_M
+                if self.centre_x is not None:
+                    i, j = self.bin_index(lp, p0), self.bin_index(ln, p1)
+                    line = np.hypot(self.centre_x[i] - self.centre_x[j],
+                                    self.centre_y[i] - self.centre_y[j])
+                    jump |= line > road[k] + BIN_M + self.lane_width[lp] + JUMP_TOL_M
+                ok[k[jump]] = False
         if ok.any():  # sin θ = Δz/(v·Δt): m·g·v·sin θ·Δt = m·g·Δz
             theta = np.where(ok, np.arcsin(np.clip(dz / np.where(ok, ds, 1.0), -1.0, 1.0)), theta)
         return theta, np.column_stack([lane, pos, z])
