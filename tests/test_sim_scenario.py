@@ -481,3 +481,37 @@ def test_slope_limit_beyond_a_wall_in_a_scenario_names_the_file(tmp_path, max_ra
                  f'[slope]\nmax_rad = {max_rad}\n', encoding="utf-8")
     with pytest.raises(UserError, match=r"s.toml: 'slope.max_rad' must be > 0 and at most 1.5, got"):
         load_scenario(p)
+
+
+MIX_ROUTES = """<routes>
+    <vType id="ev" vClass="passenger" emissionClass="Energy/unknown" mass="1600"/>
+    <vType id="petrol" vClass="passenger" emissionClass="HBEFA4/PC_petrol_Euro-6ab" mass="1350"/>
+    <flow id="e" type="ev" from="c00c10" to="c34c44" begin="0" end="40" period="10" departSpeed="0"/>
+    <flow id="p" type="petrol" from="c44c43" to="c00c01" begin="0" end="40" period="10" departSpeed="0"/>
+</routes>
+"""
+
+
+@pytest.mark.sumo
+def test_route_files_given_in_sumo_options_are_read_as_the_configs(tmp_path):
+    """`[sumo] options = ["--route-files", F]` replaces the config's route files on SUMO's
+    command line; the plug-in reads F's vTypes as it reads the config's: each car booked by
+    the chain of the carrier its emissionClass names. Before, F was not read (rehearsal
+    2026-11-27, the city config with an EV/petrol mix given so: every car booked by the
+    petrol, diesel and battery chains alike, 11.04 L of petrol over 112 km instead of 5.80 L
+    over 61 km); the same files in the config booked each by its own carrier."""
+    from sumo_drvpw.sim import run_scenario
+    (tmp_path / "mix.rou.xml").write_text(MIX_ROUTES)
+    for name, options in (("opts", ["--route-files", str(tmp_path / "mix.rou.xml")]),
+                          ("short", ["-r", str(tmp_path / "mix.rou.xml")])):
+        (tmp_path / f"{name}.toml").write_text(
+            'equations = ["epa_gasoline_car", "bmw_i3_battery"]\n[sumo]\n'
+            f'config = "{REPO / "scenarios" / "city.sumocfg"}"\noptions = {options!r}\n'.replace("'", '"'))
+        sc = load_scenario(tmp_path / f"{name}.toml")
+        assert sc.route_files[0] == (tmp_path / "mix.rou.xml").resolve()
+        assert not any(f.name == "city.rou.xml" for f in sc.route_files)
+        res = run_scenario(tmp_path / f"{name}.toml", None, end=60, figures=False)
+        v = res.vehicles
+        assert set(v[v.equation == "bmw_i3_battery"].vtype) == {"ev"}
+        assert set(v[v.equation == "epa_gasoline_car"].vtype) == {"petrol"}
+        assert not res.summary["assumptions"]["sumo_masses"]

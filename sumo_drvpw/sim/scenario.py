@@ -23,7 +23,7 @@ from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_vclass, load_equation
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.sim.sumo_outputs import additional_outputs, is_output_option
+from sumo_drvpw.sim.sumo_outputs import additional_outputs, is_output_option, option_input_files
 from sumo_drvpw.fileio import folder_given, read_toml
 from sumo_drvpw.model.terms import parse_term
 
@@ -455,6 +455,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     if isinstance(opts, list):
         opts = [str(o) if isinstance(o, (int, float)) and not isinstance(o, bool) else o for o in opts]
     args += _strlist(opts, where, "sumo.options", '["--time-to-teleport", "120"]')
+    files = option_input_files(args, [f for f in files if f not in adds], adds)  # -r, -a override
     meso = cfgvals.get("mesosim", "false").strip().lower() in ("true", "1", "yes", "on", "x")
     src = f"SUMO config {cfg}" if meso else where
     if "--mesosim" in args:
@@ -465,8 +466,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         raise UserError(f"{src}: mesosim: the mesoscopic simulation moves vehicles queue by "
                         "queue, without lanes or accelerations, so no driving power follows "
                         "from it; run the scenario microscopically (mesosim false)")
-    connection = _choice(sumo.get("connection", "libsumo"), ("libsumo", "traci"), where,
-                         "sumo.connection")
+    connection = _choice(sumo.get("connection", "libsumo"), ("libsumo", "traci"), where, "sumo.connection")
 
     eq_specs = overrides.get("equations", doc.get("equations"))
     if not eq_specs:

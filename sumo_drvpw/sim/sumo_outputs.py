@@ -233,3 +233,20 @@ def written_file(path: Path, naming: dict[str, str]) -> Path:
         if found:
             return Path(found[-1])
     return path if not target.exists() and path.exists() else target
+
+
+def option_input_files(args: list, routes: list[Path], adds: list[Path]) -> list[Path]:
+    """The route and additional files SUMO loads with the command line ``args`` (a config's
+    ``routes`` and ``adds`` as read from it): a later ``-r``/``--route-files`` replaces the
+    route files, ``-a``/``--additional-files`` the additional files, as SUMO's command line
+    overrides its config (paths relative to the working directory). Returns routes, then
+    additional files (a scenario's ``sumo.options`` then give the vTypes, stops and params)."""
+    it = iter(args)
+    for a in it:
+        if a in ("-r", "--route-files", "-a", "--additional-files"):
+            given = [Path(f.strip()).resolve() for f in str(next(it, "")).split(",") if f.strip()]
+            if a in ("-r", "--route-files"):
+                routes = given
+            else:
+                adds = given
+    return [*routes, *adds]
