@@ -283,3 +283,17 @@ def test_an_empty_time_window_is_refused(fcd, tmp_path, capsys):
                                                                        "--end", "50"))
     _refused(capsys, tmp_path, path, "--end -1", extra=("--end", "-1"))
     _refused(capsys, tmp_path, path, "--end 5", "--begin 5", extra=("--begin", "5", "--end", "5"))
+
+
+def test_a_file_without_timesteps_or_a_begin_after_its_end_is_refused(fcd, tmp_path, capsys):
+    """Rehearsal 2026-11-27: `fcd ti.xml --scenario city.sumocfg` (SUMO's tripinfo given for
+    its FCD, the step length known from the scenario) and `fcd FCD --begin 5000` on a file
+    ending at 60 s wrote an empty result with exit 0 (0 steps, 0 vehicles); refused in one
+    line naming the file."""
+    path, _ = fcd
+    ti = tmp_path / "ti.xml"
+    ti.write_text('<tripinfos>\n    <tripinfo id="a" depart="0.00" routeLength="10.0"/>\n</tripinfos>\n')
+    city = str(REPO / "scenarios" / "city.sumocfg")
+    _refused(capsys, tmp_path, ti, "ti.xml", "no timestep", extra=("--scenario", city))
+    _refused(capsys, tmp_path, path, "fcd.xml", "no timestep", extra=("--scenario", city,
+                                                                      "--begin", "5000"))
