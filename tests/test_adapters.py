@@ -604,3 +604,36 @@ def test_bmw_tum_reads_the_unit_its_header_writes(tmp_path):
     d3.mkdir()
     with pytest.raises(UserError, match=r"Velocity \[kW\].*not a speed"):
         read("bmw-i3-tum", _tum(d3 / "TripX1.csv", "Velocity [kW]", "Heating Power CAN [kW]", 36.0, 0.84))
+
+
+def test_vendor_files_with_an_extra_text_column_are_read(tmp_path):
+    """A logger's own comment, driver or mode column (text) beside the vendor's columns is
+    kept as text and noted, not a refusal of the file (dress rehearsal on unseen logs: a TUM
+    trip with a 'Comment' column, a Torque log with 'Notes', a JLU file with 'Operator' were
+    refused with 'is not numeric'); a known column with text stays an error."""
+    tum = ("Time [s];Velocity [km/h];Comment;Motor Torque [Nm];Battery Voltage [V];"
+           "Battery Current [A];Tyre Pressure [bar]\n"
+           + "".join(f"{0.1 * i:.1f};{10 + i};ok;50;390;-20;2.4\n" for i in range(6)))
+    df, rep = read("bmw-i3-tum", write(tmp_path, "TripX01.csv", tum))
+    assert_canonical(df, rep)
+    assert list(df["comment"]) == ["ok"] * 6
+    np.testing.assert_allclose(df["tyre_pressure_kpa"], 240.0)         # bar → kPa, still numeric
+    np.testing.assert_allclose(df["speed_mps"], (10 + np.arange(6)) / 3.6)
+    assert any("'Comment' is not numeric" in n and "kept as text" in n for n in rep["files"][0]["notes"])
+    with pytest.raises(UserError, match=r"TripX02.csv: column 'Motor Torque \[Nm\]' is not numeric: data row 0"):
+        read("bmw-i3-tum", write(tmp_path, "TripX02.csv", tum.replace(";50;", ";fault;")))
+
+    rec = [{"Device Time": f"25-Mar-2017 11:46:{29 + i}.500", "Speed (OBD)(mph)": 20.0 + i,
+            "Notes": "x", "Trip Distance(miles)": str(0.1 * i)} for i in range(5)]
+    df, rep = read("torquepro", write(tmp_path, "t.json", json.dumps(rec)))
+    assert_canonical(df, rep)
+    assert list(df["notes"]) == ["x"] * 5 and pd.api.types.is_float_dtype(df["trip_distance_m"])
+
+    jlu = pd.DataFrame({"PhaseTime": [0.0, 0.05, 0.1], "DAActualSpeed": [0.0, 1.0, 2.0],
+                        "REESSCurrent": [-1.0, -2.0, -3.0], "REESSVoltage": [390.0] * 3,
+                        "Operator": ["A"] * 3, "RollerTemp": [30.0] * 3})
+    jlu.to_parquet(tmp_path / "UDDS_01.parquet")
+    df, rep = read("jlu-dyno", tmp_path / "UDDS_01.parquet")
+    assert_canonical(df, rep)
+    assert list(df["operator"]) == ["A"] * 3 and list(df["rollertemp"]) == [30.0] * 3
+    np.testing.assert_allclose(df["battery_current_a"], [1.0, 2.0, 3.0])

@@ -33,7 +33,7 @@ import pandas as pd
 
 from sumo_drvpw.model.constants import KMH, RPM
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.data.adapters._common import generic_name, new_report, numeric, read_csv_strict, snake, split_header
+from sumo_drvpw.data.adapters._common import extra_values, generic_name, new_report, numeric, read_csv_strict, snake, split_header
 from sumo_drvpw.data.adapters._common import DIMENSIONS, clean_time_and_speed, lookup_unit, unique_names
 
 FORMAT = "bmw-i3-tum"
@@ -120,10 +120,12 @@ def read_file(path: Path, overview: pd.DataFrame | None, vehicle) -> tuple[pd.Da
         if key in NAMES:
             name, factor = NAMES[key]
             factor, offset = _header_unit(label, name, factor, path)
-        else:
+            col = numeric(raw[src], path, label) * factor + offset
+        else:  # not a TUM column: numeric where it reads so, else kept as text
             name, factor, offset = generic_name(label, rep["notes"])
+            col = extra_values(raw[src], path, label, rep["notes"], factor, offset)
         names.append(name)
-        cols.append(numeric(raw[src], path, label) * factor + offset)
+        cols.append(col)
     names = unique_names(names)
     df = pd.DataFrame(dict(zip(names, cols)), index=raw.index)
     df = clean_time_and_speed(df, path, rep)
