@@ -277,3 +277,39 @@ def test_report_with_a_vehicle_that_lacks_specs_skips_vsp_from_specs(tmp_path, c
                     + engine) == 0
     md = (rep / "report.md").read_text()
     assert "not compared" in md and "body.rolling_coefficient" in md and "vsp_ldv1999" in md
+
+
+@pytest.mark.parametrize("engine", [[], ["--engine", "memory"]])
+def test_a_drag_that_is_not_the_cars_is_flagged(tmp_path, capsys, engine):
+    """Dress rehearsal on unseen-like logs: the first minute of a JLU UDDS test calibrated to
+    aero 5.2 (C_d·A 8.6 m², 17 × the car's published road load) and a JLU road trip to aero 0
+    after the constrained fit (its free fit was negative), both written without a word.
+    Planted: the same speed trace with the drag of the vehicle file (bmw_i3: C_d 0.29 ×
+    A 2.38 m² → ½ρC_dA = 0.4155) is not flagged; 17 × that drag is flagged
+    on the console and in the equation's provenance, and so is a drag the constrained fit put
+    at its bound 0 (planted negative: another term took its place)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 900.0, 0.5)
+    v = 15 + 10 * np.sin(t / 40) + 3 * np.sin(t / 7) + rng.normal(0, 0.05, len(t))
+    a = np.gradient(v, t)
+    m = load_vehicle_mass("bmw_i3")
+    for aero, flagged in ((0.4155, False), (17 * 0.4155, True), (-0.3, True)):  # -0.3: fitted 0 at its bound
+        p = 1.05 * m * v * a + aero * v ** 3 + 0.01 * m * 9.81 * v + rng.normal(0, 300, len(t))
+        f = tmp_path / f"log_{aero:g}.csv"
+        pd.DataFrame({"trip_id": "T", "time_s": t, "speed_mps": v, "power_w": p}).to_csv(f, index=False)
+        out = tmp_path / f"eq_{aero:g}.toml"
+        assert cli_main(["calibrate", str(f), "--vehicle", "bmw_i3", "--out", str(out)] + engine) == 0
+        said = capsys.readouterr().out
+        assert ("not this car's drag" in said) == flagged, said
+        drag = load_equation(out).provenance.get("physical", {}).get("vehicle_drag")
+        assert (drag is not None) == flagged
+        if flagged:
+            assert drag["declared_cda_m2"] == pytest.approx(0.29 * 2.38)
+            assert drag["ratio"] == pytest.approx(2 * load_equation(out).terms["aero"] / 1.2041 / (0.29 * 2.38),
+                                                  rel=0.01)
+
+
+def load_vehicle_mass(name):
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    return load_vehicle(name).mass_kg

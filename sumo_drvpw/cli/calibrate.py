@@ -154,6 +154,8 @@ def physical(eq, m, candidates):
     """The equation, physically constrained where its free fit is implausible (issue #11 §3),
     and the note saying so ('' when plausible); the note and its hints are printed."""
     from sumo_drvpw.errors import UserError
+    import numpy as np
+
     from sumo_drvpw.fit.physical import apply_physics, constraints_of
 
     try:
@@ -163,7 +165,20 @@ def physical(eq, m, candidates):
     if note:
         print(note)
         hint_grade_source(note, m.log.df.columns, m.log.options.measurement)
+    rho = np.asarray(m.inputs.rho, float)[np.asarray(m.usable, bool)]
+    warn_drag(eq, m.vehicle, float(np.nanmean(rho)) if rho.size else None)
     return eq, note
+
+
+def warn_drag(eq, vehicle, rho_kgm3) -> None:
+    """Print a warning when the written aero coefficient is no drag of the vehicle
+    (:func:`sumo_drvpw.fit.physical.drag_against_vehicle`)."""
+    from sumo_drvpw.fit.physical import drag_against_vehicle
+    from sumo_drvpw.model.constants import RHO_DEFAULT
+
+    note = drag_against_vehicle(eq, vehicle, rho_kgm3 if rho_kgm3 and rho_kgm3 > 0 else RHO_DEFAULT)
+    if note:
+        print(f"warning: {note}")
 
 
 def hint_grade_source(note: str, columns, meas) -> None:
