@@ -637,3 +637,27 @@ def test_vendor_files_with_an_extra_text_column_are_read(tmp_path):
     assert_canonical(df, rep)
     assert list(df["operator"]) == ["A"] * 3 and list(df["rollertemp"]) == [30.0] * 3
     np.testing.assert_allclose(df["battery_current_a"], [1.0, 2.0, 3.0])
+
+
+def test_bmw_tum_trip_resaved_with_decimal_commas_reads_the_same(tmp_path):
+    """Dress rehearsal: a TUM trip opened and saved by a German-locale spreadsheet keeps ';'
+    between columns and writes '0,1' for 0.1; it was refused ("column 'Time [s]' is not
+    numeric: data row 0 holds '0,0'"). It now reads as the original, noted."""
+    header = ("Time [s];Velocity [km/h];Elevation [m];Motor Torque [Nm];Battery Voltage [V];"
+              "Battery Current [A]\n")
+    rows = [(0.1 * i, 10.5 + i, 520, 50.25, 390.4, -20.75) for i in range(8)]
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    dot = write(tmp_path / "a", "TripX01.csv", header + "".join(";".join(map(str, r)) + "\n" for r in rows))
+    comma = write(tmp_path / "b", "TripX01.csv",
+                  header + "".join(";".join(str(round(x, 2)).replace(".", ",") for x in r) + "\n" for r in rows))
+    d1, _ = read("bmw-i3-tum", dot)
+    d2, rep = read("bmw-i3-tum", comma)
+    assert_canonical(d2, rep)
+    pd.testing.assert_frame_equal(d1, d2)
+    np.testing.assert_allclose(d2["battery_current_a"], 20.75)
+    assert any("decimal comma" in n for n in rep["files"][0]["notes"])
+    # a text cell in a column the format knows is still an error naming file, column and row
+    bad = write(tmp_path / "b", "TripX02.csv", comma.read_text().replace("50,25", "fault", 1))
+    with pytest.raises(UserError, match=r"TripX02.csv: column 'Motor Torque \[Nm\]' is not numeric: data row 0"):
+        read("bmw-i3-tum", bad)

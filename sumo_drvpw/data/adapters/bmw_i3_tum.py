@@ -110,6 +110,10 @@ def read_file(path: Path, overview: pd.DataFrame | None, vehicle) -> tuple[pd.Da
     rep = new_report(path, trip, len(raw))
     labels = [str(c).replace("Â°", "°").strip() for c in raw.columns]
     keys = [split_header(c)[0].lower() for c in labels]
+    if _decimal_comma(raw, keys):  # re-saved by a German-locale spreadsheet: '12,5'
+        raw = read_csv_strict(path, sep=";", encoding="latin-1", decimal=",")
+        rep["notes"].append("decimal comma (time and speed written like '0,1'): read with ',' as the "
+                            "decimal mark")
     missing = [k for k in REQUIRED if k not in keys]
     if missing:
         sep_hint = (" (only one column: not ';'-separated?)" if raw.shape[1] == 1 else "")
@@ -147,6 +151,16 @@ def read_file(path: Path, overview: pd.DataFrame | None, vehicle) -> tuple[pd.Da
     df.insert(0, "trip_id", trip)
     df = _join_overview(df, trip, overview, vehicle, rep)
     return df.reset_index(drop=True), rep
+
+
+def _decimal_comma(raw: pd.DataFrame, keys: list[str]) -> bool:
+    """True when the time and speed columns are text whose every value is a number written
+    with a decimal comma (the TUM files use ';' between columns, so a ',' is no separator)."""
+    cols = [raw.iloc[:, keys.index(k)] for k in ("time", "velocity") if k in keys]
+    if len(cols) < 2 or any(pd.api.types.is_numeric_dtype(c) for c in cols):
+        return False
+    text = pd.concat(cols).dropna().astype(str).str.strip()
+    return bool(len(text)) and text.str.fullmatch(r"-?\d+(,\d+)?").all() and text.str.contains(",").any()
 
 
 def read_overview(folder: Path) -> pd.DataFrame | None:
