@@ -313,3 +313,24 @@ def load_vehicle_mass(name):
     from sumo_drvpw.model.vehicles import load_vehicle
 
     return load_vehicle(name).mass_kg
+
+
+@pytest.mark.parametrize("target", ["wheel", "battery"])
+def test_a_log_at_one_speed_is_refused_by_the_chain_calibration_too(tmp_path, capsys, target):
+    """Dress rehearsal: half a second of a TUM i3 trip (5 samples at one speed) was refused
+    by `calibrate` ("speed takes 1 distinct value(s) … cannot be identified") but
+    `calibrate --target battery` fitted its stepwise road load on it anyway (roll alone,
+    R² −0.03) and wrote a chain (R² −270, η_t at its bound 1, 3.2 kW auxiliary). Both now
+    refuse such a log in one line naming it, exit 2, and write nothing. Planted: 60 s at a
+    constant 10 m/s with a driving power and a battery V·I."""
+    t = np.arange(0.0, 60.0, 0.1)
+    p = np.full(len(t), 4000.0)
+    f = tmp_path / "cruise.csv"
+    pd.DataFrame({"trip_id": "T", "time_s": t, "speed_mps": 10.0, "power_w": p,
+                  "battery_voltage_v": 360.0, "battery_current_a": p / 0.9 / 360.0}).to_csv(f, index=False)
+    out = tmp_path / "eq.toml"
+    extra = ["--target", "battery"] if target == "battery" else ["--engine", "memory"]
+    assert cli_main(["calibrate", str(f), "--vehicle", "bmw_i3", "--out", str(out)] + extra) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cruise.csv" in err[0] and "cannot be identified" in err[0], err
+    assert not out.exists()
