@@ -661,3 +661,41 @@ def test_bmw_tum_trip_resaved_with_decimal_commas_reads_the_same(tmp_path):
     bad = write(tmp_path / "b", "TripX02.csv", comma.read_text().replace("50,25", "fault", 1))
     with pytest.raises(UserError, match=r"TripX02.csv: column 'Motor Torque \[Nm\]' is not numeric: data row 0"):
         read("bmw-i3-tum", bad)
+
+
+def test_bmw_trips_in_sub_folders_find_the_overview_above_and_the_folder_says_where(tmp_path):
+    """Dress rehearsal: TUM trips sorted into month folders under the data set's overview.csv.
+    Importing the top folder said only "no trip file among [...]" (sub-folders are not
+    searched): it now names the sub-folders that hold trips. Importing those folders joined no
+    overview ("no overview.csv beside the trip": no season, no added mass): the overview
+    a folder or more above is now joined when it lists the trip, and the import equals the
+    flat layout's. An overview above that does not list the trip is not taken."""
+    ov = ("Trip,Date,Route/Area,Weather,Note\n"
+          "TripZ01,2019-06-25_13-21-14,Munich East,sunny,\n"
+          "TripZ02,2019-12-02_08-00-00,Munich North,cloudy,+ 80 kg\n")
+    trip = BMW_HEADER + "0;36;500;10;390;-1\n0.1;37;500;10;390;-1\n"
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    (flat / "overview.csv").write_text(ov)
+    for t in ("TripZ01", "TripZ02"):
+        write(flat, f"{t}.csv", trip)
+    top = tmp_path / "nested"
+    for t, month in (("TripZ01", "2019/06"), ("TripZ02", "2019/12")):
+        (top / month).mkdir(parents=True)
+        write(top / month, f"{t}.csv", trip)
+    (top / "overview.csv").write_text(ov)
+    with pytest.raises(UserError, match=r"its sub-folders hold 2 such file\(s\).*2019/06.*2019/12"):
+        read("bmw-i3-tum", top)
+    d_flat, _ = read("bmw-i3-tum", flat)
+    d_nest, rep = read("bmw-i3-tum", [top / "2019/06", top / "2019/12"])
+    pd.testing.assert_frame_equal(d_flat, d_nest)
+    by = d_nest.groupby("trip_id").first()
+    assert by.loc["TripZ02", "season"] == "winter" and by.loc["TripZ02", "added_mass_kg"] == 80
+    assert by.loc["TripZ02", "mass_kg"] == load_vehicle("bmw_i3").mass_kg + 80
+    assert all(any("a folder above the trip" in n for n in r["notes"]) for r in rep["files"])
+    # an overview above that does not list the trip is not joined
+    other = tmp_path / "other" / "x"
+    other.mkdir(parents=True)
+    (tmp_path / "other" / "overview.csv").write_text(ov.replace("TripZ01", "TripY01"))
+    d, rep = read("bmw-i3-tum", write(other, "TripZ01.csv", trip))
+    assert "season" not in d and any("no trip metadata" in n for n in rep["files"][0]["notes"])
