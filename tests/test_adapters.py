@@ -604,3 +604,98 @@ def test_bmw_tum_reads_the_unit_its_header_writes(tmp_path):
     d3.mkdir()
     with pytest.raises(UserError, match=r"Velocity \[kW\].*not a speed"):
         read("bmw-i3-tum", _tum(d3 / "TripX1.csv", "Velocity [kW]", "Heating Power CAN [kW]", 36.0, 0.84))
+
+
+def test_vendor_files_with_an_extra_text_column_are_read(tmp_path):
+    """A logger's own comment, driver or mode column (text) beside the vendor's columns is
+    kept as text and noted, not a refusal of the file (dress rehearsal on unseen logs: a TUM
+    trip with a 'Comment' column, a Torque log with 'Notes', a JLU file with 'Operator' were
+    refused with 'is not numeric'); a known column with text stays an error."""
+    tum = ("Time [s];Velocity [km/h];Comment;Motor Torque [Nm];Battery Voltage [V];"
+           "Battery Current [A];Tyre Pressure [bar]\n"
+           + "".join(f"{0.1 * i:.1f};{10 + i};ok;50;390;-20;2.4\n" for i in range(6)))
+    df, rep = read("bmw-i3-tum", write(tmp_path, "TripX01.csv", tum))
+    assert_canonical(df, rep)
+    assert list(df["comment"]) == ["ok"] * 6
+    np.testing.assert_allclose(df["tyre_pressure_kpa"], 240.0)         # bar → kPa, still numeric
+    np.testing.assert_allclose(df["speed_mps"], (10 + np.arange(6)) / 3.6)
+    assert any("'Comment' is not numeric" in n and "kept as text" in n for n in rep["files"][0]["notes"])
+    with pytest.raises(UserError, match=r"TripX02.csv: column 'Motor Torque \[Nm\]' is not numeric: data row 0"):
+        read("bmw-i3-tum", write(tmp_path, "TripX02.csv", tum.replace(";50;", ";fault;")))
+
+    rec = [{"Device Time": f"25-Mar-2017 11:46:{29 + i}.500", "Speed (OBD)(mph)": 20.0 + i,
+            "Notes": "x", "Trip Distance(miles)": str(0.1 * i)} for i in range(5)]
+    df, rep = read("torquepro", write(tmp_path, "t.json", json.dumps(rec)))
+    assert_canonical(df, rep)
+    assert list(df["notes"]) == ["x"] * 5 and pd.api.types.is_float_dtype(df["trip_distance_m"])
+
+    jlu = pd.DataFrame({"PhaseTime": [0.0, 0.05, 0.1], "DAActualSpeed": [0.0, 1.0, 2.0],
+                        "REESSCurrent": [-1.0, -2.0, -3.0], "REESSVoltage": [390.0] * 3,
+                        "Operator": ["A"] * 3, "RollerTemp": [30.0] * 3})
+    jlu.to_parquet(tmp_path / "UDDS_01.parquet")
+    df, rep = read("jlu-dyno", tmp_path / "UDDS_01.parquet")
+    assert_canonical(df, rep)
+    assert list(df["operator"]) == ["A"] * 3 and list(df["rollertemp"]) == [30.0] * 3
+    np.testing.assert_allclose(df["battery_current_a"], [1.0, 2.0, 3.0])
+
+
+def test_bmw_tum_trip_resaved_with_decimal_commas_reads_the_same(tmp_path):
+    """Dress rehearsal: a TUM trip opened and saved by a German-locale spreadsheet keeps ';'
+    between columns and writes '0,1' for 0.1; it was refused ("column 'Time [s]' is not
+    numeric: data row 0 holds '0,0'"). It now reads as the original, noted."""
+    header = ("Time [s];Velocity [km/h];Elevation [m];Motor Torque [Nm];Battery Voltage [V];"
+              "Battery Current [A]\n")
+    rows = [(0.1 * i, 10.5 + i, 520, 50.25, 390.4, -20.75) for i in range(8)]
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    dot = write(tmp_path / "a", "TripX01.csv", header + "".join(";".join(map(str, r)) + "\n" for r in rows))
+    comma = write(tmp_path / "b", "TripX01.csv",
+                  header + "".join(";".join(str(round(x, 2)).replace(".", ",") for x in r) + "\n" for r in rows))
+    d1, _ = read("bmw-i3-tum", dot)
+    d2, rep = read("bmw-i3-tum", comma)
+    assert_canonical(d2, rep)
+    pd.testing.assert_frame_equal(d1, d2)
+    np.testing.assert_allclose(d2["battery_current_a"], 20.75)
+    assert any("decimal comma" in n for n in rep["files"][0]["notes"])
+    # a text cell in a column the format knows is still an error naming file, column and row
+    bad = write(tmp_path / "b", "TripX02.csv", comma.read_text().replace("50,25", "fault", 1))
+    with pytest.raises(UserError, match=r"TripX02.csv: column 'Motor Torque \[Nm\]' is not numeric: data row 0"):
+        read("bmw-i3-tum", bad)
+
+
+def test_bmw_trips_in_sub_folders_find_the_overview_above_and_the_folder_says_where(tmp_path):
+    """Dress rehearsal: TUM trips sorted into month folders under the data set's overview.csv.
+    Importing the top folder said only "no trip file among [...]" (sub-folders are not
+    searched): it now names the sub-folders that hold trips. Importing those folders joined no
+    overview ("no overview.csv beside the trip": no season, no added mass): the overview
+    a folder or more above is now joined when it lists the trip, and the import equals the
+    flat layout's. An overview above that does not list the trip is not taken."""
+    ov = ("Trip,Date,Route/Area,Weather,Note\n"
+          "TripZ01,2019-06-25_13-21-14,Munich East,sunny,\n"
+          "TripZ02,2019-12-02_08-00-00,Munich North,cloudy,+ 80 kg\n")
+    trip = BMW_HEADER + "0;36;500;10;390;-1\n0.1;37;500;10;390;-1\n"
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    (flat / "overview.csv").write_text(ov)
+    for t in ("TripZ01", "TripZ02"):
+        write(flat, f"{t}.csv", trip)
+    top = tmp_path / "nested"
+    for t, month in (("TripZ01", "2019/06"), ("TripZ02", "2019/12")):
+        (top / month).mkdir(parents=True)
+        write(top / month, f"{t}.csv", trip)
+    (top / "overview.csv").write_text(ov)
+    with pytest.raises(UserError, match=r"its sub-folders hold 2 such file\(s\).*2019/06.*2019/12"):
+        read("bmw-i3-tum", top)
+    d_flat, _ = read("bmw-i3-tum", flat)
+    d_nest, rep = read("bmw-i3-tum", [top / "2019/06", top / "2019/12"])
+    pd.testing.assert_frame_equal(d_flat, d_nest)
+    by = d_nest.groupby("trip_id").first()
+    assert by.loc["TripZ02", "season"] == "winter" and by.loc["TripZ02", "added_mass_kg"] == 80
+    assert by.loc["TripZ02", "mass_kg"] == load_vehicle("bmw_i3").mass_kg + 80
+    assert all(any("a folder above the trip" in n for n in r["notes"]) for r in rep["files"])
+    # an overview above that does not list the trip is not joined
+    other = tmp_path / "other" / "x"
+    other.mkdir(parents=True)
+    (tmp_path / "other" / "overview.csv").write_text(ov.replace("TripZ01", "TripY01"))
+    d, rep = read("bmw-i3-tum", write(other, "TripZ01.csv", trip))
+    assert "season" not in d and any("no trip metadata" in n for n in rep["files"][0]["notes"])

@@ -277,3 +277,60 @@ def test_report_with_a_vehicle_that_lacks_specs_skips_vsp_from_specs(tmp_path, c
                     + engine) == 0
     md = (rep / "report.md").read_text()
     assert "not compared" in md and "body.rolling_coefficient" in md and "vsp_ldv1999" in md
+
+
+@pytest.mark.parametrize("engine", [[], ["--engine", "memory"]])
+def test_a_drag_that_is_not_the_cars_is_flagged(tmp_path, capsys, engine):
+    """Dress rehearsal on unseen-like logs: the first minute of a JLU UDDS test calibrated to
+    aero 5.2 (C_d·A 8.6 m², 17 × the car's published road load) and a JLU road trip to aero 0
+    after the constrained fit (its free fit was negative), both written without a word.
+    Planted: the same speed trace with the drag of the vehicle file (bmw_i3: C_d 0.29 ×
+    A 2.38 m² → ½ρC_dA = 0.4155) is not flagged; 17 × that drag is flagged
+    on the console and in the equation's provenance, and so is a drag the constrained fit put
+    at its bound 0 (planted negative: another term took its place)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 900.0, 0.5)
+    v = 15 + 10 * np.sin(t / 40) + 3 * np.sin(t / 7) + rng.normal(0, 0.05, len(t))
+    a = np.gradient(v, t)
+    m = load_vehicle_mass("bmw_i3")
+    for aero, flagged in ((0.4155, False), (17 * 0.4155, True), (-0.3, True)):  # -0.3: fitted 0 at its bound
+        p = 1.05 * m * v * a + aero * v ** 3 + 0.01 * m * 9.81 * v + rng.normal(0, 300, len(t))
+        f = tmp_path / f"log_{aero:g}.csv"
+        pd.DataFrame({"trip_id": "T", "time_s": t, "speed_mps": v, "power_w": p}).to_csv(f, index=False)
+        out = tmp_path / f"eq_{aero:g}.toml"
+        assert cli_main(["calibrate", str(f), "--vehicle", "bmw_i3", "--out", str(out)] + engine) == 0
+        said = capsys.readouterr().out
+        assert ("not this car's drag" in said) == flagged, said
+        drag = load_equation(out).provenance.get("physical", {}).get("vehicle_drag")
+        assert (drag is not None) == flagged
+        if flagged:
+            assert drag["declared_cda_m2"] == pytest.approx(0.29 * 2.38)
+            assert drag["ratio"] == pytest.approx(2 * load_equation(out).terms["aero"] / 1.2041 / (0.29 * 2.38),
+                                                  rel=0.01)
+
+
+def load_vehicle_mass(name):
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    return load_vehicle(name).mass_kg
+
+
+@pytest.mark.parametrize("target", ["wheel", "battery"])
+def test_a_log_at_one_speed_is_refused_by_the_chain_calibration_too(tmp_path, capsys, target):
+    """Dress rehearsal: half a second of a TUM i3 trip (5 samples at one speed) was refused
+    by `calibrate` ("speed takes 1 distinct value(s) … cannot be identified") but
+    `calibrate --target battery` fitted its stepwise road load on it anyway (roll alone,
+    R² −0.03) and wrote a chain (R² −270, η_t at its bound 1, 3.2 kW auxiliary). Both now
+    refuse such a log in one line naming it, exit 2, and write nothing. Planted: 60 s at a
+    constant 10 m/s with a driving power and a battery V·I."""
+    t = np.arange(0.0, 60.0, 0.1)
+    p = np.full(len(t), 4000.0)
+    f = tmp_path / "cruise.csv"
+    pd.DataFrame({"trip_id": "T", "time_s": t, "speed_mps": 10.0, "power_w": p,
+                  "battery_voltage_v": 360.0, "battery_current_a": p / 0.9 / 360.0}).to_csv(f, index=False)
+    out = tmp_path / "eq.toml"
+    extra = ["--target", "battery"] if target == "battery" else ["--engine", "memory"]
+    assert cli_main(["calibrate", str(f), "--vehicle", "bmw_i3", "--out", str(out)] + extra) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cruise.csv" in err[0] and "cannot be identified" in err[0], err
+    assert not out.exists()

@@ -120,6 +120,9 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
         from sumo_drvpw.cli.calibrate import hint_grade_source, log_columns
 
         hint_grade_source(note, log_columns(args.logs), measurement_options(args))
+    from sumo_drvpw.cli.calibrate import warn_drag
+
+    warn_drag(eq, veh, st.rho_sum / st.mass_n if st.mass_n else None)
     from sumo_drvpw.cli import measurement_options
     from sumo_drvpw.cli.calibrate import declare_measurement
 

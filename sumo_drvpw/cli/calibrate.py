@@ -106,11 +106,7 @@ def main(args) -> int:
         return calibrate_streamed(args, cands, out, inputs)
     m = load_measured(args.logs, args.vehicle, read_options(args))
     note_counts(m.counts)
-    moving = np.unique(np.round(m.inputs.v[m.usable & (m.inputs.v > MOVING_MPS)], 1))
-    if len(moving) < 2:
-        raise UserError(f"{m.log.describe()}: speed takes {len(moving)} distinct value(s) above "
-                        f"{MOVING_MPS:g} m/s on the usable samples; {', '.join(cands)} cannot be "
-                        "identified (they need the speed to vary); calibrate on a log with varying speed")
+    check_speed_varies(m, cands)
     ref_mass = float(m.inputs.mass[m.usable].mean())
     res = calibrate(m.inputs, m.power_w, cands, mask=m.usable, p_enter=args.p_enter,
                     p_remove=args.p_remove, counts=m.counts, reference_mass_kg=ref_mass)
@@ -154,6 +150,8 @@ def physical(eq, m, candidates):
     """The equation, physically constrained where its free fit is implausible (issue #11 §3),
     and the note saying so ('' when plausible); the note and its hints are printed."""
     from sumo_drvpw.errors import UserError
+    import numpy as np
+
     from sumo_drvpw.fit.physical import apply_physics, constraints_of
 
     try:
@@ -163,7 +161,20 @@ def physical(eq, m, candidates):
     if note:
         print(note)
         hint_grade_source(note, m.log.df.columns, m.log.options.measurement)
+    rho = np.asarray(m.inputs.rho, float)[np.asarray(m.usable, bool)]
+    warn_drag(eq, m.vehicle, float(np.nanmean(rho)) if rho.size else None)
     return eq, note
+
+
+def warn_drag(eq, vehicle, rho_kgm3) -> None:
+    """Print a warning when the written aero coefficient is no drag of the vehicle
+    (:func:`sumo_drvpw.fit.physical.drag_against_vehicle`)."""
+    from sumo_drvpw.fit.physical import drag_against_vehicle
+    from sumo_drvpw.model.constants import RHO_DEFAULT
+
+    note = drag_against_vehicle(eq, vehicle, rho_kgm3 if rho_kgm3 and rho_kgm3 > 0 else RHO_DEFAULT)
+    if note:
+        print(f"warning: {note}")
 
 
 def hint_grade_source(note: str, columns, meas) -> None:
@@ -193,6 +204,17 @@ def declare_measurement(eq, meas) -> None:
 MOVING_MPS = 0.5
 #: power of v in the flat-road, still-air column of the speed-only terms (others: not checked)
 SPEED_POWER = {"aero": 3, "aero_rho": 3, "v3": 3, "roll_v2": 2, "v2": 2, "roll": 1, "v1": 1}
+
+
+def check_speed_varies(m, cands) -> None:
+    """Refuse a log whose usable samples hold fewer than two distinct moving speeds: no term
+    of ``cands`` can be identified on it (the stepwise road load of ``calibrate`` and of
+    ``calibrate --target battery|fuel`` alike)."""
+    moving = np.unique(np.round(m.inputs.v[m.usable & (m.inputs.v > MOVING_MPS)], 1))
+    if len(moving) < 2:
+        raise UserError(f"{m.log.describe()}: speed takes {len(moving)} distinct value(s) above "
+                        f"{MOVING_MPS:g} m/s on the usable samples; {', '.join(cands)} cannot be "
+                        "identified (they need the speed to vary); calibrate on a log with varying speed")
 
 
 def check_identified(res, where: str) -> None:
@@ -307,9 +329,12 @@ def main_chain(args) -> int:
                             "told apart from the chain's losses; give its road load with --equation (e.g. "
                             "roadload_spec, the vehicle's published A + B·v + C·v², or an equation calibrated "
                             "on logs with a driving power)")
-        res = calibrate(mw.inputs, mw.power_w, resolve_candidates(args.candidates), mask=mw.usable,
+        cands = resolve_candidates(args.candidates)
+        check_speed_varies(mw, cands)  # as plain `calibrate`: the road load needs varying speed
+        res = calibrate(mw.inputs, mw.power_w, cands, mask=mw.usable,
                         p_enter=args.p_enter, p_remove=args.p_remove, counts=mw.counts,
                         reference_mass_kg=float(mw.inputs.mass[mw.usable].mean()))
+        check_identified(res, mw.log.describe())
         eq = res.to_equation(args.name or out.stem, provenance={
             "logs": mw.log.files, "power_source": mw.source, "candidates_spec": args.candidates})
         print(res.summary())

@@ -33,7 +33,8 @@ def expand_paths(paths, suffixes: tuple[str, ...], what: str,
         if p.is_dir():
             found = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in suffixes)
             if not found:
-                raise UserError(f"{p}: folder holds no {what} file ({', '.join(suffixes)})")
+                raise UserError(f"{p}: folder holds no {what} file ({', '.join(suffixes)})"
+                                + subfolder_hint(p, suffixes))
             out.extend(found)
         elif p.is_file():
             if check_files and p.suffix.lower() not in suffixes:
@@ -45,3 +46,19 @@ def expand_paths(paths, suffixes: tuple[str, ...], what: str,
     if not out:
         raise UserError(f"no {what} given")
     return out
+
+
+def subfolder_hint(folder: Path, suffixes: tuple[str, ...], skip=("overview.csv",)) -> str:
+    """'; its sub-folders hold N such files (…): name those folders …' when files with one of
+    ``suffixes`` lie below ``folder`` (a folder is read flat, its sub-folders are not
+    searched), else ''."""
+    from itertools import islice
+
+    below = sorted(f for f in islice(Path(folder).rglob("*"), 20000)  # an error message: bounded
+                   if f.is_file() and f.suffix.lower() in suffixes and f.parent != Path(folder)
+                   and f.name not in skip)
+    if not below:
+        return ""
+    dirs = sorted({str(f.parent) for f in below})
+    return (f"; its sub-folders hold {len(below)} such file(s) (e.g. {below[0]}): name those "
+            f"folders ({', '.join(dirs[:3])}{' …' if len(dirs) > 3 else ''}), sub-folders are not searched")

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy.linalg import cholesky, solve_triangular
@@ -331,6 +332,55 @@ def apply_physics_gram(eq, g: Gram | None, rho_kgm3: float = RHO_DEFAULT,
     eq.std_err, eq.p_values = {}, {}
     return eq, (f"physically constrained fit used: the free fit is implausible: {why}; "
                 f"constraints {fit.constraints} (active: {', '.join(fit.active) or 'none'})")
+
+
+#: the fitted drag may exceed the vehicle file's by the drivetrain's 1/η (a target behind
+#: a drivetrain) and differ by the published figures' uncertainty; beyond this factor either
+#: way (zero drag included) the aero coefficient is no drag of this car
+DRAG_RATIO_MAX = 3.0
+
+
+def declared_cda(vehicle) -> tuple[float, str] | None:
+    """(C_d·A [m²], where it comes from) as the vehicle file declares it: ``[body]``
+    C_d × A, else the published road load's C = ½ρ·C_d·A (ρ of the standard test,
+    :data:`RHO_DEFAULT`); None when it declares neither."""
+    if vehicle is None:
+        return None
+    body, rl = vehicle.body or {}, vehicle.road_load or {}
+    if body.get("drag_coefficient") and body.get("frontal_area_m2"):
+        cd, a = float(body["drag_coefficient"]), float(body["frontal_area_m2"])
+        return cd * a, f"C_d {cd:g} × A {a:g} m²"
+    if rl.get("c_n_per_mps2"):
+        c = float(rl["c_n_per_mps2"])
+        return 2.0 * c / RHO_DEFAULT, f"road load C = {c:.4g} N/(m/s)²"
+    return None
+
+
+def drag_against_vehicle(eq, vehicle, rho_kgm3: float = RHO_DEFAULT) -> str | None:
+    """A note when the equation's aero coefficient, read as C_d·A, is more than
+    :data:`DRAG_RATIO_MAX` times above or below what the vehicle file declares (None when
+    it is within, or there is no aero term or no declared drag). A constrained fit can put
+    the drag at its bound 0, and a short log or a narrow speed range lets ``aero`` trade
+    with ``roll`` and ``acc``: such a coefficient is no drag, and SUMO would apply it at
+    every speed. The note is kept in ``eq.provenance["physical"]["vehicle_drag"]``."""
+    term = next((t for t in ("aero", "aero_rho") if t in eq.terms), None)
+    ref = declared_cda(vehicle)
+    if term is None or ref is None or not ref[0] > 0:
+        return None
+    c = float(eq.terms[term])
+    cda = 2.0 * c / rho_kgm3 if term == "aero" else c
+    ratio = cda / ref[0]
+    if 1.0 / DRAG_RATIO_MAX <= ratio <= DRAG_RATIO_MAX:
+        return None
+    note = (f"{term} = {c:.4g} reads as C_d·A = {cda:.3g} m² at ρ = {rho_kgm3:.4g} kg/m³, "
+            f"{ratio:.2g} × the {ref[0]:.3g} m² of {Path(vehicle.path).name if vehicle.path else vehicle.name} "
+            f"({ref[1]}): not this car's drag (outside 1/{DRAG_RATIO_MAX:g} … {DRAG_RATIO_MAX:g}×); "
+            "the data do not tell the drag apart from the other terms (a short log, a narrow "
+            "speed range?) — check the equation before using it at other speeds")
+    eq.provenance.setdefault("physical", {})["vehicle_drag"] = {
+        "term": term, "coefficient": c, "cda_m2": cda, "declared_cda_m2": ref[0],
+        "declared_from": ref[1], "ratio": ratio, "note": note}
+    return note
 
 
 def constraints_of(candidates_spec) -> dict | None:

@@ -166,6 +166,19 @@ def numeric(series: pd.Series, file, column: str, na_tokens=("-", "")) -> pd.Ser
     return conv.astype(float)
 
 
+def extra_values(series: pd.Series, file, column: str, notes: list, factor: float = 1.0,
+                 offset: float = 0.0, na_tokens=("-", "")) -> pd.Series:
+    """A vendor column the adapter does not know: numeric (converted by factor and offset)
+    where it reads as numbers, else kept as text and noted — a logger's comment, driver or
+    mode label is no reason to refuse the file (as the ``columns`` format keeps it)."""
+    try:
+        return numeric(series, file, column, na_tokens) * factor + offset
+    except UserError as e:
+        notes.append(f"column '{column}' is not numeric ({str(e).split(': ', 2)[-1]}): "
+                     "kept as text")
+        return series.astype(str)
+
+
 def read_csv_strict(path: Path, **kw) -> pd.DataFrame:
     """pandas.read_csv with empty or undecodable files turned into a UserError naming the file."""
     try:

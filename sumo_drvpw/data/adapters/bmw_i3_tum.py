@@ -33,7 +33,7 @@ import pandas as pd
 
 from sumo_drvpw.model.constants import KMH, RPM
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.data.adapters._common import generic_name, new_report, numeric, read_csv_strict, snake, split_header
+from sumo_drvpw.data.adapters._common import extra_values, generic_name, new_report, numeric, read_csv_strict, snake, split_header
 from sumo_drvpw.data.adapters._common import DIMENSIONS, clean_time_and_speed, lookup_unit, unique_names
 
 FORMAT = "bmw-i3-tum"
@@ -85,6 +85,8 @@ ROLES = {
     "trip_soc_end_pct": "response", "trip_distance_m": "response", "trip_duration_s": "response",
 }
 WINTER_MONTHS = (11, 12, 1, 2, 3)
+#: how many folders above a trip are searched for overview.csv when none is beside it
+OVERVIEW_LEVELS_UP = 3
 
 
 def _header_unit(label: str, name: str, factor: float, path) -> tuple[float, float]:
@@ -110,6 +112,10 @@ def read_file(path: Path, overview: pd.DataFrame | None, vehicle) -> tuple[pd.Da
     rep = new_report(path, trip, len(raw))
     labels = [str(c).replace("Â°", "°").strip() for c in raw.columns]
     keys = [split_header(c)[0].lower() for c in labels]
+    if _decimal_comma(raw, keys):  # re-saved by a German-locale spreadsheet: '12,5'
+        raw = read_csv_strict(path, sep=";", encoding="latin-1", decimal=",")
+        rep["notes"].append("decimal comma (time and speed written like '0,1'): read with ',' as the "
+                            "decimal mark")
     missing = [k for k in REQUIRED if k not in keys]
     if missing:
         sep_hint = (" (only one column: not ';'-separated?)" if raw.shape[1] == 1 else "")
@@ -120,10 +126,12 @@ def read_file(path: Path, overview: pd.DataFrame | None, vehicle) -> tuple[pd.Da
         if key in NAMES:
             name, factor = NAMES[key]
             factor, offset = _header_unit(label, name, factor, path)
-        else:
+            col = numeric(raw[src], path, label) * factor + offset
+        else:  # not a TUM column: numeric where it reads so, else kept as text
             name, factor, offset = generic_name(label, rep["notes"])
+            col = extra_values(raw[src], path, label, rep["notes"], factor, offset)
         names.append(name)
-        cols.append(numeric(raw[src], path, label) * factor + offset)
+        cols.append(col)
     names = unique_names(names)
     df = pd.DataFrame(dict(zip(names, cols)), index=raw.index)
     df = clean_time_and_speed(df, path, rep)
@@ -145,6 +153,16 @@ def read_file(path: Path, overview: pd.DataFrame | None, vehicle) -> tuple[pd.Da
     df.insert(0, "trip_id", trip)
     df = _join_overview(df, trip, overview, vehicle, rep)
     return df.reset_index(drop=True), rep
+
+
+def _decimal_comma(raw: pd.DataFrame, keys: list[str]) -> bool:
+    """True when the time and speed columns are text whose every value is a number written
+    with a decimal comma (the TUM files use ';' between columns, so a ',' is no separator)."""
+    cols = [raw.iloc[:, keys.index(k)] for k in ("time", "velocity") if k in keys]
+    if len(cols) < 2 or any(pd.api.types.is_numeric_dtype(c) for c in cols):
+        return False
+    text = pd.concat(cols).dropna().astype(str).str.strip()
+    return bool(len(text)) and text.str.fullmatch(r"-?\d+(,\d+)?").all() and text.str.contains(",").any()
 
 
 def read_overview(folder: Path) -> pd.DataFrame | None:
@@ -174,7 +192,7 @@ def read_overview(folder: Path) -> pd.DataFrame | None:
     ymd = date.str.extract(r"(\d{4})[-_](\d{2})[-_](\d{2})[-_ ](\d{2})-(\d{2})-(\d{2})")
     stamp = pd.to_datetime(ymd[0] + "-" + ymd[1] + "-" + ymd[2] + " " + ymd[3] + ":" + ymd[4]
                            + ":" + ymd[5], errors="coerce")
-    note = col("note").fillna("").astype(str)
+    note = col("note").astype(object).fillna("").astype(str)
     added = note.str.extract(r"\+\s*(\d+(?:\.\d+)?)\s*kg", flags=re.I)[0].astype(float).fillna(0.0)
     month = stamp.dt.month
     trip = raw[cols["trip"]].astype(str).str.strip()
@@ -194,7 +212,7 @@ def read_overview(folder: Path) -> pd.DataFrame | None:
         "cabin_setpoint_c": numeric(col("target_cabin_temperature"), p, "Target Cabin Temperature"),
         "trip_distance_m": 1000.0 * numeric(col("distance_km"), p, "Distance [km]"),
         "trip_duration_s": 60.0 * numeric(col("duration_min"), p, "Duration [min]"),
-        "fan": col("fan").fillna("").astype(str).str.strip(),
+        "fan": col("fan").astype(object).fillna("").astype(str).str.strip(),
         "note": note.str.strip(),
         "added_mass_kg": added,
     })
@@ -204,7 +222,8 @@ def read_overview(folder: Path) -> pd.DataFrame | None:
 def _join_overview(df, trip, overview, vehicle, rep):
     """Add the overview row of this trip as constant columns, and mass_kg = vehicle + added load."""
     if overview is None:
-        rep["notes"].append("no overview.csv beside the trip: no trip metadata joined")
+        rep["notes"].append(f"no overview.csv beside the trip or up to {OVERVIEW_LEVELS_UP} folders above it: "
+                            "no trip metadata joined")
         return df
     if trip not in overview.index:
         rep["notes"].append(f"trip {trip} not in overview.csv: no trip metadata joined")
@@ -224,14 +243,29 @@ def read(paths) -> tuple[list[pd.DataFrame], list[dict], list[str]]:
     vehicle = load_vehicle(VEHICLE)
     files = [f for f in expand_paths(paths, SUFFIXES, "TUM trip CSV") if f.name != "overview.csv"]
     if not files:
-        raise UserError(f"{FORMAT}: no trip file among {paths} (overview.csv alone is not a trip)")
+        from sumo_drvpw.data.paths import subfolder_hint
+
+        folders = [Path(p) for p in ([paths] if isinstance(paths, (str, Path)) else paths) if Path(p).is_dir()]
+        raise UserError(f"{FORMAT}: no trip file among {paths} (overview.csv alone is not a trip)"
+                        + "".join(subfolder_hint(d, SUFFIXES) for d in folders[:1]))
     overviews: dict[Path, pd.DataFrame | None] = {}
 
     def read_one(f: Path):
+        # overview.csv beside the trip, else in a folder above it (trips sorted into
+        # sub-folders by month or route, the data set's overview at the top)
+        # (one above is taken only when it lists this trip: an unrelated overview.csv is not)
         folder = f.parent.resolve()
-        if folder not in overviews:
-            overviews[folder] = read_overview(folder)
-        return read_file(f, overviews[folder], vehicle)
+        for d in [folder, *folder.parents][:OVERVIEW_LEVELS_UP + 1]:
+            if d not in overviews:
+                overviews[d] = read_overview(d)
+            if overviews[d] is not None and (d == folder or f.stem in overviews[d].index):
+                break
+        else:
+            d = folder
+        df, rep = read_file(f, overviews[d], vehicle)
+        if d != folder and overviews[d] is not None and "trip_start" in df:
+            rep["notes"].append(f"trip metadata from {d / 'overview.csv'} (a folder above the trip)")
+        return df, rep
 
     frames, reports = read_each(files, read_one)
     return frames, reports, [f"vehicle file {vehicle.path}"]

@@ -27,7 +27,8 @@ import pandas as pd
 
 from sumo_drvpw.model.constants import KMH
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.data.adapters._common import clean_time_and_speed, generic_name, new_report, numeric, unique_names
+from sumo_drvpw.data.adapters._common import (clean_time_and_speed, extra_values, generic_name, new_report, numeric,
+                                              unique_names)
 
 FORMAT = "jlu-dyno"
 SUFFIXES = (".parquet",)
@@ -115,7 +116,8 @@ def read_file(path: Path, vehicle, road: bool = False) -> tuple[pd.DataFrame, di
             continue
         name, f, o = (known[c] + (0.0,)) if c in known else generic_name(str(c), rep["notes"])
         names.append(name)
-        cols.append(numeric(s, path, str(c)) * f + o)
+        cols.append(numeric(s, path, str(c)) * f + o if c in known
+                    else extra_values(s, path, str(c), rep["notes"], f, o))
     df = pd.DataFrame(dict(zip(unique_names(names), cols)), index=raw.index)
     df = clean_time_and_speed(df, path, rep)
     if not road:

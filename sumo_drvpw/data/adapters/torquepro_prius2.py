@@ -39,8 +39,8 @@ import pandas as pd
 
 from sumo_drvpw.model.constants import FT, G, MPH
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.data.adapters._common import (DIMENSIONS, clean_time_and_speed, drop, generic_name, lookup_unit,
-                                              new_report, numeric, split_header, unique_names)
+from sumo_drvpw.data.adapters._common import (DIMENSIONS, clean_time_and_speed, drop, extra_values, generic_name,
+                                              lookup_unit, new_report, numeric, split_header, unique_names)
 
 FORMAT = "torquepro-prius2"
 SUFFIXES = (".json", ".csv")
@@ -132,6 +132,8 @@ def _mapping(label: str, notes: list) -> tuple[str, float, float]:
         _, f, o = u
         return name, f, o
     return generic_name(label, notes)
+#: the columns the table maps (a label in another unit included): strictly numeric
+KNOWN = {name for name, _, _ in NAMES.values()}
 #: powertrain fields whose first complete row marks the OBD link as up
 LINK = ("Engine RPM(rpm)", "MG1 Revolution(RPM)", "MG1 Torque(Nm)", "MG2 Revolution(RPM)",
         "MG2 Torque(Nm)", "HV Battery Current(Amp)", "Power Resource VB(Volt)")
@@ -196,7 +198,10 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
         n_inf = int(s.map(lambda x: isinstance(x, str) and x.strip() in INFINITE).sum())
         if n_inf:
             infinite[name] = n_inf
-        cols[name] = numeric(s, path, label, ("-", "") + INFINITE) * f + o
+        if name in KNOWN:
+            cols[name] = numeric(s, path, label, ("-", "") + INFINITE) * f + o
+        else:  # a PID this reader does not know (a comment, a mode label: kept as text)
+            cols[name] = extra_values(s, path, label, rep["notes"], f, o, ("-", "") + INFINITE)
     names = unique_names(list(cols))
     df = pd.DataFrame(dict(zip(names, cols.values())), index=raw.index)
     if "altitude_phone_m" in df and "elevation_m" in df:
