@@ -1518,12 +1518,23 @@ def test_config_with_sumos_emissions_device_puts_its_energy_beside_the_chains(tm
     sumo = dev[dev.vehicle.isin(ev_ids)].sumo_electricity_wh.sum() / 1e3
     assert b["ours"] == pytest.approx(ours, rel=1e-9) and b["sumo"] == pytest.approx(sumo, rel=1e-9)
     assert 0.3 < b["ratio"] < 3.0
+    # the ratio split: the chain's auxiliary energy (500 W over every second booked, standing
+    # included) over SUMO's total, and the rest; they add up to the ratio
+    t_ev = pd_.read_parquet(out / "vehicles.parquet").query("equation == 'bev'")
+    t_ev = t_ev[t_ev.vehicle.isin(ev_ids)].time_s.sum()
+    assert b["ours_auxiliary"] == pytest.approx(500.0 * t_ev / 3.6e6, rel=1e-9)
+    assert b["ratio_auxiliary"] == pytest.approx(b["ours_auxiliary"] / sumo, rel=1e-9)
+    assert b["ratio_rest"] == pytest.approx((ours - b["ours_auxiliary"]) / sumo, rel=1e-9)
+    assert b["ratio_auxiliary"] + b["ratio_rest"] == pytest.approx(b["ratio"], rel=1e-12)
+    assert "model difference" in b["note"] and "constantPowerIntake" in b["note"]
+    assert res.summary["sumo_device"][list(cmp.index).index("bev")]["ratio_rest"] == pytest.approx(b["ratio_rest"])
     f = cmp.loc["drvpw_prius3"]
     assert f["quantity"].startswith("fuel L") and f["vehicles"] == len(petrol)
     ours = chain[(chain.equation == "drvpw_prius3") & chain.key.isin(petrol)].fuel_l.sum()
     sumo = dev[dev.vehicle.isin(petrol)].sumo_fuel_mg.sum() / 1e6 / FUELS["gasoline"]["density_kg_per_l"]
     assert f["ours"] == pytest.approx(ours, rel=1e-9) and f["sumo"] == pytest.approx(sumo, rel=1e-9)
     assert 0.2 < f["ratio"] < 5.0
+    assert pd_.isna(f["ours_auxiliary"]) and pd_.isna(f["ratio_rest"])   # no split for fuel
     v = pd_.read_parquet(out / "vehicles.parquet")
     assert "sumo_electricity_wh" in v and v.vehicle.isin(ev_ids | petrol).all()
     # the same tripinfo gzipped reads alike (a config may name it ti.xml.gz)
@@ -1545,7 +1556,8 @@ def test_config_with_sumos_emissions_device_puts_its_energy_beside_the_chains(tm
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o3", equations=[fuel_eq, bev], begin=300, end=400)
     assert res.summary["vehicles"] == 0
     empty = pd_.read_csv(tmp_path / "o3" / "sumo_device.csv")
-    assert len(empty) == 0 and list(empty.columns) == ["equation", "quantity", "vehicles", "ours", "sumo", "ratio"]
+    assert len(empty) == 0 and list(empty.columns) == ["equation", "quantity", "vehicles", "ours", "sumo", "ratio",
+                                                "ours_auxiliary", "ratio_auxiliary", "ratio_rest", "note"]
 
 
 def test_engine_off_minus_inf_round_trips_and_bad_values_are_refused(tmp_path):

@@ -53,8 +53,8 @@ def chain_energy_params(chain, air_c: float | None = None, drive=None) -> tuple[
         if chain.loads:
             missing.append(f"logged loads {', '.join(chain.loads)} (no signal in SUMO)")
         if chain.standstill_aux_w:
-            missing.append(f"the standing draw {chain.standstill_aux_w:g} W (SUMO's device books "
-                           "constantPowerIntake only while moving)")
+            missing.append(f"the standing draw {chain.standstill_aux_w:g} W (SUMO's Energy model has "
+                           "one constantPowerIntake, booked standing and moving alike)")
     if chain.recuperation_limit_w is not None:
         missing.append(f"the recuperation limit {chain.recuperation_limit_w / 1000:.1f} kW (the Energy model "
                        "recuperates without one)")

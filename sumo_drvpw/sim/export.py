@@ -125,9 +125,9 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
         elif f in ("v1", "v^1"):
             cr += c / (G * m)
         elif f in ("one", "v^0", "moving"):
-            # constantPowerIntake: SUMO's emissions device books 0 in a step that ends at v = 0
-            # (tests/test_sim_run.py), so it is drawn while moving, which is exactly `moving`;
-            # a `v^0` drawn standing too is short there by the standing time
+            # constantPowerIntake: SUMO 1.28 books it standing too (at v = 0 without the
+            # efficiency; docs/scenario.md), which is `v^0`; a `moving` constant exported
+            # here is booked by SUMO also while the vehicle stands
             const += c
         else:
             missing.append(f"{t} (no Energy-model counterpart)")

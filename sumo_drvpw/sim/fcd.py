@@ -353,7 +353,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     does)."""
     from sumo_drvpw.sim.accountant import Accountant
     from sumo_drvpw.sim.loop import step_until
-    from sumo_drvpw.sim.network import load_network
+    from sumo_drvpw.sim.network import hidden_steps_slack, load_network
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
 
@@ -364,6 +364,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     head = header_options(fcd_file)  # the recording's options (None: no SUMO header)
     method = step_method(sc, head)
     dt, dt_warning = row_interval(sc, fcd_file, head)
+    net.jump_slack_m = hidden_steps_slack(recorded_step(head), dt)  # rows sparser than the step
     if chunk_rows is None:
         df = read_fcd(fcd_file)
         df["off"] = parked({k: df[k].to_numpy() for k in df.columns})
@@ -448,6 +449,15 @@ def step_method(sc, head: dict | None) -> str:
     given = ([head.get(k) for k in keys] if head is not None
              else [scenario_option(sc, k) for k in keys])
     return "ballistic" if ballistic_update(*given) else "euler"
+
+
+def recorded_step(head: dict | None) -> float | None:
+    """The step length [s] of the run that wrote an XML FCD (its header; SUMO's default
+    1 s when not named), None without a header."""
+    try:
+        return None if head is None else float(head.get("step-length", 1.0))
+    except ValueError:
+        return None
 
 
 def row_interval(sc, fcd_file, head: dict | None) -> tuple[float | None, list[str]]:

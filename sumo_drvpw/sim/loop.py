@@ -496,7 +496,8 @@ class Stepper:
         if self.ballistic:
             v = v_mean
         if net.z_node is not None:  # the step's grade: m·g·Δz exactly
-            theta, ledger.veh_at[vidx] = net.step_grade(lane, pos, v * dt, ledger.veh_at[vidx], theta)
+            theta, ledger.veh_at[vidx] = net.step_grade(lane, pos, v * dt, ledger.veh_at[vidx], theta,
+                                                        (v_mean + 0.5 * dt * np.abs(a)) * dt)  # max(v_t−1, v_t)·Δt
         sig = {} if physics.ambient_c is None else {"ambient_c": np.full(m, physics.ambient_c)}
         mass = ledger.veh_mass[vidx]
         if self.any_load:  # riding persons (SUMO's getTotalMass)

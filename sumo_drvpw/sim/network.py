@@ -33,6 +33,10 @@ RAW_LENGTH_M = 5.0
 #: [m] jumped there (a teleport): its rise starts afresh (:meth:`Network.step_grade`);
 #: FCD's positions and speeds to 2 decimals, SUMO's lane lengths, lie well within it
 JUMP_TOL_M = 0.5
+#: the acceleration [m/s²] a vehicle may gain and lose again between two FCD rows written
+#: less often than the step (unseen steps): SUMO's default accel is 2.6 (passenger) or less,
+#: 6.0 for a motorcycle; a car faster in between covers up to ¼·a·Δt² more road
+HIDDEN_ACCEL_MPS2 = 5.0
 
 
 @dataclass
@@ -95,6 +99,9 @@ class Network:
     centre_x: np.ndarray | None = None
     centre_y: np.ndarray | None = None
     lane_width: np.ndarray | None = None
+    #: road [m] a vehicle may cover between two steps beyond max(v_t−1, v_t)·Δt: 0 live;
+    #: an FCD written less often than its run's step sets :func:`hidden_steps_slack`
+    jump_slack_m: float = 0.0
 
     def bin_index(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Index into the per-bin arrays (``profile``, ``clipped``, ``raw``,
@@ -122,7 +129,7 @@ class Network:
         i = self.lane_offset[lane] + lane + b
         return self.z_node[i] + frac * (self.z_node[i + 1] - self.z_node[i])
 
-    def step_grade(self, lane, pos, ds, last, theta) -> tuple[np.ndarray, np.ndarray]:
+    def step_grade(self, lane, pos, ds, last, theta, reach=None) -> tuple[np.ndarray, np.ndarray]:
         """The grade of each vehicle's step, and where it is now.
 
         θ with sin θ = Δz/Δs: Δz the rise of the profile (:meth:`elevation`) from where the
@@ -133,14 +140,19 @@ class Network:
         teleport or a parking: NaN elevation), Δs shorter than 1 cm, or the rise steeper than
         the profile allows over the road covered (a jump: moveTo with positions read).
 
-        ``last`` : (n, 3) rows [lane, pos, z] of each vehicle's last step. Returns (θ, the
+        ``last`` : (n, 3) rows [lane, pos, z] of each vehicle's last step. ``reach`` : the
+        road [m] the vehicle may have covered since (default ``ds``): max(v_t−1, v_t)·Δt, so
+        that an FCD written less often than the step (``--device.fcd.period 2`` at 1-s steps:
+        a braking car covers more than v_t·Δt between its rows) is no jump; a teleported car
+        stood before it reappears (v_t−1 = 0), so that bound is its v_t·Δt. Returns (θ, the
         rows of this step)."""
         z = self.elevation(lane, pos)
         dz = z - last[:, 2]
         prev = np.where(np.isfinite(last[:, 0]), last[:, 0], lane).astype(np.int64)
         # a jump rises faster than the profile lets a vehicle climb over the road it covered
         # (pos difference on one lane — FCD written less often than the step — or v·Δt)
-        road = np.maximum(ds, np.where(last[:, 0] == lane, pos - last[:, 1], 0.0))
+        road = np.maximum((ds if reach is None else np.maximum(ds, reach)) + self.jump_slack_m,
+                          np.where(last[:, 0] == lane, pos - last[:, 1], 0.0))
         steep = np.maximum(self.lane_steep[lane], self.lane_steep[prev])
         ok = np.isfinite(dz) & (ds >= 0.01)
         ok[ok] = np.abs(dz[ok]) <= road[ok] * steep[ok] + 0.01 * np.minimum(road[ok], 1.0)  # (+ FCD's cm)
@@ -169,6 +181,15 @@ class Network:
         """Robust slope [rad] and clipped flag at lane numbers ``lane``, positions ``pos`` [m]."""
         i = self.bin_index(lane, pos)
         return self.profile[i], self.clipped[i]
+
+
+def hidden_steps_slack(step: float | None, dt: float | None) -> float:
+    """:attr:`Network.jump_slack_m` for rows ``dt`` [s] apart from a run stepped every
+    ``step`` [s]: ¼·HIDDEN_ACCEL_MPS2·Δt² when rows are sparser than the step (a car that
+    sped up and slowed again between them), else 0."""
+    if not step or not dt or dt <= step + 1e-9:
+        return 0.0
+    return 0.25 * HIDDEN_ACCEL_MPS2 * dt * dt
 
 
 def lane_numbers(lane_index: dict, lane_ids) -> np.ndarray:

@@ -466,46 +466,17 @@ class RunResult:
 
     def sumo_device_comparison(self):
         """Per equation, over the vehicles SUMO's emissions device reports for, what the
-        plug-in books beside what SUMO's own model books: an equation with a battery chain
-        its battery kWh against SUMO's electricity; with a fuel chain its litres against
-        SUMO's fuel (mg, in litres at the chain fuel's density); an equation without a chain
-        its net driving energy at the wheel against SUMO's electricity."""
-        import pandas as pd
+        plug-in books beside what SUMO's own model books (``sumo_outputs.device_comparison``:
+        battery kWh, litres or net driving energy against SUMO's electricity or fuel; a
+        battery chain's ratio split into its auxiliary part and the rest)."""
+        from sumo_drvpw.sim.sumo_outputs import device_comparison
 
-        from sumo_drvpw.model.constants import FUELS
-
-        rows = []
-        header = ["equation", "quantity", "vehicles", "ours", "sumo", "ratio"]
         if self.sumo_device is None:
-            return pd.DataFrame(rows, columns=header)
-        dev = self.sumo_device
+            return device_comparison(None, None, None, {})
         v = self._vehicles_all().to_pandas()[["vehicle", "equation", "net_total_j"]]
-        v = v.merge(dev, on="vehicle", how="inner")
-        cv = self.chain_vehicles()
-        if cv is not None and {"vehicle", "equation"} <= set(cv.columns):  # (none: no vehicle)
-            cols = [c for c in ("vehicle", "equation", "net_kwh", "fuel_l") if c in cv.columns]
-            v = v.merge(cv[cols], on=["vehicle", "equation"], how="left")
         ch = getattr(self.ledger, "chain", None)
         chains = {} if ch is None else {ch.names[i]: ch.chains[i] for i in ch.active}
-        for eq, g in v.groupby("equation", sort=False):
-            c = chains.get(eq)
-            if c is not None and c.predicts == "fuel":
-                g = g[g.sumo_fuel_mg.abs() > 0]
-                dens = FUELS[c.fuel]["density_kg_per_l"]
-                ours, sumo = g.fuel_l.sum(), g.sumo_fuel_mg.sum() / 1e6 / dens
-                q = f"fuel L (chain; SUMO's fuel mass at {dens:g} kg/L)"
-            else:
-                g = g[g.sumo_electricity_wh.abs() > 0]
-                sumo = g.sumo_electricity_wh.sum() / 1e3
-                if c is not None:
-                    ours, q = g.net_kwh.sum(), "battery kWh (chain)"
-                else:
-                    ours, q = g.net_total_j.sum() / 3.6e6, "net driving energy kWh (no chain)"
-            if len(g):
-                rows.append({"equation": eq, "quantity": q, "vehicles": int(len(g)),
-                             "ours": float(ours), "sumo": float(sumo),
-                             "ratio": float(ours / sumo) if sumo else float("nan")})
-        return pd.DataFrame(rows, columns=header)
+        return device_comparison(v, self.sumo_device, self.chain_vehicles(), chains)
 
     def edges_arrow(self) -> pa.Table:
         self._check_current()

@@ -250,3 +250,71 @@ def option_input_files(args: list, routes: list[Path], adds: list[Path]) -> list
             else:
                 adds = given
     return [*routes, *adds]
+
+
+#: sumo_device.csv's columns
+DEVICE_COLUMNS = ["equation", "quantity", "vehicles", "ours", "sumo", "ratio",
+                  "ours_auxiliary", "ratio_auxiliary", "ratio_rest", "note"]
+
+#: what a battery chain's row compares (docs/scenario.md, "SUMO's emissions device beside ours")
+BATTERY_NOTE = ("model difference, not a booking one: SUMO's Energy model takes the vType's mass, "
+                "frontSurfaceArea·airDragCoefficient, rollDragCoefficient (default 0.01), "
+                "constantPowerIntake (default 100 W, booked standing too) and efficiencies "
+                "(defaults 0.98/0.96, no recuperation limit); ours the vType's mass with the "
+                "equation's calibrated road load and its chain's efficiencies, recuperation limit "
+                "and auxiliary power (ratio_auxiliary: our auxiliary energy over SUMO's total; "
+                "ratio_rest: the remainder)")
+
+
+def device_comparison(v, dev, cv, chains: dict):
+    """Per equation, over the vehicles SUMO's emissions device reports for (``dev``: vehicle,
+    sumo_electricity_wh, sumo_fuel_mg), what the plug-in books beside what SUMO's own model
+    books: an equation with a battery chain its battery kWh against SUMO's electricity; with
+    a fuel chain its litres against SUMO's fuel (mg, in litres at the chain fuel's density);
+    an equation without a chain its net driving energy at the wheel (``v``: vehicle,
+    equation, net_total_j) against SUMO's electricity. ``cv``: the chains' per-vehicle rows
+    (vehicle, equation, net_kwh, auxiliary_kwh, fuel_l), or None; ``chains``: name → chain.
+
+    A battery chain's ratio is split additively: ``ratio_auxiliary`` = our auxiliary energy
+    (``ours_auxiliary`` kWh: the chain's constant, HVAC and cabin warm-up, standing and
+    moving) over SUMO's total, ``ratio_rest`` = the rest of ours (traction less recuperation)
+    over SUMO's total; SUMO's own total holds its constantPowerIntake, which its output does
+    not separate."""
+    import pandas as pd
+
+    from sumo_drvpw.model.constants import FUELS
+
+    rows = []
+    if dev is None:
+        return pd.DataFrame(rows, columns=DEVICE_COLUMNS)
+    v = v.merge(dev, on="vehicle", how="inner")
+    if cv is not None and {"vehicle", "equation"} <= set(cv.columns):  # (none: no vehicle)
+        cols = [c for c in ("vehicle", "equation", "net_kwh", "auxiliary_kwh", "fuel_l")
+                if c in cv.columns]
+        v = v.merge(cv[cols], on=["vehicle", "equation"], how="left")
+    nan = float("nan")
+    for eq, g in v.groupby("equation", sort=False):
+        c = chains.get(eq)
+        aux, note = nan, ""
+        if c is not None and c.predicts == "fuel":
+            g = g[g.sumo_fuel_mg.abs() > 0]
+            dens = FUELS[c.fuel]["density_kg_per_l"]
+            ours, sumo = g.fuel_l.sum(), g.sumo_fuel_mg.sum() / 1e6 / dens
+            q = f"fuel L (chain; SUMO's fuel mass at {dens:g} kg/L)"
+        else:
+            g = g[g.sumo_electricity_wh.abs() > 0]
+            sumo = g.sumo_electricity_wh.sum() / 1e3
+            if c is not None:
+                ours, q = g.net_kwh.sum(), "battery kWh (chain)"
+                aux, note = float(g.auxiliary_kwh.sum()), BATTERY_NOTE
+            else:
+                ours, q = g.net_total_j.sum() / 3.6e6, "net driving energy kWh (no chain)"
+        if len(g):
+            ok = bool(sumo) and aux == aux
+            rows.append({"equation": eq, "quantity": q, "vehicles": int(len(g)),
+                         "ours": float(ours), "sumo": float(sumo),
+                         "ratio": float(ours / sumo) if sumo else nan,
+                         "ours_auxiliary": aux,
+                         "ratio_auxiliary": aux / sumo if ok else nan,
+                         "ratio_rest": (float(ours) - aux) / sumo if ok else nan, "note": note})
+    return pd.DataFrame(rows, columns=DEVICE_COLUMNS)
