@@ -43,7 +43,8 @@ def test_basis_by_hand():
 def test_moving_is_one_while_the_vehicle_moves():
     """``moving``: 1 at v ≥ 0.1 m/s (the standstill threshold of the chain and the spec),
     0 standing; category other; ``v^0 − moving`` is the standing-only constant; SUMO's
-    Energy-model export books it as constantPowerIntake (which SUMO books while moving)."""
+    Energy-model export books it as constantPowerIntake (which SUMO 1.28 books standing
+    too) and says so."""
     from sumo_drvpw.sim.export import energy_model_params
 
     v = np.array([0.0, 0.05, 0.0999, 0.1, 3.0, 40.0])
@@ -55,6 +56,9 @@ def test_moving_is_one_while_the_vehicle_moves():
     assert_allclose(m[:, 2], v * (v >= 0.1))
     assert category_of("moving") == "other" and category_of("moving*v^1") == "roll"
     params, missing = energy_model_params(Equation("e", {"acc": 1.0, "roll": 0.01, "moving": 900.0}), 1500.0, 2.0)
+    assert params["constantPowerIntake"] == 900.0
+    assert len(missing) == 1 and "moving 900 W" in missing[0] and "standing too" in missing[0]
+    params, missing = energy_model_params(Equation("e", {"acc": 1.0, "roll": 0.01, "v^0": 900.0}), 1500.0, 2.0)
     assert params["constantPowerIntake"] == 900.0 and not missing
 
 

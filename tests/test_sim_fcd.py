@@ -222,8 +222,8 @@ def test_export_vtype_carries_a_battery_chain(tmp_path, capsys):
     power (plus its HVAC at --air-temperature) into the Energy-model vType, and lists what
     SUMO cannot express; SUMO's emissions device then books the chain's battery energy:
     within 3 % of the plug-in's chain kWh on a highway run at 0 °C (before, the vType had
-    efficiencies 1 and booked the energy at the wheels). SUMO books constantPowerIntake
-    only while moving, the plug-in standing too: at 1400 W that is most of the gap."""
+    efficiencies 1 and booked the energy at the wheels). SUMO 1.28 books
+    constantPowerIntake standing too, there without the efficiency (docs/scenario.md)."""
     from sumo_drvpw.model.chain import chain_from_dict
     from sumo_drvpw.model.equations import save_equation
 

@@ -129,6 +129,9 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
             # efficiency; docs/scenario.md), which is `v^0`; a `moving` constant exported
             # here is booked by SUMO also while the vehicle stands
             const += c
+            if f == "moving" and c:
+                missing.append(f"{t} {c:g} W drawn only while moving (SUMO books "
+                               "constantPowerIntake standing too: queues and red lights get it)")
         else:
             missing.append(f"{t} (no Energy-model counterpart)")
     if cda < 0 or cr < 0:
