@@ -256,7 +256,8 @@ def render(cars, took, cmd: str) -> str:
                   f"{mc['standing_measured_range_w'][1]:.0f} W) — what the split fits, while the single "
                   f"constant books {c['coefficients']['v^0'] / mc['standing_measured_w']:.1f} times that at every "
                   "red light. The closed-loop equation below carries "
-                  "the split; SUMO's Energy-model export books `moving` as constantPowerIntake.", ""]
+                  "the split; SUMO's Energy-model export books `moving` as constantPowerIntake, "
+                  "which SUMO books standing too (the export lists it).", ""]
         fa = car.get("all_trips")
         if fa:
             eq = fa["equation"]
