@@ -208,6 +208,7 @@ def _i3(i3: dict) -> list[str]:
          "Flagged = the trip has no heater voltage and current, so its heater load is unknown "
          "(its CAN heater power, shown for reference, can exceed E_bat − E_motor, which no heater "
          "can).", ""]
+    L += _i3_heater(i3.get("heater"))
     if i3.get("sumo_models"):
         L += ["### Side by side with SUMO's own electric models", "",
               "Each trip through `emissionsDrivingCycle` (the trip at 1 s with its fused grade); "
@@ -261,6 +262,111 @@ def _i3(i3: dict) -> list[str]:
               "|---|" + "---|" * len(i3["sumo_models"])]
         for r in rows:
             L.append(f"| {r['trip']} | " + " | ".join(_pct(r[f"{k}_error"]) for k in i3["sumo_models"]) + " |")
+    return L + [""]
+
+
+#: the heater estimators' names in the report (validation.chain_i3_heater)
+_HEATER_LABEL = {
+    "none": "none (the pipeline: heater 0 where V·I is missing)",
+    "can": "CAN heater power, gain 1",
+    "req": "requested heater power, gain 1",
+    "min_can_req": "min(CAN heater power, requested heater power)",
+    "heat_balance": "air-side heat balance k·(T_heat exchanger − T_air)⁺"}
+
+
+def _i3_heater(h: dict | None) -> list[str]:
+    """The trips without heater V·I: their missing load and the estimators tried."""
+    if not h:
+        return []
+    pr = h["protocols"]
+    k2, k5 = list(pr)
+    none5 = pr[k5]["none"]["chain_only"]
+    flagged = sorted(h["deficit_kwh"])
+    d = h["deficit_kwh"]
+    big = sorted((t for t in flagged if -none5["errors"][t] > 0.05), key=lambda t: -d[t])
+    sg = h["signals"]
+
+    def prm(e):
+        ps = pr[k5][e]["params"]
+        return "; ".join(", ".join(f"{k} {v:.3g}" for k, v in p.items()) for p in ps) if ps and ps[0] else "–"
+
+    L = ["### The trips without heater V·I: the load they miss, and estimators of it (tried, not adopted)", "",
+         f"Fed the measured motor power, the chain calibrated on the trips with V·I under-predicts the "
+         f"{len(flagged)} trips without it by {sum(d.values()):.2f} kWh net ({k5}, chain alone); "
+         f"{len(big)} trips carry {sum(d[t] for t in big):.2f} kWh of it: "
+         + ", ".join(f"{t} {d[t]:.2f} kWh ({-none5['errors'][t] * 100:.0f} %)" for t in big)
+         + f"; no trip without V·I is over-predicted by more than {max(100 * none5['errors'][t] for t in flagged):.1f} % "
+         "— a missing positive load, as a heater's. Given each such trip its own deficit as heater energy (a bound, "
+         f"not an estimator: it reads the battery), the pipeline's mean |error| would be "
+         f"{_pct(pr[k5]['bound']['mean_abs_error'])[1:]} over all trips ({_pct(pr[k5]['bound']['mean_abs_error_flagged'])[1:]} "
+         f"on those without V·I) in the {k5} and {_pct(pr[k2]['bound']['mean_abs_error'])[1:]} "
+         f"({_pct(pr[k2]['bound']['mean_abs_error_flagged'])[1:]}) in the {k2}: the rest of those trips' error is the "
+         "road-load equation's (the pipeline's error minus the chain's on the same trip, table below), not the heater's.", "",
+         f"On the trips with V·I the CAN heater power and the requested heater power read the heater's V·I "
+         f"(median ratio {sg['can_over_vi_median']:.3f} and {sg['req_over_vi_median']:.3f} while it draws > 100 W; "
+         f"{sg['can_while_off_mean_w']:.0f} W and {sg['req_while_off_mean_w']:.0f} W on average while it draws nothing): "
+         "no unit, scale or offset to correct. On the trips without V·I the CAN value is held unchanged for ≥ 60 s "
+         f"during {100 * sg['can_hold_share_flagged']:.0f} % of their time ({100 * sg['can_hold_share_unflagged']:.0f} % "
+         "on the trips with V·I), and the request exceeds the draw (energies below): the logger of those trips "
+         "(no heater V, I, LIN power or coolant temperatures) carries these signals differently, which the 34 trips "
+         "cannot show.", "",
+         "Protocol (fixed before the held-out run; `validation/chain_i3_heater.py`): an estimator's parameters are "
+         "fitted on the training folds' trips with V·I (target V·I); the training side would choose the one with the "
+         "lowest heater-energy error on held-out trips with V·I (trip-grouped 5-fold); each is judged by the battery "
+         "energy of held-out trips without V·I (trips with V·I keep it, so their errors do not change). The list "
+         "was drawn up after looking at those trips' signals, so a candidate that wins there is selected on them.", "",
+         f"| heater estimator for trips without V·I | fitted per {k5} fold | heater energy, held-out trips with V·I "
+         f"(mean abs, kWh) | {k2}: all / without V·I | {k5}: all / without V·I | chain alone, {k5}, without V·I |",
+         "|---|---|---|---|---|---|"]
+    for e in h["estimators"]:
+        L.append(f"| {_HEATER_LABEL.get(e, e)} | {prm(e)} | {h['energy_cv'][e]['mean_abs_kwh']:.3f} | "
+                 f"{_pct(pr[k2][e]['pipeline']['mean_abs_error'])[1:]} / {_pct(pr[k2][e]['pipeline']['mean_abs_error_flagged'])[1:]} | "
+                 f"{_pct(pr[k5][e]['pipeline']['mean_abs_error'])[1:]} / {_pct(pr[k5][e]['pipeline']['mean_abs_error_flagged'])[1:]} | "
+                 f"{_pct(pr[k5][e]['chain_only']['mean_abs_error_flagged'])[1:]} |")
+    L.append(f"| bound: each trip's own deficit (reads the battery) | – | – | "
+             f"{_pct(pr[k2]['bound']['mean_abs_error'])[1:]} / {_pct(pr[k2]['bound']['mean_abs_error_flagged'])[1:]} | "
+             f"{_pct(pr[k5]['bound']['mean_abs_error'])[1:]} / {_pct(pr[k5]['bound']['mean_abs_error_flagged'])[1:]} | "
+             "0.0 % |")
+    ch = h["training_choice"]
+    co = {e: pr[k5][e]["chain_only"]["errors"] for e in ("none", "min_can_req", "heat_balance")}
+    # trips whose chain-alone |error| the estimator lowers (sign 1) or raises (sign -1) by more than a point
+    moved = lambda e, sign: [t for t in flagged if sign * (abs(co["none"][t]) - abs(co[e][t])) > 0.01]  # noqa: E731
+    pos = sum(max(d[t], 0.0) for t in flagged)
+    sums = {k: sum(h["trip_kwh"][t][k] for t in flagged) for k in ("can", "req")}
+    ks = [p["k_w_per_k"] for p in pr[k5]["heat_balance"]["params"]]
+    gain = {k: pr[k]["none"]["pipeline"]["mean_abs_error"] - pr[k]["min_can_req"]["pipeline"]["mean_abs_error"]
+            for k in (k2, k5)}
+    spread = abs(pr[k5]["none"]["pipeline"]["mean_abs_error"] - pr[k2]["none"]["pipeline"]["mean_abs_error"])
+    L += ["", f"The training side's choice is the {_HEATER_LABEL.get(ch, ch)} (heater energy within "
+          f"{h['energy_cv'][ch]['mean_abs_kwh']:.3f} kWh per held-out trip with V·I); on the trips without V·I it takes "
+          f"the {k5} from {_pct(pr[k5]['none']['pipeline']['mean_abs_error_flagged'])[1:]} to "
+          f"{_pct(pr[k5][ch]['pipeline']['mean_abs_error_flagged'])[1:]}. None is adopted. The CAN and requested "
+          f"powers, which read the heater on the trips with V·I, book {sums['can']:.2f} and {sums['req']:.2f} kWh on "
+          f"the trips without it against {pos:.2f} kWh of deficits: what they report there is not the draw. Their "
+          f"minimum lowers the {k5} by {100 * gain[k5]:.2f} points and the {k2} by {100 * gain[k2]:.2f} (less than the "
+          f"{100 * spread:.2f} points between the two protocols); it lowers the chain alone's |error| by more than a point on "
+          + (", ".join(moved("min_can_req", 1)) or "no trip") + " and raises it by more than a point on "
+          + (", ".join(moved("min_can_req", -1)) or "none") + "; it is not the training side's "
+          "choice and was drawn up after looking at these trips, so that gain is not held out, and the headline "
+          f"stays above 5 % ({_pct(pr[k5]['min_can_req']['pipeline']['mean_abs_error'])[1:]}). The heat balance "
+          f"is physical (k {min(ks):.0f}–{max(ks):.0f} W/K: {min(ks) / 1005:.3f}–{max(ks) / 1005:.3f} kg/s of air "
+          "through the heater core at the fixed fan level) but reads only heat the heater core gives the air above "
+          "the air temperature: it helps " + (", ".join(moved("heat_balance", 1)) or "no trip")
+          + " and hurts " + (", ".join(moved("heat_balance", -1)) or "no trip") + " (more than a point each, "
+          "chain alone) — it misses reheat behind the A/C's evaporator and books heat the coolant kept from "
+          f"the trip before — and its heater energy is off by {h['energy_cv']['heat_balance']['mean_abs_kwh']:.3f} kWh "
+          f"per held-out trip with V·I. Even the bound leaves the {k5} at "
+          f"{_pct(pr[k5]['bound']['mean_abs_error'])[1:]}: the heater alone meets the target only at the margin.", "",
+          f"Per trip without V·I ({k5}; kWh, errors of the battery energy):", "",
+          "| trip | measured | deficit (chain alone) | CAN heater | requested heater | chain alone: none / min / heat balance "
+          "| pipeline: none / min / heat balance / bound |", "|---|---|---|---|---|---|---|"]
+    for t in flagged:
+        e = {k: pr[k5][k] for k in ("none", "min_can_req", "heat_balance")}
+        L.append(f"| {t} | {h['measured_kwh'][t]:.3f} | {d[t]:.3f} | {h['trip_kwh'][t]['can']:.3f} | "
+                 f"{h['trip_kwh'][t]['req']:.3f} | "
+                 + " / ".join(_pct(v['chain_only']['errors'][t]) for v in e.values()) + " | "
+                 + " / ".join(_pct(v['pipeline']['errors'][t]) for v in e.values())
+                 + f" / {_pct(pr[k5]['bound']['errors'][t])} |")
     return L + [""]
 
 
