@@ -35,6 +35,9 @@ class Measured:
     battery_w: np.ndarray | None = None
     #: measurement corrections applied (model.measurement.Measurement; None: the log as read)
     measurement: object | None = None
+    #: battery target read with ``sign_check=False``: the sums of the sign test
+    #: (:func:`sign_sums`), for the caller to merge over batches and test (:func:`check_sign_sums`)
+    sign_test: tuple | None = None
 
     @property
     def counts(self) -> dict:
@@ -78,11 +81,16 @@ def load_measured(paths, vehicle: str | None = None, options: ReadOptions | None
     return m
 
 
-def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measured:
+def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
+            sign_check: bool = True) -> Measured:
     """Measured power, inputs and usable mask of a read log (the streaming reader calls
     this per batch of whole trips, so it sees the same samples as :func:`load_measured`),
     with the measurement corrections of its reading options applied
-    (``log.options.measurement``; None: the log as read)."""
+    (``log.options.measurement``; None: the log as read).
+
+    ``sign_check``: test a battery target's sign here (:func:`check_battery_sign`); False
+    (a batch of a streamed log, whose test is on all batches): its sums are returned in
+    ``Measured.sign_test`` instead."""
     from sumo_drvpw.data.powertrain import measured_battery_power, measured_fuel_power
 
     battery_w = None
@@ -98,8 +106,12 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measur
     usable = ~log.excluded & np.isfinite(p)
     for arr in (x.v, x.a, x.theta, x.wind, x.mass, x.rho):
         usable &= np.isfinite(arr)
+    sign_test = None
     if target == "battery":
-        check_battery_sign(log, x, p, usable, source)
+        if sign_check:
+            check_battery_sign(log, x, p, usable, source)
+        else:
+            sign_test = sign_sums(x, p, usable)
     if target == "battery" and not _has_engine(log, veh):
         # energy into the battery while the car stands is a charger, not driving
         from sumo_drvpw.data.charging import charging_mask
@@ -120,7 +132,7 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measur
             codes = trip_codes_of(log.df["trip_id"])
             lag = int(round(measurement.power_lag_s / median_dt(log.df["time_s"].to_numpy(float), codes)))
             battery_w = np.nan_to_num(shift_within_trips(battery_w, codes, lag), nan=0.0)
-    return Measured(log, veh, p, source, x, usable, target, battery_w, measurement)
+    return Measured(log, veh, p, source, x, usable, target, battery_w, measurement, sign_test)
 
 
 #: inertial and grade power [W] beyond which a sample tests the battery current's sign
@@ -134,11 +146,57 @@ def check_battery_sign(log: DriveLog, x: Inputs, p_battery, usable, source: str)
     Tested on the samples whose inertial and grade power m·v·(a + g·sin θ) exceeds
     ±``SIGN_TEST_W``, with ≥ 50 of them; on the shared logs r is 0.88–0.98 for the
     electric cars and 0.36 for the Prius Gen-2's small hybrid battery."""
+    refuse_falling_battery(log.describe(), source, _sign_proxy(x), p_battery, usable, SIGN_TEST_W,
+                           _SIGN_RISES)
+
+
+_SIGN_RISES = "the inertial and grade power m·v·(a + g·sin θ)"
+
+
+def _sign_proxy(x: Inputs) -> np.ndarray:
     from sumo_drvpw.model.constants import G
 
-    proxy = np.asarray(x.mass * x.v * (x.a + G * np.sin(x.theta)), float)
-    refuse_falling_battery(log.describe(), source, proxy, p_battery, usable, SIGN_TEST_W,
-                           "the inertial and grade power m·v·(a + g·sin θ)")
+    return np.asarray(x.mass * x.v * (x.a + G * np.sin(x.theta)), float)
+
+
+def sign_sums(x: Inputs, p_battery, usable) -> tuple:
+    """The sign test of :func:`check_battery_sign` as mergeable sums over its samples:
+    (n, mean of the proxy, mean of the battery power, centred Σd², Σy², Σdy)."""
+    d, y = _sign_proxy(x), np.asarray(p_battery, float)
+    ok = np.asarray(usable, bool) & np.isfinite(d) & np.isfinite(y) & (np.abs(d) > SIGN_TEST_W)
+    d, y = d[ok], y[ok]
+    if not len(d):
+        return (0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    md, my = float(d.mean()), float(y.mean())
+    d, y = d - md, y - my
+    return (len(d), md, my, float(d @ d), float(y @ y), float(d @ y))
+
+
+def merge_sign_sums(a: tuple | None, b: tuple | None) -> tuple | None:
+    """The sums of :func:`sign_sums` of two batches (Chan et al. 1979 pairwise update)."""
+    if a is None or not a[0]:
+        return b
+    if b is None or not b[0]:
+        return a
+    na, nb = a[0], b[0]
+    n = na + nb
+    dd, dy = b[1] - a[1], b[2] - a[2]
+    f = na * nb / n
+    return (n, a[1] + dd * nb / n, a[2] + dy * nb / n, a[3] + b[3] + dd * dd * f,
+            a[4] + b[4] + dy * dy * f, a[5] + b[5] + dd * dy * f)
+
+
+def check_sign_sums(where: str, source: str, sums: tuple | None) -> None:
+    """:func:`check_battery_sign` on the merged sums of every batch (:func:`sign_sums`):
+    the same rule, on all samples of a streamed log."""
+    if sums is None:
+        return
+    n, _, _, sdd, syy, sdy = sums
+    if n < 50 or sdd <= 0.0 or syy <= 0.0:
+        return
+    r = sdy / float(np.sqrt(sdd * syy))
+    if r < 0:
+        raise UserError(_falling(where, source, r, n, SIGN_TEST_W, _SIGN_RISES))
 
 
 def refuse_falling_battery(where: str, source: str, drive, p_battery, mask, threshold_w: float,
@@ -152,10 +210,14 @@ def refuse_falling_battery(where: str, source: str, drive, p_battery, mask, thre
         return
     r = float(np.corrcoef(d[ok], y[ok])[0, 1])
     if r < 0:
-        raise UserError(f"{where}: the measured battery power ({source}) falls where {rises} rises (correlation "
-                        f"r = {r:.2f} over {int(ok.sum())} samples beyond ±{threshold_w / 1000:g} kW): is the "
-                        "current's sign flipped? The vehicle file's [battery] current_positive says which sign "
-                        "discharges (\"discharge\" or \"charge\")")
+        raise UserError(_falling(where, source, r, int(ok.sum()), threshold_w, rises))
+
+
+def _falling(where: str, source: str, r: float, n: int, threshold_w: float, rises: str) -> str:
+    return (f"{where}: the measured battery power ({source}) falls where {rises} rises (correlation "
+            f"r = {r:.2f} over {n} samples beyond ±{threshold_w / 1000:g} kW): is the "
+            "current's sign flipped? The vehicle file's [battery] current_positive says which sign "
+            "discharges (\"discharge\" or \"charge\")")
 
 
 def _has_engine(log: DriveLog, veh: Vehicle | None) -> bool:
