@@ -7,9 +7,12 @@ compares a model with a log goes through it, so they all see the same samples.
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 from sumo_drvpw.model.equations import SPEC_EQUATIONS, Equation, load_equation
 from sumo_drvpw.errors import UserError
@@ -82,7 +85,7 @@ def load_measured(paths, vehicle: str | None = None, options: ReadOptions | None
 
 
 def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
-            sign_check: bool = True) -> Measured:
+            sign_check: bool = True, lazy_signals: bool = False) -> Measured:
     """Measured power, inputs and usable mask of a read log (the streaming reader calls
     this per batch of whole trips, so it sees the same samples as :func:`load_measured`),
     with the measurement corrections of its reading options applied
@@ -90,7 +93,9 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
 
     ``sign_check``: test a battery target's sign here (:func:`check_battery_sign`); False
     (a batch of a streamed log, whose test is on all batches): its sums are returned in
-    ``Measured.sign_test`` instead."""
+    ``Measured.sign_test`` instead. ``lazy_signals``: the inputs' extra columns are read
+    from the table when asked for (:class:`ColumnSignals`), not copied: a caller keeps the
+    arrays it needs with :func:`keep_arrays`."""
     from sumo_drvpw.data.powertrain import measured_battery_power, measured_fuel_power
 
     battery_w = None
@@ -102,7 +107,10 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
             battery_w = np.nan_to_num(measured_battery_power(log, veh)[0], nan=0.0)
     else:
         p, source = measured_power(log, veh)
-    x = log.inputs(veh.mass_kg if veh else None)
+    x = log.inputs(veh.mass_kg if veh else None, signals=not lazy_signals)
+    if lazy_signals:
+        df = log.df
+        x = dataclasses.replace(x, signals=ColumnSignals(df, [c for c in log.extra_columns if _numeric(df[c])]))
     usable = ~log.excluded & np.isfinite(p)
     for arr in (x.v, x.a, x.theta, x.wind, x.mass, x.rho):
         usable &= np.isfinite(arr)
@@ -133,6 +141,96 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
             lag = int(round(measurement.power_lag_s / median_dt(log.df["time_s"].to_numpy(float), codes)))
             battery_w = np.nan_to_num(shift_within_trips(battery_w, codes, lag), nan=0.0)
     return Measured(log, veh, p, source, x, usable, target, battery_w, measurement, sign_test)
+
+
+def _numeric(col: pd.Series) -> bool:
+    return pd.api.types.is_bool_dtype(col) or pd.api.types.is_numeric_dtype(col)
+
+
+class ColumnSignals(Mapping):
+    """The numeric extra columns of a log's table as float arrays (NaN where missing), as
+    :meth:`~sumo_drvpw.data.log.DriveLog.inputs` gives them, each made when it is read and
+    not kept (``measure(lazy_signals=True)``)."""
+
+    def __init__(self, df: pd.DataFrame, names: list[str]):
+        self._df, self._names = df, list(names)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._names:
+            raise KeyError(name)
+        return self._df[name].to_numpy(float, na_value=np.nan)
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __contains__(self, name) -> bool:
+        return name in self._names
+
+
+def load_measured_pair(paths, vehicle: str | None, options: ReadOptions | None,
+                       target: str) -> tuple[Measured, Measured | UserError]:
+    """A battery or fuel target and the measured driving power of the same logs, read once.
+
+    Returns (the ``target``'s :class:`Measured`, as :func:`load_measured` gives it, and the
+    driving power's — or the UserError measuring it raised, for the caller to raise or pass
+    over). Both share the one table (their counts are their own, as if each had read the
+    logs) and read its extra columns lazily (:class:`ColumnSignals`): keep what a fit needs
+    with :func:`keep_arrays`, and the table goes when neither refers to it.
+    """
+    if target not in TARGETS:
+        raise UserError(f"target must be one of {', '.join(TARGETS)}, got {target!r}")
+    veh = load_vehicle(vehicle) if vehicle else None
+    log = read_log(paths, veh, options)
+    wlog = dataclasses.replace(log, counts=dict(log.counts))
+    m = _usable_or_refuse(measure(log, veh, target, lazy_signals=True))
+    try:
+        mw: Measured | UserError = _usable_or_refuse(measure(wlog, veh, lazy_signals=True))
+    except UserError as e:
+        mw = e
+    return m, mw
+
+
+def _usable_or_refuse(m: Measured) -> Measured:
+    if not m.usable.any():
+        from sumo_drvpw.data.log import exclusions
+
+        raise UserError(f"{m.log.describe()}: no usable sample among {len(m.log)} rows (excluded: "
+                        f"{exclusions(m.log.counts)}; any other row lacks a finite measured power or input)")
+    return m
+
+
+def _own(a):
+    """``a`` holding no more memory than its own: a view into a bigger array (a column of a
+    table's block of columns) is copied, so the rest can go; an array that is all of its base
+    (a column that is a block of its own) and a broadcast constant (stride 0) stay as they
+    are; None stays None."""
+    if a is None:
+        return None
+    a = np.asarray(a)
+    base = a
+    while isinstance(base.base, np.ndarray):
+        base = base.base
+    if base is a or (a.ndim == 1 and a.strides[0] == 0) or base.nbytes <= a.nbytes:
+        return a
+    return a.copy()
+
+
+def keep_arrays(m: Measured, signals=()) -> Measured:
+    """The arrays of a :class:`Measured` a fit needs, without its table: the model inputs
+    (with only the extra columns ``signals`` that it has, as arrays), measured power,
+    hybrid battery power, usable mask, and of the table the time weights ``dt_s`` alone;
+    counts, files and options stay. Values are unchanged (copies, not recomputations)."""
+    x = m.inputs
+    sig = {c: _own(np.asarray(x.signals[c], float)) for c in signals if c in x.signals}
+    x = dataclasses.replace(x, v=_own(x.v), a=_own(x.a), theta=_own(x.theta), wind=_own(x.wind),
+                            mass=_own(x.mass), rho=_own(x.rho), signals=sig, trip=_own(x.trip))
+    log = dataclasses.replace(m.log, df=pd.DataFrame({"dt_s": _own(m.log.df["dt_s"].to_numpy(float))}),
+                              excluded=None, deriv=None)
+    return dataclasses.replace(m, log=log, power_w=_own(m.power_w), inputs=x, usable=_own(m.usable),
+                               battery_w=_own(m.battery_w))
 
 
 #: inertial and grade power [W] beyond which a sample tests the battery current's sign
