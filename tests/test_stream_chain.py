@@ -272,3 +272,35 @@ def test_merged_sign_sums_equal_the_correlation_of_all_samples():
                                       float((yy - my) @ (yy - my)), float((dd - md) @ (yy - my))))
     r = sums[5] / math.sqrt(sums[3] * sums[4])
     assert sums[0] == 4000 and r == pytest.approx(np.corrcoef(d, y)[0, 1], rel=1e-12)
+
+
+def test_dask_chain_comparison_equals_local_and_memory(chain_logs, tmp_path, capsys):
+    """--engine dask on a 2-worker cluster (statistics pickled across processes, the Parquet
+    file cut into Parts at trip starts): the same report as the local engine and as memory."""
+    pytest.importorskip("distributed", reason="Dask not installed: pip install 'sumo-drvpw[dask]'")
+    from distributed import LocalCluster
+
+    from sumo_drvpw.data.stream import plan
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as c:
+        for kind in ("battery", "fuel"):
+            folder, eq, _ = chain_logs[kind]
+            eqs = resolve_equations(_specs(kind, eq))
+            parts = plan([folder], part_rows=3000)
+            assert len(parts) >= 3  # the Parquet file in Parts of whole trips, and the CSV
+            make = partial(CompareStats, eqs, None, target=kind)
+            a = run([folder], make, parts=parts, rows=2500)[0].comparison().to_json()
+            b, info = run([folder], make, engine="dask", scheduler=c.scheduler_address, parts=parts, rows=2500)
+            assert info.engine == "dask"
+            _close(a, b.comparison().to_json())
+        # the command line: the whole report.json of --engine dask equals --engine memory's
+        folder, eq, _ = chain_logs["fuel"]
+        docs = {}
+        for e, extra in (("memory", []), ("dask", ["--scheduler", c.scheduler_address])):
+            out = tmp_path / e
+            assert cli_main(["compare", str(folder), "--equation", str(eq), "--out", str(out),
+                             "--engine", e, *extra]) == 0
+            docs[e] = json.loads((out / "report.json").read_text())
+        assert "dask engine:" in capsys.readouterr().err
+        assert docs["dask"]["settings"].pop("percentiles") == "exact"
+        _close(docs["memory"], docs["dask"])

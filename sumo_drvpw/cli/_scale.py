@@ -182,8 +182,8 @@ def compare_streamed(args, tmp: Path, title: str, target: str = "wheel"):
 
 
 def compare_main(args) -> int | None:
-    """`compare` through the streaming engines (driving power, or with ``--engine local``
-    battery or fuel power); None for ``--engine memory`` (read in memory)."""
+    """`compare` through the streaming engines, local or Dask (driving power, or battery or
+    fuel power through the equations' chains); None for ``--engine memory`` (read in memory)."""
     from sumo_drvpw.cli import output_set
     from sumo_drvpw.cli.compare import print_summary
 
@@ -195,9 +195,6 @@ def compare_main(args) -> int | None:
 
         pred = {getattr(load_equation(s), "predicts", "wheel") for s in args.equation if s not in SPEC_EQUATIONS}
         target = pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
-    if target != "wheel" and args.engine == "dask":
-        raise UserError(f"--engine dask compares driving power only (this is --target {target}); "
-                        "use --engine local or memory")
     what = {"wheel": "driving", "battery": "battery", "fuel": "fuel"}[target]
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
         comp = compare_streamed(args, tmp, f"Equations against measured {what} power", target)
