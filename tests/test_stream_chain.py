@@ -104,7 +104,15 @@ def _battery_frame() -> pd.DataFrame:
     df.loc[df["trip_id"] == "B4", "heater_power_w"] = np.nan    # heater not logged on B4
     df["battery_voltage_v"] = 355.0
     df["battery_current_a"] = p_bat / 355.0
-    return df
+    return _gaps(df, {"B1": (100.0, 112.0), "B4": (50.0, 53.4)})
+
+
+def _gaps(df: pd.DataFrame, gaps: dict) -> pd.DataFrame:
+    """Logging gaps (rows left out) in trips of both files: their seconds are counted."""
+    drop = np.zeros(len(df), bool)
+    for trip, (a, b) in gaps.items():
+        drop |= ((df["trip_id"] == trip) & (df["time_s"] > a) & (df["time_s"] < b)).to_numpy()
+    return df[~drop].reset_index(drop=True)
 
 
 def _fuel_frame() -> pd.DataFrame:
@@ -122,7 +130,7 @@ def _fuel_frame() -> pd.DataFrame:
     df["battery_voltage_v"] = 201.0
     df["battery_current_a"] = assist / 201.0
     df.loc[df["trip_id"] == "F3", "ambient_c"] = np.nan        # no temperature on F3
-    return df
+    return _gaps(df, {"F1": (70.0, 80.0), "F4": (30.0, 36.5)})
 
 
 def _eq(text: str):
@@ -220,7 +228,8 @@ def test_cli_chain_compare_streams_and_equals_the_memory_engine(chain_logs, kind
     assert "local engine:" in cap.err
     assert docs["local"]["settings"].pop("percentiles") == "exact"
     got, ref = docs["local"], docs["memory"]
-    assert got["context"]["counts"]["files"] == 2
+    assert got["context"]["counts"]["files"] == 2 and got["context"]["counts"]["time_gaps"] == 2
+    assert got["context"]["counts"]["time_gaps_s"] > 15.0
     _close(ref, got)
     assert said["local"] == said["memory"] and any("unknown (NaN)" in s for s in said["local"])
 
