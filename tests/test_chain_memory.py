@@ -183,6 +183,9 @@ def test_one_read_gives_what_two_reads_gave_and_keeps_only_the_arrays(battery_lo
         assert sorted(got.inputs.signals) == sorted(ref.inputs.signals)
         for c in ref.inputs.signals:  # read from the table when asked for, the same values
             _same_array(got.inputs.signals[c], ref.inputs.signals[c])
+    sel = dm.with_signals(mw, {"heater_w", "not_a_column"})  # the table stays, two columns less
+    assert set(sel.inputs.signals) == {"heater_w"} and sel.log.df is mw.log.df
+    assert isinstance(sel.inputs.signals["heater_w"], np.ndarray)
     kept = dm.keep_arrays(m, ["heater_w", "not_a_column"])
     assert list(kept.log.df.columns) == ["dt_s"] and set(kept.inputs.signals) == {"heater_w"}
     assert kept.counts == m.counts and kept.context() == m.context()

@@ -313,7 +313,12 @@ def main_chain(args) -> int:
                             "told apart from the chain's losses; give its road load with --equation (e.g. "
                             "roadload_spec, the vehicle's published A + B·v + C·v², or an equation calibrated "
                             "on logs with a driving power)")
-        res = calibrate(mw.inputs, mw.power_w, resolve_candidates(args.candidates), mask=mw.usable,
+        from sumo_drvpw.data.measured import with_signals
+        from sumo_drvpw.model.terms import parse_term
+
+        cands = resolve_candidates(args.candidates)  # the columns its terms read, as arrays
+        mw = with_signals(mw, {c for t in cands for c in parse_term(t).columns})
+        res = calibrate(mw.inputs, mw.power_w, cands, mask=mw.usable,
                         p_enter=args.p_enter, p_remove=args.p_remove, counts=mw.counts,
                         reference_mass_kg=float(mw.inputs.mass[mw.usable].mean()))
         eq = res.to_equation(args.name or out.stem, provenance={

@@ -218,6 +218,14 @@ def _own(a):
     return a.copy()
 
 
+def with_signals(m: Measured, signals) -> Measured:
+    """``m`` whose inputs carry only the extra columns ``signals`` that it has, as arrays
+    (the table kept): what a fit of terms that read those columns needs, without making
+    every extra column again for each block it takes (:meth:`ColumnSignals.__getitem__`)."""
+    sig = {c: np.asarray(m.inputs.signals[c], float) for c in signals if c in m.inputs.signals}
+    return dataclasses.replace(m, inputs=dataclasses.replace(m.inputs, signals=sig))
+
+
 def keep_arrays(m: Measured, signals=()) -> Measured:
     """The arrays of a :class:`Measured` a fit needs, without its table: the model inputs
     (with only the extra columns ``signals`` that it has, as arrays), measured power,
