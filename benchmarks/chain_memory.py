@@ -39,10 +39,12 @@ ROOT = Path(__file__).resolve().parent.parent
 CHILD = r"""
 import sys, time
 t0 = time.perf_counter()
+import sumo_drvpw
 from sumo_drvpw.cli import main
 rc = main(sys.argv[1:])
 hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM')][0].split()[1]
-print(f'CHILD rc={rc} hwm_kb={hwm} wall_s={time.perf_counter() - t0:.3f}', file=sys.stderr)
+print(f'CHILD rc={rc} hwm_kb={hwm} wall_s={time.perf_counter() - t0:.3f} pkg={sumo_drvpw.__file__}',
+      file=sys.stderr)
 """
 MAKE = r"""
 import sys
@@ -77,7 +79,9 @@ def run_once(tree: Path, argv: list[str]) -> tuple[float, float]:
     line = [ln for ln in r.stderr.splitlines() if ln.startswith("CHILD ")]
     if r.returncode != 0 or not line or "rc=0" not in line[-1]:
         raise SystemExit(f"{tree}: sumo-drvpw {' '.join(argv)} failed:\n{r.stderr[-3000:]}")
-    kv = dict(x.split("=") for x in line[-1].split()[1:])
+    kv = dict(x.split("=", 1) for x in line[-1].split()[1:])
+    if not Path(kv["pkg"]).resolve().is_relative_to(tree.resolve()):  # the tree's code ran
+        raise SystemExit(f"{tree}: the child imported {kv['pkg']}, not this tree's package")
     return int(kv["hwm_kb"]) / 1024.0, float(kv["wall_s"])
 
 
