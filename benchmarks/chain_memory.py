@@ -15,7 +15,10 @@ own memory, not carried over from this one) and wall time; medians are reported,
 the peak RSS per row and the ratio baseline/this. The equations both write are compared
 (max. relative difference of every number of the [chain] and [terms] tables).
 
-    .venv/bin/python benchmarks/chain_memory.py --baseline REV [--sizes 1e6,3e6] [--repeat 3]
+``--compare`` also runs ``compare LOG --equation <the chain just fitted>`` with this tree's
+code, ``--engine local`` (streamed: memory flat in rows) against ``--engine memory``.
+
+    .venv/bin/python benchmarks/chain_memory.py --baseline REV [--sizes 1e6,3e6] [--repeat 3] [--compare]
 
 Last line: ``bytes_per_row_<size>=<this> ratio_<size>=<baseline/this> …``.
 """
@@ -125,6 +128,8 @@ def main():
     ap.add_argument("--equation", default="drvpw_prius3",
                     help="road-load equation under the chain ('': calibrated stepwise first)")
     ap.add_argument("--tmp", default=None, help="folder for the temporary logs")
+    ap.add_argument("--compare", action="store_true",
+                    help="also compare the fitted chain on the log, --engine local against memory")
     args = ap.parse_args()
     sizes = [int(float(s)) for s in args.sizes.split(",")]
     tmp = Path(tempfile.mkdtemp(prefix="chain_memory_", dir=args.tmp))
@@ -165,6 +170,20 @@ def main():
                 diff = max_rel_diff(numbers(outs["baseline"]), numbers(outs["this"]))
                 print(f"  peak RSS baseline/this = {ratio:.2f}; equations: max. rel. difference {diff:.1e}")
                 tail.append(f"ratio_{rows:.0e}={ratio:.2f}")
+            if args.compare:
+                cmp = {"local": [], "memory": []}
+                for r in range(args.repeat):
+                    for eng in cmp:
+                        argv = ["compare", str(log), "--vehicle", "prius3", "--equation", str(outs["this"]),
+                                "--out", str(tmp / f"cmp_{eng}_{rows}_{r}"), "--engine", eng]
+                        load = os.getloadavg()[0]
+                        mb, wall = run_once(ROOT, argv)
+                        cmp[eng].append(mb)
+                        print(f"  compare --engine {eng:<6} run {r + 1}: peak RSS {mb:,.0f} MB, {wall:.1f} s "
+                              f"(load {load:.1f})", flush=True)
+                for eng, v in cmp.items():
+                    print(f"  compare --engine {eng:<6} median: peak RSS {statistics.median(v):,.0f} MB")
+                    tail.append(f"compare_{eng}_mb_{rows:.0e}={statistics.median(v):.0f}")
             log.unlink()
         print(" ".join(tail))
     finally:
