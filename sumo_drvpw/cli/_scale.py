@@ -159,9 +159,10 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     return 0
 
 
-def compare_streamed(args, tmp: Path, title: str):
-    """`compare` of driving power through the streaming engines: writes the report into
-    ``tmp`` and returns the comparison (whose ``to_json`` covers every sample)."""
+def compare_streamed(args, tmp: Path, title: str, target: str = "wheel"):
+    """`compare` through the streaming engines (``target``: driving power, or the energy
+    chains' battery or fuel power): writes the report into ``tmp`` and returns the
+    comparison (whose ``to_json`` covers every sample)."""
     from sumo_drvpw.data.measured import resolve_equations
     from sumo_drvpw.fit.stream_compare import CompareStats
     from sumo_drvpw.model.vehicles import load_vehicle
@@ -170,7 +171,7 @@ def compare_streamed(args, tmp: Path, title: str):
     check_engine_arguments(args)
     veh = load_vehicle(args.vehicle) if args.vehicle else None
     eqs = resolve_equations(args.equation, veh)
-    cs, info = _run(args, partial(CompareStats, eqs, None), veh)
+    cs, info = _run(args, partial(CompareStats, eqs, None, target=target), veh)
     from sumo_drvpw.cli import note_counts
 
     note_counts(cs.counts)
@@ -184,8 +185,8 @@ def compare_streamed(args, tmp: Path, title: str):
 
 
 def compare_main(args) -> int | None:
-    """`compare` through the streaming engines when it compares driving power (the
-    default target); None when it compares battery or fuel power (read in memory)."""
+    """`compare` through the streaming engines, local or Dask (driving power, or battery or
+    fuel power through the equations' chains); None for ``--engine memory`` (read in memory)."""
     from sumo_drvpw.cli import output_set
     from sumo_drvpw.cli.compare import print_summary
 
@@ -197,13 +198,14 @@ def compare_main(args) -> int | None:
 
         pred = {getattr(load_equation(s), "predicts", "wheel") for s in args.equation if s not in SPEC_EQUATIONS}
         target = pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
-    if target != "wheel":
-        if args.engine == "dask":
-            raise UserError(f"--engine dask compares driving power only (this is --target {target}); "
-                            "use --engine memory")
-        return None
+    what = {"wheel": "driving", "battery": "battery", "fuel": "fuel"}[target]
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
-        comp = compare_streamed(args, tmp, "Equations against measured driving power")
+        comp = compare_streamed(args, tmp, f"Equations against measured {what} power", target)
     doc = comp.to_json(trips=False)
+    from sumo_drvpw.report.comparison import unknown_input_lines
+
+    for name, r in doc["equations"].items():
+        for x in unknown_input_lines(name, r.get("chain_unknown_inputs"), r["n"]):
+            print("note: " + x)
     print_summary(doc, args.out)
     return 0

@@ -283,8 +283,13 @@ def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
 
 
 def main_chain(args) -> int:
-    """``calibrate --target battery|fuel``: the energy chain on top of a road-load equation."""
-    from sumo_drvpw.data.measured import load_measured, resolve_equations
+    """``calibrate --target battery|fuel``: the energy chain on top of a road-load equation.
+
+    The logs are read once for the target and the driving power
+    (:func:`~sumo_drvpw.data.measured.load_measured_pair`); once the road load is known, only
+    the arrays the chain fit and its report need are kept and the table goes
+    (:func:`~sumo_drvpw.data.measured.keep_arrays`)."""
+    from sumo_drvpw.data.measured import keep_arrays, load_measured_pair, resolve_equations
     from sumo_drvpw.fileio import check_output_path
     from sumo_drvpw.fit.chain import calibrate_on, check_load_columns
     from sumo_drvpw.fit.compare import compare
@@ -310,7 +315,7 @@ def main_chain(args) -> int:
             raise UserError(f"--hvac {args.hvac}: give COLUMN[:SETPOINT_C] with a cabin set-point in "
                             "-60 … 60 °C")
     ro = read_options(args, [args.equation] if args.equation else ())
-    m = load_measured(args.logs, args.vehicle, ro, target=args.target)
+    m, mw = load_measured_pair(args.logs, args.vehicle, ro, args.target)
     note_counts(m.counts)
     check_load_columns(m, args.load)  # before the road-load fit
     if hvac and hvac["column"] not in m.inputs.signals:
@@ -322,14 +327,19 @@ def main_chain(args) -> int:
     else:
         from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
 
-        mw = load_measured(args.logs, args.vehicle, ro)
+        if isinstance(mw, UserError):
+            raise mw
         if mw.source.startswith("battery"):  # the road load would be fitted on the chain's own target
             raise UserError(f"--target {args.target}: {mw.log.describe()} logs no driving power (power_w, motor "
                             "torque, the power-split signals), only battery V·I, so the road load cannot be "
                             "told apart from the chain's losses; give its road load with --equation (e.g. "
                             "roadload_spec, the vehicle's published A + B·v + C·v², or an equation calibrated "
                             "on logs with a driving power)")
-        cands = resolve_candidates(args.candidates)
+        from sumo_drvpw.data.measured import with_signals
+        from sumo_drvpw.model.terms import parse_term
+
+        cands = resolve_candidates(args.candidates)  # the columns its terms read, as arrays
+        mw = with_signals(mw, {c for t in cands for c in parse_term(t).columns})
         check_speed_varies(mw, cands)  # as plain `calibrate`: the road load needs varying speed
         res = calibrate(mw.inputs, mw.power_w, cands, mask=mw.usable,
                         p_enter=args.p_enter, p_remove=args.p_remove, counts=mw.counts,
@@ -343,15 +353,15 @@ def main_chain(args) -> int:
             " (physically constrained: the free fit was implausible)" if note else "")
     # the chain's input: the log's measured driving power when it has one (the chain then
     # describes the powertrain, not the road-load equation's errors), else the equation's
-    from sumo_drvpw.data.measured import load_measured as _lm
-
     p_in, chain_input = None, f"driving power of {eq.name}"
-    try:
-        mw = _lm(args.logs, args.vehicle, ro)
-        if not mw.source.startswith("battery"):
-            p_in, chain_input = mw.power_w, f"measured driving power ({mw.source})"
-    except UserError:
-        pass
+    if not isinstance(mw, UserError) and not mw.source.startswith("battery"):
+        p_in, chain_input = np.array(mw.power_w, float), f"measured driving power ({mw.source})"
+    from sumo_drvpw.model.terms import parse_term
+
+    keep = set(args.load) | ({hvac["column"]} if hvac else set())
+    keep |= {c for t in eq.terms for c in parse_term(t).columns}
+    m = keep_arrays(m, sorted(keep))  # the table goes with the last reference to it
+    del mw
     fit = calibrate_on(m, eq, loads=args.load, hvac=hvac, p_drive_w=p_in, efficiency=efficiency)
     eq.name = args.name or out.stem
     eq.chain = fit.chain

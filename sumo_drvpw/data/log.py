@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.paths import expand_paths as _expand_paths
+from sumo_drvpw.data.paths import expand_paths as _expand_paths, parquet_frame
 from sumo_drvpw.data.resolution import accel_window
 from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import P_STD_KPA, RHO_DEFAULT
@@ -199,13 +199,7 @@ def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
     meta = {}
     try:
         if p.suffix.lower() == ".parquet":
-            import pyarrow.parquet as pq
-
-            table = pq.read_table(p)
-            for k, v in (table.schema.metadata or {}).items():
-                if k.startswith((b"sumo_drvpw", b"drive_log.")):  # drive_log.roles: spec
-                    meta[k.decode()] = v.decode()
-            df = table.to_pandas()
+            df, meta = parquet_frame(p, (b"sumo_drvpw", b"drive_log."))  # drive_log.roles: spec
         else:
             check_header(p)
             df = pd.read_csv(p, low_memory=False)

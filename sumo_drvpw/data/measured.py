@@ -7,9 +7,12 @@ compares a model with a log goes through it, so they all see the same samples.
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 from sumo_drvpw.model.equations import SPEC_EQUATIONS, Equation, load_equation
 from sumo_drvpw.errors import UserError
@@ -35,6 +38,9 @@ class Measured:
     battery_w: np.ndarray | None = None
     #: measurement corrections applied (model.measurement.Measurement; None: the log as read)
     measurement: object | None = None
+    #: battery target read with ``sign_check=False``: the sums of the sign test
+    #: (:func:`sign_sums`), for the caller to merge over batches and test (:func:`check_sign_sums`)
+    sign_test: tuple | None = None
 
     @property
     def counts(self) -> dict:
@@ -78,11 +84,18 @@ def load_measured(paths, vehicle: str | None = None, options: ReadOptions | None
     return m
 
 
-def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measured:
+def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
+            sign_check: bool = True, lazy_signals: bool = False) -> Measured:
     """Measured power, inputs and usable mask of a read log (the streaming reader calls
     this per batch of whole trips, so it sees the same samples as :func:`load_measured`),
     with the measurement corrections of its reading options applied
-    (``log.options.measurement``; None: the log as read)."""
+    (``log.options.measurement``; None: the log as read).
+
+    ``sign_check``: test a battery target's sign here (:func:`check_battery_sign`); False
+    (a batch of a streamed log, whose test is on all batches): its sums are returned in
+    ``Measured.sign_test`` instead. ``lazy_signals``: the inputs' extra columns are read
+    from the table when asked for (:class:`ColumnSignals`), not copied: a caller keeps the
+    arrays it needs with :func:`keep_arrays`."""
     from sumo_drvpw.data.powertrain import measured_battery_power, measured_fuel_power
 
     battery_w = None
@@ -94,12 +107,19 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measur
             battery_w = np.nan_to_num(measured_battery_power(log, veh)[0], nan=0.0)
     else:
         p, source = measured_power(log, veh)
-    x = log.inputs(veh.mass_kg if veh else None)
+    x = log.inputs(veh.mass_kg if veh else None, signals=not lazy_signals)
+    if lazy_signals:
+        df = log.df
+        x = dataclasses.replace(x, signals=ColumnSignals(df, [c for c in log.extra_columns if _numeric(df[c])]))
     usable = ~log.excluded & np.isfinite(p)
     for arr in (x.v, x.a, x.theta, x.wind, x.mass, x.rho):
         usable &= np.isfinite(arr)
+    sign_test = None
     if target == "battery":
-        check_battery_sign(log, x, p, usable, source)
+        if sign_check:
+            check_battery_sign(log, x, p, usable, source)
+        else:
+            sign_test = sign_sums(x, p, usable)
     if target == "battery" and not _has_engine(log, veh):
         # energy into the battery while the car stands is a charger, not driving
         from sumo_drvpw.data.charging import charging_mask
@@ -120,7 +140,105 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel") -> Measur
             codes = trip_codes_of(log.df["trip_id"])
             lag = int(round(measurement.power_lag_s / median_dt(log.df["time_s"].to_numpy(float), codes)))
             battery_w = np.nan_to_num(shift_within_trips(battery_w, codes, lag), nan=0.0)
-    return Measured(log, veh, p, source, x, usable, target, battery_w, measurement)
+    return Measured(log, veh, p, source, x, usable, target, battery_w, measurement, sign_test)
+
+
+def _numeric(col: pd.Series) -> bool:
+    return pd.api.types.is_bool_dtype(col) or pd.api.types.is_numeric_dtype(col)
+
+
+class ColumnSignals(Mapping):
+    """The numeric extra columns of a log's table as float arrays (NaN where missing), as
+    :meth:`~sumo_drvpw.data.log.DriveLog.inputs` gives them, each made when it is read and
+    not kept (``measure(lazy_signals=True)``)."""
+
+    def __init__(self, df: pd.DataFrame, names: list[str]):
+        self._df, self._names = df, list(names)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._names:
+            raise KeyError(name)
+        return self._df[name].to_numpy(float, na_value=np.nan)
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __contains__(self, name) -> bool:
+        return name in self._names
+
+
+def load_measured_pair(paths, vehicle: str | None, options: ReadOptions | None,
+                       target: str) -> tuple[Measured, Measured | UserError]:
+    """A battery or fuel target and the measured driving power of the same logs, read once.
+
+    Returns (the ``target``'s :class:`Measured`, as :func:`load_measured` gives it, and the
+    driving power's — or the UserError measuring it raised, for the caller to raise or pass
+    over). Both share the one table (their counts are their own, as if each had read the
+    logs) and read its extra columns lazily (:class:`ColumnSignals`): keep what a fit needs
+    with :func:`keep_arrays`, and the table goes when neither refers to it.
+    """
+    if target not in TARGETS:
+        raise UserError(f"target must be one of {', '.join(TARGETS)}, got {target!r}")
+    veh = load_vehicle(vehicle) if vehicle else None
+    log = read_log(paths, veh, options)
+    wlog = dataclasses.replace(log, counts=dict(log.counts))
+    m = _usable_or_refuse(measure(log, veh, target, lazy_signals=True))
+    try:
+        mw: Measured | UserError = _usable_or_refuse(measure(wlog, veh, lazy_signals=True))
+    except UserError as e:
+        mw = e
+    return m, mw
+
+
+def _usable_or_refuse(m: Measured) -> Measured:
+    if not m.usable.any():
+        from sumo_drvpw.data.log import exclusions
+
+        raise UserError(f"{m.log.describe()}: no usable sample among {len(m.log)} rows (excluded: "
+                        f"{exclusions(m.log.counts)}; any other row lacks a finite measured power or input)")
+    return m
+
+
+def _own(a):
+    """``a`` holding no more memory than its own: a view into a bigger array (a column of a
+    table's block of columns) is copied, so the rest can go; an array that is all of its base
+    (a column that is a block of its own) and a broadcast constant (stride 0) stay as they
+    are; None stays None."""
+    if a is None:
+        return None
+    a = np.asarray(a)
+    base = a
+    while isinstance(base.base, np.ndarray):
+        base = base.base
+    if base is a or (a.ndim == 1 and a.strides[0] == 0) or base.nbytes <= a.nbytes:
+        return a
+    return a.copy()
+
+
+def with_signals(m: Measured, signals) -> Measured:
+    """``m`` whose inputs carry only the extra columns ``signals`` that it has, as arrays
+    (the table kept): what a fit of terms that read those columns needs, without making
+    every extra column again for each block it takes (:meth:`ColumnSignals.__getitem__`)."""
+    sig = {c: np.asarray(m.inputs.signals[c], float) for c in signals if c in m.inputs.signals}
+    return dataclasses.replace(m, inputs=dataclasses.replace(m.inputs, signals=sig))
+
+
+def keep_arrays(m: Measured, signals=()) -> Measured:
+    """The arrays of a :class:`Measured` a fit needs, without its table: the model inputs
+    (with only the extra columns ``signals`` that it has, as arrays), measured power,
+    hybrid battery power, usable mask, and of the table the time weights ``dt_s`` alone;
+    counts, files and options stay. Values are unchanged (copies, not recomputations)."""
+    x = m.inputs
+    sig = {c: _own(np.asarray(x.signals[c], float)) for c in signals if c in x.signals}
+    x = dataclasses.replace(x, v=_own(x.v), a=_own(x.a), theta=_own(x.theta), wind=_own(x.wind),
+                            mass=_own(x.mass), rho=_own(x.rho), signals=sig, trip=_own(x.trip))
+    log = dataclasses.replace(m.log, df=pd.DataFrame({"dt_s": _own(m.log.df["dt_s"].to_numpy(float))}),
+                              excluded=None, deriv=None)
+    return dataclasses.replace(m, log=log, power_w=_own(m.power_w), inputs=x, usable=_own(m.usable),
+                               battery_w=_own(m.battery_w))
 
 
 #: inertial and grade power [W] beyond which a sample tests the battery current's sign
@@ -134,11 +252,57 @@ def check_battery_sign(log: DriveLog, x: Inputs, p_battery, usable, source: str)
     Tested on the samples whose inertial and grade power m·v·(a + g·sin θ) exceeds
     ±``SIGN_TEST_W``, with ≥ 50 of them; on the shared logs r is 0.88–0.98 for the
     electric cars and 0.36 for the Prius Gen-2's small hybrid battery."""
+    refuse_falling_battery(log.describe(), source, _sign_proxy(x), p_battery, usable, SIGN_TEST_W,
+                           _SIGN_RISES)
+
+
+_SIGN_RISES = "the inertial and grade power m·v·(a + g·sin θ)"
+
+
+def _sign_proxy(x: Inputs) -> np.ndarray:
     from sumo_drvpw.model.constants import G
 
-    proxy = np.asarray(x.mass * x.v * (x.a + G * np.sin(x.theta)), float)
-    refuse_falling_battery(log.describe(), source, proxy, p_battery, usable, SIGN_TEST_W,
-                           "the inertial and grade power m·v·(a + g·sin θ)")
+    return np.asarray(x.mass * x.v * (x.a + G * np.sin(x.theta)), float)
+
+
+def sign_sums(x: Inputs, p_battery, usable) -> tuple:
+    """The sign test of :func:`check_battery_sign` as mergeable sums over its samples:
+    (n, mean of the proxy, mean of the battery power, centred Σd², Σy², Σdy)."""
+    d, y = _sign_proxy(x), np.asarray(p_battery, float)
+    ok = np.asarray(usable, bool) & np.isfinite(d) & np.isfinite(y) & (np.abs(d) > SIGN_TEST_W)
+    d, y = d[ok], y[ok]
+    if not len(d):
+        return (0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    md, my = float(d.mean()), float(y.mean())
+    d, y = d - md, y - my
+    return (len(d), md, my, float(d @ d), float(y @ y), float(d @ y))
+
+
+def merge_sign_sums(a: tuple | None, b: tuple | None) -> tuple | None:
+    """The sums of :func:`sign_sums` of two batches (Chan et al. 1979 pairwise update)."""
+    if a is None or not a[0]:
+        return b
+    if b is None or not b[0]:
+        return a
+    na, nb = a[0], b[0]
+    n = na + nb
+    dd, dy = b[1] - a[1], b[2] - a[2]
+    f = na * nb / n
+    return (n, a[1] + dd * nb / n, a[2] + dy * nb / n, a[3] + b[3] + dd * dd * f,
+            a[4] + b[4] + dy * dy * f, a[5] + b[5] + dd * dy * f)
+
+
+def check_sign_sums(where: str, source: str, sums: tuple | None) -> None:
+    """:func:`check_battery_sign` on the merged sums of every batch (:func:`sign_sums`):
+    the same rule, on all samples of a streamed log."""
+    if sums is None:
+        return
+    n, _, _, sdd, syy, sdy = sums
+    if n < 50 or sdd <= 0.0 or syy <= 0.0:
+        return
+    r = sdy / float(np.sqrt(sdd * syy))
+    if r < 0:
+        raise UserError(_falling(where, source, r, n, SIGN_TEST_W, _SIGN_RISES))
 
 
 def refuse_falling_battery(where: str, source: str, drive, p_battery, mask, threshold_w: float,
@@ -152,10 +316,14 @@ def refuse_falling_battery(where: str, source: str, drive, p_battery, mask, thre
         return
     r = float(np.corrcoef(d[ok], y[ok])[0, 1])
     if r < 0:
-        raise UserError(f"{where}: the measured battery power ({source}) falls where {rises} rises (correlation "
-                        f"r = {r:.2f} over {int(ok.sum())} samples beyond ±{threshold_w / 1000:g} kW): is the "
-                        "current's sign flipped? The vehicle file's [battery] current_positive says which sign "
-                        "discharges (\"discharge\" or \"charge\")")
+        raise UserError(_falling(where, source, r, int(ok.sum()), threshold_w, rises))
+
+
+def _falling(where: str, source: str, r: float, n: int, threshold_w: float, rises: str) -> str:
+    return (f"{where}: the measured battery power ({source}) falls where {rises} rises (correlation "
+            f"r = {r:.2f} over {n} samples beyond ±{threshold_w / 1000:g} kW): is the "
+            "current's sign flipped? The vehicle file's [battery] current_positive says which sign "
+            "discharges (\"discharge\" or \"charge\")")
 
 
 def _has_engine(log: DriveLog, veh: Vehicle | None) -> bool:

@@ -2,6 +2,7 @@
 
 The one ``expand_paths`` of the package: the drive-log reader and every adapter list
 their inputs through it, so a folder, a file and a wrong name behave alike everywhere.
+``parquet_frame`` reads a Parquet file into a pandas frame at about the frame's memory.
 """
 
 from __future__ import annotations
@@ -62,3 +63,26 @@ def subfolder_hint(folder: Path, suffixes: tuple[str, ...], skip=("overview.csv"
     dirs = sorted({str(f.parent) for f in below})
     return (f"; its sub-folders hold {len(below)} such file(s) (e.g. {below[0]}): name those "
             f"folders ({', '.join(dirs[:3])}{' …' if len(dirs) > 3 else ''}), sub-folders are not searched")
+
+
+#: at most this many columns are read one block each (pandas warns beyond 100 blocks)
+SPLIT_COLUMNS_MAX = 90
+
+
+def parquet_frame(p: Path, meta_prefixes: tuple[bytes, ...] = ()) -> tuple:
+    """A Parquet file as a pandas frame, and the schema's key-value metadata whose keys start
+    with one of ``meta_prefixes`` (decoded).
+
+    Arrow's buffers are freed as each column is converted and handed back to the system after
+    (the peak is about the frame, not the frame and the Arrow table); each column keeps its own
+    block unless there are so many that pandas would call the frame fragmented."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(p)
+    meta = {k.decode(): v.decode() for k, v in (table.schema.metadata or {}).items()
+            if k.startswith(meta_prefixes)} if meta_prefixes else {}
+    df = table.to_pandas(split_blocks=table.num_columns <= SPLIT_COLUMNS_MAX, self_destruct=True)
+    del table
+    pa.default_memory_pool().release_unused()
+    return df, meta

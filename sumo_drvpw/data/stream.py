@@ -259,7 +259,8 @@ def whole_trips(part: Part, rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRI
 
 
 def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
-                  rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRIP_ROWS, columns=None):
+                  rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRIP_ROWS, columns=None,
+                  target: str = "wheel"):
     """:class:`~sumo_drvpw.data.measured.Measured` per batch of whole trips of a Part.
 
     Parameters
@@ -270,6 +271,10 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
     rows : rows per chunk read [-]
     columns : read only these columns (e.g. :data:`CANONICAL` and the signals the terms
         name); None: all
+    target : what the measured power is (``wheel``, ``battery``, ``fuel``: as for
+        :func:`~sumo_drvpw.data.measured.load_measured`); a battery target's sign test is
+        left to the caller, on all batches (``Measured.sign_test``,
+        :func:`~sumo_drvpw.data.measured.check_sign_sums`)
     """
     from sumo_drvpw.data.measured import measure
 
@@ -287,7 +292,7 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
         log = from_frame(df, vehicle, options, name=name)
         log.files = [part.path]
         del df
-        m = measure(log, vehicle)
+        m = measure(log, vehicle, target, sign_check=False)
         del log
         yield m
         del m  # before the next chunk is read: one batch in memory at a time

@@ -17,6 +17,10 @@ corrected with k = 1/η_m) is linear too::
 
 with the engine-off threshold P_off profiled the same way (``on`` = P > P_off).
 
+Memory: the design is never built whole: [√Δt·X √Δt·y] is factored block by block into
+its triangle R (TSQR: Demmel et al. 2012) and the bounded problem solved on R, which has
+the whole design's normal equations and residuals (:func:`_solve`).
+
 Uncertainty: the covariance of the linear fit on the free (inactive) parameters,
 s²·(X_fᵀW X_f)⁻¹ with s² = RSS/(n − k_free); parameters at a bound get none. Samples of
 a drive log are autocorrelated, so these are lower bounds: per-trip hold-out errors
@@ -46,6 +50,8 @@ ENGINE_ON_SPEED_GRID_MPS = (None, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 17.0, 20.0)
 #: of the calibration time lies below CITY_SPEED_MPS (50 km/h, the urban limit)
 CITY_SPEED_MPS = 50.0 / 3.6
 CITY_SHARE_MIN = 0.1
+#: samples per block of a fit's design (factored block by block, never built whole)
+BLOCK_ROWS = 65_536
 
 
 @dataclass
@@ -88,29 +94,50 @@ def _col(signals: dict, name: str, n: int, known: np.ndarray | None = None) -> n
     return np.nan_to_num(x, nan=0.0)
 
 
-def _solve(x: np.ndarray, y: np.ndarray, w: np.ndarray, lb, ub):
-    sw = np.sqrt(w)
-    xs = x * sw[:, None]
-    ys = y * sw
-    scale = np.sqrt((xs ** 2).sum(axis=0))
+def _solve(make, w: np.ndarray, ok: np.ndarray, lb, ub):
+    """Bounded least squares of y on X over the samples ``ok``, each weighted by its
+    duration ``w`` (√w on the rows), the columns scaled to unit norm for the solver.
+
+    ``make(sl)`` gives (X, y) of the samples ``sl`` (a slice of ``BLOCK_ROWS``, all of its
+    rows; ``ok`` is applied here): [√w·X √w·y] is factored block by block, R = [[R_x, z],
+    [0, ρ]], and the problem solved on (R_x, z) — the same normal equations, RSS = ‖z −
+    R_x β‖² + ρ² — with BVLS. Returns (β, RSS, active mask, (R_x, samples))."""
+    k = len(lb)
+    r, n = np.zeros((0, k + 1)), 0
+    for lo in range(0, len(ok), BLOCK_ROWS):
+        sl = slice(lo, lo + BLOCK_ROWS)
+        o = ok[sl]
+        if not o.any():
+            continue
+        x, y = make(sl)
+        sw = np.sqrt(w[sl][o])
+        blk = np.empty((sw.size, k + 1))
+        blk[:, :k] = x[o] * sw[:, None]
+        blk[:, k] = np.broadcast_to(y, o.shape)[o] * sw
+        r = np.linalg.qr(np.vstack([r, blk]), mode="r")
+        n += sw.size
+    rx, z = r[:k, :k], r[:k, k]
+    rho2 = float(r[k, k]) ** 2 if r.shape[0] > k else 0.0
+    scale = np.sqrt((rx ** 2).sum(axis=0))  # the column norms of √w·X
     scale[scale == 0] = 1.0
-    res = lsq_linear(xs / scale, ys, bounds=(np.asarray(lb) * scale, np.asarray(ub) * scale),
+    res = lsq_linear(rx / scale, z, bounds=(np.asarray(lb) * scale, np.asarray(ub) * scale),
                      method="bvls", lsmr_tol="auto")
     # the solver's bounds hold on the scaled problem up to rounding: a parameter at its bound
     # (auxiliary power 0, η_r 1) may come back 1e-14 beyond it; the bounds are physics
     beta = np.clip(res.x / scale, lb, ub)
-    r = ys - xs @ beta
-    rss = float(r @ r)
-    return beta, rss, res.active_mask, xs
+    e = z - rx @ beta
+    return beta, float(e @ e) + rho2, res.active_mask, (rx, n)
 
 
-def _covariance(xs: np.ndarray, rss: float, active: np.ndarray) -> np.ndarray:
-    k = xs.shape[1]
+def _covariance(fac: tuple, rss: float, active: np.ndarray) -> np.ndarray:
+    """Standard errors of the free parameters from the factor (R_x, samples) of :func:`_solve`."""
+    rx, n = fac
+    k = rx.shape[1]
     se = np.full(k, np.nan)
     free = np.flatnonzero(active == 0)
-    dof = xs.shape[0] - free.size
+    dof = n - free.size
     if free.size and dof > 0:
-        a = xs[:, free]
+        a = rx[:, free]
         try:
             cov = np.linalg.inv(a.T @ a) * rss / dof
             se[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -211,7 +238,7 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     lb, ub = [1.0, ETA_MIN], [1.0 / ETA_MIN, 1.0]
     known = np.ones(n, bool)  # declared loads and HVAC temperature known
     if predicts == "battery":
-        cols.append(np.ones(n))
+        cols.append(np.broadcast_to(1.0, (n,)))
         names.append("aux_power_w")
         lb.append(0.0)
         ub.append(np.inf)
@@ -246,12 +273,10 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
 
         bt, br = chain_map.fit_columns(efficiency, p, v, ok)
         emap = (bt, br)
-        cols[0] = np.maximum(p, 0.0)[:, None] * bt.matrix(p, v)
         names = ([f"traction_efficiency#{j}" for j in range(bt.size)]
                  + [f"recuperation_efficiency#{j}" for j in range(br.size)] + names[2:])
         lb = [1.0] * bt.size + [ETA_MIN] * br.size + lb[2:]
         ub = [1.0 / ETA_MIN] * bt.size + [1.0] * br.size + ub[2:]
-        hr = br.matrix(p, v)
     if ok.sum() < len(names) + 2:
         raise UserError(f"energy chain: only {int(ok.sum())} usable samples for {len(names)} parameters")
     neg = np.minimum(p, 0.0)
@@ -264,12 +289,14 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     else:
         grid = [float(limit)]
 
-    def design(lim):
-        c = list(cols)
-        c[1] = neg if lim is None else np.maximum(neg, -lim)
+    def design(sl, lim):
+        """The design's rows of the samples ``sl`` (the efficiency tables' hat weights too)."""
+        c = [None if col is None else col[sl] for col in cols]
+        c[1] = neg[sl] if lim is None else np.maximum(neg[sl], -lim)
         if emap is not None:
-            c[1] = c[1][:, None] * hr
-        return np.column_stack(c)[ok]
+            c[0] = c[0][:, None] * emap[0].matrix(p[sl], v[sl])
+            c[1] = c[1][:, None] * emap[1].matrix(p[sl], v[sl])
+        return np.column_stack(c)
 
     fixed = dict(fixed or {})
     bad = set(fixed) - set(names)
@@ -281,9 +308,12 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     lb_f, ub_f = [lb[j] for j in free], [ub[j] for j in free]
     best, profile = None, []
     for lim in grid:
-        x = design(lim)
-        off = sum(x[:, j] * val for j, val in fx.items()) if fx else 0.0
-        b_free, rss, act_free, xs = _solve(x[:, free], y[ok] - off, w[ok], lb_f, ub_f)
+        def make(sl, lim=lim):
+            x = design(sl, lim)
+            off = sum(x[:, j] * val for j, val in fx.items()) if fx else 0.0
+            return x[:, free], y[sl] - off
+
+        b_free, rss, act_free, xs = _solve(make, w, ok, lb_f, ub_f)
         k = len(free) + (lim is not None)
         bic = _bic(rss, int(ok.sum()), k)
         profile.append({"recuperation_limit_w": lim, "rss": rss, "bic": bic})
@@ -389,9 +419,13 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
         for von in (vgrid if off > -np.inf else (None,)):
             tmpl = EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von,
                                fuel_cut_below_w=fuel_cut_below_w)
-            on = tmpl.engine_on(p, v).astype(float)
-            x = np.column_stack([on, on * np.maximum(p, 0.0) - pb] + [on * c for c in lcols])[ok]
-            beta, rss, active, xs = _solve(x, y[ok], w[ok], lb, ub)
+
+            def make(sl, tmpl=tmpl):
+                on = tmpl.engine_on(p[sl], v[sl]).astype(float)
+                return (np.column_stack([on, on * np.maximum(p[sl], 0.0) - pb[sl]]
+                                        + [on * c[sl] for c in lcols]), y[sl])
+
+            beta, rss, active, xs = _solve(make, w, ok, lb, ub)
             bic = _bic(rss, int(ok.sum()), len(names) + 1 + (von is not None))
             profile.append({"engine_off_below_w": off, "engine_on_above_mps": von, "rss": rss, "bic": bic})
             if best is None or bic < best[0]:

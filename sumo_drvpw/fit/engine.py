@@ -78,7 +78,8 @@ def part_stats(part: Part, make, vehicle=None, options=None, rows: int = BATCH_R
     with _one_blas_thread():
         st = make()
         cols = st.columns() if hasattr(st, "columns") else None
-        batches = iter_measured(part, vehicle, options, rows, columns=cols)
+        batches = iter_measured(part, vehicle, options, rows, columns=cols,
+                                target=getattr(st, "target", "wheel"))
         for m in (prefetched(batches) if PREFETCH else batches):
             if ids is not None:
                 ids += _trip_ids(m)

@@ -93,10 +93,17 @@ class Moments:
 def _add_counts(a: dict, b: dict) -> dict:
     """Counts of two batches: numbers add, per-trip tables merge and lists join (batches
     hold whole trips), texts are kept (first seen; a grade source other than none wins:
-    one batch without elevation does not make the logs carry none)."""
+    one batch without elevation does not make the logs carry none). Of the reader's
+    decimal counts, the seconds of logging gaps add (each batch's rounded to ms, as the
+    reader rounds its sum) and the widest acceleration window is kept (the reader's max);
+    other decimals (the options' limits) are kept as first seen."""
     out = dict(a)
     for k, v in b.items():
-        if k in out and isinstance(v, (int, np.integer)) and not isinstance(v, bool) \
+        if k in out and k == "time_gaps_s":
+            out[k] = round(float(out[k]) + float(v), 3)
+        elif k in out and k == "accel_window_s":
+            out[k] = max(float(out[k]), float(v))
+        elif k in out and isinstance(v, (int, np.integer)) and not isinstance(v, bool) \
                 and isinstance(out[k], (int, np.integer)):
             out[k] = int(out[k]) + int(v)
         elif isinstance(v, dict) and isinstance(out.get(k), dict):

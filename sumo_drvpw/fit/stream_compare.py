@@ -6,6 +6,12 @@ all / light / heavy samples, Σ|e|, Σe², energies, per-trip energies, speed-bi
 of a deterministic random key per sample) for the percentiles and the figures: exact with
 at most ``RESERVOIR`` samples, else estimates from a uniform sample of that size. See
 :mod:`sumo_drvpw.fit.stream` for the calibration side and the merge rules.
+
+A battery or fuel target (``target``) compares each equation's energy chain with the
+measured battery V·I or fuel power, as :func:`sumo_drvpw.fit.compare.compare` does: the
+prediction is the chain's, the category energies stay at the wheel; besides, the chain's
+traction Σ max(P̂, 0)·Δt, its inputs unknown on some samples (per column: samples and
+trips) and the battery sign test's sums (tested on all batches at the end) are summed.
 """
 
 from __future__ import annotations
@@ -79,6 +85,8 @@ class _EqStats:
     hs: np.ndarray       # n, Σe, Σe² at ≥ 80 km/h, then below
     bins: np.ndarray     # (3, nbins): n, Σe, Σe² per 10 km/h speed bin
     trip_e: dict         # trip → (E⁺meas, E⁺pred, E_net meas, E_net pred)
+    ptrac: float = 0.0   # Σ max(P̂, 0)·Δt of the compared target (its chain's for battery, fuel)
+    unknown: dict = None  # chain input → [samples, read_as, [trip ids of each batch]]
 
     def merge(self, b: "_EqStats") -> "_EqStats":
         if self.cats != b.cats:
@@ -96,7 +104,33 @@ class _EqStats:
             None if self.eref is None else self.eref.merge(b.eref),
             None if self.rmin is None else np.minimum(self.rmin, b.rmin),
             None if self.rmax is None else np.maximum(self.rmax, b.rmax),
-            self.energy + b.energy, self.hs + b.hs, bins, {**self.trip_e, **b.trip_e})
+            self.energy + b.energy, self.hs + b.hs, bins, {**self.trip_e, **b.trip_e},
+            self.ptrac + b.ptrac, _merge_unknown(self.unknown, b.unknown))
+
+
+def _merge_unknown(a: dict | None, b: dict | None) -> dict | None:
+    """Chain inputs unknown in two sets of batches: samples add, trips are kept per batch."""
+    if not a or not b:
+        return a or b
+    out = {c: [u[0], u[1], list(u[2])] for c, u in a.items()}
+    for c, u in b.items():
+        if c in out:
+            out[c][0] += u[0]
+            out[c][2] += u[2]
+        else:
+            out[c] = [u[0], u[1], list(u[2])]
+    return out
+
+
+def _unknown_doc(unknown: dict | None) -> dict:
+    """:meth:`sumo_drvpw.model.chain.EnergyChain.unknown_inputs` from the merged sums
+    (trips as ``np.unique`` of all batches' gives them, as strings)."""
+    out = {}
+    for c in sorted(unknown or {}):
+        samples, read_as, trips = unknown[c]
+        out[c] = {"samples": int(samples), "read_as": read_as,
+                  "trips": [str(t) for t in np.unique(np.concatenate(trips))]}
+    return out
 
 
 def _minmax(cols: list) -> tuple[np.ndarray, np.ndarray]:
@@ -119,12 +153,19 @@ class CompareStats:
     equations : the equations compared (unique names)
     reference : optional name of one of them (``error_reference_correlation``)
     reservoir : samples kept for percentiles and figures [-]
+    target : ``wheel`` (driving power), ``battery`` or ``fuel`` (each equation's energy
+        chain against the measured battery or fuel power; every equation needs a chain
+        predicting it)
     """
 
-    def __init__(self, equations, reference: str | None = None, reservoir: int = RESERVOIR):
+    def __init__(self, equations, reference: str | None = None, reservoir: int = RESERVOIR,
+                 target: str = "wheel"):
         self.equations = list(equations)
         self.reference = reference
         self.k = int(reservoir)
+        self.target = target
+        self.sign = None          # the battery sign test's sums (data.measured.sign_sums)
+        self.seen: set = set()    # log columns the batches had (a chain's inputs among them)
         self.n = 0
         self.rows = 0
         self.meas = Moments.empty(1)
@@ -139,10 +180,14 @@ class CompareStats:
         self.vehicle = None
         self.files: list = []
 
-    def columns(self) -> frozenset:
-        """Columns to read: the reader's canonical ones and the signals the equations name."""
+    def columns(self) -> frozenset | None:
+        """Columns to read: the reader's canonical ones and the signals the equations name;
+        with a battery or fuel target every column (the fuel flow, air flow and fuel trims
+        are found by their names, as the in-memory reader finds them)."""
         from sumo_drvpw.data.stream import CANONICAL
 
+        if self.target != "wheel":
+            return None
         return CANONICAL | {s for eq in self.equations for t in eq.terms
                             for s in parse_term(t).columns}
 
@@ -150,11 +195,17 @@ class CompareStats:
         """Accumulate one batch: the usable samples of a Measured of whole trips."""
         from sumo_drvpw.fit.compare import SPEED_BIN_MPS
 
+        self._check_equations()  # after the batch was read: a log's refusal comes first, as in memory
+
         self.rows += len(m.power_w)
         self.counts = _add_counts(self.counts, m.counts)
         self.source = self.source or m.source
         self.vehicle = self.vehicle or m.vehicle
         self.files += [f for f in m.log.files if f not in self.files]
+        if self.target == "battery":
+            from sumo_drvpw.data.measured import merge_sign_sums
+
+            self.sign = merge_sign_sums(self.sign, m.sign_test)
         usable = np.asarray(m.usable, bool)
         every = bool(usable.all())
         idx = np.flatnonzero(usable)
@@ -181,6 +232,7 @@ class CompareStats:
         self.trips.update(dict.fromkeys(uniq, here))
         v = np.asarray(x.v, float)
         n = len(meas)
+        sig, bat = self._chain_inputs(m, x, idx, every, n)
         self.n += n
         self.meas = self.meas.merge(Moments.of_columns([meas]))
         self.meas_traction += float(np.where(meas > 0.0, meas, 0.0) @ dt)
@@ -203,15 +255,16 @@ class CompareStats:
             cats = prev.cats if prev is not None else _categories(pw[eq.name])
             zero = np.zeros(n)
             cw = {c: np.asarray(pw[eq.name].get(c, zero), float) for c in cats}
-            pred = np.sum(list(cw.values()), axis=0) if cw else zero
+            wheel = np.sum(list(cw.values()), axis=0) if cw else zero
+            pred = wheel if self.target == "wheel" else eq.chain.target_power(wheel, x.v, sig, bat)
             err = pred - meas
             ok = np.isfinite(err)
             sel = slice(None) if ok.all() else ok  # views when every prediction is finite
             e, mo, po, vo, dto = err[sel], meas[sel], pred[sel], v[sel], dt[sel]
             hv = mo >= HEAVY_LOAD_W
             cm = [cw[c][sel] for c in cats]
-            # Σ of the categories is the prediction (same sum, same order)
-            wgt = np.where(po > 0.0, dto, 0.0) if cats else np.zeros(len(e))
+            # Σ of the categories is the wheel power (same sum, same order): traction weights
+            wgt = np.where(wheel[sel] > 0.0, dto, 0.0) if cats else np.zeros(len(e))
             eref = rmin = rmax = None
             if self.reference is not None:
                 rp = pw[self.reference]
@@ -240,7 +293,8 @@ class CompareStats:
                 {"all": float(e.sum()), "light": float(el.sum()), "heavy": float(eh.sum())},
                 float(np.abs(e).sum()), Moments.of_columns([e] + cm), cmin, cmax,
                 eref, rmin, rmax, np.array([c @ wgt for c in cm]), hs, bins,
-                {str(t): tuple(float(s[i]) for s in sums) for i, t in enumerate(uniq)})
+                {str(t): tuple(float(s[i]) for s in sums) for i, t in enumerate(uniq)},
+                float(np.maximum(po, 0.0) @ dto), self._unknown(eq, sig, n, x.trip))
             self.eq[eq.name] = st if prev is None else prev.merge(st)
             cols[f"pred:{eq.name}"] = pred[enter]
             cols[f"ok:{eq.name}"] = ok[enter]
@@ -249,6 +303,34 @@ class CompareStats:
         key = key[enter]
         self.res = (_Reservoir(self.k, np.zeros(0), {}) if self.res is None else self.res).add(key, cols)
         return self
+
+    def _chain_inputs(self, m, x, idx, every: bool, n: int):
+        """(signals, hybrid battery power) a chain reads on a batch's usable samples: a
+        chain input the batch lacks is unknown (NaN) there, as in a log of several files
+        read at once; a column no batch had is refused at the end (:meth:`comparison`)."""
+        if self.target == "wheel":
+            return x.signals, None
+        sig = x.signals
+        self.seen |= set(sig)
+        need = {c for eq in self.equations for c in eq.chain.signals} - set(sig)
+        if need:
+            sig = {**sig, **{c: np.full(n, np.nan) for c in need}}
+        bat = None
+        if self.target == "fuel" and m.battery_w is not None:
+            bat = np.asarray(m.battery_w, float)
+            bat = bat if every else bat[idx]
+        return sig, bat
+
+    def _unknown(self, eq, sig: dict, n: int, trip) -> dict | None:
+        """A chain's inputs unknown on some of a batch's samples (sums of
+        :meth:`~sumo_drvpw.model.chain.EnergyChain.unknown_inputs`)."""
+        if self.target == "wheel":
+            return None
+        out = {}
+        for c, u in eq.chain.unknown_inputs(sig, n).items():
+            bad = ~np.isfinite(np.asarray(sig[c], float))
+            out[c] = [u["samples"], u["read_as"], [np.unique(np.asarray(trip)[bad])]]
+        return out
 
     def merge(self, o: "CompareStats") -> "CompareStats":
         """Add another CompareStats (e.g. a Dask partition's) to this one."""
@@ -268,6 +350,10 @@ class CompareStats:
         self.n_heavy += o.n_heavy
         self.n_high += o.n_high
         self.ref_cats = self.ref_cats if self.ref_cats is not None else o.ref_cats
+        from sumo_drvpw.data.measured import merge_sign_sums
+
+        self.sign = merge_sign_sums(self.sign, o.sign)
+        self.seen |= o.seen
         for name, b in o.eq.items():
             self.eq[name] = b if name not in self.eq else self.eq[name].merge(b)
         if o.res is not None:
@@ -285,6 +371,8 @@ class CompareStats:
 
             raise UserError(f"no usable sample among {self.counts.get('rows', 0)} rows (excluded: "
                             f"{exclusions(self.counts)}; any other row lacks a finite measured power or input)")
+        self._check_equations()
+        self._check_chain_inputs()
         order = np.argsort(self.res.key, kind="stable")
         r = {c: v[order] for c, v in self.res.cols.items()}
         comp = StreamedComparison(meas_w=r["meas"], speed_mps=r["v"], dt_s=r["dt"],
@@ -299,6 +387,8 @@ class CompareStats:
             total = float(sum(energy.values()))
             energy["total"] = total
             share = {c: (energy[c] / total if total > 0.0 else math.nan) for c in s.cats}
+            # the traction of what is compared: the terms' at the wheel, the chain's otherwise
+            trac = total if self.target == "wheel" else s.ptrac
             comp.results[eq.name] = EquationResult(
                 equation=eq, pred_w=r[f"pred:{eq.name}"],
                 category_w={c: r[f"cat:{eq.name}:{c}"] for c in s.cats},
@@ -306,11 +396,36 @@ class CompareStats:
                 high_speed=_high_speed(s, e, r["v"][ok]),
                 error_term_correlation=_corr(s.ecat, s.cats, s.cmin, s.cmax),
                 energy_j=energy, energy_share=share,
-                traction_energy_ratio=(total / self.meas_traction if self.meas_traction > 0.0
-                                       else math.nan), predicted_traction_j=total,
+                traction_energy_ratio=(trac / self.meas_traction if self.meas_traction > 0.0
+                                       else math.nan), predicted_traction_j=trac,
                 error_reference_correlation=(None if s.eref is None else
-                                             _corr(s.eref, self.ref_cats, s.rmin, s.rmax)))
+                                             _corr(s.eref, self.ref_cats, s.rmin, s.rmax)),
+                unknown_inputs=_unknown_doc(s.unknown))
         return comp
+
+    def _check_equations(self) -> None:
+        """With a battery or fuel target, every equation has a chain predicting it."""
+        if self.target == "wheel":
+            return
+        for eq in self.equations:
+            if eq.chain is None or eq.chain.predicts != self.target:
+                raise UserError(f"compare: equation '{eq.name}' ({eq.path or 'built in'}) has no energy "
+                                f"chain predicting '{self.target}' (it predicts '{eq.predicts}')")
+
+    def _check_chain_inputs(self) -> None:
+        """What the in-memory reader refuses on all samples: a chain input no log has, a
+        battery current whose sign is flipped (the test on the sums of every batch)."""
+        if self.target == "wheel":
+            return
+        for eq in self.equations:
+            for c in sorted(eq.chain.signals - self.seen):
+                raise UserError(f"energy chain needs the log column '{c}', which the data do not have "
+                                f"(available: {', '.join(sorted(self.seen)) or 'none'})")
+        if self.target == "battery":
+            from sumo_drvpw.data.measured import check_sign_sums
+
+            where = self.files[0] if len(self.files) == 1 else f"{len(self.files)} files"
+            check_sign_sums(where, self.source, self.sign)
 
 
 def _mean_rmse(n, s1, s2) -> tuple[float, float]:
