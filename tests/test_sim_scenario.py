@@ -515,3 +515,23 @@ def test_route_files_given_in_sumo_options_are_read_as_the_configs(tmp_path):
         assert set(v[v.equation == "bmw_i3_battery"].vtype) == {"ev"}
         assert set(v[v.equation == "epa_gasoline_car"].vtype) == {"petrol"}
         assert not res.summary["assumptions"]["sumo_masses"]
+
+
+@pytest.mark.parametrize("options", [["--route-files=ROU"], ["-r=ROU"], ["--routes", "ROU"],
+                                     ["--additional=ADD"], ["--additional-files=ADD"]])
+def test_route_and_additional_files_in_every_form_sumo_reads(tmp_path, options):
+    """SUMO takes `--route-files=F`, `-r=F` and the synonyms `--routes` / `--additional` as it
+    takes `-r F` (SUMO 1.28: each loads F, or fails on a missing F); the plug-in read only
+    the spaced long and short names, so these kept the config's city.rou.xml for the vTypes
+    (every car booked by every carrier's chain, SUMO's masses) while SUMO drove F's cars."""
+    (tmp_path / "mix.rou.xml").write_text(MIX_ROUTES)
+    (tmp_path / "mix.add.xml").write_text("<additional/>\n")
+    opts = [o.replace("ROU", str(tmp_path / "mix.rou.xml")).replace("ADD", str(tmp_path / "mix.add.xml"))
+            for o in options]
+    (tmp_path / "s.toml").write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
+                                     f'options = {opts!r}\n'.replace("'", '"'))
+    files = load_scenario(tmp_path / "s.toml").route_files
+    want = "mix.rou.xml" if "ROU" in options[-1] else "mix.add.xml"
+    assert (tmp_path / want).resolve() in files, files
+    if want == "mix.rou.xml":
+        assert not any(f.name == "city.rou.xml" for f in files), files

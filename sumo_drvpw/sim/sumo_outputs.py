@@ -240,16 +240,25 @@ def option_input_files(args: list, routes: list[Path], adds: list[Path]) -> list
     ``routes`` and ``adds`` as read from it): a later ``-r``/``--route-files`` replaces the
     route files, ``-a``/``--additional-files`` the additional files, as SUMO's command line
     overrides its config (paths relative to the working directory). Returns routes, then
-    additional files (a scenario's ``sumo.options`` then give the vTypes, stops and params)."""
+    additional files (a scenario's ``sumo.options`` then give the vTypes, stops and params).
+    SUMO's forms: ``-r F``, ``--route-files F``, ``--route-files=F`` (``-r=F``) and the
+    synonyms ``--routes`` and ``--additional``."""
     it = iter(args)
     for a in it:
-        if a in ("-r", "--route-files", "-a", "--additional-files"):
-            given = [Path(f.strip()).resolve() for f in str(next(it, "")).split(",") if f.strip()]
-            if a in ("-r", "--route-files"):
+        name, eq, value = str(a).partition("=") if str(a).startswith("-") else (a, "", "")
+        if name in ROUTE_OPTIONS + ADDITIONAL_OPTIONS:
+            given = [Path(f.strip()).resolve() for f in str(value if eq else next(it, "")).split(",")
+                     if f.strip()]
+            if name in ROUTE_OPTIONS:
                 routes = given
             else:
                 adds = given
     return [*routes, *adds]
+
+
+#: SUMO's names of its route-files and additional-files options (synonyms included)
+ROUTE_OPTIONS = ("-r", "--route-files", "--routes")
+ADDITIONAL_OPTIONS = ("-a", "--additional-files", "--additional")
 
 
 #: sumo_device.csv's columns
