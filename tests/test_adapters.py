@@ -699,3 +699,18 @@ def test_bmw_trips_in_sub_folders_find_the_overview_above_and_the_folder_says_wh
     (tmp_path / "other" / "overview.csv").write_text(ov.replace("TripZ01", "TripY01"))
     d, rep = read("bmw-i3-tum", write(other, "TripZ01.csv", trip))
     assert "season" not in d and any("no trip metadata" in n for n in rep["files"][0]["notes"])
+
+
+def test_bmw_trip_below_someone_elses_overview_csv_is_read(tmp_path):
+    """Only an overview above the trip that lists it is joined, so another data set's
+    overview.csv (no 'Trip' column) a few folders up is no reason to refuse the trip; it
+    was ("…/overview.csv: missing column 'Trip'"). One beside the trip is still checked."""
+    (tmp_path / "overview.csv").write_text("name,value\na,1\n")
+    (tmp_path / "tum" / "2019").mkdir(parents=True)
+    f = write(tmp_path / "tum" / "2019", "TripZ01.csv", BMW_HEADER + "0;36;500;10;390;-1\n0.1;37;500;10;390;-1\n")
+    d, rep = read("bmw-i3-tum", f)
+    assert len(d) == 2 and "season" not in d
+    assert any("no trip metadata" in n for n in rep["files"][0]["notes"])
+    (tmp_path / "tum" / "2019" / "overview.csv").write_text("name,value\na,1\n")
+    with pytest.raises(UserError, match="missing column 'Trip'"):
+        read("bmw-i3-tum", f)

@@ -100,3 +100,16 @@ def test_committed_heater_study_repeats_the_pipelines_own_folds():
             for t, err in proto[e]["pipeline"]["errors"].items():
                 if t not in flagged:
                     assert err == pytest.approx(none[t], abs=1e-12)
+
+
+def test_the_heater_study_uses_chain_i3s_public_helpers():
+    """chain_i3_heater reuses chain_i3's road-load fit and recuperation limit through public
+    names (it imported _road_load, _limit_w and _limited across modules)."""
+    import ast
+
+    import sumo_drvpw.validation.chain_i3_heater as mod
+
+    tree = ast.parse(Path(mod.__file__).read_text(encoding="utf-8"))
+    private = [a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and (n.module or "").startswith("sumo_drvpw")
+               for a in n.names if a.name.startswith("_")]
+    assert not private, private

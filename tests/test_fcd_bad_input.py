@@ -297,3 +297,18 @@ def test_a_file_without_timesteps_or_a_begin_after_its_end_is_refused(fcd, tmp_p
     _refused(capsys, tmp_path, ti, "ti.xml", "no timestep", extra=("--scenario", city))
     _refused(capsys, tmp_path, path, "fcd.xml", "no timestep", extra=("--scenario", city,
                                                                       "--begin", "5000"))
+
+
+def test_a_file_without_timesteps_is_refused_on_the_in_memory_path_too(fcd, tmp_path):
+    """`process_fcd(..., chunk_rows=None)` (the whole file read first, the reference path)
+    refuses a file without timesteps and a --begin after its end as the streamed path does;
+    it returned an empty result (0 steps, 0 vehicles) before."""
+    from sumo_drvpw.sim.fcd import process_fcd
+
+    path, _ = fcd
+    ti = tmp_path / "ti.xml"
+    ti.write_text('<tripinfos>\n    <tripinfo id="a" depart="0.00" routeLength="10.0"/>\n</tripinfos>\n')
+    city = REPO / "scenarios" / "city.sumocfg"
+    for f, kw in ((ti, {}), (path, {"begin_s": 5000})):
+        with pytest.raises(UserError, match="no timestep"):
+            process_fcd(f, scenario=city, equations=[PHYS], chunk_rows=None, **kw)

@@ -515,3 +515,55 @@ def test_route_files_given_in_sumo_options_are_read_as_the_configs(tmp_path):
         assert set(v[v.equation == "bmw_i3_battery"].vtype) == {"ev"}
         assert set(v[v.equation == "epa_gasoline_car"].vtype) == {"petrol"}
         assert not res.summary["assumptions"]["sumo_masses"]
+
+
+@pytest.mark.parametrize("options", [["--route-files=ROU"], ["-r=ROU"], ["--routes", "ROU"],
+                                     ["--additional=ADD"], ["--additional-files=ADD"]])
+def test_route_and_additional_files_in_every_form_sumo_reads(tmp_path, options):
+    """SUMO takes `--route-files=F`, `-r=F` and the synonyms `--routes` / `--additional` as it
+    takes `-r F` (SUMO 1.28: each loads F, or fails on a missing F); the plug-in read only
+    the spaced long and short names, so these kept the config's city.rou.xml for the vTypes
+    (every car booked by every carrier's chain, SUMO's masses) while SUMO drove F's cars."""
+    (tmp_path / "mix.rou.xml").write_text(MIX_ROUTES)
+    (tmp_path / "mix.add.xml").write_text("<additional/>\n")
+    opts = [o.replace("ROU", str(tmp_path / "mix.rou.xml")).replace("ADD", str(tmp_path / "mix.add.xml"))
+            for o in options]
+    (tmp_path / "s.toml").write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
+                                     f'options = {opts!r}\n'.replace("'", '"'))
+    files = load_scenario(tmp_path / "s.toml").route_files
+    want = "mix.rou.xml" if "ROU" in options[-1] else "mix.add.xml"
+    assert (tmp_path / want).resolve() in files, files
+    if want == "mix.rou.xml":
+        assert not any(f.name == "city.rou.xml" for f in files), files
+
+
+def test_additional_files_given_in_sumo_options_are_the_scenarios_additional_files(tmp_path):
+    """`[sumo] options = ["-a", F]` replaces the config's additional files on SUMO's command
+    line: ``Scenario.additional_files`` ("the additional files SUMO loads": the bus stops an
+    FCD replay's parked test reads, the outputs a run redirects) is F, not the config's
+    prius3.vtype.xml that SUMO no longer loads."""
+    add = tmp_path / "stops.add.xml"
+    add.write_text('<additional>\n    <edgeData id="d" file="ed.xml"/>\n</additional>\n')
+    (tmp_path / "s.toml").write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
+                                     f'options = ["-a", "{add}"]\n')
+    sc = load_scenario(tmp_path / "s.toml")
+    assert sc.additional_files == [add.resolve()]
+    assert [o.split(" → ")[-1] for o in sc.additional_outputs] == ["ed.xml"], sc.additional_outputs
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("form", ["-a", "--additional-files=", "--additional"])
+def test_outputs_of_additional_files_given_in_sumo_options_are_written_into_the_run(tmp_path, form):
+    """An additional file given in `[sumo] options` that declares an output: the run loads a
+    copy of it writing into OUT/sumo/ in place of the option, in each form SUMO reads (SUMO
+    refuses an option given twice: `--additional-files=F` beside the copies' `-a` did)."""
+    from sumo_drvpw.sim import run_scenario
+    add = tmp_path / "ed.add.xml"
+    add.write_text('<additional><edgeData id="e1" file="ed_out.xml"/></additional>\n')
+    files = f"{REPO / 'sumo_drvpw' / 'sim' / 'builtin' / 'scenarios' / 'prius3.vtype.xml'},{add}"
+    options = [form + files] if form.endswith("=") else [form, files]
+    (tmp_path / "s.toml").write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
+                                     f'options = {options!r}\n'.replace("'", '"'))
+    run_scenario(tmp_path / "s.toml", tmp_path / "out", end=30, figures=False)
+    assert (tmp_path / "out" / "sumo" / "ed_out.xml").is_file()
+    assert not (tmp_path / "ed_out.xml").exists()

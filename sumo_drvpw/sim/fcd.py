@@ -388,9 +388,10 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         steps = timesteps(parked.mark(iter_fcd_blocks(fcd_file, chunk_rows)), begin_s, keep,
                           fcd_file, replay_info)
         replay = FcdStream(steps, dt=dt, end_s=sc.end, label=fcd_file)
-        if keep is None and not replay._ahead:  # (SUMO writes every timestep; a Dask bucket may be empty)
-            raise UserError(f"FCD file {fcd_file}: no timestep (in the time asked for): not SUMO's "
-                            "FCD output (<timestep> elements, or rows with a time column)?")
+    if keep is None and not (replay._ahead if chunk_rows is not None else len(replay.times)):
+        # (SUMO writes every timestep; a Dask bucket may be empty)
+        raise UserError(f"FCD file {fcd_file}: no timestep (in the time asked for): not SUMO's "
+                        "FCD output (<timestep> elements, or rows with a time column)?")
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     replay.options = {"step-method.ballistic": str(method == "ballistic").lower()}

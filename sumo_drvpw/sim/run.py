@@ -21,7 +21,8 @@ from sumo_drvpw.sim.vtypes import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMI
                                    read_vtypes)
 from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, is_output_option, naming_leaves_folder,
                                          output_naming, prepare_output_folder,
-                                         redirect_additional_outputs, sumo_output_args, written_file)
+                                         redirect_additional_outputs, sumo_output_args, without_additional_files,
+                                         written_file)
 
 __all__ = ["run_scenario", "start_sumo", "close_sumo", "VTypeResolver"]
 
@@ -324,9 +325,8 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         sc.additional_files, sumo_dir, Path(copies.name))
     for f in [sumo_dir / n for names in moved.values() for n in names]:
         prepare_output_folder(f, naming)  # a prefix's folder part: SUMO does not create it
-    if add_args and "-a" in args:  # a scenario's sumo.additional: loaded as the copies
-        i = args.index("-a")
-        del args[i:i + 2]
+    if add_args:  # sumo.additional, or the -a / --additional=F of sumo.options: loaded as the copies
+        args = without_additional_files(args)
     args += add_args
     tmpdir, tripinfo = None, None
     if sc.sumo_device:  # SUMO's own model beside ours: its tripinfo, read after the run

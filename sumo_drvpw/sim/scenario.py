@@ -455,7 +455,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     if isinstance(opts, list):
         opts = [str(o) if isinstance(o, (int, float)) and not isinstance(o, bool) else o for o in opts]
     args += _strlist(opts, where, "sumo.options", '["--time-to-teleport", "120"]')
-    files = option_input_files(args, [f for f in files if f not in adds], adds)  # -r, -a override
+    files, adds = option_input_files(args, [f for f in files if f not in adds], adds)  # -r, -a override
     meso = cfgvals.get("mesosim", "false").strip().lower() in ("true", "1", "yes", "on", "x")
     src = f"SUMO config {cfg}" if meso else where
     if "--mesosim" in args:

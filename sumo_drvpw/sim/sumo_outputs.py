@@ -235,21 +235,46 @@ def written_file(path: Path, naming: dict[str, str]) -> Path:
     return path if not target.exists() and path.exists() else target
 
 
-def option_input_files(args: list, routes: list[Path], adds: list[Path]) -> list[Path]:
+def option_input_files(args: list, routes: list[Path], adds: list[Path]) -> tuple[list[Path], list[Path]]:
     """The route and additional files SUMO loads with the command line ``args`` (a config's
     ``routes`` and ``adds`` as read from it): a later ``-r``/``--route-files`` replaces the
     route files, ``-a``/``--additional-files`` the additional files, as SUMO's command line
-    overrides its config (paths relative to the working directory). Returns routes, then
-    additional files (a scenario's ``sumo.options`` then give the vTypes, stops and params)."""
+    overrides its config (paths relative to the working directory). Returns (routes, then
+    additional files; the additional files alone): a scenario's ``sumo.options`` then give
+    the vTypes, stops, params and the outputs additional files declare.
+    SUMO's forms: ``-r F``, ``--route-files F``, ``--route-files=F`` (``-r=F``) and the
+    synonyms ``--routes`` and ``--additional``."""
     it = iter(args)
     for a in it:
-        if a in ("-r", "--route-files", "-a", "--additional-files"):
-            given = [Path(f.strip()).resolve() for f in str(next(it, "")).split(",") if f.strip()]
-            if a in ("-r", "--route-files"):
+        name, eq, value = str(a).partition("=") if str(a).startswith("-") else (a, "", "")
+        if name in ROUTE_OPTIONS + ADDITIONAL_OPTIONS:
+            given = [Path(f.strip()).resolve() for f in str(value if eq else next(it, "")).split(",")
+                     if f.strip()]
+            if name in ROUTE_OPTIONS:
                 routes = given
             else:
                 adds = given
-    return [*routes, *adds]
+    return [*routes, *adds], adds
+
+
+def without_additional_files(args: list) -> list:
+    """``args`` without their additional files (``-a F``, ``--additional-files=F``, …: every
+    form of :data:`ADDITIONAL_OPTIONS`), for copies of those files to be given instead
+    (SUMO refuses an option given twice on its command line)."""
+    out, skip = [], False
+    for a in args:
+        if skip:
+            skip = False
+        elif str(a).startswith("-") and str(a).partition("=")[0] in ADDITIONAL_OPTIONS:
+            skip = "=" not in str(a)
+        else:
+            out.append(a)
+    return out
+
+
+#: SUMO's names of its route-files and additional-files options (synonyms included)
+ROUTE_OPTIONS = ("-r", "--route-files", "--routes")
+ADDITIONAL_OPTIONS = ("-a", "--additional-files", "--additional")
 
 
 #: sumo_device.csv's columns

@@ -53,7 +53,7 @@ I3_MEASUREMENT = Measurement(grade="fused", fusion_tau_s=60.0, air_density="alti
                              exclude_dropouts=True)
 
 
-def _road_load(x, y, use, terms, name):
+def fit_road_load(x, y, use, terms, name):
     """Least squares of ``terms``; refitted under fit.physical's constraints when implausible.
     Returns (Equation, free coefficients, constraint message or None)."""
     from sumo_drvpw.fit.ols import gram
@@ -110,9 +110,9 @@ def i3_study(data: Path) -> dict:
     for name, fold in folds.items():
         train = np.isin(trips, sorted(fold))
         use = mw.usable & grade_ok & train
-        eq, free, msg = _road_load(x, mw.power_w, use, I3_ROAD_TERMS, f"i3_fold{name}")
-        eq4, _, _ = _road_load(x, mw.power_w, use, I3_ROAD_TERMS[:4], f"i3_fold{name}_no_ambient")
-        eq_log, _, _ = _road_load(mw_logged.inputs, mw_logged.power_w, mw_logged.usable & train, I3_ROAD_TERMS[:4],
+        eq, free, msg = fit_road_load(x, mw.power_w, use, I3_ROAD_TERMS, f"i3_fold{name}")
+        eq4, _, _ = fit_road_load(x, mw.power_w, use, I3_ROAD_TERMS[:4], f"i3_fold{name}_no_ambient")
+        eq_log, _, _ = fit_road_load(mw_logged.inputs, mw_logged.power_w, mw_logged.usable & train, I3_ROAD_TERMS[:4],
                                   f"i3_fold{name}_as_logged")
         # the powertrain (motor shaft → battery) on the measured motor power, on trips whose
         # heater load is known; the logged loads enter with gain 1
@@ -123,7 +123,7 @@ def i3_study(data: Path) -> dict:
         # recuperated, from the equation's power against the motor's
         p_eq = eq.power(x)
         lim = profile_recuperation_limit(p_eq, mw.power_w, dt, mask=use)
-        chain = _limited(fit.chain, lim["recuperation_limit_w"])
+        chain = with_recuperation_limit(fit.chain, lim["recuperation_limit_w"])
         test = ~train
 
         def put(key, ch, p):
@@ -131,28 +131,28 @@ def i3_study(data: Path) -> dict:
 
         put("pipeline", chain, p_eq)
         put("no_limit", fit.chain, p_eq)
-        ch4 = _limited(fit.chain, _limit_w(eq4.power(x), mw.power_w, dt, use))
+        ch4 = with_recuperation_limit(fit.chain, fitted_recuperation_limit(eq4.power(x), mw.power_w, dt, use))
         put("no_ambient_term", ch4, eq4.power(x))
         # the temperature term in a form the SUMO plug-in evaluates (model/terms 'cold' =
         # 20 °C − T, 0 without a temperature): a drag ∝ v rising in the cold
-        eqc, _, _ = _road_load(x, mw.power_w, use, I3_ROAD_TERMS[:4] + ("cold*v^2",), f"i3_fold{name}_cold")
-        chc = _limited(fit.chain, _limit_w(eqc.power(x), mw.power_w, dt, use))
+        eqc, _, _ = fit_road_load(x, mw.power_w, use, I3_ROAD_TERMS[:4] + ("cold*v^2",), f"i3_fold{name}_cold")
+        chc = with_recuperation_limit(fit.chain, fitted_recuperation_limit(eqc.power(x), mw.power_w, dt, use))
         put("cold_form", chc, eqc.power(x))
-        chl = _limited(fit.chain, _limit_w(eq_log.power(mw_logged.inputs), mw_logged.power_w, dt,
-                                           mw_logged.usable & train))
+        chl = with_recuperation_limit(fit.chain, fitted_recuperation_limit(
+            eq_log.power(mw_logged.inputs), mw_logged.power_w, dt, mw_logged.usable & train))
         pred["as_logged"][test] = chl.evaluate(eq_log.power(mw_logged.inputs), x.v, signals=sig)["power_w"][test]
-        chf = _limited(fit_free.chain, chain.recuperation_limit_w)
+        chf = with_recuperation_limit(fit_free.chain, chain.recuperation_limit_w)
         put("loads_free", chf, p_eq)
         fit_sym = calibrate_on(mb, loads=loads, mask=train & logged, p_drive_w=mw.power_w,
                                fixed=dict(gain1, recuperation_efficiency=fit.chain.traction_efficiency),
                                limit=None)
-        chs = _limited(fit_sym.chain, chain.recuperation_limit_w)
+        chs = with_recuperation_limit(fit_sym.chain, chain.recuperation_limit_w)
         put("symmetric_efficiency", chs, p_eq)
         put("chain_only", fit.chain, mw.power_w)
         # η_t, η_r as tables over |P| (fit/chain_map.py), same loads and limit
         fit_map = calibrate_on(mb, loads=loads, mask=train & logged, p_drive_w=mw.power_w,
                                fixed=gain1, limit=None, efficiency="power")
-        chm = _limited(fit_map.chain, chain.recuperation_limit_w)
+        chm = with_recuperation_limit(fit_map.chain, chain.recuperation_limit_w)
         put("efficiency_map", chm, p_eq)
         put("chain_only_map", fit_map.chain, mw.power_w)
         params = params_of(fit)
@@ -296,9 +296,9 @@ def i3_sumo_equation(x, mw, mb, grade_ok, dt, ids, rate=None):
     fitted. Nothing is held out here: its held-out quality is the 5-fold's ``hvac_only``
     variant. Returns (Equation, summary dict for the report)."""
     use = mw.usable & grade_ok
-    eq, free, msg = _road_load(x, mw.power_w, use, I3_ROAD_TERMS[:4] + ("cold*v^2",), "bmw_i3_battery")
+    eq, free, msg = fit_road_load(x, mw.power_w, use, I3_ROAD_TERMS[:4] + ("cold*v^2",), "bmw_i3_battery")
     fit = sumo_study_chain(mb, mw, np.ones(mw.power_w.size, bool), rate)
-    chain = _limited(fit.chain, _limit_w(eq.power(x), mw.power_w, dt, use))
+    chain = with_recuperation_limit(fit.chain, fitted_recuperation_limit(eq.power(x), mw.power_w, dt, use))
     chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     chain.provenance = {"method": "sumo_drvpw/validation/chain_i3.py i3_sumo_equation",
                         "data": "TUM BMW i3, all trips", "trips": len(ids),
@@ -368,15 +368,15 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k, rate
         test = np.isin(trips, ids[j::k])
         train = ~test
         use = mw.usable & grade_ok & train
-        eq, _, _ = _road_load(x, mw.power_w, use, I3_ROAD_TERMS, f"i3_kfold{j}")
+        eq, _, _ = fit_road_load(x, mw.power_w, use, I3_ROAD_TERMS, f"i3_kfold{j}")
         p_eq = eq.power(x)
-        lim = _limit_w(p_eq, mw.power_w, dt, use)
+        lim = fitted_recuperation_limit(p_eq, mw.power_w, dt, use)
         sel = select_efficiency(mb, mw, loads, gain1, trips, train & logged, dt)
         choices.append(sel)
         for kind, a, b in (("constant", "pipeline", "chain_only"), ("power", "efficiency_map", "chain_only_map")):
             fit = calibrate_on(mb, loads=loads, mask=train & logged, p_drive_w=mw.power_w, fixed=gain1,
                                limit=None, efficiency=kind)
-            ch = _limited(fit.chain, lim)
+            ch = with_recuperation_limit(fit.chain, lim)
             pred[a][test] = ch.evaluate(p_eq, x.v, signals=sig)["power_w"][test]
             pred[b][test] = fit.chain.evaluate(mw.power_w, x.v, signals=sig)["power_w"][test]
             if kind == sel["choice"]:
@@ -385,7 +385,7 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k, rate
         # temperature instead (I3_HVAC), fitted on every training trip (the measured battery
         # power holds whatever the heater drew, logged or not)
         fit_h = sumo_study_chain(mb, mw, train)
-        ch = _limited(fit_h.chain, lim)
+        ch = with_recuperation_limit(fit_h.chain, lim)
         pred["hvac_only"][test] = ch.evaluate(p_eq, x.v, signals=sig)["power_w"][test]
         hvac_fits.append({k: p["value"] for k, p in fit_h.parameters.items()})
         # with the cabin's warm-up at a cold start (fitted beside the steady heating on the
@@ -395,7 +395,7 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k, rate
         # ("all_cold", a SUMO study's cold_start = true)
         if rates is not None:
             fit_w = sumo_study_chain(mb, mw, train, rates["cabin"])
-            ch = _limited(fit_w.chain, lim)
+            ch = with_recuperation_limit(fit_w.chain, lim)
             w = fit_w.chain.hvac.get("warmup_j_per_k", 0.0)
             base = ch.evaluate(p_eq, x.v, signals=sig)["power_w"][test]
             pred["hvac_warmup"][test] = base + w * rates["cabin"][test]
@@ -418,7 +418,7 @@ def _i3_kfold(x, mw, mb, grade_ok, logged, trips, dt, ids, loads, gain1, k, rate
     return out
 
 
-def _limit_w(p_eq, p_meas, dt, mask):
+def fitted_recuperation_limit(p_eq, p_meas, dt, mask):
     """The recuperation limit [W] profiled from an equation's power against the measured
     motor power (fit.chain.profile_recuperation_limit); None when none is kept."""
     from sumo_drvpw.fit.chain import profile_recuperation_limit
@@ -426,7 +426,7 @@ def _limit_w(p_eq, p_meas, dt, mask):
     return profile_recuperation_limit(p_eq, p_meas, dt, mask=mask)["recuperation_limit_w"]
 
 
-def _limited(chain, limit_w):
+def with_recuperation_limit(chain, limit_w):
     """A copy of ``chain`` with its recuperation limit [W] (None: no limit)."""
     import copy
 
@@ -446,9 +446,9 @@ def _pipeline_all_trips(x, mw, mb, grade_ok, logged, dt, loads, gain1, name="bmw
     from sumo_drvpw.fit.chain import calibrate_on
 
     use = mw.usable & grade_ok
-    eq, free, msg = _road_load(x, mw.power_w, use, I3_ROAD_TERMS, name)
+    eq, free, msg = fit_road_load(x, mw.power_w, use, I3_ROAD_TERMS, name)
     fit = calibrate_on(mb, loads=loads, mask=logged, p_drive_w=mw.power_w, fixed=gain1, limit=None)
-    eq.chain = _limited(fit.chain, _limit_w(eq.power(x), mw.power_w, dt, use))
+    eq.chain = with_recuperation_limit(fit.chain, fitted_recuperation_limit(eq.power(x), mw.power_w, dt, use))
     eq.provenance = {"road_load_free": free, "road_load_constrained": msg}
     return eq, fit
 

@@ -102,7 +102,8 @@ def heater_study(df, x, mw, mb, grade_ok, logged, trips, dt, ids) -> dict:
     """The heater estimators on held-out trips without V·I (module docstring): 2-fold and
     trip-grouped 5-fold battery energy per trip, the chain alone and the pipeline."""
     from sumo_drvpw.fit.chain import calibrate_on
-    from sumo_drvpw.validation.chain_i3 import I3_KFOLD, I3_LOADS, I3_ROAD_TERMS, _limit_w, _limited, _road_load
+    from sumo_drvpw.validation.chain_i3 import (I3_KFOLD, I3_LOADS, I3_ROAD_TERMS, fit_road_load,
+                                                fitted_recuperation_limit, with_recuperation_limit)
 
     cols = {"can": df["heater_power_w"].to_numpy(float), "req": df["heater_power_requested_w"].to_numpy(float),
             "hx": df["heat_exchanger_temperature_c"].to_numpy(float), "air": df["ambient_c"].to_numpy(float),
@@ -119,11 +120,11 @@ def heater_study(df, x, mw, mb, grade_ok, logged, trips, dt, ids) -> dict:
             test = np.isin(trips, held)
             train = ~test
             use = mw.usable & grade_ok & train
-            eq, _, _ = _road_load(x, mw.power_w, use, I3_ROAD_TERMS, "i3_heater")
+            eq, _, _ = fit_road_load(x, mw.power_w, use, I3_ROAD_TERMS, "i3_heater")
             p_eq = eq.power(x)
             fit = calibrate_on(mb, loads=list(I3_LOADS), mask=train & logged, p_drive_w=mw.power_w,
                                fixed=gain1, limit=None)
-            ch = _limited(fit.chain, _limit_w(p_eq, mw.power_w, dt, use))
+            ch = with_recuperation_limit(fit.chain, fitted_recuperation_limit(p_eq, mw.power_w, dt, use))
             for e in HEATER_ESTIMATORS:
                 h, prm = heater_estimate(e, cols, train & logged)
                 params[e].append(prm)

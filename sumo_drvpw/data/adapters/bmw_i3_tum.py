@@ -257,7 +257,12 @@ def read(paths) -> tuple[list[pd.DataFrame], list[dict], list[str]]:
         folder = f.parent.resolve()
         for d in [folder, *folder.parents][:OVERVIEW_LEVELS_UP + 1]:
             if d not in overviews:
-                overviews[d] = read_overview(d)
+                try:
+                    overviews[d] = read_overview(d)
+                except UserError:  # an overview.csv above that is not the TUM one: not this trip's
+                    if d == folder:
+                        raise
+                    overviews[d] = None
             if overviews[d] is not None and (d == folder or f.stem in overviews[d].index):
                 break
         else:
