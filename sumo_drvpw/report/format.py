@@ -61,3 +61,30 @@ def coef(x, sig: int = 4) -> str:
     if f is None:
         return MISSING
     return f"{f:.{sig}g}".replace("-", "−")
+
+
+# ------------------------------------------------ partial trips (fit/trip_energy.py)
+
+def _share(x) -> str:
+    return "–" if x is None else f"{100 * x:.0f} %"
+
+
+def partial_trip_flag(entry: dict) -> str:
+    """A trip table's flag for a partial trip (``partial`` in its per-trip energy entry):
+    its left-out shares of time and measured traction energy; "" when not partial."""
+    if not entry.get("partial"):
+        return ""
+    return (f"partial: {_share(entry.get('left_out_time_share'))} of time, "
+            f"{_share(entry.get('left_out_energy_share'))} of measured energy left out")
+
+
+def partial_trip_lines(trip_doc: dict | None) -> list[str]:
+    """One line naming the trips whose per-trip energies are partial (more than
+    ``partial_trip_share`` of their time or measured energy on left-out samples), if any."""
+    if not trip_doc or not trip_doc.get("partial_trips"):
+        return []
+    trips = trip_doc["trips"]
+    parts = [f"{t} ({partial_trip_flag(trips[t])[len('partial: '):]})" for t in trip_doc["partial_trips"]]
+    return [f"**Partial trips**: more than {100 * trip_doc['partial_trip_share']:.0f} % of the time or "
+            f"measured energy of {len(parts)} trip(s) lies on left-out samples, so their per-trip "
+            f"energies (`trip_energy`, `trip_net_energy`) cover only the rest: {'; '.join(parts)}."]

@@ -12,6 +12,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.calibrate import CANDIDATES
 from sumo_drvpw.fit.physical import physical_calibration
 from sumo_drvpw.fit.compare import metrics as _metrics
+from sumo_drvpw.fit.trip_energy import left_out_by_trip
 from sumo_drvpw.fit.diagnose.blocks import BlockModel
 from sumo_drvpw.fit.diagnose.candidates import (Candidate, check_include, generate_candidates, screen_signals,
                                                signal_split)
@@ -187,6 +188,7 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
                     n_usable=int(usable.sum()), skipped=skipped, sig=sig, n_candidates=len(cands),
                     n_trips=n_trips, dropped=dropped,
                     roles={k: roles[k] for k in sig if k in roles},
+                    left_out=left_out_by_trip(y_all, ana, dt_all, trip_all),
                     extra={"not_replicated": rejected, "timing": lag_note,
                            "structural": structural_notes}), declared_eq, held)
 
