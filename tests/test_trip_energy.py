@@ -137,12 +137,13 @@ def test_compare_report_flags_a_trip_that_lost_samples(tmp_path, engine):
     assert "**Partial trips**" in md and "a (30 % of time" in md
 
 
-def test_diagnose_trace_flags_a_trip_that_lost_samples(tmp_path):
+@pytest.mark.parametrize("stream", ["no", "yes"])
+def test_diagnose_trace_flags_a_trip_that_lost_samples(tmp_path, stream):
     from sumo_drvpw.cli import main as cli_main
 
     f = _log_with_a_gap(tmp_path)
     out = tmp_path / "dg"
-    assert cli_main(["diagnose", str(f), "--out", str(out)]) == 0
+    assert cli_main(["diagnose", str(f), "--stream", stream, "--out", str(out)]) == 0
     doc = json.loads((out / "trace.json").read_text())
     for key in ("baseline", "final"):
         te = doc[key]["trip_energy"]

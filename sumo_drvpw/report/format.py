@@ -71,11 +71,13 @@ def _share(x) -> str:
 
 def partial_trip_flag(entry: dict) -> str:
     """A trip table's flag for a partial trip (``partial`` in its per-trip energy entry):
-    its left-out shares of time and measured traction energy; "" when not partial."""
+    its left-out shares of time, measured traction and net energy; "" when not partial."""
     if not entry.get("partial"):
         return ""
+    net = entry.get("left_out_net_energy_share")
     return (f"partial: {_share(entry.get('left_out_time_share'))} of time, "
-            f"{_share(entry.get('left_out_energy_share'))} of measured energy left out")
+            f"{_share(entry.get('left_out_energy_share'))} of measured traction energy"
+            + (f", {_share(net)} of net energy" if net is not None and net == net else "") + " left out")
 
 
 def partial_trip_lines(trip_doc: dict | None) -> list[str]:

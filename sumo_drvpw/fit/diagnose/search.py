@@ -142,6 +142,9 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
             "coefficients, not fitted")
         decl_vals = decl_vals[:, [j for j, t in enumerate(declared) if t not in held]]
         declared = equation.term_names
+    # what each trip lost to samples outside the analysis, on the power as logged (the streamed
+    # tracer sees the same; a lag correction's few seconds at trip ends are not counted)
+    left_out = left_out_by_trip(y_all, ana, dt_all, trip_all)
     # timing (measurement side): a power–speed lag is corrected in the data before the search
     timing_finding, lag_note = None, None
     if opt.structural and opt.max_lag_s > 0:
@@ -188,7 +191,7 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
                     n_usable=int(usable.sum()), skipped=skipped, sig=sig, n_candidates=len(cands),
                     n_trips=n_trips, dropped=dropped,
                     roles={k: roles[k] for k in sig if k in roles},
-                    left_out=left_out_by_trip(y_all, ana, dt_all, trip_all),
+                    left_out=left_out,
                     extra={"not_replicated": rejected, "timing": lag_note,
                            "structural": structural_notes}), declared_eq, held)
 
