@@ -118,7 +118,8 @@ def markdown(res, figs) -> str:
     for rd in d["rounds"]:
         L.append(f"Round {rd['round']}: {rd['candidates_scored']} candidates scored; "
                  f"{'added' if rd['accepted'] else 'nothing added'} (best `{rd['best']}`, gain "
-                 f"{100 * rd['rmse_gain']:.2f} %, p·m = {rd['p_value_bonferroni']:.3g}).")
+                 f"{100 * rd['rmse_gain']:.2f} %, p·m = {rd['p_value_bonferroni']:.3g})."
+                 + (f" Stopped: {rd['stop_reason']}." if rd.get("stop_reason") else ""))
         L += ["", "| candidate | RMSE gain % | p (Bonferroni) |", "|---|---|---|"]
         for t in rd["top"][:6]:
             L.append(f"| `{t['term']}` | {100 * t['rmse_gain']:.2f} | {t['p_value_bonferroni']:.3g} |")
