@@ -94,8 +94,22 @@ def test_left_out_shares_by_trip_hand_computed():
     assert b["left_out_power_unknown_samples"] == 1
     doc = trip_energy(meas[used], meas[used], dt[used], np.array(["a"] * 3 + ["b"]))
     out = with_left_out(doc, left)
-    assert out["partial_trips"] == ["a", "b"]  # a: 50 % of energy; b: 50 % of time
+    # a: 50 % of its energy; b: 50 % of its time with no measured power, energy unknown
+    assert out["partial_trips"] == ["a", "b"]
+    assert b["left_out_power_unknown_time_share"] == pytest.approx(0.5)
     assert out["trips"]["a"]["measured_j"] == pytest.approx(20.0)  # still the used samples (10 + 10)
+
+
+def test_left_out_time_without_energy_is_not_partial():
+    """Standstill left out (a tracer's minimum speed): time, but no measured energy lost."""
+    from sumo_drvpw.fit.trip_energy import left_out_by_trip, with_left_out
+
+    meas = np.array([0.0, 0.0, 0.0, 5000.0, 6000.0])  # 3 s standing, power measured: 0 W
+    used = np.array([False, False, False, True, True])
+    left = left_out_by_trip(meas, used, 1.0, None)
+    assert left["0"]["left_out_time_share"] == pytest.approx(0.6)
+    doc = with_left_out(trip_energy(meas[used], meas[used], 1.0, None), left)
+    assert doc["partial_trips"] == [] and doc["trips"]["0"]["partial"] is False
 
 
 def _log_with_a_gap(tmp_path):

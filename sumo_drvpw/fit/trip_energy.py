@@ -120,7 +120,7 @@ def left_out_by_trip(meas_w, used, dt_s, trip) -> dict:
     -------
     ``{TRIP: {"samples", "left_out_samples", "left_out_sample_share",
     "left_out_time_share", "left_out_energy_share", "left_out_net_energy_share",
-    "left_out_power_unknown_samples"}}``: shares of the trip's samples, of its time
+    "left_out_power_unknown_samples", "left_out_power_unknown_time_share"}}``: shares of the trip's samples, of its time
     Σ Δt, of its measured traction energy Σ max(P, 0)·Δt and of its measured net energy
     Σ P·Δt that fall on left-out samples. The energy shares count the samples whose
     measured power is known (finite); left-out samples without it are counted in
@@ -150,6 +150,7 @@ def left_out_by_trip(meas_w, used, dt_s, trip) -> dict:
     e_all, e_out = s(pos), s(pos, out)
     q_all, q_out = s(net), s(net, out)
     unknown = s(np.ones(n), out & ~fin)
+    t_unknown = s(dt, out & ~fin)
     with np.errstate(divide="ignore", invalid="ignore"):
         docs = {}
         for i, t in enumerate(names):
@@ -159,16 +160,21 @@ def left_out_by_trip(meas_w, used, dt_s, trip) -> dict:
                 "left_out_time_share": float(t_out[i] / t_all[i]) if t_all[i] > 0 else math.nan,
                 "left_out_energy_share": float(e_out[i] / e_all[i]) if e_all[i] > 0 else math.nan,
                 "left_out_net_energy_share": float(q_out[i] / q_all[i]) if q_all[i] > 0 else math.nan,
-                "left_out_power_unknown_samples": int(unknown[i])}
+                "left_out_power_unknown_samples": int(unknown[i]),
+                "left_out_power_unknown_time_share": float(t_unknown[i] / t_all[i]) if t_all[i] > 0 else math.nan}
     return docs
 
 
 def partial_share(left: dict | None, net: bool = False) -> float:
-    """The largest of a trip's left-out time and traction-energy shares (``net``: and of
-    its net-energy share); 0 when none is known."""
+    """How partial a trip's energy is: the largest of its left-out traction-energy share
+    (``net``: and net-energy share) and the time share of left-out samples whose power is
+    not measured (their energy unknown); 0 when none is known. Left-out time with a
+    measured power counts through its energy only: a tracer's standstill samples are
+    left out but carry no driving energy."""
     if not left:
         return 0.0
-    keys = ("left_out_time_share", "left_out_energy_share") + (("left_out_net_energy_share",) if net else ())
+    keys = ("left_out_power_unknown_time_share", "left_out_energy_share") + (
+        ("left_out_net_energy_share",) if net else ())
     xs = [left.get(k) for k in keys]
     xs = [x for x in xs if x is not None and math.isfinite(x)]
     return max(xs, default=0.0)

@@ -80,7 +80,7 @@ def markdown(res, figs) -> str:
             L.append(f"| {t} | {v['measured_j'] / 3.6e6:.3f} | {_pct(e0)} | {_pct(e1)} | {partial_trip_flag(v)} |")
         L.append(f"| mean abs. / worst abs. | | {_pct(tb['mean_abs_error'], '')} / {_pct(tb['max_abs_error'], '')} | "
                  f"{_pct(tf['mean_abs_error'], '')} / {_pct(tf['max_abs_error'], '')} | |")
-        L += [""] + partial_trip_lines(tb)
+        L += ([""] + partial_trip_lines(tb)) if partial_trip_lines(tb) else []
     L += ["", "## Findings", ""]
     if not r["findings"]:
         L.append("None: no candidate improved the held-out error significantly. The declared terms "

@@ -74,19 +74,21 @@ def partial_trip_flag(entry: dict) -> str:
     its left-out shares of time, measured traction and net energy; "" when not partial."""
     if not entry.get("partial"):
         return ""
-    net = entry.get("left_out_net_energy_share")
+    net, unknown = entry.get("left_out_net_energy_share"), entry.get("left_out_power_unknown_time_share")
     return (f"partial: {_share(entry.get('left_out_time_share'))} of time, "
             f"{_share(entry.get('left_out_energy_share'))} of measured traction energy"
-            + (f", {_share(net)} of net energy" if net is not None and net == net else "") + " left out")
+            + (f", {_share(net)} of net energy" if net is not None and net == net else "") + " left out"
+            + (f" (power not measured on {_share(unknown)} of the time)" if unknown else ""))
 
 
 def partial_trip_lines(trip_doc: dict | None) -> list[str]:
     """One line naming the trips whose per-trip energies are partial (more than
-    ``partial_trip_share`` of their time or measured energy on left-out samples), if any."""
+    ``partial_trip_share`` of their measured energy, or of their time without a measured
+    power, on left-out samples: fit/trip_energy.py ``partial_share``), if any."""
     if not trip_doc or not trip_doc.get("partial_trips"):
         return []
     trips = trip_doc["trips"]
     parts = [f"{t} ({partial_trip_flag(trips[t])[len('partial: '):]})" for t in trip_doc["partial_trips"]]
-    return [f"**Partial trips**: more than {100 * trip_doc['partial_trip_share']:.0f} % of the time or "
-            f"measured energy of {len(parts)} trip(s) lies on left-out samples, so their per-trip "
-            f"energies (`trip_energy`, `trip_net_energy`) cover only the rest: {'; '.join(parts)}."]
+    return [f"**Partial trips**: more than {100 * trip_doc['partial_trip_share']:.0f} % of the measured energy "
+            f"(or of the time without a measured power) of {len(parts)} trip(s) lies on left-out samples, so "
+            f"their per-trip energies (`trip_energy`, `trip_net_energy`) cover only the rest: {'; '.join(parts)}."]
