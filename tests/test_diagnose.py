@@ -157,7 +157,9 @@ def test_block_validation_single_trip_and_report_files(tmp_path):
     assert set(doc["baseline"]) == {"terms", "coefficients", "metrics", "trip_energy", "trip_net_energy",
                                     "physical", "implausible"}
     te = doc["final"]["trip_energy"]
-    assert set(te) == {"mean_abs_error", "max_abs_error", "trips"} and len(te["trips"]) == 1
+    # (partial_trips, partial_trip_share and each trip's left_out_* keys added 2026-11-27)
+    assert set(te) == {"mean_abs_error", "max_abs_error", "trips", "partial_trips", "partial_trip_share"}
+    assert len(te["trips"]) == 1
     # the A/C load found: the held-out traction energy moves towards the measured one
     assert te["max_abs_error"] <= doc["baseline"]["trip_energy"]["max_abs_error"]
     assert set(doc["baseline"]["metrics"]) == {"rmse_w", "mae_w", "r2", "r2_light", "r2_heavy", "bias_w"}

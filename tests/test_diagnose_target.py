@@ -125,6 +125,13 @@ def test_nothing_planted_nothing_found(clean):
     res = trace_chain(m, _declared(b))
     assert res.report["findings"] == []
     assert res.equation.chain == b.chain() and res.equation.terms == _declared(b).terms
+    # the stop says which test the best candidates failed, in the report and trace.md
+    stop = res.report["rounds"][-1]["stop_reason"]
+    assert "not significant in the held-out block test" in stop or "below the minimum gain" in stop
+    from sumo_drvpw.report.chain_trace import markdown
+
+    assert f"Search stopped in round 1 (best `{res.report['rounds'][-1]['best']}`" in markdown(res.report)
+    assert stop + "." in markdown(res.report)
 
 
 def test_missing_grade_is_found_through_the_chain(clean):

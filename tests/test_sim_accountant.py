@@ -177,6 +177,40 @@ def test_persons_of_a_redeclared_default_pedestrian_type_are_pedestrians(tmp_pat
     assert set(res.vehicles.vclass) == {"passenger"} and len(res.vehicles) == 3
 
 
+def test_out_of_range_counts_the_driving_power_a_chain_was_fitted_on(tmp_path):
+    """A chain's fitted driving-power range ([chain.provenance] power_range_w, written by
+    calibrate --target): vehicle-steps whose driving power leaves it are counted with the
+    speed and acceleration ranges, shown in summary.json and warned about when many."""
+    from sumo_drvpw.model.chain import EnergyChain
+
+    mixed = "\n".join(ln for ln in MIXED.splitlines() if "<person" not in ln)
+    (tmp_path / "r.rou.xml").write_text(mixed.replace(
+        'from="c00c10" to="c34c44"', 'route="r"').replace(
+        '<flow id="c"', '<route id="r" edges="e01 e12 e23"/>\n  <flow id="c"').replace(
+        'period="10"', 'period="10" departSpeed="max"'), encoding="utf-8")
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["x"]\n[sumo]\nnet = "{NETS / "highway.net.xml"}"\n'
+        'routes = ["r.rou.xml"]\nend = 60\noptions = ["--no-warnings", "true"]\n'
+        '[vehicles]\nvtypes = ["car"]\n[outputs]\nfigures = false\nedgedata = false\n',
+        encoding="utf-8")
+
+    def chained(name, p_range):
+        return Equation(name, {"roll": 0.01}, chain=EnergyChain(
+            predicts="battery", provenance={"power_range_w": p_range, "speed_range_mps": [0.0, 60.0],
+                                            "warnings": ["energy chain x = 1: IMPLAUSIBLE"] * (name == "low")}))
+
+    # rolling power 0.01·m·g·v of a car at motorway speed: kilowatts, above 500 W
+    low, wide = chained("low", [-500.0, 500.0]), chained("wide", [-1e6, 1e6])
+    res = run_scenario(tmp_path / "s.toml", None, equations=[low, wide])
+    assert res["equations"]["low"]["out_of_range_samples"] > 0.5 * res["samples"]
+    assert res["equations"]["low"]["power_range_w"] == [-500.0, 500.0]
+    assert res["equations"]["wide"]["out_of_range_samples"] == 0
+    assert any(w.startswith("low: ") and "fitted on" in w for w in res["warnings"])
+    assert not any(w.startswith("wide: ") for w in res["warnings"])
+    # what the chain's calibration said is repeated where the run is read
+    assert "low: its chain's calibration warned: energy chain x = 1: IMPLAUSIBLE" in res["warnings"]
+
+
 def test_out_of_range_vehicle_steps_counted(tmp_path):
     """An equation's recorded validity range: vehicle-steps outside it are counted."""
     mixed = "\n".join(ln for ln in MIXED.splitlines() if "<person" not in ln)

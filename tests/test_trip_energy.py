@@ -70,3 +70,98 @@ def test_report_json_carries_trip_energy_only_when_trips_known():
     assert "trip_energy" not in compare(meas, x, [eq], dt_s=0.5).to_json()["equations"]["aero_only"]
     x.trip = trip  # the inputs carry the trips: used by default
     assert "trip_energy" in compare(meas, x, [eq], dt_s=0.5).to_json()["equations"]["aero_only"]
+
+
+# ------------------------------------------------- trips that lost samples (left out)
+
+def test_left_out_shares_by_trip_hand_computed():
+    from sumo_drvpw.fit.trip_energy import left_out_by_trip, with_left_out
+
+    # trip a: 4 samples of 1 s, P = 10, 10, 20, -5 W; the 20-W one is left out
+    #   -> 1/4 of samples and time, 20/40 of traction energy, 20/35 of net energy
+    # trip b: 2 samples of 2 s, the one left out has no measured power (NaN)
+    meas = np.array([10.0, 10.0, 20.0, -5.0, 8.0, np.nan])
+    used = np.array([True, True, False, True, True, False])
+    dt = np.array([1.0, 1.0, 1.0, 1.0, 2.0, 2.0])
+    left = left_out_by_trip(meas, used, dt, np.array(["a"] * 4 + ["b"] * 2))
+    a, b = left["a"], left["b"]
+    assert (a["samples"], a["left_out_samples"]) == (4, 1)
+    assert a["left_out_time_share"] == pytest.approx(0.25)
+    assert a["left_out_energy_share"] == pytest.approx(0.5)
+    assert a["left_out_net_energy_share"] == pytest.approx(20.0 / 35.0)
+    assert b["left_out_time_share"] == pytest.approx(0.5)
+    assert b["left_out_energy_share"] == pytest.approx(0.0)  # known power: none left out
+    assert b["left_out_power_unknown_samples"] == 1
+    doc = trip_energy(meas[used], meas[used], dt[used], np.array(["a"] * 3 + ["b"]))
+    out = with_left_out(doc, left)
+    # a: 50 % of its energy; b: 50 % of its time with no measured power, energy unknown
+    assert out["partial_trips"] == ["a", "b"]
+    assert b["left_out_power_unknown_time_share"] == pytest.approx(0.5)
+    assert out["trips"]["a"]["measured_j"] == pytest.approx(20.0)  # still the used samples (10 + 10)
+
+
+def test_left_out_time_without_energy_is_not_partial():
+    """Standstill left out (a tracer's minimum speed): time, but no measured energy lost."""
+    from sumo_drvpw.fit.trip_energy import left_out_by_trip, with_left_out
+
+    meas = np.array([0.0, 0.0, 0.0, 5000.0, 6000.0])  # 3 s standing, power measured: 0 W
+    used = np.array([False, False, False, True, True])
+    left = left_out_by_trip(meas, used, 1.0, None)
+    assert left["0"]["left_out_time_share"] == pytest.approx(0.6)
+    doc = with_left_out(trip_energy(meas[used], meas[used], 1.0, None), left)
+    assert doc["partial_trips"] == [] and doc["trips"]["0"]["partial"] is False
+
+
+def _log_with_a_gap(tmp_path):
+    """Two 200-s trips at 1 Hz with logged power; trip a has 60 s flagged (brake),
+    which the reader leaves out: 30 % of its time and (constant power) of its energy."""
+    import pandas as pd
+
+    rows = []
+    for trip in ("a", "b"):
+        t = np.arange(200.0)
+        v = 10.0 + 5.0 * np.sin(t / 15.0)
+        brake = (t >= 50) & (t < 110) if trip == "a" else np.zeros(200, bool)
+        rows.append(pd.DataFrame({"trip_id": trip, "time_s": t, "speed_mps": v,
+                                  "power_w": 8000.0 + 300.0 * v, "mass_kg": 1500.0, "brake": brake}))
+    f = tmp_path / "gap.csv"
+    pd.concat(rows).to_csv(f, index=False)
+    return f
+
+
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_compare_report_flags_a_trip_that_lost_samples(tmp_path, engine):
+    from sumo_drvpw.cli import main as cli_main
+
+    f = _log_with_a_gap(tmp_path)
+    out = tmp_path / "cmp"
+    assert cli_main(["compare", str(f), "--equation", "drvpw_prius3", "--engine", engine,
+                     "--out", str(out)]) == 0
+    doc = json.loads((out / "report.json").read_text())
+    for key in ("trip_energy", "trip_net_energy"):
+        te = doc["equations"]["drvpw_prius3"][key]
+        a, b = te["trips"]["a"], te["trips"]["b"]
+        assert a["left_out_samples"] == 60 and b["left_out_samples"] == 0
+        assert a["left_out_time_share"] == pytest.approx(0.3, abs=0.01)
+        assert 0.2 < a["left_out_energy_share"] < 0.4
+        assert (a["partial"], b["partial"]) == (True, False)
+        assert te["partial_trips"] == ["a"]
+        assert {"measured_j", "predicted_j", "error"} <= set(a)  # the old keys stay
+    md = (out / "report.md").read_text()
+    assert "**Partial trips**" in md and "a (30 % of time" in md
+
+
+@pytest.mark.parametrize("stream", ["no", "yes"])
+def test_diagnose_trace_flags_a_trip_that_lost_samples(tmp_path, stream):
+    from sumo_drvpw.cli import main as cli_main
+
+    f = _log_with_a_gap(tmp_path)
+    out = tmp_path / "dg"
+    assert cli_main(["diagnose", str(f), "--stream", stream, "--out", str(out)]) == 0
+    doc = json.loads((out / "trace.json").read_text())
+    for key in ("baseline", "final"):
+        te = doc[key]["trip_energy"]
+        assert te["partial_trips"] == ["a"]
+        assert te["trips"]["a"]["left_out_time_share"] == pytest.approx(0.3, abs=0.01)
+    rows = [ln for ln in (out / "trace.md").read_text().splitlines() if ln.startswith("| a |")]
+    assert rows and "partial: 30 % of time" in rows[0]

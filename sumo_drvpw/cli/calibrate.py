@@ -371,6 +371,8 @@ def main_chain(args) -> int:
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     declare_measurement(eq, ro.measurement)
     print(fit.summary())
+    for w in fit.warnings:  # implausible or unidentified parameters (fit/chain_checks.py)
+        print(f"warning: {w}")
     if args.report:
         with output_set(args, args.report, inputs) as tmp:
             from sumo_drvpw.report.comparison import write_comparison_report

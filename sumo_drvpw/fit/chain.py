@@ -67,6 +67,8 @@ class ChainFit:
     profile: list = field(default_factory=list)
     #: samples left out because a declared load or the HVAC temperature is unknown (NaN) there
     unknown_input_samples: int = 0
+    #: parameters read as implausible or not identified (fit/chain_checks.py)
+    warnings: list = field(default_factory=list)
 
     def summary(self) -> str:
         lines = [f"energy chain ({self.chain.predicts}): n={self.n}  R²={self.r2:.4f}  "
@@ -79,7 +81,10 @@ class ChainFit:
             se = p.get("std_err")
             se_s = "at bound" if p.get("at_bound") else (f"± {se:.4g}" if se is not None else "")
             lines.append(f"  {k:<28} {p['value']:>12.5g} {se_s:<14} {p.get('reading', '')}")
-        return "\n".join(lines)
+        from sumo_drvpw.fit.chain_checks import range_note
+
+        note = range_note(self.chain.provenance)
+        return "\n".join(lines + ([f"  {note}"] if note else []))
 
 
 def _col(signals: dict, name: str, n: int, known: np.ndarray | None = None) -> np.ndarray:
@@ -504,16 +509,21 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     use = m.usable if mask is None else (m.usable & mask)
     sig = m.inputs.signals
     _check_chain_inputs(m, use, loads, p)
+    from sumo_drvpw.fit.chain_checks import check_chain
+
     if m.target == "fuel":
         fuel = m.vehicle.powertrain.get("fuel", "gasoline") if m.vehicle is not None else "gasoline"
         cut = getattr(getattr(equation, "chain", None), "fuel_cut_below_w", None)  # declared: kept
-        return calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads,
-                              mask=use, engine_off=engine_off, fuel=fuel, fuel_cut_below_w=cut)
-    if m.target != "battery":
+        fit = calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads,
+                             mask=use, engine_off=engine_off, fuel=fuel, fuel_cut_below_w=cut)
+    elif m.target != "battery":
         raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
-    return calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
-                             mask=use, limit=limit, fixed=fixed, efficiency=efficiency,
-                             warmup_rate=warmup_rate)
+    else:
+        fit = calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
+                                mask=use, limit=limit, fixed=fixed, efficiency=efficiency,
+                                warmup_rate=warmup_rate)
+    check_chain(fit, m.vehicle, p, m.inputs.v, use)  # plausibility, fitted range
+    return fit
 
 
 def _check_chain_inputs(m, use: np.ndarray, loads, p_drive=None) -> None:

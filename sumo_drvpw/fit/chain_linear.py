@@ -71,7 +71,7 @@ import numpy as np
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import chain_target
 from sumo_drvpw.fit.compare import metrics as _metrics, trip_net_energy
-from sumo_drvpw.fit.diagnose.options import check_validation
+from sumo_drvpw.fit.diagnose.options import check_validation, stop_reason
 from sumo_drvpw.model.chain import EnergyChain
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.equations import Equation
@@ -371,10 +371,11 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
         top = [{"effect": c.name, "energy_gain": g, "rmse_gain": _gain(sse_cur, s),
                 "p_value_bonferroni": min(1.0, paired_test(e_cur ** 2 - e ** 2) * m_scored)}
                for g, c, s, e in scored[:10]]
-        added = None
+        added, tried = None, []  # tried: (effect, test failed, value) for the stop line
         for gain, c, sse_c, e_c in scored[:5]:
             p_adj = min(1.0, paired_test(e_cur ** 2 - e_c ** 2) * m_scored)
             if not (p_adj < opt.alpha and gain >= opt.min_gain):
+                tried.append((c.name, "gain", gain) if gain < opt.min_gain else (c.name, "significance", p_adj))
                 break  # (not the wheel tracer's rule: the chain's noise leaves a ~36 W standing bias a
                 # next candidate would pass the test on, tests/test_diagnose_target.py)
             helped, n_tr, per_trip = _replication(bl, trip, trip_names, e_cur, e_c)
@@ -382,6 +383,7 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
                 rejected.append({"effect": c.name, "round": rnd + 1, "rmse_gain": gain, "p_value_bonferroni": p_adj,
                                  "reason": f"did not replicate: lowered the held-out error on {helped} of {n_tr} trips"})
                 in_model.add(c.name)
+                tried.append((c.name, "rejected", rejected[-1]["reason"]))
                 continue
             # full-data fit of the model with the candidate (variant chosen on all samples)
             vi = best_variant(w, Zcur, r - fixed, c)
@@ -398,6 +400,7 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
                                  "reason": reading})
                 in_model.add(c.name)
                 say(f"round {rnd + 1}: {c.name} passes the block test but {reading}")
+                tried.append((c.name, "rejected", f"passes the block test but {reading}"))
                 continue
             free_coef = (None if var[1] is None else   # what a free coefficient on the fixed column reads
                          float(_full_fit(w, np.column_stack([Zcur, var[1]]), r - fixed)[0][-1]))
@@ -425,9 +428,10 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
         best = scored[0]
         rounds.append({"round": rnd + 1, "candidates_scored": m_scored, "best": best[1].name,
                        "energy_gain": best[0], "accepted": added is not None,
-                       "added": added.name if added else None, "top": top})
+                       "added": added.name if added else None, "top": top,
+                       **({} if added else {"stop_reason": stop_reason(tried, len(trip_names), m_scored, opt)})})
         say(f"round {rnd + 1}: {m_scored} candidates, best {best[1].name} block-energy gain {100 * best[0]:.2f} % → "
-            f"{'added ' + added.name if added else 'stop'}")
+            + (f"added {added.name}" if added else f"stop: {rounds[-1]['stop_reason']}"))
         if added is None:
             break
         in_model.add(added.name)

@@ -35,6 +35,8 @@ from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.errors import UserError, first_bad_row
 from sumo_drvpw.fileio import plain
 from sumo_drvpw.fit.ols import dense_gram
+# energy per trip lives in fit/trip_energy.py; imported here, where other modules find it
+from sumo_drvpw.fit.trip_energy import _dt_array, trip_energy, trip_net_energy, with_left_out
 from sumo_drvpw.model.terms import CATEGORIES, Inputs
 
 #: Width of the speed bins of Fig. 8 [m/s] (10 km/h).
@@ -272,80 +274,6 @@ def energy_shares(category_w: dict[str, np.ndarray], dt_s) -> tuple[dict, dict]:
     return energy, share
 
 
-# ------------------------------------------------------------------ energy per trip
-
-def _trip_energy(pred_w, meas_w, dt_s, trip, net: bool) -> dict:
-    pred = np.asarray(pred_w, dtype=float).ravel()
-    meas = np.asarray(meas_w, dtype=float).ravel()
-    n = meas.size
-    if pred.shape != meas.shape:
-        raise UserError(f"trip energy: predicted power has {pred.size} samples, measured "
-                        f"power {n}")
-    dt = _dt_array(dt_s, n)
-    tr = np.asarray(trip).ravel() if trip is not None else np.zeros(n, dtype=np.int64)
-    if tr.shape != (n,):
-        raise UserError(f"trip energy: trip has {tr.size} values for {n} samples")
-    ok = np.isfinite(pred) & np.isfinite(meas)
-    if net:
-        pm, mm = np.where(ok, pred, 0.0), np.where(ok, meas, 0.0)
-    else:
-        pm = np.where(ok & (pred > 0.0), pred, 0.0)
-        mm = np.where(ok & (meas > 0.0), meas, 0.0)
-    codes, names = _codes(tr)
-    k = len(names)
-    e_meas = np.bincount(codes, weights=mm * dt, minlength=k)
-    e_pred = np.bincount(codes, weights=pm * dt, minlength=k)
-    return trip_energy_doc(names, e_meas, e_pred)
-
-
-def trip_energy_doc(names, e_meas, e_pred) -> dict:
-    """The per-trip energy document from per-trip sums [J]: error = predicted/measured − 1
-    (NaN where nothing was measured), mean and max |error| over the finite ones."""
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        err = np.where(e_meas != 0.0, e_pred / e_meas - 1.0, np.nan)
-    trips = {str(t): {"measured_j": float(em), "predicted_j": float(ep), "error": float(er)}
-             for t, em, ep, er in zip(names, e_meas, e_pred, err)}
-    fin = np.abs(err[np.isfinite(err)])
-    return {"mean_abs_error": float(fin.mean()) if fin.size else math.nan,
-            "max_abs_error": float(fin.max()) if fin.size else math.nan,
-            "trips": trips}
-
-
-def _codes(trip: np.ndarray) -> tuple[np.ndarray, list]:
-    """Integer code per sample and the trip names in order of first appearance."""
-    import pandas as pd
-
-    codes, uniques = pd.factorize(pd.Series(trip), sort=False)
-    return codes.astype(np.int64), list(uniques)
-
-
-def trip_energy(pred_w, meas_w, dt_s, trip) -> dict:
-    """Traction energy per trip, predicted against measured (issue #11 §5).
-
-    Parameters
-    ----------
-    pred_w : predicted driving power per sample [W]
-    meas_w : measured driving power per sample [W]
-    dt_s : duration of each sample [s] (array or scalar; None: 1 s each)
-    trip : trip id per sample (None: one trip)
-
-    Returns
-    -------
-    ``{"mean_abs_error", "max_abs_error", "trips": {TRIP: {"measured_j", "predicted_j",
-    "error"}}}`` with E = Σ max(P, 0)·Δt over the trip's samples [J], computed separately
-    for measured and predicted power, and error = E_pred/E_meas − 1 (NaN when the trip has
-    no measured traction; left out of the mean and max). Samples with a non-finite value
-    count as zero power.
-    """
-    return _trip_energy(pred_w, meas_w, dt_s, trip, net=False)
-
-
-def trip_net_energy(pred_w, meas_w, dt_s, trip) -> dict:
-    """Net energy per trip, E = Σ P·Δt (traction minus recuperation) [J]; else as
-    :func:`trip_energy` (error = E_pred/E_meas − 1, NaN when E_meas = 0)."""
-    return _trip_energy(pred_w, meas_w, dt_s, trip, net=True)
-
-
 # -------------------------------------------------------------------- comparison
 
 @dataclass
@@ -394,6 +322,9 @@ class Comparison:
         correlated with (``error_reference_correlation``), or None
     trip : trip id per sample, or None; when given, ``to_json`` reports energy per trip
         (``trip_energy``, ``trip_net_energy``) for each equation
+    left_out : per trip, what it lost to samples left out before the comparison
+        (:func:`sumo_drvpw.fit.trip_energy.left_out_by_trip`), or None; added to each
+        trip's entry of the per-trip energies (``left_out_*``, ``partial``)
     """
 
     meas_w: np.ndarray
@@ -403,6 +334,7 @@ class Comparison:
     measured_traction_energy_j: float = math.nan
     reference: str | None = None
     trip: np.ndarray | None = None
+    left_out: dict | None = None
 
     @property
     def n_samples(self) -> int:  # number of samples compared
@@ -441,8 +373,10 @@ class Comparison:
                      predicted_traction_energy_j=r.predicted_traction_j,
                      traction_energy_ratio=r.traction_energy_ratio)
             if self.trip is not None:
-                d["trip_energy"] = trip_energy(r.pred_w, self.meas_w, self.dt_s, self.trip)
-                d["trip_net_energy"] = trip_net_energy(r.pred_w, self.meas_w, self.dt_s, self.trip)
+                d["trip_energy"] = with_left_out(trip_energy(r.pred_w, self.meas_w, self.dt_s, self.trip),
+                                                 self.left_out, net=False)
+                d["trip_net_energy"] = with_left_out(trip_net_energy(r.pred_w, self.meas_w, self.dt_s,
+                                                                     self.trip), self.left_out, net=True)
             eqs[name] = d
         return plain({
             "equations": eqs,
@@ -463,21 +397,6 @@ class Comparison:
                 "r2": "centred: 1 - SSE/SST",
             },
         })
-
-
-def _dt_array(dt_s, n: int) -> np.ndarray:
-    if dt_s is None:
-        return np.ones(n)
-    dt = np.asarray(dt_s, dtype=float)
-    if dt.ndim == 0:
-        dt = np.full(n, float(dt))
-    if dt.shape != (n,):
-        raise UserError(f"compare: dt_s has {dt.size} values for {n} samples")
-    bad = ~np.isfinite(dt) | (dt < 0.0)
-    if bad.any():
-        raise UserError(f"compare: dt_s must be finite and ≥ 0 s; {first_bad_row(bad)} "
-                        f"has {dt[bad][0]!r}")
-    return dt
 
 
 def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,

@@ -24,6 +24,7 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.ols import Gram
+from sumo_drvpw.fit.trip_energy import left_out_by_trip, with_left_out
 from sumo_drvpw.fit.stream import Moments, _add_counts, _trip_codes, trip_twice
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS
 from sumo_drvpw.model.terms import CATEGORIES, parse_term
@@ -176,6 +177,7 @@ class CompareStats:
         self.res: _Reservoir | None = None
         self.counts: dict = {}
         self.trips: dict = {}  # trip → the file(s) of the batch it came in
+        self.left_out: dict = {}  # trip → its left-out samples (fit/trip_energy.py)
         self.source: str | None = None
         self.vehicle = None
         self.files: list = []
@@ -209,6 +211,8 @@ class CompareStats:
         usable = np.asarray(m.usable, bool)
         every = bool(usable.all())
         idx = np.flatnonzero(usable)
+        self.left_out.update(left_out_by_trip(m.power_w, usable, m.log.df["dt_s"].to_numpy(float),
+                                              m.inputs.trip))
         if len(idx) == 0:
             return self
         x = m.inputs if every else m.inputs.take(idx)
@@ -338,6 +342,7 @@ class CompareStats:
         if dup:
             raise trip_twice(dup[0], self.trips[dup[0]], o.trips[dup[0]])
         self.trips.update(o.trips)
+        self.left_out.update(o.left_out)
         self.n += o.n
         self.rows += o.rows
         self.counts = _add_counts(self.counts, o.counts)
@@ -553,8 +558,9 @@ def _streamed_comparison_class():
             for name, d in doc["equations"].items():
                 if trips:
                     s = st.eq[name]
-                    d["trip_energy"] = _jsonable(_trip_block(s.trip_e, net=False))
-                    d["trip_net_energy"] = _jsonable(_trip_block(s.trip_e, net=True))
+                    d["trip_energy"] = _jsonable(with_left_out(_trip_block(s.trip_e, net=False), st.left_out))
+                    d["trip_net_energy"] = _jsonable(with_left_out(_trip_block(s.trip_e, net=True),
+                                                                   st.left_out, net=True))
             doc["n_samples"] = st.n
             doc["measured"] = _jsonable({
                 "traction_energy_j": st.meas_traction,

@@ -142,6 +142,30 @@ class Equation:
         ``powertrain_output``) without a chain, else the chain's target."""
         return self.terms_predict if self.chain is None else self.chain.predicts
 
+    def validity(self) -> tuple:
+        """(speed [m/s], acceleration [m/s²], driving power [W]) ranges of the data behind
+        the equation, each (min, max) or None: its own speed and acceleration ranges, and
+        what its energy chain was fitted on (``[chain.provenance]`` ``speed_range_mps``,
+        ``power_range_w``; fit/chain_checks.py), the speed range the narrower of the two."""
+        prov = getattr(self.chain, "provenance", None) or {}
+        got = {}
+        for key in ("speed_range_mps", "power_range_w"):
+            r = prov.get(key)
+            if r is None:
+                continue
+            try:
+                lo, hi = (float(x) for x in r)
+            except (TypeError, ValueError):
+                lo = hi = math.nan
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+                raise UserError(f"equation '{self.name}' ({self.path or 'built in'}): [chain.provenance] {key} "
+                                f"must be [min, max], got {r!r}")
+            got[key] = (lo, hi)
+        v, c = self.speed_range_mps, got.get("speed_range_mps")
+        if v is not None and c is not None:
+            v = (max(v[0], c[0]), min(v[1], c[1]))
+        return (v if v is not None else c), self.accel_range_mps2, got.get("power_range_w")
+
     def __post_init__(self):
         if not self.terms:
             raise UserError(f"equation '{self.name}' has no terms")

@@ -63,6 +63,10 @@ def markdown(r: dict) -> str:
                      f"{'–' if f['parameter'] is None else coef(f['parameter'], 4)} | {f['reading']} | "
                      f"{100 * f['energy_gain']:.1f} % | {coef(f['p_value'], 2)} | {_pct(f['energy_share'])} | "
                      f"{rep['helped_trips']} of {rep['trips']} |")
+    stop = next((x for x in r.get("rounds", []) if x.get("stop_reason")), None)
+    if stop is not None:
+        L += ["", f"Search stopped in round {stop['round']} (best `{stop['best']}`, block-energy gain "
+                  f"{100 * stop['energy_gain']:.1f} %): {stop['stop_reason']}."]
     if r["not_replicated"]:
         L += ["", "Passed the block test but not kept:", ""]
         L += [f"- `{x['effect']}` (round {x['round']}): {x['reason']}" for x in r["not_replicated"]]

@@ -12,7 +12,7 @@ from sumo_drvpw.report import figures as plots
 from sumo_drvpw.fit.compare import Comparison
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
 from sumo_drvpw.fileio import write_json, write_text
-from sumo_drvpw.report.format import KW as _KW, KWH as _KWH, coef, num
+from sumo_drvpw.report.format import KW as _KW, KWH as _KWH, coef, num, partial_trip_lines
 
 #: Figure file name → (plot function, caption).
 FIGURES = {
@@ -121,6 +121,8 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
         lines.append(f"Weakest at heavy load: **{nmw}** (R² = {num(r2w, 3)}).")
     for nm, d in eqs.items():
         lines += [x + "." for x in unknown_input_lines(nm, d.get("chain_unknown_inputs"), n)]
+    first = next(iter(eqs.values()), {})
+    lines += partial_trip_lines(first.get("trip_energy"))
     lines.append("")
 
     lines += ["## Goodness of fit (cf. paper Table 3)", "",

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sumo_drvpw.report.format import coef
+from sumo_drvpw.report.format import coef, partial_trip_flag, partial_trip_lines
 
 
 def write_outputs(res, out, figures: bool = True) -> None:
@@ -74,12 +74,13 @@ def markdown(res, figs) -> str:
     tb, tf = r["baseline"].get("trip_energy"), r["final"].get("trip_energy")
     if tb and tf:
         L += ["", "## Traction energy per trip (held-out predictions; predicted/measured − 1)", "",
-              "| trip | measured [kWh] | baseline | final |", "|---|---|---|---|"]
+              "| trip | measured [kWh] | baseline | final | left out |", "|---|---|---|---|---|"]
         for t, v in tb["trips"].items():
             e0, e1 = v["error"], tf["trips"][t]["error"]
-            L.append(f"| {t} | {v['measured_j'] / 3.6e6:.3f} | {_pct(e0)} | {_pct(e1)} |")
+            L.append(f"| {t} | {v['measured_j'] / 3.6e6:.3f} | {_pct(e0)} | {_pct(e1)} | {partial_trip_flag(v)} |")
         L.append(f"| mean abs. / worst abs. | | {_pct(tb['mean_abs_error'], '')} / {_pct(tb['max_abs_error'], '')} | "
-                 f"{_pct(tf['mean_abs_error'], '')} / {_pct(tf['max_abs_error'], '')} |")
+                 f"{_pct(tf['mean_abs_error'], '')} / {_pct(tf['max_abs_error'], '')} | |")
+        L += ([""] + partial_trip_lines(tb)) if partial_trip_lines(tb) else []
     L += ["", "## Findings", ""]
     if not r["findings"]:
         L.append("None: no candidate improved the held-out error significantly. The declared terms "
@@ -117,7 +118,8 @@ def markdown(res, figs) -> str:
     for rd in d["rounds"]:
         L.append(f"Round {rd['round']}: {rd['candidates_scored']} candidates scored; "
                  f"{'added' if rd['accepted'] else 'nothing added'} (best `{rd['best']}`, gain "
-                 f"{100 * rd['rmse_gain']:.2f} %, p·m = {rd['p_value_bonferroni']:.3g}).")
+                 f"{100 * rd['rmse_gain']:.2f} %, p·m = {rd['p_value_bonferroni']:.3g})."
+                 + (f" Stopped: {rd['stop_reason']}." if rd.get("stop_reason") else ""))
         L += ["", "| candidate | RMSE gain % | p (Bonferroni) |", "|---|---|---|"]
         for t in rd["top"][:6]:
             L.append(f"| `{t['term']}` | {100 * t['rmse_gain']:.2f} | {t['p_value_bonferroni']:.3g} |")

@@ -61,3 +61,34 @@ def coef(x, sig: int = 4) -> str:
     if f is None:
         return MISSING
     return f"{f:.{sig}g}".replace("-", "−")
+
+
+# ------------------------------------------------ partial trips (fit/trip_energy.py)
+
+def _share(x) -> str:
+    return "–" if x is None else f"{100 * x:.0f} %"
+
+
+def partial_trip_flag(entry: dict) -> str:
+    """A trip table's flag for a partial trip (``partial`` in its per-trip energy entry):
+    its left-out shares of time, measured traction and net energy; "" when not partial."""
+    if not entry.get("partial"):
+        return ""
+    net, unknown = entry.get("left_out_net_energy_share"), entry.get("left_out_power_unknown_time_share")
+    return (f"partial: {_share(entry.get('left_out_time_share'))} of time, "
+            f"{_share(entry.get('left_out_energy_share'))} of measured traction energy"
+            + (f", {_share(net)} of net energy" if net is not None and net == net else "") + " left out"
+            + (f" (power not measured on {_share(unknown)} of the time)" if unknown else ""))
+
+
+def partial_trip_lines(trip_doc: dict | None) -> list[str]:
+    """One line naming the trips whose per-trip energies are partial (more than
+    ``partial_trip_share`` of their measured energy, or of their time without a measured
+    power, on left-out samples: fit/trip_energy.py ``partial_share``), if any."""
+    if not trip_doc or not trip_doc.get("partial_trips"):
+        return []
+    trips = trip_doc["trips"]
+    parts = [f"{t} ({partial_trip_flag(trips[t])[len('partial: '):]})" for t in trip_doc["partial_trips"]]
+    return [f"**Partial trips**: more than {100 * trip_doc['partial_trip_share']:.0f} % of the measured energy "
+            f"(or of the time without a measured power) of {len(parts)} trip(s) lies on left-out samples, so "
+            f"their per-trip energies (`trip_energy`, `trip_net_energy`) cover only the rest: {'; '.join(parts)}."]

@@ -49,6 +49,9 @@ try:  # traci and libsumo accept only subclasses of traci.StepListener as listen
 except ImportError:  # pragma: no cover - traci ships with every SUMO Python install
     _Listener = object
 
+#: share of a run's vehicle-steps outside the range an equation's chain was fitted on
+#: (driving power, speed; Equation.validity) above which the run warns
+OUT_OF_RANGE_WARN = 0.05
 #: How a step is booked (summary.json ``energy_booking``; docs/scenario.md).
 ENERGY_BOOKING = ("acc term: coefficient × m·v̄·a with v̄ = (v_t + v_t−1)/2, i.e. the "
                   "kinetic-energy change ½m(v_t² − v_t−1²)/Δt, conserved at any step "
@@ -367,6 +370,19 @@ class Accountant(_Listener):
                 "speed_range_mps": list(eq.speed_range_mps) if eq.speed_range_mps else None,
                 "accel_range_mps2": list(eq.accel_range_mps2) if eq.accel_range_mps2 else None,
                 "out_of_range_samples": int(led.out_of_range[e])})
+            for w in (getattr(eq.chain, "provenance", None) or {}).get("warnings", []):
+                summary["warnings"].append(f"{eq.name}: its chain's calibration warned: {w}")
+            vr, _, pr = eq.validity()  # a chain's fitted driving power (and speed) range
+            if pr is not None:
+                summary["equations"][eq.name].update(power_range_w=list(pr),
+                                                     speed_range_mps=list(vr) if vr else None)
+                speed = f" or speed {vr[0] * 3.6:.0f} … {vr[1] * 3.6:.0f} km/h" if vr else ""
+                share = led.out_of_range[e] / max(summary.get("samples") or 0, 1)
+                if share > OUT_OF_RANGE_WARN:
+                    summary["warnings"].append(
+                        f"{eq.name}: {share:.0%} of the vehicle-steps drove outside the driving power "
+                        f"{pr[0] / 1000:.1f} … {pr[1] / 1000:.1f} kW{speed} (or acceleration) its energy chain was fitted on: its battery or fuel there is "
+                        "extrapolated (summary.json out_of_range_samples)")
         # chains that booked nobody because every vType they were made for writes another
         # carrier (SUMO's defaults choosing among the plug-in's own chains is no news)
         idle = [e.name for e in self.equations

@@ -166,11 +166,10 @@ class Stepper:
             # only a different edge or position is a disagreement; lanes -1, -2 belong to none
             self.lane_own = np.append(net.lane_own_edge, [-1, -1])
         self.every_equation_applies = True  # to every vehicle accounted so far
-        #: (equation number, speed range [m/s] or None, acceleration range [m/s²] or None)
-        self.ranges = [(k, e.speed_range_mps, e.accel_range_mps2)
-                       for k, e in enumerate(eqset.equations)
-                       if getattr(e, "speed_range_mps", None) is not None
-                       or getattr(e, "accel_range_mps2", None) is not None]
+        #: (equation number, speed [m/s], acceleration [m/s²], driving power [W] range or None;
+        #: the power range that of the equation's chain fit: Equation.validity)
+        self.ranges = [(k, *r) for k, r in ((k, e.validity() if hasattr(e, "validity") else (None,) * 3)
+                                            for k, e in enumerate(eqset.equations)) if any(x is not None for x in r)]
         self.first = True
         self.prev_ids, self.prev_sel = None, None
         #: simulation time of the last booked step [s]; steps skipped (a
@@ -510,12 +509,15 @@ class Stepper:
         x = Inputs(v, a, theta, wind, mass, np.full(m, physics.rho), sig, v_acc=v_mean)
         pc = self.eqset.category_powers(x, None if self.every_equation_applies
                                         else ledger.veh_app[vidx])
-        for k, vr, ar in self.ranges:  # vehicle-steps outside an equation's validity range
+        for k, vr, ar, pr in self.ranges:  # vehicle-steps outside an equation's validity range
             out = np.zeros(m, bool)
             if vr is not None:
                 out |= (v < vr[0]) | (v > vr[1])
             if ar is not None:
                 out |= (a < ar[0]) | (a > ar[1])
+            if pr is not None:  # the driving power its chain was fitted on
+                pk = pc[:, k].sum(axis=1)
+                out |= (pk < pr[0]) | (pk > pr[1])
             if not self.every_equation_applies:
                 out &= ledger.veh_app[vidx, k] > 0
             ledger.out_of_range[k] += int(np.count_nonzero(out))

@@ -67,3 +67,32 @@ def check_validation(opt) -> None:
         raise UserError(f"diagnose option folds must be ≥ 2, got {opt.folds}")
     if not 0 < opt.alpha < 1:
         raise UserError(f"diagnose option alpha must be between 0 and 1, got {opt.alpha}")
+
+
+#: trips a finding must replicate on (lower the held-out error on more than half of them)
+#: before replication is tested; with fewer, the held-out block test is the only one
+MIN_REPLICATION_TRIPS = 3
+
+
+def stop_reason(tried: list, n_trips: int, m: int, opt) -> str:
+    """Why a search round added nothing, for its stop line and trace: the candidates tried
+    (``tried``: (name, test failed, value), best held-out gain first; tests ``significance``
+    with the Bonferroni p over ``m`` candidates, ``gain`` with the held-out RMSE gain, or
+    ``rejected`` with the replication or plausibility reason) grouped by the test they failed
+    and, with fewer than :data:`MIN_REPLICATION_TRIPS` trips, that replication on held-out
+    trips could not be tested."""
+    parts = []
+    sig = [(t, v) for t, k, v in tried if k == "significance"]
+    if sig:
+        parts.append(f"not significant in the held-out block test (Bonferroni over {m} candidates, "
+                     f"α = {opt.alpha:g}): " + ", ".join(f"{t} p = {v:.3g}" for t, v in sig))
+    parts += [f"{t} {v}" for t, k, v in tried if k == "rejected"]
+    low = [(t, v) for t, k, v in tried if k == "gain"]
+    if low:
+        parts.append(f"below the minimum gain {100 * opt.min_gain:g} %: "
+                     + ", ".join(f"{t} {100 * v:.2f} %" for t, v in low))
+    why = "; ".join(parts) or "no candidate was tried"
+    if n_trips < MIN_REPLICATION_TRIPS:
+        why += (f"; replication on held-out trips not tested ({n_trips} trip(s), it needs "
+                f"{MIN_REPLICATION_TRIPS})")
+    return why

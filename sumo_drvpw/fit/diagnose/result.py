@@ -70,8 +70,12 @@ def _measurement(log, lag_s: float):
 def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrated: bool, opt,
              findings, rounds, ev0, base_coefs, plot, n_rows: int, n_usable: int,
              skipped, sig, n_candidates: int, n_trips: int, dropped, roles=None,
-             extra=None) -> DiagnoseResult:
-    """Final fit, report (``trace.json`` shape), details and the traced equation."""
+             extra=None, left_out=None) -> DiagnoseResult:
+    """Final fit, report (``trace.json`` shape), details and the traced equation.
+    ``left_out``: what each trip lost to samples outside the analysis
+    (:func:`sumo_drvpw.fit.trip_energy.left_out_by_trip`), added to the per-trip energies."""
+    from sumo_drvpw.fit.trip_energy import with_left_out
+
     log = measured.log
     n = tr.n
     final_fold = tr.fold_of(False)
@@ -115,8 +119,8 @@ def assemble(*, tr: BlockModel, measured, equation: Equation, declared, calibrat
         report[key]["implausible"] = implausible(reading)
     # energy per trip of the held-out predictions, before and after (issue #11 §5)
     for key, ev in (("baseline", ev0), ("final", ev_final)):
-        report[key]["trip_energy"] = ev["trip_energy"]
-        report[key]["trip_net_energy"] = ev["trip_net_energy"]
+        report[key]["trip_energy"] = with_left_out(ev["trip_energy"], left_out)
+        report[key]["trip_net_energy"] = with_left_out(ev["trip_net_energy"], left_out, net=True)
     details = {"declared_equation": equation.name, "calibrated_on_the_spot": calibrated,
                "samples": {"rows": n_rows, "usable": n_usable, "analysis": n,
                            "trips": n_trips, "blocks": tr.n_blocks},

@@ -12,10 +12,11 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.calibrate import CANDIDATES
 from sumo_drvpw.fit.physical import physical_calibration
 from sumo_drvpw.fit.compare import metrics as _metrics
+from sumo_drvpw.fit.trip_energy import left_out_by_trip
 from sumo_drvpw.fit.diagnose.blocks import BlockModel
 from sumo_drvpw.fit.diagnose.candidates import (Candidate, check_include, generate_candidates, screen_signals,
                                                signal_split)
-from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
+from sumo_drvpw.fit.diagnose.options import MIN_REPLICATION_TRIPS, DiagnoseOptions, stop_reason
 from sumo_drvpw.fit.diagnose.structural import (lag_range, per_trip_lags, shift_within_trips,
                                                 structural_signals, timing)
 from sumo_drvpw.fit.diagnose.result import (DiagnoseResult, assemble, pick_metrics as _pick_metrics,
@@ -141,6 +142,9 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
             "coefficients, not fitted")
         decl_vals = decl_vals[:, [j for j, t in enumerate(declared) if t not in held]]
         declared = equation.term_names
+    # what each trip lost to samples outside the analysis, on the power as logged (the streamed
+    # tracer sees the same; a lag correction's few seconds at trip ends are not counted)
+    left_out = left_out_by_trip(y_all, ana, dt_all, trip_all)
     # timing (measurement side): a power–speed lag is corrected in the data before the search
     timing_finding, lag_note = None, None
     if opt.structural and opt.max_lag_s > 0:
@@ -187,6 +191,7 @@ def diagnose(measured, equation: Equation | None = None, opt: DiagnoseOptions | 
                     n_usable=int(usable.sum()), skipped=skipped, sig=sig, n_candidates=len(cands),
                     n_trips=n_trips, dropped=dropped,
                     roles={k: roles[k] for k in sig if k in roles},
+                    left_out=left_out,
                     extra={"not_replicated": rejected, "timing": lag_note,
                            "structural": structural_notes}), declared_eq, held)
 
@@ -236,15 +241,17 @@ def search_rounds(tr: BlockModel, cands: list[Candidate], declared, roles: dict,
             p = paired_test(d)
             table.append({"term": c.term, "effect": c.effect, "rmse_gain": gains[i],
                           "p_value_bonferroni": min(1.0, p * m_scored)})
-        added = None
+        added, tried = None, []  # tried: (candidate, the test it failed), for the stop line
         for pos, i in enumerate(order[:MAX_TRIES]):
             cbest, sse_b, d_b, sse0_b, fold_b = results[int(i)]
             p_adj = min(1.0, paired_test(d_b) * m_scored)
             if gains[int(i)] < opt.min_gain:
+                tried.append((cbest.term, "gain", gains[int(i)]))
                 break  # (gains fall down the order)
             if not p_adj < opt.alpha:
                 # a large gain carried by a few blocks fails the test; the next candidate may
                 # pass it (the Bonferroni factor already counts every candidate scored)
+                tried.append((cbest.term, "significance", p_adj))
                 continue
             f, extra = _try_add(tr, cbest, fold_b, roles, opt, p_adj)
             if f is None:
@@ -252,6 +259,7 @@ def search_rounds(tr: BlockModel, cands: list[Candidate], declared, roles: dict,
                 rejected.append(dict(extra, term=cbest.term, round=rnd + 1, rmse_gain=gains[int(i)],
                                      p_value_bonferroni=p_adj))
                 say(f"round {rnd + 1}: {cbest.term} passes the block test but {extra['reason']}")
+                tried.append((cbest.term, "rejected", f"passes the block test but {extra['reason']}"))
                 continue
             added = (cbest, gains[int(i)], p_adj)
             findings.append(f)
@@ -264,8 +272,11 @@ def search_rounds(tr: BlockModel, cands: list[Candidate], declared, roles: dict,
                        "p_value_bonferroni": min(1.0, paired_test(results[best_i][2]) * m_scored),
                        "accepted": added is not None, "added": added[0].term if added else None,
                        "top": table})
+        if added is None:  # why: which test each candidate tried failed (trace.json, trace.md)
+            rounds[-1]["stop_reason"] = stop_reason(tried, int(np.count_nonzero(tr.trip_counts())), m_scored, opt)
         say(f"round {rnd + 1}: {m_scored} candidates, best {results[best_i][0].term} gain "
-            f"{100 * gains[best_i]:.2f} % → {'added ' + added[0].term if added else 'stop'}")
+            f"{100 * gains[best_i]:.2f} % → "
+            + (f"added {added[0].term}" if added else f"stop: {rounds[-1]['stop_reason']}"))
         if added is None:
             break
         in_model.add(added[0].term)
@@ -313,7 +324,7 @@ def _try_add(tr: BlockModel, cand: Candidate, fold, roles, opt, p_adj):
     per_trip = {t: {"rmse_before_w": math.sqrt(b / max(c, 1)), "rmse_after_w": math.sqrt(a / max(c, 1))}
                 for t, b, a, c in zip(names, sse_b, sse_a, counts[present])}
     reason = None
-    if n_tr >= 3 and helped * 2 <= n_tr:
+    if n_tr >= MIN_REPLICATION_TRIPS and helped * 2 <= n_tr:
         reason = f"did not replicate: lowered the held-out error on {helped} of {n_tr} trips"
     elif not (abs(share) <= MAX_ENERGY_SHARE):
         reason = f"implausible: energy share {100 * share:.1f} % (|share| > {100 * MAX_ENERGY_SHARE:g} %)"

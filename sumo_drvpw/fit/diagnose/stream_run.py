@@ -38,6 +38,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.diagnose.candidates import Candidate, check_include, generate_candidates, screen_signals
 from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
 from sumo_drvpw.fit.diagnose.result import DiagnoseResult, assemble, restore_held, zero_terms
+from sumo_drvpw.fit.trip_energy import left_out_by_trip
 from sumo_drvpw.fit.stream import _add_counts
 from sumo_drvpw.fit.diagnose.source import (CACHE_MB, INPUT_FIELDS, SAMPLE_ROWS, Batches, View,
                                             concat_inputs, parquet_metadata, read_batches)
@@ -130,7 +131,8 @@ def _prepare(m, eq, declared, kept, opt, lags, elev: bool, acc_col, held=()) -> 
          "t": df["time_s"].to_numpy(float)[idx], "tloc": codes[idx].astype(np.int32),
          "decl": np.ascontiguousarray(decl[idx]),
          "sig": np.column_stack(sig)[idx] if sig else np.zeros((len(idx), 0)),
-         "names": [str(n) for n in names], "rows": len(y_all), "usable": int(np.sum(m.usable))}
+         "names": [str(n) for n in names], "rows": len(y_all), "usable": int(np.sum(m.usable)),
+         "left_out": left_out_by_trip(y_all, ana, df["dt_s"].to_numpy(float), df["trip_id"].astype(str).to_numpy())}
     for f in INPUT_FIELDS:
         d[f] = np.asarray(getattr(x_eq, f), float)[idx].copy()
     if len(lags) > 1:
@@ -281,6 +283,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     batches = Batches(cache_mb)
     n_rows = n_usable = 0
     names: set = set()
+    left_out: dict = {}  # trip → what it lost to samples outside the analysis (fit/trip_energy.py)
     sample_idx = len(sample)
     try:
         reader_counts: dict = {}
@@ -289,6 +292,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
             nonlocal n_rows, n_usable, reader_counts
             reader_counts = _add_counts(reader_counts, m.counts)
             d = _prepare(m, equation, declared, kept_names, opt, lags, elev, acc_col, held)
+            left_out.update(d.pop("left_out"))
             n_rows += d.pop("rows")
             n_usable += d.pop("usable")
             names.update(d["names"])
@@ -318,7 +322,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
                        n_usable=n_usable, skipped=skipped, sig=dict.fromkeys(kept_names),
                        n_candidates=res["n_candidates"], n_trips=int((tr.trip_counts() > 0).sum()),
                        dropped=res["dropped"], roles={k: roles[k] for k in kept_names if k in roles},
-                       extra=res["extra"])
+                       extra=res["extra"], left_out=left_out)
         out = restore_held(out, declared_eq, held)
     except _HeldNotZero:  # ≠ 0 after the first rows (a folder of flat and hilly logs): no hold
         say(f"declared term(s) {', '.join(held)} ≠ 0 beyond the first rows: read again, fitting them")

@@ -27,7 +27,8 @@ from sumo_drvpw.fit.diagnose.source import View, cand_values, factor, first_appe
 #: bytes of candidate block statistics kept between rounds (beyond: recomputed per round)
 CACHE_BYTES = 400e6
 #: measured power at and above which a sample is "heavy" (as fit.compare)
-from sumo_drvpw.fit.compare import HEAVY_LOAD_W, MIN_SAMPLES, trip_energy_doc  # noqa: E402
+from sumo_drvpw.fit.compare import HEAVY_LOAD_W, MIN_SAMPLES  # noqa: E402
+from sumo_drvpw.fit.trip_energy import trip_energy_doc  # noqa: E402
 
 
 def _rs(m, starts):

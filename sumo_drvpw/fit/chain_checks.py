@@ -1,0 +1,127 @@
+"""Is a calibrated energy chain physical, and on what was it fitted?
+
+:func:`check_chain` runs after :func:`sumo_drvpw.fit.chain.calibrate_on` and
+
+* reads the fuel chain's zero-output fuel (``idle_fuel_power_w``, the Willans intercept:
+  the fuel an engine burns running without output — friction, pumping, warm-up) in L/h
+  against what a passenger car's engine burns idling, and a power-split hybrid's engine-on
+  rule against what such a car does at idle and light load (it drives electrically);
+* records the range of driving power and speed the chain was fitted on in its provenance
+  (``power_range_w``, ``speed_range_mps``): a SUMO run counts the vehicle-steps outside it
+  as it does for a road-load equation's speed and acceleration range (summary.json
+  ``out_of_range_samples``; sim/loop.py), since a chain's parameters say nothing of
+  driving they were not fitted on;
+* gathers every parameter reading flagged IMPLAUSIBLE or NOT IDENTIFIED into
+  ``ChainFit.warnings``, which ``calibrate`` prints and the equation file keeps
+  (``[chain.provenance] warnings``).
+
+References
+----------
+[DOE861] US DOE Vehicle Technologies Office, Fact of the Week #861 (23 Feb 2015), "Idle
+Fuel Consumption for Selected Gasoline and Diesel Vehicles" (Argonne National Laboratory
+worksheet; no load: no A/C, fans): petrol compact sedan, 2.0 L, 0.16 gal/h (0.61 L/h);
+petrol large sedan, 4.6 L, 0.39 gal/h (1.48 L/h); diesel compact sedan, 2.0 L, 0.17 gal/h.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sumo_drvpw.model.constants import FUELS
+
+#: what a passenger car's warm engine burns idling with no load [L/h] ([DOE861]: 0.61 L/h
+#: for a 2.0-L compact, 1.48 L/h for a 4.6-L large sedan, rounded outwards). An engine
+#: running without output burns at least its idle fuel; more than a 4.6-L engine's idle is
+#: no passenger car's zero-output fuel but a fit that extrapolates the Willans line from
+#: loaded driving (or a trip's cold start spread over it).
+IDLE_FUEL_L_PER_H = (0.5, 1.5)
+#: powertrains whose engine is off at standstill and drives electrically at light load
+HYBRID_POWERTRAINS = ("power_split",)
+#: readings that make a warning
+FLAGS = ("IMPLAUSIBLE", "NOT IDENTIFIED")
+
+
+def fuel_l_per_h(power_w: float, fuel: str = "gasoline") -> float:
+    """A fuel power ṁ·LHV [W] as a volume flow [L/h]."""
+    f = FUELS[fuel]
+    return power_w / f["lhv_j_per_kg"] / f["density_kg_per_l"] * 3600.0
+
+
+def fitted_ranges(p_drive_w, v_mps, use) -> dict:
+    """(min, max) of the driving power [W] and speed [m/s] over the samples a chain was
+    fitted on (``use``), as the equation file's ``[chain.provenance]`` keeps them."""
+    p = np.asarray(p_drive_w, float)
+    v = np.broadcast_to(np.asarray(v_mps, float), p.shape)
+    ok = np.asarray(use, bool) & np.isfinite(p) & np.isfinite(v)
+    if not ok.any():
+        return {}
+    return {"power_range_w": [float(p[ok].min()), float(p[ok].max())],
+            "speed_range_mps": [float(v[ok].min()), float(v[ok].max())]}
+
+
+def idle_fuel_note(value_w: float, engine_off_below_w: float, fuel: str, powertrain: str | None) -> str:
+    """The zero-output fuel in L/h, and why it is implausible when it is ([DOE861])."""
+    lph = fuel_l_per_h(value_w, fuel)
+    lo, hi = IDLE_FUEL_L_PER_H
+    s = f" = {lph:.2f} L/h"
+    always_on = engine_off_below_w == -np.inf
+    if lph > hi:
+        s += (f"; IMPLAUSIBLE: more than a passenger car's engine burns idling ({lo:g}–{hi:g} L/h with no "
+              f"load, DOE Fact #861: 2.0 L 0.61, 4.6 L 1.48 L/h); a Willans line extrapolated from loaded "
+              f"driving (or a cold start spread over the trip) books it "
+              + ("at every stop" if always_on else "on every step the engine runs, however light the load"))
+    elif lph < lo and always_on:
+        s += (f"; IMPLAUSIBLE for an engine that idles at stops: below a small car's idle fuel "
+              f"({lo:g}–{hi:g} L/h, DOE Fact #861)")
+    if powertrain in HYBRID_POWERTRAINS and always_on:
+        s += "; a power-split hybrid's engine is off at idle, so it burns nothing standing"
+    return s
+
+
+def engine_off_note(value_w: float, powertrain: str | None, idle_l_per_h: float) -> str:
+    """Why a power-split hybrid's chain that starts the engine at any positive driving
+    power is implausible (``idle_l_per_h``: its zero-output fuel [L/h])."""
+    if powertrain in HYBRID_POWERTRAINS and value_w <= 0.0:
+        return ("; IMPLAUSIBLE for a power-split hybrid: its engine is off at idle and at light load "
+                "(it drives electrically), but this chain runs it at any positive driving power, so a SUMO "
+                f"vehicle creeping in a queue books at least the zero-output fuel, {idle_l_per_h:.2f} L/h, "
+                "on every such step (the fit "
+                "found no light-load engine-off in these data: too little low-power driving, or too short "
+                "a log)")
+    return ""
+
+
+def check_chain(fit, vehicle, p_drive_w, v_mps, use) -> None:
+    """Add the readings, fitted ranges and warnings of this module to a ``ChainFit``
+    (in place; see the module docstring)."""
+    chain = fit.chain
+    powertrain = vehicle.powertrain_type if vehicle is not None else None
+    params = fit.parameters
+    if chain.predicts == "fuel" and "idle_fuel_power_w" in params:
+        params["idle_fuel_power_w"]["reading"] += idle_fuel_note(
+            chain.idle_fuel_power_w, chain.engine_off_below_w, chain.fuel, powertrain)
+        if "engine_off_below_w" in params:
+            params["engine_off_below_w"]["reading"] += engine_off_note(
+                chain.engine_off_below_w, powertrain, fuel_l_per_h(chain.idle_fuel_power_w, chain.fuel))
+    ranges = fitted_ranges(p_drive_w, v_mps, use)
+    chain.provenance = {**chain.provenance, **ranges}
+    fit.warnings = [f"energy chain {name} = {_value(p['value'])}: {p.get('reading', '')}"
+                    for name, p in params.items() if any(f in p.get("reading", "") for f in FLAGS)]
+    if fit.warnings:
+        chain.provenance["warnings"] = list(fit.warnings)
+
+
+def range_note(ranges: dict) -> str:
+    """One line: the driving power and speed a chain was fitted on."""
+    if not ranges:
+        return ""
+    (p0, p1), (v0, v1) = ranges["power_range_w"], ranges["speed_range_mps"]
+    return (f"fitted on driving power {p0 / 1000:.1f} … {p1 / 1000:.1f} kW and speed {v0 * 3.6:.0f} … "
+            f"{v1 * 3.6:.0f} km/h (kept in [chain.provenance]; a SUMO run counts its vehicle-steps outside "
+            "them in summary.json out_of_range_samples)")
+
+
+def _value(x: float) -> str:
+    return "-inf" if x == -math.inf else f"{x:.4g}"

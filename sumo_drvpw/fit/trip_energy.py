@@ -1,0 +1,201 @@
+"""Energy per trip, predicted against measured, and what each trip left out.
+
+A per-trip energy sums only the samples a comparison uses. A trip that lost part of its
+time (a logger dropout, an outlier run, a charger) to left-out samples then reports the
+energy of what is left: :func:`left_out_by_trip` says how much of each trip's samples,
+time and measured energy that was, and :func:`with_left_out` adds it to a per-trip energy
+document (keys ``left_out_*``; the energies themselves stay over the used samples).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sumo_drvpw.errors import UserError, first_bad_row
+
+#: a trip whose left-out share of time or measured energy exceeds this is flagged partial
+PARTIAL_TRIP_SHARE = 0.10
+
+
+def _trip_energy(pred_w, meas_w, dt_s, trip, net: bool) -> dict:
+    pred = np.asarray(pred_w, dtype=float).ravel()
+    meas = np.asarray(meas_w, dtype=float).ravel()
+    n = meas.size
+    if pred.shape != meas.shape:
+        raise UserError(f"trip energy: predicted power has {pred.size} samples, measured "
+                        f"power {n}")
+    dt = _dt_array(dt_s, n)
+    tr = np.asarray(trip).ravel() if trip is not None else np.zeros(n, dtype=np.int64)
+    if tr.shape != (n,):
+        raise UserError(f"trip energy: trip has {tr.size} values for {n} samples")
+    ok = np.isfinite(pred) & np.isfinite(meas)
+    if net:
+        pm, mm = np.where(ok, pred, 0.0), np.where(ok, meas, 0.0)
+    else:
+        pm = np.where(ok & (pred > 0.0), pred, 0.0)
+        mm = np.where(ok & (meas > 0.0), meas, 0.0)
+    codes, names = _codes(tr)
+    k = len(names)
+    e_meas = np.bincount(codes, weights=mm * dt, minlength=k)
+    e_pred = np.bincount(codes, weights=pm * dt, minlength=k)
+    return trip_energy_doc(names, e_meas, e_pred)
+
+
+def trip_energy_doc(names, e_meas, e_pred) -> dict:
+    """The per-trip energy document from per-trip sums [J]: error = predicted/measured − 1
+    (NaN where nothing was measured), mean and max |error| over the finite ones."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        err = np.where(e_meas != 0.0, e_pred / e_meas - 1.0, np.nan)
+    trips = {str(t): {"measured_j": float(em), "predicted_j": float(ep), "error": float(er)}
+             for t, em, ep, er in zip(names, e_meas, e_pred, err)}
+    fin = np.abs(err[np.isfinite(err)])
+    return {"mean_abs_error": float(fin.mean()) if fin.size else math.nan,
+            "max_abs_error": float(fin.max()) if fin.size else math.nan,
+            "trips": trips}
+
+
+def _codes(trip: np.ndarray) -> tuple[np.ndarray, list]:
+    """Integer code per sample and the trip names in order of first appearance."""
+    import pandas as pd
+
+    codes, uniques = pd.factorize(pd.Series(trip), sort=False)
+    return codes.astype(np.int64), list(uniques)
+
+
+def trip_energy(pred_w, meas_w, dt_s, trip) -> dict:
+    """Traction energy per trip, predicted against measured (issue #11 §5).
+
+    Parameters
+    ----------
+    pred_w : predicted driving power per sample [W]
+    meas_w : measured driving power per sample [W]
+    dt_s : duration of each sample [s] (array or scalar; None: 1 s each)
+    trip : trip id per sample (None: one trip)
+
+    Returns
+    -------
+    ``{"mean_abs_error", "max_abs_error", "trips": {TRIP: {"measured_j", "predicted_j",
+    "error"}}}`` with E = Σ max(P, 0)·Δt over the trip's samples [J], computed separately
+    for measured and predicted power, and error = E_pred/E_meas − 1 (NaN when the trip has
+    no measured traction; left out of the mean and max). Samples with a non-finite value
+    count as zero power.
+    """
+    return _trip_energy(pred_w, meas_w, dt_s, trip, net=False)
+
+
+def trip_net_energy(pred_w, meas_w, dt_s, trip) -> dict:
+    """Net energy per trip, E = Σ P·Δt (traction minus recuperation) [J]; else as
+    :func:`trip_energy` (error = E_pred/E_meas − 1, NaN when E_meas = 0)."""
+    return _trip_energy(pred_w, meas_w, dt_s, trip, net=True)
+
+
+def _dt_array(dt_s, n: int) -> np.ndarray:
+    if dt_s is None:
+        return np.ones(n)
+    dt = np.asarray(dt_s, dtype=float)
+    if dt.ndim == 0:
+        dt = np.full(n, float(dt))
+    if dt.shape != (n,):
+        raise UserError(f"compare: dt_s has {dt.size} values for {n} samples")
+    bad = ~np.isfinite(dt) | (dt < 0.0)
+    if bad.any():
+        raise UserError(f"compare: dt_s must be finite and ≥ 0 s; {first_bad_row(bad)} "
+                        f"has {dt[bad][0]!r}")
+    return dt
+
+
+def left_out_by_trip(meas_w, used, dt_s, trip) -> dict:
+    """What each trip lost to samples left out of a comparison.
+
+    Parameters
+    ----------
+    meas_w : measured power of *all* the log's samples [W] (NaN where not measured)
+    used : bool per sample, True where the comparison uses it
+    dt_s : duration of each sample [s]
+    trip : trip id per sample (None: one trip)
+
+    Returns
+    -------
+    ``{TRIP: {"samples", "left_out_samples", "left_out_sample_share",
+    "left_out_time_share", "left_out_energy_share", "left_out_net_energy_share",
+    "left_out_power_unknown_samples", "left_out_power_unknown_time_share"}}``: shares of the trip's samples, of its time
+    Σ Δt, of its measured traction energy Σ max(P, 0)·Δt and of its measured net energy
+    Σ P·Δt that fall on left-out samples. The energy shares count the samples whose
+    measured power is known (finite); left-out samples without it are counted in
+    ``left_out_power_unknown_samples``; a share is NaN when its denominator is 0 (and
+    the net share when the trip's net energy is not positive: a share of a net return
+    says nothing).
+    """
+    p = np.asarray(meas_w, dtype=float).ravel()
+    n = p.size
+    u = np.asarray(used, dtype=bool).ravel()
+    dt = _dt_array(dt_s, n)
+    tr = np.asarray(trip).ravel() if trip is not None else np.zeros(n, dtype=np.int64)
+    if u.shape != (n,) or tr.shape != (n,):
+        raise UserError(f"left-out samples: {u.size} usable flags and {tr.size} trip ids for {n} samples")
+    codes, names = _codes(tr)
+    k = len(names)
+    out = ~u
+    fin = np.isfinite(p)
+    pos = np.where(fin, np.maximum(p, 0.0), 0.0) * dt
+    net = np.where(fin, p, 0.0) * dt
+
+    def s(w, m=None):
+        return np.bincount(codes, weights=w if m is None else np.where(m, w, 0.0), minlength=k)
+
+    n_all, n_out = s(np.ones(n)), s(np.ones(n), out)
+    t_all, t_out = s(dt), s(dt, out)
+    e_all, e_out = s(pos), s(pos, out)
+    q_all, q_out = s(net), s(net, out)
+    unknown = s(np.ones(n), out & ~fin)
+    t_unknown = s(dt, out & ~fin)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        docs = {}
+        for i, t in enumerate(names):
+            docs[str(t)] = {
+                "samples": int(n_all[i]), "left_out_samples": int(n_out[i]),
+                "left_out_sample_share": float(n_out[i] / n_all[i]) if n_all[i] else math.nan,
+                "left_out_time_share": float(t_out[i] / t_all[i]) if t_all[i] > 0 else math.nan,
+                "left_out_energy_share": float(e_out[i] / e_all[i]) if e_all[i] > 0 else math.nan,
+                "left_out_net_energy_share": float(q_out[i] / q_all[i]) if q_all[i] > 0 else math.nan,
+                "left_out_power_unknown_samples": int(unknown[i]),
+                "left_out_power_unknown_time_share": float(t_unknown[i] / t_all[i]) if t_all[i] > 0 else math.nan}
+    return docs
+
+
+def partial_share(left: dict | None, net: bool = False) -> float:
+    """How partial a trip's energy is: the largest of its left-out traction-energy share
+    (``net``: and net-energy share) and the time share of left-out samples whose power is
+    not measured (their energy unknown); 0 when none is known. Left-out time with a
+    measured power counts through its energy only: a tracer's standstill samples are
+    left out but carry no driving energy."""
+    if not left:
+        return 0.0
+    keys = ("left_out_power_unknown_time_share", "left_out_energy_share") + (
+        ("left_out_net_energy_share",) if net else ())
+    xs = [left.get(k) for k in keys]
+    xs = [x for x in xs if x is not None and math.isfinite(x)]
+    return max(xs, default=0.0)
+
+
+def with_left_out(doc: dict, left_out: dict | None, net: bool = False) -> dict:
+    """A per-trip energy document (:func:`trip_energy`; ``net``: :func:`trip_net_energy`)
+    with each trip's left-out samples (:func:`left_out_by_trip`) added to its entry, plus
+    ``partial``: True where :func:`partial_share` exceeds :data:`PARTIAL_TRIP_SHARE`; and
+    the document's ``partial_trips`` list. Unchanged when ``left_out`` is None."""
+    if not left_out or not doc:
+        return doc
+    partial = []
+    for t, v in doc.get("trips", {}).items():
+        left = left_out.get(str(t))
+        if left is None:
+            continue
+        v.update(left)
+        v["partial"] = partial_share(left, net) > PARTIAL_TRIP_SHARE
+        if v["partial"]:
+            partial.append(str(t))
+    doc["partial_trips"] = partial
+    doc["partial_trip_share"] = PARTIAL_TRIP_SHARE
+    return doc
