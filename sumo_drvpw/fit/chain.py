@@ -36,6 +36,7 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.fit.chain_checks import reading
 from sumo_drvpw.model.chain import EnergyChain, corrected_fuel_power
 
 #: smallest efficiency the fit may return (the bound (0, 1] made closed) [-]
@@ -163,45 +164,6 @@ def _stats(pred, y, w) -> tuple[float, float, float]:
     rmse = math.sqrt(float(w @ e ** 2) / float(w.sum()))
     ey = float(w @ y)
     return r2, rmse, (float(w @ pred) / ey if ey != 0 else math.nan)
-
-
-def _reading(name: str, val: float) -> str:
-    """One-line physical reading of a calibrated parameter, flagging implausible values."""
-    if name == "traction_efficiency":
-        s = f"battery → wheel on traction {val:.1%} (motor, inverter, gear, battery resistance)"
-        return s + ("; IMPLAUSIBLE for a BEV (expected 0.75–0.95): the road load is off"
-                    if not 0.7 <= val <= 0.97 else "")
-    if name == "recuperation_efficiency":
-        s = f"wheel → battery on braking {val:.1%} (incl. the blended friction share)"
-        if val >= 0.99:
-            return s + ("; IMPLAUSIBLE (no generator is lossless): the braking power is "
-                        "underestimated or other terms absorb losses")
-        return s + ("; low: friction braking or a recuperation limit dominates" if val < 0.4 else "")
-    if name == "recuperation_limit_w":
-        return f"braking power beyond {val / 1000:.1f} kW goes to the friction brakes"
-    if name == "aux_power_w":
-        return f"constant auxiliary draw {val:.0f} W (12 V net, pumps, control; accrues at standstill)"
-    if name.startswith("loads."):
-        s = f"{val:.3f} W at the battery per W logged"
-        return s + ("; far from 1: the logged load is not electrical power at the battery"
-                    if not 0.7 <= val <= 1.3 else "")
-    if name == "hvac.warmup_j_per_k":
-        return (f"cabin warm-up at a cold start {val / 1000:.0f} kJ per K below the set-point "
-                f"({val * 15 / 3.6e6:.2f} kWh from 15 K below)")
-    if name.startswith("hvac."):
-        return f"{val:.0f} W per K from the set-point"
-    if name == "marginal_efficiency":
-        s = f"fuel → engine output at the margin {val:.1%} (Willans slope)"
-        return s + ("; IMPLAUSIBLE for a petrol engine (expected 0.3–0.45)" if not 0.25 <= val <= 0.5 else "")
-    if name == "idle_fuel_power_w":
-        return f"fuel power with the engine on at zero output {val / 1000:.2f} kW (friction, pumping, warm-up, auxiliaries)"
-    if name == "engine_off_below_w":
-        if val == -np.inf:
-            return "engine always on (a conventional engine: idles at stops and while braking)"
-        return f"engine off below {val / 1000:.1f} kW of driving power"
-    if name == "engine_on_above_mps":
-        return f"engine always on above {val * 3.6:.0f} km/h"
-    return ""
 
 
 def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = None, *,
@@ -367,7 +329,7 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
                                           "how": "profiled (BIC) over quantiles of the braking power"}
     for name, p_ in params.items():
         if "reading" not in p_:
-            p_["reading"] = _reading(name, p_["value"])
+            p_["reading"] = reading(name, p_["value"])
     if emap is not None:
         chain = chain_map.map_chain(kw, emap[0], emap[1], beta[:nt], beta[nt:nt + nr])
         chain.provenance = {"efficiency_map": efficiency,
@@ -454,7 +416,7 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
         params["engine_on_above_mps"] = {"value": engine_on_above_mps, "std_err": None,
                                          "at_bound": False, "how": "profiled (BIC) over a grid"}
     for name, p_ in params.items():
-        p_["reading"] = _reading(name, p_["value"])
+        p_["reading"] = reading(name, p_["value"])
     low = float(w[ok & (v < CITY_SPEED_MPS)].sum() / max(w[ok].sum(), 1e-12))
     if low < CITY_SHARE_MIN:  # the engine's on/off at city speeds is not in the data
         params["engine_off_below_w"]["reading"] += (

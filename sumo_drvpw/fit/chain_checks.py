@@ -11,7 +11,8 @@
   as it does for a road-load equation's speed and acceleration range (summary.json
   ``out_of_range_samples``; sim/loop.py), since a chain's parameters say nothing of
   driving they were not fitted on;
-* gathers every parameter reading flagged IMPLAUSIBLE or NOT IDENTIFIED into
+* gathers every parameter reading (:func:`reading`: one line per calibrated parameter,
+  flagging implausible values) flagged IMPLAUSIBLE or NOT IDENTIFIED into
   ``ChainFit.warnings``, which ``calibrate`` prints and the equation file keeps
   (``[chain.provenance] warnings``).
 
@@ -125,3 +126,42 @@ def range_note(ranges: dict) -> str:
 
 def _value(x: float) -> str:
     return "-inf" if x == -math.inf else f"{x:.4g}"
+
+
+def reading(name: str, val: float) -> str:
+    """One-line physical reading of a calibrated parameter, flagging implausible values."""
+    if name == "traction_efficiency":
+        s = f"battery → wheel on traction {val:.1%} (motor, inverter, gear, battery resistance)"
+        return s + ("; IMPLAUSIBLE for a BEV (expected 0.75–0.95): the road load is off"
+                    if not 0.7 <= val <= 0.97 else "")
+    if name == "recuperation_efficiency":
+        s = f"wheel → battery on braking {val:.1%} (incl. the blended friction share)"
+        if val >= 0.99:
+            return s + ("; IMPLAUSIBLE (no generator is lossless): the braking power is "
+                        "underestimated or other terms absorb losses")
+        return s + ("; low: friction braking or a recuperation limit dominates" if val < 0.4 else "")
+    if name == "recuperation_limit_w":
+        return f"braking power beyond {val / 1000:.1f} kW goes to the friction brakes"
+    if name == "aux_power_w":
+        return f"constant auxiliary draw {val:.0f} W (12 V net, pumps, control; accrues at standstill)"
+    if name.startswith("loads."):
+        s = f"{val:.3f} W at the battery per W logged"
+        return s + ("; far from 1: the logged load is not electrical power at the battery"
+                    if not 0.7 <= val <= 1.3 else "")
+    if name == "hvac.warmup_j_per_k":
+        return (f"cabin warm-up at a cold start {val / 1000:.0f} kJ per K below the set-point "
+                f"({val * 15 / 3.6e6:.2f} kWh from 15 K below)")
+    if name.startswith("hvac."):
+        return f"{val:.0f} W per K from the set-point"
+    if name == "marginal_efficiency":
+        s = f"fuel → engine output at the margin {val:.1%} (Willans slope)"
+        return s + ("; IMPLAUSIBLE for a petrol engine (expected 0.3–0.45)" if not 0.25 <= val <= 0.5 else "")
+    if name == "idle_fuel_power_w":
+        return f"fuel power with the engine on at zero output {val / 1000:.2f} kW (friction, pumping, warm-up, auxiliaries)"
+    if name == "engine_off_below_w":
+        if val == -np.inf:
+            return "engine always on (a conventional engine: idles at stops and while braking)"
+        return f"engine off below {val / 1000:.1f} kW of driving power"
+    if name == "engine_on_above_mps":
+        return f"engine always on above {val * 3.6:.0f} km/h"
+    return ""
