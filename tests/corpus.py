@@ -12,6 +12,7 @@ Used by ``tests/test_bad_input.py`` (in-process, every case) and by
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,6 +20,7 @@ from typing import Callable
 
 import numpy as np
 import pandas as pd
+import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 SHARED = Path(os.environ.get("SUMO_DRVPW_DATA") or REPO.parent / "shared" / "data")
@@ -920,3 +922,31 @@ def run_subprocess(c: Case, d: Path, python: str, timeout: float = 300) -> tuple
     r = subprocess.run([python, "-m", "sumo_drvpw", *argv], capture_output=True, text=True,
                        timeout=timeout, cwd=d)
     return judge(c, r.returncode, r.stdout, r.stderr, before, snapshot(d))
+
+
+def assert_close_documents(a, b, rtol: float = 1e-9, path: str = "", same_keys: bool = True,
+                           abs_at_zero: float = 1e-9) -> None:
+    """Every number of two JSON-like documents (a reference ``a``, a result ``b``) equal to
+    ``rtol`` relative (``abs_at_zero`` where the reference is 0; NaN and None equal, an
+    infinity equal only to itself), every other value equal; the same keys (``same_keys``),
+    or every key of ``a`` in ``b``. The streamed-against-in-memory tests share it."""
+    def close(a, b, path):
+        if isinstance(a, dict):
+            keys_ok = set(a) == set(b) if same_keys else set(a) <= set(b)
+            assert keys_ok, f"{path}: keys {set(a) ^ set(b) if same_keys else set(a) - set(b)} differ"
+            for k in a:
+                close(a[k], b[k], f"{path}/{k}")
+        elif isinstance(a, (list, tuple)):
+            assert len(a) == len(b), f"{path}: {len(a)} != {len(b)}"
+            for i, (u, v) in enumerate(zip(a, b)):
+                close(u, v, f"{path}[{i}]")
+        elif isinstance(a, float) or isinstance(b, float):
+            if a is None or b is None or (isinstance(a, float) and math.isnan(a)):
+                assert (a is None or math.isnan(a)) and (b is None or math.isnan(b)), f"{path}: {a} != {b}"
+            elif math.isinf(a):
+                assert a == b, f"{path}: {a} != {b}"
+            else:
+                assert b == pytest.approx(a, rel=rtol, abs=abs_at_zero if a == 0 else 0), f"{path}: {a} != {b}"
+        else:
+            assert a == b, f"{path}: {a!r} != {b!r}"
+    close(a, b, path)

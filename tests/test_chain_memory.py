@@ -10,13 +10,13 @@ number of the fits must equal it to 1e-9 relative. Memory itself is measured in
 ``benchmarks/chain_memory.py``, not here.
 """
 
-import math
 import tomllib
 
 import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
+import corpus
 import sumo_drvpw.fit.chain as fc
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.data import measured as dm
@@ -63,22 +63,8 @@ def old_fit(monkeypatch):
     return use
 
 
-def _close(a, b, path=""):
-    if isinstance(a, dict):
-        assert set(a) == set(b), f"{path}: {set(a) ^ set(b)}"
-        for k in a:
-            _close(a[k], b[k], f"{path}/{k}")
-    elif isinstance(a, (list, tuple)):
-        assert len(a) == len(b), path
-        for i, (u, v) in enumerate(zip(a, b)):
-            _close(u, v, f"{path}[{i}]")
-    elif isinstance(a, float) and isinstance(b, float):
-        if math.isnan(a) or math.isinf(a):
-            assert (math.isnan(a) and math.isnan(b)) or a == b, f"{path}: {a} != {b}"
-        else:
-            assert b == pytest.approx(a, rel=RTOL, abs=1e-12 if a == 0 else 0), f"{path}: {a} != {b}"
-    else:
-        assert a == b, f"{path}: {a!r} != {b!r}"
+def _close(a, b):
+    corpus.assert_close_documents(a, b, RTOL, abs_at_zero=1e-12)
 
 
 def _fit_doc(fit) -> dict:

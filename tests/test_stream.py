@@ -6,7 +6,6 @@ chunks smaller than a trip, so every trip crosses chunk boundaries; one variant 
 grade from elevation over distance (another per-trip derivation).
 """
 
-import math
 import warnings
 
 import numpy as np
@@ -18,6 +17,7 @@ from hypothesis import strategies as st
 
 from functools import partial
 
+import corpus
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.data.log import bundled_log
 from sumo_drvpw.data.measured import load_measured, resolve_equations
@@ -68,24 +68,9 @@ def logs(tmp_path_factory):
     return {"parquet": pq, "csv": csv, "folder": folder}
 
 
-def _close(a, b, path=""):
-    """Every number of two JSON-like documents equal to RTOL (NaN/None equal)."""
-    if isinstance(a, dict):
-        assert set(a) <= set(b), f"{path}: keys {set(a) - set(b)} missing"
-        for k in a:
-            _close(a[k], b[k], f"{path}/{k}")
-    elif isinstance(a, (list, tuple)):
-        assert len(a) == len(b), f"{path}: {len(a)} != {len(b)}"
-        for i, (u, v) in enumerate(zip(a, b)):
-            _close(u, v, f"{path}[{i}]")
-    elif isinstance(a, float) or isinstance(b, float):
-        if a is None or b is None or (isinstance(a, float) and math.isnan(a)):
-            assert (a is None or math.isnan(a)) and (b is None or math.isnan(b)), f"{path}: {a} != {b}"
-        else:
-            assert b == pytest.approx(a, rel=RTOL, abs=1e-9 * max(1.0, abs(a)) if a == 0 else 0), \
-                f"{path}: {a} != {b}"
-    else:
-        assert a == b, f"{path}: {a!r} != {b!r}"
+def _close(a, b):
+    """Every number equal to RTOL (corpus.assert_close_documents); ``b`` may carry more keys."""
+    corpus.assert_close_documents(a, b, RTOL, same_keys=False)
 
 
 def _in_memory_calibration(path, cands):

@@ -17,11 +17,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import corpus
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.data.log import from_frame
 from sumo_drvpw.data.measured import load_measured, resolve_equations
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.compare import compare
+from sumo_drvpw.fit.trip_energy import left_out_by_trip
 from sumo_drvpw.fit.engine import run
 from sumo_drvpw.fit.stream_compare import CompareStats
 from sumo_drvpw.model.constants import FUELS
@@ -154,24 +156,8 @@ def chain_logs(tmp_path_factory):
     return out
 
 
-def _close(a, b, path=""):
-    """Every number of two JSON-like documents equal to RTOL (NaN/None equal), same keys."""
-    if isinstance(a, dict):
-        assert set(a) == set(b), f"{path}: keys {set(a) ^ set(b)} differ"
-        for k in a:
-            _close(a[k], b[k], f"{path}/{k}")
-    elif isinstance(a, (list, tuple)):
-        assert len(a) == len(b), f"{path}: {len(a)} != {len(b)}"
-        for i, (u, v) in enumerate(zip(a, b)):
-            _close(u, v, f"{path}[{i}]")
-    elif isinstance(a, float) or isinstance(b, float):
-        if a is None or b is None or (isinstance(a, float) and math.isnan(a)):
-            assert (a is None or math.isnan(a)) and (b is None or math.isnan(b)), f"{path}: {a} != {b}"
-        else:
-            assert b == pytest.approx(a, rel=RTOL, abs=1e-9 * max(1.0, abs(a)) if a == 0 else 0), \
-                f"{path}: {a} != {b}"
-    else:
-        assert a == b, f"{path}: {a!r} != {b!r}"
+def _close(a, b):
+    corpus.assert_close_documents(a, b, RTOL)
 
 
 def _specs(kind, eq):
@@ -185,8 +171,10 @@ def test_streamed_chain_comparison_equals_in_memory(chain_logs, kind, rows):
     eqs = resolve_equations(_specs(kind, eq))
     m = load_measured([folder], target=kind)
     u = m.usable
-    ref = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],
-                  target=kind, battery_w=None if m.battery_w is None else m.battery_w[u]).to_json()
+    comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],
+                   target=kind, battery_w=None if m.battery_w is None else m.battery_w[u])
+    comp.left_out = left_out_by_trip(m.power_w, u, m.log.df["dt_s"].to_numpy(), m.inputs.trip)  # as the CLI
+    ref = comp.to_json()
     cs, info = run([folder], partial(CompareStats, eqs, None, target=kind), rows=rows)
     got = cs.comparison().to_json()
     assert info.rows == n
