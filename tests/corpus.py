@@ -950,3 +950,22 @@ def assert_close_documents(a, b, rtol: float = 1e-9, path: str = "", same_keys: 
         else:
             assert a == b, f"{path}: {a!r} != {b!r}"
     close(a, b, path)
+
+
+def sine_trips(rng, n: int, v_mean_mps: float) -> pd.DataFrame:
+    """Two 5-Hz trips T1, T2 of ``n`` samples each: speed v̄ + 9·sin(t/30 s) m/s with
+    0.05 m/s noise from ``rng`` (drawn in that order), standing for the first 40 s; 1400 kg."""
+    frames = []
+    for trip in ("T1", "T2"):
+        t = np.arange(n) * 0.2
+        v = np.clip(v_mean_mps + 9 * np.sin(t / 30.0) + rng.normal(0, 0.05, n), 0, None)
+        v[:200] = 0.0
+        frames.append(pd.DataFrame({"trip_id": trip, "time_s": t, "speed_mps": v, "mass_kg": 1400.0}))
+    return pd.concat(frames, ignore_index=True)
+
+
+def road_equation(folder: Path) -> Path:
+    """road.toml in ``folder``: a known road load, acc 1, v1 160 W·s/m, v3 0.4 W·s³/m³."""
+    road = Path(folder) / "road.toml"
+    road.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 160.0\nv3 = 0.4\n')
+    return road

@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 from hypothesis import given, settings, strategies as st
 
+import corpus
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import calibrate_battery, calibrate_fuel
 from sumo_drvpw.model.chain import EnergyChain, chain_from_dict, corrected_fuel_power
@@ -467,16 +468,8 @@ def test_cli_calibrates_a_conventional_engine_from_its_air_flow(tmp_path, capsys
     from sumo_drvpw.model.constants import AFR_STOICH_GASOLINE
 
     rng = np.random.default_rng(11)
-    frames = []
-    for trip in ("T1", "T2"):
-        n = 5000
-        t = np.arange(n) * 0.2
-        v = np.clip(11 + 9 * np.sin(t / 30.0) + rng.normal(0, 0.05, n), 0, None)
-        v[:200] = 0.0
-        frames.append(pd.DataFrame({"trip_id": trip, "time_s": t, "speed_mps": v, "mass_kg": 1400.0}))
-    df = pd.concat(frames, ignore_index=True)
-    road = tmp_path / "road.toml"
-    road.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 160.0\nv3 = 0.4\n')
+    df = corpus.sine_trips(rng, 5000, 11.0)
+    road = corpus.road_equation(tmp_path)
     x = from_frame(df).inputs()
     plant = EnergyChain(predicts="fuel", idle_fuel_power_w=9000.0, marginal_efficiency=0.33,
                         engine_off_below_w=-np.inf)

@@ -3,9 +3,9 @@
 engine-on rule, and the driving power and speed it was fitted on, kept for SUMO runs."""
 
 import numpy as np
-import pandas as pd
 import pytest
 
+import corpus
 from sumo_drvpw.fit.chain_checks import engine_off_note, fuel_l_per_h, idle_fuel_note
 from sumo_drvpw.model.chain import EnergyChain
 from sumo_drvpw.model.constants import FUELS
@@ -33,17 +33,8 @@ def _planted_fuel_log(tmp_path, plant: EnergyChain):
     """Two trips with a known road load; the fuel flow [L/h] of a planted Willans chain."""
     from sumo_drvpw.data.log import from_frame
 
-    rng = np.random.default_rng(5)
-    frames = []
-    for trip in ("T1", "T2"):
-        n = 4000
-        t = np.arange(n) * 0.2
-        v = np.clip(12 + 9 * np.sin(t / 30.0) + rng.normal(0, 0.05, n), 0, None)
-        v[:200] = 0.0
-        frames.append(pd.DataFrame({"trip_id": trip, "time_s": t, "speed_mps": v, "mass_kg": 1400.0}))
-    df = pd.concat(frames, ignore_index=True)
-    road = tmp_path / "road.toml"
-    road.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 160.0\nv3 = 0.4\n')
+    df = corpus.sine_trips(np.random.default_rng(5), 4000, 12.0)
+    road = corpus.road_equation(tmp_path)
     x = from_frame(df).inputs()
     p = load_equation(road).power(x)
     g = FUELS["gasoline"]

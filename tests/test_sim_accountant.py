@@ -177,12 +177,9 @@ def test_persons_of_a_redeclared_default_pedestrian_type_are_pedestrians(tmp_pat
     assert set(res.vehicles.vclass) == {"passenger"} and len(res.vehicles) == 3
 
 
-def test_out_of_range_counts_the_driving_power_a_chain_was_fitted_on(tmp_path):
-    """A chain's fitted driving-power range ([chain.provenance] power_range_w, written by
-    calibrate --target): vehicle-steps whose driving power leaves it are counted with the
-    speed and acceleration ranges, shown in summary.json and warned about when many."""
-    from sumo_drvpw.model.chain import EnergyChain
-
+def _motorway_cars(tmp_path):
+    """s.toml: the mixed flow's cars (no persons) on the highway network for 60 s, departing
+    at the 120 km/h limit."""
     mixed = "\n".join(ln for ln in MIXED.splitlines() if "<person" not in ln)
     (tmp_path / "r.rou.xml").write_text(mixed.replace(
         'from="c00c10" to="c34c44"', 'route="r"').replace(
@@ -193,6 +190,15 @@ def test_out_of_range_counts_the_driving_power_a_chain_was_fitted_on(tmp_path):
         'routes = ["r.rou.xml"]\nend = 60\noptions = ["--no-warnings", "true"]\n'
         '[vehicles]\nvtypes = ["car"]\n[outputs]\nfigures = false\nedgedata = false\n',
         encoding="utf-8")
+
+
+def test_out_of_range_counts_the_driving_power_a_chain_was_fitted_on(tmp_path):
+    """A chain's fitted driving-power range ([chain.provenance] power_range_w, written by
+    calibrate --target): vehicle-steps whose driving power leaves it are counted with the
+    speed and acceleration ranges, shown in summary.json and warned about when many."""
+    from sumo_drvpw.model.chain import EnergyChain
+
+    _motorway_cars(tmp_path)
 
     def chained(name, p_range):
         return Equation(name, {"roll": 0.01}, chain=EnergyChain(
@@ -213,16 +219,7 @@ def test_out_of_range_counts_the_driving_power_a_chain_was_fitted_on(tmp_path):
 
 def test_out_of_range_vehicle_steps_counted(tmp_path):
     """An equation's recorded validity range: vehicle-steps outside it are counted."""
-    mixed = "\n".join(ln for ln in MIXED.splitlines() if "<person" not in ln)
-    (tmp_path / "r.rou.xml").write_text(mixed.replace(
-        'from="c00c10" to="c34c44"', 'route="r"').replace(
-        '<flow id="c"', '<route id="r" edges="e01 e12 e23"/>\n  <flow id="c"').replace(
-        'period="10"', 'period="10" departSpeed="max"'), encoding="utf-8")
-    (tmp_path / "s.toml").write_text(
-        f'equations = ["x"]\n[sumo]\nnet = "{NETS / "highway.net.xml"}"\n'
-        'routes = ["r.rou.xml"]\nend = 60\noptions = ["--no-warnings", "true"]\n'
-        '[vehicles]\nvtypes = ["car"]\n[outputs]\nfigures = false\nedgedata = false\n',
-        encoding="utf-8")
+    _motorway_cars(tmp_path)
     slow = Equation("slow", {"roll": 0.01}, speed_range_mps=(0.0, 15.0))
     wide = Equation("wide", {"roll": 0.01}, speed_range_mps=(0.0, 60.0),
                     accel_range_mps2=(-9.0, 9.0))
