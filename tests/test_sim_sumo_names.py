@@ -154,3 +154,27 @@ def test_written_file_finds_the_stamp_or_an_unprefixed_file(tmp_path):
     (tmp_path / "c.sumocfg").write_text("x")
     assert written_file(tmp_path / "c.sumocfg", {"output-prefix": "P_"}).name == "c.sumocfg"
     assert written_file(tmp_path / "none.xml", {"output-prefix": "P_"}).name == "P_none.xml"
+
+
+@pytest.mark.parametrize("form", ["spaced", "equals"])
+def test_comparison_with_the_device_and_tripinfo_set_in_the_scenarios_options(tmp_path, capsys, form):
+    """A scenario whose sumo.options enable the emissions device and write a tripinfo
+    themselves, with outputs.sumo_device: the run reads SUMO's totals from that tripinfo and
+    leaves the device as the options set it. Before (2026-11-27 rehearsal, port_brunswick),
+    the run added both options again and SUMO refused to start ("A value for the option
+    'device.emissions.probability' was already set", exit 2)."""
+    cfg = _scenario(tmp_path, "")
+    ti = tmp_path / "mine" / "ti.xml"
+    ti.parent.mkdir()
+    opts = (["--tripinfo-output", "ti.xml", "--device.emissions.probability", "1"] if form == "spaced"
+            else [f"--tripinfo-output={ti}", "--device.emissions.probability=1"])
+    sc = tmp_path / "s.toml"
+    sc.write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{cfg}"\noptions = {json.dumps(opts)}\n'
+                  "[outputs]\nsumo_device = true\n")
+    out = tmp_path / "o"
+    code, err = _cli([sc, "--out", out], capsys)
+    assert code == 0, err
+    written = out / "sumo" / "ti.xml" if form == "spaced" else ti
+    ids = {t.get("id") for t in ET.parse(written).getroot().iter("tripinfo")}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["sumo_device"] and 0 < summary["sumo_device"][0]["vehicles"] <= len(ids)

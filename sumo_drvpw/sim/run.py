@@ -292,7 +292,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     args = list(sc.sumo_args)
     # the config's own outputs go into this run's output folder, not beside the scenario
     # (unless the scenario's options or the emissions comparison set them already)
-    given = {a[2:] for a in args if a.startswith("--")}
+    given = {a[2:].split("=", 1)[0] for a in args if a.startswith("--")}  # --key v, --key=v
     if out_dir is not None:  # an output the scenario's options name by a relative path: into OUT/sumo/
         for i in range(len(args) - 1):
             files = [f.strip() for f in args[i + 1].split(",") if f.strip()]
@@ -330,10 +330,16 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     args += add_args
     tmpdir, tripinfo = None, None
     if sc.sumo_device:  # SUMO's own model beside ours: its tripinfo, read after the run
-        if not sc.sumo_device_in_config:
+        # the config's or the options' own device settings and tripinfo stay as they are
+        # (SUMO refuses an option given twice)
+        if not (sc.sumo_device_in_config or given & {"device.emissions.probability",
+                                                      "device.emissions.explicit"}):
             args += ["--device.emissions.probability", "1"]
+        ti_opt = _option_value(args, "tripinfo-output") if "tripinfo-output" in given else None
         if keep_ti:
             tripinfo = sumo_dir / Path(ti_cfg).name
+        elif ti_opt:  # the options' tripinfo (already pointed into OUT/sumo/ when relative)
+            tripinfo = Path(ti_opt.split(",")[0].strip())
         else:
             tmpdir = tempfile.TemporaryDirectory(prefix="drvpw-tripinfo-")
             tripinfo = Path(tmpdir.name) / "tripinfo.xml"
@@ -411,6 +417,18 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         if copies is not None:
             copies.cleanup()
     return result
+
+
+def _option_value(args: list[str], key: str) -> str | None:
+    """The value of ``--key`` in SUMO's command-line ``args`` (``--key v`` or ``--key=v``;
+    the last one), or None."""
+    val = None
+    for i, a in enumerate(args):
+        if a == f"--{key}" and i + 1 < len(args):
+            val = args[i + 1]
+        elif a.startswith(f"--{key}="):
+            val = a.split("=", 1)[1]
+    return val
 
 
 def _output_naming(sc) -> dict[str, str]:
