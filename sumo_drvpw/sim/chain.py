@@ -395,7 +395,7 @@ class ChainLedger:
             acc[0] += tot[j]
             acc[1] += dist[j]
         if spill is not None:
-            spill.write_chain(self.table(tot, dist, ids))
+            spill.write_chain(self.table(tot, dist, ids), self.columns())  # every chain's columns
 
     def compact(self, keep: np.ndarray, n: int) -> None:
         """Move vehicles ``keep`` (slots, ascending) to the front, empty the rest up to ``n``."""

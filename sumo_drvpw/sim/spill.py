@@ -72,15 +72,19 @@ class VehicleSpill:
         self.parts.append(path)
         self.rows += t.num_rows
 
-    def write_chain(self, rows: list[dict]) -> None:
-        """Energy-chain rows (:meth:`sumo_drvpw.sim.chain.ChainLedger.table`) as a CSV part."""
+    def write_chain(self, rows: list[dict], columns: list[str] | None = None) -> None:
+        """Energy-chain rows (:meth:`sumo_drvpw.sim.chain.ChainLedger.table`) as a CSV part.
+        ``columns``: those of every chain of the run (``ChainLedger.columns``), fixed at the
+        first part: a part whose vehicles had only some of the chains (petrol cars first,
+        electric ones later) keeps the others' columns, and every Dask bucket writes the
+        same (default: the first part's rows' own columns)."""
         import pandas as pd
 
         if not rows:
             return
         df = pd.DataFrame(rows)
         if self.chain_columns is None:
-            self.chain_columns = list(df.columns)
+            self.chain_columns = list(columns) if columns is not None else list(df.columns)
         path = self._dir() / f"chain-{len(self.chain_parts):06d}.csv"
         df.reindex(columns=self.chain_columns).to_csv(path, index=False, header=False)
         self.chain_parts.append(path)
