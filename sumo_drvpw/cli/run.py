@@ -3,7 +3,8 @@
 One scenario: its outputs in DIR. Several (``run a.toml b.toml --jobs 2``): one SUMO per
 process, each scenario's outputs in ``DIR/<scenario name>/`` and all of them side by side in
 ``DIR/runs.csv`` (per scenario, equation and road class: traction energy [kWh] and
-energy per distance [Wh/km], the vehicles the equation booked and those of the scenario). ``--engine dask`` runs each scenario as one task on a Dask
+energy per distance [Wh/km], the vehicles the equation booked and those of the scenario), and,
+with energy-chain equations, their litres and kWh per vClass in ``DIR/chain_runs.csv``. ``--engine dask`` runs each scenario as one task on a Dask
 cluster (``--scheduler ADDRESS``, else a local cluster of ``--workers N`` processes). A scenario is a TOML file or a built-in name (``city``,
 ``highway``: ``sumo_drvpw/sim/builtin/scenarios``).
 """
@@ -181,6 +182,17 @@ def _combined(summaries: dict[str, dict], out_dirs: dict):
     return pd.DataFrame(rows)
 
 
+def _combined_chains(summaries: dict[str, dict]):
+    """Each run's energy-chain rows per vClass (its ``chain_classes.csv``: litres, CO2 and
+    L/100 km, or battery kWh and kWh/km) under a ``scenario`` column; None when no run
+    had a chain equation."""
+    import pandas as pd
+
+    rows = [{"scenario": scen, **r} for scen, s in summaries.items()
+            for r in (s.get("chain") or {}).get("classes", [])]
+    return pd.DataFrame(rows) if rows else None
+
+
 def main(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -216,6 +228,9 @@ def main(args: argparse.Namespace) -> int:
     with output_set(args, args.out, inputs, meta=meta) as tmp:
         summaries = dict(zip(names, _run_many(args, scen, [tmp / n for n in names], overrides)))
         write_text(tmp / "runs.csv", _combined(summaries, {n: tmp / n for n in names}).to_csv(index=False))
+        chains = _combined_chains(summaries)
+        if chains is not None:  # the chains' litres and kWh per vClass, run beside run
+            write_text(tmp / "chain_runs.csv", chains.to_csv(index=False))
         meta["scenarios"] = dict(zip(names, scen))
         meta["interrupted"] = any(s.get("interrupted") for s in summaries.values())
     for n, s in summaries.items():

@@ -1,0 +1,32 @@
+"""A sweep of runs with energy-chain equations puts their litres and kWh side by side
+(``chain_runs.csv``), as ``runs.csv`` does the driving energy. Real SUMO runs."""
+
+from __future__ import annotations
+
+import pytest
+
+from sumo_drvpw.cli import main as cli_main
+
+pytest.importorskip("libsumo")
+
+
+def test_sweep_with_a_fuel_chain_writes_the_litres_of_every_run_side_by_side(tmp_path):
+    """`run city highway --equation epa_gasoline_car`: chain_runs.csv holds, per scenario,
+    each run's chain_classes.csv rows (litres, CO2, L/100 km per vClass). Before (2026-11-27
+    rehearsal: a winter and a summer run of a hilly Bologna scenario with the EPA petrol and
+    i3 battery chains), the sweep's side-by-side table had only the driving energy: the
+    seasons' litres and kWh were in each run's own folder only."""
+    import pandas as pd
+
+    out = tmp_path / "runs"
+    code = cli_main(["run", "city", "highway", "--equation", "epa_gasoline_car", "--end", "60",
+                     "--no-figures", "--no-progress", "--out", str(out)])
+    assert code == 0
+    both = pd.read_csv(out / "chain_runs.csv")
+    assert list(both.columns[:3]) == ["scenario", "key", "equation"]
+    assert set(both.scenario) == {"city", "highway"}
+    for n in ("city", "highway"):
+        own = pd.read_csv(out / n / "chain_classes.csv")
+        mine = both[both.scenario == n].drop(columns="scenario").reset_index(drop=True)
+        assert len(own) > 0 and (own.fuel_l > 0).all()
+        pd.testing.assert_frame_equal(mine[list(own.columns)], own, check_dtype=False, rtol=1e-12)
