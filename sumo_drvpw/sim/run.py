@@ -292,7 +292,8 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     args = list(sc.sumo_args)
     # the config's own outputs go into this run's output folder, not beside the scenario
     # (unless the scenario's options or the emissions comparison set them already)
-    given = {a[2:].split("=", 1)[0] for a in args if a.startswith("--")}  # --key v, --key=v
+    given = {a[2:] for a in args if a.startswith("--")}
+    named = given | {a[2:].split("=", 1)[0] for a in args if a.startswith("--")}  # and --key=v
     if out_dir is not None:  # an output the scenario's options name by a relative path: into OUT/sumo/
         for i in range(len(args) - 1):
             files = [f.strip() for f in args[i + 1].split(",") if f.strip()]
@@ -301,11 +302,11 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
                 args[i + 1] = sumo_output_args({args[i][2:]: args[i + 1]}, Path(out_dir) / SUMO_OUTPUT_DIR)[1]
     # the emissions comparison reads the config's own tripinfo (in OUT/sumo/) when it writes
     # one file; otherwise a tripinfo of its own, in a temporary folder, replacing the config's
-    ti_cfg = "" if "tripinfo-output" in given else sc.config_outputs.get("tripinfo-output", "").strip()
+    ti_cfg = "" if "tripinfo-output" in named else sc.config_outputs.get("tripinfo-output", "").strip()
     keep_ti = bool(sc.sumo_device and out_dir is not None and ti_cfg and "," not in ti_cfg)
     drop_ti = bool(sc.sumo_device and ti_cfg and not keep_ti)
     redirect = {k: v for k, v in sc.config_outputs.items()
-                if k not in given and not (drop_ti and k == "tripinfo-output")}
+                if k not in named and not (drop_ti and k == "tripinfo-output")}
     scratch = None
     import tempfile
 
@@ -332,10 +333,10 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     if sc.sumo_device:  # SUMO's own model beside ours: its tripinfo, read after the run
         # the config's or the options' own device settings and tripinfo stay as they are
         # (SUMO refuses an option given twice)
-        if not (sc.sumo_device_in_config or given & {"device.emissions.probability",
+        if not (sc.sumo_device_in_config or named & {"device.emissions.probability",
                                                       "device.emissions.explicit"}):
             args += ["--device.emissions.probability", "1"]
-        ti_opt = _option_value(args, "tripinfo-output") if "tripinfo-output" in given else None
+        ti_opt = _option_value(args, "tripinfo-output") if "tripinfo-output" in named else None
         if keep_ti:
             tripinfo = sumo_dir / Path(ti_cfg).name
         elif ti_opt:  # the options' tripinfo (already pointed into OUT/sumo/ when relative)
