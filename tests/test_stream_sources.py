@@ -102,3 +102,71 @@ def test_a_trip_with_the_column_keeps_the_least_window_read_with_trips_without(t
     a_rows = (both.df["trip_id"] == "A").to_numpy()
     np.testing.assert_allclose(both.derivative(y)[a_rows], alone.derivative(alone.df["speed_mps"].to_numpy()),
                                rtol=0, atol=1e-12)
+
+
+# ------------------------------------------------------- the fuel flow, once per file
+
+def _fuel_log(d, empty_trip: str | None):
+    """The planted fuel log of test_stream_chain (five trips, a hybrid battery's V·I) with a
+    second fuel flow, fuel_rate_lph, logged 25 % high (another sensor), and the preferred
+    fuel_rate_gps empty over the whole trip ``empty_trip`` (a stretch of a batch or more)."""
+    from test_stream_chain import _fuel_frame
+
+    from sumo_drvpw.model.constants import FUELS
+
+    df = _fuel_frame()
+    df["fuel_rate_lph"] = 1.25 * df["fuel_rate_gps"] / 1000.0 * 3600.0 / FUELS["gasoline"]["density_kg_per_l"]
+    if empty_trip:
+        df.loc[df["trip_id"] == empty_trip, "fuel_rate_gps"] = np.nan
+    d.mkdir()
+    df.to_parquet(d / "fuel.parquet", row_group_size=500)
+    return d / "fuel.parquet", df
+
+
+@pytest.mark.parametrize("empty_trip", ["F0", "F2"])
+def test_a_batch_without_the_chosen_fuel_flow_is_missing_samples_not_another_flow(tmp_path, empty_trip):
+    """Found by review: the streamed paths chose the fuel-flow column per batch, so a batch in
+    which fuel_rate_gps was empty (a trip, or any stretch of whole trips) took fuel_rate_lph —
+    another sensor, here 25 % high — for that batch only, and the first batch's choice named
+    the source. In memory the whole file chooses fuel_rate_gps and that trip's samples are left
+    out (counted as non-finite power). The streamed compare and diagnose now choose once per
+    file: the same comparison, source and counts."""
+    from test_stream_chain import FUEL_EQ, _eq
+
+    from sumo_drvpw.fit.compare import compare
+    from sumo_drvpw.fit.diagnose.stream_run import diagnose_stream
+    from sumo_drvpw.fit.trip_energy import left_out_by_trip
+
+    path, df = _fuel_log(tmp_path / "logs", empty_trip)
+    eqs = [_eq(FUEL_EQ)]
+    m = load_measured([path], target="fuel")
+    u = m.usable
+    n_empty = int((df["trip_id"] == empty_trip).sum())
+    assert m.source.startswith("fuel flow fuel_rate_gps") and m.counts["excluded_nonfinite_power"] == n_empty
+    comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],
+                   target="fuel", battery_w=m.battery_w[u])
+    comp.left_out = left_out_by_trip(m.power_w, u, m.log.df["dt_s"].to_numpy(), m.inputs.trip)
+    ref = comp.to_json()
+    assert empty_trip not in ref["equations"]["hev"]["trip_energy"]["trips"]
+    cs, _ = run([path], partial(CompareStats, eqs, None, target="fuel"), rows=ROWS)
+    assert cs.source == m.source
+    assert cs.counts["excluded_nonfinite_power"] == n_empty and cs.counts["usable"] == m.counts["usable"]
+    got = cs.comparison().to_json()
+    got["settings"].pop("percentiles")
+    corpus.assert_close_documents(ref, got, 1e-9)
+    res = diagnose_stream([path], None, eqs[0], target="fuel", rows=ROWS, sample_rows=8 * ROWS)
+    assert res.details["reader_counts"]["excluded_nonfinite_power"] == n_empty
+    assert res.details["reader_counts"]["power_source"] == m.source
+
+
+def test_a_file_whose_flow_is_empty_throughout_is_still_refused_streamed(tmp_path):
+    """The choice by the whole file changes nothing for a file that has no fuel flow at all:
+    refused as in memory, naming the columns it needs."""
+    from sumo_drvpw.errors import UserError
+
+    path, df = _fuel_log(tmp_path / "logs", None)
+    df.drop(columns=["fuel_rate_lph"]).assign(fuel_rate_gps=np.nan).to_parquet(path)
+    with pytest.raises(UserError, match="needs a fuel-flow column"):
+        load_measured([path], target="fuel")
+    with pytest.raises(UserError, match="needs a fuel-flow column"):
+        run([path], partial(CompareStats, resolve_equations(["epa_gasoline_car"]), None, target="fuel"), rows=ROWS)

@@ -113,6 +113,9 @@ class DriveLog:
     #: (stretch code per sample, moving-average width per stretch [s]) of the derived
     #: acceleration: stretches are trips cut at logging gaps (:meth:`derivative`)
     deriv: tuple | None = field(default=None, repr=False)
+    #: a streamed batch: the fuel and air flows of its whole file that hold a value
+    #: (:func:`sumo_drvpw.data.powertrain.fuel_column`); None: judged on ``df``
+    logged: frozenset | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.df)
