@@ -165,3 +165,38 @@ def test_diagnose_trace_flags_a_trip_that_lost_samples(tmp_path, stream):
         assert te["trips"]["a"]["left_out_time_share"] == pytest.approx(0.3, abs=0.01)
     rows = [ln for ln in (out / "trace.md").read_text().splitlines() if ln.startswith("| a |")]
     assert rows and "partial: 30 % of time" in rows[0]
+
+
+def test_chain_trace_flags_a_trip_that_lost_samples(tmp_path):
+    """diagnose --target battery: the per-trip net energies of trace.json carry each trip's
+    left-out shares and the partial flag, and trace.md's per-trip table says it (a 'left
+    out' column and the Partial trips line), as the driving-power trace and compare do. A
+    planted battery log whose trip T0 has 30 % of its samples flagged brake (left out)."""
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.equations import Equation, load_equation, save_equation
+    from sumo_drvpw.synth.effects import BatteryLog, synth_trips
+    from sumo_drvpw.synth.track import Noise
+
+    b = BatteryLog(standstill_aux_w=0.0, noise_w=100.0)
+    df, _ = synth_trips(n_trips=4, minutes=8.0, seed=5, effects=(b,), noise=Noise(process_w=50.0, process_rel=0.002))
+    first = df["trip_id"].iloc[0]
+    rows = np.flatnonzero((df["trip_id"] == first).to_numpy())
+    df["brake"] = False
+    df.loc[df.index[rows[int(0.4 * len(rows)):int(0.7 * len(rows))]], "brake"] = True
+    log = tmp_path / "log.parquet"
+    df.to_parquet(log)
+    truth = load_equation("drvpw_prius3")
+    decl = tmp_path / "declared.toml"
+    save_equation(Equation("declared", dict(truth.terms), truth.mass_kg, chain=b.chain()), decl)
+    out = tmp_path / "trace"
+    assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--out", str(out),
+                     "--quiet"]) == 0
+    rep = json.loads((out / "trace.json").read_text())
+    for key in ("baseline", "final"):
+        te = rep[key]["trip_net_energy"]
+        assert te["partial_trips"] == [str(first)]
+        assert te["trips"][str(first)]["left_out_time_share"] == pytest.approx(0.3, abs=0.01)
+        assert all(v["left_out_samples"] == 0 for t, v in te["trips"].items() if t != str(first))
+    md = (out / "trace.md").read_text()
+    row = [ln for ln in md.splitlines() if ln.startswith(f"| {first} |")]
+    assert row and "partial: 30 % of time" in row[0] and "**Partial trips**" in md
