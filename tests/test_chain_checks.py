@@ -91,3 +91,51 @@ def test_a_power_split_hybrid_whose_engine_never_rests_at_light_load(tmp_path, c
     assert eq.chain.engine_off_below_w == 0.0
     assert "warning: energy chain engine_off_below_w = 0: " in out
     assert "IMPLAUSIBLE for a power-split hybrid" in eq.chain.reading["engine_off_below_w"]
+
+
+def test_the_idle_fuel_band_scales_with_the_engines_displacement(tmp_path):
+    """DOE Fact #861: 0.61 L/h idling at 2.0 L, 1.48 L/h at 4.6 L (0.305 and 0.322 L/h per
+    litre): each inside the band scaled to its own displacement (0.25–0.75 L/h per litre);
+    without a displacement the fixed passenger-car band (0.5–1.5 L/h) stays. The EPA fleet's
+    zero-output petrol fuel (built-in epa_gasoline_car: W per litre × 2.5 L) for a 4.6-L
+    engine, 2.1 L/h, was flagged by the fixed band and is not by the 4.6-L one; 0.89 L/h
+    passed the fixed band and is too much for a 1.0-L engine. A vehicle file's
+    powertrain.displacement_l reaches the check; an impossible one is refused."""
+    from types import SimpleNamespace
+
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.fit.chain_checks import check_chain, idle_fuel_band
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    assert idle_fuel_band(None) == (0.5, 1.5)
+    assert idle_fuel_band(2.0) == pytest.approx((0.5, 1.5))
+    assert idle_fuel_band(4.6) == pytest.approx((1.15, 3.45))
+    for disp, lph in ((2.0, 0.61), (4.6, 1.48)):          # [DOE861]'s two petrol engines
+        lo, hi = idle_fuel_band(disp)
+        assert lo < lph < hi
+    epa = load_equation("epa_gasoline_car").chain
+    per_l = epa.idle_fuel_power_w / 2.5                  # the class median displacement
+    big = 4.6 * per_l
+    assert fuel_l_per_h(big) == pytest.approx(2.08, abs=0.01)
+    assert "IMPLAUSIBLE" in idle_fuel_note(big, -np.inf, "gasoline", None)
+    assert "IMPLAUSIBLE" not in idle_fuel_note(big, -np.inf, "gasoline", None, 4.6)
+    assert "IMPLAUSIBLE" not in idle_fuel_note(8000.0, -np.inf, "gasoline", None)   # 0.89 L/h
+    note = idle_fuel_note(8000.0, -np.inf, "gasoline", None, 1.0)
+    assert "IMPLAUSIBLE" in note and "1-L engine" in note and "0.25–0.75 L/h" in note
+
+    def vehicle(extra):
+        p = tmp_path / "car.toml"
+        p.write_text(f'[vehicle]\nname = "car"\nmass_kg = 1800\n[powertrain]\n{extra}\n')
+        return load_vehicle(str(p))
+
+    def warned(veh):
+        fit = SimpleNamespace(chain=EnergyChain(predicts="fuel", idle_fuel_power_w=big, marginal_efficiency=0.35,
+                                                engine_off_below_w=-np.inf),
+                              parameters={"idle_fuel_power_w": {"value": big, "reading": ""}}, warnings=[])
+        check_chain(fit, veh, np.array([0.0, 1e4]), np.array([0.0, 20.0]), np.array([True, True]))
+        return fit.warnings
+
+    assert warned(vehicle("")) and not warned(vehicle("displacement_l = 4.6"))
+    for bad in ("0", "45", '"4.6"'):
+        with pytest.raises(UserError, match="displacement_l"):
+            vehicle(f"displacement_l = {bad}")

@@ -165,3 +165,73 @@ def test_diagnose_trace_flags_a_trip_that_lost_samples(tmp_path, stream):
         assert te["trips"]["a"]["left_out_time_share"] == pytest.approx(0.3, abs=0.01)
     rows = [ln for ln in (out / "trace.md").read_text().splitlines() if ln.startswith("| a |")]
     assert rows and "partial: 30 % of time" in rows[0]
+
+
+def test_chain_trace_flags_a_trip_that_lost_samples(tmp_path):
+    """diagnose --target battery: the per-trip net energies of trace.json carry each trip's
+    left-out shares and the partial flag, and trace.md's per-trip table says it (a 'left
+    out' column and the Partial trips line), as the driving-power trace and compare do. A
+    planted battery log whose trip T0 has 30 % of its samples flagged brake (left out)."""
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.equations import Equation, load_equation, save_equation
+    from sumo_drvpw.synth.effects import BatteryLog, synth_trips
+    from sumo_drvpw.synth.track import Noise
+
+    b = BatteryLog(standstill_aux_w=0.0, noise_w=100.0)
+    df, _ = synth_trips(n_trips=4, minutes=8.0, seed=5, effects=(b,), noise=Noise(process_w=50.0, process_rel=0.002))
+    first = df["trip_id"].iloc[0]
+    rows = np.flatnonzero((df["trip_id"] == first).to_numpy())
+    df["brake"] = False
+    df.loc[df.index[rows[int(0.4 * len(rows)):int(0.7 * len(rows))]], "brake"] = True
+    log = tmp_path / "log.parquet"
+    df.to_parquet(log)
+    truth = load_equation("drvpw_prius3")
+    decl = tmp_path / "declared.toml"
+    save_equation(Equation("declared", dict(truth.terms), truth.mass_kg, chain=b.chain()), decl)
+    out = tmp_path / "trace"
+    assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--out", str(out),
+                     "--quiet"]) == 0
+    rep = json.loads((out / "trace.json").read_text())
+    for key in ("baseline", "final"):
+        te = rep[key]["trip_net_energy"]
+        assert te["partial_trips"] == [str(first)]
+        assert te["trips"][str(first)]["left_out_time_share"] == pytest.approx(0.3, abs=0.01)
+        assert all(v["left_out_samples"] == 0 for t, v in te["trips"].items() if t != str(first))
+    md = (out / "trace.md").read_text()
+    row = [ln for ln in md.splitlines() if ln.startswith(f"| {first} |")]
+    assert row and "partial: 30 % of time" in row[0] and "**Partial trips**" in md
+
+
+def test_validation_trip_rows_carry_left_out_shares_and_the_tables_flag_partial_trips():
+    """validate --chain: a per-trip row (validation/chain_common.trip_rows) says what the trip
+    lost to samples left out (non-finite measured or predicted power) and whether that makes
+    it partial; the report's per-trip tables (JLU, Prius, i3) name partial trips with the
+    line compare's report.md has. A committed report without the keys renders as before."""
+    from pathlib import Path
+
+    from sumo_drvpw.validation.chain_common import trip_rows
+    from sumo_drvpw.validation.chain_render import render
+
+    n = 100
+    trips = np.repeat(np.array(["a", "b"]), n)
+    meas = np.full(2 * n, 2000.0)
+    pred = np.full(2 * n, 2200.0)
+    meas[20:50] = np.nan          # a: 30 % of its time without a measured power
+    pred[n + 5:n + 10] = np.nan   # b: 5 % without a prediction (its energy share 5 %: not partial)
+    rows = {r["trip"]: r for r in trip_rows(pred, meas, np.ones(2 * n), trips)}
+    a, b = rows["a"], rows["b"]
+    assert a["error"] == pytest.approx(0.1) and b["error"] == pytest.approx(0.1)
+    assert a["left_out_power_unknown_time_share"] == pytest.approx(0.3) and a["partial"] is True
+    assert b["left_out_energy_share"] == pytest.approx(0.05) and b["partial"] is False
+
+    repo = Path(__file__).resolve().parents[1]
+    doc = json.loads((repo / "docs" / "energy-chain-validation.json").read_text(encoding="utf-8"))
+    md = render(doc, "cmd")
+    assert "**Partial trips**" not in md  # rows without the keys: as committed
+    for section, key in (("jlu", "before"), ("prius2", "rows"), ("bmw_i3", "rows")):
+        row = doc[section][key][0]
+        row.update({k: a[k] for k in a if k.startswith("left_out_")}, partial=True)
+        flagged = render(doc, "cmd")
+        assert flagged.count("**Partial trips**") == 1, section
+        assert f"{row['trip']} (30 % of time" in flagged
+        row["partial"] = False

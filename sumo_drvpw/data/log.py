@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.data.paths import expand_paths as _expand_paths, parquet_frame
-from sumo_drvpw.data.resolution import accel_window
+from sumo_drvpw.data.resolution import accel_counts, accel_derivation, accel_window
 from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.errors import UserError
@@ -113,6 +113,9 @@ class DriveLog:
     #: (stretch code per sample, moving-average width per stretch [s]) of the derived
     #: acceleration: stretches are trips cut at logging gaps (:meth:`derivative`)
     deriv: tuple | None = field(default=None, repr=False)
+    #: a streamed batch: the fuel and air flows of its whole file that hold a value
+    #: (:func:`sumo_drvpw.data.powertrain.fuel_column`); None: judged on ``df``
+    logged: frozenset | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.df)
@@ -470,28 +473,17 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     lacking = None if "accel_mps2" not in df else _trips_without(df["accel_mps2"], trip_codes)
     if lacking is None or lacking.any():
         win, q = accel_window(opt, v, trip_codes)
-        wide = win > opt.accel_window_s
-        counts["accel_window_s"] = float(win.max())
+        own = np.ones(len(win), bool) if lacking is None else lacking[start]  # trips derived
+        win = np.where(own, win, opt.accel_window_s)  # a trip with the column: as read alone
         win_seg = win[trip_codes[_trip_starts(seg)]]
         derived = derivative(v, t, seg, win_seg)
-        if lacking is None:
-            df["accel_mps2"] = derived
-        else:
-            df["accel_mps2"] = np.where(lacking, derived, df["accel_mps2"].to_numpy(float))
-            counts["accel_derived_rows"] = int(lacking.sum())
+        df["accel_mps2"] = derived if lacking is None else np.where(lacking, derived, df["accel_mps2"].to_numpy(float))
         deriv = (seg, win_seg)
-        counts["accel_source"] = "derived: central difference of speed, " + (
-            f"{win[0]:.3g} s moving average" if (win == win[0]).all() else
-            f"{win.min():.3g}–{win.max():.3g} s moving average (each trip's own)") + (
-            f" (widened from {opt.accel_window_s:g} s" + ("" if wide.all() else f" on {int(wide.sum())} of {len(win)} trips")
-            + f": the speed is logged in steps of {q[wide].max():.3g} m/s, whose rounding would put more than "
-            f"{opt.accel_noise_mps2:g} m/s² of noise into the acceleration)" if wide.any() else "")
+        n_derived = len(df) if lacking is None else int(lacking.sum())
+        counts.update(accel_counts(accel_derivation(opt, win[own], q[own], len(df) - n_derived, n_derived)))
     else:
-        counts["accel_source"] = "accel_mps2 column"
+        counts.update(accel_counts(accel_derivation(opt, [], [], len(df), 0)))
         deriv = (seg, np.full(int(seg[-1]) + 1, opt.accel_window_s))
-    if lacking is not None and lacking.any():  # the files without it are the exception
-        counts["accel_source"] = ("accel_mps2 column; " + counts["accel_source"]
-                                  + f" for the {int(lacking.sum())} rows of files without it")
 
     def elevation_grade():
         step = v * np.r_[0.0, np.diff(t)]

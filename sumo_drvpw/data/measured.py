@@ -331,7 +331,7 @@ def _has_engine(log: DriveLog, veh: Vehicle | None) -> bool:
     log with fuel flow (then energy into the battery at standstill is no charger's)."""
     from sumo_drvpw.data.powertrain import fuel_column
 
-    return (veh is not None and veh.powertrain_type == "power_split") or fuel_column(log.df) is not None
+    return (veh is not None and veh.powertrain_type == "power_split") or fuel_column(log.df, getattr(log, "logged", None)) is not None
 
 
 def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:

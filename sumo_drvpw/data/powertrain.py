@@ -185,27 +185,41 @@ def measured_battery_power(log, vehicle=None) -> tuple[np.ndarray, str]:
 FUEL_COLUMNS = ("fuel_rate_gps", "fuel_rate_lph")
 
 
-def fuel_flow_candidates(df) -> list[str]:
+def fuel_flow_candidates(df, logged=None) -> list[str]:
     """Extra columns that read as a fuel volume flow: named with 'fuel', ending in ``_lph``
     (what adapters make of a vendor's L/h or gal/h flow: Torque's 'Fuel flow rate/hour',
-    Car Scanner's 'Calculated instant fuel rate'), with at least one value."""
-    return [str(c) for c in df.columns if str(c).endswith("_lph") and "fuel" in str(c) and _logged(df, c)]
+    Car Scanner's 'Calculated instant fuel rate'), with at least one value (``logged``: as
+    for :func:`fuel_column`)."""
+    return [str(c) for c in df.columns if str(c).endswith("_lph") and "fuel" in str(c) and _logged(df, c, logged)]
 
 
-def _logged(df, col) -> bool:
+def _logged(df, col, logged=None) -> bool:
     """Whether column ``col`` holds any value (a file's column for a PID the car never
-    answered is empty: no fuel flow, not a fuel flow of NaN)."""
-    return bool(df[col].notna().any())
+    answered is empty: no fuel flow, not a fuel flow of NaN): in ``df``, or when ``logged``
+    is given (the columns that hold a value in the whole file, :func:`flow_columns`), there."""
+    return col in logged if logged is not None else bool(df[col].notna().any())
 
 
-def fuel_column(df) -> str | None:
+def flow_columns(names) -> list[str]:
+    """Of the column ``names``, those whose choice depends on whether they hold a value: the
+    fuel flows, air flows and fuel trims found by name. A streamed file's batch chooses
+    among them by the whole file's values (``DriveLog.logged``), so a batch in which the
+    chosen flow is empty is missing samples (left out and counted), not another source."""
+    return [str(n) for n in names if str(n) in FUEL_COLUMNS or (str(n).endswith("_lph") and "fuel" in str(n))
+            or (str(n).endswith("_gps") and ("air" in str(n) or str(n).startswith("maf")))
+            or (str(n).endswith("_pct") and _TRIM.search(str(n)))]
+
+
+def fuel_column(df, logged=None) -> str | None:
     """The fuel-flow column of a log: ``fuel_rate_gps``, ``fuel_rate_lph``, else the one
     fuel volume flow among the extras (:func:`fuel_flow_candidates`; of several, the one
-    whose name starts with 'fuel'); None when there is none or no single one."""
+    whose name starts with 'fuel'); None when there is none or no single one. ``logged``:
+    the columns that hold a value in the whole file, when ``df`` is a batch of it (None:
+    judged on ``df``)."""
     for c in FUEL_COLUMNS:
-        if c in df and _logged(df, c):
+        if c in df and _logged(df, c, logged):
             return c
-    cands = fuel_flow_candidates(df)
+    cands = fuel_flow_candidates(df, logged)
     if len(cands) > 1:
         cands = [c for c in cands if c.startswith("fuel")]
     return cands[0] if len(cands) == 1 else None
@@ -228,14 +242,15 @@ def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.
     if name not in FUELS:
         raise UserError(f"fuel '{name}' is not one of {', '.join(FUELS)}")
     fp = FUELS[name]
-    col = fuel_column(df)
+    logged = getattr(log, "logged", None)  # a streamed batch: its whole file's choice
+    col = fuel_column(df, logged)
     if col is None:
-        air = air_flow_column(df)
+        air = air_flow_column(df, logged)
         if air is not None and name == "gasoline":
             kgps, how = fuel_from_air_flow(log, air)
             return kgps * fp["lhv_j_per_kg"], how
-        several = fuel_flow_candidates(df)
-        airs = air_flow_candidates(df)
+        several = fuel_flow_candidates(df, logged)
+        airs = air_flow_candidates(df, logged)
         raise UserError(f"{log.describe()}: the fuel target needs a fuel-flow column "
                         f"({', '.join(FUEL_COLUMNS)}, or one '…fuel…_lph' column"
                         + (", or for a petrol engine its mass air flow '…air…_gps'" if air is None else "")
@@ -259,17 +274,17 @@ def _no_negative(log, col: str, x: np.ndarray) -> None:
         raise UserError(f"{log.describe()}: column '{col}' is negative at row {i} ({x[i]!r})")
 
 
-def air_flow_candidates(df) -> list[str]:
+def air_flow_candidates(df, logged=None) -> list[str]:
     """Logged extras that read as an engine's mass air flow [g/s]: ending in ``_gps``, named
     for air or MAF (what the adapters make of OBD PID 0x10, e.g. Torque's 'Mass Air Flow
-    Rate(g/s)', VED's 'MAF[g/sec]')."""
+    Rate(g/s)', VED's 'MAF[g/sec]'); ``logged`` as for :func:`fuel_column`."""
     return [str(n) for n in df.columns if str(n).endswith("_gps") and str(n) != "fuel_rate_gps"
-            and ("air" in str(n) or str(n).startswith("maf")) and _logged(df, n)]
+            and ("air" in str(n) or str(n).startswith("maf")) and _logged(df, n, logged)]
 
 
-def air_flow_column(df) -> str | None:
+def air_flow_column(df, logged=None) -> str | None:
     """The one mass air flow of a log (:func:`air_flow_candidates`), or None."""
-    c = air_flow_candidates(df)
+    c = air_flow_candidates(df, logged)
     return c[0] if len(c) == 1 else None
 
 
@@ -295,7 +310,7 @@ def fuel_from_air_flow(log, air: str) -> tuple[np.ndarray, str]:
     trims = []
     for c in df.columns:
         m = _TRIM.search(str(c))
-        if m and str(c).endswith("_pct") and _logged(df, c):  # an inline engine has one bank
+        if m and str(c).endswith("_pct") and _logged(df, c, getattr(log, "logged", None)):  # an inline engine has one bank
             t = np.nan_to_num(df[c].to_numpy(float))
             banks[m.group(2)] = banks.get(m.group(2), 0.0) + t
             trims.append(str(c))

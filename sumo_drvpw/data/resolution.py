@@ -68,3 +68,63 @@ def accel_window(opt, v: np.ndarray, trip_codes: np.ndarray) -> tuple[np.ndarray
     q = np.array([speed_resolution(v[a:b], codes[a:b]) for a, b in zip(first, np.r_[first[1:], len(v)])])
     need = q / (np.sqrt(6.0) * opt.accel_noise_mps2) if opt.accel_noise_mps2 > 0 else np.zeros_like(q)
     return np.maximum(opt.accel_window_s, need), q
+
+
+def accel_derivation(opt, win, q, column_rows: int, derived_rows: int) -> dict:
+    """Where a log's acceleration came from, as sums that merge over batches and files
+    (:func:`merge_accel_derivation`) and read as the reader's text (:func:`accel_counts`).
+
+    Parameters
+    ----------
+    opt : the reading options (:class:`sumo_drvpw.data.log.ReadOptions`)
+    win, q : the moving-average width [s] and speed resolution [m/s] of each trip whose
+        acceleration is derived (:func:`accel_window`)
+    column_rows, derived_rows : rows whose acceleration is the ``accel_mps2`` column, and
+        rows whose acceleration is derived from the speed [-]
+    """
+    win, q = np.asarray(win, float), np.asarray(q, float)
+    wide = win > opt.accel_window_s
+    d = {"column_rows": int(column_rows), "derived_rows": int(derived_rows), "derived_trips": int(len(win)),
+         "widened_trips": int(wide.sum()), "least_window_s": float(opt.accel_window_s),
+         "noise_mps2": float(opt.accel_noise_mps2)}
+    if len(win):
+        d.update(window_min_s=float(win.min()), window_max_s=float(win.max()))
+    if wide.any():
+        d["widened_step_mps"] = float(q[wide].max())
+    return d
+
+
+def merge_accel_derivation(a: dict, b: dict) -> dict:
+    """:func:`accel_derivation` of two sets of whole trips read apart (rows and trips add,
+    the windows' range and the coarsest widened step span both)."""
+    out = {k: a[k] + b[k] for k in ("column_rows", "derived_rows", "derived_trips", "widened_trips")}
+    out.update(least_window_s=a["least_window_s"], noise_mps2=a["noise_mps2"])
+    for k, f in (("window_min_s", min), ("window_max_s", max), ("widened_step_mps", max)):
+        have = [x[k] for x in (a, b) if k in x]
+        if have:
+            out[k] = f(have)
+    return out
+
+
+def accel_counts(d: dict) -> dict:
+    """The reader's counts of :func:`accel_derivation` ``d``: ``accel_source`` (the text),
+    ``accel_derivation`` (``d``), ``accel_window_s`` (the widest window, when any trip's
+    acceleration is derived) and ``accel_derived_rows`` (when some rows have the column and
+    others not: the files of a folder without it)."""
+    out: dict = {"accel_derivation": d}
+    if not d["derived_rows"]:
+        out["accel_source"] = "accel_mps2 column"
+        return out
+    lo, hi, n, k = d["window_min_s"], d["window_max_s"], d["derived_trips"], d["widened_trips"]
+    text = "derived: central difference of speed, " + (
+        f"{lo:.3g} s moving average" if lo == hi else f"{lo:.3g}–{hi:.3g} s moving average (each trip's own)")
+    if k:
+        text += (f" (widened from {d['least_window_s']:g} s" + ("" if k == n else f" on {k} of {n} trips")
+                 + f": the speed is logged in steps of {d['widened_step_mps']:.3g} m/s, whose rounding would "
+                 f"put more than {d['noise_mps2']:g} m/s² of noise into the acceleration)")
+    out["accel_window_s"] = hi
+    if d["column_rows"]:  # the files without it are the exception
+        text = f"accel_mps2 column; {text} for the {d['derived_rows']} rows of files without it"
+        out["accel_derived_rows"] = d["derived_rows"]
+    out["accel_source"] = text
+    return out

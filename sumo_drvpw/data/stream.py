@@ -195,6 +195,33 @@ def check_required(path) -> None:
         _validate(pd.DataFrame(columns=names), p)
 
 
+def logged_flows(path, rows: int = BATCH_ROWS) -> frozenset | None:
+    """The fuel flows, air flows and fuel trims (:func:`sumo_drvpw.data.powertrain.flow_columns`)
+    that hold a value anywhere in a whole file: what its batches choose their fuel flow by,
+    as the in-memory reader chooses on the whole file (``DriveLog.logged``). Reads only those
+    columns. None when the file cannot be read so (its reading then says why)."""
+    from sumo_drvpw.data.powertrain import flow_columns
+
+    p = Path(path)
+    try:
+        names = (_parquet_file(p).schema_arrow.names if _is_parquet(p)
+                 else list(pd.read_csv(p, nrows=0).columns))
+        want = [c for c in dict.fromkeys(flow_columns(names))]
+        found: set[str] = set()
+        if not want:
+            return frozenset()
+        chunks = (_parquet_file(p).iter_batches(batch_size=rows, columns=want) if _is_parquet(p)
+                  else pd.read_csv(p, usecols=want, chunksize=rows, low_memory=False))
+        for b in chunks:
+            df = b.to_pandas() if hasattr(b, "to_pandas") else b
+            found |= {c for c in want if c not in found and bool(df[c].notna().any())}
+            if len(found) == len(want):
+                break
+        return frozenset(found)
+    except (UserError, OSError, ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
+        return None
+
+
 def _concat(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
     """Rows of ``a`` then ``b``; categorical trip ids stay categorical (union of categories)."""
     ta, tb = a.get("trip_id"), b.get("trip_id")
@@ -284,6 +311,8 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
         columns = set(columns) | needed_columns(options.measurement)
     stem = Path(part.path).stem
     check_required(part.path)
+    # the fuel flow chosen once for the file, not per batch (a battery target: is there an engine)
+    logged = logged_flows(part.path, rows) if target != "wheel" else None
     for df, off in whole_trips(part, rows, max_trip_rows, columns, categorical=True):
         first = off + (part.start or 0)
         name = part.path if first == 0 else f"{part.path} (batch from row {first})"
@@ -291,6 +320,7 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
             df.insert(0, "trip_id", stem)
         log = from_frame(df, vehicle, options, name=name)
         log.files = [part.path]
+        log.logged = logged
         del df
         m = measure(log, vehicle, target, sign_check=False)
         del log

@@ -38,6 +38,9 @@ from sumo_drvpw.model.constants import FUELS
 #: no passenger car's zero-output fuel but a fit that extrapolates the Willans line from
 #: loaded driving (or a trip's cold start spread over it).
 IDLE_FUEL_L_PER_H = (0.5, 1.5)
+#: the engine whose band IDLE_FUEL_L_PER_H is, when scaled by displacement [L]: [DOE861]'s
+#: 2.0-L compact (0.61 L/h: inside 0.5–1.5)
+IDLE_FUEL_REF_DISPLACEMENT_L = 2.0
 #: powertrains whose engine is off at standstill and drives electrically at light load
 HYBRID_POWERTRAINS = ("power_split",)
 #: readings that make a warning
@@ -62,20 +65,47 @@ def fitted_ranges(p_drive_w, v_mps, use) -> dict:
             "speed_range_mps": [float(v[ok].min()), float(v[ok].max())]}
 
 
-def idle_fuel_note(value_w: float, engine_off_below_w: float, fuel: str, powertrain: str | None) -> str:
-    """The zero-output fuel in L/h, and why it is implausible when it is ([DOE861])."""
-    lph = fuel_l_per_h(value_w, fuel)
+def idle_fuel_band(displacement_l: float | None = None) -> tuple[float, float]:
+    """The plausible zero-output fuel of an engine [L/h]: :data:`IDLE_FUEL_L_PER_H` for a
+    passenger car of unknown engine; for an engine of ``displacement_l`` [L] (the vehicle
+    file's ``powertrain.displacement_l``) that band scaled by displacement / 2.0 L.
+
+    Source of the scaling: idle fuel is about proportional to displacement — [DOE861]
+    gives 0.61 L/h for a 2.0-L and 1.48 L/h for a 4.6-L petrol engine, 0.305 and 0.322 L/h
+    per litre (the friction and pumping work of a cycle scale with the swept volume at
+    about the same idle speed) — so the band around the 2.0-L compact's idle fuel,
+    0.5–1.5 L/h, is taken per litre: 0.25–0.75 L/h per litre of displacement. A 4.6-L
+    engine's 1.48 L/h and the EPA fleet fit's zero-output fuel (built-in ``epa_*``
+    equations: 0.45 L/h per litre for petrol) are inside; a fixed band flagged a large
+    engine's plausible fuel and passed a small one's implausible one.
+    """
     lo, hi = IDLE_FUEL_L_PER_H
+    if displacement_l is None:
+        return lo, hi
+    k = float(displacement_l) / IDLE_FUEL_REF_DISPLACEMENT_L
+    return lo * k, hi * k
+
+
+def idle_fuel_note(value_w: float, engine_off_below_w: float, fuel: str, powertrain: str | None,
+                   displacement_l: float | None = None) -> str:
+    """The zero-output fuel in L/h, and why it is implausible when it is ([DOE861]; the
+    band for the engine's ``displacement_l`` [L] when known: :func:`idle_fuel_band`)."""
+    lph = fuel_l_per_h(value_w, fuel)
+    lo, hi = idle_fuel_band(displacement_l)
     s = f" = {lph:.2f} L/h"
     always_on = engine_off_below_w == -np.inf
+    whose = ("a passenger car's engine" if displacement_l is None
+             else f"a {displacement_l:g}-L engine ({IDLE_FUEL_L_PER_H[0] / IDLE_FUEL_REF_DISPLACEMENT_L:g}–"
+                  f"{IDLE_FUEL_L_PER_H[1] / IDLE_FUEL_REF_DISPLACEMENT_L:g} L/h per litre)")
     if lph > hi:
-        s += (f"; IMPLAUSIBLE: more than a passenger car's engine burns idling ({lo:g}–{hi:g} L/h with no "
+        s += (f"; IMPLAUSIBLE: more than {whose} burns idling ({lo:.2g}–{hi:.2g} L/h with no "
               f"load, DOE Fact #861: 2.0 L 0.61, 4.6 L 1.48 L/h); a Willans line extrapolated from loaded "
               f"driving (or a cold start spread over the trip) books it "
               + ("at every stop" if always_on else "on every step the engine runs, however light the load"))
     elif lph < lo and always_on:
-        s += (f"; IMPLAUSIBLE for an engine that idles at stops: below a small car's idle fuel "
-              f"({lo:g}–{hi:g} L/h, DOE Fact #861)")
+        s += ("; IMPLAUSIBLE for an engine that idles at stops: below "
+              + ("a small car's idle fuel" if displacement_l is None else f"the idle fuel of {whose}")
+              + f" ({lo:.2g}–{hi:.2g} L/h, DOE Fact #861)")
     if powertrain in HYBRID_POWERTRAINS and always_on:
         s += "; a power-split hybrid's engine is off at idle, so it burns nothing standing"
     return s
@@ -102,7 +132,8 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use) -> None:
     params = fit.parameters
     if chain.predicts == "fuel" and "idle_fuel_power_w" in params:
         params["idle_fuel_power_w"]["reading"] += idle_fuel_note(
-            chain.idle_fuel_power_w, chain.engine_off_below_w, chain.fuel, powertrain)
+            chain.idle_fuel_power_w, chain.engine_off_below_w, chain.fuel, powertrain,
+            vehicle.powertrain.get("displacement_l") if vehicle is not None else None)
         if "engine_off_below_w" in params:
             params["engine_off_below_w"]["reading"] += engine_off_note(
                 chain.engine_off_below_w, powertrain, fuel_l_per_h(chain.idle_fuel_power_w, chain.fuel))

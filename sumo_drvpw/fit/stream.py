@@ -93,10 +93,12 @@ class Moments:
 def _add_counts(a: dict, b: dict) -> dict:
     """Counts of two batches: numbers add, per-trip tables merge and lists join (batches
     hold whole trips), texts are kept (first seen; a grade source other than none wins:
-    one batch without elevation does not make the logs carry none). Of the reader's
-    decimal counts, the seconds of logging gaps add (each batch's rounded to ms, as the
-    reader rounds its sum) and the widest acceleration window is kept (the reader's max);
-    other decimals (the options' limits) are kept as first seen."""
+    one batch without elevation does not make the logs carry none), except the
+    acceleration's source: said of both from their mergeable ``accel_derivation``, as the
+    reader says it of both read together (rows from the column, rows derived, the windows).
+    Of the reader's decimal counts, the seconds of logging gaps add (each batch's rounded to
+    ms, as the reader rounds its sum) and the widest acceleration window is kept (the
+    reader's max); other decimals (the options' limits) are kept as first seen."""
     out = dict(a)
     for k, v in b.items():
         if k in out and k == "time_gaps_s":
@@ -114,6 +116,13 @@ def _add_counts(a: dict, b: dict) -> dict:
             out[k] = v
         elif k == "accel_outlier_limit_mps2" or k not in out:
             out.setdefault(k, v)
+    if "accel_derivation" in a and "accel_derivation" in b:
+        # the acceleration's source of both, as the reader says it of both read together
+        from sumo_drvpw.data.resolution import accel_counts, merge_accel_derivation
+
+        for k in ("accel_window_s", "accel_derived_rows"):
+            out.pop(k, None)
+        out.update(accel_counts(merge_accel_derivation(a["accel_derivation"], b["accel_derivation"])))
     return out
 
 

@@ -199,3 +199,20 @@ def with_left_out(doc: dict, left_out: dict | None, net: bool = False) -> dict:
     doc["partial_trips"] = partial
     doc["partial_trip_share"] = PARTIAL_TRIP_SHARE
     return doc
+
+
+def with_trace_left_out(res, m) -> dict:
+    """A chain trace's per-trip net energies (``baseline`` and ``final`` of
+    :class:`~sumo_drvpw.fit.chain_linear.ChainTraceResult`'s report) with what each trip lost
+    to the samples the trace left out (:func:`with_left_out`, ``net``): its mask
+    (``res.mask``) against every sample of the :class:`~sumo_drvpw.data.measured.Measured`
+    ``m`` it traced, the target as the trace measures it (``chain_target``). Returns the
+    report, changed in place."""
+    from sumo_drvpw.fit.chain import chain_target
+
+    df = m.log.df
+    left = left_out_by_trip(chain_target(m, res.declared.chain), res.mask, df["dt_s"].to_numpy(float),
+                            df["trip_id"].astype(str).to_numpy())
+    for k in ("baseline", "final"):
+        with_left_out(res.report[k]["trip_net_energy"], left, net=True)
+    return res.report

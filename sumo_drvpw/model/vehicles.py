@@ -22,6 +22,8 @@ Schema (every number may have a public source under ``[sources]`` with the same 
     final_drive = 3.267            # counter shaft → wheels [-]
     gear_ratio = 9.665             # single_motor: motor → wheels [-]
     wheel_radius_m = 0.3127        # dynamic tyre radius [m]
+    displacement_l = 1.8           # combustion engine's displacement [L] (scales the fuel
+                                   # chain's idle-fuel check, fit/chain_checks.py)
 
     [powertrain.inertia_kgm2]      # power_split: ice, carrier, mg1, sun, ring, mg2, wheels
     ice = 0.18
@@ -100,6 +102,7 @@ NUMBER_RANGES = {
     "powertrain.final_drive": (0.0, 50.0),
     "powertrain.gear_ratio": (0.0, 50.0),
     "powertrain.wheel_radius_m": (0.05, 2.0),
+    "powertrain.displacement_l": (0.0, 30.0),
     "road_load.a_n": (-1e-12, 1.0e5),            # A, B, C ≥ 0
     "road_load.b_n_per_mps": (-1e-12, 1.0e4),
     "road_load.c_n_per_mps2": (-1e-12, 1.0e3),

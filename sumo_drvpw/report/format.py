@@ -81,14 +81,16 @@ def partial_trip_flag(entry: dict) -> str:
             + (f" (power not measured on {_share(unknown)} of the time)" if unknown else ""))
 
 
-def partial_trip_lines(trip_doc: dict | None) -> list[str]:
+def partial_trip_lines(trip_doc: dict | None,
+                       energies: str = "per-trip energies (`trip_energy`, `trip_net_energy`)") -> list[str]:
     """One line naming the trips whose per-trip energies are partial (more than
     ``partial_trip_share`` of their measured energy, or of their time without a measured
-    power, on left-out samples: fit/trip_energy.py ``partial_share``), if any."""
+    power, on left-out samples: fit/trip_energy.py ``partial_share``), if any; ``energies``
+    names what covers only the rest."""
     if not trip_doc or not trip_doc.get("partial_trips"):
         return []
     trips = trip_doc["trips"]
     parts = [f"{t} ({partial_trip_flag(trips[t])[len('partial: '):]})" for t in trip_doc["partial_trips"]]
     return [f"**Partial trips**: more than {100 * trip_doc['partial_trip_share']:.0f} % of the measured energy "
             f"(or of the time without a measured power) of {len(parts)} trip(s) lies on left-out samples, so "
-            f"their per-trip energies (`trip_energy`, `trip_net_energy`) cover only the rest: {'; '.join(parts)}."]
+            f"their {energies} cover only the rest: {'; '.join(parts)}."]

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.model.chain import corrected_fuel_power
-from sumo_drvpw.validation.chain_common import KWH, mean_abs, params_of, read_shared, trip_rows
+from sumo_drvpw.validation.chain_common import KWH, left_out, mean_abs, params_of, read_shared, trip_rows
 from sumo_drvpw.validation.chain_i3 import i3_study
 
 
@@ -183,6 +183,8 @@ def prius2_study(data: Path) -> dict:
                      "error": pred_l / corr_l - 1.0, "error_vs_raw": pred_l / raw_l - 1.0,
                      "error_chain_fitted_on_equation": pred_eq_l / corr_l - 1.0,
                      "measured_l_per_100km": 100.0 * raw_l / dist_km})
+        s_all = trips == t
+        rows[-1].update(left_out(corr[s_all], s[s_all], dt[s_all], trips[s_all])[t])
         fits[t] = {"road_load": dict(eq.terms), "chain": params_of(fit), "r2": fit.r2,
                    "chain_fitted_on_equation": params_of(fit_eq)}
         # SUMO's PHEMlight5 petrol class along the same trip (its grade as logged)

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from sumo_drvpw.validation.chain_common import partial_lines
+
 
 # ------------------------------------------------------------------ report
 
@@ -62,6 +64,7 @@ def render(res: dict, command: str) -> str:
                      f"{i['net_elevation_m']:+.0f} | {b['measured_kwh']:.3f} | {_pct(b['error'])} | "
                      f"{_pct(bg['error'])} | {_pct(d['after'])} | {_found(d['findings'])} | "
                      f"{_pct(a['error'])} | {_pct(a2['error'])} | {_pct(a3['error'])} |")
+        L += partial_lines(j["before"])
         dv = j.get("deliverable")
         if dv:
             L += ["", f"**For new road logs of this car**: `docs/energy-chain/{dv['file']}`, the loop closed the same "
@@ -93,6 +96,7 @@ def render(res: dict, command: str) -> str:
                      f"{r['measured_l_per_100km']:.2f} | {r['battery_kwh']:+.3f} | {r['measured_corrected_l']:.3f} | "
                      f"{r['predicted_l']:.3f} | {_pct(r['error'])} | {_pct(r['error_vs_raw'])} | "
                      f"{_pct(r['error_chain_fitted_on_equation'])} | {r['predicted_co2_kg']:.2f} |")
+        L += partial_lines(p["rows"])
         L += _prius_sumo(p["rows"])
         dv = p.get("deliverable")
         if dv:
@@ -257,6 +261,7 @@ def _i3(i3: dict) -> list[str]:
                  f"{_pct(r['error_no_ambient_term'])} | {_pct(r['error_as_logged'])} | "
                  f"{r['heater_kwh']:.3f} | {r['heater_can_kwh']:.3f} | "
                  f"{r['battery_minus_motor_kwh']:.3f} | {'no heater V·I' if r['flagged'] else ''} |")
+    L += partial_lines(rows)
     if rows and "sumo_energy_chain_error" in rows[0]:
         L += ["", "| trip | " + " | ".join(k for k in i3["sumo_models"]) + " |",
               "|---|" + "---|" * len(i3["sumo_models"])]

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.stream import BATCH_ROWS, plan, whole_trips
+from sumo_drvpw.data.stream import BATCH_ROWS, logged_flows, plan, whole_trips
 from sumo_drvpw.model.terms import Inputs, parse_term
 
 #: rows of the first-look sample (screening, two-valued columns, quantiles)
@@ -45,12 +45,14 @@ def read_batches(paths, vehicle=None, options=None, target: str = "wheel", rows:
 
     for part in plan(paths):
         stem = Path(part.path).stem
+        logged = logged_flows(part.path, rows) if target != "wheel" else None  # once per file
         for df, off in whole_trips(part, rows):
             name = part.path if off == 0 else f"{part.path} (batch from row {off})"
             if "trip_id" not in df:
                 df.insert(0, "trip_id", stem)
             log = from_frame(df, vehicle, options, name=name)
             log.files = [part.path]
+            log.logged = logged
             del df
             yield measure(log, vehicle, target)
 
