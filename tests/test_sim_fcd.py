@@ -593,3 +593,59 @@ def test_a_teleports_reappearance_is_placed_not_driven_live_and_replayed(tmp_pat
     b = f.vehicles.set_index("vehicle").sort_index()
     for c in COLS + ["recup_grade_j"]:
         np.testing.assert_allclose(b[c], a[c], rtol=1e-6, atol=1.0, err_msg=c)
+
+
+def test_overtaking_on_the_opposite_lane_books_the_road_climbed(tmp_path):
+    """A two-way road over a hill built with `netconvert --opposites.guess`: cars overtake
+    slow trucks on the opposite-direction lane, where SUMO gives them that lane and counts
+    their position along it (the other way), also across the junction on the crest (from
+    their own lane onto the opposite lane of the next edge). The live run (positions
+    tracked by v·Δt, or read every step) and the replay book each car's rise as the road's:
+    net grade = m·g·(z_last − z_first) + m·g·sin θ_first·v_first·Δt (to 1 cm). Before,
+    the switch onto the opposite lane looked like a jump (booked at the opposite lane's
+    slope, the wrong sign: 1.24 m of rise lost per overtaking), and the tracked run moved a
+    car read on the opposite lane on along that lane, the wrong way (−31 to +64 m of net
+    rise where the road climbs 15 m)."""
+    import subprocess
+
+    import sumolib
+
+    from sumo_drvpw.model.constants import G
+    from sumo_drvpw.sim.network import load_network
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    (tmp_path / "n.nod.xml").write_text(
+        '<nodes><node id="A" x="0" y="0" z="0"/><node id="B" x="1500" y="0" z="45"/>'
+        '<node id="C" x="3000" y="0" z="15"/></nodes>')
+    (tmp_path / "n.edg.xml").write_text("<edges>" + "".join(
+        f'<edge id="{a}{b}" from="{a}" to="{b}" numLanes="1" speed="27.8"/>'
+        for a, b in ("AB", "BA", "BC", "CB")) + "</edges>")
+    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml",
+                    "--opposites.guess", "true", "-o", "n.net.xml", "--no-warnings"],
+                   cwd=tmp_path, check=True, capture_output=True)
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="slow" vClass="truck" maxSpeed="12" length="18"/>'
+        '<vType id="fast" vClass="passenger" maxSpeed="30" lcOpposite="1"/>'
+        '<route id="r" edges="AB BC"/>'
+        '<flow id="t" type="slow" route="r" begin="0" end="200" period="40" departSpeed="max"/>'
+        '<flow id="c" type="fast" route="r" begin="5" end="200" period="9" departSpeed="max"/></routes>')
+    sc = tmp_path / "s.toml"
+    sc.write_text('equations = ["vsp_ldv1999"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\n'
+                  'begin = 0\nend = 500\nstep_length = 1\n')
+    fcd = tmp_path / "fcd.xml"
+    kw = dict(equations=[PHYS], figures=False)
+    books = {"tracked": run_scenario(sc, None, options=["--fcd-output", str(fcd), "--precision", "6"], **kw),
+             "getter": run_scenario(sc, None, positions="getter", **kw),
+             "replay": process_fcd(fcd, scenario=sc, **kw)}
+    rows = read_fcd(fcd)
+    assert rows["lane"].str.startswith(("BA", "CB")).sum() > 100   # overtaking on them
+    s = load_scenario(sc)
+    r = _rise(load_network(s.net_file, s.road_class, s.slope_window, s.slope_max), rows)
+    for name, res in books.items():
+        b = res.vehicles.set_index("vehicle").sort_index()
+        b = b[b["vclass"] == "passenger"]
+        assert len(b) >= 20, name
+        m, z = b["mass_kg"] * G, r.reindex(b.index)
+        expect = m * (z.z1 - z.z0) + m * np.sin(z.theta) * z.v * 1.0
+        np.testing.assert_allclose(b["traction_grade_j"] + b["recup_grade_j"], expect,
+                                   rtol=0, atol=float(m.max()) * 0.01, err_msg=name)

@@ -436,6 +436,7 @@ class Stepper:
                 sub = kids if len(k) == n else [kids[i] for i in k]
                 lk = self.lane_numbers(list(map(get_lane, sub)))
                 pk = np.fromiter(map(get_pos, sub), float, len(k))
+                lk, pk = net.own_side(lane[k], pos[k], lk, pk)  # overtaking on the opposite lane: tracked on its own
                 if full:  # were the tracked ones right?
                     lane_own = self.lane_own
                     ledger.position_mismatches += int(np.count_nonzero(
