@@ -519,7 +519,7 @@ def _rise(net, rows):
 
 def test_fcd_written_less_often_than_the_step_books_the_rise_between_its_rows_exactly(tmp_path):
     """Why a sparse FCD's grade energy differs from the live run's (2026-11-27, most, 600 s,
-    rows every 2 s at 1-s steps: net grade 99.74 against 93.06 MJ). Between a vehicle's first
+    rows every 2 s at 1-s steps: net grade 99.74 against 93.12 MJ). Between a vehicle's first
     and last rows the replay books m·g·Δz of the profile exactly, as the live run between
     its first and last steps; the difference is the trip's two ends: the first row books
     the slope's rise over the distance it books, v·Δt with the rows' Δt (2 s) where the live
