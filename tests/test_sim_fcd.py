@@ -607,7 +607,8 @@ def test_overtaking_on_the_opposite_lane_books_the_road_climbed(tmp_path):
     the switch onto the opposite lane looked like a jump (booked at the opposite lane's
     slope, the wrong sign: 1.24 m of rise lost per overtaking), and the tracked run moved a
     car read on the opposite lane on along that lane, the wrong way (−31 to +64 m of net
-    rise where the road climbs 15 m)."""
+    rise where the road climbs 15 m). Its steps there are booked on its own edge, whether
+    positions are tracked or read (before, a read put them on the opposite lane's edge)."""
     import subprocess
 
     import sumolib
@@ -651,3 +652,5 @@ def test_overtaking_on_the_opposite_lane_books_the_road_climbed(tmp_path):
         expect = m * (z.z1 - z.z0) + m * np.sin(z.theta) * z.v * 1.0
         np.testing.assert_allclose(b["traction_grade_j"] + b["recup_grade_j"], expect,
                                    rtol=0, atol=float(m.max()) * 0.01, err_msg=name)
+        e = res.edges.groupby("edge")["distance_m"].sum()   # on the road the car drives
+        assert e.get("BA", 0.0) == e.get("CB", 0.0) == 0.0 and e["AB"] > 3e4, (name, e.to_dict())

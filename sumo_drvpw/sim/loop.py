@@ -447,7 +447,7 @@ class Stepper:
             ledger.veh_lane[vidx] = lane
             ledger.veh_pos[vidx] = pos
         else:
-            lane = self.lane_numbers(ln)
+            lane, pos = net.own_side_after(ledger.veh_at[vidx], v * dt, self.lane_numbers(ln), pos)
         if a is None:  # SUMO's definition: (v_t − v_t−1)/Δt, 0 when first seen
             prev = ledger.veh_prev_speed[vidx]
             a = (v - prev) / dt
@@ -468,8 +468,7 @@ class Stepper:
                     lane[j], pos[j] = d
             on_lane = lane >= 0
         if placed.any():  # put back by a teleport: its next step drives on from here
-            ledger.veh_at[vidx[placed]] = np.column_stack([lane[placed], pos[placed], net.elevation(
-                lane[placed], pos[placed]) if net.z_node is not None else np.full(placed.sum(), np.nan)])
+            ledger.veh_at[vidx[placed]] = net.place(lane[placed], pos[placed])
             on_lane &= ~placed
         if not on_lane.all():  # teleporting, parked: no lane, not booked
             ledger.veh_at[vidx[(lane < 0)], 2] = np.nan  # (its next step starts its rise afresh)

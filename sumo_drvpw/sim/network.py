@@ -186,6 +186,18 @@ class Network:
             theta = np.where(ok, np.arcsin(np.clip(dz / np.where(ok, ds, 1.0), -1.0, 1.0)), theta)
         return theta, np.column_stack([lane, pos, z])
 
+    def place(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """Rows [lane, pos, z] of vehicles at lane numbers ``lane``, positions ``pos`` [m]
+        (as :meth:`step_grade` returns them): where their next step starts."""
+        z = self.elevation(lane, pos) if self.z_node is not None else np.full(len(lane), np.nan)
+        return np.column_stack([lane, pos, z])
+
+    def own_side_after(self, last, ds, lane, pos):
+        """:meth:`own_side` for vehicles whose last step ended at rows ``last`` [lane, pos, z]
+        (:meth:`step_grade`) and that moved ``ds`` [m] since (v·Δt)."""
+        known = np.isfinite(last[:, 0])
+        return self.own_side(np.where(known, last[:, 0], -1).astype(np.int64), last[:, 1] + ds, lane, pos)
+
     def own_side(self, tracked, pred, lane, pos):
         """Lane numbers and positions [m] read (``lane``, ``pos``) of vehicles tracked on lanes
         ``tracked`` to positions ``pred`` [m]: one found on an opposite-direction lane
@@ -201,7 +213,8 @@ class Network:
 
         def near(ln, p):  # where (ln, p) is where the tracked position says
             same = self.lane_own_edge[ln] == self.lane_own_edge[t]
-            return np.abs(np.where(same, p - pred, pred - self.lane_length[t] - p)) <= BIN_M + JUMP_TOL_M
+            return (np.abs(np.where(same, p - pred, pred - self.lane_length[t] - p))
+                    <= BIN_M + JUMP_TOL_M + self.jump_slack_m)
 
         back = (tracked >= 0) & (lane >= 0) & (opp >= 0)
         back[back] = near(np.maximum(opp, 0), fwd)[back] & ~near(lane, pos)[back]
