@@ -207,19 +207,22 @@ class Network:
         is put back on its own lane at that place, so that tracking it by v·Δt moves it on."""
         if self.lane_opposite is None or not len(lane):
             return lane, pos
-        opp = self.lane_opposite[np.maximum(lane, 0)]
-        t = np.maximum(tracked, 0)
-        fwd = np.maximum(0.5 * (self.lane_length[np.maximum(opp, 0)] + self.lane_length[lane]) - pos, 0.0)
+        opp = np.where(lane >= 0, self.lane_opposite[np.maximum(lane, 0)], -1)
+        k = np.flatnonzero((tracked >= 0) & (opp >= 0))  # on a lane with an opposite one
+        if not len(k):
+            return lane, pos
+        t, o, p_pred, ln, p = tracked[k], opp[k], pred[k], lane[k], pos[k]
+        fwd = np.maximum(0.5 * (self.lane_length[o] + self.lane_length[ln]) - p, 0.0)
 
-        def near(ln, p):  # where (ln, p) is where the tracked position says
-            same = self.lane_own_edge[ln] == self.lane_own_edge[t]
-            return (np.abs(np.where(same, p - pred, pred - self.lane_length[t] - p))
+        def near(lanes, at):  # where (lanes, at) is where the tracked position says
+            same = self.lane_own_edge[lanes] == self.lane_own_edge[t]
+            return (np.abs(np.where(same, at - p_pred, p_pred - self.lane_length[t] - at))
                     <= BIN_M + JUMP_TOL_M + self.jump_slack_m)
 
-        back = (tracked >= 0) & (lane >= 0) & (opp >= 0)
-        back[back] = near(np.maximum(opp, 0), fwd)[back] & ~near(lane, pos)[back]
+        back = near(o, fwd) & ~near(ln, p)
         if back.any():
-            lane, pos = np.where(back, opp, lane), np.where(back, fwd, pos)
+            lane, pos = lane.copy(), pos.copy()
+            lane[k[back]], pos[k[back]] = o[back], fwd[back]
         return lane, pos
 
     def slope(self, lane: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
