@@ -501,3 +501,156 @@ def test_fcd_books_a_teleport_without_a_gap_as_the_live_run(tmp_path):
     grade = [c for c in COLS if "grade" in c] + ["recup_grade_j"]
     for c in grade + ["net_total_j", "distance_m", "time_s"]:
         np.testing.assert_allclose(b[c], a[c], rtol=1e-6, atol=1.0, err_msg=c)
+
+
+def _rise(net, rows):
+    """Per vehicle: (profile elevation at its first row, at its last row, robust slope and
+    speed at its first row) of FCD rows."""
+    from sumo_drvpw.sim.network import lane_numbers
+
+    rows = rows[~rows["person"]].sort_values("time", kind="stable")
+    lane = lane_numbers(net.lane_index, list(rows["lane"]))
+    rows = rows.assign(z=net.elevation(lane, rows["pos"].to_numpy()),
+                       theta=net.slope(lane, rows["pos"].to_numpy())[0])
+    g = rows.groupby("id")
+    return pd.DataFrame({"z0": g["z"].first(), "z1": g["z"].last(),
+                         "theta": g["theta"].first(), "v": g["speed"].first()})
+
+
+def test_fcd_written_less_often_than_the_step_books_the_rise_between_its_rows_exactly(tmp_path):
+    """Why a sparse FCD's grade energy differs from the live run's (2026-11-27, most, 600 s,
+    rows every 2 s at 1-s steps: net grade 99.74 against 93.12 MJ). Between a vehicle's first
+    and last rows the replay books m·g·Δz of the profile exactly, as the live run between
+    its first and last steps; the difference is the trip's two ends: the first row books
+    the slope's rise over the distance it books, v·Δt with the rows' Δt (2 s) where the live
+    run's insertion step books v·1 s, and the steps after the last row are unseen. Per
+    vehicle: net grade = m·g·(z_last − z_first) + m·g·sin θ_first·v_first·Δt, live and
+    replayed alike (here to 1e-4 or 1 cm of rise), which accounts for all of the difference between them."""
+    from sumo_drvpw.model.constants import G
+    from sumo_drvpw.sim.network import load_network
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    books = {}
+    for period in ("1", "2"):
+        fcd = tmp_path / f"fcd{period}.xml"
+        live = run_scenario(CITY, None, end=200, equations=[PHYS], figures=False,
+                            options=["--fcd-output", str(fcd), "--precision", "6", "--step-length", "1",
+                                     "--device.fcd.period", period, "--time-to-teleport", "-1"])
+        books[period] = (fcd, live.vehicles.set_index("vehicle").sort_index())
+    f = process_fcd(books["2"][0], scenario=CITY, out_dir=tmp_path / "o", equations=[PHYS], end=200,
+                    figures=False)
+    sc = load_scenario(CITY)
+    net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
+    net_grade = lambda d: d["traction_grade_j"] + d["recup_grade_j"]  # noqa: E731
+    live = books["1"][1]
+    rep = f.vehicles.set_index("vehicle").sort_index()
+    assert (live.index == rep.index).all() and len(rep) > 40
+    every, sparse = _rise(net, read_fcd(books["1"][0])), _rise(net, read_fcd(books["2"][0]))
+    for booked, r, dt in ((live, every, 1.0), (rep, sparse, 2.0)):
+        r = r.reindex(booked.index)
+        m = booked["mass_kg"] * G
+        expect = m * (r.z1 - r.z0) + m * np.sin(r.theta) * r.v * dt
+        np.testing.assert_allclose(net_grade(booked), expect, rtol=1e-4, atol=m.max() * 0.01)  # 1 cm
+    assert abs(net_grade(rep).sum() - net_grade(live).sum()) > 1e4   # a difference there is
+
+
+@pytest.mark.parametrize("step, ttt, end", [("1", "5", 200), ("0.5", "3", 300)])
+def test_a_teleports_reappearance_is_placed_not_driven_live_and_replayed(tmp_path, step, ttt, end):
+    """SUMO ends a teleport by placing the car on the next edge (its front at its length from
+    the lane's start, at the lane's speed limit: MSVehicleTransfer::checkInsertions →
+    MSLane::freeInsertion), after the step's moves: in that step it is not driven. SUMO's own
+    odometer (FCD ``odometer``) adds the jump there, where every other step adds v_t·Δt. The
+    run and the replay book that step as a teleport's: no distance, no road load, no kinetic
+    energy for the jump from standing to the insertion speed, no rise for the jump; they book on
+    from the next step. Before, both booked it as driven (city, `--time-to-teleport 5`, 200 s:
+    the teleported cars' distance +v·Δt per reappearance, their kinetic energy +½m·v²)."""
+    fcd, dt = tmp_path / "fcd.xml", float(step)
+    live = run_scenario(CITY, None, end=end, equations=[PHYS], figures=False,
+                        options=["--fcd-output", str(fcd), "--precision", "6", "--time-to-teleport", ttt,
+                                 "--step-length", step, "--fcd-output.attributes",
+                                 "id,type,speed,lane,pos,x,y,odometer"])
+    rows = read_fcd(fcd).sort_values(["id", "time"], kind="stable")
+    # SUMO's odometer per row, matched by (id, order within the id)
+    raw = pd.read_xml(fcd, xpath=".//vehicle", parser="etree")[["id", "odometer"]]
+    raw["k"] = raw.groupby("id").cumcount()
+    rows["k"] = rows.groupby("id").cumcount()
+    rows = rows.merge(raw[["id", "k", "odometer"]], on=["id", "k"])
+    first = rows["k"] == 0
+    moved = rows.groupby("id")["odometer"].diff()
+    jump = ~first & ((moved - rows["speed"] * dt).abs() > 1e-3)   # SUMO's placements
+    gaps = ~first & (rows.groupby("id")["time"].diff() > dt + 1e-9)   # teleports over steps
+    assert jump.sum() >= 3 and (gaps.sum() > 0 or step == "1"), (jump.sum(), gaps.sum())
+    driven = (rows["speed"] * dt).where(~jump, 0.0).groupby(rows["id"]).sum()
+    m = live.vehicles.set_index("vehicle")["mass_kg"]
+    v2 = rows["speed"] ** 2
+    dke = (0.5 * (v2 - v2.groupby(rows["id"]).shift())).where(~first & ~jump, 0.0).groupby(rows["id"]).sum()
+    f = process_fcd(fcd, scenario=CITY, out_dir=tmp_path / "o", equations=[PHYS], end=end, figures=False)
+    teleported = rows.loc[jump, "id"].unique()
+    for res in (live, f):
+        b = res.vehicles.set_index("vehicle").sort_index()
+        np.testing.assert_allclose(b["distance_m"], driven.reindex(b.index), rtol=1e-9, atol=1e-3)
+        acc = (b["traction_acc_j"] + b["recup_acc_j"]) / m.reindex(b.index)
+        np.testing.assert_allclose(acc.loc[teleported], dke.reindex(teleported), rtol=1e-6, atol=1e-3)
+    a = live.vehicles.set_index("vehicle").sort_index()
+    b = f.vehicles.set_index("vehicle").sort_index()
+    for c in COLS + ["recup_grade_j"]:
+        np.testing.assert_allclose(b[c], a[c], rtol=1e-6, atol=1.0, err_msg=c)
+
+
+def test_overtaking_on_the_opposite_lane_books_the_road_climbed(tmp_path):
+    """A two-way road over a hill built with `netconvert --opposites.guess`: cars overtake
+    slow trucks on the opposite-direction lane, where SUMO gives them that lane and counts
+    their position along it (the other way), also across the junction on the crest (from
+    their own lane onto the opposite lane of the next edge). The live run (positions
+    tracked by v·Δt, or read every step) and the replay book each car's rise as the road's:
+    net grade = m·g·(z_last − z_first) + m·g·sin θ_first·v_first·Δt (to 1 cm). Before,
+    the switch onto the opposite lane looked like a jump (booked at the opposite lane's
+    slope, the wrong sign: 1.24 m of rise lost per overtaking), and the tracked run moved a
+    car read on the opposite lane on along that lane, the wrong way (−31 to +64 m of net
+    rise where the road climbs 15 m). Its steps there are booked on its own edge, whether
+    positions are tracked or read (before, a read put them on the opposite lane's edge)."""
+    import subprocess
+
+    import sumolib
+
+    from sumo_drvpw.model.constants import G
+    from sumo_drvpw.sim.network import load_network
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    (tmp_path / "n.nod.xml").write_text(
+        '<nodes><node id="A" x="0" y="0" z="0"/><node id="B" x="1500" y="0" z="45"/>'
+        '<node id="C" x="3000" y="0" z="15"/></nodes>')
+    (tmp_path / "n.edg.xml").write_text("<edges>" + "".join(
+        f'<edge id="{a}{b}" from="{a}" to="{b}" numLanes="1" speed="27.8"/>'
+        for a, b in ("AB", "BA", "BC", "CB")) + "</edges>")
+    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml",
+                    "--opposites.guess", "true", "-o", "n.net.xml", "--no-warnings"],
+                   cwd=tmp_path, check=True, capture_output=True)
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="slow" vClass="truck" maxSpeed="12" length="18"/>'
+        '<vType id="fast" vClass="passenger" maxSpeed="30" lcOpposite="1"/>'
+        '<route id="r" edges="AB BC"/>'
+        '<flow id="t" type="slow" route="r" begin="0" end="200" period="40" departSpeed="max"/>'
+        '<flow id="c" type="fast" route="r" begin="5" end="200" period="9" departSpeed="max"/></routes>')
+    sc = tmp_path / "s.toml"
+    sc.write_text('equations = ["vsp_ldv1999"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\n'
+                  'begin = 0\nend = 500\nstep_length = 1\n')
+    fcd = tmp_path / "fcd.xml"
+    kw = dict(equations=[PHYS], figures=False)
+    books = {"tracked": run_scenario(sc, None, options=["--fcd-output", str(fcd), "--precision", "6"], **kw),
+             "getter": run_scenario(sc, None, positions="getter", **kw),
+             "replay": process_fcd(fcd, scenario=sc, **kw)}
+    rows = read_fcd(fcd)
+    assert rows["lane"].str.startswith(("BA", "CB")).sum() > 100   # overtaking on them
+    s = load_scenario(sc)
+    r = _rise(load_network(s.net_file, s.road_class, s.slope_window, s.slope_max), rows)
+    for name, res in books.items():
+        b = res.vehicles.set_index("vehicle").sort_index()
+        b = b[b["vclass"] == "passenger"]
+        assert len(b) >= 20, name
+        m, z = b["mass_kg"] * G, r.reindex(b.index)
+        expect = m * (z.z1 - z.z0) + m * np.sin(z.theta) * z.v * 1.0
+        np.testing.assert_allclose(b["traction_grade_j"] + b["recup_grade_j"], expect,
+                                   rtol=0, atol=float(m.max()) * 0.01, err_msg=name)
+        e = res.edges.groupby("edge")["distance_m"].sum()   # on the road the car drives
+        assert e.get("BA", 0.0) == e.get("CB", 0.0) == 0.0 and e["AB"] > 3e4, (name, e.to_dict())

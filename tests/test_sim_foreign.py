@@ -136,11 +136,10 @@ def test_a_run_without_vehicles_writes_whole_tables(tmp_path, capsys):
 
 def test_streamed_replay_keeps_a_vehicle_missing_for_a_teleport(tmp_path):
     """SUMO writes no FCD row for a teleporting vehicle; the live run keeps it in its
-    vehicle list and books the jump to its speed after the teleport (the acceleration term
-    is the kinetic-energy change). The streamed replay took such a vehicle as arrived and,
-    when it came back, as a new trip of the same id: the jump went unbooked (up to 157 kJ
-    per car in a jam-heavy run). It now goes on as the same trip, as in the whole-file
-    replay, which arrives a vehicle only after its last row."""
+    vehicle list and books on from where SUMO puts it back. The streamed replay took such a
+    vehicle as arrived and, when it came back, as a new trip of the same id (its own row).
+    It now goes on as the same trip, as in the whole-file replay, which arrives a vehicle
+    only after its last row."""
     fcd = tmp_path / "fcd.xml"
     run_scenario(CITY, None, end=120, equations=[PHYS], figures=False,
                  options=["--fcd-output", str(fcd), "--precision", "6"])

@@ -39,8 +39,8 @@ replayed timestep by timestep (:class:`FcdStream`; a timestep cut by a block bou
 joined first), so memory holds one block plus the running vehicles whatever the file's
 length; the ledger writes finished vehicles out (:mod:`sumo_drvpw.sim.spill`). A vehicle
 arrives the step after a timestep without it (SUMO's FCD does not tell an arrival from a
-teleport: a vehicle back after a gap books on in its row, its acceleration starting at 0,
-or in a second row once flushed). ``chunk_rows=None`` reads the whole file first
+teleport: a vehicle back after a gap is put back there, as a teleport's end, and books on
+from its next row, or in a second row once flushed). ``chunk_rows=None`` reads the whole file first
 (:class:`FcdReplay`: the reference the streamed replay equals exactly on gap-free FCD).
 The rows must be in time order (SUMO writes them so). Split by vehicle on Dask:
 :mod:`sumo_drvpw.sim.fcd_dask`.

@@ -27,7 +27,7 @@ from sumo_drvpw.data.wind import tailwind_mps
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network, lane_numbers
-from sumo_drvpw.sim.reader import Reader
+from sumo_drvpw.sim.reader import Reader, reinserted
 from sumo_drvpw.sim.shutoff import ShutOff
 from sumo_drvpw.sim.sumo_start import NewRun, signals_deferred, step_method
 
@@ -374,13 +374,12 @@ class Stepper:
                 if ledger.flush_due():  # before the new ones come: memory ≤ running vehicles
                     self.flush()
                     vmap = self.vmap
-        ends = np.array([vmap[v] for v in back if v in vmap], np.int64)  # teleports ended
-        ledger.veh_at[ends, 2] = np.nan  # (a replay: back after steps without a row): the rise starts afresh
+        ends = np.array([vmap[v] for v in back if v in vmap], np.int64)  # teleports ended: placed
         starts, start_ids = [], []  # vehicles first seen departing: trips that start
         for vid in departed:
             if self.is_replay and vid in vmap:  # back after a teleport (no FCD rows): the same
-                ledger.unretire(vmap[vid])  # trip, its speed kept (the jump booked), as live
-                ledger.veh_at[vmap[vid], 2] = np.nan  # (the live run saw it off the lane)
+                ledger.unretire(vmap[vid])  # trip, put back on the lane there, as live
+                ends = np.append(ends, vmap[vid])
                 continue
             if vid in vmap:  # an id used again (vehicle.add after it left): a new trip, its
                 ledger.retire([vmap[vid]])  # own row, vType and mass (the old row is done)
@@ -437,6 +436,7 @@ class Stepper:
                 sub = kids if len(k) == n else [kids[i] for i in k]
                 lk = self.lane_numbers(list(map(get_lane, sub)))
                 pk = np.fromiter(map(get_pos, sub), float, len(k))
+                lk, pk = net.own_side(lane[k], pos[k], lk, pk)  # overtaking on the opposite lane: tracked on its own
                 if full:  # were the tracked ones right?
                     lane_own = self.lane_own
                     ledger.position_mismatches += int(np.count_nonzero(
@@ -447,7 +447,7 @@ class Stepper:
             ledger.veh_lane[vidx] = lane
             ledger.veh_pos[vidx] = pos
         else:
-            lane = self.lane_numbers(ln)
+            lane, pos = net.own_side_after(ledger.veh_at[vidx], v * dt, self.lane_numbers(ln), pos)
         if a is None:  # SUMO's definition: (v_t − v_t−1)/Δt, 0 when first seen
             prev = ledger.veh_prev_speed[vidx]
             a = (v - prev) / dt
@@ -457,6 +457,7 @@ class Stepper:
             angle = np.zeros(n)
         if raw is not None:
             raw = np.radians(raw)
+        placed = reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, self.is_replay)  # not driven
         on_lane = lane >= 0
         if self.parking_known and not on_lane.all():  # parked, dwelling, or teleporting
             for j in np.flatnonzero(~on_lane):
@@ -466,8 +467,11 @@ class Stepper:
                 if d is not None:  # dwelling at a bus stop off the lane: standing there
                     lane[j], pos[j] = d
             on_lane = lane >= 0
+        if placed.any():  # put back by a teleport: its next step drives on from here
+            ledger.veh_at[vidx[placed]] = net.place(lane[placed], pos[placed])
+            on_lane &= ~placed
         if not on_lane.all():  # teleporting, parked: no lane, not booked
-            ledger.veh_at[vidx[~on_lane], 2] = np.nan  # (its next step starts its rise afresh)
+            ledger.veh_at[vidx[(lane < 0)], 2] = np.nan  # (its next step starts its rise afresh)
             vidx, lane, v, a, angle, pos = (
                 x[on_lane] for x in (vidx, lane, v, a, angle, pos))
             if raw is not None:

@@ -88,6 +88,9 @@ class Network:
     #: per lane: number of the edge it belongs to, internal edges included (unlike
     #: ``lane_edge``, which maps internal lanes to the edge they lead to)
     lane_own_edge: np.ndarray | None = None
+    #: per lane: the opposite-direction lane SUMO lets vehicles overtake on (the net's
+    #: ``<neigh>``, netconvert --opposites.guess), -1 none; its positions run the other way
+    lane_opposite: np.ndarray | None = None
     #: lane ids in lane-number order (for naming lanes in the summary)
     lane_ids: list[str] | None = None
     #: False when no lane shape has a z coordinate other than 0 (slopes are then all 0)
@@ -166,6 +169,12 @@ class Network:
             if len(k):
                 lp, p0, ln, p1 = prev[k], last[k, 1], lane[k], pos[k]
                 along = self.lane_length[lp] - p0 + p1
+                if self.lane_opposite is not None:  # a lane with an opposite-direction lane: a car
+                    o0, o1 = self.lane_opposite[lp] >= 0, self.lane_opposite[ln] >= 0  # overtaking on
+                    along = (np.minimum(self.lane_length[lp] - p0, np.where(o0, p0, np.inf))  # it counts
+                             + np.minimum(p1, np.where(o1, self.lane_length[ln] - p1, np.inf)))  # back
+                    pair = (self.lane_opposite[lp] == ln) | (self.lane_opposite[ln] == lp)  # same road
+                    along[pair] = np.abs(0.5 * (self.lane_length[lp] + self.lane_length[ln]) - p0 - p1)[pair]
                 jump = along > road[k] + JUMP_TOL_M
                 if self.centre_x is not None:
                     i, j = self.bin_index(lp, p0), self.bin_index(ln, p1)
@@ -176,6 +185,45 @@ class Network:
         if ok.any():  # sin θ = Δz/(v·Δt): m·g·v·sin θ·Δt = m·g·Δz
             theta = np.where(ok, np.arcsin(np.clip(dz / np.where(ok, ds, 1.0), -1.0, 1.0)), theta)
         return theta, np.column_stack([lane, pos, z])
+
+    def place(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """Rows [lane, pos, z] of vehicles at lane numbers ``lane``, positions ``pos`` [m]
+        (as :meth:`step_grade` returns them): where their next step starts."""
+        z = self.elevation(lane, pos) if self.z_node is not None else np.full(len(lane), np.nan)
+        return np.column_stack([lane, pos, z])
+
+    def own_side_after(self, last, ds, lane, pos):
+        """:meth:`own_side` for vehicles whose last step ended at rows ``last`` [lane, pos, z]
+        (:meth:`step_grade`) and that moved ``ds`` [m] since (v·Δt)."""
+        known = np.isfinite(last[:, 0])
+        return self.own_side(np.where(known, last[:, 0], -1).astype(np.int64), last[:, 1] + ds, lane, pos)
+
+    def own_side(self, tracked, pred, lane, pos):
+        """Lane numbers and positions [m] read (``lane``, ``pos``) of vehicles tracked on lanes
+        ``tracked`` to positions ``pred`` [m]: one found on an opposite-direction lane
+        (overtaking; SUMO counts its positions the other way) where its own lane's place
+        matches the tracked one and the read does not (on the same edge within
+        :data:`JUMP_TOL_M` + one bin, or that far past the tracked lane's end on the next),
+        is put back on its own lane at that place, so that tracking it by v·Δt moves it on."""
+        if self.lane_opposite is None or not len(lane):
+            return lane, pos
+        opp = np.where(lane >= 0, self.lane_opposite[np.maximum(lane, 0)], -1)
+        k = np.flatnonzero((tracked >= 0) & (opp >= 0))  # on a lane with an opposite one
+        if not len(k):
+            return lane, pos
+        t, o, p_pred, ln, p = tracked[k], opp[k], pred[k], lane[k], pos[k]
+        fwd = np.maximum(0.5 * (self.lane_length[o] + self.lane_length[ln]) - p, 0.0)
+
+        def near(lanes, at):  # where (lanes, at) is where the tracked position says
+            same = self.lane_own_edge[lanes] == self.lane_own_edge[t]
+            return (np.abs(np.where(same, at - p_pred, p_pred - self.lane_length[t] - at))
+                    <= BIN_M + JUMP_TOL_M + self.jump_slack_m)
+
+        back = near(o, fwd) & ~near(ln, p)
+        if back.any():
+            lane, pos = lane.copy(), pos.copy()
+            lane[k[back]], pos[k[back]] = o[back], fwd[back]
+        return lane, pos
 
     def slope(self, lane: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Robust slope [rad] and clipped flag at lane numbers ``lane``, positions ``pos`` [m]."""
@@ -411,6 +459,8 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         heading_deg=np.concatenate(heads), lane_ids=[ln.getID() for ln in lanes],
         centre_x=np.concatenate(cxs), centre_y=np.concatenate(cys),
         lane_width=np.array([ln.getWidth() for ln in lanes], float), max_rad=float(max_rad),
+        lane_opposite=np.array([lane_index.get(getattr(ln, "getNeigh", lambda: None)() or "", -1)
+                                for ln in lanes], np.int64),
         lane_steep=np.maximum(np.array(steep, float), np.tan(max_rad)),
         has_elevation=z_len > 0.0,
         z_share=float(z_len / max(float(lane_length.sum()), 1e-9)))

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from sumo_drvpw.sim.network import JUMP_TOL_M
+
 # traci variable ids (traci.constants), fixed by the TraCI protocol
 _VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE = 0x40, 0x72, 0x43
 _VAR_LANE_ID, _VAR_LANEPOSITION, _VAR_SLOPE = 0x51, 0x56, 0x36
@@ -105,3 +107,34 @@ class Reader:
             self.conn.simulation.subscribeContext("", _CMD_GET_VEHICLE_VARIABLE, _EVERYWHERE_M,
                                                   _TRACI_VARS)
             self.subscribed = True
+
+
+#: a step's speed gain [m/s²] no vehicle that stood reaches by driving (SUMO's vClass default
+#: accelerations are at most 2.6 m/s², its motorcycles' 6 in some versions): a standing
+#: vehicle on another edge in the next row this much faster was put there by a teleport
+REINSERT_ACCEL_MPS2 = 8.0
+
+
+def reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, replay: bool):
+    """Which vehicles of a step SUMO put back on a lane at a teleport's end: placed, not
+    driven (MSVehicleTransfer::checkInsertions → MSLane::freeInsertion: the front at its length
+    from the next edge's start, at that lane's speed limit or the vType's maxSpeed, in the
+    step after the moves). ``ends``: slots SUMO says ended a teleport (a live run; a replay: back
+    after steps without rows). A replay also tells one SUMO started and ended in one step (no
+    gap in the FCD) by its row: it stood (≤ 0.1 m/s) and is on another edge, faster by more
+    than :data:`REINSERT_ACCEL_MPS2`·Δt or farther along the lanes than its speed took it
+    (v_t·Δt, plus :attr:`Network.jump_slack_m` for rows sparser than the step). Parameters:
+    lane numbers, positions [m], speeds [m/s], accelerations [m/s²] (v_t − v_t−1)/Δt of slots
+    ``vidx``, Δt [s]."""
+    fresh = (np.isin(vidx, ends) if len(ends) else np.zeros(len(vidx), bool)) & (lane >= 0)
+    if replay and net.lane_own_edge is not None:
+        prev = ledger.veh_at[vidx, 0]
+        k = np.flatnonzero(np.isfinite(prev) & (lane >= 0) & (v - a * dt <= 0.1))
+        lp = prev[k].astype(np.int64)
+        k = k[net.lane_own_edge[lp] != net.lane_own_edge[lane[k]]]
+        if len(k):
+            lp = prev[k].astype(np.int64)
+            along = net.lane_length[lp] - ledger.veh_at[vidx[k], 1] + pos[k]
+            fresh[k[(a[k] > REINSERT_ACCEL_MPS2)
+                    | (along > v[k] * dt + net.jump_slack_m + JUMP_TOL_M)]] = True
+    return fresh
