@@ -291,7 +291,8 @@ def main_chain(args) -> int:
     (:func:`~sumo_drvpw.data.measured.keep_arrays`)."""
     from sumo_drvpw.data.measured import keep_arrays, load_measured_pair, resolve_equations
     from sumo_drvpw.fileio import check_output_path
-    from sumo_drvpw.fit.chain import calibrate_on, check_load_columns
+    from sumo_drvpw.fit.chain import calibrate_on
+    from sumo_drvpw.fit.chain_checks import check_load_columns
     from sumo_drvpw.fit.compare import compare
     from sumo_drvpw.model.equations import save_equation
 
