@@ -175,9 +175,9 @@ class ChainStats:
         del mw
         w = m.log.df["dt_s"].to_numpy(float)
         v = np.asarray(m.inputs.v, float)
-        sig = dict(m.inputs.signals)
         need = set(self.spec.loads) | ({self.spec.hvac["column"]} if self.spec.hvac else set())
-        self.seen |= need & set(sig)
+        sig = {c: np.asarray(m.inputs.signals[c], float) for c in need if c in m.inputs.signals}
+        self.seen |= set(sig)
         sig.update({c: np.full(len(y), np.nan) for c in need - set(sig)})  # unknown in this batch
         if scan:
             self._checks(p, y, v, use)
