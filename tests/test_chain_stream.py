@@ -147,3 +147,24 @@ def test_dask_chain_calibration_equals_memory(chain_logs, tmp_path, capsys):
             docs[e] = _undated(out)
     assert "dask engine:" in capsys.readouterr().err
     corpus.assert_close_documents(docs["memory"], docs["dask"], RTOL)
+
+
+def test_streamed_chain_refuses_files_that_differ_in_their_chain_input(chain_logs, tmp_path, capsys):
+    """One file logs a driving power (the chain's input there), the other not (the road
+    load's power there): the streamed fit takes one input for all, so it refuses, naming
+    both sources, and writes nothing (in memory the second file's rows would have no
+    measured driving power and drop out of the fit)."""
+    import pandas as pd
+
+    folder, eq, _ = chain_logs["battery"]
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    a = pd.read_parquet(folder / "a.parquet")
+    a["power_w"] = 0.9 * a["battery_voltage_v"] * a["battery_current_a"]
+    a.to_parquet(mixed / "a.parquet", row_group_size=700)
+    (mixed / "b.csv").write_bytes((folder / "b.csv").read_bytes())
+    out = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(mixed), "--target", "battery", "--equation", str(eq), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "2 files: some files have a measured driving power and some not (direct (power_w), none)" in err
+    assert not out.exists()

@@ -328,7 +328,8 @@ class ChainStats:
                                 f"{self.usable} usable samples")
         if len(self.inputs) > 1:
             raise UserError(f"{self.where}: some files have a measured driving power and some not "
-                            f"({', '.join(sorted(str(s) for s in self.inputs))}): the streamed chain "
+                            f"({', '.join(sorted('none' if s is None else s for s in self.inputs))}): "
+                            "the streamed chain "
                             "fit takes one input for all; read them together in memory")
 
     @property
