@@ -168,3 +168,16 @@ def test_streamed_chain_refuses_files_that_differ_in_their_chain_input(chain_log
     err = capsys.readouterr().err
     assert "2 files: some files have a measured driving power and some not (direct (power_w), none)" in err
     assert not out.exists()
+
+
+def test_streamed_battery_only_log_without_equation_is_refused_as_in_memory(chain_logs, tmp_path, capsys):
+    """A log with battery V·I but no driving power, a load column it has, no --equation:
+    both engines refuse it for the missing road load (not for the load column), nothing written."""
+    folder, _, _ = chain_logs["battery"]
+    for engine in ("memory", "local"):
+        out = tmp_path / f"{engine}.toml"
+        assert cli_main(["calibrate", str(folder), "--target", "battery", "--load", "heater_power_w",
+                         "--out", str(out), "--engine", engine]) == 2
+        err = capsys.readouterr().err
+        assert "2 files logs no driving power" in err and "give its road load with --equation" in err, engine
+        assert not out.exists()

@@ -177,7 +177,6 @@ class ChainStats:
         v = np.asarray(m.inputs.v, float)
         need = set(self.spec.loads) | ({self.spec.hvac["column"]} if self.spec.hvac else set())
         sig = {c: np.asarray(m.inputs.signals[c], float) for c in need if c in m.inputs.signals}
-        self.seen |= set(sig)
         sig.update({c: np.full(len(y), np.nan) for c in need - set(sig)})  # unknown in this batch
         if scan:
             self._checks(p, y, v, use)
@@ -192,6 +191,8 @@ class ChainStats:
         (fit/chain_checks.py)."""
         self.usable += int(use.sum())
         self.nonzero += int(np.count_nonzero(np.nan_to_num(y[use])))
+        need = set(self.spec.loads) | ({self.spec.hvac["column"]} if self.spec.hvac else set())
+        self.seen |= {c for c in need if c in m.inputs.signals}
         for c in self.spec.loads:
             col = m.inputs.signals.get(c)
             if col is None and c in m.log.df.columns and c not in self.load_text:
