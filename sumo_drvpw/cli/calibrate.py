@@ -282,7 +282,10 @@ def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
 def main_chain(args) -> int:
     """``calibrate --target battery|fuel``: the energy chain on top of a road-load equation.
 
-    The logs are read once for the target and the driving power
+    With constant efficiencies and ``--engine local`` (the default) or ``dask`` the logs are
+    streamed (:func:`sumo_drvpw.cli._scale.calibrate_chain_streamed`, the same equation to
+    1e-9 relative). With ``--engine memory`` or an efficiency table the logs are read once
+    for the target and the driving power
     (:func:`~sumo_drvpw.data.measured.load_measured_pair`); once the road load is known, only
     the arrays the chain fit and its report need are kept and the table goes
     (:func:`~sumo_drvpw.data.measured.keep_arrays`)."""
