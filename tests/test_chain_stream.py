@@ -181,3 +181,31 @@ def test_streamed_battery_only_log_without_equation_is_refused_as_in_memory(chai
         err = capsys.readouterr().err
         assert "2 files logs no driving power" in err and "give its road load with --equation" in err, engine
         assert not out.exists()
+
+
+def test_dask_local_cluster_serves_every_pass(chain_logs, tmp_path, capsys, monkeypatch):
+    """--engine dask --workers N: the battery chain's three passes run on one local cluster
+    (one started per pass cost its start-up three times), with the memory engine's equation."""
+    pytest.importorskip("distributed", reason="Dask not installed: pip install 'sumo-drvpw[dask]'")
+    from contextlib import contextmanager
+
+    folder, eq, _ = chain_logs["battery"]
+    started = []
+    real = engine_mod.dask_client
+
+    @contextmanager
+    def counting(scheduler=None, workers=None):
+        if scheduler is None:
+            started.append(workers)
+        with real(scheduler, workers) as c:
+            yield c
+
+    monkeypatch.setattr(engine_mod, "dask_client", counting)
+    docs = {}
+    for e, more in (("memory", []), ("dask", ["--workers", "1"])):
+        out = tmp_path / f"{e}.toml"
+        assert cli_main(["calibrate", str(folder), "--target", "battery", "--equation", str(eq),
+                         "--out", str(out), "--name", "chain", "--engine", e, *more]) == 0
+        docs[e] = _undated(out)
+    assert capsys.readouterr().err.count("dask engine:") == 3 and started == [1]
+    corpus.assert_close_documents(docs["memory"], docs["dask"], RTOL)

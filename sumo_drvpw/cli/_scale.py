@@ -226,7 +226,21 @@ def compare_main(args) -> int | None:
 
 def calibrate_chain_streamed(args, out: Path, inputs, hvac) -> int:
     """`calibrate --target battery|fuel` through the streaming engines (constant
-    efficiencies): the same equation as the in-memory path (fit/chain_stream.py)."""
+    efficiencies): the same equation as the in-memory path (fit/chain_stream.py). With
+    ``--engine dask`` and no scheduler, one local cluster serves every pass over the logs."""
+    check_engine_arguments(args)
+    if args.engine != "dask" or args.scheduler is not None:
+        return _chain_streamed(args, out, inputs, hvac)
+    import argparse
+
+    from sumo_drvpw.fit.engine import dask_client
+
+    with dask_client(None, args.workers) as client:
+        shared = argparse.Namespace(**{**vars(args), "scheduler": client.scheduler.address, "workers": None})
+        return _chain_streamed(shared, out, inputs, hvac)
+
+
+def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     from sumo_drvpw.cli import measurement_options, note_counts, output_set
     from sumo_drvpw.cli.calibrate import MOVING_MPS, declare_measurement
     from sumo_drvpw.data.measured import resolve_equations
