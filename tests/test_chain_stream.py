@@ -209,3 +209,30 @@ def test_dask_local_cluster_serves_every_pass(chain_logs, tmp_path, capsys, monk
         docs[e] = _undated(out)
     assert capsys.readouterr().err.count("dask engine:") == 3 and started == [1]
     corpus.assert_close_documents(docs["memory"], docs["dask"], RTOL)
+
+
+def test_streamed_recuperation_limits_are_numpys_quantiles_with_ties():
+    """The limits from merged bin counts and the quantile bins' distinct values equal
+    np.quantile of all braking powers, bit for bit, also when one value repeats across
+    the quantiles (a power logged at a clipped constant) and batches are merged."""
+    from sumo_drvpw.fit.chain import LIMIT_QUANTILES
+    from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, _merge_hist
+
+    rng = np.random.default_rng(9)
+    brake = rng.lognormal(9.5, 0.8, 30_000)
+    brake[rng.random(brake.size) < 0.3] = 41_250.0  # 30 % at one value
+    brake[:50] = np.nextafter(41_250.0, 0.0)        # and its neighbour, in the same bin
+    batches = np.array_split(brake, 7)
+    spec = ChainSpec("battery")
+    st = ChainStats(spec)
+    for b in batches:
+        st.hist = _merge_hist(st.hist, np.unique(_keys(b), return_counts=True))
+    _, bins = st.brake_bins()
+    assert 0 < len(bins) <= 16
+    col = ChainStats(spec, "collect", bins=bins)
+    for b in batches:
+        sel = b[np.isin(_keys(b), np.asarray(bins))]
+        if sel.size:
+            col.values = _merge_hist(col.values, np.unique(sel, return_counts=True))
+    assert col.values[0].size < 0.3 * brake.size  # the repeated value kept once
+    assert st.limits_from(col) == sorted({float(np.quantile(brake, q)) for q in LIMIT_QUANTILES})

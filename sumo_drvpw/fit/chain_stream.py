@@ -6,17 +6,17 @@ adds its own factor, stacked and factored again (:class:`ChainStats`): one facto
 value of a profiled parameter. The fuel chain's grid (engine-off threshold × engine-on
 speed) is fixed, so one pass over the logs holds every factor. The battery chain's
 recuperation limits are quantiles of the braking power on the fitted samples; they are
-found exactly, in bounded memory, in two more passes: the first counts the braking powers
-per bin of their leading 24 bits (sign, exponent and 12 bits of the mantissa: bins 1/4096
-of their value wide), the second keeps the values of the (at most 16) bins that hold the
-order statistics ``np.quantile`` interpolates (:func:`quantile_of_order`), and a third
-factors the design at each limit. R², RMSE and the energy ratio come from sums too: the
+found exactly, in bounded memory: that pass counts the braking powers per bin of their
+leading 24 bits (sign, exponent and 12 bits of the mantissa: bins 1/4096 of their value
+wide), a second keeps the distinct values (with their counts) of the (at most 16) bins
+that hold the order statistics ``np.quantile`` interpolates (:func:`quantile_of_order`),
+and a third factors the design at each limit. R², RMSE and the energy ratio come from sums too: the
 chain's prediction is the design times the coefficients, so Σw·e² is the fit's RSS and
 Σw·P̂ the coefficients times Σw·X. The same numbers as the in-memory fit to rounding
 (tests/test_chain_stream.py: 1e-9 relative).
 
-Memory: one batch, the factors (a few (k+1)² matrices per grid value) and the values of
-the quantile bins (braking powers within 1/4096 of an order statistic's value).
+Memory: one batch, the factors (a few (k+1)² matrices per grid value) and the distinct
+values of the quantile bins (braking powers within 1/4096 of an order statistic's value).
 ``--efficiency power|speed-power`` is not streamed (its knots are quantiles of the
 driving power over speed classes): the command fits it in memory.
 """
@@ -128,7 +128,7 @@ class ChainStats:
         self.w_low = 0.0
         self.fac: dict = {}            # grid value → [R, samples, Σw·X]
         self.hist = None
-        self.values: list = []
+        self.values = None             # (distinct braking powers of the quantile bins, their counts)
         self.road = None
         if spec.candidates and phase == "scan":
             from sumo_drvpw.fit.stream import CalibrationStats
@@ -241,7 +241,9 @@ class ChainStats:
         neg = np.minimum(p, 0.0)
         brake = -neg[ok & (neg < 0)]
         if self.phase == "collect":
-            self.values.append(brake[np.isin(_keys(brake), self.bins)])
+            sel = brake[np.isin(_keys(brake), self.bins)]
+            if sel.size:  # distinct values and counts: a power repeated many times is one entry
+                self.values = _merge_hist(self.values, np.unique(sel, return_counts=True))
             return
         for lim in ((None,) if self.phase == "scan" else self.limits):
             self._factor(lim, np.column_stack(battery_design(cols, neg, slice(None), lim)), y, w, ok)
@@ -293,7 +295,8 @@ class ChainStats:
                 np.linalg.qr(np.vstack([old[0], rr]), mode="r"), old[1] + n, old[2] + sx]
         if o.hist is not None:
             self.hist = _merge_hist(self.hist, o.hist)
-        self.values += o.values
+        if o.values is not None:
+            self.values = _merge_hist(self.values, o.values)
         for a in ("names", "lb", "ub"):
             if not hasattr(self, a) and hasattr(o, a):
                 setattr(self, a, getattr(o, a))
@@ -375,12 +378,14 @@ class ChainStats:
         n = int(self.hist[1].sum())
         keys, counts = self.hist
         before = dict(zip(keys.tolist(), (np.cumsum(counts) - counts).tolist()))
-        vals = np.sort(np.concatenate(collected.values)) if collected.values else np.zeros(0)
+        vals, vcum = collected.values[0], np.cumsum(collected.values[1])  # sorted distinct values
         vkeys = _keys(vals)
 
         def order(i):
             b = int(keys[np.searchsorted(np.cumsum(counts), i, side="right")])
-            return float(vals[np.searchsorted(vkeys, b) + (i - before[b])])
+            lo = int(np.searchsorted(vkeys, b))  # the bin's first value; i - before[b]: rank within it
+            base = int(vcum[lo - 1]) if lo else 0
+            return float(vals[lo + np.searchsorted(vcum[lo:] - base, i - before[b], side="right")])
 
         return sorted({quantile_of_order(order, n, q) for q in LIMIT_QUANTILES})
 
