@@ -8,19 +8,27 @@ folder deleted afterwards (made in a child process, so this process stays small)
 
 Each size runs ``calibrate LOG --vehicle prius3 --target battery --equation EQ --out …``
 (``--equation ''``: the road load calibrated stepwise first) in a fresh child process,
-the code of this tree against the code of ``--baseline REV`` (``git archive`` of that
-commit into a temporary folder), interleaved, ``--repeat`` times each. The child reports
+the code of this tree (``--engine memory``: the in-memory chain fit, the default engine's
+before the chain fit was streamed) against the code of ``--baseline REV`` (``git archive``
+of that commit into a temporary folder), interleaved, ``--repeat`` times each. The child reports
 its own peak RSS (``VmHWM`` of /proc/self/status, the high-water mark of the process's
 own memory, not carried over from this one) and wall time; medians are reported, with
 the peak RSS per row and the ratio baseline/this. The equations both write are compared
 (max. relative difference of every number of the [chain] and [terms] tables).
 
+``--streamed`` runs this tree's code twice instead, ``--engine memory`` (the chain fitted
+on the arrays kept in memory) against ``--engine local`` (streamed batch by batch,
+fit/chain_stream.py), and reports the ratio memory/local of their peak RSS and the
+difference of the two equations (with ``--baseline``, the old code runs beside them).
+
 ``--compare`` also runs ``compare LOG --equation <the chain just fitted>`` with this tree's
 code, ``--engine local`` (streamed: memory flat in rows) against ``--engine memory``.
 
     .venv/bin/python benchmarks/chain_memory.py --baseline REV [--sizes 1e6,3e6] [--repeat 3] [--compare]
+    .venv/bin/python benchmarks/chain_memory.py --streamed [--sizes 1e6,3e6] [--repeat 2]
 
-Last line: ``bytes_per_row_<size>=<this> ratio_<size>=<baseline/this> …``.
+Last line: ``bytes_per_row_<size>=<this> ratio_<size>=<baseline/this> …`` (``--streamed``:
+``bytes_per_row_<size>=<local> streamed_ratio_<size>=<memory/local>``).
 """
 
 from __future__ import annotations
@@ -128,12 +136,18 @@ def main():
     ap.add_argument("--equation", default="drvpw_prius3",
                     help="road-load equation under the chain ('': calibrated stepwise first)")
     ap.add_argument("--tmp", default=None, help="folder for the temporary logs")
+    ap.add_argument("--streamed", action="store_true",
+                    help="this tree with --engine memory against --engine local (streamed)")
     ap.add_argument("--compare", action="store_true",
                     help="also compare the fitted chain on the log, --engine local against memory")
     args = ap.parse_args()
     sizes = [int(float(s)) for s in args.sizes.split(",")]
     tmp = Path(tempfile.mkdtemp(prefix="chain_memory_", dir=args.tmp))
     trees = {"this": ROOT}
+    engines = {"this": ["--engine", "memory"]}  # extra arguments per run (the baseline's: none)
+    if args.streamed:
+        trees = {"memory": ROOT, "local": ROOT}
+        engines = {"memory": ["--engine", "memory"], "local": ["--engine", "local"]}
     try:
         if args.baseline:
             base = tmp / "baseline"
@@ -141,7 +155,8 @@ def main():
             arch = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline, "sumo_drvpw"],
                                   capture_output=True, check=True).stdout
             subprocess.run(["tar", "-x", "-C", str(base)], input=arch, check=True)
-            trees = {"baseline": base, "this": ROOT}
+            trees = {"baseline": base, **trees}
+            engines["baseline"] = []
         tail = []
         for rows in sizes:
             log = tmp / f"battery_{rows}.parquet"
@@ -154,6 +169,7 @@ def main():
                     out = tmp / f"{name}_{rows}_{r}.toml"
                     argv = ["calibrate", str(log), "--vehicle", "prius3", "--target", "battery",
                             "--out", str(out)] + (["--equation", args.equation] if args.equation else [])
+                    argv += engines[name]
                     load = os.getloadavg()[0]
                     mb, wall = run_once(tree, argv)
                     res[name].append((mb, wall))
@@ -164,17 +180,24 @@ def main():
                    for k, v in res.items()}
             for k, (mb, wall) in med.items():
                 print(f"  {k:<8} median: peak RSS {mb:,.0f} MB = {mb * 2**20 / n:,.0f} B/row, {wall:.1f} s")
-            tail.append(f"bytes_per_row_{rows:.0e}={med['this'][0] * 2**20 / n:.0f}")
+            this = "local" if args.streamed else "this"
+            tail.append(f"bytes_per_row_{rows:.0e}={med[this][0] * 2**20 / n:.0f}")
+            if args.streamed:
+                ratio = med["memory"][0] / med["local"][0]
+                diff = max_rel_diff(numbers(outs["memory"]), numbers(outs["local"]))
+                print(f"  peak RSS memory/local (streamed) = {ratio:.2f}; equations: max. rel. difference {diff:.1e}")
+                tail.append(f"streamed_ratio_{rows:.0e}={ratio:.2f} streamed_diff_{rows:.0e}={diff:.1e}")
             if "baseline" in med:
-                ratio = med["baseline"][0] / med["this"][0]
-                diff = max_rel_diff(numbers(outs["baseline"]), numbers(outs["this"]))
+                ratio = med["baseline"][0] / med[this][0]
+                diff = max_rel_diff(numbers(outs["baseline"]), numbers(outs[this]))
                 print(f"  peak RSS baseline/this = {ratio:.2f}; equations: max. rel. difference {diff:.1e}")
                 tail.append(f"ratio_{rows:.0e}={ratio:.2f}")
             if args.compare:
                 cmp = {"local": [], "memory": []}
                 for r in range(args.repeat):
                     for eng in cmp:
-                        argv = ["compare", str(log), "--vehicle", "prius3", "--equation", str(outs["this"]),
+                        argv = ["compare", str(log), "--vehicle", "prius3", "--equation",
+                                str(outs["local" if args.streamed else "this"]),
                                 "--out", str(tmp / f"cmp_{eng}_{rows}_{r}"), "--engine", eng]
                         load = os.getloadavg()[0]
                         mb, wall = run_once(ROOT, argv)

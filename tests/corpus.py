@@ -591,11 +591,13 @@ def _(d):  # was said only after the whole road-load fit
     return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--hvac", "cabin_c:21")
 
 
-@case("options", "battery chain with --engine dask", ("--engine dask", "--target battery"))
-def _(d):  # was accepted and ran in memory, the option silently ignored (compare refused it)
+@case("options", "battery chain with --engine dask and an efficiency table",
+      ("--engine dask", "--target battery", "--efficiency power"))
+def _(d):  # was accepted and ran in memory, the option silently ignored (compare refused it); constant
+    # efficiencies stream on Dask now (tests/test_chain_stream.py), the tables are fitted in memory only
     log = write(d, "log.parquet", _battery_log())
     return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--equation", "roadload_spec",
-                "--engine", "dask")
+                "--efficiency", "power", "--engine", "dask")
 
 
 @case("options", "compare --workers without --engine dask", ("--workers", "--engine dask"))

@@ -210,7 +210,7 @@ def test_cli_chain_calibration_reads_once_and_equals_the_old_path(battery_log, e
     out = tmp_path / "chain.toml"
     assert cli_main(["calibrate", str(battery_log), "--vehicle", "prius3", "--target", "battery",
                      "--load", "heater_w", "--out", str(out), "--report", str(tmp_path / "rep"),
-                     *equation]) == 0
+                     "--engine", "memory", *equation]) == 0  # (the streamed path: test_chain_stream.py)
     assert len(reads) == 1
     said = capsys.readouterr().out
     doc = tomllib.loads(out.read_text())

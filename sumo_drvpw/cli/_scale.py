@@ -71,30 +71,21 @@ def _context(st, vehicle, n_used: int) -> dict:
             "counts": counts}
 
 
-def calibrate_streamed(args, cands, out: Path, inputs) -> int:
-    """`calibrate` (driving power) through the streaming engines; same outputs."""
-    from sumo_drvpw.cli import output_set
-    from sumo_drvpw.data.measured import resolve_equations
-    from sumo_drvpw.fit.stream import CalibrationStats, calibrate_from_stats
-    from sumo_drvpw.fit.stream_compare import CompareStats
-    from sumo_drvpw.model.equations import save_equation
-    from sumo_drvpw.model.vehicles import load_vehicle
-
-    check_engine_arguments(args)
-    veh = load_vehicle(args.vehicle) if args.vehicle else None
+def fit_road_load(args, st, cands, veh, name: str, provenance: dict):
+    """The stepwise road load of streamed statistics (``st``, a CalibrationStats), refused
+    where the in-memory path refuses it and physically constrained as it is; its summary
+    and notes printed. Returns (equation, the physics note or '', the CalibrationResult)."""
+    from sumo_drvpw.fit.stream import calibrate_from_stats
     from sumo_drvpw.cli.calibrate import MOVING_MPS
 
-    st, info = _run(args, partial(CalibrationStats, tuple(cands), moving_mps=MOVING_MPS), veh)
     if st.mass_n == 0:
         from sumo_drvpw.data.log import exclusions
 
         raise UserError(f"{', '.join(map(str, args.logs))}: no usable sample among {st.counts.get('rows', 0)} "
                         f"rows (excluded: {exclusions(st.counts)}; any other row lacks a finite measured "
                         "power or input)")
-    from sumo_drvpw.cli import note_counts
     from sumo_drvpw.cli.calibrate import check_identified
 
-    note_counts(st.counts)
     where = st.files[0] if len(st.files) == 1 else f"{len(st.files)} files"
     if len(st.speeds) < 2:  # the in-memory path's identifiability check, from streamed sums
         raise UserError(f"{where}: speed takes {len(st.speeds)} distinct value(s) above "
@@ -103,9 +94,7 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     res = calibrate_from_stats(st, args.p_enter, args.p_remove)
 
     check_identified(res, ", ".join(map(str, args.logs)))
-    eq = res.to_equation(args.name or out.stem, provenance={
-        "logs": st.files, "vehicle": veh.path if veh else None, "power_source": st.source,
-        "candidates_spec": args.candidates})
+    eq = res.to_equation(name, provenance=provenance)
     print(res.summary())
     from sumo_drvpw.fit.physical import apply_physics_gram, constraints_of  # issue #11 §3
 
@@ -123,6 +112,30 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     from sumo_drvpw.cli.calibrate import warn_drag
 
     warn_drag(eq, veh, st.rho_sum / st.mass_n if st.mass_n else None)
+    return eq, note, res
+
+
+def calibrate_streamed(args, cands, out: Path, inputs) -> int:
+    """`calibrate` (driving power) through the streaming engines; same outputs."""
+    from sumo_drvpw.cli import output_set
+    from sumo_drvpw.data.measured import resolve_equations
+    from sumo_drvpw.fit.stream import CalibrationStats
+    from sumo_drvpw.fit.stream_compare import CompareStats
+    from sumo_drvpw.model.equations import save_equation
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    check_engine_arguments(args)
+    veh = load_vehicle(args.vehicle) if args.vehicle else None
+    from sumo_drvpw.cli.calibrate import MOVING_MPS
+
+    st, info = _run(args, partial(CalibrationStats, tuple(cands), moving_mps=MOVING_MPS), veh)
+    from sumo_drvpw.cli import note_counts
+
+    if st.mass_n:
+        note_counts(st.counts)
+    eq, note, res = fit_road_load(args, st, cands, veh, args.name or out.stem, {
+        "logs": st.files, "vehicle": veh.path if veh else None, "power_source": st.source,
+        "candidates_spec": args.candidates})
     from sumo_drvpw.cli import measurement_options
     from sumo_drvpw.cli.calibrate import declare_measurement
 
@@ -208,4 +221,101 @@ def compare_main(args) -> int | None:
         for x in unknown_input_lines(name, r.get("chain_unknown_inputs"), r["n"]):
             print("note: " + x)
     print_summary(doc, args.out)
+    return 0
+
+
+def calibrate_chain_streamed(args, out: Path, inputs, hvac) -> int:
+    """`calibrate --target battery|fuel` through the streaming engines (constant
+    efficiencies): the same equation as the in-memory path (fit/chain_stream.py). With
+    ``--engine dask`` and no scheduler, one local cluster serves every pass over the logs."""
+    check_engine_arguments(args)
+    if args.engine != "dask" or args.scheduler is not None:
+        return _chain_streamed(args, out, inputs, hvac)
+    import argparse
+
+    from sumo_drvpw.fit.engine import dask_client
+
+    with dask_client(None, args.workers) as client:
+        shared = argparse.Namespace(**{**vars(args), "scheduler": client.scheduler.address, "workers": None})
+        return _chain_streamed(shared, out, inputs, hvac)
+
+
+def _chain_streamed(args, out: Path, inputs, hvac) -> int:
+    from sumo_drvpw.cli import measurement_options, note_counts, output_set
+    from sumo_drvpw.cli.calibrate import MOVING_MPS, declare_measurement
+    from sumo_drvpw.data.measured import resolve_equations
+    from sumo_drvpw.fit.chain_checks import check_chain
+    from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, calibrate_chain_streamed as fit_chain
+    from sumo_drvpw.model.equations import save_equation
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    check_engine_arguments(args)
+    veh = load_vehicle(args.vehicle) if args.vehicle else None
+    eq = resolve_equations([args.equation], veh)[0] if args.equation else None
+    cands = None
+    if eq is None:
+        from sumo_drvpw.fit.calibrate import resolve_candidates
+
+        cands = tuple(resolve_candidates(args.candidates))
+    fuel = veh.powertrain.get("fuel", "gasoline") if veh is not None else "gasoline"
+    cut = getattr(getattr(eq, "chain", None), "fuel_cut_below_w", None)  # declared: kept
+    spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut)
+    infos = []
+
+    def reduce(make):
+        st, info = _run(args, make, veh)
+        infos.append(info)
+        return st
+
+    st = reduce(partial(ChainStats, spec))
+    note_counts(st.counts)
+    st.check_inputs()
+    if hvac and hvac["column"] not in st.seen:
+        raise UserError(f"--hvac {args.hvac}: {st.where} has no column '{hvac['column']}'")
+    src = st.measured_input
+    if eq is not None:
+        road = f"road-load equation {eq.name} ({eq.path or 'built in'})"
+    else:
+        if src is None:
+            if st.wheel_error:  # as in memory: the driving power's own refusal
+                raise UserError(st.wheel_error)
+            raise UserError(f"--target {args.target}: {st.where} logs no driving power (power_w, motor "
+                            "torque, the power-split signals), only battery V·I, so the road load cannot be "
+                            "told apart from the chain's losses; give its road load with --equation (e.g. "
+                            "roadload_spec, the vehicle's published A + B·v + C·v², or an equation calibrated "
+                            "on logs with a driving power)")
+        eq, note, _ = fit_road_load(args, st.road, cands, veh, args.name or out.stem, {
+            "logs": st.road.files, "power_source": st.road.source, "candidates_spec": args.candidates})
+        road = f"road-load equation calibrated stepwise on {st.road.source}" + (
+            " (physically constrained: the free fit was implausible)" if note else "")
+    chain_input = f"driving power of {eq.name}" if src is None else f"measured driving power ({src})"
+    fit = fit_chain(reduce, st)
+    check_chain(fit, veh, None, None, None, ranges=st.fitted_ranges())
+    eq.name = args.name or out.stem
+    eq.chain = fit.chain
+    eq.chain.provenance = {**fit.chain.provenance, "logs": st.files, "target": st.source, "road_load": road,
+                           "chain_input": chain_input, "vehicle": veh.path if veh else None}
+    eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
+    declare_measurement(eq, measurement_options(args))
+    print(fit.summary())
+    for w in fit.warnings:
+        print(f"warning: {w}")
+    if args.report:
+        with output_set(args, args.report, inputs) as tmp:
+            from sumo_drvpw.fit.stream_compare import CompareStats
+            from sumo_drvpw.report.comparison import write_comparison_report
+
+            cs = reduce(partial(CompareStats, [eq], None, target=args.target))
+            ctx = _context(cs, veh, cs.n)
+            ctx["calibration"] = {"equation": eq.name, "chain": fit.parameters, "r2": fit.r2,
+                                  "n": fit.n, "road_load": road}
+            write_comparison_report(cs.comparison(), tmp, f"Energy chain of {eq.name} against measured "
+                                    f"{args.target} power", ctx)
+            save_equation(eq, out)
+        print(f"wrote {Path(args.report) / 'report.md'}")
+    else:
+        save_equation(eq, out)
+    print(f"wrote {out}")
+    for info in infos:
+        print(info.line(), file=sys.stderr)
     return 0

@@ -65,9 +65,6 @@ def _check_name(args) -> None:
 def main(args) -> int:
     _check_name(args)
     if getattr(args, "target", "wheel") != "wheel":
-        if getattr(args, "engine", "local") == "dask":  # as compare: chains are fitted in memory
-            raise UserError(f"--engine dask calibrates driving power only (this is --target {args.target}); "
-                            "the chain is fitted in memory: leave --engine out")
         return main_chain(args)
     if getattr(args, "equation", None) or getattr(args, "load", None) or getattr(args, "hvac", None):
         raise UserError("--equation, --load and --hvac go with --target battery or fuel")
@@ -285,13 +282,17 @@ def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
 def main_chain(args) -> int:
     """``calibrate --target battery|fuel``: the energy chain on top of a road-load equation.
 
-    The logs are read once for the target and the driving power
+    With constant efficiencies and ``--engine local`` (the default) or ``dask`` the logs are
+    streamed (:func:`sumo_drvpw.cli._scale.calibrate_chain_streamed`, the same equation to
+    1e-9 relative). With ``--engine memory`` or an efficiency table the logs are read once
+    for the target and the driving power
     (:func:`~sumo_drvpw.data.measured.load_measured_pair`); once the road load is known, only
     the arrays the chain fit and its report need are kept and the table goes
     (:func:`~sumo_drvpw.data.measured.keep_arrays`)."""
     from sumo_drvpw.data.measured import keep_arrays, load_measured_pair, resolve_equations
     from sumo_drvpw.fileio import check_output_path
-    from sumo_drvpw.fit.chain import calibrate_on, check_load_columns
+    from sumo_drvpw.fit.chain import calibrate_on
+    from sumo_drvpw.fit.chain_checks import check_load_columns
     from sumo_drvpw.fit.compare import compare
     from sumo_drvpw.model.equations import save_equation
 
@@ -314,6 +315,17 @@ def main_chain(args) -> int:
         if not col or not -60.0 <= hvac["setpoint_c"] <= 60.0:
             raise UserError(f"--hvac {args.hvac}: give COLUMN[:SETPOINT_C] with a cabin set-point in "
                             "-60 … 60 °C")
+    engine = getattr(args, "engine", "memory")
+    if engine != "memory" and efficiency == "constant":  # streamed, bounded memory
+        from sumo_drvpw.cli._scale import calibrate_chain_streamed
+
+        return calibrate_chain_streamed(args, out, inputs, hvac)
+    if engine == "dask":
+        raise UserError(f"--engine dask with --target {args.target} fits constant efficiencies only "
+                        f"(--efficiency {efficiency} is fitted in memory): leave --engine out")
+    if engine == "local":
+        print(f"note: --efficiency {efficiency} is fitted in memory (the tables' knots are quantiles of "
+              "the driving power); only constant efficiencies are streamed")
     ro = read_options(args, [args.equation] if args.equation else ())
     m, mw = load_measured_pair(args.logs, args.vehicle, ro, args.target)
     note_counts(m.counts)
@@ -381,6 +393,9 @@ def main_chain(args) -> int:
             comp = compare(m.power_w[u], m.inputs.take(u), [eq], dt_s=m.log.df["dt_s"].to_numpy()[u],
                            target=args.target,
                            battery_w=None if m.battery_w is None else m.battery_w[u])
+            from sumo_drvpw.fit.trip_energy import left_out_by_trip  # partial trips, as compare says
+
+            comp.left_out = left_out_by_trip(m.power_w, u, m.log.df["dt_s"].to_numpy(), m.inputs.trip)
             ctx = m.context()
             ctx["calibration"] = {"equation": eq.name, "chain": fit.parameters, "r2": fit.r2,
                                   "n": fit.n, "road_load": road}

@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.fit.chain_checks import reading
+from sumo_drvpw.fit.chain_checks import _check_chain_inputs, reading
 from sumo_drvpw.model.chain import EnergyChain, corrected_fuel_power
 
 #: smallest efficiency the fit may return (the bound (0, 1] made closed) [-]
@@ -102,13 +102,15 @@ def _col(signals: dict, name: str, n: int, known: np.ndarray | None = None) -> n
 
 def _solve(make, w: np.ndarray, ok: np.ndarray, lb, ub):
     """Bounded least squares of y on X over the samples ``ok``, each weighted by its
-    duration ``w`` (√w on the rows), the columns scaled to unit norm for the solver.
+    duration ``w`` (√w on the rows): :func:`solve_factor` of :func:`factor_rows`.
+    Returns (β, RSS, active mask, (R_x, samples))."""
+    return solve_factor(*factor_rows(make, w, ok, len(lb)), lb, ub)
 
-    ``make(sl)`` gives (X, y) of the samples ``sl`` (a slice of ``BLOCK_ROWS``, all of its
-    rows; ``ok`` is applied here): [√w·X √w·y] is factored block by block, R = [[R_x, z],
-    [0, ρ]], and the problem solved on (R_x, z) — the same normal equations, RSS = ‖z −
-    R_x β‖² + ρ² — with BVLS. Returns (β, RSS, active mask, (R_x, samples))."""
-    k = len(lb)
+
+def factor_rows(make, w: np.ndarray, ok: np.ndarray, k: int) -> tuple[np.ndarray, int]:
+    """The triangle R of [√w·X √w·y] over the samples ``ok`` and their number: ``make(sl)``
+    gives (X, y) of the samples ``sl`` (a slice of ``BLOCK_ROWS``, all of its rows; ``ok``
+    is applied here), factored block by block (TSQR: a factor of more rows stacks on it)."""
     r, n = np.zeros((0, k + 1)), 0
     for lo in range(0, len(ok), BLOCK_ROWS):
         sl = slice(lo, lo + BLOCK_ROWS)
@@ -122,6 +124,14 @@ def _solve(make, w: np.ndarray, ok: np.ndarray, lb, ub):
         blk[:, k] = np.broadcast_to(y, o.shape)[o] * sw
         r = np.linalg.qr(np.vstack([r, blk]), mode="r")
         n += sw.size
+    return r, n
+
+
+def solve_factor(r: np.ndarray, n: int, lb, ub):
+    """Bounded least squares on the factor R = [[R_x, z], [0, ρ]] of [√w·X √w·y]: the
+    same normal equations, RSS = ‖z − R_x β‖² + ρ², solved with BVLS, the columns scaled
+    to unit norm for the solver. Returns (β, RSS, active mask, (R_x, samples))."""
+    k = len(lb)
     rx, z = r[:k, :k], r[:k, k]
     rho2 = float(r[k, k]) ** 2 if r.shape[0] > k else 0.0
     scale = np.sqrt((rx ** 2).sum(axis=0))  # the column norms of √w·X
@@ -166,6 +176,56 @@ def _stats(pred, y, w) -> tuple[float, float, float]:
     return r2, rmse, (float(w @ pred) / ey if ey != 0 else math.nan)
 
 
+def battery_columns(p, y, w, sig: dict, loads=(), hvac=None, predicts="battery", warmup_rate=None,
+                    mask=None):
+    """The battery chain's design columns (the recuperation column None: it depends on the
+    limit, :func:`battery_design`), names, bounds, the samples to fit on and how many were
+    left out for an unknown (NaN) declared load or HVAC temperature."""
+    n = p.size
+    cols = [np.maximum(p, 0.0), None]
+    names = ["traction_efficiency", "recuperation_efficiency"]
+    lb, ub = [1.0, ETA_MIN], [1.0 / ETA_MIN, 1.0]
+    known = np.ones(n, bool)  # declared loads and HVAC temperature known
+    if predicts == "battery":
+        cols.append(np.broadcast_to(1.0, (n,)))
+        names.append("aux_power_w")
+        lb.append(0.0)
+        ub.append(np.inf)
+        for c in loads:
+            cols.append(_col(sig, c, n, known))
+            names.append(f"loads.{c}")
+            lb.append(0.0)
+            ub.append(np.inf)
+        if hvac:
+            t = _col(sig, hvac.get("column", "ambient_c"), n, known)
+            ts = float(hvac.get("setpoint_c", 20.0))
+            cols += [np.maximum(ts - t, 0.0), np.maximum(t - ts, 0.0)]
+            names += ["hvac.heating_w_per_k", "hvac.cooling_w_per_k"]
+            lb += [0.0, 0.0]
+            ub += [np.inf, np.inf]
+            if warmup_rate is not None:
+                cols.append(np.broadcast_to(np.asarray(warmup_rate, float), (n,)))
+                names.append("hvac.warmup_j_per_k")
+                lb.append(0.0)
+                ub.append(np.inf)
+    ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w)
+    for c in cols:
+        if c is not None:
+            ok &= np.isfinite(c)
+    if mask is not None:
+        ok &= np.asarray(mask, bool)
+    unknown = int((ok & ~known).sum())
+    return cols, names, lb, ub, ok & known, unknown
+
+
+def battery_design(cols: list, neg: np.ndarray, sl, lim) -> list:
+    """The columns of :func:`battery_columns` on the samples ``sl``, the recuperation
+    column max(min(P, 0), −P_lim) for the limit ``lim`` [W] (None: no limit)."""
+    c = [None if col is None else col[sl] for col in cols]
+    c[1] = neg[sl] if lim is None else np.maximum(neg[sl], -lim)
+    return c
+
+
 def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = None, *,
                       loads=(), hvac: dict | None = None, mask=None, limit="profile",
                       predicts: str = "battery", fixed: dict | None = None,
@@ -200,40 +260,7 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     v = np.broadcast_to(np.asarray(v_mps, float), (n,))
     w = np.broadcast_to(np.asarray(dt_s, float), (n,)).astype(float)
     sig = signals or {}
-    cols = [np.maximum(p, 0.0), None]
-    names = ["traction_efficiency", "recuperation_efficiency"]
-    lb, ub = [1.0, ETA_MIN], [1.0 / ETA_MIN, 1.0]
-    known = np.ones(n, bool)  # declared loads and HVAC temperature known
-    if predicts == "battery":
-        cols.append(np.broadcast_to(1.0, (n,)))
-        names.append("aux_power_w")
-        lb.append(0.0)
-        ub.append(np.inf)
-        for c in loads:
-            cols.append(_col(sig, c, n, known))
-            names.append(f"loads.{c}")
-            lb.append(0.0)
-            ub.append(np.inf)
-        if hvac:
-            t = _col(sig, hvac.get("column", "ambient_c"), n, known)
-            ts = float(hvac.get("setpoint_c", 20.0))
-            cols += [np.maximum(ts - t, 0.0), np.maximum(t - ts, 0.0)]
-            names += ["hvac.heating_w_per_k", "hvac.cooling_w_per_k"]
-            lb += [0.0, 0.0]
-            ub += [np.inf, np.inf]
-            if warmup_rate is not None:
-                cols.append(np.broadcast_to(np.asarray(warmup_rate, float), (n,)))
-                names.append("hvac.warmup_j_per_k")
-                lb.append(0.0)
-                ub.append(np.inf)
-    ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w)
-    for c in cols:
-        if c is not None:
-            ok &= np.isfinite(c)
-    if mask is not None:
-        ok &= np.asarray(mask, bool)
-    unknown = int((ok & ~known).sum())
-    ok &= known
+    cols, names, lb, ub, ok, unknown = battery_columns(p, y, w, sig, loads, hvac, predicts, warmup_rate, mask)
     emap = None
     if efficiency != "constant":
         from sumo_drvpw.fit import chain_map
@@ -258,8 +285,7 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
 
     def design(sl, lim):
         """The design's rows of the samples ``sl`` (the efficiency tables' hat weights too)."""
-        c = [None if col is None else col[sl] for col in cols]
-        c[1] = neg[sl] if lim is None else np.maximum(neg[sl], -lim)
+        c = battery_design(cols, neg, sl, lim)
         if emap is not None:
             c[0] = c[0][:, None] * emap[0].matrix(p[sl], v[sl])
             c[1] = c[1][:, None] * emap[1].matrix(p[sl], v[sl])
@@ -295,9 +321,25 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     active[free] = act_free
     for j, val in fx.items():
         beta[j] = val
+    chain, params = battery_chain(names, beta, se, active, lim, hvac, predicts, fixed, fx, emap, efficiency)
+    pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
+    r2, rmse, ratio = _stats(pred, y[ok], w[ok])
+    chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
+    chain.metrics = {"n": int(ok.sum()), "r2": r2, "rmse_w": rmse, "energy_ratio": ratio}
+    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile, unknown)
+
+
+def battery_chain(names, beta, se, active, lim, hvac, predicts="battery", fixed=None, fx=None, emap=None,
+                  efficiency="constant"):
+    """The battery chain and its parameters (value, std_err, at_bound, reading) from the
+    fitted coefficients ``beta`` of the columns ``names`` (x_t = 1/η_t first), their
+    standard errors and active bounds, and the recuperation limit ``lim`` (None: none)."""
+    fixed, fx = fixed or {}, fx or {}
     params = {}
     kw = {"predicts": predicts, "loads": {}, "hvac": None}
     if emap is not None:
+        from sumo_drvpw.fit import chain_map
+
         nt, nr = emap[0].size, emap[1].size
         params.update(chain_map.knot_parameters("traction_efficiency", emap[0], beta[:nt], se[:nt],
                                                 active[:nt], True))
@@ -337,11 +379,59 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
                                                      "recuperation": emap[1].power.tolist()}}
     else:
         chain = EnergyChain(**kw)
-    pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
-    r2, rmse, ratio = _stats(pred, y[ok], w[ok])
-    chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
-    chain.metrics = {"n": int(ok.sum()), "r2": r2, "rmse_w": rmse, "energy_ratio": ratio}
-    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile, unknown)
+    return chain, params
+
+
+def fuel_grid(engine_off="profile", engine_on_above_mps="profile", fuel_cut_below_w=None) -> list:
+    """The fuel chains tried, one per engine-off threshold and engine-on speed (templates:
+    their engine state only); an engine that never stops (off = −inf) is on at any speed:
+    one fit, no speed threshold."""
+    grid = ENGINE_OFF_GRID_W if engine_off == "profile" else (float(engine_off),)
+    vgrid = (ENGINE_ON_SPEED_GRID_MPS if engine_on_above_mps == "profile" else (engine_on_above_mps,))
+    return [EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von,
+                        fuel_cut_below_w=fuel_cut_below_w)
+            for off in grid for von in (vgrid if off > -np.inf else (None,))]
+
+
+def fuel_design(tmpl: EnergyChain, p, v, pb, lcols) -> np.ndarray:
+    """The Willans line's design [on, on·max(P, 0) − P_bat, on·L_k] of the engine state of ``tmpl``."""
+    on = tmpl.engine_on(p, v).astype(float)
+    return np.column_stack([on, on * np.maximum(p, 0.0) - pb] + [on * c for c in lcols])
+
+
+def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fuel="gasoline",
+               fuel_cut_below_w=None):
+    """The fuel chain and its parameters from the fitted [a, b = 1/η_m, c_k], their standard
+    errors and active bounds, the engine-off threshold and engine-on speed, and the share
+    ``low`` of the calibration time below city speed."""
+    b = float(beta[1])
+    eta = 1.0 / b
+    params = {"idle_fuel_power_w": {"value": float(beta[0]), "std_err": _nan_none(se[0]),
+                                    "at_bound": bool(active[0] != 0)},
+              "marginal_efficiency": {"value": eta, "std_err": _nan_none(se[1] / b ** 2),
+                                      "at_bound": bool(active[1] != 0)}}
+    gains = {}
+    for j, c in enumerate(loads):  # c_k = g_k/η_m → g_k = c_k·η_m
+        gains[c] = float(beta[2 + j]) * eta
+        params[f"loads.{c}"] = {"value": gains[c], "std_err": _nan_none(se[2 + j] * eta),
+                                "at_bound": bool(active[2 + j] != 0)}
+    params["engine_off_below_w"] = {"value": off, "std_err": None, "at_bound": False,
+                                    "how": "profiled (BIC) over a grid"}
+    if engine_on_above_mps is not None:
+        params["engine_on_above_mps"] = {"value": engine_on_above_mps, "std_err": None,
+                                         "at_bound": False, "how": "profiled (BIC) over a grid"}
+    for name, p_ in params.items():
+        p_["reading"] = reading(name, p_["value"])
+    if low < CITY_SHARE_MIN:  # the engine's on/off at city speeds is not in the data
+        params["engine_off_below_w"]["reading"] += (
+            f"; NOT IDENTIFIED at city speeds: {low:.0%} of the calibration time is below "
+            f"{CITY_SPEED_MPS * 3.6:.0f} km/h, so where a SUMO study drives slower the engine's "
+            "on/off is extrapolated (a hybrid that runs electric at low power there would use less fuel "
+            "than this chain books)")
+    chain = EnergyChain(predicts="fuel", idle_fuel_power_w=float(beta[0]), marginal_efficiency=eta,
+                        engine_off_below_w=off, engine_on_above_mps=engine_on_above_mps,
+                        fuel_cut_below_w=fuel_cut_below_w, loads=gains, fuel=fuel)
+    return chain, params
 
 
 def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict | None = None, *,
@@ -378,55 +468,21 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     names = ["idle_fuel_power_w", "marginal_efficiency"] + [f"loads.{c}" for c in loads]
     lb = [0.0, 1.0] + [0.0] * len(loads)
     ub = [np.inf, 1.0 / ETA_MIN] + [np.inf] * len(loads)
-    grid = ENGINE_OFF_GRID_W if engine_off == "profile" else (float(engine_off),)
-    vgrid = (ENGINE_ON_SPEED_GRID_MPS if engine_on_above_mps == "profile" else (engine_on_above_mps,))
     best, profile = None, []
-    for off in grid:
-        # an engine that never stops (off = -inf) is on at any speed: one fit, no speed threshold
-        for von in (vgrid if off > -np.inf else (None,)):
-            tmpl = EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von,
-                               fuel_cut_below_w=fuel_cut_below_w)
+    for tmpl in fuel_grid(engine_off, engine_on_above_mps, fuel_cut_below_w):
+        def make(sl, tmpl=tmpl):
+            return fuel_design(tmpl, p[sl], v[sl], pb[sl], [c[sl] for c in lcols]), y[sl]
 
-            def make(sl, tmpl=tmpl):
-                on = tmpl.engine_on(p[sl], v[sl]).astype(float)
-                return (np.column_stack([on, on * np.maximum(p[sl], 0.0) - pb[sl]]
-                                        + [on * c[sl] for c in lcols]), y[sl])
-
-            beta, rss, active, xs = _solve(make, w, ok, lb, ub)
-            bic = _bic(rss, int(ok.sum()), len(names) + 1 + (von is not None))
-            profile.append({"engine_off_below_w": off, "engine_on_above_mps": von, "rss": rss, "bic": bic})
-            if best is None or bic < best[0]:
-                best = (bic, off, von, beta, active, xs, rss)
+        beta, rss, active, xs = _solve(make, w, ok, lb, ub)
+        off, von = tmpl.engine_off_below_w, tmpl.engine_on_above_mps
+        bic = _bic(rss, int(ok.sum()), len(names) + 1 + (von is not None))
+        profile.append({"engine_off_below_w": off, "engine_on_above_mps": von, "rss": rss, "bic": bic})
+        if best is None or bic < best[0]:
+            best = (bic, off, von, beta, active, xs, rss)
     _, off, engine_on_above_mps, beta, active, xs, rss = best
-    se = _covariance(xs, rss, active)
-    b = float(beta[1])
-    eta = 1.0 / b
-    params = {"idle_fuel_power_w": {"value": float(beta[0]), "std_err": _nan_none(se[0]),
-                                    "at_bound": bool(active[0] != 0)},
-              "marginal_efficiency": {"value": eta, "std_err": _nan_none(se[1] / b ** 2),
-                                      "at_bound": bool(active[1] != 0)}}
-    gains = {}
-    for j, c in enumerate(loads):  # c_k = g_k/η_m → g_k = c_k·η_m
-        gains[c] = float(beta[2 + j]) * eta
-        params[f"loads.{c}"] = {"value": gains[c], "std_err": _nan_none(se[2 + j] * eta),
-                                "at_bound": bool(active[2 + j] != 0)}
-    params["engine_off_below_w"] = {"value": off, "std_err": None, "at_bound": False,
-                                    "how": "profiled (BIC) over a grid"}
-    if engine_on_above_mps is not None:
-        params["engine_on_above_mps"] = {"value": engine_on_above_mps, "std_err": None,
-                                         "at_bound": False, "how": "profiled (BIC) over a grid"}
-    for name, p_ in params.items():
-        p_["reading"] = reading(name, p_["value"])
     low = float(w[ok & (v < CITY_SPEED_MPS)].sum() / max(w[ok].sum(), 1e-12))
-    if low < CITY_SHARE_MIN:  # the engine's on/off at city speeds is not in the data
-        params["engine_off_below_w"]["reading"] += (
-            f"; NOT IDENTIFIED at city speeds: {low:.0%} of the calibration time is below "
-            f"{CITY_SPEED_MPS * 3.6:.0f} km/h, so where a SUMO study drives slower the engine's "
-            "on/off is extrapolated (a hybrid that runs electric at low power there would use less fuel "
-            "than this chain books)")
-    chain = EnergyChain(predicts="fuel", idle_fuel_power_w=float(beta[0]), marginal_efficiency=eta,
-                        engine_off_below_w=off, engine_on_above_mps=engine_on_above_mps,
-                        fuel_cut_below_w=fuel_cut_below_w, loads=gains, fuel=fuel)
+    chain, params = fuel_chain(loads, beta, _covariance(xs, rss, active), active, off, engine_on_above_mps,
+                               low, fuel, fuel_cut_below_w)
     pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
     target = corrected_fuel_power(y, pb, chain.battery_fuel_factor)[ok]
     r2, rmse, ratio = _stats(pred, target, w[ok])
@@ -447,10 +503,6 @@ def chain_target(m, chain: EnergyChain) -> np.ndarray:
     if chain.predicts == "fuel" and m.battery_w is not None:
         return corrected_fuel_power(m.power_w, m.battery_w, chain.battery_fuel_factor)
     return m.power_w
-
-
-#: driving powers beyond this [W] test the battery current's sign (_check_chain_inputs)
-SIGN_CHECK_W = 1000.0
 
 
 def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engine_off="profile",
@@ -486,46 +538,6 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
                                 warmup_rate=warmup_rate)
     check_chain(fit, m.vehicle, p, m.inputs.v, use)  # plausibility, fitted range
     return fit
-
-
-def _check_chain_inputs(m, use: np.ndarray, loads, p_drive=None) -> None:
-    """UserError, naming the log and the column, where a chain cannot be calibrated: a
-    measured battery or fuel power that never departs from 0 (a voltage logged as 0, a
-    fuel flow never filled: the fit would return efficiencies at their bounds and an R² of
-    NaN), a battery power that falls where the driving power ``p_drive`` rises (the
-    current's sign flipped: the fit returned η_r = 0.001 and R² −2.9, exit 0), or a load
-    column without a number on the usable samples."""
-    where = m.log.describe()
-    y = np.asarray(m.power_w, float)[use]
-    if use.any() and not np.any(np.nan_to_num(y) != 0):
-        raise UserError(f"{where}: the measured {m.target} power ({m.source}) is 0 on every "
-                        f"one of the {int(use.sum())} usable samples: nothing to calibrate a "
-                        "chain on (a voltage, current or fuel flow logged as 0?)")
-    if m.target == "battery" and p_drive is not None:
-        from sumo_drvpw.data.measured import refuse_falling_battery
-
-        refuse_falling_battery(where, m.source, np.asarray(p_drive, float)[use], y, np.ones(len(y), bool),
-                               SIGN_CHECK_W, "the driving power")
-    check_load_columns(m, loads, use)
-
-
-def check_load_columns(m, loads, use=None) -> None:
-    """UserError naming the log and the column: a load column that is missing, not numeric,
-    or without a number on the usable samples ``use`` (default: the log's usable samples) —
-    checked before anything is fitted."""
-    where, use = m.log.describe(), (m.usable if use is None else use)
-    for c in loads or ():
-        col = m.inputs.signals.get(c)
-        if col is None and c in m.log.df.columns:
-            first = m.log.df[c].dropna()
-            raise UserError(f"{where}: load column '{c}' is not numeric (first value "
-                            f"{first.iloc[0] if len(first) else None!r}): a load is power in W")
-        if col is None:
-            raise UserError(f"{where}: no load column '{c}' (extra columns: "
-                            f"{', '.join(sorted(m.inputs.signals)) or 'none'})")
-        if not np.isfinite(np.asarray(col, float)[use]).any():
-            raise UserError(f"{where}: load column '{c}' has no number on the "
-                            f"{int(use.sum())} usable samples")
 
 
 def profile_recuperation_limit(p_wheel_w, p_recuperated_w, dt_s, mask=None,

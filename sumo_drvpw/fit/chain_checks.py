@@ -30,6 +30,7 @@ import math
 
 import numpy as np
 
+from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import FUELS
 
 #: what a passenger car's warm engine burns idling with no load [L/h] ([DOE861]: 0.61 L/h
@@ -124,9 +125,10 @@ def engine_off_note(value_w: float, powertrain: str | None, idle_l_per_h: float)
     return ""
 
 
-def check_chain(fit, vehicle, p_drive_w, v_mps, use) -> None:
+def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None) -> None:
     """Add the readings, fitted ranges and warnings of this module to a ``ChainFit``
-    (in place; see the module docstring)."""
+    (in place; see the module docstring); ``ranges``: the fitted ranges when known (a
+    streamed fit's), else from ``p_drive_w``, ``v_mps`` and ``use``."""
     chain = fit.chain
     powertrain = vehicle.powertrain_type if vehicle is not None else None
     params = fit.parameters
@@ -137,7 +139,7 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use) -> None:
         if "engine_off_below_w" in params:
             params["engine_off_below_w"]["reading"] += engine_off_note(
                 chain.engine_off_below_w, powertrain, fuel_l_per_h(chain.idle_fuel_power_w, chain.fuel))
-    ranges = fitted_ranges(p_drive_w, v_mps, use)
+    ranges = fitted_ranges(p_drive_w, v_mps, use) if ranges is None else ranges
     chain.provenance = {**chain.provenance, **ranges}
     fit.warnings = [f"energy chain {name} = {_value(p['value'])}: {p.get('reading', '')}"
                     for name, p in params.items() if any(f in p.get("reading", "") for f in FLAGS)]
@@ -196,3 +198,47 @@ def reading(name: str, val: float) -> str:
     if name == "engine_on_above_mps":
         return f"engine always on above {val * 3.6:.0f} km/h"
     return ""
+
+
+#: driving powers beyond this [W] test the battery current's sign (_check_chain_inputs)
+SIGN_CHECK_W = 1000.0
+
+
+def _check_chain_inputs(m, use: np.ndarray, loads, p_drive=None) -> None:
+    """UserError, naming the log and the column, where a chain cannot be calibrated: a
+    measured battery or fuel power that never departs from 0 (a voltage logged as 0, a
+    fuel flow never filled: the fit would return efficiencies at their bounds and an R² of
+    NaN), a battery power that falls where the driving power ``p_drive`` rises (the
+    current's sign flipped: the fit returned η_r = 0.001 and R² −2.9, exit 0), or a load
+    column without a number on the usable samples."""
+    where = m.log.describe()
+    y = np.asarray(m.power_w, float)[use]
+    if use.any() and not np.any(np.nan_to_num(y) != 0):
+        raise UserError(f"{where}: the measured {m.target} power ({m.source}) is 0 on every "
+                        f"one of the {int(use.sum())} usable samples: nothing to calibrate a "
+                        "chain on (a voltage, current or fuel flow logged as 0?)")
+    if m.target == "battery" and p_drive is not None:
+        from sumo_drvpw.data.measured import refuse_falling_battery
+
+        refuse_falling_battery(where, m.source, np.asarray(p_drive, float)[use], y, np.ones(len(y), bool),
+                               SIGN_CHECK_W, "the driving power")
+    check_load_columns(m, loads, use)
+
+
+def check_load_columns(m, loads, use=None) -> None:
+    """UserError naming the log and the column: a load column that is missing, not numeric,
+    or without a number on the usable samples ``use`` (default: the log's usable samples) —
+    checked before anything is fitted."""
+    where, use = m.log.describe(), (m.usable if use is None else use)
+    for c in loads or ():
+        col = m.inputs.signals.get(c)
+        if col is None and c in m.log.df.columns:
+            first = m.log.df[c].dropna()
+            raise UserError(f"{where}: load column '{c}' is not numeric (first value "
+                            f"{first.iloc[0] if len(first) else None!r}): a load is power in W")
+        if col is None:
+            raise UserError(f"{where}: no load column '{c}' (extra columns: "
+                            f"{', '.join(sorted(m.inputs.signals)) or 'none'})")
+        if not np.isfinite(np.asarray(col, float)[use]).any():
+            raise UserError(f"{where}: load column '{c}' has no number on the "
+                            f"{int(use.sum())} usable samples")

@@ -1,0 +1,462 @@
+"""`calibrate --target battery|fuel` streamed: the chain fit from per-batch sums (issue #14).
+
+The chain fits of :mod:`sumo_drvpw.fit.chain` solve bounded least squares on the
+triangular factor R of the weighted design [√w·X √w·y] (TSQR), so a batch of whole trips
+adds its own factor, stacked and factored again (:class:`ChainStats`): one factor per
+value of a profiled parameter. The fuel chain's grid (engine-off threshold × engine-on
+speed) is fixed, so one pass over the logs holds every factor. The battery chain's
+recuperation limits are quantiles of the braking power on the fitted samples; they are
+found exactly, in bounded memory: that pass counts the braking powers per bin of their
+leading 24 bits (sign, exponent and 12 bits of the mantissa: bins 1/4096 of their value
+wide), a second keeps the distinct values (with their counts) of the (at most 16) bins
+that hold the order statistics ``np.quantile`` interpolates (:func:`quantile_of_order`),
+and a third factors the design at each limit. R², RMSE and the energy ratio come from sums too: the
+chain's prediction is the design times the coefficients, so Σw·e² is the fit's RSS and
+Σw·P̂ the coefficients times Σw·X. The same numbers as the in-memory fit to rounding
+(tests/test_chain_stream.py: 1e-9 relative).
+
+Memory: one batch, the factors (a few (k+1)² matrices per grid value) and the distinct
+values of the quantile bins (braking powers within 1/4096 of an order statistic's value).
+``--efficiency power|speed-power`` is not streamed (its knots are quantiles of the
+driving power over speed classes): the command fits it in memory.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.fit.chain import (CITY_SPEED_MPS, ETA_MIN, LIMIT_QUANTILES, ChainFit, _bic, _col, _covariance,
+                                  battery_chain, battery_columns, battery_design, factor_rows, fuel_chain,
+                                  fuel_design, fuel_grid, solve_factor)
+from sumo_drvpw.fit.stream import _add_counts
+
+#: the braking powers' bins: their float64 bits shifted right by this (12 mantissa bits kept)
+KEY_SHIFT = 40
+
+
+@dataclass
+class ChainSpec:
+    """What a streamed chain calibration reads: ``target`` battery or fuel; ``equation``
+    the road load whose driving power is the chain's input where the log has no measured
+    driving power (None: the log's must be used); logged ``loads``; ``hvac`` {column,
+    setpoint_c} or None; ``candidates`` of the stepwise road load fitted in the same pass
+    (None: none); the fuel and a declared overrun cut-off of a fuel chain."""
+
+    target: str
+    equation: object = None
+    loads: tuple = ()
+    hvac: dict | None = None
+    candidates: tuple | None = None
+    moving_mps: float = 0.5
+    fuel: str = "gasoline"
+    fuel_cut_below_w: float | None = None
+
+
+def quantile_of_order(order, n: int, q: float) -> float:
+    """``np.quantile(a, q)`` (method 'linear') of n values from ``order(i)``, the i-th
+    smallest: the same index, weight and interpolation as numpy's, so the same float."""
+    vi = (n - 1) * q
+    lo = math.floor(vi)
+    if vi >= n - 1:
+        a = b = order(n - 1)
+    else:
+        a, b = order(lo), order(lo + 1)
+    g = vi - lo
+    d = b - a
+    return b - d * (1 - g) if g >= 0.5 else a + d * g
+
+
+def _keys(x: np.ndarray) -> np.ndarray:
+    """Bin of each positive float (monotone in the value)."""
+    return np.ascontiguousarray(x, np.float64).view(np.int64) >> KEY_SHIFT
+
+
+def _merge_hist(a, b):
+    if a is None:
+        return b
+    k, inv = np.unique(np.concatenate([a[0], b[0]]), return_inverse=True)
+    return k, np.bincount(inv, np.concatenate([a[1], b[1]]), len(k)).astype(np.int64)
+
+
+def _wmoments(w, cols):
+    """(Σw, weighted means, weighted centred co-moments) of the columns ``cols``."""
+    x = np.vstack(cols)
+    sw = float(w.sum())
+    if sw == 0:
+        return None
+    mu = (x @ w) / sw
+    d = x - mu[:, None]
+    return sw, mu, (d * w) @ d.T
+
+
+def _merge_wmoments(a, b):
+    """Pairwise update of weighted moments (Chan et al. 1979)."""
+    if a is None or b is None:
+        return a or b
+    w = a[0] + b[0]
+    d = b[1] - a[1]
+    return w, a[1] + d * (b[0] / w), a[2] + b[2] + np.outer(d, d) * (a[0] * b[0] / w)
+
+
+class ChainStats:
+    """Mergeable statistics of a chain calibration over batches of whole trips.
+
+    ``phase``: ``scan`` (everything a chain needs but the battery's recuperation limits:
+    counts, the checks' sums, the stepwise road load's statistics, the fuel grid's factors,
+    the battery's factor without a limit and its braking powers' bin counts), ``collect``
+    (the braking powers of the bins ``bins``) or ``fit`` (the battery's factors at the
+    limits ``limits``)."""
+
+    def __init__(self, spec: ChainSpec, phase: str = "scan", limits: tuple = (), bins: tuple = ()):
+        self.spec, self.phase, self.limits, self.bins = spec, phase, tuple(limits), np.asarray(bins, np.int64)
+        self.target = spec.target
+        self.rows, self.counts, self.files, self.source, self.vehicle = 0, {}, [], None, None
+        self.inputs: set = set()       # the chain's input per batch: a measured source, or None
+        self.wheel_error = None        # why a batch had no measured driving power
+        self.sign = self.falling = None
+        self.usable = self.nonzero = self.n_ok = self.unknown = 0
+        self.load_n = dict.fromkeys(spec.loads, 0)
+        self.load_text: dict = {}      # load column → its first value where it is not numeric
+        self.seen: set = set()
+        self.ranges = [math.inf, -math.inf, math.inf, -math.inf]
+        self.mom = None
+        self.w_low = 0.0
+        self.fac: dict = {}            # grid value → [R, samples, Σw·X]
+        self.hist = None
+        self.values = None             # (distinct braking powers of the quantile bins, their counts)
+        self.road = None
+        if spec.candidates and phase == "scan":
+            from sumo_drvpw.fit.stream import CalibrationStats
+
+            self.road = CalibrationStats(tuple(spec.candidates), moving_mps=spec.moving_mps)
+        self.grid = fuel_grid(fuel_cut_below_w=spec.fuel_cut_below_w) if spec.target == "fuel" else None
+
+    def columns(self):
+        return None  # every column: the fuel flow, air flow and fuel trims are found by name
+
+    # ----------------------------------------------------------------- one batch
+    def add(self, m) -> "ChainStats":
+        from sumo_drvpw.data.measured import measure, merge_sign_sums
+
+        self.rows += len(m.power_w)
+        scan = self.phase == "scan"
+        if scan:
+            self.counts = _add_counts(self.counts, m.counts)
+            self.source = self.source or m.source
+            self.vehicle = self.vehicle or m.vehicle
+            self.files += [f for f in m.log.files if f not in self.files]
+            if self.target == "battery":
+                self.sign = merge_sign_sums(self.sign, m.sign_test)
+        wc = dict(m.log.counts)
+        wc.pop("excluded_charging", None)  # the target's own count
+        try:  # the measured driving power, as load_measured_pair measures it
+            mw = measure(dataclasses.replace(m.log, counts=wc), m.vehicle, lazy_signals=True)
+        except UserError as e:
+            mw, self.wheel_error = None, self.wheel_error or str(e)
+        measured = mw is not None and not mw.source.startswith("battery")
+        self.inputs.add(mw.source if measured else None)
+        if scan and self.road is not None and measured:
+            self.road.add(mw)
+        use = np.asarray(m.usable, bool)
+        y = np.asarray(m.power_w, float)
+        if scan:
+            self._input_checks(m, y, use)
+        if measured:
+            p = np.asarray(mw.power_w, float)
+        elif self.spec.equation is not None:
+            p = np.asarray(self.spec.equation.power(m.inputs), float)
+        else:
+            return self  # no chain input: refused at the end (check_inputs)
+        del mw
+        w = m.log.df["dt_s"].to_numpy(float)
+        v = np.asarray(m.inputs.v, float)
+        need = set(self.spec.loads) | ({self.spec.hvac["column"]} if self.spec.hvac else set())
+        sig = {c: np.asarray(m.inputs.signals[c], float) for c in need if c in m.inputs.signals}
+        sig.update({c: np.full(len(y), np.nan) for c in need - set(sig)})  # unknown in this batch
+        if scan:
+            self._checks(p, y, v, use)
+        if self.target == "battery":
+            self._battery(p, y, w, sig, use)
+        else:
+            self._fuel(m, p, y, w, v, sig, use)
+        return self
+
+    def _input_checks(self, m, y, use) -> None:
+        """The sums of the in-memory path's checks of the target and the load columns
+        (fit/chain_checks.py)."""
+        self.usable += int(use.sum())
+        self.nonzero += int(np.count_nonzero(np.nan_to_num(y[use])))
+        need = set(self.spec.loads) | ({self.spec.hvac["column"]} if self.spec.hvac else set())
+        self.seen |= {c for c in need if c in m.inputs.signals}
+        for c in self.spec.loads:
+            col = m.inputs.signals.get(c)
+            if col is None and c in m.log.df.columns and c not in self.load_text:
+                first = m.log.df[c].dropna()
+                if len(first):
+                    self.load_text[c] = first.iloc[0]
+            if col is not None:
+                self.load_n[c] += int(np.isfinite(np.asarray(col, float)[use]).sum())
+
+    def _checks(self, p, y, v, use) -> None:
+        """The sums of the in-memory path's checks of the chain's input (fitted ranges, the
+        battery current's sign against the driving power)."""
+        from sumo_drvpw.data.measured import merge_sign_sums
+        from sumo_drvpw.fit.chain_checks import SIGN_CHECK_W
+
+        ok = use & np.isfinite(p) & np.isfinite(v)
+        if ok.any():
+            r = self.ranges
+            self.ranges = [min(r[0], float(p[ok].min())), max(r[1], float(p[ok].max())),
+                           min(r[2], float(v[ok].min())), max(r[3], float(v[ok].max()))]
+        if self.target == "battery":
+            s = use & np.isfinite(p) & np.isfinite(y) & (np.abs(p) > SIGN_CHECK_W)
+            if s.any():
+                d, e = p[s], y[s]
+                md, me = float(d.mean()), float(e.mean())
+                d, e = d - md, e - me
+                self.falling = merge_sign_sums(self.falling, (int(s.sum()), md, me, float(d @ d),
+                                                              float(e @ e), float(d @ e)))
+
+    def _factor(self, key, x: np.ndarray, y: np.ndarray, w: np.ndarray, ok: np.ndarray) -> None:
+        """Add the rows ``ok`` of the design ``x`` (target ``y``, weights ``w``) to the
+        factor of the grid value ``key`` (TSQR)."""
+        r, n = factor_rows(lambda sl: (x[sl], y[sl]), w, ok, x.shape[1])
+        if n == 0:
+            return
+        sx = w[ok] @ x[ok]
+        old = self.fac.get(key)
+        if old is not None:
+            r, n, sx = np.linalg.qr(np.vstack([old[0], r]), mode="r"), old[1] + n, old[2] + sx
+        self.fac[key] = [r, n, sx]
+
+    def _battery(self, p, y, w, sig, use) -> None:
+        sp = self.spec
+        cols, self.names, self.lb, self.ub, ok, unknown = battery_columns(p, y, w, sig, sp.loads, sp.hvac,
+                                                                          mask=use)
+        neg = np.minimum(p, 0.0)
+        brake = -neg[ok & (neg < 0)]
+        if self.phase == "collect":
+            sel = brake[np.isin(_keys(brake), self.bins)]
+            if sel.size:  # distinct values and counts: a power repeated many times is one entry
+                self.values = _merge_hist(self.values, np.unique(sel, return_counts=True))
+            return
+        for lim in ((None,) if self.phase == "scan" else self.limits):
+            self._factor(lim, np.column_stack(battery_design(cols, neg, slice(None), lim)), y, w, ok)
+        if self.phase == "scan":
+            self.n_ok += int(ok.sum())
+            self.unknown += unknown
+            self.mom = _merge_wmoments(self.mom, _wmoments(w[ok], [y[ok]]))
+            if brake.size:
+                self.hist = _merge_hist(self.hist, np.unique(_keys(brake), return_counts=True))
+
+    def _fuel(self, m, p, y, w, v, sig, use) -> None:
+        n = len(y)
+        self.names = ["idle_fuel_power_w", "marginal_efficiency"] + [f"loads.{c}" for c in self.spec.loads]
+        pb = np.zeros(n) if m.battery_w is None else np.nan_to_num(np.asarray(m.battery_w, float))
+        lcols = [_col(sig, c, n) for c in self.spec.loads]
+        ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w) & use
+        for i, tmpl in enumerate(self.grid):
+            self._factor(i, fuel_design(tmpl, p, v, pb, lcols), y, w, ok)
+        self.n_ok += int(ok.sum())
+        self.mom = _merge_wmoments(self.mom, _wmoments(w[ok], [y[ok], pb[ok]]))
+        self.w_low += float(w[ok & (v < CITY_SPEED_MPS)].sum())
+
+    # ----------------------------------------------------------------- merging
+    def merge(self, o: "ChainStats") -> "ChainStats":
+        from sumo_drvpw.data.measured import merge_sign_sums
+
+        self.rows += o.rows
+        self.counts = _add_counts(self.counts, o.counts)
+        self.files += [f for f in o.files if f not in self.files]
+        self.source, self.vehicle = self.source or o.source, self.vehicle or o.vehicle
+        self.inputs |= o.inputs
+        self.wheel_error = self.wheel_error or o.wheel_error
+        self.sign, self.falling = merge_sign_sums(self.sign, o.sign), merge_sign_sums(self.falling, o.falling)
+        self.usable += o.usable
+        self.nonzero += o.nonzero
+        self.n_ok += o.n_ok
+        self.unknown += o.unknown
+        for c, k in o.load_n.items():
+            self.load_n[c] += k
+        self.load_text = {**o.load_text, **self.load_text}
+        self.seen |= o.seen
+        r, s = self.ranges, o.ranges
+        self.ranges = [min(r[0], s[0]), max(r[1], s[1]), min(r[2], s[2]), max(r[3], s[3])]
+        self.mom = _merge_wmoments(self.mom, o.mom)
+        self.w_low += o.w_low
+        for key, (rr, n, sx) in o.fac.items():
+            old = self.fac.get(key)
+            self.fac[key] = [rr, n, sx] if old is None else [
+                np.linalg.qr(np.vstack([old[0], rr]), mode="r"), old[1] + n, old[2] + sx]
+        if o.hist is not None:
+            self.hist = _merge_hist(self.hist, o.hist)
+        if o.values is not None:
+            self.values = _merge_hist(self.values, o.values)
+        for a in ("names", "lb", "ub"):
+            if not hasattr(self, a) and hasattr(o, a):
+                setattr(self, a, getattr(o, a))
+        if self.road is not None and o.road is not None:
+            self.road = self.road.merge(o.road)
+        return self
+
+    # ----------------------------------------------------------------- at the end
+    @property
+    def where(self) -> str:
+        return self.files[0] if len(self.files) == 1 else f"{len(self.files)} files"
+
+    def check_inputs(self) -> None:
+        """What the in-memory path refuses before the road load: the battery current's sign,
+        no usable sample, a load or HVAC column missing, not numeric or without a number,
+        batches with different chain inputs, no chain input at all."""
+        from sumo_drvpw.data.log import exclusions
+        from sumo_drvpw.data.measured import check_sign_sums
+
+        if self.target == "battery":
+            check_sign_sums(self.where, self.source, self.sign)
+        if self.usable == 0:
+            raise UserError(f"{self.where}: no usable sample among {self.rows} rows (excluded: "
+                            f"{exclusions(self.counts)}; any other row lacks a finite measured power or input)")
+        for c in self.spec.loads:
+            if c in self.load_text:
+                raise UserError(f"{self.where}: load column '{c}' is not numeric (first value "
+                                f"{self.load_text[c]!r}): a load is power in W")
+            if c not in self.seen:
+                raise UserError(f"{self.where}: no load column '{c}'")
+            if not self.load_n[c]:
+                raise UserError(f"{self.where}: load column '{c}' has no number on the "
+                                f"{self.usable} usable samples")
+        if len(self.inputs) > 1:
+            raise UserError(f"{self.where}: some files have a measured driving power and some not "
+                            f"({', '.join(sorted('none' if s is None else s for s in self.inputs))}): "
+                            "the streamed chain "
+                            "fit takes one input for all; read them together in memory")
+
+    @property
+    def measured_input(self) -> str | None:
+        """The measured driving power the chain was fitted on (its source), or None."""
+        return next(iter(self.inputs), None)
+
+    def check_chain(self) -> None:
+        """What :func:`sumo_drvpw.fit.chain_checks._check_chain_inputs` refuses, from sums."""
+        from sumo_drvpw.data.measured import _falling
+        from sumo_drvpw.fit.chain_checks import SIGN_CHECK_W
+
+        if self.usable and not self.nonzero:
+            raise UserError(f"{self.where}: the measured {self.target} power ({self.source}) is 0 on every "
+                            f"one of the {self.usable} usable samples: nothing to calibrate a "
+                            "chain on (a voltage, current or fuel flow logged as 0?)")
+        f = self.falling
+        if f is not None and f[0] >= 50 and f[3] > 0 and f[4] > 0 and f[5] < 0:
+            raise UserError(_falling(self.where, self.source, f[5] / math.sqrt(f[3] * f[4]), f[0],
+                                     SIGN_CHECK_W, "the driving power"))
+        k = len(getattr(self, "names", ())) or 3
+        if self.n_ok < k + 2:
+            raise UserError(f"energy chain: only {self.n_ok} usable samples for {k} parameters")
+
+    def brake_bins(self) -> tuple[list, tuple]:
+        """(the order statistics' ranks np.quantile reads, the bins that hold them)."""
+        n = int(self.hist[1].sum()) if self.hist is not None else 0
+        if n <= 20:
+            return [], ()
+        ranks = set()
+        for q in LIMIT_QUANTILES:
+            vi = (n - 1) * q
+            lo = math.floor(vi)
+            ranks |= {n - 1} if vi >= n - 1 else {lo, lo + 1}
+        cum = np.cumsum(self.hist[1])
+        bins = {int(self.hist[0][np.searchsorted(cum, r, side="right")]) for r in ranks}
+        return sorted(ranks), tuple(sorted(bins))
+
+    def limits_from(self, collected: "ChainStats") -> list:
+        """The recuperation limits tried: np.quantile of the braking powers at
+        LIMIT_QUANTILES, from the values ``collected`` of the bins of :meth:`brake_bins`."""
+        n = int(self.hist[1].sum())
+        keys, counts = self.hist
+        before = dict(zip(keys.tolist(), (np.cumsum(counts) - counts).tolist()))
+        vals, vcum = collected.values[0], np.cumsum(collected.values[1])  # sorted distinct values
+        vkeys = _keys(vals)
+
+        def order(i):
+            b = int(keys[np.searchsorted(np.cumsum(counts), i, side="right")])
+            lo = int(np.searchsorted(vkeys, b))  # the bin's first value; i - before[b]: rank within it
+            base = int(vcum[lo - 1]) if lo else 0
+            return float(vals[lo + np.searchsorted(vcum[lo:] - base, i - before[b], side="right")])
+
+        return sorted({quantile_of_order(order, n, q) for q in LIMIT_QUANTILES})
+
+    def fit(self, limits=()) -> ChainFit:
+        """The chain: every grid value solved on its factor, the best by BIC."""
+        if self.target == "fuel":
+            return self._fit_fuel()
+        sp, best, profile = self.spec, None, []
+        for lim in [None] + list(limits):
+            beta, rss, act, xs = solve_factor(self.fac[lim][0], self.fac[lim][1], self.lb, self.ub)
+            bic = _bic(rss, self.n_ok, len(self.names) + (lim is not None))
+            profile.append({"recuperation_limit_w": lim, "rss": rss, "bic": bic})
+            if best is None or bic < best[0]:
+                best = (bic, lim, beta, rss, act, xs)
+        _, lim, beta, rss, act, xs = best
+        chain, params = battery_chain(self.names, beta, _covariance(xs, rss, act), act, lim, sp.hvac)
+        sw, mu, c = self.mom
+        r2 = 1.0 - rss / float(c[0, 0]) if c[0, 0] > 0 else math.nan
+        ey = sw * float(mu[0])
+        ratio = float(self.fac[lim][2] @ beta) / ey if ey != 0 else math.nan
+        return self._finish(chain, params, r2, math.sqrt(rss / sw), ratio, profile)
+
+    def _fit_fuel(self) -> ChainFit:
+        sp, best, profile = self.spec, None, []
+        lb = [0.0, 1.0] + [0.0] * len(sp.loads)
+        ub = [np.inf, 1.0 / ETA_MIN] + [np.inf] * len(sp.loads)
+        for i, tmpl in enumerate(self.grid):
+            beta, rss, act, xs = solve_factor(self.fac[i][0], self.fac[i][1], lb, ub)
+            off, von = tmpl.engine_off_below_w, tmpl.engine_on_above_mps
+            bic = _bic(rss, self.n_ok, len(self.names) + 1 + (von is not None))
+            profile.append({"engine_off_below_w": off, "engine_on_above_mps": von, "rss": rss, "bic": bic})
+            if best is None or bic < best[0]:
+                best = (bic, i, beta, act, xs, rss)
+        _, i, beta, act, xs, rss = best
+        tmpl = self.grid[i]
+        sw, mu, c = self.mom
+        chain, params = fuel_chain(sp.loads, beta, _covariance(xs, rss, act), act, tmpl.engine_off_below_w,
+                                   tmpl.engine_on_above_mps, self.w_low / max(sw, 1e-12), sp.fuel,
+                                   sp.fuel_cut_below_w)
+        b = chain.battery_fuel_factor  # the target: fuel + k·battery power (SOC-corrected)
+        sst = float(c[0, 0] + 2 * b * c[0, 1] + b * b * c[1, 1])
+        r2 = 1.0 - rss / sst if sst > 0 else math.nan
+        et = sw * float(mu[0] + b * mu[1])
+        ratio = (float(self.fac[i][2] @ beta) + b * sw * float(mu[1])) / et if et != 0 else math.nan
+        fit = self._finish(chain, params, r2, math.sqrt(rss / sw), ratio, profile)
+        chain.metrics["target"] = "fuel power + battery power / η_m (SOC-corrected)"
+        return fit
+
+    def _finish(self, chain, params, r2, rmse, ratio, profile) -> ChainFit:
+        chain.std_err = {k: p["std_err"] for k, p in params.items() if p["std_err"] is not None}
+        chain.metrics = {"n": self.n_ok, "r2": r2, "rmse_w": rmse, "energy_ratio": ratio}
+        return ChainFit(chain, params, self.n_ok, r2, rmse, ratio, profile, self.unknown)
+
+    def fitted_ranges(self) -> dict:
+        """:func:`sumo_drvpw.fit.chain_checks.fitted_ranges` from the streamed min/max."""
+        r = self.ranges
+        return {} if r[0] > r[1] else {"power_range_w": r[:2], "speed_range_mps": r[2:]}
+
+
+def calibrate_chain_streamed(reduce, st: ChainStats) -> ChainFit:
+    """The chain of a scanned :class:`ChainStats` (``st``, checked): for a battery chain
+    with enough braking samples, two more passes (``reduce(make)`` runs one over the logs
+    and returns the merged accumulator) find the recuperation limits and factor the design
+    at each; a fuel chain needs none."""
+    from functools import partial
+
+    st.check_chain()
+    limits = []
+    if st.target == "battery":
+        _, bins = st.brake_bins()
+        if bins:
+            limits = st.limits_from(reduce(partial(ChainStats, st.spec, "collect", bins=bins)))
+            st.fac.update(reduce(partial(ChainStats, st.spec, "fit", limits=tuple(limits))).fac)
+    return st.fit(limits)
