@@ -24,7 +24,7 @@ from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_vclass, load_equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import additional_outputs, is_output_option, option_input_files
-from sumo_drvpw.fileio import folder_given, read_toml
+from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.model.terms import parse_term
 
 DEFAULT_HIGHWAY_TYPES = ("highway.motorway", "highway.motorway_link", "highway.trunk",
@@ -309,33 +309,6 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
         if why:
             raise UserError(f"{src}: equation '{eq.name}' cannot run in SUMO: term '{t}' needs {why}")
     return eq
-
-
-#: Built-in scenarios (package data): ``sumo-drvpw run city`` / ``highway``, the demo's.
-BUILTIN_SCENARIOS = Path(__file__).resolve().parent / "builtin" / "scenarios"
-
-
-def builtin_scenario_names() -> list[str]:
-    return sorted(p.stem for p in BUILTIN_SCENARIOS.glob("*.toml"))
-
-
-def bundled_scenario(name: str) -> Path:
-    """The built-in scenario ``name`` (package data); UserError naming the known ones."""
-    p = BUILTIN_SCENARIOS / f"{name}.toml"
-    if not p.is_file():
-        raise UserError(f"unknown built-in scenario '{name}' (built-ins: "
-                        f"{', '.join(builtin_scenario_names())})")
-    return p
-
-
-def scenario_path(spec) -> Path:
-    """A scenario file path, or a built-in scenario's when ``spec`` names one and no file."""
-    p = Path(spec)
-    if p.is_dir():  # a scenario folder: name its SUMO configs and scenario files
-        raise UserError(folder_given(p, "scenario", (".sumocfg", ".toml")))
-    if p.exists() or p.suffix in (".toml", ".sumocfg") or any(c in str(spec) for c in "/\\"):
-        return p
-    return bundled_scenario(str(spec))
 
 
 def _config_files(cfg: Path) -> tuple[Path, list[Path], dict[str, str]]:
