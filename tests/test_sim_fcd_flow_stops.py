@@ -115,3 +115,33 @@ def test_fcd_switches_off_at_flow_stops_as_live(recorded, tmp_path, chunk_rows):
     np.testing.assert_allclose(rc["auxiliary_kwh"], lc["auxiliary_kwh"], rtol=1e-6)
     assert rs["replay"]["stops_whose_until_is_not_known"] == 0
     assert rs["replay"]["stops_reached"] == n_stops and rs["replay"]["stops_left_before_their_end"] == 0
+
+
+def test_a_parking_stop_ends_when_the_vehicle_leaves_its_space(tmp_path):
+    """SUMO ends a ``parking`` stop when the vehicle can leave its space, past its planned
+    end when traffic blocks it (DLR's port_lübeck, SUMO 1.28 stop output: cars parked at
+    a bus stop until 830, 870, 880 s left at 836, 881, 887 s, the live run booking nothing
+    until then); a stop on the lane ends at its planned end, the vehicle standing on booked
+    standing. Before, the replay ended both at the until and booked the parked car's wait
+    standing (port_lübeck: +5, +10, +6 s)."""
+    from types import SimpleNamespace
+
+    from sumo_drvpw.sim.fcd_stops import StopTracker
+
+    f = tmp_path / "r.rou.xml"
+    f.write_text('<routes><vehicle id="p" depart="0"><route edges="a"/>'
+                 '<stop lane="a_0" endPos="50" until="100" parking="true"/></vehicle>'
+                 '<vehicle id="q" depart="0"><route edges="a"/><stop lane="a_0" endPos="50" until="100"/></vehicle>'
+                 '<vehicle id="r" depart="0"><route edges="a"/><stop parkingArea="pa" until="100"/></vehicle>'
+                 '<parkingArea id="pa" lane="a_0" startPos="0" endPos="50"/></routes>')
+    net = SimpleNamespace(lane_index={"a_0": 0}, lane_length=np.array([100.0]))
+    tr = StopTracker(read_declared_stops([f]), net)
+    ids, ends = ["p", "q", "r"], {}
+    for t in range(90, 111):
+        v = 0.0 if t < 106 else 3.0  # all three stand until 106 s (blocked), then drive off
+        tr.step(float(t), ids, ["a_0"] * 3, [50.0] * 3, [v] * 3)
+        ends.update({vid: t for vid in tr.ending})
+        if t == 90:
+            assert set(tr.starting) == {"p", "q", "r"}
+    assert ends == {"p": 106, "q": 100, "r": 106}
+    assert tr.left_early == 0

@@ -25,8 +25,12 @@ declared stop not yet served that matches is taken, and the ones before it count
 passed: a stop is never matched out of its order, nor twice. It ends in the row the
 vehicle drives off from rest, or at its planned end (the later of arrival + ``duration``
 and ``until``; SUMO ends it in that row), whichever comes first: from then the vehicle is
-booked standing again. A vehicle that drives off before a planned end was not at its
-stop after all (SUMO holds it there): the stop is open to be matched again, and counted
+booked standing again. A ``parking`` stop (a ``parkingArea``'s always) SUMO ends only
+when the vehicle can leave its space, later when traffic blocks it (DLR's port_lübeck,
+SUMO 1.28: cars parked at a bus stop until 830/870/880 s left at 836/881/887 s): the
+replay ends it when the vehicle drives off, past its planned end. A vehicle that drives
+off before a planned end was not at its stop after all (SUMO holds it there): the stop is
+open to be matched again, and counted
 (``stops_left_before_their_end``). At a stopping place SUMO starts the stop of a vehicle
 creeping up a queue inside its range only when the vehicle reaches its stopping position,
 a few steps after its first row at 0.1 m/s or slower, where the replay starts it: a stop
@@ -65,6 +69,8 @@ STOP_TOLERANCE_M = 0.1
 #: ``trainStop`` is named by ``busStop``)
 STOPPING_PLACES = ("busStop", "trainStop", "containerStop", "chargingStation", "parkingArea")
 VEHICLE_ELEMENTS = ("vehicle", "trip", "flow")
+#: a stop's ``parking`` values that park the vehicle off the road (SUMO's bool spellings)
+PARKING_TRUE = ("true", "1", "yes", "on", "x", "t")
 
 
 def _num(val, where: str, key: str, time: bool = False) -> float | None:
@@ -85,7 +91,7 @@ class _Stop:
     """One declared stop: where (``lane`` or ``edge``, or a stopping place ``place``), its
     positions as written, and its planned ``duration`` and ``until`` [s] (None: not given)."""
 
-    __slots__ = ("lane", "edge", "place", "start", "end", "duration", "until", "on_route")
+    __slots__ = ("lane", "edge", "place", "start", "end", "duration", "until", "on_route", "parking")
 
     def __init__(self, el, where: str, on_route: bool = False):
         a = el.attrib
@@ -96,6 +102,9 @@ class _Stop:
         self.end = _num(a.get("endPos"), where, "endPos")
         self.duration = _num(a.get("duration"), where, "duration", time=True)
         self.until = _num(a.get("until"), where, "until", time=True)
+        # parked beside the lane (a parkingArea's always): SUMO ends the stop when the
+        # vehicle can leave, which may be after its planned end
+        self.parking = bool(a.get("parkingArea")) or a.get("parking", "").strip().lower() in PARKING_TRUE
 
 
 def _is_stop(el) -> bool:
@@ -361,7 +370,8 @@ class StopTracker:
                 j = rows.get(vid)
                 if j is None:
                     continue
-                if t >= cur.end_t - 1e-6 or (cur.at_rest and speed[j] > 0.0):
+                over = t >= cur.end_t - 1e-6 and not (cur.parking and speed[j] <= 0.0)
+                if over or (cur.at_rest and speed[j] > 0.0):
                     st = self.state[vid]
                     if t < cur.end_t - 1e-6 and np.isfinite(cur.end_t):  # not its stop after all
                         st[1] = cur.index
@@ -398,7 +408,7 @@ class StopTracker:
                 ends = [x for x, given in ((t + dur, dur >= 0), (until, until >= 0)) if given]
                 end_t = max(ends) if ends else np.inf
                 cur = SimpleNamespace(duration=dur, until=until, arrival=t, end_t=end_t,
-                                      at_rest=speed[j] == 0.0, index=k)
+                                      at_rest=speed[j] == 0.0, index=k, parking=s.parking)
                 st[3] = cur
                 self.data[vid] = cur
                 starting.append(vid)
