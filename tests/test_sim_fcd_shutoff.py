@@ -132,8 +132,9 @@ def test_fcd_switches_off_at_the_long_stops_the_route_files_declare(recorded, tm
 def test_declared_stops_are_read_in_sumos_order_and_a_bad_one_is_named(tmp_path, capsys):
     """The route files' stops: a route's and the vehicle's own in the order along the route
     (SUMO's), waypoints left out, a flow's vehicles with the flow's stops and their until
-    shifted by n periods; a duration that is no number: one line naming the file, the
-    vehicle and the key, exit 2."""
+    shifted by n periods (the named route's by the depart: the same for a period flow from
+    0); a duration that is no number: one line naming the file, the vehicle and the key,
+    exit 2."""
     from sumo_drvpw.sim.fcd_stops import read_declared_stops
 
     f = tmp_path / "r.rou.xml"
@@ -145,11 +146,11 @@ def test_declared_stops_are_read_in_sumos_order_and_a_bad_one_is_named(tmp_path,
 </routes>""")
     ds = read_declared_stops([f])
     stops, shift, why = ds.stops_of("v")
-    assert [s.lane for s in stops] == ["a_0", "c_0"] and shift == 0 and why is None
+    assert [s.lane for s in stops] == ["a_0", "c_0"] and shift == [0, 0] and why is None
     stops, shift, _ = ds.stops_of("f.3")
     assert [(s.lane, s.edge) for s in stops] == [(None, "b"), ("c_0", None)] and stops[0].until == 3600
-    assert shift == 30
-    assert np.isnan(ds.stops_of("p.2")[1])  # a flow by probability: its offsets not known
+    assert shift == [30, 30]
+    assert np.isnan(ds.stops_of("p.2")[1][0])  # a flow by probability: its departs not known
     assert ds.stops_of("x")[0] is None
     f.write_text('<routes><vehicle id="v" depart="0"><route edges="a"/><stop lane="a_0" duration="long"/>'
                  "</vehicle></routes>")

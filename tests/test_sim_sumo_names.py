@@ -178,3 +178,41 @@ def test_comparison_with_the_device_and_tripinfo_set_in_the_scenarios_options(tm
     ids = {t.get("id") for t in ET.parse(written).getroot().iter("tripinfo")}
     summary = json.loads((out / "summary.json").read_text())
     assert summary["sumo_device"] and 0 < summary["sumo_device"][0]["vehicles"] <= len(ids)
+
+
+@pytest.mark.parametrize("where", ["config", "spaced", "equals", "explicit"])
+def test_the_device_switched_on_in_the_options_compares_as_in_the_config(tmp_path, capsys, where):
+    """SUMO's emissions device switched on by the config, or by the scenario's sumo.options
+    (either option form, a probability or an explicit vehicle list), without
+    outputs.sumo_device: each run writes sumo_device.csv beside its own totals, the device
+    settings left as given. Before (2026-11-27 rehearsal), only the config's device turned
+    the comparison on: with the options' the run wrote no sumo_device.csv and said nothing."""
+    more = DEVICE if where == "config" else ""
+    cfg = _scenario(tmp_path, "", more)
+    opts = {"config": [], "spaced": ["--device.emissions.probability", "1"],
+            "equals": ["--device.emissions.probability=1"],
+            "explicit": ["--device.emissions.explicit", "f0.0,f1.0"]}[where]
+    sc = tmp_path / "s.toml"
+    sc.write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{cfg}"\noptions = {json.dumps(opts)}\n')
+    code, err = _cli([sc, "--out", tmp_path / "o"], capsys)
+    assert code == 0, err
+    rows = (tmp_path / "o" / "sumo_device.csv").read_text().splitlines()
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert len(rows) >= 2 and summary["sumo_device"][0]["vehicles"] > 0
+
+
+def test_options_replace_the_configs_device_setting(tmp_path):
+    """The options' device setting replaces the config's, as SUMO takes the command line's:
+    probability 0 in the options switches the comparison off, 1 on; outputs.sumo_device
+    decides over both."""
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    on = _scenario(tmp_path, "", DEVICE)
+    for opts, want in (([], True), (["--device.emissions.probability", "0"], False),
+                       (["--device.emissions.probability=0", "--device.emissions.probability", "0.5"], True),
+                       (["--device.emissions.probability"], True)):  # no value: SUMO refuses it
+        assert load_scenario(doc={"equations": ["epa_gasoline_car"],
+                                  "sumo": {"config": str(on), "options": opts}}).sumo_device is want, opts
+    sc = load_scenario(doc={"equations": ["epa_gasoline_car"], "outputs": {"sumo_device": False},
+                            "sumo": {"config": str(on), "options": ["--device.emissions.probability=1"]}})
+    assert not sc.sumo_device

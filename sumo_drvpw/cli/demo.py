@@ -101,7 +101,7 @@ def _demo(args, out: Path, final: Path, held_log: Path) -> None:
 def _scenario(name: str) -> Path:
     """A bundled scenario: package data when the build ships it, else the checkout's."""
     try:
-        from sumo_drvpw.sim.scenario import bundled_scenario
+        from sumo_drvpw.sim.scenario_paths import bundled_scenario
     except ImportError:
         return repo_root() / "scenarios" / f"{name}.toml"
     return Path(bundled_scenario(name))

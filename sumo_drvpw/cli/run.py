@@ -85,7 +85,7 @@ def _overrides(args) -> dict:
 def _run_one(scenario: str, out: str, overrides: dict) -> dict:
     """One scenario in this process; returns its summary (picklable for --jobs)."""
     from sumo_drvpw.sim import run_scenario
-    from sumo_drvpw.sim.scenario import scenario_path
+    from sumo_drvpw.sim.scenario_paths import scenario_path
 
     return run_scenario(scenario_path(scenario), out, **overrides).summary
 

@@ -405,7 +405,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     replay.type_params = {vt: i.shut_off for vt, i in acc.file_vtypes.items() if i.shut_off}
     # SUMO loads the additional files first: a route (with its stops) defined there serves
     # the vehicles of the route files
-    declared = read_declared_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files])))
+    declared = read_declared_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files])),
+                                   begin=sc.begin, end=sc.end)
     if declared:
         replay.stops = StopTracker(declared, net)
     acc.stepper.replay_info = replay_info  # a --begin after the file's start: no cold starts then

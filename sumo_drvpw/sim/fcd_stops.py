@@ -9,8 +9,10 @@ SUMO's FCD holds no stops. The route files do: ``<stop>`` elements of a ``<vehic
 stopping places' lanes and positions from the additional files), with their ``duration``
 and ``until``. A vehicle's stops are its route's and then its own (SUMO adds them so,
 ``MSBaseVehicle::addStops``), ordered along the route when it has both; a flow's vehicles
-``<flow id>.<n>`` take the flow's stops, a ``period`` flow's ``until`` shifted by n periods
-(SUMO 1.28: ``f.1`` of a 30-s flow stops until 230 where the flow says 200).
+``<flow id>.<n>`` take the flow's stops. SUMO shifts a stop's ``until``: a flow's own
+stops by n × its spacing (``period``, 3600/``vehsPerHour``, or (end − begin)/``number``;
+SUMO 1.28: ``f.1`` of a 30-s flow stops until 230 where the flow says 200), a named
+route's stops by the vehicle's depart (:meth:`DeclaredStops.stops_of`).
 
 A stop starts where SUMO's does (``MSVehicle::processNextStop``): the vehicle, on the
 stop's lane (any lane of its edge for an ``edge`` stop), at most 0.1 m/s fast (SUMO's
@@ -23,8 +25,12 @@ declared stop not yet served that matches is taken, and the ones before it count
 passed: a stop is never matched out of its order, nor twice. It ends in the row the
 vehicle drives off from rest, or at its planned end (the later of arrival + ``duration``
 and ``until``; SUMO ends it in that row), whichever comes first: from then the vehicle is
-booked standing again. A vehicle that drives off before a planned end was not at its
-stop after all (SUMO holds it there): the stop is open to be matched again, and counted
+booked standing again. A ``parking`` stop (a ``parkingArea``'s always) SUMO ends only
+when the vehicle can leave its space, later when traffic blocks it (DLR's port_lübeck,
+SUMO 1.28: cars parked at a bus stop until 830/870/880 s left at 836/881/887 s): the
+replay ends it when the vehicle drives off, past its planned end. A vehicle that drives
+off before a planned end was not at its stop after all (SUMO holds it there): the stop is
+open to be matched again, and counted
 (``stops_left_before_their_end``). At a stopping place SUMO starts the stop of a vehicle
 creeping up a queue inside its range only when the vehicle reaches its stopping position,
 a few steps after its first row at 0.1 m/s or slower, where the replay starts it: a stop
@@ -33,9 +39,10 @@ with a ``duration`` then ends that much earlier here (booked standing).
 What the replay cannot place is booked standing, as the run would book a short stop:
 stops added while the run ran (TraCI, rerouters, taxis, parking reroutes), the stops of
 vehicles whose route is drawn from a ``routeDistribution`` (which member's stops is not
-in the FCD) or repeats (``repeat``), a ``period`` that is not a number (``exp(…)``, a
-``probability`` flow) where ``until`` alone makes the stop long, and stops on a stopping
-place of none of the files read. :meth:`StopTracker.report` counts them.
+in the FCD) or repeats (``repeat``), a named route's stop of a vehicle whose depart is
+random (a ``probability`` or ``period="exp(…)"`` flow's) or no time (``triggered``) where
+``until`` alone makes the stop long, and stops on a stopping place of none of the files
+read. :meth:`StopTracker.report` counts them.
 """
 
 from __future__ import annotations
@@ -62,6 +69,8 @@ STOP_TOLERANCE_M = 0.1
 #: ``trainStop`` is named by ``busStop``)
 STOPPING_PLACES = ("busStop", "trainStop", "containerStop", "chargingStation", "parkingArea")
 VEHICLE_ELEMENTS = ("vehicle", "trip", "flow")
+#: a stop's ``parking`` values that park the vehicle off the road (SUMO's bool spellings)
+PARKING_TRUE = ("true", "1", "yes", "on", "x", "t")
 
 
 def _num(val, where: str, key: str, time: bool = False) -> float | None:
@@ -82,16 +91,20 @@ class _Stop:
     """One declared stop: where (``lane`` or ``edge``, or a stopping place ``place``), its
     positions as written, and its planned ``duration`` and ``until`` [s] (None: not given)."""
 
-    __slots__ = ("lane", "edge", "place", "start", "end", "duration", "until")
+    __slots__ = ("lane", "edge", "place", "start", "end", "duration", "until", "on_route", "parking")
 
-    def __init__(self, el, where: str):
+    def __init__(self, el, where: str, on_route: bool = False):
         a = el.attrib
+        self.on_route = on_route  # a named route's stop: its until counts from the depart
         self.lane, self.edge = a.get("lane"), a.get("edge")
         self.place = next((a[k] for k in STOPPING_PLACES if a.get(k)), None)
         self.start = _num(a.get("startPos"), where, "startPos")
         self.end = _num(a.get("endPos"), where, "endPos")
         self.duration = _num(a.get("duration"), where, "duration", time=True)
         self.until = _num(a.get("until"), where, "until", time=True)
+        # parked beside the lane (a parkingArea's always): SUMO ends the stop when the
+        # vehicle can leave, which may be after its planned end
+        self.parking = bool(a.get("parkingArea")) or a.get("parking", "").strip().lower() in PARKING_TRUE
 
 
 def _is_stop(el) -> bool:
@@ -104,12 +117,14 @@ def _is_stop(el) -> bool:
 
 class DeclaredStops:
     """The stops of the route files (:func:`read_declared_stops`): vehicle id → its stops
-    in order, flow id → its vehicles' stops and period, stopping place id → (lane,
-    startPos, endPos), and the vehicles whose stops cannot be known (id → why)."""
+    in order and depart, flow id → its vehicles' stops, begin and spacing, stopping place
+    id → (lane, startPos, endPos), and the vehicles whose stops cannot be known (id → why).
+    ``begin``/``end``: the run's (SUMO's defaults for a flow without them; None: not set)."""
 
-    def __init__(self):
-        self.vehicles: dict[str, list[_Stop]] = {}
-        self.flows: dict[str, tuple[list[_Stop], float | None]] = {}
+    def __init__(self, begin: float | None = None, end: float | None = None):
+        self.begin, self.end = begin, end
+        self.vehicles: dict[str, tuple[list[_Stop], float]] = {}
+        self.flows: dict[str, tuple[list[_Stop], float, float | None]] = {}
         self.places: dict[str, tuple[str, float | None, float | None]] = {}
         self.unknown: dict[str, str] = {}         # vehicle or flow id → why
         self._routes: dict[str, tuple[list[str], list[_Stop], bool]] = {}
@@ -118,25 +133,65 @@ class DeclaredStops:
     def __bool__(self) -> bool:
         return bool(self.vehicles or self.flows or self.unknown)
 
-    def stops_of(self, vid: str) -> tuple[list[_Stop] | None, float, str | None]:
-        """A vehicle's stops (None: none declared), the shift of their ``until`` [s] (a
-        flow's n periods; NaN: not known) and why they cannot be known (None: they can)."""
+    def stops_of(self, vid: str) -> tuple[list[_Stop] | None, list[float], str | None]:
+        """A vehicle's stops (None: none declared), the shift of each one's ``until`` [s]
+        (NaN: not known) and why they cannot be known (None: they can).
+
+        SUMO 1.28 (``MSBaseVehicle::addStops``) shifts the ``until`` of a named route's
+        stops by the vehicle's depart, and of its own stops (and its inner route's) by
+        n × the flow's spacing for ``<flow id>.<n>``: ``period``, 3600/``vehsPerHour``
+        (``perHour``), or for ``number`` alone (end − begin)/number (SUMO's
+        ``parseFlowAttributes``; without an ``end`` the run's, else begin + 24 h). A flow
+        by ``probability`` or ``period="exp(…)"`` has no spacing: its own stops are not
+        shifted, and its vehicles' departs (a route's stops' shift) are random."""
         if vid in self.vehicles:
-            return self.vehicles[vid], 0.0, None
+            stops, depart = self.vehicles[vid]
+            return stops, [depart if s.on_route else 0.0 for s in stops], None
         if vid in self.unknown:
-            return None, 0.0, self.unknown[vid]
+            return None, [], self.unknown[vid]
         flow, _, n = vid.rpartition(".")
         if flow and n.isdigit():
             if flow in self.flows:
-                stops, period = self.flows[flow]
-                return stops, (int(n) * period if period is not None else np.nan), None
+                stops, begin, spacing = self.flows[flow]
+                own = int(n) * spacing if spacing is not None else 0.0
+                depart = begin + own if spacing is not None else np.nan
+                return stops, [depart if s.on_route else own for s in stops], None
             if flow in self.unknown:
-                return None, 0.0, self.unknown[flow]
-        return None, 0.0, None
+                return None, [], self.unknown[flow]
+        return None, [], None
 
-    def _route(self, el, where: str) -> tuple[list[str], list[_Stop], bool]:
+    def _flow_timing(self, el) -> tuple[float, float | None]:
+        """A flow's begin [s] (NaN: not a time, e.g. ``triggered``) and the spacing of its
+        vehicles [s] (None: random, by ``probability`` or ``period="exp(…)"``), as SUMO 1.28
+        reads them (``SUMOVehicleParserHelper::parseFlowAttributes``, in ms)."""
+        b = el.get("begin")
+        begin = (sumo_seconds(b) if b is not None else self.begin if self.begin is not None else 0.0)
+        begin = np.nan if begin is None else begin
+        per = el.get("period")
+        if per is not None:
+            t = sumo_seconds(per)
+            return begin, (round(t * 1000) / 1000 if t is not None else None)  # exp(…): random
+        for k in ("vehsPerHour", "perHour"):
+            if el.get(k) is not None:
+                try:
+                    return begin, round(3600.0 / float(el.get(k)) * 1000) / 1000
+                except (ValueError, ZeroDivisionError):
+                    return begin, np.nan
+        if el.get("probability") is not None:
+            return begin, None
+        try:
+            number = int(el.get("number"))
+        except (TypeError, ValueError):
+            return begin, np.nan
+        e = el.get("end")
+        end = sumo_seconds(e) if e is not None else self.end if self.end is not None else begin + 86400.0
+        if end is None or number <= 0 or begin != begin:
+            return begin, np.nan
+        return begin, ((round(end * 1000) - round(begin * 1000)) // number) / 1000  # SUMOTime: ms
+
+    def _route(self, el, where: str, named: bool = False) -> tuple[list[str], list[_Stop], bool]:
         edges = (el.get("edges") or "").split()
-        stops = [_Stop(s, where) for s in el if s.tag == "stop" and _is_stop(s)]
+        stops = [_Stop(s, where, named) for s in el if s.tag == "stop" and _is_stop(s)]
         return edges, stops, bool(el.get("repeat") not in (None, "", "0"))
 
     def _distribution(self, el, where: str) -> bool:
@@ -147,7 +202,7 @@ class DeclaredStops:
             if r.tag != "route":
                 continue
             if r.get("id"):
-                self._routes[r.get("id")] = self._route(r, f"{where}: route '{r.get('id')}'")
+                self._routes[r.get("id")] = self._route(r, f"{where}: route '{r.get('id')}'", True)
             member = self._routes.get(r.get("refId") or r.get("id") or "")
             stops |= bool(member and member[1]) or any(s.tag == "stop" for s in r)
         if stops and el.get("id"):
@@ -179,14 +234,10 @@ class DeclaredStops:
             return
         stops = _ordered(rstops, own, edges, self.places)
         if tag == "flow":
-            period = el.get("period")
-            try:
-                period = float(period) if period is not None else None
-            except ValueError:
-                period = None  # exp(…), or a flow by probability: its vehicles' offsets unknown
-            self.flows[vid] = (stops, period)
+            self.flows[vid] = (stops, *self._flow_timing(el))
         else:
-            self.vehicles[vid] = stops
+            depart = sumo_seconds(el.get("depart") or "")  # "triggered", "now": not known
+            self.vehicles[vid] = (stops, np.nan if depart is None else depart)
 
 
 def _edge_of(s: _Stop, places: dict) -> str | None:
@@ -207,10 +258,12 @@ def _ordered(rstops: list, own: list, edges: list, places: dict) -> list:
     return [s for *_, s in sorted(keyed, key=lambda x: x[:3])]
 
 
-def read_declared_stops(files, depth: int = 0, out: DeclaredStops | None = None) -> DeclaredStops:
+def read_declared_stops(files, depth: int = 0, out: DeclaredStops | None = None,
+                        begin: float | None = None, end: float | None = None) -> DeclaredStops:
     """The stops of SUMO route/additional ``files`` (and of the files they ``<include>``),
-    in load order; a bad number is a UserError naming the file, element and key."""
-    out = DeclaredStops() if out is None else out
+    in load order; a bad number is a UserError naming the file, element and key. ``begin``,
+    ``end``: the run's [s] (a flow without them takes them)."""
+    out = DeclaredStops(begin, end) if out is None else out
     for f in files:
         path = Path(f)
         try:
@@ -231,7 +284,7 @@ def read_declared_stops(files, depth: int = 0, out: DeclaredStops | None = None)
                     if tag == "include" and el.get("href") and depth < INCLUDE_DEPTH:
                         read_declared_stops([path.parent / el.get("href")], depth + 1, out)
                     elif tag == "route" and el.get("id"):
-                        out._routes[el.get("id")] = out._route(el, f"{path}: route '{el.get('id')}'")
+                        out._routes[el.get("id")] = out._route(el, f"{path}: route '{el.get('id')}'", True)
                     elif tag == "routeDistribution" and el.get("id"):
                         out._distribution(el, str(path))
                     elif tag in VEHICLE_ELEMENTS:
@@ -252,7 +305,7 @@ class StopTracker:
 
     def __init__(self, declared: DeclaredStops, net):
         self.declared, self.net = declared, net
-        self.state: dict[str, list] = {}     # vehicle id → [stops, next index, shift, current]
+        self.state: dict[str, list] = {}     # vehicle id → [stops, next index, shifts, current]
         self.starting: tuple = ()
         self.ending: tuple = ()
         self.data: dict[str, SimpleNamespace] = {}
@@ -266,12 +319,12 @@ class StopTracker:
     def _state(self, vid: str):
         st = self.state.get(vid)
         if st is None:
-            stops, shift, why = self.declared.stops_of(vid)
+            stops, shifts, why = self.declared.stops_of(vid)
             if why is not None:
                 self.not_known[why] = self.not_known.get(why, 0) + 1
             if stops:
                 self.vehicles += 1
-            st = self.state[vid] = [stops or [], 0, shift, None]
+            st = self.state[vid] = [stops or [], 0, shifts, None]
         return st
 
     def _span(self, s: _Stop, lane: str) -> tuple[float, float] | None:
@@ -317,7 +370,8 @@ class StopTracker:
                 j = rows.get(vid)
                 if j is None:
                     continue
-                if t >= cur.end_t - 1e-6 or (cur.at_rest and speed[j] > 0.0):
+                over = t >= cur.end_t - 1e-6 and not (cur.parking and speed[j] <= 0.0)
+                if over or (cur.at_rest and speed[j] > 0.0):
                     st = self.state[vid]
                     if t < cur.end_t - 1e-6 and np.isfinite(cur.end_t):  # not its stop after all
                         st[1] = cur.index
@@ -344,8 +398,8 @@ class StopTracker:
                 self.matched += 1
                 if parked is not None and parked[j]:
                     break  # parked there: not booked anyway
-                until = -1.0 if s.until is None else s.until + st[2]
-                if until != until:  # NaN: a flow whose period is no number
+                until = -1.0 if s.until is None else s.until + st[2][k]
+                if until != until:  # NaN: a depart not known (a random flow's, "triggered")
                     self.until_unknown += 1
                     until = -1.0
                 dur = -1.0 if s.duration is None else s.duration
@@ -354,7 +408,7 @@ class StopTracker:
                 ends = [x for x, given in ((t + dur, dur >= 0), (until, until >= 0)) if given]
                 end_t = max(ends) if ends else np.inf
                 cur = SimpleNamespace(duration=dur, until=until, arrival=t, end_t=end_t,
-                                      at_rest=speed[j] == 0.0, index=k)
+                                      at_rest=speed[j] == 0.0, index=k, parking=s.parking)
                 st[3] = cur
                 self.data[vid] = cur
                 starting.append(vid)
@@ -369,7 +423,7 @@ class StopTracker:
     def report(self) -> dict:
         """What the replay matched and what it could not know (summary.json)."""
         d = self.declared
-        lists = [*d.vehicles.values(), *(f[0] for f in d.flows.values())]
+        lists = [*(v[0] for v in d.vehicles.values()), *(f[0] for f in d.flows.values())]
         places = sum(1 for stops in lists for s in stops if s.place is not None and s.place not in d.places)
         return {"vehicles_with_declared_stops": self.vehicles, "stops_reached": self.matched,
                 "vehicles_whose_stops_are_not_known": dict(sorted(self.not_known.items())),

@@ -527,7 +527,8 @@ def run_scenarios(scenarios: list, out_dirs: list, overrides: dict | None = None
         scenario on a Dask cluster: ``scheduler`` address, else a local cluster of
         ``workers`` single-threaded processes)
     """
-    from sumo_drvpw.sim.scenario import load_scenario, scenario_path
+    from sumo_drvpw.sim.scenario import load_scenario
+    from sumo_drvpw.sim.scenario_paths import scenario_path
 
     overrides = dict(overrides or {})
     paths = [str(scenario_path(s)) for s in scenarios]

@@ -24,7 +24,7 @@ from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_vclass, load_equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import additional_outputs, is_output_option, option_input_files
-from sumo_drvpw.fileio import folder_given, read_toml
+from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.model.terms import parse_term
 
 DEFAULT_HIGHWAY_TYPES = ("highway.motorway", "highway.motorway_link", "highway.trunk",
@@ -151,9 +151,10 @@ class Scenario:
     period: float | None = None
     #: also run SUMO's emissions device and put its per-vehicle totals beside ours
     sumo_device: bool = False
-    #: the SUMO config itself enables the emissions device (device.emissions.probability
-    #: > 0 or .explicit): its per-vehicle totals go beside ours unless outputs.sumo_device
-    #: = false, and the run leaves the config's device settings as they are
+    #: the SUMO config or the SUMO options (sumo.options, a run's options) enable the
+    #: emissions device (device.emissions.probability > 0 or .explicit): its per-vehicle
+    #: totals go beside ours unless outputs.sumo_device = false, and the run leaves the
+    #: device settings as they are
     sumo_device_in_config: bool = False
     #: output options the SUMO config sets (option → file as written there); a run
     #: redirects them into its output folder's ``sumo/`` (sim.sumo_outputs.sumo_output_args)
@@ -185,6 +186,21 @@ def device_in_config(cfgvals: dict[str, str]) -> bool:
     except ValueError:
         pass
     return bool(cfgvals.get("device.emissions.explicit", "").strip())
+
+
+#: the options that enable SUMO's emissions device (:func:`device_in_config`)
+DEVICE_OPTIONS = ("device.emissions.probability", "device.emissions.explicit")
+
+
+def _given_options(args: list[str], keys) -> dict[str, str]:
+    """The values SUMO's command-line ``args`` give the options ``keys`` (``--key v`` or
+    ``--key=v``; the last one)."""
+    out = {}
+    for i, a in enumerate(args):
+        k, eq, v = a[2:].partition("=")
+        if a.startswith("--") and k in keys and (eq or i + 1 < len(args)):
+            out[k] = v if eq else args[i + 1]
+    return out
 
 
 def sumo_seconds(text: str) -> float | None:
@@ -309,33 +325,6 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
         if why:
             raise UserError(f"{src}: equation '{eq.name}' cannot run in SUMO: term '{t}' needs {why}")
     return eq
-
-
-#: Built-in scenarios (package data): ``sumo-drvpw run city`` / ``highway``, the demo's.
-BUILTIN_SCENARIOS = Path(__file__).resolve().parent / "builtin" / "scenarios"
-
-
-def builtin_scenario_names() -> list[str]:
-    return sorted(p.stem for p in BUILTIN_SCENARIOS.glob("*.toml"))
-
-
-def bundled_scenario(name: str) -> Path:
-    """The built-in scenario ``name`` (package data); UserError naming the known ones."""
-    p = BUILTIN_SCENARIOS / f"{name}.toml"
-    if not p.is_file():
-        raise UserError(f"unknown built-in scenario '{name}' (built-ins: "
-                        f"{', '.join(builtin_scenario_names())})")
-    return p
-
-
-def scenario_path(spec) -> Path:
-    """A scenario file path, or a built-in scenario's when ``spec`` names one and no file."""
-    p = Path(spec)
-    if p.is_dir():  # a scenario folder: name its SUMO configs and scenario files
-        raise UserError(folder_given(p, "scenario", (".sumocfg", ".toml")))
-    if p.exists() or p.suffix in (".toml", ".sumocfg") or any(c in str(spec) for c in "/\\"):
-        return p
-    return bundled_scenario(str(spec))
 
 
 def _config_files(cfg: Path) -> tuple[Path, list[Path], dict[str, str]]:
@@ -562,7 +551,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         if len(diff) != 2 or any(d not in names for d in diff):
             raise UserError(f"{where}: outputs.difference must name two of the scenario's "
                             f"equations ({', '.join(names)}), got {diff}")
-    device_on = device_in_config(cfgvals)
+    # the config's device options, replaced by the command line's (sumo.options, a run's
+    # options; "--key value" or "--key=value", the last one) as SUMO takes them
+    device_on = device_in_config({**cfgvals, **_given_options(args, DEVICE_OPTIONS)})
     return Scenario(
         config_outputs={k: v for k, v in cfgvals.items() if is_output_option(k) and v.strip()},
         additional_outputs=additional_outputs(adds), additional_files=list(adds),

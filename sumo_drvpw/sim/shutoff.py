@@ -194,6 +194,7 @@ class ShutOff:
             "where it stands at most 0.1 m/s fast, in their order, ending when it drives off or at the "
             "planned end; stops added while the run ran (TraCI, rerouters, taxis), those of a vehicle whose "
             "route is drawn from a routeDistribution or repeats, and a stop made long only by an until the "
-            "replay cannot shift (a flow without a numeric period) are booked standing; the shut-off params "
-            "are the route files' vTypes' (a vType made by TraCI has none)")
+            "replay cannot shift (a named route's stop of a vehicle with a random or no depart time) are "
+            "booked standing; the shut-off params are the route files' vTypes' (a vType made by TraCI has "
+            "none)")
         return out

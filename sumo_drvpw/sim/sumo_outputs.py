@@ -290,6 +290,18 @@ BATTERY_NOTE = ("model difference, not a booking one: SUMO's Energy model takes 
                 "and auxiliary power (ratio_auxiliary: our auxiliary energy over SUMO's total; "
                 "ratio_rest: the remainder)")
 
+#: what the row of an equation without an energy chain compares (an electric bus: no battery
+#: chain applies to buses); its ratio is no verdict on the equation
+NO_CHAIN_NOTE = ("not like for like: no energy chain applies to these vehicles, so ours is the "
+                 "equation's net driving energy at the wheels (traction less all recuperable "
+                 "braking energy: no drivetrain or recuperation efficiencies, recuperation limit "
+                 "or auxiliary power); SUMO's electricity adds its model's efficiencies "
+                 "(propulsionEfficiency, recuperationEfficiency; defaults 0.98/0.96) and "
+                 "constantPowerIntake (default 100 W, booked standing too) to the vType's road "
+                 "load: the ratio checks the road load only against a vType with efficiencies 1 "
+                 "and no intake (sumo-drvpw export-vtype); otherwise SUMO's losses and "
+                 "auxiliaries, which ours leaves out, lower it")
+
 
 def device_comparison(v, dev, cv, chains: dict):
     """Per equation, over the vehicles SUMO's emissions device reports for (``dev``: vehicle,
@@ -297,7 +309,7 @@ def device_comparison(v, dev, cv, chains: dict):
     books: an equation with a battery chain its battery kWh against SUMO's electricity; with
     a fuel chain its litres against SUMO's fuel (mg, in litres at the chain fuel's density);
     an equation without a chain its net driving energy at the wheel (``v``: vehicle,
-    equation, net_total_j) against SUMO's electricity. ``cv``: the chains' per-vehicle rows
+    equation, net_total_j) against SUMO's electricity, with :data:`NO_CHAIN_NOTE`. ``cv``: the chains' per-vehicle rows
     (vehicle, equation, net_kwh, auxiliary_kwh, fuel_l), or None; ``chains``: name → chain.
 
     A battery chain's ratio is split additively: ``ratio_auxiliary`` = our auxiliary energy
@@ -334,6 +346,7 @@ def device_comparison(v, dev, cv, chains: dict):
                 aux, note = float(g.auxiliary_kwh.sum()), BATTERY_NOTE
             else:
                 ours, q = g.net_total_j.sum() / 3.6e6, "net driving energy kWh (no chain)"
+                note = NO_CHAIN_NOTE
         if len(g):
             ok = bool(sumo) and aux == aux
             rows.append({"equation": eq, "quantity": q, "vehicles": int(len(g)),
