@@ -353,7 +353,9 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
     grade = ``grade_rad``, else atan(``grade_pct``/100), else from ``elevation_m``
     smoothed over distance, else 0; wind = ``wind_mps``, else speed − ``airspeed_mps``,
     else 0; air density = ``air_density_kgm3``, else p/(R·T) from ``ambient_c`` and
-    ``pressure_kpa`` (101.325 kPa if absent), else 1.2041 kg/m³.
+    ``pressure_kpa`` (101.325 kPa if absent), else 1.2041 kg/m³. Each trip takes the first
+    source that holds a value in it (:mod:`sumo_drvpw.data.conditions`), so a file of a
+    folder of different loggers is read as it is alone.
     """
     opt = check_options(options or ReadOptions())
     files = expand_paths(paths)
