@@ -1,6 +1,6 @@
 """A folder of drive logs from different loggers reads the same in memory and streamed, and
 each file as it would be read alone (README: "Each trip is derived on its own ... so logs
-of different loggers may share a folder"): its own wind, air density and grade
+of different loggers may share a folder"): its own wind, air density, grade and power
 columns, whatever the other files carry, and the sources said of all files.
 
 Each test plants two or three small logs that differ in one kind of column, reads the
@@ -28,7 +28,8 @@ ROWS = 700  # rows per streamed batch
 KEYS = ("usable", "excluded_total", "excluded_nan_wind_mps", "excluded_nan_air_density_kgm3",
         "excluded_nan_grade_rad", "wind_source", "air_density_source", "grade_source",
         "grade_filled_rows", "grade_flat_trips", "air_density_default_samples",
-        "elevation_missing_samples", "power_source", "wind_rows", "air_density_rows", "grade_rows")
+        "elevation_missing_samples", "power_source", "wind_rows", "air_density_rows", "grade_rows",
+        "power_rows")
 
 
 def _drive(trip, hz=10.0, n_s=150.0, seed=0):
@@ -81,6 +82,7 @@ def _streamed_as_in_memory(d, m):
     ref = _pick(m.counts)
     for got in (cs.counts, st.counts, res.details["reader_counts"]):
         corpus.assert_close_documents(ref, _pick(got), 1e-9)
+    assert cs.source == st.source == res.equation.provenance["power_source"] == m.source
     u = m.usable
     mem = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],
                   trip=m.inputs.trip[u]).to_json()
@@ -159,3 +161,26 @@ def test_grade_of_each_file_from_its_own_column(tmp_path, first):
                                    "elevation_m over distance: 1 m grid, 100 m moving average, gradient "
                                    "for 1500 rows")
 
+
+@pytest.mark.parametrize("first", ["power", "motor"])
+def test_measured_power_of_each_file_from_its_own_columns(tmp_path, first):
+    """Found by review: in memory, a file with only motor torque and speed read with one that
+    has power_w got NaN power (all its rows left out), while the streamed paths used its
+    motor power and said the source of whichever batch came first ('direct (power_w)' or
+    'single motor ...'). Each file's power comes from its own columns, as read alone, and
+    the source says both, in memory and streamed."""
+    from sumo_drvpw.model.constants import RPM
+
+    b = _drive("B", seed=2)
+    w = b["speed_mps"] / 0.3 * 8.0  # motor speed [rad/s]: wheel radius 0.3 m, gear ratio 8
+    motor = b.assign(motor_speed_rpm=w / RPM, motor_torque_nm=b["power_w"] / w)
+    logs = {"power": _drive("A", seed=1), "motor": motor.drop(columns="power_w")}
+    d = _folder(tmp_path, logs, first)
+    m = load_measured([d])
+    rows = m.inputs.trip == "B"
+    assert m.counts["usable"] == 3000
+    np.testing.assert_allclose(m.power_w[rows], b["power_w"], rtol=1e-12)
+    _each_file_as_alone(d, m)
+    ref = _streamed_as_in_memory(d, m)
+    assert ref["power_source"] == ("direct (power_w) for 1500 rows; single motor (motor torque × motor speed) "
+                                   "for 1500 rows")

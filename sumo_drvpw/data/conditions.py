@@ -17,8 +17,12 @@ from sumo_drvpw.model.constants import P_STD_KPA, RHO_DEFAULT
 GRADE_SOURCES = ("grade_rad column", "grade_pct column", "elevation_m over distance", "none")
 WIND_SOURCES = ("wind_mps column", "speed − airspeed_mps", "none")
 DENSITY_SOURCES = ("air_density_kgm3 column", "ideal gas", "default")
+#: the measured driving power's (:func:`sumo_drvpw.data.powertrain.measured_power`)
+POWER_SOURCES = ("direct", "power-split", "single motor (motor torque × motor speed)", "single motor",
+                 "battery")
 #: count → its sources; the count holds the rows of each source, keyed by the source's text
-ROWS_OF = {"grade_rows": GRADE_SOURCES, "wind_rows": WIND_SOURCES, "air_density_rows": DENSITY_SOURCES}
+ROWS_OF = {"grade_rows": GRADE_SOURCES, "wind_rows": WIND_SOURCES, "air_density_rows": DENSITY_SOURCES,
+           "power_rows": POWER_SOURCES}
 
 
 def _pick(df: pd.DataFrame, cols, trip_codes: np.ndarray, least: int = 1) -> np.ndarray:
@@ -61,7 +65,7 @@ def source_counts(counts: dict) -> dict:
     ``wind_rows``, ``air_density_rows``): ``grade_source`` (a flat road is said only when
     no trip has a grade: flat trips are listed in ``grade_flat_trips``; "elevation_m holds no
     value" when ``grade_elevation_column``), ``wind_source``,
-    ``air_density_source``, and
+    ``air_density_source``, ``power_source`` (the measured power's, ``power_rows``), and
     ``grade_filled_rows`` (rows without a grade_rad or grade_pct value in a log with such a
     column, ``grade_column``: the files of a folder without it)."""
     out = {}
@@ -74,7 +78,8 @@ def source_counts(counts: dict) -> dict:
         n_col = sum(n for k, n in g.items() if _rank(k, "grade_rows") < 2)
         if counts.get("grade_column") and n_col < sum(g.values()):
             out["grade_filled_rows"] = sum(g.values()) - n_col
-    for c, text in (("wind_rows", "wind_source"), ("air_density_rows", "air_density_source")):
+    for c, text in (("wind_rows", "wind_source"), ("air_density_rows", "air_density_source"),
+                    ("power_rows", "power_source")):
         if c in counts:
             out[text] = said(counts[c])
     return out

@@ -96,8 +96,9 @@ def _add_counts(a: dict, b: dict) -> dict:
     one batch without elevation does not make the logs carry none), except the
     acceleration's source: said of both from their mergeable ``accel_derivation``, as the
     reader says it of both read together (rows from the column, rows derived, the windows),
-    and the grade's, wind's and air density's: said from their rows per source
-    (``grade_rows``, ``wind_rows``, ``air_density_rows``; :mod:`sumo_drvpw.data.conditions`).
+    and the grade's, wind's, air density's and measured power's: said from their rows per
+    source (``grade_rows``, ``wind_rows``, ``air_density_rows``, ``power_rows``;
+    :mod:`sumo_drvpw.data.conditions`).
     Of the reader's decimal counts, the seconds of logging gaps add (each batch's rounded to
     ms, as the reader rounds its sum) and the widest acceleration window is kept (the
     reader's max); other decimals (the options' limits) are kept as first seen."""
@@ -260,7 +261,7 @@ class CalibrationStats:
         c = m.counts
         c["excluded_nonfinite_power"] = int((~np.isfinite(y)).sum())
         self.counts = _add_counts(self.counts, c)
-        self.source = self.source or m.source
+        self.source = self.counts.get("power_source") or self.source or m.source  # of all batches
         self.vehicle = self.vehicle or m.vehicle
         for f in m.log.files:
             if f not in self.files:
@@ -313,6 +314,7 @@ class CalibrationStats:
                                self.rho_sum + o.rho_sum,
                                frozenset(list(self.speeds | o.speeds)[:2]), self.moving_mps,
                                _merge_ranges(self.ranges, o.ranges), {**self.trip_files, **o.trip_files})
+        out.source = out.counts.get("power_source") or out.source  # of both
         return out
 
     def factor(self, trips=None) -> tuple[np.ndarray, Moments]:
