@@ -184,3 +184,20 @@ def test_measured_power_of_each_file_from_its_own_columns(tmp_path, first):
     ref = _streamed_as_in_memory(d, m)
     assert ref["power_source"] == ("direct (power_w) for 1500 rows; single motor (motor torque × motor speed) "
                                    "for 1500 rows")
+
+
+@pytest.mark.parametrize("first", ["flags", "none"])
+def test_brake_and_reverse_flags_of_each_file_as_read_alone(tmp_path, first):
+    """Found while fixing the above: in memory, a file without the brake and reverse columns
+    read with one that has them got NaN there, read as set: all its rows were left out as
+    braking and reversing (excluded_brake 1500, usable 1500; streamed 0 and 3000). A file
+    that marks no braking has none marked, as read alone."""
+    a = _drive("A", seed=1).assign(brake=False, reverse=0)
+    a.loc[:99, "brake"] = True  # 10 s of braking: left out
+    d = _folder(tmp_path, {"flags": a, "none": _drive("B", seed=2)}, first)
+    m = load_measured([d])
+    assert (m.counts["excluded_brake"], m.counts["excluded_reverse"], m.counts["usable"]) == (100, 0, 2900)
+    _each_file_as_alone(d, m)
+    ref = _streamed_as_in_memory(d, m)
+    cs, _ = run([d], partial(CompareStats, resolve_equations(["vsp_ldv1999"]), None), None, rows=ROWS)
+    assert (cs.counts["excluded_brake"], cs.counts["excluded_reverse"]) == (100, 0) and ref["usable"] == 2900

@@ -488,9 +488,11 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
         if lacking.any():
             df["mass_kg"] = np.where(lacking, float(vehicle.mass_kg), df["mass_kg"].to_numpy(float))
             counts["mass_from_vehicle_rows"] = int(lacking.sum())
-    for c in FLAGS:
+    for c in FLAGS:  # a file of a folder without the flag (NaN there): not set, as read alone
         if c not in df:
             df[c] = False
+        elif not pd.api.types.is_bool_dtype(df[c]):
+            df[c] = df[c].astype("boolean").fillna(False).astype(bool)
 
     excluded = np.zeros(len(df), bool)
     for c in FLAGS:
