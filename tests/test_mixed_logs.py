@@ -32,14 +32,23 @@ KEYS = ("usable", "excluded_total", "excluded_nan_wind_mps", "excluded_nan_air_d
         "power_rows")
 
 
-def _drive(trip, hz=10.0, n_s=150.0, seed=0):
-    """A trip of smooth stop-and-go driving, its wheel power a road load (every sample usable)."""
+def _drive(letter, hz=10.0, n_s=75.0, seed=0):
+    """A file's two trips (``letter`` 1 and 2) of smooth stop-and-go driving, 750 rows each
+    (so each is a batch of its own), the wheel power a road load (every sample usable)."""
     rng = np.random.default_rng(seed)
-    t = np.arange(0.0, n_s, 1.0 / hz)
-    v = 12.0 + 6.0 * np.sin(2 * np.pi * t / 40.0 + rng.uniform(0, 6)) + 2.0 * np.sin(2 * np.pi * t / 7.0)
-    a = np.gradient(v, t)
-    return pd.DataFrame({"trip_id": trip, "time_s": t, "speed_mps": v,
-                         "power_w": 1500.0 * v * a + 150.0 * v + 0.4 * v ** 3, "mass_kg": 1500.0})
+    out = []
+    for k in (1, 2):
+        t = np.arange(0.0, n_s, 1.0 / hz)
+        v = 12.0 + 6.0 * np.sin(2 * np.pi * t / 40.0 + rng.uniform(0, 6)) + 2.0 * np.sin(2 * np.pi * t / 7.0)
+        a = np.gradient(v, t)
+        out.append(pd.DataFrame({"trip_id": f"{letter}{k}", "time_s": t, "speed_mps": v,
+                                 "power_w": 1500.0 * v * a + 150.0 * v + 0.4 * v ** 3, "mass_kg": 1500.0}))
+    return pd.concat(out, ignore_index=True)
+
+
+def _file_of(m) -> np.ndarray:
+    """Each sample's file letter (its trip's first character)."""
+    return np.array([t[0] for t in m.inputs.trip])
 
 
 def _folder(tmp_path, logs: dict, first: str):
@@ -103,7 +112,7 @@ def test_wind_of_each_file_as_read_alone(tmp_path, first):
     d = _folder(tmp_path, logs, first)
     m = load_measured([d])
     assert m.counts["usable"] == 4500 and not m.counts["excluded_nan_wind_mps"]
-    wind = pd.Series(m.inputs.wind).groupby(m.inputs.trip).agg(["min", "max"])
+    wind = pd.Series(m.inputs.wind).groupby(_file_of(m)).agg(["min", "max"])
     assert wind.loc["C"].tolist() == [0.0, 0.0]
     np.testing.assert_allclose(wind.loc["B"].tolist(), [-2.0, -2.0], rtol=0, atol=1e-12)
     _each_file_as_alone(d, m)
@@ -125,7 +134,7 @@ def test_air_density_of_each_file_as_read_alone(tmp_path, first):
     d = _folder(tmp_path, logs, first)
     m = load_measured([d])
     assert m.counts["usable"] == 4500 and not m.counts["excluded_nan_air_density_kgm3"]
-    rho = pd.Series(m.inputs.rho).groupby(m.inputs.trip).agg(["min", "max"])
+    rho = pd.Series(m.inputs.rho).groupby(_file_of(m)).agg(["min", "max"])
     assert rho.loc["A"].tolist() == [1.1, 1.1] and rho.loc["C"].tolist() == [RHO_DEFAULT, RHO_DEFAULT]
     # 101.325 kPa / (287.05 J/(kg·K) · 298.15 K) = 1.184 kg/m³
     np.testing.assert_allclose(rho.loc["B", "min"], 1.184, atol=1e-3)
@@ -150,13 +159,13 @@ def test_grade_of_each_file_from_its_own_column(tmp_path, first):
             "none": _drive("D", seed=4)}
     d = _folder(tmp_path, logs, first)
     m = load_measured([d])
-    theta = pd.Series(m.inputs.theta).groupby(m.inputs.trip)
+    theta = pd.Series(m.inputs.theta).groupby(_file_of(m))
     np.testing.assert_allclose(theta.min()[["A", "B"]], [0.02, np.arctan(0.03)], rtol=1e-12)
     np.testing.assert_allclose(theta.median()["C"], np.arctan(0.04), rtol=0.05)  # climbs 4 %
     assert theta.max()["D"] == 0.0 == theta.min()["D"]
     _each_file_as_alone(d, m)
     ref = _streamed_as_in_memory(d, m)
-    assert ref["grade_filled_rows"] == 3000 and ref["grade_flat_trips"] == ["D"]
+    assert ref["grade_filled_rows"] == 3000 and ref["grade_flat_trips"] == ["D1", "D2"]
     assert ref["grade_source"] == ("grade_rad column for 1500 rows; grade_pct column for 1500 rows; "
                                    "elevation_m over distance: 1 m grid, 100 m moving average, gradient "
                                    "for 1500 rows")
@@ -177,7 +186,7 @@ def test_measured_power_of_each_file_from_its_own_columns(tmp_path, first):
     logs = {"power": _drive("A", seed=1), "motor": motor.drop(columns="power_w")}
     d = _folder(tmp_path, logs, first)
     m = load_measured([d])
-    rows = m.inputs.trip == "B"
+    rows = _file_of(m) == "B"
     assert m.counts["usable"] == 3000
     np.testing.assert_allclose(m.power_w[rows], b["power_w"], rtol=1e-12)
     _each_file_as_alone(d, m)
