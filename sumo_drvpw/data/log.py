@@ -15,14 +15,13 @@ import pandas as pd
 
 from sumo_drvpw.data.paths import expand_paths as _expand_paths, parquet_frame
 from sumo_drvpw.data.resolution import accel_counts, accel_derivation, accel_window
-from sumo_drvpw.model.air import air_density
-from sumo_drvpw.model.constants import P_STD_KPA, RHO_DEFAULT
+from sumo_drvpw.data.conditions import derive_conditions
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.data.trips import (derivative, grade_from_elevation,  # noqa: F401  (re-exported)
                                    per_trip_rolling_mean as _per_trip_rolling_mean,
                                    run_median_step, trip_array as _trip_array, trip_codes_of,
-                                   trip_starts as _trip_starts)
+                                   trip_starts as _trip_starts, trips_without as _trips_without)
 from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_header,  # noqa: F401
                                        check_distinct_trips, check_speed_unit, check_time_step,
                                        exclusions, implied_acceleration)
@@ -354,7 +353,9 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
     grade = ``grade_rad``, else atan(``grade_pct``/100), else from ``elevation_m``
     smoothed over distance, else 0; wind = ``wind_mps``, else speed − ``airspeed_mps``,
     else 0; air density = ``air_density_kgm3``, else p/(R·T) from ``ambient_c`` and
-    ``pressure_kpa`` (101.325 kPa if absent), else 1.2041 kg/m³.
+    ``pressure_kpa`` (101.325 kPa if absent), else 1.2041 kg/m³. Each trip takes the first
+    source that holds a value in it (:mod:`sumo_drvpw.data.conditions`), so a file of a
+    folder of different loggers is read as it is alone.
     """
     opt = check_options(options or ReadOptions())
     files = expand_paths(paths)
@@ -422,13 +423,6 @@ def _prepare(df: pd.DataFrame, p: Path, default_trip: str,
     return df, clipped
 
 
-def _trips_without(col: pd.Series, trip_codes: np.ndarray) -> np.ndarray:
-    """Rows of the trips in which the column holds no value at all (in a folder of logs, the
-    trips of a file without it), as a bool mask."""
-    has = np.bincount(trip_codes, weights=col.notna().to_numpy(float)) > 0
-    return ~has[trip_codes]
-
-
 def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOptions,
             clipped: int = 0) -> DriveLog:
     """Derived inputs, exclusion mask and counts of validated, concatenated tables."""
@@ -485,71 +479,7 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
         counts.update(accel_counts(accel_derivation(opt, [], [], len(df), 0)))
         deriv = (seg, np.full(int(seg[-1]) + 1, opt.accel_window_s))
 
-    def elevation_grade():
-        step = v * np.r_[0.0, np.diff(t)]
-        step[start] = 0.0
-        dist = pd.Series(step).groupby(trip_codes, sort=False).cumsum().to_numpy()
-        return grade_from_elevation(df["elevation_m"].to_numpy(float), dist, trip_codes, opt.grade_window_m)
-
-    has_z = "elevation_m" in df and np.isfinite(df["elevation_m"].to_numpy(float)).any()
-    lacking = None
-    if "grade_rad" in df:
-        counts["grade_source"] = "grade_rad column"
-        lacking = _trips_without(df["grade_rad"], trip_codes)
-    elif "grade_pct" in df:
-        df["grade_rad"] = np.arctan(df["grade_pct"].to_numpy(float) / 100.0)
-        counts["grade_source"] = "grade_pct column"
-        lacking = _trips_without(df["grade_pct"], trip_codes)
-    elif has_z:
-        z = df["elevation_m"].to_numpy(float)
-        df["grade_rad"] = elevation_grade()
-        counts["grade_source"] = (f"elevation_m over distance: 1 m grid, {opt.grade_window_m:g} m "
-                                  "moving average, gradient")
-        # a trip without elevation is read flat, a stretch without it (no GPS fix) is bridged
-        # or held: both said (no grade energy there)
-        n_fin = pd.Series(np.isfinite(z)).groupby(trip_codes).transform("sum").to_numpy()
-        flat = df["trip_id"].to_numpy()[start & (n_fin < 2)]
-        if len(flat):
-            counts["grade_flat_trips"] = [str(x) for x in flat]
-        counts["elevation_missing_samples"] = int((~np.isfinite(z) & (n_fin >= 2)).sum())
-    else:
-        df["grade_rad"] = 0.0
-        counts["grade_source"] = ("none (elevation_m holds no value: flat road assumed)" if "elevation_m" in df
-                                  else "none (flat road assumed)")
-        counts["grade_flat_trips"] = [str(x) for x in df["trip_id"].to_numpy()[start]]
-    if lacking is not None and lacking.any():  # a file of a folder without the column: its
-        # trips' grade from their elevation, else flat, as the file read alone (NaN: left out)
-        fill = np.nan_to_num(elevation_grade()) if has_z else np.zeros(len(df))
-        df["grade_rad"] = np.where(lacking, fill, df["grade_rad"].to_numpy(float))
-        counts["grade_filled_rows"] = int(lacking.sum())
-        zs = df["elevation_m"].to_numpy(float) if has_z else np.full(len(df), np.nan)
-        no_z = np.bincount(trip_codes, weights=np.isfinite(zs).astype(float)) < 2
-        flat = df["trip_id"].to_numpy()[start & lacking & no_z[trip_codes]]
-        if len(flat):
-            counts["grade_flat_trips"] = [str(x) for x in flat]
-
-    if "wind_mps" in df:
-        counts["wind_source"] = "wind_mps column"
-    elif "airspeed_mps" in df:
-        df["wind_mps"] = v - df["airspeed_mps"].to_numpy(float)
-        counts["wind_source"] = "speed − airspeed_mps"
-    else:
-        df["wind_mps"] = 0.0
-        counts["wind_source"] = "none (still air assumed)"
-
-    if "air_density_kgm3" in df:
-        counts["air_density_source"] = "air_density_kgm3 column"
-    elif "ambient_c" in df:
-        p_kpa = df["pressure_kpa"].to_numpy(float) if "pressure_kpa" in df else np.full(len(df), P_STD_KPA)
-        p_kpa = np.where(np.isnan(p_kpa), P_STD_KPA, p_kpa)  # missing pressure: standard
-        rho = air_density(df["ambient_c"].to_numpy(float), p_kpa)
-        missing = np.isnan(rho)  # no temperature logged in that sample: the default density
-        df["air_density_kgm3"] = np.where(missing, RHO_DEFAULT, rho)
-        counts["air_density_source"] = "ideal gas from ambient_c and pressure_kpa"
-        counts["air_density_default_samples"] = int(missing.sum())
-    else:
-        df["air_density_kgm3"] = RHO_DEFAULT
-        counts["air_density_source"] = f"default {RHO_DEFAULT} kg/m³"
+    derive_conditions(df, t, v, trip_codes, start, opt, counts)
 
     if "mass_kg" not in df and vehicle is not None:
         df["mass_kg"] = float(vehicle.mass_kg)
@@ -558,9 +488,11 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
         if lacking.any():
             df["mass_kg"] = np.where(lacking, float(vehicle.mass_kg), df["mass_kg"].to_numpy(float))
             counts["mass_from_vehicle_rows"] = int(lacking.sum())
-    for c in FLAGS:
+    for c in FLAGS:  # a file of a folder without the flag (NaN there): not set, as read alone
         if c not in df:
             df[c] = False
+        elif not pd.api.types.is_bool_dtype(df[c]):
+            df[c] = df[c].astype("boolean").fillna(False).astype(bool)
 
     excluded = np.zeros(len(df), bool)
     for c in FLAGS:

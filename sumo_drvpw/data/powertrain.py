@@ -107,6 +107,11 @@ def battery_power(voltage_v, current_a, current_positive: str = "discharge"):
 POWER_SPLIT_COLUMNS = ("ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm", "mg2_speed_rpm", "mg2_torque_nm")
 
 
+#: the measured driving power's sources in the spec's order: the columns a trip must hold
+POWER_SOURCES = (("power_w",), POWER_SPLIT_COLUMNS, ("motor_torque_nm", "motor_speed_rpm"),
+                 ("motor_torque_nm",), ("battery_voltage_v", "battery_current_a"))
+
+
 def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np.ndarray, str]:
     """The measured driving power of a :class:`~sumo_drvpw.data.log.DriveLog` [W] and its source.
 
@@ -114,15 +119,51 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
     (:meth:`~sumo_drvpw.data.log.DriveLog.derivative`: each trip's window, never across a
     logging gap; ``window_s`` [s]: one width instead).
 
-    Exactly one source is used, in the spec's order: ``power_w``; the power-split signals
-    (needs a ``power_split`` vehicle); motor torque and speed (speed from vehicle speed,
-    gear ratio and wheel radius when ``motor_speed_rpm`` is absent); battery V·I.
+    Each trip uses exactly one source, the first in the spec's order that holds a value in
+    it: ``power_w``; the power-split signals (needs a ``power_split`` vehicle); motor torque
+    and speed (speed from vehicle speed, gear ratio and wheel radius when ``motor_speed_rpm``
+    is absent); battery V·I. So a file of a folder is read as it is alone; a trip that holds
+    none takes the first the table has (its power NaN: left out). The rows of each source go
+    to ``log.counts["power_rows"]``; the text says each (:func:`sumo_drvpw.data.conditions.source_counts`).
     """
+    from sumo_drvpw.data.conditions import said
+    from sumo_drvpw.data.trips import trip_codes_of
+
     df = log.df
     where = log.describe()
-    if "power_w" in df:
+    present = [all(c in df for c in cols) for cols in POWER_SOURCES]
+    if not any(present):
+        raise UserError(f"{where}: no measured power: the log needs 'power_w', or the power-split columns "
+                        f"({', '.join(POWER_SPLIT_COLUMNS)}), or 'motor_torque_nm', or "
+                        "'battery_voltage_v' and 'battery_current_a'")
+    codes = trip_codes_of(df["trip_id"])
+    n = int(codes.max()) + 1
+    pick = np.full(n, -1)
+    for i in range(len(POWER_SOURCES) - 1, -1, -1):
+        if present[i]:
+            held = np.ones(n, bool)
+            for c in POWER_SOURCES[i]:
+                held &= np.bincount(codes, weights=np.isfinite(df[c].to_numpy(float)), minlength=n) > 0
+            pick[held] = i
+    pick[pick < 0] = present.index(True)
+    row = pick[codes]
+    p, rows = np.full(len(df), np.nan), {}
+    for i in np.unique(pick):
+        q, text = _power_of(int(i), log, vehicle, window_s)
+        sel = row == i
+        p = q if len(rows) == 0 and sel.all() else np.where(sel, q, p)
+        rows[text] = int(sel.sum())
+    log.counts["power_rows"] = rows
+    return p, said(rows)
+
+
+def _power_of(kind: int, log, vehicle, window_s) -> tuple[np.ndarray, str]:
+    """The power of every row from source ``kind`` (:data:`POWER_SOURCES`) and its text."""
+    df = log.df
+    where = log.describe()
+    if kind == 0:
         return df["power_w"].to_numpy(float), "direct (power_w)"
-    if all(c in df for c in POWER_SPLIT_COLUMNS):
+    if kind == 1:
         if vehicle is None or vehicle.powertrain_type != "power_split":
             raise UserError(f"{where}: the log has power-split signals ({', '.join(POWER_SPLIT_COLUMNS)}); "
                             "give a vehicle with a power_split powertrain (e.g. prius3, prius2)")
@@ -143,8 +184,8 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
             mg2_reduction=kr, counter_ratio=kc, final_drive=kf,
             inertia=pt.get("inertia_kgm2", {}))
         return out["power_w"], "power-split (MG1, MG2, engine; Eq. 5-12)"
-    if "motor_torque_nm" in df:
-        if "motor_speed_rpm" in df:
+    if kind in (2, 3):
+        if kind == 2:
             w = df["motor_speed_rpm"].to_numpy(float) * RPM
             how = "motor torque × motor speed"
         else:
@@ -155,14 +196,10 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
                  * vehicle.need("powertrain", "gear_ratio"))
             how = "motor torque × (speed / wheel radius × gear ratio)"
         return single_motor_power(df["motor_torque_nm"].to_numpy(float), w), f"single motor ({how})"
-    if "battery_voltage_v" in df and "battery_current_a" in df:
-        conv = (vehicle.battery.get("current_positive", "discharge") if vehicle is not None
-                else "discharge")
-        return (battery_power(df["battery_voltage_v"], df["battery_current_a"], conv),
-                f"battery V·I (current positive = {conv})")
-    raise UserError(f"{where}: no measured power: the log needs 'power_w', or the power-split columns "
-                    f"({', '.join(POWER_SPLIT_COLUMNS)}), or 'motor_torque_nm', or "
-                    "'battery_voltage_v' and 'battery_current_a'")
+    conv = (vehicle.battery.get("current_positive", "discharge") if vehicle is not None
+            else "discharge")
+    return (battery_power(df["battery_voltage_v"], df["battery_current_a"], conv),
+            f"battery V·I (current positive = {conv})")
 
 
 def measured_battery_power(log, vehicle=None) -> tuple[np.ndarray, str]:

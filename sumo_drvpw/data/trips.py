@@ -191,3 +191,10 @@ def grade_from_elevation(z: np.ndarray, dist: np.ndarray, trip_codes: np.ndarray
         slope = np.gradient(zg, grid) if len(grid) > 1 else np.zeros_like(grid)
         theta[a:b] = np.arctan(np.interp(s, grid, slope))
     return theta
+
+
+def trips_without(col: pd.Series, trip_codes: np.ndarray) -> np.ndarray:
+    """Rows of the trips in which the column holds no value at all (in a folder of logs, the
+    trips of a file without it), as a bool mask."""
+    has = np.bincount(trip_codes, weights=col.notna().to_numpy(float)) > 0
+    return ~has[trip_codes]

@@ -95,7 +95,10 @@ def _add_counts(a: dict, b: dict) -> dict:
     hold whole trips), texts are kept (first seen; a grade source other than none wins:
     one batch without elevation does not make the logs carry none), except the
     acceleration's source: said of both from their mergeable ``accel_derivation``, as the
-    reader says it of both read together (rows from the column, rows derived, the windows).
+    reader says it of both read together (rows from the column, rows derived, the windows),
+    and the grade's, wind's, air density's and measured power's: said from their rows per
+    source (``grade_rows``, ``wind_rows``, ``air_density_rows``, ``power_rows``;
+    :mod:`sumo_drvpw.data.conditions`).
     Of the reader's decimal counts, the seconds of logging gaps add (each batch's rounded to
     ms, as the reader rounds its sum) and the widest acceleration window is kept (the
     reader's max); other decimals (the options' limits) are kept as first seen."""
@@ -123,6 +126,14 @@ def _add_counts(a: dict, b: dict) -> dict:
         for k in ("accel_window_s", "accel_derived_rows"):
             out.pop(k, None)
         out.update(accel_counts(merge_accel_derivation(a["accel_derivation"], b["accel_derivation"])))
+    from sumo_drvpw.data.conditions import ROWS_OF, merge_rows, source_counts
+
+    if any(k in a and k in b for k in ROWS_OF):  # grade, wind, density: rows per source add
+        for k in ROWS_OF:
+            if k in a and k in b:
+                out[k] = merge_rows(a[k], b[k], k)
+        out.pop("grade_filled_rows", None)
+        out.update(source_counts(out))
     return out
 
 
@@ -250,7 +261,7 @@ class CalibrationStats:
         c = m.counts
         c["excluded_nonfinite_power"] = int((~np.isfinite(y)).sum())
         self.counts = _add_counts(self.counts, c)
-        self.source = self.source or m.source
+        self.source = self.counts.get("power_source") or self.source or m.source  # of all batches
         self.vehicle = self.vehicle or m.vehicle
         for f in m.log.files:
             if f not in self.files:
@@ -303,6 +314,7 @@ class CalibrationStats:
                                self.rho_sum + o.rho_sum,
                                frozenset(list(self.speeds | o.speeds)[:2]), self.moving_mps,
                                _merge_ranges(self.ranges, o.ranges), {**self.trip_files, **o.trip_files})
+        out.source = out.counts.get("power_source") or out.source  # of both
         return out
 
     def factor(self, trips=None) -> tuple[np.ndarray, Moments]:

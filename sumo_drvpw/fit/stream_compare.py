@@ -201,7 +201,7 @@ class CompareStats:
 
         self.rows += len(m.power_w)
         self.counts = _add_counts(self.counts, m.counts)
-        self.source = self.source or m.source
+        self.source = self.counts.get("power_source") or self.source or m.source  # of all batches
         self.vehicle = self.vehicle or m.vehicle
         self.files += [f for f in m.log.files if f not in self.files]
         if self.target == "battery":
@@ -346,7 +346,7 @@ class CompareStats:
         self.n += o.n
         self.rows += o.rows
         self.counts = _add_counts(self.counts, o.counts)
-        self.source = self.source or o.source
+        self.source = self.counts.get("power_source") or self.source or o.source
         self.vehicle = self.vehicle or o.vehicle
         self.files += [f for f in o.files if f not in self.files]
         self.meas = self.meas.merge(o.meas)

@@ -315,7 +315,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
         binary = _binary(prep, sample_idx, sample_rows)
         res = _trace(prep, equation, declared, opt, lags, dt_med, elev, (acc_col, dt_acc), binary, roles, say)
         tr = res["tr"]
-        measured = _Measured(_Log(files, read_options), source)
+        measured = _Measured(_Log(files, read_options), reader_counts.get("power_source") or source)  # of all
         out = assemble(tr=tr, measured=measured, equation=equation, declared=declared, calibrated=calibrated,
                        opt=opt, findings=res["findings"], rounds=res["rounds"], ev0=res["ev0"],
                        base_coefs=res["base_coefs"], plot={"findings": []}, n_rows=n_rows,
