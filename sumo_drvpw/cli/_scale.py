@@ -49,7 +49,8 @@ def check_engine_arguments(args) -> None:
             raise UserError("--engine dask needs Dask: pip install 'sumo-drvpw[dask]'") from None
 
 
-def _run(args, make, vehicle):
+def _run(args, make, vehicle, rows: int | None = None):
+    from sumo_drvpw.data.stream import BATCH_ROWS
     from sumo_drvpw.fit.engine import run
 
     from sumo_drvpw.cli import read_options
@@ -59,7 +60,7 @@ def _run(args, make, vehicle):
     eqs = getattr(args, "equation", None)
     eqs = [eqs] if isinstance(eqs, str) else (eqs or ())
     return run(args.logs, make, vehicle, options=read_options(args, eqs), engine=args.engine,
-               scheduler=args.scheduler, workers=args.workers)
+               scheduler=args.scheduler, workers=args.workers, rows=rows or BATCH_ROWS)
 
 
 def _context(st, vehicle, n_used: int) -> dict:
@@ -245,7 +246,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     from sumo_drvpw.cli.calibrate import MOVING_MPS, declare_measurement
     from sumo_drvpw.data.measured import resolve_equations
     from sumo_drvpw.fit.chain_checks import check_chain
-    from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, calibrate_chain_streamed as fit_chain
+    from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, batch_rows, calibrate_chain_streamed as fit_chain
     from sumo_drvpw.model.equations import save_equation
     from sumo_drvpw.model.vehicles import load_vehicle
 
@@ -261,9 +262,10 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     cut = getattr(getattr(eq, "chain", None), "fuel_cut_below_w", None)  # declared: kept
     spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut)
     infos = []
+    rows = batch_rows(args.logs)  # a wide log in fewer rows: the batch's reading is the peak
 
     def reduce(make):
-        st, info = _run(args, make, veh)
+        st, info = _run(args, make, veh, rows)
         infos.append(info)
         return st
 

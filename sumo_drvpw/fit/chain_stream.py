@@ -15,7 +15,7 @@ chain's prediction is the design times the coefficients, so Σw·e² is the fit'
 Σw·P̂ the coefficients times Σw·X. The same numbers as the in-memory fit to rounding
 (tests/test_chain_stream.py: 1e-9 relative).
 
-Memory: one batch, the factors (a few (k+1)² matrices per grid value) and the distinct
+Memory: one batch (of :func:`batch_rows`: fewer rows for a wide log), the factors (a few (k+1)² matrices per grid value) and the distinct
 values of the quantile bins (braking powers within 1/4096 of an order statistic's value).
 ``--efficiency power|speed-power`` is not streamed (its knots are quantiles of the
 driving power over speed classes): the command fits it in memory.
@@ -37,6 +37,13 @@ from sumo_drvpw.fit.stream import _add_counts
 
 #: the braking powers' bins: their float64 bits shifted right by this (12 mantissa bits kept)
 KEY_SHIFT = 40
+#: Values (rows × columns) a batch of the chain's passes holds at most: the peak is the
+#: reader's working set of one batch of every column (the Arrow batch, its frame, the
+#: validated copy, the derived inputs, the next batch read meanwhile: about 40 bytes per
+#: value), not the chain's factors (a few MB), so a wide log is read in fewer rows
+BATCH_VALUES = 2_000_000
+#: ... but at least this many rows per batch (the per-batch overhead)
+MIN_BATCH_ROWS = 10_000
 
 
 @dataclass
@@ -55,6 +62,27 @@ class ChainSpec:
     moving_mps: float = 0.5
     fuel: str = "gasoline"
     fuel_cut_below_w: float | None = None
+
+
+def batch_rows(paths) -> int:
+    """Rows per batch of the chain's passes over the logs ``paths``: :data:`BATCH_VALUES`
+    over the widest file's column count, within [:data:`MIN_BATCH_ROWS`, the reader's
+    ``BATCH_ROWS``]. A header that cannot be read counts as narrow (its reading says why)."""
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    from sumo_drvpw.data.log import expand_paths
+    from sumo_drvpw.data.stream import BATCH_ROWS
+
+    width = 1
+    for p in expand_paths(paths):
+        try:
+            n = (len(pq.read_schema(p).names) if p.suffix.lower() == ".parquet"
+                 else len(pd.read_csv(p, nrows=0).columns))
+        except Exception:  # noqa: BLE001 - refused, with the reason, when read
+            continue
+        width = max(width, n)
+    return int(min(BATCH_ROWS, max(MIN_BATCH_ROWS, BATCH_VALUES // width)))
 
 
 def quantile_of_order(order, n: int, q: float) -> float:
