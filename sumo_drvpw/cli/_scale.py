@@ -49,8 +49,7 @@ def check_engine_arguments(args) -> None:
             raise UserError("--engine dask needs Dask: pip install 'sumo-drvpw[dask]'") from None
 
 
-def _run(args, make, vehicle, rows: int | None = None):
-    from sumo_drvpw.data.stream import BATCH_ROWS
+def _run(args, make, vehicle):
     from sumo_drvpw.fit.engine import run
 
     from sumo_drvpw.cli import read_options
@@ -60,7 +59,7 @@ def _run(args, make, vehicle, rows: int | None = None):
     eqs = getattr(args, "equation", None)
     eqs = [eqs] if isinstance(eqs, str) else (eqs or ())
     return run(args.logs, make, vehicle, options=read_options(args, eqs), engine=args.engine,
-               scheduler=args.scheduler, workers=args.workers, rows=rows or BATCH_ROWS)
+               scheduler=args.scheduler, workers=args.workers)
 
 
 def _context(st, vehicle, n_used: int) -> dict:
@@ -260,12 +259,12 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
         cands = tuple(resolve_candidates(args.candidates))
     fuel = veh.powertrain.get("fuel", "gasoline") if veh is not None else "gasoline"
     cut = getattr(getattr(eq, "chain", None), "fuel_cut_below_w", None)  # declared: kept
-    spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut)
+    # a wide log in fewer rows per batch: the batch's reading is the peak
+    spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut, batch_rows(args.logs))
     infos = []
-    rows = batch_rows(args.logs)  # a wide log in fewer rows: the batch's reading is the peak
 
     def reduce(make):
-        st, info = _run(args, make, veh, rows)
+        st, info = _run(args, make, veh)
         infos.append(info)
         return st
 

@@ -52,7 +52,8 @@ class ChainSpec:
     the road load whose driving power is the chain's input where the log has no measured
     driving power (None: the log's must be used); logged ``loads``; ``hvac`` {column,
     setpoint_c} or None; ``candidates`` of the stepwise road load fitted in the same pass
-    (None: none); the fuel and a declared overrun cut-off of a fuel chain."""
+    (None: none); the fuel and a declared overrun cut-off of a fuel chain; ``batch_rows``:
+    rows per batch at most (:func:`batch_rows`; None: the engine's)."""
 
     target: str
     equation: object = None
@@ -62,6 +63,7 @@ class ChainSpec:
     moving_mps: float = 0.5
     fuel: str = "gasoline"
     fuel_cut_below_w: float | None = None
+    batch_rows: int | None = None
 
 
 def batch_rows(paths) -> int:
@@ -166,6 +168,11 @@ class ChainStats:
 
     def columns(self):
         return None  # every column: the fuel flow, air flow and fuel trims are found by name
+
+    @property
+    def batch_rows(self) -> int | None:
+        """Rows per batch at most (the engine reads no more; None: its own)."""
+        return self.spec.batch_rows
 
     # ----------------------------------------------------------------- one batch
     def add(self, m) -> "ChainStats":
