@@ -170,6 +170,33 @@ def test_streamed_chain_refuses_files_that_differ_in_their_chain_input(chain_log
     assert not out.exists()
 
 
+def test_in_memory_chain_refuses_files_that_differ_in_their_chain_input(chain_logs, tmp_path, capsys):
+    """The same folder as above with ``--engine memory``: the table read whole has
+    ``power_w`` empty on the CSV's rows, which dropped out of the fit silently (the chain
+    fitted on the Parquet file alone); refused as streamed, one line naming the file
+    without it, nothing written."""
+    import pandas as pd
+
+    folder, eq, _ = chain_logs["battery"]
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    a = pd.read_parquet(folder / "a.parquet")
+    a["power_w"] = 0.9 * a["battery_voltage_v"] * a["battery_current_a"]
+    a.to_parquet(mixed / "a.parquet")
+    (mixed / "b.csv").write_bytes((folder / "b.csv").read_bytes())
+    for extra in ([], ["--efficiency", "power"]):
+        out = tmp_path / "eq.toml"
+        rc = cli_main(["calibrate", str(mixed), "--target", "battery", "--equation", str(eq), "--out", str(out),
+                       "--engine", "memory", *extra])
+        err = capsys.readouterr().err
+        assert rc == 2, err
+        line = [ln for ln in err.splitlines() if ln.startswith("sumo-drvpw calibrate: error: ")]
+        assert len(line) == 1 and "Traceback" not in err
+        assert f"{mixed / 'b.csv'}: no measured driving power" in line[0]
+        assert "direct (power_w)" in line[0] and str(mixed / "a.parquet") in line[0]
+        assert not out.exists()
+
+
 def test_streamed_battery_only_log_without_equation_is_refused_as_in_memory(chain_logs, tmp_path, capsys):
     """A log with battery V·I but no driving power, a load column it has, no --equation:
     both engines refuse it for the missing road load (not for the load column), nothing written."""
