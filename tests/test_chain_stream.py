@@ -22,6 +22,7 @@ import corpus
 import test_stream_chain as planted
 import sumo_drvpw.fit.engine as engine_mod
 from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.fit import chain_stream
 from sumo_drvpw.fit.chain_stream import _keys, quantile_of_order
 
 RTOL = 1e-9
@@ -79,7 +80,8 @@ def test_streamed_chain_calibration_equals_in_memory(chain_logs, kind, tmp_path,
     if kind == "battery":  # what was planted (BATTERY_EQ), through the streamed fit
         assert ch["traction_efficiency"] == pytest.approx(0.88, rel=0.03)
         assert ch["loads"]["heater_power_w"] == pytest.approx(1.0, rel=0.1)
-        assert cl.err.count("local engine:") == 4  # the scan, the quantile bins, the limits' factors, the report
+        # the scan (the quantile bins and the limits' factors on the arrays it kept), the report
+        assert cl.err.count("local engine:") == 2
         assert "left out of the fit" in cl.out  # the heater unknown on B4
     else:
         assert ch["engine_off_below_w"] == 4000.0 and ch["engine_on_above_mps"] == pytest.approx(19.0, abs=3.0)
@@ -101,8 +103,13 @@ def test_streamed_chain_on_a_stepwise_road_load_equals_in_memory(tmp_path, monke
     got, cl, said_l = _calibrate(monkeypatch, capsys, log, tmp_path / "local.toml", "local", *extra, rows=3000)
     corpus.assert_close_documents(ref, got, RTOL)
     assert got["terms"] and got["chain"]["provenance"]["chain_input"].startswith("measured driving power")
-    assert cl.err.count("local engine:") == 3  # the scan, the quantile bins, the limits' factors
+    assert cl.err.count("local engine:") == 1  # the scan; the later passes on the arrays it kept
     assert said_l == said_m
+    # nothing kept (logs beyond KEEP_BYTES): the quantile bins and the limits' factors read the logs again
+    monkeypatch.setattr(chain_stream, "KEEP_BYTES", 0)
+    again, cl, said_l = _calibrate(monkeypatch, capsys, log, tmp_path / "again.toml", "local", *extra, rows=3000)
+    assert cl.err.count("local engine:") == 3 and said_l == said_m
+    corpus.assert_close_documents(ref, again, RTOL)
 
 
 def test_streamed_chain_refuses_what_the_in_memory_path_refuses(chain_logs, tmp_path, capsys):

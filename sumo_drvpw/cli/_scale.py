@@ -268,7 +268,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
         infos.append(info)
         return st
 
-    st = reduce(partial(ChainStats, spec))
+    # one process: the scan keeps what the battery chain's later passes read (no re-reading)
+    st = reduce(partial(ChainStats, spec, keep=args.engine == "local"))
     note_counts(st.counts)
     st.check_inputs()
     if hvac and hvac["column"] not in st.seen:

@@ -10,7 +10,8 @@ found exactly, in bounded memory: that pass counts the braking powers per bin of
 leading 24 bits (sign, exponent and 12 bits of the mantissa: bins 1/4096 of their value
 wide), a second keeps the distinct values (with their counts) of the (at most 16) bins
 that hold the order statistics ``np.quantile`` interpolates (:func:`quantile_of_order`),
-and a third factors the design at each limit. R², RMSE and the energy ratio come from sums too: the
+and a third factors the design at each limit (in one process, on the arrays the first pass
+kept, up to :data:`KEEP_BYTES`: the logs are read once). R², RMSE and the energy ratio come from sums too: the
 chain's prediction is the design times the coefficients, so Σw·e² is the fit's RSS and
 Σw·P̂ the coefficients times Σw·X. The same numbers as the in-memory fit to rounding
 (tests/test_chain_stream.py: 1e-9 relative).
@@ -44,6 +45,10 @@ KEY_SHIFT = 40
 BATCH_VALUES = 2_000_000
 #: ... but at least this many rows per batch (the per-batch overhead)
 MIN_BATCH_ROWS = 10_000
+#: A battery chain's scan keeps the arrays its later passes read (driving power, target,
+#: weights, loads, mask: 25 B a row and 8 per load) up to this many bytes, so those passes
+#: need not read the logs again (``keep``; beyond it they do)
+KEEP_BYTES = 128 * 2**20
 
 
 @dataclass
@@ -140,10 +145,15 @@ class ChainStats:
     counts, the checks' sums, the stepwise road load's statistics, the fuel grid's factors,
     the battery's factor without a limit and its braking powers' bin counts), ``collect``
     (the braking powers of the bins ``bins``) or ``fit`` (the battery's factors at the
-    limits ``limits``)."""
+    limits ``limits``). ``keep``: a battery chain's scan keeps each batch's arrays of the
+    later passes in ``kept`` (per Part, per batch; None beyond :data:`KEEP_BYTES`), for
+    :func:`replay` (one process only: a Dask worker's would travel back)."""
 
-    def __init__(self, spec: ChainSpec, phase: str = "scan", limits: tuple = (), bins: tuple = ()):
+    def __init__(self, spec: ChainSpec, phase: str = "scan", limits: tuple = (), bins: tuple = (),
+                 keep: bool = False):
         self.spec, self.phase, self.limits, self.bins = spec, phase, tuple(limits), np.asarray(bins, np.int64)
+        keep = keep and phase == "scan" and spec.target == "battery"
+        self.kept, self.kept_bytes = ([[]] if keep else None), 0
         self.target = spec.target
         self.rows, self.counts, self.files, self.source, self.vehicle = 0, {}, [], None, None
         self.inputs: set = set()       # the chain's input per batch: a measured source, or None
@@ -217,9 +227,19 @@ class ChainStats:
             self._checks(p, y, v, use)
         if self.target == "battery":
             self._battery(p, y, w, sig, use)
+            if self.kept is not None:  # copies: a view would keep the batch's table
+                self._keep([np.array(p, float), np.array(y, float), np.array(w, float),
+                            {c: np.array(x, float) for c, x in sig.items()}, np.array(use, bool)])
         else:
             self._fuel(m, p, y, w, v, sig, use)
         return self
+
+    def _keep(self, arrays) -> None:
+        self.kept_bytes += sum(a.nbytes for a in arrays[:3] + list(arrays[3].values()) + arrays[4:])
+        if self.kept_bytes > KEEP_BYTES:
+            self.kept = None
+        else:
+            self.kept[-1].append(arrays)
 
     def _input_checks(self, m, y, use) -> None:
         """The sums of the in-memory path's checks of the target and the load columns
@@ -306,6 +326,9 @@ class ChainStats:
         from sumo_drvpw.data.measured import merge_sign_sums
 
         self.rows += o.rows
+        self.kept_bytes += o.kept_bytes
+        self.kept = (None if self.kept is None or o.kept is None or self.kept_bytes > KEEP_BYTES
+                     else self.kept + o.kept)
         self.counts = _add_counts(self.counts, o.counts)
         self.files += [f for f in o.files if f not in self.files]
         self.source, self.vehicle = self.source or o.source, self.vehicle or o.vehicle
@@ -480,14 +503,30 @@ class ChainStats:
         return {} if r[0] > r[1] else {"power_range_w": r[:2], "speed_range_mps": r[2:]}
 
 
+def replay(make, kept) -> ChainStats:
+    """A pass over the arrays a scan kept (``ChainStats.kept``) instead of the logs: the
+    same batches added in the same order, per Part, the Parts merged in order, as
+    :func:`sumo_drvpw.fit.engine.run` does locally, so the same numbers."""
+    acc = None
+    for part in kept:
+        st = make()
+        for p, y, w, sig, use in part:
+            st._battery(p, y, w, sig, use)
+        acc = st if acc is None else acc.merge(st)
+    return acc
+
+
 def calibrate_chain_streamed(reduce, st: ChainStats) -> ChainFit:
     """The chain of a scanned :class:`ChainStats` (``st``, checked): for a battery chain
     with enough braking samples, two more passes (``reduce(make)`` runs one over the logs
-    and returns the merged accumulator) find the recuperation limits and factor the design
-    at each; a fuel chain needs none."""
+    and returns the merged accumulator; over the arrays the scan kept, when it kept them)
+    find the recuperation limits and factor the design at each; a fuel chain needs none."""
     from functools import partial
 
     st.check_chain()
+    if st.kept is not None:
+        reduce = partial(replay, kept=st.kept)
+    st.kept = None
     limits = []
     if st.target == "battery":
         _, bins = st.brake_bins()
