@@ -307,7 +307,9 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
             from sumo_drvpw.fit.stream_compare import CompareStats
             from sumo_drvpw.report.comparison import write_comparison_report
 
-            cs = reduce(partial(CompareStats, [eq], None, target=args.target))
+            from sumo_drvpw.fit.chain_stream import bounded
+
+            cs = reduce(partial(bounded, partial(CompareStats, [eq], None, target=args.target), spec.batch_rows))
             ctx = _context(cs, veh, cs.n)
             ctx["calibration"] = {"equation": eq.name, "chain": fit.parameters, "r2": fit.r2,
                                   "n": fit.n, "road_load": road}

@@ -503,6 +503,14 @@ class ChainStats:
         return {} if r[0] > r[1] else {"power_range_w": r[:2], "speed_range_mps": r[2:]}
 
 
+def bounded(make, rows: int | None):
+    """``make()`` read in batches of at most ``rows`` (its ``batch_rows``): e.g. the report's
+    comparison of a chain calibration, in the chain's batches (picklable with ``partial``)."""
+    st = make()
+    st.batch_rows = rows
+    return st
+
+
 def replay(make, kept) -> ChainStats:
     """A pass over the arrays a scan kept (``ChainStats.kept``) instead of the logs: the
     same batches added in the same order, per Part, the Parts merged in order, as
