@@ -22,6 +22,7 @@ import corpus
 import test_stream_chain as planted
 import sumo_drvpw.fit.engine as engine_mod
 from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.fit import chain_stream
 from sumo_drvpw.fit.chain_stream import _keys, quantile_of_order
 
 RTOL = 1e-9
@@ -79,7 +80,8 @@ def test_streamed_chain_calibration_equals_in_memory(chain_logs, kind, tmp_path,
     if kind == "battery":  # what was planted (BATTERY_EQ), through the streamed fit
         assert ch["traction_efficiency"] == pytest.approx(0.88, rel=0.03)
         assert ch["loads"]["heater_power_w"] == pytest.approx(1.0, rel=0.1)
-        assert cl.err.count("local engine:") == 4  # the scan, the quantile bins, the limits' factors, the report
+        # the scan (the quantile bins and the limits' factors on the arrays it kept), the report
+        assert cl.err.count("local engine:") == 2
         assert "left out of the fit" in cl.out  # the heater unknown on B4
     else:
         assert ch["engine_off_below_w"] == 4000.0 and ch["engine_on_above_mps"] == pytest.approx(19.0, abs=3.0)
@@ -101,8 +103,13 @@ def test_streamed_chain_on_a_stepwise_road_load_equals_in_memory(tmp_path, monke
     got, cl, said_l = _calibrate(monkeypatch, capsys, log, tmp_path / "local.toml", "local", *extra, rows=3000)
     corpus.assert_close_documents(ref, got, RTOL)
     assert got["terms"] and got["chain"]["provenance"]["chain_input"].startswith("measured driving power")
-    assert cl.err.count("local engine:") == 3  # the scan, the quantile bins, the limits' factors
+    assert cl.err.count("local engine:") == 1  # the scan; the later passes on the arrays it kept
     assert said_l == said_m
+    # nothing kept (logs beyond KEEP_BYTES): the quantile bins and the limits' factors read the logs again
+    monkeypatch.setattr(chain_stream, "KEEP_BYTES", 0)
+    again, cl, said_l = _calibrate(monkeypatch, capsys, log, tmp_path / "again.toml", "local", *extra, rows=3000)
+    assert cl.err.count("local engine:") == 3 and said_l == said_m
+    corpus.assert_close_documents(ref, again, RTOL)
 
 
 def test_streamed_chain_refuses_what_the_in_memory_path_refuses(chain_logs, tmp_path, capsys):
@@ -168,6 +175,33 @@ def test_streamed_chain_refuses_files_that_differ_in_their_chain_input(chain_log
     err = capsys.readouterr().err
     assert "2 files: some files have a measured driving power and some not (direct (power_w), none)" in err
     assert not out.exists()
+
+
+def test_in_memory_chain_refuses_files_that_differ_in_their_chain_input(chain_logs, tmp_path, capsys):
+    """The same folder as above with ``--engine memory``: the table read whole has
+    ``power_w`` empty on the CSV's rows, which dropped out of the fit silently (the chain
+    fitted on the Parquet file alone); refused as streamed, one line naming the file
+    without it, nothing written."""
+    import pandas as pd
+
+    folder, eq, _ = chain_logs["battery"]
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    a = pd.read_parquet(folder / "a.parquet")
+    a["power_w"] = 0.9 * a["battery_voltage_v"] * a["battery_current_a"]
+    a.to_parquet(mixed / "a.parquet")
+    (mixed / "b.csv").write_bytes((folder / "b.csv").read_bytes())
+    for extra in ([], ["--efficiency", "power"]):
+        out = tmp_path / "eq.toml"
+        rc = cli_main(["calibrate", str(mixed), "--target", "battery", "--equation", str(eq), "--out", str(out),
+                       "--engine", "memory", *extra])
+        err = capsys.readouterr().err
+        assert rc == 2, err
+        line = [ln for ln in err.splitlines() if ln.startswith("sumo-drvpw calibrate: error: ")]
+        assert len(line) == 1 and "Traceback" not in err
+        assert f"{mixed / 'b.csv'}: no measured driving power" in line[0]
+        assert "direct (power_w)" in line[0] and str(mixed / "a.parquet") in line[0]
+        assert not out.exists()
 
 
 def test_streamed_battery_only_log_without_equation_is_refused_as_in_memory(chain_logs, tmp_path, capsys):

@@ -245,7 +245,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     from sumo_drvpw.cli.calibrate import MOVING_MPS, declare_measurement
     from sumo_drvpw.data.measured import resolve_equations
     from sumo_drvpw.fit.chain_checks import check_chain
-    from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, calibrate_chain_streamed as fit_chain
+    from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, batch_rows, calibrate_chain_streamed as fit_chain
     from sumo_drvpw.model.equations import save_equation
     from sumo_drvpw.model.vehicles import load_vehicle
 
@@ -259,7 +259,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
         cands = tuple(resolve_candidates(args.candidates))
     fuel = veh.powertrain.get("fuel", "gasoline") if veh is not None else "gasoline"
     cut = getattr(getattr(eq, "chain", None), "fuel_cut_below_w", None)  # declared: kept
-    spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut)
+    # a wide log in fewer rows per batch: the batch's reading is the peak
+    spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut, batch_rows(args.logs))
     infos = []
 
     def reduce(make):
@@ -267,7 +268,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
         infos.append(info)
         return st
 
-    st = reduce(partial(ChainStats, spec))
+    # one process: the scan keeps what the battery chain's later passes read (no re-reading)
+    st = reduce(partial(ChainStats, spec, keep=args.engine == "local"))
     note_counts(st.counts)
     st.check_inputs()
     if hvac and hvac["column"] not in st.seen:
@@ -305,7 +307,9 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
             from sumo_drvpw.fit.stream_compare import CompareStats
             from sumo_drvpw.report.comparison import write_comparison_report
 
-            cs = reduce(partial(CompareStats, [eq], None, target=args.target))
+            from sumo_drvpw.fit.chain_stream import bounded
+
+            cs = reduce(partial(bounded, partial(CompareStats, [eq], None, target=args.target), spec.batch_rows))
             ctx = _context(cs, veh, cs.n)
             ctx["calibration"] = {"equation": eq.name, "chain": fit.parameters, "r2": fit.r2,
                                   "n": fit.n, "road_load": road}

@@ -292,7 +292,7 @@ def main_chain(args) -> int:
     from sumo_drvpw.data.measured import keep_arrays, load_measured_pair, resolve_equations
     from sumo_drvpw.fileio import check_output_path
     from sumo_drvpw.fit.chain import calibrate_on
-    from sumo_drvpw.fit.chain_checks import check_load_columns
+    from sumo_drvpw.fit.chain_checks import check_load_columns, check_one_driving_power
     from sumo_drvpw.fit.compare import compare
     from sumo_drvpw.model.equations import save_equation
 
@@ -333,6 +333,7 @@ def main_chain(args) -> int:
     if hvac and hvac["column"] not in m.inputs.signals:
         raise UserError(f"--hvac {args.hvac}: {m.log.describe()} has no column '{hvac['column']}' "
                         f"(extra columns: {', '.join(sorted(m.inputs.signals)) or 'none'})")
+    check_one_driving_power(m.log.files)  # else a file's rows without it drop out silently
     if args.equation:
         eq = resolve_equations([args.equation], m.vehicle)[0]
         road = f"road-load equation {eq.name} ({eq.path or 'built in'})"

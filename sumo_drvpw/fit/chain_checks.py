@@ -242,3 +242,48 @@ def check_load_columns(m, loads, use=None) -> None:
         if not np.isfinite(np.asarray(col, float)[use]).any():
             raise UserError(f"{where}: load column '{c}' has no number on the "
                             f"{int(use.sum())} usable samples")
+
+
+def driving_power_of(path) -> str | None:
+    """The measured driving power a drive log file's own columns give, in the order
+    :func:`sumo_drvpw.data.powertrain.measured_power` tries them (None: none, battery V·I at
+    most; also when its header cannot be read)."""
+    from pathlib import Path
+
+    import pandas as pd
+
+    from sumo_drvpw.data.powertrain import POWER_SPLIT_COLUMNS
+
+    p = Path(path)
+    try:
+        if p.suffix.lower() == ".parquet":
+            import pyarrow.parquet as pq
+
+            names = set(pq.read_schema(p).names)
+        else:
+            names = set(pd.read_csv(p, nrows=0).columns)
+    except Exception:  # noqa: BLE001 - read already; nothing to compare then
+        return None
+    if "power_w" in names:
+        return "direct (power_w)"
+    if all(c in names for c in POWER_SPLIT_COLUMNS):
+        return "power-split (MG1, MG2, engine)"
+    return "single motor (motor_torque_nm)" if "motor_torque_nm" in names else None
+
+
+def check_one_driving_power(files) -> None:
+    """Files read into one table that differ in their measured driving power (one logs it,
+    another not, or another kind) are refused, naming the first that differs from the first
+    file: the chain takes one input for all samples, and in one table the rows of a file
+    without the others' columns have no measured driving power and drop out of the fit
+    silently (the streamed fit refuses them too, :meth:`~sumo_drvpw.fit.chain_stream.ChainStats.check_inputs`)."""
+    src = {str(f): driving_power_of(f) for f in files}
+    first = next(iter(src), None)
+    for f, s in src.items():
+        if s != src[first]:
+            a, b = (first, f) if src[first] is not None else (f, first)
+            what = (f"{b}: no measured driving power (power_w, motor torque, the power-split signals) while "
+                    f"{a} has one ({src[a]})" if src[b] is None else
+                    f"{f}: measured driving power {s} while {first} has {src[first]}")
+            raise UserError(f"{what}: the chain takes one input for all files (in one table the rows without "
+                            "it would drop out of the fit); calibrate them apart, or give every file the same columns")

@@ -10,12 +10,13 @@ found exactly, in bounded memory: that pass counts the braking powers per bin of
 leading 24 bits (sign, exponent and 12 bits of the mantissa: bins 1/4096 of their value
 wide), a second keeps the distinct values (with their counts) of the (at most 16) bins
 that hold the order statistics ``np.quantile`` interpolates (:func:`quantile_of_order`),
-and a third factors the design at each limit. R², RMSE and the energy ratio come from sums too: the
+and a third factors the design at each limit (in one process, on the arrays the first pass
+kept, up to :data:`KEEP_BYTES`: the logs are read once). R², RMSE and the energy ratio come from sums too: the
 chain's prediction is the design times the coefficients, so Σw·e² is the fit's RSS and
 Σw·P̂ the coefficients times Σw·X. The same numbers as the in-memory fit to rounding
 (tests/test_chain_stream.py: 1e-9 relative).
 
-Memory: one batch, the factors (a few (k+1)² matrices per grid value) and the distinct
+Memory: one batch (of :func:`batch_rows`: fewer rows for a wide log), the factors (a few (k+1)² matrices per grid value) and the distinct
 values of the quantile bins (braking powers within 1/4096 of an order statistic's value).
 ``--efficiency power|speed-power`` is not streamed (its knots are quantiles of the
 driving power over speed classes): the command fits it in memory.
@@ -37,6 +38,17 @@ from sumo_drvpw.fit.stream import _add_counts
 
 #: the braking powers' bins: their float64 bits shifted right by this (12 mantissa bits kept)
 KEY_SHIFT = 40
+#: Values (rows × columns) a batch of the chain's passes holds at most: the peak is the
+#: reader's working set of one batch of every column (the Arrow batch, its frame, the
+#: validated copy, the derived inputs, the next batch read meanwhile: about 40 bytes per
+#: value), not the chain's factors (a few MB), so a wide log is read in fewer rows
+BATCH_VALUES = 2_000_000
+#: ... but at least this many rows per batch (the per-batch overhead)
+MIN_BATCH_ROWS = 10_000
+#: A battery chain's scan keeps the arrays its later passes read (driving power, target,
+#: weights, loads, mask: 25 B a row and 8 per load) up to this many bytes, so those passes
+#: need not read the logs again (``keep``; beyond it they do)
+KEEP_BYTES = 128 * 2**20
 
 
 @dataclass
@@ -45,7 +57,8 @@ class ChainSpec:
     the road load whose driving power is the chain's input where the log has no measured
     driving power (None: the log's must be used); logged ``loads``; ``hvac`` {column,
     setpoint_c} or None; ``candidates`` of the stepwise road load fitted in the same pass
-    (None: none); the fuel and a declared overrun cut-off of a fuel chain."""
+    (None: none); the fuel and a declared overrun cut-off of a fuel chain; ``batch_rows``:
+    rows per batch at most (:func:`batch_rows`; None: the engine's)."""
 
     target: str
     equation: object = None
@@ -55,6 +68,28 @@ class ChainSpec:
     moving_mps: float = 0.5
     fuel: str = "gasoline"
     fuel_cut_below_w: float | None = None
+    batch_rows: int | None = None
+
+
+def batch_rows(paths) -> int:
+    """Rows per batch of the chain's passes over the logs ``paths``: :data:`BATCH_VALUES`
+    over the widest file's column count, within [:data:`MIN_BATCH_ROWS`, the reader's
+    ``BATCH_ROWS``]. A header that cannot be read counts as narrow (its reading says why)."""
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    from sumo_drvpw.data.log import expand_paths
+    from sumo_drvpw.data.stream import BATCH_ROWS
+
+    width = 1
+    for p in expand_paths(paths):
+        try:
+            n = (len(pq.read_schema(p).names) if p.suffix.lower() == ".parquet"
+                 else len(pd.read_csv(p, nrows=0).columns))
+        except Exception:  # noqa: BLE001 - refused, with the reason, when read
+            continue
+        width = max(width, n)
+    return int(min(BATCH_ROWS, max(MIN_BATCH_ROWS, BATCH_VALUES // width)))
 
 
 def quantile_of_order(order, n: int, q: float) -> float:
@@ -110,10 +145,15 @@ class ChainStats:
     counts, the checks' sums, the stepwise road load's statistics, the fuel grid's factors,
     the battery's factor without a limit and its braking powers' bin counts), ``collect``
     (the braking powers of the bins ``bins``) or ``fit`` (the battery's factors at the
-    limits ``limits``)."""
+    limits ``limits``). ``keep``: a battery chain's scan keeps each batch's arrays of the
+    later passes in ``kept`` (per Part, per batch; None beyond :data:`KEEP_BYTES`), for
+    :func:`replay` (one process only: a Dask worker's would travel back)."""
 
-    def __init__(self, spec: ChainSpec, phase: str = "scan", limits: tuple = (), bins: tuple = ()):
+    def __init__(self, spec: ChainSpec, phase: str = "scan", limits: tuple = (), bins: tuple = (),
+                 keep: bool = False):
         self.spec, self.phase, self.limits, self.bins = spec, phase, tuple(limits), np.asarray(bins, np.int64)
+        keep = keep and phase == "scan" and spec.target == "battery"
+        self.kept, self.kept_bytes = ([[]] if keep else None), 0
         self.target = spec.target
         self.rows, self.counts, self.files, self.source, self.vehicle = 0, {}, [], None, None
         self.inputs: set = set()       # the chain's input per batch: a measured source, or None
@@ -138,6 +178,11 @@ class ChainStats:
 
     def columns(self):
         return None  # every column: the fuel flow, air flow and fuel trims are found by name
+
+    @property
+    def batch_rows(self) -> int | None:
+        """Rows per batch at most (the engine reads no more; None: its own)."""
+        return self.spec.batch_rows
 
     # ----------------------------------------------------------------- one batch
     def add(self, m) -> "ChainStats":
@@ -182,9 +227,19 @@ class ChainStats:
             self._checks(p, y, v, use)
         if self.target == "battery":
             self._battery(p, y, w, sig, use)
+            if self.kept is not None:  # copies: a view would keep the batch's table
+                self._keep([np.array(p, float), np.array(y, float), np.array(w, float),
+                            {c: np.array(x, float) for c, x in sig.items()}, np.array(use, bool)])
         else:
             self._fuel(m, p, y, w, v, sig, use)
         return self
+
+    def _keep(self, arrays) -> None:
+        self.kept_bytes += sum(a.nbytes for a in arrays[:3] + list(arrays[3].values()) + arrays[4:])
+        if self.kept_bytes > KEEP_BYTES:
+            self.kept = None
+        else:
+            self.kept[-1].append(arrays)
 
     def _input_checks(self, m, y, use) -> None:
         """The sums of the in-memory path's checks of the target and the load columns
@@ -271,6 +326,9 @@ class ChainStats:
         from sumo_drvpw.data.measured import merge_sign_sums
 
         self.rows += o.rows
+        self.kept_bytes += o.kept_bytes
+        self.kept = (None if self.kept is None or o.kept is None or self.kept_bytes > KEEP_BYTES
+                     else self.kept + o.kept)
         self.counts = _add_counts(self.counts, o.counts)
         self.files += [f for f in o.files if f not in self.files]
         self.source, self.vehicle = self.source or o.source, self.vehicle or o.vehicle
@@ -445,14 +503,38 @@ class ChainStats:
         return {} if r[0] > r[1] else {"power_range_w": r[:2], "speed_range_mps": r[2:]}
 
 
+def bounded(make, rows: int | None):
+    """``make()`` read in batches of at most ``rows`` (its ``batch_rows``): e.g. the report's
+    comparison of a chain calibration, in the chain's batches (picklable with ``partial``)."""
+    st = make()
+    st.batch_rows = rows
+    return st
+
+
+def replay(make, kept) -> ChainStats:
+    """A pass over the arrays a scan kept (``ChainStats.kept``) instead of the logs: the
+    same batches added in the same order, per Part, the Parts merged in order, as
+    :func:`sumo_drvpw.fit.engine.run` does locally, so the same numbers."""
+    acc = None
+    for part in kept:
+        st = make()
+        for p, y, w, sig, use in part:
+            st._battery(p, y, w, sig, use)
+        acc = st if acc is None else acc.merge(st)
+    return acc
+
+
 def calibrate_chain_streamed(reduce, st: ChainStats) -> ChainFit:
     """The chain of a scanned :class:`ChainStats` (``st``, checked): for a battery chain
     with enough braking samples, two more passes (``reduce(make)`` runs one over the logs
-    and returns the merged accumulator) find the recuperation limits and factor the design
-    at each; a fuel chain needs none."""
+    and returns the merged accumulator; over the arrays the scan kept, when it kept them)
+    find the recuperation limits and factor the design at each; a fuel chain needs none."""
     from functools import partial
 
     st.check_chain()
+    if st.kept is not None:
+        reduce = partial(replay, kept=st.kept)
+    st.kept = None
     limits = []
     if st.target == "battery":
         _, bins = st.brake_bins()

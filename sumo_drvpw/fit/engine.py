@@ -78,6 +78,7 @@ def part_stats(part: Part, make, vehicle=None, options=None, rows: int = BATCH_R
     with _one_blas_thread():
         st = make()
         cols = st.columns() if hasattr(st, "columns") else None
+        rows = min(rows, getattr(st, "batch_rows", None) or rows)  # an accumulator's own bound
         batches = iter_measured(part, vehicle, options, rows, columns=cols,
                                 target=getattr(st, "target", "wheel"))
         for m in (prefetched(batches) if PREFETCH else batches):
