@@ -117,11 +117,9 @@ def fit_road_load(args, st, cands, veh, name: str, provenance: dict):
 
 def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     """`calibrate` (driving power) through the streaming engines; same outputs."""
-    from sumo_drvpw.cli import output_set
     from sumo_drvpw.data.measured import resolve_equations
     from sumo_drvpw.fit.stream import CalibrationStats
     from sumo_drvpw.fit.stream_compare import CompareStats
-    from sumo_drvpw.model.equations import save_equation
     from sumo_drvpw.model.vehicles import load_vehicle
 
     check_engine_arguments(args)
@@ -141,32 +139,30 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
 
     declare_measurement(eq, measurement_options(args))
     lines = [info.line()]
-    if args.report:
+
+    def report(tmp):
         from sumo_drvpw.cli.calibrate import report_specs
+        from sumo_drvpw.report.comparison import write_comparison_report
 
         specs, skipped = report_specs(veh, args.compare_with)
         eqs = [eq] + [e for e in resolve_equations(specs, veh) if e.name != eq.name]
-        with output_set(args, args.report, inputs) as tmp:
-            cs, info2 = _run(args, partial(CompareStats, eqs, eq.name), veh)
-            ctx = _context(st, veh, res.n)
-            if skipped:
-                ctx["not compared"] = skipped
-            ctx["calibration"] = {
-                "equation": eq.name, "terms": eq.terms, "std_err": eq.std_err,
-                "p_values": eq.p_values, "r2": res.r2, "n": res.n, "selection_trace": res.trace,
-                "settings": res.settings, "beta_mass_free": eq.metrics.get("beta_mass_free"),
-                "reference_mass_kg": res.reference_mass_kg,
-                "dropped_candidates": [f"{d['term']} dropped: {d['reason']}" for d in res.dropped]}
-            from sumo_drvpw.report.comparison import write_comparison_report
-
-            write_comparison_report(cs.comparison(), tmp,
-                                    f"Calibration of {eq.name} against classic VSP", ctx)
-            save_equation(eq, out)
+        cs, info2 = _run(args, partial(CompareStats, eqs, eq.name), veh)
+        ctx = _context(st, veh, res.n)
+        if skipped:
+            ctx["not compared"] = skipped
+        ctx["calibration"] = {
+            "equation": eq.name, "terms": eq.terms, "std_err": eq.std_err,
+            "p_values": eq.p_values, "r2": res.r2, "n": res.n, "selection_trace": res.trace,
+            "settings": res.settings, "beta_mass_free": eq.metrics.get("beta_mass_free"),
+            "reference_mass_kg": res.reference_mass_kg,
+            "dropped_candidates": [f"{d['term']} dropped: {d['reason']}" for d in res.dropped]}
+        write_comparison_report(cs.comparison(), tmp,
+                                f"Calibration of {eq.name} against classic VSP", ctx)
         lines.append(info2.line() + " (report pass)")
-        print(f"wrote {Path(args.report) / 'report.md'}")
-    else:
-        save_equation(eq, out)
-    print(f"wrote {out}")
+
+    from sumo_drvpw.cli.calibrate import write_equation
+
+    write_equation(args, eq, out, inputs, report)
     for ln in lines:
         print(ln, file=sys.stderr)
     return 0
@@ -241,12 +237,11 @@ def calibrate_chain_streamed(args, out: Path, inputs, hvac) -> int:
 
 
 def _chain_streamed(args, out: Path, inputs, hvac) -> int:
-    from sumo_drvpw.cli import measurement_options, note_counts, output_set
+    from sumo_drvpw.cli import measurement_options, note_counts
     from sumo_drvpw.cli.calibrate import MOVING_MPS, declare_measurement
     from sumo_drvpw.data.measured import resolve_equations
     from sumo_drvpw.fit.chain_checks import check_chain
     from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, batch_rows, calibrate_chain_streamed as fit_chain
-    from sumo_drvpw.model.equations import save_equation
     from sumo_drvpw.model.vehicles import load_vehicle
 
     check_engine_arguments(args)
@@ -302,24 +297,21 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     print(fit.summary())
     for w in fit.warnings:
         print(f"warning: {w}")
-    if args.report:
-        with output_set(args, args.report, inputs) as tmp:
-            from sumo_drvpw.fit.stream_compare import CompareStats
-            from sumo_drvpw.report.comparison import write_comparison_report
+    def report(tmp):
+        from sumo_drvpw.fit.chain_stream import bounded
+        from sumo_drvpw.fit.stream_compare import CompareStats
+        from sumo_drvpw.report.comparison import write_comparison_report
 
-            from sumo_drvpw.fit.chain_stream import bounded
+        cs = reduce(partial(bounded, partial(CompareStats, [eq], None, target=args.target), spec.batch_rows))
+        ctx = _context(cs, veh, cs.n)
+        ctx["calibration"] = {"equation": eq.name, "chain": fit.parameters, "r2": fit.r2,
+                              "n": fit.n, "road_load": road}
+        write_comparison_report(cs.comparison(), tmp, f"Energy chain of {eq.name} against measured "
+                                f"{args.target} power", ctx)
 
-            cs = reduce(partial(bounded, partial(CompareStats, [eq], None, target=args.target), spec.batch_rows))
-            ctx = _context(cs, veh, cs.n)
-            ctx["calibration"] = {"equation": eq.name, "chain": fit.parameters, "r2": fit.r2,
-                                  "n": fit.n, "road_load": road}
-            write_comparison_report(cs.comparison(), tmp, f"Energy chain of {eq.name} against measured "
-                                    f"{args.target} power", ctx)
-            save_equation(eq, out)
-        print(f"wrote {Path(args.report) / 'report.md'}")
-    else:
-        save_equation(eq, out)
-    print(f"wrote {out}")
+    from sumo_drvpw.cli.calibrate import write_equation
+
+    write_equation(args, eq, out, inputs, report)
     for info in infos:
         print(info.line(), file=sys.stderr)
     return 0

@@ -71,7 +71,6 @@ def main(args) -> int:
     if getattr(args, "efficiency", "constant") != "constant":
         raise UserError(f"--efficiency {args.efficiency} goes with --target battery")
     from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
-    from sumo_drvpw.model.equations import save_equation
     from sumo_drvpw.data.measured import load_measured
     from sumo_drvpw.fileio import _is_within, check_output_path
 
@@ -115,14 +114,7 @@ def main(args) -> int:
     print(res.summary())
     eq, _ = physical(eq, m, args.candidates)
     declare_measurement(eq, m.log.options.measurement)
-    if args.report:  # report and equation together: the equation is written last
-        with output_set(args, args.report, inputs) as tmp:
-            write_calibration_report(m, eq, res, tmp, args.compare_with)
-            save_equation(eq, out)
-        print(f"wrote {Path(args.report) / 'report.md'}")
-    else:
-        save_equation(eq, out)
-    print(f"wrote {out}")
+    write_equation(args, eq, out, inputs, lambda tmp: write_calibration_report(m, eq, res, tmp, args.compare_with))
     return 0
 
 
@@ -279,6 +271,21 @@ def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
     return comp.to_json()
 
 
+
+def write_equation(args, eq, out, inputs, report=None) -> None:
+    """The equation file, and with ``--report`` the report folder (``report(tmp)`` writes
+    into it): both together, the equation written last, so neither is left without the other."""
+    from sumo_drvpw.model.equations import save_equation
+
+    if args.report:
+        with output_set(args, args.report, inputs) as tmp:
+            report(tmp)
+            save_equation(eq, out)
+        print(f"wrote {Path(args.report) / 'report.md'}")
+    else:
+        save_equation(eq, out)
+    print(f"wrote {out}")
+
 def main_chain(args) -> int:
     """``calibrate --target battery|fuel``: the energy chain on top of a road-load equation.
 
@@ -294,7 +301,6 @@ def main_chain(args) -> int:
     from sumo_drvpw.fit.chain import calibrate_on
     from sumo_drvpw.fit.chain_checks import check_load_columns, check_one_driving_power
     from sumo_drvpw.fit.compare import compare
-    from sumo_drvpw.model.equations import save_equation
 
     out = Path(args.out)
     if out.suffix != ".toml":
@@ -386,25 +392,22 @@ def main_chain(args) -> int:
     print(fit.summary())
     for w in fit.warnings:  # implausible or unidentified parameters (fit/chain_checks.py)
         print(f"warning: {w}")
-    if args.report:
-        with output_set(args, args.report, inputs) as tmp:
-            from sumo_drvpw.report.comparison import write_comparison_report
 
-            u = m.usable
-            comp = compare(m.power_w[u], m.inputs.take(u), [eq], dt_s=m.log.df["dt_s"].to_numpy()[u],
-                           target=args.target,
-                           battery_w=None if m.battery_w is None else m.battery_w[u])
-            from sumo_drvpw.fit.trip_energy import left_out_by_trip  # partial trips, as compare says
+    def report(tmp):
+        from sumo_drvpw.report.comparison import write_comparison_report
 
-            comp.left_out = left_out_by_trip(m.power_w, u, m.log.df["dt_s"].to_numpy(), m.inputs.trip)
-            ctx = m.context()
-            ctx["calibration"] = {"equation": eq.name, "chain": fit.parameters, "r2": fit.r2,
-                                  "n": fit.n, "road_load": road}
-            write_comparison_report(comp, tmp, f"Energy chain of {eq.name} against measured "
-                                    f"{args.target} power", ctx)
-            save_equation(eq, out)
-        print(f"wrote {Path(args.report) / 'report.md'}")
-    else:
-        save_equation(eq, out)
-    print(f"wrote {out}")
+        u = m.usable
+        comp = compare(m.power_w[u], m.inputs.take(u), [eq], dt_s=m.log.df["dt_s"].to_numpy()[u],
+                       target=args.target,
+                       battery_w=None if m.battery_w is None else m.battery_w[u])
+        from sumo_drvpw.fit.trip_energy import left_out_by_trip  # partial trips, as compare says
+
+        comp.left_out = left_out_by_trip(m.power_w, u, m.log.df["dt_s"].to_numpy(), m.inputs.trip)
+        ctx = m.context()
+        ctx["calibration"] = {"equation": eq.name, "chain": fit.parameters, "r2": fit.r2,
+                              "n": fit.n, "road_load": road}
+        write_comparison_report(comp, tmp, f"Energy chain of {eq.name} against measured "
+                                f"{args.target} power", ctx)
+
+    write_equation(args, eq, out, inputs, report)
     return 0
