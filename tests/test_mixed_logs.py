@@ -210,3 +210,39 @@ def test_brake_and_reverse_flags_of_each_file_as_read_alone(tmp_path, first):
     ref = _streamed_as_in_memory(d, m)
     cs, _ = run([d], partial(CompareStats, resolve_equations(["vsp_ldv1999"]), None), None, rows=ROWS)
     assert (cs.counts["excluded_brake"], cs.counts["excluded_reverse"]) == (100, 0) and ref["usable"] == 2900
+
+
+@pytest.mark.parametrize("second", ["elevation", "pressure"])
+def test_diagnose_air_density_at_altitude_decided_on_all_files(tmp_path, second):
+    """Found by review: streamed diagnose decided whether to offer air density at altitude
+    from the first batch's columns and air density source, in memory from the whole log.
+    Planted: the air's density at ±30 m relief with the pressure not logged (sea level
+    assumed). A folder where only the second file logs its elevation: not offered (the
+    first file's altitude is unknown), in memory and streamed; where the second file logs
+    its pressure: not offered in memory (the log's ρ is of a measured pressure), but it was
+    streamed (found, in the first file's batches' columns). Now both decide on all files."""
+    import sumo_drvpw.synth.effects as E
+    from sumo_drvpw.fit.diagnose import DiagnoseOptions, diagnose
+    from sumo_drvpw.fit.diagnose.stream_run import diagnose_stream
+    from sumo_drvpw.synth.track import Noise
+
+    df, _ = E.synth_trips(4, 8.0, seed=11, effects=[E.AltitudeAir(), E.LogPower()],
+                          noise=Noise(process_w=200.0, process_rel=0.01))
+    df = df.drop(columns="pressure_kpa")
+    first = df["trip_id"].isin(df["trip_id"].unique()[:2])
+    a, b = df[first], df[~first]
+    if second == "elevation":
+        a = a.drop(columns="elevation_m")
+    else:
+        b = b.assign(pressure_kpa=100.8)
+    d = tmp_path / "logs"
+    d.mkdir()
+    a.to_parquet(d / "a.parquet")
+    b.to_parquet(d / "b.parquet")
+    eq, opt = load_equation("drvpw_prius3"), DiagnoseOptions(max_findings=2)
+    mem = diagnose(load_measured([d], "prius3"), eq, opt)
+    st = diagnose_stream([d], "prius3", eq, opt, rows=2500)
+    got = [[f["term"] for f in r.report["findings"]] for r in (mem, st)]
+    assert got[0] == got[1] and not any("air_density_altitude" in t for t in got[0])
+    assert "air_density_altitude" not in mem.details["structural"]
+    assert "air_density_altitude" not in st.details["structural"]
