@@ -370,13 +370,14 @@ fuel = "gasoline"
 """
 
 
-@pytest.mark.parametrize("first", ["gps", "lph"])
+@pytest.mark.parametrize("first", ["gps", "maf"])
 def test_fuel_flow_of_each_file_and_its_source_said_of_all(tmp_path, capsys, monkeypatch, first):
     """Found by review: in memory, the fuel flow was chosen on the whole table, so a file
     with only fuel_rate_lph read with one that has fuel_rate_gps got NaN (all its rows left
     out: usable 1500 of 3000), while streamed each file used its own flow and the source
-    said was the first batch's. Each file's flow is its own, as read alone, and the source
-    says both with their rows, in memory and streamed (`compare --target fuel`)."""
+    said was the first batch's. Each file's flow is its own (a third file: only its mass
+    air flow, the petrol estimate), as read alone, and the source says each with its rows,
+    in memory and streamed (`compare --target fuel`)."""
     from sumo_drvpw.model.constants import FUELS
 
     gas = FUELS["gasoline"]
@@ -384,14 +385,20 @@ def test_fuel_flow_of_each_file_and_its_source_said_of_all(tmp_path, capsys, mon
     def fuel_w(df):  # the chain's fuel power of the wheel power: idle + wheel / 0.9 / 0.33
         return 3000.0 + np.maximum(df["power_w"].to_numpy() / 0.9 + 300.0, 0.0) / 0.33
 
-    a, b = _drive("A", seed=1), _drive("B", seed=2)
+    from sumo_drvpw.model.constants import AFR_STOICH_GASOLINE
+
+    a, b, c = _drive("A", seed=1), _drive("B", seed=2), _drive("C", seed=3)
     logs = {"gps": a.assign(fuel_rate_gps=fuel_w(a) / gas["lhv_j_per_kg"] * 1000.0),
-            "lph": b.assign(fuel_rate_lph=fuel_w(b) / gas["lhv_j_per_kg"] / gas["density_kg_per_l"] * 3600.0)}
+            "lph": b.assign(fuel_rate_lph=fuel_w(b) / gas["lhv_j_per_kg"] / gas["density_kg_per_l"] * 3600.0),
+            "maf": c.assign(maf_gps=fuel_w(c) / gas["lhv_j_per_kg"] * 1000.0 * AFR_STOICH_GASOLINE)}
     d = _folder(tmp_path, logs, first)
     m = load_measured([d], target="fuel")
-    assert m.counts["usable"] == 3000
-    np.testing.assert_allclose(m.power_w[_file_of(m) == "B"], fuel_w(b), rtol=1e-12)
+    assert m.counts["usable"] == 4500
+    for f, df in (("B", b), ("C", c)):
+        np.testing.assert_allclose(m.power_w[_file_of(m) == f], fuel_w(df), rtol=1e-12)
     doc = _compare_streamed_and_in_memory(tmp_path, capsys, monkeypatch, d, "fuel", FUEL_EQ)
     assert doc["context"]["counts"]["power_source"] == (
         "fuel flow fuel_rate_gps × LHV of gasoline for 1500 rows; "
-        "fuel flow fuel_rate_lph × LHV of gasoline for 1500 rows")
+        "fuel flow fuel_rate_lph × LHV of gasoline for 1500 rows; "
+        f"ESTIMATE: fuel from the mass air flow maf_gps / {AFR_STOICH_GASOLINE:.2f} (stoichiometric "
+        "petrol) × LHV of gasoline (deceleration fuel cut reads as air: an overestimate there) for 1500 rows")
