@@ -210,3 +210,195 @@ def test_brake_and_reverse_flags_of_each_file_as_read_alone(tmp_path, first):
     ref = _streamed_as_in_memory(d, m)
     cs, _ = run([d], partial(CompareStats, resolve_equations(["vsp_ldv1999"]), None), None, rows=ROWS)
     assert (cs.counts["excluded_brake"], cs.counts["excluded_reverse"]) == (100, 0) and ref["usable"] == 2900
+
+
+BATTERY_EQ = """[equation]
+name = "ev"
+[terms]
+acc = 1.0
+v1 = 150.0
+v3 = 0.4
+[chain]
+predicts = "battery"
+traction_efficiency = 0.9
+recuperation_efficiency = 0.7
+aux_power_w = 400.0
+"""
+
+
+def _battery(df, volts=355.0):
+    """The battery V and I of a wheel power: its chain (90 % out, 70 % back, 400 W aux)."""
+    p = df["power_w"].to_numpy()
+    return df.assign(battery_voltage_v=volts,
+                     battery_current_a=(np.where(p > 0, p / 0.9, p * 0.7) + 400.0) / volts)
+
+
+def _compare_streamed_and_in_memory(tmp_path, capsys, monkeypatch, d, target, equation=BATTERY_EQ):
+    """report.json of `compare --target` with ``equation`` streamed (batches of ROWS) and
+    --engine memory: equal to 1e-9."""
+    import json
+
+    import sumo_drvpw.fit.engine as engine
+    from sumo_drvpw.cli import main as cli_main
+
+    eq = tmp_path / "eq.toml"
+    eq.write_text(equation)
+    monkeypatch.setattr(engine, "run", partial(engine.run, rows=ROWS))
+    docs = {}
+    for e in ("memory", "local"):
+        out = tmp_path / e
+        rc = cli_main(["compare", str(d), "--equation", str(eq), "--target", target, "--out", str(out),
+                       "--engine", e])
+        assert rc == 0, capsys.readouterr().err
+        capsys.readouterr()
+        docs[e] = json.loads((out / "report.json").read_text())
+    docs["local"]["settings"].pop("percentiles")
+    corpus.assert_close_documents(docs["memory"], docs["local"], 1e-9)
+    return docs["memory"]
+
+
+@pytest.mark.parametrize("first", ["power", "motor"])
+def test_battery_target_of_a_mixed_folder_streamed_as_in_memory(tmp_path, capsys, monkeypatch, first):
+    """The battery target of a folder of different loggers (one logs power_w and wind, one
+    motor torque and speed, one its elevation; each its battery V and I): `compare --target
+    battery` streamed is the in-memory report, counts and sources included."""
+    from sumo_drvpw.model.constants import RPM
+
+    b = _drive("B", seed=2)
+    w = b["speed_mps"] / 0.3 * 8.0
+    c = _drive("C", seed=3)
+    logs = {"power": _battery(_drive("A", seed=1)).assign(wind_mps=1.0),
+            "motor": _battery(b).assign(motor_speed_rpm=w / RPM, motor_torque_nm=b["power_w"] / w)
+                                .drop(columns="power_w"),
+            "elev": _battery(c).assign(elevation_m=100.0 + 0.04 * np.cumsum(c["speed_mps"] * 0.1))}
+    d = _folder(tmp_path, logs, first)
+    m = load_measured([d], target="battery")
+    assert m.counts["usable"] == 4500
+    doc = _compare_streamed_and_in_memory(tmp_path, capsys, monkeypatch, d, "battery")
+    c = doc["context"]["counts"]
+    assert c["power_source"] == "battery V·I (current positive = discharge)"
+    assert c["power_rows"] == {"battery V·I (current positive = discharge)": 4500}
+    assert c["wind_source"].startswith("wind_mps column for 1500 rows")
+
+
+@pytest.mark.parametrize("target", ["wheel", "battery", "fuel"])
+@pytest.mark.parametrize("first", ["with", "without"])
+def test_a_file_that_cannot_give_the_target_is_refused_by_name(tmp_path, capsys, target, first):
+    """Found by review: a file of a folder without any column of the target (wheel: no power
+    column at all; battery: no battery V and I; fuel: no fuel or air flow), read with one
+    that has them, was read in
+    memory as NaN (all its rows left out, counted), streamed or alone refused. A file that
+    cannot give the target is a file the user must drop or map; it is refused as read alone,
+    one line naming it, in memory and streamed (the CLI: exit 2, nothing written)."""
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.errors import UserError
+
+    a = _drive("A", seed=1)
+    has = {"wheel": a, "battery": _battery(a), "fuel": a.assign(fuel_rate_gps=0.5)}[target]
+    logs = {"with": has,
+            "without": _drive("B", seed=2).drop(columns="power_w")}
+    d = _folder(tmp_path, logs, first)
+    bad = next(f for f in d.iterdir() if f.name.endswith("_without.csv"))
+    with pytest.raises(UserError) as mem:
+        load_measured([d], target=target)
+    with pytest.raises(UserError) as streamed:
+        eq = {"wheel": "vsp_ldv1999", "battery": "bmw_i3_battery", "fuel": "epa_gasoline_car"}[target]
+        run([d], partial(CompareStats, resolve_equations([eq]), None, target=target), None, rows=ROWS)
+    with pytest.raises(UserError) as alone:
+        load_measured([bad], target=target)
+    assert str(mem.value) == str(streamed.value) == str(alone.value)
+    assert str(mem.value).startswith(f"{bad}: ") and "\n" not in str(mem.value)
+    if target != "wheel":  # an equation without measurement corrections
+        (tmp_path / "ev.toml").write_text(BATTERY_EQ if target == "battery" else FUEL_EQ)
+        eq = str(tmp_path / "ev.toml")
+    for e in ("memory", "local"):
+        out = tmp_path / e
+        assert cli_main(["compare", str(d), "--equation", eq, "--target", target, "--out", str(out),
+                         "--engine", e]) == 2
+        assert capsys.readouterr().err.strip().endswith(str(mem.value)) and not out.exists()
+
+
+@pytest.mark.parametrize("second", ["elevation", "pressure"])
+def test_diagnose_air_density_at_altitude_decided_on_all_files(tmp_path, second):
+    """Found by review: streamed diagnose decided whether to offer air density at altitude
+    from the first batch's columns and air density source, in memory from the whole log.
+    Planted: the air's density at ±30 m relief with the pressure not logged (sea level
+    assumed). A folder where only the second file logs its elevation: not offered (the
+    first file's altitude is unknown), in memory and streamed; where the second file logs
+    its pressure: not offered in memory (the log's ρ is of a measured pressure), but it was
+    streamed (found, in the first file's batches' columns). Now both decide on all files."""
+    import sumo_drvpw.synth.effects as E
+    from sumo_drvpw.fit.diagnose import DiagnoseOptions, diagnose
+    from sumo_drvpw.fit.diagnose.stream_run import diagnose_stream
+    from sumo_drvpw.synth.track import Noise
+
+    df, _ = E.synth_trips(4, 8.0, seed=11, effects=[E.AltitudeAir(), E.LogPower()],
+                          noise=Noise(process_w=200.0, process_rel=0.01))
+    df = df.drop(columns="pressure_kpa")
+    first = df["trip_id"].isin(df["trip_id"].unique()[:2])
+    a, b = df[first], df[~first]
+    if second == "elevation":
+        a = a.drop(columns="elevation_m")
+    else:
+        b = b.assign(pressure_kpa=100.8)
+    d = tmp_path / "logs"
+    d.mkdir()
+    a.to_parquet(d / "a.parquet")
+    b.to_parquet(d / "b.parquet")
+    eq, opt = load_equation("drvpw_prius3"), DiagnoseOptions(max_findings=2)
+    mem = diagnose(load_measured([d], "prius3"), eq, opt)
+    st = diagnose_stream([d], "prius3", eq, opt, rows=2500)
+    got = [[f["term"] for f in r.report["findings"]] for r in (mem, st)]
+    assert got[0] == got[1] and not any("air_density_altitude" in t for t in got[0])
+    assert "air_density_altitude" not in mem.details["structural"]
+    assert "air_density_altitude" not in st.details["structural"]
+
+
+FUEL_EQ = """[equation]
+name = "ice"
+[terms]
+acc = 1.0
+v1 = 150.0
+v3 = 0.4
+[chain]
+predicts = "fuel"
+traction_efficiency = 0.9
+aux_power_w = 300.0
+idle_fuel_power_w = 3000.0
+marginal_efficiency = 0.33
+fuel = "gasoline"
+"""
+
+
+@pytest.mark.parametrize("first", ["gps", "maf"])
+def test_fuel_flow_of_each_file_and_its_source_said_of_all(tmp_path, capsys, monkeypatch, first):
+    """Found by review: in memory, the fuel flow was chosen on the whole table, so a file
+    with only fuel_rate_lph read with one that has fuel_rate_gps got NaN (all its rows left
+    out: usable 1500 of 3000), while streamed each file used its own flow and the source
+    said was the first batch's. Each file's flow is its own (a third file: only its mass
+    air flow, the petrol estimate), as read alone, and the source says each with its rows,
+    in memory and streamed (`compare --target fuel`)."""
+    from sumo_drvpw.model.constants import FUELS
+
+    gas = FUELS["gasoline"]
+
+    def fuel_w(df):  # the chain's fuel power of the wheel power: idle + wheel / 0.9 / 0.33
+        return 3000.0 + np.maximum(df["power_w"].to_numpy() / 0.9 + 300.0, 0.0) / 0.33
+
+    from sumo_drvpw.model.constants import AFR_STOICH_GASOLINE
+
+    a, b, c = _drive("A", seed=1), _drive("B", seed=2), _drive("C", seed=3)
+    logs = {"gps": a.assign(fuel_rate_gps=fuel_w(a) / gas["lhv_j_per_kg"] * 1000.0),
+            "lph": b.assign(fuel_rate_lph=fuel_w(b) / gas["lhv_j_per_kg"] / gas["density_kg_per_l"] * 3600.0),
+            "maf": c.assign(maf_gps=fuel_w(c) / gas["lhv_j_per_kg"] * 1000.0 * AFR_STOICH_GASOLINE)}
+    d = _folder(tmp_path, logs, first)
+    m = load_measured([d], target="fuel")
+    assert m.counts["usable"] == 4500
+    for f, df in (("B", b), ("C", c)):
+        np.testing.assert_allclose(m.power_w[_file_of(m) == f], fuel_w(df), rtol=1e-12)
+    doc = _compare_streamed_and_in_memory(tmp_path, capsys, monkeypatch, d, "fuel", FUEL_EQ)
+    assert doc["context"]["counts"]["power_source"] == (
+        "fuel flow fuel_rate_gps × LHV of gasoline for 1500 rows; "
+        "fuel flow fuel_rate_lph × LHV of gasoline for 1500 rows; "
+        f"ESTIMATE: fuel from the mass air flow maf_gps / {AFR_STOICH_GASOLINE:.2f} (stoichiometric "
+        "petrol) × LHV of gasoline (deceleration fuel cut reads as air: an overestimate there) for 1500 rows")

@@ -19,7 +19,7 @@ WIND_SOURCES = ("wind_mps column", "speed − airspeed_mps", "none")
 DENSITY_SOURCES = ("air_density_kgm3 column", "ideal gas", "default")
 #: the measured driving power's (:func:`sumo_drvpw.data.powertrain.measured_power`)
 POWER_SOURCES = ("direct", "power-split", "single motor (motor torque × motor speed)", "single motor",
-                 "battery")
+                 "battery", "fuel flow", "ESTIMATE: fuel from the mass air flow")
 #: count → its sources; the count holds the rows of each source, keyed by the source's text
 ROWS_OF = {"grade_rows": GRADE_SOURCES, "wind_rows": WIND_SOURCES, "air_density_rows": DENSITY_SOURCES,
            "power_rows": POWER_SOURCES}

@@ -115,6 +115,12 @@ class DriveLog:
     #: a streamed batch: the fuel and air flows of its whole file that hold a value
     #: (:func:`sumo_drvpw.data.powertrain.fuel_column`); None: judged on ``df``
     logged: frozenset | None = field(default=None, repr=False)
+    #: a folder read in memory: each file's columns (a file that cannot give the measured
+    #: power is refused by name, as read alone), its fuel and air flows that hold a value
+    #: (as ``logged``) and its trips; None: one table
+    file_columns: dict | None = field(default=None, repr=False)
+    file_logged: dict | None = field(default=None, repr=False)
+    file_trips: dict | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.df)
@@ -359,7 +365,9 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
     """
     opt = check_options(options or ReadOptions())
     files = expand_paths(paths)
-    frames, meta, clipped, owner = [], {}, 0, {}
+    from sumo_drvpw.data.powertrain import flow_columns
+
+    frames, meta, clipped, owner, columns, logged = [], {}, 0, {}, {}, {}
     for p in files:
         df, m = _read_table(p)
         meta.update(m)
@@ -370,9 +378,15 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
                                 "belong in one file, give each trip its own id")
             owner[tid] = p
         frames.append(df)
+        columns[str(p)] = frozenset(map(str, df.columns))
+        logged[str(p)] = frozenset(c for c in flow_columns(df.columns) if df[c].notna().any())
         clipped += n
     df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
-    return _derive(df, [str(p) for p in files], meta, vehicle, opt, clipped)
+    log = _derive(df, [str(p) for p in files], meta, vehicle, opt, clipped)
+    if len(files) > 1:  # each file as read alone (data/powertrain.py)
+        log.file_columns, log.file_logged = columns, logged
+        log.file_trips = {str(f): [t for t, o in owner.items() if o == f] for f in files}
+    return log
 
 
 def check_options(opt: ReadOptions) -> ReadOptions:

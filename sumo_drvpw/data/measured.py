@@ -101,6 +101,7 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
     battery_w = None
     if target == "battery":
         p, source = measured_battery_power(log, veh)
+        log.counts["power_rows"] = {source: len(p)}  # one source: its rows merge over batches
     elif target == "fuel":
         p, source = measured_fuel_power(log, veh)
         if "battery_voltage_v" in log.df and "battery_current_a" in log.df:

@@ -123,19 +123,20 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
     it: ``power_w``; the power-split signals (needs a ``power_split`` vehicle); motor torque
     and speed (speed from vehicle speed, gear ratio and wheel radius when ``motor_speed_rpm``
     is absent); battery V·I. So a file of a folder is read as it is alone; a trip that holds
-    none takes the first the table has (its power NaN: left out). The rows of each source go
+    none takes the first the table has (its power NaN: left out), and a file of a folder
+    that has none of the columns is refused, named, as read alone. The rows of each source go
     to ``log.counts["power_rows"]``; the text says each (:func:`sumo_drvpw.data.conditions.source_counts`).
     """
     from sumo_drvpw.data.conditions import said
     from sumo_drvpw.data.trips import trip_codes_of
 
     df = log.df
-    where = log.describe()
     present = [all(c in df for c in cols) for cols in POWER_SOURCES]
-    if not any(present):
-        raise UserError(f"{where}: no measured power: the log needs 'power_w', or the power-split columns "
-                        f"({', '.join(POWER_SPLIT_COLUMNS)}), or 'motor_torque_nm', or "
-                        "'battery_voltage_v' and 'battery_current_a'")
+    for f, cols in _each_file(log, df):  # a file that has none is refused, as read alone
+        if not any(all(c in cols for c in s) for s in POWER_SOURCES):
+            raise UserError(f"{f}: no measured power: the log needs 'power_w', or the power-split columns "
+                            f"({', '.join(POWER_SPLIT_COLUMNS)}), or 'motor_torque_nm', or "
+                            "'battery_voltage_v' and 'battery_current_a'")
     codes = trip_codes_of(df["trip_id"])
     n = int(codes.max()) + 1
     pick = np.full(n, -1)
@@ -202,17 +203,28 @@ def _power_of(kind: int, log, vehicle, window_s) -> tuple[np.ndarray, str]:
             f"battery V·I (current positive = {conv})")
 
 
+def _each_file(log, df) -> list[tuple[str, frozenset]]:
+    """(file, its columns) of each file of a folder read in memory (``log.file_columns``);
+    else the log's description and the table's columns: a measured power is refused for a
+    file that cannot give it, named, as the file read alone (or streamed) is."""
+    if getattr(log, "file_columns", None):
+        return list(log.file_columns.items())
+    return [(log.describe(), frozenset(map(str, df.columns)))]
+
+
 def measured_battery_power(log, vehicle=None) -> tuple[np.ndarray, str]:
     """Battery power V·I of a drive log [W], positive when discharging, and its source.
 
     The sign convention is the vehicle file's ``battery.current_positive`` (default
-    ``discharge``, the spec's canonical sign).
+    ``discharge``, the spec's canonical sign). A file of a folder without the two columns
+    is refused, named, as read alone (not read as NaN).
     """
     df = log.df
-    missing = [c for c in ("battery_voltage_v", "battery_current_a") if c not in df]
-    if missing:
-        raise UserError(f"{log.describe()}: the battery target needs the column '{missing[0]}' "
-                        "(battery_voltage_v and battery_current_a)")
+    for f, cols in _each_file(log, df):  # a file without them is refused, as read alone
+        missing = [c for c in ("battery_voltage_v", "battery_current_a") if c not in cols]
+        if missing:
+            raise UserError(f"{f}: the battery target needs the column '{missing[0]}' "
+                            "(battery_voltage_v and battery_current_a)")
     conv = vehicle.battery.get("current_positive", "discharge") if vehicle is not None else "discharge"
     return (battery_power(df["battery_voltage_v"], df["battery_current_a"], conv),
             f"battery V·I (current positive = {conv})")
@@ -271,15 +283,53 @@ def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.
     :data:`sumo_drvpw.model.constants.FUELS`. A petrol car's log without a fuel flow but
     with its mass air flow (:func:`air_flow_column`) gives an estimate: ṁ = MAF / AFR_st
     × (1 + fuel trims) / commanded λ (:func:`fuel_from_air_flow`).
+
+    Each file of a folder read in memory takes its own flow, as read alone or streamed (a
+    file without one is refused, named); the rows of each source go to
+    ``log.counts["power_rows"]`` and the text says each.
     """
     from sumo_drvpw.model.constants import FUELS
 
-    df = log.df
+    import dataclasses
+
+    from sumo_drvpw.data.conditions import merge_rows, said
+
     name = fuel or (vehicle.powertrain.get("fuel", "gasoline") if vehicle is not None else "gasoline")
     if name not in FUELS:
         raise UserError(f"fuel '{name}' is not one of {', '.join(FUELS)}")
     fp = FUELS[name]
-    logged = getattr(log, "logged", None)  # a streamed batch: its whole file's choice
+    groups = _files_by_flows(log)
+    if groups is None:  # one table, or a streamed batch (its whole file's choice: ``log.logged``)
+        p, text = _fuel_of(log, getattr(log, "logged", None), name, fp)
+        log.counts["power_rows"] = {text: len(p)}
+        return p, text
+    # a folder read in memory: each file's flow as the file read alone, its rows said
+    p, rows = np.full(len(log.df), np.nan), {}
+    for files, logged, sel in groups:
+        q, text = _fuel_of(dataclasses.replace(log, files=files, logged=logged), logged, name, fp)
+        p = np.where(sel, q, p)
+        rows[text] = rows.get(text, 0) + int(sel.sum())
+    rows = merge_rows(rows, {}, "power_rows")  # in the sources' order, as batches merge
+    log.counts["power_rows"] = rows
+    return p, said(rows)
+
+
+def _files_by_flows(log):
+    """A folder read in memory (``log.file_logged``): (its files, their fuel and air flows
+    that hold a value, their rows) per distinct set of flows; else None."""
+    if not getattr(log, "file_logged", None) or len(set(log.file_logged.values())) < 2:
+        return None
+    by: dict = {}
+    for f, logged in log.file_logged.items():
+        by.setdefault(logged, []).append(f)
+    trip = log.df["trip_id"].astype(str)
+    return [(files, logged, trip.isin([t for f in files for t in log.file_trips[f]]).to_numpy())
+            for logged, files in by.items()]
+
+
+def _fuel_of(log, logged, name: str, fp: dict) -> tuple[np.ndarray, str]:
+    """The fuel power of every row of ``log`` from the flow chosen by ``logged`` and its text."""
+    df = log.df
     col = fuel_column(df, logged)
     if col is None:
         air = air_flow_column(df, logged)

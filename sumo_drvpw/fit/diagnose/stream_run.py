@@ -140,8 +140,8 @@ def _prepare(m, eq, declared, kept, opt, lags, elev: bool, acc_col, held=()) -> 
         d["common"] = _finite_at_every_shift(y_all, codes, int(lags[-1]))[idx]
     if acc_col is not None:
         d["imu"] = np.asarray(m.inputs.signals[acc_col], float)[idx]
-    if elev:
-        d["elev"] = df["elevation_m"].to_numpy(float)[idx] if "elevation_m" in df else np.full(len(idx), np.nan)
+    if elev and "elevation_m" in df:  # a batch without: NaN (the candidate then not offered)
+        d["elev"] = df["elevation_m"].to_numpy(float)[idx]
     return d
 
 
@@ -272,10 +272,10 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
         declared = equation.term_names
     dt_med = float(np.median(np.diff(t_s)[np.diff(tcodes_s) == 0])) if len(t_s) > 1 else 0.0
     lags = lag_range(dt_med, opt.max_lag_s) if opt.structural and opt.max_lag_s > 0 else np.array([0])
-    cnt = sample[0].log.counts
-    elev = bool(opt.structural and "elevation_m" in first_log.df and "ambient_c" in first_log.df
-                and "pressure_kpa" not in first_log.df
-                and str(cnt.get("air_density_source", "")).startswith("ideal gas"))
+    # air density at altitude: decided on all batches (their columns and the merged air
+    # density source), as in memory on the whole log; each batch keeps its elevation till then
+    elev = bool(opt.structural)
+    seen_cols: set = set()
     acc_col = next((c for c in ACCELEROMETER_COLUMNS if c in x_s.signals), None) if opt.structural else None
     dt_acc = float(np.median(np.diff(t_s))) if len(t_s) > 1 else 1.0
     del x_s, y_s, usable_s, trip_s, t_s, tcodes_s
@@ -291,6 +291,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
         def consume(m):
             nonlocal n_rows, n_usable, reader_counts
             reader_counts = _add_counts(reader_counts, m.counts)
+            seen_cols.update(c for c in ("elevation_m", "ambient_c", "pressure_kpa") if c in m.log.df)
             d = _prepare(m, equation, declared, kept_names, opt, lags, elev, acc_col, held)
             left_out.update(d.pop("left_out"))
             n_rows += d.pop("rows")
@@ -313,6 +314,8 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
             + (" (prepared arrays on disk)" if batches.on_disk else ""))
         # two-valued columns, on the sample's analysis samples
         binary = _binary(prep, sample_idx, sample_rows)
+        elev = bool(elev and {"elevation_m", "ambient_c"} <= seen_cols and "pressure_kpa" not in seen_cols
+                    and str(reader_counts.get("air_density_source", "")).startswith("ideal gas"))
         res = _trace(prep, equation, declared, opt, lags, dt_med, elev, (acc_col, dt_acc), binary, roles, say)
         tr = res["tr"]
         measured = _Measured(_Log(files, read_options), reader_counts.get("power_source") or source)  # of all
@@ -473,6 +476,9 @@ def _structural(tr: StreamModel, prep: Prepared, declared, elev: bool, acc):
     if elev:
         lo, hi, s1, fin = math.inf, -math.inf, 0.0, True
         for d in prep.batches:
+            if "elev" not in d:  # a batch without elevation_m: NaN, as in memory
+                fin = fin and not (d["common"].any() if tr.common else len(d["y"]))
+                continue
             h = d["elev"] if not tr.common else d["elev"][d["common"]]
             fin &= bool(np.isfinite(h).all())
             if len(h):
