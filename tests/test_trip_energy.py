@@ -226,8 +226,22 @@ def test_validation_trip_rows_carry_left_out_shares_and_the_tables_flag_partial_
 
     repo = Path(__file__).resolve().parents[1]
     doc = json.loads((repo / "docs" / "energy-chain-validation.json").read_text(encoding="utf-8"))
+
+    def rows_of(d):  # every per-trip row of the report, wherever it sits
+        if isinstance(d, dict):
+            if "trip" in d:
+                yield d
+            for v in d.values():
+                yield from rows_of(v)
+        elif isinstance(d, list):
+            for v in d:
+                yield from rows_of(v)
+
+    for r in rows_of(doc):  # a report written before the keys existed
+        for k in [k for k in r if k.startswith("left_out_") or k == "partial"]:
+            del r[k]
     md = render(doc, "cmd")
-    assert "**Partial trips**" not in md  # rows without the keys: as committed
+    assert "**Partial trips**" not in md  # rows without the keys: rendered as before
     for section, key in (("jlu", "before"), ("prius2", "rows"), ("bmw_i3", "rows")):
         row = doc[section][key][0]
         row.update({k: a[k] for k in a if k.startswith("left_out_")}, partial=True)
