@@ -145,3 +145,60 @@ def test_a_parking_stop_ends_when_the_vehicle_leaves_its_space(tmp_path):
             assert set(tr.starting) == {"p", "q", "r"}
     assert ends == {"p": 106, "q": 100, "r": 106}
     assert tr.left_early == 0
+
+
+#: electric cars at long ``parking`` stops (until > 300 s after arrival): parked in a bus
+#: bay (a busStop with parkingLength: live, dwelling there, switched off, one stop each),
+#: beside a lane and at a containerStop (live, parked off the lane: not booked, no
+#: switched-off stop), as DLR's port_lübeck parks its cars and trucks
+PARKED = f"""<routes>
+    <vType id="ev" vClass="passenger" mass="1500" emissionClass="Energy/unknown"/>
+    <flow id="bay" type="ev" begin="0" end="100" number="4" departSpeed="0">
+        <route edges="{_row(0)[0]}"/><stop busStop="bs" until="600" parking="true"/></flow>
+    <flow id="side" type="ev" begin="0" end="100" number="4" departSpeed="0">
+        <route edges="{_row(3)[0]}"/>{_stop(_row(3)[1], 600).replace("/>", ' parking="true"/>')}</flow>
+    <flow id="box" type="ev" begin="0" end="100" number="4" departSpeed="0">
+        <route edges="{_row(2)[0]}"/><stop containerStop="cs" until="650" parking="true"/></flow>
+    <vehicle id="v" type="ev" depart="30" departSpeed="0">
+        <route edges="{_row(1, True)[0]}"/>{_stop(_row(1, True)[1], 500).replace("/>", ' parking="true"/>')}</vehicle>
+</routes>
+"""
+
+
+@pytest.fixture(scope="module")
+def parked(tmp_path_factory):
+    """The parking scenario run live (libsumo) with its FCD (--precision 6)."""
+    d = tmp_path_factory.mktemp("parkstops")
+    (d / "r.rou.xml").write_text(PARKED)
+    (d / "p.add.xml").write_text(
+        f'<additional><busStop id="bs" lane="{_row(0)[1]}" startPos="100" endPos="200" parkingLength="1000"/>'
+        f'<containerStop id="cs" lane="{_row(2)[1]}" startPos="100" endPos="200" parkingLength="1000"/></additional>')
+    (d / "s.toml").write_text(
+        f'equations = ["{I3_BATTERY}"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n'
+        'additional = ["p.add.xml"]\nbegin = 0\nend = 1000\nstep_length = 1.0\n'
+        'options = ["--no-warnings", "true"]\n[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n')
+    run_scenario(d / "s.toml", d / "live", options=["--fcd-output", str(d / "fcd.xml"), "--precision", "6",
+                                                    "--stop-output", str(d / "stops.xml")])
+    return d
+
+
+@pytest.mark.parametrize("chunk_rows", [None, 7])
+def test_fcd_books_parking_stops_as_live(parked, tmp_path, chunk_rows):
+    """SUMO puts a parked vehicle back on its lane, at its space, the step before it
+    drives off (its parking ends there: the live run books that row, also one switched
+    off in a bus bay, then no longer counted switched off); a vehicle parked off the lane
+    (beside it, at a containerStop) is no switched-off stop live, one in a bus bay is.
+    Before, the replay ended a parking stop in the row the vehicle drove off (−1 s for
+    each one in a bus bay: port_lübeck's cars), counted as switched off a vehicle it took
+    as at its stop a row before SUMO parked it (port_lübeck: trucktoship.5 at a
+    containerStop, 10 stops against 9; here box.3, −1 s, 5 against 4), and the live run
+    counted the bay's last row both booked and switched off (+1 s each)."""
+    d = parked
+    process_fcd(d / "fcd.xml", scenario=d / "s.toml", out_dir=tmp_path / "o", chunk_rows=chunk_rows)
+    (lc, lt, ls), (rc, rt, rs) = _booked(d / "live"), _booked(tmp_path / "o")
+    ended = [s.get("id") for s in ET.parse(d / "stops.xml").getroot()]
+    assert len(ended) == 13 and all(s.get("parking") == "1" for s in ET.parse(d / "stops.xml").getroot())
+    assert ls["stops"] == 4  # the bay's: dwelling in service, switched off
+    assert rs["stops"] == ls["stops"] and rs["vehicle_s"] == pytest.approx(ls["vehicle_s"])
+    pd.testing.assert_series_equal(rt, lt, rtol=1e-9)
+    np.testing.assert_allclose(rc["auxiliary_kwh"], lc["auxiliary_kwh"], rtol=1e-6)

@@ -216,3 +216,26 @@ def test_options_replace_the_configs_device_setting(tmp_path):
     sc = load_scenario(doc={"equations": ["epa_gasoline_car"], "outputs": {"sumo_device": False},
                             "sumo": {"config": str(on), "options": ["--device.emissions.probability=1"]}})
     assert not sc.sumo_device
+
+
+@pytest.mark.parametrize("opts", [["--device.emissions.probability", "0"],
+                                  ["--device.emissions.probability=0.0", "--device.emissions.explicit", ""]])
+def test_sumo_device_with_the_device_off_in_the_options_is_refused(tmp_path, capsys, opts):
+    """outputs.sumo_device = true whose SUMO options switch the emissions device off for
+    every vehicle (probability 0, no explicit vehicle) contradict each other: the run keeps
+    the options' setting, SUMO reports for no vehicle. Refused as the other contradictory
+    keys are (exit 2, one line naming the option, nothing written); before, the run wrote
+    a sumo_device.csv with no row and said nothing. The same options with sumo_device at
+    its default run, without the comparison."""
+    cfg = _scenario(tmp_path, "")
+    sc = tmp_path / "s.toml"
+    body = f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{cfg}"\nend = 60\noptions = {json.dumps(opts)}\n'
+    sc.write_text(body + "[outputs]\nsumo_device = true\n")
+    code, err = _cli([sc, "--out", tmp_path / "o"], capsys)
+    assert code == 2 and not (tmp_path / "o").exists()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "outputs.sumo_device" in lines[0] and "--device.emissions.probability" in lines[0]
+    sc.write_text(body)
+    code, err = _cli([sc, "--out", tmp_path / "p"], capsys)
+    assert code == 0, err
+    assert not (tmp_path / "p" / "sumo_device.csv").exists()

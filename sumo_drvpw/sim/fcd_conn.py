@@ -152,7 +152,8 @@ class _Rows:
             self._ride(None, c)
         if self.stops is not None:  # (lanes as written: a parked vehicle serves its stop too)
             self.stops.forget(self.arrived)
-            self.stops.step(self.t - self.dt, c["id"], c["lane"], c["pos"], c["speed"], c.get("off"))
+            self.stops.step(self.t - self.dt, c["id"], c["lane"], c["pos"], c["speed"], c.get("off"),
+                            (float(nxt["time"][0]), nxt["id"], nxt["speed"]) if nxt is not None and len(nxt["id"]) else None)
         ok = c.get("lane_ok")
         if ok is not None and len(ok):
             self.lane_rows += int(np.count_nonzero(ok > 0))

@@ -27,8 +27,13 @@ vehicle drives off from rest, or at its planned end (the later of arrival + ``du
 and ``until``; SUMO ends it in that row), whichever comes first: from then the vehicle is
 booked standing again. A ``parking`` stop (a ``parkingArea``'s always) SUMO ends only
 when the vehicle can leave its space, later when traffic blocks it (DLR's port_lübeck,
-SUMO 1.28: cars parked at a bus stop until 830/870/880 s left at 836/881/887 s): the
-replay ends it when the vehicle drives off, past its planned end. A vehicle that drives
+SUMO 1.28: cars parked at a bus stop until 830/870/880 s left at 836/881/887 s), and
+puts the vehicle back on its lane, at its space, the step before it drives off (its
+parking ends there; the live loop books it from that row): the replay ends it in the row
+before the one the vehicle moves in (past its planned end). A vehicle parked off the lane
+(beside it, at a containerStop or parkingArea; not in a bus bay) is not booked whatever
+its stop, and live no switched-off stop: a stop of it the replay took as started a row
+before SUMO parked it ends in its first parked row. A vehicle that drives
 off before a planned end was not at its stop after all (SUMO holds it there): the stop is
 open to be matched again, and counted
 (``stops_left_before_their_end``). At a stopping place SUMO starts the stop of a vehicle
@@ -358,22 +363,38 @@ class StopTracker:
             a += length
         return a, b
 
-    def step(self, t: float, ids, lanes, pos, speed, parked=None) -> None:
+    def step(self, t: float, ids, lanes, pos, speed, parked=None, after=None) -> None:
         """Timestep ``t`` [s] (the FCD's time) with its vehicle rows: ids, lanes (as SUMO
-        wrote them, parked vehicles' too), positions [m], speeds [m/s], and which rows are
-        parked (off the lane; their stop is served, not booked)."""
+        wrote them, parked vehicles' too), positions [m], speeds [m/s], which rows are
+        parked (off the lane; their stop is served, not booked), and ``after``: the next
+        timestep's (time, ids, speeds) (None: none), in which a vehicle leaving its parking
+        space drives off."""
         starting, ending = [], []
         speed = np.asarray(speed, float)
         if self.data:  # the vehicles at a stop: does it end in this row?
             rows = dict(zip(ids, range(len(ids))))
+            moving = None
             for vid, cur in list(self.data.items()):
                 j = rows.get(vid)
                 if j is None:
                     continue
-                over = t >= cur.end_t - 1e-6 and not (cur.parking and speed[j] <= 0.0)
-                if over or (cur.at_rest and speed[j] > 0.0):
+                if parked is not None and parked[j]:  # parked off the lane: served there, not
+                    cur.end_t, cur.index = t, -1       # booked (as if it had parked at once)
+                t_end = t
+                if cur.parking and cur.index >= 0:
+                    # SUMO puts a parked vehicle back on its lane, at its space, the step
+                    # before it drives off (its parking ends there, and the live run books
+                    # it from that row): the stop ends in the row before the one it moves in
+                    over = speed[j] > 0.0 and (cur.at_rest or t >= cur.end_t - 1e-6)
+                    if not over and after is not None and speed[j] <= 0.0:
+                        if moving is None:
+                            moving = set(np.asarray(after[1], object)[np.asarray(after[2], float) > 0.0])
+                        over, t_end = vid in moving, float(after[0])
+                else:
+                    over = t >= cur.end_t - 1e-6 or (cur.at_rest and speed[j] > 0.0)
+                if over:
                     st = self.state[vid]
-                    if t < cur.end_t - 1e-6 and np.isfinite(cur.end_t):  # not its stop after all
+                    if t_end < cur.end_t - 1e-6 and np.isfinite(cur.end_t):  # not its stop after all
                         st[1] = cur.index
                         self.left_early += 1
                     st[3] = None

@@ -23,7 +23,8 @@ from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_vclass, load_equation
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.sim.sumo_outputs import additional_outputs, is_output_option, option_input_files
+from sumo_drvpw.sim.sumo_outputs import (additional_outputs, device_wanted, is_output_option,
+                                         option_input_files)
 from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.model.terms import parse_term
 
@@ -553,7 +554,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                             f"equations ({', '.join(names)}), got {diff}")
     # the config's device options, replaced by the command line's (sumo.options, a run's
     # options; "--key value" or "--key=value", the last one) as SUMO takes them
-    device_on = device_in_config({**cfgvals, **_given_options(args, DEVICE_OPTIONS)})
+    given_device = _given_options(args, DEVICE_OPTIONS)
+    device_on = device_in_config({**cfgvals, **given_device})
     return Scenario(
         config_outputs={k: v for k, v in cfgvals.items() if is_output_option(k) and v.strip()},
         additional_outputs=additional_outputs(adds), additional_files=list(adds),
@@ -586,6 +588,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         edgedata=_bool(out.get("edgedata", True), where, "outputs.edgedata"),
         figures=_bool(out.get("figures", True), where, "outputs.figures"), difference=diff,
         progress=_bool(out.get("progress", True), where, "outputs.progress"),
-        sumo_device=_bool(out.get("sumo_device", device_on), where, "outputs.sumo_device"), sumo_device_in_config=device_on,
+        sumo_device=device_wanted(_bool(out.get("sumo_device", device_on), where, "outputs.sumo_device"),
+                                  device_on, given_device, where), sumo_device_in_config=device_on,
         period=None if out.get("period") is None else _num(out["period"], where,
                                                              "outputs.period", positive=True))

@@ -8,6 +8,7 @@ import xml.etree.ElementTree as ET
 import zlib
 from pathlib import Path
 
+from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 
 #: how deep ``<include href>`` is followed in SUMO's XML inputs (SUMO's own loader has no
@@ -275,6 +276,20 @@ def without_additional_files(args: list) -> list:
 #: SUMO's names of its route-files and additional-files options (synonyms included)
 ROUTE_OPTIONS = ("-r", "--route-files", "--routes")
 ADDITIONAL_OPTIONS = ("-a", "--additional-files", "--additional")
+
+
+def device_wanted(wanted: bool, on: bool, given: dict[str, str], where: str) -> bool:
+    """``outputs.sumo_device`` as the scenario sets it (``wanted``), refused when the run's
+    SUMO options ``given`` (option → value: device.emissions.probability, .explicit) switch
+    SUMO's emissions device off for every vehicle (``on`` False: probability 0, no explicit
+    vehicle): the run keeps the options' device setting as given (SUMO refuses an option
+    twice) and would write an empty ``sumo_device.csv``. A UserError naming the option."""
+    if wanted and given and not on:
+        opts = ", ".join(f"--{k} {v!r}" for k, v in given.items())
+        raise UserError(f"{where}: outputs.sumo_device = true, but the SUMO options set {opts}: SUMO's "
+                        "emissions device is off for every vehicle and sumo_device.csv would be empty; "
+                        "drop the option (or give a probability > 0) or set outputs.sumo_device = false")
+    return wanted
 
 
 #: sumo_device.csv's columns
