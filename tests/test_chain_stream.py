@@ -159,7 +159,7 @@ def test_dask_chain_calibration_equals_memory(chain_logs, tmp_path, capsys):
 def test_streamed_chain_refuses_files_that_differ_in_their_chain_input(chain_logs, tmp_path, capsys):
     """One file logs a driving power (the chain's input there), the other not (the road
     load's power there): the streamed fit takes one input for all, so it refuses, naming
-    both sources, and writes nothing (in memory the second file's rows would have no
+    the file without it and the file with it (as in memory, below), and writes nothing (in memory the second file's rows would have no
     measured driving power and drop out of the fit)."""
     import pandas as pd
 
@@ -173,7 +173,10 @@ def test_streamed_chain_refuses_files_that_differ_in_their_chain_input(chain_log
     out = tmp_path / "eq.toml"
     assert cli_main(["calibrate", str(mixed), "--target", "battery", "--equation", str(eq), "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "2 files: some files have a measured driving power and some not (direct (power_w), none)" in err
+    line = [ln for ln in err.splitlines() if ln.startswith("sumo-drvpw calibrate: error: ")]
+    assert len(line) == 1 and "Traceback" not in err
+    assert f"{mixed / 'b.csv'}: no measured driving power" in line[0]
+    assert "direct (power_w)" in line[0] and str(mixed / "a.parquet") in line[0]
     assert not out.exists()
 
 

@@ -156,7 +156,7 @@ class ChainStats:
         self.kept, self.kept_bytes = ([[]] if keep else None), 0
         self.target = spec.target
         self.rows, self.counts, self.files, self.source, self.vehicle = 0, {}, [], None, None
-        self.inputs: set = set()       # the chain's input per batch: a measured source, or None
+        self.inputs: dict = {}         # the chain's input (a measured source, or None) → its first file
         self.wheel_error = None        # why a batch had no measured driving power
         self.sign = self.falling = None
         self.usable = self.nonzero = self.n_ok = self.unknown = 0
@@ -204,7 +204,7 @@ class ChainStats:
         except UserError as e:
             mw, self.wheel_error = None, self.wheel_error or str(e)
         measured = mw is not None and not mw.source.startswith("battery")
-        self.inputs.add(mw.source if measured else None)
+        self.inputs.setdefault(mw.source if measured else None, m.log.files[0] if m.log.files else "?")
         if scan and self.road is not None and measured:
             self.road.add(mw)
         use = np.asarray(m.usable, bool)
@@ -332,7 +332,7 @@ class ChainStats:
         self.counts = _add_counts(self.counts, o.counts)
         self.files += [f for f in o.files if f not in self.files]
         self.source, self.vehicle = self.source or o.source, self.vehicle or o.vehicle
-        self.inputs |= o.inputs
+        self.inputs = {**o.inputs, **self.inputs}
         self.wheel_error = self.wheel_error or o.wheel_error
         self.sign, self.falling = merge_sign_sums(self.sign, o.sign), merge_sign_sums(self.falling, o.falling)
         self.usable += o.usable
@@ -389,10 +389,16 @@ class ChainStats:
                 raise UserError(f"{self.where}: load column '{c}' has no number on the "
                                 f"{self.usable} usable samples")
         if len(self.inputs) > 1:
-            raise UserError(f"{self.where}: some files have a measured driving power and some not "
-                            f"({', '.join(sorted('none' if s is None else s for s in self.inputs))}): "
-                            "the streamed chain "
-                            "fit takes one input for all; read them together in memory")
+            without = self.inputs.get(None)
+            src, with_ = next((k, f) for k, f in sorted(self.inputs.items(), key=lambda kv: str(kv[0]))
+                              if k is not None)
+            raise UserError(f"{without}: no measured driving power (power_w, motor torque, the power-split "
+                            f"signals) while {with_} has one ({src}): the chain takes one input for all "
+                            "files; calibrate them apart, or give every file the same columns"
+                            if without is not None else
+                            f"{self.where}: the files measure the driving power differently "
+                            f"({', '.join(sorted(self.inputs))}): the chain takes one input for all files; "
+                            "calibrate them apart")
 
     @property
     def measured_input(self) -> str | None:
