@@ -63,10 +63,20 @@ ROUTES = f"""<routes>
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     """The scenario run live (libsumo) with its FCD (--precision 6) and SUMO's stop output."""
-    d = tmp_path_factory.mktemp("flowstops")
-    (d / "r.rou.xml").write_text(ROUTES)
+    return _run_live(tmp_path_factory.mktemp("flowstops"), ROUTES)
+
+
+def _run_live(d: Path, routes: str, additional: str | None = None) -> Path:
+    """The i3 battery chain on the routes ``routes`` (and the additional file ``additional``)
+    of the city net, 0-1000 s at 1-s steps, run live in ``d``/live with its FCD
+    (--precision 6) in ``d``/fcd.xml and SUMO's stop output in ``d``/stops.xml."""
+    (d / "r.rou.xml").write_text(routes)
+    add = ""
+    if additional is not None:
+        (d / "p.add.xml").write_text(additional)
+        add = 'additional = ["p.add.xml"]\n'
     (d / "s.toml").write_text(
-        f'equations = ["{I3_BATTERY}"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n'
+        f'equations = ["{I3_BATTERY}"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n{add}'
         'begin = 0\nend = 1000\nstep_length = 1.0\noptions = ["--no-warnings", "true"]\n'
         '[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n')
     run_scenario(d / "s.toml", d / "live", options=["--fcd-output", str(d / "fcd.xml"), "--precision", "6",
@@ -168,18 +178,11 @@ PARKED = f"""<routes>
 @pytest.fixture(scope="module")
 def parked(tmp_path_factory):
     """The parking scenario run live (libsumo) with its FCD (--precision 6)."""
-    d = tmp_path_factory.mktemp("parkstops")
-    (d / "r.rou.xml").write_text(PARKED)
-    (d / "p.add.xml").write_text(
-        f'<additional><busStop id="bs" lane="{_row(0)[1]}" startPos="100" endPos="200" parkingLength="1000"/>'
-        f'<containerStop id="cs" lane="{_row(2)[1]}" startPos="100" endPos="200" parkingLength="1000"/></additional>')
-    (d / "s.toml").write_text(
-        f'equations = ["{I3_BATTERY}"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n'
-        'additional = ["p.add.xml"]\nbegin = 0\nend = 1000\nstep_length = 1.0\n'
-        'options = ["--no-warnings", "true"]\n[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n')
-    run_scenario(d / "s.toml", d / "live", options=["--fcd-output", str(d / "fcd.xml"), "--precision", "6",
-                                                    "--stop-output", str(d / "stops.xml")])
-    return d
+    return _run_live(tmp_path_factory.mktemp("parkstops"), PARKED,
+                     f'<additional><busStop id="bs" lane="{_row(0)[1]}" startPos="100" endPos="200" '
+                     'parkingLength="1000"/>'
+                     f'<containerStop id="cs" lane="{_row(2)[1]}" startPos="100" endPos="200" '
+                     'parkingLength="1000"/></additional>')
 
 
 @pytest.mark.parametrize("chunk_rows", [None, 7])
