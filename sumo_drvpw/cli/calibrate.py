@@ -119,20 +119,12 @@ def main(args) -> int:
 
 
 def log_columns(paths) -> set[str]:
-    """Column names of the logs (their headers only)."""
-    import pandas as pd
-    import pyarrow.parquet as pq
-
+    """Column names of the logs (their headers only; one that cannot be read here was read,
+    or refused, by the reader)."""
     from sumo_drvpw.data.log import expand_paths
+    from sumo_drvpw.data.stream import column_names
 
-    cols = set()
-    for p in expand_paths(paths):
-        try:
-            cols |= set(pq.read_schema(p).names) if str(p).endswith(".parquet") else \
-                set(pd.read_csv(p, nrows=0).columns)
-        except Exception:  # a header we cannot read here was read (or refused) by the reader
-            continue
-    return cols
+    return {c for p in expand_paths(paths) for c in column_names(p) or ()}
 
 
 def physical(eq, m, candidates):

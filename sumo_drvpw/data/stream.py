@@ -195,6 +195,19 @@ def check_required(path) -> None:
         _validate(pd.DataFrame(columns=names), p)
 
 
+def column_names(path) -> list[str] | None:
+    """The column names of a drive log file (a Parquet file's schema, a CSV file's header),
+    without reading its rows; None when the header cannot be read (reading the file then
+    says why)."""
+    p = Path(path)
+    try:
+        return list(_parquet_file(p).schema_arrow.names if _is_parquet(p)
+                    else map(str, pd.read_csv(p, nrows=0).columns))
+    except (UserError, OSError, ValueError, UnicodeDecodeError, pd.errors.ParserError,
+            pd.errors.EmptyDataError):
+        return None
+
+
 def logged_flows(path, rows: int = BATCH_ROWS) -> frozenset | None:
     """The fuel flows, air flows and fuel trims (:func:`sumo_drvpw.data.powertrain.flow_columns`)
     that hold a value anywhere in a whole file: what its batches choose their fuel flow by,
@@ -203,9 +216,10 @@ def logged_flows(path, rows: int = BATCH_ROWS) -> frozenset | None:
     from sumo_drvpw.data.powertrain import flow_columns
 
     p = Path(path)
+    names = column_names(p)
+    if names is None:
+        return None
     try:
-        names = (_parquet_file(p).schema_arrow.names if _is_parquet(p)
-                 else list(pd.read_csv(p, nrows=0).columns))
         want = [c for c in dict.fromkeys(flow_columns(names))]
         found: set[str] = set()
         if not want:

@@ -248,27 +248,13 @@ def driving_power_of(path) -> str | None:
     """The measured driving power a drive log file's own columns give, in the order
     :func:`sumo_drvpw.data.powertrain.measured_power` tries them (None: none, battery V·I at
     most; also when its header cannot be read)."""
-    from pathlib import Path
+    from sumo_drvpw.data.powertrain import POWER_SOURCES
+    from sumo_drvpw.data.stream import column_names
 
-    import pandas as pd
-
-    from sumo_drvpw.data.powertrain import POWER_SPLIT_COLUMNS
-
-    p = Path(path)
-    try:
-        if p.suffix.lower() == ".parquet":
-            import pyarrow.parquet as pq
-
-            names = set(pq.read_schema(p).names)
-        else:
-            names = set(pd.read_csv(p, nrows=0).columns)
-    except Exception:  # noqa: BLE001 - read already; nothing to compare then
-        return None
-    if "power_w" in names:
-        return "direct (power_w)"
-    if all(c in names for c in POWER_SPLIT_COLUMNS):
-        return "power-split (MG1, MG2, engine)"
-    return "single motor (motor_torque_nm)" if "motor_torque_nm" in names else None
+    names = set(column_names(path) or ())
+    labels = ("direct (power_w)", "power-split (MG1, MG2, engine)", "single motor (motor_torque_nm)",
+              "single motor (motor_torque_nm)")  # POWER_SOURCES but the battery's V·I
+    return next((lab for cols, lab in zip(POWER_SOURCES, labels) if all(c in names for c in cols)), None)
 
 
 def check_one_driving_power(files) -> None:

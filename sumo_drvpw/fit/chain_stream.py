@@ -75,20 +75,10 @@ def batch_rows(paths) -> int:
     """Rows per batch of the chain's passes over the logs ``paths``: :data:`BATCH_VALUES`
     over the widest file's column count, within [:data:`MIN_BATCH_ROWS`, the reader's
     ``BATCH_ROWS``]. A header that cannot be read counts as narrow (its reading says why)."""
-    import pandas as pd
-    import pyarrow.parquet as pq
-
     from sumo_drvpw.data.log import expand_paths
-    from sumo_drvpw.data.stream import BATCH_ROWS
+    from sumo_drvpw.data.stream import BATCH_ROWS, column_names
 
-    width = 1
-    for p in expand_paths(paths):
-        try:
-            n = (len(pq.read_schema(p).names) if p.suffix.lower() == ".parquet"
-                 else len(pd.read_csv(p, nrows=0).columns))
-        except Exception:  # noqa: BLE001 - refused, with the reason, when read
-            continue
-        width = max(width, n)
+    width = max([1] + [len(column_names(p) or ()) for p in expand_paths(paths)])
     return int(min(BATCH_ROWS, max(MIN_BATCH_ROWS, BATCH_VALUES // width)))
 
 
