@@ -115,20 +115,13 @@ def test_streamed_chain_on_a_stepwise_road_load_equals_in_memory(tmp_path, monke
 def test_streamed_chain_refuses_what_the_in_memory_path_refuses(chain_logs, tmp_path, capsys):
     """A load column no file has, and a battery current whose sign is flipped: exit 2 with
     the in-memory path's words, nothing written."""
-    import pandas as pd
-
     folder, eq, _ = chain_logs["battery"]
     for engine in ("memory", "local"):
         out = tmp_path / f"{engine}.toml"
         assert cli_main(["calibrate", str(folder), "--target", "battery", "--equation", str(eq), "--load",
                          "seat_heater_w", "--out", str(out), "--engine", engine]) == 2
         assert "2 files: no load column 'seat_heater_w'" in capsys.readouterr().err and not out.exists()
-    flipped = tmp_path / "flipped"
-    flipped.mkdir()
-    for f in folder.iterdir():
-        d = pd.read_parquet(f) if f.suffix == ".parquet" else pd.read_csv(f)
-        d["battery_current_a"] = -d["battery_current_a"]
-        d.to_parquet(flipped / (f.stem + ".parquet"), row_group_size=700)
+    flipped = planted.flipped_current(folder, tmp_path / "flipped")
     said = {}
     for engine in ("memory", "local"):
         out = tmp_path / f"flipped_{engine}.toml"

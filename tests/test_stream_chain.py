@@ -222,16 +222,22 @@ def test_cli_chain_compare_streams_and_equals_the_memory_engine(chain_logs, kind
     assert said["local"] == said["memory"] and any("unknown (NaN)" in s for s in said["local"])
 
 
+def flipped_current(folder, dest):
+    """A copy of the logs of ``folder`` in ``dest`` (Parquet, row groups of 700 rows) with
+    the battery current's sign flipped."""
+    dest.mkdir()
+    for f in folder.iterdir():
+        df = pd.read_parquet(f) if f.suffix == ".parquet" else pd.read_csv(f)
+        df["battery_current_a"] = -df["battery_current_a"]
+        df.to_parquet(dest / (f.stem + ".parquet"), row_group_size=700)
+    return dest
+
+
 def test_streamed_battery_sign_test_is_on_all_batches(chain_logs, tmp_path):
     """The flipped-current test reads every batch's sums, as the in-memory reader reads the
     whole log: a current whose sign is flipped is refused, naming the files."""
     folder, eq, _ = chain_logs["battery"]
-    flipped = tmp_path / "flipped"
-    flipped.mkdir()
-    for f in folder.iterdir():
-        df = pd.read_parquet(f) if f.suffix == ".parquet" else pd.read_csv(f)
-        df["battery_current_a"] = -df["battery_current_a"]
-        df.to_parquet(flipped / (f.stem + ".parquet"), row_group_size=700)
+    flipped = flipped_current(folder, tmp_path / "flipped")
     eqs = resolve_equations([str(eq)])
     with pytest.raises(UserError, match="falls where") as mem:
         load_measured([flipped], target="battery")
