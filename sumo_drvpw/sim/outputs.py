@@ -17,6 +17,7 @@ import pyarrow.parquet as pq
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import atomic_path, write_figure, write_json, write_parquet, write_text
+from sumo_drvpw.sim import teleport
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, Ledger
 from sumo_drvpw.sim.network import Network
 
@@ -79,6 +80,7 @@ def vehicles_table(ledger: Ledger, names: list[str],
     cols["net_total_j"] = cols["traction_total_j"] + cols["recup_total_j"]
     cols["traction_whpkm"] = _whpkm(cols["traction_total_j"], cols["distance_m"])
     cols["net_whpkm"] = _whpkm(cols["net_total_j"], cols["distance_m"])
+    cols.update(teleport.columns(ledger.veh_teleports[vi], ledger.veh_tele[vi, ei]))
     return table_with_units(cols)
 
 
@@ -96,6 +98,7 @@ def edges_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
     cols["net_total_j"] = cols["traction_total_j"] + cols["recup_total_j"]
     cols["traction_whpkm"] = _whpkm(cols["traction_total_j"], cols["distance_m"])
     cols["net_whpkm"] = _whpkm(cols["net_total_j"], cols["distance_m"])
+    cols.update(teleport.columns(ledger.edge_teleports[ed, eq], ledger.edge_tele[ed, eq]))
     return table_with_units(cols)
 
 
@@ -120,6 +123,8 @@ def classes_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
         cdist[:, e] = np.bincount(k, weights=ledger.edge_dist_eq[:, e], minlength=len(classes))
     rows = {"class": [], "equation": [], "term": [], "traction_energy_j": [], "share": [],
             "recup_energy_j": [], "distance_m": [], "traction_whpkm": []}
+    tcount, tenergy = teleport.by_class(ledger, net, classes)  # per class × equation, each term row
+    rows.update({c: [] for c in teleport.COLUMNS})
     for ki, c in enumerate(classes):
         for e, name in enumerate(names):
             tot = tr[ki, e].sum()
@@ -133,6 +138,8 @@ def classes_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
                 rows["distance_m"].append(cdist[ki, e])
                 rows["traction_whpkm"].append(
                     tr[ki, e, ci] / (cdist[ki, e] * 3.6) if cdist[ki, e] > 0 else np.nan)
+                for col, x in teleport.columns(tcount[ki, e], tenergy[ki, e]).items():
+                    rows[col].append(float(x))
     return table_with_units(rows)
 
 
@@ -227,6 +234,13 @@ def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: boo
            "classes": classes,
            "equations": eqs}
     out.update(extra)
+    net_j = {n: sum(eqs[n]["energy_j"][c]["total"] + eqs[n]["recuperable_energy_j"][c]["total"]
+                    for c in classes) for n in names}
+    out["teleports"], per_eq, warn = teleport.summary(ledger, net, names, classes, net_j)
+    for n in names:
+        eqs[n]["teleports"] = per_eq[n]
+    if warn:
+        out["warnings"] = list(out.get("warnings", [])) + warn
     return out
 
 
