@@ -27,11 +27,12 @@ def teleported(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("teleport")
     fcd = d / "fcd.xml"
-    live = run_scenario(CITY, None, end=END, equations=[PHYS], figures=False,
+    live = run_scenario(CITY, None, end=END, equations=[PHYS], figures=False, period=50,
                         options=["--fcd-output", str(fcd), "--precision", "6", "--time-to-teleport", "5",
                                  "--step-length", "1", "--fcd-output.attributes",
                                  "id,type,speed,lane,pos,x,y,odometer"])
-    rep = process_fcd(fcd, scenario=CITY, out_dir=d / "o", equations=[PHYS], end=END, figures=False)
+    rep = process_fcd(fcd, scenario=CITY, out_dir=d / "o", equations=[PHYS], end=END, figures=False,
+                      period=50)
     rows = read_fcd(fcd).sort_values(["id", "time"], kind="stable")
     raw = pd.read_xml(fcd, xpath=".//vehicle", parser="etree")[["id", "odometer"]]
     raw["k"] = raw.groupby("id").cumcount()
@@ -109,6 +110,19 @@ def test_teleports_are_booked_on_the_edge_put_back_on_and_totals_agree(teleporte
         # the driving energy is what the terms booked, without the jumps
         cats = ["acc", "grade", "aero", "roll", "other"]
         np.testing.assert_allclose(v["net_total_j"], v[[f"{p}_{k}_j" for p in ("traction", "recup") for k in cats]].sum(axis=1))
+        # edgedata.xml: each interval's placements on their edges, (begin, end] as it books steps
+        import xml.etree.ElementTree as ET
+
+        jumps = rows[rows["jump"]].assign(edge=put)
+        tele = [(float(iv.get("begin")), float(iv.get("end")), ed.get("id"), float(ed.get("phys_teleports", 0)),
+                 float(ed.get("phys_teleport_kinetic_j", 0.0)))
+                for iv in ET.fromstring(res.edgedata_xml()).iter("interval") for ed in iv.iter("edge")]
+        tele = pd.DataFrame(tele, columns=["t0", "t1", "edge", "n", "kin"])
+        assert tele["t1"].nunique() == END // 50 and tele["kin"].sum() == pytest.approx(v["teleport_kinetic_j"].sum(), rel=1e-6)
+        for (t0, t1), ivl in tele[tele["n"] > 0].groupby(["t0", "t1"]):
+            want = jumps[(jumps["time"] > t0) & (jumps["time"] <= t1)]["edge"].value_counts().sort_index()
+            np.testing.assert_array_equal(ivl.set_index("edge")["n"].sort_index(), want)
+        assert tele["n"].sum() == len(jumps)
         _print_summary(s, "out")
         said = capsys.readouterr()
         kwh = s["teleports"]["kinetic_j"]["phys"] / 3.6e6

@@ -113,7 +113,7 @@ class Ledger:
         self.edge_tele = np.zeros((n_edges, self.E, 2))
         self.teleports = 0  # accounted vehicles put back on a lane by a teleport's end
         #: cumulative edge totals at interval boundaries: [(time [s], energies, distances,
-        #: times, counts, entered)] (see :meth:`snapshot`)
+        #: times, counts, entered, teleports, their energies)] (see :meth:`snapshot`)
         self.snapshots: list[tuple] = []
         self.n_veh = 0
         self._alloc(capacity)
@@ -188,7 +188,8 @@ class Ledger:
         if self.chain is not None:
             self.chain.snapshot(t)
         self.snapshots.append((float(t), energy.copy(), dist_eq.copy(), etime.copy(),
-                               self.edge_count.copy(), self.edge_entered.copy()))
+                               self.edge_count.copy(), self.edge_entered.copy(),
+                               self.edge_teleports.copy(), self.edge_tele.copy()))
 
     @property
     def edge_trac(self) -> np.ndarray:

@@ -64,6 +64,15 @@ def columns(count, energy) -> dict[str, np.ndarray]:
     return {COLUMNS[0]: np.asarray(count), COLUMNS[1]: energy[..., 0], COLUMNS[2]: energy[..., 1]}
 
 
+def edge_attrs(name: str, count: float, energy) -> list[str]:
+    """edgedata.xml attributes of equation ``name`` on an edge where ``count`` teleports
+    ended in an interval, with their [kinetic, potential] ``energy`` [J] (none without)."""
+    if count <= 0:
+        return []
+    return [f'{name}_teleports="{count:.0f}"', f'{name}_teleport_kinetic_j="{energy[0]:.3f}"',
+            f'{name}_teleport_potential_j="{energy[1]:.3f}"']
+
+
 def by_class(ledger, net, classes: list[str]) -> tuple[np.ndarray, np.ndarray]:
     """Teleports (K, E) and their energies (K, E, 2) [J] per road class of the edge the
     vehicles were put back on."""
