@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.fcd import process_fcd, read_fcd
 from test_sim_fcd import CITY, PHYS, _rise
@@ -16,6 +17,8 @@ from test_sim_fcd import CITY, PHYS, _rise
 pytestmark = pytest.mark.sumo
 
 END, DT = 200, 1.0
+#: an equation with its own mass and a rotating-mass factor: it books the jumps at its mass
+HEAVY = Equation("heavy", {"acc": 1.1, "grade": 1.0, "m_v1": 0.132}, mass_kg=2000.0)
 
 
 @pytest.fixture(scope="module")
@@ -27,11 +30,11 @@ def teleported(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("teleport")
     fcd = d / "fcd.xml"
-    live = run_scenario(CITY, None, end=END, equations=[PHYS], figures=False, period=50,
+    live = run_scenario(CITY, None, end=END, equations=[PHYS, HEAVY], figures=False, period=50,
                         options=["--fcd-output", str(fcd), "--precision", "6", "--time-to-teleport", "5",
                                  "--step-length", "1", "--fcd-output.attributes",
                                  "id,type,speed,lane,pos,x,y,odometer"])
-    rep = process_fcd(fcd, scenario=CITY, out_dir=d / "o", equations=[PHYS], end=END, figures=False,
+    rep = process_fcd(fcd, scenario=CITY, out_dir=d / "o", equations=[PHYS, HEAVY], end=END, figures=False,
                       period=50)
     rows = read_fcd(fcd).sort_values(["id", "time"], kind="stable")
     raw = pd.read_xml(fcd, xpath=".//vehicle", parser="etree")[["id", "odometer"]]
@@ -53,31 +56,32 @@ def test_a_vehicles_energy_balance_closes_with_its_teleports(teleported):
     ½m(v_last² − v_first²) and m·g·(z_last − z_first), live and replayed. The teleports counted
     per vehicle are SUMO's placements (where its odometer jumps). Before the teleport line
     (e5e6b3e), the jumps were nowhere: the cars stood in a jam, were put back at 13.9 m/s and
-    braked from there, booking recuperable energy that had no traction."""
+    braked from there, booking recuperable energy that had no traction. An equation with its
+    own mass books the jumps at that mass, and its term 1.1·acc 1.1 times the balance."""
     live, rep, rows, net = teleported
     g = rows.groupby("id")
     v0, v1 = g["speed"].first(), g["speed"].last()
     placements = g["jump"].sum()
     assert placements.sum() >= 3 and rows.loc[rows["jump"], "speed"].min() > 5.0
-    for res in (live, rep):
-        b = res.vehicles.set_index("vehicle").sort_index()
+    for res, eq, c_acc in ((live, "phys", 1.0), (rep, "phys", 1.0), (live, "heavy", 1.1), (rep, "heavy", 1.1)):
+        b = res.vehicles.query("equation == @eq").set_index("vehicle").sort_index()
         assert len(b) > 40 and b["teleports"].sum() == placements.sum()
         np.testing.assert_array_equal(b["teleports"], placements.reindex(b.index))
-        m = b["mass_kg"]
+        m = b["mass_kg"] if eq == "phys" else pd.Series(2000.0, b.index)
         dke = 0.5 * m * (v1.reindex(b.index) ** 2 - v0.reindex(b.index) ** 2)
-        acc = b["traction_acc_j"] + b["recup_acc_j"]
-        np.testing.assert_allclose(acc + b["teleport_kinetic_j"], dke, rtol=1e-6, atol=1.0)
+        acc = (b["traction_acc_j"] + b["recup_acc_j"]) / c_acc
+        np.testing.assert_allclose(acc + b["teleport_kinetic_j"], dke, rtol=1e-6, atol=1.0, err_msg=eq)
         r = _rise(net, rows).reindex(b.index)
         rise = m * G * (r.z1 - r.z0) + m * G * np.sin(r.theta) * r.v * DT
         grade = b["traction_grade_j"] + b["recup_grade_j"]
-        np.testing.assert_allclose(grade + b["teleport_potential_j"], rise, rtol=1e-4, atol=m.max() * G * 0.01)
+        np.testing.assert_allclose(grade + b["teleport_potential_j"], rise, rtol=1e-4, atol=m.max() * G * 0.01, err_msg=eq)
         moved = b["teleports"] > 0
         assert (b.loc[~moved, ["teleport_kinetic_j", "teleport_potential_j"]] == 0).all().all()
         # the jumps are no rounding: without them the balance misses by up to ½m·(13.9 m/s)²
         assert b.loc[moved, "teleport_kinetic_j"].max() > 0.5 * 1000 * 10.0 ** 2
         assert (b.loc[moved, "teleport_potential_j"].abs() > m[moved] * G * 0.1).any()
-    a = live.vehicles.set_index("vehicle").sort_index()
-    b = rep.vehicles.set_index("vehicle").sort_index()
+    a = live.vehicles.set_index(["vehicle", "equation"]).sort_index()
+    b = rep.vehicles.set_index(["vehicle", "equation"]).sort_index()
     for c in ("teleport_kinetic_j", "teleport_potential_j"):
         np.testing.assert_allclose(b[c], a[c], rtol=1e-6, atol=1.0, err_msg=c)
 
@@ -92,11 +96,12 @@ def test_teleports_are_booked_on_the_edge_put_back_on_and_totals_agree(teleporte
     live, rep, rows, net = teleported
     put = rows.loc[rows["jump"], "lane"].map(lambda ln: net.edge_ids[net.lane_edge[net.lane_index[ln]]])
     for res in (live, rep):
-        v, e, c = res.vehicles, res.edges, res.classes
+        v, e, c = (t[t["equation"] == "phys"] for t in (res.vehicles, res.edges, res.classes))
         got = e.set_index("edge")["teleports"]
         np.testing.assert_array_equal(got[got > 0].sort_index(), put.value_counts().sort_index())
         # classes.parquet: the class × equation figures on each of its term rows (as distance_m)
         assert set(c["class"]) == set(net.classes) and len(c) == len(net.classes) * 5
+        assert len(res.classes) == 2 * len(c)
         assert (c.groupby(["class", "equation"])[["teleports", "teleport_kinetic_j"]].nunique() == 1).all().all()
         per_class = c[c["term"] == "roll"].set_index("class")
         s = res.summary
@@ -139,16 +144,18 @@ def test_fcd_on_dask_books_the_teleports_as_the_serial_replay(teleported, tmp_pa
 
     _, rep, _, _ = teleported
     fcd = rep.summary["source"]["fcd"]
-    res = process_fcd_dask(fcd, tmp_path / "od", scenario=CITY, equations=[PHYS], end=END,
+    res = process_fcd_dask(fcd, tmp_path / "od", scenario=CITY, equations=[PHYS, HEAVY], end=END,
                            buckets=2, workers=1, figures=False)
     s = res.summary
     assert s["teleports"]["count"] == rep.summary["teleports"]["count"] > 0
     for key in ("kinetic_j", "potential_j"):
-        assert s["teleports"][key]["phys"] == pytest.approx(rep.summary["teleports"][key]["phys"], rel=1e-9)
+        for eq in ("phys", "heavy"):
+            assert s["teleports"][key][eq] == pytest.approx(rep.summary["teleports"][key][eq], rel=1e-9)
     cols = ["teleports", "teleport_kinetic_j", "teleport_potential_j"]
     for name, table, key in (("vehicles", rep.vehicles, "vehicle"), ("edges", rep.edges, "edge")):
-        got = pd.read_parquet(tmp_path / "od" / f"{name}.parquet").set_index(key).sort_index()[cols]
-        np.testing.assert_allclose(got.to_numpy(float), table.set_index(key).sort_index()[cols].to_numpy(float),
+        got = pd.read_parquet(tmp_path / "od" / f"{name}.parquet").set_index([key, "equation"]).sort_index()[cols]
+        np.testing.assert_allclose(got.to_numpy(float),
+                                   table.set_index([key, "equation"]).sort_index()[cols].to_numpy(float),
                                    rtol=1e-9, atol=1e-6, err_msg=name)
 
 
@@ -171,7 +178,7 @@ def test_an_accountant_in_a_user_loop_books_the_teleports_as_run(teleported):
     finally:
         close_sumo(conn)
     cols = ["teleports", "teleport_kinetic_j", "teleport_potential_j"]
-    a = live.vehicles.set_index("vehicle").sort_index()
+    a = live.vehicles.query("equation == 'phys'").set_index("vehicle").sort_index()
     b = res.vehicles.set_index("vehicle").sort_index()
     assert (a.index == b.index).all() and a["teleports"].sum() > 0
     np.testing.assert_allclose(b[cols].to_numpy(float), a[cols].to_numpy(float), rtol=1e-12, atol=1e-9)
