@@ -218,7 +218,9 @@ class Accountant(_Listener):
     # -- reading while the simulation runs ----------------------------------------------
     def energy(self, vehicle_id: str) -> dict[str, dict[str, float]]:
         """Energies of a vehicle so far [J]: equation → {acc, grade, aero, roll, other
-        (net per term), traction, recuperable, net}; only equations that apply to it. An
+        (net per term), traction, recuperable, net — the driving energy —, teleports,
+        teleport_kinetic, teleport_potential: the energy jumps of the teleports it ended,
+        apart from driving, sim/teleport.py}; only equations that apply to it. An
         equation with an energy chain adds ``"chain"``: {traction_j, recuperated_j,
         auxiliary_j, net_j [J at the battery] or fuel_j [J], fuel_l [L], co2_kg [kg]}."""
         i = self.stepper.vmap.get(vehicle_id)
@@ -236,7 +238,9 @@ class Accountant(_Listener):
             tr, rc = led.veh_trac[i, e], led.veh_recup[i, e]
             d = {c: float(tr[k] + rc[k]) for k, c in enumerate(LEDGER_CATEGORIES)}
             d.update(traction=float(tr.sum()), recuperable=float(rc.sum()),
-                     net=float(tr.sum() + rc.sum()))
+                     net=float(tr.sum() + rc.sum()), teleports=int(led.veh_teleports[i]),
+                     teleport_kinetic=float(led.veh_tele[i, e, 0]),
+                     teleport_potential=float(led.veh_tele[i, e, 1]))
             out[name] = d
         chain = getattr(led, "chain", None)
         if chain is not None:

@@ -113,10 +113,10 @@ def merge_ledgers(ledgers: list):
             raise RuntimeError("fcd buckets stepped different timesteps")
         for name in ("_edge_closed", "_edge_dist_closed", "_edge_time_closed",
                      "_edge_dist_eq_closed", "edge_count", "edge_entered", "out_of_range",
-                     "lane_clipped"):
+                     "lane_clipped", "edge_teleports", "edge_tele"):
             setattr(out, name, getattr(out, name) + getattr(led, name))
         for name in ("samples", "corrected", "clipped", "position_reads", "position_mismatches",
-                     "flushed_vehicles", "flushed_kept", "load_samples"):
+                     "flushed_vehicles", "flushed_kept", "load_samples", "teleports"):
             setattr(out, name, getattr(out, name) + getattr(led, name))
         out.load_max_kg = max(out.load_max_kg, led.load_max_kg)
         out.snapshots = [(s[0],) + tuple(x + y for x, y in zip(s[1:], o[1:]))

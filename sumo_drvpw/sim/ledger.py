@@ -107,8 +107,13 @@ class Ledger:
         self.edge_count = np.zeros((n_edges, self.E))
         #: accounted vehicles that entered each edge (SUMO's edgeData ``entered``)
         self.edge_entered = np.zeros(n_edges)
+        #: teleports ended on each edge (weighted by each equation's applicability) and their
+        #: [kinetic, potential] energy jumps [J], (edges, E, 2): apart from driving (sim/teleport.py)
+        self.edge_teleports = np.zeros((n_edges, self.E))
+        self.edge_tele = np.zeros((n_edges, self.E, 2))
+        self.teleports = 0  # accounted vehicles put back on a lane by a teleport's end
         #: cumulative edge totals at interval boundaries: [(time [s], energies, distances,
-        #: times, counts, entered)] (see :meth:`snapshot`)
+        #: times, counts, entered, teleports, their energies)] (see :meth:`snapshot`)
         self.snapshots: list[tuple] = []
         self.n_veh = 0
         self._alloc(capacity)
@@ -183,7 +188,8 @@ class Ledger:
         if self.chain is not None:
             self.chain.snapshot(t)
         self.snapshots.append((float(t), energy.copy(), dist_eq.copy(), etime.copy(),
-                               self.edge_count.copy(), self.edge_entered.copy()))
+                               self.edge_count.copy(), self.edge_entered.copy(),
+                               self.edge_teleports.copy(), self.edge_tele.copy()))
 
     @property
     def edge_trac(self) -> np.ndarray:
@@ -237,6 +243,8 @@ class Ledger:
         grow("veh_parked", (cap,), bool, False)  # parked off the lane: not read, not booked
         grow("veh_stand", (cap,), float, 0.0)  # standing since [s] (sim/shutoff.py)
         grow("veh_auto_off", (cap,), float, np.inf)  # its vType's shutOffAutoDuration [s]
+        grow("veh_teleports", (cap,), np.int64, 0)  # teleports it ended (sim/teleport.py)
+        grow("veh_tele", (cap, E, 2))  # their [kinetic, potential] energy jumps [J]
         self.capacity = cap
 
     #: per-vehicle arrays and their empty value (what :meth:`flush` compacts)
@@ -246,7 +254,8 @@ class Ledger:
                    ("veh_keep", False),
                    ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_lane", -2),
                    ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_parked", False),
-                   ("veh_stand", 0.0), ("veh_auto_off", np.inf))
+                   ("veh_stand", 0.0), ("veh_auto_off", np.inf), ("veh_teleports", 0),
+                   ("veh_tele", 0.0))
 
     def add_vehicle(self, vid: str, vtype: str, mass: float, app: np.ndarray,
                     keep: bool, vclass: str = "") -> int:

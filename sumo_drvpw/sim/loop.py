@@ -30,6 +30,7 @@ from sumo_drvpw.sim.network import Network, lane_numbers
 from sumo_drvpw.sim.reader import Reader, reinserted
 from sumo_drvpw.sim.shutoff import ShutOff
 from sumo_drvpw.sim.sumo_start import NewRun, signals_deferred, step_method
+from sumo_drvpw.sim.teleport import put_back
 
 @dataclass
 class Physics:
@@ -448,11 +449,11 @@ class Stepper:
             ledger.veh_pos[vidx] = pos
         else:
             lane, pos = net.own_side_after(ledger.veh_at[vidx], v * dt, self.lane_numbers(ln), pos)
+        prev = ledger.veh_prev_speed[vidx]  # last step's (a teleport's: on the lane it left)
+        ledger.veh_prev_speed[vidx] = v
         if a is None:  # SUMO's definition: (v_t − v_t−1)/Δt, 0 when first seen
-            prev = ledger.veh_prev_speed[vidx]
             a = (v - prev) / dt
             a[np.isnan(a)] = 0.0
-            ledger.veh_prev_speed[vidx] = v
         if angle is None:
             angle = np.zeros(n)
         if raw is not None:
@@ -467,8 +468,8 @@ class Stepper:
                 if d is not None:  # dwelling at a bus stop off the lane: standing there
                     lane[j], pos[j] = d
             on_lane = lane >= 0
-        if placed.any():  # put back by a teleport: its next step drives on from here
-            ledger.veh_at[vidx[placed]] = net.place(lane[placed], pos[placed])
+        if placed.any():  # put back by a teleport: its energy jump booked apart, then driven on
+            put_back(ledger, net, self.eqset.equations, placed, vidx, lane, pos, v, prev)
             on_lane &= ~placed
         if not on_lane.all():  # teleporting, parked: no lane, not booked
             ledger.veh_at[vidx[(lane < 0)], 2] = np.nan  # (its next step starts its rise afresh)

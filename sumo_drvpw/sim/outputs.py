@@ -17,6 +17,7 @@ import pyarrow.parquet as pq
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import atomic_path, write_figure, write_json, write_parquet, write_text
+from sumo_drvpw.sim import teleport
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, Ledger
 from sumo_drvpw.sim.network import Network
 
@@ -79,6 +80,7 @@ def vehicles_table(ledger: Ledger, names: list[str],
     cols["net_total_j"] = cols["traction_total_j"] + cols["recup_total_j"]
     cols["traction_whpkm"] = _whpkm(cols["traction_total_j"], cols["distance_m"])
     cols["net_whpkm"] = _whpkm(cols["net_total_j"], cols["distance_m"])
+    cols.update(teleport.columns(ledger.veh_teleports[vi], ledger.veh_tele[vi, ei]))
     return table_with_units(cols)
 
 
@@ -96,6 +98,7 @@ def edges_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
     cols["net_total_j"] = cols["traction_total_j"] + cols["recup_total_j"]
     cols["traction_whpkm"] = _whpkm(cols["traction_total_j"], cols["distance_m"])
     cols["net_whpkm"] = _whpkm(cols["net_total_j"], cols["distance_m"])
+    cols.update(teleport.columns(ledger.edge_teleports[ed, eq], ledger.edge_tele[ed, eq]))
     return table_with_units(cols)
 
 
@@ -120,6 +123,8 @@ def classes_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
         cdist[:, e] = np.bincount(k, weights=ledger.edge_dist_eq[:, e], minlength=len(classes))
     rows = {"class": [], "equation": [], "term": [], "traction_energy_j": [], "share": [],
             "recup_energy_j": [], "distance_m": [], "traction_whpkm": []}
+    tcount, tenergy = teleport.by_class(ledger, net, classes)  # per class × equation, each term row
+    rows.update({c: [] for c in teleport.COLUMNS})
     for ki, c in enumerate(classes):
         for e, name in enumerate(names):
             tot = tr[ki, e].sum()
@@ -133,6 +138,8 @@ def classes_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
                 rows["distance_m"].append(cdist[ki, e])
                 rows["traction_whpkm"].append(
                     tr[ki, e, ci] / (cdist[ki, e] * 3.6) if cdist[ki, e] > 0 else np.nan)
+                for col, x in teleport.columns(tcount[ki, e], tenergy[ki, e]).items():
+                    rows[col].append(float(x))
     return table_with_units(rows)
 
 
@@ -149,19 +156,21 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
     Equation names are restricted to ``NAME_PATTERN`` (valid XML names); ids are escaped.
     Equations with an energy chain add ``<eq>_battery_{traction,recuperated,auxiliary,net}_kwh``
     or ``<eq>_fuel_l`` and ``<eq>_co2_kg`` (:meth:`sumo_drvpw.sim.chain.ChainLedger.edge_attrs`).
+    Where teleports ended on an edge in the interval: ``<eq>_teleports``,
+    ``<eq>_teleport_kinetic_j``, ``<eq>_teleport_potential_j`` (apart from the driving energy).
     """
     from xml.sax.saxutils import quoteattr
 
     energy_, _, etime_, dist_eq_ = ledger._edges()
-    cur = (float(end), energy_, dist_eq_, etime_, ledger.edge_count, ledger.edge_entered)
+    cur = (float(end), energy_, dist_eq_, etime_, ledger.edge_count, ledger.edge_entered,
+           ledger.edge_teleports, ledger.edge_tele)
     bounds = [s for s in ledger.snapshots if begin < s[0] < end] + [cur]
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              "<!-- sumo-drvpw: driving energy per edge, equation and term (traction [J], "
              "recuperable [J], per vehicle [J], per metre [J/m]) -->",
              # no XSD reference: SUMO validates declared schemas, and ours adds attributes
              "<meandata>"]
-    prev = (float(begin), np.zeros_like(cur[1]), np.zeros_like(cur[2]), np.zeros_like(cur[3]),
-            np.zeros_like(cur[4]), np.zeros_like(cur[5]))
+    prev = (float(begin),) + tuple(np.zeros_like(x) for x in cur[1:])
     cats = [c for c in LEDGER_CATEGORIES]
     chain = getattr(ledger, "chain", None)  # battery/fuel per edge (sim/chain.py, #12)
     if chain is not None:
@@ -170,9 +179,9 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
         chain_prev = np.zeros_like(chain.edge)
     for b in bounds:
         t0, t1 = prev[0], b[0]
-        energy, dist, etime, count, entered = (b[k] - prev[k] for k in range(1, 6))
+        energy, dist, etime, count, entered, tcount, tenergy = (b[k] - prev[k] for k in range(1, 8))
         lines.append(f'    <interval begin="{t0:.2f}" end="{t1:.2f}" id="drvpw">')
-        for i in np.flatnonzero(etime > 0):
+        for i in np.flatnonzero((etime > 0) | (tcount > 0).any(axis=1)):
             attrs = [f'sampledSeconds="{etime[i]:.2f}"', f'entered="{entered[i]:.0f}"']
             for e, name in enumerate(names):
                 tr = energy[i, 0, e]
@@ -185,6 +194,7 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
                 attrs.append(f'{name}_total_perVeh_j="{per_veh:.3f}"')
                 normed = tot / dist[i, e] if dist[i, e] > 0 else 0.0
                 attrs.append(f'{name}_total_normed_jpm="{normed:.6f}"')
+                attrs += teleport.edge_attrs(name, tcount[i, e], tenergy[i, e])
             if chain is not None:
                 attrs += chain.edge_attrs(chain_at[b[0]][i] - chain_prev[i])
             lines.append(f"        <edge id={quoteattr(net.edge_ids[i])} {' '.join(attrs)}/>")
@@ -227,6 +237,13 @@ def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: boo
            "classes": classes,
            "equations": eqs}
     out.update(extra)
+    net_j = {n: sum(eqs[n]["energy_j"][c]["total"] + eqs[n]["recuperable_energy_j"][c]["total"]
+                    for c in classes) for n in names}
+    out["teleports"], per_eq, warn = teleport.summary(ledger, net, names, classes, net_j)
+    for n in names:
+        eqs[n]["teleports"] = per_eq[n]
+    if warn:
+        out["warnings"] = list(out.get("warnings", [])) + warn
     return out
 
 
