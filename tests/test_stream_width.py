@@ -109,3 +109,21 @@ def test_streamed_calibrate_and_compare_of_a_wide_log_bounded_and_equal_to_memor
     doc = cs.comparison().to_json()
     corpus.assert_close_documents(want, doc, RTOL, same_keys=False)
     assert doc["settings"]["percentiles"] == "exact"
+
+
+def test_reservoir_is_the_bottom_k_of_every_batch_added():
+    """compare's reservoir selects once per k/4 waiting samples, not per batch: read at any
+    point, it is the k smallest keys of all batches added so far, with their columns."""
+    from sumo_drvpw.fit.stream_compare import _Reservoir
+
+    rng = np.random.default_rng(2)
+    res, keys = _Reservoir(100, np.zeros(0), {}), []
+    for i, n in enumerate(rng.integers(0, 40, 60)):
+        key = rng.random(n)
+        keys.append(key)
+        res = res.add(key, {"x": key * 2.0, "ok": key < 0.5})
+        if i % 7 == 0:  # read midway: the waiting batches are selected first
+            assert np.array_equal(np.sort(res.key), np.sort(np.concatenate(keys))[:100])
+    want = np.sort(np.concatenate(keys))[:100]
+    assert np.array_equal(np.sort(res.key), want)
+    assert np.array_equal(res.cols["x"], res.key * 2.0) and np.array_equal(res.cols["ok"], res.key < 0.5)
