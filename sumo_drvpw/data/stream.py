@@ -48,10 +48,11 @@ BATCH_ROWS = 500_000
 #: the next batch read meanwhile: about 40 bytes per value), so a wide log is read in fewer
 #: rows (:func:`rows_for`) and the peak does not grow with its width
 BATCH_VALUES = 2_000_000
-#: Values per row a batch holds besides the columns read: the inputs, measured power, masks,
-#: weights and per-trip codes derived from them, and the statistics' temporaries (measured:
-#: about 1.2 kB a row with 10 columns read, 40 values of 8 bytes and their copies)
-DERIVED_VALUES = 30
+#: Values per row counted besides the columns read, for the inputs, measured power, masks,
+#: weights and trip codes derived from them: a narrow log is read in about 100,000 rows a
+#: batch, not 500,000 (calibrate of benchmarks/scale.py's 10 M-row log of 8 columns: peak RSS
+#: ~315 against ~520 MB, the same CPU time; batches of 50,000 rows took 20–100 % more CPU)
+DERIVED_VALUES = 10
 #: ... but at least this many rows per chunk (the per-batch overhead)
 MIN_BATCH_ROWS = 10_000
 #: Longest trip streamed [rows] (about 29 days at 8 Hz); longer ones must be split.
