@@ -241,7 +241,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     from sumo_drvpw.cli.calibrate import MOVING_MPS, declare_measurement
     from sumo_drvpw.data.measured import resolve_equations
     from sumo_drvpw.fit.chain_checks import check_chain
-    from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, batch_rows, calibrate_chain_streamed as fit_chain
+    from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, calibrate_chain_streamed as fit_chain
     from sumo_drvpw.model.vehicles import load_vehicle
 
     check_engine_arguments(args)
@@ -254,8 +254,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
         cands = tuple(resolve_candidates(args.candidates))
     fuel = veh.powertrain.get("fuel", "gasoline") if veh is not None else "gasoline"
     cut = getattr(getattr(eq, "chain", None), "fuel_cut_below_w", None)  # declared: kept
-    # a wide log in fewer rows per batch: the batch's reading is the peak
-    spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut, batch_rows(args.logs))
+    spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut)
     infos = []
 
     def reduce(make):
@@ -298,11 +297,10 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     for w in fit.warnings:
         print(f"warning: {w}")
     def report(tmp):
-        from sumo_drvpw.fit.chain_stream import bounded
         from sumo_drvpw.fit.stream_compare import CompareStats
         from sumo_drvpw.report.comparison import write_comparison_report
 
-        cs = reduce(partial(bounded, partial(CompareStats, [eq], None, target=args.target), spec.batch_rows))
+        cs = reduce(partial(CompareStats, [eq], None, target=args.target))
         ctx = _context(cs, veh, cs.n)
         ctx["calibration"] = {"equation": eq.name, "chain": fit.parameters, "r2": fit.r2,
                               "n": fit.n, "road_load": road}

@@ -7,9 +7,10 @@ already, so a batch of *whole* trips goes through exactly the reader's own path
 sees the same samples as :func:`~sumo_drvpw.data.measured.load_measured`.
 
 Files are read in chunks of ``rows`` (Parquet record batches via pyarrow, CSV chunks via
-pandas). The last trip of a chunk may continue in the next one; its rows are carried over
-until the trip ends (or the file does), so a trip is never cut. Memory is therefore
-O(``rows`` + the longest trip); a trip longer than ``max_trip_rows`` is refused with a
+pandas); :func:`iter_measured` reads fewer rows of a wide file, at most :data:`BATCH_VALUES`
+values of the columns it reads. The last trip of a chunk may continue in the next one; its
+rows are carried over until the trip ends (or the file does), so a trip is never cut.
+Memory is therefore O(``rows`` + the longest trip); a trip longer than ``max_trip_rows`` is refused with a
 ``UserError`` (split it into trips: ``trip_id``). A file without ``trip_id`` is one trip.
 
 A :class:`Part` is a piece of the input that holds whole trips (a file, or a range of
@@ -39,8 +40,21 @@ from sumo_drvpw.errors import UserError
 #: Columns the reader and measured power use; calibrate and compare read these plus the
 #: signals their terms name (extra columns are for the tracer, not read here).
 CANONICAL = frozenset(NUMERIC) | frozenset(FLAGS) | frozenset(DERIVED)
-#: Rows read per chunk [-]: the memory bound besides the longest trip.
+#: Rows read per chunk at most [-] (a narrow log's bound; a wide one's is :data:`BATCH_VALUES`).
 BATCH_ROWS = 500_000
+#: Values (rows × (columns read + :data:`DERIVED_VALUES`)) a batch holds at most: the
+#: streamed reader's peak is its working set of one batch (the Arrow batch, its frame, the
+#: validated copy, the derived inputs and extra signals, what the statistics compute on it,
+#: the next batch read meanwhile: about 40 bytes per value), so a wide log is read in fewer
+#: rows (:func:`rows_for`) and the peak does not grow with its width
+BATCH_VALUES = 2_000_000
+#: Values per row counted besides the columns read, for the inputs, measured power, masks,
+#: weights and trip codes derived from them: a narrow log is read in about 100,000 rows a
+#: batch, not 500,000 (calibrate of benchmarks/scale.py's 10 M-row log of 8 columns: peak RSS
+#: ~315 against ~520 MB, the same CPU time; batches of 50,000 rows took 20–100 % more CPU)
+DERIVED_VALUES = 10
+#: ... but at least this many rows per chunk (the per-batch overhead)
+MIN_BATCH_ROWS = 10_000
 #: Longest trip streamed [rows] (about 29 days at 8 Hz); longer ones must be split.
 MAX_TRIP_ROWS = 20_000_000
 #: Rows a Part of a Parquet file has at least when a file is cut for parallel engines.
@@ -208,6 +222,23 @@ def column_names(path) -> list[str] | None:
         return None
 
 
+def rows_for(width: int, rows: int = BATCH_ROWS) -> int:
+    """Rows per chunk of a file read ``width`` columns wide: :data:`BATCH_VALUES` over the
+    width plus :data:`DERIVED_VALUES`, within [:data:`MIN_BATCH_ROWS`, ``rows``] (``rows``
+    below that minimum is kept)."""
+    return int(min(rows, max(MIN_BATCH_ROWS, BATCH_VALUES // (max(int(width), 0) + DERIVED_VALUES))))
+
+
+def read_width(path, columns=None) -> int:
+    """Columns a chunk of the file ``path`` holds when ``columns`` are wanted (None: all): a
+    Parquet file reads only those it has; a CSV chunk is parsed whole, then cut (:func:`_chunks`).
+    A header that cannot be read counts as none (its reading says why)."""
+    names = column_names(path) or ()
+    if columns is None or not _is_parquet(Path(path)):
+        return len(names)
+    return sum(c in columns for c in names)
+
+
 def logged_flows(path, rows: int = BATCH_ROWS) -> frozenset | None:
     """The fuel flows, air flows and fuel trims (:func:`sumo_drvpw.data.powertrain.flow_columns`)
     that hold a value anywhere in a whole file: what its batches choose their fuel flow by,
@@ -316,6 +347,9 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
         :func:`~sumo_drvpw.data.measured.load_measured`); a battery target's sign test is
         left to the caller, on all batches (``Measured.sign_test``,
         :func:`~sumo_drvpw.data.measured.check_sign_sums`)
+
+    Each chunk holds at most ``rows`` rows and :data:`BATCH_VALUES` values of the columns
+    read (:func:`rows_for` of the Part's :func:`read_width`): a wide log in fewer rows.
     """
     from sumo_drvpw.data.measured import measure
 
@@ -325,6 +359,7 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
         columns = set(columns) | needed_columns(options.measurement)
     stem = Path(part.path).stem
     check_required(part.path)
+    rows = rows_for(read_width(part.path, columns), rows)  # a wide log in fewer rows
     # the fuel flow chosen once for the file, not per batch (a battery target: is there an engine)
     logged = logged_flows(part.path, rows) if target != "wheel" else None
     for df, off in whole_trips(part, rows, max_trip_rows, columns, categorical=True):

@@ -16,8 +16,9 @@ chain's prediction is the design times the coefficients, so Σw·e² is the fit'
 Σw·P̂ the coefficients times Σw·X. The same numbers as the in-memory fit to rounding
 (tests/test_chain_stream.py: 1e-9 relative).
 
-Memory: one batch (of :func:`batch_rows`: fewer rows for a wide log), the factors (a few (k+1)² matrices per grid value) and the distinct
-values of the quantile bins (braking powers within 1/4096 of an order statistic's value).
+Memory: one batch (the reader's: fewer rows of a wide log, :func:`sumo_drvpw.data.stream.rows_for`),
+the factors (a few (k+1)² matrices per grid value) and the distinct values of the quantile
+bins (braking powers within 1/4096 of an order statistic's value).
 ``--efficiency power|speed-power`` is not streamed (its knots are quantiles of the
 driving power over speed classes): the command fits it in memory.
 """
@@ -38,13 +39,6 @@ from sumo_drvpw.fit.stream import _add_counts
 
 #: the braking powers' bins: their float64 bits shifted right by this (12 mantissa bits kept)
 KEY_SHIFT = 40
-#: Values (rows × columns) a batch of the chain's passes holds at most: the peak is the
-#: reader's working set of one batch of every column (the Arrow batch, its frame, the
-#: validated copy, the derived inputs, the next batch read meanwhile: about 40 bytes per
-#: value), not the chain's factors (a few MB), so a wide log is read in fewer rows
-BATCH_VALUES = 2_000_000
-#: ... but at least this many rows per batch (the per-batch overhead)
-MIN_BATCH_ROWS = 10_000
 #: A battery chain's scan keeps the arrays its later passes read (driving power, target,
 #: weights, loads, mask: 25 B a row and 8 per load) up to this many bytes, so those passes
 #: need not read the logs again (``keep``; beyond it they do)
@@ -57,8 +51,7 @@ class ChainSpec:
     the road load whose driving power is the chain's input where the log has no measured
     driving power (None: the log's must be used); logged ``loads``; ``hvac`` {column,
     setpoint_c} or None; ``candidates`` of the stepwise road load fitted in the same pass
-    (None: none); the fuel and a declared overrun cut-off of a fuel chain; ``batch_rows``:
-    rows per batch at most (:func:`batch_rows`; None: the engine's)."""
+    (None: none); the fuel and a declared overrun cut-off of a fuel chain."""
 
     target: str
     equation: object = None
@@ -68,18 +61,6 @@ class ChainSpec:
     moving_mps: float = 0.5
     fuel: str = "gasoline"
     fuel_cut_below_w: float | None = None
-    batch_rows: int | None = None
-
-
-def batch_rows(paths) -> int:
-    """Rows per batch of the chain's passes over the logs ``paths``: :data:`BATCH_VALUES`
-    over the widest file's column count, within [:data:`MIN_BATCH_ROWS`, the reader's
-    ``BATCH_ROWS``]. A header that cannot be read counts as narrow (its reading says why)."""
-    from sumo_drvpw.data.log import expand_paths
-    from sumo_drvpw.data.stream import BATCH_ROWS, column_names
-
-    width = max([1] + [len(column_names(p) or ()) for p in expand_paths(paths)])
-    return int(min(BATCH_ROWS, max(MIN_BATCH_ROWS, BATCH_VALUES // width)))
 
 
 def quantile_of_order(order, n: int, q: float) -> float:
@@ -168,11 +149,6 @@ class ChainStats:
 
     def columns(self):
         return None  # every column: the fuel flow, air flow and fuel trims are found by name
-
-    @property
-    def batch_rows(self) -> int | None:
-        """Rows per batch at most (the engine reads no more; None: its own)."""
-        return self.spec.batch_rows
 
     # ----------------------------------------------------------------- one batch
     def add(self, m) -> "ChainStats":
@@ -497,14 +473,6 @@ class ChainStats:
         """:func:`sumo_drvpw.fit.chain_checks.fitted_ranges` from the streamed min/max."""
         r = self.ranges
         return {} if r[0] > r[1] else {"power_range_w": r[:2], "speed_range_mps": r[2:]}
-
-
-def bounded(make, rows: int | None):
-    """``make()`` read in batches of at most ``rows`` (its ``batch_rows``): e.g. the report's
-    comparison of a chain calibration, in the chain's batches (picklable with ``partial``)."""
-    st = make()
-    st.batch_rows = rows
-    return st
 
 
 def replay(make, kept) -> ChainStats:

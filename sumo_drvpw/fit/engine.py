@@ -7,8 +7,10 @@ measured power the reader's way, and add each batch to an accumulator
 :class:`~sumo_drvpw.fit.stream.CompareStats`). The accumulators of the Parts are merged in
 Part order, so the local and the Dask engine add the same numbers in the same order.
 
-* ``local``: one process, Parts one after the other; memory is one batch (about
-  ``BATCH_ROWS`` rows plus the longest trip) plus the accumulator, whatever the rows.
+* ``local``: one process, Parts one after the other; memory is one batch (at most
+  ``BATCH_ROWS`` rows and ``BATCH_VALUES`` values of the columns read, plus the longest
+  trip: :func:`~sumo_drvpw.data.stream.iter_measured`) plus the accumulator, whatever the
+  rows and columns of the logs.
 * ``dask``: one task per Part on a Dask cluster: ``scheduler`` = the address of an
   existing one (``tcp://host:8786``; a dask-jobqueue or Kubernetes cluster prints it),
   else a ``LocalCluster`` of ``workers`` processes. Dask is an optional extra:
@@ -78,7 +80,6 @@ def part_stats(part: Part, make, vehicle=None, options=None, rows: int = BATCH_R
     with _one_blas_thread():
         st = make()
         cols = st.columns() if hasattr(st, "columns") else None
-        rows = min(rows, getattr(st, "batch_rows", None) or rows)  # an accumulator's own bound
         batches = iter_measured(part, vehicle, options, rows, columns=cols,
                                 target=getattr(st, "target", "wheel"))
         for m in (prefetched(batches) if PREFETCH else batches):

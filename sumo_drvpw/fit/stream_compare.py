@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -49,22 +49,43 @@ def _keys(ids, starts: np.ndarray, n: int) -> np.ndarray:
 
 @dataclass
 class _Reservoir:
-    """Bottom-k sample by key: columns (dict name → array) of the k smallest keys."""
+    """Bottom-k sample by key: columns (dict name → array) of the k smallest keys. Batches
+    wait in ``pending`` until k/4 samples do, then are selected from at once (not the whole
+    sample copied per batch); ``key`` and ``cols`` are read with the waiting ones selected."""
 
     k: int
-    key: np.ndarray
-    cols: dict
+    _key: np.ndarray
+    _cols: dict
+    pending: list = field(default_factory=list)
+    waiting: int = 0
 
     def add(self, key: np.ndarray, cols: dict) -> "_Reservoir":
-        allk = np.concatenate([self.key, key])
-        allc = {c: np.concatenate([self.cols[c], cols[c]]) if c in self.cols else cols[c]
-                for c in cols}
+        self.pending.append((key, cols))
+        self.waiting += len(key)
+        return self.flush() if self.waiting >= self.k // 4 else self
+
+    def flush(self) -> "_Reservoir":
+        if not self.pending:
+            return self
+        allk = np.concatenate([self._key] + [k for k, _ in self.pending])
+        allc = {c: np.concatenate(([self._cols[c]] if c in self._cols else []) + [p[c] for _, p in self.pending])
+                for c in self.pending[-1][1]}
+        self.pending, self.waiting = [], 0
         if len(allk) > self.k:
             keep = np.argpartition(allk, self.k - 1)[:self.k]
             keep.sort()
             allk = allk[keep]
             allc = {c: v[keep] for c, v in allc.items()}
-        return _Reservoir(self.k, allk, allc)
+        self._key, self._cols = allk, allc
+        return self
+
+    @property
+    def key(self) -> np.ndarray:
+        return self.flush()._key
+
+    @property
+    def cols(self) -> dict:
+        return self.flush()._cols
 
 
 @dataclass
@@ -249,8 +270,8 @@ class CompareStats:
             self.ref_cats = _categories(pw[self.reference])
         # the reservoir: only samples whose key is below the k-th smallest so far can enter
         key = _keys(uniq, starts, n)
-        if self.res is not None and len(self.res.key) >= self.k:
-            enter = np.flatnonzero(key < self.res.key.max())
+        if self.res is not None and len(self.res._key) >= self.k:  # (the selected ones' max: a bound)
+            enter = np.flatnonzero(key < self.res._key.max())
         else:
             enter = np.arange(n)
         cols = {"meas": meas[enter], "v": v[enter], "dt": dt[enter]}
