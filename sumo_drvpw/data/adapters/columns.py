@@ -10,6 +10,7 @@ Mapping file::
                               # "datetime" parses timestamps (time_format = "%Y-%m-%d %H:%M:%S")
     na_values = ["-", "N/A"]  # cells read as missing
     keep_unmapped = true      # keep other columns as snake_case extras (default true)
+    skip_rows = 2             # CSV lines before the header (an app's title lines; default 0)
 
     [columns."Speed"]         # source column label
     name = "speed_mps"        # canonical or extra name; the suffix must fit the unit
@@ -43,7 +44,10 @@ from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midni
 
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
-OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped"}
+OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped",
+           "skip_rows"}
+#: lines of a CSV searched for a mapped label that is not in the header (the hint of the error)
+HEADER_SEARCH_LINES = 50
 ENTRY = {"name", "unit", "scale", "role"}
 SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 
@@ -62,6 +66,10 @@ def load_mapping(path) -> dict:
     for k in opts:
         if k not in OPTIONS:
             raise UserError(f"{p}: unknown option 'options.{k}' (known: {', '.join(sorted(OPTIONS))})")
+    skip = opts.get("skip_rows", 0)
+    if not isinstance(skip, int) or isinstance(skip, bool) or skip < 0:
+        raise UserError(f"{p}: options.skip_rows must be a whole number ≥ 0 (lines before the "
+                        f"header), got {skip!r}")
     if "keep_unmapped" in opts and not isinstance(opts["keep_unmapped"], bool):
         raise UserError(f"{p}: options.keep_unmapped must be true or false, got "
                         f"{opts['keep_unmapped']!r}")
@@ -73,6 +81,11 @@ def load_mapping(path) -> dict:
     entries = {}
     for label, e in cols.items():
         key = f"columns.{label!r}" if not label.isidentifier() else f"columns.{label}"
+        if label.strip() != label:  # header labels are read stripped: a label copied with the
+            label = label.strip()   # header's own leading space (' Speed (km/h)') names the same
+            if label in cols or label in entries:
+                raise UserError(f"{p}: {key} and columns.{label!r} name the same source column "
+                                "(labels are read without their surrounding spaces)")
         if not isinstance(e, dict) or "name" not in e:
             raise UserError(f"{p}: {key} needs a table with 'name' (and 'unit')")
         for k in e:
@@ -111,7 +124,7 @@ def load_mapping(path) -> dict:
     return {"path": p, "sep": str(opts.get("sep", ",")), "encoding": str(opts.get("encoding", "utf-8")),
             "decimal": str(opts.get("decimal", ".")), "time_format": opts.get("time_format"),
             "na_values": [str(x) for x in na], "keep_unmapped": bool(opts.get("keep_unmapped", True)),
-            "columns": entries}
+            "skip_rows": skip, "columns": entries}
 
 
 def _check_text_options(p, opts: dict, entries: dict) -> None:
@@ -177,8 +190,44 @@ def _read_table(path: Path, m: dict) -> pd.DataFrame:
         if len(df) == 0:
             raise UserError(f"{path}: no data rows")
         return df
-    return read_csv_strict(path, sep=m["sep"], encoding=m["encoding"], decimal=m["decimal"],
-                           dtype=str, keep_default_na=False, na_filter=False)
+    try:
+        return read_csv_strict(path, sep=m["sep"], encoding=m["encoding"], decimal=m["decimal"],
+                               dtype=str, keep_default_na=False, na_filter=False,
+                               skiprows=m.get("skip_rows", 0) or None)
+    except UserError as e:  # title lines of another width above the header: say where it is
+        hint = _skip_hint(path, m)
+        if hint:
+            raise UserError(f"{e}{hint}") from None
+        raise
+
+
+def _skip_hint(path: Path, m: dict) -> str:
+    """' (… set options.skip_rows = N)' when a mapped label sits on a line below the one read
+    as the header, else ''."""
+    for label in m["columns"]:
+        line = _header_line_of(path, m, label)
+        if line is not None and line != m.get("skip_rows", 0) + 1:
+            return (f" ('{label}' is on line {line}: the header is there, below {line - 1} other "
+                    f"line(s); set options.skip_rows = {line - 1} in {m['path']})")
+    return ""
+
+
+def _header_line_of(path: Path, m: dict, label: str) -> int | None:
+    """The 1-based line among the first :data:`HEADER_SEARCH_LINES` of a CSV whose cells hold
+    ``label`` (a header below an app's title lines), or None."""
+    if path.suffix.lower() in (".parquet", ".pq"):
+        return None
+    try:
+        with open(path, encoding=m["encoding"], errors="replace") as f:
+            for i, line in enumerate(f, 1):
+                if i > HEADER_SEARCH_LINES:
+                    break
+                cells = [c.strip().strip('"').strip().lstrip("\ufeff") for c in line.split(m["sep"])]
+                if label in cells:
+                    return i
+    except OSError:
+        return None
+    return None
 
 
 def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
@@ -190,6 +239,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
         if label not in raw.columns:
             hint = (f" (only one column '{raw.columns[0][:40]}': wrong sep {m['sep']!r}?)"
                     if raw.shape[1] == 1 else "")
+            hint = _skip_hint(path, m) or hint
             raise UserError(f"{path}: missing column '{label}' named in {m['path']}{hint}")
     na = tuple(m["na_values"])
     out: dict[str, pd.Series] = {}

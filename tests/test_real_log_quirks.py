@@ -1,0 +1,54 @@
+"""Quirks of real public drive logs a new user met (docs/adapters.md "Data quirks"),
+each reproduced on a small synthetic file: an app's title lines above the CSV header,
+header labels with a leading space copied into the mapping, …"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sumo_drvpw.data.adapters import read
+from sumo_drvpw.errors import UserError
+
+# BlueDriver's export (and others): title lines above the header, labels after ', '
+TITLED = ("BlueDriver Data Log,,\n"
+          "07/16/2017, 2017 2:47:57 PM,\n"
+          "Time (s), Engine RPM (rpm), Vehicle Speed (km/h)\n"
+          "0, , \n"
+          "1.5,838,36\n"
+          "3,814,72\n")
+MAP = ('[columns."Time (s)"]\nname = "time_s"\n'
+       '[columns." Vehicle Speed (km/h)"]\nname = "speed_mps"\nunit = "km/h"\n')
+
+
+def _write(tmp_path, name, text):
+    p = tmp_path / name
+    p.write_text(text, encoding="utf-8")
+    return p
+
+
+def test_mapping_label_with_the_headers_leading_space_names_the_column(tmp_path):
+    """A label copied verbatim from a ', '-separated header (' Vehicle Speed (km/h)') is the
+    column the reader sees stripped ('Vehicle Speed (km/h)'), not a missing one."""
+    src = _write(tmp_path, "log.csv", TITLED.split("\n", 2)[2])
+    df, rep = read("columns", [src], columns=_write(tmp_path, "m.toml", MAP))
+    np.testing.assert_allclose(df["speed_mps"], [10.0, 20.0])   # 36, 72 km/h
+    assert rep["dropped"] == {"NaN speed": 1}                   # the row of blank ' ' cells
+    both = MAP + '[columns."Vehicle Speed (km/h)"]\nname = "gps_speed_mps"\nunit = "km/h"\n'
+    with pytest.raises(UserError, match="name the same source column"):
+        read("columns", [src], columns=_write(tmp_path, "m2.toml", both))
+
+
+def test_title_lines_above_the_header_skip_rows_and_the_hint(tmp_path):
+    src = _write(tmp_path, "log.csv", TITLED)
+    with pytest.raises(UserError, match=r"on line 3.*set options.skip_rows = 2 in .*m.toml"):
+        read("columns", [src], columns=_write(tmp_path, "m.toml", MAP))
+    df, _ = read("columns", [src], columns=_write(tmp_path, "s.toml", "[options]\nskip_rows = 2\n" + MAP))
+    np.testing.assert_allclose(df["time_s"], [1.5, 3.0])
+    np.testing.assert_allclose(df["engine_rpm_rpm"], [838, 814])
+    one_wide = _write(tmp_path, "one.csv", "My logger v2\nTime (s),Vehicle Speed (km/h)\n0,36\n1,72\n")
+    with pytest.raises(UserError, match=r"set options.skip_rows = 1"):  # a parser error, hinted
+        read("columns", [one_wide], columns=_write(tmp_path, "m.toml", MAP))
+    for bad in ("-1", "true", "1.5", '"2"'):
+        with pytest.raises(UserError, match="options.skip_rows must be a whole number"):
+            read("columns", [src], columns=_write(tmp_path, "b.toml", f"[options]\nskip_rows = {bad}\n" + MAP))
