@@ -225,7 +225,7 @@ def _header_line_of(path: Path, m: dict, label: str) -> int | None:
                 cells = [c.strip().strip('"').strip().lstrip("\ufeff") for c in line.split(m["sep"])]
                 if label in cells:
                     return i
-    except OSError:
+    except (OSError, ValueError, LookupError):  # unreadable in that encoding: reading it says why
         return None
     return None
 
