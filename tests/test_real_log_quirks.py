@@ -52,3 +52,47 @@ def test_title_lines_above_the_header_skip_rows_and_the_hint(tmp_path):
     for bad in ("-1", "true", "1.5", '"2"'):
         with pytest.raises(UserError, match="options.skip_rows must be a whole number"):
             read("columns", [src], columns=_write(tmp_path, "b.toml", f"[options]\nskip_rows = {bad}\n" + MAP))
+
+
+# A petrol car's Torque Pro log (yudhi-chen/OBD_viewer): speed and the app's fuel flow, no
+# driving power; the user first runs the wheel-level commands on it
+def _fuel_log(tmp_path):
+    t = np.arange(0.0, 120.0, 1.0)
+    v = 10.0 + 5.0 * np.sin(t / 10.0)
+    rows = "\n".join(f"trip,{a:g},{b:.3f},{1.0 + 0.2 * b:.3f}" for a, b in zip(t, v))
+    return _write(tmp_path, "fuel.csv", "trip_id,time_s,speed_mps,fuel_flow_rate_hour_lph\n" + rows + "\n")
+
+
+@pytest.mark.parametrize("argv,want", [
+    (["calibrate"], "calibrate its fuel chain with `sumo-drvpw calibrate LOG --vehicle V --target fuel"),
+    (["compare", "--equation", "vsp_spec"], "then compare or diagnose with --target fuel"),
+    (["diagnose"], "calibrate its fuel chain with"),
+    (["calibrate", "--target", "fuel"], "give it with --equation (vsp_spec"),
+    (["calibrate", "--target", "fuel", "--engine", "memory"], "give it with --equation (vsp_spec"),
+])
+def test_a_fuel_log_without_driving_power_is_told_what_it_can_do(tmp_path, capsys, argv, want):
+    from sumo_drvpw.cli import main as cli_main
+
+    log = _fuel_log(tmp_path)
+    out = tmp_path / ("o.toml" if argv[0] == "calibrate" else "o")
+    code = cli_main([argv[0], str(log), *argv[1:], "--vehicle", "prius3", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "no measured power" in err and "it holds fuel_flow_rate_hour_lph" in err and want in err
+    assert not out.exists()
+
+
+def test_no_driving_power_crosses_a_task_boundary_whole():
+    """A Dask task's refusal is pickled to the driver: it stays a NoDrivingPower with its targets."""
+    import pickle
+
+    from sumo_drvpw.errors import NoDrivingPower
+    from sumo_drvpw.fit.engine import guarded, unguarded
+
+    def refuse():
+        raise NoDrivingPower("x.csv: no measured power", ("fuel",))
+
+    with pytest.raises(NoDrivingPower) as e:
+        unguarded(pickle.loads(pickle.dumps(guarded(refuse))))
+    assert e.value.targets == ("fuel",) and str(e.value) == "x.csv: no measured power"
+    assert pickle.loads(pickle.dumps(e.value)).targets == ("fuel",)

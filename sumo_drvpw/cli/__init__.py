@@ -14,7 +14,7 @@ import signal
 import sys
 import warnings
 
-from sumo_drvpw.errors import OutputExists, UserError
+from sumo_drvpw.errors import NoDrivingPower, OutputExists, UserError
 
 #: sub-command → (module, one-line help)
 COMMANDS = {
@@ -291,6 +291,21 @@ def note_counts(counts: dict) -> None:
               "keeps closer to the elevation, a fusion over driven distance (fused:1000m) keeps it")
 
 
+def _driving_power_hint(e: NoDrivingPower, args) -> str:
+    """What a log without a driving power can still do, in the command's flags: an energy
+    chain's road load from --equation, or the fuel target the log holds."""
+    target = getattr(args, "target", None)
+    if target in ("battery", "fuel") and getattr(args, "equation", None) is None:
+        return ("; the chain needs a road load to sit on: give it with --equation (vsp_spec: the "
+                "vehicle file's [body]; roadload_spec: its published A + B·v + C·v²; or an equation "
+                "calibrated on logs with a driving power)")
+    if "fuel" in e.targets and target in (None, "wheel"):
+        return ("; calibrate its fuel chain with `sumo-drvpw calibrate LOG --vehicle V --target fuel "
+                "--equation vsp_spec|roadload_spec|EQ --out CHAIN.toml`, then compare or diagnose with "
+                "--target fuel --equation CHAIN.toml")
+    return ""
+
+
 class _Terminated(KeyboardInterrupt):
     """SIGTERM, raised where Ctrl-C (SIGINT) would be: the run stops the same clean way."""
 
@@ -378,6 +393,10 @@ def main(argv: list[str] | None = None) -> int:
             return rc
     except OutputExists as e:
         print(f"sumo-drvpw {args.command}: error: {_one_line(e)}; give --force to replace it",
+              file=sys.stderr)
+        return 2
+    except NoDrivingPower as e:
+        print(f"sumo-drvpw {args.command}: error: {_as_typed(_one_line(e), args)}{_driving_power_hint(e, args)}",
               file=sys.stderr)
         return 2
     except UserError as e:
