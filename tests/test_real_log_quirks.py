@@ -96,3 +96,68 @@ def test_no_driving_power_crosses_a_task_boundary_whole():
         unguarded(pickle.loads(pickle.dumps(guarded(refuse))))
     assert e.value.targets == ("fuel",) and str(e.value) == "x.csv: no measured power"
     assert pickle.loads(pickle.dumps(e.value)).targets == ("fuel",)
+
+
+# LeafSpy (a Nissan Leaf's phone logger, euw15/NissanLeafSpy_DataCapture): a signed speed —
+# backing up is negative —, −3.6 km/h logged for 'no reading' while the car regenerates at
+# speed, and status columns that are text in some files and numbers in others
+LEAF_MAP = ('[options]\ntime_unit = "datetime"\n'
+            '[columns."Date/Time"]\nname = "time_s"\n'
+            '[columns."Speed"]\nname = "speed_mps"\nunit = "km/h"\n')
+
+
+def _leaf(tmp_path, name, speeds, status=None):
+    rows = [f"05/20/2017 14:{7 + (5 * i) // 60:02d}:{(5 * i) % 60:02d},{v},{'' if status is None else status[i]}"
+            for i, v in enumerate(speeds)]
+    return _write(tmp_path, name, "Date/Time,Speed,GPS Status\n" + "\n".join(rows) + "\n")
+
+
+def test_a_signed_speed_backing_up_is_read_as_reversing(tmp_path):
+    m = _write(tmp_path, "m.toml", LEAF_MAP)
+    fwd = [0.0, 10.0, 20.0, 30.0, 30.0, 20.0, 10.0, 0.0, 5.0, 10.0, 10.0] + [30.0] * 30 + [10.0, 0.0, 0.0]
+    src = _leaf(tmp_path, "park.csv", fwd[:8] + [-0.5, -1.3, -0.7] + fwd[11:])
+    df, rep = read("columns", [src], columns=m)
+    np.testing.assert_allclose(df["speed_mps"].iloc[8:11], np.array([0.5, 1.3, 0.7]) / 3.6)
+    assert df["reverse"].tolist() == [False] * 8 + [True] * 3 + [False] * 33
+    assert any("3 sample(s) with a negative speed" in n and "reversing" in n for n in rep["files"][0]["notes"])
+    for speeds, why in (([-x for x in fwd], "mostly negative: a wrong sign"),
+                        (fwd[:8] + [-50.0] + fwd[9:], "faster than a car backs up")):
+        with pytest.raises(UserError, match=r"outside \[0, 100\] m/s: wrong unit or sign\?"):
+            read("columns", [_leaf(tmp_path, "bad.csv", speeds)], columns=m)
+
+
+def test_a_repeated_negative_speed_is_a_no_reading_value_not_reversing(tmp_path):
+    speeds = [0.0, 10.0, 20.0, 30.0, 43.5, -3.6, -3.6, -3.6, 43.5, 38.0, 30.0, 20.0, 10.0, 5.0, 0.0,
+              0.0, 10.0, 20.0, 30.0, 40.0, 40.0, 40.0, 40.0, 40.0, 40.0, 40.0, 40.0, 40.0, 40.0, 0.0]
+    src = _leaf(tmp_path, "sentinel.csv", speeds)
+    with pytest.raises(UserError, match=r"'no reading' value: every negative speed, 3 sample\(s\).*na_values"):
+        read("columns", [src], columns=_write(tmp_path, "m.toml", LEAF_MAP))
+    own = LEAF_MAP.replace('unit = "km/h"\n', 'unit = "km/h"\nna_values = [-3.6]\n')
+    df, rep = read("columns", [src], columns=_write(tmp_path, "own.toml", own))
+    assert len(df) == 27 and rep["dropped"] == {"NaN speed": 3} and "reverse" not in df
+    assert any("'Speed': 3 cell(s) held its 'no reading' value (-3.6)" in n for n in rep["files"][0]["notes"])
+    with pytest.raises(UserError, match=r"columns.Speed.na_values must be a number or text"):
+        read("columns", [src], columns=_write(tmp_path, "b.toml", own.replace("[-3.6]", "[true]")))
+
+
+def test_a_column_text_in_one_file_and_numbers_in_another_is_kept_as_text(tmp_path):
+    """Before: the Parquet writer failed with a traceback (ArrowTypeError: expected bytes,
+    got a 'float' object) on LeafSpy's 'GPS Status'."""
+    from sumo_drvpw.cli import main as cli_main
+
+    d = tmp_path / "logs"
+    d.mkdir()
+    speeds = [0.0, 10.0, 20.0, 10.0, 0.0]
+    _leaf(d, "a.csv", speeds, status=["none", "none", "fix", "fix", "none"])
+    _leaf(d, "b.csv", speeds, status=[0, 1, 1, 1, 0])
+    m = _write(tmp_path, "m.toml", LEAF_MAP)
+    out = tmp_path / "leaf.parquet"
+    assert cli_main(["import", "columns", str(d), "--columns", str(m), "--out", str(out)]) == 0
+    import pandas as pd
+
+    df = pd.read_parquet(out)
+    assert df["gps_status"].tolist() == ["none", "none", "fix", "fix", "none", "0.0", "1.0", "1.0", "1.0", "0.0"]
+    from sumo_drvpw.cli.import_ import read_report
+
+    assert any("'gps_status' is text in 1 file(s) (a.csv) and numbers in others" in n
+               for n in read_report(out)["notes"])

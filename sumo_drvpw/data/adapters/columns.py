@@ -17,6 +17,8 @@ Mapping file::
     unit = "km/h"             # converted to SI (see _common.UNITS)
     scale = -1                # optional extra factor (e.g. flip a current's sign)
     role = "response"         # optional: condition | load | response (drive-log spec)
+    na_values = [-3.6]        # optional: this column's own 'no reading' values (numbers in
+                              # the file's unit, or texts), read as missing and counted
 
     [columns."Trip"]
     name = "trip_id"          # text; without it trip_id = file stem
@@ -48,7 +50,7 @@ OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values"
            "skip_rows"}
 #: lines of a CSV searched for a mapped label that is not in the header (the hint of the error)
 HEADER_SEARCH_LINES = 50
-ENTRY = {"name", "unit", "scale", "role"}
+ENTRY = {"name", "unit", "scale", "role", "na_values"}
 SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 
 
@@ -103,6 +105,13 @@ def load_mapping(path) -> dict:
         if not isinstance(scale, (int, float)) or isinstance(scale, bool) or not math.isfinite(scale):
             raise UserError(f"{p}: {key}.scale must be a number, got {scale!r}")
         entries[label] = _entry(p, key, name, unit, float(scale))
+        if "na_values" in e:
+            own = e["na_values"] if isinstance(e["na_values"], list) else [e["na_values"]]
+            if not own or any(isinstance(x, bool) or not isinstance(x, (str, int, float)) for x in own):
+                raise UserError(f"{p}: {key}.na_values must be a number or text, or a list of them, "
+                                f"got {e['na_values']!r}")
+            entries[label]["na_text"] = tuple(str(x).strip() for x in own if isinstance(x, str))
+            entries[label]["na_num"] = tuple(float(x) for x in own if not isinstance(x, str))
         if "role" in e:
             from sumo_drvpw.data.roles import check_role
 
@@ -274,7 +283,15 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
                                 "not a date/time")
             out["time_s"] = _seconds(t, m["time_format"], rep)
         else:
-            out[e["name"]] = numeric(s, path, label, na) * e["factor"] + e["offset"]
+            x = numeric(s, path, label, na + e.get("na_text", ()))
+            own = x.isin(e.get("na_num", ())) | (raw[label].astype(str).str.strip().isin(e.get("na_text", ()))
+                                               & ~raw[label].astype(str).str.strip().isin(na))
+            if own.any():
+                rep["notes"].append(f"column '{label}': {int(own.sum())} cell(s) held its 'no reading' value "
+                                    f"({', '.join(map(str, e.get('na_num', ()) + e.get('na_text', ())))}): "
+                                    "read as missing")
+                x = x.where(~own)
+            out[e["name"]] = x * e["factor"] + e["offset"]
     names = unique_names(list(out))
     df = pd.DataFrame(dict(zip(names, out.values())), index=raw.index)
     if "trip_id" in df:
