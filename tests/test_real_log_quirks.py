@@ -161,3 +161,27 @@ def test_a_column_text_in_one_file_and_numbers_in_another_is_kept_as_text(tmp_pa
 
     assert any("'gps_status' is text in 1 file(s) (a.csv) and numbers in others" in n
                for n in read_report(out)["notes"])
+
+
+def test_a_folder_where_one_file_backs_up_reads_as_a_drive_log(tmp_path):
+    """The reverse flag of one file is 'not set' in the others, in the import and in a log
+    whose flag column has gaps (before: 'column reverse must be boolean, got None')."""
+    import pandas as pd
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.data.log import read_log
+
+    d = tmp_path / "logs"
+    d.mkdir()
+    fwd = [0.0, 10.0, 20.0, 30.0] + [30.0] * 30 + [10.0, 0.0]
+    _leaf(d, "a.csv", fwd[:2] + [-0.5, -1.0] + fwd[4:])
+    _leaf(d, "b.csv", fwd)
+    out = tmp_path / "leaf.parquet"
+    assert cli_main(["import", "columns", str(d), "--columns", str(_write(tmp_path, "m.toml", LEAF_MAP)),
+                     "--out", str(out)]) == 0
+    log = read_log(out)
+    assert log.counts["excluded_reverse"] == 2 and pd.read_parquet(out)["reverse"].dtype == bool
+    gappy = pd.read_parquet(out).astype({"reverse": object})
+    gappy.loc[gappy["trip_id"] == "b", "reverse"] = None
+    gappy.to_parquet(tmp_path / "gappy.parquet")
+    assert read_log(tmp_path / "gappy.parquet").counts["excluded_reverse"] == 2

@@ -244,7 +244,7 @@ def _check_flags(df: pd.DataFrame, p: Path) -> None:
         if pd.api.types.is_bool_dtype(col):
             df[c] = col.fillna(False).astype(bool)
             continue
-        s = col.astype(str).str.strip().str.lower()
+        s = col.astype(object).where(col.notna(), "").astype(str).str.strip().str.lower()  # NA: not set
         mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True,
                    "0.0": False, "yes": True, "no": False, "nan": False, "": False,
                    "none": False, "<na>": False}

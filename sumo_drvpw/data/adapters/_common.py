@@ -467,6 +467,9 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
         _refuse_infinite(f, r)
     df = pd.concat(frames, ignore_index=True, sort=False)
     df = order_columns(df)
+    for c in ("brake", "reverse"):  # a flag one file sets (a car backing up): not set in the others
+        if c in df:
+            df[c] = df[c].astype("boolean").fillna(False).astype(bool)
     mixed = _text_in_some_files(df, frames, reports)
     dropped: dict[str, int] = {}
     for r in reports:
