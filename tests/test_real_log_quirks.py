@@ -185,3 +185,31 @@ def test_a_folder_where_one_file_backs_up_reads_as_a_drive_log(tmp_path):
     gappy.loc[gappy["trip_id"] == "b", "reverse"] = None
     gappy.to_parquet(tmp_path / "gappy.parquet")
     assert read_log(tmp_path / "gappy.parquet").counts["excluded_reverse"] == 2
+
+
+def test_a_standstill_that_draws_driving_power_is_a_lost_speed_signal(tmp_path):
+    """LeafSpy logged speed 0 for minutes while the battery gave 74 kW and took 13 kW back
+    (euw15/NissanLeafSpy_DataCapture, 2017-10-31): such a 'standstill' is driving. Its whole
+    stretch is left out (its low-power samples are cruising, not auxiliaries) and counted; a
+    real stop drawing a heater's 6 kW, one spike, and a charging stop are not."""
+    from sumo_drvpw.data.charging import DRIVE_MIN_W, speed_dropout_mask
+    from sumo_drvpw.data.measured import load_measured
+
+    n = 400
+    t = np.arange(n) * 1.0
+    v = np.full(n, 2.0)                                       # slow: no km/h-like jumps
+    p = np.full(n, 8000.0)
+    v[50:100], p[50:100] = 0.0, 6000.0                       # a stop with the heater on
+    v[120:130], p[120:130] = 0.0, 500.0
+    p[125] = 40000.0                                          # one spike
+    v[200:300] = 0.0                                          # speed lost while driving:
+    p[200:300] = np.where(np.arange(100) % 4 == 0, 60000.0, np.where(np.arange(100) % 4 == 1, -13000.0, 4000.0))
+    v[330:360], p[330:360] = 0.0, -40000.0                   # a fast charger
+    m = speed_dropout_mask(p, v, np.zeros(n, int))
+    assert np.flatnonzero(m).tolist() == list(range(200, 300)) and DRIVE_MIN_W > 7000.0
+    rows = "\n".join(f"T,{a:g},{b:g},360,{c / 360:.4f}" for a, b, c in zip(t, v, p))
+    log = _write(tmp_path, "bev.csv", "trip_id,time_s,speed_mps,battery_voltage_v,battery_current_a\n" + rows + "\n")
+    for target in ("battery", "wheel"):
+        mm = load_measured([log], "bmw_i3", target=target)
+        assert mm.log.counts["excluded_speed_dropout"] == 100
+        assert not mm.usable[200:300].any() and mm.usable[50:100].all()
