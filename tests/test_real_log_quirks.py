@@ -213,3 +213,20 @@ def test_a_standstill_that_draws_driving_power_is_a_lost_speed_signal(tmp_path):
         mm = load_measured([log], "bmw_i3", target=target)
         assert mm.log.counts["excluded_speed_dropout"] == 100
         assert not mm.usable[200:300].any() and mm.usable[50:100].all()
+
+
+def test_a_few_glitch_values_out_of_range_are_named_as_such(tmp_path):
+    from sumo_drvpw.data.log import read_log
+
+    n = 300
+    amb = np.full(n, 25.0)
+    amb[[40, 41]] = 95.0                                       # LeafSpy's 203 °F
+    rows = "\n".join(f"T,{i},5.0,{a:g}" for i, a in enumerate(amb))
+    p = _write(tmp_path, "a.csv", "trip_id,time_s,speed_mps,ambient_c\n" + rows + "\n")
+    with pytest.raises(UserError, match=r"of the 300 values read with it, 2 are outside \(95\), the rest in "
+                                        r"\[25, 25\].*na_values"):
+        read_log(p)
+    rows = "\n".join(f"T,{i},5.0,{a + 273.15:g}" for i, a in enumerate(np.full(n, 25.0)))
+    k = _write(tmp_path, "k.csv", "trip_id,time_s,speed_mps,ambient_c\n" + rows + "\n")
+    with pytest.raises(UserError, match=r"in K\? subtract 273.15"):                # a wrong unit
+        read_log(k)
