@@ -230,3 +230,22 @@ def test_a_few_glitch_values_out_of_range_are_named_as_such(tmp_path):
     k = _write(tmp_path, "k.csv", "trip_id,time_s,speed_mps,ambient_c\n" + rows + "\n")
     with pytest.raises(UserError, match=r"in K\? subtract 273.15"):                # a wrong unit
         read_log(k)
+
+
+def test_small_trips_keep_their_error_but_do_not_swamp_the_mean():
+    """A folder of LeafSpy files holds files logged while parked: a trip of 0.002 kWh predicted
+    at 0.04 kWh (+1600 %) made compare's mean per-trip error 53 % where the trips that drove
+    scored 14 %."""
+    from sumo_drvpw.fit.trip_energy import SMALL_TRIP_SHARE, trip_energy_doc
+    from sumo_drvpw.report.format import partial_trip_lines
+
+    kwh = 3.6e6
+    doc = trip_energy_doc(["a", "b", "c", "parked"], np.array([2.0, 3.0, 4.0, 0.002]) * kwh,
+                          np.array([2.2, 2.7, 4.0, 0.036]) * kwh)
+    assert doc["trips"]["parked"]["error"] == pytest.approx(17.0)          # kept per trip
+    assert doc["small_trips"] == ["parked"] and doc["small_trip_share"] == SMALL_TRIP_SHARE
+    assert doc["mean_abs_error"] == pytest.approx((0.1 + 0.1 + 0.0) / 3)
+    assert doc["max_abs_error"] == pytest.approx(0.1)
+    assert any(line.startswith("**Small trips**: 1 trip(s)") and "parked" in line for line in partial_trip_lines(doc))
+    even = trip_energy_doc(["a", "b"], np.array([2.0, 3.0]) * kwh, np.array([2.2, 2.7]) * kwh)
+    assert "small_trips" not in even and partial_trip_lines(even) == []
