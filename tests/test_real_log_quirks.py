@@ -249,3 +249,15 @@ def test_small_trips_keep_their_error_but_do_not_swamp_the_mean():
     assert any(line.startswith("**Small trips**: 1 trip(s)") and "parked" in line for line in partial_trip_lines(doc))
     even = trip_energy_doc(["a", "b"], np.array([2.0, 3.0]) * kwh, np.array([2.2, 2.7]) * kwh)
     assert "small_trips" not in even and partial_trip_lines(even) == []
+
+
+def test_a_continuation_file_without_header_is_named_as_such(tmp_path):
+    """LeafSpy continues a log in a '_2' file without its header (4 of 209 files)."""
+    m = _write(tmp_path, "m.toml", LEAF_MAP)
+    cont = _write(tmp_path, "log_2.csv", "04/06/2017 8:14:52,0.0,\n04/06/2017 8:14:57,2.7,\n")
+    with pytest.raises(UserError, match=r"missing column 'Date/Time'.*its first line is data, not a header: "
+                                        r"'04/06/2017 8:14:52,0.0.*put the header line of its other files above it"):
+        read("columns", [cont], columns=m)
+    other = _write(tmp_path, "other.csv", "Zeit,Tempo\n0,1\n1,2\n")
+    with pytest.raises(UserError, match=r"missing column 'Date/Time' named in .*m.toml$"):
+        read("columns", [other], columns=m)

@@ -221,6 +221,25 @@ def _skip_hint(path: Path, m: dict) -> str:
     return ""
 
 
+def _no_header_hint(raw: pd.DataFrame) -> str:
+    """' (… no header …)' when what was read as the header is mostly numbers or dates (a
+    logger's continuation file, written without the header of its first file), else ''."""
+    cells = [str(c) for c in raw.columns]
+    data = sum(_is_number(c) or not pd.isna(pd.to_datetime(c, errors="coerce", format="mixed")) for c in cells)
+    if len(cells) < 2 or data < 0.5 * len(cells):
+        return ""
+    return (f" (its first line is data, not a header: '{','.join(cells[:3])[:60]},…' — a logger's "
+            "continuation file? put the header line of its other files above it)")
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
 def _header_line_of(path: Path, m: dict, label: str) -> int | None:
     """The 1-based line among the first :data:`HEADER_SEARCH_LINES` of a CSV whose cells hold
     ``label`` (a header below an app's title lines), or None."""
@@ -248,7 +267,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
         if label not in raw.columns:
             hint = (f" (only one column '{raw.columns[0][:40]}': wrong sep {m['sep']!r}?)"
                     if raw.shape[1] == 1 else "")
-            hint = _skip_hint(path, m) or hint
+            hint = _skip_hint(path, m) or _no_header_hint(raw) or hint
             raise UserError(f"{path}: missing column '{label}' named in {m['path']}{hint}")
     na = tuple(m["na_values"])
     out: dict[str, pd.Series] = {}
