@@ -245,6 +245,12 @@ def read_options(args, equations=()):
         raise UserError(f"--negative-speed-tolerance / --speed-unit: {e}") from None
 
 
+#: share of a log's samples left out as steeper than any road above which its elevation is
+#: read as noise (a phone's GPS altitude: 6.7 % on a flat coastal Torque Pro trip, ±150 m;
+#: none on the shared i3, JLU and Prius logs)
+NOISY_ELEVATION_SHARE = 0.02
+
+
 def note_counts(counts: dict) -> None:
     """Print what the log reader changed or assumed (e.g. clipped standstill noise)."""
     n = int(counts.get("clipped_negative_speed", 0) or 0)
@@ -278,9 +284,14 @@ def note_counts(counts: dict) -> None:
     n = int(counts.get("excluded_grade_outlier", 0) or 0)
     if n:
         lim = float(counts.get("grade_outlier_limit", 0.35))
+        share = n / max(int(counts.get("rows", 0) or 0), 1)
         print(f"note: {n} sample(s) with a grade steeper than {100 * lim:.0f} % left out: no road is that "
               f"steep; an elevation glitch (GPS altitude settling or jumping) put it there "
-              f"(source: {counts.get('grade_source', '?')})")
+              f"(source: {counts.get('grade_source', '?')})"
+              + (f"; at {100 * share:.1f} % of the samples the elevation is noise, not glitches: its noise is "
+                 "in the grade of the samples kept too, booked as climbs and descents (see the grade term's "
+                 "energy share in compare); where the roads are flat, read the logs without elevation_m"
+                 if share >= NOISY_ELEVATION_SHARE else ""))
     n = int(counts.get("grade_elevation_gap_trips", 0) or 0)
     if n:
         gaps = sorted((counts.get("grade_elevation_gap_m") or {}).items(), key=lambda tg: -abs(tg[1]))[:10]
