@@ -23,3 +23,19 @@ class OutputExists(UserError):
 
     The CLI adds how to replace it anyway (``--force``); library code never names flags.
     """
+
+
+class NoDrivingPower(UserError):
+    """A log without a measured driving power (power_w, motor torque, power-split signals,
+    battery V·I) where one is needed.
+
+    ``targets`` are the energy targets the log's columns do hold (``"fuel"`` for a fuel or
+    mass air flow): the CLI adds the command that uses them; library code never names flags.
+    """
+
+    def __init__(self, message: str, targets: tuple = ()):
+        super().__init__(message)
+        self.targets = tuple(targets)
+
+    def __reduce__(self):  # pickled whole (a Dask task's refusal reaches the driver as it was)
+        return (NoDrivingPower, (str(self), self.targets))

@@ -12,7 +12,7 @@ import sys
 from functools import partial
 from pathlib import Path
 
-from sumo_drvpw.errors import UserError
+from sumo_drvpw.errors import NoDrivingPower, UserError
 
 ENGINES = ("local", "dask", "memory")
 
@@ -273,8 +273,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
         road = f"road-load equation {eq.name} ({eq.path or 'built in'})"
     else:
         if src is None:
-            if st.wheel_error:  # as in memory: the driving power's own refusal
-                raise UserError(st.wheel_error)
+            if st.wheel_error:  # as in memory: the driving power's own refusal (the CLI adds --equation)
+                raise NoDrivingPower(st.wheel_error)
             raise UserError(f"--target {args.target}: {st.where} logs no driving power (power_w, motor "
                             "torque, the power-split signals), only battery V·I, so the road load cannot be "
                             "told apart from the chain's losses; give its road load with --equation (e.g. "

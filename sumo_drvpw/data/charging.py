@@ -1,4 +1,7 @@
-"""External charging inside a drive log: energy into the traction battery while the car stands.
+"""Standstill stretches of a drive log that are no standstill: external charging (energy into
+the traction battery while the car stands, below) and a lost speed signal
+(:func:`speed_dropout_mask`: the speed reads 0 while the measured power drives the car,
+counted as ``excluded_speed_dropout``).
 
 A battery-electric car that stands still cannot recuperate: its wheels deliver nothing, and
 its auxiliaries (12 V net, heater, A/C, pumps) *draw* power. A standstill stretch whose
@@ -64,3 +67,27 @@ def charging_mask(battery_w, speed_mps, time_s, trip_codes, min_w: float = CHARG
     stats = pd.DataFrame({"span": g["t"].max() - g["t"].min(), "median": g["p"].median()})
     charging = stats.index[(stats["span"] >= min_s) & (stats["median"] < -min_w)]
     return stand & np.isin(seg, charging.to_numpy())
+
+
+#: battery power above this at standstill is driving [W]: more than a standing car's
+#: auxiliaries draw at their worst (a resistive cabin heater 5–7 kW, an A/C compressor 3–5 kW,
+#: battery conditioning, 12 V), the power of driving at 50–100 km/h
+DRIVE_MIN_W = 15000.0
+
+
+def speed_dropout_mask(power_w, speed_mps, trip_codes, min_w: float = DRIVE_MIN_W) -> np.ndarray:
+    """True on the samples of standstill stretches (runs of a trip with speed < 0.1 m/s) in
+    which the measured power exceeds ``min_w`` on at least two samples: the car was driving
+    while its speed read 0 (a logger that lost the speed signal, as LeafSpy does for minutes),
+    so none of the stretch's samples is a standstill (its low-power samples are cruising).
+    One spike does not decide; charging (power flowing in) never exceeds it."""
+    p = np.asarray(power_w, float)
+    v = np.asarray(speed_mps, float)
+    codes = np.asarray(trip_codes)
+    if p.size == 0:
+        return np.zeros(0, bool)
+    stand = np.isfinite(v) & (v < STANDSTILL_MPS)
+    new = np.r_[True, (stand[1:] != stand[:-1]) | (codes[1:] != codes[:-1])]
+    seg = np.cumsum(new) - 1
+    high = np.bincount(seg, weights=(stand & (p > min_w)).astype(float), minlength=int(seg[-1]) + 1)
+    return stand & (high[seg] >= 2)

@@ -244,7 +244,7 @@ def _check_flags(df: pd.DataFrame, p: Path) -> None:
         if pd.api.types.is_bool_dtype(col):
             df[c] = col.fillna(False).astype(bool)
             continue
-        s = col.astype(str).str.strip().str.lower()
+        s = col.astype(object).where(col.notna(), "").astype(str).str.strip().str.lower()  # NA: not set
         mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True,
                    "0.0": False, "yes": True, "no": False, "nan": False, "": False,
                    "none": False, "<na>": False}
@@ -320,9 +320,12 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
             x = df[c].to_numpy(float, na_value=np.nan)
             bad = (x < lo) | (x > hi)
             if bad.any():
-                i = int(np.flatnonzero(bad)[0])
-                raise UserError(f"{p}: column '{c}' is {x[i]:g} at row {i}, outside "
-                                f"[{lo:g}, {hi:g}] {unit}: {hint}")
+                i, ok = int(np.flatnonzero(bad)[0]), np.isfinite(x) & ~bad
+                few = ok.any() and bad.sum() <= 0.01 * ok.sum()  # a few glitches among good values
+                raise UserError(f"{p}: column '{c}' is {x[i]:g} at row {i}, outside [{lo:g}, {hi:g}] {unit}: "
+                                + (f"of the {int(bad.sum() + ok.sum())} values read with it, {int(bad.sum())} are outside ({', '.join(f'{u:g}' for u in np.unique(x[bad])[:4])}"
+                                   f"), the rest in [{x[ok].min():g}, {x[ok].max():g}]: a logger's glitch or 'no reading' "
+                                   "value? read them as missing (the import columns mapping's na_values)" if few else hint))
     t = df["time_s"].to_numpy(float)
     trip = trip_codes_of(df["trip_id"])  # integer codes: neighbour comparisons without strings
     same = trip[1:] == trip[:-1]

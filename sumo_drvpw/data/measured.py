@@ -129,6 +129,14 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
         chg = charging_mask(p, x.v, log.df["time_s"].to_numpy(float), trip_codes_of(log.df["trip_id"]))
         log.counts["excluded_charging"] = int((chg & usable).sum())
         usable &= ~chg
+    if target in ("battery", "wheel"):  # standing while the power drives: the speed dropped out
+        from sumo_drvpw.data.charging import speed_dropout_mask
+        from sumo_drvpw.data.trips import trip_codes_of
+
+        lost = speed_dropout_mask(p, x.v, trip_codes_of(log.df["trip_id"]))
+        if lost.any():
+            log.counts["excluded_speed_dropout"] = int((lost & usable).sum())
+        usable &= ~lost
     measurement = log.options.measurement
     if measurement is not None and not measurement.identity:
         from sumo_drvpw.data.corrections import apply_measurement

@@ -165,6 +165,9 @@ def exclusions(counts: dict) -> str:
             label = f"|grade| > {counts.get('grade_outlier_limit', '?')} rad ({counts.get('grade_source', 'grade')})"
         elif what == "brake":
             label = "braking"
+        elif what == "speed_dropout":  # data/charging.py speed_dropout_mask
+            label = ("speed 0 while the measured power drives the car (over 15 kW: the speed was not logged "
+                     "there, and without it no acceleration, grade or drag can be fitted)")
         else:
             label = what.replace("_", " ")
         parts.append(f"{label} {int(v)}")

@@ -42,7 +42,7 @@ import re
 import numpy as np
 
 from sumo_drvpw.model.constants import RPM
-from sumo_drvpw.errors import UserError
+from sumo_drvpw.errors import NoDrivingPower, UserError
 
 
 def planetary_mg1_speed(ice_rad_s, ring_rad_s, sun_teeth: float, ring_teeth: float):
@@ -134,9 +134,14 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
     present = [all(c in df for c in cols) for cols in POWER_SOURCES]
     for f, cols in _each_file(log, df):  # a file that has none is refused, as read alone
         if not any(all(c in cols for c in s) for s in POWER_SOURCES):
-            raise UserError(f"{f}: no measured power: the log needs 'power_w', or the power-split columns "
-                            f"({', '.join(POWER_SPLIT_COLUMNS)}), or 'motor_torque_nm', or "
-                            "'battery_voltage_v' and 'battery_current_a'")
+            flows = [c for c in flow_columns(sorted(_header_of(f) | cols)) if not c.endswith("_pct")]
+            raise NoDrivingPower(
+                f"{f}: no measured power: the log needs 'power_w', or the power-split columns "
+                f"({', '.join(POWER_SPLIT_COLUMNS)}), or 'motor_torque_nm', or "
+                "'battery_voltage_v' and 'battery_current_a'"
+                + (f"; it holds {', '.join(flows[:3])}, the engine's fuel or air flow: a fuel-chain target, "
+                   "calibrated on a road-load equation" if flows else ""),
+                targets=("fuel",) if flows else ())
     codes = trip_codes_of(df["trip_id"])
     n = int(codes.max()) + 1
     pick = np.full(n, -1)
@@ -201,6 +206,16 @@ def _power_of(kind: int, log, vehicle, window_s) -> tuple[np.ndarray, str]:
             else "discharge")
     return (battery_power(df["battery_voltage_v"], df["battery_current_a"], conv),
             f"battery V·I (current positive = {conv})")
+
+
+def _header_of(f) -> frozenset:
+    """The column names of the file ``f`` (a streamed batch reads only the columns it uses:
+    what else the file holds is in its header), or none when ``f`` is no readable file."""
+    from pathlib import Path
+
+    from sumo_drvpw.data.stream import column_names
+
+    return frozenset(column_names(f) or ()) if Path(str(f)).is_file() else frozenset()
 
 
 def _each_file(log, df) -> list[tuple[str, frozenset]]:

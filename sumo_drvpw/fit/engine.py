@@ -33,7 +33,7 @@ from functools import partial
 import numpy as np
 
 from sumo_drvpw.data.stream import BATCH_ROWS, PART_ROWS, Part, iter_measured, plan
-from sumo_drvpw.errors import UserError
+from sumo_drvpw.errors import NoDrivingPower, UserError
 from sumo_drvpw.fileio import signals_blocked
 
 ENGINES = ("local", "dask")
@@ -295,8 +295,9 @@ class Refused:
     """A task's UserError carried back as its result (:func:`guarded`): a bad input is the
     user's, not a task failure, so a Dask worker logs no "Compute Failed" block for it."""
 
-    def __init__(self, message: str):
+    def __init__(self, message: str, targets: tuple | None = None):
         self.message = message
+        self.targets = targets  # a NoDrivingPower's: what the log holds instead (None: another error)
 
 
 def guarded(fn, *args, **kwargs):
@@ -304,12 +305,14 @@ def guarded(fn, *args, **kwargs):
     try:
         return fn(*args, **kwargs)
     except UserError as e:
-        return Refused(str(e))
+        return Refused(str(e), e.targets if isinstance(e, NoDrivingPower) else None)
 
 
 def unguarded(result):
     """A task's result; a :class:`Refused` raises its UserError here, in the driver."""
     if isinstance(result, Refused):
+        if result.targets is not None:
+            raise NoDrivingPower(result.message, result.targets)
         raise UserError(result.message)
     return result
 

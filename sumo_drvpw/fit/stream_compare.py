@@ -548,15 +548,12 @@ def _corr(mom: Moments, cats: list, cmin: np.ndarray, cmax: np.ndarray) -> dict:
 
 def _trip_block(trip_e: dict, net: bool) -> dict:
     """:func:`sumo_drvpw.fit.compare.trip_energy` (``net``: ``trip_net_energy``) from sums."""
-    trips, errs = {}, []
-    for t, (pm, pp, nm, npd) in trip_e.items():
-        em, ep = (nm, npd) if net else (pm, pp)
-        err = ep / em - 1.0 if em != 0.0 else math.nan
-        trips[t] = {"measured_j": em, "predicted_j": ep, "error": err}
-        if math.isfinite(err):
-            errs.append(abs(err))
-    return {"mean_abs_error": float(np.mean(errs)) if errs else math.nan,
-            "max_abs_error": float(np.max(errs)) if errs else math.nan, "trips": trips}
+    from sumo_drvpw.fit.trip_energy import trip_energy_doc
+
+    names = list(trip_e)
+    em = [trip_e[t][2] if net else trip_e[t][0] for t in names]
+    ep = [trip_e[t][3] if net else trip_e[t][1] for t in names]
+    return trip_energy_doc(names, em, ep)  # as in memory (small trips, NaN where none measured)
 
 
 def _streamed_comparison_class():

@@ -86,11 +86,21 @@ def partial_trip_lines(trip_doc: dict | None,
     """One line naming the trips whose per-trip energies are partial (more than
     ``partial_trip_share`` of their measured energy, or of their time without a measured
     power, on left-out samples: fit/trip_energy.py ``partial_share``), if any; ``energies``
-    names what covers only the rest."""
-    if not trip_doc or not trip_doc.get("partial_trips"):
+    names what covers only the rest. And one naming the small trips the mean and worst
+    per-trip error leave out (fit/trip_energy.py ``SMALL_TRIP_SHARE``), if any."""
+    if not trip_doc:
         return []
-    trips = trip_doc["trips"]
-    parts = [f"{t} ({partial_trip_flag(trips[t])[len('partial: '):]})" for t in trip_doc["partial_trips"]]
-    return [f"**Partial trips**: more than {100 * trip_doc['partial_trip_share']:.0f} % of the measured energy "
-            f"(or of the time without a measured power) of {len(parts)} trip(s) lies on left-out samples, so "
-            f"their {energies} cover only the rest: {'; '.join(parts)}."]
+    out = []
+    if trip_doc.get("partial_trips"):
+        trips = trip_doc["trips"]
+        parts = [f"{t} ({partial_trip_flag(trips[t])[len('partial: '):]})" for t in trip_doc["partial_trips"]]
+        out.append(f"**Partial trips**: more than {100 * trip_doc['partial_trip_share']:.0f} % of the measured "
+                   f"energy (or of the time without a measured power) of {len(parts)} trip(s) lies on left-out "
+                   f"samples, so their {energies} cover only the rest: {'; '.join(parts)}.")
+    small = trip_doc.get("small_trips") or []
+    if small:  # fit/trip_energy.py SMALL_TRIP_SHARE
+        out.append(f"**Small trips**: {len(small)} trip(s) measured under {100 * trip_doc['small_trip_share']:.0f} % "
+                   f"of the median trip's energy ({', '.join(small[:8])}{', …' if len(small) > 8 else ''}): their "
+                   "errors are kept per trip but left out of the mean and worst per-trip error, which a near-zero "
+                   "energy would swamp.")
+    return out

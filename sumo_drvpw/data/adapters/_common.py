@@ -156,14 +156,32 @@ def numeric(series: pd.Series, file, column: str, na_tokens=("-", "")) -> pd.Ser
     if pd.api.types.is_numeric_dtype(series):
         return series.astype(float)
     s = series.astype(object)
-    is_na = s.isna() | s.map(lambda x: isinstance(x, str) and x.strip() in na_tokens)
-    conv = pd.to_numeric(s.where(~is_na, np.nan), errors="coerce")
-    bad = conv.isna() & ~is_na
+    # numbers parse at once, in numpy; only the cells that do not (usually none) are tested
+    # against the tokens (per-cell and per-Series work was most of a wide log's import time)
+    arr = s.to_numpy()
+    conv = pd.to_numeric(s, errors="coerce").to_numpy(float, copy=True)
+    tokens = {str(t).strip() for t in na_tokens}
+    is_na = pd.isna(arr)
+    check = ~is_na & (np.isnan(conv) | any(_is_number(t) for t in tokens))
+    for i in np.flatnonzero(check):
+        x = arr[i]
+        if isinstance(x, str) and x.strip() in tokens:
+            is_na[i] = True
+    conv[is_na] = np.nan
+    bad = np.isnan(conv) & ~is_na
     if bad.any():
-        i = int(np.flatnonzero(bad.to_numpy())[0])
+        i = int(np.flatnonzero(bad)[0])
         raise UserError(f"{file}: column '{column}' is not numeric: data row {i} holds "
                         f"{s.iloc[i]!r}")
-    return conv.astype(float)
+    return pd.Series(conv, index=series.index)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
 
 
 def extra_values(series: pd.Series, file, column: str, notes: list, factor: float = 1.0,
@@ -355,7 +373,8 @@ def clean_time_and_speed(df: pd.DataFrame, path, report: dict) -> pd.DataFrame:
     (:func:`align_channels`), so dropping the rows without speed loses no channel.
     A sample whose time equals the latest kept time is a 'duplicate timestamp' (the first
     one is kept); one whose time is earlier is 'time going backwards'. Speed must be in
-    [0, 100] m/s after conversion, else a UserError names file and row (wrong unit).
+    [0, 100] m/s after conversion, else a UserError names file and row (wrong unit), except a
+    signed speed backing up (:func:`_reversing`): its magnitude, flagged ``reverse``, noted.
     """
     df = align_channels(df, report)
     df = drop(df, df["time_s"].isna(), "NaN time", report)
@@ -368,17 +387,50 @@ def clean_time_and_speed(df: pd.DataFrame, path, report: dict) -> pd.DataFrame:
     back = t < prev_max
     df = drop(df, back, "time going backwards", report)
     v = df["speed_mps"].to_numpy(float)
-    bad = (v < -0.01) | (v > 100.0)
+    back_up = _reversing(v)
+    bad = ((v < -0.01) & ~back_up) | (v > 100.0)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
+        same = int((v == v[i]).sum())
         raise UserError(f"{path}: speed {v[i]:.3g} m/s at data row {df.index[i]} is outside "
-                        "[0, 100] m/s: wrong unit or sign?")
+                        "[0, 100] m/s: wrong unit or sign?"
+                        + (f" (or a logger's 'no reading' value: every negative speed, {same} sample(s), "
+                           "holds exactly it; give it as the speed column's na_values)"
+                           if v[i] < 0 and same >= 3 and same == int((v < -0.01).sum()) else ""))
     df = df.copy()
+    if back_up.any():  # a signed speed (CAN, LeafSpy): backing up is driving, in reverse
+        rev = df["reverse"].astype("boolean").fillna(False).to_numpy(bool) if "reverse" in df else False
+        df["reverse"] = back_up | rev
+        report["notes"].append(f"{int(back_up.sum())} sample(s) with a negative speed (down to {v.min():.3g} m/s) "
+                               "read as reversing: speed taken as its magnitude, flag 'reverse' set (left out "
+                               "of calibration)")
+        v = np.abs(v)
     df["speed_mps"] = np.clip(v, 0.0, None)
     report["kept"] = int(len(df))
     if len(df) == 0:
         raise UserError(f"{path}: no sample left after dropping {report['dropped']}")
     return df
+
+
+#: fastest backing up read as reversing [m/s] (36 km/h: above a car's top speed in reverse)
+REVERSE_MAX_MPS = 10.0
+#: largest share of the moving samples a signed speed may have below zero to read as
+#: reversing (more: the speed's sign is wrong, the whole log is refused)
+REVERSE_MAX_SHARE = 0.1
+
+
+def _reversing(v: np.ndarray) -> np.ndarray:
+    """Samples of a signed speed that are backing up: below −0.01 m/s, no faster than
+    :data:`REVERSE_MAX_MPS`, in a log that mostly drives forward (at most
+    :data:`REVERSE_MAX_SHARE` of its moving samples below zero), and not all one value (a
+    logger's 'no reading' value repeated, as LeafSpy's −3.6 km/h while the car regenerates
+    at speed); else none."""
+    neg = v < -0.01
+    moving = np.abs(v) > 0.01
+    if not neg.any() or neg.sum() > REVERSE_MAX_SHARE * moving.sum() or np.nanmin(v) < -REVERSE_MAX_MPS \
+            or (neg.sum() >= 3 and np.unique(v[neg]).size == 1):  # one value, repeated: a sentinel
+        return np.zeros(len(v), bool)
+    return neg
 
 
 def order_columns(df: pd.DataFrame) -> pd.DataFrame:
@@ -415,14 +467,37 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
         _refuse_infinite(f, r)
     df = pd.concat(frames, ignore_index=True, sort=False)
     df = order_columns(df)
+    for c in ("brake", "reverse"):  # a flag one file sets (a car backing up): not set in the others
+        if c in df:
+            df[c] = df[c].astype("boolean").fillna(False).astype(bool)
+    mixed = _text_in_some_files(df, frames, reports)
     dropped: dict[str, int] = {}
     for r in reports:
         for k, n in r["dropped"].items():
             dropped[k] = dropped.get(k, 0) + n
     report = {"format": fmt, "files": reports, "rows_read": sum(r["rows_read"] for r in reports),
-              "kept": int(len(df)), "dropped": dropped, "notes": list(notes),
+              "kept": int(len(df)), "dropped": dropped, "notes": list(notes) + mixed,
               "columns": list(df.columns)}
     return df, report
+
+
+def _text_in_some_files(df: pd.DataFrame, frames: list[pd.DataFrame], reports: list[dict]) -> list[str]:
+    """An extra column that is text in some files and numbers in others (a logger's status
+    field written 'none' in one file, 0 in another) is kept as text in all, the numbers
+    written as text (a Parquet column holds one type); the note names it and its files."""
+    notes = []
+    for c in df.columns:
+        if df[c].dtype != object:
+            continue
+        x = df[c]
+        kinds = x[x.notna()].map(lambda v: isinstance(v, str))
+        if kinds.all() or not kinds.any():
+            continue
+        df[c] = x.where(x.isna(), x.astype(str))
+        text = [r["file"] for f, r in zip(frames, reports) if c in f and not pd.api.types.is_numeric_dtype(f[c])]
+        notes.append(f"column '{c}' is text in {len(text)} file(s) ({', '.join(Path(t).name for t in text[:3])}"
+                     f"{', …' if len(text) > 3 else ''}) and numbers in others: kept as text in all")
+    return notes
 
 
 def _refuse_infinite(df: pd.DataFrame, report: dict) -> None:

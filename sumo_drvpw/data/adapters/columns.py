@@ -10,12 +10,15 @@ Mapping file::
                               # "datetime" parses timestamps (time_format = "%Y-%m-%d %H:%M:%S")
     na_values = ["-", "N/A"]  # cells read as missing
     keep_unmapped = true      # keep other columns as snake_case extras (default true)
+    skip_rows = 2             # CSV lines before the header (an app's title lines; default 0)
 
     [columns."Speed"]         # source column label
     name = "speed_mps"        # canonical or extra name; the suffix must fit the unit
     unit = "km/h"             # converted to SI (see _common.UNITS)
     scale = -1                # optional extra factor (e.g. flip a current's sign)
     role = "response"         # optional: condition | load | response (drive-log spec)
+    na_values = [-3.6]        # optional: this column's own 'no reading' values (numbers in
+                              # the file's unit, or texts), read as missing and counted
 
     [columns."Trip"]
     name = "trip_id"          # text; without it trip_id = file stem
@@ -43,8 +46,11 @@ from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midni
 
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
-OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped"}
-ENTRY = {"name", "unit", "scale", "role"}
+OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped",
+           "skip_rows"}
+#: lines of a CSV searched for a mapped label that is not in the header (the hint of the error)
+HEADER_SEARCH_LINES = 50
+ENTRY = {"name", "unit", "scale", "role", "na_values"}
 SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 
 
@@ -62,6 +68,10 @@ def load_mapping(path) -> dict:
     for k in opts:
         if k not in OPTIONS:
             raise UserError(f"{p}: unknown option 'options.{k}' (known: {', '.join(sorted(OPTIONS))})")
+    skip = opts.get("skip_rows", 0)
+    if not isinstance(skip, int) or isinstance(skip, bool) or skip < 0:
+        raise UserError(f"{p}: options.skip_rows must be a whole number ≥ 0 (lines before the "
+                        f"header), got {skip!r}")
     if "keep_unmapped" in opts and not isinstance(opts["keep_unmapped"], bool):
         raise UserError(f"{p}: options.keep_unmapped must be true or false, got "
                         f"{opts['keep_unmapped']!r}")
@@ -73,6 +83,11 @@ def load_mapping(path) -> dict:
     entries = {}
     for label, e in cols.items():
         key = f"columns.{label!r}" if not label.isidentifier() else f"columns.{label}"
+        if label.strip() != label:  # header labels are read stripped: a label copied with the
+            label = label.strip()   # header's own leading space (' Speed (km/h)') names the same
+            if label in cols or label in entries:
+                raise UserError(f"{p}: {key} and columns.{label!r} name the same source column "
+                                "(labels are read without their surrounding spaces)")
         if not isinstance(e, dict) or "name" not in e:
             raise UserError(f"{p}: {key} needs a table with 'name' (and 'unit')")
         for k in e:
@@ -90,6 +105,13 @@ def load_mapping(path) -> dict:
         if not isinstance(scale, (int, float)) or isinstance(scale, bool) or not math.isfinite(scale):
             raise UserError(f"{p}: {key}.scale must be a number, got {scale!r}")
         entries[label] = _entry(p, key, name, unit, float(scale))
+        if "na_values" in e:
+            own = e["na_values"] if isinstance(e["na_values"], list) else [e["na_values"]]
+            if not own or any(isinstance(x, bool) or not isinstance(x, (str, int, float)) for x in own):
+                raise UserError(f"{p}: {key}.na_values must be a number or text, or a list of them, "
+                                f"got {e['na_values']!r}")
+            entries[label]["na_text"] = tuple(str(x).strip() for x in own if isinstance(x, str))
+            entries[label]["na_num"] = tuple(float(x) for x in own if not isinstance(x, str))
         if "role" in e:
             from sumo_drvpw.data.roles import check_role
 
@@ -111,7 +133,7 @@ def load_mapping(path) -> dict:
     return {"path": p, "sep": str(opts.get("sep", ",")), "encoding": str(opts.get("encoding", "utf-8")),
             "decimal": str(opts.get("decimal", ".")), "time_format": opts.get("time_format"),
             "na_values": [str(x) for x in na], "keep_unmapped": bool(opts.get("keep_unmapped", True)),
-            "columns": entries}
+            "skip_rows": skip, "columns": entries}
 
 
 def _check_text_options(p, opts: dict, entries: dict) -> None:
@@ -177,8 +199,63 @@ def _read_table(path: Path, m: dict) -> pd.DataFrame:
         if len(df) == 0:
             raise UserError(f"{path}: no data rows")
         return df
-    return read_csv_strict(path, sep=m["sep"], encoding=m["encoding"], decimal=m["decimal"],
-                           dtype=str, keep_default_na=False, na_filter=False)
+    try:
+        return read_csv_strict(path, sep=m["sep"], encoding=m["encoding"], decimal=m["decimal"],
+                               dtype=str, keep_default_na=False, na_filter=False,
+                               skiprows=m.get("skip_rows", 0) or None)
+    except UserError as e:  # title lines of another width above the header: say where it is
+        hint = _skip_hint(path, m)
+        if hint:
+            raise UserError(f"{e}{hint}") from None
+        raise
+
+
+def _skip_hint(path: Path, m: dict) -> str:
+    """' (… set options.skip_rows = N)' when a mapped label sits on a line below the one read
+    as the header, else ''."""
+    for label in m["columns"]:
+        line = _header_line_of(path, m, label)
+        if line is not None and line != m.get("skip_rows", 0) + 1:
+            return (f" ('{label}' is on line {line}: the header is there, below {line - 1} other "
+                    f"line(s); set options.skip_rows = {line - 1} in {m['path']})")
+    return ""
+
+
+def _no_header_hint(raw: pd.DataFrame) -> str:
+    """' (… no header …)' when what was read as the header is mostly numbers or dates (a
+    logger's continuation file, written without the header of its first file), else ''."""
+    cells = [str(c) for c in raw.columns]
+    data = sum(_is_number(c) or not pd.isna(pd.to_datetime(c, errors="coerce", format="mixed")) for c in cells)
+    if len(cells) < 2 or data < 0.5 * len(cells):
+        return ""
+    return (f" (its first line is data, not a header: '{','.join(cells[:3])[:60]},…' — a logger's "
+            "continuation file? put the header line of its other files above it)")
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def _header_line_of(path: Path, m: dict, label: str) -> int | None:
+    """The 1-based line among the first :data:`HEADER_SEARCH_LINES` of a CSV whose cells hold
+    ``label`` (a header below an app's title lines), or None."""
+    if path.suffix.lower() in (".parquet", ".pq"):
+        return None
+    try:
+        with open(path, encoding=m["encoding"], errors="replace") as f:
+            for i, line in enumerate(f, 1):
+                if i > HEADER_SEARCH_LINES:
+                    break
+                cells = [c.strip().strip('"').strip().lstrip("\ufeff") for c in line.split(m["sep"])]
+                if label in cells:
+                    return i
+    except (OSError, ValueError, LookupError):  # unreadable in that encoding: reading it says why
+        return None
+    return None
 
 
 def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
@@ -190,6 +267,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
         if label not in raw.columns:
             hint = (f" (only one column '{raw.columns[0][:40]}': wrong sep {m['sep']!r}?)"
                     if raw.shape[1] == 1 else "")
+            hint = _skip_hint(path, m) or _no_header_hint(raw) or hint
             raise UserError(f"{path}: missing column '{label}' named in {m['path']}{hint}")
     na = tuple(m["na_values"])
     out: dict[str, pd.Series] = {}
@@ -224,7 +302,15 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
                                 "not a date/time")
             out["time_s"] = _seconds(t, m["time_format"], rep)
         else:
-            out[e["name"]] = numeric(s, path, label, na) * e["factor"] + e["offset"]
+            x = numeric(s, path, label, na + e.get("na_text", ()))
+            own = x.isin(e.get("na_num", ())) | (raw[label].astype(str).str.strip().isin(e.get("na_text", ()))
+                                               & ~raw[label].astype(str).str.strip().isin(na))
+            if own.any():
+                rep["notes"].append(f"column '{label}': {int(own.sum())} cell(s) held its 'no reading' value "
+                                    f"({', '.join(map(str, e.get('na_num', ()) + e.get('na_text', ())))}): "
+                                    "read as missing")
+                x = x.where(~own)
+            out[e["name"]] = x * e["factor"] + e["offset"]
     names = unique_names(list(out))
     df = pd.DataFrame(dict(zip(names, out.values())), index=raw.index)
     if "trip_id" in df:
