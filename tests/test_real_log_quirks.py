@@ -205,8 +205,23 @@ def test_a_standstill_that_draws_driving_power_is_a_lost_speed_signal(tmp_path):
     v[200:300] = 0.0                                          # speed lost while driving:
     p[200:300] = np.where(np.arange(100) % 4 == 0, 60000.0, np.where(np.arange(100) % 4 == 1, -13000.0, 4000.0))
     v[330:360], p[330:360] = 0.0, -40000.0                   # a fast charger
-    m = speed_dropout_mask(p, v, np.zeros(n, int))
+    m = speed_dropout_mask(p, v, np.zeros(n, int), t)
     assert np.flatnonzero(m).tolist() == list(range(200, 300)) and DRIVE_MIN_W > 7000.0
+    # a 10-Hz OBD log whose speed lags the power by 1.5 s: at each stop the car still brakes
+    # (−20 kW) and at each start already pulls away (50 kW) while its speed reads 0 — no dropout
+    tl = np.arange(600) * 0.1
+    vl, pl = np.full(600, 8.0), np.full(600, 12000.0)
+    vl[100:400], pl[100:400] = 0.0, 500.0
+    pl[100:115], pl[385:400] = -20000.0, 50000.0
+    # an e-bus at a stop with 25 kW of air conditioning for 5 minutes: a large load, no braking
+    tb = np.arange(400) * 1.0
+    vb, pb = np.full(400, 8.0), np.full(400, 60000.0)
+    vb[50:350], pb[50:350] = 0.0, 25000.0
+    for tt, vv, pp in ((tl, vl, pl), (tb, vb, pb)):
+        assert not speed_dropout_mask(pp, vv, np.zeros(len(tt), int), tt).any()
+    # the same stretches read as a lost speed without those guards (the rule of 4baf5a0)
+    assert speed_dropout_mask(pl, vl, np.zeros(600, int), tl, min_s=0.0).any()
+    assert speed_dropout_mask(pb, vb, np.zeros(400, int), tb, brake_w=-np.inf).any()
     rows = "\n".join(f"T,{a:g},{b:g},360,{c / 360:.4f}" for a, b, c in zip(t, v, p))
     log = _write(tmp_path, "bev.csv", "trip_id,time_s,speed_mps,battery_voltage_v,battery_current_a\n" + rows + "\n")
     for target in ("battery", "wheel"):

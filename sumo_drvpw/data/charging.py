@@ -74,20 +74,40 @@ def charging_mask(battery_w, speed_mps, time_s, trip_codes, min_w: float = CHARG
 #: battery conditioning, 12 V), the power of driving at 50–100 km/h
 DRIVE_MIN_W = 15000.0
 
+#: [s] a standstill stretch drives above :data:`DRIVE_MIN_W` for at least this long to be a lost
+#: speed: a logger whose speed lags the power (OBD, about 1–2 s) reads 0 while the car already
+#: pulls away, for a second or two at each start, which is no dropout
+DROPOUT_MIN_S = 10.0
 
-def speed_dropout_mask(power_w, speed_mps, trip_codes, min_w: float = DRIVE_MIN_W) -> np.ndarray:
+#: [W] and it takes power back below minus this: braking. A standing vehicle never feeds its
+#: battery but from a charger (a steady flow in, :func:`charging_mask`), so a stretch that both
+#: drives and brakes moved; one that only draws much (an e-bus's 20–30 kW of air conditioning at
+#: a stop, a truck's power take-off) stood
+DROPOUT_BRAKE_W = 3000.0
+
+
+def speed_dropout_mask(power_w, speed_mps, trip_codes, time_s, min_w: float = DRIVE_MIN_W,
+                       min_s: float = DROPOUT_MIN_S, brake_w: float = DROPOUT_BRAKE_W) -> np.ndarray:
     """True on the samples of standstill stretches (runs of a trip with speed < 0.1 m/s) in
-    which the measured power exceeds ``min_w`` on at least two samples: the car was driving
-    while its speed read 0 (a logger that lost the speed signal, as LeafSpy does for minutes),
-    so none of the stretch's samples is a standstill (its low-power samples are cruising).
-    One spike does not decide; charging (power flowing in) never exceeds it."""
+    which the measured power exceeds ``min_w`` for at least ``min_s`` seconds (each sample
+    counts its interval to the next, at most 5 s) and falls below −``brake_w`` somewhere: the
+    car drove and braked while its speed read 0 (a logger that lost the speed signal, as
+    LeafSpy does for minutes), so none of the stretch's samples is a standstill (its low-power
+    samples are cruising). A lagging speed at a start or a stop, a spike, a large standing
+    load and charging (power flowing in, never out) do not decide."""
     p = np.asarray(power_w, float)
     v = np.asarray(speed_mps, float)
+    t = np.asarray(time_s, float)
     codes = np.asarray(trip_codes)
     if p.size == 0:
         return np.zeros(0, bool)
     stand = np.isfinite(v) & (v < STANDSTILL_MPS)
     new = np.r_[True, (stand[1:] != stand[:-1]) | (codes[1:] != codes[:-1])]
     seg = np.cumsum(new) - 1
-    high = np.bincount(seg, weights=(stand & (p > min_w)).astype(float), minlength=int(seg[-1]) + 1)
-    return stand & (high[seg] >= 2)
+    last = np.r_[codes[1:] != codes[:-1], True]
+    dt = np.where(last, 0.0, np.clip(np.r_[np.diff(t), 0.0], 0.0, 5.0))
+    dt[~np.isfinite(dt)] = 0.0
+    k = int(seg[-1]) + 1
+    high = np.bincount(seg, weights=np.where(stand & (p > min_w), dt, 0.0), minlength=k)
+    brakes = np.bincount(seg, weights=(stand & (p < -brake_w)).astype(float), minlength=k)
+    return stand & (high[seg] >= min_s) & (brakes[seg] > 0)

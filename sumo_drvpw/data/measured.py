@@ -133,7 +133,7 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
         from sumo_drvpw.data.charging import speed_dropout_mask
         from sumo_drvpw.data.trips import trip_codes_of
 
-        lost = speed_dropout_mask(p, x.v, trip_codes_of(log.df["trip_id"]))
+        lost = speed_dropout_mask(p, x.v, trip_codes_of(log.df["trip_id"]), log.df["time_s"].to_numpy(float))
         if lost.any():
             log.counts["excluded_speed_dropout"] = int((lost & usable).sum())
         usable &= ~lost

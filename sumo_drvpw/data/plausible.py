@@ -166,7 +166,7 @@ def exclusions(counts: dict) -> str:
         elif what == "brake":
             label = "braking"
         elif what == "speed_dropout":  # data/charging.py speed_dropout_mask
-            label = ("speed 0 while the measured power drives the car (over 15 kW: the speed was not logged "
+            label = ("speed 0 while the measured power drives and brakes the car (over 15 kW for 10 s: the speed was not logged "
                      "there, and without it no acceleration, grade or drag can be fitted)")
         else:
             label = what.replace("_", " ")
