@@ -162,7 +162,7 @@ def numeric(series: pd.Series, file, column: str, na_tokens=("-", "")) -> pd.Ser
     conv = pd.to_numeric(s, errors="coerce").to_numpy(float, copy=True)
     tokens = {str(t).strip() for t in na_tokens}
     is_na = pd.isna(arr)
-    check = ~is_na & (np.isnan(conv) | any(_is_number(t) for t in tokens))
+    check = ~is_na & (np.isnan(conv) | any(is_number(t) for t in tokens))
     for i in np.flatnonzero(check):
         x = arr[i]
         if isinstance(x, str) and x.strip() in tokens:
@@ -176,7 +176,8 @@ def numeric(series: pd.Series, file, column: str, na_tokens=("-", "")) -> pd.Ser
     return pd.Series(conv, index=series.index)
 
 
-def _is_number(text: str) -> bool:
+def is_number(text: str) -> bool:
+    """Whether ``text`` reads as a number (float() takes it)."""
     try:
         float(text)
         return True

@@ -40,7 +40,7 @@ import pandas as pd
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
-from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midnight, clean_time_and_speed,
+from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midnight, clean_time_and_speed, is_number,
                       expand_paths, generic_name, lookup_unit, new_report, numeric, read_csv_strict,
                       read_each, unique_names)
 
@@ -225,19 +225,11 @@ def _no_header_hint(raw: pd.DataFrame) -> str:
     """' (… no header …)' when what was read as the header is mostly numbers or dates (a
     logger's continuation file, written without the header of its first file), else ''."""
     cells = [str(c) for c in raw.columns]
-    data = sum(_is_number(c) or not pd.isna(pd.to_datetime(c, errors="coerce", format="mixed")) for c in cells)
+    data = sum(is_number(c) or not pd.isna(pd.to_datetime(c, errors="coerce", format="mixed")) for c in cells)
     if len(cells) < 2 or data < 0.5 * len(cells):
         return ""
     return (f" (its first line is data, not a header: '{','.join(cells[:3])[:60]},…' — a logger's "
             "continuation file? put the header line of its other files above it)")
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
 
 
 def _header_line_of(path: Path, m: dict, label: str) -> int | None:
