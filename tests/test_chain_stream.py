@@ -149,11 +149,9 @@ def test_dask_chain_calibration_equals_memory(chain_logs, tmp_path, capsys):
     corpus.assert_close_documents(docs["memory"], docs["dask"], RTOL)
 
 
-def test_streamed_chain_refuses_files_that_differ_in_their_chain_input(chain_logs, tmp_path, capsys):
-    """One file logs a driving power (the chain's input there), the other not (the road
-    load's power there): the streamed fit takes one input for all, so it refuses, naming
-    the file without it and the file with it (as in memory, below), and writes nothing (in memory the second file's rows would have no
-    measured driving power and drop out of the fit)."""
+def _mixed_power_folder(chain_logs, tmp_path):
+    """The planted battery logs with a driving power (0.9·V·I) logged in a.parquet only (in
+    row groups of 700), b.csv as it was: (folder, road-load equation)."""
     import pandas as pd
 
     folder, eq, _ = chain_logs["battery"]
@@ -163,9 +161,16 @@ def test_streamed_chain_refuses_files_that_differ_in_their_chain_input(chain_log
     a["power_w"] = 0.9 * a["battery_voltage_v"] * a["battery_current_a"]
     a.to_parquet(mixed / "a.parquet", row_group_size=700)
     (mixed / "b.csv").write_bytes((folder / "b.csv").read_bytes())
+    return mixed, eq
+
+
+def _refused_naming_the_files(mixed, eq, tmp_path, capsys, extra):
+    """calibrate --target battery on the mixed folder (with the options ``extra``) exits 2
+    with one line naming b.csv (no driving power) and a.parquet (direct power_w), writes nothing."""
     out = tmp_path / "eq.toml"
-    assert cli_main(["calibrate", str(mixed), "--target", "battery", "--equation", str(eq), "--out", str(out)]) == 2
+    rc = cli_main(["calibrate", str(mixed), "--target", "battery", "--equation", str(eq), "--out", str(out), *extra])
     err = capsys.readouterr().err
+    assert rc == 2, err
     line = [ln for ln in err.splitlines() if ln.startswith("sumo-drvpw calibrate: error: ")]
     assert len(line) == 1 and "Traceback" not in err
     assert f"{mixed / 'b.csv'}: no measured driving power" in line[0]
@@ -173,31 +178,23 @@ def test_streamed_chain_refuses_files_that_differ_in_their_chain_input(chain_log
     assert not out.exists()
 
 
+def test_streamed_chain_refuses_files_that_differ_in_their_chain_input(chain_logs, tmp_path, capsys):
+    """One file logs a driving power (the chain's input there), the other not (the road
+    load's power there): the streamed fit takes one input for all, so it refuses, naming
+    the file without it and the file with it (as in memory, below), and writes nothing (in memory the second file's rows would have no
+    measured driving power and drop out of the fit)."""
+    mixed, eq = _mixed_power_folder(chain_logs, tmp_path)
+    _refused_naming_the_files(mixed, eq, tmp_path, capsys, [])
+
+
 def test_in_memory_chain_refuses_files_that_differ_in_their_chain_input(chain_logs, tmp_path, capsys):
     """The same folder as above with ``--engine memory``: the table read whole has
     ``power_w`` empty on the CSV's rows, which dropped out of the fit silently (the chain
     fitted on the Parquet file alone); refused as streamed, one line naming the file
     without it, nothing written."""
-    import pandas as pd
-
-    folder, eq, _ = chain_logs["battery"]
-    mixed = tmp_path / "mixed"
-    mixed.mkdir()
-    a = pd.read_parquet(folder / "a.parquet")
-    a["power_w"] = 0.9 * a["battery_voltage_v"] * a["battery_current_a"]
-    a.to_parquet(mixed / "a.parquet")
-    (mixed / "b.csv").write_bytes((folder / "b.csv").read_bytes())
+    mixed, eq = _mixed_power_folder(chain_logs, tmp_path)
     for extra in ([], ["--efficiency", "power"]):
-        out = tmp_path / "eq.toml"
-        rc = cli_main(["calibrate", str(mixed), "--target", "battery", "--equation", str(eq), "--out", str(out),
-                       "--engine", "memory", *extra])
-        err = capsys.readouterr().err
-        assert rc == 2, err
-        line = [ln for ln in err.splitlines() if ln.startswith("sumo-drvpw calibrate: error: ")]
-        assert len(line) == 1 and "Traceback" not in err
-        assert f"{mixed / 'b.csv'}: no measured driving power" in line[0]
-        assert "direct (power_w)" in line[0] and str(mixed / "a.parquet") in line[0]
-        assert not out.exists()
+        _refused_naming_the_files(mixed, eq, tmp_path, capsys, ["--engine", "memory", *extra])
 
 
 def test_streamed_battery_only_log_without_equation_is_refused_as_in_memory(chain_logs, tmp_path, capsys):
