@@ -205,3 +205,18 @@ def test_fcd_books_parking_stops_as_live(parked, tmp_path, chunk_rows):
     assert rs["stops"] == ls["stops"] and rs["vehicle_s"] == pytest.approx(ls["vehicle_s"])
     pd.testing.assert_series_equal(rt, lt, rtol=1e-9)
     np.testing.assert_allclose(rc["auxiliary_kwh"], lc["auxiliary_kwh"], rtol=1e-6)
+
+
+def test_bus_stops_of_the_vtype_files_are_read_without_a_scenario(parked, tmp_path):
+    """fcd without a scenario, the route and additional files given as vType files (as
+    `fcd --vtypes`, or those the FCD's header names): the bus bay of the additional file
+    is known, so the cars dwelling in it are booked and switched off as live (before, its
+    bus stops were read only from a scenario's additional files: the bay's cars were taken
+    as parked off the lane and not booked, 0 stops against 4)."""
+    d = parked
+    process_fcd(d / "fcd.xml", net=NET, equations=[str(I3_BATTERY)], out_dir=tmp_path / "o",
+                vtype_files=[d / "r.rou.xml", d / "p.add.xml"], air_temperature_c=20.0, figures=False)
+    (lc, lt, ls), (rc, rt, rs) = _booked(d / "live"), _booked(tmp_path / "o")
+    assert ls["stops"] == 4 and rs["stops"] == ls["stops"]
+    pd.testing.assert_series_equal(rt, lt, rtol=1e-9)
+    np.testing.assert_allclose(rc["auxiliary_kwh"], lc["auxiliary_kwh"], rtol=1e-6)

@@ -13,8 +13,9 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
   ``--fcd-output.acceleration``);
 - lane and position are read for every vehicle-step (no tracking);
 - vTypes' masses and vClasses come from the scenario's route/additional files (``--vtypes``
-  or ``[sumo]`` of the scenario); without them every vType is a ``passenger`` car with the
-  class's default mass (listed in ``summary.json`` ``assumptions``);
+  or ``[sumo]`` of the scenario; the ``fcd`` command takes those an XML FCD's header names,
+  :func:`~sumo_drvpw.sim.fcd_read.recorded_inputs`); without them every vType is a
+  ``passenger`` car with the class's default mass (listed in ``summary.json`` ``assumptions``);
 - persons (``<person>``; in SUMO's tabular FCD rows without a lane) are not vehicles: they
   are counted in ``skipped`` as the live loop counts them, and a person whose x, y and
   speed equal a vehicle's rides in it, adding its vType's mass (route files; else SUMO's
@@ -358,7 +359,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
 
     net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
-    parked = ParkedTest(net, bus_stops(sc.additional_files))
+    # bus stops of the additional files, and of the files given for the vTypes (--vtypes)
+    parked = ParkedTest(net, bus_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files]))))
     from sumo_drvpw.sim.fcd_read import header_options
 
     head = header_options(fcd_file)  # the recording's options (None: no SUMO header)
