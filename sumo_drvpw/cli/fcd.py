@@ -1,4 +1,4 @@
-"""``sumo-drvpw fcd FCD_FILE --net NET [--scenario S.toml] --out DIR``: book a finished SUMO
+"""``sumo-drvpw fcd FCD_FILE [--net NET] [--scenario S.toml] --out DIR``: book a finished SUMO
 run from its FCD output (XML, .xml.gz, Parquet, CSV, or partitioned Parquet: a folder or a
 glob of parts) and write what ``run`` writes. The file is streamed in blocks of rows (memory:
 one block and the vehicles running, whatever the file's length). ``--engine dask`` splits the
@@ -22,12 +22,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "--precision 6 keeps speeds exact")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--net", metavar="NET", help="the network the FCD was recorded on "
-                        "(default: the scenario's)")
+                        "(default: the scenario's, else the one the XML FCD's header names)")
     parser.add_argument("--scenario", metavar="S.toml|X.sumocfg",
                         help="scenario (or the run's SUMO config) for equations, vTypes (masses, "
                              "vClasses) and options")
     parser.add_argument("--vtypes", action="append", metavar="FILE",
-                        help="route/additional file(s) with the vTypes (default: the scenario's)")
+                        help="route/additional file(s) with the vTypes (default: the scenario's, else "
+                             "those the XML FCD's header names)")
     parser.add_argument("--equation", action="append", metavar="NAME_OR_FILE",
                         help="evaluate these equations instead of the scenario's (repeatable; "
                              "default without a scenario: the built-in equations of every vClass)")
@@ -55,6 +56,8 @@ def main(args: argparse.Namespace) -> int:
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.sim.fcd import process_fcd
 
+    if args.scenario is None and (args.net is None or args.vtypes is None):
+        _recorded_inputs(args)
     if args.scenario is None and args.net is None:
         raise UserError("give --net (the network of the FCD) or --scenario")
     replaced = bool(args.equation)  # the user's equations replace the scenario's
@@ -63,7 +66,8 @@ def main(args: argparse.Namespace) -> int:
 
         args.equation = list(CONFIG_EQUATIONS)
         print("note: no --equation or --scenario: every vehicle by the built-in equations made for its "
-              "vClass (vClasses from --vtypes, else every vehicle a passenger car)")
+              "vClass (vClasses from " + ("the route and additional files" if args.vtypes
+                                          else "no vType file: every vehicle a passenger car") + ")")
     check_engine_arguments(args)
     if args.buckets is not None and args.engine != "dask":
         raise UserError(f"--buckets goes with --engine dask (got --engine {args.engine})")
@@ -108,3 +112,30 @@ def main(args: argparse.Namespace) -> int:
         print("interrupted: outputs cover the replayed part")
         return 130
     return 0
+
+
+def _recorded_inputs(args: argparse.Namespace) -> None:
+    """Without --scenario: the network (unless --net) and the route and additional files
+    (unless --vtypes) of the run that recorded the FCD, as its header names them
+    (:func:`sumo_drvpw.sim.fcd_read.recorded_inputs`), each said in a note."""
+    from sumo_drvpw.sim.fcd_read import recorded_inputs
+
+    rec = recorded_inputs(args.fcd)
+    if rec is None:
+        return
+    want = {"net-file": args.net is None, "route-files": args.vtypes is None,
+            "additional-files": args.vtypes is None}
+    took = []
+    if args.net is None and rec["net"] is not None:
+        args.net = str(rec["net"])
+        took.append(f"network {rec['net']}")
+    if args.vtypes is None and rec["files"]:
+        args.vtypes = [str(f) for f in rec["files"]]
+        took.append("vTypes and stops from " + ", ".join(str(f) for f in rec["files"]))
+    if took:
+        print("note: from the run that recorded the FCD (its header): " + "; ".join(took)
+              + " (--net, --vtypes or --scenario choose others)")
+    missing = [v for k, v in rec["missing"] if want[k]]
+    if missing:
+        print(f"note: the FCD's header names {', '.join(missing)}, not found beside the FCD "
+              f"(looked in {', '.join(rec['looked_in'])}); give --vtypes (and --net) for its vTypes")

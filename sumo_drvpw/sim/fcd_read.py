@@ -385,6 +385,100 @@ def header_options(path) -> dict[str, str] | None:
     return dict(re.findall(r"<([\w.:-]+) value=\"([^\"]*)\"\s*/>", m.group(1)))
 
 
+#: the input options of a SUMO run whose files a replay takes from an FCD's header
+RECORDED_INPUTS = ("net-file", "route-files", "additional-files")
+#: folders named by the header's paths but not by where the FCD is now, searched at most
+#: this deep and this many (the run's folder beside the FCD's: ``scenario/`` of ``out/``)
+_SEARCH_DEPTH, _SEARCH_DIRS = 2, 2000
+#: the name standing for a folder of the run the FCD's path does not name
+_MARK = "\u2039run folder\u203a"
+
+
+def recorded_inputs(path, head: dict[str, str] | None = None, cwd=None) -> dict | None:
+    """The network, route and additional files of the run that recorded an XML FCD, as its
+    header names them (:func:`header_options`), found on this machine: ``{"net": Path |
+    None, "files": [route files, then additional files], "missing": [(option, path as
+    written) not found], "looked_in": [folders tried]}``; None without a header or when it
+    names no input.
+
+    SUMO writes each path as given, relative to the folder of its config (``-c``) or to
+    the working folder of the run — a folder the header does not name. The header's own
+    ``fcd-output`` path leads from that folder to the FCD, so a path is found from where the
+    FCD is now, wherever the run was started. Where it climbs out of the FCD's folders (a
+    config in ``scenario/`` writing ``../out/fcd.xml`` and reading ``net.net.xml``), the
+    run's folder is the one folder that deep beside them holding the most of the header's
+    files (a tie: none). Else — the FCD renamed or moved on its own — the folder of the FCD,
+    its parent and ``cwd`` (default: the working folder) are tried in that order. A path
+    SUMO wrote absolute is taken as it is."""
+    import posixpath
+
+    head = header_options(path) if head is None else head
+    if not head or not any(head.get(k, "").strip() for k in RECORDED_INPUTS):
+        return None
+    fcd = Path(path).resolve()
+    fallbacks = list(dict.fromkeys([fcd.parent, fcd.parent.parent, Path(cwd or Path.cwd()).resolve()]))
+    # a stand-in for the run's folder, deep enough that no ".." of a real path climbs out
+    marks = [f"{_MARK}{i}" for i in range(32)]
+    root = "/" + "/".join(marks)
+    out_rel = head.get("fcd-output", "").strip().replace("\\", "/")
+    start = (posixpath.dirname(posixpath.normpath(posixpath.join(root, out_rel)))
+             if out_rel and not posixpath.isabs(out_rel) else None)
+    values = [(k, v.strip().replace("\\", "/")) for k in RECORDED_INPUTS
+              for v in (head.get(k) or "").split(",") if v.strip()]
+
+    def from_fcd(v: str) -> str | None:  # the path from the FCD's folder (marks: unknown names)
+        if start is None or posixpath.isabs(v):
+            return None
+        return posixpath.relpath(posixpath.normpath(posixpath.join(root, v)), start)
+
+    # the run's folders the paths name and the FCD's does not: the candidate beside them
+    # that holds the most of the files
+    hidden = {v: r for _, v in values if (r := from_fcd(v)) is not None and _MARK in r}
+    names: dict[str, str] = {}
+    if hidden:
+        depth = max(sum(p in marks for p in r.split("/")) for r in hidden.values())
+        up = next(iter(hidden.values())).split("/" + _MARK)[0]
+        last = marks[-depth:]
+        if depth <= _SEARCH_DEPTH and all(r.startswith(f"{up}/{_MARK}") for r in hidden.values()):
+            best: list[tuple[int, tuple]] = []
+            for n, cand in enumerate((fcd.parent / up).resolve().glob("/".join(["*"] * depth))):
+                if n >= _SEARCH_DIRS:
+                    break
+                if not cand.is_dir():
+                    continue
+                sub = dict(zip(last, cand.parts[-depth:]))
+                hits = sum((fcd.parent / "/".join(sub.get(p, p) for p in r.split("/"))).is_file()
+                           for r in hidden.values())
+                if hits:
+                    best.append((hits, tuple(sub.items())))
+            best.sort(reverse=True)
+            if best and (len(best) == 1 or best[0][0] > best[1][0]):
+                names = dict(best[0][1])
+
+    def find(v: str) -> Path | None:
+        if posixpath.isabs(v) or Path(v).is_absolute():
+            return Path(v).resolve() if Path(v).is_file() else None
+        tries = []
+        r = from_fcd(v)
+        if r is not None:
+            r = "/".join(names.get(p, p) for p in r.split("/"))
+            if _MARK not in r:
+                tries.append(fcd.parent / r)
+        tries += [d / v for d in fallbacks]
+        return next((t.resolve() for t in tries if t.is_file()), None)
+
+    net, files, missing = None, [], []
+    for key, v in values:
+        p = find(v)
+        if p is None:
+            missing.append((key, v))
+        elif key == "net-file":
+            net = p
+        elif p not in files:
+            files.append(p)
+    return {"net": net, "files": files, "missing": missing, "looked_in": [str(d) for d in fallbacks]}
+
+
 def iter_fcd_blocks(path, chunk_rows: int = CHUNK_ROWS):
     """Blocks of about ``chunk_rows`` rows of an FCD file (XML, ``.xml.gz``, Parquet, CSV)
     or of partitioned Parquet FCD (a folder or a glob pattern), in time order."""

@@ -1,0 +1,146 @@
+"""`fcd` without --scenario takes the network, vTypes and stops of the run that recorded
+the FCD from the files its header names (sim.fcd_read.recorded_inputs): found from where
+the FCD is now, whatever folder SUMO was started in (real SUMO, and headers written here)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.sim.fcd_read import recorded_inputs
+
+REPO = Path(__file__).resolve().parent.parent
+CITY_NET = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"
+
+ROUTES = """<routes>
+    <vType id="lorry" vClass="truck" mass="12000"/>
+    <vType id="car" vClass="passenger" mass="1400"/>
+    <flow id="t" type="lorry" from="c00c10" to="c34c44" begin="0" end="30" number="3" departSpeed="0"/>
+    <flow id="c" type="car" from="c40c30" to="c04c14" begin="0" end="30" number="3" departSpeed="0"/>
+</routes>
+"""
+CONFIG = """<configuration>
+    <input>
+        <net-file value="../nets/city.net.xml"/>
+        <route-files value="r.rou.xml"/>
+    </input>
+</configuration>
+"""
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A study laid out as many are: the config in scen/, the network in nets/, the FCD
+    written to ../out/ (so the header's paths are relative to scen/, a folder it does not
+    name)."""
+    import sumolib
+
+    d = tmp_path_factory.mktemp("study")
+    (d / "nets").mkdir()
+    shutil.copy(CITY_NET, d / "nets" / "city.net.xml")
+    (d / "scen").mkdir()
+    (d / "scen" / "r.rou.xml").write_text(ROUTES)
+    (d / "scen" / "run.sumocfg").write_text(CONFIG)
+    (d / "out").mkdir()
+    # started in scen/ with a relative config: SUMO writes the paths as the config has them
+    subprocess.run([sumolib.checkBinary("sumo"), "-c", "run.sumocfg", "-e", "60",
+                    "--fcd-output", "../out/fcd.xml", "--no-step-log", "--no-warnings"],
+                   check=True, capture_output=True, cwd=d / "scen")
+    return d
+
+
+@pytest.mark.sumo
+def test_fcd_books_trucks_as_trucks_from_the_files_its_header_names(recorded, tmp_path,
+                                                                     monkeypatch, capsys):
+    """Given only the FCD (before: "give --net"), and given only --net (before: every vType
+    a passenger car), the trucks are booked as trucks at their vType's mass, as with
+    --vtypes, and a note names the files taken."""
+    d = recorded
+    monkeypatch.chdir(tmp_path)  # started anywhere
+    assert cli_main(["fcd", str(d / "out" / "fcd.xml"), "--no-figures", "--out", "bare"]) == 0
+    out = capsys.readouterr().out
+    assert "from the run that recorded the FCD" in out and str(d / "scen" / "r.rou.xml") in out
+    assert str(d / "nets" / "city.net.xml") in out
+    v = pd.read_parquet(tmp_path / "bare" / "vehicles.parquet")
+    lorry = v[v.vtype == "lorry"]
+    assert len(lorry) and set(lorry.vclass) == {"truck"} and set(lorry.mass_kg) == {12000.0}
+    assert set(v[v.vtype == "car"].vclass) == {"passenger"}
+    assert cli_main(["fcd", str(d / "out" / "fcd.xml"), "--net", str(d / "nets" / "city.net.xml"),
+                     "--no-figures", "--out", "net_only"]) == 0
+    assert cli_main(["fcd", str(d / "out" / "fcd.xml"), "--net", str(d / "nets" / "city.net.xml"),
+                     "--vtypes", str(d / "scen" / "r.rou.xml"), "--no-figures", "--out", "given"]) == 0
+    same = [json.loads((tmp_path / k / "summary.json").read_text())["equations"]
+            for k in ("bare", "net_only", "given")]
+    assert same[0] == same[1] == same[2]
+    trucks = same[0]["moves_single_unit_truck"]["energy_j"]
+    assert trucks and any(t["total"] > 0 for t in trucks.values())
+
+
+def _fcd_with_header(path: Path, inputs: dict[str, str], fcd_output: str | None) -> Path:
+    opts = "".join(f'        <{k} value="{v}"/>\n' for k, v in inputs.items())
+    out = f'        <fcd-output value="{fcd_output}"/>\n' if fcd_output else ""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text('<?xml version="1.0" encoding="UTF-8"?>\n\n<!-- generated on 2026-11-27 by '
+                    "Eclipse SUMO sumo 1.28.0\n<sumoConfiguration>\n    <input>\n" + opts
+                    + "    </input>\n    <output>\n" + out + "    </output>\n</sumoConfiguration>\n"
+                    "-->\n\n<fcd-export>\n    <timestep time=\"0.00\"/>\n</fcd-export>\n")
+    return path
+
+
+def _touch(*paths: Path) -> None:
+    for p in paths:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text("<routes/>")
+
+
+def test_paths_are_found_from_where_the_fcd_is_now(tmp_path):
+    """The header's paths, relative to a folder it does not name, are found through its
+    own fcd-output path: the FCD in a subfolder of the run's folder, and beside it."""
+    _touch(tmp_path / "a" / "n.net.xml", tmp_path / "a" / "r.rou.xml", tmp_path / "a" / "add" / "s.add.xml")
+    inputs = {"net-file": "n.net.xml", "route-files": "r.rou.xml", "additional-files": "add/s.add.xml"}
+    for out in ("res/deep/fcd.xml", "fcd.xml"):
+        rec = recorded_inputs(_fcd_with_header(tmp_path / "a" / out, inputs, out), cwd="/")
+        assert rec["net"] == tmp_path / "a" / "n.net.xml"
+        assert rec["files"] == [tmp_path / "a" / "r.rou.xml", tmp_path / "a" / "add" / "s.add.xml"]
+        assert rec["missing"] == []
+
+
+def test_the_runs_own_folder_beside_the_fcds_is_the_one_holding_its_files(tmp_path):
+    """../out/fcd.xml from scen/: scen/ is the folder beside out/ that holds the header's
+    files; with two such folders equally good, none is guessed (the files are missing)."""
+    _touch(tmp_path / "scen" / "r.rou.xml", tmp_path / "scen" / "v.add.xml", tmp_path / "other" / "r.rou.xml")
+    inputs = {"route-files": "r.rou.xml,v.add.xml"}
+    fcd = _fcd_with_header(tmp_path / "out" / "fcd.xml", inputs, "../out/fcd.xml")
+    rec = recorded_inputs(fcd, cwd="/")
+    assert rec["files"] == [tmp_path / "scen" / "r.rou.xml", tmp_path / "scen" / "v.add.xml"]
+    _touch(tmp_path / "other" / "v.add.xml")  # now both folders hold both files
+    rec = recorded_inputs(fcd, cwd="/")
+    assert rec["files"] == [] and rec["missing"] == [("route-files", "r.rou.xml"),
+                                                     ("route-files", "v.add.xml")]
+
+
+def test_a_moved_fcd_falls_back_to_its_folders_and_the_working_folder(tmp_path):
+    """An FCD moved or renamed on its own (its fcd-output path no longer leads to it):
+    the FCD's folder, its parent and the working folder are tried; an absolute path is
+    taken as written; a name found nowhere is listed missing, not guessed."""
+    _touch(tmp_path / "work" / "r.rou.xml", tmp_path / "abs" / "n.net.xml")
+    inputs = {"net-file": str(tmp_path / "abs" / "n.net.xml"), "route-files": "r.rou.xml,gone.rou.xml"}
+    fcd = _fcd_with_header(tmp_path / "elsewhere" / "renamed.xml", inputs, "/old/place/fcd.xml")
+    rec = recorded_inputs(fcd, cwd=tmp_path / "work")
+    assert rec["net"] == tmp_path / "abs" / "n.net.xml"
+    assert rec["files"] == [tmp_path / "work" / "r.rou.xml"]
+    assert rec["missing"] == [("route-files", "gone.rou.xml")]
+
+
+def test_no_header_no_inputs(tmp_path):
+    """A file without SUMO's header (another tool's XML, CSV) or a header naming no input
+    gives None: the replay asks for --net as before."""
+    (tmp_path / "plain.xml").write_text("<fcd-export><timestep time=\"0\"/></fcd-export>")
+    assert recorded_inputs(tmp_path / "plain.xml") is None
+    assert recorded_inputs(_fcd_with_header(tmp_path / "h.xml", {}, "h.xml")) is None
