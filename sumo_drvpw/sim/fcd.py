@@ -41,7 +41,9 @@ joined first), so memory holds one block plus the running vehicles whatever the 
 length; the ledger writes finished vehicles out (:mod:`sumo_drvpw.sim.spill`). A vehicle
 arrives the step after a timestep without it (SUMO's FCD does not tell an arrival from a
 teleport: a vehicle back after a gap is put back there, as a teleport's end, and books on
-from its next row, or in a second row once flushed). ``chunk_rows=None`` reads the whole file first
+from its next row; one whose rows end while it stands is held in memory for
+:data:`TELEPORT_HOLD_S`, so a flush of finished vehicles does not split it — one back later,
+or one that vanished driving and was flushed, books on in a second row). ``chunk_rows=None`` reads the whole file first
 (:class:`FcdReplay`: the reference the streamed replay equals exactly on gap-free FCD).
 The rows must be in time order (SUMO writes them so). Split by vehicle on Dask:
 :mod:`sumo_drvpw.sim.fcd_dask`.
@@ -59,6 +61,12 @@ from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
 from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
+
+#: how long [s] a vehicle whose rows end while it stands stays in memory, in case it comes
+#: back from a teleport (SUMO teleports a car waiting in a jam, writes no rows while it
+#: moves over the edges it skips at their speed limits — seconds to minutes — and puts it
+#: back); one back later, or one that vanished driving, books on in a second row
+TELEPORT_HOLD_S = 900.0
 
 
 class FcdReplay(_Rows):
@@ -401,6 +409,9 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                      trace_path=Path(out_dir) / "trace.parquet" if sc.trace and out_dir else None,
                      spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,
                      keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles, net=net)
+    # a vehicle whose rows end while it stands may be in a teleport: kept in memory (not
+    # flushed) so that it books on in its own row when it comes back within TELEPORT_HOLD_S
+    acc.ledger.hold_steps = int(np.ceil(TELEPORT_HOLD_S / replay.dt))
     replay.type_mass = {vt: i.mass_kg for vt, i in acc.file_vtypes.items() if i.mass_kg}
     # long planned stops and start-stop systems as in the live run (sim/shutoff.py): the
     # vTypes' shut-off params and the vehicles' stops from the route and additional files

@@ -29,6 +29,9 @@ from sumo_drvpw.model.terms import CATEGORIES, Inputs, parse_term
 
 #: Reporting categories of the ledger: the four physical ones and "other".
 LEDGER_CATEGORIES = CATEGORIES + ("other",)
+#: SUMO's halting speed [m/s] (SUMO_const_haltingSpeed): below it a vehicle waits, and a
+#: jammed one is teleported after --time-to-teleport of waiting
+HALTING_SPEED_MPS = 0.1
 
 
 class EquationSet:
@@ -145,6 +148,10 @@ class Ledger:
         #: finished vehicles held before they are flushed to :attr:`spill`
         self.flush_vehicles = 1024
         self.n_done = 0
+        #: steps a vehicle that left standing stays in memory before it may be flushed (an
+        #: FCD replay: one that vanished from its rows standing may be in a teleport and come
+        #: back, sim/fcd.py TELEPORT_HOLD_S; 0: none held)
+        self.hold_steps = 0
         #: vehicles written out by :meth:`flush` (all, and the accounted ones), their vTypes
         self.flushed_vehicles = 0
         self.flushed_kept = 0
@@ -240,6 +247,7 @@ class Ledger:
         grow("veh_pos", (cap,), float, np.nan)  # tracked lane position [m]
         grow("veh_at", (cap, 3), float, np.nan)  # last step's lane, position, profile z
         grow("veh_done", (cap,), bool, False)  # left the simulation, not yet flushed
+        grow("veh_done_step", (cap,), np.int64, 0)  # the step it left at
         grow("veh_parked", (cap,), bool, False)  # parked off the lane: not read, not booked
         grow("veh_stand", (cap,), float, 0.0)  # standing since [s] (sim/shutoff.py)
         grow("veh_auto_off", (cap,), float, np.inf)  # its vType's shutOffAutoDuration [s]
@@ -253,7 +261,8 @@ class Ledger:
                    ("veh_mass", np.nan), ("veh_load", 0.0), ("veh_app", 0.0),
                    ("veh_keep", False),
                    ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_lane", -2),
-                   ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_parked", False),
+                   ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_done_step", 0),
+                   ("veh_parked", False),
                    ("veh_stand", 0.0), ("veh_auto_off", np.inf), ("veh_teleports", 0),
                    ("veh_tele", 0.0))
 
@@ -299,7 +308,19 @@ class Ledger:
         slots = np.asarray(slots, np.int64)
         new = slots[~self.veh_done[slots]]
         self.veh_done[new] = True
+        self.veh_done_step[new] = self.steps
         self.n_done += len(np.unique(new))
+
+    def _flushable(self) -> np.ndarray:
+        """Finished vehicles that may leave memory: all but those that left standing (last
+        speed ≤ :data:`HALTING_SPEED_MPS`, as a car stuck in a jam when SUMO teleports it)
+        less than :attr:`hold_steps` ago."""
+        n = self.n_veh
+        done = self.veh_done[:n]
+        if self.hold_steps > 0:
+            done = done & ~((self.veh_done_step[:n] > self.steps - self.hold_steps)
+                            & (self.veh_prev_speed[:n] <= HALTING_SPEED_MPS))
+        return done
 
     def unretire(self, i: int) -> None:
         """A vehicle back in an FCD replay after steps without its rows (a teleport): it
@@ -309,7 +330,9 @@ class Ledger:
             self.n_done -= 1
 
     def flush_due(self) -> bool:
-        return self.spill is not None and self.n_done >= self.flush_vehicles
+        if self.spill is None or self.n_done < self.flush_vehicles:
+            return False
+        return self.hold_steps <= 0 or int(np.count_nonzero(self._flushable())) >= self.flush_vehicles
 
     def _close_segments(self, vo: np.ndarray) -> None:
         """Add the open edge segments of vehicles ``vo`` (on an edge) to the closed totals."""
@@ -321,14 +344,15 @@ class Ledger:
         np.add.at(self._edge_time_closed, old, self.veh_time[vo] - self._seg_time[vo])
 
     def flush(self) -> np.ndarray | None:
-        """Write the finished vehicles to :attr:`spill` and drop them from memory.
+        """Write the finished vehicles (those finished :attr:`hold_steps` ago) to
+        :attr:`spill` and drop them from memory.
 
         Returns the slot map old → new (−1: flushed) for the caller's id → slot table, or
         None when nothing was finished. Edge totals are unchanged (the open segments of the
         leaving vehicles are closed first); the finished rows go out in slot order.
         """
         n = self.n_veh
-        done = self.veh_done[:n]
+        done = self._flushable()
         gone = np.flatnonzero(done)
         if len(gone) == 0:
             return None
@@ -358,7 +382,7 @@ class Ledger:
             self.chain.compact(keep, n)
         remap = np.full(n, -1, np.int64)
         remap[keep] = np.arange(m)
-        self.n_veh, self.n_done = m, 0
+        self.n_veh, self.n_done = m, int(np.count_nonzero(self.veh_done[:m]))  # held ones stay
         return remap
 
     def book(self, vidx: np.ndarray, eidx: np.ndarray, v: np.ndarray, dt: float,
