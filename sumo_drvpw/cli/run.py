@@ -30,7 +30,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--begin", type=sumo_time_arg, help="override sumo.begin [s, or h:m:s]")
     parser.add_argument("--end", type=sumo_time_arg, help="override sumo.end [s, or h:m:s]")
     parser.add_argument("--equation", action="append", metavar="NAME_OR_FILE",
-                        help="evaluate these equations instead of the scenario's (repeatable)")
+                        help="evaluate these equations instead of the scenario's (repeatable; "
+                             "vtype_energy: each Energy/… vType by its own SUMO Energy-model parameters)")
     parser.add_argument("--traci", action="store_true",
                         help="use traci instead of libsumo (slower; allows --gui)")
     parser.add_argument("--gui", action="store_true", help="watch in sumo-gui (implies --traci)")

@@ -22,6 +22,7 @@ from pathlib import Path
 from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_vclass, load_equation
+from sumo_drvpw.sim.vtype_energy import VTYPE_ENERGY, placeholder
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import (additional_outputs, device_wanted, is_output_option,
                                          option_input_files)
@@ -304,7 +305,10 @@ def _path(v, where: str, key: str) -> str:
 
 def resolve_equation(spec, base: Path | None, where: str) -> Equation:
     """Load one equation (Equation object, built-in name or TOML path relative to ``base``)
-    and check it can run in SUMO (no log-only ``[column]`` or ``trip=`` factors)."""
+    and check it can run in SUMO (no log-only ``[column]`` or ``trip=`` factors);
+    ``vtype_energy``: its stand-in (sim/vtype_energy.py)."""
+    if spec == VTYPE_ENERGY:
+        return placeholder()
     if isinstance(spec, Equation):
         eq = spec
         if not re.match(NAME_PATTERN, eq.name):

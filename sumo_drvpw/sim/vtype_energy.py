@@ -1,0 +1,177 @@
+"""The reserved equation ``vtype_energy``: each vType's own SUMO Energy-model parameters,
+booked as an equation with a battery chain (:mod:`sumo_drvpw.model.energy_params`).
+
+``vtype_energy`` may stand wherever an equation name goes (a scenario's ``equations``,
+``vtypes.<id>.equations``, ``vclasses.<c>.equations``, a vType's ``drvpw.equation``, a
+run's or an FCD replay's equations). The run replaces it by one equation per vType of the
+route/additional files read whose ``emissionClass`` is ``Energy/…`` and that writes at
+least one Energy-model parameter, named ``vtype_energy.<vType id>`` and booking only that
+vType: the ledger evaluates one coefficient row per equation for every vehicle
+(:class:`~sumo_drvpw.sim.ledger.EquationSet`), so per-vType coefficients are per-vType
+equations, and the outputs name the vType with the energy. Other vTypes are not booked by
+it and are listed (summary.json ``assumptions.vtype_energy``).
+
+The plug-in's own equations (a bare SUMO config, ``fcd`` without equations:
+:data:`~sumo_drvpw.sim.scenario.CONFIG_EQUATIONS`) bring it too: such a vType is booked by
+its ``vtype_energy.<id>`` beside its class's equations.
+
+Mass: the vType's Energy-model mass (``mass`` attribute, else param ``vehicleMass``, plus
+``loading``). Where the run books the vType at that same mass (no ``drvpw.mass``, no
+scenario ``vtypes.<id>.mass_kg``) the equation takes the vehicle's booked mass, so riding
+persons count as in SUMO's ``getTotalMass`` (the rotating mass, an acc coefficient of
+1 + m_rot/m at the vType's mass, then grows by the riders' share: +1.2 % of the kinetic
+power of a 12-t bus with 500 kg m_rot and 5 t of riders); otherwise (and at SUMO's default 1830 kg) the
+mass is fixed to SUMO's, without riders.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from sumo_drvpw.model.energy_params import ENERGY_PARAMS, energy_params_equation
+from sumo_drvpw.model.equations import SUMO_VCLASSES, Equation
+
+#: the reserved equation name
+VTYPE_ENERGY = "vtype_energy"
+#: provenance key that marks the placeholder and, with the vType id, its equations
+_KEY = "vtype_energy"
+
+
+def placeholder() -> Equation:
+    """The stand-in a scenario holds for ``vtype_energy`` until the run reads the vTypes."""
+    return Equation(name=VTYPE_ENERGY, terms={"acc": 1.0}, vclasses=SUMO_VCLASSES,
+                    description="each vType's own SUMO Energy-model parameters",
+                    provenance={_KEY: None})
+
+
+def is_placeholder(eq) -> bool:
+    return isinstance(eq, Equation) and eq.provenance.get(_KEY, 0) is None
+
+
+def energy_vtype_of(equations) -> dict[str, str]:
+    """Equation name → vType id of the run's ``vtype_energy`` equations."""
+    return {e.name: e.provenance[_KEY] for e in equations
+            if isinstance(e, Equation) and e.provenance.get(_KEY)}
+
+
+def not_booked_why(info) -> str | None:
+    """Why ``vtype_energy`` does not book a vType of the files (None: it does)."""
+    ec = info.emission_class
+    if not ec or not ec.startswith("Energy/"):
+        return (f"emissionClass {ec} is not SUMO's Energy model" if ec
+                else "no emissionClass written (SUMO's default is not the Energy model)")
+    if not any(k in (info.energy_params or {}) for k in ENERGY_PARAMS):
+        return "writes no Energy-model parameter"
+    return None
+
+
+def _name(vt: str, taken: set[str]) -> str:
+    base = (VTYPE_ENERGY + "." + re.sub(r"[^A-Za-z0-9_.-]", "_", vt))[:64]
+    name, k = base, 2
+    while name in taken:
+        name = f"{base[:60]}-{k}"
+        k += 1
+    taken.add(name)
+    return name
+
+
+def vtype_equations(file_vtypes, sc=None) -> tuple[list[Equation], dict]:
+    """One equation per vType of ``file_vtypes`` that writes SUMO's Energy model (the
+    scenario's ``vehicles.vtypes`` filter applies); returns (equations, listing) with
+    listing = {"booked": {vType: {equation, mass_kg, defaults, not_expressed}},
+    "not_booked": {vType: why}}."""
+    vfilter = getattr(sc, "vtype_filter", None)
+    vdata = getattr(sc, "vtype_data", {}) or {}
+    eqs: list[Equation] = []
+    booked: dict[str, dict] = {}
+    not_booked: dict[str, str] = {}
+    taken: set[str] = set()
+    for vt, info in file_vtypes.items():
+        if vfilter is not None and vt not in vfilter:
+            continue
+        why = not_booked_why(info)
+        if why is not None:
+            not_booked[vt] = why
+            continue
+        where = f"{info.source}: vType '{vt}'"
+        eq, notes = energy_params_equation(_name(vt, taken), info.energy_params, info.mass_attr_kg,
+                                           where, (info.vclass or "passenger",))
+        model = eq.chain.provenance["sumo_energy_model"]
+        eq.provenance = {_KEY: vt}
+        eq.path = str(info.source)
+        same_mass = (model["mass"]["from"] != "SUMO default" and not info.drvpw_mass
+                     and vdata.get(vt, {}).get("mass_kg") is None)
+        if same_mass:  # the vehicle's booked mass: the same, plus riders as SUMO adds them
+            eq.mass_kg = None
+        eqs.append(eq)
+        booked[vt] = {"equation": eq.name,
+                      "mass_kg": model["mass"]["value"] + model["loading"]["value"],
+                      "mass": "the vehicle's (riders included)" if same_mass else "fixed (no riders)",
+                      "defaults": {k: d["value"] for k, d in model.items() if d["from"] == "SUMO default"},
+                      "not_expressed": notes}
+    return eqs, {"booked": booked, "not_booked": not_booked}
+
+
+def own_energy(names: list[str], energy_of: dict[str, str], vt: str, chosen, app: np.ndarray) -> np.ndarray:
+    """``app`` with each ``vtype_energy`` equation booking its own vType only: when
+    ``chosen`` (the equations the scenario or the vType names) holds ``vtype_energy`` or
+    the equation's name, or when none are named (``chosen`` None: the equations made for
+    the class, which bring it)."""
+    if not energy_of:
+        return app
+    app = np.array(app, float)
+    for i, n in enumerate(names):
+        own = energy_of.get(n)
+        if own is not None:
+            app[i] = float(own == vt and (chosen is None or VTYPE_ENERGY in chosen or n in chosen))
+    return app
+
+
+def listing_warning(listing: dict) -> str | None:
+    """The console line on what ``vtype_energy`` booked (None: nothing to say)."""
+    booked, nb = listing.get("booked", {}), listing.get("not_booked", {})
+    if not booked:
+        return None
+    parts = []
+    for vt, b in sorted(booked.items()):
+        d = ", ".join(f"{k} {v:g}" for k, v in b["defaults"].items())
+        parts.append(f"{vt} as {b['equation']} ({b['mass_kg']:g} kg"
+                     + (f"; SUMO's defaults {d}" if d else "") + ")")
+    left = [vt for vt, w in nb.items() if w == "writes no Energy-model parameter"]
+    return ("vTypes with SUMO's Energy model were booked by their own parameters as a battery "
+            "chain (vtype_energy): " + "; ".join(parts)
+            + (f"; Energy vTypes without parameters not booked by it: {', '.join(sorted(left))}" if left else "")
+            + " (summary.json assumptions.vtype_energy: radial drag in curves and what else it "
+            "cannot express)")
+
+
+def expand(equations: list, file_vtypes, sc) -> tuple[list, dict]:
+    """The run's equations with ``vtype_energy`` replaced by the vTypes' own equations
+    (appended to the plug-in's own equations, :data:`~sumo_drvpw.sim.scenario.CONFIG_EQUATIONS`,
+    when the files declare such vTypes), and the listing of :func:`vtype_equations` ({}
+    when the run has no ``vtype_energy``). UserError when it was the run's only equation
+    and no vType of the files writes SUMO's Energy model."""
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+    has = any(is_placeholder(e) for e in equations)
+    own = [e.name for e in getattr(sc, "equations", [])] == list(CONFIG_EQUATIONS)
+    if not (has or own):
+        return equations, {}
+    eqs, listing = vtype_equations(file_vtypes, sc)
+    taken = {e.name for e in equations if not is_placeholder(e)}
+    clash = sorted(taken & {e.name for e in eqs})
+    if clash:
+        raise UserError(f"equation name(s) {clash} of the run clash with the vtype_energy equations "
+                        "of the vTypes of those names: rename the equation files")
+    out = [x for e in equations for x in (eqs if is_placeholder(e) else [e])]
+    if own and not has:
+        out += eqs
+    if not out:
+        raise UserError("equation vtype_energy: no vType of the route/additional files read writes SUMO's "
+                        "Energy model (emissionClass Energy/… and at least one of its parameters: "
+                        + ", ".join(f"{vt}: {w}" for vt, w in sorted(listing["not_booked"].items())[:5])
+                        + "); name another equation")
+    return out, listing
