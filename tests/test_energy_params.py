@@ -261,6 +261,18 @@ def test_bare_config_books_energy_vtypes_beside_their_class(tmp_path):
     assert {"bmw_i3_battery", "vtype_energy.ecar"} <= by["ecar"]
     assert not any(e.startswith("vtype_energy") for e in by["plain"] | by["petrol"])
     assert "vtype_energy.ebus" in res["equations"]
+    # without Energy vTypes the plug-in's own equations are as before, and say nothing of it
+    (tmp_path / "r2.rou.xml").write_text(
+        '<routes><vType id="petrol" vClass="passenger" mass="1300" emissionClass="HBEFA4/PC_petrol_Euro-6ab"/>'
+        '<flow id="g" type="petrol" from="e01" to="e56" begin="0" end="40" period="10" departSpeed="0"/>'
+        '</routes>', encoding="utf-8")
+    cfg2 = tmp_path / "c2.sumocfg"
+    cfg2.write_text(cfg.read_text(encoding="utf-8").replace("r.rou.xml", "r2.rou.xml"), encoding="utf-8")
+    r2 = run_scenario(cfg2, tmp_path / "o2", figures=False, progress=False)
+    from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+    assert list(r2["equations"]) == list(CONFIG_EQUATIONS) and r2["vehicles"] > 0
+    assert r2["assumptions"]["vtype_energy"] == {}
     # named explicitly: its own only
     (tmp_path / "s.toml").write_text(
         f'equations = ["vtype_energy", "moves_transit_bus"]\n[vtypes.ebus]\nequations = ["vtype_energy"]\n'

@@ -60,7 +60,8 @@ def not_booked_why(info) -> str | None:
     """Why ``vtype_energy`` does not book a vType of the files (None: it does)."""
     ec = info.emission_class
     if not ec or not ec.startswith("Energy/"):
-        return (f"emissionClass {ec} is not SUMO's Energy model" if ec
+        return (f"emissionClass {ec} is not SUMO's Energy model"
+                + (" (MMPEVEM's parameters are not read)" if ec.startswith("MMPEVEM") else "") if ec
                 else "no emissionClass written (SUMO's default is not the Energy model)")
     if not any(k in (info.energy_params or {}) for k in ENERGY_PARAMS):
         return "writes no Energy-model parameter"
@@ -161,6 +162,8 @@ def expand(equations: list, file_vtypes, sc) -> tuple[list, dict]:
     if not (has or own):
         return equations, {}
     eqs, listing = vtype_equations(file_vtypes, sc)
+    if own and not has and not eqs:  # the plug-in's own equations, no Energy vType: nothing to say
+        return equations, {}
     taken = {e.name for e in equations if not is_placeholder(e)}
     clash = sorted(taken & {e.name for e in eqs})
     if clash:
