@@ -239,6 +239,9 @@ def test_vtype_energy_agrees_with_sumos_device(tmp_path):
     assert ve["not_booked"] == {"plain": "writes no Energy-model parameter",
                                 "petrol": "emissionClass HBEFA4/PC_petrol_Euro-6ab is not SUMO's Energy model"}
     assert any("vtype_energy" in w for w in res["warnings"])
+    # the e-car, booked by its vtype_energy only, at SUMO's mass, not a class default
+    assert "ecar" not in res["assumptions"]["default_masses"]
+    assert (v[v.vtype == "ecar"].mass_kg == 1830.0).all()
 
 
 def test_bare_config_books_energy_vtypes_beside_their_class(tmp_path):

@@ -72,6 +72,7 @@ class VTypeResolver:
                            (None if isinstance(e, str) else equation_carrier(e)) for e in equations}
         self.cache: dict[str, tuple] = {}
         self.energy_of = energy_vtype_of(equations)  # vtype_energy equation → its vType
+        self.energy_mass = {e.name: e.mass_kg for e in equations if getattr(e, "name", None) in self.energy_of}
         #: vTypes resolved by other resolvers of the same run (Dask buckets of an FCD replay)
         self.seen: set[str] = set()
         #: vehicles not accounted because no equation is made for their vClass (by_vclass,
@@ -250,6 +251,9 @@ class VTypeResolver:
             mass = self._sumo_mass(vt)  # a vType made during the run (TraCI copy, setMass)
             if mass is not None:  # or loaded from a file the plug-in did not read: said
                 self.sumo_masses[vt] = {"vclass": vclass, "mass_kg": mass}
+        fixed = [self.energy_mass.get(n) for n, a in zip(self.names, app) if a]
+        if mass is None and all(fixed):  # booked by its vtype_energy only: SUMO's mass, no class default
+            mass = fixed[0]
         # a class mass for a vType that gives none: plus the vType's SUMO loading (payload)
         loading = info.loading_kg if info is not None else 0.0
         if mass is None and cdata.get("mass_kg") is not None:
