@@ -4,8 +4,9 @@ booked as an equation with a battery chain (:mod:`sumo_drvpw.model.energy_params
 ``vtype_energy`` may stand wherever an equation name goes (a scenario's ``equations``,
 ``vtypes.<id>.equations``, ``vclasses.<c>.equations``, a vType's ``drvpw.equation``, a
 run's or an FCD replay's equations). The run replaces it by one equation per vType of the
-route/additional files read whose ``emissionClass`` is ``Energy/…`` and that writes at
-least one Energy-model parameter, named ``vtype_energy.<vType id>`` and booking only that
+route/additional files read that SUMO runs on its Energy model (``emissionClass``
+``Energy/…`` or ``Energy``; none, with SUMO's battery device on: :func:`not_booked_why`)
+and that writes at least one Energy-model parameter, named ``vtype_energy.<vType id>`` and booking only that
 vType: the ledger evaluates one coefficient row per equation for every vehicle
 (:class:`~sumo_drvpw.sim.ledger.EquationSet`), so per-vType coefficients are per-vType
 equations, and the outputs name the vType with the energy. Other vTypes are not booked by
@@ -56,13 +57,42 @@ def energy_vtype_of(equations) -> dict[str, str]:
             if isinstance(e, Equation) and e.provenance.get(_KEY)}
 
 
-def not_booked_why(info) -> str | None:
-    """Why ``vtype_energy`` does not book a vType of the files (None: it does)."""
+def is_energy_class(ec: str | None) -> bool:
+    """Whether an emissionClass names SUMO's Energy model (``Energy/…``, or the bare
+    ``Energy``, which SUMO 1.28 reads as ``Energy/default``)."""
+    return bool(ec) and (ec == "Energy" or ec.startswith("Energy/"))
+
+
+def battery_for_all(sc) -> bool:
+    """Whether the run's SUMO options (or its config) equip every vehicle with SUMO's
+    battery device (``device.battery.probability`` ≥ 1)."""
+    from sumo_drvpw.sim.sumo_start import scenario_option
+
+    if sc is None or not hasattr(sc, "sumo_args"):
+        return False
+    try:
+        return float(scenario_option(sc, "device.battery.probability") or 0) >= 1.0
+    except ValueError:
+        return False  # SUMO refuses it itself
+
+
+def not_booked_why(info, battery_all: bool = False) -> str | None:
+    """Why ``vtype_energy`` does not book a vType of the files (None: it does).
+
+    SUMO runs a vType on its Energy model when its emissionClass is ``Energy/…`` (or
+    ``Energy``), and, when it writes no emissionClass, when the battery device is on for it
+    (param ``has.battery.device``, or ``battery_all``: device.battery.probability 1):
+    SUMO 1.28 warns "The emission class Energy/unknown will be used" (probed with libsumo
+    1.28.0, 2026-11-27: getEmissionClass reads Energy/default, the emissions device's
+    electricity equals the battery device's)."""
     ec = info.emission_class
-    if not ec or not ec.startswith("Energy/"):
+    if not ec and (getattr(info, "battery_device", False) or battery_all):
+        ec = "Energy/unknown"
+    if not is_energy_class(ec):
         return (f"emissionClass {ec} is not SUMO's Energy model"
                 + (" (MMPEVEM's parameters are not read)" if ec.startswith("MMPEVEM") else "") if ec
-                else "no emissionClass written (SUMO's default is not the Energy model)")
+                else "no emissionClass written and no battery device (SUMO's default is then not "
+                     "the Energy model)")
     if not any(k in (info.energy_params or {}) for k in ENERGY_PARAMS):
         return "writes no Energy-model parameter"
     return None
@@ -85,6 +115,7 @@ def vtype_equations(file_vtypes, sc=None) -> tuple[list[Equation], dict]:
     "not_booked": {vType: why}}."""
     vfilter = getattr(sc, "vtype_filter", None)
     vdata = getattr(sc, "vtype_data", {}) or {}
+    battery_all = battery_for_all(sc)
     eqs: list[Equation] = []
     booked: dict[str, dict] = {}
     not_booked: dict[str, str] = {}
@@ -92,7 +123,7 @@ def vtype_equations(file_vtypes, sc=None) -> tuple[list[Equation], dict]:
     for vt, info in file_vtypes.items():
         if vfilter is not None and vt not in vfilter:
             continue
-        why = not_booked_why(info)
+        why = not_booked_why(info, battery_all)
         if why is not None:
             not_booked[vt] = why
             continue
@@ -108,6 +139,8 @@ def vtype_equations(file_vtypes, sc=None) -> tuple[list[Equation], dict]:
             eq.mass_kg = None
         eqs.append(eq)
         booked[vt] = {"equation": eq.name,
+                      "emission_class": info.emission_class or "none written: Energy/unknown, as SUMO "
+                                                               "takes it with the battery device on",
                       "mass_kg": model["mass"]["value"] + model["loading"]["value"],
                       "mass": "the vehicle's (riders included)" if same_mass else "fixed (no riders)",
                       "defaults": {k: d["value"] for k, d in model.items() if d["from"] == "SUMO default"},
@@ -174,7 +207,8 @@ def expand(equations: list, file_vtypes, sc) -> tuple[list, dict]:
         out += eqs
     if not out:
         raise UserError("equation vtype_energy: no vType of the route/additional files read writes SUMO's "
-                        "Energy model (emissionClass Energy/… and at least one of its parameters: "
+                        "Energy model (emissionClass Energy/…, or none with SUMO's battery device on, and at least "
+                        "one of its parameters: "
                         + ", ".join(f"{vt}: {w}" for vt, w in sorted(listing["not_booked"].items())[:5])
                         + "); name another equation")
     return out, listing

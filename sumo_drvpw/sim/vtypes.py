@@ -214,6 +214,9 @@ class VTypeInfo:
     mass_attr_kg: float | None = None
     #: whether param ``drvpw.mass`` (the plug-in's own mass) is written
     drvpw_mass: bool = False
+    #: whether param ``has.battery.device`` is true (SUMO then runs a vType without an
+    #: emissionClass on its Energy model: "The emission class Energy/unknown will be used")
+    battery_device: bool = False
 
 
 #: SUMO's default vType lengths of the heavy classes [m] (for the booking note)
@@ -299,6 +302,15 @@ class FileVTypes(dict):
 #: the vType params of SUMO's Energy model a file's vType keeps (:attr:`VTypeInfo.energy_params`)
 ENERGY_KEYS = ENERGY_PARAMS + ("loading", "maximumPower")
 
+#: the values SUMO reads as true (StringUtils::toBool, case-insensitive)
+SUMO_TRUE = ("1", "yes", "true", "on", "x")
+
+
+def is_true(val: str | None) -> bool:
+    """Whether SUMO reads a param or option value as true."""
+    return val is not None and val.strip().lower() in SUMO_TRUE
+
+
 #: the route files' elements that define vehicles (and may carry a vehicle's own params)
 VEHICLE_TAGS = {"vehicle": "vehicle_cold_start", "trip": "vehicle_cold_start", "flow": "flow_cold_start"}
 
@@ -367,7 +379,8 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                                      {k: params[k] for k in SHUT_OFF_PARAMS if params.get(k) is not None},
                                      {k: params[k] for k in ENERGY_KEYS if params.get(k) is not None} or None,
                                      _mass(where, "mass", el.attrib.get("mass")),
-                                     params.get("drvpw.mass") is not None)
+                                     params.get("drvpw.mass") is not None,
+                                     is_true(params.get("has.battery.device")))
                 el.clear()
     except ET.ParseError as e:
         raise UserError(f"{path}: not valid XML: {e}") from None
