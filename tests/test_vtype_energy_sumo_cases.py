@@ -86,3 +86,73 @@ def test_battery_device_vtypes_agree_with_sumos_device(tmp_path):
         assert cmp.loc[eq, "ratio"] == pytest.approx(1.0, abs=0.01), eq
     v = res.vehicles
     assert set(v[v.equation == "vtype_energy.own_device"].vtype) == {"own_device"}
+
+
+def _scenario(tmp_path, head: str, tables: str = "", options: str = "") -> Path:
+    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
+    f = tmp_path / "s.toml"
+    f.write_text(f'{head}\n{tables}\n[sumo]\nnet = "{HW_NET}"\nroutes = ["r.rou.xml"]\nend = 30\n'
+                 f'options = ["--no-warnings", "true"{options}]\n[outputs]\nfigures = false\n', encoding="utf-8")
+    return f
+
+
+def test_a_vtype_may_name_its_own_vtype_energy_equation(tmp_path):
+    """``[vtypes.<id>] equations = ["vtype_energy.<id>"]`` books that vType by its own
+    parameters only (as ``["vtype_energy"]`` does); another vType's, one under
+    ``[vclasses]``, or one without ``vtype_energy`` among the equations: a one-line
+    UserError naming the key (before: refused with "list it there", which cannot be done)."""
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    f = _scenario(tmp_path, 'equations = ["vtype_energy", "moves_passenger_car"]',
+                  '[vtypes.bare_energy]\nequations = ["vtype_energy.bare_energy"]')
+    assert load_scenario(f).vtype_data["bare_energy"]["equations"] == ["vtype_energy.bare_energy"]
+    v = run_scenario(f, tmp_path / "o").vehicles
+    assert set(v[v.vtype == "bare_energy"].equation) == {"vtype_energy.bare_energy"}
+    assert set(v[v.vtype == "own_device"].equation) == {"vtype_energy.own_device", "moves_passenger_car"}
+    for head, tables, why in [
+            ('equations = ["vtype_energy"]', '[vtypes.bare_energy]\nequations = ["vtype_energy.own_device"]',
+             "books its own vType only; name 'vtype_energy' or 'vtype_energy.bare_energy'"),
+            ('equations = ["vtype_energy"]', '[vclasses.passenger]\nequations = ["vtype_energy.own_device"]',
+             "name 'vtype_energy' there"),
+            ('equations = ["moves_passenger_car"]', '[vtypes.bare_energy]\nequations = ["vtype_energy.bare_energy"]',
+             "list 'vtype_energy' among the scenario's equations")]:
+        with pytest.raises(UserError) as e:
+            load_scenario(_scenario(tmp_path, head, tables))
+        assert "equations names 'vtype_energy." in str(e.value) and why in str(e.value), str(e.value)
+        assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("name", ["vtype_energy", "vtype_energy.own_device"])
+def test_an_equation_file_may_not_take_the_reserved_name(tmp_path, capsys, name):
+    """An equation file named ``vtype_energy`` (or ``vtype_energy.…``) is refused, naming the
+    file: before, it ran and its outputs gave another equation's energy under the run's own
+    name. The CLI exits 2 and writes nothing."""
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.equations import load_equation
+
+    src = Path(load_equation("moves_passenger_car").path).read_text(encoding="utf-8")
+    lines = [f'name = "{name}"' if ln.startswith("name =") else ln for ln in src.splitlines()]
+    (tmp_path / "mine.toml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    f = _scenario(tmp_path, 'equations = ["mine.toml"]')
+    out = tmp_path / "o"
+    assert cli_main(["run", str(f), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert not out.exists() and "mine.toml" in err and f"'{name}' is reserved" in err and "\n" not in err
+
+
+def test_an_energy_vtype_no_vehicle_ran_is_one_short_line(tmp_path, capsys):
+    """With the SUMO option device.battery.probability 1 the vType without emissionClass
+    and without has.battery.device is SUMO's Energy model too and gets its equation; no
+    vehicle of it runs: the console says so in one line of its own, not among the class
+    equations that "booked no vehicle (none of their vClasses, or of their fuel)"."""
+    import json
+
+    from sumo_drvpw.cli import main as cli_main
+
+    f = _scenario(tmp_path, 'equations = ["vtype_energy"]', options=', "--device.battery.probability", "1"')
+    assert cli_main(["run", str(f), "--out", str(tmp_path / "o"), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "  vtype_energy: no vehicle of vType no_device ran" in out and "booked no vehicle" not in out
+    summ = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert set(summ["assumptions"]["vtype_energy"]["booked"]) == {"own_device", "bare_energy", "no_device"}

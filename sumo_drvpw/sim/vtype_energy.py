@@ -47,6 +47,17 @@ def placeholder() -> Equation:
                     provenance={_KEY: None})
 
 
+def reserved_name(eq, where: str) -> None:
+    """UserError when an equation loaded from a file or a built-in name is named
+    ``vtype_energy`` or ``vtype_energy.…``: the names of the run's own (its outputs would
+    give another equation's energy under them)."""
+    if eq.name == VTYPE_ENERGY or eq.name.startswith(VTYPE_ENERGY + "."):
+        from sumo_drvpw.errors import UserError
+
+        raise UserError(f"{eq.path or where}: equation name '{eq.name}' is reserved (vtype_energy: each "
+                        "vType's own SUMO Energy-model parameters); rename the equation")
+
+
 def is_placeholder(eq) -> bool:
     return isinstance(eq, Equation) and eq.provenance.get(_KEY, 0) is None
 
@@ -98,8 +109,35 @@ def not_booked_why(info, battery_all: bool = False) -> str | None:
     return None
 
 
+def own_name(vt: str) -> str:
+    """The name of vType ``vt``'s ``vtype_energy`` equation (before a clash's suffix)."""
+    return (VTYPE_ENERGY + "." + re.sub(r"[^A-Za-z0-9_.-]", "_", vt))[:64]
+
+
+def named_in_table(e: str, table: str, key: str, names: list[str], where: str) -> bool:
+    """Whether ``e``, named in a scenario's ``[table.key] equations`` but not among its
+    equations, is the ``vtype_energy`` equation the run makes for that vType (``[vtypes.<id>]``
+    naming ``vtype_energy.<id>``, with ``vtype_energy`` among the scenario's equations):
+    True; False when ``e`` is no ``vtype_energy.…`` name. A UserError when it names another
+    vType's, or ``vtype_energy`` is not among the equations, or it stands under ``vclasses``."""
+    from sumo_drvpw.errors import UserError
+
+    if not e.startswith(VTYPE_ENERGY + "."):
+        return False
+    at = f"{where}: {table}.{key}.equations names '{e}'"
+    if table != "vtypes":
+        raise UserError(f"{at}: a vtype_energy equation books its own vType only; name "
+                        "'vtype_energy' there (each vType of the class by its own parameters)")
+    if e != own_name(key):
+        raise UserError(f"{at}: a vtype_energy equation books its own vType only; name "
+                        f"'vtype_energy' or '{own_name(key)}' for vType '{key}'")
+    if VTYPE_ENERGY not in names:
+        raise UserError(f"{at}: list 'vtype_energy' among the scenario's equations (it makes '{e}')")
+    return True
+
+
 def _name(vt: str, taken: set[str]) -> str:
-    base = (VTYPE_ENERGY + "." + re.sub(r"[^A-Za-z0-9_.-]", "_", vt))[:64]
+    base = own_name(vt)
     name, k = base, 2
     while name in taken:
         name = f"{base[:60]}-{k}"
