@@ -30,7 +30,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--begin", type=sumo_time_arg, help="override sumo.begin [s, or h:m:s]")
     parser.add_argument("--end", type=sumo_time_arg, help="override sumo.end [s, or h:m:s]")
     parser.add_argument("--equation", action="append", metavar="NAME_OR_FILE",
-                        help="evaluate these equations instead of the scenario's (repeatable)")
+                        help="evaluate these equations instead of the scenario's (repeatable; "
+                             "vtype_energy: each Energy/… vType by its own SUMO Energy-model parameters)")
     parser.add_argument("--traci", action="store_true",
                         help="use traci instead of libsumo (slower; allows --gui)")
     parser.add_argument("--gui", action="store_true", help="watch in sumo-gui (implies --traci)")
@@ -120,8 +121,13 @@ def _print_summary(s: dict, out, label: str = "", replaced: bool = False) -> Non
         also = {"wheel": "", "powertrain_output": " (at the powertrain output)",
                 "battery": "; its battery energy per class below", "fuel": "; its fuel per class below"}
         print(f"  {name}: traction of its terms {parts or '0'}{also.get(eq.get('predicts', 'wheel'), '')}")
+    # a vtype_energy equation books its own vType only: idle when no vehicle of it ran
+    unused = [n[len("vtype_energy."):] for n in idle if n.startswith("vtype_energy.")]
+    idle = [n for n in idle if not n.startswith("vtype_energy.")]
     if idle:
         print(f"  booked no vehicle (none of their vClasses, or of their fuel): {', '.join(idle)}")
+    if unused:
+        print(f"  vtype_energy: no vehicle of vType {', '.join(unused)} ran")
     tp = s.get("teleports") or {}
     if tp.get("count"):  # SUMO put cars back on a lane at speed: energy apart from driving
         print(f"  teleports: {tp['count']} vehicles put back on a lane (not driven, not in the energies "

@@ -40,6 +40,7 @@ from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.outputs import RunResult, TraceWriter, summary_dict
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
 from sumo_drvpw.sim.sumo_start import NewRun, scenario_option
+from sumo_drvpw.sim.vtype_energy import expand as expand_vtype_energy, listing_warning
 from sumo_drvpw.sim.vtypes import GENERIC_VCLASSES, read_vtypes
 
 __all__ = ["Accountant", "RunResult"]
@@ -154,7 +155,9 @@ class Accountant(_Listener):
                                     f"'{info.equation}', whose name is '{eq.name}'")
                 self.equations.append(eq)
                 names.append(eq.name)
-        self.names = names
+        # vtype_energy: the vTypes' own Energy-model parameters, one equation per vType
+        self.equations, self.vtype_energy = expand_vtype_energy(self.equations, self.file_vtypes, sc)
+        self.names = names = [e.name for e in self.equations]
         self.net = net if net is not None else load_network(
             sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
         self.eqset = EquationSet(self.equations)
@@ -302,7 +305,8 @@ class Accountant(_Listener):
             "assumptions": {"default_masses": dict(sorted(self.resolver.assumptions.items())),
                             "sumo_masses": dict(sorted(self.resolver.sumo_masses.items())),
                             "booked_as": dict(sorted(self.resolver.booked_as.items())),
-                            "energy_carrier": dict(sorted(self.resolver.carriers.items()))},
+                            "energy_carrier": dict(sorted(self.resolver.carriers.items())),
+                            "vtype_energy": self.vtype_energy},
         }
         summary_extra.update(extra or {})
         warnings = network_warnings(net)
@@ -332,6 +336,8 @@ class Accountant(_Listener):
                             + " (summary.json assumptions.sumo_masses; set vtypes.<id>.mass_kg)")
         if self.resolver.booked_as:
             warnings.append(booked_as_warning(self.resolver.booked_as))
+        if listing_warning(self.vtype_energy):
+            warnings.append(listing_warning(self.vtype_energy))
         # persons (counted as pedestrians) are never booked: no warning for them
         skipped = {c: n for c, n in self.resolver.skipped["by_vclass"].items() if c != "pedestrian"}
         if skipped:

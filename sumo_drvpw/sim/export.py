@@ -3,10 +3,12 @@
 SUMO's Energy model (src/utils/emissions/HelpersEnergy.cpp, SUMO 1.28) computes per step
 
     P = m·g·sin θ·v + ½(m + m_rot)(v² − v_prev²)/Δt + ½·ρ·A·C_d·v³ + c_r·g·m·v
-        + radial drag + constant power intake,
+        + radial drag,
 
-with ρ = 1.2041 kg/m³, then divides traction by the propulsion efficiency and multiplies
-recuperation by the recuperation efficiency. Our terms map onto it as follows (m: the
+with ρ = 1.2041 kg/m³ and g = 9.80665 m/s², then divides traction by the propulsion
+efficiency, multiplies recuperation by the recuperation efficiency and adds the constant
+power intake (after the efficiency, probed in SUMO 1.28: :mod:`sumo_drvpw.model.energy_params`,
+which reads such a vType back as an equation). Our terms map onto it as follows (m: the
 equation's fixed mass, else the vehicle's):
 
 ============  ==========================================  =============================
@@ -18,7 +20,7 @@ aero_rho      ½·ρ·c·v³ (no wind)                            A·C_d = c
 aero          c·v³ (no wind)                                A·C_d = 2c/ρ_SUMO
 m_v3, v3      c·m·v³, c·v³                                  A·C_d = 2c·m/ρ_SUMO, 2c/ρ_SUMO
 roll          c·m·g·v·cos θ                                 rollDragCoefficient = c (no cos θ)
-m_v1, v1      c·m·v, c·v                                    c_r = c/g, c/(g·m)
+m_v1, v1      c·m·v, c·v                                    c_r = c/g, c/(g·m), SUMO's g
 one           c                                             constantPowerIntake = c [W]
 ============  ==========================================  =============================
 
@@ -42,7 +44,8 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.chain_sumo import chain_energy_params
-from sumo_drvpw.model.constants import G, RHO_DEFAULT
+from sumo_drvpw.model.constants import RHO_DEFAULT
+from sumo_drvpw.model.energy_params import G_SUMO
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import parse_term
 
@@ -120,10 +123,10 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
             cda += 2.0 * c / RHO_SUMO
         elif f == "roll":
             cr += c
-        elif f == "m_v1":
-            cr += c / G
+        elif f == "m_v1":  # SUMO's rolling term c_r·g·m·v with its g (9.80665)
+            cr += c / G_SUMO
         elif f in ("v1", "v^1"):
-            cr += c / (G * m)
+            cr += c / (G_SUMO * m)
         elif f in ("one", "v^0", "moving"):
             # constantPowerIntake: SUMO 1.28 books it standing too (at v = 0 without the
             # efficiency; docs/scenario.md), which is `v^0`; a `moving` constant exported

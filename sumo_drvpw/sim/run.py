@@ -16,6 +16,7 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_start import close_sumo, start_sumo
+from sumo_drvpw.sim.vtype_energy import energy_vtype_of, own_energy
 from sumo_drvpw.sim.vtypes import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER,
                                    SUMO_DEFAULT_VTYPES, energy_carrier, equation_carrier,
                                    read_vtypes)
@@ -70,6 +71,8 @@ class VTypeResolver:
         self.carrier_of = {(e if isinstance(e, str) else e.name):
                            (None if isinstance(e, str) else equation_carrier(e)) for e in equations}
         self.cache: dict[str, tuple] = {}
+        self.energy_of = energy_vtype_of(equations)  # vtype_energy equation → its vType
+        self.energy_mass = {e.name: e.mass_kg for e in equations if getattr(e, "name", None) in self.energy_of}
         #: vTypes resolved by other resolvers of the same run (Dask buckets of an FCD replay)
         self.seen: set[str] = set()
         #: vehicles not accounted because no equation is made for their vClass (by_vclass,
@@ -125,7 +128,8 @@ class VTypeResolver:
 
     def _made_for(self, vclass: str) -> list[str]:
         """The equations made for a vClass (plain names: any)."""
-        return [n for n in self.names if self.vclasses[n] is None or vclass in self.vclasses[n]]
+        return [n for n in self.names if (self.vclasses[n] is None or vclass in self.vclasses[n])
+                and n not in self.energy_of]
 
     def _default_emission_class(self, vt: str, vclass: str, written: bool = False) -> tuple[str, str]:
         """SUMO's default emissionClass for the vType (SUMO's own when it writes none and the
@@ -207,6 +211,7 @@ class VTypeResolver:
             one = (info.equation if info is not None else None) or self._param(vt, "drvpw.equation")
             eq = [one] if one else cdata.get("equations")
         explicit = eq is not None
+        chosen = eq  # the equations named (None: those made for the class)
         if eq is None:
             eq = self._made_for(vclass)
         app = np.array([1.0 if n in eq else 0.0 for n in self.names])
@@ -216,10 +221,12 @@ class VTypeResolver:
         named = vehicle_body(vclass, info, vt)
         body = named[0] if named is not None else vclass
         if named is not None and not explicit and (vclass not in GENERIC_VCLASSES or not app.any()):
-            eq = sc_classes.get(body, {}).get("equations") or self._made_for(body)
+            chosen = sc_classes.get(body, {}).get("equations")
+            eq = chosen or self._made_for(body)
             app = np.array([1.0 if n in eq else 0.0 for n in self.names])
             if app.any():
                 self.booked_as[vt] = {"vclass": vclass, "booked_as": body, "from": named[1]}
+        app = own_energy(self.names, self.energy_of, vt, chosen, app)
         if not app.any():
             return (np.nan, app, False, vclass, "vclass")
         if not explicit:
@@ -244,6 +251,9 @@ class VTypeResolver:
             mass = self._sumo_mass(vt)  # a vType made during the run (TraCI copy, setMass)
             if mass is not None:  # or loaded from a file the plug-in did not read: said
                 self.sumo_masses[vt] = {"vclass": vclass, "mass_kg": mass}
+        fixed = [self.energy_mass.get(n) for n, a in zip(self.names, app) if a]
+        if mass is None and all(fixed):  # booked by its vtype_energy only: SUMO's mass, no class default
+            mass = fixed[0]
         # a class mass for a vType that gives none: plus the vType's SUMO loading (payload)
         loading = info.loading_kg if info is not None else 0.0
         if mass is None and cdata.get("mass_kg") is not None:

@@ -22,6 +22,7 @@ from pathlib import Path
 from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_vclass, load_equation
+from sumo_drvpw.sim.vtype_energy import VTYPE_ENERGY, named_in_table, placeholder, reserved_name
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import (additional_outputs, device_wanted, is_output_option,
                                          option_input_files)
@@ -304,7 +305,10 @@ def _path(v, where: str, key: str) -> str:
 
 def resolve_equation(spec, base: Path | None, where: str) -> Equation:
     """Load one equation (Equation object, built-in name or TOML path relative to ``base``)
-    and check it can run in SUMO (no log-only ``[column]`` or ``trip=`` factors)."""
+    and check it can run in SUMO (no log-only ``[column]`` or ``trip=`` factors);
+    ``vtype_energy``: its stand-in (sim/vtype_energy.py)."""
+    if spec == VTYPE_ENERGY:
+        return placeholder()
     if isinstance(spec, Equation):
         eq = spec
         if not re.match(NAME_PATTERN, eq.name):
@@ -318,6 +322,7 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
             if str(e).startswith("unknown equation"):  # say where the name was written
                 raise UserError(f"{where}: {e}") from None
             raise
+        reserved_name(eq, where)  # vtype_energy, vtype_energy.…: the run's own
     src = eq.path or where  # the equation file the term is written in, else the scenario
     for t in eq.term_names:
         term = parse_term(t)
@@ -484,7 +489,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                 eqs = [e if e in names or not e.endswith(".toml") else
                        resolve_equation(e, base, f"{where}: {table}.{vt}.equations").name for e in eqs]
                 for e in eqs:
-                    if e not in names:
+                    if e not in names and not named_in_table(e, table, str(vt), names, where):
                         raise UserError(f"{where}: {table}.{vt}.equations names '{e}', which is not "
                                         f"among the scenario's equations ({', '.join(names)}): list it there")
                 entry["equations"] = eqs

@@ -305,6 +305,12 @@ BATTERY_NOTE = ("model difference, not a booking one: SUMO's Energy model takes 
                 "and auxiliary power (ratio_auxiliary: our auxiliary energy over SUMO's total; "
                 "ratio_rest: the remainder)")
 
+#: what the row of a ``vtype_energy`` equation compares (sim/vtype_energy.py)
+OWN_PARAMS_NOTE = ("like for like: the vType's own Energy-model parameters (SUMO's defaults for those it "
+                   "leaves out) as terms and a battery chain; left out: the radial drag in curves, a "
+                   "recuperation efficiency by deceleration; the slopes' source differs on grade changes "
+                   "(summary.json assumptions.vtype_energy)")
+
 #: what the row of an equation without an energy chain compares (an electric bus: no battery
 #: chain applies to buses); its ratio is no verdict on the equation
 NO_CHAIN_NOTE = ("not like for like: no energy chain applies to these vehicles, so ours is the "
@@ -359,6 +365,8 @@ def device_comparison(v, dev, cv, chains: dict):
             if c is not None:
                 ours, q = g.net_kwh.sum(), "battery kWh (chain)"
                 aux, note = float(g.auxiliary_kwh.sum()), BATTERY_NOTE
+                if (getattr(c, "provenance", None) or {}).get("sumo_energy_model"):
+                    note = OWN_PARAMS_NOTE
             else:
                 ours, q = g.net_total_j.sum() / 3.6e6, "net driving energy kWh (no chain)"
                 note = NO_CHAIN_NOTE

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
+from sumo_drvpw.model.energy_params import ENERGY_PARAMS
 from sumo_drvpw.sim.shutoff import SHUT_OFF_PARAMS
 from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
@@ -205,6 +206,17 @@ class VTypeInfo:
     #: ``shutOffAutoDuration``: :data:`SHUT_OFF_PARAMS`) as written: what an FCD replay's
     #: vehicletype.getParameter answers (:mod:`sumo_drvpw.sim.shutoff` reads them as SUMO)
     shut_off: dict | None = None
+    #: SUMO's Energy-model params as written (:data:`sumo_drvpw.model.energy_params.ENERGY_PARAMS`,
+    #: ``loading``, ``maximumPower``; key → value string), None when it writes none of them
+    energy_params: dict | None = None
+    #: the ``mass`` attribute as written [kg] (None: not given; the Energy model then takes
+    #: the vehicleMass param, else its default)
+    mass_attr_kg: float | None = None
+    #: whether param ``drvpw.mass`` (the plug-in's own mass) is written
+    drvpw_mass: bool = False
+    #: whether param ``has.battery.device`` is true (SUMO then runs a vType without an
+    #: emissionClass on its Energy model: "The emission class Energy/unknown will be used")
+    battery_device: bool = False
 
 
 #: SUMO's default vType lengths of the heavy classes [m] (for the booking note)
@@ -287,6 +299,18 @@ class FileVTypes(dict):
         self.flow_cold_start: dict[str, float] = {}
 
 
+#: the vType params of SUMO's Energy model a file's vType keeps (:attr:`VTypeInfo.energy_params`)
+ENERGY_KEYS = ENERGY_PARAMS + ("loading", "maximumPower")
+
+#: the values SUMO reads as true (StringUtils::toBool, case-insensitive)
+SUMO_TRUE = ("1", "yes", "true", "on", "x")
+
+
+def is_true(val: str | None) -> bool:
+    """Whether SUMO reads a param or option value as true."""
+    return val is not None and val.strip().lower() in SUMO_TRUE
+
+
 #: the route files' elements that define vehicles (and may carry a vehicle's own params)
 VEHICLE_TAGS = {"vehicle": "vehicle_cold_start", "trip": "vehicle_cold_start", "flow": "flow_cold_start"}
 
@@ -352,7 +376,11 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                                      _length(el.attrib.get("length")),
                                      _capacity(el.attrib.get("personCapacity")),
                                      _cold_share(where, params.get("drvpw.cold_start")),
-                                     {k: params[k] for k in SHUT_OFF_PARAMS if params.get(k) is not None})
+                                     {k: params[k] for k in SHUT_OFF_PARAMS if params.get(k) is not None},
+                                     {k: params[k] for k in ENERGY_KEYS if params.get(k) is not None} or None,
+                                     _mass(where, "mass", el.attrib.get("mass")),
+                                     params.get("drvpw.mass") is not None,
+                                     is_true(params.get("has.battery.device")))
                 el.clear()
     except ET.ParseError as e:
         raise UserError(f"{path}: not valid XML: {e}") from None

@@ -1,0 +1,252 @@
+"""The reserved equation ``vtype_energy``: each vType's own SUMO Energy-model parameters,
+booked as an equation with a battery chain (:mod:`sumo_drvpw.model.energy_params`).
+
+``vtype_energy`` may stand wherever an equation name goes (a scenario's ``equations``,
+``vtypes.<id>.equations``, ``vclasses.<c>.equations``, a vType's ``drvpw.equation``, a
+run's or an FCD replay's equations). The run replaces it by one equation per vType of the
+route/additional files read that SUMO runs on its Energy model (``emissionClass``
+``Energy/…`` or ``Energy``; none, with SUMO's battery device on: :func:`not_booked_why`)
+and that writes at least one Energy-model parameter, named ``vtype_energy.<vType id>`` and booking only that
+vType: the ledger evaluates one coefficient row per equation for every vehicle
+(:class:`~sumo_drvpw.sim.ledger.EquationSet`), so per-vType coefficients are per-vType
+equations, and the outputs name the vType with the energy. Other vTypes are not booked by
+it and are listed (summary.json ``assumptions.vtype_energy``).
+
+The plug-in's own equations (a bare SUMO config, ``fcd`` without equations:
+:data:`~sumo_drvpw.sim.scenario.CONFIG_EQUATIONS`) bring it too: such a vType is booked by
+its ``vtype_energy.<id>`` beside its class's equations.
+
+Mass: the vType's Energy-model mass (``mass`` attribute, else param ``vehicleMass``, plus
+``loading``). Where the run books the vType at that same mass (no ``drvpw.mass``, no
+scenario ``vtypes.<id>.mass_kg``) the equation takes the vehicle's booked mass, so riding
+persons count as in SUMO's ``getTotalMass`` (the rotating mass, an acc coefficient of
+1 + m_rot/m at the vType's mass, then grows by the riders' share: +1.2 % of the kinetic
+power of a 12-t bus with 500 kg m_rot and 5 t of riders); otherwise (and at SUMO's default 1830 kg) the
+mass is fixed to SUMO's, without riders.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from sumo_drvpw.model.energy_params import ENERGY_PARAMS, energy_params_equation
+from sumo_drvpw.model.equations import SUMO_VCLASSES, Equation
+
+#: the reserved equation name
+VTYPE_ENERGY = "vtype_energy"
+#: provenance key that marks the placeholder and, with the vType id, its equations
+_KEY = "vtype_energy"
+
+
+def placeholder() -> Equation:
+    """The stand-in a scenario holds for ``vtype_energy`` until the run reads the vTypes."""
+    return Equation(name=VTYPE_ENERGY, terms={"acc": 1.0}, vclasses=SUMO_VCLASSES,
+                    description="each vType's own SUMO Energy-model parameters",
+                    provenance={_KEY: None})
+
+
+def reserved_name(eq, where: str) -> None:
+    """UserError when an equation loaded from a file or a built-in name is named
+    ``vtype_energy`` or ``vtype_energy.…``: the names of the run's own (its outputs would
+    give another equation's energy under them)."""
+    if eq.name == VTYPE_ENERGY or eq.name.startswith(VTYPE_ENERGY + "."):
+        from sumo_drvpw.errors import UserError
+
+        raise UserError(f"{eq.path or where}: equation name '{eq.name}' is reserved (vtype_energy: each "
+                        "vType's own SUMO Energy-model parameters); rename the equation")
+
+
+def is_placeholder(eq) -> bool:
+    return isinstance(eq, Equation) and eq.provenance.get(_KEY, 0) is None
+
+
+def energy_vtype_of(equations) -> dict[str, str]:
+    """Equation name → vType id of the run's ``vtype_energy`` equations."""
+    return {e.name: e.provenance[_KEY] for e in equations
+            if isinstance(e, Equation) and e.provenance.get(_KEY)}
+
+
+def is_energy_class(ec: str | None) -> bool:
+    """Whether an emissionClass names SUMO's Energy model (``Energy/…``, or the bare
+    ``Energy``, which SUMO 1.28 reads as ``Energy/default``)."""
+    return bool(ec) and (ec == "Energy" or ec.startswith("Energy/"))
+
+
+def battery_for_all(sc) -> bool:
+    """Whether the run's SUMO options (or its config) equip every vehicle with SUMO's
+    battery device (``device.battery.probability`` ≥ 1)."""
+    from sumo_drvpw.sim.sumo_start import scenario_option
+
+    if sc is None or not hasattr(sc, "sumo_args"):
+        return False
+    try:
+        return float(scenario_option(sc, "device.battery.probability") or 0) >= 1.0
+    except ValueError:
+        return False  # SUMO refuses it itself
+
+
+def not_booked_why(info, battery_all: bool = False) -> str | None:
+    """Why ``vtype_energy`` does not book a vType of the files (None: it does).
+
+    SUMO runs a vType on its Energy model when its emissionClass is ``Energy/…`` (or
+    ``Energy``), and, when it writes no emissionClass, when the battery device is on for it
+    (param ``has.battery.device``, or ``battery_all``: device.battery.probability 1):
+    SUMO 1.28 warns "The emission class Energy/unknown will be used" (probed with libsumo
+    1.28.0, 2026-11-27: getEmissionClass reads Energy/default, the emissions device's
+    electricity equals the battery device's)."""
+    ec = info.emission_class
+    if not ec and (getattr(info, "battery_device", False) or battery_all):
+        ec = "Energy/unknown"
+    if not is_energy_class(ec):
+        return (f"emissionClass {ec} is not SUMO's Energy model"
+                + (" (MMPEVEM's parameters are not read)" if ec.startswith("MMPEVEM") else "") if ec
+                else "no emissionClass written and no battery device (SUMO's default is then not "
+                     "the Energy model)")
+    if not any(k in (info.energy_params or {}) for k in ENERGY_PARAMS):
+        return "writes no Energy-model parameter"
+    return None
+
+
+def own_name(vt: str) -> str:
+    """The name of vType ``vt``'s ``vtype_energy`` equation (before a clash's suffix)."""
+    return (VTYPE_ENERGY + "." + re.sub(r"[^A-Za-z0-9_.-]", "_", vt))[:64]
+
+
+def named_in_table(e: str, table: str, key: str, names: list[str], where: str) -> bool:
+    """Whether ``e``, named in a scenario's ``[table.key] equations`` but not among its
+    equations, is the ``vtype_energy`` equation the run makes for that vType (``[vtypes.<id>]``
+    naming ``vtype_energy.<id>``, with ``vtype_energy`` among the scenario's equations):
+    True; False when ``e`` is no ``vtype_energy.…`` name. A UserError when it names another
+    vType's, or ``vtype_energy`` is not among the equations, or it stands under ``vclasses``."""
+    from sumo_drvpw.errors import UserError
+
+    if not e.startswith(VTYPE_ENERGY + "."):
+        return False
+    at = f"{where}: {table}.{key}.equations names '{e}'"
+    if table != "vtypes":
+        raise UserError(f"{at}: a vtype_energy equation books its own vType only; name "
+                        "'vtype_energy' there (each vType of the class by its own parameters)")
+    if e != own_name(key):
+        raise UserError(f"{at}: a vtype_energy equation books its own vType only; name "
+                        f"'vtype_energy' or '{own_name(key)}' for vType '{key}'")
+    if VTYPE_ENERGY not in names:
+        raise UserError(f"{at}: list 'vtype_energy' among the scenario's equations (it makes '{e}')")
+    return True
+
+
+def _name(vt: str, taken: set[str]) -> str:
+    base = own_name(vt)
+    name, k = base, 2
+    while name in taken:
+        name = f"{base[:60]}-{k}"
+        k += 1
+    taken.add(name)
+    return name
+
+
+def vtype_equations(file_vtypes, sc=None) -> tuple[list[Equation], dict]:
+    """One equation per vType of ``file_vtypes`` that writes SUMO's Energy model (the
+    scenario's ``vehicles.vtypes`` filter applies); returns (equations, listing) with
+    listing = {"booked": {vType: {equation, mass_kg, defaults, not_expressed}},
+    "not_booked": {vType: why}}."""
+    vfilter = getattr(sc, "vtype_filter", None)
+    vdata = getattr(sc, "vtype_data", {}) or {}
+    battery_all = battery_for_all(sc)
+    eqs: list[Equation] = []
+    booked: dict[str, dict] = {}
+    not_booked: dict[str, str] = {}
+    taken: set[str] = set()
+    for vt, info in file_vtypes.items():
+        if vfilter is not None and vt not in vfilter:
+            continue
+        why = not_booked_why(info, battery_all)
+        if why is not None:
+            not_booked[vt] = why
+            continue
+        where = f"{info.source}: vType '{vt}'"
+        eq, notes = energy_params_equation(_name(vt, taken), info.energy_params, info.mass_attr_kg,
+                                           where, (info.vclass or "passenger",))
+        model = eq.chain.provenance["sumo_energy_model"]
+        eq.provenance = {_KEY: vt}
+        eq.path = str(info.source)
+        same_mass = (model["mass"]["from"] != "SUMO default" and not info.drvpw_mass
+                     and vdata.get(vt, {}).get("mass_kg") is None)
+        if same_mass:  # the vehicle's booked mass: the same, plus riders as SUMO adds them
+            eq.mass_kg = None
+        eqs.append(eq)
+        booked[vt] = {"equation": eq.name,
+                      "emission_class": info.emission_class or "none written: Energy/unknown, as SUMO "
+                                                               "takes it with the battery device on",
+                      "mass_kg": model["mass"]["value"] + model["loading"]["value"],
+                      "mass": "the vehicle's (riders included)" if same_mass else "fixed (no riders)",
+                      "defaults": {k: d["value"] for k, d in model.items() if d["from"] == "SUMO default"},
+                      "not_expressed": notes}
+    return eqs, {"booked": booked, "not_booked": not_booked}
+
+
+def own_energy(names: list[str], energy_of: dict[str, str], vt: str, chosen, app: np.ndarray) -> np.ndarray:
+    """``app`` with each ``vtype_energy`` equation booking its own vType only: when
+    ``chosen`` (the equations the scenario or the vType names) holds ``vtype_energy`` or
+    the equation's name, or when none are named (``chosen`` None: the equations made for
+    the class, which bring it)."""
+    if not energy_of:
+        return app
+    app = np.array(app, float)
+    for i, n in enumerate(names):
+        own = energy_of.get(n)
+        if own is not None:
+            app[i] = float(own == vt and (chosen is None or VTYPE_ENERGY in chosen or n in chosen))
+    return app
+
+
+def listing_warning(listing: dict) -> str | None:
+    """The console line on what ``vtype_energy`` booked (None: nothing to say)."""
+    booked, nb = listing.get("booked", {}), listing.get("not_booked", {})
+    if not booked:
+        return None
+    parts = []
+    for vt, b in sorted(booked.items()):
+        d = ", ".join(f"{k} {v:g}" for k, v in b["defaults"].items())
+        parts.append(f"{vt} as {b['equation']} ({b['mass_kg']:g} kg"
+                     + (f"; SUMO's defaults {d}" if d else "") + ")")
+    left = [vt for vt, w in nb.items() if w == "writes no Energy-model parameter"]
+    return ("vTypes with SUMO's Energy model were booked by their own parameters as a battery "
+            "chain (vtype_energy): " + "; ".join(parts)
+            + (f"; Energy vTypes without parameters not booked by it: {', '.join(sorted(left))}" if left else "")
+            + " (summary.json assumptions.vtype_energy: radial drag in curves and what else it "
+            "cannot express)")
+
+
+def expand(equations: list, file_vtypes, sc) -> tuple[list, dict]:
+    """The run's equations with ``vtype_energy`` replaced by the vTypes' own equations
+    (appended to the plug-in's own equations, :data:`~sumo_drvpw.sim.scenario.CONFIG_EQUATIONS`,
+    when the files declare such vTypes), and the listing of :func:`vtype_equations` ({}
+    when the run has no ``vtype_energy``). UserError when it was the run's only equation
+    and no vType of the files writes SUMO's Energy model."""
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+    has = any(is_placeholder(e) for e in equations)
+    own = [e.name for e in getattr(sc, "equations", [])] == list(CONFIG_EQUATIONS)
+    if not (has or own):
+        return equations, {}
+    eqs, listing = vtype_equations(file_vtypes, sc)
+    if own and not has and not eqs:  # the plug-in's own equations, no Energy vType: nothing to say
+        return equations, {}
+    taken = {e.name for e in equations if not is_placeholder(e)}
+    clash = sorted(taken & {e.name for e in eqs})
+    if clash:
+        raise UserError(f"equation name(s) {clash} of the run clash with the vtype_energy equations "
+                        "of the vTypes of those names: rename the equation files")
+    out = [x for e in equations for x in (eqs if is_placeholder(e) else [e])]
+    if own and not has:
+        out += eqs
+    if not out:
+        raise UserError("equation vtype_energy: no vType of the route/additional files read writes SUMO's "
+                        "Energy model (emissionClass Energy/…, or none with SUMO's battery device on, and at least "
+                        "one of its parameters: "
+                        + ", ".join(f"{vt}: {w}" for vt, w in sorted(listing["not_booked"].items())[:5])
+                        + "); name another equation")
+    return out, listing
