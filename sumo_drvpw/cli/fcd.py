@@ -66,8 +66,9 @@ def main(args: argparse.Namespace) -> int:
 
         args.equation = list(CONFIG_EQUATIONS)
         print("note: no --equation or --scenario: every vehicle by the built-in equations made for its "
-              "vClass (vClasses from " + ("the route and additional files" if args.vtypes
-                                          else "no vType file: every vehicle a passenger car") + ")")
+              "vClass (" + ("vClasses from the route and additional files" if args.vtypes
+                            else "no vType file: every vehicle a passenger car; --vtypes gives the "
+                                 "run's route files") + ")")
     check_engine_arguments(args)
     if args.buckets is not None and args.engine != "dask":
         raise UserError(f"--buckets goes with --engine dask (got --engine {args.engine})")
