@@ -249,3 +249,193 @@ def test_validation_trip_rows_carry_left_out_shares_and_the_tables_flag_partial_
         assert flagged.count("**Partial trips**") == 1, section
         assert f"{row['trip']} (30 % of time" in flagged
         row["partial"] = False
+
+
+# ------------------------------------------------- report.md: energy per trip, in the chain's unit
+
+def _md_table(md: str, heading: str) -> dict:
+    """The rows of the table under ``heading`` in report.md: first cell → the other cells."""
+    lines = md.splitlines()
+    i = lines.index(heading)
+    i = next(j for j in range(i + 1, len(lines)) if lines[j].startswith("|"))  # the table's header
+    rows = {}
+    for ln in lines[i + 2:]:
+        if not ln.startswith("|"):
+            break
+        cells = [c.strip() for c in ln.strip("|").split("|")]
+        rows[cells[0]] = cells[1:]
+    return rows
+
+
+def _pct(cell: str) -> float:
+    return float(cell.replace("−", "-").replace("%", "").strip()) / 100.0
+
+
+def _trips_log(tmp_path, fuel=None):
+    """Eleven trips (t1 … t11, so t10 sorts after t9 only in natural order) of stop-and-go
+    driving at 2 Hz with a logged wheel power; trip t3 loses 30 % of its time to braking
+    flags (partial); trip t11 is 8 s parked with a little power (small). ``fuel``: an
+    equation file whose chain gives the logged fuel flow (± 4 % noise per sample)."""
+    import pandas as pd
+
+    rng = np.random.default_rng(7)
+    rows = []
+    for k in range(1, 12):
+        t = np.arange(0.0, 16.0 if k == 11 else 120.0, 0.5)
+        v = 12.0 + 6.0 * np.sin(2 * np.pi * t / 40.0 + k) + 2.0 * np.sin(2 * np.pi * t / 7.0)
+        if k == 11:
+            v = np.zeros_like(t)
+        p = 1500.0 * v * np.gradient(v, t) + 150.0 * v + 0.4 * v ** 3 + (300.0 if k == 11 else 0.0)
+        brake = (t >= 30) & (t < 66) if k == 3 else np.zeros(t.size, bool)
+        rows.append(pd.DataFrame({"trip_id": f"t{k}", "time_s": t, "speed_mps": v, "power_w": p,
+                                  "mass_kg": 1500.0, "brake": brake}))
+    df = pd.concat(rows, ignore_index=True)
+    if fuel is not None:
+        from sumo_drvpw.data.log import from_frame
+        from sumo_drvpw.model.constants import FUELS
+        from sumo_drvpw.model.equations import load_equation
+
+        ch = load_equation(fuel).chain
+        pf = ch.evaluate(df["power_w"].to_numpy(), from_frame(df).inputs().v)["power_w"]
+        df["fuel_rate_gps"] = pf / FUELS["gasoline"]["lhv_j_per_kg"] * 1e3 * (1 + 0.04 * rng.standard_normal(len(df)))
+    f = tmp_path / "trips.csv"
+    df.to_csv(f, index=False)
+    return f
+
+
+def _check_trip_tables(md: str, eq_docs: dict, heading: str, key: str, per_unit, unit_key=None):
+    """Each trip's row of the table under ``heading``: measured and each equation's predicted
+    energy equal report.json's J · ``per_unit`` to the decimals shown (and to its ``unit_key``
+    value, litres, when given), the errors report.json's; trips in natural order; the last
+    row the mean and worst |error| of report.json (small trips out)."""
+    rows = _md_table(md, heading)
+    names = list(eq_docs)
+    first = eq_docs[names[0]][key]
+    assert list(rows)[:-1] == sorted(first["trips"], key=lambda t: int(t[1:]))
+    for t, cells in list(rows.items())[:-1]:
+        meas = float(cells[0].replace("−", "-"))
+        nd = len(cells[0].split(".")[1])
+        assert meas == pytest.approx(first["trips"][t]["measured_j"] * per_unit, abs=0.51 * 10 ** -nd)
+        if unit_key:
+            assert meas == pytest.approx(first["trips"][t][f"measured_{unit_key}"], abs=0.51 * 10 ** -nd)
+        for i, nm in enumerate(names):
+            x = eq_docs[nm][key]["trips"][t]
+            assert float(cells[1 + 2 * i].replace("−", "-")) == pytest.approx(x["predicted_j"] * per_unit,
+                                                                           abs=0.51 * 10 ** -nd)
+            if unit_key:
+                assert float(cells[1 + 2 * i].replace("−", "-")) == pytest.approx(x[f"predicted_{unit_key}"],
+                                                                               abs=0.51 * 10 ** -nd)
+            assert _pct(cells[2 + 2 * i]) == pytest.approx(x["error"], abs=0.0005)
+    last = rows["mean / worst abs. error"]
+    for i, nm in enumerate(names):
+        d = eq_docs[nm][key]
+        mean, worst = last[2 + 2 * i].split(" (")[0].split(" / ")
+        assert _pct(mean) == pytest.approx(d["mean_abs_error"], abs=0.0005)
+        assert _pct(worst) == pytest.approx(d["max_abs_error"], abs=0.0005)
+    return rows
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+def test_compare_report_md_has_energy_per_trip_in_kwh(tmp_path, engine):
+    """compare's report.md: a section "Energy per trip" whose traction and net tables give,
+    per trip, the measured and each equation's predicted energy in kWh = report.json's
+    J / 3.6e6, the error and the mean / worst |error| as report.json has them (the small
+    parked trip left out of those and marked, the partial trip marked), trips sorted."""
+    from sumo_drvpw.cli import main as cli_main
+
+    out = tmp_path / "cmp"
+    assert cli_main(["compare", str(_trips_log(tmp_path)), "--equation", "drvpw_prius3", "--equation",
+                     "vsp_ldv1999", "--engine", engine, "--out", str(out)]) == 0
+    doc = json.loads((out / "report.json").read_text())
+    md = (out / "report.md").read_text()
+    assert "## Energy per trip" in md
+    eqs = doc["equations"]
+    assert eqs["drvpw_prius3"]["trip_energy"]["small_trips"] == ["t11"]
+    assert eqs["drvpw_prius3"]["trip_energy"]["partial_trips"] == ["t3"]
+    for heading, key in (("### Traction energy [kWh]", "trip_energy"), ("### Net energy [kWh]", "trip_net_energy")):
+        rows = _check_trip_tables(md, eqs, heading, key, 1 / 3.6e6)
+        assert rows["t11"][-1].startswith("small") and "partial: 30 % of time" in rows["t3"][-1]
+        assert rows["t1"][-1] == ""
+
+
+def _fuel_eq(tmp_path, name, fuel, v3):
+    f = tmp_path / f"{name}.toml"
+    f.write_text(f'[equation]\nname = "{name}"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = {v3}\n[chain]\n'
+                 'predicts = "fuel"\ntraction_efficiency = 0.9\naux_power_w = 300.0\nidle_fuel_power_w = 3000.0\n'
+                 f'marginal_efficiency = 0.33\nfuel = "{fuel}"\n')
+    return f
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+def test_compare_report_gives_a_fuel_chain_trip_energy_in_litres(tmp_path, engine):
+    """compare --target fuel: report.json's per-trip energies carry litres too (measured_l,
+    predicted_l = J / (LHV · density) of the chain's fuel: petrol 43.2 MJ/kg · 0.745 kg/L =
+    32.184 MJ/L, diesel 43.1 · 0.832 = 35.859 MJ/L, JEC WTW v5), and report.md's per-trip
+    tables give them, headed with the fuel; the errors are the J's. A petrol and a diesel
+    chain: one table each."""
+    from sumo_drvpw.cli import main as cli_main
+
+    ice, dsl = _fuel_eq(tmp_path, "ice", "gasoline", 0.42), _fuel_eq(tmp_path, "dsl", "diesel", 0.38)
+    out = tmp_path / "cmp"
+    assert cli_main(["compare", str(_trips_log(tmp_path, fuel=ice)), "--equation", str(ice), "--equation", str(dsl),
+                     "--target", "fuel", "--engine", engine, "--out", str(out)]) == 0
+    doc = json.loads((out / "report.json").read_text())
+    md = (out / "report.md").read_text()
+    assert doc["settings"]["target"] == "fuel"
+    for nm, per_l in (("ice", 43.2e6 * 0.745), ("dsl", 43.1e6 * 0.832)):
+        for key in ("trip_energy", "trip_net_energy"):
+            te = doc["equations"][nm][key]
+            assert te["fuel_j_per_l"] == pytest.approx(per_l, rel=1e-12)
+            for x in te["trips"].values():
+                assert x["measured_l"] == pytest.approx(x["measured_j"] / per_l, rel=1e-12)
+                assert x["predicted_l"] == pytest.approx(x["predicted_j"] / per_l, rel=1e-12)
+        fuel = doc["equations"][nm]["chain"]["fuel"]
+        # fuel power is never negative here: traction and net are one table
+        heading = f"### Traction and net energy [L of {fuel}] (equal here: no sample has negative power)"
+        _check_trip_tables(md, {nm: doc["equations"][nm]}, heading, "trip_energy", 1 / per_l, unit_key="l")
+    assert "32.18 MJ per litre" in md and "35.86 MJ per litre" in md
+
+
+def test_chain_trace_md_gives_a_fuel_target_in_litres(tmp_path):
+    """diagnose --target fuel: trace.md's per-trip table is in litres of the chain's fuel
+    (trace.json's J / 32.184 MJ/L), as compare's report.md (one helper: report/format.py
+    energy_unit)."""
+    from sumo_drvpw.cli import main as cli_main
+
+    ice = _fuel_eq(tmp_path, "ice", "gasoline", 0.42)
+    out = tmp_path / "trace"
+    assert cli_main(["diagnose", str(_trips_log(tmp_path, fuel=ice)), "--equation", str(ice), "--target", "fuel",
+                     "--out", str(out), "--quiet"]) == 0
+    rep = json.loads((out / "trace.json").read_text())
+    md = (out / "trace.md").read_text()
+    assert "| trip | measured L | before L |" in md and "Litres of gasoline" in md
+    rows = _md_table(md, "## Before and after, per trip (net energy; after = held out)")
+    per_l = 43.2e6 * 0.745
+    for t, x in rep["baseline"]["trip_net_energy"]["trips"].items():
+        assert float(rows[t][0]) == pytest.approx(x["measured_j"] / per_l, abs=5.1e-4)
+        assert float(rows[t][1]) == pytest.approx(x["predicted_j"] / per_l, abs=5.1e-4)
+
+
+def test_many_trips_show_the_worst_and_say_how_many_are_left_out():
+    """A report of 250 trips: each table shows the 200 with the largest |error|, in trip
+    order, and says that 50 are omitted and report.json has every trip. A report.json
+    written before ``settings.target`` existed renders too (kWh for a wheel target)."""
+    from sumo_drvpw.fit.trip_energy import trip_energy, trip_net_energy
+    from sumo_drvpw.report.comparison import MAX_TRIP_ROWS, trip_energy_lines
+
+    n = 250
+    rng = np.random.default_rng(3)
+    trip = np.repeat([f"x{i}" for i in range(n)], 10)
+    meas = rng.uniform(-5e3, 2e4, trip.size)  # with recuperation: traction and net differ
+    pred = meas * np.repeat(1.0 + rng.normal(0.0, 0.05, n), 10)
+    doc = {"equations": {"eq": {"trip_energy": trip_energy(pred, meas, 1.0, trip),
+                                "trip_net_energy": trip_net_energy(pred, meas, 1.0, trip)}},
+           "settings": {}}
+    md = "\n".join(trip_energy_lines(doc))
+    assert f"The {MAX_TRIP_ROWS} trips with the largest |error| of {n}; {n - MAX_TRIP_ROWS} omitted " \
+           "(report.json has every trip)." in md
+    rows = _md_table(md, "### Traction energy [kWh]")
+    shown = list(rows)[:-1]
+    assert len(shown) == MAX_TRIP_ROWS and shown == sorted(shown, key=lambda t: int(t[1:]))
+    err = {t: abs(v["error"]) for t, v in doc["equations"]["eq"]["trip_energy"]["trips"].items()}
+    assert min(err[t] for t in shown) >= max(err[t] for t in err if t not in shown)

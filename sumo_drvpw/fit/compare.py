@@ -36,7 +36,8 @@ from sumo_drvpw.errors import UserError, first_bad_row
 from sumo_drvpw.fileio import plain
 from sumo_drvpw.fit.ols import dense_gram
 # energy per trip lives in fit/trip_energy.py; imported here, where other modules find it
-from sumo_drvpw.fit.trip_energy import _dt_array, trip_energy, trip_net_energy, with_left_out
+from sumo_drvpw.fit.trip_energy import (_dt_array, trip_energy, trip_net_energy, with_fuel_volumes,
+                                         with_left_out)
 from sumo_drvpw.model.terms import CATEGORIES, Inputs
 
 #: Width of the speed bins of Fig. 8 [m/s] (10 km/h).
@@ -325,6 +326,8 @@ class Comparison:
     left_out : per trip, what it lost to samples left out before the comparison
         (:func:`sumo_drvpw.fit.trip_energy.left_out_by_trip`), or None; added to each
         trip's entry of the per-trip energies (``left_out_*``, ``partial``)
+    target : what was compared: ``wheel``, ``battery`` or ``fuel`` (:func:`compare`);
+        with ``fuel`` the per-trip energies are also given in litres of each chain's fuel
     """
 
     meas_w: np.ndarray
@@ -335,6 +338,7 @@ class Comparison:
     reference: str | None = None
     trip: np.ndarray | None = None
     left_out: dict | None = None
+    target: str = "wheel"
 
     @property
     def n_samples(self) -> int:  # number of samples compared
@@ -377,7 +381,7 @@ class Comparison:
                                                  self.left_out, net=False)
                 d["trip_net_energy"] = with_left_out(trip_net_energy(r.pred_w, self.meas_w, self.dt_s,
                                                                      self.trip), self.left_out, net=True)
-            eqs[name] = d
+            eqs[name] = with_fuel_volumes(d, self.target)
         return plain({
             "equations": eqs,
             "n_samples": self.n_samples,
@@ -393,6 +397,7 @@ class Comparison:
                 "high_speed_mps": HIGH_SPEED_MPS,
                 "speed_bin_mps": SPEED_BIN_MPS,
                 "reference": self.reference,
+                "target": self.target,
                 "error": "predicted - measured",
                 "r2": "centred: 1 - SSE/SST",
             },
@@ -477,7 +482,7 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
             raise UserError(f"compare: trip has {trip.size} values for {n} samples")
     comp = Comparison(meas_w=meas, speed_mps=v, dt_s=dt,
                       measured_traction_energy_j=meas_traction, reference=reference,
-                      trip=trip)
+                      trip=trip, target=target)
     cat_powers = {eq.name: eq.category_powers(inputs) for eq in equations}
     for eq in equations:
         cats = cat_powers[eq.name]

@@ -24,7 +24,7 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.ols import Gram
-from sumo_drvpw.fit.trip_energy import left_out_by_trip, with_left_out
+from sumo_drvpw.fit.trip_energy import left_out_by_trip, with_fuel_volumes, with_left_out
 from sumo_drvpw.fit.stream import Moments, _add_counts, _trip_codes, trip_twice
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS
 from sumo_drvpw.model.terms import CATEGORIES, parse_term
@@ -403,7 +403,7 @@ class CompareStats:
         r = {c: v[order] for c, v in self.res.cols.items()}
         comp = StreamedComparison(meas_w=r["meas"], speed_mps=r["v"], dt_s=r["dt"],
                                   measured_traction_energy_j=self.meas_traction,
-                                  reference=self.reference)
+                                  reference=self.reference, target=self.target)
         comp.stats = self
         for eq in self.equations:
             s = self.eq[eq.name]
@@ -579,6 +579,7 @@ def _streamed_comparison_class():
                     d["trip_energy"] = _jsonable(with_left_out(_trip_block(s.trip_e, net=False), st.left_out))
                     d["trip_net_energy"] = _jsonable(with_left_out(_trip_block(s.trip_e, net=True),
                                                                    st.left_out, net=True))
+                    with_fuel_volumes(d, self.target)  # litres of a fuel target, as in memory
             doc["n_samples"] = st.n
             doc["measured"] = _jsonable({
                 "traction_energy_j": st.meas_traction,

@@ -231,3 +231,35 @@ def with_trace_left_out(res, m) -> dict:
     for k in ("baseline", "final"):
         with_left_out(res.report[k]["trip_net_energy"], left, net=True)
     return res.report
+
+
+def with_fuel_volume(doc: dict | None, fuel: str) -> dict | None:
+    """A per-trip energy document of a fuel target (:func:`trip_energy`,
+    :func:`trip_net_energy`: fuel energy at the lower heating value [J]) with each trip's
+    energies also in litres of ``fuel`` (a key of :data:`sumo_drvpw.model.constants.FUELS`):
+    ``measured_l``, ``predicted_l`` = ``*_j`` / (LHV · density), and the document's ``fuel``
+    and ``fuel_j_per_l``. The ``*_j`` keys and the errors stay (litres are J scaled: the
+    relative errors are the same). Changed in place; None stays None."""
+    from sumo_drvpw.model.chain import fuel_j_per_l
+
+    if not doc:
+        return doc
+    per_l = fuel_j_per_l(fuel)
+    for v in doc.get("trips", {}).values():
+        for k in ("measured", "predicted"):
+            j = v.get(f"{k}_j")
+            v[f"{k}_l"] = None if j is None else float(j) / per_l
+    doc["fuel"] = fuel
+    doc["fuel_j_per_l"] = per_l
+    return doc
+
+
+def with_fuel_volumes(eq_doc: dict, target: str) -> dict:
+    """One equation's comparison document (``Comparison.to_json``'s entry) with its per-trip
+    energies in litres too (:func:`with_fuel_volume`) when the compared target is fuel; the
+    fuel is its chain's. Unchanged otherwise. Changed in place."""
+    chain = eq_doc.get("chain") or {}
+    if target == "fuel" and chain.get("predicts") == "fuel":
+        for key in ("trip_energy", "trip_net_energy"):
+            with_fuel_volume(eq_doc.get(key), chain.get("fuel", "gasoline"))
+    return eq_doc

@@ -556,3 +556,17 @@ def corrected_fuel_power(fuel_power_w, battery_power_w, battery_to_fuel: float) 
     battery_to_fuel : k [-], fuel energy per unit of battery energy (≈ 1/η_marginal)
     """
     return np.asarray(fuel_power_w, float) + battery_to_fuel * np.asarray(battery_power_w, float)
+
+
+def fuel_j_per_l(fuel: str) -> float:
+    """A fuel's energy per litre at its lower heating value [J/L]: LHV [J/kg] · density [kg/L]
+    (:data:`sumo_drvpw.model.constants.FUELS`), so litres = fuel energy [J] / this, as
+    :meth:`EnergyChain.evaluate` turns fuel power into ``fuel_lps``.
+
+    >>> round(fuel_j_per_l("gasoline") / 1e6, 2)   # 43.2 MJ/kg · 0.745 kg/L
+    32.18
+    """
+    if fuel not in FUELS:
+        raise UserError(f"fuel must be one of {', '.join(FUELS)}, got {fuel!r}")
+    fp = FUELS[fuel]
+    return fp["lhv_j_per_kg"] * fp["density_kg_per_l"]

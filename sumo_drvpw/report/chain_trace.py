@@ -9,9 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from sumo_drvpw.report.comparison import unknown_input_lines
-from sumo_drvpw.report.format import coef, num, partial_trip_flag, partial_trip_lines
-
-KWH = 3.6e6
+from sumo_drvpw.report.format import coef, energy_unit, num, partial_trip_flag, partial_trip_lines
 
 
 def write_chain_outputs(res, out) -> None:
@@ -71,16 +69,17 @@ def markdown(r: dict) -> str:
         L += ["", "Passed the block test but not kept:", ""]
         L += [f"- `{x['effect']}` (round {x['round']}): {x['reason']}" for x in r["not_replicated"]]
     b, a = r["baseline"], r["final"]
+    u = energy_unit(tgt, r.get("declared_chain"))  # kWh, or litres of the chain's fuel
     L += ["", "## Before and after, per trip (net energy; after = held out)", "",
           f"Mean |error| per trip: before **{_pct(b['trip_net_energy']['mean_abs_error'])[1:]}**, after "
           f"**{_pct(a['trip_net_energy']['mean_abs_error'])[1:]}**; RMSE {num(b['metrics']['rmse_w'], 0)} → "
-          f"{num(a['metrics']['rmse_w'], 0)} W. {a['note']}.", "",
-          "| trip | measured kWh | before kWh | before | after kWh | after | left out |",
+          f"{num(a['metrics']['rmse_w'], 0)} W. {a['note']}." + (f" {u.note()}" if u.note() else ""), "",
+          f"| trip | measured {u.label} | before {u.label} | before | after {u.label} | after | left out |",
           "|---|---|---|---|---|---|---|"]
     for t, x in b["trip_net_energy"]["trips"].items():
         y = a["trip_net_energy"]["trips"].get(t, {})
-        L.append(f"| {t} | {x['measured_j'] / KWH:.3f} | {x['predicted_j'] / KWH:.3f} | {_pct(x['error'])} | "
-                 f"{y.get('predicted_j', float('nan')) / KWH:.3f} | {_pct(y.get('error'))} | {partial_trip_flag(x)} |")
+        L.append(f"| {t} | {u(x['measured_j'])} | {u(x['predicted_j'])} | {_pct(x['error'])} | "
+                 f"{u(y.get('predicted_j'))} | {_pct(y.get('error'))} | {partial_trip_flag(x)} |")
     L += ([""] + partial_trip_lines(b["trip_net_energy"])) if partial_trip_lines(b["trip_net_energy"]) else []
     L += ["", f"## Closed equation `{r['closed_equation']}` (final_equation.toml)", "",
           f"- road load: {', '.join(f'{k} {coef(v)}' for k, v in r['closed_terms'].items())}",

@@ -12,7 +12,8 @@ from sumo_drvpw.report import figures as plots
 from sumo_drvpw.fit.compare import Comparison
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
 from sumo_drvpw.fileio import write_json, write_text
-from sumo_drvpw.report.format import KW as _KW, KWH as _KWH, coef, num, partial_trip_lines
+from sumo_drvpw.report.format import (KW as _KW, KWH as _KWH, coef, energy_unit, num, partial_trip_flag,
+                                      partial_trip_lines)
 
 #: Figure file name → (plot function, caption).
 FIGURES = {
@@ -200,6 +201,8 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
                      f" | {num(d['traction_energy_ratio'], 3)} |")
     lines.append("")
 
+    lines += trip_energy_lines(doc)
+
     lines += ["## Figures", ""]
     for fname, (_, caption) in FIGURES.items():
         lines += [f"![{caption}]({fname})", f"*{caption}*", ""]
@@ -229,3 +232,129 @@ def _corr_cell(c: dict | None) -> str:
     if not c or c.get("r") is None and c.get("partial_slope") is None:
         return "–"
     return f"{num(c.get('r'), 2)} / {num(c.get('partial_slope'), 2)}"
+
+
+# ------------------------------------------------------------- energy per trip
+
+#: at most this many trips per table of report.md (the largest errors; report.json has all)
+MAX_TRIP_ROWS = 200
+
+
+def _target(doc: dict) -> str:
+    """What a report compared: its ``settings.target``; a report written before it was
+    recorded: what its equations' chains all predict when battery or fuel, else wheel (the
+    command's default)."""
+    t = doc.get("settings", {}).get("target")
+    if t:
+        return t
+    pred = {d.get("predicts", "wheel") for d in doc["equations"].values()}
+    return pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
+
+
+def _trip_key(t: str):
+    """Trip ids in natural order (T2 before T10)."""
+    import re
+
+    return [(0, int(x), "") if x.isdigit() else (1, 0, x) for x in re.split(r"(\d+)", str(t)) if x]
+
+
+def _signed_pct(x) -> str:
+    s = num(x, 1, 100.0)
+    return s if s == "–" else ("+" if s[0].isdigit() and float(s) != 0.0 else "") + s + " %"
+
+
+def _worst(te: dict) -> str:
+    """Mean and worst |error| of a per-trip document as report.json has them, and the worst
+    trip (small trips left out, as there)."""
+    small = set(te.get("small_trips") or [])
+    worst = te.get("max_abs_error")
+    trip = next((t for t, v in te["trips"].items() if t not in small and worst is not None
+                 and v.get("error") is not None and abs(v["error"]) == worst), None)
+    return (f"{num(te.get('mean_abs_error'), 1, 100.0)} % / {num(worst, 1, 100.0)} %"
+            + (f" ({trip})" if trip is not None else ""))
+
+
+def _decimals(first: dict, unit) -> int:
+    """Decimals that give the median trip's measured energy four significant digits (1–6)."""
+    import math
+
+    xs = sorted(abs(v["measured_j"]) * unit.scale for v in first["trips"].values()
+                if v.get("measured_j") is not None and v["measured_j"] == v["measured_j"] and v["measured_j"])
+    if not xs:
+        return unit.nd
+    return min(max(3 - math.floor(math.log10(xs[len(xs) // 2])), 1), 6)
+
+
+def _trip_table(names: list, docs: dict, unit) -> list[str]:
+    """One table: per trip, measured and each equation's predicted energy and error."""
+    import dataclasses
+
+    first = docs[names[0]]
+    unit = dataclasses.replace(unit, nd=_decimals(first, unit))
+    trips = list(first["trips"])
+    lines = []
+    if len(trips) > MAX_TRIP_ROWS:
+        def worst(t):
+            errs = [abs(e) for nm in names if (e := docs[nm]["trips"].get(t, {}).get("error")) is not None
+                    and e == e]
+            return max(errs, default=-1.0)
+        keep = set(sorted(trips, key=worst, reverse=True)[:MAX_TRIP_ROWS])
+        lines += [f"The {MAX_TRIP_ROWS} trips with the largest |error| of {len(trips)}; "
+                  f"{len(trips) - MAX_TRIP_ROWS} omitted (report.json has every trip).", ""]
+        trips = [t for t in trips if t in keep]
+    small = set(first.get("small_trips") or [])
+    lines += ["| trip | measured [" + unit.label + "] | "
+              + " | ".join(f"{nm} [{unit.label}] | {nm} error" for nm in names) + " | note |",
+              "|---|---|" + "---|---|" * len(names) + "---|"]
+    for t in sorted(trips, key=_trip_key):
+        x = first["trips"][t]
+        note = "; ".join(s for s in ("small: left out of mean and worst" if t in small else "",
+                                      partial_trip_flag(x)) if s)
+        cells = [f"{unit(docs[nm]['trips'].get(t, {}).get('predicted_j'))} | "
+                 f"{_signed_pct(docs[nm]['trips'].get(t, {}).get('error'))}" for nm in names]
+        lines.append(f"| {t} | {unit(x.get('measured_j'))} | " + " | ".join(cells) + f" | {note} |")
+    lines.append("| mean / worst abs. error | | " + " | ".join(f" | {_worst(docs[nm])}" for nm in names) + " | |")
+    return lines + [""]
+
+
+def trip_energy_lines(doc: dict) -> list[str]:
+    """The "Energy per trip" section of report.md from report.json's per-trip energies
+    (``trip_energy``, ``trip_net_energy``): per trip the measured and each equation's
+    predicted energy and error, traction and net, in the unit of what is compared (kWh, or
+    litres of a fuel chain's fuel: :func:`sumo_drvpw.report.format.energy_unit`), and each
+    equation's mean and worst |error| as report.json has them; [] without trips."""
+    eqs = {nm: d for nm, d in doc["equations"].items() if d.get("trip_energy")}
+    if not eqs:
+        return []
+    target = _target(doc)
+    groups: dict = {}  # one table per unit (equations of different fuels)
+    for nm, d in eqs.items():
+        groups.setdefault(energy_unit(target, d.get("chain")), []).append(nm)
+    lines = ["## Energy per trip", "",
+             "Energy of each trip, measured and predicted by each equation; error = predicted / measured − 1. "
+             "Traction counts the samples of positive power (Σ max(P, 0)·Δt), net every sample (Σ P·Δt: "
+             "recuperation returns energy). Mean and worst |error| are report.json's (`trip_energy`, "
+             "`trip_net_energy`): small trips are left out of them, partial trips are kept and marked."]
+    lines += [u.note() for u in groups if u.note()]
+    if len({u.fuel for u in groups} - {None}) > 1:
+        lines.append("The equations' chains burn different fuels while the log measured one: an equation's "
+                     "measured litres are the measured fuel energy in litres of its own chain's fuel.")
+    lines.append("")
+    for u, names in groups.items():
+        trac = {nm: eqs[nm]["trip_energy"] for nm in names}
+        net = {nm: eqs[nm]["trip_net_energy"] for nm in names if eqs[nm].get("trip_net_energy")}
+        if len(net) == len(trac) and all(_same_energies(trac[nm], net[nm]) for nm in names):
+            lines += [f"### Traction and net energy [{u.what}] (equal here: no sample has negative power)", ""]
+            lines += _trip_table(names, trac, u)
+            continue
+        lines += [f"### Traction energy [{u.what}]", ""] + _trip_table(names, trac, u)
+        if net:
+            lines += [f"### Net energy [{u.what}]", ""] + _trip_table(list(net), net, u)
+    return lines
+
+
+def _same_energies(a: dict, b: dict) -> bool:
+    """Two per-trip documents with the same trips and the same measured and predicted energies."""
+    keys = ("measured_j", "predicted_j")
+    return a["trips"].keys() == b["trips"].keys() and all(
+        a["trips"][t].get(k) == b["trips"][t].get(k) for t in a["trips"] for k in keys)

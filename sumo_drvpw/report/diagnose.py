@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sumo_drvpw.report.format import coef, partial_trip_flag, partial_trip_lines
+from sumo_drvpw.report.format import coef, energy_unit, partial_trip_flag, partial_trip_lines
 
 
 def write_outputs(res, out, figures: bool = True) -> None:
@@ -73,11 +73,12 @@ def markdown(res, figs) -> str:
         L.append(_mrow(f"+ finding {i}: `{f['term']}`", f["metrics_after"]))
     tb, tf = r["baseline"].get("trip_energy"), r["final"].get("trip_energy")
     if tb and tf:
+        u = energy_unit("wheel")  # the tracer's target: driving power
         L += ["", "## Traction energy per trip (held-out predictions; predicted/measured − 1)", "",
-              "| trip | measured [kWh] | baseline | final | left out |", "|---|---|---|---|---|"]
+              f"| trip | measured [{u.label}] | baseline | final | left out |", "|---|---|---|---|---|"]
         for t, v in tb["trips"].items():
             e0, e1 = v["error"], tf["trips"][t]["error"]
-            L.append(f"| {t} | {v['measured_j'] / 3.6e6:.3f} | {_pct(e0)} | {_pct(e1)} | {partial_trip_flag(v)} |")
+            L.append(f"| {t} | {u(v['measured_j'])} | {_pct(e0)} | {_pct(e1)} | {partial_trip_flag(v)} |")
         L.append(f"| mean abs. / worst abs. | | {_pct(tb['mean_abs_error'], '')} / {_pct(tb['max_abs_error'], '')} | "
                  f"{_pct(tf['mean_abs_error'], '')} / {_pct(tf['max_abs_error'], '')} | |")
         L += ([""] + partial_trip_lines(tb)) if partial_trip_lines(tb) else []

@@ -12,6 +12,7 @@ the ``scale`` argument converts at this edge (``KW`` W → kW, ``KWH`` J → kWh
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 #: W → kW, J → kJ (display only)
 KW = 1e-3
@@ -61,6 +62,55 @@ def coef(x, sig: int = 4) -> str:
     if f is None:
         return MISSING
     return f"{f:.{sig}g}".replace("-", "−")
+
+
+# ------------------------------------------------ energy in the unit of what is predicted
+
+@dataclass(frozen=True)
+class EnergyUnit:
+    """How a report shows an energy [J] of what is compared: kWh (driving power at the wheel
+    or powertrain, a battery's V·I), or litres of a fuel (fuel energy at its lower heating
+    value, the unit its chain predicts in: :func:`sumo_drvpw.model.chain.fuel_j_per_l`).
+    Build with :func:`energy_unit`; ``unit(j)`` formats an energy in J."""
+
+    label: str                 # "kWh" or "L"
+    scale: float               # display units per J
+    nd: int = 3                # decimals
+    fuel: str | None = None    # the fuel, for litres
+    j_per_l: float | None = None
+
+    def __call__(self, j) -> str:
+        return num(j, self.nd, self.scale)
+
+    @property
+    def what(self) -> str:
+        """The unit with its fuel: "kWh", "L of gasoline"."""
+        return self.label if self.fuel is None else f"{self.label} of {self.fuel}"
+
+    def note(self) -> str:
+        """One sentence on how litres follow from the fuel energy; "" for kWh."""
+        if self.fuel is None:
+            return ""
+        return (f"Litres of {self.fuel}: fuel energy at its lower heating value over "
+                f"{num(self.j_per_l / 1e6, 2)} MJ per litre (model/constants.py FUELS); the measured fuel "
+                f"energy is read back into litres of the same fuel.")
+
+
+def energy_unit(target: str | None, chain: dict | None = None) -> EnergyUnit:
+    """The unit a report shows energies of ``target`` in (``wheel``, ``powertrain_output``,
+    ``battery``: kWh; ``fuel``: litres of the fuel of ``chain``, a ``[chain]`` table as in a
+    report's JSON, gasoline when it names none).
+
+    >>> energy_unit("battery")(7.2e6), energy_unit("fuel", {"fuel": "diesel"}).what
+    ('2.000', 'L of diesel')
+    """
+    if target != "fuel":
+        return EnergyUnit("kWh", KWH)
+    from sumo_drvpw.model.chain import fuel_j_per_l
+
+    fuel = str((chain or {}).get("fuel") or "gasoline")
+    per_l = fuel_j_per_l(fuel)
+    return EnergyUnit("L", 1.0 / per_l, fuel=fuel, j_per_l=per_l)
 
 
 # ------------------------------------------------ partial trips (fit/trip_energy.py)
