@@ -177,3 +177,30 @@ def test_broken_equation_files(tmp_path):
     p.write_text("[equation]\nname='x'\n[terms]\nacc = 1\n[extra]\nq = 1\n")
     with pytest.raises(UserError, match="extra"):
         load_equation(p)
+
+
+def test_export_writes_a_constant_term_through_the_chains_drivetrain():
+    """An equation's constant term is driving power: with a battery chain the chain draws
+    it through the drivetrain (c/η_t while the vehicle drives or stands). SUMO's Energy model
+    adds constantPowerIntake after the efficiency, so the export writes c/η_t (plus the
+    chain's auxiliary power) and lists the recuperating case; before, it wrote c, 10 % short
+    at η_t 0.9. Checked against the chain on a cruise: SUMO's formula with the exported
+    values, P_rest/η_t + constantPowerIntake, equals the chain's battery power."""
+    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.sim.export import energy_model_params
+
+    chain = chain_from_dict({"predicts": "battery", "traction_efficiency": 0.9,
+                             "recuperation_efficiency": 0.8, "aux_power_w": 300.0})
+    eq = Equation("e", {"acc": 1.0, "roll": 0.01, "v^0": 500.0}, chain=chain)
+    params, missing = energy_model_params(eq, 1500.0, 2.0)
+    assert params["constantPowerIntake"] == pytest.approx(500.0 / 0.9 + 300.0, rel=1e-12)
+    assert any("500/η_t" in s and "recuperates" in s for s in missing)
+    v = np.array([0.0, 10.0, 20.0])
+    x = Inputs(v, np.zeros(3), np.zeros(3), np.zeros(3), np.full(3, 1500.0), np.full(3, 1.2))
+    battery = chain.evaluate(eq.power(x), v)["power_w"]
+    rest = 0.01 * 1500.0 * G * v  # the road load SUMO computes (no constant)
+    sumo = rest / params["propulsionEfficiency"] + params["constantPowerIntake"]
+    assert_allclose(battery, sumo, rtol=1e-12)
+    # without a chain the constant stays c (efficiencies 1)
+    assert energy_model_params(Equation("e", {"roll": 0.01, "v^0": 500.0}), 1500.0)[0][
+        "constantPowerIntake"] == 500.0

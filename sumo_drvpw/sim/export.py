@@ -30,7 +30,10 @@ out and listed. ``frontSurfaceArea`` is the vehicle's frontal area when known (t
 
 An equation with a battery (or powertrain-output) chain brings its chain
 (:func:`chain_energy_params`): ``propulsionEfficiency`` = η_t, ``recuperationEfficiency`` =
-η_r, ``constantPowerIntake`` += P_aux,0, plus its HVAC at a given air temperature; what the
+η_r, ``constantPowerIntake`` += P_aux,0, plus its HVAC at a given air temperature; the
+equation's own constant term c, driving power that the chain draws through the drivetrain
+(c/η_t while the vehicle drives or stands), is written as c/η_t, as SUMO adds
+constantPowerIntake after the efficiency (listed: while recuperating the chain books η_r·c); what the
 Energy model has no counterpart for (efficiency tables, a recuperation limit, logged loads,
 a standing draw, the cabin's warm-up at cold starts) is listed. Without a chain the
 efficiencies are 1: the vType books the driving energy at the wheels.
@@ -149,6 +152,14 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
     if chain is not None and chain.predicts != "wheel":
         cp, cm = chain_energy_params(chain, air_c, _bundled_drive(eq, m) if _has_table(chain) else None)
         params.update({k: v for k, v in cp.items() if k != "constantPowerIntake"})
+        if const:  # driving power: through the drivetrain in the chain, after it in SUMO
+            eta_t, eta_r = params["propulsionEfficiency"], params["recuperationEfficiency"]
+            missing.append(f"the equation's constant {const:g} W is driving power, which the chain draws "
+                           f"through the drivetrain: written as {const:g}/η_t = {const / eta_t:.6g} W, exact "
+                           f"while the vehicle drives or stands (SUMO adds constantPowerIntake after the "
+                           f"efficiency); while it recuperates the chain books η_r·{const:g} = "
+                           f"{eta_r * const:.6g} W")
+            params["constantPowerIntake"] = const / eta_t
         params["constantPowerIntake"] += cp.get("constantPowerIntake", 0.0)
         missing += cm
     return params, missing
