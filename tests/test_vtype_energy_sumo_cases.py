@@ -64,6 +64,12 @@ def test_vtypes_sumo_runs_on_its_energy_model_are_booked(tmp_path):
     assert [e.name for e in eqs][-1] == "vtype_energy.no_device"
     eqs, _ = vtype_equations(vt, _Options(0.5))
     assert "vtype_energy.no_device" not in [e.name for e in eqs]
+    # SUMO reads each of these as true (libsumo 1.28.0: has.battery.device with each makes
+    # the vType Energy/default); "false" and "0" not
+    from sumo_drvpw.sim.vtypes import is_true
+
+    assert all(is_true(x) for x in ("1", "yes", "on", "x", "t", "TRUE", "True", " true "))
+    assert not any(is_true(x) for x in ("0", "false", "no", "", None))
 
 
 def test_with_the_battery_device_tracking_fuel_the_default_class_stays(tmp_path):
