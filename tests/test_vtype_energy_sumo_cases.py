@@ -38,10 +38,10 @@ ROUTES = f"""<routes>
 
 
 class _Options:
-    """A scenario whose SUMO options give ``device.battery.probability``."""
+    """A scenario whose SUMO options give ``device.battery.probability`` (and more)."""
 
-    def __init__(self, p):
-        self.sumo_args = ["--device.battery.probability", str(p)]
+    def __init__(self, p, *more):
+        self.sumo_args = ["--device.battery.probability", str(p), *more]
 
 
 def test_vtypes_sumo_runs_on_its_energy_model_are_booked(tmp_path):
@@ -64,6 +64,27 @@ def test_vtypes_sumo_runs_on_its_energy_model_are_booked(tmp_path):
     assert [e.name for e in eqs][-1] == "vtype_energy.no_device"
     eqs, _ = vtype_equations(vt, _Options(0.5))
     assert "vtype_energy.no_device" not in [e.name for e in eqs]
+    # SUMO reads each of these as true (libsumo 1.28.0: has.battery.device with each makes
+    # the vType Energy/default); "false" and "0" not
+    from sumo_drvpw.sim.vtypes import is_true
+
+    assert all(is_true(x) for x in ("1", "yes", "on", "x", "t", "TRUE", "True", " true "))
+    assert not any(is_true(x) for x in ("0", "false", "no", "", None))
+
+
+def test_with_the_battery_device_tracking_fuel_the_default_class_stays(tmp_path):
+    """SUMO's option device.battery.track-fuel: the battery device tracks the fuel of the
+    vType's default class, which stays (libsumo 1.28.0, 2026-11-27: a passenger vType with
+    has.battery.device and a truck, both without emissionClass, read HBEFA4/PC_petrol_Euro-4
+    and HBEFA4/RT_le7.5t_Euro-VI_A-C, electricity 0): no vType without emissionClass is
+    booked, and the listing says why; "Energy" is still booked."""
+    f = tmp_path / "r.rou.xml"
+    f.write_text(ROUTES, encoding="utf-8")
+    vt = read_vtypes([f])
+    for opts in (_Options(1, "--device.battery.track-fuel"), _Options(0, "--device.battery.track-fuel", "true")):
+        eqs, listing = vtype_equations(vt, opts)
+        assert [e.name for e in eqs] == ["vtype_energy.bare_energy"]
+        assert "tracks fuel (device.battery.track-fuel)" in listing["not_booked"]["own_device"]
 
 
 def test_battery_device_vtypes_agree_with_sumos_device(tmp_path):

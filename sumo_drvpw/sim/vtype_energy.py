@@ -74,34 +74,43 @@ def is_energy_class(ec: str | None) -> bool:
     return bool(ec) and (ec == "Energy" or ec.startswith("Energy/"))
 
 
-def battery_for_all(sc) -> bool:
-    """Whether the run's SUMO options (or its config) equip every vehicle with SUMO's
-    battery device (``device.battery.probability`` ≥ 1)."""
+def battery_switch(sc) -> str:
+    """Which vTypes without an emissionClass SUMO's battery device puts on its Energy model
+    in the run of scenario ``sc`` (its SUMO options, else its config): "none" with
+    ``device.battery.track-fuel`` (the device then tracks the fuel of the vType's default
+    class, which stays: probed with libsumo 1.28.0, also for a vType with
+    has.battery.device), "all" with ``device.battery.probability`` ≥ 1, else "param" (those
+    with param has.battery.device)."""
     from sumo_drvpw.sim.sumo_start import scenario_option
+    from sumo_drvpw.sim.vtypes import is_true
 
     if sc is None or not hasattr(sc, "sumo_args"):
-        return False
+        return "param"
+    if is_true(scenario_option(sc, "device.battery.track-fuel")):
+        return "none"
     try:
-        return float(scenario_option(sc, "device.battery.probability") or 0) >= 1.0
+        return "all" if float(scenario_option(sc, "device.battery.probability") or 0) >= 1.0 else "param"
     except ValueError:
-        return False  # SUMO refuses it itself
+        return "param"  # SUMO refuses it itself
 
 
-def not_booked_why(info, battery_all: bool = False) -> str | None:
+def not_booked_why(info, switch: str = "param") -> str | None:
     """Why ``vtype_energy`` does not book a vType of the files (None: it does).
 
     SUMO runs a vType on its Energy model when its emissionClass is ``Energy/…`` (or
     ``Energy``), and, when it writes no emissionClass, when the battery device is on for it
-    (param ``has.battery.device``, or ``battery_all``: device.battery.probability 1):
-    SUMO 1.28 warns "The emission class Energy/unknown will be used" (probed with libsumo
-    1.28.0, 2026-11-27: getEmissionClass reads Energy/default, the emissions device's
-    electricity equals the battery device's)."""
+    (``switch``, :func:`battery_switch`: "param" those with param has.battery.device, "all"
+    every vType, "none" none, the device tracking fuel): SUMO 1.28 warns "The emission class
+    Energy/unknown will be used" (probed with libsumo 1.28.0, 2026-11-27: getEmissionClass
+    reads Energy/default, the emissions device's electricity equals the battery device's)."""
     ec = info.emission_class
-    if not ec and (getattr(info, "battery_device", False) or battery_all):
+    if not ec and switch != "none" and (getattr(info, "battery_device", False) or switch == "all"):
         ec = "Energy/unknown"
     if not is_energy_class(ec):
         return (f"emissionClass {ec} is not SUMO's Energy model"
                 + (" (MMPEVEM's parameters are not read)" if ec.startswith("MMPEVEM") else "") if ec
+                else "no emissionClass written and SUMO's battery device tracks fuel "
+                     "(device.battery.track-fuel): its default class stays" if switch == "none"
                 else "no emissionClass written and no battery device (SUMO's default is then not "
                      "the Energy model)")
     if not any(k in (info.energy_params or {}) for k in ENERGY_PARAMS):
@@ -153,7 +162,7 @@ def vtype_equations(file_vtypes, sc=None) -> tuple[list[Equation], dict]:
     "not_booked": {vType: why}}."""
     vfilter = getattr(sc, "vtype_filter", None)
     vdata = getattr(sc, "vtype_data", {}) or {}
-    battery_all = battery_for_all(sc)
+    switch = battery_switch(sc)
     eqs: list[Equation] = []
     booked: dict[str, dict] = {}
     not_booked: dict[str, str] = {}
@@ -161,7 +170,7 @@ def vtype_equations(file_vtypes, sc=None) -> tuple[list[Equation], dict]:
     for vt, info in file_vtypes.items():
         if vfilter is not None and vt not in vfilter:
             continue
-        why = not_booked_why(info, battery_all)
+        why = not_booked_why(info, switch)
         if why is not None:
             not_booked[vt] = why
             continue

@@ -302,8 +302,9 @@ class FileVTypes(dict):
 #: the vType params of SUMO's Energy model a file's vType keeps (:attr:`VTypeInfo.energy_params`)
 ENERGY_KEYS = ENERGY_PARAMS + ("loading", "maximumPower")
 
-#: the values SUMO reads as true (StringUtils::toBool, case-insensitive)
-SUMO_TRUE = ("1", "yes", "true", "on", "x")
+#: the values SUMO reads as true (StringUtils::toBool, case-insensitive; each checked with
+#: libsumo 1.28.0 as has.battery.device, 2026-11-27)
+SUMO_TRUE = ("1", "yes", "true", "on", "x", "t")
 
 
 def is_true(val: str | None) -> bool:
