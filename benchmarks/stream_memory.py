@@ -1,4 +1,4 @@
-"""Benchmark: peak memory of the streamed (default) `calibrate` and `compare` on wide logs.
+"""Benchmark: peak memory of the streamed (default) `calibrate`, `compare` and `diagnose` on wide logs.
 
 Logs: (a) the 50 BMW i3 trips of the shared data imported to Parquet
 (``sumo-drvpw import bmw-i3-tum DATA --out i3.parquet``: 652,765 rows, 68 columns; left
@@ -13,7 +13,10 @@ Commands, each in a fresh child process (its own peak RSS: ``VmHWM``, see
 ``calibrate LOG --vehicle V --out cal.toml`` (driving power, stepwise),
 ``compare LOG --vehicle V --equation cal.toml --equation vsp_ldv1999`` (driving power) and,
 on the i3 log, ``compare LOG --vehicle bmw_i3 --equation docs/energy-chain/bmw_i3_battery_logged.toml``
-(battery target: the chain's inputs are found by name, so every column is read).
+(battery target: the chain's inputs are found by name, so every column is read) and
+``diagnose LOG --vehicle V [--equation drvpw_prius3] --stream yes`` (the streamed residual
+tracer; the Prius logs with the declared drvpw_prius3, the others calibrated on the spot
+on the first-look sample); ``--commands`` picks some of them.
 This tree's code runs against ``--baseline REV`` (``git archive`` of that commit),
 interleaved, ``--repeat`` times; medians are reported with the ratio baseline/this. With
 ``--narrow ROWS`` a narrow log of that many rows (``benchmarks/scale.py``'s fleet log:
@@ -22,7 +25,7 @@ costs where the width did not matter. Every
 number of the two equations and of the two report.json files is compared (max. relative
 difference; percentiles and counts must be equal).
 
-    .venv/bin/python benchmarks/stream_memory.py --baseline REV [--rows 1e6] [--extra 150] [--narrow 1e7] [--repeat 2]
+    .venv/bin/python benchmarks/stream_memory.py --baseline REV [--rows 1e6] [--extra 150] [--narrow 1e7] [--repeat 2] [--commands diagnose]
 
 Last line: ``<log>_<command>_mb=<this> <log>_<command>_ratio=<baseline/this> …``.
 """
@@ -105,24 +108,30 @@ def make_i3(src: Path, path: Path) -> tuple[int, int]:
     return f.metadata.num_rows, len(f.schema_arrow.names)
 
 
+def json_numbers(x, key: str = "") -> dict:
+    """Every number of a JSON document by key path."""
+    out = {}
+    if isinstance(x, dict):
+        for k, v in x.items():
+            out.update(json_numbers(v, f"{key}/{k}"))
+    elif isinstance(x, list):
+        for i, v in enumerate(x):
+            out.update(json_numbers(v, f"{key}[{i}]"))
+    elif isinstance(x, (int, float)) and not isinstance(x, bool):
+        out[key] = float(x)
+    return out
+
+
 def report_numbers(folder: Path) -> dict:
     """Every number of a report.json by key path (the calibrated equation's name made neutral)."""
     doc = json.loads((folder / "report.json").read_text())
-    out = {}
+    out = json_numbers(doc.get("equations", {})) | json_numbers({"n_samples": doc.get("n_samples")})
+    return {re.sub(r"cal_\w+?_\d+", "CAL", k): v for k, v in out.items()}
 
-    def walk(x, key):
-        if isinstance(x, dict):
-            for k, v in x.items():
-                walk(v, f"{key}/{k}")
-        elif isinstance(x, list):
-            for i, v in enumerate(x):
-                walk(v, f"{key}[{i}]")
-        elif isinstance(x, (int, float)) and not isinstance(x, bool):
-            out[re.sub(r"cal_\w+?_\d+", "CAL", key)] = float(x)
 
-    walk(doc.get("equations", {}), "")
-    walk({"n_samples": doc.get("n_samples")}, "")
-    return out
+def trace_numbers(folder: Path) -> dict:
+    """Every number of a diagnose trace.json by key path."""
+    return json_numbers(json.loads((folder / "trace.json").read_text()))
 
 
 def exact_parts(a: dict, b: dict) -> int:
@@ -145,6 +154,8 @@ def main():
     ap.add_argument("--narrow", default="0",
                     help="rows of a narrow log (benchmarks/scale.py's, without --vehicle) to time too (0: none)")
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--commands", default="calibrate,compare,compare_battery,diagnose",
+                    help="commands to run, comma-separated (default: all)")
     ap.add_argument("--tmp", default=None, help="folder for the temporary logs")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="stream_memory_", dir=args.tmp))
@@ -170,7 +181,11 @@ def main():
         battery = ROOT / "docs" / "energy-chain" / "bmw_i3_battery_logged.toml"
         tail = []
         for name, (log, veh) in logs.items():
-            cmds = ["calibrate", "compare"] + (["compare_battery"] if name == "i3" and battery.exists() else [])
+            cmds = ["calibrate", "compare"] + (["compare_battery"] if name == "i3" and battery.exists() else []) \
+                + ["diagnose"]
+            cmds = [c for c in cmds if c in args.commands.split(",")]
+            if "compare" in cmds and "calibrate" not in cmds:
+                cmds.insert(0, "calibrate")  # compare compares the equation it calibrates
             res = {(c, t): [] for c in cmds for t in trees}
             outs = {}
             for r in range(args.repeat):
@@ -181,6 +196,9 @@ def main():
                         car = ["--vehicle", veh] if veh else []
                         if cmd == "calibrate":
                             argv = ["calibrate", str(log), *car, "--out", str(cal)]
+                        elif cmd == "diagnose":
+                            eq = ["--equation", "drvpw_prius3"] if veh == "prius3" else []
+                            argv = ["diagnose", str(log), *car, *eq, "--stream", "yes", "--out", str(out)]
                         elif cmd == "compare":
                             argv = ["compare", str(log), *car, "--equation", str(cal),
                                     "--equation", "vsp_ldv1999", "--out", str(out)]
@@ -199,6 +217,9 @@ def main():
                 ratio = med["baseline"][0] / med["this"][0]
                 if cmd == "calibrate":
                     diff, bad = max_rel_diff(numbers(outs[cmd, "baseline"]), numbers(outs[cmd, "this"])), 0
+                elif cmd == "diagnose":
+                    a, b = trace_numbers(outs[cmd, "baseline"]), trace_numbers(outs[cmd, "this"])
+                    diff, bad = max_rel_diff(a, b), sum(a.get(k) != b.get(k) for k in set(a) ^ set(b))
                 else:
                     a, b = report_numbers(outs[cmd, "baseline"]), report_numbers(outs[cmd, "this"])
                     diff = max_rel_diff(a, b)

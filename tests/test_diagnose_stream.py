@@ -266,3 +266,57 @@ def test_a_term_zero_only_in_the_first_rows_is_fitted_streamed_as_in_memory(tmp_
     assert mem.report["n_samples"] == st.report["n_samples"]  # the flat trips read flat in both
     # the declared fit alike (the screening differs: the streamed one sees the first file only)
     assert not _compare(mem.report["baseline"], st.report["baseline"], "baseline")
+
+
+def test_the_sample_and_the_trace_do_not_depend_on_the_chunk_size(tmp_path):
+    """A log larger than the first-look sample, read in chunks of 2,500 rows and of whole
+    files: the sample ends at the end of the trip that holds row ``sample_rows`` − 1, the
+    batches after it read only the columns the trace uses, and every number of the report
+    is the same (to 1e-9). Before, the sample ended where the first batch past
+    ``sample_rows`` did: the first trip (3,840 rows) in chunks of 2,500, the first file's
+    first two trips (7,680 rows) read in one chunk, and the first look differed with it."""
+    paths = _logs(tmp_path, [E.AuxLoad(), E.Distractors()], n_trips=9)
+    eq = load_equation("drvpw_prius3")
+    sample = 3000  # inside the first trip (3,840 rows a trip, three a file): the sample is that trip
+    a = diagnose_stream(paths, "prius3", eq, DiagnoseOptions(), rows=2500, sample_rows=sample)
+    b = diagnose_stream(paths, "prius3", eq, DiagnoseOptions(), rows=10 ** 6, sample_rows=sample)
+    assert a.details["resources"]["sample_rows"] == b.details["resources"]["sample_rows"] == 3840
+    assert [f["term"] for f in a.report["findings"]] == ["[ac_power_w]"]
+    _assert_equal(a, b)
+
+
+def test_batches_are_bounded_by_values_and_narrow_to_the_columns_asked_for(tmp_path, monkeypatch):
+    """read_batches: a wide log's chunks hold at most BATCH_VALUES values of the columns read
+    (rows_for of its width; here scaled down), each batch whole trips; once the columns are
+    narrowed (after the first look), the rest of a Parquet file is read from the next trip
+    on with only those columns, every row read once."""
+    import pandas as pd
+
+    import sumo_drvpw.data.stream as S
+    from sumo_drvpw.fit.diagnose.source import read_batches
+
+    monkeypatch.setattr(S, "BATCH_VALUES", 60_000)
+    monkeypatch.setattr(S, "MIN_BATCH_ROWS", 100)
+    rng = np.random.default_rng(1)
+    frames = []
+    for k in range(30):  # 30 trips of 200 rows, 4 canonical and 40 extra columns
+        t = np.arange(200) * 0.5
+        v = 10.0 + 3.0 * np.sin(t / 9.0 + k)
+        frames.append(pd.DataFrame({"trip_id": f"k{k:02d}", "time_s": t, "speed_mps": v,
+                                    "power_w": 150.0 * v + 0.4 * v ** 3, "mass_kg": 1500.0,
+                                    **{f"x{j:02d}": rng.normal(size=200) for j in range(40)}}))
+    f = tmp_path / "wide.parquet"
+    pd.concat(frames, ignore_index=True).to_parquet(f, row_group_size=1000)
+    chunk = S.rows_for(45)  # 60,000 / (45 + 10) = 1,090 rows: five trips
+    assert chunk == 60_000 // 55
+    want = {"columns": None}
+    seen, cols = [], []
+    for m in read_batches([f], want=want, rows=10 ** 6, sample_rows=1500):
+        seen += list(m.log.df["trip_id"].astype(str).unique())
+        cols.append(set(m.log.df.columns))
+        assert len(m.power_w) <= chunk and len(m.power_w) % 200 == 0
+        if len(seen) == 8:  # the first look is over: only x03 of the extras from now on
+            want["columns"] = frozenset(S.CANONICAL | {"x03"})
+    assert seen == [f"k{k:02d}" for k in range(30)]  # every trip once, in order
+    first, later = cols[0], cols[-1]
+    assert {"x00", "x03", "x39"} <= first and "x03" in later and not ({"x00", "x39"} & later)

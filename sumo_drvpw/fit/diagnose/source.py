@@ -13,8 +13,11 @@ these prepared arrays (those it uses), not the logs.
 A first look at the data — column screening, which columns are two-valued, the sample
 interval of the lag search, the calibration on the spot (without a declared equation),
 the quantiles of the recuperation regimes — is made on a *sample*: the first
-``sample_rows`` rows (whole trips) in reading order. With fewer rows than that, the sample
-is all data and the streamed tracer equals the in-memory one (test).
+``sample_rows`` rows (whole trips: up to the end of the trip of row ``sample_rows`` − 1,
+whatever the chunk size) in reading order. With fewer rows than that, the sample is all
+data and the streamed tracer equals the in-memory one (test). The logs are read in chunks
+of at most ``BATCH_VALUES`` values (data/stream.py ``rows_for``: a wide log in fewer rows),
+every column for the sample, then only the columns the tracer reads.
 """
 
 from __future__ import annotations
@@ -37,24 +40,86 @@ CACHE_MB = 200
 INPUT_FIELDS = ("v", "a", "theta", "wind", "mass", "rho")
 
 
-def read_batches(paths, vehicle=None, options=None, target: str = "wheel", rows: int = BATCH_ROWS):
+def read_batches(paths, vehicle=None, options=None, target: str = "wheel", rows: int = BATCH_ROWS,
+                 sample_rows: int | None = None, want: dict | None = None):
     """:class:`~sumo_drvpw.data.measured.Measured` per batch of whole trips of every log, in
-    reading order (the per-batch loader of the tracer; ``target`` as for ``load_measured``)."""
+    reading order (the per-batch loader of the tracer; ``target`` as for ``load_measured``).
+
+    Parameters
+    ----------
+    rows : rows per chunk read at most [-]; a wide file is read in fewer, at most
+        :data:`~sumo_drvpw.data.stream.BATCH_VALUES` values of the columns read
+        (:func:`~sumo_drvpw.data.stream.rows_for`), so a batch's memory does not grow with
+        the log's width
+    sample_rows : when given, the batch that holds row ``sample_rows`` (counted over all
+        files) is cut after the trip of row ``sample_rows − 1``: the first-look sample (the
+        batches up to ``sample_rows`` rows) then ends at that trip's end, whatever the
+        chunk size
+    want : ``{"columns": set | None}``, the columns to read (None: all), looked up at each
+        file and after each batch: narrowed, the rest of a Parquet file is read with only
+        those columns from the next trip on (a CSV chunk is parsed whole, then cut)
+
+    The extra columns' signals are read from each batch's table when asked for
+    (``measure(lazy_signals=True)``), not copied.
+    """
     from sumo_drvpw.data.log import from_frame
     from sumo_drvpw.data.measured import measure
+    from sumo_drvpw.data.stream import Part, read_width, rows_for
 
-    for part in plan(paths):
+    want = {"columns": None} if want is None else want
+    seen = 0  # rows yielded before this batch, over all files
+    todo = list(plan(paths))
+    logged_of: dict = {}
+    while todo:
+        part = todo.pop(0)
         stem = Path(part.path).stem
-        logged = logged_flows(part.path, rows) if target != "wheel" else None  # once per file
-        for df, off in whole_trips(part, rows):
-            name = part.path if off == 0 else f"{part.path} (batch from row {off})"
-            if "trip_id" not in df:
-                df.insert(0, "trip_id", stem)
-            log = from_frame(df, vehicle, options, name=name)
-            log.files = [part.path]
-            log.logged = logged
+        if part.path not in logged_of:  # the fuel flow chosen once per file, on all of it
+            logged_of[part.path] = logged_flows(part.path, rows) if target != "wheel" else None
+        cols = want["columns"]
+        chunk = rows_for(read_width(part.path, cols), rows)  # a wide log in fewer rows
+        for df, off in whole_trips(part, chunk, columns=cols, categorical=True):
+            first = off + (part.start or 0)
+            pieces = [df]
+            if sample_rows is not None and seen < sample_rows < seen + len(df):
+                pieces = _cut_after_trip_of(df, sample_rows - seen - 1)
             del df
-            yield measure(log, vehicle, target)
+            at = first
+            while pieces:
+                piece = pieces.pop(0)
+                name = part.path if at == 0 else f"{part.path} (batch from row {at})"
+                if "trip_id" not in piece:
+                    piece.insert(0, "trip_id", stem)
+                log = from_frame(piece, vehicle, options, name=name)
+                log.files = [part.path]
+                log.logged = logged_of[part.path]
+                n = len(piece)
+                del piece
+                seen += n
+                at += n
+                m = measure(log, vehicle, target, lazy_signals=True)
+                del log
+                yield m
+                del m  # before the next chunk is read: one batch in memory at a time
+            nxt = at  # the first row after this batch
+            stop = part.stop if part.stop is not None else part.rows
+            if want["columns"] != cols and part.path.lower().endswith(".parquet") and stop and nxt < stop:
+                # narrowed: the rest of this file from the next trip on, only those columns
+                todo.insert(0, Part(part.path, nxt, stop, stop - nxt))
+                break
+
+
+def _cut_after_trip_of(df: pd.DataFrame, i: int) -> list:
+    """A frame of whole trips cut after the trip that row ``i`` is in (one piece when that
+    trip is the last)."""
+    if "trip_id" not in df:
+        return [df]
+    tid = df["trip_id"]
+    codes = pd.factorize(tid if isinstance(tid.dtype, pd.CategoricalDtype) else tid.astype(str))[0]
+    after = np.flatnonzero(codes[i:] != codes[i])
+    if not len(after):
+        return [df]
+    end = i + int(after[0])
+    return [df.iloc[:end].reset_index(drop=True), df.iloc[end:].reset_index(drop=True)]
 
 
 def parquet_metadata(paths) -> dict:
@@ -70,11 +135,31 @@ def parquet_metadata(paths) -> dict:
     return meta
 
 
-def concat_inputs(xs: list[Inputs]) -> Inputs:
-    """One :class:`Inputs` of several (signals: those all have)."""
-    keys = [k for k in xs[0].signals if all(k in x.signals for x in xs)]
-    return Inputs(*(np.concatenate([getattr(x, f) for x in xs]) for f in INPUT_FIELDS),
-                  {k: np.concatenate([np.asarray(x.signals[k]) for x in xs]) for k in keys})
+def concat_inputs(ms: list) -> Inputs:
+    """One :class:`Inputs` of the inputs of several batches (:class:`~sumo_drvpw.data.measured.Measured`;
+    signals: those all have), each signal made once and filled batch by batch. Each batch is
+    left holding its share as views of the whole (its own signals and the table's extra
+    columns go: the table keeps what the tracer reads of it — trip, time, weights, elevation,
+    the air's columns), so the batches are held once, not twice. Changed in place."""
+    import dataclasses
+
+    from sumo_drvpw.data.log import DERIVED
+
+    keep = set(DERIVED) | {"elevation_m", "ambient_c", "pressure_kpa"}
+    keys = [k for k in ms[0].inputs.signals if all(k in m.inputs.signals for m in ms)]
+    sizes = [len(m.inputs.v) for m in ms]
+    sig = {k: np.empty(sum(sizes)) for k in keys}
+    lo = 0
+    for m, n in zip(ms, sizes):
+        for k in keys:
+            sig[k][lo:lo + n] = np.asarray(m.inputs.signals[k], float)
+        # the inputs copied too: v and mass may be views of the table's whole block
+        m.inputs = dataclasses.replace(m.inputs, signals={k: v[lo:lo + n] for k, v in sig.items()},
+                                       **{f: np.array(getattr(m.inputs, f), float) for f in INPUT_FIELDS})
+        # a copy: a selection of columns is a view of the whole table's block (pandas ≥ 3)
+        m.log.df = m.log.df[[c for c in m.log.df.columns if c in keep]].copy()
+        lo += n
+    return Inputs(*(np.concatenate([getattr(m.inputs, f) for m in ms]) for f in INPUT_FIELDS), sig)
 
 
 class Batches:

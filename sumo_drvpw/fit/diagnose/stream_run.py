@@ -4,11 +4,14 @@
 fit in memory. What differs is only where the sums come from:
 
 1. **first look, on a sample** — the first ``sample_rows`` rows (whole trips, reading
-   order): column screening and roles, two-valued columns, the sample interval of the lag
+   order: up to the end of the trip of row ``sample_rows`` − 1, whatever the chunk size):
+   column screening and roles, two-valued columns, the sample interval of the lag
    search, the calibration on the spot (no declared equation) and the recuperation
    quantiles. With fewer rows than ``sample_rows`` the sample is all data.
 2. **one read of the logs** — batch by batch of whole trips
-   (:func:`~sumo_drvpw.fit.diagnose.source.read_batches`) into the arrays the tracer needs
+   (:func:`~sumo_drvpw.fit.diagnose.source.read_batches`: chunks of at most
+   ``BATCH_VALUES`` values, so a wide log in fewer rows; after the first look only the
+   columns the trace reads) into the arrays the tracer needs
    (:class:`~sumo_drvpw.fit.diagnose.source.Batches`: in memory up to a budget, else in a
    temporary folder).
 3. **passes** over the prepared batches for every statistic the search needs
@@ -145,6 +148,21 @@ def _prepare(m, eq, declared, kept, opt, lags, elev: bool, acc_col, held=()) -> 
     return d
 
 
+def _columns_read(target: str, read_options, term_signals: set, kept, acc_col) -> frozenset | None:
+    """The columns the batches after the first look are read with: the reader's canonical
+    ones, the signals offered and those the declared terms name, the accelerometer and what
+    the measurement corrections read; with a battery or fuel target every column (its fuel
+    and air flows are found by name, as compare reads them)."""
+    from sumo_drvpw.data.corrections import needed_columns
+    from sumo_drvpw.data.stream import CANONICAL
+
+    if target != "wheel":
+        return None
+    meas = getattr(read_options, "measurement", None)
+    return frozenset(CANONICAL | set(kept) | term_signals | ({acc_col} if acc_col else set())
+                     | needed_columns(meas))
+
+
 def _trip_codes(trip: pd.Series):
     """Trip code per row and the trips' names (str), as ``pd.factorize`` of the ids as
     strings; factorized as they are (5× faster on Arrow strings) unless an id is missing
@@ -157,8 +175,9 @@ def _trip_codes(trip: pd.Series):
     return codes, names
 
 
-#: rows per chunk read [-]: half the calibrate/compare chunk (the prepared batches and the
-#: per-block statistics share the memory budget)
+#: rows per chunk read at most [-]: half the calibrate/compare chunk (the prepared batches and
+#: the per-block statistics share the memory budget); a wide log's chunks hold fewer, at most
+#: data/stream.py BATCH_VALUES values of the columns read (source.read_batches)
 READ_ROWS = BATCH_ROWS // 2
 
 
@@ -193,7 +212,8 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     opt : :class:`DiagnoseOptions`
     read_options : :class:`~sumo_drvpw.data.log.ReadOptions`
     target : what the measured power is (``load_measured``'s ``target``)
-    rows : rows per chunk read [-]
+    rows : rows per chunk read at most [-] (a wide log's chunks hold fewer: at most
+        data/stream.py ``BATCH_VALUES`` values)
     sample_rows : rows of the first-look sample [-]
     cache_mb : prepared batches kept in memory up to this size [MB], beyond on disk
     progress : optional callable(str) for progress messages
@@ -214,9 +234,11 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     opt.check()
     say = progress or (lambda s: None)
     veh = load_vehicle(vehicle) if isinstance(vehicle, str) else vehicle
-    # diagnose reads READ_ROWS at a time (no reading ahead in a thread: on this shared 2-core
-    # machine at load 3 it cost 20-30 % wall time, 10 M rows)
-    gen = read_batches(paths, veh, read_options, target, rows)
+    # diagnose reads a chunk at a time (no reading ahead in a thread: on this shared 2-core
+    # machine at load 3 it cost 20-30 % wall time, 10 M rows); every column for the first
+    # look (screening), then only those the trace reads
+    want: dict = {"columns": None}
+    gen = read_batches(paths, veh, read_options, target, rows, sample_rows=sample_rows, want=want)
     sample, n_sample = [], 0
     for m in gen:
         sample.append(m)
@@ -227,10 +249,10 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
             break
     if not sample:
         raise UserError("no drive log rows to trace")
-    first_log = sample[0].log
+    first_extra = list(sample[0].log.extra_columns)  # the columns whose roles are resolved
     files = list(dict.fromkeys(p.path for p in plan(paths)))
     y_s = np.concatenate([np.asarray(m.power_w, float) for m in sample])
-    x_s = concat_inputs([m.inputs for m in sample])
+    x_s = concat_inputs(sample)  # each batch then holds its signals as views of x_s's
     usable_s = np.concatenate([np.asarray(m.usable, bool) for m in sample])
     trip_s = np.concatenate([m.log.df["trip_id"].astype(str).to_numpy() for m in sample])
     t_s = np.concatenate([m.log.df["time_s"].to_numpy(float) for m in sample])
@@ -253,7 +275,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     for s in equation.signals:
         if s not in x_s.signals:
             raise UserError(f"equation '{equation.name}' needs the log column '{s}', which the data lack")
-    roles = resolve(first_log.extra_columns, from_metadata(parquet_metadata(paths)))
+    roles = resolve(first_extra, from_metadata(parquet_metadata(paths)))
     kept, skipped = screen_signals(dict(x_s.signals), y_s, x_s, tcodes_s, usable_s, opt, roles)
     for name in list(kept):
         if name in equation.signals:
@@ -279,6 +301,11 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     acc_col = next((c for c in ACCELEROMETER_COLUMNS if c in x_s.signals), None) if opt.structural else None
     dt_acc = float(np.median(np.diff(t_s))) if len(t_s) > 1 else 1.0
     del x_s, y_s, usable_s, trip_s, t_s, tcodes_s
+    term_signals = set(equation.signals) | set(declared_eq.signals)
+    want["columns"] = _columns_read(target, read_options, term_signals, kept_names, acc_col)
+    used = set(kept_names) | term_signals | {acc_col}
+    for m in sample:  # the sample's other signals go with x_s
+        m.inputs.signals = {k: v for k, v in m.inputs.signals.items() if k in used}
     # one read of the logs into prepared batches
     batches = Batches(cache_mb)
     n_rows = n_usable = 0
