@@ -144,3 +144,38 @@ def test_no_header_no_inputs(tmp_path):
     (tmp_path / "plain.xml").write_text("<fcd-export><timestep time=\"0\"/></fcd-export>")
     assert recorded_inputs(tmp_path / "plain.xml") is None
     assert recorded_inputs(_fcd_with_header(tmp_path / "h.xml", {}, "h.xml")) is None
+
+
+@pytest.mark.sumo
+def test_the_recordings_battery_device_option_reaches_the_replay(tmp_path):
+    """A run given SUMO's option --device.battery.probability 1 on its command line runs a
+    vType that writes Energy-model parameters but no emissionClass on SUMO's Energy model,
+    and the live run's vtype_energy books it. Its XML FCD's header names the option: the
+    replay without a scenario books it too, the same energy (before: the replay did not see
+    the option and refused, no vType of SUMO's Energy model)."""
+    from sumo_drvpw.sim import run_scenario
+    from sumo_drvpw.sim.fcd import process_fcd
+    from test_vtype_energy_sumo_cases import HW_NET, PARAMS
+
+    (tmp_path / "r.rou.xml").write_text(
+        f'<routes><vType id="pkw" vClass="passenger" sigma="0.5">{PARAMS}</vType>\n'
+        '<flow id="a" type="pkw" from="e01" to="e56" begin="0" end="30" period="10" departSpeed="0"/></routes>')
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["vtype_energy"]\n[sumo]\nnet = "{HW_NET}"\nroutes = ["r.rou.xml"]\nend = 60\n'
+        'options = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n')
+    live = run_scenario(tmp_path / "s.toml", tmp_path / "live",
+                        options=["--device.battery.probability", "1", "--fcd-output",
+                                 str(tmp_path / "fcd.xml"), "--precision", "6"])
+    rep = process_fcd(tmp_path / "fcd.xml", net=HW_NET, vtype_files=[tmp_path / "r.rou.xml"],
+                      equations=["vtype_energy"], out_dir=tmp_path / "rep", figures=False, end=60)
+    assert list(live["equations"]) == list(rep["equations"]) == ["vtype_energy.pkw"]
+    a = live["equations"]["vtype_energy.pkw"]["energy_j"]["highway"]["total"]
+    assert a > 0 and rep["equations"]["vtype_energy.pkw"]["energy_j"]["highway"]["total"] == \
+        pytest.approx(a, rel=2e-3)
+    pytest.importorskip("distributed")
+    from sumo_drvpw.sim.fcd_dask import process_fcd_dask
+
+    dk = process_fcd_dask(tmp_path / "fcd.xml", tmp_path / "dask", net=HW_NET,
+                          vtype_files=[tmp_path / "r.rou.xml"], equations=["vtype_energy"],
+                          buckets=2, workers=1, figures=False, end=60)
+    assert dk["equations"]["vtype_energy.pkw"]["energy_j"] == rep["equations"]["vtype_energy.pkw"]["energy_j"]

@@ -372,6 +372,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     from sumo_drvpw.sim.fcd_read import header_options
 
     head = header_options(fcd_file)  # the recording's options (None: no SUMO header)
+    sc = recorded_device_options(sc, head)
     method = step_method(sc, head)
     dt, dt_warning = row_interval(sc, fcd_file, head)
     net.jump_slack_m = hidden_steps_slack(recorded_step(head), dt)  # rows sparser than the step
@@ -449,6 +450,25 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         if out_dir is not None and publish:
             discard_parts(acc.ledger)
     return result
+
+
+#: SUMO options of the recording run that decide which vTypes SUMO ran on its Energy model
+#: (sim/vtype_energy.py): taken from an XML FCD's header when the scenario gives none
+RECORDED_DEVICE_OPTIONS = ("device.battery.probability", "device.battery.track-fuel")
+
+
+def recorded_device_options(sc, head: dict | None):
+    """``sc`` with the battery-device options of the run that recorded the FCD (its header
+    ``head``) added to its SUMO options where the scenario sets none: with SUMO's option
+    device.battery.probability 1 a vType without emissionClass runs on SUMO's Energy model,
+    so the replay's ``vtype_energy`` books it as the live run does."""
+    import dataclasses
+
+    from sumo_drvpw.sim.sumo_start import scenario_option
+
+    add = [x for k in RECORDED_DEVICE_OPTIONS if head and head.get(k) is not None
+           and scenario_option(sc, k) is None for x in (f"--{k}", head[k])]
+    return dataclasses.replace(sc, sumo_args=[*sc.sumo_args, *add]) if add else sc
 
 
 def step_method(sc, head: dict | None) -> str:

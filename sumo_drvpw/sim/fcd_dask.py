@@ -154,8 +154,8 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     ``out_dir`` (required: the workers write their parts there) and returns the RunResult."""
     from sumo_drvpw.fit.engine import dask_client, guarded, unguarded
     from sumo_drvpw.sim.accountant import Accountant
-    from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario, lane_warnings
-    from sumo_drvpw.sim.fcd_read import fcd_parts
+    from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario, lane_warnings, recorded_device_options
+    from sumo_drvpw.sim.fcd_read import fcd_parts, header_options
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import VehicleSpill, write_published
 
@@ -169,6 +169,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     if not fcd_parts(spec) and not Path(spec).is_file():
         raise UserError(f"FCD file not found: {spec}")
     spec = os.path.abspath(spec)  # a worker's working folder is not ours
+    sc = recorded_device_options(sc, header_options(spec))  # as each bucket's replay takes them
     out = Path(out_dir).resolve()
     root = out / BUCKET_DIR
     root.mkdir(parents=True, exist_ok=True)
