@@ -1,0 +1,47 @@
+"""Defects found rehearsing public logs nobody here had used (2026-11-27, docs/adapters.md):
+a Torque Pro export of several logging sessions out of order (cshell7/sample-obd-data) and
+a LeafSpy log sampled every 15-25 s (corentinHuaulme/LeafSpyVisualizer). Synthetic files only."""
+
+from __future__ import annotations
+
+from sumo_drvpw.data.adapters import read
+
+
+def _torque_csv(path, sessions):
+    """A Torque Pro CSV export: one row per second of each (start 'HH:MM', seconds) session,
+    written in the given order."""
+    rows = ["GPS Time, Device Time,Speed (OBD)(mph),Engine RPM(rpm)"]
+    for start, n in sessions:
+        for k in range(n):
+            rows.append(f"-,27-Jun-2020 {start}:{k:02d}.000,{30 + k},{1500 + 10 * k}")
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def test_sessions_out_of_order_are_named_with_where_and_how_to_keep_them(tmp_path):
+    # the later session (15:19) first, then an earlier one (14:19) of 6 rows: all 6 go
+    # backwards; the note says where, by how much, and how to keep them
+    src = _torque_csv(tmp_path / "back.csv", [("15:19", 10), ("14:19", 6)])
+    df, rep = read("torquepro", [src])
+    f = rep["files"][0]
+    assert f["dropped"] == {"time going backwards": 6}
+    assert len(df) == 10
+    note = [n for n in f["notes"] if n.startswith("time going backwards")]
+    assert len(note) == 1, f["notes"]
+    assert "6 row(s) dropped" in note[0] and "data row 10" in note[0]
+    assert "3609 s" in note[0]                       # 15:19:09 → 14:19:00
+    assert "file of its own" in note[0]
+
+
+def test_a_clock_glitch_is_named_without_the_session_hint(tmp_path):
+    # one sample 0.5 s back (a phone clock's correction): located, no session advice
+    src = tmp_path / "glitch.csv"
+    rows = ["GPS Time, Device Time,Speed (OBD)(mph),Engine RPM(rpm)"]
+    for k, s in enumerate(["00.000", "01.000", "02.000", "01.500", "03.000"]):
+        rows.append(f"-,27-Jun-2020 15:19:{s},{30 + k},1500")
+    src.write_text("\n".join(rows) + "\n")
+    df, rep = read("torquepro", [src])
+    f = rep["files"][0]
+    assert f["dropped"] == {"time going backwards": 1}
+    note = [n for n in f["notes"] if n.startswith("time going backwards")]
+    assert note and "by 0.5 s at data row 3" in note[0] and "file of its own" not in note[0]
