@@ -45,3 +45,34 @@ def test_a_clock_glitch_is_named_without_the_session_hint(tmp_path):
     assert f["dropped"] == {"time going backwards": 1}
     note = [n for n in f["notes"] if n.startswith("time going backwards")]
     assert note and "by 0.5 s at data row 3" in note[0] and "file of its own" not in note[0]
+
+
+def _canonical(path, trip, step_s, n):
+    import numpy as np
+    import pandas as pd
+
+    t = np.arange(n) * step_s
+    v = 12.0 + 6.0 * np.sin(t / 90.0)          # whole mph steps would widen the window too
+    pd.DataFrame({"trip_id": trip, "time_s": t, "speed_mps": np.round(v / 0.44704) * 0.44704,
+                  "power_w": 400.0 * v}).to_csv(path, index=False)
+    return path
+
+
+def test_samples_far_apart_are_said_to_lose_the_inertial_power(tmp_path):
+    # LeafSpy (corentinHuaulme/LeafSpyVisualizer @ 1c46bc8) logs every 15-25 s: the derived
+    # acceleration spans ~34 s while the note claimed a 3.65-s moving average, and nothing
+    # said why a per-sample fit could not be good
+    from sumo_drvpw.data.log import read_log
+    from sumo_drvpw.data.resolution import merge_accel_derivation
+
+    coarse = _canonical(tmp_path / "coarse.csv", "coarse", 17.0, 200)
+    fine = _canonical(tmp_path / "fine.csv", "fine", 1.0, 600)
+    text = read_log([coarse], options=None).counts["accel_source"]
+    assert "up to 17 s apart (median step)" in text and "inertial power" in text
+    assert "apart" not in read_log([fine]).counts["accel_source"]     # a 1-Hz log: as before
+    both = read_log([coarse, fine]).counts
+    assert "up to 17 s apart on 1 of 2 trips" in both["accel_source"]
+    # batches of whole trips (the streamed reader) merge to the same derivation
+    merged = merge_accel_derivation(read_log([coarse]).counts["accel_derivation"],
+                                    read_log([fine]).counts["accel_derivation"])
+    assert merged == both["accel_derivation"]
