@@ -76,3 +76,26 @@ def test_samples_far_apart_are_said_to_lose_the_inertial_power(tmp_path):
     merged = merge_accel_derivation(read_log([coarse]).counts["accel_derivation"],
                                     read_log([fine]).counts["accel_derivation"])
     assert merged == both["accel_derivation"]
+
+
+def test_phone_altitude_is_the_elevation_of_a_torque_log_without_the_gps_altitude_pid(tmp_path):
+    # cshell7/sample-obd-data @ c759cb3 logs the phone's ' Altitude' (m) but no 'GPS
+    # Altitude' PID: the import kept it aside, and the commands then said the logs carry
+    # no grade and to log the GPS altitude
+    rows = ["GPS Time, Device Time, Altitude,Speed (OBD)(mph),Engine RPM(rpm)"]
+    for k in range(8):
+        alt = "-" if k == 3 else f"{1300 + 2.5 * k}"
+        rows.append(f"-,27-Jun-2020 15:19:{k:02d}.000,{alt},{40 + k},2000")
+    src = tmp_path / "phone_alt.csv"
+    src.write_text("\n".join(rows) + "\n")
+    df, rep = read("torquepro", [src])
+    assert "elevation_m" in df
+    assert df["elevation_m"].iloc[7] == 1317.5 and df["elevation_m"].isna().sum() == 1
+    assert any("phone's 'Altitude'" in n for n in rep["files"][0]["notes"])
+    # with the PID, the PID wins and the phone's value only fills its gaps (as before)
+    rows = ["GPS Time, Device Time,GPS Altitude(ft), Altitude,Speed (OBD)(mph),Engine RPM(rpm)"]
+    rows += [f"-,27-Jun-2020 15:19:{k:02d}.000,{'-' if k == 2 else 1000},500,40,2000" for k in range(4)]
+    src.write_text("\n".join(rows) + "\n")
+    df, rep = read("torquepro", [src])
+    assert list(df["elevation_m"].round(2)) == [304.8, 304.8, 500.0, 304.8]
+    assert not any("phone's 'Altitude'" in n for n in rep["files"][0]["notes"])
