@@ -99,3 +99,14 @@ def test_phone_altitude_is_the_elevation_of_a_torque_log_without_the_gps_altitud
     df, rep = read("torquepro", [src])
     assert list(df["elevation_m"].round(2)) == [304.8, 304.8, 500.0, 304.8]
     assert not any("phone's 'Altitude'" in n for n in rep["files"][0]["notes"])
+
+
+def test_torque_nissan_maf_in_gm_per_s_is_a_mass_flow(tmp_path):
+    # cshell7/sample-obd-data: '[NADV] Mass Air Flow(gm/s)' was kept unconverted, 'unit not known'
+    rows = ["GPS Time, Device Time,Speed (OBD)(mph),Engine RPM(rpm),[NADV] Mass Air Flow(gm/s)"]
+    rows += [f"-,27-Jun-2020 15:19:{k:02d}.000,40,2000,{20 + k}" for k in range(4)]
+    src = tmp_path / "maf.csv"
+    src.write_text("\n".join(rows) + "\n")
+    df, rep = read("torquepro", [src])
+    assert list(df["nadv_mass_air_flow_gps"]) == [20.0, 21.0, 22.0, 23.0]
+    assert not any("not known" in n for n in rep["files"][0]["notes"])
