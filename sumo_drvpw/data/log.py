@@ -491,7 +491,8 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
         df["accel_mps2"] = derived if lacking is None else np.where(lacking, derived, df["accel_mps2"].to_numpy(float))
         deriv = (seg, win_seg)
         n_derived = len(df) if lacking is None else int(lacking.sum())
-        counts.update(accel_counts(accel_derivation(opt, win[own], q[own], len(df) - n_derived, n_derived)))
+        counts.update(accel_counts(accel_derivation(opt, win[own], q[own], len(df) - n_derived, n_derived,
+                                                     med[own])))
     else:
         counts.update(accel_counts(accel_derivation(opt, [], [], len(df), 0)))
         deriv = (seg, np.full(int(seg[-1]) + 1, opt.accel_window_s))

@@ -70,7 +70,12 @@ def accel_window(opt, v: np.ndarray, trip_codes: np.ndarray) -> tuple[np.ndarray
     return np.maximum(opt.accel_window_s, need), q
 
 
-def accel_derivation(opt, win, q, column_rows: int, derived_rows: int) -> dict:
+#: a trip whose samples lie further apart than this (its median step) [s] has a derived
+#: acceleration over 2 steps or more: the commands say so
+COARSE_STEP_S = 5.0
+
+
+def accel_derivation(opt, win, q, column_rows: int, derived_rows: int, step=()) -> dict:
     """Where a log's acceleration came from, as sums that merge over batches and files
     (:func:`merge_accel_derivation`) and read as the reader's text (:func:`accel_counts`).
 
@@ -81,6 +86,8 @@ def accel_derivation(opt, win, q, column_rows: int, derived_rows: int) -> dict:
         acceleration is derived (:func:`accel_window`)
     column_rows, derived_rows : rows whose acceleration is the ``accel_mps2`` column, and
         rows whose acceleration is derived from the speed [-]
+    step : the median time step of each of those trips [s] (``coarse_trips`` and
+        ``coarse_step_s``, the largest, count the trips sampled over COARSE_STEP_S apart)
     """
     win, q = np.asarray(win, float), np.asarray(q, float)
     wide = win > opt.accel_window_s
@@ -91,6 +98,10 @@ def accel_derivation(opt, win, q, column_rows: int, derived_rows: int) -> dict:
         d.update(window_min_s=float(win.min()), window_max_s=float(win.max()))
     if wide.any():
         d["widened_step_mps"] = float(q[wide].max())
+    step = np.asarray(step, float)
+    coarse = step[np.isfinite(step) & (step > COARSE_STEP_S)]
+    if coarse.size:
+        d.update(coarse_trips=int(coarse.size), coarse_step_s=float(coarse.max()))
     return d
 
 
@@ -99,7 +110,9 @@ def merge_accel_derivation(a: dict, b: dict) -> dict:
     the windows' range and the coarsest widened step span both)."""
     out = {k: a[k] + b[k] for k in ("column_rows", "derived_rows", "derived_trips", "widened_trips")}
     out.update(least_window_s=a["least_window_s"], noise_mps2=a["noise_mps2"])
-    for k, f in (("window_min_s", min), ("window_max_s", max), ("widened_step_mps", max)):
+    if "coarse_trips" in a or "coarse_trips" in b:
+        out["coarse_trips"] = a.get("coarse_trips", 0) + b.get("coarse_trips", 0)
+    for k, f in (("window_min_s", min), ("window_max_s", max), ("widened_step_mps", max), ("coarse_step_s", max)):
         have = [x[k] for x in (a, b) if k in x]
         if have:
             out[k] = f(have)
@@ -122,6 +135,11 @@ def accel_counts(d: dict) -> dict:
         text += (f" (widened from {d['least_window_s']:g} s" + ("" if k == n else f" on {k} of {n} trips")
                  + f": the speed is logged in steps of {d['widened_step_mps']:.3g} m/s, whose rounding would "
                  f"put more than {d['noise_mps2']:g} m/s² of noise into the acceleration)")
+    if d.get("coarse_trips"):
+        c = d["coarse_trips"]
+        text += (f"; the samples lie up to {d['coarse_step_s']:.3g} s apart" + ("" if c == n else f" on {c} of {n} trips")
+                 + " (median step), so the difference spans twice that: the inertial power of shorter speed "
+                 "changes is not in the log, per-sample power fits poorly (trip energies hold)")
     out["accel_window_s"] = hi
     if d["column_rows"]:  # the files without it are the exception
         text = f"accel_mps2 column; {text} for the {d['derived_rows']} rows of files without it"

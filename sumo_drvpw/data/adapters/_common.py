@@ -94,7 +94,7 @@ _u("energy", 3.6e6, 0.0, "kwh")
 _u("volume_flow", 1.0, 0.0, "l/h", "lph", "l/hr", "l-hr")
 _u("volume_flow", GAL * 1000.0, 0.0, "gal/h", "gal-hr", "gal/hr", "gph")
 _u("density", 1.0, 0.0, "kg/m3", "kg/m^3", "kg/m³")
-_u("mass_flow", 1.0, 0.0, "g/s", "g/sec", "gps")  # a mass air flow (OBD PID 0x10 MAF, g/s)
+_u("mass_flow", 1.0, 0.0, "g/s", "g/sec", "gps", "gm/s")  # a mass air flow (OBD PID 0x10 MAF, g/s; gm/s: Torque's Nissan PIDs)
 _u("mass_flow", 1000.0 / 3600.0, 0.0, "kg/h", "kg/hr")
 _u("mass_flow", LB * 1000.0 / 60.0, 0.0, "lb/min")
 _u("dimensionless", 1.0, 0.0, "", "-", "1", "bool", "text", ":1", "lambda", "λ")  # ratios (Torque's AFR, λ)
@@ -386,6 +386,8 @@ def clean_time_and_speed(df: pd.DataFrame, path, report: dict) -> pd.DataFrame:
     t = df["time_s"].to_numpy(float)
     prev_max = np.concatenate([[-np.inf], np.maximum.accumulate(t)[:-1]])
     back = t < prev_max
+    if back.any():
+        report["notes"].append(_backwards_note(t, prev_max, back, df.index))
     df = drop(df, back, "time going backwards", report)
     v = df["speed_mps"].to_numpy(float)
     back_up = _reversing(v)
@@ -411,6 +413,29 @@ def clean_time_and_speed(df: pd.DataFrame, path, report: dict) -> pd.DataFrame:
     if len(df) == 0:
         raise UserError(f"{path}: no sample left after dropping {report['dropped']}")
     return df
+
+
+#: a step back in time at least this long [s] is a logging session of its own, not a clock
+#: glitch: the note on 'time going backwards' says how to keep it
+SESSION_BACK_S = 600.0
+
+
+def _backwards_note(t: np.ndarray, prev_max: np.ndarray, back: np.ndarray, index) -> str:
+    """Where and by how much a file's time first steps back, for the 'time going backwards'
+    drops: a jump back by minutes or hours (logging sessions written out of order into one
+    file) loses every row up to where the time passes its latest value again."""
+    i = int(np.flatnonzero(back)[0])
+    jump = float(prev_max[i] - t[i])
+    worst = float(np.max(prev_max[back] - t[back]))
+    def span(x: float) -> str:
+        return f"{x:.4g} s" if x < SESSION_BACK_S else f"{x:.0f} s ({x / 3600:.1f} h)"
+
+    text = (f"time going backwards: {int(back.sum())} row(s) dropped; it first steps back by {span(jump)} "
+            f"at data row {index[i]}" + ("" if worst == jump else f" (by up to {span(worst)})"))
+    if worst >= SESSION_BACK_S:
+        text += ("; a step back by minutes or hours is an earlier logging session written after a later one: "
+                 "put each session into a file of its own (one trip each) to keep its rows")
+    return text
 
 
 #: fastest backing up read as reversing [m/s] (36 km/h: above a car's top speed in reverse)

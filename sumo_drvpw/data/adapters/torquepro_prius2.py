@@ -9,7 +9,8 @@ Mapping (everything else kept as ``snake_name_<unit suffix>`` in SI):
 
 - Device Time (ms resolution) → ``time_s`` = seconds since the file's first sample.
 - Speed (OBD)(mph) → ``speed_mps``; Speed (GPS)(mph) → ``gps_speed_mps``.
-- GPS Altitude(ft) → ``elevation_m`` (the phone's 'Altitude' [m] fills its ``-`` gaps).
+- GPS Altitude(ft) → ``elevation_m`` (the phone's 'Altitude' [m] fills its ``-`` gaps, and is
+  the elevation of a log without the GPS Altitude PID, noted).
 - Engine RPM → ``ice_speed_rpm``; MG1/MG2 Revolution(RPM) and Torque(Nm) →
   ``mg1_speed_rpm``, ``mg1_torque_nm``, ``mg2_speed_rpm``, ``mg2_torque_nm``.
 - HV Battery Current(Amp) → ``battery_current_a`` (as logged: positive when discharging);
@@ -206,6 +207,9 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     df = pd.DataFrame(dict(zip(names, cols.values())), index=raw.index)
     if "altitude_phone_m" in df and "elevation_m" in df:
         df["elevation_m"] = df["elevation_m"].fillna(df["altitude_phone_m"])
+    elif "altitude_phone_m" in df and df["altitude_phone_m"].notna().any():
+        df["elevation_m"] = df["altitude_phone_m"]  # the same GPS fix, without the PID
+        rep["notes"].append("no 'GPS Altitude' column: elevation_m is the phone's 'Altitude' [m]")
     # samples before the OBD link is up: leading rows with any powertrain field '-'
     link = sorted({_mapping(k, [])[0] for k in labels} & {NAMES[k][0] for k in LINK})
     # (a field that never answers — no engine speed on an EV, a PID the car lacks — says
