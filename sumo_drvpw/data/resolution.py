@@ -139,7 +139,7 @@ def accel_counts(d: dict) -> dict:
         c = d["coarse_trips"]
         text += (f"; the samples lie up to {d['coarse_step_s']:.3g} s apart" + ("" if c == n else f" on {c} of {n} trips")
                  + " (median step), so the difference spans twice that: the inertial power of shorter speed "
-                 "changes is not in the log, per-sample power fits poorly (trip energies hold)")
+                 "changes is not in the log, and per-sample power fits poorly")
     out["accel_window_s"] = hi
     if d["column_rows"]:  # the files without it are the exception
         text = f"accel_mps2 column; {text} for the {d['derived_rows']} rows of files without it"
