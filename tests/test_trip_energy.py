@@ -439,3 +439,49 @@ def test_many_trips_show_the_worst_and_say_how_many_are_left_out():
     assert len(shown) == MAX_TRIP_ROWS and shown == sorted(shown, key=lambda t: int(t[1:]))
     err = {t: abs(v["error"]) for t, v in doc["equations"]["eq"]["trip_energy"]["trips"].items()}
     assert min(err[t] for t in shown) >= max(err[t] for t in err if t not in shown)
+
+
+# ------------------------------------------------- a fuel target's litres elsewhere (follow-ups)
+
+def _share_rows(md: str) -> tuple[list, dict]:
+    """The energy-share table of report.md: its header cells and its rows (name → cells)."""
+    lines = md.splitlines()
+    i = next(j for j in range(lines.index("## Energy share of each term (cf. paper Fig. 10)"), len(lines))
+             if lines[j].startswith("|"))
+    head = [c.strip() for c in lines[i].strip("|").split("|")]
+    rows = {}
+    for ln in lines[i + 2:]:
+        if not ln.startswith("|"):
+            break
+        cells = [c.strip() for c in ln.strip("|").split("|")]
+        rows[cells[0]] = dict(zip(head[1:], cells[1:]))
+    return head, rows
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+def test_energy_share_table_gives_a_fuel_target_in_litres(tmp_path, engine):
+    """compare --target fuel: the energy-share table's predicted and measured traction are
+    litres of the chain's fuel, report.json's J / (LHV · density) (petrol 32.184 MJ/L), its
+    header says so; a wheel target keeps kWh (J / 3.6e6)."""
+    from sumo_drvpw.cli import main as cli_main
+
+    ice = _fuel_eq(tmp_path, "ice", "gasoline", 0.42)
+    log = _trips_log(tmp_path, fuel=ice)
+    out = tmp_path / "cmp"
+    assert cli_main(["compare", str(log), "--equation", str(ice), "--target", "fuel", "--engine", engine,
+                     "--out", str(out)]) == 0
+    doc = json.loads((out / "report.json").read_text())
+    head, rows = _share_rows((out / "report.md").read_text())
+    assert "Predicted traction [L of gasoline]" in head and "Measured traction [L of gasoline]" in head
+    d, per_l = doc["equations"]["ice"], 43.2e6 * 0.745
+    row = rows["ice"]
+    assert float(row["Predicted traction [L of gasoline]"]) == pytest.approx(d["predicted_traction_energy_j"] / per_l,
+                                                                             abs=5.1e-4)
+    assert float(row["Measured traction [L of gasoline]"]) == pytest.approx(doc["measured"]["traction_energy_j"]
+                                                                            / per_l, abs=5.1e-4)
+    out2 = tmp_path / "wheel"
+    assert cli_main(["compare", str(log), "--equation", "drvpw_prius3", "--engine", engine, "--out", str(out2)]) == 0
+    doc2 = json.loads((out2 / "report.json").read_text())
+    head2, rows2 = _share_rows((out2 / "report.md").read_text())
+    assert float(rows2["drvpw_prius3"]["Predicted traction [kWh]"]) == pytest.approx(
+        doc2["equations"]["drvpw_prius3"]["predicted_traction_energy_j"] / 3.6e6, abs=5.1e-4)
