@@ -197,6 +197,7 @@ def test_chain_trace_flags_a_trip_that_lost_samples(tmp_path):
         assert te["partial_trips"] == [str(first)]
         assert te["trips"][str(first)]["left_out_time_share"] == pytest.approx(0.3, abs=0.01)
         assert all(v["left_out_samples"] == 0 for t, v in te["trips"].items() if t != str(first))
+        assert "fuel" not in te and all("measured_l" not in v for v in te["trips"].values())  # kWh: no litres
     md = (out / "trace.md").read_text()
     row = [ln for ln in md.splitlines() if ln.startswith(f"| {first} |")]
     assert row and "partial: 30 % of time" in row[0] and "**Partial trips**" in md
@@ -485,3 +486,28 @@ def test_energy_share_table_gives_a_fuel_target_in_litres(tmp_path, engine):
     head2, rows2 = _share_rows((out2 / "report.md").read_text())
     assert float(rows2["drvpw_prius3"]["Predicted traction [kWh]"]) == pytest.approx(
         doc2["equations"]["drvpw_prius3"]["predicted_traction_energy_j"] / 3.6e6, abs=5.1e-4)
+
+
+def test_chain_trace_json_gives_a_fuel_target_in_litres(tmp_path):
+    """diagnose --target fuel: trace.json's per-trip net energies (baseline and final) carry
+    litres of the chain's fuel too, measured_l / predicted_l = J / 32.184 MJ/L (petrol), the
+    document's fuel and fuel_j_per_l, as compare's report.json; the J keys stay, and trace.md's
+    litres are these (a battery target's get none: test_chain_trace_flags_a_trip_that_lost_samples)."""
+    from sumo_drvpw.cli import main as cli_main
+
+    ice = _fuel_eq(tmp_path, "ice", "gasoline", 0.42)
+    out = tmp_path / "trace"
+    assert cli_main(["diagnose", str(_trips_log(tmp_path, fuel=ice)), "--equation", str(ice), "--target", "fuel",
+                     "--out", str(out), "--quiet"]) == 0
+    rep = json.loads((out / "trace.json").read_text())
+    rows = _md_table((out / "trace.md").read_text(), "## Before and after, per trip (net energy; after = held out)")
+    per_l = 43.2e6 * 0.745
+    for key in ("baseline", "final"):
+        te = rep[key]["trip_net_energy"]
+        assert te["fuel"] == "gasoline" and te["fuel_j_per_l"] == pytest.approx(per_l, rel=1e-12)
+        for t, x in te["trips"].items():
+            assert x["measured_l"] == pytest.approx(x["measured_j"] / per_l, rel=1e-12)
+            assert x["predicted_l"] == pytest.approx(x["predicted_j"] / per_l, rel=1e-12)
+            cell = rows[t][1] if key == "baseline" else rows[t][3]
+            assert float(cell) == pytest.approx(x["predicted_l"], abs=5.1e-4)
+            assert float(rows[t][0]) == pytest.approx(x["measured_l"], abs=5.1e-4)

@@ -257,9 +257,9 @@ def _chain_main(args, target, progress) -> int:
 
         note_counts(m.counts)
         res = trace_chain(m, eq, opt, progress=progress)
-        from sumo_drvpw.fit.trip_energy import with_trace_left_out
+        from sumo_drvpw.fit.trip_energy import with_trace_fuel_volumes, with_trace_left_out
 
-        with_trace_left_out(res, m)
+        with_trace_fuel_volumes(with_trace_left_out(res, m))  # a fuel target's litres too
         write_chain_outputs(res, tmp)
     r = res.report
     from sumo_drvpw.report.comparison import unknown_input_lines

@@ -263,3 +263,15 @@ def with_fuel_volumes(eq_doc: dict, target: str) -> dict:
         for key in ("trip_energy", "trip_net_energy"):
             with_fuel_volume(eq_doc.get(key), chain.get("fuel", "gasoline"))
     return eq_doc
+
+
+def with_trace_fuel_volumes(report: dict) -> dict:
+    """A chain trace's report (:class:`~sumo_drvpw.fit.chain_linear.ChainTraceResult`'s)
+    with its per-trip net energies (``baseline``, ``final``) in litres too when its target is
+    fuel (:func:`with_fuel_volume`), of its declared chain's fuel, as trace.md shows them.
+    Unchanged otherwise. Changed in place."""
+    if report.get("target") == "fuel":
+        fuel = (report.get("declared_chain") or {}).get("fuel") or "gasoline"
+        for k in ("baseline", "final"):
+            with_fuel_volume(report[k].get("trip_net_energy"), fuel)
+    return report
