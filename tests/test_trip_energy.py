@@ -511,3 +511,34 @@ def test_chain_trace_json_gives_a_fuel_target_in_litres(tmp_path):
             cell = rows[t][1] if key == "baseline" else rows[t][3]
             assert float(cell) == pytest.approx(x["predicted_l"], abs=5.1e-4)
             assert float(rows[t][0]) == pytest.approx(x["measured_l"], abs=5.1e-4)
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+def test_compare_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as(tmp_path, engine):
+    """compare --target fuel reads the log's fuel flow as the vehicle file's powertrain.fuel
+    (else gasoline) and gives litres of each chain's fuel: when they differ, report.json
+    (settings.fuel_note, with settings.measured_fuel) and report.md's summary say so in one
+    line naming both fuels and the chain; when they agree, no note."""
+    from sumo_drvpw.cli import main as cli_main
+
+    ice, dsl = _fuel_eq(tmp_path, "ice", "gasoline", 0.42), _fuel_eq(tmp_path, "dsl", "diesel", 0.38)
+    log = _trips_log(tmp_path, fuel=ice)
+    car = tmp_path / "car.toml"
+    car.write_text('[vehicle]\nname = "car"\nmass_kg = 1500\n[powertrain]\nfuel = "diesel"\n')
+    runs = {"vehicle diesel, chain gasoline": (["--vehicle", str(car), "--equation", str(ice)], "diesel", "ice"),
+            "no vehicle, chain diesel": (["--equation", str(dsl)], "gasoline", "dsl"),
+            "agree": (["--equation", str(ice)], "gasoline", None)}
+    for i, (args, read_as, odd) in enumerate(runs.values()):
+        out = tmp_path / f"cmp{i}"
+        assert cli_main(["compare", str(log), *args, "--target", "fuel", "--engine", engine, "--out", str(out)]) == 0
+        s = json.loads((out / "report.json").read_text())["settings"]
+        md = (out / "report.md").read_text()
+        assert s["measured_fuel"] == read_as
+        if odd is None:
+            assert "fuel_note" not in s and "was read as" not in md
+            continue
+        note = s["fuel_note"]
+        burns = "gasoline" if read_as == "diesel" else "diesel"
+        assert f"read as {read_as}" in note and f"{odd} burns {burns}" in note and "\n" not in note
+        summary = md.split("## Summary")[1].split("\n## ")[0]
+        assert summary.count(note) == 1

@@ -275,3 +275,22 @@ def with_trace_fuel_volumes(report: dict) -> dict:
         for k in ("baseline", "final"):
             with_fuel_volume(report[k].get("trip_net_energy"), fuel)
     return report
+
+
+def fuel_mismatch_note(eq_docs: dict, measured: tuple[str, str] | None) -> str | None:
+    """One line when a fuel chain of the equations' documents (``Comparison.to_json``'s
+    ``equations``) burns another fuel than the log's flow was read as (``measured``: the fuel
+    and where it comes from, :func:`sumo_drvpw.data.powertrain.measured_fuel`): the measured
+    energy is the flow × LHV of the one, its litres are litres of the other. None when they
+    agree (or nothing is known of the measured fuel)."""
+    if not measured:
+        return None
+    fuel, where = measured
+    odd = {nm: f for nm, d in eq_docs.items() if (d.get("chain") or {}).get("predicts") == "fuel"
+           and (f := (d.get("chain") or {}).get("fuel") or "gasoline") != fuel}
+    if not odd:
+        return None
+    return (f"The log's fuel flow was read as {fuel} ({where}) while the chain of "
+            + ", ".join(f"{nm} burns {f}" for nm, f in odd.items())
+            + f": the measured fuel energy is the flow × LHV of {fuel}, and its litres in this report are that "
+            "energy in litres of each chain's own fuel, not the litres the log metered.")

@@ -124,6 +124,8 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
         lines += [x + "." for x in unknown_input_lines(nm, d.get("chain_unknown_inputs"), n)]
     first = next(iter(eqs.values()), {})
     lines += partial_trip_lines(first.get("trip_energy"))
+    if doc["settings"].get("fuel_note"):  # a chain of another fuel than the log was read as
+        lines.append(doc["settings"]["fuel_note"])
     lines.append("")
 
     lines += ["## Goodness of fit (cf. paper Table 3)", "",
