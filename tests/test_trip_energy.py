@@ -542,3 +542,25 @@ def test_compare_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as
         assert f"read as {read_as}" in note and f"{odd} burns {burns}" in note and "\n" not in note
         summary = md.split("## Summary")[1].split("\n## ")[0]
         assert summary.count(note) == 1
+
+
+def test_chain_trace_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as(tmp_path):
+    """diagnose --target fuel, no vehicle file (the flow read as gasoline) and a diesel
+    chain: trace.json's fuel_note (with measured_fuel) and one line of trace.md say so, as
+    compare's report; a gasoline chain: measured_fuel gasoline, no note."""
+    from sumo_drvpw.cli import main as cli_main
+
+    ice, dsl = _fuel_eq(tmp_path, "ice", "gasoline", 0.42), _fuel_eq(tmp_path, "dsl", "diesel", 0.38)
+    log = _trips_log(tmp_path, fuel=ice)
+    for eq, note in ((dsl, True), (ice, False)):
+        out = tmp_path / f"trace_{eq.stem}"
+        assert cli_main(["diagnose", str(log), "--equation", str(eq), "--target", "fuel", "--out", str(out),
+                         "--quiet"]) == 0
+        rep = json.loads((out / "trace.json").read_text())
+        md = (out / "trace.md").read_text()
+        assert rep["measured_fuel"] == "gasoline"
+        if note:
+            assert "read as gasoline" in rep["fuel_note"] and "dsl burns diesel" in rep["fuel_note"]
+            assert md.count(rep["fuel_note"]) == 1
+        else:
+            assert "fuel_note" not in rep and "was read as" not in md

@@ -265,15 +265,21 @@ def with_fuel_volumes(eq_doc: dict, target: str) -> dict:
     return eq_doc
 
 
-def with_trace_fuel_volumes(report: dict) -> dict:
+def with_trace_fuel_volumes(report: dict, measured: tuple[str, str] | None = None) -> dict:
     """A chain trace's report (:class:`~sumo_drvpw.fit.chain_linear.ChainTraceResult`'s)
     with its per-trip net energies (``baseline``, ``final``) in litres too when its target is
-    fuel (:func:`with_fuel_volume`), of its declared chain's fuel, as trace.md shows them.
-    Unchanged otherwise. Changed in place."""
+    fuel (:func:`with_fuel_volume`), of its declared chain's fuel, as trace.md shows them;
+    with ``measured`` (the fuel the log's flow was read as, and where from) also
+    ``measured_fuel`` and, when the chain burns another, ``fuel_note``
+    (:func:`fuel_mismatch_note`). Unchanged otherwise. Changed in place."""
     if report.get("target") == "fuel":
-        fuel = (report.get("declared_chain") or {}).get("fuel") or "gasoline"
+        chain = report.get("declared_chain") or {}
         for k in ("baseline", "final"):
-            with_fuel_volume(report[k].get("trip_net_energy"), fuel)
+            with_fuel_volume(report[k].get("trip_net_energy"), chain.get("fuel") or "gasoline")
+        if measured:
+            report["measured_fuel"] = measured[0]
+            note = fuel_mismatch_note({report.get("declared_equation", "declared"): {"chain": chain}}, measured)
+            report.update({"fuel_note": note} if note else {})
     return report
 
 
