@@ -197,6 +197,7 @@ def test_chain_trace_flags_a_trip_that_lost_samples(tmp_path):
         assert te["partial_trips"] == [str(first)]
         assert te["trips"][str(first)]["left_out_time_share"] == pytest.approx(0.3, abs=0.01)
         assert all(v["left_out_samples"] == 0 for t, v in te["trips"].items() if t != str(first))
+        assert "fuel" not in te and all("measured_l" not in v for v in te["trips"].values())  # kWh: no litres
     md = (out / "trace.md").read_text()
     row = [ln for ln in md.splitlines() if ln.startswith(f"| {first} |")]
     assert row and "partial: 30 % of time" in row[0] and "**Partial trips**" in md
@@ -439,3 +440,127 @@ def test_many_trips_show_the_worst_and_say_how_many_are_left_out():
     assert len(shown) == MAX_TRIP_ROWS and shown == sorted(shown, key=lambda t: int(t[1:]))
     err = {t: abs(v["error"]) for t, v in doc["equations"]["eq"]["trip_energy"]["trips"].items()}
     assert min(err[t] for t in shown) >= max(err[t] for t in err if t not in shown)
+
+
+# ------------------------------------------------- a fuel target's litres elsewhere (follow-ups)
+
+def _share_rows(md: str) -> tuple[list, dict]:
+    """The energy-share table of report.md: its header cells and its rows (name → cells)."""
+    lines = md.splitlines()
+    i = next(j for j in range(lines.index("## Energy share of each term (cf. paper Fig. 10)"), len(lines))
+             if lines[j].startswith("|"))
+    head = [c.strip() for c in lines[i].strip("|").split("|")]
+    rows = {}
+    for ln in lines[i + 2:]:
+        if not ln.startswith("|"):
+            break
+        cells = [c.strip() for c in ln.strip("|").split("|")]
+        rows[cells[0]] = dict(zip(head[1:], cells[1:]))
+    return head, rows
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+def test_energy_share_table_gives_a_fuel_target_in_litres(tmp_path, engine):
+    """compare --target fuel: the energy-share table's predicted and measured traction are
+    litres of the chain's fuel, report.json's J / (LHV · density) (petrol 32.184 MJ/L), its
+    header says so; a wheel target keeps kWh (J / 3.6e6)."""
+    from sumo_drvpw.cli import main as cli_main
+
+    ice = _fuel_eq(tmp_path, "ice", "gasoline", 0.42)
+    log = _trips_log(tmp_path, fuel=ice)
+    out = tmp_path / "cmp"
+    assert cli_main(["compare", str(log), "--equation", str(ice), "--target", "fuel", "--engine", engine,
+                     "--out", str(out)]) == 0
+    doc = json.loads((out / "report.json").read_text())
+    head, rows = _share_rows((out / "report.md").read_text())
+    assert "Predicted traction [L of gasoline]" in head and "Measured traction [L of gasoline]" in head
+    d, per_l = doc["equations"]["ice"], 43.2e6 * 0.745
+    row = rows["ice"]
+    assert float(row["Predicted traction [L of gasoline]"]) == pytest.approx(d["predicted_traction_energy_j"] / per_l,
+                                                                             abs=5.1e-4)
+    assert float(row["Measured traction [L of gasoline]"]) == pytest.approx(doc["measured"]["traction_energy_j"]
+                                                                            / per_l, abs=5.1e-4)
+    out2 = tmp_path / "wheel"
+    assert cli_main(["compare", str(log), "--equation", "drvpw_prius3", "--engine", engine, "--out", str(out2)]) == 0
+    doc2 = json.loads((out2 / "report.json").read_text())
+    head2, rows2 = _share_rows((out2 / "report.md").read_text())
+    assert float(rows2["drvpw_prius3"]["Predicted traction [kWh]"]) == pytest.approx(
+        doc2["equations"]["drvpw_prius3"]["predicted_traction_energy_j"] / 3.6e6, abs=5.1e-4)
+
+
+def test_chain_trace_json_gives_a_fuel_target_in_litres(tmp_path):
+    """diagnose --target fuel: trace.json's per-trip net energies (baseline and final) carry
+    litres of the chain's fuel too, measured_l / predicted_l = J / 32.184 MJ/L (petrol), the
+    document's fuel and fuel_j_per_l, as compare's report.json; the J keys stay, and trace.md's
+    litres are these (a battery target's get none: test_chain_trace_flags_a_trip_that_lost_samples)."""
+    from sumo_drvpw.cli import main as cli_main
+
+    ice = _fuel_eq(tmp_path, "ice", "gasoline", 0.42)
+    out = tmp_path / "trace"
+    assert cli_main(["diagnose", str(_trips_log(tmp_path, fuel=ice)), "--equation", str(ice), "--target", "fuel",
+                     "--out", str(out), "--quiet"]) == 0
+    rep = json.loads((out / "trace.json").read_text())
+    rows = _md_table((out / "trace.md").read_text(), "## Before and after, per trip (net energy; after = held out)")
+    per_l = 43.2e6 * 0.745
+    for key in ("baseline", "final"):
+        te = rep[key]["trip_net_energy"]
+        assert te["fuel"] == "gasoline" and te["fuel_j_per_l"] == pytest.approx(per_l, rel=1e-12)
+        for t, x in te["trips"].items():
+            assert x["measured_l"] == pytest.approx(x["measured_j"] / per_l, rel=1e-12)
+            assert x["predicted_l"] == pytest.approx(x["predicted_j"] / per_l, rel=1e-12)
+            cell = rows[t][1] if key == "baseline" else rows[t][3]
+            assert float(cell) == pytest.approx(x["predicted_l"], abs=5.1e-4)
+            assert float(rows[t][0]) == pytest.approx(x["measured_l"], abs=5.1e-4)
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+def test_compare_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as(tmp_path, engine):
+    """compare --target fuel reads the log's fuel flow as the vehicle file's powertrain.fuel
+    (else gasoline) and gives litres of each chain's fuel: when they differ, report.json
+    (settings.fuel_note, with settings.measured_fuel) and report.md's summary say so in one
+    line naming both fuels and the chain; when they agree, no note."""
+    from sumo_drvpw.cli import main as cli_main
+
+    ice, dsl = _fuel_eq(tmp_path, "ice", "gasoline", 0.42), _fuel_eq(tmp_path, "dsl", "diesel", 0.38)
+    log = _trips_log(tmp_path, fuel=ice)
+    car = tmp_path / "car.toml"
+    car.write_text('[vehicle]\nname = "car"\nmass_kg = 1500\n[powertrain]\nfuel = "diesel"\n')
+    runs = {"vehicle diesel, chain gasoline": (["--vehicle", str(car), "--equation", str(ice)], "diesel", "ice"),
+            "no vehicle, chain diesel": (["--equation", str(dsl)], "gasoline", "dsl"),
+            "agree": (["--equation", str(ice)], "gasoline", None)}
+    for i, (args, read_as, odd) in enumerate(runs.values()):
+        out = tmp_path / f"cmp{i}"
+        assert cli_main(["compare", str(log), *args, "--target", "fuel", "--engine", engine, "--out", str(out)]) == 0
+        s = json.loads((out / "report.json").read_text())["settings"]
+        md = (out / "report.md").read_text()
+        assert s["measured_fuel"] == read_as
+        if odd is None:
+            assert "fuel_note" not in s and "was read as" not in md
+            continue
+        note = s["fuel_note"]
+        burns = "gasoline" if read_as == "diesel" else "diesel"
+        assert f"read as {read_as}" in note and f"{odd} burns {burns}" in note and "\n" not in note
+        summary = md.split("## Summary")[1].split("\n## ")[0]
+        assert summary.count(note) == 1
+
+
+def test_chain_trace_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as(tmp_path):
+    """diagnose --target fuel, no vehicle file (the flow read as gasoline) and a diesel
+    chain: trace.json's fuel_note (with measured_fuel) and one line of trace.md say so, as
+    compare's report; a gasoline chain: measured_fuel gasoline, no note."""
+    from sumo_drvpw.cli import main as cli_main
+
+    ice, dsl = _fuel_eq(tmp_path, "ice", "gasoline", 0.42), _fuel_eq(tmp_path, "dsl", "diesel", 0.38)
+    log = _trips_log(tmp_path, fuel=ice)
+    for eq, note in ((dsl, True), (ice, False)):
+        out = tmp_path / f"trace_{eq.stem}"
+        assert cli_main(["diagnose", str(log), "--equation", str(eq), "--target", "fuel", "--out", str(out),
+                         "--quiet"]) == 0
+        rep = json.loads((out / "trace.json").read_text())
+        md = (out / "trace.md").read_text()
+        assert rep["measured_fuel"] == "gasoline"
+        if note:
+            assert "read as gasoline" in rep["fuel_note"] and "dsl burns diesel" in rep["fuel_note"]
+            assert md.count(rep["fuel_note"]) == 1
+        else:
+            assert "fuel_note" not in rep and "was read as" not in md

@@ -188,6 +188,9 @@ def compare_streamed(args, tmp: Path, title: str, target: str = "wheel"):
         comp = cs.comparison()
     except UserError as e:  # no usable sample: name the logs
         raise UserError(f"{', '.join(map(str, args.logs))}: {e}") from None
+    from sumo_drvpw.data.powertrain import measured_fuel
+
+    comp.measured_fuel = measured_fuel(veh)  # what the log's fuel flow was read as
     write_comparison_report(comp, tmp, title, _context(cs, veh, cs.n))
     print(info.line(), file=sys.stderr)
     return comp

@@ -28,6 +28,7 @@ def main(args) -> int:
     from sumo_drvpw.fit.trip_energy import left_out_by_trip
     from sumo_drvpw.report.comparison import write_comparison_report
     from sumo_drvpw.data.measured import load_measured, resolve_equations
+    from sumo_drvpw.data.powertrain import measured_fuel
     from sumo_drvpw.cli._scale import check_engine_arguments, compare_main
 
     check_engine_arguments(args)  # --workers, --scheduler only with --engine dask
@@ -46,6 +47,7 @@ def main(args) -> int:
         u = m.usable
         comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],
                        target=target, battery_w=None if m.battery_w is None else m.battery_w[u])
+        comp.measured_fuel = measured_fuel(m.vehicle)  # what the log's fuel flow was read as
         comp.left_out = left_out_by_trip(m.power_w, u, m.log.df["dt_s"].to_numpy(), m.inputs.trip)
         what = {"wheel": "driving", "battery": "battery", "fuel": "fuel"}[target]
         write_comparison_report(comp, tmp, f"Equations against measured {what} power", m.context())

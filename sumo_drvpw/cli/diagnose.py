@@ -257,9 +257,11 @@ def _chain_main(args, target, progress) -> int:
 
         note_counts(m.counts)
         res = trace_chain(m, eq, opt, progress=progress)
-        from sumo_drvpw.fit.trip_energy import with_trace_left_out
+        from sumo_drvpw.fit.trip_energy import with_trace_fuel_volumes, with_trace_left_out
 
-        with_trace_left_out(res, m)
+        from sumo_drvpw.data.powertrain import measured_fuel
+
+        with_trace_fuel_volumes(with_trace_left_out(res, m), measured_fuel(m.vehicle))  # a fuel target's litres
         write_chain_outputs(res, tmp)
     r = res.report
     from sumo_drvpw.report.comparison import unknown_input_lines

@@ -289,6 +289,14 @@ def fuel_column(df, logged=None) -> str | None:
     return cands[0] if len(cands) == 1 else None
 
 
+def measured_fuel(vehicle=None) -> tuple[str, str]:
+    """The fuel a log's fuel flow is read as (:func:`measured_fuel_power`: its LHV and
+    density) and where that comes from: the vehicle file's ``powertrain.fuel``, else gasoline."""
+    if vehicle is not None and vehicle.powertrain.get("fuel"):
+        return str(vehicle.powertrain["fuel"]), f"vehicle {vehicle.name}'s powertrain.fuel"
+    return "gasoline", "the default: no vehicle file names a fuel"
+
+
 def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.ndarray, str]:
     """Fuel power of a drive log [W] (mass flow × lower heating value) and its source.
 
@@ -309,7 +317,7 @@ def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.
 
     from sumo_drvpw.data.conditions import merge_rows, said
 
-    name = fuel or (vehicle.powertrain.get("fuel", "gasoline") if vehicle is not None else "gasoline")
+    name = fuel or measured_fuel(vehicle)[0]
     if name not in FUELS:
         raise UserError(f"fuel '{name}' is not one of {', '.join(FUELS)}")
     fp = FUELS[name]

@@ -36,8 +36,8 @@ from sumo_drvpw.errors import UserError, first_bad_row
 from sumo_drvpw.fileio import plain
 from sumo_drvpw.fit.ols import dense_gram
 # energy per trip lives in fit/trip_energy.py; imported here, where other modules find it
-from sumo_drvpw.fit.trip_energy import (_dt_array, trip_energy, trip_net_energy, with_fuel_volumes,
-                                         with_left_out)
+from sumo_drvpw.fit.trip_energy import (_dt_array, fuel_mismatch_note, trip_energy, trip_net_energy,
+                                         with_fuel_volumes, with_left_out)
 from sumo_drvpw.model.terms import CATEGORIES, Inputs
 
 #: Width of the speed bins of Fig. 8 [m/s] (10 km/h).
@@ -328,6 +328,10 @@ class Comparison:
         trip's entry of the per-trip energies (``left_out_*``, ``partial``)
     target : what was compared: ``wheel``, ``battery`` or ``fuel`` (:func:`compare`);
         with ``fuel`` the per-trip energies are also given in litres of each chain's fuel
+    measured_fuel : with ``fuel``, the fuel the log's flow was read as and where from
+        (:func:`sumo_drvpw.data.powertrain.measured_fuel`), or None; ``to_json`` gives it
+        (``settings.measured_fuel``) and a note when a chain burns another
+        (``settings.fuel_note``, :func:`sumo_drvpw.fit.trip_energy.fuel_mismatch_note`)
     """
 
     meas_w: np.ndarray
@@ -339,6 +343,7 @@ class Comparison:
     trip: np.ndarray | None = None
     left_out: dict | None = None
     target: str = "wheel"
+    measured_fuel: tuple[str, str] | None = None
 
     @property
     def n_samples(self) -> int:  # number of samples compared
@@ -382,6 +387,11 @@ class Comparison:
                 d["trip_net_energy"] = with_left_out(trip_net_energy(r.pred_w, self.meas_w, self.dt_s,
                                                                      self.trip), self.left_out, net=True)
             eqs[name] = with_fuel_volumes(d, self.target)
+        fuel = {}
+        if self.target == "fuel" and self.measured_fuel:
+            note = fuel_mismatch_note(eqs, self.measured_fuel)
+            fuel = {"measured_fuel": self.measured_fuel[0], "measured_fuel_from": self.measured_fuel[1],
+                    **({"fuel_note": note} if note else {})}
         return plain({
             "equations": eqs,
             "n_samples": self.n_samples,
@@ -400,6 +410,7 @@ class Comparison:
                 "target": self.target,
                 "error": "predicted - measured",
                 "r2": "centred: 1 - SSE/SST",
+                **fuel,
             },
         })
 

@@ -263,3 +263,40 @@ def with_fuel_volumes(eq_doc: dict, target: str) -> dict:
         for key in ("trip_energy", "trip_net_energy"):
             with_fuel_volume(eq_doc.get(key), chain.get("fuel", "gasoline"))
     return eq_doc
+
+
+def with_trace_fuel_volumes(report: dict, measured: tuple[str, str] | None = None) -> dict:
+    """A chain trace's report (:class:`~sumo_drvpw.fit.chain_linear.ChainTraceResult`'s)
+    with its per-trip net energies (``baseline``, ``final``) in litres too when its target is
+    fuel (:func:`with_fuel_volume`), of its declared chain's fuel, as trace.md shows them;
+    with ``measured`` (the fuel the log's flow was read as, and where from) also
+    ``measured_fuel`` and, when the chain burns another, ``fuel_note``
+    (:func:`fuel_mismatch_note`). Unchanged otherwise. Changed in place."""
+    if report.get("target") == "fuel":
+        chain = report.get("declared_chain") or {}
+        for k in ("baseline", "final"):
+            with_fuel_volume(report[k].get("trip_net_energy"), chain.get("fuel") or "gasoline")
+        if measured:
+            report["measured_fuel"] = measured[0]
+            note = fuel_mismatch_note({report.get("declared_equation", "declared"): {"chain": chain}}, measured)
+            report.update({"fuel_note": note} if note else {})
+    return report
+
+
+def fuel_mismatch_note(eq_docs: dict, measured: tuple[str, str] | None) -> str | None:
+    """One line when a fuel chain of the equations' documents (``Comparison.to_json``'s
+    ``equations``) burns another fuel than the log's flow was read as (``measured``: the fuel
+    and where it comes from, :func:`sumo_drvpw.data.powertrain.measured_fuel`): the measured
+    energy is the flow × LHV of the one, its litres are litres of the other. None when they
+    agree (or nothing is known of the measured fuel)."""
+    if not measured:
+        return None
+    fuel, where = measured
+    odd = {nm: f for nm, d in eq_docs.items() if (d.get("chain") or {}).get("predicts") == "fuel"
+           and (f := (d.get("chain") or {}).get("fuel") or "gasoline") != fuel}
+    if not odd:
+        return None
+    return (f"The log's fuel flow was read as {fuel} ({where}) while the chain of "
+            + ", ".join(f"{nm} burns {f}" for nm, f in odd.items())
+            + f": the measured fuel energy is the flow × LHV of {fuel}, and its litres in this report are that "
+            "energy in litres of each chain's own fuel, not the litres the log metered.")

@@ -12,7 +12,7 @@ from sumo_drvpw.report import figures as plots
 from sumo_drvpw.fit.compare import Comparison
 from sumo_drvpw.model.constants import HEAVY_LOAD_W, HIGH_SPEED_MPS, KMH
 from sumo_drvpw.fileio import write_json, write_text
-from sumo_drvpw.report.format import (KW as _KW, KWH as _KWH, coef, energy_unit, num, partial_trip_flag,
+from sumo_drvpw.report.format import (KW as _KW, coef, energy_unit, num, partial_trip_flag,
                                       partial_trip_lines)
 
 #: Figure file name → (plot function, caption).
@@ -124,6 +124,8 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
         lines += [x + "." for x in unknown_input_lines(nm, d.get("chain_unknown_inputs"), n)]
     first = next(iter(eqs.values()), {})
     lines += partial_trip_lines(first.get("trip_energy"))
+    if doc["settings"].get("fuel_note"):  # a chain of another fuel than the log was read as
+        lines.append(doc["settings"]["fuel_note"])
     lines.append("")
 
     lines += ["## Goodness of fit (cf. paper Table 3)", "",
@@ -183,22 +185,27 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
         lines += _corr_table(eqs, "error_reference_correlation")
 
     scats = _categories(eqs, "energy_share")
+    units = {nm: energy_unit(_target(doc), d.get("chain")) for nm, d in eqs.items()}  # kWh, or L of a fuel
+    one = len(set(units.values())) <= 1
+    what = next(iter(units.values())).what if one else "L of the row's fuel"
     lines += ["## Energy share of each term (cf. paper Fig. 10)", "",
               "Share of the predicted traction energy (samples where the equation's total "
               "power is positive). A negative share is energy the term returns during "
               "traction, e.g. downhill grade."
               + (" With a battery or fuel target the shares are the road-load terms' at the wheel, while "
                  "predicted and measured traction are the target's (the chain's battery or fuel power)."
-                 if any(d.get("predicts") in ("battery", "fuel") for d in eqs.values()) else ""), "",
+                 if any(d.get("predicts") in ("battery", "fuel") for d in eqs.values()) else "")
+              + ("" if what == "kWh" else " Traction energies in litres: the fuel energy at the lower heating "
+                 "value over the fuel's energy per litre (see Energy per trip)."), "",
               "| Equation | " + " | ".join(f"{c} [%]" for c in scats)
-              + " | Predicted traction [kWh] | Measured traction [kWh] | Predicted / measured |",
+              + f" | Predicted traction [{what}] | Measured traction [{what}] | Predicted / measured |",
               "|---|" + "---|" * (len(scats) + 3)]
     for nm, d in eqs.items():
         cells = [num(d["energy_share"].get(c), 1, 100.0) for c in scats]
-        lines.append(f"| {nm} | " + " | ".join(cells)
-                     + f" | {num(d.get('predicted_traction_energy_j', d['energy_j']['total']), 3, _KWH)}"
-                     f" | {num(meas['traction_energy_j'], 3, _KWH)}"
-                     f" | {num(d['traction_energy_ratio'], 3)} |")
+        u = units[nm]
+        lines.append(f"| {nm}{'' if one else f' ({u.what})'} | " + " | ".join(cells)
+                     + f" | {u(d.get('predicted_traction_energy_j', d['energy_j']['total']))}"
+                     f" | {u(meas['traction_energy_j'])} | {num(d['traction_energy_ratio'], 3)} |")
     lines.append("")
 
     lines += trip_energy_lines(doc)
