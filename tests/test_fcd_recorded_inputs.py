@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim.fcd_read import recorded_inputs
@@ -179,3 +181,39 @@ def test_the_recordings_battery_device_option_reaches_the_replay(tmp_path):
                           vtype_files=[tmp_path / "r.rou.xml"], equations=["vtype_energy"],
                           buckets=2, workers=1, figures=False, end=60)
     assert dk["equations"]["vtype_energy.pkw"]["energy_j"] == rep["equations"]["vtype_energy.pkw"]["energy_j"]
+
+
+_NAME = st.sampled_from(["scen", "run", "out", "data", "nets", "a b", "x.y"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(depth=st.integers(0, 2), names=st.lists(_NAME, min_size=4, max_size=4), ups=st.integers(0, 2),
+       downs=st.lists(_NAME, max_size=2), where=st.lists(st.integers(0, 2), min_size=3, max_size=3),
+       decoy=st.booleans())
+def test_any_layout_sumo_writes_is_found_from_the_fcd(depth, names, ups, downs, where, decoy):
+    """Property: the run's folder B (at some depth), the FCD written to ``../``×ups +
+    downs below it, the inputs in B, in a folder below B, or in a folder beside B, all
+    written relative to B as SUMO writes them: each input is found, as that file, from the
+    FCD alone (no working folder to help); a decoy folder beside B holding one of the files
+    does not win over B, which holds them all."""
+    import tempfile
+
+    ups = min(ups, depth)  # SUMO's paths climb at most to the root of this tree
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        base = root.joinpath(*[f"{n}{i}" for i, n in enumerate(names[:depth])])
+        rel_out = "/".join([".."] * ups + [f"o{i}_{d}" for i, d in enumerate(downs)] + ["fcd.xml"])
+        spots = {0: "", 1: "sub/", 2: "../side/"}  # in B, below it, beside it
+        files = {}
+        for k, (key, fname) in enumerate(zip(("net-file", "route-files", "additional-files"),
+                                             ("n.net.xml", "r.rou.xml", "s.add.xml"))):
+            spot = spots[where[k]] if depth or where[k] != 2 else ""  # nothing beside the root
+            files[key] = spot + fname
+            _touch(base / (spot + fname))
+        if decoy and depth:
+            _touch(base.parent / "decoy" / files["route-files"].split("/")[-1])
+        fcd = _fcd_with_header((base / rel_out).resolve(), files, rel_out)
+        rec = recorded_inputs(fcd, cwd="/")
+        assert rec["missing"] == []
+        assert rec["net"] == (base / files["net-file"]).resolve()
+        assert rec["files"] == [(base / files[k]).resolve() for k in ("route-files", "additional-files")]

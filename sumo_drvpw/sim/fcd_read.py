@@ -437,9 +437,13 @@ def recorded_inputs(path, head: dict[str, str] | None = None, cwd=None) -> dict 
     names: dict[str, str] = {}
     if hidden:
         depth = max(sum(p in marks for p in r.split("/")) for r in hidden.values())
-        up = next(iter(hidden.values())).split("/" + _MARK)[0]
+        def known(r: str) -> str:  # the part of a path before its first unnamed folder
+            parts = r.split("/")
+            return "/".join(parts[:next(i for i, p in enumerate(parts) if p in marks)])
+
+        up = known(next(iter(hidden.values())))  # "": the run's folder is below the FCD's
         last = marks[-depth:]
-        if depth <= _SEARCH_DEPTH and all(r.startswith(f"{up}/{_MARK}") for r in hidden.values()):
+        if depth <= _SEARCH_DEPTH and all(known(r) == up for r in hidden.values()):
             best: list[tuple[int, tuple]] = []
             for n, cand in enumerate((fcd.parent / up).resolve().glob("/".join(["*"] * depth))):
                 if n >= _SEARCH_DIRS:
