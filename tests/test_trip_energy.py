@@ -516,9 +516,12 @@ def test_chain_trace_json_gives_a_fuel_target_in_litres(tmp_path):
 @pytest.mark.parametrize("engine", ["memory", "local"])
 def test_compare_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as(tmp_path, engine):
     """compare --target fuel reads the log's fuel flow as the vehicle file's powertrain.fuel
-    (else gasoline) and gives litres of each chain's fuel: when they differ, report.json
-    (settings.fuel_note, with settings.measured_fuel) and report.md's summary say so in one
-    line naming both fuels and the chain; when they agree, no note."""
+    (else the one fuel the compared chains burn, else gasoline) and gives litres of each
+    chain's fuel: when they differ, report.json (settings.fuel_note, with
+    settings.measured_fuel) and report.md's summary say so in one line naming both fuels and
+    the chain; when they agree, no note. Without a vehicle file and with a diesel chain the
+    flow is read as diesel (before: as gasoline, with the note): its measured energy is the
+    gasoline reading's × 43.1/43.2 (the fuels' LHV per kg; the log's flow is in g/s)."""
     from sumo_drvpw.cli import main as cli_main
 
     ice, dsl = _fuel_eq(tmp_path, "ice", "gasoline", 0.42), _fuel_eq(tmp_path, "dsl", "diesel", 0.38)
@@ -526,14 +529,16 @@ def test_compare_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as
     car = tmp_path / "car.toml"
     car.write_text('[vehicle]\nname = "car"\nmass_kg = 1500\n[powertrain]\nfuel = "diesel"\n')
     runs = {"vehicle diesel, chain gasoline": (["--vehicle", str(car), "--equation", str(ice)], "diesel", "ice"),
-            "no vehicle, chain diesel": (["--equation", str(dsl)], "gasoline", "dsl"),
+            "no vehicle, chain diesel": (["--equation", str(dsl)], "diesel", None),
             "agree": (["--equation", str(ice)], "gasoline", None)}
+    measured = {}
     for i, (args, read_as, odd) in enumerate(runs.values()):
         out = tmp_path / f"cmp{i}"
         assert cli_main(["compare", str(log), *args, "--target", "fuel", "--engine", engine, "--out", str(out)]) == 0
-        s = json.loads((out / "report.json").read_text())["settings"]
-        md = (out / "report.md").read_text()
+        doc = json.loads((out / "report.json").read_text())
+        s, md = doc["settings"], (out / "report.md").read_text()
         assert s["measured_fuel"] == read_as
+        measured[i] = next(iter(doc["equations"].values()))["trip_net_energy"]["trips"]
         if odd is None:
             assert "fuel_note" not in s and "was read as" not in md
             continue
@@ -542,23 +547,29 @@ def test_compare_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as
         assert f"read as {read_as}" in note and f"{odd} burns {burns}" in note and "\n" not in note
         summary = md.split("## Summary")[1].split("\n## ")[0]
         assert summary.count(note) == 1
+    for trip, d in measured[1].items():  # read as diesel against as gasoline
+        assert d["measured_j"] == pytest.approx(measured[2][trip]["measured_j"] * 43.1 / 43.2, rel=1e-9)
 
 
 def test_chain_trace_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as(tmp_path):
-    """diagnose --target fuel, no vehicle file (the flow read as gasoline) and a diesel
-    chain: trace.json's fuel_note (with measured_fuel) and one line of trace.md say so, as
-    compare's report; a gasoline chain: measured_fuel gasoline, no note."""
+    """diagnose --target fuel with a vehicle file naming gasoline and a diesel chain:
+    trace.json's fuel_note (with measured_fuel) and one line of trace.md say so, as
+    compare's report; a gasoline chain: no note. Without a vehicle file the flow is read as
+    the chain's fuel (diesel), and no note."""
     from sumo_drvpw.cli import main as cli_main
 
     ice, dsl = _fuel_eq(tmp_path, "ice", "gasoline", 0.42), _fuel_eq(tmp_path, "dsl", "diesel", 0.38)
     log = _trips_log(tmp_path, fuel=ice)
-    for eq, note in ((dsl, True), (ice, False)):
-        out = tmp_path / f"trace_{eq.stem}"
-        assert cli_main(["diagnose", str(log), "--equation", str(eq), "--target", "fuel", "--out", str(out),
+    car = tmp_path / "petrol_car.toml"
+    car.write_text('[vehicle]\nname = "petrol_car"\nmass_kg = 1500\n[powertrain]\nfuel = "gasoline"\n')
+    for eq, note, veh, read_as in ((dsl, True, ["--vehicle", str(car)], "gasoline"), (ice, False, [], "gasoline"),
+                                   (dsl, False, [], "diesel")):
+        out = tmp_path / f"trace_{eq.stem}_{len(veh)}"
+        assert cli_main(["diagnose", str(log), "--equation", str(eq), *veh, "--target", "fuel", "--out", str(out),
                          "--quiet"]) == 0
         rep = json.loads((out / "trace.json").read_text())
         md = (out / "trace.md").read_text()
-        assert rep["measured_fuel"] == "gasoline"
+        assert rep["measured_fuel"] == read_as
         if note:
             assert "read as gasoline" in rep["fuel_note"] and "dsl burns diesel" in rep["fuel_note"]
             assert md.count(rep["fuel_note"]) == 1

@@ -230,6 +230,26 @@ def measurement_options(args, equations=()):
     return meas
 
 
+def chains_fuel(equations) -> str | None:
+    """The one fuel the fuel chains of ``equations`` (names or files) burn, None when none
+    has a fuel chain or they burn several: a fuel flow is read as it when no vehicle file
+    names a fuel (:func:`sumo_drvpw.data.powertrain.measured_fuel`). An equation that does
+    not load is left to the command's own error."""
+    from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
+
+    fuels = set()
+    for spec in equations or ():
+        if not isinstance(spec, str) or spec in SPEC_EQUATIONS:
+            continue
+        try:
+            ch = load_equation(spec).chain
+        except UserError:
+            continue
+        if ch is not None and ch.predicts == "fuel":
+            fuels.add(ch.fuel or "gasoline")
+    return fuels.pop() if len(fuels) == 1 else None
+
+
 def read_options(args, equations=()):
     """:class:`sumo_drvpw.data.log.ReadOptions` from the options of :func:`add_log_options`
     (measurement corrections: :func:`measurement_options`)."""
@@ -238,7 +258,7 @@ def read_options(args, equations=()):
     tol = getattr(args, "negative_speed_tolerance", None)
     opt = ReadOptions(speed_unit=getattr(args, "speed_unit", None),
                       negative_speed_tolerance_mps=0.1 if tol is None else tol,
-                      measurement=measurement_options(args, equations))
+                      measurement=measurement_options(args, equations), fuel=chains_fuel(equations))
     try:
         return check_options(opt)
     except UserError as e:

@@ -190,7 +190,9 @@ def compare_streamed(args, tmp: Path, title: str, target: str = "wheel"):
         raise UserError(f"{', '.join(map(str, args.logs))}: {e}") from None
     from sumo_drvpw.data.powertrain import measured_fuel
 
-    comp.measured_fuel = measured_fuel(veh)  # what the log's fuel flow was read as
+    from sumo_drvpw.cli import chains_fuel
+
+    comp.measured_fuel = measured_fuel(veh, chains_fuel(args.equation))  # what the log's fuel flow was read as
     write_comparison_report(comp, tmp, title, _context(cs, veh, cs.n))
     print(info.line(), file=sys.stderr)
     return comp

@@ -47,7 +47,7 @@ def main(args) -> int:
         u = m.usable
         comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],
                        target=target, battery_w=None if m.battery_w is None else m.battery_w[u])
-        comp.measured_fuel = measured_fuel(m.vehicle)  # what the log's fuel flow was read as
+        comp.measured_fuel = measured_fuel(m.vehicle, m.log.options.fuel)  # what the log's fuel flow was read as
         comp.left_out = left_out_by_trip(m.power_w, u, m.log.df["dt_s"].to_numpy(), m.inputs.trip)
         what = {"wheel": "driving", "battery": "battery", "fuel": "fuel"}[target]
         write_comparison_report(comp, tmp, f"Equations against measured {what} power", m.context())

@@ -261,7 +261,7 @@ def _chain_main(args, target, progress) -> int:
 
         from sumo_drvpw.data.powertrain import measured_fuel
 
-        with_trace_fuel_volumes(with_trace_left_out(res, m), measured_fuel(m.vehicle))  # a fuel target's litres
+        with_trace_fuel_volumes(with_trace_left_out(res, m), measured_fuel(m.vehicle, m.log.options.fuel))  # a fuel target's litres
         write_chain_outputs(res, tmp)
     r = res.report
     from sumo_drvpw.report.comparison import unknown_input_lines

@@ -86,6 +86,9 @@ class ReadOptions:
     #: (:class:`sumo_drvpw.model.measurement.Measurement`: power lag, grade source, air
     #: density; :mod:`sumo_drvpw.data.corrections`); None = the log as read
     measurement: object | None = None
+    #: the fuel a fuel flow is read as when no vehicle file names one (the fuel of the
+    #: equations' fuel chains, when they all burn one: cli.read_options); None = gasoline
+    fuel: str | None = None
 
 
 #: a logging gap: an interval within a trip longer than this many of the trip's median

@@ -289,11 +289,15 @@ def fuel_column(df, logged=None) -> str | None:
     return cands[0] if len(cands) == 1 else None
 
 
-def measured_fuel(vehicle=None) -> tuple[str, str]:
+def measured_fuel(vehicle=None, chains_fuel: str | None = None) -> tuple[str, str]:
     """The fuel a log's fuel flow is read as (:func:`measured_fuel_power`: its LHV and
-    density) and where that comes from: the vehicle file's ``powertrain.fuel``, else gasoline."""
+    density) and where that comes from: the vehicle file's ``powertrain.fuel``, else
+    ``chains_fuel`` (the one fuel the compared equations' chains burn:
+    :attr:`~sumo_drvpw.data.log.ReadOptions.fuel`), else gasoline."""
     if vehicle is not None and vehicle.powertrain.get("fuel"):
         return str(vehicle.powertrain["fuel"]), f"vehicle {vehicle.name}'s powertrain.fuel"
+    if chains_fuel:
+        return str(chains_fuel), "the fuel the equations' chains burn: no vehicle file names a fuel"
     return "gasoline", "the default: no vehicle file names a fuel"
 
 
@@ -302,7 +306,8 @@ def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.
 
     P_fuel = ṁ·LHV with ṁ [kg/s] from ``fuel_rate_gps`` / 1000, or from a volume flow [L/h]
     × density / 3600. The fuel is ``fuel`` if given, else the vehicle file's
-    ``powertrain.fuel``, else gasoline; its LHV and density are in
+    ``powertrain.fuel``, else the log's reading options' ``fuel`` (the compared chains'),
+    else gasoline; its LHV and density are in
     :data:`sumo_drvpw.model.constants.FUELS`. A petrol car's log without a fuel flow but
     with its mass air flow (:func:`air_flow_column`) gives an estimate: ṁ = MAF / AFR_st
     × (1 + fuel trims) / commanded λ (:func:`fuel_from_air_flow`).
@@ -317,7 +322,7 @@ def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.
 
     from sumo_drvpw.data.conditions import merge_rows, said
 
-    name = fuel or measured_fuel(vehicle)[0]
+    name = fuel or measured_fuel(vehicle, getattr(getattr(log, "options", None), "fuel", None))[0]
     if name not in FUELS:
         raise UserError(f"fuel '{name}' is not one of {', '.join(FUELS)}")
     fp = FUELS[name]
