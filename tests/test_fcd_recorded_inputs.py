@@ -217,3 +217,30 @@ def test_any_layout_sumo_writes_is_found_from_the_fcd(depth, names, ups, downs, 
         assert rec["missing"] == []
         assert rec["net"] == (base / files["net-file"]).resolve()
         assert rec["files"] == [(base / files[k]).resolve() for k in ("route-files", "additional-files")]
+
+
+@pytest.mark.sumo
+def test_a_tabular_fcd_takes_the_files_of_the_config_that_writes_it(recorded, tmp_path, monkeypatch, capsys):
+    """SUMO's Parquet and CSV outputs carry no header. When the SUMO config beside the FCD
+    (or one folder up) writes it (its fcd-output is this file), fcd takes that config's
+    network and route files, says so, and books the trucks as trucks (before: 'give --net',
+    and with --net every vType a passenger car). Two configs naming it: none is guessed."""
+    import sumolib
+
+    d = tmp_path / "study"
+    shutil.copytree(recorded / "nets", d / "nets")
+    shutil.copytree(recorded / "scen", d / "scen")
+    cfg = (d / "scen" / "run.sumocfg").read_text().replace(
+        "</input>", '</input>\n    <output>\n        <fcd-output value="fcd.parquet"/>\n    </output>')
+    (d / "scen" / "run.sumocfg").write_text(cfg)
+    subprocess.run([sumolib.checkBinary("sumo"), "-c", "run.sumocfg", "-e", "60", "--no-step-log",
+                    "--no-warnings"], check=True, capture_output=True, cwd=d / "scen")
+    monkeypatch.chdir(tmp_path)
+    assert cli_main(["fcd", str(d / "scen" / "fcd.parquet"), "--no-figures", "--out", "o"]) == 0
+    out = capsys.readouterr().out
+    assert "from the SUMO config that writes the FCD" in out and "run.sumocfg" in out
+    v = pd.read_parquet(tmp_path / "o" / "vehicles.parquet")
+    assert set(v[v.vtype == "lorry"].vclass) == {"truck"} and set(v[v.vtype == "lorry"].mass_kg) == {12000.0}
+    (d / "scen" / "copy.sumocfg").write_text(cfg)  # a second config naming it: ambiguous
+    assert cli_main(["fcd", str(d / "scen" / "fcd.parquet"), "--no-figures", "--out", "o2"]) == 2
+    assert "give --net" in capsys.readouterr().err

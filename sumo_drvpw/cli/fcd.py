@@ -118,12 +118,18 @@ def main(args: argparse.Namespace) -> int:
 def _recorded_inputs(args: argparse.Namespace) -> None:
     """Without --scenario: the network (unless --net) and the route and additional files
     (unless --vtypes) of the run that recorded the FCD, as its header names them
-    (:func:`sumo_drvpw.sim.fcd_read.recorded_inputs`), each said in a note."""
-    from sumo_drvpw.sim.fcd_read import recorded_inputs
+    (:func:`sumo_drvpw.sim.fcd_read.recorded_inputs`), else as the one SUMO config beside it
+    that writes it does (:func:`~sumo_drvpw.sim.fcd_read.configured_inputs`), each said in a
+    note."""
+    from sumo_drvpw.sim.fcd_read import configured_inputs, recorded_inputs
 
     rec = recorded_inputs(args.fcd)
-    if rec is None:
-        return
+    how, src = "from the run that recorded the FCD (its header)", "the FCD's header"
+    if rec is None:  # no header: the SUMO config beside it that writes it
+        rec = configured_inputs(args.fcd)
+        if rec is None:
+            return
+        how, src = f"from the SUMO config that writes the FCD ({rec['config']})", f"the config {rec['config'].name}"
     want = {"net-file": args.net is None, "route-files": args.vtypes is None,
             "additional-files": args.vtypes is None}
     took = []
@@ -134,9 +140,9 @@ def _recorded_inputs(args: argparse.Namespace) -> None:
         args.vtypes = [str(f) for f in rec["files"]]
         took.append("vTypes and stops from " + ", ".join(str(f) for f in rec["files"]))
     if took:
-        print("note: from the run that recorded the FCD (its header): " + "; ".join(took)
+        print(f"note: {how}: " + "; ".join(took)
               + " (--net, --vtypes or --scenario choose others)")
     missing = [v for k, v in rec["missing"] if want[k]]
     if missing:
-        print(f"note: the FCD's header names {', '.join(missing)}, not found beside the FCD "
+        print(f"note: {src} names {', '.join(missing)}, not found beside the FCD "
               f"(looked in {', '.join(rec['looked_in'])}); give --vtypes (and --net) for its vTypes")

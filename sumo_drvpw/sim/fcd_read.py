@@ -483,6 +483,41 @@ def recorded_inputs(path, head: dict[str, str] | None = None, cwd=None) -> dict 
     return {"net": net, "files": files, "missing": missing, "looked_in": [str(d) for d in fallbacks]}
 
 
+#: SUMO configs looked at for the one that wrote a header-less FCD (beside it and one up)
+CONFIGS_LOOKED_AT = 50
+
+
+def configured_inputs(path) -> dict | None:
+    """For an FCD without SUMO's header (Parquet, CSV, or XML another tool wrote): the
+    network, route and additional files of the one SUMO config (``*.sumocfg`` in the FCD's
+    folder or the one above it) whose ``fcd-output`` is this file, as
+    :func:`recorded_inputs` returns them (plus ``"config"``); None when no config, or more
+    than one, names it (a run given ``--fcd-output`` on its command line names it nowhere)."""
+    from sumo_drvpw.sim.scenario import _config_files
+
+    p = Path(path)
+    if fcd_parts(path) or not p.is_file():
+        return None
+    fcd = p.resolve()
+    found = []
+    for cfg in [*sorted(fcd.parent.glob("*.sumocfg")), *sorted(fcd.parent.parent.glob("*.sumocfg"))][:CONFIGS_LOOKED_AT]:
+        try:
+            net, files, vals = _config_files(cfg)
+        except UserError:
+            continue
+        out = vals.get("fcd-output", "").strip()
+        if out and (cfg.parent / out).resolve() == fcd:
+            found.append((cfg, net, files))
+    if len(found) != 1:
+        return None
+    cfg, net, files = found[0]
+    have = [f for f in files if f.is_file()]
+    return {"net": net if net.is_file() else None, "files": have, "config": cfg,
+            "missing": ([("net-file", str(net))] if not net.is_file() else [])
+            + [("route-files", str(f)) for f in files if not f.is_file()],
+            "looked_in": [str(cfg.parent)]}
+
+
 def iter_fcd_blocks(path, chunk_rows: int = CHUNK_ROWS):
     """Blocks of about ``chunk_rows`` rows of an FCD file (XML, ``.xml.gz``, Parquet, CSV)
     or of partitioned Parquet FCD (a folder or a glob pattern), in time order."""
