@@ -244,3 +244,16 @@ def test_a_tabular_fcd_takes_the_files_of_the_config_that_writes_it(recorded, tm
     (d / "scen" / "copy.sumocfg").write_text(cfg)  # a second config naming it: ambiguous
     assert cli_main(["fcd", str(d / "scen" / "fcd.parquet"), "--no-figures", "--out", "o2"]) == 2
     assert "give --net" in capsys.readouterr().err
+
+
+@pytest.mark.sumo
+def test_process_fcd_finds_the_runs_files_as_the_command_does(recorded, tmp_path):
+    """The Python API: process_fcd(FCD) with neither network nor vType files takes those
+    the FCD's header names, as the fcd command does (before: 'FCD: give the network')."""
+    from sumo_drvpw.sim.fcd import process_fcd
+
+    res = process_fcd(recorded / "out" / "fcd.xml", equations=["moves_single_unit_truck", "vsp_ldv1999"],
+                      out_dir=tmp_path / "o", figures=False)
+    v = pd.read_parquet(tmp_path / "o" / "vehicles.parquet")
+    assert set(v[v.vtype == "lorry"].vclass) == {"truck"} and set(v[v.vtype == "lorry"].mass_kg) == {12000.0}
+    assert res["equations"]["moves_single_unit_truck"]["energy_j"]

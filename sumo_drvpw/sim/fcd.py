@@ -287,13 +287,22 @@ class FcdStream(FcdReplay):
         self._prev, self._prev_set = ids, now
 
 
-def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, **overrides):
+def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, fcd_file=None,
+                 **overrides):
     """The scenario an FCD replay books with: the scenario file's (or defaults around
-    ``net``), equations and vType files replaced when given, positions read every step."""
+    ``net``), equations and vType files replaced when given, positions read every step.
+    Without a scenario, the network and vType files not given are those of the run that
+    recorded ``fcd_file`` (:func:`~sumo_drvpw.sim.fcd_read.recorded_inputs`, else
+    :func:`~sumo_drvpw.sim.fcd_read.configured_inputs`), where found."""
     import dataclasses
 
+    from sumo_drvpw.sim.fcd_read import configured_inputs, recorded_inputs
     from sumo_drvpw.sim.scenario import load_scenario
 
+    if scenario is None and fcd_file is not None and (net is None or vtype_files is None):
+        rec = recorded_inputs(fcd_file) or configured_inputs(fcd_file) or {}
+        net = net if net is not None else rec.get("net")
+        vtype_files = vtype_files if vtype_files is not None else (rec.get("files") or None)
     if scenario is None and net is None:
         raise UserError("FCD: give the network the FCD was recorded on, or a scenario")
     if equations is not None:
@@ -330,10 +339,12 @@ def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
     ----------
     fcd_file : SUMO FCD output (XML, .xml.gz, .parquet, .csv), or partitioned Parquet FCD
         (a folder or a glob pattern of parts)
-    net : the network the FCD was recorded on (default: the scenario's)
+    net : the network the FCD was recorded on (default: the scenario's, else the one the
+        FCD's header or the config that writes it names, :func:`fcd_scenario`)
     scenario : optional scenario TOML (options, vTypes, equations)
     equations : equations instead of the scenario's (names, paths, Equation objects)
-    vtype_files : route/additional files with the vTypes (default: the scenario's)
+    vtype_files : route/additional files with the vTypes (default: the scenario's, else
+        those the FCD's header or config names)
     begin_s : ignore timesteps before this simulation time [s]
     keep_vehicles, flush_vehicles : as for :func:`sumo_drvpw.sim.run.run_scenario` (a
         vehicle leaves memory the step after its last row in the file)
@@ -345,7 +356,7 @@ def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
     memory: every row from ``begin_s`` on). For many vehicles on several processes or
     machines see :func:`sumo_drvpw.sim.fcd_dask.process_fcd_dask`.
     """
-    sc = fcd_scenario(net, scenario, equations, vtype_files, **overrides)
+    sc = fcd_scenario(net, scenario, equations, vtype_files, fcd_file, **overrides)
     return replay_fcd(sc, fcd_file, out_dir, begin_s=begin_s, keep_vehicles=keep_vehicles,
                       flush_vehicles=flush_vehicles, chunk_rows=chunk_rows)
 

@@ -159,7 +159,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import VehicleSpill, write_published
 
-    sc = fcd_scenario(net, scenario, equations, vtype_files, **overrides)
+    sc = fcd_scenario(net, scenario, equations, vtype_files, fcd_file, **overrides)
     if sc.trace:
         raise UserError("FCD on Dask: no per vehicle-step trace (outputs.trace); replay "
                         "locally for a trace")
