@@ -406,8 +406,9 @@ def recorded_inputs(path, head: dict[str, str] | None = None, cwd=None) -> dict 
     ``fcd-output`` path leads from that folder to the FCD, so a path is found from where the
     FCD is now, wherever the run was started. Where it climbs out of the FCD's folders (a
     config in ``scenario/`` writing ``../out/fcd.xml`` and reading ``net.net.xml``), the
-    run's folder is the one folder that deep beside them holding the most of the header's
-    files (a tie: none). Else — the FCD renamed or moved on its own — the folder of the FCD,
+    run's folder is the folder that deep beside them holding the most of the header's
+    files; where several hold as many, a file is taken only where they all put the same one
+    (a folder's name the paths leave open: each folder's copy differs, none is guessed). Else — the FCD renamed or moved on its own — the folder of the FCD,
     its parent and ``cwd`` (default: the working folder) are tried in that order. A path
     SUMO wrote absolute is taken as it is."""
     import posixpath
@@ -431,43 +432,46 @@ def recorded_inputs(path, head: dict[str, str] | None = None, cwd=None) -> dict 
             return None
         return posixpath.relpath(posixpath.normpath(posixpath.join(root, v)), start)
 
-    # the run's folders the paths name and the FCD's does not: the candidate beside them
-    # that holds the most of the files
+    # the run's folders the paths name and the FCD's does not: the candidates beside them
+    # that hold the most of the files; a file is taken where they all put the same one
     hidden = {v: r for _, v in values if (r := from_fcd(v)) is not None and _MARK in r}
-    names: dict[str, str] = {}
+    chosen: dict[str, Path] = {}
     if hidden:
-        depth = max(sum(p in marks for p in r.split("/")) for r in hidden.values())
         def known(r: str) -> str:  # the part of a path before its first unnamed folder
             parts = r.split("/")
             return "/".join(parts[:next(i for i, p in enumerate(parts) if p in marks)])
 
+        def named(r: str, sub: dict) -> Path:
+            return fcd.parent / "/".join(sub.get(p, p) for p in r.split("/"))
+
+        # the unnamed folders, outermost first (each path names a leading run of them)
+        chain = max(([p for p in r.split("/") if p in marks] for r in hidden.values()), key=len)
+        depth = len(chain)
         up = known(next(iter(hidden.values())))  # "": the run's folder is below the FCD's
-        last = marks[-depth:]
         if depth <= _SEARCH_DEPTH and all(known(r) == up for r in hidden.values()):
-            best: list[tuple[int, tuple]] = []
+            best: list[tuple[int, dict]] = []
             for n, cand in enumerate((fcd.parent / up).resolve().glob("/".join(["*"] * depth))):
                 if n >= _SEARCH_DIRS:
                     break
                 if not cand.is_dir():
                     continue
-                sub = dict(zip(last, cand.parts[-depth:]))
-                hits = sum((fcd.parent / "/".join(sub.get(p, p) for p in r.split("/"))).is_file()
-                           for r in hidden.values())
+                sub = dict(zip(chain, cand.parts[-depth:]))
+                hits = sum(named(r, sub).is_file() for r in hidden.values())
                 if hits:
-                    best.append((hits, tuple(sub.items())))
-            best.sort(reverse=True)
-            if best and (len(best) == 1 or best[0][0] > best[1][0]):
-                names = dict(best[0][1])
+                    best.append((hits, sub))
+            top = [sub for h, sub in best if h == max(h for h, _ in best)] if best else []
+            for v, r in hidden.items():
+                found = {named(r, sub).resolve() for sub in top if named(r, sub).is_file()}
+                if len(found) == 1 and len(top) == len([1 for sub in top if named(r, sub).is_file()]):
+                    chosen[v] = found.pop()
 
     def find(v: str) -> Path | None:
         if posixpath.isabs(v) or Path(v).is_absolute():
             return Path(v).resolve() if Path(v).is_file() else None
-        tries = []
+        tries = [chosen[v]] if v in chosen else []
         r = from_fcd(v)
-        if r is not None:
-            r = "/".join(names.get(p, p) for p in r.split("/"))
-            if _MARK not in r:
-                tries.append(fcd.parent / r)
+        if r is not None and _MARK not in r:
+            tries.append(fcd.parent / r)
         tries += [d / v for d in fallbacks]
         return next((t.resolve() for t in tries if t.is_file()), None)
 
