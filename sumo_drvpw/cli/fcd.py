@@ -118,17 +118,15 @@ def main(args: argparse.Namespace) -> int:
 def _recorded_inputs(args: argparse.Namespace) -> None:
     """Without --scenario: the network (unless --net) and the route and additional files
     (unless --vtypes) of the run that recorded the FCD, as its header names them
-    (:func:`sumo_drvpw.sim.fcd_read.recorded_inputs`), else as the one SUMO config beside it
-    that writes it does (:func:`~sumo_drvpw.sim.fcd_read.configured_inputs`), each said in a
-    note."""
-    from sumo_drvpw.sim.fcd_read import configured_inputs, recorded_inputs
+    (:func:`sumo_drvpw.sim.fcd_read.run_inputs`: else the one SUMO config beside it that
+    writes it), each said in a note."""
+    from sumo_drvpw.sim.fcd_read import run_inputs
 
-    rec = recorded_inputs(args.fcd)
+    rec = run_inputs(args.fcd)
+    if rec is None:
+        return
     how, src = "from the run that recorded the FCD (its header)", "the FCD's header"
-    if rec is None:  # no header: the SUMO config beside it that writes it
-        rec = configured_inputs(args.fcd)
-        if rec is None:
-            return
+    if "config" in rec:  # no header: the SUMO config beside it that writes it
         how, src = f"from the SUMO config that writes the FCD ({rec['config']})", f"the config {rec['config'].name}"
     want = {"net-file": args.net is None, "route-files": args.vtypes is None,
             "additional-files": args.vtypes is None}

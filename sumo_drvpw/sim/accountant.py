@@ -336,8 +336,9 @@ class Accountant(_Listener):
                             + " (summary.json assumptions.sumo_masses; set vtypes.<id>.mass_kg)")
         if self.resolver.booked_as:
             warnings.append(booked_as_warning(self.resolver.booked_as))
-        if listing_warning(self.vtype_energy):
-            warnings.append(listing_warning(self.vtype_energy))
+        vt_warning = listing_warning(self.vtype_energy)
+        if vt_warning:
+            warnings.append(vt_warning)
         # persons (counted as pedestrians) are never booked: no warning for them
         skipped = {c: n for c, n in self.resolver.skipped["by_vclass"].items() if c != "pedestrian"}
         if skipped:

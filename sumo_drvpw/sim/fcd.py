@@ -292,15 +292,14 @@ def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, fcd_
     """The scenario an FCD replay books with: the scenario file's (or defaults around
     ``net``), equations and vType files replaced when given, positions read every step.
     Without a scenario, the network and vType files not given are those of the run that
-    recorded ``fcd_file`` (:func:`~sumo_drvpw.sim.fcd_read.recorded_inputs`, else
-    :func:`~sumo_drvpw.sim.fcd_read.configured_inputs`), where found."""
+    recorded ``fcd_file`` (:func:`~sumo_drvpw.sim.fcd_read.run_inputs`), where found."""
     import dataclasses
 
-    from sumo_drvpw.sim.fcd_read import configured_inputs, recorded_inputs
+    from sumo_drvpw.sim.fcd_read import run_inputs
     from sumo_drvpw.sim.scenario import load_scenario
 
     if scenario is None and fcd_file is not None and (net is None or vtype_files is None):
-        rec = recorded_inputs(fcd_file) or configured_inputs(fcd_file) or {}
+        rec = run_inputs(fcd_file) or {}
         net = net if net is not None else rec.get("net")
         vtype_files = vtype_files if vtype_files is not None else (rec.get("files") or None)
     if scenario is None and net is None:

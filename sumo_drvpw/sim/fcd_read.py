@@ -522,6 +522,13 @@ def configured_inputs(path) -> dict | None:
             "looked_in": [str(cfg.parent)]}
 
 
+def run_inputs(path) -> dict | None:
+    """The files of the run that wrote an FCD: those its header names
+    (:func:`recorded_inputs`), else those of the SUMO config beside it that writes it
+    (:func:`configured_inputs`, with ``"config"``); None when neither names any."""
+    return recorded_inputs(path) or configured_inputs(path)
+
+
 def iter_fcd_blocks(path, chunk_rows: int = CHUNK_ROWS):
     """Blocks of about ``chunk_rows`` rows of an FCD file (XML, ``.xml.gz``, Parquet, CSV)
     or of partitioned Parquet FCD (a folder or a glob pattern), in time order."""
