@@ -203,7 +203,7 @@ def test_vtype_energy_agrees_with_sumos_device(tmp_path):
     Battery kWh agree within 0.3 % per equation and 1 % per vehicle (measured 2026-11-27:
     0.9994 and 0.9982; vehicles 0.993–1.003). What remains: the slopes' source on grade
     changes, the steps of departure and arrival; the road is straight, so the radial drag
-    SUMO books in curves is 0. Vehicle, edge and class totals of the chain agree; the
+    (booked, tests/test_vtype_energy_radial.py) is 0. Vehicle, edge and class totals of the chain agree; the
     Energy vType without parameters and the petrol car are not booked by it, and listed."""
     (tmp_path / "r.rou.xml").write_text(EV_ROUTES, encoding="utf-8")
     (tmp_path / "s.toml").write_text(
@@ -235,7 +235,7 @@ def test_vtype_energy_agrees_with_sumos_device(tmp_path):
     assert set(ve["booked"]) == {"ebus", "ecar"}
     assert ve["booked"]["ecar"]["mass_kg"] == 1830.0 and ve["booked"]["ebus"]["defaults"] == {
         "recuperationEfficiencyByDeceleration": 0.0}
-    assert any("radialDragCoefficient 0.5" in n for n in ve["booked"]["ebus"]["not_expressed"])
+    assert ve["booked"]["ebus"]["radial_drag"].startswith("radialDragCoefficient 0.5 booked")
     assert ve["not_booked"] == {"plain": "writes no Energy-model parameter",
                                 "petrol": "emissionClass HBEFA4/PC_petrol_Euro-6ab is not SUMO's Energy model"}
     assert any("vtype_energy" in w for w in res["warnings"])

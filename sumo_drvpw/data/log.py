@@ -31,7 +31,7 @@ NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "eleva
            "wind_mps", "airspeed_mps", "air_density_kgm3", "ambient_c", "pressure_kpa",
            "mass_kg", "power_w", "ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm",
            "mg2_speed_rpm", "mg2_torque_nm", "motor_torque_nm", "motor_speed_rpm",
-           "battery_voltage_v", "battery_current_a")
+           "battery_voltage_v", "battery_current_a", "yaw_rate_rps")
 REQUIRED = ("time_s", "speed_mps")
 FLAGS = ("brake", "reverse")
 #: Columns the reader derives; every other column is an extra signal.
@@ -48,6 +48,7 @@ RANGES = {
     "air_density_kgm3": (0.1, 2.0, "kg/m³", "air density is about 1.2 kg/m³"),
     "wind_mps": (-100.0, 100.0, "m/s", "wind along the direction of travel, in m/s"),
     "airspeed_mps": (-50.0, 150.0, "m/s", "air speed in m/s"),
+    "yaw_rate_rps": (-10.0, 10.0, "rad/s", "yaw rate in rad/s (in deg/s? multiply by π/180)"),
 }
 #: Bundled demo log (package data): a synthetic Prius3 test-track log, see its README.
 BUNDLED_LOG = "prius3_testtrack.parquet"

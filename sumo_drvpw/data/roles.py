@@ -31,7 +31,8 @@ META_KEY = "drive_log.roles"
 #: names that leave no doubt: a torque, current or voltage is never an exogenous cause.
 NAME_RULES: tuple[tuple[str, str], ...] = (
     (r"(^|_)(ambient|outside|outdoor|amb)(_|$)|(^|_)season|weather|(^|_)winter|(^|_)summer"
-     r"|wiper|rain|passenger|occupan|tyre_press|tire_press|altitude|(^|_)set_?point", "condition"),
+     r"|wiper|rain|passenger|occupan|tyre_press|tire_press|altitude|(^|_)set_?point"
+     r"|(^|_)yaw_rate|curvature", "condition"),
     (r"(heater|heating|hvac|a_?c|aircon|aux|compressor|ptc)_?(power)?_(w|kw)$", "load"),
     (r"torque|(^|_)current|_a$|voltage|_v$|pedal|throttle|(^|_)soc|state_of_charge|(^|_)rpm"
      r"|_rpm$|engine_load|(^|_)load_pct|fuel|regen|(^|_)tot_|total_|cumul|odometer|counter"

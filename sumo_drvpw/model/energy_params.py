@@ -6,7 +6,7 @@ computes per step, with m the vType's mass plus its ``loading`` (and riding pers
 g = 9.80665 m/s² (SUMO's GRAVITY) and ρ = 1.2041 kg/m³ fixed::
 
     P = m·g·sin θ·v + ½(m + m_rot)(v² − v_prev²)/Δt + ½·ρ·A·C_d·v³ + c_r·g·m·v
-        + radial drag (curves only)
+        + radialDragCoefficient·m·v·|Δψ|/Δt²  (curves only; Δψ the step's heading change)
     P_bat = P/η_t (P > 0) or η_r·P (P ≤ 0), plus constantPowerIntake
 
 As our terms (:mod:`sumo_drvpw.model.terms`; G = 9.81 in the basis):
@@ -18,7 +18,14 @@ acc (m·v̄·a)            1 + rotatingMass / m   (½(m + m_rot)Δ(v²)/Δt = (m
 grade (m·G·v·sin θ)    g_SUMO / G = 9.80665 / 9.81
 aero (v·v_air·|v_air|)  ½·1.2041·frontSurfaceArea·airDragCoefficient (SUMO's fixed ρ)
 m_v1 (m·v)             rollDragCoefficient·g_SUMO (SUMO's rolling term has no cos θ)
+radial (m·v·|ω|)       radialDragCoefficient / Δt (ω = Δψ/Δt; the run's step length Δt)
 =====================  =================================================================
+
+SUMO's radial drag is radialDragCoefficient × the centripetal force m·v·|ω| booked as
+energy per step (probed with SUMO 1.28.0, 2026-11-27, :func:`sumo_drvpw.sim.reader.yaw_rate`):
+as a power it is divided by Δt, so the same curve driven at 0.1-s steps costs ten times
+what it costs at 1-s steps. The equation books it as SUMO does, for the run's Δt (a note
+says so); a tyre's cornering drag is ``radial*v1`` (:mod:`sumo_drvpw.model.terms`).
 
 and a battery chain: traction efficiency = propulsionEfficiency, recuperation efficiency
 = recuperationEfficiency, auxiliary power = constantPowerIntake, no recuperation limit.
@@ -42,8 +49,8 @@ instead"). Each value was checked against SUMO 1.28.0 itself (libsumo,
 getElectricityConsumption at set speeds, one parameter left out at a time; tests/
 test_energy_params.py repeats it), g = 9.80665 (``GRAVITY``) likewise.
 
-What the equation cannot carry is listed as notes: the radial drag in curves (no
-curvature in the basis), a recuperation efficiency by deceleration (exp(−k/|a|)), the
+What the equation cannot carry is listed as notes: the radial drag when the step length
+is not known, a recuperation efficiency by deceleration (exp(−k/|a|)), the
 ``maximumPower`` and the MMPEVEM parameters (another model, not read).
 """
 
@@ -124,9 +131,16 @@ def energy_model_values(params: Mapping, mass_kg: float | None = None,
     return out
 
 
+def radial_drag_note(c_rad: float, step_s: float) -> str:
+    """What booking SUMO's radialDragCoefficient ``c_rad`` at step length ``step_s`` [s] means."""
+    return (f"radialDragCoefficient {c_rad:g} booked as SUMO 1.28 books it, c × the centripetal "
+            f"force m·v·|ω| per step: the term radial at c/Δt = {c_rad / step_s:.4g} for Δt = {step_s:g} s "
+            "(it grows as the step shortens: SUMO's form, not a tyre's)")
+
+
 def energy_params_equation(name: str, params: Mapping, mass_kg: float | None = None,
                            where: str = "vType", vclasses=DEFAULT_VCLASSES,
-                           source: str = "") -> tuple[Equation, list[str]]:
+                           source: str = "", step_s: float | None = None) -> tuple[Equation, list[str]]:
     """One vType's SUMO Energy-model parameters as an :class:`Equation` with a battery
     chain (mapping and defaults in the module docstring); returns (equation, notes on what
     it cannot express).
@@ -139,6 +153,8 @@ def energy_params_equation(name: str, params: Mapping, mass_kg: float | None = N
     where : names the file and vType in errors (e.g. ``"f.rou.xml: vType 'ebus'"``)
     vclasses : the vClasses the equation is made for
     source : the equation's source text (default: ``where``)
+    step_s : the run's step length Δt [s], which SUMO's radial drag divides by (None: the
+        radial drag is not booked, and a note says so)
     """
     val = energy_model_values(params, mass_kg, where)
     m = val["mass"][0] + val["loading"][0]
@@ -149,16 +165,18 @@ def energy_params_equation(name: str, params: Mapping, mass_kg: float | None = N
         terms["aero"] = 0.5 * RHO_SUMO * cda
     if f["rollDragCoefficient"]:
         terms["m_v1"] = f["rollDragCoefficient"] * G_SUMO
+    c_rad = f["radialDragCoefficient"]
+    if c_rad and step_s:
+        terms["radial"] = c_rad / float(step_s)
     chain = EnergyChain(predicts="battery", traction_efficiency=f["propulsionEfficiency"],
                         recuperation_efficiency=f["recuperationEfficiency"],
                         recuperation_limit_w=None, aux_power_w=f["constantPowerIntake"],
                         provenance={"sumo_energy_model": {k: {"value": v, "from": s}
                                                           for k, (v, s) in val.items()}})
     notes = []
-    if f["radialDragCoefficient"]:
-        notes.append(f"radialDragCoefficient {f['radialDragCoefficient']:g} "
-                     f"({val['radialDragCoefficient'][1]}): SUMO's drag in curves "
-                     "(c·m·v³/r, r from the heading change per step) has no term; 0 on straight roads")
+    if c_rad and not step_s:
+        notes.append(f"radialDragCoefficient {c_rad:g} ({val['radialDragCoefficient'][1]}): SUMO books "
+                     "its drag in curves per step, and the step length is not known here: not booked")
     if f["recuperationEfficiencyByDeceleration"]:
         notes.append(f"recuperationEfficiencyByDeceleration {f['recuperationEfficiencyByDeceleration']:g}: "
                      "SUMO scales recuperation by exp(−k/|a|), the chain's efficiency is constant")
@@ -166,7 +184,8 @@ def energy_params_equation(name: str, params: Mapping, mass_kg: float | None = N
         notes.append("maximumPower: SUMO's Energy model does not cap the power with it either")
     defaults = sorted(k for k, (_, s) in val.items() if s == "SUMO default")
     desc = ("SUMO Energy-model parameters of " + where + " (HelpersEnergy.cpp as terms and a "
-            "battery chain; SUMO 1.28 defaults for " + (", ".join(defaults) or "none") + ")")
+            "battery chain; SUMO 1.28 defaults for " + (", ".join(defaults) or "none") + ")"
+            + (f"; {radial_drag_note(c_rad, step_s)}" if "radial" in terms else ""))
     eq = Equation(name=name, terms=terms, mass_kg=m, description=desc, source=source or where,
                   chain=chain, vclasses=tuple(vclasses))
     return eq, notes

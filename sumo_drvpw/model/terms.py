@@ -22,6 +22,8 @@ factor             value                                unit        category
                    the ambient temperature is unknown)
 ``moving``         1 while the vehicle moves (v ≥ 0.1 m/s),  –           other
                    0 while it stands
+``radial``         m·v·|ω|: the centripetal force in curves N           roll
+                   (ω the yaw rate; 0 when it is unknown)
 ``v^k``            v to an integer power k (0…4)        (m/s)^k     v^3 aero, else roll
 ``[col]``          the log column ``col`` (``[col]^2`` squared)     other
 ``trip=ID``        1 on samples of trip ID, else 0      –           other
@@ -52,6 +54,16 @@ auxiliaries a car draws standing too: 12 V net, control, pumps), ``moving`` only
 vehicle moves (powertrain losses that do not scale with the load: inverter switching,
 magnetising, coolant pumps running with the drive). On a dynamometer the car hardly
 stands, so only a road log separates them.
+
+``radial`` reads the yaw rate ω [rad/s] from the signal ``yaw_rate_rps`` (a log's column; in
+SUMO the change of the vehicle's angle over the step, which the loop passes when an
+equation has the factor) and is 0 without it. m·v·|ω| = m·v²/r is the centripetal force
+the tyres carry in a curve of radius r; a tyre carries it at a slip angle, which costs a
+drag. ``radial*v1`` (μ·m·v²·|ω|, μ dimensionless: the share of the centripetal force that
+acts as drag) is that loss as a power. ``radial`` alone, with a coefficient in m/s, is the
+form of SUMO's Energy model, which books radialDragCoefficient × the centripetal force as
+energy per step, i.e. a power coefficient of radialDragCoefficient/Δt
+(:mod:`sumo_drvpw.model.energy_params`). Booked under ``roll``: both are tyre losses.
 
 ``roll*cold`` gives the temperature dependence of the rolling resistance,
 c_r(T) = c_r0·(1 + k·(T_ref − T)) with k ≈ 0.6–1 %/K for passenger-car tyres (ISO 28580
@@ -135,6 +147,16 @@ def _airspeed_term(x: Inputs) -> np.ndarray:
     return x.v * u * np.abs(u)
 
 
+def _radial(x: Inputs) -> np.ndarray:
+    """m·v·|ω| [N] with the yaw rate ω [rad/s] from the signal ``yaw_rate_rps``; 0 without
+    it, and where it is not finite."""
+    w = x.signals.get("yaw_rate_rps") if x.signals else None
+    if w is None:
+        return np.zeros_like(np.asarray(x.v, dtype=float))
+    w = np.abs(np.asarray(w, dtype=float))
+    return x.mass * x.v * np.where(np.isfinite(w), w, 0.0)
+
+
 def _cold(x: Inputs) -> np.ndarray:
     """T_ref − T_ambient [K] from the signal ``ambient_c`` [°C]; 0 (reference) without it,
     and where the temperature is not finite."""
@@ -163,7 +185,10 @@ PRIMITIVES: dict[str, tuple[Callable[[Inputs], np.ndarray], str, int]] = {
     "one": (lambda x: np.ones_like(x.v, dtype=float), "other", 0),
     "cold": (lambda x: _cold(x), "other", 0),
     "moving": (lambda x: (np.asarray(x.v, float) >= STANDSTILL_MPS).astype(float), "other", 0),
+    "radial": (_radial, "roll", 1),
 }
+#: signals a physics factor reads when the data have them (0 without): factor → signal
+OPTIONAL_SIGNALS = {"cold": "ambient_c", "radial": "yaw_rate_rps"}
 
 _VPOW = re.compile(r"^v\^([0-4])$")
 _COL = re.compile(r"^\[([^\[\]]+)\](?:\^2)?$")
@@ -192,9 +217,10 @@ class Term:
     @property
     def columns(self) -> tuple[str, ...]:
         """Every log column the term's value depends on: its ``[col]`` signals, and
-        ``ambient_c`` for the ``cold`` factor (which is 0 without it, so it is not required
-        as a signal is; a reader that selects columns must still read it)."""
-        extra = ("ambient_c",) if "cold" in self.factors else ()
+        ``ambient_c`` for the ``cold`` factor, ``yaw_rate_rps`` for ``radial`` (each 0
+        without it, so not required as a signal is; a reader that selects columns must
+        still read it)."""
+        extra = tuple(OPTIONAL_SIGNALS[f] for f in self.factors if f in OPTIONAL_SIGNALS)
         return self.signals + tuple(c for c in extra if c not in self.signals)
 
     def evaluate(self, x: Inputs) -> np.ndarray:

@@ -138,6 +138,10 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
             if f == "moving" and c:
                 missing.append(f"{t} {c:g} W drawn only while moving (SUMO books "
                                "constantPowerIntake standing too: queues and red lights get it)")
+        elif f == "radial":  # SUMO books radialDragCoefficient·m·v·|ω| per step: c/Δt as a power
+            missing.append(f"radial coefficient {c:g} m/s: SUMO books radialDragCoefficient × the "
+                           f"centripetal force per step, so it is {c:g}·Δt for a run at step length Δt "
+                           f"(written 0; e.g. {c:g} at 1 s, {0.1 * c:g} at 0.1 s)")
         else:
             missing.append(f"{t} (no Energy-model counterpart)")
     if cda < 0 or cr < 0:

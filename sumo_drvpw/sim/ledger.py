@@ -66,6 +66,9 @@ class EquationSet:
             self.groups.append((mass, [parse_term(t) for t in terms], entries))
         self.uses_other = any(parse_term(t).category == "other"
                               for e in self.equations for t in e.term_names)
+        #: an equation has the ``radial`` factor: the loop passes the yaw rate
+        self.uses_yaw = any("radial" in parse_term(t).factors
+                            for e in self.equations for t in e.term_names)
 
     def category_powers(self, x: Inputs, app: np.ndarray | None = None) -> np.ndarray:
         """Power [W] per sample, equation and category, shape (n, E, C).
@@ -243,6 +246,7 @@ class Ledger:
         grow("veh_keep", (cap,), bool, False)
         grow("veh_prev_edge", (cap,), np.int64, -1)
         grow("veh_prev_speed", (cap,), float, np.nan)
+        grow("veh_prev_angle", (cap,), float, np.nan)  # SUMO's angle a step ago [deg]
         grow("veh_lane", (cap,), np.int64, -2)  # tracked lane (-2: never read)
         grow("veh_pos", (cap,), float, np.nan)  # tracked lane position [m]
         grow("veh_at", (cap, 3), float, np.nan)  # last step's lane, position, profile z
@@ -260,7 +264,8 @@ class Ledger:
                    ("_seg_time", 0.0), ("veh_dist", 0.0), ("veh_time", 0.0),
                    ("veh_mass", np.nan), ("veh_load", 0.0), ("veh_app", 0.0),
                    ("veh_keep", False),
-                   ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_lane", -2),
+                   ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_prev_angle", np.nan),
+                   ("veh_lane", -2),
                    ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_done_step", 0),
                    ("veh_parked", False),
                    ("veh_stand", 0.0), ("veh_auto_off", np.inf), ("veh_teleports", 0),

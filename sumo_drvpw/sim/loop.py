@@ -23,11 +23,10 @@ from typing import Callable
 
 import numpy as np
 
-from sumo_drvpw.data.wind import tailwind_mps
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network, lane_numbers
-from sumo_drvpw.sim.reader import Reader, reinserted
+from sumo_drvpw.sim.reader import Reader, reinserted, tailwind, yaw_rate  # noqa: F401 (tailwind re-exported)
 from sumo_drvpw.sim.shutoff import ShutOff
 from sumo_drvpw.sim.sumo_start import NewRun, signals_deferred, step_method
 from sumo_drvpw.sim.teleport import put_back
@@ -90,15 +89,6 @@ STOP_PARKING = 2
 TYPE_CHECK_STEPS = 25
 
 
-def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
-    """Wind along the heading ``angle_deg`` (SUMO's, deg clockwise from north), tailwind
-    positive [m/s], of a wind of ``speed`` [m/s] blowing from ``from_deg``
-    (:func:`sumo_drvpw.data.wind.tailwind_mps`, as a drive log's wind is written)."""
-    if speed == 0.0:
-        return np.zeros(len(angle_deg))
-    return tailwind_mps(angle_deg, speed, from_deg)
-
-
 class Stepper:
     """Books one SUMO step at a time: call :meth:`after_step` after every
     ``simulationStep`` (``run_loop`` does; so does :class:`sumo_drvpw.sim.Accountant`
@@ -141,9 +131,10 @@ class Stepper:
         self.lane_edge_ext = np.append(net.lane_edge, -1)  # lane -1 → edge -1
         read_accel = physics.acceleration == "getter"
         read_slope = physics.slope_reference == "getslope"
+        self.yaw = eqset.uses_yaw  # an equation's ``radial`` factor: the angle's change per step
         self.reader = Reader(conn, use_subscriptions,
-                              (True, read_accel,
-                               physics.wind_speed != 0.0 and physics.heading == "getangle",
+                              (True, read_accel, self.yaw or (
+                                  physics.wind_speed != 0.0 and physics.heading == "getangle"),
                                True, True, read_slope))
         self.heading_from_lane = physics.wind_speed != 0.0 and physics.heading == "geometry"
         method = step_method(conn, physics.ballistic_given)
@@ -456,6 +447,10 @@ class Stepper:
             a[np.isnan(a)] = 0.0
         if angle is None:
             angle = np.zeros(n)
+        yaw = None
+        if self.yaw:  # SUMO's angle difference of the step, as its Energy model reads it
+            yaw = yaw_rate(ledger.veh_prev_angle[vidx], angle, dt)
+            ledger.veh_prev_angle[vidx] = angle
         if raw is not None:
             raw = np.radians(raw)
         placed = reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, self.is_replay)  # not driven
@@ -473,10 +468,10 @@ class Stepper:
             on_lane &= ~placed
         if not on_lane.all():  # teleporting, parked: no lane, not booked
             ledger.veh_at[vidx[(lane < 0)], 2] = np.nan  # (its next step starts its rise afresh)
+            ledger.veh_prev_angle[vidx[(lane < 0)]] = np.nan  # (and its turning)
             vidx, lane, v, a, angle, pos = (
                 x[on_lane] for x in (vidx, lane, v, a, angle, pos))
-            if raw is not None:
-                raw = raw[on_lane]
+            raw, yaw = (None if x is None else x[on_lane] for x in (raw, yaw))
             if len(vidx) == 0:
                 return
         at = net.bin_index(lane, pos)  # robust slope, shape slope, heading there
@@ -503,6 +498,8 @@ class Stepper:
             theta, ledger.veh_at[vidx] = net.step_grade(lane, pos, v * dt, ledger.veh_at[vidx], theta,
                                                         (v_mean + 0.5 * dt * np.abs(a)) * dt)  # max(v_t−1, v_t)·Δt
         sig = {} if physics.ambient_c is None else {"ambient_c": np.full(m, physics.ambient_c)}
+        if yaw is not None:
+            sig["yaw_rate_rps"] = yaw
         mass = ledger.veh_mass[vidx]
         if self.any_load:  # riding persons (SUMO's getTotalMass)
             load = ledger.veh_load[vidx]

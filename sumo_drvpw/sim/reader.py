@@ -1,11 +1,13 @@
 """Reading the per-vehicle state of a step from SUMO: plain getters mapped over the id list
 (libsumo: the cheapest way, design.md) or, through traci (each getter a socket round trip),
-one context subscription on the simulation that returns every vehicle's variables."""
+one context subscription on the simulation that returns every vehicle's variables; and what
+a vehicle's heading gives: the wind along it, the yaw rate from its change."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from sumo_drvpw.data.wind import tailwind_mps
 from sumo_drvpw.sim.network import JUMP_TOL_M
 
 # traci variable ids (traci.constants), fixed by the TraCI protocol
@@ -20,6 +22,27 @@ _CMD_GET_VEHICLE_VARIABLE = 0xa4
 #: vehicle's subscriptions only when the vehicle arrives in that step,
 #: TraCIServer::postProcessSimulationStep)
 _EVERYWHERE_M = 1e9
+
+
+def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
+    """Wind along the heading ``angle_deg`` (SUMO's, deg clockwise from north), tailwind
+    positive [m/s], of a wind of ``speed`` [m/s] blowing from ``from_deg``
+    (:func:`sumo_drvpw.data.wind.tailwind_mps`, as a drive log's wind is written)."""
+    if speed == 0.0:
+        return np.zeros(len(angle_deg))
+    return tailwind_mps(angle_deg, speed, from_deg)
+
+
+def yaw_rate(prev_deg: np.ndarray, angle_deg: np.ndarray, dt: float) -> np.ndarray:
+    """The yaw rate [rad/s] of a step: the change of SUMO's vehicle angle [deg] since the
+    last step, the short way round (GeomHelper::angleDiff), over Δt [s]; 0 where there is no
+    last angle (NaN: first seen, back from a teleport). It is the angle change SUMO's Energy
+    model reads for its radial drag (probed with SUMO 1.28.0, 2026-11-27: on a 50-m arc at
+    21.2 m/s its emission output's electricity rose by radialDragCoefficient·m·v·|Δψ|/Δt
+    per step to 1e-9, Δψ the FCD angles' change in rad, at Δt 1, 0.5 and 0.25 s)."""
+    d = (np.asarray(angle_deg, float) - prev_deg + 180.0) % 360.0 - 180.0
+    w = np.radians(d) / dt
+    return np.where(np.isfinite(w), w, 0.0)
 
 
 class Reader:

@@ -31,7 +31,7 @@ import re
 
 import numpy as np
 
-from sumo_drvpw.model.energy_params import ENERGY_PARAMS, energy_params_equation
+from sumo_drvpw.model.energy_params import ENERGY_PARAMS, energy_params_equation, radial_drag_note
 from sumo_drvpw.model.equations import SUMO_VCLASSES, Equation
 
 #: the reserved equation name
@@ -155,9 +155,10 @@ def _name(vt: str, taken: set[str]) -> str:
     return name
 
 
-def vtype_equations(file_vtypes, sc=None) -> tuple[list[Equation], dict]:
+def vtype_equations(file_vtypes, sc=None, step_s: float | None = None) -> tuple[list[Equation], dict]:
     """One equation per vType of ``file_vtypes`` that writes SUMO's Energy model (the
-    scenario's ``vehicles.vtypes`` filter applies); returns (equations, listing) with
+    scenario's ``vehicles.vtypes`` filter applies), for the run's step length ``step_s``
+    [s] (its radial drag; None: left out); returns (equations, listing) with
     listing = {"booked": {vType: {equation, mass_kg, defaults, not_expressed}},
     "not_booked": {vType: why}}."""
     vfilter = getattr(sc, "vtype_filter", None)
@@ -176,7 +177,7 @@ def vtype_equations(file_vtypes, sc=None) -> tuple[list[Equation], dict]:
             continue
         where = f"{info.source}: vType '{vt}'"
         eq, notes = energy_params_equation(_name(vt, taken), info.energy_params, info.mass_attr_kg,
-                                           where, (info.vclass or "passenger",))
+                                           where, (info.vclass or "passenger",), step_s=step_s)
         model = eq.chain.provenance["sumo_energy_model"]
         eq.provenance = {_KEY: vt}
         eq.path = str(info.source)
@@ -192,6 +193,8 @@ def vtype_equations(file_vtypes, sc=None) -> tuple[list[Equation], dict]:
                       "mass": "the vehicle's (riders included)" if same_mass else "fixed (no riders)",
                       "defaults": {k: d["value"] for k, d in model.items() if d["from"] == "SUMO default"},
                       "not_expressed": notes}
+        if "radial" in eq.terms:
+            booked[vt]["radial_drag"] = radial_drag_note(model["radialDragCoefficient"]["value"], step_s)
     return eqs, {"booked": booked, "not_booked": not_booked}
 
 
@@ -224,11 +227,11 @@ def listing_warning(listing: dict) -> str | None:
     return ("vTypes with SUMO's Energy model were booked by their own parameters as a battery "
             "chain (vtype_energy): " + "; ".join(parts)
             + (f"; Energy vTypes without parameters not booked by it: {', '.join(sorted(left))}" if left else "")
-            + " (summary.json assumptions.vtype_energy: radial drag in curves and what else it "
-            "cannot express)")
+            + " (summary.json assumptions.vtype_energy: what it cannot express, and the radial drag "
+            "in curves, which SUMO books per step)")
 
 
-def expand(equations: list, file_vtypes, sc) -> tuple[list, dict]:
+def expand(equations: list, file_vtypes, sc, step_s: float | None = None) -> tuple[list, dict]:
     """The run's equations with ``vtype_energy`` replaced by the vTypes' own equations
     (appended to the plug-in's own equations, :data:`~sumo_drvpw.sim.scenario.CONFIG_EQUATIONS`,
     when the files declare such vTypes), and the listing of :func:`vtype_equations` ({}
@@ -241,7 +244,7 @@ def expand(equations: list, file_vtypes, sc) -> tuple[list, dict]:
     own = [e.name for e in getattr(sc, "equations", [])] == list(CONFIG_EQUATIONS)
     if not (has or own):
         return equations, {}
-    eqs, listing = vtype_equations(file_vtypes, sc)
+    eqs, listing = vtype_equations(file_vtypes, sc, step_s)
     if own and not has and not eqs:  # the plug-in's own equations, no Energy vType: nothing to say
         return equations, {}
     taken = {e.name for e in equations if not is_placeholder(e)}
