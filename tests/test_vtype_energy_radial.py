@@ -136,3 +136,53 @@ def test_vtype_energy_books_sumos_radial_drag(tmp_path, dt):
     a = cv.groupby("equation").net_kwh.sum()
     b = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").groupby("equation").net_kwh.sum()
     np.testing.assert_allclose(b.loc[a.index].values, a.values, rtol=1e-3)
+
+
+def _curvy_log(path, mu=0.02, seed=0, deg=False):
+    """A 10-Hz log of 40 min: speed 5–25 m/s, curves of 40–400 m radius either way
+    between straights, and the driving power of a 1500-kg car with a cornering drag
+    μ·m·v²·|ω| planted (μ = ``mu``), plus noise of 150 W."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 2400.0, 0.1)
+    v = 15.0 + 8.0 * np.sin(2 * np.pi * t / 300.0) + 2.0 * np.sin(2 * np.pi * t / 47.0)
+    a = 8.0 * 2 * np.pi / 300.0 * np.cos(2 * np.pi * t / 300.0) + 2.0 * 2 * np.pi / 47.0 * np.cos(2 * np.pi * t / 47.0)
+    seg = (t // 20.0).astype(int)  # 20-s pieces: a straight or a curve of one radius
+    r = rng.choice([np.inf, 40.0, 80.0, 150.0, 400.0], size=seg.max() + 1)
+    sign = rng.choice([-1.0, 1.0], size=seg.max() + 1)
+    yaw = sign[seg] * v / r[seg]
+    m = 1500.0
+    p = 1.05 * m * v * a + 0.32 * v ** 3 + 0.011 * m * 9.81 * v + mu * m * v ** 2 * np.abs(yaw)
+    df = pd.DataFrame({"time_s": t, "speed_mps": v, "power_w": p + rng.normal(0.0, 150.0, len(t)),
+                       "mass_kg": m, "yaw_rate_rps": np.degrees(yaw) if deg else yaw})
+    df.to_csv(path, index=False)
+    return df
+
+
+def test_a_planted_cornering_drag_is_calibrated_from_a_logs_yaw_rate(tmp_path):
+    """A log's ``yaw_rate_rps`` column feeds the radial factor: stepwise calibration with the
+    candidate ``radial*v1`` recovers a planted cornering drag μ = 0.02 (the share of the
+    centripetal force that acts as drag) within 5 %, and the other coefficients with it, and
+    finds none (|μ| < 0.002) where none is planted; a
+    yaw rate written in deg/s is refused, naming the column, the row and the unit."""
+    from sumo_drvpw.data.measured import load_measured
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.fit.calibrate import calibrate
+    from sumo_drvpw.fit.physical import physical_reading
+
+    _curvy_log(tmp_path / "log.csv")
+    m = load_measured([tmp_path / "log.csv"])
+    res = calibrate(m.inputs, m.power_w, ("acc", "aero", "roll", "radial*v1"), mask=m.usable)
+    assert "radial*v1" in res.terms
+    assert res.params["radial*v1"] == pytest.approx(0.02, rel=0.05)
+    assert res.params["aero"] == pytest.approx(0.32, rel=0.02)
+    assert res.params["acc"] == pytest.approx(1.05, rel=0.02)
+    reading = physical_reading(res.params)["radial*v1"]
+    assert reading["plausible"] and "slip angle" in reading["reads_as"]
+    assert physical_reading({"radial*v1": -0.01})["radial*v1"]["plausible"] is False
+    _curvy_log(tmp_path / "none.csv", mu=0.0, seed=1)  # nothing planted: nothing found
+    m0 = load_measured([tmp_path / "none.csv"])
+    r0 = calibrate(m0.inputs, m0.power_w, ("acc", "aero", "roll", "radial*v1"), mask=m0.usable)
+    assert abs(r0.params.get("radial*v1", 0.0)) < 0.002
+    _curvy_log(tmp_path / "deg.csv", deg=True)
+    with pytest.raises(UserError, match=r"column 'yaw_rate_rps' is .* at row \d+, outside \[-10, 10\] rad/s"):
+        load_measured([tmp_path / "deg.csv"])

@@ -62,7 +62,10 @@ from sumo_drvpw.fit.ols import Gram, gram
 from sumo_drvpw.model.constants import RHO_DEFAULT
 
 #: term → (low, high) of the plausible coefficient (see the module table)
-PLAUSIBLE = {"acc": (0.95, 1.4), "grade": (0.9, 1.3), "roll": (0.0, 0.03)}
+PLAUSIBLE = {"acc": (0.95, 1.4), "grade": (0.9, 1.3), "roll": (0.0, 0.03),
+             # a tyre's cornering drag over its centripetal force ≈ its slip angle [rad]:
+             # a few degrees at the lateral accelerations of road driving
+             "radial*v1": (0.0, 0.1)}
 #: plausible C_d·A [m²]: ≥ 0 (a powertrain-output target includes losses: no upper bound)
 CDA_MIN = 0.0
 #: constraints used when the unconstrained fit is implausible and none are declared
@@ -121,6 +124,12 @@ def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> 
             out[t] = {"coefficient": c, "reads_as": "rolling coefficient c_r", "value": c, "unit": "-",
                       "plausible": ok, "note": "" if ok else (
                           "negative rolling resistance" if c < 0 else "above 0.03: more than tyres")}
+        elif t == "radial*v1":
+            lo, hi = PLAUSIBLE[t]
+            ok = lo <= c <= hi
+            out[t] = {"coefficient": c, "reads_as": "cornering drag over the centripetal force (≈ the tyres' "
+                      "slip angle in rad)", "value": c, "unit": "-", "plausible": ok, "note": "" if ok else (
+                          "negative cornering drag" if c < lo else "above 0.1: more than tyres' slip")}
         else:
             out[t] = {"coefficient": c, "reads_as": "no physical reading", "value": None, "unit": "",
                       "plausible": None, "note": ""}
