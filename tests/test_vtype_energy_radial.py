@@ -106,7 +106,8 @@ def test_vtype_energy_books_sumos_radial_drag(tmp_path, dt):
     and grows as the step shortens, as SUMO books it: SUMO's own energy with the e-car's
     radialDragCoefficient 0.5 against 0 is +11 % at 1-s steps and +50 % at 0.25 s (measured;
     asserted > 5 % and growing), so the agreement fails without the term. An FCD replay of
-    the run (angles from the FCD) books the same to 1e-3."""
+    the run (angles from the FCD) books the same to 1e-3; one without angles books no drag
+    and warns."""
     _curve(tmp_path)
     for c in ("0.5", "0"):
         (tmp_path / f"r{c}.rou.xml").write_text(ROUTES.format(c=c))
@@ -136,6 +137,19 @@ def test_vtype_energy_books_sumos_radial_drag(tmp_path, dt):
     a = cv.groupby("equation").net_kwh.sum()
     b = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").groupby("equation").net_kwh.sum()
     np.testing.assert_allclose(b.loc[a.index].values, a.values, rtol=1e-3)
+    if dt == 1.0:  # an FCD written without angles: no drag, and a warning says so
+        import json
+        import re
+
+        text = (tmp_path / "fcd.xml").read_text()
+        (tmp_path / "fcd_na.xml").write_text(re.sub(r' angle="[^"]*"', "", text))
+        assert cli_main(["fcd", str(tmp_path / "fcd_na.xml"), "--net", str(tmp_path / "n.net.xml"), "--vtypes",
+                         str(tmp_path / "r0.5.rou.xml"), "--equation", "vtype_energy", "--end", "150",
+                         "--out", str(tmp_path / "na"), "--no-figures"]) == 0
+        warn = json.loads((tmp_path / "na" / "summary.json").read_text())["warnings"]
+        assert any("has no angle column" in w and "booked as 0" in w for w in warn)
+        c = pd.read_csv(tmp_path / "na" / "chain_vehicles.csv").groupby("equation").net_kwh.sum()
+        assert c["vtype_energy.ecar"] < a["vtype_energy.ecar"] * 0.97
 
 
 def _curvy_log(path, mu=0.02, seed=0, deg=False):

@@ -132,6 +132,7 @@ class FcdReplay(_Rows):
         ids = tuple(cols["id"])
         self.ids = ids
         self.state = dict(zip(ids, zip(*_state_columns(cols)))) if ids else {}
+        self.no_angle = self.no_angle or (bool(ids) and "angle" not in cols)
         new = tuple(v for v in ids if v not in self._seen)
         self.back = self._back.get(self.k - 1, ())
         self._seen.update(new)
@@ -280,6 +281,7 @@ class FcdStream(FcdReplay):
         n = len(ids)
         self.ids = ids
         self.state = dict(zip(ids, zip(*_state_columns(c)))) if n else {}
+        self.no_angle = self.no_angle or (bool(n) and "angle" not in c)
         self.types = dict(zip(ids, c["type"]))
         now = set(ids)
         self.departed = tuple(v for v in ids if v not in self._prev_set)
@@ -449,6 +451,10 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
             acc.close_trace()
             return acc, extra
         warn = lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning
+        if replay.no_angle and acc.eqset.uses_yaw:
+            warn.append(f"FCD file {fcd_file} has no angle column (fcd-output.attributes without angle): "
+                        "the radial drag in curves (the factor radial, SUMO's radialDragCoefficient) is "
+                        "booked as 0")
         if warn:
             extra["warnings"] = warn
         result = acc.result(extra)

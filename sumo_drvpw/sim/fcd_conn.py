@@ -136,6 +136,8 @@ class _Rows:
         #: set by replay_fcd, None: no file declares a stop)
         self.stops = None
         self.count_persons = True
+        #: a timestep with vehicles but no angle column (no yaw rate for the radial factor)
+        self.no_angle = False
         #: vehicle rows on a lane of the network, on a lane it lacks, and the first of
         #: those (lane, time) (with the column ``lane_ok`` of ParkedTest.mark)
         self.lane_rows, self.unknown_rows, self.first_unknown = 0, 0, None
