@@ -23,6 +23,9 @@ every timed run loads that state and steps the same ``--steps`` steps:
 - ``plugin_getters``: the defaults but everything read from SUMO every step
   (``acceleration = "getter"``, ``positions = "getter"``, ``slope.reference =
   "getslope"``, ``wind.heading = "getangle"``: six getters per vehicle and step);
+- ``plugin_radial``: the defaults plus a fifth equation with SUMO's radial drag (the term
+  ``radial``, as ``vtype_energy`` books a vType's radialDragCoefficient): ``getAngle`` read
+  per vehicle and step, the yaw rate from its change;
 - ``emissions``: bare stepping with SUMO's own ``--device.emissions.probability 1``.
 
 Prints median wall times of ``--repeats`` runs (variants interleaved), then the ratios;
@@ -160,6 +163,10 @@ def timed(variant: str, net, routes, state, steps: int, eqs) -> float:
         t_begin = conn.simulation.getTime()
         end = t_begin + steps * conn.simulation.getDeltaT()
         if variant.startswith("plugin"):
+            if variant == "plugin_radial":
+                from sumo_drvpw.model.equations import Equation
+
+                eqs = [*eqs, Equation("radial", {"acc": 1.0, "aero": 0.5, "m_v1": 0.1, "radial": 0.1})]
             eqset = EquationSet(eqs)
             led = Ledger(len(table.edge_ids), len(eqs), capacity=8192)
             app = np.ones(len(eqs))
@@ -208,8 +215,8 @@ def main(argv=None) -> int:
             routes = build_routes(work, n)
             state = work / f"state{n}.xml.gz"
             running = warm_up(net, routes, state, args.warm)
-            times = {"bare": [], "plugin": [], "plugin_getangle": [], "plugin_getters": [],
-                     "emissions": []}
+            times = {"bare": [], "plugin": [], "plugin_getangle": [], "plugin_radial": [],
+                     "plugin_getters": [], "emissions": []}
             for _ in range(args.repeats):
                 for variant in times:
                     times[variant].append(timed(variant, net, routes, state, args.steps, eqs))
@@ -225,6 +232,7 @@ def main(argv=None) -> int:
     for n, (running, med) in results.items():
         print(f"ratios N={n}: plugin/bare={med['plugin'] / med['bare']:.3f} "
               f"plugin_getangle/bare={med['plugin_getangle'] / med['bare']:.3f} "
+              f"plugin_radial/plugin={med['plugin_radial'] / med['plugin']:.3f} "
               f"plugin_getters/bare={med['plugin_getters'] / med['bare']:.3f} "
               f"emissions/bare={med['emissions'] / med['bare']:.3f}")
     big = max(results)
