@@ -475,9 +475,16 @@ def recorded_inputs(path, head: dict[str, str] | None = None, cwd=None) -> dict 
         tries += [d / v for d in fallbacks]
         return next((t.resolve() for t in tries if t.is_file()), None)
 
+    from sumo_drvpw.sim.sumo_outputs import original_of_copy
+
+    got = [(key, v, find(v)) for key, v in values]
+    # an FCD that ``sumo-drvpw run`` recorded names its temporary copies of the additional
+    # files that declare outputs (gone after the run): the originals, where its others are
+    homes = list(dict.fromkeys(p.parent for _, _, p in got if p is not None))
     net, files, missing = None, [], []
-    for key, v in values:
-        p = find(v)
+    for key, v, p in got:
+        name = original_of_copy(v) if p is None else None
+        p = p or next(((d / name).resolve() for d in homes if name and (d / name).is_file()), None)
         if p is None:
             missing.append((key, v))
         elif key == "net-file":

@@ -20,7 +20,7 @@ from sumo_drvpw.sim.vtype_energy import energy_vtype_of, own_energy
 from sumo_drvpw.sim.vtypes import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER,
                                    SUMO_DEFAULT_VTYPES, energy_carrier, equation_carrier,
                                    read_vtypes)
-from sumo_drvpw.sim.sumo_outputs import (SUMO_OUTPUT_DIR, is_output_option, naming_leaves_folder,
+from sumo_drvpw.sim.sumo_outputs import (COPIES_PREFIX, SUMO_OUTPUT_DIR, is_output_option, naming_leaves_folder,
                                          output_naming, prepare_output_folder,
                                          redirect_additional_outputs, sumo_output_args, without_additional_files,
                                          written_file)
@@ -322,7 +322,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
 
     # outputs declared in additional files: into the same folder, through copies of those
     # files (SUMO writes them beside the file that declares them: the scenario's folder)
-    copies = (tempfile.TemporaryDirectory(prefix="drvpw-additional-")
+    copies = (tempfile.TemporaryDirectory(prefix=COPIES_PREFIX)
               if sc.additional_outputs and "additional-files" not in given else None)
     if redirect or sc.additional_outputs:
         if out_dir is not None:

@@ -4,6 +4,7 @@ beside the scenario's files (inputs are never modified; a read-only scenario run
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
 import zlib
 from pathlib import Path
@@ -77,6 +78,20 @@ def sumo_output_args(outputs: dict[str, str], folder: Path) -> list[str]:
 
 #: attributes of additional-file elements that name an input file, relative to that file
 _INPUT_PATH_ATTRIBUTES = ("file", "href", "edgesFile", "imgFile")
+
+
+#: the temporary folder of a run's copies of its additional files (:func:`redirect_additional_outputs`),
+#: each named ``<n>.<original name>``: an FCD the run recorded names them in its header
+COPIES_PREFIX = "drvpw-additional-"
+
+
+def original_of_copy(path: str) -> str | None:
+    """The original file name of a run's copy of an additional file named in a recording's
+    header (``…/drvpw-additional-XXXX/0.stops.add.xml`` → ``stops.add.xml``); None for any
+    other path."""
+    parts = path.replace("\\", "/").split("/")
+    m = re.match(r"^\d+\.(.+)$", parts[-1])
+    return m.group(1) if m and len(parts) > 1 and parts[-2].startswith(COPIES_PREFIX) else None
 
 
 def redirect_additional_outputs(adds: list[Path], folder: Path, work: Path
