@@ -104,7 +104,7 @@ def test_vtype_energy_books_sumos_radial_drag(tmp_path, dt):
     emission output does, step by step, its radial drag included: per vehicle within 0.05 %
     (measured 2026-11-27: 0.99997–1.0001; SUMO writes 6 decimals). The drag is large there
     and grows as the step shortens, as SUMO books it: SUMO's own energy with the e-car's
-    radialDragCoefficient 0.5 against 0 is +11 % at 1-s steps and +50 % at 0.25 s (measured;
+    radialDragCoefficient 0.5 against 0 is +11 % at 1-s steps and +44 % at 0.25 s (measured;
     asserted > 5 % and growing), so the agreement fails without the term. An FCD replay of
     the run (angles from the FCD) books the same to 1e-3; one without angles books no drag
     and warns."""
