@@ -13,6 +13,8 @@ import numpy as np
 import pandas as pd
 import pytest
 import sumolib
+from hypothesis import given
+from hypothesis import strategies as st
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.model.energy_params import energy_params_equation
@@ -46,6 +48,15 @@ def test_yaw_rate_takes_the_short_way_round():
     w = yaw_rate(np.array([359.0, np.nan, 10.0, 90.0]), np.array([1.0, 5.0, 350.0, 90.0]), 0.5)
     np.testing.assert_allclose(w, [math.radians(2.0) / 0.5, 0.0, math.radians(-20.0) / 0.5, 0.0],
                                atol=1e-12)
+
+
+@given(st.floats(0.0, 360.0, exclude_max=True), st.floats(-179.9, 179.9), st.sampled_from([0.1, 0.5, 1.0]))
+def test_yaw_rate_is_the_turn_whatever_the_heading(prev, turn, dt):
+    """Property: a turn of d degrees in a step reads as radians(d)/Δt from any heading, SUMO's
+    angle written in [0, 360) (through north either way)."""
+    now = (prev + turn) % 360.0
+    w = yaw_rate(np.array([prev]), np.array([now]), dt)[0]
+    assert w == pytest.approx(math.radians(turn) / dt, abs=1e-9)
 
 
 def test_sumos_radial_drag_is_a_term_at_c_over_the_step():
