@@ -21,7 +21,8 @@ once in turn. The i3 is run on a second split fixed by the same rule from anothe
    5-fold cross-validation on the training trips (mean absolute trip traction-energy error);
 4. with at least 5 training trips, physical candidates in forms SUMO can evaluate
    (``fit.physical.PHYSICAL_CANDIDATES``: ρ(T, altitude) in the aero term, c_r(T),
-   cold drivetrain drag, recuperation on its own coefficient, inertial power by direction) are chosen forward by the
+   cold drivetrain drag, recuperation on its own coefficient, inertial power by direction, and a
+   cornering drag where the logs carry a yaw rate — the shared ones do not) are chosen forward by the
    same trip-grouped cross-validation (``fit.physical.select_physical``), each kept only
    with a plausible coefficient; the closed-loop equation is fitted with them. The
    tracer's log-only findings (``[ambient_c]*…``) are reported, not carried: SUMO cannot

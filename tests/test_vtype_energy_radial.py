@@ -211,3 +211,46 @@ def test_a_planted_cornering_drag_is_calibrated_from_a_logs_yaw_rate(tmp_path):
     _curvy_log(tmp_path / "deg.csv", deg=True)
     with pytest.raises(UserError, match=r"column 'yaw_rate_rps' is .* at row \d+, outside \[-10, 10\] rad/s"):
         load_measured([tmp_path / "deg.csv"])
+
+
+def _curvy_trips(mu, n_trips=12, n=1500, seed=3, yaw=True):
+    """Synthetic trips (0.5-s samples) through curves of 40–400 m radius either way, no
+    temperature logged; truth 1.1·m·v·a + m·g·v·sin θ + 0.35·v³ + 0.012·m·g·v·cos θ +
+    μ·m·v²·|ω|, noise 300 W."""
+    from sumo_drvpw.model.constants import G
+
+    rng = np.random.default_rng(seed)
+    parts = []
+    for i in range(n_trips):
+        t = np.arange(n) * 0.5
+        v = np.clip(12 + 6 * np.sin(t / 45.0 + i) + np.cumsum(rng.normal(0, 0.05, n)), 1.0, 30.0)
+        seg = (t // (10.0 + i)).astype(int)
+        r = rng.choice([np.inf, np.inf, 40.0, 80.0, 150.0, 400.0], size=seg.max() + 1)
+        w = rng.choice([-1.0, 1.0], size=seg.max() + 1)[seg] * v / r[seg]
+        th = 0.02 * np.sin(t / (60.0 + 7 * i) + i)
+        parts.append((v, np.gradient(v, 0.5), th, w, np.full(n, f"T{i:02d}")))
+    v, a, th, w, trip = (np.concatenate(z) for z in zip(*parts))
+    m = np.full(v.size, 1500.0)
+    x = Inputs(v, a, th, np.zeros(v.size), m, np.full(v.size, 1.2),
+               {"yaw_rate_rps": w} if yaw else {}, trip)
+    p = (1.1 * m * v * a + m * G * v * np.sin(th) + 0.35 * v ** 3 + 0.012 * m * G * v * np.cos(th)
+         + mu * m * v ** 2 * np.abs(w) + rng.normal(0, 300.0, v.size))
+    return x, p, np.ones(v.size, bool), np.full(v.size, 0.5), trip
+
+
+def test_the_closed_loop_keeps_a_planted_cornering_drag_on_whole_trips():
+    """fit.physical.select_physical (the closed loop's physical candidates, trip-grouped
+    cross-validation of per-trip traction energy): a planted cornering drag μ = 0.03 is kept
+    with its reading within 10 %; none planted, none kept; without a yaw rate in the data
+    (or a temperature, for c_r(T)) the candidate is not tried."""
+    from sumo_drvpw.fit.physical import select_physical
+
+    base = ["acc", "aero", "roll", "grade"]
+    sel = select_physical(*_curvy_trips(0.03), base, candidates=("cornering drag", "c_r(T)"))
+    assert sel["chosen"] == ["cornering drag"]
+    step = next(s for s in sel["steps"] if s["accepted"])
+    assert step["reading"]["value"] == pytest.approx(0.03, rel=0.1) and step["reading"]["plausible"]
+    assert all(s["candidate"] != "c_r(T)" for s in sel["steps"])   # no temperature: not tried
+    assert select_physical(*_curvy_trips(0.0, seed=4), base, candidates=("cornering drag",))["chosen"] == []
+    none = select_physical(*_curvy_trips(0.03, yaw=False), base, candidates=("cornering drag",))
+    assert none["chosen"] == [] and none["steps"] == []

@@ -40,8 +40,9 @@ Constraints are declared in a candidate TOML file beside ``terms``::
 
 Physical candidates (:data:`PHYSICAL_CANDIDATES`, :func:`select_physical`): effects whose
 form SUMO can evaluate — air density from temperature and altitude in the aero term
-(``aero`` → ``aero_rho``), c_r(T) (``roll*cold``), cold drivetrain drag (``cold*v^2``) and
-recuperation on its own coefficient (:func:`regime_fit`) — are chosen forward on whole
+(``aero`` → ``aero_rho``), c_r(T) (``roll*cold``), cold drivetrain drag (``cold*v^2``),
+a cornering drag (``radial*v1``, where the logs carry a yaw rate) and recuperation on its
+own coefficient (:func:`regime_fit`) — are chosen forward on whole
 trips by trip-grouped cross-validation of the per-trip traction energy, each kept only when
 its gain is material, replicates over most trips and its coefficient reads plausibly.
 """
@@ -411,6 +412,8 @@ PHYSICAL_CANDIDATES = {
     "regime": ("recuperation on its own coefficient (drivetrain efficiency differs by direction)", {}, ()),
     "inertia by direction": ("inertial power on its own coefficient while speeding up: the drivetrain "
                              "delivers kinetic energy at 1/η and returns it at η", {}, ("acc_pos",)),
+    "cornering drag": ("tyre drag in curves, a share of the centripetal force (needs a yaw rate, "
+                       "yaw_rate_rps)", {}, ("radial*v1",)),
 }
 #: plausible tyre temperature coefficient k of c_r(T) [1/K]: ISO 28580 corrects with 0.008/K;
 #: up to 0.03/K leaves room for bearings and the drivetrain share of the ``roll`` term
@@ -504,6 +507,10 @@ def candidate_reading(name: str, params: dict[str, float], r: float, rho_kgm3: f
         eta = 1.0 / math.sqrt(ratio) if ratio > 0 else math.nan
         return {"reads_as": "η of the inertial power, (c_acc + c_acc_pos)/c_acc = 1/η²", "value": eta,
                 "unit": "-", "plausible": bool(ETA_INERTIA_MIN <= eta <= 1.0)}
+    if name == "cornering drag":
+        c = params["radial*v1"]
+        return {"reads_as": "cornering drag over the centripetal force (≈ the tyres' slip angle)", "value": c,
+                "unit": "rad", "plausible": bool(PLAUSIBLE["radial*v1"][0] <= c <= PLAUSIBLE["radial*v1"][1])}
     if name == "regime":
         return {"reads_as": "recuperation scale 1 + r (≈ η² with friction braking)", "value": 1.0 + r,
                 "unit": "-", "plausible": bool(0.0 < 1.0 + r <= 1.0)}
@@ -537,7 +544,10 @@ def select_physical(x, y, use, dt, trip, base_terms, candidates=tuple(PHYSICAL_C
     cur = trip_cv(x, y, use, dt, trip, base_terms, k=k)
     out = {"base_cv": cur, "steps": [], "chosen": chosen}
     rho = float(np.nanmean(np.asarray(x.rho, float)[use]))
-    left = [c for c in candidates]
+    # a candidate whose added terms are 0 on every sample (no yaw rate, no temperature logged)
+    # has nothing to fit: not tried
+    left = [c for c in candidates if all(np.any(term_matrix([t], x)[np.asarray(use, bool), 0] != 0)
+                                         for t in PHYSICAL_CANDIDATES[c][2])]
     while left:
         trials = []
         for c in left:
