@@ -133,6 +133,7 @@ def test_vtype_energy_books_sumos_radial_drag(tmp_path, dt):
     np.testing.assert_allclose(cv.net_kwh * 1000.0, cv.key.map(sumo), rtol=5e-4)
     booked = res["assumptions"]["vtype_energy"]["booked"]
     assert f"c/Δt = {0.5 / dt:g} for Δt = {dt:g} s" in booked["ecar"]["radial_drag"]
+    assert any("radial drag in curves of ecar, edef booked per step" in w for w in res["warnings"])
     # SUMO's own drag: the same cars with the coefficient 0
     subprocess.run([sumolib.checkBinary("sumo"), "-n", "n.net.xml", "-r", "r0.rou.xml", "-e", "150",
                     "--step-length", str(dt), "--emission-output", "em0.xml", "--precision", "6",

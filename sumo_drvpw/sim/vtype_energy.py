@@ -224,9 +224,12 @@ def listing_warning(listing: dict) -> str | None:
         parts.append(f"{vt} as {b['equation']} ({b['mass_kg']:g} kg"
                      + (f"; SUMO's defaults {d}" if d else "") + ")")
     left = [vt for vt, w in nb.items() if w == "writes no Energy-model parameter"]
+    radial = sorted(vt for vt, b in booked.items() if b.get("radial_drag"))
     return ("vTypes with SUMO's Energy model were booked by their own parameters as a battery "
             "chain (vtype_energy): " + "; ".join(parts)
             + (f"; Energy vTypes without parameters not booked by it: {', '.join(sorted(left))}" if left else "")
+            + (f"; the radial drag in curves of {', '.join(radial)} booked per step as SUMO books it, so it "
+               "grows as the step shortens (×10 from 1 s to 0.1 s)" if radial else "")
             + " (summary.json assumptions.vtype_energy: what it cannot express, and the radial drag "
             "in curves, which SUMO books per step)")
 
