@@ -37,8 +37,8 @@ def yaw_rate(prev_deg: np.ndarray, angle_deg: np.ndarray, dt: float) -> np.ndarr
     """The yaw rate [rad/s] of a step: the change of SUMO's vehicle angle [deg] since the
     last step, the short way round (GeomHelper::angleDiff), over Δt [s]; 0 where there is no
     last angle (NaN: first seen, back from a teleport). It is the angle change SUMO's Energy
-    model reads for its radial drag (probed with SUMO 1.28.0, 2026-11-27: on a 50-m arc at
-    21.2 m/s its emission output's electricity rose by radialDragCoefficient·m·v·|Δψ|/Δt
+    model reads for its radial drag (probed with SUMO 1.28.0, 2026-11-27: on a 90° arc of 50 m
+    radius at 21.2 m/s its emission output's electricity rose by radialDragCoefficient·m·v·|Δψ|/Δt
     per step to 1e-9, Δψ the FCD angles' change in rad, at Δt 1, 0.5 and 0.25 s). Not
     reproduced: SUMO caps the radius v·Δt/|Δψ| at 10 km, so a change below v·Δt/10⁴ rad
     books as that radius (on Doerpfeldstr, 352 EVs over 600 s at radialDragCoefficient 0.5:

@@ -230,8 +230,7 @@ def listing_warning(listing: dict) -> str | None:
             + (f"; Energy vTypes without parameters not booked by it: {', '.join(sorted(left))}" if left else "")
             + (f"; the radial drag in curves of {', '.join(radial)} booked per step as SUMO books it, so it "
                "grows as the step shortens (×10 from 1 s to 0.1 s)" if radial else "")
-            + " (summary.json assumptions.vtype_energy: what it cannot express, and the radial drag "
-            "in curves, which SUMO books per step)")
+            + " (summary.json assumptions.vtype_energy: what it books and cannot express)")
 
 
 def expand(equations: list, file_vtypes, sc, step_s: float | None = None) -> tuple[list, dict]:
