@@ -232,7 +232,9 @@ def test_a_tabular_fcd_takes_the_files_of_the_config_that_writes_it(recorded, tm
     """SUMO's Parquet and CSV outputs carry no header. When the SUMO config beside the FCD
     (or one folder up) writes it (its fcd-output is this file), fcd takes that config's
     network and route files, says so, and books the trucks as trucks (before: 'give --net',
-    and with --net every vType a passenger car). Two configs naming it: none is guessed."""
+    and with --net every vType a passenger car). Two configs naming it: none is guessed. None
+    naming it (SUMO given --fcd-output on its command line): the refusal offers the config
+    beside it as --scenario."""
     import sumolib
 
     d = tmp_path / "study"
@@ -252,6 +254,17 @@ def test_a_tabular_fcd_takes_the_files_of_the_config_that_writes_it(recorded, tm
     (d / "scen" / "copy.sumocfg").write_text(cfg)  # a second config naming it: ambiguous
     assert cli_main(["fcd", str(d / "scen" / "fcd.parquet"), "--no-figures", "--out", "o2"]) == 2
     assert "give --net" in capsys.readouterr().err
+    # written by an --fcd-output on SUMO's command line: no config names it; the one beside
+    # it is offered in the one line, and with it the run books as above
+    (d / "scen" / "copy.sumocfg").unlink()
+    (d / "scen" / "fcd.parquet").rename(d / "scen" / "cmdline.parquet")
+    assert cli_main(["fcd", str(d / "scen" / "cmdline.parquet"), "--no-figures", "--out", "o3"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"if it ran it, --scenario {d / 'scen' / 'run.sumocfg'}" in err
+    assert cli_main(["fcd", str(d / "scen" / "cmdline.parquet"), "--scenario", str(d / "scen" / "run.sumocfg"),
+                     "--no-figures", "--out", "o3"]) == 0
+    v = pd.read_parquet(tmp_path / "o3" / "vehicles.parquet")
+    assert set(v[v.vtype == "lorry"].vclass) == {"truck"}
 
 
 @pytest.mark.sumo

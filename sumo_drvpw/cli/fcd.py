@@ -59,7 +59,14 @@ def main(args: argparse.Namespace) -> int:
     if args.scenario is None and (args.net is None or args.vtypes is None):
         _recorded_inputs(args)
     if args.scenario is None and args.net is None:
-        raise UserError("give --net (the network of the FCD) or --scenario")
+        from sumo_drvpw.sim.fcd_read import configs_beside, fcd_parts
+
+        cfgs = [] if fcd_parts(args.fcd) else configs_beside(args.fcd)
+        raise UserError("give --net (the network of the FCD) or --scenario" + (
+            f"; no SUMO config beside {args.fcd} writes it ({', '.join(c.name for c in cfgs[:3])}"
+            f"{', …' if len(cfgs) > 3 else ''}: an --fcd-output on SUMO's command line?): "
+            + (f"if it ran it, --scenario {cfgs[0]}" if len(cfgs) == 1 else "if one of them ran it, --scenario it")
+            if cfgs else ""))
     replaced = bool(args.equation)  # the user's equations replace the scenario's
     if args.scenario is None and not args.equation:  # as `run X.sumocfg` does
         from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS

@@ -498,6 +498,13 @@ def recorded_inputs(path, head: dict[str, str] | None = None, cwd=None) -> dict 
 CONFIGS_LOOKED_AT = 50
 
 
+def configs_beside(path) -> list[Path]:
+    """The SUMO configs (``*.sumocfg``) in an FCD's folder and the one above it, at most
+    :data:`CONFIGS_LOOKED_AT`."""
+    fcd = Path(path).resolve()
+    return [*sorted(fcd.parent.glob("*.sumocfg")), *sorted(fcd.parent.parent.glob("*.sumocfg"))][:CONFIGS_LOOKED_AT]
+
+
 def configured_inputs(path) -> dict | None:
     """For an FCD without SUMO's header (Parquet, CSV, or XML another tool wrote): the
     network, route and additional files of the one SUMO config (``*.sumocfg`` in the FCD's
@@ -511,7 +518,7 @@ def configured_inputs(path) -> dict | None:
         return None
     fcd = p.resolve()
     found = []
-    for cfg in [*sorted(fcd.parent.glob("*.sumocfg")), *sorted(fcd.parent.parent.glob("*.sumocfg"))][:CONFIGS_LOOKED_AT]:
+    for cfg in configs_beside(fcd):
         try:
             net, files, vals = _config_files(cfg)
         except UserError:
