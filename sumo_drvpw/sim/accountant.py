@@ -156,8 +156,10 @@ class Accountant(_Listener):
                 self.equations.append(eq)
                 names.append(eq.name)
         # vtype_energy: the vTypes' own Energy-model parameters, one equation per vType
+        # (SUMO books its radial drag per step: a replay's recording's step, not its rows' interval)
         self.equations, self.vtype_energy = expand_vtype_energy(
-            self.equations, self.file_vtypes, sc, float(conn.simulation.getDeltaT()))
+            self.equations, self.file_vtypes, sc,
+            getattr(conn, "recorded_step_s", None) or float(conn.simulation.getDeltaT()))
         self.names = names = [e.name for e in self.equations]
         self.net = net if net is not None else load_network(
             sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)

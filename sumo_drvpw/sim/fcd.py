@@ -418,6 +418,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     replay.options = {"step-method.ballistic": str(method == "ballistic").lower()}
+    replay.recorded_step_s = recorded_step(head)  # (the radial drag of vtype_energy: per step of it)
     acc = Accountant(replay, scenario=sc,
                      trace_path=Path(out_dir) / "trace.parquet" if sc.trace and out_dir else None,
                      spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,
@@ -452,9 +453,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
             return acc, extra
         warn = lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning
         if replay.no_angle and acc.eqset.uses_yaw:
-            warn.append(f"FCD file {fcd_file} has no angle column (fcd-output.attributes without angle): "
-                        "the radial drag in curves (the factor radial, SUMO's radialDragCoefficient) is "
-                        "booked as 0")
+            warn.append(no_angle_warning(fcd_file))
         if warn:
             extra["warnings"] = warn
         result = acc.result(extra)
@@ -534,6 +533,12 @@ def row_interval(sc, fcd_file, head: dict | None) -> tuple[float | None, list[st
     why = f"step-length {step:g} s" + (f", device.fcd.period {period:g} s" if period > step else "")
     return dt, [f"FCD {Path(fcd_file).name}: its rows are {dt:g} s apart (its header: {why}); each is booked "
                 f"over {dt:g} s, not the scenario's step length of {sc.step_length:g} s"]
+
+
+def no_angle_warning(fcd_file) -> str:
+    """What a replay of an FCD without angles, for an equation with the factor ``radial``, says."""
+    return (f"FCD file {fcd_file} has no angle column (fcd-output.attributes without angle): the radial "
+            "drag in curves (the factor radial, SUMO's radialDragCoefficient) is booked as 0")
 
 
 def lane_warnings(fcd_file, net_file, unknown: int, known: int, first) -> list[str]:

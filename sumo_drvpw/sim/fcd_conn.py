@@ -138,6 +138,9 @@ class _Rows:
         self.count_persons = True
         #: a timestep with vehicles but no angle column (no yaw rate for the radial factor)
         self.no_angle = False
+        #: the step length [s] of the run that recorded the FCD (its header; set by replay_fcd,
+        #: None: unknown): SUMO booked its radial drag per step of it, whatever the rows' interval
+        self.recorded_step_s = None
         #: vehicle rows on a lane of the network, on a lane it lacks, and the first of
         #: those (lane, time) (with the column ``lane_ok`` of ParkedTest.mark)
         self.lane_rows, self.unknown_rows, self.first_unknown = 0, 0, None

@@ -76,7 +76,7 @@ def bucket_task(sc, fcd_file: str, part_dir: str, b: int, buckets: int, begin_s=
             "end": acc.stepper.now(), "dt": acc.stepper.dt, "missed_steps": acc.stepper.missed_steps,
             "interrupted": acc.interrupted, "skipped": r.skipped, "excluded": r.excluded,
             "assumptions": r.assumptions, "sumo_masses": r.sumo_masses, "seen_vtypes": list(r.cache),
-            "lanes": acc.fcd_lanes,
+            "lanes": acc.fcd_lanes, "no_angle": bool(acc.conn.no_angle and acc.eqset.uses_yaw),
             "shutoff": acc.stepper.shutoff.summary() if acc.stepper.shutoff is not None else None}
 
 
@@ -154,7 +154,8 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     ``out_dir`` (required: the workers write their parts there) and returns the RunResult."""
     from sumo_drvpw.fit.engine import dask_client, guarded, unguarded
     from sumo_drvpw.sim.accountant import Accountant
-    from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario, lane_warnings, recorded_device_options
+    from sumo_drvpw.sim.fcd import (FcdStream, fcd_scenario, lane_warnings, no_angle_warning,
+                                    recorded_device_options, recorded_step)
     from sumo_drvpw.sim.fcd_read import fcd_parts, header_options
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import VehicleSpill, write_published
@@ -190,9 +191,12 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
         warn = lane_warnings(spec, sc.net_file, sum(d["lanes"][0] for d in done),
                              sum(d["lanes"][1] for d in done),
                              min(firsts, key=lambda x: x[1]) if firsts else None)
+        if any(d["no_angle"] for d in done):
+            warn.append(no_angle_warning(spec))
         # the driver's own accountant (no rows) carries the scenario, network and resolver
         first = done[0]
         replay = FcdStream(iter(()), dt=first["dt"], label=spec)
+        replay.recorded_step_s = recorded_step(header_options(spec))  # as the buckets' (vtype_energy's radial drag)
         acc = Accountant(replay, scenario=sc, keep_vehicles=True)
         spill = VehicleSpill(acc.names, [e.predicts for e in acc.equations], None)
         for d in done:
