@@ -253,7 +253,9 @@ def test_a_tabular_fcd_takes_the_files_of_the_config_that_writes_it(recorded, tm
     assert set(v[v.vtype == "lorry"].vclass) == {"truck"} and set(v[v.vtype == "lorry"].mass_kg) == {12000.0}
     (d / "scen" / "copy.sumocfg").write_text(cfg)  # a second config naming it: ambiguous
     assert cli_main(["fcd", str(d / "scen" / "fcd.parquet"), "--no-figures", "--out", "o2"]) == 2
-    assert "give --net" in capsys.readouterr().err
+    err = capsys.readouterr().err  # both named, none said not to write it
+    assert "give --net" in err and "write it (copy.sumocfg, run.sumocfg): --scenario the one that ran it" in err
+    assert "no SUMO config" not in err
     # written by an --fcd-output on SUMO's command line: no config names it; the one beside
     # it is offered in the one line, and with it the run books as above
     (d / "scen" / "copy.sumocfg").unlink()
@@ -301,3 +303,21 @@ def test_an_fcd_the_plugin_recorded_names_its_additional_files_not_their_copies(
     got = recorded_inputs(fcd)
     assert got["missing"] == [] and (d / "scen" / "stops.add.xml").resolve() in got["files"]
     assert got["net"] == (d / "nets" / "city.net.xml").resolve()
+
+
+@pytest.mark.sumo
+def test_an_fcd_with_a_header_whose_network_is_gone_is_not_said_to_lack_a_config(recorded, tmp_path, monkeypatch,
+                                                                                 capsys):
+    """An XML FCD with SUMO's header, moved away from the network it names, beside a config
+    that writes it: the refusal asks for --net in one line and does not say that no config
+    beside it writes it (before: "no SUMO config beside … writes it … an --fcd-output on
+    SUMO's command line?", the offer meant for a header-less FCD)."""
+    d = tmp_path / "moved"
+    d.mkdir()
+    shutil.copy(recorded / "out" / "fcd.xml", d / "fcd.xml")
+    (d / "run.sumocfg").write_text(CONFIG.replace("</input>", '</input><output><fcd-output value="fcd.xml"/></output>'))
+    monkeypatch.chdir(tmp_path)
+    assert cli_main(["fcd", str(d / "fcd.xml"), "--no-figures", "--out", "o"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "give --net" in err and len(err.splitlines()) == 1
+    assert "no SUMO config" not in err

@@ -59,12 +59,19 @@ def main(args: argparse.Namespace) -> int:
     if args.scenario is None and (args.net is None or args.vtypes is None):
         _recorded_inputs(args)
     if args.scenario is None and args.net is None:
-        from sumo_drvpw.sim.fcd_read import configs_beside, fcd_parts
+        from pathlib import Path
 
-        cfgs = [] if fcd_parts(args.fcd) else configs_beside(args.fcd)
+        from sumo_drvpw.sim.fcd_read import configs_beside, configs_writing, fcd_parts, header_options
+
+        # a header-less FCD (Parquet, CSV): the SUMO configs beside it that may have run it
+        bare = Path(args.fcd).is_file() and not fcd_parts(args.fcd) and header_options(args.fcd) is None
+        writers = [c for c, _, _ in configs_writing(args.fcd)] if bare else []
+        cfgs = configs_beside(args.fcd) if bare and not writers else []
+        names = ", ".join(c.name for c in (writers or cfgs)[:3]) + (", …" if len(writers or cfgs) > 3 else "")
         raise UserError("give --net (the network of the FCD) or --scenario" + (
-            f"; no SUMO config beside {args.fcd} writes it ({', '.join(c.name for c in cfgs[:3])}"
-            f"{', …' if len(cfgs) > 3 else ''}: an --fcd-output on SUMO's command line?): "
+            f"; SUMO configs beside {args.fcd} write it ({names}): --scenario the one that ran it"
+            if len(writers) > 1 else
+            f"; no SUMO config beside {args.fcd} writes it ({names}: an --fcd-output on SUMO's command line?): "
             + (f"if it ran it, --scenario {cfgs[0]}" if len(cfgs) == 1 else "if one of them ran it, --scenario it")
             if cfgs else ""))
     replaced = bool(args.equation)  # the user's equations replace the scenario's

@@ -505,17 +505,14 @@ def configs_beside(path) -> list[Path]:
     return [*sorted(fcd.parent.glob("*.sumocfg")), *sorted(fcd.parent.parent.glob("*.sumocfg"))][:CONFIGS_LOOKED_AT]
 
 
-def configured_inputs(path) -> dict | None:
-    """For an FCD without SUMO's header (Parquet, CSV, or XML another tool wrote): the
-    network, route and additional files of the one SUMO config (``*.sumocfg`` in the FCD's
-    folder or the one above it) whose ``fcd-output`` is this file, as
-    :func:`recorded_inputs` returns them (plus ``"config"``); None when no config, or more
-    than one, names it (a run given ``--fcd-output`` on its command line names it nowhere)."""
+def configs_writing(path) -> list[tuple[Path, Path, list[Path]]]:
+    """The SUMO configs beside an FCD file (:func:`configs_beside`) whose ``fcd-output`` is
+    this file, each as (config, its network, its route and additional files)."""
     from sumo_drvpw.sim.scenario import _config_files
 
     p = Path(path)
     if fcd_parts(path) or not p.is_file():
-        return None
+        return []
     fcd = p.resolve()
     found = []
     for cfg in configs_beside(fcd):
@@ -526,6 +523,16 @@ def configured_inputs(path) -> dict | None:
         out = vals.get("fcd-output", "").strip()
         if out and (cfg.parent / out).resolve() == fcd:
             found.append((cfg, net, files))
+    return found
+
+
+def configured_inputs(path) -> dict | None:
+    """For an FCD without SUMO's header (Parquet, CSV, or XML another tool wrote): the
+    network, route and additional files of the one SUMO config (``*.sumocfg`` in the FCD's
+    folder or the one above it) whose ``fcd-output`` is this file, as
+    :func:`recorded_inputs` returns them (plus ``"config"``); None when no config, or more
+    than one, names it (a run given ``--fcd-output`` on its command line names it nowhere)."""
+    found = configs_writing(path)
     if len(found) != 1:
         return None
     cfg, net, files = found[0]
