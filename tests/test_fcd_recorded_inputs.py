@@ -283,25 +283,30 @@ def test_process_fcd_finds_the_runs_files_as_the_command_does(recorded, tmp_path
 
 
 @pytest.mark.sumo
-def test_an_fcd_the_plugin_recorded_names_its_additional_files_not_their_copies(recorded, tmp_path):
+@pytest.mark.parametrize("gz", [False, True])
+def test_an_fcd_the_plugin_recorded_names_its_additional_files_not_their_copies(recorded, tmp_path, gz):
     """``sumo-drvpw run`` loads copies of the additional files that declare outputs (their
     outputs sent into OUT/sumo/), from a temporary folder gone after the run; an FCD the run
     records names those copies. The replay takes the originals, beside the run's other
-    files (before: listed as missing, with "give --vtypes")."""
+    files (before: listed as missing, with "give --vtypes"); a gzipped one too (its copy
+    is written plain, without the .gz: before, listed as missing)."""
+    import gzip
+
     from sumo_drvpw.sim import run_scenario
 
     d = recorded
-    (d / "scen" / "stops.add.xml").write_text(
-        '<additional><vType id="van" vClass="delivery" mass="2500"/>'
-        '<edgeData id="ed" file="ed.xml" period="30"/></additional>')
+    name = "zipped.add.xml.gz" if gz else "stops.add.xml"  # (the study is shared by the module)
+    text = ('<additional><vType id="van" vClass="delivery" mass="2500"/>'
+            '<edgeData id="ed" file="ed.xml" period="30"/></additional>')
+    (d / "scen" / name).write_bytes(gzip.compress(text.encode()) if gz else text.encode())
     (d / "scen" / "addrun.sumocfg").write_text(CONFIG.replace(
-        "</input>", '<additional-files value="stops.add.xml"/></input>'))
+        "</input>", f'<additional-files value="{name}"/></input>'))
     fcd = tmp_path / "fcd.xml"
     run_scenario(d / "scen" / "addrun.sumocfg", tmp_path / "o", figures=False, progress=False,
                  end=30, options=["--fcd-output", str(fcd)])
     assert (tmp_path / "o" / "sumo" / "ed.xml").is_file() and not (d / "scen" / "ed.xml").exists()
     got = recorded_inputs(fcd)
-    assert got["missing"] == [] and (d / "scen" / "stops.add.xml").resolve() in got["files"]
+    assert got["missing"] == [] and (d / "scen" / name).resolve() in got["files"]
     assert got["net"] == (d / "nets" / "city.net.xml").resolve()
 
 

@@ -484,7 +484,8 @@ def recorded_inputs(path, head: dict[str, str] | None = None, cwd=None) -> dict 
     net, files, missing = None, [], []
     for key, v, p in got:
         name = original_of_copy(v) if p is None else None
-        p = p or next(((d / name).resolve() for d in homes if name and (d / name).is_file()), None)
+        names = (name, name + ".gz") if name else ()  # (the copy of x.add.xml.gz is N.x.add.xml)
+        p = p or next(((d / n).resolve() for d in homes for n in names if (d / n).is_file()), None)
         if p is None:
             missing.append((key, v))
         elif key == "net-file":
