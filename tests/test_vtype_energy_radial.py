@@ -164,8 +164,8 @@ def test_vtype_energy_books_sumos_radial_drag(tmp_path, dt):
         assert c["vtype_energy.ecar"] < a["vtype_energy.ecar"] * 0.97
 
 
-def _curvy_log(path, mu=0.02, seed=0, deg=False):
-    """A 10-Hz log of 40 min: speed 5–25 m/s, curves of 40–400 m radius either way
+def _curvy_log(path, mu=0.02, seed=0, deg=False, gentle=False):
+    """A 10-Hz log of 40 min: speed 5–25 m/s, curves of 80–400 m radius (``gentle``: 400–800 m) either way
     between straights, and the driving power of a 1500-kg car with a cornering drag
     μ·m·v²·|ω| planted (μ = ``mu``), plus noise of 150 W."""
     rng = np.random.default_rng(seed)
@@ -173,9 +173,9 @@ def _curvy_log(path, mu=0.02, seed=0, deg=False):
     v = 15.0 + 8.0 * np.sin(2 * np.pi * t / 300.0) + 2.0 * np.sin(2 * np.pi * t / 47.0)
     a = 8.0 * 2 * np.pi / 300.0 * np.cos(2 * np.pi * t / 300.0) + 2.0 * 2 * np.pi / 47.0 * np.cos(2 * np.pi * t / 47.0)
     seg = (t // 20.0).astype(int)  # 20-s pieces: a straight or a curve of one radius
-    r = rng.choice([np.inf, 40.0, 80.0, 150.0, 400.0], size=seg.max() + 1)
+    r = rng.choice([np.inf, 80.0, 150.0, 400.0] if not gentle else [np.inf, 400.0, 800.0], size=seg.max() + 1)
     sign = rng.choice([-1.0, 1.0], size=seg.max() + 1)
-    yaw = sign[seg] * v / r[seg]
+    yaw = sign[seg] * v / r[seg]  # at most 25²/80 = 7.8 m/s² of lateral acceleration
     m = 1500.0
     p = 1.05 * m * v * a + 0.32 * v ** 3 + 0.011 * m * 9.81 * v + mu * m * v ** 2 * np.abs(yaw)
     df = pd.DataFrame({"time_s": t, "speed_mps": v, "power_w": p + rng.normal(0.0, 150.0, len(t)),
@@ -212,10 +212,17 @@ def test_a_planted_cornering_drag_is_calibrated_from_a_logs_yaw_rate(tmp_path):
     _curvy_log(tmp_path / "deg.csv", deg=True)
     with pytest.raises(UserError, match=r"column 'yaw_rate_rps' is .* at row \d+, outside \[-10, 10\] rad/s"):
         load_measured([tmp_path / "deg.csv"])
+    # gentle curves in deg/s stay within ±10 (at most 3.6 °/s), but no tyre carries 57× their grip
+    _curvy_log(tmp_path / "gentle.csv", deg=True, gentle=True)
+    with pytest.raises(UserError, match=r"column 'yaw_rate_rps' gives a lateral acceleration .* at row \d+, "
+                                        r"above 12 m/s².*in deg/s\?"):
+        load_measured([tmp_path / "gentle.csv"])
+    _curvy_log(tmp_path / "gentle_rad.csv", gentle=True)
+    assert load_measured([tmp_path / "gentle_rad.csv"]).usable.any()
 
 
 def _curvy_trips(mu, n_trips=12, n=1500, seed=3, yaw=True):
-    """Synthetic trips (0.5-s samples) through curves of 40–400 m radius either way, no
+    """Synthetic trips (0.5-s samples) through curves of 80–400 m radius either way, no
     temperature logged; truth 1.1·m·v·a + m·g·v·sin θ + 0.35·v³ + 0.012·m·g·v·cos θ +
     μ·m·v²·|ω|, noise 300 W."""
     from sumo_drvpw.model.constants import G
@@ -226,7 +233,7 @@ def _curvy_trips(mu, n_trips=12, n=1500, seed=3, yaw=True):
         t = np.arange(n) * 0.5
         v = np.clip(12 + 6 * np.sin(t / 45.0 + i) + np.cumsum(rng.normal(0, 0.05, n)), 1.0, 30.0)
         seg = (t // (10.0 + i)).astype(int)
-        r = rng.choice([np.inf, np.inf, 40.0, 80.0, 150.0, 400.0], size=seg.max() + 1)
+        r = rng.choice([np.inf, np.inf, 80.0, 150.0, 400.0], size=seg.max() + 1)  # ≤ 30²/80 m/s²
         w = rng.choice([-1.0, 1.0], size=seg.max() + 1)[seg] * v / r[seg]
         th = 0.02 * np.sin(t / (60.0 + 7 * i) + i)
         parts.append((v, np.gradient(v, 0.5), th, w, np.full(n, f"T{i:02d}")))

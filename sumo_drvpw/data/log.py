@@ -50,6 +50,9 @@ RANGES = {
     "airspeed_mps": (-50.0, 150.0, "m/s", "air speed in m/s"),
     "yaw_rate_rps": (-10.0, 10.0, "rad/s", "yaw rate in rad/s (in deg/s? multiply by π/180)"),
 }
+#: the largest lateral acceleration v·|ω| a yaw rate may give on more than 1 % of a log's
+#: rows [m/s²]: about 1.2 g, beyond a road tyre's grip (a yaw rate in deg/s gives 57× its own)
+LATERAL_MAX_MPS2 = 12.0
 #: Bundled demo log (package data): a synthetic Prius3 test-track log, see its README.
 BUNDLED_LOG = "prius3_testtrack.parquet"
 GRADE_MAX_RAD = 0.6
@@ -330,6 +333,14 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
                                 + (f"of the {int(bad.sum() + ok.sum())} values read with it, {int(bad.sum())} are outside ({', '.join(f'{u:g}' for u in np.unique(x[bad])[:4])}"
                                    f"), the rest in [{x[ok].min():g}, {x[ok].max():g}]: a logger's glitch or 'no reading' "
                                    "value? read them as missing (the import columns mapping's na_values)" if few else hint))
+    if "yaw_rate_rps" in df:  # in deg/s a gentle curve's yaw rate passes the range: the tyres' grip tells
+        a_lat = np.abs(v * df["yaw_rate_rps"].to_numpy(float, na_value=np.nan))
+        high = a_lat > LATERAL_MAX_MPS2
+        if high.sum() > 0.01 * np.isfinite(a_lat).sum():
+            i = int(np.flatnonzero(high)[0])
+            raise UserError(f"{p}: column 'yaw_rate_rps' gives a lateral acceleration v·|ω| of {a_lat[i]:.3g} m/s² "
+                            f"at row {i}, above {LATERAL_MAX_MPS2:g} m/s² (more than tyres carry) on "
+                            f"{int(high.sum())} rows: a yaw rate in deg/s? multiply by π/180")
     t = df["time_s"].to_numpy(float)
     trip = trip_codes_of(df["trip_id"])  # integer codes: neighbour comparisons without strings
     same = trip[1:] == trip[:-1]
