@@ -168,7 +168,7 @@ def test_defaults_are_sumos_own():
     assert {k for k, d in model.items() if d["from"] == "SUMO default"} == {
         "mass", "frontSurfaceArea", "rotatingMass", "radialDragCoefficient", "rollDragCoefficient",
         "constantPowerIntake", "propulsionEfficiency", "recuperationEfficiency",
-        "recuperationEfficiencyByDeceleration"}
+        "recuperationEfficiencyByDecel"}
 
 
 EV_ROUTES = """<routes>
@@ -234,7 +234,7 @@ def test_vtype_energy_agrees_with_sumos_device(tmp_path):
     ve = res["assumptions"]["vtype_energy"]
     assert set(ve["booked"]) == {"ebus", "ecar"}
     assert ve["booked"]["ecar"]["mass_kg"] == 1830.0 and ve["booked"]["ebus"]["defaults"] == {
-        "recuperationEfficiencyByDeceleration": 0.0}
+        "recuperationEfficiencyByDecel": 0.0}
     assert ve["booked"]["ebus"]["radial_drag"].startswith("radialDragCoefficient 0.5 booked")
     assert ve["not_booked"] == {"plain": "writes no Energy-model parameter",
                                 "petrol": "emissionClass HBEFA4/PC_petrol_Euro-6ab is not SUMO's Energy model"}

@@ -43,7 +43,8 @@ of sumo.dlr.de/docs/Models/Electric.html): mass 1830 kg (``SUMO_ATTR_MASS`` = 18
 ``Energy/`` class, whatever the vClass), frontSurfaceArea 2.6 m², airDragCoefficient 0.35,
 rotatingMass 40 kg, radialDragCoefficient 0.1, rollDragCoefficient 0.01,
 constantPowerIntake 100 W, propulsionEfficiency 0.98, recuperationEfficiency 0.96,
-recuperationEfficiencyByDeceleration 0; the deprecated ``internalMomentOfInertia`` is
+recuperationEfficiencyByDecel 0 (SUMO's key, SUMOXMLDefinitions.cpp; SUMO 1.28 ignores a
+longer ``recuperationEfficiencyByDeceleration``, and so does this); the deprecated ``internalMomentOfInertia`` is
 read as rotatingMass when that is not given (the same file: "Use 'rotatingMass'
 instead"). Each value was checked against SUMO 1.28.0 itself (libsumo,
 getElectricityConsumption at set speeds, one parameter left out at a time; tests/
@@ -73,13 +74,13 @@ SUMO_DEFAULTS = {
     "mass": 1830.0, "frontSurfaceArea": 2.6, "airDragCoefficient": 0.35, "rotatingMass": 40.0,
     "radialDragCoefficient": 0.1, "rollDragCoefficient": 0.01, "constantPowerIntake": 100.0,
     "propulsionEfficiency": 0.98, "recuperationEfficiency": 0.96,
-    "recuperationEfficiencyByDeceleration": 0.0,
+    "recuperationEfficiencyByDecel": 0.0,
 }
 #: the vType params SUMO's Energy model reads (besides the ``mass`` attribute and ``loading``)
 ENERGY_PARAMS = ("vehicleMass", "frontSurfaceArea", "airDragCoefficient", "rotatingMass",
                  "internalMomentOfInertia", "radialDragCoefficient", "rollDragCoefficient",
                  "constantPowerIntake", "propulsionEfficiency", "recuperationEfficiency",
-                 "recuperationEfficiencyByDeceleration")
+                 "recuperationEfficiencyByDecel")
 #: params that must lie in (0, 1]
 _EFFICIENCIES = ("propulsionEfficiency", "recuperationEfficiency")
 
@@ -177,8 +178,8 @@ def energy_params_equation(name: str, params: Mapping, mass_kg: float | None = N
     if c_rad and not step_s:
         notes.append(f"radialDragCoefficient {c_rad:g} ({val['radialDragCoefficient'][1]}): SUMO books "
                      "its drag in curves per step, and the step length is not known here: not booked")
-    if f["recuperationEfficiencyByDeceleration"]:
-        notes.append(f"recuperationEfficiencyByDeceleration {f['recuperationEfficiencyByDeceleration']:g}: "
+    if f["recuperationEfficiencyByDecel"]:
+        notes.append(f"recuperationEfficiencyByDecel {f['recuperationEfficiencyByDecel']:g}: "
                      "SUMO scales recuperation by exp(−k/|a|), the chain's efficiency is constant")
     if params.get("maximumPower") is not None:
         notes.append("maximumPower: SUMO's Energy model does not cap the power with it either")
