@@ -80,7 +80,9 @@ def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
             raise UserError(f"sumo.gui: cannot reach the display DISPLAY={display!r} (no X server "
                             "answers there); run without the GUI, or where a display is")
     binary = sumolib.checkBinary("sumo-gui" if gui else "sumo")
-    cmd = [binary, *args, "--no-step-log", "true"]
+    cmd = [binary, *args]
+    if not any(a == "--no-step-log" or a.startswith("--no-step-log=") for a in args):
+        cmd += ["--no-step-log", "true"]  # given twice, SUMO refuses to start (its own tests give it)
     if connection == "libsumo":
         if gui:
             raise UserError("sumo.gui needs connection = 'traci'")
