@@ -324,8 +324,8 @@ BATTERY_NOTE = ("model difference, not a booking one: SUMO's Energy model takes 
 OWN_PARAMS_NOTE = ("like for like: the vType's own Energy-model parameters (SUMO's defaults for those it "
                    "leaves out) as terms and a battery chain, its radial drag in curves as SUMO books it "
                    "per step; left out: a recuperation efficiency by deceleration; the slopes' source "
-                   "differs on grade changes, and SUMO's emissions device books one step more than its own "
-                   "emission output, the step a vehicle arrives in (docs/scenario.md) "
+                   "differs on grade changes, and SUMO's emissions device books a trip's last steps otherwise "
+                   "than its own emission output (a few % of a short trip, docs/scenario.md) "
                    "(summary.json assumptions.vtype_energy)")
 
 #: what the row of an equation without an energy chain compares (an electric bus: no battery
