@@ -346,7 +346,7 @@ class Accountant(_Listener):
         skipped = {c: n for c, n in self.resolver.skipped["by_vclass"].items() if c != "pedestrian"}
         if skipped:
             generic = sorted(c for c in skipped if c in GENERIC_VCLASSES)
-            warnings.append("vehicles of vClasses no equation is made for were not booked: "
+            warnings.append("vehicles of vClasses none of the run's equations is made for were not booked: "
                             + ", ".join(f"{c} {n}" for c, n in sorted(skipped.items()))
                             + (f" (vClass {', '.join(generic)} says what a vehicle may use, not "
                                "what it is, and their vTypes' emissionClass, guiShape and id name no "
