@@ -17,9 +17,10 @@ HW_NET = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml
 
 
 @pytest.mark.parametrize("opts", [["--no-step-log"], ["--no-step-log", "true", "--no-duration-log"],
-                                  ["--no-step-log=true"]])
+                                  ["--no-step-log=true"], ["--remote-port=0"]])
 def test_a_scenario_may_give_no_step_log_itself(tmp_path, opts):
-    """The options as SUMO's tests write them run, and book the car as without them."""
+    """The options as SUMO's tests write them run, and book the car as without them; so does
+    --remote-port=0 (the plug-in adds --remote-port 0 in-process unless it is given)."""
     (tmp_path / "r.rou.xml").write_text(
         '<routes><vehicle id="v" depart="0" departSpeed="max"><route edges="e01 e12"/></vehicle></routes>')
     q = ", ".join(f'"{o}"' for o in opts)

@@ -88,7 +88,7 @@ def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
             raise UserError("sumo.gui needs connection = 'traci'")
         import libsumo
 
-        if "--remote-port" not in args:
+        if not any(a == "--remote-port" or a.startswith("--remote-port=") for a in args):
             # a config written for TraCI scripts may set remote-port (sumo-rl's OW-traci.sumocfg:
             # 8813): SUMO would then wait for a client that never comes; in-process, none is needed
             cmd += ["--remote-port", "0"]
