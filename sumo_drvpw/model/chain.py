@@ -9,6 +9,8 @@ chain turns it into what a user pays for::
     traction_efficiency = 0.90        # η_t (0, 1]; or a table, see below
     recuperation_efficiency = 0.75    # η_r (0, 1]
     recuperation_limit_w = 40000      # optional: braking power beyond it goes to the friction brakes [W]
+    recuperation_by_decel_mps2 = 0    # optional: SUMO's recuperationEfficiencyByDecel k: recuperation
+                                      #   × exp(−k/|a|) (a ≠ 0; the acceleration a from the SUMO loop or a log)
     aux_power_w = 300                 # constant auxiliary power P_aux,0 ≥ 0 [W]
     standstill_aux_w = 0              # optional: auxiliary power while standing (v < 0.1 m/s) minus that while
                                       #   moving [W]; aux_power_w + standstill_aux_w ≥ 0 (negative: drawn only
@@ -94,7 +96,7 @@ from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
 PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 #: keys of the [chain] table, besides sub-tables loads, hvac and efficiency tables
 KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
-        "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
+        "recuperation_by_decel_mps2", "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
         "engine_off_below_w", "engine_on_above_mps", "fuel_cut_below_w", "fuel", "battery_to_fuel",
         "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "running_fuel_per_k",
         "std_err", "reading", "provenance", "metrics")
@@ -205,6 +207,7 @@ class EnergyChain:
     traction_efficiency: Efficiency = 1.0
     recuperation_efficiency: Efficiency = 1.0
     recuperation_limit_w: float | None = None
+    recuperation_by_decel_mps2: float = 0.0
     aux_power_w: float = 0.0
     standstill_aux_w: float = 0.0
     loads: dict[str, float] = field(default_factory=dict)
@@ -239,10 +242,14 @@ class EnergyChain:
             s.add(self.temperature_column)
         return s
 
-    def target_power(self, p_drive_w, v_mps, signals: dict | None = None, battery_w=None) -> np.ndarray:
+    def target_power(self, p_drive_w, v_mps, signals: dict | None = None, battery_w=None,
+                     accel=None) -> np.ndarray:
         """The chain's prediction in the form its measurement takes [W]: battery power, or
         fuel power less k·P_bat when the hybrid battery's V·I ``battery_w`` is given (so a
-        state-of-charge swing is not a fuel error; k = :attr:`battery_fuel_factor`)."""
+        state-of-charge swing is not a fuel error; k = :attr:`battery_fuel_factor`).
+        ``accel``: the acceleration [m/s²] a recuperation by deceleration reads."""
+        if accel is not None and self.recuperation_by_decel_mps2:
+            signals = {**(signals or {}), "accel_mps2": accel}
         pred = self.evaluate(p_drive_w, v_mps, signals=signals)["power_w"]
         if self.predicts == "fuel" and battery_w is not None:
             pred = pred - self.battery_fuel_factor * np.asarray(battery_w, float)
@@ -336,6 +343,12 @@ class EnergyChain:
             rec_mech = neg
         trac = pos / _eval(self.traction_efficiency, v, p)
         rec = _eval(self.recuperation_efficiency, v, p) * rec_mech
+        if self.recuperation_by_decel_mps2:  # SUMO's exp(−k/|a|) where a ≠ 0
+            a = (signals or {}).get("accel_mps2")
+            if a is None:
+                raise UserError("chain: recuperation_by_decel_mps2 needs the acceleration (signal accel_mps2)")
+            a = np.abs(np.asarray(a, float))
+            rec = rec * np.exp(-self.recuperation_by_decel_mps2 / np.where(a > 0, a, np.inf))
         aux = (self.auxiliary(n, signals) if self.predicts == "battery" else np.zeros(n))
         if self.predicts == "battery" and self.standstill_aux_w:
             aux = aux + self.standstill_aux_w * (v < STANDSTILL_MPS)
@@ -408,6 +421,8 @@ class EnergyChain:
             d[k] = val.to_dict() if isinstance(val, Table) else float(val)
         if self.predicts != "fuel" and self.recuperation_limit_w is not None:
             d["recuperation_limit_w"] = float(self.recuperation_limit_w)
+        if self.predicts != "fuel" and self.recuperation_by_decel_mps2:
+            d["recuperation_by_decel_mps2"] = float(self.recuperation_by_decel_mps2)
         if self.predicts in ("battery", "fuel"):
             d["aux_power_w"] = float(self.aux_power_w)
             if self.predicts == "battery" and self.standstill_aux_w:
@@ -486,7 +501,7 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         if pred != "fuel":
             raise UserError(f"{where} [chain]: 'fuel_cut_below_w' cuts an engine's fuel: only for "
                             f"predicts = \"fuel\", got predicts = {pred!r}")
-    for k in ("recuperation_limit_w", "aux_power_w", "idle_fuel_power_w",
+    for k in ("recuperation_limit_w", "recuperation_by_decel_mps2", "aux_power_w", "idle_fuel_power_w",
               "engine_on_above_mps", "battery_to_fuel", "cold_start_fuel_l", "cold_start_fuel_l_per_k"):
         if k in doc:
             kw[k] = _nonneg(doc[k], k, where, inf=k in ("recuperation_limit_w", "engine_on_above_mps"))

@@ -7,7 +7,8 @@ g = 9.80665 m/s² (SUMO's GRAVITY) and ρ = 1.2041 kg/m³ fixed::
 
     P = m·g·sin θ·v + ½(m + m_rot)(v² − v_prev²)/Δt + ½·ρ·A·C_d·v³ + c_r·g·m·v
         + radialDragCoefficient·m·v·|Δψ|/Δt²  (curves only; Δψ the step's heading change)
-    P_bat = P/η_t (P > 0) or η_r·P (P ≤ 0), plus constantPowerIntake
+    P_bat = P/η_t (P > 0) or η_r·exp(−k/|a|)·P (P ≤ 0; k recuperationEfficiencyByDecel, the
+            factor only where a ≠ 0), plus constantPowerIntake
 
 As our terms (:mod:`sumo_drvpw.model.terms`; G = 9.81 in the basis):
 
@@ -28,7 +29,9 @@ what it costs at 1-s steps. The equation books it as SUMO does, for the run's Δ
 says so); a tyre's cornering drag is ``radial*v1`` (:mod:`sumo_drvpw.model.terms`).
 
 and a battery chain: traction efficiency = propulsionEfficiency, recuperation efficiency
-= recuperationEfficiency, auxiliary power = constantPowerIntake, no recuperation limit.
+= recuperationEfficiency (times exp(−k/|a|) with k = recuperationEfficiencyByDecel, the
+chain's ``recuperation_by_decel_mps2``), auxiliary power = constantPowerIntake, no
+recuperation limit.
 The equation's mass is fixed to the vType's (``mass`` attribute, else the deprecated
 ``vehicleMass`` param, plus ``loading``).
 
@@ -51,8 +54,7 @@ getElectricityConsumption at set speeds, one parameter left out at a time; tests
 test_energy_params.py repeats it), g = 9.80665 (``GRAVITY``) likewise.
 
 What the equation cannot carry is listed as notes: the radial drag when the step length
-is not known, a recuperation efficiency by deceleration (exp(−k/|a|)), the
-``maximumPower`` and the MMPEVEM parameters (another model, not read).
+is not known, the ``maximumPower`` and the MMPEVEM parameters (another model, not read).
 """
 
 from __future__ import annotations
@@ -172,15 +174,13 @@ def energy_params_equation(name: str, params: Mapping, mass_kg: float | None = N
     chain = EnergyChain(predicts="battery", traction_efficiency=f["propulsionEfficiency"],
                         recuperation_efficiency=f["recuperationEfficiency"],
                         recuperation_limit_w=None, aux_power_w=f["constantPowerIntake"],
+                        recuperation_by_decel_mps2=f["recuperationEfficiencyByDecel"],
                         provenance={"sumo_energy_model": {k: {"value": v, "from": s}
                                                           for k, (v, s) in val.items()}})
     notes = []
     if c_rad and not step_s:
         notes.append(f"radialDragCoefficient {c_rad:g} ({val['radialDragCoefficient'][1]}): SUMO books "
                      "its drag in curves per step, and the step length is not known here: not booked")
-    if f["recuperationEfficiencyByDecel"]:
-        notes.append(f"recuperationEfficiencyByDecel {f['recuperationEfficiencyByDecel']:g}: "
-                     "SUMO scales recuperation by exp(−k/|a|), the chain's efficiency is constant")
     if params.get("maximumPower") is not None:
         notes.append("maximumPower: SUMO's Energy model does not cap the power with it either")
     defaults = sorted(k for k, (_, s) in val.items() if s == "SUMO default")

@@ -288,16 +288,20 @@ class ChainLedger:
         return q
 
     def book(self, vidx: np.ndarray, eidx: np.ndarray, v: np.ndarray, dt: float,
-             p_drive_w: np.ndarray, signals: dict | None = None, app=None, engine_off=None) -> np.ndarray:
+             p_drive_w: np.ndarray, signals: dict | None = None, app=None, engine_off=None,
+             accel=None) -> np.ndarray:
         """Book one step for vehicles ``vidx`` (each once) on edges ``eidx``; returns the
         step's quantities (n, C) (:meth:`expand` → (n, E, Q)). ``app`` (n, E): 1 where an
         equation applies to the vehicle, 0 where not (nothing booked, not even auxiliary
-        power); ``engine_off`` (n,): no fuel (:meth:`step_quantities`)."""
+        power); ``engine_off`` (n,): no fuel (:meth:`step_quantities`); ``accel`` (n,): the
+        step's acceleration [m/s²] (signal ``accel_mps2``, for a recuperation by deceleration)."""
         vidx = np.asarray(vidx, np.int64)
         if vidx.size:
             self._grow(int(vidx.max()) + 1)
         if signals is None:
             signals = self._constant_signals(len(vidx))
+        if accel is not None:
+            signals = {**signals, "accel_mps2": accel}
         q = self.step_quantities(p_drive_w, v, dt, signals, engine_off)
         if self.cold_start_on:
             share = self._starting[vidx]

@@ -527,7 +527,7 @@ class Stepper:
         ledger.book(vidx, eidx, v, dt, pc)
         if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
             off = None if self.shutoff is None else self.shutoff.auto_off(ledger, vidx, v, dt)
-            ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx], engine_off=off)
+            ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx], engine_off=off, accel=a)
         if self.trace is not None:
             self.trace.write(t_now, vidx, eidx, v, a, theta, wind, pc)
 

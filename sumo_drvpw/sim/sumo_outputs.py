@@ -323,7 +323,7 @@ BATTERY_NOTE = ("model difference, not a booking one: SUMO's Energy model takes 
 #: what the row of a ``vtype_energy`` equation compares (sim/vtype_energy.py)
 OWN_PARAMS_NOTE = ("like for like: the vType's own Energy-model parameters (SUMO's defaults for those it "
                    "leaves out) as terms and a battery chain, its radial drag in curves as SUMO books it "
-                   "per step; left out: a recuperation efficiency by deceleration; the slopes' source "
+                   "per step; the slopes' source "
                    "differs on grade changes, and SUMO's emissions device books a trip's last steps otherwise "
                    "than its own emission output (a few % of a short trip, docs/scenario.md) "
                    "(summary.json assumptions.vtype_energy)")
