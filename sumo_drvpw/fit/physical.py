@@ -509,8 +509,8 @@ def candidate_reading(name: str, params: dict[str, float], r: float, rho_kgm3: f
                 "unit": "-", "plausible": bool(ETA_INERTIA_MIN <= eta <= 1.0)}
     if name == "cornering drag":
         c = params["radial*v1"]
-        return {"reads_as": "cornering drag over the centripetal force (≈ the tyres' slip angle)", "value": c,
-                "unit": "rad", "plausible": bool(PLAUSIBLE["radial*v1"][0] <= c <= PLAUSIBLE["radial*v1"][1])}
+        return {"reads_as": "cornering drag over the centripetal force (≈ the tyres' slip angle in rad)",
+                "value": c, "unit": "-", "plausible": bool(PLAUSIBLE["radial*v1"][0] <= c <= PLAUSIBLE["radial*v1"][1])}
     if name == "regime":
         return {"reads_as": "recuperation scale 1 + r (≈ η² with friction braking)", "value": 1.0 + r,
                 "unit": "-", "plausible": bool(0.0 < 1.0 + r <= 1.0)}
