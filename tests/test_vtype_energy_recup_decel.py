@@ -105,3 +105,12 @@ def test_the_chains_recuperation_by_deceleration_by_hand():
         ch.evaluate(p, np.full(3, 10.0))
     back = chain_from_dict(ch.to_dict(), "x.toml")
     assert back.recuperation_by_decel_mps2 == 0.5
+    # to SUMO's Energy model and back (export-vtype, then vtype_energy): the same k
+    from sumo_drvpw.model.energy_params import energy_params_equation
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.sim.export import energy_model_params
+
+    params, _ = energy_model_params(Equation("e", {"acc": 1.0, "aero": 0.3}, mass_kg=1500.0, chain=ch))
+    assert params["recuperationEfficiencyByDecel"] == 0.5
+    again, _ = energy_params_equation("e", {k: str(v) for k, v in params.items() if k != "mass"}, 1500.0)
+    assert again.chain.recuperation_by_decel_mps2 == 0.5

@@ -58,5 +58,7 @@ def chain_energy_params(chain, air_c: float | None = None, drive=None) -> tuple[
     if chain.recuperation_limit_w is not None:
         missing.append(f"the recuperation limit {chain.recuperation_limit_w / 1000:.1f} kW (the Energy model "
                        "recuperates without one)")
+    if chain.recuperation_by_decel_mps2:  # SUMO's own parameter for it
+        p["recuperationEfficiencyByDecel"] = float(chain.recuperation_by_decel_mps2)
     p["constantPowerIntake"] = aux
     return p, missing

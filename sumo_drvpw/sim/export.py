@@ -189,7 +189,8 @@ def energy_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
               f'        <param key="drvpw.mass" value="{params["mass"]:.6g}"/>']
     for k in ("frontSurfaceArea", "airDragCoefficient", "rollDragCoefficient", "rotatingMass",
               "constantPowerIntake", "radialDragCoefficient", "propulsionEfficiency",
-              "recuperationEfficiency"):
-        lines.append(f'        <param key="{k}" value="{params[k]:.9g}"/>')
+              "recuperationEfficiency", "recuperationEfficiencyByDecel"):
+        if k in params:
+            lines.append(f'        <param key="{k}" value="{params[k]:.9g}"/>')
     lines += ["    </vType>", "</additional>", ""]
     return "\n".join(lines), missing
