@@ -167,24 +167,32 @@ class Network:
             # than the step covered (the line: bins of BIN_M, a lane change in the step)
             k = np.flatnonzero(ok & (self.lane_own_edge[prev] != self.lane_own_edge[lane]))
             if len(k):
-                lp, p0, ln, p1 = prev[k], last[k, 1], lane[k], pos[k]
-                along = self.lane_length[lp] - p0 + p1
-                if self.lane_opposite is not None:  # a lane with an opposite-direction lane: a car
-                    o0, o1 = self.lane_opposite[lp] >= 0, self.lane_opposite[ln] >= 0  # overtaking on
-                    along = (np.minimum(self.lane_length[lp] - p0, np.where(o0, p0, np.inf))  # it counts
-                             + np.minimum(p1, np.where(o1, self.lane_length[ln] - p1, np.inf)))  # back
-                    pair = (self.lane_opposite[lp] == ln) | (self.lane_opposite[ln] == lp)  # same road
-                    along[pair] = np.abs(0.5 * (self.lane_length[lp] + self.lane_length[ln]) - p0 - p1)[pair]
-                jump = along > road[k] + JUMP_TOL_M
-                if self.centre_x is not None:
-                    i, j = self.bin_index(lp, p0), self.bin_index(ln, p1)
-                    line = np.hypot(self.centre_x[i] - self.centre_x[j],
-                                    self.centre_y[i] - self.centre_y[j])
-                    jump |= line > road[k] + BIN_M + self.lane_width[lp] + JUMP_TOL_M
-                ok[k[jump]] = False
+                ok[k[self.jumped(prev[k], last[k, 1], lane[k], pos[k], road[k])]] = False
         if ok.any():  # sin θ = Δz/(v·Δt): m·g·v·sin θ·Δt = m·g·Δz
             theta = np.where(ok, np.arcsin(np.clip(dz / np.where(ok, ds, 1.0), -1.0, 1.0)), theta)
         return theta, np.column_stack([lane, pos, z])
+
+    def jumped(self, lp, p0, ln, p1, road) -> np.ndarray:
+        """Which moves from lane numbers ``lp``, positions ``p0`` [m] to lanes ``ln`` of
+        other edges, positions ``p1`` [m] cover more than ``road`` [m]: a jump (a teleport SUMO
+        starts and ends in one step, which FCD shows without a gap). The road from the last
+        position to its lane's end and on to this position, or the straight line between them
+        (a junction crossed in between: its lane is longer than that line), is longer than
+        ``road`` (the line: bins of BIN_M, a lane change in the step); a car overtaking on an
+        opposite-direction lane counts that lane's positions back."""
+        along = self.lane_length[lp] - p0 + p1
+        if self.lane_opposite is not None:
+            o0, o1 = self.lane_opposite[lp] >= 0, self.lane_opposite[ln] >= 0
+            along = (np.minimum(self.lane_length[lp] - p0, np.where(o0, p0, np.inf))
+                     + np.minimum(p1, np.where(o1, self.lane_length[ln] - p1, np.inf)))
+            pair = (self.lane_opposite[lp] == ln) | (self.lane_opposite[ln] == lp)  # same road
+            along[pair] = np.abs(0.5 * (self.lane_length[lp] + self.lane_length[ln]) - p0 - p1)[pair]
+        jump = along > road + JUMP_TOL_M
+        if self.centre_x is not None:
+            i, j = self.bin_index(lp, p0), self.bin_index(ln, p1)
+            line = np.hypot(self.centre_x[i] - self.centre_x[j], self.centre_y[i] - self.centre_y[j])
+            jump |= line > road + BIN_M + self.lane_width[lp] + JUMP_TOL_M
+        return jump
 
     def place(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Rows [lane, pos, z] of vehicles at lane numbers ``lane``, positions ``pos`` [m]

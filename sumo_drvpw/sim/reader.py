@@ -135,9 +135,9 @@ class Reader:
             self.subscribed = True
 
 
-#: a step's speed gain [m/s²] no vehicle that stood reaches by driving (SUMO's vClass default
-#: accelerations are at most 2.6 m/s², its motorcycles' 6 in some versions): a standing
-#: vehicle on another edge in the next row this much faster was put there by a teleport
+#: a step's speed gain [m/s²] no vehicle reaches by driving (SUMO's vClass default
+#: accelerations are at most 2.6 m/s², its motorcycles' 6 in some versions): a vehicle on
+#: another edge in the next row this much faster was put there by a teleport
 REINSERT_ACCEL_MPS2 = 8.0
 
 
@@ -147,20 +147,27 @@ def reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, replay: bool):
     from the next edge's start, at that lane's speed limit or the vType's maxSpeed, in the
     step after the moves). ``ends``: slots SUMO says ended a teleport (a live run; a replay: back
     after steps without rows). A replay also tells one SUMO started and ended in one step (no
-    gap in the FCD) by its row: it stood (≤ 0.1 m/s) and is on another edge, faster by more
+    gap in the FCD) by its row: on another edge, it stood (≤ 0.1 m/s) and is faster by more
     than :data:`REINSERT_ACCEL_MPS2`·Δt or farther along the lanes than its speed took it
-    (v_t·Δt, plus :attr:`Network.jump_slack_m` for rows sparser than the step). Parameters:
+    (v_t·Δt, plus :attr:`Network.jump_slack_m` for rows sparser than the step), or it moved
+    (a collision's teleport) and is that much faster or farther than max(v_t−1, v_t)·Δt (+ that
+    slack) took it
+    (:meth:`Network.jumped`, the test the grade makes of a jump). Parameters:
     lane numbers, positions [m], speeds [m/s], accelerations [m/s²] (v_t − v_t−1)/Δt of slots
     ``vidx``, Δt [s]."""
     fresh = (np.isin(vidx, ends) if len(ends) else np.zeros(len(vidx), bool)) & (lane >= 0)
     if replay and net.lane_own_edge is not None:
         prev = ledger.veh_at[vidx, 0]
-        k = np.flatnonzero(np.isfinite(prev) & (lane >= 0) & (v - a * dt <= 0.1))
-        lp = prev[k].astype(np.int64)
-        k = k[net.lane_own_edge[lp] != net.lane_own_edge[lane[k]]]
+        k = np.flatnonzero(np.isfinite(prev) & (lane >= 0))
+        k = k[net.lane_own_edge[prev[k].astype(np.int64)] != net.lane_own_edge[lane[k]]]
         if len(k):
-            lp = prev[k].astype(np.int64)
-            along = net.lane_length[lp] - ledger.veh_at[vidx[k], 1] + pos[k]
-            fresh[k[(a[k] > REINSERT_ACCEL_MPS2)
-                    | (along > v[k] * dt + net.jump_slack_m + JUMP_TOL_M)]] = True
+            lp, p0, was = prev[k].astype(np.int64), ledger.veh_at[vidx[k], 1], v[k] - a[k] * dt
+            stood = was <= 0.1
+            along = net.lane_length[lp] - p0 + pos[k]
+            fresh[k[stood & ((a[k] > REINSERT_ACCEL_MPS2)
+                             | (along > v[k] * dt + net.jump_slack_m + JUMP_TOL_M))]] = True
+            m = ~stood  # a moving car put back (a collision's teleport): faster or farther than it could go
+            fresh[k[m][(a[k][m] > REINSERT_ACCEL_MPS2)
+                       | net.jumped(lp[m], p0[m], lane[k][m], pos[k][m],
+                                    np.maximum(v[k][m], was[m]) * dt + net.jump_slack_m)]] = True
     return fresh
