@@ -63,17 +63,21 @@ def main(args: argparse.Namespace) -> int:
 
         from sumo_drvpw.sim.fcd_read import configs_beside, configs_writing, fcd_parts, header_options
 
+        msg = "give --net (the network of the FCD) or --scenario"
         # a header-less FCD (Parquet, CSV): the SUMO configs beside it that may have run it
-        bare = Path(args.fcd).is_file() and not fcd_parts(args.fcd) and header_options(args.fcd) is None
-        writers = [c for c, _, _ in configs_writing(args.fcd)] if bare else []
-        cfgs = configs_beside(args.fcd) if bare and not writers else []
-        names = ", ".join(c.name for c in (writers or cfgs)[:3]) + (", …" if len(writers or cfgs) > 3 else "")
-        raise UserError("give --net (the network of the FCD) or --scenario" + (
-            f"; SUMO configs beside {args.fcd} write it ({names}): --scenario the one that ran it"
-            if len(writers) > 1 else
-            f"; no SUMO config beside {args.fcd} writes it ({names}: an --fcd-output on SUMO's command line?): "
-            + (f"if it ran it, --scenario {cfgs[0]}" if len(cfgs) == 1 else "if one of them ran it, --scenario it")
-            if cfgs else ""))
+        if Path(args.fcd).is_file() and not fcd_parts(args.fcd) and header_options(args.fcd) is None:
+            writers = [c for c, _, _ in configs_writing(args.fcd)]
+            cfgs = [] if writers else configs_beside(args.fcd)
+
+            def names(cs):
+                return ", ".join(c.name for c in cs[:3]) + (", …" if len(cs) > 3 else "")
+            if len(writers) > 1:
+                msg += f"; SUMO configs beside {args.fcd} write it ({names(writers)}): --scenario the one that ran it"
+            elif cfgs:
+                msg += (f"; no SUMO config beside {args.fcd} writes it ({names(cfgs)}: an --fcd-output on SUMO's "
+                        "command line?): " + (f"if it ran it, --scenario {cfgs[0]}" if len(cfgs) == 1
+                                              else "if one of them ran it, --scenario it"))
+        raise UserError(msg)
     replaced = bool(args.equation)  # the user's equations replace the scenario's
     if args.scenario is None and not args.equation:  # as `run X.sumocfg` does
         from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS

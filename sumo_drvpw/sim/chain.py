@@ -90,6 +90,7 @@ class ChainLedger:
         self._running_active = [j for j, e in enumerate(self.active) if self.chains[e].running_fuel_per_k]
         self.air_temperature_c = float(self.signal_values.get("ambient_c", T_REF_C))
         self._hvac_active = [j for j, e in enumerate(self.active) if self.chains[e].hvac]
+        self._reads_accel = any(self.chains[e].recuperation_by_decel_mps2 for e in self.active)
         self.E, self.Q = len(self.names), len(QUANTITIES)
         #: (equation, quantity) columns a chain books: battery 0–3, fuel 4–7
         self._cols = [(e, k) for e in self.active
@@ -300,7 +301,7 @@ class ChainLedger:
             self._grow(int(vidx.max()) + 1)
         if signals is None:
             signals = self._constant_signals(len(vidx))
-        if accel is not None:
+        if accel is not None and self._reads_accel:
             signals = {**signals, "accel_mps2": accel}
         q = self.step_quantities(p_drive_w, v, dt, signals, engine_off)
         if self.cold_start_on:

@@ -170,7 +170,8 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     if not fcd_parts(spec) and not Path(spec).is_file():
         raise UserError(f"FCD file not found: {spec}")
     spec = os.path.abspath(spec)  # a worker's working folder is not ours
-    sc = recorded_device_options(sc, header_options(spec))  # as each bucket's replay takes them
+    head = header_options(spec)
+    sc = recorded_device_options(sc, head)  # as each bucket's replay takes them
     out = Path(out_dir).resolve()
     root = out / BUCKET_DIR
     root.mkdir(parents=True, exist_ok=True)
@@ -196,7 +197,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
         # the driver's own accountant (no rows) carries the scenario, network and resolver
         first = done[0]
         replay = FcdStream(iter(()), dt=first["dt"], label=spec)
-        replay.recorded_step_s = recorded_step(header_options(spec))  # as the buckets' (vtype_energy's radial drag)
+        replay.recorded_step_s = recorded_step(head)  # as the buckets' (vtype_energy's radial drag)
         acc = Accountant(replay, scenario=sc, keep_vehicles=True)
         spill = VehicleSpill(acc.names, [e.predicts for e in acc.equations], None)
         for d in done:
