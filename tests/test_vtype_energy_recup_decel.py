@@ -81,8 +81,8 @@ def test_the_key_sumo_reads_is_recuperationEfficiencyByDecel(tmp_path):
     for key, kwh in zip(cv.key, cv.net_kwh):
         assert kwh * 1000.0 == pytest.approx(sumo[key], rel=1e-4, abs=1e-4), key
     (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace("short.rou", "long.rou"))
-    with pytest.raises(UserError, match="no vType .* writes SUMO's Energy model .*k: writes no Energy-model"):
-        run_scenario(tmp_path / "s.toml")
+    with pytest.raises(UserError, match="no vType .* writes its Energy model .*k: writes no Energy-model"):
+        run_scenario(tmp_path / "s.toml", tmp_path / "o2")  # (no out: SUMO writes em.xml into the cwd)
 
 
 def test_the_chains_recuperation_by_deceleration_by_hand():
