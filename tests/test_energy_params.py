@@ -237,7 +237,7 @@ def test_vtype_energy_agrees_with_sumos_device(tmp_path):
         "recuperationEfficiencyByDecel": 0.0}
     assert ve["booked"]["ebus"]["radial_drag"].startswith("radialDragCoefficient 0.5 booked")
     assert ve["not_booked"] == {"plain": "writes no Energy-model parameter",
-                                "petrol": "emissionClass HBEFA4/PC_petrol_Euro-6ab is not SUMO's Energy model"}
+                                "petrol": "emissionClass HBEFA4/PC_petrol_Euro-6ab is not SUMO's Energy model or MMPEVEM"}
     assert any("vtype_energy" in w for w in res["warnings"])
     # the e-car, booked by its vtype_energy only, at SUMO's mass, not a class default
     assert "ecar" not in res["assumptions"]["default_masses"]

@@ -103,7 +103,8 @@ def test_vtypes_in_included_files_and_sumo_default_types(tmp_path, capsys):
 def test_sumo_shipped_mmpevem_vehicle_is_electric(tmp_path, capsys):
     """Every vehicle file SUMO ships for its MMPEVEM model writes the bare
     emissionClass="MMPEVEM": such cars were booked as petrol cars (litres and CO₂ for a BMW
-    i3). SUMO's own BMW_i3.xml now makes them electric: the battery chain books them."""
+    i3). SUMO's own BMW_i3.xml now makes them electric: the battery chain books them, and
+    ``vtype_energy`` (among the plug-in's own equations) by their MMPEVEM parameters."""
     import sumo
 
     i3 = Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml"
@@ -116,7 +117,7 @@ def test_sumo_shipped_mmpevem_vehicle_is_electric(tmp_path, capsys):
     s, _ = _run_summary(cfg, tmp_path / "o", capsys)
     assert s["assumptions"]["energy_carrier"]["BMW_i3"]["carrier"] == "electricity"
     ch = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv")
-    assert list(ch.equation) == ["bmw_i3_battery"] and ch.net_kwh.iloc[0] > 0
+    assert list(ch.equation) == ["bmw_i3_battery", "vtype_energy.BMW_i3"] and (ch.net_kwh > 0).all()
     assert "fuel_l" not in ch.columns
 
 

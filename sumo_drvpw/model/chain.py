@@ -71,12 +71,12 @@ engine's extra fuel in the cold, a share of the fuel power per kelvin below
 
     P_fuel(T) = P_fuel · (1 + r · max(T_ref − T, 0))
 
-with T the air temperature ``ambient_c`` (the HVAC's column when the chain has one): the
-log's where it has one (unknown: no factor), in SUMO the run's air temperature (none
-given: the default air's 20 °C, as for the HVAC and cold starts, and the run says so).
-Measured fuel is corrected for
-the hybrid battery's energy change before it is compared (``battery_to_fuel``: fuel
-energy per unit of battery energy, default 1/η_m; see :func:`corrected_fuel_power`).
+with T the air temperature ``ambient_c`` (the HVAC's column when the chain has one): the log's
+where it has one (unknown: no factor), in SUMO the run's air temperature (none given: the
+default air's 20 °C, as for the HVAC and cold starts, and the run says so). Measured fuel is
+corrected for the hybrid battery's energy change before it is compared (``battery_to_fuel``:
+fuel energy per unit of battery energy, default 1/η_m; see :func:`corrected_fuel_power`).
+A ``[chain.motor]`` table is SUMO's MMPEVEM motor and battery (:mod:`sumo_drvpw.model.mmpevem`).
 
 Sources: the battery form is the usual BEV energy balance (e.g. Fiori, Ahn & Rakha,
 Applied Energy 168 (2016) 257–268, Eq. 8–10; SUMO's Energy model, Kurczveil et al. 2014);
@@ -99,7 +99,7 @@ KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperat
         "recuperation_by_decel_mps2", "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
         "engine_off_below_w", "engine_on_above_mps", "fuel_cut_below_w", "fuel", "battery_to_fuel",
         "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "running_fuel_per_k",
-        "std_err", "reading", "provenance", "metrics")
+        "motor", "std_err", "reading", "provenance", "metrics")
 #: the largest plausible warm-running fuel increase per kelvin (5 %/K: +150 % at −6.7 °C
 #: against the FTP's 23.9 °C, far beyond the ≈ 9 % certification pairs show)
 RUNNING_FUEL_PER_K_MAX = 0.05
@@ -223,6 +223,8 @@ class EnergyChain:
     cold_start_fuel_l_per_k: float = 0.0
     cold_start_ref_c: float = 23.9
     running_fuel_per_k: float = 0.0
+    #: SUMO's MMPEVEM motor and battery (model/mmpevem.py SumoMotor), in place of η_t, η_r
+    motor: object | None = None
     std_err: dict = field(default_factory=dict)
     reading: dict = field(default_factory=dict)
     provenance: dict = field(default_factory=dict)
@@ -248,21 +250,23 @@ class EnergyChain:
         fuel power less k·P_bat when the hybrid battery's V·I ``battery_w`` is given (so a
         state-of-charge swing is not a fuel error; k = :attr:`battery_fuel_factor`).
         ``accel``: the acceleration [m/s²] a recuperation by deceleration reads."""
-        if accel is not None and self.recuperation_by_decel_mps2:
+        if accel is not None and self.reads_accel:
             signals = {**(signals or {}), "accel_mps2": accel}
         pred = self.evaluate(p_drive_w, v_mps, signals=signals)["power_w"]
         if self.predicts == "fuel" and battery_w is not None:
             pred = pred - self.battery_fuel_factor * np.asarray(battery_w, float)
         return pred
 
+    @property
+    def reads_accel(self) -> bool:
+        """Whether it reads the acceleration ``accel_mps2`` (recuperation by deceleration, a motor)."""
+        return bool(self.recuperation_by_decel_mps2) or self.motor is not None
+
     def unknown_inputs(self, signals: dict | None, n: int, trip=None) -> dict:
         """The chain's inputs (declared loads, HVAC temperature) that are unknown (NaN) on
         some of ``n`` samples: ``{column: {"samples", "read_as", "trips"}}`` (trips only
-        when ``trip`` is given).
-
-        :meth:`evaluate` reads an unknown load as no draw and an unknown temperature as the
-        set-point (no HVAC): the prediction there lacks what they drew, so a report says where.
-        """
+        when ``trip`` is given). :meth:`evaluate` reads an unknown load as no draw and an
+        unknown temperature as the set-point (no HVAC): a report says where."""
         out = {}
         for col in sorted(self.signals):
             x = np.asarray((signals or {}).get(col, np.nan), float)
@@ -335,6 +339,8 @@ class EnergyChain:
         return out
 
     def _battery(self, p, v, n, signals) -> dict:
+        if self.motor is not None:
+            return self.motor.battery(p, v, signals)
         pos = np.maximum(p, 0.0)
         neg = np.minimum(p, 0.0)
         if self.recuperation_limit_w is not None:
@@ -416,7 +422,10 @@ class EnergyChain:
         d: dict = {"predicts": self.predicts}
         if self.predicts == "wheel":
             return d
-        for k in ("traction_efficiency",) + (("recuperation_efficiency",) if self.predicts != "fuel" else ()):
+        if self.motor is not None:  # its motor, loss map and battery in place of η_t, η_r
+            d["motor"] = self.motor.to_dict()
+        for k in () if self.motor is not None else ("traction_efficiency",) + (
+                ("recuperation_efficiency",) if self.predicts != "fuel" else ()):
             val = getattr(self, k)
             d[k] = val.to_dict() if isinstance(val, Table) else float(val)
         if self.predicts != "fuel" and self.recuperation_limit_w is not None:
@@ -550,6 +559,10 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         if doc["fuel"] not in FUELS:
             raise UserError(f"{where} [chain]: fuel must be one of {', '.join(FUELS)}, got {doc['fuel']!r}")
         kw["fuel"] = doc["fuel"]
+    if "motor" in doc:
+        from sumo_drvpw.model.mmpevem import motor_from_dict
+
+        kw["motor"] = motor_from_dict(doc, where)
     for k in ("std_err", "reading", "provenance", "metrics"):
         if k in doc:
             kw[k] = dict(doc[k])

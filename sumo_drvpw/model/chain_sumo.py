@@ -19,6 +19,9 @@ def chain_energy_params(chain, air_c: float | None = None, drive=None) -> tuple[
     missing: list[str] = []
     if chain.predicts == "fuel":
         return p, ["the fuel chain (SUMO's Energy model is electric)"]
+    if chain.motor is not None:  # its own model: written as efficiencies 1 it would book no loss
+        return p, ["the MMPEVEM motor, loss map and battery of the chain (write its vType with "
+                   "emissionClass MMPEVEM and those parameters instead)"]
     for key, attr in (("propulsionEfficiency", "traction_efficiency"),
                       ("recuperationEfficiency", "recuperation_efficiency")):
         v = getattr(chain, attr)

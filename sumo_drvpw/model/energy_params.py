@@ -54,7 +54,7 @@ getElectricityConsumption at set speeds, one parameter left out at a time; tests
 test_energy_params.py repeats it), g = 9.80665 (``GRAVITY``) likewise.
 
 What the equation cannot carry is listed as notes: the radial drag when the step length
-is not known, the ``maximumPower`` and the MMPEVEM parameters (another model, not read).
+is not known, and the ``maximumPower``. (A vType on MMPEVEM: :mod:`sumo_drvpw.model.mmpevem`.)
 """
 
 from __future__ import annotations

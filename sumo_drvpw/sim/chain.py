@@ -22,10 +22,9 @@ to t + Δt of its booked time (τ: constants.FUEL_COLD_START_TAU_S, CABIN_WARMUP
 the edges it drives then: a trip of T seconds takes V · (1 − e^(−T/τ)), a trip much longer
 than τ the whole cold start, a 60-s hop not the energy of a whole warm-up. Vehicles already
 on the road when accounting starts (a user's TraCI script attaching mid-run) get none.
-Vehicles' running totals take one
-scatter-add per step; edges take one ``np.add.at`` per step; class totals are sums of
-the vehicle totals, so vehicle, edge and class totals agree by construction (tests check
-it on a real SUMO run, with the per-step sums).
+Vehicles' running totals take one scatter-add per step, edges one ``np.add.at``; class totals
+are sums of the vehicle totals, so vehicle, edge and class totals agree by construction
+(tests check it on a real SUMO run, with the per-step sums).
 """
 
 from __future__ import annotations
@@ -90,7 +89,8 @@ class ChainLedger:
         self._running_active = [j for j, e in enumerate(self.active) if self.chains[e].running_fuel_per_k]
         self.air_temperature_c = float(self.signal_values.get("ambient_c", T_REF_C))
         self._hvac_active = [j for j, e in enumerate(self.active) if self.chains[e].hvac]
-        self._reads_accel = any(self.chains[e].recuperation_by_decel_mps2 for e in self.active)
+        self._reads_accel, self._motor = (any(self.chains[e].reads_accel for e in self.active),
+                                          {e for e in self.active if self.chains[e].motor is not None})
         self.E, self.Q = len(self.names), len(QUANTITIES)
         #: (equation, quantity) columns a chain books: battery 0–3, fuel 4–7
         self._cols = [(e, k) for e in self.active
@@ -141,8 +141,7 @@ class ChainLedger:
         self._starting = np.zeros(capacity)
         self._cold_age = np.zeros(capacity)
         self._cold_new = np.zeros(capacity, bool)
-        #: vehicles whose departure was booked (with its share of a cold start, > 0) by a
-        #: chain that has one, and the sum of their shares (the expected cold starts)
+        #: departures booked (share of a cold start > 0) by a chain with one; their shares' sum
         self.cold_starts = 0
         self.cold_starts_expected = 0.0
 
@@ -258,7 +257,7 @@ class ChainLedger:
             self._cold_new[vidx] = True
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
-                        signals: dict | None = None, engine_off=None) -> np.ndarray:
+                        signals: dict | None = None, engine_off=None, v_mean=None) -> np.ndarray:
         """Chain quantities of one step, (n vehicles, C booked columns) (:meth:`expand`
         gives (n, E, Q)).
 
@@ -277,7 +276,7 @@ class ChainLedger:
         j = 0
         for e in self.active:
             ch = self.chains[e]
-            out = ch.evaluate(p[:, e], v, dt, signals)
+            out = ch.evaluate(p[:, e], v if v_mean is None or e not in self._motor else v_mean, dt, signals)
             keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
                     ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
             for key in keys:
@@ -290,12 +289,13 @@ class ChainLedger:
 
     def book(self, vidx: np.ndarray, eidx: np.ndarray, v: np.ndarray, dt: float,
              p_drive_w: np.ndarray, signals: dict | None = None, app=None, engine_off=None,
-             accel=None) -> np.ndarray:
+             accel=None, v_mean=None, grade=None) -> np.ndarray:
         """Book one step for vehicles ``vidx`` (each once) on edges ``eidx``; returns the
         step's quantities (n, C) (:meth:`expand` → (n, E, Q)). ``app`` (n, E): 1 where an
         equation applies to the vehicle, 0 where not (nothing booked, not even auxiliary
         power); ``engine_off`` (n,): no fuel (:meth:`step_quantities`); ``accel`` (n,): the
-        step's acceleration [m/s²] (signal ``accel_mps2``, for a recuperation by deceleration)."""
+        step's acceleration [m/s²] (signal ``accel_mps2``); ``v_mean``, ``grade`` (n,): the step's
+        mean speed and grade [rad], at which chains with SUMO's MMPEVEM motor book."""
         vidx = np.asarray(vidx, np.int64)
         if vidx.size:
             self._grow(int(vidx.max()) + 1)
@@ -303,7 +303,9 @@ class ChainLedger:
             signals = self._constant_signals(len(vidx))
         if accel is not None and self._reads_accel:
             signals = {**signals, "accel_mps2": accel}
-        q = self.step_quantities(p_drive_w, v, dt, signals, engine_off)
+        if grade is not None and self._motor:
+            signals = {**signals, "grade_rad": grade}
+        q = self.step_quantities(p_drive_w, v, dt, signals, engine_off, v_mean if self._motor else None)
         if self.cold_start_on:
             share = self._starting[vidx]
             s = share > 0

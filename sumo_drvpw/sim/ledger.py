@@ -34,6 +34,14 @@ LEDGER_CATEGORIES = CATEGORIES + ("other",)
 HALTING_SPEED_MPS = 0.1
 
 
+def at_mean_speed(eq) -> bool:
+    """Whether the SUMO loop evaluates equation ``eq`` at the step's mean speed v̄ = v − a·Δt/2
+    in every term (not only ``acc``): one whose chain is SUMO's MMPEVEM motor, as MMPEVEM
+    evaluates its forces (model/mmpevem.py)."""
+    ch = getattr(eq, "chain", None)
+    return ch is not None and getattr(ch, "motor", None) is not None
+
+
 class EquationSet:
     """Several equations evaluated at once into per-category powers.
 
@@ -46,11 +54,11 @@ class EquationSet:
         self.equations = list(equations)
         self.names = [e.name for e in self.equations]
         C = len(LEDGER_CATEGORIES)
-        groups: dict[float | None, list[int]] = {}
+        groups: dict[tuple, list[int]] = {}
         for i, e in enumerate(self.equations):
-            groups.setdefault(e.mass_kg, []).append(i)
+            groups.setdefault((e.mass_kg, at_mean_speed(e)), []).append(i)
         self.groups = []
-        for mass, members in groups.items():
+        for (mass, mean), members in groups.items():
             terms: list[str] = []
             for i in members:
                 for t in self.equations[i].term_names:
@@ -63,27 +71,31 @@ class EquationSet:
                 for t, c in self.equations[i].terms.items():
                     cat = LEDGER_CATEGORIES.index(parse_term(t).category)
                     entries.append((terms.index(t), i * C + cat, float(c)))
-            self.groups.append((mass, [parse_term(t) for t in terms], entries))
+            self.groups.append((mass, [parse_term(t) for t in terms], entries, mean))
         self.uses_other = any(parse_term(t).category == "other"
                               for e in self.equations for t in e.term_names)
         #: an equation has the ``radial`` factor: the loop passes the yaw rate
         self.uses_yaw = any("radial" in parse_term(t).factors
                             for e in self.equations for t in e.term_names)
+        #: an equation is evaluated at the step's mean speed (:func:`at_mean_speed`)
+        self.uses_mean = any(g[3] for g in self.groups)
 
-    def category_powers(self, x: Inputs, app: np.ndarray | None = None) -> np.ndarray:
+    def category_powers(self, x: Inputs, app: np.ndarray | None = None, x_mean: Inputs | None = None) -> np.ndarray:
         """Power [W] per sample, equation and category, shape (n, E, C).
 
         Parameters
         ----------
         x : inputs of n samples
         app : optional (n, E) weights (1: the equation applies to the vehicle, 0: not)
+        x_mean : the inputs at the step's mean speed, for equations evaluated there
+            (:func:`at_mean_speed`; None: ``x``)
 
         The result is a view of an (E, C, n) array (what :meth:`Ledger.book` uses).
         """
         E, C, n = len(self.equations), len(LEDGER_CATEGORIES), len(x)
         out = np.zeros((E * C, n))
-        for mass, terms, entries in self.groups:
-            xm = x.with_mass(mass)
+        for mass, terms, entries, mean in self.groups:
+            xm = (x_mean if mean and x_mean is not None else x).with_mass(mass)
             vals = [t.evaluate(xm) for t in terms]
             for u, row, c in entries:
                 out[row] += c * vals[u]

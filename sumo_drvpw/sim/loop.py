@@ -17,7 +17,7 @@ getSlope). Everything after reading is vectorized over the vehicles of the step.
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Callable
 
@@ -509,8 +509,9 @@ class Stepper:
                 ledger.load_samples += int(np.count_nonzero(riding))
                 ledger.load_max_kg = max(ledger.load_max_kg, float(load.max()))
         x = Inputs(v, a, theta, wind, mass, np.full(m, physics.rho), sig, v_acc=v_mean)
+        xm = replace(x, v=v_mean) if self.eqset.uses_mean else None  # MMPEVEM's forces
         pc = self.eqset.category_powers(x, None if self.every_equation_applies
-                                        else ledger.veh_app[vidx])
+                                        else ledger.veh_app[vidx], xm)
         for k, vr, ar, pr in self.ranges:  # vehicle-steps outside an equation's validity range
             out = np.zeros(m, bool)
             if vr is not None:
@@ -527,7 +528,8 @@ class Stepper:
         ledger.book(vidx, eidx, v, dt, pc)
         if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
             off = None if self.shutoff is None else self.shutoff.auto_off(ledger, vidx, v, dt)
-            ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx], engine_off=off, accel=a)
+            ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx], engine_off=off, accel=a,
+                              v_mean=v_mean, grade=theta)
         if self.trace is not None:
             self.trace.write(t_now, vidx, eidx, v, a, theta, wind, pc)
 

@@ -1,5 +1,8 @@
 """The reserved equation ``vtype_energy``: each vType's own SUMO Energy-model parameters,
-booked as an equation with a battery chain (:mod:`sumo_drvpw.model.energy_params`).
+booked as an equation with a battery chain (:mod:`sumo_drvpw.model.energy_params`), or
+its MMPEVEM parameters (``emissionClass="MMPEVEM…"``: road load, motor, loss map and battery
+as SUMO computes them, :mod:`sumo_drvpw.model.mmpevem`; booked whatever params it writes,
+since SUMO's defaults are then a whole car, its VW ID.3; its mass fixed, without riders).
 
 ``vtype_energy`` may stand wherever an equation name goes (a scenario's ``equations``,
 ``vtypes.<id>.equations``, ``vclasses.<c>.equations``, a vType's ``drvpw.equation``, a
@@ -32,6 +35,7 @@ import re
 import numpy as np
 
 from sumo_drvpw.model.energy_params import ENERGY_PARAMS, energy_params_equation, radial_drag_note
+from sumo_drvpw.model.mmpevem import is_mmpevem_class, mmpevem_equation
 from sumo_drvpw.model.equations import SUMO_VCLASSES, Equation
 
 #: the reserved equation name
@@ -106,9 +110,10 @@ def not_booked_why(info, switch: str = "param") -> str | None:
     ec = info.emission_class
     if not ec and switch != "none" and (getattr(info, "battery_device", False) or switch == "all"):
         ec = "Energy/unknown"
+    if is_mmpevem_class(ec):  # its defaults are a whole car (SUMO's VW ID.3): booked with none written
+        return None
     if not is_energy_class(ec):
-        return (f"emissionClass {ec} is not SUMO's Energy model"
-                + (" (MMPEVEM's parameters are not read)" if ec.startswith("MMPEVEM") else "") if ec
+        return (f"emissionClass {ec} is not SUMO's Energy model or MMPEVEM" if ec
                 else "no emissionClass written and SUMO's battery device tracks fuel "
                      "(device.battery.track-fuel): its default class stays" if switch == "none"
                 else "no emissionClass written and no battery device (SUMO's default is then not "
@@ -176,12 +181,17 @@ def vtype_equations(file_vtypes, sc=None, step_s: float | None = None) -> tuple[
             not_booked[vt] = why
             continue
         where = f"{info.source}: vType '{vt}'"
-        eq, notes = energy_params_equation(_name(vt, taken), info.energy_params, info.mass_attr_kg,
-                                           where, (info.vclass or "passenger",), step_s=step_s)
-        model = eq.chain.provenance["sumo_energy_model"]
+        mmp = is_mmpevem_class(info.emission_class)
+        if mmp:
+            eq, notes = mmpevem_equation(_name(vt, taken), info.energy_params or {}, info.mass_attr_kg,
+                                         where, (info.vclass or "passenger",))
+        else:
+            eq, notes = energy_params_equation(_name(vt, taken), info.energy_params, info.mass_attr_kg,
+                                               where, (info.vclass or "passenger",), step_s=step_s)
+        model = eq.chain.provenance["sumo_mmpevem" if mmp else "sumo_energy_model"]
         eq.provenance = {_KEY: vt}
         eq.path = str(info.source)
-        same_mass = (model["mass"]["from"] != "SUMO default" and not info.drvpw_mass
+        same_mass = (not mmp and model["mass"]["from"] != "SUMO default" and not info.drvpw_mass
                      and vdata.get(vt, {}).get("mass_kg") is None)
         if same_mass:  # the vehicle's booked mass: the same, plus riders as SUMO adds them
             eq.mass_kg = None
@@ -189,6 +199,7 @@ def vtype_equations(file_vtypes, sc=None, step_s: float | None = None) -> tuple[
         booked[vt] = {"equation": eq.name,
                       "emission_class": info.emission_class or "none written: Energy/unknown, as SUMO "
                                                                "takes it with the battery device on",
+                      "model": "MMPEVEM" if mmp else "Energy",
                       "mass_kg": model["mass"]["value"] + model["loading"]["value"],
                       "mass": "the vehicle's (riders included)" if same_mass else "fixed (no riders)",
                       "defaults": {k: d["value"] for k, d in model.items() if d["from"] == "SUMO default"},
@@ -225,7 +236,7 @@ def listing_warning(listing: dict) -> str | None:
                      + (f"; SUMO's defaults {d}" if d else "") + ")")
     left = [vt for vt, w in nb.items() if w == "writes no Energy-model parameter"]
     radial = sorted(vt for vt, b in booked.items() if b.get("radial_drag"))
-    return ("vTypes with SUMO's Energy model were booked by their own parameters as a battery "
+    return ("vTypes with SUMO's Energy model or MMPEVEM were booked by their own parameters as a battery "
             "chain (vtype_energy): " + "; ".join(parts)
             + (f"; Energy vTypes without parameters not booked by it: {', '.join(sorted(left))}" if left else "")
             + (f"; the radial drag in curves of {', '.join(radial)} booked per step as SUMO books it, so it "
@@ -258,9 +269,9 @@ def expand(equations: list, file_vtypes, sc, step_s: float | None = None) -> tup
     if own and not has:
         out += eqs
     if not out:
-        raise UserError("equation vtype_energy: no vType of the route/additional files read writes SUMO's "
-                        "Energy model (emissionClass Energy/…, or none with SUMO's battery device on, and at least "
-                        "one of its parameters: "
+        raise UserError("equation vtype_energy: no vType of the route/additional files read runs SUMO's "
+                        "MMPEVEM or writes its Energy model (emissionClass Energy/…, or none with SUMO's battery "
+                        "device on, and at least one of its parameters: "
                         + ", ".join(f"{vt}: {w}" for vt, w in sorted(listing["not_booked"].items())[:5])
                         + "); name another equation")
     return out, listing

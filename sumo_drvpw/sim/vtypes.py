@@ -19,6 +19,7 @@ from pathlib import Path
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.model.energy_params import ENERGY_PARAMS
+from sumo_drvpw.model.mmpevem import MMPEVEM_PARAMS
 from sumo_drvpw.sim.shutoff import SHUT_OFF_PARAMS
 from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
@@ -299,8 +300,8 @@ class FileVTypes(dict):
         self.flow_cold_start: dict[str, float] = {}
 
 
-#: the vType params of SUMO's Energy model a file's vType keeps (:attr:`VTypeInfo.energy_params`)
-ENERGY_KEYS = ENERGY_PARAMS + ("loading", "maximumPower")
+#: the vType params of SUMO's Energy model and MMPEVEM a file's vType keeps (:attr:`VTypeInfo.energy_params`)
+ENERGY_KEYS = tuple(dict.fromkeys(ENERGY_PARAMS + ("loading", "maximumPower") + MMPEVEM_PARAMS))
 
 #: the values SUMO reads as true (StringUtils::toBool, case-insensitive; each checked with
 #: libsumo 1.28.0 as has.battery.device, 2026-11-27)
