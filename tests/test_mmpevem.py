@@ -221,3 +221,20 @@ def test_vtype_energy_books_mmpevem_as_sumo(tmp_path):
     rep = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").groupby("equation").net_kwh.sum()
     live = cv.groupby("equation").net_kwh.sum()
     np.testing.assert_allclose(rep.loc[live.index].values, live.values, rtol=1e-3)
+
+
+def test_evaluate_where_is_the_chain_on_those_vehicles_only():
+    """The SUMO loop evaluates a motor chain only on the vehicles its equation books
+    (``evaluate_where``): those rows equal the whole evaluation's, the others are 0."""
+    from sumo_drvpw.model.mmpevem import evaluate_where
+
+    _, params, mass = _vtype_params(_sumo_home() / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml")
+    ch = mmpevem_equation("x", params, float(mass), "i3")[0].chain
+    rng = np.random.default_rng(1)
+    p, v, a = rng.normal(0, 2e4, 40), rng.uniform(0, 30, 40), rng.normal(0, 1, 40)
+    sel = rng.random(40) < 0.3
+    full = ch.evaluate(p, v, 0.5, {"accel_mps2": a, "grade_rad": np.full(40, 0.01)})
+    part = evaluate_where(ch, sel, p, v, 0.5, {"accel_mps2": a, "grade_rad": np.full(40, 0.01)})
+    for k in ("traction_j", "recuperated_j", "auxiliary_j", "power_j", "invalid"):
+        np.testing.assert_array_equal(part[k][sel], full[k][sel])
+        assert not part[k][~sel].any()

@@ -35,6 +35,7 @@ import numpy as np
 
 from sumo_drvpw.model.chain import EnergyChain
 from sumo_drvpw.model.constants import CABIN_WARMUP_TAU_S, FUEL_COLD_START_TAU_S, T_REF_C
+from sumo_drvpw.model.mmpevem import evaluate_where
 
 #: a cold start is booked until this many decay times after the departure (e^−20: all of it)
 COLD_DONE = 20.0
@@ -77,10 +78,9 @@ class ChainLedger:
         self.names = list(names)
         self.chains = list(chains)
         self.active = [i for i, c in enumerate(self.chains) if c is not None and c.predicts != "wheel"]
-        #: the chains' HVAC temperature columns (whatever a calibration named them): in SUMO
-        #: each reads the run's air temperature, ``signal_values["ambient_c"]``; when the run
-        #: gives none, the default air's T_REF_C (20 °C, that of ρ = 1.2041 kg/m³ and of the
-        #: ``cold`` term's reference) and :attr:`air_temperature_assumed` says so
+        #: the chains' HVAC temperature columns (any name): in SUMO each reads the run's air
+        #: temperature, ``signal_values["ambient_c"]``, else T_REF_C (20 °C, that of ρ = 1.2041
+        #: kg/m³ and the ``cold`` reference), and :attr:`air_temperature_assumed` says so
         self.hvac_columns = {self.chains[i].temperature_column
                              for i in self.active if self.chains[i].hvac}
         #: the same for the temperature of warm-running fuel factors (running_fuel_per_k)
@@ -99,9 +99,8 @@ class ChainLedger:
         self._ck = np.array([k for _, k in self._cols], np.int64)
         # compact storage: only the booked columns, (rows, C); veh/edge expand on read
         self._edge = np.zeros((n_edges, len(self._cols)))
-        #: distance [m] booked per edge and active chain equation (``active`` order): only by
-        #: vehicles the equation applies to, so that a chain's per-km figures count the
-        #: vehicles it books (petrol litres over petrol cars' kilometres)
+        #: distance [m] per edge and active chain equation (``active`` order), by the vehicles
+        #: it applies to: its per-km figures count those (petrol litres over petrol cars' km)
         self.A = len(self.active)
         self.edge_dist = np.zeros((n_edges, self.A))
         self._veh = np.zeros((capacity, len(self._cols)))
@@ -257,9 +256,9 @@ class ChainLedger:
             self._cold_new[vidx] = True
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
-                        signals: dict | None = None, engine_off=None, v_mean=None) -> np.ndarray:
-        """Chain quantities of one step, (n vehicles, C booked columns) (:meth:`expand`
-        gives (n, E, Q)).
+                        signals: dict | None = None, engine_off=None, v_mean=None, app=None) -> np.ndarray:
+        """Chain quantities of one step, (n vehicles, C booked columns) (:meth:`expand` gives
+        (n, E, Q)); a chain with SUMO's motor is evaluated only where ``app`` (n, E) > 0.
 
         Parameters
         ----------
@@ -267,8 +266,7 @@ class ChainLedger:
         v : speed [m/s], (n,)
         dt : step length [s]
         signals : column → (n,) arrays for the chains' loads and HVAC temperature
-        engine_off : optional (n,) bool: engines switched off by a start-stop system
-            (SUMO's shutOffAutoDuration, :mod:`sumo_drvpw.sim.shutoff`): no fuel there
+        engine_off : optional (n,) bool: engines a start-stop system switched off: no fuel
         """
         p = np.asarray(p_drive_w, float)
         n = p.shape[0]
@@ -276,7 +274,9 @@ class ChainLedger:
         j = 0
         for e in self.active:
             ch = self.chains[e]
-            out = ch.evaluate(p[:, e], v if v_mean is None or e not in self._motor else v_mean, dt, signals)
+            vv = v if v_mean is None or e not in self._motor else v_mean
+            out = (evaluate_where(ch, np.asarray(app)[:, e] > 0, p[:, e], vv, dt, signals)
+                   if app is not None and e in self._motor else ch.evaluate(p[:, e], vv, dt, signals))
             keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
                     ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
             for key in keys:
@@ -305,7 +305,7 @@ class ChainLedger:
             signals = {**signals, "accel_mps2": accel}
         if grade is not None and self._motor:
             signals = {**signals, "grade_rad": grade}
-        q = self.step_quantities(p_drive_w, v, dt, signals, engine_off, v_mean if self._motor else None)
+        q = self.step_quantities(p_drive_w, v, dt, signals, engine_off, v_mean if self._motor else None, app)
         if self.cold_start_on:
             share = self._starting[vidx]
             s = share > 0
