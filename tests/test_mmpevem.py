@@ -238,3 +238,21 @@ def test_evaluate_where_is_the_chain_on_those_vehicles_only():
     for k in ("traction_j", "recuperated_j", "auxiliary_j", "power_j", "invalid"):
         np.testing.assert_array_equal(part[k][sel], full[k][sel])
         assert not part[k][~sel].any()
+
+
+def test_off_the_map_the_loss_at_its_edge():
+    """Beyond the loss map (SUMO's i3 at 45 m/s turns its motor at 12,000 rpm, the map ends
+    at 11,000: SUMO writes nan) the step is marked invalid and booked with the loss at the
+    map's nearest edge, by hand: P_b = P_m + loss(11000 rpm, M) + P_const through the battery's
+    resistance."""
+    _, params, mass = _vtype_params(_sumo_home() / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml")
+    mo = mmpevem_equation("x", params, float(mass), "i3")[0].chain.motor
+    v, p = 45.0, 30000.0
+    n = v / (2 * math.pi * mo.wheel_radius_m) * 60 * mo.gear_ratio
+    assert n > mo.loss_map.speed_rpm[-1]
+    m = p / v * mo.wheel_radius_m / mo.gear_ratio / mo.gear_efficiency
+    pb = m * 2 * math.pi * n / 60 + float(mo.loss_map(mo.loss_map.speed_rpm[-1], m)[0]) + mo.aux_power_w
+    u, r = mo.battery_voltage_v, mo.battery_resistance_ohm
+    out = mo.battery(np.array([p]), np.array([v]))
+    assert out["invalid"][0]
+    assert out["power_w"][0] == pytest.approx(u * u / (2 * r) - u * math.sqrt((u * u - 4 * r * pb) / (4 * r * r)))

@@ -29,8 +29,9 @@ recuperated = min(P_bat − P_const, 0); friction brakes = the recuperation beyo
 (at the motor shaft).
 
 Where SUMO 1.28 writes nan (a traction torque or power beyond the motor's limits, or an
-operating point outside the loss map, e.g. an i3 above 150 km/h), this books the capped
-state the model describes, with no loss from the map there.
+operating point outside the loss map, e.g. SUMO's i3 above 150 km/h), this books the capped
+state the model describes, with the loss at the map's nearest edge (an undefined point of
+the map, nan in it: no loss).
 
 SUMO 1.28's values of a parameter a vType leaves out (:data:`SUMO_DEFAULTS`) are those of
 its shipped ``data/emissions/MMPEVEM/VW_ID3.xml`` with a loss map of 0 W everywhere;
@@ -201,7 +202,12 @@ class SumoMotor:
         pm = np.where(over, -self.max_recuperation_power_w, pm)
         m = np.where(over, pm / w, m)
         loss = self.loss_map(n, m).reshape(p.shape)
-        bad |= ~np.isfinite(loss)
+        off = ~np.isfinite(loss)
+        if off.any():  # off the map (SUMO: nan): the loss at its nearest edge; an undefined point: 0
+            lm = self.loss_map
+            edge = lm(np.clip(n, lm.speed_rpm[0], lm.speed_rpm[-1]), np.clip(m, lm.torque_nm[0], lm.torque_nm[-1]))
+            loss = np.where(off, edge.reshape(p.shape), loss)
+        bad |= off
         pb = pm + np.nan_to_num(loss, nan=0.0) + self.aux_power_w
         u, res = self.battery_voltage_v, self.battery_resistance_ohm
         disc = u * u - 4.0 * res * pb
@@ -323,7 +329,7 @@ def mmpevem_equation(name: str, params: Mapping, mass_kg: float | None = None, w
     chain = EnergyChain(predicts="battery", aux_power_w=f["constantPowerIntake"], motor=motor,
                         provenance={"sumo_mmpevem": prov})
     notes = ["steps where SUMO writes nan (a demand beyond the motor's torque or power, or off the loss map): "
-             "booked at the motor's limits, with no loss from the map"]
+             "booked at the motor's limits, with the loss at the map's nearest edge"]
     if params.get("vehicleMass") is not None:
         notes.append("vehicleMass: SUMO 1.28's MMPEVEM does not read it either (the mass attribute, else 1794 kg)")
     defaults = sorted(k for k, (_, s) in val.items() if s == "SUMO default")
