@@ -21,7 +21,10 @@ g_SUMO/G, roll c_rr·g_SUMO/G (``roll`` carries cos θ), aero ½·1.204·c_d·A.
 (:class:`SumoMotor`, an :class:`~sumo_drvpw.model.chain.EnergyChain`'s ``motor``) gets that
 driving power P = F·v̄ and v̄, so F = P/v̄; standing (v̄ = 0), where P is 0, the motor still
 holds the car on a slope: F = m·(e_i·a + g·sin θ) from the signals ``accel_mps2`` and
-``grade_rad`` (0 when not given), as SUMO books it. The SUMO loop evaluates an equation
+``grade_rad`` (0 when not given), as SUMO books it. Riding persons (signal ``load_kg``, L;
+SUMO's getTotalMass) add to the mass but not to the rotating inertia: F = P/v̄ − (e_i − 1)·L·a
+(P from the terms at m + L), standing F = (m + L)·(a + g·sin θ) + (e_i − 1)·m·a. The SUMO
+loop evaluates an equation
 with such a chain at the step's mean speed (:mod:`sumo_drvpw.sim.ledger`).
 
 Its battery power splits as: auxiliary = P_const; traction = max(P_bat − P_const, 0);
@@ -173,9 +176,13 @@ class SumoMotor:
         sig = signals or {}
         a = np.broadcast_to(np.nan_to_num(np.asarray(sig.get("accel_mps2", 0.0), float)), p.shape)
         th = np.broadcast_to(np.nan_to_num(np.asarray(sig.get("grade_rad", 0.0), float)), p.shape)
+        load = np.broadcast_to(np.nan_to_num(np.asarray(sig.get("load_kg", 0.0), float)), p.shape)
         moving = np.abs(v) > EPS
-        hold = self.mass_kg * (self.mass_factor * a + G_UNIT * np.sin(th))
-        f = np.where(moving, p / np.where(moving, v, 1.0), hold)
+        # riders (load L) add to m but not to Θ/r²: m·e_i becomes m + L + (e_i − 1)·m, while P was
+        # evaluated with e_i·(m + L) (the equation's fixed acc coefficient)
+        inertia = (self.mass_factor - 1.0) * self.mass_kg
+        hold = (self.mass_kg + load) * (a + G_UNIT * np.sin(th)) + inertia * a
+        f = np.where(moving, p / np.where(moving, v, 1.0) - (self.mass_factor - 1.0) * load * a, hold)
         r, i, eta = self.wheel_radius_m, self.gear_ratio, self.gear_efficiency
         n = v / (2.0 * math.pi * r) * 60.0 * i
         w = 2.0 * math.pi * n / 60.0

@@ -509,7 +509,7 @@ class Stepper:
                 ledger.load_samples += int(np.count_nonzero(riding))
                 ledger.load_max_kg = max(ledger.load_max_kg, float(load.max()))
         x = Inputs(v, a, theta, wind, mass, np.full(m, physics.rho), sig, v_acc=v_mean)
-        xm = replace(x, v=v_mean) if self.eqset.uses_mean else None  # MMPEVEM's forces
+        xm = replace(x, v=v_mean, signals={**sig, "load_kg": ledger.veh_load[vidx]}) if self.eqset.uses_mean else None
         pc = self.eqset.category_powers(x, None if self.every_equation_applies
                                         else ledger.veh_app[vidx], xm)
         for k, vr, ar, pr in self.ranges:  # vehicle-steps outside an equation's validity range
@@ -529,7 +529,7 @@ class Stepper:
         if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
             off = None if self.shutoff is None else self.shutoff.auto_off(ledger, vidx, v, dt)
             ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx], engine_off=off, accel=a,
-                              v_mean=v_mean, grade=theta)
+                              v_mean=v_mean, grade=theta, load=None if xm is None else xm.signals["load_kg"])
         if self.trace is not None:
             self.trace.write(t_now, vidx, eidx, v, a, theta, wind, pc)
 
