@@ -167,11 +167,14 @@ class SumoMotor:
     aux_power_w: float
     loss_map: LossMap
 
-    def battery(self, p_drive_w, v_mps, signals: Mapping | None = None) -> dict:
+    def battery(self, p_drive_w, v_mps, signals: Mapping | None = None, aux_w=None) -> dict:
         """Battery power [W] and its parts (:meth:`EnergyChain.evaluate`'s keys) plus
         ``invalid`` (bool: where SUMO writes nan) from driving power P [W] at the mean speed
-        v̄ [m/s] of each step."""
+        v̄ [m/s] of each step. ``aux_w``: the auxiliary power drawn at the battery, P_const
+        (default :attr:`aux_power_w`; an :class:`EnergyChain` passes its own, loads, HVAC and
+        standstill draw included)."""
         p = np.asarray(p_drive_w, float)
+        aux = np.broadcast_to(np.asarray(self.aux_power_w if aux_w is None else aux_w, float), p.shape)
         v = np.broadcast_to(np.asarray(v_mps, float), p.shape)
         sig = signals or {}
         a = np.broadcast_to(np.nan_to_num(np.asarray(sig.get("accel_mps2", 0.0), float)), p.shape)
@@ -209,14 +212,14 @@ class SumoMotor:
         m = np.where(over, pm / w, m)
         loss = self.loss_map(n, m).reshape(p.shape)
         bad |= ~np.isfinite(loss)
-        pb = pm + np.nan_to_num(loss, nan=0.0) + self.aux_power_w
+        pb = pm + np.nan_to_num(loss, nan=0.0) + aux
         u, res = self.battery_voltage_v, self.battery_resistance_ohm
         disc = u * u - 4.0 * res * pb
         bad |= disc < 0  # beyond what the battery can deliver: SUMO's square root is nan
         total = u * u / (2.0 * res) - u * np.sqrt(np.maximum(disc, 0.0) / (4.0 * res * res))
-        drive = total - self.aux_power_w
+        drive = total - aux
         return {"traction_w": np.maximum(drive, 0.0), "recuperated_w": np.minimum(drive, 0.0),
-                "auxiliary_w": np.full(p.shape, self.aux_power_w),
+                "auxiliary_w": np.array(aux, float),
                 "friction_brake_w": np.where(rec, np.minimum(raw - pm, 0.0), 0.0),
                 "power_w": total, "invalid": bad}
 
@@ -254,6 +257,9 @@ def motor_from_dict(chain_doc: dict, where: str) -> SumoMotor:
     if bad or missing:
         raise UserError(f"{where} [chain.motor]: " + (f"unknown key(s) {bad}" if bad else f"missing {missing}")
                         + f" (keys: {', '.join(_FIELDS)}, loss_map)")
+    if "aux_power_w" in chain_doc and "aux_power_w" in doc and chain_doc["aux_power_w"] != doc["aux_power_w"]:
+        raise UserError(f"{where} [chain] aux_power_w = {chain_doc['aux_power_w']!r} and [chain.motor] aux_power_w = "
+                        f"{doc['aux_power_w']!r}: the motor's constant power intake is the chain's; give one value")
     kw = {}
     for k in _FIELDS:
         try:

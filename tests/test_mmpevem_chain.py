@@ -1,0 +1,78 @@
+"""An energy chain holding SUMO's MMPEVEM motor ([chain.motor]) and what else its [chain]
+table says: the chain's auxiliary draws — aux_power_w (the motor's constantPowerIntake),
+logged loads, HVAC, the standstill draw — are drawn at the motor's battery, through its
+internal resistance, as MMPEVEM books constantPowerIntake (before they were read and
+silently ignored: the battery power did not change by a watt)."""
+
+from __future__ import annotations
+
+import dataclasses
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.equations import equation_from_dict
+from sumo_drvpw.model.mmpevem import mmpevem_equation
+
+
+def _i3_doc() -> dict:
+    import sumo
+
+    vt = ET.parse(Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").getroot().find(".//vType")
+    eq, _ = mmpevem_equation("i3", {p.get("key"): p.get("value") for p in vt.findall("param")}, float(vt.get("mass")))
+    return eq.to_dict()
+
+
+def _with(doc: dict, **chain) -> dict:
+    return {**doc, "chain": {**doc["chain"], **chain}}
+
+
+P = np.array([0.0, 0.0, 8000.0, -4000.0, 30000.0])
+V = np.array([0.0, 0.0, 12.0, 9.0, 25.0])
+SIG = {"heater_w": np.array([1500.0, 0.0, 800.0, 2500.0, 0.0]), "ambient_c": np.full(5, 5.0),
+       "grade_rad": np.array([0.03, 0.0, 0.0, 0.0, 0.0]), "accel_mps2": np.zeros(5)}
+
+
+def _motor_at(doc, aux_w):
+    """The battery power of the motor alone with P_const = aux_w per sample (SUMO's formula)."""
+    m = equation_from_dict(doc, "i3.toml").chain.motor
+    aux = np.broadcast_to(np.asarray(aux_w, float), P.shape)
+    return np.array([dataclasses.replace(m, aux_power_w=float(aux[i])).battery(
+        P[i:i + 1], V[i:i + 1], {k: s[i:i + 1] for k, s in SIG.items()})["power_w"][0] for i in range(len(P))])
+
+
+def test_the_chains_auxiliary_is_drawn_at_the_motors_battery():
+    doc = _i3_doc()
+    base = equation_from_dict(doc, "i3.toml").chain.evaluate(P, V, signals=SIG)["power_w"]
+    np.testing.assert_allclose(base, _motor_at(doc, 360.0), rtol=1e-12)
+    cases = {  # [chain] keys → P_const per sample at the battery
+        "aux": ({"aux_power_w": 2000.0, "motor": {**doc["chain"]["motor"], "aux_power_w": 2000.0}}, np.full(5, 2000.0)),
+        "loads": ({"loads": {"heater_w": 1.0}}, 360.0 + SIG["heater_w"]),
+        "standstill": ({"standstill_aux_w": 500.0}, 360.0 + 500.0 * (V < 0.1)),
+        "hvac": ({"hvac": {"column": "ambient_c", "setpoint_c": 20.0, "heating_w_per_k": 100.0,
+                           "cooling_w_per_k": 0.0}}, np.full(5, 360.0 + 1500.0)),
+    }
+    for name, (keys, aux) in cases.items():
+        d = _with(doc, **keys)
+        got = equation_from_dict(d, "i3.toml").chain.evaluate(P, V, signals=SIG)
+        np.testing.assert_allclose(got["power_w"], _motor_at(doc, aux), rtol=1e-12, err_msg=name)
+        assert np.all(got["power_w"] - base > np.minimum(aux - 360.0, 1.0) * 0.99 - 1e-9), name
+        back = equation_from_dict(equation_from_dict(d, "i3.toml").to_dict(), "i3.toml")  # round trip
+        np.testing.assert_allclose(back.chain.evaluate(P, V, signals=SIG)["power_w"], got["power_w"], rtol=1e-12)
+
+
+def test_aux_given_once_or_agreeing():
+    doc = _i3_doc()
+    no_aux = {k: v for k, v in doc["chain"].items() if k != "aux_power_w"}
+    ch = equation_from_dict({**doc, "chain": no_aux}, "i3.toml").chain
+    assert ch.aux_power_w == 360.0  # the motor's constantPowerIntake
+    with pytest.raises(UserError, match=r"i3.toml \[chain\] aux_power_w = 2000.0 and \[chain.motor\] aux_power_w = 360.0"):
+        equation_from_dict(_with(doc, aux_power_w=2000.0), "i3.toml")
+    # a chain changed in memory (diagnose's aux_power_w finding) writes one value
+    eq = equation_from_dict(doc, "i3.toml")
+    eq.chain = dataclasses.replace(eq.chain, aux_power_w=900.0)
+    d = eq.to_dict()
+    assert d["chain"]["aux_power_w"] == d["chain"]["motor"]["aux_power_w"] == 900.0
