@@ -76,3 +76,30 @@ def test_aux_given_once_or_agreeing():
     eq.chain = dataclasses.replace(eq.chain, aux_power_w=900.0)
     d = eq.to_dict()
     assert d["chain"]["aux_power_w"] == d["chain"]["motor"]["aux_power_w"] == 900.0
+
+
+def test_diagnose_offers_a_motor_chain_only_effects_it_can_hold():
+    """``diagnose --target battery`` on an equation whose chain is SUMO's MMPEVEM motor: no
+    traction or recuperation efficiency, no recuperation limit (the motor has none of them;
+    before they were offered, scored and — had one been accepted — written into fields the
+    motor ignores and TOML drops); what it finds acts on the held-out prediction and the
+    closed equation reads back from its TOML. A synthetic battery log with a 450-W standstill
+    load, declared as SUMO's default MMPEVEM car."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_diagnose_target import _measured
+
+    from sumo_drvpw.fit.chain_linear import trace_chain
+
+    m, _, _ = _measured(450.0)
+    eq, _ = mmpevem_equation("mm", {}, 1400.0, "x")
+    res = trace_chain(m, eq)
+    offered = {c["effect"] for c in res.report["candidates"]}
+    assert not offered & {"traction_efficiency", "recuperation_efficiency", "recuperation_limit_w"}, offered
+    assert res.report["findings"]
+    assert res.report["final"]["metrics"]["rmse_w"] < 0.9 * res.report["baseline"]["metrics"]["rmse_w"]
+    back = equation_from_dict(res.equation.to_dict(), "closed.toml")
+    x = m.inputs.with_mass(eq.mass_kg)
+    np.testing.assert_allclose(back.chain.evaluate(back.power(x), x.v, signals=m.inputs.signals)["power_w"],
+                               res.equation.chain.evaluate(res.equation.power(x), x.v, signals=m.inputs.signals)["power_w"])
