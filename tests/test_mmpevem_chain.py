@@ -103,3 +103,31 @@ def test_diagnose_offers_a_motor_chain_only_effects_it_can_hold():
     x = m.inputs.with_mass(eq.mass_kg)
     np.testing.assert_allclose(back.chain.evaluate(back.power(x), x.v, signals=m.inputs.signals)["power_w"],
                                res.equation.chain.evaluate(res.equation.power(x), x.v, signals=m.inputs.signals)["power_w"])
+
+
+def test_calibrate_on_a_motor_equation_says_the_motor_is_replaced(tmp_path, capsys):
+    """``calibrate --target battery --equation FILE`` fits a chain of efficiencies on top of
+    FILE's road load; when FILE's chain is SUMO's MMPEVEM motor the calibrated file no longer
+    claims it (before: its description still read '... motor, loss map and battery as the
+    chain's motor' over a chain of η_t, η_r) and the console says it was replaced."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_diagnose_target import _measured
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.equations import load_equation, save_equation
+
+    _, _, df = _measured(0.0, trips=3, minutes=5.0)
+    log = tmp_path / "log.parquet"
+    df.to_parquet(log)
+    eq, _ = mmpevem_equation("mm", {}, 1400.0, "x")
+    save_equation(eq, tmp_path / "mm.toml")
+    for engine in ("local", "memory"):
+        out = tmp_path / f"cal_{engine}.toml"
+        assert cli_main(["calibrate", str(log), "--vehicle", "prius3", "--target", "battery", "--equation",
+                         str(tmp_path / "mm.toml"), "--engine", engine, "--out", str(out)]) == 0
+        assert "was SUMO's MMPEVEM motor" in capsys.readouterr().out
+        cal = load_equation(str(out))
+        assert cal.chain.motor is None and cal.terms == eq.terms
+        assert "motor replaced by the calibrated chain" in cal.description
