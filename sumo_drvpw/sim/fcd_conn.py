@@ -101,6 +101,9 @@ class _VType(_Domain):
     def getParameter(self, vt, key):  # noqa: N802 (SUMO's shut-off params of the route files)
         return (self.r.type_params.get(vt) or {}).get(key, "")
 
+    def getEmissionClass(self, vt):  # noqa: N802 (the route files')
+        return self.r.type_eclass.get(vt, "")
+
     def getMass(self, vt):  # noqa: N802 (a person type's: the route files', else SUMO's 70 kg)
         return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
 
@@ -132,6 +135,7 @@ class _Rows:
         self.type_mass: dict = {}
         #: vType → its shut-off params as the route files write them (set by replay_fcd)
         self.type_params: dict = {}
+        self.type_eclass: dict = {}
         #: the route files' stops matched to where vehicles stand (fcd_stops.StopTracker;
         #: set by replay_fcd, None: no file declares a stop)
         self.stops = None
