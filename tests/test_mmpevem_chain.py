@@ -131,3 +131,41 @@ def test_calibrate_on_a_motor_equation_says_the_motor_is_replaced(tmp_path, caps
         cal = load_equation(str(out))
         assert cal.chain.motor is None and cal.terms == eq.terms
         assert "motor replaced by the calibrated chain" in cal.description
+
+
+def test_export_vtype_writes_an_mmpevem_vtype_sumo_books_as_the_original(tmp_path, capsys):
+    """``export-vtype`` of an equation whose chain is SUMO's MMPEVEM motor writes an MMPEVEM
+    vType (before: an Energy-model vType with efficiencies 1 and constantPowerIntake 0, the
+    motor, its losses and its 360 W left out): SUMO's emissionsDrivingCycle books it as the
+    shipped vehicle file it came from, every step to SUMO's 6 decimals (random 500-s drive with
+    slopes and stops, nan on the same steps); a term MMPEVEM has not is listed."""
+    import subprocess
+
+    import pandas as pd
+    import sumo
+    import sumolib
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.equations import save_equation
+    from test_mmpevem import _drive  # noqa: F401 (tests/ on the path: pytest's rootdir)
+
+    src = Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml"
+    eq = equation_from_dict(_i3_doc(), "i3.toml")
+    save_equation(eq, tmp_path / "i3.toml")
+    assert cli_main(["export-vtype", str(tmp_path / "i3.toml"), "--id", "i3x", "--out", str(tmp_path / "x.add.xml")]) == 0
+    assert "(MMPEVEM)" in capsys.readouterr().out
+    vt = ET.parse(tmp_path / "x.add.xml").getroot().find(".//vType")
+    assert vt.get("emissionClass") == "MMPEVEM"
+    _drive(tmp_path)
+    out = {}
+    for name, add, vid in (("orig", src, "BMW_i3"), ("export", tmp_path / "x.add.xml", "i3x")):
+        subprocess.run([sumolib.checkBinary("emissionsDrivingCycle"), "-t", "tl.csv", "-e", "MMPEVEM", "--have-slope",
+                        "-o", f"{name}.csv", "--additional-files", str(add), "--vtype", vid],
+                       check=True, capture_output=True, cwd=tmp_path)
+        out[name] = pd.read_csv(tmp_path / f"{name}.csv", sep=";", header=None).iloc[:, -1].to_numpy(float)
+    assert np.isnan(out["orig"]).sum() >= 1
+    np.testing.assert_allclose(out["export"], out["orig"], atol=2e-6, equal_nan=True)
+    eq.terms = {**eq.terms, "v2": 0.5}
+    save_equation(eq, tmp_path / "i3v2.toml")
+    assert cli_main(["export-vtype", str(tmp_path / "i3v2.toml"), "--id", "i3y", "--out", str(tmp_path / "y.add.xml")]) == 0
+    assert "v2 (MMPEVEM's road load has acc, grade, roll and aero only)" in capsys.readouterr().out

@@ -346,3 +346,39 @@ def mmpevem_equation(name: str, params: Mapping, mass_kg: float | None = None, w
     eq = Equation(name=name, terms=terms, mass_kg=m, description=desc, source=source or where,
                   chain=chain, vclasses=tuple(vclasses))
     return eq, notes
+
+
+def mmpevem_params(eq, frontal_area_m2: float | None = None) -> tuple[dict, list[str]]:
+    """The inverse of :func:`mmpevem_equation`: an equation whose chain is SUMO's motor as
+    MMPEVEM vType values ({"mass": kg, param: value}, the loss map's text included), and
+    what MMPEVEM cannot express of it (terms other than its road load, or coefficients that
+    are not the motor's; the chain's loads, HVAC, standstill draw), with why. ``frontal_area_m2``
+    splits c_d·A (default 1 m²)."""
+    mo = eq.chain.motor
+    m, r = mo.mass_kg, mo.wheel_radius_m
+    k = G / G_UNIT  # the terms carry SUMO's g as a share of the project's
+    want = {"acc": mo.mass_factor, "grade": 1.0 / k}
+    missing: list[str] = []
+    if eq.mass_kg is not None and abs(eq.mass_kg - m) > 1e-9 * m:
+        missing.append(f"the equation's mass {eq.mass_kg:g} kg: MMPEVEM's is the motor's {m:g} kg")
+    for t, c in eq.terms.items():
+        if t in want and abs(c - want[t]) > 1e-9 * abs(want[t]):
+            missing.append(f"{t} coefficient {c:g} (MMPEVEM's is {want[t]:g} for this motor)")
+        elif t not in want and t not in ("roll", "aero_rho", "aero"):
+            missing.append(f"{t} (MMPEVEM's road load has acc, grade, roll and aero only)")
+    area = float(frontal_area_m2) if frontal_area_m2 else 1.0
+    cda = eq.terms.get("aero", 0.0) / (0.5 * RHO_MMPEVEM) + eq.terms.get("aero_rho", 0.0)
+    ch = eq.chain
+    for what, has in (("logged loads", ch.loads), ("an HVAC", ch.hvac), ("a standstill draw", ch.standstill_aux_w)):
+        if has:
+            missing.append(f"the chain's {what} (MMPEVEM draws constantPowerIntake only)")
+    p = {"mass": m, "wheelRadius": r, "internalMomentOfInertia": (mo.mass_factor - 1.0) * m * r * r,
+         "rollDragCoefficient": eq.terms.get("roll", 0.0) * k, "airDragCoefficient": cda / area,
+         "frontSurfaceArea": area, "gearRatio": mo.gear_ratio, "gearEfficiency": mo.gear_efficiency,
+         "maximumTorque": mo.max_torque_nm, "maximumPower": mo.max_power_w,
+         "maximumRecuperationTorque": mo.max_recuperation_torque_nm,
+         "maximumRecuperationPower": mo.max_recuperation_power_w,
+         "internalBatteryResistance": mo.battery_resistance_ohm,
+         "nominalBatteryVoltage": mo.battery_voltage_v, "constantPowerIntake": ch.aux_power_w,
+         "powerLossMap": mo.loss_map.text}
+    return p, missing
