@@ -199,15 +199,8 @@ class _Rows:
         else:
             self.person_count, self.departed_persons, self.person_types = 0, (), {}
         old = self.riders
-        # persons board and leave while the vehicle stands; the live loop reads its riders
-        # when the stop ends (as it drives off): a standing vehicle keeps the riders it had
-        # (SUMO lets them leave as the vehicle creeps into the stop, braked with them aboard)
-        standing = set(np.asarray(v["id"], object)[np.asarray(v["speed"], float) < STANDSTILL_MPS])
-        for vid in (set(old) | set(riders)) & standing:
-            if vid in old:
-                riders[vid] = old[vid]
-            else:
-                riders.pop(vid, None)
+        # persons board and leave as SUMO's emission models count them (sim/riders.py): the
+        # riders of each row, standing or not
         self.load_changed = tuple(vid for vid in set(old) | set(riders)
                                   if old.get(vid) != riders.get(vid))
         self.riders = riders
