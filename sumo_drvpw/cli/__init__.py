@@ -25,7 +25,8 @@ COMMANDS = {
     "run": ("sumo_drvpw.cli.run", "apply equations to every vehicle of a SUMO scenario"),
     "fcd": ("sumo_drvpw.cli.fcd", "apply equations to a finished SUMO run's FCD output"),
     "export-vtype": ("sumo_drvpw.cli.export_vtype",
-                     "write a SUMO Energy-model vType from an equation"),
+                     "write a SUMO Energy-model vType from an equation (an MMPEVEM one when its chain "
+                     "is SUMO's MMPEVEM motor)"),
     "import": ("sumo_drvpw.cli.import_", "convert vendor logs to canonical drive logs"),
     "validate": ("sumo_drvpw.cli.validate", "validation report on the real data in ../shared/data"),
     "diagnose": ("sumo_drvpw.cli.diagnose", "trace the residual of an equation to missing effects"),

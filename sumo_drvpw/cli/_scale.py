@@ -293,7 +293,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     fit = fit_chain(reduce, st)
     check_chain(fit, veh, None, None, None, ranges=st.fitted_ranges())
     eq.name = args.name or out.stem
-    eq.chain = fit.chain
+    replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": st.files, "target": st.source, "road_load": road,
                            "chain_input": chain_input, "vehicle": veh.path if veh else None}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
@@ -318,3 +318,14 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     for info in infos:
         print(info.line(), file=sys.stderr)
     return 0
+
+
+def replace_chain(eq, chain) -> None:
+    """``eq.chain = chain`` (a calibrated chain on top of road-load equation ``eq``); where
+    ``eq``'s own chain was SUMO's MMPEVEM motor (its description names it), says so on the
+    console and in the description, which would otherwise claim a motor the file lacks."""
+    if getattr(eq.chain, "motor", None) is not None:
+        print(f"note: the chain of --equation {eq.path or eq.source or eq.name} was SUMO's MMPEVEM motor "
+              "(loss map, limits, battery): the calibrated chain replaces it, its road load stays")
+        eq.description = f"road load of: {eq.description}; its MMPEVEM motor replaced by the calibrated chain"
+    eq.chain = chain

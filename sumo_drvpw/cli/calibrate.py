@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.cli import add_force, add_log_options, existing_paths, note_counts, output_set, read_options
-from sumo_drvpw.cli._scale import add_engine_arguments
+from sumo_drvpw.cli._scale import add_engine_arguments, replace_chain
 from sumo_drvpw.errors import UserError
 
 
@@ -375,7 +375,7 @@ def main_chain(args) -> int:
     del mw
     fit = calibrate_on(m, eq, loads=args.load, hvac=hvac, p_drive_w=p_in, efficiency=efficiency)
     eq.name = args.name or out.stem
-    eq.chain = fit.chain
+    replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": m.log.files, "target": m.source, "road_load": road,
                            "chain_input": chain_input,
                            "vehicle": m.vehicle.path if m.vehicle else None}

@@ -1,5 +1,6 @@
 """``sumo-drvpw export-vtype EQ --vehicle NAME --id ID --out FILE.add.xml``: an equation as
-a vType for SUMO's own Energy model (where its parameters come from: a calibration)."""
+a vType for SUMO's own Energy model (where its parameters come from: a calibration); an
+equation whose chain is SUMO's MMPEVEM motor as an MMPEVEM vType (sim/export.py)."""
 
 from __future__ import annotations
 
@@ -60,7 +61,8 @@ def main(args: argparse.Namespace) -> int:
     check_air_temperature(args.air_temperature)
     xml, missing = energy_vtype_xml(eq, args.id, mass, area, args.vclass, args.air_temperature)
     write_text(args.out, xml)
-    print(f"wrote vType '{args.id}' (Energy/unknown) from equation '{eq.name}' to {args.out}")
+    model = ("MMPEVEM", "MMPEVEM") if getattr(eq.chain, "motor", None) is not None else ("Energy/unknown", "Energy model")
+    print(f"wrote vType '{args.id}' ({model[0]}) from equation '{eq.name}' to {args.out}")
     for m in missing:
-        print(f"  not expressible in SUMO's Energy model: {m}")
+        print(f"  not expressible in SUMO's {model[1]}: {m}")
     return 0

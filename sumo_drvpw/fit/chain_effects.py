@@ -67,7 +67,7 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
                         [(None, gw * g, 1.0)]))
     out.append(Cand("aux_power_w", "constant auxiliary power at the battery/engine the declared chain lacks",
                     "structural", "W", [(np.column_stack([ga]), None, None)]))
-    if ch.predicts == "battery":
+    if ch.predicts == "battery":  # (SUMO's MMPEVEM motor has no η_t, η_r or limit of that kind: not offered)
         st = (v < STANDSTILL_MPS).astype(float)
         if 0.01 < st.mean() < 0.99:
             out.append(Cand("standstill_aux_w", "auxiliary power while standing (v < 0.1 m/s): HVAC, 12 V, "
@@ -75,7 +75,7 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
         eta_r = _eta(ch.recuperation_efficiency, v, pp)
         lim0 = np.inf if ch.recuperation_limit_w is None else ch.recuperation_limit_w
         brake = -pp[pp < 0]
-        if brake.size > 50:
+        if brake.size > 50 and ch.motor is None:
             qs = sorted({float(np.quantile(brake, q)) for q in LIMIT_QUANTILES if np.quantile(brake, q) < lim0})
             col = lambda L: eta_r * (np.maximum(pp, -L) - np.maximum(pp, -lim0))  # noqa: E731
             var = [(None, col(L), L) for L in qs if L > 0]
@@ -83,11 +83,11 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
                 out.append(Cand("recuperation_limit_w", "a recuperation limit: braking power beyond it goes to the "
                                 "friction brakes (profiled over quantiles of the braking power, refined between "
                                 "them)", "structural", "W", var, profile=(col, float(min(brake.max(), lim0)))))
-        if not isinstance(ch.recuperation_efficiency, Table):
+        if not isinstance(ch.recuperation_efficiency, Table) and ch.motor is None:
             rec = eta_r * np.maximum(np.minimum(pp, 0.0), -lim0)
             out.append(Cand("recuperation_efficiency", "recuperation efficiency differs from the declared chain's",
                             "structural", "-", [(np.column_stack([rec]), None, None)]))
-    if not isinstance(ch.traction_efficiency, Table):
+    if not isinstance(ch.traction_efficiency, Table) and ch.motor is None:
         tra = gw * np.maximum(pp, 0.0)
         out.append(Cand("traction_efficiency", "traction efficiency differs from the declared chain's",
                         "structural", "-", [(np.column_stack([tra]), None, None)]))

@@ -126,6 +126,10 @@ def gains(chain: EnergyChain, p_w, v_mps, signals=None) -> tuple[np.ndarray, np.
     a fuel chain's warm-running factor at the air temperature of ``signals`` included."""
     p = np.asarray(p_w, float)
     v = np.broadcast_to(np.asarray(v_mps, float), p.shape)
+    if chain.motor is not None:  # SUMO's MMPEVEM motor: its slopes by central differences of ±1 W
+        f = lambda dp, da: chain.evaluate(p + dp, v, signals=signals)["power_w"] if da == 0 else (  # noqa: E731
+            chain.motor.battery(p, v, signals, chain.auxiliary(p.size, signals) + da)["power_w"])
+        return (f(1.0, 0) - f(-1.0, 0)) / 2.0, (f(0.0, 1.0) - f(0.0, -1.0)) / 2.0
     if chain.predicts == "fuel":
         on = chain.engine_on(p, v).astype(float) * chain.running_factor(p.size, signals)
         gw = on * (p > 0) / (_eff(chain.traction_efficiency, v, p) * chain.marginal_efficiency)

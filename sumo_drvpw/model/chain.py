@@ -339,8 +339,8 @@ class EnergyChain:
         return out
 
     def _battery(self, p, v, n, signals) -> dict:
-        if self.motor is not None:
-            return self.motor.battery(p, v, signals)
+        if self.motor is not None:  # the chain's auxiliary draws (P_const, loads, HVAC, standing) at its battery
+            return self.motor.battery(p, v, signals, self.auxiliary(n, signals) + self.standstill_aux_w * (v < STANDSTILL_MPS))
         pos = np.maximum(p, 0.0)
         neg = np.minimum(p, 0.0)
         if self.recuperation_limit_w is not None:
@@ -423,7 +423,7 @@ class EnergyChain:
         if self.predicts == "wheel":
             return d
         if self.motor is not None:  # its motor, loss map and battery in place of η_t, η_r
-            d["motor"] = self.motor.to_dict()
+            d["motor"] = {**self.motor.to_dict(), "aux_power_w": float(self.aux_power_w)}
         for k in () if self.motor is not None else ("traction_efficiency",) + (
                 ("recuperation_efficiency",) if self.predicts != "fuel" else ()):
             val = getattr(self, k)
@@ -559,10 +559,10 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         if doc["fuel"] not in FUELS:
             raise UserError(f"{where} [chain]: fuel must be one of {', '.join(FUELS)}, got {doc['fuel']!r}")
         kw["fuel"] = doc["fuel"]
-    if "motor" in doc:
+    if "motor" in doc:  # SUMO's MMPEVEM motor: its constantPowerIntake is the chain's aux_power_w
         from sumo_drvpw.model.mmpevem import motor_from_dict
-
         kw["motor"] = motor_from_dict(doc, where)
+        kw.setdefault("aux_power_w", kw["motor"].aux_power_w)
     for k in ("std_err", "reading", "provenance", "metrics"):
         if k in doc:
             kw[k] = dict(doc[k])

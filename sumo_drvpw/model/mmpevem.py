@@ -21,7 +21,10 @@ g_SUMO/G, roll c_rr·g_SUMO/G (``roll`` carries cos θ), aero ½·1.204·c_d·A.
 (:class:`SumoMotor`, an :class:`~sumo_drvpw.model.chain.EnergyChain`'s ``motor``) gets that
 driving power P = F·v̄ and v̄, so F = P/v̄; standing (v̄ = 0), where P is 0, the motor still
 holds the car on a slope: F = m·(e_i·a + g·sin θ) from the signals ``accel_mps2`` and
-``grade_rad`` (0 when not given), as SUMO books it. The SUMO loop evaluates an equation
+``grade_rad`` (0 when not given), as SUMO books it. Riding persons (signal ``load_kg``, L;
+SUMO's getTotalMass) add to the mass but not to the rotating inertia: F = P/v̄ − (e_i − 1)·L·a
+(P from the terms at m + L), standing F = (m + L)·(a + g·sin θ) + (e_i − 1)·m·a. The SUMO
+loop evaluates an equation
 with such a chain at the step's mean speed (:mod:`sumo_drvpw.sim.ledger`).
 
 Its battery power splits as: auxiliary = P_const; traction = max(P_bat − P_const, 0);
@@ -165,18 +168,25 @@ class SumoMotor:
     aux_power_w: float
     loss_map: LossMap
 
-    def battery(self, p_drive_w, v_mps, signals: Mapping | None = None) -> dict:
+    def battery(self, p_drive_w, v_mps, signals: Mapping | None = None, aux_w=None) -> dict:
         """Battery power [W] and its parts (:meth:`EnergyChain.evaluate`'s keys) plus
         ``invalid`` (bool: where SUMO writes nan) from driving power P [W] at the mean speed
-        v̄ [m/s] of each step."""
+        v̄ [m/s] of each step. ``aux_w``: the auxiliary power drawn at the battery, P_const
+        (default :attr:`aux_power_w`; an :class:`EnergyChain` passes its own, loads, HVAC and
+        standstill draw included)."""
         p = np.asarray(p_drive_w, float)
+        aux = np.broadcast_to(np.asarray(self.aux_power_w if aux_w is None else aux_w, float), p.shape)
         v = np.broadcast_to(np.asarray(v_mps, float), p.shape)
         sig = signals or {}
         a = np.broadcast_to(np.nan_to_num(np.asarray(sig.get("accel_mps2", 0.0), float)), p.shape)
         th = np.broadcast_to(np.nan_to_num(np.asarray(sig.get("grade_rad", 0.0), float)), p.shape)
+        load = np.broadcast_to(np.nan_to_num(np.asarray(sig.get("load_kg", 0.0), float)), p.shape)
         moving = np.abs(v) > EPS
-        hold = self.mass_kg * (self.mass_factor * a + G_UNIT * np.sin(th))
-        f = np.where(moving, p / np.where(moving, v, 1.0), hold)
+        # riders (load L) add to m but not to Θ/r²: m·e_i becomes m + L + (e_i − 1)·m, while P was
+        # evaluated with e_i·(m + L) (the equation's fixed acc coefficient)
+        inertia = (self.mass_factor - 1.0) * self.mass_kg
+        hold = (self.mass_kg + load) * (a + G_UNIT * np.sin(th)) + inertia * a
+        f = np.where(moving, p / np.where(moving, v, 1.0) - (self.mass_factor - 1.0) * load * a, hold)
         r, i, eta = self.wheel_radius_m, self.gear_ratio, self.gear_efficiency
         n = v / (2.0 * math.pi * r) * 60.0 * i
         w = 2.0 * math.pi * n / 60.0
@@ -208,14 +218,14 @@ class SumoMotor:
             edge = lm(np.clip(n, lm.speed_rpm[0], lm.speed_rpm[-1]), np.clip(m, lm.torque_nm[0], lm.torque_nm[-1]))
             loss = np.where(off, edge.reshape(p.shape), loss)
         bad |= off
-        pb = pm + np.nan_to_num(loss, nan=0.0) + self.aux_power_w
+        pb = pm + np.nan_to_num(loss, nan=0.0) + aux
         u, res = self.battery_voltage_v, self.battery_resistance_ohm
         disc = u * u - 4.0 * res * pb
         bad |= disc < 0  # beyond what the battery can deliver: SUMO's square root is nan
         total = u * u / (2.0 * res) - u * np.sqrt(np.maximum(disc, 0.0) / (4.0 * res * res))
-        drive = total - self.aux_power_w
+        drive = total - aux
         return {"traction_w": np.maximum(drive, 0.0), "recuperated_w": np.minimum(drive, 0.0),
-                "auxiliary_w": np.full(p.shape, self.aux_power_w),
+                "auxiliary_w": np.array(aux, float),
                 "friction_brake_w": np.where(rec, np.minimum(raw - pm, 0.0), 0.0),
                 "power_w": total, "invalid": bad}
 
@@ -253,6 +263,9 @@ def motor_from_dict(chain_doc: dict, where: str) -> SumoMotor:
     if bad or missing:
         raise UserError(f"{where} [chain.motor]: " + (f"unknown key(s) {bad}" if bad else f"missing {missing}")
                         + f" (keys: {', '.join(_FIELDS)}, loss_map)")
+    if "aux_power_w" in chain_doc and "aux_power_w" in doc and chain_doc["aux_power_w"] != doc["aux_power_w"]:
+        raise UserError(f"{where} [chain] aux_power_w = {chain_doc['aux_power_w']!r} and [chain.motor] aux_power_w = "
+                        f"{doc['aux_power_w']!r}: the motor's constant power intake is the chain's; give one value")
     kw = {}
     for k in _FIELDS:
         try:
@@ -355,3 +368,39 @@ def evaluate_where(chain, sel: np.ndarray, p_drive_w, v_mps, dt_s, signals: Mapp
         full[sel] = x
         out[k] = full
     return out
+
+
+def mmpevem_params(eq, frontal_area_m2: float | None = None) -> tuple[dict, list[str]]:
+    """The inverse of :func:`mmpevem_equation`: an equation whose chain is SUMO's motor as
+    MMPEVEM vType values ({"mass": kg, param: value}, the loss map's text included), and
+    what MMPEVEM cannot express of it (terms other than its road load, or coefficients that
+    are not the motor's; the chain's loads, HVAC, standstill draw), with why. ``frontal_area_m2``
+    splits c_d·A (default 1 m²)."""
+    mo = eq.chain.motor
+    m, r = mo.mass_kg, mo.wheel_radius_m
+    k = G / G_UNIT  # the terms carry SUMO's g as a share of the project's
+    want = {"acc": mo.mass_factor, "grade": 1.0 / k}
+    missing: list[str] = []
+    if eq.mass_kg is not None and abs(eq.mass_kg - m) > 1e-9 * m:
+        missing.append(f"the equation's mass {eq.mass_kg:g} kg: MMPEVEM's is the motor's {m:g} kg")
+    for t, c in eq.terms.items():
+        if t in want and abs(c - want[t]) > 1e-9 * abs(want[t]):
+            missing.append(f"{t} coefficient {c:g} (MMPEVEM's is {want[t]:g} for this motor)")
+        elif t not in want and t not in ("roll", "aero_rho", "aero"):
+            missing.append(f"{t} (MMPEVEM's road load has acc, grade, roll and aero only)")
+    area = float(frontal_area_m2) if frontal_area_m2 else 1.0
+    cda = eq.terms.get("aero", 0.0) / (0.5 * RHO_MMPEVEM) + eq.terms.get("aero_rho", 0.0)
+    ch = eq.chain
+    for what, has in (("logged loads", ch.loads), ("an HVAC", ch.hvac), ("a standstill draw", ch.standstill_aux_w)):
+        if has:
+            missing.append(f"the chain's {what} (MMPEVEM draws constantPowerIntake only)")
+    p = {"mass": m, "wheelRadius": r, "internalMomentOfInertia": (mo.mass_factor - 1.0) * m * r * r,
+         "rollDragCoefficient": eq.terms.get("roll", 0.0) * k, "airDragCoefficient": cda / area,
+         "frontSurfaceArea": area, "gearRatio": mo.gear_ratio, "gearEfficiency": mo.gear_efficiency,
+         "maximumTorque": mo.max_torque_nm, "maximumPower": mo.max_power_w,
+         "maximumRecuperationTorque": mo.max_recuperation_torque_nm,
+         "maximumRecuperationPower": mo.max_recuperation_power_w,
+         "internalBatteryResistance": mo.battery_resistance_ohm,
+         "nominalBatteryVoltage": mo.battery_voltage_v, "constantPowerIntake": ch.aux_power_w,
+         "powerLossMap": mo.loss_map.text}
+    return p, missing

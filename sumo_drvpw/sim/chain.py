@@ -289,13 +289,13 @@ class ChainLedger:
 
     def book(self, vidx: np.ndarray, eidx: np.ndarray, v: np.ndarray, dt: float,
              p_drive_w: np.ndarray, signals: dict | None = None, app=None, engine_off=None,
-             accel=None, v_mean=None, grade=None) -> np.ndarray:
+             accel=None, v_mean=None, grade=None, load=None) -> np.ndarray:
         """Book one step for vehicles ``vidx`` (each once) on edges ``eidx``; returns the
         step's quantities (n, C) (:meth:`expand` → (n, E, Q)). ``app`` (n, E): 1 where an
         equation applies to the vehicle, 0 where not (nothing booked, not even auxiliary
         power); ``engine_off`` (n,): no fuel (:meth:`step_quantities`); ``accel`` (n,): the
-        step's acceleration [m/s²] (signal ``accel_mps2``); ``v_mean``, ``grade`` (n,): the step's
-        mean speed and grade [rad], at which chains with SUMO's MMPEVEM motor book."""
+        step's acceleration [m/s²] (signal ``accel_mps2``); ``v_mean``, ``grade``, ``load`` (n,): the step's
+        mean speed, grade [rad] and riders' mass [kg], at which chains with SUMO's MMPEVEM motor book."""
         vidx = np.asarray(vidx, np.int64)
         if vidx.size:
             self._grow(int(vidx.max()) + 1)
@@ -304,7 +304,7 @@ class ChainLedger:
         if accel is not None and self._reads_accel:
             signals = {**signals, "accel_mps2": accel}
         if grade is not None and self._motor:
-            signals = {**signals, "grade_rad": grade}
+            signals = {**signals, "grade_rad": grade, **({} if load is None else {"load_kg": load})}
         q = self.step_quantities(p_drive_w, v, dt, signals, engine_off, v_mean if self._motor else None, app)
         if self.cold_start_on:
             share = self._starting[vidx]

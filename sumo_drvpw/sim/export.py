@@ -172,7 +172,10 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
 def energy_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
                      frontal_area_m2: float | None = None,
                      vclass: str | None = None, air_c: float | None = None) -> tuple[str, list[str]]:
-    """An additional file with one Energy-model vType for ``eq``; returns (XML, missing)."""
+    """An additional file with one Energy-model vType for ``eq`` (an MMPEVEM one when its
+    chain is SUMO's MMPEVEM motor: :func:`mmpevem_vtype_xml`); returns (XML, missing)."""
+    if getattr(getattr(eq, "chain", None), "motor", None) is not None:
+        return mmpevem_vtype_xml(eq, vtype_id, mass_kg, frontal_area_m2, vclass)
     params, missing = energy_model_params(eq, mass_kg, frontal_area_m2, air_c)
     attrs = (f"id={quoteattr(vtype_id)} emissionClass=\"Energy/unknown\" "
              f"mass=\"{params['mass']:.6g}\"")
@@ -192,5 +195,33 @@ def energy_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
               "recuperationEfficiency", "recuperationEfficiencyByDecel"):
         if k in params:
             lines.append(f'        <param key="{k}" value="{params[k]:.9g}"/>')
+    lines += ["    </vType>", "</additional>", ""]
+    return "\n".join(lines), missing
+
+
+def mmpevem_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
+                      frontal_area_m2: float | None = None, vclass: str | None = None) -> tuple[str, list[str]]:
+    """An additional file with one vType on SUMO's MMPEVEM (``emissionClass="MMPEVEM"``) for
+    an equation whose chain is SUMO's MMPEVEM motor (:func:`~sumo_drvpw.model.mmpevem.mmpevem_params`,
+    the inverse of the equation ``vtype_energy`` makes of such a vType); returns (XML, missing)."""
+    from sumo_drvpw.model.mmpevem import mmpevem_params
+
+    params, missing = mmpevem_params(eq, frontal_area_m2)
+    if mass_kg is not None and abs(float(mass_kg) - params["mass"]) > 1e-9 * params["mass"]:
+        missing.append(f"the mass given, {float(mass_kg):g} kg: MMPEVEM's is the motor's {params['mass']:g} kg "
+                       "(its mass factor and holding force are at it)")
+    attrs = f'id={quoteattr(vtype_id)} emissionClass="MMPEVEM" mass="{params["mass"]:.9g}"'
+    if vclass:
+        attrs += f" vClass={quoteattr(vclass)}"
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             f"<!-- sumo-drvpw export-vtype: equation {eq.name} (battery) as SUMO's MMPEVEM (HelpersMMPEVEM). -->"]
+    if missing:
+        lines.append("<!-- not expressible in SUMO's MMPEVEM, left out: "
+                     + "; ".join(m.replace("--", "- -") for m in missing) + " -->")
+    lines += ["<additional>", f"    <vType {attrs}>",
+              f'        <param key="drvpw.equation" value={quoteattr(eq.name)}/>']
+    for k, v in params.items():
+        if k != "mass":
+            lines.append(f'        <param key="{k}" value={quoteattr(v if isinstance(v, str) else f"{v:.12g}")}/>')
     lines += ["    </vType>", "</additional>", ""]
     return "\n".join(lines), missing

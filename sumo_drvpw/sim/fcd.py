@@ -430,6 +430,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     # long planned stops and start-stop systems as in the live run (sim/shutoff.py): the
     # vTypes' shut-off params and the vehicles' stops from the route and additional files
     replay.type_params = {vt: i.shut_off for vt, i in acc.file_vtypes.items() if i.shut_off}
+    replay.type_eclass = {vt: i.emission_class for vt, i in acc.file_vtypes.items() if i.emission_class}
     # SUMO loads the additional files first: a route (with its stops) defined there serves
     # the vehicles of the route files
     declared = read_declared_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files])),

@@ -101,6 +101,9 @@ class _VType(_Domain):
     def getParameter(self, vt, key):  # noqa: N802 (SUMO's shut-off params of the route files)
         return (self.r.type_params.get(vt) or {}).get(key, "")
 
+    def getEmissionClass(self, vt):  # noqa: N802 (the route files')
+        return self.r.type_eclass.get(vt, "")
+
     def getMass(self, vt):  # noqa: N802 (a person type's: the route files', else SUMO's 70 kg)
         return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
 
@@ -132,6 +135,7 @@ class _Rows:
         self.type_mass: dict = {}
         #: vType → its shut-off params as the route files write them (set by replay_fcd)
         self.type_params: dict = {}
+        self.type_eclass: dict = {}
         #: the route files' stops matched to where vehicles stand (fcd_stops.StopTracker;
         #: set by replay_fcd, None: no file declares a stop)
         self.stops = None
@@ -195,15 +199,8 @@ class _Rows:
         else:
             self.person_count, self.departed_persons, self.person_types = 0, (), {}
         old = self.riders
-        # persons board and leave while the vehicle stands; the live loop reads its riders
-        # when the stop ends (as it drives off): a standing vehicle keeps the riders it had
-        # (SUMO lets them leave as the vehicle creeps into the stop, braked with them aboard)
-        standing = set(np.asarray(v["id"], object)[np.asarray(v["speed"], float) < STANDSTILL_MPS])
-        for vid in (set(old) | set(riders)) & standing:
-            if vid in old:
-                riders[vid] = old[vid]
-            else:
-                riders.pop(vid, None)
+        # persons board and leave as SUMO's emission models count them (sim/riders.py): the
+        # riders of each row, standing or not
         self.load_changed = tuple(vid for vid in set(old) | set(riders)
                                   if old.get(vid) != riders.get(vid))
         self.riders = riders

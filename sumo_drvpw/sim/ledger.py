@@ -22,6 +22,8 @@ not with the trips of the run; edge and class totals are sums kept per edge.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from sumo_drvpw.model.equations import Equation
@@ -88,7 +90,8 @@ class EquationSet:
         x : inputs of n samples
         app : optional (n, E) weights (1: the equation applies to the vehicle, 0: not)
         x_mean : the inputs at the step's mean speed, for equations evaluated there
-            (:func:`at_mean_speed`; None: ``x``)
+            (:func:`at_mean_speed`; None: ``x``); its signal ``load_kg`` (riders' mass [kg])
+            is added to the fixed mass of such an equation, as MMPEVEM adds it (getTotalMass)
 
         The result is a view of an (E, C, n) array (what :meth:`Ledger.book` uses).
         """
@@ -96,6 +99,8 @@ class EquationSet:
         out = np.zeros((E * C, n))
         for mass, terms, entries, mean in self.groups:
             xm = (x_mean if mean and x_mean is not None else x).with_mass(mass)
+            if mean and mass is not None and x_mean is not None and "load_kg" in x_mean.signals:
+                xm = replace(xm, mass=xm.mass + np.asarray(x_mean.signals["load_kg"], float))
             vals = [t.evaluate(xm) for t in terms]
             for u, row, c in entries:
                 out[row] += c * vals[u]

@@ -27,6 +27,7 @@ from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network, lane_numbers
 from sumo_drvpw.sim.reader import Reader, reinserted, tailwind, yaw_rate  # noqa: F401 (tailwind re-exported)
+from sumo_drvpw.sim.riders import Riders
 from sumo_drvpw.sim.shutoff import ShutOff
 from sumo_drvpw.sim.sumo_start import NewRun, signals_deferred, step_method
 from sumo_drvpw.sim.teleport import put_back
@@ -180,14 +181,8 @@ class Stepper:
         self.arrived = getattr(conn.simulation, "getArrivedIDList", None)
         self.last_ids = None  # the id list of the last step (vehicles removed between steps)
         self.is_replay = bool(getattr(conn, "is_replay", False))  # an FCD replay
-        #: riding persons (Physics.transportable_mass): their mass is read when a vehicle
-        #: departs and when a stop of it ends, while any are in the network (TraCI has no
-        #: containers' vehicle: they are not booked; the FCD replay answers these getters)
-        self.stop_ending = getattr(conn.simulation, "getStopEndingVehiclesIDList", None)
-        self.riders = (physics.transportable_mass and self.stop_ending is not None
-                       and hasattr(conn.vehicle, "getPersonIDList") and hasattr(conn, "person"))
-        self.any_load = False
-        self._type_mass: dict[str, float] = {}
+        #: riding persons (Physics.transportable_mass; sim/riders.py)
+        self.riders = Riders(conn, physics.transportable_mass)
         #: parked vehicles (SUMO takes them off the lane: engine off, not booked) are told
         #: once, when a read finds them without a lane (stop state 'parking'), and are not
         #: read again until their parking ends (getParkingEndingVehiclesIDList): a parked
@@ -231,29 +226,6 @@ class Stepper:
             self.every_equation_applies = False
         self.reader.subscribe_existing([vid])
         return i
-
-    def load_kg(self, vid: str) -> float:
-        """Mass of the persons riding in vehicle ``vid`` [kg]: the sum of their vTypes'
-        masses, as SUMO's emission models add them."""
-        conn, kg = self.conn, 0.0
-        for r in conn.vehicle.getPersonIDList(vid):
-            vt = conn.person.getTypeID(r)
-            m = self._type_mass.get(vt)
-            if m is None:
-                m = self._type_mass[vt] = float(conn.vehicletype.getMass(vt))
-            kg += m
-        return kg
-
-    def update_loads(self, vids) -> None:
-        """Read the riders' mass of the vehicles ``vids`` (those booked) into the ledger."""
-        ledger, vmap = self.ledger, self.vmap
-        for vid in vids:
-            i = vmap.get(vid)
-            if i is not None and ledger.veh_keep[i]:
-                kg = self.load_kg(vid)
-                ledger.veh_load[i] = kg
-                if kg > 0.0:
-                    self.any_load = True
 
     def parking_started(self, vid: str, i: int) -> bool:
         """Vehicle ``vid`` (slot ``i``), just read without a lane: parked (not read until its
@@ -361,6 +333,7 @@ class Stepper:
                 for v in gone:
                     self.dwell.pop(v, None)
                     self.seen_type.pop(v, None)
+                    self.riders.at_stop.discard(v)
                 if self.shutoff is not None:
                     self.shutoff.arrived(gone)
                 if ledger.flush_due():  # before the new ones come: memory ≤ running vehicles
@@ -381,9 +354,7 @@ class Stepper:
         if starts and ledger.chain is not None and ledger.chain.cold_start_on \
                 and not (ledger.steps == 1 and self.replay_info.get("skipped")):
             ledger.chain.depart(starts, start_ids, ledger.veh_type, ledger.veh_class)
-        if self.riders and (self.any_load or conn.person.getIDCount()):
-            self.update_loads(departed)
-            self.update_loads(self.stop_ending())
+        self.riders.step(ledger, vmap, departed)
         if self.parking_known:
             self.parking_ended()
         if self.shutoff is not None:
@@ -501,7 +472,7 @@ class Stepper:
         if yaw is not None:
             sig["yaw_rate_rps"] = yaw
         mass = ledger.veh_mass[vidx]
-        if self.any_load:  # riding persons (SUMO's getTotalMass)
+        if self.riders.any_load:  # riding persons (SUMO's getTotalMass)
             load = ledger.veh_load[vidx]
             riding = load > 0.0
             if riding.any():
@@ -509,7 +480,7 @@ class Stepper:
                 ledger.load_samples += int(np.count_nonzero(riding))
                 ledger.load_max_kg = max(ledger.load_max_kg, float(load.max()))
         x = Inputs(v, a, theta, wind, mass, np.full(m, physics.rho), sig, v_acc=v_mean)
-        xm = replace(x, v=v_mean) if self.eqset.uses_mean else None  # MMPEVEM's forces
+        xm = replace(x, v=v_mean, signals={**sig, "load_kg": ledger.veh_load[vidx]}) if self.eqset.uses_mean else None
         pc = self.eqset.category_powers(x, None if self.every_equation_applies
                                         else ledger.veh_app[vidx], xm)
         for k, vr, ar, pr in self.ranges:  # vehicle-steps outside an equation's validity range
@@ -529,7 +500,7 @@ class Stepper:
         if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
             off = None if self.shutoff is None else self.shutoff.auto_off(ledger, vidx, v, dt)
             ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx], engine_off=off, accel=a,
-                              v_mean=v_mean, grade=theta)
+                              v_mean=v_mean, grade=theta, load=None if xm is None else xm.signals["load_kg"])
         if self.trace is not None:
             self.trace.write(t_now, vidx, eidx, v, a, theta, wind, pc)
 

@@ -17,7 +17,8 @@ later (TraCI's StopData, read once when the stop starts).
 A start-stop system: a vType's ``shutOffAutoDuration`` (SUMO's default: never) switches
 the engine off once the vehicle has stood longer than that (SUMO's waiting time,
 ``EnergyParams::isEngineOff``): from then until it moves, its fuel chains book no fuel.
-SUMO's electric models do not switch off in traffic (``isOff`` reads the planned stop
+SUMO's MMPEVEM does not read ``shutOffStopDuration`` (1.28: a car on it draws at any stop),
+so its vTypes are never switched off at a stop. SUMO's electric models do not switch off in traffic (``isOff`` reads the planned stop
 only), and neither do battery chains here: the auxiliaries of a car halted in traffic keep
 running. (The standing time counts from the last step the vehicle moved, as SUMO's
 waiting time, but also at a planned stop shorter than ``shutOffStopDuration``, where SUMO
@@ -41,6 +42,7 @@ from __future__ import annotations
 import numpy as np
 
 from sumo_drvpw.model.constants import STANDSTILL_MPS
+from sumo_drvpw.model.mmpevem import is_mmpevem_class
 
 #: SUMO's default ``shutOffStopDuration`` [s] (EnergyParams.cpp, DEFAULT_VEH_SHUT_OFF_STOP)
 SHUT_OFF_STOP_S = 300.0
@@ -101,7 +103,13 @@ class ShutOff:
         return lim
 
     def limit_of(self, vtype: str) -> float:
-        """The vType's ``shutOffStopDuration`` [s]."""
+        """The vType's ``shutOffStopDuration`` [s]; none (∞) for a vType on SUMO's MMPEVEM, which
+        does not read it (SUMO 1.28 writes such a car's power standing at any stop: constant
+        power and the holding torque; tests/test_mmpevem_shutoff.py)."""
+        if vtype not in self.limit_s:
+            get = getattr(self.conn.vehicletype, "getEmissionClass", None)
+            if get is not None and is_mmpevem_class(str(get(vtype)) or None):
+                self.limit_s[vtype] = np.inf
         return self._param(self.limit_s, vtype, STOP_PARAM, SHUT_OFF_STOP_S)
 
     def registered(self, ledger, i: int, vtype: str, vid: str) -> None:

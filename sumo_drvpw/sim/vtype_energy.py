@@ -2,7 +2,7 @@
 booked as an equation with a battery chain (:mod:`sumo_drvpw.model.energy_params`), or
 its MMPEVEM parameters (``emissionClass="MMPEVEM…"``: road load, motor, loss map and battery
 as SUMO computes them, :mod:`sumo_drvpw.model.mmpevem`; booked whatever params it writes,
-since SUMO's defaults are then a whole car, its VW ID.3; its mass fixed, without riders).
+since SUMO's defaults are then a whole car, its VW ID.3; its mass SUMO's, plus riders as SUMO adds them).
 
 ``vtype_energy`` may stand wherever an equation name goes (a scenario's ``equations``,
 ``vtypes.<id>.equations``, ``vclasses.<c>.equations``, a vType's ``drvpw.equation``, a
@@ -201,7 +201,8 @@ def vtype_equations(file_vtypes, sc=None, step_s: float | None = None) -> tuple[
                                                                "takes it with the battery device on",
                       "model": "MMPEVEM" if mmp else "Energy",
                       "mass_kg": model["mass"]["value"] + model["loading"]["value"],
-                      "mass": "the vehicle's (riders included)" if same_mass else "fixed (no riders)",
+                      "mass": "the vehicle's (riders included)" if same_mass else
+                      "SUMO's MMPEVEM mass (riders included)" if mmp else "fixed (no riders)",
                       "defaults": {k: d["value"] for k, d in model.items() if d["from"] == "SUMO default"},
                       "not_expressed": notes}
         if "radial" in eq.terms:
