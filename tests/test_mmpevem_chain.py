@@ -169,3 +169,37 @@ def test_export_vtype_writes_an_mmpevem_vtype_sumo_books_as_the_original(tmp_pat
     save_equation(eq, tmp_path / "i3v2.toml")
     assert cli_main(["export-vtype", str(tmp_path / "i3v2.toml"), "--id", "i3y", "--out", str(tmp_path / "y.add.xml")]) == 0
     assert "v2 (MMPEVEM's road load has acc, grade, roll and aero only)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_compare_books_the_motor_holding_a_car_on_a_slope(tmp_path, engine):
+    """``compare --target battery`` with an equation whose chain is SUMO's MMPEVEM motor
+    passes the log's grade to the motor, as the SUMO loop does: a car standing 60 s on a
+    5 % slope draws P_const plus the loss of the torque that holds it (SUMO's formula by
+    hand: the i3's map at 0 rpm and m·g·sin θ·r/i/η); without the grade it drew P_const only."""
+    import json
+    import math
+
+    import pandas as pd
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.equations import save_equation
+
+    doc = _i3_doc()
+    eq = equation_from_dict(doc, "i3.toml")
+    save_equation(eq, tmp_path / "i3.toml")
+    th = math.atan(0.05)
+    n = 600
+    pd.DataFrame({"trip_id": "stand", "time_s": np.arange(n) * 0.1, "speed_mps": 0.0, "grade_rad": th,
+                  "mass_kg": 1417.0, "battery_voltage_v": 370.0, "battery_current_a": 2.0}).to_parquet(tmp_path / "s.parquet")
+    assert cli_main(["compare", str(tmp_path / "s.parquet"), "--equation", str(tmp_path / "i3.toml"),
+                     "--target", "battery", "--engine", engine, "--out", str(tmp_path / "o")]) == 0
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())["equations"]["i3"]
+    mo = eq.chain.motor
+    torque = 1417.0 * 9.80665 * math.sin(th) * mo.wheel_radius_m / mo.gear_ratio / mo.gear_efficiency
+    pb = float(mo.loss_map(0.0, torque)[0]) + mo.aux_power_w
+    u, r = mo.battery_voltage_v, mo.battery_resistance_ohm
+    p_bat = u * u / (2 * r) - u * math.sqrt((u * u - 4 * r * pb) / (4 * r * r))
+    trip = rep["trip_net_energy"]["trips"]["stand"]
+    assert float(mo.loss_map(0.0, torque)[0]) > 20.0
+    assert trip["predicted_j"] == pytest.approx(p_bat * (n - 1) * 0.1, rel=2e-3)

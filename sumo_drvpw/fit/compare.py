@@ -504,7 +504,7 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
             if eq.chain is None or eq.chain.predicts != target:
                 raise UserError(f"compare: equation '{eq.name}' ({eq.path or 'built in'}) has no energy "
                                 f"chain predicting '{target}' (it predicts '{eq.predicts}')")
-            pred = eq.chain.target_power(pred, inputs.v, inputs.signals, battery_w, inputs.a)
+            pred = eq.chain.target_power(pred, inputs.v, inputs.signals, battery_w, inputs.a, inputs.theta)
         err = pred - meas
         ok = np.isfinite(err)
         allok = bool(ok.all())

@@ -281,7 +281,7 @@ class CompareStats:
             zero = np.zeros(n)
             cw = {c: np.asarray(pw[eq.name].get(c, zero), float) for c in cats}
             wheel = np.sum(list(cw.values()), axis=0) if cw else zero
-            pred = wheel if self.target == "wheel" else eq.chain.target_power(wheel, x.v, sig, bat, x.a)
+            pred = wheel if self.target == "wheel" else eq.chain.target_power(wheel, x.v, sig, bat, x.a, x.theta)
             err = pred - meas
             ok = np.isfinite(err)
             sel = slice(None) if ok.all() else ok  # views when every prediction is finite

@@ -245,13 +245,13 @@ class EnergyChain:
         return s
 
     def target_power(self, p_drive_w, v_mps, signals: dict | None = None, battery_w=None,
-                     accel=None) -> np.ndarray:
+                     accel=None, grade=None) -> np.ndarray:
         """The chain's prediction in the form its measurement takes [W]: battery power, or
         fuel power less k·P_bat when the hybrid battery's V·I ``battery_w`` is given (so a
-        state-of-charge swing is not a fuel error; k = :attr:`battery_fuel_factor`).
-        ``accel``: the acceleration [m/s²] a recuperation by deceleration reads."""
-        if accel is not None and self.reads_accel:
-            signals = {**(signals or {}), "accel_mps2": accel}
+        state-of-charge swing is not a fuel error; k = :attr:`battery_fuel_factor`). ``accel``
+        [m/s²], ``grade`` [rad]: what a recuperation by deceleration or a motor reads."""
+        signals = {**(signals or {}), **({"accel_mps2": accel} if accel is not None and self.reads_accel else {}),
+                   **({"grade_rad": grade} if grade is not None and self.motor is not None else {})}
         pred = self.evaluate(p_drive_w, v_mps, signals=signals)["power_w"]
         if self.predicts == "fuel" and battery_w is not None:
             pred = pred - self.battery_fuel_factor * np.asarray(battery_w, float)
