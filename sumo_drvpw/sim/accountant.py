@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.sim.chain import chain_warnings
+from sumo_drvpw.sim.chain_outputs import chain_warnings
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
 from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network

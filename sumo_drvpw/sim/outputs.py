@@ -565,7 +565,7 @@ def write_outputs(out_dir: Path, result: RunResult) -> dict[str, str]:
                            out_dir / "difference_map.png")
             files["difference_map"] = str(out_dir / "difference_map.png")
     if getattr(result.ledger, "chain", None) is not None:  # battery/fuel accounts (#12)
-        from sumo_drvpw.sim.chain import write_chain_outputs
+        from sumo_drvpw.sim.chain_outputs import write_chain_outputs
 
         files.update(write_chain_outputs(out_dir, result))
     summary.setdefault("files", {}).update({k: os.path.basename(v) for k, v in files.items()})

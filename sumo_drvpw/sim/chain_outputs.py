@@ -1,0 +1,108 @@
+"""What a run's battery and fuel accounts (:class:`sumo_drvpw.sim.chain.ChainLedger`) write
+and say: the per-class summary for summary.json, the warnings on what they assumed, and the
+chain CSVs (vehicles, edges, classes)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sumo_drvpw.model.constants import CABIN_WARMUP_TAU_S, FUEL_COLD_START_TAU_S, T_REF_C
+from sumo_drvpw.sim.chain import KWH, ChainLedger
+
+
+def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str],
+                  class_order=None) -> dict:
+    """Per vehicle class and equation: battery kWh (traction, recuperated, auxiliary, net)
+    and kWh/km, or fuel L, L/100 km and CO₂ kg, g/km; plus the run's totals."""
+    rep = chain.report(veh_ids, veh_classes, [], class_order)
+    per_start = {chain.names[e]: chain.chains[e].cold_start(chain.air_temperature_c)["fuel_l"]
+                 for e in chain.active if chain.chains[e].predicts == "fuel"}
+    warmup = {chain.names[e]: chain.chains[e].cold_start(chain.air_temperature_c)["battery_j"] / KWH
+              for e in chain.active if chain.chains[e].predicts == "battery"
+              and (chain.chains[e].hvac or {}).get("warmup_j_per_k")}
+    return {"classes": rep["classes"],
+            "quantities": "battery: traction/recuperated/auxiliary/net kWh (auxiliary accrues "
+                          "while standing); fuel: litres (LHV, density of the chain's fuel), CO2 kg"
+                          + ("; cold_start_l: the part of the litres that cold starts took"
+                             if chain.cold_start_on else ""),
+            "cold_start": {"booked": chain.cold_start_on, "share": chain.cold_start,
+                           **({"share_by_vtype": chain.cold_start_vtypes} if chain.cold_start_vtypes else {}),
+                           **({"share_by_vclass": chain.cold_start_vclasses} if chain.cold_start_vclasses else {}),
+                           **({"own_share_vehicles": len(chain.cold_start_vehicles)} if chain.cold_start_vehicles else {}),
+                           **({"own_share_flows": len(chain.cold_start_flows)} if chain.cold_start_flows else {}),
+                           "vehicles": chain.cold_starts,
+                           "expected_cold_starts": round(chain.cold_starts_expected, 9),
+                           **({"fuel_l_per_start": per_start} if per_start else {}),
+                           **({"battery_kwh_per_start": warmup} if warmup else {}),
+                           "air_temperature_c": chain.air_temperature_c,
+                           "rule": "the chain's cold_start_fuel_l (a battery chain: its cabin warm-up) for each "
+                                   "vehicle departing during the run, times its share (its own param, else its vType's, else its "
+                                   "vClass's, else the run's), "
+                                   "as it decays from the departure, e^(-t/tau) (tau: fuel "
+                                   f"{FUEL_COLD_START_TAU_S:.0f} s, cabin {CABIN_WARMUP_TAU_S:.0f} s), on the edges "
+                                   "driven then: a trip of T seconds takes 1 - e^(-T/tau) of it "
+                                   "([vehicles] cold_start, [vtypes.<id>] / "
+                                   "[vclasses.<vClass>] cold_start, or the run command's cold-start option)"
+                                   if chain.cold_start_on else
+                                   "not booked: every trip taken as starting warm (through traffic, "
+                                   "or engines already warm); [vehicles] cold_start = true or "
+                                   "the run command's cold-start option books it"} if per_start or warmup else None,
+            "signals_assumed_zero": sorted(chain.assumed_zero),
+            "signal_values": chain.signal_values,
+            **({"warm_running": chain.warm_running()} if chain.running_columns else {}),
+            "hvac_air_temperature_c": chain.air_temperature_c if chain.hvac_columns else None,
+            "hvac_air_temperature_assumed": chain.air_temperature_assumed}
+
+
+def chain_warnings(chain: ChainLedger | None, chainless: dict | None = None) -> list[str]:
+    """What a run's battery/fuel accounts assumed that the scenario did not say, and the
+    vClasses they leave out (``chainless``: vClass → vehicles no chain applies to)."""
+    if chain is None:
+        return []
+    out = []
+    if chainless:
+        out.append("no battery or fuel chain applies to "
+                   + ", ".join(f"{n} {c}" for c, n in sorted(chainless.items(), key=lambda x: -x[1]))
+                   + " vehicle(s): their driving energy is booked, but the kWh, litres and CO2 totals "
+                   "leave them out (give them an equation with a chain: [vclasses.<vClass>] or "
+                   "[vtypes.<id>] equations)")
+    if chain.air_temperature_assumed:
+        out.append(f"no air temperature given: the energy chains' HVAC, cold starts and warm-running fuel read "
+                   f"{T_REF_C:g} °C (the "
+                   "default air, as the air density and the cold terms do); give the season's "
+                   "air temperature (the scenario's [air] temperature_c, or the run command's "
+                   "air-temperature option)")
+    if chain.assumed_zero:
+        out.append("chain loads SUMO has no signal for were taken as 0: "
+                   + ", ".join(sorted(chain.assumed_zero))
+                   + " (a logged load has no counterpart in SUMO: for a SUMO study use a chain whose "
+                   "heating and cooling follow the air temperature, [chain.hvac], as bmw_i3_battery's do)")
+    return out
+
+
+def write_chain_outputs(out_dir, result) -> dict[str, str]:
+    """Write ``chain_vehicles.csv``, ``chain_edges.csv``, ``chain_classes.csv`` of a run
+    (:class:`sumo_drvpw.sim.outputs.RunResult` whose ledger has a ``chain``) and put the
+    per-class summary under ``result.summary["chain"]``; returns name → path."""
+    import pandas as pd
+
+    from sumo_drvpw.fileio import write_text
+
+    led = result.ledger
+    chain = led.chain
+    n = led.n_veh
+    ids, classes = list(led.veh_ids[:n]), [c or "unknown" for c in led.veh_class[:n]]
+    order = list(getattr(led, "class_seen", {}) or [])
+    rep = chain.report(ids, classes, list(result.net.edge_ids), order)
+    files = {}
+    spill = getattr(led, "spill", None)
+    for key, rows in rep.items():
+        path = Path(out_dir) / f"chain_{key}.csv"
+        if key == "vehicles" and spill is not None and spill.has_chain_rows:
+            spill.write_chain_csv(path, rows)  # the flushed vehicles' rows, then the rest
+        else:
+            write_text(path, pd.DataFrame(rows, columns=None if rows else chain.columns())
+                       .to_csv(index=False))
+        files[f"chain_{key}"] = str(path)
+    result.summary["chain"] = chain_summary(chain, ids, classes, order)
+    return files
