@@ -187,8 +187,9 @@ def test_vtype_energy_books_mmpevem_as_sumo(tmp_path):
     books its loss map at the holding torque). ``vtype_energy`` books each MMPEVEM car as
     SUMO's emission output does, per car within 1e-6 (measured 2026-11-27: within 2e-8; without the holding torque 1e-4 off), the
     Energy-model car beside them too; the i3 driven beyond its motor, where SUMO writes nan
-    on some steps, is booked at the motor's limits: more than SUMO's finite steps, finite.
-    An FCD replay of the run books the same."""
+    on some steps, is booked at the motor's limits: more than SUMO's finite steps, finite;
+    summary.json counts exactly the steps SUMO writes nan and a warning says so. An FCD
+    replay of the run books the same."""
     (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0" z="0"/><node id="b" x="3000" y="0" z="60"/></nodes>')
     (tmp_path / "n.edg.xml").write_text('<edges><edge id="e" from="a" to="b" numLanes="2" speed="16"/></edges>')
     subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml"],
@@ -212,6 +213,11 @@ def test_vtype_energy_books_mmpevem_as_sumo(tmp_path):
         else:
             assert row.net_kwh * 1000.0 == pytest.approx(sumo[key], rel=1e-6), key
     assert sum(nan[k] for k in cv.index if k.startswith("f")) > 0
+    # the steps SUMO writes nan are the steps the chain could not serve, counted and said
+    counted = res["chain"]["mmpevem_nan_steps"]
+    assert counted == {"vtype_energy.BMW_i3": 0, "vtype_energy.id3": 0,
+                       "vtype_energy.fast": sum(nan[k] for k in cv.index if k.startswith("f"))}
+    assert any("MMPEVEM would write nan on" in w and "vtype_energy.fast" in w for w in res["warnings"])
     held = [float(v.get("pos")) for ts in ET.parse(tmp_path / "em.xml").getroot() for v in ts
             if v.get("id") == "i.0" and float(v.get("speed")) == 0.0 and float(v.get("pos")) > 800]
     assert len(held) >= 25  # it stood at its stop on the slope (15 s)

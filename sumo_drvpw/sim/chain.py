@@ -89,6 +89,9 @@ class ChainLedger:
         self._hvac_active = [j for j, e in enumerate(self.active) if self.chains[e].hvac]
         self._reads_accel, self._motor = (any(self.chains[e].reads_accel for e in self.active),
                                           {e for e in self.active if self.chains[e].motor is not None})
+        #: per equation: vehicle-steps its SUMO MMPEVEM motor could not serve (beyond its torque or
+        #: power, off its loss map), where SUMO writes nan and the chain books the motor's limits
+        self.motor_invalid = np.zeros(len(self.names), np.int64)
         self.E, self.Q = len(self.names), len(QUANTITIES)
         #: (equation, quantity) columns a chain books: battery 0–3, fuel 4–7
         self._cols = [(e, k) for e in self.active
@@ -275,6 +278,8 @@ class ChainLedger:
             vv = v if v_mean is None or e not in self._motor else v_mean
             out = (evaluate_where(ch, np.asarray(app)[:, e] > 0, p[:, e], vv, dt, signals)
                    if app is not None and e in self._motor else ch.evaluate(p[:, e], vv, dt, signals))
+            if "invalid" in out:
+                self.motor_invalid[e] += int(np.count_nonzero(out["invalid"]))
             keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
                     ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
             for key in keys:

@@ -10,6 +10,11 @@ from sumo_drvpw.model.constants import CABIN_WARMUP_TAU_S, FUEL_COLD_START_TAU_S
 from sumo_drvpw.sim.chain import KWH, ChainLedger
 
 
+def _motors(chain: ChainLedger) -> list[int]:
+    """The active equations whose chain is SUMO's MMPEVEM motor."""
+    return [e for e in chain.active if chain.chains[e].motor is not None]
+
+
 def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str],
                   class_order=None) -> dict:
     """Per vehicle class and equation: battery kWh (traction, recuperated, auxiliary, net)
@@ -47,6 +52,8 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
                                    "not booked: every trip taken as starting warm (through traffic, "
                                    "or engines already warm); [vehicles] cold_start = true or "
                                    "the run command's cold-start option books it"} if per_start or warmup else None,
+            **({"mmpevem_nan_steps": {chain.names[e]: int(chain.motor_invalid[e]) for e in _motors(chain)}}
+               if _motors(chain) else {}),
             "signals_assumed_zero": sorted(chain.assumed_zero),
             "signal_values": chain.signal_values,
             **({"warm_running": chain.warm_running()} if chain.running_columns else {}),
@@ -72,6 +79,12 @@ def chain_warnings(chain: ChainLedger | None, chainless: dict | None = None) -> 
                    "default air, as the air density and the cold terms do); give the season's "
                    "air temperature (the scenario's [air] temperature_c, or the run command's "
                    "air-temperature option)")
+    nan = {chain.names[e]: int(chain.motor_invalid[e]) for e in _motors(chain) if chain.motor_invalid[e]}
+    if nan:
+        out.append("SUMO's MMPEVEM would write nan on " + ", ".join(f"{n} vehicle-steps of {k}" for k, n in nan.items())
+                   + ": the demand exceeds the motor's torque or power, or leaves its loss map (a vType faster "
+                   "or quicker than its motor: check maxSpeed and accel); booked at the motor's limits, with the "
+                   "loss at the map's edge (summary.json chain.mmpevem_nan_steps)")
     if chain.assumed_zero:
         out.append("chain loads SUMO has no signal for were taken as 0: "
                    + ", ".join(sorted(chain.assumed_zero))
