@@ -476,7 +476,7 @@ class Stepper:
             load = ledger.veh_load[vidx]
             riding = load > 0.0
             if riding.any():
-                mass = mass + load
+                mass, sig["load_kg"] = mass + load, load
                 ledger.load_samples += int(np.count_nonzero(riding))
                 ledger.load_max_kg = max(ledger.load_max_kg, float(load.max()))
         x = Inputs(v, a, theta, wind, mass, np.full(m, physics.rho), sig, v_acc=v_mean)

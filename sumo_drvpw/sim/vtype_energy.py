@@ -22,10 +22,10 @@ its ``vtype_energy.<id>`` beside its class's equations.
 Mass: the vType's Energy-model mass (``mass`` attribute, else param ``vehicleMass``, plus
 ``loading``). Where the run books the vType at that same mass (no ``drvpw.mass``, no
 scenario ``vtypes.<id>.mass_kg``) the equation takes the vehicle's booked mass, so riding
-persons count as in SUMO's ``getTotalMass`` (the rotating mass, an acc coefficient of
-1 + m_rot/m at the vType's mass, then grows by the riders' share: +1.2 % of the kinetic
-power of a 12-t bus with 500 kg m_rot and 5 t of riders); otherwise (and at SUMO's default 1830 kg) the
-mass is fixed to SUMO's, without riders.
+persons count as in SUMO's ``getTotalMass``, and the rotating mass stays the vType's (the
+acc coefficient 1 + m_rot/m at the vType's mass; the ledger takes the riders' share of it
+back, :class:`~sumo_drvpw.sim.ledger.EquationSet`, as SUMO books (m + riders + m_rot)·v̄·a);
+otherwise (and at SUMO's default 1830 kg) the mass is fixed to SUMO's, without riders.
 """
 
 from __future__ import annotations
@@ -193,8 +193,9 @@ def vtype_equations(file_vtypes, sc=None, step_s: float | None = None) -> tuple[
         eq.path = str(info.source)
         same_mass = (not mmp and model["mass"]["from"] != "SUMO default" and not info.drvpw_mass
                      and vdata.get(vt, {}).get("mass_kg") is None)
-        if same_mass:  # the vehicle's booked mass: the same, plus riders as SUMO adds them
-            eq.mass_kg = None
+        if same_mass:  # the vehicle's booked mass: the same, plus riders as SUMO adds them, but
+            eq.mass_kg = None  # its rotating mass does not grow with them (sim/ledger.py)
+            eq.provenance["rotating_mass_fixed"] = True
         eqs.append(eq)
         booked[vt] = {"equation": eq.name,
                       "emission_class": info.emission_class or "none written: Energy/unknown, as SUMO "
