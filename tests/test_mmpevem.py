@@ -262,3 +262,17 @@ def test_off_the_map_the_loss_at_its_edge():
     out = mo.battery(np.array([p]), np.array([v]))
     assert out["invalid"][0]
     assert out["power_w"][0] == pytest.approx(u * u / (2 * r) - u * math.sqrt((u * u - 4 * r * pb) / (4 * r * r)))
+
+
+def test_a_motor_without_recuperation_round_trips():
+    """A vType that writes maximumRecuperationPower 0 (no recuperation) makes an equation
+    that is written and read back (limits and the intake may be 0; the gear ratio may not)."""
+    eq, _ = mmpevem_equation("norec", {"maximumRecuperationPower": "0", "constantPowerIntake": "0"}, 1500.0, "x")
+    back = equation_from_dict(eq.to_dict(), "norec.toml")
+    assert back.chain.motor.max_recuperation_power_w == 0.0
+    out = back.chain.evaluate(np.array([-20000.0]), np.array([15.0]))
+    assert out["recuperated_w"][0] == 0.0 and out["power_w"][0] == pytest.approx(0.0, abs=1e-9)
+    bad = eq.to_dict()
+    bad["chain"]["motor"]["gear_ratio"] = 0.0
+    with pytest.raises(UserError, match="gear_ratio: must be a finite number > 0"):
+        equation_from_dict(bad, "norec.toml")

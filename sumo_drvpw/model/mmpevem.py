@@ -12,7 +12,7 @@ and F the tractive force at the wheels::
     M      = F·r/i / η_gear (F ≥ 0), F·r/i · η_gear (F < 0)             motor torque [N·m]
     P_m    = M·ω, capped: M ≤ M_max, P_m ≤ P_max (traction; SUMO then writes nan),
              M ≥ −M_rec, P_m ≥ −P_rec (recuperation: the rest goes to the friction brakes)
-    P_loss = the power-loss map of motor and inverter at (n, M) (outside it: 0, and SUMO nan)
+    P_loss = the power-loss map of motor and inverter at (n, M) (outside it SUMO writes nan)
     P_b    = P_m + P_loss + P_const
     P_bat  = U²/(2R) − U·sqrt((U² − 4R·P_b)/(4R²))                      (battery losses R·I²)
 
@@ -24,8 +24,7 @@ holds the car on a slope: F = m·(e_i·a + g·sin θ) from the signals ``accel_m
 ``grade_rad`` (0 when not given), as SUMO books it. Riding persons (signal ``load_kg``, L;
 SUMO's getTotalMass) add to the mass but not to the rotating inertia: F = P/v̄ − (e_i − 1)·L·a
 (P from the terms at m + L), standing F = (m + L)·(a + g·sin θ) + (e_i − 1)·m·a. The SUMO
-loop evaluates an equation
-with such a chain at the step's mean speed (:mod:`sumo_drvpw.sim.ledger`).
+loop evaluates an equation with such a chain at the step's mean speed (:mod:`sumo_drvpw.sim.ledger`).
 
 Its battery power splits as: auxiliary = P_const; traction = max(P_bat − P_const, 0);
 recuperated = min(P_bat − P_const, 0); friction brakes = the recuperation beyond the caps
@@ -272,9 +271,9 @@ def motor_from_dict(chain_doc: dict, where: str) -> SumoMotor:
             x = float(doc[k])
         except (TypeError, ValueError):
             raise UserError(f"{where} [chain.motor] {k}: must be a number, got {doc[k]!r}") from None
-        if not math.isfinite(x) or x < 0 or (x == 0 and k not in ("aux_power_w",)) or \
-                (k == "gear_efficiency" and x > 1):
-            raise UserError(f"{where} [chain.motor] {k}: must be a finite number > 0"
+        positive = k not in ("aux_power_w",) and not k.startswith("max_")  # limits and intake may be 0
+        if not math.isfinite(x) or x < 0 or (x == 0 and positive) or (k == "gear_efficiency" and x > 1):
+            raise UserError(f"{where} [chain.motor] {k}: must be a finite number " + ("> 0" if positive else "≥ 0")
                             + (" and ≤ 1" if k == "gear_efficiency" else "") + f", got {doc[k]!r}")
         kw[k] = x
     return SumoMotor(**kw, loss_map=LossMap.parse(doc["loss_map"], f"{where} [chain.motor] loss_map"))
