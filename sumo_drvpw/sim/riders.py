@@ -4,7 +4,8 @@ models add it (``EnergyParams::getTotalMass``: mass + loading + transportable ma
 SUMO changes a vehicle's transportable mass as persons board and alight: at the start of a
 stop (those leaving, those waiting there), during it (those arriving while it dwells) and
 at a departure (a triggered one). The loop reads a vehicle's riders when it departs, when
-a stop of it starts or ends, and every step while it stands at a stop — from the step its
+a stop of it starts or ends, and every step while it stands at a stop (not parked: a
+parked vehicle is not booked; its riders are read when its stop ends) — from the step its
 stop starts, as SUMO's emission output books them (probed 2026-11-27 with SUMO 1.28's
 MMPEVEM, whose holding torque on a slope shows the mass of every standing step:
 tests/test_mmpevem_riders.py). Containers are not booked (TraCI has no containers'
@@ -62,4 +63,10 @@ class Riders:
         self.at_stop.update(starting)
         self.at_stop.difference_update(ending)  # (the loop drops those that left the network)
         if self.any_load or self.conn.person.getIDCount():
+            # a parked vehicle (off the lane, not booked: Stepper.parking_started) is not read
+            # while it stands; its riders are read when its stop ends (``ending``), so a
+            # parked fleet costs no getter calls, also while persons walk
+            parked = ledger.veh_parked
+            gone = [v for v in self.at_stop if (i := vmap.get(v)) is not None and parked[i]]
+            self.at_stop.difference_update(gone)  # until its stop ends: parked all along
             self.update(ledger, vmap, [*departed, *ending, *self.at_stop])
