@@ -342,6 +342,11 @@ class Accountant(_Listener):
         vt_warning = listing_warning(self.vtype_energy)
         if vt_warning:
             warnings.append(vt_warning)
+        n_cont = getattr(self.file_vtypes, "containers", 0)
+        if n_cont and self.physics.transportable_mass:
+            warnings.append(f"the route files define {n_cont} container(s) or containerFlow(s): their mass, "
+                            "which SUMO's emission models add to the vehicle carrying them, is not booked "
+                            "(riding persons are); give it as the vType's param loading")
         # persons (counted as pedestrians) are never booked: no warning for them
         skipped = {c: n for c, n in self.resolver.skipped["by_vclass"].items() if c != "pedestrian"}
         if skipped:

@@ -298,6 +298,9 @@ class FileVTypes(dict):
         super().__init__(*args, **kw)
         self.vehicle_cold_start: dict[str, float] = {}
         self.flow_cold_start: dict[str, float] = {}
+        #: ``<container>`` and ``<containerFlow>`` elements of the files (not booked: their
+        #: mass, which SUMO's emission models add to their vehicle's, is left out)
+        self.containers = 0
 
 
 #: the vType params of SUMO's Energy model and MMPEVEM a file's vType keeps (:attr:`VTypeInfo.energy_params`)
@@ -354,6 +357,8 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                     _vehicle_share(out, path, tag, el)
                     el.clear()
                     continue
+                if tag in ("container", "containerFlow"):
+                    out.containers += 1
                 if tag != "vType":
                     if tag not in ("param",):
                         el.clear()
