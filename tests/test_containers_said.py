@@ -6,15 +6,12 @@ emission output."""
 from __future__ import annotations
 
 import json
-import subprocess
-import xml.etree.ElementTree as ET
-from collections import defaultdict
 
 import pandas as pd
-import sumolib
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim import run_scenario
+from sumo_probe import build_net, emitted_wh, energy_scenario
 
 ROUTES = """<routes>
   <vType id="etruck" vClass="truck" mass="9000" emissionClass="Energy/unknown" containerCapacity="2">
@@ -28,20 +25,13 @@ def test_containers_not_booked_are_said(tmp_path):
     """A 9-t Energy-model truck carrying one container 800 m at 0.5-s steps: booked 0.87 of
     SUMO's emission output (measured 2026-11-27), and, since this commit, the run and the FCD
     replay warn that containers are not booked (before: no word of it)."""
-    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text('<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml"],
-                   check=True, capture_output=True, cwd=tmp_path)
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
     (tmp_path / "r.rou.xml").write_text(ROUTES)
-    (tmp_path / "s.toml").write_text(
-        'equations = ["vtype_energy"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\n'
-        f'end = 100\nstep_length = 0.5\noptions = ["--no-warnings", "true", "--precision", "6", "--emission-output", '
-        f'"{tmp_path / "em.xml"}", "--fcd-output", "{tmp_path / "fcd.xml"}"]\n[outputs]\nfigures = false\n')
+    energy_scenario(tmp_path, 100)
     run_scenario(tmp_path / "s.toml", tmp_path / "o")
-    sumo_wh = defaultdict(float)
-    for ts in ET.parse(tmp_path / "em.xml").getroot():
-        for v in ts:
-            sumo_wh[v.get("id")] += float(v.get("electricity")) * 0.5
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert cv.loc["t", "net_kwh"] * 1000.0 < 0.95 * sumo_wh["t"]  # the container's mass is left out
     assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),

@@ -5,16 +5,13 @@ output does, live and replayed."""
 
 from __future__ import annotations
 
-import subprocess
-import xml.etree.ElementTree as ET
-from collections import defaultdict
 
 import pandas as pd
 import pytest
-import sumolib
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim import run_scenario
+from sumo_probe import build_net, emitted_wh, energy_scenario
 
 PERSONS = "".join(f'<person id="p{i}" depart="0" departPos="{151 + i % 28}"><ride from="e" busStop="{"bs2" if i % 2 else "bs3"}" lines="b"/></person>'
                   for i in range(30))
@@ -35,25 +32,18 @@ def test_energy_bus_riders_as_sumo(tmp_path):
     of riders in SUMO; the bus as SUMO's emission output to 1e-6, live and replayed (measured
     2026-11-27 before the fix, when the acc coefficient 1 + m_rot/m scaled the riders too:
     1583.48 against SUMO's 1582.50 Wh, +6.2e-4)."""
-    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="c" x="2000" y="0"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text('<edges><edge id="e" from="a" to="c" numLanes="1" speed="14"/></edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml"],
-                   check=True, capture_output=True, cwd=tmp_path)
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="c" x="2000" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="c" numLanes="1" speed="14"/></edges>')
     (tmp_path / "r.rou.xml").write_text(ROUTES.format(persons=PERSONS))
     (tmp_path / "a.add.xml").write_text('<additional><busStop id="bs" lane="e_0" startPos="150" endPos="180"/>'
                                         '<busStop id="bs2" lane="e_0" startPos="900" endPos="930"/>'
                                         '<busStop id="bs3" lane="e_0" startPos="1600" endPos="1630"/></additional>')
-    (tmp_path / "s.toml").write_text(
-        'equations = ["vtype_energy"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\nadditional = ["a.add.xml"]\n'
-        f'end = 300\nstep_length = 0.5\noptions = ["--no-warnings", "true", "--precision", "6", "--emission-output", '
-        f'"{tmp_path / "em.xml"}", "--fcd-output", "{tmp_path / "fcd.xml"}"]\n[outputs]\nfigures = false\n')
+    energy_scenario(tmp_path, 300, additional="a.add.xml")
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
     assert res["assumptions"]["vtype_energy"]["booked"]["ebus"]["mass"] == "the vehicle's (riders included)"
     assert res["transportables"]["max_kg"] == 2100.0  # the 30 riders boarded (SUMO's 70 kg each)
-    sumo_wh = defaultdict(float)
-    for ts in ET.parse(tmp_path / "em.xml").getroot():
-        for v in ts:
-            sumo_wh[v.get("id")] += float(v.get("electricity")) * 0.5
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
     assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
                      "--out", str(tmp_path / "fcd"), "--no-figures"]) == 0
     for out in ("o", "fcd"):

@@ -6,14 +6,13 @@ car's rows, as the live run hears of it from SUMO, and books it apart as the liv
 from __future__ import annotations
 
 import json
-import subprocess
 
 import pandas as pd
 import pytest
-import sumolib
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim import run_scenario
+from sumo_probe import build_net
 
 ROUTES = """<routes>
   <vType id="ecar" vClass="passenger" mass="1600" emissionClass="Energy/unknown" sigma="0.5">
@@ -31,16 +30,12 @@ ROUTES = """<routes>
 
 def _crossing(d):
     """A priority crossing of two 1-lane roads, 500 m each side."""
-    (d / "n.nod.xml").write_text(
-        '<nodes><node id="w" x="-500" y="0"/><node id="c" x="0" y="0" type="priority"/><node id="e" x="500" y="0"/>'
-        '<node id="s" x="0" y="-500"/><node id="n" x="0" y="500"/></nodes>')
-    (d / "n.edg.xml").write_text(
-        '<edges><edge id="we" from="w" to="c" numLanes="1" speed="15" priority="2"/>'
-        '<edge id="ce" from="c" to="e" numLanes="1" speed="15" priority="2"/>'
-        '<edge id="sc" from="s" to="c" numLanes="1" speed="15" priority="1"/>'
-        '<edge id="cn" from="c" to="n" numLanes="1" speed="15" priority="1"/></edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml",
-                    "--no-turnarounds"], check=True, capture_output=True, cwd=d)
+    build_net(d, '<nodes><node id="w" x="-500" y="0"/><node id="c" x="0" y="0" type="priority"/>'
+              '<node id="e" x="500" y="0"/><node id="s" x="0" y="-500"/><node id="n" x="0" y="500"/></nodes>',
+              '<edges><edge id="we" from="w" to="c" numLanes="1" speed="15" priority="2"/>'
+              '<edge id="ce" from="c" to="e" numLanes="1" speed="15" priority="2"/>'
+              '<edge id="sc" from="s" to="c" numLanes="1" speed="15" priority="1"/>'
+              '<edge id="cn" from="c" to="n" numLanes="1" speed="15" priority="1"/></edges>', "--no-turnarounds")
 
 
 def test_a_collisions_teleport_books_in_the_replay_as_live(tmp_path):

@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 import subprocess
 import xml.etree.ElementTree as ET
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,7 @@ from sumo_drvpw.model.equations import equation_from_dict
 from sumo_drvpw.model.mmpevem import SUMO_DEFAULTS, LossMap, mmpevem_equation
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim import run_scenario
+from sumo_probe import build_net, emitted_wh, energy_scenario
 
 
 def _sumo_home() -> Path:
@@ -169,18 +169,6 @@ def _routes(tmp_path: Path) -> Path:
     return p
 
 
-def _emitted_wh(path: Path, dt: float):
-    out, nan = defaultdict(float), defaultdict(int)
-    for ts in ET.parse(path).getroot():
-        for v in ts:
-            e = float(v.get("electricity"))
-            if math.isnan(e):
-                nan[v.get("id")] += 1
-            else:
-                out[v.get("id")] += e * dt
-    return out, nan
-
-
 def test_vtype_energy_books_mmpevem_as_sumo(tmp_path):
     """A straight road of 3 km at a constant 2 % grade and 16 m/s (no grade change: the slopes' source
     stays out), 0.5-s steps; MMPEVEM cars stop on the slope (the motor holds them: SUMO
@@ -190,20 +178,14 @@ def test_vtype_energy_books_mmpevem_as_sumo(tmp_path):
     on some steps, is booked at the motor's limits: more than SUMO's finite steps, finite;
     summary.json counts exactly the steps SUMO writes nan and a warning says so. An FCD
     replay of the run books the same."""
-    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0" z="0"/><node id="b" x="3000" y="0" z="60"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text('<edges><edge id="e" from="a" to="b" numLanes="2" speed="16"/></edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml"],
-                   check=True, capture_output=True, cwd=tmp_path)
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0" z="0"/><node id="b" x="3000" y="0" z="60"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="2" speed="16"/></edges>')
     routes = _routes(tmp_path)
-    (tmp_path / "s.toml").write_text(
-        f'equations = ["vtype_energy"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["{routes.name}"]\nend = 250\n'
-        f'step_length = 0.5\noptions = ["--no-warnings", "true", "--precision", "6", "--emission-output", '
-        f'"{tmp_path / "em.xml"}", "--fcd-output", "{tmp_path / "fcd.xml"}"]\n[outputs]\nfigures = false\n')
-    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    res = run_scenario(energy_scenario(tmp_path, 250, routes=routes.name), tmp_path / "o")
     booked = res["assumptions"]["vtype_energy"]["booked"]
     assert {b["model"] for b in booked.values()} == {"MMPEVEM", "Energy"} and len(booked) == 4
     assert booked["id3"]["mass_kg"] == SUMO_DEFAULTS["mass"] and "powerLossMap" in booked["id3"]["defaults"]
-    sumo, nan = _emitted_wh(tmp_path / "em.xml", 0.5)
+    sumo, nan = emitted_wh(tmp_path / "em.xml", 0.5)
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert {k[0] for k in cv.index} == {"i", "d", "c", "f"}
     for key, row in cv.iterrows():

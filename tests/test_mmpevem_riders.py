@@ -7,17 +7,16 @@ emission output does, live and in the FCD replay."""
 from __future__ import annotations
 
 import math
-import subprocess
 import xml.etree.ElementTree as ET
 from collections import defaultdict
 from pathlib import Path
 
 import pandas as pd
 import pytest
-import sumolib
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim import run_scenario
+from sumo_probe import build_net, energy_scenario
 
 ROUTES = """<routes>
   {i3}
@@ -46,20 +45,15 @@ def test_riders_mass_as_sumos_mmpevem(tmp_path):
     stop ends (as before) v1 −2e-4 (the dwell's holding torque with the old riders)."""
     import sumo
 
-    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0" z="0"/>'
-                                        '<node id="b" x="1500" y="0" z="30"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text('<edges><edge id="e" from="a" to="b" numLanes="2" speed="16"/></edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml"],
-                   check=True, capture_output=True, cwd=tmp_path)
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0" z="0"/>'
+                                        '<node id="b" x="1500" y="0" z="30"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="2" speed="16"/></edges>')
     text = (Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text()
     i3 = text[text.index("<vType"):text.index("</vType>") + len("</vType>")]
     (tmp_path / "r.rou.xml").write_text(ROUTES.format(i3=i3))
     (tmp_path / "a.add.xml").write_text('<additional><busStop id="bs" lane="e_0" startPos="500" endPos="540"/>'
                                         '<busStop id="bs2" lane="e_0" startPos="1200" endPos="1240"/></additional>')
-    (tmp_path / "s.toml").write_text(
-        'equations = ["vtype_energy"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\nadditional = ["a.add.xml"]\n'
-        f'end = 160\nstep_length = 0.5\noptions = ["--no-warnings", "true", "--precision", "6", "--emission-output", '
-        f'"{tmp_path / "em.xml"}", "--fcd-output", "{tmp_path / "fcd.xml"}"]\n[outputs]\nfigures = false\n')
+    energy_scenario(tmp_path, 160, additional="a.add.xml")
     run_scenario(tmp_path / "s.toml", tmp_path / "o")
     sumo_wh, at_bs = defaultdict(float), []
     for ts in ET.parse(tmp_path / "em.xml").getroot():

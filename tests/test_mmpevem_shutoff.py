@@ -7,16 +7,15 @@ below SUMO's output, its 15-s stop not booked). Live and in the FCD replay."""
 from __future__ import annotations
 
 import math
-import subprocess
 import xml.etree.ElementTree as ET
 from collections import defaultdict
 
 import pandas as pd
 import pytest
-import sumolib
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim import run_scenario
+from sumo_probe import build_net, energy_scenario
 
 SHUT = '<param key="shutOffStopDuration" value="5"/>'
 ROUTES = f"""<routes>
@@ -31,16 +30,11 @@ ROUTES = f"""<routes>
 
 
 def test_long_stop_switches_off_the_energy_model_only(tmp_path):
-    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0" z="0"/>'
-                                        '<node id="b" x="1000" y="0" z="20"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text('<edges><edge id="e" from="a" to="b" numLanes="2" speed="16"/></edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml"],
-                   check=True, capture_output=True, cwd=tmp_path)
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0" z="0"/>'
+                                        '<node id="b" x="1000" y="0" z="20"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="2" speed="16"/></edges>')
     (tmp_path / "r.rou.xml").write_text(ROUTES)
-    (tmp_path / "s.toml").write_text(
-        'equations = ["vtype_energy"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\nend = 120\n'
-        f'step_length = 0.5\noptions = ["--no-warnings", "true", "--precision", "6", "--emission-output", '
-        f'"{tmp_path / "em.xml"}", "--fcd-output", "{tmp_path / "fcd.xml"}"]\n[outputs]\nfigures = false\n')
+    energy_scenario(tmp_path, 120)
     run_scenario(tmp_path / "s.toml", tmp_path / "o")
     sumo_wh, standing = defaultdict(float), defaultdict(list)
     for ts in ET.parse(tmp_path / "em.xml").getroot():

@@ -5,16 +5,13 @@ from a parking area with a rider is booked with him, as SUMO's emission output b
 
 from __future__ import annotations
 
-import subprocess
-import xml.etree.ElementTree as ET
-from collections import defaultdict
 
 import libsumo
 import pandas as pd
 import pytest
-import sumolib
 
 from sumo_drvpw.sim import run_scenario
+from sumo_probe import build_net, emitted_wh, energy_scenario
 
 PARKED = "".join(f'<vehicle id="f{i}" type="ecar" depart="{100 + i}" departPos="5"><route edges="e1"/>'
                  f'<stop parkingArea="pb" duration="5000"/></vehicle>' for i in range(30))
@@ -36,18 +33,13 @@ def test_parked_fleet_riders(tmp_path, monkeypatch):
     Measured 2026-11-27 before the fix (every vehicle at a stop read each step while persons
     exist, parked ones too): getPersonIDList called 2,248 times; now 54 (departures, stop
     starts and ends); the rider's car as SUMO's emission output to 1e-6 after the fix."""
-    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="1500" y="0"/><node id="d" x="2000" y="0"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text('<edges><edge id="e1" from="a" to="b" numLanes="1" speed="14"/><edge id="e2" from="b" to="d" numLanes="1" speed="14"/></edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml"],
-                   check=True, capture_output=True, cwd=tmp_path)
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="1500" y="0"/><node id="d" x="2000" y="0"/></nodes>',
+              '<edges><edge id="e1" from="a" to="b" numLanes="1" speed="14"/><edge id="e2" from="b" to="d" numLanes="1" speed="14"/></edges>')
     (tmp_path / "r.rou.xml").write_text(ROUTES.format(parked=PARKED))
     (tmp_path / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e1_0" startPos="400" endPos="450" '
                                         'roadsideCapacity="3"/><parkingArea id="pb" lane="e1_0" startPos="600" '
                                         'endPos="1000" roadsideCapacity="40"/></additional>')
-    (tmp_path / "s.toml").write_text(
-        'equations = ["vtype_energy"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\nadditional = ["a.add.xml"]\n'
-        f'end = 250\nstep_length = 0.5\noptions = ["--no-warnings", "true", "--precision", "6", "--emission-output", '
-        f'"{tmp_path / "em.xml"}"]\n[outputs]\nfigures = false\n')
+    energy_scenario(tmp_path, 250, additional="a.add.xml", fcd=False)
     calls = [0]
     real = libsumo.vehicle.getPersonIDList
 
@@ -60,9 +52,7 @@ def test_parked_fleet_riders(tmp_path, monkeypatch):
     assert res["transportables"]["max_kg"] == 400.0
     # 31 departures, 31 stop starts, 1 stop end: not one read per parked car and step
     assert calls[0] < 200, calls[0]
-    sumo_wh = defaultdict(float)
-    for ts in ET.parse(tmp_path / "em.xml").getroot():
-        for v in ts:
-            sumo_wh[v.get("id")] += float(v.get("electricity")) * 0.5
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert cv.loc["c", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["c"], rel=1e-6)

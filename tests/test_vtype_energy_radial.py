@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import math
 import subprocess
-import xml.etree.ElementTree as ET
-from collections import defaultdict
 
 import numpy as np
 import pandas as pd
@@ -22,6 +20,7 @@ from sumo_drvpw.model.terms import Inputs, parse_term, term_matrix
 from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.export import energy_model_params
 from sumo_drvpw.sim.reader import yaw_rate
+from sumo_probe import build_net, emitted_wh
 
 
 def _inputs(v, yaw=None, m=1500.0):
@@ -93,20 +92,16 @@ def _curve(d):
         (200 + 40 * math.cos(-math.pi / 2 + k * math.pi / 24), 40 + 40 * math.sin(-math.pi / 2 + k * math.pi / 24))
         for k in range(1, 25)] + [(0.0, 80.0)]
     shape = " ".join(f"{x:.3f},{y:.3f}" for x, y in pts)
-    (d / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="0" y="80"/></nodes>')
-    (d / "n.edg.xml").write_text(f'<edges><edge id="e" from="a" to="b" numLanes="2" speed="16" '
-                                 f'shape="{shape}"/></edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml",
-                    "-o", "n.net.xml", "--no-turnarounds"], check=True, capture_output=True, cwd=d)
+    build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="0" y="80"/></nodes>',
+              f'<edges><edge id="e" from="a" to="b" numLanes="2" speed="16" shape="{shape}"/></edges>',
+              "--no-turnarounds")
 
 
 def _emitted_wh(path, dt):
-    """SUMO's emission output: electricity [Wh/s] × Δt summed per vehicle [Wh]."""
-    out = defaultdict(float)
-    for ts in ET.parse(path).getroot():
-        for v in ts:
-            out[v.get("id")] += float(v.get("electricity")) * dt
-    return out
+    """SUMO's emission output: electricity [Wh/s] × Δt summed per vehicle [Wh] (none nan)."""
+    wh, nan = emitted_wh(path, dt)
+    assert not nan
+    return wh
 
 
 @pytest.mark.parametrize("dt", [1.0, 0.25])
