@@ -295,6 +295,7 @@ class Accountant(_Listener):
             "missed_steps": st.missed_steps, "energy_booking": ENERGY_BOOKING,
             "vtype_changes": st.retyped,
             "shut_off_at_long_stops": st.shutoff.summary() if st.shutoff is not None else None,
+            "parking": st.parking.summary() if st.parking.on else None,
             "network": network_info(net, led), "interrupted": self.interrupted,
             "wall_time_s": time.perf_counter() - self._t0, "connection": sc.connection,
             "air_density_kgm3": sc.rho, "slope_reference": sc.slope_reference,

@@ -26,6 +26,7 @@ import numpy as np
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network, lane_numbers
+from sumo_drvpw.sim.parking import Parking
 from sumo_drvpw.sim.reader import Reader, reinserted, tailwind, yaw_rate  # noqa: F401 (tailwind re-exported)
 from sumo_drvpw.sim.riders import Riders
 from sumo_drvpw.sim.shutoff import ShutOff
@@ -79,12 +80,6 @@ class Physics:
     transportable_mass: bool = True
 
 
-#: vehicle.getStopState bit: the vehicle stops at a bus (or train) stop (TraCI's stop
-#: state: 1 stopped, 2 parking, 4/8 triggered, 16 at a busStop, 32 containerStop, 64
-#: chargingStation, 128 parkingArea)
-STOP_AT_BUS_STOP = 16
-#: vehicle.getStopState bit: the vehicle is parking (off the lane)
-STOP_PARKING = 2
 #: every this many steps the running vehicles' vTypes are read again (a script's setType,
 #: setMass): a change books from then on (over traci, each read a round trip: 10× as many)
 TYPE_CHECK_STEPS = 25
@@ -183,22 +178,14 @@ class Stepper:
         self.is_replay = bool(getattr(conn, "is_replay", False))  # an FCD replay
         #: riding persons (Physics.transportable_mass; sim/riders.py)
         self.riders = Riders(conn, physics.transportable_mass)
-        #: parked vehicles (SUMO takes them off the lane: engine off, not booked) are told
-        #: once, when a read finds them without a lane (stop state 'parking'), and are not
-        #: read again until their parking ends (getParkingEndingVehiclesIDList): a parked
-        #: fleet costs no getter calls. A vehicle parked at a bus stop (a bus bay:
-        #: ``parking="true"`` at a busStop) dwells there in service: booked standing on the
-        #: stop's lane (time, auxiliary power), as at a stop on the lane.
-        self.parking_ends = getattr(conn.simulation, "getParkingEndingVehiclesIDList", None)
-        self.parking_known = (self.parking_ends is not None
-                              and hasattr(conn.vehicle, "getStopState")
-                              and hasattr(conn.vehicle, "getStops"))
-        #: vehicle id → (lane number, lane position) of its bus-stop dwell
-        self.dwell: dict[str, tuple[int, float]] = {}
         self.retyped = 0  # vehicles whose vType changed during their trip (check_types)
         self.seen_type: dict[str, str] = {}  # vehicle id → its last vType id seen there
         so = ShutOff(conn)  # long planned stops switch vehicles off, as in SUMO
         self.shutoff = so if so.available else None
+        #: parked vehicles: not read while parked, booked standing at a bus stop's bay
+        #: or idling in their space while their way out is blocked (sim/parking.py)
+        self.parking = Parking(conn, net, self.lane_index, self.shutoff)
+        self.dwell = self.parking.dwell  # vehicle id → (lane, position) booked standing off the lane
 
     def now(self) -> float:
         """Simulation time [s]; after an interrupted exchange with SUMO (a signal in the
@@ -226,38 +213,6 @@ class Stepper:
             self.every_equation_applies = False
         self.reader.subscribe_existing([vid])
         return i
-
-    def parking_started(self, vid: str, i: int) -> bool:
-        """Vehicle ``vid`` (slot ``i``), just read without a lane: parked (not read until its
-        parking ends), dwelling at a bus stop (booked standing there), or neither (a
-        teleport: read again next step). True when it dwells."""
-        st = int(self.conn.vehicle.getStopState(vid))
-        if not st & STOP_PARKING:
-            return False
-        if st & STOP_AT_BUS_STOP:
-            stops = self.conn.vehicle.getStops(vid, 1)
-            lane = self.lane_index.get(stops[0].lane, -1) if stops else -1
-            if lane >= 0:
-                pos = float(self.conn.vehicle.getLanePosition(vid))
-                self.dwell[vid] = (lane, min(max(pos, 0.0), float(self.net.lane_length[lane])))
-                return True
-        self.ledger.veh_parked[i] = True
-        self.prev_ids = None  # the selection of vehicles read changes
-        return False
-
-    def parking_ended(self) -> None:
-        """Vehicles whose parking ended in the step just made: read and booked again, from
-        standstill."""
-        ledger, vmap = self.ledger, self.vmap
-        for vid in self.parking_ends():
-            self.dwell.pop(vid, None)
-            i = vmap.get(vid)
-            if i is not None and ledger.veh_parked[i]:
-                ledger.veh_parked[i] = False
-                ledger.veh_lane[i] = -2
-                ledger.veh_prev_speed[i] = 0.0
-                ledger.veh_at[i, 2] = np.nan
-                self.prev_ids = None
 
     def check_types(self, kids, vidx) -> None:
         """vTypes changed during a trip: ``vehicle.setType`` books on with the new vType's
@@ -331,7 +286,7 @@ class Stepper:
             if gone:
                 ledger.retire([vmap[v] for v in gone if v in vmap])
                 for v in gone:
-                    self.dwell.pop(v, None)
+                    self.parking.forget(v)
                     self.seen_type.pop(v, None)
                     self.riders.at_stop.discard(v)
                 if self.shutoff is not None:
@@ -355,8 +310,8 @@ class Stepper:
                 and not (ledger.steps == 1 and self.replay_info.get("skipped")):
             ledger.chain.depart(starts, start_ids, ledger.veh_type, ledger.veh_class)
         self.riders.step(ledger, vmap, departed)
-        if self.parking_known:
-            self.parking_ended()
+        if self.parking.on and self.parking.step(ledger, vmap, t_now, dt):
+            self.prev_ids = None  # the selection of vehicles read changes
         if self.shutoff is not None:
             self.shutoff.step(self, ids)
         if len(ids) == 0:
@@ -426,12 +381,15 @@ class Stepper:
             raw = np.radians(raw)
         placed = reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, self.is_replay)  # not driven
         on_lane = lane >= 0
-        if self.parking_known and not on_lane.all():  # parked, dwelling, or teleporting
+        if self.parking.on and not on_lane.all():  # parked, dwelling, idling, or teleporting
             for j in np.flatnonzero(~on_lane):
                 d = self.dwell.get(kids[j])
-                if d is None and self.parking_started(kids[j], int(vidx[j])):
-                    d = self.dwell[kids[j]]
-                if d is not None:  # dwelling at a bus stop off the lane: standing there
+                if d is None:
+                    if self.parking.started(ledger, kids[j], int(vidx[j]), t_now):
+                        d = self.dwell[kids[j]]
+                    elif ledger.veh_parked[vidx[j]]:
+                        self.prev_ids = None  # the selection of vehicles read changes
+                if d is not None:  # at a bus stop's bay or idling in its space: standing there
                     lane[j], pos[j] = d
             on_lane = lane >= 0
         if placed.any():  # put back by a teleport: its energy jump booked apart, then driven on

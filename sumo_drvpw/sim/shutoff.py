@@ -148,7 +148,7 @@ class ShutOff:
             if i is None or not ledger.veh_keep[i] or ledger.veh_parked[i] or ledger.veh_done[i]:
                 continue
             ledger.veh_parked[i] = True
-            stepper.dwell.pop(vid, None)
+            stepper.parking.forget(vid)
             self.off.add(vid)
             self.stops += 1
             stepper.prev_ids = None  # the selection of vehicles read changes

@@ -1,0 +1,163 @@
+"""Parked vehicles in the live loop: not booked while parked, booked again when they leave,
+and booked idling while they wait in their space for a gap to leave by.
+
+SUMO takes a parking vehicle off its lane (``MSVehicleTransfer``): engine off, no auxiliary
+power, not in its emission output. The loop tells it once, when a read finds it without a
+lane and its stop state says parking, and does not read it again until its parking ends
+(``getParkingEndingVehiclesIDList``): a parked fleet costs no getter calls. A vehicle
+parked at a bus stop (a bus bay: ``parking="true"`` at a busStop) dwells there in service:
+it is booked standing on the stop's lane (time, auxiliary power), as at a stop on the lane.
+
+**A way out that is blocked.** When the parking time is over but the lane has no gap at the
+space (``MSVehicleTransfer::checkInsertions``: insertion failed), SUMO keeps the vehicle in
+its space *idling* — "blocked from entering the road, engine assumed to be idling" — and
+switches on its blinker to signal the wish to re-enter. Its emission output writes every
+such step (``isOnRoad() || isIdling()``) at speed 0 on the parking lane, and its emissions
+device books them (``notifyIdle``). The loop books them standing in the space (the stop's
+lane, the position SUMO gives), with the grade there, as the emission output does (the
+emissions device's tripinfo takes slope 0: the two differ only for a car on SUMO's MMPEVEM
+parked on a slope, by its holding torque). A parked vehicle is asked for its signals
+(one getter) only from its parking's earliest planned end on (its arrival plus the
+remaining ``duration``, or its ``until``; every step for a stop with neither, as a
+triggered one), so a parked fleet still costs nothing until it is due to leave. A stop
+that a script shortens (``vehicle.resume``, ``setStop``) after it started is due at the
+end planned when it started: idling before then is not booked. A vehicle switched off for
+its stop (planned longer than its vType's ``shutOffStopDuration``: sim/shutoff.py) stays
+off while it idles — its stop is still SUMO's current one — and is not booked (SUMO 1.28
+writes it at 0). An FCD replay cannot tell
+an idling car from a parked one (:mod:`sumo_drvpw.sim.fcd`): both are left out there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sumo_drvpw.sim.shutoff import planned_duration_s
+
+#: vehicle.getStopState bit: the vehicle stops at a bus (or train) stop (TraCI's stop
+#: state: 1 stopped, 2 parking, 4/8 triggered, 16 at a busStop, 32 containerStop, 64
+#: chargingStation, 128 parkingArea)
+STOP_AT_BUS_STOP = 16
+#: vehicle.getStopState bit: the vehicle is parking (off the lane)
+STOP_PARKING = 2
+#: vehicle.getSignals bits: blinker right (1) and left (2); SUMO switches on the one
+#: towards the road (left; right in a left-hand network) while a parked vehicle waits to
+#: re-enter the road
+BLINKERS = 1 | 2
+#: TraCI's "not set" for a stop's time fields (INVALID_DOUBLE_VALUE, −2³⁰)
+UNSET = -1e9
+
+
+class Parking:
+    """Which vehicles of a run are parked, dwelling at a bus stop, or idling in their space
+    (see the module docstring); ``on`` when the connection can tell parking."""
+
+    def __init__(self, conn, net, lane_index: dict, shutoff=None):
+        self.conn, self.net, self.lane_index, self.shutoff = conn, net, lane_index, shutoff
+        sim, veh = conn.simulation, conn.vehicle
+        self.ends = getattr(sim, "getParkingEndingVehiclesIDList", None)
+        self.on = self.ends is not None and hasattr(veh, "getStopState") and hasattr(veh, "getStops")
+        self.signals = getattr(veh, "getSignals", None) if self.on else None
+        #: vehicle id → (lane number, lane position) where it is booked standing off the
+        #: lane: dwelling at a bus stop, or idling in its parking space
+        self.dwell: dict[str, tuple[int, float]] = {}
+        #: parked vehicle id → simulation time [s] from which it may leave (signals read)
+        self.due: dict[str, float] = {}
+        self.idling: set[str] = set()  # parked vehicles idling in their space, waiting to leave
+        self.idle_starts = 0  # times a parked vehicle began to idle
+        self.idle_vehicle_s = 0.0  # time booked idling [s]
+
+    def _standing(self, vid: str) -> tuple[int, float] | None:
+        """The lane number and position of vehicle ``vid`` at its current stop, or None."""
+        stops = self.conn.vehicle.getStops(vid, 1)
+        lane = self.lane_index.get(stops[0].lane, -1) if stops else -1
+        if lane < 0:
+            return None
+        pos = float(self.conn.vehicle.getLanePosition(vid))
+        return lane, min(max(pos, 0.0), float(self.net.lane_length[lane]))
+
+    def started(self, ledger, vid: str, i: int, now: float) -> bool:
+        """Vehicle ``vid`` (slot ``i``), just read without a lane: parked (not read until its
+        parking ends), dwelling at a bus stop (booked standing there), or neither (a
+        teleport: read again next step). True when it dwells."""
+        st = int(self.conn.vehicle.getStopState(vid))
+        if not st & STOP_PARKING:
+            return False
+        if st & STOP_AT_BUS_STOP:
+            d = self._standing(vid)
+            if d is not None:
+                self.dwell[vid] = d
+                return True
+        ledger.veh_parked[i] = True
+        if self.signals is not None:
+            stops = self.conn.vehicle.getStops(vid, 1)
+            # switched off for a stop longer than its vType's shutOffStopDuration, it stays
+            # off while it idles (its stop is still SUMO's current one): nothing to book
+            if not (stops and self.shutoff is not None and planned_duration_s(stops[0])
+                    > self.shutoff.limit_of(ledger.veh_type[i])):
+                self.due[vid] = self._earliest_end(stops, now)
+        return False
+
+    @staticmethod
+    def _earliest_end(stops, now: float) -> float:
+        """The earliest time the parking at ``stops[0]`` can end [s] (never later than
+        SUMO's: the remaining duration counts down, so arrival + remaining is at most the
+        planned end)."""
+        if not stops:
+            return now
+        s = stops[0]
+        dur, until, arrival = (float(getattr(s, k, UNSET)) for k in ("duration", "until", "arrival"))
+        start = arrival if arrival > UNSET else now
+        ends = [start + dur] if dur > UNSET else []
+        if until > UNSET:
+            ends.append(until)
+        return max(ends) if ends else now
+
+    def _unpark(self, ledger, i: int) -> None:
+        ledger.veh_parked[i] = False
+        ledger.veh_lane[i] = -2          # read its lane and position again
+        ledger.veh_prev_speed[i] = 0.0   # from standstill
+        ledger.veh_at[i, 2] = np.nan
+
+    def step(self, ledger, vmap, now: float, dt: float) -> bool:
+        """Once per step, before the vehicles are read: those whose parking ended are read
+        and booked again, from standstill; parked ones now idling in their space, waiting
+        to leave, are booked standing there from this step. True when the selection of
+        vehicles read changes."""
+        changed = False
+        for vid in self.ends():
+            self.forget(vid)
+            i = vmap.get(vid)
+            if i is not None and ledger.veh_parked[i]:
+                self._unpark(ledger, i)
+                changed = True
+        if self.due:
+            get = self.signals
+            for vid in [v for v, t in self.due.items() if t <= now + 1e-9]:
+                i = vmap.get(vid)
+                if i is None or not ledger.veh_parked[i] or ledger.veh_done[i]:
+                    del self.due[vid]
+                    continue
+                if int(get(vid)) & BLINKERS:
+                    d = self._standing(vid)
+                    del self.due[vid]
+                    if d is not None:
+                        self.dwell[vid] = d
+                        self._unpark(ledger, i)
+                        self.idling.add(vid)
+                        self.idle_starts += 1
+                        changed = True
+        self.idle_vehicle_s += len(self.idling) * dt
+        return changed
+
+    def forget(self, vid: str) -> None:
+        """Vehicle ``vid`` left the simulation, or its parking ended."""
+        self.dwell.pop(vid, None)
+        self.due.pop(vid, None)
+        self.idling.discard(vid)
+
+    def summary(self) -> dict:
+        return {"idle_starts": self.idle_starts, "idle_vehicle_s": self.idle_vehicle_s,
+                "rule": "a parked vehicle whose parking is over but whose way back onto the road "
+                        "is blocked idles in its space (SUMO: engine on, blinker on), booked standing "
+                        "there until it leaves, unless switched off for its stop (shutOffStopDuration)"}

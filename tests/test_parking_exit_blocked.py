@@ -1,0 +1,61 @@
+"""A car whose parking has ended but whose way back onto the road is blocked idles in its
+parking space, and SUMO books it there: ``MSVehicleTransfer::checkInsertions`` sets it
+idling and signals its wish to re-enter (the blinker), and the emission output writes every
+idling step (``isOnRoad() || isIdling()``) at speed 0 on its parking lane. The loop books
+those steps standing on that lane (sim/parking.py)."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from sumo_drvpw.sim import run_scenario
+from sumo_probe import build_net, emitted_wh, energy_scenario
+
+ROUTES = """<routes>
+  <vType id="ecar" vClass="passenger" mass="1500" emissionClass="Energy/unknown">
+    <param key="rotatingMass" value="40"/>{params}</vType>
+  <vType id="car" vClass="passenger" minGap="0.5" tau="0.5"/>
+  <vehicle id="p" type="ecar" depart="0" departSpeed="max"><route edges="e"/>
+    <stop parkingArea="pa" duration="20"/></vehicle>
+  <vehicle id="b" type="car" depart="1"><route edges="e"/><stop lane="e_0" endPos="590" duration="100"/></vehicle>
+  <flow id="f" type="car" begin="2" end="70" period="1" departSpeed="max"><route edges="e"/></flow>
+</routes>"""
+
+
+def scenario(d, params=""):
+    build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
+    (d / "r.rou.xml").write_text(ROUTES.format(params=params))
+    (d / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
+                                 'roadsideCapacity="2"/></additional>')
+    return energy_scenario(d, 300, additional="a.add.xml", fcd=False)
+
+
+@pytest.mark.parametrize("watts,connection", [(100.0, "libsumo"), (900.0, "libsumo"), (100.0, "traci")])
+def test_a_car_blocked_in_its_parking_space_is_booked_idling_as_sumo_books_it(tmp_path, watts, connection):
+    """The queue behind a car standing 100 s near the lane's end holds the parked car about
+    160 s past its 20-s parking: SUMO's emission output books it its constant power every
+    such step (measured 2026-11-27 before the fix: 49.52 Wh booked against SUMO's 53.91 —
+    the 158 idling seconds at 100 W; 59.52 against 99.02 at 900 W)."""
+    params = "" if watts == 100.0 else f'<param key="constantPowerIntake" value="{watts:g}"/>'
+    res = run_scenario(scenario(tmp_path, params), tmp_path / "o", connection=connection)
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
+    idle_s = (sumo_wh["p"] - 49.52) * 3600.0 / watts  # the idling time in SUMO's output
+    assert idle_s > 100.0
+    assert res["parking"]["idle_starts"] == 1
+
+
+def test_a_car_switched_off_for_its_parking_stays_off_while_blocked(tmp_path):
+    """With ``shutOffStopDuration`` 5 s the 20-s parking switches the car off, and SUMO
+    1.28 writes the idling steps at 0 (its stop is still the current one): none is booked.
+    (The booking stays one step above SUMO's, 0.5 s of constant power: the step the car
+    comes to rest at a long stop, which SUMO already leaves out — sim/shutoff.py.)"""
+    res = run_scenario(scenario(tmp_path, '<param key="shutOffStopDuration" value="5"/>'), tmp_path / "o")
+    sumo_wh, _ = emitted_wh(tmp_path / "em.xml", 0.5)
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    assert 0.0 <= cv.loc["p", "net_kwh"] * 1000.0 - sumo_wh["p"] <= 100.0 * 0.5 / 3600.0 + 1e-6
+    assert res["parking"]["idle_starts"] == 0
