@@ -59,3 +59,33 @@ def test_a_car_switched_off_for_its_parking_stays_off_while_blocked(tmp_path):
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert 0.0 <= cv.loc["p", "net_kwh"] * 1000.0 - sumo_wh["p"] <= 100.0 * 0.5 / 3600.0 + 1e-6
     assert res["parking"]["idle_starts"] == 0
+
+
+def test_a_parked_fleet_is_not_asked_for_its_signals_before_its_parking_can_end(tmp_path, monkeypatch):
+    """20 cars parked for 1000 s (from 60 s) and one for 20 s before them, leaving an empty
+    lane on time (its parking ends in the step it is due: never asked): getSignals is
+    never called — a parked fleet costs no getter calls until its parking can end."""
+    import libsumo
+
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
+    fleet = "".join(f'<vehicle id="f{i}" type="ecar" depart="{60 + 2 * i}"><route edges="e"/>'
+                    f'<stop parkingArea="pb" duration="1000"/></vehicle>' for i in range(20))
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="ecar" vClass="passenger" emissionClass="Energy/unknown">'
+        '<param key="rotatingMass" value="40"/></vType>'
+        '<vehicle id="p" type="ecar" depart="0"><route edges="e"/><stop parkingArea="pa" duration="20"/></vehicle>'
+        f'{fleet}</routes>')
+    (tmp_path / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="100" endPos="130" '
+                                        'roadsideCapacity="2"/><parkingArea id="pb" lane="e_0" startPos="300" '
+                                        'endPos="500" roadsideCapacity="30"/></additional>')
+    energy_scenario(tmp_path, 150, additional="a.add.xml", fcd=False)
+    calls = []
+    real = libsumo.vehicle.getSignals
+    monkeypatch.setattr(libsumo.vehicle, "getSignals", lambda vid: calls.append(vid) or real(vid))
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    assert calls == []
+    assert res["parking"]["idle_starts"] == 0
+    sumo_wh, _ = emitted_wh(tmp_path / "em.xml", 0.5)
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)

@@ -30,6 +30,8 @@ an idling car from a parked one (:mod:`sumo_drvpw.sim.fcd`): both are left out t
 
 from __future__ import annotations
 
+import heapq
+
 import numpy as np
 
 from sumo_drvpw.sim.shutoff import planned_duration_s
@@ -61,8 +63,12 @@ class Parking:
         #: vehicle id → (lane number, lane position) where it is booked standing off the
         #: lane: dwelling at a bus stop, or idling in its parking space
         self.dwell: dict[str, tuple[int, float]] = {}
-        #: parked vehicle id → simulation time [s] from which it may leave (signals read)
+        #: parked vehicle id → simulation time [s] from which it may leave; a heap of
+        #: (time, id) gives those due in a step without a look at the others, which move to
+        #: ``polling`` (their signals read each step until they idle or leave)
         self.due: dict[str, float] = {}
+        self.heap: list[tuple[float, str]] = []
+        self.polling: set[str] = set()
         self.idling: set[str] = set()  # parked vehicles idling in their space, waiting to leave
         self.idle_starts = 0  # times a parked vehicle began to idle
         self.idle_vehicle_s = 0.0  # time booked idling [s]
@@ -95,7 +101,8 @@ class Parking:
             # off while it idles (its stop is still SUMO's current one): nothing to book
             if not (stops and self.shutoff is not None and planned_duration_s(stops[0])
                     > self.shutoff.limit_of(ledger.veh_type[i])):
-                self.due[vid] = self._earliest_end(stops, now)
+                t = self.due[vid] = self._earliest_end(stops, now)
+                heapq.heappush(self.heap, (t, vid))
         return False
 
     @staticmethod
@@ -131,22 +138,24 @@ class Parking:
             if i is not None and ledger.veh_parked[i]:
                 self._unpark(ledger, i)
                 changed = True
-        if self.due:
-            get = self.signals
-            for vid in [v for v, t in self.due.items() if t <= now + 1e-9]:
-                i = vmap.get(vid)
-                if i is None or not ledger.veh_parked[i] or ledger.veh_done[i]:
-                    del self.due[vid]
-                    continue
-                if int(get(vid)) & BLINKERS:
-                    d = self._standing(vid)
-                    del self.due[vid]
-                    if d is not None:
-                        self.dwell[vid] = d
-                        self._unpark(ledger, i)
-                        self.idling.add(vid)
-                        self.idle_starts += 1
-                        changed = True
+        heap, due = self.heap, self.due
+        while heap and heap[0][0] <= now + 1e-9:
+            t, vid = heapq.heappop(heap)
+            if due.get(vid) == t:  # (else forgotten, or parked again since: a newer entry)
+                self.polling.add(vid)
+        for vid in list(self.polling):
+            i = vmap.get(vid)
+            if i is None or not ledger.veh_parked[i] or ledger.veh_done[i]:
+                self.forget(vid)
+            elif int(self.signals(vid)) & BLINKERS:
+                d = self._standing(vid)
+                self.forget(vid)
+                if d is not None:
+                    self.dwell[vid] = d
+                    self._unpark(ledger, i)
+                    self.idling.add(vid)
+                    self.idle_starts += 1
+                    changed = True
         self.idle_vehicle_s += len(self.idling) * dt
         return changed
 
@@ -154,6 +163,7 @@ class Parking:
         """Vehicle ``vid`` left the simulation, or its parking ended."""
         self.dwell.pop(vid, None)
         self.due.pop(vid, None)
+        self.polling.discard(vid)
         self.idling.discard(vid)
 
     def summary(self) -> dict:
