@@ -59,3 +59,34 @@ def test_a_car_switched_off_for_its_parking_stays_off_while_blocked(tmp_path):
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert 0.0 <= cv.loc["p", "net_kwh"] * 1000.0 - sumo_wh["p"] <= 100.0 * 0.5 / 3600.0 + 1e-6
     assert res["parking"]["idle_starts"] == 0
+
+
+LATE = """<routes>
+  <vType id="ecar" vClass="passenger" mass="1500" emissionClass="Energy/unknown"><param key="rotatingMass" value="40"/></vType>
+  <vType id="car" vClass="passenger" minGap="0.5" tau="0.5"/>
+  <flow id="f" type="car" begin="0" end="60" period="1" departSpeed="max"><route edges="e"/></flow>
+  <vehicle id="p" type="ecar" depart="5" departSpeed="max"><route edges="e"/><stop parkingArea="pa" until="10"/></vehicle>
+</routes>"""
+
+
+@pytest.mark.parametrize("lefthand", [False, True])
+def test_a_car_whose_parking_is_over_when_it_arrives_idles_from_that_step(tmp_path, lefthand):
+    """The car reaches its space about 24 s after its ``until``: SUMO tries to put it back in
+    the step it parks, the flow behind keeps it out (blinker on at once) and its emission
+    output books that step, at the last speed of its creep into the space (0.04 m/s), and the
+    next one braking from it. Measured 2026-11-27 before the fix (idling booked from the next
+    step, from standstill): 12.37150 Wh against SUMO's 12.36279 (+8.7e-3 Wh); after: −1e-5
+    (SUMO's output rounded to 6 decimals). Left-hand traffic: the right blinker."""
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>',
+              *(["--lefthand"] if lefthand else []))
+    (tmp_path / "r.rou.xml").write_text(LATE)
+    (tmp_path / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
+                                        'roadsideCapacity="2"/></additional>')
+    res = run_scenario(energy_scenario(tmp_path, 100, additional="a.add.xml", fcd=False), tmp_path / "o")
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=5e-5)
+    assert res["parking"]["idle_starts"] == 1 and res["parking"]["idle_vehicle_s"] > 30.0
+
