@@ -28,7 +28,9 @@ that a script shortens (``vehicle.resume``, ``setStop``) after it started is due
 end planned when it started: idling before then is not booked. A vehicle switched off for
 its stop (planned longer than its vType's ``shutOffStopDuration``: sim/shutoff.py) stays
 off while it idles — its stop is still SUMO's current one — and is not booked (SUMO 1.28
-writes it at 0). An FCD replay cannot tell
+writes it at 0). Persons who boarded while it was parked (a ``triggered="person"`` stop)
+are read when it starts to idle, and every step while it idles (its stop is still the
+current one): SUMO's MMPEVEM books their mass in the holding torque on a slope. An FCD replay cannot tell
 an idling car from a parked one (:mod:`sumo_drvpw.sim.fcd`): both are left out there.
 """
 
@@ -56,8 +58,9 @@ class Parking:
     """Which vehicles of a run are parked, dwelling at a bus stop, or idling in their space
     (see the module docstring); ``on`` when the connection can tell parking."""
 
-    def __init__(self, conn, net, lane_index: dict, shutoff=None):
+    def __init__(self, conn, net, lane_index: dict, shutoff=None, riders=None):
         self.conn, self.net, self.lane_index, self.shutoff = conn, net, lane_index, shutoff
+        self.riders = riders  # sim/riders.py: who rides in a car that starts to idle
         sim, veh = conn.simulation, conn.vehicle
         self.ends = getattr(sim, "getParkingEndingVehiclesIDList", None)
         self.on = self.ends is not None and hasattr(veh, "getStopState") and hasattr(veh, "getStops")
@@ -113,7 +116,7 @@ class Parking:
 
     def _idle(self, ledger, vmap, vid: str) -> bool:
         """Parked vehicle ``vid`` idles in its space from this step (its blinker shows it):
-        booked standing there. True when it is."""
+        booked standing there, with whoever rides in it. True when it is."""
         del self.due[vid]
         d = self._standing(vid)
         if d is None:
@@ -121,6 +124,10 @@ class Parking:
         self.dwell[vid] = d
         self.idling.add(vid)
         self.idle_starts += 1
+        r = self.riders
+        if r is not None and r.on:  # persons who boarded while it was parked (not read then)
+            r.at_stop.add(vid)      # and those boarding while it idles: its stop is not over
+            r.update(ledger, vmap, [vid])
         return True
 
     @staticmethod
