@@ -6,6 +6,8 @@ those steps standing on that lane (sim/parking.py)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pandas as pd
 import pytest
 
@@ -89,3 +91,68 @@ def test_a_parked_fleet_is_not_asked_for_its_signals_before_its_parking_can_end(
     sumo_wh, _ = emitted_wh(tmp_path / "em.xml", 0.5)
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
+
+
+LATE = """<routes>
+  <vType id="ecar" vClass="passenger" mass="1500" emissionClass="Energy/unknown"><param key="rotatingMass" value="40"/></vType>
+  <vType id="car" vClass="passenger" minGap="0.5" tau="0.5"/>
+  <flow id="f" type="car" begin="0" end="60" period="1" departSpeed="max"><route edges="e"/></flow>
+  <vehicle id="p" type="ecar" depart="5" departSpeed="max"><route edges="e"/><stop parkingArea="pa" until="10"/></vehicle>
+</routes>"""
+
+
+@pytest.mark.parametrize("lefthand", [False, True])
+def test_a_car_whose_parking_is_over_when_it_arrives_idles_from_that_step(tmp_path, lefthand):
+    """The car reaches its space about 24 s after its ``until``: SUMO tries to put it back in
+    the step it parks, the flow behind keeps it out (blinker on at once) and its emission
+    output books that step, at the last speed of its creep into the space (0.04 m/s), and the
+    next one braking from it. Measured 2026-11-27 before the fix (idling booked from the next
+    step, from standstill): 12.37150 Wh against SUMO's 12.36279 (+8.7e-3 Wh); after: −1e-5
+    (SUMO's output rounded to 6 decimals). Left-hand traffic: the right blinker."""
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>',
+              *(["--lefthand"] if lefthand else []))
+    (tmp_path / "r.rou.xml").write_text(LATE)
+    (tmp_path / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
+                                        'roadsideCapacity="2"/></additional>')
+    res = run_scenario(energy_scenario(tmp_path, 100, additional="a.add.xml", fcd=False), tmp_path / "o")
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=5e-5)
+    assert res["parking"]["idle_starts"] == 1 and res["parking"]["idle_vehicle_s"] > 30.0
+
+
+def test_a_rider_who_boarded_while_the_car_was_parked_is_booked_while_it_idles(tmp_path):
+    """SUMO's own BMW i3 (MMPEVEM) on a 5 % grade waits parked for a 400-kg person
+    (``triggered="person"``), who walks there and boards after 55 s, when the queue behind
+    a car standing 100 s near the lane's end blocks the way out: it idles about 145 s, and
+    MMPEVEM's holding torque there shows the rider's mass (SUMO: 0.163 Wh/s; without him
+    0.139). Measured 2026-11-27 before the fix (riders of a parked car read only when its
+    stop ends, after the idling): 293.51 Wh against SUMO's 296.92 (−1.1e-2); after: to 1e-6."""
+    import re
+
+    import sumo
+
+    i3 = (Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text()
+    vtype = re.search(r"<vType.*?</vType>", i3, re.S).group(0)
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0" z="0"/><node id="b" x="600" y="0" z="30"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
+    (tmp_path / "r.rou.xml").write_text(f"""<routes>{vtype}
+  <vType id="heavy" vClass="pedestrian" mass="400"/><vType id="car" vClass="passenger" minGap="0.5" tau="0.5"/>
+  <vehicle id="p" type="BMW_i3" depart="0" departSpeed="max"><route edges="e"/>
+    <stop parkingArea="pa" duration="5" triggered="person"/></vehicle>
+  <person id="w" type="heavy" depart="0" departPos="250"><walk edges="e" parkingArea="pa"/>
+    <ride from="e" to="e" lines="p" arrivalPos="590"/></person>
+  <vehicle id="b" type="car" depart="1"><route edges="e"/><stop lane="e_0" endPos="590" duration="100"/></vehicle>
+  <flow id="f" type="car" begin="2" end="70" period="1" departSpeed="max"><route edges="e"/></flow>
+</routes>""")
+    (tmp_path / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
+                                        'roadsideCapacity="2"/></additional>')
+    res = run_scenario(energy_scenario(tmp_path, 300, additional="a.add.xml", fcd=False), tmp_path / "o")
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
+    assert res["parking"]["idle_starts"] == 1 and res["parking"]["idle_vehicle_s"] > 100.0
+    assert res["transportables"]["max_kg"] == 400.0

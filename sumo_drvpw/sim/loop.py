@@ -184,7 +184,7 @@ class Stepper:
         self.shutoff = so if so.available else None
         #: parked vehicles: not read while parked, booked standing at a bus stop's bay
         #: or idling in their space while their way out is blocked (sim/parking.py)
-        self.parking = Parking(conn, net, self.lane_index, self.shutoff)
+        self.parking = Parking(conn, net, self.lane_index, self.shutoff, self.riders)
         self.dwell = self.parking.dwell  # vehicle id → (lane, position) booked standing off the lane
 
     def now(self) -> float:

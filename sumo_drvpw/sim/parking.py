@@ -19,12 +19,18 @@ emissions device's tripinfo takes slope 0: the two differ only for a car on SUMO
 parked on a slope, by its holding torque). A parked vehicle is asked for its signals
 (one getter) only from its parking's earliest planned end on (its arrival plus the
 remaining ``duration``, or its ``until``; every step for a stop with neither, as a
-triggered one), so a parked fleet still costs nothing until it is due to leave. A stop
+triggered one), so a parked fleet still costs nothing until it is due to leave. A car
+whose parking is over when it gets there (its ``until`` passed while it drove) is tried
+in the step it parks, and idles from that very step when the way is blocked: booked then
+at the speed SUMO still gives it (the last of its creep into the space) and, from the next
+step, braking from it to 0, as the emission output books them. A stop
 that a script shortens (``vehicle.resume``, ``setStop``) after it started is due at the
 end planned when it started: idling before then is not booked. A vehicle switched off for
 its stop (planned longer than its vType's ``shutOffStopDuration``: sim/shutoff.py) stays
 off while it idles — its stop is still SUMO's current one — and is not booked (SUMO 1.28
-writes it at 0). An FCD replay cannot tell
+writes it at 0). Persons who boarded while it was parked (a ``triggered="person"`` stop)
+are read when it starts to idle, and every step while it idles (its stop is still the
+current one): SUMO's MMPEVEM books their mass in the holding torque on a slope. An FCD replay cannot tell
 an idling car from a parked one (:mod:`sumo_drvpw.sim.fcd`): both are left out there.
 """
 
@@ -54,8 +60,9 @@ class Parking:
     """Which vehicles of a run are parked, dwelling at a bus stop, or idling in their space
     (see the module docstring); ``on`` when the connection can tell parking."""
 
-    def __init__(self, conn, net, lane_index: dict, shutoff=None):
+    def __init__(self, conn, net, lane_index: dict, shutoff=None, riders=None):
         self.conn, self.net, self.lane_index, self.shutoff = conn, net, lane_index, shutoff
+        self.riders = riders  # sim/riders.py: who rides in a car that starts to idle
         sim, veh = conn.simulation, conn.vehicle
         self.ends = getattr(sim, "getParkingEndingVehiclesIDList", None)
         self.on = self.ends is not None and hasattr(veh, "getStopState") and hasattr(veh, "getStops")
@@ -72,6 +79,7 @@ class Parking:
         self.idling: set[str] = set()  # parked vehicles idling in their space, waiting to leave
         self.idle_starts = 0  # times a parked vehicle began to idle
         self.idle_vehicle_s = 0.0  # time booked idling [s]
+        self.dt = float(sim.getDeltaT())
 
     def _standing(self, vid: str) -> tuple[int, float] | None:
         """The lane number and position of vehicle ``vid`` at its current stop, or None."""
@@ -101,9 +109,34 @@ class Parking:
             # off while it idles (its stop is still SUMO's current one): nothing to book
             if not (stops and self.shutoff is not None and planned_duration_s(stops[0])
                     > self.shutoff.limit_of(ledger.veh_type[i])):
-                t = self.due[vid] = self._earliest_end(stops, now)
-                heapq.heappush(self.heap, (t, vid))
+                self.due[vid] = due = self._earliest_end(stops, now)
+                heapq.heappush(self.heap, (due, vid))
+                # over already when it arrives (an ``until`` it came too late for): SUMO
+                # tries to put it back on the road in the step it parks, and idles it there
+                # at once when the road is blocked: booked from this step, at the speed SUMO
+                # gives it (the last of its creep into the space, in its emission output too)
+                if due <= now + 1e-9 and int(self.signals(vid)) & BLINKERS:
+                    ledger.veh_parked[i] = False
+                    self.idle_vehicle_s += self.dt  # (step() counted this step's before)
+                    return self._idle(ledger, {vid: i}, vid)
         return False
+
+    def _idle(self, ledger, vmap, vid: str) -> bool:
+        """Parked vehicle ``vid`` idles in its space from this step (its blinker shows it):
+        booked standing there, with whoever rides in it. True when it is."""
+        self.due.pop(vid, None)
+        self.polling.discard(vid)
+        d = self._standing(vid)
+        if d is None:
+            return False
+        self.dwell[vid] = d
+        self.idling.add(vid)
+        self.idle_starts += 1
+        r = self.riders
+        if r is not None and r.on:  # persons who boarded while it was parked (not read then)
+            r.at_stop.add(vid)      # and those boarding while it idles: its stop is not over
+            r.update(ledger, vmap, [vid])
+        return True
 
     @staticmethod
     def _earliest_end(stops, now: float) -> float:
@@ -147,15 +180,9 @@ class Parking:
             i = vmap.get(vid)
             if i is None or not ledger.veh_parked[i] or ledger.veh_done[i]:
                 self.forget(vid)
-            elif int(self.signals(vid)) & BLINKERS:
-                d = self._standing(vid)
-                self.forget(vid)
-                if d is not None:
-                    self.dwell[vid] = d
-                    self._unpark(ledger, i)
-                    self.idling.add(vid)
-                    self.idle_starts += 1
-                    changed = True
+            elif int(self.signals(vid)) & BLINKERS and self._idle(ledger, vmap, vid):
+                self._unpark(ledger, i)
+                changed = True
         self.idle_vehicle_s += len(self.idling) * dt
         return changed
 

@@ -5,7 +5,8 @@ SUMO changes a vehicle's transportable mass as persons board and alight: at the 
 stop (those leaving, those waiting there), during it (those arriving while it dwells) and
 at a departure (a triggered one). The loop reads a vehicle's riders when it departs, when
 a stop of it starts or ends, and every step while it stands at a stop (not parked: a
-parked vehicle is not booked; its riders are read when its stop ends) — from the step its
+parked vehicle is not booked; its riders are read when its stop ends, or when it starts
+to idle in its space, its way out blocked: sim/parking.py) — from the step its
 stop starts, as SUMO's emission output books them (probed 2026-11-27 with SUMO 1.28's
 MMPEVEM, whose holding torque on a slope shows the mass of every standing step:
 tests/test_mmpevem_riders.py). Containers are not booked (TraCI has no containers'
