@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import xml.etree.ElementTree as ET
+
 import pandas as pd
 import pytest
 
@@ -51,16 +53,26 @@ def test_a_car_blocked_in_its_parking_space_is_booked_idling_as_sumo_books_it(tm
     assert res["parking"]["idle_starts"] == 1
 
 
-def test_a_car_switched_off_for_its_parking_stays_off_while_blocked(tmp_path):
-    """With ``shutOffStopDuration`` 5 s the 20-s parking switches the car off, and SUMO
-    1.28 writes the idling steps at 0 (its stop is still the current one): none is booked.
-    (The booking stays one step above SUMO's, 0.5 s of constant power: the step the car
-    comes to rest at a long stop, which SUMO already leaves out — sim/shutoff.py.)"""
-    res = run_scenario(scenario(tmp_path, '<param key="shutOffStopDuration" value="5"/>'), tmp_path / "o")
-    sumo_wh, _ = emitted_wh(tmp_path / "em.xml", 0.5)
+@pytest.mark.parametrize("blocked", [True, False])
+def test_a_car_switched_off_for_its_parking_stays_off_until_its_stop_ends(tmp_path, blocked):
+    """With ``shutOffStopDuration`` 5 s the 20-s parking switches the car off. SUMO 1.28
+    writes the idling steps at 0 (its stop is still the current one), and also the step its
+    parking ends — back on its lane at speed 0, one step before its stop ends: neither is
+    booked, blocked or leaving on time (without the queue). Measured 2026-11-27 before the
+    fix: one step of constant power (0.5 s × 100 W = 0.0139 Wh) above SUMO's in both."""
+    params = '<param key="shutOffStopDuration" value="5"/>'
+    scenario(tmp_path, params)
+    if not blocked:
+        r = tmp_path / "r.rou.xml"
+        r.write_text(r.read_text().replace('begin="2" end="70"', 'begin="2" end="3"'))
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
-    assert 0.0 <= cv.loc["p", "net_kwh"] * 1000.0 - sumo_wh["p"] <= 100.0 * 0.5 / 3600.0 + 1e-6
+    # (1e-4 Wh: SUMO's output at 6 decimals summed over the trip; one step is 0.0139 Wh)
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=1e-4)
     assert res["parking"]["idle_starts"] == 0
+    assert res["shut_off_at_long_stops"]["vehicle_s"] > 0.0
 
 
 def test_a_parked_fleet_is_not_asked_for_its_signals_before_its_parking_can_end(tmp_path, monkeypatch):
@@ -156,3 +168,38 @@ def test_a_rider_who_boarded_while_the_car_was_parked_is_booked_while_it_idles(t
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
     assert res["parking"]["idle_starts"] == 1 and res["parking"]["idle_vehicle_s"] > 100.0
     assert res["transportables"]["max_kg"] == 400.0
+
+
+@pytest.mark.parametrize("place", ['busStop="bs"', 'lane="e_0" endPos="330"'])
+def test_a_car_switched_off_in_a_bus_bay_or_beside_the_lane_stays_off_until_its_stop_ends(tmp_path, place):
+    """The same in a bus bay (a busStop with parkingLength) and parked beside the lane:
+    SUMO 1.28 puts the car back on its lane at speed 0 one step before its stop ends and
+    writes that step at 0 (probed 2026-11-27), so the booking has no step there (before
+    the fix: a standing step of 100 W). Beside the lane the car books as SUMO's output to
+    1e-4 Wh; in the bay it books, as it always did, the last metres into the bay and its
+    dwell (sim/parking.py), which SUMO's output leaves out (the car is off the road)."""
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
+    (tmp_path / "a.add.xml").write_text('<additional><busStop id="bs" lane="e_0" startPos="300" endPos="330" '
+                                        'parkingLength="20"/></additional>')
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="ecar" vClass="passenger" emissionClass="Energy/unknown">'
+        '<param key="rotatingMass" value="40"/><param key="shutOffStopDuration" value="5"/></vType>'
+        f'<vehicle id="p" type="ecar" depart="0" departSpeed="max"><route edges="e"/>'
+        f'<stop {place} duration="20" parking="true"/></vehicle></routes>')
+    energy_scenario(tmp_path, 120, additional="a.add.xml", fcd=False)
+    toml = tmp_path / "s.toml"
+    toml.write_text(toml.read_text().replace("[outputs]\n", "[outputs]\ntrace = true\n"))
+    res = run_scenario(toml, tmp_path / "o")
+    # SUMO's step at 0 standing: its emission output's time is the step's start
+    zero = [float(ts.get("time")) + 0.5 for ts in ET.parse(tmp_path / "em.xml").getroot() for v in ts
+            if v.get("id") == "p" and float(v.get("speed")) == 0.0 and float(v.get("electricity")) == 0.0]
+    assert len(zero) == 1
+    times = set(pd.read_parquet(tmp_path / "o" / "trace.parquet", columns=["time_s", "vehicle"])
+                .query("vehicle == 'p'")["time_s"].round(6))
+    assert zero[0] not in times and zero[0] + 0.5 in times
+    assert res["shut_off_at_long_stops"]["vehicle_s"] > 0.0
+    if place.startswith("lane"):
+        sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+        cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+        assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=1e-4)

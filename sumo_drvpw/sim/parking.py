@@ -76,6 +76,8 @@ class Parking:
         self.due: dict[str, float] = {}
         self.heap: list[tuple[float, str]] = []
         self.polling: set[str] = set()
+        #: parked vehicles switched off for their stop (sim/shutoff.py's rule)
+        self.off: set[str] = set()
         self.idling: set[str] = set()  # parked vehicles idling in their space, waiting to leave
         self.idle_starts = 0  # times a parked vehicle began to idle
         self.idle_vehicle_s = 0.0  # time booked idling [s]
@@ -103,22 +105,28 @@ class Parking:
                 self.dwell[vid] = d
                 return True
         ledger.veh_parked[i] = True
-        if self.signals is not None:
+        stops = None
+        if self.shutoff is not None:
             stops = self.conn.vehicle.getStops(vid, 1)
-            # switched off for a stop longer than its vType's shutOffStopDuration, it stays
-            # off while it idles (its stop is still SUMO's current one): nothing to book
-            if not (stops and self.shutoff is not None and planned_duration_s(stops[0])
-                    > self.shutoff.limit_of(ledger.veh_type[i])):
-                self.due[vid] = due = self._earliest_end(stops, now)
-                heapq.heappush(self.heap, (due, vid))
-                # over already when it arrives (an ``until`` it came too late for): SUMO
-                # tries to put it back on the road in the step it parks, and idles it there
-                # at once when the road is blocked: booked from this step, at the speed SUMO
-                # gives it (the last of its creep into the space, in its emission output too)
-                if due <= now + 1e-9 and int(self.signals(vid)) & BLINKERS:
-                    ledger.veh_parked[i] = False
-                    self.idle_vehicle_s += self.dt  # (step() counted this step's before)
-                    return self._idle(ledger, {vid: i}, vid)
+            if stops and planned_duration_s(stops[0]) > self.shutoff.limit_of(ledger.veh_type[i]):
+                # switched off for a stop longer than its vType's shutOffStopDuration: off
+                # while it idles and in the step its parking ends, until its stop ends (SUMO
+                # 1.28 writes 0 for both: the stop is still its current one)
+                self.off.add(vid)
+                return False
+        if self.signals is not None:
+            if stops is None:
+                stops = self.conn.vehicle.getStops(vid, 1)
+            self.due[vid] = due = self._earliest_end(stops, now)
+            heapq.heappush(self.heap, (due, vid))
+            # over already when it arrives (an ``until`` it came too late for): SUMO
+            # tries to put it back on the road in the step it parks, and idles it there
+            # at once when the road is blocked: booked from this step, at the speed SUMO
+            # gives it (the last of its creep into the space, in its emission output too)
+            if due <= now + 1e-9 and int(self.signals(vid)) & BLINKERS:
+                ledger.veh_parked[i] = False
+                self.idle_vehicle_s += self.dt  # (step() counted this step's before)
+                return self._idle(ledger, {vid: i}, vid)
         return False
 
     def _idle(self, ledger, vmap, vid: str) -> bool:
@@ -166,11 +174,16 @@ class Parking:
         vehicles read changes."""
         changed = False
         for vid in self.ends():
+            # switched off for its stop (parked, or dwelling in a bus bay: sim/shutoff.py)
+            off = vid in self.off or (self.shutoff is not None and vid in self.shutoff.off)
             self.forget(vid)
             i = vmap.get(vid)
             if i is not None and ledger.veh_parked[i]:
-                self._unpark(ledger, i)
-                changed = True
+                if off:  # back on its lane, still off until its stop ends: ShutOff books it then
+                    self.shutoff.off.add(vid)
+                else:
+                    self._unpark(ledger, i)
+                    changed = True
         heap, due = self.heap, self.due
         while heap and heap[0][0] <= now + 1e-9:
             t, vid = heapq.heappop(heap)
@@ -192,6 +205,7 @@ class Parking:
         self.due.pop(vid, None)
         self.polling.discard(vid)
         self.idling.discard(vid)
+        self.off.discard(vid)
 
     def summary(self) -> dict:
         return {"idle_starts": self.idle_starts, "idle_vehicle_s": self.idle_vehicle_s,
