@@ -2,9 +2,9 @@
 blocked as the live run books it (tests/test_parking_exit_blocked.py, sim/parking.py):
 SUMO keeps it idling in its space and its emission output writes every such step at speed
 0. SUMO's FCD writes it as it writes a parked car (beside the lane, speed 0); the replay
-tells its idling rows from the route files' declared stop — parked at or after its planned
-end (sim/fcd_idle.py) — or from the FCD's blinker bits when it has them
-(``--fcd-output.signals``)."""
+tells its idling rows from the route files' declared stop — parked from the step SUMO
+ends it, by its planned end or, waiting for a person, her boarding (sim/fcd_idle.py) — or
+from the FCD's blinker bits when it has them (``--fcd-output.signals``)."""
 
 from __future__ import annotations
 
@@ -17,14 +17,15 @@ from sumo_probe import build_net, emitted_wh, energy_scenario
 from test_parking_exit_blocked import ROUTES
 
 
-def recorded(d, step=0.5, params="", stop='<stop parkingArea="pa" duration="20"/>', signals=False):
-    """The blocked-exit scenario of tests/test_parking_exit_blocked.py run live with SUMO's
-    emission output and FCD at 6 decimals: (scenario, live chain_vehicles by key, SUMO's
-    electricity per vehicle [Wh])."""
+def recorded(d, step=0.5, params="", stop='<stop parkingArea="pa" duration="20"/>', signals=False, extra=""):
+    """The blocked-exit scenario of tests/test_parking_exit_blocked.py (the parked car's
+    ``stop``, ``extra`` elements added to the routes) run live with SUMO's emission output
+    and FCD at 6 decimals: (scenario, live chain_vehicles by key, SUMO's electricity per
+    vehicle [Wh])."""
     build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
     (d / "r.rou.xml").write_text(ROUTES.format(params=params).replace(
-        '<stop parkingArea="pa" duration="20"/>', stop))
+        '<stop parkingArea="pa" duration="20"/>', stop).replace("</routes>", extra + "</routes>"))
     (d / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
                                  'roadsideCapacity="2"/></additional>')
     sc = energy_scenario(d, 300, step_length=step, additional="a.add.xml", fcd=True)
@@ -70,28 +71,38 @@ def test_a_replay_leaves_a_car_switched_off_for_its_parking_out_while_blocked(tm
     assert res["source"]["idling_rows"] == 0 and res["source"]["parked_rows"] > 300
 
 
-def test_a_triggered_parking_is_told_idling_only_by_the_blinker(tmp_path):
-    """A stop that waits for a person or container (``triggered``) ends when it boards, which
-    the route files do not say: without the FCD's signals its parked rows stay parked (not
-    booked), with them the blinker tells the idling rows. The recording's route file is
-    replaced by one whose stop is triggered (same FCD: the files alone decide)."""
-    sc, live, _ = recorded(tmp_path, signals=True)
-    res = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "sig")
-    pd.testing.assert_series_equal(_chain(tmp_path / "sig"), live, rtol=1e-6)
-    idle_rows = res["source"]["idling_rows"]
-    assert idle_rows > 300
-    rou = tmp_path / "r.rou.xml"
-    rou.write_text(rou.read_text().replace('duration="20"/>', 'duration="20" triggered="person"/>'))
-    res = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "trig")
-    pd.testing.assert_series_equal(_chain(tmp_path / "trig"), live, rtol=1e-6)  # the blinker
-    text = (tmp_path / "fcd.xml").read_text()
+#: a person who starts beside the parked car at 60 s and rides in it (its stop waits for her)
+RIDER = '<person id="x" depart="60" departPos="316"><ride from="e" to="e" lines="p" arrivalPos="590"/></person>'
+
+
+def test_a_triggered_parking_idles_from_the_step_its_person_boards(tmp_path):
+    """A stop that waits for a person (``triggered``) ends when she boards, and SUMO 1.28
+    keeps the car idling from that step while its way out is blocked (here from 60 s, its
+    20 s long over). The FCD writes a riding person at her car's x, y and speed: the replay
+    tells the boarding from those rows, and books the car as the live run to 1e-6 without
+    the FCD's signals as with them. A container trigger (the recording's route file
+    replaced, same FCD: the files alone decide) the FCD does not tell: its parked rows stay
+    parked without signals — each 0.5 s of 100 W left out — and the blinker tells them."""
+    stop = '<stop parkingArea="pa" duration="20" triggered="person"/>'
+    sc, live, sumo = recorded(tmp_path, stop=stop, signals=True, extra=RIDER)
+    assert live["p"] == pytest.approx(sumo["p"], rel=1e-6)
     import re
+    text = (tmp_path / "fcd.xml").read_text()
     (tmp_path / "nosig.xml").write_text(re.sub(r' signals="[^"]*"', "", text))
-    res = process_fcd(tmp_path / "nosig.xml", scenario=sc, out_dir=tmp_path / "nosig")
-    got = _chain(tmp_path / "nosig")
+    rows = {}
+    for f in ("fcd.xml", "nosig.xml"):
+        res = process_fcd(tmp_path / f, scenario=sc, out_dir=tmp_path / f"o_{f}", chunk_rows=9)
+        pd.testing.assert_series_equal(_chain(tmp_path / f"o_{f}"), live, rtol=1e-6)
+        rows[f] = res["source"]["idling_rows"]
+    assert rows["fcd.xml"] == rows["nosig.xml"] > 250  # ~139 s from 60 s on
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text(rou.read_text().replace('triggered="person"', 'triggered="container"'))
+    res = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "c_sig")
+    pd.testing.assert_series_equal(_chain(tmp_path / "c_sig"), live, rtol=1e-6)
+    res = process_fcd(tmp_path / "nosig.xml", scenario=sc, out_dir=tmp_path / "c_nosig")
+    got = _chain(tmp_path / "c_nosig")
     assert res["source"]["idling_rows"] == 0
-    # the idling rows the blinker told, each 0.5 s of 100 W, left out
-    assert live["p"] - got["p"] == pytest.approx(idle_rows * 0.5 * 100.0 / 3600.0, rel=1e-6)
+    assert live["p"] - got["p"] == pytest.approx(rows["fcd.xml"] * 0.5 * 100.0 / 3600.0, rel=1e-6)
     pd.testing.assert_series_equal(got.drop("p"), live.drop("p"), rtol=1e-6)
 
 

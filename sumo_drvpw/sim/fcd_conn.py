@@ -185,7 +185,8 @@ class _Rows:
             lanes, n = _unpark(c["lane"], c["id"], c["off"], nxt["id"] if nxt else None,
                                nxt["off"] if nxt else None)
             if self.idling is not None:  # idling in its space, its way out blocked: booked there
-                idle = self.idling.rows(self.t - self.dt, c["id"], c["type"], c["off"], c.get("signals"))
+                idle = self.idling.rows(self.t - self.dt, c["id"], c["type"], c["off"], c.get("signals"),
+                                        self.riders)
                 idle &= lanes == ""
                 if idle.any():
                     lanes[idle] = c["lane"][idle]

@@ -18,11 +18,18 @@ idling rows of a parked car:
   step length: SUMO 1.28 counts the stop's duration down from its arrival step and ends
   it, and first fails to re-insert, in the step before; at 0.5 and 1 s steps, for
   ``duration``, ``until`` and both, the emission output's first idling step is that row).
-  A *triggered* stop (waiting for a person or container, or a joining train) ends when its
-  trigger comes, which the files do not say — waiting for it is parking, not idling —: its
-  rows are left out as parked. So are those of a parked car whose stop the files do not
-  hold (added by TraCI, a rerouter, a parking reroute) or whose ``until`` the replay
-  cannot shift.
+  A stop *triggered* by a person (``triggered="person"``/``"true"``, all of its
+  ``expected`` persons when it names them) waits, parked and not idling, until she
+  boards: it ends at the later of her boarding and its planned end. SUMO's FCD writes a
+  riding person at her vehicle's x, y and speed (:class:`~sumo_drvpw.sim.fcd_conn._Rows`
+  tells the riders so): the car idles from the row in which a person not riding in it at
+  its arrival (all the expected ones) rides in it, or from its planned end's row when that
+  is later (SUMO 1.28: boarding at 30 and 60 s, 20 s parked from 22 s, and without a
+  ``duration``: the emission output's first idling step is that row). A stop waiting for a
+  container or a joining train (``container``, ``join``, ``containerTriggered``), or with
+  an ``extension``, the replay does not tell: its rows are left out as parked. So are
+  those of a parked car whose stop the files do not hold (added by TraCI, a rerouter, a
+  parking reroute) or whose ``until`` the replay cannot shift.
 
 A car switched off for its stop (planned longer than its vType's
 ``shutOffStopDuration``: :mod:`sumo_drvpw.sim.shutoff`) stays off while it idles (SUMO
@@ -61,16 +68,25 @@ class Idling:
         self.stops, self.limit, self.step_s = stops, limit, float(step_s)
         self.idle_from: dict[str, float] = {}  # parked vehicle id → FCD time it idles from [s]
         self.shut: set[str] = set()            # parked vehicles switched off for their stop
+        #: parked vehicle id → (its riders at its arrival, the persons it waits for (none:
+        #: any), its planned end [s] or −∞) while a person-triggered stop waits for one
+        self.waiting: dict[str, tuple] = {}
 
-    def _parked(self, vid: str, vtype: str, stop) -> None:
-        """Vehicle ``vid`` of ``vtype`` just parked at its declared ``stop`` (fcd_stops)."""
+    def _parked(self, vid: str, vtype: str, stop, riders: dict) -> None:
+        """Vehicle ``vid`` of ``vtype`` just parked at its declared ``stop`` (fcd_stops);
+        ``riders``: vehicle id → the persons riding in it now."""
         ends = [x for x, given in ((stop.arrival + stop.duration, stop.duration >= 0),
                                    (stop.until, stop.until >= 0)) if given]
-        # a triggered stop ends when its trigger comes; an until the replay cannot shift (NaN):
-        # its end not known
-        told = ends and not stop.triggered and stop.until == stop.until
-        # SUMO ends it, and first fails to re-insert the car, in the step before its end
-        self.idle_from[vid] = max(ends) - self.step_s - TIME_EPS_S if told else np.inf
+        # an until the replay cannot shift (NaN): its end not known; a triggered stop ends
+        # when its trigger comes: a person boarding, which the FCD's riders tell
+        known, trig = stop.until == stop.until, stop.trigger
+        self.idle_from[vid] = np.inf
+        self.waiting.pop(vid, None)
+        if known and trig is not None and trig[0] == "person":
+            self.waiting[vid] = (set(riders.get(vid, ())), set(trig[1]), max(ends) if ends else -np.inf)
+        elif known and ends and trig is None:
+            # SUMO ends it, and first fails to re-insert the car, in the step before its end
+            self.idle_from[vid] = max(ends) - self.step_s - TIME_EPS_S
         if planned_duration_s(stop) > self.limit(vtype):
             self.shut.add(vid)  # switched off for its stop: off while it idles
         else:
@@ -81,14 +97,22 @@ class Idling:
         for v in vids:
             self.idle_from.pop(v, None)
             self.shut.discard(v)
+            self.waiting.pop(v, None)
 
-    def rows(self, t: float, ids, types, off, signals=None) -> np.ndarray:
+    def rows(self, t: float, ids, types, off, signals=None, riders=None) -> np.ndarray:
         """Timestep ``t`` [s] (the FCD's time): which of its rows (ids, vTypes, ``off``:
         parked, :class:`~sumo_drvpw.sim.fcd_conn.ParkedTest`; ``signals``: the FCD's, NaN
-        or None where it has none) idle in their parking space; call it for every
-        timestep, in order, after the stop tracker's step."""
+        or None where it has none; ``riders``: vehicle id → the persons riding in it) idle
+        in their parking space; call it for every timestep, in order, after the stop
+        tracker's step."""
+        riders = riders or {}
         for vid, j, stop in (self.stops.parking if self.stops is not None else ()):
-            self._parked(vid, types[j], stop)
+            self._parked(vid, types[j], stop, riders)
+        for vid, (before, expected, end) in list(self.waiting.items()):
+            now = set(riders.get(vid, ()))
+            if (expected <= now) if expected else bool(now - before):  # boarded: the stop
+                del self.waiting[vid]  # ends then, or at its planned end when that is later
+                self.idle_from[vid] = max(t, end - self.step_s) - TIME_EPS_S
         ids = np.asarray(ids, object)
         idle = np.zeros(len(ids), bool)
         if self.idle_from:  # back on the lane: parked again elsewhere, at no declared stop

@@ -35,7 +35,7 @@ before the one the vehicle moves in (past its planned end). A vehicle parked off
 its stop, and live no switched-off stop: a stop of it the replay took as started a row
 before SUMO parked it ends in its first parked row. The stop it parked at is told
 (:attr:`StopTracker.parking`: arrival its first parked row, as SUMO parks a car in the
-step it reaches its stop; ``triggered`` or not) so that a car still parked past the
+step it reaches its stop; what it waits for when ``triggered``) so that a car still parked past the
 stop's planned end, its way out blocked, is booked idling there
 (:mod:`sumo_drvpw.sim.fcd_idle`). A vehicle that drives
 off before a planned end was not at its stop after all (SUMO holds it there): the stop is
@@ -82,6 +82,8 @@ VEHICLE_ELEMENTS = ("vehicle", "trip", "flow")
 PARKING_TRUE = ("true", "1", "yes", "on", "x", "t")
 #: a stop's ``triggered`` values that do not make it wait for a trigger (SUMO's false ones)
 NOT_TRIGGERED = ("", "false", "0", "no", "off", "-", "f")
+#: ``triggered`` values that make it wait for a person (SUMO's true ones and "person")
+PERSON_TRIGGERED = ("true", "1", "yes", "on", "x", "t", "person")
 
 
 def _num(val, where: str, key: str, time: bool = False) -> float | None:
@@ -102,7 +104,7 @@ class _Stop:
     """One declared stop: where (``lane`` or ``edge``, or a stopping place ``place``), its
     positions as written, and its planned ``duration`` and ``until`` [s] (None: not given)."""
 
-    __slots__ = ("lane", "edge", "place", "start", "end", "duration", "until", "on_route", "parking", "triggered")
+    __slots__ = ("lane", "edge", "place", "start", "end", "duration", "until", "on_route", "parking", "trigger")
 
     def __init__(self, el, where: str, on_route: bool = False):
         a = el.attrib
@@ -116,9 +118,13 @@ class _Stop:
         # parked beside the lane (a parkingArea's always): SUMO ends the stop when the
         # vehicle can leave, which may be after its planned end
         self.parking = bool(a.get("parkingArea")) or a.get("parking", "").strip().lower() in PARKING_TRUE
-        # waits for a person, container or joining train: ends when it boards, not planned
-        self.triggered = any(a.get(k, "").strip().lower() not in NOT_TRIGGERED
-                             for k in ("triggered", "containerTriggered"))
+        # waits for a person, container or joining train: ends when it boards, not planned;
+        # None, ("person", the ``expected`` person ids) or ("other", ())
+        words = set(a.get("triggered", "").lower().replace(",", " ").split()) - set(NOT_TRIGGERED)
+        if a.get("containerTriggered", "").strip().lower() not in NOT_TRIGGERED:
+            words.add("container")
+        self.trigger = (None if not words else ("person", tuple(a.get("expected", "").split()))
+                        if words <= set(PERSON_TRIGGERED) and not a.get("extension") else ("other", ()))
 
 
 def _is_stop(el) -> bool:
@@ -331,7 +337,7 @@ class StopTracker:
         self.left_early = 0                  # "stops" driven off before their planned end
         #: the vehicles that parked off the lane at a declared stop in this step: (id, row,
         #: the stop: ``duration``, ``until`` (NaN: not known), ``arrival`` its first parked
-        #: row's time, ``triggered``), for telling a car idling in its space (sim/fcd_idle.py)
+        #: row's time, ``trigger``), for telling a car idling in its space (sim/fcd_idle.py)
         self.parking: list[tuple] = []
 
     def _state(self, vid: str):
@@ -394,7 +400,7 @@ class StopTracker:
                     continue
                 if parked is not None and parked[j]:  # parked off the lane: served there, not
                     if cur.index >= 0:                 # booked (as if it had parked at once)
-                        self._park(vid, j, cur.duration, np.nan if cur.open else cur.until, t, cur.triggered)
+                        self._park(vid, j, cur.duration, np.nan if cur.open else cur.until, t, cur.trigger)
                     cur.end_t, cur.index = t, -1
                 t_end = t
                 if cur.parking and cur.index >= 0:
@@ -440,25 +446,25 @@ class StopTracker:
                     until = -1.0
                 dur = -1.0 if s.duration is None else s.duration
                 if parked is not None and parked[j]:  # parked there: not booked (but it may
-                    self._park(vid, j, dur, np.nan if unknown else until, t, s.triggered)  # idle there)
+                    self._park(vid, j, dur, np.nan if unknown else until, t, s.trigger)  # idle there)
                     break
                 # SUMO ends it at the later of arrival + duration and until; neither
                 # given: when the vehicle drives off
                 ends = [x for x, given in ((t + dur, dur >= 0), (until, until >= 0)) if given]
                 end_t = max(ends) if ends else np.inf
                 cur = SimpleNamespace(duration=dur, until=until, arrival=t, end_t=end_t, at_rest=speed[j] == 0.0,
-                                      index=k, parking=s.parking, triggered=s.triggered, open=unknown)
+                                      index=k, parking=s.parking, trigger=s.trigger, open=unknown)
                 st[3] = cur
                 self.data[vid] = cur
                 starting.append(vid)
                 break
         self.starting, self.ending = tuple(starting), tuple(ending)
 
-    def _park(self, vid: str, j: int, dur: float, until: float, t: float, triggered: bool) -> None:
+    def _park(self, vid: str, j: int, dur: float, until: float, t: float, trigger) -> None:
         """Vehicle ``vid`` (row ``j``) parked off the lane at its declared stop at ``t`` [s]
         (SUMO's arrival there: it parks in the step it reaches the stop)."""
         self.parking.append((vid, int(j), SimpleNamespace(duration=dur, until=until, arrival=t,
-                                                          triggered=triggered)))
+                                                          trigger=trigger)))
 
     def forget(self, vids) -> None:
         for v in vids:
