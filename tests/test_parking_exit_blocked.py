@@ -72,7 +72,7 @@ def test_a_car_switched_off_for_its_parking_stays_off_until_its_stop_ends(tmp_pa
     # (1e-4 Wh: SUMO's output at 6 decimals summed over the trip; one step is 0.0139 Wh)
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=1e-4)
     assert res["parking"]["idle_starts"] == 0
-    assert res["shut_off_at_long_stops"]["vehicle_s"] > 0.0
+    assert res["shut_off_at_long_stops"]["stops"] == 0  # parked off the lane: no switched-off stop
 
 
 def test_a_parked_fleet_is_not_asked_for_its_signals_before_its_parking_can_end(tmp_path, monkeypatch):
@@ -198,7 +198,8 @@ def test_a_car_switched_off_in_a_bus_bay_or_beside_the_lane_stays_off_until_its_
     times = set(pd.read_parquet(tmp_path / "o" / "trace.parquet", columns=["time_s", "vehicle"])
                 .query("vehicle == 'p'")["time_s"].round(6))
     assert zero[0] not in times and zero[0] + 0.5 in times
-    assert res["shut_off_at_long_stops"]["vehicle_s"] > 0.0
+    # dwelling in the bay it is switched off at its stop; parked beside the lane it is parked
+    assert res["shut_off_at_long_stops"]["stops"] == (1 if place.startswith("busStop") else 0)
     if place.startswith("lane"):
         sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
         cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")

@@ -167,8 +167,7 @@ class _Rows:
             self.idling.forget(self.arrived)
         if self.stops is not None:  # (lanes as written: a parked vehicle serves its stop too)
             self.stops.forget(self.arrived)
-            self.stops.step(self.t - self.dt, c["id"], c["lane"], c["pos"], c["speed"], c.get("off"),
-                            (float(nxt["time"][0]), nxt["id"], nxt["speed"]) if nxt is not None and len(nxt["id"]) else None)
+            self.stops.step(self.t - self.dt, c["id"], c["lane"], c["pos"], c["speed"], c.get("off"))
         ok = c.get("lane_ok")
         if ok is not None and len(ok):
             self.lane_rows += int(np.count_nonzero(ok > 0))
@@ -193,6 +192,12 @@ class _Rows:
                     k = int(np.count_nonzero(idle))
                     self.idle_rows += k
                     n -= k
+                shut = self.idling.shut
+                if shut:  # back on its lane a step before its stop ends, still switched off
+                    back = np.flatnonzero(c["off"] & (lanes != "") & ~idle)  # (SUMO writes 0)
+                    back = back[np.fromiter(map(shut.__contains__, c["id"][back]), bool, len(back))]
+                    lanes[back] = ""
+                    n += len(back)
             c = dict(c, lane=lanes)
             self.parked_rows += n
         return c

@@ -34,9 +34,10 @@ idling rows of a parked car:
 A car switched off for its stop (planned longer than its vType's
 ``shutOffStopDuration``: :mod:`sumo_drvpw.sim.shutoff`) stays off while it idles (SUMO
 1.28 writes it at 0) and is not booked, with or without signals (a stop the files do not
-hold: not switched off, as the replay books such a stop standing). The row in which the car
-leaves its space is booked already (:func:`~sumo_drvpw.sim.fcd_conn._unpark`: SUMO put it
-back on its lane there). ``summary.json`` ``source.idling_rows`` counts the rows booked
+hold: not switched off, as the replay books such a stop standing); nor is the row before
+the one it drives off in, where SUMO put it back on its lane a step before its stop ends,
+still switched off (written at 0; ``_Rows._vehicles``); another car is booked there,
+standing on its lane (:func:`~sumo_drvpw.sim.fcd_conn._unpark`). ``summary.json`` ``source.idling_rows`` counts the rows booked
 idling (``parked_rows`` no longer counts them).
 """
 

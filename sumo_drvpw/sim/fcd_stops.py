@@ -29,8 +29,9 @@ booked standing again. A ``parking`` stop (a ``parkingArea``'s always) SUMO ends
 when the vehicle can leave its space, later when traffic blocks it (DLR's port_lübeck,
 SUMO 1.28: cars parked at a bus stop until 830/870/880 s left at 836/881/887 s), and
 puts the vehicle back on its lane, at its space, the step before it drives off (its
-parking ends there; the live loop books it from that row): the replay ends it in the row
-before the one the vehicle moves in (past its planned end). A vehicle parked off the lane
+parking ends there), and ends the stop in the step it drives off (one switched off for
+its stop is written at 0 in the step between; the live loop books it again from its
+stop's end): the replay ends it in the row the vehicle moves in (past its planned end). A vehicle parked off the lane
 (beside it, at a containerStop or parkingArea; not in a bus bay) is not booked whatever
 its stop, and live no switched-off stop: a stop of it the replay took as started a row
 before SUMO parked it ends in its first parked row. The stop it parked at is told
@@ -382,18 +383,15 @@ class StopTracker:
             a += length
         return a, b
 
-    def step(self, t: float, ids, lanes, pos, speed, parked=None, after=None) -> None:
+    def step(self, t: float, ids, lanes, pos, speed, parked=None) -> None:
         """Timestep ``t`` [s] (the FCD's time) with its vehicle rows: ids, lanes (as SUMO
-        wrote them, parked vehicles' too), positions [m], speeds [m/s], which rows are
-        parked (off the lane; their stop is served, not booked), and ``after``: the next
-        timestep's (time, ids, speeds) (None: none), in which a vehicle leaving its parking
-        space drives off."""
+        wrote them, parked vehicles' too), positions [m], speeds [m/s], and which rows are
+        parked (off the lane; their stop is served, not booked)."""
         starting, ending = [], []
         self.parking = []
         speed = np.asarray(speed, float)
         if self.data:  # the vehicles at a stop: does it end in this row?
             rows = dict(zip(ids, range(len(ids))))
-            moving = None
             for vid, cur in list(self.data.items()):
                 j = rows.get(vid)
                 if j is None:
@@ -405,13 +403,10 @@ class StopTracker:
                 t_end = t
                 if cur.parking and cur.index >= 0:
                     # SUMO puts a parked vehicle back on its lane, at its space, the step
-                    # before it drives off (its parking ends there, and the live run books
-                    # it from that row): the stop ends in the row before the one it moves in
+                    # before it drives off (its parking ends there), but its stop ends in
+                    # the step it drives off (a switched-off one is written at 0 in the
+                    # step between, and the live run books it again from its stop's end)
                     over = speed[j] > 0.0 and (cur.at_rest or t >= cur.end_t - 1e-6)
-                    if not over and after is not None and speed[j] <= 0.0:
-                        if moving is None:
-                            moving = set(np.asarray(after[1], object)[np.asarray(after[2], float) > 0.0])
-                        over, t_end = vid in moving, float(after[0])
                 else:
                     over = t >= cur.end_t - 1e-6 or (cur.at_rest and speed[j] > 0.0)
                 if over:

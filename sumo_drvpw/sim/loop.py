@@ -286,7 +286,7 @@ class Stepper:
             if gone:
                 ledger.retire([vmap[v] for v in gone if v in vmap])
                 for v in gone:
-                    self.parking.forget(v)
+                    self.parking.gone(v)
                     self.seen_type.pop(v, None)
                     self.riders.at_stop.discard(v)
                 if self.shutoff is not None:

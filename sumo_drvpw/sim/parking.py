@@ -30,8 +30,15 @@ its stop (planned longer than its vType's ``shutOffStopDuration``: sim/shutoff.p
 off while it idles — its stop is still SUMO's current one — and is not booked (SUMO 1.28
 writes it at 0). Persons who boarded while it was parked (a ``triggered="person"`` stop)
 are read when it starts to idle, and every step while it idles (its stop is still the
-current one): SUMO's MMPEVEM books their mass in the holding torque on a slope. An FCD replay cannot tell
-an idling car from a parked one (:mod:`sumo_drvpw.sim.fcd`): both are left out there.
+current one): SUMO's MMPEVEM books their mass in the holding torque on a slope. An FCD
+replay books idling cars from the FCD's blinker bits or the declared stops
+(:mod:`sumo_drvpw.sim.fcd_idle`).
+
+**The step a parking ends.** SUMO puts the vehicle back on its lane at speed 0 one step
+before its stop ends; one switched off for its stop (planned longer than its vType's
+``shutOffStopDuration``) it writes at 0 there (SUMO 1.28, a parkingArea, beside the lane,
+a bus bay): such a vehicle is booked again only from the step its stop ends (a parked one
+here, one dwelling in a bus bay by :class:`~sumo_drvpw.sim.shutoff.ShutOff`).
 """
 
 from __future__ import annotations
@@ -76,8 +83,11 @@ class Parking:
         self.due: dict[str, float] = {}
         self.heap: list[tuple[float, str]] = []
         self.polling: set[str] = set()
-        #: parked vehicles switched off for their stop (sim/shutoff.py's rule)
+        #: parked vehicles switched off for their stop (sim/shutoff.py's rule), and those of
+        #: them back on their lane, still off until their stop ends
         self.off: set[str] = set()
+        self.leaving: set[str] = set()
+        self.stop_ends = getattr(sim, "getStopEndingVehiclesIDList", lambda: ())
         self.idling: set[str] = set()  # parked vehicles idling in their space, waiting to leave
         self.idle_starts = 0  # times a parked vehicle began to idle
         self.idle_vehicle_s = 0.0  # time booked idling [s]
@@ -174,14 +184,23 @@ class Parking:
         vehicles read changes."""
         changed = False
         for vid in self.ends():
-            # switched off for its stop (parked, or dwelling in a bus bay: sim/shutoff.py)
-            off = vid in self.off or (self.shutoff is not None and vid in self.shutoff.off)
+            # back on its lane a step before its stop ends: switched off for its stop, it
+            # stays off until then (SUMO writes 0): parked (booked again here when its stop
+            # ends), or dwelling in a bus bay (ShutOff, which switched it off, books it then)
+            parked_off = vid in self.off
             self.forget(vid)
             i = vmap.get(vid)
             if i is not None and ledger.veh_parked[i]:
-                if off:  # back on its lane, still off until its stop ends: ShutOff books it then
-                    self.shutoff.off.add(vid)
-                else:
+                if parked_off:
+                    self.leaving.add(vid)
+                elif self.shutoff is None or vid not in self.shutoff.off:
+                    self._unpark(ledger, i)
+                    changed = True
+        if self.leaving:
+            for vid in self.leaving.intersection(self.stop_ends()):
+                self.leaving.discard(vid)
+                i = vmap.get(vid)
+                if i is not None and ledger.veh_parked[i]:
                     self._unpark(ledger, i)
                     changed = True
         heap, due = self.heap, self.due
@@ -206,6 +225,11 @@ class Parking:
         self.polling.discard(vid)
         self.idling.discard(vid)
         self.off.discard(vid)
+
+    def gone(self, vid: str) -> None:
+        """Vehicle ``vid`` left the simulation."""
+        self.forget(vid)
+        self.leaving.discard(vid)
 
     def summary(self) -> dict:
         return {"idle_starts": self.idle_starts, "idle_vehicle_s": self.idle_vehicle_s,
