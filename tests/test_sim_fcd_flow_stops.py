@@ -188,8 +188,10 @@ def parked(tmp_path_factory):
 @pytest.mark.parametrize("chunk_rows", [None, 7])
 def test_fcd_books_parking_stops_as_live(parked, tmp_path, chunk_rows):
     """SUMO puts a parked vehicle back on its lane, at its space, the step before it
-    drives off (its parking ends there: the live run books that row, also one switched
-    off in a bus bay, then no longer counted switched off); a vehicle parked off the lane
+    drives off (its parking ends there; its stop ends in the step it drives off, and one
+    switched off for its stop — in a bus bay, beside the lane, at a containerStop, all of
+    them here — is written at 0 in the step between: booked from its stop's end, live
+    and replayed; before 2026-11-27 both booked that row); a vehicle parked off the lane
     (beside it, at a containerStop) is no switched-off stop live, one in a bus bay is.
     Before, the replay ended a parking stop in the row the vehicle drove off (−1 s for
     each one in a bus bay: port_lübeck's cars), counted as switched off a vehicle it took
