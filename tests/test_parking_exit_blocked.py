@@ -126,3 +126,41 @@ def test_a_rider_who_boarded_while_the_car_was_parked_is_booked_while_it_idles(t
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
     assert res["parking"]["idle_starts"] == 1 and res["parking"]["idle_vehicle_s"] > 100.0
     assert res["transportables"]["max_kg"] == 400.0
+
+
+@pytest.mark.parametrize("connection,removed_at", [("libsumo", None), ("libsumo", 60.0), ("traci", None)])
+def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_list(tmp_path, connection, removed_at):
+    """The user's own libsumo loop ends the parking of the car at 30 s (``vehicle.resume``),
+    10 s before its ``until``, while the flow passes: SUMO takes the car out of its id list
+    (getIDList leaves it out until it is back on the road, about 170 s later) and its emission
+    output books it idling in its space all that time. Measured 2026-11-27 before the fix
+    (the car never read after the resume): 49.52 Wh against SUMO's 54.23; after: to 1e-6.
+    A car the script removes while it idles there leaves the booking without an error. Through
+    traci (its context subscription answers such a car with SUMO's "no value", −2³⁰, for
+    speed and acceleration) as through libsumo."""
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    path = scenario(tmp_path)
+    (tmp_path / "r.rou.xml").write_text(ROUTES.format(params="").replace('duration="20"', 'until="40"'))
+    conn = start_sumo(load_scenario(path).sumo_args, connection=connection)
+    try:
+        acc = Accountant(conn, scenario=path, keep_vehicles=True)
+        listener = conn.addStepListener(acc)
+        while conn.simulation.getTime() < 300 - 1e-9:
+            conn.simulationStep()
+            t = conn.simulation.getTime()
+            if abs(t - 30.0) < 1e-9:
+                conn.vehicle.resume("p")
+            if removed_at is not None and abs(t - removed_at) < 1e-9:
+                assert "p" not in conn.vehicle.getIDList()  # idling, out of SUMO's list
+                conn.vehicle.remove("p")
+        booked = acc.energy("p")["vtype_energy.ecar"]["chain"]["net_j"] / 3600.0
+        res = acc.result()
+        conn.removeStepListener(listener)
+    finally:
+        close_sumo(conn)
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
+    assert booked == pytest.approx(sumo_wh["p"], rel=1e-6)
+    assert res["parking"]["idle_starts"] == 1

@@ -270,6 +270,8 @@ class Stepper:
             self.missed_steps += int(round((t_now - self.last_t) / dt)) - 1
         self.last_t = t_now
         ids = conn.vehicle.getIDList()
+        if self.parking.resumed:  # parked cars whose stop a script ended: out of SUMO's list
+            ids = self.parking.with_resumed(ids)
         if self.first:
             self.reader.subscribe_existing(ids)
             self.first = False
@@ -282,6 +284,8 @@ class Stepper:
             gone = self.arrived()
             if not self.is_replay:  # and those a script removed between steps
                 gone = list(gone) + self.reader.removed(self.last_ids, ids, gone, departed, back)
+                if self.reader.kept and self.parking.signals is not None:  # out, not gone: parked
+                    ids = (*ids, *self.parking.resume(ledger, vmap, self.reader.kept, t_now))  # cars resumed
             self.last_ids = ids
             if gone:
                 ledger.retire([vmap[v] for v in gone if v in vmap])
@@ -339,6 +343,8 @@ class Stepper:
             self.check_types(kids, vidx)
         tracking = self.tracking
         v, a, angle, ln, pos, raw = self.reader.read(kids, skip_lanes=tracking)
+        if self.parking.resumed:
+            self.parking.at_rest(kids, (v, a, angle, raw))
         if tracking:
             lane = ledger.veh_lane[vidx]
             pos = ledger.veh_pos[vidx] + v * dt  # SUMO's Euler update: x += v_t·Δt

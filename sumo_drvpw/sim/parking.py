@@ -23,9 +23,16 @@ triggered one), so a parked fleet still costs nothing until it is due to leave. 
 whose parking is over when it gets there (its ``until`` passed while it drove) is tried
 in the step it parks, and idles from that very step when the way is blocked: booked then
 at the speed SUMO still gives it (the last of its creep into the space) and, from the next
-step, braking from it to 0, as the emission output books them. A stop
-that a script shortens (``vehicle.resume``, ``setStop``) after it started is due at the
-end planned when it started: idling before then is not booked. A vehicle switched off for
+step, braking from it to 0, as the emission output books them. A parked car whose stop
+a script ends (``vehicle.resume``) leaves SUMO's id list until it is back on the road (SUMO
+1.28: its getters answer "no value", −2³⁰, its emission output books it idling in its
+space): the loop tells it by the id list's count (one getLoadedIDList, as for a removed
+vehicle), asks for its signals from then on, and reads it, idling, from the space it
+parked in (:meth:`Parking.resume`). A stop that a script shortens (``setStop``,
+``setParkingAreaStop`` with a shorter duration) after it started is due at the end planned
+when it started: idling before then is not booked (a probe, 2026-11-27: the car of
+tests/test_parking_exit_blocked.py cut from ``until`` 40 s to 1 s at 30 s idles 19 steps
+the loop misses, 0.26 Wh of SUMO's 54.23). A vehicle switched off for
 its stop (planned longer than its vType's ``shutOffStopDuration``: sim/shutoff.py) stays
 off while it idles — its stop is still SUMO's current one — and is not booked (SUMO 1.28
 writes it at 0). Persons who boarded while it was parked (a ``triggered="person"`` stop)
@@ -74,10 +81,17 @@ class Parking:
         self.idle_starts = 0  # times a parked vehicle began to idle
         self.idle_vehicle_s = 0.0  # time booked idling [s]
         self.dt = float(sim.getDeltaT())
+        #: parked vehicle id → (lane number, lane position) of its space, read when it parks
+        self.space: dict[str, tuple[int, float]] = {}
+        #: parked vehicles whose stop a script ended (``vehicle.resume``): out of SUMO's id
+        #: list until they are back on the road, read all the same (:meth:`with_resumed`)
+        self.resumed: set[str] = set()
 
-    def _standing(self, vid: str) -> tuple[int, float] | None:
-        """The lane number and position of vehicle ``vid`` at its current stop, or None."""
-        stops = self.conn.vehicle.getStops(vid, 1)
+    def _standing(self, vid: str, stops=None) -> tuple[int, float] | None:
+        """The lane number and position of vehicle ``vid`` at its current stop (``stops``:
+        its getStops(vid, 1) when read already), or None."""
+        if stops is None:
+            stops = self.conn.vehicle.getStops(vid, 1)
         lane = self.lane_index.get(stops[0].lane, -1) if stops else -1
         if lane < 0:
             return None
@@ -99,6 +113,9 @@ class Parking:
         ledger.veh_parked[i] = True
         if self.signals is not None:
             stops = self.conn.vehicle.getStops(vid, 1)
+            d = self._standing(vid, stops)
+            if d is not None:  # where it idles should a script end its stop (resume)
+                self.space[vid] = d
             # switched off for a stop longer than its vType's shutOffStopDuration, it stays
             # off while it idles (its stop is still SUMO's current one): nothing to book
             if not (stops and self.shutoff is not None and planned_duration_s(stops[0])
@@ -118,7 +135,7 @@ class Parking:
         """Parked vehicle ``vid`` idles in its space from this step (its blinker shows it):
         booked standing there, with whoever rides in it. True when it is."""
         del self.due[vid]
-        d = self._standing(vid)
+        d = self.space.get(vid) if vid in self.resumed else self._standing(vid)
         if d is None:
             return False
         self.dwell[vid] = d
@@ -181,6 +198,52 @@ class Parking:
         self.dwell.pop(vid, None)
         self.due.pop(vid, None)
         self.idling.discard(vid)
+        self.space.pop(vid, None)
+        self.resumed.discard(vid)
+
+    def resume(self, ledger, vmap, vids, now: float) -> list:
+        """Vehicles ``vids`` left SUMO's id list without leaving the simulation: those
+        parked are out of their stop, which a script ended (``vehicle.resume``), and SUMO
+        tries to put them back on the road from the next step, idling them in their space
+        while the way is blocked — out of its id list until they are back on the road
+        (probed with SUMO 1.28: getIDList leaves such a car out, its emission output books
+        it idling). Their signals are read from now on; returns those parked."""
+        out = []
+        for vid in vids:
+            i = vmap.get(vid)
+            if i is not None and ledger.veh_parked[i] and vid in self.space:
+                self.resumed.add(vid)
+                self.due[vid] = now
+                out.append(vid)
+        return out
+
+    def with_resumed(self, ids):
+        """SUMO's id list ``ids`` and the parked vehicles whose stop a script ended, which
+        it leaves out (:meth:`resume`): those still in the simulation (one getter each; one
+        a script removed is forgotten, and retired by the loop as removed)."""
+        live, extra = set(ids), []
+        for vid in list(self.resumed):
+            if vid in live:
+                continue
+            try:
+                self.conn.vehicle.getStopState(vid)
+            except Exception as e:  # TraCIException: "Vehicle '…' is not known"
+                if type(e).__name__ == "FatalTraCIError":  # the connection itself failed
+                    raise
+                self.forget(vid)
+                continue
+            extra.append(vid)
+        return (*ids, *extra) if extra else ids
+
+    def at_rest(self, kids, values) -> None:
+        """The state read of vehicles ``kids`` (``values``: arrays of speed, acceleration,
+        angle, slope, or None; in place) for those idling out of SUMO's id list
+        (:meth:`resume`), for which SUMO answers its "no value", −2³⁰: standing (speed and
+        acceleration 0; its angle 0, its slope unknown: the lane's is booked)."""
+        idx = [j for j, k in enumerate(kids) if k in self.resumed]
+        for x, rest in zip(values, (0.0, 0.0, 0.0, np.nan)):
+            if x is not None and idx:
+                x[idx] = rest
 
     def summary(self) -> dict:
         return {"idle_starts": self.idle_starts, "idle_vehicle_s": self.idle_vehicle_s,
