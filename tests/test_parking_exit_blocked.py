@@ -11,6 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim import run_scenario
 from sumo_probe import build_net, emitted_wh, energy_scenario
 
@@ -25,13 +26,13 @@ ROUTES = """<routes>
 </routes>"""
 
 
-def scenario(d, params=""):
+def scenario(d, params="", fcd=False):
     build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
     (d / "r.rou.xml").write_text(ROUTES.format(params=params))
     (d / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
                                  'roadsideCapacity="2"/></additional>')
-    return energy_scenario(d, 300, additional="a.add.xml", fcd=False)
+    return energy_scenario(d, 300, additional="a.add.xml", fcd=fcd)
 
 
 @pytest.mark.parametrize("watts,connection", [(100.0, "libsumo"), (900.0, "libsumo"), (100.0, "traci")])
@@ -53,13 +54,19 @@ def test_a_car_blocked_in_its_parking_space_is_booked_idling_as_sumo_books_it(tm
 
 def test_a_car_switched_off_for_its_parking_stays_off_while_blocked(tmp_path):
     """With ``shutOffStopDuration`` 5 s the 20-s parking switches the car off, and SUMO
-    1.28 writes the idling steps at 0 (its stop is still the current one): none is booked.
-    (The booking stays one step above SUMO's, 0.5 s of constant power: the step the car
-    comes to rest at a long stop, which SUMO already leaves out — sim/shutoff.py.)"""
-    res = run_scenario(scenario(tmp_path, '<param key="shutOffStopDuration" value="5"/>'), tmp_path / "o")
+    1.28 writes the idling steps at 0 (its stop is still the current one): none is booked;
+    nor is the step it is back on the road, which SUMO writes off too (its stop ends in the
+    next). Measured 2026-11-27 before the fix (that step booked): 49.52049 Wh against SUMO's
+    49.50660, one step of constant power above (0.5 s × 100 W); after: to 1e-6 — and the
+    replay of the run's FCD books as much (it left that row in too)."""
+    path = scenario(tmp_path, '<param key="shutOffStopDuration" value="5"/>', fcd=True)
+    res = run_scenario(path, tmp_path / "o")
+    assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(path), "--out", str(tmp_path / "r"),
+                     "--no-figures"]) == 0
     sumo_wh, _ = emitted_wh(tmp_path / "em.xml", 0.5)
-    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
-    assert 0.0 <= cv.loc["p", "net_kwh"] * 1000.0 - sumo_wh["p"] <= 100.0 * 0.5 / 3600.0 + 1e-6
+    for out in ("o", "r"):
+        cv = pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key")
+        assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6), out
     assert res["parking"]["idle_starts"] == 0
 
 
@@ -128,8 +135,10 @@ def test_a_rider_who_boarded_while_the_car_was_parked_is_booked_while_it_idles(t
     assert res["transportables"]["max_kg"] == 400.0
 
 
-@pytest.mark.parametrize("connection,removed_at", [("libsumo", None), ("libsumo", 60.0), ("traci", None)])
-def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_list(tmp_path, connection, removed_at):
+@pytest.mark.parametrize("connection,removed_at,off", [("libsumo", None, False), ("libsumo", 60.0, False),
+                                                      ("traci", None, False), ("libsumo", None, True)])
+def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_list(tmp_path, connection,
+                                                                                      removed_at, off):
     """The user's own libsumo loop ends the parking of the car at 30 s (``vehicle.resume``),
     10 s before its ``until``, while the flow passes: SUMO takes the car out of its id list
     (getIDList leaves it out until it is back on the road, about 170 s later) and its emission
@@ -137,12 +146,15 @@ def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_
     (the car never read after the resume): 49.52 Wh against SUMO's 54.23; after: to 1e-6.
     A car the script removes while it idles there leaves the booking without an error. Through
     traci (its context subscription answers such a car with SUMO's "no value", −2³⁰, for
-    speed and acceleration) as through libsumo."""
+    speed and acceleration) as through libsumo. A car switched off for its parking
+    (``shutOffStopDuration`` 5 s < its 18 s) stays off: SUMO 1.28 writes its idling steps and
+    the step it is back on the road at 0 (before the fix: 54.23 Wh booked against 49.51)."""
     from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
     from sumo_drvpw.sim.scenario import load_scenario
 
+    params = '<param key="shutOffStopDuration" value="5"/>' if off else ""
     path = scenario(tmp_path)
-    (tmp_path / "r.rou.xml").write_text(ROUTES.format(params="").replace('duration="20"', 'until="40"'))
+    (tmp_path / "r.rou.xml").write_text(ROUTES.format(params=params).replace('duration="20"', 'until="40"'))
     conn = start_sumo(load_scenario(path).sumo_args, connection=connection)
     try:
         acc = Accountant(conn, scenario=path, keep_vehicles=True)
@@ -163,4 +175,4 @@ def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_
     sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
     assert not nan
     assert booked == pytest.approx(sumo_wh["p"], rel=1e-6)
-    assert res["parking"]["idle_starts"] == 1
+    assert res["parking"]["idle_starts"] == (0 if off else 1)

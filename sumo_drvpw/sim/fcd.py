@@ -437,6 +437,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                                    begin=sc.begin, end=sc.end)
     if declared:
         replay.stops = StopTracker(declared, net)
+        so = acc.stepper.shutoff  # a car switched off for its parking: off as it is back on its lane
+        replay.stop_limit = so.limit_of if so is not None else None
     acc.stepper.replay_info = replay_info  # a --begin after the file's start: no cold starts then
     replay.count_persons = count_persons
     try:

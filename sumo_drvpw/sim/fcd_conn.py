@@ -139,6 +139,8 @@ class _Rows:
         #: the route files' stops matched to where vehicles stand (fcd_stops.StopTracker;
         #: set by replay_fcd, None: no file declares a stop)
         self.stops = None
+        #: vType → its shutOffStopDuration [s] (the replay's ShutOff.limit_of; set by replay_fcd)
+        self.stop_limit = None
         self.count_persons = True
         #: a timestep with vehicles but no angle column (no yaw rate for the radial factor)
         self.no_angle = False
@@ -178,9 +180,23 @@ class _Rows:
                 nxt = {"id": nxt["id"][keep], "off": nxt["off"][keep]}
             lanes, n = _unpark(c["lane"], c["id"], c["off"], nxt["id"] if nxt else None,
                                nxt["off"] if nxt else None)
+            if self.stops is not None and self.stop_limit is not None and self.stops.parked_planned:
+                self._still_off(c, lanes)
             c = dict(c, lane=lanes)
             self.parked_rows += n
         return c
+
+    def _still_off(self, c: dict, lanes) -> None:
+        """Rows back on their lane at their parking space (off, not parked: ``lanes``), of
+        vehicles switched off for their parking (planned longer than their vType's
+        shutOffStopDuration): SUMO 1.28 still writes them off in that step, and the live
+        loop leaves it out (sim/parking.py): out of the booking here too (lane "")."""
+        planned = self.stops.parked_planned
+        for j in np.flatnonzero(c["off"]):
+            vid = c["id"][j]
+            if lanes[j] != "" and vid in planned:
+                if planned.pop(vid) > self.stop_limit(c["type"][j]):
+                    lanes[j] = ""
 
     def _ride(self, p: dict | None, v: dict) -> None:
         """Riders per vehicle from the persons' rows ``p`` and the vehicles' rows ``v``."""

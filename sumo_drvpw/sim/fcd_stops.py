@@ -320,6 +320,9 @@ class StopTracker:
         self.unplaced = 0                    # stops on a stopping place no file declares
         self.until_unknown = 0               # stops reached whose until could not be shifted
         self.left_early = 0                  # "stops" driven off before their planned end
+        #: vehicle id → planned duration [s] of the parking stop it is parked at, off the
+        #: lane (as sim/shutoff.planned_duration_s: the later of duration and until)
+        self.parked_planned: dict[str, float] = {}
 
     def _state(self, vid: str):
         st = self.state.get(vid)
@@ -379,7 +382,9 @@ class StopTracker:
                 if j is None:
                     continue
                 if parked is not None and parked[j]:  # parked off the lane: served there, not
-                    cur.end_t, cur.index = t, -1       # booked (as if it had parked at once)
+                    if cur.index >= 0:                 # booked (as if it had parked at once)
+                        self.parked_planned[vid] = max(cur.duration, cur.until - cur.arrival)
+                    cur.end_t, cur.index = t, -1
                 t_end = t
                 if cur.parking and cur.index >= 0:
                     # SUMO puts a parked vehicle back on its lane, at its space, the step
@@ -417,13 +422,14 @@ class StopTracker:
                     continue
                 st[1] = k + 1
                 self.matched += 1
-                if parked is not None and parked[j]:
-                    break  # parked there: not booked anyway
                 until = -1.0 if s.until is None else s.until + st[2][k]
                 if until != until:  # NaN: a depart not known (a random flow's, "triggered")
-                    self.until_unknown += 1
+                    self.until_unknown += int(not (parked is not None and parked[j]))
                     until = -1.0
                 dur = -1.0 if s.duration is None else s.duration
+                if parked is not None and parked[j]:
+                    self.parked_planned[vid] = max(dur, until - t)
+                    break  # parked there: not booked anyway
                 # SUMO ends it at the later of arrival + duration and until; neither
                 # given: when the vehicle drives off
                 ends = [x for x, given in ((t + dur, dur >= 0), (until, until >= 0)) if given]
@@ -440,6 +446,7 @@ class StopTracker:
         for v in vids:
             self.state.pop(v, None)
             self.data.pop(v, None)
+            self.parked_planned.pop(v, None)
 
     def report(self) -> dict:
         """What the replay matched and what it could not know (summary.json)."""

@@ -35,7 +35,10 @@ tests/test_parking_exit_blocked.py cut from ``until`` 40 s to 1 s at 30 s idles 
 the loop misses, 0.26 Wh of SUMO's 54.23). A vehicle switched off for
 its stop (planned longer than its vType's ``shutOffStopDuration``: sim/shutoff.py) stays
 off while it idles — its stop is still SUMO's current one — and is not booked (SUMO 1.28
-writes it at 0). Persons who boarded while it was parked (a ``triggered="person"`` stop)
+writes it at 0), nor in the step it is back on the road (SUMO writes that one off too: the
+stop's duration its emission model reads is that of the step before): booked from the step
+after, when its stop ends. Its stop ended by a script, it stays off all the same (SUMO
+1.28 writes 0 while it idles out of the id list). Persons who boarded while it was parked (a ``triggered="person"`` stop)
 are read when it starts to idle, and every step while it idles (its stop is still the
 current one): SUMO's MMPEVEM books their mass in the holding torque on a slope. An FCD replay cannot tell
 an idling car from a parked one (:mod:`sumo_drvpw.sim.fcd`): both are left out there.
@@ -86,6 +89,10 @@ class Parking:
         #: parked vehicles whose stop a script ended (``vehicle.resume``): out of SUMO's id
         #: list until they are back on the road, read all the same (:meth:`with_resumed`)
         self.resumed: set[str] = set()
+        #: vehicles switched off at their stop (sim/shutoff.py) whose parking ended in the
+        #: last step: SUMO writes them off in the step they are back on the road too
+        self.waking: set[str] = set()
+        self.off: set[str] = set()  # parked vehicles switched off for their stop (shutoff.py)
 
     def _standing(self, vid: str, stops=None) -> tuple[int, float] | None:
         """The lane number and position of vehicle ``vid`` at its current stop (``stops``:
@@ -111,24 +118,25 @@ class Parking:
                 self.dwell[vid] = d
                 return True
         ledger.veh_parked[i] = True
-        if self.signals is not None:
-            stops = self.conn.vehicle.getStops(vid, 1)
+        stops = self.conn.vehicle.getStops(vid, 1)
+        # switched off for a stop longer than its vType's shutOffStopDuration, it stays
+        # off while it idles (its stop is still SUMO's current one): nothing to book
+        if stops and self.shutoff is not None and planned_duration_s(stops[0]) \
+                > self.shutoff.limit_of(ledger.veh_type[i]):
+            self.off.add(vid)
+        elif self.signals is not None:
             d = self._standing(vid, stops)
             if d is not None:  # where it idles should a script end its stop (resume)
                 self.space[vid] = d
-            # switched off for a stop longer than its vType's shutOffStopDuration, it stays
-            # off while it idles (its stop is still SUMO's current one): nothing to book
-            if not (stops and self.shutoff is not None and planned_duration_s(stops[0])
-                    > self.shutoff.limit_of(ledger.veh_type[i])):
-                self.due[vid] = due = self._earliest_end(stops, now)
-                # over already when it arrives (an ``until`` it came too late for): SUMO
-                # tries to put it back on the road in the step it parks, and idles it there
-                # at once when the road is blocked: booked from this step, at the speed SUMO
-                # gives it (the last of its creep into the space, in its emission output too)
-                if due <= now + 1e-9 and int(self.signals(vid)) & BLINKERS:
-                    ledger.veh_parked[i] = False
-                    self.idle_vehicle_s += self.dt  # (step() counted this step's before)
-                    return self._idle(ledger, {vid: i}, vid)
+            self.due[vid] = due = self._earliest_end(stops, now)
+            # over already when it arrives (an ``until`` it came too late for): SUMO
+            # tries to put it back on the road in the step it parks, and idles it there
+            # at once when the road is blocked: booked from this step, at the speed SUMO
+            # gives it (the last of its creep into the space, in its emission output too)
+            if due <= now + 1e-9 and int(self.signals(vid)) & BLINKERS:
+                ledger.veh_parked[i] = False
+                self.idle_vehicle_s += self.dt  # (step() counted this step's before)
+                return self._idle(ledger, {vid: i}, vid)
         return False
 
     def _idle(self, ledger, vmap, vid: str) -> bool:
@@ -174,10 +182,20 @@ class Parking:
         to leave, are booked standing there from this step. True when the selection of
         vehicles read changes."""
         changed = False
+        waking, self.waking = self.waking, set()
+        for vid in waking:  # back on the road a step ago, switched off at its stop: on now
+            i = vmap.get(vid)
+            if i is not None and ledger.veh_parked[i] and not ledger.veh_done[i]:
+                self._unpark(ledger, i)
+                changed = True
         for vid in self.ends():
+            off = vid in self.off
             self.forget(vid)
             i = vmap.get(vid)
             if i is not None and ledger.veh_parked[i]:
+                if off:  # switched off at its stop: SUMO 1.28 still writes it off (0)
+                    self.waking.add(vid)  # in the step it is back on the road (the stop's
+                    continue              # duration its emission model reads is that step's)
                 self._unpark(ledger, i)
                 changed = True
         if self.due:
@@ -200,6 +218,8 @@ class Parking:
         self.idling.discard(vid)
         self.space.pop(vid, None)
         self.resumed.discard(vid)
+        self.waking.discard(vid)
+        self.off.discard(vid)
 
     def resume(self, ledger, vmap, vids, now: float) -> list:
         """Vehicles ``vids`` left SUMO's id list without leaving the simulation: those
@@ -211,7 +231,7 @@ class Parking:
         out = []
         for vid in vids:
             i = vmap.get(vid)
-            if i is not None and ledger.veh_parked[i] and vid in self.space:
+            if i is not None and ledger.veh_parked[i] and vid in self.space and vid not in self.off:
                 self.resumed.add(vid)
                 self.due[vid] = now
                 out.append(vid)
