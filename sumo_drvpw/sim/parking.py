@@ -135,6 +135,9 @@ class Parking:
             # gives it (the last of its creep into the space, in its emission output too)
             if due <= now + 1e-9 and int(self.signals(vid)) & BLINKERS:
                 ledger.veh_parked[i] = False
+                # its grade: the slope at the space, as SUMO's (SUMO set it into the space
+                # farther than its speed took it: the rise since its last read is no grade)
+                ledger.veh_at[i, 2] = np.nan
                 self.idle_vehicle_s += self.dt  # (step() counted this step's before)
                 return self._idle(ledger, {vid: i}, vid)
         return False
