@@ -16,10 +16,20 @@ such step (``isOnRoad() || isIdling()``) at speed 0 on the parking lane, and its
 device books them (``notifyIdle``). The loop books them standing in the space (the stop's
 lane, the position SUMO gives), with the grade there, as the emission output does (the
 emissions device's tripinfo takes slope 0: the two differ only for a car on SUMO's MMPEVEM
-parked on a slope, by its holding torque). A parked vehicle is asked for its signals
+parked on a slope, by its holding torque). The grade there is the plug-in's robust profile
+(``[slope] window_m``), as for any standing car: on a uniform grade SUMO's slope, but where
+the lane's grade changes within a car length of the space SUMO takes the car's front-to-back
+slope and the two part (a probe, 2026-11-27: SUMO's BMW i3 idling 158 s at 315 m, where a
+7.0° ramp of the lane's shape ends: SUMO 0.326 Wh/s, the loop 0.164 at the profile's 3.7°,
+−14 % of that car's energy; an i3 stopping on the lane at the same place is booked alike,
+−11 %). A parked vehicle is asked for its signals
 (one getter) only from its parking's earliest planned end on (its arrival plus the
 remaining ``duration``, or its ``until``; every step for a stop with neither, as a
-triggered one), so a parked fleet still costs nothing until it is due to leave. A car
+triggered one), so a parked fleet still costs nothing until it is due to leave (a probe,
+2026-11-27, 300 s at 0.5-s steps: 40 cars parked for 5000 s — 20 of SUMO's MMPEVEM i3,
+never switched off, and 20 on the Energy model, switched off — cost no getSignals call; 20
+cars at ``triggered="person"`` stops without a duration, whom no person boards, cost one
+per car and step from their arrival, 7,901). A car
 whose parking is over when it gets there (its ``until`` passed while it drove) is tried
 in the step it parks, and idles from that very step when the way is blocked: booked then
 at the speed SUMO still gives it (the last of its creep into the space) and, from the next
