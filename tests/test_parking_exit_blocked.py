@@ -180,3 +180,35 @@ def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_
     assert not nan
     assert booked == pytest.approx(sumo_wh["p"], rel=1e-6)
     assert res["parking"]["idle_starts"] == (0 if off else 1)
+
+
+@pytest.mark.parametrize("blocked", [True, False])
+def test_a_car_on_mmpevem_in_a_sloped_lot_space_is_booked_at_its_slope(tmp_path, blocked):
+    """A parking area whose two lot spaces have ``slope="6"`` beside a flat lane: SUMO's
+    BMW i3 (MMPEVEM) parked there draws its holding torque at 6° in SUMO's emission output
+    while it idles, its way out blocked (about 158 s), and in the step it is back on the lane
+    (its stop not yet over) — also when it leaves at once. Measured 2026-11-27 before the fix
+    (the lane's flat profile booked): blocked 125.61 Wh against SUMO's 151.90 (−17 %), free
+    101.507 against 101.591 (−8.2e-4); after: to 1e-6."""
+    import re
+
+    import sumo
+
+    i3 = (Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text()
+    routes = re.sub(r'<vType id="ecar".*?</vType>', lambda _: re.search(r"<vType.*?</vType>", i3, re.S).group(0)
+                    .replace('id="BMW_i3"', 'id="ecar"'), ROUTES.format(params=""), count=1, flags=re.S)
+    assert 'emissionClass="MMPEVEM"' in routes
+    if not blocked:
+        routes = re.sub(r'<vehicle id="b".*?</vehicle>\s*<flow.*?</flow>', "", routes, flags=re.S)
+    path = scenario(tmp_path)
+    (tmp_path / "r.rou.xml").write_text(routes)
+    (tmp_path / "a.add.xml").write_text(
+        '<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" roadsideCapacity="0">'
+        '<space x="315" y="-8" angle="0" slope="6"/><space x="320" y="-8" angle="0" slope="6"/>'
+        '</parkingArea></additional>')
+    res = run_scenario(path, tmp_path / "o")
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
+    assert res["parking"]["idle_starts"] == (1 if blocked else 0)

@@ -386,7 +386,7 @@ class Stepper:
         if raw is not None:
             raw = np.radians(raw)
         placed = reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, self.is_replay)  # not driven
-        on_lane = lane >= 0
+        on_lane, tilt = lane >= 0, None
         if self.parking.on and not on_lane.all():  # parked, dwelling, idling, or teleporting
             for j in np.flatnonzero(~on_lane):
                 d = self.dwell.get(kids[j])
@@ -397,7 +397,12 @@ class Stepper:
                         self.prev_ids = None  # the selection of vehicles read changes
                 if d is not None:  # at a bus stop's bay or idling in its space: standing there
                     lane[j], pos[j] = d
+                    if kids[j] in self.parking.grade:  # idling, at the slope SUMO gives it there
+                        tilt = np.full(len(kids), np.nan) if tilt is None else tilt
+                        tilt[j] = self.parking.grade[kids[j]]
             on_lane = lane >= 0
+        if self.parking.once:  # back on the lane from a parking, at its space's slope this step
+            tilt = self.parking.tilt(kids, tilt)
         if placed.any():  # put back by a teleport: its energy jump booked apart, then driven on
             put_back(ledger, net, self.eqset.equations, placed, vidx, lane, pos, v, prev)
             on_lane &= ~placed
@@ -406,7 +411,7 @@ class Stepper:
             ledger.veh_prev_angle[vidx[(lane < 0)]] = np.nan  # (and its turning)
             vidx, lane, v, a, angle, pos = (
                 x[on_lane] for x in (vidx, lane, v, a, angle, pos))
-            raw, yaw = (None if x is None else x[on_lane] for x in (raw, yaw))
+            raw, yaw, tilt = (None if x is None else x[on_lane] for x in (raw, yaw, tilt))
             if len(vidx) == 0:
                 return
         at = net.bin_index(lane, pos)  # robust slope, shape slope, heading there
@@ -417,6 +422,8 @@ class Stepper:
             raw = net.raw[at]
         ledger.corrected += int(np.count_nonzero(
             (np.abs(raw - theta) > physics.slope_tol) | clipped))
+        if tilt is not None:
+            theta = np.where(np.isnan(tilt), theta, tilt)
         nclip = int(np.count_nonzero(clipped))
         if nclip:
             ledger.clipped += nclip

@@ -16,13 +16,19 @@ such step (``isOnRoad() || isIdling()``) at speed 0 on the parking lane, and its
 device books them (``notifyIdle``). The loop books them standing in the space (the stop's
 lane, the position SUMO gives), with the grade there, as the emission output does (the
 emissions device's tripinfo takes slope 0: the two differ only for a car on SUMO's MMPEVEM
-parked on a slope, by its holding torque). The grade there is the plug-in's robust profile
-(``[slope] window_m``), as for any standing car: on a uniform grade SUMO's slope, but where
-the lane's grade changes within a car length of the space SUMO takes the car's front-to-back
-slope and the two part (a probe, 2026-11-27: SUMO's BMW i3 idling 158 s at 315 m, where a
-7.0° ramp of the lane's shape ends: SUMO 0.326 Wh/s, the loop 0.164 at the profile's 3.7°,
-−14 % of that car's energy; an i3 stopping on the lane at the same place is booked alike,
-−11 %). A parked vehicle is asked for its signals
+parked on a slope, by its holding torque). The grade is the slope SUMO gives the car in its
+space, read once when it starts to idle (``getSlope``: a parking area's ``<space>`` may
+have a ``slope`` of its own; beside the lane, the car's front-to-back slope there), and
+once in the step its parking ends, when it is back on the lane but still at its stop and
+SUMO still takes that slope — not the plug-in's robust profile of the lane, which parts
+from it on a lot's sloped space or where the lane's grade changes within a car length (a
+probe, 2026-11-27, SUMO's MMPEVEM BMW i3: idling 158 s in a space of ``slope="6"`` beside
+a flat lane, −17 % of the car before, 5e-7 after; at 315 m, where a 7.0° ramp of the lane's
+shape ends, SUMO 0.326 Wh/s against 0.164 at the profile's 3.7°, −14 % before; a car
+leaving the sloped space at once, its one step back on the lane, −8.2e-4 before, 2e-9 after.
+Its stop ended by a script, SUMO takes the lane's slope, and the loop the profile. A car
+standing on the lane at such a grade change — at a stop, in a queue — is still booked at
+the profile: an i3 stopping on the lane at 315 m, −11 %). A parked vehicle is asked for its signals
 (one getter) only from its parking's earliest planned end on (its arrival plus the
 remaining ``duration``, or its ``until``; every step for a stop with neither, as a
 triggered one), so a parked fleet still costs nothing until it is due to leave (a probe,
@@ -103,6 +109,14 @@ class Parking:
         #: last step: SUMO writes them off in the step they are back on the road too
         self.waking: set[str] = set()
         self.off: set[str] = set()  # parked vehicles switched off for their stop (shutoff.py)
+        #: idling vehicle id → the slope SUMO gives it in its space [rad] (getSlope at its
+        #: idle start: a parking area's space may have its own ``slope``; the car's front-to-
+        #: back slope on the lane), which its emission output takes (MMPEVEM's holding torque)
+        self.grade: dict[str, float] = {}
+        self.slope = getattr(veh, "getSlope", None)
+        #: vehicle id → its slope [rad] in the step its parking ended: back on its lane, its
+        #: stop not yet over, SUMO still gives it its space's (read once)
+        self.once: dict[str, float] = {}
 
     def _standing(self, vid: str, stops=None) -> tuple[int, float] | None:
         """The lane number and position of vehicle ``vid`` at its current stop (``stops``:
@@ -162,6 +176,10 @@ class Parking:
         self.dwell[vid] = d
         self.idling.add(vid)
         self.idle_starts += 1
+        if self.slope is not None and vid not in self.resumed:  # (out of its stop SUMO takes
+            s = float(self.slope(vid))                           # the lane's: the profile's)
+            if -90.0 <= s <= 90.0:
+                self.grade[vid] = np.radians(s)
         r = self.riders
         if r is not None and r.on:  # persons who boarded while it was parked (not read then)
             r.at_stop.add(vid)      # and those boarding while it idles: its stop is not over
@@ -195,6 +213,7 @@ class Parking:
         to leave, are booked standing there from this step. True when the selection of
         vehicles read changes."""
         changed = False
+        self.once = {}
         waking, self.waking = self.waking, set()
         for vid in waking:  # back on the road a step ago, switched off at its stop: on now
             i = vmap.get(vid)
@@ -211,6 +230,10 @@ class Parking:
                     continue              # duration its emission model reads is that step's)
                 self._unpark(ledger, i)
                 changed = True
+            if i is not None and not off and self.slope is not None:
+                s = float(self.slope(vid))
+                if -90.0 <= s <= 90.0:
+                    self.once[vid] = np.radians(s)
         if self.due:
             get = self.signals
             for vid in [v for v, t in self.due.items() if t <= now + 1e-9]:
@@ -233,6 +256,7 @@ class Parking:
         self.resumed.discard(vid)
         self.waking.discard(vid)
         self.off.discard(vid)
+        self.grade.pop(vid, None)
 
     def resume(self, ledger, vmap, vids, now: float) -> list:
         """Vehicles ``vids`` left SUMO's id list without leaving the simulation: those
@@ -267,6 +291,18 @@ class Parking:
                 continue
             extra.append(vid)
         return (*ids, *extra) if extra else ids
+
+    def tilt(self, kids, tilt):
+        """``tilt`` ((n,) slopes [rad] over ``kids``, NaN where the lane's; None: none yet)
+        with the slopes of the vehicles whose parking ended in this step (:attr:`once`)."""
+        for vid, g in self.once.items():
+            try:
+                j = kids.index(vid)
+            except ValueError:  # not read (a vType not booked)
+                continue
+            tilt = np.full(len(kids), np.nan) if tilt is None else tilt
+            tilt[j] = g
+        return tilt
 
     def at_rest(self, kids, values) -> None:
         """The state read of vehicles ``kids`` (``values``: arrays of speed, acceleration,
