@@ -54,10 +54,19 @@ off while it idles — its stop is still SUMO's current one — and is not booke
 writes it at 0), nor in the step it is back on the road (SUMO writes that one off too: the
 stop's duration its emission model reads is that of the step before): booked from the step
 after, when its stop ends. Its stop ended by a script, it stays off all the same (SUMO
-1.28 writes 0 while it idles out of the id list). Persons who boarded while it was parked (a ``triggered="person"`` stop)
-are read when it starts to idle, and every step while it idles (its stop is still the
-current one): SUMO's MMPEVEM books their mass in the holding torque on a slope. An FCD replay cannot tell
-an idling car from a parked one (:mod:`sumo_drvpw.sim.fcd`): both are left out there.
+1.28 writes 0 while it idles out of the id list). Persons who boarded while it was parked
+(a ``triggered="person"`` stop) are read when it starts to idle, and every step while it
+idles (its stop is still the current one): SUMO's MMPEVEM books their mass in the holding
+torque on a slope. An FCD replay cannot tell an idling car from a parked one
+(:mod:`sumo_drvpw.sim.fcd`): both are left out there.
+
+Not reproduced (probes of 2026-11-27 with SUMO 1.28): a car whose parking starts and ends
+in one step (its ``until`` passed, the way free) is written by SUMO at speed 0 with the
+acceleration of its last move into the space (getAcceleration −0.25 m/s² where its speed
+fell from 0.33 to 0 in the 1-s step), which the loop books as (0 − 0.33)/Δt: for SUMO's
+MMPEVEM i3, whose holding torque takes the acceleration at speed 0, −1.1e-5 of that car.
+A bus in a bay (``parking="true"`` at a busStop, booked dwelling) whose stop a script ends
+leaves SUMO's id list as a parked car does and is not booked until it is back on the road.
 """
 
 from __future__ import annotations
