@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import xml.etree.ElementTree as ET
+
 import pandas as pd
 import pytest
 
@@ -68,6 +70,60 @@ def test_a_car_switched_off_for_its_parking_stays_off_while_blocked(tmp_path):
         cv = pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key")
         assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6), out
     assert res["parking"]["idle_starts"] == 0
+
+
+@pytest.mark.parametrize("blocked", [True, False])
+def test_a_car_switched_off_for_its_parking_stays_off_until_its_stop_ends(tmp_path, blocked):
+    """With ``shutOffStopDuration`` 5 s the 20-s parking switches the car off. SUMO 1.28
+    writes the idling steps at 0 (its stop is still the current one), and also the step its
+    parking ends — back on its lane at speed 0, one step before its stop ends: neither is
+    booked, blocked or leaving on time (without the queue). Measured 2026-11-27 before the
+    fix: one step of constant power (0.5 s × 100 W = 0.0139 Wh) above SUMO's in both."""
+    params = '<param key="shutOffStopDuration" value="5"/>'
+    scenario(tmp_path, params)
+    if not blocked:
+        r = tmp_path / "r.rou.xml"
+        r.write_text(r.read_text().replace('begin="2" end="70"', 'begin="2" end="3"'))
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    # (1e-4 Wh: SUMO's output at 6 decimals summed over the trip; one step is 0.0139 Wh)
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=1e-4)
+    assert res["parking"]["idle_starts"] == 0
+    # parked off the lane: not one of ShutOff's stops (as an FCD replay counts it,
+    # tests/test_sim_fcd_flow_stops.py), also not in the step its parking ends
+    assert res["shut_off_at_long_stops"]["vehicle_s"] == 0.0
+
+
+def test_a_parked_fleet_is_not_asked_for_its_signals_before_its_parking_can_end(tmp_path, monkeypatch):
+    """20 cars parked for 1000 s (from 60 s) and one for 20 s before them, leaving an empty
+    lane on time (its parking ends in the step it is due: never asked): getSignals is
+    never called — a parked fleet costs no getter calls until its parking can end."""
+    import libsumo
+
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
+    fleet = "".join(f'<vehicle id="f{i}" type="ecar" depart="{60 + 2 * i}"><route edges="e"/>'
+                    f'<stop parkingArea="pb" duration="1000"/></vehicle>' for i in range(20))
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="ecar" vClass="passenger" emissionClass="Energy/unknown">'
+        '<param key="rotatingMass" value="40"/></vType>'
+        '<vehicle id="p" type="ecar" depart="0"><route edges="e"/><stop parkingArea="pa" duration="20"/></vehicle>'
+        f'{fleet}</routes>')
+    (tmp_path / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="100" endPos="130" '
+                                        'roadsideCapacity="2"/><parkingArea id="pb" lane="e_0" startPos="300" '
+                                        'endPos="500" roadsideCapacity="30"/></additional>')
+    energy_scenario(tmp_path, 150, additional="a.add.xml", fcd=False)
+    calls = []
+    real = libsumo.vehicle.getSignals
+    monkeypatch.setattr(libsumo.vehicle, "getSignals", lambda vid: calls.append(vid) or real(vid))
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    assert calls == []
+    assert res["parking"]["idle_starts"] == 0
+    sumo_wh, _ = emitted_wh(tmp_path / "em.xml", 0.5)
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
 
 
 LATE = """<routes>
@@ -212,3 +268,39 @@ def test_a_car_on_mmpevem_in_a_sloped_lot_space_is_booked_at_its_slope(tmp_path,
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
     assert res["parking"]["idle_starts"] == (1 if blocked else 0)
+
+
+@pytest.mark.parametrize("place", ['busStop="bs"', 'lane="e_0" endPos="330"'])
+def test_a_car_switched_off_in_a_bus_bay_or_beside_the_lane_stays_off_until_its_stop_ends(tmp_path, place):
+    """The same in a bus bay (a busStop with parkingLength) and parked beside the lane:
+    SUMO 1.28 puts the car back on its lane at speed 0 one step before its stop ends and
+    writes that step at 0 (probed 2026-11-27), so the booking has no step there (before
+    the fix: a standing step of 100 W). Beside the lane the car books as SUMO's output to
+    1e-4 Wh; in the bay it books, as it always did, the last metres into the bay and its
+    dwell (sim/parking.py), which SUMO's output leaves out (the car is off the road)."""
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
+    (tmp_path / "a.add.xml").write_text('<additional><busStop id="bs" lane="e_0" startPos="300" endPos="330" '
+                                        'parkingLength="20"/></additional>')
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="ecar" vClass="passenger" emissionClass="Energy/unknown">'
+        '<param key="rotatingMass" value="40"/><param key="shutOffStopDuration" value="5"/></vType>'
+        f'<vehicle id="p" type="ecar" depart="0" departSpeed="max"><route edges="e"/>'
+        f'<stop {place} duration="20" parking="true"/></vehicle></routes>')
+    energy_scenario(tmp_path, 120, additional="a.add.xml", fcd=False)
+    toml = tmp_path / "s.toml"
+    toml.write_text(toml.read_text().replace("[outputs]\n", "[outputs]\ntrace = true\n"))
+    res = run_scenario(toml, tmp_path / "o")
+    # SUMO's step at 0 standing: its emission output's time is the step's start
+    zero = [float(ts.get("time")) + 0.5 for ts in ET.parse(tmp_path / "em.xml").getroot() for v in ts
+            if v.get("id") == "p" and float(v.get("speed")) == 0.0 and float(v.get("electricity")) == 0.0]
+    assert len(zero) == 1
+    times = set(pd.read_parquet(tmp_path / "o" / "trace.parquet", columns=["time_s", "vehicle"])
+                .query("vehicle == 'p'")["time_s"].round(6))
+    assert zero[0] not in times and zero[0] + 0.5 in times
+    # dwelling in the bay it is ShutOff's stop; parked off the lane it is not (as replayed)
+    assert (res["shut_off_at_long_stops"]["vehicle_s"] > 0.0) == place.startswith("busStop")
+    if place.startswith("lane"):
+        sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+        cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+        assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=1e-4)

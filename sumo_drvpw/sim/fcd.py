@@ -24,7 +24,9 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
   is told from a standing one by its x, y beside the lane (:class:`ParkedTest`) and, as in
   the live loop, not booked (``summary.json`` ``source.parked_rows``); FCD without x, y
   (``--fcd-output.attributes`` without them, or ``.geo``/``.utm`` coordinates) books it
-  as standing;
+  as standing; one whose parking is over but whose way out is blocked idles in its space
+  and is booked standing there, as live (:mod:`sumo_drvpw.sim.fcd_idle`: told by the FCD's
+  blinker bits, else by its declared stop's planned end; ``source.idling_rows``);
 - vehicles are switched off at long planned stops and by start-stop systems as in the live
   run (:mod:`sumo_drvpw.sim.shutoff`): the vTypes' shut-off params from the route files,
   the stops from the route files' ``<stop>`` elements matched to where each vehicle stands
@@ -58,6 +60,7 @@ import pandas as pd
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops
+from sumo_drvpw.sim.fcd_idle import Idling
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
 from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
@@ -437,8 +440,10 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                                    begin=sc.begin, end=sc.end)
     if declared:
         replay.stops = StopTracker(declared, net)
-        so = acc.stepper.shutoff  # a car switched off for its parking: off as it is back on its lane
-        replay.stop_limit = so.limit_of if so is not None else None
+    # a parked car idling in its space, its way out blocked, as the live run books it
+    so = acc.stepper.shutoff
+    replay.idling = Idling(replay.stops, so.limit_of if so is not None else lambda vt: np.inf,
+                           replay.recorded_step_s or replay.dt)
     acc.stepper.replay_info = replay_info  # a --begin after the file's start: no cold starts then
     replay.count_persons = count_persons
     try:
@@ -448,6 +453,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         rows = replay.rows if chunk_rows is not None else len(df)
         extra = {"source": {"fcd": str(fcd_file), "rows": int(rows),
                             "timesteps": int(replay.k), "parked_rows": int(replay.parked_rows),
+                            "idling_rows": int(replay.idle_rows),
                             "riding_person_rows": int(replay.rider_rows)}}
         if sc.trace and out_dir:
             extra["files"] = {"trace": "trace.parquet"}

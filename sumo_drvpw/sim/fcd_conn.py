@@ -1,7 +1,8 @@
 """What an FCD replay answers in place of SUMO (:mod:`sumo_drvpw.sim.fcd`): the subset of
 the libsumo API the loop reads (time, vehicles, getters, departures and arrivals, riders)
 and what SUMO's FCD rows say beyond the vehicles' own columns — parked vehicles (beside
-their lane: :class:`ParkedTest`), buses dwelling at their stops (:func:`bus_stops`), and
+their lane: :class:`ParkedTest`; those idling in their space, their way out blocked, booked
+there: :mod:`sumo_drvpw.sim.fcd_idle`), buses dwelling at their stops (:func:`bus_stops`), and
 persons riding in vehicles (at the vehicle's x, y and speed: :class:`_Rows`) —, with what
 the route files add: their vTypes' shut-off params and their vehicles' planned stops
 (:mod:`sumo_drvpw.sim.fcd_stops`), so that :class:`~sumo_drvpw.sim.shutoff.ShutOff`
@@ -139,8 +140,9 @@ class _Rows:
         #: the route files' stops matched to where vehicles stand (fcd_stops.StopTracker;
         #: set by replay_fcd, None: no file declares a stop)
         self.stops = None
-        #: vType → its shutOffStopDuration [s] (the replay's ShutOff.limit_of; set by replay_fcd)
-        self.stop_limit = None
+        #: which parked rows idle in their space, their way out blocked (fcd_idle.Idling;
+        #: set by replay_fcd, None: none told), and the rows booked so
+        self.idling, self.idle_rows = None, 0
         self.count_persons = True
         #: a timestep with vehicles but no angle column (no yaw rate for the radial factor)
         self.no_angle = False
@@ -161,6 +163,8 @@ class _Rows:
             c = {k: v[veh] for k, v in c.items()}
         elif self.riders or self.person_count:
             self._ride(None, c)
+        if self.idling is not None:
+            self.idling.forget(self.arrived)
         if self.stops is not None:  # (lanes as written: a parked vehicle serves its stop too)
             self.stops.forget(self.arrived)
             self.stops.step(self.t - self.dt, c["id"], c["lane"], c["pos"], c["speed"], c.get("off"),
@@ -180,23 +184,24 @@ class _Rows:
                 nxt = {"id": nxt["id"][keep], "off": nxt["off"][keep]}
             lanes, n = _unpark(c["lane"], c["id"], c["off"], nxt["id"] if nxt else None,
                                nxt["off"] if nxt else None)
-            if self.stops is not None and self.stop_limit is not None and self.stops.parked_planned:
-                self._still_off(c, lanes)
+            if self.idling is not None:  # idling in its space, its way out blocked: booked there
+                idle = self.idling.rows(self.t - self.dt, c["id"], c["type"], c["off"], c.get("signals"),
+                                        self.riders)
+                idle &= lanes == ""
+                if idle.any():
+                    lanes[idle] = c["lane"][idle]
+                    k = int(np.count_nonzero(idle))
+                    self.idle_rows += k
+                    n -= k
+                if self.idling.shut:  # back on its lane at its space, switched off for its stop:
+                    # SUMO 1.28 writes that step off (0) — its stop ends in the next — and the
+                    # live run leaves it out (sim/parking.py): out here too
+                    for j in np.flatnonzero(c["off"] & (lanes != "") & ~idle):
+                        if c["id"][j] in self.idling.shut:
+                            lanes[j] = ""
             c = dict(c, lane=lanes)
             self.parked_rows += n
         return c
-
-    def _still_off(self, c: dict, lanes) -> None:
-        """Rows back on their lane at their parking space (off, not parked: ``lanes``), of
-        vehicles switched off for their parking (planned longer than their vType's
-        shutOffStopDuration): SUMO 1.28 still writes them off in that step, and the live
-        loop leaves it out (sim/parking.py): out of the booking here too (lane "")."""
-        planned = self.stops.parked_planned
-        for j in np.flatnonzero(c["off"]):
-            vid = c["id"][j]
-            if lanes[j] != "" and vid in planned:
-                if planned.pop(vid) > self.stop_limit(c["type"][j]):
-                    lanes[j] = ""
 
     def _ride(self, p: dict | None, v: dict) -> None:
         """Riders per vehicle from the persons' rows ``p`` and the vehicles' rows ``v``."""
@@ -228,7 +233,9 @@ class ParkedTest:
     lane (:func:`~sumo_drvpw.sim.network.off_lane`). SUMO's FCD writes a parked vehicle
     with its lane, at speed 0, at the parking space's x, y; libsumo gives it no lane, and
     the live loop books nothing for it (engine off; SUMO's emission output leaves it out
-    too). Applied once per block of rows (:meth:`mark`), not per timestep. A bus parked at
+    too) — unless its parking is over and its way out blocked: SUMO keeps it idling in its
+    space, booked standing there (:mod:`sumo_drvpw.sim.fcd_idle`, applied per timestep in
+    ``_Rows._vehicles``). Applied once per block of rows (:meth:`mark`), not per timestep. A bus parked at
     one of ``bus_stops`` (lane id → [(start, end)] positions, :func:`bus_stops`) dwells
     there in service and stays on its lane (booked standing), as in the live loop."""
 

@@ -222,6 +222,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
         extra = dict(first["extra"])
         extra["source"] = dict(extra["source"], rows=sum(d["extra"]["source"]["rows"] for d in done),
                                parked_rows=sum(d["extra"]["source"]["parked_rows"] for d in done),
+                               idling_rows=sum(d["extra"]["source"]["idling_rows"] for d in done),
                                riding_person_rows=sum(d["extra"]["source"]["riding_person_rows"]
                                                       for d in done),
                                engine="dask", buckets=k)

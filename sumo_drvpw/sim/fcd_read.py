@@ -3,7 +3,7 @@
 ``iter_fcd_blocks(path, chunk_rows)`` yields :class:`Block` objects: the timesteps the
 block covers (every ``<timestep>`` of an XML file, vehicles or not; the distinct row
 times of a tabular file) and its rows as NumPy columns (time, id, type, speed, lane, pos,
-and angle, slope, accel when the file has them), checked and converted as
+and angle, slope, accel, x, y, signals when the file has them), checked and converted as
 :func:`read_fcd` always did. Memory is one block: XML is parsed with ``iterparse`` and cut
 after a ``</timestep>`` once ``chunk_rows`` rows are collected; Parquet is read record
 batch by record batch (only the FCD columns), the parts of a partitioned FCD one after
@@ -37,12 +37,13 @@ from sumo_drvpw.sim.scenario import sumo_seconds
 FCD_COLUMNS = {"time": "timestep_time", "id": "vehicle_id", "type": "vehicle_type",
                "speed": "vehicle_speed", "lane": "vehicle_lane", "pos": "vehicle_pos",
                "angle": "vehicle_angle", "slope": "vehicle_slope",
-               "accel": "vehicle_acceleration", "x": "vehicle_x", "y": "vehicle_y"}
+               "accel": "vehicle_acceleration", "x": "vehicle_x", "y": "vehicle_y", "signals": "vehicle_signals"}
 _REQUIRED = ("time", "id", "type", "speed", "lane", "pos")
-#: optional columns; x, y tell a parked vehicle (beside its lane) from a standing one
-_OPTIONAL = ("angle", "slope", "accel", "x", "y")
-_XML_ATTRS = {"id": "id", "type": "type", "speed": "speed", "lane": "lane", "pos": "pos",
-              "angle": "angle", "slope": "slope", "accel": "acceleration", "x": "x", "y": "y"}
+#: optional columns; x, y tell a parked vehicle (beside its lane) from a standing one, and
+#: signals (--fcd-output.signals) one idling in its space, blinker on (sim/fcd_idle.py)
+_OPTIONAL = ("angle", "slope", "accel", "x", "y", "signals")
+_XML_ATTRS = {"id": "id", "type": "type", "speed": "speed", "lane": "lane", "pos": "pos", "angle": "angle",
+              "slope": "slope", "accel": "acceleration", "x": "x", "y": "y", "signals": "signals"}
 #: what a row missing one of the replay's attributes tells the user to do
 ATTRIBUTES_HINT = ("; an FCD recorded with --fcd-output.attributes needs speed, lane, pos and type "
                    "among them (and x, y to tell parked vehicles)")

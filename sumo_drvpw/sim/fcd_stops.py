@@ -33,7 +33,11 @@ parking ends there; the live loop books it from that row): the replay ends it in
 before the one the vehicle moves in (past its planned end). A vehicle parked off the lane
 (beside it, at a containerStop or parkingArea; not in a bus bay) is not booked whatever
 its stop, and live no switched-off stop: a stop of it the replay took as started a row
-before SUMO parked it ends in its first parked row. A vehicle that drives
+before SUMO parked it ends in its first parked row. The stop it parked at is told
+(:attr:`StopTracker.parking`: arrival its first parked row, as SUMO parks a car in the
+step it reaches its stop; what it waits for when ``triggered``) so that a car still parked past the
+stop's planned end, its way out blocked, is booked idling there
+(:mod:`sumo_drvpw.sim.fcd_idle`). A vehicle that drives
 off before a planned end was not at its stop after all (SUMO holds it there): the stop is
 open to be matched again, and counted
 (``stops_left_before_their_end``). At a stopping place SUMO starts the stop of a vehicle
@@ -76,6 +80,10 @@ STOPPING_PLACES = ("busStop", "trainStop", "containerStop", "chargingStation", "
 VEHICLE_ELEMENTS = ("vehicle", "trip", "flow")
 #: a stop's ``parking`` values that park the vehicle off the road (SUMO's bool spellings)
 PARKING_TRUE = ("true", "1", "yes", "on", "x", "t")
+#: a stop's ``triggered`` values that do not make it wait for a trigger (SUMO's false ones)
+NOT_TRIGGERED = ("", "false", "0", "no", "off", "-", "f")
+#: ``triggered`` values that make it wait for a person (SUMO's true ones and "person")
+PERSON_TRIGGERED = ("true", "1", "yes", "on", "x", "t", "person")
 
 
 def _num(val, where: str, key: str, time: bool = False) -> float | None:
@@ -96,7 +104,7 @@ class _Stop:
     """One declared stop: where (``lane`` or ``edge``, or a stopping place ``place``), its
     positions as written, and its planned ``duration`` and ``until`` [s] (None: not given)."""
 
-    __slots__ = ("lane", "edge", "place", "start", "end", "duration", "until", "on_route", "parking")
+    __slots__ = ("lane", "edge", "place", "start", "end", "duration", "until", "on_route", "parking", "trigger")
 
     def __init__(self, el, where: str, on_route: bool = False):
         a = el.attrib
@@ -110,6 +118,13 @@ class _Stop:
         # parked beside the lane (a parkingArea's always): SUMO ends the stop when the
         # vehicle can leave, which may be after its planned end
         self.parking = bool(a.get("parkingArea")) or a.get("parking", "").strip().lower() in PARKING_TRUE
+        # waits for a person, container or joining train: ends when it boards, not planned;
+        # None, ("person", the ``expected`` person ids) or ("other", ())
+        words = set(a.get("triggered", "").lower().replace(",", " ").split()) - set(NOT_TRIGGERED)
+        if a.get("containerTriggered", "").strip().lower() not in NOT_TRIGGERED:
+            words.add("container")
+        self.trigger = (None if not words else ("person", tuple(a.get("expected", "").split()))
+                        if words <= set(PERSON_TRIGGERED) and not a.get("extension") else ("other", ()))
 
 
 def _is_stop(el) -> bool:
@@ -320,9 +335,10 @@ class StopTracker:
         self.unplaced = 0                    # stops on a stopping place no file declares
         self.until_unknown = 0               # stops reached whose until could not be shifted
         self.left_early = 0                  # "stops" driven off before their planned end
-        #: vehicle id → planned duration [s] of the parking stop it is parked at, off the
-        #: lane (as sim/shutoff.planned_duration_s: the later of duration and until)
-        self.parked_planned: dict[str, float] = {}
+        #: the vehicles that parked off the lane at a declared stop in this step: (id, row,
+        #: the stop: ``duration``, ``until`` (NaN: not known), ``arrival`` its first parked
+        #: row's time, ``trigger``), for telling a car idling in its space (sim/fcd_idle.py)
+        self.parking: list[tuple] = []
 
     def _state(self, vid: str):
         st = self.state.get(vid)
@@ -370,31 +386,29 @@ class StopTracker:
         """Timestep ``t`` [s] (the FCD's time) with its vehicle rows: ids, lanes (as SUMO
         wrote them, parked vehicles' too), positions [m], speeds [m/s], which rows are
         parked (off the lane; their stop is served, not booked), and ``after``: the next
-        timestep's (time, ids, speeds) (None: none), in which a vehicle leaving its parking
-        space drives off."""
+        timestep's (time, ids, speeds) (None: none; no longer read: a parking stop ends in
+        the row the vehicle drives off in, as SUMO ends it)."""
         starting, ending = [], []
+        self.parking = []
         speed = np.asarray(speed, float)
         if self.data:  # the vehicles at a stop: does it end in this row?
             rows = dict(zip(ids, range(len(ids))))
-            moving = None
             for vid, cur in list(self.data.items()):
                 j = rows.get(vid)
                 if j is None:
                     continue
                 if parked is not None and parked[j]:  # parked off the lane: served there, not
                     if cur.index >= 0:                 # booked (as if it had parked at once)
-                        self.parked_planned[vid] = max(cur.duration, cur.until - cur.arrival)
+                        self._park(vid, j, cur.duration, np.nan if cur.open else cur.until, t, cur.trigger)
                     cur.end_t, cur.index = t, -1
                 t_end = t
                 if cur.parking and cur.index >= 0:
                     # SUMO puts a parked vehicle back on its lane, at its space, the step
-                    # before it drives off (its parking ends there, and the live run books
-                    # it from that row): the stop ends in the row before the one it moves in
+                    # before it drives off (its parking ends there), but its stop ends in the
+                    # step it moves: one switched off for it (in a bus bay) is written off
+                    # (0) in that row before, and the live run books it from the row it moves
+                    # in (sim/parking.py)
                     over = speed[j] > 0.0 and (cur.at_rest or t >= cur.end_t - 1e-6)
-                    if not over and after is not None and speed[j] <= 0.0:
-                        if moving is None:
-                            moving = set(np.asarray(after[1], object)[np.asarray(after[2], float) > 0.0])
-                        over, t_end = vid in moving, float(after[0])
                 else:
                     over = t >= cur.end_t - 1e-6 or (cur.at_rest and speed[j] > 0.0)
                 if over:
@@ -423,30 +437,36 @@ class StopTracker:
                 st[1] = k + 1
                 self.matched += 1
                 until = -1.0 if s.until is None else s.until + st[2][k]
-                if until != until:  # NaN: a depart not known (a random flow's, "triggered")
-                    self.until_unknown += int(not (parked is not None and parked[j]))
+                unknown = until != until  # NaN: a depart not known (a random flow's, "triggered")
+                if unknown:
+                    self.until_unknown += 1
                     until = -1.0
                 dur = -1.0 if s.duration is None else s.duration
-                if parked is not None and parked[j]:
-                    self.parked_planned[vid] = max(dur, until - t)
-                    break  # parked there: not booked anyway
+                if parked is not None and parked[j]:  # parked there: not booked (but it may
+                    self._park(vid, j, dur, np.nan if unknown else until, t, s.trigger)  # idle there)
+                    break
                 # SUMO ends it at the later of arrival + duration and until; neither
                 # given: when the vehicle drives off
                 ends = [x for x, given in ((t + dur, dur >= 0), (until, until >= 0)) if given]
                 end_t = max(ends) if ends else np.inf
-                cur = SimpleNamespace(duration=dur, until=until, arrival=t, end_t=end_t,
-                                      at_rest=speed[j] == 0.0, index=k, parking=s.parking)
+                cur = SimpleNamespace(duration=dur, until=until, arrival=t, end_t=end_t, at_rest=speed[j] == 0.0,
+                                      index=k, parking=s.parking, trigger=s.trigger, open=unknown)
                 st[3] = cur
                 self.data[vid] = cur
                 starting.append(vid)
                 break
         self.starting, self.ending = tuple(starting), tuple(ending)
 
+    def _park(self, vid: str, j: int, dur: float, until: float, t: float, trigger) -> None:
+        """Vehicle ``vid`` (row ``j``) parked off the lane at its declared stop at ``t`` [s]
+        (SUMO's arrival there: it parks in the step it reaches the stop)."""
+        self.parking.append((vid, int(j), SimpleNamespace(duration=dur, until=until, arrival=t,
+                                                          trigger=trigger)))
+
     def forget(self, vids) -> None:
         for v in vids:
             self.state.pop(v, None)
             self.data.pop(v, None)
-            self.parked_planned.pop(v, None)
 
     def report(self) -> dict:
         """What the replay matched and what it could not know (summary.json)."""

@@ -57,8 +57,8 @@ after, when its stop ends. Its stop ended by a script, it stays off all the same
 1.28 writes 0 while it idles out of the id list). Persons who boarded while it was parked
 (a ``triggered="person"`` stop) are read when it starts to idle, and every step while it
 idles (its stop is still the current one): SUMO's MMPEVEM books their mass in the holding
-torque on a slope. An FCD replay cannot tell an idling car from a parked one
-(:mod:`sumo_drvpw.sim.fcd`): both are left out there.
+torque on a slope. The FCD replay tells an idling car by the FCD's blinker, or by its
+declared stop (:mod:`sumo_drvpw.sim.fcd_idle`).
 
 Not reproduced (probes of 2026-11-27 with SUMO 1.28): a car whose parking starts and ends
 in one step (its ``until`` passed, the way free) is written by SUMO at speed 0 with the
@@ -70,6 +70,8 @@ leaves SUMO's id list as a parked car does and is not booked until it is back on
 """
 
 from __future__ import annotations
+
+import heapq
 
 import numpy as np
 
@@ -103,8 +105,12 @@ class Parking:
         #: vehicle id → (lane number, lane position) where it is booked standing off the
         #: lane: dwelling at a bus stop, or idling in its parking space
         self.dwell: dict[str, tuple[int, float]] = {}
-        #: parked vehicle id → simulation time [s] from which it may leave (signals read)
+        #: parked vehicle id → simulation time [s] from which it may leave; a heap of
+        #: (time, id) gives those due in a step without a look at the others, which move to
+        #: ``polling`` (their signals read each step until they idle or leave)
         self.due: dict[str, float] = {}
+        self.heap: list[tuple[float, str]] = []
+        self.polling: set[str] = set()
         self.idling: set[str] = set()  # parked vehicles idling in their space, waiting to leave
         self.idle_starts = 0  # times a parked vehicle began to idle
         self.idle_vehicle_s = 0.0  # time booked idling [s]
@@ -162,6 +168,7 @@ class Parking:
             if d is not None:  # where it idles should a script end its stop (resume)
                 self.space[vid] = d
             self.due[vid] = due = self._earliest_end(stops, now)
+            heapq.heappush(self.heap, (due, vid))
             # over already when it arrives (an ``until`` it came too late for): SUMO
             # tries to put it back on the road in the step it parks, and idles it there
             # at once when the road is blocked: booked from this step, at the speed SUMO
@@ -178,7 +185,8 @@ class Parking:
     def _idle(self, ledger, vmap, vid: str) -> bool:
         """Parked vehicle ``vid`` idles in its space from this step (its blinker shows it):
         booked standing there, with whoever rides in it. True when it is."""
-        del self.due[vid]
+        self.due.pop(vid, None)
+        self.polling.discard(vid)
         d = self.space.get(vid) if vid in self.resumed else self._standing(vid)
         if d is None:
             return False
@@ -230,29 +238,38 @@ class Parking:
                 self._unpark(ledger, i)
                 changed = True
         for vid in self.ends():
-            off = vid in self.off
+            parked_off = vid in self.off  # switched off for its stop, parked off the lane
+            off = parked_off or (self.shutoff is not None and vid in self.shutoff.off)  # (a bay)
             self.forget(vid)
             i = vmap.get(vid)
             if i is not None and ledger.veh_parked[i]:
-                if off:  # switched off at its stop: SUMO 1.28 still writes it off (0)
-                    self.waking.add(vid)  # in the step it is back on the road (the stop's
-                    continue              # duration its emission model reads is that step's)
+                # back on its lane, still off in this step (SUMO 1.28 writes 0: the stop's
+                # duration its emission model reads is the step's before): booked from the
+                # next, when its stop ends — one parked off the lane by this class (also one
+                # whose stop a script ended: no ending for a step listener to hear then), one
+                # dwelling in a bus bay by ShutOff, whose own it is and which hears its end
+                if parked_off:
+                    self.waking.add(vid)
+                if off:
+                    continue
                 self._unpark(ledger, i)
                 changed = True
             if i is not None and not off and self.slope is not None:
                 s = float(self.slope(vid))
                 if -90.0 <= s <= 90.0:
                     self.once[vid] = np.radians(s)
-        if self.due:
-            get = self.signals
-            for vid in [v for v, t in self.due.items() if t <= now + 1e-9]:
-                i = vmap.get(vid)
-                if i is None or not ledger.veh_parked[i] or ledger.veh_done[i]:
-                    del self.due[vid]
-                    continue
-                if int(get(vid)) & BLINKERS and self._idle(ledger, vmap, vid):
-                    self._unpark(ledger, i)
-                    changed = True
+        heap, due = self.heap, self.due
+        while heap and heap[0][0] <= now + 1e-9:
+            t, vid = heapq.heappop(heap)
+            if due.get(vid) == t:  # (else forgotten, or parked again since: a newer entry)
+                self.polling.add(vid)
+        for vid in list(self.polling):
+            i = vmap.get(vid)
+            if i is None or not ledger.veh_parked[i] or ledger.veh_done[i]:
+                self.forget(vid)
+            elif int(self.signals(vid)) & BLINKERS and self._idle(ledger, vmap, vid):
+                self._unpark(ledger, i)
+                changed = True
         self.idle_vehicle_s += len(self.idling) * dt
         return changed
 
@@ -260,6 +277,7 @@ class Parking:
         """Vehicle ``vid`` left the simulation, or its parking ended."""
         self.dwell.pop(vid, None)
         self.due.pop(vid, None)
+        self.polling.discard(vid)
         self.idling.discard(vid)
         self.space.pop(vid, None)
         self.resumed.discard(vid)
@@ -277,9 +295,14 @@ class Parking:
         out = []
         for vid in vids:
             i = vmap.get(vid)
-            if i is not None and ledger.veh_parked[i] and vid in self.space and vid not in self.off:
+            if i is None or not ledger.veh_parked[i]:
+                continue
+            if vid in self.off:  # switched off for its stop: off while it idles (SUMO 1.28
+                continue           # writes 0), on a step after it is back on the road
+            if vid in self.space:
                 self.resumed.add(vid)
                 self.due[vid] = now
+                heapq.heappush(self.heap, (now, vid))
                 out.append(vid)
         return out
 

@@ -6,9 +6,13 @@ parameter ``shutOffStopDuration`` (default 300 s) as switched off from the stop'
 unloading for ten minutes or a bus laying over at its terminus. Such a vehicle is not
 booked while it stands there, as a parked one is not: no auxiliary power, no idle fuel,
 no standing time. The step in which it comes to rest at the stop is booked as usual;
-booking resumes in the step the stop ends, from standstill (at a ``parking`` stop in a
-bus bay, in the step before, where SUMO's parking ends and the live loop books it again).
-A vType
+booking resumes in the step the stop ends, from standstill — after a ``parking`` stop too
+(in a bus bay, beside the lane, in a parkingArea): SUMO puts the vehicle back on its lane
+a step before its stop ends and writes it at 0 there, still switched off (SUMO 1.28,
+probed 2026-11-27: tests/test_parking_exit_blocked.py; sim/parking.py keeps one parked
+off the lane out of the booking for that step itself — it is no stop of this class, whose
+``vehicle_s`` does not count it, as an FCD replay does not — and leaves one dwelling in a
+bus bay to this class until its stop ends). A vType
 keeps its engine on at every stop with a large ``shutOffStopDuration``.
 
 The planned duration is the stop's ``duration``, or until its ``until`` when that is
@@ -141,8 +145,8 @@ class ShutOff:
             present = set(ids)
             self.arrived([v for v in (*self.pending, *self.off, *self.waiting) if v not in present])
         self.vehicle_s += len(self.off) * stepper.dt
-        if self.off:  # parking that ended (loop.py parking_ended) a step before its stop: on,
-            self.off = {v for v in self.off if v not in vmap or ledger.veh_parked[vmap[v]]}  # booked
+        if self.off:  # (a vehicle booked again by other means is no longer off)
+            self.off = {v for v in self.off if v not in vmap or ledger.veh_parked[vmap[v]]}
         for vid in self.pending:
             i = vmap.get(vid)
             if i is None or not ledger.veh_keep[i] or ledger.veh_parked[i] or ledger.veh_done[i]:
