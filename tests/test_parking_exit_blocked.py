@@ -13,6 +13,7 @@ import xml.etree.ElementTree as ET
 import pandas as pd
 import pytest
 
+from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim import run_scenario
 from sumo_probe import build_net, emitted_wh, energy_scenario
 
@@ -27,13 +28,13 @@ ROUTES = """<routes>
 </routes>"""
 
 
-def scenario(d, params=""):
+def scenario(d, params="", fcd=False):
     build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
     (d / "r.rou.xml").write_text(ROUTES.format(params=params))
     (d / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
                                  'roadsideCapacity="2"/></additional>')
-    return energy_scenario(d, 300, additional="a.add.xml", fcd=False)
+    return energy_scenario(d, 300, additional="a.add.xml", fcd=fcd)
 
 
 @pytest.mark.parametrize("watts,connection", [(100.0, "libsumo"), (900.0, "libsumo"), (100.0, "traci")])
@@ -51,6 +52,24 @@ def test_a_car_blocked_in_its_parking_space_is_booked_idling_as_sumo_books_it(tm
     idle_s = (sumo_wh["p"] - 49.52) * 3600.0 / watts  # the idling time in SUMO's output
     assert idle_s > 100.0
     assert res["parking"]["idle_starts"] == 1
+
+
+def test_a_car_switched_off_for_its_parking_stays_off_while_blocked(tmp_path):
+    """With ``shutOffStopDuration`` 5 s the 20-s parking switches the car off, and SUMO
+    1.28 writes the idling steps at 0 (its stop is still the current one): none is booked;
+    nor is the step it is back on the road, which SUMO writes off too (its stop ends in the
+    next). Measured 2026-11-27 before the fix (that step booked): 49.52049 Wh against SUMO's
+    49.50660, one step of constant power above (0.5 s × 100 W); after: to 1e-6 — and the
+    replay of the run's FCD books as much (it left that row in too)."""
+    path = scenario(tmp_path, '<param key="shutOffStopDuration" value="5"/>', fcd=True)
+    res = run_scenario(path, tmp_path / "o")
+    assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(path), "--out", str(tmp_path / "r"),
+                     "--no-figures"]) == 0
+    sumo_wh, _ = emitted_wh(tmp_path / "em.xml", 0.5)
+    for out in ("o", "r"):
+        cv = pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key")
+        assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6), out
+    assert res["parking"]["idle_starts"] == 0
 
 
 @pytest.mark.parametrize("blocked", [True, False])
@@ -72,7 +91,9 @@ def test_a_car_switched_off_for_its_parking_stays_off_until_its_stop_ends(tmp_pa
     # (1e-4 Wh: SUMO's output at 6 decimals summed over the trip; one step is 0.0139 Wh)
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=1e-4)
     assert res["parking"]["idle_starts"] == 0
-    assert res["shut_off_at_long_stops"]["stops"] == 0  # parked off the lane: no switched-off stop
+    # parked off the lane: not one of ShutOff's stops (as an FCD replay counts it,
+    # tests/test_sim_fcd_flow_stops.py), also not in the step its parking ends
+    assert res["shut_off_at_long_stops"]["vehicle_s"] == 0.0
 
 
 def test_a_parked_fleet_is_not_asked_for_its_signals_before_its_parking_can_end(tmp_path, monkeypatch):
@@ -113,15 +134,18 @@ LATE = """<routes>
 </routes>"""
 
 
-@pytest.mark.parametrize("lefthand", [False, True])
-def test_a_car_whose_parking_is_over_when_it_arrives_idles_from_that_step(tmp_path, lefthand):
+@pytest.mark.parametrize("lefthand,rise", [(False, 0), (True, 0), (False, 30)])
+def test_a_car_whose_parking_is_over_when_it_arrives_idles_from_that_step(tmp_path, lefthand, rise):
     """The car reaches its space about 24 s after its ``until``: SUMO tries to put it back in
     the step it parks, the flow behind keeps it out (blinker on at once) and its emission
     output books that step, at the last speed of its creep into the space (0.04 m/s), and the
     next one braking from it. Measured 2026-11-27 before the fix (idling booked from the next
     step, from standstill): 12.37150 Wh against SUMO's 12.36279 (+8.7e-3 Wh); after: −1e-5
-    (SUMO's output rounded to 6 decimals). Left-hand traffic: the right blinker."""
-    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
+    (SUMO's output rounded to 6 decimals). Left-hand traffic: the right blinker. On a 5 %
+    grade that first step is booked at the grade there, as SUMO books it, not at the rise
+    since the car's last read (SUMO sets it into its space 3.5 mm farther than its 0.04 m/s
+    took it; measured before: 87.41676 Wh against SUMO's 87.41592, +8.4e-4; after: −6.7e-5)."""
+    build_net(tmp_path, f'<nodes><node id="a" x="0" y="0" z="0"/><node id="b" x="600" y="0" z="{rise}"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>',
               *(["--lefthand"] if lefthand else []))
     (tmp_path / "r.rou.xml").write_text(LATE)
@@ -131,7 +155,8 @@ def test_a_car_whose_parking_is_over_when_it_arrives_idles_from_that_step(tmp_pa
     sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
     assert not nan
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
-    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=5e-5)
+    # (SUMO's driving steps on the grade stand ~1e-6 Wh above the loop's: −7e-5 over the run)
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=2e-4 if rise else 5e-5)
     assert res["parking"]["idle_starts"] == 1 and res["parking"]["idle_vehicle_s"] > 30.0
 
 
@@ -170,6 +195,81 @@ def test_a_rider_who_boarded_while_the_car_was_parked_is_booked_while_it_idles(t
     assert res["transportables"]["max_kg"] == 400.0
 
 
+@pytest.mark.parametrize("connection,removed_at,off", [("libsumo", None, False), ("libsumo", 60.0, False),
+                                                      ("traci", None, False), ("libsumo", None, True)])
+def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_list(tmp_path, connection,
+                                                                                      removed_at, off):
+    """The user's own libsumo loop ends the parking of the car at 30 s (``vehicle.resume``),
+    10 s before its ``until``, while the flow passes: SUMO takes the car out of its id list
+    (getIDList leaves it out until it is back on the road, about 170 s later) and its emission
+    output books it idling in its space all that time. Measured 2026-11-27 before the fix
+    (the car never read after the resume): 49.52 Wh against SUMO's 54.23; after: to 1e-6.
+    A car the script removes while it idles there leaves the booking without an error. Through
+    traci (its context subscription answers such a car with SUMO's "no value", −2³⁰, for
+    speed and acceleration) as through libsumo. A car switched off for its parking
+    (``shutOffStopDuration`` 5 s < its 18 s) stays off: SUMO 1.28 writes its idling steps and
+    the step it is back on the road at 0 (before the fix: 54.23 Wh booked against 49.51)."""
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    params = '<param key="shutOffStopDuration" value="5"/>' if off else ""
+    path = scenario(tmp_path)
+    (tmp_path / "r.rou.xml").write_text(ROUTES.format(params=params).replace('duration="20"', 'until="40"'))
+    conn = start_sumo(load_scenario(path).sumo_args, connection=connection)
+    try:
+        acc = Accountant(conn, scenario=path, keep_vehicles=True)
+        listener = conn.addStepListener(acc)
+        while conn.simulation.getTime() < 300 - 1e-9:
+            conn.simulationStep()
+            t = conn.simulation.getTime()
+            if abs(t - 30.0) < 1e-9:
+                conn.vehicle.resume("p")
+            if removed_at is not None and abs(t - removed_at) < 1e-9:
+                assert "p" not in conn.vehicle.getIDList()  # idling, out of SUMO's list
+                conn.vehicle.remove("p")
+        booked = acc.energy("p")["vtype_energy.ecar"]["chain"]["net_j"] / 3600.0
+        res = acc.result()
+        conn.removeStepListener(listener)
+    finally:
+        close_sumo(conn)
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
+    assert booked == pytest.approx(sumo_wh["p"], rel=1e-6)
+    assert res["parking"]["idle_starts"] == (0 if off else 1)
+
+
+@pytest.mark.parametrize("blocked", [True, False])
+def test_a_car_on_mmpevem_in_a_sloped_lot_space_is_booked_at_its_slope(tmp_path, blocked):
+    """A parking area whose two lot spaces have ``slope="6"`` beside a flat lane: SUMO's
+    BMW i3 (MMPEVEM) parked there draws its holding torque at 6° in SUMO's emission output
+    while it idles, its way out blocked (about 158 s), and in the step it is back on the lane
+    (its stop not yet over) — also when it leaves at once. Measured 2026-11-27 before the fix
+    (the lane's flat profile booked): blocked 125.61 Wh against SUMO's 151.90 (−17 %), free
+    101.507 against 101.591 (−8.2e-4); after: to 1e-6."""
+    import re
+
+    import sumo
+
+    i3 = (Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text()
+    routes = re.sub(r'<vType id="ecar".*?</vType>', lambda _: re.search(r"<vType.*?</vType>", i3, re.S).group(0)
+                    .replace('id="BMW_i3"', 'id="ecar"'), ROUTES.format(params=""), count=1, flags=re.S)
+    assert 'emissionClass="MMPEVEM"' in routes
+    if not blocked:
+        routes = re.sub(r'<vehicle id="b".*?</vehicle>\s*<flow.*?</flow>', "", routes, flags=re.S)
+    path = scenario(tmp_path)
+    (tmp_path / "r.rou.xml").write_text(routes)
+    (tmp_path / "a.add.xml").write_text(
+        '<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" roadsideCapacity="0">'
+        '<space x="315" y="-8" angle="0" slope="6"/><space x="320" y="-8" angle="0" slope="6"/>'
+        '</parkingArea></additional>')
+    res = run_scenario(path, tmp_path / "o")
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
+    assert res["parking"]["idle_starts"] == (1 if blocked else 0)
+
+
 @pytest.mark.parametrize("place", ['busStop="bs"', 'lane="e_0" endPos="330"'])
 def test_a_car_switched_off_in_a_bus_bay_or_beside_the_lane_stays_off_until_its_stop_ends(tmp_path, place):
     """The same in a bus bay (a busStop with parkingLength) and parked beside the lane:
@@ -198,8 +298,8 @@ def test_a_car_switched_off_in_a_bus_bay_or_beside_the_lane_stays_off_until_its_
     times = set(pd.read_parquet(tmp_path / "o" / "trace.parquet", columns=["time_s", "vehicle"])
                 .query("vehicle == 'p'")["time_s"].round(6))
     assert zero[0] not in times and zero[0] + 0.5 in times
-    # dwelling in the bay it is switched off at its stop; parked beside the lane it is parked
-    assert res["shut_off_at_long_stops"]["stops"] == (1 if place.startswith("busStop") else 0)
+    # dwelling in the bay it is ShutOff's stop; parked off the lane it is not (as replayed)
+    assert (res["shut_off_at_long_stops"]["vehicle_s"] > 0.0) == place.startswith("busStop")
     if place.startswith("lane"):
         sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
         cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")

@@ -270,6 +270,8 @@ class Stepper:
             self.missed_steps += int(round((t_now - self.last_t) / dt)) - 1
         self.last_t = t_now
         ids = conn.vehicle.getIDList()
+        if self.parking.resumed:  # parked cars whose stop a script ended: out of SUMO's list
+            ids = self.parking.with_resumed(ids)
         if self.first:
             self.reader.subscribe_existing(ids)
             self.first = False
@@ -282,11 +284,13 @@ class Stepper:
             gone = self.arrived()
             if not self.is_replay:  # and those a script removed between steps
                 gone = list(gone) + self.reader.removed(self.last_ids, ids, gone, departed, back)
+                if self.reader.kept and self.parking.signals is not None:  # out, not gone: parked
+                    ids = (*ids, *self.parking.resume(ledger, vmap, self.reader.kept, t_now))  # cars resumed
             self.last_ids = ids
             if gone:
                 ledger.retire([vmap[v] for v in gone if v in vmap])
                 for v in gone:
-                    self.parking.gone(v)
+                    self.parking.forget(v)
                     self.seen_type.pop(v, None)
                     self.riders.at_stop.discard(v)
                 if self.shutoff is not None:
@@ -339,6 +343,8 @@ class Stepper:
             self.check_types(kids, vidx)
         tracking = self.tracking
         v, a, angle, ln, pos, raw = self.reader.read(kids, skip_lanes=tracking)
+        if self.parking.resumed:
+            self.parking.at_rest(kids, (v, a, angle, raw))
         if tracking:
             lane = ledger.veh_lane[vidx]
             pos = ledger.veh_pos[vidx] + v * dt  # SUMO's Euler update: x += v_t·Δt
@@ -380,7 +386,7 @@ class Stepper:
         if raw is not None:
             raw = np.radians(raw)
         placed = reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, self.is_replay)  # not driven
-        on_lane = lane >= 0
+        on_lane, tilt = lane >= 0, None
         if self.parking.on and not on_lane.all():  # parked, dwelling, idling, or teleporting
             for j in np.flatnonzero(~on_lane):
                 d = self.dwell.get(kids[j])
@@ -391,7 +397,12 @@ class Stepper:
                         self.prev_ids = None  # the selection of vehicles read changes
                 if d is not None:  # at a bus stop's bay or idling in its space: standing there
                     lane[j], pos[j] = d
+                    if kids[j] in self.parking.grade:  # idling, at the slope SUMO gives it there
+                        tilt = np.full(len(kids), np.nan) if tilt is None else tilt
+                        tilt[j] = self.parking.grade[kids[j]]
             on_lane = lane >= 0
+        if self.parking.once:  # back on the lane from a parking, at its space's slope this step
+            tilt = self.parking.tilt(kids, tilt)
         if placed.any():  # put back by a teleport: its energy jump booked apart, then driven on
             put_back(ledger, net, self.eqset.equations, placed, vidx, lane, pos, v, prev)
             on_lane &= ~placed
@@ -400,7 +411,7 @@ class Stepper:
             ledger.veh_prev_angle[vidx[(lane < 0)]] = np.nan  # (and its turning)
             vidx, lane, v, a, angle, pos = (
                 x[on_lane] for x in (vidx, lane, v, a, angle, pos))
-            raw, yaw = (None if x is None else x[on_lane] for x in (raw, yaw))
+            raw, yaw, tilt = (None if x is None else x[on_lane] for x in (raw, yaw, tilt))
             if len(vidx) == 0:
                 return
         at = net.bin_index(lane, pos)  # robust slope, shape slope, heading there
@@ -411,6 +422,8 @@ class Stepper:
             raw = net.raw[at]
         ledger.corrected += int(np.count_nonzero(
             (np.abs(raw - theta) > physics.slope_tol) | clipped))
+        if tilt is not None:
+            theta = np.where(np.isnan(tilt), theta, tilt)
         nclip = int(np.count_nonzero(clipped))
         if nclip:
             ledger.clipped += nclip

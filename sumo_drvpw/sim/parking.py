@@ -16,29 +16,57 @@ such step (``isOnRoad() || isIdling()``) at speed 0 on the parking lane, and its
 device books them (``notifyIdle``). The loop books them standing in the space (the stop's
 lane, the position SUMO gives), with the grade there, as the emission output does (the
 emissions device's tripinfo takes slope 0: the two differ only for a car on SUMO's MMPEVEM
-parked on a slope, by its holding torque). A parked vehicle is asked for its signals
+parked on a slope, by its holding torque). The grade is the slope SUMO gives the car in its
+space, read once when it starts to idle (``getSlope``: a parking area's ``<space>`` may
+have a ``slope`` of its own; beside the lane, the car's front-to-back slope there), and
+once in the step its parking ends, when it is back on the lane but still at its stop and
+SUMO still takes that slope — not the plug-in's robust profile of the lane, which parts
+from it on a lot's sloped space or where the lane's grade changes within a car length (a
+probe, 2026-11-27, SUMO's MMPEVEM BMW i3: idling 158 s in a space of ``slope="6"`` beside
+a flat lane, −17 % of the car before, 5e-7 after; at 315 m, where a 7.0° ramp of the lane's
+shape ends, SUMO 0.326 Wh/s against 0.164 at the profile's 3.7°, −14 % before; a car
+leaving the sloped space at once, its one step back on the lane, −8.2e-4 before, 2e-9 after.
+Its stop ended by a script, SUMO takes the lane's slope, and the loop the profile. A car
+standing on the lane at such a grade change — at a stop, in a queue — is still booked at
+the profile: an i3 stopping on the lane at 315 m, −11 %). A parked vehicle is asked for its signals
 (one getter) only from its parking's earliest planned end on (its arrival plus the
 remaining ``duration``, or its ``until``; every step for a stop with neither, as a
-triggered one), so a parked fleet still costs nothing until it is due to leave. A car
+triggered one), so a parked fleet still costs nothing until it is due to leave (a probe,
+2026-11-27, 300 s at 0.5-s steps: 40 cars parked for 5000 s — 20 of SUMO's MMPEVEM i3,
+never switched off, and 20 on the Energy model, switched off — cost no getSignals call; 20
+cars at ``triggered="person"`` stops without a duration, whom no person boards, cost one
+per car and step from their arrival, 7,901). A car
 whose parking is over when it gets there (its ``until`` passed while it drove) is tried
 in the step it parks, and idles from that very step when the way is blocked: booked then
 at the speed SUMO still gives it (the last of its creep into the space) and, from the next
-step, braking from it to 0, as the emission output books them. A stop
-that a script shortens (``vehicle.resume``, ``setStop``) after it started is due at the
-end planned when it started: idling before then is not booked. A vehicle switched off for
+step, braking from it to 0, as the emission output books them. A parked car whose stop
+a script ends (``vehicle.resume``) leaves SUMO's id list until it is back on the road (SUMO
+1.28: its getters answer "no value", −2³⁰, its emission output books it idling in its
+space): the loop tells it by the id list's count (one getLoadedIDList, as for a removed
+vehicle), asks for its signals from then on, and reads it, idling, from the space it
+parked in (:meth:`Parking.resume`). A stop that a script shortens (``setStop``,
+``setParkingAreaStop`` with a shorter duration) after it started is due at the end planned
+when it started: idling before then is not booked (a probe, 2026-11-27: the car of
+tests/test_parking_exit_blocked.py cut from ``until`` 40 s to 1 s at 30 s idles 19 steps
+the loop misses, 0.26 Wh of SUMO's 54.23). A vehicle switched off for
 its stop (planned longer than its vType's ``shutOffStopDuration``: sim/shutoff.py) stays
 off while it idles — its stop is still SUMO's current one — and is not booked (SUMO 1.28
-writes it at 0). Persons who boarded while it was parked (a ``triggered="person"`` stop)
-are read when it starts to idle, and every step while it idles (its stop is still the
-current one): SUMO's MMPEVEM books their mass in the holding torque on a slope. An FCD
-replay books idling cars from the FCD's blinker bits or the declared stops
-(:mod:`sumo_drvpw.sim.fcd_idle`).
+writes it at 0), nor in the step it is back on the road (SUMO writes that one off too: the
+stop's duration its emission model reads is that of the step before): booked from the step
+after, when its stop ends. Its stop ended by a script, it stays off all the same (SUMO
+1.28 writes 0 while it idles out of the id list). Persons who boarded while it was parked
+(a ``triggered="person"`` stop) are read when it starts to idle, and every step while it
+idles (its stop is still the current one): SUMO's MMPEVEM books their mass in the holding
+torque on a slope. The FCD replay tells an idling car by the FCD's blinker, or by its
+declared stop (:mod:`sumo_drvpw.sim.fcd_idle`).
 
-**The step a parking ends.** SUMO puts the vehicle back on its lane at speed 0 one step
-before its stop ends; one switched off for its stop (planned longer than its vType's
-``shutOffStopDuration``) it writes at 0 there (SUMO 1.28, a parkingArea, beside the lane,
-a bus bay): such a vehicle is booked again only from the step its stop ends (a parked one
-here, one dwelling in a bus bay by :class:`~sumo_drvpw.sim.shutoff.ShutOff`).
+Not reproduced (probes of 2026-11-27 with SUMO 1.28): a car whose parking starts and ends
+in one step (its ``until`` passed, the way free) is written by SUMO at speed 0 with the
+acceleration of its last move into the space (getAcceleration −0.25 m/s² where its speed
+fell from 0.33 to 0 in the 1-s step), which the loop books as (0 − 0.33)/Δt: for SUMO's
+MMPEVEM i3, whose holding torque takes the acceleration at speed 0, −1.1e-5 of that car.
+A bus in a bay (``parking="true"`` at a busStop, booked dwelling) whose stop a script ends
+leaves SUMO's id list as a parked car does and is not booked until it is back on the road.
 """
 
 from __future__ import annotations
@@ -83,19 +111,33 @@ class Parking:
         self.due: dict[str, float] = {}
         self.heap: list[tuple[float, str]] = []
         self.polling: set[str] = set()
-        #: parked vehicles switched off for their stop (sim/shutoff.py's rule), and those of
-        #: them back on their lane, still off until their stop ends
-        self.off: set[str] = set()
-        self.leaving: set[str] = set()
-        self.stop_ends = getattr(sim, "getStopEndingVehiclesIDList", lambda: ())
         self.idling: set[str] = set()  # parked vehicles idling in their space, waiting to leave
         self.idle_starts = 0  # times a parked vehicle began to idle
         self.idle_vehicle_s = 0.0  # time booked idling [s]
         self.dt = float(sim.getDeltaT())
+        #: parked vehicle id → (lane number, lane position) of its space, read when it parks
+        self.space: dict[str, tuple[int, float]] = {}
+        #: parked vehicles whose stop a script ended (``vehicle.resume``): out of SUMO's id
+        #: list until they are back on the road, read all the same (:meth:`with_resumed`)
+        self.resumed: set[str] = set()
+        #: vehicles switched off at their stop (sim/shutoff.py) whose parking ended in the
+        #: last step: SUMO writes them off in the step they are back on the road too
+        self.waking: set[str] = set()
+        self.off: set[str] = set()  # parked vehicles switched off for their stop (shutoff.py)
+        #: idling vehicle id → the slope SUMO gives it in its space [rad] (getSlope at its
+        #: idle start: a parking area's space may have its own ``slope``; the car's front-to-
+        #: back slope on the lane), which its emission output takes (MMPEVEM's holding torque)
+        self.grade: dict[str, float] = {}
+        self.slope = getattr(veh, "getSlope", None)
+        #: vehicle id → its slope [rad] in the step its parking ended: back on its lane, its
+        #: stop not yet over, SUMO still gives it its space's (read once)
+        self.once: dict[str, float] = {}
 
-    def _standing(self, vid: str) -> tuple[int, float] | None:
-        """The lane number and position of vehicle ``vid`` at its current stop, or None."""
-        stops = self.conn.vehicle.getStops(vid, 1)
+    def _standing(self, vid: str, stops=None) -> tuple[int, float] | None:
+        """The lane number and position of vehicle ``vid`` at its current stop (``stops``:
+        its getStops(vid, 1) when read already), or None."""
+        if stops is None:
+            stops = self.conn.vehicle.getStops(vid, 1)
         lane = self.lane_index.get(stops[0].lane, -1) if stops else -1
         if lane < 0:
             return None
@@ -115,18 +157,16 @@ class Parking:
                 self.dwell[vid] = d
                 return True
         ledger.veh_parked[i] = True
-        stops = None
-        if self.shutoff is not None:
-            stops = self.conn.vehicle.getStops(vid, 1)
-            if stops and planned_duration_s(stops[0]) > self.shutoff.limit_of(ledger.veh_type[i]):
-                # switched off for a stop longer than its vType's shutOffStopDuration: off
-                # while it idles and in the step its parking ends, until its stop ends (SUMO
-                # 1.28 writes 0 for both: the stop is still its current one)
-                self.off.add(vid)
-                return False
-        if self.signals is not None:
-            if stops is None:
-                stops = self.conn.vehicle.getStops(vid, 1)
+        stops = self.conn.vehicle.getStops(vid, 1)
+        # switched off for a stop longer than its vType's shutOffStopDuration, it stays
+        # off while it idles (its stop is still SUMO's current one): nothing to book
+        if stops and self.shutoff is not None and planned_duration_s(stops[0]) \
+                > self.shutoff.limit_of(ledger.veh_type[i]):
+            self.off.add(vid)
+        elif self.signals is not None:
+            d = self._standing(vid, stops)
+            if d is not None:  # where it idles should a script end its stop (resume)
+                self.space[vid] = d
             self.due[vid] = due = self._earliest_end(stops, now)
             heapq.heappush(self.heap, (due, vid))
             # over already when it arrives (an ``until`` it came too late for): SUMO
@@ -135,6 +175,9 @@ class Parking:
             # gives it (the last of its creep into the space, in its emission output too)
             if due <= now + 1e-9 and int(self.signals(vid)) & BLINKERS:
                 ledger.veh_parked[i] = False
+                # its grade: the slope at the space, as SUMO's (SUMO set it into the space
+                # farther than its speed took it: the rise since its last read is no grade)
+                ledger.veh_at[i, 2] = np.nan
                 self.idle_vehicle_s += self.dt  # (step() counted this step's before)
                 return self._idle(ledger, {vid: i}, vid)
         return False
@@ -144,12 +187,16 @@ class Parking:
         booked standing there, with whoever rides in it. True when it is."""
         self.due.pop(vid, None)
         self.polling.discard(vid)
-        d = self._standing(vid)
+        d = self.space.get(vid) if vid in self.resumed else self._standing(vid)
         if d is None:
             return False
         self.dwell[vid] = d
         self.idling.add(vid)
         self.idle_starts += 1
+        if self.slope is not None and vid not in self.resumed:  # (out of its stop SUMO takes
+            s = float(self.slope(vid))                           # the lane's: the profile's)
+            if -90.0 <= s <= 90.0:
+                self.grade[vid] = np.radians(s)
         r = self.riders
         if r is not None and r.on:  # persons who boarded while it was parked (not read then)
             r.at_stop.add(vid)      # and those boarding while it idles: its stop is not over
@@ -183,26 +230,34 @@ class Parking:
         to leave, are booked standing there from this step. True when the selection of
         vehicles read changes."""
         changed = False
+        self.once = {}
+        waking, self.waking = self.waking, set()
+        for vid in waking:  # back on the road a step ago, switched off at its stop: on now
+            i = vmap.get(vid)
+            if i is not None and ledger.veh_parked[i] and not ledger.veh_done[i]:
+                self._unpark(ledger, i)
+                changed = True
         for vid in self.ends():
-            # back on its lane a step before its stop ends: switched off for its stop, it
-            # stays off until then (SUMO writes 0): parked (booked again here when its stop
-            # ends), or dwelling in a bus bay (ShutOff, which switched it off, books it then)
-            parked_off = vid in self.off
+            parked_off = vid in self.off  # switched off for its stop, parked off the lane
+            off = parked_off or (self.shutoff is not None and vid in self.shutoff.off)  # (a bay)
             self.forget(vid)
             i = vmap.get(vid)
             if i is not None and ledger.veh_parked[i]:
+                # back on its lane, still off in this step (SUMO 1.28 writes 0: the stop's
+                # duration its emission model reads is the step's before): booked from the
+                # next, when its stop ends — one parked off the lane by this class (also one
+                # whose stop a script ended: no ending for a step listener to hear then), one
+                # dwelling in a bus bay by ShutOff, whose own it is and which hears its end
                 if parked_off:
-                    self.leaving.add(vid)
-                elif self.shutoff is None or vid not in self.shutoff.off:
-                    self._unpark(ledger, i)
-                    changed = True
-        if self.leaving:
-            for vid in self.leaving.intersection(self.stop_ends()):
-                self.leaving.discard(vid)
-                i = vmap.get(vid)
-                if i is not None and ledger.veh_parked[i]:
-                    self._unpark(ledger, i)
-                    changed = True
+                    self.waking.add(vid)
+                if off:
+                    continue
+                self._unpark(ledger, i)
+                changed = True
+            if i is not None and not off and self.slope is not None:
+                s = float(self.slope(vid))
+                if -90.0 <= s <= 90.0:
+                    self.once[vid] = np.radians(s)
         heap, due = self.heap, self.due
         while heap and heap[0][0] <= now + 1e-9:
             t, vid = heapq.heappop(heap)
@@ -224,12 +279,72 @@ class Parking:
         self.due.pop(vid, None)
         self.polling.discard(vid)
         self.idling.discard(vid)
+        self.space.pop(vid, None)
+        self.resumed.discard(vid)
+        self.waking.discard(vid)
         self.off.discard(vid)
+        self.grade.pop(vid, None)
 
-    def gone(self, vid: str) -> None:
-        """Vehicle ``vid`` left the simulation."""
-        self.forget(vid)
-        self.leaving.discard(vid)
+    def resume(self, ledger, vmap, vids, now: float) -> list:
+        """Vehicles ``vids`` left SUMO's id list without leaving the simulation: those
+        parked are out of their stop, which a script ended (``vehicle.resume``), and SUMO
+        tries to put them back on the road from the next step, idling them in their space
+        while the way is blocked — out of its id list until they are back on the road
+        (probed with SUMO 1.28: getIDList leaves such a car out, its emission output books
+        it idling). Their signals are read from now on; returns those parked."""
+        out = []
+        for vid in vids:
+            i = vmap.get(vid)
+            if i is None or not ledger.veh_parked[i]:
+                continue
+            if vid in self.off:  # switched off for its stop: off while it idles (SUMO 1.28
+                continue           # writes 0), on a step after it is back on the road
+            if vid in self.space:
+                self.resumed.add(vid)
+                self.due[vid] = now
+                heapq.heappush(self.heap, (now, vid))
+                out.append(vid)
+        return out
+
+    def with_resumed(self, ids):
+        """SUMO's id list ``ids`` and the parked vehicles whose stop a script ended, which
+        it leaves out (:meth:`resume`): those still in the simulation (one getter each; one
+        a script removed is forgotten, and retired by the loop as removed)."""
+        live, extra = set(ids), []
+        for vid in list(self.resumed):
+            if vid in live:
+                continue
+            try:
+                self.conn.vehicle.getStopState(vid)
+            except Exception as e:  # TraCIException: "Vehicle '…' is not known"
+                if type(e).__name__ == "FatalTraCIError":  # the connection itself failed
+                    raise
+                self.forget(vid)
+                continue
+            extra.append(vid)
+        return (*ids, *extra) if extra else ids
+
+    def tilt(self, kids, tilt):
+        """``tilt`` ((n,) slopes [rad] over ``kids``, NaN where the lane's; None: none yet)
+        with the slopes of the vehicles whose parking ended in this step (:attr:`once`)."""
+        for vid, g in self.once.items():
+            try:
+                j = kids.index(vid)
+            except ValueError:  # not read (a vType not booked)
+                continue
+            tilt = np.full(len(kids), np.nan) if tilt is None else tilt
+            tilt[j] = g
+        return tilt
+
+    def at_rest(self, kids, values) -> None:
+        """The state read of vehicles ``kids`` (``values``: arrays of speed, acceleration,
+        angle, slope, or None; in place) for those idling out of SUMO's id list
+        (:meth:`resume`), for which SUMO answers its "no value", −2³⁰: standing (speed and
+        acceleration 0; its angle 0, its slope unknown: the lane's is booked)."""
+        idx = [j for j, k in enumerate(kids) if k in self.resumed]
+        for x, rest in zip(values, (0.0, 0.0, 0.0, np.nan)):
+            if x is not None and idx:
+                x[idx] = rest
 
     def summary(self) -> dict:
         return {"idle_starts": self.idle_starts, "idle_vehicle_s": self.idle_vehicle_s,

@@ -57,6 +57,9 @@ class Reader:
         self.need = need  # speed, accel, angle, lane, position, slope
         self.subscribed = False
         self.fallback_reads = 0  # vehicle-steps read by getters: missing from the subscription
+        #: vehicles :meth:`removed` found gone from the id list but still in the simulation
+        #: (teleporting; parked, their stop ended by a script: sim/parking.py)
+        self.kept: list = []
 
         V = conn.vehicle
         self.getters = [V.getSpeed, V.getAcceleration, V.getAngle, V.getLaneID,
@@ -99,6 +102,7 @@ class Reader:
         leaves the id list but SUMO still has it loaded, a removed one it has not: one
         getLoadedIDList then (no getter on a vehicle that is gone: through traci SUMO prints
         an error line for each)."""
+        self.kept = []  # those gone from the list but still in the simulation (set below)
         if last_ids is None:
             return []
         came = sum(1 for v in back if v not in last_ids) if back else 0
@@ -116,6 +120,7 @@ class Reader:
                 if type(e).__name__ == "FatalTraCIError":
                     raise
             else:
+                self.kept = [vid for vid in lost if vid in known]
                 return [vid for vid in lost if vid not in known]
         out = []
         for vid in lost:  # a connection without getLoadedIDList: ask for each
@@ -125,6 +130,8 @@ class Reader:
                 if type(e).__name__ == "FatalTraCIError":  # the connection itself failed
                     raise
                 out.append(vid)
+                continue
+            self.kept.append(vid)
         return out
 
     def subscribe_existing(self, ids):

@@ -9,8 +9,10 @@ no standing time. The step in which it comes to rest at the stop is booked as us
 booking resumes in the step the stop ends, from standstill — after a ``parking`` stop too
 (in a bus bay, beside the lane, in a parkingArea): SUMO puts the vehicle back on its lane
 a step before its stop ends and writes it at 0 there, still switched off (SUMO 1.28,
-probed 2026-11-27: tests/test_parking_exit_blocked.py; sim/parking.py hands such a
-vehicle over to this class when its parking ends). A vType
+probed 2026-11-27: tests/test_parking_exit_blocked.py; sim/parking.py keeps one parked
+off the lane out of the booking for that step itself — it is no stop of this class, whose
+``vehicle_s`` does not count it, as an FCD replay does not — and leaves one dwelling in a
+bus bay to this class until its stop ends). A vType
 keeps its engine on at every stop with a large ``shutOffStopDuration``.
 
 The planned duration is the stop's ``duration``, or until its ``until`` when that is
