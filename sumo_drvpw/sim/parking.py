@@ -75,6 +75,7 @@ import heapq
 
 import numpy as np
 
+from sumo_drvpw.sim.reader import known_to_sumo
 from sumo_drvpw.sim.shutoff import planned_duration_s
 
 #: vehicle.getStopState bit: the vehicle stops at a bus (or train) stop (TraCI's stop
@@ -314,14 +315,10 @@ class Parking:
         for vid in list(self.resumed):
             if vid in live:
                 continue
-            try:
-                self.conn.vehicle.getStopState(vid)
-            except Exception as e:  # TraCIException: "Vehicle '…' is not known"
-                if type(e).__name__ == "FatalTraCIError":  # the connection itself failed
-                    raise
+            if known_to_sumo(self.conn.vehicle.getStopState, vid):
+                extra.append(vid)
+            else:
                 self.forget(vid)
-                continue
-            extra.append(vid)
         return (*ids, *extra) if extra else ids
 
     def tilt(self, kids, tilt):

@@ -24,6 +24,18 @@ _CMD_GET_VEHICLE_VARIABLE = 0xa4
 _EVERYWHERE_M = 1e9
 
 
+def known_to_sumo(get, vid: str) -> bool:
+    """Whether SUMO still has vehicle ``vid``: its getter ``get`` answers (a TraCIException,
+    "Vehicle '…' is not known", says it has not; a failed connection raises)."""
+    try:
+        get(vid)
+    except Exception as e:
+        if type(e).__name__ == "FatalTraCIError":  # the connection itself failed
+            raise
+        return False
+    return True
+
+
 def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray:
     """Wind along the heading ``angle_deg`` (SUMO's, deg clockwise from north), tailwind
     positive [m/s], of a wind of ``speed`` [m/s] blowing from ``from_deg``
@@ -124,14 +136,7 @@ class Reader:
                 return [vid for vid in lost if vid not in known]
         out = []
         for vid in lost:  # a connection without getLoadedIDList: ask for each
-            try:
-                self.conn.vehicle.getTypeID(vid)
-            except Exception as e:  # TraCIException: "Vehicle '…' is not known"
-                if type(e).__name__ == "FatalTraCIError":  # the connection itself failed
-                    raise
-                out.append(vid)
-                continue
-            self.kept.append(vid)
+            (self.kept if known_to_sumo(self.conn.vehicle.getTypeID, vid) else out).append(vid)
         return out
 
     def subscribe_existing(self, ids):
