@@ -28,13 +28,25 @@ ROUTES = """<routes>
 </routes>"""
 
 
+#: the parking area of these tests: 300–330 m of the lane, two roadside spaces
+PARKING_AREA = ('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
+                'roadsideCapacity="2"/></additional>')
+
+
 def scenario(d, params="", fcd=False):
     build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
     (d / "r.rou.xml").write_text(ROUTES.format(params=params))
-    (d / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
-                                 'roadsideCapacity="2"/></additional>')
+    (d / "a.add.xml").write_text(PARKING_AREA)
     return energy_scenario(d, 300, additional="a.add.xml", fcd=fcd)
+
+
+def run_against_sumo(toml, d, **overrides):
+    """Run scenario ``toml`` (outputs in ``d``/o): its summary, its chain's vehicles, and
+    SUMO's emission output of the run per vehicle [Wh] with its nan steps."""
+    res = run_scenario(toml, d / "o", **overrides)
+    sumo_wh, nan = emitted_wh(d / "em.xml", 0.5)
+    return res, pd.read_csv(d / "o" / "chain_vehicles.csv").set_index("key"), sumo_wh, nan
 
 
 @pytest.mark.parametrize("watts,connection", [(100.0, "libsumo"), (900.0, "libsumo"), (100.0, "traci")])
@@ -44,10 +56,8 @@ def test_a_car_blocked_in_its_parking_space_is_booked_idling_as_sumo_books_it(tm
     such step (measured 2026-11-27 before the fix: 49.52 Wh booked against SUMO's 53.91 —
     the 158 idling seconds at 100 W; 59.52 against 99.02 at 900 W)."""
     params = "" if watts == 100.0 else f'<param key="constantPowerIntake" value="{watts:g}"/>'
-    res = run_scenario(scenario(tmp_path, params), tmp_path / "o", connection=connection)
-    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    res, cv, sumo_wh, nan = run_against_sumo(scenario(tmp_path, params), tmp_path, connection=connection)
     assert not nan
-    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
     idle_s = (sumo_wh["p"] - 49.52) * 3600.0 / watts  # the idling time in SUMO's output
     assert idle_s > 100.0
@@ -72,22 +82,16 @@ def test_a_car_switched_off_for_its_parking_stays_off_while_blocked(tmp_path):
     assert res["parking"]["idle_starts"] == 0
 
 
-@pytest.mark.parametrize("blocked", [True, False])
-def test_a_car_switched_off_for_its_parking_stays_off_until_its_stop_ends(tmp_path, blocked):
-    """With ``shutOffStopDuration`` 5 s the 20-s parking switches the car off. SUMO 1.28
-    writes the idling steps at 0 (its stop is still the current one), and also the step its
-    parking ends — back on its lane at speed 0, one step before its stop ends: neither is
-    booked, blocked or leaving on time (without the queue). Measured 2026-11-27 before the
-    fix: one step of constant power (0.5 s × 100 W = 0.0139 Wh) above SUMO's in both."""
-    params = '<param key="shutOffStopDuration" value="5"/>'
-    scenario(tmp_path, params)
-    if not blocked:
-        r = tmp_path / "r.rou.xml"
-        r.write_text(r.read_text().replace('begin="2" end="70"', 'begin="2" end="3"'))
-    res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
-    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+def test_a_car_switched_off_for_its_parking_stays_off_until_its_stop_ends(tmp_path):
+    """The same car leaving on time (without the queue; blocked: the test above): SUMO 1.28
+    writes the step its parking ends — back on its lane at speed 0, one step before its
+    stop ends — at 0, and it is not booked. Measured 2026-11-27 before the fix: one step of
+    constant power (0.5 s × 100 W = 0.0139 Wh) above SUMO's."""
+    scenario(tmp_path, '<param key="shutOffStopDuration" value="5"/>')
+    r = tmp_path / "r.rou.xml"
+    r.write_text(r.read_text().replace('begin="2" end="70"', 'begin="2" end="3"'))
+    res, cv, sumo_wh, nan = run_against_sumo(tmp_path / "s.toml", tmp_path)
     assert not nan
-    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     # (1e-4 Wh: SUMO's output at 6 decimals summed over the trip; one step is 0.0139 Wh)
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=1e-4)
     assert res["parking"]["idle_starts"] == 0
@@ -149,12 +153,10 @@ def test_a_car_whose_parking_is_over_when_it_arrives_idles_from_that_step(tmp_pa
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>',
               *(["--lefthand"] if lefthand else []))
     (tmp_path / "r.rou.xml").write_text(LATE)
-    (tmp_path / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
-                                        'roadsideCapacity="2"/></additional>')
-    res = run_scenario(energy_scenario(tmp_path, 100, additional="a.add.xml", fcd=False), tmp_path / "o")
-    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    (tmp_path / "a.add.xml").write_text(PARKING_AREA)
+    res, cv, sumo_wh, nan = run_against_sumo(energy_scenario(tmp_path, 100, additional="a.add.xml", fcd=False),
+                                             tmp_path)
     assert not nan
-    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     # (SUMO's driving steps on the grade stand ~1e-6 Wh above the loop's: −7e-5 over the run)
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=2e-4 if rise else 5e-5)
     assert res["parking"]["idle_starts"] == 1 and res["parking"]["idle_vehicle_s"] > 30.0
@@ -184,12 +186,10 @@ def test_a_rider_who_boarded_while_the_car_was_parked_is_booked_while_it_idles(t
   <vehicle id="b" type="car" depart="1"><route edges="e"/><stop lane="e_0" endPos="590" duration="100"/></vehicle>
   <flow id="f" type="car" begin="2" end="70" period="1" departSpeed="max"><route edges="e"/></flow>
 </routes>""")
-    (tmp_path / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
-                                        'roadsideCapacity="2"/></additional>')
-    res = run_scenario(energy_scenario(tmp_path, 300, additional="a.add.xml", fcd=False), tmp_path / "o")
-    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    (tmp_path / "a.add.xml").write_text(PARKING_AREA)
+    res, cv, sumo_wh, nan = run_against_sumo(energy_scenario(tmp_path, 300, additional="a.add.xml", fcd=False),
+                                             tmp_path)
     assert not nan
-    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
     assert res["parking"]["idle_starts"] == 1 and res["parking"]["idle_vehicle_s"] > 100.0
     assert res["transportables"]["max_kg"] == 400.0
@@ -262,10 +262,8 @@ def test_a_car_on_mmpevem_in_a_sloped_lot_space_is_booked_at_its_slope(tmp_path,
         '<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" roadsideCapacity="0">'
         '<space x="315" y="-8" angle="0" slope="6"/><space x="320" y="-8" angle="0" slope="6"/>'
         '</parkingArea></additional>')
-    res = run_scenario(path, tmp_path / "o")
-    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    res, cv, sumo_wh, nan = run_against_sumo(path, tmp_path)
     assert not nan
-    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
     assert res["parking"]["idle_starts"] == (1 if blocked else 0)
 

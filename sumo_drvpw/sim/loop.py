@@ -185,7 +185,6 @@ class Stepper:
         #: parked vehicles: not read while parked, booked standing at a bus stop's bay
         #: or idling in their space while their way out is blocked (sim/parking.py)
         self.parking = Parking(conn, net, self.lane_index, self.shutoff, self.riders)
-        self.dwell = self.parking.dwell  # vehicle id → (lane, position) booked standing off the lane
 
     def now(self) -> float:
         """Simulation time [s]; after an interrupted exchange with SUMO (a signal in the
@@ -389,10 +388,10 @@ class Stepper:
         on_lane, tilt = lane >= 0, None
         if self.parking.on and not on_lane.all():  # parked, dwelling, idling, or teleporting
             for j in np.flatnonzero(~on_lane):
-                d = self.dwell.get(kids[j])
+                d = self.parking.dwell.get(kids[j])
                 if d is None:
                     if self.parking.started(ledger, kids[j], int(vidx[j]), t_now):
-                        d = self.dwell[kids[j]]
+                        d = self.parking.dwell[kids[j]]
                     elif ledger.veh_parked[vidx[j]]:
                         self.prev_ids = None  # the selection of vehicles read changes
                 if d is not None:  # at a bus stop's bay or idling in its space: standing there
