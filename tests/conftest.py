@@ -4,6 +4,15 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# Property tests draw the same examples on every run and every machine (seeded from each
+# test's source), so the README's test command passes or fails the same way on a fresh
+# clone as here; a failure names its example and reproduces. To search new examples (as
+# a developer should before a change lands): HYPOTHESIS_PROFILE=explore python -m pytest -q
+settings.register_profile("repeatable", derandomize=True, print_blob=True)
+settings.register_profile("explore", derandomize=False, print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 
 REPO = Path(__file__).resolve().parent.parent
 BUNDLED_LOG = REPO / "sumo_drvpw" / "data" / "builtin" / "logs" / "prius3_testtrack.parquet"
