@@ -17,8 +17,11 @@ once in turn. The i3 is run on a second split fixed by the same rule from anothe
    tracer finds that the accelerometer carries grade the logged grade lacks, the grade is
    fused: accelerometer above a crossover, logged grade below it, which removes the
    accelerometer's mounting-pitch bias), and the equation is recalibrated on it. The
-   crossover (over driven distance, or in time) is chosen from TAU_GRID_S by trip-grouped
-   5-fold cross-validation on the training trips (mean absolute trip traction-energy error);
+   grade source (a crossover over driven distance or in time, or the accelerometer alone)
+   is chosen from TAU_GRID_S together with the physical candidates of step 4: for every
+   source its own candidates, and the source whose closed-loop structure has the lowest
+   trip-grouped 5-fold cross-validated mean absolute trip traction-energy error on the
+   training trips (GRADE_CHOICE);
 4. with at least 5 training trips, physical candidates in forms SUMO can evaluate
    (``fit.physical.PHYSICAL_CANDIDATES``: ρ(T, altitude) in the aero term, c_r(T),
    cold drivetrain drag, recuperation on its own coefficient, inertial power by direction, and a
@@ -67,11 +70,15 @@ HOLD_EVERY = 5
 #: part weights standing samples too, and the grade's integral drifts from the elevation).
 LOGGER_OFFSET = "logger offset"
 TAU_GRID_S = (60.0, 300.0, "250 m", "500 m", "1000 m", "2000 m", "4000 m", math.inf, LOGGER_OFFSET)
-#: choose the grade source a second time with the closed-loop terms (``--recheck-grade``);
-#: off by default: on the shared i3 data it picks the logger offset, whose free grade
-#: coefficient (1.12–1.14) leaves the ±10 % band around 1 and whose held-out trip errors are
-#: mixed (docs/closing-the-loop.md, "What this shows")
-RECHECK_GRADE = False
+#: how the grade source and the physical candidates are chosen (``--grade-choice``):
+#: "joint" (default) — for every grade source its own physical candidates, and the grade
+#: source whose closed-loop structure cross-validates best; "sequential" — the grade source
+#: with the calibrated terms first (a missing temperature term then dominates the trip errors
+#: that choose it), the physical candidates on it; "recheck" — sequential, then the grade
+#: source once more with the closed-loop terms. The comparison, a nested cross-validation
+#: over all trips: scripts/grade_choice_cv.py, docs/closing-the-loop.md ("What this shows")
+GRADE_CHOICES = ("joint", "sequential", "recheck")
+GRADE_CHOICE = "joint"
 #: fewest training trips for trip-grouped cross-validation of choices (tau, physical terms)
 MIN_CV_TRIPS = 5
 #: cars whose trips are one day's drives in different directions (an out-and-back pair):
@@ -333,19 +340,20 @@ def choose_tau(train, vehicle, lag, terms, m_train) -> dict:
 
 
 def grade_and_physics(path, vehicle, lag, base_terms, m_train, name):
-    """The grade source and the physical candidates, each chosen by trip-grouped CV on the
-    training log ``path``: the grade source with the calibrated terms (:func:`choose_tau`),
-    the physical candidates on data read that way (:func:`physical_stage`), then the grade
-    source once more with the closed-loop terms — a missing temperature term makes trip
-    errors that bury the grade's — and, if that choice differs, the physical candidates
-    again on data read the new way (only with RECHECK_GRADE, ``--recheck-grade``: not the
-    default, see docs/closing-the-loop.md). Returns (tau, m_corr, equation, selection, regime r);
-    ``tau["first"]`` is the first choice when the second replaced it."""
+    """The grade source and the physical candidates, chosen by trip-grouped CV on the
+    training log ``path`` as GRADE_CHOICE says: jointly (:func:`joint_grade_and_physics`), or
+    the grade source with the calibrated terms (:func:`choose_tau`) and then the physical
+    candidates on data read that way (:func:`physical_stage`) — with "recheck", the grade
+    source once more with the closed-loop terms and, if that choice differs, the physical
+    candidates again on data read the new way. Returns (tau, m_corr, equation, selection,
+    regime r); ``tau["first"]`` is the first choice when the second replaced it."""
+    if GRADE_CHOICE == "joint":
+        return joint_grade_and_physics(path, vehicle, lag, base_terms, m_train, name)
     tau = choose_tau(path, vehicle, lag, base_terms, m_train)
     off = tau["logger_offset"]["offset_mps2"]
     m_corr = corrected_measured(path, vehicle, lag, True, tau["tau_s"], off)
     eq, sel, r = physical_stage(m_corr, list(base_terms), name)
-    if not RECHECK_GRADE:
+    if GRADE_CHOICE != "recheck":
         return tau, m_corr, eq, sel, r
     again = choose_tau(path, vehicle, lag, eq.terms, m_train)
     again["terms"] = list(eq.terms)
@@ -356,6 +364,30 @@ def grade_and_physics(path, vehicle, lag, base_terms, m_train, name):
     m_corr = corrected_measured(path, vehicle, lag, True, again["tau_s"], off)
     eq, sel, r = physical_stage(m_corr, list(base_terms), name)
     return again, m_corr, eq, sel, r
+
+
+def joint_grade_and_physics(path, vehicle, lag, base_terms, m_train, name):
+    """The grade source and the physical candidates chosen together on the training log
+    ``path``: for every grade source of TAU_GRID_S, the data read that way and the physical
+    candidates chosen on it (:func:`physical_stage`, trip-grouped 5-fold CV); the grade source
+    whose closed-loop structure has the lowest cross-validated mean absolute trip
+    traction-energy error. Each grade source is judged with the terms it would be used with,
+    so a missing temperature term cannot decide it. Returns what :func:`grade_and_physics`
+    does; ``tau["cv"][source]`` carries the candidates chosen with that source."""
+    off = logger_offset(m_train)
+    cv, best = {}, None
+    for tau in TAU_GRID_S:
+        if tau == LOGGER_OFFSET and not math.isfinite(off["offset_mps2"]):
+            continue
+        m = corrected_measured(path, vehicle, lag, True, tau, off["offset_mps2"])
+        eq, sel, r = physical_stage(m, list(base_terms), name)
+        c = sel["cv"]
+        cv[tau] = {"mean_abs_error": c["mean_abs_error"], "max_abs_error": c["max_abs_error"],
+                   "rmse_w": c["rmse_w"], "chosen": list(sel["chosen"])}
+        if best is None or c["mean_abs_error"] < cv[best[0]]["mean_abs_error"]:
+            best = (tau, m, eq, sel, r)  # one Measured kept at a time: each is the whole log
+    tau, m, eq, sel, r = best
+    return {"tau_s": tau, "cv": cv, "logger_offset": off, "joint": True}, m, eq, sel, r
 
 
 def physical_stage(m, base_terms, name):
@@ -696,16 +728,16 @@ def moving_check(m, dyno_eq) -> dict:
 
 
 def main() -> int:
+    global GRADE_CHOICE
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=os.environ.get(
         "SUMO_DRVPW_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data")))
     ap.add_argument("--out", default="docs")
     ap.add_argument("--only", default="", help="comma list of i3, prius2, jlu (default: all)")
-    ap.add_argument("--recheck-grade", action="store_true",
-                    help="choose the grade source again with the closed-loop terms (see RECHECK_GRADE)")
+    ap.add_argument("--grade-choice", choices=GRADE_CHOICES, default=GRADE_CHOICE,
+                    help="how the grade source and the physical candidates are chosen (see GRADE_CHOICE)")
     a = ap.parse_args()
-    global RECHECK_GRADE
-    RECHECK_GRADE = a.recheck_grade
+    GRADE_CHOICE = a.grade_choice
     from sumo_drvpw.data.adapters import read
     from sumo_drvpw.fileio import write_text
 

@@ -1,0 +1,100 @@
+"""Which way of choosing the grade source holds up on trips it never saw? A nested
+cross-validation over all trips of the shared BMW i3 logs.
+
+    .venv/bin/python scripts/grade_choice_cv.py --data ../shared/data
+
+Outer loop: trip-grouped 5-fold (fold j holds out every 5th trip in name order from the
+j-th). Inside each fold, on its training trips only, the grade source and the physical
+candidates are chosen the two ways scripts/closing_the_loop.py offers (GRADE_CHOICE):
+
+- **sequential**: the grade source from TAU_GRID_S with the calibrated terms
+  (``choose_tau``), then the physical candidates on data read that way;
+- **joint**: for every grade source its own physical candidates, and the source whose
+  closed-loop structure cross-validates best (``joint_grade_and_physics``).
+
+Each fold's closed-loop equation, fitted on its training trips, predicts the held-out
+trips' traction energy (Σ max(P, 0)·Δt, predicted/measured − 1). The lag is 0 and the
+grade comes from the accelerometer, as the tracer finds on these logs
+(docs/closing-the-loop.md). Prints per-trip errors of both and their summary; run time
+about 20 min on 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import closing_the_loop as C  # noqa: E402
+from closing_the_loop_report import _tau  # noqa: E402
+
+K = 5
+
+
+def held_out_errors(m, sel, held) -> dict:
+    """Per held-out trip traction-energy error of the structure ``sel`` fitted on the other
+    trips of the Measured ``m`` (the whole log read with the fold's corrections)."""
+    from sumo_drvpw.fit.compare import trip_energy
+    from sumo_drvpw.fit.physical import regime_fit, regime_power
+    from sumo_drvpw.model.terms import term_matrix
+
+    x, y, u, dt, trip = C._cv_args(m)
+    X = term_matrix(sel["terms"], x)
+    ok = u & np.all(np.isfinite(X), axis=1)
+    test = ok & np.isin(trip, held)
+    b, r = regime_fit(X[ok & ~test], y[ok & ~test], sel["regime"])
+    e = trip_energy(regime_power(X[test], b, r), y[test], dt[test], trip[test])["trips"]
+    return {t: v["error"] for t, v in e.items()}, dict(zip(sel["terms"], map(float, b)))
+
+
+def main() -> int:
+    from scipy.stats import wilcoxon
+
+    from sumo_drvpw.data.adapters import read
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+    a = ap.parse_args()
+    df, rep = read("bmw-i3-tum", Path(a.data) / "bmw_i3_tum")
+    roles = rep.get("roles")
+    trips = sorted(df["trip_id"].unique())
+    errs = {"sequential": {}, "joint": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = C.write_subset(df, [], Path(tmp) / "all.parquet", keep=False, roles=roles)
+        for j in range(K):
+            t0 = time.perf_counter()
+            held = trips[j::K]
+            train = C.write_subset(df, held, Path(tmp) / "train.parquet", keep=False, roles=roles)
+            m_train = C.load_checked(train, "bmw_i3")
+            base_eq, _ = C.calibrate_physical(m_train, "i3_calibrated")
+            line = []
+            for how in errs:
+                C.GRADE_CHOICE = how
+                tau, _, _, sel, _ = C.grade_and_physics(train, "bmw_i3", 0.0, base_eq.terms, m_train, "i3_closed")
+                m_all = C.corrected_measured(path, "bmw_i3", 0.0, True, tau["tau_s"],
+                                             tau["logger_offset"]["offset_mps2"])
+                e, b = held_out_errors(m_all, sel, held)
+                errs[how].update(e)
+                line.append(f"{how}: {_tau(tau['tau_s'])} + [{', '.join(sel['chosen']) or 'none'}], "
+                            f"grade {b['grade']:.3f}")
+            print(f"fold {j + 1} ({time.perf_counter() - t0:.0f} s): " + "; ".join(line), flush=True)
+    print("\ntrip        sequential   joint")
+    for t in sorted(trips, key=lambda t: errs["sequential"][t]):
+        print(f"{t:10s} {100 * errs['sequential'][t]:+9.1f} % {100 * errs['joint'][t]:+7.1f} %")
+    for how, e in errs.items():
+        a_ = 100 * np.abs(np.array(list(e.values())))
+        print(f"{how}: mean abs {a_.mean():.2f} %, median {np.median(a_):.2f} %, worst {a_.max():.1f} %, "
+              f"beyond 6 %: {(a_ > 6).sum()} of {len(a_)}")
+    d = np.array([abs(errs["sequential"][t]) - abs(errs["joint"][t]) for t in trips])
+    print(f"joint lower on {(d > 0).sum()} of {len(d)} trips; one-sided Wilcoxon p = "
+          f"{wilcoxon(d, alternative='greater').pvalue:.2g}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
