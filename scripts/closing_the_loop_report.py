@@ -509,8 +509,10 @@ def render(cars, took, cmd: str) -> str:
           "300-s fusion in time the grade reads 0.94–0.95 beside the same acc 1.18: 24 % rotating mass, "
           "more than a single-speed electric car has — that fusion's slow part attenuates the grade. So a "
           "grade coefficient within ±10 % of 1 is no proof of a right grade here, and one above the band "
-          "can be the mass; in SUMO, where the slope is exact, the vehicle's own mass carries the grade "
-          "term (a vType's mass set to the car as driven books both right).",
+          "can be the mass. In SUMO the coefficients multiply the vType's mass: the deliverable books the "
+          "car as these logs drove it when the vType carries the declared 1270 kg; if the extra mass is real "
+          "and a study's i3 carries less, its grade, acc and roll coefficients over-book that car by the same "
+          "ratio — the logs cannot tell.",
           "- Tried, not adopted: choosing the grade source a second time with the closed-loop terms "
           "(`--grade-choice recheck`: sequential, then the grade source once more with the closed-loop "
           "terms). On both i3 splits it switched to the logger offset; "
