@@ -319,6 +319,16 @@ def _cv_args(m):
             m.log.df["trip_id"].to_numpy().astype(str))
 
 
+def each_grade_source(path, vehicle, lag, off):
+    """(grade source, the log ``path`` read with it) for each entry of TAU_GRID_S, one at a
+    time; the logger offset ``off`` (:func:`logger_offset`) left out when it could not be
+    estimated."""
+    for tau in TAU_GRID_S:
+        if tau == LOGGER_OFFSET and not math.isfinite(off["offset_mps2"]):
+            continue
+        yield tau, corrected_measured(path, vehicle, lag, True, tau, off["offset_mps2"])
+
+
 def choose_tau(train, vehicle, lag, terms, m_train) -> dict:
     """The grade source from TAU_GRID_S (fusion crossovers, the accelerometer with per-trip
     offsets, the accelerometer with the logger's offset estimated on ``m_train``'s inputs)
@@ -328,10 +338,7 @@ def choose_tau(train, vehicle, lag, terms, m_train) -> dict:
 
     off = logger_offset(m_train)
     cv = {}
-    for tau in TAU_GRID_S:
-        if tau == LOGGER_OFFSET and not math.isfinite(off["offset_mps2"]):
-            continue
-        m = corrected_measured(train, vehicle, lag, True, tau, off["offset_mps2"])
+    for tau, m in each_grade_source(train, vehicle, lag, off):
         r = trip_cv(*_cv_args(m), list(terms))
         cv[tau] = {"mean_abs_error": r["mean_abs_error"], "max_abs_error": r["max_abs_error"],
                    "rmse_w": r["rmse_w"]}
@@ -376,10 +383,7 @@ def joint_grade_and_physics(path, vehicle, lag, base_terms, m_train, name):
     does; ``tau["cv"][source]`` carries the candidates chosen with that source."""
     off = logger_offset(m_train)
     cv, best = {}, None
-    for tau in TAU_GRID_S:
-        if tau == LOGGER_OFFSET and not math.isfinite(off["offset_mps2"]):
-            continue
-        m = corrected_measured(path, vehicle, lag, True, tau, off["offset_mps2"])
+    for tau, m in each_grade_source(path, vehicle, lag, off):
         eq, sel, r = physical_stage(m, list(base_terms), name)
         c = sel["cv"]
         cv[tau] = {"mean_abs_error": c["mean_abs_error"], "max_abs_error": c["max_abs_error"],

@@ -36,22 +36,6 @@ from closing_the_loop_report import _tau  # noqa: E402
 K = 5
 
 
-def held_out_errors(m, sel, held) -> dict:
-    """Per held-out trip traction-energy error of the structure ``sel`` fitted on the other
-    trips of the Measured ``m`` (the whole log read with the fold's corrections)."""
-    from sumo_drvpw.fit.compare import trip_energy
-    from sumo_drvpw.fit.physical import regime_fit, regime_power
-    from sumo_drvpw.model.terms import term_matrix
-
-    x, y, u, dt, trip = C._cv_args(m)
-    X = term_matrix(sel["terms"], x)
-    ok = u & np.all(np.isfinite(X), axis=1)
-    test = ok & np.isin(trip, held)
-    b, r = regime_fit(X[ok & ~test], y[ok & ~test], sel["regime"])
-    e = trip_energy(regime_power(X[test], b, r), y[test], dt[test], trip[test])["trips"]
-    return {t: v["error"] for t, v in e.items()}, dict(zip(sel["terms"], map(float, b)))
-
-
 def main() -> int:
     from scipy.stats import wilcoxon
 
@@ -65,23 +49,26 @@ def main() -> int:
     trips = sorted(df["trip_id"].unique())
     errs = {"sequential": {}, "joint": {}}
     with tempfile.TemporaryDirectory() as tmp:
-        path = C.write_subset(df, [], Path(tmp) / "all.parquet", keep=False, roles=roles)
         for j in range(K):
             t0 = time.perf_counter()
             held = trips[j::K]
             train = C.write_subset(df, held, Path(tmp) / "train.parquet", keep=False, roles=roles)
+            test = C.write_subset(df, held, Path(tmp) / "test.parquet", keep=True, roles=roles)
             m_train = C.load_checked(train, "bmw_i3")
             base_eq, _ = C.calibrate_physical(m_train, "i3_calibrated")
             line = []
             for how in errs:
                 C.GRADE_CHOICE = how
-                tau, _, _, sel, _ = C.grade_and_physics(train, "bmw_i3", 0.0, base_eq.terms, m_train, "i3_closed")
-                m_all = C.corrected_measured(path, "bmw_i3", 0.0, True, tau["tau_s"],
-                                             tau["logger_offset"]["offset_mps2"])
-                e, b = held_out_errors(m_all, sel, held)
-                errs[how].update(e)
+                # the closed-loop equation fitted on the training trips predicts the held-out
+                # trips, read with the same corrections (as scripts/closing_the_loop.py does)
+                tau, _, eq, sel, r = C.grade_and_physics(train, "bmw_i3", 0.0, base_eq.terms, m_train,
+                                                         "i3_closed")
+                m_held = C.corrected_measured(test, "bmw_i3", 0.0, True, tau["tau_s"],
+                                              tau["logger_offset"]["offset_mps2"])
+                e = C.regime_eval(m_held, eq, 1.0 + r)["trip_energy"]["trips"]
+                errs[how].update({t: v["error"] for t, v in e.items()})
                 line.append(f"{how}: {_tau(tau['tau_s'])} + [{', '.join(sel['chosen']) or 'none'}], "
-                            f"grade {b['grade']:.3f}")
+                            f"grade {eq.terms['grade']:.3f}")
             print(f"fold {j + 1} ({time.perf_counter() - t0:.0f} s): " + "; ".join(line), flush=True)
     print("\ntrip        sequential   joint")
     for t in sorted(trips, key=lambda t: errs["sequential"][t]):
