@@ -9,7 +9,8 @@ from the j-th; :mod:`sumo_drvpw.validation.chain_i3`). Inside each fold, on its 
 only:
 
 1. the road load as scripts/closing_the_loop.py builds it: the calibrated DrvPw terms, then
-   the grade source and the physical candidates chosen together (GRADE_CHOICE "joint");
+   the grade source and the physical candidates chosen together (GRADE_CHOICE "joint") on
+   the trip traction energy, or with ``--selection-energy net`` on the net energy;
 2. the recuperation limit profiled from that equation's power against the measured motor
    power, and the battery chain (constant η, the heater's V·I and the A/C as logged loads at
    gain 1) fitted on the measured motor power of the training trips whose heater V·I is
@@ -110,6 +111,9 @@ def main() -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
+    ap.add_argument("--selection-energy", choices=C.SELECTION_ENERGIES, default=C.SELECTION_ENERGY,
+                    help="the trip energy whose error chooses the closed loop's structure "
+                         "(closing_the_loop.SELECTION_ENERGY)")
     a = ap.parse_args()
     df, rep = read("bmw-i3-tum", Path(a.data) / "bmw_i3_tum")
     df = with_loads(df)
@@ -120,7 +124,7 @@ def main() -> int:
     err = {h: {} for h in how}
     road = {h: {} for h in how}
     flagged = {}
-    C.GRADE_CHOICE = "joint"
+    C.GRADE_CHOICE, C.SELECTION_ENERGY = "joint", a.selection_energy
     with tempfile.TemporaryDirectory() as tmp:
         full = C.write_subset(df, [], Path(tmp) / "all.parquet", keep=False, roles=roles)
         head = read_as(full, I3_MEASUREMENT)  # the headline pipeline's reading (60-s fusion)

@@ -166,6 +166,26 @@ def test_trip_cv_energy_is_the_compare_definition():
     assert want["measured_j"] == pytest.approx(float(np.sum(np.maximum(p[test], 0)) * 0.5))
 
 
+def test_trip_cv_net_energy_is_the_compare_definition():
+    """energy="net": a held-out trip's error is trip_net_energy's (Σ P·Δt, braking included),
+    not the traction energy's; and the selection judged on it finds a planted recuperation
+    scale and nothing where none is planted."""
+    from sumo_drvpw.fit.compare import trip_net_energy
+    from sumo_drvpw.fit.physical import regime_fit, regime_power, select_physical, trip_cv
+
+    x, p, use, dt, trip = _trips(n_trips=4, n=800, recup_scale=0.7)
+    cv = trip_cv(x, p, use, dt, trip, BASE, k=4, energy="net")
+    X = term_matrix(BASE, x)
+    test = trip == "T01"
+    b, r = regime_fit(X[~test], p[~test], False)
+    want = trip_net_energy(regime_power(X[test], b, r), p[test], dt[test], trip[test])["trips"]["T01"]
+    assert cv["errors"]["T01"] == pytest.approx(want["error"], rel=1e-9)
+    assert want["measured_j"] == pytest.approx(float(np.sum(p[test]) * 0.5))   # Σ P·Δt by hand
+    assert cv["errors"]["T01"] != pytest.approx(trip_cv(x, p, use, dt, trip, BASE, k=4)["errors"]["T01"], rel=1e-3)
+    assert select_physical(*_trips(recup_scale=0.7), BASE, candidates=("regime",), energy="net")["chosen"] == ["regime"]
+    assert select_physical(*_trips(), BASE, candidates=("regime",), energy="net")["chosen"] == []
+
+
 def test_trip_cv_k1_is_the_in_sample_fit():
     """k = 1: one fit on every trip, each trip's error in sample (the same definition), and
     never worse than the held-out errors on average."""
@@ -527,7 +547,7 @@ def test_joint_choice_judges_each_grade_source_by_its_own_closed_loop_structure(
     monkeypatch.setattr(mod, "corrected_measured", corrected)
     monkeypatch.setattr(mod, "physical_stage", stage)
     monkeypatch.setattr(mod, "_cv_args", lambda m: (m,))
-    monkeypatch.setattr(phys, "trip_cv", lambda m, terms: {"mean_abs_error": table[m.tau][0],
+    monkeypatch.setattr(phys, "trip_cv", lambda m, terms, energy="traction": {"mean_abs_error": table[m.tau][0],
                                                            "max_abs_error": 0.1, "rmse_w": 1.0})
     monkeypatch.setattr(mod, "GRADE_CHOICE", "sequential")
     tau, m, eq, sel, _ = mod.grade_and_physics("train.parquet", "car", 0.0, ["acc", "grade"], None, "x")

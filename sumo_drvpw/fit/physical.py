@@ -461,13 +461,14 @@ def _terms_of(base: list[str], chosen: list[str]) -> tuple[list[str], bool]:
     return terms, "regime" in chosen
 
 
-def trip_cv(x, y, use, dt, trip, terms, regime=False, k: int = 5) -> dict:
+def trip_cv(x, y, use, dt, trip, terms, regime=False, k: int = 5, energy: str = "traction") -> dict:
     """Trip-grouped k-fold cross-validation of ``terms``: fold j holds out every k-th trip in
     name order from the j-th; per held-out trip the traction-energy error (Σ max(P, 0)·Δt,
-    predicted/measured − 1, :func:`sumo_drvpw.fit.compare.trip_energy`) and the pooled RMSE.
+    predicted/measured − 1, :func:`sumo_drvpw.fit.compare.trip_energy`; ``energy="net"``: of
+    Σ P·Δt, :func:`~sumo_drvpw.fit.compare.trip_net_energy`) and the pooled RMSE.
     ``k = 1``: one fit on every trip and its in-sample errors (what no held-out protocol can
     beat)."""
-    from sumo_drvpw.fit.compare import trip_energy
+    from sumo_drvpw.fit.compare import trip_energy, trip_net_energy
     from sumo_drvpw.model.terms import term_matrix
 
     X = term_matrix(terms, x)
@@ -480,7 +481,8 @@ def trip_cv(x, y, use, dt, trip, terms, regime=False, k: int = 5) -> dict:
         train = ok & ~test if k > 1 else ok  # k = 1: fitted on every trip, errors in sample
         b, r = regime_fit(X[train], y[train], regime)
         p = regime_power(X[test], b, r)
-        errs.update({t: v["error"] for t, v in trip_energy(p, y[test], dt[test], trip[test])["trips"].items()})
+        per = (trip_net_energy if energy == "net" else trip_energy)(p, y[test], dt[test], trip[test])
+        errs.update({t: v["error"] for t, v in per["trips"].items()})
         sse += float(np.sum((y[test] - p) ** 2))
         n += int(test.sum())
     a = np.abs(np.array([e for e in errs.values() if np.isfinite(e)]))
@@ -518,7 +520,7 @@ def candidate_reading(name: str, params: dict[str, float], r: float, rho_kgm3: f
 
 
 def select_physical(x, y, use, dt, trip, base_terms, candidates=tuple(PHYSICAL_CANDIDATES),
-                    k: int = 5) -> dict:
+                    k: int = 5, energy: str = "traction") -> dict:
     """Forward selection of physical candidates on whole training trips.
 
     A candidate is added when, with those chosen before, it lowers the trip-grouped k-fold
@@ -533,6 +535,7 @@ def select_physical(x, y, use, dt, trip, base_terms, candidates=tuple(PHYSICAL_C
     x, y, use, dt, trip : inputs, measured power [W], usable mask, sample duration [s] and
         trip id per sample (the training trips only)
     base_terms : the declared terms (e.g. acc, aero, roll, grade)
+    energy : "traction" or "net": the trip energy whose error is judged (:func:`trip_cv`)
 
     Returns ``{"chosen", "terms", "regime", "steps": [{candidate, cv, helped, trips, reading,
     accepted, why}], "base_cv"}``.
@@ -541,7 +544,7 @@ def select_physical(x, y, use, dt, trip, base_terms, candidates=tuple(PHYSICAL_C
 
     y = np.asarray(y, float)
     chosen: list[str] = []
-    cur = trip_cv(x, y, use, dt, trip, base_terms, k=k)
+    cur = trip_cv(x, y, use, dt, trip, base_terms, k=k, energy=energy)
     out = {"base_cv": cur, "steps": [], "chosen": chosen}
     rho = float(np.nanmean(np.asarray(x.rho, float)[use]))
     # a candidate whose added terms are 0 on every sample (no yaw rate, no temperature logged)
@@ -552,7 +555,7 @@ def select_physical(x, y, use, dt, trip, base_terms, candidates=tuple(PHYSICAL_C
         trials = []
         for c in left:
             terms, regime = _terms_of(base_terms, chosen + [c])
-            cv = trip_cv(x, y, use, dt, trip, terms, regime, k=k)
+            cv = trip_cv(x, y, use, dt, trip, terms, regime, k=k, energy=energy)
             common = [t for t in cv["errors"]
                       if np.isfinite(cv["errors"][t]) and np.isfinite(cur["errors"].get(t, np.nan))]
             d = np.array([abs(cur["errors"][t]) - abs(cv["errors"][t]) for t in common])
