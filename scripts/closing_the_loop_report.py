@@ -514,7 +514,9 @@ def render(cars, took, cmd: str) -> str:
           "docs/energy-chain.md). Not adopted yet: it was tried after the traction result was seen (two "
           "protocols compared on the same 50 trips), its grade stays outside issue #11's ±10 % band, and a "
           "trip whose net energy is near 0 (a descent) would dominate its mean — it needs a guard and a "
-          "replication on other cars' logs.",
+          "replication on other cars' logs (the shared Prius Gen-2 and JLU logs have too few training trips "
+          "for these choices, MIN_CV_TRIPS: with `--only prius2,jlu --selection-energy net` their results are "
+          "the same as above).",
           "- Reading the grade coefficient: with the accelerometer grade (the logger offset; no elevation "
           "smoothing) free fits give grade 1.13–1.15 beside acc 1.18 (the inertial mass factor). Read "
           "together, acc / grade ≈ 1.03–1.04 is the share of rotating mass — Larminie & Lowry (Electric Vehicle "
