@@ -84,8 +84,8 @@ GRADE_CHOICE = "joint"
 #: measure) or "net" (Σ P·Δt: recuperation and the climb's potential energy judged too, what a
 #: battery follows). In a nested cross-validation over the 50 i3 trips "net" chose the same
 #: structure in every fold and lowered the held-out traction, net and battery errors, but it
-#: was tried after the traction result was seen and a trip with a net energy near 0 (a
-#: descent) would dominate its mean: scripts/battery_nested_cv.py, docs/energy-chain.md
+#: was tried after the traction result was seen (a descent's net error is bounded:
+#: fit.trip_energy.net_energy_errors): scripts/battery_nested_cv.py, docs/energy-chain.md
 SELECTION_ENERGIES = ("traction", "net")
 SELECTION_ENERGY = "traction"
 #: fewest training trips for trip-grouped cross-validation of choices (tau, physical terms)

@@ -167,7 +167,7 @@ def test_trip_cv_energy_is_the_compare_definition():
 
 
 def test_trip_cv_net_energy_is_the_compare_definition():
-    """energy="net": a held-out trip's error is trip_net_energy's (Σ P·Δt, braking included),
+    """energy="net": a held-out trip's error (no descent here) is trip_net_energy's (Σ P·Δt),
     not the traction energy's; and the selection judged on it finds a planted recuperation
     scale and nothing where none is planted."""
     from sumo_drvpw.fit.compare import trip_net_energy
@@ -184,6 +184,28 @@ def test_trip_cv_net_energy_is_the_compare_definition():
     assert cv["errors"]["T01"] != pytest.approx(trip_cv(x, p, use, dt, trip, BASE, k=4)["errors"]["T01"], rel=1e-3)
     assert select_physical(*_trips(recup_scale=0.7), BASE, candidates=("regime",), energy="net")["chosen"] == ["regime"]
     assert select_physical(*_trips(), BASE, candidates=("regime",), energy="net")["chosen"] == []
+
+
+def test_net_energy_error_stays_bounded_on_a_descent():
+    """fit.trip_energy.net_energy_errors, by hand: a trip whose measured net energy is at least
+    NET_SHARE_MIN of its traction energy gets trip_net_energy's relative error; a descent
+    (net 0.5 % of traction) gets its net miss as a share of its traction energy, not the
+    relative error's ×20 blow-up; a trip without traction gets NaN."""
+    from sumo_drvpw.fit.trip_energy import NET_SHARE_MIN, net_energy_errors, trip_net_energy
+
+    # trip A: 10 s at +20 kW, 10 s at −5 kW (net 150 kJ of 200 kJ traction);
+    # trip D: 10 s at +20 kW, 10 s at −19.9 kW (net 1 kJ of 200 kJ); trip S: standing, braking
+    meas = np.array([20e3] * 10 + [-5e3] * 10 + [20e3] * 10 + [-19.9e3] * 10 + [-1e3] * 5)
+    pred = meas * 1.0
+    pred[:10] *= 1.1             # A: traction over-predicted by 10 % → net +20 kJ
+    pred[20:30] *= 1.1           # D: the same miss, +20 kJ on a net of 1 kJ
+    trip = np.array(["A"] * 20 + ["D"] * 20 + ["S"] * 5)
+    e = net_energy_errors(pred, meas, 1.0, trip)
+    assert 150e3 >= NET_SHARE_MIN * 200e3 > 1e3
+    assert e["A"] == pytest.approx(trip_net_energy(pred, meas, 1.0, trip)["trips"]["A"]["error"], rel=1e-12)
+    assert e["A"] == pytest.approx(20e3 / 150e3)
+    assert e["D"] == pytest.approx(20e3 / 200e3)                     # not 20 kJ / 1 kJ = 20
+    assert np.isnan(e["S"])
 
 
 def test_trip_cv_k1_is_the_in_sample_fit():

@@ -465,10 +465,12 @@ def trip_cv(x, y, use, dt, trip, terms, regime=False, k: int = 5, energy: str = 
     """Trip-grouped k-fold cross-validation of ``terms``: fold j holds out every k-th trip in
     name order from the j-th; per held-out trip the traction-energy error (Σ max(P, 0)·Δt,
     predicted/measured − 1, :func:`sumo_drvpw.fit.compare.trip_energy`; ``energy="net"``: of
-    Σ P·Δt, :func:`~sumo_drvpw.fit.compare.trip_net_energy`) and the pooled RMSE.
+    Σ P·Δt, bounded on a descent, :func:`~sumo_drvpw.fit.trip_energy.net_energy_errors`) and
+    the pooled RMSE.
     ``k = 1``: one fit on every trip and its in-sample errors (what no held-out protocol can
     beat)."""
-    from sumo_drvpw.fit.compare import trip_energy, trip_net_energy
+    from sumo_drvpw.fit.compare import trip_energy
+    from sumo_drvpw.fit.trip_energy import net_energy_errors
     from sumo_drvpw.model.terms import term_matrix
 
     X = term_matrix(terms, x)
@@ -481,8 +483,10 @@ def trip_cv(x, y, use, dt, trip, terms, regime=False, k: int = 5, energy: str = 
         train = ok & ~test if k > 1 else ok  # k = 1: fitted on every trip, errors in sample
         b, r = regime_fit(X[train], y[train], regime)
         p = regime_power(X[test], b, r)
-        per = (trip_net_energy if energy == "net" else trip_energy)(p, y[test], dt[test], trip[test])
-        errs.update({t: v["error"] for t, v in per["trips"].items()})
+        if energy == "net":
+            errs.update(net_energy_errors(p, y[test], dt[test], trip[test]))
+        else:
+            errs.update({t: v["error"] for t, v in trip_energy(p, y[test], dt[test], trip[test])["trips"].items()})
         sse += float(np.sum((y[test] - p) ** 2))
         n += int(test.sum())
     a = np.abs(np.array([e for e in errs.values() if np.isfinite(e)]))

@@ -106,6 +106,32 @@ def trip_net_energy(pred_w, meas_w, dt_s, trip) -> dict:
     return _trip_energy(pred_w, meas_w, dt_s, trip, net=True)
 
 
+#: below this share of its measured traction energy, a trip's measured net energy (a long
+#: descent: recuperation nearly as large as traction, or larger) is too small a denominator
+#: for a relative error (:func:`net_energy_errors`)
+NET_SHARE_MIN = 0.2
+
+
+def net_energy_errors(pred_w, meas_w, dt_s, trip) -> dict:
+    """Per trip, the net-energy error a structure is chosen on: E_pred/E_meas − 1 of the net
+    energy (:func:`trip_net_energy`) where the measured net energy is at least
+    :data:`NET_SHARE_MIN` of the trip's measured traction energy; elsewhere the net-energy miss
+    as a share of that traction energy, (E_pred − E_meas)/E_traction, which stays bounded when
+    a descent brings the net energy near 0 or below. NaN for a trip without traction."""
+    net = trip_net_energy(pred_w, meas_w, dt_s, trip)["trips"]
+    trac = trip_energy(pred_w, meas_w, dt_s, trip)["trips"]
+    out = {}
+    for t, v in net.items():
+        e_t = trac[t]["measured_j"]
+        if not e_t > 0:
+            out[t] = math.nan
+        elif v["measured_j"] >= NET_SHARE_MIN * e_t:
+            out[t] = v["error"]
+        else:
+            out[t] = (v["predicted_j"] - v["measured_j"]) / e_t
+    return out
+
+
 def _dt_array(dt_s, n: int) -> np.ndarray:
     if dt_s is None:
         return np.ones(n)
