@@ -46,16 +46,6 @@ K = 5
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def with_loads(df):
-    """The heater's electrical power V·I and the A/C's as load columns (0 where not logged,
-    as the headline pipeline reads them) and whether the heater's V·I is logged."""
-    df = df.copy()
-    df["heater_logged"] = (df["heater_voltage_v"].notna() & df["heater_current_a"].notna())
-    df["heater_electric_w"] = (df["heater_voltage_v"] * df["heater_current_a"]).fillna(0.0)
-    df["aircon_power_w"] = df["aircon_power_w"].fillna(0.0)
-    return df
-
-
 def read_as(full, meas):
     """(battery Measured, motor-power Measured, dropouts) of ``full`` read with ``meas``."""
     from sumo_drvpw.data.dropouts import log_dropouts
@@ -107,7 +97,8 @@ def main() -> int:
 
     from sumo_drvpw.data.adapters import read
     from sumo_drvpw.validation.chain_common import trip_rows
-    from sumo_drvpw.validation.chain_i3 import I3_MEASUREMENT, I3_ROAD_TERMS, fit_road_load
+    from sumo_drvpw.validation.chain_i3 import (I3_LOADS, I3_MEASUREMENT, I3_ROAD_TERMS, fit_road_load,
+                                                with_i3_loads)
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
@@ -116,8 +107,8 @@ def main() -> int:
                          "(closing_the_loop.SELECTION_ENERGY)")
     a = ap.parse_args()
     df, rep = read("bmw-i3-tum", Path(a.data) / "bmw_i3_tum")
-    df = with_loads(df)
-    loads = ["heater_electric_w", "aircon_power_w"]
+    df = with_i3_loads(df)
+    loads = list(I3_LOADS)
     roles = dict(rep.get("roles") or {}, heater_electric_w="load", heater_logged="condition")
     trips = sorted(df["trip_id"].unique())
     how = ("closed loop", "headline")

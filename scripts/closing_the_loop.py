@@ -328,6 +328,11 @@ def _cv_args(m):
             m.log.df["trip_id"].to_numpy().astype(str))
 
 
+def _cv_summary(cv: dict) -> dict:
+    """What a grade-source choice keeps of a fit.physical.trip_cv result."""
+    return {k: cv[k] for k in ("mean_abs_error", "max_abs_error", "rmse_w")}
+
+
 def each_grade_source(path, vehicle, lag, off):
     """(grade source, the log ``path`` read with it) for each entry of TAU_GRID_S, one at a
     time; the logger offset ``off`` (:func:`logger_offset`) left out when it could not be
@@ -348,9 +353,7 @@ def choose_tau(train, vehicle, lag, terms, m_train) -> dict:
     off = logger_offset(m_train)
     cv = {}
     for tau, m in each_grade_source(train, vehicle, lag, off):
-        r = trip_cv(*_cv_args(m), list(terms), energy=SELECTION_ENERGY)
-        cv[tau] = {"mean_abs_error": r["mean_abs_error"], "max_abs_error": r["max_abs_error"],
-                   "rmse_w": r["rmse_w"]}
+        cv[tau] = _cv_summary(trip_cv(*_cv_args(m), list(terms), energy=SELECTION_ENERGY))
     best = min(cv, key=lambda t: cv[t]["mean_abs_error"])
     return {"tau_s": best, "cv": cv, "logger_offset": off, "energy": SELECTION_ENERGY}
 
@@ -394,10 +397,8 @@ def joint_grade_and_physics(path, vehicle, lag, base_terms, m_train, name):
     cv, best = {}, None
     for tau, m in each_grade_source(path, vehicle, lag, off):
         eq, sel, r = physical_stage(m, list(base_terms), name)
-        c = sel["cv"]
-        cv[tau] = {"mean_abs_error": c["mean_abs_error"], "max_abs_error": c["max_abs_error"],
-                   "rmse_w": c["rmse_w"], "chosen": list(sel["chosen"])}
-        if best is None or c["mean_abs_error"] < cv[best[0]]["mean_abs_error"]:
+        cv[tau] = dict(_cv_summary(sel["cv"]), chosen=list(sel["chosen"]))
+        if best is None or cv[tau]["mean_abs_error"] < cv[best[0]]["mean_abs_error"]:
             best = (tau, m, eq, sel, r)  # one Measured kept at a time: each is the whole log
     tau, m, eq, sel, r = best
     return {"tau_s": tau, "cv": cv, "logger_offset": off, "joint": True, "energy": SELECTION_ENERGY}, m, eq, sel, r
@@ -413,7 +414,6 @@ def physical_stage(m, base_terms, name):
 
     args = _cv_args(m)
     sel = select_physical(*args, list(base_terms), energy=SELECTION_ENERGY)
-    sel["energy"] = SELECTION_ENERGY
     X = term_matrix(sel["terms"], m.inputs)
     ok = args[2] & np.all(np.isfinite(X), axis=1)
     b, r = regime_fit(X[ok], args[1][ok], sel["regime"])

@@ -542,14 +542,14 @@ def select_physical(x, y, use, dt, trip, base_terms, candidates=tuple(PHYSICAL_C
     energy : "traction" or "net": the trip energy whose error is judged (:func:`trip_cv`)
 
     Returns ``{"chosen", "terms", "regime", "steps": [{candidate, cv, helped, trips, reading,
-    accepted, why}], "base_cv"}``.
+    accepted, why}], "base_cv", "energy"}``.
     """
     from sumo_drvpw.model.terms import term_matrix
 
     y = np.asarray(y, float)
     chosen: list[str] = []
     cur = trip_cv(x, y, use, dt, trip, base_terms, k=k, energy=energy)
-    out = {"base_cv": cur, "steps": [], "chosen": chosen}
+    out = {"base_cv": cur, "steps": [], "chosen": chosen, "energy": energy}
     rho = float(np.nanmean(np.asarray(x.rho, float)[use]))
     # a candidate whose added terms are 0 on every sample (no yaw rate, no temperature logged)
     # has nothing to fit: not tried

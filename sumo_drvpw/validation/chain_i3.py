@@ -53,6 +53,17 @@ I3_MEASUREMENT = Measurement(grade="fused", fusion_tau_s=60.0, air_density="alti
                              exclude_dropouts=True)
 
 
+def with_i3_loads(df):
+    """The i3 adapter's table with its logged loads as columns (:data:`I3_LOADS`): the
+    heater's electrical power V·I and the A/C's, 0 where not logged, and ``heater_logged``,
+    whether the heater's V·I is logged on the sample."""
+    df = df.copy()
+    df["heater_logged"] = (df["heater_voltage_v"].notna() & df["heater_current_a"].notna())
+    df["heater_electric_w"] = (df["heater_voltage_v"] * df["heater_current_a"]).fillna(0.0)
+    df["aircon_power_w"] = df["aircon_power_w"].fillna(0.0)
+    return df
+
+
 def fit_road_load(x, y, use, terms, name):
     """Least squares of ``terms``; refitted under fit.physical's constraints when implausible.
     Returns (Equation, free coefficients, constraint message or None)."""
@@ -74,14 +85,7 @@ def i3_study(data: Path) -> dict:
     from sumo_drvpw.data.dropouts import dropout_report, log_dropouts
     from sumo_drvpw.validation.chain_i3_heater import heater_study
 
-    def add(df):
-        df = df.copy()
-        df["heater_logged"] = (df["heater_voltage_v"].notna() & df["heater_current_a"].notna())
-        df["heater_electric_w"] = (df["heater_voltage_v"] * df["heater_current_a"]).fillna(0.0)
-        df["aircon_power_w"] = df["aircon_power_w"].fillna(0.0)
-        return df
-
-    raw, veh = read_shared(data, "bmw_i3_tum", "bmw-i3-tum", "bmw_i3", add)
+    raw, veh = read_shared(data, "bmw_i3_tum", "bmw-i3-tum", "bmw_i3", with_i3_loads)
     log = dataclasses.replace(raw, counts=dict(raw.counts),
                               options=dataclasses.replace(raw.options, measurement=I3_MEASUREMENT))
     mw, mb = measure(log, veh), measure(log, veh, "battery")
