@@ -343,6 +343,14 @@ def test_inertia_by_direction_found(tmp_path):
     assert f and f[0]["term"] == "acc_pos" and f[0]["role"] == "structural", [x["term"] for x in f]
     assert f[0]["coefficient"] == pytest.approx(0.25, rel=0.15)
     assert f[0]["replication"]["helped_trips"] >= 3
+    # the final equation's grade is also read at the wheels, with the η the acc_pos shows
+    from sumo_drvpw.report.diagnose import markdown
+
+    c = res.report["final"]["coefficients"]
+    w = res.report["final"]["physical"]["grade"]["at_wheels"]
+    assert w["eta"] == pytest.approx((c["acc"] / (c["acc"] + c["acc_pos"])) ** 0.5, rel=1e-12)
+    assert w["value"] == pytest.approx(c["grade"] * w["eta"], rel=1e-12)
+    assert f"at the wheels c_grade·η = {w['value']:.3f}" in markdown(res, [])
 
 
 def test_recuperation_limit_found(tmp_path):

@@ -26,7 +26,8 @@ bounds and fixed coefficients, exactly from the sufficient statistics: with Xᵀ
 
 Every coefficient of a target measured behind a drivetrain (motor shaft, powertrain output,
 battery) carries the factor 1/η; the grade coefficient reads it directly (potential energy
-is exact physics), and acc/grade is then the mass factor.
+is exact physics) and, where the fit shows η otherwise, c_grade·η is the grade at the wheels
+(:mod:`sumo_drvpw.fit.drivetrain`).
 
 Constraints are declared in a candidate TOML file beside ``terms``::
 
@@ -42,9 +43,9 @@ Physical candidates (:data:`PHYSICAL_CANDIDATES`, :func:`select_physical`): effe
 form SUMO can evaluate — air density from temperature and altitude in the aero term
 (``aero`` → ``aero_rho``), c_r(T) (``roll*cold``), cold drivetrain drag (``cold*v^2``),
 a cornering drag (``radial*v1``, where the logs carry a yaw rate) and recuperation on its
-own coefficient (:func:`regime_fit`) — are chosen forward on whole
-trips by trip-grouped cross-validation of the per-trip traction energy, each kept only when
-its gain is material, replicates over most trips and its coefficient reads plausibly.
+own coefficient (:func:`regime_fit`) — are chosen forward on whole trips by trip-grouped
+cross-validation of the per-trip traction energy, each kept only when its gain is
+material, replicates over most trips and its coefficient reads plausibly.
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ from scipy.optimize import lsq_linear
 from scipy.stats import wilcoxon
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.fit.drivetrain import drivetrain_eta, wheel_grade
 from sumo_drvpw.fit.ols import Gram, gram
 from sumo_drvpw.model.constants import RHO_DEFAULT
 
@@ -101,8 +103,7 @@ def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> 
                           "below 1: a lag between power and speed or a smoothed speed absorbed"
                           if c < PLAUSIBLE["acc"][0] else "above 1.4: more rotating mass than a car has")}
         elif t == "acc_pos" and "acc" in terms:
-            ratio = (float(terms["acc"]) + c) / float(terms["acc"]) if float(terms["acc"]) else math.nan
-            eta = 1.0 / math.sqrt(ratio) if ratio > 0 else math.nan
+            eta = (drivetrain_eta(terms) or (math.nan,))[0]
             ok = ETA_INERTIA_MIN <= eta <= 1.0
             out[t] = {"coefficient": c, "reads_as": "η of the inertial power, (c_acc + c_acc_pos)/c_acc = 1/η²",
                       "value": eta, "unit": "-", "plausible": ok, "note": "" if ok else (
@@ -114,12 +115,13 @@ def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> 
                       "unit": "-", "plausible": ok, "note": "" if ok else (
                           "below 1: the logged grade is attenuated (coarse or smoothed elevation)"
                           if c < PLAUSIBLE["grade"][0] else "above 1.3: the logged grade is too small")}
+            if (w := wheel_grade(terms)) is not None:   # c·η, η from the inertia by direction
+                out[t]["at_wheels"] = w
         elif t in ("aero", "aero_rho"):
             cda = 2.0 * c / rho_kgm3 if t == "aero" else c
             ok = cda >= CDA_MIN
-            out[t] = {"coefficient": c, "reads_as": f"C_d·A at ρ = {rho_kgm3:.4g} kg/m³", "value": cda,
-                      "unit": "m²", "plausible": ok,
-                      "note": "" if ok else "negative drag: another term or an artefact took its place"}
+            out[t] = {"coefficient": c, "reads_as": f"C_d·A at ρ = {rho_kgm3:.4g} kg/m³", "value": cda, "unit": "m²",
+                      "plausible": ok, "note": "" if ok else "negative drag: another term or an artefact took its place"}
         elif t == "roll":
             ok = PLAUSIBLE["roll"][0] <= c <= PLAUSIBLE["roll"][1]
             out[t] = {"coefficient": c, "reads_as": "rolling coefficient c_r", "value": c, "unit": "-",
@@ -508,9 +510,7 @@ def candidate_reading(name: str, params: dict[str, float], r: float, rho_kgm3: f
         return {"reads_as": "extra drag force per K below T_ref and per m/s", "value": c, "unit": "N·s/(m·K)",
                 "plausible": bool(c >= 0.0)}
     if name == "inertia by direction":
-        a, ap = params.get("acc", math.nan), params.get("acc_pos", math.nan)
-        ratio = (a + ap) / a if a and math.isfinite(a) else math.nan
-        eta = 1.0 / math.sqrt(ratio) if ratio > 0 else math.nan
+        eta = (drivetrain_eta(params) or (math.nan,))[0]
         return {"reads_as": "η of the inertial power, (c_acc + c_acc_pos)/c_acc = 1/η²", "value": eta,
                 "unit": "-", "plausible": bool(ETA_INERTIA_MIN <= eta <= 1.0)}
     if name == "cornering drag":

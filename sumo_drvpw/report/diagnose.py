@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sumo_drvpw.fit.drivetrain import describe as describe_wheel_grade
 from sumo_drvpw.report.format import coef, energy_unit, partial_trip_flag, partial_trip_lines
 
 
@@ -130,7 +131,8 @@ def markdown(res, figs) -> str:
     for t, c in r["final"]["coefficients"].items():
         p = phys.get(t)
         read = "" if p is None else (f"{p['reads_as']} = {p['value']:.4g} {p['unit']}".rstrip(" -")
-                                     + ("" if p["plausible"] else f" — implausible: {p['note']}"))
+                                     + ("" if p["plausible"] else f" — implausible: {p['note']}")
+                                     + (f"; {describe_wheel_grade(p['at_wheels'])}" if p.get("at_wheels") else ""))
         L.append(f"| `{t}` | {c:.6g} | {read} |")
     if r["final"].get("implausible"):
         L += ["", f"Implausible coefficients: {', '.join(r['final']['implausible'])}. The tracer refits the "
