@@ -16,6 +16,24 @@ def _f(x, nd=3):
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
 
 
+def _wheel_cell(run):
+    """The closed-loop equation's grade at the wheels (fit.drivetrain.wheel_grade), or –."""
+    from sumo_drvpw.fit.drivetrain import wheel_grade
+
+    sel = run.get("sel") or {}
+    w = wheel_grade(run["final_eq"].terms, 1.0 + run["rscale"] if sel.get("regime") else None)
+    if w is None:
+        return "–"
+    return f"{w['value']:.3f} (η {w['eta']:.3f})" + ("" if w["plausible"] else " ⚠")
+
+
+def _wheel_phrase(terms, sel, rscale):
+    from sumo_drvpw.fit.drivetrain import describe, wheel_grade
+
+    w = wheel_grade(terms, 1.0 + rscale if (sel or {}).get("regime") else None)
+    return "" if w is None else f"; grade {describe(w)}"
+
+
 def _pct(x):
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{100 * x:+.1f} %"
 
@@ -203,9 +221,10 @@ def render(cars, took, cmd: str) -> str:
          "before any fit; every number under *held out* comes from trips the calibration and the tracer "
          "never saw. Per-run tracer reports (every round, every column left out and why) are linked.", ""]
     L += ["## Summary (held-out trips; the issue's targets in brackets)", "",
-          "| car / fold | lag found [s] | grade coefficient, free fit after corrections | response findings | "
-          "findings rejected | closed-loop R² | mean / worst trip traction-energy error |",
-          "|---|---|---|---|---|---|---|"]
+          "| car / fold | lag found [s] | grade coefficient, free fit after corrections | closed-loop grade at "
+          "the wheels, c_grade·η | response findings | findings rejected | closed-loop R² | mean / worst trip "
+          "traction-energy error |",
+          "|---|---|---|---|---|---|---|---|"]
     for car in cars:
         for run in car.get("runs", []):
             d, r = run["res"].details, run["res"].report
@@ -218,13 +237,18 @@ def render(cars, took, cmd: str) -> str:
             sumo_doc = (run["held_corr"] or {}).get(run["final_eq"].name, {})
             r2 = _f(doc.get("r2")) if not run.get("held_regime") else \
                 f"{_f(sumo_doc.get('r2'))} ({_f(doc.get('r2'))} with the recuperation scale)"
-            L.append(f"| {run['tag']} | {run['lag']:+.3g} | {_f(free.get('grade'))} | {resp} | "
+            L.append(f"| {run['tag']} | {run['lag']:+.3g} | {_f(free.get('grade'))} | {_wheel_cell(run)} | {resp} | "
                      f"{len(d.get('not_replicated', []))} | {r2} | "
                      f"{_abs_pct(te.get('mean_abs_error'))} / {_abs_pct(te.get('max_abs_error'))} |")
     L += ["", "Targets (issue #11): Prius Gen-2 lag found and corrected; i3 grade within 10 % of 1; no "
           "response column as a finding; held-out i3 mean trip traction-energy error ≤ 3 %, worst ≤ 6 %, "
           "R² ≥ 0.95. The grade column is the free least-squares coefficient on the corrected training data "
-          "(behind a drivetrain it reads 1/η, so slightly above 1 is physical).", ""]
+          "(behind a drivetrain it reads 1/η, so slightly above 1 is physical). The next column reads the "
+          "closed-loop equation's grade at the wheels: its grade coefficient times the drivetrain efficiency η "
+          "that the same equation shows without the grade — from its inertia by direction, (c_acc + c_acc_pos)/"
+          "c_acc = 1/η², or its recuperation scale 1 + r = η² (`sumo_drvpw/fit/drivetrain.py`; – where it has "
+          "neither). Potential energy is exact at the wheels, so 1 there says the grade and the drivetrain tell "
+          "one story; on a planted symmetric drivetrain (η 0.85–0.95) it reads 1 within 1 %.", ""]
     for car in cars:
         L += [f"## {car['name']} (vehicle `{car['vehicle']}`)", ""]
         if car.get("error"):
@@ -265,7 +289,8 @@ def render(cars, took, cmd: str) -> str:
                   "held-out quality is that of the splits below): "
                   f"[closed_equation.toml](closing-the-loop/{fa['tag']}/closed_equation.toml) — {_terms(eq)}; "
                   f"tracer findings {', '.join(fa['findings']) or 'none'}; physical candidates "
-                  f"{', '.join(fa['sel']['chosen']) or 'none'}; corrections: {eq.measurement.describe() if eq.measurement else 'none'}. "
+                  f"{', '.join(fa['sel']['chosen']) or 'none'}{_wheel_phrase(eq.terms, fa['sel'], fa['rscale'])}; corrections: "
+                  f"{eq.measurement.describe() if eq.measurement else 'none'}. "
                   "On new logs of this car: "
                   f"`sumo-drvpw compare NEW_LOGS --vehicle {car['vehicle']} --equation "
                   f"docs/closing-the-loop/{fa['tag']}/closed_equation.toml --out DIR` (the corrections are applied "
@@ -532,7 +557,15 @@ def render(cars, took, cmd: str) -> str:
           "can be the mass. In SUMO the coefficients multiply the vType's mass: the deliverable books the "
           "car as these logs drove it when the vType carries the declared 1270 kg; if the extra mass is real "
           "and a study's i3 carries less, its grade, acc and roll coefficients over-book that car by the same "
-          "ratio — the logs cannot tell.",
+          "ratio — the logs cannot tell. The closed-loop equations carry the inertia by direction, and with "
+          "it a third reading (the summary's grade at the wheels): the deliverable's acc while speeding up "
+          "(c_acc + c_acc_pos = 1.29), while slowing down (1.05) and its grade (1.135) fit a drivetrain that "
+          "passes η = 0.90 each way with the declared mass (c_grade·η = 1.02) — or a lossless drivetrain, a "
+          "car 13–15 % heavier and a regenerative torque that under-reads by about a fifth (the battery "
+          "chain's η_r at its bound 1, docs/energy-chain-validation.md). Both put the rotating mass at "
+          "acc while speeding up / grade = 1.14, more than the 5 % above, so part of the asymmetry may be "
+          "the torque signal's at high torque. The logs cannot tell these apart either; the reading rules "
+          "out only a grade and a drivetrain that disagree (tests/test_drivetrain.py plants one).",
           "- Tried, not adopted: choosing the grade source a second time with the closed-loop terms "
           "(`--grade-choice recheck`: sequential, then the grade source once more with the closed-loop "
           "terms). On both i3 splits it switched to the logger offset; "
