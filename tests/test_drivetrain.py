@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from sumo_drvpw.fit.drivetrain import WHEEL_GRADE_BAND, drivetrain_eta, wheel_grade
 from sumo_drvpw.fit.physical import physical_reading, regime_fit
@@ -81,3 +82,15 @@ def test_asymmetric_inertia_with_an_exact_grade_is_flagged():
     assert b["grade"] == pytest.approx(1.0, abs=0.02)
     w = wheel_grade(b)
     assert w["value"] < WHEEL_GRADE_BAND[0] and not w["plausible"] and "disagree" in w["note"]
+
+
+@settings(max_examples=200, deadline=None)
+@given(eta=st.floats(0.6, 1.0), f=st.floats(1.0, 1.3), k=st.floats(0.7, 1.4))
+def test_exact_drivetrain_coefficients_read_back(eta, f, k):
+    """Coefficients of a drivetrain η each way, rotating-mass factor f and mass ratio k
+    (traction acc k·f/η, recuperation acc k·f·η, grade k/η) read back η and k exactly."""
+    terms = {"acc": k * f * eta, "acc_pos": k * f * (1.0 / eta - eta), "grade": k / eta}
+    w = wheel_grade(terms)
+    assert w["eta"] == pytest.approx(eta, rel=1e-9)
+    assert w["value"] == pytest.approx(k, rel=1e-9)
+    assert w["plausible"] == (WHEEL_GRADE_BAND[0] <= w["value"] <= WHEEL_GRADE_BAND[1])
