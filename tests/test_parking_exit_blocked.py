@@ -302,3 +302,54 @@ def test_a_car_switched_off_in_a_bus_bay_or_beside_the_lane_stays_off_until_its_
         sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
         cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
         assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=1e-4)
+
+
+@pytest.mark.parametrize("connection", ["libsumo", "traci"])
+def test_a_bus_whose_bay_stop_a_script_ends_dwells_there_until_it_is_back_on_the_road(tmp_path, connection):
+    """A 12-t e-bus dwelling in a bus bay (``parking="true"`` at a busStop), booked standing
+    there as in service (sim/parking.py), whose stop the user's own loop ends at 30 s, 30 s
+    before its planned end, while the flow blocks its way out: SUMO takes it out of its id
+    list until it is back on the road (about 200 s later). Measured 2026-11-28 before the
+    fix: booked 56.5 s of its 229-s trip (113 kJ of auxiliary energy at 2 kW); after: its
+    whole trip, as without the script (tripinfo duration 229 s; 458 kJ)."""
+    import xml.etree.ElementTree as ET_
+
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
+    (tmp_path / "a.add.xml").write_text('<additional><busStop id="bs" lane="e_0" startPos="300" endPos="330" '
+                                        'parkingLength="20"/></additional>')
+    bus = ('<vType id="ebus" vClass="bus" mass="12000" emissionClass="Energy/unknown">'
+           '<param key="constantPowerIntake" value="2000"/></vType>')
+    routes = ROUTES.format(params="").replace('<vType id="ecar"', bus + '<vType id="ecar"').replace(
+        '<vehicle id="p" type="ecar" depart="0" departSpeed="max"><route edges="e"/>\n    '
+        '<stop parkingArea="pa" duration="20"/>',
+        '<vehicle id="p" type="ebus" depart="0" departSpeed="max"><route edges="e"/>\n    '
+        '<stop busStop="bs" duration="60" parking="true"/>')
+    assert 'busStop="bs"' in routes
+    (tmp_path / "r.rou.xml").write_text(routes)
+    path = energy_scenario(tmp_path, 300, additional="a.add.xml", fcd=False)
+    conn = start_sumo(load_scenario(path).sumo_args + ["--tripinfo-output", str(tmp_path / "ti.xml")],
+                      connection=connection)
+    out_of_list = 0
+    try:
+        acc = Accountant(conn, scenario=path, keep_vehicles=True)
+        listener = conn.addStepListener(acc)
+        while conn.simulation.getTime() < 300 - 1e-9:
+            conn.simulationStep()
+            t = conn.simulation.getTime()
+            if abs(t - 30.0) < 1e-9:
+                conn.vehicle.resume("p")
+            out_of_list += 30.0 < t < 229.0 and "p" not in conn.vehicle.getIDList()
+        chain = acc.energy("p")["vtype_energy.ebus"]["chain"]
+        res = acc.result()
+        conn.removeStepListener(listener)
+    finally:
+        close_sumo(conn)
+    duration = next(float(ti.get("duration")) for ti in ET_.parse(tmp_path / "ti.xml").getroot() if ti.get("id") == "p")
+    assert out_of_list > 100  # the premise: SUMO left it out of its list while blocked
+    booked = res.vehicles.set_index("vehicle").loc["p", "time_s"]
+    assert booked == pytest.approx(duration, abs=1e-9)
+    assert chain["auxiliary_j"] == pytest.approx(2000.0 * duration, rel=1e-9)

@@ -44,7 +44,9 @@ a script ends (``vehicle.resume``) leaves SUMO's id list until it is back on the
 1.28: its getters answer "no value", −2³⁰, its emission output books it idling in its
 space): the loop tells it by the id list's count (one getLoadedIDList, as for a removed
 vehicle), asks for its signals from then on, and reads it, idling, from the space it
-parked in (:meth:`Parking.resume`). A stop that a script shortens (``setStop``,
+parked in (:meth:`Parking.resume`); a bus in a bay whose stop a script ends leaves the
+list alike and is booked dwelling there until it is back on the road (its FCD has no rows
+for that time, so a replay books none). A stop that a script shortens (``setStop``,
 ``setParkingAreaStop`` with a shorter duration) after it started is due at the end planned
 when it started: idling before then is not booked (a probe, 2026-11-27: the car of
 tests/test_parking_exit_blocked.py cut from ``until`` 40 s to 1 s at 30 s idles 19 steps
@@ -65,8 +67,6 @@ in one step (its ``until`` passed, the way free) is written by SUMO at speed 0 w
 acceleration of its last move into the space (getAcceleration −0.25 m/s² where its speed
 fell from 0.33 to 0 in the 1-s step), which the loop books as (0 − 0.33)/Δt: for SUMO's
 MMPEVEM i3, whose holding torque takes the acceleration at speed 0, −1.1e-5 of that car.
-A bus in a bay (``parking="true"`` at a busStop, booked dwelling) whose stop a script ends
-leaves SUMO's id list as a parked car does and is not booked until it is back on the road.
 """
 
 from __future__ import annotations
@@ -292,10 +292,15 @@ class Parking:
         tries to put them back on the road from the next step, idling them in their space
         while the way is blocked — out of its id list until they are back on the road
         (probed with SUMO 1.28: getIDList leaves such a car out, its emission output books
-        it idling). Their signals are read from now on; returns those parked."""
+        it idling). Their signals are read from now on. A bus dwelling in a bay leaves the
+        list alike: read, dwelling there, until it is back on the road. Returns those
+        parked or dwelling."""
         out = []
         for vid in vids:
             i = vmap.get(vid)
+            if i is not None and not ledger.veh_parked[i] and vid in self.dwell:
+                self.resumed.add(vid)  # a bus in a bay: dwelling there until back on the road
+                out.append(vid)
             if i is None or not ledger.veh_parked[i]:
                 continue
             if vid in self.off:  # switched off for its stop: off while it idles (SUMO 1.28
