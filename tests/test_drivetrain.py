@@ -94,3 +94,29 @@ def test_exact_drivetrain_coefficients_read_back(eta, f, k):
     assert w["eta"] == pytest.approx(eta, rel=1e-9)
     assert w["value"] == pytest.approx(k, rel=1e-9)
     assert w["plausible"] == (WHEEL_GRADE_BAND[0] <= w["value"] <= WHEEL_GRADE_BAND[1])
+
+
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_calibrate_says_the_grade_at_the_wheels(tmp_path, capsys, engine):
+    """`sumo-drvpw calibrate` on a motor-side log of a planted symmetric drivetrain (η 0.9)
+    with acc_pos among the candidates prints the grade at the wheels (≈ 1) and writes it into
+    the equation's physical reading, streamed and in memory alike."""
+    import pandas as pd
+
+    from sumo_drvpw.cli import main
+    from sumo_drvpw.model.equations import load_equation
+
+    x, pw, rng = _drive(n_trips=4)
+    pm = np.where(pw > 0, pw / 0.9, pw * 0.9) + rng.normal(0, 400, pw.size)
+    pd.DataFrame({"time_s": np.arange(pw.size) * 0.5, "speed_mps": x.v, "accel_mps2": x.a,
+                  "grade_rad": x.theta, "mass_kg": x.mass, "power_w": pm}).to_parquet(tmp_path / "log.parquet")
+    (tmp_path / "c.toml").write_text('terms = ["acc", "acc_pos", "grade", "aero", "roll"]\n')
+    out = tmp_path / "eq.toml"
+    assert main(["calibrate", str(tmp_path / "log.parquet"), "--candidates", str(tmp_path / "c.toml"),
+                 "--out", str(out), "--engine", engine]) == 0
+    printed = capsys.readouterr().out
+    eq = load_equation(out)
+    w = wheel_grade(eq.terms)
+    assert w["value"] == pytest.approx(1.0, abs=0.01)
+    assert f"grade at the wheels c_grade·η = {w['value']:.3f}" in printed and "warning: grade" not in printed
+    assert eq.provenance["physical"]["reading"]["grade"]["at_wheels"]["value"] == pytest.approx(w["value"], rel=1e-9)

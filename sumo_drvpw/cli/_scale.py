@@ -109,9 +109,9 @@ def fit_road_load(args, st, cands, veh, name: str, provenance: dict):
         from sumo_drvpw.cli.calibrate import hint_grade_source, log_columns
 
         hint_grade_source(note, log_columns(args.logs), measurement_options(args))
-    from sumo_drvpw.cli.calibrate import warn_drag
+    from sumo_drvpw.cli.calibrate import say_physics
 
-    warn_drag(eq, veh, st.rho_sum / st.mass_n if st.mass_n else None)
+    say_physics(eq, veh, st.rho_sum / st.mass_n if st.mass_n else None)
     return eq, note, res
 
 

@@ -143,19 +143,25 @@ def physical(eq, m, candidates):
         print(note)
         hint_grade_source(note, m.log.df.columns, m.log.options.measurement)
     rho = np.asarray(m.inputs.rho, float)[np.asarray(m.usable, bool)]
-    warn_drag(eq, m.vehicle, float(np.nanmean(rho)) if rho.size else None)
+    say_physics(eq, m.vehicle, float(np.nanmean(rho)) if rho.size else None)
     return eq, note
 
 
-def warn_drag(eq, vehicle, rho_kgm3) -> None:
+def say_physics(eq, vehicle, rho_kgm3) -> None:
     """Print a warning when the written aero coefficient is no drag of the vehicle
-    (:func:`sumo_drvpw.fit.physical.drag_against_vehicle`)."""
+    (:func:`sumo_drvpw.fit.physical.drag_against_vehicle`), and the grade at the wheels
+    where the equation shows its drivetrain's η (:mod:`sumo_drvpw.fit.drivetrain`; a
+    warning when it disagrees with the grade)."""
+    from sumo_drvpw.fit.drivetrain import describe
     from sumo_drvpw.fit.physical import drag_against_vehicle
     from sumo_drvpw.model.constants import RHO_DEFAULT
 
     note = drag_against_vehicle(eq, vehicle, rho_kgm3 if rho_kgm3 and rho_kgm3 > 0 else RHO_DEFAULT)
     if note:
         print(f"warning: {note}")
+    w = (eq.provenance.get("physical", {}).get("reading", {}).get("grade") or {}).get("at_wheels")
+    if w:
+        print(("" if w["plausible"] else "warning: ") + f"grade {describe(w)}")
 
 
 def hint_grade_source(note: str, columns, meas) -> None:
