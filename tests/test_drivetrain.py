@@ -120,3 +120,25 @@ def test_calibrate_says_the_grade_at_the_wheels(tmp_path, capsys, engine):
     assert w["value"] == pytest.approx(1.0, abs=0.01)
     assert f"grade at the wheels c_grade·η = {w['value']:.3f}" in printed and "warning: grade" not in printed
     assert eq.provenance["physical"]["reading"]["grade"]["at_wheels"]["value"] == pytest.approx(w["value"], rel=1e-9)
+
+
+def test_calibrate_says_when_the_constraints_held_the_grade(tmp_path, capsys):
+    """The grade logged 2.5 × too steep reads 0.4 free (implausible): the candidate file's
+    constraint holds it at 1, and the grade at the wheels is printed as what it then is, a
+    reading of η alone — no warning."""
+    import pandas as pd
+
+    from sumo_drvpw.cli import main
+
+    x, pw, rng = _drive(n_trips=4)
+    pm = np.where(pw > 0, pw / 0.9, pw * 0.9) + rng.normal(0, 400, pw.size)
+    pd.DataFrame({"time_s": np.arange(pw.size) * 0.5, "speed_mps": x.v, "accel_mps2": x.a,
+                  "grade_rad": 2.5 * x.theta, "mass_kg": x.mass, "power_w": pm}).to_parquet(tmp_path / "log.parquet")
+    (tmp_path / "c.toml").write_text('terms = ["acc", "acc_pos", "grade", "aero", "roll"]\n'
+                                     '[constraints]\ngrade = { fixed = 1.0 }\n')
+    assert main(["calibrate", str(tmp_path / "log.parquet"), "--candidates", str(tmp_path / "c.toml"),
+                 "--out", str(tmp_path / "eq.toml")]) == 0
+    printed = capsys.readouterr().out
+    assert "physically constrained fit used" in printed
+    assert "the grade is held at its constraint, so this reads only η" in printed
+    assert "warning: grade" not in printed

@@ -159,9 +159,12 @@ def say_physics(eq, vehicle, rho_kgm3) -> None:
     note = drag_against_vehicle(eq, vehicle, rho_kgm3 if rho_kgm3 and rho_kgm3 > 0 else RHO_DEFAULT)
     if note:
         print(f"warning: {note}")
-    w = (eq.provenance.get("physical", {}).get("reading", {}).get("grade") or {}).get("at_wheels")
+    phys = eq.provenance.get("physical", {})
+    w = (phys.get("reading", {}).get("grade") or {}).get("at_wheels")
     if w:
-        print(("" if w["plausible"] else "warning: ") + f"grade {describe(w)}")
+        held = "grade" in phys.get("active", ())  # the constraints set it, not the data
+        print(("" if w["plausible"] or held else "warning: ") + f"grade {describe(w)}"
+              + (" — the grade is held at its constraint, so this reads only η" if held else ""))
 
 
 def hint_grade_source(note: str, columns, meas) -> None:
