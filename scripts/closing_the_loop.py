@@ -298,7 +298,7 @@ def calibrate_physical(m, name: str):
 def fit_terms(m, terms, name: str, fixed: dict | None = None):
     """Least squares of ``terms`` on a Measured's usable samples; physical constraints
     (fit.physical.DEFAULT_CONSTRAINTS) when the free fit is implausible; ``fixed``: term →
-    value kept as given. Returns (Equation, {"used", "reading", "free", "why"})."""
+    value kept as given. Returns (Equation, {"used", "reading", "free", "why", "active"})."""
     from sumo_drvpw.fit.ols import gram
     from sumo_drvpw.fit.physical import (DEFAULT_CONSTRAINTS, constrained_fit, implausible,
                                          physical_reading)
@@ -318,7 +318,7 @@ def fit_terms(m, terms, name: str, fixed: dict | None = None):
         cons = dict({t: c for t, c in DEFAULT_CONSTRAINTS.items() if t not in fixed_c}, **fixed_c)
         fit = constrained_fit(g, cons)
         info.update(used="constrained", why="free fit implausible: " + ", ".join(bad))
-    info["reading"] = physical_reading(fit.params, rho)
+    info["reading"], info["active"] = physical_reading(fit.params, rho), list(fit.active)
     return Equation(name=name, terms=dict(fit.params)), info
 
 

@@ -24,6 +24,8 @@ def _wheel_cell(run):
     w = wheel_grade(run["final_eq"].terms, 1.0 + run["rscale"] if sel.get("regime") else None)
     if w is None:
         return "–"
+    if "grade" in run["final_info"].get("active", ()):  # held by a constraint: reads η only
+        return f"– (grade held at {run['final_eq'].terms['grade']:g}; η {w['eta']:.3f})"
     return f"{w['value']:.3f} (η {w['eta']:.3f})" + ("" if w["plausible"] else " ⚠")
 
 
