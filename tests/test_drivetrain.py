@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from sumo_drvpw.fit.drivetrain import WHEEL_GRADE_BAND, drivetrain_eta, wheel_grade
+from sumo_drvpw.fit.drivetrain import ETA_INERTIA_MIN, WHEEL_GRADE_BAND, drivetrain_eta, wheel_grade
 from sumo_drvpw.fit.physical import physical_reading, regime_fit
 from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.terms import Inputs, term_matrix
@@ -85,12 +85,17 @@ def test_asymmetric_inertia_with_an_exact_grade_is_flagged():
 
 
 @settings(max_examples=200, deadline=None)
-@given(eta=st.floats(0.6, 1.0), f=st.floats(1.0, 1.3), k=st.floats(0.7, 1.4))
+@given(eta=st.floats(0.6, 1.2), f=st.floats(1.0, 1.3), k=st.floats(0.7, 1.4))
 def test_exact_drivetrain_coefficients_read_back(eta, f, k):
     """Coefficients of a drivetrain η each way, rotating-mass factor f and mass ratio k
-    (traction acc k·f/η, recuperation acc k·f·η, grade k/η) read back η and k exactly."""
+    (traction acc k·f/η, recuperation acc k·f·η, grade k/η) read back η and k exactly —
+    where η is a drivetrain's (ETA_INERTIA_MIN … 1); else no grade at the wheels."""
     terms = {"acc": k * f * eta, "acc_pos": k * f * (1.0 / eta - eta), "grade": k / eta}
     w = wheel_grade(terms)
+    assert drivetrain_eta(terms)[0] == pytest.approx(eta, rel=1e-9)
+    if not ETA_INERTIA_MIN <= drivetrain_eta(terms)[0] <= 1.0:
+        assert w is None
+        return
     assert w["eta"] == pytest.approx(eta, rel=1e-9)
     assert w["value"] == pytest.approx(k, rel=1e-9)
     assert w["plausible"] == (WHEEL_GRADE_BAND[0] <= w["value"] <= WHEEL_GRADE_BAND[1])

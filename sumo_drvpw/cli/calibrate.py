@@ -162,9 +162,11 @@ def say_physics(eq, vehicle, rho_kgm3) -> None:
     phys = eq.provenance.get("physical", {})
     w = (phys.get("reading", {}).get("grade") or {}).get("at_wheels")
     if w:
-        held = "grade" in phys.get("active", ())  # the constraints set it, not the data
-        print(("" if w["plausible"] or held else "warning: ") + f"grade {describe(w)}"
-              + (" — the grade is held at its constraint, so this reads only η" if held else ""))
+        if "grade" in phys.get("active", ()):  # the constraints set it, not the data
+            print(f"grade {describe(dict(w, plausible=True))} — the grade is held at its constraint, "
+                  "so this reads only η")
+        else:
+            print(("" if w["plausible"] else "warning: ") + f"grade {describe(w)}")
 
 
 def hint_grade_source(note: str, columns, meas) -> None:

@@ -28,6 +28,9 @@ from __future__ import annotations
 
 import math
 
+#: the inertia-by-direction candidate reads as (c_acc + c_acc_pos)/c_acc = 1/η²: η below
+#: this (ratio above 1/η²) is not a drivetrain; nor is η above 1
+ETA_INERTIA_MIN = 0.8
 #: grade at the wheels (c_grade·η) read as consistent: potential energy is exact, the
 #: band leaves 10 % for the declared mass and the grade's measurement (issue #11's band)
 WHEEL_GRADE_BAND = (0.9, 1.1)
@@ -48,7 +51,8 @@ def drivetrain_eta(terms: dict[str, float], regime_scale: float | None = None) -
 
 def wheel_grade(terms: dict[str, float], regime_scale: float | None = None) -> dict | None:
     """The grade coefficient at the wheels, c_grade·η (module docstring), or None without a
-    grade term or without an η (:func:`drivetrain_eta`).
+    grade term or without a drivetrain's η (:func:`drivetrain_eta`; η outside
+    ``ETA_INERTIA_MIN`` … 1 is none, and its own reading says so).
 
     Returns ``{"value", "eta", "eta_from", "plausible", "note"}``.
     """
@@ -57,6 +61,8 @@ def wheel_grade(terms: dict[str, float], regime_scale: float | None = None) -> d
     if g is None or got is None:
         return None
     eta, src = got
+    if not ETA_INERTIA_MIN <= eta <= 1.0:
+        return None
     w = float(g) * eta
     lo, hi = WHEEL_GRADE_BAND
     ok = lo <= w <= hi

@@ -60,7 +60,7 @@ from scipy.optimize import lsq_linear
 from scipy.stats import wilcoxon
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.fit.drivetrain import drivetrain_eta, wheel_grade
+from sumo_drvpw.fit.drivetrain import ETA_INERTIA_MIN, drivetrain_eta, wheel_grade
 from sumo_drvpw.fit.ols import Gram, gram
 from sumo_drvpw.model.constants import RHO_DEFAULT
 
@@ -75,11 +75,6 @@ CDA_MIN = 0.0
 #: (grade: 1/η ≥ 1 behind a drivetrain; = 1 at the wheels, declare ``grade = { fixed = 1.0 }``)
 DEFAULT_CONSTRAINTS = {"grade": {"min": 1.0, "max": 1.3}, "aero": {"min": 0.0},
                        "aero_rho": {"min": 0.0}, "roll": {"min": 0.0}, "acc": {"min": 1.0}}
-
-
-#: the inertia-by-direction candidate reads as (c_acc + c_acc_pos)/c_acc = 1/η²: η below
-#: this (ratio above 1/η²) is not a drivetrain
-ETA_INERTIA_MIN = 0.8
 
 
 def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> dict[str, dict]:
