@@ -17,9 +17,9 @@ one story. The product is 1 whichever way the fit shares η between its terms: o
 symmetric drivetrain (η 0.85–0.95, tests/test_drivetrain.py) the inertia candidate reads
 η too high (it also absorbs what the other terms lose in braking: 0.92 for 0.85) and the
 free grade too low by about the same factor (1.09 for 1/0.85 = 1.18), and the product
-stays within 1 % of 1. A product well away from 1
-says the grade and the drivetrain disagree: a grade the data attenuate or exaggerate, a
-mass the log gets wrong, or an asymmetry that is no drivetrain. (A power signal that reads
+stays within 1 % of 1. A product well away from 1 says the grade and the drivetrain
+disagree: a grade the data attenuate or exaggerate, a mass the log gets wrong, or an
+asymmetry that is no drivetrain. (A power signal that reads
 s_t times true in traction and s_r times in recuperation gives c_grade·η = √(s_t·s_r): one
 that over-reads one direction as much as it under-reads the other looks like a drivetrain.)
 """
