@@ -46,6 +46,14 @@ K = 5
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def _at_wheels(eq, sel, r) -> str:
+    """The closed-loop grade at the wheels (fit.drivetrain.wheel_grade), for the fold's line."""
+    from sumo_drvpw.fit.drivetrain import wheel_grade
+
+    w = wheel_grade(eq.terms, 1.0 + r if sel.get("regime") else None)
+    return "" if w is None else f" (at the wheels {w['value']:.3f}, η {w['eta']:.3f})"
+
+
 def read_as(full, meas):
     """(battery Measured, motor-power Measured, dropouts) of ``full`` read with ``meas``."""
     from sumo_drvpw.data.dropouts import log_dropouts
@@ -151,7 +159,7 @@ def main() -> int:
             flagged.update({t: not bool(logged[tr == t].mean() > 0.5) for t in held})
             del closed
             print(f"fold {j + 1} ({time.perf_counter() - t0:.0f} s): {_tau(tau['tau_s'])} + "
-                  f"[{', '.join(sel['chosen']) or 'none'}], grade {eq.terms['grade']:.3f}; "
+                  f"[{', '.join(sel['chosen']) or 'none'}], grade {eq.terms['grade']:.3f}{_at_wheels(eq, sel, r)}; "
                   + "; ".join(line), flush=True)
     summ = ROOT / "docs" / "validation" / "summary.json"
     if summ.exists():  # the committed headline, for a check that this script reproduces it

@@ -543,7 +543,10 @@ def render(cars, took, cmd: str) -> str:
           "dominate the mean (`fit.trip_energy.net_energy_errors`; on the 50 i3 trips the net energy is "
           "46–90 % of the traction energy, so the figures above hold with it). Not adopted yet: it was tried "
           "after the traction result was seen (two protocols compared on the same 50 trips), and its grade "
-          "stays outside issue #11's ±10 % band — it needs a replication on other cars' logs (the shared "
+          "stays outside issue #11's ±10 % band at the motor shaft (1.12–1.14; at the wheels, × the η 0.90–0.91 "
+          "of each fold's inertia by direction, 1.00–1.03: `scripts/battery_nested_cv.py` prints it per fold, "
+          "2026-11-28; the traction criterion's folds that carry the inertia read 0.97–1.02, the two without it "
+          "no η) — it needs a replication on other cars' logs (the shared "
           "Prius Gen-2 and JLU logs have too few training trips "
           "for these choices, MIN_CV_TRIPS: with `--only prius2,jlu --selection-energy net` their results are "
           "the same as above).",
