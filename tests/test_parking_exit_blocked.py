@@ -49,6 +49,31 @@ def run_against_sumo(toml, d, **overrides):
     return res, pd.read_csv(d / "o" / "chain_vehicles.csv").set_index("key"), sumo_wh, nan
 
 
+def resumed_at_30(path, connection, extra=(), on_step=None):
+    """Run scenario ``path`` in the user's own loop with an Accountant, ending vehicle p's
+    stop at 30 s (``vehicle.resume``); ``on_step(conn, t)`` after every step. Returns p's
+    energies (Accountant.energy) and the run's result."""
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    conn = start_sumo(load_scenario(path).sumo_args + list(extra), connection=connection)
+    try:
+        acc = Accountant(conn, scenario=path, keep_vehicles=True)
+        listener = conn.addStepListener(acc)
+        while conn.simulation.getTime() < 300 - 1e-9:
+            conn.simulationStep()
+            t = conn.simulation.getTime()
+            if abs(t - 30.0) < 1e-9:
+                conn.vehicle.resume("p")
+            if on_step is not None:
+                on_step(conn, t)
+        energy, res = acc.energy("p"), acc.result()
+        conn.removeStepListener(listener)
+    finally:
+        close_sumo(conn)
+    return energy, res
+
+
 @pytest.mark.parametrize("watts,connection", [(100.0, "libsumo"), (900.0, "libsumo"), (100.0, "traci")])
 def test_a_car_blocked_in_its_parking_space_is_booked_idling_as_sumo_books_it(tmp_path, watts, connection):
     """The queue behind a car standing 100 s near the lane's end holds the parked car about
@@ -209,29 +234,17 @@ def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_
     speed and acceleration) as through libsumo. A car switched off for its parking
     (``shutOffStopDuration`` 5 s < its 18 s) stays off: SUMO 1.28 writes its idling steps and
     the step it is back on the road at 0 (before the fix: 54.23 Wh booked against 49.51)."""
-    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
-    from sumo_drvpw.sim.scenario import load_scenario
-
     params = '<param key="shutOffStopDuration" value="5"/>' if off else ""
     path = scenario(tmp_path)
     (tmp_path / "r.rou.xml").write_text(ROUTES.format(params=params).replace('duration="20"', 'until="40"'))
-    conn = start_sumo(load_scenario(path).sumo_args, connection=connection)
-    try:
-        acc = Accountant(conn, scenario=path, keep_vehicles=True)
-        listener = conn.addStepListener(acc)
-        while conn.simulation.getTime() < 300 - 1e-9:
-            conn.simulationStep()
-            t = conn.simulation.getTime()
-            if abs(t - 30.0) < 1e-9:
-                conn.vehicle.resume("p")
-            if removed_at is not None and abs(t - removed_at) < 1e-9:
-                assert "p" not in conn.vehicle.getIDList()  # idling, out of SUMO's list
-                conn.vehicle.remove("p")
-        booked = acc.energy("p")["vtype_energy.ecar"]["chain"]["net_j"] / 3600.0
-        res = acc.result()
-        conn.removeStepListener(listener)
-    finally:
-        close_sumo(conn)
+
+    def remove(conn, t):
+        if removed_at is not None and abs(t - removed_at) < 1e-9:
+            assert "p" not in conn.vehicle.getIDList()  # idling, out of SUMO's list
+            conn.vehicle.remove("p")
+
+    energy, res = resumed_at_30(path, connection, on_step=remove)
+    booked = energy["vtype_energy.ecar"]["chain"]["net_j"] / 3600.0
     sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
     assert not nan
     assert booked == pytest.approx(sumo_wh["p"], rel=1e-6)
@@ -314,9 +327,6 @@ def test_a_bus_whose_bay_stop_a_script_ends_dwells_there_until_it_is_back_on_the
     whole trip, as without the script (tripinfo duration 229 s; 458 kJ)."""
     import xml.etree.ElementTree as ET_
 
-    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
-    from sumo_drvpw.sim.scenario import load_scenario
-
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
     (tmp_path / "a.add.xml").write_text('<additional><busStop id="bs" lane="e_0" startPos="300" endPos="330" '
@@ -331,23 +341,10 @@ def test_a_bus_whose_bay_stop_a_script_ends_dwells_there_until_it_is_back_on_the
     assert 'busStop="bs"' in routes
     (tmp_path / "r.rou.xml").write_text(routes)
     path = energy_scenario(tmp_path, 300, additional="a.add.xml", fcd=False)
-    conn = start_sumo(load_scenario(path).sumo_args + ["--tripinfo-output", str(tmp_path / "ti.xml")],
-                      connection=connection)
-    out_of_list = 0
-    try:
-        acc = Accountant(conn, scenario=path, keep_vehicles=True)
-        listener = conn.addStepListener(acc)
-        while conn.simulation.getTime() < 300 - 1e-9:
-            conn.simulationStep()
-            t = conn.simulation.getTime()
-            if abs(t - 30.0) < 1e-9:
-                conn.vehicle.resume("p")
-            out_of_list += 30.0 < t < 229.0 and "p" not in conn.vehicle.getIDList()
-        chain = acc.energy("p")["vtype_energy.ebus"]["chain"]
-        res = acc.result()
-        conn.removeStepListener(listener)
-    finally:
-        close_sumo(conn)
+    out = []  # steps the bus is out of SUMO's id list, before it arrives
+    energy, res = resumed_at_30(path, connection, ["--tripinfo-output", str(tmp_path / "ti.xml")],
+                                lambda conn, t: out.append(30.0 < t < 229.0 and "p" not in conn.vehicle.getIDList()))
+    chain, out_of_list = energy["vtype_energy.ebus"]["chain"], sum(out)
     duration = next(float(ti.get("duration")) for ti in ET_.parse(tmp_path / "ti.xml").getroot() if ti.get("id") == "p")
     assert out_of_list > 100  # the premise: SUMO left it out of its list while blocked
     row = res.vehicles.set_index("vehicle").loc["p"]
