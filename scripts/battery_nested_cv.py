@@ -40,17 +40,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import closing_the_loop as C  # noqa: E402
-from closing_the_loop_report import _tau  # noqa: E402
+from closing_the_loop_report import _tau, wheel_of  # noqa: E402
 
 K = 5
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _at_wheels(eq, sel, r) -> str:
-    """The closed-loop grade at the wheels (fit.drivetrain.wheel_grade), for the fold's line."""
-    from sumo_drvpw.fit.drivetrain import wheel_grade
-
-    w = wheel_grade(eq.terms, 1.0 + r if sel.get("regime") else None)
+    """The closed-loop grade at the wheels (closing_the_loop_report.wheel_of), for the fold's line."""
+    w = wheel_of(eq.terms, sel, r)
     return "" if w is None else f" (at the wheels {w['value']:.3f}, η {w['eta']:.3f})"
 
 

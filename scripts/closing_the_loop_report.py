@@ -16,12 +16,17 @@ def _f(x, nd=3):
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
 
 
-def _wheel_cell(run):
-    """The closed-loop equation's grade at the wheels (fit.drivetrain.wheel_grade), or –."""
+def wheel_of(terms, sel, rscale):
+    """A closed-loop fit's grade at the wheels (fit.drivetrain.wheel_grade), its η from the
+    inertia by direction or, where the regime was chosen, the recuperation scale 1 + r."""
     from sumo_drvpw.fit.drivetrain import wheel_grade
 
-    sel = run.get("sel") or {}
-    w = wheel_grade(run["final_eq"].terms, 1.0 + run["rscale"] if sel.get("regime") else None)
+    return wheel_grade(terms, 1.0 + rscale if (sel or {}).get("regime") else None)
+
+
+def _wheel_cell(run):
+    """The closed-loop equation's grade at the wheels, or –."""
+    w = wheel_of(run["final_eq"].terms, run.get("sel"), run["rscale"])
     if w is None:
         return "–"
     if "grade" in run["final_info"].get("active", ()):  # held by a constraint: reads η only
@@ -30,9 +35,9 @@ def _wheel_cell(run):
 
 
 def _wheel_phrase(terms, sel, rscale):
-    from sumo_drvpw.fit.drivetrain import describe, wheel_grade
+    from sumo_drvpw.fit.drivetrain import describe
 
-    w = wheel_grade(terms, 1.0 + rscale if (sel or {}).get("regime") else None)
+    w = wheel_of(terms, sel, rscale)
     return "" if w is None else f"; grade {describe(w)}"
 
 

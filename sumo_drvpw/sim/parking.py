@@ -298,10 +298,12 @@ class Parking:
         out = []
         for vid in vids:
             i = vmap.get(vid)
-            if i is not None and not ledger.veh_parked[i] and vid in self.dwell:
-                self.resumed.add(vid)  # a bus in a bay: dwelling there until back on the road
-                out.append(vid)
-            if i is None or not ledger.veh_parked[i]:
+            if i is None:
+                continue
+            if not ledger.veh_parked[i]:
+                if vid in self.dwell:  # a bus in a bay: dwelling there until back on the road
+                    self.resumed.add(vid)
+                    out.append(vid)
                 continue
             if vid in self.off:  # switched off for its stop: off while it idles (SUMO 1.28
                 continue           # writes 0), on a step after it is back on the road
