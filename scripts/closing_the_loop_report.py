@@ -593,6 +593,14 @@ def render(cars, took, cmd: str) -> str:
           "- The temperature effect replicates on both i3 splits but its form does not separate: `cold drag` "
           "(v²·(T_ref − T)) and `c_r(T)` (m·g·v·(T_ref − T)) are nearly collinear on these trips; the cross-"
           "validation picks one and then rejects the other.",
+          "- Tyre and drivetrain warm-up, checked and not found (`.venv/bin/python scripts/warmup_check.py "
+          "--data ../shared/data`, exploratory: the deliverable's structure in the trip-grouped 5-fold over all "
+          "50 trips, held-out trips included): an extra rolling force decaying with the time since the trip's "
+          "start, exp(−t/τ), raises the mean abs. trip traction-energy error from 3.21 % to 3.25–3.33 % for τ "
+          "300–3600 s, helps on 23–26 of 50 trips (Wilcoxon p ≥ 0.69), and its start excess (46 % of c_r at "
+          "300 s, 227 % at 3600 s) grows with τ: it trades against the `roll` term instead of finding a warm-up. "
+          "The logs do not say how long the car stood before a trip (repeat trips start minutes apart), so a "
+          "warm-up that depends on it is not ruled out; one that follows the trip's start is.",
           "- Input checks (`sumo_drvpw/fit/input_checks.py`) read inputs only, never a held-out target: a "
           "logger dropout (speed and accelerometer exactly linear in time for ≥ 5 s within the logged digits: a "
           "held or linearly filled stretch; a real accelerometer never draws a straight line for seconds) is taken "
