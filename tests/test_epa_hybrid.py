@@ -25,6 +25,7 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared" / "data"
 
 ETA, P_L, P_OFF = 0.42, 3000.0, 4000.0  # the planted line: η, idle fuel per litre [W/L], engine off below [W]
+COLD_RATIO = 1.2  # the Cold CO test's bag 3 burns 20 % more than the FTP's
 
 
 def _hybrid_litres(v, a_n, b, c, m, disp) -> tuple[float, float]:
@@ -66,6 +67,10 @@ def _write(folder: Path, speeds: dict, n: int = 24, seed: int = 3) -> list[dict]
             rows.append(base | {"Test Procedure Description": "HWFE", "RND_ADJ_FE": _hmpg(speeds["hwfet"], *car)})
             if i % 2:
                 rows.append(base | {"Test Procedure Description": "US06", "RND_ADJ_FE": _hmpg(speeds["us06"], *car)})
+            if i < 22:  # the FTP at −6.7 °C on winter fuel: bag 3 (hot start) at 1/1.2 of the FTP's economy
+                rows.append(base | {"Test Procedure Description": "Cold CO", "Test Fuel Type Description":
+                                    "Cold CO Regular (Tier 2)", "FE Bag 1": b3 * 0.5, "FE Bag 2": b4 * 0.9,
+                                    "FE Bag 3": b3 / COLD_RATIO, "RND_ADJ_FE": b4 * 0.8})
             cars.append({"year": year, "car": car})
         conv = dict(rows[1]) | {"Represented Test Veh Model": "Sedan", "Test Vehicle ID": f"C{year}"}
         car0 = cars[-1]["car"]
@@ -116,6 +121,18 @@ def test_cold_start_by_hand(planted):
     assert res["cold_start"]["median_ml"] == pytest.approx(np.median(hot) * 0.25 * 1000, rel=1e-6)
 
 
+def test_warm_running_in_the_cold_by_hand(planted):
+    """44 configurations tested both ways, bag 3 at −6.7 °C burning 20 % more: 0.2 / 30.6 K
+    per kelvin; the newest year predicted exactly with it, 1/1.2 − 1 off without it."""
+    _, res, _, _ = planted
+    rn = res["running"]
+    assert rn["configurations"] == 44 and rn["bag3_ratio"] == pytest.approx(COLD_RATIO, rel=1e-9)
+    assert rn["running_per_k"] == pytest.approx((COLD_RATIO - 1) / (ef.FTP_AIR_C - ef.COLD_CO_AIR_C), rel=1e-9)
+    h = rn["held_out"]
+    assert h["mean_abs_error_with"] < 1e-9 and h["mean_abs_error_without"] == pytest.approx(1 - 1 / COLD_RATIO)
+    assert res["equation"]["chain"]["running_fuel_per_k"] == pytest.approx(rn["running_per_k"], abs=1e-6)
+
+
 def test_evaluator_books_no_fuel_below_the_threshold():
     """Standing and creeping below P_off: no fuel; above it: p_L·D + P/η, sample by sample."""
     obs = pd.DataFrame([{"config": "x", "test": "hwfet", "vehicle_type": "Car", "etw_kg": 1500.0, "a_n": 150.0,
@@ -144,9 +161,12 @@ def test_builtin_is_what_the_study_writes_on_the_shared_lists(shared):
     assert shared["counts"]["full hybrids"] > 50 and shared["counts"]["mild hybrids (town below highway) left out"] > 0
     eq, want = load_equation(eh.NAME), equation_from_dict(shared["equation"])
     assert eq.terms == pytest.approx(want.terms) and eq.predicts == "fuel"
-    for k in ("marginal_efficiency", "idle_fuel_power_w", "engine_off_below_w", "cold_start_fuel_l"):
+    for k in ("marginal_efficiency", "idle_fuel_power_w", "engine_off_below_w", "cold_start_fuel_l",
+              "running_fuel_per_k"):
         assert getattr(eq.chain, k) == pytest.approx(getattr(want.chain, k)), k
     assert 0.02 < eq.chain.cold_start_fuel_l < 0.2
+    h = shared["running"]["held_out"]  # the warm-running factor predicts a newer model year's cold test
+    assert 0.001 < eq.chain.running_fuel_per_k < 0.01 and h["mean_abs_error_with"] < h["mean_abs_error_without"]
 
 
 def test_the_hybrid_burns_less_than_the_conventional_car_on_the_prius_trips(shared):
@@ -164,7 +184,7 @@ def test_the_hybrid_burns_less_than_the_conventional_car_on_the_prius_trips(shar
 def test_sumo_run_books_no_fuel_while_a_hybrid_stands(tmp_path):
     """A real SUMO run (city, 300 s, 0.5-s steps) with the built-in hybrid: per vehicle, the
     fuel is Σ over its steps of (p_L·D + P/η)·Δt where its driving power exceeds the
-    threshold and nothing elsewhere — standing and creeping included — from the run's own
+    threshold, times the warm-running factor at the scenario's 20 °C, and nothing elsewhere — standing and creeping included — from the run's own
     per-step powers (trace); below the engine-on-throughout form; class total = Σ vehicles."""
     pytest.importorskip("libsumo")
     from sumo_drvpw.cli import main as cli_main
@@ -180,12 +200,15 @@ def test_sumo_run_books_no_fuel_while_a_hybrid_stands(tmp_path):
     assert len(veh) > 10 and set(fuel.index) == set(veh.index)
     dt = float(np.median(np.diff(np.unique(tr["time_s"]))))
     p = tr["p_total_w"].to_numpy()
-    tr["fuel_j"] = np.where(p > ch.engine_off_below_w, ch.idle_fuel_power_w + p / ch.marginal_efficiency, 0.0) * dt
+    warm = 1.0 + ch.running_fuel_per_k * (ch.cold_start_ref_c - 20.0)  # the city scenario's air: 20 °C
+    assert ch.running_fuel_per_k > 0
+    tr["fuel_j"] = np.where(p > ch.engine_off_below_w, ch.idle_fuel_power_w + p / ch.marginal_efficiency,
+                            0.0) * dt * warm
     want = tr.groupby("vehicle")["fuel_j"].sum().reindex(veh.index)
     got = fuel["fuel_kwh"].reindex(veh.index) * 3.6e6
     assert np.allclose(got, want, rtol=1e-9, atol=1e-6)
     assert (tr["speed_mps"] < 0.1).sum() > 100 and (tr.loc[tr["speed_mps"] < 0.1, "fuel_j"] == 0).all()
-    always_on = ch.idle_fuel_power_w * veh["time_s"] + veh["traction_total_j"] / ch.marginal_efficiency
+    always_on = (ch.idle_fuel_power_w * veh["time_s"] + veh["traction_total_j"] / ch.marginal_efficiency) * warm
     assert (got < always_on).all()
     cls = pd.read_csv(out / "chain_classes.csv").set_index("key")
     assert cls.loc["passenger", "fuel_l"] == pytest.approx(fuel["fuel_l"].sum(), rel=1e-9)

@@ -46,6 +46,11 @@ wheels) fits the same selection better in sample — 5.1 % against 6.2 %, at 2 k
 46 % of the braking energy (tried once, after) — but the evaluator's fuel form has none, so
 the built-in keeps the form SUMO runs.
 
+A warm engine's extra fuel in the cold (``running_fuel_per_k``, a share per kelvin below
+the FTP's 23.9 °C) is taken as for the conventional chains: the Cold CO test's bag 3 over
+the FTP's, the same schedule after the same soak (:func:`running_in_the_cold`), held out by
+model year.
+
 **Held out**: the newest model year predicted by the fit on the older ones and the oldest
 by the newer, with each car's road load and with the class default (medians of the cars'
 road load per kg, ETW and displacement). **Real-world check**: the Prius Gen 2's two OBD
@@ -242,6 +247,34 @@ def cold_start(obs: pd.DataFrame) -> dict:
             "q25_ml": float(x.quantile(0.25)), "q75_ml": float(x.quantile(0.75))}
 
 
+def running_in_the_cold(lists: pd.DataFrame, tests: pd.DataFrame, speeds) -> dict:
+    """A warm engine's extra fuel in the cold, as the conventional chains take it
+    (:mod:`~sumo_drvpw.validation.epa_cold`): per full-hybrid configuration with a Cold CO
+    test (the FTP at −6.7 °C) and an FTP, the Cold CO bag 3 over the FTP's bag 3 (the
+    hot-start 505 s after the same 10-min soak) as a share per kelvin; the median, and held
+    out by model year (:func:`epa_cold._running_held_out`). A hybrid's bag 3 alone is not
+    charge-sustaining, but both tests' bags 3 run the same schedule after the same soak."""
+    from sumo_drvpw.validation.epa_cold import _running_held_out
+
+    dist = ef._distance_m(speeds["udds_hot"][:506])
+    full = set(tests["config"])
+    c = lists[lists["procedure"].eq(ef.COLD_CO) & lists["derived"].eq("No") & lists["config"].isin(full)
+              & (lists["fe_bag3"] > 0)]
+    w = tests[tests["procedure"].isin(ef.FTP) & (tests["fe_bag3"] > 0)]
+    pair = pd.DataFrame({"bag3_l": ef._litres(dist, c["fe_bag3"]).groupby(c["config"]).median(),
+                         "warm_bag3_l": ef._litres(dist, w["fe_bag3"]).groupby(w["config"]).median(),
+                         "year": tests.groupby("config")["model_year"].first()}).dropna()
+    span = ef.FTP_AIR_C - ef.COLD_CO_AIR_C
+    ratio = pair["bag3_l"] / pair["warm_bag3_l"]
+    pair["running_per_k"] = ((ratio - 1.0) / span).where(ratio.between(*ef.RECORD_RATIO))
+    g = pair.dropna(subset=["running_per_k"])
+    if len(g) < ef.MIN_COLD_PAIRS:
+        return {"configurations": int(len(g)), "running_per_k": 0.0}
+    return {"configurations": int(len(g)), "running_per_k": float(g["running_per_k"].median()),
+            "bag3_ratio": float(ratio[g.index].median()), "record_errors": int(len(pair) - len(g)),
+            "held_out": _running_held_out(g, span)}
+
+
 def prius2_check(data: Path, doc: dict) -> dict:
     """The built-in on the Prius Gen 2's OBD trips: fuel per trip against the measured fuel
     corrected for the hybrid battery's energy change; with the class road load at the
@@ -300,7 +333,8 @@ def study(data: Path, lists: pd.DataFrame | None = None) -> dict:
            "models": sorted(set(on_line["model"].str.upper())),
            "splits": {"newest held out": split(obs, [years[-1]], speeds),
                       "oldest held out": split(obs, [years[0]], speeds)},
-           "fit_all": fit(obs), "default": class_default(on_line), "cold_start": cold_start(obs)}
+           "fit_all": fit(obs), "default": class_default(on_line), "cold_start": cold_start(obs),
+           "running": running_in_the_cold(lists, d, speeds)}
     res["fit_all_errors"] = _errors(on_line, predict(on_line, res["fit_all"], speeds))
     res["equation"] = builtin_equation(res)
     res["seconds"] = time.perf_counter() - t0
@@ -312,7 +346,7 @@ def builtin_equation(res: dict) -> dict:
     from sumo_drvpw.model.equations import load_equation
 
     conv_eta = load_equation("epa_gasoline_car").chain.marginal_efficiency
-    p, dfl, cold = res["fit_all"], res["default"], res["cold_start"]
+    p, dfl, cold, run = res["fit_all"], res["default"], res["cold_start"], res["running"]
     hold = res["splits"]["newest held out"]
     years = f"{res['years'][0]}–{res['years'][-1]}"
     return {
@@ -339,6 +373,7 @@ def builtin_equation(res: dict) -> dict:
             "idle_fuel_power_w": round(p["p_idle_w_per_l"] * dfl["displacement_l"], 1),
             "engine_off_below_w": p["engine_off_below_w"], "aux_power_w": 0.0, "fuel": "gasoline",
             "cold_start_fuel_l": round(cold["median_ml"] / 1000.0, 4), "cold_start_ref_c": ef.FTP_AIR_C,
+            "running_fuel_per_k": round(max(run["running_per_k"], 0.0), 6),
             "reading": {
                 "marginal_efficiency": ("effective fuel → wheels at the margin over a charge-sustaining test: the "
                                         "engine's efficiency, raised by the braking energy the battery gives back "
@@ -354,6 +389,15 @@ def builtin_equation(res: dict) -> dict:
                                       f"of the same test, median of {cold['configurations']} configurations, at "
                                       f"the FTP's {ef.FTP_AIR_C} °C; no slope below it (not fitted for hybrids); "
                                       "booked in SUMO only where the run says trips start cold"),
+                "running_fuel_per_k": (
+                    f"a warm engine's extra fuel per kelvin colder than {ef.FTP_AIR_C} °C, as a share: the Cold CO "
+                    f"test's bag 3 over the FTP's bag 3, median ×{run.get('bag3_ratio', float('nan')):.3f} over "
+                    f"{run['configurations']} full-hybrid configurations, linear between {ef.COLD_CO_AIR_C} °C and "
+                    f"{ef.FTP_AIR_C} °C (the engine also runs longer to heat the cabin and its catalyst); applied at "
+                    "the air temperature (a SUMO run's [air] temperature_c, a log's ambient_c)"
+                    if run["configurations"] >= ef.MIN_COLD_PAIRS else
+                    f"0: {run['configurations']} full-hybrid configurations with a Cold CO test and an FTP "
+                    f"(fewer than {ef.MIN_COLD_PAIRS}); not modelled"),
             },
             "provenance": {
                 "held_out": (f"model year {hold['test_years'][0]} predicted by the fit on "
@@ -409,6 +453,16 @@ def render(res: dict, cmd: str, seconds: float) -> str:
           f"C {dfl['c_n_per_mps2']:.4f} N/(m/s)², ETW {dfl['etw_kg']:.0f} kg, {dfl['displacement_l']:.2f} L. "
           f"Cold start (cold − hot UDDS): median {cs['median_ml']:.0f} mL over {cs['configurations']} configurations"
           + (f" (IQR {cs['q25_ml']:.0f}–{cs['q75_ml']:.0f} mL)." if cs["configurations"] else ".")]
+    rn = res["running"]
+    if rn.get("held_out"):
+        h = rn["held_out"]
+        L += ["", f"A warm engine in the cold: the Cold CO test's bag 3 over the FTP's, median "
+              f"×{rn['bag3_ratio']:.3f} over {rn['configurations']} configurations ({rn['record_errors']} record "
+              f"errors left out), {100 * rn['running_per_k']:.2f} % more fuel per kelvin below {ef.FTP_AIR_C} °C "
+              f"(the built-in's `running_fuel_per_k`). Held out: model year {h['test_year']}'s "
+              f"{h['test_pairs']} pairs from the {h['train_pairs']} of {', '.join(map(str, h['train_years']))}: "
+              f"Cold CO bag 3 mean |error| {100 * h['mean_abs_error_without']:.1f} % without the factor, "
+              f"{100 * h['mean_abs_error_with']:.1f} % with it."]
     pr = res.get("prius2")
     if pr:
         L += ["", "## On the road: the Prius Gen 2's OBD trips", "",
@@ -439,7 +493,7 @@ def render(res: dict, cmd: str, seconds: float) -> str:
           "vTypes that are full hybrids (or give it as a run's equation for every car); it is not among a bare SUMO "
           "config's equations (SUMO has no full-hybrid emission class to tell them by). What it leaves out: "
           "auxiliaries (A/C), the cold start's growth below "
-          f"{ef.FTP_AIR_C} °C, a warm engine's extra fuel in the cold, and the state of charge: it books a trip as "
+          f"{ef.FTP_AIR_C} °C, and the state of charge: it books a trip as "
           "charge-sustaining, so a short trip that ends with a fuller or emptier battery than it began is booked "
           "as if it ended as it began.", ""]
     return "\n".join(L)
