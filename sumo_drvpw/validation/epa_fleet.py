@@ -178,11 +178,7 @@ def select(d: pd.DataFrame, fuel: str = "gasoline") -> tuple[pd.DataFrame, dict]
     hybrid = (d["fe_bag4"].notna() & proc.isin(FTP)) | proc.str.startswith("Charge Depleting") \
         | d["fuel"].eq("Electricity") | d["model"].str.contains(HYBRID_WORDS)
     bad = set(d.loc[hybrid, "config"])
-    v = np.linspace(0.0, MAX_CHECK_MPS, 27)
-    f = d["a_n"].to_numpy()[:, None] + d["b_n_per_mps"].to_numpy()[:, None] * v \
-        + d["c_n_per_mps2"].to_numpy()[:, None] * v ** 2
-    physical = ((d["displacement_l"] > 0) & (d["etw_kg"] > 0) & (d["a_n"] > 0) & (d["c_n_per_mps2"] > 0)
-                & np.all(f > 0, axis=1))
+    physical = physical_road_load(d)
     keep = d["fuel"].eq(TEST_FUELS[fuel]) & d["derived"].eq("No")
     counts = {"tests": int(len(d)), "configurations": int(d["config"].nunique()),
               "hybrid, plug-in or electric configurations left out": len(bad),
@@ -190,6 +186,16 @@ def select(d: pd.DataFrame, fuel: str = "gasoline") -> tuple[pd.DataFrame, dict]
               "tests without a physical road load or displacement": int((keep & ~physical).sum())}
     out = d[keep & physical & ~d["config"].isin(bad)]
     return out, counts
+
+
+def physical_road_load(d: pd.DataFrame) -> pd.Series:
+    """Tests with a positive displacement, ETW, A and C and a road-load force > 0 at every
+    speed up to :data:`MAX_CHECK_MPS`."""
+    v = np.linspace(0.0, MAX_CHECK_MPS, 27)
+    f = d["a_n"].to_numpy()[:, None] + d["b_n_per_mps"].to_numpy()[:, None] * v \
+        + d["c_n_per_mps2"].to_numpy()[:, None] * v ** 2
+    return ((d["displacement_l"] > 0) & (d["etw_kg"] > 0) & (d["a_n"] > 0) & (d["c_n_per_mps2"] > 0)
+            & np.all(f > 0, axis=1))
 
 
 def schedules(folder: Path) -> dict[str, np.ndarray]:

@@ -93,14 +93,9 @@ def select_hybrids(d: pd.DataFrame, speeds: dict[str, np.ndarray]) -> tuple[pd.D
     hybrid = set(d.loc[(d["fe_bag4"].notna() & proc.isin(ef.FTP)) | d["model"].str.contains(ef.HYBRID_WORDS), "config"])
     plugin = set(d.loc[proc.str.startswith("Charge Depleting") | d["fuel"].eq("Electricity")
                        | d["model"].str.contains(PLUGIN_WORDS), "config"])
-    conv, _ = ef.select(d, "gasoline")      # for the physical road-load rule, applied alike
+    conv, _ = ef.select(d, "gasoline")      # counted beside
     keep = d["fuel"].eq(ef.TEST_FUELS["gasoline"]) & d["derived"].eq("No")
-    v = np.linspace(0.0, ef.MAX_CHECK_MPS, 27)
-    f = d["a_n"].to_numpy()[:, None] + d["b_n_per_mps"].to_numpy()[:, None] * v \
-        + d["c_n_per_mps2"].to_numpy()[:, None] * v ** 2
-    physical = ((d["displacement_l"] > 0) & (d["etw_kg"] > 0) & (d["a_n"] > 0) & (d["c_n_per_mps2"] > 0)
-                & np.all(f > 0, axis=1))
-    t = d[keep & physical & d["config"].isin(hybrid - plugin)]
+    t = d[keep & ef.physical_road_load(d) & d["config"].isin(hybrid - plugin)]
     ftp = t[t["procedure"].isin(ef.FTP) & (t["fe_bag3"] > 0) & (t["fe_bag4"] > 0)]
     town = _mpg_hot(ftp, speeds).groupby(ftp["config"]).median()
     road = t[t["procedure"].eq(ef.HWFET) & (t["fe_mpg"] > 0)].groupby("config")["fe_mpg"].median()
