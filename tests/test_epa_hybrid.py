@@ -212,3 +212,26 @@ def test_sumo_run_books_no_fuel_while_a_hybrid_stands(tmp_path):
     assert (got < always_on).all()
     cls = pd.read_csv(out / "chain_classes.csv").set_index("key")
     assert cls.loc["passenger", "fuel_l"] == pytest.approx(fuel["fuel_l"].sum(), rel=1e-9)
+
+
+def test_lists_without_a_full_hybrid_are_one_line(tmp_path):
+    """Only conventional cars (the conventional study's planted lists): exit 2, one line
+    naming the folder, no report and no built-in written."""
+    import subprocess
+    import sys
+
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.model.equations import BUILTIN_DIR
+    from test_epa_fleet import _write_lists
+
+    speeds = _schedules(tmp_path / "cycles")
+    (tmp_path / "epa_test_car_list").mkdir()
+    _write_lists(tmp_path / "epa_test_car_list", speeds, n=6)
+    with pytest.raises(UserError, match=r"epa_test_car_list: no full hybrid tested on Tier 2 Cert Gasoline"):
+        eh.study(tmp_path)
+    before = (BUILTIN_DIR / f"{eh.NAME}.toml").read_bytes()
+    r = subprocess.run([sys.executable, "-m", "sumo_drvpw.validation.epa_hybrid", str(tmp_path / "r.md"),
+                        str(tmp_path)], capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+    assert "no full hybrid" in r.stderr and not (tmp_path / "r.md").exists()
+    assert (BUILTIN_DIR / f"{eh.NAME}.toml").read_bytes() == before
