@@ -52,8 +52,9 @@ the FTP's, the same schedule after the same soak (:func:`running_in_the_cold`), 
 model year.
 
 **Held out**: the newest model year predicted by the fit on the older ones and the oldest
-by the newer, with each car's road load and with the class default (medians of the cars'
-road load per kg, ETW and displacement). **Real-world check**: the Prius Gen 2's two OBD
+by the newer, with each car's road load and with the class default of its EPA vehicle type
+(:func:`epa_fleet.class_defaults`: medians of the road load per kg, ETW and displacement;
+the built-in carries the cars'). **Real-world check**: the Prius Gen 2's two OBD
 trips (``prius_gen2_torquepro/``: measured fuel flow, corrected for the hybrid battery's
 energy change as docs/energy-chain-validation.md does) predicted by the built-in at the
 Prius's mass, and by the same chain on the Prius's own EPA road load.
@@ -284,7 +285,7 @@ def prius2_check(data: Path, doc: dict) -> dict:
     per_l = FUELS["gasoline"]["lhv_j_per_kg"] * FUELS["gasoline"]["density_kg_per_l"]
     preds = {"class_road_load": eq.chain.evaluate(eq.power(mf.inputs), mf.inputs.v, dt_s=dt, signals=mf.inputs.signals),
              "own_road_load": eq.chain.evaluate(own.power(mf.inputs), mf.inputs.v, dt_s=dt, signals=mf.inputs.signals),
-             # the chain's first version, before the warm-running factor was added (disclosed in the report)
+             # the same without the warm-running factor (the report says what it adds)
              "class_road_load_without_cold_factor": dataclasses.replace(eq.chain, running_fuel_per_k=0.0).evaluate(
                  eq.power(mf.inputs), mf.inputs.v, dt_s=dt, signals=mf.inputs.signals)}
     conv = load_equation("epa_gasoline_car")
