@@ -46,7 +46,8 @@ def render(results: dict, cmd: str, seconds: float) -> str:
           "and the run's air density the aerodynamic force (`aero_rho`, C_d·A = 2C/1.17 kg/m³, the coastdown's "
           "reference density). What they leave out: the A/C and "
           "other auxiliaries (certification runs without them: `aux_power_w` is 0), and stop-start (the engine "
-          "idles at every stop). Hybrids and heavy vehicles are not in these data.", ""]
+          "idles at every stop). Full hybrids have their own chain, fitted on the same lists "
+          "([epa-hybrid.md](epa-hybrid.md): `epa_gasoline_hybrid_car`); heavy vehicles are not in these data.", ""]
     return "\n".join(L)
 
 
