@@ -30,11 +30,12 @@ COLD_RATIO = 1.2  # the Cold CO test's bag 3 burns 20 % more than the FTP's
 
 def _hybrid_litres(v, a_n, b, c, m, disp) -> tuple[float, float]:
     """Fuel [L] and distance [m] of the planted line on schedule v, by hand: 1-s steps at the
-    mean speed, m·v̄·Δv; fuel only in the steps whose power exceeds P_OFF."""
+    mean speed, m·v̄·Δv; idle fuel only in the steps whose power exceeds P_OFF, every joule of
+    positive power at η (charge-sustaining)."""
     vm, dv = 0.5 * (v[1:] + v[:-1]), np.diff(v)
     p = (a_n + b * vm + c * vm ** 2) * vm + m * vm * dv
     on = p > P_OFF
-    e_fuel = P_L * disp * on.sum() + p[on].sum() / ETA
+    e_fuel = P_L * disp * on.sum() + p[p > 0].sum() / ETA
     f = FUELS["gasoline"]
     return e_fuel / (f["lhv_j_per_kg"] * f["density_kg_per_l"]), float(vm.sum())
 
@@ -133,14 +134,15 @@ def test_warm_running_in_the_cold_by_hand(planted):
     assert res["equation"]["chain"]["running_fuel_per_k"] == pytest.approx(rn["running_per_k"], abs=1e-6)
 
 
-def test_evaluator_books_no_fuel_below_the_threshold():
-    """Standing and creeping below P_off: no fuel; above it: p_L·D + P/η, sample by sample."""
+def test_evaluator_books_no_idle_fuel_below_the_threshold():
+    """Standing: no fuel; creeping below P_off: P/η, no idle fuel; above it: p_L·D + P/η,
+    sample by sample (charge-sustaining)."""
     obs = pd.DataFrame([{"config": "x", "test": "hwfet", "vehicle_type": "Car", "etw_kg": 1500.0, "a_n": 150.0,
                          "b_n_per_mps": 2.0, "c_n_per_mps2": 0.4, "displacement_l": 2.0,
                          "p_w": np.r_[np.zeros(10), np.full(10, 3000.0), np.full(10, 9000.0)]}])
     v = np.r_[np.zeros(11), np.full(10, 5.0), np.full(10, 20.0)]
     got = eh.predict(obs, {"eta": 0.4, "p_idle_w_per_l": 3000.0, "engine_off_below_w": 4000.0}, {"hwfet": v})[0]
-    assert got == pytest.approx(10 * (3000.0 * 2.0 + 9000.0 / 0.4), rel=1e-12)
+    assert got == pytest.approx(10 * 3000.0 / 0.4 + 10 * (3000.0 * 2.0 + 9000.0 / 0.4), rel=1e-12)
 
 
 @pytest.fixture(scope="module")
@@ -181,11 +183,12 @@ def test_the_hybrid_burns_less_than_the_conventional_car_on_the_prius_trips(shar
         assert np.isfinite(r["measured_corrected_l"]) and r["measured_corrected_l"] > 1.0
 
 
-def test_sumo_run_books_no_fuel_while_a_hybrid_stands(tmp_path):
+def test_sumo_run_books_a_hybrid_charge_sustaining_and_nothing_while_it_stands(tmp_path):
     """A real SUMO run (city, 300 s, 0.5-s steps) with the built-in hybrid: per vehicle, the
-    fuel is Σ over its steps of (p_L·D + P/η)·Δt where its driving power exceeds the
-    threshold, times the warm-running factor at the scenario's 20 °C, and nothing elsewhere — standing and creeping included — from the run's own
-    per-step powers (trace); below the engine-on-throughout form; class total = Σ vehicles."""
+    fuel is Σ over its steps of (p_L·D·[P > P_off] + max(P, 0)/η)·Δt, times the warm-running
+    factor at the scenario's 20 °C — nothing while standing, no idle fuel below the threshold —
+    from the run's own per-step powers (trace); below the engine-on-throughout form; class
+    total = Σ vehicles."""
     pytest.importorskip("libsumo")
     from sumo_drvpw.cli import main as cli_main
     from sumo_drvpw.model.equations import load_equation
@@ -202,12 +205,14 @@ def test_sumo_run_books_no_fuel_while_a_hybrid_stands(tmp_path):
     p = tr["p_total_w"].to_numpy()
     warm = 1.0 + ch.running_fuel_per_k * (ch.cold_start_ref_c - 20.0)  # the city scenario's air: 20 °C
     assert ch.running_fuel_per_k > 0
-    tr["fuel_j"] = np.where(p > ch.engine_off_below_w, ch.idle_fuel_power_w + p / ch.marginal_efficiency,
-                            0.0) * dt * warm
+    assert ch.charge_sustaining and ch.engine_off_below_w > 0
+    tr["fuel_j"] = (np.where(p > ch.engine_off_below_w, ch.idle_fuel_power_w, 0.0)
+                    + np.maximum(p, 0.0) / ch.marginal_efficiency) * dt * warm
     want = tr.groupby("vehicle")["fuel_j"].sum().reindex(veh.index)
     got = fuel["fuel_kwh"].reindex(veh.index) * 3.6e6
     assert np.allclose(got, want, rtol=1e-9, atol=1e-6)
-    assert (tr["speed_mps"] < 0.1).sum() > 100 and (tr.loc[tr["speed_mps"] < 0.1, "fuel_j"] == 0).all()
+    stand = tr["speed_mps"] == 0.0
+    assert stand.sum() > 100 and (tr.loc[stand, "fuel_j"] == 0).all()
     always_on = (ch.idle_fuel_power_w * veh["time_s"] + veh["traction_total_j"] / ch.marginal_efficiency) * warm
     assert (got < always_on).all()
     cls = pd.read_csv(out / "chain_classes.csv").set_index("key")
@@ -235,3 +240,25 @@ def test_lists_without_a_full_hybrid_are_one_line(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
     assert "no full hybrid" in r.stderr and not (tmp_path / "r.md").exists()
     assert (BUILTIN_DIR / f"{eh.NAME}.toml").read_bytes() == before
+
+
+def test_charge_sustaining_key_round_trips_and_bad_values_are_one_line():
+    """``charge_sustaining`` in a [chain] table: kept through to_dict/from_dict; it changes
+    nothing where the engine runs whenever the power is positive (P_off ≤ 0), and books the
+    power below a positive threshold at η; a non-boolean or a battery chain is refused."""
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.model.chain import chain_from_dict
+
+    base = {"predicts": "fuel", "idle_fuel_power_w": 5000.0, "marginal_efficiency": 0.4, "engine_off_below_w": 0.0}
+    p = np.array([-2000.0, 0.0, 1500.0, 4000.0, 9000.0])
+    v = np.full(p.size, 10.0)
+    plain, cs = chain_from_dict(base), chain_from_dict(base | {"charge_sustaining": True})
+    assert cs.charge_sustaining and chain_from_dict(cs.to_dict()).charge_sustaining
+    assert "charge_sustaining" not in plain.to_dict()
+    assert np.array_equal(plain.evaluate(p, v)["power_w"], cs.evaluate(p, v)["power_w"])
+    hi = chain_from_dict(base | {"engine_off_below_w": 3000.0, "charge_sustaining": True})
+    assert np.allclose(hi.evaluate(p, v)["power_w"], [0.0, 0.0, 1500.0 / 0.4, 5000.0 + 4000.0 / 0.4,
+                                                      5000.0 + 9000.0 / 0.4])
+    for bad in ({**base, "charge_sustaining": "yes"}, {"predicts": "battery", "charge_sustaining": True}):
+        with pytest.raises(UserError, match=r"'charge_sustaining' must be true or false"):
+            chain_from_dict(bad, "x.toml")

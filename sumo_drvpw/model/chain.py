@@ -46,6 +46,7 @@ Fuel (``predicts = "fuel"``), a Willans line with engine-off (power-split hybrid
     P_eng  = max(P, 0) / η_t + P_aux                      (engine output demand) [W]
     on     = (P > P_off  or  v > v_on)  and not (v > v_0 and P < P_cut)     (engine fuelled)
     P_fuel = on · (P_idle,fuel + P_eng / η_m)             [W of fuel, lower heating value]
+    P_fuel = on · P_idle,fuel + P_eng / η_m               (``charge_sustaining = true``)
     fuel rate [L/s] = P_fuel / (LHV · ρ_fuel);  CO₂ [kg/s] = P_fuel / LHV · c_CO₂
 
 with ``idle_fuel_power_w`` (P_idle,fuel ≥ 0), ``marginal_efficiency`` (η_m, (0, 1]),
@@ -53,7 +54,10 @@ with ``idle_fuel_power_w`` (P_idle,fuel ≥ 0), ``marginal_efficiency`` (η_m, (
 idling at stops), optional ``engine_on_above_mps`` (v_on), optional ``fuel_cut_below_w``
 (P_cut: overrun fuel cut-off — while the vehicle moves (v above STANDSTILL_MPS, v_0), a
 driving power below P_cut, typically 0, means the wheels turn the engine and its injection
-is cut: no fuel; standing, it idles; declared, kept, not fitted by calibration) and ``fuel``
+is cut: no fuel; standing, it idles; declared, kept, not fitted by calibration),
+``charge_sustaining`` (a declared hybrid whose battery drives below P_off: the engine puts
+that energy back later, so it is booked at the margin all the same and only the idle fuel
+stops with the engine; default false, the engine-off power free) and ``fuel``
 (a key of :data:`sumo_drvpw.model.constants.FUELS`). ``cold_start_fuel_l`` (≥ 0, default 0)
 is the extra fuel of one start of a cold engine [L] (warm-up enrichment, catalyst
 heating, cold oil) at the air temperature ``cold_start_ref_c`` (default 23.9 °C, the
@@ -91,109 +95,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.chain_values import Efficiency, Table, _efficiency, _nonneg, _number  # noqa: F401
 from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
 
 PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 #: keys of the [chain] table, besides sub-tables loads, hvac and efficiency tables
 KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
         "recuperation_by_decel_mps2", "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
-        "engine_off_below_w", "engine_on_above_mps", "fuel_cut_below_w", "fuel", "battery_to_fuel",
+        "engine_off_below_w", "engine_on_above_mps", "fuel_cut_below_w", "charge_sustaining", "fuel", "battery_to_fuel",
         "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "running_fuel_per_k",
         "motor", "std_err", "reading", "provenance", "metrics")
 #: the largest plausible warm-running fuel increase per kelvin (5 %/K: +150 % at −6.7 °C
 #: against the FTP's 23.9 °C, far beyond the ≈ 9 % certification pairs show)
 RUNNING_FUEL_PER_K_MAX = 0.05
 HVAC_KEYS = ("column", "setpoint_c", "heating_w_per_k", "cooling_w_per_k", "warmup_j_per_k")
-
-
-@dataclass(eq=False)
-class Table:
-    """A small efficiency table over speed [m/s] and/or |power| [W], linearly interpolated."""
-
-    values: np.ndarray
-    speed_mps: np.ndarray | None = None
-    power_w: np.ndarray | None = None
-
-    def __call__(self, v, p) -> np.ndarray:
-        """Interpolated value at speed ``v`` [m/s] and power ``p`` [W] (|p| is used)."""
-        from scipy.interpolate import RegularGridInterpolator
-
-        axes, pts = [], []
-        if self.speed_mps is not None:
-            axes.append(self.speed_mps)
-            pts.append(np.clip(np.asarray(v, float), self.speed_mps[0], self.speed_mps[-1]))
-        if self.power_w is not None:
-            axes.append(self.power_w)
-            pts.append(np.clip(np.abs(np.asarray(p, float)), self.power_w[0], self.power_w[-1]))
-        f = RegularGridInterpolator(tuple(axes), self.values, method="linear")
-        return f(np.stack(np.broadcast_arrays(*pts), axis=-1))
-
-    def __eq__(self, other) -> bool:
-        return isinstance(other, Table) and self.to_dict() == other.to_dict()
-
-    def to_dict(self) -> dict:
-        d = {}
-        if self.speed_mps is not None:
-            d["speed_mps"] = self.speed_mps.tolist()
-        if self.power_w is not None:
-            d["power_w"] = self.power_w.tolist()
-        d["values"] = self.values.tolist()
-        return d
-
-
-Efficiency = float | Table
-
-
-def _efficiency(val, key: str, where: str) -> Efficiency:
-    if isinstance(val, dict):
-        unknown = set(val) - {"speed_mps", "power_w", "values"}
-        if unknown:
-            raise UserError(f"{where} [chain.{key}]: unknown key(s) {sorted(unknown)} "
-                            "(known: speed_mps, power_w, values)")
-        axes = {}
-        for ax in ("speed_mps", "power_w"):
-            if ax in val:
-                a = np.asarray(val[ax], float)
-                if a.ndim != 1 or a.size < 2 or np.any(np.diff(a) <= 0):
-                    raise UserError(f"{where} [chain.{key}]: '{ax}' must be ≥ 2 strictly "
-                                    f"increasing numbers, got {val[ax]!r}")
-                axes[ax] = a
-        if not axes or "values" not in val:
-            raise UserError(f"{where} [chain.{key}]: a table needs 'values' and at least one "
-                            "axis of speed_mps, power_w")
-        vals = np.asarray(val["values"], float)
-        shape = tuple(a.size for a in axes.values())
-        if vals.shape != shape:
-            raise UserError(f"{where} [chain.{key}]: 'values' has shape {vals.shape}, the axes "
-                            f"need {shape}")
-        bad = ~((vals > 0) & (vals <= 1))
-        if bad.any():
-            raise UserError(f"{where} [chain.{key}]: efficiencies must be in (0, 1], got "
-                            f"{vals[bad].flat[0]!r}")
-        return Table(vals, axes.get("speed_mps"), axes.get("power_w"))
-    x = _number(val, key, where)
-    if not 0 < x <= 1:
-        raise UserError(f"{where} [chain]: '{key}' must be in (0, 1], got {val!r}")
-    return x
-
-
-def _number(val, key: str, where: str, finite: bool = True) -> float:
-    """A number (finite unless ``finite`` is False; NaN never)."""
-    if isinstance(val, bool) or not isinstance(val, (int, float)):
-        raise UserError(f"{where} [chain]: '{key}' must be a number, got {val!r}")
-    x = float(val)
-    if np.isnan(x) or (finite and not np.isfinite(x)):
-        raise UserError(f"{where} [chain]: '{key}' must be a finite number, got {val!r}")
-    return x
-
-
-def _nonneg(val, key: str, where: str, inf: bool = False) -> float:
-    """A number ≥ 0; +inf only where ``inf`` (a limit or threshold never reached)."""
-    x = _number(val, key, where, finite=False)
-    if not x >= 0 or (x == np.inf and not inf):
-        raise UserError(f"{where} [chain]: '{key}' must be ≥ 0{'' if inf else ' and finite'}, "
-                        f"got {val!r}")
-    return x
 
 
 @dataclass
@@ -217,6 +132,7 @@ class EnergyChain:
     engine_off_below_w: float = 0.0
     engine_on_above_mps: float | None = None
     fuel_cut_below_w: float | None = None
+    charge_sustaining: bool = False
     fuel: str = "gasoline"
     battery_to_fuel: float | None = None
     cold_start_fuel_l: float = 0.0
@@ -373,7 +289,8 @@ class EnergyChain:
     def _fuel(self, p, v, n, signals) -> dict:
         on = self.engine_on(p, v)
         eng = np.maximum(p, 0.0) / _eval(self.traction_efficiency, v, p) + self.auxiliary(n, signals)
-        pf = np.where(on, self.idle_fuel_power_w + eng / self.marginal_efficiency, 0.0)
+        paid = on | self.charge_sustaining  # where the engine output demand costs fuel
+        pf = np.where(on, self.idle_fuel_power_w, 0.0) + np.where(paid, eng / self.marginal_efficiency, 0.0)
         if self.running_fuel_per_k:
             pf = pf * self.running_factor(n, signals)
         fp = self.fuel_props
@@ -447,6 +364,8 @@ class EnergyChain:
             for k in ("engine_on_above_mps", "fuel_cut_below_w"):
                 if getattr(self, k) is not None:
                     d[k] = float(getattr(self, k))
+            if self.charge_sustaining:
+                d["charge_sustaining"] = True
             if self.battery_to_fuel is not None:
                 d["battery_to_fuel"] = float(self.battery_to_fuel)
             if self.cold_start_fuel_l or self.cold_start_fuel_l_per_k:
@@ -505,6 +424,11 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         if np.isnan(kw["engine_off_below_w"]) or kw["engine_off_below_w"] == np.inf:
             raise UserError(f"{where} [chain]: 'engine_off_below_w' must be a number below +inf "
                             f"(-inf: the engine never stops), got {doc['engine_off_below_w']!r}")
+    if "charge_sustaining" in doc:
+        if not isinstance(doc["charge_sustaining"], bool) or pred != "fuel":
+            raise UserError(f"{where} [chain]: 'charge_sustaining' must be true or false, for predicts = "
+                            f"\"fuel\" only, got {doc['charge_sustaining']!r} (predicts = {pred!r})")
+        kw["charge_sustaining"] = doc["charge_sustaining"]
     if "fuel_cut_below_w" in doc:
         kw["fuel_cut_below_w"] = _number(doc["fuel_cut_below_w"], "fuel_cut_below_w", where)
         if pred != "fuel":

@@ -1,0 +1,100 @@
+"""An energy chain's parameter values: efficiency tables over speed and |power|, and the
+checked numbers of a ``[chain]`` table (:mod:`sumo_drvpw.model.chain` reads them)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sumo_drvpw.errors import UserError
+
+
+@dataclass(eq=False)
+class Table:
+    """A small efficiency table over speed [m/s] and/or |power| [W], linearly interpolated."""
+
+    values: np.ndarray
+    speed_mps: np.ndarray | None = None
+    power_w: np.ndarray | None = None
+
+    def __call__(self, v, p) -> np.ndarray:
+        """Interpolated value at speed ``v`` [m/s] and power ``p`` [W] (|p| is used)."""
+        from scipy.interpolate import RegularGridInterpolator
+
+        axes, pts = [], []
+        if self.speed_mps is not None:
+            axes.append(self.speed_mps)
+            pts.append(np.clip(np.asarray(v, float), self.speed_mps[0], self.speed_mps[-1]))
+        if self.power_w is not None:
+            axes.append(self.power_w)
+            pts.append(np.clip(np.abs(np.asarray(p, float)), self.power_w[0], self.power_w[-1]))
+        f = RegularGridInterpolator(tuple(axes), self.values, method="linear")
+        return f(np.stack(np.broadcast_arrays(*pts), axis=-1))
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Table) and self.to_dict() == other.to_dict()
+
+    def to_dict(self) -> dict:
+        d = {}
+        if self.speed_mps is not None:
+            d["speed_mps"] = self.speed_mps.tolist()
+        if self.power_w is not None:
+            d["power_w"] = self.power_w.tolist()
+        d["values"] = self.values.tolist()
+        return d
+
+
+Efficiency = float | Table
+
+
+def _efficiency(val, key: str, where: str) -> Efficiency:
+    if isinstance(val, dict):
+        unknown = set(val) - {"speed_mps", "power_w", "values"}
+        if unknown:
+            raise UserError(f"{where} [chain.{key}]: unknown key(s) {sorted(unknown)} "
+                            "(known: speed_mps, power_w, values)")
+        axes = {}
+        for ax in ("speed_mps", "power_w"):
+            if ax in val:
+                a = np.asarray(val[ax], float)
+                if a.ndim != 1 or a.size < 2 or np.any(np.diff(a) <= 0):
+                    raise UserError(f"{where} [chain.{key}]: '{ax}' must be ≥ 2 strictly "
+                                    f"increasing numbers, got {val[ax]!r}")
+                axes[ax] = a
+        if not axes or "values" not in val:
+            raise UserError(f"{where} [chain.{key}]: a table needs 'values' and at least one "
+                            "axis of speed_mps, power_w")
+        vals = np.asarray(val["values"], float)
+        shape = tuple(a.size for a in axes.values())
+        if vals.shape != shape:
+            raise UserError(f"{where} [chain.{key}]: 'values' has shape {vals.shape}, the axes "
+                            f"need {shape}")
+        bad = ~((vals > 0) & (vals <= 1))
+        if bad.any():
+            raise UserError(f"{where} [chain.{key}]: efficiencies must be in (0, 1], got "
+                            f"{vals[bad].flat[0]!r}")
+        return Table(vals, axes.get("speed_mps"), axes.get("power_w"))
+    x = _number(val, key, where)
+    if not 0 < x <= 1:
+        raise UserError(f"{where} [chain]: '{key}' must be in (0, 1], got {val!r}")
+    return x
+
+
+def _number(val, key: str, where: str, finite: bool = True) -> float:
+    """A number (finite unless ``finite`` is False; NaN never)."""
+    if isinstance(val, bool) or not isinstance(val, (int, float)):
+        raise UserError(f"{where} [chain]: '{key}' must be a number, got {val!r}")
+    x = float(val)
+    if np.isnan(x) or (finite and not np.isfinite(x)):
+        raise UserError(f"{where} [chain]: '{key}' must be a finite number, got {val!r}")
+    return x
+
+
+def _nonneg(val, key: str, where: str, inf: bool = False) -> float:
+    """A number ≥ 0; +inf only where ``inf`` (a limit or threshold never reached)."""
+    x = _number(val, key, where, finite=False)
+    if not x >= 0 or (x == np.inf and not inf):
+        raise UserError(f"{where} [chain]: '{key}' must be ≥ 0{'' if inf else ' and finite'}, "
+                        f"got {val!r}")
+    return x
