@@ -463,7 +463,7 @@ def render(res: dict, cmd: str, seconds: float) -> str:
          f"Fitted on every model year: engine off below **{f['engine_off_below_w'] / 1000:.0f} kW**, "
          f"η = **{f['eta']:.3f}** ± {f['eta_se']:.3f}, p_L = **{f['p_idle_w_per_l']:.0f}** ± "
          f"{f['p_idle_w_per_l_se']:.0f} W per litre of displacement; fuel per test mean |error| "
-         f"{res['fit_all_errors']['all']['mean_abs']:.1%} (in sample).", "",
+         f"{100 * res['fit_all_errors']['all']['mean_abs']:.1f} % (in sample).", "",
          "| engine off below [kW] | η | p_L [W/L] | mean abs. error, in sample |", "|---|---|---|---|"]
     for g in f["grid"]:
         L.append(f"| {g['engine_off_below_w'] / 1000:.0f} | {g['eta']:.3f} | {g['p_idle_w_per_l']:.0f} | "
