@@ -84,8 +84,8 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import FUELS, G
 from sumo_drvpw.validation import epa_fleet as ef
 
-#: the tests on the line: name → (schedule, first second, last second)
-TESTS = {"udds_hot": ("udds", 0, 1369), "hwfet": ("hwfet", 0, None), "us06": ("us06", 0, None)}
+#: the tests on the line (their speeds: :func:`schedules`)
+TESTS = ("udds_hot", "hwfet", "us06")
 COLD = "udds_cold"
 #: engine-off thresholds tried [W], fixed before the fit
 P_OFF_GRID_W = tuple(float(p) for p in range(0, 10001, 1000))
@@ -96,14 +96,14 @@ NAME = "epa_gasoline_hybrid_car"
 ETA_PLAUSIBLE = (0.3, 0.6)
 
 
-def select_hybrids(d: pd.DataFrame, speeds: dict[str, np.ndarray]) -> tuple[pd.DataFrame, dict]:
+def select_hybrids(d: pd.DataFrame, speeds: dict[str, np.ndarray], conv: pd.DataFrame) -> tuple[pd.DataFrame, dict]:
     """The full hybrids' measured tests on the petrol certification fuel, and the counts
-    (``speeds``: :func:`schedules`, for the hot UDDS's fuel economy)."""
+    (``speeds``: :func:`schedules`, for the hot UDDS's fuel economy; ``conv``: the conventional
+    petrol tests, :func:`epa_fleet.select`, counted beside)."""
     proc = d["procedure"]
     hybrid = set(d.loc[(d["fe_bag4"].notna() & proc.isin(ef.FTP)) | d["model"].str.contains(ef.HYBRID_WORDS), "config"])
     plugin = set(d.loc[proc.str.startswith("Charge Depleting") | d["fuel"].eq("Electricity")
                        | d["model"].str.contains(PLUGIN_WORDS), "config"])
-    conv, _ = ef.select(d, "gasoline")      # counted beside
     keep = d["fuel"].eq(ef.TEST_FUELS["gasoline"]) & d["derived"].eq("No")
     t = d[keep & ef.physical_road_load(d) & d["config"].isin(hybrid - plugin)]
     ftp = t[t["procedure"].isin(ef.FTP) & (t["fe_bag3"] > 0) & (t["fe_bag4"] > 0)]
@@ -276,13 +276,12 @@ def running_in_the_cold(lists: pd.DataFrame, tests: pd.DataFrame, speeds) -> dic
             "held_out": _running_held_out(g, span)}
 
 
-def same_model_savings(lists: pd.DataFrame, full: pd.DataFrame, speeds) -> dict:
+def same_model_savings(conv: pd.DataFrame, full: pd.DataFrame, speeds) -> dict:
     """What a full hybrid saves in town, from the lists alone: the hot UDDS's fuel per km of
     each full hybrid's model against the conventional petrol configurations of the same
     model year whose model name starts with the hybrid's first word (CAMRY HYBRID LE →
     CAMRY …; medians per model and year); the saving 1 − hybrid/petrol per pair."""
     d3, d4 = _parts_m(speeds)
-    conv, _ = ef.select(lists, "gasoline")
     h = full[full["procedure"].isin(ef.FTP) & (full["fe_bag3"] > 0) & (full["fe_bag4"] > 0)]
     c = conv[conv["procedure"].isin(ef.FTP) & (conv["fe_bag3"] > 0) & (conv["fe_bag2"] > 0)]
     per_mile = lambda t, b4: (d3 / t["fe_bag3"] + d4 / t[b4]) / (d3 + d4)  # noqa: E731  (gallons per mile)
@@ -315,11 +314,12 @@ def prius2_check(data: Path, doc: dict) -> dict:
     trips, dt = np.asarray(log.df["trip_id"]).astype(str), log.df["dt_s"].to_numpy(float)
     corr = corrected_fuel_power(mf.power_w, mf.battery_w, eq.chain.battery_fuel_factor)
     per_l = FUELS["gasoline"]["lhv_j_per_kg"] * FUELS["gasoline"]["density_kg_per_l"]
-    preds = {"class_road_load": eq.chain.evaluate(eq.power(mf.inputs), mf.inputs.v, dt_s=dt, signals=mf.inputs.signals),
+    p_class = eq.power(mf.inputs)
+    preds = {"class_road_load": eq.chain.evaluate(p_class, mf.inputs.v, dt_s=dt, signals=mf.inputs.signals),
              "own_road_load": eq.chain.evaluate(own.power(mf.inputs), mf.inputs.v, dt_s=dt, signals=mf.inputs.signals),
              # the same without the warm-running factor (the report says what it adds)
              "class_road_load_without_cold_factor": dataclasses.replace(eq.chain, running_fuel_per_k=0.0).evaluate(
-                 eq.power(mf.inputs), mf.inputs.v, dt_s=dt, signals=mf.inputs.signals)}
+                 p_class, mf.inputs.v, dt_s=dt, signals=mf.inputs.signals)}
     conv = load_equation("epa_gasoline_car")
     conv_out = conv.chain.evaluate(conv.power(mf.inputs), mf.inputs.v, dt_s=dt, signals=mf.inputs.signals)
     rows = []
@@ -344,7 +344,8 @@ def study(data: Path, lists: pd.DataFrame | None = None) -> dict:
     t0 = time.perf_counter()
     lists = ef.read_lists(Path(data) / ef.DATASET) if lists is None else lists
     speeds = schedules(Path(data) / ef.CYCLES)
-    d, counts = select_hybrids(lists, speeds)
+    conv, _ = ef.select(lists, "gasoline")
+    d, counts = select_hybrids(lists, speeds, conv)
     if d.empty:
         raise UserError(f"{Path(data) / ef.DATASET}: no full hybrid tested on {ef.TEST_FUELS['gasoline']}")
     obs = observations(d, speeds)
@@ -360,7 +361,7 @@ def study(data: Path, lists: pd.DataFrame | None = None) -> dict:
            "splits": {"newest held out": split(obs, [years[-1]], speeds),
                       "oldest held out": split(obs, [years[0]], speeds)},
            "fit_all": fit(obs), "defaults": ef.class_defaults(on_line), "cold_start": cold_start(obs),
-           "running": running_in_the_cold(lists, d, speeds), "same_model_savings": same_model_savings(lists, d, speeds)}
+           "running": running_in_the_cold(lists, d, speeds), "same_model_savings": same_model_savings(conv, d, speeds)}
     res["fit_all_errors"] = _errors(on_line, predict(on_line, res["fit_all"], speeds))
     res["equation"] = builtin_equation(res)
     res["seconds"] = time.perf_counter() - t0
