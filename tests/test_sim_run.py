@@ -957,6 +957,16 @@ def test_a_config_written_for_traci_scripts_does_not_wait_for_a_client(tmp_path)
     # booked as petrol cars (found by a sweep)
     ("HBEFA4/PC_PHEV_petrol_Euro-6d_(El)", "electricity"), ("HBEFA4/LCV_PHEV_diesel_N1-III_Euro-6d_(El)", "electricity"),
     ("HBEFA4/PC_FuelCell", "hydrogen"),
+    # the mode a bi-fuel or flex-fuel class names last (SUMO 1.28's HBEFA 4 names): the
+    # petrol share of a CNG, LPG or flex-fuel car was booked as gas or none, a flex-fuel
+    # van's as diesel (found by a sweep of libsumo's class names, 2026-11-28)
+    ("HBEFA4/PC_CNG_petrol_Euro-4_(P)", "gasoline"), ("HBEFA4/PC_CNG_petrol_Euro-4_(CNG)", "gas"),
+    ("HBEFA4/PC_LPG_petrol_Euro-4_(P)", "gasoline"), ("HBEFA4/PC_LPG_petrol_Euro-4_(LPG)", "gas"),
+    ("HBEFA4/PC_FFV_Euro-4__(P)", "gasoline"), ("HBEFA4/LCV_FFV_N1-II_Euro-6__(P)", "gasoline"),
+    ("HBEFA4/LCV_FFV_N1-II_Euro-6__(E85)", "ethanol"), ("HBEFA4/PC_PHEV_petrol_Euro-6d_(P)", "gasoline"),
+    ("HBEFA4/RigidTruck_PHEV_le7_5t_Euro-VI-(D)", "diesel"), ("HBEFA4/TT_AT_PHEV_Euro-VI-(El)", "electricity"),
+    ("HBEFA4/TT_AT_LNG_Euro-VI_(CI)", "gas"), ("HBEFA4/PC_diesel_Euro-4_(DPF)", "diesel"),
+    ("HBEFA4/PC_petrol_AGV82_(CH)", "gasoline"),
     ("HBEFA2/P_7_7", None), ("", None), (None, None)])
 def test_energy_carrier_of_sumo_emission_classes(ec, carrier):
     """The carrier a SUMO emissionClass names (names as SUMO's emission-model pages and its

@@ -420,6 +420,12 @@ CARRIER_WORDS = (
     ("diesel", {"d", "diesel"}),
     ("gasoline", {"g", "petrol", "gasoline", "benzin"}),
 )
+#: the mode a HBEFA 4 class of a bi-fuel, flex-fuel or plug-in vehicle describes, written
+#: last in parentheses → its carrier (``PC_CNG_petrol_Euro-4_(P)``: the petrol share of a
+#: CNG car; ``LCV_FFV_N1-II_Euro-6__(P)``; ``RigidTruck_PHEV_le7_5t_Euro-VI-(D)``); a last
+#: parenthesis of another kind (``(DPF)``, ``(CI)``) names none
+MODE_CARRIERS = {"p": "gasoline", "d": "diesel", "el": "electricity", "cng": "gas", "lpg": "gas",
+                 "lng": "gas", "e85": "ethanol"}
 #: emission-class models that are electric whatever the name (SUMO's Energy and MMPEVEM
 #: models, and Zero: no exhaust)
 ELECTRIC_MODELS = ("energy", "mmpevem", "zero")
@@ -437,7 +443,9 @@ def energy_carrier(emission_class: str | None) -> str | None:
     the bare model name, as SUMO's shipped ``data/emissions/MMPEVEM`` files write it:
     electricity) and the words of the name (``PC_petrol_Euro-4``, ``PC_G_EU4``: gasoline;
     ``LCV_diesel_…``, ``PC_D_EU6``: diesel; ``PC_BEV``, a plug-in hybrid's electric mode
-    ``PC_PHEV_petrol_Euro-6d_(El)``: electricity; ``PC_FuelCell``: hydrogen); a heavy-duty
+    ``PC_PHEV_petrol_Euro-6d_(El)``: electricity; ``PC_FuelCell``: hydrogen; the mode a
+    bi-fuel, flex-fuel or plug-in class names last first: ``PC_CNG_petrol_Euro-4_(P)``,
+    the petrol share of a CNG car, is gasoline, :data:`MODE_CARRIERS`); a heavy-duty
     name without a fuel word is diesel."""
     if not emission_class:
         return None
@@ -446,6 +454,9 @@ def energy_carrier(emission_class: str | None) -> str | None:
         model, name = ("", model) if model.strip().lower() not in ELECTRIC_MODELS else (model, "")
     if model.strip().lower() in ELECTRIC_MODELS:
         return "electricity"
+    mode = re.search(r"\(([A-Za-z0-9]+)\)\s*$", name)
+    if mode and mode.group(1).lower() in MODE_CARRIERS:
+        return MODE_CARRIERS[mode.group(1).lower()]
     words = [w for w in re.split(r"[^a-z0-9]+", name.lower()) if w]
     for carrier, keys in CARRIER_WORDS:
         if any(w in keys for w in words):
