@@ -10,7 +10,8 @@ from hypothesis import given, settings, strategies as st
 
 import corpus
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.fit.chain import calibrate_battery, calibrate_fuel
+from sumo_drvpw.fit.chain import calibrate_battery
+from sumo_drvpw.fit.chain_fuel import calibrate_fuel
 from sumo_drvpw.model.chain import EnergyChain, chain_from_dict, corrected_fuel_power
 from sumo_drvpw.model.constants import CABIN_WARMUP_TAU_S, FUEL_COLD_START_TAU_S, FUELS
 from sumo_drvpw.model.equations import equation_from_dict, load_equation, save_equation
@@ -330,25 +331,39 @@ def test_calibration_finds_a_planted_recuperation_limit():
 
 
 def test_calibration_recovers_a_planted_fuel_chain_with_soc_swings():
+    """A power-split hybrid: below 5 kW the battery drives (engine off, no fuel); with the
+    engine on the battery assists (> 0) or is charged (< 0) by up to 30 % of the demand, the
+    engine delivering P − P_bat. Against the SOC-corrected fuel, fuel + P_bat/η_m, that is
+    the charge-sustaining line: recovered, threshold included. The plain form (driving
+    below the threshold unfuelled), fitted on the same log, is not the target's form: its
+    idle fuel and threshold come out wrong."""
     rng, v, p, heater, temp, dt = _drive(seed=3)
     plant = EnergyChain(predicts="fuel", idle_fuel_power_w=4_000.0, marginal_efficiency=0.36,
-                        engine_off_below_w=5_000.0)
+                        engine_off_below_w=5_000.0, charge_sustaining=True, aux_power_w=400.0)
     on = plant.engine_on(p, v)
-    # with the engine on, the battery assists (> 0) or is charged (< 0) by up to 30 % of the
-    # demand: the engine delivers P − P_bat, so fuel = P_idle + (P − P_bat)/η_m (the chain's form)
-    assist = np.where(on, rng.uniform(-0.3, 0.3, p.size) * np.maximum(p, 0), 0.0)
-    fuel = np.where(on, 4_000.0 + (np.maximum(p, 0) - assist) / 0.36, 0.0)
+    pos = np.maximum(p, 0)
+    assist = np.where(on, rng.uniform(-0.3, 0.3, p.size) * pos, pos + 400.0)  # off: the battery carries all
+    fuel = np.where(on, 4_000.0 + (pos + 400.0 - assist) / 0.36, 0.0)
     fuel = fuel + rng.normal(0, 200.0, p.size) * on
     fit = calibrate_fuel(p, v, fuel, dt, battery_w=assist)
+    assert fit.chain.charge_sustaining
     assert fit.chain.marginal_efficiency == pytest.approx(0.36, rel=0.02)
     assert fit.chain.idle_fuel_power_w == pytest.approx(4_000.0, rel=0.02)
+    assert fit.chain.aux_power_w == pytest.approx(400.0, rel=0.05)  # standing, the battery carries it
     assert fit.chain.engine_off_below_w == 5_000.0
-    # a trip that only charges the battery: without the correction η_m comes out biased
-    charge = np.where(on, -0.2 * np.maximum(p, 0), 0.0)
-    fuel_c = np.where(on, 4_000.0 + (np.maximum(p, 0) - charge) / 0.36, 0.0)
+    assert "charge-sustaining" in fit.parameters["engine_off_below_w"]["reading"]
+    target = corrected_fuel_power(fuel, assist, 1 / 0.36)
+    assert fit.chain.evaluate(p, v)["power_w"] @ dt == pytest.approx(target @ dt, rel=1e-3)
+    plain = calibrate_fuel(p, v, fuel, dt, battery_w=assist, charge_sustaining=False)
+    assert not plain.chain.charge_sustaining and plain.chain.engine_off_below_w != 5_000.0
+    assert abs(plain.chain.idle_fuel_power_w / 4_000.0 - 1) > 0.3 and plain.chain.aux_power_w == 0.0
+    # a trip that only charges the battery (and drives on it below the threshold): without
+    # the correction η_m comes out biased
+    charge = np.where(on, -0.2 * pos, pos)  # (no auxiliary draw)
+    fuel_c = np.where(on, 4_000.0 + (pos - charge) / 0.36, 0.0)
     corrected = calibrate_fuel(p, v, fuel_c, dt, battery_w=charge).chain.marginal_efficiency
     naive = calibrate_fuel(p, v, fuel_c, dt, battery_w=None).chain.marginal_efficiency
-    assert corrected == pytest.approx(0.36, rel=0.01) and naive == pytest.approx(0.30, rel=0.01)
+    assert corrected == pytest.approx(0.36, rel=0.01) and naive == pytest.approx(0.30, rel=0.02)
     # a conventional engine with overrun fuel cut-off: declared, it is kept and the line
     # recovered; left out, the unfuelled overrun samples pull the idle fuel down
     cut = EnergyChain(predicts="fuel", idle_fuel_power_w=4_000.0, marginal_efficiency=0.36,
@@ -1574,7 +1589,7 @@ def test_engine_off_minus_inf_round_trips_and_bad_values_are_refused(tmp_path):
 def test_fuel_calibration_finds_a_conventional_engine():
     """A planted engine that runs throughout (fuel at idle, at stops and while braking):
     the profiled engine-off threshold is -inf and the line is recovered."""
-    from sumo_drvpw.fit.chain import calibrate_fuel
+    from sumo_drvpw.fit.chain_fuel import calibrate_fuel
 
     rng = np.random.default_rng(3)
     n = 4000

@@ -20,7 +20,8 @@ import corpus
 import sumo_drvpw.fit.chain as fc
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.data import measured as dm
-from sumo_drvpw.fit.chain import calibrate_battery, calibrate_fuel
+from sumo_drvpw.fit.chain import calibrate_battery
+from sumo_drvpw.fit.chain_fuel import calibrate_fuel
 from sumo_drvpw.model.chain import EnergyChain
 
 RTOL = 1e-9

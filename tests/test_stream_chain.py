@@ -69,6 +69,7 @@ idle_fuel_power_w = 3500.0
 marginal_efficiency = 0.34
 engine_off_below_w = 4000.0
 engine_on_above_mps = 19.0
+charge_sustaining = true
 running_fuel_per_k = 0.004
 cold_start_ref_c = 23.9
 fuel = "gasoline"
@@ -124,9 +125,14 @@ def _fuel_frame() -> pd.DataFrame:
     x = from_frame(df.copy()).inputs()
     eq = _eq(FUEL_EQ)
     p = eq.power(x)
-    on = eq.chain.engine_on(p, x.v)
-    assist = np.where(on, rng.uniform(-0.25, 0.25, len(df)) * np.maximum(p, 0.0), 0.0)
-    fuel_w = eq.chain.evaluate(p - assist, x.v, signals={"ambient_c": df["ambient_c"].to_numpy()})["power_w"]
+    ch, sig = eq.chain, {"ambient_c": df["ambient_c"].to_numpy()}
+    on = ch.engine_on(p, x.v)
+    # engine off, the battery drives (the engine output it stands in for, at the engine's
+    # warm-running factor: the fuel that puts it back), so the SOC-corrected fuel is the
+    # charge-sustaining line's; engine on, it assists or is charged
+    stand_in = (np.maximum(p, 0.0) / ch.traction_efficiency + ch.aux_power_w) * ch.running_factor(len(df), sig)
+    assist = np.where(on, rng.uniform(-0.25, 0.25, len(df)) * np.maximum(p, 0.0), stand_in)
+    fuel_w = np.where(on, ch.evaluate(p - assist, x.v, signals=sig)["power_w"], 0.0)
     fuel_w = np.maximum(fuel_w + rng.normal(0, 300.0, len(df)) * on, 0.0)
     df["fuel_rate_gps"] = fuel_w / FUELS["gasoline"]["lhv_j_per_kg"] * 1000.0
     df["battery_voltage_v"] = 201.0

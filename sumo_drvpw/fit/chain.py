@@ -10,12 +10,8 @@ so for a fixed recuperation limit P_lim it is a bounded linear least-squares pro
 solved by ``scipy.optimize.lsq_linear`` (x_t ≥ 1, 0 < η_r ≤ 1, P_aux,0, g_k, h ≥ 0), each
 sample weighted by its duration (√Δt on the rows), so irregular logs weigh time, not rows.
 The limit is profiled over a grid of the observed braking powers and kept only when it
-lowers the BIC (n·ln RSS + k·ln n). The fuel form (Willans line with engine-off, SOC
-corrected with k = 1/η_m) is linear too::
-
-    P_fuel = a·on + b·(on·max(P, 0) − P_bat) + Σ c_k·on·L_k,    b = 1/η_m, a = P_idle,fuel
-
-with the engine-off threshold P_off profiled the same way (``on`` = P > P_off).
+lowers the BIC (n·ln RSS + k·ln n). The fuel form is fitted the same way
+(fit/chain_fuel.py).
 
 Memory: the design is never built whole: [√Δt·X √Δt·y] is factored block by block into
 its triangle R (TSQR: Demmel et al. 2012) and the bounded problem solved on R, which has
@@ -43,14 +39,6 @@ from sumo_drvpw.model.chain import EnergyChain, corrected_fuel_power
 ETA_MIN = 1e-3
 #: quantiles of the observed braking power |min(P, 0)| tried as recuperation limits
 LIMIT_QUANTILES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995)
-#: engine-off thresholds tried for the fuel chain [W]
-ENGINE_OFF_GRID_W = (-np.inf, 0.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 8000.0, 10000.0, 12000.0, 15000.0)
-#: speeds above which the engine always runs, tried for the fuel chain [m/s] (None: no such speed)
-ENGINE_ON_SPEED_GRID_MPS = (None, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 17.0, 20.0)
-#: a fuel chain's engine on/off is identified at city speeds only when at least this share
-#: of the calibration time lies below CITY_SPEED_MPS (50 km/h, the urban limit)
-CITY_SPEED_MPS = 50.0 / 3.6
-CITY_SHARE_MIN = 0.1
 #: samples per block of a fit's design (factored block by block, never built whole)
 BLOCK_ROWS = 65_536
 
@@ -162,8 +150,15 @@ def _covariance(fac: tuple, rss: float, active: np.ndarray) -> np.ndarray:
     return se
 
 
-def _bic(rss: float, n: int, k: int) -> float:
-    return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
+#: a residual sum of squares below this share of the target's (uncentred, weighted) sum of
+#: squares is numerically zero: fits that reach it tie, and the BIC's penalty chooses
+RSS_ZERO = 1e-12
+
+
+def _bic(rss: float, n: int, k: int, yy: float = 0.0) -> float:
+    """n·ln(RSS/n) + k·ln n, the RSS floored at :data:`RSS_ZERO`·``yy`` (Σw·y²): without
+    noise, nested forms that both fit exactly would otherwise be told apart by rounding."""
+    return n * math.log(max(rss, RSS_ZERO * yy, 1e-300) / n) + k * math.log(n)
 
 
 def _stats(pred, y, w) -> tuple[float, float, float]:
@@ -382,116 +377,6 @@ def battery_chain(names, beta, se, active, lim, hvac, predicts="battery", fixed=
     return chain, params
 
 
-def fuel_grid(engine_off="profile", engine_on_above_mps="profile", fuel_cut_below_w=None) -> list:
-    """The fuel chains tried, one per engine-off threshold and engine-on speed (templates:
-    their engine state only); an engine that never stops (off = −inf) is on at any speed:
-    one fit, no speed threshold."""
-    grid = ENGINE_OFF_GRID_W if engine_off == "profile" else (float(engine_off),)
-    vgrid = (ENGINE_ON_SPEED_GRID_MPS if engine_on_above_mps == "profile" else (engine_on_above_mps,))
-    return [EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von,
-                        fuel_cut_below_w=fuel_cut_below_w)
-            for off in grid for von in (vgrid if off > -np.inf else (None,))]
-
-
-def fuel_design(tmpl: EnergyChain, p, v, pb, lcols) -> np.ndarray:
-    """The Willans line's design [on, on·max(P, 0) − P_bat, on·L_k] of the engine state of ``tmpl``."""
-    on = tmpl.engine_on(p, v).astype(float)
-    return np.column_stack([on, on * np.maximum(p, 0.0) - pb] + [on * c for c in lcols])
-
-
-def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fuel="gasoline",
-               fuel_cut_below_w=None):
-    """The fuel chain and its parameters from the fitted [a, b = 1/η_m, c_k], their standard
-    errors and active bounds, the engine-off threshold and engine-on speed, and the share
-    ``low`` of the calibration time below city speed."""
-    b = float(beta[1])
-    eta = 1.0 / b
-    params = {"idle_fuel_power_w": {"value": float(beta[0]), "std_err": _nan_none(se[0]),
-                                    "at_bound": bool(active[0] != 0)},
-              "marginal_efficiency": {"value": eta, "std_err": _nan_none(se[1] / b ** 2),
-                                      "at_bound": bool(active[1] != 0)}}
-    gains = {}
-    for j, c in enumerate(loads):  # c_k = g_k/η_m → g_k = c_k·η_m
-        gains[c] = float(beta[2 + j]) * eta
-        params[f"loads.{c}"] = {"value": gains[c], "std_err": _nan_none(se[2 + j] * eta),
-                                "at_bound": bool(active[2 + j] != 0)}
-    params["engine_off_below_w"] = {"value": off, "std_err": None, "at_bound": False,
-                                    "how": "profiled (BIC) over a grid"}
-    if engine_on_above_mps is not None:
-        params["engine_on_above_mps"] = {"value": engine_on_above_mps, "std_err": None,
-                                         "at_bound": False, "how": "profiled (BIC) over a grid"}
-    for name, p_ in params.items():
-        p_["reading"] = reading(name, p_["value"])
-    if low < CITY_SHARE_MIN:  # the engine's on/off at city speeds is not in the data
-        params["engine_off_below_w"]["reading"] += (
-            f"; NOT IDENTIFIED at city speeds: {low:.0%} of the calibration time is below "
-            f"{CITY_SPEED_MPS * 3.6:.0f} km/h, so where a SUMO study drives slower the engine's "
-            "on/off is extrapolated (a hybrid that runs electric at low power there would use less fuel "
-            "than this chain books)")
-    chain = EnergyChain(predicts="fuel", idle_fuel_power_w=float(beta[0]), marginal_efficiency=eta,
-                        engine_off_below_w=off, engine_on_above_mps=engine_on_above_mps,
-                        fuel_cut_below_w=fuel_cut_below_w, loads=gains, fuel=fuel)
-    return chain, params
-
-
-def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict | None = None, *,
-                   loads=(), mask=None, engine_off="profile", fuel: str = "gasoline",
-                   engine_on_above_mps="profile", fuel_cut_below_w: float | None = None) -> ChainFit:
-    """Calibrate a Willans-line fuel chain with engine-off and battery (SOC) correction.
-
-    Parameters
-    ----------
-    p_drive_w : driving power of the road-load equation [W]
-    v_mps : speed [m/s]
-    fuel_w : measured fuel power ṁ·LHV [W]
-    dt_s : sample durations [s]
-    battery_w : hybrid battery power V·I, positive when discharging [W], or None
-    loads : logged load columns (gains ≥ 0, at the engine output)
-    engine_off : "profile" (grid :data:`ENGINE_OFF_GRID_W`, by RSS) or a number [W]
-    fuel : key of :data:`sumo_drvpw.model.constants.FUELS`
-    engine_on_above_mps : speed above which the engine always runs [m/s]: "profile" (grid
-        :data:`ENGINE_ON_SPEED_GRID_MPS` jointly with the threshold, by BIC), None or a number
-    fuel_cut_below_w : a declared overrun fuel cut-off (model/chain.py), kept: those samples
-        are unfuelled in the fit and the chain keeps it; None: none
-    """
-    p = np.asarray(p_drive_w, float)
-    n = p.size
-    y = np.asarray(fuel_w, float)
-    v = np.broadcast_to(np.asarray(v_mps, float), (n,))
-    w = np.broadcast_to(np.asarray(dt_s, float), (n,)).astype(float)
-    pb = np.zeros(n) if battery_w is None else np.nan_to_num(np.asarray(battery_w, float))
-    sig = signals or {}
-    lcols = [_col(sig, c, n) for c in loads]
-    ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w)
-    if mask is not None:
-        ok &= np.asarray(mask, bool)
-    names = ["idle_fuel_power_w", "marginal_efficiency"] + [f"loads.{c}" for c in loads]
-    lb = [0.0, 1.0] + [0.0] * len(loads)
-    ub = [np.inf, 1.0 / ETA_MIN] + [np.inf] * len(loads)
-    best, profile = None, []
-    for tmpl in fuel_grid(engine_off, engine_on_above_mps, fuel_cut_below_w):
-        def make(sl, tmpl=tmpl):
-            return fuel_design(tmpl, p[sl], v[sl], pb[sl], [c[sl] for c in lcols]), y[sl]
-
-        beta, rss, active, xs = _solve(make, w, ok, lb, ub)
-        off, von = tmpl.engine_off_below_w, tmpl.engine_on_above_mps
-        bic = _bic(rss, int(ok.sum()), len(names) + 1 + (von is not None))
-        profile.append({"engine_off_below_w": off, "engine_on_above_mps": von, "rss": rss, "bic": bic})
-        if best is None or bic < best[0]:
-            best = (bic, off, von, beta, active, xs, rss)
-    _, off, engine_on_above_mps, beta, active, xs, rss = best
-    low = float(w[ok & (v < CITY_SPEED_MPS)].sum() / max(w[ok].sum(), 1e-12))
-    chain, params = fuel_chain(loads, beta, _covariance(xs, rss, active), active, off, engine_on_above_mps,
-                               low, fuel, fuel_cut_below_w)
-    pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
-    target = corrected_fuel_power(y, pb, chain.battery_fuel_factor)[ok]
-    r2, rmse, ratio = _stats(pred, target, w[ok])
-    chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
-    chain.metrics = {"n": int(ok.sum()), "r2": r2, "rmse_w": rmse, "energy_ratio": ratio,
-                     "target": "fuel power + battery power / η_m (SOC-corrected)"}
-    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile)
-
-
 def _nan_none(x) -> float | None:
     x = float(x)
     return None if math.isnan(x) else x
@@ -527,6 +412,8 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
 
     if m.target == "fuel":
         fuel = m.vehicle.powertrain.get("fuel", "gasoline") if m.vehicle is not None else "gasoline"
+        from sumo_drvpw.fit.chain_fuel import calibrate_fuel
+
         cut = getattr(getattr(equation, "chain", None), "fuel_cut_below_w", None)  # declared: kept
         fit = calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads,
                              mask=use, engine_off=engine_off, fuel=fuel, fuel_cut_below_w=cut)

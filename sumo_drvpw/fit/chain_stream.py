@@ -32,9 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.fit.chain import (CITY_SPEED_MPS, ETA_MIN, LIMIT_QUANTILES, ChainFit, _bic, _col, _covariance,
-                                  battery_chain, battery_columns, battery_design, factor_rows, fuel_chain,
-                                  fuel_design, fuel_grid, solve_factor)
+from sumo_drvpw.fit.chain import (LIMIT_QUANTILES, ChainFit, _bic, _col, _covariance, battery_chain,
+                                  battery_columns, battery_design, factor_rows, solve_factor)
+from sumo_drvpw.fit.chain_fuel import (CITY_SPEED_MPS, fuel_bounds, fuel_chain, fuel_design, fuel_grid,
+                                       fuel_names)
 from sumo_drvpw.fit.stream import _add_counts
 
 #: the braking powers' bins: their float64 bits shifted right by this (12 mantissa bits kept)
@@ -277,7 +278,6 @@ class ChainStats:
 
     def _fuel(self, m, p, y, w, v, sig, use) -> None:
         n = len(y)
-        self.names = ["idle_fuel_power_w", "marginal_efficiency"] + [f"loads.{c}" for c in self.spec.loads]
         pb = np.zeros(n) if m.battery_w is None else np.nan_to_num(np.asarray(m.battery_w, float))
         lcols = [_col(sig, c, n) for c in self.spec.loads]
         ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w) & use
@@ -440,21 +440,21 @@ class ChainStats:
 
     def _fit_fuel(self) -> ChainFit:
         sp, best, profile = self.spec, None, []
-        lb = [0.0, 1.0] + [0.0] * len(sp.loads)
-        ub = [np.inf, 1.0 / ETA_MIN] + [np.inf] * len(sp.loads)
+        sw, mu, c = self.mom
+        yy = float(c[0, 0] + sw * mu[0] ** 2)  # Σw·y² of the fuel power
         for i, tmpl in enumerate(self.grid):
-            beta, rss, act, xs = solve_factor(self.fac[i][0], self.fac[i][1], lb, ub)
+            names = fuel_names(tmpl, sp.loads)
+            beta, rss, act, xs = solve_factor(self.fac[i][0], self.fac[i][1], *fuel_bounds(names))
             off, von = tmpl.engine_off_below_w, tmpl.engine_on_above_mps
-            bic = _bic(rss, self.n_ok, len(self.names) + 1 + (von is not None))
+            bic = _bic(rss, self.n_ok, len(names) + 1 + (von is not None), yy)
             profile.append({"engine_off_below_w": off, "engine_on_above_mps": von, "rss": rss, "bic": bic})
             if best is None or bic < best[0]:
                 best = (bic, i, beta, act, xs, rss)
         _, i, beta, act, xs, rss = best
         tmpl = self.grid[i]
-        sw, mu, c = self.mom
         chain, params = fuel_chain(sp.loads, beta, _covariance(xs, rss, act), act, tmpl.engine_off_below_w,
                                    tmpl.engine_on_above_mps, self.w_low / max(sw, 1e-12), sp.fuel,
-                                   sp.fuel_cut_below_w)
+                                   sp.fuel_cut_below_w, tmpl.charge_sustaining)
         b = chain.battery_fuel_factor  # the target: fuel + k·battery power (SOC-corrected)
         sst = float(c[0, 0] + 2 * b * c[0, 1] + b * b * c[1, 1])
         r2 = 1.0 - rss / sst if sst > 0 else math.nan

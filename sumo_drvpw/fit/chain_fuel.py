@@ -1,0 +1,190 @@
+"""Calibrate a fuel chain (model/chain.py) on top of a road-load equation: a Willans line
+with engine-off, SOC-corrected with k = 1/η_m, linear in its parameters::
+
+    P_fuel = a·on + b·(paid·max(P, 0) − P_bat) + c·cs + Σ c_k·paid·L_k,
+    b = 1/η_m, a = P_idle,fuel, c = P_aux/η_m,
+
+solved as the battery form is (fit/chain.py: bounded least squares on the factored design,
+each sample weighted by its duration), with the engine-off threshold P_off (``on`` = P >
+P_off) and the speed above which the engine always runs profiled over grids by BIC.
+
+An engine that stops is fitted in the charge-sustaining form (``paid`` = 1, ``cs`` = 1;
+model/chain.py): the target, fuel + P_bat/η_m, holds the battery's energy at the margin,
+also where the engine is off and the battery drives, so only the idle fuel stops with
+the engine, and the auxiliary draw the battery carries while it is off is a parameter of
+its own. (The plain form, ``paid`` = ``on`` and no ``c``, would call that driving free:
+it is the per-sample fuel flow, not the fuel a trip costs.) An engine that never stops
+(P_off = −inf) has one form, its auxiliary draw in the idle fuel.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sumo_drvpw.fit.chain import (ETA_MIN, ChainFit, _bic, _col, _covariance, _nan_none, _solve,
+                                  _stats)
+from sumo_drvpw.fit.chain_checks import reading
+from sumo_drvpw.model.chain import EnergyChain, corrected_fuel_power
+
+#: engine-off thresholds tried for the fuel chain [W]
+ENGINE_OFF_GRID_W = (-np.inf, 0.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 8000.0, 10000.0, 12000.0, 15000.0)
+#: speeds above which the engine always runs, tried for the fuel chain [m/s] (None: no such speed)
+ENGINE_ON_SPEED_GRID_MPS = (None, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 17.0, 20.0)
+#: a fuel chain's engine on/off is identified at city speeds only when at least this share
+#: of the calibration time lies below CITY_SPEED_MPS (50 km/h, the urban limit)
+CITY_SPEED_MPS = 50.0 / 3.6
+CITY_SHARE_MIN = 0.1
+#: the largest auxiliary draw a car's engine plausibly carries [W] (12 V net and the A/C
+#: compressor at full load together; a fuel chain's reading flags more)
+CAR_AUX_MAX_W = 3000.0
+
+
+def fuel_grid(engine_off="profile", engine_on_above_mps="profile", fuel_cut_below_w=None,
+              charge_sustaining: bool = True) -> list:
+    """The fuel chains tried, one per engine-off threshold and engine-on speed (templates:
+    their engine state only); an engine that never stops (off = −inf) is on at any speed:
+    one fit, no speed threshold, and sustains no charge (``charge_sustaining`` applies to
+    the thresholds it can stop at)."""
+    grid = ENGINE_OFF_GRID_W if engine_off == "profile" else (float(engine_off),)
+    vgrid = (ENGINE_ON_SPEED_GRID_MPS if engine_on_above_mps == "profile" else (engine_on_above_mps,))
+    return [EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von,
+                        fuel_cut_below_w=fuel_cut_below_w, charge_sustaining=charge_sustaining and off > -np.inf)
+            for off in grid for von in (vgrid if off > -np.inf else (None,))]
+
+
+def fuel_names(tmpl: EnergyChain, loads) -> list[str]:
+    """The parameters of ``tmpl``'s Willans line: the idle fuel, 1/η_m, for a
+    charge-sustaining template the auxiliary power (paid also while the engine is off: the
+    battery carries it and the engine puts it back; with the engine off only while on, it is
+    the idle fuel's), and the load gains."""
+    return (["idle_fuel_power_w", "marginal_efficiency"] + ["aux_power_w"] * tmpl.charge_sustaining
+            + [f"loads.{c}" for c in loads])
+
+
+def fuel_bounds(names) -> tuple[list, list]:
+    """Bounds of :func:`fuel_names`'s parameters: 1/η_m in [1, 1/ETA_MIN], the rest ≥ 0."""
+    return [0.0, 1.0] + [0.0] * (len(names) - 2), [np.inf, 1.0 / ETA_MIN] + [np.inf] * (len(names) - 2)
+
+
+def fuel_design(tmpl: EnergyChain, p, v, pb, lcols) -> np.ndarray:
+    """The Willans line's design [on, paid·max(P, 0) − P_bat, (1), paid·L_k] of the engine
+    state of ``tmpl`` (:func:`fuel_names`): paid = on, or everywhere for a charge-sustaining
+    template (model/chain.py), which has the auxiliary power's column of ones."""
+    on = tmpl.engine_on(p, v)
+    paid = (on | tmpl.charge_sustaining).astype(float)
+    aux = [np.ones(p.shape)] if tmpl.charge_sustaining else []
+    return np.column_stack([on.astype(float), paid * np.maximum(p, 0.0) - pb] + aux + [paid * c for c in lcols])
+
+
+def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fuel="gasoline",
+               fuel_cut_below_w=None, charge_sustaining: bool = False):
+    """The fuel chain and its parameters from the fitted [a, b = 1/η_m, (c = P_aux/η_m for a
+    ``charge_sustaining`` one), c_k] (:func:`fuel_names`), their standard errors and active
+    bounds, the engine-off threshold and engine-on speed, and the share ``low`` of the
+    calibration time below city speed."""
+    b = float(beta[1])
+    eta = 1.0 / b
+    params = {"idle_fuel_power_w": {"value": float(beta[0]), "std_err": _nan_none(se[0]),
+                                    "at_bound": bool(active[0] != 0)},
+              "marginal_efficiency": {"value": eta, "std_err": _nan_none(se[1] / b ** 2),
+                                      "at_bound": bool(active[1] != 0)}}
+    gains, k0 = {}, 2 + charge_sustaining  # the columns of fuel_names
+    if charge_sustaining:  # c = P_aux/η_m
+        params["aux_power_w"] = {"value": float(beta[2]) * eta, "std_err": _nan_none(se[2] * eta),
+                                 "at_bound": bool(active[2] != 0)}
+    for j, c in enumerate(loads):  # c_k = g_k/η_m → g_k = c_k·η_m
+        gains[c] = float(beta[k0 + j]) * eta
+        params[f"loads.{c}"] = {"value": gains[c], "std_err": _nan_none(se[k0 + j] * eta),
+                                "at_bound": bool(active[k0 + j] != 0)}
+    params["engine_off_below_w"] = {"value": off, "std_err": None, "at_bound": False,
+                                    "how": "profiled (BIC) over a grid"}
+    if engine_on_above_mps is not None:
+        params["engine_on_above_mps"] = {"value": engine_on_above_mps, "std_err": None,
+                                         "at_bound": False, "how": "profiled (BIC) over a grid"}
+    for name, p_ in params.items():
+        p_["reading"] = reading(name, p_["value"])
+    if charge_sustaining:
+        aux = params["aux_power_w"]["value"]
+        params["aux_power_w"]["reading"] = (
+            f"auxiliary draw {aux:.0f} W at the engine output (12 V net, pumps, A/C): the battery carries it "
+            "while the engine is off and the engine puts it back, so it costs fuel at the margin also standing"
+            + (f"; IMPLAUSIBLE for a car (12 V and A/C together up to about {CAR_AUX_MAX_W / 1000:.0f} kW): "
+               "the line takes up what the driving power misses" if aux > CAR_AUX_MAX_W else ""))
+    if charge_sustaining and off > 0:
+        params["engine_off_below_w"]["reading"] += (
+            "; charge-sustaining: below it the battery drives and the engine puts that energy back "
+            "later, so all driving power costs fuel at the margin and only the idle fuel stops")
+    if low < CITY_SHARE_MIN:  # the engine's on/off at city speeds is not in the data
+        params["engine_off_below_w"]["reading"] += (
+            f"; NOT IDENTIFIED at city speeds: {low:.0%} of the calibration time is below "
+            f"{CITY_SPEED_MPS * 3.6:.0f} km/h, so where a SUMO study drives slower the engine's "
+            "on/off is extrapolated (a hybrid that runs electric at low power there would use less fuel "
+            "than this chain books)")
+    chain = EnergyChain(predicts="fuel", idle_fuel_power_w=float(beta[0]), marginal_efficiency=eta,
+                        engine_off_below_w=off, engine_on_above_mps=engine_on_above_mps,
+                        fuel_cut_below_w=fuel_cut_below_w, loads=gains, fuel=fuel,
+                        charge_sustaining=charge_sustaining,
+                        aux_power_w=params["aux_power_w"]["value"] if charge_sustaining else 0.0)
+    return chain, params
+
+
+def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict | None = None, *,
+                   loads=(), mask=None, engine_off="profile", fuel: str = "gasoline",
+                   engine_on_above_mps="profile", fuel_cut_below_w: float | None = None,
+                   charge_sustaining: bool = True) -> ChainFit:
+    """Calibrate a Willans-line fuel chain with engine-off and battery (SOC) correction.
+
+    Parameters
+    ----------
+    p_drive_w : driving power of the road-load equation [W]
+    v_mps : speed [m/s]
+    fuel_w : measured fuel power ṁ·LHV [W]
+    dt_s : sample durations [s]
+    battery_w : hybrid battery power V·I, positive when discharging [W], or None
+    loads : logged load columns (gains ≥ 0, at the engine output)
+    engine_off : "profile" (grid :data:`ENGINE_OFF_GRID_W`, by RSS) or a number [W]
+    fuel : key of :data:`sumo_drvpw.model.constants.FUELS`
+    engine_on_above_mps : speed above which the engine always runs [m/s]: "profile" (grid
+        :data:`ENGINE_ON_SPEED_GRID_MPS` jointly with the threshold, by BIC), None or a number
+    fuel_cut_below_w : a declared overrun fuel cut-off (model/chain.py), kept: those samples
+        are unfuelled in the fit and the chain keeps it; None: none
+    charge_sustaining : fit and return the charge-sustaining form for an engine that stops
+        (default: the SOC-corrected target is that form's; an engine that never stops has
+        one form); False: the plain form, the driving below P_off unfuelled
+    """
+    p = np.asarray(p_drive_w, float)
+    n = p.size
+    y = np.asarray(fuel_w, float)
+    v = np.broadcast_to(np.asarray(v_mps, float), (n,))
+    w = np.broadcast_to(np.asarray(dt_s, float), (n,)).astype(float)
+    pb = np.zeros(n) if battery_w is None else np.nan_to_num(np.asarray(battery_w, float))
+    sig = signals or {}
+    lcols = [_col(sig, c, n) for c in loads]
+    ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w)
+    if mask is not None:
+        ok &= np.asarray(mask, bool)
+    best, profile = None, []
+    yy = float(w[ok] @ y[ok] ** 2)
+    for tmpl in fuel_grid(engine_off, engine_on_above_mps, fuel_cut_below_w, charge_sustaining):
+        def make(sl, tmpl=tmpl):
+            return fuel_design(tmpl, p[sl], v[sl], pb[sl], [c[sl] for c in lcols]), y[sl]
+
+        names = fuel_names(tmpl, loads)
+        beta, rss, active, xs = _solve(make, w, ok, *fuel_bounds(names))
+        off, von = tmpl.engine_off_below_w, tmpl.engine_on_above_mps
+        bic = _bic(rss, int(ok.sum()), len(names) + 1 + (von is not None), yy)
+        profile.append({"engine_off_below_w": off, "engine_on_above_mps": von, "rss": rss, "bic": bic})
+        if best is None or bic < best[0]:
+            best = (bic, tmpl, beta, active, xs, rss)
+    _, tmpl, beta, active, xs, rss = best
+    off, engine_on_above_mps = tmpl.engine_off_below_w, tmpl.engine_on_above_mps
+    low = float(w[ok & (v < CITY_SPEED_MPS)].sum() / max(w[ok].sum(), 1e-12))
+    chain, params = fuel_chain(loads, beta, _covariance(xs, rss, active), active, off, engine_on_above_mps,
+                               low, fuel, fuel_cut_below_w, tmpl.charge_sustaining)
+    pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
+    target = corrected_fuel_power(y, pb, chain.battery_fuel_factor)[ok]
+    r2, rmse, ratio = _stats(pred, target, w[ok])
+    chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
+    chain.metrics = {"n": int(ok.sum()), "r2": r2, "rmse_w": rmse, "energy_ratio": ratio,
+                     "target": "fuel power + battery power / η_m (SOC-corrected)"}
+    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile)
