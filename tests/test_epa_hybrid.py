@@ -262,3 +262,63 @@ def test_charge_sustaining_key_round_trips_and_bad_values_are_one_line():
     for bad in ({**base, "charge_sustaining": "yes"}, {"predicts": "battery", "charge_sustaining": True}):
         with pytest.raises(UserError, match=r"'charge_sustaining' must be true or false"):
             chain_from_dict(bad, "x.toml")
+
+
+PHEV_ROUTES = """<routes>
+  <vType id="phev" emissionClass="HBEFA4/PC_PHEV_petrol_Euro-6d_(P)" mass="1700"/>
+  <vType id="petrol" emissionClass="HBEFA4/PC_petrol_Euro-6d" mass="1400"/>
+  <vType id="plain" mass="1400"/>
+  <flow id="h" type="phev" begin="0" end="30" period="10"><route edges="e"/></flow>
+  <flow id="p" type="petrol" begin="1" end="30" period="10"><route edges="e"/></flow>
+  <flow id="n" type="plain" begin="2" end="30" period="10"><route edges="e"/></flow>
+</routes>"""
+
+
+def test_a_bare_config_books_a_plug_in_hybrids_petrol_share_with_the_hybrid_chain(tmp_path):
+    """A bare SUMO config: the vType whose emissionClass names a plug-in hybrid's petrol share
+    (HBEFA4/PC_PHEV_petrol_Euro-6d_(P)) is booked by the full hybrids' chain and not by the
+    conventional petrol car's; a conventional class, written or SUMO's default, the
+    reverse; summary.json says which chain each left out. A scenario that names both chains
+    books a vType that writes no class with both (alternatives), and the hybrid class still
+    with the hybrid's only. A calibrated chain whose engine stops only at P ≤ 0 (start-stop)
+    is no hybrid's."""
+    pytest.importorskip("libsumo")
+    import json
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.chain import EnergyChain
+    from sumo_drvpw.model.equations import Equation
+    from sumo_probe import build_net
+    from sumo_drvpw.sim.vtypes import is_hybrid_chain, is_hybrid_class
+
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
+    (tmp_path / "r.rou.xml").write_text(PHEV_ROUTES)
+    (tmp_path / "c.sumocfg").write_text('<configuration><input><net-file value="n.net.xml"/><route-files '
+                                        'value="r.rou.xml"/></input><time><end value="150"/></time></configuration>')
+    books = {}
+    for name, target in (("bare", "c.sumocfg"), ("both", "s.toml")):
+        if name == "both":
+            (tmp_path / "s.toml").write_text(f'equations = ["epa_gasoline_car", "{eh.NAME}"]\n[sumo]\n'
+                                             'config = "c.sumocfg"\n[outputs]\nfigures = false\n')
+        out = tmp_path / name
+        assert cli_main(["run", str(tmp_path / target), "--no-figures", "--out", str(out)]) == 0
+        ch = pd.read_csv(out / "chain_vehicles.csv", dtype={"key": str})
+        books[name] = ch.groupby(ch["key"].str[0])["equation"].agg(lambda s: sorted(set(s))).to_dict()
+        books[name + "_summary"] = json.loads((out / "summary.json").read_text())["assumptions"]["powertrain"]
+    assert books["bare"] == {"h": [eh.NAME], "p": ["epa_gasoline_car"], "n": ["epa_gasoline_car"]}
+    pt = books["bare_summary"]
+    assert pt["phev"]["powertrain"] == "hybrid" and pt["phev"]["not_booked_by"] == ["epa_gasoline_car"]
+    assert pt["petrol"]["not_booked_by"] == pt["plain"]["not_booked_by"] == [eh.NAME]
+    assert pt["plain"]["from"].startswith("SUMO's default")
+    assert books["both"] == {"h": [eh.NAME], "p": ["epa_gasoline_car"], "n": ["epa_gasoline_car", eh.NAME]}
+    assert set(books["both_summary"]) == {"phev", "petrol"}
+    # the classes and chains the routing reads
+    assert is_hybrid_class("HBEFA4/LCV_PHEV_petrol_N1-II_Euro-6_(P)") and not is_hybrid_class("HBEFA3/PC_G_EU4")
+    stop_start = EnergyChain(predicts="fuel", idle_fuel_power_w=3000.0, marginal_efficiency=0.35,
+                             engine_off_below_w=0.0, charge_sustaining=True, aux_power_w=300.0)
+    hybrid = EnergyChain(predicts="fuel", idle_fuel_power_w=3000.0, marginal_efficiency=0.35,
+                         engine_off_below_w=6000.0, charge_sustaining=True)
+    assert [is_hybrid_chain(Equation(name="x", terms={"acc": 1.0}, chain=c)) for c in (stop_start, hybrid)] == [
+        False, True]
+    assert is_hybrid_chain(Equation(name="x", terms={"acc": 1.0})) is None

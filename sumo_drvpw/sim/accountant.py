@@ -126,7 +126,7 @@ class Accountant(_Listener):
     def __init__(self, conn, equations=None, scenario=None, trace_path=None,
                  keep_vehicles: bool = False, spill_dir=None, flush_vehicles: int | None = None,
                  net=None, vtypes=None, **overrides):
-        from sumo_drvpw.sim.run import VTypeResolver
+        from sumo_drvpw.sim.resolver import VTypeResolver
 
         self._t0 = time.perf_counter()
         self.conn = conn
@@ -310,6 +310,7 @@ class Accountant(_Listener):
                             "sumo_masses": dict(sorted(self.resolver.sumo_masses.items())),
                             "booked_as": dict(sorted(self.resolver.booked_as.items())),
                             "energy_carrier": dict(sorted(self.resolver.carriers.items())),
+                            "powertrain": dict(sorted(self.resolver.powertrains.items())),
                             "vtype_energy": self.vtype_energy},
         }
         summary_extra.update(extra or {})

@@ -61,13 +61,15 @@ OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equ
 #: VSP (LDV 1999), the seed paper's DrvPw and MOVES's passenger car; trucks, buses and motorcycles by their
 #: MOVES type — and cars and vans by the EPA fleet's fuel chains, trucks and buses by their MOVES type's
 #: diesel chain (docs/hdv-fuel.md), electric cars by the i3's battery chain, each vehicle by the carrier of
-#: its emissionClass (SUMO's default where it writes none: ``default_carrier``; an evehicle's is electric)
+#: its emissionClass (SUMO's default where it writes none: ``default_carrier``; an evehicle's is electric),
+#: and petrol cars whose emissionClass names a hybrid (HBEFA 4's plug-in hybrids' petrol share) by the EPA
+#: full hybrids' chain instead of the conventional one (sim/resolver.py)
 CONFIG_EQUATIONS = ("vsp_ldv1999", "drvpw_prius3", "moves_passenger_car", "moves_motorcycle",
                     "moves_light_commercial_truck", "moves_single_unit_truck", "moves_combination_truck",
                     "moves_transit_bus", "moves_intercity_bus", "epa_gasoline_car", "epa_diesel_car",
                     "epa_gasoline_light_truck", "epa_diesel_light_truck", "moves_single_unit_truck_diesel",
                     "moves_combination_truck_diesel", "moves_transit_bus_diesel", "moves_intercity_bus_diesel",
-                    "bmw_i3_battery")
+                    "bmw_i3_battery", "epa_gasoline_hybrid_car")
 @dataclass
 class RoadClassRule:
     """How an edge gets its road class: edge id map > type map > highway types/speed > city."""

@@ -477,3 +477,25 @@ def equation_carrier(eq) -> str | None:
     if ch.predicts == "fuel":
         return ch.fuel
     return "electricity" if ch.predicts == "battery" else None
+
+
+#: words of an emission-class name that make it a hybrid's (HBEFA 4's plug-in hybrids,
+#: ``PC_PHEV_petrol_Euro-6d_(P)``: the share they drive on petrol)
+HYBRID_WORDS = {"phev", "hev", "hybrid"}
+
+
+def is_hybrid_class(emission_class: str | None) -> bool:
+    """Whether a SUMO emissionClass names a hybrid (:data:`HYBRID_WORDS`)."""
+    words = re.split(r"[^a-z0-9]+", (emission_class or "").partition("/")[2].lower() or
+                     (emission_class or "").lower())
+    return any(w in HYBRID_WORDS for w in words)
+
+
+def is_hybrid_chain(eq) -> bool | None:
+    """For an equation whose chain books fuel: whether it is a hybrid's (charge-sustaining,
+    the engine off below a positive driving power: the battery drives; a conventional
+    engine's start-stop, off at P ≤ 0, is not); None for any other equation."""
+    ch = getattr(eq, "chain", None)
+    if ch is None or ch.predicts != "fuel":
+        return None
+    return bool(ch.charge_sustaining and ch.engine_off_below_w > 0)

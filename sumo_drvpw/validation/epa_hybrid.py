@@ -383,8 +383,9 @@ def builtin_equation(res: dict) -> dict:
                             f"the {dfl['configurations']} EPA-certified full-hybrid cars (model years {years}) and a Willans "
                             f"fuel line with engine-off fitted on the certification tests of every full hybrid "
                             f"({res['configurations_used']} configurations, light trucks included); the mass "
-                            "comes from the vType. Not in a bare SUMO config's equations: name it for the vTypes "
-                            "that are hybrids"),
+                            "comes from the vType. In a bare SUMO config it books the petrol cars whose "
+                            "emissionClass names a hybrid (HBEFA 4's plug-in hybrids' petrol share); name it for "
+                            "other vTypes that are hybrids"),
             "source": ("US EPA Test Car List (data.gov), model years " + ", ".join(map(str, res["years"]))
                        + "; fitted by python -m sumo_drvpw.validation.epa_hybrid (docs/epa-hybrid.md)"),
         },
@@ -544,8 +545,10 @@ def render(res: dict, cmd: str, seconds: float) -> str:
                      "knowing the car." if all(r["class_road_load_l"] > r["own_road_load_l"] for r in pr["rows"]) else "")]
     L += ["", "## Use", "",
           f"List `{NAME}` among a scenario's `equations` and as `[vtypes.<id>] equations = [\"{NAME}\"]` for the "
-          "vTypes that are full hybrids (or give it as a run's equation for every car); it is not among a bare SUMO "
-          "config's equations (SUMO has no full-hybrid emission class to tell them by). What it leaves out: "
+          "vTypes that are full hybrids (or give it as a run's equation for every car). A bare SUMO config books "
+          "with it the petrol cars whose emissionClass names a hybrid — SUMO has no full-hybrid class, but HBEFA 4's "
+          "plug-in hybrids' petrol share (`HBEFA4/PC_PHEV_petrol_Euro-6d_(P)`) drives as one — and every other "
+          "petrol car with the conventional chain. What it leaves out: "
           "auxiliaries (A/C), the cold start's growth below "
           f"{ef.FTP_AIR_C} °C, and the state of charge: it books a trip as "
           "charge-sustaining, so a short trip that ends with a fuller or emptier battery than it began is booked "

@@ -1,0 +1,283 @@
+"""Which equations book a vehicle, and at what mass: :class:`VTypeResolver`, asked once
+per vType by the run (sim/run.py), an FCD replay (sim/fcd.py) and the Accountant: its
+vClass and what vehicle it is (sim/vtypes.vehicle_body), the equations made for it, its
+energy carrier and powertrain (a hybrid's or a conventional engine's fuel chain), its mass.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.vtype_energy import energy_vtype_of, own_energy
+from sumo_drvpw.sim.vtypes import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER,
+                                   SUMO_DEFAULT_VTYPES, energy_carrier, equation_carrier,
+                                   is_hybrid_chain, is_hybrid_class)
+
+
+class VTypeResolver:
+    """vType id → (mass [kg], applicability per equation, accounted?, vClass) for the loop.
+
+    vClass: SUMO's (``vehicletype.getVehicleClass``) > the vType's ``vClass`` attribute in
+    the files > ``passenger`` (SUMO's default).
+    Equations: scenario ``vtypes.<id>.equations`` > param ``drvpw.equation`` > scenario
+    ``vclasses.<vClass>.equations`` > every equation whose ``vclasses`` contain the vClass.
+    A vType of a generic vClass (``ignoring``, ``custom1``, ``custom2``:
+    :data:`sumo_drvpw.sim.vtypes.GENERIC_VCLASSES`) that none of these gives an equation is
+    booked as the road vehicle its ``emissionClass``, ``guiShape`` or id names; so is a vType
+    of a light vClass whose written ``emissionClass`` names a heavy vehicle, or the reverse
+    (a sedan in vClass bus for the bus lanes) unless the scenario or the vType names its
+    equations (:func:`sumo_drvpw.sim.vtypes.vehicle_body`; that vehicle's class equations,
+    ``vclasses.<that>`` settings and default mass), listed in :attr:`booked_as`.
+    A vType with none is not accounted and counted in :attr:`skipped` (by vClass and vType).
+    Energy carrier: unless the scenario or the vType names its equations, an equation whose
+    chain books a fuel or the battery books only vehicles whose written emissionClass names
+    that carrier or none (:func:`sumo_drvpw.sim.vtypes.energy_carrier`): a petrol chain
+    does not book an electric or a diesel car. A vType that writes none is booked by every
+    chain made for its vClass (alternatives a user chose), except with the scenario's
+    ``default_carrier`` (the plug-in's own equations) where chains of several carriers
+    apply: then by SUMO's default emissionClass (petrol car, diesel van). The chains left
+    out per vType are in :attr:`carriers`, vehicles with no equation left in
+    :attr:`skipped` ``by_carrier``.
+    Mass: scenario ``vtypes.<id>.mass_kg`` > param ``drvpw.mass`` > ``mass`` attribute (or
+    SUMO's deprecated ``vehicleMass`` param) plus the ``loading`` param, written in the
+    route/additional files > for a vType no file declares and no SUMO default type (made
+    during a live run by TraCI), SUMO's ``vehicletype.getMass`` > scenario
+    ``vclasses.<vClass>.mass_kg`` (plus loading) > the built-in default of the vClass
+    (:data:`sumo_drvpw.sim.vtypes.DEFAULT_MASS_KG`, listed in :attr:`assumptions`) unless
+    ``vehicles.default_masses = false``; none → UserError.
+    """
+
+    def __init__(self, scenario, file_vtypes: dict, equations: list, conn=None):
+        self.sc, self.files, self.conn = scenario, file_vtypes, conn
+        self.names = [e if isinstance(e, str) else e.name for e in equations]
+        #: equation name → vClasses it is made for (names given as plain strings: any)
+        self.vclasses = {(e if isinstance(e, str) else e.name):
+                         (None if isinstance(e, str) else set(e.vclasses)) for e in equations}
+        #: equation name → energy carrier its chain books (None: driving power only)
+        self.carrier_of = {(e if isinstance(e, str) else e.name):
+                           (None if isinstance(e, str) else equation_carrier(e)) for e in equations}
+        #: fuel-chain equation → whether it is a hybrid's (sim/vtypes.is_hybrid_chain)
+        self.hybrid_of = {e.name: h for e in equations if not isinstance(e, str)
+                          and (h := is_hybrid_chain(e)) is not None}
+        self.cache: dict[str, tuple] = {}
+        self.energy_of = energy_vtype_of(equations)  # vtype_energy equation → its vType
+        self.energy_mass = {e.name: e.mass_kg for e in equations if getattr(e, "name", None) in self.energy_of}
+        #: vTypes resolved by other resolvers of the same run (Dask buckets of an FCD replay)
+        self.seen: set[str] = set()
+        #: vehicles not accounted because no equation is made for their vClass (by_vclass,
+        #: by_vtype) or none books their energy carrier (by_carrier, when any: vClass → count)
+        self.skipped: dict[str, dict[str, int]] = {"by_vclass": {}, "by_vtype": {}}
+        #: vType → {"emission_class", "from", "carrier", "not_booked_by"}: chain equations
+        #: made for the vType's vClass that book another energy carrier
+        self.carriers: dict[str, dict] = {}
+        #: vType → {"emission_class", "from", "powertrain", "not_booked_by"}: fuel chains of
+        #: its carrier made for another powertrain (a hybrid's or a conventional engine's)
+        self.powertrains: dict[str, dict] = {}
+        #: vehicles left out by ``vehicles.vtypes``
+        self.excluded = 0
+        #: vType → {"vclass", "mass_kg", "source"} for masses taken from class defaults
+        self.assumptions: dict[str, dict] = {}
+        #: vType → {"vclass", "mass_kg"}: vTypes in no file read, at SUMO's mass (made during
+        #: the run by TraCI, or loaded through SUMO options the plug-in does not read)
+        self.sumo_masses: dict[str, dict] = {}
+        #: vType → {"vclass", "booked_as", "from"}: vTypes booked as the vehicle their
+        #: emissionClass, guiShape, id or length names, not by their vClass
+        self.booked_as: dict[str, dict] = {}
+
+    def _param(self, vt: str, key: str) -> str:
+        if self.conn is None:
+            return ""
+        try:
+            return self.conn.vehicletype.getParameter(vt, key) or ""
+        except Exception:
+            return ""
+
+    def _sumo_mass(self, vt: str) -> float | None:
+        """SUMO's mass of a vType no file declares (made by a TraCI script: a copy, a
+        vehicle's own type after setMass), from a live run; None otherwise."""
+        if self.conn is None or getattr(self.conn, "is_replay", False):
+            return None
+        try:
+            m = float(self.conn.vehicletype.getMass(vt))
+        except Exception:
+            return None
+        return m if m > 0 and np.isfinite(m) else None
+
+    def _vclass(self, vt: str, info, default: str = "passenger") -> str:
+        """SUMO's vClass of a vType, else the files', else that of SUMO's own type of this
+        id (DEFAULT_BIKETYPE: bicycle …) when no file declares it, else SUMO's default for a
+        vehicle (passenger) or, with ``default``, for a person (pedestrian)."""
+        if self.conn is not None:
+            try:
+                vc = self.conn.vehicletype.getVehicleClass(vt)
+                if vc:
+                    return str(vc)
+            except Exception:
+                pass
+        if info is None and vt in SUMO_DEFAULT_VTYPES:
+            return SUMO_DEFAULT_VTYPES[vt]
+        return (info.vclass if info is not None and info.vclass else None) or default
+
+    def _made_for(self, vclass: str) -> list[str]:
+        """The equations made for a vClass (plain names: any)."""
+        return [n for n in self.names if (self.vclasses[n] is None or vclass in self.vclasses[n])
+                and n not in self.energy_of]
+
+    def _default_emission_class(self, vt: str, vclass: str, written: bool = False) -> tuple[str, str]:
+        """SUMO's default emissionClass for the vType (SUMO's own when it writes none and the
+        run has a connection, else SUMO's default for the vClass), and where it came from."""
+        if self.conn is not None and not written:
+            try:
+                ec = self.conn.vehicletype.getEmissionClass(vt)
+                if ec:
+                    return str(ec), "SUMO's default (none written)"
+            except Exception:
+                pass
+        return (SUMO_DEFAULT_EMISSION_CLASS.get(vclass, SUMO_DEFAULT_EMISSION_CLASS_OTHER),
+                f"SUMO's default for vClass {vclass} ("
+                + ("the written one names no fuel" if written else "none written") + ")")
+
+    def _by_carrier(self, vt: str, info, vclass: str, app: np.ndarray) -> np.ndarray:
+        """``app`` without the chain equations of another energy carrier than the vType's:
+        its written emissionClass's; where that names none (or none is written) and chains
+        of several carriers apply, SUMO's default one's when the scenario says
+        ``default_carrier``."""
+        present = {self.carrier_of[n] for n, a in zip(self.names, app) if a} - {None}
+        if not present:
+            return app
+        ec = info.emission_class if info is not None else None
+        carrier, src = energy_carrier(ec), "written"
+        if carrier is None:  # none written, or a name of no known carrier
+            if len(present) < 2 or not getattr(self.sc, "default_carrier", False):
+                return app
+            ec, src = self._default_emission_class(vt, vclass, written=ec is not None)
+            carrier = energy_carrier(ec)
+            if carrier is None:
+                return app
+        wrong = [i for i, n in enumerate(self.names) if app[i] and self.carrier_of[n] not in (None, carrier)]
+        if wrong:
+            app = app.copy()
+            app[wrong] = 0.0
+            self.carriers[vt] = {"emission_class": ec, "from": src, "carrier": carrier,
+                                 "not_booked_by": [self.names[i] for i in wrong]}
+        return self._by_powertrain(vt, ec, src, app)
+
+    def _by_powertrain(self, vt: str, ec: str, src: str, app: np.ndarray) -> np.ndarray:
+        """``app`` without the fuel chains of the other powertrain where both a hybrid's
+        and a conventional engine's apply: a class that names a hybrid
+        (:func:`~sumo_drvpw.sim.vtypes.is_hybrid_class`) is booked by the hybrid's, any
+        other by the conventional's; where only one kind applies, it books."""
+        fuel = [i for i, n in enumerate(self.names) if app[i] and n in self.hybrid_of]
+        if len({self.hybrid_of[self.names[i]] for i in fuel}) < 2:
+            return app
+        hybrid = is_hybrid_class(ec)
+        other = [i for i in fuel if self.hybrid_of[self.names[i]] != hybrid]
+        app = app.copy()
+        app[other] = 0.0
+        self.powertrains[vt] = {"emission_class": ec, "from": src,
+                                "powertrain": "hybrid" if hybrid else "conventional",
+                                "not_booked_by": [self.names[i] for i in other]}
+        return app
+
+    def __call__(self, vt: str, vid: str):
+        out = self.cache.get(vt)
+        if out is None:
+            out = self.cache[vt] = self._resolve(vt, vid)
+        if not out[2]:
+            if out[4] == "filter":
+                self.excluded += 1
+            elif out[4] == "carrier":
+                for key, k in (("by_carrier", out[3]), ("by_vtype", vt)):
+                    d = self.skipped.setdefault(key, {})
+                    d[k] = d.get(k, 0) + 1
+            else:
+                for key, k in (("by_vclass", out[3]), ("by_vtype", vt)):
+                    self.skipped[key][k] = self.skipped[key].get(k, 0) + 1
+        return out[:4]
+
+    def skip_person(self, vt: str) -> None:
+        """Count a departing person (vType ``vt``) as skipped: persons are not booked, and
+        a person is a pedestrian whatever its vType's vClass says (a type nobody declared,
+        e.g. SUMO's DEFAULT_PEDTYPE in an FCD replay, or one redeclared without a vClass,
+        which SUMO reads as passenger)."""
+        for key, k in (("by_vclass", "pedestrian"), ("by_vtype", vt)):
+            self.skipped[key][k] = self.skipped[key].get(k, 0) + 1
+
+    def _resolve(self, vt: str, vid: str):
+        from sumo_drvpw.sim.vtypes import (DEFAULT_MASS_KG, DEFAULT_MASS_SOURCE, GENERIC_VCLASSES,
+                                           vehicle_body)
+
+        sc = self.sc
+        data = sc.vtype_data.get(vt, {})
+        info = self.files.get(vt)
+        vclass = self._vclass(vt, info)
+        sc_classes = getattr(sc, "vclass_data", {})
+        cdata = sc_classes.get(vclass, {})
+        if sc.vtype_filter is not None and vt not in sc.vtype_filter:
+            return (np.nan, np.zeros(len(self.names)), False, vclass, "filter")
+        eq = data.get("equations")
+        if eq is None:
+            one = (info.equation if info is not None else None) or self._param(vt, "drvpw.equation")
+            eq = [one] if one else cdata.get("equations")
+        explicit = eq is not None
+        chosen = eq  # the equations named (None: those made for the class)
+        if eq is None:
+            eq = self._made_for(vclass)
+        app = np.array([1.0 if n in eq else 0.0 for n in self.names])
+        # a vClass may say what the vehicle may use, not what it is (generic classes; a car in
+        # vClass bus for the bus lanes): then its emission class, shape or id names the
+        # vehicle (its equations, class settings, default mass)
+        named = vehicle_body(vclass, info, vt)
+        body = named[0] if named is not None else vclass
+        if named is not None and not explicit and (vclass not in GENERIC_VCLASSES or not app.any()):
+            chosen = sc_classes.get(body, {}).get("equations")
+            eq = chosen or self._made_for(body)
+            app = np.array([1.0 if n in eq else 0.0 for n in self.names])
+            if app.any():
+                self.booked_as[vt] = {"vclass": vclass, "booked_as": body, "from": named[1]}
+        app = own_energy(self.names, self.energy_of, vt, chosen, app)
+        if not app.any():
+            return (np.nan, app, False, vclass, "vclass")
+        if not explicit:
+            app = self._by_carrier(vt, info, body, app)
+            if not app.any():
+                return (np.nan, app, False, vclass, "carrier")
+        if vt not in self.booked_as and vclass not in GENERIC_VCLASSES:
+            body = vclass   # its own equations, so its own class's mass
+        if body != vclass and cdata.get("mass_kg") is None:
+            cdata = sc_classes.get(body, {})
+        mass = data.get("mass_kg")
+        if mass is None and info is not None:
+            mass = info.mass_kg
+        if mass is None:
+            p = self._param(vt, "drvpw.mass")
+            if p:
+                try:
+                    mass = float(p)
+                except ValueError:
+                    raise UserError(f"vType '{vt}': drvpw.mass is not a number: {p!r}") from None
+        if mass is None and info is None and vt not in SUMO_DEFAULT_VTYPES:
+            mass = self._sumo_mass(vt)  # a vType made during the run (TraCI copy, setMass)
+            if mass is not None:  # or loaded from a file the plug-in did not read: said
+                self.sumo_masses[vt] = {"vclass": vclass, "mass_kg": mass}
+        fixed = [self.energy_mass.get(n) for n, a in zip(self.names, app) if a]
+        if mass is None and all(fixed):  # booked by its vtype_energy only: SUMO's mass, no class default
+            mass = fixed[0]
+        # a class mass for a vType that gives none: plus the vType's SUMO loading (payload)
+        loading = info.loading_kg if info is not None else 0.0
+        if mass is None and cdata.get("mass_kg") is not None:
+            mass = cdata["mass_kg"] + loading
+        if mass is None and getattr(sc, "default_masses", True) and body in DEFAULT_MASS_KG:
+            mass = DEFAULT_MASS_KG[body] + loading
+            self.assumptions[vt] = {"vclass": body, "mass_kg": mass,
+                                    "source": DEFAULT_MASS_SOURCE[body]
+                                    + (f" + loading {loading:g} kg" if loading else "")}
+        if mass is None:
+            where = f" (defined in {info.source})" if info is not None else \
+                " (not defined in the route/additional files: SUMO's default type?)"
+            raise UserError(
+                f"vType '{vt}' of vehicle '{vid}'{where} has no mass: give it a mass attribute, "
+                f'a <param key="drvpw.mass" value="..."/>, or vtypes.{vt}.mass_kg or '
+                f"vclasses.{vclass}.mass_kg in the scenario (or leave it out with vehicles.vtypes)")
+        return (float(mass), app, True, vclass, "")
