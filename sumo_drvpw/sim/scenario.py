@@ -62,8 +62,7 @@ OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equ
 #: MOVES type — and cars and vans by the EPA fleet's fuel chains, trucks and buses by their MOVES type's
 #: diesel chain (docs/hdv-fuel.md), electric cars by the i3's battery chain, each vehicle by the carrier of
 #: its emissionClass (SUMO's default where it writes none: ``default_carrier``; an evehicle's is electric),
-#: and petrol cars whose emissionClass names a hybrid (HBEFA 4's plug-in hybrids' petrol share) by the EPA
-#: full hybrids' chain instead of the conventional one (sim/resolver.py)
+#: a hybrid's class (a plug-in's petrol share) by the full hybrids' chain (sim/resolver.py)
 CONFIG_EQUATIONS = ("vsp_ldv1999", "drvpw_prius3", "moves_passenger_car", "moves_motorcycle",
                     "moves_light_commercial_truck", "moves_single_unit_truck", "moves_combination_truck",
                     "moves_transit_bus", "moves_intercity_bus", "epa_gasoline_car", "epa_diesel_car",
