@@ -361,9 +361,14 @@ def test_calibration_recovers_a_planted_fuel_chain_with_soc_swings():
     # the correction η_m comes out biased
     charge = np.where(on, -0.2 * pos, pos)  # (no auxiliary draw)
     fuel_c = np.where(on, 4_000.0 + (pos - charge) / 0.36, 0.0)
-    corrected = calibrate_fuel(p, v, fuel_c, dt, battery_w=charge).chain.marginal_efficiency
-    naive = calibrate_fuel(p, v, fuel_c, dt, battery_w=None).chain.marginal_efficiency
-    assert corrected == pytest.approx(0.36, rel=0.01) and naive == pytest.approx(0.30, rel=0.02)
+    corrected = calibrate_fuel(p, v, fuel_c, dt, battery_w=charge)
+    naive = calibrate_fuel(p, v, fuel_c, dt, battery_w=None)
+    assert corrected.chain.marginal_efficiency == pytest.approx(0.36, rel=0.01)
+    assert naive.chain.marginal_efficiency == pytest.approx(0.30, rel=0.02)
+    # and its reading says the battery's share below the threshold is not in the log
+    assert naive.chain.engine_off_below_w > 0
+    assert "NOT IDENTIFIED: the log has no hybrid-battery power" in naive.parameters["engine_off_below_w"]["reading"]
+    assert "NOT IDENTIFIED" not in corrected.parameters["engine_off_below_w"]["reading"]
     # a conventional engine with overrun fuel cut-off: declared, it is kept and the line
     # recovered; left out, the unfuelled overrun samples pull the idle fuel down
     cut = EnergyChain(predicts="fuel", idle_fuel_power_w=4_000.0, marginal_efficiency=0.36,

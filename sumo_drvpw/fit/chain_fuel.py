@@ -77,11 +77,12 @@ def fuel_design(tmpl: EnergyChain, p, v, pb, lcols) -> np.ndarray:
 
 
 def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fuel="gasoline",
-               fuel_cut_below_w=None, charge_sustaining: bool = False):
+               fuel_cut_below_w=None, charge_sustaining: bool = False, battery: bool = True):
     """The fuel chain and its parameters from the fitted [a, b = 1/η_m, (c = P_aux/η_m for a
     ``charge_sustaining`` one), c_k] (:func:`fuel_names`), their standard errors and active
-    bounds, the engine-off threshold and engine-on speed, and the share ``low`` of the
-    calibration time below city speed."""
+    bounds, the engine-off threshold and engine-on speed, the share ``low`` of the
+    calibration time below city speed, and whether the log had the hybrid battery's power
+    (``battery``)."""
     b = float(beta[1])
     eta = 1.0 / b
     params = {"idle_fuel_power_w": {"value": float(beta[0]), "std_err": _nan_none(se[0]),
@@ -114,6 +115,12 @@ def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fu
         params["engine_off_below_w"]["reading"] += (
             "; charge-sustaining: below it the battery drives and the engine puts that energy back "
             "later, so all driving power costs fuel at the margin and only the idle fuel stops")
+        if not battery:
+            params["engine_off_below_w"]["reading"] += (
+                "; the battery's share is NOT IDENTIFIED: the log has no hybrid-battery power "
+                "(battery_voltage_v, battery_current_a), so the fit sees no fuel below the threshold and "
+                "the recharging only as heavier fuel with the engine on, which the idle fuel and the "
+                "auxiliary draw take up")
     if low < CITY_SHARE_MIN:  # the engine's on/off at city speeds is not in the data
         params["engine_off_below_w"]["reading"] += (
             f"; NOT IDENTIFIED at city speeds: {low:.0%} of the calibration time is below "
@@ -180,7 +187,7 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     off, engine_on_above_mps = tmpl.engine_off_below_w, tmpl.engine_on_above_mps
     low = float(w[ok & (v < CITY_SPEED_MPS)].sum() / max(w[ok].sum(), 1e-12))
     chain, params = fuel_chain(loads, beta, _covariance(xs, rss, active), active, off, engine_on_above_mps,
-                               low, fuel, fuel_cut_below_w, tmpl.charge_sustaining)
+                               low, fuel, fuel_cut_below_w, tmpl.charge_sustaining, battery_w is not None)
     pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
     target = corrected_fuel_power(y, pb, chain.battery_fuel_factor)[ok]
     r2, rmse, ratio = _stats(pred, target, w[ok])

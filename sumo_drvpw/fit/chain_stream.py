@@ -138,6 +138,7 @@ class ChainStats:
         self.ranges = [math.inf, -math.inf, math.inf, -math.inf]
         self.mom = None
         self.w_low = 0.0
+        self.battery = False           # a hybrid battery's V·I in any batch (fuel target)
         self.fac: dict = {}            # grid value → [R, samples, Σw·X]
         self.hist = None
         self.values = None             # (distinct braking powers of the quantile bins, their counts)
@@ -286,6 +287,7 @@ class ChainStats:
         self.n_ok += int(ok.sum())
         self.mom = _merge_wmoments(self.mom, _wmoments(w[ok], [y[ok], pb[ok]]))
         self.w_low += float(w[ok & (v < CITY_SPEED_MPS)].sum())
+        self.battery |= m.battery_w is not None
 
     # ----------------------------------------------------------------- merging
     def merge(self, o: "ChainStats") -> "ChainStats":
@@ -313,6 +315,7 @@ class ChainStats:
         self.ranges = [min(r[0], s[0]), max(r[1], s[1]), min(r[2], s[2]), max(r[3], s[3])]
         self.mom = _merge_wmoments(self.mom, o.mom)
         self.w_low += o.w_low
+        self.battery |= o.battery
         for key, (rr, n, sx) in o.fac.items():
             old = self.fac.get(key)
             self.fac[key] = [rr, n, sx] if old is None else [
@@ -454,7 +457,7 @@ class ChainStats:
         tmpl = self.grid[i]
         chain, params = fuel_chain(sp.loads, beta, _covariance(xs, rss, act), act, tmpl.engine_off_below_w,
                                    tmpl.engine_on_above_mps, self.w_low / max(sw, 1e-12), sp.fuel,
-                                   sp.fuel_cut_below_w, tmpl.charge_sustaining)
+                                   sp.fuel_cut_below_w, tmpl.charge_sustaining, self.battery)
         b = chain.battery_fuel_factor  # the target: fuel + k·battery power (SOC-corrected)
         sst = float(c[0, 0] + 2 * b * c[0, 1] + b * b * c[1, 1])
         r2 = 1.0 - rss / sst if sst > 0 else math.nan
