@@ -264,6 +264,20 @@ def test_charge_sustaining_key_round_trips_and_bad_values_are_one_line():
             chain_from_dict(bad, "x.toml")
 
 
+def _phev_config(d: Path, fcd: bool = False) -> Path:
+    """A bare SUMO config in ``d``: PHEV_ROUTES on an 800-m road, 150 s (with ``fcd``, its
+    FCD at 6 decimals: a run writes it into OUT/sumo/fcd.xml)."""
+    from sumo_probe import build_net
+
+    build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
+    (d / "r.rou.xml").write_text(PHEV_ROUTES)
+    out = '<output><fcd-output value="fcd.xml"/><precision value="6"/></output>' if fcd else ""
+    (d / "c.sumocfg").write_text('<configuration><input><net-file value="n.net.xml"/><route-files '
+                                 f'value="r.rou.xml"/></input>{out}<time><end value="150"/></time></configuration>')
+    return d / "c.sumocfg"
+
+
 PHEV_ROUTES = """<routes>
   <vType id="phev" emissionClass="HBEFA4/PC_PHEV_petrol_Euro-6d_(P)" mass="1700"/>
   <vType id="petrol" emissionClass="HBEFA4/PC_petrol_Euro-6d" mass="1400"/>
@@ -288,14 +302,9 @@ def test_a_bare_config_books_a_plug_in_hybrids_petrol_share_with_the_hybrid_chai
     from sumo_drvpw.cli import main as cli_main
     from sumo_drvpw.model.chain import EnergyChain
     from sumo_drvpw.model.equations import Equation
-    from sumo_probe import build_net
     from sumo_drvpw.sim.vtypes import is_hybrid_chain, is_hybrid_class
 
-    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
-              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
-    (tmp_path / "r.rou.xml").write_text(PHEV_ROUTES)
-    (tmp_path / "c.sumocfg").write_text('<configuration><input><net-file value="n.net.xml"/><route-files '
-                                        'value="r.rou.xml"/></input><time><end value="150"/></time></configuration>')
+    _phev_config(tmp_path)
     books = {}
     for name, target in (("bare", "c.sumocfg"), ("both", "s.toml")):
         if name == "both":
@@ -322,3 +331,39 @@ def test_a_bare_config_books_a_plug_in_hybrids_petrol_share_with_the_hybrid_chai
     assert [is_hybrid_chain(Equation(name="x", terms={"acc": 1.0}, chain=c)) for c in (stop_start, hybrid)] == [
         False, True]
     assert is_hybrid_chain(Equation(name="x", terms={"acc": 1.0})) is None
+
+
+def test_an_fcd_replay_serial_or_on_dask_books_the_powertrains_as_the_live_run(tmp_path):
+    """The bare config's run replayed from its FCD (no equations: the bare config's): the
+    same chain per vehicle as live, and summary.json's energy carrier, powertrain and
+    booked-as assumptions the same, also on Dask, whose buckets each resolve their own
+    vTypes (the driver's summary had lost them: empty before the buckets' were merged)."""
+    pytest.importorskip("libsumo")
+    pytest.importorskip("distributed")
+    import json
+
+    from sumo_drvpw.cli import main as cli_main
+
+    cfg = _phev_config(tmp_path, fcd=True)
+    assert cli_main(["run", str(cfg), "--no-figures", "--out", str(tmp_path / "live")]) == 0
+    want = json.loads((tmp_path / "live" / "summary.json").read_text())["assumptions"]
+    assert want["powertrain"] and want["energy_carrier"]
+    live = pd.read_csv(tmp_path / "live" / "chain_vehicles.csv").set_index(["key", "equation"])["fuel_l"]
+    fcd = tmp_path / "live" / "sumo" / "fcd.xml"  # where the run sends the config's outputs
+    got = {}
+    for engine, opts in (("local", []), ("dask", ["--workers", "1", "--buckets", "2"])):
+        out = tmp_path / engine
+        assert cli_main(["fcd", str(fcd), "--scenario", str(cfg), "--no-figures", "--engine", engine, *opts,
+                         "--out", str(out)]) == 0
+        got[engine] = json.loads((out / "summary.json").read_text())["assumptions"]
+        for key in ("energy_carrier", "powertrain", "booked_as"):  # the replay has no SUMO to ask its
+            assert _without_from(got[engine][key]) == _without_from(want[key]), (engine, key)  # default
+            assert got[engine][key] == got["local"][key], (engine, key)
+        fuel = pd.read_csv(out / "chain_vehicles.csv").set_index(["key", "equation"])["fuel_l"]
+        pd.testing.assert_series_equal(fuel.sort_index(), live.sort_index(), rtol=1e-6)
+
+
+def _without_from(d: dict) -> dict:
+    """Per-vType assumptions without where the class came from (a live run asks SUMO for its
+    default class, a replay reads SUMO's default for the vClass: the same class)."""
+    return {vt: {k: x for k, x in a.items() if k != "from"} for vt, a in d.items()}
