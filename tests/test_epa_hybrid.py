@@ -294,8 +294,8 @@ def test_a_bare_config_books_a_plug_in_hybrids_petrol_share_with_the_hybrid_chai
     conventional petrol car's; a conventional class, written or SUMO's default, the
     reverse; summary.json says which chain each left out. A scenario that names both chains
     books a vType that writes no class with both (alternatives), and the hybrid class still
-    with the hybrid's only. A calibrated chain whose engine stops only at P ≤ 0 (start-stop)
-    is no hybrid's."""
+    with the hybrid's only. A charge-sustaining chain whose engine stops only at P ≤ 0 (a
+    start-stop engine's, as calibration writes it) is no hybrid's."""
     pytest.importorskip("libsumo")
     import json
 
