@@ -314,12 +314,17 @@ def test_a_bare_config_books_a_plug_in_hybrids_petrol_share_with_the_hybrid_chai
         assert cli_main(["run", str(tmp_path / target), "--no-figures", "--out", str(out)]) == 0
         ch = pd.read_csv(out / "chain_vehicles.csv", dtype={"key": str})
         books[name] = ch.groupby(ch["key"].str[0])["equation"].agg(lambda s: sorted(set(s))).to_dict()
-        books[name + "_summary"] = json.loads((out / "summary.json").read_text())["assumptions"]["powertrain"]
+        summary = json.loads((out / "summary.json").read_text())
+        books[name + "_summary"] = summary["assumptions"]["powertrain"]
+        books[name + "_warned"] = [w for w in summary["warnings"] if "emissionClass names their fuel" in w]
     assert books["bare"] == {"h": [eh.NAME], "p": ["epa_gasoline_car"], "n": ["epa_gasoline_car"]}
     pt = books["bare_summary"]
     assert pt["phev"]["powertrain"] == "hybrid" and pt["phev"]["not_booked_by"] == ["epa_gasoline_car"]
     assert pt["petrol"]["not_booked_by"] == pt["plain"]["not_booked_by"] == [eh.NAME]
     assert pt["plain"]["from"].startswith("SUMO's default")
+    # the bare config's diesel and battery chains book nobody here (every car writes petrol):
+    # the plug-in's own chains, one per carrier, are no news
+    assert books["bare_warned"] == [] and books["both_warned"] == []
     assert books["both"] == {"h": [eh.NAME], "p": ["epa_gasoline_car"], "n": ["epa_gasoline_car", eh.NAME]}
     assert set(books["both_summary"]) == {"phev", "petrol"}
     # the classes and chains the routing reads

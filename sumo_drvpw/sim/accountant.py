@@ -405,11 +405,12 @@ class Accountant(_Listener):
                         f"{pr[0] / 1000:.1f} … {pr[1] / 1000:.1f} kW{speed} (or acceleration) its energy chain was fitted on: its battery or fuel there is "
                         "extrapolated (summary.json out_of_range_samples)")
         # chains that booked nobody because every vType they were made for writes another
-        # carrier (SUMO's defaults choosing among the plug-in's own chains is no news)
-        idle = [e.name for e in self.equations
-                if not any(summary["equations"][e.name]["distance_m"].values())
-                and any(e.name in c["not_booked_by"] for c in self.resolver.carriers.values()
-                        if c["from"] == "written")]
+        # carrier (no news among the plug-in's own chains, one per carrier: the classes,
+        # written or SUMO's defaults, choosing among them is what they are for)
+        idle = [] if getattr(sc, "default_carrier", False) else [
+            e.name for e in self.equations
+            if not any(summary["equations"][e.name]["distance_m"].values())
+            and any(e.name in c["not_booked_by"] for c in self.resolver.carriers.values() if c["from"] == "written")]
         by_carrier = self.resolver.skipped.get("by_carrier", {})
         if idle or by_carrier:
             summary["warnings"].append(carrier_warning(self.resolver.carriers, by_carrier, idle))
