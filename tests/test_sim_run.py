@@ -17,12 +17,15 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.equations import Equation, load_equation
 from sumo_drvpw.sim import close_sumo, run_scenario, start_sumo
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
+from sumo_drvpw.sim.vtypes import MODE_CARRIERS
 from sumo_drvpw.sim.loop import Physics, run_loop
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.scenario import RoadClassRule
@@ -975,6 +978,20 @@ def test_energy_carrier_of_sumo_emission_classes(ec, carrier):
     from sumo_drvpw.sim.vtypes import energy_carrier
 
     assert energy_carrier(ec) == carrier
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.sampled_from(["PC_CNG_petrol_Euro-4", "LCV_FFV_N1-II_Euro-6_", "PC_PHEV_diesel_Euro-6d",
+                        "RigidTruck_PHEV_le7_5t_Euro-VI", "PC_LPG_petrol_Euro-5", "PC_petrol_Euro-6d",
+                        "UBus_Std_gt15-18t_Euro-VI_A-C", "PC_BEV"]),
+       st.sampled_from(["_", "-", "__"]), st.sampled_from(sorted(MODE_CARRIERS)),
+       st.sampled_from([str.lower, str.upper, str.capitalize]), st.sampled_from(["HBEFA4/", "PHEMlight5/", ""]))
+def test_the_mode_a_class_names_last_is_its_carrier(base, sep, mode, case, model):
+    """Whatever the body and fuel words before it, the model prefix, the separator and the
+    case, a class name ending in a mode in parentheses books that mode's carrier."""
+    from sumo_drvpw.sim.vtypes import energy_carrier
+
+    assert energy_carrier(f"{model}{base}{sep}({case(mode)})") == MODE_CARRIERS[mode]
 
 
 def test_chains_book_the_vehicles_of_their_energy_carrier(tmp_path, capsys):
