@@ -31,6 +31,7 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=Path("../shared/data"))
     args = ap.parse_args(argv)
     from sumo_drvpw.data.measured import measure
+    from sumo_drvpw.fit.chain_fuel import fuel_bounds, fuel_design, fuel_grid, fuel_names
     from sumo_drvpw.validation.chain_common import read_shared
 
     log, veh = read_shared(args.data, "prius_gen2_torquepro", "torquepro-prius2", "prius2")
@@ -54,8 +55,10 @@ def main(argv=None) -> int:
         rows = []
         for p0, p1, von in grid:
             s = share(p0, p1, von)
-            x = np.column_stack([s, np.maximum(p, 0.0) - pb, np.ones_like(p)])  # y = a·s + b·(P⁺ − P_bat) + c
-            r = lsq_linear(x[train] * w[:, None], y[train] * w, bounds=([0, 1, 0], [np.inf, 1000, np.inf])).x
+            tmpl = fuel_grid(p0, von)[0]  # the charge-sustaining line of fit/chain_fuel.py …
+            x = fuel_design(tmpl, p, v, pb, [])
+            x[:, 0] = s  # … its idle-fuel column the ramp: y = a·s + b·(P⁺ − P_bat) + c
+            r = lsq_linear(x[train] * w[:, None], y[train] * w, bounds=fuel_bounds(fuel_names(tmpl, []))).x
             rss = float(((x[train] @ r - y[train]) ** 2 * dt[train]).sum())
             k = 3 + (p1 > p0) + (von is not None) + 1
             pred = r[0] * s + r[1] * np.maximum(p, 0.0) + r[2]  # charge-sustaining: every W of P paid

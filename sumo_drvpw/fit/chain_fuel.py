@@ -70,10 +70,10 @@ def fuel_design(tmpl: EnergyChain, p, v, pb, lcols) -> np.ndarray:
     """The Willans line's design [on, paid·max(P, 0) − P_bat, (1), paid·L_k] of the engine
     state of ``tmpl`` (:func:`fuel_names`): paid = on, or everywhere for a charge-sustaining
     template (model/chain.py), which has the auxiliary power's column of ones."""
-    on = tmpl.engine_on(p, v)
-    paid = (on | tmpl.charge_sustaining).astype(float)
+    paid = tmpl.paid(p, v).astype(float)
     aux = [np.ones(p.shape)] if tmpl.charge_sustaining else []
-    return np.column_stack([on.astype(float), paid * np.maximum(p, 0.0) - pb] + aux + [paid * c for c in lcols])
+    return np.column_stack([tmpl.engine_on(p, v).astype(float), paid * np.maximum(p, 0.0) - pb] + aux
+                           + [paid * c for c in lcols])
 
 
 def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fuel="gasoline",

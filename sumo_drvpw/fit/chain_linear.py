@@ -131,7 +131,7 @@ def gains(chain: EnergyChain, p_w, v_mps, signals=None) -> tuple[np.ndarray, np.
             chain.motor.battery(p, v, signals, chain.auxiliary(p.size, signals) + da)["power_w"])
         return (f(1.0, 0) - f(-1.0, 0)) / 2.0, (f(0.0, 1.0) - f(0.0, -1.0)) / 2.0
     if chain.predicts == "fuel":
-        paid = (chain.engine_on(p, v) | chain.charge_sustaining).astype(float) * chain.running_factor(p.size, signals)
+        paid = chain.paid(p, v).astype(float) * chain.running_factor(p.size, signals)
         gw = paid * (p > 0) / (_eff(chain.traction_efficiency, v, p) * chain.marginal_efficiency)
         return gw, paid / chain.marginal_efficiency
     lim = np.inf if chain.recuperation_limit_w is None else chain.recuperation_limit_w

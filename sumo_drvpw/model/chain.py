@@ -286,11 +286,15 @@ class EnergyChain:
             on &= ~((np.asarray(p, float) < self.fuel_cut_below_w) & (np.asarray(v, float) > STANDSTILL_MPS))
         return on
 
+    def paid(self, p, v) -> np.ndarray:
+        """Where the engine output demand costs fuel: where the engine is fuelled, or
+        everywhere for a ``charge_sustaining`` chain (the battery's energy paid back)."""
+        return self.engine_on(p, v) | self.charge_sustaining
+
     def _fuel(self, p, v, n, signals) -> dict:
         on = self.engine_on(p, v)
         eng = np.maximum(p, 0.0) / _eval(self.traction_efficiency, v, p) + self.auxiliary(n, signals)
-        paid = on | self.charge_sustaining  # where the engine output demand costs fuel
-        pf = np.where(on, self.idle_fuel_power_w, 0.0) + np.where(paid, eng / self.marginal_efficiency, 0.0)
+        pf = np.where(on, self.idle_fuel_power_w, 0.0) + np.where(self.paid(p, v), eng / self.marginal_efficiency, 0.0)
         if self.running_fuel_per_k:
             pf = pf * self.running_factor(n, signals)
         fp = self.fuel_props

@@ -486,9 +486,7 @@ HYBRID_WORDS = {"phev", "hev", "hybrid"}
 
 def is_hybrid_class(emission_class: str | None) -> bool:
     """Whether a SUMO emissionClass names a hybrid (:data:`HYBRID_WORDS`)."""
-    words = re.split(r"[^a-z0-9]+", (emission_class or "").partition("/")[2].lower() or
-                     (emission_class or "").lower())
-    return any(w in HYBRID_WORDS for w in words)
+    return any(w in HYBRID_WORDS for w in re.split(r"[^a-z0-9]+", (emission_class or "").lower()))
 
 
 def is_hybrid_chain(eq) -> bool | None:
