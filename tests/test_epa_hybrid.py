@@ -372,3 +372,53 @@ def _without_from(d: dict) -> dict:
     """Per-vType assumptions without where the class came from (a live run asks SUMO for its
     default class, a replay reads SUMO's default for the vClass: the same class)."""
     return {vt: {k: x for k, x in a.items() if k != "from"} for vt, a in d.items()}
+
+
+def test_a_hybrid_without_a_hybrid_chain_for_its_vclass_is_said(tmp_path):
+    """A bare SUMO config with a plug-in hybrid van's petrol share (vClass delivery) and a
+    hybrid city bus: no hybrid chain is made for those vClasses, so the conventional van's
+    and bus's chains book them — and the run says so, naming the vTypes, their classes and
+    the chains (summary.json assumptions.powertrain ``no_hybrid_chain``); the petrol van is
+    not named. Given a hybrid chain in a scenario (the built-in car's, for the van), the van
+    is no longer named; the bus still is."""
+    pytest.importorskip("libsumo")
+    import json
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_probe import build_net
+
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
+    (tmp_path / "r.rou.xml").write_text("""<routes>
+  <vType id="hvan" vClass="delivery" emissionClass="HBEFA4/LCV_PHEV_petrol_N1-II_Euro-6_(P)"/>
+  <vType id="van" vClass="delivery" emissionClass="HBEFA4/LCV_petrol_N1-II_Euro-6d"/>
+  <vType id="hbus" vClass="bus" emissionClass="HBEFA4/UBus_Std_gt15-18t_HEV_Euro-VI_D-E"/>
+  <flow id="h" type="hvan" begin="0" end="20" period="10"><route edges="e"/></flow>
+  <flow id="v" type="van" begin="1" end="20" period="10"><route edges="e"/></flow>
+  <flow id="b" type="hbus" begin="2" end="20" period="10"><route edges="e"/></flow>
+</routes>""")
+    (tmp_path / "c.sumocfg").write_text('<configuration><input><net-file value="n.net.xml"/><route-files '
+                                        'value="r.rou.xml"/></input><time><end value="100"/></time></configuration>')
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["epa_gasoline_light_truck", "moves_transit_bus_diesel", "{eh.NAME}"]\n'
+        f'[vtypes.hvan]\nequations = ["{eh.NAME}"]\n[sumo]\nconfig = "c.sumocfg"\n')
+    seen = {}
+    for name, target in (("bare", "c.sumocfg"), ("given", "s.toml")):
+        out = tmp_path / name
+        assert cli_main(["run", str(tmp_path / target), "--no-figures", "--out", str(out)]) == 0
+        summary = json.loads((out / "summary.json").read_text())
+        ch = pd.read_csv(out / "chain_vehicles.csv", dtype={"key": str})
+        seen[name] = (summary["assumptions"]["powertrain"],
+                      [w for w in summary["warnings"] if "no hybrid chain is made" in w],
+                      ch.groupby(ch["key"].str[0])["equation"].agg(lambda s: sorted(set(s))).to_dict())
+    pt, warned, books = seen["bare"]
+    assert books == {"h": ["epa_gasoline_light_truck"], "v": ["epa_gasoline_light_truck"],
+                     "b": ["moves_transit_bus_diesel"]}
+    assert pt["hvan"]["no_hybrid_chain"] == ["epa_gasoline_light_truck"]
+    assert pt["hbus"]["no_hybrid_chain"] == ["moves_transit_bus_diesel"]
+    assert "van" not in pt and len(warned) == 1
+    assert "hvan (HBEFA4/LCV_PHEV_petrol_N1-II_Euro-6_(P): epa_gasoline_light_truck)" in warned[0]
+    assert "hbus (" in warned[0] and "van (" not in warned[0].replace("hvan (", "")
+    pt, warned, books = seen["given"]
+    assert books["h"] == [eh.NAME] and "hvan" not in pt and "hbus" in pt
+    assert len(warned) == 1 and "hvan" not in warned[0]

@@ -167,11 +167,18 @@ class VTypeResolver:
         """``app`` without the fuel chains of the other powertrain where both a hybrid's
         and a conventional engine's apply: a class that names a hybrid
         (:func:`~sumo_drvpw.sim.vtypes.is_hybrid_class`) is booked by the hybrid's, any
-        other by the conventional's; where only one kind applies, it books."""
+        other by the conventional's; where only one kind applies, it books (a hybrid that
+        only conventional engines' chains book is noted: ``no_hybrid_chain`` names them,
+        sim/accountant.no_hybrid_chain_warning)."""
         fuel = [i for i, n in enumerate(self.names) if app[i] and n in self.hybrid_of]
-        if len({self.hybrid_of[self.names[i]] for i in fuel}) < 2:
-            return app
+        kinds = {self.hybrid_of[self.names[i]] for i in fuel}
         hybrid = is_hybrid_class(ec)
+        if kinds == {False} and hybrid:  # a hybrid, and only conventional engines' chains for it
+            self.powertrains[vt] = {"emission_class": ec, "from": src, "powertrain": "conventional",
+                                    "no_hybrid_chain": [self.names[i] for i in fuel],
+                                    "not_booked_by": []}
+        if len(kinds) < 2:
+            return app
         other = [i for i in fuel if self.hybrid_of[self.names[i]] != hybrid]
         app = app.copy()
         app[other] = 0.0
