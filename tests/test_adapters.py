@@ -567,6 +567,47 @@ def test_ved_layout_through_the_documented_mapping(tmp_path):
     np.testing.assert_allclose(m.power_w, want, rtol=1e-12)
 
 
+def test_d3_layout_through_the_documented_mapping_compares_with_a_fuel_chain(tmp_path, capsys):
+    """A file with the labels of Argonne's D3 tests as FASTSim ships them (Time[s],
+    Eng_FuelFlow_Direct_DI[ccps], Dyno_Spd[mph]) imports through the mapping docs/adapters.md
+    gives, the flow in cc/s read as 3.6 L/h each; and `compare --target fuel` runs the
+    built-in petrol chain on it although the log has no air temperature (a dynamometer test
+    at the reference temperature): its warm-running factor is left out and the run says so
+    (it used to refuse the log for the missing column)."""
+    import re as _re
+
+    from sumo_drvpw.cli import main as cli_main
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "adapters.md").read_text(encoding="utf-8")
+    block = doc.split("### Example: Argonne's D3 dynamometer data", 1)[1]
+    (tmp_path / "d3.toml").write_text(_re.search(r"```toml\n(.*?)```", block, _re.S).group(1), encoding="utf-8")
+    t = np.arange(0.0, 300.0)
+    mph = np.clip(np.minimum(t - 10, 200 - t) * 0.8, 0.0, 40.0)
+    ccps = np.where(mph > 0, 0.25 + 0.03 * mph, 0.22)
+    pd.DataFrame({"Time[s]": t, "Eng_FuelFlow_Direct_DI[ccps]": ccps, "Dyno_Spd[mph]": mph}).to_csv(
+        tmp_path / "61811099 Test Data.txt", index=False)
+    out = tmp_path / "d3.parquet"
+    assert cli_main(["import", "columns", str(tmp_path / "61811099 Test Data.txt"), "--columns",
+                     str(tmp_path / "d3.toml"), "--out", str(out)]) == 0
+    df = pd.read_parquet(out)
+    np.testing.assert_allclose(df["fuel_rate_lph"], ccps * 3.6, rtol=1e-12)
+    np.testing.assert_allclose(df["speed_mps"], mph * 0.44704, rtol=1e-12)
+    (tmp_path / "car.toml").write_text('[vehicle]\nname = "car"\nmass_kg = 1644.0\n')
+    capsys.readouterr()
+    assert cli_main(["compare", str(out), "--vehicle", str(tmp_path / "car.toml"), "--equation",
+                     "epa_gasoline_car", "--target", "fuel", "--out", str(tmp_path / "cmp")]) == 0
+    said = capsys.readouterr().out
+    assert "chain input 'ambient_c' unknown (NaN) on 300 of 300 samples" in said
+    assert "no warm-running factor" in said
+    trip = json.loads((tmp_path / "cmp" / "report.json").read_text())
+    eq = trip["equations"][0] if isinstance(trip["equations"], list) else next(iter(trip["equations"].values()))
+    (got,) = eq["trip_energy"]["trips"].values()
+    from sumo_drvpw.model.constants import FUELS
+
+    fp = FUELS["gasoline"]
+    assert got["measured_j"] == pytest.approx((ccps / 1000 * fp["density_kg_per_l"] * fp["lhv_j_per_kg"]).sum(), rel=1e-3)
+
+
 @pytest.mark.parametrize("unit, factor", [
     ("g", 9.80665),            # the unit g: standard gravity by definition (3rd CGPM, 1901), not the models' 9.81
     ("mph", 0.44704), ("km/h", 1 / 3.6), ("ft", 0.3048), ("lb", 0.45359237),  # exact by definition

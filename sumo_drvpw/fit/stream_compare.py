@@ -444,7 +444,7 @@ class CompareStats:
         if self.target == "wheel":
             return
         for eq in self.equations:
-            for c in sorted(eq.chain.signals - self.seen):
+            for c in sorted(eq.chain.required_signals - self.seen):
                 raise UserError(f"energy chain needs the log column '{c}', which the data do not have "
                                 f"(available: {', '.join(sorted(self.seen)) or 'none'})")
         if self.target == "battery":

@@ -160,6 +160,14 @@ class EnergyChain:
             s.add(self.temperature_column)
         return s
 
+    @property
+    def required_signals(self) -> set[str]:
+        """The :attr:`signals` a log must have: the loads and the HVAC's temperature. The
+        warm-running factor's temperature is read where a log has it; a log without it
+        (a dynamometer test at the reference temperature) gets no factor, and a comparison
+        says so (:meth:`unknown_inputs`)."""
+        return set(self.loads) | ({self.temperature_column} if self.hvac else set())
+
     def target_power(self, p_drive_w, v_mps, signals: dict | None = None, battery_w=None,
                      accel=None, grade=None) -> np.ndarray:
         """The chain's prediction in the form its measurement takes [W]: battery power, or

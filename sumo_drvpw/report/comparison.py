@@ -88,8 +88,10 @@ def unknown_input_note(name: str, col: str, u: dict, n: int) -> str:
     trips = u.get("trips") or []
     where = (f" ({len(trips)} trip(s): {', '.join(trips[:8])}{'…' if len(trips) > 8 else ''})"
              if trips else "")
+    read_as = u.get("read_as", "no load")
+    lacks = "what it drew" if read_as == "no load" else "what the air temperature adds"
     return (f"{name}: chain input '{col}' unknown (NaN) on {u['samples']} of {n} samples{where}; "
-            f"read as {u.get('read_as', 'no load')} there, so the prediction lacks what it drew")
+            f"read as {read_as} there, so the prediction lacks {lacks}")
 
 
 def unknown_input_lines(name: str, unknown: dict | None, n: int) -> list[str]:
