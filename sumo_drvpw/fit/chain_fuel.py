@@ -15,6 +15,14 @@ the engine, and the auxiliary draw the battery carries while it is off is a para
 its own. (The plain form, ``paid`` = ``on`` and no ``c``, would call that driving free:
 it is the per-sample fuel flow, not the fuel a trip costs.) An engine that never stops
 (P_off = −inf) has one form, its auxiliary draw in the idle fuel.
+
+An engine the log shows idling at stops (fuel flowing on most of the standing time:
+:func:`idles_at_stops`) is fitted as one that runs at standstill: every threshold P_off ≥ 0
+stops the engine where the car stands (P = 0), which the log says it does not. Found on
+Argonne's D3 dynamometer tests of a 2018 Toyota Camry (docs/d3-camry.md): without this
+rule one fold read the conventional car as an engine that stops at P ≤ 0 with a 1.8 kW
+auxiliary draw paid at the margin — a charge-sustaining hybrid's form taking up the
+higher fuel of an engine in gear than at idle.
 """
 
 from __future__ import annotations
@@ -34,6 +42,13 @@ ENGINE_ON_SPEED_GRID_MPS = (None, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 17.0, 20.0)
 #: of the calibration time lies below CITY_SPEED_MPS (50 km/h, the urban limit)
 CITY_SPEED_MPS = 50.0 / 3.6
 CITY_SHARE_MIN = 0.1
+#: an engine burning fuel on at least this share of the standing time idles at stops
+IDLES_AT_STOPS_SHARE = 0.5
+#: burning fuel: a fuel power above this [W] (0.06 L/h of petrol; an engine that is off
+#: reads 0, a small engine idling 0.3 L/h or more)
+FUEL_FLOWING_W = 500.0
+#: the standing time [s] below which a log does not tell whether its engine idles at stops
+IDLING_MIN_STANDING_S = 30.0
 #: the largest auxiliary draw a car's engine plausibly carries [W] (12 V net and the A/C
 #: compressor at full load together; a fuel chain's reading flags more)
 CAR_AUX_MAX_W = 3000.0
@@ -50,6 +65,29 @@ def fuel_grid(engine_off="profile", engine_on_above_mps="profile", fuel_cut_belo
     return [EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von,
                         fuel_cut_below_w=fuel_cut_below_w, charge_sustaining=charge_sustaining and off > -np.inf)
             for off in grid for von in (vgrid if off > -np.inf else (None,))]
+
+
+def standing_sums(v, fuel_w, dt_s, ok) -> np.ndarray:
+    """[standing time, of it with fuel flowing] [s] on the samples ``ok`` (standing: v <
+    STANDSTILL_MPS; flowing: fuel power above :data:`FUEL_FLOWING_W`): sums, so batches add."""
+    from sumo_drvpw.model.constants import STANDSTILL_MPS
+
+    stand = ok & (v < STANDSTILL_MPS)
+    return np.array([float(dt_s[stand].sum()), float(dt_s[stand & (fuel_w > FUEL_FLOWING_W)].sum())])
+
+
+def idles_at_stops(sums) -> bool:
+    """Whether :func:`standing_sums` show an engine idling at stops (enough standing time,
+    fuel flowing on most of it)."""
+    return bool(sums[0] >= IDLING_MIN_STANDING_S and sums[1] >= IDLES_AT_STOPS_SHARE * sums[0])
+
+
+def note_idling(params: dict, sums) -> None:
+    """The engine-off reading of a fit made with the engine running at standstill."""
+    params["engine_off_below_w"]["reading"] += (
+        f"; the log shows it idling at stops (fuel flowing on {sums[1] / sums[0]:.0%} of {sums[0]:.0f} s "
+        "standing), so only an engine that runs at standstill was fitted")
+    params["engine_off_below_w"]["how"] = "fixed: the engine idles at stops in the log"
 
 
 def fuel_names(tmpl: EnergyChain, loads) -> list[str]:
@@ -172,6 +210,9 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
         ok &= np.asarray(mask, bool)
     best, profile = None, []
     yy = float(w[ok] @ y[ok] ** 2)
+    idling = engine_off == "profile" and idles_at_stops(stand := standing_sums(v, y, w, ok))
+    if idling:
+        engine_off = -np.inf  # it runs where the car stands: no threshold P_off ≥ 0 fits that
     for tmpl in fuel_grid(engine_off, engine_on_above_mps, fuel_cut_below_w, charge_sustaining):
         def make(sl, tmpl=tmpl):
             return fuel_design(tmpl, p[sl], v[sl], pb[sl], [c[sl] for c in lcols]), y[sl]
@@ -188,6 +229,8 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     low = float(w[ok & (v < CITY_SPEED_MPS)].sum() / max(w[ok].sum(), 1e-12))
     chain, params = fuel_chain(loads, beta, _covariance(xs, rss, active), active, off, engine_on_above_mps,
                                low, fuel, fuel_cut_below_w, tmpl.charge_sustaining, battery_w is not None)
+    if idling:
+        note_idling(params, stand)
     pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
     target = corrected_fuel_power(y, pb, chain.battery_fuel_factor)[ok]
     r2, rmse, ratio = _stats(pred, target, w[ok])

@@ -35,6 +35,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import (LIMIT_QUANTILES, ChainFit, _bic, _col, _covariance, battery_chain,
                                   battery_columns, battery_design, factor_rows, solve_factor)
 from sumo_drvpw.fit.chain_fuel import (CITY_SPEED_MPS, fuel_bounds, fuel_chain, fuel_design, fuel_grid,
+                                       idles_at_stops, note_idling, standing_sums,
                                        fuel_names)
 from sumo_drvpw.fit.stream import _add_counts
 
@@ -138,6 +139,7 @@ class ChainStats:
         self.ranges = [math.inf, -math.inf, math.inf, -math.inf]
         self.mom = None
         self.w_low = 0.0
+        self.standing = np.zeros(2)    # [standing time, of it with fuel flowing] (fuel target)
         self.battery = False           # a hybrid battery's V·I in any batch (fuel target)
         self.fac: dict = {}            # grid value → [R, samples, Σw·X]
         self.hist = None
@@ -287,6 +289,7 @@ class ChainStats:
         self.n_ok += int(ok.sum())
         self.mom = _merge_wmoments(self.mom, _wmoments(w[ok], [y[ok], pb[ok]]))
         self.w_low += float(w[ok & (v < CITY_SPEED_MPS)].sum())
+        self.standing = self.standing + standing_sums(v, y, w, ok)
         self.battery |= m.battery_w is not None
 
     # ----------------------------------------------------------------- merging
@@ -315,6 +318,7 @@ class ChainStats:
         self.ranges = [min(r[0], s[0]), max(r[1], s[1]), min(r[2], s[2]), max(r[3], s[3])]
         self.mom = _merge_wmoments(self.mom, o.mom)
         self.w_low += o.w_low
+        self.standing = self.standing + o.standing
         self.battery |= o.battery
         for key, (rr, n, sx) in o.fac.items():
             old = self.fac.get(key)
@@ -445,7 +449,10 @@ class ChainStats:
         sp, best, profile = self.spec, None, []
         sw, mu, c = self.mom
         yy = float(c[0, 0] + sw * mu[0] ** 2)  # Σw·y² of the fuel power
+        idling = idles_at_stops(self.standing)  # then only an engine that runs at standstill
         for i, tmpl in enumerate(self.grid):
+            if idling and tmpl.engine_off_below_w > -np.inf:
+                continue
             names = fuel_names(tmpl, sp.loads)
             beta, rss, act, xs = solve_factor(self.fac[i][0], self.fac[i][1], *fuel_bounds(names))
             off, von = tmpl.engine_off_below_w, tmpl.engine_on_above_mps
@@ -458,6 +465,8 @@ class ChainStats:
         chain, params = fuel_chain(sp.loads, beta, _covariance(xs, rss, act), act, tmpl.engine_off_below_w,
                                    tmpl.engine_on_above_mps, self.w_low / max(sw, 1e-12), sp.fuel,
                                    sp.fuel_cut_below_w, tmpl.charge_sustaining, self.battery)
+        if idling:
+            note_idling(params, self.standing)
         b = chain.battery_fuel_factor  # the target: fuel + k·battery power (SOC-corrected)
         sst = float(c[0, 0] + 2 * b * c[0, 1] + b * b * c[1, 1])
         r2 = 1.0 - rss / sst if sst > 0 else math.nan
