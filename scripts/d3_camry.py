@@ -168,7 +168,8 @@ def cut_table(w: Path, logs: dict, rl: dict, etw: float) -> list[tuple[str, int,
     out = []
     for lo, hi in zip(edges[:-1], edges[1:]):
         m = (p >= lo) & (p < hi)
-        out.append((f"{lo / 1e3:g} … {hi / 1e3:g}", int(m.sum()), float((q[m] < 0.072).mean())))
+        if m.any():
+            out.append((f"{lo / 1e3:g} … {hi / 1e3:g}", int(m.sum()), float((q[m] < 0.072).mean())))
     return out
 
 
