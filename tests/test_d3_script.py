@@ -35,8 +35,11 @@ def _schedule(rng, n_hills: int) -> np.ndarray:
     return np.concatenate(v)
 
 
-def test_the_d3_script_on_planted_tests(tmp_path):
+def test_the_d3_script_on_planted_tests(tmp_path, monkeypatch):
+    import sumo_drvpw.report.comparison as comparison
     from sumo_drvpw.model.constants import FUELS
+
+    monkeypatch.setattr(comparison, "FIGURES", {})  # 12 comparisons' figures: not what is tested here
 
     d3 = _load()
     fp = FUELS["gasoline"]
