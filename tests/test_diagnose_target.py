@@ -293,6 +293,48 @@ def test_fuel_target_finds_a_planted_engine_load(clean):
     assert found[1500.0]["aux_power_w"] == pytest.approx(1500.0, rel=0.1)
 
 
+def test_fuel_target_finds_a_planted_overrun_cut_off(clean):
+    """A conventional engine (always on, idling at stops) that cuts its fuel while moving
+    with a driving power below −1 kW (the wheels turn it; Argonne's D3 Camry ran 10–21 % of
+    its moving time so, docs/d3-camry.md): the trace of the chain without the cut-off finds
+    it at the planted power and writes it into the chain; with no cut-off planted it finds
+    nothing, and a chain that already declares one is not offered another."""
+    from sumo_drvpw.model.constants import FUELS
+
+    _, b, df = clean
+    veh = load_vehicle("prius3")
+    truth = load_equation("drvpw_prius3")
+    x0 = measure(from_frame(df, veh, name="synth"), veh, "battery")
+    p = truth.power(x0.inputs)
+    rng = np.random.default_rng(8)
+    lhv = FUELS["gasoline"]["lhv_j_per_kg"]
+    declared = EnergyChain("fuel", 1.0, idle_fuel_power_w=6000.0, marginal_efficiency=0.33, engine_off_below_w=-np.inf)
+    found = {}
+    for cut in (None, -1000.0):
+        ch = EnergyChain("fuel", 1.0, idle_fuel_power_w=6000.0, marginal_efficiency=0.33, engine_off_below_w=-np.inf,
+                         fuel_cut_below_w=cut)
+        assert cut is None or np.mean(ch.engine_on(p, x0.inputs.v) == 0) > 0.05
+        pf = ch.evaluate(p, x0.inputs.v)["power_w"] * (1.0 + rng.normal(0, 0.03, p.size)).clip(0.0)
+        d = df.drop(columns=["battery_voltage_v", "battery_current_a"]).assign(fuel_rate_gps=pf / lhv * 1000.0)
+        m = measure(from_frame(d, veh, name="synth-fuel"), veh, "fuel")
+        res = trace_chain(m, Equation("declared", dict(truth.terms), truth.mass_kg, chain=declared))
+        found[cut] = ({f["term"]: f["parameter"] for f in res.report["findings"]}, res.equation)
+    assert found[None][0] == {}
+    assert found[-1000.0][0] == {"fuel_cut_below_w": -1000.0}
+    assert found[-1000.0][1].chain.fuel_cut_below_w == -1000.0
+    from sumo_drvpw.fit.chain_effects import candidates
+
+    x = measure(from_frame(df, veh, name="synth"), veh, "battery")
+    idx = np.arange(p.size)
+    names = lambda c: [k.name for k in candidates(x, Equation("d", dict(truth.terms), truth.mass_kg, chain=c), p, idx)]  # noqa: E731
+    assert "fuel_cut_below_w" in names(declared)
+    assert "fuel_cut_below_w" not in names(EnergyChain("fuel", 1.0, idle_fuel_power_w=6000.0, marginal_efficiency=0.33,
+                                                       engine_off_below_w=-np.inf, fuel_cut_below_w=0.0))
+    # an engine that stops at P ≤ 0 (start-stop) has nothing to cut in overrun: not offered
+    assert "fuel_cut_below_w" not in names(EnergyChain("fuel", 1.0, idle_fuel_power_w=6000.0,
+                                                       marginal_efficiency=0.33, engine_off_below_w=0.0))
+
+
 def test_jlu_road_from_the_dyno_chain(shared_data):
     """The issue's case (#12 §3): the chain calibrated on the JLU dynamometer, traced on the
     road trips. The dyno saw no grade and little auxiliary load; both are found (grade with

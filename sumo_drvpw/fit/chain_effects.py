@@ -24,6 +24,10 @@ from sumo_drvpw.model.terms import term_matrix
 LIMIT_QUANTILES = (0.5, 0.7, 0.8, 0.9, 0.95, 0.98)
 #: HVAC set-point of the ``hvac`` candidate [°C] (the chain's default)
 HVAC_SETPOINT_C = 20.0
+#: driving powers [W] at which an overrun fuel cut-off is profiled (``fuel_cut_below_w``)
+FUEL_CUT_GRID_W = (-5000.0, -3000.0, -2000.0, -1500.0, -1000.0, -500.0, 0.0)
+#: moving samples below a cut-off power it needs to be offered at that power
+FUEL_CUT_MIN_SAMPLES = 20
 
 
 @dataclass
@@ -67,6 +71,12 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
                         [(None, gw * g, 1.0)]))
     out.append(Cand("aux_power_w", "constant auxiliary power at the battery/engine the declared chain lacks",
                     "structural", "W", [(np.column_stack([ga]), None, None)]))
+    if ch.predicts == "fuel" and ch.fuel_cut_below_w is None and ch.idle_fuel_power_w > 0:
+        cut = _fuel_cut_columns(ch, pp, v, {k: np.asarray(a)[idx] for k, a in sig.items()})
+        if cut:
+            out.append(Cand("fuel_cut_below_w", "overrun fuel cut-off: moving with a driving power below the "
+                            "cut-off, the wheels turn the engine and its injection is cut (profiled over "
+                            f"{', '.join(f'{c / 1000:g}' for c in FUEL_CUT_GRID_W)} kW)", "structural", "W", cut))
     if ch.predicts == "battery":  # (SUMO's MMPEVEM motor has no η_t, η_r or limit of that kind: not offered)
         st = (v < STANDSTILL_MPS).astype(float)
         if 0.01 < st.mean() < 0.99:
@@ -148,6 +158,12 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
                         "moving (drawn only while moving: drivetrain no-load losses, cooling, or road load the "
                         "declared equation lacks)")
         return eq, f"extra auxiliary power while standing {new:.0f} W"
+    if name == "fuel_cut_below_w":
+        if param is None or param > 0:
+            return None, f"a fuel cut-off at a positive driving power ({param}) is no overrun"
+        ch.fuel_cut_below_w = float(param)
+        return eq, (f"overrun fuel cut-off below {param / 1000:g} kW of driving power while moving: the "
+                    "wheels turn the engine, no fuel")
     if name == "recuperation_limit_w":
         ch.recuperation_limit_w = float(param)
         return eq, f"braking power beyond {param / 1000:.1f} kW goes to the friction brakes"
@@ -179,6 +195,23 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
     raise UserError(f"unknown chain effect '{name}'")
 
 
+
+
+def _fuel_cut_columns(ch, p, v, signals) -> list:
+    """Variants (None, column, cut-off) of the overrun fuel cut-off: the fuel chain's
+    prediction with the cut-off at each power of :data:`FUEL_CUT_GRID_W` less its
+    prediction without (≤ 0), where enough moving samples lie below that power."""
+    import dataclasses
+
+    base = ch.evaluate(p, v, signals=signals)["power_w"]
+    moving = v > STANDSTILL_MPS
+    out = []
+    for c in FUEL_CUT_GRID_W:
+        if int(np.sum(moving & (p < c))) >= FUEL_CUT_MIN_SAMPLES:
+            col = dataclasses.replace(ch, fuel_cut_below_w=c).evaluate(p, v, signals=signals)["power_w"] - base
+            if np.any(col != 0):
+                out.append((None, col, c))
+    return out
 
 
 def _eta(e, v, p):

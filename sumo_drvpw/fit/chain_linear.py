@@ -31,6 +31,9 @@ Candidate effects (each a column, or a family profiled over one parameter):
 * ``recuperation_limit_w`` — braking power beyond P_lim goes to the friction brakes:
   column η_r·(max(P, −P_lim) − max(P, −P_lim,declared)) with coefficient 1, P_lim
   profiled over quantiles of the braking power on the training data of each fold;
+* ``fuel_cut_below_w`` — fuel chains whose engine runs in overrun: an overrun fuel cut-off
+  (moving with P below P_cut, no fuel), the column the prediction with the cut-off less
+  the prediction without, with coefficient 1, P_cut on a grid of −5 … 0 kW;
 * ``traction_efficiency`` / ``recuperation_efficiency`` — the chain's efficiency differs
   (column P/η_t for P > 0, resp. η_r·P for P < 0; coefficient c → η_t/(1 + c), η_r·(1 + c));
 * ``hvac`` — heating and cooling power over the ambient temperature, max(T_set − T, 0)
