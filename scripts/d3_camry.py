@@ -37,9 +37,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from sumo_drvpw.model.constants import LB, LBF, MPH  # noqa: F401  (LB, LBF: the planted test's too)
+
 # 2019 CAMRY XLE/XSE, 2.487 L, 8 gears, ETW 3625 lb (19tstcar.csv, FTP and HWFE rows)
 ETW_LB, A_LBF, B_LBF_MPH, C_LBF_MPH2, DISPLACEMENT_L = 3625.0, 26.509, 0.19851, 0.016476, 2.487
-LB, LBF, MPH = 0.45359237, 4.4482216152605, 0.44704
+#: a flow below this [cc/s] is no fuel (the meter's zero)
+NO_FUEL_CCPS = 0.02
 FUEL_COLUMNS = ("Eng_FuelFlow_Direct_DI[ccps]", "Eng_FuelFlow_Direct[ccps]", "Eng_FuelFlow_Direct[cc/s]")
 #: the overrun fuel cut-off declared in the variant [W]: where the table of zero-fuel share by
 #: driving power on all four tests (exploratory, seen before this was fixed) crosses one half
@@ -64,15 +67,12 @@ def trim(src: Path, dst: Path) -> dict:
     d = pd.read_csv(src)
     fuel = next(c for c in FUEL_COLUMNS if c in d.columns)
     v, q, t = d["Dyno_Spd[mph]"].to_numpy() * MPH, d[fuel].to_numpy(), d["Time[s]"].to_numpy()
-    off = (v < 0.05) & (q < 0.02)
-    keep, i = np.ones(len(d), bool), 0
-    while i < len(d):
-        j = i
-        while j < len(d) and off[j]:
-            j += 1
-        if j - i >= KEY_OFF_S:
-            keep[i:j] = False
-        i = max(j, i + 1)
+    from sumo_drvpw.data.dropouts import _runs
+
+    keep = np.ones(len(d), bool)
+    for a, b in zip(*_runs((v < 0.05) & (q < NO_FUEL_CCPS))):
+        if b - a >= KEY_OFF_S:
+            keep[a:b] = False
     k = np.flatnonzero(keep)
     part = np.concatenate([[0], np.cumsum(np.diff(t[k]) > SPLIT_GAP_S)])
     stem = src.stem.split()[0]
@@ -84,7 +84,7 @@ def trim(src: Path, dst: Path) -> dict:
     return {"test": stem, "seconds": float(t[-1] - t[0]), "key_off_s": float(dt[~keep].sum()),
             "km": float((v * dt).sum() / 1000), "litres": float((q * dt).sum() / 1000),
             "idle_lph": float(np.median(q[keep & (v < 0.05)]) * 3.6),
-            "cut_share": float(dt[moving & (q < 0.02)].sum() / dt[moving].sum()), "trips": sorted(set(e["Trip"]))}
+            "cut_share": float(dt[moving & (q < NO_FUEL_CCPS)].sum() / dt[moving].sum()), "trips": sorted(set(e["Trip"]))}
 
 
 def trip_errors(report: Path) -> dict:
@@ -147,29 +147,29 @@ def main(argv=None) -> int:
                 fits[kind][t] = tomllib.loads(out.read_text())["chain"]
                 _cli("compare", log, *veh, "--equation", out, "--target", "fuel", "--out", w / f"held{kind}{t}")
                 held[kind].update(next(iter(trip_errors(w / f"held{kind}{t}").values())))
-        zero = cut_table(w, logs, rl, etw)
+        zero = cut_table(w, logs)
     args.out.write_text(report(tests, prior, held, fits, etw, rl, base, zero), encoding="utf-8")
     print(f"wrote {args.out}")
     return 0
 
 
-def cut_table(w: Path, logs: dict, rl: dict, etw: float) -> list[tuple[str, int, float]]:
-    """Share of the moving samples with no fuel, by driving power band (all tests)."""
+def cut_table(w: Path, logs: dict) -> list[tuple[str, int, float]]:
+    """Share of the moving samples with no fuel, by driving power band (all tests; the
+    driving power of the road-load equation ``w/rl.toml`` as the commands take it)."""
+    from sumo_drvpw.data.measured import load_measured
+    from sumo_drvpw.model.equations import load_equation
+
+    eq = load_equation(w / "rl.toml")
+    m = load_measured(list(logs.values()), w / "camry.toml", target="fuel")
+    p, v = eq.power(m.inputs.with_mass(eq.mass_kg)), np.asarray(m.inputs.v)
+    q = m.log.df["fuel_rate_lph"].to_numpy(float) / 3.6  # cc/s
+    moving = m.usable & (v > 1.0)
     edges = [-np.inf, -10e3, -5e3, -2e3, -1e3, 0.0, 1e3, 2e3, np.inf]
-    p_all, q_all = [], []
-    for log in logs.values():
-        d = pd.read_parquet(log)
-        for _, g in d.groupby("trip_id"):
-            t, v = g["time_s"].to_numpy(), g["speed_mps"].to_numpy()
-            p = (rl["v1"] + rl["v2"] * v + rl["v3"] * v * v) * v + etw * np.gradient(v, t) * v
-            p_all.append(p[v > 1.0])
-            q_all.append(g["fuel_rate_lph"].to_numpy()[v > 1.0])
-    p, q = np.concatenate(p_all), np.concatenate(q_all)
     out = []
     for lo, hi in zip(edges[:-1], edges[1:]):
-        m = (p >= lo) & (p < hi)
-        if m.any():
-            out.append((f"{lo / 1e3:g} … {hi / 1e3:g}", int(m.sum()), float((q[m] < 0.072).mean())))
+        b = moving & (p >= lo) & (p < hi)
+        if b.any():
+            out.append((f"{lo / 1e3:g} … {hi / 1e3:g}", int(b.sum()), float((q[b] < NO_FUEL_CCPS).mean())))
     return out
 
 

@@ -33,6 +33,7 @@ from sumo_drvpw.fit.chain import (ETA_MIN, ChainFit, _bic, _col, _covariance, _n
                                   _stats)
 from sumo_drvpw.fit.chain_checks import reading
 from sumo_drvpw.model.chain import EnergyChain, corrected_fuel_power
+from sumo_drvpw.model.constants import STANDSTILL_MPS
 
 #: engine-off thresholds tried for the fuel chain [W]
 ENGINE_OFF_GRID_W = (-np.inf, 0.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 8000.0, 10000.0, 12000.0, 15000.0)
@@ -70,8 +71,6 @@ def fuel_grid(engine_off="profile", engine_on_above_mps="profile", fuel_cut_belo
 def standing_sums(v, fuel_w, dt_s, ok) -> np.ndarray:
     """[standing time, of it with fuel flowing] [s] on the samples ``ok`` (standing: v <
     STANDSTILL_MPS; flowing: fuel power above :data:`FUEL_FLOWING_W`): sums, so batches add."""
-    from sumo_drvpw.model.constants import STANDSTILL_MPS
-
     stand = ok & (v < STANDSTILL_MPS)
     return np.array([float(dt_s[stand].sum()), float(dt_s[stand & (fuel_w > FUEL_FLOWING_W)].sum())])
 
