@@ -47,15 +47,19 @@ from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midni
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
 OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped",
-           "skip_rows"}
+           "skip_rows", "dbc"}
 #: lines of a CSV searched for a mapped label that is not in the header (the hint of the error)
 HEADER_SEARCH_LINES = 50
 ENTRY = {"name", "unit", "scale", "role", "na_values"}
 SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 
 
-def load_mapping(path) -> dict:
-    """Read and check a mapping TOML; every problem is a UserError naming the file and key."""
+def load_mapping(path, mdf: bool = False) -> dict:
+    """Read and check a mapping TOML; every problem is a UserError naming the file and key.
+
+    ``mdf``: the mapping is for ASAM MDF files (:mod:`~sumo_drvpw.data.adapters.mdf`):
+    ``time_s`` is not required, and an entry without a unit takes its channel's unit from
+    the file (its ``unit`` is then None until read)."""
     p = Path(path)
     doc = read_toml(p, "column mapping")
     for k in doc:
@@ -104,7 +108,12 @@ def load_mapping(path) -> dict:
         scale = e.get("scale", 1.0)
         if not isinstance(scale, (int, float)) or isinstance(scale, bool) or not math.isfinite(scale):
             raise UserError(f"{p}: {key}.scale must be a number, got {scale!r}")
-        entries[label] = _entry(p, key, name, unit, float(scale))
+        if mdf and "unit" not in e and name not in ("time_s", "trip_id"):
+            # the channel's unit is read from the file (factor: the scale, for the check below)
+            entries[label] = {"name": name, "kind": "number", "factor": float(scale), "offset": 0.0, "unit": None}
+        else:
+            entries[label] = {**_entry(p, key, name, unit, float(scale)), "unit": unit}
+        entries[label].update(key=key, scale=float(scale))
         if "na_values" in e:
             own = e["na_values"] if isinstance(e["na_values"], list) else [e["na_values"]]
             if not own or any(isinstance(x, bool) or not isinstance(x, (str, int, float)) for x in own):
@@ -120,7 +129,7 @@ def load_mapping(path) -> dict:
     if "time_format" in opts and not any(e["kind"] == "datetime" for e in entries.values()):
         raise UserError(f"{p}: options.time_format is for timestamps: it goes with a time "
                         "column read as dates (options.time_unit or its unit = \"datetime\")")
-    for need in ("time_s", "speed_mps"):
+    for need in ("speed_mps",) if mdf else ("time_s", "speed_mps"):
         if need not in names:
             raise UserError(f"{p}: no source column is mapped to '{need}' (required)")
     dup = sorted({n for n in names if names.count(n) > 1})
@@ -133,7 +142,19 @@ def load_mapping(path) -> dict:
     return {"path": p, "sep": str(opts.get("sep", ",")), "encoding": str(opts.get("encoding", "utf-8")),
             "decimal": str(opts.get("decimal", ".")), "time_format": opts.get("time_format"),
             "na_values": [str(x) for x in na], "keep_unmapped": bool(opts.get("keep_unmapped", True)),
-            "skip_rows": skip, "columns": entries}
+            "skip_rows": skip, "columns": entries, "dbc": _dbc_files(p, opts.get("dbc", []))}
+
+
+def _dbc_files(p: Path, dbc) -> list[Path]:
+    """options.dbc: DBC files (relative to the mapping file) that decode an MDF bus log."""
+    items = [dbc] if isinstance(dbc, str) else dbc
+    if not isinstance(items, list) or not all(isinstance(x, str) and x for x in items):
+        raise UserError(f"{p}: options.dbc must be a file name or a list of them, got {dbc!r}")
+    files = [(p.parent / x) for x in items]
+    for f, x in zip(files, items):
+        if not f.is_file():
+            raise UserError(f"{p}: options.dbc: no file {x!r} (looked for {f})")
+    return files
 
 
 def _check_text_options(p, opts: dict, entries: dict) -> None:
@@ -163,7 +184,7 @@ def mapping_roles(path) -> dict[str, str]:
     """Roles declared in a mapping TOML: canonical/extra column name → role."""
     if path is None:
         return {}
-    return {e["name"]: e["role"] for e in load_mapping(path)["columns"].values() if "role" in e}
+    return {e["name"]: e["role"] for e in load_mapping(path, mdf=True)["columns"].values() if "role" in e}
 
 
 def _entry(p, key, name, unit, scale) -> dict:
@@ -366,10 +387,31 @@ def _split_trips(df, path, rep):
 
 
 def read(paths, columns):
-    """Read CSV/Parquet files through the mapping TOML ``columns``."""
+    """Read CSV/Parquet or ASAM MDF files through the mapping TOML ``columns``."""
+    from sumo_drvpw.data.adapters import mdf
+
     if columns is None:
         raise UserError("format 'columns' needs a mapping file (mapping.toml)")
-    m = load_mapping(columns)
-    frames, reports = read_each(expand_paths(paths, SUFFIXES, "CSV/Parquet"),
-                                lambda f: read_file(f, m))
+    files = expand_paths(paths, SUFFIXES + mdf.SUFFIXES, "CSV/Parquet/MDF")
+    kinds = {mdf.is_mdf(f) for f in files}
+    if len(kinds) > 1:
+        first = next(f for f in files if mdf.is_mdf(f))
+        raise UserError(f"{first}: an ASAM MDF file among CSV/Parquet files: import MDF files "
+                        "on their own (their mapping takes the time and units from the file)")
+    m = load_mapping(columns, mdf=kinds == {True})
+    if kinds == {True}:
+        def entry_of(label, file_unit, path):
+            e = m["columns"][label]
+            if e["unit"] is not None:
+                return e
+            try:
+                return _entry(m["path"], e["key"], e["name"], file_unit, e["scale"])
+            except UserError as err:
+                raise UserError(f"{path}: channel '{label}' has the unit {file_unit!r} in the file, "
+                                f"which does not fit '{e['name']}' ({str(err).split(': ', 2)[-1]}): give "
+                                f"{e['key']}.unit in {m['path']}") from None
+
+        return (*read_each(files, lambda f: mdf.read_file(f, m, lambda lb, u: entry_of(lb, u, f))),
+                [f"mapping {m['path']}"])
+    frames, reports = read_each(files, lambda f: read_file(f, m))
     return frames, reports, [f"mapping {m['path']}"]

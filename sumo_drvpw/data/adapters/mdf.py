@@ -1,0 +1,177 @@
+"""ASAM MDF measurement files (``.mf4``, ``.mdf``, ``.dat``) through the ``columns`` mapping.
+
+CAN and data loggers (Vector, ETAS, CSS Electronics' CANedge, dSPACE, …) write ASAM MDF;
+``sumo-drvpw import columns LOGS --columns mapping.toml`` reads them with the same mapping
+TOML as CSV files (:mod:`sumo_drvpw.data.adapters.columns`), a source label naming a
+channel instead of a column. What differs:
+
+* **Time** is the file's own time base: the speed channel's time stamps (seconds since the
+  measurement's start). ``time_s`` needs no mapping, and one is refused.
+* **One row per speed sample.** Every other mapped channel is put onto the speed channel's
+  time stamps: a measured value (floating point) linearly in time, a state (integer or
+  boolean: a gear, a flag) held from its last sample; across gaps up to
+  :data:`~sumo_drvpw.data.adapters._common.ALIGN_MAX_GAP_INTERVALS` × the channel's median
+  sampling interval, NaN beyond (the logger paused the channel) and outside its time span.
+  A channel logged faster than the speed is sampled at the speed's instants, not averaged.
+* **Units** come from the file when the mapping gives none (the channel's unit, e.g.
+  ``km/h``, ``degC``); a unit in the mapping overrides it.
+* **Only mapped channels** are read (a bus log holds hundreds); ``keep_unmapped`` has no
+  effect on MDF files. Each file is one trip, named after the file.
+* **Raw bus logs** (CAN frames, as a CANedge writes them) are decoded first with the DBC
+  files of ``[options] dbc = ["powertrain.dbc", …]`` (paths relative to the mapping file;
+  every CAN bus channel). A signal is then named by its DBC name (``Speed``) or, where two
+  messages carry the same name, ``MESSAGE.Signal``.
+* A channel name found in several channel groups is named as ``name@GROUP`` (the group's
+  number, as the error lists them).
+
+Reading MDF needs the optional package asammdf (``pip install 'sumo-drvpw[mdf]'``).
+"""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.data.adapters._common import (ALIGN_MAX_GAP_INTERVALS, clean_time_and_speed,
+                                              interp_onto, new_report)
+
+SUFFIXES = (".mf4", ".mdf", ".dat")
+INSTALL = "pip install 'sumo-drvpw[mdf]'"
+
+
+def is_mdf(path) -> bool:
+    """Whether a file is read as ASAM MDF (by its suffix)."""
+    return Path(path).suffix.lower() in SUFFIXES
+
+
+def _open(path: Path, m: dict):
+    """The file as an asammdf ``MDF`` (its CAN frames decoded with the mapping's DBC files)."""
+    try:
+        from asammdf import MDF
+    except ImportError:
+        raise UserError(f"{path}: reading ASAM MDF files needs the package asammdf: {INSTALL}") from None
+    try:
+        mdf = MDF(str(path))
+    except Exception as e:  # asammdf raises many kinds on a file that is not MDF
+        first = (str(e).splitlines() or [type(e).__name__])[0]
+        raise UserError(f"{path}: cannot be read as ASAM MDF: {first}") from None
+    if not m.get("dbc"):
+        return mdf
+    try:
+        decoded = mdf.extract_bus_logging({"CAN": [(str(d), 0) for d in m["dbc"]]})
+    except Exception as e:
+        first = (str(e).splitlines() or [type(e).__name__])[0]
+        raise UserError(f"{m['path']}: options.dbc: {path} cannot be decoded with "
+                        f"{', '.join(d.name for d in m['dbc'])}: {first}") from None
+    finally:
+        mdf.close()
+    return decoded
+
+
+def _occurrences(mdf, label: str) -> tuple[str, list]:
+    """(channel name, [(group, index), …]) of a source label (``name`` or ``name@GROUP``)."""
+    occ = list(mdf.channels_db.get(label, ()))
+    if occ or "@" not in label:
+        return label, occ
+    name, group = label.rsplit("@", 1)
+    if not group.isdigit():
+        return label, []
+    return name, [o for o in mdf.channels_db.get(name, ()) if o[0] == int(group)]
+
+
+def _signal(mdf, path: Path, label: str, m: dict):
+    """The channel a source label names; a UserError names a missing or ambiguous one."""
+    name, occ = _occurrences(mdf, label)
+    if not occ:
+        names = [n for n in mdf.channels_db if n not in ("time", "t")]
+        close = difflib.get_close_matches(label, names, n=3, cutoff=0.6)
+        hint = (f" (close: {', '.join(close)})" if close else
+                f" ({len(names)} channels, e.g. {', '.join(names[:5])}"
+                + ("; a raw bus log needs its DBC files: options.dbc" if not m.get("dbc")
+                   and any(n.startswith("CAN_DataFrame") for n in names) else "") + ")")
+        raise UserError(f"{path}: no channel '{label}' named in {m['path']}{hint}")
+    if len(occ) > 1:
+        raise UserError(f"{path}: channel '{label}' named in {m['path']} is in {len(occ)} channel "
+                        f"groups: name one as {', '.join(f'{name}@{g}' for g, _ in occ[:4])}")
+    g, i = occ[0]
+    return mdf.get(name, group=g, index=i)
+
+
+def _held(ts: np.ndarray, tc: np.ndarray, xc: np.ndarray) -> np.ndarray:
+    """A state channel at the times ``ts``: its last sample at or before each (zero-order
+    hold) until its next sample, across gaps up to ALIGN_MAX_GAP_INTERVALS × its median
+    interval, and for one median interval after its last sample; NaN elsewhere."""
+    ok = np.isfinite(tc) & np.isfinite(xc)
+    order = np.argsort(tc[ok], kind="stable")
+    tc, xc = tc[ok][order], xc[ok][order]
+    out = np.full(len(ts), np.nan)
+    if len(tc) == 0:
+        return out
+    step = float(np.median(np.diff(tc))) if len(tc) > 1 else 0.0
+    j = np.searchsorted(tc, ts, side="right") - 1
+    jj = np.maximum(j, 0)
+    gap = np.where(jj < len(tc) - 1, tc[np.minimum(jj + 1, len(tc) - 1)] - tc[jj], step)
+    ok = (j >= 0) & ((ts == tc[jj]) | ((gap <= ALIGN_MAX_GAP_INTERVALS * step) & (ts - tc[jj] <= gap)))
+    out[ok] = xc[j[ok]]
+    return out
+
+
+def _numbers(sig, path: Path, label: str) -> np.ndarray:
+    x = np.asarray(sig.samples)
+    if x.dtype.kind == "b":
+        return x.astype(float)
+    if x.dtype.kind not in "iuf" or x.ndim != 1:
+        v = x[0].item() if x.size and x.ndim == 1 else None
+        v = v.decode("utf-8", "replace") if isinstance(v, bytes) else v
+        what = repr(v) if v is not None else f"values of type {x.dtype}"
+        raise UserError(f"{path}: channel '{label}' holds {what}: not a number (a text or "
+                        "array channel cannot be mapped)")
+    return x.astype(float)
+
+
+def read_file(path: Path, m: dict, entry_of) -> tuple[pd.DataFrame, dict]:
+    """One MDF file through the mapping ``m`` → canonical frame and report.
+
+    ``entry_of(label, unit)`` gives a mapped label's conversion (the mapping's unit, else
+    ``unit``, the channel's unit in the file)."""
+    labels = {e["name"]: label for label, e in m["columns"].items()}
+    for name in ("time_s", "trip_id"):
+        if name in labels:
+            raise UserError(f"{m['path']}: columns.{labels[name]!r} maps '{name}': an MDF file "
+                            + ("carries its own time base (the speed channel's time stamps): "
+                               if name == "time_s" else "is one trip, named after the file: ")
+                            + "leave it unmapped")
+    out: dict[str, np.ndarray] = {}
+    missing = []
+    mdf = _open(path, m)
+    try:
+        speed = _signal(mdf, path, labels["speed_mps"], m)
+        ts = np.asarray(speed.timestamps, float)
+        for label, e in m["columns"].items():
+            sig = speed if e["name"] == "speed_mps" else _signal(mdf, path, label, m)
+            conv = entry_of(label, str(sig.unit or ""))
+            x = _numbers(sig, path, label)
+            own = np.isin(x, e.get("na_num", ()))
+            x = np.where(own, np.nan, x)
+            if e["name"] != "speed_mps":
+                tc = np.asarray(sig.timestamps, float)
+                x = (_held if np.asarray(sig.samples).dtype.kind in "biu" else interp_onto)(ts, tc, x)
+                if len(x) and (share := float(np.mean(~np.isfinite(x)))) > 0:
+                    missing.append(f"{label} {100 * share:.2g} %")
+            out[e["name"]] = x * conv["factor"] + conv["offset"]
+    finally:
+        mdf.close()
+    rep = new_report(path, path.stem, len(ts))
+    rep["notes"].append(
+        f"ASAM MDF: {len(out) - 1} channel(s) put onto the {len(ts)} samples of the speed channel "
+        f"'{labels['speed_mps']}' (measured values linear in time, states held; across gaps up to "
+        f"{ALIGN_MAX_GAP_INTERVALS:g}× a channel's median sampling interval)"
+        + (f"; missing: {', '.join(missing)}" if missing else ""))
+    df = pd.DataFrame({"time_s": ts, **out})
+    df = clean_time_and_speed(df, path, rep)
+    df.insert(0, "trip_id", path.stem)
+    return df.reset_index(drop=True), rep

@@ -1,0 +1,265 @@
+"""ASAM MDF import (sumo_drvpw/data/adapters/mdf.py): channels at their own rates put onto
+the speed channel's samples, units from the file, a real CAN bus log decoded with its DBC,
+and every bad input in one line with exit code 2."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+asammdf = pytest.importorskip("asammdf")
+from asammdf import MDF, Signal  # noqa: E402
+
+from sumo_drvpw.cli import main as cli_main  # noqa: E402
+from sumo_drvpw.data.adapters import read  # noqa: E402
+from sumo_drvpw.data.adapters.mdf import _held  # noqa: E402
+from sumo_drvpw.data.log import read_log  # noqa: E402
+from sumo_drvpw.data.roles import from_metadata  # noqa: E402
+from sumo_drvpw.errors import UserError  # noqa: E402
+
+HERE = Path(__file__).resolve().parent / "data" / "mdf"
+
+
+def speed_kmh(t):
+    return 36.0 + 18.0 * np.sin(0.2 * t)
+
+
+def current_a(t):
+    return 100.0 * np.sin(0.5 * t) + 20.0
+
+
+def write_mf4(path: Path, extra=()) -> Path:
+    """A 60-s logger file: speed 10 Hz in km/h, current 50 Hz (A, offset by 3 ms), gear 2 Hz
+    (int), air temperature 1 Hz in degC with the logger pausing it for 10 s, power 10 Hz in W,
+    elevation 5 Hz in m; each channel in its own group, as loggers write them."""
+    ts = np.arange(0, 60, 0.1)
+    tc = np.arange(0, 60, 0.02) + 0.003
+    tg = np.arange(0, 60, 0.5)
+    ta = np.concatenate([np.arange(0, 20, 1.0), np.arange(30, 60, 1.0)])
+    te = np.arange(0, 60, 0.2)
+    mdf = MDF(version="4.10")
+    for sig in [Signal(speed_kmh(ts), ts, name="VehSpd", unit="km/h"),
+                Signal(current_a(tc), tc, name="BattCurr", unit="A"),
+                Signal((np.arange(len(tg)) // 10 % 5 + 1).astype(np.int8), tg, name="Gear", unit=""),
+                Signal(15.0 + 0.1 * ta, ta, name="AmbT", unit="degC"),
+                Signal(1000.0 * np.ones(len(ts)), ts, name="AuxPwr", unit="W"),
+                Signal(500.0 + 0.5 * te, te, name="Alt", unit="m"), *extra]:
+        mdf.append([sig])
+    mdf.save(path, overwrite=True)
+    mdf.close()
+    return path
+
+
+MAPPING = """
+[columns.VehSpd]
+name = "speed_mps"
+[columns.BattCurr]
+name = "battery_current_a"
+role = "response"
+[columns.Gear]
+name = "gear"
+[columns.AmbT]
+name = "ambient_c"
+[columns.AuxPwr]
+name = "aux_power_w"
+unit = "kW"
+[columns.Alt]
+name = "elevation_m"
+"""
+
+
+def mapping(tmp_path: Path, text: str = MAPPING) -> Path:
+    p = tmp_path / "map.toml"
+    p.write_text(text)
+    return p
+
+
+def test_channels_onto_speed_samples_units_from_the_file(tmp_path):
+    f = write_mf4(tmp_path / "drive_01.mf4")
+    df, rep = read("columns", f, mapping(tmp_path))
+    t = df["time_s"].to_numpy()
+    assert set(df["trip_id"]) == {"drive_01"}
+    np.testing.assert_allclose(t, np.arange(0, 60, 0.1))               # the speed's time base
+    # the file's km/h, no unit in the mapping: / 3.6
+    np.testing.assert_allclose(df["speed_mps"], speed_kmh(t) / 3.6, rtol=1e-12)
+    # 50 Hz current at the 10 Hz speed instants, linear in time: error ≤ h²/8·max|f''| = 1.25e-3 A
+    i = df["battery_current_a"].to_numpy()
+    ok = np.isfinite(i)
+    assert ok[1:].all() and not ok[0]                                  # t = 0 is before its first sample
+    assert np.max(np.abs(i[ok] - current_a(t[ok]))) < 1.3e-3
+    # a state is held, never interpolated: gear k+1 from its k-th sample on
+    g = df["gear"].to_numpy()
+    np.testing.assert_array_equal(g, (np.floor(t / 0.5 + 1e-9) // 10 % 5 + 1))
+    # the air temperature in degC, paused 20 … 30 s: missing there, linear elsewhere
+    a = df["ambient_c"].to_numpy()
+    gap = (t > 19.0 + 1e-9) & (t < 30.0 - 1e-9)
+    assert np.isnan(a[gap]).all() and np.isfinite(a[~gap & (t <= 59.0)]).all()
+    np.testing.assert_allclose(a[~gap & (t <= 59.0)], 15.0 + 0.1 * t[~gap & (t <= 59.0)], rtol=1e-12)
+    # the mapping's unit wins over the file's (W in the file, declared kW): × 1000
+    np.testing.assert_allclose(df["aux_power_w"], 1e6)
+    np.testing.assert_allclose(df["elevation_m"].dropna(), 500.0 + 0.5 * t[np.isfinite(df["elevation_m"])])
+    assert rep["kept"] == rep["rows_read"] == 600
+    assert any("ASAM MDF: 5 channel(s)" in n and "ambient_c" not in n and "AmbT" in n
+               for n in rep["files"][0]["notes"])
+    assert rep["roles"] == {"battery_current_a": "response"}
+
+
+def test_cli_round_trip_and_folder(tmp_path, capsys):
+    d = tmp_path / "logs"
+    d.mkdir()
+    write_mf4(d / "a.MF4")
+    write_mf4(d / "b.mf4")
+    out = tmp_path / "log.parquet"
+    code = cli_main(["import", "columns", str(d), "--columns", str(mapping(tmp_path)), "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    df = pd.read_parquet(out)
+    assert list(dict.fromkeys(df["trip_id"])) == ["a", "b"] and len(df) == 1200
+    meta = pq.read_schema(out).metadata
+    assert any(b"response" in v for v in meta.values())                # the role is stored with the log
+    # the canonical log reads back as a drive log, with derived acceleration and the role
+    log = read_log(out)
+    assert len(log.df) == 1200 and np.isfinite(log.df["accel_mps2"]).all()
+    assert from_metadata(log.metadata).get("battery_current_a") == "response"
+
+
+def test_real_can_bus_log_decoded_with_its_dbc(tmp_path):
+    """A CANedge's raw CAN frames (tests/data/mdf/README.md), decoded with the module's DBC
+    through options.dbc: the speed integrated over time matches the logger's own odometer."""
+    m = tmp_path / "map.toml"
+    m.write_text(f"""
+[options]
+dbc = "{(HERE / 'canmod-gps.dbc').as_posix()}"
+[columns.Speed]
+name = "speed_mps"
+[columns."gnss_odo.DistanceTrip"]
+name = "odometer_m"
+[columns.Altitude]
+name = "elevation_m"
+[columns.Satellites]
+name = "satellites"
+""")
+    df, rep = read("columns", HERE / "canmod_gps.MF4", m)
+    assert len(df) == 41 and set(df["trip_id"]) == {"canmod_gps"}
+    assert 0.5 < np.median(np.diff(df["time_s"])) < 1.5                # 1 Hz
+    assert df["speed_mps"].between(0, 15).all() and df["speed_mps"].max() > 10
+    t, v = df["time_s"].to_numpy(), df["speed_mps"].to_numpy()
+    odo = df["odometer_m"].dropna()
+    driven = float(odo.iloc[-1] - odo.iloc[0])
+    ok = np.isfinite(df["odometer_m"]).to_numpy()
+    assert driven > 200
+    assert np.trapezoid(v[ok], t[ok]) == pytest.approx(driven, rel=0.02)  # metres counted by the module
+    assert df["elevation_m"].dropna().between(70, 90).all()            # the DBC's 0.1 m, −6000 m offset
+    assert set(df["satellites"].dropna()) <= set(range(4, 32))
+
+
+def test_raw_bus_log_without_dbc_is_said(tmp_path, capsys):
+    m = mapping(tmp_path, '[columns.Speed]\nname = "speed_mps"\n')
+    code = cli_main(["import", "columns", str(HERE / "canmod_gps.MF4"), "--columns", str(m),
+                     "--out", str(tmp_path / "x.parquet")])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert "no channel 'Speed'" in err and "options.dbc" in err
+    assert not (tmp_path / "x.parquet").exists()
+
+
+@pytest.mark.parametrize("case", ["missing", "ambiguous", "unit", "time", "text", "mixed", "garbage",
+                                  "dbc", "no_asammdf"])
+def test_bad_input_one_line(tmp_path, capsys, monkeypatch, case):
+    extra = ()
+    text = MAPPING
+    src = [write_mf4(tmp_path / "trip.mf4")] if case not in ("ambiguous", "unit", "text") else None
+    if case == "missing":
+        text = MAPPING.replace("columns.BattCurr", "columns.BatCurr")
+        expect = "no channel 'BatCurr'"
+    elif case == "ambiguous":
+        extra = (Signal(np.zeros(10), np.arange(10.0), name="AmbT", unit="degC"),)
+        expect = "AmbT@3, AmbT@6"
+    elif case == "unit":
+        extra = (Signal(np.zeros(10), np.arange(10.0), name="Odo", unit="furlong"),)
+        text = MAPPING + '[columns.Odo]\nname = "odometer_m"\n'
+        expect = "channel 'Odo' has the unit 'furlong'"
+    elif case == "time":
+        text = MAPPING + '[columns.AuxPwr2]\nname = "time_s"\nunit = "s"\n'
+        expect = "carries its own time base"
+    elif case == "text":
+        extra = (Signal(np.array([b"D", b"R"] * 5), np.arange(10.0), name="Mode", unit="", encoding="utf-8"),)
+        text = MAPPING + '[columns.Mode]\nname = "mode"\n'
+        expect = "channel 'Mode' holds 'D': not a number"
+    elif case == "mixed":
+        csv = tmp_path / "other.csv"
+        csv.write_text("t,v\n0,1\n1,2\n")
+        src.append(csv)
+        expect = "an ASAM MDF file among CSV/Parquet files"
+    elif case == "garbage":
+        src = [tmp_path / "junk.mf4"]
+        src[0].write_bytes(b"not an mdf file at all" * 10)
+        expect = "cannot be read as ASAM MDF"
+    elif case == "dbc":
+        text = '[options]\ndbc = ["missing.dbc"]\n' + MAPPING
+        expect = "options.dbc: no file 'missing.dbc'"
+    elif case == "no_asammdf":
+        import builtins
+
+        real = builtins.__import__
+
+        def fake(name, *a, **k):
+            if name == "asammdf" or name.startswith("asammdf."):
+                raise ImportError(name)
+            return real(name, *a, **k)
+
+        monkeypatch.setattr(builtins, "__import__", fake)
+        expect = "needs the package asammdf: pip install 'sumo-drvpw[mdf]'"
+    if src is None:
+        src = [write_mf4(tmp_path / "trip.mf4", extra)]
+    out = tmp_path / "out.parquet"
+    before = {p: p.read_bytes() for p in src}
+    code = cli_main(["import", "columns", *map(str, src), "--columns", str(mapping(tmp_path, text)),
+                     "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert expect in err, err
+    assert not out.exists() and {p: p.read_bytes() for p in src} == before
+
+
+def test_group_qualified_name_picks_one(tmp_path):
+    extra = (Signal(np.full(600, 99.0), np.arange(0, 60, 0.1), name="AmbT", unit="degC"),)
+    f = write_mf4(tmp_path / "trip.mf4", extra)
+    df, _ = read("columns", f, mapping(tmp_path, MAPPING.replace("columns.AmbT", 'columns."AmbT@6"')))
+    np.testing.assert_allclose(df["ambient_c"], 99.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(0, 100, allow_nan=False), min_size=2, max_size=40, unique=True),
+       st.lists(st.floats(-5, 105, allow_nan=False), min_size=1, max_size=40))
+def test_held_is_the_last_sample_before(tc, ts):
+    """Oracle: pandas' merge_asof (backward) — the hold, where the gap rule lets it."""
+    tc, ts = np.sort(np.array(tc)), np.array(ts)
+    xc = np.arange(len(tc), dtype=float)
+    got = _held(ts, tc, xc)
+    order = np.argsort(ts, kind="stable")
+    ref = pd.merge_asof(pd.DataFrame({"t": ts[order]}), pd.DataFrame({"t": tc, "x": xc}), on="t",
+                        direction="backward")["x"].to_numpy()
+    want = np.empty_like(ref)
+    want[order] = ref
+    step = np.median(np.diff(tc))
+    for k in range(len(ts)):
+        if np.isfinite(got[k]):
+            assert got[k] == want[k]
+        else:  # missing only before the first sample, beyond one interval after the last, or in a long gap
+            j = np.searchsorted(tc, ts[k], side="right") - 1
+            assert ts[k] < tc[0] or ts[k] > tc[-1] + step or (
+                j < len(tc) - 1 and tc[j + 1] - tc[j] > 3 * step and ts[k] != tc[j])
+
+
+def test_mdf_reader_is_not_offered_a_csv_mapping_requirement(tmp_path):
+    """A CSV mapping still needs its time column (the MDF leniency is for MDF files only)."""
+    csv = tmp_path / "log.csv"
+    csv.write_text("v\n1\n2\n")
+    with pytest.raises(UserError, match="no source column is mapped to 'time_s'"):
+        read("columns", csv, mapping(tmp_path, '[columns.v]\nname = "speed_mps"\nunit = "m/s"\n'))
