@@ -34,7 +34,7 @@ def current_a(t):
     return 100.0 * np.sin(0.5 * t) + 20.0
 
 
-def write_mf4(path: Path, extra=()) -> Path:
+def write_mf4(path: Path, extra=(), version: str = "4.10") -> Path:
     """A 60-s logger file: speed 10 Hz in km/h, current 50 Hz (A, offset by 3 ms), gear 2 Hz
     (int), air temperature 1 Hz in degC with the logger pausing it for 10 s, power 10 Hz in W,
     elevation 5 Hz in m; each channel in its own group, as loggers write them."""
@@ -43,7 +43,7 @@ def write_mf4(path: Path, extra=()) -> Path:
     tg = np.arange(0, 60, 0.5)
     ta = np.concatenate([np.arange(0, 20, 1.0), np.arange(30, 60, 1.0)])
     te = np.arange(0, 60, 0.2)
-    mdf = MDF(version="4.10")
+    mdf = MDF(version=version)
     for sig in [Signal(speed_kmh(ts), ts, name="VehSpd", unit="km/h"),
                 Signal(current_a(tc), tc, name="BattCurr", unit="A"),
                 Signal((np.arange(len(tg)) // 10 % 5 + 1).astype(np.int8), tg, name="Gear", unit=""),
@@ -51,8 +51,10 @@ def write_mf4(path: Path, extra=()) -> Path:
                 Signal(1000.0 * np.ones(len(ts)), ts, name="AuxPwr", unit="W"),
                 Signal(500.0 + 0.5 * te, te, name="Alt", unit="m"), *extra]:
         mdf.append([sig])
-    mdf.save(path, overwrite=True)
+    written = Path(mdf.save(path, overwrite=True))  # asammdf names an MDF 3 file .mdf
     mdf.close()
+    if written != path:
+        written.rename(path)
     return path
 
 
@@ -80,8 +82,9 @@ def mapping(tmp_path: Path, text: str = MAPPING) -> Path:
     return p
 
 
-def test_channels_onto_speed_samples_units_from_the_file(tmp_path):
-    f = write_mf4(tmp_path / "drive_01.mf4")
+@pytest.mark.parametrize("version,suffix", [("4.10", ".mf4"), ("3.30", ".mdf"), ("3.30", ".dat")])
+def test_channels_onto_speed_samples_units_from_the_file(tmp_path, version, suffix):
+    f = write_mf4(tmp_path / f"drive_01{suffix}", version=version)
     df, rep = read("columns", f, mapping(tmp_path))
     t = df["time_s"].to_numpy()
     assert set(df["trip_id"]) == {"drive_01"}
