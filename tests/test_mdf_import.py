@@ -230,6 +230,26 @@ def test_bad_input_one_line(tmp_path, capsys, monkeypatch, case):
     assert not out.exists() and {p: p.read_bytes() for p in src} == before
 
 
+def test_value_table_and_invalid_samples(tmp_path):
+    """A gear whose value table reads P/D is taken as its raw numbers (noted); a speed sample
+    the file marks invalid is a gap, not a value."""
+    from asammdf.signal import InvalidationArray
+
+    t = np.arange(0, 60, 0.1)
+    bad = np.zeros(len(t), bool)
+    bad[100] = True
+    conv = {"val_0": 0, "text_0": "P", "val_1": 1, "text_1": "D", "default": "?"}
+    extra = (Signal((t >= 30).astype(np.uint8), t, name="GearSel", conversion=conv),
+             Signal(np.full(len(t), 7.0), t, name="V2", unit="m/s", invalidation_bits=InvalidationArray(bad)))
+    f = write_mf4(tmp_path / "trip.mf4", extra)
+    text = ('[columns.V2]\nname = "speed_mps"\n[columns.VehSpd]\nname = "vehicle_speed_mps"\n'
+            '[columns.GearSel]\nname = "gear_sel"\n')
+    df, rep = read("columns", f, mapping(tmp_path, text))
+    assert len(df) == 599 and not np.isclose(df["time_s"], 10.0).any()   # the invalid sample left out
+    np.testing.assert_array_equal(df["gear_sel"], (df["time_s"] >= 30 - 1e-9).astype(float))
+    assert any("value table reads it as texts (D, P" in n for n in rep["files"][0]["notes"]), rep["files"][0]["notes"]
+
+
 def test_group_qualified_name_picks_one(tmp_path):
     extra = (Signal(np.full(600, 99.0), np.arange(0, 60, 0.1), name="AmbT", unit="degC"),)
     f = write_mf4(tmp_path / "trip.mf4", extra)

@@ -23,6 +23,9 @@ channel instead of a column. What differs:
   messages carry the same name, ``MESSAGE.Signal``.
 * A channel name found in several channel groups is named as ``name@GROUP`` (the group's
   number, as the error lists them).
+* Samples the file marks invalid (MDF 4 invalidation bits) are left out by asammdf, as a
+  gap; an integer channel whose value table turns it into texts (a gear ``P``/``D``) is
+  read as its raw numbers (noted).
 
 Reading MDF needs the optional package asammdf (``pip install 'sumo-drvpw[mdf]'``).
 """
@@ -83,7 +86,7 @@ def _occurrences(mdf, label: str) -> tuple[str, list]:
     return name, [o for o in mdf.channels_db.get(name, ()) if o[0] == int(group)]
 
 
-def _signal(mdf, path: Path, label: str, m: dict):
+def _signal(mdf, path: Path, label: str, m: dict, raw: bool = False):
     """The channel a source label names; a UserError names a missing or ambiguous one."""
     name, occ = _occurrences(mdf, label)
     if not occ:
@@ -98,7 +101,7 @@ def _signal(mdf, path: Path, label: str, m: dict):
         raise UserError(f"{path}: channel '{label}' named in {m['path']} is in {len(occ)} channel "
                         f"groups: name one as {', '.join(f'{name}@{g}' for g, _ in occ[:4])}")
     g, i = occ[0]
-    return mdf.get(name, group=g, index=i)
+    return mdf.get(name, group=g, index=i, raw=raw)
 
 
 def _held(ts: np.ndarray, tc: np.ndarray, xc: np.ndarray) -> np.ndarray:
@@ -146,13 +149,21 @@ def read_file(path: Path, m: dict, entry_of) -> tuple[pd.DataFrame, dict]:
                                if name == "time_s" else "is one trip, named after the file: ")
                             + "leave it unmapped")
     out: dict[str, np.ndarray] = {}
-    missing = []
+    missing, notes = [], []
     mdf = _open(path, m)
     try:
         speed = _signal(mdf, path, labels["speed_mps"], m)
         ts = np.asarray(speed.timestamps, float)
         for label, e in m["columns"].items():
             sig = speed if e["name"] == "speed_mps" else _signal(mdf, path, label, m)
+            if np.asarray(sig.samples).dtype.kind in "SUO":  # texts by the file's value table
+                raw = _signal(mdf, path, label, m, raw=True)
+                if np.asarray(raw.samples).dtype.kind in "biu":
+                    texts = ", ".join(sorted({v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
+                                              for v in np.asarray(sig.samples)[:1000]})[:4])
+                    notes.append(f"channel '{label}': the file's value table reads it as texts ({texts}"
+                                 ", …): its raw numbers are taken")
+                    sig = raw
             conv = entry_of(label, str(sig.unit or ""))
             x = _numbers(sig, path, label)
             own = np.isin(x, e.get("na_num", ()))
@@ -171,6 +182,7 @@ def read_file(path: Path, m: dict, entry_of) -> tuple[pd.DataFrame, dict]:
         f"'{labels['speed_mps']}' (measured values linear in time, states held; across gaps up to "
         f"{ALIGN_MAX_GAP_INTERVALS:g}× a channel's median sampling interval)"
         + (f"; missing: {', '.join(missing)}" if missing else ""))
+    rep["notes"].extend(notes)
     df = pd.DataFrame({"time_s": ts, **out})
     df = clean_time_and_speed(df, path, rep)
     df.insert(0, "trip_id", path.stem)
