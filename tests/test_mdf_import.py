@@ -250,6 +250,62 @@ def test_value_table_and_invalid_samples(tmp_path):
     assert any("value table reads it as texts (D, P" in n for n in rep["files"][0]["notes"]), rep["files"][0]["notes"]
 
 
+def test_validity_flag_reads_flagged_samples_as_missing(tmp_path):
+    """valid = "FLAG": where the flag is 0 (a GNSS altitude before the fix: the DBC's offset,
+    −5400 m) the sample is missing and is not interpolated into its neighbours; in a CSV too."""
+    t = np.arange(0, 60, 1.0)
+    flag = (t >= 10).astype(np.uint8)
+    alt = np.where(flag == 1, 500.0, -5400.0)
+    extra = (Signal(alt, t, name="GnssAlt", unit="m"), Signal(flag, t, name="GnssAltValid", unit=""))
+    f = write_mf4(tmp_path / "trip.mf4", extra)
+    text = MAPPING + '[columns.GnssAlt]\nname = "gnss_altitude_m"\nvalid = "GnssAltValid"\n'
+    df, rep = read("columns", f, mapping(tmp_path, text))
+    a, tt = df["gnss_altitude_m"].to_numpy(), df["time_s"].to_numpy()
+    assert np.isnan(a[tt < 10 - 1e-9]).all() and (a[(tt >= 10 - 1e-9) & (tt <= 59)] == 500.0).all()
+    assert any("10 sample(s) flagged invalid by 'GnssAltValid'" in n for n in rep["files"][0]["notes"])
+    # without the flag the offset value is read, and bleeds into the interpolation
+    df0, _ = read("columns", f, mapping(tmp_path, MAPPING + '[columns.GnssAlt]\nname = "gnss_altitude_m"\n'))
+    assert df0["gnss_altitude_m"].min() == -5400.0
+    # a CSV column's flag
+    csv = tmp_path / "log.csv"
+    csv.write_text("t,v,alt,ok\n0,1,-5400,0\n1,2,500,1\n2,3,501,1\n")
+    m = mapping(tmp_path, '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\nunit = "m/s"\n'
+                          '[columns.alt]\nname = "elevation_m"\nunit = "m"\nvalid = "ok"\n')
+    dc, _ = read("columns", csv, m)
+    assert np.isnan(dc["elevation_m"].iloc[0]) and list(dc["elevation_m"].iloc[1:]) == [500.0, 501.0]
+    m.write_text(m.read_text().replace('valid = "ok"', 'valid = "okay"'))
+    with pytest.raises(UserError, match="missing column 'okay' .the validity flag of 'alt'"):
+        read("columns", csv, m)
+
+
+def test_split_files_of_a_session_joined_as_one_trip(tmp_path):
+    """options.mdf_trips = "folder": a logger's split files (each 20 s, one session start)
+    are one trip named after the folder, on one time line; by default each file is a trip."""
+    import datetime
+
+    d = tmp_path / "00000164"
+    d.mkdir()
+    start = datetime.datetime(2021, 7, 26, 4, 40, 54, tzinfo=datetime.timezone.utc)
+    for k in range(3):
+        ts = np.arange(20.0 * k, 20.0 * (k + 1), 0.5)
+        mdf = MDF(version="4.10")
+        mdf.header.start_time = start
+        mdf.append([Signal(speed_kmh(ts), ts, name="VehSpd", unit="km/h")])
+        mdf.append([Signal(current_a(ts), ts, name="BattCurr", unit="A")])
+        mdf.save(d / f"0000000{k + 1}.MF4", overwrite=True)
+        mdf.close()
+    text = '[columns.VehSpd]\nname = "speed_mps"\n[columns.BattCurr]\nname = "battery_current_a"\n'
+    df, rep = read("columns", d, mapping(tmp_path, '[options]\nmdf_trips = "folder"\n' + text))
+    assert set(df["trip_id"]) == {"00000164"} and len(df) == 120
+    np.testing.assert_allclose(df["time_s"], np.arange(0, 60, 0.5))
+    np.testing.assert_allclose(df["battery_current_a"], current_a(np.arange(0, 60, 0.5)))
+    assert "3 MDF files joined in time as one trip" in rep["files"][0]["notes"][0]
+    df1, _ = read("columns", d, mapping(tmp_path, text))
+    assert list(dict.fromkeys(df1["trip_id"])) == ["00000001", "00000002", "00000003"]
+    with pytest.raises(UserError, match="options.mdf_trips must be one of 'file', 'folder'"):
+        read("columns", d, mapping(tmp_path, '[options]\nmdf_trips = "session"\n' + text))
+
+
 def test_group_qualified_name_picks_one(tmp_path):
     extra = (Signal(np.full(600, 99.0), np.arange(0, 60, 0.1), name="AmbT", unit="degC"),)
     f = write_mf4(tmp_path / "trip.mf4", extra)

@@ -47,10 +47,10 @@ from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midni
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
 OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped",
-           "skip_rows", "dbc"}
+           "skip_rows", "dbc", "mdf_trips"}
 #: lines of a CSV searched for a mapped label that is not in the header (the hint of the error)
 HEADER_SEARCH_LINES = 50
-ENTRY = {"name", "unit", "scale", "role", "na_values"}
+ENTRY = {"name", "unit", "scale", "role", "na_values", "valid"}
 SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 
 
@@ -97,7 +97,7 @@ def load_mapping(path, mdf: bool = False) -> dict:
         for k in e:
             if k not in ENTRY:
                 raise UserError(f"{p}: {key}.{k} is not one of {', '.join(sorted(ENTRY))}")
-        for k in ("name", "unit", "role"):
+        for k in ("name", "unit", "role", "valid"):
             if k in e and not isinstance(e[k], str):
                 raise UserError(f"{p}: {key}.{k} must be a text, got {e[k]!r}")
         name = e["name"]
@@ -121,6 +121,8 @@ def load_mapping(path, mdf: bool = False) -> dict:
                                 f"got {e['na_values']!r}")
             entries[label]["na_text"] = tuple(str(x).strip() for x in own if isinstance(x, str))
             entries[label]["na_num"] = tuple(float(x) for x in own if not isinstance(x, str))
+        if "valid" in e:  # a validity flag (a CAN signal's 'valid' bit): 0 marks a sample unread
+            entries[label]["valid"] = e["valid"]
         if "role" in e:
             from sumo_drvpw.data.roles import check_role
 
@@ -142,7 +144,16 @@ def load_mapping(path, mdf: bool = False) -> dict:
     return {"path": p, "sep": str(opts.get("sep", ",")), "encoding": str(opts.get("encoding", "utf-8")),
             "decimal": str(opts.get("decimal", ".")), "time_format": opts.get("time_format"),
             "na_values": [str(x) for x in na], "keep_unmapped": bool(opts.get("keep_unmapped", True)),
-            "skip_rows": skip, "columns": entries, "dbc": _dbc_files(p, opts.get("dbc", []))}
+            "skip_rows": skip, "columns": entries, "dbc": _dbc_files(p, opts.get("dbc", [])),
+            "mdf_trips": _choice(p, opts, "mdf_trips", ("file", "folder"))}
+
+
+def _choice(p: Path, opts: dict, key: str, allowed: tuple[str, ...]) -> str:
+    """An option that takes one of ``allowed`` texts (the first is its default)."""
+    v = opts.get(key, allowed[0])
+    if v not in allowed:
+        raise UserError(f"{p}: options.{key} must be one of {', '.join(map(repr, allowed))}, got {v!r}")
+    return v
 
 
 def _dbc_files(p: Path, dbc) -> list[Path]:
@@ -323,6 +334,8 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
                                     f"({', '.join(map(str, e.get('na_num', ()) + e.get('na_text', ())))}): "
                                     "read as missing")
                 x = x.where(~own)
+            if "valid" in e:
+                x = x.where(_valid_flag(raw, e["valid"], path, label, m, na) != 0)
             out[e["name"]] = x * e["factor"] + e["offset"]
     names = unique_names(list(out))
     df = pd.DataFrame(dict(zip(names, out.values())), index=raw.index)
@@ -331,6 +344,13 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     df = clean_time_and_speed(df, path, rep)
     df.insert(0, "trip_id", path.stem)
     return df.reset_index(drop=True), rep
+
+
+def _valid_flag(raw: pd.DataFrame, flag: str, path: Path, label: str, m: dict, na) -> pd.Series:
+    """The validity column ``flag`` of a mapped column (0: the sample is no reading)."""
+    if flag not in raw.columns:
+        raise UserError(f"{path}: missing column '{flag}' (the validity flag of '{label}' in {m['path']})")
+    return numeric(raw[flag], path, flag, na).fillna(0)
 
 
 def to_datetimes(s: pd.Series, time_format) -> pd.Series:
@@ -411,6 +431,12 @@ def read(paths, columns):
                                 f"which does not fit '{e['name']}' ({str(err).split(': ', 2)[-1]}): give "
                                 f"{e['key']}.unit in {m['path']}") from None
 
+        if m["mdf_trips"] == "folder":
+            groups: dict[Path, list[Path]] = {}
+            for f in files:
+                groups.setdefault(f.parent, []).append(f)
+            return (*read_each(groups, lambda d: mdf.read_file(d, m, lambda lb, u: entry_of(lb, u, d),
+                                                               groups[d])), [f"mapping {m['path']}"])
         return (*read_each(files, lambda f: mdf.read_file(f, m, lambda lb, u: entry_of(lb, u, f))),
                 [f"mapping {m['path']}"])
     frames, reports = read_each(files, lambda f: read_file(f, m))

@@ -16,7 +16,11 @@ channel instead of a column. What differs:
 * **Units** come from the file when the mapping gives none (the channel's unit, e.g.
   ``km/h``, ``degC``); a unit in the mapping overrides it.
 * **Only mapped channels** are read (a bus log holds hundreds); ``keep_unmapped`` has no
-  effect on MDF files. Each file is one trip, named after the file.
+  effect on MDF files. Each file is one trip, named after the file; with ``[options]
+  mdf_trips = "folder"`` the files of each folder are one trip, named after the folder,
+  joined in time (a logger that splits a session into files of some minutes, as a CANedge
+  writes ``LOG/<device>/<session>/00000001.MF4, …``; asammdf's concatenation keeps each
+  file's time stamps from the session's start).
 * **Raw bus logs** (CAN frames, as a CANedge writes them) are decoded first with the DBC
   files of ``[options] dbc = ["powertrain.dbc", …]`` (paths relative to the mapping file;
   every CAN bus channel). A signal is then named by its DBC name (``Speed``) or, where two
@@ -24,7 +28,9 @@ channel instead of a column. What differs:
 * A channel name found in several channel groups is named as ``name@GROUP`` (the group's
   number, as the error lists them).
 * Samples the file marks invalid (MDF 4 invalidation bits) are left out by asammdf, as a
-  gap; an integer channel whose value table turns it into texts (a gear ``P``/``D``) is
+  gap; a channel's ``valid = "FLAG"`` (a CAN signal's validity bit, e.g. a GNSS altitude's
+  ``AltitudeValid``) reads its samples where the flag is 0 as missing, before they are put
+  onto the speed's samples; an integer channel whose value table turns it into texts (a gear ``P``/``D``) is
   read as its raw numbers (noted).
 
 Reading MDF needs the optional package asammdf (``pip install 'sumo-drvpw[mdf]'``).
@@ -51,17 +57,21 @@ def is_mdf(path) -> bool:
     return Path(path).suffix.lower() in SUFFIXES
 
 
-def _open(path: Path, m: dict):
-    """The file as an asammdf ``MDF`` (its CAN frames decoded with the mapping's DBC files)."""
+def _open(path: Path, m: dict, parts: list[Path] | None = None):
+    """The file as an asammdf ``MDF`` (its CAN frames decoded with the mapping's DBC files);
+    ``parts``: the files of one logging session (``path`` their folder), joined in time."""
     try:
         from asammdf import MDF
     except ImportError:
         raise UserError(f"{path}: reading ASAM MDF files needs the package asammdf: {INSTALL}") from None
     try:
-        mdf = MDF(str(path))
+        mdf = MDF(str(path)) if parts is None else MDF.concatenate([str(p) for p in parts])
     except Exception as e:  # asammdf raises many kinds on a file that is not MDF
         first = (str(e).splitlines() or [type(e).__name__])[0]
-        raise UserError(f"{path}: cannot be read as ASAM MDF: {first}") from None
+        what = ("cannot be read as ASAM MDF" if parts is None else
+                f"its {len(parts)} MDF files cannot be joined into one trip (options.mdf_trips = "
+                "\"folder\": the split files of one logging session)")
+        raise UserError(f"{path}: {what}: {first}") from None
     if not m.get("dbc"):
         return mdf
     try:
@@ -136,8 +146,9 @@ def _numbers(sig, path: Path, label: str) -> np.ndarray:
     return x.astype(float)
 
 
-def read_file(path: Path, m: dict, entry_of) -> tuple[pd.DataFrame, dict]:
-    """One MDF file through the mapping ``m`` → canonical frame and report.
+def read_file(path: Path, m: dict, entry_of, parts: list[Path] | None = None) -> tuple[pd.DataFrame, dict]:
+    """One MDF file through the mapping ``m`` → canonical frame and report; or, with
+    ``parts``, the files of one folder (``path``) joined in time as one trip named after it.
 
     ``entry_of(label, unit)`` gives a mapped label's conversion (the mapping's unit, else
     ``unit``, the channel's unit in the file)."""
@@ -150,7 +161,7 @@ def read_file(path: Path, m: dict, entry_of) -> tuple[pd.DataFrame, dict]:
                             + "leave it unmapped")
     out: dict[str, np.ndarray] = {}
     missing, notes = [], []
-    mdf = _open(path, m)
+    mdf = _open(path, m, parts)
     try:
         speed = _signal(mdf, path, labels["speed_mps"], m)
         ts = np.asarray(speed.timestamps, float)
@@ -167,6 +178,13 @@ def read_file(path: Path, m: dict, entry_of) -> tuple[pd.DataFrame, dict]:
             conv = entry_of(label, str(sig.unit or ""))
             x = _numbers(sig, path, label)
             own = np.isin(x, e.get("na_num", ()))
+            if "valid" in e:  # the channel's validity flag, at the channel's own samples
+                flag = _signal(mdf, path, e["valid"], m, raw=True)
+                fx = _held(np.asarray(sig.timestamps, float), np.asarray(flag.timestamps, float),
+                           _numbers(flag, path, e["valid"]))
+                own |= ~(np.nan_to_num(fx) != 0)
+                if (n := int((~(np.nan_to_num(fx) != 0)).sum())):
+                    notes.append(f"channel '{label}': {n} sample(s) flagged invalid by '{e['valid']}': read as missing")
             x = np.where(own, np.nan, x)
             if e["name"] != "speed_mps":
                 tc = np.asarray(sig.timestamps, float)
@@ -176,7 +194,11 @@ def read_file(path: Path, m: dict, entry_of) -> tuple[pd.DataFrame, dict]:
             out[e["name"]] = x * conv["factor"] + conv["offset"]
     finally:
         mdf.close()
-    rep = new_report(path, path.stem, len(ts))
+    trip = path.stem if parts is None else path.name
+    rep = new_report(path, trip, len(ts))
+    if parts is not None:
+        rep["notes"].append(f"{len(parts)} MDF files joined in time as one trip: "
+                            f"{', '.join(p.name for p in parts[:3])}" + (", …" if len(parts) > 3 else ""))
     rep["notes"].append(
         f"ASAM MDF: {len(out) - 1} channel(s) put onto the {len(ts)} samples of the speed channel "
         f"'{labels['speed_mps']}' (measured values linear in time, states held; across gaps up to "
@@ -185,5 +207,5 @@ def read_file(path: Path, m: dict, entry_of) -> tuple[pd.DataFrame, dict]:
     rep["notes"].extend(notes)
     df = pd.DataFrame({"time_s": ts, **out})
     df = clean_time_and_speed(df, path, rep)
-    df.insert(0, "trip_id", path.stem)
+    df.insert(0, "trip_id", trip)
     return df.reset_index(drop=True), rep
