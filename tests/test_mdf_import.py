@@ -336,6 +336,22 @@ def test_held_is_the_last_sample_before(tc, ts):
                 j < len(tc) - 1 and tc[j + 1] - tc[j] > 3 * step and ts[k] != tc[j])
 
 
+def test_a_text_dat_file_is_still_read_as_csv(tmp_path):
+    """MDF is told by its first bytes: a comma-separated .dat (as some loggers name their
+    text exports) is read as CSV when named; in a folder beside an MDF .dat it is left out."""
+    txt = tmp_path / "export.dat"
+    txt.write_text("t,v\n0,1\n1,2\n2,3\n")
+    m = mapping(tmp_path, '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\nunit = "m/s"\n')
+    df, _ = read("columns", txt, m)
+    assert list(df["speed_mps"]) == [1.0, 2.0, 3.0]
+    d = tmp_path / "logs"
+    d.mkdir()
+    write_mf4(d / "trip.dat", version="3.30")
+    (d / "notes.dat").write_text("not a log\n")
+    df, _ = read("columns", d, mapping(tmp_path))
+    assert set(df["trip_id"]) == {"trip"}
+
+
 def test_mdf_reader_is_not_offered_a_csv_mapping_requirement(tmp_path):
     """A CSV mapping still needs its time column (the MDF leniency is for MDF files only)."""
     csv = tmp_path / "log.csv"

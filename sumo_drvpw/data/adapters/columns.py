@@ -412,7 +412,9 @@ def read(paths, columns):
 
     if columns is None:
         raise UserError("format 'columns' needs a mapping file (mapping.toml)")
-    files = expand_paths(paths, SUFFIXES + mdf.SUFFIXES, "CSV/Parquet/MDF")
+    named = {Path(p) for p in ([paths] if isinstance(paths, (str, Path)) else paths)}
+    files = [f for f in expand_paths(paths, SUFFIXES + mdf.SUFFIXES, "CSV/Parquet/MDF")
+             if f.suffix.lower() != ".dat" or f in named or mdf.is_mdf(f)]  # a folder's text .dat: not a log
     kinds = {mdf.is_mdf(f) for f in files}
     if len(kinds) > 1:
         first = next(f for f in files if mdf.is_mdf(f))

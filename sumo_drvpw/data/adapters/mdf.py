@@ -52,9 +52,22 @@ SUFFIXES = (".mf4", ".mdf", ".dat")
 INSTALL = "pip install 'sumo-drvpw[mdf]'"
 
 
+#: the identification block every MDF 3/4 file begins with (finalised, and as a logger leaves
+#: it unfinalised)
+MAGIC = (b"MDF     ", b"UnFinMF ")
+
+
 def is_mdf(path) -> bool:
-    """Whether a file is read as ASAM MDF (by its suffix)."""
-    return Path(path).suffix.lower() in SUFFIXES
+    """Whether a file is read as ASAM MDF: by its suffix ``.mf4``/``.mdf``; any other file
+    (``.dat`` is also a text suffix) by its first bytes, MDF's identification."""
+    p = Path(path)
+    if p.suffix.lower() in (".mf4", ".mdf"):
+        return True
+    try:
+        with open(p, "rb") as f:
+            return f.read(8) in MAGIC
+    except OSError:  # unreadable: the reader of its kind says why
+        return False
 
 
 def _open(path: Path, m: dict, parts: list[Path] | None = None):
