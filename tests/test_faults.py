@@ -573,3 +573,24 @@ def test_a_signal_raised_inside_a_gc_callback_prints_no_traceback():
         hook(types.SimpleNamespace(exc_type=type(exc), exc_value=exc, exc_traceback=None,
                                    err_msg=None, object=None))
     assert [type(u.exc_value) for u in seen] == [ValueError]
+
+
+def test_output_piped_into_a_reader_that_has_gone(tmp_path):
+    """`sumo-drvpw import … | head -1` once head has exited: the reader's end is closed
+    before the command writes; the command still writes its log, exits 0 and prints no
+    traceback (it used to stop at its first print: BrokenPipeError, output absent)."""
+    csv = tmp_path / "log.csv"
+    csv.write_text("t,v\n" + "".join(f"{i},{i % 7}\n" for i in range(200)))
+    m = tmp_path / "map.toml"
+    m.write_text('[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\nunit = "m/s"\n')
+    out = tmp_path / "log.parquet"
+    exe = Path(sys.executable).with_name("sumo-drvpw")
+    r, w = os.pipe()
+    os.close(r)  # the reader is gone before anything is written
+    try:
+        p = subprocess.run([str(exe), "import", "columns", str(csv), "--columns", str(m), "--out", str(out)],
+                           stdout=w, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(w)
+    assert p.returncode == 0 and p.stderr == "", p.stderr
+    assert len(pd.read_parquet(out)) == 200

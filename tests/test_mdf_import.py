@@ -17,6 +17,7 @@ asammdf = pytest.importorskip("asammdf")
 from asammdf import MDF, Signal  # noqa: E402
 
 from sumo_drvpw.cli import main as cli_main  # noqa: E402
+from sumo_drvpw.cli.import_ import format_report  # noqa: E402
 from sumo_drvpw.data.adapters import read  # noqa: E402
 from sumo_drvpw.data.adapters.mdf import _held  # noqa: E402
 from sumo_drvpw.data.log import read_log  # noqa: E402
@@ -300,6 +301,7 @@ def test_split_files_of_a_session_joined_as_one_trip(tmp_path):
     np.testing.assert_allclose(df["time_s"], np.arange(0, 60, 0.5))
     np.testing.assert_allclose(df["battery_current_a"], current_a(np.arange(0, 60, 0.5)))
     assert "3 MDF files joined in time as one trip" in rep["files"][0]["notes"][0]
+    assert format_report(rep).splitlines()[0] == "import columns: 3 file(s) joined into 1 trip(s)"
     df1, _ = read("columns", d, mapping(tmp_path, text))
     assert list(dict.fromkeys(df1["trip_id"])) == ["00000001", "00000002", "00000003"]
     with pytest.raises(UserError, match="options.mdf_trips must be one of 'file', 'folder'"):
@@ -358,3 +360,4 @@ def test_mdf_reader_is_not_offered_a_csv_mapping_requirement(tmp_path):
     csv.write_text("v\n1\n2\n")
     with pytest.raises(UserError, match="no source column is mapped to 'time_s'"):
         read("columns", csv, mapping(tmp_path, '[columns.v]\nname = "speed_mps"\nunit = "m/s"\n'))
+

@@ -387,6 +387,42 @@ def _stopped_by_signal() -> int | None:
     return _signal_exit(bool(_TERMINATED)) if _TERMINATED or _INTERRUPTED else None
 
 
+class _ClosedPipeSafe:
+    """Standard output that goes on when its reader has gone (``sumo-drvpw … | head``):
+    the first broken pipe points the descriptor at /dev/null (the idiom of Python's signal
+    documentation, "Note on SIGPIPE") and later writes are dropped, so the command finishes
+    its work and writes its outputs instead of stopping with a traceback."""
+
+    def __init__(self, stream):
+        self._stream, self.closed_reader = stream, False
+
+    def _guard(self, op, *a):
+        if self.closed_reader:
+            return None
+        try:
+            return op(*a)
+        except BrokenPipeError:
+            self.closed_reader = True
+            try:
+                import os
+
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, self._stream.fileno())
+            except (OSError, ValueError, AttributeError):  # no descriptor (a test's capture)
+                pass
+            return None
+
+    def write(self, text):
+        r = self._guard(self._stream.write, text)
+        return len(text) if r is None else r
+
+    def flush(self):
+        self._guard(self._stream.flush)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def main(argv: list[str] | None = None) -> int:
     from sumo_drvpw import fileio
 
@@ -398,6 +434,8 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     fileio.CURRENT_COMMAND = ["sumo-drvpw", *argv]
+    prev_stdout = sys.stdout
+    sys.stdout = _ClosedPipeSafe(prev_stdout)
     prev_term = prev_int = None
     prev_hook, sys.unraisablehook = sys.unraisablehook, _quiet_signal_hook(sys.unraisablehook)
     try:  # only the main thread may install handlers (tests may call main elsewhere)
@@ -452,6 +490,9 @@ def main(argv: list[str] | None = None) -> int:
         raise
     finally:
         fileio.CURRENT_COMMAND = None
+        if isinstance(sys.stdout, _ClosedPipeSafe):
+            sys.stdout.flush()  # a pipe's block buffer is written here, not at exit unguarded
+            sys.stdout = prev_stdout
         _TERMINATED.clear()
         _INTERRUPTED.clear()
         sys.unraisablehook = prev_hook

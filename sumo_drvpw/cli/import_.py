@@ -49,7 +49,9 @@ def _notes(notes: list[str]) -> list[str]:
 def format_report(report: dict) -> str:
     """Human-readable kept/dropped table: one line per file, then the totals (long notes
     shortened: the report stored with the log, :func:`read_report`, has them whole)."""
-    lines = [f"import {report['format']}: {len(report['files'])} file(s)"]
+    parts = sum(r.get("parts", 1) for r in report["files"])
+    lines = [f"import {report['format']}: {parts} file(s)"
+             + (f" joined into {len(report['files'])} trip(s)" if parts != len(report["files"]) else "")]
     shortened = False
     for r in report["files"]:
         d = ", ".join(f"{k} {n}" for k, n in r["dropped"].items()) or "none"

@@ -210,6 +210,7 @@ def read_file(path: Path, m: dict, entry_of, parts: list[Path] | None = None) ->
     trip = path.stem if parts is None else path.name
     rep = new_report(path, trip, len(ts))
     if parts is not None:
+        rep["parts"] = len(parts)
         rep["notes"].append(f"{len(parts)} MDF files joined in time as one trip: "
                             f"{', '.join(p.name for p in parts[:3])}" + (", …" if len(parts) > 3 else ""))
     rep["notes"].append(
