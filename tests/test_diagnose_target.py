@@ -120,6 +120,16 @@ def test_planted_standstill_load_is_found(planted):
     assert after < before
 
 
+def test_an_effect_that_did_not_replicate_is_not_offered(planted):
+    """skip_effects (the JLU deliverable drops a finding the leave-one-out traces did not
+    make): the planted standstill load is then never a finding, and the report says why."""
+    m, b, _ = planted
+    res = trace_chain(m, _declared(b), ChainTraceOptions(skip_effects=("standstill_aux_w",)))
+    assert "standstill_aux_w" not in [f["term"] for f in res.report["findings"]]
+    assert res.report["columns_left_out"]["standstill_aux_w"] == "not offered (skip_effects option)"
+    assert res.equation.chain.standstill_aux_w == b.chain().standstill_aux_w
+
+
 def test_nothing_planted_nothing_found(clean):
     m, b, _ = clean
     res = trace_chain(m, _declared(b))

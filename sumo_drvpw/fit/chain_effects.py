@@ -130,7 +130,11 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
         else:
             out.append(Cand(f"loads.{col}", f"logged load '{col}' the declared chain lacks", "load", "W/W",
                             [(np.column_stack([ga * L]), None, None)]))
-    return out
+    skip = set(getattr(opt, "skip_effects", ()) or ())
+    for c in out:
+        if c.name in skip:
+            left_out[c.name] = "not offered (skip_effects option)"
+    return [c for c in out if c.name not in skip]
 
 
 def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | None, str]:

@@ -26,8 +26,7 @@ Candidate effects (each a column, or a family profiled over one parameter):
   at the wheels; a free coefficient would absorb attenuated grade from coarse elevation and
   under-book every climb in SUMO — what it would read is reported as ``free_coefficient``);
 * ``aux_power_w`` — a constant auxiliary power [W] (g_aux);
-* ``standstill_aux_w`` — auxiliary power only while standing (v < 0.1 m/s) [W]
-  (battery chains: HVAC, 12 V and pumps of a car waiting at lights);
+* ``standstill_aux_w`` — battery chains: auxiliary power only while standing (v < 0.1 m/s) [W];
 * ``recuperation_limit_w`` — braking power beyond P_lim goes to the friction brakes:
   column η_r·(max(P, −P_lim) − max(P, −P_lim,declared)) with coefficient 1, P_lim
   profiled over quantiles of the braking power on the training data of each fold;
@@ -96,6 +95,7 @@ class ChainTraceOptions:
     validation: str = "auto"   # auto | trip | blocks
     include: tuple = ()  # glob patterns: offer only these columns as loads (unknown role too)
     exclude: tuple = ()  # never these
+    skip_effects: tuple = ()  # candidate effects never offered (e.g. ones that did not replicate)
 
     def check(self):
         check_validation(self)

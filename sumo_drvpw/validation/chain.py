@@ -88,7 +88,7 @@ def jlu_study(data: Path) -> dict:
     declared = Equation("jlu_dyno_chain", dict(terms))
     declared.chain = dfit.chain
     traced = close_loop_heldout(ro, declared)
-    deliverable = jlu_road_equation(ro, declared, trips, dt)
+    deliverable = jlu_road_equation(ro, declared, trips, dt, traced["found_on"], len(traced["trips"]))
     sens = {k: trip_rows(preds[k], ro.power_w, dt, trips) for k in ("after_no_limit", "after_all_refit")}
     g = rlog.df.groupby("trip_id", sort=False)
     info = {str(k): {"ambient_c": float(v["ambient_c"].mean()), "duration_s": float(v["time_s"].max() - v["time_s"].min()),
@@ -119,14 +119,25 @@ def jlu_study(data: Path) -> dict:
 JLU_DELIVERABLE = "jlu_bev_road_battery.toml"
 
 
-def jlu_road_equation(ro, declared, trips, dt) -> dict:
+def jlu_road_equation(ro, declared, trips, dt, found_on: dict, folds: int) -> dict:
     """The loop closed on every shared road trip: diagnose's battery-target tracer
     (:func:`sumo_drvpw.fit.chain_linear.trace_chain`) adds to the dyno chain what the road
     needs, as an equation file for new road logs of this car. Its held-out quality is the
-    leave-one-trip-out result; in sample, its per-trip errors (``in_sample``)."""
-    from sumo_drvpw.fit.chain_linear import predict, trace_chain
+    leave-one-trip-out result; in sample, its per-trip errors (``in_sample``).
 
-    res = trace_chain(ro, declared)
+    A finding must replicate (issue #11 §4): one that the tracer found in fewer than half of
+    the ``folds`` leave-one-trip-out traces (``found_on``: effect → folds) is not kept — the
+    trace on all trips runs again without offering it (``not_replicated``: effect → folds)."""
+    from sumo_drvpw.fit.chain_linear import ChainTraceOptions, predict, trace_chain
+
+    skipped: dict[str, int] = {}
+    for _ in range(4):  # a trace without an effect may find another that did not replicate
+        res = trace_chain(ro, declared, ChainTraceOptions(skip_effects=tuple(skipped)))
+        new = {f["term"]: found_on.get(f["term"], 0) for f in res.report["findings"]
+               if 2 * found_on.get(f["term"], 0) < folds}
+        if not new:
+            break
+        skipped.update(new)
     eq = res.equation
     eq.name = "jlu_bev_road_battery"
     eq.description = ("JLU BEV battery energy on the road: the published road load and the chain calibrated on the "
@@ -139,7 +150,7 @@ def jlu_road_equation(ro, declared, trips, dt) -> dict:
     return {"file": JLU_DELIVERABLE, "findings": {f["term"]: (f["parameter"] if f["coefficient"] is None
                                                              else f["coefficient"]) for f in res.report["findings"]},
             "in_sample": {r["trip"]: r["error"] for r in rows}, "mean_abs_error_in_sample": mean_abs(rows),
-            "equation": eq.to_dict()}
+            "not_replicated": skipped, "folds": folds, "equation": eq.to_dict()}
 
 
 # ------------------------------------------------------------------ Prius Gen 2

@@ -73,9 +73,10 @@ def render(res: dict, command: str) -> str:
                   "energy per trip; its held-out quality is the leave-one-trip-out column above "
                   f"({_pct(j['mean_abs_error_after_diagnose'])[1:]}); on the six trips themselves "
                   f"{_pct(dv['mean_abs_error_in_sample'])[1:]}"
-                  + (f" — {', '.join(only)} was found only with all six trips, in no leave-one-out fold: it lowers "
-                     "the samples' error, not necessarily the trips' energy error" if (only := [
-                         k for k in dv["findings"] if k not in j["diagnose_found_on"]]) else "") + "."]
+                  + (f". Found on all six trips and not kept, because the leave-one-out traces found it in "
+                     f"fewer than half of their {dv['folds']} folds (a finding must replicate): "
+                     + ", ".join(f"{k} ({n} of {dv['folds']})" for k, n in dv["not_replicated"].items())
+                     if dv.get("not_replicated") else "") + "."]
         L += ["", "What the road adds, per left-out trip (efficiencies fixed at the dyno's):", "",
               "| left out | " + " | ".join(next(iter(j["loo_parameters"].values()))) + " |",
               "|---|" + "---|" * len(next(iter(j["loo_parameters"].values())))]
