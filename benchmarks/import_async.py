@@ -17,13 +17,11 @@ what reading the file costs). Not part of the test suite.
 from __future__ import annotations
 
 import argparse
-import json
-import statistics
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
+
+from _child import compare, report
 
 
 def write_log(path: Path, hours: float, pids: int) -> int:
@@ -54,12 +52,7 @@ def child(kind: str, path: str) -> None:
         import pandas as pd
 
         df = pd.read_csv(path, sep=";")
-    took = time.perf_counter() - t0
-    rss = 0.0
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            rss = int(line.split()[1]) / 1024.0
-    print(json.dumps({"kind": kind, "s": took, "rss_mb": rss, "rows": len(df)}))
+    report(kind, time.perf_counter() - t0, len(df))
 
 
 def main() -> None:
@@ -76,19 +69,7 @@ def main() -> None:
         path = Path(tmp) / "log.csv"
         n = write_log(path, a.hours, a.pids)
         print(f"{n} rows, {path.stat().st_size / 1e6:.0f} MB")
-        res = {"import": [], "read_csv": []}
-        for _ in range(a.repeats):
-            for kind in ("read_csv", "import"):  # interleaved: the same load for both
-                r = subprocess.run([sys.executable, __file__, "--child", kind, str(path)],
-                                   capture_output=True, text=True, check=True)
-                res[kind].append(json.loads(r.stdout.strip().splitlines()[-1]))
-        med = {k: (statistics.median(x["s"] for x in v), statistics.median(x["rss_mb"] for x in v))
-               for k, v in res.items()}
-        for k, (s, m) in med.items():
-            print(f"{k}: {s:.2f} s, peak RSS {m:.0f} MB (medians of {a.repeats})")
-        print(f"time_ratio={med['import'][0] / med['read_csv'][0]:.2f} "
-              f"rss_ratio={med['import'][1] / med['read_csv'][1]:.2f} rows={n}")
-
+        compare(__file__, "read_csv", "import", [str(path)], a.repeats, n)
 
 if __name__ == "__main__":
     main()

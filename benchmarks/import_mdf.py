@@ -17,13 +17,11 @@ resampling onto the speed channel's time stamps, no unit conversion, no checks).
 from __future__ import annotations
 
 import argparse
-import json
-import statistics
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
+
+from _child import compare, report
 
 RATES_HZ = (10.0, 20.0, 50.0, 100.0)
 
@@ -64,12 +62,7 @@ def child(kind: str, path: str, channels: int) -> None:
 
         with MDF(path) as mdf:
             df = mdf.to_dataframe(channels=["VehSpd", *names(channels)], raster="VehSpd")
-    took = time.perf_counter() - t0
-    rss = 0.0
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            rss = int(line.split()[1]) / 1024.0
-    print(json.dumps({"kind": kind, "s": took, "rss_mb": rss, "rows": len(df)}))
+    report(kind, time.perf_counter() - t0, len(df))
 
 
 def main() -> None:
@@ -89,21 +82,7 @@ def main() -> None:
             '[columns.VehSpd]\nname = "speed_mps"\n'
             + "".join(f'[columns.{c}]\nname = "{c.lower()}"\n' for c in names(a.channels)))
         print(f"{n} speed samples, {a.channels} other channels, {path.stat().st_size / 1e6:.0f} MB")
-        res = {"import": [], "to_dataframe": []}
-        for _ in range(a.repeats):
-            for kind in ("to_dataframe", "import"):  # interleaved: the same load for both
-                r = subprocess.run([sys.executable, __file__, "--child", kind, str(path), str(a.channels)],
-                                   capture_output=True, text=True, check=True)
-                res[kind].append(json.loads(r.stdout.strip().splitlines()[-1]))
-        if len({x["rows"] for v in res.values() for x in v}) != 1:
-            print(f"row counts differ: { {k: v[0]['rows'] for k, v in res.items()} }")
-        med = {k: (statistics.median(x["s"] for x in v), statistics.median(x["rss_mb"] for x in v))
-               for k, v in res.items()}
-        for k, (s, m) in med.items():
-            print(f"{k}: {s:.2f} s, peak RSS {m:.0f} MB (medians of {a.repeats})")
-        print(f"time_ratio={med['import'][0] / med['to_dataframe'][0]:.2f} "
-              f"rss_ratio={med['import'][1] / med['to_dataframe'][1]:.2f} rows={n}")
-
+        compare(__file__, "to_dataframe", "import", [str(path), str(a.channels)], a.repeats, n)
 
 if __name__ == "__main__":
     main()
