@@ -22,7 +22,9 @@ def configure(parser) -> None:
     parser.add_argument("--out", required=True, metavar="LOG.parquet",
                         help="canonical drive log to write (Parquet)")
     parser.add_argument("--columns", metavar="mapping.toml",
-                        help="column mapping (format 'columns' only)")
+                        help="column mapping (format 'columns' only: CSV/Parquet columns, or the "
+                             "channels of ASAM MDF .mf4/.mdf files, raw CAN logs with options.dbc; "
+                             "docs/adapters.md)")
     parser.add_argument("--wind", metavar="SPEED@FROM",
                         help="the day's wind (e.g. a weather station's record): speed [m/s] and the "
                              "direction it blows from [° clockwise from north], e.g. 4.2@210; writes "
