@@ -590,7 +590,12 @@ def test_output_piped_into_a_reader_that_has_gone(tmp_path):
     try:
         p = subprocess.run([str(exe), "import", "columns", str(csv), "--columns", str(m), "--out", str(out)],
                            stdout=w, stderr=subprocess.PIPE, text=True, timeout=120)
+        assert p.returncode == 0 and p.stderr == "", p.stderr
+        assert len(pd.read_parquet(out)) == 200
+        # `… 2>&1 | head` of a command that fails: the one-line error into the closed pipe
+        # too, exit 2, no traceback anywhere, nothing written
+        bad = subprocess.run([str(exe), "import", "columns", str(csv), "--columns", str(tmp_path / "no.toml"),
+                              "--out", str(tmp_path / "x.parquet")], stdout=w, stderr=w, timeout=120)
+        assert bad.returncode == 2 and not (tmp_path / "x.parquet").exists()
     finally:
         os.close(w)
-    assert p.returncode == 0 and p.stderr == "", p.stderr
-    assert len(pd.read_parquet(out)) == 200

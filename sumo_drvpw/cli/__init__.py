@@ -388,7 +388,7 @@ def _stopped_by_signal() -> int | None:
 
 
 class _ClosedPipeSafe:
-    """Standard output that goes on when its reader has gone (``sumo-drvpw … | head``):
+    """Standard output or error that goes on when its reader has gone (``sumo-drvpw … | head``):
     the first broken pipe points the descriptor at /dev/null (the idiom of Python's signal
     documentation, "Note on SIGPIPE") and later writes are dropped, so the command finishes
     its work and writes its outputs instead of stopping with a traceback."""
@@ -434,8 +434,8 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     fileio.CURRENT_COMMAND = ["sumo-drvpw", *argv]
-    prev_stdout = sys.stdout
-    sys.stdout = _ClosedPipeSafe(prev_stdout)
+    prev_stdout, prev_stderr = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _ClosedPipeSafe(prev_stdout), _ClosedPipeSafe(prev_stderr)
     prev_term = prev_int = None
     prev_hook, sys.unraisablehook = sys.unraisablehook, _quiet_signal_hook(sys.unraisablehook)
     try:  # only the main thread may install handlers (tests may call main elsewhere)
@@ -490,9 +490,10 @@ def main(argv: list[str] | None = None) -> int:
         raise
     finally:
         fileio.CURRENT_COMMAND = None
-        if isinstance(sys.stdout, _ClosedPipeSafe):
-            sys.stdout.flush()  # a pipe's block buffer is written here, not at exit unguarded
-            sys.stdout = prev_stdout
+        for name, prev in (("stdout", prev_stdout), ("stderr", prev_stderr)):
+            if isinstance(getattr(sys, name), _ClosedPipeSafe):
+                getattr(sys, name).flush()  # a pipe's buffer is written here, not at exit unguarded
+                setattr(sys, name, prev)
         _TERMINATED.clear()
         _INTERRUPTED.clear()
         sys.unraisablehook = prev_hook
