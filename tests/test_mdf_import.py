@@ -308,6 +308,22 @@ def test_split_files_of_a_session_joined_as_one_trip(tmp_path):
         read("columns", d, mapping(tmp_path, '[options]\nmdf_trips = "session"\n' + text))
 
 
+def test_an_integer_with_a_unit_is_measured_not_a_state(tmp_path):
+    """A DBC signal at factor 1 is an integer (OBD-II's vehicle speed in whole km/h): with a
+    physical unit it is a measured value, linear in time between its samples; without one
+    (a gear) it is held."""
+    t = np.arange(0, 60, 5.0)
+    extra = (Signal((10 * t / 5).astype(np.uint8), t, name="ObdSpeed", unit="km/h"),
+             Signal((t / 5).astype(np.uint8), t, name="Mode", unit=""))
+    f = write_mf4(tmp_path / "trip.mf4", extra)
+    text = MAPPING + '[columns.ObdSpeed]\nname = "obd_speed_mps"\n[columns.Mode]\nname = "mode"\n'
+    df, _ = read("columns", f, mapping(tmp_path, text))
+    tt = df["time_s"].to_numpy()
+    inside = tt <= 55 + 1e-9
+    np.testing.assert_allclose(df["obd_speed_mps"][inside], 2 * tt[inside] / 3.6, atol=1e-9)
+    np.testing.assert_array_equal(df["mode"][inside], np.floor(tt[inside] / 5 + 1e-9))
+
+
 def test_group_qualified_name_picks_one(tmp_path):
     extra = (Signal(np.full(600, 99.0), np.arange(0, 60, 0.1), name="AmbT", unit="degC"),)
     f = write_mf4(tmp_path / "trip.mf4", extra)

@@ -8,8 +8,8 @@ channel instead of a column. What differs:
 * **Time** is the file's own time base: the speed channel's time stamps (seconds since the
   measurement's start). ``time_s`` needs no mapping, and one is refused.
 * **One row per speed sample.** Every other mapped channel is put onto the speed channel's
-  time stamps: a measured value (floating point) linearly in time, a state (integer or
-  boolean: a gear, a flag) held from its last sample; across gaps up to
+  time stamps: a measured value linearly in time, a state (integer or boolean without a
+  physical unit: a gear, a flag) held from its last sample; across gaps up to
   :data:`~sumo_drvpw.data.adapters._common.ALIGN_MAX_GAP_INTERVALS` × the channel's median
   sampling interval, NaN beyond (the logger paused the channel) and outside its time span.
   A channel logged faster than the speed is sampled at the speed's instants, not averaged.
@@ -46,7 +46,7 @@ import pandas as pd
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.data.adapters._common import (ALIGN_MAX_GAP_INTERVALS, clean_time_and_speed,
-                                              interp_onto, new_report)
+                                              interp_onto, lookup_unit, new_report)
 
 SUFFIXES = (".mf4", ".mdf", ".dat")
 INSTALL = "pip install 'sumo-drvpw[mdf]'"
@@ -146,6 +146,16 @@ def _held(ts: np.ndarray, tc: np.ndarray, xc: np.ndarray) -> np.ndarray:
     return out
 
 
+def _is_state(sig, e: dict) -> bool:
+    """Whether a channel is a state, held between its samples: integer or boolean, with no
+    physical unit (a gear, a mode, a flag). An integer with a unit is a measured value
+    logged in whole units (a DBC's km/h or kPa at factor 1): linear in time like a float."""
+    if np.asarray(sig.samples).dtype.kind not in "biu":
+        return False
+    u = lookup_unit(e["unit"] if e.get("unit") is not None else str(sig.unit or ""))
+    return u is None or u[0] == "dimensionless"
+
+
 def _numbers(sig, path: Path, label: str) -> np.ndarray:
     x = np.asarray(sig.samples)
     if x.dtype.kind == "b":
@@ -201,7 +211,7 @@ def read_file(path: Path, m: dict, entry_of, parts: list[Path] | None = None) ->
             x = np.where(own, np.nan, x)
             if e["name"] != "speed_mps":
                 tc = np.asarray(sig.timestamps, float)
-                x = (_held if np.asarray(sig.samples).dtype.kind in "biu" else interp_onto)(ts, tc, x)
+                x = (_held if _is_state(sig, e) else interp_onto)(ts, tc, x)
                 if len(x) and (share := float(np.mean(~np.isfinite(x)))) > 0:
                     missing.append(f"{label} {100 * share:.2g} %")
             out[e["name"]] = x * conv["factor"] + conv["offset"]
