@@ -30,8 +30,10 @@ channel instead of a column. What differs:
 * Samples the file marks invalid (MDF 4 invalidation bits) are left out by asammdf, as a
   gap; a channel's ``valid = "FLAG"`` (a CAN signal's validity bit, e.g. a GNSS altitude's
   ``AltitudeValid``) reads its samples where the flag is 0 as missing, before they are put
-  onto the speed's samples; an integer channel whose value table turns it into texts (a gear ``P``/``D``) is
-  read as its raw numbers (noted).
+  onto the speed's samples; an integer channel whose value table turns it into texts (a
+  gear ``P``/``D``) is read as its raw numbers (noted).
+* ``.mf4`` and ``.mdf`` files are MDF; any other file (``.dat`` is also a text suffix) is
+  MDF when its first bytes are MDF's identification (:func:`is_mdf`).
 
 Reading MDF needs the optional package asammdf (``pip install 'sumo-drvpw[mdf]'``).
 """
