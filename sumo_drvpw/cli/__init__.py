@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import errno
 import importlib
+import os
 import signal
 import sys
 import warnings
@@ -404,8 +405,6 @@ class _ClosedPipeSafe:
         except BrokenPipeError:
             self.closed_reader = True
             try:
-                import os
-
                 devnull = os.open(os.devnull, os.O_WRONLY)
                 os.dup2(devnull, self._stream.fileno())
             except (OSError, ValueError, AttributeError):  # no descriptor (a test's capture)
