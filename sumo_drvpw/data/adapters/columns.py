@@ -422,24 +422,11 @@ def read(paths, columns):
                         "on their own (their mapping takes the time and units from the file)")
     m = load_mapping(columns, mdf=kinds == {True})
     if kinds == {True}:
-        def entry_of(label, file_unit, path):
-            e = m["columns"][label]
-            if e["unit"] is not None:
-                return e
-            try:
-                return _entry(m["path"], e["key"], e["name"], file_unit, e["scale"])
-            except UserError as err:
-                raise UserError(f"{path}: channel '{label}' has the unit {file_unit!r} in the file, "
-                                f"which does not fit '{e['name']}' ({str(err).split(': ', 2)[-1]}): give "
-                                f"{e['key']}.unit in {m['path']}") from None
-
+        groups = {f: None for f in files}  # each file a trip, or each folder's files one trip
         if m["mdf_trips"] == "folder":
-            groups: dict[Path, list[Path]] = {}
+            groups = {}
             for f in files:
                 groups.setdefault(f.parent, []).append(f)
-            return (*read_each(groups, lambda d: mdf.read_file(d, m, lambda lb, u: entry_of(lb, u, d),
-                                                               groups[d])), [f"mapping {m['path']}"])
-        return (*read_each(files, lambda f: mdf.read_file(f, m, lambda lb, u: entry_of(lb, u, f))),
-                [f"mapping {m['path']}"])
+        return (*read_each(groups, lambda p: mdf.read_file(p, m, groups[p])), [f"mapping {m['path']}"])
     frames, reports = read_each(files, lambda f: read_file(f, m))
     return frames, reports, [f"mapping {m['path']}"]

@@ -171,12 +171,25 @@ def _numbers(sig, path: Path, label: str) -> np.ndarray:
     return x.astype(float)
 
 
-def read_file(path: Path, m: dict, entry_of, parts: list[Path] | None = None) -> tuple[pd.DataFrame, dict]:
-    """One MDF file through the mapping ``m`` → canonical frame and report; or, with
-    ``parts``, the files of one folder (``path``) joined in time as one trip named after it.
+def _conversion(m: dict, label: str, file_unit: str, path: Path) -> dict:
+    """A mapped label's conversion: the mapping's unit, else the channel's unit in the file."""
+    from sumo_drvpw.data.adapters.columns import _entry
 
-    ``entry_of(label, unit)`` gives a mapped label's conversion (the mapping's unit, else
-    ``unit``, the channel's unit in the file)."""
+    e = m["columns"][label]
+    if e["unit"] is not None:
+        return e
+    try:
+        return _entry(m["path"], e["key"], e["name"], file_unit, e["scale"])
+    except UserError as err:
+        raise UserError(f"{path}: channel '{label}' has the unit {file_unit!r} in the file, "
+                        f"which does not fit '{e['name']}' ({str(err).split(': ', 2)[-1]}): give "
+                        f"{e['key']}.unit in {m['path']}") from None
+
+
+def read_file(path: Path, m: dict, parts: list[Path] | None = None) -> tuple[pd.DataFrame, dict]:
+    """One MDF file through the mapping ``m`` (:func:`~sumo_drvpw.data.adapters.columns.load_mapping`
+    with ``mdf=True``) → canonical frame and report; or, with ``parts``, the files of one
+    folder (``path``) joined in time as one trip named after it."""
     labels = {e["name"]: label for label, e in m["columns"].items()}
     for name in ("time_s", "trip_id"):
         if name in labels:
@@ -200,15 +213,16 @@ def read_file(path: Path, m: dict, entry_of, parts: list[Path] | None = None) ->
                     notes.append(f"channel '{label}': the file's value table reads it as texts ({texts}"
                                  ", …): its raw numbers are taken")
                     sig = raw
-            conv = entry_of(label, str(sig.unit or ""))
+            conv = _conversion(m, label, str(sig.unit or ""), path)
             x = _numbers(sig, path, label)
             own = np.isin(x, e.get("na_num", ()))
             if "valid" in e:  # the channel's validity flag, at the channel's own samples
                 flag = _signal(mdf, path, e["valid"], m, raw=True)
                 fx = _held(np.asarray(sig.timestamps, float), np.asarray(flag.timestamps, float),
                            _numbers(flag, path, e["valid"]))
-                own |= ~(np.nan_to_num(fx) != 0)
-                if (n := int((~(np.nan_to_num(fx) != 0)).sum())):
+                flagged = np.nan_to_num(fx) == 0
+                own |= flagged
+                if (n := int(flagged.sum())):
                     notes.append(f"channel '{label}': {n} sample(s) flagged invalid by '{e['valid']}': read as missing")
             x = np.where(own, np.nan, x)
             if e["name"] != "speed_mps":
