@@ -5,7 +5,8 @@ Usage: .venv/bin/python benchmarks/import_mdf.py [--hours 10] [--channels 12] [-
 
 Data: an MF4 written here: the speed at 10 Hz (km/h) and ``--channels`` other channels,
 each in its own channel group as loggers write them — measured values (float) at 10, 20,
-50 and 100 Hz in turn, every fourth an integer state at 2 Hz. Each repeat runs in a fresh
+50 and 100 Hz in turn (those faster than the speed averaged over each speed interval by the
+import, interpolated by the baseline), every fourth an integer state at 2 Hz. Each repeat runs in a fresh
 process, which reports its own peak RSS (``VmHWM``): the import
 (``sumo_drvpw.data.adapters.read("columns", …)`` with a mapping naming every channel) and,
 as baseline, ``asammdf.MDF(path).to_dataframe(channels=…, raster="VehSpd")`` (asammdf's own

@@ -1,6 +1,6 @@
 """Asynchronous logs: loggers that write one value per row (phone OBD apps, CAN-bus
 exports) have each channel on its own rows; the import puts every channel onto the speed
-samples (``_common.align_channels``) instead of keeping the speed rows with empty channels.
+samples (``align.align_channels``) instead of keeping the speed rows with empty channels.
 
 The logs are written here: a known speed profile and channels linear in time (so linear
 interpolation onto the speed samples is exact), polled in turn as an OBD app does; the
@@ -15,7 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sumo_drvpw.data.adapters import read
-from sumo_drvpw.data.adapters._common import ALIGN_MAX_GAP_INTERVALS, align_channels, new_report
+from sumo_drvpw.data.adapters._common import new_report
+from sumo_drvpw.data.adapters.align import ALIGN_MAX_GAP_INTERVALS, align_channels, faster, windows
 
 PIDS = ("Vehicle speed (km/h)", "Battery DC Current (A)", "Battery DC Voltage (V)",
         "Ambient temperature (\u2103)", "Battery DC Min Voltage (V)")
@@ -123,14 +124,15 @@ def test_synchronous_log_is_not_touched():
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.floats(0.05, 0.9), st.floats(-3.0, 3.0), st.floats(-50.0, 50.0), st.integers(0, 10_000))
-def test_aligned_values_are_linear_interpolation(jitter, slope, offset, seed):
-    """Any polling jitter: a channel linear in time comes out exact at every speed sample
-    inside its own time span, and only there."""
+@given(st.floats(0.05, 0.9), st.floats(-3.0, 3.0), st.floats(-50.0, 50.0), st.integers(0, 10_000),
+       st.floats(0.15, 0.6))
+def test_aligned_values_are_linear_interpolation(jitter, slope, offset, seed, speed_share):
+    """Any polling jitter and share of speed rows: a channel linear in time comes out exact
+    at every speed sample inside its own time span, and only there."""
     rng = np.random.default_rng(seed)
     n = 300
     t = np.cumsum(rng.uniform(0.1, 0.1 + jitter, n))
-    is_speed = rng.uniform(size=n) < 0.4
+    is_speed = rng.uniform(size=n) < speed_share
     df = pd.DataFrame({"time_s": t, "speed_mps": np.where(is_speed, 5.0, np.nan),
                        "x": np.where(is_speed, np.nan, offset + slope * t)})
     rep = new_report("f.csv", "f", n)
@@ -139,11 +141,14 @@ def test_aligned_values_are_linear_interpolation(jitter, slope, offset, seed):
     tx = t[~is_speed]
     ts = out["time_s"].to_numpy()
     x = out["x"].to_numpy()
-    inside = (ts >= tx.min()) & (ts <= tx.max())
+    # a channel polled at least twice as often as the speed is its mean over each speed
+    # interval: for a line, its value at the interval's middle; else the value at the sample
+    lo, hi = windows(ts) if faster(ts, tx) else (ts, ts)
+    inside = (lo >= tx.min()) & (hi <= tx.max())
     assert np.all(np.isnan(x[~inside]))
     gap = np.diff(tx).max() <= ALIGN_MAX_GAP_INTERVALS * np.median(np.diff(tx))
     if gap:
-        np.testing.assert_allclose(x[inside], offset + slope * ts[inside], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(x[inside], offset + slope * 0.5 * (lo + hi)[inside], rtol=1e-9, atol=1e-9)
 
 
 def test_columns_aligns_within_each_trip_of_a_file(tmp_path):

@@ -19,7 +19,7 @@ from asammdf import MDF, Signal  # noqa: E402
 from sumo_drvpw.cli import main as cli_main  # noqa: E402
 from sumo_drvpw.cli.import_ import format_report  # noqa: E402
 from sumo_drvpw.data.adapters import read  # noqa: E402
-from sumo_drvpw.data.adapters.mdf import _held  # noqa: E402
+from sumo_drvpw.data.adapters.align import held as _held  # noqa: E402
 from sumo_drvpw.data.log import read_log  # noqa: E402
 from sumo_drvpw.data.roles import from_metadata  # noqa: E402
 from sumo_drvpw.errors import UserError  # noqa: E402
@@ -92,11 +92,19 @@ def test_channels_onto_speed_samples_units_from_the_file(tmp_path, version, suff
     np.testing.assert_allclose(t, np.arange(0, 60, 0.1))               # the speed's time base
     # the file's km/h, no unit in the mapping: / 3.6
     np.testing.assert_allclose(df["speed_mps"], speed_kmh(t) / 3.6, rtol=1e-12)
-    # 50 Hz current at the 10 Hz speed instants, linear in time: error ≤ h²/8·max|f''| = 1.25e-3 A
+    # the 50 Hz current, logged faster than the speed, is its mean over each speed sample's
+    # interval (midpoint to midpoint; the last from 59.85 to 59.9 s). By hand: the mean of
+    # 100·sin(0.5 t) + 20 over [a, b] is 20 + 100·(cos 0.5a − cos 0.5b)/(0.5(b − a)); the
+    # line through the 50 Hz samples is within h²/8·max|f''| = 1.25e-3 A of the sine, so its mean is
     i = df["battery_current_a"].to_numpy()
     ok = np.isfinite(i)
     assert ok[1:].all() and not ok[0]                                  # t = 0 is before its first sample
-    assert np.max(np.abs(i[ok] - current_a(t[ok]))) < 1.3e-3
+    a = np.r_[t[0], 0.5 * (t[1:] + t[:-1])]
+    b = np.r_[0.5 * (t[1:] + t[:-1]), t[-1]]
+    exact = 20.0 + 100.0 * (np.cos(0.5 * a) - np.cos(0.5 * b)) / (0.5 * (b - a))
+    assert np.max(np.abs(i[ok] - exact[ok])) < 1.25e-3
+    # not the current at the instant: over a 0.1 s interval they differ by up to 1.0e-2 A
+    assert np.max(np.abs(i[ok][:-1] - current_a(t[ok][:-1]))) > 9e-3
     # a state is held, never interpolated: gear k+1 from its k-th sample on
     g = df["gear"].to_numpy()
     np.testing.assert_array_equal(g, (np.floor(t / 0.5 + 1e-9) // 10 % 5 + 1))
@@ -420,3 +428,43 @@ def test_a_real_trip_logged_as_mdf_compares_as_from_its_csv(shared_data, tmp_pat
     for k in ("measured_j", "predicted_j"):
         assert got["mdf"][k] == pytest.approx(got["csv"][k], rel=1e-3), k  # seen: 1.4e-4, 2.8e-4
     assert abs(got["mdf"]["error"] - got["csv"]["error"]) < 1e-3
+
+
+def test_a_fast_current_at_one_hertz_speed_keeps_the_real_trip_energy(shared_data, tmp_path):
+    """A shared JLU road trip (20 Hz) as a logger with a 1-Hz speed (a GNSS receiver's) and
+    the pack current and voltage at 20 Hz, each on its own clock, would write it: the
+    imported drive log's Σ V·I·dt_s is the battery energy of the 20-Hz signals over the same
+    span (seen: 1e-15). Taking V and I at the 1-Hz instants instead misses it by 2.4 %
+    (on trips 003 and 006 by 0.2 % and 0.8 %), averaging each apart by 0.6 %."""
+    from sumo_drvpw.data.adapters.align import interp_onto
+
+    src = shared_data / "jlu_bev_road" / "021.parquet"
+    df, _ = read("jlu-road", src)
+    t = df["time_s"].to_numpy()
+    i, v = df["battery_current_a"].to_numpy(float), df["battery_voltage_v"].to_numpy(float)
+    mdf = MDF(version="4.10")
+    for sig in [Signal(df["speed_mps"].to_numpy()[::20] * 3.6, t[::20], name="GnssSpeed", unit="km/h"),
+                Signal(i, t, name="PackCurrent", unit="A"),
+                Signal(v, t + 0.013, name="PackVoltage", unit="V")]:
+        mdf.append([sig])
+    f = tmp_path / "021.mf4"
+    mdf.save(f, overwrite=True)
+    mdf.close()
+    m = mapping(tmp_path, "".join(f'[columns.{a}]\nname = "{b}"\n' for a, b in [
+        ("GnssSpeed", "speed_mps"), ("PackCurrent", "battery_current_a"), ("PackVoltage", "battery_voltage_v")]))
+    out = tmp_path / "021.parquet"
+    assert cli_main(["import", "columns", str(f), "--columns", str(m), "--out", str(out)]) == 0
+    log = read_log(out).df
+    ts, dt = log["time_s"].to_numpy(), log["dt_s"].to_numpy()
+    p = (log["battery_current_a"] * log["battery_voltage_v"]).to_numpy()
+    ok = np.isfinite(p)
+    assert not ok[0] and ok[1:].all()  # the first interval starts before the voltage's first sample
+    got = float(np.sum(p[ok] * dt[ok]))
+    lo, hi = ts[0] + 0.5 * (ts[1] - ts[0]), ts[-1]  # the span of the intervals with V·I
+    # the 20-Hz energy: V·I on the current's clock (the voltage interpolated onto it), linear between
+    own = (t > lo) & (t < hi)
+    grid = np.r_[lo, t[own], hi]
+    exact = float(np.trapezoid(np.interp(grid, t, i * np.interp(t, t + 0.013, v)), grid))
+    assert got == pytest.approx(exact, rel=1e-9)
+    point = float(np.sum((interp_onto(ts, t, i) * interp_onto(ts, t + 0.013, v) * dt)[ok]))
+    assert abs(point / exact - 1) > 0.01

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from sumo_drvpw.data.adapters.align import align_channels
 from sumo_drvpw.data.paths import expand_paths  # noqa: F401  (re-exported for the adapters)
 from sumo_drvpw.model.constants import FT, G_UNIT, GAL, HP, KELVIN, KMH, LB, LBF, MILE, MPH, RPM
 from sumo_drvpw.errors import UserError
@@ -285,94 +286,12 @@ def carry_midnight(seconds) -> tuple[np.ndarray, int]:
     return t + days, int(back.sum())
 
 
-#: a channel logged on its own rows is interpolated across gaps up to this many of its median
-#: sampling intervals; a longer gap (the logger paused the channel) stays missing
-ALIGN_MAX_GAP_INTERVALS = 3.0
-
-
-def interp_onto(ts: np.ndarray, tc: np.ndarray, xc: np.ndarray) -> np.ndarray:
-    """One channel's own samples (times ``tc``, values ``xc``; any order, a repeated time
-    keeps its last value) at the times ``ts``: linear in time between its two neighbouring
-    samples where these are at most :data:`ALIGN_MAX_GAP_INTERVALS` of its median sampling
-    interval apart (a sample at the very time is taken as it is); NaN elsewhere (a gap the
-    logger left, or outside the channel's time span)."""
-    ok = np.isfinite(tc) & np.isfinite(xc)
-    order = np.argsort(tc[ok], kind="stable")
-    tc, xc = tc[ok][order], xc[ok][order]
-    if len(tc) == 0:
-        return np.full(len(ts), np.nan)
-    keep = np.concatenate([np.diff(tc) > 0, [True]])
-    tc, xc = tc[keep], xc[keep]
-    if len(tc) < 2:
-        return np.where(ts == tc[0], xc[0], np.nan)
-    hi = np.clip(np.searchsorted(tc, ts, side="left"), 1, len(tc) - 1)
-    exact = tc[np.minimum(np.searchsorted(tc, ts), len(tc) - 1)] == ts
-    inside = (ts >= tc[0]) & (ts <= tc[-1])
-    ok = inside & (exact | (tc[hi] - tc[hi - 1] <= ALIGN_MAX_GAP_INTERVALS * np.median(np.diff(tc))))
-    return np.where(ok, np.interp(ts, tc, xc), np.nan)
-
-
-def aligned_note(n_other: int, n_speed: int, aligned: dict[str, np.ndarray], report: dict) -> None:
-    """The import note of an asynchronous log whose channels ``aligned`` (name → values at
-    the speed samples) were put onto its ``n_speed`` speed samples, and the count of the
-    ``n_other`` rows without speed under their drop reason."""
-    still = [f"{c} {100 * m:.2g} %" for c, x in aligned.items()
-             if x.size and (m := float(np.mean(~np.isfinite(x)))) > 0]
-    report["notes"].append(
-        f"asynchronous log: {n_other} rows carry no speed; {len(aligned)} channel(s) logged on their "
-        f"own rows are interpolated onto the {n_speed} speed samples (linear in time, across gaps up to "
-        f"{ALIGN_MAX_GAP_INTERVALS:g}× the channel's median sampling interval)"
-        + (f"; still missing: {', '.join(still)}" if still else ""))
-    if n_other:
-        reason = "rows without speed (their channels put onto the speed samples)"
-        report["dropped"][reason] = report["dropped"].get(reason, 0) + int(n_other)
-
-
-def align_channels(df: pd.DataFrame, report: dict) -> pd.DataFrame:
-    """Put the channels of an asynchronous log onto its speed samples.
-
-    Loggers that poll one value per row (OBD apps such as Car Scanner, CAN-bus exports)
-    leave every other column empty on a speed row. A numeric channel logged mostly on
-    rows without speed is asynchronous: its value at each speed sample is interpolated
-    (:func:`interp_onto`); a value logged on the speed row itself is kept. Channels logged
-    on the speed rows (a synchronous log) are not touched. The report's notes say which
-    channels were aligned and how much of each stayed missing. Call per trip.
-    """
-    t = pd.to_numeric(df["time_s"], errors="coerce").to_numpy(float)
-    speed_row = np.isfinite(t) & df["speed_mps"].notna().to_numpy()
-    other = np.isfinite(t) & ~speed_row
-    if not other.any() or not speed_row.any():
-        return df
-    aligned: dict[str, np.ndarray] = {}
-    ts = t[speed_row]
-    for c in df.columns:
-        if c in ("time_s", "speed_mps", "trip_id") or not pd.api.types.is_numeric_dtype(df[c]):
-            continue
-        x = df[c].to_numpy(float)
-        own = np.isfinite(t) & np.isfinite(x)
-        if not own.any() or (own & speed_row).sum() >= 0.5 * own.sum():
-            continue
-        col = x[speed_row].copy()
-        todo = ~np.isfinite(col)
-        col[todo] = interp_onto(ts[todo], t[own], x[own])
-        aligned[c] = col
-    if not aligned:
-        return df
-    out = df.loc[~other].copy()  # the speed rows, and rows without a time (dropped later)
-    on_speed = speed_row[~other]
-    for c, col in aligned.items():
-        full = out[c].to_numpy(float, copy=True)
-        full[on_speed] = col
-        out[c] = full
-    aligned_note(int(other.sum()), int(speed_row.sum()), aligned, report)
-    return out
-
-
 def clean_time_and_speed(df: pd.DataFrame, path, report: dict) -> pd.DataFrame:
     """Drop NaN time/speed and samples whose time does not increase; check speed is plausible.
 
     An asynchronous log's channels are first put onto its speed samples
-    (:func:`align_channels`), so dropping the rows without speed loses no channel.
+    (:func:`~sumo_drvpw.data.adapters.align.align_channels`), so dropping the rows without
+    speed loses no channel.
     A sample whose time equals the latest kept time is a 'duplicate timestamp' (the first
     one is kept); one whose time is earlier is 'time going backwards'. Speed must be in
     [0, 100] m/s after conversion, else a UserError names file and row (wrong unit), except a

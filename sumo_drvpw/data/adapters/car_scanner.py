@@ -9,9 +9,10 @@ its two CSV layouts:
   value (``PID (unit)``), ``time`` the time of day (``HH:MM:SS.fff``), and on each row
   only the value polled then (the other cells empty).
 
-Either way the channels are asynchronous: each is kept as its own samples and interpolated
-onto the speed samples (:func:`sumo_drvpw.data.adapters._common.interp_onto`, as
-``align_channels`` does for other asynchronous logs), and the import report says so.
+Either way the channels are asynchronous: each is kept as its own samples and put onto
+the speed samples (:func:`sumo_drvpw.data.adapters.align.onto`: interpolated, or averaged
+over each speed interval when polled faster than the speed, as ``align_channels`` does for
+other asynchronous logs), and the import report says so.
 A time of day that steps back by more than 12 h has passed midnight. trip_id = file stem.
 
 Mapping (PID names as Car Scanner writes them; every other value is kept as
@@ -40,9 +41,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.adapters._common import (aligned_note, carry_midnight, clean_time_and_speed, expand_paths,
-                                              generic_name, interp_onto, lookup_unit, new_report, note_truncated,
-                                              read_csv_strict, read_each, split_header, unique_names)
+from sumo_drvpw.data.adapters._common import (carry_midnight, clean_time_and_speed, expand_paths, generic_name,
+                                              lookup_unit, new_report, note_truncated, read_csv_strict,
+                                              read_each, split_header, unique_names)
+from sumo_drvpw.data.adapters.align import aligned_note, onto
 from sumo_drvpw.errors import UserError
 
 FORMAT = "car-scanner"
@@ -237,7 +239,7 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
                                 "use the 'columns' format to name one")
     ts, vs = chans[speed or gps]
     _, f, o = generic_name(speed or gps)
-    names, values = ["time_s", "speed_mps"], [ts, vs * f + o]
+    names, values, averaged = ["time_s", "speed_mps"], [ts, vs * f + o], []
     for lab, (tc, xc) in chans.items():
         if lab == (speed or gps) or lab not in labels:
             continue
@@ -249,11 +251,14 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
         else:
             name, f, o = generic_name(lab, rep["notes"])
         names.append(name)
-        values.append(interp_onto(ts, tc, xc) * f + o)
+        x, mean = onto(ts, tc, xc)
+        values.append(x * f + o)
+        averaged += [len(names) - 1] if mean else []
     names = unique_names(names)
     df = pd.DataFrame(dict(zip(names, values)))
     if len(names) > 2:
-        aligned_note(rows - len(ts), len(ts), dict(zip(names[2:], values[2:])), rep)
+        aligned_note(rows - len(ts), len(ts), dict(zip(names[2:], values[2:])), rep,
+                     [names[i] for i in averaged])
     df = clean_time_and_speed(df, path, rep)
     df.insert(0, "trip_id", path.stem)
     return df.reset_index(drop=True), rep

@@ -8,11 +8,13 @@ channel instead of a column. What differs:
 * **Time** is the file's own time base: the speed channel's time stamps (seconds since the
   measurement's start). ``time_s`` needs no mapping, and one is refused.
 * **One row per speed sample.** Every other mapped channel is put onto the speed channel's
-  time stamps: a measured value linearly in time, a state (integer or boolean without a
-  physical unit: a gear, a flag) held from its last sample; across gaps up to
-  :data:`~sumo_drvpw.data.adapters._common.ALIGN_MAX_GAP_INTERVALS` × the channel's median
-  sampling interval, NaN beyond (the logger paused the channel) and outside its time span.
-  A channel logged faster than the speed is sampled at the speed's instants, not averaged.
+  time stamps (:mod:`sumo_drvpw.data.adapters.align`): a measured value linearly in time,
+  or, logged at least twice as fast as the speed, as its mean over each speed sample's
+  interval (the charge of each interval, not the current of one instant); a state (integer
+  or boolean without a physical unit: a gear, a flag) held from its last sample; across
+  gaps up to :data:`~sumo_drvpw.data.adapters.align.ALIGN_MAX_GAP_INTERVALS` × the
+  channel's median sampling interval, NaN beyond (the logger paused the channel) and
+  outside its time span.
 * **Units** come from the file when the mapping gives none (the channel's unit, e.g.
   ``km/h``, ``degC``); a unit in the mapping overrides it.
 * **Only mapped channels** are read (a bus log holds hundreds); ``keep_unmapped`` has no
@@ -47,8 +49,8 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.data.adapters._common import (ALIGN_MAX_GAP_INTERVALS, clean_time_and_speed,
-                                              interp_onto, lookup_unit, new_report)
+from sumo_drvpw.data.adapters._common import clean_time_and_speed, lookup_unit, new_report
+from sumo_drvpw.data.adapters.align import POWER_FACTORS, held, how, keep_power, onto
 
 SUFFIXES = (".mf4", ".mdf", ".dat")
 INSTALL = "pip install 'sumo-drvpw[mdf]'"
@@ -129,25 +131,6 @@ def _signal(mdf, path: Path, label: str, m: dict, raw: bool = False):
     return mdf.get(name, group=g, index=i, raw=raw)
 
 
-def _held(ts: np.ndarray, tc: np.ndarray, xc: np.ndarray) -> np.ndarray:
-    """A state channel at the times ``ts``: its last sample at or before each (zero-order
-    hold) until its next sample, across gaps up to ALIGN_MAX_GAP_INTERVALS × its median
-    interval, and for one median interval after its last sample; NaN elsewhere."""
-    ok = np.isfinite(tc) & np.isfinite(xc)
-    order = np.argsort(tc[ok], kind="stable")
-    tc, xc = tc[ok][order], xc[ok][order]
-    out = np.full(len(ts), np.nan)
-    if len(tc) == 0:
-        return out
-    step = float(np.median(np.diff(tc))) if len(tc) > 1 else 0.0
-    j = np.searchsorted(tc, ts, side="right") - 1
-    jj = np.maximum(j, 0)
-    gap = np.where(jj < len(tc) - 1, tc[np.minimum(jj + 1, len(tc) - 1)] - tc[jj], step)
-    ok = (j >= 0) & ((ts == tc[jj]) | ((gap <= ALIGN_MAX_GAP_INTERVALS * step) & (ts - tc[jj] <= gap)))
-    out[ok] = xc[j[ok]]
-    return out
-
-
 def _is_state(sig, e: dict) -> bool:
     """Whether a channel is a state, held between its samples: integer or boolean, with no
     physical unit (a gear, a mode, a flag). An integer with a unit is a measured value
@@ -198,7 +181,7 @@ def read_file(path: Path, m: dict, parts: list[Path] | None = None) -> tuple[pd.
                                if name == "time_s" else "is one trip, named after the file: ")
                             + "leave it unmapped")
     out: dict[str, np.ndarray] = {}
-    missing, notes = [], []
+    missing, notes, averaged, fast_raw = [], [], [], {}
     mdf = _open(path, m, parts)
     try:
         speed = _signal(mdf, path, labels["speed_mps"], m)
@@ -218,8 +201,8 @@ def read_file(path: Path, m: dict, parts: list[Path] | None = None) -> tuple[pd.
             own = np.isin(x, e.get("na_num", ()))
             if "valid" in e:  # the channel's validity flag, at the channel's own samples
                 flag = _signal(mdf, path, e["valid"], m, raw=True)
-                fx = _held(np.asarray(sig.timestamps, float), np.asarray(flag.timestamps, float),
-                           _numbers(flag, path, e["valid"]))
+                fx = held(np.asarray(sig.timestamps, float), np.asarray(flag.timestamps, float),
+                          _numbers(flag, path, e["valid"]))
                 flagged = np.nan_to_num(fx) == 0
                 own |= flagged
                 if (n := int(flagged.sum())):
@@ -227,12 +210,22 @@ def read_file(path: Path, m: dict, parts: list[Path] | None = None) -> tuple[pd.
             x = np.where(own, np.nan, x)
             if e["name"] != "speed_mps":
                 tc = np.asarray(sig.timestamps, float)
-                x = (_held if _is_state(sig, e) else interp_onto)(ts, tc, x)
+                if _is_state(sig, e):
+                    x = held(ts, tc, x)
+                else:
+                    fast, mean = onto(ts, tc, x)
+                    if mean:
+                        averaged.append(label)
+                        if e["name"] in POWER_FACTORS:  # its own samples, for keep_power
+                            fast_raw[e["name"]] = (tc, x * conv["factor"] + conv["offset"])
+                    x = fast
                 if len(x) and (share := float(np.mean(~np.isfinite(x)))) > 0:
                     missing.append(f"{label} {100 * share:.2g} %")
             out[e["name"]] = x * conv["factor"] + conv["offset"]
     finally:
         mdf.close()
+    notes += [f"channel '{labels[a]}' ({a}) is its mean weighted by '{labels[b]}' ({b}) over each speed "
+              f"interval, so that {a} × {b} carries the mean power" for a, b in keep_power(ts, fast_raw, out)]
     trip = path.stem if parts is None else path.name
     rep = new_report(path, trip, len(ts))
     if parts is not None:
@@ -241,8 +234,7 @@ def read_file(path: Path, m: dict, parts: list[Path] | None = None) -> tuple[pd.
                             f"{', '.join(p.name for p in parts[:3])}" + (", …" if len(parts) > 3 else ""))
     rep["notes"].append(
         f"ASAM MDF: {len(out) - 1} channel(s) put onto the {len(ts)} samples of the speed channel "
-        f"'{labels['speed_mps']}' (measured values linear in time, states held; across gaps up to "
-        f"{ALIGN_MAX_GAP_INTERVALS:g}× a channel's median sampling interval)"
+        f"'{labels['speed_mps']}' (states held; measured values {how(averaged)})"
         + (f"; missing: {', '.join(missing)}" if missing else ""))
     rep["notes"].extend(notes)
     df = pd.DataFrame({"time_s": ts, **out})
