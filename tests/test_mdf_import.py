@@ -178,6 +178,14 @@ def test_raw_bus_log_without_dbc_is_said(tmp_path, capsys):
     assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
     assert "no channel 'Speed'" in err and "options.dbc" in err
     assert not (tmp_path / "x.parquet").exists()
+    # a DBC that decodes none of its frames (another vehicle's, or not a DBC) is named
+    (tmp_path / "other.dbc").write_text("not a DBC\n")
+    m = mapping(tmp_path, 'options.dbc = "other.dbc"\n[columns.Speed]\nname = "speed_mps"\n')
+    code = cli_main(["import", "columns", str(HERE / "canmod_gps.MF4"), "--columns", str(m),
+                     "--out", str(tmp_path / "x.parquet")])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert "its DBC files other.dbc decode no message of this file" in err
 
 
 @pytest.mark.parametrize("case", ["missing", "ambiguous", "unit", "time", "text", "mixed", "garbage",

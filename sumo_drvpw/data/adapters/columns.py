@@ -44,10 +44,12 @@ from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midni
                       expand_paths, generic_name, lookup_unit, new_report, numeric, read_csv_strict,
                       read_each, unique_names)
 
+from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
+
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
 OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped",
-           "skip_rows", "dbc", "mdf_trips"}
+           "skip_rows", "dbc", "mdf_trips", "isotp_layout"}
 #: lines of a CSV searched for a mapped label that is not in the header (the hint of the error)
 HEADER_SEARCH_LINES = 50
 ENTRY = {"name", "unit", "scale", "role", "na_values", "valid"}
@@ -145,7 +147,8 @@ def load_mapping(path, mdf: bool = False) -> dict:
             "decimal": str(opts.get("decimal", ".")), "time_format": opts.get("time_format"),
             "na_values": [str(x) for x in na], "keep_unmapped": bool(opts.get("keep_unmapped", True)),
             "skip_rows": skip, "columns": entries, "dbc": _dbc_files(p, opts.get("dbc", [])),
-            "mdf_trips": _choice(p, opts, "mdf_trips", ("file", "folder"))}
+            "mdf_trips": _choice(p, opts, "mdf_trips", ("file", "folder")),
+            "isotp_layout": _choice(p, opts, "isotp_layout", ISOTP_LAYOUTS)}
 
 
 def _choice(p: Path, opts: dict, key: str, allowed: tuple[str, ...]) -> str:

@@ -26,7 +26,9 @@ channel instead of a column. What differs:
 * **Raw bus logs** (CAN frames, as a CANedge writes them) are decoded first with the DBC
   files of ``[options] dbc = ["powertrain.dbc", …]`` (paths relative to the mapping file;
   every CAN bus channel). A signal is then named by its DBC name (``Speed``) or, where two
-  messages carry the same name, ``MESSAGE.Signal``.
+  messages carry the same name, ``MESSAGE.Signal``. Diagnostic responses longer than a
+  frame (a BEV's battery data as UDS responses over ISO-TP) are reassembled first
+  (:mod:`~sumo_drvpw.data.adapters.isotp`; ``[options] isotp_layout``).
 * A channel name found in several channel groups is named as ``name@GROUP`` (the group's
   number, as the error lists them).
 * Samples the file marks invalid (MDF 4 invalidation bits) are left out by asammdf, as a
@@ -74,9 +76,12 @@ def is_mdf(path) -> bool:
         return False
 
 
-def _open(path: Path, m: dict, parts: list[Path] | None = None):
-    """The file as an asammdf ``MDF`` (its CAN frames decoded with the mapping's DBC files);
-    ``parts``: the files of one logging session (``path`` their folder), joined in time."""
+def _open(path: Path, m: dict, parts: list[Path] | None = None, notes: list | None = None):
+    """The file as an asammdf ``MDF`` (its CAN frames decoded with the mapping's DBC files,
+    multi-frame diagnostic responses reassembled first: :mod:`~sumo_drvpw.data.adapters.isotp`);
+    ``parts``: the files of one logging session (``path`` their folder), joined in time;
+    ``notes``: the import notes, which it adds to."""
+    notes = [] if notes is None else notes
     try:
         from asammdf import MDF
     except ImportError:
@@ -91,8 +96,18 @@ def _open(path: Path, m: dict, parts: list[Path] | None = None):
         raise UserError(f"{path}: {what}: {first}") from None
     if not m.get("dbc"):
         return mdf
+    from sumo_drvpw.data.adapters import isotp
+
     try:
-        decoded = mdf.extract_bus_logging({"CAN": [(str(d), 0) for d in m["dbc"]]})
+        dbs, tp = isotp.split_databases(mdf, m["dbc"])
+        decoded = mdf.extract_bus_logging({"CAN": [(db, 0) for db in dbs]})
+        if tp:
+            counts = isotp.decode_into(decoded, mdf, tp, m["isotp_layout"])
+            notes.append("ISO-TP responses reassembled (options.isotp_layout = "
+                         f"{m['isotp_layout']!r}): "
+                         + ", ".join(f"{k} {a}" + (f" ({b} incomplete, left out: a first frame without its "
+                                                   "consecutive frames — no flow control, or a frame lost)" if b else "")
+                                     for k, (a, b) in counts.items()))
     except Exception as e:
         first = (str(e).splitlines() or [type(e).__name__])[0]
         raise UserError(f"{m['path']}: options.dbc: {path} cannot be decoded with "
@@ -120,6 +135,8 @@ def _signal(mdf, path: Path, label: str, m: dict, raw: bool = False):
         names = [n for n in mdf.channels_db if n not in ("time", "t")]
         close = difflib.get_close_matches(label, names, n=3, cutoff=0.6)
         hint = (f" (close: {', '.join(close)})" if close else
+                f" (its DBC files {', '.join(d.name for d in m['dbc'])} decode no message of this file)"
+                if not names and m.get("dbc") else
                 f" ({len(names)} channels, e.g. {', '.join(names[:5])}"
                 + ("; a raw bus log needs its DBC files: options.dbc" if not m.get("dbc")
                    and any(n.startswith("CAN_DataFrame") for n in names) else "") + ")")
@@ -182,7 +199,7 @@ def read_file(path: Path, m: dict, parts: list[Path] | None = None) -> tuple[pd.
                             + "leave it unmapped")
     out: dict[str, np.ndarray] = {}
     missing, notes, averaged, fast_raw = [], [], [], {}
-    mdf = _open(path, m, parts)
+    mdf = _open(path, m, parts, notes)
     try:
         speed = _signal(mdf, path, labels["speed_mps"], m)
         ts = np.asarray(speed.timestamps, float)
