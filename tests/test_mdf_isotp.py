@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -130,3 +131,26 @@ def test_the_import_carries_the_reassembled_signals(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "options.isotp_layout must be one of 'css', 'payload', got 'bogus'" in err[0]
     assert not (tmp_path / "k.parquet").exists()
+
+
+def test_a_real_leaf_log_with_gnss_speed_imports_its_battery_responses(tmp_path):
+    """A CANedge log (64 s) of a Nissan Leaf with its GNSS module: the speed from the module's
+    DBC, the state of charge and pack temperature from the Li-ion battery controller's
+    responses on 0x7BB (service 0x61, 55 bytes over eight frames), decoded with CSS's Nissan
+    UDS DBC: a drive log whose battery columns came over ISO-TP. The car stands (GNSS speed
+    below 0.5 m/s), at 89.1–89.2 % charge, its pack at 2 °C on a January day."""
+    p = tmp_path / "map.toml"
+    p.write_text(f'[options]\ndbc = ["{HERE / "tp_uds_nissan.dbc"}", "{HERE / "canmod-gps.dbc"}"]\n'
+                 '[columns.Speed]\nname = "speed_mps"\n'
+                 '[columns.SoC]\nname = "soc_pct"\nunit = "%"\n'
+                 '[columns.BatPackTemp1]\nname = "battery_temp_c"\nunit = "degC"\n')
+    out = tmp_path / "leaf.parquet"
+    assert cli_main(["import", "columns", str(HERE / "leaf_uds_gnss.MF4"), "--columns", str(p),
+                     "--out", str(out)]) == 0
+    df = pd.read_parquet(out)
+    assert len(df) == 44 and df["speed_mps"].max() < 0.5
+    soc = df["soc_pct"].dropna()
+    assert len(soc) >= 40 and 89.0 < soc.min() <= soc.max() < 89.3
+    assert set(df["battery_temp_c"].dropna()) == {2.0}
+    df2, rep = read("columns", HERE / "leaf_uds_gnss.MF4", p)
+    assert "ISO-TP responses reassembled (options.isotp_layout = 'css'): SoC_Temp 26" in rep["files"][0]["notes"]
