@@ -1,4 +1,5 @@
-"""``sumo-drvpw import FORMAT SRC... --out LOG.parquet [--columns mapping.toml]``.
+"""``sumo-drvpw import FORMAT SRC... --out LOG.parquet [--columns mapping.toml]``, or
+``sumo-drvpw import columns SRC... --list [--columns mapping.toml]``.
 
 Converts vendor logs to one canonical drive log (Parquet), prints kept/dropped samples per
 reason and per file, and stores that report as JSON in the Parquet schema metadata under
@@ -19,8 +20,13 @@ META_KEY = b"sumo_drvpw.import"
 def configure(parser) -> None:
     parser.add_argument("format", metavar="FORMAT", help="one of: " + ", ".join(FORMATS))
     parser.add_argument("src", metavar="SRC", nargs="+", help="vendor files or folders")
-    parser.add_argument("--out", required=True, metavar="LOG.parquet",
-                        help="canonical drive log to write (Parquet)")
+    parser.add_argument("--out", metavar="LOG.parquet",
+                        help="canonical drive log to write (Parquet; required unless --list)")
+    parser.add_argument("--list", action="store_true",
+                        help="format 'columns': list what each SRC file offers — MDF channels with unit, "
+                             "samples and rate (raw CAN decoded with the mapping's options.dbc), CSV/Parquet "
+                             "columns with the unit their label carries — to write the mapping from; "
+                             "--columns is optional then (only its [options] are read); writes nothing")
     parser.add_argument("--columns", metavar="mapping.toml",
                         help="column mapping (format 'columns' only: CSV/Parquet columns, or the "
                              "channels of ASAM MDF .mf4/.mdf files, raw CAN logs with options.dbc; "
@@ -96,7 +102,35 @@ def read_report(path) -> dict:
     return json.loads(meta[META_KEY])
 
 
+def format_listing(files: list[dict]) -> str:
+    """The terminal table of :func:`sumo_drvpw.data.adapters.listing.list_sources`."""
+    lines = []
+    for f in files:
+        rows = f["rows"]
+        lines.append(f"{f['file']} ({f['kind']}): {len(rows)} {'channels' if 'MDF' in f['kind'] else 'columns'}")
+        w = max([len(r["label"]) for r in rows] + [5])
+        if "MDF" in f["kind"]:
+            lines.append(f"  {'label':<{w}}  {'unit':<8} {'samples':>9} {'rate Hz':>9}")
+            lines += [f"  {r['label']:<{w}}  {r['unit']:<8} {r['samples']:>9} {r['rate_hz']:>9.3g}" for r in rows]
+        else:
+            lines.append(f"  {'label':<{w}}  {'unit':<8} {'values':>7} {'numbers':>7}  first value")
+            lines += [f"  {r['label']:<{w}}  {r['unit']:<8} {r['samples']:>7} {r['numbers']:>7}  {r['first'][:30]}"
+                      for r in rows]
+        lines += [f"  note: {n}" for n in f["notes"]]
+    return "\n".join(lines)
+
+
 def main(args) -> int:
+    if args.list:
+        if args.format != "columns":
+            raise UserError(f"--list is for format 'columns' (what a CSV, Parquet or MDF file offers to map), "
+                            f"not '{args.format}'")
+        from sumo_drvpw.data.adapters.listing import list_sources
+
+        print(format_listing(list_sources(args.src, args.columns)))
+        return 0
+    if args.out is None:
+        raise UserError("import: --out LOG.parquet is required (or --list, to see what the files offer)")
     out = Path(args.out)
     if out.suffix.lower() != ".parquet":
         raise UserError(f"--out {out}: must end in .parquet")

@@ -64,23 +64,8 @@ def load_mapping(path, mdf: bool = False) -> dict:
     the file (its ``unit`` is then None until read)."""
     p = Path(path)
     doc = read_toml(p, "column mapping")
-    for k in doc:
-        if k not in ("options", "columns"):
-            raise UserError(f"{p}: unknown key '{k}' (a mapping has [options] and "
-                            "[columns.\"<source label>\"])")
+    out = _options(p, doc)
     opts = doc.get("options", {})
-    if not isinstance(opts, dict):
-        raise UserError(f"{p}: [options] must be a table")
-    for k in opts:
-        if k not in OPTIONS:
-            raise UserError(f"{p}: unknown option 'options.{k}' (known: {', '.join(sorted(OPTIONS))})")
-    skip = opts.get("skip_rows", 0)
-    if not isinstance(skip, int) or isinstance(skip, bool) or skip < 0:
-        raise UserError(f"{p}: options.skip_rows must be a whole number ≥ 0 (lines before the "
-                        f"header), got {skip!r}")
-    if "keep_unmapped" in opts and not isinstance(opts["keep_unmapped"], bool):
-        raise UserError(f"{p}: options.keep_unmapped must be true or false, got "
-                        f"{opts['keep_unmapped']!r}")
 
     cols = doc.get("columns")
     if not isinstance(cols, dict) or not cols:
@@ -139,14 +124,45 @@ def load_mapping(path, mdf: bool = False) -> dict:
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise UserError(f"{p}: more than one source column is mapped to '{dup[0]}'")
+    _check_text_options(p, opts, entries)
+    return {**out, "columns": entries}
+
+
+def load_options(path) -> dict:
+    """The ``[options]`` of a mapping TOML alone, checked — how to read a file and its DBC
+    files — for listing what a file offers before its ``[columns]`` are written
+    (``import columns SRC --list``); :func:`load_mapping` without the columns."""
+    p = Path(path)
+    return {**_options(p, read_toml(p, "column mapping")), "columns": {}}
+
+
+def _options(p: Path, doc: dict) -> dict:
+    """A mapping's top-level keys and ``[options]`` checked, with their defaults."""
+    for k in doc:
+        if k not in ("options", "columns"):
+            raise UserError(f"{p}: unknown key '{k}' (a mapping has [options] and "
+                            "[columns.\"<source label>\"])")
+    opts = doc.get("options", {})
+    if not isinstance(opts, dict):
+        raise UserError(f"{p}: [options] must be a table")
+    for k in opts:
+        if k not in OPTIONS:
+            raise UserError(f"{p}: unknown option 'options.{k}' (known: {', '.join(sorted(OPTIONS))})")
+    skip = opts.get("skip_rows", 0)
+    if not isinstance(skip, int) or isinstance(skip, bool) or skip < 0:
+        raise UserError(f"{p}: options.skip_rows must be a whole number ≥ 0 (lines before the "
+                        f"header), got {skip!r}")
+    if "keep_unmapped" in opts and not isinstance(opts["keep_unmapped"], bool):
+        raise UserError(f"{p}: options.keep_unmapped must be true or false, got "
+                        f"{opts['keep_unmapped']!r}")
+    _check_text_options(p, opts, {})
     na = opts.get("na_values", ["-", ""])
     if isinstance(na, str):
         na = [na]
-    _check_text_options(p, opts, entries)
     return {"path": p, "sep": str(opts.get("sep", ",")), "encoding": str(opts.get("encoding", "utf-8")),
             "decimal": str(opts.get("decimal", ".")), "time_format": opts.get("time_format"),
             "na_values": [str(x) for x in na], "keep_unmapped": bool(opts.get("keep_unmapped", True)),
-            "skip_rows": skip, "columns": entries, "dbc": _dbc_files(p, opts.get("dbc", [])),
+            "skip_rows": skip, "dbc": _dbc_files(p, opts.get("dbc", [])),
             "mdf_trips": _choice(p, opts, "mdf_trips", ("file", "folder")),
             "isotp_layout": _choice(p, opts, "isotp_layout", ISOTP_LAYOUTS)}
 
@@ -237,7 +253,7 @@ def _read_table(path: Path, m: dict) -> pd.DataFrame:
     try:
         return read_csv_strict(path, sep=m["sep"], encoding=m["encoding"], decimal=m["decimal"],
                                dtype=str, keep_default_na=False, na_filter=False,
-                               skiprows=m.get("skip_rows", 0) or None)
+                               skiprows=m.get("skip_rows", 0) or None, nrows=m.get("nrows"))
     except UserError as e:  # title lines of another width above the header: say where it is
         hint = _skip_hint(path, m)
         if hint:

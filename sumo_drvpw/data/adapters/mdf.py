@@ -258,3 +258,34 @@ def read_file(path: Path, m: dict, parts: list[Path] | None = None) -> tuple[pd.
     df = clean_time_and_speed(df, path, rep)
     df.insert(0, "trip_id", trip)
     return df.reset_index(drop=True), rep
+
+
+def channels(path: Path, m: dict) -> tuple[list[dict], list[str]]:
+    """What an MDF file offers, to write a mapping from (``import columns SRC --list``): per
+    channel its label (``name@GROUP`` where several groups carry the name), unit, samples and
+    median sampling rate [Hz] — raw CAN frames decoded with the mapping's DBC files first —
+    and the notes of the decoding."""
+    notes: list[str] = []
+    mdf = _open(path, m, None, notes)
+    try:
+        rows = []
+        masters = getattr(mdf, "masters_db", {})
+        for g, grp in enumerate(mdf.groups):
+            n = int(grp.channel_group.cycles_nr)
+            if not n:
+                continue
+            t = np.asarray(mdf.get_master(g), float)
+            d = np.diff(t)
+            step = float(np.median(d[d > 0])) if (d > 0).any() else float("nan")
+            for i, ch in enumerate(grp.channels):
+                if masters.get(g) == i or ch.name in ("time", "t"):
+                    continue
+                label = ch.name if len(mdf.channels_db.get(ch.name, ())) < 2 else f"{ch.name}@{g}"
+                rows.append({"label": label, "unit": str(getattr(ch, "unit", "") or ""), "samples": n,
+                             "rate_hz": 1.0 / step if step > 0 else float("nan")})
+    finally:
+        mdf.close()
+    if not m.get("dbc") and any(r["label"].startswith("CAN_DataFrame") for r in rows):
+        notes.append("raw CAN frames: name the vehicle's DBC files as options.dbc in a mapping file "
+                     "to list their signals")
+    return rows, notes
