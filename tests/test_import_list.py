@@ -62,6 +62,54 @@ def test_a_csv_without_mapping_is_sniffed_and_its_units_read_from_the_labels(tmp
     assert any("read as latin-1, ';'-separated (sniffed)" in line for line in out)
 
 
+def _sketch(lines: list[str]) -> str:
+    return "\n".join(lines[next(i for i, line in enumerate(lines) if line.startswith("# from ")):]) + "\n"
+
+
+def test_the_mapping_sketch_imports_the_file_it_was_listed_from(tmp_path, capsys):
+    """The listing ends with a mapping guessed from labels and units; saved as it is, it
+    imports the file: here a Latin-1, ';'-separated log with a speed in km/h, a battery's
+    voltage and current beside a cell's voltage (not taken), an outside temperature."""
+    import numpy as np
+
+    from sumo_drvpw.data.log import read_log
+
+    f = tmp_path / "drive.csv"
+    t = np.arange(0.0, 30.0, 0.5)
+    rows = [f"{a:g};{3.6 * min(a, 10.0):g};{395 - a:g};{3.9:g};{20 + a:g};4" for a in t]
+    f.write_bytes(("Zeit [s];Geschwindigkeit [km/h];Battery Voltage [V];Cell Voltage Max [V];"
+                   "Battery Current [A];Außentemperatur (°C)\n" + "\n".join(rows) + "\n").encode("latin-1"))
+    assert cli_main(["import", "columns", str(f), "--list"]) == 0
+    sk = _sketch(_lines(capsys))
+    for want in ('[columns."Geschwindigkeit [km/h]"]\nname = "speed_mps"\nunit = "km/h"',
+                 '[columns."Battery Voltage [V]"]\nname = "battery_voltage_v"',
+                 '[columns."Außentemperatur (°C)"]\nname = "ambient_c"', 'sep = ";"', 'encoding = "latin-1"'):
+        assert want in sk, sk
+    assert "Cell Voltage" not in sk
+    (tmp_path / "map.toml").write_text(sk, encoding="utf-8")
+    assert cli_main(["import", "columns", str(f), "--columns", str(tmp_path / "map.toml"),
+                     "--out", str(tmp_path / "drive.parquet")]) == 0
+    df = read_log(tmp_path / "drive.parquet").df
+    np.testing.assert_allclose(df["speed_mps"], np.minimum(t, 10.0))
+    np.testing.assert_allclose(df["battery_current_a"], 20 + t)
+    assert set(df["ambient_c"]) == {4.0}
+
+
+def test_the_sketch_of_a_raw_can_log_names_its_dbc_and_imports(tmp_path, capsys):
+    pytest.importorskip("asammdf")
+    import shutil
+
+    shutil.copy(HERE / "canmod-gps.dbc", tmp_path / "canmod-gps.dbc")
+    m = tmp_path / "options.toml"
+    m.write_text('[options]\ndbc = ["canmod-gps.dbc"]\n')
+    assert cli_main(["import", "columns", str(HERE / "canmod_gps.MF4"), "--list", "--columns", str(m)]) == 0
+    sk = _sketch(_lines(capsys))
+    assert 'dbc = ["canmod-gps.dbc"]' in sk and '[columns."Speed"]\nname = "speed_mps"' in sk, sk
+    (tmp_path / "map.toml").write_text(sk, encoding="utf-8")
+    assert cli_main(["import", "columns", str(HERE / "canmod_gps.MF4"), "--columns", str(tmp_path / "map.toml"),
+                     "--out", str(tmp_path / "gps.parquet")]) == 0
+
+
 @pytest.mark.parametrize("args, says", [
     (["import", "jlu-road", "x.parquet", "--list"], "--list is for format 'columns'"),
     (["import", "columns", "x.csv", "--columns", "m.toml"], "--out LOG.parquet is required"),

@@ -117,6 +117,9 @@ def format_listing(files: list[dict]) -> str:
             lines += [f"  {r['label']:<{w}}  {r['unit']:<8} {r['samples']:>7} {r['numbers']:>7}  {r['first'][:30]}"
                       for r in rows]
         lines += [f"  note: {n}" for n in f["notes"]]
+    if files:  # the files of one listing mostly share a layout: one sketch, from the first
+        lines += ["", f"# from {files[0]['file']}" + (f" (of {len(files)} files)" if len(files) > 1 else ""),
+                  files[0]["sketch"]]
     return "\n".join(lines)
 
 

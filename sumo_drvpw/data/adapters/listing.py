@@ -8,22 +8,30 @@ label, the unit its label carries (``Speed (km/h)``, ``Speed [km/h]``), how many
 read hold a value and how many of those read as numbers, and a first value. The mapping is
 optional; only its ``[options]`` are read (separator, encoding, lines before the header,
 DBC files), so its ``[columns]`` may still be unwritten.
+
+Each listing ends with a mapping sketch (:func:`sketch`): the canonical names guessed from
+the labels and their units (a speed named speed, velocity, … in a speed unit; a battery's
+voltage and current, not a cell's; the ambient temperature; elevation; a motor's torque and
+speed), to check and complete.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
-from sumo_drvpw.data.adapters._common import expand_paths, is_number, split_header
+from sumo_drvpw.data.adapters._common import expand_paths, is_number, lookup_unit, split_header
 
 #: rows of a CSV read for the listing (the header and a first stretch of the log)
 ROWS_READ = 5000
 
 
 def list_sources(paths, mapping=None) -> list[dict]:
-    """Per file: {"file", "kind", "rows": [{label, unit, samples, …}], "notes"}."""
+    """Per file: {"file", "kind", "rows": [{label, unit, samples, …}], "notes", "sketch"}."""
     from sumo_drvpw.data.adapters import mdf
     from sumo_drvpw.data.adapters.columns import SUFFIXES, load_options
+
+    import os
 
     m = load_options(mapping) if mapping is not None else None
     out = []
@@ -32,9 +40,15 @@ def list_sources(paths, mapping=None) -> list[dict]:
         if mdf.is_mdf(f):
             rows, notes = mdf.channels(f, m or {"path": Path("(no mapping)"), "dbc": [], "isotp_layout": "css"})
             kind = "ASAM MDF" + (f", decoded with {', '.join(d.name for d in m['dbc'])}" if m and m["dbc"] else "")
+            opts = {} if not m else {k: v for k, v in (
+                ("dbc", [os.path.relpath(d, m["path"].parent) for d in m["dbc"]]),
+                ("isotp_layout", m["isotp_layout"])) if v and v != "css"}
         else:
-            rows, kind = _table_columns(f, m or _sniffed(f, notes)), "table"
-        out.append({"file": f, "kind": kind, "rows": rows, "notes": notes})
+            used = m or _sniffed(f, notes)
+            rows, kind = _table_columns(f, used), "table"
+            opts = {k: used[k] for k, default in (("sep", ","), ("encoding", "utf-8"), ("decimal", ".")) if used[k] != default}
+        out.append({"file": f, "kind": kind, "rows": rows, "notes": notes,
+                    "sketch": sketch(rows, mdf.is_mdf(f), opts)})
     return out
 
 
@@ -78,3 +92,57 @@ def _table_columns(path: Path, m: dict) -> list[dict]:
         rows.append({"label": str(c), "unit": unit, "samples": len(vals),
                      "numbers": sum(is_number(v) for v in vals), "first": vals[0] if vals else ""})
     return rows
+
+
+#: canonical name → (dimension of its unit, label pattern, labels it must not match): the
+#: guesses of the mapping sketch
+GUESSES = {
+    "time_s": ("time", r"\btime\b|zeit|timestamp|^t$", r"trip|duration|since"),
+    "speed_mps": ("speed", r"speed|velocity|geschw|vitesse|\bspd", r"wheel|motor|engine|fan|accuracy|max|limit|set"),
+    "elevation_m": ("length", r"elev|altitude|höhe|hoehe|height", r"accuracy|valid"),
+    "ambient_c": ("temperature", r"ambient|outside|outdoor|außen|aussen|environment", None),
+    "battery_voltage_v": ("voltage", r"batt|\bhv\b|pack|traction", r"cell|min|max|12 ?v|aux"),
+    "battery_current_a": ("current", r"batt|\bhv\b|pack|traction", r"cell|min|max|12 ?v|aux|limit"),
+    "motor_torque_nm": ("torque", r"motor|\bmg2\b|drive", r"request|limit|max"),
+    "motor_speed_rpm": ("rotational_speed", r"motor|\bmg2\b", r"fan|pump|max"),
+}
+
+
+def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
+    """A mapping TOML to start from: each canonical name of :data:`GUESSES` on the first label
+    whose name matches and whose unit has the name's dimension (the others that would fit in
+    a comment); ``options``: the [options] to write (sep, encoding, dbc). MDF files need no
+    time and take units from the file; a CSV's unit is written from its label."""
+    lines = ["# a mapping to start from — guessed from the labels and units above: check each, "
+             "add what else to keep (docs/adapters.md)"]
+    if options:
+        lines.append("[options]")
+        lines += [f"{k} = {_toml(v)}" for k, v in options.items()]
+    for name, (dim, pat, bad) in GUESSES.items():
+        if mdf and name == "time_s":
+            continue
+        hits = []
+        for r in rows:
+            label, unit = r["label"], r.get("unit", "")
+            u = lookup_unit(unit) if unit else None
+            text = split_header(label)[0] if not mdf else label
+            if u and u[0] == dim and re.search(pat, text, re.I) and not (bad and re.search(bad, text, re.I)):
+                hits.append((label, unit))
+        if not hits:
+            if name in ("time_s", "speed_mps"):
+                lines.append(f"# no label recognised as {name} (required): map one")
+            continue
+        label, unit = hits[0]
+        lines.append(f"[columns.{_toml(label)}]")
+        lines.append(f'name = "{name}"' + (f"  # also fits: {', '.join(h for h, _ in hits[1:4])}" if len(hits) > 1 else ""))
+        if not mdf:
+            lines.append(f"unit = {_toml(unit)}")
+        if name == "battery_current_a":
+            lines.append("# + while discharging; scale = -1 if this log counts charging positive")
+    return "\n".join(lines)
+
+
+def _toml(v) -> str:
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml(x) for x in v) + "]"
+    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
