@@ -119,3 +119,19 @@ def test_misuse_in_one_line(tmp_path, capsys, monkeypatch, args, says):
     assert cli_main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0]
+
+
+def test_labels_without_units_are_offered_as_comments(tmp_path, capsys):
+    """A Parquet log whose labels carry no unit (as the JLU car's): the sketch maps nothing it
+    cannot read a unit for, and names the likely columns in comments."""
+    import pandas as pd
+
+    f = tmp_path / "road.parquet"
+    pd.DataFrame({"PhaseTime": [0.0, 0.05], "DAActualSpeed": [0.0, 1.2], "REESSVoltage": [392.3, 392.1],
+                  "tempAmb": [21.5, 21.5]}).to_parquet(f)
+    assert cli_main(["import", "columns", str(f), "--list"]) == 0
+    sk = _sketch(_lines(capsys))
+    assert "[columns." not in sk
+    for want in ("# time_s: perhaps PhaseTime", "# speed_mps: perhaps DAActualSpeed",
+                 "# battery_voltage_v: perhaps REESSVoltage", "# ambient_c: perhaps tempAmb"):
+        assert want in sk, sk

@@ -97,15 +97,19 @@ def _table_columns(path: Path, m: dict) -> list[dict]:
 #: canonical name → (dimension of its unit, label pattern, labels it must not match): the
 #: guesses of the mapping sketch
 GUESSES = {
-    "time_s": ("time", r"\btime\b|zeit|timestamp|^t$", r"trip|duration|since"),
+    "time_s": ("time", r"time\b|zeit|timestamp|^t$", r"trip|duration|since"),
     "speed_mps": ("speed", r"speed|velocity|geschw|vitesse|\bspd", r"wheel|motor|engine|fan|accuracy|max|limit|set"),
     "elevation_m": ("length", r"elev|altitude|höhe|hoehe|height", r"accuracy|valid"),
-    "ambient_c": ("temperature", r"ambient|outside|outdoor|außen|aussen|environment", None),
-    "battery_voltage_v": ("voltage", r"batt|\bhv\b|pack|traction", r"cell|min|max|12 ?v|aux"),
-    "battery_current_a": ("current", r"batt|\bhv\b|pack|traction", r"cell|min|max|12 ?v|aux|limit"),
+    "ambient_c": ("temperature", r"ambient|amb\b|outside|outdoor|außen|aussen|environment", None),
+    "battery_voltage_v": ("voltage", r"batt|\bhv\b|pack|traction|reess", r"cell|min|max|12 ?v|aux"),
+    "battery_current_a": ("current", r"batt|\bhv\b|pack|traction|reess", r"cell|min|max|12 ?v|aux|limit"),
     "motor_torque_nm": ("torque", r"motor|\bmg2\b|drive", r"request|limit|max"),
     "motor_speed_rpm": ("rotational_speed", r"motor|\bmg2\b", r"fan|pump|max"),
 }
+#: a label without a unit is offered for a name only when it also names the quantity
+UNITLESS_WORDS = {"time": r"time|zeit", "speed": r"speed|veloc|geschw|spd", "length": r"elev|alti|height|höhe",
+                  "temperature": r"temp|amb", "voltage": r"volt", "current": r"curr|amp",
+                  "torque": r"torq|trq", "rotational_speed": r"rpm|speed|drehz"}
 
 
 def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
@@ -121,15 +125,21 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
     for name, (dim, pat, bad) in GUESSES.items():
         if mdf and name == "time_s":
             continue
-        hits = []
+        hits, unitless = [], []
         for r in rows:
             label, unit = r["label"], r.get("unit", "")
             u = lookup_unit(unit) if unit else None
             text = split_header(label)[0] if not mdf else label
-            if u and u[0] == dim and re.search(pat, text, re.I) and not (bad and re.search(bad, text, re.I)):
+            if not re.search(pat, text, re.I) or (bad and re.search(bad, text, re.I)):
+                continue
+            if u and u[0] == dim:
                 hits.append((label, unit))
+            elif not unit and re.search(UNITLESS_WORDS[dim], text, re.I):
+                unitless.append(label)
         if not hits:
-            if name in ("time_s", "speed_mps"):
+            if unitless:
+                lines.append(f"# {name}: perhaps {', '.join(unitless[:3])} (no unit in the file: give its unit)")
+            elif name in ("time_s", "speed_mps"):
                 lines.append(f"# no label recognised as {name} (required): map one")
             continue
         label, unit = hits[0]
