@@ -17,6 +17,8 @@ speed), to check and complete.
 
 from __future__ import annotations
 
+import codecs
+import os
 import re
 from pathlib import Path
 
@@ -30,8 +32,6 @@ def list_sources(paths, mapping=None) -> list[dict]:
     """Per file: {"file", "kind", "rows": [{label, unit, samples, …}], "notes", "sketch"}."""
     from sumo_drvpw.data.adapters import mdf
     from sumo_drvpw.data.adapters.columns import SUFFIXES, load_options
-
-    import os
 
     m = load_options(mapping) if mapping is not None else None
     out = []
@@ -62,8 +62,8 @@ def _sniffed(path: Path, notes: list) -> dict:
     if path.suffix.lower() in (".parquet", ".pq"):
         return m
     head = path.read_bytes()[:65536]
-    try:
-        text = head.decode("utf-8")
+    try:  # a character cut at the 64-KiB end is not a decoding error
+        text = codecs.getincrementaldecoder("utf-8")().decode(head, final=False)
     except UnicodeDecodeError:
         text, m["encoding"] = head.decode("latin-1"), "latin-1"
     try:
