@@ -112,10 +112,12 @@ def test_the_sketch_of_a_raw_can_log_names_its_dbc_and_imports(tmp_path, capsys)
 
 @pytest.mark.parametrize("args, says", [
     (["import", "jlu-road", "x.parquet", "--list"], "--list is for format 'columns'"),
+    (["import", "columns", "broken.parquet", "--list"], "broken.parquet: cannot be read as Parquet"),
     (["import", "columns", "x.csv", "--columns", "m.toml"], "--out LOG.parquet is required"),
 ])
 def test_misuse_in_one_line(tmp_path, capsys, monkeypatch, args, says):
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "broken.parquet").write_bytes(b"not parquet at all")
     assert cli_main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0]

@@ -22,6 +22,7 @@ import os
 import re
 from pathlib import Path
 
+from sumo_drvpw.errors import UserError
 from sumo_drvpw.data.adapters._common import expand_paths, is_number, lookup_unit, split_header
 
 #: rows of a CSV read for the listing (the header and a first stretch of the log)
@@ -81,8 +82,11 @@ def _table_columns(path: Path, m: dict) -> list[dict]:
     if path.suffix.lower() in (".parquet", ".pq"):
         import pyarrow.parquet as pq
 
-        pf = pq.ParquetFile(path)
-        df = next(pf.iter_batches(batch_size=ROWS_READ)).to_pandas().astype(str) if pf.metadata.num_rows else None
+        try:
+            pf = pq.ParquetFile(path)
+            df = next(pf.iter_batches(batch_size=ROWS_READ)).to_pandas().astype(str) if pf.metadata.num_rows else None
+        except Exception as e:  # pyarrow raises several kinds on a file that is not Parquet
+            raise UserError(f"{path}: cannot be read as Parquet: {str(e).splitlines()[0]}") from None
     else:
         df = _read_table(path, {**m, "nrows": ROWS_READ})
     rows = []
