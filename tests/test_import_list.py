@@ -137,3 +137,14 @@ def test_labels_without_units_are_offered_as_comments(tmp_path, capsys):
     for want in ("# time_s: perhaps PhaseTime", "# speed_mps: perhaps DAActualSpeed",
                  "# battery_voltage_v: perhaps REESSVoltage", "# ambient_c: perhaps tempAmb"):
         assert want in sk, sk
+
+
+def test_the_sketch_prefers_the_vehicle_speed_to_a_wheel_speed():
+    """J1939's WheelBasedVehicleSpeed is the vehicle's speed; a single wheel's speed is not."""
+    from sumo_drvpw.data.adapters.listing import sketch
+
+    rows = [{"label": "WheelSpeedFL", "unit": "km/h"}, {"label": "EngineSpeed", "unit": "rpm"},
+            {"label": "GpsSpeed", "unit": "km/h"}, {"label": "WheelBasedVehicleSpeed", "unit": "km/h"}]
+    sk = sketch(rows, True, {})
+    assert '[columns."WheelBasedVehicleSpeed"]\nname = "speed_mps"  # also fits: GpsSpeed' in sk, sk
+    assert "WheelSpeedFL" not in sk and "EngineSpeed" not in sk

@@ -102,7 +102,7 @@ def _table_columns(path: Path, m: dict) -> list[dict]:
 #: guesses of the mapping sketch
 GUESSES = {
     "time_s": ("time", r"time\b|zeit|timestamp|^t$", r"trip|duration|since"),
-    "speed_mps": ("speed", r"speed|velocity|geschw|vitesse|\bspd", r"wheel|motor|engine|fan|accuracy|max|limit|set"),
+    "speed_mps": ("speed", r"speed|velocity|geschw|vitesse|\bspd", r"wheel ?speed|motor|engine|fan|accuracy|max|limit|set"),
     "elevation_m": ("length", r"elev|altitude|höhe|hoehe|height", r"accuracy|valid"),
     "ambient_c": ("temperature", r"ambient|amb\b|outside|outdoor|außen|aussen|environment", None),
     "battery_voltage_v": ("voltage", r"batt|\bhv\b|pack|traction|reess", r"cell|min|max|12 ?v|aux"),
@@ -146,6 +146,7 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
             elif name in ("time_s", "speed_mps"):
                 lines.append(f"# no label recognised as {name} (required): map one")
             continue
+        hits.sort(key=lambda h: not re.search(r"vehicle|veh", h[0], re.I))  # the vehicle's own first
         label, unit = hits[0]
         lines.append(f"[columns.{_toml(label)}]")
         lines.append(f'name = "{name}"' + (f"  # also fits: {', '.join(h for h, _ in hits[1:4])}" if len(hits) > 1 else ""))
