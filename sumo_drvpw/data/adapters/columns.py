@@ -124,7 +124,7 @@ def load_mapping(path, mdf: bool = False) -> dict:
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise UserError(f"{p}: more than one source column is mapped to '{dup[0]}'")
-    _check_text_options(p, opts, entries)
+    _check_scales(p, entries)
     return {**out, "columns": entries}
 
 
@@ -134,6 +134,11 @@ def load_options(path) -> dict:
     (``import columns SRC --list``); :func:`load_mapping` without the columns."""
     p = Path(path)
     return {**_options(p, read_toml(p, "column mapping")), "columns": {}}
+
+
+def default_options(where: str = "(no mapping)") -> dict:
+    """The options every mapping starts from (:func:`load_options` of an empty file)."""
+    return {**_options(Path(where), {}), "columns": {}}
 
 
 def _options(p: Path, doc: dict) -> dict:
@@ -155,7 +160,7 @@ def _options(p: Path, doc: dict) -> dict:
     if "keep_unmapped" in opts and not isinstance(opts["keep_unmapped"], bool):
         raise UserError(f"{p}: options.keep_unmapped must be true or false, got "
                         f"{opts['keep_unmapped']!r}")
-    _check_text_options(p, opts, {})
+    _check_text_options(p, opts)
     na = opts.get("na_values", ["-", ""])
     if isinstance(na, str):
         na = [na]
@@ -187,8 +192,8 @@ def _dbc_files(p: Path, dbc) -> list[Path]:
     return files
 
 
-def _check_text_options(p, opts: dict, entries: dict) -> None:
-    """options.encoding a known codec, sep/decimal distinct single characters, scale ≠ 0."""
+def _check_text_options(p, opts: dict) -> None:
+    """options.encoding a known codec, sep/decimal distinct single characters."""
     import codecs
 
     enc = opts.get("encoding", "utf-8")
@@ -205,6 +210,10 @@ def _check_text_options(p, opts: dict, entries: dict) -> None:
             raise UserError(f"{p}: options.{k} must be a non-empty text, got {v!r}")
     if sep == dec:
         raise UserError(f"{p}: options.decimal {dec!r} equals options.sep: numbers could not be told apart")
+
+
+def _check_scales(p, entries: dict) -> None:
+    """No mapped number is scaled by 0."""
     zero = [label for label, e in entries.items() if e.get("kind") == "number" and e["factor"] == 0]
     if zero:
         raise UserError(f"{p}: columns.{zero[0]!r}.scale is 0: every value would read as 0")

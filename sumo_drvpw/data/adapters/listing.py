@@ -32,14 +32,14 @@ ROWS_READ = 5000
 def list_sources(paths, mapping=None) -> list[dict]:
     """Per file: {"file", "kind", "rows": [{label, unit, samples, …}], "notes", "sketch"}."""
     from sumo_drvpw.data.adapters import mdf
-    from sumo_drvpw.data.adapters.columns import SUFFIXES, load_options
+    from sumo_drvpw.data.adapters.columns import SUFFIXES, default_options, load_options
 
     m = load_options(mapping) if mapping is not None else None
     out = []
     for f in expand_paths(paths, SUFFIXES + mdf.SUFFIXES, "CSV/Parquet/MDF"):
         notes: list[str] = []
         if mdf.is_mdf(f):
-            rows, notes = mdf.channels(f, m or {"path": Path("(no mapping)"), "dbc": [], "isotp_layout": "css"})
+            rows, notes = mdf.channels(f, m or default_options())
             kind = "ASAM MDF" + (f", decoded with {', '.join(d.name for d in m['dbc'])}" if m and m["dbc"] else "")
             opts = {} if not m else {k: v for k, v in (
                 ("dbc", [os.path.relpath(d, m["path"].parent) for d in m["dbc"]]),
@@ -58,8 +58,9 @@ def _sniffed(path: Path, notes: list) -> dict:
     header line shows (Python's csv.Sniffer; else ','), said in ``notes``."""
     import csv
 
-    m = {"path": Path("(no mapping)"), "sep": ",", "encoding": "utf-8", "decimal": ".", "skip_rows": 0,
-         "columns": {}}
+    from sumo_drvpw.data.adapters.columns import default_options
+
+    m = default_options()
     if path.suffix.lower() in (".parquet", ".pq"):
         return m
     head = path.read_bytes()[:65536]
