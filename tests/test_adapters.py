@@ -194,7 +194,7 @@ def test_jlu_road_trips_read_with_elevation_temperature_and_roles(tmp_path):
     # ρ from ambient temperature at standard pressure: 1.17–1.22 kg/m³ at 7–26 °C
     assert df["air_density_kgm3"].between(1.15, 1.26).all()
     r = roles.of_log(log)
-    assert r["tot_char"] == {"role": "response", "source": "declared"}
+    assert r["battery_charge_energy_j"] == {"role": "response", "source": "declared"}
     assert r["ambient_c"]["role"] == "condition"
     # battery power positive when discharging: accelerating draws current
     a = df["accel_mps2"].to_numpy()

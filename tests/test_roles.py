@@ -12,7 +12,7 @@ from sumo_drvpw.errors import UserError
     ("ambient_c", "condition"), ("winter", "condition"), ("wiper_on", "condition"),
     ("heater_power_w", "load"), ("aircon_power_w", "load"), ("ac_power_w", "load"),
     ("throttle_pct", "response"), ("accel_pedal_pct", "response"), ("mg2_torque_exec_nm", "response"),
-    ("soc_max_pct", "response"), ("tot_char", "response"), ("battery_current_ib_a", "response"),
+    ("soc_max_pct", "response"), ("tot_char", "response"), ("battery_discharge_energy_j", "response"), ("battery_current_ib_a", "response"),
     ("random_walk", "unknown"), ("tyre_temp_c", "unknown"),
 ])
 def test_roles_inferred_from_clear_names(name, role):

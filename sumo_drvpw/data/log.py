@@ -22,6 +22,7 @@ from sumo_drvpw.data.trips import (derivative, grade_from_elevation,  # noqa: F4
                                    per_trip_rolling_mean as _per_trip_rolling_mean,
                                    run_median_step, trip_array as _trip_array, trip_codes_of,
                                    trip_starts as _trip_starts, trips_without as _trips_without)
+from sumo_drvpw.data.counters import check_counters
 from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_header,  # noqa: F401
                                        check_distinct_trips, check_speed_unit, check_time_step,
                                        exclusions, implied_acceleration)
@@ -31,7 +32,8 @@ NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "eleva
            "wind_mps", "airspeed_mps", "air_density_kgm3", "ambient_c", "pressure_kpa",
            "mass_kg", "power_w", "ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm",
            "mg2_speed_rpm", "mg2_torque_nm", "motor_torque_nm", "motor_speed_rpm",
-           "battery_voltage_v", "battery_current_a", "yaw_rate_rps")
+           "battery_voltage_v", "battery_current_a", "yaw_rate_rps",
+           "battery_discharge_energy_j", "battery_charge_energy_j")
 REQUIRED = ("time_s", "speed_mps")
 FLAGS = ("brake", "reverse")
 #: Columns the reader derives; every other column is an extra signal.
@@ -350,6 +352,7 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
         raise UserError(f"{p}: column 'time_s' does not increase within trip '{df['trip_id'].iloc[i]}' at row {i} "
                         f"({t[i - 1]:g} then {t[i]:g}); time must be strictly increasing")
     check_time_step(t, same, p)
+    check_counters(df, p, trip)
     for c, lim in (("grade_rad", GRADE_MAX_RAD), ("grade_pct", 100 * np.tan(GRADE_MAX_RAD))):
         if c in df:
             g = df[c].to_numpy(float)

@@ -41,6 +41,10 @@ class Measured:
     #: battery target read with ``sign_check=False``: the sums of the sign test
     #: (:func:`sign_sums`), for the caller to merge over batches and test (:func:`check_sign_sums`)
     sign_test: tuple | None = None
+    #: a battery target read from the BMS's energy counters: their view of the log
+    #: (:class:`~sumo_drvpw.data.counters.CounterView`), through which a fit sees its model's
+    #: power as the counters book it; None for V·I and other targets
+    counter_view: object | None = None
 
     @property
     def counts(self) -> dict:
@@ -96,15 +100,16 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
     ``Measured.sign_test`` instead. ``lazy_signals``: the inputs' extra columns are read
     from the table when asked for (:class:`ColumnSignals`), not copied: a caller keeps the
     arrays it needs with :func:`keep_arrays`."""
-    from sumo_drvpw.data.powertrain import measured_battery_power, measured_fuel_power
+    from sumo_drvpw.data.counters import COUNTERS
+    from sumo_drvpw.data.powertrain import battery_power_and_view, measured_battery_power, measured_fuel_power
 
-    battery_w = None
+    battery_w = view = None
     if target == "battery":
-        p, source = measured_battery_power(log, veh)
-        log.counts["power_rows"] = {source: len(p)}  # one source: its rows merge over batches
+        p, source, view = battery_power_and_view(log, veh)  # its rows per source: power_rows
     elif target == "fuel":
         p, source = measured_fuel_power(log, veh)
-        if "battery_voltage_v" in log.df and "battery_current_a" in log.df:
+        if all(c in log.df for c in ("battery_voltage_v", "battery_current_a")) \
+                or all(c in log.df for c in COUNTERS):
             battery_w = np.nan_to_num(measured_battery_power(log, veh)[0], nan=0.0)
     else:
         p, source = measured_power(log, veh)
@@ -116,11 +121,12 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
     for arr in (x.v, x.a, x.theta, x.wind, x.mass, x.rho):
         usable &= np.isfinite(arr)
     sign_test = None
-    if target == "battery":
+    if target == "battery":  # V·I's sign (the counters name what they count: no sign to test)
+        signed = usable if view is None else usable & ~view.rows
         if sign_check:
-            check_battery_sign(log, x, p, usable, source)
+            check_battery_sign(log, x, p, signed, source)
         else:
-            sign_test = sign_sums(x, p, usable)
+            sign_test = sign_sums(x, p, signed)
     if target == "battery" and not _has_engine(log, veh):
         # energy into the battery while the car stands is a charger, not driving
         from sumo_drvpw.data.charging import charging_mask
@@ -149,7 +155,7 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
             codes = trip_codes_of(log.df["trip_id"])
             lag = int(round(measurement.power_lag_s / median_dt(log.df["time_s"].to_numpy(float), codes)))
             battery_w = np.nan_to_num(shift_within_trips(battery_w, codes, lag), nan=0.0)
-    return Measured(log, veh, p, source, x, usable, target, battery_w, measurement, sign_test)
+    return Measured(log, veh, p, source, x, usable, target, battery_w, measurement, sign_test, view)
 
 
 def _numeric(col: pd.Series) -> bool:

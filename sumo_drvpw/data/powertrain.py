@@ -228,21 +228,62 @@ def _each_file(log, df) -> list[tuple[str, frozenset]]:
 
 
 def measured_battery_power(log, vehicle=None) -> tuple[np.ndarray, str]:
-    """Battery power V·I of a drive log [W], positive when discharging, and its source.
+    """Battery power of a drive log [W], positive when discharging, and its source: V·I, or,
+    for a trip without them, the rate of the BMS's energy counters
+    (:mod:`sumo_drvpw.data.counters`); see :func:`battery_power_and_view`."""
+    return battery_power_and_view(log, vehicle, count=False)[:2]
 
-    The sign convention is the vehicle file's ``battery.current_positive`` (default
-    ``discharge``, the spec's canonical sign). A file of a folder without the two columns
-    is refused, named, as read alone (not read as NaN).
+
+def battery_power_and_view(log, vehicle=None, count: bool = True) -> tuple[np.ndarray, str, object]:
+    """Battery power of a drive log [W], positive when discharging, its source, and the
+    counters' view of the log (:class:`~sumo_drvpw.data.counters.CounterView`; None when
+    every trip logs V·I).
+
+    V·I takes the vehicle file's sign convention ``battery.current_positive`` (default
+    ``discharge``, the spec's canonical sign). Each trip uses V·I where it holds them, else
+    the counters. A file of a folder with neither pair is refused, named, as read alone (not
+    read as NaN). With ``count`` (the battery target's reading; not a hybrid's fuel target's
+    correction), the rows of each source go to ``log.counts["power_rows"]``.
     """
+    from sumo_drvpw.data.conditions import said
+    from sumo_drvpw.data.counters import COUNTER_SOURCE, COUNTERS, CounterView
+    from sumo_drvpw.data.trips import trip_codes_of
+
+    vi = ("battery_voltage_v", "battery_current_a")
     df = log.df
     for f, cols in _each_file(log, df):  # a file without them is refused, as read alone
-        missing = [c for c in ("battery_voltage_v", "battery_current_a") if c not in cols]
+        if all(c in cols for c in COUNTERS):
+            continue
+        missing = [c for c in vi if c not in cols]
         if missing:
             raise UserError(f"{f}: the battery target needs the column '{missing[0]}' "
-                            "(battery_voltage_v and battery_current_a)")
+                            "(battery_voltage_v and battery_current_a; or the BMS's energy counters "
+                            "battery_discharge_energy_j and battery_charge_energy_j)")
     conv = vehicle.battery.get("current_positive", "discharge") if vehicle is not None else "discharge"
-    return (battery_power(df["battery_voltage_v"], df["battery_current_a"], conv),
-            f"battery V·I (current positive = {conv})")
+    has_vi, has_ctr = all(c in df for c in vi), all(c in df for c in COUNTERS)
+    p = battery_power(df["battery_voltage_v"], df["battery_current_a"], conv) if has_vi else None
+    text = f"battery V·I (current positive = {conv})"
+    counts = log.counts if count else {}
+    counts["power_rows"] = {text: len(df)}
+    if not has_ctr:
+        return p, text, None
+    codes = trip_codes_of(df["trip_id"])
+    use = np.ones(len(df), bool)
+    if has_vi:  # a trip that holds V·I keeps them
+        n = int(codes.max()) + 1
+        held = np.bincount(codes, weights=np.isfinite(p), minlength=n) > 0
+        use = ~held[codes]
+    if not use.any():
+        return p, text, None
+    view = CounterView(df["time_s"].to_numpy(float), df["dt_s"].to_numpy(float), codes,
+                       *(df[k].to_numpy(float, na_value=np.nan) for k in COUNTERS), rows=use)
+    q = view.power()
+    if not has_vi or use.all():
+        counts["power_rows"] = {COUNTER_SOURCE: len(df)}
+        return q, COUNTER_SOURCE, view
+    rows = {text: int((~use).sum()), COUNTER_SOURCE: int(use.sum())}
+    counts["power_rows"] = rows
+    return np.where(use, q, p), said(rows), view
 
 
 #: fuel-flow columns in the order they are used: mass flow [g/s], or volume flow [L/h]

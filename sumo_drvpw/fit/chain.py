@@ -224,7 +224,7 @@ def battery_design(cols: list, neg: np.ndarray, sl, lim) -> list:
 def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = None, *,
                       loads=(), hvac: dict | None = None, mask=None, limit="profile",
                       predicts: str = "battery", fixed: dict | None = None,
-                      efficiency: str = "constant", warmup_rate=None) -> ChainFit:
+                      efficiency: str = "constant", warmup_rate=None, counter_view=None) -> ChainFit:
     """Calibrate a battery (or powertrain-output) chain on measured power.
 
     Parameters
@@ -248,6 +248,9 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
         is spread over the trip's start (e.g. (T_set − T_cabin,0)⁺·e^(−t/τ)/τ); its
         coefficient is the chain's ``hvac.warmup_j_per_k`` [J/K] ≥ 0, booked in SUMO once
         per cold departure (:meth:`EnergyChain.cold_start`), not by :meth:`EnergyChain.evaluate`
+    counter_view : the measured power is the BMS's energy counters' rate: their view of the
+        log (:class:`~sumo_drvpw.data.counters.CounterView`), through which the design is
+        seen as the counters book it (None: V·I)
     """
     p = np.asarray(p_drive_w, float)
     n = p.size
@@ -278,8 +281,19 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     else:
         grid = [float(limit)]
 
+    seen = {}
+
     def design(sl, lim):
-        """The design's rows of the samples ``sl`` (the efficiency tables' hat weights too)."""
+        """The design's rows of the samples ``sl`` (the efficiency tables' hat weights too;
+        through the counters' view when the target is theirs)."""
+        if counter_view is not None:
+            if lim not in seen:
+                seen.clear()
+                seen[lim] = counter_view(raw_design(slice(None), lim))
+            return seen[lim][sl]
+        return raw_design(sl, lim)
+
+    def raw_design(sl, lim):
         c = battery_design(cols, neg, sl, lim)
         if emap is not None:
             c[0] = c[0][:, None] * emap[0].matrix(p[sl], v[sl])
@@ -317,7 +331,10 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     for j, val in fx.items():
         beta[j] = val
     chain, params = battery_chain(names, beta, se, active, lim, hvac, predicts, fixed, fx, emap, efficiency)
-    pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
+    if counter_view is None:
+        pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
+    else:  # as the fit saw it (and a streamed fit's sums do)
+        pred = counter_view(chain.evaluate(p, v, signals=sig)["power_w"])[ok]
     r2, rmse, ratio = _stats(pred, y[ok], w[ok])
     chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
     chain.metrics = {"n": int(ok.sum()), "r2": r2, "rmse_w": rmse, "energy_ratio": ratio}
@@ -422,7 +439,7 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     else:
         fit = calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
                                 mask=use, limit=limit, fixed=fixed, efficiency=efficiency,
-                                warmup_rate=warmup_rate)
+                                warmup_rate=warmup_rate, counter_view=getattr(m, "counter_view", None))
     check_chain(fit, m.vehicle, p, m.inputs.v, use)  # plausibility, fitted range
     return fit
 

@@ -196,16 +196,18 @@ class ChainStats:
         if scan:
             self._checks(p, y, v, use)
         if self.target == "battery":
-            self._battery(p, y, w, sig, use)
+            view = getattr(m, "counter_view", None)
+            self._battery(p, y, w, sig, use, view)
             if self.kept is not None:  # copies: a view would keep the batch's table
                 self._keep([np.array(p, float), np.array(y, float), np.array(w, float),
-                            {c: np.array(x, float) for c, x in sig.items()}, np.array(use, bool)])
+                            {c: np.array(x, float) for c, x in sig.items()}, np.array(use, bool), view])
         else:
             self._fuel(m, p, y, w, v, sig, use)
         return self
 
     def _keep(self, arrays) -> None:
-        self.kept_bytes += sum(a.nbytes for a in arrays[:3] + list(arrays[3].values()) + arrays[4:])
+        self.kept_bytes += sum(a.nbytes for a in arrays[:3] + list(arrays[3].values()) + arrays[4:5])
+        self.kept_bytes += arrays[5].nbytes if arrays[5] is not None else 0
         if self.kept_bytes > KEEP_BYTES:
             self.kept = None
         else:
@@ -259,7 +261,7 @@ class ChainStats:
             r, n, sx = np.linalg.qr(np.vstack([old[0], r]), mode="r"), old[1] + n, old[2] + sx
         self.fac[key] = [r, n, sx]
 
-    def _battery(self, p, y, w, sig, use) -> None:
+    def _battery(self, p, y, w, sig, use, view=None) -> None:
         sp = self.spec
         cols, self.names, self.lb, self.ub, ok, unknown = battery_columns(p, y, w, sig, sp.loads, sp.hvac,
                                                                           mask=use)
@@ -271,7 +273,8 @@ class ChainStats:
                 self.values = _merge_hist(self.values, np.unique(sel, return_counts=True))
             return
         for lim in ((None,) if self.phase == "scan" else self.limits):
-            self._factor(lim, np.column_stack(battery_design(cols, neg, slice(None), lim)), y, w, ok)
+            x = np.column_stack(battery_design(cols, neg, slice(None), lim))
+            self._factor(lim, x if view is None else view(x), y, w, ok)  # as the counters book it
         if self.phase == "scan":
             self.n_ok += int(ok.sum())
             self.unknown += unknown
@@ -494,8 +497,8 @@ def replay(make, kept) -> ChainStats:
     acc = None
     for part in kept:
         st = make()
-        for p, y, w, sig, use in part:
-            st._battery(p, y, w, sig, use)
+        for p, y, w, sig, use, view in part:
+            st._battery(p, y, w, sig, use, view)
         acc = st if acc is None else acc.merge(st)
     return acc
 

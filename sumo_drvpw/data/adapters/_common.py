@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from sumo_drvpw.data.counters import COUNTERS, describe
 from sumo_drvpw.data.adapters.align import align_channels
 from sumo_drvpw.data.paths import expand_paths  # noqa: F401  (re-exported for the adapters)
 from sumo_drvpw.model.constants import FT, G_UNIT, GAL, HP, KELVIN, KMH, LB, LBF, MILE, MPH, RPM
@@ -24,7 +25,7 @@ CANONICAL = (
     "wind_mps", "airspeed_mps", "air_density_kgm3", "ambient_c", "pressure_kpa", "mass_kg",
     "brake", "reverse", "power_w", "motor_torque_nm", "motor_speed_rpm", "battery_voltage_v",
     "battery_current_a", "ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm", "mg2_speed_rpm",
-    "mg2_torque_nm",
+    "mg2_torque_nm", "battery_discharge_energy_j", "battery_charge_energy_j",
 )
 
 #: dimension → suffix of the column name that holds it in the canonical unit
@@ -329,6 +330,9 @@ def clean_time_and_speed(df: pd.DataFrame, path, report: dict) -> pd.DataFrame:
                                "of calibration)")
         v = np.abs(v)
     df["speed_mps"] = np.clip(v, 0.0, None)
+    if all(c in df for c in COUNTERS):  # how finely they resolve the battery's power
+        report["notes"].append(describe(df["time_s"].to_numpy(float), np.zeros(len(df), int),
+                                        *(df[c].to_numpy(float, na_value=np.nan) for c in COUNTERS)))
     report["kept"] = int(len(df))
     if len(df) == 0:
         raise UserError(f"{path}: no sample left after dropping {report['dropped']}")

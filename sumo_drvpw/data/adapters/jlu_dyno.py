@@ -48,7 +48,7 @@ REQUIRED = ("PhaseTime", "DAActualSpeed", "REESSVoltage", "REESSCurrent")
 #: roles of the columns this adapter writes (drive-log spec "Roles"; stored with the log)
 ROLES = {"reess_voltage2_v": "response", "reess_current2_a": "response", "cycle": "condition",
          "clock_s": "response", "schedule_speed_mps": "condition", "ambient_c": "condition",
-         "gear": "response", "tot_disc": "response", "tot_char": "response",
+         "gear": "response", "battery_discharge_energy_j": "response", "battery_charge_energy_j": "response",
          "latitude_deg": "condition", "longitude_deg": "condition"}
 
 
@@ -66,8 +66,8 @@ ROAD_NAMES = {
     "lat": ("latitude_deg", 1.0),
     "long": ("longitude_deg", 1.0),
     "gear": ("gear", 1.0),
-    "tot_disc": ("tot_disc", 1.0),
-    "tot_char": ("tot_char", 1.0),
+    "tot_disc": ("battery_discharge_energy_j", 3.6e6),  # the BMS's counters, kWh
+    "tot_char": ("battery_charge_energy_j", 3.6e6),
 }
 #: constant zero on the road (no schedule, no second channel): not written
 ROAD_DROP = ("DAScheduleSpeed", "REESSCurrent2", "REESSVoltage2")

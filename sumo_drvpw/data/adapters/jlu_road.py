@@ -8,8 +8,10 @@ cumulative counters ``tot_disc``/``tot_char``. ``Time`` is a wall-clock text tim
 
 Mapping (beyond :mod:`jlu_dyno`'s): tempAmb → ``ambient_c`` (so the reader derives ρ from
 it at standard pressure), elevation → ``elevation_m`` (grade from elevation smoothed over
-distance), lat/long → ``latitude_deg``/``longitude_deg``, gear, tot_disc, tot_char kept
-(roles: response — the counters identify the trip, they are no physical effect). The
+distance), lat/long → ``latitude_deg``/``longitude_deg``, gear kept; the BMS's cumulative
+energy counters tot_disc, tot_char [kWh] → ``battery_discharge_energy_j``,
+``battery_charge_energy_j`` (roles: response — they identify the trip, they are no physical
+effect; the battery target of a trip without V·I, :mod:`sumo_drvpw.data.counters`). The
 all-zero DAScheduleSpeed, REESSCurrent2 and REESSVoltage2 are left out. ``mass_kg`` = the
 test mass of jlu_bev.toml (1919 kg, as on the dynamometer; the driver is not added).
 """

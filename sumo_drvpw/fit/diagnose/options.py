@@ -9,7 +9,8 @@ from sumo_drvpw.errors import UserError
 #: Columns from which the spec derives measured power: never offered as effects.
 POWER_SOURCE_COLUMNS = ("power_w", "motor_torque_nm", "motor_speed_rpm", "mg1_speed_rpm",
                         "mg1_torque_nm", "mg2_speed_rpm", "mg2_torque_nm", "ice_speed_rpm",
-                        "battery_voltage_v", "battery_current_a")
+                        "battery_voltage_v", "battery_current_a", "battery_discharge_energy_j",
+                        "battery_charge_energy_j")
 #: Metrics copied into the report (from :func:`sumo_drvpw.fit.compare.metrics`).
 METRIC_KEYS = ("rmse_w", "mae_w", "r2", "r2_light", "r2_heavy", "bias_w")
 
