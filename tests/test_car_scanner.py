@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.data.adapters import read
 from sumo_drvpw.errors import UserError
-from test_async_logs import PIDS, current_a, long_csv, polls, speed_kmh, wide_csv
+from test_async_logs import PIDS, clock, current_a, long_csv, polls, speed_kmh, wide_csv
 
 
 def test_wide_layout_channels_on_the_speed_samples(tmp_path):
@@ -277,3 +277,45 @@ def test_pid_labels_from_category_codes_equal_the_row_strings(rows):
     ref_codes, ref_labels = pd.factorize(p + np.where(u != "", " (" + u + ")", ""))
     assert list(labels) == list(ref_labels)
     np.testing.assert_array_equal(codes, ref_codes)
+
+
+def test_a_kia_hyundai_log_without_current_books_its_energy_from_the_bms_counters(tmp_path, capsys):
+    """Car Scanner's Hyundai/Kia EV PIDs "Cumulative Energy Discharged (CED)" and "...
+    Charged (CEC)" (kWh, 0.1-kWh steps here) without the battery current: they map to the
+    canonical counters, the import notes their steps, and compare --target battery books
+    the trip's net energy as their change (the counters' power, sumo_drvpw.data.counters)."""
+    from sumo_drvpw.data.counters import COUNTERS
+
+    pids = ("Vehicle speed (km/h)", "Cumulative Energy Discharged (CED) (kWh)", "Cumulative Energy Charged (CEC) (kWh)")
+    lines = ["time," + ",".join(f'"{p}"' for p in pids)]
+    start = 9 * 3600.0
+    for i in range(4000):  # 1000 s polled in turn every 0.25 s: 2 kW out, 0.5 kW back
+        t = 0.25 * i
+        k = i % 4
+        val = {0: np.round(speed_kmh(t)), 1: 12345.6 + np.floor(2.0 * t / 3600 / 0.1) * 0.1,
+               2: 2345.6 + np.floor(0.5 * t / 3600 / 0.1) * 0.1}.get(k)
+        if val is None:
+            continue
+        cells = ["" if j != k else f"{val:.6f}" for j in range(3)]
+        lines.append(clock(start + t) + "," + ",".join(cells))
+    src = tmp_path / "kona.csv"
+    src.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    df, rep = read("car-scanner", src)
+    assert set(COUNTERS) <= set(df.columns)
+    assert any(n.startswith("battery energy counters (discharged in steps of") for n in rep["files"][0]["notes"])
+    out = tmp_path / "log.parquet"
+    assert cli_main(["import", "car-scanner", str(src), "--out", str(out)]) == 0
+    eq = tmp_path / "ev.toml"
+    eq.write_text('[equation]\nname = "ev"\n[terms]\nv1 = 150.0\n[chain]\npredicts = "battery"\n'
+                  "traction_efficiency = 0.9\nrecuperation_efficiency = 0.7\naux_power_w = 400.0\n")
+    capsys.readouterr()
+    assert cli_main(["compare", str(out), "--equation", str(eq), "--target", "battery", "--vehicle", "bmw_i3",
+                     "--out", str(tmp_path / "cmp")]) == 0
+    import json
+
+    rep = json.loads((tmp_path / "cmp" / "report.json").read_text())
+    trip = rep["equations"]["ev"]["trip_net_energy"]["trips"]["kona"]
+    d, c = (pd.read_parquet(out)[k].dropna() for k in COUNTERS)  # read from their first poll
+    want = (d.iloc[-1] - d.iloc[0]) - (c.iloc[-1] - c.iloc[0])
+    assert trip["measured_j"] == pytest.approx(want, rel=1e-6) and want == pytest.approx(0.4 * 3.6e6)
+    assert "battery energy counters" in rep["context"]["counts"]["power_source"]

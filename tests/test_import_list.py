@@ -148,3 +148,19 @@ def test_the_sketch_prefers_the_vehicle_speed_to_a_wheel_speed():
     sk = sketch(rows, True, {})
     assert '[columns."WheelBasedVehicleSpeed"]\nname = "speed_mps"  # also fits: GpsSpeed' in sk, sk
     assert "WheelSpeedFL" not in sk and "EngineSpeed" not in sk
+
+
+def test_the_sketch_maps_a_bms_energy_counters():
+    """A BMS's cumulative energy counters (Hyundai/Kia CED and CEC; the JLU car's tot_disc,
+    tot_char) are the battery target of a log without V·I: the sketch maps each to its own
+    counter, never the discharged one to the charged one, and not a power or a cell value."""
+    from sumo_drvpw.data.adapters.listing import sketch
+
+    rows = [{"label": "Cumulative Energy Discharged (CED) (kWh)", "unit": "kWh"},
+            {"label": "Cumulative Energy Charged (CEC) (kWh)", "unit": "kWh"},
+            {"label": "Max regen power (kW)", "unit": "kW"}]
+    sk = sketch(rows, False, {})
+    assert '[columns."Cumulative Energy Discharged (CED) (kWh)"]\nname = "battery_discharge_energy_j"\nunit = "kWh"' in sk, sk
+    assert '[columns."Cumulative Energy Charged (CEC) (kWh)"]\nname = "battery_charge_energy_j"\nunit = "kWh"' in sk, sk
+    jlu = sketch([{"label": "tot_disc", "unit": ""}, {"label": "tot_char", "unit": ""}], True, {})
+    assert "# battery_discharge_energy_j: perhaps tot_disc" in jlu and "# battery_charge_energy_j: perhaps tot_char" in jlu, jlu

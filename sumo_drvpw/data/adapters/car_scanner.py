@@ -23,6 +23,10 @@ Mapping (PID names as Car Scanner writes them; every other value is kept as
 - ``Altitude (GPS)`` → ``elevation_m`` (the reader smooths it over distance for the grade);
   the position columns → ``latitude_deg``, ``longitude_deg``.
 - The ambient temperature (one PID naming ambient/outside temperature) → ``ambient_c``.
+- The BMS's cumulative energy counters (Hyundai's and Kia's "Cumulative Energy Discharged
+  (CED)" and "... Charged (CEC)", kWh) → ``battery_discharge_energy_j``,
+  ``battery_charge_energy_j``: the battery target of a log without V·I
+  (:mod:`sumo_drvpw.data.counters`).
 - The traction battery's current and voltage (one PID each naming the battery or HV and a
   current in A or a voltage in V; cell, minimum/maximum, 12 V and module values are not
   it) → ``battery_current_a``, ``battery_voltage_v``. Car Scanner keeps the sign the car's
@@ -223,7 +227,10 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     if speed and gps:
         named[gps] = "gps_speed_mps"
     for pattern, dim, name in ((r"^altitude \(gps\)$|^gps altitude$", "length", "elevation_m"),
-                               (r"ambient|outside|outdoor", "temperature", "ambient_c")):
+                               (r"ambient|outside|outdoor", "temperature", "ambient_c"),
+                               # the BMS's cumulative energy counters (Hyundai/Kia CED, CEC)
+                               (r"cumulative energy discharged|\bced\b", "energy", "battery_discharge_energy_j"),
+                               (r"cumulative energy charged|\bcec\b", "energy", "battery_charge_energy_j")):
         lab, hits = _one(labels, pattern, dim, exclude=None)
         if lab:
             named[lab] = name

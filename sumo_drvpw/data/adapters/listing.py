@@ -110,11 +110,14 @@ GUESSES = {
     "battery_current_a": ("current", r"batt|\bhv\b|pack|traction|reess", r"cell|min|max|12 ?v|aux|limit"),
     "motor_torque_nm": ("torque", r"motor|\bmg2\b|drive", r"request|limit|max"),
     "motor_speed_rpm": ("rotational_speed", r"motor|\bmg2\b", r"fan|pump|max"),
+    # a BMS's cumulative energy counters (Hyundai/Kia CED, CEC): the battery target without V·I
+    "battery_discharge_energy_j": ("energy", r"discharg|\bced\b|tot_?disc", r"cell|max|limit|power"),
+    "battery_charge_energy_j": ("energy", r"(?<!dis)charg|\bcec\b|tot_?char", r"cell|max|limit|power|discharg"),
 }
 #: a label without a unit is offered for a name only when it also names the quantity
 UNITLESS_WORDS = {"time": r"time|zeit", "speed": r"speed|veloc|geschw|spd", "length": r"elev|alti|height|höhe",
                   "temperature": r"temp|amb", "voltage": r"volt", "current": r"curr|amp",
-                  "torque": r"torq|trq", "rotational_speed": r"rpm|speed|drehz"}
+                  "torque": r"torq|trq", "rotational_speed": r"rpm|speed|drehz", "energy": r"energy|ced|cec|tot_"}
 
 
 def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
