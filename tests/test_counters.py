@@ -265,3 +265,25 @@ def test_a_chain_calibrated_from_counters_streamed_equals_in_memory(tmp_path, ca
     assert ch["traction_efficiency"] == pytest.approx(0.9, rel=0.02)
     assert ch["recuperation_efficiency"] == pytest.approx(0.7, rel=0.02)
     assert ch["aux_power_w"] == pytest.approx(400.0, rel=0.02)
+
+
+def test_a_condition_that_follows_the_trip_is_not_screened_as_the_same_quantity_as_a_counter():
+    """Found when the JLU road trips' counters became the canonical columns: diagnose left out
+    the ambient temperature as 'the same quantity as the measured-power source column
+    battery_charge_energy_j' (|corr| 0.906): across trips a cumulative counter follows the
+    trip, as a temperature constant per trip does. Counters are never offered, and no column
+    is screened against them."""
+    from sumo_drvpw.fit.diagnose.candidates import screen_signals
+    from sumo_drvpw.fit.diagnose.options import DiagnoseOptions
+
+    df = _planted()
+    log = _log(df)
+    m = measure(log, None, "battery")
+    codes = pd.factorize(df["trip_id"])[0]
+    temp = 5.0 + 4.0 * codes  # a condition constant per trip, rising with the counters' level
+    sig = {COUNTERS[0]: df[COUNTERS[0]].to_numpy() + 1e8 * codes, COUNTERS[1]: df[COUNTERS[1]].to_numpy() + 1e7 * codes,
+           "ambient_c": temp.astype(float)}
+    kept, skipped = screen_signals(sig, m.power_w, m.inputs, codes, m.usable & np.isfinite(m.power_w), DiagnoseOptions(),
+                                   roles={"ambient_c": {"role": "condition", "source": "declared"}})
+    assert "ambient_c" in kept, skipped
+    assert {s["column"] for s in skipped} >= set(COUNTERS)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sumo_drvpw.fit.diagnose.options import POWER_SOURCE_COLUMNS, DiagnoseOptions
+from sumo_drvpw.fit.diagnose.options import CUMULATIVE_SOURCE_COLUMNS, POWER_SOURCE_COLUMNS, DiagnoseOptions
 from sumo_drvpw.model.terms import Inputs, parse_term
 
 
@@ -99,7 +99,7 @@ def screen_signals(signals: dict, y: np.ndarray, x: Inputs, trip_codes: np.ndarr
     same_trip = tc[1:] == tc[:-1]
     src = {}
     for c in POWER_SOURCE_COLUMNS:
-        if c in signals:
+        if c in signals and c not in CUMULATIVE_SOURCE_COLUMNS:
             a = np.asarray(signals[c], float)[u]
             a = np.where(np.isfinite(a), a, np.nanmean(a) if np.isfinite(a).any() else 0.0)
             if a.std() > 0:

@@ -11,6 +11,9 @@ POWER_SOURCE_COLUMNS = ("power_w", "motor_torque_nm", "motor_speed_rpm", "mg1_sp
                         "mg1_torque_nm", "mg2_speed_rpm", "mg2_torque_nm", "ice_speed_rpm",
                         "battery_voltage_v", "battery_current_a", "battery_discharge_energy_j",
                         "battery_charge_energy_j")
+#: of those, cumulative counters: no power component, so no column is screened as "the same
+#: quantity" as them (across trips they follow the trip, as anything constant per trip does)
+CUMULATIVE_SOURCE_COLUMNS = ("battery_discharge_energy_j", "battery_charge_energy_j")
 #: Metrics copied into the report (from :func:`sumo_drvpw.fit.compare.metrics`).
 METRIC_KEYS = ("rmse_w", "mae_w", "r2", "r2_light", "r2_heavy", "bias_w")
 
