@@ -287,3 +287,26 @@ def test_a_condition_that_follows_the_trip_is_not_screened_as_the_same_quantity_
                                    roles={"ambient_c": {"role": "condition", "source": "declared"}})
     assert "ambient_c" in kept, skipped
     assert {s["column"] for s in skipped} >= set(COUNTERS)
+
+
+def test_the_chain_tracer_sees_its_model_as_the_counters_book_it():
+    """diagnose's battery tracer (fit.chain_linear) on counters of 2-Wh steps, from a declared
+    chain whose recuperation efficiency is wrong (0.85; planted 0.7, η_t 0.9 and 400 W
+    right): it finds η_r 0.698 and nothing else. Fitted per sample on the counters' spread
+    power (the view taken away) it found η_r 0.671, an auxiliary power 158 W lower and
+    η_t 0.906: effects the counters' steps made, not the car."""
+    import dataclasses
+
+    from sumo_drvpw.fit.chain_linear import trace_chain
+    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.equations import Equation
+
+    m = measure(_log(_planted(step_j=7200.0)), None, "battery")
+    eq = Equation("ev", {"acc": 1.0, "v1": 150.0, "v3": 0.4})
+    eq.chain = chain_from_dict({"predicts": "battery", "traction_efficiency": 0.9, "recuperation_efficiency": 0.85,
+                                "aux_power_w": 400.0})
+    res = trace_chain(m, eq)
+    assert [f["term"] for f in res.report["findings"]] == ["recuperation_efficiency"]
+    assert res.equation.chain.recuperation_efficiency == pytest.approx(0.7, rel=0.01)
+    spread = trace_chain(dataclasses.replace(m, counter_view=None), eq)  # the per-sample fit it replaces
+    assert len(spread.report["findings"]) > 1

@@ -222,6 +222,37 @@ def _eta(e, v, p):
     return e(v, p) if isinstance(e, Table) else np.full(np.shape(p), float(e))
 
 
+def through_counters(m, idx, n):
+    """None; or, for a target read from the BMS's energy counters (``m.counter_view``), a
+    function giving columns on the samples ``idx`` (of ``n``) as the counters would book them
+    (:class:`sumo_drvpw.data.counters.CounterView`; zero on the samples not in ``idx``), so
+    the tracer fits its model as its target sees the battery: not biased by the spreading of
+    the power between the counters' steps."""
+    view = getattr(m, "counter_view", None)
+    if view is None:
+        return None
+
+    def see(col):
+        if col is None:
+            return None
+        a = np.asarray(col, float)
+        full = np.zeros((n,) + a.shape[1:])
+        full[idx] = np.nan_to_num(a)
+        return view(full)[idx]
+    return see
+
+
+def seen_candidates(cands: list, see) -> list:
+    """The candidates' columns, fixed columns and profiled columns through ``see``
+    (:func:`through_counters`)."""
+    for c in cands:
+        c.variants = [(see(z), see(f), par) for z, f, par in c.variants]
+        if c.profile is not None:
+            col, top = c.profile
+            c.profile = (lambda L, col=col: see(col(L)), top)
+    return cands
+
+
 def best_variant(w, Z, t, c: Cand, rows=slice(None)) -> int:
     """The variant of a candidate with the smallest weighted RSS of t − fixed ~ Z on ``rows``.
 

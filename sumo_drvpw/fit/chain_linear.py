@@ -53,13 +53,8 @@ The closed loop: each accepted finding is written into the equation (grade) or t
 (auxiliary, standstill, limit, efficiencies, HVAC, loads); the closed equation is an
 ordinary equation file with a ``[chain]`` that ``compare`` and SUMO runs take unchanged.
 Before/after per trip is computed with the exact (nonlinear) chain: before = declared,
-after = the closed equation of the fold that held the trip out.
-
-Example::
-
-    m = load_measured(logs, "jlu_bev", target="battery")
-    res = trace_chain(m, load_equation("jlu_dyno_chain.toml"))
-    save_equation(res.equation, "jlu_road_closed.toml")
+after = the closed equation of the fold that held the trip out. A target of a BMS's energy
+counters sees the model as they book it (:func:`~sumo_drvpw.fit.chain_effects.through_counters`).
 """
 
 from __future__ import annotations
@@ -78,7 +73,8 @@ from sumo_drvpw.model.chain import EnergyChain
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import term_matrix
-from sumo_drvpw.fit.chain_effects import _eta as _eff, apply, best_variant, candidates as _candidates, mark_changed
+from sumo_drvpw.fit.chain_effects import (_eta as _eff, apply, best_variant, candidates as _candidates, mark_changed,
+                                          seen_candidates, through_counters)
 
 METRIC_KEYS = ("rmse_w", "mae_w", "r2", "bias_w")
 
@@ -347,9 +343,12 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
     trip_names, trip = np.unique(m.log.df["trip_id"].astype(str).to_numpy()[idx], return_inverse=True)
     t = m.log.df["time_s"].to_numpy(float)[idx]
     y, pred0, w = y_all[idx], pred0_all[idx], dt_all[idx]
+    see = through_counters(m, idx, y_all.size)
+    pred0 = pred0 if see is None else m.counter_view(pred0_all)[idx]  # as the counters book it
     r = y - pred0
     bl = _Blocks(r, w, trip, t, opt)
     cands = _candidates(m, equation, p, idx, opt, left_out := {})  # (columns not offered, and why)
+    cands = cands if see is None else seen_candidates(cands, see)
     say(f"{idx.size} samples, {len(trip_names)} trip(s), {bl.n_blocks} blocks; {len(cands)} candidate effects; "
         f"validation: {bl.how}")
     # the model: accepted free columns (list of n×k) and accepted fixed columns
@@ -457,6 +456,7 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
                                           "logs": list(m.log.files)})
     # held-out, exact: each fold's closed equation predicts the samples it held out
     held = _heldout_exact(m, equation, accepted, bl, idx, w, r, cands)
+    held = held if see is None else see(held)
     report = _report(m, equation, closed, bl, idx, y, pred0, held, w, trip_names, trip, findings, rounds,
                      rejected, (sse_base, e_base), (sse_cur, e_cur), cands)
     report["columns_left_out"] = left_out
