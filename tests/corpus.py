@@ -195,6 +195,14 @@ _log_case("acceleration all outliers", lambda df: df.assign(accel_mps2=50.0),
           ("log.csv", "no usable sample", "|acceleration| > 8"))
 _log_case("acceleration all outliers compare", lambda df: df.assign(accel_mps2=50.0),
           ("log.csv", "no usable sample", "|acceleration| > 8"), cmd="compare")
+_COUNTERS = lambda df: df.assign(battery_discharge_energy_j=np.cumsum(np.clip(df.power_w, 0, None)) / 8.0,  # noqa: E731
+                                  battery_charge_energy_j=np.cumsum(np.clip(-df.power_w, 0, None)) / 8.0)
+_log_case("energy counter falls (reset)", lambda df: _COUNTERS(df).pipe(_set("battery_charge_energy_j", slice(900, None), 0.0)),
+          ("battery_charge_energy_j", "row 900", "falls"))
+_log_case("energy counter text", lambda df: _COUNTERS(df).pipe(_set("battery_discharge_energy_j", 33, "n/a?")),
+          ("battery_discharge_energy_j", "n/a?"))
+_log_case("energy counter inf", lambda df: _COUNTERS(df).pipe(_set("battery_discharge_energy_j", 34, np.inf)),
+          ("battery_discharge_energy_j", "row 34"))
 _log_case("time as timestamps parquet", lambda df: df.assign(time_s=pd.to_datetime(df.time_s, unit="s")),
           ("time_s", "timestamps"), fmt="parquet")
 _log_case("time in milliseconds", lambda df: df.assign(time_s=df.time_s * 1000), ("time_s", "milliseconds"))
