@@ -164,3 +164,14 @@ def test_the_sketch_maps_a_bms_energy_counters():
     assert '[columns."Cumulative Energy Charged (CEC) (kWh)"]\nname = "battery_charge_energy_j"\nunit = "kWh"' in sk, sk
     jlu = sketch([{"label": "tot_disc", "unit": ""}, {"label": "tot_char", "unit": ""}], True, {})
     assert "# battery_discharge_energy_j: perhaps tot_disc" in jlu and "# battery_charge_energy_j: perhaps tot_char" in jlu, jlu
+
+
+def test_a_label_whose_parenthesis_is_no_unit_is_offered_as_a_comment():
+    """'Cumulative Energy Discharged (CED)' reads as unit 'CED' (the label's parenthesis), no
+    unit known: it was left out of the sketch; now it is offered, to be given its unit."""
+    from sumo_drvpw.data.adapters.listing import sketch
+
+    sk = sketch([{"label": "Cumulative Energy Discharged (CED)", "unit": "CED"},
+                 {"label": "Cumulative Energy Charged (CEC)", "unit": "CEC"}], False, {})
+    assert "# battery_discharge_energy_j: perhaps Cumulative Energy Discharged (CED) (no unit recognised" in sk, sk
+    assert "# battery_charge_energy_j: perhaps Cumulative Energy Charged (CEC) (no unit recognised" in sk, sk

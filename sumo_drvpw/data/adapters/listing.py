@@ -142,11 +142,12 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
                 continue
             if u and u[0] == dim:
                 hits.append((label, unit))
-            elif not unit and re.search(UNITLESS_WORDS[dim], text, re.I):
+            elif u is None and re.search(UNITLESS_WORDS[dim], text, re.I):  # no unit, or "(CED)": none known
                 unitless.append(label)
         if not hits:
             if unitless:
-                lines.append(f"# {name}: perhaps {', '.join(unitless[:3])} (no unit in the file: give its unit)")
+                lines.append(f"# {name}: perhaps {', '.join(unitless[:3])} (no unit recognised in the file: "
+                             "give its unit)")
             elif name in ("time_s", "speed_mps"):
                 lines.append(f"# no label recognised as {name} (required): map one")
             continue
