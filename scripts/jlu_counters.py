@@ -136,17 +136,18 @@ def _quantised(df, every_s, step_j=7200.0):
 
     from sumo_drvpw.data.counters import COUNTERS
 
+    from sumo_drvpw.synth.effects import energy_counters
+
     out = []
     for _, g in df.groupby("trip_id", sort=False):
         p = (g["battery_voltage_v"] * g["battery_current_a"]).to_numpy(float)
         t = g["time_s"].to_numpy(float)
-        w = np.r_[np.diff(t), 0.0]
-        e_d, e_c = np.cumsum(np.clip(p, 0, None) * w), np.cumsum(np.clip(-p, 0, None) * w)
-        if every_s:
+        e_d, e_c = energy_counters(t, p, step_j)
+        if every_s:  # read once every every_s: each reading held to the next
             k = np.floor((t - t[0]) / every_s)
             idx = np.maximum.accumulate(np.where(np.r_[True, k[1:] != k[:-1]], np.arange(len(t)), 0))
             e_d, e_c = e_d[idx], e_c[idx]
-        out.append(g.assign(**{COUNTERS[0]: np.floor(e_d / step_j) * step_j, COUNTERS[1]: np.floor(e_c / step_j) * step_j}))
+        out.append(g.assign(**{COUNTERS[0]: e_d, COUNTERS[1]: e_c}))
     return pd.concat(out).drop(columns=["battery_voltage_v", "battery_current_a"])
 
 

@@ -16,6 +16,7 @@ from sumo_drvpw.data.log import from_frame
 from sumo_drvpw.data.measured import measure
 from sumo_drvpw.data.powertrain import measured_battery_power
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.synth.effects import counter_drive, energy_counters
 
 KWH = 3.6e6
 
@@ -66,11 +67,9 @@ def test_each_trips_energy_is_the_counters_change(seed, step, hz, gap):
         if gap:
             t[n // 2:] += 60.0
         pw = 20_000.0 * np.sin(t / rng.uniform(3, 30)) + 2_000.0 * rng.standard_normal(n)
-        w = np.r_[np.diff(t), 0.0]
-        d = np.floor(np.cumsum(np.clip(pw, 0, None) * w) / step) * step + 1e9
-        c = np.floor(np.cumsum(np.clip(-pw, 0, None) * w) / step) * step
+        d, c = energy_counters(t, pw, step)
         frames.append(pd.DataFrame({"trip_id": f"T{k}", "time_s": t, "speed_mps": 10.0,
-                                    COUNTERS[0]: d, COUNTERS[1]: c}))
+                                    COUNTERS[0]: d + 1e9, COUNTERS[1]: c}))
     log = _log(pd.concat(frames, ignore_index=True))
     p, src = measured_battery_power(log)
     assert src == "battery energy counters (discharged − charged)"
@@ -89,24 +88,9 @@ def test_each_trips_energy_is_the_counters_change(seed, step, hz, gap):
 
 
 def _planted(seed=0, step_j=7200.0):
-    """An EV's stop-and-go drive at 10 Hz (four trips of 10 min) with a planted chain: 90 %
-    out, 70 % back, 400 W auxiliary, on a road load acc 1, v1 150, v3 0.4; its battery logs
-    only the BMS's counters, in steps of ``step_j``."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for k in range(4):
-        t = np.arange(0.0, 600.0, 0.1)
-        v = np.clip(12.0 + 9.0 * np.sin(2 * np.pi * t / rng.uniform(50, 90) + rng.uniform(0, 6))
-                    + 3.0 * np.sin(2 * np.pi * t / 11.0), 0.0, None)
-        a = np.gradient(v, t)
-        wheel = 1500.0 * v * a + 150.0 * v + 0.4 * v ** 3
-        batt = np.where(wheel > 0, wheel / 0.9, wheel * 0.7) + 400.0
-        w = np.r_[np.diff(t), 0.0]
-        d = np.floor(np.cumsum(np.clip(batt, 0, None) * w) / step_j) * step_j
-        c = np.floor(np.cumsum(np.clip(-batt, 0, None) * w) / step_j) * step_j
-        out.append(pd.DataFrame({"trip_id": f"T{k}", "time_s": t, "speed_mps": v, "accel_mps2": a, "mass_kg": 1500.0,
-                                 COUNTERS[0]: d, COUNTERS[1]: c, "true_battery_w": batt}))
-    return pd.concat(out, ignore_index=True)
+    """An EV's stop-and-go drive, four trips of 10 min, with a planted chain (90 % out, 70 %
+    back, 400 W) logged only as counters in steps of ``step_j`` (synth.effects.counter_drive)."""
+    return counter_drive(4, 600.0, step_j, seed)
 
 
 @pytest.mark.parametrize("step_j", [720.0, 7200.0])

@@ -160,13 +160,12 @@ class CounterView:
         np.maximum.at(hi, ktrip, tau[self.knots])
         two = np.bincount(ktrip, minlength=seg.max() + 1) >= 2
         self.inside = self.rows & two[seg] & (tau >= lo[seg]) & (tau <= hi[seg])
-        self.seg = seg
 
     @property
     def nbytes(self) -> int:
         """Bytes its arrays hold (a streamed calibration keeps it with its batch)."""
         return sum(a.nbytes for a in (self.rows, self.left, self.right, self.width, self.knots, self.net,
-                                      self.tau, self.inside, self.seg))
+                                      self.tau, self.inside))
 
     def _rate(self, tk: np.ndarray, xk: np.ndarray) -> np.ndarray:
         """The rate over each sample's window of the line through (knot times ``tk``, energies ``xk``)."""
