@@ -254,6 +254,10 @@ def test_fcd_on_dask_equals_local(fcd, tmp_path, capsys):
     assert la.keys() == lb.keys() and len(la) > 4
     for k, x in la.items():
         assert lb[k] == (pytest.approx(x, rel=1e-9, abs=1e-9) if isinstance(x, float) else x), k
+    da, db = _leaves(sa["driving_dynamics"]), _leaves(sb["driving_dynamics"])  # the buckets' 1-Hz samples add up
+    assert da.keys() == db.keys() and len(da) > 10
+    for k, x in da.items():
+        assert db[k] == (pytest.approx(x, rel=1e-9) if isinstance(x, float) else x), k
     assert sb["source"]["buckets"] == 3 and sb["source"]["rows"] == sa["source"]["rows"]
     assert sb["warnings"] == sa["warnings"] and not any("matched no vehicle" in w for w in sb["warnings"])
     assert not (b / BUCKET_DIR).exists()

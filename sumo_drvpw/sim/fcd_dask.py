@@ -121,12 +121,15 @@ def merge_ledgers(ledgers: list):
                      "flushed_vehicles", "flushed_kept", "load_samples", "teleports"):
             setattr(out, name, getattr(out, name) + getattr(led, name))
         out.load_max_kg = max(out.load_max_kg, led.load_max_kg)
+        out.dynamics.merge(led.dynamics)
         out.snapshots = [(s[0],) + tuple(x + y for x, y in zip(s[1:], o[1:]))
                          for s, o in zip(out.snapshots, led.snapshots)]
         out.flushed_types |= led.flushed_types
         out.peak_held = max(out.peak_held, led.peak_held)
         for c in led.class_seen:
-            out.class_seen.setdefault(c, None)
+            if c not in out.class_seen:
+                out.class_seen[c] = None
+                out.class_list.append(c)
         if out.chain is not None:
             a, b = out.chain, led.chain
             a._edge = a._edge + b._edge

@@ -28,6 +28,7 @@ import numpy as np
 
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import CATEGORIES, Inputs, parse_term
+from sumo_drvpw.sim.dynamics import Dynamics
 
 #: Reporting categories of the ledger: the four physical ones and "other".
 LEDGER_CATEGORIES = CATEGORIES + ("other",)
@@ -188,6 +189,9 @@ class Ledger:
         self.peak_held = 0
         #: vClass labels in the order vehicles of them were first registered
         self.class_seen: dict[str, None] = {}
+        self.class_list: list[str] = []  # the same, as a list (veh_cls indexes it)
+        #: the trajectories' driving dynamics against real driving (EU RDE)
+        self.dynamics = Dynamics()
 
     def _edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Edge energies (edges, 2, E, C), distances, times and distances per equation
@@ -282,6 +286,8 @@ class Ledger:
         grow("veh_auto_off", (cap,), float, np.inf)  # its vType's shutOffAutoDuration [s]
         grow("veh_teleports", (cap,), np.int64, 0)  # teleports it ended (sim/teleport.py)
         grow("veh_tele", (cap, E, 2))  # their [kinetic, potential] energy jumps [J]
+        grow("veh_rde", (cap, 4), float, np.nan)  # its last two 1-Hz samples (sim/dynamics.py)
+        grow("veh_cls", (cap,), np.int64, -1)  # its vClass label's place in class_list
         self.capacity = cap
 
     #: per-vehicle arrays and their empty value (what :meth:`flush` compacts)
@@ -294,7 +300,7 @@ class Ledger:
                    ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_done_step", 0),
                    ("veh_parked", False),
                    ("veh_stand", 0.0), ("veh_auto_off", np.inf), ("veh_teleports", 0),
-                   ("veh_tele", 0.0))
+                   ("veh_tele", 0.0), ("veh_rde", np.nan), ("veh_cls", -1))
 
     def add_vehicle(self, vid: str, vtype: str, mass: float, app: np.ndarray,
                     keep: bool, vclass: str = "") -> int:
@@ -311,6 +317,7 @@ class Ledger:
         self.veh_at[i] = np.nan
         self.veh_stand[i] = 0.0
         self.veh_auto_off[i] = np.inf
+        self.veh_rde[i] = np.nan
         self.veh_app[i] = app
         self.veh_keep[i] = keep
         if keep and self.chain is not None and self.chain.active and not np.any(np.asarray(app)[self.chain.active]):
@@ -321,6 +328,8 @@ class Ledger:
         label = vclass or "unknown"
         if label not in self.class_seen:
             self.class_seen[label] = None
+            self.class_list.append(label)
+        self.veh_cls[i] = self.class_list.index(label)
         return i
 
     @property

@@ -24,6 +24,7 @@ from typing import Callable
 import numpy as np
 
 from sumo_drvpw.model.terms import Inputs
+from sumo_drvpw.sim.dynamics import whole_second
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network, lane_numbers
 from sumo_drvpw.sim.parking import Parking
@@ -467,6 +468,10 @@ class Stepper:
             ledger.out_of_range[k] += int(np.count_nonzero(out))
         eidx = self.lane_edge_ext[lane]
         ledger.book(vidx, eidx, v, dt, pc)
+        ledger.dynamics.step(ledger, vidx, v_mean, a, v, dt)
+        if whole_second(t_now - dt, dt):  # the trajectories at 1 Hz, as the RDE reads a trip (at the
+            # time SUMO's outputs give this state: the step's begin, getTime() − Δt after the step)
+            ledger.dynamics.sample(ledger, vidx, v_mean + 0.5 * dt * a, t_now - dt)
         if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
             off = None if self.shutoff is None else self.shutoff.auto_off(ledger, vidx, v, dt)
             ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx], engine_off=off, accel=a,

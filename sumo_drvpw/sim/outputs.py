@@ -17,7 +17,7 @@ import pyarrow.parquet as pq
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import atomic_path, write_figure, write_json, write_parquet, write_text
-from sumo_drvpw.sim import teleport
+from sumo_drvpw.sim import dynamics, teleport
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, Ledger
 from sumo_drvpw.sim.network import Network
 
@@ -242,6 +242,10 @@ def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: boo
     out["teleports"], per_eq, warn = teleport.summary(ledger, net, names, classes, net_j)
     for n in names:
         eqs[n]["teleports"] = per_eq[n]
+    dyn = getattr(ledger, "dynamics", None)
+    if dyn is not None:
+        out["driving_dynamics"] = {"source": dynamics.SOURCE, "vclasses": dyn.summary()}
+        warn = list(warn) + dynamics.warnings(out["driving_dynamics"]["vclasses"])
     if warn:
         out["warnings"] = list(out.get("warnings", [])) + warn
     return out

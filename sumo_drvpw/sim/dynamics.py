@@ -1,0 +1,246 @@
+"""Driving dynamics of a run's trajectories, against what real driving shows (EU RDE).
+
+The acceleration term books the kinetic energy a vehicle gains, so a SUMO study's driving
+energy is only as right as its trajectories' accelerations. SUMO's car-following models
+can drive far more dynamically than people do: the Krauss model accelerates at the vType's
+full ``accel`` from every stop and at any speed, and its driver imperfection (``sigma``, default 0.5) slows
+a car at random and lets it accelerate back, an oscillation whose size depends on the step
+length (SUMO issue #10494; the vType's ``sigmaStep`` decouples it). Measured on the
+DLR-TS Bologna "acosta" scenario (docs/scenario.md): its cars' relative positive
+acceleration at urban speeds falls from 0.32 to 0.24 m/s² with sigma 0 instead of 0.5.
+
+This module measures the trajectories as the European Real Driving Emissions test judges
+a real test trip's dynamics (Commission Regulation (EU) 2017/1151, Annex IIIA,
+Appendix 7a, "verification of trip dynamics"): speeds at 1 Hz; accelerations by central
+difference a_i = (v_i+1 − v_i−1)/2 s; the samples split by speed into urban (≤ 60 km/h),
+rural (60–90) and motorway (> 90); per part
+
+- the 95th percentile of v·a_pos over the samples with a > 0.1 m/s² [m²/s³]: a trip
+  above 0.136·v̄ + 14.44 (v̄ ≤ 74.6 km/h; else 0.0742·v̄ + 18.966, v̄ the part's mean
+  speed in km/h) is driven too dynamically to be a valid real-world test;
+- the relative positive acceleration RPA = Σ v·a_pos·Δt / Σ v·Δt [m/s²]: below
+  −0.0016·v̄ + 0.1755 (v̄ ≤ 94.05 km/h; else 0.025) a trip is too smooth.
+
+(A part's percentile is judged from :data:`MIN_SAMPLES` samples with a > 0.1 m/s² on,
+its RPA from as many samples.) The speeds are sampled at the first step of
+every whole second of simulation time, so a run at 0.25 s and one at 1 s that drive the
+same trajectory measure the same; a vehicle's sample needs its speeds one and two
+seconds before (a vehicle off the lane in between, teleporting or parked, starts afresh).
+Only accounted vehicles count, per vClass label as the run reports classes. Each part
+keeps sums and a histogram of v·a_pos (bins of :data:`HIST_STEP` m²/s³), so the figures
+of Dask buckets and of vehicles flushed from memory add up exactly.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: the RDE parts: name, upper speed bound [km/h] (inclusive; the last has none)
+PARTS = (("urban", 60.0), ("rural", 90.0), ("motorway", math.inf))
+#: an acceleration counts as positive above this [m/s²]
+A_POS_MIN = 0.1
+#: samples a part needs before its RPA (all samples) or its percentile (those with a >
+#: A_POS_MIN) is judged against the bounds
+MIN_SAMPLES = 100
+#: histogram of v·a_pos: bin width [m²/s³] and number of bins (the last holds the rest:
+#: 400 m²/s³ is 10 m/s² at 40 m/s, beyond any road vehicle)
+HIST_STEP = 0.1
+HIST_BINS = 4000
+#: sums kept per part: time [s], distance [m], samples with a > A_POS_MIN, Σ v·a_pos·Δt [m²/s²]
+SUMS = ("time_s", "distance_m", "apos_samples", "va_pos_sum")
+#: the longest gap [s] between a vehicle's two earlier samples and this one still read as 1-Hz
+MAX_SPAN_S = 2.5
+#: vClass labels of heavy vehicles: the RDE's bounds are a light-duty vehicle's
+HEAVY = frozenset({"bus", "coach", "truck", "trailer"})
+SOURCE = ("EU RDE trip dynamics: Commission Regulation (EU) 2017/1151, Annex IIIA, Appendix 7a "
+          "(95th percentile of v·a_pos and relative positive acceleration per urban/rural/motorway part)")
+
+
+def va_pos_95_max(v_kmh: float) -> float:
+    """The RDE's largest 95th percentile of v·a_pos [m²/s³] at a part's mean speed [km/h]."""
+    return 0.136 * v_kmh + 14.44 if v_kmh <= 74.6 else 0.0742 * v_kmh + 18.966
+
+
+def rpa_min(v_kmh: float) -> float:
+    """The RDE's smallest relative positive acceleration [m/s²] at a part's mean speed [km/h]."""
+    return -0.0016 * v_kmh + 0.1755 if v_kmh <= 94.05 else 0.025
+
+
+def part_of(v_mps: np.ndarray) -> np.ndarray:
+    """The RDE part (index into :data:`PARTS`) of each speed [m/s]."""
+    kmh = np.asarray(v_mps, float) * 3.6
+    return np.searchsorted(np.array([p[1] for p in PARTS[:-1]]), kmh, side="left")
+
+
+def whole_second(t: float, dt: float) -> bool:
+    """Whether a state at time ``t`` [s], a step of ``dt`` [s] after the one before, is the
+    first of a whole second."""
+    return math.floor(t + 1e-9) != math.floor(t - dt + 1e-9)
+
+
+class Dynamics:
+    """Per class label: per RDE part the sums :data:`SUMS` and the v·a_pos histogram.
+
+    Per-vehicle state (the speeds and times of its last two 1-Hz samples) lives in the
+    ledger's ``veh_rde`` array, (vehicles, 4): [v_k−1, t_k−1, v_k−2, t_k−2].
+    """
+
+    def __init__(self):
+        self.sums: dict[str, np.ndarray] = {}  # label → (parts, len(SUMS))
+        self.hist: dict[str, np.ndarray] = {}  # label → (parts, HIST_BINS)
+        #: label → [Σ max(v̄·a, 0)·Δt [J/kg], Σ distance [m]] over every step (the run's own step)
+        self.kinetic: dict[str, np.ndarray] = {}
+
+    def step(self, ledger, vidx: np.ndarray, v_mean: np.ndarray, a: np.ndarray, v_dist: np.ndarray,
+             dt: float) -> None:
+        """Add a step's positive kinetic energy per kg, ½(v_t² − v_t−1²)⁺ = (v̄·a)⁺·Δt, and
+        distance (``v_dist``·Δt) per class of the accounted vehicles ``vidx``."""
+        keep = ledger.veh_keep[vidx]
+        code = ledger.veh_cls[vidx[keep]]
+        n = len(ledger.class_list)
+        kin = np.bincount(code, np.maximum(v_mean[keep] * a[keep], 0.0) * dt, minlength=n)
+        dist = np.bincount(code, v_dist[keep] * dt, minlength=n)
+        for c in np.flatnonzero(dist > 0):
+            acc = self.kinetic.setdefault(ledger.class_list[c], np.zeros(2))
+            acc += (kin[c], dist[c])
+
+    def _acc(self, label: str) -> tuple[np.ndarray, np.ndarray]:
+        if label not in self.sums:
+            self.sums[label] = np.zeros((len(PARTS), len(SUMS)))
+            self.hist[label] = np.zeros((len(PARTS), HIST_BINS), np.int64)
+        return self.sums[label], self.hist[label]
+
+    def sample(self, ledger, vidx: np.ndarray, v: np.ndarray, t_now: float) -> None:
+        """Take this whole second's speeds ``v`` [m/s] of vehicles ``vidx`` (on a lane)."""
+        keep = ledger.veh_keep[vidx]
+        vidx, v = vidx[keep], v[keep]
+        if len(vidx) == 0:
+            return
+        st = ledger.veh_rde[vidx]
+        v1, t1, v2, t2 = st[:, 0], st[:, 1], st[:, 2], st[:, 3]
+        ok = np.isfinite(t2) & (t_now - t2 <= MAX_SPAN_S) & (t1 > t2)
+        if ok.any():
+            j = np.flatnonzero(ok)
+            labels = np.asarray(ledger.class_list, dtype=object)[ledger.veh_cls[vidx[j]]]
+            self.add(labels, v1[j], (v[j] - v2[j]) / (t_now - t2[j]), 0.5 * (t_now - t2[j]))
+        # shift the history: this sample becomes k−1, the old k−1 becomes k−2
+        st[:, 2], st[:, 3] = v1, t1
+        st[:, 0], st[:, 1] = v, t_now
+        ledger.veh_rde[vidx] = st
+
+    def add(self, labels: np.ndarray, v: np.ndarray, a: np.ndarray, dt: np.ndarray) -> None:
+        """Add 1-Hz samples: class labels, speeds [m/s], central-difference accelerations
+        [m/s²] and the time each sample stands for [s]."""
+        part, pos, va = part_of(v), a > A_POS_MIN, v * a
+        labels = np.asarray(labels, dtype=object)
+        for lab in dict.fromkeys(labels.tolist()):
+            m = labels == lab
+            sums, hist = self._acc(lab)
+            for k in range(len(PARTS)):
+                mk = m & (part == k)
+                if not mk.any():
+                    continue
+                pk = mk & pos
+                sums[k] += (dt[mk].sum(), (v[mk] * dt[mk]).sum(), pk.sum(), (va[pk] * dt[pk]).sum())
+                np.add.at(hist[k], np.minimum((va[pk] / HIST_STEP).astype(np.int64), HIST_BINS - 1), 1)
+
+    def add_trajectory(self, t_s, v_mps, label: str, dt: float | None = None) -> None:
+        """Add one vehicle's trajectory (times [s], speeds [m/s], in time order, at a step
+        of ``dt`` [s]; None: the median spacing of its times) as a run reads it: the states
+        at the first step of every whole second (:func:`whole_second`), central differences
+        over the samples one second either side (none across a gap longer than
+        :data:`MAX_SPAN_S`)."""
+        t, v = np.asarray(t_s, float), np.asarray(v_mps, float)
+        if dt is None:
+            dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+        if len(t) > 1:  # every step: positive kinetic energy per kg, distance at v_t (Euler)
+            acc = self.kinetic.setdefault(label, np.zeros(2))
+            acc += (np.maximum(0.5 * np.diff(v ** 2), 0.0).sum(), (v[1:] * np.diff(t)).sum())
+        first = np.floor(t + 1e-9) != np.floor(t - dt + 1e-9)
+        t, v = t[first], v[first]
+        if len(t) < 3:
+            return
+        span = t[2:] - t[:-2]
+        ok = span <= MAX_SPAN_S
+        self.add(np.full(int(ok.sum()), label), v[1:-1][ok], ((v[2:] - v[:-2]) / span)[ok], 0.5 * span[ok])
+
+    def merge(self, other: "Dynamics") -> None:
+        """Add the sums of ``other`` (another bucket's vehicles of the same run)."""
+        for lab, x in other.kinetic.items():
+            acc = self.kinetic.setdefault(lab, np.zeros(2))
+            acc += x
+        for lab in other.sums:
+            sums, hist = self._acc(lab)
+            sums += other.sums[lab]
+            hist += other.hist[lab]
+
+    def summary(self) -> dict:
+        """Per class: ``parts`` — per RDE part its mean speed [km/h], the 95th percentile of
+        v·a_pos [m²/s³], RPA [m/s²], the RDE bounds at that mean speed, time [s], distance
+        [km], samples with a > 0.1 m/s², and whether each figure is judged (enough samples:
+        :data:`MIN_SAMPLES`) — and ``kinetic_j_per_kg_km``, the positive kinetic energy per kg
+        and km at the run's own step (what the acceleration term books as traction, per kg,
+        where the rest of the road load does not turn the step's power negative; against
+        1000 × RPA it shows what oscillations shorter than the 1-Hz differences add)."""
+        out = {}
+        for lab in dict.fromkeys([*self.sums, *self.kinetic]):
+            parts = {}
+            for k, (name, _) in enumerate(PARTS):
+                t, d, n, va = self.sums[lab][k] if lab in self.sums else (0.0, 0.0, 0, 0.0)
+                if t <= 0:
+                    continue
+                vbar = 3.6 * d / t
+                h = self.hist[lab][k]
+                p95 = float("nan")
+                if h.sum() > 0:  # the upper edge of the bin holding the 95th percentile
+                    p95 = float((np.searchsorted(np.cumsum(h), 0.95 * h.sum(), side="left") + 1) * HIST_STEP)
+                parts[name] = {"mean_speed_kmh": vbar, "va_pos_95_m2ps3": p95,
+                               "rpa_mps2": va / d if d > 0 else float("nan"),
+                               "rde_va_pos_95_max": va_pos_95_max(vbar), "rde_rpa_min": rpa_min(vbar),
+                               "time_s": float(t), "distance_km": float(d) / 1000.0,
+                               "apos_samples": int(n), "va_pos_95_judged": bool(n >= MIN_SAMPLES),
+                               "rpa_judged": bool(t >= MIN_SAMPLES)}
+            kin, dist = self.kinetic.get(lab, (0.0, 0.0))
+            out[lab] = {"parts": parts, "kinetic_j_per_kg_km": 1000.0 * kin / dist if dist > 0 else float("nan")}
+        return out
+
+
+def of_trajectory(t_s, v_mps, label: str = "trajectory", dt: float | None = None) -> dict:
+    """:meth:`Dynamics.summary` of one trajectory (:meth:`Dynamics.add_trajectory`)."""
+    d = Dynamics()
+    d.add_trajectory(t_s, v_mps, label, dt)
+    return d.summary().get(label, {"parts": {}, "kinetic_j_per_kg_km": float("nan")})
+
+
+def warnings(summary: dict) -> list[str]:
+    """At most two lines: the classes whose trajectories an RDE test would reject as too
+    dynamic in some part, and those it would reject as too smooth (judged parts only)."""
+    hard, smooth = [], []
+    for lab, doc in summary.items():
+        parts = doc["parts"]
+        heavy = "; a car's bound: a heavy vehicle's real driving stays well below it" if lab in HEAVY else ""
+        over = [f"{name} {p['va_pos_95_m2ps3']:.1f} > {p['rde_va_pos_95_max']:.1f} m²/s³ at "
+                f"{p['mean_speed_kmh']:.0f} km/h" for name, p in parts.items()
+                if p["va_pos_95_judged"] and p["va_pos_95_m2ps3"] > p["rde_va_pos_95_max"]]
+        under = [f"{name} {p['rpa_mps2']:.3f} < {p['rde_rpa_min']:.3f} m/s² at {p['mean_speed_kmh']:.0f} km/h"
+                 for name, p in parts.items() if p["rpa_judged"] and p["rpa_mps2"] < p["rde_rpa_min"]]
+        if over:
+            hard.append(f"{lab} ({', '.join(over)}{heavy})")
+        if under:
+            smooth.append(f"{lab} ({', '.join(under)})")
+    out = []
+    if hard:
+        out.append("driving dynamics: trajectories accelerate harder than a valid real-world test trip "
+                   f"(EU RDE, 95th percentile of v·a_pos above its bound): {'; '.join(hard)}; the acceleration "
+                   "term books more kinetic energy than such driving would: check the vTypes' accel and sigma "
+                   "(the Krauss model accelerates at the full accel at any speed, where a real vehicle's power "
+                   "limits it, and its driver imperfection sigma adds speed "
+                   "oscillations whose size depends on the step length, SUMO issue #10494) (summary.json driving_dynamics)")
+    if smooth:
+        out.append("driving dynamics: trajectories smoother than a valid real-world test trip (EU RDE, "
+                   f"relative positive acceleration below its bound): {'; '.join(smooth)}; the acceleration term "
+                   "books less kinetic energy than real driving, whose speed varies more (summary.json "
+                   "driving_dynamics)")
+    return out

@@ -1,0 +1,173 @@
+"""Driving dynamics of a run's trajectories against the EU RDE's trip-dynamics bounds
+(sumo_drvpw/sim/dynamics.py): the definitions, the 1-Hz sampling, and real SUMO runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sumo_drvpw.sim import dynamics as D
+
+REPO = Path(__file__).resolve().parent.parent
+NETS = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks"
+
+
+def rde_by_definition(v_mps: np.ndarray):
+    """The RDE's figures of a 1-Hz trace, written out as Appendix 7a defines them (one
+    part: every sample urban): central differences, v·a_pos over a > 0.1 m/s², its 95th
+    percentile, RPA = Σ v·a_pos·Δt / Σ v·Δt over the inner samples."""
+    a = (v_mps[2:] - v_mps[:-2]) / 2.0
+    v = v_mps[1:-1]
+    va = v * a
+    pos = a > 0.1
+    p95 = np.percentile(va[pos], 95, method="inverted_cdf") if pos.any() else np.nan
+    return p95, va[pos].sum() / v.sum(), int(pos.sum())
+
+
+def test_the_bounds_meet_at_the_regulations_breakpoints():
+    """The two pieces of each bound nearly meet where the regulation switches between them
+    (74.6 and 94.05 km/h): a typo in a coefficient would open a gap there."""
+    assert abs(0.136 * 74.6 + 14.44 - (0.0742 * 74.6 + 18.966)) < 0.1
+    assert abs(D.va_pos_95_max(74.6) - D.va_pos_95_max(74.6 + 1e-9)) < 0.1
+    assert abs(D.rpa_min(94.05) - D.rpa_min(94.05 + 1e-9)) < 1e-4
+    assert D.va_pos_95_max(30.0) == pytest.approx(18.52) and D.rpa_min(30.0) == pytest.approx(0.1275)
+    assert D.rpa_min(120.0) == 0.025
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(0.2, 16.0), min_size=30, max_size=300))
+def test_a_trace_reads_as_the_regulation_defines_it(speeds):
+    """Any 1-Hz trace at urban speeds: RPA as the definition gives it; the 95th
+    percentile within one histogram bin above it; the samples counted alike."""
+    v = np.asarray(speeds)
+    p95, rpa, n = rde_by_definition(v)
+    got = D.of_trajectory(np.arange(len(v), dtype=float), v)["parts"]["urban"]
+    assert got["apos_samples"] == n
+    assert got["rpa_mps2"] == pytest.approx(rpa, rel=1e-9, abs=1e-12)
+    if n:
+        assert p95 - 1e-9 <= got["va_pos_95_m2ps3"] <= p95 + D.HIST_STEP + 1e-9
+    assert got["time_s"] == len(v) - 2
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.lists(st.floats(0.0, 40.0), min_size=5, max_size=120), st.sampled_from([0.1, 0.25, 0.5]))
+def test_a_finer_step_with_the_same_whole_second_speeds_reads_the_same(speeds, dt):
+    """A run at a step of 0.1–0.5 s whose speeds at whole seconds are a 1-Hz trace's reads
+    exactly as that trace in the RDE's figures (whatever it does in between)."""
+    v1 = np.asarray(speeds)
+    k = int(round(1 / dt))
+    t = np.arange(len(v1) * k) * dt
+    v = np.repeat(v1, k) + np.tile(np.r_[0.0, np.full(k - 1, 3.0)], len(v1))  # wild in between
+    fine, coarse = D.of_trajectory(t, v, dt=dt), D.of_trajectory(np.arange(len(v1), dtype=float), v1)
+    np.testing.assert_equal(fine["parts"], coarse["parts"])
+
+
+def test_gaps_start_afresh():
+    """A trajectory with a gap longer than 2.5 s takes no central difference across it."""
+    t = np.r_[np.arange(10.0), np.arange(20.0, 30.0)]
+    v = np.r_[np.linspace(0, 9, 10), np.linspace(0, 9, 10)]
+    assert D.of_trajectory(t, v, dt=1.0)["parts"]["urban"]["time_s"] == 16  # 8 + 8 inner samples
+
+
+def test_cycles_read_as_published(tmp_path):
+    """The US06 cycle (an aggressive one), driven three times in a row, exceeds the RDE's percentile bound at urban
+    speeds, WLTC's low phase does not; WLTC low's mean speed is its published 18.9 km/h
+    (UNECE GTR 15, class 3: 589 s, 3.095 km) within the part's definition."""
+    import pandas as pd
+
+    cyc = REPO.parent / "shared" / "data" / "cycles"
+    if not cyc.is_dir():
+        pytest.skip(f"shared cycles not found at {cyc}")
+    low = pd.read_csv(cyc / "wltc_low_3.csv")
+    us06 = pd.read_csv(cyc / "us06.csv")
+    w = D.of_trajectory(low.cycSecs, low.cycMps)["parts"]["urban"]
+    n = len(us06)  # three US06 in a row: enough accelerating samples to be judged
+    u = D.of_trajectory(np.arange(3 * n, dtype=float), np.tile(us06.cycMps.to_numpy(), 3))["parts"]["urban"]
+    assert w["mean_speed_kmh"] == pytest.approx(18.9, abs=0.3)
+    assert w["va_pos_95_m2ps3"] < w["rde_va_pos_95_max"] and w["rpa_mps2"] > w["rde_rpa_min"]
+    assert u["va_pos_95_m2ps3"] > u["rde_va_pos_95_max"]
+    assert D.warnings({"passenger": {"parts": {"urban": u}}})[0].startswith("driving dynamics: trajectories accelerate harder")
+    assert D.warnings({"passenger": {"parts": {"urban": w}}}) == []
+
+
+ROUTES = """<routes>
+    <vType id="t" vClass="passenger" mass="1500" accel="{accel}" decel="4.5" sigma="{sigma}" speedFactor="1"/>
+    <flow id="f0" type="t" from="c00c10" to="c34c44" begin="0" end="300" period="6" departSpeed="0"/>
+    <flow id="f1" type="t" from="c44c43" to="c00c01" begin="0" end="300" period="6" departSpeed="0"/>
+    <flow id="f2" type="t" from="c20c21" to="c23c24" begin="0" end="300" period="6" departSpeed="0"/>
+</routes>
+"""
+
+
+def _run(tmp_path, accel, sigma, step=1.0, fcd=False):
+    from sumo_drvpw.fileio import write_text
+    from sumo_drvpw.sim import run_scenario
+
+    d = tmp_path / f"a{accel}_s{sigma}_{step}"
+    d.mkdir()
+    write_text(d / "r.rou.xml", ROUTES.format(accel=accel, sigma=sigma))
+    opts = '"--seed", "3"' + (', "--fcd-output", "fcd.xml", "--precision", "6"' if fcd else "")
+    write_text(d / "s.toml", f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NETS / "city.net.xml"}"\n'
+                             f'routes = ["r.rou.xml"]\nend = 400\nstep_length = {step}\noptions = [{opts}]\n'
+                             '[outputs]\nfigures = false\n')
+    res = run_scenario(d / "s.toml", d / "o")
+    return res, json.loads((d / "o" / "summary.json").read_text()), d
+
+
+@pytest.mark.sumo
+def test_a_hard_driving_fleet_is_flagged_and_a_gentle_one_is_not(tmp_path):
+    """Real SUMO on the city grid: cars at accel 3.5 m/s² with sigma 0.9 drive beyond
+    the RDE's urban bound and the run says so, naming the vClass; the same cars at accel
+    0.8 and sigma 0 stay within it, with a lower RPA, and the run does not warn."""
+    _, hard, _ = _run(tmp_path, 3.5, 0.9)
+    _, soft, _ = _run(tmp_path, 0.8, 0.0)
+    hd, sd = (r["driving_dynamics"]["vclasses"]["passenger"] for r in (hard, soft))
+    h, s = hd["parts"]["urban"], sd["parts"]["urban"]
+    assert h["va_pos_95_judged"] and s["va_pos_95_judged"]
+    assert h["va_pos_95_m2ps3"] > h["rde_va_pos_95_max"] > s["va_pos_95_m2ps3"]
+    assert h["rpa_mps2"] > s["rpa_mps2"]
+    assert hd["kinetic_j_per_kg_km"] > sd["kinetic_j_per_kg_km"] > 0
+    assert any(w.startswith("driving dynamics: trajectories accelerate harder") and "passenger (urban" in w
+               for w in hard["warnings"])
+    assert not any("driving dynamics" in w for w in soft.get("warnings", []))
+
+
+@pytest.mark.sumo
+def test_the_run_reads_its_trajectories_as_its_fcd_does(tmp_path):
+    """At a 0.5-s step: the FCD replay of the run reads the same figures as the live run,
+    and so does the FCD read vehicle by vehicle through :meth:`Dynamics.add_trajectory` —
+    an independent path — at the times the FCD gives (a state SUMO writes at time t is the
+    one the loop reads after the step, at getTime() = t + Δt): the same samples, RPA to
+    1e-6 (the FCD's 6 decimals)."""
+    from sumo_drvpw.sim.fcd import process_fcd, read_fcd
+
+    _, summ, d = _run(tmp_path, 2.6, 0.5, step=0.5, fcd=True)
+    fcd = d / "o" / "sumo" / "fcd.xml"  # (the run writes SUMO's outputs there)
+    rep = process_fcd(fcd, scenario=d / "s.toml", out_dir=tmp_path / "r", figures=False)
+    gotd, againd = (r["driving_dynamics"]["vclasses"]["passenger"] for r in (summ, rep))
+    got, again = gotd["parts"], againd["parts"]
+    rows = read_fcd(fcd).sort_values(["id", "time"])
+    ref = D.Dynamics()
+    for _, g in rows[~rows["person"]].groupby("id"):
+        ref.add_trajectory(g["time"].to_numpy(), g["speed"].to_numpy(), "passenger", dt=0.5)
+    wantd = ref.summary()["passenger"]
+    want = wantd["parts"]
+    assert set(got) == set(again) == set(want) and got["urban"]["apos_samples"] > 1000
+    for part in want:
+        assert again[part]["apos_samples"] == got[part]["apos_samples"]
+        assert again[part]["rpa_mps2"] == pytest.approx(got[part]["rpa_mps2"], rel=1e-6)
+        assert again[part]["va_pos_95_m2ps3"] == got[part]["va_pos_95_m2ps3"]
+    assert againd["kinetic_j_per_kg_km"] == pytest.approx(gotd["kinetic_j_per_kg_km"], rel=1e-6)
+    # every step's ½Δ(v²)⁺ and v·Δt, from the FCD's rows: the live run books each vehicle
+    # from its insertion step on (its first difference is its first step's), the same sums
+    assert gotd["kinetic_j_per_kg_km"] == pytest.approx(wantd["kinetic_j_per_kg_km"], rel=1e-3)
+    for part in want:
+        assert got[part]["apos_samples"] == want[part]["apos_samples"]
+        assert got[part]["time_s"] == want[part]["time_s"]
+        assert got[part]["rpa_mps2"] == pytest.approx(want[part]["rpa_mps2"], rel=1e-6)
+        assert got[part]["va_pos_95_m2ps3"] == pytest.approx(want[part]["va_pos_95_m2ps3"], abs=D.HIST_STEP)
