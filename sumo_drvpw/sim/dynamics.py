@@ -214,6 +214,26 @@ def of_trajectory(t_s, v_mps, label: str = "trajectory", dt: float | None = None
     return d.summary().get(label, {"parts": {}, "kinetic_j_per_kg_km": float("nan")})
 
 
+def markdown_rows(doc: dict, lead: list[str], min_apos: int = 0) -> list[str]:
+    """Markdown table rows of one class's :meth:`Dynamics.summary` (``doc``), one per part
+    with at least ``min_apos`` accelerating samples, each after the cells ``lead``; the
+    columns of :func:`markdown_head`."""
+    rows = []
+    for part, p in doc["parts"].items():
+        if p["apos_samples"] >= min_apos:
+            rows.append(f"| {' | '.join(lead)} | {part} | {p['mean_speed_kmh']:.1f} | {p['va_pos_95_m2ps3']:.1f} "
+                        f"({p['rde_va_pos_95_max']:.1f}) | {p['rpa_mps2']:.3f} ({p['rde_rpa_min']:.3f}) | "
+                        f"{p['time_s']:.0f} | {doc['kinetic_j_per_kg_km']:.0f} |")
+    return rows
+
+
+def markdown_head(lead: list[str]) -> list[str]:
+    """The header of :func:`markdown_rows`' table after the columns ``lead``."""
+    cols = [*lead, "part", "mean speed km/h", "v·a_pos 95th pct. m²/s³ (RDE max)", "RPA m/s² (RDE min)",
+            "part's time s", "kinetic energy J/(kg·km)"]
+    return ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+
+
 def warnings(summary: dict) -> list[str]:
     """At most two lines: the classes whose trajectories an RDE test would reject as too
     dynamic in some part, and those it would reject as too smooth (judged parts only)."""
