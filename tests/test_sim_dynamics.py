@@ -75,8 +75,8 @@ def test_gaps_start_afresh():
 
 
 def test_cycles_read_as_published(tmp_path):
-    """The US06 cycle (an aggressive one), driven three times in a row, exceeds the RDE's percentile bound at urban
-    speeds, WLTC's low phase does not; WLTC low's mean speed is its published 18.9 km/h
+    """The US06 cycle (an aggressive one), driven three times in a row, exceeds the RDE's
+    percentile bound at urban speeds, WLTC's low phase does not; WLTC low's mean speed is its published 18.9 km/h
     (UNECE GTR 15, class 3: 589 s, 3.095 km) within the part's definition."""
     import pandas as pd
 
@@ -163,8 +163,7 @@ def test_the_run_reads_its_trajectories_as_its_fcd_does(tmp_path):
         assert again[part]["rpa_mps2"] == pytest.approx(got[part]["rpa_mps2"], rel=1e-6)
         assert again[part]["va_pos_95_m2ps3"] == got[part]["va_pos_95_m2ps3"]
     assert againd["kinetic_j_per_kg_km"] == pytest.approx(gotd["kinetic_j_per_kg_km"], rel=1e-6)
-    # every step's ½Δ(v²)⁺ and v·Δt, from the FCD's rows: the live run books each vehicle
-    # from its insertion step on (its first difference is its first step's), the same sums
+    # every step's ½Δ(v²)⁺ and v·Δt summed from the FCD's rows: the run's own sums to 1e-3
     assert gotd["kinetic_j_per_kg_km"] == pytest.approx(wantd["kinetic_j_per_kg_km"], rel=1e-3)
     for part in want:
         assert got[part]["apos_samples"] == want[part]["apos_samples"]
