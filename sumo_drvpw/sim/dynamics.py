@@ -195,7 +195,7 @@ class Dynamics:
                 h = self.hist[lab][k]
                 p95 = float("nan")
                 if h.sum() > 0:  # the upper edge of the bin holding the 95th percentile
-                    p95 = float((np.searchsorted(np.cumsum(h), 0.95 * h.sum(), side="left") + 1) * HIST_STEP)
+                    p95 = round((np.searchsorted(np.cumsum(h), 0.95 * h.sum(), side="left") + 1) * HIST_STEP, 9)
                 parts[name] = {"mean_speed_kmh": vbar, "va_pos_95_m2ps3": p95,
                                "rpa_mps2": va / d if d > 0 else float("nan"),
                                "rde_va_pos_95_max": va_pos_95_max(vbar), "rde_rpa_min": rpa_min(vbar),
