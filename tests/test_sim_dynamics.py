@@ -104,7 +104,7 @@ ROUTES = """<routes>
 """
 
 
-def _run(tmp_path, accel, sigma, step=1.0, fcd=False):
+def _run(tmp_path, accel, sigma, step=1.0, fcd=False, fcd_period=None):
     from sumo_drvpw.fileio import write_text
     from sumo_drvpw.sim import run_scenario
 
@@ -112,6 +112,7 @@ def _run(tmp_path, accel, sigma, step=1.0, fcd=False):
     d.mkdir()
     write_text(d / "r.rou.xml", ROUTES.format(accel=accel, sigma=sigma))
     opts = '"--seed", "3"' + (', "--fcd-output", "fcd.xml", "--precision", "6"' if fcd else "")
+    opts += f', "--device.fcd.period", "{fcd_period}"' if fcd_period else ""
     write_text(d / "s.toml", f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NETS / "city.net.xml"}"\n'
                              f'routes = ["r.rou.xml"]\nend = 400\nstep_length = {step}\noptions = [{opts}]\n'
                              '[outputs]\nfigures = false\n')
@@ -170,3 +171,29 @@ def test_the_run_reads_its_trajectories_as_its_fcd_does(tmp_path):
         assert got[part]["time_s"] == want[part]["time_s"]
         assert got[part]["rpa_mps2"] == pytest.approx(want[part]["rpa_mps2"], rel=1e-6)
         assert got[part]["va_pos_95_m2ps3"] == pytest.approx(want[part]["va_pos_95_m2ps3"], abs=D.HIST_STEP)
+
+
+@pytest.mark.sumo
+def test_an_fcd_written_every_second_replays_the_runs_1hz_figures(tmp_path):
+    """A 0.5-s run whose FCD holds a row per second: its replay reads the live run's 1-Hz
+    figures exactly (they need no more), while its kinetic energy per km is that of the
+    rows' 1-s steps, lower than the run's own (the oscillation between the rows is gone)."""
+    from sumo_drvpw.sim.fcd import process_fcd
+
+    _, summ, d = _run(tmp_path, 2.6, 0.5, step=0.5, fcd=True, fcd_period=1)
+    rep = process_fcd(d / "o" / "sumo" / "fcd.xml", scenario=d / "s.toml", out_dir=tmp_path / "r", figures=False)
+    live, again = (r["driving_dynamics"]["vclasses"]["passenger"] for r in (summ, rep))
+    assert set(live["parts"]) == set(again["parts"]) and live["parts"]["urban"]["apos_samples"] > 1000
+    for part, p in live["parts"].items():
+        for k in ("apos_samples", "time_s", "va_pos_95_m2ps3"):
+            assert again["parts"][part][k] == p[k], (part, k)
+        assert again["parts"][part]["rpa_mps2"] == pytest.approx(p["rpa_mps2"], rel=1e-6)
+    assert 0 < again["kinetic_j_per_kg_km"] < 0.9 * live["kinetic_j_per_kg_km"]
+
+
+def test_steps_longer_than_the_rdes_differences_give_no_1hz_figures():
+    """A trajectory at 2-s steps has no samples a second either side: no RDE figures, its
+    kinetic energy per km still."""
+    doc = D.of_trajectory(np.arange(0.0, 40.0, 2.0), np.linspace(0.0, 15.0, 20))
+    assert doc["parts"] == {} and doc["kinetic_j_per_kg_km"] > 0
+    assert D.warnings({"passenger": doc}) == []

@@ -25,7 +25,10 @@ rural (60–90) and motorway (> 90); per part
 its RPA from as many samples.) The speeds are sampled at the first step of
 every whole second of simulation time, so a run at 0.25 s and one at 1 s that drive the
 same trajectory measure the same; a vehicle's sample needs its speeds one and two
-seconds before (a vehicle off the lane in between, teleporting or parked, starts afresh).
+seconds before (a vehicle off the lane in between, teleporting or parked, starts afresh; a
+run whose steps are longer than 1.25 s has no such samples and gets no 1-Hz figures).
+An FCD replay reads the same 1-Hz figures from rows written every second, while its
+kinetic energy per km is at its rows' spacing.
 Only accounted vehicles count, per vClass label as the run reports classes. Each part
 keeps sums and a histogram of v·a_pos (bins of :data:`HIST_STEP` m²/s³), so the figures
 of Dask buckets and of vehicles flushed from memory add up exactly.
