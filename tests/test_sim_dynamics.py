@@ -134,7 +134,8 @@ def test_a_hard_driving_fleet_is_flagged_and_a_gentle_one_is_not(tmp_path):
     assert h["rpa_mps2"] > s["rpa_mps2"]
     assert hd["kinetic_j_per_kg_km"] > sd["kinetic_j_per_kg_km"] > 0
     assert any(w.startswith("driving dynamics: trajectories accelerate harder") and "passenger (urban" in w
-               for w in hard["warnings"])
+               and "; vType t)" in w for w in hard["warnings"])  # the vType to look at
+    assert hd["vtypes"] == ["t"]
     assert not any("driving dynamics" in w for w in soft.get("warnings", []))
 
 

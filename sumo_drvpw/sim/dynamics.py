@@ -237,6 +237,15 @@ def markdown_head(lead: list[str]) -> list[str]:
     return ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
 
 
+def _vtypes(doc: dict, show: int = 4) -> str:
+    """'; vTypes a, b, c and N more' of a class's summary (``vtypes``), or ''."""
+    names = doc.get("vtypes") or []
+    if not names:
+        return ""
+    more = f" and {len(names) - show} more" if len(names) > show else ""
+    return f"; vType{'s' if len(names) > 1 else ''} {', '.join(names[:show])}{more}"
+
+
 def warnings(summary: dict) -> list[str]:
     """At most two lines: the classes whose trajectories an RDE test would reject as too
     dynamic in some part, and those it would reject as too smooth (judged parts only)."""
@@ -250,7 +259,7 @@ def warnings(summary: dict) -> list[str]:
         under = [f"{name} {p['rpa_mps2']:.3f} < {p['rde_rpa_min']:.3f} m/s² at {p['mean_speed_kmh']:.0f} km/h"
                  for name, p in parts.items() if p["rpa_judged"] and p["rpa_mps2"] < p["rde_rpa_min"]]
         if over:
-            hard.append(f"{lab} ({', '.join(over)}{heavy})")
+            hard.append(f"{lab} ({', '.join(over)}{heavy}{_vtypes(doc)})")
         if under:
             smooth.append(f"{lab} ({', '.join(under)})")
     out = []

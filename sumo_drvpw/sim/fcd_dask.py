@@ -122,6 +122,8 @@ def merge_ledgers(ledgers: list):
             setattr(out, name, getattr(out, name) + getattr(led, name))
         out.load_max_kg = max(out.load_max_kg, led.load_max_kg)
         out.dynamics.merge(led.dynamics)
+        for c, types in led.class_vtypes.items():
+            out.class_vtypes.setdefault(c, {}).update(types)
         out.snapshots = [(s[0],) + tuple(x + y for x, y in zip(s[1:], o[1:]))
                          for s, o in zip(out.snapshots, led.snapshots)]
         out.flushed_types |= led.flushed_types

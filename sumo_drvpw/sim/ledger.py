@@ -190,6 +190,8 @@ class Ledger:
         #: vClass labels in the order vehicles of them were first registered
         self.class_seen: dict[str, None] = {}
         self.class_list: list[str] = []  # the same, as a list (veh_cls indexes it)
+        #: vClass label → the vTypes of its accounted vehicles, in the order first seen
+        self.class_vtypes: dict[str, dict[str, None]] = {}
         #: the trajectories' driving dynamics against real driving (EU RDE)
         self.dynamics = Dynamics()
 
@@ -326,6 +328,8 @@ class Ledger:
         if self.n_veh > self.peak_held:
             self.peak_held = self.n_veh
         label = vclass or "unknown"
+        if keep:
+            self.class_vtypes.setdefault(label, {})[vtype] = None
         if label not in self.class_seen:
             self.class_seen[label] = None
             self.class_list.append(label)

@@ -245,6 +245,8 @@ def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: boo
     dyn = getattr(ledger, "dynamics", None)
     if dyn is not None:
         out["driving_dynamics"] = {"source": dynamics.SOURCE, "vclasses": dyn.summary()}
+        for lab, doc in out["driving_dynamics"]["vclasses"].items():  # where to look: its vTypes
+            doc["vtypes"] = sorted(ledger.class_vtypes.get(lab, ()))
         warn = list(warn) + dynamics.warnings(out["driving_dynamics"]["vclasses"])
     if warn:
         out["warnings"] = list(out.get("warnings", [])) + warn
