@@ -147,7 +147,7 @@ class Dynamics:
                     continue
                 pk = mk & pos
                 sums[k] += (dt[mk].sum(), (v[mk] * dt[mk]).sum(), pk.sum(), (va[pk] * dt[pk]).sum())
-                np.add.at(hist[k], np.minimum((va[pk] / HIST_STEP).astype(np.int64), HIST_BINS - 1), 1)
+                np.add.at(hist[k], np.clip((va[pk] / HIST_STEP).astype(np.int64), 0, HIST_BINS - 1), 1)
 
     def add_trajectory(self, t_s, v_mps, label: str, dt: float | None = None) -> None:
         """Add one vehicle's trajectory (times [s], speeds [m/s], in time order, at a step
