@@ -4,6 +4,7 @@ for both), medians and their ratio."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import statistics
 import subprocess
@@ -18,6 +19,19 @@ def report(kind: str, seconds: float, rows: int) -> None:
         if line.startswith("VmHWM:"):
             rss = int(line.split()[1]) / 1024.0
     print(json.dumps({"kind": kind, "s": seconds, "rss_mb": rss, "rows": rows}))
+
+
+def parse(ap: argparse.ArgumentParser, child, nargs: int):
+    """The benchmark's arguments plus ``--repeats`` and the hidden ``--child KIND ARG…``
+    that :func:`compare` passes (``nargs`` values); called as a child, run ``child(*those)``
+    and return None, else return the arguments."""
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--child", nargs=nargs, help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.child:
+        child(*a.child)
+        return None
+    return a
 
 
 def compare(script: str, baseline: str, candidate: str, args: list[str], repeats: int, rows: int) -> None:

@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _child import compare, report
+from _child import compare, parse, report
 
 EQ = '[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = 0.4\n'
 
@@ -62,11 +62,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--hours", type=float, default=50.0)
     ap.add_argument("--engine", default="local", choices=("local", "memory"))
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
-    a = ap.parse_args()
-    if a.child:
-        child(*a.child)
+    a = parse(ap, child, 3)
+    if a is None:
         return
     with tempfile.TemporaryDirectory() as tmp:
         n = write_logs(Path(tmp), a.hours)

@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _child import compare, report
+from _child import compare, parse, report
 
 
 def write_log(path: Path, hours: float, pids: int) -> int:
@@ -59,17 +59,15 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--hours", type=float, default=10.0)
     ap.add_argument("--pids", type=int, default=50)
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
-    a = ap.parse_args()
-    if a.child:
-        child(*a.child)
+    a = parse(ap, child, 2)
+    if a is None:
         return
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "log.csv"
         n = write_log(path, a.hours, a.pids)
         print(f"{n} rows, {path.stat().st_size / 1e6:.0f} MB")
         compare(__file__, "read_csv", "import", [str(path)], a.repeats, n)
+
 
 if __name__ == "__main__":
     main()

@@ -22,7 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _child import compare, report
+from _child import compare, parse, report
 
 RATES_HZ = (10.0, 20.0, 50.0, 100.0)
 
@@ -51,7 +51,8 @@ def write_mf4(path: Path, hours: float, channels: int) -> int:
     return len(ts)
 
 
-def child(kind: str, path: str, channels: int) -> None:
+def child(kind: str, path: str, channels: str) -> None:
+    channels = int(channels)
     t0 = time.perf_counter()
     if kind == "import":
         from sumo_drvpw.data.adapters import read
@@ -70,11 +71,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--hours", type=float, default=10.0)
     ap.add_argument("--channels", type=int, default=12)
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
-    a = ap.parse_args()
-    if a.child:
-        child(a.child[0], a.child[1], int(a.child[2]))
+    a = parse(ap, child, 3)
+    if a is None:
         return
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "log.mf4"

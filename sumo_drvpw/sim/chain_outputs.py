@@ -105,7 +105,7 @@ def write_chain_outputs(out_dir, result) -> dict[str, str]:
     chain = led.chain
     n = led.n_veh
     ids, classes = list(led.veh_ids[:n]), [c or "unknown" for c in led.veh_class[:n]]
-    order = list(getattr(led, "class_seen", {}) or [])
+    order = list(getattr(led, "class_list", []) or [])
     rep = chain.report(ids, classes, list(result.net.edge_ids), order)
     files = {}
     spill = getattr(led, "spill", None)

@@ -128,10 +128,7 @@ def merge_ledgers(ledgers: list):
                          for s, o in zip(out.snapshots, led.snapshots)]
         out.flushed_types |= led.flushed_types
         out.peak_held = max(out.peak_held, led.peak_held)
-        for c in led.class_seen:
-            if c not in out.class_seen:
-                out.class_seen[c] = None
-                out.class_list.append(c)
+        out.class_list += [c for c in led.class_list if c not in out.class_list]
         if out.chain is not None:
             a, b = out.chain, led.chain
             a._edge = a._edge + b._edge

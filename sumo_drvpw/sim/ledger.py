@@ -187,9 +187,8 @@ class Ledger:
         self.flushed_types: set[str] = set()
         #: most vehicles held in memory at once
         self.peak_held = 0
-        #: vClass labels in the order vehicles of them were first registered
-        self.class_seen: dict[str, None] = {}
-        self.class_list: list[str] = []  # the same, as a list (veh_cls indexes it)
+        #: vClass labels in the order vehicles of them were first registered (veh_cls indexes it)
+        self.class_list: list[str] = []
         #: vClass label → the vTypes of its accounted vehicles, in the order first seen
         self.class_vtypes: dict[str, dict[str, None]] = {}
         #: the trajectories' driving dynamics against real driving (EU RDE)
@@ -330,8 +329,7 @@ class Ledger:
         label = vclass or "unknown"
         if keep:
             self.class_vtypes.setdefault(label, {})[vtype] = None
-        if label not in self.class_seen:
-            self.class_seen[label] = None
+        if label not in self.class_list:
             self.class_list.append(label)
         self.veh_cls[i] = self.class_list.index(label)
         return i
