@@ -49,12 +49,12 @@ def test_a_replay_books_a_car_blocked_in_its_parking_space_as_the_live_run(tmp_p
     emission output books it 100 W every idling step. The FCD has no signals: the declared
     stops tell the idling rows. Measured 2026-11-27 before the fix (step 0.5 s,
     duration 20): the replay booked 49.52 Wh against the live run's and SUMO's 53.91. Now
-    every car as the live run to 1e-6, in memory, streamed in blocks of 7 rows (timesteps
+    every car as the live run to 1e-6, in memory, streamed in blocks of 31 rows (timesteps
     cut), and the idling rows counted."""
     sc, live, sumo = recorded(tmp_path, step, stop=stop, signals=signals)
     assert live["p"] == pytest.approx(sumo["p"], rel=1e-6)
     idle_s = 8.0 if step == 1.0 else 150.0  # booked idling at least (the row it leaves in aside)
-    for rows in (None, 7):
+    for rows in (None, 31):
         out = tmp_path / f"r{rows}"
         res = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=out, chunk_rows=rows)
         got = _chain(out)
@@ -91,7 +91,7 @@ def test_a_triggered_parking_idles_from_the_step_its_person_boards(tmp_path):
     (tmp_path / "nosig.xml").write_text(re.sub(r' signals="[^"]*"', "", text))
     rows = {}
     for f in ("fcd.xml", "nosig.xml"):
-        res = process_fcd(tmp_path / f, scenario=sc, out_dir=tmp_path / f"o_{f}", chunk_rows=9)
+        res = process_fcd(tmp_path / f, scenario=sc, out_dir=tmp_path / f"o_{f}", chunk_rows=31)
         pd.testing.assert_series_equal(_chain(tmp_path / f"o_{f}"), live, rtol=1e-6)
         rows[f] = res["source"]["idling_rows"]
     assert rows["fcd.xml"] == rows["nosig.xml"] > 250  # ~139 s from 60 s on

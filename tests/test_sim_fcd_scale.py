@@ -50,6 +50,11 @@ def fcd(tmp_path_factory):
     return d
 
 
+#: rows per block of the streamed reads: a prime, so boundaries fall inside timesteps and
+#: inside the vehicles' trips (about 200 blocks of the 200-s city FCD)
+ROWS = 97
+
+
 def _tables(res):
     v = res.vehicles.sort_values(KEY).reset_index(drop=True)
     e = res.edges.sort_values(["edge", "equation"]).reset_index(drop=True)
@@ -60,7 +65,7 @@ def _tables(res):
 @pytest.mark.sumo
 @pytest.mark.parametrize("name", ["fcd.xml.gz", "fcd.parquet", "fcd.csv"])
 def test_streamed_fcd_equals_the_whole_file(fcd, tmp_path, name):
-    """Blocks of 13 rows (Parquet: block boundaries inside timesteps and inside every
+    """Blocks of :data:`ROWS` rows (block boundaries inside timesteps and inside every
     vehicle's trip) book exactly what the whole file read at once books: per-vehicle,
     per-edge and per-class tables and the summary's energies, bit for bit; with flushes of
     2 finished vehicles, so the arrivals must come at the same steps too."""
@@ -68,12 +73,12 @@ def test_streamed_fcd_equals_the_whole_file(fcd, tmp_path, name):
     if name == "fcd.csv":  # SUMO's tabular CSV, from the Parquet output's rows
         pd.read_parquet(fcd / "fcd.parquet").to_csv(path, sep=";", index=False)
     if name.endswith(".parquet"):  # the test's premise: a timestep is cut by a block boundary
-        blocks = list(iter_fcd_blocks(path, 13))
+        blocks = list(iter_fcd_blocks(path, ROWS))
         cut = sum(a.cols["time"][-1] == b.cols["time"][0] for a, b in zip(blocks, blocks[1:]))
         assert cut > 10
     kw = dict(scenario=CITY, equations=[PHYS, VSP], end=200, figures=False, flush_vehicles=2)
     ref = process_fcd(path, chunk_rows=None, out_dir=tmp_path / "ref", **kw)
-    res = process_fcd(path, chunk_rows=13, out_dir=tmp_path / "out", **kw)
+    res = process_fcd(path, chunk_rows=ROWS, out_dir=tmp_path / "out", **kw)
     for a, b in zip(_tables(ref), _tables(res)):
         pd.testing.assert_frame_equal(a, b, check_exact=True)
     assert len(_tables(res)[0]) > 80 and res.ledger.flushed_vehicles >= 8
