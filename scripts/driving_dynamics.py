@@ -3,7 +3,7 @@ measured as a SUMO run's trajectories are (sumo_drvpw/sim/dynamics.py: EU RDE
 trip-dynamics figures per urban/rural/motorway part), as references for the
 ``driving_dynamics`` a run reports (docs/scenario.md, "Driving dynamics").
 
-    .venv/bin/python scripts/driving_dynamics.py --data ../shared/data [--only cycles|logs]
+    .venv/bin/python scripts/driving_dynamics.py --data ../shared/data [--only cycles|logs|profile]
 
 Cycles: ``DATA/cycles/`` (FASTSim's WLTC class 3 phases, UDDS, HWFET, US06; carculator's
 CADC — the Common Artemis Driving Cycles, built from real European driving — urban, road and
@@ -15,6 +15,11 @@ trip a trajectory of its car. Prints a Markdown table for each: per cycle or car
 its mean speed, the 95th percentile of v·a_pos against the RDE's largest, the relative
 positive acceleration against the RDE's smallest, the part's time, and per cycle or car
 the positive kinetic energy per kg and km at its own rate. About 15 s.
+
+``--only profile``: per car the 95th percentile of its trips' accelerations above 0.1 m/s²
+in 5-m/s speed bins (speeds interpolated to whole seconds, central differences): a SUMO
+vType's speed-dependent desired acceleration (``speedTable``/``desAccelProfile``) from
+measured driving (docs/scenario.md, "Driving dynamics").
 """
 
 from __future__ import annotations
@@ -26,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.sim.dynamics import Dynamics, markdown_head, markdown_rows, of_trajectory
+from sumo_drvpw.sim.dynamics import A_POS_MIN, Dynamics, markdown_head, markdown_rows, of_trajectory
 from sumo_drvpw.validation.chain_common import read_shared
 
 #: (label, file, time column, speed column, speed unit factor to m/s, separator)
@@ -80,10 +85,40 @@ def log_rows(data: Path) -> list[str]:
     return out
 
 
+#: speed bins of the acceleration profile [m/s], and the smallest sample count a bin needs
+PROFILE_BIN_MPS = 5.0
+PROFILE_MIN_SAMPLES = 50
+
+
+def profile_rows(data: Path) -> list[str]:
+    out = ["| logs | speed m/s | samples with a > 0.1 m/s² | median m/s² | 85th pct. | 95th pct. |",
+           "|---|---|---|---|---|---|"]
+    for label, folder, fmt, vehicle in LOGS:
+        df = read_shared(data, folder, fmt, vehicle)[0].df
+        vs, acc = [], []
+        for _, g in df.groupby("trip_id", sort=False):
+            t, v = g["time_s"].to_numpy(float), g["speed_mps"].to_numpy(float)
+            ok = np.isfinite(t) & np.isfinite(v)
+            t, v = t[ok], v[ok]
+            if len(t) < 3:
+                continue
+            v1 = np.interp(np.arange(np.ceil(t[0]), np.floor(t[-1]) + 1), t, v)
+            vs.append(v1[1:-1])
+            acc.append((v1[2:] - v1[:-2]) / 2.0)
+        v, a = np.concatenate(vs), np.concatenate(acc)
+        for lo in np.arange(0.0, v.max(), PROFILE_BIN_MPS):
+            s = (v >= lo) & (v < lo + PROFILE_BIN_MPS) & (a > A_POS_MIN)
+            if s.sum() >= PROFILE_MIN_SAMPLES:
+                q = np.percentile(a[s], [50, 85, 95])
+                out.append(f"| {label} | {lo:.0f}–{lo + PROFILE_BIN_MPS:.0f} | {int(s.sum())} | "
+                           f"{q[0]:.2f} | {q[1]:.2f} | {q[2]:.2f} |")
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="../shared/data", help="the shared data folder (holds cycles/ and the logs)")
-    ap.add_argument("--only", choices=("cycles", "logs"), help="print one table only")
+    ap.add_argument("--only", choices=("cycles", "logs", "profile"), help="print one table only")
     a = ap.parse_args(argv)
     data = Path(a.data)
     out = []
@@ -91,6 +126,8 @@ def main(argv=None) -> int:
         out += ["Standard cycles:", "", *cycle_rows(data), ""]
     if a.only in (None, "logs"):
         out += ["Measured trips:", "", *log_rows(data), ""]
+    if a.only in (None, "profile"):
+        out += ["Accelerations by speed:", "", *profile_rows(data), ""]
     print("\n".join(out))
     return 0
 

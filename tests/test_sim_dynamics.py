@@ -134,9 +134,55 @@ def test_a_hard_driving_fleet_is_flagged_and_a_gentle_one_is_not(tmp_path):
     assert h["rpa_mps2"] > s["rpa_mps2"]
     assert hd["kinetic_j_per_kg_km"] > sd["kinetic_j_per_kg_km"] > 0
     assert any(w.startswith("driving dynamics: trajectories accelerate harder") and "passenger (urban" in w
-               and "; vType t)" in w for w in hard["warnings"])  # the vType to look at
+               and "; vType t (Krauss, accel 3.5, sigma 0.9))" in w for w in hard["warnings"])  # where to look
     assert hd["vtypes"] == ["t"]
+    assert hd["vtype_driving"] == {"t": {"car_follow_model": "Krauss", "accel_mps2": 3.5, "decel_mps2": 4.5,
+                                         "sigma": 0.9, "des_accel_profile": False}}
     assert not any("driving dynamics" in w for w in soft.get("warnings", []))
+
+
+VTYPES = """<routes>
+    <vType id="plain"/>
+    <vType id="eidm" carFollowModel="EIDM" accel="1.9"/>
+    <vType id="child" vClass="bus" sigma="0.2"><carFollowing-Krauss accel="0.9" sigma="0.3"/></vType>
+    <vType id="idm_child" vClass="truck"><param key="x" value="1"/><carFollowing-IDM decel="3.5"/></vType>
+    <vType id="profile" accel="2.6" sigma="0" speedTable="0 10 20" desAccelProfile="2 1.5 0.8"/>
+    <vType id="kx" carFollowModel="KraussPS" vClass="coach"/>
+{classes}
+</routes>
+"""
+
+
+@pytest.mark.sumo
+def test_the_vtypes_driving_parameters_read_as_sumo_reads_them(tmp_path):
+    """Every vClass's car-following defaults, and vTypes that write attributes, a child
+    ``<carFollowing-X>`` or another model: what the run lists for each vType (from the
+    files, so an FCD replay lists the same) is what SUMO answers — accel, decel, and sigma
+    (getImperfection; −1, a model without it, is None)."""
+    libsumo = pytest.importorskip("libsumo")
+    from sumo_drvpw.fileio import write_text
+    from sumo_drvpw.sim.vtypes import read_vtypes
+
+    classes = [*D.SUMO_CF_DEFAULTS, "taxi", "delivery", "emergency", "evehicle", "custom1", "army"]
+    rou = tmp_path / "v.rou.xml"
+    write_text(rou, VTYPES.format(classes="\n".join(
+        f'    <vType id="c_{c}" vClass="{c}"/>' for c in classes)))
+    files = read_vtypes([rou])
+    libsumo.start(["sumo", "-n", str(NETS / "city.net.xml"), "-r", str(rou), "--no-step-log", "true"])
+    try:
+        for vt in libsumo.vehicletype.getIDList():
+            info = files.get(vt)
+            got = D.vtype_driving(info.driving if info else None,
+                                  (info.vclass if info else None) or libsumo.vehicletype.getVehicleClass(vt))
+            sigma = libsumo.vehicletype.getImperfection(vt)
+            assert (got["accel_mps2"], got["decel_mps2"], got["sigma"]) == (
+                libsumo.vehicletype.getAccel(vt), libsumo.vehicletype.getDecel(vt),
+                None if sigma == -1 else sigma), vt
+    finally:
+        libsumo.close()
+    assert D.vtype_driving(files["child"].driving, "bus")["car_follow_model"] == "Krauss"
+    assert D.vtype_driving(files["idm_child"].driving, "truck")["car_follow_model"] == "IDM"
+    assert [D.vtype_driving(files[v].driving, None)["des_accel_profile"] for v in ("profile", "plain")] == [True, False]
 
 
 @pytest.mark.sumo

@@ -382,7 +382,8 @@ class Accountant(_Listener):
                             "start a new one for the new run".format(*self.left_new_run))
         warnings += chain_warnings(led.chain, led.chainless)
         summary_extra["warnings"] = warnings + list(summary_extra.get("warnings", []))
-        summary = summary_dict(led, net, self.names, self.eqset.uses_other, summary_extra)
+        summary = summary_dict(led, net, self.names, self.eqset.uses_other, summary_extra,
+                               self.file_vtypes)
         classes = list(net.classes)
         k = np.array([classes.index(c) for c in net.edge_class], np.int64)
         for e, eq in enumerate(self.equations):

@@ -57,6 +57,20 @@ SUMS = ("time_s", "distance_m", "apos_samples", "va_pos_sum")
 MAX_SPAN_S = 2.5
 #: vClass labels of heavy vehicles: the RDE's bounds are a light-duty vehicle's
 HEAVY = frozenset({"bus", "coach", "truck", "trailer"})
+#: SUMO 1.28's car-following defaults of a vType that sets none, per vClass: accel, decel
+#: [m/s²] and the Krauss driver imperfection sigma (vehicletype.getAccel, getDecel,
+#: getImperfection; tests/test_sim_dynamics.py asks SUMO); any other vClass: the passenger's
+SUMO_CF_DEFAULTS = {
+    "passenger": (2.6, 4.5, 0.5), "bicycle": (1.2, 3.0, 0.5), "pedestrian": (1.5, 2.0, 0.5),
+    "moped": (1.1, 7.0, 0.5), "motorcycle": (6.0, 10.0, 0.5), "bus": (1.2, 4.0, 0.5),
+    "coach": (2.0, 4.0, 0.5), "truck": (1.3, 4.0, 0.5), "trailer": (1.1, 4.0, 0.5),
+    "tram": (1.0, 3.0, 0.0), "rail_urban": (1.0, 3.0, 0.0), "rail": (0.25, 1.3, 0.0),
+    "rail_electric": (0.5, 1.3, 0.0), "rail_fast": (0.5, 1.3, 0.0), "ship": (0.1, 0.15, 0.0),
+}
+#: SUMO's default car-following model, and the models that read sigma (the Krauss family;
+#: SUMO answers getImperfection −1 for the others)
+CF_DEFAULT_MODEL = "Krauss"
+SIGMA_MODELS = frozenset({"Krauss", "KraussOrig1", "KraussPS", "KraussX"})
 SOURCE = ("EU RDE trip dynamics: Commission Regulation (EU) 2017/1151, Annex IIIA, Appendix 7a "
           "(95th percentile of v·a_pos and relative positive acceleration per urban/rural/motorway part)")
 
@@ -237,13 +251,53 @@ def markdown_head(lead: list[str]) -> list[str]:
     return ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
 
 
+def _number(val: str | None, default: float | None) -> float | str | None:
+    """A car-following attribute as written (a number, else its text), else ``default``."""
+    if val is None:
+        return default
+    try:
+        return float(val)
+    except ValueError:
+        return val
+
+
+def vtype_driving(driving: dict | None, vclass: str | None) -> dict:
+    """What drives a vType's accelerations (:attr:`~sumo_drvpw.sim.vtypes.VTypeInfo.driving`
+    as written, else SUMO's defaults for its vClass): ``car_follow_model``, ``accel_mps2``,
+    ``decel_mps2``, ``sigma`` (None: its model reads none) and ``des_accel_profile`` (a
+    speed-dependent desired acceleration, SUMO's ``speedTable``/``desAccelProfile``)."""
+    d = driving or {}
+    accel, decel, sigma = SUMO_CF_DEFAULTS.get(vclass or "passenger", SUMO_CF_DEFAULTS["passenger"])
+    model = d.get("carFollowModel") or CF_DEFAULT_MODEL
+    return {"car_follow_model": model, "accel_mps2": _number(d.get("accel"), accel),
+            "decel_mps2": _number(d.get("decel"), decel),
+            "sigma": _number(d.get("sigma"), sigma) if model in SIGMA_MODELS else None,
+            "des_accel_profile": d.get("desAccelProfile") is not None}
+
+
+def _text(x) -> str:
+    return f"{x:g}" if isinstance(x, float) else str(x)
+
+
 def _vtypes(doc: dict, show: int = 4) -> str:
-    """'; vTypes a, b, c and N more' of a class's summary (``vtypes``), or ''."""
+    """'; vTypes a (Krauss, accel 2.6, sigma 0.5), b … and N more' of a class's summary
+    (``vtypes``, ``vtype_driving``), or ''."""
     names = doc.get("vtypes") or []
     if not names:
         return ""
     more = f" and {len(names) - show} more" if len(names) > show else ""
-    return f"; vType{'s' if len(names) > 1 else ''} {', '.join(names[:show])}{more}"
+
+    def say(name):
+        p = (doc.get("vtype_driving") or {}).get(name)
+        if p is None:
+            return name
+        what = [p["car_follow_model"], f"accel {_text(p['accel_mps2'])}"]
+        if p["sigma"] is not None:
+            what.append(f"sigma {_text(p['sigma'])}")
+        if p["des_accel_profile"]:
+            what.append("desAccelProfile")
+        return f"{name} ({', '.join(what)})"
+    return f"; vType{'s' if len(names) > 1 else ''} {', '.join(say(n) for n in names[:show])}{more}"
 
 
 def warnings(summary: dict) -> list[str]:
@@ -269,7 +323,9 @@ def warnings(summary: dict) -> list[str]:
                    "term books more kinetic energy than such driving would: check the vTypes' accel and sigma "
                    "(the Krauss model accelerates at the full accel at any speed, where a real vehicle's power "
                    "limits it, and its driver imperfection sigma adds speed "
-                   "oscillations whose size depends on the step length, SUMO issue #10494) (summary.json driving_dynamics)")
+                   "oscillations whose size depends on the step length, SUMO issue #10494; the vType "
+                   "attributes speedTable and desAccelProfile lower its desired acceleration with speed) "
+                   "(summary.json driving_dynamics)")
     if smooth:
         out.append("driving dynamics: trajectories smoother than a valid real-world test trip (EU RDE, "
                    f"relative positive acceleration below its bound): {'; '.join(smooth)}; the acceleration term "

@@ -20,6 +20,7 @@ from sumo_drvpw.fileio import atomic_path, write_figure, write_json, write_parqu
 from sumo_drvpw.sim import dynamics, teleport
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, Ledger
 from sumo_drvpw.sim.network import Network
+from sumo_drvpw.sim.vtypes import SUMO_DEFAULT_VTYPES
 
 UNITS = {"_j": "J", "_m": "m", "_s": "s", "_kg": "kg", "_w": "W", "_mps": "m/s",
          "_mps2": "m/s2", "_rad": "rad", "share": "1", "_whpkm": "Wh/km", "_kwh": "kWh",
@@ -207,8 +208,10 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
 
 
 def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: bool,
-                 extra: dict) -> dict:
-    """The summary.json document (see the issue's contract)."""
+                 extra: dict, vtypes: dict | None = None) -> dict:
+    """The summary.json document (see the issue's contract); ``vtypes``: the route files'
+    vTypes (:func:`~sumo_drvpw.sim.vtypes.read_vtypes`), whose car-following attributes the
+    driving dynamics list."""
     classes, tr, rc = class_energy(ledger, net)
     cats = list(LEDGER_CATEGORIES) if uses_other else list(LEDGER_CATEGORIES[:4])
     eqs = {}
@@ -247,10 +250,20 @@ def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: boo
         out["driving_dynamics"] = {"source": dynamics.SOURCE, "vclasses": dyn.summary()}
         for lab, doc in out["driving_dynamics"]["vclasses"].items():  # where to look: its vTypes
             doc["vtypes"] = sorted(ledger.class_vtypes.get(lab, ()))
+            doc["vtype_driving"] = {vt: dynamics.vtype_driving(*_cf_of(vtypes or {}, vt)) for vt in doc["vtypes"]}
         warn = list(warn) + dynamics.warnings(out["driving_dynamics"]["vclasses"])
     if warn:
         out["warnings"] = list(out.get("warnings", [])) + warn
     return out
+
+
+def _cf_of(vtypes: dict, vt: str) -> tuple[dict | None, str | None]:
+    """A vType's car-following attributes as the files write them, and its vClass (SUMO's
+    own vTypes, like DEFAULT_VEHTYPE, when no file redeclares them)."""
+    info = vtypes.get(vt)
+    if info is None:
+        return None, SUMO_DEFAULT_VTYPES.get(vt, "passenger")
+    return info.driving, info.vclass or "passenger"
 
 
 class TraceWriter:

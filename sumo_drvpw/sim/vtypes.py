@@ -218,6 +218,9 @@ class VTypeInfo:
     #: whether param ``has.battery.device`` is true (SUMO then runs a vType without an
     #: emissionClass on its Energy model: "The emission class Energy/unknown will be used")
     battery_device: bool = False
+    #: its car-following attributes as written (:data:`CF_KEYS`; a ``<carFollowing-X>``
+    #: child's over the vType's own, and model X), None when it writes none of them
+    driving: dict | None = None
 
 
 #: SUMO's default vType lengths of the heavy classes [m] (for the booking note)
@@ -317,6 +320,22 @@ def is_true(val: str | None) -> bool:
 
 
 #: the route files' elements that define vehicles (and may carry a vehicle's own params)
+#: the car-following attributes a file's vType keeps (:attr:`VTypeInfo.driving`)
+CF_KEYS = ("carFollowModel", "accel", "decel", "sigma", "sigmaStep", "speedTable", "desAccelProfile")
+CF_CHILD = "carFollowing-"
+
+
+def _driving(el) -> dict | None:
+    """:attr:`VTypeInfo.driving` of a ``<vType>`` element (its children still attached)."""
+    out = {k: el.attrib[k] for k in CF_KEYS if el.attrib.get(k) is not None}
+    for ch in el:
+        tag = ch.tag.split("}")[-1]
+        if tag.startswith(CF_CHILD):
+            out.update({k: ch.attrib[k] for k in CF_KEYS if ch.attrib.get(k) is not None})
+            out["carFollowModel"] = tag[len(CF_CHILD):]
+    return out or None
+
+
 VEHICLE_TAGS = {"vehicle": "vehicle_cold_start", "trip": "vehicle_cold_start", "flow": "flow_cold_start"}
 
 
@@ -360,7 +379,7 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                 if tag in ("container", "containerFlow"):
                     out.containers += 1
                 if tag != "vType":
-                    if tag not in ("param",):
+                    if tag != "param" and not tag.startswith(CF_CHILD):
                         el.clear()
                     continue
                 vid = el.attrib.get("id")
@@ -387,7 +406,8 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                                      {k: params[k] for k in ENERGY_KEYS if params.get(k) is not None} or None,
                                      _mass(where, "mass", el.attrib.get("mass")),
                                      params.get("drvpw.mass") is not None,
-                                     is_true(params.get("has.battery.device")))
+                                     is_true(params.get("has.battery.device")),
+                                     _driving(el))
                 el.clear()
     except ET.ParseError as e:
         raise UserError(f"{path}: not valid XML: {e}") from None
