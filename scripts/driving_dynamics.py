@@ -16,10 +16,10 @@ its mean speed, the 95th percentile of v·a_pos against the RDE's largest, the r
 positive acceleration against the RDE's smallest, the part's time, and per cycle or car
 the positive kinetic energy per kg and km at its own rate. About 15 s.
 
-``--only profile``: per car the 95th percentile of its trips' accelerations above 0.1 m/s²
-in 5-m/s speed bins (speeds interpolated to whole seconds, central differences): a SUMO
-vType's speed-dependent desired acceleration (``speedTable``/``desAccelProfile``) from
-measured driving (docs/scenario.md, "Driving dynamics").
+``--only profile``: per car the median, 85th and 95th percentile of its trips' 1-Hz
+accelerations above 0.1 m/s² in 5-m/s speed bins, as ``sumo-drvpw dynamics`` reads a log:
+a SUMO vType's speed-dependent desired acceleration (``speedTable``/``desAccelProfile``)
+from measured driving (docs/scenario.md, "Driving dynamics").
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.sim.dynamics import A_POS_MIN, Dynamics, markdown_head, markdown_rows, of_trajectory
+from sumo_drvpw.sim.dynamics import markdown_head, markdown_rows, of_log, of_trajectory
 from sumo_drvpw.validation.chain_common import read_shared
 
 #: (label, file, time column, speed column, speed unit factor to m/s, separator)
@@ -74,20 +74,9 @@ def cycle_rows(data: Path) -> list[str]:
 def log_rows(data: Path) -> list[str]:
     out = markdown_head(["logs", "trips"])
     for label, folder, fmt, vehicle in LOGS:
-        df = read_shared(data, folder, fmt, vehicle)[0].df
-        d = Dynamics()
-        trips = df["trip_id"].astype(str).to_numpy()
-        t, v = df["time_s"].to_numpy(float), df["speed_mps"].to_numpy(float)
-        for trip in dict.fromkeys(trips):
-            s = (trips == trip) & np.isfinite(v) & np.isfinite(t)
-            d.add_trajectory(t[s], v[s], label)
-        out += markdown_rows(d.summary()[label], [label, str(len(set(trips)))])
+        doc, trips = of_log(read_shared(data, folder, fmt, vehicle)[0].df)  # as `sumo-drvpw dynamics`
+        out += markdown_rows(doc, [label, str(trips)])
     return out
-
-
-#: speed bins of the acceleration profile [m/s], and the smallest sample count a bin needs
-PROFILE_BIN_MPS = 5.0
-PROFILE_MIN_SAMPLES = 50
 
 
 def profile_rows(data: Path) -> list[str]:
@@ -95,23 +84,10 @@ def profile_rows(data: Path) -> list[str]:
            "|---|---|---|---|---|---|"]
     for label, folder, fmt, vehicle in LOGS:
         df = read_shared(data, folder, fmt, vehicle)[0].df
-        vs, acc = [], []
-        for _, g in df.groupby("trip_id", sort=False):
-            t, v = g["time_s"].to_numpy(float), g["speed_mps"].to_numpy(float)
-            ok = np.isfinite(t) & np.isfinite(v)
-            t, v = t[ok], v[ok]
-            if len(t) < 3:
-                continue
-            v1 = np.interp(np.arange(np.ceil(t[0]), np.floor(t[-1]) + 1), t, v)
-            vs.append(v1[1:-1])
-            acc.append((v1[2:] - v1[:-2]) / 2.0)
-        v, a = np.concatenate(vs), np.concatenate(acc)
-        for lo in np.arange(0.0, v.max(), PROFILE_BIN_MPS):
-            s = (v >= lo) & (v < lo + PROFILE_BIN_MPS) & (a > A_POS_MIN)
-            if s.sum() >= PROFILE_MIN_SAMPLES:
-                q = np.percentile(a[s], [50, 85, 95])
-                out.append(f"| {label} | {lo:.0f}–{lo + PROFILE_BIN_MPS:.0f} | {int(s.sum())} | "
-                           f"{q[0]:.2f} | {q[1]:.2f} | {q[2]:.2f} |")
+        for b in of_log(df)[0]["accel_profile"]:  # as `sumo-drvpw dynamics` reads a log
+            to = "…" if b["speed_to_mps"] is None else f"{b['speed_to_mps']:g}"
+            out.append(f"| {label} | {b['speed_from_mps']:g}–{to} | {b['samples']} | {b['a_pos_50_mps2']:.2f} | "
+                       f"{b['a_pos_85_mps2']:.2f} | {b['a_pos_95_mps2']:.2f} |")
     return out
 
 

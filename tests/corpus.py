@@ -486,6 +486,16 @@ def _(d):
     return ["import", "columns", str(s), "--columns", str(m), "--out", str(m)]
 
 
+@case("drive-log", "dynamics on two samples", ("log.csv", "no 1-Hz figures"))
+def _(d):
+    return ["dynamics", str(write(d, "log.csv", base_log().head(2))), "--out", str(d / "dyn")]
+
+
+@case("out-path", "dynamics into the folder of its input", ("input",))
+def _(d):
+    return ["dynamics", str(write(d, "log.parquet", base_log())), "--out", str(d)]
+
+
 @case("out-path", "compare into the folder of its input", ("input",))
 def _(d):
     log = write(d, "log.parquet", base_log())

@@ -244,3 +244,65 @@ def test_steps_longer_than_the_rdes_differences_give_no_1hz_figures():
     doc = D.of_trajectory(np.arange(0.0, 40.0, 2.0), np.linspace(0.0, 15.0, 20))
     assert doc["parts"] == {} and doc["kinetic_j_per_kg_km"] > 0
     assert D.warnings({"passenger": doc}) == []
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(0.0, 45.0), min_size=30, max_size=400))
+def test_the_acceleration_profile_reads_as_its_definition(speeds):
+    """Any 1-Hz trace: per 5-m/s speed bin the 1-Hz accelerations above 0.1 m/s² counted
+    alike, and their median, 85th and 95th percentile within one ACC_STEP bin above the
+    definition's (the last speed bin holds the rest)."""
+    v = np.asarray(speeds)
+    a, vm = (v[2:] - v[:-2]) / 2.0, v[1:-1]
+    d = D.Dynamics()
+    d.add_trajectory(np.arange(len(v), dtype=float), v, "x")
+    got = {b["speed_from_mps"]: b for b in d.summary()["x"]["accel_profile"]}
+    for k in range(D.PROFILE_BINS):
+        lo = k * D.PROFILE_BIN_MPS
+        hi = np.inf if k == D.PROFILE_BINS - 1 else lo + D.PROFILE_BIN_MPS
+        s = (vm >= lo) & (vm < hi) & (a > D.A_POS_MIN)
+        if s.sum() < D.PROFILE_MIN_SAMPLES:
+            assert lo not in got
+            continue
+        assert got[lo]["samples"] == s.sum()
+        for q in (50, 85, 95):
+            want = min(np.percentile(a[s], q, method="inverted_cdf"), D.ACC_STEP * (D.ACC_BINS - 1))
+            assert want - 1e-9 <= got[lo][f"a_pos_{q}_mps2"] <= want + D.ACC_STEP + 1e-9, (lo, q)
+
+
+@pytest.mark.sumo
+def test_sumo_drives_the_vtype_profile_as_written(tmp_path):
+    """The vType attributes :func:`sumo_profile` writes, given to a free car on a straight
+    road (sigma 0, 1-s steps): SUMO accelerates it at the profile interpolated at its speed,
+    held beyond the table's ends — what the attributes are meant to say."""
+    libsumo = pytest.importorskip("libsumo")
+    from sumo_drvpw.fileio import write_text
+
+    prof = [{"speed_from_mps": 5.0 * k, "speed_to_mps": 5.0 * (k + 1), "samples": 99,
+             "a_pos_50_mps2": 0.5, "a_pos_85_mps2": 1.0, "a_pos_95_mps2": a} for k, a in enumerate((1.8, 1.6, 1.1, 0.7))]
+    vt = D.sumo_profile(prof)
+    assert vt == {"speedTable": "2.5 7.5 12.5 17.5", "desAccelProfile": "1.8 1.6 1.1 0.7"}
+    speeds, acc = np.array([2.5, 7.5, 12.5, 17.5]), np.array([1.8, 1.6, 1.1, 0.7])
+    rou = tmp_path / "r.rou.xml"
+    write_text(rou, f'<routes><vType id="p" accel="2.6" sigma="0" speedFactor="1" speedTable="{vt["speedTable"]}" '
+                    f'desAccelProfile="{vt["desAccelProfile"]}"/><vehicle id="v" type="p" depart="0" '
+                    'departSpeed="0"><route edges="c00c10 c10c20 c20c30 c30c40"/></vehicle></routes>')
+    libsumo.start(["sumo", "-n", str(NETS / "city.net.xml"), "-r", str(rou), "--no-step-log", "true",
+                   "--no-warnings", "true"])
+    seen = []
+    try:
+        prev = None
+        for _ in range(60):
+            libsumo.simulationStep()
+            if "v" not in libsumo.vehicle.getIDList():
+                break
+            v = libsumo.vehicle.getSpeed("v")
+            if prev is not None and v - prev > 1e-9:  # speeding up, free
+                seen.append((prev, v - prev))
+            prev = v
+    finally:
+        libsumo.close()
+    speeding = [(v0, dv) for v0, dv in seen if v0 + np.interp(v0, speeds, acc) < 9.0]  # well below the 50 km/h lanes
+    assert len(speeding) >= 5 and speeding[0][0] == 0.0
+    for v0, dv in speeding:
+        assert dv == pytest.approx(np.interp(v0, speeds, acc), abs=1e-6), v0

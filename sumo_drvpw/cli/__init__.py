@@ -31,6 +31,8 @@ COMMANDS = {
     "import": ("sumo_drvpw.cli.import_", "convert vendor logs to canonical drive logs"),
     "validate": ("sumo_drvpw.cli.validate", "validation report on the real data in ../shared/data"),
     "diagnose": ("sumo_drvpw.cli.diagnose", "trace the residual of an equation to missing effects"),
+    "dynamics": ("sumo_drvpw.cli.dynamics", "driving dynamics of drive logs, as a SUMO run reports its "
+                 "trajectories' (EU RDE figures, accelerations by speed, a vType acceleration profile)"),
 }
 
 
@@ -146,13 +148,23 @@ def output_set(args, out, inputs=(), meta=None):
 
 
 def add_log_options(p) -> None:
-    """How drive logs are read: --speed-unit and --negative-speed-tolerance."""
+    """How drive logs are read: --speed-unit and --negative-speed-tolerance
+    (:func:`add_read_options`), and the measurement corrections."""
+    add_read_options(p)
+    _add_corrections(p)
+
+
+def add_read_options(p) -> None:
+    """--speed-unit and --negative-speed-tolerance."""
     g = p.add_argument_group("reading drive logs")
     g.add_argument("--speed-unit", choices=("m/s", "km/h", "mph"),
                    help="unit of the logs' speed_mps column (default m/s, checked: speeds whose implied "
                         "accelerations only make sense in km/h are refused; m/s = trust the log)")
     g.add_argument("--negative-speed-tolerance", type=float, default=0.1, metavar="M_S",
                    help="speeds in [-M_S, 0) are standstill noise, clipped to 0 and counted (default 0.1)")
+
+
+def _add_corrections(p) -> None:
     g = p.add_argument_group(
         "measurement corrections (default: none, or what the --equation files declare in [measurement]; "
         "given here, they replace that)")

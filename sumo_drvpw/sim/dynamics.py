@@ -55,6 +55,16 @@ HIST_BINS = 4000
 SUMS = ("time_s", "distance_m", "apos_samples", "va_pos_sum")
 #: the longest gap [s] between a vehicle's two earlier samples and this one still read as 1-Hz
 MAX_SPAN_S = 2.5
+#: the acceleration profile: speed bins of PROFILE_BIN_MPS [m/s] (the last holds the rest),
+#: in each a histogram of the 1-Hz accelerations above A_POS_MIN in bins of ACC_STEP [m/s²]
+#: (the last holds the rest), and the samples a bin needs to be reported
+PROFILE_BIN_MPS = 5.0
+PROFILE_BINS = 10
+ACC_STEP = 0.02
+ACC_BINS = 300
+PROFILE_MIN_SAMPLES = 50
+#: the class label of a drive log's figures (a SUMO run's are its vClasses)
+LOG_LABEL = "measured"
 #: vClass labels of heavy vehicles: the RDE's bounds are a light-duty vehicle's
 HEAVY = frozenset({"bus", "coach", "truck", "trailer"})
 #: SUMO 1.28's car-following defaults of a vType that sets none, per vClass: accel, decel
@@ -109,6 +119,7 @@ class Dynamics:
         self.hist: dict[str, np.ndarray] = {}  # label → (parts, HIST_BINS)
         #: label → [Σ max(v̄·a, 0)·Δt [J/kg], Σ distance [m]] over every step (the run's own step)
         self.kinetic: dict[str, np.ndarray] = {}
+        self.acc_hist: dict[str, np.ndarray] = {}  # label → (PROFILE_BINS, ACC_BINS)
 
     def step(self, ledger, vidx: np.ndarray, v_mean: np.ndarray, a: np.ndarray, v_dist: np.ndarray,
              dt: float) -> None:
@@ -127,6 +138,7 @@ class Dynamics:
         if label not in self.sums:
             self.sums[label] = np.zeros((len(PARTS), len(SUMS)))
             self.hist[label] = np.zeros((len(PARTS), HIST_BINS), np.int64)
+            self.acc_hist[label] = np.zeros((PROFILE_BINS, ACC_BINS), np.int64)
         return self.sums[label], self.hist[label]
 
     def sample(self, ledger, vidx: np.ndarray, v: np.ndarray, t_now: float) -> None:
@@ -152,9 +164,12 @@ class Dynamics:
         [m/s²] and the time each sample stands for [s]."""
         part, pos, va = part_of(v), a > A_POS_MIN, v * a
         labels = np.asarray(labels, dtype=object)
+        sbin = np.clip((v / PROFILE_BIN_MPS).astype(np.int64), 0, PROFILE_BINS - 1)
+        abin = np.clip((np.where(pos, a, 0.0) / ACC_STEP).astype(np.int64), 0, ACC_BINS - 1)
         for lab in dict.fromkeys(labels.tolist()):
             m = labels == lab
             sums, hist = self._acc(lab)
+            np.add.at(self.acc_hist[lab], (sbin[m & pos], abin[m & pos]), 1)
             for k in range(len(PARTS)):
                 mk = m & (part == k)
                 if not mk.any():
@@ -192,6 +207,7 @@ class Dynamics:
             sums, hist = self._acc(lab)
             sums += other.sums[lab]
             hist += other.hist[lab]
+            self.acc_hist[lab] += other.acc_hist[lab]
 
     def summary(self) -> dict:
         """Per class: ``parts`` — per RDE part its mean speed [km/h], the 95th percentile of
@@ -212,7 +228,7 @@ class Dynamics:
                 h = self.hist[lab][k]
                 p95 = float("nan")
                 if h.sum() > 0:  # the upper edge of the bin holding the 95th percentile
-                    p95 = round((np.searchsorted(np.cumsum(h), 0.95 * h.sum(), side="left") + 1) * HIST_STEP, 9)
+                    p95 = _quantile(h, 0.95, HIST_STEP)
                 parts[name] = {"mean_speed_kmh": vbar, "va_pos_95_m2ps3": p95,
                                "rpa_mps2": va / d if d > 0 else float("nan"),
                                "rde_va_pos_95_max": va_pos_95_max(vbar), "rde_rpa_min": rpa_min(vbar),
@@ -220,8 +236,44 @@ class Dynamics:
                                "apos_samples": int(n), "va_pos_95_judged": bool(n >= MIN_SAMPLES),
                                "rpa_judged": bool(t >= MIN_SAMPLES)}
             kin, dist = self.kinetic.get(lab, (0.0, 0.0))
-            out[lab] = {"parts": parts, "kinetic_j_per_kg_km": 1000.0 * kin / dist if dist > 0 else float("nan")}
+            out[lab] = {"parts": parts, "kinetic_j_per_kg_km": 1000.0 * kin / dist if dist > 0 else float("nan"),
+                        "accel_profile": accel_profile(self.acc_hist[lab]) if lab in self.acc_hist else []}
         return out
+
+
+def _quantile(h: np.ndarray, q: float, step: float) -> float:
+    """The upper edge of the histogram bin (width ``step``) that holds the ``q`` quantile."""
+    return round((np.searchsorted(np.cumsum(h), q * h.sum(), side="left") + 1) * step, 9)
+
+
+def accel_profile(acc_hist: np.ndarray) -> list[dict]:
+    """Per speed bin with :data:`PROFILE_MIN_SAMPLES` 1-Hz accelerations above
+    :data:`A_POS_MIN` or more: its speeds [m/s] (``speed_to_mps`` None: and above), samples,
+    and the median, 85th and 95th percentile of those accelerations [m/s²] (each the upper
+    edge of its :data:`ACC_STEP` bin)."""
+    out = []
+    for k, h in enumerate(acc_hist):
+        n = int(h.sum())
+        if n < PROFILE_MIN_SAMPLES:
+            continue
+        out.append({"speed_from_mps": k * PROFILE_BIN_MPS,
+                    "speed_to_mps": (k + 1) * PROFILE_BIN_MPS if k < PROFILE_BINS - 1 else None,
+                    "samples": n, **{f"a_pos_{q}_mps2": _quantile(h, q / 100, ACC_STEP) for q in (50, 85, 95)}})
+    return out
+
+
+def sumo_profile(profile: list[dict], q: int = 95) -> dict | None:
+    """SUMO 1.28's speed-dependent desired acceleration of a vType from an
+    :func:`accel_profile`: ``speedTable`` (each bin's middle [m/s]; the last open bin at its
+    lower edge) and ``desAccelProfile`` (its ``q``-th percentile [m/s²]), as the attribute
+    strings; None with fewer than two bins. SUMO holds the first and last value beyond the
+    table's ends (tests/test_sim_dynamics.py drives it)."""
+    if len(profile) < 2:
+        return None
+    speeds = [b["speed_from_mps"] + (PROFILE_BIN_MPS / 2 if b["speed_to_mps"] is not None else 0.0)
+              for b in profile]
+    return {"speedTable": " ".join(f"{x:g}" for x in speeds),
+            "desAccelProfile": " ".join(f"{b[f'a_pos_{q}_mps2']:g}" for b in profile)}
 
 
 def of_trajectory(t_s, v_mps, label: str = "trajectory", dt: float | None = None) -> dict:
@@ -332,3 +384,46 @@ def warnings(summary: dict) -> list[str]:
                    "books less kinetic energy than real driving, whose speed varies more (summary.json "
                    "driving_dynamics)")
     return out
+
+
+def of_log(df) -> "tuple[dict, int]":
+    """(:meth:`Dynamics.summary` of a drive log's trips — a canonical log's ``time_s``,
+    ``speed_mps`` and ``trip_id``; each trip one trajectory — under :data:`LOG_LOG_LABEL`, or {}
+    when no trip gives a 1-Hz sample; the number of trips)."""
+    d = Dynamics()
+    trips = df["trip_id"].astype(str).to_numpy()
+    t, v = df["time_s"].to_numpy(float), df["speed_mps"].to_numpy(float)
+    names = list(dict.fromkeys(trips))
+    for trip in names:
+        s = (trips == trip) & np.isfinite(v) & np.isfinite(t)  # (the reader: time increases within a trip)
+        d.add_trajectory(t[s], v[s], LOG_LABEL)
+    return d.summary().get(LOG_LABEL, {}), len(names)
+
+
+def report_md(doc: dict) -> str:
+    """The report.md of ``sumo-drvpw dynamics``' document (its dynamics.json)."""
+    dyn = doc["driving_dynamics"]
+    lines = ["# Driving dynamics of the logs", "",
+             f"{doc['trips']} trips of {len(doc['logs'])} file(s), measured as a SUMO run measures its "
+             f"trajectories ({doc['source']}; speeds at 1 Hz, central differences).", "",
+             *markdown_head(["logs"]), *markdown_rows(dyn, [LOG_LABEL]), "",
+             "Accelerations above 0.1 m/s² by speed (1 Hz):", "",
+             "| speed m/s | samples | median m/s² | 85th pct. | 95th pct. |", "|---|---|---|---|---|"]
+    for b in dyn.get("accel_profile", []):
+        to = "…" if b["speed_to_mps"] is None else f"{b['speed_to_mps']:g}"
+        lines.append(f"| {b['speed_from_mps']:g}–{to} | {b['samples']} | {b['a_pos_50_mps2']:.2f} | "
+                     f"{b['a_pos_85_mps2']:.2f} | {b['a_pos_95_mps2']:.2f} |")
+    vt = doc["sumo_vtype"]
+    lines.append("")
+    if vt:
+        lines += ["A SUMO vType that accelerates, wherever it is free to, at these drivers' 95th "
+                  "percentile (SUMO 1.28 reads the two attributes on the vType; between the speeds it "
+                  "interpolates, beyond them it holds the first and last value):", "", "```xml",
+                  f'<vType id="..." speedTable="{vt["speedTable"]}" desAccelProfile="{vt["desAccelProfile"]}"/>',
+                  "```", "",
+                  "It changes the traffic as well as the dynamics: vehicles that pull away more slowly "
+                  "clear fewer per green, so a scenario's flows and travel times are calibrated again "
+                  "with it (docs/scenario.md, \"Driving dynamics\", measured on Bologna Acosta)."]
+    else:
+        lines.append("Too few accelerating samples for a vType profile (two speed bins of 50 needed).")
+    return "\n".join(lines) + "\n"

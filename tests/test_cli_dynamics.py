@@ -1,0 +1,59 @@
+"""``sumo-drvpw dynamics``: drive logs' driving dynamics, measured as a SUMO run measures
+its trajectories (sim/dynamics.py), with a vType acceleration profile."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.sim import dynamics as D
+
+
+def _trip(seed: int, n: int = 8000, hz: float = 10.0) -> pd.DataFrame:
+    """A stop-and-go trip at ``hz``: accelerations up to ~2 m/s², speeds 0–25 m/s."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / hz
+    v = np.clip(12 + 11 * np.sin(t / 15.0 + seed) + np.cumsum(rng.normal(0, 0.05, n)), 0, 30)
+    return pd.DataFrame({"time_s": t + 1000.0 * seed, "speed_mps": v, "trip_id": f"T{seed}"})
+
+
+def test_a_log_reads_as_the_run_reads_trajectories(tmp_path, capsys):
+    """Two trips of one file: dynamics.json
+    holds what :class:`Dynamics` gives the trips added one by one — parts, kinetic energy
+    and the acceleration profile — and a vType profile from the 95th percentiles; report.md
+    shows them; the input is not touched."""
+    df = pd.concat([_trip(1), _trip(2)], ignore_index=True)
+    log = tmp_path / "log.csv"
+    df.to_csv(log, index=False)
+    before = log.read_bytes()
+    assert cli_main(["dynamics", str(log), "--out", str(tmp_path / "o")]) == 0
+    doc = json.loads((tmp_path / "o" / "dynamics.json").read_text())
+    ref = D.Dynamics()
+    for seed in (1, 2):
+        tr = _trip(seed)
+        ref.add_trajectory(tr.time_s.to_numpy(), tr.speed_mps.to_numpy(), "measured")
+    want = json.loads(json.dumps(ref.summary()["measured"]))
+    assert doc["driving_dynamics"] == want and doc["trips"] == 2 and doc["samples"] == len(df)
+    prof = want["accel_profile"]
+    assert len(prof) >= 3 and doc["sumo_vtype"] == D.sumo_profile(prof)
+    assert doc["sumo_vtype"]["desAccelProfile"].split() == [f"{b['a_pos_95_mps2']:g}" for b in prof]
+    md = (tmp_path / "o" / "report.md").read_text()
+    assert f'speedTable="{doc["sumo_vtype"]["speedTable"]}"' in md and "| measured | urban |" in md
+    assert log.read_bytes() == before
+    assert "RPA" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("rows,needle", [
+    ("time_s,speed_mps,trip_id\n0,1,a\n1,2,a\n", "no 1-Hz figures"),
+    ("time_s,speed,trip_id\n0,1,a\n1,2,a\n2,3,a\n", "missing required column 'speed_mps'")])
+def test_bad_logs_exit_2_in_one_line_and_write_nothing(tmp_path, capsys, rows, needle):
+    log = tmp_path / "log.csv"
+    log.write_text(rows)
+    assert cli_main(["dynamics", str(log), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and str(log) in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
