@@ -349,6 +349,9 @@ def test_an_id_used_again_is_a_new_trip_with_its_own_vtype():
     assert res.summary["assumptions"]["sumo_masses"] == {"heavy": {"vclass": "passenger", "mass_kg": 5000.0}}
     assert any("heavy (passenger, 5000 kg)" in w for w in res.summary["warnings"])
     assert (rows.time_s > 0).all() and rows.time_s.iloc[0] <= 15.5
+    # the driving dynamics list how the file's vType drives, and cannot say for the copy
+    drv = res.summary["driving_dynamics"]["vclasses"]["passenger"]["vtype_driving"]
+    assert drv["heavy"] is None and drv[vt]["car_follow_model"] == "Krauss"
 
 
 def test_a_car_removed_between_steps_is_retired_at_once():

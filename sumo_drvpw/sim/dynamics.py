@@ -388,7 +388,7 @@ def warnings(summary: dict) -> list[str]:
 
 def of_log(df) -> "tuple[dict, int]":
     """(:meth:`Dynamics.summary` of a drive log's trips — a canonical log's ``time_s``,
-    ``speed_mps`` and ``trip_id``; each trip one trajectory — under :data:`LOG_LOG_LABEL`, or {}
+    ``speed_mps`` and ``trip_id``; each trip one trajectory — under :data:`LOG_LABEL`, or {}
     when no trip gives a 1-Hz sample; the number of trips)."""
     d = Dynamics()
     trips = df["trip_id"].astype(str).to_numpy()

@@ -250,20 +250,23 @@ def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: boo
         out["driving_dynamics"] = {"source": dynamics.SOURCE, "vclasses": dyn.summary()}
         for lab, doc in out["driving_dynamics"]["vclasses"].items():  # where to look: its vTypes
             doc["vtypes"] = sorted(ledger.class_vtypes.get(lab, ()))
-            doc["vtype_driving"] = {vt: dynamics.vtype_driving(*_cf_of(vtypes or {}, vt)) for vt in doc["vtypes"]}
+            doc["vtype_driving"] = {vt: _driving_of(vtypes or {}, vt) for vt in doc["vtypes"]}
         warn = list(warn) + dynamics.warnings(out["driving_dynamics"]["vclasses"])
     if warn:
         out["warnings"] = list(out.get("warnings", [])) + warn
     return out
 
 
-def _cf_of(vtypes: dict, vt: str) -> tuple[dict | None, str | None]:
-    """A vType's car-following attributes as the files write them, and its vClass (SUMO's
-    own vTypes, like DEFAULT_VEHTYPE, when no file redeclares them)."""
+def _driving_of(vtypes: dict, vt: str) -> dict | None:
+    """:func:`dynamics.vtype_driving` of a vType the files declare, or one of SUMO's own
+    (DEFAULT_VEHTYPE, …) no file redeclares; None for one made at run time (a TraCI
+    script's ``vehicletype.copy``): the files cannot say how it drives."""
     info = vtypes.get(vt)
-    if info is None:
-        return None, SUMO_DEFAULT_VTYPES.get(vt, "passenger")
-    return info.driving, info.vclass or "passenger"
+    if info is not None:
+        return dynamics.vtype_driving(info.driving, info.vclass or "passenger")
+    if vt in SUMO_DEFAULT_VTYPES:
+        return dynamics.vtype_driving(None, SUMO_DEFAULT_VTYPES[vt])
+    return None
 
 
 class TraceWriter:
