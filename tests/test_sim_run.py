@@ -384,6 +384,25 @@ def test_heading_from_lane_geometry_agrees_with_getangle(tmp_path):
     assert g == pytest.approx(a, rel=0.01)
 
 
+@pytest.mark.parametrize("routes, warned", [
+    ('<vType id="bike" vClass="bicycle"/>', True),  # a trips file with a vType only (a user scenario)
+    ('<vehicle id="late" depart="500"><route edges="c00c10"/></vehicle>', True),  # after the run's end
+    ('<vehicle id="car" depart="0"><route edges="c00c10"/></vehicle>', False)])
+def test_a_run_without_vehicles_says_so(tmp_path, routes, warned):
+    """A config whose route files hold no vehicle departing in the run's window ran
+    silently to zeros, exit 0 (found in a user scenario: a trips file with only a vType);
+    the run now says it in one warning, and a run with a vehicle does not."""
+    from sumo_drvpw.sim import run_scenario
+
+    (tmp_path / "r.rou.xml").write_text(f"<routes>{routes}</routes>\n")
+    cfg = tmp_path / "c.sumocfg"
+    cfg.write_text(f'<configuration><input><net-file value="{NETS / "city.net.xml"}"/>'
+                   '<route-files value="r.rou.xml"/></input><time><end value="60"/></time></configuration>\n')
+    s = run_scenario(cfg, tmp_path / "o", figures=False)
+    said = [w for w in s.get("warnings", []) if w.startswith("no vehicle was on the road between 0 s and 60 s")]
+    assert len(said) == (1 if warned else 0) and (s["vehicles"] == 0) == warned
+
+
 def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_path, capsys):
     """`run X.sumocfg`: a SUMO config given as it is runs with the class equations
     (CONFIG_EQUATIONS: every motor vehicle by an equation made for its vClass); the outputs

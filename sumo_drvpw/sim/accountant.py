@@ -362,6 +362,11 @@ class Accountant(_Listener):
                                "what it is, and their vTypes' emissionClass, guiShape and id name no "
                                f"vehicle: set vclasses.{generic[0]}.equations and mass_kg in a "
                                "scenario file)" if generic else ""))
+        if not led.types_seen:  # (a vehicle left out, by its vClass or the scenario's vtypes, is seen)
+            warnings.append(f"no vehicle was on the road between {self.begin:g} s and {end:g} s, so every "
+                            "total is 0: the route files hold no vehicle departing in that window (check "
+                            "their vehicles', trips' and flows' departure times against the run's begin "
+                            "and end)")
         clipped = summary_extra["network"]["slope_clipped_lanes"]
         if clipped:
             warnings.append(f"{int(led.clipped)} vehicle-steps on slopes beyond "
