@@ -440,6 +440,23 @@ def test_vehicle_body_books_a_short_bus_or_truck_as_a_van(vclass, length, capaci
     assert (got[0] if got else None) == body
 
 
+@pytest.mark.parametrize("vclass, shape, length, body", [
+    ("taxi", "motorcycle", 2.0, "motorcycle"),      # a motorcycle taxi (MotortaxiTraCI's "motortaxi")
+    ("passenger", "scooter", 1.8, "moped"), ("private", "moped", 2.1, "moped"),
+    ("taxi", "motorcycle", None, None),             # SUMO's taxi length (5 m): a car drawn so
+    ("taxi", "motorcycle", 4.5, None), ("taxi", "passenger", 2.0, None),  # a microcar stays a car
+    ("delivery", "motorcycle", 2.0, None),          # not a car class: its vClass says it
+])
+def test_vehicle_body_books_a_car_class_two_wheeler_as_one(vclass, shape, length, body):
+    """A car vClass whose guiShape and written length are a two-wheeler's is booked as that
+    two-wheeler (found in a user scenario: a motorcycle taxi booked as a 1.5-t car)."""
+    from sumo_drvpw.sim.vtypes import VTypeInfo, vehicle_body
+
+    info = VTypeInfo("t", None, None, "f", vclass, 0.0, None, shape, length, 1)
+    got = vehicle_body(vclass, info, "t")
+    assert (got[0] if got else None) == body
+
+
 def test_vtype_equations_may_name_an_equation_file(tmp_path):
     """docs/validation.md tells users `[vtypes.<id>] equations = ["docs/energy-chain/
     bmw_i3_battery.toml"]`; that was refused ("not among the scenario's equations") even

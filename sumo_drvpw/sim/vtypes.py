@@ -144,6 +144,13 @@ VAN_LENGTH_M = {"bus": 7.5, "coach": 7.5, "truck": 6.5, "army": 6.5}
 #: too (the DRT game's 8-m, 9-person shuttle)
 MINIBUS_CAPACITY = 9
 MINIBUS_LENGTH_M = 9.0
+#: Car vClasses whose vType may be a two-wheeler: a motorcycle taxi (an ojek, a boda boda)
+#: written as vClass taxi with guiShape motorcycle and a 2-m length (the user scenario
+#: ErinDelaRosa/MotortaxiTraCI) is booked as the motorcycle its shape and length say, when
+#: it is no longer than TWO_WHEELER_MAX_LENGTH_M (SUMO 1.28's default motorcycle is 2.2 m,
+#: moped 2.1 m, every car class 5 m)
+CAR_VCLASSES = ("passenger", "private", "taxi", "hov", "vip", "evehicle", "authority")
+TWO_WHEELER_MAX_LENGTH_M = 3.0
 #: a van weighs at most this [kg] (EU categories N1 and M1, the car-licence limit): a short
 #: bus, coach or truck whose vType declares a larger mass stays heavy (a 6-m, 7.5-t rigid truck)
 VAN_MAX_MASS_KG = 3500.0
@@ -153,7 +160,9 @@ def vehicle_body(vclass: str, info: "VTypeInfo | None", vtype_id: str) -> tuple[
     """The road vehicle a vType is booked as when its vClass does not say it (None: the
     vClass does), with why: for a generic vClass (:data:`GENERIC_VCLASSES`) what
     :func:`body_vclass` reads; for a light or heavy vClass whose written emissionClass
-    names a vehicle of the other weight, that vehicle; for a bus, coach or truck written
+    names a vehicle of the other weight, that vehicle; for a car vClass whose guiShape is a
+    two-wheeler's and whose written length is one's (:data:`TWO_WHEELER_MAX_LENGTH_M`), that
+    two-wheeler; for a bus, coach or truck written
     no longer than a van (:data:`VAN_LENGTH_M`) and with no emissionClass naming a
     vehicle nor a mass above a van's (:data:`VAN_MAX_MASS_KG`), a van (delivery)."""
     if info is None:
@@ -165,6 +174,11 @@ def vehicle_body(vclass: str, info: "VTypeInfo | None", vtype_id: str) -> tuple[
         if info.mass_kg is not None and info.mass_kg > VAN_MAX_MASS_KG:
             return None  # its mass says heavy, whatever its length
         L, cap = info.length_m, info.person_capacity
+        shape = GUI_SHAPE_BODY.get((info.gui_shape or "").strip().lower())
+        if (vclass in CAR_VCLASSES and shape in ("motorcycle", "moped") and L is not None
+                and L <= TWO_WHEELER_MAX_LENGTH_M):
+            return shape, (f"guiShape {info.gui_shape} and length {L:g} m: a two-wheeler (a "
+                           f"{vclass} car is longer), e.g. a motorcycle taxi")
         if L is not None and L <= VAN_LENGTH_M.get(vclass, 0.0):
             return "delivery", (f"length {L:g} m: a van or minibus (a {vclass} is longer; "
                                 f"SUMO's default {vclass} is {SUMO_DEFAULT_LENGTH_M[vclass]:g} m)")
