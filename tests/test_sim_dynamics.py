@@ -93,6 +93,10 @@ def test_cycles_read_as_published(tmp_path):
     assert u["va_pos_95_m2ps3"] > u["rde_va_pos_95_max"]
     assert D.warnings({"passenger": {"parts": {"urban": u}}})[0].startswith("driving dynamics: trajectories accelerate harder")
     assert D.warnings({"passenger": {"parts": {"urban": w}}}) == []
+    # the bounds are a car's: said beside a bus's and a motorcycle's figures
+    said = D.warnings({"bus": {"parts": {"urban": u}}, "motorcycle": {"parts": {"urban": u}}})[0]
+    assert "bus (urban" in said and "heavy vehicle's real driving stays well below it" in said
+    assert "motorcycle (urban" in said and "two-wheeler's real driving may exceed it" in said
 
 
 ROUTES = """<routes>

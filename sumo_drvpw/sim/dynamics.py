@@ -67,6 +67,8 @@ PROFILE_MIN_SAMPLES = 50
 LOG_LABEL = "measured"
 #: vClass labels of heavy vehicles: the RDE's bounds are a light-duty vehicle's
 HEAVY = frozenset({"bus", "coach", "truck", "trailer"})
+#: and of two-wheelers, whose real driving (a motorcycle's power per kg) may exceed them
+TWO_WHEELERS = frozenset({"motorcycle", "moped"})
 #: SUMO 1.28's car-following defaults of a vType that sets none, per vClass: accel, decel
 #: [m/s²] and the Krauss driver imperfection sigma (vehicletype.getAccel, getDecel,
 #: getImperfection; tests/test_sim_dynamics.py asks SUMO); any other vClass: the passenger's
@@ -358,7 +360,8 @@ def warnings(summary: dict) -> list[str]:
     hard, smooth = [], []
     for lab, doc in summary.items():
         parts = doc["parts"]
-        heavy = "; a car's bound: a heavy vehicle's real driving stays well below it" if lab in HEAVY else ""
+        heavy = ("; a car's bound: a heavy vehicle's real driving stays well below it" if lab in HEAVY else
+                 "; a car's bound: a two-wheeler's real driving may exceed it" if lab in TWO_WHEELERS else "")
         over = [f"{name} {p['va_pos_95_m2ps3']:.1f} > {p['rde_va_pos_95_max']:.1f} m²/s³ at "
                 f"{p['mean_speed_kmh']:.0f} km/h" for name, p in parts.items()
                 if p["va_pos_95_judged"] and p["va_pos_95_m2ps3"] > p["rde_va_pos_95_max"]]
