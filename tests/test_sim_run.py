@@ -401,6 +401,9 @@ def test_a_run_without_vehicles_says_so(tmp_path, routes, warned):
     s = run_scenario(cfg, tmp_path / "o", figures=False)
     said = [w for w in s.get("warnings", []) if w.startswith("no vehicle was on the road between 0 s and 60 s")]
     assert len(said) == (1 if warned else 0) and (s["vehicles"] == 0) == warned
+    # one car's few hundred metres: its class's litres per 100 km stand for one short trip
+    thin = [w for w in s.get("warnings", []) if w.startswith("per-km battery or fuel figures of classes driven less")]
+    assert len(thin) == (0 if warned else 1) and (warned or "passenger 0." in thin[0])
 
 
 def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_path, capsys):

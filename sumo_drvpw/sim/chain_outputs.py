@@ -15,6 +15,10 @@ def _motors(chain: ChainLedger) -> list[int]:
     return [e for e in chain.active if chain.chains[e].motor is not None]
 
 
+#: a vehicle class's per-km chain figures are said to stand for few trips below this [km]
+THIN_CLASS_KM = 10.0
+
+
 def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str],
                   class_order=None) -> dict:
     """Per vehicle class and equation: battery kWh (traction, recuperated, auxiliary, net)
@@ -118,4 +122,13 @@ def write_chain_outputs(out_dir, result) -> dict[str, str]:
                        .to_csv(index=False))
         files[f"chain_{key}"] = str(path)
     result.summary["chain"] = chain_summary(chain, ids, classes, order)
+    thin = {r["key"]: r["distance_km"] for r in rep["classes"] if 0 < r["distance_km"] < THIN_CLASS_KM}
+    if thin:
+        result.summary.setdefault("warnings", []).append(
+            "per-km battery or fuel figures of classes driven less than "
+            f"{THIN_CLASS_KM:g} km in the run stand for few trips: "
+            + ", ".join(f"{c} {km:.1f} km" for c, km in thin.items())
+            + " (chain_classes.csv; over a few km a class's standing at stops and its trips cut by "
+            "the run's begin and end weigh heavily: a longer run or a larger demand gives a figure "
+            "to quote)")
     return files
