@@ -434,6 +434,7 @@ class Stepper:
         # m·v̄·a·Δt = ½m(v_t² − v_t−1²); the other terms the speed of the distance SUMO
         # moved the car in the step (Euler: v_t·Δt; ballistic: v̄·Δt)
         v_mean = v - 0.5 * dt * a
+        v_state = v  # the speed SUMO gives the state (its outputs write it), whatever books the distance
         if self.ballistic:
             v = v_mean
         if net.z_node is not None:  # the step's grade: m·g·Δz exactly
@@ -471,7 +472,7 @@ class Stepper:
         ledger.dynamics.step(ledger, vidx, v_mean, a, v, dt)
         if whole_second(t_now - dt, dt):  # the trajectories at 1 Hz, as the RDE reads a trip (at the
             # time SUMO's outputs give this state: the step's begin, getTime() − Δt after the step)
-            ledger.dynamics.sample(ledger, vidx, v_mean + 0.5 * dt * a, t_now - dt)
+            ledger.dynamics.sample(ledger, vidx, v_state, t_now - dt)
         if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
             off = None if self.shutoff is None else self.shutoff.auto_off(ledger, vidx, v, dt)
             ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx], engine_off=off, accel=a,
