@@ -100,7 +100,7 @@ class FcdReplay(_Rows):
         self._all["person"] = person
         self._init_rows()
         veh = df[~person]
-        self.types = dict(zip(veh["id"], veh["type"]))
+        self.types: dict = {}  # vehicle id → its vType in the current step
         self.k = 0
         # FCD time t is the state after SUMO executed step t; a live loop reads that state
         # after simulationStep() with getTime() = t + Δt: the replay labels steps alike
@@ -135,6 +135,7 @@ class FcdReplay(_Rows):
         ids = tuple(cols["id"])
         self.ids = ids
         self.state = dict(zip(ids, zip(*_state_columns(cols)))) if ids else {}
+        self.types = dict(zip(ids, cols["type"]))  # this step's: a vType can change in a trip
         self.no_angle = self.no_angle or (bool(ids) and "angle" not in cols)
         new = tuple(v for v in ids if v not in self._seen)
         self.back = self._back.get(self.k - 1, ())

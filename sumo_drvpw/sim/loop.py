@@ -228,7 +228,7 @@ class Stepper:
                 continue
             seen[vid] = vt
             if vt == f"{types[i]}@{vid}":  # its own copy: only a mass set by the script counts
-                if tget is None:
+                if tget is None or self.is_replay:  # (FCD names the copy, not its mass)
                     continue
                 m = float(tget.getMass(vt))
                 if m > 0 and m != float(tget.getMass(types[i])):
@@ -339,8 +339,8 @@ class Stepper:
         n = len(kids)
         if n == 0:
             return
-        if ledger.steps % (TYPE_CHECK_STEPS * (10 if self.reader.subs else 1)) == 0 and not self.is_replay:
-            self.check_types(kids, vidx)
+        if ledger.steps % (TYPE_CHECK_STEPS * (10 if self.reader.subs else 1)) == 0:
+            self.check_types(kids, vidx)  # (a replay: at the steps a live libsumo run reads them)
         tracking = self.tracking
         v, a, angle, ln, pos, raw = self.reader.read(kids, skip_lanes=tracking)
         if self.parking.resumed:
