@@ -439,10 +439,20 @@ def network_info(net, ledger, top: int = 10) -> dict:
             "z_share": float(net.z_share), "slope_clipped_lanes": lanes}
 
 
+#: a network whose lane shapes carry z on less than this share of their length is warned of:
+#: its elevation is partial (bridges, a few OSM ele points), the rest is booked flat
+PARTIAL_ELEVATION_SHARE = 0.5
+
+
 def network_warnings(net) -> list[str]:
     """Warnings about the network a user should see (printed by the CLI)."""
     if net.has_elevation:
-        return []
+        if net.z_share >= PARTIAL_ELEVATION_SHARE:
+            return []
+        return [f"network {net.path.name} has elevation on only {100 * net.z_share:.2g} % of its "
+                "lane length (z in a few lane shapes: bridges, a few OSM ele points): every other "
+                "slope is 0, so the grade term books only those lanes; build it with elevation "
+                "(netconvert --heightmap.geotiffs / OSM ele) for hilly areas"]
     return [f"network {net.path.name} has no elevation (no z in any lane shape): every slope "
             "is 0, so the grade term is 0; build it with elevation (netconvert "
             "--heightmap.geotiffs / OSM ele) for hilly areas"]
