@@ -185,9 +185,26 @@ def test_equation_option_replacing_the_class_equations_says_so(tmp_path, capsys)
                      "--end", "20", "--equation", "vsp_ldv1999"]) == 0
     out = capsys.readouterr().out
     assert "not booked (no equation for the vClass)" in out and "with --equation only the equations given are applied" in out
+    # each vClass left out is told the built-ins made for it (a bus was told a truck's)
+    assert "bus: moves_transit_bus, moves_transit_bus_diesel" in out
+    assert "trailer: moves_combination_truck, moves_combination_truck_diesel" in out
+    assert "bus: moves_single_unit_truck" not in out
     assert cli_main(["run", str(cfg), "--out", str(tmp_path / "b"), "--no-figures", "--no-progress",
                      "--end", "20"]) == 0
     assert "with --equation only" not in capsys.readouterr().out
+
+
+def test_persons_are_counted_apart_not_as_a_vclass_without_an_equation(capsys):
+    """A run's persons (walking or riding) are never booked themselves: the console counts
+    them on their own line, not as 'pedestrian' among the vClasses no equation is made for
+    (a rehearsal on a PRT scenario read its 30 riders as a missing equation)."""
+    from sumo_drvpw.cli.run import _print_summary
+
+    _print_summary({"steps": 10, "vehicles": 2, "slope_corrected_samples": 0, "equations": {},
+                    "skipped": {"by_vclass": {"pedestrian": 30}}}, "out", replaced=True)
+    out = capsys.readouterr().out
+    assert "persons (walking or riding; never booked themselves): 30" in out
+    assert "not booked" not in out and "pedestrian" not in out
 
 
 def test_a_failing_sumo_tool_is_one_line(tmp_path):

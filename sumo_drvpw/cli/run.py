@@ -105,12 +105,22 @@ def _print_summary(s: dict, out, label: str = "", replaced: bool = False) -> Non
         print(f"warning: {label}{w}", file=sys.stderr)
     print(f"{label}{s['steps']} steps, {s['vehicles']} vehicles, "
           f"{s['slope_corrected_samples']} slope-corrected samples; outputs in {out}")
-    skipped = s.get("skipped", {}).get("by_vclass", {})
+    skipped = dict(s.get("skipped", {}).get("by_vclass", {}))
+    persons = skipped.pop("pedestrian", 0)
     if skipped:
+        hint = ""
+        if replaced:
+            from sumo_drvpw.sim.resolver import builtin_equations_for
+
+            made = {c: builtin_equations_for(c) for c in skipped}
+            hint = (" — with --equation only the equations given are applied: repeat it with one made for"
+                    " these vClasses" + (" (built-in: " + "; ".join(
+                        f"{c}: {', '.join(m)}" for c, m in made.items() if m) + ")"
+                        if any(made.values()) else ""))
         print("  not booked (no equation for the vClass): "
-              + ", ".join(f"{c} {n}" for c, n in skipped.items())
-              + (" — with --equation only the equations given are applied: repeat it with one made for"
-                 " these vClasses (e.g. moves_single_unit_truck, moves_transit_bus)" if replaced else ""))
+              + ", ".join(f"{c} {n}" for c, n in skipped.items()) + hint)
+    if persons:
+        print(f"  persons (walking or riding; never booked themselves): {persons}")
     idle = []
     for name, eq in s["equations"].items():
         if not any(d > 0 for d in eq.get("distance_m", {}).values()) and eq.get("vclasses"):

@@ -288,3 +288,12 @@ class VTypeResolver:
                 f'a <param key="drvpw.mass" value="..."/>, or vtypes.{vt}.mass_kg or '
                 f"vclasses.{vclass}.mass_kg in the scenario (or leave it out with vehicles.vtypes)")
         return (float(mass), app, True, vclass, "")
+
+
+def builtin_equations_for(vclass: str) -> list[str]:
+    """The built-in equations of a bare SUMO config (:data:`~sumo_drvpw.sim.scenario.CONFIG_EQUATIONS`)
+    made for ``vclass`` (what to add when a run's own equations leave it unbooked)."""
+    from sumo_drvpw.model.equations import load_equation
+    from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+    return [n for n in CONFIG_EQUATIONS if vclass in (load_equation(n).vclasses or ())]
