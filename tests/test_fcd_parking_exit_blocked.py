@@ -60,6 +60,7 @@ def test_a_replay_books_a_car_blocked_in_its_parking_space_as_the_live_run(tmp_p
         got = _chain(out)
         pd.testing.assert_series_equal(got, live, rtol=1e-6)
         assert res["source"]["idling_rows"] * step >= idle_s
+        assert res["source"]["untold_parked_rows"] == 0  # the declared stops tell every row
 
 
 def test_a_replay_leaves_a_car_switched_off_for_its_parking_out_while_blocked(tmp_path):
@@ -94,14 +95,22 @@ def test_a_triggered_parking_idles_from_the_step_its_person_boards(tmp_path):
         res = process_fcd(tmp_path / f, scenario=sc, out_dir=tmp_path / f"o_{f}", chunk_rows=31)
         pd.testing.assert_series_equal(_chain(tmp_path / f"o_{f}"), live, rtol=1e-6)
         rows[f] = res["source"]["idling_rows"]
+        assert res["source"]["untold_parked_rows"] == 0  # the boarding tells them
     assert rows["fcd.xml"] == rows["nosig.xml"] > 250  # ~139 s from 60 s on
     rou = tmp_path / "r.rou.xml"
     rou.write_text(rou.read_text().replace('triggered="person"', 'triggered="container"'))
     res = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "c_sig")
     pd.testing.assert_series_equal(_chain(tmp_path / "c_sig"), live, rtol=1e-6)
+    assert res["source"]["untold_parked_rows"] == 0
+    assert not [w for w in res["warnings"] if "parked FCD rows" in w]
     res = process_fcd(tmp_path / "nosig.xml", scenario=sc, out_dir=tmp_path / "c_nosig")
     got = _chain(tmp_path / "c_nosig")
     assert res["source"]["idling_rows"] == 0
+    # its parked rows, none told, are counted and warned of (a PRT replay was silent)
+    untold = res["source"]["untold_parked_rows"]
+    assert untold >= rows["fcd.xml"] and res["source"]["untold_parked_vehicles"] == 1
+    assert [w for w in res["warnings"] if f"{untold} parked FCD rows of 1 vehicle(s)" in w
+            and "fcd-output.signals" in w]
     assert live["p"] - got["p"] == pytest.approx(rows["fcd.xml"] * 0.5 * 100.0 / 3600.0, rel=1e-6)
     pd.testing.assert_series_equal(got.drop("p"), live.drop("p"), rtol=1e-6)
 
@@ -119,3 +128,14 @@ def test_a_replay_on_dask_books_the_idling_as_the_serial_replay(tmp_path):
     pd.testing.assert_series_equal(_chain(tmp_path / "od"), live, rtol=1e-6)
     assert res["source"]["idling_rows"] == serial["source"]["idling_rows"] > 300
     assert res["source"]["parked_rows"] == serial["source"]["parked_rows"]
+    assert res["source"]["untold_parked_rows"] == serial["source"]["untold_parked_rows"] == 0
+    # the same FCD with the stop gone from the route files: no row of the parked car is told
+    # (a stop added by a device or a script); the buckets count them as the serial replay
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text(rou.read_text().replace('<stop parkingArea="pa" duration="20"/>', ""))
+    serial = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "o2")
+    res = process_fcd_dask(tmp_path / "fcd.xml", tmp_path / "od2", scenario=sc, buckets=3, workers=1,
+                           chunk_rows=50)
+    assert res["source"]["untold_parked_rows"] == serial["source"]["untold_parked_rows"] > 300
+    assert res["source"]["untold_parked_vehicles"] == serial["source"]["untold_parked_vehicles"] == 1
+    assert [w for w in res["warnings"] if "parked FCD rows of 1 vehicle(s)" in w]

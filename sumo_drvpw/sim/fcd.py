@@ -60,7 +60,7 @@ import pandas as pd
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops
-from sumo_drvpw.sim.fcd_idle import Idling
+from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
 from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
@@ -455,6 +455,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         extra = {"source": {"fcd": str(fcd_file), "rows": int(rows),
                             "timesteps": int(replay.k), "parked_rows": int(replay.parked_rows),
                             "idling_rows": int(replay.idle_rows),
+                            "untold_parked_rows": int(replay.idling.untold_rows),
+                            "untold_parked_vehicles": len(replay.idling.untold_ids),
                             "riding_person_rows": int(replay.rider_rows)}}
         if sc.trace and out_dir:
             extra["files"] = {"trace": "trace.parquet"}
@@ -464,6 +466,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         warn = lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning
         if replay.no_angle and acc.eqset.uses_yaw:
             warn.append(no_angle_warning(fcd_file))
+        if replay.idling.untold_rows:
+            warn.append(untold_warning(replay.idling.untold_rows, len(replay.idling.untold_ids)))
         if warn:
             extra["warnings"] = warn
         result = acc.result(extra)

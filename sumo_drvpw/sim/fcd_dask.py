@@ -159,6 +159,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     from sumo_drvpw.sim.accountant import Accountant
     from sumo_drvpw.sim.fcd import (FcdStream, fcd_scenario, lane_warnings, no_angle_warning,
                                     recorded_device_options, recorded_step)
+    from sumo_drvpw.sim.fcd_idle import untold_warning
     from sumo_drvpw.sim.fcd_read import fcd_parts, header_options
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import VehicleSpill, write_published
@@ -197,6 +198,9 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
                              min(firsts, key=lambda x: x[1]) if firsts else None)
         if any(d["no_angle"] for d in done):
             warn.append(no_angle_warning(spec))
+        untold = [sum(d["extra"]["source"][k] for d in done) for k in ("untold_parked_rows", "untold_parked_vehicles")]
+        if untold[0]:  # (each vehicle in one bucket: their counts add up)
+            warn.append(untold_warning(*untold))
         # the driver's own accountant (no rows) carries the scenario, network and resolver
         first = done[0]
         replay = FcdStream(iter(()), dt=first["dt"], label=spec)
@@ -228,6 +232,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
         extra["source"] = dict(extra["source"], rows=sum(d["extra"]["source"]["rows"] for d in done),
                                parked_rows=sum(d["extra"]["source"]["parked_rows"] for d in done),
                                idling_rows=sum(d["extra"]["source"]["idling_rows"] for d in done),
+                               untold_parked_rows=untold[0], untold_parked_vehicles=untold[1],
                                riding_person_rows=sum(d["extra"]["source"]["riding_person_rows"]
                                                       for d in done),
                                engine="dask", buckets=k)

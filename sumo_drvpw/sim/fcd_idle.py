@@ -38,7 +38,9 @@ hold: not switched off, as the replay books such a stop standing); nor is the ro
 the one it drives off in, where SUMO put it back on its lane a step before its stop ends,
 still switched off (written at 0; ``_Rows._vehicles``); another car is booked there,
 standing on its lane (:func:`~sumo_drvpw.sim.fcd_conn._unpark`). ``summary.json`` ``source.idling_rows`` counts the rows booked
-idling (``parked_rows`` no longer counts them).
+idling (``parked_rows`` no longer counts them); ``source.untold_parked_rows`` and
+``untold_parked_vehicles`` the parked rows without signals whose idling the replay cannot
+tell (their stop not declared, or its end not known), booked parked and warned of.
 """
 
 from __future__ import annotations
@@ -72,6 +74,10 @@ class Idling:
         #: parked vehicle id → (its riders at its arrival, the persons it waits for (none:
         #: any), its planned end [s] or −∞) while a person-triggered stop waits for one
         self.waiting: dict[str, tuple] = {}
+        #: parked rows without signals whose idling the replay cannot tell (no declared stop
+        #: matched, or one without a planned end it knows): booked parked, and their vehicles
+        self.untold_rows = 0
+        self.untold_ids: set[str] = set()
 
     def _parked(self, vid: str, vtype: str, stop, riders: dict) -> None:
         """Vehicle ``vid`` of ``vtype`` just parked at its declared ``stop`` (fcd_stops);
@@ -123,14 +129,30 @@ class Idling:
         if not len(k):
             return idle
         vk = ids[k]
-        if self.idle_from:
-            frm = np.fromiter(map(self.idle_from.get, vk, repeat(np.inf)), float, len(k))
-            idle[k] = t >= frm
+        frm = np.fromiter(map(self.idle_from.get, vk, repeat(np.inf)), float, len(k))
+        idle[k] = t >= frm
+        has = np.zeros(len(k), bool)
         if signals is not None:  # the FCD's blinker says it, where it has signals
             sk = np.asarray(signals, float)[k]
             has = ~np.isnan(sk)
             idle[k[has]] = (sk[has].astype(np.int64) & BLINKERS) != 0
+        untold = ~has & ~np.isfinite(frm)
+        if untold.any() and self.waiting:  # a person-triggered stop ends when she boards
+            untold &= ~np.fromiter(map(self.waiting.__contains__, vk), bool, len(k))
+        if untold.any():
+            self.untold_rows += int(np.count_nonzero(untold))
+            self.untold_ids.update(vk[untold].tolist())
         if self.shut and idle.any():
             j = np.flatnonzero(idle)
             idle[j[np.fromiter(map(self.shut.__contains__, ids[j]), bool, len(j))]] = False
         return idle
+
+
+def untold_warning(rows: int, vehicles: int) -> str:
+    """One line for a replay whose parked rows without signals it could not tell idling or
+    not (:attr:`Idling.untold_rows`)."""
+    return (f"{rows} parked FCD rows of {vehicles} vehicle(s), at stops the route files do not hold "
+            "(a taxi device's, a parking reroute's, a script's) or whose end the replay cannot "
+            "tell, carry no signals: all are booked parked, so a car SUMO kept idling in its "
+            "space, its way out blocked, books nothing there (record the FCD with SUMO's option "
+            "fcd-output.signals, whose blinker says it)")
