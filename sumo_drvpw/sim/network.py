@@ -319,6 +319,13 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float,
     return out
 
 
+def flat_profile(length: float):
+    """:func:`lane_profile` of a lane of ``length`` [m] whose shape (two points or more) has
+    no z: (θ, clipped, z at the bin edges), all 0."""
+    nb = max(1, int(np.ceil(max(length, 1e-9) / BIN_M)))
+    return np.zeros(nb), np.zeros(nb, bool), np.zeros(nb + 1)
+
+
 def conserve_rise(tan: np.ndarray, width: np.ndarray, rise: float, limit: float) -> np.ndarray:
     """Gradients ``tan`` (|tan| ≤ ``limit``) over bins of horizontal ``width`` [m], changed
     so that Σ tan·width = ``rise`` [m] with |tan| ≤ ``limit`` still: the missing rise goes
@@ -430,15 +437,24 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     z_len = 0.0
     for ln in lanes:
         shape = ln.getShape3D()
-        if any(len(p) > 2 and p[2] != 0.0 for p in shape):
+        has_z = any(len(p) > 2 and p[2] != 0.0 for p in shape)
+        if has_z:
             z_len += ln.getLength()
-        th, cl, zn = lane_profile(shape, ln.getLength(), window, max_rad, nodes=True)
+        if not has_z and len(shape) >= 2:
+            # a lane without z (most of a network built without elevation): its profiles
+            # are 0, as lane_profile gives them, at a fraction of the time
+            th, cl, zn = flat_profile(ln.getLength())
+            rise, raw = 0.0, th
+        else:
+            th, cl, zn = lane_profile(shape, ln.getLength(), window, max_rad, nodes=True)
+            pos_w = np.diff(np.minimum(np.arange(len(zn)) * BIN_M, max(ln.getLength(), 1e-9)))
+            rise = float(np.max(np.abs(np.diff(zn)) / np.maximum(pos_w, 1e-9)))
+            raw = lane_profile(shape, ln.getLength(), RAW_LENGTH_M, np.inf, behind=True)[0]
         profs.append(th)
         clips.append(cl)
         znodes.append(zn)
-        pos_w = np.diff(np.minimum(np.arange(len(zn)) * BIN_M, max(ln.getLength(), 1e-9)))
-        steep.append(float(np.max(np.abs(np.diff(zn)) / np.maximum(pos_w, 1e-9))))
-        raws.append(lane_profile(shape, ln.getLength(), RAW_LENGTH_M, np.inf, behind=True)[0])
+        steep.append(rise)
+        raws.append(raw)
         h, cx, cy = lane_heading(shape, ln.getLength())
         heads.append(h)
         cxs.append(cx)
