@@ -129,7 +129,8 @@ class Idling:
         if not len(k):
             return idle
         vk = ids[k]
-        frm = np.fromiter(map(self.idle_from.get, vk, repeat(np.inf)), float, len(k))
+        frm = (np.fromiter(map(self.idle_from.get, vk, repeat(np.inf)), float, len(k))
+               if self.idle_from else np.full(len(k), np.inf))
         idle[k] = t >= frm
         has = np.zeros(len(k), bool)
         if signals is not None:  # the FCD's blinker says it, where it has signals
@@ -141,7 +142,7 @@ class Idling:
             untold &= ~np.fromiter(map(self.waiting.__contains__, vk), bool, len(k))
         if untold.any():
             self.untold_rows += int(np.count_nonzero(untold))
-            self.untold_ids.update(vk[untold].tolist())
+            self.untold_ids.update(vk[untold])
         if self.shut and idle.any():
             j = np.flatnonzero(idle)
             idle[j[np.fromiter(map(self.shut.__contains__, ids[j]), bool, len(j))]] = False
