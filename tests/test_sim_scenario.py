@@ -239,6 +239,27 @@ def test_a_lane_without_z_takes_the_flat_profile_lane_profile_gives(xy, scale, w
     np.testing.assert_array_equal(lane_profile(shape, length, RAW_LENGTH_M, np.inf, behind=True)[0], f_th)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.lists(st.tuples(st.floats(-500.0, 500.0), st.floats(-500.0, 500.0)),
+                                   min_size=1, max_size=20), st.floats(0.01, 1.5)),
+                min_size=1, max_size=12))
+def test_lane_headings_of_a_network_equal_each_lanes_heading(lanes):
+    """load_network computes the headings and centre lines of the two-point lanes together
+    (lane_headings): they equal lane_heading's of each lane, whatever the mix of shapes
+    (one point, two — repeated included — or more) and SUMO lengths against the shapes'."""
+    from sumo_drvpw.sim.network import lane_heading, lane_headings
+
+    shapes = [[(x, y, 0.0) for x, y in pts] for pts, _ in lanes]
+    lengths = [max(0.1, scale * float(np.sum(np.hypot(*np.diff(np.asarray(pts, float), axis=0).T))))
+               for pts, scale in lanes]
+    heads, cxs, cys = lane_headings(shapes, lengths)
+    for sh, length, h, cx, cy in zip(shapes, lengths, heads, cxs, cys):
+        h0, cx0, cy0 = lane_heading(sh, length)
+        np.testing.assert_allclose((h - h0 + 180.0) % 360.0 - 180.0, 0.0, atol=1e-9)  # (0° = 360°)
+        np.testing.assert_allclose(cx, cx0, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(cy, cy0, rtol=1e-12, atol=1e-9)
+
+
 _HIGHWAY: list = []
 
 

@@ -364,6 +364,48 @@ def lane_heading(shape, length: float) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return ang[k], p[k, 0] + f * d[k, 0], p[k, 1] + f * d[k, 1]
 
 
+#: lanes of up to this many shape points are computed together by :func:`lane_headings`
+HEADING_BATCH_POINTS = 16
+
+
+def lane_headings(shapes: list, lengths) -> tuple[list, list, list]:
+    """:func:`lane_heading` of every lane (shapes, SUMO lengths), as lists of arrays in lane
+    order; the lanes of 2 … ``HEADING_BATCH_POINTS`` shape points (nearly all of a network)
+    computed together, one batch per point count, with the operations :func:`lane_heading`
+    makes for each (equal to rounding)."""
+    n = len(shapes)
+    heads: list = [None] * n
+    cxs: list = [None] * n
+    cys: list = [None] * n
+    groups: dict[int, list[int]] = {}
+    for i, sh in enumerate(shapes):
+        if 2 <= len(sh) <= HEADING_BATCH_POINTS:
+            groups.setdefault(len(sh), []).append(i)
+        else:
+            heads[i], cxs[i], cys[i] = lane_heading(sh, lengths[i])
+    for m, idx in groups.items():
+        p = np.array([[q[:2] for q in shapes[i]] for i in idx], float)  # lanes × m × 2
+        length = np.array([lengths[i] for i in idx], float)
+        d = np.diff(p, axis=1)
+        seg = np.hypot(d[..., 0], d[..., 1])                             # lanes × (m − 1)
+        s = np.concatenate([np.zeros((len(idx), 1)), np.cumsum(seg, axis=1)], axis=1)
+        ang = np.degrees(np.arctan2(d[..., 0], d[..., 1])) % 360.0
+        nb = np.maximum(1, np.ceil(np.maximum(length, 1e-9) / BIN_M).astype(np.int64))
+        lane = np.repeat(np.arange(len(idx)), nb)
+        j = np.arange(len(lane)) - np.repeat(np.cumsum(nb) - nb, nb)
+        total = s[:, -1]
+        centre = np.minimum((j + 0.5) * BIN_M * (total / np.maximum(length, 1e-9))[lane], total[lane])
+        # searchsorted(s, centre, "right") − 1, clipped to the lane's segments
+        k = np.clip((s[lane, 1:] <= centre[:, None]).sum(axis=1), 0, m - 2)
+        f = (centre - s[lane, k]) / np.maximum(seg[lane, k], 1e-12)
+        cx = p[lane, k, 0] + f * d[lane, k, 0]
+        cy = p[lane, k, 1] + f * d[lane, k, 1]
+        cuts = np.cumsum(nb)[:-1]
+        for i, h, x, y in zip(idx, np.split(ang[lane, k], cuts), np.split(cx, cuts), np.split(cy, cuts)):
+            heads[i], cxs[i], cys[i] = h, x, y
+    return heads, cxs, cys
+
+
 #: a vehicle standing farther than this beyond its lane's edge is no longer on the lane:
 #: SUMO has parked it beside (a parking stop, a parkingArea) [m]
 PARKED_BEYOND_EDGE_M = 0.1
@@ -433,10 +475,11 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     for i in np.flatnonzero(lane_edge < 0):
         inc = lanes[i].getIncoming() if hasattr(lanes[i], "getIncoming") else []
         lane_edge[i] = eidx.get(inc[0].getEdge().getID(), 0) if inc else 0
-    profs, clips, raws, heads, cxs, cys, znodes, steep = [], [], [], [], [], [], [], []
+    profs, clips, raws, znodes, steep, shapes = [], [], [], [], [], []
     z_len = 0.0
     for ln in lanes:
         shape = ln.getShape3D()
+        shapes.append(shape)
         has_z = any(len(p) > 2 and p[2] != 0.0 for p in shape)
         if has_z:
             z_len += ln.getLength()
@@ -455,10 +498,7 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         znodes.append(zn)
         steep.append(rise)
         raws.append(raw)
-        h, cx, cy = lane_heading(shape, ln.getLength())
-        heads.append(h)
-        cxs.append(cx)
-        cys.append(cy)
+    heads, cxs, cys = lane_headings(shapes, [ln.getLength() for ln in lanes])
     lane_length = np.array([ln.getLength() for ln in lanes], float)
     with_lanes = [e for e in net.getEdges() if e.getLanes()]  # lanes are listed edge by edge
     lane_end = np.concatenate(
