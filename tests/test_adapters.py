@@ -347,6 +347,32 @@ def test_columns_datetime_time_and_trip_column(tmp_path):
     assert list(df["trip_id"]) == ["a", "a", "b"]
 
 
+def test_columns_data_rows_ending_in_a_separator_keep_their_columns(tmp_path):
+    """A logger that ends every data row with a comma, but not its header (eron93br/carOBD's
+    Carloop CSVs, CRLF): pandas took the first column as the index and shifted every column
+    by one, silently (time read from the speed, speed from the next column)."""
+    m = write(tmp_path, "map.toml", '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\n'
+              'unit = "km/h"\n')
+    src = write(tmp_path, "x.csv", "t,v,x\r\n0,10,1,\r\n1,12,2,\r\n2,14,3,\r\n3,16,4,\r\n")
+    df, rep = read("columns", src, columns=m)
+    np.testing.assert_allclose(df["time_s"], [0, 1, 2, 3])
+    np.testing.assert_allclose(df["speed_mps"], np.array([10, 12, 14, 16]) / 3.6)
+
+
+def test_columns_brake_flag_held_or_refused(tmp_path):
+    """``brake`` is a flag: on its own rows of an asynchronous log it is held (its last value)
+    at each speed sample, never interpolated between 0 and 1 (a Ford OpenXC trace ended in a
+    pandas TypeError traceback); a value other than 0 or 1 is refused naming file and column."""
+    m = write(tmp_path, "map.toml", '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\n'
+              'unit = "m/s"\n[columns.b]\nname = "brake"\n')
+    src = write(tmp_path, "a.csv", "t,v,b\n0,1,\n0.5,,0\n1,2,\n1.5,,1\n2,3,\n2.5,,1\n3,4,\n3.5,,0\n4,5,\n")
+    df, _ = read("columns", src, columns=m)
+    assert list(df["brake"]) == [False, False, True, True, False]
+    bad = write(tmp_path, "h.csv", "t,v,b\n0,1,0\n1,2,0.5\n2,3,1\n")
+    with pytest.raises(UserError, match=r"h.csv: column 'brake' holds 0.5 \(its first value not 0 or 1\)"):
+        read("columns", bad, columns=m)
+
+
 def test_columns_iso_times_with_changing_utc_offsets_and_fractions(tmp_path):
     """ISO 8601 timestamps as loggers write them: a file holding a summer (+02:00) and a
     winter (+01:00) trip, a trip across the end of daylight saving (02:59:59+02:00 is

@@ -202,7 +202,11 @@ def extra_values(series: pd.Series, file, column: str, notes: list, factor: floa
 
 
 def read_csv_strict(path: Path, **kw) -> pd.DataFrame:
-    """pandas.read_csv with empty or undecodable files turned into a UserError naming the file."""
+    """pandas.read_csv with empty or undecodable files turned into a UserError naming the file.
+    No column becomes the index: a logger that ends every data row with a separator, but not
+    its header line, leaves an empty last field, which pandas would otherwise read as a
+    shift of every column by one (the first taken as the index, silently)."""
+    kw.setdefault("index_col", False)
     try:
         df = pd.read_csv(path, **kw)
     except pd.errors.EmptyDataError:
@@ -402,6 +406,25 @@ def _fold_unit_notes(notes: list[str]) -> list[str]:
             + ", ".join(m["col"] for m in hits)] + rest
 
 
+def _refuse_non_flags(frame: pd.DataFrame, report: dict) -> None:
+    """A flag column (``brake``, ``reverse``) holds 0/1 or true/false; anything else (a pedal
+    position, a percentage) is refused naming the file, the column and its first such value."""
+    for c in ("brake", "reverse"):
+        if c not in frame:
+            continue
+        x = frame[c]
+        if pd.api.types.is_bool_dtype(x):
+            continue
+        num = pd.to_numeric(x, errors="coerce")
+        bad = x.notna() & ~num.isin([0, 1])
+        if bad.any():
+            v = x[bad].iloc[0]
+            v = repr(v) if isinstance(v, str) else f"{float(v):g}"
+            raise UserError(f"{report['file']}: column '{c}' holds {v} "
+                            f"(its first value not 0 or 1): '{c}' is a flag, 0 or 1 (map a pedal "
+                            "position or a percentage to a column of its own name instead)")
+
+
 def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=()) -> tuple:
     """Concatenate per-file frames and build the import report (totals + per file)."""
     if not frames:
@@ -415,6 +438,7 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
                         + ", ".join(r["file"] for r in reports if r["trip_id"] == dup[0]))
     for f, r in zip(frames, reports):
         _refuse_infinite(f, r)
+        _refuse_non_flags(f, r)
     df = pd.concat(frames, ignore_index=True, sort=False)
     df = order_columns(df)
     for c in ("brake", "reverse"):  # a flag one file sets (a car backing up): not set in the others

@@ -269,7 +269,10 @@ def align_channels(df: pd.DataFrame, report: dict) -> pd.DataFrame:
         if not own.any() or (own & speed_row).sum() >= 0.5 * own.sum():
             continue
         col = x[speed_row].copy()
-        put, mean = onto(ts, t[own], x[own])
+        if c in ("brake", "reverse"):  # a state (an on/off flag): its last value held, never averaged
+            put, mean = held(ts, t[own], x[own]), False
+        else:
+            put, mean = onto(ts, t[own], x[own])
         if mean:
             col = put
             averaged.append(c)
