@@ -357,6 +357,7 @@ def test_columns_data_rows_ending_in_a_separator_keep_their_columns(tmp_path):
     df, rep = read("columns", src, columns=m)
     np.testing.assert_allclose(df["time_s"], [0, 1, 2, 3])
     np.testing.assert_allclose(df["speed_mps"], np.array([10, 12, 14, 16]) / 3.6)
+    assert any("more fields than the header line" in n for n in rep["files"][0]["notes"]), rep
 
 
 def test_columns_brake_flag_held_or_refused(tmp_path):

@@ -206,9 +206,15 @@ def read_csv_strict(path: Path, **kw) -> pd.DataFrame:
     No column becomes the index: a logger that ends every data row with a separator, but not
     its header line, leaves an empty last field, which pandas would otherwise read as a
     shift of every column by one (the first taken as the index, silently)."""
+    import warnings
+
     kw.setdefault("index_col", False)
     try:
-        df = pd.read_csv(path, **kw)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", pd.errors.ParserWarning)
+            df = pd.read_csv(path, **kw)
+        if any(issubclass(w.category, pd.errors.ParserWarning) for w in caught):
+            WIDER_ROWS.add(str(path))
     except pd.errors.EmptyDataError:
         raise UserError(f"{path}: file is empty") from None
     except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as e:
@@ -233,6 +239,8 @@ def read_csv_strict(path: Path, **kw) -> pd.DataFrame:
 
 #: files whose last row was cut mid-row (path → rows dropped), read by :func:`new_report`
 TRUNCATED: dict[str, int] = {}
+#: files whose data rows hold more fields than their header line, read by :func:`new_report`
+WIDER_ROWS: set[str] = set()
 
 
 def _cut_mid_row(path: Path, sep: str, encoding: str) -> bool:
@@ -266,6 +274,10 @@ def note_truncated(rep: dict, path: Path) -> dict:
         rep["rows_read"] += cut
         rep["dropped"]["truncated last row"] = cut
         rep["notes"].append("file is cut short (truncated): it ends inside its last row, which is dropped")
+    if str(path) in WIDER_ROWS:
+        WIDER_ROWS.discard(str(path))
+        rep["notes"].append("data rows hold more fields than the header line (a separator at the end of "
+                            "each row): the fields beyond the header's are not read")
     return rep
 
 
