@@ -287,7 +287,7 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float,
     s_h = np.concatenate([[0.0], np.cumsum(seg_h)])    # horizontal distance
     s_3 = np.concatenate([[0.0], np.cumsum(seg_3d)])   # along-shape distance
     total_h, total_3 = s_h[-1], s_3[-1]
-    nb = max(1, int(np.ceil(max(length, 1e-9) / BIN_M)))
+    nb = lane_bins(length)
     if total_h <= 1e-6:
         return (np.zeros(nb), np.zeros(nb, bool)) + ((np.full(nb + 1, p[0, 2]),) if nodes else ())
     scale = total_3 / max(length, 1e-9)  # SUMO position → along-shape distance
@@ -319,10 +319,15 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float,
     return out
 
 
+def lane_bins(length: float) -> int:
+    """The number of ``BIN_M`` bins of a lane of SUMO ``length`` [m] (at least one)."""
+    return max(1, int(np.ceil(max(length, 1e-9) / BIN_M)))
+
+
 def flat_profile(length: float):
     """:func:`lane_profile` of a lane of ``length`` [m] whose shape (two points or more) has
     no z: (θ, clipped, z at the bin edges), all 0."""
-    nb = max(1, int(np.ceil(max(length, 1e-9) / BIN_M)))
+    nb = lane_bins(length)
     return np.zeros(nb), np.zeros(nb, bool), np.zeros(nb + 1)
 
 
@@ -350,7 +355,7 @@ def lane_heading(shape, length: float) -> tuple[np.ndarray, np.ndarray, np.ndarr
     x, y on the lane's centre line [m] (positions scaled from SUMO's lane length to the
     shape's length, as SUMO places a vehicle)."""
     p = np.asarray(shape, dtype=float)[:, :2]
-    nb = max(1, int(np.ceil(max(length, 1e-9) / BIN_M)))
+    nb = lane_bins(length)
     if len(p) < 2:
         q = p[0] if len(p) else np.zeros(2)
         return np.zeros(nb), np.full(nb, q[0]), np.full(nb, q[1])

@@ -15,6 +15,7 @@ import pandas as pd
 
 from sumo_drvpw.data.counters import COUNTERS, describe
 from sumo_drvpw.data.adapters.align import align_channels
+from sumo_drvpw.data.log import FLAGS
 from sumo_drvpw.data.paths import expand_paths  # noqa: F401  (re-exported for the adapters)
 from sumo_drvpw.model.constants import FT, G_UNIT, GAL, HP, KELVIN, KMH, LB, LBF, MILE, MPH, RPM
 from sumo_drvpw.errors import UserError
@@ -421,7 +422,7 @@ def _fold_unit_notes(notes: list[str]) -> list[str]:
 def _refuse_non_flags(frame: pd.DataFrame, report: dict) -> None:
     """A flag column (``brake``, ``reverse``) holds 0/1 or true/false; anything else (a pedal
     position, a percentage) is refused naming the file, the column and its first such value."""
-    for c in ("brake", "reverse"):
+    for c in FLAGS:
         if c not in frame:
             continue
         x = frame[c]
@@ -453,7 +454,7 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
         _refuse_non_flags(f, r)
     df = pd.concat(frames, ignore_index=True, sort=False)
     df = order_columns(df)
-    for c in ("brake", "reverse"):  # a flag one file sets (a car backing up): not set in the others
+    for c in FLAGS:  # a flag one file sets (a car backing up): not set in the others
         if c in df:
             df[c] = df[c].astype("boolean").fillna(False).astype(bool)
     mixed = _text_in_some_files(df, frames, reports)

@@ -30,6 +30,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from sumo_drvpw.data.log import FLAGS
+
 #: a channel logged on its own rows is interpolated across gaps up to this many of its median
 #: sampling intervals; a longer gap (the logger paused the channel) stays missing
 ALIGN_MAX_GAP_INTERVALS = 3.0
@@ -269,7 +271,7 @@ def align_channels(df: pd.DataFrame, report: dict) -> pd.DataFrame:
         if not own.any() or (own & speed_row).sum() >= 0.5 * own.sum():
             continue
         col = x[speed_row].copy()
-        if c in ("brake", "reverse"):  # a state (an on/off flag): its last value held, never averaged
+        if c in FLAGS:  # a state (an on/off flag): its last value held, never averaged
             put, mean = held(ts, t[own], x[own]), False
         else:
             put, mean = onto(ts, t[own], x[own])
