@@ -37,17 +37,43 @@ def test_a_log_reads_as_the_run_reads_trajectories(tmp_path, capsys):
         tr = _trip(seed)
         ref.add_trajectory(tr.time_s.to_numpy(), tr.speed_mps.to_numpy(), "measured")
     want = json.loads(json.dumps(ref.summary()["measured"]))
-    assert doc["driving_dynamics"] == want and doc["trips"] == 2 and doc["samples"] == len(df)
+    got = doc["driving_dynamics"]
+    assert got.pop("logged_s") == pytest.approx(2 * 7999 / 10.0) and got.pop("median_step_s") == pytest.approx(0.1)
+    assert got == want and doc["trips"] == 2 and doc["samples"] == len(df)
+    out = capsys.readouterr().out
+    assert "RPA" in out and "warning" not in out  # (10 Hz: the 1-Hz figures cover the log)
     prof = want["accel_profile"]
     assert len(prof) >= 3 and doc["sumo_vtype"] == D.sumo_profile(prof)
     assert doc["sumo_vtype"]["desAccelProfile"].split() == [f"{b['a_pos_95_mps2']:g}" for b in prof]
     md = (tmp_path / "o" / "report.md").read_text()
     assert f'speedTable="{doc["sumo_vtype"]["speedTable"]}"' in md and "| measured | urban |" in md
     assert log.read_bytes() == before
-    assert "RPA" in capsys.readouterr().out
+
+
+def test_a_log_sampled_every_two_seconds_says_how_little_its_figures_rest_on(tmp_path, capsys):
+    """A trip sampled every 2 s with a few 1-s steps (as carOBD's logs): the 1-Hz central
+    differences exist only around those steps, so the figures rest on a sliver of the log —
+    said on the console and in report.md; a 1-Hz log of the same drive is not warned of."""
+    t = np.arange(0.0, 3600.0, 2.0)
+    t = np.sort(np.concatenate([t, t[::100] + 1.0]))  # a 1-s step every 200 s
+    v = np.clip(12 + 10 * np.sin(t / 40.0), 0, None)
+    log = tmp_path / "log.csv"
+    pd.DataFrame({"time_s": t, "speed_mps": v}).to_csv(log, index=False)
+    assert cli_main(["dynamics", str(log), "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    doc = json.loads((tmp_path / "o" / "dynamics.json").read_text())["driving_dynamics"]
+    covered = sum(p["time_s"] for p in doc["parts"].values())
+    assert 0 < covered < 0.1 * doc["logged_s"] and doc["median_step_s"] == 2.0
+    assert "warning: the 1-Hz figures rest on" in out and "2 s apart" in out
+    assert "**Warning:** the 1-Hz figures rest on" in (tmp_path / "o" / "report.md").read_text()
+    t1 = np.arange(0.0, 3600.0, 1.0)
+    pd.DataFrame({"time_s": t1, "speed_mps": np.clip(12 + 10 * np.sin(t1 / 40.0), 0, None)}).to_csv(log, index=False)
+    assert cli_main(["dynamics", str(log), "--out", str(tmp_path / "o1")]) == 0
+    assert "warning" not in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("rows,needle", [
+    ("time_s,speed_mps\n0,0\n1,0\n2,0\n3,0\n", "column 'speed_mps' is 0 on every row"),
     ("time_s,speed_mps,trip_id\n0,1,a\n1,2,a\n", "no 1-Hz figures"),
     ("time_s,speed,trip_id\n0,1,a\n1,2,a\n2,3,a\n", "missing required column 'speed_mps'")])
 def test_bad_logs_exit_2_in_one_line_and_write_nothing(tmp_path, capsys, rows, needle):

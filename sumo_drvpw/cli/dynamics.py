@@ -23,10 +23,13 @@ def main(args) -> int:
     from sumo_drvpw.data.log import read_log
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.fileio import write_json, write_text
-    from sumo_drvpw.sim.dynamics import SOURCE, of_log, report_md, sumo_profile
+    from sumo_drvpw.sim.dynamics import SOURCE, coverage_warning, of_log, report_md, sumo_profile
 
     log = read_log(args.logs, None, read_options(args))
     note_counts(log.counts)
+    if not (log.df["speed_mps"] > 0).any():
+        raise UserError(f"{args.logs[0]}: column 'speed_mps' is 0 on every row: the vehicle never "
+                        "moves, so there are no driving dynamics")
     dyn, trips = of_log(log.df)
     if not dyn.get("parts"):
         raise UserError(f"{args.logs[0]}: no trip has speeds one and two seconds apart (at least 3 s "
@@ -42,5 +45,7 @@ def main(args) -> int:
               f"(RDE max {p['rde_va_pos_95_max']:.1f}) m²/s³  RPA {p['rpa_mps2']:.3f} "
               f"(RDE min {p['rde_rpa_min']:.3f}) m/s²")
     print(f"kinetic energy {dyn['kinetic_j_per_kg_km']:.0f} J/(kg·km) over {trips} trips")
+    if (w := coverage_warning(dyn)):
+        print(f"warning: {w}")
     print(f"wrote {Path(args.out) / 'report.md'}")
     return 0

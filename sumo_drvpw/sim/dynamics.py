@@ -392,15 +392,44 @@ def warnings(summary: dict) -> list[str]:
 def of_log(df) -> "tuple[dict, int]":
     """(:meth:`Dynamics.summary` of a drive log's trips — a canonical log's ``time_s``,
     ``speed_mps`` and ``trip_id``; each trip one trajectory — under :data:`LOG_LABEL`, or {}
-    when no trip gives a 1-Hz sample; the number of trips)."""
+    when no trip gives a 1-Hz sample, with ``logged_s`` (the trips' time, first to last
+    sample) and ``median_step_s`` (the median spacing of their samples); the number of
+    trips). The parts' ``time_s`` is the time the 1-Hz figures cover: against ``logged_s``
+    it shows how much of a coarsely sampled log they rest on (:func:`coverage_warning`)."""
     d = Dynamics()
     trips = df["trip_id"].astype(str).to_numpy()
     t, v = df["time_s"].to_numpy(float), df["speed_mps"].to_numpy(float)
     names = list(dict.fromkeys(trips))
+    logged, steps = 0.0, []
     for trip in names:
         s = (trips == trip) & np.isfinite(v) & np.isfinite(t)  # (the reader: time increases within a trip)
         d.add_trajectory(t[s], v[s], LOG_LABEL)
-    return d.summary().get(LOG_LABEL, {}), len(names)
+        if s.sum() > 1:
+            logged += float(t[s][-1] - t[s][0])
+            steps.append(np.diff(t[s]))
+    out = d.summary().get(LOG_LABEL, {})
+    if out:
+        out["logged_s"] = logged
+        out["median_step_s"] = float(np.median(np.concatenate(steps))) if steps else float("nan")
+    return out, len(names)
+
+
+#: the share of a log's time its 1-Hz figures must cover before they stand for the log
+MIN_COVERAGE = 0.5
+
+
+def coverage_warning(dyn: dict) -> str | None:
+    """A warning when the 1-Hz figures of :func:`of_log`'s result cover less than
+    :data:`MIN_COVERAGE` of the logged time (samples mostly more than a second apart, or
+    gaps over :data:`MAX_SPAN_S`), else None."""
+    covered = sum(p["time_s"] for p in dyn.get("parts", {}).values())
+    logged = dyn.get("logged_s", 0.0)
+    if logged <= 0 or covered >= MIN_COVERAGE * logged:
+        return None
+    return (f"the 1-Hz figures rest on {covered:.0f} s of the logs' {logged:.0f} s "
+            f"({100 * covered / logged:.1f} %): the samples are {dyn['median_step_s']:g} s apart "
+            f"(median), and RDE differences need speeds one second apart (gaps up to {MAX_SPAN_S:g} s); "
+            "the figures describe only those stretches, not the logs")
 
 
 def report_md(doc: dict) -> str:
@@ -409,6 +438,7 @@ def report_md(doc: dict) -> str:
     lines = ["# Driving dynamics of the logs", "",
              f"{doc['trips']} trips of {len(doc['logs'])} file(s), measured as a SUMO run measures its "
              f"trajectories ({doc['source']}; speeds at 1 Hz, central differences).", "",
+             *([f"**Warning:** {w}.", ""] if (w := coverage_warning(dyn)) else []),
              *markdown_head(["logs"]), *markdown_rows(dyn, [LOG_LABEL]), "",
              "Accelerations above 0.1 m/s² by speed (1 Hz):", "",
              "| speed m/s | samples | median m/s² | 85th pct. | 95th pct. |", "|---|---|---|---|---|"]
