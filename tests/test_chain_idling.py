@@ -90,3 +90,64 @@ def test_calibrate_fits_an_idling_engine_as_one_in_memory_and_streamed(tmp_path,
     chain = tomllib.loads(out.read_text())["chain"]
     assert chain["engine_off_below_w"] == -np.inf and not chain.get("charge_sustaining", False)
     assert "idling at stops" in chain["reading"]["engine_off_below_w"]
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+def test_a_log_that_only_idles_is_refused_not_fitted_to_an_efficiency_at_its_bound(tmp_path, capsys, engine):
+    """Half an hour of idling with one creep to 5 km/h (a rehearsal's idling-only log): no
+    driving power above 2 kW, so the Willans slope is not identified — the fit put it at its
+    bound (100 %) and wrote the file, exit 0. Now exit 2 in one line naming the log, no file."""
+    from sumo_drvpw.cli import main as cli_main
+
+    rng = np.random.default_rng(1)
+    t = np.arange(0.0, 1800.0, 0.5)
+    v = np.zeros(t.size)
+    v[1000:1040] = 1.5 * np.sin(np.linspace(0.0, np.pi, 40))
+    log = tmp_path / "idle.parquet"
+    pd.DataFrame({"time_s": t, "speed_mps": v, "fuel_rate_gps": 0.166 + rng.normal(0, 0.005, t.size),
+                  "mass_kg": MASS}).to_parquet(log)
+    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n')
+    out = tmp_path / "o.toml"
+    assert cli_main(["calibrate", str(log), "--target", "fuel", "--equation", str(tmp_path / "rl.toml"),
+                     "--engine", engine, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err and "idle.parquet" in err
+    assert "never above 2 kW" in err and "marginal efficiency cannot be told" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("fuel,eta,flagged", [("gasoline", 0.52, True), ("diesel", 0.52, False),
+                                              ("gasoline", 0.27, False), ("diesel", 0.27, True)])
+def test_the_willans_slope_is_judged_by_the_engine_s_fuel(fuel, eta, flagged):
+    """A diesel's marginal efficiency of 0.52 is plausible (the literature's ≈ 0.45), a
+    petrol engine's is not, and 0.27 the other way round; the reading names the engine's fuel, not "petrol" for both."""
+    from sumo_drvpw.fit.chain_checks import reading
+
+    r = reading("marginal_efficiency", eta, fuel)
+    assert ("IMPLAUSIBLE" in r) == flagged
+    assert not flagged or f"for a {'petrol' if fuel == 'gasoline' else 'diesel'} engine" in r
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+@pytest.mark.parametrize("declared,want", [("never", -np.inf), ("2000", 2000.0)])
+def test_the_engine_off_threshold_can_be_declared(tmp_path, engine, declared, want):
+    """A log too short to show its engine idling at stops (under 30 s standing) is profiled
+    over every threshold; `--engine-off never` declares the conventional engine that runs
+    throughout (or a threshold in W), in memory and streamed alike, and the file says it
+    was declared."""
+    from sumo_drvpw.cli import main as cli_main
+
+    rng, t, v, p = _stop_and_go(seed=6)
+    keep = np.cumsum(v < 0.05) * 0.5 < 25.0  # the log ends 25 s into its stops
+    standing = float(0.5 * (v[keep] < 0.05).sum())
+    assert standing < 30.0  # too short for the idling rule (IDLING_MIN_STANDING_S)
+    lph = _fuel(rng, v, p)[keep] / (42.5e6 * 0.745) * 3600.0
+    pd.DataFrame({"time_s": t[keep], "speed_mps": v[keep], "fuel_rate_lph": lph, "mass_kg": MASS}).to_parquet(
+        tmp_path / "log.parquet")
+    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n')
+    out = tmp_path / f"{engine}.toml"
+    assert cli_main(["calibrate", str(tmp_path / "log.parquet"), "--target", "fuel", "--equation",
+                     str(tmp_path / "rl.toml"), "--engine", engine, "--engine-off", declared, "--out", str(out)]) == 0
+    chain = tomllib.loads(out.read_text())["chain"]
+    assert chain["engine_off_below_w"] == want
+    assert chain["reading"]["engine_off_below_w"].endswith("declared, not profiled")

@@ -259,7 +259,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
         cands = tuple(resolve_candidates(args.candidates))
     fuel = veh.powertrain.get("fuel", "gasoline") if veh is not None else "gasoline"
     cut = getattr(getattr(eq, "chain", None), "fuel_cut_below_w", None)  # declared: kept
-    spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut)
+    spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut,
+                     getattr(args, "engine_off", "profile"))
     infos = []
 
     def reduce(make):
@@ -291,7 +292,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
             " (physically constrained: the free fit was implausible)" if note else "")
     chain_input = f"driving power of {eq.name}" if src is None else f"measured driving power ({src})"
     fit = fit_chain(reduce, st)
-    check_chain(fit, veh, None, None, None, ranges=st.fitted_ranges())
+    check_chain(fit, veh, None, None, None, ranges=st.fitted_ranges(), where=st.where)
     eq.name = args.name or out.stem
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": st.files, "target": st.source, "road_load": road,

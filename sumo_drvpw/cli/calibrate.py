@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +43,10 @@ def configure(p):
     g.add_argument("--hvac", metavar="COLUMN[:SETPOINT_C]",
                    help="fit heating and cooling power per K of COLUMN (ambient °C) from the set-point "
                         "(default 20)")
+    g.add_argument("--engine-off", metavar="never|W", dest="engine_off",
+                   help="fuel chain: the engine never stops ('never': a conventional engine without "
+                        "start-stop), or stops below this driving power in W (default: profiled from "
+                        "the log, and 'never' where it idles at stops)")
     g.add_argument("--efficiency", choices=("constant", "power", "speed-power"), default="constant",
                    help="battery chain: traction and recuperation efficiency as constants (default) "
                         "or tables over |power| (and speed), fitted on a piecewise-linear basis")
@@ -289,6 +295,26 @@ def write_equation(args, eq, out, inputs, report=None) -> None:
         save_equation(eq, out)
     print(f"wrote {out}")
 
+def engine_off_option(args) -> "str | float":
+    """``--engine-off`` as the fuel chain takes it: "profile" (not given), −inf ('never') or
+    a driving power [W]; refused in one line where it is not one or goes with another target."""
+    val = getattr(args, "engine_off", None)
+    if val is None or val == "profile":
+        return "profile"
+    if args.target != "fuel":
+        raise UserError(f"--engine-off {val} goes with --target fuel (an engine's stops)")
+    if str(val).strip().lower() == "never":
+        return -math.inf
+    try:
+        w = float(val)
+    except ValueError:
+        w = math.nan
+    if not math.isfinite(w) or w < 0:
+        raise UserError(f"--engine-off {val}: give 'never' or the driving power in W below which the "
+                        "engine stops (≥ 0, e.g. 0)")
+    return w
+
+
 def main_chain(args) -> int:
     """``calibrate --target battery|fuel``: the energy chain on top of a road-load equation.
 
@@ -312,6 +338,7 @@ def main_chain(args) -> int:
     if efficiency != "constant" and args.target != "battery":
         raise UserError(f"--efficiency {efficiency} goes with --target battery (a fuel chain's "
                         "efficiency is its Willans line)")
+    args.engine_off = engine_off_option(args)
     inputs = existing_paths(args.logs, args.vehicle, args.equation)
     check_output_path(out, inputs, "file")
     hvac = None
@@ -384,7 +411,8 @@ def main_chain(args) -> int:
     keep |= {c for t in eq.terms for c in parse_term(t).columns}
     m = keep_arrays(m, sorted(keep))  # the table goes with the last reference to it
     del mw
-    fit = calibrate_on(m, eq, loads=args.load, hvac=hvac, p_drive_w=p_in, efficiency=efficiency)
+    fit = calibrate_on(m, eq, loads=args.load, hvac=hvac, p_drive_w=p_in, efficiency=efficiency,
+                       engine_off=args.engine_off)
     eq.name = args.name or out.stem
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": m.log.files, "target": m.source, "road_load": road,

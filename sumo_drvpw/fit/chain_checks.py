@@ -125,11 +125,27 @@ def engine_off_note(value_w: float, powertrain: str | None, idle_l_per_h: float)
     return ""
 
 
-def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None) -> None:
+#: the driving power [W] a chain's efficiency needs the usable samples to exceed: below it
+#: a log holds standing, idling or creeping only, and the slope of battery or fuel power on
+#: driving power is not identified (an idling log's fit put η_m at its bound, 1, exit 0)
+IDENTIFY_DRIVE_W = 2000.0
+
+
+def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
+                where: str = "the logs") -> None:
     """Add the readings, fitted ranges and warnings of this module to a ``ChainFit``
     (in place; see the module docstring); ``ranges``: the fitted ranges when known (a
-    streamed fit's), else from ``p_drive_w``, ``v_mps`` and ``use``."""
+    streamed fit's), else from ``p_drive_w``, ``v_mps`` and ``use``. UserError, naming
+    ``where``, when the driving power never exceeds :data:`IDENTIFY_DRIVE_W`."""
     chain = fit.chain
+    ranges = fitted_ranges(p_drive_w, v_mps, use) if ranges is None else ranges
+    if ranges and ranges["power_range_w"][1] < IDENTIFY_DRIVE_W:
+        (p0, p1), (_, v1) = ranges["power_range_w"], ranges["speed_range_mps"]
+        what = "marginal efficiency" if chain.predicts == "fuel" else "traction efficiency"
+        raise UserError(f"{where}: the driving power stays within {p0 / 1000:.1f} … {p1 / 1000:.1f} kW "
+                        f"(speed up to {v1 * 3.6:.0f} km/h) on the usable samples, never above "
+                        f"{IDENTIFY_DRIVE_W / 1000:.0f} kW: the chain's {what} cannot be told from "
+                        "such a log (standing, idling or creeping only); calibrate on logs that drive")
     powertrain = vehicle.powertrain_type if vehicle is not None else None
     params = fit.parameters
     if chain.predicts == "fuel" and "idle_fuel_power_w" in params:
@@ -139,7 +155,6 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None)
         if "engine_off_below_w" in params:
             params["engine_off_below_w"]["reading"] += engine_off_note(
                 chain.engine_off_below_w, powertrain, fuel_l_per_h(chain.idle_fuel_power_w, chain.fuel))
-    ranges = fitted_ranges(p_drive_w, v_mps, use) if ranges is None else ranges
     chain.provenance = {**chain.provenance, **ranges}
     fit.warnings = [f"energy chain {name} = {_value(p['value'])}: {p.get('reading', '')}"
                     for name, p in params.items() if any(f in p.get("reading", "") for f in FLAGS)]
@@ -161,8 +176,17 @@ def _value(x: float) -> str:
     return "-inf" if x == -math.inf else f"{x:.4g}"
 
 
-def reading(name: str, val: float) -> str:
-    """One-line physical reading of a calibrated parameter, flagging implausible values."""
+#: plausible marginal (Willans-slope) efficiency of an engine by fuel: (checked band, the
+#: expected range said). Petrol 0.3–0.45; diesel 0.35–0.5, around the diesel slope ≈ 0.45
+#: of the Willans-line literature [RGB99] and the EPA light-duty diesels' measured 0.412 at
+#: the wheels (docs/sources.md, docs/hdv-fuel.md)
+MARGINAL_EFFICIENCY = {"gasoline": ((0.25, 0.5), "0.3–0.45", "petrol"),
+                       "diesel": ((0.3, 0.55), "0.35–0.5", "diesel")}
+
+
+def reading(name: str, val: float, fuel: str = "gasoline") -> str:
+    """One-line physical reading of a calibrated parameter, flagging implausible values
+    (an engine's by its ``fuel``, a key of :data:`sumo_drvpw.model.constants.FUELS`)."""
     if name == "traction_efficiency":
         s = f"battery → wheel on traction {val:.1%} (motor, inverter, gear, battery resistance)"
         return s + ("; IMPLAUSIBLE for a BEV (expected 0.75–0.95): the road load is off"
@@ -188,7 +212,8 @@ def reading(name: str, val: float) -> str:
         return f"{val:.0f} W per K from the set-point"
     if name == "marginal_efficiency":
         s = f"fuel → engine output at the margin {val:.1%} (Willans slope)"
-        return s + ("; IMPLAUSIBLE for a petrol engine (expected 0.3–0.45)" if not 0.25 <= val <= 0.5 else "")
+        (lo, hi), said, kind = MARGINAL_EFFICIENCY.get(fuel, MARGINAL_EFFICIENCY["gasoline"])
+        return s + (f"; IMPLAUSIBLE for a {kind} engine (expected {said})" if not lo <= val <= hi else "")
     if name == "idle_fuel_power_w":
         return f"fuel power with the engine on at zero output {val / 1000:.2f} kW (friction, pumping, warm-up, auxiliaries)"
     if name == "engine_off_below_w":

@@ -89,6 +89,12 @@ def note_idling(params: dict, sums) -> None:
     params["engine_off_below_w"]["how"] = "fixed: the engine idles at stops in the log"
 
 
+def note_declared(params: dict) -> None:
+    """The engine-off threshold of a fit made with the one the user declared."""
+    params["engine_off_below_w"]["how"] = "declared"
+    params["engine_off_below_w"]["reading"] += "; declared, not profiled"
+
+
 def fuel_names(tmpl: EnergyChain, loads) -> list[str]:
     """The parameters of ``tmpl``'s Willans line: the idle fuel, 1/η_m, for a
     charge-sustaining template the auxiliary power (paid also while the engine is off: the
@@ -140,7 +146,7 @@ def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fu
         params["engine_on_above_mps"] = {"value": engine_on_above_mps, "std_err": None,
                                          "at_bound": False, "how": "profiled (BIC) over a grid"}
     for name, p_ in params.items():
-        p_["reading"] = reading(name, p_["value"])
+        p_["reading"] = reading(name, p_["value"], fuel)
     if charge_sustaining:
         aux = params["aux_power_w"]["value"]
         params["aux_power_w"]["reading"] = (
@@ -208,6 +214,7 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     if mask is not None:
         ok &= np.asarray(mask, bool)
     best, profile = None, []
+    declared = not (isinstance(engine_off, str) and engine_off == "profile")
     yy = float(w[ok] @ y[ok] ** 2)
     idling = engine_off == "profile" and idles_at_stops(stand := standing_sums(v, y, w, ok))
     if idling:
@@ -230,6 +237,8 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
                                low, fuel, fuel_cut_below_w, tmpl.charge_sustaining, battery_w is not None)
     if idling:
         note_idling(params, stand)
+    if declared:
+        note_declared(params)
     pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
     target = corrected_fuel_power(y, pb, chain.battery_fuel_factor)[ok]
     r2, rmse, ratio = _stats(pred, target, w[ok])

@@ -35,7 +35,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import (LIMIT_QUANTILES, ChainFit, _bic, _col, _covariance, battery_chain,
                                   battery_columns, battery_design, factor_rows, solve_factor)
 from sumo_drvpw.fit.chain_fuel import (CITY_SPEED_MPS, fuel_bounds, fuel_chain, fuel_design, fuel_grid,
-                                       idles_at_stops, note_idling, standing_sums,
+                                       idles_at_stops, note_declared, note_idling, standing_sums,
                                        fuel_names)
 from sumo_drvpw.fit.stream import _add_counts
 
@@ -53,7 +53,8 @@ class ChainSpec:
     the road load whose driving power is the chain's input where the log has no measured
     driving power (None: the log's must be used); logged ``loads``; ``hvac`` {column,
     setpoint_c} or None; ``candidates`` of the stepwise road load fitted in the same pass
-    (None: none); the fuel and a declared overrun cut-off of a fuel chain."""
+    (None: none); the fuel, a declared overrun cut-off and the engine-off threshold of a
+    fuel chain ("profile", −inf: never, or W)."""
 
     target: str
     equation: object = None
@@ -63,6 +64,7 @@ class ChainSpec:
     moving_mps: float = 0.5
     fuel: str = "gasoline"
     fuel_cut_below_w: float | None = None
+    engine_off: "str | float" = "profile"
 
 
 def quantile_of_order(order, n: int, q: float) -> float:
@@ -149,7 +151,8 @@ class ChainStats:
             from sumo_drvpw.fit.stream import CalibrationStats
 
             self.road = CalibrationStats(tuple(spec.candidates), moving_mps=spec.moving_mps)
-        self.grid = fuel_grid(fuel_cut_below_w=spec.fuel_cut_below_w) if spec.target == "fuel" else None
+        self.grid = (fuel_grid(spec.engine_off, fuel_cut_below_w=spec.fuel_cut_below_w)
+                     if spec.target == "fuel" else None)
 
     def columns(self):
         return None  # every column: the fuel flow, air flow and fuel trims are found by name
@@ -452,7 +455,7 @@ class ChainStats:
         sp, best, profile = self.spec, None, []
         sw, mu, c = self.mom
         yy = float(c[0, 0] + sw * mu[0] ** 2)  # Σw·y² of the fuel power
-        idling = idles_at_stops(self.standing)  # then only an engine that runs at standstill
+        idling = sp.engine_off == "profile" and idles_at_stops(self.standing)  # then only one that runs standing
         for i, tmpl in enumerate(self.grid):
             if idling and tmpl.engine_off_below_w > -np.inf:
                 continue
@@ -470,6 +473,8 @@ class ChainStats:
                                    sp.fuel_cut_below_w, tmpl.charge_sustaining, self.battery)
         if idling:
             note_idling(params, self.standing)
+        if sp.engine_off != "profile":
+            note_declared(params)
         b = chain.battery_fuel_factor  # the target: fuel + k·battery power (SOC-corrected)
         sst = float(c[0, 0] + 2 * b * c[0, 1] + b * b * c[1, 1])
         r2 = 1.0 - rss / sst if sst > 0 else math.nan
