@@ -34,8 +34,8 @@ def test_a_raw_can_log_lists_its_frames_then_its_signals_with_the_dbc(tmp_path, 
     assert cli_main(["import", "columns", str(HERE / "canmod_gps.MF4"), "--list", "--columns", str(m)]) == 0
     out = _lines(capsys)
     assert "decoded with canmod-gps.dbc): 39 channels" in out[0]
-    assert _row(out, "Speed") == ["Speed", "m/s", "41", "1"]                 # the GNSS at 1 Hz
-    assert _row(out, "AccelerationX") == ["AccelerationX", "m/s^2", "4518", "100"]  # the IMU at 100 Hz
+    assert _row(out, "Speed") == ["Speed", "m/s", "41", "1", "0.953"]      # the GNSS at 1 Hz, with a gap
+    assert _row(out, "AccelerationX") == ["AccelerationX", "m/s^2", "4518", "100", "101"]  # the IMU at 100 Hz
     assert sorted(p.name for p in tmp_path.iterdir()) == ["map.toml"]        # nothing written
 
 
@@ -45,7 +45,8 @@ def test_iso_tp_responses_are_listed_as_signals(tmp_path, capsys):
     m.write_text(f'[options]\ndbc = ["{(HERE / "tp_uds.dbc").as_posix()}"]\n')
     assert cli_main(["import", "columns", str(HERE / "kona_uds.MF4"), "--list", "--columns", str(m)]) == 0
     out = _lines(capsys)
-    assert _row(out, "M_SID_0x220101_StateOfChargeBMS") == ["M_SID_0x220101_StateOfChargeBMS", "%", "120", "0.5"]
+    assert _row(out, "M_SID_0x220101_StateOfChargeBMS") == ["M_SID_0x220101_StateOfChargeBMS", "%", "120", "0.5",
+                                                               "0.496"]
     assert any("ISO-TP responses reassembled" in line and "Battery 120" in line for line in out)
 
 
@@ -148,6 +149,22 @@ def test_the_sketch_prefers_the_vehicle_speed_to_a_wheel_speed():
     sk = sketch(rows, True, {})
     assert '[columns."WheelBasedVehicleSpeed"]\nname = "speed_mps"  # also fits: GpsSpeed' in sk, sk
     assert "WheelSpeedFL" not in sk and "EngineSpeed" not in sk
+
+
+def test_the_sketch_prefers_the_channel_that_covers_the_log_to_a_bursty_one():
+    """A J1939 log's tachograph speed (TCO1) came in bursts: 20 Hz between gaps, 2 Hz over the
+    log; the wheel-based speed (CCVS) at a steady 10 Hz. Both name the vehicle's speed; the
+    sketch mapped the one listed first — the bursty one. Now the mean rate over the log
+    decides; a table's column with more values wins the same way."""
+    from sumo_drvpw.data.adapters.listing import sketch
+
+    rows = [{"label": "TachographVehicleSpeed", "unit": "km/h", "samples": 7200, "rate_hz": 20.0, "mean_rate_hz": 2.0},
+            {"label": "WheelBasedVehicleSpeed", "unit": "km/h", "samples": 36000, "rate_hz": 10.0, "mean_rate_hz": 10.0}]
+    sk = sketch(rows, True, {})
+    assert '[columns."WheelBasedVehicleSpeed"]\nname = "speed_mps"  # also fits: TachographVehicleSpeed' in sk, sk
+    table = [{"label": "Vehicle speed (km/h)", "unit": "km/h", "samples": 40},
+             {"label": "Vehicle speed OBD (km/h)", "unit": "km/h", "samples": 4000}]
+    assert '[columns."Vehicle speed OBD (km/h)"]' in sketch(table, False, {})
 
 
 def test_the_sketch_maps_a_bms_energy_counters():

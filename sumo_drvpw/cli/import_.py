@@ -110,8 +110,9 @@ def format_listing(files: list[dict]) -> str:
         lines.append(f"{f['file']} ({f['kind']}): {len(rows)} {'channels' if 'MDF' in f['kind'] else 'columns'}")
         w = max([len(r["label"]) for r in rows] + [5])
         if "MDF" in f["kind"]:
-            lines.append(f"  {'label':<{w}}  {'unit':<8} {'samples':>9} {'rate Hz':>9}")
-            lines += [f"  {r['label']:<{w}}  {r['unit']:<8} {r['samples']:>9} {r['rate_hz']:>9.3g}" for r in rows]
+            lines.append(f"  {'label':<{w}}  {'unit':<8} {'samples':>9} {'rate Hz':>9} {'mean Hz':>9}")
+            lines += [f"  {r['label']:<{w}}  {r['unit']:<8} {r['samples']:>9} {r['rate_hz']:>9.3g} "
+                      f"{r.get('mean_rate_hz', float('nan')):>9.3g}" for r in rows]
         else:
             lines.append(f"  {'label':<{w}}  {'unit':<8} {'values':>7} {'numbers':>7}  first value")
             lines += [f"  {r['label']:<{w}}  {r['unit']:<8} {r['samples']:>7} {r['numbers']:>7}  {r['first'][:30]}"

@@ -141,7 +141,7 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
             if not re.search(pat, text, re.I) or (bad and re.search(bad, text, re.I)):
                 continue
             if u and u[0] == dim:
-                hits.append((label, unit))
+                hits.append((label, unit, r))
             elif u is None and re.search(UNITLESS_WORDS[dim], text, re.I):  # no unit, or "(CED)": none known
                 unitless.append(label)
         if not hits:
@@ -151,15 +151,24 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
             elif name in ("time_s", "speed_mps"):
                 lines.append(f"# no label recognised as {name} (required): map one")
             continue
-        hits.sort(key=lambda h: not re.search(r"vehicle|veh", h[0], re.I))  # the vehicle's own first
-        label, unit = hits[0]
+        # the vehicle's own first; among those the best covered: an MDF channel's mean rate over
+        # its group's span (a bursty one reads low), a table column's values
+        hits.sort(key=lambda h: (not re.search(r"vehicle|veh", h[0], re.I), -_coverage(h[2])))
+        label, unit = hits[0][:2]
         lines.append(f"[columns.{_toml(label)}]")
-        lines.append(f'name = "{name}"' + (f"  # also fits: {', '.join(h for h, _ in hits[1:4])}" if len(hits) > 1 else ""))
+        lines.append(f'name = "{name}"' + (f"  # also fits: {', '.join(h[0] for h in hits[1:4])}" if len(hits) > 1 else ""))
         if not mdf:
             lines.append(f"unit = {_toml(unit)}")
         if name == "battery_current_a":
             lines.append("# + while discharging; scale = -1 if this log counts charging positive")
     return "\n".join(lines)
+
+
+def _coverage(row: dict) -> float:
+    """How well a listed channel covers its log: an MDF channel's mean rate [Hz], a table
+    column's values (rows of neither: 0; the sort is stable, so they keep their order)."""
+    x = row.get("mean_rate_hz", row.get("samples", 0))
+    return float(x) if x == x and x is not None else 0.0
 
 
 def _toml(v) -> str:

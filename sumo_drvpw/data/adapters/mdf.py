@@ -262,9 +262,10 @@ def read_file(path: Path, m: dict, parts: list[Path] | None = None) -> tuple[pd.
 
 def channels(path: Path, m: dict) -> tuple[list[dict], list[str]]:
     """What an MDF file offers, to write a mapping from (``import columns SRC --list``): per
-    channel its label (``name@GROUP`` where several groups carry the name), unit, samples and
-    median sampling rate [Hz] — raw CAN frames decoded with the mapping's DBC files first —
-    and the notes of the decoding."""
+    channel its label (``name@GROUP`` where several groups carry the name), unit, samples,
+    median sampling rate [Hz] and mean rate over the group's time span [Hz] (below the median
+    where the channel comes in bursts with gaps between) — raw CAN frames decoded with the
+    mapping's DBC files first — and the notes of the decoding."""
     notes: list[str] = []
     mdf = _open(path, m, None, notes)
     try:
@@ -277,12 +278,14 @@ def channels(path: Path, m: dict) -> tuple[list[dict], list[str]]:
             t = np.asarray(mdf.get_master(g), float)
             d = np.diff(t)
             step = float(np.median(d[d > 0])) if (d > 0).any() else float("nan")
+            span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
+            mean_hz = (len(t) - 1) / span if span > 0 else float("nan")
             for i, ch in enumerate(grp.channels):
                 if masters.get(g) == i or ch.name in ("time", "t"):
                     continue
                 label = ch.name if len(mdf.channels_db.get(ch.name, ())) < 2 else f"{ch.name}@{g}"
                 rows.append({"label": label, "unit": str(getattr(ch, "unit", "") or ""), "samples": n,
-                             "rate_hz": 1.0 / step if step > 0 else float("nan")})
+                             "rate_hz": 1.0 / step if step > 0 else float("nan"), "mean_rate_hz": mean_hz})
     finally:
         mdf.close()
     if not m.get("dbc") and any(r["label"].startswith("CAN_DataFrame") for r in rows):
