@@ -124,6 +124,28 @@ def test_misuse_in_one_line(tmp_path, capsys, monkeypatch, args, says):
     assert len(err) == 1 and says in err[0]
 
 
+@pytest.mark.parametrize("args, says", [
+    (["import", "columns", "00000001.MFC", "--list"], "00000001.MFC: a CANedge log file compressed by the logger"),
+    (["import", "columns", "LOG", "--columns", "m.toml", "--out", "o.parquet"],
+     "00000002.MFE: a CANedge log file encrypted by the logger"),
+    (["compare", "00000003.MFM", "--equation", "vsp_ldv1999", "--vehicle", "bmw_i3", "--out", "o"],
+     "00000003.MFM: a CANedge log file compressed and encrypted by the logger"),
+])
+def test_a_canedge_packed_file_is_named_as_one(tmp_path, capsys, monkeypatch, args, says):
+    """A CANedge's compressed (.MFC) or encrypted (.MFE, .MFM) MF4 — a rehearsal's J1939 log
+    — was read as CSV and refused as "no data rows"; now it is named for what it is, with
+    the converter that unpacks it, named or found in a folder, by every reader."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "LOG").mkdir()
+    for f in ("00000001.MFC", "LOG/00000002.MFE", "00000003.MFM"):
+        (tmp_path / f).write_bytes(b"\x00\x01packed")
+    (tmp_path / "m.toml").write_text('[columns."Speed"]\nname = "speed_mps"\n')
+    assert cli_main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0] and "MF4 converters" in err[0]
+    assert not (tmp_path / "o").exists() and not (tmp_path / "o.parquet").exists()
+
+
 def test_labels_without_units_are_offered_as_comments(tmp_path, capsys):
     """A Parquet log whose labels carry no unit (as the JLU car's): the sketch maps nothing it
     cannot read a unit for, and names the likely columns in comments."""

@@ -12,6 +12,22 @@ from pathlib import Path
 from sumo_drvpw.errors import UserError
 
 
+#: CSS Electronics CANedge log files that are MF4 packed by the logger (its converters read
+#: them: canlogger.csselectronics.com, "CANedge MF4 converters"); no MDF reader opens them
+PACKED_MF4 = {".mfc": "compressed", ".mfe": "encrypted", ".mfm": "compressed and encrypted"}
+
+
+def refuse_packed(p: Path) -> None:
+    """UserError for a CANedge MF4 that the logger compressed or encrypted (:data:`PACKED_MF4`),
+    naming the file and what unpacks it; else nothing."""
+    how = PACKED_MF4.get(p.suffix.lower())
+    if how:
+        raise UserError(f"{p}: a CANedge log file {how} by the logger ({p.suffix}), not a plain MF4: "
+                        "unpack it to .MF4 first with CSS Electronics' MF4 converters (e.g. the MDF "
+                        "converter, mdf2finalized; an encrypted file needs its passwords.json), then "
+                        "read the .MF4")
+
+
 def expand_paths(paths, suffixes: tuple[str, ...], what: str,
                  check_files: bool = False) -> list[Path]:
     """Files named in ``paths`` plus, for each folder named, its files with one of
@@ -34,10 +50,13 @@ def expand_paths(paths, suffixes: tuple[str, ...], what: str,
         if p.is_dir():
             found = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in suffixes)
             if not found:
+                for f in sorted(p.iterdir()):
+                    refuse_packed(f)
                 raise UserError(f"{p}: folder holds no {what} file ({', '.join(suffixes)})"
                                 + subfolder_hint(p, suffixes))
             out.extend(found)
         elif p.is_file():
+            refuse_packed(p)
             if check_files and p.suffix.lower() not in suffixes:
                 raise UserError(f"{p}: unknown file type '{p.suffix}' (a {what} is "
                                 f"{' or '.join(suffixes)}, or a folder of them)")
