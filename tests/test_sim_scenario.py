@@ -372,6 +372,36 @@ def test_read_vtypes_sumo_loading_and_deprecated_vehicle_mass(tmp_path):
     res = VTypeResolver(sc, vt, [Equation("lcv", {"roll": 0.01}, vclasses=("delivery",))])
     assert res("load_only", "v")[0] == DEFAULT_MASS_KG["delivery"] + 500
     assert "loading 500" in res.assumptions["load_only"]["source"]
+    assert "length_m" not in res.assumptions["load_only"]
+
+
+def test_a_car_vtype_far_shorter_than_a_car_is_warned_of_when_it_takes_a_car_s_mass(tmp_path):
+    """A PRT pod written as vClass taxi, 2.5 m long, no mass (DLR's Bad Hersfeld scenario)
+    was booked as a 1,478.8-kg car with only the general default-mass warning; now a second
+    warning names it with its length. A 4.5-m taxi without mass, or a 2.5-m pod with one,
+    is not named."""
+    from sumo_drvpw.sim.run import VTypeResolver
+    from sumo_drvpw.sim.vtypes import DEFAULT_MASS_KG, default_mass_warnings
+
+    f = _write(tmp_path, """<routes>
+      <vType id="pod" vClass="taxi" length="2.5" width="1"/>
+      <vType id="cab" vClass="taxi" length="4.5"/>
+      <vType id="light_pod" vClass="taxi" length="2.5" mass="600"/>
+    </routes>""", "r.rou.xml")
+    sc = load_scenario(doc={"equations": ["vsp_ldv1999"], "sumo": {"net": str(NETS / "highway.net.xml")}})
+    res = VTypeResolver(sc, read_vtypes([f]), [Equation("car", {"roll": 0.01}, vclasses=("taxi",))])
+    assert [res(v, "x")[0] for v in ("pod", "cab", "light_pod")] == [DEFAULT_MASS_KG["taxi"]] * 2 + [600.0]
+    assert res.assumptions["pod"]["length_m"] == 2.5 and "length_m" not in res.assumptions["cab"]
+    general, short = default_mass_warnings(res.assumptions)
+    assert "pod (taxi, 1478.8 kg)" in general and "cab (taxi, 1478.8 kg)" in general
+    assert short.startswith("vTypes written far shorter than a car") and "pod (taxi, 2.5 m long, 1478.8 kg)" in short
+    assert "cab" not in short and "light_pod" not in short
+    assert default_mass_warnings({}) == []
+    del res.assumptions["pod"]
+    assert len(default_mass_warnings(res.assumptions)) == 1
+
+
+def test_read_vtypes_refuses_bad_sumo_params(tmp_path):
     for key, val in (("loading", "-5"), ("vehicleMass", "0"), ("loading", "lots")):
         bad = _write(tmp_path, f'<routes><vType id="x"><param key="{key}" '
                                f'value="{val}"/></vType></routes>', "bad.rou.xml")

@@ -41,7 +41,7 @@ from sumo_drvpw.sim.outputs import RunResult, TraceWriter, summary_dict
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
 from sumo_drvpw.sim.sumo_start import NewRun, scenario_option
 from sumo_drvpw.sim.vtype_energy import expand as expand_vtype_energy, listing_warning
-from sumo_drvpw.sim.vtypes import GENERIC_VCLASSES, read_vtypes
+from sumo_drvpw.sim.vtypes import GENERIC_VCLASSES, default_mass_warnings, read_vtypes
 
 __all__ = ["Accountant", "RunResult"]
 
@@ -321,12 +321,7 @@ class Accountant(_Listener):
                             "context subscription and were read by getters, a call each (slow): did the "
                             "script change the simulation domain's context subscription (subscribeContext "
                             "or unsubscribeContext on traci.simulation)?")
-        if self.resolver.assumptions:
-            warnings.append("vTypes without a mass took their vClass's default mass: " + ", ".join(
-                f"{vt} ({a['vclass']}, {a['mass_kg']:g} kg)"
-                for vt, a in sorted(self.resolver.assumptions.items()))
-                + " (summary.json assumptions; set vtypes.<id>.mass_kg or "
-                "vclasses.<vClass>.mass_kg to override)")
+        warnings += default_mass_warnings(self.resolver.assumptions)
         unused = sorted(set(getattr(sc, "vtype_data", {})) - set(self.resolver.cache) - self.resolver.seen)
         if unused:  # a typo, or a vTypeDistribution's id (its vehicles have the members' vTypes)
             warnings.append(f"{sc.path or 'the scenario'}: " + ", ".join(f"[vtypes.{v}]" for v in unused)

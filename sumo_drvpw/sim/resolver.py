@@ -10,9 +10,9 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.vtype_energy import energy_vtype_of, own_energy
-from sumo_drvpw.sim.vtypes import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER,
-                                   SUMO_DEFAULT_VTYPES, energy_carrier, equation_carrier,
-                                   is_hybrid_chain, is_hybrid_class)
+from sumo_drvpw.sim.vtypes import (CAR_VCLASSES, SHORT_CAR_M, SUMO_DEFAULT_EMISSION_CLASS,
+                                   SUMO_DEFAULT_EMISSION_CLASS_OTHER, SUMO_DEFAULT_VTYPES, energy_carrier,
+                                   equation_carrier, is_hybrid_chain, is_hybrid_class)
 
 
 class VTypeResolver:
@@ -280,6 +280,9 @@ class VTypeResolver:
             self.assumptions[vt] = {"vclass": body, "mass_kg": mass,
                                     "source": DEFAULT_MASS_SOURCE[body]
                                     + (f" + loading {loading:g} kg" if loading else "")}
+            length = info.length_m if info is not None else None
+            if body in CAR_VCLASSES and length is not None and length < SHORT_CAR_M:
+                self.assumptions[vt]["length_m"] = length  # a microcar or pod: warned of
         if mass is None:
             where = f" (defined in {info.source})" if info is not None else \
                 " (not defined in the route/additional files: SUMO's default type?)"

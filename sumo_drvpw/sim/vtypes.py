@@ -151,9 +151,32 @@ MINIBUS_LENGTH_M = 9.0
 #: moped 2.1 m, every car class 5 m)
 CAR_VCLASSES = ("passenger", "private", "taxi", "hov", "vip", "evehicle", "authority")
 TWO_WHEELER_MAX_LENGTH_M = 3.0
+#: a car vType written shorter than this [m] is a microcar or a pod, not the mid-size car
+#: whose mass a car class's default is (SUMO's default car is 5 m; a two-seater city car is
+#: about 2.7 m and under 1 t)
+SHORT_CAR_M = 3.0
 #: a van weighs at most this [kg] (EU categories N1 and M1, the car-licence limit): a short
 #: bus, coach or truck whose vType declares a larger mass stays heavy (a 6-m, 7.5-t rigid truck)
 VAN_MAX_MASS_KG = 3500.0
+
+
+def default_mass_warnings(assumptions: dict) -> list[str]:
+    """The run's warnings on the default masses it took (``VTypeResolver.assumptions``):
+    which vTypes took one, and which of them are written far shorter than the car whose
+    mass they took (``length_m`` in their assumption: :data:`SHORT_CAR_M`)."""
+    if not assumptions:
+        return []
+    out = ["vTypes without a mass took their vClass's default mass: " + ", ".join(
+        f"{vt} ({a['vclass']}, {a['mass_kg']:g} kg)" for vt, a in sorted(assumptions.items()))
+        + " (summary.json assumptions; set vtypes.<id>.mass_kg or vclasses.<vClass>.mass_kg to override)"]
+    short = {vt: a for vt, a in sorted(assumptions.items()) if a.get("length_m") is not None}
+    if short:
+        out.append("vTypes written far shorter than a car took a mid-size car's default mass all the "
+                   "same: " + ", ".join(f"{vt} ({a['vclass']}, {a['length_m']:g} m long, {a['mass_kg']:g} kg)"
+                                        for vt, a in short.items())
+                   + f" — a car under {SHORT_CAR_M:g} m is a microcar or a pod (a 2.7-m two-seater weighs "
+                   "under 1 t): give their mass, or their energy is overstated")
+    return out
 
 
 def vehicle_body(vclass: str, info: "VTypeInfo | None", vtype_id: str) -> tuple[str, str] | None:
