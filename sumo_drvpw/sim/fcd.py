@@ -59,7 +59,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops
+from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
@@ -423,6 +423,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     replay.options = {"step-method.ballistic": str(method == "ballistic").lower()}
     replay.recorded_step_s = recorded_step(head)  # (the radial drag of vtype_energy: per step of it)
+    replay.calibrators = calibrators(list(dict.fromkeys([*sc.additional_files, *sc.route_files])))
     acc = Accountant(replay, scenario=sc,
                      trace_path=Path(out_dir) / "trace.parquet" if sc.trace and out_dir else None,
                      spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,

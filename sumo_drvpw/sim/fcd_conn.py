@@ -109,6 +109,14 @@ class _VType(_Domain):
         return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
 
 
+class _Calib(_Domain):
+    def getIDList(self):  # noqa: N802 (the scenario files' calibrators: set by replay_fcd)
+        return list(self.r.calibrators)
+
+    def getEdgeID(self, c):  # noqa: N802
+        return self.r.calibrators[c]
+
+
 #: SUMO's default mass of a person's vType [kg] (libsumo vehicletype.getMass of a
 #: pedestrian type without a mass)
 DEFAULT_PERSON_MASS_KG = 70.0
@@ -152,7 +160,10 @@ class _Rows:
         #: vehicle rows on a lane of the network, on a lane it lacks, and the first of
         #: those (lane, time) (with the column ``lane_ok`` of ParkedTest.mark)
         self.lane_rows, self.unknown_rows, self.first_unknown = 0, 0, None
-        self.person, self.vehicletype = _Person(self), _VType(self)
+        #: calibrator id → its edge, of the scenario's files (set by replay_fcd): where SUMO
+        #: changes vTypes, read every step there as the live run does (sim/reader.calibrator_lanes)
+        self.calibrators: dict = {}
+        self.person, self.vehicletype, self.calibrator = _Person(self), _VType(self), _Calib(self)
 
     def _vehicles(self, c: dict, nxt: dict | None) -> dict:
         """The vehicles' rows of timestep ``c`` (next timestep ``nxt``, None at the end)."""
@@ -301,6 +312,24 @@ def bus_stops(files, depth: int = 0) -> dict[str, list[tuple[float, float]]]:
                             continue
                         out.setdefault(el.get("lane"), []).append(
                             (max(a, 0.0), b if b >= 0 else np.inf))
+                    el.clear()
+        except (ET.ParseError, OSError):
+            continue
+    return out
+
+
+def calibrators(files, depth: int = 0) -> dict[str, str]:
+    """Calibrators of SUMO additional files (and of the files they ``<include href>``):
+    id → edge (its ``edge``, else its ``lane``'s edge). Unreadable files are left to SUMO."""
+    out: dict[str, str] = {}
+    for f in files:
+        try:
+            with open_maybe_gzip(f) as src:
+                for _, el in ET.iterparse(src, events=("end",)):
+                    if el.tag == "include" and el.get("href") and depth < INCLUDE_DEPTH:
+                        out.update(calibrators([Path(f).parent / el.get("href")], depth + 1))
+                    elif el.tag == "calibrator" and (el.get("edge") or el.get("lane")):
+                        out[el.get("id", "")] = el.get("edge") or el.get("lane").rsplit("_", 1)[0]
                     el.clear()
         except (ET.ParseError, OSError):
             continue

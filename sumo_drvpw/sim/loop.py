@@ -28,7 +28,8 @@ from sumo_drvpw.sim.dynamics import whole_second
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import Network, lane_numbers
 from sumo_drvpw.sim.parking import Parking
-from sumo_drvpw.sim.reader import Reader, reinserted, tailwind, yaw_rate  # noqa: F401 (tailwind re-exported)
+from sumo_drvpw.sim.reader import (Reader, calibrator_lanes, reinserted, tailwind,  # noqa: F401 (tailwind re-exported)
+                                   yaw_rate)
 from sumo_drvpw.sim.riders import Riders
 from sumo_drvpw.sim.shutoff import ShutOff
 from sumo_drvpw.sim.sumo_start import NewRun, signals_deferred, step_method
@@ -82,7 +83,8 @@ class Physics:
 
 
 #: every this many steps the running vehicles' vTypes are read again (a script's setType,
-#: setMass): a change books from then on (over traci, each read a round trip: 10× as many)
+#: setMass): a change books from then on (over traci, each read a round trip: 10× as many);
+#: vehicles on a calibrator's edge, where SUMO changes vTypes itself, are read every step
 TYPE_CHECK_STEPS = 25
 
 
@@ -154,6 +156,8 @@ class Stepper:
             # a lane change keeps the position and the edge (internal ones included), so
             # only a different edge or position is a disagreement; lanes -1, -2 belong to none
             self.lane_own = np.append(net.lane_own_edge, [-1, -1])
+        #: per lane: on a calibrator's edge (None: the run has no calibrator)
+        self.calib_lane = calibrator_lanes(conn, net)
         self.every_equation_applies = True  # to every vehicle accounted so far
         #: (equation number, speed [m/s], acceleration [m/s²], driving power [W] range or None;
         #: the power range that of the equation's chain fit: Equation.validity)
@@ -372,6 +376,10 @@ class Stepper:
             ledger.veh_pos[vidx] = pos
         else:
             lane, pos = net.own_side_after(ledger.veh_at[vidx], v * dt, self.lane_numbers(ln), pos)
+        if self.calib_lane is not None:  # where SUMO changes vTypes: booked from the step it does
+            j = np.flatnonzero(self.calib_lane[lane])
+            if len(j):
+                self.check_types([kids[i] for i in j], vidx[j])
         prev = ledger.veh_prev_speed[vidx]  # last step's (a teleport's: on the lane it left)
         ledger.veh_prev_speed[vidx] = v
         if a is None:  # SUMO's definition: (v_t − v_t−1)/Δt, 0 when first seen

@@ -60,6 +60,26 @@ def yaw_rate(prev_deg: np.ndarray, angle_deg: np.ndarray, dt: float) -> np.ndarr
     return np.where(np.isfinite(w), w, 0.0)
 
 
+def calibrator_lanes(conn, net) -> np.ndarray | None:
+    """Per lane of ``net`` (plus lanes -1, -2: none), whether it lies on the edge of one of
+    SUMO's calibrators — where SUMO changes a passing vehicle's vType (a calibrator whose
+    flow gives a type and no flow); None when the run has none. Asked of SUMO (its
+    ``calibrator`` domain; an FCD replay's answers from the scenario's files)."""
+    dom = getattr(conn, "calibrator", None)
+    try:
+        ids = list(dom.getIDList()) if dom is not None else []
+    except Exception as e:  # a SUMO server without the domain: checked every 25 steps only
+        if type(e).__name__ == "FatalTraCIError":
+            raise
+        return None
+    edges = {dom.getEdgeID(c) for c in ids}
+    idx = [i for i, e in enumerate(net.edge_ids) if e in edges]
+    if not idx:
+        return None
+    on = np.isin(net.lane_edge, idx)
+    return np.append(on, [False, False])
+
+
 class Reader:
     """Reads the per-vehicle state of a step as lists (getters or traci subscriptions)."""
 
