@@ -360,6 +360,23 @@ def test_columns_data_rows_ending_in_a_separator_keep_their_columns(tmp_path):
     assert any("more fields than the header line" in n for n in rep["files"][0]["notes"]), rep
 
 
+def test_columns_two_labels_alike_but_for_a_space_keep_both_or_are_refused_by_name(tmp_path):
+    """The shared i3's winter trips label two columns 'Temperature Vent right [°C] ' and
+    'Temperature Vent right [°C]': read without their spaces they were one label, and
+    `import columns` ended in a pandas TypeError traceback. Kept as two columns when not
+    mapped; refused in one line, naming the file and the label, when the mapping maps it."""
+    m = write(tmp_path, "map.toml", '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\n'
+              'unit = "m/s"\n')
+    src = write(tmp_path, "x.csv", "t;v;Vent [°C] ;Vent [°C]\n0;1;20;21\n1;2;22;23\n2;3;24;25\n")
+    m.write_text('[options]\nsep = ";"\n' + m.read_text())
+    df, _ = read("columns", src, columns=m)
+    np.testing.assert_allclose(df["vent_c"], [20, 22, 24])
+    np.testing.assert_allclose(df["vent_c_2"], [21, 23, 25])
+    m.write_text(m.read_text() + '[columns."Vent [°C]"]\nname = "cabin_c"\nunit = "°C"\n')
+    with pytest.raises(UserError, match=r"x.csv: 2 columns are labelled 'Vent \[°C\]'.*cannot tell them apart"):
+        read("columns", src, columns=m)
+
+
 def test_columns_brake_flag_held_or_refused(tmp_path):
     """``brake`` is a flag: on its own rows of an asynchronous log it is held (its last value)
     at each speed sample, never interpolated between 0 and 1 (a Ford OpenXC trace ended in a

@@ -315,6 +315,11 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     raw = _read_table(path, m)
     raw.columns = [str(c).strip() for c in raw.columns]
     rep = new_report(path, path.stem, len(raw))
+    labels = list(raw.columns)
+    twice = [c for c in m["columns"] if labels.count(c) > 1]
+    if twice:  # (the i3 logs label two columns 'Temperature Vent right [°C]', one with a space)
+        raise UserError(f"{path}: {labels.count(twice[0])} columns are labelled '{twice[0]}' (spaces around "
+                        f"labels are not read), and {m['path']} maps that label: it cannot tell them apart")
     for label in m["columns"]:
         if label not in raw.columns:
             hint = (f" (only one column '{raw.columns[0][:40]}': wrong sep {m['sep']!r}?)"
@@ -322,10 +327,10 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
             hint = _skip_hint(path, m) or _no_header_hint(raw) or hint
             raise UserError(f"{path}: missing column '{label}' named in {m['path']}{hint}")
     na = tuple(m["na_values"])
-    out: dict[str, pd.Series] = {}
+    out: list[tuple[str, pd.Series]] = []  # (a list: two columns may read as one name)
     comma = m["decimal"] != "." and path.suffix.lower() not in (".parquet", ".pq")
-    for label in raw.columns:
-        s = raw[label]
+    for j, label in enumerate(labels):
+        s = cell = raw.iloc[:, j]  # (cell: as read, before the decimal mark is applied)
         if comma:  # CSV read as text (exact cells for error messages): apply the decimal mark here
             s = s.astype(str).str.replace(m["decimal"], ".", regex=False)
         e = m["columns"].get(label)
@@ -338,25 +343,24 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
                 continue
             name, f, o = generic_name(label, rep["notes"])
             try:
-                out[name] = numeric(s, path, label, na) * f + o
+                out.append((name, numeric(s, path, label, na) * f + o))
             except UserError:
-                out[name] = raw[label].astype(str)  # text extra (e.g. a date or a mode label)
+                out.append((name, cell.astype(str)))  # text extra (e.g. a date or a mode label)
             continue
         if e["kind"] == "text":
-            out[e["name"]] = raw[label].astype(str).str.strip()
+            out.append((e["name"], cell.astype(str).str.strip()))
         elif e["kind"] == "datetime":
-            s = raw[label]
             t = to_datetimes(s, m["time_format"])
             bad = t.isna() & ~s.astype(str).str.strip().isin(na)
             if bad.any():
                 i = int(np.flatnonzero(bad.to_numpy())[0])
                 raise UserError(f"{path}: column '{label}' data row {i} holds {s.iloc[i]!r}: "
                                 "not a date/time")
-            out["time_s"] = _seconds(t, m["time_format"], rep)
+            out.append(("time_s", _seconds(t, m["time_format"], rep)))
         else:
             x = numeric(s, path, label, na + e.get("na_text", ()))
-            own = x.isin(e.get("na_num", ())) | (raw[label].astype(str).str.strip().isin(e.get("na_text", ()))
-                                               & ~raw[label].astype(str).str.strip().isin(na))
+            cells = cell.astype(str).str.strip()
+            own = x.isin(e.get("na_num", ())) | (cells.isin(e.get("na_text", ())) & ~cells.isin(na))
             if own.any():
                 rep["notes"].append(f"column '{label}': {int(own.sum())} cell(s) held its 'no reading' value "
                                     f"({', '.join(map(str, e.get('na_num', ()) + e.get('na_text', ())))}): "
@@ -364,9 +368,9 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
                 x = x.where(~own)
             if "valid" in e:
                 x = x.where(_valid_flag(raw, e["valid"], path, label, m, na) != 0)
-            out[e["name"]] = x * e["factor"] + e["offset"]
-    names = unique_names(list(out))
-    df = pd.DataFrame(dict(zip(names, out.values())), index=raw.index)
+            out.append((e["name"], x * e["factor"] + e["offset"]))
+    names = unique_names([n for n, _ in out])
+    df = pd.DataFrame(dict(zip(names, (x for _, x in out))), index=raw.index)
     if "trip_id" in df:
         return _split_trips(df, path, rep)
     df = clean_time_and_speed(df, path, rep)
