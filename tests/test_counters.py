@@ -294,3 +294,81 @@ def test_the_chain_tracer_sees_its_model_as_the_counters_book_it():
     assert res.equation.chain.recuperation_efficiency == pytest.approx(0.7, rel=0.01)
     spread = trace_chain(dataclasses.replace(m, counter_view=None), eq)  # the per-sample fit it replaces
     assert len(spread.report["findings"]) > 1
+
+
+def _soc_drive(tmp_path, cap_kwh=20.0, step_pct=0.1):
+    """counter_drive's planted battery power as a logger of the SOC alone would write it: a
+    CSV of time, speed (km/h) and SOC [%] from 80 % down by the battery's energy over
+    ``cap_kwh``, rounded to ``step_pct``, and a mapping with options.soc_capacity_kwh."""
+    from sumo_drvpw.synth.effects import counter_drive
+
+    df = counter_drive(trips=3, seconds=600.0)
+    soc = []
+    for _, g in df.groupby("trip_id", sort=False):
+        e = np.concatenate([[0.0], np.cumsum(g["true_battery_w"].to_numpy()[1:] * np.diff(g["time_s"]))])
+        soc.append(np.round((80.0 - 100.0 * e / (cap_kwh * KWH)) / step_pct) * step_pct)
+    out = df.assign(soc=np.concatenate(soc), kmh=df["speed_mps"] * 3.6)
+    f = tmp_path / "soc.csv"
+    out[["trip_id", "time_s", "kmh", "soc", "mass_kg"]].to_csv(f, index=False)
+    m = tmp_path / "map.toml"
+    m.write_text(f'[options]\nsoc_capacity_kwh = {cap_kwh}\n[columns.trip_id]\nname = "trip_id"\n'
+                 '[columns.time_s]\nname = "time_s"\n[columns.kmh]\nname = "speed_mps"\nunit = "km/h"\n'
+                 '[columns.soc]\nname = "soc_pct"\n[columns.mass_kg]\nname = "mass_kg"\nunit = "kg"\n',
+                 encoding="utf-8")
+    return df, f, m
+
+
+def test_a_soc_and_the_battery_s_capacity_book_each_trips_energy(tmp_path):
+    """A log of the SOC alone (no V·I, no counters), imported with options.soc_capacity_kwh:
+    the counters it becomes net the SOC's change × capacity exactly, never fall, and the
+    battery target books each trip's planted energy to within the SOC's step (0.1 % of
+    20 kWh = 20 Wh, on trips of 0.4–0.6 kWh); the import says it is an estimate."""
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.data.measured import load_measured
+
+    df, f, m = _soc_drive(tmp_path)
+    out = tmp_path / "log.parquet"
+    assert cli_main(["import", "columns", str(f), "--columns", str(m), "--out", str(out)]) == 0
+    log = pd.read_parquet(out)
+    for _, g in log.groupby("trip_id"):
+        d, c = (g[k].to_numpy() for k in COUNTERS)
+        assert (np.diff(d) >= 0).all() and (np.diff(c) >= 0).all()
+        net = (d[-1] - c[-1]) - (d[0] - c[0])
+        assert net == pytest.approx((g["soc_pct"].iloc[0] - g["soc_pct"].iloc[-1]) / 100 * 20.0 * KWH, rel=1e-9)
+    mb = load_measured([out], target="battery")
+    assert mb.source == "battery energy counters (discharged − charged)"
+    dt = mb.log.df["dt_s"].to_numpy()
+    got = pd.Series(mb.power_w * dt).groupby(mb.log.df["trip_id"].to_numpy()).sum()
+    want = pd.Series(df["true_battery_w"].to_numpy() * dt).groupby(df["trip_id"].to_numpy()).sum()
+    assert (want > 0.4 * KWH).all()
+    np.testing.assert_allclose(got[want.index], want, atol=0.001 * 20.0 * KWH)
+
+
+@pytest.mark.parametrize("option,soc,says", [
+    ("soc_capacity_kwh = 20.0", 120.0, "soc.csv: column 'soc_pct' is 120 at data row"),
+    ("soc_capacity_kwh = -5", 80.0, "options.soc_capacity_kwh must be the battery energy"),
+    ("soc_capacity_kwh = true", 80.0, "options.soc_capacity_kwh must be the battery energy"),
+])
+def test_a_bad_soc_or_capacity_is_refused_in_one_line(tmp_path, capsys, option, soc, says):
+    from sumo_drvpw.cli import main as cli_main
+
+    _, f, m = _soc_drive(tmp_path)
+    m.write_text(m.read_text().replace("soc_capacity_kwh = 20.0", option))
+    if soc != 80.0:  # the first data row's SOC
+        lines = f.read_text().splitlines()
+        row = lines[1].split(",")
+        row[3] = f"{soc:g}"
+        f.write_text("\n".join([lines[0], ",".join(row), *lines[2:]]) + "\n")
+    assert cli_main(["import", "columns", str(f), "--columns", str(m), "--out", str(tmp_path / "o.parquet")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err and "Traceback" not in err
+    assert not (tmp_path / "o.parquet").exists()
+
+
+def test_a_capacity_without_a_mapped_soc_is_refused(tmp_path):
+    from sumo_drvpw.data.adapters.columns import load_mapping
+
+    _, _, m = _soc_drive(tmp_path)
+    m.write_text(m.read_text().replace('name = "soc_pct"', 'name = "charge_pct"'))
+    with pytest.raises(UserError, match="options.soc_capacity_kwh estimates .* map a source column to 'soc_pct'"):
+        load_mapping(m)

@@ -240,3 +240,57 @@ def describe(time_s, codes, discharged_j, charged_j) -> str:
         parts.append(f"{name} in steps of {step / 1000:.3g} kJ every {every:.3g} s" if np.isfinite(step)
                      else f"{name} never rises")
     return "battery energy counters (" + "; ".join(parts) + ")"
+
+
+#: a trip whose SOC readings leave more than this [s] at its ends unread is noted
+SOC_UNREAD_NOTE_S = 10.0
+
+
+def soc_counters(df: pd.DataFrame, report: dict, capacity_kwh: float) -> pd.DataFrame:
+    """A file's frame with the battery's energy counters (:data:`COUNTERS`) estimated from
+    its state of charge ``soc_pct`` [%] and the energy its 0–100 % spans, ``capacity_kwh``
+    (a mapping's ``options.soc_capacity_kwh``): per trip, every fall of SOC × capacity adds
+    to the discharged count, every rise to the charged one, where ``soc_pct`` is logged
+    (NaN between), so the net of the counters is the SOC's energy change exactly. What it
+    cannot carry, the import's note says: the SOC's step (a 0.5-% step of 23 kWh is 115 Wh),
+    and that a BMS counts charge, not energy at the terminals. Refused, naming the file and
+    the first row: a SOC outside 0–100 %. A frame that has the counters keeps them."""
+    if all(c in df for c in COUNTERS):
+        report["notes"].append("options.soc_capacity_kwh not used: the file logs the battery's energy counters")
+        return df
+    soc = df["soc_pct"].to_numpy(float, na_value=np.nan)
+    bad = np.isfinite(soc) & ((soc < 0) | (soc > 100))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"{report['file']}: column 'soc_pct' is {soc[i]:g} at data row {df.index[i]}: a state "
+                        "of charge is 0–100 % (options.soc_capacity_kwh reads it in %)")
+    e = soc * (capacity_kwh * 3.6e6 / 100.0)
+    dis, chg = np.full(len(df), np.nan), np.full(len(df), np.nan)
+    trips = df["trip_id"].astype(str).to_numpy() if "trip_id" in df else np.zeros(len(df), str)
+    time = df["time_s"].to_numpy(float)
+    unread = []  # (trip, seconds before its first and after its last SOC reading)
+    for t in dict.fromkeys(trips.tolist()):
+        own = np.flatnonzero(trips == t)
+        rows = own[np.isfinite(e[own])]
+        if len(rows) == 0:
+            unread.append((t, time[own[-1]] - time[own[0]]))
+            continue
+        d = np.diff(e[rows], prepend=e[rows[0]])
+        dis[rows], chg[rows] = np.cumsum(np.maximum(-d, 0.0)), np.cumsum(np.maximum(d, 0.0))
+        ends = (time[rows[0]] - time[own[0]]) + (time[own[-1]] - time[rows[-1]])
+        if ends > SOC_UNREAD_NOTE_S:
+            unread.append((t, ends))
+    out = df.assign(**{COUNTERS[0]: dis, COUNTERS[1]: chg})
+    if unread:
+        report["notes"].append("soc_pct is not logged before the first or after the last reading of "
+                               + ", ".join(f"trip {t} ({s:.0f} s)" for t, s in unread[:3])
+                               + (f" and {len(unread) - 3} more" if len(unread) > 3 else "")
+                               + ": the battery energy there is not counted")
+    moves = np.abs(np.diff(soc[np.isfinite(soc)]))
+    step = _step(moves[moves > 0]) if (moves > 0).any() else float("nan")
+    report["notes"].append(
+        f"battery energy counters estimated from soc_pct × {capacity_kwh:g} kWh (options.soc_capacity_kwh): "
+        f"an estimate — the SOC's step{f' ({step:g} %, {step * capacity_kwh * 10:.0f} Wh)' if step == step else ''} "
+        "limits each trip's energy, and a BMS counts charge, not energy at the terminals; the battery "
+        "target reads V·I where a trip logs them")
+    return out

@@ -49,9 +49,11 @@ from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
 OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped",
-           "skip_rows", "dbc", "mdf_trips", "isotp_layout"}
+           "skip_rows", "dbc", "mdf_trips", "isotp_layout", "soc_capacity_kwh"}
 #: lines of a CSV searched for a mapped label that is not in the header (the hint of the error)
 HEADER_SEARCH_LINES = 50
+#: the largest battery options.soc_capacity_kwh accepts [kWh] (a heavy truck's is about 1 MWh)
+MAX_SOC_CAPACITY_KWH = 2000.0
 ENTRY = {"name", "unit", "scale", "role", "na_values", "valid"}
 SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 
@@ -125,6 +127,9 @@ def load_mapping(path, mdf: bool = False) -> dict:
     if dup:
         raise UserError(f"{p}: more than one source column is mapped to '{dup[0]}'")
     _check_scales(p, entries)
+    if out["soc_capacity_kwh"] is not None and "soc_pct" not in names:
+        raise UserError(f"{p}: options.soc_capacity_kwh estimates the battery's energy from the state "
+                        "of charge: map a source column to 'soc_pct' (in %)")
     return {**out, "columns": entries}
 
 
@@ -161,6 +166,11 @@ def _options(p: Path, doc: dict) -> dict:
         raise UserError(f"{p}: options.keep_unmapped must be true or false, got "
                         f"{opts['keep_unmapped']!r}")
     _check_text_options(p, opts)
+    cap = opts.get("soc_capacity_kwh")
+    if cap is not None and (isinstance(cap, bool) or not isinstance(cap, (int, float))
+                            or not 0 < cap <= MAX_SOC_CAPACITY_KWH):
+        raise UserError(f"{p}: options.soc_capacity_kwh must be the battery energy [kWh] that the "
+                        f"logged SOC's 0–100 % spans (> 0, ≤ {MAX_SOC_CAPACITY_KWH:g}), got {cap!r}")
     na = opts.get("na_values", ["-", ""])
     if isinstance(na, str):
         na = [na]
@@ -169,7 +179,8 @@ def _options(p: Path, doc: dict) -> dict:
             "na_values": [str(x) for x in na], "keep_unmapped": bool(opts.get("keep_unmapped", True)),
             "skip_rows": skip, "dbc": _dbc_files(p, opts.get("dbc", [])),
             "mdf_trips": _choice(p, opts, "mdf_trips", ("file", "folder")),
-            "isotp_layout": _choice(p, opts, "isotp_layout", ISOTP_LAYOUTS)}
+            "isotp_layout": _choice(p, opts, "isotp_layout", ISOTP_LAYOUTS),
+            "soc_capacity_kwh": None if cap is None else float(cap)}
 
 
 def _choice(p: Path, opts: dict, key: str, allowed: tuple[str, ...]) -> str:
@@ -459,6 +470,11 @@ def read(paths, columns):
             groups = {}
             for f in files:
                 groups.setdefault(f.parent, []).append(f)
-        return (*read_each(groups, lambda p: mdf.read_file(p, m, groups[p])), [f"mapping {m['path']}"])
-    frames, reports = read_each(files, lambda f: read_file(f, m))
+        frames, reports = read_each(groups, lambda p: mdf.read_file(p, m, groups[p]))
+    else:
+        frames, reports = read_each(files, lambda f: read_file(f, m))
+    if m["soc_capacity_kwh"] is not None:  # the battery's energy estimated from its SOC
+        from sumo_drvpw.data.counters import soc_counters
+
+        frames = [soc_counters(f, r, m["soc_capacity_kwh"]) for f, r in zip(frames, reports)]
     return frames, reports, [f"mapping {m['path']}"]
