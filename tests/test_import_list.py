@@ -189,6 +189,19 @@ def test_the_sketch_prefers_the_channel_that_covers_the_log_to_a_bursty_one():
     assert '[columns."Vehicle speed OBD (km/h)"]' in sketch(table, False, {})
 
 
+def test_the_sketch_maps_the_bms_state_of_charge_and_says_how_it_becomes_energy():
+    """The BMS's SOC (not the displayed one, nor a minimum, maximum or health) is sketched as
+    soc_pct, with the option that makes it the battery's energy where the log has no V·I."""
+    from sumo_drvpw.data.adapters.listing import sketch
+
+    rows = [{"label": "displayed SoC [%]", "unit": "%"}, {"label": "min. SoC [%]", "unit": "%"},
+            {"label": "SoH [%]", "unit": "%"}, {"label": "SoC [%]", "unit": "%"}]
+    sk = sketch(rows, False, {})
+    assert '[columns."SoC [%]"]\nname = "soc_pct"\nunit = "%"\n# without battery V·I' in sk, sk
+    assert "soc_capacity_kwh" in sk and "displayed" not in sk and "min. SoC" not in sk
+    assert "soc_pct" not in sketch([{"label": "Throttle [%]", "unit": "%"}], False, {})
+
+
 def test_the_sketch_maps_a_bms_energy_counters():
     """A BMS's cumulative energy counters (Hyundai/Kia CED and CEC; the JLU car's tot_disc,
     tot_char) are the battery target of a log without V·I: the sketch maps each to its own

@@ -113,9 +113,11 @@ GUESSES = {
     # a BMS's cumulative energy counters (Hyundai/Kia CED, CEC): the battery target without V·I
     "battery_discharge_energy_j": ("energy", r"discharg|\bced\b|tot_?disc", r"cell|max|limit|power"),
     "battery_charge_energy_j": ("energy", r"(?<!dis)charg|\bcec\b|tot_?char", r"cell|max|limit|power|discharg"),
+    # an EV's state of charge: with options.soc_capacity_kwh, the battery's energy (an estimate)
+    "soc_pct": ("percent", r"\bsoc\b|state of charge|ladezustand", r"display|min|max|target|limit|health|\bsoh\b"),
 }
 #: a label without a unit is offered for a name only when it also names the quantity
-UNITLESS_WORDS = {"time": r"time|zeit", "speed": r"speed|veloc|geschw|spd", "length": r"elev|alti|height|höhe",
+UNITLESS_WORDS = {"percent": r"soc|state of charge", "time": r"time|zeit", "speed": r"speed|veloc|geschw|spd", "length": r"elev|alti|height|höhe",
                   "temperature": r"temp|amb", "voltage": r"volt", "current": r"curr|amp",
                   "torque": r"torq|trq", "rotational_speed": r"rpm|speed|drehz", "energy": r"energy|ced|cec|tot_"}
 
@@ -161,6 +163,9 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
             lines.append(f"unit = {_toml(unit)}")
         if name == "battery_current_a":
             lines.append("# + while discharging; scale = -1 if this log counts charging positive")
+        if name == "soc_pct":
+            lines.append("# without battery V·I or energy counters, [options] soc_capacity_kwh = <the energy "
+                         "its 0–100 % spans> makes it the battery's energy (an estimate; docs/adapters.md)")
     return "\n".join(lines)
 
 
