@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-
 from pathlib import Path
 
 import numpy as np
@@ -294,6 +293,7 @@ def write_equation(args, eq, out, inputs, report=None) -> None:
     else:
         save_equation(eq, out)
     print(f"wrote {out}")
+
 
 def engine_off_option(args) -> "str | float":
     """``--engine-off`` as the fuel chain takes it: "profile" (not given), −inf ('never') or
