@@ -456,6 +456,9 @@ _map_case("name is a number", MAP_OK + '[columns."x"]\nname = 5\n', ("columns.x.
 _map_case("unknown top-level table", MAP_OK + "[extras]\nfoo = 1\n", ("extras",))
 _map_case("keep_unmapped a text", '[options]\nkeep_unmapped = "yes"\n' + MAP_OK, ("keep_unmapped", "yes"))
 _map_case("time_format without dates", '[options]\ntime_format = "%H"\n' + MAP_OK, ("time_format",))
+_map_case("soc capacity zero", '[options]\nsoc_capacity_kwh = 0\n' + MAP_OK + '[columns."s"]\nname = "soc_pct"\n',
+          ("soc_capacity_kwh",), src="t,v,s\n" + "".join(f"{i / 8},{20 + i % 7},{80 - i / 100}\n" for i in range(80)))
+_map_case("soc capacity without a soc", '[options]\nsoc_capacity_kwh = 20\n' + MAP_OK, ("soc_capacity_kwh", "soc_pct"))
 _map_case("time unit given twice, differently", '[options]\ntime_unit = "ms"\n'
           + MAP_OK.replace('unit = "s"', 'unit = "h"'), ("columns.t.unit", "'h'", "'ms'"))
 
