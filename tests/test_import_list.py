@@ -200,6 +200,10 @@ def test_the_sketch_maps_the_bms_state_of_charge_and_says_how_it_becomes_energy(
     assert '[columns."SoC [%]"]\nname = "soc_pct"\nunit = "%"\n# without battery V·I' in sk, sk
     assert "soc_capacity_kwh" in sk and "displayed" not in sk and "min. SoC" not in sk
     assert "soc_pct" not in sketch([{"label": "Throttle [%]", "unit": "%"}], False, {})
+    for label in ("M_SID_0x220101_StateOfChargeBMS", "SOC_BMS", "State of Charge (BMS)"):  # UDS, DBC, apps
+        assert f'[columns."{label}"]\nname = "soc_pct"' in sketch([{"label": label, "unit": "%"}], True, {})
+    assert "soc_pct" not in sketch([{"label": "StateOfChargeDisplay", "unit": "%"},
+                                    {"label": "SoH_BMS", "unit": "%"}], True, {})
 
 
 def test_the_sketch_maps_a_bms_energy_counters():

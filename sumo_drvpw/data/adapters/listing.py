@@ -114,7 +114,8 @@ GUESSES = {
     "battery_discharge_energy_j": ("energy", r"discharg|\bced\b|tot_?disc", r"cell|max|limit|power"),
     "battery_charge_energy_j": ("energy", r"(?<!dis)charg|\bcec\b|tot_?char", r"cell|max|limit|power|discharg"),
     # an EV's state of charge: with options.soc_capacity_kwh, the battery's energy (an estimate)
-    "soc_pct": ("percent", r"\bsoc\b|state of charge|ladezustand", r"display|min|max|target|limit|health|\bsoh\b"),
+    "soc_pct": ("percent", r"(?<![a-z])soc(?![a-z])|state ?of ?charge|ladezustand",
+                r"display|min|max|target|limit|health|(?<![a-z])soh(?![a-z])"),
 }
 #: a label without a unit is offered for a name only when it also names the quantity
 UNITLESS_WORDS = {"percent": r"soc|state of charge", "time": r"time|zeit", "speed": r"speed|veloc|geschw|spd", "length": r"elev|alti|height|höhe",
