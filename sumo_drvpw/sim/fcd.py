@@ -64,6 +64,7 @@ from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
 from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
+from sumo_drvpw.sim.vtype_energy import battery_switch, replay_emission_classes
 
 #: how long [s] a vehicle whose rows end while it stands stays in memory, in case it comes
 #: back from a teleport (SUMO teleports a car waiting in a jam, writes no rows while it
@@ -435,7 +436,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     # long planned stops and start-stop systems as in the live run (sim/shutoff.py): the
     # vTypes' shut-off params and the vehicles' stops from the route and additional files
     replay.type_params = {vt: i.shut_off for vt, i in acc.file_vtypes.items() if i.shut_off}
-    replay.type_eclass = {vt: i.emission_class for vt, i in acc.file_vtypes.items() if i.emission_class}
+    # (a vType writing none runs on SUMO's Energy model where the battery device is on: as live)
+    replay.type_eclass, replay.default_eclass = replay_emission_classes(acc.file_vtypes, battery_switch(sc))
     # SUMO loads the additional files first: a route (with its stops) defined there serves
     # the vehicles of the route files
     declared = read_declared_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files])),

@@ -102,8 +102,8 @@ class _VType(_Domain):
     def getParameter(self, vt, key):  # noqa: N802 (SUMO's shut-off params of the route files)
         return (self.r.type_params.get(vt) or {}).get(key, "")
 
-    def getEmissionClass(self, vt):  # noqa: N802 (the route files')
-        return self.r.type_eclass.get(vt, "")
+    def getEmissionClass(self, vt):  # noqa: N802 (the route files', as the recorded run read them)
+        return self.r.type_eclass.get(vt, self.r.default_eclass)
 
     def getMass(self, vt):  # noqa: N802 (a person type's: the route files', else SUMO's 70 kg)
         return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
@@ -145,6 +145,7 @@ class _Rows:
         #: vType → its shut-off params as the route files write them (set by replay_fcd)
         self.type_params: dict = {}
         self.type_eclass: dict = {}
+        self.default_eclass = ""  # (a vType the files do not hold: sim/vtype_energy.replay_emission_classes)
         #: the route files' stops matched to where vehicles stand (fcd_stops.StopTracker;
         #: set by replay_fcd, None: no file declares a stop)
         self.stops = None

@@ -98,6 +98,24 @@ def battery_switch(sc) -> str:
         return "param"  # SUMO refuses it itself
 
 
+#: what SUMO 1.28's vehicletype.getEmissionClass reads for a vType that writes no
+#: emissionClass and has the battery device (probed with libsumo 1.28.0, 2026-11-27)
+BATTERY_DEVICE_CLASS = "Energy/default"
+
+
+def replay_emission_classes(file_vtypes: dict, switch: str) -> tuple[dict, str]:
+    """What an FCD replay answers for ``vehicletype.getEmissionClass`` as SUMO did in the
+    recorded run: vType → its written emissionClass, or :data:`BATTERY_DEVICE_CLASS` where it
+    writes none and the battery device puts it on the Energy model (``switch``,
+    :func:`battery_switch`); and the class of a vType the files do not hold (SUMO's default
+    type: that class with the device on every vehicle, else "" — SUMO's default)."""
+    out = {vt: i.emission_class for vt, i in file_vtypes.items() if i.emission_class}
+    if switch != "none":
+        out.update({vt: BATTERY_DEVICE_CLASS for vt, i in file_vtypes.items()
+                    if not i.emission_class and (switch == "all" or getattr(i, "battery_device", False))})
+    return out, BATTERY_DEVICE_CLASS if switch == "all" else ""
+
+
 def not_booked_why(info, switch: str = "param") -> str | None:
     """Why ``vtype_energy`` does not book a vType of the files (None: it does).
 
