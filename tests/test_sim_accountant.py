@@ -490,3 +490,18 @@ def test_scenario_vtype_settings_no_vehicle_had_are_said(tmp_path):
     hit = [w for w in res.summary["warnings"] if "matched no vehicle" in w]
     assert len(hit) == 1 and "[vtypes.prius_3]" in hit[0] and "[vtypes.prius3]" not in hit[0]
     assert len(res.vehicles) > 0 and (res.vehicles.mass_kg == 1600.0).all()
+
+
+def test_each_row_shows_the_mass_its_equation_booked(tmp_path):
+    """vehicles.parquet's mass_kg is the mass the row's equation took: a MOVES equation's
+    fixed source mass (1478.8 kg, whatever the vehicle weighs), the vehicle's own for an
+    equation without one (a rehearsal read 2124 kg on a MOVES row booked at 1478.8 kg)."""
+    routes = """<routes>
+      <vType id="heavy_car" vClass="passenger" mass="2124"/>
+      <flow id="f" type="heavy_car" begin="0" end="30" period="10" departSpeed="max">
+        <route edges="c00c10 c10c20"/></flow>
+    </routes>"""
+    res = _run_routes(tmp_path, routes, ["vsp_ldv1999", "moves_passenger_car"], 120)
+    v = res.vehicles
+    assert (v[v.equation == "vsp_ldv1999"].mass_kg == 2124.0).all()
+    assert (v[v.equation == "moves_passenger_car"].mass_kg == 1478.8).all() and len(v) == 6

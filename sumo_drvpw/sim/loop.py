@@ -109,6 +109,8 @@ class Stepper:
                  physics: Physics, resolve: Callable[[str, str], tuple[float, np.ndarray, bool]],
                  trace=None, use_subscriptions: bool = False):
         self.conn, self.net, self.eqset, self.ledger = conn, net, eqset, ledger
+        #: each equation's own fixed mass [kg] (NaN: the vehicle's), for the rows' booked mass
+        ledger.eq_mass = np.array([np.nan if e.mass_kg is None else float(e.mass_kg) for e in eqset.equations])
         if ledger.chain is None:  # battery/fuel accounts when an equation has a chain (#12)
             from sumo_drvpw.sim.chain import COLD_START_KEYWORDS, chain_ledger
 
