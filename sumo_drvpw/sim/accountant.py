@@ -322,6 +322,12 @@ class Accountant(_Listener):
                             "script change the simulation domain's context subscription (subscribeContext "
                             "or unsubscribeContext on traci.simulation)?")
         warnings += default_mass_warnings(self.resolver.assumptions)
+        if led.hard_brakes:
+            warnings.append(f"{led.hard_brakes} vehicle-step(s) decelerated beyond any brake (up to "
+                            f"{led.hard_brake_max_mps2:.0f} m/s², over 1.2 g: SUMO's emergency braking, e.g. a "
+                            "train stopped at a red signal within one step): their energy at the wheels is "
+                            "booked, but no battery or fuel chain recuperates it (friction brakes) "
+                            "(summary.json hard_brakes)")
         unused = sorted(set(getattr(sc, "vtype_data", {})) - set(self.resolver.cache) - self.resolver.seen)
         if unused:  # a typo, or a vTypeDistribution's id (its vehicles have the members' vTypes)
             warnings.append(f"{sc.path or 'the scenario'}: " + ", ".join(f"[vtypes.{v}]" for v in unused)

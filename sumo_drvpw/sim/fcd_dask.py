@@ -118,9 +118,10 @@ def merge_ledgers(ledgers: list):
                      "lane_clipped", "edge_teleports", "edge_tele"):
             setattr(out, name, getattr(out, name) + getattr(led, name))
         for name in ("samples", "corrected", "clipped", "position_reads", "position_mismatches",
-                     "flushed_vehicles", "flushed_kept", "load_samples", "teleports"):
+                     "flushed_vehicles", "flushed_kept", "load_samples", "teleports", "hard_brakes"):
             setattr(out, name, getattr(out, name) + getattr(led, name))
         out.load_max_kg = max(out.load_max_kg, led.load_max_kg)
+        out.hard_brake_max_mps2 = max(out.hard_brake_max_mps2, led.hard_brake_max_mps2)
         out.dynamics.merge(led.dynamics)
         for c, types in led.class_vtypes.items():
             out.class_vtypes.setdefault(c, {}).update(types)

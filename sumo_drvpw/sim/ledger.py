@@ -161,6 +161,10 @@ class Ledger:
         #: lane/position reads of tracked positions, and resync reads that disagreed
         self.position_reads = 0
         self.position_mismatches = 0
+        #: vehicle-steps that decelerated beyond any brake (sim/loop.IMPOSSIBLE_DECEL_MPS2),
+        #: and the hardest such deceleration [m/s²]
+        self.hard_brakes = 0
+        self.hard_brake_max_mps2 = 0.0
         #: vehicle-steps booked with riding persons, and the most they weighed
         self.load_samples = 0
         self.load_max_kg = 0.0

@@ -82,6 +82,14 @@ class Physics:
     transportable_mass: bool = True
 
 
+#: a deceleration [m/s²] beyond any brake, on tyres or on rails (1.2 g; a car's best
+#: emergency stop is about 1 g): a step SUMO ends at such a rate (its emergency braking, a
+#: train stopped at a red signal within one step from 64 m/s) sheds its kinetic energy in
+#: friction brakes, not in a battery — the chains recuperate none of it that step, as SUMO's
+#: own emission output booked only the auxiliary power there (its test
+#: rail/bidi_noconflict_insertion with a 400-t Energy-model train, SUMO 1.28, 2026-11-29)
+IMPOSSIBLE_DECEL_MPS2 = 1.2 * 9.81
+
 #: every this many steps the running vehicles' vTypes are read again (a script's setType,
 #: setMass): a change books from then on (over traci, each read a round trip: 10× as many);
 #: vehicles on a calibrator's edge, where SUMO changes vTypes itself, are read every step
@@ -483,9 +491,15 @@ class Stepper:
         if whole_second(t_now - dt, dt):  # the trajectories at 1 Hz, as the RDE reads a trip (at the
             # time SUMO's outputs give this state: the step's begin, getTime() − Δt after the step)
             ledger.dynamics.sample(ledger, vidx, v_state, t_now - dt)
+        p_chain = pc.sum(axis=2)
+        hard = a < -IMPOSSIBLE_DECEL_MPS2
+        if hard.any():  # braked beyond any brake: the wheels' energy is booked, no chain recuperates it
+            ledger.hard_brakes += int(np.count_nonzero(hard))
+            ledger.hard_brake_max_mps2 = max(ledger.hard_brake_max_mps2, float(-a[hard].min()))
+            p_chain[hard] = np.maximum(p_chain[hard], 0.0)
         if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
             off = None if self.shutoff is None else self.shutoff.auto_off(ledger, vidx, v, dt)
-            ledger.chain.book(vidx, eidx, v, dt, pc.sum(axis=2), app=ledger.veh_app[vidx], engine_off=off, accel=a,
+            ledger.chain.book(vidx, eidx, v, dt, p_chain, app=ledger.veh_app[vidx], engine_off=off, accel=a,
                               v_mean=v_mean, grade=theta, load=None if xm is None else xm.signals["load_kg"])
         if self.trace is not None:
             self.trace.write(t_now, vidx, eidx, v, a, theta, wind, pc)

@@ -243,6 +243,8 @@ def summary_dict(ledger: Ledger, net: Network, names: list[str], uses_other: boo
            "slope_clipped_samples": int(ledger.clipped),
            "position_reads": int(ledger.position_reads),
            "position_mismatches": int(ledger.position_mismatches),
+           "hard_brakes": {"samples": int(getattr(ledger, "hard_brakes", 0)),
+                           "max_decel_mps2": float(getattr(ledger, "hard_brake_max_mps2", 0.0))},
            "transportables": {"samples": int(getattr(ledger, "load_samples", 0)),
                               "max_kg": float(getattr(ledger, "load_max_kg", 0.0))},
            "internal_edges": "energy on internal junction lanes is booked on the edge "
