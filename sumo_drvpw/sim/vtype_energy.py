@@ -9,7 +9,7 @@ since SUMO's defaults are then a whole car, its VW ID.3; its mass SUMO's, plus r
 run's or an FCD replay's equations). The run replaces it by one equation per vType of the
 route/additional files read that SUMO runs on its Energy model (``emissionClass``
 ``Energy/…`` or ``Energy``; none, with SUMO's battery device on: :func:`not_booked_why`)
-and that writes at least one Energy-model parameter, named ``vtype_energy.<vType id>`` and booking only that
+and that writes a ``mass`` or at least one Energy-model parameter, named ``vtype_energy.<vType id>`` and booking only that
 vType: the ledger evaluates one coefficient row per equation for every vehicle
 (:class:`~sumo_drvpw.sim.ledger.EquationSet`), so per-vType coefficients are per-vType
 equations, and the outputs name the vType with the energy. Other vTypes are not booked by
@@ -136,8 +136,8 @@ def not_booked_why(info, switch: str = "param") -> str | None:
                      "(device.battery.track-fuel): its default class stays" if switch == "none"
                 else "no emissionClass written and no battery device (SUMO's default is then not "
                      "the Energy model)")
-    if not any(k in (info.energy_params or {}) for k in ENERGY_PARAMS):
-        return "writes no Energy-model parameter"
+    if not any(k in (info.energy_params or {}) for k in ENERGY_PARAMS) and getattr(info, "mass_attr_kg", None) is None:
+        return "writes no Energy-model parameter"  # (a mass is one: SUMO's Energy model takes it)
     return None
 
 
@@ -204,7 +204,7 @@ def vtype_equations(file_vtypes, sc=None, step_s: float | None = None) -> tuple[
             eq, notes = mmpevem_equation(_name(vt, taken), info.energy_params or {}, info.mass_attr_kg,
                                          where, (info.vclass or "passenger",))
         else:
-            eq, notes = energy_params_equation(_name(vt, taken), info.energy_params, info.mass_attr_kg,
+            eq, notes = energy_params_equation(_name(vt, taken), info.energy_params or {}, info.mass_attr_kg,
                                                where, (info.vclass or "passenger",), step_s=step_s)
         model = eq.chain.provenance["sumo_mmpevem" if mmp else "sumo_energy_model"]
         eq.provenance = {_KEY: vt}
