@@ -1096,11 +1096,13 @@ def test_bare_config_books_electric_cars_in_kwh_and_petrol_cars_in_litres(tmp_pa
     veh = pd.read_parquet(tmp_path / "o" / "vehicles.parquet")
     eqs = veh.groupby("vehicle")["equation"].apply(set).to_dict()
     wheel = {"vsp_ldv1999", "drvpw_prius3", "moves_passenger_car"}
-    assert eqs["e"] == eqs["w"] == wheel | {"bmw_i3_battery"}
+    assert eqs["e"] == wheel | {"bmw_i3_battery"}
+    # (an Energy vType that writes its mass is also booked by SUMO's own model, vtype_energy)
+    assert eqs["w"] == wheel | {"bmw_i3_battery", "vtype_energy.ev_written"}
     assert eqs["c"] == wheel | {"epa_gasoline_car"}
     cls = {(r["key"], r["equation"]) for r in s["chain"]["classes"]}
     assert cls == {("evehicle", "bmw_i3_battery"), ("passenger", "bmw_i3_battery"),
-                   ("passenger", "epa_gasoline_car")}
+                   ("passenger", "epa_gasoline_car"), ("passenger", "vtype_energy.ev_written")}
     assert s["chain"]["hvac_air_temperature_assumed"] and "no air temperature given" in err
     # without electric cars the battery chain books nobody; the petrol chain's warm-running
     # fuel read the default air (20 °C: 3.9 K below the certification's), and the run says so
