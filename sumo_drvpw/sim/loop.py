@@ -502,7 +502,9 @@ class Stepper:
             ledger.chain.book(vidx, eidx, v, dt, p_chain, app=ledger.veh_app[vidx], engine_off=off, accel=a,
                               v_mean=v_mean, grade=theta, load=None if xm is None else xm.signals["load_kg"])
         if self.trace is not None:
-            self.trace.write(t_now, vidx, eidx, v, a, theta, wind, pc)
+            # (at the time SUMO's own outputs give this state, as its FCD and emission output do:
+            # the step's start, getTime() − Δt after the step)
+            self.trace.write(t_now - dt, vidx, eidx, v, a, theta, wind, pc)
 
 
 def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Physics,
