@@ -348,6 +348,18 @@ class Ledger:
         """vTypes of every vehicle registered in the run."""
         return set(self.veh_type[:self.n_veh]) | self.flushed_types
 
+    def booked_mass(self, vi: np.ndarray, ei: np.ndarray) -> np.ndarray:
+        """The mass [kg] each (vehicle slot ``vi``, equation ``ei``) was booked at: the
+        equation's own fixed mass (a MOVES source mass, SUMO's Energy-model mass of a
+        ``vtype_energy``: :attr:`eq_mass`, set by the loop), else the vehicle's (as it ended
+        its trip, riders included)."""
+        veh = self.veh_mass[vi]
+        fixed = getattr(self, "eq_mass", None)
+        if fixed is None or len(fixed) == 0:
+            return veh
+        own = np.asarray(fixed, float)[ei]
+        return np.where(np.isfinite(own), own, veh)
+
     def retire(self, slots) -> None:
         """Mark vehicles ``slots`` as gone (arrived, removed); flushed by :meth:`flush`."""
         slots = np.asarray(slots, np.int64)

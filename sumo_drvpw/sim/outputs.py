@@ -58,18 +58,6 @@ def _whpkm(energy_j: np.ndarray, dist_m: np.ndarray) -> np.ndarray:
     return np.divide(e, d * 3.6, out=np.full_like(e, np.nan), where=d > 0)
 
 
-def booked_mass(ledger: Ledger, vi: np.ndarray, ei: np.ndarray) -> np.ndarray:
-    """The mass [kg] each (vehicle ``vi``, equation ``ei``) row was booked at: the equation's
-    own fixed mass (a MOVES source mass, SUMO's Energy-model mass of a ``vtype_energy``:
-    ``Ledger.eq_mass``), else the vehicle's (as it ended its trip, riders included)."""
-    fixed = getattr(ledger, "eq_mass", None)
-    veh = ledger.veh_mass[vi]
-    if fixed is None or len(fixed) == 0:
-        return veh
-    own = np.asarray(fixed, float)[ei]
-    return np.where(np.isfinite(own), own, veh)
-
-
 def vehicles_table(ledger: Ledger, names: list[str],
                    predicts: list[str] | None = None, slots=None) -> pa.Table:
     """Per vehicle × equation (only accounted vehicles and equations applied to them): the
@@ -86,7 +74,7 @@ def vehicles_table(ledger: Ledger, names: list[str],
             "vclass": [ledger.veh_class[i] if i < len(ledger.veh_class) else "" for i in vi],
             "equation": [names[e] for e in ei],
             "predicts": [(predicts or ["wheel"] * len(names))[e] for e in ei],
-            "mass_kg": booked_mass(ledger, vi, ei), "distance_m": ledger.veh_dist[vi],
+            "mass_kg": ledger.booked_mass(vi, ei), "distance_m": ledger.veh_dist[vi],
             "time_s": ledger.veh_time[vi]}
     cols.update(_energy_cols("traction", tr))
     cols.update(_energy_cols("recup", rc))
