@@ -530,6 +530,25 @@ def test_vehicle_body_books_a_car_class_two_wheeler_as_one(vclass, shape, length
     assert (got[0] if got else None) == body
 
 
+@pytest.mark.parametrize("vclass, shape, length, body", [
+    ("taxi", "truck", 7.1, "truck"),                # SUMO's test devices/taxi/basic/1container
+    ("passenger", "truck/semitrailer", 16.5, "trailer"), ("taxi", "bus", 12.0, "bus"),
+    ("taxi", "delivery", 6.5, "delivery"),
+    ("taxi", "truck", 5.0, None),                   # car-sized: a car drawn as a truck
+    ("taxi", "truck", None, None),                  # no length written: SUMO's car length
+    ("taxi", "passenger", 7.1, None),               # a stretch limousine stays a car
+])
+def test_vehicle_body_books_a_car_class_drawn_and_sized_as_a_heavy_vehicle_as_one(vclass, shape, length, body):
+    """A car vClass whose guiShape is a heavy vehicle's and whose written length is longer
+    than any car's is booked as that vehicle (a rehearsal: SUMO's container taxi, a 7.1-m
+    truck shape in vClass taxi, was booked silently as a 1,478.8-kg car)."""
+    from sumo_drvpw.sim.vtypes import VTypeInfo, vehicle_body
+
+    info = VTypeInfo("t", None, None, "f", vclass, 0.0, None, shape, length, 1)
+    got = vehicle_body(vclass, info, "t")
+    assert (got[0] if got else None) == body
+
+
 def test_vtype_equations_may_name_an_equation_file(tmp_path):
     """docs/validation.md tells users `[vtypes.<id>] equations = ["docs/energy-chain/
     bmw_i3_battery.toml"]`; that was refused ("not among the scenario's equations") even

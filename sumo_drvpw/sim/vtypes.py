@@ -155,6 +155,11 @@ TWO_WHEELER_MAX_LENGTH_M = 3.0
 #: whose mass a car class's default is (SUMO's default car is 5 m; a two-seater city car is
 #: about 2.7 m and under 1 t)
 SHORT_CAR_M = 3.0
+#: a car vType whose guiShape draws a heavy vehicle and whose written length is at least
+#: this [m] (longer than any car; SUMO's default truck is 7.1 m) is that heavy vehicle: SUMO's
+#: taxi test devices/taxi/basic/1container writes its container taxi as vClass taxi, guiShape
+#: truck, 7.1 m long (booked as a 1,478.8-kg car before)
+HEAVY_SHAPE_MIN_LENGTH_M = 6.5
 #: a van weighs at most this [kg] (EU categories N1 and M1, the car-licence limit): a short
 #: bus, coach or truck whose vType declares a larger mass stays heavy (a 6-m, 7.5-t rigid truck)
 VAN_MAX_MASS_KG = 3500.0
@@ -202,6 +207,10 @@ def vehicle_body(vclass: str, info: "VTypeInfo | None", vtype_id: str) -> tuple[
                 and L <= TWO_WHEELER_MAX_LENGTH_M):
             return shape, (f"guiShape {info.gui_shape} and length {L:g} m: a two-wheeler (a "
                            f"{vclass} car is longer), e.g. a motorcycle taxi")
+        if (vclass in CAR_VCLASSES and shape in HEAVY_VCLASSES + ("delivery",) and L is not None
+                and L >= HEAVY_SHAPE_MIN_LENGTH_M):
+            return shape, (f"guiShape {info.gui_shape} and length {L:g} m: a {shape}, not the car a "
+                           f"vClass {vclass} is (a car is shorter), e.g. a taxi that carries containers")
         if L is not None and L <= VAN_LENGTH_M.get(vclass, 0.0):
             return "delivery", (f"length {L:g} m: a van or minibus (a {vclass} is longer; "
                                 f"SUMO's default {vclass} is {SUMO_DEFAULT_LENGTH_M[vclass]:g} m)")
