@@ -118,7 +118,8 @@ GUESSES = {
                 r"display|min|max|target|limit|health|(?<![a-z])soh(?![a-z])"),
 }
 #: a label without a unit is offered for a name only when it also names the quantity
-UNITLESS_WORDS = {"percent": r"soc|state of charge", "time": r"time|zeit", "speed": r"speed|veloc|geschw|spd", "length": r"elev|alti|height|höhe",
+UNITLESS_WORDS = {"percent": r"soc|state of charge", "time": r"time|zeit", "speed": r"speed|veloc|geschw|spd",
+                  "length": r"elev|alti|height|höhe",
                   "temperature": r"temp|amb", "voltage": r"volt", "current": r"curr|amp",
                   "torque": r"torq|trq", "rotational_speed": r"rpm|speed|drehz", "energy": r"energy|ced|cec|tot_"}
 
