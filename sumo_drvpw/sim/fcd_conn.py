@@ -10,16 +10,12 @@ switches vehicles off as in a live run."""
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.sim.network import off_lane
-from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
+from sumo_drvpw.sim.sumo_outputs import additional_elements
 
 
 class _Domain:
@@ -291,50 +287,29 @@ class ParkedTest:
             yield b
 
 
-def bus_stops(files, depth: int = 0) -> dict[str, list[tuple[float, float]]]:
+def bus_stops(files) -> dict[str, list[tuple[float, float]]]:
     """Bus and train stops of SUMO additional files (and of the files they ``<include
     href>``): lane id → [(startPos, endPos)] [m] (SUMO's defaults: 0 and the lane's end;
     negative positions count from the end, read as 0 / the end here). Unreadable files are
     left to SUMO."""
     out: dict[str, list[tuple[float, float]]] = {}
-    for f in files:
-        try:
-            with open_maybe_gzip(f) as src:
-                for _, el in ET.iterparse(src, events=("end",)):
-                    if el.tag == "include" and el.get("href") and depth < INCLUDE_DEPTH:
-                        for lane, spans in bus_stops([Path(f).parent / el.get("href")],
-                                                     depth + 1).items():
-                            out.setdefault(lane, []).extend(spans)
-                    elif el.tag in ("busStop", "trainStop") and el.get("lane"):
-                        try:
-                            a = float(el.get("startPos", 0.0))
-                            b = float(el.get("endPos", np.inf))
-                        except ValueError:
-                            continue
-                        out.setdefault(el.get("lane"), []).append(
-                            (max(a, 0.0), b if b >= 0 else np.inf))
-                    el.clear()
-        except (ET.ParseError, OSError):
-            continue
+    for _, el in additional_elements(files):
+        if el.tag in ("busStop", "trainStop") and el.get("lane"):
+            try:
+                a = float(el.get("startPos", 0.0))
+                b = float(el.get("endPos", np.inf))
+            except ValueError:
+                continue
+            out.setdefault(el.get("lane"), []).append((max(a, 0.0), b if b >= 0 else np.inf))
     return out
 
 
-def calibrators(files, depth: int = 0) -> dict[str, str]:
+def calibrators(files) -> dict[str, str]:
     """Calibrators of SUMO additional files (and of the files they ``<include href>``):
     id → edge (its ``edge``, else its ``lane``'s edge). Unreadable files are left to SUMO."""
-    out: dict[str, str] = {}
-    for f in files:
-        try:
-            with open_maybe_gzip(f) as src:
-                for _, el in ET.iterparse(src, events=("end",)):
-                    if el.tag == "include" and el.get("href") and depth < INCLUDE_DEPTH:
-                        out.update(calibrators([Path(f).parent / el.get("href")], depth + 1))
-                    elif el.tag == "calibrator" and (el.get("edge") or el.get("lane")):
-                        out[el.get("id", "")] = el.get("edge") or el.get("lane").rsplit("_", 1)[0]
-                    el.clear()
-        except (ET.ParseError, OSError):
-            continue
-    return out
+    return {el.get("id", ""): el.get("edge") or el.get("lane").rsplit("_", 1)[0]
+            for _, el in additional_elements(files)
+            if el.tag == "calibrator" and (el.get("edge") or el.get("lane"))}
 
 
 def _unpark(lanes, ids, off, nxt_ids, nxt_off) -> tuple[np.ndarray, int]:

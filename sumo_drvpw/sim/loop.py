@@ -491,13 +491,13 @@ class Stepper:
         if whole_second(t_now - dt, dt):  # the trajectories at 1 Hz, as the RDE reads a trip (at the
             # time SUMO's outputs give this state: the step's begin, getTime() − Δt after the step)
             ledger.dynamics.sample(ledger, vidx, v_state, t_now - dt)
-        p_chain = pc.sum(axis=2)
-        hard = a < -IMPOSSIBLE_DECEL_MPS2
-        if hard.any():  # braked beyond any brake: the wheels' energy is booked, no chain recuperates it
+        hard = a < -IMPOSSIBLE_DECEL_MPS2  # braked beyond any brake: booked at the wheels, not recuperated
+        if hard.any():
             ledger.hard_brakes += int(np.count_nonzero(hard))
             ledger.hard_brake_max_mps2 = max(ledger.hard_brake_max_mps2, float(-a[hard].min()))
-            p_chain[hard] = np.maximum(p_chain[hard], 0.0)
         if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
+            p_chain = pc.sum(axis=2)
+            p_chain[hard] = np.maximum(p_chain[hard], 0.0)
             off = None if self.shutoff is None else self.shutoff.auto_off(ledger, vidx, v, dt)
             ledger.chain.book(vidx, eidx, v, dt, p_chain, app=ledger.veh_app[vidx], engine_off=off, accel=a,
                               v_mean=v_mean, grade=theta, load=None if xm is None else xm.signals["load_kg"])

@@ -319,9 +319,11 @@ def lane_profile(shape3d, length: float, window: float, max_rad: float,
     return out
 
 
-def lane_bins(length: float) -> int:
-    """The number of ``BIN_M`` bins of a lane of SUMO ``length`` [m] (at least one)."""
-    return max(1, int(np.ceil(max(length, 1e-9) / BIN_M)))
+def lane_bins(length):
+    """The number of ``BIN_M`` bins of a lane of SUMO ``length`` [m] (at least one); of
+    each lane for an array of lengths."""
+    nb = np.maximum(1, np.ceil(np.maximum(length, 1e-9) / BIN_M).astype(np.int64))
+    return int(nb) if np.ndim(nb) == 0 else nb
 
 
 def flat_profile(length: float):
@@ -395,7 +397,7 @@ def lane_headings(shapes: list, lengths) -> tuple[list, list, list]:
         seg = np.hypot(d[..., 0], d[..., 1])                             # lanes × (m − 1)
         s = np.concatenate([np.zeros((len(idx), 1)), np.cumsum(seg, axis=1)], axis=1)
         ang = np.degrees(np.arctan2(d[..., 0], d[..., 1])) % 360.0
-        nb = np.maximum(1, np.ceil(np.maximum(length, 1e-9) / BIN_M).astype(np.int64))
+        nb = lane_bins(length)
         lane = np.repeat(np.arange(len(idx)), nb)
         j = np.arange(len(lane)) - np.repeat(np.cumsum(nb) - nb, nb)
         total = s[:, -1]

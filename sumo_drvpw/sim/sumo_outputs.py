@@ -39,24 +39,34 @@ def is_output_option(key: str) -> bool:
     return key.endswith("-output") or key in _OUTPUT_OPTIONS
 
 
-def additional_outputs(paths, depth: int = 0) -> list[str]:
-    """Outputs the additional files declare (``edgeData id='x' file='y'`` …), theirs and
-    those of the files they ``<include href>``, as 'FILE: element id → output' lines; SUMO
-    writes them beside the file that declares them."""
-    found = []
+def additional_elements(paths, depth: int = 0):
+    """Every element of SUMO XML files ``paths`` and of the files they ``<include href>``
+    (to :data:`INCLUDE_DEPTH`), as (file, element) at the element's end, an include's
+    elements where it stands; each element is cleared once the caller moves on. A file that
+    cannot be read or parsed (a truncated .gz among them) is passed over: SUMO reports it."""
     for p in paths:
         try:
             with open_maybe_gzip(p) as src:
                 for _, el in ET.iterparse(src, events=("end",)):
-                    tag = el.tag.split("}")[-1]
-                    key = output_attribute(tag)
-                    if key and el.get(key):
-                        found.append(f"{p}: {tag} '{el.get('id', '')}' → {el.get(key)}")
-                    elif tag == "include" and el.get("href") and depth < INCLUDE_DEPTH:
-                        found += additional_outputs([Path(p).parent / el.get("href")], depth + 1)
+                    if el.tag.split("}")[-1] == "include" and el.get("href") and depth < INCLUDE_DEPTH:
+                        yield from additional_elements([Path(p).parent / el.get("href")], depth + 1)
+                    else:
+                        yield p, el
                     el.clear()
-        except (ET.ParseError, OSError, EOFError, zlib.error):  # a truncated .gz among them
-            continue  # SUMO reports an unreadable additional file itself
+        except (ET.ParseError, OSError, EOFError, zlib.error):
+            continue
+
+
+def additional_outputs(paths) -> list[str]:
+    """Outputs the additional files declare (``edgeData id='x' file='y'`` …), theirs and
+    those of the files they ``<include href>``, as 'FILE: element id → output' lines; SUMO
+    writes them beside the file that declares them."""
+    found = []
+    for p, el in additional_elements(paths):
+        tag = el.tag.split("}")[-1]
+        key = output_attribute(tag)
+        if key and el.get(key):
+            found.append(f"{p}: {tag} '{el.get('id', '')}' → {el.get(key)}")
     return found
 
 

@@ -103,16 +103,25 @@ def battery_switch(sc) -> str:
 BATTERY_DEVICE_CLASS = "Energy/default"
 
 
+def run_emission_class(info, switch: str) -> str | None:
+    """The emissionClass SUMO runs a vType of the files on: the written one; where it
+    writes none and the battery device is on for it (``switch``, :func:`battery_switch`:
+    "param" those with param has.battery.device, "all" every vType, "none" none, the device
+    tracking fuel) the Energy model's, :data:`BATTERY_DEVICE_CLASS`; else None (SUMO's
+    default for its vClass)."""
+    if info.emission_class:
+        return info.emission_class
+    if switch != "none" and (getattr(info, "battery_device", False) or switch == "all"):
+        return BATTERY_DEVICE_CLASS
+    return None
+
+
 def replay_emission_classes(file_vtypes: dict, switch: str) -> tuple[dict, str]:
     """What an FCD replay answers for ``vehicletype.getEmissionClass`` as SUMO did in the
-    recorded run: vType → its written emissionClass, or :data:`BATTERY_DEVICE_CLASS` where it
-    writes none and the battery device puts it on the Energy model (``switch``,
-    :func:`battery_switch`); and the class of a vType the files do not hold (SUMO's default
-    type: that class with the device on every vehicle, else "" — SUMO's default)."""
-    out = {vt: i.emission_class for vt, i in file_vtypes.items() if i.emission_class}
-    if switch != "none":
-        out.update({vt: BATTERY_DEVICE_CLASS for vt, i in file_vtypes.items()
-                    if not i.emission_class and (switch == "all" or getattr(i, "battery_device", False))})
+    recorded run: vType → :func:`run_emission_class` (where it names one); and the class of
+    a vType the files do not hold (SUMO's default type: the Energy model's with the device
+    on every vehicle, else "" — SUMO's default)."""
+    out = {vt: ec for vt, i in file_vtypes.items() if (ec := run_emission_class(i, switch))}
     return out, BATTERY_DEVICE_CLASS if switch == "all" else ""
 
 
@@ -125,9 +134,7 @@ def not_booked_why(info, switch: str = "param") -> str | None:
     every vType, "none" none, the device tracking fuel): SUMO 1.28 warns "The emission class
     Energy/unknown will be used" (probed with libsumo 1.28.0, 2026-11-27: getEmissionClass
     reads Energy/default, the emissions device's electricity equals the battery device's)."""
-    ec = info.emission_class
-    if not ec and switch != "none" and (getattr(info, "battery_device", False) or switch == "all"):
-        ec = "Energy/unknown"
+    ec = run_emission_class(info, switch)
     if is_mmpevem_class(ec):  # its defaults are a whole car (SUMO's VW ID.3): booked with none written
         return None
     if not is_energy_class(ec):
