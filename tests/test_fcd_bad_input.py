@@ -9,6 +9,7 @@ import gzip
 import hashlib
 import json
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -314,3 +315,23 @@ def test_a_file_without_timesteps_is_refused_on_the_in_memory_path_too(fcd, tmp_
     for f, kw in ((ti, {}), (path, {"begin_s": 5000})):
         with pytest.raises(UserError, match="no timestep"):
             process_fcd(f, scenario=city, equations=[PHYS], chunk_rows=None, **kw)
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("flag", [[], ["--no-progress"]], ids=["bar", "no-progress"])
+def test_the_replay_shows_its_progress_on_a_terminal(fcd, tmp_path, capsys, monkeypatch, flag):
+    """`fcd` on a terminal counts the timesteps it replays (tqdm, no total: a streamed file's
+    length is not known ahead), as `run` shows its steps; `--no-progress` leaves stderr to
+    the messages. Before, an FCD replay showed nothing however long it ran."""
+    path, text = fcd
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
+    code = cli_main(["fcd", str(path), "--net", str(CITY_NET), "--equation", "vsp_ldv1999",
+                     "--no-figures", "--out", str(tmp_path / "o"), *flag])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    steps = len(re.findall(r"<timestep ", text))
+    shown = re.findall(r"(?:^|\r)(\d+)step \[", err)  # tqdm: "\r120step [00:00, …]"
+    if flag:
+        assert not shown
+    else:
+        assert shown and int(shown[-1]) == steps

@@ -40,6 +40,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(as run's option: the cold terms, HVAC, cold starts, warm-engine fuel)")
     add_cold_start(parser, "in the FCD")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="no progress bar (timesteps replayed, on a terminal)")
     add_engine_arguments(parser, ("local", "dask"),
                          "local: stream the FCD on this machine in bounded memory (default); "
                          "dask: the vehicles split into buckets, one task each on a Dask cluster "
@@ -109,6 +111,8 @@ def main(args: argparse.Namespace) -> int:
         overrides["air_temperature_c"] = args.air_temperature
     if args.no_figures:
         overrides["figures"] = False
+    if args.no_progress:
+        overrides["progress"] = False
     cold_start_override(args, overrides)
     meta: dict = {}
     with output_set(args, args.out, [args.fcd, args.net, args.scenario, args.vtypes], meta=meta) as tmp:

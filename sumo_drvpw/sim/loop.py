@@ -538,12 +538,13 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
     """
     ledger, dt = stepper.ledger, stepper.dt
     interrupted = False
-    bar = None
-    if progress and end is not None and sys.stderr.isatty():
+    bar, steps0 = None, ledger.steps
+    if progress and sys.stderr.isatty():  # (no end: steps counted, no total)
         from tqdm import tqdm
 
         t0 = conn.simulation.getTime()
-        bar = tqdm(total=max(0, int(round((end - t0) / dt))), unit="step", file=sys.stderr)
+        bar = tqdm(total=None if end is None else max(0, int(round((end - t0) / dt))), unit="step",
+                   file=sys.stderr)
     next_cut = None
     if period:
         t0 = conn.simulation.getTime()
@@ -561,12 +562,13 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
                 if next_cut is not None and conn.simulation.getTime() >= next_cut - 1e-9:
                     ledger.snapshot(next_cut)
                     next_cut += period
-            if bar is not None and ledger.steps % 50 == 0:
+            if bar is not None and (ledger.steps - steps0) % 50 == 0:
                 bar.update(50)
     except KeyboardInterrupt:
         interrupted = True
     finally:
         if bar is not None:
+            bar.update(max(0, ledger.steps - steps0 - bar.n))  # (the last < 50 steps)
             bar.close()
     return {"interrupted": interrupted, "end_time_s": stepper.now(),
             "step_length_s": dt, "step_method": stepper.step_method}
