@@ -231,3 +231,20 @@ def test_a_label_whose_parenthesis_is_no_unit_is_offered_as_a_comment():
                  {"label": "Cumulative Energy Charged (CEC)", "unit": "CEC"}], False, {})
     assert "# battery_discharge_energy_j: perhaps Cumulative Energy Discharged (CED) (no unit recognised" in sk, sk
     assert "# battery_charge_energy_j: perhaps Cumulative Energy Charged (CEC) (no unit recognised" in sk, sk
+
+
+def test_a_parquet_column_whose_first_values_are_missing_is_listed(tmp_path, capsys):
+    """A Parquet log whose column starts with missing values (a float NaN, a string None): its
+    first value is the first one present and its count leaves the missing ones out, as the
+    CSV listing does. Before, the listing crashed with a traceback ('float' object is not
+    subscriptable: pandas' str dtype keeps NaN a float) — found on an OBD Auto Doctor log
+    whose ambient temperature arrived after the first rows."""
+    import pandas as pd
+
+    f = tmp_path / "obd.parquet"
+    pd.DataFrame({"Time (s)": [0.0, 0.5, 1.0], "Speed (km/h)": [0.0, 3.6, 7.2],
+                  "Ambient (°C)": [float("nan"), 4.0, 4.5], "Note": [None, None, "warm"]}).to_parquet(f)
+    assert cli_main(["import", "columns", str(f), "--list"]) == 0
+    rows = {ln.split()[0]: ln for ln in _lines(capsys) if ln.startswith("  ")}
+    assert rows["Ambient"].split()[-3:] == ["2", "2", "4.0"], rows
+    assert rows["Note"].split()[-3:] == ["1", "0", "warm"], rows

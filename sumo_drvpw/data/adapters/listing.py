@@ -22,6 +22,8 @@ import os
 import re
 from pathlib import Path
 
+import pandas as pd
+
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.data.adapters._common import expand_paths, is_number, lookup_unit, split_header
 
@@ -77,6 +79,14 @@ def _sniffed(path: Path, notes: list) -> dict:
     return m
 
 
+def _missing(x) -> bool:
+    """A missing cell (NaN, None, NaT; a list cell is not)."""
+    try:
+        return bool(pd.isna(x))
+    except (TypeError, ValueError):
+        return False
+
+
 def _table_columns(path: Path, m: dict) -> list[dict]:
     from sumo_drvpw.data.adapters.columns import _read_table
 
@@ -85,14 +95,15 @@ def _table_columns(path: Path, m: dict) -> list[dict]:
 
         try:
             pf = pq.ParquetFile(path)
-            df = next(pf.iter_batches(batch_size=ROWS_READ)).to_pandas().astype(str) if pf.metadata.num_rows else None
+            df = next(pf.iter_batches(batch_size=ROWS_READ)).to_pandas() if pf.metadata.num_rows else None
         except Exception as e:  # pyarrow raises several kinds on a file that is not Parquet
             raise UserError(f"{path}: cannot be read as Parquet: {str(e).splitlines()[0]}") from None
     else:
         df = _read_table(path, {**m, "nrows": ROWS_READ})
     rows = []
     for c in ([] if df is None else df.columns):
-        vals = [v for v in df[c].astype(str).str.strip() if v not in ("", "nan", "None", "-")]
+        # (a missing value: NaN or None, whatever the dtype; pandas' str dtype keeps NaN a float)
+        vals = [v for v in (str(x).strip() for x in df[c] if not _missing(x)) if v not in ("", "nan", "None", "-")]
         unit = split_header(str(c))[1]
         rows.append({"label": str(c), "unit": unit, "samples": len(vals),
                      "numbers": sum(is_number(v) for v in vals), "first": vals[0] if vals else ""})
