@@ -151,3 +151,71 @@ def test_the_engine_off_threshold_can_be_declared(tmp_path, engine, declared, wa
     chain = tomllib.loads(out.read_text())["chain"]
     assert chain["engine_off_below_w"] == want
     assert chain["reading"]["engine_off_below_w"].endswith("declared, not profiled")
+
+
+def _short_log(tmp_path, idle_w=IDLE_W):
+    """The short log above (under 30 s standing: the idling rule cannot tell) with an equation."""
+    rng, t, v, p = _stop_and_go(seed=6)
+    keep = np.cumsum(v < 0.05) * 0.5 < 25.0
+    fuel = np.where(v > 0.05, _fuel(rng, v, p), idle_w + rng.normal(0, 300.0, v.size))[keep]
+    pd.DataFrame({"time_s": t[keep], "speed_mps": v[keep], "fuel_rate_lph": fuel / (42.5e6 * 0.745) * 3600.0,
+                  "mass_kg": MASS}).to_parquet(tmp_path / "log.parquet")
+    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n')
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+@pytest.mark.parametrize("battery", [False, True], ids=["no-traction-battery", "battery-declared"])
+def test_a_car_without_a_traction_battery_is_not_fitted_as_a_hybrid(tmp_path, engine, battery):
+    """A vehicle file of powertrain type 'direct' without a [battery] table, and no battery
+    power logged: a car whose engine alone drives it. Its engine-off threshold is profiled
+    only over 'never' and 0 W (stops where no driving power is asked), without the
+    charge-sustaining form (no battery carries its loads while the engine is off). Before, a
+    rehearsal's OBD log of a conventional Seat Leon (under 30 s standing) was fitted as an
+    engine off below 5 kW, 'the battery drives', with a 10-kW auxiliary draw. A vehicle file
+    that declares its battery keeps the whole profile."""
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.fit.chain_fuel import CONVENTIONAL_OFF_GRID_W, ENGINE_OFF_GRID_W
+
+    _short_log(tmp_path)
+    (tmp_path / "car.toml").write_text(
+        f'[vehicle]\nname = "car"\nmass_kg = {MASS}\n[powertrain]\ntype = "direct"\nfuel = "gasoline"\n'
+        + ('[battery]\ncapacity_kwh = 1.3\n' if battery else ""))
+    out = tmp_path / f"{engine}.toml"
+    assert cli_main(["calibrate", str(tmp_path / "log.parquet"), "--vehicle", str(tmp_path / "car.toml"),
+                     "--target", "fuel", "--equation", str(tmp_path / "rl.toml"), "--engine", engine,
+                     "--out", str(out)]) == 0
+    doc = tomllib.loads(out.read_text())
+    chain = doc["chain"]
+    from sumo_drvpw.fit.chain_fuel import engine_off_for, fuel_grid
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    how = engine_off_for(load_vehicle(str(tmp_path / "car.toml")), False)
+    tried = {c.engine_off_below_w for c in fuel_grid(how)}
+    assert tried == set(ENGINE_OFF_GRID_W if battery else CONVENTIONAL_OFF_GRID_W)
+    assert engine_off_for(load_vehicle(str(tmp_path / "car.toml")), True) == "profile"  # battery logged
+    if battery:
+        assert "without a traction battery" not in chain["reading"]["engine_off_below_w"]
+    else:
+        assert chain["engine_off_below_w"] in CONVENTIONAL_OFF_GRID_W
+        assert not chain.get("charge_sustaining", False) and chain.get("aux_power_w", 0.0) == 0.0
+        assert "a car without a traction battery" in chain["reading"]["engine_off_below_w"]
+
+
+@pytest.mark.parametrize("idle_w,flagged", [(IDLE_W, False), (30_000.0, True)])
+def test_a_fuel_target_no_idling_engine_burns_at_standstill_is_flagged(idle_w, flagged):
+    """The log's own fuel at standstill, 3.4 L/h for a car (a diesel's air flow read as a
+    petrol's, a rehearsal's Seat Leon TDI), is beyond any idling engine (2.5× the idle
+    band's top): the chain's reading says the target is wrong, not only the fit; a
+    plausible idle says nothing."""
+    from sumo_drvpw.fit.chain_checks import check_chain
+    from sumo_drvpw.model.vehicles import Vehicle
+
+    rng, t, v, p = _stop_and_go(seed=7)
+    fuel = np.where(v > 0.05, _fuel(rng, v, p), idle_w + rng.normal(0, 300.0, v.size))
+    dt = np.full(v.size, 0.5)
+    fit = calibrate_fuel(p, v, fuel, dt, engine_off=-np.inf)
+    assert fit.standing is not None and fit.standing[1] > 1000
+    check_chain(fit, Vehicle("car", MASS, powertrain={"displacement_l": 1.4}), p, v, np.ones(v.size, bool))
+    r = fit.parameters["idle_fuel_power_w"]["reading"]
+    assert ("IMPLAUSIBLE TARGET" in r) == flagged, r
+    assert any("IMPLAUSIBLE TARGET" in w for w in fit.warnings) == flagged

@@ -58,6 +58,9 @@ class ChainFit:
     unknown_input_samples: int = 0
     #: parameters read as implausible or not identified (fit/chain_checks.py)
     warnings: list = field(default_factory=list)
+    #: a fuel chain's target at standstill (:func:`~sumo_drvpw.fit.chain_fuel.standing_sums`:
+    #: standing s, with fuel flowing s, that fuel J), or None
+    standing: object = None
 
     def summary(self) -> str:
         lines = [f"energy chain ({self.chain.predicts}): n={self.n}  R²={self.r2:.4f}  "
@@ -429,11 +432,12 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
 
     if m.target == "fuel":
         fuel = m.vehicle.powertrain.get("fuel", "gasoline") if m.vehicle is not None else "gasoline"
-        from sumo_drvpw.fit.chain_fuel import calibrate_fuel
+        from sumo_drvpw.fit.chain_fuel import calibrate_fuel, engine_off_for
 
         cut = getattr(getattr(equation, "chain", None), "fuel_cut_below_w", None)  # declared: kept
-        fit = calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads,
-                             mask=use, engine_off=engine_off, fuel=fuel, fuel_cut_below_w=cut)
+        fit = calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads, mask=use,
+                             engine_off=engine_off_for(m.vehicle, m.battery_w is not None, engine_off),
+                             fuel=fuel, fuel_cut_below_w=cut)
     elif m.target != "battery":
         raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
     else:

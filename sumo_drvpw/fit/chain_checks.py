@@ -112,6 +112,29 @@ def idle_fuel_note(value_w: float, engine_off_below_w: float, fuel: str, powertr
     return s
 
 
+#: a measured fuel flow at standstill beyond this multiple of the idle band's top is no
+#: idling engine (a cold engine idles at up to about twice its warm fuel)
+STANDING_FUEL_MAX_FACTOR = 2.5
+
+
+def standing_fuel_note(standing, fuel: str, displacement_l: float | None = None) -> str:
+    """Why the log's own fuel at standstill says the fuel target is wrong, when it does:
+    ``standing`` = [standing s, with fuel flowing s, that fuel J]
+    (:func:`sumo_drvpw.fit.chain_fuel.standing_sums`); the band :func:`idle_fuel_band`."""
+    if standing is None or len(standing) < 3 or standing[1] <= 0:
+        return ""
+    lph = fuel_l_per_h(standing[2] / standing[1], fuel)
+    hi = idle_fuel_band(displacement_l)[1]
+    if lph <= STANDING_FUEL_MAX_FACTOR * hi:
+        return ""
+    return (f"; IMPLAUSIBLE TARGET: the log's own fuel flow while the car stands is {lph:.2f} L/h "
+            f"({standing[1]:.0f} s), {lph / hi:.1f}× the most an idling "
+            + ("passenger car's engine" if displacement_l is None else f"{displacement_l:g}-L engine")
+            + f" burns ({hi:.2g} L/h, DOE Fact #861): no engine idles so; a fuel estimated from the "
+            "mass air flow of a diesel (unthrottled and lean: its air says nothing of its fuel), a flow "
+            "in other units, or the wrong fuel declared — the chain fits that target, not the car's fuel")
+
+
 def engine_off_note(value_w: float, powertrain: str | None, idle_l_per_h: float) -> str:
     """Why a power-split hybrid's chain that starts the engine at any positive driving
     power is implausible (``idle_l_per_h``: its zero-output fuel [L/h])."""
@@ -151,6 +174,9 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
     if chain.predicts == "fuel" and "idle_fuel_power_w" in params:
         params["idle_fuel_power_w"]["reading"] += idle_fuel_note(
             chain.idle_fuel_power_w, chain.engine_off_below_w, chain.fuel, powertrain,
+            vehicle.powertrain.get("displacement_l") if vehicle is not None else None)
+        params["idle_fuel_power_w"]["reading"] += standing_fuel_note(
+            getattr(fit, "standing", None), chain.fuel,
             vehicle.powertrain.get("displacement_l") if vehicle is not None else None)
         if "engine_off_below_w" in params:
             params["engine_off_below_w"]["reading"] += engine_off_note(

@@ -37,6 +37,10 @@ from sumo_drvpw.model.constants import STANDSTILL_MPS
 
 #: engine-off thresholds tried for the fuel chain [W]
 ENGINE_OFF_GRID_W = (-np.inf, 0.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 8000.0, 10000.0, 12000.0, 15000.0)
+#: the engine-off thresholds tried for a car without a traction battery [W]: an engine that
+#: never stops, or one that stops only where no driving power is asked (at rest with
+#: stop-start, on overrun); above 0 W nothing but a battery could drive the car
+CONVENTIONAL_OFF_GRID_W = (-np.inf, 0.0)
 #: speeds above which the engine always runs, tried for the fuel chain [m/s] (None: no such speed)
 ENGINE_ON_SPEED_GRID_MPS = (None, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 17.0, 20.0)
 #: a fuel chain's engine on/off is identified at city speeds only when at least this share
@@ -61,18 +65,43 @@ def fuel_grid(engine_off="profile", engine_on_above_mps="profile", fuel_cut_belo
     their engine state only); an engine that never stops (off = −inf) is on at any speed:
     one fit, no speed threshold, and sustains no charge (``charge_sustaining`` applies to
     the thresholds it can stop at)."""
-    grid = ENGINE_OFF_GRID_W if engine_off == "profile" else (float(engine_off),)
+    grid = {"profile": ENGINE_OFF_GRID_W, "conventional": CONVENTIONAL_OFF_GRID_W}.get(
+        engine_off, None) if isinstance(engine_off, str) else None
+    grid = grid or (float(engine_off),)
     vgrid = (ENGINE_ON_SPEED_GRID_MPS if engine_on_above_mps == "profile" else (engine_on_above_mps,))
     return [EnergyChain(predicts="fuel", engine_off_below_w=off, engine_on_above_mps=von,
                         fuel_cut_below_w=fuel_cut_below_w, charge_sustaining=charge_sustaining and off > -np.inf)
             for off in grid for von in (vgrid if off > -np.inf else (None,))]
 
 
+def engine_off_for(vehicle, battery_logged: bool, engine_off="profile"):
+    """The engine-off thresholds to profile: "conventional" (:data:`CONVENTIONAL_OFF_GRID_W`)
+    where ``engine_off`` is "profile" and the vehicle file declares no traction battery (its
+    powertrain type 'direct', no [battery] table) and no battery power is logged; else
+    ``engine_off`` as given."""
+    if (isinstance(engine_off, str) and engine_off == "profile" and vehicle is not None
+            and not battery_logged and vehicle.powertrain_type == "direct" and not vehicle.battery):
+        return "conventional"
+    return engine_off
+
+
+def note_conventional(params: dict) -> None:
+    """The engine-off reading of a fit made for a car without a traction battery."""
+    params["engine_off_below_w"]["reading"] += (
+        "; a car without a traction battery (the vehicle file declares none: powertrain type 'direct', "
+        "no [battery]; no battery power logged): only an engine that never stops or one that stops "
+        "where no driving power is asked (at rest, on overrun) was tried — a hybrid's engine-off "
+        "threshold is profiled when its vehicle file declares its battery, or declared")
+    params["engine_off_below_w"]["how"] = "profiled among 'never' and 0 W (no traction battery)"
+
+
 def standing_sums(v, fuel_w, dt_s, ok) -> np.ndarray:
-    """[standing time, of it with fuel flowing] [s] on the samples ``ok`` (standing: v <
-    STANDSTILL_MPS; flowing: fuel power above :data:`FUEL_FLOWING_W`): sums, so batches add."""
+    """[standing time, of it with fuel flowing [s], the fuel energy flowing then [J]] on the
+    samples ``ok`` (standing: v < STANDSTILL_MPS; flowing: fuel power above
+    :data:`FUEL_FLOWING_W`): sums, so batches add."""
     stand = ok & (v < STANDSTILL_MPS)
-    return np.array([float(dt_s[stand].sum()), float(dt_s[stand & (fuel_w > FUEL_FLOWING_W)].sum())])
+    flow = stand & (fuel_w > FUEL_FLOWING_W)
+    return np.array([float(dt_s[stand].sum()), float(dt_s[flow].sum()), float(dt_s[flow] @ fuel_w[flow])])
 
 
 def idles_at_stops(sums) -> bool:
@@ -214,12 +243,14 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     if mask is not None:
         ok &= np.asarray(mask, bool)
     best, profile = None, []
-    declared = not (isinstance(engine_off, str) and engine_off == "profile")
+    profiled = isinstance(engine_off, str) and engine_off in ("profile", "conventional")
+    conventional = profiled and engine_off == "conventional"
     yy = float(w[ok] @ y[ok] ** 2)
-    idling = engine_off == "profile" and idles_at_stops(stand := standing_sums(v, y, w, ok))
+    idling = profiled and idles_at_stops(stand := standing_sums(v, y, w, ok))
     if idling:
         engine_off = -np.inf  # it runs where the car stands: no threshold P_off ≥ 0 fits that
-    for tmpl in fuel_grid(engine_off, engine_on_above_mps, fuel_cut_below_w, charge_sustaining):
+    # (no traction battery: nothing carries the car's loads while its engine is off)
+    for tmpl in fuel_grid(engine_off, engine_on_above_mps, fuel_cut_below_w, charge_sustaining and not conventional):
         def make(sl, tmpl=tmpl):
             return fuel_design(tmpl, p[sl], v[sl], pb[sl], [c[sl] for c in lcols]), y[sl]
 
@@ -235,14 +266,22 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     low = float(w[ok & (v < CITY_SPEED_MPS)].sum() / max(w[ok].sum(), 1e-12))
     chain, params = fuel_chain(loads, beta, _covariance(xs, rss, active), active, off, engine_on_above_mps,
                                low, fuel, fuel_cut_below_w, tmpl.charge_sustaining, battery_w is not None)
+    fit_standing = stand if profiled else standing_sums(v, y, w, ok)
     if idling:
         note_idling(params, stand)
-    if declared:
+    elif conventional:
+        note_conventional(params)
+    if not profiled:
         note_declared(params)
     pred = chain.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in sig.items()})["power_w"]
     target = corrected_fuel_power(y, pb, chain.battery_fuel_factor)[ok]
     r2, rmse, ratio = _stats(pred, target, w[ok])
     chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
     chain.metrics = {"n": int(ok.sum()), "r2": r2, "rmse_w": rmse, "energy_ratio": ratio,
-                     "target": "fuel power + battery power / η_m (SOC-corrected)"}
-    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile)
+                     "target": fuel_target_text(battery_w is not None)}
+    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile, standing=fit_standing)
+
+
+def fuel_target_text(battery: bool) -> str:
+    """What a fuel chain was fitted to (its ``metrics["target"]``)."""
+    return "fuel power + battery power / η_m (SOC-corrected)" if battery else "fuel power"

@@ -35,8 +35,8 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import (LIMIT_QUANTILES, ChainFit, _bic, _col, _covariance, battery_chain,
                                   battery_columns, battery_design, factor_rows, solve_factor)
 from sumo_drvpw.fit.chain_fuel import (CITY_SPEED_MPS, fuel_bounds, fuel_chain, fuel_design, fuel_grid,
-                                       idles_at_stops, note_declared, note_idling, standing_sums,
-                                       fuel_names)
+                                       fuel_target_text, idles_at_stops, note_conventional, note_declared,
+                                       note_idling, standing_sums, fuel_names)
 from sumo_drvpw.fit.stream import _add_counts
 
 #: the braking powers' bins: their float64 bits shifted right by this (12 mantissa bits kept)
@@ -141,7 +141,7 @@ class ChainStats:
         self.ranges = [math.inf, -math.inf, math.inf, -math.inf]
         self.mom = None
         self.w_low = 0.0
-        self.standing = np.zeros(2)    # [standing time, of it with fuel flowing] (fuel target)
+        self.standing = np.zeros(3)    # [standing time, of it with fuel flowing, that fuel J] (fuel target)
         self.battery = False           # a hybrid battery's V·I in any batch (fuel target)
         self.fac: dict = {}            # grid value → [R, samples, Σw·X]
         self.hist = None
@@ -151,7 +151,8 @@ class ChainStats:
             from sumo_drvpw.fit.stream import CalibrationStats
 
             self.road = CalibrationStats(tuple(spec.candidates), moving_mps=spec.moving_mps)
-        self.grid = (fuel_grid(spec.engine_off, fuel_cut_below_w=spec.fuel_cut_below_w)
+        self.grid = (fuel_grid(spec.engine_off, fuel_cut_below_w=spec.fuel_cut_below_w,  # (no traction
+                               charge_sustaining=spec.engine_off != "conventional")  # battery: none)
                      if spec.target == "fuel" else None)
 
     def columns(self):
@@ -455,7 +456,8 @@ class ChainStats:
         sp, best, profile = self.spec, None, []
         sw, mu, c = self.mom
         yy = float(c[0, 0] + sw * mu[0] ** 2)  # Σw·y² of the fuel power
-        idling = sp.engine_off == "profile" and idles_at_stops(self.standing)  # then only one that runs standing
+        profiled = isinstance(sp.engine_off, str) and sp.engine_off in ("profile", "conventional")
+        idling = profiled and idles_at_stops(self.standing)  # then only one that runs standing
         for i, tmpl in enumerate(self.grid):
             if idling and tmpl.engine_off_below_w > -np.inf:
                 continue
@@ -473,7 +475,9 @@ class ChainStats:
                                    sp.fuel_cut_below_w, tmpl.charge_sustaining, self.battery)
         if idling:
             note_idling(params, self.standing)
-        if sp.engine_off != "profile":
+        elif profiled and sp.engine_off == "conventional":
+            note_conventional(params)
+        if not profiled:
             note_declared(params)
         b = chain.battery_fuel_factor  # the target: fuel + k·battery power (SOC-corrected)
         sst = float(c[0, 0] + 2 * b * c[0, 1] + b * b * c[1, 1])
@@ -481,7 +485,8 @@ class ChainStats:
         et = sw * float(mu[0] + b * mu[1])
         ratio = (float(self.fac[i][2] @ beta) + b * sw * float(mu[1])) / et if et != 0 else math.nan
         fit = self._finish(chain, params, r2, math.sqrt(rss / sw), ratio, profile)
-        chain.metrics["target"] = "fuel power + battery power / η_m (SOC-corrected)"
+        chain.metrics["target"] = fuel_target_text(self.battery)
+        fit.standing = self.standing
         return fit
 
     def _finish(self, chain, params, r2, rmse, ratio, profile) -> ChainFit:
