@@ -219,3 +219,23 @@ def test_vsp_prius3spec_air_density_choice_is_close_to_vsp_fixed():
     lo = eq.category_powers(_inputs(V100, rho=1.10))["aero"][0]
     hi = eq.category_powers(_inputs(V100, rho=1.30))["aero"][0]
     assert hi / lo == pytest.approx(1.30 / 1.10)   # density comes from the data
+
+
+@pytest.mark.parametrize("powertrain,said", [
+    ('fuell = "diesel"', "unknown key 'powertrain.fuell' (known: "),
+    ('fuel = "petrolx"', "powertrain.fuel = 'petrolx': must be one of gasoline, diesel"),
+    ('type = "hybrid"', "powertrain.type = 'hybrid': must be one of power_split, single_motor, battery, direct"),
+    ('type = "power_split"\n[powertrain.inertia_kgm2]\nengine = 0.2', "unknown key 'powertrain.inertia_kgm2.engine'"),
+], ids=["misspelt-key", "fuel", "type", "inertia"])
+def test_a_powertrain_key_or_word_the_tool_does_not_read_is_refused(tmp_path, powertrain, said):
+    """[powertrain] as [body]: a misspelt key (`fuell`) went unread — a diesel calibrated
+    silently as a petrol car (a rehearsal) — and a wrong fuel word was refused without the
+    file or key named. Both now refused in one line naming the file and the key."""
+    from sumo_drvpw.errors import UserError
+
+    f = tmp_path / "car.toml"
+    f.write_text(f'[vehicle]\nname = "car"\nmass_kg = 1330\n[powertrain]\n{powertrain}\n')
+    with pytest.raises(UserError) as e:
+        load_vehicle(str(f))
+    assert str(e.value).startswith(f"{f}: ") and said in str(e.value), str(e.value)
+    assert len(str(e.value).splitlines()) == 1

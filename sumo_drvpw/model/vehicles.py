@@ -24,6 +24,9 @@ Schema (every number may have a public source under ``[sources]`` with the same 
     wheel_radius_m = 0.3127        # dynamic tyre radius [m]
     displacement_l = 1.8           # combustion engine's displacement [L] (scales the fuel
                                    # chain's idle-fuel check, fit/chain_checks.py)
+    fuel = "gasoline"              # gasoline | diesel: the fuel target's and chain's fuel
+                                   # (a car of type direct without [battery]: no traction
+                                   # battery, fit/chain_fuel.engine_off_for)
 
     [powertrain.inertia_kgm2]      # power_split: ice, carrier, mg1, sun, ring, mg2, wheels
     ice = 0.18
@@ -46,6 +49,7 @@ from pathlib import Path
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
+from sumo_drvpw.model.constants import FUELS
 
 #: built-in vehicles: package data (importlib.resources; a regular install unpacks them)
 VEHICLE_DIR = Path(str(resources.files("sumo_drvpw.model") / "builtin" / "vehicles"))
@@ -111,6 +115,12 @@ NUMBER_RANGES = {
 INERTIA_MAX_KGM2 = 1.0e3
 
 
+#: the vehicle file's keys that hold a word, "table.key" → the words allowed (the
+#: powertrain's inertias are a table of their own, INERTIA_KEYS)
+TEXT_KEYS = {"powertrain.type": POWERTRAIN_TYPES, "powertrain.fuel": tuple(FUELS),
+             "powertrain.inertia_kgm2": None}
+
+
 def check_numbers(doc: dict, p) -> None:
     """Every number in [vehicle], [body], [powertrain] finite; known keys in physical range.
 
@@ -127,11 +137,16 @@ def check_numbers(doc: dict, p) -> None:
             raise UserError(f"{p}: [{table}] must be a table")
         for k, v in t.items():
             key = f"{table}.{k}"
-            if table == "body" and key not in NUMBER_RANGES:  # a misspelt key would go unread
-                known = ", ".join(n.split(".", 1)[1] for n in NUMBER_RANGES if n.startswith("body."))
+            if table in ("body", "powertrain") and key not in NUMBER_RANGES and key not in TEXT_KEYS:
+                # a misspelt key would go unread
+                known = ", ".join(n.split(".", 1)[1] for n in (*NUMBER_RANGES, *TEXT_KEYS) if n.startswith(f"{table}."))
                 raise UserError(f"{p}: unknown key {key!r} (known: {known})")
+            if TEXT_KEYS.get(key) is not None and v not in TEXT_KEYS[key]:
+                raise UserError(f"{p}: {key} = {v!r}: must be one of {', '.join(TEXT_KEYS[key])}")
             if isinstance(v, dict):
                 for k2, v2 in v.items():
+                    if k == "inertia_kgm2" and k2 not in INERTIA_KEYS:
+                        raise UserError(f"{p}: unknown key '{key}.{k2}' (known: {', '.join(INERTIA_KEYS)})")
                     if not num(v2) or not math.isfinite(v2) or (
                             k == "inertia_kgm2" and not 0 <= v2 <= INERTIA_MAX_KGM2):
                         raise UserError(f"{p}: {key}.{k2} = {v2!r}: "
