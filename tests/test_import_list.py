@@ -248,3 +248,30 @@ def test_a_parquet_column_whose_first_values_are_missing_is_listed(tmp_path, cap
     rows = {ln.split()[0]: ln for ln in _lines(capsys) if ln.startswith("  ")}
     assert rows["Ambient"].split()[-3:] == ["2", "2", "4.0"], rows
     assert rows["Note"].split()[-3:] == ["1", "0", "warm"], rows
+
+
+def test_a_speed_unit_declared_for_an_imported_log_is_refused(tmp_path, capsys):
+    """`import` writes speed_mps in m/s; `--speed-unit km/h` on its output divided the speed by
+    3.6 a second time (a rehearsal's Seat Leon calibrated at a top speed of 33 km/h, only the
+    efficiency flagged). Refused in one line naming the log; a canonical Parquet written by
+    other means still takes the unit."""
+    import numpy as np
+    import pandas as pd
+
+    f = tmp_path / "drive.csv"
+    t = np.arange(0.0, 60.0, 0.5)
+    f.write_text("Time [s],Speed [km/h]\n" + "\n".join(f"{a:g},{3.6 * min(a, 20.0):g}" for a in t) + "\n")
+    (tmp_path / "m.toml").write_text('[columns."Time [s]"]\nname = "time_s"\n'
+                                     '[columns."Speed [km/h]"]\nname = "speed_mps"\nunit = "km/h"\n')
+    log = tmp_path / "drive.parquet"
+    assert cli_main(["import", "columns", str(f), "--columns", str(tmp_path / "m.toml"), "--out", str(log)]) == 0
+    capsys.readouterr()
+    assert cli_main(["dynamics", str(log), "--speed-unit", "km/h", "--out", str(tmp_path / "d")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(log) in err and "m/s already" in err, err
+    assert not (tmp_path / "d").exists()
+    plain = tmp_path / "plain.parquet"  # not the import's: the declared unit is read
+    pd.DataFrame({"time_s": t, "speed_mps": 3.6 * np.minimum(t, 20.0)}).to_parquet(plain)
+    from sumo_drvpw.data.log import ReadOptions, check_declared_unit
+
+    check_declared_unit([plain], ReadOptions(speed_unit="km/h"))

@@ -274,9 +274,14 @@ def read_options(args, equations=()):
                       negative_speed_tolerance_mps=0.1 if tol is None else tol,
                       measurement=measurement_options(args, equations), fuel=chains_fuel(equations))
     try:
-        return check_options(opt)
+        opt = check_options(opt)
     except UserError as e:
         raise UserError(f"--negative-speed-tolerance / --speed-unit: {e}") from None
+    if getattr(args, "logs", None):  # a log `import` wrote is in m/s already
+        from sumo_drvpw.data.log import check_declared_unit
+
+        check_declared_unit(args.logs, opt)
+    return opt
 
 
 #: share of a log's samples left out as steeper than any road above which its elevation is

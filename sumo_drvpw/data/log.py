@@ -410,6 +410,27 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
     return log
 
 
+def check_declared_unit(paths, opt: ReadOptions) -> None:
+    """UserError when a speed unit other than m/s is declared for a Parquet log that `import`
+    wrote (its metadata ``sumo_drvpw.import``): its speed_mps is in m/s already, and the
+    declared unit would convert it a second time. Reads only the files' schema."""
+    if opt.speed_unit in (None, "m/s"):
+        return
+    import pyarrow.parquet as pq
+
+    for p in expand_paths(paths):
+        if p.suffix.lower() != ".parquet":
+            continue
+        try:
+            meta = pq.read_schema(p).metadata or {}
+        except (OSError, ValueError):
+            continue  # (refused, named, where it is read)
+        if b"sumo_drvpw.import" in meta:
+            raise UserError(f"{p}: speed unit {opt.speed_unit} declared, but this log was written by "
+                            "the import (metadata 'sumo_drvpw.import'): its speed_mps is in m/s already, "
+                            "and the unit would convert it a second time (top speed / 3.6)")
+
+
 def check_options(opt: ReadOptions) -> ReadOptions:
     """Reading options within their meaning; a UserError names the option's value."""
     if opt.speed_unit is not None and opt.speed_unit not in SPEED_UNITS:
