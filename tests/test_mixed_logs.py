@@ -141,9 +141,12 @@ def test_air_density_of_each_file_as_read_alone(tmp_path, first):
     assert m.counts["air_density_default_samples"] == 100
     _each_file_as_alone(d, m)
     ref = _streamed_as_in_memory(d, m)
-    assert ref["air_density_source"] == (f"air_density_kgm3 column for 1500 rows; ideal gas from ambient_c "
-                                         f"and pressure_kpa for 1500 rows; default {RHO_DEFAULT} kg/m³ for "
-                                         "1500 rows")
+    # (B logs no pressure: standard pressure, said so; its 100 rows without a temperature
+    # take the default density and are counted there — both were said as 'ideal gas from
+    # ambient_c and pressure_kpa for 1500 rows', a rehearsal's OBD log without pressure)
+    assert ref["air_density_source"] == ("air_density_kgm3 column for 1500 rows; ideal gas from ambient_c "
+                                         "at standard pressure (101.325 kPa) for 1400 rows; default "
+                                         f"{RHO_DEFAULT} kg/m³ for 1600 rows")
 
 
 @pytest.mark.parametrize("first", ["rad", "pct"])

@@ -146,14 +146,20 @@ def derive_conditions(df: pd.DataFrame, t: np.ndarray, v: np.ndarray, trip_codes
     r = _pick(df, ("air_density_kgm3", "ambient_c"), trip_codes)
     rho = np.where(r == 0, col("air_density_kgm3"), RHO_DEFAULT)
     gas = r == 1
+    # each row's source: 0 the column, 1 ideal gas at the logged pressure, 2 at standard
+    # pressure (none logged in that row), 3 the default density
+    src = np.where(r == 0, 0, 3)
     if gas.any():
         p_kpa = col("pressure_kpa")
-        p_kpa = np.where(np.isnan(p_kpa), P_STD_KPA, p_kpa)  # missing pressure: standard
+        std = np.isnan(p_kpa)
+        p_kpa = np.where(std, P_STD_KPA, p_kpa)  # missing pressure: standard
         ideal = air_density(col("ambient_c"), p_kpa)
         missing = gas & np.isnan(ideal)  # no temperature logged in that sample: the default density
         rho = np.where(gas & ~missing, ideal, rho)
+        src = np.where(gas & ~missing, np.where(std, 2, 1), src)
         counts["air_density_default_samples"] = int(missing.sum())
     df["air_density_kgm3"] = rho
     counts["air_density_rows"] = _rows(("air_density_kgm3 column", "ideal gas from ambient_c and pressure_kpa",
-                                        f"default {RHO_DEFAULT} kg/m³"), r)
+                                        f"ideal gas from ambient_c at standard pressure ({P_STD_KPA:g} kPa)",
+                                        f"default {RHO_DEFAULT} kg/m³"), src)
     counts.update(source_counts(counts))
