@@ -382,6 +382,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     from sumo_drvpw.sim.network import hidden_steps_slack, load_network
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published
+    from sumo_drvpw.sim.sumo_start import scenario_option
 
     net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
     # bus stops of the additional files, and of the files given for the vTypes (--vtypes)
@@ -423,6 +424,9 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     replay.options = {"step-method.ballistic": str(method == "ballistic").lower()}
+    # (not given: SUMO switched to ballistic where a vType of its own action step length ran)
+    replay.asl_may_switch = (head.get("step-method.ballistic") if head is not None
+                             else scenario_option(sc, "step-method.ballistic")) is None
     replay.recorded_step_s = recorded_step(head)  # (the radial drag of vtype_energy: per step of it)
     replay.calibrators = calibrators(list(dict.fromkeys([*sc.additional_files, *sc.route_files])))
     acc = Accountant(replay, scenario=sc,
@@ -433,6 +437,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     # flushed) so that it books on in its own row when it comes back within TELEPORT_HOLD_S
     acc.ledger.hold_steps = int(np.ceil(TELEPORT_HOLD_S / replay.dt))
     replay.type_mass = {vt: i.mass_kg for vt, i in acc.file_vtypes.items() if i.mass_kg}
+    replay.type_asl = {vt: i.action_step_s for vt, i in acc.file_vtypes.items() if i.action_step_s is not None}
     # long planned stops and start-stop systems as in the live run (sim/shutoff.py): the
     # vTypes' shut-off params and the vehicles' stops from the route and additional files
     replay.type_params = {vt: i.shut_off for vt, i in acc.file_vtypes.items() if i.shut_off}

@@ -101,6 +101,9 @@ class _VType(_Domain):
     def getEmissionClass(self, vt):  # noqa: N802 (the route files', as the recorded run read them)
         return self.r.type_eclass.get(vt, self.r.default_eclass)
 
+    def getActionStepLength(self, vt):  # noqa: N802 (the route files', else the step length)
+        return getattr(self.r, "type_asl", {}).get(vt, self.r.dt)
+
     def getMass(self, vt):  # noqa: N802 (a person type's: the route files', else SUMO's 70 kg)
         return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
 

@@ -32,7 +32,7 @@ from sumo_drvpw.sim.reader import (Reader, calibrator_lanes, reinserted, tailwin
                                    yaw_rate)
 from sumo_drvpw.sim.riders import Riders
 from sumo_drvpw.sim.shutoff import ShutOff
-from sumo_drvpw.sim.sumo_start import NewRun, signals_deferred, step_method
+from sumo_drvpw.sim.sumo_start import NewRun, action_step_switches, signals_deferred, step_method
 from sumo_drvpw.sim.teleport import put_back
 
 @dataclass
@@ -148,6 +148,15 @@ class Stepper:
         self.heading_from_lane = physics.wind_speed != 0.0 and physics.heading == "geometry"
         method = step_method(conn, physics.ballistic_given)
         self.ballistic = method == "ballistic"
+        #: SUMO switches Euler to ballistic when a vehicle of a vType with its own action step
+        #: length is built, where step-method.ballistic is not given (sumo_start.action_step_switches):
+        #: the vType of each vehicle registered is asked then; ``ballistic_from`` the first such vType
+        self.asl = (getattr(conn.vehicletype, "getActionStepLength", None)
+                    if method == "euler" and hasattr(conn, "vehicletype")
+                    and (getattr(conn, "asl_may_switch", False) if getattr(conn, "is_replay", False)
+                         else physics.ballistic_given is None) else None)
+        self.asl_seen: set = set()
+        self.ballistic_from: str | None = None
         self.tracking = (physics.positions == "tracked" and not use_subscriptions
                          and method == "euler" and net.lane_end is not None
                          and net.lane_own_edge is not None)
@@ -216,6 +225,11 @@ class Stepper:
     def register(self, vid: str) -> int:
         ledger = self.ledger
         vt = self.conn.vehicle.getTypeID(vid)
+        if self.asl is not None and vt not in self.asl_seen:
+            self.asl_seen.add(vt)
+            if action_step_switches(float(self.asl(vt)), self.dt):  # SUMO moves ballistic from now
+                self.ballistic, self.tracking, self.asl = True, False, None
+                self.ballistic_from = vt
         res = self.resolve(vt, vid)
         mass, app, keep = res[:3]
         i = ledger.add_vehicle(vid, vt, mass, app, keep, res[3] if len(res) > 3 else "")

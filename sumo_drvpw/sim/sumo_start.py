@@ -210,6 +210,16 @@ def ballistic_update(given: str | None, action_step: str | None) -> bool:
         return False
 
 
+def action_step_switches(action_step_s: float, dt: float) -> bool:
+    """Whether a vType's action step length [s] makes SUMO switch the Euler update to the
+    ballistic one when a vehicle of it is built and ``step-method.ballistic`` is not given
+    (MSVehicleType::check, SUMO 1.28: "Action step length … is used for vehicle type … but
+    step-method.ballistic was not set. Setting it now"): a length other than the step
+    length ``dt`` [s], as SUMO keeps it — a multiple of the step, at least one step."""
+    k = max(1, int(round(float(action_step_s) / dt))) if action_step_s == action_step_s else 1
+    return k != 1
+
+
 def step_method(conn, given: str | None = None) -> str | None:
     """The update a running SUMO moves vehicles by: "euler" (x += v_t·Δt, which position
     tracking relies on), "ballistic" (x += ½(v_t−1 + v_t)·Δt), or None when the connection

@@ -267,6 +267,8 @@ class VTypeInfo:
     #: its car-following attributes as written (:data:`CF_KEYS`; a ``<carFollowing-X>``
     #: child's over the vType's own, and model X), None when it writes none of them
     driving: dict | None = None
+    #: the ``actionStepLength`` attribute as written [s] (None: not given, the step length)
+    action_step_s: float | None = None
 
 
 #: SUMO's default vType lengths of the heavy classes [m] (for the booking note)
@@ -371,6 +373,15 @@ CF_KEYS = ("carFollowModel", "accel", "decel", "sigma", "sigmaStep", "speedTable
 CF_CHILD = "carFollowing-"
 
 
+def _action_step(text: str | None) -> float | None:
+    """:attr:`VTypeInfo.action_step_s` from the attribute (None: not given or not a number,
+    which SUMO refuses itself)."""
+    try:
+        return None if text is None else float(text)
+    except ValueError:
+        return None
+
+
 def _driving(el) -> dict | None:
     """:attr:`VTypeInfo.driving` of a ``<vType>`` element (its children still attached)."""
     out = {k: el.attrib[k] for k in CF_KEYS if el.attrib.get(k) is not None}
@@ -453,7 +464,7 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                                      _mass(where, "mass", el.attrib.get("mass")),
                                      params.get("drvpw.mass") is not None,
                                      is_true(params.get("has.battery.device")),
-                                     _driving(el))
+                                     _driving(el), _action_step(el.attrib.get("actionStepLength")))
                 el.clear()
     except ET.ParseError as e:
         raise UserError(f"{path}: not valid XML: {e}") from None
