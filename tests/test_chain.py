@@ -1283,7 +1283,7 @@ def test_roadload_spec_is_the_vehicle_files_a_b_c_by_hand():
     # 10 m/s cruise: (179.4 + 10.08 + 30.456)·10 = 2199.36 W; 20 m/s at 1 m/s²: + 1919·20
     want = [2199.36, (179.4 + 1.008 * 20 + 0.30456 * 400) * 20 + 1919.0 * 20]
     np.testing.assert_allclose(eq.power(x), want, rtol=1e-12)
-    with pytest.raises(UserError, match=r"\[road_load\] lacks 'a_n'"):
+    with pytest.raises(UserError, match=r"\[road_load\] lacks 'a_n' or 'f0_N'"):
         resolve_equations(["roadload_spec"], load_vehicle("prius3"))
     with pytest.raises(UserError, match="needs a vehicle"):
         resolve_equations(["roadload_spec"])

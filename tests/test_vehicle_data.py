@@ -239,3 +239,22 @@ def test_a_powertrain_key_or_word_the_tool_does_not_read_is_refused(tmp_path, po
         load_vehicle(str(f))
     assert str(e.value).startswith(f"{f}: ") and said in str(e.value), str(e.value)
     assert len(str(e.value).splitlines()) == 1
+
+
+def test_roadload_spec_reads_the_prius_files_road_load_and_names_what_is_missing(tmp_path):
+    """`--equation roadload_spec` read only a_n/b_n_per_mps/c_n_per_mps2; the built-in Prius
+    files write the same EPA coefficients as f0_N/f1_N_per_mps/f2_N_per_mps2 (a rehearsal:
+    "[road_load] lacks 'a_n'" for prius2). Both are read; a missing one is named under both
+    names."""
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.model.equations import roadload_from_specs
+
+    v = load_vehicle("prius2")
+    eq = roadload_from_specs(v)
+    rl = v.road_load
+    assert eq.terms == {"acc": 1.0, "v1": rl["f0_N"], "v2": rl["f1_N_per_mps"], "v3": rl["f2_N_per_mps2"]}
+    f = tmp_path / "car.toml"
+    f.write_text('[vehicle]\nname = "car"\nmass_kg = 1330\n[road_load]\na_n = 120.0\nb_n_per_mps = 1.0\n')
+    with pytest.raises(UserError) as e:
+        roadload_from_specs(load_vehicle(str(f)))
+    assert "lacks 'c_n_per_mps2' or 'f2_N_per_mps2'" in str(e.value) and str(f) in str(e.value)

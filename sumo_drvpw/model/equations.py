@@ -446,6 +446,10 @@ def vsp_from_specs(vehicle) -> Equation:
                     source=f"vehicle file {vehicle.path}")
 
 
+#: the [road_load] keys of A, B, C, each under either name (the second: the Prius files')
+ROAD_LOAD_KEYS = (("a_n", "f0_N"), ("b_n_per_mps", "f1_N_per_mps"), ("c_n_per_mps2", "f2_N_per_mps2"))
+
+
 def roadload_from_specs(vehicle) -> Equation:
     """The vehicle's published road load as an equation: F = A + B·v + C·v² (coast-down or
     chassis-dynamometer target coefficients) plus the inertial force m·a.
@@ -457,11 +461,17 @@ def roadload_from_specs(vehicle) -> Equation:
     Parameters
     ----------
     vehicle : :class:`sumo_drvpw.model.vehicles.Vehicle` with [road_load] a_n, b_n_per_mps,
-        c_n_per_mps2
+        c_n_per_mps2 (or as the built-in Prius files write them: f0_N, f1_N_per_mps,
+        f2_N_per_mps2)
     """
-    a = vehicle.need("road_load", "a_n")
-    b = vehicle.need("road_load", "b_n_per_mps")
-    c = vehicle.need("road_load", "c_n_per_mps2")
+    rl = vehicle.road_load
+    got = [next((k for k in keys if k in rl), None) for keys in ROAD_LOAD_KEYS]
+    if None in got:
+        raise UserError(f"vehicle '{vehicle.name}' ({vehicle.path}): [road_load] lacks "
+                        + ", ".join(" or ".join(repr(k) for k in keys)
+                                    for keys, k in zip(ROAD_LOAD_KEYS, got) if k is None)
+                        + " (the published A [N], B [N/(m/s)], C [N/(m/s)²])")
+    a, b, c = (vehicle.need("road_load", k) for k in got)
     return Equation(name=f"roadload_{vehicle.name}",
                     terms={"acc": 1.0, "v1": a, "v2": b, "v3": c},
                     description=f"published road load of {vehicle.name} (A + B·v + C·v², plus m·a)",
