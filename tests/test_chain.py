@@ -1283,8 +1283,11 @@ def test_roadload_spec_is_the_vehicle_files_a_b_c_by_hand():
     # 10 m/s cruise: (179.4 + 10.08 + 30.456)·10 = 2199.36 W; 20 m/s at 1 m/s²: + 1919·20
     want = [2199.36, (179.4 + 1.008 * 20 + 0.30456 * 400) * 20 + 1919.0 * 20]
     np.testing.assert_allclose(eq.power(x), want, rtol=1e-12)
+    # the Prius files write A, B, C as f0_N, f1_N_per_mps, f2_N_per_mps2: read as well
+    p3 = load_vehicle("prius3")
+    assert resolve_equations(["roadload_spec"], p3)[0].terms["v1"] == p3.road_load["f0_N"]
     with pytest.raises(UserError, match=r"\[road_load\] lacks 'a_n' or 'f0_N'"):
-        resolve_equations(["roadload_spec"], load_vehicle("prius3"))
+        resolve_equations(["roadload_spec"], load_vehicle("bmw_i3"))
     with pytest.raises(UserError, match="needs a vehicle"):
         resolve_equations(["roadload_spec"])
 
