@@ -239,7 +239,7 @@ class Accountant(_Listener):
         led = self.ledger
         out = {}
         for e, name in enumerate(self.names):
-            if not led.veh_keep[i] or led.veh_app[i, e] <= 0:
+            if not led.veh_keep[i] or not led.veh_app_seen[i, e]:  # (applied at some time of its trip)
                 continue
             tr, rc = led.veh_trac[i, e], led.veh_recup[i, e]
             d = {c: float(tr[k] + rc[k]) for k, c in enumerate(LEDGER_CATEGORIES)}

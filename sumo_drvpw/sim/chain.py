@@ -105,10 +105,11 @@ class ChainLedger:
         self.A = len(self.active)
         self.edge_dist = np.zeros((n_edges, self.A))
         self._veh = np.zeros((capacity, len(self._cols)))
-        #: per vehicle row: distance [m] and time [s] in the network, and which active chain
-        #: equations apply to it (:meth:`vehicle_dist`, :meth:`vehicle_time` per equation)
-        self.veh_dist = np.zeros(capacity)
-        self.veh_time = np.zeros(capacity)
+        #: per vehicle row and active chain equation: distance [m] and time [s] it drove
+        #: while the equation applied (a vType changed in the trip: each its own part), and
+        #: whether it ever applied (:meth:`vehicle_dist`, :meth:`vehicle_time`)
+        self.veh_dist = np.zeros((capacity, self.A))
+        self.veh_time = np.zeros((capacity, self.A))
         self._app = np.zeros((capacity, self.A), bool)
         #: which active chain equations booked any vehicle so far
         self.booked_any = np.zeros(self.A, bool)
@@ -192,13 +193,13 @@ class ChainLedger:
         """Distance [m] each of the first ``n`` vehicle rows drove under each active chain
         equation (0 where it does not apply), (n, A)."""
         self._grow(n)
-        return self.veh_dist[:n, None] * self._app[:n]
+        return self.veh_dist[:n]
 
     def vehicle_time(self, n: int) -> np.ndarray:
         """Time [s] each of the first ``n`` vehicle rows was booked by each active chain
         equation, (n, A)."""
         self._grow(n)
-        return self.veh_time[:n, None] * self._app[:n]
+        return self.veh_time[:n]
 
     @property
     def edge(self) -> np.ndarray:
@@ -211,8 +212,8 @@ class ChainLedger:
             return
         new = max(n, 2 * cap)
         self._veh = np.concatenate([self._veh, np.zeros((new - cap, self._veh.shape[1]))])
-        self.veh_dist = np.concatenate([self.veh_dist, np.zeros(new - cap)])
-        self.veh_time = np.concatenate([self.veh_time, np.zeros(new - cap)])
+        self.veh_dist = np.concatenate([self.veh_dist, np.zeros((new - cap, self.A))])
+        self.veh_time = np.concatenate([self.veh_time, np.zeros((new - cap, self.A))])
         self._app = np.concatenate([self._app, np.zeros((new - cap, self.A), bool)])
         self._starting = np.concatenate([self._starting, np.zeros(new - cap)])
         self._cold_age = np.concatenate([self._cold_age, np.zeros(new - cap)])
@@ -336,9 +337,9 @@ class ChainLedger:
             a = np.ones((len(vidx), self.A))
         self._veh[vidx] += q
         d = np.asarray(v, float) * dt
-        self.veh_dist[vidx] += d
-        self.veh_time[vidx] += dt
-        self._app[vidx] = a > 0
+        self.veh_dist[vidx] += d[:, None] * a
+        self.veh_time[vidx] += dt * a
+        self._app[vidx] |= a > 0
         self.booked_any |= (a > 0).any(axis=0)
         eidx = np.asarray(eidx, np.int64)
         ne = self._edge.shape[0]
@@ -399,7 +400,7 @@ class ChainLedger:
         and their rows handed to ``spill.write_chain`` (``chain_vehicles.csv``)."""
         self._grow(int(gone.max()) + 1)
         tot = self.expand(self._veh[gone])
-        dist = self.veh_dist[gone, None] * self._app[gone]
+        dist = self.veh_dist[gone]
         for j, c in enumerate(labels):
             acc = self.flushed_class.setdefault(c, [np.zeros((self.E, self.Q)), np.zeros(self.A)])
             acc[0] += tot[j]

@@ -209,9 +209,8 @@ class Ledger:
             open_ = np.flatnonzero(self.veh_prev_edge[:n] >= 0)
             e = self.veh_prev_edge[open_]
             np.add.at(energy, e, self._veh_energy[open_] - self._seg_energy[open_])
-            d = self.veh_dist[open_] - self._seg_dist[open_]
-            np.add.at(dist, e, d)
-            np.add.at(dist_eq, e, d[:, None] * self.veh_app[open_])
+            np.add.at(dist, e, self.veh_dist[open_] - self._seg_dist[open_])
+            np.add.at(dist_eq, e, self.veh_dist_eq[open_] - self._seg_dist_eq[open_])
             np.add.at(etime, e, self.veh_time[open_] - self._seg_time[open_])
             self._edge_cache = (energy, dist, etime, dist_eq)
         return self._edge_cache
@@ -274,6 +273,12 @@ class Ledger:
         grow("_seg_time", (cap,))
         grow("veh_dist", (cap,))
         grow("veh_time", (cap,))
+        # per equation: the distance [m] and time [s] driven while it applied (a vType changed
+        # in the trip: each equation its own part), and whether it ever applied
+        grow("veh_dist_eq", (cap, E))
+        grow("veh_time_eq", (cap, E))
+        grow("veh_app_seen", (cap, E), bool, False)
+        grow("_seg_dist_eq", (cap, E))  # veh_dist_eq when the edge was entered
         grow("veh_mass", (cap,), float, np.nan)
         grow("veh_load", (cap,), float, 0.0)  # riding persons [kg]
         grow("veh_app", (cap, E))
@@ -298,6 +303,7 @@ class Ledger:
     #: per-vehicle arrays and their empty value (what :meth:`flush` compacts)
     _VEH_ARRAYS = (("_veh_energy", 0.0), ("_seg_energy", 0.0), ("_seg_dist", 0.0),
                    ("_seg_time", 0.0), ("veh_dist", 0.0), ("veh_time", 0.0),
+                   ("veh_dist_eq", 0.0), ("veh_time_eq", 0.0), ("veh_app_seen", False), ("_seg_dist_eq", 0.0),
                    ("veh_mass", np.nan), ("veh_load", 0.0), ("veh_app", 0.0),
                    ("veh_keep", False),
                    ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_prev_angle", np.nan),
@@ -323,7 +329,7 @@ class Ledger:
         self.veh_stand[i] = 0.0
         self.veh_auto_off[i] = np.inf
         self.veh_rde[i] = np.nan
-        self.veh_app[i] = app
+        self.set_app(i, app)
         self.veh_keep[i] = keep
         if keep and self.chain is not None and self.chain.active and not np.any(np.asarray(app)[self.chain.active]):
             self.chainless[vclass or "unknown"] = self.chainless.get(vclass or "unknown", 0) + 1
@@ -337,6 +343,17 @@ class Ledger:
             self.class_list.append(label)
         self.veh_cls[i] = self.class_list.index(label)
         return i
+
+    def set_app(self, i: int, app) -> None:
+        """The equations that apply to vehicle ``i`` from now (0/1 per equation): at its
+        registration, and when its vType changes in the trip."""
+        new = np.asarray(app, float)
+        e = self.veh_prev_edge[i]
+        if e >= 0:  # changed on an edge: the equations new to it count it there
+            self.edge_count[e] += np.maximum(new - self.veh_app[i], 0.0)
+            self._edge_cache = None
+        self.veh_app[i] = new
+        self.veh_app_seen[i] |= new > 0
 
     @property
     def vehicles_total(self) -> int:
@@ -395,9 +412,8 @@ class Ledger:
         """Add the open edge segments of vehicles ``vo`` (on an edge) to the closed totals."""
         old = self.veh_prev_edge[vo]
         np.add.at(self._edge_closed, old, self._veh_energy[vo] - self._seg_energy[vo])
-        d = self.veh_dist[vo] - self._seg_dist[vo]
-        np.add.at(self._edge_dist_closed, old, d)
-        np.add.at(self._edge_dist_eq_closed, old, d[:, None] * self.veh_app[vo])
+        np.add.at(self._edge_dist_closed, old, self.veh_dist[vo] - self._seg_dist[vo])
+        np.add.at(self._edge_dist_eq_closed, old, self.veh_dist_eq[vo] - self._seg_dist_eq[vo])
         np.add.at(self._edge_time_closed, old, self.veh_time[vo] - self._seg_time[vo])
 
     def flush(self) -> np.ndarray | None:
@@ -474,6 +490,7 @@ class Ledger:
                 self._close_segments(vi[had])
             self._seg_energy[vi] = self._veh_energy[vi]
             self._seg_dist[vi] = self.veh_dist[vi]
+            self._seg_dist_eq[vi] = self.veh_dist_eq[vi]
             self._seg_time[vi] = self.veh_time[vi]
             self.veh_prev_edge[vi] = eidx[enter]
             np.add.at(self.edge_count, eidx[enter], self.veh_app[vi])
@@ -481,7 +498,11 @@ class Ledger:
         # one scatter-add of the vehicle rows: the per-call overhead, not the arithmetic,
         # dominates at a few thousand vehicles
         self._veh_energy[vidx] += split.transpose(3, 0, 1, 2)
-        self.veh_dist[vidx] += v * dt
+        d = v * dt
+        self.veh_dist[vidx] += d
         self.veh_time[vidx] += dt
+        app = self.veh_app[vidx]
+        self.veh_dist_eq[vidx] += d[:, None] * app
+        self.veh_time_eq[vidx] += dt * app
         self.samples += n
         return split[0].transpose(2, 0, 1), split[1].transpose(2, 0, 1)

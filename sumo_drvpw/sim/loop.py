@@ -265,7 +265,8 @@ class Stepper:
                 continue
             res = self.resolve(vt, vid)
             types[i] = vt
-            ledger.veh_mass[i], ledger.veh_app[i], ledger.veh_keep[i] = res[0], res[1], res[2]
+            ledger.veh_mass[i], ledger.veh_keep[i] = res[0], res[2]
+            ledger.set_app(i, res[1])
             if len(res) > 3:
                 ledger.veh_class[i] = res[3]
             if self.shutoff is not None:

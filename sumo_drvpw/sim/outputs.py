@@ -65,7 +65,9 @@ def vehicles_table(ledger: Ledger, names: list[str],
     n = ledger.n_veh
     sel = np.arange(n) if slots is None else np.asarray(slots, np.int64)
     keep = ledger.veh_keep[sel]
-    si, ei = np.nonzero(keep[:, None] & (ledger.veh_app[sel] > 0))
+    # (every equation that applied at some time of the trip: a vType changed in it books on
+    # by its new equations, each row its own distance and time)
+    si, ei = np.nonzero(keep[:, None] & ledger.veh_app_seen[sel])
     vi = sel[si]
     tr = ledger.veh_trac[vi, ei]
     rc = ledger.veh_recup[vi, ei]
@@ -74,8 +76,8 @@ def vehicles_table(ledger: Ledger, names: list[str],
             "vclass": [ledger.veh_class[i] if i < len(ledger.veh_class) else "" for i in vi],
             "equation": [names[e] for e in ei],
             "predicts": [(predicts or ["wheel"] * len(names))[e] for e in ei],
-            "mass_kg": ledger.booked_mass(vi, ei), "distance_m": ledger.veh_dist[vi],
-            "time_s": ledger.veh_time[vi]}
+            "mass_kg": ledger.booked_mass(vi, ei), "distance_m": ledger.veh_dist_eq[vi, ei],
+            "time_s": ledger.veh_time_eq[vi, ei]}
     cols.update(_energy_cols("traction", tr))
     cols.update(_energy_cols("recup", rc))
     cols["net_total_j"] = cols["traction_total_j"] + cols["recup_total_j"]
@@ -294,7 +296,7 @@ class TraceWriter:
     def write(self, t, vidx, eidx, v, a, theta, wind, pc) -> None:
         n, E, _ = pc.shape
         self.buf.append({"t": t, "vidx": vidx, "eidx": eidx, "v": v, "a": a, "theta": theta,
-                         "wind": wind, "pc": pc.copy()})
+                         "wind": wind, "pc": pc.copy(), "app": self.ledger.veh_app[vidx] > 0})  # (as it booked)
         self.nbuf += n * E
         if self.nbuf >= self.rows_per_group:
             self.flush()
@@ -310,7 +312,7 @@ class TraceWriter:
         eidx = cat("eidx")
         pc = np.concatenate([x["pc"].reshape(-1, x["pc"].shape[2]) for x in b])
         eq = np.concatenate([np.tile(np.arange(E), len(x["vidx"])) for x in b])
-        app = self.ledger.veh_app[vidx, eq] > 0
+        app = np.concatenate([x["app"].reshape(-1) for x in b])
         ids = np.asarray(self.ledger.veh_ids, dtype=object)
         cols = {"time_s": time[app],
                 "vehicle": pa.array(ids[vidx[app]].astype(str)).dictionary_encode(),
