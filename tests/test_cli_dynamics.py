@@ -75,6 +75,9 @@ def test_a_log_sampled_every_two_seconds_says_how_little_its_figures_rest_on(tmp
 @pytest.mark.parametrize("rows,needle", [
     ("time_s,speed_mps\n0,0\n1,0\n2,0\n3,0\n", "column 'speed_mps' is 0 on every row"),
     ("time_s,speed_mps,trip_id\n0,1,a\n1,2,a\n", "no 1-Hz figures"),
+    # a log sampled every 2 s (carOBD's): the refusal says how far apart its samples are
+    ("time_s,speed_mps\n" + "".join(f"{2 * k},{k % 7}\n" for k in range(60)),
+     "its samples are 2 s apart (median): the RDE figures need a log sampled at 1 Hz or faster"),
     ("time_s,speed,trip_id\n0,1,a\n1,2,a\n2,3,a\n", "missing required column 'speed_mps'")])
 def test_bad_logs_exit_2_in_one_line_and_write_nothing(tmp_path, capsys, rows, needle):
     log = tmp_path / "log.csv"
@@ -83,3 +86,24 @@ def test_bad_logs_exit_2_in_one_line_and_write_nothing(tmp_path, capsys, rows, n
     err = capsys.readouterr().err
     assert needle in err and str(log) in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
     assert not (tmp_path / "o").exists()
+
+
+def test_figures_on_too_few_samples_are_marked_not_judged(tmp_path, capsys):
+    """A part with fewer than 100 samples is not judged against the RDE bound (dynamics.json
+    said so, the console and report.md showed it as any other figure); now marked * with a
+    note, and the whole log's kinetic energy is said once, not repeated in every part's row
+    as if it were that part's (a rehearsal's Seat Leon log)."""
+    t = np.arange(0.0, 900.0, 1.0)
+    v = np.where(t < 800, np.clip(8 + 6 * np.sin(t / 20.0), 0, None), 24 + np.sin(t / 5.0))  # 100 s rural
+    log = tmp_path / "log.csv"
+    pd.DataFrame({"time_s": t, "speed_mps": v}).to_csv(log, index=False)
+    assert cli_main(["dynamics", str(log), "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    doc = json.loads((tmp_path / "o" / "dynamics.json").read_text())["driving_dynamics"]
+    assert doc["parts"]["urban"]["va_pos_95_judged"] and not doc["parts"]["rural"]["va_pos_95_judged"]
+    rural = next(ln for ln in out.splitlines() if ln.startswith("rural"))
+    assert f"{doc['parts']['rural']['va_pos_95_m2ps3']:5.1f}* (RDE max" in rural
+    assert "* not judged against the RDE bound" in out
+    md = (tmp_path / "o" / "report.md").read_text()
+    assert md.count(f"{doc['kinetic_j_per_kg_km']:.0f} J/(kg·km)") == 1 and "| rural |" in md
+    assert "not judged against the RDE bound" in md

@@ -23,7 +23,7 @@ def main(args) -> int:
     from sumo_drvpw.data.log import read_log
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.fileio import write_json, write_text
-    from sumo_drvpw.sim.dynamics import SOURCE, coverage_warning, of_log, report_md, sumo_profile
+    from sumo_drvpw.sim.dynamics import MIN_SAMPLES, SOURCE, coverage_warning, of_log, report_md, sumo_profile
 
     log = read_log(args.logs, None, read_options(args))
     note_counts(log.counts)
@@ -32,8 +32,11 @@ def main(args) -> int:
                         "moves, so there are no driving dynamics")
     dyn, trips = of_log(log.df)
     if not dyn.get("parts"):
+        step = dyn.get("median_step_s", float("nan"))
         raise UserError(f"{args.logs[0]}: no trip has speeds one and two seconds apart (at least 3 s "
-                        "of samples, no gap over 2.5 s): no 1-Hz figures")
+                        "of samples, no gap over 2.5 s): no 1-Hz figures"
+                        + (f" — its samples are {step:g} s apart (median): the RDE figures need a log "
+                           "sampled at 1 Hz or faster" if step == step else ""))
     doc = {"source": SOURCE, "logs": [str(f) for f in log.files], "trips": trips,
            "samples": int(len(log.df)), "driving_dynamics": dyn,
            "sumo_vtype": sumo_profile(dyn.get("accel_profile", []))}
@@ -41,9 +44,12 @@ def main(args) -> int:
         write_json(tmp / "dynamics.json", doc)
         write_text(tmp / "report.md", report_md(doc))
     for name, p in dyn["parts"].items():
-        print(f"{name:<9} v̄ {p['mean_speed_kmh']:5.1f} km/h  v·a_pos 95th pct. {p['va_pos_95_m2ps3']:5.1f} "
-              f"(RDE max {p['rde_va_pos_95_max']:.1f}) m²/s³  RPA {p['rpa_mps2']:.3f} "
-              f"(RDE min {p['rde_rpa_min']:.3f}) m/s²")
+        mark = {k: "" if p[k] else "*" for k in ("va_pos_95_judged", "rpa_judged")}
+        print(f"{name:<9} v̄ {p['mean_speed_kmh']:5.1f} km/h  v·a_pos 95th pct. {p['va_pos_95_m2ps3']:5.1f}"
+              f"{mark['va_pos_95_judged']} (RDE max {p['rde_va_pos_95_max']:.1f}) m²/s³  RPA {p['rpa_mps2']:.3f}"
+              f"{mark['rpa_judged']} (RDE min {p['rde_rpa_min']:.3f}) m/s²")
+    if not all(p["va_pos_95_judged"] and p["rpa_judged"] for p in dyn["parts"].values()):
+        print(f"* not judged against the RDE bound: fewer than {MIN_SAMPLES} samples in that part")
     print(f"kinetic energy {dyn['kinetic_j_per_kg_km']:.0f} J/(kg·km) over {trips} trips")
     if (w := coverage_warning(dyn)):
         print(f"warning: {w}")

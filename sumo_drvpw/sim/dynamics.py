@@ -292,16 +292,27 @@ def markdown_rows(doc: dict, lead: list[str], min_apos: int = 0) -> list[str]:
     rows = []
     for part, p in doc["parts"].items():
         if p["apos_samples"] >= min_apos:
-            rows.append(f"| {' | '.join(lead)} | {part} | {p['mean_speed_kmh']:.1f} | {p['va_pos_95_m2ps3']:.1f} "
-                        f"({p['rde_va_pos_95_max']:.1f}) | {p['rpa_mps2']:.3f} ({p['rde_rpa_min']:.3f}) | "
-                        f"{p['time_s']:.0f} | {doc['kinetic_j_per_kg_km']:.0f} |")
+            # (a figure on fewer than MIN_SAMPLES samples is not judged: marked *, see the note)
+            va = "" if p.get("va_pos_95_judged", True) else "*"
+            rpa = "" if p.get("rpa_judged", True) else "*"
+            rows.append(f"| {' | '.join(lead)} | {part} | {p['mean_speed_kmh']:.1f} | {p['va_pos_95_m2ps3']:.1f}{va} "
+                        f"({p['rde_va_pos_95_max']:.1f}) | {p['rpa_mps2']:.3f}{rpa} ({p['rde_rpa_min']:.3f}) | "
+                        f"{p['time_s']:.0f} |")
     return rows
+
+
+def unjudged_note(doc: dict) -> list[str]:
+    """The note under :func:`markdown_rows`' table when a figure in it is not judged."""
+    if all(p.get("va_pos_95_judged", True) and p.get("rpa_judged", True) for p in doc["parts"].values()):
+        return []
+    return [f"\\* not judged against the RDE bound: fewer than {MIN_SAMPLES} samples (accelerating "
+            "samples for v·a_pos, seconds for RPA) in that part", ""]
 
 
 def markdown_head(lead: list[str]) -> list[str]:
     """The header of :func:`markdown_rows`' table after the columns ``lead``."""
     cols = [*lead, "part", "mean speed km/h", "v·a_pos 95th pct. m²/s³ (RDE max)", "RPA m/s² (RDE min)",
-            "part's time s", "kinetic energy J/(kg·km)"]
+            "part's time s"]
     return ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
 
 
@@ -408,7 +419,7 @@ def of_log(df) -> "tuple[dict, int]":
             logged += float(t[s][-1] - t[s][0])
             steps.append(np.diff(t[s]))
     out = d.summary().get(LOG_LABEL, {})
-    if out:
+    if steps:  # (also where no part has a 1-Hz sample: the refusal says how far apart they are)
         out["logged_s"] = logged
         out["median_step_s"] = float(np.median(np.concatenate(steps))) if steps else float("nan")
     return out, len(names)
@@ -439,7 +450,8 @@ def report_md(doc: dict) -> str:
              f"{doc['trips']} trips of {len(doc['logs'])} file(s), measured as a SUMO run measures its "
              f"trajectories ({doc['source']}; speeds at 1 Hz, central differences).", "",
              *([f"**Warning:** {w}.", ""] if (w := coverage_warning(dyn)) else []),
-             *markdown_head(["logs"]), *markdown_rows(dyn, [LOG_LABEL]), "",
+             *markdown_head(["logs"]), *markdown_rows(dyn, [LOG_LABEL]), "", *unjudged_note(dyn),
+             f"Positive kinetic energy over all parts: {dyn['kinetic_j_per_kg_km']:.0f} J/(kg·km).", "",
              "Accelerations above 0.1 m/s² by speed (1 Hz):", "",
              "| speed m/s | samples | median m/s² | 85th pct. | 95th pct. |", "|---|---|---|---|---|"]
     for b in dyn.get("accel_profile", []):
