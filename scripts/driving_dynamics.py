@@ -60,22 +60,22 @@ LOGS = (("BMW i3, Munich", "bmw_i3_tum", "bmw-i3-tum", "bmw_i3"),
 
 
 def cycle_rows(data: Path) -> list[str]:
-    out = markdown_head(["cycle"])
+    out = markdown_head(["cycle"], kinetic=True)
     for label, f, tc, vc, k, sep in CYCLES:
         df = pd.read_csv(data / "cycles" / f, sep=sep, encoding="utf-8-sig")
         t = df[tc].to_numpy(float)
         v = df[vc].to_numpy(float) * k
         end = np.flatnonzero(np.isfinite(v))  # carculator pads the shorter cycles
         t, v = t[: end[-1] + 1], v[: end[-1] + 1]
-        out += markdown_rows(of_trajectory(t, v), [label], min_apos=10)
+        out += markdown_rows(of_trajectory(t, v), [label], min_apos=10, kinetic=True)
     return out
 
 
 def log_rows(data: Path) -> list[str]:
-    out = markdown_head(["logs", "trips"])
+    out = markdown_head(["logs", "trips"], kinetic=True)
     for label, folder, fmt, vehicle in LOGS:
         doc, trips = of_log(read_shared(data, folder, fmt, vehicle)[0].df)  # as `sumo-drvpw dynamics`
-        out += markdown_rows(doc, [label, str(trips)])
+        out += markdown_rows(doc, [label, str(trips)], kinetic=True)
     return out
 
 

@@ -285,7 +285,7 @@ def of_trajectory(t_s, v_mps, label: str = "trajectory", dt: float | None = None
     return d.summary().get(label, {"parts": {}, "kinetic_j_per_kg_km": float("nan")})
 
 
-def markdown_rows(doc: dict, lead: list[str], min_apos: int = 0) -> list[str]:
+def markdown_rows(doc: dict, lead: list[str], min_apos: int = 0, kinetic: bool = False) -> list[str]:
     """Markdown table rows of one class's :meth:`Dynamics.summary` (``doc``), one per part
     with at least ``min_apos`` accelerating samples, each after the cells ``lead``; the
     columns of :func:`markdown_head`."""
@@ -297,7 +297,7 @@ def markdown_rows(doc: dict, lead: list[str], min_apos: int = 0) -> list[str]:
             rpa = "" if p.get("rpa_judged", True) else "*"
             rows.append(f"| {' | '.join(lead)} | {part} | {p['mean_speed_kmh']:.1f} | {p['va_pos_95_m2ps3']:.1f}{va} "
                         f"({p['rde_va_pos_95_max']:.1f}) | {p['rpa_mps2']:.3f}{rpa} ({p['rde_rpa_min']:.3f}) | "
-                        f"{p['time_s']:.0f} |")
+                        f"{p['time_s']:.0f} |" + (f" {doc['kinetic_j_per_kg_km']:.0f} |" if kinetic else ""))
     return rows
 
 
@@ -309,10 +309,12 @@ def unjudged_note(doc: dict) -> list[str]:
             "samples for v·a_pos, seconds for RPA) in that part", ""]
 
 
-def markdown_head(lead: list[str]) -> list[str]:
-    """The header of :func:`markdown_rows`' table after the columns ``lead``."""
+def markdown_head(lead: list[str], kinetic: bool = False) -> list[str]:
+    """The header of :func:`markdown_rows`' table after the columns ``lead`` (``kinetic``: with
+    the whole trajectory's kinetic energy in every row, as a table of one row per trajectory
+    and part shows it)."""
     cols = [*lead, "part", "mean speed km/h", "v·a_pos 95th pct. m²/s³ (RDE max)", "RPA m/s² (RDE min)",
-            "part's time s"]
+            "part's time s", *(["kinetic energy J/(kg·km), whole trajectory"] if kinetic else [])]
     return ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
 
 
