@@ -50,3 +50,17 @@ def test_energy_bus_riders_as_sumo(tmp_path):
         cv = pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key")
         assert list(cv.index) == ["b"]
         assert cv.loc["b", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["b"], rel=1e-6), out
+    # the same FCD without x, y (fcd-output.attributes without them): riders cannot be matched
+    # to the bus, said in a warning (before: booked without them, silently — a rehearsal)
+    import json
+    import re
+
+    bare = re.sub(r' (x|y)="[^"]*"', "", (tmp_path / "fcd.xml").read_text())
+    (tmp_path / "bare.xml").write_text(bare)
+    assert cli_main(["fcd", str(tmp_path / "bare.xml"), "--scenario", str(tmp_path / "s.toml"),
+                     "--out", str(tmp_path / "bare"), "--no-figures"]) == 0
+    warn = json.loads((tmp_path / "bare" / "summary.json").read_text()).get("warnings", [])
+    assert any("person rows without x, y" in w and "riders' mass is not booked" in w for w in warn), warn
+    assert not any("without x, y" in w for w in json.loads((tmp_path / "fcd" / "summary.json").read_text()).get("warnings", []))
+    cv = pd.read_csv(tmp_path / "bare" / "chain_vehicles.csv").set_index("key")
+    assert cv.loc["b", "net_kwh"] * 1000.0 < sumo_wh["b"] * (1 - 1e-3)  # (the riders' 2.1 t missing)

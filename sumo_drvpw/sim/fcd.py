@@ -474,6 +474,10 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         warn = lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning
         if replay.no_angle and acc.eqset.uses_yaw:
             warn.append(no_angle_warning(fcd_file))
+        if replay.unplaced_person_rows and sc.transportable_mass:
+            warn.append(f"FCD file {fcd_file}: {replay.unplaced_person_rows} person rows without x, y "
+                        "(fcd-output.attributes without them): riding persons cannot be matched to their "
+                        "vehicles, whose riders' mass is not booked")
         if replay.idling.untold_rows:
             warn.append(untold_warning(replay.idling.untold_rows, len(replay.idling.untold_ids)))
         if warn:

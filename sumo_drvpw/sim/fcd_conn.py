@@ -139,6 +139,9 @@ class _Rows:
         self.departed_persons: tuple = ()
         self.load_changed: tuple = ()
         self.rider_rows = 0
+        #: person rows of timesteps without x, y (persons or vehicles): no rider told (matched
+        #: by place and speed), their mass not booked
+        self.unplaced_person_rows = 0
         #: vType → mass [kg] of the route files (set by replay_fcd)
         self.type_mass: dict = {}
         #: vType → its shut-off params as the route files write them (set by replay_fcd)
@@ -221,7 +224,9 @@ class _Rows:
             before = self.person_types
             self.person_types = dict(zip(p["id"], p["type"]))
             self.departed_persons = tuple(q for q in self.person_types if q not in before)
-            if "x" in p and "y" in p and len(v["id"]):
+            if not ("x" in p and "y" in p and "x" in v and "y" in v):
+                self.unplaced_person_rows += len(p["id"])
+            elif len(v["id"]):
                 at = dict(zip(zip(v["x"], v["y"], v["speed"]), v["id"]))
                 for q, key in zip(p["id"], zip(p["x"], p["y"], p["speed"])):
                     vid = at.get(key)
