@@ -335,3 +335,23 @@ def test_the_replay_shows_its_progress_on_a_terminal(fcd, tmp_path, capsys, monk
         assert not shown
     else:
         assert shown and int(shown[-1]) == steps
+
+
+@pytest.mark.sumo
+def test_an_fcd_of_part_of_the_run_says_so(fcd, tmp_path, capsys):
+    """An FCD recorded for a share of the vehicles (device.fcd.probability 0.5, which its
+    header writes) was booked as if it were the fleet's, without a note (a rehearsal); now
+    a warning names the share, and one recorded on part of the network says that."""
+    path, text = fcd
+    head = re.search(r"<!--.*?-->", text, re.S)
+    assert head and "Configuration" in head.group(0)
+    for opt, said in (('<device.fcd.probability value="0.5"/>', "records a share of the vehicles "
+                       "(device.fcd.probability 0.5)"),
+                      ('<fcd-output.filter-edges.input-file value="edges.txt"/>', "records part of the network")):
+        f = tmp_path / f"part{len(said)}.xml"
+        f.write_text(text.replace("</libsumoConfiguration>", f"<device>{opt}</device></libsumoConfiguration>", 1))
+        out = tmp_path / f"o{len(said)}"
+        assert cli_main(["fcd", str(f), "--net", str(CITY_NET), "--equation", "vsp_ldv1999",
+                         "--no-figures", "--out", str(out)]) == 0, capsys.readouterr().err
+        warn = json.loads((out / "summary.json").read_text()).get("warnings", [])
+        assert any(said in w for w in warn), warn

@@ -34,7 +34,7 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
   ``summary.json`` ``shut_off_at_long_stops.replay``);
 - a vehicle row on a lane the network lacks is not booked (as the live loop books no
   vehicle without a lane); ``summary.json`` ``warnings`` counts them, and FCD none of
-  whose vehicle rows is on a lane of the network is refused (:func:`lane_warnings`).
+  whose vehicle rows is on a lane of the network is refused (:func:`~sumo_drvpw.sim.fcd_warn.lane_warnings`).
 
 Bounded memory (#14): the file is read in blocks of ``chunk_rows`` rows
 (:mod:`sumo_drvpw.sim.fcd_read`: XML iterparse, Parquet record batches, CSV chunks) and
@@ -61,6 +61,7 @@ import pandas as pd
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
+from sumo_drvpw.sim.fcd_warn import lane_warnings, no_angle_warning, partial_warnings, unplaced_person_warning
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
 from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
@@ -465,19 +466,18 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                             "idling_rows": int(replay.idle_rows),
                             "untold_parked_rows": int(replay.idling.untold_rows),
                             "untold_parked_vehicles": len(replay.idling.untold_ids),
-                            "riding_person_rows": int(replay.rider_rows)}}
+                            "riding_person_rows": int(replay.rider_rows),
+                            "unplaced_person_rows": int(replay.unplaced_person_rows)}}
         if sc.trace and out_dir:
             extra["files"] = {"trace": "trace.parquet"}
         if not publish:
             acc.close_trace()
             return acc, extra
-        warn = lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning
+        warn = lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning + partial_warnings(fcd_file, head)
         if replay.no_angle and acc.eqset.uses_yaw:
             warn.append(no_angle_warning(fcd_file))
         if replay.unplaced_person_rows and sc.transportable_mass:
-            warn.append(f"FCD file {fcd_file}: {replay.unplaced_person_rows} person rows without x, y "
-                        "(fcd-output.attributes without them): riding persons cannot be matched to their "
-                        "vehicles, whose riders' mass is not booked")
+            warn.append(unplaced_person_warning(fcd_file, replay.unplaced_person_rows))
         if replay.idling.untold_rows:
             warn.append(untold_warning(replay.idling.untold_rows, len(replay.idling.untold_ids)))
         if warn:
@@ -559,26 +559,3 @@ def row_interval(sc, fcd_file, head: dict | None) -> tuple[float | None, list[st
     why = f"step-length {step:g} s" + (f", device.fcd.period {period:g} s" if period > step else "")
     return dt, [f"FCD {Path(fcd_file).name}: its rows are {dt:g} s apart (its header: {why}); each is booked "
                 f"over {dt:g} s, not the scenario's step length of {sc.step_length:g} s"]
-
-
-def no_angle_warning(fcd_file) -> str:
-    """What a replay of an FCD without angles, for an equation with the factor ``radial``, says."""
-    return (f"FCD file {fcd_file} has no angle column (fcd-output.attributes without angle): the radial "
-            "drag in curves (the factor radial, SUMO's radialDragCoefficient) is booked as 0")
-
-
-def lane_warnings(fcd_file, net_file, unknown: int, known: int, first) -> list[str]:
-    """What a replay's vehicle rows on lanes the network lacks (``unknown`` of them;
-    ``known`` on its lanes; ``first``: the first one's (lane, time)) call for: a UserError
-    when none is on one of its lanes (the FCD of another network), else a warning (the
-    rows are not booked, as the live loop books no vehicle without a lane)."""
-    if not unknown:
-        return []
-    lane, t = first
-    if not known:
-        raise UserError(f"FCD {fcd_file}: none of its vehicles' lanes is in the network "
-                        f"{net_file} (the first: lane {lane!r} at t = {t:g} s): recorded on "
-                        "another network?")
-    return [f"{unknown} FCD row{'s' if unknown > 1 else ''} of vehicles on lanes the network {Path(net_file).name} lacks "
-            f"{'were' if unknown > 1 else 'was'} not booked (the first: lane {lane!r} at t = {t:g} s); recorded on another "
-            "version of the network?"]

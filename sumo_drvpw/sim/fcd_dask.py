@@ -158,9 +158,10 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     ``out_dir`` (required: the workers write their parts there) and returns the RunResult."""
     from sumo_drvpw.fit.engine import dask_client, guarded, unguarded
     from sumo_drvpw.sim.accountant import Accountant
-    from sumo_drvpw.sim.fcd import (FcdStream, fcd_scenario, lane_warnings, no_angle_warning,
-                                    recorded_device_options, recorded_step)
+    from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario, recorded_device_options, recorded_step
     from sumo_drvpw.sim.fcd_idle import untold_warning
+    from sumo_drvpw.sim.fcd_warn import (lane_warnings, no_angle_warning, partial_warnings,
+                                         unplaced_person_warning)
     from sumo_drvpw.sim.fcd_read import fcd_parts, header_options
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import VehicleSpill, write_published
@@ -197,8 +198,12 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
         warn = lane_warnings(spec, sc.net_file, sum(d["lanes"][0] for d in done),
                              sum(d["lanes"][1] for d in done),
                              min(firsts, key=lambda x: x[1]) if firsts else None)
+        warn += partial_warnings(spec, head)
         if any(d["no_angle"] for d in done):
             warn.append(no_angle_warning(spec))
+        unplaced = max(d["extra"]["source"].get("unplaced_person_rows", 0) for d in done)
+        if unplaced and sc.transportable_mass:  # (every bucket reads every person's rows)
+            warn.append(unplaced_person_warning(spec, unplaced))
         untold = [sum(d["extra"]["source"][k] for d in done) for k in ("untold_parked_rows", "untold_parked_vehicles")]
         if untold[0]:  # (each vehicle in one bucket: their counts add up)
             warn.append(untold_warning(*untold))

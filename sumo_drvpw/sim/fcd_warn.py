@@ -1,0 +1,59 @@
+"""What an FCD replay warns of about the file itself: vehicle rows on lanes the network
+lacks, no angles for an equation with radial drag, a recording of part of the run (a share
+of the vehicles, part of the network), person rows that cannot be matched to vehicles."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sumo_drvpw.errors import UserError
+
+
+def unplaced_person_warning(fcd_file, rows: int) -> str:
+    """What a replay whose person rows carry no x, y (or whose vehicle rows do not) says:
+    riders are matched by place and speed (sim/fcd_conn)."""
+    return (f"FCD file {fcd_file}: {rows} person rows without x, y (fcd-output.attributes without them): "
+            "riding persons cannot be matched to their vehicles, whose riders' mass is not booked")
+
+
+def partial_warnings(fcd_file, head: dict | None) -> list[str]:
+    """What an FCD that records only part of the run says (its header's options): a share of
+    the vehicles (``device.fcd.probability`` < 1), or of the network (``fcd-output.filter-edges
+    .input-file``, ``fcd-output.filter-shapes``): the totals are that part's."""
+    head = head or {}
+    out = []
+    try:
+        share = float(head.get("device.fcd.probability", 1.0))
+    except ValueError:
+        share = 1.0
+    if share < 1.0:
+        out.append(f"FCD file {fcd_file} records a share of the vehicles (device.fcd.probability {share:g}): "
+                   "the totals are those vehicles', not the run's")
+    where = [k for k in ("fcd-output.filter-edges.input-file", "fcd-output.filter-shapes") if head.get(k)]
+    if where:
+        out.append(f"FCD file {fcd_file} records part of the network ({', '.join(f'{k} {head[k]}' for k in where)}): "
+                   "the vehicles are booked there only")
+    return out
+
+
+def no_angle_warning(fcd_file) -> str:
+    """What a replay of an FCD without angles, for an equation with the factor ``radial``, says."""
+    return (f"FCD file {fcd_file} has no angle column (fcd-output.attributes without angle): the radial "
+            "drag in curves (the factor radial, SUMO's radialDragCoefficient) is booked as 0")
+
+
+def lane_warnings(fcd_file, net_file, unknown: int, known: int, first) -> list[str]:
+    """What a replay's vehicle rows on lanes the network lacks (``unknown`` of them;
+    ``known`` on its lanes; ``first``: the first one's (lane, time)) call for: a UserError
+    when none is on one of its lanes (the FCD of another network), else a warning (the
+    rows are not booked, as the live loop books no vehicle without a lane)."""
+    if not unknown:
+        return []
+    lane, t = first
+    if not known:
+        raise UserError(f"FCD {fcd_file}: none of its vehicles' lanes is in the network "
+                        f"{net_file} (the first: lane {lane!r} at t = {t:g} s): recorded on "
+                        "another network?")
+    return [f"{unknown} FCD row{'s' if unknown > 1 else ''} of vehicles on lanes the network {Path(net_file).name} lacks "
+            f"{'were' if unknown > 1 else 'was'} not booked (the first: lane {lane!r} at t = {t:g} s); recorded on another "
+            "version of the network?"]
