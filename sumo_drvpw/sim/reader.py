@@ -122,7 +122,10 @@ class Reader:
                 rows[j] = {k: g(ids[j]) for k, g in zip(_TRACI_VARS, self.getters)}
                 self.fallback_reads += 1
         cols = [[r[k] for r in rows] for k in _TRACI_VARS]
-        return tuple(c if k == 3 else np.asarray(c, float) for k, c in enumerate(cols))
+        # (the subscription answers every variable; SUMO's slope is used only where asked for,
+        # as without subscriptions: else the geometry's, whatever the connection)
+        return tuple(None if k == 5 and not self.need[5] else c if k == 3 else np.asarray(c, float)
+                     for k, c in enumerate(cols))
 
     def removed(self, last_ids, ids, gone, departed, back=()) -> list:
         """Vehicles of the last step that are gone without being in this step's arrived list
