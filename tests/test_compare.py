@@ -363,3 +363,29 @@ def test_two_files_of_one_equation_name_are_refused_naming_both(tmp_path):
         resolve_equations([str(a), str(b)])
     msg = str(e.value)
     assert str(a) in msg and str(b) in msg and "'eq_base'" in msg
+
+
+@pytest.mark.parametrize("predicts", ["fuel", "battery"])
+def test_which_term_errs_reads_a_chain_target_in_its_own_watts(predicts):
+    """The measured target is a chain of the true driving power, whose aero term is 1.5× the
+    equation's; the equation carries the same chain. The error, in the target's watts, is
+    regressed on each term as it reaches the target (the chain's slope times the term), so
+    aero's partial slope reads −0.5 (“the data ask for 1.5× that term”) as at the wheels.
+    Regressed on the wheel powers, a fuel chain's 1/η_m (≈ 2.9) came out in it (−1.43; a
+    rehearsal read 'roll' −9.5 on a petrol car's fuel)."""
+    from sumo_drvpw.model.chain import EnergyChain
+    from sumo_drvpw.model.equations import Equation
+
+    x = _drive()
+    terms = {"acc": 1.0, "grade": 1.0, "aero_rho": 0.3, "roll": 0.01}
+    chain = (EnergyChain(predicts="fuel", idle_fuel_power_w=3000.0, marginal_efficiency=0.35,
+                         engine_off_below_w=-np.inf)
+             if predicts == "fuel" else EnergyChain(predicts="battery", traction_efficiency=0.9,
+                                                    recuperation_efficiency=0.9))
+    eq = Equation("eq", terms, chain=chain)
+    true = Equation("true", {**terms, "aero_rho": 0.45}, chain=chain)
+    meas = chain.target_power(true.power(x), x.v, x.signals, None, x.a, x.theta)
+    res = compare(meas, x, [eq], target=predicts).results["eq"]
+    assert res.error_term_correlation["aero"]["partial_slope"] == pytest.approx(-0.5, abs=0.02)
+    for c in ("acc", "roll"):
+        assert abs(res.error_term_correlation[c]["partial_slope"]) < 0.05  # (the sign of P near 0 differs)

@@ -200,6 +200,20 @@ def high_speed_summary(err_w, speed_mps, threshold_mps: float = HIGH_SPEED_MPS) 
     return out
 
 
+def target_terms(chain, cats: dict, wheel, target, inputs, battery_w=None) -> dict:
+    """Each term's power as it reaches a chain's target (battery or fuel) [W]: the term's
+    wheel power times the chain's slope from zero to the sample's driving power, (f(P) −
+    f(0))/P (0 where |P| < 1 W), so that "which term carries the error" reads the error of
+    the target in the target's watts (a partial slope s: about (1 − s) times that term).
+    Regressed on the wheel powers instead, a fuel chain's slope 1/η_m came out as the term's
+    error (a rehearsal read 'roll' −9.5: "10.5 × the rolling term")."""
+    base = chain.target_power(np.zeros_like(np.asarray(wheel, float)), inputs.v, inputs.signals, battery_w,
+                              inputs.a, inputs.theta)
+    w = np.asarray(wheel, float)
+    k = np.divide(np.asarray(target, float) - base, w, out=np.zeros_like(w), where=np.abs(w) >= 1.0)
+    return {c: np.asarray(p, float) * k for c, p in cats.items()}
+
+
 def error_term_correlation(err_w, category_w: dict[str, np.ndarray]) -> dict[str, dict]:
     """Which term carries the error: error against each category's power (paper Fig. 9).
 
@@ -495,36 +509,42 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
                       measured_traction_energy_j=meas_traction, reference=reference,
                       trip=trip, target=target)
     cat_powers = {eq.name: eq.category_powers(inputs) for eq in equations}
+    prepared = {}  # name → (its terms, its prediction, its terms where its error is measured)
     for eq in equations:
         cats = cat_powers[eq.name]
         # drop empty "other"; keep the four physical categories always (Fig. 10 axes)
         cats = {c: p for c, p in cats.items() if c in CATEGORIES or np.any(p != 0.0)}
         pred = np.sum(list(cats.values()), axis=0) if cats else np.zeros(n)
+        cats_at = cats
         if target != "wheel":
             if eq.chain is None or eq.chain.predicts != target:
                 raise UserError(f"compare: equation '{eq.name}' ({eq.path or 'built in'}) has no energy "
                                 f"chain predicting '{target}' (it predicts '{eq.predicts}')")
+            wheel = pred
             pred = eq.chain.target_power(pred, inputs.v, inputs.signals, battery_w, inputs.a, inputs.theta)
+            cats_at = target_terms(eq.chain, cats, wheel, pred, inputs, battery_w)  # (the chain's target's watts)
+        prepared[eq.name] = (cats, pred, cats_at)
+    for eq in equations:
+        cats, pred, cats_at = prepared[eq.name]
         err = pred - meas
         ok = np.isfinite(err)
         allok = bool(ok.all())
         e, vv = (err, v) if allok else (err[ok], v[ok])
         cats_ok = cats if allok else {c: p[ok] for c, p in cats.items()}
+        at_ok = cats_at if allok else {c: p[ok] for c, p in cats_at.items()}
         energy, share = energy_shares(cats_ok, dt if allok else dt[ok])
         # the traction of what is compared: the terms' at the wheel, the chain's otherwise
         p_trac = energy["total"] if target == "wheel" else float(np.maximum(pred[ok], 0.0) @ dt[ok])
         ref_corr = None
         if reference is not None:
-            rc = cat_powers[reference]
-            ref_corr = error_term_correlation(
-                e, {c: (p if allok else p[ok]) for c, p in rc.items()
-                    if c in CATEGORIES or np.any(p != 0.0)})
+            rc = prepared[reference][2]
+            ref_corr = error_term_correlation(e, {c: (p if allok else p[ok]) for c, p in rc.items()})
         comp.results[eq.name] = EquationResult(
             equation=eq, pred_w=pred, category_w=cats,
             metrics=metrics(pred, meas),
             speed_bins=speed_bins(e, vv),
             high_speed=high_speed_summary(e, vv),
-            error_term_correlation=error_term_correlation(e, cats_ok),
+            error_term_correlation=error_term_correlation(e, at_ok),
             energy_j=energy, energy_share=share,
             traction_energy_ratio=(p_trac / meas_traction if meas_traction > 0.0 else math.nan),
             error_reference_correlation=ref_corr,

@@ -178,7 +178,11 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
               "Correlation r of the error with each term's power in the same equation, and "
               "the partial slope when the error is regressed on all terms at once. A partial "
               "slope s means the data ask for about (1 − s) times that term: −0.5 → the term "
-              "is too small by half of itself. A missing term shows as “–”.", ""]
+              "is too small by half of itself. A missing term shows as “–”."
+              + ("" if _target(doc) == "wheel" else
+                 f" The error is in {_target(doc)} power, and each term's power is taken as it reaches "
+                 "it: its driving power times the chain's slope from zero to the sample's driving power."),
+              ""]
     lines += _corr_table(eqs, "error_term_correlation")
     if doc["settings"].get("reference"):
         ref = doc["settings"]["reference"]
