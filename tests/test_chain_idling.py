@@ -164,7 +164,8 @@ def _short_log(tmp_path, idle_w=IDLE_W):
 
 
 @pytest.mark.parametrize("engine", ["memory", "local"])
-@pytest.mark.parametrize("battery", [False, True], ids=["no-traction-battery", "battery-declared"])
+@pytest.mark.parametrize("battery", [False, True, "logged"], ids=["no-traction-battery", "battery-declared",
+                                                                   "battery-logged"])
 def test_a_car_without_a_traction_battery_is_not_fitted_as_a_hybrid(tmp_path, engine, battery):
     """A vehicle file of powertrain type 'direct' without a [battery] table, and no battery
     power logged: a car whose engine alone drives it. Its engine-off threshold is profiled
@@ -177,9 +178,13 @@ def test_a_car_without_a_traction_battery_is_not_fitted_as_a_hybrid(tmp_path, en
     from sumo_drvpw.fit.chain_fuel import CONVENTIONAL_OFF_GRID_W, ENGINE_OFF_GRID_W
 
     _short_log(tmp_path)
+    if battery == "logged":  # a hybrid's battery V·I in the log, no [battery] in its file: a hybrid
+        df = pd.read_parquet(tmp_path / "log.parquet")
+        df = df.assign(battery_voltage_v=200.0, battery_current_a=np.random.default_rng(2).normal(0, 5, len(df)))
+        df.to_parquet(tmp_path / "log.parquet")
     (tmp_path / "car.toml").write_text(
         f'[vehicle]\nname = "car"\nmass_kg = {MASS}\n[powertrain]\ntype = "direct"\nfuel = "gasoline"\n'
-        + ('[battery]\ncapacity_kwh = 1.3\n' if battery else ""))
+        + ('[battery]\ncapacity_kwh = 1.3\n' if battery is True else ""))
     out = tmp_path / f"{engine}.toml"
     assert cli_main(["calibrate", str(tmp_path / "log.parquet"), "--vehicle", str(tmp_path / "car.toml"),
                      "--target", "fuel", "--equation", str(tmp_path / "rl.toml"), "--engine", engine,
@@ -189,7 +194,7 @@ def test_a_car_without_a_traction_battery_is_not_fitted_as_a_hybrid(tmp_path, en
     from sumo_drvpw.fit.chain_fuel import engine_off_for, fuel_grid
     from sumo_drvpw.model.vehicles import load_vehicle
 
-    how = engine_off_for(load_vehicle(str(tmp_path / "car.toml")), False)
+    how = engine_off_for(load_vehicle(str(tmp_path / "car.toml")), battery == "logged")
     tried = {c.engine_off_below_w for c in fuel_grid(how)}
     assert tried == set(ENGINE_OFF_GRID_W if battery else CONVENTIONAL_OFF_GRID_W)
     assert engine_off_for(load_vehicle(str(tmp_path / "car.toml")), True) == "profile"  # battery logged

@@ -262,7 +262,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     from sumo_drvpw.fit.chain_fuel import engine_off_for
 
     spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut,
-                     engine_off_for(veh, False, getattr(args, "engine_off", "profile")))
+                     engine_off_for(veh, False, getattr(args, "engine_off", "profile")))  # (battery: at the fit)
     infos = []
 
     def reduce(make):

@@ -151,9 +151,17 @@ class ChainStats:
             from sumo_drvpw.fit.stream import CalibrationStats
 
             self.road = CalibrationStats(tuple(spec.candidates), moving_mps=spec.moving_mps)
-        self.grid = (fuel_grid(spec.engine_off, fuel_cut_below_w=spec.fuel_cut_below_w,  # (no traction
-                               charge_sustaining=spec.engine_off != "conventional")  # battery: none)
-                     if spec.target == "fuel" else None)
+        self.grid, self.conv = None, []
+        if spec.target == "fuel":
+            self.grid = fuel_grid("profile" if spec.engine_off == "conventional" else spec.engine_off,
+                                  fuel_cut_below_w=spec.fuel_cut_below_w)
+            self.conv = [False] * len(self.grid)
+            if spec.engine_off == "conventional":  # (no battery declared: the conventional grid, unless the
+                # logs carry battery power — known after the scan — then the whole profile, as in memory)
+                extra = [t for t in fuel_grid("conventional", fuel_cut_below_w=spec.fuel_cut_below_w,
+                                              charge_sustaining=False) if t.engine_off_below_w > -np.inf]
+                self.grid += extra
+                self.conv += [True] * len(extra)
 
     def columns(self):
         return None  # every column: the fuel flow, air flow and fuel trims are found by name
@@ -457,10 +465,13 @@ class ChainStats:
         sw, mu, c = self.mom
         yy = float(c[0, 0] + sw * mu[0] ** 2)  # Σw·y² of the fuel power
         profiled = isinstance(sp.engine_off, str) and sp.engine_off in ("profile", "conventional")
+        conventional = sp.engine_off == "conventional" and not self.battery
         idling = profiled and idles_at_stops(self.standing)  # then only one that runs standing
         for i, tmpl in enumerate(self.grid):
             if idling and tmpl.engine_off_below_w > -np.inf:
                 continue
+            if tmpl.engine_off_below_w > -np.inf and self.conv[i] != conventional:
+                continue  # (the conventional grid or the whole profile: above)
             names = fuel_names(tmpl, sp.loads)
             beta, rss, act, xs = solve_factor(self.fac[i][0], self.fac[i][1], *fuel_bounds(names))
             off, von = tmpl.engine_off_below_w, tmpl.engine_on_above_mps
@@ -475,7 +486,7 @@ class ChainStats:
                                    sp.fuel_cut_below_w, tmpl.charge_sustaining, self.battery)
         if idling:
             note_idling(params, self.standing)
-        elif profiled and sp.engine_off == "conventional":
+        elif conventional:
             note_conventional(params)
         if not profiled:
             note_declared(params)
