@@ -216,7 +216,7 @@ class CompareStats:
 
     def add(self, m) -> "CompareStats":
         """Accumulate one batch: the usable samples of a Measured of whole trips."""
-        from sumo_drvpw.fit.compare import SPEED_BIN_MPS
+        from sumo_drvpw.fit.compare import SPEED_BIN_MPS, target_terms
 
         self._check_equations()  # after the batch was read: a log's refusal comes first, as in memory
 
@@ -275,24 +275,33 @@ class CompareStats:
         else:
             enter = np.arange(n)
         cols = {"meas": meas[enter], "v": v[enter], "dt": dt[enter]}
+        zero = np.zeros(n)
+        pre = {}  # name → its terms, their powers, its driving and predicted power, terms at the target
         for eq in self.equations:
             prev = self.eq.get(eq.name)
             cats = prev.cats if prev is not None else _categories(pw[eq.name])
-            zero = np.zeros(n)
             cw = {c: np.asarray(pw[eq.name].get(c, zero), float) for c in cats}
             wheel = np.sum(list(cw.values()), axis=0) if cw else zero
-            pred = wheel if self.target == "wheel" else eq.chain.target_power(wheel, x.v, sig, bat, x.a, x.theta)
+            pred, at = wheel, cw
+            if self.target != "wheel":  # (compare.target_terms: each term as it reaches the target)
+                pred = eq.chain.target_power(wheel, x.v, sig, bat, x.a, x.theta)
+                at = target_terms(eq.chain, cw, wheel, pred, x.v, sig, bat, x.a, x.theta)
+            pre[eq.name] = (cats, cw, wheel, pred, at)
+        for eq in self.equations:
+            prev = self.eq.get(eq.name)
+            cats, cw, wheel, pred, at = pre[eq.name]
             err = pred - meas
             ok = np.isfinite(err)
             sel = slice(None) if ok.all() else ok  # views when every prediction is finite
             e, mo, po, vo, dto = err[sel], meas[sel], pred[sel], v[sel], dt[sel]
             hv = mo >= HEAVY_LOAD_W
             cm = [cw[c][sel] for c in cats]
+            am = cm if at is cw else [at[c][sel] for c in cats]  # (where the error is measured)
             # Σ of the categories is the wheel power (same sum, same order): traction weights
             wgt = np.where(wheel[sel] > 0.0, dto, 0.0) if cats else np.zeros(len(e))
             eref = rmin = rmax = None
             if self.reference is not None:
-                rp = pw[self.reference]
+                rp = pre[self.reference][4]
                 rm = [np.asarray(rp.get(c, zero), float)[sel] for c in self.ref_cats]
                 eref = Moments.of_columns([e] + rm)
                 rmin, rmax = _minmax(rm)
@@ -308,7 +317,7 @@ class CompareStats:
             sums = [np.bincount(codes, np.where(meas > 0.0, meas, 0.0) * dt, k),
                     np.bincount(codes, np.where(pm > 0.0, pm, 0.0) * dt, k),
                     np.bincount(codes, meas * dt, k), np.bincount(codes, pm * dt, k)]
-            cmin, cmax = _minmax(cm)
+            cmin, cmax = _minmax(am)
             el, eh = e[~hv], e[hv]
             st = _EqStats(
                 cats, {"all": Moments.of_columns([mo, po]),
@@ -316,7 +325,7 @@ class CompareStats:
                        "heavy": Moments.of_columns([mo[hv], po[hv]])},
                 {"all": float(e @ e), "light": float(el @ el), "heavy": float(eh @ eh)},
                 {"all": float(e.sum()), "light": float(el.sum()), "heavy": float(eh.sum())},
-                float(np.abs(e).sum()), Moments.of_columns([e] + cm), cmin, cmax,
+                float(np.abs(e).sum()), Moments.of_columns([e] + am), cmin, cmax,
                 eref, rmin, rmax, np.array([c @ wgt for c in cm]), hs, bins,
                 {str(t): tuple(float(s[i]) for s in sums) for i, t in enumerate(uniq)},
                 float(np.maximum(po, 0.0) @ dto), self._unknown(eq, sig, n, x.trip))
