@@ -555,19 +555,10 @@ def _corr(mom: Moments, cats: list, cmin: np.ndarray, cmax: np.ndarray) -> dict:
     return out
 
 
-def _trip_block(trip_e: dict, net: bool) -> dict:
-    """:func:`sumo_drvpw.fit.compare.trip_energy` (``net``: ``trip_net_energy``) from sums."""
-    from sumo_drvpw.fit.trip_energy import trip_energy_doc
-
-    names = list(trip_e)
-    em = [trip_e[t][2] if net else trip_e[t][0] for t in names]
-    ep = [trip_e[t][3] if net else trip_e[t][1] for t in names]
-    return trip_energy_doc(names, em, ep)  # as in memory (small trips, NaN where none measured)
-
-
 def _streamed_comparison_class():
     from sumo_drvpw.fileio import plain as _jsonable
     from sumo_drvpw.fit.compare import Comparison
+    from sumo_drvpw.fit.trip_energy import trip_block
 
     class StreamedComparison(Comparison):
         """A Comparison whose arrays are a reservoir sample and whose ``to_json`` reports
@@ -585,8 +576,8 @@ def _streamed_comparison_class():
             for name, d in doc["equations"].items():
                 if trips:
                     s = st.eq[name]
-                    d["trip_energy"] = _jsonable(with_left_out(_trip_block(s.trip_e, net=False), st.left_out))
-                    d["trip_net_energy"] = _jsonable(with_left_out(_trip_block(s.trip_e, net=True),
+                    d["trip_energy"] = _jsonable(with_left_out(trip_block(s.trip_e, net=False), st.left_out))
+                    d["trip_net_energy"] = _jsonable(with_left_out(trip_block(s.trip_e, net=True),
                                                                    st.left_out, net=True))
                     with_fuel_volumes(d, self.target)  # litres of a fuel target, as in memory
             doc["n_samples"] = st.n

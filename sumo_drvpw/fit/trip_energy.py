@@ -326,3 +326,13 @@ def fuel_mismatch_note(eq_docs: dict, measured: tuple[str, str] | None) -> str |
             + ", ".join(f"{nm} burns {f}" for nm, f in odd.items())
             + f": the measured fuel energy is the flow × LHV of {fuel}, and its litres in this report are that "
             "energy in litres of each chain's own fuel, not the litres the log metered.")
+
+
+def trip_block(trip_e: dict, net: bool) -> dict:
+    """:func:`sumo_drvpw.fit.compare.trip_energy` (``net``: ``trip_net_energy``) from a
+    streamed comparison's sums per trip ([measured, predicted traction, measured, predicted
+    net] energy [J])."""
+    names = list(trip_e)
+    em = [trip_e[t][2] if net else trip_e[t][0] for t in names]
+    ep = [trip_e[t][3] if net else trip_e[t][1] for t in names]
+    return trip_energy_doc(names, em, ep)  # as in memory (small trips, NaN where none measured)
