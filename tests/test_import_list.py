@@ -275,3 +275,56 @@ def test_a_speed_unit_declared_for_an_imported_log_is_refused(tmp_path, capsys):
     from sumo_drvpw.data.log import ReadOptions, check_declared_unit
 
     check_declared_unit([plain], ReadOptions(speed_unit="km/h"))
+
+
+def test_the_sketch_maps_clock_times_and_a_petrol_engines_air_and_fuel_flow(tmp_path, capsys):
+    """An OBD Auto Doctor export (KIT's OBD-II dataset): its time column holds clock times
+    ('17:58:02.288'), its fuel target is the mass air flow. The sketch said of the time
+    "give its unit" (a unit that then failed as 'not numeric') and proposed no MAF; now it
+    maps the clock times with [options] time_unit/time_format, the air flow as maf_gps and a
+    fuel rate as fuel_rate_lph, and the sketch imports the file as it is."""
+    import numpy as np
+
+    from sumo_drvpw.data.log import read_log
+
+    f = tmp_path / "obd.csv"
+    t = np.arange(0.0, 30.0, 0.5)
+    rows = [f"17:58:{2 + a:06.3f},{3.6 * min(a, 10.0):g},{6.5 + a:g},{0.8 + a / 10:g},{60 + a:g}" for a in t]
+    f.write_text("Time,Vehicle Speed Sensor [km/h],Air Flow Rate from Mass Flow Sensor [g/s],"
+                 "Fuel Rate [L/h],Average Fuel Economy [L/h]\n" + "\n".join(rows) + "\n")
+    assert cli_main(["import", "columns", str(f), "--list"]) == 0
+    sk = _sketch(_lines(capsys))
+    for want in ('time_unit = "datetime"', 'time_format = "%H:%M:%S.%f"', '[columns."Time"]\nname = "time_s"',
+                 '[columns."Air Flow Rate from Mass Flow Sensor [g/s]"]\nname = "maf_gps"',
+                 '[columns."Fuel Rate [L/h]"]\nname = "fuel_rate_lph"'):
+        assert want in sk, sk
+    assert "Average Fuel Economy" not in sk.split("fuel_rate_lph")[0].split("\n")[-2]
+    (tmp_path / "map.toml").write_text(sk, encoding="utf-8")
+    assert cli_main(["import", "columns", str(f), "--columns", str(tmp_path / "map.toml"),
+                     "--out", str(tmp_path / "obd.parquet")]) == 0
+    df = read_log(tmp_path / "obd.parquet").df
+    np.testing.assert_allclose(df["time_s"] - df["time_s"].iloc[0], t, atol=1e-6)
+    np.testing.assert_allclose(df["maf_gps"], 6.5 + t)
+    np.testing.assert_allclose(df["fuel_rate_lph"], 0.8 + t / 10)
+
+
+def test_rows_finer_than_the_time_column_are_said_when_they_are_dropped(tmp_path, capsys):
+    """carOBD's logs: the time in whole seconds, 3–4 rows in each; 73 % of the rows were
+    dropped as 'duplicate timestamp' with no word why. The import now says that the time
+    column is coarser than the rows, and what would keep them; a few repeated times are not
+    remarked on."""
+    f = tmp_path / "obd.csv"
+    rows = [f"{k // 4},{k % 40}" for k in range(400)]
+    f.write_text("Run time (s),Speed (km/h)\n" + "\n".join(rows) + "\n")
+    (tmp_path / "m.toml").write_text('[columns."Run time (s)"]\nname = "time_s"\nunit = "s"\n'
+                                     '[columns."Speed (km/h)"]\nname = "speed_mps"\nunit = "km/h"\n')
+    assert cli_main(["import", "columns", str(f), "--columns", str(tmp_path / "m.toml"),
+                     "--out", str(tmp_path / "o.parquet")]) == 0
+    out = capsys.readouterr().out
+    assert "dropped: duplicate timestamp 300" in out
+    assert ("300 of 400 rows share their time with the row before (the time column steps by 1 s, the rows "
+            "come 4.0 per step)") in out
+    f.write_text("Run time (s),Speed (km/h)\n" + "\n".join(f"{k},{k % 40}" for k in range(400)) + "\n0,1\n")
+    assert cli_main(["import", "columns", str(f), "--columns", str(tmp_path / "m.toml"),
+                     "--out", str(tmp_path / "p.parquet")]) == 0
+    assert "share their time" not in capsys.readouterr().out

@@ -304,6 +304,10 @@ def carry_midnight(seconds) -> tuple[np.ndarray, int]:
     return t + days, int(back.sum())
 
 
+#: the share of a file's rows dropped as duplicate timestamps beyond which the import says why
+DUPLICATE_NOTE_SHARE = 0.2
+
+
 def clean_time_and_speed(df: pd.DataFrame, path, report: dict) -> pd.DataFrame:
     """Drop NaN time/speed and samples whose time does not increase; check speed is plausible.
 
@@ -320,7 +324,15 @@ def clean_time_and_speed(df: pd.DataFrame, path, report: dict) -> pd.DataFrame:
     df = drop(df, df["speed_mps"].isna(), "NaN speed", report)
     t = df["time_s"].to_numpy(float)
     prev_max = np.concatenate([[-np.inf], np.maximum.accumulate(t)[:-1]])
-    df = drop(df, t == prev_max, "duplicate timestamp", report)
+    dup = t == prev_max
+    if dup.sum() > DUPLICATE_NOTE_SHARE * len(t):  # more rows than the clock tells apart: say why
+        kept = t[~dup]
+        step = float(np.median(np.diff(kept))) if len(kept) > 1 else float("nan")
+        report["notes"].append(
+            f"{int(dup.sum())} of {len(t)} rows share their time with the row before (the time column steps "
+            f"by {step:g} s, the rows come {len(t) / max(len(kept), 1):.1f} per step): the first row of each "
+            "time is kept; a time column of finer resolution (or the logger's own timestamp) keeps them all")
+    df = drop(df, dup, "duplicate timestamp", report)
     t = df["time_s"].to_numpy(float)
     prev_max = np.concatenate([[-np.inf], np.maximum.accumulate(t)[:-1]])
     back = t < prev_max

@@ -127,12 +127,21 @@ GUESSES = {
     # an EV's state of charge: with options.soc_capacity_kwh, the battery's energy (an estimate)
     "soc_pct": ("percent", r"(?<![a-z])soc(?![a-z])|state ?of ?charge|ladezustand",
                 r"display|min|max|target|limit|health|(?<![a-z])soh(?![a-z])"),
+    # a petrol engine's fuel target without a fuel-flow sensor (OBD PID 0x10), and a fuel flow
+    "maf_gps": ("mass_flow", r"air ?flow|(?<![a-z])maf(?![a-z])|mass air", r"temp|pressure|volt"),
+    "fuel_rate_lph": ("volume_flow", r"fuel", r"avg|average|trip|total|used|level|pressure|temp|trim|remaining"),
 }
+#: a time column's first value as a clock time or a timestamp → its [options] time_format
+CLOCK_FORMATS = ((re.compile(r"^\d{1,2}:\d{2}:\d{2}\.\d+$"), "%H:%M:%S.%f"),
+                 (re.compile(r"^\d{1,2}:\d{2}:\d{2}$"), "%H:%M:%S"),
+                 (re.compile(r"^\d{4}-\d{2}-\d{2}[ T]\d{1,2}:\d{2}:\d{2}\.\d+$"), "%Y-%m-%d %H:%M:%S.%f"),
+                 (re.compile(r"^\d{4}-\d{2}-\d{2}[ T]\d{1,2}:\d{2}:\d{2}$"), "%Y-%m-%d %H:%M:%S"))
 #: a label without a unit is offered for a name only when it also names the quantity
 UNITLESS_WORDS = {"percent": r"soc|state of charge", "time": r"time|zeit", "speed": r"speed|veloc|geschw|spd",
                   "length": r"elev|alti|height|höhe",
                   "temperature": r"temp|amb", "voltage": r"volt", "current": r"curr|amp",
-                  "torque": r"torq|trq", "rotational_speed": r"rpm|speed|drehz", "energy": r"energy|ced|cec|tot_"}
+                  "torque": r"torq|trq", "rotational_speed": r"rpm|speed|drehz", "energy": r"energy|ced|cec|tot_",
+                  "mass_flow": r"maf|air ?flow", "volume_flow": r"fuel (rate|flow)"}
 
 
 def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
@@ -142,6 +151,9 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
     time and take units from the file; a CSV's unit is written from its label."""
     lines = ["# a mapping to start from — guessed from the labels and units above: check each, "
              "add what else to keep (docs/adapters.md)"]
+    clock = None if mdf else _clock_time(rows)  # (label, its time_format): a clock-time column
+    if clock:
+        options = {**options, "time_unit": "datetime", "time_format": clock[1]}
     if options:
         lines.append("[options]")
         lines += [f"{k} = {_toml(v)}" for k, v in options.items()]
@@ -159,6 +171,9 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
                 hits.append((label, unit, r))
             elif u is None and re.search(UNITLESS_WORDS[dim], text, re.I):  # no unit, or "(CED)": none known
                 unitless.append(label)
+        if not hits and name == "time_s" and clock:
+            lines += [f"[columns.{_toml(clock[0])}]", 'name = "time_s"  # clock times: [options] time_format']
+            continue
         if not hits:
             if unitless:
                 lines.append(f"# {name}: perhaps {', '.join(unitless[:3])} (no unit recognised in the file: "
@@ -180,6 +195,20 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
             lines.append("# without battery V·I or energy counters, [options] soc_capacity_kwh = <the energy "
                          "its 0–100 % spans> makes it the battery's energy (an estimate; docs/adapters.md)")
     return "\n".join(lines)
+
+
+def _clock_time(rows: list[dict]) -> tuple[str, str] | None:
+    """The first time-like label whose first value is a clock time or a timestamp
+    (:data:`CLOCK_FORMATS`), with its format; else None."""
+    pat, bad = GUESSES["time_s"][1:]
+    for r in rows:
+        text = split_header(r["label"])[0]
+        if not re.search(pat, text, re.I) or (bad and re.search(bad, text, re.I)):
+            continue
+        for rx, fmt in CLOCK_FORMATS:
+            if rx.match(str(r.get("first", "")).strip()):
+                return r["label"], fmt
+    return None
 
 
 def _coverage(row: dict) -> float:
