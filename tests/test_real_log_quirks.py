@@ -297,3 +297,23 @@ def test_an_elevation_that_is_noise_is_called_noise(tmp_path, capsys):
         note_counts(log.counts)
         out = capsys.readouterr().out
         assert ("the elevation is noise, not glitches" in out) is noisy, out
+
+
+@pytest.mark.parametrize("encoding,said", [
+    ("", "(its UTF-8 written twice over: map that label as it reads)"),
+    ('encoding = "latin-1"\n', '(UTF-8 read as Latin-1: [options] encoding = "utf-8", or map that label)')])
+def test_a_label_mis_encoded_by_the_logger_or_the_reading_is_named(tmp_path, encoding, said):
+    """KIT's 2017 OBD logs write '°C' as 'Â°C' (their UTF-8 encoded twice); a mapping of the
+    clean label was refused as a missing column with no pointer to the label the file has.
+    Now the near label is named, and what to do: read as UTF-8 where a Latin-1 reading made
+    it, map the label as it reads where the file holds it so."""
+    m = _write(tmp_path, "m.toml", f"[options]\n{encoding}" + '[columns."t [s]"]\nname = "time_s"\n'
+               '[columns."v [km/h]"]\nname = "speed_mps"\nunit = "km/h"\n'
+               '[columns."Ambient [°C]"]\nname = "ambient_c"\nunit = "°C"\n')
+    f = tmp_path / "log.csv"
+    head = "t [s],v [km/h],Ambient [°C]\n" if encoding else "t [s],v [km/h],Ambient [Â°C]\n"
+    f.write_bytes((head + "0,0,4\n1,3.6,4\n").encode("utf-8"))
+    with pytest.raises(UserError) as e:
+        read("columns", [f], columns=m)
+    assert "missing column 'Ambient [°C]'" in str(e.value) and "the file has 'Ambient [Â°C]'" in str(e.value)
+    assert said in str(e.value), str(e.value)

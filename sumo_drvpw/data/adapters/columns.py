@@ -321,6 +321,22 @@ def _header_line_of(path: Path, m: dict, label: str) -> int | None:
     return None
 
 
+def _close_label(label: str, labels: list[str], encoding: str) -> str:
+    """A hint naming the file's label that differs from ``label`` only by case, spacing or
+    a mis-decoded character ('°C' as 'Â°C': UTF-8 read as Latin-1, or written so), else ""."""
+    def key(x: str) -> str:
+        return "".join(str(x).replace("Â", "").replace("Ã", "").lower().split())
+    near = [c for c in labels if key(c) == key(label)]
+    if not near:
+        return ""
+    if not any("Â" in c or "Ã" in c for c in near):
+        return f" — the file has '{near[0]}': map that label"
+    latin = encoding.lower().replace("_", "-") in ("latin-1", "latin1", "iso-8859-1", "cp1252", "windows-1252")
+    return (f" — the file has '{near[0]}' (" + ("UTF-8 read as Latin-1: [options] encoding = \"utf-8\", or map "
+                                                "that label" if latin else
+                                                "its UTF-8 written twice over: map that label as it reads") + ")")
+
+
 def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     """One CSV/Parquet file through the mapping → canonical frame and report."""
     raw = _read_table(path, m)
@@ -335,7 +351,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
         if label not in raw.columns:
             hint = (f" (only one column '{raw.columns[0][:40]}': wrong sep {m['sep']!r}?)"
                     if raw.shape[1] == 1 else "")
-            hint = _skip_hint(path, m) or _no_header_hint(raw) or hint
+            hint = _skip_hint(path, m) or _no_header_hint(raw) or _close_label(label, labels, m["encoding"]) or hint
             raise UserError(f"{path}: missing column '{label}' named in {m['path']}{hint}")
     na = tuple(m["na_values"])
     out: list[tuple[str, pd.Series]] = []  # (a list: two columns may read as one name)
