@@ -654,3 +654,32 @@ def test_overtaking_on_the_opposite_lane_books_the_road_climbed(tmp_path):
                                    rtol=0, atol=float(m.max()) * 0.01, err_msg=name)
         e = res.edges.groupby("edge")["distance_m"].sum()   # on the road the car drives
         assert e.get("BA", 0.0) == e.get("CB", 0.0) == 0.0 and e["AB"] > 3e4, (name, e.to_dict())
+
+
+def test_an_exported_vtype_of_a_users_equation_runs_in_a_bare_config(tmp_path, capsys):
+    """export-vtype wrote the equation's name into the vType's drvpw.equation; for a user's
+    own equation (not a built-in) a run of the SUMO config then stopped: "unknown equation
+    'ev_mine': not a file and not a built-in" (a rehearsal following docs/scenario.md). It
+    now writes the equation file's path, relative to the additional file, and the run books
+    that vType's vehicles by it; a built-in keeps its name."""
+    from sumo_drvpw.fileio import write_text
+    from sumo_drvpw.model.equations import save_equation
+    from sumo_drvpw.sim.export import equation_ref
+    from sumo_drvpw.model.equations import load_equation
+
+    (tmp_path / "eqs").mkdir()
+    save_equation(Equation("ev_mine", {"acc": 1.08, "grade": 1.0, "aero_rho": 0.62, "m_v1": 0.0098 * 9.81}),
+                  tmp_path / "eqs" / "mine.toml")
+    (tmp_path / "net").mkdir()
+    assert cli_main(["export-vtype", str(tmp_path / "eqs" / "mine.toml"), "--mass", "1700", "--id", "ev",
+                     "--out", str(tmp_path / "net" / "ev.add.xml")]) == 0
+    assert 'key="drvpw.equation" value="../eqs/mine.toml"' in (tmp_path / "net" / "ev.add.xml").read_text()
+    write_text(tmp_path / "net" / "r.rou.xml", EXPORT_ROUTES.format(vt="ev"))
+    write_text(tmp_path / "net" / "c.sumocfg", f'<configuration><input><net-file value="{NETS / "highway.net.xml"}"/>'
+               '<route-files value="r.rou.xml"/><additional-files value="ev.add.xml"/></input>'
+               '<time><end value="200"/></time><report><no-warnings value="true"/></report></configuration>')
+    capsys.readouterr()
+    assert cli_main(["run", str(tmp_path / "net" / "c.sumocfg"), "--no-figures", "--out", str(tmp_path / "o")]) == 0
+    v = pd.read_parquet(tmp_path / "o" / "vehicles.parquet")
+    assert set(v.equation) == {"ev_mine"} and len(v) >= 5 and (v.traction_total_j > 0).all()
+    assert equation_ref(load_equation("bmw_i3_battery"), tmp_path / "x.xml") == "bmw_i3_battery"

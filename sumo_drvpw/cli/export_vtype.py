@@ -59,7 +59,7 @@ def main(args: argparse.Namespace) -> int:
     from sumo_drvpw.cli import check_air_temperature
 
     check_air_temperature(args.air_temperature)
-    xml, missing = energy_vtype_xml(eq, args.id, mass, area, args.vclass, args.air_temperature)
+    xml, missing = energy_vtype_xml(eq, args.id, mass, area, args.vclass, args.air_temperature, out=args.out)
     write_text(args.out, xml)
     model = ("MMPEVEM", "MMPEVEM") if getattr(eq.chain, "motor", None) is not None else ("Energy/unknown", "Energy model")
     print(f"wrote vType '{args.id}' ({model[0]}) from equation '{eq.name}' to {args.out}")

@@ -27,6 +27,7 @@ Memory is bounded: vehicles that left the simulation are written out in batches
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -144,17 +145,22 @@ class Accountant(_Listener):
                             else read_vtypes([f for f in files if f.is_file()]))
         self.equations = list(sc.equations)
         names = [e.name for e in self.equations]
-        for info in self.file_vtypes.values():  # vTypes naming an equation the scenario lacks
+        for vid, info in list(self.file_vtypes.items()):  # vTypes naming an equation the scenario lacks
             if info.equation and info.equation not in names:
                 if sc.vtype_filter is not None and info.id not in sc.vtype_filter:
                     continue
                 eq = resolve_equation(info.equation, Path(info.source).parent,
                                       f"{info.source}: vType '{info.id}' drvpw.equation")
                 if eq.name != info.equation:
-                    raise UserError(f"{info.source}: vType '{info.id}' names equation "
-                                    f"'{info.equation}', whose name is '{eq.name}'")
-                self.equations.append(eq)
-                names.append(eq.name)
+                    if not _names_a_file(info.equation):
+                        raise UserError(f"{info.source}: vType '{info.id}' names equation "
+                                        f"'{info.equation}', whose name is '{eq.name}'")
+                    # an equation file named by its path (as export-vtype writes it): the vType
+                    # books by the equation the file holds
+                    self.file_vtypes[vid] = dataclasses.replace(info, equation=eq.name)
+                if eq.name not in names:
+                    self.equations.append(eq)
+                    names.append(eq.name)
         # vtype_energy: the vTypes' own Energy-model parameters, one equation per vType
         # (SUMO books its radial drag per step: a replay's recording's step, not its rows' interval)
         self.equations, self.vtype_energy = expand_vtype_energy(
@@ -507,3 +513,9 @@ def no_hybrid_chain_warning(powertrains: dict[str, dict]) -> str | None:
             "driving high (full hybrid cars burn 33–56 % less than their petrol twins on the EPA's hot "
             "UDDS, docs/epa-hybrid.md); give these vTypes a hybrid chain (a fuel chain calibrated on "
             "such a vehicle's logs) in the scenario's equations (summary.json assumptions.powertrain)")
+
+
+def _names_a_file(value: str) -> bool:
+    """Whether a vType's ``drvpw.equation`` value is an equation file's path (a TOML file, or
+    a path with a folder), not an equation's name."""
+    return value.lower().endswith(".toml") or "/" in value or "\\" in value

@@ -41,6 +41,8 @@ efficiencies are 1: the vType books the driving energy at the wheels.
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -169,13 +171,27 @@ def energy_model_params(eq: Equation, mass_kg: float | None = None,
     return params, missing
 
 
+def equation_ref(eq: Equation, out=None) -> str:
+    """What a vType's ``drvpw.equation`` names for ``eq``: a built-in's name, else its file's
+    path — relative to the folder of ``out`` (the additional file written) when given — so
+    that a run finds it (a bare name of a user's equation is no built-in: the run refused it)."""
+    from sumo_drvpw.model.equations import BUILTIN_DIR
+
+    p = getattr(eq, "path", None)
+    if not p or Path(p).resolve().parent == BUILTIN_DIR.resolve():
+        return eq.name
+    if out is None:
+        return str(Path(p).resolve())
+    return Path(os.path.relpath(Path(p).resolve(), Path(out).resolve().parent)).as_posix()
+
+
 def energy_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
                      frontal_area_m2: float | None = None,
-                     vclass: str | None = None, air_c: float | None = None) -> tuple[str, list[str]]:
+                     vclass: str | None = None, air_c: float | None = None, out=None) -> tuple[str, list[str]]:
     """An additional file with one Energy-model vType for ``eq`` (an MMPEVEM one when its
     chain is SUMO's MMPEVEM motor: :func:`mmpevem_vtype_xml`); returns (XML, missing)."""
     if getattr(getattr(eq, "chain", None), "motor", None) is not None:
-        return mmpevem_vtype_xml(eq, vtype_id, mass_kg, frontal_area_m2, vclass)
+        return mmpevem_vtype_xml(eq, vtype_id, mass_kg, frontal_area_m2, vclass, out)
     params, missing = energy_model_params(eq, mass_kg, frontal_area_m2, air_c)
     attrs = (f"id={quoteattr(vtype_id)} emissionClass=\"Energy/unknown\" "
              f"mass=\"{params['mass']:.6g}\"")
@@ -188,7 +204,7 @@ def energy_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
         lines.append("<!-- not expressible in SUMO's Energy model, left out: "
                      + "; ".join(m.replace("--", "- -") for m in missing) + " -->")
     lines += ["<additional>", f"    <vType {attrs}>",
-              f'        <param key="drvpw.equation" value={quoteattr(eq.name)}/>',
+              f'        <param key="drvpw.equation" value={quoteattr(equation_ref(eq, out))}/>',
               f'        <param key="drvpw.mass" value="{params["mass"]:.6g}"/>']
     for k in ("frontSurfaceArea", "airDragCoefficient", "rollDragCoefficient", "rotatingMass",
               "constantPowerIntake", "radialDragCoefficient", "propulsionEfficiency",
@@ -200,7 +216,8 @@ def energy_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
 
 
 def mmpevem_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
-                      frontal_area_m2: float | None = None, vclass: str | None = None) -> tuple[str, list[str]]:
+                      frontal_area_m2: float | None = None, vclass: str | None = None,
+                      out=None) -> tuple[str, list[str]]:
     """An additional file with one vType on SUMO's MMPEVEM (``emissionClass="MMPEVEM"``) for
     an equation whose chain is SUMO's MMPEVEM motor (:func:`~sumo_drvpw.model.mmpevem.mmpevem_params`,
     the inverse of the equation ``vtype_energy`` makes of such a vType); returns (XML, missing)."""
@@ -219,7 +236,7 @@ def mmpevem_vtype_xml(eq: Equation, vtype_id: str, mass_kg: float | None = None,
         lines.append("<!-- not expressible in SUMO's MMPEVEM, left out: "
                      + "; ".join(m.replace("--", "- -") for m in missing) + " -->")
     lines += ["<additional>", f"    <vType {attrs}>",
-              f'        <param key="drvpw.equation" value={quoteattr(eq.name)}/>']
+              f'        <param key="drvpw.equation" value={quoteattr(equation_ref(eq, out))}/>']
     for k, v in params.items():
         if k != "mass":
             lines.append(f'        <param key="{k}" value={quoteattr(v if isinstance(v, str) else f"{v:.12g}")}/>')
