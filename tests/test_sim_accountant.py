@@ -505,3 +505,28 @@ def test_each_row_shows_the_mass_its_equation_booked(tmp_path):
     v = res.vehicles
     assert (v[v.equation == "vsp_ldv1999"].mass_kg == 2124.0).all()
     assert (v[v.equation == "moves_passenger_car"].mass_kg == 1478.8).all() and len(v) == 6
+
+
+def test_an_accountant_stepped_twice_per_step_books_each_step_once(tmp_path):
+    """A script that adds the Accountant as a step listener and also calls its step() (or
+    adds the listener twice) booked every step twice — distance, time and energy doubled,
+    silently (a rehearsal: +56 % net energy). A call for a time already booked is now
+    ignored and counted in a warning; the totals equal a single listener's."""
+    ran = run_scenario(CITY, tmp_path / "run", end=120, equations=[PHYS], figures=False)
+    sc = load_scenario(CITY, end=120)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, equations=[PHYS], scenario=CITY, figures=False)
+        conn.addStepListener(acc)
+        while conn.simulation.getTime() < 120 - 1e-9:
+            conn.simulationStep()
+            acc.step()  # the script's own call beside the listener
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    a = ran.vehicles.sort_values(["vehicle", "equation"]).reset_index(drop=True)
+    b = res.vehicles.sort_values(["vehicle", "equation"]).reset_index(drop=True)
+    assert len(a) == len(b) > 10
+    np.testing.assert_allclose(b[COLS], a[COLS], rtol=1e-12, atol=1e-9)
+    assert res["steps"] == ran["steps"]
+    assert any("calls to book a simulation step already booked" in w for w in res["warnings"])

@@ -388,6 +388,10 @@ class Accountant(_Listener):
         elif st.missed_steps:
             warnings.append(f"{st.missed_steps} simulation steps were not booked: call "
                             "simulationStep() without a target time")
+        if getattr(st, "repeated_steps", 0):
+            warnings.append(f"{st.repeated_steps} calls to book a simulation step already booked (the same "
+                            "time) were ignored: the accountant is stepped twice per step (added as a step "
+                            "listener twice, or as one and called by the script too)")
         if self.left_new_run:
             warnings.append("a new run began (simulation time went back from {:g} s to {:g} s): this "
                             "Accountant stopped booking there and left the step listeners; "

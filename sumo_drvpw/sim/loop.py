@@ -188,6 +188,8 @@ class Stepper:
         #: ``simulationStep(t)`` jumping several steps) are counted in ``missed_steps``
         self.last_t: float | None = None
         self.missed_steps = 0
+        #: calls for a step already booked (the same simulation time): not booked again
+        self.repeated_steps = 0
         #: an FCD replay that starts after the file's first timestep sets ``skipped``: the
         #: vehicles of its first step were on the road already, not departing (cold starts)
         self.replay_info: dict = {}
@@ -294,6 +296,9 @@ class Stepper:
         t_now = conn.simulation.getTime()
         if self.last_t is not None and t_now < self.last_t - 1e-9:  # a load() began a new run
             raise NewRun(self.last_t, t_now)
+        if self.last_t is not None and t_now <= self.last_t + 1e-9:  # this step is booked already
+            self.repeated_steps += 1  # (a listener added twice, or beside a script's own step())
+            return
         ledger.steps += 1
         if self.last_t is not None and t_now - self.last_t > 1.5 * dt:
             self.missed_steps += int(round((t_now - self.last_t) / dt)) - 1
