@@ -530,3 +530,23 @@ def test_an_accountant_stepped_twice_per_step_books_each_step_once(tmp_path):
     np.testing.assert_allclose(b[COLS], a[COLS], rtol=1e-12, atol=1e-9)
     assert res["steps"] == ran["steps"]
     assert any("calls to book a simulation step already booked" in w for w in res["warnings"])
+
+
+def test_a_scenario_naming_another_network_than_sumo_runs_is_refused(tmp_path):
+    """SUMO runs the city network; the Accountant's scenario names the highway network. Every
+    vehicle was read on lanes the scenario's network lacks and booked nowhere — all zeros,
+    no warning (a rehearsal). Now a UserError names the network and the first lane."""
+    from sumo_drvpw.errors import UserError
+
+    (tmp_path / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NETS / "highway.net.xml"}"\n')
+    sc = load_scenario(CITY, end=300)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, scenario=tmp_path / "s.toml", figures=False)
+        with pytest.raises(UserError, match=r"lanes the network .*highway.net.xml lacks \(the first: '.*'; none on "
+                                            r"its lanes\): the scenario's network is not the one SUMO runs"):
+            for _ in range(300):
+                conn.simulationStep()
+                acc.step()
+    finally:
+        close_sumo(conn)

@@ -388,6 +388,8 @@ class Accountant(_Listener):
         elif st.missed_steps:
             warnings.append(f"{st.missed_steps} simulation steps were not booked: call "
                             "simulationStep() without a target time")
+        if (w := getattr(st.lane_numbers, "warning", lambda: None)()):
+            warnings.append(w)
         if getattr(st, "repeated_steps", 0):
             warnings.append(f"{st.repeated_steps} calls to book a simulation step already booked (the same "
                             "time) were ignored: the accountant is stepped twice per step (added as a step "

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass, replace
-from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -26,7 +25,7 @@ import numpy as np
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.dynamics import whole_second
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
-from sumo_drvpw.sim.network import Network, lane_numbers
+from sumo_drvpw.sim.network import LaneNumbers, Network
 from sumo_drvpw.sim.parking import Parking
 from sumo_drvpw.sim.reader import (Reader, calibrator_lanes, reinserted, tailwind,  # noqa: F401 (tailwind re-exported)
                                    yaw_rate)
@@ -133,7 +132,9 @@ class Stepper:
             ledger.lane_clipped = np.zeros(len(net.lane_edge), np.int64)
         self.vmap: dict[str, int] = {}
         self.lane_index = dict(net.lane_index)
-        self.lane_numbers = partial(lane_numbers, self.lane_index)
+        # (a replay checks its rows' lanes itself: sim/fcd_warn.lane_warnings)
+        self.lane_numbers = LaneNumbers(self.lane_index, None if getattr(conn, "is_replay", False)
+                                        else getattr(net, "path", None))
         #: vehicles whose teleport ended this step: their next step's rise starts afresh
         self.teleport_ends = getattr(conn.simulation, "getEndingTeleportIDList", lambda: ())
         self.lane_index[""] = -1

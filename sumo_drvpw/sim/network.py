@@ -256,6 +256,45 @@ def lane_numbers(lane_index: dict, lane_ids) -> np.ndarray:
         return np.fromiter((lane_index.get(x, -1) for x in lane_ids), np.int64, len(lane_ids))
 
 
+class LaneNumbers:
+    """:func:`lane_numbers` for a run's reads, counting the lane ids the network lacks
+    (``unknown``; ``first`` the first of them) beside the ones it has (``known``). Reads of
+    such lanes only (:data:`FOREIGN_READS` of them, none known) are a UserError naming
+    ``net_file``: the scenario's network is not the one SUMO runs (its vehicles were booked
+    nowhere: zeros, silently). ``net_file`` None: reads not counted (an FCD replay, which
+    checks its rows' lanes itself)."""
+
+    FOREIGN_READS = 20
+
+    def __init__(self, lane_index: dict, net_file=None):
+        self.index, self.net_file = lane_index, net_file
+        self.unknown, self.known, self.first = 0, 0, None
+
+    def __call__(self, lane_ids) -> np.ndarray:
+        out = lane_numbers(self.index, lane_ids)
+        if self.net_file is None:  # (not counted)
+            return out
+        k = int(np.count_nonzero(out >= 0))
+        self.known += k
+        if k < len(out):
+            bad = [x for x in lane_ids if x and x not in self.index]
+            self.unknown += len(bad)
+            if bad and self.first is None:
+                self.first = bad[0]
+            if self.known == 0 and self.unknown >= self.FOREIGN_READS:
+                raise UserError(f"SUMO's vehicles drive on lanes the network {self.net_file} lacks (the "
+                                f"first: {self.first!r}; none on its lanes): the scenario's network is not "
+                                "the one SUMO runs — give the net-file SUMO runs")
+        return out
+
+    def warning(self) -> str | None:
+        """What the run's summary says of reads on lanes the network lacks, if any."""
+        if not self.unknown:
+            return None
+        return (f"{self.unknown} reads of vehicles on lanes the network {Path(str(self.net_file)).name} lacks "
+                f"(the first: {self.first!r}) were not booked: is the scenario's network the one SUMO runs?")
+
+
 def lane_profile(shape3d, length: float, window: float, max_rad: float,
                  behind: bool = False, nodes: bool = False):
     """Robust slope profile of one lane: (θ per bin [rad], clipped flags[, z at the bin
