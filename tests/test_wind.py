@@ -79,6 +79,11 @@ def test_add_wind_needs_a_heading_and_never_replaces_a_measured_wind():
     assert out["wind_mps"].tolist() == pytest.approx([-3.0, 3.0]) and "wind_mps" not in df
     assert rep["heading_source"] == "column bearing_deg"
     assert heading_of(df.assign(heading_deg=[370.0, np.nan]))[0][0] == pytest.approx(10.0)
+    # a standing car's logged heading is not read: still air there, as docs/adapters.md says
+    # (a phone's bearing at standstill gave standing samples a wind: a rehearsal)
+    stand = df.assign(speed_mps=[0.0, 10.0], heading_deg=[90.0, 90.0])
+    out, rep = add_wind(stand, 3.0, 90.0)
+    assert out["wind_mps"].tolist() == pytest.approx([0.0, -3.0]) and rep["samples_with_heading"] == 1
 
 
 def _synth_without_air_data(wind_mps: float, wind_from: float, seed: int):

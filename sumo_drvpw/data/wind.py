@@ -101,12 +101,15 @@ def heading_from_positions(lat_deg, lon_deg, speed_mps, trip_ids,
 
 def heading_of(df: pd.DataFrame, where: str = "the log") -> tuple[np.ndarray, str]:
     """Heading per sample [°] and where it came from: a heading column
-    (:data:`HEADING_COLUMNS`), else GPS positions (:func:`heading_from_positions`). A log
+    (:data:`HEADING_COLUMNS`), else GPS positions (:func:`heading_from_positions`); NaN
+    where the car moves slower than :data:`HEADING_MIN_SPEED_MPS` either way. A log
     with neither is a UserError naming the columns."""
     for c in HEADING_COLUMNS:
         if c in df:
             h = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
-            return np.where(np.isfinite(h), h % 360.0, np.nan), f"column {c}"
+            # (a standing car's heading is not read, as from positions: still air there)
+            moving = pd.to_numeric(df["speed_mps"], errors="coerce").to_numpy(float) >= HEADING_MIN_SPEED_MPS
+            return np.where(np.isfinite(h) & moving, h % 360.0, np.nan), f"column {c}"
     if {"latitude_deg", "longitude_deg"} <= set(df.columns):
         return (heading_from_positions(df["latitude_deg"], df["longitude_deg"], df["speed_mps"],
                                        df["trip_id"]),
