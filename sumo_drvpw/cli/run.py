@@ -257,7 +257,8 @@ def main(args: argparse.Namespace) -> int:
         meta["interrupted"] = any(s.get("interrupted") for s in summaries.values())
     for n, s in summaries.items():
         _print_summary(s, Path(args.out) / n, f"[{n}] ", replaced=bool(args.equation))
-    print(f"all runs side by side: {Path(args.out) / 'runs.csv'}")
+    print(f"all runs side by side: {Path(args.out) / 'runs.csv'}"
+          + (f"; their litres and kWh per vClass: {Path(args.out) / 'chain_runs.csv'}" if chains is not None else ""))
     if meta["interrupted"]:  # one after the other: the sweep ended in the interrupted scenario
         left = [n for n in names if n not in summaries]
         print(f"interrupted: outputs cover the simulated part of [{list(summaries)[-1]}]"
