@@ -683,3 +683,30 @@ def test_an_exported_vtype_of_a_users_equation_runs_in_a_bare_config(tmp_path, c
     v = pd.read_parquet(tmp_path / "o" / "vehicles.parquet")
     assert set(v.equation) == {"ev_mine"} and len(v) >= 5 and (v.traction_total_j > 0).all()
     assert equation_ref(load_equation("bmw_i3_battery"), tmp_path / "x.xml") == "bmw_i3_battery"
+
+
+def test_an_exported_vtype_naming_a_builtin_is_booked_by_it_and_said_so(tmp_path, capsys):
+    """An exported vType names its equation (drvpw.equation bmw_i3_battery) and writes SUMO's
+    Energy-model parameters. The run books it by the named equation (drvpw.equation outranks
+    vtype_energy), but its listing said the vType was booked by its own parameters
+    (vtype_energy.i3) and then that no vehicle of it ran (a rehearsal). Now vtype_energy leaves
+    it to the equation it names (among its vTypes not booked, with the reason, where the run
+    lists any)."""
+    from sumo_drvpw.fileio import write_text
+
+    assert cli_main(["export-vtype", "bmw_i3_battery", "--vehicle", "bmw_i3", "--id", "i3",
+                     "--out", str(tmp_path / "i3.add.xml")]) == 0
+    write_text(tmp_path / "r.rou.xml", EXPORT_ROUTES.format(vt="i3"))
+    write_text(tmp_path / "c.sumocfg", f'<configuration><input><net-file value="{NETS / "highway.net.xml"}"/>'
+               '<route-files value="r.rou.xml"/><additional-files value="i3.add.xml"/></input>'
+               '<time><end value="150"/></time><report><no-warnings value="true"/></report></configuration>')
+    capsys.readouterr()
+    assert cli_main(["run", str(tmp_path / "c.sumocfg"), "--no-figures", "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert "no vehicle of vType i3 ran" not in out and "vtype_energy.i3" not in out
+    doc = json.loads((tmp_path / "o" / "summary.json").read_text())
+    ve = doc["assumptions"].get("vtype_energy", {})
+    assert "i3" not in ve.get("booked", {})
+    assert not ve or "drvpw.equation names its equation (bmw_i3_battery)" in ve["not_booked"]["i3"]
+    v = pd.read_parquet(tmp_path / "o" / "vehicles.parquet")
+    assert set(v[v.vtype == "i3"].equation) == {"bmw_i3_battery"}

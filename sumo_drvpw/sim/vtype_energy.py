@@ -185,6 +185,20 @@ def _name(vt: str, taken: set[str]) -> str:
     return name
 
 
+def _named_elsewhere(vt: str, info, vdata: dict) -> str | None:
+    """Why a vType the scenario or its own ``drvpw.equation`` gives other equations is not
+    booked by its Energy-model parameters (the resolver books it by those: an exported
+    vType names its equation so), else None."""
+    named = (vdata.get(vt) or {}).get("equations")
+    if named is not None:
+        if any(str(e) == VTYPE_ENERGY or str(e).startswith(VTYPE_ENERGY + ".") for e in named):
+            return None
+        return f"the scenario's vtypes.{vt}.equations names its equations"
+    if info.equation and not str(info.equation).startswith(VTYPE_ENERGY):
+        return f"its drvpw.equation names its equation ({info.equation})"
+    return None
+
+
 def vtype_equations(file_vtypes, sc=None, step_s: float | None = None) -> tuple[list[Equation], dict]:
     """One equation per vType of ``file_vtypes`` that writes SUMO's Energy model (the
     scenario's ``vehicles.vtypes`` filter applies), for the run's step length ``step_s``
@@ -285,6 +299,12 @@ def expand(equations: list, file_vtypes, sc, step_s: float | None = None) -> tup
     if not (has or own):
         return equations, {}
     eqs, listing = vtype_equations(file_vtypes, sc, step_s)
+    vdata = getattr(sc, "vtype_data", {}) or {}
+    for vt in list(listing.get("booked", {})):  # the run books these by the equations they name
+        why = _named_elsewhere(vt, file_vtypes[vt], vdata)
+        if why is not None:
+            eqs = [e for e in eqs if e.name != listing["booked"].pop(vt)["equation"]]
+            listing["not_booked"][vt] = why
     if own and not has and not eqs:  # the plug-in's own equations, no Energy vType: nothing to say
         return equations, {}
     taken = {e.name for e in equations if not is_placeholder(e)}
