@@ -550,3 +550,23 @@ def test_a_scenario_naming_another_network_than_sumo_runs_is_refused(tmp_path):
                 acc.step()
     finally:
         close_sumo(conn)
+
+
+def test_an_accountant_takes_a_builtin_scenarios_name_and_refuses_a_net_path(tmp_path):
+    """`sumo-drvpw run city` takes the built-in scenario's name; Accountant(scenario="city")
+    said "scenario file not found: city". And net= given a path (a natural mistake: it takes
+    a loaded network) raised an AttributeError; now one UserError line."""
+    from sumo_drvpw.errors import UserError
+
+    sc = load_scenario(CITY, end=30)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, scenario="city", equations=[PHYS], figures=False)
+        for _ in range(20):
+            conn.simulationStep()
+            acc.step()
+        assert acc.result()["steps"] == 20
+        with pytest.raises(UserError, match=r"Accountant: net must be a loaded network .*got str '/etc/passwd'"):
+            Accountant(conn, equations=[PHYS], net="/etc/passwd")
+    finally:
+        close_sumo(conn)

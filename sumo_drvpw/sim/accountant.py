@@ -88,7 +88,9 @@ def scenario_for(conn, equations, scenario=None, **overrides) -> Scenario:
     if scenario is not None:
         if equations is not None:
             overrides["equations"] = list(equations)
-        return load_scenario(scenario, **overrides)
+        from sumo_drvpw.sim.scenario_paths import scenario_path
+
+        return load_scenario(scenario_path(scenario), **overrides)  # (a built-in's name too, as run takes it)
     if not equations:
         raise UserError("Accountant: give equations=[...] or scenario=...")
     nets = _option_files(conn, "net-file")
@@ -167,6 +169,10 @@ class Accountant(_Listener):
             self.equations, self.file_vtypes, sc,
             getattr(conn, "recorded_step_s", None) or float(conn.simulation.getDeltaT()))
         self.names = names = [e.name for e in self.equations]
+        if net is not None and not hasattr(net, "edge_ids"):
+            raise UserError(f"Accountant: net must be a loaded network (sumo_drvpw.sim.network.load_network), "
+                            f"got {type(net).__name__} {str(net)[:60]!r}; a net file goes in the scenario "
+                            "([sumo] net), or SUMO's own is read")
         self.net = net if net is not None else load_network(
             sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
         self.eqset = EquationSet(self.equations)
