@@ -1778,6 +1778,7 @@ def test_a_flipped_battery_current_is_refused_not_fitted(tmp_path, capsys):
                      "--load", "heater_power_w", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "is the current's sign flipped?" in err and "flipped.csv" in err and "current_positive" in err
+    assert "its mapping's scale = -1 on battery_current_a" in err  # (the import's fix, too: a rehearsal)
     assert not out.exists()
     # the log as logged still calibrates
     assert cli_main(["calibrate", str(log), "--target", "battery", "--equation", str(road),

@@ -338,7 +338,8 @@ def _falling(where: str, source: str, r: float, n: int, threshold_w: float, rise
     return (f"{where}: the measured battery power ({source}) falls where {rises} rises (correlation "
             f"r = {r:.2f} over {n} samples beyond ±{threshold_w / 1000:g} kW): is the "
             "current's sign flipped? The vehicle file's [battery] current_positive says which sign "
-            "discharges (\"discharge\" or \"charge\")")
+            "discharges (\"discharge\" or \"charge\"); for a log written by the column import, "
+            "its mapping's scale = -1 on battery_current_a turns the sign at the import")
 
 
 def _has_engine(log: DriveLog, veh: Vehicle | None) -> bool:
