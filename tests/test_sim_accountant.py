@@ -570,3 +570,21 @@ def test_an_accountant_takes_a_builtin_scenarios_name_and_refuses_a_net_path(tmp
             Accountant(conn, equations=[PHYS], net="/etc/passwd")
     finally:
         close_sumo(conn)
+
+
+def test_a_step_after_sumo_closed_is_one_clear_error(tmp_path):
+    """step() after the script closed SUMO raised libsumo's or traci's own error ('A network
+    was not yet constructed'); now a UserError that says SUMO is closed, and result() stays
+    readable."""
+    from sumo_drvpw.errors import UserError
+
+    sc = load_scenario(CITY, end=30)
+    conn = start_sumo(sc.sumo_args)
+    acc = Accountant(conn, equations=[PHYS], scenario=CITY, figures=False)
+    for _ in range(5):
+        conn.simulationStep()
+        acc.step()
+    close_sumo(conn)
+    with pytest.raises(UserError, match="Accountant: SUMO is closed"):
+        acc.step()
+    assert acc.result()["steps"] == 5

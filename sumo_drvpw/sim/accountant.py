@@ -228,6 +228,12 @@ class Accountant(_Listener):
                 raise
             self.left_new_run = (e.last_t, e.t_now)
             return False
+        except Exception as e:  # SUMO closed under it: traci's FatalTraCIError, libsumo's error
+            if type(e).__name__ in ("FatalTraCIError", "TraCIException") and self.stepper.last_t is not None \
+                    and not _connected(self.conn):
+                raise UserError("Accountant: SUMO is closed (or not started): step() books the step SUMO "
+                                "just made; its result() stays readable") from None
+            raise
         return True
 
     def cleanUp(self) -> None:  # noqa: N802 (traci's name)
@@ -531,3 +537,12 @@ def _names_a_file(value: str) -> bool:
     """Whether a vType's ``drvpw.equation`` value is an equation file's path (a TOML file, or
     a path with a folder), not an equation's name."""
     return value.lower().endswith(".toml") or "/" in value or "\\" in value
+
+
+def _connected(conn) -> bool:
+    """Whether SUMO answers on ``conn`` (a closed libsumo or traci connection does not)."""
+    try:
+        conn.simulation.getTime()
+        return True
+    except Exception:
+        return False
