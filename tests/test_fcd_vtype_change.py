@@ -22,28 +22,35 @@ NETS = Path(__file__).resolve().parent.parent / "sumo_drvpw" / "sim" / "builtin"
 PHYS = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01})
 
 
-def _scenario(d: Path) -> Path:
-    """Cars of 1600 kg whose calibrator on their second edge makes them 'loaded' (3000 kg)."""
-    (d / "r.rou.xml").write_text("""<routes>
-    <vType id="car" vClass="passenger" mass="1600"/>
-    <flow id="f" type="car" begin="0" end="60" period="10" departSpeed="max">
-        <route edges="c00c10 c10c20"/></flow>
+def calibrated(d: Path, first: str, second: str, route: str = "c00c10 c10c20", pos: float = 0.0,
+               end: float = 200.0) -> Path:
+    """A city-net config whose cars (vType 'first', its attributes ``first``) a calibrator on
+    their second edge, at ``pos``, makes vType 'second' (attributes ``second``)."""
+    (d / "r.rou.xml").write_text(f"""<routes>
+    <vType id="first" {first}/>
+    <flow id="f" type="first" begin="0" end="60" period="10" departSpeed="max">
+        <route edges="{route}"/></flow>
 </routes>
 """)
-    (d / "cal.add.xml").write_text("""<additional>
-    <vType id="loaded" vClass="passenger" mass="3000"/>
-    <calibrator id="ca" edge="c10c20" pos="0" vTypes="car"><flow begin="0" end="1000" type="loaded"/></calibrator>
+    (d / "cal.add.xml").write_text(f"""<additional>
+    <vType id="second" {second}/>
+    <calibrator id="ca" edge="c10c20" pos="{pos:g}" vTypes="first"><flow begin="0" end="1000" type="second"/></calibrator>
 </additional>
 """)
     cfg = d / "c.sumocfg"
     cfg.write_text(f"""<configuration>
     <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/>
         <additional-files value="cal.add.xml"/></input>
-    <time><begin value="0"/><end value="200"/></time>
+    <time><begin value="0"/><end value="{end:g}"/></time>
     <report><no-warnings value="true"/></report>
 </configuration>
 """)
     return cfg
+
+
+def _scenario(d: Path) -> Path:
+    """Cars of 1600 kg whose calibrator on their second edge makes them vType 'second' (3000 kg)."""
+    return calibrated(d, 'vClass="passenger" mass="1600"', 'vClass="passenger" mass="3000"')
 
 
 @pytest.mark.parametrize("chunk_rows", [None, 97], ids=["whole", "streamed"])
@@ -54,13 +61,13 @@ def test_a_vtype_sumo_changes_during_a_trip_replays_as_live(tmp_path, chunk_rows
     fcd = process_fcd(tmp_path / "fcd.xml", vtype_files=[tmp_path / "r.rou.xml", tmp_path / "cal.add.xml"],
                       net=NETS / "city.net.xml", equations=[PHYS], end=200, figures=False,
                       chunk_rows=chunk_rows)
-    assert "type=\"loaded\"" in (tmp_path / "fcd.xml").read_text()
+    assert "type=\"second\"" in (tmp_path / "fcd.xml").read_text()
     a = live.vehicles.set_index("vehicle").sort_index()
     b = fcd.vehicles.set_index("vehicle").sort_index()
     assert len(a) == len(b) == 6 and (a.index == b.index).all()
     # vehicles on a calibrator's edge are read every step, live and replayed: every car
     # changes (read only every TYPE_CHECK_STEPS, the sixth left before a check: 5)
-    changed = a.vtype == "loaded"
+    changed = a.vtype == "second"
     assert live["vtype_changes"] == fcd["vtype_changes"] == changed.sum() == 6
     assert (b.vtype == a.vtype).all() and (b.mass_kg == a.mass_kg).all()
     assert (a.mass_kg[changed] == 3000.0).all() and (a.mass_kg[~changed] == 1600.0).all()

@@ -18,35 +18,18 @@ import pytest
 
 from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.fcd import process_fcd
+from test_fcd_vtype_change import calibrated
 
 pytestmark = pytest.mark.sumo
 
-NETS = Path(__file__).resolve().parent.parent / "sumo_drvpw" / "sim" / "builtin" / "networks"
 PETROL, DIESEL = "epa_gasoline_car", "epa_diesel_car"
 
 
 def _scenario(d: Path) -> Path:
     """Petrol cars that a calibrator on their second edge (mid-edge) turns into diesel cars."""
-    (d / "r.rou.xml").write_text("""<routes>
-    <vType id="petrol" vClass="passenger" emissionClass="HBEFA4/PC_petrol_Euro-6ab"/>
-    <flow id="f" type="petrol" begin="0" end="60" period="10" departSpeed="max">
-        <route edges="c00c10 c10c20 c20c30"/></flow>
-</routes>
-""")
-    (d / "cal.add.xml").write_text("""<additional>
-    <vType id="diesel" vClass="passenger" emissionClass="HBEFA4/PC_diesel_Euro-6ab"/>
-    <calibrator id="ca" edge="c10c20" pos="40" vTypes="petrol"><flow begin="0" end="1000" type="diesel"/></calibrator>
-</additional>
-""")
-    cfg = d / "c.sumocfg"
-    cfg.write_text(f"""<configuration>
-    <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/>
-        <additional-files value="cal.add.xml"/></input>
-    <time><begin value="0"/><end value="250"/></time>
-    <report><no-warnings value="true"/></report>
-</configuration>
-""")
-    return cfg
+    return calibrated(d, 'vClass="passenger" emissionClass="HBEFA4/PC_petrol_Euro-6ab"',
+                      'vClass="passenger" emissionClass="HBEFA4/PC_diesel_Euro-6ab"',
+                      route="c00c10 c10c20 c20c30", pos=40.0, end=250.0)
 
 
 def _check(res, out: Path | None = None):
@@ -86,7 +69,7 @@ def test_a_vtype_change_to_other_equations_books_each_its_part(tmp_path, chunk_r
     cfg = _scenario(tmp_path)
     live = run_scenario(cfg, tmp_path / "live", end=250, figures=False, trace=True,
                         options=["--fcd-output", str(tmp_path / "fcd.xml"), "--precision", "6"])
-    assert 'type="diesel"' in (tmp_path / "fcd.xml").read_text()
+    assert 'type="second"' in (tmp_path / "fcd.xml").read_text()
     _check(live, tmp_path / "live")
     rep = process_fcd(tmp_path / "fcd.xml", scenario=cfg, end=250, figures=False, chunk_rows=chunk_rows)
     _check(rep)
