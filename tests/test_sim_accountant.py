@@ -588,3 +588,30 @@ def test_a_step_after_sumo_closed_is_one_clear_error(tmp_path):
     with pytest.raises(UserError, match="Accountant: SUMO is closed"):
         acc.step()
     assert acc.result()["steps"] == 5
+
+
+def test_a_vtype_made_at_run_time_is_booked_by_its_emission_classs_carrier(tmp_path):
+    """A script copies a vType and sets the copy's emissionClass to SUMO's Energy model
+    (vehicletype.copy, setEmissionClass): its cars were booked by the petrol chain as well
+    as the battery chain (a rehearsal: 0.209 L of petrol for an EV), since only the files'
+    emissionClass was read. A vType the files do not declare now takes the class SUMO gives
+    it; the files' own vType keeps its petrol chain."""
+    sc = load_scenario(CITY, end=120)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, equations=["epa_gasoline_car", "bmw_i3_battery"], figures=False)  # (no vType filter)
+        conn.vehicletype.copy("prius3", "ev_rt")
+        conn.vehicletype.setEmissionClass("ev_rt", "Energy/unknown")
+        conn.route.add("r_rt", ["c00c10", "c10c20"])
+        for k in range(3):
+            conn.vehicle.add(f"ev{k}", "r_rt", typeID="ev_rt", depart=str(2 * k))
+        for _ in range(120):
+            conn.simulationStep()
+            acc.step()
+        v = acc.result().vehicles
+    finally:
+        close_sumo(conn)
+    ev = v[v.vtype == "ev_rt"]
+    assert len(ev) == 3 and set(ev.equation) == {"bmw_i3_battery"}, ev[["vehicle", "equation"]]
+    other = v[v.vtype == "prius3"]
+    assert len(other) > 0 and "epa_gasoline_car" in set(other.equation)

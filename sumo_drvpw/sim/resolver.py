@@ -148,6 +148,14 @@ class VTypeResolver:
             return app
         ec = info.emission_class if info is not None else None
         carrier, src = energy_carrier(ec), "written"
+        if info is None and vt not in SUMO_DEFAULT_VTYPES and self.conn is not None:
+            # a vType the files do not declare, made at run time (vehicletype.copy and its
+            # setters): its carrier is the class SUMO gives it (before, every chain booked it)
+            try:
+                ec = str(self.conn.vehicletype.getEmissionClass(vt)) or None
+            except Exception:  # (a connection that cannot say)
+                ec = None
+            carrier, src = energy_carrier(ec), "SUMO's (a vType made at run time)"
         if carrier is None:  # none written, or a name of no known carrier
             if len(present) < 2 or not getattr(self.sc, "default_carrier", False):
                 return app
