@@ -423,7 +423,7 @@ def of_log(df) -> "tuple[dict, int]":
     out = d.summary().get(LOG_LABEL, {})
     if steps:  # (also where no part has a 1-Hz sample: the refusal says how far apart they are)
         out["logged_s"] = logged
-        out["median_step_s"] = float(np.median(np.concatenate(steps))) if steps else float("nan")
+        out["median_step_s"] = float(np.median(np.concatenate(steps)))
     return out, len(names)
 
 

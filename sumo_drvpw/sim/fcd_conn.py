@@ -102,7 +102,7 @@ class _VType(_Domain):
         return self.r.type_eclass.get(vt, self.r.default_eclass)
 
     def getActionStepLength(self, vt):  # noqa: N802 (the route files', else the step length)
-        return getattr(self.r, "type_asl", {}).get(vt, self.r.dt)
+        return self.r.type_asl.get(vt, self.r.dt)
 
     def getMass(self, vt):  # noqa: N802 (a person type's: the route files', else SUMO's 70 kg)
         return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
@@ -147,6 +147,8 @@ class _Rows:
         #: vType → its shut-off params as the route files write them (set by replay_fcd)
         self.type_params: dict = {}
         self.type_eclass: dict = {}
+        #: vType → its actionStepLength [s] as the route files write it (set by replay_fcd)
+        self.type_asl: dict = {}
         self.default_eclass = ""  # (a vType the files do not hold: sim/vtype_energy.replay_emission_classes)
         #: the route files' stops matched to where vehicles stand (fcd_stops.StopTracker;
         #: set by replay_fcd, None: no file declares a stop)

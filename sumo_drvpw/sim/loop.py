@@ -151,13 +151,12 @@ class Stepper:
         self.ballistic = method == "ballistic"
         #: SUMO switches Euler to ballistic when a vehicle of a vType with its own action step
         #: length is built, where step-method.ballistic is not given (sumo_start.action_step_switches):
-        #: the vType of each vehicle registered is asked then; ``ballistic_from`` the first such vType
-        self.asl = (getattr(conn.vehicletype, "getActionStepLength", None)
-                    if method == "euler" and hasattr(conn, "vehicletype")
-                    and (getattr(conn, "asl_may_switch", False) if getattr(conn, "is_replay", False)
-                         else physics.ballistic_given is None) else None)
+        #: the vType of each vehicle registered is asked then (None: no switch to watch for)
+        may_switch = (getattr(conn, "asl_may_switch", False) if getattr(conn, "is_replay", False)
+                      else physics.ballistic_given is None)
+        self.asl = (getattr(getattr(conn, "vehicletype", None), "getActionStepLength", None)
+                    if method == "euler" and may_switch else None)
         self.asl_seen: set = set()
-        self.ballistic_from: str | None = None
         self.tracking = (physics.positions == "tracked" and not use_subscriptions
                          and method == "euler" and net.lane_end is not None
                          and net.lane_own_edge is not None)
@@ -232,7 +231,6 @@ class Stepper:
             self.asl_seen.add(vt)
             if action_step_switches(float(self.asl(vt)), self.dt):  # SUMO moves ballistic from now
                 self.ballistic, self.tracking, self.asl = True, False, None
-                self.ballistic_from = vt
         res = self.resolve(vt, vid)
         mass, app, keep = res[:3]
         i = ledger.add_vehicle(vid, vt, mass, app, keep, res[3] if len(res) > 3 else "")

@@ -257,31 +257,34 @@ def lane_numbers(lane_index: dict, lane_ids) -> np.ndarray:
 
 
 class LaneNumbers:
-    """:func:`lane_numbers` for a run's reads, counting the lane ids the network lacks
-    (``unknown``; ``first`` the first of them) beside the ones it has (``known``). Reads of
-    such lanes only (:data:`FOREIGN_READS` of them, none known) are a UserError naming
+    """:func:`lane_numbers` for a run's reads, counting the reads of lane ids the network
+    lacks (``unknown``; ``first`` the first of them). Reads of such lanes only
+    (:data:`FOREIGN_READS` of them, none on its lanes yet) are a UserError naming
     ``net_file``: the scenario's network is not the one SUMO runs (its vehicles were booked
     nowhere: zeros, silently). ``net_file`` None: reads not counted (an FCD replay, which
-    checks its rows' lanes itself)."""
+    checks its rows' lanes itself). The ids are looked at one by one only when one is
+    unknown (a KeyError of the fast path)."""
 
     FOREIGN_READS = 20
 
     def __init__(self, lane_index: dict, net_file=None):
         self.index, self.net_file = lane_index, net_file
-        self.unknown, self.known, self.first = 0, 0, None
+        self.unknown, self.first, self.any_known = 0, None, False
 
     def __call__(self, lane_ids) -> np.ndarray:
-        out = lane_numbers(self.index, lane_ids)
-        if self.net_file is None:  # (not counted)
-            return out
-        k = int(np.count_nonzero(out >= 0))
-        self.known += k
-        if k < len(out):
-            bad = [x for x in lane_ids if x and x not in self.index]
+        if self.net_file is None:
+            return lane_numbers(self.index, lane_ids)
+        try:
+            out = np.fromiter(map(self.index.__getitem__, lane_ids), np.int64, len(lane_ids))
+        except KeyError:
+            bad = [x for x in lane_ids if x not in self.index]
             self.unknown += len(bad)
-            if bad and self.first is None:
+            if self.first is None:
                 self.first = bad[0]
-            if self.known == 0 and self.unknown >= self.FOREIGN_READS:
+            out = np.fromiter((self.index.get(x, -1) for x in lane_ids), np.int64, len(lane_ids))
+        if not self.any_known:
+            self.any_known = bool((out >= 0).any())
+            if not self.any_known and self.unknown >= self.FOREIGN_READS:
                 raise UserError(f"SUMO's vehicles drive on lanes the network {self.net_file} lacks (the "
                                 f"first: {self.first!r}; none on its lanes): the scenario's network is not "
                                 "the one SUMO runs — give the net-file SUMO runs")
