@@ -615,3 +615,36 @@ def test_a_vtype_made_at_run_time_is_booked_by_its_emission_classs_carrier(tmp_p
     assert len(ev) == 3 and set(ev.equation) == {"bmw_i3_battery"}, ev[["vehicle", "equation"]]
     other = v[v.vtype == "prius3"]
     assert len(other) > 0 and "epa_gasoline_car" in set(other.equation)
+
+
+def test_an_accountant_attached_mid_run_books_what_a_whole_run_books_from_then(tmp_path):
+    """A rehearsal's Accountant created after SUMO had run 150 steps: the cars already on the
+    road had their first booked step without its kinetic-energy change (a = 0 where the speed
+    before was unknown), up to 9 kJ off each. Now SUMO's acceleration of that step is read:
+    per vehicle and equation, the late Accountant books what one attached at the start books
+    after that step (its totals less its energy(vehicle) then), and the vehicles departing
+    later alike."""
+    sc = load_scenario(CITY, end=300)
+    runs = []
+    for attach in (0, 150):
+        conn = start_sumo(sc.sumo_args)
+        try:
+            acc, snap = None, {}
+            for k in range(300):
+                if k == attach:
+                    acc = Accountant(conn, equations=[PHYS, VSP], scenario=CITY, keep_vehicles=True)
+                    conn.addStepListener(acc)
+                conn.simulationStep()
+                if attach == 0 and k + 1 == 150:
+                    snap = {v: acc.energy(v) for v in conn.vehicle.getIDList()}
+            runs.append((acc.result().vehicles.set_index(["vehicle", "equation"]), snap))
+        finally:
+            close_sumo(conn)
+    (whole, snap), (late, _) = runs
+    on_road = [v for v in snap if snap[v]["phys"]["traction"] > 0]
+    assert len(on_road) >= 5
+    for (v, e), row in late.iterrows():
+        was = snap.get(v, {}).get(e, {})
+        for col, key in (("traction_total_j", "traction"), ("recup_total_j", "recuperable"),
+                         ("net_total_j", "net")):
+            assert row[col] == pytest.approx(whole.loc[(v, e), col] - was.get(key, 0.0), rel=1e-9, abs=0.01)

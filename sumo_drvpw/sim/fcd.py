@@ -59,6 +59,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.fcd_begin import accel_at_begin, begin_frame
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_warn import lane_warnings, no_angle_warning, partial_warnings, unplaced_person_warning
@@ -187,6 +188,7 @@ def timesteps(blocks, begin_s: float | None = None, keep=None, label="", info: d
     ``info["skipped"]`` is set True when a timestep before ``begin_s`` was left out."""
     pending: _Step | None = None
     pieces: list[dict] = []
+    skipped = None  # the last timestep before begin_s: (its time, its pieces)
     last = -np.inf
     for blk in blocks:
         cols = blk.cols
@@ -214,16 +216,22 @@ def timesteps(blocks, begin_s: float | None = None, keep=None, label="", info: d
             if begin_s is not None and u < begin_s - 1e-9:
                 if info is not None:
                     info["skipped"] = True
+                skipped = (u, [*(skipped[1] if skipped and skipped[0] == u else ()), _cut(cols, a, b)])
                 continue
             if pending is not None and u == pending.t:
                 pieces.append(_cut(cols, a, b))
                 continue
             if pending is not None:
                 pending.cols = _join(pieces)
+                if skipped:  # the first timestep replayed: its accelerations (accel_at_begin)
+                    pending.cols = accel_at_begin(pending.cols, _join(skipped[1]), pending.t, skipped[0])
+                    skipped = None
                 yield pending
             pending, pieces = _Step(u, None), [_cut(cols, a, b)]
     if pending is not None:
         pending.cols = _join(pieces)
+        if skipped:
+            pending.cols = accel_at_begin(pending.cols, _join(skipped[1]), pending.t, skipped[0])
         yield pending
 
 
@@ -407,8 +415,10 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         if begin_s is not None:
             times = df.attrs["times"]
             replay_info["skipped"] = bool((times < begin_s - 1e-9).any())
-            df = df[df["time"] >= begin_s - 1e-9].copy()
-            df.attrs["times"] = times[times >= begin_s - 1e-9]
+            t_b, t_f = times[times < begin_s - 1e-9], times[times >= begin_s - 1e-9]
+            df = df[df["time"] >= begin_s - 1e-9].copy() if not (len(t_b) and len(t_f)) else \
+                begin_frame(df, float(t_b[-1]), float(t_f[0]))
+            df.attrs["times"] = t_f
         replay = FcdReplay(df, dt=dt)
         if sc.end is not None:
             n = int(np.searchsorted(replay.times + replay.dt, sc.end + 1e-9, side="right"))

@@ -27,8 +27,8 @@ from sumo_drvpw.sim.dynamics import whole_second
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import LaneNumbers, Network
 from sumo_drvpw.sim.parking import Parking
-from sumo_drvpw.sim.reader import (Reader, calibrator_lanes, reinserted, tailwind,  # noqa: F401 (tailwind re-exported)
-                                   yaw_rate)
+from sumo_drvpw.sim.reader import (Reader, calibrator_lanes, on_road_acceleration, reinserted,  # noqa: F401
+                                   tailwind, yaw_rate)  # (tailwind re-exported)
 from sumo_drvpw.sim.riders import Riders
 from sumo_drvpw.sim.shutoff import ShutOff
 from sumo_drvpw.sim.sumo_start import NewRun, action_step_switches, signals_deferred, step_method
@@ -333,6 +333,7 @@ class Stepper:
                     vmap = self.vmap
         ends = np.array([vmap[v] for v in back if v in vmap], np.int64)  # teleports ended: placed
         starts, start_ids = [], []  # vehicles first seen departing: trips that start
+        joined = []  # vehicles first seen on the road, not departing: accounting began mid-trip
         for vid in departed:
             if self.is_replay and vid in vmap:  # back after a teleport (no FCD rows): the same
                 ledger.unretire(vmap[vid])  # trip, put back on the lane there, as live
@@ -343,6 +344,8 @@ class Stepper:
                 self.prev_ids = None
             starts.append(self.register(vid))
             start_ids.append(vid)
+        if starts and self.is_replay and ledger.steps == 1 and self.replay_info.get("skipped"):
+            joined = starts  # an FCD replay from --begin: its first rows' vehicles were driving
         if starts and ledger.chain is not None and ledger.chain.cold_start_on \
                 and not (ledger.steps == 1 and self.replay_info.get("skipped")):
             ledger.chain.depart(starts, start_ids, ledger.veh_type, ledger.veh_class)
@@ -360,8 +363,10 @@ class Stepper:
             try:
                 vidx = np.fromiter(map(vmap.__getitem__, ids), np.int64, n_all)
             except KeyError:
+                n_known = ledger.n_veh
                 vidx = np.fromiter((vmap[v] if v in vmap else self.register(v) for v in ids),
                                    np.int64, n_all)
+                joined = vidx[vidx >= n_known].tolist() or joined  # (those registered just now)
             kept = ledger.veh_keep[vidx] & ~ledger.veh_parked[vidx]
             if kept.all():
                 kids = ids
@@ -413,6 +418,8 @@ class Stepper:
         ledger.veh_prev_speed[vidx] = v
         if a is None:  # SUMO's definition: (v_t − v_t−1)/Δt, 0 when first seen
             a = (v - prev) / dt
+            if joined:  # on the road when accounting began: SUMO's own (v_t − v_t−1)/Δt of the step
+                on_road_acceleration(a, vidx, joined, prev, kids, self.reader.getters[1])
             a[np.isnan(a)] = 0.0
         if angle is None:
             angle = np.zeros(n)

@@ -206,3 +206,16 @@ def reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, replay: bool):
                        | net.jumped(lp[m], p0[m], lane[k][m], pos[k][m],
                                     np.maximum(v[k][m], was[m]) * dt + net.jump_slack_m)]] = True
     return fresh
+
+
+def on_road_acceleration(a, vidx, joined, prev, kids, get_accel) -> None:
+    """Into ``a``: SUMO's acceleration of the step just made (getAcceleration: (v_t − v_t−1)/Δt,
+    exact) for the vehicles of slots ``joined`` that were on the road when they were first
+    seen (no speed of theirs read before, ``prev`` NaN): an Accountant attached mid-run, an
+    FCD replay from ``--begin``. Without it their first step booked no kinetic-energy change
+    (a = 0), one step's ½m(v_t² − v_t−1²) off each. A replay whose file has no acceleration
+    leaves NaN (then 0)."""
+    j = np.flatnonzero(np.isin(vidx, joined) & np.isnan(prev))
+    for i in j.tolist():
+        x = get_accel(kids[i])
+        a[i] = np.nan if x is None else float(x)
