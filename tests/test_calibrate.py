@@ -301,7 +301,8 @@ def test_a_drag_that_is_not_the_cars_is_flagged(tmp_path, capsys, engine):
     v = 15 + 10 * np.sin(t / 40) + 3 * np.sin(t / 7) + rng.normal(0, 0.05, len(t))
     a = np.gradient(v, t)
     m = load_vehicle_mass("bmw_i3")
-    for aero, flagged in ((0.4155, False), (17 * 0.4155, True), (-0.3, True)):  # -0.3: fitted 0 at its bound
+    for aero, flagged in ((0.4155, False), (17 * 0.4155, True), (0.4 * 0.4155, True),
+                          (-0.3, True)):  # -0.3: fitted 0 at its bound
         p = 1.05 * m * v * a + aero * v ** 3 + 0.01 * m * 9.81 * v + rng.normal(0, 300, len(t))
         f = tmp_path / f"log_{aero:g}.csv"
         pd.DataFrame({"trip_id": "T", "time_s": t, "speed_mps": v, "power_w": p}).to_csv(f, index=False)
@@ -342,3 +343,37 @@ def test_a_log_at_one_speed_is_refused_by_the_chain_calibration_too(tmp_path, ca
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cruise.csv" in err[0] and "cannot be identified" in err[0], err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("engine", [[], ["--engine", "memory"]])
+def test_a_constrained_fit_is_printed_as_written_and_a_traction_only_power_is_named(tmp_path, capsys, engine):
+    """Rehearsal on a public Nissan Leaf log whose motor power is never negative: calibrate
+    printed the free fit (R² 0.46, grade 0.32, acc 0.32), said "physically constrained fit
+    used" and wrote coefficients and an R² (−0.58) it never showed; nothing said the power
+    logs traction only. Planted: a physical power (1.05·m·v·a + drag + rolling) is not
+    flagged; the same clipped at 0 is, by count of braking samples; a power that carries
+    0.3 of the inertial power (free acc 0.3: a lag, a smoothed speed) is refit at acc's
+    bound 1, printed with the R² written in the file, and that R² below 0 is a warning."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 900.0, 0.5)
+    v = 15 + 10 * np.sin(t / 40) + 3 * np.sin(t / 7) + rng.normal(0, 0.05, len(t))
+    a = np.gradient(v, t)
+    m = load_vehicle_mass("bmw_i3")
+    road = 0.4155 * v ** 3 + 0.01 * m * 9.81 * v + rng.normal(0, 300, len(t))
+    for name, p in (("signed", 1.05 * m * v * a + road), ("traction", np.maximum(1.05 * m * v * a + road, 0.0)),
+                    ("falling", 0.3 * m * v * a + road)):
+        f = tmp_path / f"{name}.csv"
+        pd.DataFrame({"trip_id": "T", "time_s": t, "speed_mps": v, "power_w": p}).to_csv(f, index=False)
+        out = tmp_path / f"{name}.toml"
+        assert cli_main(["calibrate", str(f), "--vehicle", "bmw_i3", "--out", str(out)] + engine) == 0
+        said = capsys.readouterr().out
+        assert ("records traction only" in said) == (name == "traction"), said
+        eq = load_equation(out)
+        if name == "falling":
+            r2 = eq.metrics["r2"]
+            assert eq.terms["acc"] == pytest.approx(1.0) and r2 < 0
+            line = next(ln for ln in said.splitlines() if ln.startswith("written, physically constrained"))
+            assert f"R² = {r2:.4f}" in line and "acc 1 (at its bound)" in line
+            assert "explains less of the measured power than its mean" in said
+        else:
+            assert "explains less" not in said

@@ -161,10 +161,12 @@ def say_physics(eq, vehicle, rho_kgm3) -> None:
     from sumo_drvpw.fit.physical import drag_against_vehicle
     from sumo_drvpw.model.constants import RHO_DEFAULT
 
+    phys = eq.provenance.get("physical", {})
+    if phys.get("used") == "constrained":  # what is written, not the free fit printed above
+        say_constrained(eq, phys)
     note = drag_against_vehicle(eq, vehicle, rho_kgm3 if rho_kgm3 and rho_kgm3 > 0 else RHO_DEFAULT)
     if note:
         print(f"warning: {note}")
-    phys = eq.provenance.get("physical", {})
     w = (phys.get("reading", {}).get("grade") or {}).get("at_wheels")
     if w:
         if "grade" in phys.get("active", ()):  # the constraints set it, not the data
@@ -172,6 +174,20 @@ def say_physics(eq, vehicle, rho_kgm3) -> None:
                   "so this reads only η")
         else:
             print(("" if w["plausible"] else "warning: ") + f"grade {describe(w)}")
+
+
+def say_constrained(eq, phys) -> None:
+    """Print the constrained fit the equation file gets (the table above is the free fit's)
+    and its R²; a warning when that explains less than the power's mean does."""
+    r2, free = eq.metrics.get("r2"), eq.metrics.get("r2_unconstrained")
+    active = set(phys.get("active", ()))
+    terms = ", ".join(f"{t} {c:.4g}" + (" (at its bound)" if t in active else "") for t, c in eq.terms.items())
+    fit = "" if r2 is None else f"R² = {r2:.4f}" + ("" if free is None else f" (free fit {free:.4f}); ")
+    print(f"written, physically constrained: {fit}{terms}")
+    if r2 is not None and r2 < 0:
+        print(f"warning: the constrained equation explains less of the measured power than its mean does "
+              f"(R² {r2:.3f}): the physics do not fit these data — check what the power column measures "
+              "(its sign and unit, whether it logs traction only), the speed and the grade before using it")
 
 
 def hint_grade_source(note: str, columns, meas) -> None:

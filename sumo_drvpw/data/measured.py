@@ -155,7 +155,30 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
             codes = trip_codes_of(log.df["trip_id"])
             lag = int(round(measurement.power_lag_s / median_dt(log.df["time_s"].to_numpy(float), codes)))
             battery_w = np.nan_to_num(shift_within_trips(battery_w, codes, lag), nan=0.0)
+    if target in ("battery", "wheel"):  # does the power carry braking? (cli.note_counts says)
+        log.counts.update(braking_counts(x, p, usable))
     return Measured(log, veh, p, source, x, usable, target, battery_w, measurement, sign_test, view)
+
+
+#: inertial and grade power m·v·(a + g·sin θ) [W] below which a sample brakes hard enough
+#: that a powertrain able to recuperate shows negative power
+BRAKING_PROXY_W = -10000.0
+#: measured power [W] below which a braking sample recuperates
+RECUPERATING_W = -1000.0
+#: share of braking samples that recuperate below which a log records traction only
+TRACTION_ONLY_SHARE = 0.02
+
+
+def braking_counts(x: Inputs, p, usable) -> dict:
+    """Mergeable counts (batches add): usable samples braking hard (``braking_samples``:
+    m·v·(a + g·sin θ) < :data:`BRAKING_PROXY_W`) and those of them whose measured power
+    ``p`` recuperates (``braking_recuperating``: < :data:`RECUPERATING_W`). Nearly none
+    recuperating: the power logs traction only (a motor power or engine estimate clipped at
+    0), which no linear driving-power equation fits and which leaves a battery chain no
+    recuperation."""
+    d, y = _sign_proxy(x), np.asarray(p, float)
+    brake = np.asarray(usable, bool) & (d < BRAKING_PROXY_W) & np.isfinite(y)
+    return {"braking_samples": int(brake.sum()), "braking_recuperating": int((brake & (y < RECUPERATING_W)).sum())}
 
 
 def _numeric(col: pd.Series) -> bool:

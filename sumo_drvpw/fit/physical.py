@@ -342,9 +342,11 @@ def apply_physics_gram(eq, g: Gram | None, rho_kgm3: float = RHO_DEFAULT,
 
 
 #: the fitted drag may exceed the vehicle file's by the drivetrain's 1/η (a target behind
-#: a drivetrain) and differ by the published figures' uncertainty; beyond this factor either
-#: way (zero drag included) the aero coefficient is no drag of this car
-DRAG_RATIO_MAX = 3.0
+#: a drivetrain: ≤ 1.25) and differ by the published figures' and the air density's
+#: uncertainty (±10 % each): together at most ~1.5×; beyond this factor either way (zero
+#: drag included) the aero coefficient is no drag of this car (a rehearsal's Nissan Leaf:
+#: 0.41× its C_d·A, the rest in a c_r of 0.018, passed the factor 3 used before)
+DRAG_RATIO_MAX = 2.0
 
 
 def declared_cda(vehicle) -> tuple[float, str] | None:
