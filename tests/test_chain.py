@@ -569,6 +569,17 @@ def test_cli_calibrate_battery_then_compare_uses_the_chain(tmp_path, capsys):
     assert rep["energy_j"]["total"] < 0.95 * p_bat  # the wheel needs less than the battery gives
     md = (out / "report.md").read_text()
     assert f"{p_bat / 3.6e6:.3f}" in md and "the target's (the chain's battery or fuel power)" in md
+    # a chain beside an equation without one (a rehearsal: the battery target dropped without
+    # a word): compared at the wheels, and said, on the console and in the report's context
+    capsys.readouterr()
+    for engine in ([], ["--engine", "memory"]):
+        mixed = tmp_path / f"mixed{len(engine)}"
+        assert cli_main(["compare", str(log), "--equation", str(eq), "--equation", str(road),
+                         "--out", str(mixed)] + engine) == 0
+        said = capsys.readouterr().out
+        assert "note: the equations predict different targets" in said and "--target battery" in said
+        assert json.loads((mixed / "report.json").read_text())["settings"]["target"] == "wheel"
+        assert "**target**: the equations predict different targets" in (mixed / "report.md").read_text()
     # a driving-power comparison of a log without a driving-power source is refused (exit 2)
     assert cli_main(["compare", str(log), "--equation", str(eq), "--target", "fuel",
                      "--out", str(tmp_path / "f")]) == 2
@@ -1818,3 +1829,32 @@ def test_no_cold_start_fuel_while_a_start_stop_engine_is_off():
     assert tot[0, 0, 5] == 0.0 and tot[1, 0, 5] == pytest.approx(4000.0 * 60 / 43.2e6 / 0.745 + 0.07 * part)
     warm = 80e3 * 20.0 * (1.0 - np.exp(-60.0 / CABIN_WARMUP_TAU_S))
     assert tot[0, 1, 2] == pytest.approx(300.0 * 60 + warm) == tot[1, 1, 2]
+
+
+def test_a_battery_chain_that_recuperates_nothing_is_flagged(tmp_path, capsys):
+    """Rehearsal on a public Nissan Leaf log: `calibrate --target battery` fitted a
+    recuperation efficiency of 0.001 (at its bound) and called it "low: friction braking or
+    a recuperation limit dominates", no warning; SUMO runs then booked no recuperation for
+    an electric car. Planted: the battery V·I of a chain returning 0.7 of braking is not
+    flagged; the same V·I with only the auxiliaries' draw while braking (a battery that
+    never takes energy back) is, in the console's warnings and in the equation's [chain.provenance] warnings."""
+    from sumo_drvpw.cli import main as cli_main
+
+    from sumo_drvpw.data.log import from_frame
+
+    log, road = _planted_battery_log(tmp_path)
+    df = pd.read_csv(log)
+    braking = load_equation(road).power(from_frame(df).inputs()) < 0
+    clipped = tmp_path / "clipped.csv"  # while braking only the auxiliaries draw: nothing returns
+    df.assign(battery_current_a=np.where(braking, (500.0 + df["heater_power_w"]) / 360.0,
+                                         df["battery_current_a"])).to_csv(clipped, index=False)
+    for f, flagged in ((log, False), (clipped, True)):
+        eq = tmp_path / f"{f.stem}.toml"
+        assert cli_main(["calibrate", str(f), "--target", "battery", "--equation", str(road),
+                         "--load", "heater_power_w", "--out", str(eq)]) == 0
+        said = capsys.readouterr().out
+        chain = load_equation(eq).chain
+        assert (chain.recuperation_efficiency < 0.15) == flagged
+        hit = "IMPLAUSIBLE for a car that recuperates"
+        assert (f"warning: energy chain recuperation_efficiency" in said and hit in said) == flagged, said
+        assert any(hit in w for w in chain.provenance.get("warnings", [])) == flagged
