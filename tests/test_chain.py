@@ -1856,5 +1856,5 @@ def test_a_battery_chain_that_recuperates_nothing_is_flagged(tmp_path, capsys):
         chain = load_equation(eq).chain
         assert (chain.recuperation_efficiency < 0.15) == flagged
         hit = "IMPLAUSIBLE for a car that recuperates"
-        assert (f"warning: energy chain recuperation_efficiency" in said and hit in said) == flagged, said
+        assert ("warning: energy chain recuperation_efficiency" in said and hit in said) == flagged, said
         assert any(hit in w for w in chain.provenance.get("warnings", [])) == flagged

@@ -168,10 +168,11 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     return 0
 
 
-def compare_streamed(args, tmp: Path, title: str, target: str = "wheel"):
+def compare_streamed(args, tmp: Path, title: str, target: str = "wheel", target_note: str | None = None):
     """`compare` through the streaming engines (``target``: driving power, or the energy
-    chains' battery or fuel power): writes the report into ``tmp`` and returns the
-    comparison (whose ``to_json`` covers every sample)."""
+    chains' battery or fuel power; ``target_note``: why, in the report's context): writes
+    the report into ``tmp`` and returns the comparison (whose ``to_json`` covers every
+    sample)."""
     from sumo_drvpw.data.measured import resolve_equations
     from sumo_drvpw.fit.stream_compare import CompareStats
     from sumo_drvpw.model.vehicles import load_vehicle
@@ -193,7 +194,10 @@ def compare_streamed(args, tmp: Path, title: str, target: str = "wheel"):
     from sumo_drvpw.cli import chains_fuel
 
     comp.measured_fuel = measured_fuel(veh, chains_fuel(args.equation))  # what the log's fuel flow was read as
-    write_comparison_report(comp, tmp, title, _context(cs, veh, cs.n))
+    ctx = _context(cs, veh, cs.n)
+    if target_note:
+        ctx["target"] = target_note
+    write_comparison_report(comp, tmp, title, ctx)
     print(info.line(), file=sys.stderr)
     return comp
 
@@ -206,15 +210,12 @@ def compare_main(args) -> int | None:
 
     if getattr(args, "engine", "memory") == "memory":
         return None
-    target = getattr(args, "target", None)
-    if target is None:
-        from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
+    from sumo_drvpw.cli.compare import compare_target
 
-        pred = {getattr(load_equation(s), "predicts", "wheel") for s in args.equation if s not in SPEC_EQUATIONS}
-        target = pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
+    target, note = compare_target(args)
     what = {"wheel": "driving", "battery": "battery", "fuel": "fuel"}[target]
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
-        comp = compare_streamed(args, tmp, f"Equations against measured {what} power", target)
+        comp = compare_streamed(args, tmp, f"Equations against measured {what} power", target, note)
     doc = comp.to_json(trips=False)
     from sumo_drvpw.report.comparison import unknown_input_lines
 

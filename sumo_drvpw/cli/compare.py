@@ -35,12 +35,7 @@ def main(args) -> int:
     if compare_main(args) is not None:  # driving power, streamed in bounded memory (issue #14)
         return 0
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
-        target = getattr(args, "target", None)
-        if target is None:
-            from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
-
-            pred = {load_equation(s).predicts for s in args.equation if s not in SPEC_EQUATIONS}
-            target = pred.pop() if len(pred) == 1 and pred <= {"battery", "fuel"} else "wheel"
+        target, note = compare_target(args)
         m = load_measured(args.logs, args.vehicle, read_options(args, args.equation), target=target)
         note_counts(m.counts)
         eqs = resolve_equations(args.equation, m.vehicle)
@@ -50,7 +45,10 @@ def main(args) -> int:
         comp.measured_fuel = measured_fuel(m.vehicle, m.log.options.fuel)  # what the log's fuel flow was read as
         comp.left_out = left_out_by_trip(m.power_w, u, m.log.df["dt_s"].to_numpy(), m.inputs.trip)
         what = {"wheel": "driving", "battery": "battery", "fuel": "fuel"}[target]
-        write_comparison_report(comp, tmp, f"Equations against measured {what} power", m.context())
+        ctx = m.context()
+        if note:
+            ctx["target"] = note
+        write_comparison_report(comp, tmp, f"Equations against measured {what} power", ctx)
     doc = comp.to_json()
     from sumo_drvpw.report.comparison import unknown_input_lines
 
@@ -59,6 +57,32 @@ def main(args) -> int:
             print("note: " + x)
     print_summary(doc, args.out)
     return 0
+
+
+def compare_target(args) -> tuple[str, str | None]:
+    """The target ``compare`` measures against: ``--target``, else what the equations'
+    energy chains predict when they all predict the same battery or fuel, else the driving
+    power; and a note, printed and kept in the report's context, when equations predict
+    different targets (their chains then unused)."""
+    target = getattr(args, "target", None)
+    if target is not None:
+        return target, None
+    from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
+
+    by = {s: getattr(load_equation(s), "predicts", "wheel") if s not in SPEC_EQUATIONS else "wheel"
+          for s in args.equation}
+    pred = set(by.values())
+    if len(pred) == 1 and pred <= {"battery", "fuel"}:
+        return pred.pop(), None
+    chains = sorted(p for p in pred if p != "wheel")
+    if not chains:
+        return "wheel", None
+    note = (f"the equations predict different targets ({'; '.join(f'{s}: {p}' for s, p in by.items())}): "
+            "compared on the driving power at the wheels, their energy chains unused; "
+            + " or ".join(f"--target {c}" for c in chains) + " compares at the "
+            + " or ".join("battery" if c == "battery" else "tank" for c in chains))
+    print("note: " + note)
+    return "wheel", note
 
 
 def print_summary(doc: dict, out) -> None:

@@ -46,6 +46,9 @@ IDLE_FUEL_REF_DISPLACEMENT_L = 2.0
 HYBRID_POWERTRAINS = ("power_split",)
 #: readings that make a warning
 FLAGS = ("IMPLAUSIBLE", "NOT IDENTIFIED")
+#: a battery chain's recuperation efficiency below which it returns next to nothing: no
+#: electric or hybrid car's (a rehearsal's Nissan Leaf on a traction-only power: 0.001)
+RECUPERATION_MIN = 0.15
 
 
 def fuel_l_per_h(power_w: float, fuel: str = "gasoline") -> float:
@@ -222,6 +225,11 @@ def reading(name: str, val: float, fuel: str = "gasoline") -> str:
         if val >= 0.99:
             return s + ("; IMPLAUSIBLE (no generator is lossless): the braking power is "
                         "underestimated or other terms absorb losses")
+        if val < RECUPERATION_MIN:  # (a battery chain is an electric or hybrid car's: it recuperates)
+            return s + ("; IMPLAUSIBLE for a car that recuperates (electric and hybrid cars return "
+                        "about 0.5–0.7 at the battery): the braking energy does not reach this target — "
+                        "a road-load equation fitted on a power logged for traction only, or a battery "
+                        "energy too coarse to show it (state-of-charge steps)")
         return s + ("; low: friction braking or a recuperation limit dominates" if val < 0.4 else "")
     if name == "recuperation_limit_w":
         return f"braking power beyond {val / 1000:.1f} kW goes to the friction brakes"
