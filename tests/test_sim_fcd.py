@@ -750,3 +750,21 @@ def test_a_replay_from_begin_books_what_the_whole_run_books_from_then(tmp_path, 
             # (the kinetic energy to 1 J; the totals to 0.5 %: a car that came onto a new lane in the
             # first replayed step has its grade there from the slope, not the rise from where it was)
             np.testing.assert_allclose(have, want, rtol=1e-6 if c == "acc" else 5e-3, atol=1.0)
+
+
+def test_a_recording_is_replayed_whole_whatever_end_its_config_gives(tmp_path):
+    """Rehearsal: an FCD recorded with `sumo -c run.sumocfg --end 3600` and replayed with
+    `fcd --scenario run.sumocfg` was replayed to the config's <end> 1200 s — two thirds of
+    the vehicles and energy dropped, no warning, `interrupted: false`. Planted: the city
+    config ends at 600 s; its FCD recorded to 700 s is replayed to 700 s (every vehicle of
+    the recording), and `end=` still cuts it."""
+    cfg = REPO / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.sumocfg"
+    f = tmp_path / "fcd.xml"
+    run_scenario(CITY, None, end=700, equations=[PHYS], figures=False,
+                 options=["--fcd-output", str(f), "--precision", "6"])
+    ids = set(read_fcd(f).query("~person")["id"])
+    whole = process_fcd(f, scenario=cfg, out_dir=None, equations=[PHYS], figures=False)
+    assert set(whole.vehicles["vehicle"]) == ids
+    assert whole.summary["end_s"] == pytest.approx(700.0, abs=1.0)
+    cut = process_fcd(f, scenario=cfg, out_dir=None, equations=[PHYS], figures=False, end=300)
+    assert cut.summary["end_s"] == pytest.approx(300.0) and len(cut.vehicles) < len(whole.vehicles)

@@ -33,7 +33,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="evaluate these equations instead of the scenario's (repeatable; "
                              "default without a scenario: the built-in equations of every vClass)")
     parser.add_argument("--begin", type=sumo_time_arg, help="ignore timesteps before this [s, or h:m:s]")
-    parser.add_argument("--end", type=sumo_time_arg, help="stop at this simulation time [s, or h:m:s]")
+    parser.add_argument("--end", type=sumo_time_arg, help="stop at this simulation time [s, or h:m:s] (default: the recording's last timestep, whatever end the scenario or its config gives)")
     parser.add_argument("--period", type=float, metavar="S", help="edgeData interval [s]")
     parser.add_argument("--air-temperature", type=float, metavar="C",
                         help="air temperature [°C] of the recorded run, replacing the scenario's [air] "

@@ -306,7 +306,10 @@ class FcdStream(FcdReplay):
 def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, fcd_file=None,
                  **overrides):
     """The scenario an FCD replay books with: the scenario file's (or defaults around
-    ``net``), equations and vType files replaced when given, positions read every step.
+    ``net``), equations and vType files replaced when given, positions read every step,
+    the whole recording replayed (the scenario's or its config's end is not the end the
+    recording's run was given: a rehearsal's FCD recorded to 3600 s with `--end` was
+    replayed to its config's 1200 s without a word), unless ``end`` is given.
     Without a scenario, the network and vType files not given are those of the run that
     recorded ``fcd_file`` (:func:`~sumo_drvpw.sim.fcd_read.run_inputs`), where found."""
     import dataclasses
@@ -329,6 +332,8 @@ def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, fcd_
             raise UserError("FCD: give the equations, or a scenario that names them")
         sc = load_scenario(doc={"sumo": {"net": str(net)}}, **overrides)  # equations: the run's own
     changes = {"positions": "getter"}
+    if "end" not in overrides:  # a recording is replayed whole: the end its run was given on the
+        changes["end"] = None  # command line is not the config's (the user's end= cuts it)
     if net is not None:
         p = Path(net)
         if not p.is_file():
