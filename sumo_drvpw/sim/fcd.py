@@ -307,9 +307,7 @@ def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, fcd_
                  **overrides):
     """The scenario an FCD replay books with: the scenario file's (or defaults around
     ``net``), equations and vType files replaced when given, positions read every step,
-    the whole recording replayed (the scenario's or its config's end is not the end the
-    recording's run was given: a rehearsal's FCD recorded to 3600 s with `--end` was
-    replayed to its config's 1200 s without a word), unless ``end`` is given.
+    the whole recording replayed unless ``end`` is given (:func:`replay_fcd`).
     Without a scenario, the network and vType files not given are those of the run that
     recorded ``fcd_file`` (:func:`~sumo_drvpw.sim.fcd_read.run_inputs`), where found."""
     import dataclasses
@@ -332,8 +330,6 @@ def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, fcd_
             raise UserError("FCD: give the equations, or a scenario that names them")
         sc = load_scenario(doc={"sumo": {"net": str(net)}}, **overrides)  # equations: the run's own
     changes = {"positions": "getter"}
-    if "end" not in overrides:  # a recording is replayed whole: the end its run was given on the
-        changes["end"] = None  # command line is not the config's (the user's end= cuts it)
     if net is not None:
         p = Path(net)
         if not p.is_file():
@@ -399,6 +395,11 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     from sumo_drvpw.sim.sumo_start import scenario_option
 
     net = load_network(sc.net_file, sc.road_class, sc.slope_window, sc.slope_max)
+    # the recording is replayed whole unless the run was given an end: the scenario's or its
+    # config's is not the one the recording's run had (a rehearsal's FCD recorded to 3600 s
+    # with `--end` was replayed to its config's 1200 s without a word); flows without an end
+    # still end at the scenario's (its stops: read_declared_stops)
+    cut = sc.end if sc.end_given else None
     # bus stops of the additional files, and of the files given for the vTypes (--vtypes)
     parked = ParkedTest(net, bus_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files]))))
     from sumo_drvpw.sim.fcd_read import header_options
@@ -425,14 +426,14 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                 begin_frame(df, float(t_b[-1]), float(t_f[0]))
             df.attrs["times"] = t_f
         replay = FcdReplay(df, dt=dt)
-        if sc.end is not None:
-            n = int(np.searchsorted(replay.times + replay.dt, sc.end + 1e-9, side="right"))
+        if cut is not None:
+            n = int(np.searchsorted(replay.times + replay.dt, cut + 1e-9, side="right"))
             replay.times, replay._rows = replay.times[:n], replay._rows[:n]
     else:
         replay_info = {}
         steps = timesteps(parked.mark(iter_fcd_blocks(fcd_file, chunk_rows)), begin_s, keep,
                           fcd_file, replay_info)
-        replay = FcdStream(steps, dt=dt, end_s=sc.end, label=fcd_file)
+        replay = FcdStream(steps, dt=dt, end_s=cut, label=fcd_file)
     if keep is None and not (replay._ahead if chunk_rows is not None else len(replay.times)):
         # (SUMO writes every timestep; a Dask bucket may be empty)
         raise UserError(f"FCD file {fcd_file}: no timestep (in the time asked for): not SUMO's "

@@ -162,11 +162,11 @@ class Scenario:
     #: output options the SUMO config sets (option → file as written there); a run
     #: redirects them into its output folder's ``sumo/`` (sim.sumo_outputs.sumo_output_args)
     config_outputs: dict[str, str] = field(default_factory=dict)
-    #: outputs declared in additional files, which SUMO writes beside those files unless
-    #: a run redirects them (sim.sumo_outputs.redirect_additional_outputs)
+    #: outputs declared in additional files, written beside them unless a run redirects them (sim.sumo_outputs)
     additional_outputs: list[str] = field(default_factory=list)
     #: the additional files SUMO loads (absolute; a config's or ``sumo.additional``)
     additional_files: list[Path] = field(default_factory=list)
+    end_given: bool = False  # ``end`` given to the run (an override), not the file's or config's
 
 
 def _where(path) -> str:
@@ -566,7 +566,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         config_outputs={k: v for k, v in cfgvals.items() if is_output_option(k) and v.strip()},
         additional_outputs=additional_outputs(adds), additional_files=list(adds),
         path=Path(path) if path else None, sumo_args=args, route_files=files, net_file=net,
-        begin=times.get("begin"), end=times.get("end"), step_length=times.get("step_length"),
+        begin=times.get("begin"), end=times.get("end"), step_length=times.get("step_length"), end_given="end" in overrides,
         connection=connection, gui=_bool(sumo.get("gui", False), where, "sumo.gui"),
         equations=equations,
         vtype_filter=vfilter, vtype_data=vdata, vclass_data=cdata,
