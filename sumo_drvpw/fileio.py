@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import os
 import stat
@@ -286,11 +287,18 @@ def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
     if not force and _foreign_folder(out):
         raise OutputExists(f"{out}: folder exists, is not empty and was not written by "
                            "sumo-drvpw (no manifest.json); it is left untouched")
+    extra = [] if force else unlisted_files(out)
+    if extra:
+        raise OutputExists(f"{out}: an earlier output set holds {len(extra)} file(s) it did not write "
+                           f"(first: {extra[0]}), which replacing the set would delete; they are left "
+                           "untouched — move them out")
     parent = out.parent if str(out.parent) else Path(".")
     made = [d for d in [parent, *parent.parents] if not d.exists()]
     try:
         parent.mkdir(parents=True, exist_ok=True)
+        remove_abandoned(parent, out.name)
         stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=parent))
+        _own(stage)
     except PermissionError:
         raise UserError(f"{out}: cannot write in {made[-1].parent if made else parent} "
                         "(permission denied)") from None
@@ -306,7 +314,7 @@ def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
         try:
             yield tmp
             files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())
-            companions = sorted(p.name for p in stage.iterdir() if p.name != out.name)
+            companions = sorted(p.name for p in stage.iterdir() if p.name not in (out.name, OWNER))
             manifest = {"tool": "sumo-drvpw", "version": _version(),
                         "command": list(command if command is not None else (CURRENT_COMMAND or [])),
                         "created_utc": datetime.datetime.now(datetime.timezone.utc)
@@ -340,6 +348,48 @@ def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
                     pass
 
 
+#: the file in an output set's temporary folders naming the process that made them
+OWNER = ".sumo-drvpw-owner"
+
+
+def _own(folder: Path) -> None:
+    """Name this process (host and pid) in a temporary folder of an output set."""
+    import socket
+
+    (folder / OWNER).write_text(f"{socket.gethostname()} {os.getpid()}\n", encoding="utf-8")
+
+
+def remove_abandoned(parent: Path, name: str) -> list[Path]:
+    """Remove the temporary folders of output sets named ``name`` in ``parent`` whose run
+    was killed (``kill -9``, a crash of the machine's power aside: no cleanup ran) — those
+    whose owner file names a process of this host that no longer exists; returns them.
+    A folder without an owner file, or of another host, is left alone."""
+    import shutil
+    import socket
+
+    host, gone = socket.gethostname(), []
+    for d in parent.glob(f".{glob.escape(name)}.*"):
+        if not (d.suffix in (".tmp", ".old") and d.is_dir()):
+            continue
+        try:
+            who, pid = (d / OWNER).read_text(encoding="utf-8").split()
+            pid = int(pid)
+        except (OSError, ValueError):
+            continue
+        if who != host or pid == os.getpid():
+            continue
+        try:
+            os.kill(pid, 0)
+            continue  # still running (or a pid taken again by another process: left alone)
+        except ProcessLookupError:
+            pass
+        except OSError:  # another user's process: alive
+            continue
+        shutil.rmtree(d, ignore_errors=True)
+        gone.append(d)
+    return gone
+
+
 def _publish(tmp: Path, out: Path, parent: Path, olds: list, attempts: int = 20) -> None:
     """Move the folder ``tmp`` onto ``out``, moving an existing ``out`` aside first.
 
@@ -352,6 +402,7 @@ def _publish(tmp: Path, out: Path, parent: Path, olds: list, attempts: int = 20)
     for attempt in range(attempts):
         if out.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
+            _own(old)
             olds.append(old)
             try:
                 os.replace(out, old / out.name)
@@ -386,6 +437,25 @@ def _foreign_folder(out: Path) -> bool:
         return out.stat().st_ino == st.st_ino and not (out / MANIFEST).exists()
     except FileNotFoundError:
         return False
+
+
+def unlisted_files(folder: Path) -> list[str]:
+    """Files (relative paths) an earlier output set in ``folder`` does not list in its
+    manifest.json — a user's own, added since: replacing the set would delete them. Hidden
+    files (an editor's or the OS's) are not counted; [] for a folder that is no output set."""
+    try:
+        doc = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))
+        if doc.get("tool") != "sumo-drvpw":
+            return []
+        listed = {str(f["path"]) for f in doc.get("files", [])} | {MANIFEST}
+    except (OSError, ValueError, AttributeError, KeyError, TypeError):
+        return []
+    out = []
+    for p in sorted(folder.rglob("*")):
+        rel = p.relative_to(folder)
+        if p.is_file() and not any(part.startswith(".") for part in rel.parts) and str(rel) not in listed:
+            out.append(str(rel))
+    return out
 
 
 def _is_output_set(folder: Path) -> bool:

@@ -92,6 +92,59 @@ def test_output_set_refuses_foreign_folder_and_inputs(tmp_path):
     assert sorted(p.name for p in mine.iterdir()) == [MANIFEST, "r.txt"]
 
 
+def test_a_users_file_in_an_earlier_set_is_not_deleted_without_force(tmp_path):
+    """Rehearsal: a note a user put into an earlier output folder was deleted without a
+    word by the next run into it (the folder's manifest made all of it 'ours'). Now a file
+    the manifest does not list is refused, named, and kept; --force replaces the set."""
+    from sumo_drvpw.errors import OutputExists
+
+    out = tmp_path / "set"
+    with output_set(out) as t:
+        write_text(t / "a.txt", "first")
+    write_text(out / "notes" / "mine.txt", "my analysis")
+    (out / ".DS_Store").write_text("os")  # hidden files do not count
+    with pytest.raises(OutputExists, match=r"1 file\(s\) it did not write \(first: notes/mine.txt\)"):
+        with output_set(out) as t:
+            write_text(t / "b.txt", "second")
+    assert (out / "notes" / "mine.txt").read_text() == "my analysis" and not (out / "b.txt").exists()
+    assert _hidden(tmp_path) == []
+    with output_set(out, force=True) as t:
+        write_text(t / "b.txt", "second")
+    assert sorted(p.name for p in out.iterdir()) == ["b.txt", MANIFEST]
+
+
+def test_a_killed_runs_temporary_folder_is_removed_by_the_next_run(tmp_path):
+    """Rehearsal: `kill -9` of an `fcd` run left its hidden temporary folder (2.2 MB,
+    partial) beside --out, and later runs into that folder left it there too. Now each
+    temporary folder names its process; the next run into the same folder removes those
+    of processes that no longer exist, and leaves those of running processes (a concurrent
+    run) and those it cannot attribute."""
+    import socket
+
+    from sumo_drvpw.fileio import OWNER
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        host = socket.gethostname()
+        for name, owner in ((".set.killed.tmp", f"{host} {dead.pid}"), (".set.moved.old", f"{host} {dead.pid}"),
+                            (".set.running.tmp", f"{host} {alive.pid}"), (".set.unknown.tmp", None),
+                            (".set.elsewhere.tmp", f"otherhost {dead.pid}"), (".other.killed.tmp", f"{host} {dead.pid}")):
+            d = tmp_path / name
+            write_text(d / "set" / "part.parquet", "partial")
+            if owner:
+                (d / OWNER).write_text(owner)
+        with output_set(tmp_path / "set") as t:
+            write_text(t / "a.txt", "x")
+        assert _hidden(tmp_path) == [".other.killed.tmp", ".set.elsewhere.tmp", ".set.running.tmp",
+                                     ".set.unknown.tmp"]
+        assert _assert_whole(tmp_path / "set")
+    finally:
+        alive.kill()
+        alive.wait()
+
+
 def test_companion_files_move_beside_the_set(tmp_path):
     """validate writes <DIR>.md beside <DIR>/: both appear together, links keep the name."""
     out = tmp_path / "validation"
