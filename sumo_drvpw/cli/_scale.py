@@ -95,7 +95,7 @@ def fit_road_load(args, st, cands, veh, name: str, provenance: dict):
 
     check_identified(res, ", ".join(map(str, args.logs)))
     eq = res.to_equation(name, provenance=provenance)
-    print(res.summary())
+    print(res.summary(physics=False))  # (the physics: apply_physics_gram says, below)
     from sumo_drvpw.fit.physical import apply_physics_gram, constraints_of  # issue #11 §3
 
     try:

@@ -116,7 +116,7 @@ def main(args) -> int:
     eq = res.to_equation(name, provenance={
         "logs": m.log.files, "vehicle": m.vehicle.path if m.vehicle else None,
         "power_source": m.source, "candidates_spec": args.candidates})
-    print(res.summary())
+    print(res.summary(physics=False))  # (the physics: physical() says, below)
     eq, _ = physical(eq, m, args.candidates)
     declare_measurement(eq, m.log.options.measurement)
     write_equation(args, eq, out, inputs, lambda tmp: write_calibration_report(m, eq, res, tmp, args.compare_with))
@@ -412,7 +412,7 @@ def main_chain(args) -> int:
         check_identified(res, mw.log.describe())
         eq = res.to_equation(args.name or out.stem, provenance={
             "logs": mw.log.files, "power_source": mw.source, "candidates_spec": args.candidates})
-        print(res.summary())
+        print(res.summary(physics=False))
         eq, note = physical(eq, mw, args.candidates)  # the same physics as `calibrate`
         road = f"road-load equation calibrated stepwise on {mw.source}" + (
             " (physically constrained: the free fit was implausible)" if note else "")

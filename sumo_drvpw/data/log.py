@@ -7,6 +7,7 @@ grade, wind, air density) and keeps every other column for the residual tracer.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -372,7 +373,8 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
     Parameters
     ----------
     paths : file or folder paths (Parquet, CSV)
-    vehicle : optional :class:`sumo_drvpw.model.vehicles.Vehicle` (mass when the log has none)
+    vehicle : optional :class:`sumo_drvpw.model.vehicles.Vehicle`, or a built-in vehicle's
+        name or a vehicle TOML file (mass when the log has none)
     options : :class:`ReadOptions`
 
     Derivations (all within a trip):
@@ -385,6 +387,7 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
     folder of different loggers is read as it is alone.
     """
     opt = check_options(options or ReadOptions())
+    vehicle = as_vehicle(vehicle)
     files = expand_paths(paths)
     from sumo_drvpw.data.powertrain import flow_columns
 
@@ -431,6 +434,20 @@ def check_declared_unit(paths, opt: ReadOptions) -> None:
                             "and the unit would convert it a second time (top speed / 3.6)")
 
 
+def as_vehicle(vehicle):
+    """A :class:`~sumo_drvpw.model.vehicles.Vehicle` from one, a built-in vehicle's name
+    or a vehicle TOML path (None stays None), as the commands take ``--vehicle``."""
+    if isinstance(vehicle, (str, Path)):
+        from sumo_drvpw.model.vehicles import load_vehicle
+
+        return load_vehicle(str(vehicle))
+    return vehicle
+
+
+#: ReadOptions fields that must be finite and > 0, and ≥ 0 (0: no smoothing)
+_POSITIVE_OPTIONS, _NONNEGATIVE_OPTIONS = ("accel_outlier_mps2", "grade_outlier"), ("accel_window_s", "accel_noise_mps2", "grade_window_m")
+
+
 def check_options(opt: ReadOptions) -> ReadOptions:
     """Reading options within their meaning; a UserError names the option's value."""
     if opt.speed_unit is not None and opt.speed_unit not in SPEED_UNITS:
@@ -438,6 +455,12 @@ def check_options(opt: ReadOptions) -> ReadOptions:
     tol = opt.negative_speed_tolerance_mps
     if not (np.isfinite(tol) and 0 <= tol <= 1.0):
         raise UserError(f"negative speed tolerance {tol:g} m/s: give a value in [0, 1] m/s")
+    for k in _POSITIVE_OPTIONS + _NONNEGATIVE_OPTIONS:
+        v = getattr(opt, k)
+        ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and np.isfinite(v) and (v > 0 if k in _POSITIVE_OPTIONS else v >= 0)
+        if not ok:
+            raise UserError(f"reading option {k} = {v!r}: give a finite number "
+                            + ("> 0" if k in _POSITIVE_OPTIONS else "≥ 0"))
     return opt
 
 
@@ -450,6 +473,7 @@ def from_frame(df: pd.DataFrame, vehicle=None, options: ReadOptions | None = Non
     error messages and in ``DriveLog.files``.
     """
     opt = check_options(options or ReadOptions())
+    vehicle = as_vehicle(vehicle)
     frame, clipped = _prepare(df.copy(), Path(name), Path(name).stem, opt)
     return _derive(frame.reset_index(drop=True), [str(name)], {}, vehicle, opt, clipped)
 

@@ -103,6 +103,9 @@ def measure(log: DriveLog, veh: Vehicle | None, target: str = "wheel",
     from sumo_drvpw.data.counters import COUNTERS
     from sumo_drvpw.data.powertrain import battery_power_and_view, measured_battery_power, measured_fuel_power
 
+    if target not in TARGETS:
+        raise UserError(f"target must be one of {', '.join(TARGETS)}, got {target!r}")
+
     battery_w = view = None
     if target == "battery":
         p, source, view = battery_power_and_view(log, veh)  # its rows per source: power_rows

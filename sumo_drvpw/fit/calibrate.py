@@ -163,8 +163,20 @@ class CalibrationResult:
     speed_range_mps: tuple[float, float] | None = None
     accel_range_mps2: tuple[float, float] | None = None
 
+    @property
+    def implausible(self) -> dict[str, str]:
+        """Coefficients of this free fit that read implausibly as physics (term → why:
+        :func:`sumo_drvpw.fit.physical.physical_reading`, the aero term at sea-level air);
+        {} when all read plausibly. ``sumo-drvpw calibrate`` then writes the physically
+        constrained refit (:func:`sumo_drvpw.fit.physical.physical_calibration` in Python)."""
+        from sumo_drvpw.fit.physical import physical_reading
+
+        return {t: r["note"] for t, r in physical_reading(self.params).items() if r["plausible"] is False}
+
     def to_equation(self, name: str, provenance: dict | None = None) -> Equation:
-        """The calibrated equation, ready for ``compare`` and the SUMO loop."""
+        """The equation of this free fit, for ``compare`` and the SUMO loop; check
+        :attr:`implausible` first (a lag or a smoothed grade absorbed into a coefficient
+        is wrong in SUMO, where inputs are clean)."""
         prov = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                 "method": "forward-backward stepwise OLS without intercept, final fit statsmodels OLS",
                 "settings": self.settings, "selection_trace": self.trace, "sample_counts": self.counts,
@@ -180,14 +192,18 @@ class CalibrationResult:
                         speed_range_mps=self.speed_range_mps,
                         accel_range_mps2=self.accel_range_mps2)
 
-    def summary(self) -> str:
+    def summary(self, physics: bool = True) -> str:
         """A plain-text table: n, R², and per term the coefficient [W per unit of the
-        term], its standard error and p-value; then the dropped candidates."""
+        term], its standard error and p-value; then the dropped candidates and (``physics``)
+        the coefficients that read implausibly (:attr:`implausible`)."""
         lines = [f"n = {self.n}, R² = {self.r2:.4f}", f"{'term':<12}{'coefficient':>14}{'std err':>12}{'p':>10}"]
         for t in self.terms:
             lines.append(f"{t:<12}{self.params[t]:>14.6g}{self.std_err[t]:>12.3g}{self.p_values[t]:>10.2g}")
         for d in self.dropped:
             lines.append(f"`{d['term']}` dropped: {d['reason']}")
+        bad = self.implausible if physics else {}
+        if bad:
+            lines.append("implausible as physics: " + "; ".join(f"{t} ({why})" for t, why in bad.items()))
         return "\n".join(lines)
 
 
@@ -236,7 +252,14 @@ def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = No
     >>> res = calibrate(x, y + rng.normal(0, 200, n), ("acc", "aero", "roll"))
     >>> res.terms, round(res.params["aero"], 2)
     (['acc', 'aero', 'roll'], 0.35)
+    >>> res.implausible                  # {} here: every coefficient reads as physics
+    {}
     >>> eq = res.to_equation("my_car")   # ready for compare() and the SUMO loop
+
+    Where ``res.implausible`` names coefficients, use
+    :func:`sumo_drvpw.fit.physical.physical_calibration` (the refit under physical
+    constraints that ``sumo-drvpw calibrate`` writes). ``x``, ``y`` and ``mask`` must have
+    one value per sample (a UserError otherwise).
     """
     import statsmodels.api as sm
 
@@ -244,6 +267,11 @@ def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = No
     for t in candidates:
         parse_term(t)
     y = np.asarray(y, float)
+    n_x = len(np.asarray(x.v))
+    if y.shape != (n_x,) or (mask is not None and np.shape(mask) != (n_x,)):
+        raise UserError(f"calibrate: the inputs have {n_x} samples, the measured power "
+                        f"{y.shape[0] if y.ndim else 0}" + ("" if mask is None else f", the mask {np.shape(mask)[0] if np.ndim(mask) else 0}")
+                        + ": give one value per sample")
     use = np.isfinite(y) if mask is None else (np.asarray(mask, bool) & np.isfinite(y))
     # rows whose candidate terms are not finite (NaN signals) are left out as well
     for t in candidates:

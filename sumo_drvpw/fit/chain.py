@@ -423,6 +423,9 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     noise in the input attenuates the fitted slopes (errors in variables): on the Prius
     Gen 2 this turns η_m ≈ 0.39 into an implausible 0.6 (docs/energy-chain.md).
     """
+    if p_drive_w is None and equation is None:
+        raise UserError("calibrate_on: give the chain's input, the measured driving power (p_drive_w=) "
+                        "or a road-load equation (equation=)")
     p = equation.power(m.inputs) if p_drive_w is None else np.asarray(p_drive_w, float)
     dt = m.log.df["dt_s"].to_numpy(float)
     use = m.usable if mask is None else (m.usable & mask)

@@ -1,6 +1,6 @@
 """Run a scenario: start SUMO, resolve vTypes, step the loop, write the outputs.
 
-``run_scenario(scenario_path, out_dir, **overrides) -> summary`` runs a scenario file
+``run_scenario(scenario_path, out_dir, **overrides) -> RunResult`` runs a scenario file
 (see :mod:`sumo_drvpw.sim.scenario`) with libsumo (or traci) and writes the outputs of
 :mod:`sumo_drvpw.sim.outputs` into ``out_dir``. Modules: ``scenario`` (config), ``vtypes``
 (mass and drvpw.* params from the route files), ``resolver`` (which equations book a vType,
@@ -32,7 +32,8 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
 
     Parameters
     ----------
-    scenario_path : scenario TOML file
+    scenario_path : scenario TOML file or SUMO config, or a built-in scenario's name
+        (``"city"``, ``"highway"``), as ``sumo-drvpw run`` takes it
     out_dir : output directory (created), or None to write nothing
     keep_vehicles : keep every vehicle in memory (default: vehicles that left are
         streamed out, :class:`~sumo_drvpw.sim.accountant.Accountant`)
@@ -44,8 +45,9 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     from sumo_drvpw.sim.accountant import Accountant
     from sumo_drvpw.sim.loop import step_until
     from sumo_drvpw.sim.scenario import load_scenario
+    from sumo_drvpw.sim.scenario_paths import scenario_path as file_of
 
-    sc = load_scenario(scenario_path, **overrides)
+    sc = load_scenario(file_of(scenario_path), **overrides)  # (a built-in's name too, as `run` takes it)
     if sc.trace and out_dir is None:
         raise UserError("outputs.trace needs an output directory")
     naming = _output_naming(sc)
