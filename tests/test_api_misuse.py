@@ -79,3 +79,24 @@ def test_run_scenario_takes_a_builtin_scenarios_name():
     assert res["steps"] == 40 and len(res.vehicles) > 0
     with pytest.raises(UserError, match="unknown built-in scenario 'nocity'"):
         run_scenario("nocity", None)
+
+
+def test_a_traced_equations_measurement_finding_says_what_to_do_instead():
+    """diagnose's traced equation keeps `[grade_accelerometer]` (the logs' grade measured
+    wrongly); on a held-out log, in compare and in SUMO it failed with 'needs the signal
+    grade_accelerometer, which the data do not have' — though the log had its accelerometer.
+    It now says it is a measurement-side finding, corrected in the data: recalibrate on logs
+    read with the correction. An ordinary log-only term keeps its message."""
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.sim.scenario import load_scenario
+    from sumo_drvpw.sim.scenario_paths import scenario_path
+
+    eq = Equation("traced", {"acc": 1.0, "grade": 1.0, "[grade_accelerometer]": 1.15})
+    x, _ = _planted(n=10)
+    with pytest.raises(UserError, match=r"measurement-side finding of diagnose \(the grade measured by the "
+                                        r"accelerometer.*recalibrate the equation on the logs read with"):
+        eq.power(x)
+    with pytest.raises(UserError, match=r"cannot run in SUMO: term '\[grade_accelerometer\]' is a measurement-side"):
+        load_scenario(scenario_path("city"), equations=[eq])
+    with pytest.raises(UserError, match=r"term '\[ambient_c\]\*v1' needs the log-only signal 'ambient_c'"):
+        load_scenario(scenario_path("city"), equations=[Equation("t", {"acc": 1.0, "[ambient_c]*v1": -5.0})])

@@ -232,6 +232,26 @@ class Term:
         return np.asarray(val, dtype=float)
 
 
+#: signals of diagnose's measurement-side findings (fit/diagnose/structural.py): what the
+#: logs measured wrongly, corrected in the data — not terms an equation evaluates
+MEASUREMENT_FINDINGS = {"grade_accelerometer": "the grade measured by the accelerometer instead of the "
+                                               "logged elevation's",
+                        "air_density_altitude": "the air density at the logged altitude"}
+
+
+def measurement_finding(term: str, signal: str) -> str | None:
+    """Why ``term`` cannot be evaluated when its ``signal`` is one of diagnose's
+    measurement-side findings (None otherwise): the traced equation says what the logs
+    lack; the equation to use is recalibrated on logs read with the correction."""
+    what = MEASUREMENT_FINDINGS.get(signal)
+    if what is None:
+        return None
+    return (f"term '{term}' is a measurement-side finding of diagnose ({what}): it says what the "
+            "logs measured wrongly and is corrected in the data, not evaluated — recalibrate the "
+            "equation on the logs read with that correction (the calibrate command diagnose printed; "
+            "the equation then keeps it in its [measurement]) and use that one")
+
+
 def _factor_value(f: str, x: Inputs) -> np.ndarray:
     if f in PRIMITIVES:
         return PRIMITIVES[f][0](x)
@@ -242,8 +262,9 @@ def _factor_value(f: str, x: Inputs) -> np.ndarray:
     if m:
         name = m.group(1)
         if name not in x.signals:
-            raise UserError(f"term factor '{f}' needs the signal '{name}', which the data "
-                            f"do not have (available: {', '.join(sorted(x.signals)) or 'none'})")
+            raise UserError(measurement_finding(f, name) or (
+                f"term factor '{f}' needs the signal '{name}', which the data "
+                f"do not have (available: {', '.join(sorted(x.signals)) or 'none'})"))
         s = np.asarray(x.signals[name], dtype=float)
         return s * s if f.endswith("^2") else s
     m = _TRIP.match(f)

@@ -27,7 +27,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import (additional_outputs, device_wanted, is_output_option,
                                          option_input_files)
 from sumo_drvpw.fileio import read_toml
-from sumo_drvpw.model.terms import parse_term
+from sumo_drvpw.model.terms import measurement_finding, parse_term
 
 DEFAULT_HIGHWAY_TYPES = ("highway.motorway", "highway.motorway_link", "highway.trunk",
                          "highway.trunk_link")
@@ -327,10 +327,10 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
     src = eq.path or where  # the equation file the term is written in, else the scenario
     for t in eq.term_names:
         term = parse_term(t)
-        why = (f"the log-only signal '{term.signals[0]}'" if term.signals else "trip ids of a drive log"
-               if any(f.startswith("trip=") for f in term.factors) else None)
+        why = (measurement_finding(t, term.signals[0]) or f"term '{t}' needs the log-only signal '{term.signals[0]}'"
+               if term.signals else f"term '{t}' needs trip ids of a drive log" if any(f.startswith("trip=") for f in term.factors) else None)
         if why:
-            raise UserError(f"{src}: equation '{eq.name}' cannot run in SUMO: term '{t}' needs {why}")
+            raise UserError(f"{src}: equation '{eq.name}' cannot run in SUMO: {why}")
     return eq
 
 
