@@ -139,6 +139,7 @@ def test_bare_config_books_trucks_and_buses_in_litres(tmp_path, capsys):
     assert cut > 0  # the heavy vehicles did roll in overrun: the cut was exercised
     cls = pd.read_csv(out / "chain_classes.csv").set_index("key")
     assert {"truck", "trailer", "bus", "coach"} <= set(cls.index)
+    assert list(cls.index) == sorted(cls.index)  # by class name (was: order of first departure)
     assert cls.loc["bus", "fuel_l"] == pytest.approx(fuel[fuel.key == "b"].fuel_l.sum(), rel=1e-9)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["assumptions"]["energy_carrier"]["ebus"]["carrier"] == "electricity"

@@ -152,12 +152,17 @@ def _print_summary(s: dict, out, label: str = "", replaced: bool = False) -> Non
             # the distance beside the per-km figure: a class that barely moved (a shuttle
             # idling at its stop) reads 1,000 L/100 km, which is true but not a consumption
             print(f"  {r['equation']} fuel, {r['key']}: {r['fuel_l']:.2f} L{cold} over "
-                  f"{r['distance_km']:.3g} km, {r['fuel_l_per_100km']:.2f} L/100 km, "
+                  f"{_km(r['distance_km'])} km, {r['fuel_l_per_100km']:.2f} L/100 km, "
                   f"CO₂ {r['co2_kg']:.1f} kg")
         else:
             print(f"  {r['equation']} battery, {r['key']}: net {r['net_kwh']:.2f} kWh over "
-                  f"{r['distance_km']:.3g} km ({r['net_kwh_per_km']:.3f} kWh/km; auxiliary "
+                  f"{_km(r['distance_km'])} km ({r['net_kwh_per_km']:.3f} kWh/km; auxiliary "
                   f"{r['auxiliary_kwh']:.2f} kWh)")
+
+
+def _km(km: float) -> str:
+    """A distance for the console: 32,912 not 3.29e+04; 3 significant digits below 100 km."""
+    return f"{km:,.0f}" if km >= 100 else f"{km:.3g}"
 
 
 def _names(scenarios: list[str]) -> list[str]:

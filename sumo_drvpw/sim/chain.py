@@ -469,7 +469,7 @@ class ChainLedger:
     def report(self, veh_ids: list[str], veh_classes: list[str], edge_ids: list[str],
                class_order=None) -> dict:
         """Per-vehicle, per-edge and per-class rows (see :meth:`table`); the vehicles held in
-        memory, the classes with the flushed vehicles' totals added (in ``class_order``)."""
+        memory, the classes with the flushed vehicles' totals added, by class name."""
         n = len(veh_ids)
         cls = self.class_totals(veh_classes)
         labels = np.asarray(veh_classes, dtype=object)
@@ -484,6 +484,9 @@ class ChainLedger:
             order += [c for c in cls if c not in order]
             cls = {c: cls[c] for c in order}
             cdist = np.array([dist[c] for c in order]).reshape(len(order), self.A)
+        if cls:  # by class name: the same rows live, replayed and on Dask (vehicles come in other orders)
+            k = np.argsort(np.array(list(cls), dtype=object))
+            cls, cdist = {c: cls[c] for c in np.array(list(cls), dtype=object)[k]}, cdist[k]
         return {"vehicles": self.table(self.vehicle_totals(n), vdist, list(veh_ids)),
                 "edges": self.table(self.edge, self.edge_dist, list(edge_ids)),
                 "classes": self.table(np.stack(list(cls.values())) if cls else np.zeros((0, self.E, self.Q)),
