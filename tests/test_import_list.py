@@ -328,3 +328,19 @@ def test_rows_finer_than_the_time_column_are_said_when_they_are_dropped(tmp_path
     assert cli_main(["import", "columns", str(f), "--columns", str(tmp_path / "m.toml"),
                      "--out", str(tmp_path / "p.parquet")]) == 0
     assert "share their time" not in capsys.readouterr().out
+
+
+def test_the_sketch_maps_a_motor_power_and_names_units_it_does_not_know(tmp_path, capsys):
+    """A public Nissan Leaf log (d-EVD): 'Motor Pwr(w)' was listed with its unit but the
+    sketch proposed no power_w, and 'Aux Pwr(100w)' (hundreds of watts) was not said to
+    be a unit it does not know. Now the motor power is the sketch's power_w (with a word on
+    traction-only logs), an auxiliary or charging power is not, and the unknown unit is
+    named with the way to map it (unit and scale)."""
+    f = tmp_path / "leaf.csv"
+    f.write_text("time_s,speed(km/h),Motor Pwr(w),Aux Pwr(100w),Charge Power(kW)\n"
+                 + "\n".join(f"{t},{10 + t},{1500 - 100 * t},{2},{0}" for t in range(20)) + "\n")
+    assert cli_main(["import", "columns", str(f), "--list"]) == 0
+    sk = _sketch(_lines(capsys))
+    assert '[columns."Motor Pwr(w)"]\nname = "power_w"' in sk, sk
+    assert "Aux Pwr(100w)\"]" not in sk and "Charge Power" not in sk.split("# units")[0]
+    assert "units not recognised" in sk and "Aux Pwr(100w) [100w]" in sk and "scale = 100" in sk

@@ -130,6 +130,9 @@ GUESSES = {
     # a petrol engine's fuel target without a fuel-flow sensor (OBD PID 0x10), and a fuel flow
     "maf_gps": ("mass_flow", r"air ?flow|(?<![a-z])maf(?![a-z])|mass air", r"temp|pressure|volt"),
     "fuel_rate_lph": ("volume_flow", r"fuel", r"avg|average|trip|total|used|level|pressure|temp|trim|remaining"),
+    # an electric drive's power (+ driving, − recuperating): the driving power at its output
+    "power_w": ("power", r"(motor|drive|traction|wheel|e-?machine|\bmg2\b).*(power|pwr)|(power|pwr).*(motor|drive|traction|wheel)",
+                r"aux|heat|hvac|a/?c\b|climate|limit|max|avail|request|charg"),
 }
 #: a time column's first value as a clock time or a timestamp → its [options] time_format
 CLOCK_FORMATS = ((re.compile(r"^\d{1,2}:\d{2}:\d{2}\.\d+$"), "%H:%M:%S.%f"),
@@ -141,7 +144,7 @@ UNITLESS_WORDS = {"percent": r"soc|state of charge", "time": r"time|zeit", "spee
                   "length": r"elev|alti|height|höhe",
                   "temperature": r"temp|amb", "voltage": r"volt", "current": r"curr|amp",
                   "torque": r"torq|trq", "rotational_speed": r"rpm|speed|drehz", "energy": r"energy|ced|cec|tot_",
-                  "mass_flow": r"maf|air ?flow", "volume_flow": r"fuel (rate|flow)"}
+                  "mass_flow": r"maf|air ?flow", "volume_flow": r"fuel (rate|flow)", "power": r"power|pwr"}
 
 
 def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
@@ -194,6 +197,13 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
         if name == "soc_pct":
             lines.append("# without battery V·I or energy counters, [options] soc_capacity_kwh = <the energy "
                          "its 0–100 % spans> makes it the battery's energy (an estimate; docs/adapters.md)")
+        if name == "power_w":
+            lines.append("# the drive's power out (+ driving, − recuperating); one never negative logs traction "
+                         "only, which no driving-power equation fits")
+    odd = [(r["label"], r["unit"]) for r in rows if r.get("unit") and lookup_unit(r["unit"]) is None]
+    if odd and not mdf:
+        lines.append("# units not recognised (a mapping gives unit and scale, e.g. '100w': unit = \"W\", "
+                     "scale = 100): " + ", ".join(f"{lb} [{u}]" for lb, u in odd[:6]) + (" …" if len(odd) > 6 else ""))
     return "\n".join(lines)
 
 
