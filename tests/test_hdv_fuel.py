@@ -219,3 +219,30 @@ def test_a_failing_sumo_tool_is_one_line(tmp_path):
         pytest.skip("SUMO's emissionsDrivingCycle not found")
     with pytest.raises(UserError, match=r"emissionsDrivingCycle with HBEFA4/NoSuchClass: exit \d+: Error"):
         sumo_l_per_100km("HBEFA4/NoSuchClass", np.linspace(0.0, 10.0, 20), tmp_path)
+
+
+def test_cold_starts_say_which_chains_book_the_trips_warm(tmp_path, capsys):
+    """Rehearsal on MoST: with --cold-start every car's trip took its cold-start litres, the
+    buses, trucks and coaches printed 'cold starts 0.00 L' and nothing said why (their
+    chains carry no cold-start fuel). Now a warning names them; and --cold-start beside a
+    --cold-start-share of another value (the share silently won) is refused."""
+    pytest.importorskip("libsumo")
+    from sumo_drvpw.cli import main as cli_main
+
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    cfg = _config(sc)
+    assert cli_main(["run", str(cfg), "--out", str(tmp_path / "o"), "--no-figures", "--no-progress",
+                     "--cold-start"]) == 0
+    err = capsys.readouterr().err
+    line = next(ln for ln in err.splitlines() if "cold starts asked for" in ln)
+    for name in ("moves_single_unit_truck_diesel", "moves_combination_truck_diesel", "moves_transit_bus_diesel",
+                 "moves_intercity_bus_diesel"):
+        assert name in line
+    assert "epa_gasoline_car" not in line  # it books its cold start
+    cls = pd.read_csv(tmp_path / "o" / "chain_classes.csv").set_index("key")
+    assert cls.loc["passenger", "cold_start_l"] > 0 and cls.loc["truck", "cold_start_l"] == 0
+    assert cli_main(["run", str(cfg), "--out", str(tmp_path / "o2"), "--cold-start",
+                     "--cold-start-share", "0.5"]) == 2
+    assert "say different things" in capsys.readouterr().err
+    assert not (tmp_path / "o2").exists()

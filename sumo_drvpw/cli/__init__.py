@@ -94,6 +94,9 @@ def cold_start_override(args, overrides: dict) -> None:
     from sumo_drvpw.errors import UserError
 
     share = getattr(args, "cold_start_share", None)
+    if share is not None and getattr(args, "cold_start", False) and share != 1.0:
+        raise UserError(f"--cold-start (every trip starts cold) and --cold-start-share {share:g} say "
+                        "different things: give one")
     if share is not None:
         if not 0.0 <= share <= 1.0:
             raise UserError(f"--cold-start-share {share:g}: a share of the vehicles, from 0 to 1")

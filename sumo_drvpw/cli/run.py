@@ -141,9 +141,10 @@ def _print_summary(s: dict, out, label: str = "", replaced: bool = False) -> Non
     tp = s.get("teleports") or {}
     if tp.get("count"):  # SUMO put cars back on a lane at speed: energy apart from driving
         print(f"  teleports: {tp['count']} vehicles put back on a lane (not driven, not in the energies "
-              "above): " + ", ".join(f"{n} kinetic {tp['kinetic_j'][n] / 3.6e6:+.3f} kWh, potential "
-                                    f"{tp['potential_j'][n] / 3.6e6:+.3f} kWh" for n in tp["kinetic_j"]
-                                    if n not in idle))
+              "above): " + (", ".join(f"{n} kinetic {tp['kinetic_j'][n] / 3.6e6:+.3f} kWh, potential "
+                                     f"{tp['potential_j'][n] / 3.6e6:+.3f} kWh" for n in tp["kinetic_j"]
+                                     if n not in idle and max(abs(tp['kinetic_j'][n]), abs(tp['potential_j'][n])) >= 1800.0)
+                            or "under 0.0005 kWh for every equation"))  # (those booking none of them: not listed)
     for r in (s.get("chain") or {}).get("classes", []):  # battery kWh or fuel L per class
         if not r.get("distance_km"):
             continue

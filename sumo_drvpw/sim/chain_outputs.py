@@ -89,6 +89,14 @@ def chain_warnings(chain: ChainLedger | None, chainless: dict | None = None) -> 
                    + ": the demand exceeds the motor's torque or power, or leaves its loss map (a vType faster "
                    "or quicker than its motor: check maxSpeed and accel); booked at the motor's limits, with the "
                    "loss at the map's edge (summary.json chain.mmpevem_nan_steps)")
+    if chain.cold_start_on:  # fuel chains that drove but carry no cold-start fuel: booked warm, said
+        drove = chain.edge_dist.sum(axis=0) > 0
+        warm = [chain.names[e] for j, e in enumerate(chain.active) if drove[j] and chain.chains[e].predicts == "fuel"
+                and not chain.chains[e].cold_start(chain.air_temperature_c)["fuel_l"]]
+        if warm:
+            out.append("cold starts asked for, but " + ", ".join(warm) + " carry no cold-start fuel "
+                       "(cold_start_fuel_l; the heavy-duty chains' sources give none): their trips are "
+                       "booked warm")
     if chain.assumed_zero:
         out.append("chain loads SUMO has no signal for were taken as 0: "
                    + ", ".join(sorted(chain.assumed_zero))

@@ -340,7 +340,8 @@ OWN_PARAMS_NOTE = ("like for like: the vType's own Energy-model parameters (SUMO
 
 #: what the row of an equation without an energy chain compares (an electric bus: no battery
 #: chain applies to buses); its ratio is no verdict on the equation
-NO_CHAIN_NOTE = ("not like for like: no energy chain applies to these vehicles, so ours is the "
+NO_CHAIN_NOTE = ("not like for like: this equation has no energy chain (another equation's may book "
+                 "these vehicles), so its figure is the "
                  "equation's net driving energy at the wheels (traction less all recuperable "
                  "braking energy: no drivetrain or recuperation efficiencies, recuperation limit "
                  "or auxiliary power); SUMO's electricity adds its model's efficiencies "

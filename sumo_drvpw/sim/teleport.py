@@ -116,7 +116,7 @@ def summary(ledger, net, names: list[str], classes: list[str], net_j: dict[str, 
                 f"{n} kinetic {kin[names.index(n)] / 3.6e6:+.2f} kWh, potential "
                 f"{pot[names.index(n)] / 3.6e6:+.2f} kWh beside a net driving energy of "
                 f"{net_j.get(n, 0.0) / 3.6e6:.2f} kWh" for n in big)
-            + (": cars that stood were put back at speed and later brake from speeds they were "
+            + (": vehicles that stood were put back at speed and later brake from speeds they were "
                "never booked to reach, so the run books less than if they had driven off" if faster else "")
             + " (summary.json teleports; vehicles.parquet teleport_kinetic_j, teleport_potential_j)")
     return block, per_eq, warnings
