@@ -141,7 +141,8 @@ def test_a_closed_loop_books_no_net_climb_on_odd_lanes(tmp_path, step):
     than its shape (503 m, falling 40 m) had every step taken for a jump and booked −20 m per
     lap; an edge falling 3 m over 1 m (an elevation step, steeper than [slope] max_rad on
     average) left a step at its end, booked or not as the step length fell (2.7–5.4 m). Two
-    laps of a loop with both now book no net climb, live and replayed from the FCD."""
+    laps of a loop with both now book no net climb, live and replayed from the FCD, and no
+    step steeper than max_rad."""
     import subprocess
 
     import pandas as pd
@@ -174,8 +175,13 @@ def test_a_closed_loop_books_no_net_climb_on_odd_lanes(tmp_path, step):
         '<output><fcd-output value="fcd.xml"/></output></configuration>')
     (tmp_path / "g.toml").write_text('[equation]\nname = "g"\n[terms]\ngrade = 1.0\n')
     (tmp_path / "s.toml").write_text(f'equations = ["g.toml"]\n[sumo]\nconfig = "n.sumocfg"\nstep_length = {step}\n'
-                                     '[outputs]\nfigures = false\n')
+                                     '[outputs]\nfigures = false\ntrace = true\n')
     run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    # no step books a grade beyond [slope] max_rad (0.25): the 3-m step was booked at up to
+    # 0.41 rad in one step (MoST's 7.6-m step between lanes at 1.10 rad, 2.7 MW of a trailer's
+    # grade power); the rise beyond the limit is carried to the next steps
+    theta = pd.read_parquet(tmp_path / "o" / "trace.parquet", columns=["theta_rad"])["theta_rad"]
+    assert theta.abs().max() <= 0.25 + 1e-9 and theta.abs().max() > 0.2
     for out in ("o", "r"):
         if out == "r":
             assert cli_main(["fcd", str(tmp_path / "o" / "sumo" / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),

@@ -288,7 +288,7 @@ class Ledger:
         grow("veh_prev_angle", (cap,), float, np.nan)  # SUMO's angle a step ago [deg]
         grow("veh_lane", (cap,), np.int64, -2)  # tracked lane (-2: never read)
         grow("veh_pos", (cap,), float, np.nan)  # tracked lane position [m]
-        grow("veh_at", (cap, 3), float, np.nan)  # last step's lane, position, profile z
+        grow("veh_at", (cap, 4), float, np.nan)  # last step's lane, position, profile z, rise not yet booked
         grow("veh_done", (cap,), bool, False)  # left the simulation, not yet flushed
         grow("veh_done_step", (cap,), np.int64, 0)  # the step it left at
         grow("veh_parked", (cap,), bool, False)  # parked off the lane: not read, not booked

@@ -12,7 +12,8 @@ shorter), θ = atan(Δz/Δs), clipped to ±``max_rad`` — and what clipping tak
 spread over the lane's other bins, so that the profile still climbs the lane's rise
 (:func:`lane_profile`). The loop books a vehicle's grade from the profile's elevation at
 the step's start and end (:meth:`Network.elevation`), so m·g·Δz over a route is exact,
-clipped or not.
+clipped or not; no step steeper than ``max_rad`` (a rise beyond it, an elevation step
+between two lanes, is carried to the vehicle's next steps: :meth:`Network.step_grade`).
 """
 
 from __future__ import annotations
@@ -143,7 +144,15 @@ class Network:
         teleport or a parking: NaN elevation), Δs shorter than 1 cm, or the rise steeper than
         the profile allows over the road covered (a jump: moveTo with positions read).
 
-        ``last`` : (n, 3) rows [lane, pos, z] of each vehicle's last step. ``reach`` : the
+        No step books a grade steeper than ``max_rad``: where the profile rises faster over
+        a step — a lane's elevation step to the next (MoST: 7.6 m between two lanes, booked
+        at 1.10 rad, 2.7 MW of a trailer's grade power), a lane steeper on average than the
+        limit — the step books the limit's rise, sin(max_rad)·Δs, and the rest is carried
+        to the vehicle's next steps (its rows' fourth column), so a route's potential energy
+        stays m·g·Δz but for what a trip's last steps still carry.
+
+        ``last`` : (n, 4) rows [lane, pos, z, rise not yet booked] of each vehicle's last
+        step (NaN: none). ``reach`` : the
         road [m] the vehicle may have covered since (default ``ds``): max(v_t−1, v_t)·Δt, so
         that an FCD written less often than the step (``--device.fcd.period 2`` at 1-s steps:
         a braking car covers more than v_t·Δt between its rows) is no jump; a teleported car
@@ -168,9 +177,14 @@ class Network:
             k = np.flatnonzero(ok & (self.lane_own_edge[prev] != self.lane_own_edge[lane]))
             if len(k):
                 ok[k[self.jumped(prev[k], last[k, 1], lane[k], pos[k], road[k])]] = False
-        if ok.any():  # sin θ = Δz/(v·Δt): m·g·v·sin θ·Δt = m·g·Δz
-            theta = np.where(ok, np.arcsin(np.clip(dz / np.where(ok, ds, 1.0), -1.0, 1.0)), theta)
-        return theta, np.column_stack([lane, pos, z])
+        owed = np.nan_to_num(last[:, 3]) if last.shape[1] > 3 else np.zeros(len(lane))
+        if ok.any():  # sin θ = Δz/(v·Δt): m·g·v·sin θ·Δt = m·g·Δz, at most sin(max_rad)
+            want = np.where(ok, dz + owed, 0.0)
+            lim = np.sin(min(self.max_rad, 0.5 * np.pi)) * np.where(ok, ds, 0.0)
+            booked = np.clip(want, -lim, lim)
+            theta = np.where(ok, np.arcsin(np.clip(booked / np.where(ok, ds, 1.0), -1.0, 1.0)), theta)
+            owed = np.where(ok, want - booked, owed)
+        return theta, np.column_stack([lane, pos, z, owed])
 
     def jumped(self, lp, p0, ln, p1, road) -> np.ndarray:
         """Which moves from lane numbers ``lp``, positions ``p0`` [m] to lanes ``ln`` of
@@ -195,10 +209,11 @@ class Network:
         return jump
 
     def place(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
-        """Rows [lane, pos, z] of vehicles at lane numbers ``lane``, positions ``pos`` [m]
-        (as :meth:`step_grade` returns them): where their next step starts."""
+        """Rows [lane, pos, z, 0] of vehicles at lane numbers ``lane``, positions ``pos`` [m]
+        (as :meth:`step_grade` returns them): where their next step starts (a rise not yet
+        booked is forgiven: the jump's potential energy is booked apart)."""
         z = self.elevation(lane, pos) if self.z_node is not None else np.full(len(lane), np.nan)
-        return np.column_stack([lane, pos, z])
+        return np.column_stack([lane, pos, z, np.zeros(len(lane))])
 
     def own_side_after(self, last, ds, lane, pos):
         """:meth:`own_side` for vehicles whose last step ended at rows ``last`` [lane, pos, z]
