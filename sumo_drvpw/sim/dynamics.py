@@ -67,6 +67,14 @@ PROFILE_MIN_SAMPLES = 50
 LOG_LABEL = "measured"
 #: vClass labels of heavy vehicles: the RDE's bounds are a light-duty vehicle's
 HEAVY = frozenset({"bus", "coach", "truck", "trailer"})
+#: specific power for accelerating and climbing alone, v̄·a + g·v·sin θ [W/kg], beyond which a
+#: heavy vehicle's step asks more than any production engine gives at its mass (the strongest
+#: trucks' 560 kW are 14 W/kg at 40 t, 23 at 24 t; a 300-kW coach at 12 t: 25): SUMO's
+#: car-following models neither see the grade nor limit the power (a rehearsal on MoST: a
+#: 24-t trailer climbing 5.7 % at 100 km/h, 10.5 % of its steps above 400 kW)
+HEAVY_POWER_W_PER_KG = 25.0
+#: share of a heavy class's vehicle-steps beyond :data:`HEAVY_POWER_W_PER_KG` that is said
+HEAVY_POWER_WARN_SHARE = 0.01
 #: and of two-wheelers, whose real driving (a motorcycle's power per kg) may exceed them
 TWO_WHEELERS = frozenset({"motorcycle", "moped"})
 #: SUMO 1.28's car-following defaults of a vType that sets none, per vClass: accel, decel
@@ -122,11 +130,15 @@ class Dynamics:
         #: label → [Σ max(v̄·a, 0)·Δt [J/kg], Σ distance [m]] over every step (the run's own step)
         self.kinetic: dict[str, np.ndarray] = {}
         self.acc_hist: dict[str, np.ndarray] = {}  # label → (PROFILE_BINS, ACC_BINS)
+        #: heavy class label → [vehicle-steps beyond HEAVY_POWER_W_PER_KG, vehicle-steps]
+        self.beyond: dict[str, np.ndarray] = {}
 
     def step(self, ledger, vidx: np.ndarray, v_mean: np.ndarray, a: np.ndarray, v_dist: np.ndarray,
-             dt: float) -> None:
+             dt: float, theta: np.ndarray | None = None) -> None:
         """Add a step's positive kinetic energy per kg, ½(v_t² − v_t−1²)⁺ = (v̄·a)⁺·Δt, and
-        distance (``v_dist``·Δt) per class of the accounted vehicles ``vidx``."""
+        distance (``v_dist``·Δt) per class of the accounted vehicles ``vidx``; with the
+        grades ``theta`` [rad], count the heavy classes' steps beyond
+        :data:`HEAVY_POWER_W_PER_KG`."""
         keep = ledger.veh_keep[vidx]
         code = ledger.veh_cls[vidx[keep]]
         n = len(ledger.class_list)
@@ -135,6 +147,15 @@ class Dynamics:
         for c in np.flatnonzero(dist > 0):
             acc = self.kinetic.setdefault(ledger.class_list[c], np.zeros(2))
             acc += (kin[c], dist[c])
+        heavy = [c for c in range(n) if ledger.class_list[c] in HEAVY]
+        if theta is None or not heavy:
+            return
+        sp = v_mean[keep] * a[keep] + 9.80665 * v_dist[keep] * np.sin(theta[keep])
+        over = np.bincount(code, sp > HEAVY_POWER_W_PER_KG, minlength=n).astype(np.int64)
+        steps = np.bincount(code, minlength=n)
+        for c in heavy:
+            if steps[c]:
+                self.beyond.setdefault(ledger.class_list[c], np.zeros(2, np.int64))[:] += (over[c], steps[c])
 
     def _acc(self, label: str) -> tuple[np.ndarray, np.ndarray]:
         if label not in self.sums:
@@ -205,6 +226,8 @@ class Dynamics:
         for lab, x in other.kinetic.items():
             acc = self.kinetic.setdefault(lab, np.zeros(2))
             acc += x
+        for lab, x in other.beyond.items():
+            self.beyond.setdefault(lab, np.zeros(2, np.int64))[:] += x
         for lab in other.sums:
             sums, hist = self._acc(lab)
             sums += other.sums[lab]
@@ -240,6 +263,10 @@ class Dynamics:
             kin, dist = self.kinetic.get(lab, (0.0, 0.0))
             out[lab] = {"parts": parts, "kinetic_j_per_kg_km": 1000.0 * kin / dist if dist > 0 else float("nan"),
                         "accel_profile": accel_profile(self.acc_hist[lab]) if lab in self.acc_hist else []}
+            if lab in self.beyond:  # a heavy class: its steps beyond an engine's specific power
+                k, m = (int(x) for x in self.beyond[lab])
+                out[lab]["beyond_engine_power"] = {"w_per_kg": HEAVY_POWER_W_PER_KG, "steps": k,
+                                                   "of_steps": m, "share": k / m if m else 0.0}
         return out
 
 
@@ -385,6 +412,16 @@ def warnings(summary: dict) -> list[str]:
         if under:
             smooth.append(f"{lab} ({', '.join(under)})")
     out = []
+    strong = {lab: doc["beyond_engine_power"] for lab, doc in summary.items()
+              if doc.get("beyond_engine_power", {}).get("share", 0.0) > HEAVY_POWER_WARN_SHARE}
+    if strong:
+        out.append("driving dynamics: heavy vehicles accelerate and climb beyond any engine's power: "
+                   + "; ".join(f"{lab} {b['share']:.1%} of its vehicle-steps above {b['w_per_kg']:g} W/kg for "
+                               "accelerating and climbing alone" for lab, b in strong.items())
+                   + " (the strongest trucks' 560 kW are 14 W/kg at 40 t): SUMO's car-following models "
+                   "neither see the grade nor limit the power, and the energy and fuel booked follow those "
+                   "trajectories — lower the vTypes' accel, their maxSpeed on climbs, or use a power-"
+                   "limited model (summary.json driving_dynamics beyond_engine_power)")
     if hard:
         out.append("driving dynamics: trajectories accelerate harder than a valid real-world test trip "
                    f"(EU RDE, 95th percentile of v·a_pos above its bound): {'; '.join(hard)}; the acceleration "

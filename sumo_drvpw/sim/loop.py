@@ -513,7 +513,7 @@ class Stepper:
             ledger.out_of_range[k] += int(np.count_nonzero(out))
         eidx = self.lane_edge_ext[lane]
         ledger.book(vidx, eidx, v, dt, pc)
-        ledger.dynamics.step(ledger, vidx, v_mean, a, v, dt)
+        ledger.dynamics.step(ledger, vidx, v_mean, a, v, dt, theta)
         if whole_second(t_now - dt, dt):  # the trajectories at 1 Hz, as the RDE reads a trip (at the
             # time SUMO's outputs give this state: the step's begin, getTime() − Δt after the step)
             ledger.dynamics.sample(ledger, vidx, v_state, t_now - dt)
