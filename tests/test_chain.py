@@ -580,6 +580,10 @@ def test_cli_calibrate_battery_then_compare_uses_the_chain(tmp_path, capsys):
         assert "note: the equations predict different targets" in said and "--target battery" in said
         assert json.loads((mixed / "report.json").read_text())["settings"]["target"] == "wheel"
         assert "**target**: the equations predict different targets" in (mixed / "report.md").read_text()
+    # an equation at the powertrain output (drvpw_prius3) is a driving power: no such note
+    assert cli_main(["compare", str(log), "--equation", str(road), "--equation", "drvpw_prius3",
+                     "--out", str(tmp_path / "po")]) == 0
+    assert "different targets" not in capsys.readouterr().out
     # a driving-power comparison of a log without a driving-power source is refused (exit 2)
     assert cli_main(["compare", str(log), "--equation", str(eq), "--target", "fuel",
                      "--out", str(tmp_path / "f")]) == 2

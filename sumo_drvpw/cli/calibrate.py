@@ -68,7 +68,10 @@ def _check_name(args) -> None:
 
 
 def main(args) -> int:
+    from sumo_drvpw.cli._scale import check_engine_arguments
+
     _check_name(args)
+    check_engine_arguments(args)  # --workers, --scheduler only with --engine dask (every path)
     if getattr(args, "target", "wheel") != "wheel":
         return main_chain(args)
     if getattr(args, "equation", None) or getattr(args, "load", None) or getattr(args, "hvac", None):

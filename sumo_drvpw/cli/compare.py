@@ -74,7 +74,7 @@ def compare_target(args) -> tuple[str, str | None]:
     pred = set(by.values())
     if len(pred) == 1 and pred <= {"battery", "fuel"}:
         return pred.pop(), None
-    chains = sorted(p for p in pred if p != "wheel")
+    chains = sorted(p for p in pred if p in ("battery", "fuel"))  # (powertrain_output: a driving power)
     if not chains:
         return "wheel", None
     note = (f"the equations predict different targets ({'; '.join(f'{s}: {p}' for s, p in by.items())}): "

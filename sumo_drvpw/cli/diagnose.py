@@ -53,7 +53,8 @@ def configure(p):
     p.add_argument("--stream", choices=("auto", "yes", "no"), default="auto",
                    help="read the logs batch by batch of whole trips in bounded memory (yes), all at once "
                         f"(no), or auto: streamed above {STREAM_ROWS:,} rows (default); streamed runs "
-                        "screen columns on the first rows and draw no figures")
+                        "screen columns on the first rows and draw no figures; the tracer of an energy "
+                        "chain (--target battery|fuel) reads in memory")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     from sumo_drvpw.cli import add_force, add_log_options
 
@@ -246,6 +247,12 @@ def _chain_main(args, target, progress) -> int:
 
     if not args.equation:
         raise UserError(f"--target {target} needs --equation with an energy chain predicting {target}")
+    if args.stream == "yes":  # the chain tracer reads the logs in memory: a promise it cannot keep
+        raise UserError(f"--stream yes: the tracer of an energy chain (--target {target}) reads the logs in "
+                        "memory, it has no streamed path yet; give --stream no (or auto), or a share of the logs")
+    if args.stream == "auto" and should_stream(args.logs, "auto"):
+        print(f"note: the tracer of an energy chain reads the logs in memory (no streamed path yet), these "
+              f"beyond the {STREAM_ROWS:,} rows above which the driving power's tracer streams")
     eq = load_equation(args.equation)
     check_chain_equation(eq, target)
     opt = ChainTraceOptions(block_s=args.block_s, folds=args.folds, alpha=args.alpha, min_gain=args.min_gain,
