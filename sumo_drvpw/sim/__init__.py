@@ -3,12 +3,14 @@
 ``run_scenario(scenario_path, out_dir=None, **overrides) -> RunResult`` runs a scenario
 file (:mod:`.scenario`) with libsumo (or traci) and writes the outputs of :mod:`.outputs`;
 ``Accountant`` does the same inside a user's own TraCI/libsumo loop (a step listener);
-``process_fcd`` books a finished run from SUMO's FCD output. Modules, in the order the data
-travel: ``scenario`` (config), ``vtypes`` (mass, vClass and drvpw.* params from the route
-files), ``network`` (edge table, road classes, robust slopes), ``loop`` (one step at a
-time, connection passed in), ``ledger`` (vectorized evaluation and accumulation),
+``process_fcd`` (:mod:`.fcd`; ``process_fcd_dask`` in :mod:`.fcd_dask`) books a finished run
+from SUMO's FCD output. Modules, in the order the data travel: ``scenario`` (config),
+``vtypes`` (mass, vClass and drvpw.* params from the route files), ``resolver`` (which
+equations book a vType, at what mass), ``network`` (edge table, road classes, robust slopes),
+``reader`` (a step's state from SUMO), ``loop`` (one step at a time, connection passed in),
+``ledger`` (vectorized evaluation and accumulation), ``chain`` (battery and fuel accounts),
 ``accountant`` (ties them to a connection), ``outputs`` (tables, edgeData, figures,
-RunResult); ``run`` starts SUMO; ``fcd`` replays FCD files.
+RunResult); ``sumo_start`` starts SUMO, ``run`` runs a scenario; ``fcd*`` replay FCD files.
 """
 
 from sumo_drvpw.sim.accountant import Accountant
@@ -16,4 +18,12 @@ from sumo_drvpw.sim.outputs import RunResult
 from sumo_drvpw.sim.run import VTypeResolver, close_sumo, run_scenario, start_sumo
 
 __all__ = ["run_scenario", "start_sumo", "close_sumo", "VTypeResolver", "Accountant",
-           "RunResult"]
+           "RunResult", "process_fcd"]
+
+
+def __getattr__(name):  # process_fcd on first use (the FCD readers are not loaded before)
+    if name == "process_fcd":
+        from sumo_drvpw.sim.fcd import process_fcd
+
+        return process_fcd
+    raise AttributeError(f"module 'sumo_drvpw.sim' has no attribute {name!r}")

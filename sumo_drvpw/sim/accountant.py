@@ -10,7 +10,7 @@
         conn.simulationStep()
         e = acc.energy("veh0")                   # energies so far [J] per equation and term
     result = acc.result()                        # RunResult: .vehicles, .edges, .classes, .summary
-    result.write("out")                          # exactly what `sumo-drvpw run` writes
+    result.write("out")                          # what `sumo-drvpw run` writes (but manifest.json)
     conn.close()
 
 Masses, vClasses and equations per vType are resolved as in ``run``

@@ -40,6 +40,8 @@ import math
 
 import numpy as np
 
+from sumo_drvpw.model.constants import G
+
 #: the RDE parts: name, upper speed bound [km/h] (inclusive; the last has none)
 PARTS = (("urban", 60.0), ("rural", 90.0), ("motorway", math.inf))
 #: an acceleration counts as positive above this [m/s²]
@@ -150,7 +152,7 @@ class Dynamics:
         heavy = [c for c in range(n) if ledger.class_list[c] in HEAVY]
         if theta is None or not heavy:
             return
-        sp = v_mean[keep] * a[keep] + 9.80665 * v_dist[keep] * np.sin(theta[keep])
+        sp = v_mean[keep] * a[keep] + G * v_dist[keep] * np.sin(theta[keep])
         over = np.bincount(code, sp > HEAVY_POWER_W_PER_KG, minlength=n).astype(np.int64)
         steps = np.bincount(code, minlength=n)
         for c in heavy:

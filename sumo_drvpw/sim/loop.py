@@ -22,13 +22,13 @@ from typing import Callable
 
 import numpy as np
 
+from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.dynamics import whole_second
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import LaneNumbers, Network
 from sumo_drvpw.sim.parking import Parking
-from sumo_drvpw.sim.reader import (Reader, calibrator_lanes, on_road_acceleration, reinserted,  # noqa: F401
-                                   tailwind, yaw_rate)  # (tailwind re-exported)
+from sumo_drvpw.sim.reader import Reader, calibrator_lanes, on_road_acceleration, reinserted, tailwind, yaw_rate  # noqa: F401,E501
 from sumo_drvpw.sim.riders import Riders
 from sumo_drvpw.sim.shutoff import ShutOff
 from sumo_drvpw.sim.sumo_start import NewRun, action_step_switches, signals_deferred, step_method
@@ -87,7 +87,7 @@ class Physics:
 #: friction brakes, not in a battery — the chains recuperate none of it that step, as SUMO's
 #: own emission output booked only the auxiliary power there (its test
 #: rail/bidi_noconflict_insertion with a 400-t Energy-model train, SUMO 1.28, 2026-11-29)
-IMPOSSIBLE_DECEL_MPS2 = 1.2 * 9.81
+IMPOSSIBLE_DECEL_MPS2 = 1.2 * G
 
 #: every this many steps the running vehicles' vTypes are read again (a script's setType,
 #: setMass): a change books from then on (over traci, each read a round trip: 10× as many);
