@@ -648,3 +648,38 @@ def test_an_accountant_attached_mid_run_books_what_a_whole_run_books_from_then(t
         for col, key in (("traction_total_j", "traction"), ("recup_total_j", "recuperable"),
                          ("net_total_j", "net")):
             assert row[col] == pytest.approx(whole.loc[(v, e), col] - was.get(key, 0.0), rel=1e-9, abs=0.01)
+
+
+def test_a_vehicle_a_script_turns_electric_is_booked_by_the_battery_chain_from_then(tmp_path):
+    """vehicle.setEmissionClass on one car (SUMO gives it its own vType copy, 'prius3@<id>')
+    was ignored: the petrol car stayed on the petrol chain for its whole trip. Now the copy's
+    emissionClass chooses the chain from the type's equations: the petrol chain books the
+    car until the type check (every few seconds) sees the copy, the battery chain from then
+    on; the car's km
+    split between the two add up to its trip; a car left alone stays on petrol."""
+    sc = load_scenario(CITY, end=200)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, equations=["epa_gasoline_car", "bmw_i3_battery"], figures=False,
+                         keep_vehicles=True)
+        conn.vehicletype.copy("prius3", "petrol")  # a petrol car's vType
+        conn.vehicletype.setEmissionClass("petrol", "HBEFA4/PC_petrol_Euro-4")
+        conn.route.add("r_ev", ["c00c10", "c10c20"])
+        conn.vehicle.add("turned", "r_ev", typeID="petrol", depart="0")
+        conn.vehicle.add("left", "r_ev", typeID="petrol", depart="3")
+        switched = False
+        for _ in range(400):
+            conn.simulationStep()
+            acc.step()
+            if not switched and "turned" in conn.vehicle.getIDList():
+                conn.vehicle.setEmissionClass("turned", "Energy/unknown")
+                switched = True
+        v = acc.result().vehicles
+    finally:
+        close_sumo(conn)
+    t = v[v.vehicle == "turned"].set_index("equation")
+    assert set(t.index) == {"epa_gasoline_car", "bmw_i3_battery"}, t
+    assert t.loc["bmw_i3_battery", "distance_m"] > 2 * t.loc["epa_gasoline_car", "distance_m"] > 0
+    left = v[v.vehicle == "left"]
+    assert list(left.equation) == ["epa_gasoline_car"]
+    assert t["distance_m"].sum() == pytest.approx(left["distance_m"].iloc[0], rel=0.05)  # the same route

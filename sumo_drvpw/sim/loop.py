@@ -247,8 +247,9 @@ class Stepper:
         """vTypes changed during a trip: ``vehicle.setType`` books on with the new vType's
         mass, class and equations; ``setMass`` and the other vType setters give the vehicle
         a type of its own, ``<type>@<id>``, which keeps its type's resolution (scenario
-        settings, equations, filter) and takes only a mass SUMO now gives otherwise
-        (``retyped`` counts both)."""
+        settings, equations, filter) and takes only a mass or an emissionClass of another
+        energy carrier SUMO now gives it (:meth:`VTypeResolver.own_copy`; ``retyped`` counts
+        both)."""
         ledger, get, seen = self.ledger, self.conn.vehicle.getTypeID, self.seen_type
         types, tget = ledger.veh_type, getattr(self.conn, "vehicletype", None)
         for vid, i in zip(kids, vidx.tolist()):
@@ -256,13 +257,11 @@ class Stepper:
             if vt == seen.get(vid, types[i]):
                 continue
             seen[vid] = vt
-            if vt == f"{types[i]}@{vid}":  # its own copy: only a mass set by the script counts
-                if tget is None or self.is_replay:  # (FCD names the copy, not its mass)
-                    continue
-                m = float(tget.getMass(vt))
-                if m > 0 and m != float(tget.getMass(types[i])):
-                    ledger.veh_mass[i] = m
-                    self.retyped += 1
+            if vt == f"{types[i]}@{vid}":  # its own copy: a mass or an emissionClass the script set
+                own = getattr(self.resolve, "own_copy", None)  # (a VTypeResolver's)
+                if own and tget is not None and not self.is_replay and own(ledger, i, types[i], vt):
+                    self.retyped += 1  # (FCD names the copy, not its mass)
+                    self.every_equation_applies &= bool(np.all(ledger.veh_app[i] == 1.0))
                 continue
             res = self.resolve(vt, vid)
             types[i] = vt

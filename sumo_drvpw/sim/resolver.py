@@ -71,6 +71,10 @@ class VTypeResolver:
         #: vType → {"emission_class", "from", "carrier", "not_booked_by"}: chain equations
         #: made for the vType's vClass that book another energy carrier
         self.carriers: dict[str, dict] = {}
+        #: vType → its equations before its energy carrier chose among them (those made for
+        #: its class; not for a vType whose equations are named): a vehicle's own copy with
+        #: another emissionClass is booked from them (:meth:`own_copy`)
+        self.made_for_app: dict[str, np.ndarray] = {}
         #: vType → {"emission_class", "from", "powertrain", "not_booked_by"}: fuel chains of
         #: its carrier made for another powertrain (a hybrid's or a conventional engine's)
         self.powertrains: dict[str, dict] = {}
@@ -195,6 +199,35 @@ class VTypeResolver:
                                 "not_booked_by": [self.names[i] for i in other]}
         return app
 
+    def own_copy(self, ledger, i: int, vt: str, copy: str) -> bool:
+        """Vehicle row ``i`` of vType ``vt`` now runs on its own copy ``copy`` (``<vt>@<id>``:
+        SUMO makes one when a script calls the vehicle's setMass, setEmissionClass, …): its
+        mass when the script set another, and where the copy's emissionClass names another
+        energy carrier than ``vt``'s, the equations of that carrier among those made for its
+        class (a petrol car a script turns electric: the battery chain, not the petrol one).
+        True when either changed."""
+        tget = self.conn.vehicletype
+        changed = False
+        m = float(tget.getMass(copy))
+        if m > 0 and m != float(tget.getMass(vt)):
+            ledger.veh_mass[i] = m
+            changed = True
+        made = self.made_for_app.get(vt)
+        ec = str(tget.getEmissionClass(copy)) or None
+        carrier = energy_carrier(ec)
+        if made is None or carrier is None or ec == (str(tget.getEmissionClass(vt)) or None):
+            return changed
+        app = made.copy()
+        app[[k for k, n in enumerate(self.names) if app[k] and self.carrier_of[n] not in (None, carrier)]] = 0.0
+        app = self._by_powertrain(copy, ec, "set by a script on the vehicle", app)
+        if app.any() and not np.array_equal(app, ledger.veh_app[i]):
+            ledger.set_app(i, app)
+            self.carriers[copy] = {"emission_class": ec, "from": "set by a script on the vehicle",
+                                   "carrier": carrier, "not_booked_by": [n for n, a in zip(self.names, app)
+                                                                         if not a and made[self.names.index(n)]]}
+            changed = True
+        return changed
+
     def __call__(self, vt: str, vid: str):
         out = self.cache.get(vt)
         if out is None:
@@ -255,6 +288,7 @@ class VTypeResolver:
         if not app.any():
             return (np.nan, app, False, vclass, "vclass")
         if not explicit:
+            self.made_for_app[vt] = app.copy()
             app = self._by_carrier(vt, info, body, app)
             if not app.any():
                 return (np.nan, app, False, vclass, "carrier")
