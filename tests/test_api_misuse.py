@@ -43,6 +43,8 @@ def test_inputs_of_different_lengths_are_one_user_error():
         calibrate(x, y[:-5], ("acc", "aero"))
     with pytest.raises(UserError, match=r"the mask 3995"):
         calibrate(x, y, ("acc", "aero"), mask=np.ones(3995, bool))
+    with pytest.raises(UserError, match=r"measured power is 0 on all 4000 usable samples"):
+        calibrate(x, np.zeros(4000), ("acc", "aero"))  # (was: zeros and a statsmodels RuntimeWarning)
 
 
 def test_a_vehicle_by_name_options_and_targets_checked(tmp_path):

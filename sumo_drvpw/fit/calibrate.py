@@ -281,6 +281,8 @@ def calibrate(x: Inputs, y: np.ndarray, candidates, mask: np.ndarray | None = No
     counts = dict(counts or {})
     counts["excluded_nonfinite_power"] = int((~np.isfinite(y)).sum())
     n_use = int(use.sum())
+    if n_use and not np.any(y[use] != 0.0):
+        raise UserError(f"calibrate: the measured power is 0 on all {n_use} usable samples: nothing to fit")
     g = gram(x, y, candidates, use)
     sel, trace, dropped = select_terms(g, p_enter, p_remove)
     xs, ys = _design(sel, x, y, use)
