@@ -135,6 +135,22 @@ def test_standing_and_moving_constants_in_a_sumo_run(tmp_path):
     assert 0 < tot["standing"] < tot["moving"] < tot["always"]
 
 
+def _network(tmp_path, nodes: str, edges: str, routes: str, outputs: str = "") -> Path:
+    """Nodes, edges (netconvert) and routes written into ``tmp_path``; its SUMO config."""
+    import subprocess
+
+    import sumolib
+
+    (tmp_path / "n.nod.xml").write_text(f"<nodes>{nodes}</nodes>")
+    (tmp_path / "n.edg.xml").write_text(f"<edges>{edges}</edges>")
+    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml",
+                    "--no-warnings"], check=True, capture_output=True, cwd=tmp_path)
+    (tmp_path / "n.rou.xml").write_text(f"<routes>{routes}</routes>")
+    (tmp_path / "n.sumocfg").write_text('<configuration><input><net-file value="n.net.xml"/><route-files '
+                                        f'value="n.rou.xml"/></input>{outputs}</configuration>')
+    return tmp_path / "n.sumocfg"
+
+
 @pytest.mark.parametrize("step", [1.0, 0.1])
 def test_a_closed_loop_books_no_net_climb_on_odd_lanes(tmp_path, step):
     """Found by the review of the step-grade change: a lane whose `length` (250 m) is shorter
@@ -143,36 +159,26 @@ def test_a_closed_loop_books_no_net_climb_on_odd_lanes(tmp_path, step):
     average) left a step at its end, booked or not as the step length fell (2.7–5.4 m). Two
     laps of a loop with both now book no net climb, live and replayed from the FCD, and no
     step steeper than max_rad."""
-    import subprocess
-
     import pandas as pd
-    import sumolib
 
     from sumo_drvpw.cli import main as cli_main
     from sumo_drvpw.model.constants import G
     from sumo_drvpw.sim.run import run_scenario
 
-    (tmp_path / "n.nod.xml").write_text(
-        '<nodes><node id="n0" x="0" y="0" z="0"/><node id="n1" x="500" y="0" z="0"/>'
-        '<node id="n2" x="500" y="500" z="40"/><node id="n3" x="0" y="500" z="40"/>'
-        '<node id="n4" x="0" y="499" z="37"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text(
-        '<edges><edge id="a" from="n0" to="n1" numLanes="1" speed="15"/>'
-        '<edge id="b" from="n1" to="n2" numLanes="1" speed="15" shape="500,0,0 500,100,0 500,350,40 500,500,40"/>'
-        '<edge id="c" from="n2" to="n3" numLanes="1" speed="15"/>'
-        '<edge id="s" from="n3" to="n4" numLanes="1" speed="15"/>'
-        '<edge id="d" from="n4" to="n0" numLanes="1" speed="15" length="250" shape="0,499,37 0,400,37 0,150,0 0,0,0"/>'
-        '</edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml",
-                    "--no-warnings"], check=True, capture_output=True, cwd=tmp_path)
-    (tmp_path / "n.rou.xml").write_text(
-        '<routes><vType id="car" mass="1500" sigma="0" maxSpeed="15"/><vType id="slow" mass="1500" sigma="0" '
-        'maxSpeed="5"/><route id="loop" edges="a b c s d a b c s d a"/>'
-        '<vehicle id="fast" type="car" route="loop" depart="0" departPos="100" arrivalPos="100"/>'
-        '<vehicle id="slow" type="slow" route="loop" depart="0" departPos="50" arrivalPos="50"/></routes>')
-    (tmp_path / "n.sumocfg").write_text(
-        '<configuration><input><net-file value="n.net.xml"/><route-files value="n.rou.xml"/></input>'
-        '<output><fcd-output value="fcd.xml"/></output></configuration>')
+    _network(tmp_path,
+             '<node id="n0" x="0" y="0" z="0"/><node id="n1" x="500" y="0" z="0"/>'
+             '<node id="n2" x="500" y="500" z="40"/><node id="n3" x="0" y="500" z="40"/>'
+             '<node id="n4" x="0" y="499" z="37"/>',
+             '<edge id="a" from="n0" to="n1" numLanes="1" speed="15"/>'
+             '<edge id="b" from="n1" to="n2" numLanes="1" speed="15" shape="500,0,0 500,100,0 500,350,40 500,500,40"/>'
+             '<edge id="c" from="n2" to="n3" numLanes="1" speed="15"/>'
+             '<edge id="s" from="n3" to="n4" numLanes="1" speed="15"/>'
+             '<edge id="d" from="n4" to="n0" numLanes="1" speed="15" length="250" shape="0,499,37 0,400,37 0,150,0 0,0,0"/>',
+             '<vType id="car" mass="1500" sigma="0" maxSpeed="15"/><vType id="slow" mass="1500" sigma="0" '
+             'maxSpeed="5"/><route id="loop" edges="a b c s d a b c s d a"/>'
+             '<vehicle id="fast" type="car" route="loop" depart="0" departPos="100" arrivalPos="100"/>'
+             '<vehicle id="slow" type="slow" route="loop" depart="0" departPos="50" arrivalPos="50"/>',
+             '<output><fcd-output value="fcd.xml"/></output>')
     (tmp_path / "g.toml").write_text('[equation]\nname = "g"\n[terms]\ngrade = 1.0\n')
     (tmp_path / "s.toml").write_text(f'equations = ["g.toml"]\n[sumo]\nconfig = "n.sumocfg"\nstep_length = {step}\n'
                                      '[outputs]\nfigures = false\ntrace = true\n')
@@ -198,63 +204,19 @@ def test_an_output_the_scenario_options_name_relatively_goes_into_the_run_folder
     scenario wrote fcd.xml into the working directory, outside the run's output set (the
     config's own outputs go into OUT/sumo/). A relative output path of the options now goes
     there too; an absolute one is kept."""
-    import subprocess
-
-    import sumolib
-
     from sumo_drvpw.sim.run import run_scenario
 
-    (tmp_path / "f.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="300" y="0"/></nodes>')
-    (tmp_path / "f.edg.xml").write_text('<edges><edge id="ab" from="a" to="b" numLanes="1" speed="20"/></edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "f.nod.xml", "-e", "f.edg.xml", "-o", "f.net.xml",
-                    "--no-warnings"], check=True, capture_output=True, cwd=tmp_path)
-    (tmp_path / "r.rou.xml").write_text('<routes><vType id="car" mass="1500"/><vehicle id="v" type="car" '
-                                        'depart="0"><route edges="ab"/></vehicle></routes>')
-    (tmp_path / "c.sumocfg").write_text('<configuration><input><net-file value="f.net.xml"/>'
-                                        '<route-files value="r.rou.xml"/></input></configuration>')
-    kept = tmp_path / "abs" / "summary.xml"
-    kept.parent.mkdir()
-    (tmp_path / "s.toml").write_text(
-        'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "c.sumocfg"\n'
-        f'options = ["--fcd-output", "fcd.xml", "--summary-output", "{kept}"]\n[outputs]\nfigures = false\n')
-    cwd = tmp_path / "elsewhere"
-    cwd.mkdir()
-    monkeypatch.chdir(cwd)
-    run_scenario(tmp_path / "s.toml", tmp_path / "o")
-    assert (tmp_path / "o" / "sumo" / "fcd.xml").stat().st_size > 0
-    assert not (cwd / "fcd.xml").exists() and kept.stat().st_size > 0
-
-
-def test_heavy_vehicles_climbing_beyond_any_engines_power_are_said(tmp_path):
-    """Rehearsal on MoST: SUMO drove 24-t trailers up 5.7 % at 100 km/h — 10.5 % of their
-    steps above 400 kW, the 99th percentile 1.19 MW, where the strongest production truck
-    has 560 kW — and nothing said so (their 80 L/100 km followed). Planted: a 1-km climb of
-    10 % after a flat run-up; a trailer at up to 30 m/s climbs it at 29 W/kg for climbing
-    alone (counted and said), a bus held to 8 m/s at 8 W/kg (counted, not said), a car not
-    counted (not heavy)."""
-    import subprocess
-
-    import sumolib
-
-    from sumo_drvpw.sim.run import run_scenario
-
-    (tmp_path / "n.nod.xml").write_text(
-        '<nodes><node id="a" x="0" y="0" z="0"/><node id="b" x="1500" y="0" z="0"/>'
-        '<node id="c" x="2500" y="0" z="100"/><node id="d" x="2600" y="0" z="100"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text(
-        '<edges><edge id="ab" from="a" to="b" numLanes="1" speed="30"/><edge id="bc" from="b" to="c" '
-        'numLanes="1" speed="30"/><edge id="cd" from="c" to="d" numLanes="1" speed="30"/></edges>')
-    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml",
-                    "--no-warnings"], check=True, capture_output=True, cwd=tmp_path)
-    (tmp_path / "n.rou.xml").write_text(
-        '<routes><vType id="semi" vClass="trailer" mass="24000" sigma="0" accel="1.0" maxSpeed="30"/>'
-        '<vType id="bus" vClass="bus" mass="15000" sigma="0" maxSpeed="8"/>'
-        '<vType id="car" vClass="passenger" sigma="0" maxSpeed="30"/><route id="r" edges="ab bc cd"/>'
-        '<vehicle id="t" type="semi" route="r" depart="0"/><vehicle id="b" type="bus" route="r" depart="5"/>'
-        '<vehicle id="c" type="car" route="r" depart="10"/></routes>')
-    (tmp_path / "n.sumocfg").write_text('<configuration><input><net-file value="n.net.xml"/>'
-                                        '<route-files value="n.rou.xml"/></input></configuration>')
-    res = run_scenario(tmp_path / "n.sumocfg", tmp_path / "o", figures=False)
+    cfg = _network(tmp_path,
+                   '<node id="a" x="0" y="0" z="0"/><node id="b" x="1500" y="0" z="0"/>'
+                   '<node id="c" x="2500" y="0" z="100"/><node id="d" x="2600" y="0" z="100"/>',
+                   '<edge id="ab" from="a" to="b" numLanes="1" speed="30"/><edge id="bc" from="b" to="c" '
+                   'numLanes="1" speed="30"/><edge id="cd" from="c" to="d" numLanes="1" speed="30"/>',
+                   '<vType id="semi" vClass="trailer" mass="24000" sigma="0" accel="1.0" maxSpeed="30"/>'
+                   '<vType id="bus" vClass="bus" mass="15000" sigma="0" maxSpeed="8"/>'
+                   '<vType id="car" vClass="passenger" sigma="0" maxSpeed="30"/><route id="r" edges="ab bc cd"/>'
+                   '<vehicle id="t" type="semi" route="r" depart="0"/><vehicle id="b" type="bus" route="r" depart="5"/>'
+                   '<vehicle id="c" type="car" route="r" depart="10"/>')
+    res = run_scenario(cfg, tmp_path / "o", figures=False)
     dyn = res.summary["driving_dynamics"]["vclasses"]
     semi, bus = dyn["trailer"]["beyond_engine_power"], dyn["bus"]["beyond_engine_power"]
     assert semi["share"] > 0.1 and semi["steps"] > 20 and bus["steps"] == 0 and bus["of_steps"] > 100
