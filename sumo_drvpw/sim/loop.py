@@ -258,9 +258,9 @@ class Stepper:
                 continue
             seen[vid] = vt
             if vt == f"{types[i]}@{vid}":  # its own copy: a mass or an emissionClass the script set
-                own = getattr(self.resolve, "own_copy", None)  # (a VTypeResolver's)
+                own = getattr(self.resolve, "own_copy", None)  # (a VTypeResolver's; FCD names the copy only)
                 if own and tget is not None and not self.is_replay and own(ledger, i, types[i], vt):
-                    self.retyped += 1  # (FCD names the copy, not its mass)
+                    self.retyped += 1
                     self.every_equation_applies &= bool(np.all(ledger.veh_app[i] == 1.0))
                 continue
             res = self.resolve(vt, vid)

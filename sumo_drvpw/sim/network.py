@@ -211,7 +211,7 @@ class Network:
     def place(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Rows [lane, pos, z, 0] of vehicles at lane numbers ``lane``, positions ``pos`` [m]
         (as :meth:`step_grade` returns them): where their next step starts (a rise not yet
-        booked is forgiven: the jump's potential energy is booked apart)."""
+        booked went with the jump's potential energy, booked apart: sim/teleport.put_back)."""
         z = self.elevation(lane, pos) if self.z_node is not None else np.full(len(lane), np.nan)
         return np.column_stack([lane, pos, z, np.zeros(len(lane))])
 

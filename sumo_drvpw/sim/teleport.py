@@ -47,7 +47,9 @@ def put_back(ledger, net, equations, sel, vidx, lane, pos, v, v_before) -> None:
     vi, lane, pos, v, v_before = vidx[sel], lane[sel], pos[sel], v[sel], v_before[sel]
     rows = net.place(lane, pos)
     v0 = np.where(np.isfinite(v_before), v_before, v)
-    dz = rows[:, 2] - ledger.veh_at[vi, 2]  # NaN: no elevation, or its last z unknown
+    # NaN: no elevation, or its last z unknown; a rise its steps had not yet booked (steeper
+    # than max_rad: Network.step_grade) goes with the jump
+    dz = rows[:, 2] - ledger.veh_at[vi, 2] + np.nan_to_num(ledger.veh_at[vi, 3])
     per_kg = np.column_stack([0.5 * (v * v - v0 * v0), G * np.where(np.isfinite(dz), dz, 0.0)])
     e = equation_masses(ledger, equations, vi)[:, :, None] * per_kg[:, None, :]  # (n, E, 2)
     ledger.veh_tele[vi] += e
