@@ -223,3 +223,22 @@ def test_an_output_the_scenario_options_name_relatively_goes_into_the_run_folder
     assert "beyond_engine_power" not in dyn["passenger"]
     said = [w for w in res.summary["warnings"] if "beyond any engine's power" in w]
     assert len(said) == 1 and "trailer" in said[0] and "bus" not in said[0]
+
+
+def test_a_first_step_on_a_lane_steeper_than_max_rad_books_at_most_max_rad(tmp_path):
+    """Regression rehearsal on MoST after the step-grade limit: steps booked from the slope
+    — a trip's first step, a step shorter than 1 cm — still took a lane's mean gradient where
+    the whole lane is steeper than max_rad (0.27 rad, a trailer's 340 kW first step; 1.2 rad
+    standing). Planted: a car departing on a lane of 0.40 rad books its first step at 0.25."""
+    cfg = _network(tmp_path, '<node id="a" x="0" y="0" z="0"/><node id="b" x="50" y="0" z="21"/>'
+                             '<node id="c" x="150" y="0" z="21"/>',
+                   '<edge id="ab" from="a" to="b" numLanes="1" speed="15"/>'
+                   '<edge id="bc" from="b" to="c" numLanes="1" speed="15"/>',
+                   '<vType id="car" mass="1500" sigma="0"/><route id="r" edges="ab bc"/>'
+                   '<vehicle id="v" type="car" route="r" depart="0" departPos="5" departSpeed="5"/>')
+    (tmp_path / "s.toml").write_text('equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "n.sumocfg"\n'
+                                     '[outputs]\nfigures = false\ntrace = true\n')
+    run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    tr = pd.read_parquet(tmp_path / "o" / "trace.parquet").sort_values("time_s")
+    assert tr["theta_rad"].abs().max() <= 0.25 + 1e-9
+    assert tr["theta_rad"].iloc[0] == pytest.approx(0.25)  # (the lane's 0.40, clipped)

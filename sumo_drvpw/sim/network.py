@@ -184,7 +184,10 @@ class Network:
             booked = np.clip(want, -lim, lim)
             theta = np.where(ok, np.arcsin(np.clip(booked / np.where(ok, ds, 1.0), -1.0, 1.0)), theta)
             owed = np.where(ok, want - booked, owed)
-        return theta, np.column_stack([lane, pos, z, owed])
+        # (a step booked from the slope — a first step, one shorter than 1 cm — at most max_rad
+        # too: a lane steeper on average than the limit keeps its mean gradient in the profile)
+        lim_rad = min(self.max_rad, 0.5 * np.pi)
+        return np.clip(theta, -lim_rad, lim_rad), np.column_stack([lane, pos, z, owed])
 
     def jumped(self, lp, p0, ln, p1, road) -> np.ndarray:
         """Which moves from lane numbers ``lp``, positions ``p0`` [m] to lanes ``ln`` of
