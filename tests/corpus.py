@@ -782,6 +782,22 @@ def _(d):
     return ["validate", "--data", str(d / "nope"), "--out", str(d / "v")]
 
 
+@case("options", "calibrate --scheduler with the memory engine", ("--scheduler",))
+def _(d):
+    return _cal(write(d, "log.parquet", base_log()), d, "--engine", "memory", "--scheduler", "tcp://1.2.3.4:8786")
+
+
+@case("options", "diagnose a chain target --stream yes", ("--stream yes",))
+def _(d):
+    return ["diagnose", str(write(d, "log.parquet", base_log())), "--equation", "bmw_i3_battery",
+            "--target", "battery", "--stream", "yes", "--out", str(d / "diag")]
+
+
+@case("options", "run --cold-start beside another --cold-start-share", ("--cold-start",))
+def _(d):
+    return ["run", "city", "--cold-start", "--cold-start-share", "0.5", "--out", str(d / "run")]
+
+
 # --- vendor files cut short (import) --------------------------------------------------
 
 def _cut(src: Path, dst: Path, nbytes: int | None = None, lines: int | None = None) -> Path:
