@@ -185,7 +185,7 @@ def say_constrained(eq, phys) -> None:
     r2, free = eq.metrics.get("r2"), eq.metrics.get("r2_unconstrained")
     active = set(phys.get("active", ()))
     terms = ", ".join(f"{t} {c:.4g}" + (" (at its bound)" if t in active else "") for t, c in eq.terms.items())
-    fit = "" if r2 is None else f"R² = {r2:.4f}" + ("" if free is None else f" (free fit {free:.4f}); ")
+    fit = "" if r2 is None else f"R² = {r2:.4f}" + ("" if free is None else f" (free fit {free:.4f})") + "; "
     print(f"written, physically constrained: {fit}{terms}")
     if r2 is not None and r2 < 0:
         print(f"warning: the constrained equation explains less of the measured power than its mean does "

@@ -251,8 +251,8 @@ def _chain_main(args, target, progress) -> int:
         raise UserError(f"--stream yes: the tracer of an energy chain (--target {target}) reads the logs in "
                         "memory, it has no streamed path yet; give --stream no (or auto), or a share of the logs")
     if args.stream == "auto" and should_stream(args.logs, "auto"):
-        print(f"note: the tracer of an energy chain reads the logs in memory (no streamed path yet), these "
-              f"beyond the {STREAM_ROWS:,} rows above which the driving power's tracer streams")
+        print(f"note: these logs hold more than the {STREAM_ROWS:,} rows above which the driving power's "
+              "tracer streams; the tracer of an energy chain reads them in memory (no streamed path yet)")
     eq = load_equation(args.equation)
     check_chain_equation(eq, target)
     opt = ChainTraceOptions(block_s=args.block_s, folds=args.folds, alpha=args.alpha, min_gain=args.min_gain,

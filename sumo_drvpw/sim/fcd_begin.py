@@ -15,8 +15,9 @@ def accel_at_begin(first: dict, before: dict, t_first: float, t_before: float) -
     filled, where the file has none, from the speeds of the timestep before it (``before``,
     left out): (v_t − v_t−1)/Δt, SUMO's getAcceleration, for the vehicles driving then; the
     first step of a vehicle already on the road books its kinetic-energy change as a live
-    Accountant attached then does (sim/reader.on_road_acceleration). Persons, vehicles not
-    in ``before`` and a gap between the two timesteps (rows sparser than the step) keep NaN."""
+    Accountant attached then does (sim/reader.on_road_acceleration); rows sparser than the
+    step give the mean acceleration between them, as the loop's (v_t − v_t−1)/Δt does.
+    Persons and vehicles not in ``before`` keep NaN (then 0)."""
     n = len(first["id"])
     acc = np.asarray(first["accel"], float).copy() if "accel" in first else np.full(n, np.nan)
     if n == 0 or not np.isnan(acc).any() or not len(before["id"]) or t_first <= t_before:
