@@ -122,7 +122,6 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     from sumo_drvpw.fit.stream_compare import CompareStats
     from sumo_drvpw.model.vehicles import load_vehicle
 
-    check_engine_arguments(args)
     veh = load_vehicle(args.vehicle) if args.vehicle else None
     from sumo_drvpw.cli.calibrate import MOVING_MPS
 
@@ -178,7 +177,6 @@ def compare_streamed(args, tmp: Path, title: str, target: str = "wheel", target_
     from sumo_drvpw.model.vehicles import load_vehicle
     from sumo_drvpw.report.comparison import write_comparison_report
 
-    check_engine_arguments(args)
     veh = load_vehicle(args.vehicle) if args.vehicle else None
     eqs = resolve_equations(args.equation, veh)
     cs, info = _run(args, partial(CompareStats, eqs, None, target=target), veh)
@@ -230,7 +228,6 @@ def calibrate_chain_streamed(args, out: Path, inputs, hvac) -> int:
     """`calibrate --target battery|fuel` through the streaming engines (constant
     efficiencies): the same equation as the in-memory path (fit/chain_stream.py). With
     ``--engine dask`` and no scheduler, one local cluster serves every pass over the logs."""
-    check_engine_arguments(args)
     if args.engine != "dask" or args.scheduler is not None:
         return _chain_streamed(args, out, inputs, hvac)
     import argparse
@@ -250,7 +247,6 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, calibrate_chain_streamed as fit_chain
     from sumo_drvpw.model.vehicles import load_vehicle
 
-    check_engine_arguments(args)
     veh = load_vehicle(args.vehicle) if args.vehicle else None
     eq = resolve_equations([args.equation], veh)[0] if args.equation else None
     cands = None

@@ -223,8 +223,8 @@ class VTypeResolver:
         if app.any() and not np.array_equal(app, ledger.veh_app[i]):
             ledger.set_app(i, app)
             self.carriers[copy] = {"emission_class": ec, "from": "set by a script on the vehicle",
-                                   "carrier": carrier, "not_booked_by": [n for n, a in zip(self.names, app)
-                                                                         if not a and made[self.names.index(n)]]}
+                                   "carrier": carrier, "not_booked_by": [n for n, a, b in zip(self.names, app, made)
+                                                                         if b and not a]}
             changed = True
         return changed
 
