@@ -661,11 +661,13 @@ def test_additional_files_given_in_sumo_options_are_the_scenarios_additional_fil
 
 
 @pytest.mark.sumo
-@pytest.mark.parametrize("form", ["-a", "--additional-files=", "--additional"])
+@pytest.mark.parametrize("form", ["-a", "--additional-files=", "--additional", "--additional-files"])
 def test_outputs_of_additional_files_given_in_sumo_options_are_written_into_the_run(tmp_path, form):
     """An additional file given in `[sumo] options` that declares an output: the run loads a
     copy of it writing into OUT/sumo/ in place of the option, in each form SUMO reads (SUMO
-    refuses an option given twice: `--additional-files=F` beside the copies' `-a` did)."""
+    refuses an option given twice: `--additional-files=F` beside the copies' `-a` did).
+    The spaced long form `--additional-files F` was left as it was (rehearsal 2026-11-29:
+    Hamburg's edgeOutputs.add.xml wrote 8 files into the scenario's folder)."""
     from sumo_drvpw.sim import run_scenario
     add = tmp_path / "ed.add.xml"
     add.write_text('<additional><edgeData id="e1" file="ed_out.xml"/></additional>\n')
@@ -676,3 +678,25 @@ def test_outputs_of_additional_files_given_in_sumo_options_are_written_into_the_
     run_scenario(tmp_path / "s.toml", tmp_path / "out", end=30, figures=False)
     assert (tmp_path / "out" / "sumo" / "ed_out.xml").is_file()
     assert not (tmp_path / "ed_out.xml").exists()
+
+
+def test_a_linked_config_reads_the_files_beside_the_link_as_sumo_does(tmp_path):
+    """`sumo-drvpw run LINK.sumocfg`, LINK a symbolic link to a config in another folder: SUMO
+    reads the config's relative paths from the link's folder (`sumo -c LINK`), and so must
+    the plug-in. Before (rehearsal 2026-11-29, Hamburg with its own bus routes beside a link
+    to the shared config) it read the target's folder: the route files SUMO did not load
+    (the vTypes' masses and carriers of other files), and a link named otherwise than its
+    target was 'no such SUMO config'."""
+    net = NETS / "city.net.xml"
+    routes = REPO / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.rou.xml"
+    home, mine = tmp_path / "shared", tmp_path / "mine"
+    for d in (home, mine):
+        d.mkdir()
+        (d / "net.net.xml").symlink_to(net)
+        (d / "r.rou.xml").write_text(routes.read_text())
+    (home / "run.sumocfg").write_text('<configuration><input><net-file value="net.net.xml"/>'
+                                      '<route-files value="r.rou.xml"/></input></configuration>\n')
+    for name in ("run.sumocfg", "other.sumocfg"):
+        (mine / name).symlink_to(home / "run.sumocfg")
+        sc = load_scenario(mine / name)
+        assert sc.route_files == [mine / "r.rou.xml"], sc.route_files

@@ -76,8 +76,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
 
     # outputs declared in additional files: into the same folder, through copies of those
     # files (SUMO writes them beside the file that declares them: the scenario's folder)
-    copies = (tempfile.TemporaryDirectory(prefix=COPIES_PREFIX)
-              if sc.additional_outputs and "additional-files" not in given else None)
+    copies = tempfile.TemporaryDirectory(prefix=COPIES_PREFIX) if sc.additional_outputs else None
     if redirect or sc.additional_outputs:
         if out_dir is not None:
             sumo_dir = Path(out_dir) / SUMO_OUTPUT_DIR

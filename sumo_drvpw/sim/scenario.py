@@ -14,6 +14,7 @@ with none of them has no mass: SUMO would silently use its default, so this is a
 from __future__ import annotations
 
 import math
+import os
 import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -380,7 +381,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             doc = {"sumo": {"config": p.name}, "equations": list(CONFIG_EQUATIONS)}
         else:
             doc = read_toml(p, "scenario file")
-        base = p.resolve().parent
+        # relative to where the file is named, as SUMO reads a config (a link's folder, not
+        # its target's: files beside a linked config are the ones SUMO loads)
+        base = Path(os.path.abspath(p)).parent
         path = p
     bad = set(overrides) - OVERRIDES
     if bad:
