@@ -1595,7 +1595,7 @@ def test_engine_off_minus_inf_round_trips_and_bad_values_are_refused(tmp_path):
     from sumo_drvpw.model.equations import load_equation, save_equation
 
     text = ('[equation]\nname = "c"\n[terms]\nacc = 1.0\n[chain]\npredicts = "fuel"\n'
-            'idle_fuel_power_w = 8000.0\nmarginal_efficiency = 0.35\nengine_off_below_w = {}\n')
+            'idle_fuel_power_w = 8000.0\nmarginal_efficiency = 0.35\nengine_off_below_w = {}\nfuel = "gasoline"\n')
     (tmp_path / "c.toml").write_text(text.format("-inf"))
     eq = load_equation(tmp_path / "c.toml")
     out = eq.chain.evaluate(np.array([-5000.0, 0.0, 7000.0]), np.array([10.0, 0.0, 10.0]), dt_s=1.0)
@@ -1607,6 +1607,30 @@ def test_engine_off_minus_inf_round_trips_and_bad_values_are_refused(tmp_path):
         (tmp_path / "b.toml").write_text(text.format(bad))
         with pytest.raises(UserError, match="engine_off_below_w"):
             load_equation(tmp_path / "b.toml")
+
+
+@pytest.mark.parametrize("left_out", ["fuel", "marginal_efficiency", "idle_fuel_power_w", "engine_off_below_w"])
+def test_a_fuel_chain_without_an_engine_s_keys_is_refused_naming_them(tmp_path, capsys, left_out):
+    """A fuel chain must say its fuel, η_m, idle fuel and engine-off threshold: the defaults
+    (petrol, η_m = 1, no idle fuel, off at rest) describe no engine. Before (rehearsal
+    2026-11-29: a diesel bus's chain with only predicts and the efficiencies) the run booked
+    26.9 L/100 km of petrol from a 100 %-efficient engine without a word."""
+    from sumo_drvpw.cli import main
+    from sumo_drvpw.model.equations import load_equation
+
+    keys = {"fuel": '"diesel"', "marginal_efficiency": "0.42", "idle_fuel_power_w": "20000.0",
+            "engine_off_below_w": "-inf"}
+    text = ('[equation]\nname = "bus"\n[terms]\nacc = 1.0\nv1 = 900.0\n[chain]\npredicts = "fuel"\n'
+            'traction_efficiency = 0.85\n' + "".join(f"{k} = {v}\n" for k, v in keys.items() if k != left_out))
+    (tmp_path / "bus.toml").write_text(text)
+    with pytest.raises(UserError, match=rf"bus\.toml \[chain\]: predicts = \"fuel\" needs '{left_out}'"):
+        load_equation(tmp_path / "bus.toml")
+    rc = main(["run", "city", "--equation", str(tmp_path / "bus.toml"), "--out", str(tmp_path / "o"), "--end", "5"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and left_out in err, err
+    assert not (tmp_path / "o").exists()
+    (tmp_path / "bus.toml").write_text(text + f"{left_out} = {keys[left_out]}\n")
+    assert load_equation(tmp_path / "bus.toml").chain.fuel == "diesel"
 
 
 def test_fuel_calibration_finds_a_conventional_engine():

@@ -369,6 +369,7 @@ traction_efficiency = 0.9
 aux_power_w = 300.0
 idle_fuel_power_w = 3000.0
 marginal_efficiency = 0.33
+engine_off_below_w = 0.0
 fuel = "gasoline"
 """
 

@@ -363,7 +363,7 @@ def _fuel_eq(tmp_path, name, fuel, v3):
     f = tmp_path / f"{name}.toml"
     f.write_text(f'[equation]\nname = "{name}"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = {v3}\n[chain]\n'
                  'predicts = "fuel"\ntraction_efficiency = 0.9\naux_power_w = 300.0\nidle_fuel_power_w = 3000.0\n'
-                 f'marginal_efficiency = 0.33\nfuel = "{fuel}"\n')
+                 f'marginal_efficiency = 0.33\nengine_off_below_w = 0.0\nfuel = "{fuel}"\n')
     return f
 
 

@@ -108,6 +108,8 @@ KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperat
 #: the largest plausible warm-running fuel increase per kelvin (5 %/K: +150 % at −6.7 °C
 #: against the FTP's 23.9 °C, far beyond the ≈ 9 % certification pairs show)
 RUNNING_FUEL_PER_K_MAX = 0.05
+#: keys a fuel chain must give (docs/energy-chain.md): no default describes an engine
+FUEL_REQUIRED = ("fuel", "marginal_efficiency", "idle_fuel_power_w", "engine_off_below_w")
 HVAC_KEYS = ("column", "setpoint_c", "heating_w_per_k", "cooling_w_per_k", "warmup_j_per_k")
 
 
@@ -502,6 +504,12 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
     for k in ("std_err", "reading", "provenance", "metrics"):
         if k in doc:
             kw[k] = dict(doc[k])
+    missing = [k for k in FUEL_REQUIRED if k not in doc] if pred == "fuel" else []
+    if missing:  # no default is an engine's: η_m 1, no idle fuel, off at rest (a hybrid), petrol
+        raise UserError(f"{where} [chain]: predicts = \"fuel\" needs {', '.join(repr(k) for k in missing)}: "
+                        "the engine's fuel (one of " + ", ".join(FUELS) + "), its marginal efficiency η_m, its "
+                        "idle fuel power [W] and the driving power below which it stops [W] (-inf: a conventional "
+                        "engine that runs at rest; 0: a hybrid's, off at rest) — none has a default an engine has")
     return EnergyChain(**kw)
 
 
