@@ -249,7 +249,8 @@ def test_charge_sustaining_key_round_trips_and_bad_values_are_one_line():
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.model.chain import chain_from_dict
 
-    base = {"predicts": "fuel", "idle_fuel_power_w": 5000.0, "marginal_efficiency": 0.4, "engine_off_below_w": 0.0}
+    base = {"predicts": "fuel", "idle_fuel_power_w": 5000.0, "marginal_efficiency": 0.4, "engine_off_below_w": 0.0,
+            "fuel": "gasoline"}
     p = np.array([-2000.0, 0.0, 1500.0, 4000.0, 9000.0])
     v = np.full(p.size, 10.0)
     plain, cs = chain_from_dict(base), chain_from_dict(base | {"charge_sustaining": True})

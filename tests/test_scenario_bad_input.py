@@ -294,6 +294,39 @@ def test_unknown_equation_name_says_where_it_was_written(tmp_path, capsys):
                  "the equations given to the run", "'nosuch'")
 
 
+def test_missing_equation_file_says_which_key_named_it_and_where_it_was_looked_for(tmp_path, capsys):
+    """An equation file a scenario names that is not there: the message names the scenario,
+    the key and the path looked for (it said only 'equation file not found: nofile.toml';
+    rehearsal 2026-11-29)."""
+    net = BUILTIN / "networks" / "city.net.xml"
+    sc = _write(tmp_path, 'equations = ["vsp_ldv1999", "mine/bus.toml"]\n[sumo]\n'
+                f'net = "{net}"\n', "s.toml")
+    _cli_refused(capsys, ["run", str(sc), "--end", "10", "--no-figures"], tmp_path / "o1",
+                 f"{sc}: equations", "mine/bus.toml", str(tmp_path / "mine" / "bus.toml"))
+    sc = _write(tmp_path, 'equations = ["vsp_ldv1999"]\n[sumo]\n'
+                f'net = "{net}"\n[vtypes.BUS]\nequations = ["nofile.toml"]\n', "s2.toml")
+    _cli_refused(capsys, ["run", str(sc), "--end", "10", "--no-figures"], tmp_path / "o2",
+                 f"{sc}: vtypes.BUS.equations", str(tmp_path / "nofile.toml"))
+
+
+def test_a_vtype_table_naming_no_vtype_of_the_files_is_refused_before_sumo_starts(tmp_path, capsys):
+    """`[vtypes.BUSS]` where the route files define BUS: refused before the run, with the
+    nearest id (it was warned of after the whole run, exit 0, the buses booked on the
+    defaults; rehearsal 2026-11-29). A vTypeDistribution's id and SUMO's own types pass."""
+    net = BUILTIN / "networks" / "city.net.xml"
+    rou = _write(tmp_path, '<routes><vType id="BUS" vClass="bus"/><vTypeDistribution id="mix">'
+                 '<vType id="a" probability="1"/></vTypeDistribution><vehicle id="v" type="BUS" depart="0">'
+                 '<route edges="c00c10 c10c20"/></vehicle></routes>', "r.rou.xml")
+    head = f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{net}"\nroutes = ["{rou}"]\n'
+    sc = _write(tmp_path, head + '[vtypes.BUSS]\nmass_kg = 14000\n', "s.toml")
+    _cli_refused(capsys, ["run", str(sc), "--end", "10", "--no-figures"], tmp_path / "o1",
+                 f"{sc}: [vtypes.BUSS]", "did you mean 'BUS'?", "BUS, a, mix")
+    for vt in ("BUS", "mix", "DEFAULT_VEHTYPE"):
+        sc = _write(tmp_path, head + f'[vtypes.{vt}]\nmass_kg = 14000\n', "s.toml")
+        assert load_scenario(sc) and cli_main(["run", str(sc), "--end", "2", "--no-figures",
+                                               "--out", str(tmp_path / vt)]) == 0
+
+
 # --- 6. a truncated .gz among the SUMO inputs ---------------------------------------------
 
 def _truncated_gz(path: Path, text: str) -> Path:

@@ -481,15 +481,28 @@ def test_a_car_removed_at_its_long_stop_leaves_nothing_switched_off(tmp_path, ag
 
 
 def test_scenario_vtype_settings_no_vehicle_had_are_said(tmp_path):
-    """[vtypes.<id>] for an id no vehicle of the run has (a typo, a vTypeDistribution's id)
-    is a warning naming it; before, its mass was silently not used (found by a sweep)."""
+    """[vtypes.<id>] for an id no vehicle of the run has (a vTypeDistribution's id, whose
+    vehicles take its members' ids; a typo in a user's script) is a warning naming it;
+    before, its mass was silently not used (found by a sweep). A run refuses an id of no
+    vType of its files before SUMO starts (tests/test_scenario_bad_input.py)."""
+    from sumo_drvpw.errors import UserError
+
+    rou = tmp_path / "d.rou.xml"
+    rou.write_text((CITY.parent.parent / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.rou.xml").read_text()
+                   .replace("<routes>", '<routes><vTypeDistribution id="mix"><vType id="m1" probability="1"/>'
+                            '</vTypeDistribution>', 1), encoding="utf-8")
+    assert "mix" in rou.read_text()
     (tmp_path / "s.toml").write_text(
         f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{CITY.parent / "city.sumocfg"}"\nend = 30\n'
-        '[vtypes.prius3]\nmass_kg = 1600\n[vtypes.prius_3]\nmass_kg = 1700\n', encoding="utf-8")
+        f'options = ["-r", "{rou}"]\n[vtypes.prius3]\nmass_kg = 1600\n[vtypes.mix]\nmass_kg = 1700\n',
+        encoding="utf-8")
     res = run_scenario(tmp_path / "s.toml", None, figures=False)
     hit = [w for w in res.summary["warnings"] if "matched no vehicle" in w]
-    assert len(hit) == 1 and "[vtypes.prius_3]" in hit[0] and "[vtypes.prius3]" not in hit[0]
+    assert len(hit) == 1 and "[vtypes.mix]" in hit[0] and "[vtypes.prius3]" not in hit[0]
     assert len(res.vehicles) > 0 and (res.vehicles.mass_kg == 1600.0).all()
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace("vtypes.mix", "vtypes.prius_3"))
+    with pytest.raises(UserError, match=r"\[vtypes\.prius_3\] names no vType .*did you mean 'prius3'"):
+        run_scenario(tmp_path / "s.toml", None, figures=False)
 
 
 def test_each_row_shows_the_mass_its_equation_booked(tmp_path):

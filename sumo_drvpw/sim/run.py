@@ -25,6 +25,32 @@ from sumo_drvpw.sim.sumo_outputs import (COPIES_PREFIX, SUMO_OUTPUT_DIR, is_outp
 __all__ = ["run_scenario", "start_sumo", "close_sumo", "VTypeResolver"]
 
 
+#: the vTypes SUMO defines itself (MSVehicleControl, SUMOVTypeParameter)
+SUMO_DEFAULT_VTYPES = ("DEFAULT_VEHTYPE", "DEFAULT_PEDTYPE", "DEFAULT_BIKETYPE", "DEFAULT_CONTAINERTYPE",
+                       "DEFAULT_TAXITYPE", "DEFAULT_RAILTYPE")
+
+
+def check_vtype_tables(sc, vtypes) -> None:
+    """A scenario's ``[vtypes.<id>]`` that names no vType (nor vTypeDistribution) of the route
+    and additional files the run loads, nor one of SUMO's own: refused before SUMO starts,
+    with the nearest id (a typo would leave the vType's vehicles on the defaults)."""
+    if vtypes is None or not getattr(sc, "vtype_data", None):
+        return
+    import difflib
+
+    known = set(vtypes) | vtypes.distributions | set(SUMO_DEFAULT_VTYPES)
+    for vt in sc.vtype_data:
+        if vt not in known:
+            near = difflib.get_close_matches(vt, sorted(known), n=1)
+            raise UserError(f"{sc.path or 'the scenario'}: [vtypes.{vt}] names no vType of the route and "
+                            f"additional files the run loads" + (f" (did you mean '{near[0]}'?)" if near else "")
+                            + f"; their vTypes: {_listed(sorted(set(vtypes) | vtypes.distributions))}")
+
+
+def _listed(ids: list[str], most: int = 12) -> str:
+    return (", ".join(ids[:most]) + (f" … ({len(ids)} in all)" if len(ids) > most else "")) or "none"
+
+
 def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
                  flush_vehicles: int | None = None, **overrides):
     """Run a scenario; returns its :class:`~sumo_drvpw.sim.outputs.RunResult` and writes
@@ -121,6 +147,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     # the route files' vTypes before SUMO reads them: a bad mass is named with its file and
     # vType here (SUMO's own refusal names neither); the Accountant books with them
     vtypes = read_vtypes([f for f in sc.route_files if Path(f).is_file()]) if sc.route_files else None
+    check_vtype_tables(sc, vtypes)
     conn = start_sumo(args, sc.connection, sc.gui)
     acc = None
     try:

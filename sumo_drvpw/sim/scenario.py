@@ -323,6 +323,9 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
         except UserError as e:
             if str(e).startswith("unknown equation"):  # say where the name was written
                 raise UserError(f"{where}: {e}") from None
+            if str(e).startswith("equation file not found") and not p.is_absolute():
+                raise UserError(f"{where}: {e} (looked for {base / p if base else p.absolute()}"
+                                + (f" and {p.absolute()}" if base and base / p != p.absolute() else "") + ")") from None
             raise
         reserved_name(eq, where)  # vtype_energy, vtype_energy.…: the run's own
     src = eq.path or where  # the equation file the term is written in, else the scenario

@@ -352,6 +352,8 @@ class FileVTypes(dict):
         #: ``<container>`` and ``<containerFlow>`` elements of the files (not booked: their
         #: mass, which SUMO's emission models add to their vehicle's, is left out)
         self.containers = 0
+        #: ids of the files' ``<vTypeDistribution>`` elements (vehicles name them as a type)
+        self.distributions: set[str] = set()
 
 
 #: the vType params of SUMO's Energy model and MMPEVEM a file's vType keeps (:attr:`VTypeInfo.energy_params`)
@@ -435,6 +437,8 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                     continue
                 if tag in ("container", "containerFlow"):
                     out.containers += 1
+                if tag == "vTypeDistribution" and el.attrib.get("id"):
+                    out.distributions.add(el.attrib["id"])
                 if tag != "vType":
                     if tag != "param" and not tag.startswith(CF_CHILD):
                         el.clear()
