@@ -139,3 +139,39 @@ def test_the_idle_fuel_band_scales_with_the_engines_displacement(tmp_path):
     for bad in ("0", "45", '"4.6"'):
         with pytest.raises(UserError, match="displacement_l"):
             vehicle(f"displacement_l = {bad}")
+
+
+def test_a_fuel_chain_takes_no_hvac_and_a_load_must_be_a_power(tmp_path, capsys):
+    """`calibrate --target fuel --hvac C` was accepted and the HVAC silently not fitted; a
+    `--load` of a column whose suffix says °C was fitted (gain 0) and read as 'W at the
+    battery' (rehearsal 2026-11-29, an OBD log). Both refused in one line, naming the option
+    or column; a load in W of a fuel chain reads as engine output per W logged."""
+    from sumo_drvpw.cli import main as cli_main
+
+    plant = EnergyChain(predicts="fuel", idle_fuel_power_w=8000.0, marginal_efficiency=0.35,
+                        engine_off_below_w=-np.inf, aux_power_w=400.0, loads={"fan_w": 1.8})
+    log, road, p = _planted_fuel_log(tmp_path, EnergyChain(predicts="fuel", idle_fuel_power_w=8000.0,
+                                                           marginal_efficiency=0.35, engine_off_below_w=-np.inf))
+    df = __import__("pandas").read_csv(log)
+    df["coolant_c"] = 80.0 + np.arange(len(df)) % 7
+    df["fan_w"] = np.where(np.arange(len(df)) % 600 < 200, 300.0, 0.0)
+    g = FUELS["gasoline"]
+    from sumo_drvpw.data.log import from_frame
+    x = from_frame(df).inputs()
+    fuel_w = plant.evaluate(p, x.v, signals={"fan_w": df["fan_w"].to_numpy()})["power_w"]
+    df["fuel_flow_rate_hour_lph"] = fuel_w / g["lhv_j_per_kg"] / g["density_kg_per_l"] * 3600.0
+    df.to_csv(log, index=False)
+    for extra, needles in ((["--hvac", "ambient_c:20"], ("--hvac ambient_c:20", "--target battery only")),
+                           (["--load", "coolant_c"], ("--load coolant_c", "'_c'", "a power in W"))):
+        capsys.readouterr()
+        rc = cli_main(["calibrate", str(log), "--target", "fuel", "--equation", str(road),
+                       "--out", str(tmp_path / "x.toml"), *extra])
+        err = capsys.readouterr().err
+        assert rc == 2 and len(err.strip().splitlines()) == 1 and all(n in err for n in needles), err
+        assert not (tmp_path / "x.toml").exists()
+    assert cli_main(["calibrate", str(log), "--target", "fuel", "--equation", str(road),
+                     "--out", str(tmp_path / "eq.toml"), "--load", "fan_w"]) == 0
+    chain = load_equation(tmp_path / "eq.toml").chain
+    assert chain.loads["fan_w"] == pytest.approx(1.8, rel=0.02)
+    assert chain.reading["loads.fan_w"].startswith("1.8") and "W of engine output per W logged" in chain.reading["loads.fan_w"]
+    assert "IMPLAUSIBLE" not in chain.reading["loads.fan_w"]

@@ -360,7 +360,15 @@ def main_chain(args) -> int:
     args.engine_off = engine_off_option(args)
     inputs = existing_paths(args.logs, args.vehicle, args.equation)
     check_output_path(out, inputs, "file")
+    from sumo_drvpw.fit.chain_checks import not_a_power
+
+    for c in args.load:
+        if not_a_power(c):
+            raise UserError(f"--load {c}: {not_a_power(c)}")
     hvac = None
+    if args.hvac and args.target == "fuel":
+        raise UserError(f"--hvac {args.hvac}: the HVAC power per kelvin is fitted for --target battery only; "
+                        "a fuel chain books the climate's draw as auxiliary power (or a logged load, --load)")
     if args.hvac:
         col, _, sp = args.hvac.partition(":")
         try:

@@ -434,6 +434,10 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     from sumo_drvpw.fit.chain_checks import check_chain
 
     if m.target == "fuel":
+        if hvac:  # the fuel chain's calibration fits no HVAC power: not dropped without a word
+            raise UserError(f"hvac {hvac.get('column')}: the HVAC power per kelvin is fitted for the battery "
+                            "target only; a fuel chain books the climate's draw as auxiliary power "
+                            "(or a logged load in W)")
         fuel = m.vehicle.powertrain.get("fuel", "gasoline") if m.vehicle is not None else "gasoline"
         from sumo_drvpw.fit.chain_fuel import calibrate_fuel, engine_off_for
 

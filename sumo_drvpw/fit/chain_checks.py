@@ -213,7 +213,7 @@ MARGINAL_EFFICIENCY = {"gasoline": ((0.25, 0.5), "0.3–0.45", "petrol"),
                        "diesel": ((0.3, 0.55), "0.35–0.5", "diesel")}
 
 
-def reading(name: str, val: float, fuel: str = "gasoline") -> str:
+def reading(name: str, val: float, fuel: str | None = None) -> str:
     """One-line physical reading of a calibrated parameter, flagging implausible values
     (an engine's by its ``fuel``, a key of :data:`sumo_drvpw.model.constants.FUELS`)."""
     if name == "traction_efficiency":
@@ -235,6 +235,10 @@ def reading(name: str, val: float, fuel: str = "gasoline") -> str:
         return f"braking power beyond {val / 1000:.1f} kW goes to the friction brakes"
     if name == "aux_power_w":
         return f"constant auxiliary draw {val:.0f} W (12 V net, pumps, control; accrues at standstill)"
+    if name.startswith("loads.") and fuel is not None:  # a fuel chain: engine output per W logged
+        s = f"{val:.3f} W of engine output per W logged"
+        return s + ("; IMPLAUSIBLE: an electrical load costs the engine about 1.2–3 W per W (alternator), a "
+                    "mechanical one about 1" if not 0.8 <= val <= 3.0 else "")
     if name.startswith("loads."):
         s = f"{val:.3f} W at the battery per W logged"
         return s + ("; far from 1: the logged load is not electrical power at the battery"
@@ -284,12 +288,25 @@ def _check_chain_inputs(m, use: np.ndarray, loads, p_drive=None) -> None:
     check_load_columns(m, loads, use)
 
 
+def not_a_power(column: str) -> str:
+    """'' for a load column whose name may hold a power; else why not: its unit suffix is
+    another dimension's (``coolant_c``: a temperature; data.adapters._common.DIMENSIONS)."""
+    from sumo_drvpw.data.adapters._common import DIMENSIONS
+
+    other = {s: d for d, s in DIMENSIONS.items() if s and s != "w"}
+    suffix = column.rsplit("_", 1)[-1] if "_" in column else ""
+    return (f"'{column}' holds a {other[suffix].replace('_', ' ')} by its name's suffix '_{suffix}': a load is "
+            "a power in W (a column named …_w)") if suffix in other else ""
+
+
 def check_load_columns(m, loads, use=None) -> None:
     """UserError naming the log and the column: a load column that is missing, not numeric,
     or without a number on the usable samples ``use`` (default: the log's usable samples) —
     checked before anything is fitted."""
     where, use = m.log.describe(), (m.usable if use is None else use)
     for c in loads or ():
+        if not_a_power(c):
+            raise UserError(f"{where}: load column {not_a_power(c)}")
         col = m.inputs.signals.get(c)
         if col is None and c in m.log.df.columns:
             first = m.log.df[c].dropna()
