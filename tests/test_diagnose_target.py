@@ -486,3 +486,52 @@ def test_a_promise_of_bounded_memory_the_chain_tracer_cannot_keep_is_refused(tmp
                          "--out", str(tmp_path / "w.toml")]) == 2
         assert f"{flag[0]} goes with --engine dask" in capsys.readouterr().err
     assert not (tmp_path / "w.toml").exists()
+
+
+def test_a_chain_traced_on_the_logs_it_was_calibrated_on_says_so(tmp_path, clean, capsys):
+    """A declared chain whose provenance lists the traced log, and which was calibrated with
+    a warning: diagnose says both on the console and in trace.md ('after = held out' read as
+    if the chain had not seen those trips; the warning was only in the equation file;
+    rehearsal 2026-11-29). A log it was not calibrated on gets no such note."""
+    m, b, df = clean
+    log = tmp_path / "log.parquet"
+    df.to_parquet(log)
+    eq = _declared(b)
+    eq.chain.provenance = {"logs": [str(tmp_path)], "warnings": ["energy chain x = 1: IMPLAUSIBLE (planted)"]}
+    decl = tmp_path / "declared.toml"
+    save_equation(eq, decl)
+    capsys.readouterr()
+    assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--out",
+                     str(tmp_path / "t"), "--quiet", "--max-findings", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "warning: declared: its chain's calibration warned: energy chain x = 1: IMPLAUSIBLE (planted)" in out
+    assert "note: the declared chain was calibrated on 1 of these 1 log file(s)" in out
+    md = (tmp_path / "t" / "trace.md").read_text()
+    assert "calibrated on 1 of these 1 log file(s)" in md and "IMPLAUSIBLE (planted)" in md
+    other = tmp_path / "elsewhere"
+    other.mkdir()
+    df.to_parquet(other / "new.parquet")
+    eq.chain.provenance = {"logs": [str(log)]}
+    save_equation(eq, decl)
+    assert cli_main(["diagnose", str(other / "new.parquet"), "--vehicle", "prius3", "--equation", str(decl),
+                     "--out", str(tmp_path / "t2"), "--quiet", "--max-findings", "1"]) == 0
+    assert "calibrated on" not in capsys.readouterr().out
+
+
+def test_the_hvac_candidate_left_out_is_said_with_why():
+    """No ambient_c (a log whose air temperature is named otherwise), or one without a number
+    everywhere: the hvac candidate was silently not offered (rehearsal 2026-11-29, an OBD
+    log with its ambient temperature under its own name); now columns_left_out says why."""
+    b = BatteryLog(standstill_aux_w=0.0, noise_w=100.0)
+    df, _ = synth_trips(n_trips=3, minutes=5.0, seed=4, effects=(b,), noise=QUIET)
+    veh = load_vehicle("prius3")
+    assert "ambient_c" in df
+
+    def left(frame):
+        m = measure(from_frame(frame, veh, name="synth"), veh, "battery")
+        return trace_chain(m, _declared(b), ChainTraceOptions(max_findings=1)).report["columns_left_out"]
+
+    assert "no such column" in left(df.rename(columns={"ambient_c": "outside_air_c"}))["ambient_c"]
+    gap = df.copy()
+    gap.loc[gap.index[::50], "ambient_c"] = np.nan
+    assert "no number on 2.0% of the samples" in left(gap)["ambient_c"]

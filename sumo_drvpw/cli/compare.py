@@ -49,13 +49,7 @@ def main(args) -> int:
         if note:
             ctx["target"] = note
         write_comparison_report(comp, tmp, f"Equations against measured {what} power", ctx)
-    doc = comp.to_json()
-    from sumo_drvpw.report.comparison import unknown_input_lines
-
-    for name, r in doc["equations"].items():
-        for x in unknown_input_lines(name, r.get("chain_unknown_inputs"), r["n"]):
-            print("note: " + x)
-    print_summary(doc, args.out)
+    print_summary(comp.to_json(), args.out)
     return 0
 
 
@@ -86,7 +80,15 @@ def compare_target(args) -> tuple[str, str | None]:
 
 
 def print_summary(doc: dict, out) -> None:
-    """One line per equation of a comparison's report.json, then where the report is."""
+    """The notes on each equation of a comparison's report.json (chain inputs the log lacks,
+    its chain's calibration warnings), one line per equation, then where the report is."""
+    from sumo_drvpw.report.comparison import calibration_warnings, unknown_input_lines
+
+    for name, r in doc["equations"].items():
+        for x in unknown_input_lines(name, r.get("chain_unknown_inputs"), r["n"]):
+            print("note: " + x)
+        for w in calibration_warnings(name, r):
+            print("warning: " + w)
     for name, r in doc["equations"].items():
         print(f"{name:<24} n={r['n']:<8} R²={num(r['r2'], 3)}  R²<50kW={num(r['r2_light'], 3)}  "
               f"R²≥50kW={num(r['r2_heavy'], 3)}  RMSE={r['rmse_w'] / 1000:.2f} kW  bias={r['bias_w'] / 1000:+.2f} kW")

@@ -237,6 +237,24 @@ def _target(args) -> str:
     return "wheel"
 
 
+def chain_notes(eq, files) -> list[str]:
+    """What to read a chain trace's figures with: the warnings the declared chain was
+    calibrated with, and the logs among ``files`` it was calibrated on (its own parameters
+    have seen them: 'before' there is in sample, and 'after' is held out for the findings
+    only)."""
+    from sumo_drvpw.data.paths import files_in_common
+    from sumo_drvpw.report.comparison import calibration_warnings
+
+    notes = calibration_warnings(eq.name, {"chain": eq.chain.to_dict()})
+    seen = files_in_common((eq.chain.provenance or {}).get("logs") or [], files)
+    if seen:
+        notes.append(f"the declared chain was calibrated on {len(seen)} of these {len(files)} log file(s) "
+                     f"({', '.join(map(str, seen[:3]))}{' …' if len(seen) > 3 else ''}): its parameters have seen "
+                     "them, so 'before' is in sample there and 'after' is held out for the findings only; "
+                     "trace logs it was not calibrated on to judge it")
+    return notes
+
+
 def _chain_main(args, target, progress) -> int:
     from sumo_drvpw.cli import output_set, read_options
     from sumo_drvpw.data.measured import load_measured
@@ -264,6 +282,7 @@ def _chain_main(args, target, progress) -> int:
 
         note_counts(m.counts)
         res = trace_chain(m, eq, opt, progress=progress)
+        res.report["notes"] = chain_notes(eq, m.log.files)
         from sumo_drvpw.fit.trip_energy import with_trace_fuel_volumes, with_trace_left_out
 
         from sumo_drvpw.data.powertrain import measured_fuel
@@ -275,6 +294,8 @@ def _chain_main(args, target, progress) -> int:
 
     for x in unknown_input_lines(r["declared_equation"], r.get("chain_unknown_inputs"), r["n_samples"]):
         print("note: " + x)
+    for x in r["notes"]:
+        print(("warning: " if "calibration warned" in x else "note: ") + x)
     print(f"{target}: declared chain RMSE {r['baseline']['metrics']['rmse_w']:.1f} W, per-trip net energy "
           f"{100 * r['baseline']['trip_net_energy']['mean_abs_error']:.1f} %; {len(r['findings'])} finding(s)")
     for f in r["findings"]:

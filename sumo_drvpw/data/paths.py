@@ -17,6 +17,19 @@ from sumo_drvpw.errors import UserError
 PACKED_MF4 = {".mfc": "compressed", ".mfe": "encrypted", ".mfm": "compressed and encrypted"}
 
 
+def files_in_common(named, files) -> list[str]:
+    """The ``files`` that ``named`` names too — files, or folders holding them, as an
+    equation's provenance lists the logs it was calibrated on; compared as resolved paths."""
+    seen = set()
+    for x in named:
+        p = Path(x)
+        if p.is_dir():
+            seen |= {q.resolve() for q in p.rglob("*") if q.is_file()}
+        elif p.exists():
+            seen.add(p.resolve())
+    return [f for f in files if Path(f).resolve() in seen]
+
+
 def refuse_packed(p: Path) -> None:
     """UserError for a CANedge MF4 that the logger compressed or encrypted (:data:`PACKED_MF4`),
     naming the file and what unpacks it; else nothing."""

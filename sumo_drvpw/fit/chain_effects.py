@@ -103,16 +103,23 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
                         "structural", "-", [(np.column_stack([tra]), None, None)]))
     sig = x.signals
     roles = of_log(m.log)
+    left_out = {} if left_out is None else left_out
+    if ch.hvac is None and "ambient_c" not in sig:  # said, so a log's own temperature is mapped to it
+        left_out["ambient_c"] = ("no such column: the hvac candidate reads the air temperature as ambient_c "
+                                 "(map the log's to it)")
     if ch.hvac is None and "ambient_c" in sig:
         t = np.asarray(sig["ambient_c"], float)[idx]
-        if np.all(np.isfinite(t)) and np.std(t) > 0:
+        if not (np.all(np.isfinite(t)) and np.std(t) > 0):
+            left_out["ambient_c"] = ("the hvac candidate needs the air temperature on every sample, varying: "
+                                     + ("constant" if np.all(np.isfinite(t)) else
+                                        f"no number on {np.mean(~np.isfinite(t)):.1%} of the samples"))
+        else:
             c = [ga * np.maximum(HVAC_SETPOINT_C - t, 0.0), ga * np.maximum(t - HVAC_SETPOINT_C, 0.0)]
             keep = [k for k in range(2) if np.any(c[k] > 0)]
             out.append(Cand("hvac", f"heating/cooling power over the ambient temperature (set-point "
                             f"{HVAC_SETPOINT_C:g} °C)", "condition", "W/K",
                             [(np.column_stack([c[k] for k in keep]), None, tuple(keep))]))
     inc, exc = tuple(getattr(opt, "include", ()) or ()), tuple(getattr(opt, "exclude", ()) or ())
-    left_out = {} if left_out is None else left_out
     for col in sig:
         named = any(fnmatch.fnmatchcase(col, g) for g in inc)
         if col in ch.loads or not (named or roles.get(col, {}).get("role") == "load"):

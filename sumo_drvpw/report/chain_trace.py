@@ -47,6 +47,7 @@ def markdown(r: dict) -> str:
     L += ["- " + x for x in unknown_input_lines(r["declared_equation"], r.get("chain_unknown_inputs"),
                                                  r["n_samples"])]
     L += [f"- {r['fuel_note']}"] if r.get("fuel_note") else []  # a chain of another fuel than the log's
+    L += [f"- **{x}**" for x in r.get("notes", [])]  # its calibration's warnings; logs it was fitted on
     L += ["", "## Findings", ""]
     L.append("Coefficients and readings from the final joint fit of every finding; gain, p and energy share "
              "as the finding was accepted (its coefficient then: trace.json `coefficient_when_found`).")

@@ -99,6 +99,14 @@ def unknown_input_lines(name: str, unknown: dict | None, n: int) -> list[str]:
     return [unknown_input_note(name, col, u, n) for col, u in (unknown or {}).items()]
 
 
+def calibration_warnings(name: str, eq_doc: dict) -> list[str]:
+    """The warnings an equation's energy chain was calibrated with (an IMPLAUSIBLE idle fuel,
+    a target that is not the fuel …), from its entry in report.json: a comparison's figures
+    are read with them, as a SUMO run prints them."""
+    prov = (eq_doc.get("chain") or {}).get("provenance") or {}
+    return [f"{name}: its chain's calibration warned: {w}" for w in prov.get("warnings", [])]
+
+
 def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> str:
     """The Markdown text of the report (see :func:`write_comparison_report`)."""
     eqs = doc["equations"]
@@ -124,6 +132,7 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
         lines.append(f"Weakest at heavy load: **{nmw}** (R² = {num(r2w, 3)}).")
     for nm, d in eqs.items():
         lines += [x + "." for x in unknown_input_lines(nm, d.get("chain_unknown_inputs"), n)]
+        lines += [f"**{w}**" for w in calibration_warnings(nm, d)]
     first = next(iter(eqs.values()), {})
     lines += partial_trip_lines(first.get("trip_energy"))
     if doc["settings"].get("fuel_note"):  # a chain of another fuel than the log was read as
