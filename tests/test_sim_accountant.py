@@ -43,12 +43,16 @@ def test_accountant_in_a_user_loop_equals_run(tmp_path):
                 seen["energy"] = acc.energy(seen["probe"])  # readable during the run
         res = acc.result()
         res.write(tmp_path / "user")
+        driving = set(conn.vehicle.getIDList())
     finally:
         close_sumo(conn)
     a = ran.vehicles.sort_values(["vehicle", "equation"]).reset_index(drop=True)
     b = res.vehicles.sort_values(["vehicle", "equation"]).reset_index(drop=True)
     assert len(a) == len(b) > 40
     assert (a.vehicle == b.vehicle).all()
+    # on_road_at_end: the trips the end cut (SUMO's vehicles then), the others arrived
+    assert set(b.vehicle[b.on_road_at_end]) == driving and 0 < len(driving) < b.vehicle.nunique()
+    assert (a.on_road_at_end == b.on_road_at_end).all()
     np.testing.assert_allclose(b[COLS], a[COLS], rtol=1e-12, atol=1e-9)
     assert res["equations"] == ran["equations"]
     for name in ("vehicles.parquet", "edges.parquet", "classes.parquet", "edgedata.xml"):

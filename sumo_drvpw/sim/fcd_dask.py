@@ -62,7 +62,7 @@ def bucket_task(sc, fcd_file: str, part_dir: str, b: int, buckets: int, begin_s=
                             count_persons=b == 0)
     led = acc.ledger
     if led.n_veh:  # the vehicles running at the end go out too: the ledger keeps sums only
-        led.retire(np.arange(led.n_veh))
+        led.retire(np.arange(led.n_veh), at_end=True)
         led.hold_steps = 0  # the replay is over: none comes back
         acc.stepper.flush()
     spill = led.spill

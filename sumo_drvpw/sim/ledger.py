@@ -377,13 +377,18 @@ class Ledger:
         own = np.asarray(fixed, float)[ei]
         return np.where(np.isfinite(own), own, veh)
 
-    def retire(self, slots) -> None:
-        """Mark vehicles ``slots`` as gone (arrived, removed); flushed by :meth:`flush`."""
+    def retire(self, slots, at_end: bool = False) -> None:
+        """Mark vehicles ``slots`` as gone (arrived, removed; ``at_end``: on the road when the
+        run ended, flushed all the same: step -1, :meth:`on_road_at_end`); flushed by :meth:`flush`."""
         slots = np.asarray(slots, np.int64)
         new = slots[~self.veh_done[slots]]
         self.veh_done[new] = True
-        self.veh_done_step[new] = self.steps
+        self.veh_done_step[new] = -1 if at_end else self.steps
         self.n_done += len(np.unique(new))
+
+    def on_road_at_end(self, slots) -> np.ndarray:
+        """Whether vehicles ``slots`` were still driving when the run (or the recording) ended."""
+        return ~self.veh_done[slots] | (self.veh_done_step[slots] == -1)
 
     def _flushable(self) -> np.ndarray:
         """Finished vehicles that may leave memory: all but those that left standing (last
