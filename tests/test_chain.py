@@ -1611,8 +1611,9 @@ def test_engine_off_minus_inf_round_trips_and_bad_values_are_refused(tmp_path):
 
 @pytest.mark.parametrize("left_out", ["fuel", "marginal_efficiency", "idle_fuel_power_w", "engine_off_below_w"])
 def test_a_fuel_chain_without_an_engine_s_keys_is_refused_naming_them(tmp_path, capsys, left_out):
-    """A fuel chain must say its fuel, η_m, idle fuel and engine-off threshold: the defaults
-    (petrol, η_m = 1, no idle fuel, off at rest) describe no engine. Before (rehearsal
+    """A fuel chain that predicts (a run, compare, diagnose) must say its fuel, η_m, idle fuel
+    and engine-off threshold: the defaults (petrol, η_m = 1, no idle fuel, off at rest)
+    describe no engine; one that declares a calibration's fuel cut-off need not. Before (rehearsal
     2026-11-29: a diesel bus's chain with only predicts and the efficiencies) the run booked
     26.9 L/100 km of petrol from a 100 %-efficient engine without a word."""
     from sumo_drvpw.cli import main
@@ -1624,11 +1625,13 @@ def test_a_fuel_chain_without_an_engine_s_keys_is_refused_naming_them(tmp_path, 
             'traction_efficiency = 0.85\n' + "".join(f"{k} = {v}\n" for k, v in keys.items() if k != left_out))
     (tmp_path / "bus.toml").write_text(text)
     with pytest.raises(UserError, match=rf"bus\.toml \[chain\]: predicts = \"fuel\" needs '{left_out}'"):
-        load_equation(tmp_path / "bus.toml")
+        load_equation(tmp_path / "bus.toml").chain.evaluate(np.ones(3), np.ones(3))
     rc = main(["run", "city", "--equation", str(tmp_path / "bus.toml"), "--out", str(tmp_path / "o"), "--end", "5"])
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1 and left_out in err, err
     assert not (tmp_path / "o").exists()
+    # a declaration for calibrate (its fuel cut-off kept) reads: the chain is not used to predict
+    assert load_equation(tmp_path / "bus.toml").chain.missing == (left_out,)
     (tmp_path / "bus.toml").write_text(text + f"{left_out} = {keys[left_out]}\n")
     assert load_equation(tmp_path / "bus.toml").chain.fuel == "diesel"
 

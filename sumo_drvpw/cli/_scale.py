@@ -242,7 +242,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     from sumo_drvpw.model.vehicles import load_vehicle
 
     veh = load_vehicle(args.vehicle) if args.vehicle else None
-    eq = resolve_equations([args.equation], veh)[0] if args.equation else None
+    eq = resolve_equations([args.equation], veh, predicting=False)[0] if args.equation else None
     cands = None
     if eq is None:
         from sumo_drvpw.fit.calibrate import resolve_candidates

@@ -398,7 +398,7 @@ def main_chain(args) -> int:
                         f"(extra columns: {', '.join(sorted(m.inputs.signals)) or 'none'})")
     check_one_driving_power(m.log.files)  # else a file's rows without it drop out silently
     if args.equation:
-        eq = resolve_equations([args.equation], m.vehicle)[0]
+        eq = resolve_equations([args.equation], m.vehicle, predicting=False)[0]
         road = f"road-load equation {eq.name} ({eq.path or 'built in'})"
     else:
         from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates

@@ -376,10 +376,11 @@ def _has_engine(log: DriveLog, veh: Vehicle | None) -> bool:
     return (veh is not None and veh.powertrain_type == "power_split") or fuel_column(log.df, getattr(log, "logged", None)) is not None
 
 
-def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:
+def resolve_equations(specs, vehicle: Vehicle | None = None, predicting: bool = True) -> list[Equation]:
     """Equations by name or file; ``vsp_spec`` means VSP from the vehicle's body specs,
     ``roadload_spec`` the vehicle's published road load A + B·v + C·v²
-    (:data:`sumo_drvpw.model.equations.SPEC_EQUATIONS`)."""
+    (:data:`sumo_drvpw.model.equations.SPEC_EQUATIONS`). ``predicting`` false: the road load
+    under a chain to calibrate, whose own ``[chain]`` may declare only what the fit keeps."""
     out = []
     for s in specs:
         if s in SPEC_EQUATIONS:
@@ -388,6 +389,8 @@ def resolve_equations(specs, vehicle: Vehicle | None = None) -> list[Equation]:
             out.append(SPEC_EQUATIONS[s](vehicle))
         else:
             out.append(load_equation(s))
+            if predicting and out[-1].chain is not None:  # (a fuel chain without its engine: a declaration)
+                out[-1].chain.require_complete()
     names = [e.name for e in out]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:

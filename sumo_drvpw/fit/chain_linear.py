@@ -297,11 +297,11 @@ def check_chain_equation(equation: Equation, target: str) -> None:
     """Raise :class:`UserError` unless ``equation`` carries a chain predicting ``target``."""
     ch = equation.chain
     if ch is None or ch.predicts != target:
-        have = "no energy chain" if ch is None else f"a chain that predicts {ch.predicts}"
-        raise UserError(f"equation '{equation.name}' has {have}; tracing the {target} target needs an "
+        raise UserError(f"equation '{equation.name}' has {'no energy chain' if ch is None else 'a chain that predicts ' + ch.predicts}; tracing the {target} target needs an "
                         f"equation whose [chain] predicts {target} (calibrate one with that target first)")
     if target not in ("battery", "fuel"):
         raise UserError(f"chain trace: target must be battery or fuel, got '{target}'")
+    ch.require_complete()
 
 
 def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, progress=None,

@@ -147,6 +147,19 @@ class EnergyChain:
     reading: dict = field(default_factory=dict)
     provenance: dict = field(default_factory=dict)
     metrics: dict = field(default_factory=dict)
+    #: keys of :data:`FUEL_REQUIRED` its file left out (a declaration for ``calibrate``), and that file
+    missing: tuple = field(default=(), compare=False, repr=False)
+    where: str = field(default="<equation>", compare=False, repr=False)
+
+    def require_complete(self) -> None:
+        """UserError where a fuel chain that leaves out its engine's keys is to predict fuel: no
+        default describes an engine (η_m 1, no idle fuel, off at rest, petrol)."""
+        if self.missing:
+            raise UserError(f"{self.where} [chain]: predicts = \"fuel\" needs {', '.join(map(repr, self.missing))}: "
+                            "the engine's fuel (one of " + ", ".join(FUELS) + "), its marginal efficiency η_m, its "
+                            "idle fuel power [W] and the driving power below which it stops [W] (-inf: a "
+                            "conventional engine that runs at rest; 0: a hybrid's, off at rest) — none has a "
+                            "default an engine has (a calibration on the fuel target fits them)")
 
     @property
     def temperature_column(self) -> str:
@@ -229,7 +242,8 @@ class EnergyChain:
         return p
 
     def evaluate(self, p_drive_w, v_mps, dt_s=None, signals: dict | None = None) -> dict:
-        """Battery or fuel power per sample from driving power (vectorized).
+        """Battery or fuel power per sample from driving power (vectorized); a fuel chain
+        without its engine's keys is refused (:meth:`require_complete`).
 
         Parameters
         ----------
@@ -246,6 +260,7 @@ class EnergyChain:
         ``power_w`` (net). Fuel: ``engine_on`` (bool), ``engine_w``, ``power_w`` (fuel power,
         LHV), ``fuel_lps`` [L/s], ``co2_kgps`` [kg/s]. Wheel: ``power_w``.
         """
+        self.require_complete()
         p = np.asarray(p_drive_w, float)
         v = np.broadcast_to(np.asarray(v_mps, float), p.shape)
         n = p.size
@@ -504,12 +519,10 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
     for k in ("std_err", "reading", "provenance", "metrics"):
         if k in doc:
             kw[k] = dict(doc[k])
-    missing = [k for k in FUEL_REQUIRED if k not in doc] if pred == "fuel" else []
-    if missing:  # no default is an engine's: η_m 1, no idle fuel, off at rest (a hybrid), petrol
-        raise UserError(f"{where} [chain]: predicts = \"fuel\" needs {', '.join(repr(k) for k in missing)}: "
-                        "the engine's fuel (one of " + ", ".join(FUELS) + "), its marginal efficiency η_m, its "
-                        "idle fuel power [W] and the driving power below which it stops [W] (-inf: a conventional "
-                        "engine that runs at rest; 0: a hybrid's, off at rest) — none has a default an engine has")
+    # a fuel chain without its engine's keys declares what a calibration keeps (its fuel cut-off)
+    # and predicts nothing: :meth:`EnergyChain.require_complete` where it is used
+    kw["missing"] = tuple(k for k in FUEL_REQUIRED if k not in doc) if pred == "fuel" else ()
+    kw["where"] = where
     return EnergyChain(**kw)
 
 

@@ -510,7 +510,7 @@ def configs_beside(path) -> list[Path]:
 def configs_writing(path) -> list[tuple[Path, Path, list[Path]]]:
     """The SUMO configs beside an FCD file (:func:`configs_beside`) whose ``fcd-output`` is
     this file, each as (config, its network, its route and additional files)."""
-    from sumo_drvpw.sim.scenario import _config_files
+    from sumo_drvpw.sim.scenario_paths import config_files
 
     p = Path(path)
     if fcd_parts(path) or not p.is_file():
@@ -519,7 +519,7 @@ def configs_writing(path) -> list[tuple[Path, Path, list[Path]]]:
     found = []
     for cfg in configs_beside(fcd):
         try:
-            net, files, vals = _config_files(cfg)
+            net, files, vals = config_files(cfg)
         except UserError:
             continue
         out = vals.get("fcd-output", "").strip()

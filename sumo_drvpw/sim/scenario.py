@@ -16,13 +16,13 @@ from __future__ import annotations
 import math
 import os
 import re
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_vclass, load_equation
+from sumo_drvpw.sim.scenario_paths import config_files
 from sumo_drvpw.sim.vtype_energy import VTYPE_ENERGY, named_in_table, placeholder, reserved_name
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import (additional_outputs, device_wanted, is_output_option,
@@ -328,6 +328,8 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
                                 + (f" and {p.absolute()}" if base and base / p != p.absolute() else "") + ")") from None
             raise
         reserved_name(eq, where)  # vtype_energy, vtype_energy.…: the run's own
+    if eq.chain is not None:
+        eq.chain.require_complete()
     src = eq.path or where  # the equation file the term is written in, else the scenario
     for t in eq.term_names:
         term = parse_term(t)
@@ -336,30 +338,6 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
         if why:
             raise UserError(f"{src}: equation '{eq.name}' cannot run in SUMO: {why}")
     return eq
-
-
-def _config_files(cfg: Path) -> tuple[Path, list[Path], dict[str, str]]:
-    """Net file, route+additional files and time values named in a SUMO config."""
-    try:
-        root = ET.parse(cfg).getroot()
-    except ET.ParseError as e:
-        raise UserError(f"SUMO config {cfg}: not valid XML: {e}") from None
-    except OSError as e:
-        raise UserError(f"SUMO config {cfg}: cannot read: {e}") from None
-    vals: dict[str, str] = {}
-    for el in root.iter():
-        tag = el.tag.split("}")[-1]
-        if "value" in el.attrib:
-            vals[tag] = el.attrib["value"]
-    net = vals.get("net-file")
-    if not net:
-        raise UserError(f"SUMO config {cfg}: no <net-file>")
-    files = []
-    for key in ("route-files", "additional-files"):
-        for f in vals.get(key, "").split(","):
-            if f.strip():
-                files.append((cfg.parent / f.strip()).resolve())
-    return (cfg.parent / net).resolve(), files, vals
 
 
 def load_scenario(path: str | Path | None = None, doc: dict | None = None,
@@ -418,7 +396,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         cfg = rel(_path(sumo["config"], where, "sumo.config"))
         if not cfg.is_file():
             raise UserError(f"{where}: SUMO config not found: {cfg}")
-        net, files, cfgvals = _config_files(cfg)
+        net, files, cfgvals = config_files(cfg)
         args = ["-c", str(cfg)]
         adds = [(cfg.parent / f.strip()).resolve()
                 for f in cfgvals.get("additional-files", "").split(",") if f.strip()]

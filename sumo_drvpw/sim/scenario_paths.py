@@ -1,8 +1,10 @@
 """Where a scenario is: a scenario file or SUMO config given by its path, or one of the
-built-in scenarios (package data, ``sim/builtin/scenarios``) given by its name."""
+built-in scenarios (package data, ``sim/builtin/scenarios``) given by its name; and the
+files a SUMO config names (:func:`config_files`)."""
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from sumo_drvpw.errors import UserError
@@ -34,3 +36,27 @@ def scenario_path(spec) -> Path:
     if p.exists() or p.suffix in (".toml", ".sumocfg") or any(c in str(spec) for c in "/\\"):
         return p
     return bundled_scenario(str(spec))
+
+
+def config_files(cfg: Path) -> tuple[Path, list[Path], dict[str, str]]:
+    """Net file, route+additional files and time values named in a SUMO config."""
+    try:
+        root = ET.parse(cfg).getroot()
+    except ET.ParseError as e:
+        raise UserError(f"SUMO config {cfg}: not valid XML: {e}") from None
+    except OSError as e:
+        raise UserError(f"SUMO config {cfg}: cannot read: {e}") from None
+    vals: dict[str, str] = {}
+    for el in root.iter():
+        tag = el.tag.split("}")[-1]
+        if "value" in el.attrib:
+            vals[tag] = el.attrib["value"]
+    net = vals.get("net-file")
+    if not net:
+        raise UserError(f"SUMO config {cfg}: no <net-file>")
+    files = []
+    for key in ("route-files", "additional-files"):
+        for f in vals.get(key, "").split(","):
+            if f.strip():
+                files.append((cfg.parent / f.strip()).resolve())
+    return (cfg.parent / net).resolve(), files, vals

@@ -154,7 +154,7 @@ def _malformed(args: list[str]) -> str:
     import xml.parsers.expat
 
     from sumo_drvpw.fileio import open_maybe_gzip
-    from sumo_drvpw.sim.scenario import _config_files
+    from sumo_drvpw.sim.scenario_paths import config_files
 
     files: list[Path] = []
     it = iter(args)
@@ -166,7 +166,7 @@ def _malformed(args: list[str]) -> str:
         if a in ("-c", "--configuration-file"):
             files.append(Path(val))
             try:
-                net, more, _ = _config_files(Path(val))
+                net, more, _ = config_files(Path(val))
             except UserError as e:
                 return f"; {e}"
             files += [net, *more]
@@ -245,13 +245,13 @@ def scenario_option(sc, key: str) -> str | None:
     """The value a scenario gives a SUMO option: its SUMO options (``--key value``, a bare
     ``--key`` flag: true, ``--key=value``; the last one wins, as in SUMO), else its
     config's ``<key value=…/>``; None when neither gives it."""
-    from sumo_drvpw.sim.scenario import _config_files
+    from sumo_drvpw.sim.scenario_paths import config_files
 
     args = list(getattr(sc, "sumo_args", ()))
     val = None
     for i, a in enumerate(args):
         if a == "-c" and i + 1 < len(args) and Path(args[i + 1]).is_file():
-            val = _config_files(Path(args[i + 1]))[2].get(key, val)
+            val = config_files(Path(args[i + 1]))[2].get(key, val)
     for i, a in enumerate(args):
         if a == f"--{key}":
             nxt = args[i + 1] if i + 1 < len(args) else ""
