@@ -39,3 +39,32 @@ def test_containers_not_booked_are_said(tmp_path):
     for out in ("o", "fcd"):
         warnings = json.loads((tmp_path / out / "summary.json").read_text())["warnings"]
         assert any("1 container(s)" in w and "not booked" in w for w in warnings), (out, warnings)
+
+
+def test_a_tabular_fcd_s_containers_are_not_read_as_riding_persons(tmp_path):
+    """SUMO's tabular FCD (CSV) writes a container in the vehicles' columns as it writes a
+    person (an edge, no lane): the replay read it as a person riding in its truck, booked its
+    mass (the 9-t truck +10 % in a rehearsal, 2026-11-29) and counted it among the persons,
+    while saying containers are not booked. Now it equals the XML replay, which has no
+    container rows."""
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
+    (tmp_path / "r.rou.xml").write_text(ROUTES.replace('<container id="k0"', '<vType id="box" vClass="ignoring" '
+                                                       'mass="2000"/>\n  <container id="k0" type="box"'))
+    sc = energy_scenario(tmp_path, 100)
+    run_scenario(sc, tmp_path / "o")  # its FCD in XML
+    import subprocess
+
+    import sumo  # SUMO's own binary writes the tabular FCD of the same run
+    subprocess.run([f"{sumo.SUMO_HOME}/bin/sumo", "-n", str(tmp_path / "n.net.xml"), "-r", str(tmp_path / "r.rou.xml"),
+                    "--end", "100", "--step-length", "0.5", "--precision", "6", "--no-warnings", "true",
+                    "--fcd-output", str(tmp_path / "fcd.csv")], check=True, capture_output=True)
+    assert "box" in (tmp_path / "fcd.csv").read_text()
+    rows = {}
+    for name in ("fcd.xml", "fcd.csv"):
+        assert cli_main(["fcd", str(tmp_path / name), "--scenario", str(sc), "--out", str(tmp_path / name[4:]),
+                         "--no-figures"]) == 0
+        s = json.loads((tmp_path / name[4:] / "summary.json").read_text())
+        rows[name] = pd.read_parquet(tmp_path / name[4:] / "vehicles.parquet").set_index("vehicle").net_total_j
+        assert s["transportables"] == {"samples": 0, "max_kg": 0.0}, (name, s["transportables"])
+    assert rows["fcd.csv"]["t"] == rows["fcd.xml"]["t"]

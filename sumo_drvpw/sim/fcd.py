@@ -454,6 +454,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     # flushed) so that it books on in its own row when it comes back within TELEPORT_HOLD_S
     acc.ledger.hold_steps = int(np.ceil(TELEPORT_HOLD_S / replay.dt))
     replay.type_mass = {vt: i.mass_kg for vt, i in acc.file_vtypes.items() if i.mass_kg}
+    replay.container_types = set(getattr(acc.file_vtypes, "container_types", ()))
     replay.type_asl = {vt: i.action_step_s for vt, i in acc.file_vtypes.items() if i.action_step_s is not None}
     # long planned stops and start-stop systems as in the live run (sim/shutoff.py): the
     # vTypes' shut-off params and the vehicles' stops from the route and additional files

@@ -352,6 +352,8 @@ class FileVTypes(dict):
         #: ``<container>`` and ``<containerFlow>`` elements of the files (not booked: their
         #: mass, which SUMO's emission models add to their vehicle's, is left out)
         self.containers = 0
+        #: the vTypes of those elements (SUMO's tabular FCD writes containers as persons)
+        self.container_types: set[str] = set()
         #: ids of the files' ``<vTypeDistribution>`` elements (vehicles name them as a type)
         self.distributions: set[str] = set()
 
@@ -437,6 +439,7 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                     continue
                 if tag in ("container", "containerFlow"):
                     out.containers += 1
+                    out.container_types.add(el.attrib.get("type", "DEFAULT_CONTAINERTYPE"))
                 if tag == "vTypeDistribution" and el.attrib.get("id"):
                     out.distributions.add(el.attrib["id"])
                 if tag != "vType":
