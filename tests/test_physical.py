@@ -93,6 +93,22 @@ def test_bad_constraints_named():
         parse_constraints({"acc": {"min": 2.0, "max": 1.0}}, "cands.toml")
 
 
+def test_a_candidate_file_s_constraints_are_read_whatever_its_name(tmp_path):
+    """Its terms were read from any file that exists, its [constraints] only from a name
+    ending in .toml: `cands_grade` gave grade 1.3 under the default constraints, where
+    `cands_grade.toml` held it at 1 (a newcomer's rehearsal, 2026-11-29)."""
+    from sumo_drvpw.fit.calibrate import resolve_candidates
+    from sumo_drvpw.fit.physical import constraints_of
+
+    text = 'terms = ["acc", "grade", "aero", "roll"]\n[constraints]\ngrade = { fixed = 1.0 }\n'
+    for name in ("cands_grade.toml", "cands_grade"):
+        (tmp_path / name).write_text(text)
+        spec = str(tmp_path / name)
+        assert resolve_candidates(spec) == ("acc", "grade", "aero", "roll")
+        assert constraints_of(spec)["grade"] == {"fixed": 1.0}, name
+    assert constraints_of("indt-var-1") is None and constraints_of("acc,aero") is None
+
+
 @pytest.mark.parametrize("engine", ["local", "memory"])
 def test_calibrate_cli_uses_the_constrained_fit_when_implausible(tmp_path, capsys, engine):
     """`sumo-drvpw calibrate` keeps a plausible fit and refits an implausible one under the

@@ -323,7 +323,7 @@ def resolve_candidates(spec: str) -> tuple[str, ...]:
     from pathlib import Path
 
     p = Path(spec)
-    if p.suffix == ".toml" or p.exists():
+    if is_candidate_file(spec):
         import tomllib
 
         if not p.is_file():
@@ -341,12 +341,18 @@ def resolve_candidates(spec: str) -> tuple[str, ...]:
             except UserError as e:
                 raise UserError(f"candidate file {p}: {e}") from None
         return tuple(map(str, terms))
-    if "," in spec or spec:
-        terms = tuple(s.strip() for s in spec.split(",") if s.strip())
-        try:
-            for t in terms:
-                parse_term(t)
-        except UserError as e:
-            raise UserError(f"candidate terms '{spec}': {e} (or use indt-var-1, indt-var-2, a TOML file)") from None
-        return terms
-    raise UserError("candidate terms: empty (give indt-var-1, indt-var-2, a TOML file or a comma list)")
+    terms = tuple(s.strip() for s in spec.split(",") if s.strip())
+    try:
+        for t in terms:
+            parse_term(t)
+    except UserError as e:
+        raise UserError(f"candidate terms '{spec}': {e} (or use indt-var-1, indt-var-2, a TOML file)") from None
+    return terms
+
+
+def is_candidate_file(spec) -> bool:
+    """Whether a candidates option names a file (a .toml name, or any file that exists): its
+    terms and its [constraints] are read from it, whatever its name."""
+    from pathlib import Path
+
+    return str(spec) not in CANDIDATES and (Path(str(spec)).suffix == ".toml" or Path(str(spec)).exists())

@@ -394,7 +394,9 @@ def drag_against_vehicle(eq, vehicle, rho_kgm3: float = RHO_DEFAULT) -> str | No
 
 def constraints_of(candidates_spec) -> dict | None:
     """Constraints declared in a candidate TOML file, or None (a set name or a list)."""
-    return read_constraints(candidates_spec) if str(candidates_spec).endswith(".toml") else None
+    from sumo_drvpw.fit.calibrate import is_candidate_file
+
+    return read_constraints(candidates_spec) if is_candidate_file(candidates_spec) else None
 
 
 # ------------------------------------------------- physical candidates, chosen on whole trips
