@@ -319,3 +319,20 @@ def test_a_kia_hyundai_log_without_current_books_its_energy_from_the_bms_counter
     want = (d.iloc[-1] - d.iloc[0]) - (c.iloc[-1] - c.iloc[0])
     assert trip["measured_j"] == pytest.approx(want, rel=1e-6) and want == pytest.approx(0.4 * 3.6e6)
     assert "battery energy counters" in rep["context"]["counts"]["power_source"]
+
+
+def test_a_refused_cut_short_file_leaves_no_note_on_its_next_read(tmp_path):
+    """A file cut mid-row and refused for a bad time (before its report was started) left
+    its 'cut short' mark behind: the same file, mended, then read 'truncated last row 1'
+    (a newcomer's rehearsal through read(), 2026-11-29). Each read says its own."""
+    path = wide_csv(tmp_path / "trip.csv", polls())
+    good = path.read_text()
+    lines = good.splitlines()
+    bad = lines[:5] + [lines[5].replace(lines[5].split(";")[0], "noon", 1)] + lines[6:]
+    path.write_text("\n".join(bad)[:-3])  # cut inside its last row, and a bad time in row 4
+    with pytest.raises(UserError, match="data row 4 holds 'noon'"):
+        read("car-scanner", path)
+    path.write_text(good)
+    _, rep = read("car-scanner", path)
+    assert "truncated last row" not in rep["files"][0]["dropped"], rep["files"][0]
+    assert not any("cut short" in n for n in rep["files"][0]["notes"])

@@ -33,6 +33,10 @@ def read(format: str, paths, columns=None):
     """
     if format not in FORMATS:
         raise UserError(f"unknown format '{format}': use one of {', '.join(FORMATS)}")
+    from sumo_drvpw.data.adapters._common import TRUNCATED, WIDER_ROWS
+
+    TRUNCATED.clear()  # what an earlier read left (an adapter refused a file before its report
+    WIDER_ROWS.clear()  # took the file's marks): each read says its own
     mod = importlib.import_module(FORMATS[format])
     if format == "columns":
         frames, reports, notes = mod.read(paths, columns)
