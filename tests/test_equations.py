@@ -55,6 +55,10 @@ def test_moving_is_one_while_the_vehicle_moves():
     assert_allclose(m[:, 1] - m[:, 0], [1, 1, 1, 0, 0, 0])
     assert_allclose(m[:, 2], v * (v >= 0.1))
     assert category_of("moving") == "other" and category_of("moving*v^1") == "roll"
+    # v^0 is a constant power as `one` is (it was booked as rolling resistance: a run's
+    # auxiliary energy reported as rolling; a newcomer's rehearsal, 2026-11-29)
+    assert category_of("v^0") == category_of("one") == "other" and category_of("[heater_w]*v^0") == "other"
+    assert category_of("v^1") == "roll" and category_of("v^3") == "aero"
     params, missing = energy_model_params(Equation("e", {"acc": 1.0, "roll": 0.01, "moving": 900.0}), 1500.0, 2.0)
     assert params["constantPowerIntake"] == 900.0
     assert len(missing) == 1 and "moving 900 W" in missing[0] and "standing too" in missing[0]

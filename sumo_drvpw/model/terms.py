@@ -24,7 +24,7 @@ factor             value                                unit        category
                    0 while it stands
 ``radial``         m·v·|ω|: the centripetal force in curves N           roll
                    (ω the yaw rate; 0 when it is unknown)
-``v^k``            v to an integer power k (0…4)        (m/s)^k     v^3 aero, else roll
+``v^k``            v to an integer power k (0…4)        (m/s)^k     v^3 aero, v^0 other, else roll
 ``[col]``          the log column ``col`` (``[col]^2`` squared)     other
 ``trip=ID``        1 on samples of trip ID, else 0      –           other
 =================  ==================================  ==========  =========
@@ -292,7 +292,7 @@ def parse_term(text: str) -> Term:
             continue
         m = _VPOW.match(f)
         if m:
-            if category == "other":
+            if category == "other" and m.group(1) != "0":  # v^0: a constant power, as ``one``
                 category = "aero" if m.group(1) == "3" else "roll"
             continue
         if _COL.match(f) or _TRIP.match(f):
