@@ -92,10 +92,6 @@ def main(args) -> int:
     out = Path(args.out)
     if out.suffix != ".toml":
         raise UserError(f"--out {out}: an equation file ends in .toml")
-    efficiency = getattr(args, "efficiency", "constant")
-    if efficiency != "constant" and args.target != "battery":
-        raise UserError(f"--efficiency {efficiency} goes with --target battery (a fuel chain's "
-                        "efficiency is its Willans line)")
     inputs = existing_paths(args.logs, args.vehicle, args.candidates, args.compare_with)
     check_output_path(out, inputs, "file")
     if args.report:

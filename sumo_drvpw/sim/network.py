@@ -118,11 +118,6 @@ class Network:
         """Direction of the lane at ``pos`` [deg clockwise from north, SUMO's angle]."""
         return self.heading_deg[self.bin_index(lane, pos)]
 
-    def raw_slope(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
-        """Unsmoothed geometric slope [rad] over the ``RAW_LENGTH_M`` behind ``pos``: what
-        SUMO's getSlope computes from a vehicle's front and back positions."""
-        return self.raw[self.bin_index(lane, pos)]
-
     def elevation(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Elevation [m] of the robust profile at lane numbers ``lane``, positions ``pos``
         [m] (linear within a bin): its differences along a vehicle's path are the rise the

@@ -23,7 +23,6 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -221,9 +220,3 @@ def sumo_fuel_l(t_s, v_mps, grade_rad, workdir: Path, density_kg_per_l: float) -
                       "nan_steps": int(np.isnan(mg).sum())}
     return out
 
-
-def vtype_xml_text(params: dict, vtype_id: str, cls: str = "Energy/unknown") -> str:
-    """The vType as XML text (for the report: what a SUMO user would load)."""
-    lines = [f"<vType id={quoteattr(vtype_id)} emissionClass={quoteattr(cls)} mass=\"{params['mass']:.6g}\">"]
-    lines += [f'    <param key="{k}" value="{v:.6g}"/>' for k, v in params.items() if k != "mass"]
-    return "\n".join(lines + ["</vType>"])

@@ -303,13 +303,6 @@ class View:
         return self._s(self.d["decl"])
 
 
-def shift_rows(y: np.ndarray, trip: np.ndarray, lag: int) -> np.ndarray:
-    """y(i + lag) where row i + lag is in the same trip, else NaN (rows of one batch)."""
-    from sumo_drvpw.fit.diagnose.structural import shift_within_trips
-
-    return shift_within_trips(y, trip, lag)
-
-
 def factor(view: View, f: str, declared: list) -> np.ndarray:
     """Value of one factor of a candidate term on a view (as ``BlockModel.factor``)."""
     if f.startswith("[") and f.endswith("]^2"):

@@ -111,7 +111,7 @@ class StreamModel(BlockModel):
     common : analysis samples restricted to those whose power is finite at every shift
         of the lag search (as the in-memory lag step)
     lag : shift of the measured power [samples] (0: none)
-    columns : model columns added in the layout pass (:meth:`add_all`)
+    columns : model columns added in the layout pass
     hook : called as hook(view, block starts) for every view of the layout pass
     defer : the layout pass is run by the caller (``layout_step`` per view of
         ``prep.views(common, lag)``, then ``layout_end``), e.g. for two models in one pass
@@ -258,7 +258,7 @@ class StreamModel(BlockModel):
                      vy[:, 0] / (scale * self.y_scale))
 
     def _column_sums(self, view, st, cands):
-        """Block sums of one view for :meth:`add_all`: Σv², Σv·y, Σv·x_j (model columns),
+        """Block sums of one view for the layout pass: Σv², Σv·y, Σv·x_j (model columns),
         Σv_i·v_j (j < i) of the raw values v of ``cands``."""
         m, q0 = len(cands), len(self.cols)
         nb = len(st)
@@ -274,14 +274,6 @@ class StreamModel(BlockModel):
             for j in range(i):
                 new[:, i, j] = _rs(v * vals[j], st)
         return vv, vy, old, new
-
-    def add_all(self, cands: list[Candidate]) -> None:
-        """:meth:`add` each of ``cands`` in order, all in one pass (the same sums: the
-        products x_i·x_j of the raw values per block, scaled afterwards)."""
-        if not cands:
-            return
-        sums = [self._column_sums(view, view.extra["starts"], cands) for view in self._views()]
-        self._add_from_sums(cands, *_concat_parts(sums))
 
     def _add_from_sums(self, cands, vv, vy, old, new) -> None:
         for i, cand in enumerate(cands):
