@@ -75,3 +75,32 @@ def test_a_vtype_action_step_books_the_run_ballistic_live_and_replayed(tmp_path)
     euler = run_scenario(_scenario(tmp_path, "", asl=""), None, end=150, figures=False)
     assert euler.summary["step_method"] == "euler"
     json.dumps(live.summary)
+
+
+@pytest.mark.parametrize("ballistic", [True, False])
+def test_a_tabular_fcd_without_a_header_is_replayed_by_the_method_its_rows_show(tmp_path, ballistic):
+    """SUMO's CSV FCD has no header: replayed without the run's config, a ballistic run was
+    booked as Euler, without a word (a rehearsal, 2026-11-29: distance +0.4 %, energy up to
+    +0.7 %, per vehicle up to 1 %). Now the rows tell — the step's distance is the mean of its
+    two speeds × Δt, or the new speed × Δt — and the replay equals the live run, and says so."""
+    from sumo_drvpw.sim.fcd_method import method_of_rows
+    from sumo_drvpw.sim.fcd_read import read_fcd
+
+    opt = '<step-method.ballistic value="true"/>' if ballistic else ""
+    cfg = _scenario(tmp_path, opt, asl="")
+    csv = tmp_path / "fcd.csv"
+    live = run_scenario(cfg, None, end=150, figures=False, options=["--fcd-output", str(csv), "--precision", "6"],
+                        equations=["vsp_ldv1999", "epa_gasoline_car"])
+    assert live.summary["step_method"] == ("ballistic" if ballistic else "euler")
+    rep = process_fcd(csv, net=NETS / "city.net.xml", vtype_files=[tmp_path / "r.rou.xml"], figures=False,
+                      equations=["vsp_ldv1999", "epa_gasoline_car"])
+    assert rep.summary["step_method"] == live.summary["step_method"]
+    said = [w for w in rep.summary.get("warnings", []) if "replayed as ballistic" in w]
+    assert bool(said) == ballistic, rep.summary.get("warnings")
+    got, ref = _per_vehicle(rep), _per_vehicle(live)
+    assert got.index.equals(ref.index) and len(ref) > 10
+    np.testing.assert_allclose(got.to_numpy(), ref.to_numpy(), rtol=1e-5, atol=1e-3)
+    df = read_fcd(csv)  # every other row: rows sparser than the step tell nothing
+    assert method_of_rows({k: df[k].to_numpy() for k in df.columns}, None) == live.summary["step_method"]
+    sparse = df[np.isin(df["time"], np.unique(df["time"])[::2])]
+    assert method_of_rows({k: sparse[k].to_numpy() for k in sparse.columns}, None) is None

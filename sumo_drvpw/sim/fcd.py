@@ -62,6 +62,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.fcd_begin import accel_at_begin, begin_frame
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
+from sumo_drvpw.sim.fcd_method import recorded_method
 from sumo_drvpw.sim.fcd_warn import lane_warnings, no_angle_warning, partial_warnings, unplaced_person_warning
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
@@ -406,8 +407,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
 
     head = header_options(fcd_file)  # the recording's options (None: no SUMO header)
     sc = recorded_device_options(sc, head)
-    method = step_method(sc, head)
     dt, dt_warning = row_interval(sc, fcd_file, head)
+    method, method_note = recorded_method(sc, head, fcd_file, dt)  # (a header, the scenario, or the rows)
     net.jump_slack_m = hidden_steps_slack(recorded_step(head), dt)  # rows sparser than the step
     if chunk_rows is None:
         df = read_fcd(fcd_file)
@@ -490,7 +491,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         if not publish:
             acc.close_trace()
             return acc, extra
-        warn = lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning + partial_warnings(fcd_file, head)
+        warn = (lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning + [method_note] * bool(method_note)
+                + partial_warnings(fcd_file, head))
         if replay.no_angle and acc.eqset.uses_yaw:
             warn.append(no_angle_warning(fcd_file))
         if replay.unplaced_person_rows and sc.transportable_mass:
@@ -529,21 +531,6 @@ def recorded_device_options(sc, head: dict | None):
     return dataclasses.replace(sc, sumo_args=[*sc.sumo_args, *add]) if add else sc
 
 
-def step_method(sc, head: dict | None) -> str:
-    """How the recording moved its vehicles, "ballistic" or "euler" (the step's distance:
-    the mean of the step's two speeds × Δt, or the new speed × Δt), by SUMO's rule
-    (:func:`sumo_drvpw.sim.sumo_start.ballistic_update`) on the options of the FCD file's
-    own header ``head`` (:func:`~sumo_drvpw.sim.fcd_read.header_options`: SUMO writes those
-    of the run that differ from its defaults); without a header, on the scenario's SUMO
-    options and config; else SUMO's default, Euler."""
-    from sumo_drvpw.sim.sumo_start import ballistic_update, scenario_option
-
-    keys = ("step-method.ballistic", "default.action-step-length")
-    given = ([head.get(k) for k in keys] if head is not None
-             else [scenario_option(sc, k) for k in keys])
-    return "ballistic" if ballistic_update(*given) else "euler"
-
-
 def recorded_step(head: dict | None) -> float | None:
     """The step length [s] of the run that wrote an XML FCD (its header; SUMO's default
     1 s when not named), None without a header."""
@@ -562,7 +549,7 @@ def row_interval(sc, fcd_file, head: dict | None) -> tuple[float | None, list[st
     apart, whatever the scenario's or config's ``step_length`` (a run given another step
     length on the command line, or FCD written every few steps). Without a header, the
     scenario's step length; without one either, None (the file's first two timesteps).
-    ``head``: the file's header options, as :func:`step_method` takes them."""
+    ``head``: the file's header options (:func:`sumo_drvpw.sim.fcd_method.step_method`)."""
     if head is None:
         return sc.step_length, []
     try:
