@@ -335,7 +335,9 @@ OWN_PARAMS_NOTE = ("like for like: the vType's own Energy-model parameters (SUMO
                    "leaves out) as terms and a battery chain, its radial drag in curves as SUMO books it "
                    "per step; the slopes' source "
                    "differs on grade changes, and SUMO's emissions device books a trip's last steps otherwise "
-                   "than its own emission output (a few % of a short trip, docs/scenario.md) "
+                   "than its own emission output (a few % of a short trip, docs/scenario.md); a bus dwelling "
+                   "in a bay (a busStop with parking=\"true\") is off its lane for SUMO, which books nothing "
+                   "there, where ours books it standing with its constantPowerIntake (an e-bus line: several %) "
                    "(summary.json assumptions.vtype_energy)")
 
 #: what the row of an equation without an energy chain compares (an electric bus: no battery
