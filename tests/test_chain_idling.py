@@ -224,3 +224,22 @@ def test_a_fuel_target_no_idling_engine_burns_at_standstill_is_flagged(idle_w, f
     r = fit.parameters["idle_fuel_power_w"]["reading"]
     assert ("IMPLAUSIBLE TARGET" in r) == flagged, r
     assert any("IMPLAUSIBLE TARGET" in w for w in fit.warnings) == flagged
+
+
+@pytest.mark.parametrize("idle_w,said", [(IDLE_W, False), (22_000.0, True)])
+def test_a_standing_fuel_above_a_car_s_idle_asks_for_the_engine_when_its_size_is_unknown(idle_w, said):
+    """Without the engine's displacement the standstill check's band is any car's (up to a
+    large engine's cold idle), so a diesel's air flow read as petrol at 3.3 L/h standing
+    passed without a word (a rehearsal's KIT Seat Leon, 2026-11-29). Above a 2.0-L car's
+    idle it now says to give the displacement (a warning); a plausible idle says nothing."""
+    from sumo_drvpw.fit.chain_checks import check_chain
+    from sumo_drvpw.model.vehicles import Vehicle
+
+    rng, t, v, p = _stop_and_go(seed=7)
+    fuel = np.where(v > 0.05, _fuel(rng, v, p), idle_w + rng.normal(0, 300.0, v.size))
+    fit = calibrate_fuel(p, v, fuel, np.full(v.size, 0.5), engine_off=-np.inf)
+    check_chain(fit, Vehicle("car", MASS), p, v, np.ones(v.size, bool))
+    r = fit.parameters["idle_fuel_power_w"]["reading"]
+    assert ("CHECK THE TARGET" in r and "powertrain.displacement_l" in r) == said, r
+    assert any("CHECK THE TARGET" in w for w in fit.warnings) == said
+    assert "IMPLAUSIBLE TARGET" not in r

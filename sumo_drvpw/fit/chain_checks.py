@@ -45,7 +45,7 @@ IDLE_FUEL_REF_DISPLACEMENT_L = 2.0
 #: powertrains whose engine is off at standstill and drives electrically at light load
 HYBRID_POWERTRAINS = ("power_split",)
 #: readings that make a warning
-FLAGS = ("IMPLAUSIBLE", "NOT IDENTIFIED")
+FLAGS = ("IMPLAUSIBLE", "NOT IDENTIFIED", "CHECK THE TARGET")
 #: a battery chain's recuperation efficiency below which it returns next to nothing: no
 #: electric or hybrid car's (a rehearsal's Nissan Leaf on a traction-only power: 0.001)
 RECUPERATION_MIN = 0.15
@@ -128,8 +128,10 @@ def standing_fuel_note(standing, fuel: str, displacement_l: float | None = None)
         return ""
     lph = fuel_l_per_h(standing[2] / standing[1], fuel)
     hi = idle_fuel_band(displacement_l)[1]
-    if lph <= STANDING_FUEL_MAX_FACTOR * hi:
-        return ""
+    if lph <= STANDING_FUEL_MAX_FACTOR * hi:  # (an unknown engine's band is wide: say what would judge it)
+        return (f"; CHECK THE TARGET: the log's own fuel flow while the car stands is {lph:.2f} L/h, above a 2.0-L car's idle "
+                f"({hi:.2g} L/h): give the engine's powertrain.displacement_l in the vehicle file to judge it "
+                "(a diesel's air flow or a flow in other units reads so)") if displacement_l is None and lph > hi else ""
     return (f"; IMPLAUSIBLE TARGET: the log's own fuel flow while the car stands is {lph:.2f} L/h "
             f"({standing[1]:.0f} s), {lph / hi:.1f}× the most an idling "
             + ("passenger car's engine" if displacement_l is None else f"{displacement_l:g}-L engine")
