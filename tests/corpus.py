@@ -798,6 +798,43 @@ def _(d):
     return ["run", "city", "--cold-start", "--cold-start-share", "0.5", "--out", str(d / "run")]
 
 
+@case("options", "calibrate --target fuel with --hvac", ("--hvac",))
+def _(d):
+    df = base_log()
+    df["fuel_rate_lph"] = 0.6 + df["power_w"].clip(lower=0) / 9000.0
+    return _cal(write(d, "log.parquet", df), d, "--target", "fuel", "--hvac", "ambient_c:20")
+
+
+@case("options", "calibrate --load of a temperature column", ("--load coolant_c",))
+def _(d):
+    df = base_log()
+    df["coolant_c"] = 85.0
+    return _cal(write(d, "log.parquet", df), d, "--target", "battery", "--load", "coolant_c")
+
+
+@case("options", "run a fuel chain without its engine's keys", ("bus.toml", "'fuel'"))
+def _(d):
+    (d / "bus.toml").write_text('[equation]\nname = "bus"\n[terms]\nacc = 1.0\nv1 = 900.0\n[chain]\n'
+                                'predicts = "fuel"\ntraction_efficiency = 0.85\nmarginal_efficiency = 0.4\n'
+                                'idle_fuel_power_w = 20000.0\nengine_off_below_w = -inf\n')
+    return ["run", "city", "--equation", str(d / "bus.toml"), "--end", "5", "--out", str(d / "run")]
+
+
+@case("options", "scenario vtypes table naming no vType", ("[vtypes.prius_3]", "prius3"))
+def _(d):
+    cfg = Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg"
+    (d / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{cfg.as_posix()}"\n'
+                              '[vtypes.prius_3]\nmass_kg = 1600\n')
+    return ["run", str(d / "s.toml"), "--end", "5", "--out", str(d / "run")]
+
+
+@case("options", "scenario names a missing equation file", ("mine/bus.toml",))
+def _(d):
+    cfg = Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg"
+    (d / "s.toml").write_text(f'equations = ["vsp_ldv1999", "mine/bus.toml"]\n[sumo]\nconfig = "{cfg.as_posix()}"\n')
+    return ["run", str(d / "s.toml"), "--end", "5", "--out", str(d / "run")]
+
+
 # --- vendor files cut short (import) --------------------------------------------------
 
 def _cut(src: Path, dst: Path, nbytes: int | None = None, lines: int | None = None) -> Path:
