@@ -19,7 +19,8 @@ from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim import VTypeResolver
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
-from sumo_drvpw.sim.loop import Physics, run_loop
+from sumo_drvpw.sim.loop import Physics
+from sumo_drvpw.sim.stepping import run_loop
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.scenario import RoadClassRule, load_scenario
 from sumo_drvpw.model.terms import Inputs

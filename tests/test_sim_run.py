@@ -26,7 +26,8 @@ from sumo_drvpw.model.equations import Equation, load_equation
 from sumo_drvpw.sim import close_sumo, run_scenario, start_sumo
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
 from sumo_drvpw.sim.vtypes import MODE_CARRIERS
-from sumo_drvpw.sim.loop import Physics, run_loop
+from sumo_drvpw.sim.loop import Physics
+from sumo_drvpw.sim.stepping import run_loop
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.scenario import RoadClassRule
 

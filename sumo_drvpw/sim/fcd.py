@@ -389,7 +389,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     ``count_persons``: count the persons in ``summary.json`` ``skipped`` (one Dask task
     does)."""
     from sumo_drvpw.sim.accountant import Accountant
-    from sumo_drvpw.sim.loop import step_until
+    from sumo_drvpw.sim.stepping import step_until
     from sumo_drvpw.sim.network import hidden_steps_slack, load_network
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import SPILL_DIR, discard_parts, write_published

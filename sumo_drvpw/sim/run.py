@@ -69,7 +69,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         progress, difference, period
     """
     from sumo_drvpw.sim.accountant import Accountant
-    from sumo_drvpw.sim.loop import step_until
+    from sumo_drvpw.sim.stepping import step_until
     from sumo_drvpw.sim.scenario import load_scenario
     from sumo_drvpw.sim.scenario_paths import scenario_path as file_of
 
