@@ -211,6 +211,8 @@ class Accountant(_Listener):
         use_subs = getattr(conn, "__name__", "") != "libsumo" and hasattr(conn, "getLabel")
         self.stepper = Stepper(conn, self.net, self.eqset, self.ledger, self.physics,
                                self.resolver, self.trace, use_subscriptions=use_subs)
+        # a run that resumes a saved state (load-state): its first step's vehicles are not booked again
+        self.stepper.resumed = sc is not None and scenario_option(sc, "load-state") is not None
         self.begin = float(conn.simulation.getTime())
         self.interrupted = False
 

@@ -192,6 +192,9 @@ class Stepper:
         #: an FCD replay that starts after the file's first timestep sets ``skipped``: the
         #: vehicles of its first step were on the road already, not departing (cold starts)
         self.replay_info: dict = {}
+        #: the run resumes a saved state (SUMO's load-state): its first step's vehicles are that
+        #: state, the step the saving run booked last: seeded, not booked again (set by the Accountant)
+        self.resumed = False
         #: persons (pedestrians, also riding) are never booked; a resolver with
         #: ``skip_person`` counts them by vClass and vType (one more call per step)
         self.count_persons = (hasattr(resolve, "skip_person") and hasattr(conn, "person")
@@ -342,10 +345,10 @@ class Stepper:
                 self.prev_ids = None
             starts.append(self.register(vid))
             start_ids.append(vid)
-        if starts and self.is_replay and ledger.steps == 1 and self.replay_info.get("skipped"):
-            joined = starts  # an FCD replay from --begin: its first rows' vehicles were driving
+        if starts and ledger.steps == 1 and ((self.is_replay and self.replay_info.get("skipped")) or self.resumed):
+            joined = starts  # an FCD replay from --begin (a saved state's: SUMO departs them again): driving
         if starts and ledger.chain is not None and ledger.chain.cold_start_on \
-                and not (ledger.steps == 1 and self.replay_info.get("skipped")):
+                and not (ledger.steps == 1 and (self.replay_info.get("skipped") or self.resumed)):
             ledger.chain.depart(starts, start_ids, ledger.veh_type, ledger.veh_class)
         self.riders.step(ledger, vmap, departed)
         if self.parking.on and self.parking.step(ledger, vmap, t_now, dt):
@@ -364,7 +367,7 @@ class Stepper:
                 n_known = ledger.n_veh
                 vidx = np.fromiter((vmap[v] if v in vmap else self.register(v) for v in ids),
                                    np.int64, n_all)
-                joined = vidx[vidx >= n_known].tolist() or joined  # (those registered just now)
+                joined = vidx[vidx >= n_known].tolist() + joined  # (those registered just now)
             kept = ledger.veh_keep[vidx] & ~ledger.veh_parked[vidx]
             if kept.all():
                 kids = ids
@@ -448,7 +451,12 @@ class Stepper:
         if placed.any():  # put back by a teleport: its energy jump booked apart, then driven on
             put_back(ledger, net, self.eqset.equations, placed, vidx, lane, pos, v, prev)
             on_lane &= ~placed
-        if not on_lane.all():  # teleporting, parked: no lane, not booked
+        if self.resumed and ledger.steps == 1 and joined:  # a saved state: where its next step starts
+            seed = on_lane & np.isin(vidx, joined)
+            ledger.veh_at[vidx[seed]] = np.column_stack([lane[seed], pos[seed], net.elevation(lane[seed], pos[seed])
+                                                         if net.z_node is not None else np.nan, np.zeros(seed.sum())])
+            on_lane &= ~seed
+        if not on_lane.all():  # teleporting, parked: no lane, not booked (nor a saved state's first row)
             ledger.veh_at[vidx[(lane < 0)], 2] = np.nan  # (its next step starts its rise afresh)
             ledger.veh_prev_angle[vidx[(lane < 0)]] = np.nan  # (and its turning)
             vidx, lane, v, a, angle, pos = (
