@@ -189,3 +189,23 @@ def test_the_equation_files_r2_is_that_of_its_constrained_coefficients(tmp_path,
     r2 = json.loads((tmp_path / "c" / "report.json").read_text())["equations"][eq.name]["r2"]
     assert eq.metrics["r2"] == pytest.approx(r2, abs=1e-9)
     assert eq.metrics["r2_unconstrained"] > eq.metrics["r2"]
+
+
+def test_a_rolling_coefficient_far_from_the_car_s_is_said():
+    """The fitted `roll` against the vehicle file's c_r (else its road load's A/(m·g)): a
+    Prius Gen 2 fit read c_r 0.0221 as plausible, 3.6× the car's 0.0061 (a rehearsal,
+    2026-11-29); within 3× (drivetrain losses ride on it) nothing is said."""
+    from sumo_drvpw.fit.physical import roll_against_vehicle
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.model.vehicles import Vehicle, load_vehicle
+
+    prius = load_vehicle("prius2")
+    far = Equation("e", {"acc": 1.0, "aero": 0.3, "roll": 0.0221})
+    note = roll_against_vehicle(far, prius)
+    assert note and "3.6 × the 0.0061" in note and far.provenance["physical"]["vehicle_roll"]["ratio"] > 3
+    assert roll_against_vehicle(Equation("e", {"roll": 0.0164}), prius) is None
+    assert "× the" in roll_against_vehicle(Equation("e", {"roll": 0.0015}), prius)  # too low too
+    by_a = Vehicle("v", 1500.0, road_load={"a_n": 147.1})  # A/(m·g) = 0.0100
+    assert roll_against_vehicle(Equation("e", {"roll": 0.0401}), by_a) and \
+        roll_against_vehicle(Equation("e", {"roll": 0.0200}), by_a) is None
+    assert roll_against_vehicle(far, Vehicle("v", 1500.0)) is None and roll_against_vehicle(far, None) is None

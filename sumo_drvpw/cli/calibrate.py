@@ -157,15 +157,16 @@ def say_physics(eq, vehicle, rho_kgm3) -> None:
     where the equation shows its drivetrain's η (:mod:`sumo_drvpw.fit.drivetrain`; a
     warning when it disagrees with the grade)."""
     from sumo_drvpw.fit.drivetrain import describe
-    from sumo_drvpw.fit.physical import drag_against_vehicle
+    from sumo_drvpw.fit.physical import drag_against_vehicle, roll_against_vehicle
     from sumo_drvpw.model.constants import RHO_DEFAULT
 
     phys = eq.provenance.get("physical", {})
     if phys.get("used") == "constrained":  # what is written, not the free fit printed above
         say_constrained(eq, phys)
-    note = drag_against_vehicle(eq, vehicle, rho_kgm3 if rho_kgm3 and rho_kgm3 > 0 else RHO_DEFAULT)
-    if note:
-        print(f"warning: {note}")
+    for note in (drag_against_vehicle(eq, vehicle, rho_kgm3 if rho_kgm3 and rho_kgm3 > 0 else RHO_DEFAULT),
+                 roll_against_vehicle(eq, vehicle)):
+        if note:
+            print(f"warning: {note}")
     w = (phys.get("reading", {}).get("grade") or {}).get("at_wheels")
     if w:
         if "grade" in phys.get("active", ()):  # the constraints set it, not the data

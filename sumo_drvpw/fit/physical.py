@@ -392,6 +392,44 @@ def drag_against_vehicle(eq, vehicle, rho_kgm3: float = RHO_DEFAULT) -> str | No
     return note
 
 
+#: a fitted ``roll`` coefficient carries, beside the tyres' c_r, the losses of a drivetrain
+#: and its bearings that grow with speed (up to about twice the tyres' on the logs here:
+#: the i3's road-load fits); beyond this factor of the vehicle file's c_r it is no rolling
+#: resistance of this car (a rehearsal's Prius Gen 2: 0.0221, 3.6× its 0.0061, read plausible)
+ROLL_RATIO_MAX = 3.0
+
+
+def roll_against_vehicle(eq, vehicle) -> str | None:
+    """A note when the equation's ``roll`` coefficient (c_r) is more than
+    :data:`ROLL_RATIO_MAX` times above, or below 1/ROLL_RATIO_MAX of, the vehicle file's
+    rolling resistance (``[body] rolling_coefficient``, else the published road load's
+    A/(m·g)); None when it is within, or either is missing. Kept in
+    ``eq.provenance["physical"]["vehicle_roll"]``."""
+    from sumo_drvpw.model.constants import G
+
+    if vehicle is None or "roll" not in eq.terms:
+        return None
+    body, rl = vehicle.body or {}, vehicle.road_load or {}
+    if body.get("rolling_coefficient"):
+        ref, src = float(body["rolling_coefficient"]), "c_r"
+    elif rl.get("a_n") and vehicle.mass_kg:
+        ref, src = float(rl["a_n"]) / (float(vehicle.mass_kg) * G), f"road load A = {float(rl['a_n']):.4g} N / (m·g)"
+    else:
+        return None
+    c = float(eq.terms["roll"])
+    ratio = c / ref if ref > 0 else float("inf")
+    if 1.0 / ROLL_RATIO_MAX <= ratio <= ROLL_RATIO_MAX:
+        return None
+    note = (f"roll = {c:.4g} reads as a rolling coefficient {ratio:.2g} × the {ref:.3g} of "
+            f"{Path(vehicle.path).name if vehicle.path else vehicle.name} ({src}): not this car's rolling "
+            f"resistance (outside 1/{ROLL_RATIO_MAX:g} … {ROLL_RATIO_MAX:g}×, drivetrain losses included); the "
+            "term carries what the other terms leave (the drag, a speed-dependent loss, a narrow speed range?) "
+            "— SUMO books it at every speed")
+    eq.provenance.setdefault("physical", {})["vehicle_roll"] = {
+        "coefficient": c, "declared": ref, "declared_from": src, "ratio": ratio, "note": note}
+    return note
+
+
 def constraints_of(candidates_spec) -> dict | None:
     """Constraints declared in a candidate TOML file, or None (a set name or a list)."""
     from sumo_drvpw.fit.calibrate import is_candidate_file
