@@ -276,7 +276,6 @@ def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
     meta : extra manifest fields; the caller may fill it inside the block (e.g.
         ``meta["interrupted"] = True`` for a run stopped by Ctrl-C that writes what it has)
     """
-    import datetime
     import shutil
     import signal
 
@@ -313,17 +312,8 @@ def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
     try:
         try:
             yield tmp
-            files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())
             companions = sorted(p.name for p in stage.iterdir() if p.name not in (out.name, OWNER))
-            manifest = {"tool": "sumo-drvpw", "version": _version(),
-                        "command": list(command if command is not None else (CURRENT_COMMAND or [])),
-                        "created_utc": datetime.datetime.now(datetime.timezone.utc)
-                        .isoformat(timespec="seconds"),
-                        "interrupted": False, **info,
-                        "files": [{"path": f, "bytes": (tmp / f).stat().st_size} for f in files],
-                        "companions": [{"path": f"../{c}", "bytes": (stage / c).stat().st_size}
-                                       for c in companions]}
-            write_json(tmp / MANIFEST, manifest)
+            write_manifest(tmp, info, command, [(c, (stage / c).stat().st_size) for c in companions])
         except OSError as e:
             if e.errno in _NO_SPACE:
                 raise UserError(no_space_message(out, e)) from None
@@ -346,6 +336,66 @@ def output_set(out_dir, *, force: bool = False, command=None, inputs=(),
                     d.rmdir()
                 except OSError:
                     pass
+
+
+def write_manifest(folder: Path, meta: dict | None = None, command=None, companions=(), kept=()) -> None:
+    """``manifest.json`` of an output set in ``folder``: every file in it with its size (but
+    ``kept``, a user's files the set was written beside), the command line, version, UTC time
+    and ``meta`` (``companions``: (name, bytes) beside it)."""
+    import datetime
+
+    folder = Path(folder)
+    files = sorted(str(p.relative_to(folder)) for p in folder.rglob("*")
+                   if p.is_file() and p != folder / MANIFEST and str(p.relative_to(folder)) not in set(kept))
+    write_json(folder / MANIFEST, {
+        "tool": "sumo-drvpw", "version": _version(),
+        "command": list(command if command is not None else (CURRENT_COMMAND or [])),
+        "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "interrupted": False, **(meta or {}),
+        "files": [{"path": f, "bytes": (folder / f).stat().st_size} for f in files],
+        "companions": [{"path": f"../{c}", "bytes": b} for c, b in companions]})
+
+
+def in_output_set(folder) -> bool:
+    """Whether ``folder`` is (or lies in) the staging folder an :func:`output_set` yielded:
+    the set is then written whole by it."""
+    return any((p / OWNER).is_file() for p in Path(folder).absolute().parents)
+
+
+def clear_earlier_set(out, force: bool = False) -> list[str]:
+    """Make ``out`` ready for an output set written in place (the Python API's
+    ``run_scenario(out_dir=…)`` and ``RunResult.write``, as :func:`output_set` is for the
+    commands): the files an earlier set lists in its manifest are removed, so none of them
+    is left beside the new set's (a chain's CSVs of an earlier run beside a run without a
+    chain). Refused (:class:`OutputExists`) unless ``force``: a non-empty folder that is no
+    output set, and files a user added to an earlier set (``force``: left in place). Returns
+    the files left in place (relative paths), for :func:`write_manifest` to leave out."""
+    from sumo_drvpw.errors import OutputExists, UserError
+
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"{out}: is a file; give a folder to write the outputs into")
+    if not out.exists():
+        return []
+    if _foreign_folder(out):
+        if force:
+            return sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+        raise OutputExists(f"{out}: folder exists, is not empty and was not written by sumo-drvpw "
+                           "(no manifest.json); it is left untouched (force=True writes into it)")
+    extra = unlisted_files(out)
+    if extra and not force:
+        raise OutputExists(f"{out}: an earlier output set holds {len(extra)} file(s) it did not write "
+                           f"(first: {extra[0]}), which writing the new set would leave beside it; "
+                           "move them out (force=True keeps them there)")
+    try:
+        listed = [str(f["path"]) for f in json.loads((out / MANIFEST).read_text(encoding="utf-8"))["files"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        listed = []
+    for f in listed + [MANIFEST]:
+        p = (out / f).resolve()
+        if p.is_file() and p.is_relative_to(out.resolve()):
+            p.unlink()
+    return extra
 
 
 #: the file in an output set's temporary folders naming the process that made them

@@ -102,3 +102,38 @@ def test_a_traced_equations_measurement_finding_says_what_to_do_instead():
         load_scenario(scenario_path("city"), equations=[eq])
     with pytest.raises(UserError, match=r"term '\[ambient_c\]\*v1' needs the log-only signal 'ambient_c'"):
         load_scenario(scenario_path("city"), equations=[Equation("t", {"acc": 1.0, "[ambient_c]*v1": -5.0})])
+
+
+def test_python_api_outputs_are_whole_sets_as_the_commands_are(tmp_path):
+    """run_scenario(out_dir=D) and RunResult.write(D) into a folder an earlier run wrote left
+    that run's files beside the new ones (its chain CSVs beside a summary without a chain),
+    and wrote into a folder of the user's without a word (a rehearsal, 2026-11-29): now an
+    earlier set's files go, a manifest.json lists the set, and a folder or file of the
+    user's is refused unless force=True, which keeps it (and leaves it out of the manifest)."""
+    import json
+
+    from sumo_drvpw.errors import OutputExists
+    from sumo_drvpw.sim import run_scenario
+
+    d = tmp_path / "out"
+    run_scenario("city", d, end=30, figures=False, equations=["epa_gasoline_car"])
+    assert (d / "chain_vehicles.csv").is_file() and (d / "manifest.json").is_file()
+    res = run_scenario("city", d, end=30, figures=False, equations=["vsp_ldv1999"])
+    assert not (d / "chain_vehicles.csv").exists()
+    listed = {f["path"] for f in json.loads((d / "manifest.json").read_text())["files"]}
+    assert listed == {str(p.relative_to(d)) for p in d.rglob("*") if p.is_file()} - {"manifest.json"}
+    (d / "notes.txt").write_text("mine")
+    with pytest.raises(OutputExists, match="notes.txt"):
+        run_scenario("city", d, end=30, figures=False, equations=["vsp_ldv1999"])
+    with pytest.raises(OutputExists, match="notes.txt"):
+        res.write(d)
+    res.write(d, force=True)
+    assert (d / "notes.txt").read_text() == "mine"
+    assert "notes.txt" not in {f["path"] for f in json.loads((d / "manifest.json").read_text())["files"]}
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "data.csv").write_text("1,2\n")
+    with pytest.raises(OutputExists, match="not written by sumo-drvpw"):
+        res.write(mine)
+    res.write(tmp_path / "fresh")
+    assert (tmp_path / "fresh" / "vehicles.parquet").is_file() and (tmp_path / "fresh" / "manifest.json").is_file()

@@ -195,7 +195,7 @@ def test_a_rolling_coefficient_far_from_the_car_s_is_said():
     """The fitted `roll` against the vehicle file's c_r (else its road load's A/(m·g)): a
     Prius Gen 2 fit read c_r 0.0221 as plausible, 3.6× the car's 0.0061 (a rehearsal,
     2026-11-29); within 3× (drivetrain losses ride on it) nothing is said."""
-    from sumo_drvpw.fit.physical import roll_against_vehicle
+    from sumo_drvpw.fit.vehicle_checks import roll_against_vehicle
     from sumo_drvpw.model.equations import Equation
     from sumo_drvpw.model.vehicles import Vehicle, load_vehicle
 

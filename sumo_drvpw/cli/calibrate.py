@@ -153,11 +153,11 @@ def physical(eq, m, candidates):
 
 def say_physics(eq, vehicle, rho_kgm3) -> None:
     """Print a warning when the written aero coefficient is no drag of the vehicle
-    (:func:`sumo_drvpw.fit.physical.drag_against_vehicle`), and the grade at the wheels
+    (:func:`sumo_drvpw.fit.vehicle_checks.drag_against_vehicle`, and the roll: `roll_against_vehicle`), and the grade at the wheels
     where the equation shows its drivetrain's η (:mod:`sumo_drvpw.fit.drivetrain`; a
     warning when it disagrees with the grade)."""
     from sumo_drvpw.fit.drivetrain import describe
-    from sumo_drvpw.fit.physical import drag_against_vehicle, roll_against_vehicle
+    from sumo_drvpw.fit.vehicle_checks import drag_against_vehicle, roll_against_vehicle
     from sumo_drvpw.model.constants import RHO_DEFAULT
 
     phys = eq.provenance.get("physical", {})

@@ -38,7 +38,8 @@ from sumo_drvpw.sim.chain_outputs import chain_warnings
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
 from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network
-from sumo_drvpw.sim.outputs import RunResult, TraceWriter, summary_dict
+from sumo_drvpw.sim.outputs import RunResult, summary_dict
+from sumo_drvpw.sim.trace import TraceWriter
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
 from sumo_drvpw.sim.sumo_start import NewRun, scenario_option
 from sumo_drvpw.sim.vtype_energy import expand as expand_vtype_energy, listing_warning

@@ -52,7 +52,7 @@ def _listed(ids: list[str], most: int = 12) -> str:
 
 
 def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
-                 flush_vehicles: int | None = None, **overrides):
+                 flush_vehicles: int | None = None, force: bool = False, **overrides):
     """Run a scenario; returns its :class:`~sumo_drvpw.sim.outputs.RunResult` and writes
     its outputs into ``out_dir`` when given (``result["steps"]`` reads the summary).
 
@@ -60,13 +60,16 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     ----------
     scenario_path : scenario TOML file or SUMO config, or a built-in scenario's name
         (``"city"``, ``"highway"``), as ``sumo-drvpw run`` takes it
-    out_dir : output directory (created), or None to write nothing
+    out_dir : output directory (created), or None to write nothing; written as a whole set with
+        its manifest.json, as the commands write theirs: an earlier set's files there are
+        removed first, and a folder that holds other files is refused unless ``force``
     keep_vehicles : keep every vehicle in memory (default: vehicles that left are
         streamed out, :class:`~sumo_drvpw.sim.accountant.Accountant`)
     flush_vehicles : finished vehicles held before they are written out (default 1024)
+    force : write into ``out_dir`` though it holds files of the user's (they are kept)
     overrides : replace scenario values: begin, end, step_length [s], connection, gui,
         options, equations (names, paths or Equation objects), trace, edgedata, figures,
-        progress, difference, period
+        progress, difference, period, air_temperature_c, cold_start
     """
     from sumo_drvpw.sim.accountant import Accountant
     from sumo_drvpw.sim.stepping import step_until
@@ -77,6 +80,10 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     if sc.trace and out_dir is None:
         raise UserError("outputs.trace needs an output directory")
     naming = _output_naming(sc)
+    from sumo_drvpw.fileio import clear_earlier_set, in_output_set, write_manifest
+
+    standalone = out_dir is not None and not in_output_set(out_dir)  # (a command writes its set whole)
+    kept = clear_earlier_set(out_dir, force) if standalone else []  # (the Python API: an earlier set's files go)
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     args = list(sc.sumo_args)
@@ -200,6 +207,9 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             result.summary["warnings"] = list(result.summary.get("warnings", [])) + notes
         if out_dir is not None:
             write_published(result, out_dir)
+        if standalone:
+            discard_parts(acc.ledger)
+            write_manifest(Path(out_dir), command=["run_scenario", str(scenario_path)], kept=kept)
     finally:  # the parts never stay in the output folder
         if acc is not None and out_dir is not None:
             discard_parts(acc.ledger)

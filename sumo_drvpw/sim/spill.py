@@ -21,7 +21,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sumo_drvpw.fileio import atomic_path
-from sumo_drvpw.sim.outputs import vehicles_table
+from sumo_drvpw.sim.outputs import vehicles_table, write_outputs
 
 #: Name of the spill folder a run makes inside its output folder (removed after writing).
 SPILL_DIR = ".drvpw-spill"
@@ -166,10 +166,11 @@ class VehicleSpill:
 
 
 def write_published(result, out_dir) -> None:
-    """``result.write(out_dir)``; then the result's spilled rows are read from the written
+    """The result's tables written into ``out_dir`` (the run's own folder: its caller makes it
+    an output set); then the result's spilled rows are read from the written
     ``vehicles.parquet`` (and ``chain_vehicles.csv``) and the parts are removed."""
     out_dir = Path(out_dir)
-    result.write(out_dir)
+    write_outputs(out_dir, result)
     spill = getattr(result.ledger, "spill", None)
     if spill is not None and spill.has_rows:
         chain = out_dir / "chain_vehicles.csv"
