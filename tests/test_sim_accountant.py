@@ -700,3 +700,28 @@ def test_a_vehicle_a_script_turns_electric_is_booked_by_the_battery_chain_from_t
     left = v[v.vehicle == "left"]
     assert list(left.equation) == ["epa_gasoline_car"]
     assert t["distance_m"].sum() == pytest.approx(left["distance_m"].iloc[0], rel=0.05)  # the same route
+
+
+def test_the_end_of_an_accountant_s_result_is_its_last_booked_step(tmp_path):
+    """A listener removed at 100 s, SUMO stepped on to 200 s: the result's end_s and its
+    edgeData interval said 200 s (SUMO's time), though the booking ended at 100 s (a
+    rehearsal, 2026-11-29). Now the last step it booked."""
+    import sumolib
+
+    sc = load_scenario(CITY, end=200)
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, equations=["vsp_ldv1999"], scenario=CITY, figures=False)
+        lid = conn.addStepListener(acc)
+        while conn.simulation.getTime() < 100 - 1e-9:
+            conn.simulationStep()
+        conn.removeStepListener(lid)
+        while conn.simulation.getTime() < 200 - 1e-9:
+            conn.simulationStep()
+        res = acc.result()
+        res.write(tmp_path / "o")
+    finally:
+        close_sumo(conn)
+    assert res.summary["end_s"] == pytest.approx(100.0)
+    ends = [float(i.end) for i in sumolib.xml.parse(str(tmp_path / "o" / "edgedata.xml"), "interval")]
+    assert ends == [pytest.approx(100.0)]
