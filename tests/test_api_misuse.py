@@ -137,3 +137,22 @@ def test_python_api_outputs_are_whole_sets_as_the_commands_are(tmp_path):
         res.write(mine)
     res.write(tmp_path / "fresh")
     assert (tmp_path / "fresh" / "vehicles.parquet").is_file() and (tmp_path / "fresh" / "manifest.json").is_file()
+
+
+@pytest.mark.parametrize("kw,needle", [
+    ({"terms": {"acc": float("nan"), "aero": 0.3}}, "must be a finite number, got nan"),
+    ({"terms": {"acc": float("inf")}}, "must be a finite number"),
+    ({"terms": {"acc": "1"}}, "must be a number, got '1'"),
+    ({"terms": {"acc": 1.0}, "mass_kg": -3.0}, "mass_kg must be a vehicle mass"),
+    ({"terms": {"acc": 1.0}, "vclasses": ("pasenger",)}, "not a SUMO vClass"),
+    ({"terms": {"acc": 1.0}, "vclasses": "passenger"}, "vclasses must be a list")])
+def test_an_equation_built_in_code_is_checked_as_a_file_is(kw, needle):
+    """An Equation object with NaN booked NaN energy (and a valid term's 0), a string
+    coefficient was read as a number, a negative mass booked negative energy, a misspelt or
+    string vClass booked no vehicle — each silently (a rehearsal, 2026-11-29). Each is now a
+    UserError naming the equation and the value, in a run and in an Accountant alike."""
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.sim import run_scenario
+
+    with pytest.raises(UserError, match=needle):
+        run_scenario("city", None, end=5, figures=False, equations=[Equation("mine", **kw)])

@@ -313,6 +313,21 @@ def _mass(meta: dict, key: str, where: str) -> float | None:
     return float(v)
 
 
+def check_equation(eq: Equation, where: str) -> None:
+    """UserError for an :class:`Equation` built in code whose values no equation file may
+    have: a coefficient that is no finite number (NaN books NaN energy, a string is read as
+    a number), a mass outside :data:`MASS_RANGE_KG`, a vClass SUMO does not know (it would
+    book no vehicle, silently) — as :func:`equation_from_dict` checks a file's."""
+    what = f"{where}: equation '{eq.name}'"
+    _floats(dict(eq.terms), f"{what} terms")
+    _mass({"mass_kg": eq.mass_kg}, "mass_kg", what)
+    if isinstance(eq.vclasses, str) or not all(isinstance(v, str) for v in eq.vclasses):
+        raise UserError(f"{what}: vclasses must be a list of SUMO vClass names, e.g. (\"passenger\",), "
+                        f"got {eq.vclasses!r}")
+    for v in eq.vclasses:
+        check_vclass(v, what, "vclasses")
+
+
 def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
     """Build an :class:`Equation` from a parsed TOML document; errors name ``where``."""
     known = {"equation", "terms", "beta", "std_err", "p_values", "provenance", "metrics", "paper",

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
-from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_vclass, load_equation
+from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_equation, check_vclass, load_equation
 from sumo_drvpw.sim.scenario_paths import config_files
 from sumo_drvpw.sim.vtype_energy import VTYPE_ENERGY, named_in_table, placeholder, reserved_name
 from sumo_drvpw.errors import UserError
@@ -316,6 +316,7 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
         if not re.match(NAME_PATTERN, eq.name):
             raise UserError(f"{where}: equation name {eq.name!r} is not allowed: use a letter, "
                             "then letters, digits, '_', '.', '-' (at most 64 characters)")
+        check_equation(eq, where)  # (a file's values are checked as it is read)
     else:
         p = Path(spec)
         try:
