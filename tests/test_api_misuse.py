@@ -156,3 +156,30 @@ def test_an_equation_built_in_code_is_checked_as_a_file_is(kw, needle):
 
     with pytest.raises(UserError, match=needle):
         run_scenario("city", None, end=5, figures=False, equations=[Equation("mine", **kw)])
+
+
+def test_an_accountant_refuses_what_starts_sumo_and_books_the_built_ins_by_default():
+    """Accountant(conn, equations=..., end=30, step_length=2) booked to wherever the script
+    stepped at SUMO's own step length, saying nothing; with no equations at all it was refused
+    (a rehearsal, 2026-11-29). Now the first is a UserError naming the overrides, the second
+    books each vehicle by its class's built-in equations, as a bare SUMO config is run."""
+    from pathlib import Path
+
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+    from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS, load_scenario
+
+    city = Path(__file__).resolve().parent.parent / "scenarios" / "city.toml"
+    conn = start_sumo(load_scenario(city, end=60).sumo_args)
+    try:
+        with pytest.raises(UserError, match="end, step_length start or step SUMO"):
+            Accountant(conn, equations=["vsp_ldv1999"], end=30, step_length=2.0)
+        acc = Accountant(conn)
+        conn.addStepListener(acc)
+        for _ in range(60):
+            conn.simulationStep()
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    booked = set(res.vehicles.equation)
+    assert booked and booked <= set(CONFIG_EQUATIONS) | {"epa_gasoline_car", "epa_diesel_car", "bmw_i3_battery"}
+    assert "epa_gasoline_car" in booked  # the city's petrol cars: litres too

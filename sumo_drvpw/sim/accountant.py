@@ -77,7 +77,14 @@ def _option_files(conn, key: str) -> list[Path]:
 
 def scenario_for(conn, equations, scenario=None, **overrides) -> Scenario:
     """The scenario of an Accountant: a file or parsed :class:`Scenario` (its equations
-    replaced by ``equations`` when given), or defaults around SUMO's own net file."""
+    replaced by ``equations`` when given), or defaults around SUMO's own net file (no
+    equations given: every vehicle by its class's built-in equations, as a bare SUMO config
+    is run). Overrides that start or step SUMO — which the user's script does — are refused."""
+    stepping = sorted(set(overrides) & {"begin", "end", "step_length", "connection", "gui", "options"})
+    if stepping:
+        raise UserError(f"Accountant: {', '.join(stepping)} start or step SUMO, which your script does (give "
+                        "them to libsumo.start / traci.start, and step as far as you want); the Accountant books "
+                        "the steps it is given")
     if isinstance(scenario, Scenario):
         if equations is None:
             return scenario
@@ -93,7 +100,9 @@ def scenario_for(conn, equations, scenario=None, **overrides) -> Scenario:
 
         return load_scenario(scenario_path(scenario), **overrides)  # (a built-in's name too, as run takes it)
     if not equations:
-        raise UserError("Accountant: give equations=[...] or scenario=...")
+        from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+        equations = list(CONFIG_EQUATIONS)
     nets = _option_files(conn, "net-file")
     if not nets:
         raise UserError("Accountant: SUMO does not say its net-file (getOption): is it started "
@@ -110,7 +119,8 @@ class Accountant(_Listener):
     ----------
     conn : the ``libsumo`` module or a ``traci`` connection, already started
     equations : built-in names, TOML paths or :class:`Equation` objects (default: the
-        scenario's)
+        scenario's; without a scenario, each vehicle's class's built-in equations and the
+        chain of the carrier its emissionClass names, as a bare SUMO config is run)
     scenario : optional scenario TOML (or parsed :class:`Scenario`) for the options
     trace_path : optional path of a per vehicle-step ``trace.parquet``
     keep_vehicles : keep every vehicle's row in memory for the whole run (the old,
@@ -121,7 +131,9 @@ class Accountant(_Listener):
         already loaded (default: loaded from the scenario)
     vtypes : the route files' vTypes (:func:`~sumo_drvpw.sim.vtypes.read_vtypes`), when
         already read (default: read from the scenario's route files, else SUMO's options)
-    overrides : scenario values to replace (see ``sumo_drvpw.sim.scenario.OVERRIDES``)
+    overrides : scenario values to replace (see ``sumo_drvpw.sim.scenario.OVERRIDES``), but
+        those that start or step SUMO (begin, end, step_length, connection, gui, options):
+        the user's script does that
 
     Use it as a step listener (``conn.addStepListener(acc)``) or call :meth:`step` after
     each ``simulationStep()`` yourself.
