@@ -183,3 +183,16 @@ def test_an_accountant_refuses_what_starts_sumo_and_books_the_built_ins_by_defau
     booked = set(res.vehicles.equation)
     assert booked and booked <= set(CONFIG_EQUATIONS) | {"epa_gasoline_car", "epa_diesel_car", "bmw_i3_battery"}
     assert "epa_gasoline_car" in booked  # the city's petrol cars: litres too
+
+
+@pytest.mark.parametrize("spec", [42, None, 3.5])
+def test_a_scenario_that_is_no_path_is_a_user_error(spec, tmp_path):
+    """run_scenario(42) and Accountant(scenario=3) raised pathlib's TypeError; an out_dir that
+    is a file raised FileExistsError (a rehearsal, 2026-11-29): each a UserError now."""
+    from sumo_drvpw.sim import run_scenario
+
+    with pytest.raises(UserError, match="give a scenario file, a SUMO config or a built-in"):
+        run_scenario(spec)
+    (tmp_path / "f.txt").write_text("x")
+    with pytest.raises(UserError, match="is a file; give a folder"):
+        run_scenario("city", tmp_path / "f.txt", end=5)

@@ -4,6 +4,7 @@ files a SUMO config names (:func:`config_files`)."""
 
 from __future__ import annotations
 
+import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -30,6 +31,9 @@ def bundled_scenario(name: str) -> Path:
 
 def scenario_path(spec) -> Path:
     """A scenario file path, or a built-in scenario's when ``spec`` names one and no file."""
+    if not isinstance(spec, (str, os.PathLike)):
+        raise UserError(f"scenario: give a scenario file, a SUMO config or a built-in scenario's name "
+                        f"({', '.join(builtin_scenario_names())}), got {spec!r}")
     p = Path(spec)
     if p.is_dir():  # a scenario folder: name its SUMO configs and scenario files
         raise UserError(folder_given(p, "scenario", (".sumocfg", ".toml")))
