@@ -450,11 +450,16 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     connection = _choice(sumo.get("connection", "libsumo"), ("libsumo", "traci"), where, "sumo.connection")
 
     eq_specs = overrides.get("equations", doc.get("equations"))
+    given = "equations" in overrides  # (from Python: one name, path or Equation alone too; paths as names)
+    if given and isinstance(eq_specs, (str, os.PathLike, Equation)):
+        eq_specs = [eq_specs]
+    if given and isinstance(eq_specs, (list, tuple)):
+        eq_specs = [str(e) if isinstance(e, os.PathLike) else e for e in eq_specs]
     if not eq_specs:
-        raise UserError(f"{where}: 'equations' must name at least one equation")
-    eq_where = "the equations given to the run" if "equations" in overrides else f"{where}: equations"
+        raise UserError(f"{'the equations given to the run' if given else where}: 'equations' must name at least one equation")
+    eq_where = "the equations given to the run" if given else f"{where}: equations"
     equations = [resolve_equation(s, base, eq_where)
-                 for s in _strlist(eq_specs, where, "equations", '["vsp_ldv1999"]')]
+                 for s in _strlist(eq_specs, "the run" if given else where, "equations", '["vsp_ldv1999"]')]
     names = [e.name for e in equations]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
