@@ -377,3 +377,30 @@ def test_a_constrained_fit_is_printed_as_written_and_a_traction_only_power_is_na
             assert "explains less of the measured power than its mean" in said
         else:
             assert "explains less" not in said
+
+
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_an_equation_calibrated_on_a_power_split_s_output_says_it_predicts_that(tmp_path, engine):
+    """A power-split log's measured power is the powertrain output (P_PTdrv, paper Eq. 5-12),
+    as the built-in drvpw_prius3 says; a calibration on it was labelled 'wheel' (a rehearsal,
+    2026-11-29). A log's own power_w stays 'wheel'."""
+    import pandas as pd
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.equations import load_equation
+
+    log = tmp_path / "syn.parquet"
+    assert cli_main(["synth", "--out", str(log), "--minutes", "5"]) == 0
+    assert cli_main(["calibrate", str(log), "--vehicle", "prius3", "--engine", engine,
+                     "--out", str(tmp_path / "ps.toml")]) == 0
+    assert load_equation(tmp_path / "ps.toml").predicts == "powertrain_output"
+    df = pd.read_parquet(log)
+    from sumo_drvpw.data.log import from_frame
+    from sumo_drvpw.data.powertrain import measured_power
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    df["power_w"] = measured_power(from_frame(df, load_vehicle("prius3")), load_vehicle("prius3"))[0]
+    df[["time_s", "speed_mps", "power_w", "mass_kg", "trip_id"]].to_parquet(tmp_path / "w.parquet")
+    assert cli_main(["calibrate", str(tmp_path / "w.parquet"), "--engine", engine,
+                     "--out", str(tmp_path / "w.toml")]) == 0
+    assert load_equation(tmp_path / "w.toml").predicts == "wheel"

@@ -12,6 +12,7 @@ import sys
 from functools import partial
 from pathlib import Path
 
+from sumo_drvpw.data.powertrain import terms_predict_of
 from sumo_drvpw.errors import NoDrivingPower, UserError
 
 ENGINES = ("local", "dask", "memory")
@@ -133,6 +134,7 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     eq, note, res = fit_road_load(args, st, cands, veh, args.name or out.stem, {
         "logs": st.files, "vehicle": veh.path if veh else None, "power_source": st.source,
         "candidates_spec": args.candidates})
+    eq.terms_predict = terms_predict_of(st.source)  # (the P_PTdrv of a power-split: its output)
     from sumo_drvpw.cli import measurement_options
     from sumo_drvpw.cli.calibrate import declare_measurement
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from sumo_drvpw.cli import add_force, add_log_options, existing_paths, note_counts, output_set, read_options
 from sumo_drvpw.cli._scale import add_engine_arguments, replace_chain
+from sumo_drvpw.data.powertrain import terms_predict_of
 from sumo_drvpw.errors import UserError
 
 
@@ -115,6 +116,7 @@ def main(args) -> int:
     eq = res.to_equation(name, provenance={
         "logs": m.log.files, "vehicle": m.vehicle.path if m.vehicle else None,
         "power_source": m.source, "candidates_spec": args.candidates})
+    eq.terms_predict = terms_predict_of(m.source)  # (the P_PTdrv of a power-split: its output)
     print(res.summary(physics=False))  # (the physics: physical() says, below)
     eq, _ = physical(eq, m, args.candidates)
     declare_measurement(eq, m.log.options.measurement)

@@ -112,6 +112,13 @@ POWER_SOURCES = (("power_w",), POWER_SPLIT_COLUMNS, ("motor_torque_nm", "motor_s
                  ("motor_torque_nm",), ("battery_voltage_v", "battery_current_a"))
 
 
+def terms_predict_of(source: str) -> str:
+    """What an equation calibrated on the measured power of ``source`` (:func:`measured_power`'s
+    text) predicts: the powertrain output for a power-split's P_PTdrv or a motor's shaft power
+    (the drivetrain's losses behind it are not in it), else the wheel."""
+    return "powertrain_output" if str(source).startswith(("power-split", "single motor")) else "wheel"
+
+
 def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np.ndarray, str]:
     """The measured driving power of a :class:`~sumo_drvpw.data.log.DriveLog` [W] and its source.
 
