@@ -94,9 +94,10 @@ def chain_warnings(chain: ChainLedger | None, chainless: dict | None = None) -> 
         warm = [chain.names[e] for j, e in enumerate(chain.active) if drove[j] and chain.chains[e].predicts == "fuel"
                 and not chain.chains[e].cold_start(chain.air_temperature_c)["fuel_l"]]
         if warm:
-            out.append("cold starts asked for, but " + ", ".join(warm) + " carry no cold-start fuel "
-                       "(cold_start_fuel_l; the heavy-duty chains' sources give none): their trips are "
-                       "booked warm")
+            out.append("cold starts asked for, but " + ", ".join(warm) + (" carries" if len(warm) == 1 else " carry")
+                       + " no cold-start fuel (cold_start_fuel_l: a chain calibrated on logs, which do not say "
+                       "whether an engine started cold, and the heavy-duty chains, whose sources give none): "
+                       + ("its" if len(warm) == 1 else "their") + " trips are booked warm")
     if chain.assumed_zero:
         out.append("chain loads SUMO has no signal for were taken as 0: "
                    + ", ".join(sorted(chain.assumed_zero))

@@ -396,6 +396,15 @@ def _vtypes(doc: dict, show: int = 4) -> str:
     return f"; vType{'s' if len(names) > 1 else ''} {', '.join(say(n) for n in names[:show])}{more}"
 
 
+def _apart(value: float, bound: float, op: str) -> str:
+    """``value op bound`` with as many decimals (1 to 3) as show them apart (18.4 > 18.4 said
+    nothing)."""
+    for d in (1, 2, 3):
+        if f"{value:.{d}f}" != f"{bound:.{d}f}":
+            break
+    return f"{value:.{d}f} {op} {bound:.{d}f}"
+
+
 def warnings(summary: dict) -> list[str]:
     """At most two lines: the classes whose trajectories an RDE test would reject as too
     dynamic in some part, and those it would reject as too smooth (judged parts only)."""
@@ -404,7 +413,7 @@ def warnings(summary: dict) -> list[str]:
         parts = doc["parts"]
         heavy = ("; a car's bound: a heavy vehicle's real driving stays well below it" if lab in HEAVY else
                  "; a car's bound: a two-wheeler's real driving may exceed it" if lab in TWO_WHEELERS else "")
-        over = [f"{name} {p['va_pos_95_m2ps3']:.1f} > {p['rde_va_pos_95_max']:.1f} m²/s³ at "
+        over = [f"{name} {_apart(p['va_pos_95_m2ps3'], p['rde_va_pos_95_max'], '>')} m²/s³ at "
                 f"{p['mean_speed_kmh']:.0f} km/h" for name, p in parts.items()
                 if p["va_pos_95_judged"] and p["va_pos_95_m2ps3"] > p["rde_va_pos_95_max"]]
         under = [f"{name} {p['rpa_mps2']:.3f} < {p['rde_rpa_min']:.3f} m/s² at {p['mean_speed_kmh']:.0f} km/h"

@@ -325,8 +325,9 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
             if str(e).startswith("unknown equation"):  # say where the name was written
                 raise UserError(f"{where}: {e}") from None
             if str(e).startswith("equation file not found") and not p.is_absolute():
-                raise UserError(f"{where}: {e} (looked for {base / p if base else p.absolute()}"
-                                + (f" and {p.absolute()}" if base and base / p != p.absolute() else "") + ")") from None
+                here = Path(os.path.abspath(p))
+                raise UserError(f"{where}: {e} (looked for {Path(os.path.abspath(base / p)) if base else here}"
+                                + (f" and {here}" if base and Path(os.path.abspath(base / p)) != here else "") + ")") from None
             raise
         reserved_name(eq, where)  # vtype_energy, vtype_energy.…: the run's own
     if eq.chain is not None:
@@ -458,7 +459,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     if not eq_specs:
         raise UserError(f"{'the equations given to the run' if given else where}: 'equations' must name at least one equation")
     eq_where = "the equations given to the run" if given else f"{where}: equations"
-    equations = [resolve_equation(s, base, eq_where)
+    equations = [resolve_equation(s, None if given else base, eq_where)  # (given to the run: from the working folder)
                  for s in _strlist(eq_specs, "the run" if given else where, "equations", '["vsp_ldv1999"]')]
     names = [e.name for e in equations]
     dup = {n for n in names if names.count(n) > 1}
