@@ -84,6 +84,8 @@ def test_an_implausible_zero_output_fuel_is_said_and_kept(tmp_path, capsys):
     said = [x for x in printed.splitlines() if "its chain's calibration warned" in x]
     assert said and said[0].startswith(f"warning: {eq.name}: ") and "idle_fuel_power_w" in said[0], printed
     assert "IMPLAUSIBLE" in said[0] and said[0][len("warning: "):] in (tmp_path / "cmp" / "report.md").read_text()
+    md = (tmp_path / "cmp" / "report.md").read_text()  # the chain's parameters with their readings
+    assert "## Energy chains" in md and "| eq | `idle_fuel_power_w` | 2e+04" in md and "= 2.24 L/h; IMPLAUSIBLE" in md
 
 
 def test_a_plausible_chain_has_no_warning(tmp_path, capsys):

@@ -6,6 +6,7 @@ reading, converted here at the edge.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from sumo_drvpw.report import figures as plots
@@ -107,6 +108,28 @@ def calibration_warnings(name: str, eq_doc: dict) -> list[str]:
     return [f"{name}: its chain's calibration warned: {w}" for w in prov.get("warnings", [])]
 
 
+def chain_lines(comp) -> list[str]:
+    """The energy chains of the compared equations: each parameter, ± its standard error
+    where known, and its physical reading (the table above shows the road-load terms only)."""
+    rows = []
+    for nm, r in comp.results.items():
+        ch = r.equation.chain
+        if ch is None or ch.predicts not in ("battery", "fuel"):
+            continue
+        d = ch.to_dict()
+        for k, v in d.items():
+            if k in ("predicts", "std_err", "reading", "provenance", "metrics") or isinstance(v, (dict, list)):
+                continue
+            se = (ch.std_err or {}).get(k)
+            val = coef(v) if isinstance(v, float) and math.isfinite(v) else str(v)
+            rows.append(f"| {nm} | `{k}` | {val}{f' ± {coef(se)}' if se is not None else ''} | "
+                        f"{(ch.reading or {}).get(k, '')} |")
+    if not rows:
+        return []
+    return ["## Energy chains", "", "What each chain predicts the target from (the driving power of its terms):",
+            "", "| Equation | parameter | value | reading |", "|---|---|---|---|", *rows, ""]
+
+
 def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> str:
     """The Markdown text of the report (see :func:`write_comparison_report`)."""
     eqs = doc["equations"]
@@ -162,6 +185,7 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
                      f"| {num(d['rmse_w'], 2, _KW)} | {num(d['rmse_heavy_w'], 2, _KW)} "
                      f"| {num(d['bias_w'], 2, _KW)} | {d['n']} |")
     lines.append("")
+    lines += chain_lines(comp)
 
     lines += [f"## Error at ≥ {HIGH_SPEED_MPS / KMH:.0f} km/h (cf. paper Fig. 8)", ""]
     for nm, d in eqs.items():
