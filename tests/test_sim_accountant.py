@@ -53,6 +53,7 @@ def test_accountant_in_a_user_loop_equals_run(tmp_path):
     # on_road_at_end: the trips the end cut (SUMO's vehicles then), the others arrived
     assert set(b.vehicle[b.on_road_at_end]) == driving and 0 < len(driving) < b.vehicle.nunique()
     assert (a.on_road_at_end == b.on_road_at_end).all()
+    assert not b.on_road_at_begin.any() and not a.on_road_at_begin.any()  # booked from the start
     np.testing.assert_allclose(b[COLS], a[COLS], rtol=1e-12, atol=1e-9)
     assert res["equations"] == ran["equations"]
     for name in ("vehicles.parquet", "edges.parquet", "classes.parquet", "edgedata.xml"):
@@ -660,6 +661,9 @@ def test_an_accountant_attached_mid_run_books_what_a_whole_run_books_from_then(t
     (whole, snap), (late, _) = runs
     on_road = [v for v in snap if snap[v]["phys"]["traction"] > 0]
     assert len(on_road) >= 5
+    # vehicles.parquet says which trips the late Accountant booked from the middle
+    began = set(late.index.get_level_values(0)[late.on_road_at_begin.to_numpy()])
+    assert began == set(snap) and not whole.on_road_at_begin.any()
     for (v, e), row in late.iterrows():
         was = snap.get(v, {}).get(e, {})
         for col, key in (("traction_total_j", "traction"), ("recup_total_j", "recuperable"),

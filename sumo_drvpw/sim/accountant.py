@@ -322,7 +322,7 @@ class Accountant(_Listener):
         self.close_trace()
         sc, led, net, st = self.scenario, self.ledger, self.net, self.stepper
         # the last step it booked (SUMO may have stepped on: a listener removed, a new session)
-        end = float(st.last_t) if st.last_t is not None else self.begin
+        end = float(st.last_t) if st.last_t is not None else st.now()  # (none booked: a merged replay's end)
         summary_extra = {
             "scenario": str(sc.path) if sc.path else None, "begin_s": self.begin,
             "end_s": end, "step_length_s": st.dt, "step_method": st.step_method,

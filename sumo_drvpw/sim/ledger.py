@@ -291,6 +291,7 @@ class Ledger:
         grow("veh_at", (cap, 4), float, np.nan)  # last step's lane, position, profile z, rise not yet booked
         grow("veh_done", (cap,), bool, False)  # left the simulation, not yet flushed
         grow("veh_done_step", (cap,), np.int64, 0)  # the step it left at
+        grow("veh_joined", (cap,), bool, False)  # on the road when the booking began (not departing)
         grow("veh_parked", (cap,), bool, False)  # parked off the lane: not read, not booked
         grow("veh_stand", (cap,), float, 0.0)  # standing since [s] (sim/shutoff.py)
         grow("veh_auto_off", (cap,), float, np.inf)  # its vType's shutOffAutoDuration [s]
@@ -308,7 +309,7 @@ class Ledger:
                    ("veh_keep", False),
                    ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_prev_angle", np.nan),
                    ("veh_lane", -2),
-                   ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_done_step", 0),
+                   ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_done_step", 0), ("veh_joined", False),
                    ("veh_parked", False),
                    ("veh_stand", 0.0), ("veh_auto_off", np.inf), ("veh_teleports", 0),
                    ("veh_tele", 0.0), ("veh_rde", np.nan), ("veh_cls", -1))

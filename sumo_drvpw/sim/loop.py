@@ -375,6 +375,8 @@ class Stepper:
                 sel = np.flatnonzero(kept)
                 vidx, kids = vidx[sel], [ids[i] for i in sel]
             self.prev_ids, self.prev_sel = ids, (vidx, kids)
+        if joined:  # its trip began before the booking did (vehicles.parquet on_road_at_begin)
+            ledger.veh_joined[np.asarray(joined, np.int64)] = True
         n = len(kids)
         if n == 0:
             return

@@ -76,7 +76,7 @@ def vehicles_table(ledger: Ledger, names: list[str],
             "equation": [names[e] for e in ei],
             "predicts": [(predicts or ["wheel"] * len(names))[e] for e in ei],
             "mass_kg": ledger.booked_mass(vi, ei), "distance_m": ledger.veh_dist_eq[vi, ei],
-            "time_s": ledger.veh_time_eq[vi, ei], "on_road_at_end": ledger.on_road_at_end(vi)}
+            "time_s": ledger.veh_time_eq[vi, ei], "on_road_at_begin": ledger.veh_joined[vi], "on_road_at_end": ledger.on_road_at_end(vi)}
     cols.update(_energy_cols("traction", tr))
     cols.update(_energy_cols("recup", rc))
     cols["net_total_j"] = cols["traction_total_j"] + cols["recup_total_j"]
