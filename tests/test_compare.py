@@ -389,3 +389,28 @@ def test_which_term_errs_reads_a_chain_target_in_its_own_watts(predicts):
     assert res.error_term_correlation["aero"]["partial_slope"] == pytest.approx(-0.5, abs=0.02)
     for c in ("acc", "roll"):
         assert abs(res.error_term_correlation[c]["partial_slope"]) < 0.05  # (the sign of P near 0 differs)
+
+
+def test_a_fuel_comparison_with_the_hybrid_battery_says_which_side_is_corrected(tmp_path):
+    """With the hybrid battery's V·I each chain's predicted fuel has the battery's energy
+    change taken off while 'measured' is the logged flow; report.md said nothing of it (a
+    rehearsal's Prius: 2.679 L measured against docs' corrected 2.625 L, 2026-11-29)."""
+    from sumo_drvpw.fit.compare import compare
+    from sumo_drvpw.model.chain import EnergyChain
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.model.terms import Inputs
+    from sumo_drvpw.report.comparison import write_comparison_report
+
+    n = 400
+    v = 10.0 + 3.0 * np.sin(np.arange(n) / 20.0)
+    x = Inputs(v, np.gradient(v), np.zeros(n), np.zeros(n), np.full(n, 1400.0), np.full(n, 1.2))
+    eq = Equation("h", {"acc": 1.0, "roll": 0.01},
+                  chain=EnergyChain(predicts="fuel", idle_fuel_power_w=4000.0, marginal_efficiency=0.38,
+                                    engine_off_below_w=0.0, fuel="gasoline"))
+    meas = eq.chain.evaluate(eq.power(x), v)["power_w"]
+    for bat, said in ((None, False), (np.full(n, 1500.0), True)):
+        comp = compare(meas, x, [eq], dt_s=np.ones(n), target="fuel", battery_w=bat)
+        doc = comp.to_json()
+        assert ("battery_correction" in doc["settings"]) == said
+        write_comparison_report(comp, tmp_path / str(said), "t")
+        assert ("hybrid battery's energy change taken off" in (tmp_path / str(said) / "report.md").read_text()) == said

@@ -357,6 +357,9 @@ class Comparison:
     left_out: dict | None = None
     target: str = "wheel"
     measured_fuel: tuple[str, str] | None = None
+    #: a fuel target with the hybrid battery's V·I: each chain's prediction takes the battery's
+    #: energy change off (SAE J1711), the measured fuel is the logged one (``settings.battery_correction``)
+    battery_corrected: bool = False
 
     @property
     def n_samples(self) -> int:  # number of samples compared
@@ -405,6 +408,12 @@ class Comparison:
             note = fuel_mismatch_note(eqs, self.measured_fuel)
             fuel = {"measured_fuel": self.measured_fuel[0], "measured_fuel_from": self.measured_fuel[1],
                     **({"fuel_note": note} if note else {})}
+        if self.battery_corrected:
+            fuel["battery_correction"] = (
+                "the measured fuel is the logged flow; each chain's predicted fuel has the hybrid battery's "
+                "energy change taken off (SAE J1711: k = battery_to_fuel, else 1/η_m, fuel joules per battery "
+                "joule), so a state-of-charge swing over a trip is no fuel error; the measured fuel corrected "
+                "the other way (logged + k·battery energy) is what the chain books on a charge-sustaining trip")
         return plain({
             "equations": eqs,
             "n_samples": self.n_samples,
@@ -506,7 +515,7 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
             raise UserError(f"compare: trip has {trip.size} values for {n} samples")
     comp = Comparison(meas_w=meas, speed_mps=v, dt_s=dt,
                       measured_traction_energy_j=meas_traction, reference=reference,
-                      trip=trip, target=target)
+                      trip=trip, target=target, battery_corrected=target == "fuel" and battery_w is not None)
     cat_powers = {eq.name: eq.category_powers(inputs) for eq in equations}
     prepared = {}  # name → (its terms, its prediction, its terms where its error is measured)
     for eq in equations:

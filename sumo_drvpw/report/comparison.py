@@ -160,6 +160,8 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
     lines += partial_trip_lines(first.get("trip_energy"))
     if doc["settings"].get("fuel_note"):  # a chain of another fuel than the log was read as
         lines.append(doc["settings"]["fuel_note"])
+    if doc["settings"].get("battery_correction"):  # what 'measured' and 'predicted' are on a hybrid
+        lines.append(doc["settings"]["battery_correction"][0].upper() + doc["settings"]["battery_correction"][1:] + ".")
     lines.append("")
 
     lines += ["## Goodness of fit (cf. paper Table 3)", "",
