@@ -145,9 +145,14 @@ def render_markdown(comp: Comparison, doc: dict, title: str, context: dict) -> s
                  f"{meas['n_high_speed']} at ≥ {HIGH_SPEED_MPS / KMH:.0f} km/h.")
     lines.append("Error is predicted minus measured power: negative means the equation "
                  "underpredicts.")
+    tgt = doc["settings"].get("target", "wheel")
+    if tgt in ("battery", "fuel"):  # the paper's split is of the driving power
+        lines.append(f"The {HEAVY_LOAD_W * _KW:.0f}-kW split (the paper's, of the driving power) is here of the "
+                     f"measured {tgt} power" + (" (fuel power at its heating value: about 2.5 × the engine's "
+                                                "output)" if tgt == "fuel" else "") + ".")
     heavy_ranked = sorted(((d["r2_heavy"], nm) for nm, d in eqs.items()
                            if d["r2_heavy"] is not None), reverse=True)
-    if heavy_ranked:
+    if heavy_ranked and heavy_ranked[0][0] > 0:  # (a negative R² fits worse than the mean: no best fit)
         r2, nm = heavy_ranked[0]
         lines.append(f"Best fit at heavy load: **{nm}** (R² = {num(r2, 3)}).")
     if len(heavy_ranked) > 1:
