@@ -9,7 +9,9 @@ from __future__ import annotations
 from sumo_drvpw.errors import UserError
 
 #: --plant names: the one table of planted effects (sumo_drvpw.synth.effects.PLANTS), without
-#: log-power, which the synthetic log needs no plant for
+#: log-power, which the synthetic log needs no plant for — its keys written out so that the
+#: command line does not import the synthesizer to build its help (0.4 s);
+#: tests/test_synth.py keeps the two equal
 PLANT_NAMES = ("ac", "cold-tyres", "speed-quadratic", "trip-mass", "distractors", "pedal", "power-lag",
                "recuperation-efficiency", "recuperation-limit", "altitude-air", "attenuated-grade",
                "battery-standstill-aux")
