@@ -48,10 +48,9 @@ from sumo_drvpw.fit.diagnose.source import (CACHE_MB, INPUT_FIELDS, SAMPLE_ROWS,
 from sumo_drvpw.fit.diagnose.stream_lag import LagSums, coarse_lags, timing_step
 from sumo_drvpw.fit.diagnose.streamed import StreamModel
 from sumo_drvpw.fit.diagnose.streamed import _Moments
-from sumo_drvpw.fit.diagnose.structural import (ACCELEROMETER_COLUMNS, FUSION_TAU_S, P0_KPA, RECUP_QUANTILES,
+from sumo_drvpw.fit.diagnose.structural import (ACCELEROMETER_COLUMNS, accelerometer_candidate, accelerometer_grade_power, FUSION_TAU_S, P0_KPA, RECUP_QUANTILES,
                                                 accelerometer_sin_grade, fused_sin_grade, lag_range, model_side_candidates,
                                                 pressure_at_altitude_kpa)
-from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.terms import parse_term, term_matrix
 
 
@@ -527,11 +526,8 @@ def _structural(tr: StreamModel, prep: Prepared, declared, elev: bool, acc):
                                                    for d in prep.batches):
         def sin_acc(v, d, sel):
             return accelerometer_sin_grade(d["imu"] if sel is None else d["imu"][sel], v.x.a, v.trip, dt_acc)
-        prep.derived["grade_accelerometer"] = lambda v, d, sel: (
-            v.x.mass * G * v.x.v * (sin_acc(v, d, sel) - np.sin(v.x.theta)))
-        cands.append(Candidate("[grade_accelerometer]", f"grade measured by the accelerometer "
-                               f"'{acc_col}' (reads dv/dt + g·sin θ) instead of the logged grade: "
-                               "m·g·v·(sin θ_acc − sin θ_log)", (), "structural"))
+        prep.derived["grade_accelerometer"] = lambda v, d, sel: accelerometer_grade_power(v.x, sin_acc(v, d, sel))
+        cands.append(accelerometer_candidate(acc_col))
         sums = {k: [0.0, _Moments()] for k in ("logged", "accelerometer", "fused")}
         xy = np.zeros(5)
         for view in tr._views(blocks=False):

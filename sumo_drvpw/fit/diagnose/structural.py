@@ -210,6 +210,19 @@ def model_side_candidates(declared, theta_ptp: float) -> list[Candidate]:
     return cands
 
 
+def accelerometer_grade_power(x, sin_acc) -> np.ndarray:
+    """The ``[grade_accelerometer]`` column: m·g·v·(sin θ_acc − sin θ_log), the grade power the
+    accelerometer's grade adds to the logged one (a factor on the grade term,
+    (sin θ_acc − sin θ_log)/sin θ_log, is ill-posed at 0)."""
+    return x.mass * G * x.v * (sin_acc - np.sin(x.theta))
+
+
+def accelerometer_candidate(acc_col: str) -> Candidate:
+    """The ``[grade_accelerometer]`` candidate of an accelerometer column (in memory and streamed)."""
+    return Candidate("[grade_accelerometer]", f"grade measured by the accelerometer '{acc_col}' (reads "
+                     "dv/dt + g·sin θ) instead of the logged grade: m·g·v·(sin θ_acc − sin θ_log)", (), "structural")
+
+
 def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_df,
                        counts: dict) -> tuple[dict, list[Candidate], dict]:
     """Derived columns and candidates of the model-side structural effects.
@@ -265,10 +278,8 @@ def structural_signals(tr, declared, x_all_signals: dict, idx: np.ndarray, log_d
             sin_log = np.sin(x.theta)
             # factor on the grade term: (sin θ_acc − sin θ_log)/sin θ_log is ill-posed at 0;
             # the candidate is the grade power difference m·g·v·(sin θ_acc − sin θ_log)
-            sig["grade_accelerometer"] = x.mass * G * x.v * (sin_acc - sin_log)
-            cands.append(Candidate("[grade_accelerometer]", f"grade measured by the accelerometer "
-                                   f"'{acc_col}' (reads dv/dt + g·sin θ) instead of the logged grade: "
-                                   "m·g·v·(sin θ_acc − sin θ_log)", (), "structural"))
+            sig["grade_accelerometer"] = accelerometer_grade_power(x, sin_acc)
+            cands.append(accelerometer_candidate(acc_col))
             notes["grade_sources"] = {
                 "accelerometer_column": acc_col,
                 "logged": {"mean_abs_deg": float(np.degrees(np.mean(np.abs(np.arcsin(np.clip(sin_log, -1, 1)))))),
