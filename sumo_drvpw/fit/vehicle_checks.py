@@ -52,7 +52,7 @@ def drag_against_vehicle(eq, vehicle, rho_kgm3: float = RHO_DEFAULT) -> str | No
     if 1.0 / DRAG_RATIO_MAX <= ratio <= DRAG_RATIO_MAX:
         return None
     note = (f"{term} = {c:.4g} reads as C_d·A = {cda:.3g} m² at ρ = {rho_kgm3:.4g} kg/m³, "
-            f"{ratio:.2g} × the {ref[0]:.3g} m² of {Path(vehicle.path).name if vehicle.path else vehicle.name} "
+            f"{ratio:.2g} × the {ref[0]:.3g} m² of {_named(vehicle)} "
             f"({ref[1]}): not this car's drag (outside 1/{DRAG_RATIO_MAX:g} … {DRAG_RATIO_MAX:g}×); "
             "the data do not tell the drag apart from the other terms (a short log, a narrow "
             "speed range?) — check the equation before using it at other speeds")
@@ -67,6 +67,11 @@ def drag_against_vehicle(eq, vehicle, rho_kgm3: float = RHO_DEFAULT) -> str | No
 #: the i3's road-load fits); beyond this factor of the vehicle file's c_r it is no rolling
 #: resistance of this car (a rehearsal's Prius Gen 2: 0.0221, 3.6× its 0.0061, read plausible)
 ROLL_RATIO_MAX = 3.0
+
+
+def _named(vehicle) -> str:
+    """The vehicle file's name, else the vehicle's."""
+    return Path(vehicle.path).name if vehicle.path else vehicle.name
 
 
 def roll_against_vehicle(eq, vehicle) -> str | None:
@@ -91,7 +96,7 @@ def roll_against_vehicle(eq, vehicle) -> str | None:
     if 1.0 / ROLL_RATIO_MAX <= ratio <= ROLL_RATIO_MAX:
         return None
     note = (f"roll = {c:.4g} reads as a rolling coefficient {ratio:.2g} × the {ref:.3g} of "
-            f"{Path(vehicle.path).name if vehicle.path else vehicle.name} ({src}): not this car's rolling "
+            f"{_named(vehicle)} ({src}): not this car's rolling "
             f"resistance (outside 1/{ROLL_RATIO_MAX:g} … {ROLL_RATIO_MAX:g}×, drivetrain losses included); the "
             "term carries what the other terms leave (the drag, a speed-dependent loss, a narrow speed range?) "
             "— SUMO books it at every speed")
