@@ -362,24 +362,23 @@ def in_output_set(folder) -> bool:
     return any((p / OWNER).is_file() for p in Path(folder).absolute().parents)
 
 
-def clear_earlier_set(out, force: bool = False) -> list[str]:
-    """Make ``out`` ready for an output set written in place (the Python API's
+def check_earlier_set(out, force: bool = False) -> tuple[list[str], list[str]]:
+    """Check ``out`` for an output set written in place (the Python API's
     ``run_scenario(out_dir=…)`` and ``RunResult.write``, as :func:`output_set` is for the
-    commands): the files an earlier set lists in its manifest are removed, so none of them
-    is left beside the new set's (a chain's CSVs of an earlier run beside a run without a
-    chain). Refused (:class:`OutputExists`) unless ``force``: a non-empty folder that is no
-    output set, and files a user added to an earlier set (``force``: left in place). Returns
-    the files left in place (relative paths), for :func:`write_manifest` to leave out."""
+    commands), before anything is written or removed: refused (:class:`OutputExists`)
+    unless ``force`` — a non-empty folder that is no output set, and files a user added to
+    an earlier set (``force``: left in place). Returns (the earlier set's files, the files
+    left in place), for :func:`remove_stale` and :func:`write_manifest`."""
     from sumo_drvpw.errors import OutputExists, UserError
 
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise UserError(f"{out}: is a file; give a folder to write the outputs into")
     if not out.exists():
-        return []
+        return [], []
     if _foreign_folder(out):
         if force:
-            return sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+            return [], sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
         raise OutputExists(f"{out}: folder exists, is not empty and was not written by sumo-drvpw "
                            "(no manifest.json); it is left untouched (force=True writes into it)")
     extra = unlisted_files(out)
@@ -391,11 +390,23 @@ def clear_earlier_set(out, force: bool = False) -> list[str]:
         listed = [str(f["path"]) for f in json.loads((out / MANIFEST).read_text(encoding="utf-8"))["files"]]
     except (OSError, ValueError, KeyError, TypeError):
         listed = []
-    for f in listed + [MANIFEST]:
+    return listed, extra
+
+
+def remove_stale(out, listed, since: float) -> None:
+    """Remove the files of an earlier set (``listed``: :func:`check_earlier_set`) that the
+    new one, written in place since the time ``since`` [s, epoch], did not write again: none
+    is left beside the new set's (a chain's CSVs of an earlier run beside a run without a
+    chain). Called once the new set is written, so a run refused or failed before leaves the
+    earlier set as it was."""
+    out = Path(out)
+    for f in listed:
         p = (out / f).resolve()
-        if p.is_file() and p.is_relative_to(out.resolve()):
-            p.unlink()
-    return extra
+        try:
+            if p.is_file() and p.is_relative_to(out.resolve()) and p.stat().st_mtime < since:
+                p.unlink()
+        except OSError:
+            pass
 
 
 #: the file in an output set's temporary folders naming the process that made them

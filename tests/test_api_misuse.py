@@ -5,6 +5,8 @@ which coefficients read implausibly."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -196,3 +198,25 @@ def test_a_scenario_that_is_no_path_is_a_user_error(spec, tmp_path):
     (tmp_path / "f.txt").write_text("x")
     with pytest.raises(UserError, match="is a file; give a folder"):
         run_scenario("city", tmp_path / "f.txt", end=5)
+
+
+def test_a_refused_run_leaves_the_earlier_set_and_a_code_built_fuel_chain_needs_its_engine(tmp_path):
+    """A run refused before it starts (a [vtypes] of no vType) emptied the folder of the
+    earlier set it was to replace; an EnergyChain(predicts='fuel') built in code booked a
+    100 %-efficient petrol engine (a review, 2026-11-29)."""
+    from sumo_drvpw.model.chain import EnergyChain
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.sim import run_scenario
+
+    d = tmp_path / "out"
+    run_scenario("city", d, end=20, figures=False, equations=["vsp_ldv1999"])
+    before = sorted(p.name for p in d.iterdir())
+    cfg = (Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg").as_posix()
+    (tmp_path / "typo.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{cfg}"\n'
+                                        '[vtypes.prius33]\nmass_kg = 1600\n')
+    with pytest.raises(UserError, match="prius33"):
+        run_scenario(tmp_path / "typo.toml", d, end=20, figures=False)
+    assert sorted(p.name for p in d.iterdir()) == before
+    bare = Equation("bare", {"acc": 1.0, "roll": 0.01}, chain=EnergyChain(predicts="fuel"))
+    with pytest.raises(UserError, match="marginal_efficiency is 1"):
+        run_scenario("city", None, end=5, figures=False, equations=[bare])

@@ -70,3 +70,29 @@ def test_a_run_resumed_from_a_saved_state_adds_up_to_the_whole_run(tmp_path):
     got, live = _totals(replay), _totals(second)
     assert got.index.sort_values().equals(live.index.sort_values())
     np.testing.assert_allclose(got.loc[live.index], live, rtol=1e-4, atol=1.0)
+
+
+def test_a_user_script_that_starts_sumo_from_a_saved_state_is_seen_to_resume(tmp_path):
+    """The saved state given to libsumo.start by the user's own script (no scenario file
+    saying so): the Accountant reads SUMO's load-state option, and books as the run does
+    (before, the first row was booked again: +54 m in a review, 2026-11-29)."""
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+
+    (tmp_path / "r.rou.xml").write_text(ROUTES)
+    state = tmp_path / "state150.xml"
+    run_scenario(_config(tmp_path, "a.sumocfg", 0, 151, ""), None, figures=False, equations=["vsp_ldv1999"],
+                 options=["--save-state.times", "150", "--save-state.files", str(state), "--save-state.rng", "true",
+                          "--save-state.precision", "8"])
+    cfg_b = _config(tmp_path, "b.sumocfg", 150, 300, f'<load-state value="{state}"/>')
+    ref = _totals(run_scenario(cfg_b, None, figures=False, equations=["vsp_ldv1999"]))
+    conn = start_sumo(["-c", str(_config(tmp_path, "plain.sumocfg", 150, 300, "")), "--load-state", str(state)])
+    try:
+        acc = Accountant(conn, equations=["vsp_ldv1999"])
+        conn.addStepListener(acc)
+        while conn.simulation.getTime() < 300 - 1e-9:
+            conn.simulationStep()
+        got = _totals(acc.result())
+    finally:
+        close_sumo(conn)
+    assert got.index.sort_values().equals(ref.index.sort_values())
+    np.testing.assert_allclose(got.loc[ref.index], ref, rtol=1e-9, atol=1e-6)

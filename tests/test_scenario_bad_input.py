@@ -312,7 +312,8 @@ def test_missing_equation_file_says_which_key_named_it_and_where_it_was_looked_f
 def test_a_vtype_table_naming_no_vtype_of_the_files_is_refused_before_sumo_starts(tmp_path, capsys):
     """`[vtypes.BUSS]` where the route files define BUS: refused before the run, with the
     nearest id (it was warned of after the whole run, exit 0, the buses booked on the
-    defaults; rehearsal 2026-11-29). A vTypeDistribution's id and SUMO's own types pass."""
+    defaults; rehearsal 2026-11-29). SUMO's own types pass; a vTypeDistribution's id is
+    refused too (its vehicles take its members' ids: its settings would book none)."""
     net = BUILTIN / "networks" / "city.net.xml"
     rou = _write(tmp_path, '<routes><vType id="BUS" vClass="bus"/><vTypeDistribution id="mix">'
                  '<vType id="a" probability="1"/></vTypeDistribution><vehicle id="v" type="BUS" depart="0">'
@@ -321,7 +322,16 @@ def test_a_vtype_table_naming_no_vtype_of_the_files_is_refused_before_sumo_start
     sc = _write(tmp_path, head + '[vtypes.BUSS]\nmass_kg = 14000\n', "s.toml")
     _cli_refused(capsys, ["run", str(sc), "--end", "10", "--no-figures"], tmp_path / "o1",
                  f"{sc}: [vtypes.BUSS]", "did you mean 'BUS'?", "BUS, a, mix")
-    for vt in ("BUS", "mix", "DEFAULT_VEHTYPE"):
+    sc = _write(tmp_path, head + '[vtypes.mix]\nmass_kg = 3000\n', "s.toml")
+    _cli_refused(capsys, ["run", str(sc), "--end", "10", "--no-figures"], tmp_path / "o2",
+                 f"{sc}: [vtypes.mix] names a vTypeDistribution", "per member")
+    row = '<vehicle id="v" x="0" y="0" angle="0" type="BUS" speed="0" pos="1" lane="c00c10_0" slope="0"/>'
+    fcd = _write(tmp_path, f'<fcd-export><timestep time="0.00">{row}</timestep><timestep time="1.00">{row}'
+                 '</timestep></fcd-export>', "fcd.xml")
+    sc = _write(tmp_path, head + '[vtypes.BUSS]\nmass_kg = 14000\n', "s.toml")
+    _cli_refused(capsys, ["fcd", str(fcd), "--scenario", str(sc), "--no-figures"], tmp_path / "o3",
+                 f"{sc}: [vtypes.BUSS]", "did you mean 'BUS'?")  # a replay as a run
+    for vt in ("BUS", "DEFAULT_VEHTYPE"):
         sc = _write(tmp_path, head + f'[vtypes.{vt}]\nmass_kg = 14000\n', "s.toml")
         assert load_scenario(sc) and cli_main(["run", str(sc), "--end", "2", "--no-figures",
                                                "--out", str(tmp_path / vt)]) == 0

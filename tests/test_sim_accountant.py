@@ -501,10 +501,21 @@ def test_scenario_vtype_settings_no_vehicle_had_are_said(tmp_path):
         f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{CITY.parent / "city.sumocfg"}"\nend = 30\n'
         f'options = ["-r", "{rou}"]\n[vtypes.prius3]\nmass_kg = 1600\n[vtypes.mix]\nmass_kg = 1700\n',
         encoding="utf-8")
-    res = run_scenario(tmp_path / "s.toml", None, figures=False)
+    sc = load_scenario(tmp_path / "s.toml")  # a user's script: its own loop, the scenario's settings
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, scenario=tmp_path / "s.toml")
+        conn.addStepListener(acc)
+        while conn.simulation.getTime() < 30 - 1e-9:
+            conn.simulationStep()
+        res = acc.result()
+    finally:
+        close_sumo(conn)
     hit = [w for w in res.summary["warnings"] if "matched no vehicle" in w]
     assert len(hit) == 1 and "[vtypes.mix]" in hit[0] and "[vtypes.prius3]" not in hit[0]
     assert len(res.vehicles) > 0 and (res.vehicles.mass_kg == 1600.0).all()
+    with pytest.raises(UserError, match=r"\[vtypes\.mix\] names a vTypeDistribution"):
+        run_scenario(tmp_path / "s.toml", None, figures=False)  # a run refuses both before SUMO starts
     (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace("vtypes.mix", "vtypes.prius_3"))
     with pytest.raises(UserError, match=r"\[vtypes\.prius_3\] names no vType .*did you mean 'prius3'"):
         run_scenario(tmp_path / "s.toml", None, figures=False)

@@ -41,8 +41,8 @@ def configure(p):
     g.add_argument("--load", action="append", default=[], metavar="COLUMN",
                    help="logged auxiliary load in W (e.g. heater_power_w); repeat")
     g.add_argument("--hvac", metavar="COLUMN[:SETPOINT_C]",
-                   help="fit heating and cooling power per K of COLUMN (ambient °C) from the set-point "
-                        "(default 20)")
+                   help="battery target: fit heating and cooling power per K of COLUMN (ambient °C) from "
+                        "the set-point (default 20)")
     g.add_argument("--engine-off", metavar="never|W", dest="engine_off",
                    help="fuel chain: the engine never stops ('never': a conventional engine without "
                         "start-stop), or stops below this driving power in W (default: profiled from "

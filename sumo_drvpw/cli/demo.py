@@ -63,6 +63,9 @@ def _demo(args, out: Path, final: Path, held_log: Path) -> None:
                     counts=m.counts, reference_mass_kg=float(m.vehicle.mass_kg))
     eq = res.to_equation("drvpw_calibrated", provenance={"logs": m.log.files, "vehicle": m.vehicle.path,
                                                          "power_source": m.source})
+    from sumo_drvpw.data.powertrain import terms_predict_of
+
+    eq.terms_predict = terms_predict_of(m.source)  # the power-split's P_PTdrv: its output
     eq_path = out / "drvpw_calibrated.toml"
     save_equation(eq, eq_path)
     print(f"[2/4] calibrated {final / eq_path.name}\n{res.summary()}")

@@ -246,7 +246,9 @@ def chain_notes(eq, files) -> list[str]:
     from sumo_drvpw.report.comparison import calibration_warnings
 
     notes = calibration_warnings(eq.name, {"chain": eq.chain.to_dict()})
-    seen = files_in_common((eq.chain.provenance or {}).get("logs") or [], files)
+    logs = [str(x) for x in (eq.chain.provenance or {}).get("logs") or []]  # (as calibrate was given them:
+    here = [str(Path(eq.path).parent / x) for x in logs if eq.path and not Path(x).is_absolute()]  # or beside it)
+    seen = files_in_common(logs + here, files)
     if seen:
         notes.append(f"the declared chain was calibrated on {len(seen)} of these {len(files)} log file(s) "
                      f"({', '.join(map(str, seen[:3]))}{' …' if len(seen) > 3 else ''}): its parameters have seen "

@@ -297,6 +297,8 @@ def not_a_power(column: str) -> str:
 
     other = {s: d for d, s in DIMENSIONS.items() if s and s != "w"}
     suffix = column.rsplit("_", 1)[-1] if "_" in column else ""
+    if suffix == "kw":  # a power, not in W: a gain 1000× off
+        return f"'{column}' holds a power in kW by its name's suffix: a load is a power in W (convert it, …_w)"
     return (f"'{column}' holds a {other[suffix].replace('_', ' ')} by its name's suffix '_{suffix}': a load is "
             "a power in W (a column named …_w)") if suffix in other else ""
 

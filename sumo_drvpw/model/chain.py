@@ -242,8 +242,8 @@ class EnergyChain:
         return p
 
     def evaluate(self, p_drive_w, v_mps, dt_s=None, signals: dict | None = None) -> dict:
-        """Battery or fuel power per sample from driving power (vectorized); a fuel chain
-        without its engine's keys is refused (:meth:`require_complete`).
+        """Battery or fuel power per sample from driving power (vectorized); a fuel chain read
+        from a file without its engine's keys is refused (:meth:`require_complete`).
 
         Parameters
         ----------

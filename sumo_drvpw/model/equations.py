@@ -326,6 +326,13 @@ def check_equation(eq: Equation, where: str) -> None:
                         f"got {eq.vclasses!r}")
     for v in eq.vclasses:
         check_vclass(v, what, "vclasses")
+    ch = eq.chain
+    if ch is not None and ch.predicts == "fuel":
+        ch.require_complete()  # (read from a file without its engine's keys)
+        if not 0.0 < float(ch.marginal_efficiency) < 1.0:  # an EnergyChain's default, no engine's
+            raise UserError(f"{what}: its fuel chain's marginal_efficiency is {ch.marginal_efficiency!r}: no "
+                            "engine turns all its fuel into work (the EnergyChain default, 1, describes none); "
+                            "give the engine's fuel, marginal_efficiency, idle_fuel_power_w and engine_off_below_w")
 
 
 def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:

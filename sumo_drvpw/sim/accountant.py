@@ -10,7 +10,7 @@
         conn.simulationStep()
         e = acc.energy("veh0")                   # energies so far [J] per equation and term
     result = acc.result()                        # RunResult: .vehicles, .edges, .classes, .summary
-    result.write("out")                          # what `sumo-drvpw run` writes (but manifest.json)
+    result.write("out")                          # what `sumo-drvpw run` writes, as one output set
     conn.close()
 
 Masses, vClasses and equations per vType are resolved as in ``run``
@@ -85,6 +85,10 @@ def scenario_for(conn, equations, scenario=None, **overrides) -> Scenario:
         raise UserError(f"Accountant: {', '.join(stepping)} start or step SUMO, which your script does (give "
                         "them to libsumo.start / traci.start, and step as far as you want); the Accountant books "
                         "the steps it is given")
+    loop = sorted(set(overrides) & {"trace", "progress"})
+    if loop:  # (a run's: the Accountant writes a trace where trace_path says, and draws no bar)
+        raise UserError(f"Accountant: {', '.join(loop)} are a run's settings: give trace_path=... for a trace; "
+                        "your loop shows its own progress")
     if isinstance(scenario, Scenario):
         if equations is None:
             return scenario
@@ -99,7 +103,7 @@ def scenario_for(conn, equations, scenario=None, **overrides) -> Scenario:
         from sumo_drvpw.sim.scenario_paths import scenario_path
 
         return load_scenario(scenario_path(scenario), **overrides)  # (a built-in's name too, as run takes it)
-    if not equations:
+    if equations is None:
         from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
 
         equations = list(CONFIG_EQUATIONS)
@@ -225,7 +229,8 @@ class Accountant(_Listener):
         self.stepper = Stepper(conn, self.net, self.eqset, self.ledger, self.physics,
                                self.resolver, self.trace, use_subscriptions=use_subs)
         # a run that resumes a saved state (load-state): its first step's vehicles are not booked again
-        self.stepper.resumed = sc is not None and scenario_option(sc, "load-state") is not None
+        self.stepper.resumed = (sc is not None and scenario_option(sc, "load-state") is not None) \
+            or bool(_option_files(conn, "load-state"))  # (started so by the user's script)
         self.begin = float(conn.simulation.getTime())
         self.interrupted = False
 

@@ -451,6 +451,10 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                      trace_path=Path(out_dir) / "trace.parquet" if sc.trace and out_dir else None,
                      spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None,
                      keep_vehicles=keep_vehicles, flush_vehicles=flush_vehicles, net=net)
+    if getattr(acc, "file_vtypes", None) is not None:  # a [vtypes.X] of no vType: refused as a run does
+        from sumo_drvpw.sim.run import check_vtype_tables
+
+        check_vtype_tables(sc, acc.file_vtypes)
     # a vehicle whose rows end while it stands may be in a teleport: kept in memory (not
     # flushed) so that it books on in its own row when it comes back within TELEPORT_HOLD_S
     acc.ledger.hold_steps = int(np.ceil(TELEPORT_HOLD_S / replay.dt))

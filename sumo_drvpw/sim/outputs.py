@@ -474,12 +474,16 @@ class RunResult:
         """Write every table, figure and summary.json into ``out_dir`` as one output set
         with its manifest.json (an earlier set's files there removed first; a folder holding
         other files refused unless ``force``, which keeps them)."""
-        from sumo_drvpw.fileio import clear_earlier_set, in_output_set, write_manifest
+        import time
+
+        from sumo_drvpw.fileio import check_earlier_set, in_output_set, remove_stale, write_manifest
 
         if in_output_set(out_dir):  # (a command's set, written whole by it)
             return write_outputs(Path(out_dir), self)
-        kept = clear_earlier_set(out_dir, force)
+        t0 = time.time()
+        listed, kept = check_earlier_set(out_dir, force)
         files = write_outputs(Path(out_dir), self)
+        remove_stale(out_dir, listed, t0)
         write_manifest(Path(out_dir), command=["RunResult.write"], kept=kept)
         return files
 

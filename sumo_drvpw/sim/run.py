@@ -38,13 +38,17 @@ def check_vtype_tables(sc, vtypes) -> None:
         return
     import difflib
 
-    known = set(vtypes) | vtypes.distributions | set(SUMO_DEFAULT_VTYPES)
+    known = set(vtypes) | set(SUMO_DEFAULT_VTYPES)
     for vt in sc.vtype_data:
+        if vt in getattr(vtypes, "distributions", ()) and vt not in vtypes:
+            raise UserError(f"{sc.path or 'the scenario'}: [vtypes.{vt}] names a vTypeDistribution: its vehicles "
+                            "take its members' vType ids, so its settings would book none; give them per member "
+                            "([vtypes.<member>])")
         if vt not in known:
             near = difflib.get_close_matches(vt, sorted(known), n=1)
             raise UserError(f"{sc.path or 'the scenario'}: [vtypes.{vt}] names no vType of the route and "
                             f"additional files the run loads" + (f" (did you mean '{near[0]}'?)" if near else "")
-                            + f"; their vTypes: {_listed(sorted(set(vtypes) | vtypes.distributions))}")
+                            + f"; their vTypes: {_listed(sorted(set(vtypes) | set(getattr(vtypes, 'distributions', ()))))}")
 
 
 def _listed(ids: list[str], most: int = 12) -> str:
@@ -67,9 +71,10 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         streamed out, :class:`~sumo_drvpw.sim.accountant.Accountant`)
     flush_vehicles : finished vehicles held before they are written out (default 1024)
     force : write into ``out_dir`` though it holds files of the user's (they are kept)
-    overrides : replace scenario values: begin, end, step_length [s], connection, gui,
-        options, equations (names, paths or Equation objects), trace, edgedata, figures,
-        progress, difference, period, air_temperature_c, cold_start
+    overrides : replace scenario values (every key of ``sumo_drvpw.sim.scenario.OVERRIDES``):
+        begin, end, step_length [s], connection, gui, options, equations (names, paths or
+        Equation objects; one alone too), trace, edgedata, figures, progress, difference,
+        period, air_temperature_c, cold_start, and the reading settings
     """
     from sumo_drvpw.sim.accountant import Accountant
     from sumo_drvpw.sim.stepping import step_until
@@ -80,10 +85,13 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     if sc.trace and out_dir is None:
         raise UserError("outputs.trace needs an output directory")
     naming = _output_naming(sc)
-    from sumo_drvpw.fileio import clear_earlier_set, in_output_set, write_manifest
+    import time
+
+    from sumo_drvpw.fileio import check_earlier_set, in_output_set, remove_stale, write_manifest
 
     standalone = out_dir is not None and not in_output_set(out_dir)  # (a command writes its set whole)
-    kept = clear_earlier_set(out_dir, force) if standalone else []  # (the Python API: an earlier set's files go)
+    t0 = time.time()  # (the Python API: an earlier set's files not written again go once the run is written)
+    listed, kept = check_earlier_set(out_dir, force) if standalone else ([], [])
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     args = list(sc.sumo_args)
@@ -209,6 +217,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             write_published(result, out_dir)
         if standalone:
             discard_parts(acc.ledger)
+            remove_stale(out_dir, listed, t0)
             write_manifest(Path(out_dir), command=["run_scenario", str(scenario_path)], kept=kept)
     finally:  # the parts never stay in the output folder
         if acc is not None and out_dir is not None:

@@ -364,9 +364,10 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             doc = {"sumo": {"config": p.name}, "equations": list(CONFIG_EQUATIONS)}
         else:
             doc = read_toml(p, "scenario file")
-        # relative to where the file is named, as SUMO reads a config (a link's folder, not
-        # its target's: files beside a linked config are the ones SUMO loads)
-        base = Path(os.path.abspath(p)).parent
+        # a config relative to where it is named, as SUMO reads it (a link's folder, not its
+        # target's: files beside a linked config are the ones SUMO loads); a scenario file's
+        # paths relative to the file itself (a link to it reads its target's folder)
+        base = Path(os.path.abspath(p)).parent if p.suffix == ".sumocfg" else p.resolve().parent
         path = p
     bad = set(overrides) - OVERRIDES
     if bad:
