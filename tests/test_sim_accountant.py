@@ -103,6 +103,12 @@ def test_edgedata_intervals_parsed_by_sumolib(tmp_path):
     # per-vehicle and per-metre figures are the totals divided as SUMO's _perVeh/_normed
     e0 = next(e for i in intervals for e in i.edge if float(e.phys_total_j) > 0)
     assert float(e0.phys_total_perVeh_j) > 0 and float(e0.phys_total_normed_jpm) > 0
+    # per vehicle driving the whole edge (SUMO's _perVeh): never 0 where energy was booked — it
+    # divided by the vehicles that entered in the interval, 0 for one driving on across its start
+    length = {eid: float(ln) for eid, ln in zip(edges.edge, edges.length_m)}
+    for e in (e for i in intervals for e in i.edge if float(e.phys_total_j) > 0):
+        assert float(e.phys_total_perVeh_j) == pytest.approx(
+            float(e.phys_total_normed_jpm) * length[e.id], rel=1e-5, abs=2e-3)
     assert not any(f.startswith("drvpw_") for f in e0._fields)  # no doubled prefixes
     # SUMO's router takes it as edge weights (energy-optimal routes)
     import subprocess

@@ -153,7 +153,8 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
     Per edge: ``sampledSeconds`` (vehicle-seconds [s]), ``entered`` (accounted vehicles
     that entered), and per equation ``<eq>_<term>_j`` (traction energy per term [J]),
     ``<eq>_recup_j`` (recuperable energy, ≤ 0 [J]), ``<eq>_total_j`` (traction [J]),
-    ``<eq>_total_perVeh_j`` (per vehicle that entered [J]) and ``<eq>_total_normed_jpm``
+    ``<eq>_total_perVeh_j`` (per vehicle driving the whole edge: total × length / distance
+    driven [J], as SUMO's MSMeanData_Emissions scales its ``_perVeh``) and ``<eq>_total_normed_jpm``
     (per metre driven [J/m]), in the manner of SUMO's ``CO2_abs``/``_perVeh``/``_normed``.
     Equation names are restricted to ``NAME_PATTERN`` (valid XML names); ids are escaped.
     Equations with an energy chain add ``<eq>_battery_{traction,recuperated,auxiliary,net}_kwh``
@@ -192,7 +193,9 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
                     attrs.append(f'{name}_{cat}_j="{tr[ci]:.3f}"')
                 attrs.append(f'{name}_recup_j="{energy[i, 1, e].sum():.3f}"')
                 attrs.append(f'{name}_total_j="{tot:.3f}"')
-                per_veh = tot / count[i, e] if count[i, e] > 0 else 0.0
+                # SUMO's _perVeh: per vehicle driving the whole edge, the total × length / distance
+                # (per vehicle that entered in the interval gave 0 where one drove on across its start)
+                per_veh = tot * float(net.edge_length[i]) / dist[i, e] if dist[i, e] > 0 else 0.0
                 attrs.append(f'{name}_total_perVeh_j="{per_veh:.3f}"')
                 normed = tot / dist[i, e] if dist[i, e] > 0 else 0.0
                 attrs.append(f'{name}_total_normed_jpm="{normed:.6f}"')
