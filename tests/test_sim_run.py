@@ -1181,3 +1181,31 @@ def test_a_start_stop_vtype_books_no_fuel_once_it_has_stood_longer_than_its_shut
     assert idle > 0 and ch.fuel in FUELS
     # (to 0.1 %: a car creeping below 0.1 m/s stands, with a little power beyond idle)
     assert c0["fuel_l"].sum() - c1["fuel_l"].sum() == pytest.approx(idle * off_s, rel=1e-3)
+
+
+def test_the_difference_of_two_equations_is_a_table_and_says_when_they_book_different_vehicles(tmp_path):
+    """[outputs] difference drew only a map; of a car and a bus equation it drew ±129,000 Wh/km
+    without a word, and of one equation twice an all-zero map (a rehearsal, 2026-11-29). Now
+    difference.csv holds the map's numbers (recomputed here from edges.parquet), a pair of
+    different vehicles is warned of, and a pair of one equation is refused."""
+    from sumo_drvpw.errors import UserError
+
+    cfg = REPO / "scenarios" / "city.sumocfg"
+    res = run_scenario(cfg, tmp_path / "o", end=120, figures=False, equations=["vsp_ldv1999", "moves_passenger_car"])
+    d = pd.read_csv(tmp_path / "o" / "difference.csv")
+    e = pd.read_parquet(tmp_path / "o" / "edges.parquet").set_index(["edge", "equation"])
+    for _, row in d.head(20).iterrows():
+        a, b = e.loc[(row.edge, "vsp_ldv1999")], e.loc[(row.edge, "moves_passenger_car")]
+        assert row.vsp_ldv1999_traction_j == pytest.approx(a.traction_total_j)
+        assert row.difference_whpkm == pytest.approx(
+            (a.traction_total_j - b.traction_total_j) / min(a.distance_m, b.distance_m) / 3.6, rel=1e-9)
+    assert not any("booked different vehicles" in w for w in res.summary.get("warnings", []))
+    (tmp_path / "s.toml").write_text(f'equations = ["vsp_ldv1999", "moves_transit_bus"]\n[sumo]\nconfig = "{cfg}"\n'
+                                     '[vclasses.passenger]\nequations = ["vsp_ldv1999"]\n'
+                                     '[outputs]\ndifference = ["vsp_ldv1999", "moves_transit_bus"]\n')
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o2", end=60, figures=False)
+    assert any("booked different vehicles" in w for w in res.summary["warnings"]), res.summary["warnings"]
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace(
+        'difference = ["vsp_ldv1999", "moves_transit_bus"]', 'difference = ["vsp_ldv1999", "vsp_ldv1999"]'))
+    with pytest.raises(UserError, match="two different equations"):
+        run_scenario(tmp_path / "s.toml", None, end=10, figures=False)

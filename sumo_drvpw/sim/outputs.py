@@ -316,6 +316,30 @@ def share_figure(classes_tbl: pa.Table, path: Path, predicts: dict | None = None
     write_figure(path, fig)
 
 
+def difference_table(ledger: Ledger, net: Network, names: list[str], pair: list[str]):
+    """Per edge driven by either of two equations' vehicles: each one's traction energy [J] and
+    distance [m], and their difference per km of the lesser distance [Wh/km] (the map's);
+    and a warning when the two booked different vehicles (their distances apart by more than
+    1 %: a bus equation beside a car's), whose difference is then no comparison of models."""
+    import pandas as pd
+
+    a, b = names.index(pair[0]), names.index(pair[1])
+    ta, tb = ledger.edge_trac[:, a].sum(1), ledger.edge_trac[:, b].sum(1)
+    da, db = ledger.edge_dist_eq[:, a], ledger.edge_dist_eq[:, b]
+    k = np.flatnonzero((da > 0) | (db > 0))
+    table = pd.DataFrame({"edge": [net.edge_ids[i] for i in k], "class": [str(net.edge_class[i]) for i in k],
+                          f"{pair[0]}_traction_j": ta[k], f"{pair[1]}_traction_j": tb[k],
+                          f"{pair[0]}_distance_m": da[k], f"{pair[1]}_distance_m": db[k],
+                          "difference_whpkm": _whpkm(ta[k] - tb[k], np.minimum(da[k], db[k]))})
+    sa, sb = float(da.sum()), float(db.sum())
+    note = None
+    if max(sa, sb) > 0 and abs(sa - sb) > 0.01 * max(sa, sb):
+        note = (f"difference {pair[0]} − {pair[1]}: the two booked different vehicles ({sa / 1000:,.1f} and "
+                f"{sb / 1000:,.1f} km): the map and difference.csv compare them where both drove, per km of "
+                "the lesser distance — no comparison of two models of the same vehicles ([outputs] difference)")
+    return table, note
+
+
 def difference_map(ledger: Ledger, net: Network, names: list[str], pair: list[str],
                    path: Path) -> None:
     """Network map coloured by the per-edge traction-energy difference of two equations,
@@ -520,11 +544,17 @@ def write_outputs(out_dir: Path, result: RunResult) -> dict[str, str]:
         write_text(out_dir / "edgedata.xml", result.edgedata_xml())
         files["edgedata"] = str(out_dir / "edgedata.xml")
     names = result.names
+    pair = (result.difference or names[:2]) if len(names) >= 2 else None
+    if pair is not None:  # the per-edge difference of two equations, as a table (and a map)
+        table, note = difference_table(result.ledger, result.net, names, pair)
+        write_text(out_dir / "difference.csv", table.to_csv(index=False))
+        files["difference"] = str(out_dir / "difference.csv")
+        if note and note not in summary.setdefault("warnings", []):
+            summary["warnings"].append(note)
     if result.figures:
         share_figure(ct, out_dir / "shares.png", dict(zip(names, result.predicts)))
         files["shares_figure"] = str(out_dir / "shares.png")
-        if len(names) >= 2:
-            pair = result.difference or names[:2]
+        if pair is not None:
             difference_map(result.ledger, result.net, names, pair,
                            out_dir / "difference_map.png")
             files["difference_map"] = str(out_dir / "difference_map.png")

@@ -547,9 +547,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             and any(d not in names for d in diff):
         diff = None  # the file's pair is gone with its equations: use the first two
     if diff is not None:
-        if len(diff) != 2 or any(d not in names for d in diff):
-            raise UserError(f"{where}: outputs.difference must name two of the scenario's "
-                            f"equations ({', '.join(names)}), got {diff}")
+        if len(diff) != 2 or any(d not in names for d in diff) or diff[0] == diff[1]:
+            raise UserError(f"{where}: outputs.difference must name two different equations of the "
+                            f"scenario's ({', '.join(names)}), got {diff}")
     # the config's device options, replaced by the command line's (sumo.options, a run's
     # options; "--key value" or "--key=value", the last one) as SUMO takes them
     given_device = _given_options(args, DEVICE_OPTIONS)
