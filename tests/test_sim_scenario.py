@@ -700,3 +700,25 @@ def test_a_linked_config_reads_the_files_beside_the_link_as_sumo_does(tmp_path):
         (mine / name).symlink_to(home / "run.sumocfg")
         sc = load_scenario(mine / name)
         assert sc.route_files == [mine / "r.rou.xml"], sc.route_files
+
+
+def test_road_class_types_and_edges_that_match_nothing_are_said(tmp_path):
+    """A [road_class] type or edge id the network lacks made an empty class without a word
+    (a rehearsal's Hamburg: 'highway.primary' classed 16 edges, its 110 compound
+    'cycleway.lane|highway.primary' edges stayed city; an edge-id typo). Now a warning names
+    them and the compound types that hold the name."""
+    from sumo_drvpw.sim import run_scenario
+    from sumo_drvpw.sim.accountant import road_class_warnings
+    from sumo_drvpw.sim.network import load_network
+
+    net = load_network(NETS / "city.net.xml", RoadClassRule())
+    net.edge_type = ["cycleway.lane|highway.trunk" if t == "highway.primary" else t for t in net.edge_type]
+    rule = RoadClassRule(types={"highway.trunk": "arterial"}, edges={"no_such_edge": "x", net.edge_ids[1]: "y"})
+    said = road_class_warnings(rule, net)
+    assert len(said) == 2 and "'highway.trunk'" in said[0] and "cycleway.lane|highway.trunk" in said[0]
+    assert "'no_such_edge'" in said[1] and net.edge_ids[1] not in said[1]
+    assert road_class_warnings(RoadClassRule(), net) == []
+    (tmp_path / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
+                                     '[road_class]\nedges = { nope = "special" }\n')
+    res = run_scenario(tmp_path / "s.toml", None, end=10, figures=False)
+    assert any("road classes: edges 'nope'" in w for w in res.summary["warnings"]), res.summary["warnings"]

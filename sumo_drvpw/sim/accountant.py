@@ -353,7 +353,7 @@ class Accountant(_Listener):
                             "vtype_energy": self.vtype_energy},
         }
         summary_extra.update(extra or {})
-        warnings = network_warnings(net)
+        warnings = network_warnings(net) + road_class_warnings(sc.road_class, net)
         rd = st.reader
         if rd.subs and rd.fallback_reads > max(100, 0.01 * led.samples):  # traci: one call per getter
             warnings.append(f"{rd.fallback_reads} vehicle-steps were missing from the plug-in's traci "
@@ -502,6 +502,27 @@ def network_warnings(net) -> list[str]:
     return [f"network {net.path.name} has no elevation (no z in any lane shape): every slope "
             "is 0, so the grade term is 0; build it with elevation (netconvert "
             "--heightmap.geotiffs / OSM ele) for hilly areas"]
+
+
+def road_class_warnings(rule, net) -> list[str]:
+    """The road-class rule's edge types and edge ids that match nothing in the network (a typo
+    there leaves its edges in city or highway, its class empty, without a word); a type
+    matched exactly, so an OSM compound type ('cycleway.lane|highway.primary') is named."""
+    types = set(net.edge_type)
+    out = []
+    for kind, keys, have in (("types", getattr(rule, "types", {}) or {}, types),
+                             ("edges", getattr(rule, "edges", {}) or {}, set(net.edge_ids))):
+        gone = sorted(k for k in keys if k not in have)
+        if not gone:
+            continue
+        hint = ""
+        if kind == "types":  # compound types holding the name: the likely intent
+            near = sorted(t for t in types if any(g in t.split("|") for g in gone) and t not in keys)
+            hint = (f"; the network's types holding it: {', '.join(near[:4])}{' …' if len(near) > 4 else ''}"
+                    " (types match whole: list them too)") if near else ""
+        out.append(f"road classes: {kind} {', '.join(map(repr, gone[:6]))}{' …' if len(gone) > 6 else ''} "
+                   f"match no edge of {net.path.name}: their class books nothing{hint}")
+    return out
 
 
 def carrier_warning(carriers: dict[str, dict], skipped: dict[str, int], idle: list[str]) -> str:
