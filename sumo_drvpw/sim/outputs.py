@@ -299,9 +299,11 @@ def share_figure(classes_tbl: pa.Table, path: Path, predicts: dict | None = None
     if len(kwh):
         kwh.plot.bar(stacked=True, ax=ax, width=0.75,
                      color=[TERM_COLOURS[c] for c in kwh.columns])
-        what = predicts or {}
-        ax.set_xticklabels([f"{c}\n{e}\n({what.get(e, 'wheel').replace('_', ' ')})"
-                            for c, e in kwh.index], rotation=0, fontsize=7)
+        what = predicts or {}  # (the bars are the terms' driving energy, a chain's equation too)
+        label = {"battery": "driving; chain: battery", "fuel": "driving; chain: fuel"}
+        many = len(kwh) > 12  # (upright labels would overlap)
+        ax.set_xticklabels([f"{c}\n{e}\n({label.get(what.get(e, 'wheel'), what.get(e, 'wheel').replace('_', ' '))})"
+                            for c, e in kwh.index], rotation=90 if many else 0, fontsize=6 if many else 7)
         tot = kwh.sum(axis=1).to_numpy()
         for k, (idx, t) in enumerate(zip(kwh.index, tot)):
             w = whpkm.get(idx, np.nan)
