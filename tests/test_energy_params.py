@@ -234,6 +234,10 @@ def test_vtype_energy_agrees_with_sumos_device(tmp_path):
         tot = cv[cv.equation == eq].net_kwh.sum()
         assert ce[ce.equation == eq].net_kwh.sum() == pytest.approx(tot, rel=1e-9)
         assert cc[cc.equation == eq].net_kwh.sum() == pytest.approx(tot, rel=1e-9)
+        # per road class from chain_edges.csv's road_class, as the edges' tables class them
+        edges = pd.read_parquet(tmp_path / "o" / "edges.parquet")
+        assert set(ce.road_class) <= set(edges["class"]) and \
+            ce[ce.equation == eq].groupby("road_class").net_kwh.sum().sum() == pytest.approx(tot, rel=1e-9)
     ve = res["assumptions"]["vtype_energy"]
     assert set(ve["booked"]) == {"ebus", "ecar", "massonly"}
     assert ve["booked"]["ecar"]["mass_kg"] == 1830.0 and ve["booked"]["ebus"]["defaults"] == {

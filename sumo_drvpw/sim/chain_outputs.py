@@ -120,6 +120,9 @@ def write_chain_outputs(out_dir, result) -> dict[str, str]:
     ids, classes = list(led.veh_ids[:n]), [c or "unknown" for c in led.veh_class[:n]]
     order = list(getattr(led, "class_list", []) or [])
     rep = chain.report(ids, classes, list(result.net.edge_ids), order)
+    road = dict(zip(result.net.edge_ids, map(str, result.net.edge_class)))
+    for r in rep.get("edges", []):  # (litres or kWh per road class: summed over this column)
+        r["road_class"] = road.get(r.get("key"), "")
     files = {}
     spill = getattr(led, "spill", None)
     for key, rows in rep.items():
