@@ -835,6 +835,21 @@ def _(d):
     return ["run", str(d / "s.toml"), "--end", "5", "--out", str(d / "run")]
 
 
+@case("options", "scenario difference of one equation twice", ("two different equations",))
+def _(d):
+    cfg = Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg"
+    (d / "s.toml").write_text(f'equations = ["vsp_ldv1999", "drvpw_prius3"]\n[sumo]\nconfig = "{cfg.as_posix()}"\n'
+                              '[outputs]\ndifference = ["vsp_ldv1999", "vsp_ldv1999"]\n')
+    return ["run", str(d / "s.toml"), "--end", "5", "--out", str(d / "run")]
+
+
+@case("options", "calibrate --load of a power in kW", ("--load heater_kw", "kW"))
+def _(d):
+    df = base_log()
+    df["heater_kw"] = 1.5
+    return _cal(write(d, "log.parquet", df), d, "--target", "battery", "--load", "heater_kw")
+
+
 # --- vendor files cut short (import) --------------------------------------------------
 
 def _cut(src: Path, dst: Path, nbytes: int | None = None, lines: int | None = None) -> Path:
