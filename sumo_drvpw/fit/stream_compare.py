@@ -187,6 +187,7 @@ class CompareStats:
         self.k = int(reservoir)
         self.target = target
         self.sign = None          # the battery sign test's sums (data.measured.sign_sums)
+        self.battery_seen = False # a fuel target's hybrid battery V·I in some batch
         self.seen: set = set()    # log columns the batches had (a chain's inputs among them)
         self.n = 0
         self.rows = 0
@@ -353,6 +354,7 @@ class CompareStats:
         if self.target == "fuel" and m.battery_w is not None:
             bat = np.asarray(m.battery_w, float)
             bat = bat if every else bat[idx]
+            self.battery_seen = True  # (the comparison says its predictions take the battery off)
         return sig, bat
 
     def _unknown(self, eq, sig: dict, n: int, trip) -> dict | None:
@@ -388,6 +390,7 @@ class CompareStats:
         from sumo_drvpw.data.measured import merge_sign_sums
 
         self.sign = merge_sign_sums(self.sign, o.sign)
+        self.battery_seen = self.battery_seen or o.battery_seen
         self.seen |= o.seen
         for name, b in o.eq.items():
             self.eq[name] = b if name not in self.eq else self.eq[name].merge(b)
@@ -412,7 +415,8 @@ class CompareStats:
         r = {c: v[order] for c, v in self.res.cols.items()}
         comp = StreamedComparison(meas_w=r["meas"], speed_mps=r["v"], dt_s=r["dt"],
                                   measured_traction_energy_j=self.meas_traction,
-                                  reference=self.reference, target=self.target)
+                                  reference=self.reference, target=self.target,
+                                  battery_corrected=self.target == "fuel" and self.battery_seen)
         comp.stats = self
         for eq in self.equations:
             s = self.eq[eq.name]
