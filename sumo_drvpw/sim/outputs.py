@@ -501,8 +501,9 @@ class RunResult:
 
     def write(self, out_dir, force: bool = False) -> dict[str, str]:
         """Write every table, figure and summary.json into ``out_dir`` as one output set
-        with its manifest.json (an earlier set's files there removed first; a folder holding
-        other files refused unless ``force``, which keeps them)."""
+        with its manifest.json (an earlier set's files there that are not written again
+        removed once it is written; a folder holding other files refused unless ``force``,
+        which keeps them)."""
         import time
 
         from sumo_drvpw.fileio import check_earlier_set, in_output_set, remove_stale, write_manifest

@@ -31,9 +31,10 @@ SUMO_DEFAULT_VTYPES = ("DEFAULT_VEHTYPE", "DEFAULT_PEDTYPE", "DEFAULT_BIKETYPE",
 
 
 def check_vtype_tables(sc, vtypes) -> None:
-    """A scenario's ``[vtypes.<id>]`` that names no vType (nor vTypeDistribution) of the route
-    and additional files the run loads, nor one of SUMO's own: refused before SUMO starts,
-    with the nearest id (a typo would leave the vType's vehicles on the defaults)."""
+    """A scenario's ``[vtypes.<id>]`` that names no vType of the route and additional files the
+    run loads, nor one of SUMO's own: refused before SUMO starts, with the nearest id (a typo
+    would leave the vType's vehicles on the defaults); one naming a vTypeDistribution too (its
+    vehicles take its members' ids: its settings would book none)."""
     if vtypes is None or not getattr(sc, "vtype_data", None):
         return
     import difflib
@@ -65,8 +66,9 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     scenario_path : scenario TOML file or SUMO config, or a built-in scenario's name
         (``"city"``, ``"highway"``), as ``sumo-drvpw run`` takes it
     out_dir : output directory (created), or None to write nothing; written as a whole set with
-        its manifest.json, as the commands write theirs: an earlier set's files there are
-        removed first, and a folder that holds other files is refused unless ``force``
+        its manifest.json, as the commands write theirs: an earlier set's files there that the
+        run does not write again are removed once it is written (a run refused or failed
+        leaves the earlier set), and a folder that holds other files is refused unless ``force``
     keep_vehicles : keep every vehicle in memory (default: vehicles that left are
         streamed out, :class:`~sumo_drvpw.sim.accountant.Accountant`)
     flush_vehicles : finished vehicles held before they are written out (default 1024)
