@@ -148,7 +148,8 @@ class _Resolver:
 
 def timed(variant: str, net, routes, state, steps: int, eqs) -> float:
     from sumo_drvpw.sim.ledger import EquationSet, Ledger
-    from sumo_drvpw.sim.loop import Physics, run_loop
+    from sumo_drvpw.sim.loop import Physics
+    from sumo_drvpw.sim.stepping import run_loop
     from sumo_drvpw.sim.network import load_network
     from sumo_drvpw.sim.scenario import RoadClassRule
 

@@ -96,7 +96,7 @@ TYPE_CHECK_STEPS = 25
 
 class Stepper:
     """Books one SUMO step at a time: call :meth:`after_step` after every
-    ``simulationStep`` (``run_loop`` does; so does :class:`sumo_drvpw.sim.Accountant`
+    ``simulationStep`` (``sim.stepping.run_loop`` does; so does :class:`sumo_drvpw.sim.Accountant`
     as a step listener in the user's own loop).
 
     Parameters
