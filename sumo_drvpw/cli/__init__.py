@@ -310,6 +310,13 @@ def say_traction_only(counts: dict) -> None:
 def note_counts(counts: dict) -> None:
     """Print what the log reader changed or assumed (e.g. clipped standstill noise)."""
     say_traction_only(counts)
+    moving, held = int(counts.get("moving_rows", 0) or 0), int(counts.get("held_moving_rows", 0) or 0)
+    if moving >= 100 and held > 0.5 * moving:  # a logger's held values: fewer independent samples
+        k = moving / max(moving - held, 1)
+        print(f"note: {held / moving:.0%} of the moving rows repeat the row before (speed and measured power "
+              f"alike): values held between the logger's updates, about one new value per {k:.1f} rows; fitted "
+              f"standard errors and p-values count every row, so the errors are about {k ** 0.5:.1f}× too small "
+              "(and stepwise selection too willing)")
     n = int(counts.get("clipped_negative_speed", 0) or 0)
     if n:
         tol = counts.get("negative_speed_tolerance_mps", 0.1)

@@ -18,6 +18,7 @@ from sumo_drvpw.model.equations import SPEC_EQUATIONS, Equation, load_equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.data.log import DriveLog, ReadOptions, read_log
 from sumo_drvpw.data.powertrain import measured_power
+from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.model.vehicles import Vehicle, load_vehicle
 
@@ -53,6 +54,7 @@ class Measured:
         c["target"] = self.target
         c["excluded_nonfinite_power"] = int((~np.isfinite(self.power_w)).sum())
         c["usable"] = int(self.usable.sum())
+        c.update(held_rows(self.inputs.v, self.power_w, self.inputs.trip, self.usable))
         if self.measurement is not None and not self.measurement.identity:
             c["measurement"] = self.measurement.to_dict()
         return c
@@ -61,6 +63,20 @@ class Measured:
         return {"logs": self.log.files, "vehicle": self.vehicle.name if self.vehicle else None,
                 "power_source": self.source, "samples": len(self.log), "usable": int(self.usable.sum()),
                 "counts": self.counts}
+
+
+def held_rows(v, p, trip, use) -> dict:
+    """``moving_rows`` (usable, moving) and ``held_moving_rows``: those whose speed and
+    measured power both equal the row's before in the trip — values a logger holds between
+    its updates (an OBD log at 11 rows/s of values new about once a second: 90 %), which a
+    fit counts as independent samples."""
+    v, p, use = np.asarray(v, float), np.asarray(p, float), np.asarray(use, bool)
+    if v.size < 2:
+        return {"moving_rows": int((use & (v > STANDSTILL_MPS)).sum()), "held_moving_rows": 0}
+    same_trip = np.ones(v.size - 1, bool) if trip is None else (np.asarray(trip)[1:] == np.asarray(trip)[:-1])
+    mov = use[1:] & use[:-1] & (v[1:] > STANDSTILL_MPS)
+    held = mov & same_trip & (v[1:] == v[:-1]) & (p[1:] == p[:-1])
+    return {"moving_rows": int(mov.sum()), "held_moving_rows": int(held.sum())}
 
 
 #: what a measured power can be (``load_measured(target=...)``)
