@@ -66,16 +66,16 @@ class Measured:
 
 
 def held_rows(v, p, trip, use) -> dict:
-    """``moving_rows`` (usable, moving) and ``held_moving_rows``: those whose speed and
+    """``moving_rows`` (usable, moving, after a usable row of the same trip) and ``held_moving_rows``: those whose speed and
     measured power both equal the row's before in the trip — values a logger holds between
     its updates (an OBD log at 11 rows/s of values new about once a second: 90 %), which a
     fit counts as independent samples."""
     v, p, use = np.asarray(v, float), np.asarray(p, float), np.asarray(use, bool)
     if v.size < 2:
-        return {"moving_rows": int((use & (v > STANDSTILL_MPS)).sum()), "held_moving_rows": 0}
+        return {"moving_rows": 0, "held_moving_rows": 0}
     same_trip = np.ones(v.size - 1, bool) if trip is None else (np.asarray(trip)[1:] == np.asarray(trip)[:-1])
-    mov = use[1:] & use[:-1] & (v[1:] > STANDSTILL_MPS)
-    held = mov & same_trip & (v[1:] == v[:-1]) & (p[1:] == p[:-1])
+    mov = use[1:] & use[:-1] & (v[1:] > STANDSTILL_MPS) & same_trip  # (pairs within a trip: a batch's too)
+    held = mov & (v[1:] == v[:-1]) & (p[1:] == p[:-1])
     return {"moving_rows": int(mov.sum()), "held_moving_rows": int(held.sum())}
 
 
