@@ -553,7 +553,7 @@ def row_interval(sc, fcd_file, head: dict | None) -> tuple[float | None, list[st
     apart, whatever the scenario's or config's ``step_length`` (a run given another step
     length on the command line, or FCD written every few steps). Without a header, the
     scenario's step length; without one either, None (the file's first two timesteps).
-    ``head``: the file's header options (:func:`sumo_drvpw.sim.fcd_method.step_method`)."""
+    ``head``: the file's header options (:func:`sumo_drvpw.sim.fcd_method.stated_method`)."""
     if head is None:
         return sc.step_length, []
     try:

@@ -17,7 +17,7 @@ PEEK_ROWS = 200_000
 MIN_PAIRS = 20
 
 
-def step_method(sc, head: dict | None) -> str | None:
+def stated_method(sc, head: dict | None) -> str | None:
     """"ballistic" or "euler" by SUMO's rule (:func:`sumo_drvpw.sim.sumo_start.ballistic_update`)
     on the options of the FCD file's own header ``head`` (:func:`~sumo_drvpw.sim.fcd_read.header_options`:
     SUMO writes those of the run that differ from its defaults), else on the scenario's SUMO
@@ -66,7 +66,7 @@ def method_of_rows(cols: dict, dt: float | None) -> str | None:
 def recorded_method(sc, head: dict | None, fcd_file, dt: float | None) -> tuple[str, str | None]:
     """The method to replay ``fcd_file`` by, and a note when its rows told it (a tabular FCD
     without a header, a scenario that does not say)."""
-    said = step_method(sc, head)
+    said = stated_method(sc, head)
     if said is not None:
         return said, None
     from pathlib import Path

@@ -16,18 +16,13 @@ from pathlib import Path
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_start import close_sumo, start_sumo
 from sumo_drvpw.sim.resolver import VTypeResolver
-from sumo_drvpw.sim.vtypes import read_vtypes
+from sumo_drvpw.sim.vtypes import SUMO_DEFAULT_VTYPES, read_vtypes
 from sumo_drvpw.sim.sumo_outputs import (COPIES_PREFIX, SUMO_OUTPUT_DIR, is_output_option, naming_leaves_folder,
                                          output_naming, prepare_output_folder,
                                          redirect_additional_outputs, sumo_output_args, without_additional_files,
                                          written_file)
 
 __all__ = ["run_scenario", "start_sumo", "close_sumo", "VTypeResolver"]
-
-
-#: the vTypes SUMO defines itself (MSVehicleControl, SUMOVTypeParameter)
-SUMO_DEFAULT_VTYPES = ("DEFAULT_VEHTYPE", "DEFAULT_PEDTYPE", "DEFAULT_BIKETYPE", "DEFAULT_CONTAINERTYPE",
-                       "DEFAULT_TAXITYPE", "DEFAULT_RAILTYPE")
 
 
 def check_vtype_tables(sc, vtypes) -> None:

@@ -330,8 +330,8 @@ def resolve_equation(spec, base: Path | None, where: str) -> Equation:
                                 + (f" and {here}" if base and Path(os.path.abspath(base / p)) != here else "") + ")") from None
             raise
         reserved_name(eq, where)  # vtype_energy, vtype_energy.…: the run's own
-    if eq.chain is not None:
-        eq.chain.require_complete()
+        if eq.chain is not None:  # (an Equation object's: check_equation)
+            eq.chain.require_complete()
     src = eq.path or where  # the equation file the term is written in, else the scenario
     for t in eq.term_names:
         term = parse_term(t)
