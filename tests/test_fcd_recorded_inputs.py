@@ -326,3 +326,48 @@ def test_an_fcd_with_a_header_whose_network_is_gone_is_not_said_to_lack_a_config
     err = capsys.readouterr().err.strip()
     assert "give --net" in err and len(err.splitlines()) == 1
     assert "no SUMO config" not in err
+
+
+@pytest.mark.sumo
+def test_a_config_listing_its_files_after_a_comma_and_space_is_read_whole(tmp_path, monkeypatch, capsys):
+    """A config that lists its route files as "v.xml, r.rou.xml" (Hamburg's does), started by
+    its path from another folder: SUMO reports the list as "scen/v.xml,scen/ r.rou.xml" (getOption,
+    the FCD's header) and loads both. The Accountant and `fcd` without --scenario read the
+    vTypes of the second file too (before: a rehearsal's trucks booked at SUMO's default
+    mass, and every car of an electric vType as petrol)."""
+    import sumolib
+
+    from sumo_drvpw.sim import Accountant
+
+    (tmp_path / "nets").mkdir()
+    shutil.copy(CITY_NET, tmp_path / "nets" / "city.net.xml")
+    scen = tmp_path / "scen"
+    scen.mkdir()
+    (scen / "r.rou.xml").write_text("<routes/>")
+    vtypes, flows = ROUTES.split("    <flow", 1)
+    (scen / "flows.rou.xml").write_text("<routes>\n    <flow" + flows)
+    (scen / "types.xml").write_text(vtypes + "</routes>\n")
+    (scen / "run.sumocfg").write_text(CONFIG.replace('value="r.rou.xml"', 'value="r.rou.xml, types.xml, flows.rou.xml"'))
+    monkeypatch.chdir(tmp_path)
+    subprocess.run([sumolib.checkBinary("sumo"), "-c", "scen/run.sumocfg", "-e", "60",
+                    "--fcd-output", "fcd.xml", "--no-step-log", "--no-warnings"],
+                   check=True, capture_output=True)
+    assert "scen/ flows.rou.xml" in (tmp_path / "fcd.xml").read_text()[:3000]  # as SUMO reports it
+    assert cli_main(["fcd", "fcd.xml", "--no-figures", "--out", "replay"]) == 0
+    v = pd.read_parquet(tmp_path / "replay" / "vehicles.parquet")
+    assert set(v[v.vtype == "lorry"].mass_kg) == {12000.0} and set(v[v.vtype == "lorry"].vclass) == {"truck"}
+
+    import libsumo
+
+    libsumo.start([sumolib.checkBinary("sumo"), "-c", "scen/run.sumocfg", "--no-step-log", "--no-warnings"])
+    try:
+        acc = Accountant(libsumo, figures=False)
+        libsumo.addStepListener(acc)
+        while libsumo.simulation.getTime() < 60 - 1e-9:
+            libsumo.simulationStep()
+        res = acc.result()
+    finally:
+        libsumo.close()
+    for v in (v, res.vehicles):  # (moves_passenger_car books at its source type's fixed mass)
+        car = v[(v.vtype == "car") & (v.equation == "vsp_ldv1999")]
+        assert set(v[v.vtype == "lorry"].mass_kg) == {12000.0} and set(car.mass_kg) == {1400.0}

@@ -41,6 +41,7 @@ from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.outputs import RunResult, summary_dict
 from sumo_drvpw.sim.trace import TraceWriter
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
+from sumo_drvpw.sim.scenario_paths import sumo_file_list
 from sumo_drvpw.sim.sumo_start import NewRun, scenario_option
 from sumo_drvpw.sim.vtype_energy import expand as expand_vtype_energy, listing_warning
 from sumo_drvpw.sim.vtypes import GENERIC_VCLASSES, default_mass_warnings, read_vtypes
@@ -72,7 +73,7 @@ def _option(conn, key: str) -> str:
 
 
 def _option_files(conn, key: str) -> list[Path]:
-    return [Path(f.strip()) for f in _option(conn, key).split(",") if f.strip()]
+    return [Path(f) for f in sumo_file_list(_option(conn, key))]
 
 
 def scenario_for(conn, equations, scenario=None, **overrides) -> Scenario:

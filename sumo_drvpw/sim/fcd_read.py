@@ -32,6 +32,7 @@ from sumo_drvpw.data.log import SPEED_MAX_MPS
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.sim.scenario import sumo_seconds
+from sumo_drvpw.sim.scenario_paths import sumo_file_list
 
 #: our name → SUMO's tabular FCD column (``<element>_<attribute>``)
 FCD_COLUMNS = {"time": "timestep_time", "id": "vehicle_id", "type": "vehicle_type",
@@ -425,8 +426,7 @@ def recorded_inputs(path, head: dict[str, str] | None = None, cwd=None) -> dict 
     out_rel = head.get("fcd-output", "").strip().replace("\\", "/")
     start = (posixpath.dirname(posixpath.normpath(posixpath.join(root, out_rel)))
              if out_rel and not posixpath.isabs(out_rel) else None)
-    values = [(k, v.strip().replace("\\", "/")) for k in RECORDED_INPUTS
-              for v in (head.get(k) or "").split(",") if v.strip()]
+    values = [(k, v.replace("\\", "/")) for k in RECORDED_INPUTS for v in sumo_file_list(head.get(k))]
 
     def from_fcd(v: str) -> str | None:  # the path from the FCD's folder (marks: unknown names)
         if start is None or posixpath.isabs(v):

@@ -22,7 +22,7 @@ from pathlib import Path
 from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_equation, check_vclass, load_equation
-from sumo_drvpw.sim.scenario_paths import config_files
+from sumo_drvpw.sim.scenario_paths import config_files, sumo_file_list
 from sumo_drvpw.sim.vtype_energy import VTYPE_ENERGY, named_in_table, placeholder, reserved_name
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import (additional_outputs, device_wanted, is_output_option,
@@ -401,8 +401,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             raise UserError(f"{where}: SUMO config not found: {cfg}")
         net, files, cfgvals = config_files(cfg)
         args = ["-c", str(cfg)]
-        adds = [(cfg.parent / f.strip()).resolve()
-                for f in cfgvals.get("additional-files", "").split(",") if f.strip()]
+        adds = [(cfg.parent / f).resolve() for f in sumo_file_list(cfgvals.get("additional-files"))]
     elif "net" in sumo:
         net = rel(_path(sumo["net"], where, "sumo.net")).resolve()
         routes = [rel(_path(r, where, "sumo.routes")).resolve()

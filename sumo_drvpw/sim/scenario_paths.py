@@ -42,6 +42,21 @@ def scenario_path(spec) -> Path:
     return bundled_scenario(str(spec))
 
 
+def sumo_file_list(value) -> list[str]:
+    """The files of a SUMO file-list option ("a.xml, b.xml"), each stripped, also where
+    SUMO put its config's folder before a name the config gave after ", ": a config given
+    by a path from another folder reports its list as "dir/a.xml,dir/ b.xml" (getOption,
+    an FCD's header), and SUMO itself loads dir/b.xml."""
+    out = []
+    for f in str(value or "").split(","):
+        f = f.strip()
+        cut = max(f.rfind("/"), f.rfind("\\")) + 1
+        f = f[:cut] + f[cut:].strip()
+        if f:
+            out.append(f)
+    return out
+
+
 def config_files(cfg: Path) -> tuple[Path, list[Path], dict[str, str]]:
     """Net file, route+additional files and time values named in a SUMO config."""
     try:
@@ -60,7 +75,6 @@ def config_files(cfg: Path) -> tuple[Path, list[Path], dict[str, str]]:
         raise UserError(f"SUMO config {cfg}: no <net-file>")
     files = []
     for key in ("route-files", "additional-files"):
-        for f in vals.get(key, "").split(","):
-            if f.strip():
-                files.append((cfg.parent / f.strip()).resolve())
+        for f in sumo_file_list(vals.get(key, "")):
+            files.append((cfg.parent / f).resolve())
     return (cfg.parent / net).resolve(), files, vals
