@@ -371,3 +371,19 @@ def test_a_config_listing_its_files_after_a_comma_and_space_is_read_whole(tmp_pa
     for v in (v, res.vehicles):  # (moves_passenger_car books at its source type's fixed mass)
         car = v[(v.vtype == "car") & (v.equation == "vsp_ldv1999")]
         assert set(v[v.vtype == "lorry"].mass_kg) == {12000.0} and set(car.mass_kg) == {1400.0}
+
+
+@pytest.mark.sumo
+def test_a_route_file_the_header_names_and_that_is_gone_is_warned_of(recorded, tmp_path, monkeypatch, capsys):
+    """Its vTypes are unknown, so its trucks are booked as cars: a warning (it was a note
+    among the notes), naming the file."""
+    study = tmp_path / "study"
+    shutil.copytree(recorded, study)
+    (study / "scen" / "r.rou.xml").unlink()
+    monkeypatch.chdir(tmp_path)
+    assert cli_main(["fcd", str(study / "out" / "fcd.xml"), "--no-figures", "--out", "o"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the FCD's header names r.rou.xml, not found beside the FCD" in err
+    assert "booked as passenger cars" in err
+    v = pd.read_parquet(tmp_path / "o" / "vehicles.parquet")
+    assert set(v[v.vtype == "lorry"].vclass) == {"passenger"}  # what the warning says

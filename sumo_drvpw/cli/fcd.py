@@ -9,6 +9,7 @@ results are the local engine's summed."""
 from __future__ import annotations
 
 import argparse
+import sys
 
 from sumo_drvpw.cli import (add_cold_start, add_force, check_air_temperature, check_period,
                             cold_start_override, output_set, sumo_time_arg)
@@ -163,6 +164,11 @@ def _recorded_inputs(args: argparse.Namespace) -> None:
         print(f"note: {how}: " + "; ".join(took)
               + " (--net, --vtypes or --scenario choose others)")
     missing = [v for k, v in rec["missing"] if want[k]]
-    if missing:
+    if missing and args.net is None:  # refused next, in one line: "give --net"
         print(f"note: {src} names {', '.join(missing)}, not found beside the FCD "
               f"(looked in {', '.join(rec['looked_in'])}); give --vtypes (and --net) for its vTypes")
+    elif missing:
+        print(f"warning: {src} names {', '.join(missing)}, not found beside the FCD "
+              f"(looked in {', '.join(rec['looked_in'])}): the vTypes defined there are unknown, their vehicles "
+              "booked as passenger cars (SUMO's default vClass) at a car's mass; give --vtypes (and --net) for its vTypes",
+              file=sys.stderr)
