@@ -323,3 +323,17 @@ def test_fcd_on_dask_books_riders_as_local(tmp_path):
     assert sb["source"]["riding_person_rows"] == sa["source"]["riding_person_rows"] > 0
     for t, x in sa["equations"]["phys"]["energy_j"]["city"].items():
         assert sb["equations"]["phys"]["energy_j"]["city"][t] == pytest.approx(x, rel=1e-9)
+
+
+def test_dask_buckets_add_up_the_vehicles_no_chain_books():
+    """merge_ledgers adds the buckets' counts of vehicles no chain books, per vClass and per
+    vType (it kept the first bucket's only: the warning and summary.json chain.chainless
+    counted a third of them on three buckets)."""
+    from sumo_drvpw.sim.fcd_dask import merge_ledgers
+    from sumo_drvpw.sim.ledger import Ledger
+
+    a, b = Ledger(3, 1), Ledger(3, 1)
+    a.chainless, a.chainless_vtypes = {"passenger": 2}, {"cng": 2}
+    b.chainless, b.chainless_vtypes = {"passenger": 1, "bus": 4}, {"cng": 1, "ebus": 4}
+    out = merge_ledgers([a, b])
+    assert out.chainless == {"passenger": 3, "bus": 4} and out.chainless_vtypes == {"cng": 3, "ebus": 4}

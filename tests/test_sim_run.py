@@ -1079,6 +1079,9 @@ def test_chains_book_the_vehicles_of_their_energy_carrier(tmp_path, capsys):
     # and the CO2 totals leave those cars out: said with their count and vClass
     w = [x for x in s["warnings"] if "no battery or fuel chain applies to" in x]
     assert len(w) == 1 and "to 2 passenger vehicle(s)" in w[0]
+    # which vTypes, with the class that names their carrier (a rehearsal: 357 cars, no names)
+    assert "vTypes petrol 2 (HBEFA3/PC_G_EU4)" in w[0]
+    assert s["chain"]["chainless"] == {"by_vclass": {"passenger": 2}, "by_vtype": {"petrol": 2}}
     assert "epa_diesel_car" in err
     assert load_equation("epa_diesel_car").chain.fuel == "diesel"
 
@@ -1103,6 +1106,10 @@ def test_bare_config_books_electric_cars_in_kwh_and_petrol_cars_in_litres(tmp_pa
     assert eqs["e"] == wheel | {"bmw_i3_battery"}
     # (an Energy vType that writes its mass is also booked by SUMO's own model, vtype_energy)
     assert eqs["w"] == wheel | {"bmw_i3_battery", "vtype_energy.ev_written"}
+    # the same cars in both battery rows: said, so a class's kWh is not added up twice
+    assert s["assumptions"]["vtype_energy"]["also_booked_by"] == {"vtype_energy.ev_written": ["bmw_i3_battery"]}
+    w = [x for x in s["warnings"] if "booked by their own parameters" in x]
+    assert len(w) == 1 and "which book the same vehicles" in w[0] and "ev_written and bmw_i3_battery" in w[0]
     assert eqs["c"] == wheel | {"epa_gasoline_car"}
     cls = {(r["key"], r["equation"]) for r in s["chain"]["classes"]}
     assert cls == {("evehicle", "bmw_i3_battery"), ("passenger", "bmw_i3_battery"),

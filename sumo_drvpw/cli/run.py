@@ -145,6 +145,8 @@ def _print_summary(s: dict, out, label: str = "", replaced: bool = False) -> Non
                                      f"{tp['potential_j'][n] / 3.6e6:+.3f} kWh" for n in tp["kinetic_j"]
                                      if n not in idle and max(abs(tp['kinetic_j'][n]), abs(tp['potential_j'][n])) >= 1800.0)
                             or "under 0.0005 kWh for every equation"))  # (those booking none of them: not listed)
+    # a vType's own Energy-model equation books vehicles another battery chain books too
+    also = ((s.get("assumptions") or {}).get("vtype_energy") or {}).get("also_booked_by", {})
     for r in (s.get("chain") or {}).get("classes", []):  # battery kWh or fuel L per class
         if not r.get("distance_km"):
             continue
@@ -158,7 +160,9 @@ def _print_summary(s: dict, out, label: str = "", replaced: bool = False) -> Non
         else:
             print(f"  {r['equation']} battery, {r['key']}: net {r['net_kwh']:.2f} kWh over "
                   f"{_km(r['distance_km'])} km ({r['net_kwh_per_km']:.3f} kWh/km; auxiliary "
-                  f"{r['auxiliary_kwh']:.2f} kWh)")
+                  f"{r['auxiliary_kwh']:.2f} kWh)"
+                  + (f" — its vType's own parameters, for vehicles {' and '.join(also[r['equation']])} books "
+                     "too: an alternative, not more vehicles" if also.get(r["equation"]) else ""))
 
 
 def _km(km: float) -> str:

@@ -323,6 +323,21 @@ class Accountant(_Listener):
             self.trace.close()
             self.trace = None
 
+    def _vtype_energy_listing(self) -> dict:
+        """summary.json assumptions.vtype_energy, with ``also_booked_by``: vtype_energy
+        equation → the other battery chains that booked its vType's vehicles too
+        (alternatives, not more vehicles)."""
+        r = self.resolver
+        also = {}
+        for eq, vt in r.energy_of.items():
+            app = (r.cache.get(vt) or (None, None))[1]
+            if app is None:
+                continue
+            others = [n for n, a in zip(r.names, app) if a and n != eq and r.carrier_of.get(n) == "electricity"]
+            if others:
+                also[eq] = others
+        return {**self.vtype_energy, "also_booked_by": also} if also else self.vtype_energy
+
     def result(self, extra: dict | None = None) -> RunResult:
         """Everything booked so far as a :class:`RunResult` (tables, summary, writer)."""
         self.close_trace()
@@ -351,7 +366,7 @@ class Accountant(_Listener):
                             "booked_as": dict(sorted(self.resolver.booked_as.items())),
                             "energy_carrier": dict(sorted(self.resolver.carriers.items())),
                             "powertrain": dict(sorted(self.resolver.powertrains.items())),
-                            "vtype_energy": self.vtype_energy},
+                            "vtype_energy": self._vtype_energy_listing()},
         }
         summary_extra.update(extra or {})
         warnings = network_warnings(net) + road_class_warnings(sc.road_class, net)
@@ -385,7 +400,7 @@ class Accountant(_Listener):
         no_hybrid = no_hybrid_chain_warning(self.resolver.powertrains)
         if no_hybrid:
             warnings.append(no_hybrid)
-        vt_warning = listing_warning(self.vtype_energy)
+        vt_warning = listing_warning(self._vtype_energy_listing())
         if vt_warning:
             warnings.append(vt_warning)
         n_cont = getattr(self.file_vtypes, "containers", 0)
@@ -432,7 +447,8 @@ class Accountant(_Listener):
             warnings.append("a new run began (simulation time went back from {:g} s to {:g} s): this "
                             "Accountant stopped booking there and left the step listeners; "
                             "start a new one for the new run".format(*self.left_new_run))
-        warnings += chain_warnings(led.chain, led.chainless)
+        ecs = {vt: v.emission_class for vt, v in self.file_vtypes.items() if getattr(v, "emission_class", None)}
+        warnings += chain_warnings(led.chain, led.chainless, led.chainless_vtypes, ecs)
         summary_extra["warnings"] = warnings + list(summary_extra.get("warnings", []))
         summary = summary_dict(led, net, self.names, self.eqset.uses_other, summary_extra,
                                self.file_vtypes)

@@ -65,16 +65,29 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
             "hvac_air_temperature_assumed": chain.air_temperature_assumed}
 
 
-def chain_warnings(chain: ChainLedger | None, chainless: dict | None = None) -> list[str]:
+#: vTypes named in the warning on vehicles no chain books (the rest counted)
+CHAINLESS_VTYPES_SHOWN = 8
+
+
+def chain_warnings(chain: ChainLedger | None, chainless: dict | None = None,
+                   by_vtype: dict | None = None, emission_class: dict | None = None) -> list[str]:
     """What a run's battery/fuel accounts assumed that the scenario did not say, and the
-    vClasses they leave out (``chainless``: vClass → vehicles no chain applies to)."""
+    vClasses they leave out (``chainless``: vClass → vehicles no chain applies to;
+    ``by_vtype``: the same per vType, named with its ``emission_class`` where known)."""
     if chain is None:
         return []
     out = []
     if chainless:
+        top = sorted((by_vtype or {}).items(), key=lambda x: (-x[1], x[0]))
+        named = [f"{vt} {n}" + (f" ({emission_class[vt]})" if (emission_class or {}).get(vt) else "")
+                 for vt, n in top[:CHAINLESS_VTYPES_SHOWN]]
+        if len(top) > CHAINLESS_VTYPES_SHOWN:
+            named.append(f"{len(top) - CHAINLESS_VTYPES_SHOWN} more vTypes")
         out.append("no battery or fuel chain applies to "
                    + ", ".join(f"{n} {c}" for c, n in sorted(chainless.items(), key=lambda x: -x[1]))
-                   + " vehicle(s): their driving energy is booked, but the kWh, litres and CO2 totals "
+                   + " vehicle(s)" + (f" — vTypes {', '.join(named)}, a carrier no chain of the run books "
+                                      "or a class none is made for (summary.json chain.chainless)" if named else "")
+                   + ": their driving energy is booked, but the kWh, litres and CO2 totals "
                    "leave them out (give them an equation with a chain: [vclasses.<vClass>] or "
                    "[vtypes.<id>] equations)")
     if chain.air_temperature_assumed:
@@ -134,6 +147,9 @@ def write_chain_outputs(out_dir, result) -> dict[str, str]:
                        .to_csv(index=False))
         files[f"chain_{key}"] = str(path)
     result.summary["chain"] = chain_summary(chain, ids, classes, order)
+    result.summary["chain"]["chainless"] = {  # accounted vehicles no chain books
+        "by_vclass": dict(sorted(getattr(led, "chainless", {}).items())),
+        "by_vtype": dict(sorted(getattr(led, "chainless_vtypes", {}).items()))}
     thin = {r["key"]: r["distance_km"] for r in rep["classes"] if 0 < r["distance_km"] < THIN_CLASS_KM}
     if thin:
         result.summary.setdefault("warnings", []).append(

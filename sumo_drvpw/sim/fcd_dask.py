@@ -123,6 +123,9 @@ def merge_ledgers(ledgers: list):
         out.load_max_kg = max(out.load_max_kg, led.load_max_kg)
         out.hard_brake_max_mps2 = max(out.hard_brake_max_mps2, led.hard_brake_max_mps2)
         out.dynamics.merge(led.dynamics)
+        for name in ("chainless", "chainless_vtypes"):  # (vClass or vType → vehicles)
+            for k, n in getattr(led, name).items():
+                getattr(out, name)[k] = getattr(out, name).get(k, 0) + n
         for c, types in led.class_vtypes.items():
             out.class_vtypes.setdefault(c, {}).update(types)
         out.snapshots = [(s[0],) + tuple(x + y for x, y in zip(s[1:], o[1:]))

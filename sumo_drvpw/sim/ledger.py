@@ -175,6 +175,8 @@ class Ledger:
         #: vClass → accounted vehicles no battery or fuel chain of the run applies to (their
         #: driving energy is booked; their kWh, litres and CO₂ are not)
         self.chainless: dict[str, int] = {}
+        #: the same by vType
+        self.chainless_vtypes: dict[str, int] = {}
         #: where finished vehicles' rows go (``write(ledger, slots)``, ``write_chain(rows)``:
         #: :class:`sumo_drvpw.sim.spill.VehicleSpill`); None keeps every vehicle in memory
         self.spill = None
@@ -334,6 +336,7 @@ class Ledger:
         self.veh_keep[i] = keep
         if keep and self.chain is not None and self.chain.active and not np.any(np.asarray(app)[self.chain.active]):
             self.chainless[vclass or "unknown"] = self.chainless.get(vclass or "unknown", 0) + 1
+            self.chainless_vtypes[vtype] = self.chainless_vtypes.get(vtype, 0) + 1
         self.n_veh += 1
         if self.n_veh > self.peak_held:
             self.peak_held = self.n_veh

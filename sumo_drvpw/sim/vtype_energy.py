@@ -279,6 +279,10 @@ def listing_warning(listing: dict) -> str | None:
     radial = sorted(vt for vt, b in booked.items() if b.get("radial_drag"))
     return ("vTypes with SUMO's Energy model or MMPEVEM were booked by their own parameters as a battery "
             "chain (vtype_energy): " + "; ".join(parts)
+            + ("; beside the class's battery chains, which book the same vehicles (alternatives, not more "
+               "vehicles: a class's or fleet's kWh takes one of them): " + ", ".join(
+                   f"{e} and {' and '.join(o)}" for e, o in sorted(also.items())) if (also := listing.get("also_booked_by"))
+               else "")
             + (f"; Energy vTypes without parameters not booked by it: {', '.join(sorted(left))}" if left else "")
             + (f"; the radial drag in curves of {', '.join(radial)} booked per step as SUMO books it, so it "
                "grows as the step shortens (×10 from 1 s to 0.1 s)" if radial else "")
