@@ -327,15 +327,7 @@ class Accountant(_Listener):
         """summary.json assumptions.vtype_energy, with ``also_booked_by``: vtype_energy
         equation → the other battery chains that booked its vType's vehicles too
         (alternatives, not more vehicles)."""
-        r = self.resolver
-        also = {}
-        for eq, vt in r.energy_of.items():
-            app = (r.cache.get(vt) or (None, None))[1]
-            if app is None:
-                continue
-            others = [n for n, a in zip(r.names, app) if a and n != eq and r.carrier_of.get(n) == "electricity"]
-            if others:
-                also[eq] = others
+        also = dict(sorted(self.resolver.also_booked.items()))
         return {**self.vtype_energy, "also_booked_by": also} if also else self.vtype_energy
 
     def result(self, extra: dict | None = None) -> RunResult:

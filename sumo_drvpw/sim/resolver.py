@@ -85,6 +85,9 @@ class VTypeResolver:
         #: vType → {"vclass", "mass_kg"}: vTypes in no file read, at SUMO's mass (made during
         #: the run by TraCI, or loaded through SUMO options the plug-in does not read)
         self.sumo_masses: dict[str, dict] = {}
+        #: vtype_energy equation → the other battery chains that book its vType's vehicles
+        #: too (alternatives, not more vehicles)
+        self.also_booked: dict[str, list[str]] = {}
         #: vType → {"vclass", "booked_as", "from"}: vTypes booked as the vehicle their
         #: emissionClass, guiShape, id or length names, not by their vClass
         self.booked_as: dict[str, dict] = {}
@@ -332,6 +335,12 @@ class VTypeResolver:
                 f"vType '{vt}' of vehicle '{vid}'{where} has no mass: give it a mass attribute, "
                 f'a <param key="drvpw.mass" value="..."/>, or vtypes.{vt}.mass_kg or '
                 f"vclasses.{vclass}.mass_kg in the scenario (or leave it out with vehicles.vtypes)")
+        for i, n in enumerate(self.names):  # its own vtype_energy beside other battery chains
+            if app[i] and self.energy_of.get(n) == vt:
+                others = [o for o, a in zip(self.names, app)
+                          if a and o != n and self.carrier_of.get(o) == "electricity"]
+                if others:
+                    self.also_booked[n] = others
         return (float(mass), app, True, vclass, "")
 
 
