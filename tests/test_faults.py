@@ -652,3 +652,34 @@ def test_output_piped_into_a_reader_that_has_gone(tmp_path):
         assert bad.returncode == 2 and not (tmp_path / "x.parquet").exists()
     finally:
         os.close(w)
+
+
+def test_a_console_that_cannot_show_the_reports_symbols_gets_them_plain(tmp_path):
+    """A Latin-1 (or cp1252) console: calibrate printed ρ, →, − and stopped with a
+    UnicodeEncodeError traceback, writing nothing (a rehearsal, LC_ALL=de_DE.ISO-8859-1).
+    Now the symbols come out plain and the command finishes."""
+    env = dict(os.environ, PYTHONIOENCODING="latin-1")
+    out = tmp_path / "eq.toml"
+    r = subprocess.run([sys.executable, "-m", "sumo_drvpw", "calibrate", str(BUNDLED_LOG), "--vehicle", "prius3",
+                        "--out", str(out)], capture_output=True, env=env, cwd=tmp_path, timeout=600)
+    assert r.returncode == 0, r.stderr.decode("latin-1")[-500:]
+    assert out.is_file() and b"Traceback" not in r.stderr
+    text = r.stdout.decode("latin-1")
+    assert text and "rho" in text  # ρ, plain
+
+
+def test_no_usable_temporary_folder_is_one_line(tmp_path, monkeypatch, capsys):
+    """Python finds no writable temporary folder (TMPDIR, /tmp, /var/tmp, the working
+    folder): one line naming the remedy and exit 2, not a FileNotFoundError traceback."""
+    import errno
+    import tempfile
+
+    def none(*a, **k):
+        raise FileNotFoundError(errno.ENOENT, "No usable temporary directory found in ['/tmp', '/var/tmp']")
+
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    monkeypatch.setattr(tempfile, "_get_default_tempdir", none)
+    code = cli_main(["run", "city", "--end", "5", "--no-figures", "--no-progress", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "set TMPDIR to a writable folder" in err
+    assert not (tmp_path / "o").exists()

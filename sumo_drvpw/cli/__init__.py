@@ -430,6 +430,20 @@ def _stopped_by_signal() -> int | None:
     return _signal_exit(bool(_TERMINATED)) if _TERMINATED or _INTERRUPTED else None
 
 
+#: plain stand-ins for the symbols the reports print, on a console that cannot show them
+_PLAIN = str.maketrans({"→": "->", "←": "<-", "−": "-", "–": "-", "—": "-", "≥": ">=", "≤": "<=",
+                        "≈": "~", "±": "+/-", "×": "x", "·": "*", "Δ": "d", "Σ": "sum", "η": "eta",
+                        "ρ": "rho", "σ": "sigma", "θ": "theta", "²": "^2", "³": "^3", "₂": "2",
+                        "√": "sqrt", "…": "...", "‘": "'", "’": "'", "“": '"', "”": '"'})
+
+
+def _encodable(text: str, stream) -> str:
+    """``text`` as the stream's encoding can write it: the reports' symbols in plain
+    characters, anything else escaped (a Latin-1 or cp1252 console: no traceback)."""
+    enc = getattr(stream, "encoding", None) or "ascii"
+    return text.translate(_PLAIN).encode(enc, "backslashreplace").decode(enc)
+
+
 class _ClosedPipeSafe:
     """Standard output or error that goes on when its reader has gone (``sumo-drvpw … | head``):
     the first broken pipe points the descriptor at /dev/null (the idiom of Python's signal
@@ -454,7 +468,10 @@ class _ClosedPipeSafe:
             return None
 
     def write(self, text):
-        r = self._guard(self._stream.write, text)
+        try:
+            r = self._guard(self._stream.write, text)
+        except UnicodeEncodeError:  # a console whose encoding lacks →, Δ, − (Latin-1, cp1252)
+            r = self._guard(self._stream.write, _encodable(text, self._stream))
         return len(text) if r is None else r
 
     def flush(self):
@@ -519,6 +536,10 @@ def main(argv: list[str] | None = None) -> int:
         rc = _stopped_by_signal()
         if rc is not None:
             return rc
+        if e.errno == errno.ENOENT and e.filename is None and "temporary directory" in str(e.strerror):
+            print(f"sumo-drvpw {args.command}: error: no usable temporary folder (TMPDIR, /tmp, /var/tmp and "
+                  "the working folder cannot be written): set TMPDIR to a writable folder", file=sys.stderr)
+            return 2
         if e.errno in (errno.ENOSPC, errno.EDQUOT):
             print(f"sumo-drvpw {args.command}: error: disk full (no space left on the device) "
                   f"while writing {e.filename or 'the output'}", file=sys.stderr)
