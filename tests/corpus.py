@@ -816,7 +816,7 @@ def _(d):
 def _(d):
     (d / "bus.toml").write_text('[equation]\nname = "bus"\n[terms]\nacc = 1.0\nv1 = 900.0\n[chain]\n'
                                 'predicts = "fuel"\ntraction_efficiency = 0.85\nmarginal_efficiency = 0.4\n'
-                                'idle_fuel_power_w = 20000.0\nengine_off_below_w = -inf\n')
+                                'idle_fuel_power_w = 20000.0\nengine_off_below_w = -inf\n', encoding="utf-8")
     return ["run", "city", "--equation", str(d / "bus.toml"), "--end", "5", "--out", str(d / "run")]
 
 
@@ -824,14 +824,14 @@ def _(d):
 def _(d):
     cfg = Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg"
     (d / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{cfg.as_posix()}"\n'
-                              '[vtypes.prius_3]\nmass_kg = 1600\n')
+                              '[vtypes.prius_3]\nmass_kg = 1600\n', encoding="utf-8")
     return ["run", str(d / "s.toml"), "--end", "5", "--out", str(d / "run")]
 
 
 @case("options", "scenario names a missing equation file", ("mine/bus.toml",))
 def _(d):
     cfg = Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg"
-    (d / "s.toml").write_text(f'equations = ["vsp_ldv1999", "mine/bus.toml"]\n[sumo]\nconfig = "{cfg.as_posix()}"\n')
+    (d / "s.toml").write_text(f'equations = ["vsp_ldv1999", "mine/bus.toml"]\n[sumo]\nconfig = "{cfg.as_posix()}"\n', encoding="utf-8")
     return ["run", str(d / "s.toml"), "--end", "5", "--out", str(d / "run")]
 
 
@@ -839,7 +839,7 @@ def _(d):
 def _(d):
     cfg = Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg"
     (d / "s.toml").write_text(f'equations = ["vsp_ldv1999", "drvpw_prius3"]\n[sumo]\nconfig = "{cfg.as_posix()}"\n'
-                              '[outputs]\ndifference = ["vsp_ldv1999", "vsp_ldv1999"]\n')
+                              '[outputs]\ndifference = ["vsp_ldv1999", "vsp_ldv1999"]\n', encoding="utf-8")
     return ["run", str(d / "s.toml"), "--end", "5", "--out", str(d / "run")]
 
 
@@ -1058,5 +1058,5 @@ def sine_trips(rng, n: int, v_mean_mps: float) -> pd.DataFrame:
 def road_equation(folder: Path) -> Path:
     """road.toml in ``folder``: a known road load, acc 1, v1 160 W·s/m, v3 0.4 W·s³/m³."""
     road = Path(folder) / "road.toml"
-    road.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 160.0\nv3 = 0.4\n')
+    road.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 160.0\nv3 = 0.4\n', encoding="utf-8")
     return road

@@ -16,8 +16,8 @@ import sumolib
 def build_net(d: Path, nodes_xml: str, edges_xml: str, *options: str) -> Path:
     """``n.net.xml`` in ``d`` from the ``<nodes>`` and ``<edges>`` texts (netconvert options
     added)."""
-    (d / "n.nod.xml").write_text(nodes_xml)
-    (d / "n.edg.xml").write_text(edges_xml)
+    (d / "n.nod.xml").write_text(nodes_xml, encoding="utf-8")
+    (d / "n.edg.xml").write_text(edges_xml, encoding="utf-8")
     subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml",
                     *options], check=True, capture_output=True, cwd=d)
     return d / "n.net.xml"
@@ -32,7 +32,7 @@ def energy_scenario(d: Path, end: float, step_length: float = 0.5, additional: s
         f'equations = ["vtype_energy"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["{routes}"]\n'
         + (f'additional = ["{additional}"]\n' if additional else "")
         + f'end = {end}\nstep_length = {step_length}\noptions = ["--no-warnings", "true", "--precision", "6", '
-        f'{outs}]\n[outputs]\nfigures = false\n')
+        f'{outs}]\n[outputs]\nfigures = false\n', encoding="utf-8")
     return d / "s.toml"
 
 

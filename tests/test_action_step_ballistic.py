@@ -38,7 +38,7 @@ def _scenario(d: Path, ballistic: str, asl: str = 'actionStepLength="1.0"') -> P
     <flow id="s" type="slow" begin="0" end="40" period="4" departSpeed="max"><route edges="c00c10 c10c20"/></flow>
     <flow id="p" type="plain" begin="2" end="60" period="4" departSpeed="max"><route edges="c00c10 c10c20"/></flow>
 </routes>
-""")
+""", encoding="utf-8")
     cfg = d / f"c{len(ballistic)}{len(asl)}.sumocfg"
     cfg.write_text(f"""<configuration>
     <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
@@ -47,7 +47,7 @@ def _scenario(d: Path, ballistic: str, asl: str = 'actionStepLength="1.0"') -> P
     <random_number><seed value="7"/></random_number>
     <report><no-warnings value="true"/></report>
 </configuration>
-""")
+""", encoding="utf-8")
     return cfg
 
 

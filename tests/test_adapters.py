@@ -231,13 +231,13 @@ def test_jlu_cycle_names():
 
 def test_jlu_vehicle_road_load_si_conversions():
     import tomllib
-    doc = tomllib.loads((REPO / "sumo_drvpw/model/builtin/vehicles/jlu_bev.toml").read_text())
+    doc = tomllib.loads((REPO / "sumo_drvpw/model/builtin/vehicles/jlu_bev.toml").read_text(encoding="utf-8"))
     rl = doc["road_load"]
     assert rl["b_n_per_mps"] == pytest.approx(rl["b_n_per_kmh"] * 3.6)
     assert rl["c_n_per_mps2"] == pytest.approx(rl["c_n_per_kmh2"] * 3.6**2)
     for key in ("vehicle.mass_kg", "road_load.a_n", "road_load.b_n_per_kmh", "road_load.c_n_per_kmh2"):
         assert key in doc["sources"]
-    bmw = tomllib.loads((REPO / "sumo_drvpw/model/builtin/vehicles/bmw_i3.toml").read_text())
+    bmw = tomllib.loads((REPO / "sumo_drvpw/model/builtin/vehicles/bmw_i3.toml").read_text(encoding="utf-8"))
     for table, values in bmw.items():
         if table in ("sources",) or not isinstance(values, dict):
             continue
@@ -368,11 +368,11 @@ def test_columns_two_labels_alike_but_for_a_space_keep_both_or_are_refused_by_na
     m = write(tmp_path, "map.toml", '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\n'
               'unit = "m/s"\n')
     src = write(tmp_path, "x.csv", "t;v;Vent [°C] ;Vent [°C]\n0;1;20;21\n1;2;22;23\n2;3;24;25\n")
-    m.write_text('[options]\nsep = ";"\n' + m.read_text())
+    m.write_text('[options]\nsep = ";"\n' + m.read_text(encoding="utf-8"), encoding="utf-8")
     df, _ = read("columns", src, columns=m)
     np.testing.assert_allclose(df["vent_c"], [20, 22, 24])
     np.testing.assert_allclose(df["vent_c_2"], [21, 23, 25])
-    m.write_text(m.read_text() + '[columns."Vent [°C]"]\nname = "cabin_c"\nunit = "°C"\n')
+    m.write_text(m.read_text(encoding="utf-8") + '[columns."Vent [°C]"]\nname = "cabin_c"\nunit = "°C"\n', encoding="utf-8")
     with pytest.raises(UserError, match=r"x.csv: 2 columns are labelled 'Vent \[°C\]'.*cannot tell them apart"):
         read("columns", src, columns=m)
 
@@ -546,7 +546,7 @@ def test_cli_round_trip(tmp_path, capsys):
     rep = read_report(out)
     assert rep["kept"] == 3 and rep["rows_read"] == 6 and rep["format"] == "columns"
     assert json.loads(pq.read_schema(out).metadata[b"sumo_drvpw.import"])["out"] == str(out)
-    src.write_text("")                                             # broken input: exit 2, old file kept
+    src.write_text("", encoding="utf-8")                                             # broken input: exit 2, old file kept
     assert cli_main(["import", "columns", str(src), "--columns", str(m), "--out", str(out)]) == 2
     assert "file is empty" in capsys.readouterr().err
     assert len(pd.read_parquet(out)) == 3
@@ -636,14 +636,14 @@ def test_d3_layout_through_the_documented_mapping_compares_with_a_fuel_chain(tmp
     df = pd.read_parquet(out)
     np.testing.assert_allclose(df["fuel_rate_lph"], ccps * 3.6, rtol=1e-12)
     np.testing.assert_allclose(df["speed_mps"], mph * 0.44704, rtol=1e-12)
-    (tmp_path / "car.toml").write_text('[vehicle]\nname = "car"\nmass_kg = 1644.0\n')
+    (tmp_path / "car.toml").write_text('[vehicle]\nname = "car"\nmass_kg = 1644.0\n', encoding="utf-8")
     capsys.readouterr()
     assert cli_main(["compare", str(out), "--vehicle", str(tmp_path / "car.toml"), "--equation",
                      "epa_gasoline_car", "--target", "fuel", "--out", str(tmp_path / "cmp")]) == 0
     said = capsys.readouterr().out
     assert "chain input 'ambient_c' unknown (NaN) on 300 of 300 samples" in said
     assert "no warm-running factor" in said
-    trip = json.loads((tmp_path / "cmp" / "report.json").read_text())
+    trip = json.loads((tmp_path / "cmp" / "report.json").read_text(encoding="utf-8"))
     eq = trip["equations"][0] if isinstance(trip["equations"], list) else next(iter(trip["equations"].values()))
     (got,) = eq["trip_energy"]["trips"].values()
     from sumo_drvpw.model.constants import FUELS
@@ -743,7 +743,7 @@ def test_bmw_tum_trip_resaved_with_decimal_commas_reads_the_same(tmp_path):
     np.testing.assert_allclose(d2["battery_current_a"], 20.75)
     assert any("decimal comma" in n for n in rep["files"][0]["notes"])
     # a text cell in a column the format knows is still an error naming file, column and row
-    bad = write(tmp_path / "b", "TripX02.csv", comma.read_text().replace("50,25", "fault", 1))
+    bad = write(tmp_path / "b", "TripX02.csv", comma.read_text(encoding="utf-8").replace("50,25", "fault", 1))
     with pytest.raises(UserError, match=r"TripX02.csv: column 'Motor Torque \[Nm\]' is not numeric: data row 0"):
         read("bmw-i3-tum", bad)
 
@@ -761,14 +761,14 @@ def test_bmw_trips_in_sub_folders_find_the_overview_above_and_the_folder_says_wh
     trip = BMW_HEADER + "0;36;500;10;390;-1\n0.1;37;500;10;390;-1\n"
     flat = tmp_path / "flat"
     flat.mkdir()
-    (flat / "overview.csv").write_text(ov)
+    (flat / "overview.csv").write_text(ov, encoding="utf-8")
     for t in ("TripZ01", "TripZ02"):
         write(flat, f"{t}.csv", trip)
     top = tmp_path / "nested"
     for t, month in (("TripZ01", "2019/06"), ("TripZ02", "2019/12")):
         (top / month).mkdir(parents=True)
         write(top / month, f"{t}.csv", trip)
-    (top / "overview.csv").write_text(ov)
+    (top / "overview.csv").write_text(ov, encoding="utf-8")
     with pytest.raises(UserError, match=r"its sub-folders hold 2 such file\(s\).*2019/06.*2019/12"):
         read("bmw-i3-tum", top)
     d_flat, _ = read("bmw-i3-tum", flat)
@@ -781,7 +781,7 @@ def test_bmw_trips_in_sub_folders_find_the_overview_above_and_the_folder_says_wh
     # an overview above that does not list the trip is not joined
     other = tmp_path / "other" / "x"
     other.mkdir(parents=True)
-    (tmp_path / "other" / "overview.csv").write_text(ov.replace("TripZ01", "TripY01"))
+    (tmp_path / "other" / "overview.csv").write_text(ov.replace("TripZ01", "TripY01"), encoding="utf-8")
     d, rep = read("bmw-i3-tum", write(other, "TripZ01.csv", trip))
     assert "season" not in d and any("no trip metadata" in n for n in rep["files"][0]["notes"])
 
@@ -790,12 +790,12 @@ def test_bmw_trip_below_someone_elses_overview_csv_is_read(tmp_path):
     """Only an overview above the trip that lists it is joined, so another data set's
     overview.csv (no 'Trip' column) a few folders up is no reason to refuse the trip; it
     was ("…/overview.csv: missing column 'Trip'"). One beside the trip is still checked."""
-    (tmp_path / "overview.csv").write_text("name,value\na,1\n")
+    (tmp_path / "overview.csv").write_text("name,value\na,1\n", encoding="utf-8")
     (tmp_path / "tum" / "2019").mkdir(parents=True)
     f = write(tmp_path / "tum" / "2019", "TripZ01.csv", BMW_HEADER + "0;36;500;10;390;-1\n0.1;37;500;10;390;-1\n")
     d, rep = read("bmw-i3-tum", f)
     assert len(d) == 2 and "season" not in d
     assert any("no trip metadata" in n for n in rep["files"][0]["notes"])
-    (tmp_path / "tum" / "2019" / "overview.csv").write_text("name,value\na,1\n")
+    (tmp_path / "tum" / "2019" / "overview.csv").write_text("name,value\na,1\n", encoding="utf-8")
     with pytest.raises(UserError, match="missing column 'Trip'"):
         read("bmw-i3-tum", f)

@@ -122,19 +122,19 @@ def test_python_api_outputs_are_whole_sets_as_the_commands_are(tmp_path):
     assert (d / "chain_vehicles.csv").is_file() and (d / "manifest.json").is_file()
     res = run_scenario("city", d, end=30, figures=False, equations=["vsp_ldv1999"])
     assert not (d / "chain_vehicles.csv").exists()
-    listed = {f["path"] for f in json.loads((d / "manifest.json").read_text())["files"]}
+    listed = {f["path"] for f in json.loads((d / "manifest.json").read_text(encoding="utf-8"))["files"]}
     assert listed == {str(p.relative_to(d)) for p in d.rglob("*") if p.is_file()} - {"manifest.json"}
-    (d / "notes.txt").write_text("mine")
+    (d / "notes.txt").write_text("mine", encoding="utf-8")
     with pytest.raises(OutputExists, match="notes.txt"):
         run_scenario("city", d, end=30, figures=False, equations=["vsp_ldv1999"])
     with pytest.raises(OutputExists, match="notes.txt"):
         res.write(d)
     res.write(d, force=True)
-    assert (d / "notes.txt").read_text() == "mine"
-    assert "notes.txt" not in {f["path"] for f in json.loads((d / "manifest.json").read_text())["files"]}
+    assert (d / "notes.txt").read_text(encoding="utf-8") == "mine"
+    assert "notes.txt" not in {f["path"] for f in json.loads((d / "manifest.json").read_text(encoding="utf-8"))["files"]}
     mine = tmp_path / "mine"
     mine.mkdir()
-    (mine / "data.csv").write_text("1,2\n")
+    (mine / "data.csv").write_text("1,2\n", encoding="utf-8")
     with pytest.raises(OutputExists, match="not written by sumo-drvpw"):
         res.write(mine)
     res.write(tmp_path / "fresh")
@@ -195,7 +195,7 @@ def test_a_scenario_that_is_no_path_is_a_user_error(spec, tmp_path):
 
     with pytest.raises(UserError, match="give a scenario file, a SUMO config or a built-in"):
         run_scenario(spec)
-    (tmp_path / "f.txt").write_text("x")
+    (tmp_path / "f.txt").write_text("x", encoding="utf-8")
     with pytest.raises(UserError, match="is a file; give a folder"):
         run_scenario("city", tmp_path / "f.txt", end=5)
 
@@ -213,7 +213,7 @@ def test_a_refused_run_leaves_the_earlier_set_and_a_code_built_fuel_chain_needs_
     before = sorted(p.name for p in d.iterdir())
     cfg = (Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg").as_posix()
     (tmp_path / "typo.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{cfg}"\n'
-                                        '[vtypes.prius33]\nmass_kg = 1600\n')
+                                        '[vtypes.prius33]\nmass_kg = 1600\n', encoding="utf-8")
     with pytest.raises(UserError, match="prius33"):
         run_scenario(tmp_path / "typo.toml", d, end=20, figures=False)
     assert sorted(p.name for p in d.iterdir()) == before

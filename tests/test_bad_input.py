@@ -159,12 +159,12 @@ def test_tiny_negative_speeds_are_clipped_and_counted(tmp_path, capsys):
     assert cli_main(["calibrate", str(b), "--out", str(tmp_path / "b.toml")]) == 0
     import tomllib
 
-    ta = tomllib.loads((tmp_path / "a.toml").read_text())["terms"]
-    tb = tomllib.loads((tmp_path / "b.toml").read_text())["terms"]
+    ta = tomllib.loads((tmp_path / "a.toml").read_text(encoding="utf-8"))["terms"]
+    tb = tomllib.loads((tmp_path / "b.toml").read_text(encoding="utf-8"))["terms"]
     assert ta == tb
     import json
 
-    rep = json.loads((tmp_path / "rep" / "report.json").read_text())
+    rep = json.loads((tmp_path / "rep" / "report.json").read_text(encoding="utf-8"))
     assert f'"clipped_negative_speed": {int(still.sum())}' in json.dumps(rep)
 
 
@@ -177,8 +177,8 @@ def test_speed_unit_kmh_option_gives_the_ms_calibration(tmp_path, capsys):
     assert cli_main(["calibrate", str(ms), "--out", str(tmp_path / "b.toml")]) == 0
     import tomllib
 
-    ta = tomllib.loads((tmp_path / "a.toml").read_text())["terms"]
-    tb = tomllib.loads((tmp_path / "b.toml").read_text())["terms"]
+    ta = tomllib.loads((tmp_path / "a.toml").read_text(encoding="utf-8"))["terms"]
+    tb = tomllib.loads((tmp_path / "b.toml").read_text(encoding="utf-8"))["terms"]
     assert ta.keys() == tb.keys()
     for k in ta:
         assert ta[k] == pytest.approx(tb[k], rel=1e-9)

@@ -144,7 +144,7 @@ def test_report_reproduces_the_papers_pattern(long_log, tmp_path):
     eq = tmp_path / "cal.toml"
     code = cli_main(["calibrate", str(long_log), "--vehicle", "prius3", "--out", str(eq), "--report", str(out)])
     assert code == 0
-    rep = json.loads((out / "report.json").read_text())["equations"]
+    rep = json.loads((out / "report.json").read_text(encoding="utf-8"))["equations"]
     cal, vsp = rep["cal"], rep["vsp_ldv1999"]
     # Table 3: VSP LDV 1999's R² at ≥ 50 kW clearly below DrvPw's
     assert cal["r2_heavy"] > 0.9
@@ -167,7 +167,7 @@ def test_calibrated_equation_drops_into_compare(long_log, tmp_path):
     out = tmp_path / "cmp"
     assert cli_main(["compare", str(long_log), "--vehicle", "prius3", "--equation", str(eq),
                      "--equation", "vsp_ldv1999", "--out", str(out)]) == 0
-    rep = json.loads((out / "report.json").read_text())
+    rep = json.loads((out / "report.json").read_text(encoding="utf-8"))
     for name in ("mine", "vsp_ldv1999"):
         assert {"n", "r2", "r2_light", "r2_heavy", "rmse_w", "bias_w"} <= set(rep["equations"][name])
 
@@ -176,9 +176,9 @@ def test_candidates_specs(tmp_path):
     assert resolve_candidates("indt-var-1") == ("acc", "grade", "aero", "roll")
     assert resolve_candidates("acc, v^2") == ("acc", "v^2")
     f = tmp_path / "c.toml"
-    f.write_text('terms = ["acc", "roll", "[heater_w]"]\n')
+    f.write_text('terms = ["acc", "roll", "[heater_w]"]\n', encoding="utf-8")
     assert resolve_candidates(str(f)) == ("acc", "roll", "[heater_w]")
-    f.write_text('terms = ["acc", "flux"]\n')
+    f.write_text('terms = ["acc", "flux"]\n', encoding="utf-8")
     with pytest.raises(UserError, match="flux"):
         resolve_candidates(str(f))
 
@@ -283,7 +283,7 @@ def test_report_with_a_vehicle_that_lacks_specs_skips_vsp_from_specs(tmp_path, c
     out, rep = tmp_path / "eq.toml", tmp_path / "rep"
     assert cli_main(["calibrate", str(f), "--vehicle", "bmw_i3", "--out", str(out), "--report", str(rep)]
                     + engine) == 0
-    md = (rep / "report.md").read_text()
+    md = (rep / "report.md").read_text(encoding="utf-8")
     assert "not compared" in md and "body.rolling_coefficient" in md and "vsp_ldv1999" in md
 
 

@@ -307,13 +307,13 @@ def test_a_kia_hyundai_log_without_current_books_its_energy_from_the_bms_counter
     assert cli_main(["import", "car-scanner", str(src), "--out", str(out)]) == 0
     eq = tmp_path / "ev.toml"
     eq.write_text('[equation]\nname = "ev"\n[terms]\nv1 = 150.0\n[chain]\npredicts = "battery"\n'
-                  "traction_efficiency = 0.9\nrecuperation_efficiency = 0.7\naux_power_w = 400.0\n")
+                  "traction_efficiency = 0.9\nrecuperation_efficiency = 0.7\naux_power_w = 400.0\n", encoding="utf-8")
     capsys.readouterr()
     assert cli_main(["compare", str(out), "--equation", str(eq), "--target", "battery", "--vehicle", "bmw_i3",
                      "--out", str(tmp_path / "cmp")]) == 0
     import json
 
-    rep = json.loads((tmp_path / "cmp" / "report.json").read_text())
+    rep = json.loads((tmp_path / "cmp" / "report.json").read_text(encoding="utf-8"))
     trip = rep["equations"]["ev"]["trip_net_energy"]["trips"]["kona"]
     d, c = (pd.read_parquet(out)[k].dropna() for k in COUNTERS)  # read from their first poll
     want = (d.iloc[-1] - d.iloc[0]) - (c.iloc[-1] - c.iloc[0])
@@ -326,13 +326,13 @@ def test_a_refused_cut_short_file_leaves_no_note_on_its_next_read(tmp_path):
     its 'cut short' mark behind: the same file, mended, then read 'truncated last row 1'
     (a newcomer's rehearsal through read(), 2026-11-29). Each read says its own."""
     path = wide_csv(tmp_path / "trip.csv", polls())
-    good = path.read_text()
+    good = path.read_text(encoding="utf-8")
     lines = good.splitlines()
     bad = lines[:5] + [lines[5].replace(lines[5].split(";")[0], "noon", 1)] + lines[6:]
-    path.write_text("\n".join(bad)[:-3])  # cut inside its last row, and a bad time in row 4
+    path.write_text("\n".join(bad)[:-3], encoding="utf-8")  # cut inside its last row, and a bad time in row 4
     with pytest.raises(UserError, match="data row 4 holds 'noon'"):
         read("car-scanner", path)
-    path.write_text(good)
+    path.write_text(good, encoding="utf-8")
     _, rep = read("car-scanner", path)
     assert "truncated last row" not in rep["files"][0]["dropped"], rep["files"][0]
     assert not any("cut short" in n for n in rep["files"][0]["notes"])

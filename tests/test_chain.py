@@ -526,7 +526,7 @@ def _planted_battery_log(tmp_path):
                                     "heater_power_w": heater}))
     df = pd.concat(frames, ignore_index=True)
     road = tmp_path / "road.toml"
-    road.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = 0.35\n')
+    road.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = 0.35\n', encoding="utf-8")
     from sumo_drvpw.data.log import from_frame
 
     x = from_frame(df).inputs()  # inputs as the reader derives them (acceleration from speed)
@@ -553,7 +553,7 @@ def test_cli_calibrate_battery_then_compare_uses_the_chain(tmp_path, capsys):
     assert ch.aux_power_w == pytest.approx(500.0, rel=0.02) and ch.std_err
     out = tmp_path / "cmp"
     assert cli_main(["compare", str(log), "--equation", str(eq), "--out", str(out)]) == 0
-    rep = json.loads((out / "report.json").read_text())["equations"]["chain"]
+    rep = json.loads((out / "report.json").read_text(encoding="utf-8"))["equations"]["chain"]
     assert rep["predicts"] == "battery"
     trips = rep["trip_net_energy"]["trips"]
     assert set(trips) == {"T1", "T2"}
@@ -567,7 +567,7 @@ def test_cli_calibrate_battery_then_compare_uses_the_chain(tmp_path, capsys):
     assert rep["traction_energy_ratio"] == pytest.approx(p_bat / rep["measured_traction_energy_j"], rel=1e-9)
     assert abs(rep["traction_energy_ratio"] - 1.0) < 0.01
     assert rep["energy_j"]["total"] < 0.95 * p_bat  # the wheel needs less than the battery gives
-    md = (out / "report.md").read_text()
+    md = (out / "report.md").read_text(encoding="utf-8")
     assert f"{p_bat / 3.6e6:.3f}" in md and "the target's (the chain's battery or fuel power)" in md
     # a chain beside an equation without one (a rehearsal: the battery target dropped without
     # a word): compared at the wheels, and said, on the console and in the report's context
@@ -578,8 +578,8 @@ def test_cli_calibrate_battery_then_compare_uses_the_chain(tmp_path, capsys):
                          "--out", str(mixed)] + engine) == 0
         said = capsys.readouterr().out
         assert "note: the equations predict different targets" in said and "--target battery" in said
-        assert json.loads((mixed / "report.json").read_text())["settings"]["target"] == "wheel"
-        assert "**target**: the equations predict different targets" in (mixed / "report.md").read_text()
+        assert json.loads((mixed / "report.json").read_text(encoding="utf-8"))["settings"]["target"] == "wheel"
+        assert "**target**: the equations predict different targets" in (mixed / "report.md").read_text(encoding="utf-8")
     # an equation at the powertrain output (drvpw_prius3) is a driving power: no such note
     assert cli_main(["compare", str(log), "--equation", str(road), "--equation", "drvpw_prius3",
                      "--out", str(tmp_path / "po")]) == 0
@@ -1316,7 +1316,7 @@ def test_cli_dyno_chain_on_the_published_road_load(tmp_path, capsys):
     log, _ = _planted_battery_log(tmp_path)       # its road load: acc 1, v1 150, v3 0.35
     veh = tmp_path / "dyno_car.toml"
     veh.write_text('[vehicle]\nname = "dyno_car"\nmass_kg = 1500\n[powertrain]\ntype = "battery"\n'
-                   '[road_load]\na_n = 150.0\nb_n_per_mps = 0.0\nc_n_per_mps2 = 0.35\n')
+                   '[road_load]\na_n = 150.0\nb_n_per_mps = 0.0\nc_n_per_mps2 = 0.35\n', encoding="utf-8")
     eq = tmp_path / "chain.toml"
     assert cli_main(["calibrate", str(log), "--vehicle", str(veh), "--target", "battery",
                      "--equation", "roadload_spec", "--load", "heater_power_w", "--out", str(eq)]) == 0
@@ -1324,14 +1324,14 @@ def test_cli_dyno_chain_on_the_published_road_load(tmp_path, capsys):
     assert ch.traction_efficiency == pytest.approx(0.9, rel=0.02)
     assert ch.aux_power_w == pytest.approx(500.0, rel=0.02)
     assert load_equation(eq).terms == {"acc": 1.0, "v1": 150.0, "v2": 0.0, "v3": 0.35}
-    veh.write_text(veh.read_text().replace("c_n_per_mps2 = 0.35", "c_n_per_mps2 = -0.35"))
+    veh.write_text(veh.read_text(encoding="utf-8").replace("c_n_per_mps2 = 0.35", "c_n_per_mps2 = -0.35"), encoding="utf-8")
     capsys.readouterr()
     assert cli_main(["calibrate", str(log), "--vehicle", str(veh), "--target", "battery",
                      "--equation", "roadload_spec", "--out", str(tmp_path / "bad.toml")]) == 2
     assert "road_load.c_n_per_mps2 = -0.35" in capsys.readouterr().err
     # without --equation the road load was fitted on the battery power itself (the chain's
     # own target; on the JLU road trips η_t 0.974, IMPLAUSIBLE): refused, one line
-    veh.write_text(veh.read_text().replace("c_n_per_mps2 = -0.35", "c_n_per_mps2 = 0.35"))
+    veh.write_text(veh.read_text(encoding="utf-8").replace("c_n_per_mps2 = -0.35", "c_n_per_mps2 = 0.35"), encoding="utf-8")
     assert cli_main(["calibrate", str(log), "--vehicle", str(veh), "--target", "battery",
                      "--out", str(tmp_path / "none.toml")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -1392,7 +1392,7 @@ def test_i3_battery_equation_for_sumo_studies_runs_in_sumo(tmp_path):
         sc = tmp_path / f"i3_{temp:g}.toml"
         sc.write_text(f'equations = ["{eq_path}"]\n[sumo]\nconfig = "{cfg}"\nbegin = 0\nend = 150\n'
                       f'[vtypes.prius3]\nmass_kg = {mass}\n'
-                      f'[air]\ntemperature_c = {temp}\n[outputs]\nfigures = false\nedgedata = false\n')
+                      f'[air]\ntemperature_c = {temp}\n[outputs]\nfigures = false\nedgedata = false\n', encoding="utf-8")
         out = tmp_path / f"out{temp:g}"
         res = run_scenario(sc, out)
         cls = [r for r in res.summary["chain"]["classes"] if r["equation"] == "bmw_i3_battery"]
@@ -1464,18 +1464,18 @@ def test_compare_says_where_a_chain_load_is_unknown(tmp_path, capsys):
     out = tmp_path / "cmp"
     assert cli_main(["compare", str(part), "--equation", str(eq), "--out", str(out)]) == 0
     said = capsys.readouterr().out
-    rep = json.loads((out / "report.json").read_text())["equations"]["chain"]
+    rep = json.loads((out / "report.json").read_text(encoding="utf-8"))["equations"]["chain"]
     u = rep["chain_unknown_inputs"]["heater_power_w"]
     assert u["trips"] == ["T2"] and u["read_as"] == "no load"
     assert 0 < u["samples"] <= int(t2.sum())
     assert "'heater_power_w' unknown (NaN)" in said and "T2" in said
-    assert "'heater_power_w' unknown (NaN)" in (out / "report.md").read_text()
+    assert "'heater_power_w' unknown (NaN)" in (out / "report.md").read_text(encoding="utf-8")
     # read as no load: trip T2's net battery energy is under-predicted by the heater's
     errs = rep["trip_net_energy"]["trips"]
     assert abs(errs["T1"]["error"]) < 0.01 and errs["T2"]["error"] < -0.05
     # a log with the load known everywhere: nothing to say
     assert cli_main(["compare", str(log), "--equation", str(eq), "--out", str(tmp_path / "c2")]) == 0
-    assert "chain_unknown_inputs" not in json.loads((tmp_path / "c2" / "report.json").read_text())[
+    assert "chain_unknown_inputs" not in json.loads((tmp_path / "c2" / "report.json").read_text(encoding="utf-8"))[
         "equations"]["chain"]
 
 
@@ -1520,7 +1520,7 @@ def test_config_with_sumos_emissions_device_puts_its_energy_beside_the_chains(tm
     <flow id="e" type="ev" begin="0" end="60" period="10" departSpeed="0"><route edges="c00c10 c10c20 c20c30"/></flow>
     <flow id="p" type="petrol" begin="0" end="60" period="10" departSpeed="0"><route edges="c00c10 c10c20 c20c30"/></flow>
 </routes>
-""")
+""", encoding="utf-8")
     (tmp_path / "c.sumocfg").write_text(f"""<configuration>
     <input><net-file value="{net}"/><route-files value="r.rou.xml"/></input>
     <output><tripinfo-output value="ti.xml"/></output>
@@ -1528,10 +1528,10 @@ def test_config_with_sumos_emissions_device_puts_its_energy_beside_the_chains(tm
     <time><begin value="0"/><end value="400"/><step-length value="0.5"/></time>
     <report><no-warnings value="true"/></report>
 </configuration>
-""")
+""", encoding="utf-8")
     fuel_eq, bev = _chain_equations()
     (tmp_path / "s.toml").write_text('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\n'
-                                     '[outputs]\nfigures = false\n')
+                                     '[outputs]\nfigures = false\n', encoding="utf-8")
     out = tmp_path / "o"
     res = run_scenario(tmp_path / "s.toml", out, equations=[fuel_eq, bev], flush_vehicles=2)
     assert (out / "sumo" / "ti.xml").is_file() and not (tmp_path / "ti.xml").exists()
@@ -1576,14 +1576,14 @@ def test_config_with_sumos_emissions_device_puts_its_energy_beside_the_chains(tm
     pd_.testing.assert_frame_equal(read_tripinfo_emissions(tmp_path / "ti.xml.gz"), dev)
     # asked not to: no comparison, the config's tripinfo still kept
     (tmp_path / "s.toml").write_text('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\n'
-                                     '[outputs]\nfigures = false\nsumo_device = false\n')
+                                     '[outputs]\nfigures = false\nsumo_device = false\n', encoding="utf-8")
     run_scenario(tmp_path / "s.toml", tmp_path / "o2", equations=[fuel_eq, bev])
     assert not (tmp_path / "o2" / "sumo_device.csv").exists()
     assert (tmp_path / "o2" / "sumo" / "ti.xml").is_file()
     # a window no vehicle drives in: an empty comparison with its header (a traceback,
     # KeyError 'vehicle', and a 1-byte file before; found by a sweep)
     (tmp_path / "s.toml").write_text('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\n'
-                                     '[outputs]\nfigures = false\n')
+                                     '[outputs]\nfigures = false\n', encoding="utf-8")
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o3", equations=[fuel_eq, bev], begin=300, end=400)
     assert res.summary["vehicles"] == 0
     empty = pd_.read_csv(tmp_path / "o3" / "sumo_device.csv")
@@ -1596,7 +1596,7 @@ def test_engine_off_minus_inf_round_trips_and_bad_values_are_refused(tmp_path):
 
     text = ('[equation]\nname = "c"\n[terms]\nacc = 1.0\n[chain]\npredicts = "fuel"\n'
             'idle_fuel_power_w = 8000.0\nmarginal_efficiency = 0.35\nengine_off_below_w = {}\nfuel = "gasoline"\n')
-    (tmp_path / "c.toml").write_text(text.format("-inf"))
+    (tmp_path / "c.toml").write_text(text.format("-inf"), encoding="utf-8")
     eq = load_equation(tmp_path / "c.toml")
     out = eq.chain.evaluate(np.array([-5000.0, 0.0, 7000.0]), np.array([10.0, 0.0, 10.0]), dt_s=1.0)
     assert out["engine_on"].all()  # braking and standing: the engine idles
@@ -1604,7 +1604,7 @@ def test_engine_off_minus_inf_round_trips_and_bad_values_are_refused(tmp_path):
     save_equation(eq, tmp_path / "c2.toml")
     assert load_equation(tmp_path / "c2.toml").chain.engine_off_below_w == -np.inf
     for bad in ("inf", "nan", '"never"'):
-        (tmp_path / "b.toml").write_text(text.format(bad))
+        (tmp_path / "b.toml").write_text(text.format(bad), encoding="utf-8")
         with pytest.raises(UserError, match="engine_off_below_w"):
             load_equation(tmp_path / "b.toml")
 
@@ -1623,7 +1623,7 @@ def test_a_fuel_chain_without_an_engine_s_keys_is_refused_naming_them(tmp_path, 
             "engine_off_below_w": "-inf"}
     text = ('[equation]\nname = "bus"\n[terms]\nacc = 1.0\nv1 = 900.0\n[chain]\npredicts = "fuel"\n'
             'traction_efficiency = 0.85\n' + "".join(f"{k} = {v}\n" for k, v in keys.items() if k != left_out))
-    (tmp_path / "bus.toml").write_text(text)
+    (tmp_path / "bus.toml").write_text(text, encoding="utf-8")
     with pytest.raises(UserError, match=rf"bus\.toml \[chain\]: predicts = \"fuel\" needs '{left_out}'"):
         load_equation(tmp_path / "bus.toml").chain.evaluate(np.ones(3), np.ones(3))
     rc = main(["run", "city", "--equation", str(tmp_path / "bus.toml"), "--out", str(tmp_path / "o"), "--end", "5"])
@@ -1632,7 +1632,7 @@ def test_a_fuel_chain_without_an_engine_s_keys_is_refused_naming_them(tmp_path, 
     assert not (tmp_path / "o").exists()
     # a declaration for calibrate (its fuel cut-off kept) reads: the chain is not used to predict
     assert load_equation(tmp_path / "bus.toml").chain.missing == (left_out,)
-    (tmp_path / "bus.toml").write_text(text + f"{left_out} = {keys[left_out]}\n")
+    (tmp_path / "bus.toml").write_text(text + f"{left_out} = {keys[left_out]}\n", encoding="utf-8")
     assert load_equation(tmp_path / "bus.toml").chain.fuel == "diesel"
 
 

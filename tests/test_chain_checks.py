@@ -83,8 +83,8 @@ def test_an_implausible_zero_output_fuel_is_said_and_kept(tmp_path, capsys):
     printed = capsys.readouterr().out
     said = [x for x in printed.splitlines() if "its chain's calibration warned" in x]
     assert said and said[0].startswith(f"warning: {eq.name}: ") and "idle_fuel_power_w" in said[0], printed
-    assert "IMPLAUSIBLE" in said[0] and said[0][len("warning: "):] in (tmp_path / "cmp" / "report.md").read_text()
-    md = (tmp_path / "cmp" / "report.md").read_text()  # the chain's parameters with their readings
+    assert "IMPLAUSIBLE" in said[0] and said[0][len("warning: "):] in (tmp_path / "cmp" / "report.md").read_text(encoding="utf-8")
+    md = (tmp_path / "cmp" / "report.md").read_text(encoding="utf-8")  # the chain's parameters with their readings
     assert "## Energy chains" in md and "| eq | `idle_fuel_power_w` | 2e+04" in md and "= 2.24 L/h; IMPLAUSIBLE" in md
 
 
@@ -138,7 +138,7 @@ def test_the_idle_fuel_band_scales_with_the_engines_displacement(tmp_path):
 
     def vehicle(extra):
         p = tmp_path / "car.toml"
-        p.write_text(f'[vehicle]\nname = "car"\nmass_kg = 1800\n[powertrain]\n{extra}\n')
+        p.write_text(f'[vehicle]\nname = "car"\nmass_kg = 1800\n[powertrain]\n{extra}\n', encoding="utf-8")
         return load_vehicle(str(p))
 
     def warned(veh):

@@ -83,11 +83,11 @@ def test_calibrate_fits_an_idling_engine_as_one_in_memory_and_streamed(tmp_path,
     lph = fuel_w / (42.5e6 * 0.745) * 3600.0  # any petrol: the structure, not the numbers
     pd.DataFrame({"time_s": t, "speed_mps": v, "fuel_rate_lph": lph, "mass_kg": MASS}).to_parquet(
         tmp_path / "log.parquet")
-    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n')
+    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n', encoding="utf-8")
     out = tmp_path / f"{engine}.toml"
     assert cli_main(["calibrate", str(tmp_path / "log.parquet"), "--target", "fuel", "--equation",
                      str(tmp_path / "rl.toml"), "--engine", engine, "--out", str(out)]) == 0
-    chain = tomllib.loads(out.read_text())["chain"]
+    chain = tomllib.loads(out.read_text(encoding="utf-8"))["chain"]
     assert chain["engine_off_below_w"] == -np.inf and not chain.get("charge_sustaining", False)
     assert "idling at stops" in chain["reading"]["engine_off_below_w"]
 
@@ -106,7 +106,7 @@ def test_a_log_that_only_idles_is_refused_not_fitted_to_an_efficiency_at_its_bou
     log = tmp_path / "idle.parquet"
     pd.DataFrame({"time_s": t, "speed_mps": v, "fuel_rate_gps": 0.166 + rng.normal(0, 0.005, t.size),
                   "mass_kg": MASS}).to_parquet(log)
-    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n')
+    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n', encoding="utf-8")
     out = tmp_path / "o.toml"
     assert cli_main(["calibrate", str(log), "--target", "fuel", "--equation", str(tmp_path / "rl.toml"),
                      "--engine", engine, "--out", str(out)]) == 2
@@ -144,11 +144,11 @@ def test_the_engine_off_threshold_can_be_declared(tmp_path, engine, declared, wa
     lph = _fuel(rng, v, p)[keep] / (42.5e6 * 0.745) * 3600.0
     pd.DataFrame({"time_s": t[keep], "speed_mps": v[keep], "fuel_rate_lph": lph, "mass_kg": MASS}).to_parquet(
         tmp_path / "log.parquet")
-    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n')
+    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n', encoding="utf-8")
     out = tmp_path / f"{engine}.toml"
     assert cli_main(["calibrate", str(tmp_path / "log.parquet"), "--target", "fuel", "--equation",
                      str(tmp_path / "rl.toml"), "--engine", engine, "--engine-off", declared, "--out", str(out)]) == 0
-    chain = tomllib.loads(out.read_text())["chain"]
+    chain = tomllib.loads(out.read_text(encoding="utf-8"))["chain"]
     assert chain["engine_off_below_w"] == want
     assert chain["reading"]["engine_off_below_w"].endswith("declared, not profiled")
 
@@ -160,7 +160,7 @@ def _short_log(tmp_path, idle_w=IDLE_W):
     fuel = np.where(v > 0.05, _fuel(rng, v, p), idle_w + rng.normal(0, 300.0, v.size))[keep]
     pd.DataFrame({"time_s": t[keep], "speed_mps": v[keep], "fuel_rate_lph": fuel / (42.5e6 * 0.745) * 3600.0,
                   "mass_kg": MASS}).to_parquet(tmp_path / "log.parquet")
-    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n')
+    (tmp_path / "rl.toml").write_text(f'[equation]\nname = "rl"\n[terms]\nv1 = {F0}\nv3 = {F2}\nacc = 1.0\n', encoding="utf-8")
 
 
 @pytest.mark.parametrize("engine", ["memory", "local"])
@@ -184,12 +184,12 @@ def test_a_car_without_a_traction_battery_is_not_fitted_as_a_hybrid(tmp_path, en
         df.to_parquet(tmp_path / "log.parquet")
     (tmp_path / "car.toml").write_text(
         f'[vehicle]\nname = "car"\nmass_kg = {MASS}\n[powertrain]\ntype = "direct"\nfuel = "gasoline"\n'
-        + ('[battery]\ncapacity_kwh = 1.3\n' if battery is True else ""))
+        + ('[battery]\ncapacity_kwh = 1.3\n' if battery is True else ""), encoding="utf-8")
     out = tmp_path / f"{engine}.toml"
     assert cli_main(["calibrate", str(tmp_path / "log.parquet"), "--vehicle", str(tmp_path / "car.toml"),
                      "--target", "fuel", "--equation", str(tmp_path / "rl.toml"), "--engine", engine,
                      "--out", str(out)]) == 0
-    doc = tomllib.loads(out.read_text())
+    doc = tomllib.loads(out.read_text(encoding="utf-8"))
     chain = doc["chain"]
     from sumo_drvpw.fit.chain_fuel import engine_off_for, fuel_grid
     from sumo_drvpw.model.vehicles import load_vehicle

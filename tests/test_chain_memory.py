@@ -214,7 +214,7 @@ def test_cli_chain_calibration_reads_once_and_equals_the_old_path(battery_log, e
                      "--engine", "memory", *equation]) == 0  # (the streamed path: test_chain_stream.py)
     assert len(reads) == 1
     said = capsys.readouterr().out
-    doc = tomllib.loads(out.read_text())
+    doc = tomllib.loads(out.read_text(encoding="utf-8"))
     assert (tmp_path / "rep" / "report.json").is_file()
     # the old path: the target and the driving power read apart, the design whole
     old_fit()

@@ -42,7 +42,7 @@ def _calibrate(monkeypatch, capsys, log, out, engine, *extra, rows=2000):
 
 def _undated(path) -> dict:
     """An equation file's document without the time it was written."""
-    doc = tomllib.loads(path.read_text())
+    doc = tomllib.loads(path.read_text(encoding="utf-8"))
     doc.get("provenance", {}).pop("date", None)
     return doc
 
@@ -73,7 +73,7 @@ def test_streamed_chain_calibration_equals_in_memory(chain_logs, kind, tmp_path,
     assert "local engine:" in cl.err and "local engine:" not in cm.err
     corpus.assert_close_documents(ref, got, RTOL)
     # the report: every number of report.json (the chain against the measured power, per trip)
-    rep = {e: json.loads((tmp_path / f"rep_{e}" / "report.json").read_text()) for e in ("memory", "local")}
+    rep = {e: json.loads((tmp_path / f"rep_{e}" / "report.json").read_text(encoding="utf-8")) for e in ("memory", "local")}
     assert rep["local"]["settings"].pop("percentiles") == "exact"
     corpus.assert_close_documents(rep["memory"], rep["local"], RTOL)
     ch = got["chain"]

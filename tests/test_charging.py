@@ -76,13 +76,13 @@ def test_battery_fit_and_trip_energy_leave_a_charging_stop_out(tmp_path):
     assert ch.traction_efficiency == pytest.approx(0.9, rel=0.03)
     out = tmp_path / "cmp"
     assert main(["compare", str(log), "--equation", str(eq), "--out", str(out)]) == 0
-    rep = json.loads((out / "report.json").read_text())
+    rep = json.loads((out / "report.json").read_text(encoding="utf-8"))
     trips = rep["equations"]["chain"]["trip_net_energy"]["trips"]
     assert trips["T2"]["measured_j"] > 0                     # 4 kWh charged would make it negative
     assert abs(trips["T2"]["error"]) < 0.02
     # the charger's 300 s and the 30 s of standing that join them (one standstill stretch)
     assert n <= _count(rep) <= n + 300
-    assert "excluded_charging: " in (out / "report.md").read_text()
+    assert "excluded_charging: " in (out / "report.md").read_text(encoding="utf-8")
 
 
 def _count(rep) -> int:

@@ -31,7 +31,7 @@ def test_a_log_reads_as_the_run_reads_trajectories(tmp_path, capsys):
     df.to_csv(log, index=False)
     before = log.read_bytes()
     assert cli_main(["dynamics", str(log), "--out", str(tmp_path / "o")]) == 0
-    doc = json.loads((tmp_path / "o" / "dynamics.json").read_text())
+    doc = json.loads((tmp_path / "o" / "dynamics.json").read_text(encoding="utf-8"))
     ref = D.Dynamics()
     for seed in (1, 2):
         tr = _trip(seed)
@@ -45,7 +45,7 @@ def test_a_log_reads_as_the_run_reads_trajectories(tmp_path, capsys):
     prof = want["accel_profile"]
     assert len(prof) >= 3 and doc["sumo_vtype"] == D.sumo_profile(prof)
     assert doc["sumo_vtype"]["desAccelProfile"].split() == [f"{b['a_pos_95_mps2']:g}" for b in prof]
-    md = (tmp_path / "o" / "report.md").read_text()
+    md = (tmp_path / "o" / "report.md").read_text(encoding="utf-8")
     assert f'speedTable="{doc["sumo_vtype"]["speedTable"]}"' in md and "| measured | urban |" in md
     assert log.read_bytes() == before
 
@@ -61,11 +61,11 @@ def test_a_log_sampled_every_two_seconds_says_how_little_its_figures_rest_on(tmp
     pd.DataFrame({"time_s": t, "speed_mps": v}).to_csv(log, index=False)
     assert cli_main(["dynamics", str(log), "--out", str(tmp_path / "o")]) == 0
     out = capsys.readouterr().out
-    doc = json.loads((tmp_path / "o" / "dynamics.json").read_text())["driving_dynamics"]
+    doc = json.loads((tmp_path / "o" / "dynamics.json").read_text(encoding="utf-8"))["driving_dynamics"]
     covered = sum(p["time_s"] for p in doc["parts"].values())
     assert 0 < covered < 0.1 * doc["logged_s"] and doc["median_step_s"] == 2.0
     assert "warning: the 1-Hz figures rest on" in out and "2 s apart" in out
-    assert "**Warning:** the 1-Hz figures rest on" in (tmp_path / "o" / "report.md").read_text()
+    assert "**Warning:** the 1-Hz figures rest on" in (tmp_path / "o" / "report.md").read_text(encoding="utf-8")
     t1 = np.arange(0.0, 3600.0, 1.0)
     pd.DataFrame({"time_s": t1, "speed_mps": np.clip(12 + 10 * np.sin(t1 / 40.0), 0, None)}).to_csv(log, index=False)
     assert cli_main(["dynamics", str(log), "--out", str(tmp_path / "o1")]) == 0
@@ -81,7 +81,7 @@ def test_a_log_sampled_every_two_seconds_says_how_little_its_figures_rest_on(tmp
     ("time_s,speed,trip_id\n0,1,a\n1,2,a\n2,3,a\n", "missing required column 'speed_mps'")])
 def test_bad_logs_exit_2_in_one_line_and_write_nothing(tmp_path, capsys, rows, needle):
     log = tmp_path / "log.csv"
-    log.write_text(rows)
+    log.write_text(rows, encoding="utf-8")
     assert cli_main(["dynamics", str(log), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert needle in err and str(log) in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
@@ -99,11 +99,11 @@ def test_figures_on_too_few_samples_are_marked_not_judged(tmp_path, capsys):
     pd.DataFrame({"time_s": t, "speed_mps": v}).to_csv(log, index=False)
     assert cli_main(["dynamics", str(log), "--out", str(tmp_path / "o")]) == 0
     out = capsys.readouterr().out
-    doc = json.loads((tmp_path / "o" / "dynamics.json").read_text())["driving_dynamics"]
+    doc = json.loads((tmp_path / "o" / "dynamics.json").read_text(encoding="utf-8"))["driving_dynamics"]
     assert doc["parts"]["urban"]["va_pos_95_judged"] and not doc["parts"]["rural"]["va_pos_95_judged"]
     rural = next(ln for ln in out.splitlines() if ln.startswith("rural"))
     assert f"{doc['parts']['rural']['va_pos_95_m2ps3']:5.1f}* (RDE max" in rural
     assert "* not judged against the RDE bound" in out
-    md = (tmp_path / "o" / "report.md").read_text()
+    md = (tmp_path / "o" / "report.md").read_text(encoding="utf-8")
     assert md.count(f"{doc['kinetic_j_per_kg_km']:.0f} J/(kg·km)") == 1 and "| rural |" in md
     assert "not judged against the RDE bound" in md

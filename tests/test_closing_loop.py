@@ -281,11 +281,11 @@ def test_sumo_books_the_cold_terms_at_the_scenario_air_temperature(tmp_path):
     import sumo_drvpw.sim as sim
 
     src = Path(sim.__file__).parent / "builtin" / "scenarios" / "city.toml"
-    text = src.read_text().replace("temperature_c = 20.0", "temperature_c = 0.0").replace(
+    text = src.read_text(encoding="utf-8").replace("temperature_c = 20.0", "temperature_c = 0.0").replace(
         'config = "city.sumocfg"', f'config = "{(src.parent / "city.sumocfg").as_posix()}"')
     assert "temperature_c = 0.0" in text and str(src.parent) in text
     sc = tmp_path / "city.toml"
-    sc.write_text(text)
+    sc.write_text(text, encoding="utf-8")
     base = {"acc": 1.27, "grade": 1.05, "aero": 0.33}
     k = 0.01
     cold = Equation("cold", dict(base, roll=0.015, **{"roll*cold": 0.015 * k}))
@@ -468,8 +468,8 @@ def test_the_documented_closed_equation_reproduces_its_held_out_figures_through_
     assert cli_main(["compare", str(log), "--vehicle", "bmw_i3", "--equation", str(eq_path),
                      "--out", str(tmp_path / "c")]) == 0
     assert "[measurement] of" in capsys.readouterr().out
-    got = json.loads((tmp_path / "c" / "report.json").read_text())["equations"][doc["equation"]["name"]]
-    md = (docs / "closing-the-loop.md").read_text()
+    got = json.loads((tmp_path / "c" / "report.json").read_text(encoding="utf-8"))["equations"][doc["equation"]["name"]]
+    md = (docs / "closing-the-loop.md").read_text(encoding="utf-8")
     section = md.split(f"### {run}: held out")[1]
     row = next(ln for ln in section.splitlines() if ln.startswith(f"| `{doc['equation']['name']}` |"))
     cells = [c.strip() for c in row.split("|")]

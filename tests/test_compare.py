@@ -321,7 +321,7 @@ def test_report_files_and_keys(tmp_path):
     out = tmp_path / "rep"
     write_comparison_report(comp, out, "Synthetic check", {"log": "synthetic.parquet",
                                                            "vehicle": "prius3"})
-    doc = json.loads((out / "report.json").read_text())
+    doc = json.loads((out / "report.json").read_text(encoding="utf-8"))
     assert doc["n_samples"] == len(x)
     assert doc["context"]["vehicle"] == "prius3" and doc["title"] == "Synthetic check"
     for name in ("truth", "no_aero"):
@@ -337,8 +337,8 @@ def test_report_files_and_keys(tmp_path):
     assert doc["equations"]["no_aero"]["error_term_correlation"]["aero"]["r"] is None  # NaN
     assert doc["equations"]["no_aero"]["high_speed"]["mean_w"] < -5e3
     # strict JSON: NaN written as null
-    json.loads((out / "report.json").read_text(), parse_constant=lambda c: 1 / 0)
-    md = (out / "report.md").read_text()
+    json.loads((out / "report.json").read_text(encoding="utf-8"), parse_constant=lambda c: 1 / 0)
+    md = (out / "report.md").read_text(encoding="utf-8")
     assert md.startswith("# Synthetic check")
     assert "R² ≥ 50 kW" in md and "80 km/h" in md and "no_aero" in md
     assert "underpredicts" in md  # no_aero above 80 km/h
@@ -357,8 +357,8 @@ def test_two_files_of_one_equation_name_are_refused_naming_both(tmp_path):
 
     body = '[equation]\nname = "eq_base"\n[terms]\nacc = 1.0\nv3 = 0.35\n'
     a, b = tmp_path / "a.toml", tmp_path / "copy.toml"
-    a.write_text(body)
-    b.write_text(body)
+    a.write_text(body, encoding="utf-8")
+    b.write_text(body, encoding="utf-8")
     with pytest.raises(UserError) as e:
         resolve_equations([str(a), str(b)])
     msg = str(e.value)
@@ -413,6 +413,6 @@ def test_a_fuel_comparison_with_the_hybrid_battery_says_which_side_is_corrected(
         doc = comp.to_json()
         assert ("battery_correction" in doc["settings"]) == said
         write_comparison_report(comp, tmp_path / str(said), "t")
-        md = (tmp_path / str(said) / "report.md").read_text()
+        md = (tmp_path / str(said) / "report.md").read_text(encoding="utf-8")
         assert ("hybrid battery's energy change taken off" in md) == said
         assert "is here of the measured fuel power" in md  # (the paper's split is of the driving power)

@@ -27,7 +27,7 @@ def test_containers_not_booked_are_said(tmp_path):
     replay warn that containers are not booked (before: no word of it)."""
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
-    (tmp_path / "r.rou.xml").write_text(ROUTES)
+    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
     energy_scenario(tmp_path, 100)
     run_scenario(tmp_path / "s.toml", tmp_path / "o")
     sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
@@ -37,7 +37,7 @@ def test_containers_not_booked_are_said(tmp_path):
     assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
                      "--out", str(tmp_path / "fcd"), "--no-figures"]) == 0
     for out in ("o", "fcd"):
-        warnings = json.loads((tmp_path / out / "summary.json").read_text())["warnings"]
+        warnings = json.loads((tmp_path / out / "summary.json").read_text(encoding="utf-8"))["warnings"]
         assert any("1 container(s)" in w and "not booked" in w for w in warnings), (out, warnings)
 
 
@@ -50,7 +50,7 @@ def test_a_tabular_fcd_s_containers_are_not_read_as_riding_persons(tmp_path):
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
     (tmp_path / "r.rou.xml").write_text(ROUTES.replace('<container id="k0"', '<vType id="box" vClass="ignoring" '
-                                                       'mass="2000"/>\n  <container id="k0" type="box"'))
+                                                       'mass="2000"/>\n  <container id="k0" type="box"'), encoding="utf-8")
     sc = energy_scenario(tmp_path, 100)
     run_scenario(sc, tmp_path / "o")  # its FCD in XML
     import subprocess
@@ -59,12 +59,12 @@ def test_a_tabular_fcd_s_containers_are_not_read_as_riding_persons(tmp_path):
     subprocess.run([f"{sumo.SUMO_HOME}/bin/sumo", "-n", str(tmp_path / "n.net.xml"), "-r", str(tmp_path / "r.rou.xml"),
                     "--end", "100", "--step-length", "0.5", "--precision", "6", "--no-warnings", "true",
                     "--fcd-output", str(tmp_path / "fcd.csv")], check=True, capture_output=True)
-    assert "box" in (tmp_path / "fcd.csv").read_text()
+    assert "box" in (tmp_path / "fcd.csv").read_text(encoding="utf-8")
     rows = {}
     for name in ("fcd.xml", "fcd.csv"):
         assert cli_main(["fcd", str(tmp_path / name), "--scenario", str(sc), "--out", str(tmp_path / name[4:]),
                          "--no-figures"]) == 0
-        s = json.loads((tmp_path / name[4:] / "summary.json").read_text())
+        s = json.loads((tmp_path / name[4:] / "summary.json").read_text(encoding="utf-8"))
         rows[name] = pd.read_parquet(tmp_path / name[4:] / "vehicles.parquet").set_index("vehicle").net_total_j
         assert s["transportables"] == {"samples": 0, "max_kg": 0.0}, (name, s["transportables"])
     assert rows["fcd.csv"]["t"] == rows["fcd.xml"]["t"]

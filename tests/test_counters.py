@@ -141,7 +141,7 @@ def test_a_trip_with_v_and_i_keeps_them_and_one_without_takes_the_counters(tmp_p
                                       "battery energy counters (discharged − charged)": 12000}
     eq = tmp_path / "eq.toml"
     eq.write_text('[equation]\nname = "ev"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = 0.4\n[chain]\npredicts = "battery"\n'
-                  "traction_efficiency = 0.9\nrecuperation_efficiency = 0.7\naux_power_w = 400.0\n")
+                  "traction_efficiency = 0.9\nrecuperation_efficiency = 0.7\naux_power_w = 400.0\n", encoding="utf-8")
     docs = {}
     mp = pytest.MonkeyPatch()
     mp.setattr(engine, "run", partial(engine.run, rows=5000))
@@ -149,7 +149,7 @@ def test_a_trip_with_v_and_i_keeps_them_and_one_without_takes_the_counters(tmp_p
         for e in ("memory", "local"):
             assert cli_main(["compare", str(d), "--equation", str(eq), "--target", "battery",
                              "--out", str(tmp_path / e), "--engine", e]) == 0
-            docs[e] = json.loads((tmp_path / e / "report.json").read_text())
+            docs[e] = json.loads((tmp_path / e / "report.json").read_text(encoding="utf-8"))
     finally:
         mp.undo()
     import corpus
@@ -227,7 +227,7 @@ def test_a_chain_calibrated_from_counters_streamed_equals_in_memory(tmp_path, ca
     for t, g in df.groupby("trip_id"):
         g.to_csv(d / f"{t}.csv", index=False)
     eq = tmp_path / "road.toml"
-    eq.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = 0.4\n')
+    eq.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = 0.4\n', encoding="utf-8")
     docs = {}
     mp = pytest.MonkeyPatch()
     mp.setattr(engine, "run", partial(engine.run, rows=6000))
@@ -237,7 +237,7 @@ def test_a_chain_calibrated_from_counters_streamed_equals_in_memory(tmp_path, ca
             rc = cli_main(["calibrate", str(d), "--target", "battery", "--equation", str(eq), "--out", str(out),
                            "--name", "ev", "--engine", e])
             assert rc == 0, capsys.readouterr().err
-            doc = tomllib.loads(out.read_text())
+            doc = tomllib.loads(out.read_text(encoding="utf-8"))
             doc.get("provenance", {}).pop("date", None)
             docs[e] = doc
     finally:
@@ -353,12 +353,12 @@ def test_a_bad_soc_or_capacity_is_refused_in_one_line(tmp_path, capsys, option, 
     from sumo_drvpw.cli import main as cli_main
 
     _, f, m = _soc_drive(tmp_path)
-    m.write_text(m.read_text().replace("soc_capacity_kwh = 20.0", option))
+    m.write_text(m.read_text(encoding="utf-8").replace("soc_capacity_kwh = 20.0", option), encoding="utf-8")
     if soc != 80.0:  # the first data row's SOC
-        lines = f.read_text().splitlines()
+        lines = f.read_text(encoding="utf-8").splitlines()
         row = lines[1].split(",")
         row[3] = f"{soc:g}"
-        f.write_text("\n".join([lines[0], ",".join(row), *lines[2:]]) + "\n")
+        f.write_text("\n".join([lines[0], ",".join(row), *lines[2:]]) + "\n", encoding="utf-8")
     assert cli_main(["import", "columns", str(f), "--columns", str(m), "--out", str(tmp_path / "o.parquet")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and says in err and "Traceback" not in err
@@ -369,6 +369,6 @@ def test_a_capacity_without_a_mapped_soc_is_refused(tmp_path):
     from sumo_drvpw.data.adapters.columns import load_mapping
 
     _, _, m = _soc_drive(tmp_path)
-    m.write_text(m.read_text().replace('name = "soc_pct"', 'name = "charge_pct"'))
+    m.write_text(m.read_text(encoding="utf-8").replace('name = "soc_pct"', 'name = "charge_pct"'), encoding="utf-8")
     with pytest.raises(UserError, match="options.soc_capacity_kwh estimates .* map a source column to 'soc_pct'"):
         load_mapping(m)

@@ -64,7 +64,7 @@ def test_the_d3_script_on_planted_tests(tmp_path, monkeypatch):
             tmp_path / f"6181101{k + 1} Test Data.txt", index=False)
     out = tmp_path / "d3.md"
     assert d3.main(["--data", str(tmp_path), "--out", str(out)]) == 0
-    md = out.read_text()
+    md = out.read_text(encoding="utf-8")
     assert "61811011a" in md and "61811011b" in md
     per_trip = md.split("## Fuel per trip", 1)[1].split("## The calibrated chains", 1)[0]
     rows = {m.group(1): m.group(2)

@@ -152,7 +152,7 @@ def test_block_validation_single_trip_and_report_files(tmp_path):
     df.to_parquet(path)
     out = tmp_path / "out"
     run([path], "prius3", None, out, DiagnoseOptions(), figures=True)
-    doc = json.loads((out / "trace.json").read_text())
+    doc = json.loads((out / "trace.json").read_text(encoding="utf-8"))
     assert set(doc) == {"target", "n_samples", "validation", "baseline", "findings", "final"}
     assert set(doc["baseline"]) == {"terms", "coefficients", "metrics", "trip_energy", "trip_net_energy",
                                     "physical", "implausible"}
@@ -173,7 +173,7 @@ def test_block_validation_single_trip_and_report_files(tmp_path):
     assert eq.provenance["declared_equation"] == "calibrated_indt_var_1"
     assert (out / "error_vs_speed.png").stat().st_size > 1000
     assert list(out.glob("finding1_residual_vs_*.png"))
-    assert "Findings" in (out / "trace.md").read_text()
+    assert "Findings" in (out / "trace.md").read_text(encoding="utf-8")
 
 
 def test_leaky_columns_are_not_offered():
@@ -256,7 +256,7 @@ def test_cli_exit_codes(tmp_path, capsys):
     assert "needs ≥ 3 trips" in capsys.readouterr().err
     assert main(["diagnose", str(path), "--vehicle", "prius3", "--equation", TRUTH, "--out",
                  str(tmp_path / "o"), "--no-figures", "--quiet"]) == 0
-    doc = json.loads((tmp_path / "o" / "trace.json").read_text())
+    doc = json.loads((tmp_path / "o" / "trace.json").read_text(encoding="utf-8"))
     assert doc["findings"] == []
 
 
@@ -408,7 +408,7 @@ def test_cli_writes_one_output_set_and_never_half(tmp_path, capsys):
     # a folder sumo-drvpw did not write is left untouched without --force
     foreign = tmp_path / "mine"
     foreign.mkdir()
-    (foreign / "notes.txt").write_text("keep")
+    (foreign / "notes.txt").write_text("keep", encoding="utf-8")
     assert main(["diagnose", str(path), "--vehicle", "prius3", "--out", str(foreign), "--quiet"]) != 0
     assert [p.name for p in foreign.iterdir()] == ["notes.txt"]
 

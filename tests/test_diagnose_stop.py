@@ -32,6 +32,6 @@ def test_diagnose_stop_line_names_the_failed_tests(tmp_path, capsys):
     assert len(stop) == 1 and "→ stop: " in stop[0]
     assert "implausible: energy share" in stop[0]
     assert "replication on held-out trips not tested (2 trip(s), it needs 3)" in stop[0]
-    last = json.loads((out / "trace_details.json").read_text())["rounds"][-1]
+    last = json.loads((out / "trace_details.json").read_text(encoding="utf-8"))["rounds"][-1]
     assert stop[0].endswith(last["stop_reason"])
-    assert f"Stopped: {last['stop_reason']}." in (out / "trace.md").read_text()
+    assert f"Stopped: {last['stop_reason']}." in (out / "trace.md").read_text(encoding="utf-8")

@@ -145,9 +145,9 @@ def test_cli_streams_above_the_row_limit_and_prints_resources(tmp_path, capsys, 
     err = cap.err
     assert "streamed" in err and "rows/s" in err and "peak RSS" in err
     assert "note: 7 speed sample(s) in [-0.1, 0) m/s clipped to 0" in cap.out
-    details = json.loads((out / "trace_details.json").read_text())
+    details = json.loads((out / "trace_details.json").read_text(encoding="utf-8"))
     assert details["resources"]["passes"] > 0
-    assert json.loads((out / "trace.json").read_text())["findings"][0]["term"] == "[ac_power_w]"
+    assert json.loads((out / "trace.json").read_text(encoding="utf-8"))["findings"][0]["term"] == "[ac_power_w]"
     assert not list(out.glob("*.png"))      # streamed runs draw no figures
 
 

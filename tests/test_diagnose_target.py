@@ -186,22 +186,22 @@ def test_cli_diagnose_battery_from_the_equation(tmp_path, clean):
     out = tmp_path / "trace"
     assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--out", str(out),
                      "--quiet"]) == 0
-    rep = json.loads((out / "trace.json").read_text())
+    rep = json.loads((out / "trace.json").read_text(encoding="utf-8"))
     assert rep["target"] == "battery" and rep["findings"][0]["term"] == "grade"
-    assert "grade" in (out / "trace.md").read_text()
+    assert "grade" in (out / "trace.md").read_text(encoding="utf-8")
     closed = load_equation(str(out / "final_equation.toml"))
     assert closed.chain.predicts == "battery" and "grade" in closed.terms
     cmp_out = tmp_path / "cmp"
     assert cli_main(["compare", str(log), "--vehicle", "prius3", "--equation", str(decl), "--equation",
                      str(out / "final_equation.toml"), "--out", str(cmp_out)]) == 0
-    doc = json.loads((cmp_out / "report.json").read_text())
+    doc = json.loads((cmp_out / "report.json").read_text(encoding="utf-8"))
     r2 = {k: v["r2"] for k, v in doc["equations"].items()}
     assert r2[closed.name] > r2["declared"] + 0.05
     # told otherwise: --target wheel traces the driving power with the residual tracer
     wheel = tmp_path / "wheel"
     assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--target", "wheel",
                      "--out", str(wheel), "--quiet", "--no-figures", "--max-findings", "1"]) == 0
-    w = json.loads((wheel / "trace.json").read_text())
+    w = json.loads((wheel / "trace.json").read_text(encoding="utf-8"))
     assert "declared_chain" not in w and "battery" not in str(w["target"]).lower()
 
 
@@ -506,7 +506,7 @@ def test_a_chain_traced_on_the_logs_it_was_calibrated_on_says_so(tmp_path, clean
     out = capsys.readouterr().out
     assert "warning: declared: its chain's calibration warned: energy chain x = 1: IMPLAUSIBLE (planted)" in out
     assert "note: the declared chain was calibrated on 1 of these 1 log file(s)" in out
-    md = (tmp_path / "t" / "trace.md").read_text()
+    md = (tmp_path / "t" / "trace.md").read_text(encoding="utf-8")
     assert "calibrated on 1 of these 1 log file(s)" in md and "IMPLAUSIBLE (planted)" in md
     other = tmp_path / "elsewhere"
     other.mkdir()

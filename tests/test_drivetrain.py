@@ -115,7 +115,7 @@ def test_calibrate_says_the_grade_at_the_wheels(tmp_path, capsys, engine):
     pm = np.where(pw > 0, pw / 0.9, pw * 0.9) + rng.normal(0, 400, pw.size)
     pd.DataFrame({"time_s": np.arange(pw.size) * 0.5, "speed_mps": x.v, "accel_mps2": x.a,
                   "grade_rad": x.theta, "mass_kg": x.mass, "power_w": pm}).to_parquet(tmp_path / "log.parquet")
-    (tmp_path / "c.toml").write_text('terms = ["acc", "acc_pos", "grade", "aero", "roll"]\n')
+    (tmp_path / "c.toml").write_text('terms = ["acc", "acc_pos", "grade", "aero", "roll"]\n', encoding="utf-8")
     out = tmp_path / "eq.toml"
     assert main(["calibrate", str(tmp_path / "log.parquet"), "--candidates", str(tmp_path / "c.toml"),
                  "--out", str(out), "--engine", engine]) == 0
@@ -140,7 +140,7 @@ def test_calibrate_says_when_the_constraints_held_the_grade(tmp_path, capsys):
     pd.DataFrame({"time_s": np.arange(pw.size) * 0.5, "speed_mps": x.v, "accel_mps2": x.a,
                   "grade_rad": 2.5 * x.theta, "mass_kg": x.mass, "power_w": pm}).to_parquet(tmp_path / "log.parquet")
     (tmp_path / "c.toml").write_text('terms = ["acc", "acc_pos", "grade", "aero", "roll"]\n'
-                                     '[constraints]\ngrade = { fixed = 1.0 }\n')
+                                     '[constraints]\ngrade = { fixed = 1.0 }\n', encoding="utf-8")
     assert main(["calibrate", str(tmp_path / "log.parquet"), "--candidates", str(tmp_path / "c.toml"),
                  "--out", str(tmp_path / "eq.toml")]) == 0
     printed = capsys.readouterr().out

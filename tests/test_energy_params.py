@@ -294,7 +294,7 @@ def test_bare_config_books_energy_vtypes_beside_their_class(tmp_path):
     code = cli_main(["run", str(tmp_path / "s.toml"), "--equation", "vtype_energy", "--out",
                      str(tmp_path / "cli"), "--no-figures", "--no-progress"])
     assert code == 0
-    summ = json.loads((tmp_path / "cli" / "summary.json").read_text())
+    summ = json.loads((tmp_path / "cli" / "summary.json").read_text(encoding="utf-8"))
     assert sorted(summ["equations"]) == ["vtype_energy.ebus", "vtype_energy.ecar", "vtype_energy.massonly"]
 
 

@@ -34,10 +34,10 @@ def test_energy_bus_riders_as_sumo(tmp_path):
     1583.48 against SUMO's 1582.50 Wh, +6.2e-4)."""
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="c" x="2000" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="c" numLanes="1" speed="14"/></edges>')
-    (tmp_path / "r.rou.xml").write_text(ROUTES.format(persons=PERSONS))
+    (tmp_path / "r.rou.xml").write_text(ROUTES.format(persons=PERSONS), encoding="utf-8")
     (tmp_path / "a.add.xml").write_text('<additional><busStop id="bs" lane="e_0" startPos="150" endPos="180"/>'
                                         '<busStop id="bs2" lane="e_0" startPos="900" endPos="930"/>'
-                                        '<busStop id="bs3" lane="e_0" startPos="1600" endPos="1630"/></additional>')
+                                        '<busStop id="bs3" lane="e_0" startPos="1600" endPos="1630"/></additional>', encoding="utf-8")
     energy_scenario(tmp_path, 300, additional="a.add.xml")
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
     assert res["assumptions"]["vtype_energy"]["booked"]["ebus"]["mass"] == "the vehicle's (riders included)"
@@ -55,12 +55,12 @@ def test_energy_bus_riders_as_sumo(tmp_path):
     import json
     import re
 
-    bare = re.sub(r' (x|y)="[^"]*"', "", (tmp_path / "fcd.xml").read_text())
-    (tmp_path / "bare.xml").write_text(bare)
+    bare = re.sub(r' (x|y)="[^"]*"', "", (tmp_path / "fcd.xml").read_text(encoding="utf-8"))
+    (tmp_path / "bare.xml").write_text(bare, encoding="utf-8")
     assert cli_main(["fcd", str(tmp_path / "bare.xml"), "--scenario", str(tmp_path / "s.toml"),
                      "--out", str(tmp_path / "bare"), "--no-figures"]) == 0
-    warn = json.loads((tmp_path / "bare" / "summary.json").read_text()).get("warnings", [])
+    warn = json.loads((tmp_path / "bare" / "summary.json").read_text(encoding="utf-8")).get("warnings", [])
     assert any("person rows without x, y" in w and "riders' mass is not booked" in w for w in warn), warn
-    assert not any("without x, y" in w for w in json.loads((tmp_path / "fcd" / "summary.json").read_text()).get("warnings", []))
+    assert not any("without x, y" in w for w in json.loads((tmp_path / "fcd" / "summary.json").read_text(encoding="utf-8")).get("warnings", []))
     cv = pd.read_csv(tmp_path / "bare" / "chain_vehicles.csv").set_index("key")
     assert cv.loc["b", "net_kwh"] * 1000.0 < sumo_wh["b"] * (1 - 1e-3)  # (the riders' 2.1 t missing)

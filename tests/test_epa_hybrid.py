@@ -272,10 +272,10 @@ def _phev_config(d: Path, fcd: bool = False) -> Path:
 
     build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
-    (d / "r.rou.xml").write_text(PHEV_ROUTES)
+    (d / "r.rou.xml").write_text(PHEV_ROUTES, encoding="utf-8")
     out = '<output><fcd-output value="fcd.xml"/><precision value="6"/></output>' if fcd else ""
     (d / "c.sumocfg").write_text('<configuration><input><net-file value="n.net.xml"/><route-files '
-                                 f'value="r.rou.xml"/></input>{out}<time><end value="150"/></time></configuration>')
+                                 f'value="r.rou.xml"/></input>{out}<time><end value="150"/></time></configuration>', encoding="utf-8")
     return d / "c.sumocfg"
 
 
@@ -310,12 +310,12 @@ def test_a_bare_config_books_a_plug_in_hybrids_petrol_share_with_the_hybrid_chai
     for name, target in (("bare", "c.sumocfg"), ("both", "s.toml")):
         if name == "both":
             (tmp_path / "s.toml").write_text(f'equations = ["epa_gasoline_car", "{eh.NAME}"]\n[sumo]\n'
-                                             'config = "c.sumocfg"\n[outputs]\nfigures = false\n')
+                                             'config = "c.sumocfg"\n[outputs]\nfigures = false\n', encoding="utf-8")
         out = tmp_path / name
         assert cli_main(["run", str(tmp_path / target), "--no-figures", "--out", str(out)]) == 0
         ch = pd.read_csv(out / "chain_vehicles.csv", dtype={"key": str})
         books[name] = ch.groupby(ch["key"].str[0])["equation"].agg(lambda s: sorted(set(s))).to_dict()
-        summary = json.loads((out / "summary.json").read_text())
+        summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         books[name + "_summary"] = summary["assumptions"]["powertrain"]
         books[name + "_warned"] = [w for w in summary["warnings"] if "emissionClass names their fuel" in w]
     assert books["bare"] == {"h": [eh.NAME], "p": ["epa_gasoline_car"], "n": ["epa_gasoline_car"]}
@@ -352,7 +352,7 @@ def test_an_fcd_replay_serial_or_on_dask_books_the_powertrains_as_the_live_run(t
 
     cfg = _phev_config(tmp_path, fcd=True)
     assert cli_main(["run", str(cfg), "--no-figures", "--out", str(tmp_path / "live")]) == 0
-    want = json.loads((tmp_path / "live" / "summary.json").read_text())["assumptions"]
+    want = json.loads((tmp_path / "live" / "summary.json").read_text(encoding="utf-8"))["assumptions"]
     assert want["powertrain"] and want["energy_carrier"]
     live = pd.read_csv(tmp_path / "live" / "chain_vehicles.csv").set_index(["key", "equation"])["fuel_l"]
     fcd = tmp_path / "live" / "sumo" / "fcd.xml"  # where the run sends the config's outputs
@@ -361,7 +361,7 @@ def test_an_fcd_replay_serial_or_on_dask_books_the_powertrains_as_the_live_run(t
         out = tmp_path / engine
         assert cli_main(["fcd", str(fcd), "--scenario", str(cfg), "--no-figures", "--engine", engine, *opts,
                          "--out", str(out)]) == 0
-        got[engine] = json.loads((out / "summary.json").read_text())["assumptions"]
+        got[engine] = json.loads((out / "summary.json").read_text(encoding="utf-8"))["assumptions"]
         for key in ("energy_carrier", "powertrain", "booked_as"):  # the replay has no SUMO to ask its
             assert _without_from(got[engine][key]) == _without_from(want[key]), (engine, key)  # default
             assert got[engine][key] == got["local"][key], (engine, key)
@@ -397,17 +397,17 @@ def test_a_hybrid_without_a_hybrid_chain_for_its_vclass_is_said(tmp_path):
   <flow id="h" type="hvan" begin="0" end="20" period="10"><route edges="e"/></flow>
   <flow id="v" type="van" begin="1" end="20" period="10"><route edges="e"/></flow>
   <flow id="b" type="hbus" begin="2" end="20" period="10"><route edges="e"/></flow>
-</routes>""")
+</routes>""", encoding="utf-8")
     (tmp_path / "c.sumocfg").write_text('<configuration><input><net-file value="n.net.xml"/><route-files '
-                                        'value="r.rou.xml"/></input><time><end value="100"/></time></configuration>')
+                                        'value="r.rou.xml"/></input><time><end value="100"/></time></configuration>', encoding="utf-8")
     (tmp_path / "s.toml").write_text(
         f'equations = ["epa_gasoline_light_truck", "moves_transit_bus_diesel", "{eh.NAME}"]\n'
-        f'[vtypes.hvan]\nequations = ["{eh.NAME}"]\n[sumo]\nconfig = "c.sumocfg"\n')
+        f'[vtypes.hvan]\nequations = ["{eh.NAME}"]\n[sumo]\nconfig = "c.sumocfg"\n', encoding="utf-8")
     seen = {}
     for name, target in (("bare", "c.sumocfg"), ("given", "s.toml")):
         out = tmp_path / name
         assert cli_main(["run", str(tmp_path / target), "--no-figures", "--out", str(out)]) == 0
-        summary = json.loads((out / "summary.json").read_text())
+        summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         ch = pd.read_csv(out / "chain_vehicles.csv", dtype={"key": str})
         seen[name] = (summary["assumptions"]["powertrain"],
                       [w for w in summary["warnings"] if "no hybrid chain is made" in w],

@@ -169,16 +169,16 @@ def test_unknown_equation_lists_builtins():
 
 def test_broken_equation_files(tmp_path):
     p = tmp_path / "bad.toml"
-    p.write_text("[equation]\nname='x'\n[terms]\nacc = 'one'\n")
+    p.write_text("[equation]\nname='x'\n[terms]\nacc = 'one'\n", encoding="utf-8")
     with pytest.raises(UserError, match=r"bad.toml.*acc"):
         load_equation(p)
-    p.write_text("[equation]\nname='x'\n[beta]\nacc = 1\n")
+    p.write_text("[equation]\nname='x'\n[beta]\nacc = 1\n", encoding="utf-8")
     with pytest.raises(UserError, match="reference_mass_kg"):
         load_equation(p)
-    p.write_text("not toml ===")
+    p.write_text("not toml ===", encoding="utf-8")
     with pytest.raises(UserError, match="TOML"):
         load_equation(p)
-    p.write_text("[equation]\nname='x'\n[terms]\nacc = 1\n[extra]\nq = 1\n")
+    p.write_text("[equation]\nname='x'\n[terms]\nacc = 1\n[extra]\nq = 1\n", encoding="utf-8")
     with pytest.raises(UserError, match="extra"):
         load_equation(p)
 

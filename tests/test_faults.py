@@ -34,7 +34,7 @@ def _hidden(folder: Path) -> list[str]:
 
 def _assert_whole(out: Path):
     """A published set: the manifest lists exactly the files present."""
-    man = json.loads((out / MANIFEST).read_text())
+    man = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
     listed = sorted(f["path"] for f in man["files"])
     present = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and p.name != MANIFEST)
     assert listed == present
@@ -57,7 +57,7 @@ def test_output_set_replaces_whole_and_keeps_on_failure(tmp_path):
         with output_set(out) as t:
             write_text(t / "c.txt", "second")
             raise RuntimeError("boom")
-    assert (out / "a.txt").read_text() == "first" and not (out / "c.txt").exists()
+    assert (out / "a.txt").read_text(encoding="utf-8") == "first" and not (out / "c.txt").exists()
     assert _hidden(tmp_path) == []
     # a successful second run replaces the set whole: nothing of the first remains
     with output_set(out) as t:
@@ -71,14 +71,14 @@ def test_output_set_refuses_foreign_folder_and_inputs(tmp_path):
 
     mine = tmp_path / "mine"
     mine.mkdir()
-    (mine / "thesis.tex").write_text("years")
+    (mine / "thesis.tex").write_text("years", encoding="utf-8")
     with pytest.raises(OutputExists):
         with output_set(mine):
             pass
-    assert (mine / "thesis.tex").read_text() == "years"
+    assert (mine / "thesis.tex").read_text(encoding="utf-8") == "years"
     log = tmp_path / "in" / "log.csv"
     log.parent.mkdir()
-    log.write_text("x")
+    log.write_text("x", encoding="utf-8")
     for bad, inputs in ((tmp_path / "in", [log]), (tmp_path, [log]), (log, [log]),
                         (tmp_path / "in" / "rep", [log.parent])):
         with pytest.raises(UserError):
@@ -86,7 +86,7 @@ def test_output_set_refuses_foreign_folder_and_inputs(tmp_path):
                 pass
     with output_set(tmp_path / "in" / "rep", inputs=[log]) as t:  # beside a file input: fine
         write_text(t / "r.txt", "ok")
-    assert log.read_text() == "x"
+    assert log.read_text(encoding="utf-8") == "x"
     with output_set(mine, force=True) as t:
         write_text(t / "r.txt", "ok")
     assert sorted(p.name for p in mine.iterdir()) == [MANIFEST, "r.txt"]
@@ -102,11 +102,11 @@ def test_a_users_file_in_an_earlier_set_is_not_deleted_without_force(tmp_path):
     with output_set(out) as t:
         write_text(t / "a.txt", "first")
     write_text(out / "notes" / "mine.txt", "my analysis")
-    (out / ".DS_Store").write_text("os")  # hidden files do not count
+    (out / ".DS_Store").write_text("os", encoding="utf-8")  # hidden files do not count
     with pytest.raises(OutputExists, match=r"1 file\(s\) it did not write \(first: notes/mine.txt\)"):
         with output_set(out) as t:
             write_text(t / "b.txt", "second")
-    assert (out / "notes" / "mine.txt").read_text() == "my analysis" and not (out / "b.txt").exists()
+    assert (out / "notes" / "mine.txt").read_text(encoding="utf-8") == "my analysis" and not (out / "b.txt").exists()
     assert _hidden(tmp_path) == []
     with output_set(out, force=True) as t:
         write_text(t / "b.txt", "second")
@@ -134,7 +134,7 @@ def test_a_killed_runs_temporary_folder_is_removed_by_the_next_run(tmp_path):
             d = tmp_path / name
             write_text(d / "set" / "part.parquet", "partial")
             if owner:
-                (d / OWNER).write_text(owner)
+                (d / OWNER).write_text(owner, encoding="utf-8")
         with output_set(tmp_path / "set") as t:
             write_text(t / "a.txt", "x")
         assert _hidden(tmp_path) == [".other.killed.tmp", ".set.elsewhere.tmp", ".set.running.tmp",
@@ -152,7 +152,7 @@ def test_companion_files_move_beside_the_set(tmp_path):
         assert t.name == "validation"
         write_text(t / "summary.json", "{}")
         write_text(t.parent / "validation.md", "see validation/summary.json")
-    assert (tmp_path / "validation.md").read_text() == "see validation/summary.json"
+    assert (tmp_path / "validation.md").read_text(encoding="utf-8") == "see validation/summary.json"
     man = _assert_whole(out)
     assert man["companions"][0]["path"] == "../validation.md"
 
@@ -170,7 +170,7 @@ def test_two_runs_into_one_folder(tmp_path):
     assert cli_main(["compare", str(log), "--equation", "moves_passenger_car", "--out", str(out),
                      "--engine", "memory"]) == 0
     second = _assert_whole(out)
-    rep = json.loads((out / "report.json").read_text())
+    rep = json.loads((out / "report.json").read_text(encoding="utf-8"))
     assert list(rep["equations"]) == ["moves_passenger_car"]
     assert first["command"] != second["command"]
 
@@ -195,7 +195,7 @@ def test_two_runs_into_one_folder(tmp_path):
     assert errors == []
     race = tmp_path / "race"
     _assert_whole(race)
-    tags = {(race / f"{i}.txt").read_text() for i in range(5)}
+    tags = {(race / f"{i}.txt").read_text(encoding="utf-8") for i in range(5)}
     assert len(tags) == 1, tags
     assert _hidden(tmp_path) == []
 
@@ -383,7 +383,7 @@ def test_signal_during_run(tmp_path, sig, delay):
     if out.exists():
         assert _assert_whole(out)["interrupted"] is True
         # the end is the last step booked whole (it read one step past what was booked)
-        s = json.loads((out / "summary.json").read_text())
+        s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         assert s["end_s"] == pytest.approx(s["begin_s"] + s["steps"] * s["step_length_s"])
 
 
@@ -417,7 +417,7 @@ def test_interrupt_during_fcd_writes_the_replayed_part_marked(tmp_path, monkeypa
     o = capsys.readouterr()
     assert code == 130 and "interrupted" in o.out and "completed" not in o.err, (o.out, o.err)
     assert _assert_whole(out)["interrupted"] is True and _hidden(tmp_path) == []
-    s = json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert s["interrupted"] is True and s["steps"] == 50  # booked whole; the 51st was stopped
 
 
@@ -433,7 +433,7 @@ def test_interrupt_during_a_sweep_stops_it_there(tmp_path, monkeypatch, capsys):
     o = capsys.readouterr()
     assert code == 130 and "not run: highway" in o.out, (o.out, o.err)
     assert _assert_whole(out)["interrupted"] is True and _hidden(tmp_path) == []
-    assert json.loads((out / "city" / "summary.json").read_text())["interrupted"] is True
+    assert json.loads((out / "city" / "summary.json").read_text(encoding="utf-8"))["interrupted"] is True
     assert not (out / "highway").exists()
     assert set(pd.read_csv(out / "runs.csv").scenario) == {"city"}
 
@@ -459,7 +459,7 @@ def _children(pid: int) -> list[int]:
     for task in Path(f"/proc/{pid}/task").glob("*"):
         kids = task / "children"
         if kids.exists():
-            out += [int(x) for x in kids.read_text().split()]
+            out += [int(x) for x in kids.read_text(encoding="utf-8").split()]
     return out
 
 
@@ -633,9 +633,9 @@ def test_output_piped_into_a_reader_that_has_gone(tmp_path):
     before the command writes; the command still writes its log, exits 0 and prints no
     traceback (it used to stop at its first print: BrokenPipeError, output absent)."""
     csv = tmp_path / "log.csv"
-    csv.write_text("t,v\n" + "".join(f"{i},{i % 7}\n" for i in range(200)))
+    csv.write_text("t,v\n" + "".join(f"{i},{i % 7}\n" for i in range(200)), encoding="utf-8")
     m = tmp_path / "map.toml"
-    m.write_text('[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\nunit = "m/s"\n')
+    m.write_text('[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\nunit = "m/s"\n', encoding="utf-8")
     out = tmp_path / "log.parquet"
     exe = Path(sys.executable).with_name("sumo-drvpw")
     r, w = os.pipe()

@@ -40,7 +40,7 @@ def fcd(tmp_path_factory):
     path = d / "fcd.xml"
     run_scenario(REPO / "scenarios" / "city.toml", None, end=60, equations=[PHYS],
                  figures=False, options=["--fcd-output", str(path), "--precision", "6"])
-    text = path.read_text()
+    text = path.read_text(encoding="utf-8")
     assert len(ROW.findall(text)) > 100
     return path, text
 
@@ -101,7 +101,7 @@ def test_a_vehicle_without_type_is_refused_on_both_engines(fcd, tmp_path, capsys
     (local) or a 45-line ArrowInvalid (dask); the reader refuses it, naming the row."""
     path, text = fcd
     bad = tmp_path / "no_type.xml"
-    bad.write_text(_edit_row(text, 4, lambda r: re.sub(r' type="[^"]*"', "", r)))
+    bad.write_text(_edit_row(text, 4, lambda r: re.sub(r' type="[^"]*"', "", r)), encoding="utf-8")
     _refused(capsys, tmp_path, bad, str(bad), "attribute type", "vehicle row 5")
     _refused(capsys, tmp_path, bad, bad.name, "attribute type", "vehicle row 5",
              extra=("--engine", "dask", "--workers", "1"))
@@ -117,12 +117,12 @@ def test_fcd_without_lanes_is_refused(fcd, tmp_path, capsys):
     """Finding 3: FCD written without ``lane`` was an IndexError."""
     _, text = fcd
     bad = tmp_path / "no_lane.xml"
-    bad.write_text(re.sub(r' lane="[^"]*"', "", text))
+    bad.write_text(re.sub(r' lane="[^"]*"', "", text), encoding="utf-8")
     _refused(capsys, tmp_path, bad, str(bad), "attribute lane", "vehicle row 1")
     # a mesoscopic run writes the edge instead of the lane: the message says why that FCD
     # carries no driving power (it said only that SUMO writes a lane for every vehicle)
     meso = tmp_path / "meso.xml"
-    meso.write_text(re.sub(r' lane="([^"]*)_\d+"', r' edge="\1"', text))
+    meso.write_text(re.sub(r' lane="([^"]*)_\d+"', r' edge="\1"', text), encoding="utf-8")
     _refused(capsys, tmp_path, meso, str(meso), "attribute lane", "mesoscopic")
 
 
@@ -141,7 +141,7 @@ def test_a_row_without_time_or_a_vehicle_twice_in_a_step_is_refused(fcd, tmp_pat
     df.to_csv(tmp_path / "twice.csv", index=False)
     _refused(capsys, tmp_path, tmp_path / "twice.csv", "appears twice", "row 502")
     bad = tmp_path / "twice.xml"
-    bad.write_text(_edit_row(text, 4, lambda r: r + r))
+    bad.write_text(_edit_row(text, 4, lambda r: r + r), encoding="utf-8")
     _refused(capsys, tmp_path, bad, "appears twice", "vehicle row 6")
 
 
@@ -160,7 +160,7 @@ def test_a_tabular_fcd_with_a_byte_order_mark_is_read(fcd, tmp_path, capsys):
         code = cli_main(["fcd", str(f), "--net", str(CITY_NET), "--equation", "vsp_ldv1999",
                          "--vtypes", str(vt), "--no-figures", "--out", str(tmp_path / out)])
         assert code == 0, capsys.readouterr().err
-        runs.append(json.loads((tmp_path / out / "summary.json").read_text()))
+        runs.append(json.loads((tmp_path / out / "summary.json").read_text(encoding="utf-8")))
     assert runs[1]["vehicles"] == runs[0]["vehicles"] > 0
     assert runs[1]["equations"] == runs[0]["equations"]
 
@@ -177,7 +177,7 @@ def test_a_gap_in_the_fcd_is_named_as_one(fcd, tmp_path, capsys):
     code = cli_main(["fcd", str(tmp_path / "gap.csv"), "--net", str(CITY_NET), "--equation",
                      "vsp_ldv1999", "--no-figures", "--out", str(tmp_path / "o")])
     assert code == 0, capsys.readouterr().err
-    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     w = [x for x in s["warnings"] if "timesteps of 0.5 s are missing" in x]
     assert s["missed_steps"] == 21 and len(w) == 1 and "simulationStep" not in w[0]
 
@@ -187,7 +187,7 @@ def test_a_net_that_is_no_network_is_named(tmp_path, capsys):
     ValueError."""
     fcd_file = tmp_path / "fcd.xml"
     fcd_file.write_text('<fcd-export><timestep time="0.00"><vehicle id="v" type="t" '
-                        'speed="1" pos="1" lane="a_0"/></timestep></fcd-export>\n')
+                        'speed="1" pos="1" lane="a_0"/></timestep></fcd-export>\n', encoding="utf-8")
     _refused(capsys, tmp_path, fcd_file, str(fcd_file), "not a SUMO network", net=fcd_file)
 
 
@@ -227,7 +227,7 @@ def test_implausible_speeds_are_refused_naming_the_files_row(fcd, tmp_path, caps
     for value in ("1e9", "inf", "100.5", "-5"):
         bad = tmp_path / f"speed_{value}.xml"
         bad.write_text(_edit_row(text, k, lambda r: re.sub(r' speed="[^"]*"',
-                                                           f' speed="{value}"', r)))
+                                                           f' speed="{value}"', r)), encoding="utf-8")
         _refused(capsys, tmp_path, bad, str(bad), "attribute speed", f"vehicle row {k + 1}",
                  "100 m/s")
         with pytest.raises(UserError, match=f"vehicle row {k + 1} "):
@@ -266,11 +266,11 @@ def test_fcd_of_another_network_is_refused_and_unknown_lanes_warned(fcd, tmp_pat
                     ("one", _edit_row(text, 20, lambda r: re.sub(r' lane="[^"]*"',
                                                                  ' lane="nowhere_0"', r)))):
         f = tmp_path / f"{name}.xml"
-        f.write_text(t)
+        f.write_text(t, encoding="utf-8")
         capsys.readouterr()
         assert cli_main(["fcd", str(f), "--net", str(CITY_NET), "--equation", "vsp_ldv1999",
                          "--no-figures", "--out", str(tmp_path / name)]) == 0
-        out[name] = json.loads((tmp_path / name / "summary.json").read_text())
+        out[name] = json.loads((tmp_path / name / "summary.json").read_text(encoding="utf-8"))
     warned = [w for w in out["one"]["warnings"] if "lanes the network" in w]
     assert len(warned) == 1 and warned[0].startswith("1 FCD row ") and "'nowhere_0'" in warned[0]
     assert not [w for w in out["ok"]["warnings"] if "lanes the network" in w]
@@ -295,7 +295,7 @@ def test_a_file_without_timesteps_or_a_begin_after_its_end_is_refused(fcd, tmp_p
     line naming the file."""
     path, _ = fcd
     ti = tmp_path / "ti.xml"
-    ti.write_text('<tripinfos>\n    <tripinfo id="a" depart="0.00" routeLength="10.0"/>\n</tripinfos>\n')
+    ti.write_text('<tripinfos>\n    <tripinfo id="a" depart="0.00" routeLength="10.0"/>\n</tripinfos>\n', encoding="utf-8")
     city = str(REPO / "scenarios" / "city.sumocfg")
     _refused(capsys, tmp_path, ti, "ti.xml", "no timestep", extra=("--scenario", city))
     _refused(capsys, tmp_path, path, "fcd.xml", "no timestep", extra=("--scenario", city,
@@ -310,7 +310,7 @@ def test_a_file_without_timesteps_is_refused_on_the_in_memory_path_too(fcd, tmp_
 
     path, _ = fcd
     ti = tmp_path / "ti.xml"
-    ti.write_text('<tripinfos>\n    <tripinfo id="a" depart="0.00" routeLength="10.0"/>\n</tripinfos>\n')
+    ti.write_text('<tripinfos>\n    <tripinfo id="a" depart="0.00" routeLength="10.0"/>\n</tripinfos>\n', encoding="utf-8")
     city = REPO / "scenarios" / "city.sumocfg"
     for f, kw in ((ti, {}), (path, {"begin_s": 5000})):
         with pytest.raises(UserError, match="no timestep"):
@@ -349,9 +349,9 @@ def test_an_fcd_of_part_of_the_run_says_so(fcd, tmp_path, capsys):
                        "(device.fcd.probability 0.5)"),
                       ('<fcd-output.filter-edges.input-file value="edges.txt"/>', "records part of the network")):
         f = tmp_path / f"part{len(said)}.xml"
-        f.write_text(text.replace("</libsumoConfiguration>", f"<device>{opt}</device></libsumoConfiguration>", 1))
+        f.write_text(text.replace("</libsumoConfiguration>", f"<device>{opt}</device></libsumoConfiguration>", 1), encoding="utf-8")
         out = tmp_path / f"o{len(said)}"
         assert cli_main(["fcd", str(f), "--net", str(CITY_NET), "--equation", "vsp_ldv1999",
                          "--no-figures", "--out", str(out)]) == 0, capsys.readouterr().err
-        warn = json.loads((out / "summary.json").read_text()).get("warnings", [])
+        warn = json.loads((out / "summary.json").read_text(encoding="utf-8")).get("warnings", [])
         assert any(said in w for w in warn), warn

@@ -32,7 +32,7 @@ def _scenario(d: Path, battery: str) -> Path:
     <flow id="d" type="device" begin="3" end="33" period="10" departSpeed="max"><route edges="c00c10 c10c20"/></flow>
     <flow id="g" type="petrol" begin="6" end="36" period="10" departSpeed="max"><route edges="c00c10 c10c20"/></flow>
 </routes>
-""")
+""", encoding="utf-8")
     cfg = d / "c.sumocfg"
     cfg.write_text(f"""<configuration>
     <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
@@ -40,7 +40,7 @@ def _scenario(d: Path, battery: str) -> Path:
     <time><begin value="0"/><end value="150"/></time>
     <report><no-warnings value="true"/></report>
 </configuration>
-""")
+""", encoding="utf-8")
     return cfg
 
 

@@ -48,18 +48,18 @@ def test_a_collisions_teleport_books_in_the_replay_as_live(tmp_path):
     in the acceleration term: those two cars' net energy 1.455 and 1.927 of the live run's, the
     teleports not counted (replay 0, live 2)."""
     _crossing(tmp_path)
-    (tmp_path / "r.rou.xml").write_text(ROUTES)
+    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
     (tmp_path / "s.toml").write_text(
         'equations = ["vtype_energy"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\nend = 75\n'
         'step_length = 1\noptions = ["--no-warnings", "true", "--precision", "6", "--collision.check-junctions", '
         f'"true", "--collision.action", "teleport", "--fcd-output", "{tmp_path / "fcd.xml"}"]\n'
-        '[outputs]\nfigures = false\n')
+        '[outputs]\nfigures = false\n', encoding="utf-8")
     run_scenario(tmp_path / "s.toml", tmp_path / "o")
     assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--net", str(tmp_path / "n.net.xml"), "--vtypes",
                      str(tmp_path / "r.rou.xml"), "--equation", "vtype_energy", "--end", "75",
                      "--out", str(tmp_path / "f"), "--no-figures"]) == 0
-    live = json.loads((tmp_path / "o" / "summary.json").read_text())["teleports"]
-    rep = json.loads((tmp_path / "f" / "summary.json").read_text())["teleports"]
+    live = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))["teleports"]
+    rep = json.loads((tmp_path / "f" / "summary.json").read_text(encoding="utf-8"))["teleports"]
     assert live["count"] >= 2 and rep["count"] == live["count"]
     assert rep["kinetic_j"]["vtype_energy.rude"] == pytest.approx(live["kinetic_j"]["vtype_energy.rude"], rel=1e-6)
     cols = ["net_total_j", "distance_m", "time_s", "teleports", "teleport_kinetic_j"]

@@ -25,12 +25,12 @@ def recorded(d, step=0.5, params="", stop='<stop parkingArea="pa" duration="20"/
     build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
     (d / "r.rou.xml").write_text(ROUTES.format(params=params).replace(
-        '<stop parkingArea="pa" duration="20"/>', stop).replace("</routes>", extra + "</routes>"))
+        '<stop parkingArea="pa" duration="20"/>', stop).replace("</routes>", extra + "</routes>"), encoding="utf-8")
     (d / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" '
-                                 'roadsideCapacity="2"/></additional>')
+                                 'roadsideCapacity="2"/></additional>', encoding="utf-8")
     sc = energy_scenario(d, 300, step_length=step, additional="a.add.xml", fcd=True)
     if signals:
-        sc.write_text(sc.read_text().replace('"--fcd-output",', '"--fcd-output.signals", "true", "--fcd-output",'))
+        sc.write_text(sc.read_text(encoding="utf-8").replace('"--fcd-output",', '"--fcd-output.signals", "true", "--fcd-output",'), encoding="utf-8")
     run_scenario(sc, d / "live")
     return sc, _chain(d / "live"), emitted_wh(d / "em.xml", step)[0]
 
@@ -88,8 +88,8 @@ def test_a_triggered_parking_idles_from_the_step_its_person_boards(tmp_path):
     sc, live, sumo = recorded(tmp_path, stop=stop, signals=True, extra=RIDER)
     assert live["p"] == pytest.approx(sumo["p"], rel=1e-6)
     import re
-    text = (tmp_path / "fcd.xml").read_text()
-    (tmp_path / "nosig.xml").write_text(re.sub(r' signals="[^"]*"', "", text))
+    text = (tmp_path / "fcd.xml").read_text(encoding="utf-8")
+    (tmp_path / "nosig.xml").write_text(re.sub(r' signals="[^"]*"', "", text), encoding="utf-8")
     rows = {}
     for f in ("fcd.xml", "nosig.xml"):
         res = process_fcd(tmp_path / f, scenario=sc, out_dir=tmp_path / f"o_{f}", chunk_rows=31)
@@ -98,7 +98,7 @@ def test_a_triggered_parking_idles_from_the_step_its_person_boards(tmp_path):
         assert res["source"]["untold_parked_rows"] == 0  # the boarding tells them
     assert rows["fcd.xml"] == rows["nosig.xml"] > 250  # ~139 s from 60 s on
     rou = tmp_path / "r.rou.xml"
-    rou.write_text(rou.read_text().replace('triggered="person"', 'triggered="container"'))
+    rou.write_text(rou.read_text(encoding="utf-8").replace('triggered="person"', 'triggered="container"'), encoding="utf-8")
     res = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "c_sig")
     pd.testing.assert_series_equal(_chain(tmp_path / "c_sig"), live, rtol=1e-6)
     assert res["source"]["untold_parked_rows"] == 0
@@ -132,7 +132,7 @@ def test_a_replay_on_dask_books_the_idling_as_the_serial_replay(tmp_path):
     # the same FCD with the stop gone from the route files: no row of the parked car is told
     # (a stop added by a device or a script); the buckets count them as the serial replay
     rou = tmp_path / "r.rou.xml"
-    rou.write_text(rou.read_text().replace('<stop parkingArea="pa" duration="20"/>', ""))
+    rou.write_text(rou.read_text(encoding="utf-8").replace('<stop parkingArea="pa" duration="20"/>', ""), encoding="utf-8")
     serial = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "o2")
     res = process_fcd_dask(tmp_path / "fcd.xml", tmp_path / "od2", scenario=sc, buckets=3, workers=1,
                            chunk_rows=50)

@@ -47,8 +47,8 @@ def recorded(tmp_path_factory):
     (d / "nets").mkdir()
     shutil.copy(CITY_NET, d / "nets" / "city.net.xml")
     (d / "scen").mkdir()
-    (d / "scen" / "r.rou.xml").write_text(ROUTES)
-    (d / "scen" / "run.sumocfg").write_text(CONFIG)
+    (d / "scen" / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
+    (d / "scen" / "run.sumocfg").write_text(CONFIG, encoding="utf-8")
     (d / "out").mkdir()
     # started in scen/ with a relative config: SUMO writes the paths as the config has them
     subprocess.run([sumolib.checkBinary("sumo"), "-c", "run.sumocfg", "-e", "60",
@@ -77,7 +77,7 @@ def test_fcd_books_trucks_as_trucks_from_the_files_its_header_names(recorded, tm
                      "--no-figures", "--out", "net_only"]) == 0
     assert cli_main(["fcd", str(d / "out" / "fcd.xml"), "--net", str(d / "nets" / "city.net.xml"),
                      "--vtypes", str(d / "scen" / "r.rou.xml"), "--no-figures", "--out", "given"]) == 0
-    same = [json.loads((tmp_path / k / "summary.json").read_text())["equations"]
+    same = [json.loads((tmp_path / k / "summary.json").read_text(encoding="utf-8"))["equations"]
             for k in ("bare", "net_only", "given")]
     assert same[0] == same[1] == same[2]
     trucks = same[0]["moves_single_unit_truck"]["energy_j"]
@@ -91,14 +91,14 @@ def _fcd_with_header(path: Path, inputs: dict[str, str], fcd_output: str | None)
     path.write_text('<?xml version="1.0" encoding="UTF-8"?>\n\n<!-- generated on 2026-11-27 by '
                     "Eclipse SUMO sumo 1.28.0\n<sumoConfiguration>\n    <input>\n" + opts
                     + "    </input>\n    <output>\n" + out + "    </output>\n</sumoConfiguration>\n"
-                    "-->\n\n<fcd-export>\n    <timestep time=\"0.00\"/>\n</fcd-export>\n")
+                    "-->\n\n<fcd-export>\n    <timestep time=\"0.00\"/>\n</fcd-export>\n", encoding="utf-8")
     return path
 
 
 def _touch(*paths: Path) -> None:
     for p in paths:
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text("<routes/>")
+        p.write_text("<routes/>", encoding="utf-8")
 
 
 def test_paths_are_found_from_where_the_fcd_is_now(tmp_path):
@@ -143,7 +143,7 @@ def test_a_moved_fcd_falls_back_to_its_folders_and_the_working_folder(tmp_path):
 def test_no_header_no_inputs(tmp_path):
     """A file without SUMO's header (another tool's XML, CSV) or a header naming no input
     gives None: the replay asks for --net as before."""
-    (tmp_path / "plain.xml").write_text("<fcd-export><timestep time=\"0\"/></fcd-export>")
+    (tmp_path / "plain.xml").write_text("<fcd-export><timestep time=\"0\"/></fcd-export>", encoding="utf-8")
     assert recorded_inputs(tmp_path / "plain.xml") is None
     assert recorded_inputs(_fcd_with_header(tmp_path / "h.xml", {}, "h.xml")) is None
 
@@ -161,10 +161,10 @@ def test_the_recordings_battery_device_option_reaches_the_replay(tmp_path):
 
     (tmp_path / "r.rou.xml").write_text(
         f'<routes><vType id="pkw" vClass="passenger" sigma="0.5">{PARAMS}</vType>\n'
-        '<flow id="a" type="pkw" from="e01" to="e56" begin="0" end="30" period="10" departSpeed="0"/></routes>')
+        '<flow id="a" type="pkw" from="e01" to="e56" begin="0" end="30" period="10" departSpeed="0"/></routes>', encoding="utf-8")
     (tmp_path / "s.toml").write_text(
         f'equations = ["vtype_energy"]\n[sumo]\nnet = "{HW_NET}"\nroutes = ["r.rou.xml"]\nend = 60\n'
-        'options = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n')
+        'options = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n', encoding="utf-8")
     live = run_scenario(tmp_path / "s.toml", tmp_path / "live",
                         options=["--device.battery.probability", "1", "--fcd-output",
                                  str(tmp_path / "fcd.xml"), "--precision", "6"])
@@ -240,9 +240,9 @@ def test_a_tabular_fcd_takes_the_files_of_the_config_that_writes_it(recorded, tm
     d = tmp_path / "study"
     shutil.copytree(recorded / "nets", d / "nets")
     shutil.copytree(recorded / "scen", d / "scen")
-    cfg = (d / "scen" / "run.sumocfg").read_text().replace(
+    cfg = (d / "scen" / "run.sumocfg").read_text(encoding="utf-8").replace(
         "</input>", '</input>\n    <output>\n        <fcd-output value="fcd.parquet"/>\n    </output>')
-    (d / "scen" / "run.sumocfg").write_text(cfg)
+    (d / "scen" / "run.sumocfg").write_text(cfg, encoding="utf-8")
     subprocess.run([sumolib.checkBinary("sumo"), "-c", "run.sumocfg", "-e", "60", "--no-step-log",
                     "--no-warnings"], check=True, capture_output=True, cwd=d / "scen")
     monkeypatch.chdir(tmp_path)
@@ -251,7 +251,7 @@ def test_a_tabular_fcd_takes_the_files_of_the_config_that_writes_it(recorded, tm
     assert "from the SUMO config that writes the FCD" in out and "run.sumocfg" in out
     v = pd.read_parquet(tmp_path / "o" / "vehicles.parquet")
     assert set(v[v.vtype == "lorry"].vclass) == {"truck"} and set(v[v.vtype == "lorry"].mass_kg) == {12000.0}
-    (d / "scen" / "copy.sumocfg").write_text(cfg)  # a second config naming it: ambiguous
+    (d / "scen" / "copy.sumocfg").write_text(cfg, encoding="utf-8")  # a second config naming it: ambiguous
     assert cli_main(["fcd", str(d / "scen" / "fcd.parquet"), "--no-figures", "--out", "o2"]) == 2
     err = capsys.readouterr().err  # both named, none said not to write it
     assert "give --net" in err and "write it (copy.sumocfg, run.sumocfg): --scenario the one that ran it" in err
@@ -300,7 +300,7 @@ def test_an_fcd_the_plugin_recorded_names_its_additional_files_not_their_copies(
             '<edgeData id="ed" file="ed.xml" period="30"/></additional>')
     (d / "scen" / name).write_bytes(gzip.compress(text.encode()) if gz else text.encode())
     (d / "scen" / "addrun.sumocfg").write_text(CONFIG.replace(
-        "</input>", f'<additional-files value="{name}"/></input>'))
+        "</input>", f'<additional-files value="{name}"/></input>'), encoding="utf-8")
     fcd = tmp_path / "fcd.xml"
     run_scenario(d / "scen" / "addrun.sumocfg", tmp_path / "o", figures=False, progress=False,
                  end=30, options=["--fcd-output", str(fcd)])
@@ -320,7 +320,7 @@ def test_an_fcd_with_a_header_whose_network_is_gone_is_not_said_to_lack_a_config
     d = tmp_path / "moved"
     d.mkdir()
     shutil.copy(recorded / "out" / "fcd.xml", d / "fcd.xml")
-    (d / "run.sumocfg").write_text(CONFIG.replace("</input>", '</input><output><fcd-output value="fcd.xml"/></output>'))
+    (d / "run.sumocfg").write_text(CONFIG.replace("</input>", '</input><output><fcd-output value="fcd.xml"/></output>'), encoding="utf-8")
     monkeypatch.chdir(tmp_path)
     assert cli_main(["fcd", str(d / "fcd.xml"), "--no-figures", "--out", "o"]) == 2
     err = capsys.readouterr().err.strip()
@@ -343,16 +343,16 @@ def test_a_config_listing_its_files_after_a_comma_and_space_is_read_whole(tmp_pa
     shutil.copy(CITY_NET, tmp_path / "nets" / "city.net.xml")
     scen = tmp_path / "scen"
     scen.mkdir()
-    (scen / "r.rou.xml").write_text("<routes/>")
+    (scen / "r.rou.xml").write_text("<routes/>", encoding="utf-8")
     vtypes, flows = ROUTES.split("    <flow", 1)
-    (scen / "flows.rou.xml").write_text("<routes>\n    <flow" + flows)
-    (scen / "types.xml").write_text(vtypes + "</routes>\n")
-    (scen / "run.sumocfg").write_text(CONFIG.replace('value="r.rou.xml"', 'value="r.rou.xml, types.xml, flows.rou.xml"'))
+    (scen / "flows.rou.xml").write_text("<routes>\n    <flow" + flows, encoding="utf-8")
+    (scen / "types.xml").write_text(vtypes + "</routes>\n", encoding="utf-8")
+    (scen / "run.sumocfg").write_text(CONFIG.replace('value="r.rou.xml"', 'value="r.rou.xml, types.xml, flows.rou.xml"'), encoding="utf-8")
     monkeypatch.chdir(tmp_path)
     subprocess.run([sumolib.checkBinary("sumo"), "-c", "scen/run.sumocfg", "-e", "60",
                     "--fcd-output", "fcd.xml", "--no-step-log", "--no-warnings"],
                    check=True, capture_output=True)
-    assert "scen/ flows.rou.xml" in (tmp_path / "fcd.xml").read_text()[:3000]  # as SUMO reports it
+    assert "scen/ flows.rou.xml" in (tmp_path / "fcd.xml").read_text(encoding="utf-8")[:3000]  # as SUMO reports it
     assert cli_main(["fcd", "fcd.xml", "--no-figures", "--out", "replay"]) == 0
     v = pd.read_parquet(tmp_path / "replay" / "vehicles.parquet")
     assert set(v[v.vtype == "lorry"].mass_kg) == {12000.0} and set(v[v.vtype == "lorry"].vclass) == {"truck"}

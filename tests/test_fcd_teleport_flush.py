@@ -39,13 +39,13 @@ def jammed(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("jam")
     (d / "n.nod.xml").write_text("<nodes>" + "".join(
-        f'<node id="n{i}" x="{x}" y="0"/>' for i, x in enumerate(NODES_X)) + "</nodes>")
+        f'<node id="n{i}" x="{x}" y="0"/>' for i, x in enumerate(NODES_X)) + "</nodes>", encoding="utf-8")
     (d / "n.edg.xml").write_text("<edges>" + "".join(
         f'<edge id="e{i}" from="n{i}" to="n{i + 1}" numLanes="1" speed="13.89"/>' for i in range(5))
-        + "</edges>")
+        + "</edges>", encoding="utf-8")
     subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml",
                     "-o", "n.net.xml", "--no-turnarounds"], check=True, capture_output=True, cwd=d)
-    (d / "r.rou.xml").write_text(ROUTES)
+    (d / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
     subprocess.run([sumolib.checkBinary("sumo"), "-n", "n.net.xml", "-r", "r.rou.xml", "-e", "300",
                     "--time-to-teleport", "20", "--fcd-output", "fcd.xml", "--precision", "6",
                     "--no-step-log", "--no-warnings"], check=True, capture_output=True, cwd=d)

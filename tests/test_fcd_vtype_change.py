@@ -31,12 +31,12 @@ def calibrated(d: Path, first: str, second: str, route: str = "c00c10 c10c20", p
     <flow id="f" type="first" begin="0" end="60" period="10" departSpeed="max">
         <route edges="{route}"/></flow>
 </routes>
-""")
+""", encoding="utf-8")
     (d / "cal.add.xml").write_text(f"""<additional>
     <vType id="second" {second}/>
     <calibrator id="ca" edge="c10c20" pos="{pos:g}" vTypes="first"><flow begin="0" end="1000" type="second"/></calibrator>
 </additional>
-""")
+""", encoding="utf-8")
     cfg = d / "c.sumocfg"
     cfg.write_text(f"""<configuration>
     <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/>
@@ -44,7 +44,7 @@ def calibrated(d: Path, first: str, second: str, route: str = "c00c10 c10c20", p
     <time><begin value="0"/><end value="{end:g}"/></time>
     <report><no-warnings value="true"/></report>
 </configuration>
-""")
+""", encoding="utf-8")
     return cfg
 
 
@@ -61,7 +61,7 @@ def test_a_vtype_sumo_changes_during_a_trip_replays_as_live(tmp_path, chunk_rows
     fcd = process_fcd(tmp_path / "fcd.xml", vtype_files=[tmp_path / "r.rou.xml", tmp_path / "cal.add.xml"],
                       net=NETS / "city.net.xml", equations=[PHYS], end=200, figures=False,
                       chunk_rows=chunk_rows)
-    assert "type=\"second\"" in (tmp_path / "fcd.xml").read_text()
+    assert "type=\"second\"" in (tmp_path / "fcd.xml").read_text(encoding="utf-8")
     a = live.vehicles.set_index("vehicle").sort_index()
     b = fcd.vehicles.set_index("vehicle").sort_index()
     assert len(a) == len(b) == 6 and (a.index == b.index).all()

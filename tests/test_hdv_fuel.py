@@ -141,7 +141,7 @@ def test_bare_config_books_trucks_and_buses_in_litres(tmp_path, capsys):
     assert {"truck", "trailer", "bus", "coach"} <= set(cls.index)
     assert list(cls.index) == sorted(cls.index)  # by class name (was: order of first departure)
     assert cls.loc["bus", "fuel_l"] == pytest.approx(fuel[fuel.key == "b"].fuel_l.sum(), rel=1e-9)
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["assumptions"]["energy_carrier"]["ebus"]["carrier"] == "electricity"
     assert "moves_transit_bus_diesel" in summary["assumptions"]["energy_carrier"]["ebus"]["not_booked_by"]
     assert "no battery or fuel chain applies to 1 bus vehicle(s)" in err and "truck" not in err.split(

@@ -30,7 +30,7 @@ def test_a_raw_can_log_lists_its_frames_then_its_signals_with_the_dbc(tmp_path, 
     assert any("name the vehicle's DBC files as options.dbc" in line for line in out)
     # a mapping with its [options] alone (the [columns] not yet written) gives the DBC
     m = tmp_path / "map.toml"
-    m.write_text(f'[options]\ndbc = ["{(HERE / "canmod-gps.dbc").as_posix()}"]\n')
+    m.write_text(f'[options]\ndbc = ["{(HERE / "canmod-gps.dbc").as_posix()}"]\n', encoding="utf-8")
     assert cli_main(["import", "columns", str(HERE / "canmod_gps.MF4"), "--list", "--columns", str(m)]) == 0
     out = _lines(capsys)
     assert "decoded with canmod-gps.dbc): 39 channels" in out[0]
@@ -42,7 +42,7 @@ def test_a_raw_can_log_lists_its_frames_then_its_signals_with_the_dbc(tmp_path, 
 def test_iso_tp_responses_are_listed_as_signals(tmp_path, capsys):
     pytest.importorskip("asammdf")
     m = tmp_path / "map.toml"
-    m.write_text(f'[options]\ndbc = ["{(HERE / "tp_uds.dbc").as_posix()}"]\n')
+    m.write_text(f'[options]\ndbc = ["{(HERE / "tp_uds.dbc").as_posix()}"]\n', encoding="utf-8")
     assert cli_main(["import", "columns", str(HERE / "kona_uds.MF4"), "--list", "--columns", str(m)]) == 0
     out = _lines(capsys)
     assert _row(out, "M_SID_0x220101_StateOfChargeBMS") == ["M_SID_0x220101_StateOfChargeBMS", "%", "120", "0.5",
@@ -102,7 +102,7 @@ def test_the_sketch_of_a_raw_can_log_names_its_dbc_and_imports(tmp_path, capsys)
 
     shutil.copy(HERE / "canmod-gps.dbc", tmp_path / "canmod-gps.dbc")
     m = tmp_path / "options.toml"
-    m.write_text('[options]\ndbc = ["canmod-gps.dbc"]\n')
+    m.write_text('[options]\ndbc = ["canmod-gps.dbc"]\n', encoding="utf-8")
     assert cli_main(["import", "columns", str(HERE / "canmod_gps.MF4"), "--list", "--columns", str(m)]) == 0
     sk = _sketch(_lines(capsys))
     assert 'dbc = ["canmod-gps.dbc"]' in sk and '[columns."Speed"]\nname = "speed_mps"' in sk, sk
@@ -139,7 +139,7 @@ def test_a_canedge_packed_file_is_named_as_one(tmp_path, capsys, monkeypatch, ar
     (tmp_path / "LOG").mkdir()
     for f in ("00000001.MFC", "LOG/00000002.MFE", "00000003.MFM"):
         (tmp_path / f).write_bytes(b"\x00\x01packed")
-    (tmp_path / "m.toml").write_text('[columns."Speed"]\nname = "speed_mps"\n')
+    (tmp_path / "m.toml").write_text('[columns."Speed"]\nname = "speed_mps"\n', encoding="utf-8")
     assert cli_main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0] and "MF4 converters" in err[0]
@@ -260,9 +260,9 @@ def test_a_speed_unit_declared_for_an_imported_log_is_refused(tmp_path, capsys):
 
     f = tmp_path / "drive.csv"
     t = np.arange(0.0, 60.0, 0.5)
-    f.write_text("Time [s],Speed [km/h]\n" + "\n".join(f"{a:g},{3.6 * min(a, 20.0):g}" for a in t) + "\n")
+    f.write_text("Time [s],Speed [km/h]\n" + "\n".join(f"{a:g},{3.6 * min(a, 20.0):g}" for a in t) + "\n", encoding="utf-8")
     (tmp_path / "m.toml").write_text('[columns."Time [s]"]\nname = "time_s"\n'
-                                     '[columns."Speed [km/h]"]\nname = "speed_mps"\nunit = "km/h"\n')
+                                     '[columns."Speed [km/h]"]\nname = "speed_mps"\nunit = "km/h"\n', encoding="utf-8")
     log = tmp_path / "drive.parquet"
     assert cli_main(["import", "columns", str(f), "--columns", str(tmp_path / "m.toml"), "--out", str(log)]) == 0
     capsys.readouterr()
@@ -291,7 +291,7 @@ def test_the_sketch_maps_clock_times_and_a_petrol_engines_air_and_fuel_flow(tmp_
     t = np.arange(0.0, 30.0, 0.5)
     rows = [f"17:58:{2 + a:06.3f},{3.6 * min(a, 10.0):g},{6.5 + a:g},{0.8 + a / 10:g},{60 + a:g}" for a in t]
     f.write_text("Time,Vehicle Speed Sensor [km/h],Air Flow Rate from Mass Flow Sensor [g/s],"
-                 "Fuel Rate [L/h],Average Fuel Economy [L/h]\n" + "\n".join(rows) + "\n")
+                 "Fuel Rate [L/h],Average Fuel Economy [L/h]\n" + "\n".join(rows) + "\n", encoding="utf-8")
     assert cli_main(["import", "columns", str(f), "--list"]) == 0
     sk = _sketch(_lines(capsys))
     for want in ('time_unit = "datetime"', 'time_format = "%H:%M:%S.%f"', '[columns."Time"]\nname = "time_s"',
@@ -315,16 +315,16 @@ def test_rows_finer_than_the_time_column_are_said_when_they_are_dropped(tmp_path
     remarked on."""
     f = tmp_path / "obd.csv"
     rows = [f"{k // 4},{k % 40}" for k in range(400)]
-    f.write_text("Run time (s),Speed (km/h)\n" + "\n".join(rows) + "\n")
+    f.write_text("Run time (s),Speed (km/h)\n" + "\n".join(rows) + "\n", encoding="utf-8")
     (tmp_path / "m.toml").write_text('[columns."Run time (s)"]\nname = "time_s"\nunit = "s"\n'
-                                     '[columns."Speed (km/h)"]\nname = "speed_mps"\nunit = "km/h"\n')
+                                     '[columns."Speed (km/h)"]\nname = "speed_mps"\nunit = "km/h"\n', encoding="utf-8")
     assert cli_main(["import", "columns", str(f), "--columns", str(tmp_path / "m.toml"),
                      "--out", str(tmp_path / "o.parquet")]) == 0
     out = capsys.readouterr().out
     assert "dropped: duplicate timestamp 300" in out
     assert ("300 of 400 rows share their time with the row before (the time column steps by 1 s, the rows "
             "come 4.0 per step)") in out
-    f.write_text("Run time (s),Speed (km/h)\n" + "\n".join(f"{k},{k % 40}" for k in range(400)) + "\n0,1\n")
+    f.write_text("Run time (s),Speed (km/h)\n" + "\n".join(f"{k},{k % 40}" for k in range(400)) + "\n0,1\n", encoding="utf-8")
     assert cli_main(["import", "columns", str(f), "--columns", str(tmp_path / "m.toml"),
                      "--out", str(tmp_path / "p.parquet")]) == 0
     assert "share their time" not in capsys.readouterr().out
@@ -338,7 +338,7 @@ def test_the_sketch_maps_a_motor_power_and_names_units_it_does_not_know(tmp_path
     named with the way to map it (unit and scale)."""
     f = tmp_path / "leaf.csv"
     f.write_text("time_s,speed(km/h),Motor Pwr(w),Aux Pwr(100w),Charge Power(kW)\n"
-                 + "\n".join(f"{t},{10 + t},{1500 - 100 * t},{2},{0}" for t in range(20)) + "\n")
+                 + "\n".join(f"{t},{10 + t},{1500 - 100 * t},{2},{0}" for t in range(20)) + "\n", encoding="utf-8")
     assert cli_main(["import", "columns", str(f), "--list"]) == 0
     sk = _sketch(_lines(capsys))
     assert '[columns."Motor Pwr(w)"]\nname = "power_w"' in sk, sk

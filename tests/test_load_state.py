@@ -37,7 +37,7 @@ def _config(d: Path, name: str, begin: float, end: float, extra: str) -> Path:
     <time><begin value="{begin:g}"/><end value="{end:g}"/><step-length value="1"/></time>
     <processing><default.speeddev value="0"/></processing>
 </configuration>
-""")
+""", encoding="utf-8")
     return d / name
 
 
@@ -46,7 +46,7 @@ def _totals(res) -> pd.DataFrame:
 
 
 def test_a_run_resumed_from_a_saved_state_adds_up_to_the_whole_run(tmp_path):
-    (tmp_path / "r.rou.xml").write_text(ROUTES)
+    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
     eqs = ["vsp_ldv1999", "epa_gasoline_car"]
     state = tmp_path / "state150.xml"
     whole = run_scenario(_config(tmp_path, "whole.sumocfg", 0, 500, ""), None, figures=False, equations=eqs)
@@ -78,7 +78,7 @@ def test_a_user_script_that_starts_sumo_from_a_saved_state_is_seen_to_resume(tmp
     (before, the first row was booked again: +54 m in a review, 2026-11-29)."""
     from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
 
-    (tmp_path / "r.rou.xml").write_text(ROUTES)
+    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
     state = tmp_path / "state150.xml"
     run_scenario(_config(tmp_path, "a.sumocfg", 0, 151, ""), None, figures=False, equations=["vsp_ldv1999"],
                  options=["--save-state.times", "150", "--save-state.files", str(state), "--save-state.rng", "true",

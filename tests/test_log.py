@@ -76,10 +76,10 @@ def test_time_may_restart_in_a_new_trip(tmp_path):
 
 def test_empty_file(tmp_path, capsys):
     p = tmp_path / "empty.csv"
-    p.write_text("")
+    p.write_text("", encoding="utf-8")
     _expect_exit2(tmp_path, capsys, p, str(p), "empty")
     p2 = tmp_path / "header.csv"
-    p2.write_text("time_s,speed_mps\n")
+    p2.write_text("time_s,speed_mps\n", encoding="utf-8")
     _expect_exit2(tmp_path, capsys, p2, "no samples")
 
 

@@ -79,7 +79,7 @@ name = "elevation_m"
 
 def mapping(tmp_path: Path, text: str = MAPPING) -> Path:
     p = tmp_path / "map.toml"
-    p.write_text(text)
+    p.write_text(text, encoding="utf-8")
     return p
 
 
@@ -155,7 +155,7 @@ name = "odometer_m"
 name = "elevation_m"
 [columns.Satellites]
 name = "satellites"
-""")
+""", encoding="utf-8")
     df, rep = read("columns", HERE / "canmod_gps.MF4", m)
     assert len(df) == 41 and set(df["trip_id"]) == {"canmod_gps"}
     assert 0.5 < np.median(np.diff(df["time_s"])) < 1.5                # 1 Hz
@@ -179,7 +179,7 @@ def test_raw_bus_log_without_dbc_is_said(tmp_path, capsys):
     assert "no channel 'Speed'" in err and "options.dbc" in err
     assert not (tmp_path / "x.parquet").exists()
     # a DBC that decodes none of its frames (another vehicle's, or not a DBC) is named
-    (tmp_path / "other.dbc").write_text("not a DBC\n")
+    (tmp_path / "other.dbc").write_text("not a DBC\n", encoding="utf-8")
     m = mapping(tmp_path, 'options.dbc = "other.dbc"\n[columns.Speed]\nname = "speed_mps"\n')
     code = cli_main(["import", "columns", str(HERE / "canmod_gps.MF4"), "--columns", str(m),
                      "--out", str(tmp_path / "x.parquet")])
@@ -213,7 +213,7 @@ def test_bad_input_one_line(tmp_path, capsys, monkeypatch, case):
         expect = "channel 'Mode' holds 'D': not a number"
     elif case == "mixed":
         csv = tmp_path / "other.csv"
-        csv.write_text("t,v\n0,1\n1,2\n")
+        csv.write_text("t,v\n0,1\n1,2\n", encoding="utf-8")
         src.append(csv)
         expect = "an ASAM MDF file among CSV/Parquet files"
     elif case == "garbage":
@@ -285,12 +285,12 @@ def test_validity_flag_reads_flagged_samples_as_missing(tmp_path):
     assert df0["gnss_altitude_m"].min() == -5400.0
     # a CSV column's flag
     csv = tmp_path / "log.csv"
-    csv.write_text("t,v,alt,ok\n0,1,-5400,0\n1,2,500,1\n2,3,501,1\n")
+    csv.write_text("t,v,alt,ok\n0,1,-5400,0\n1,2,500,1\n2,3,501,1\n", encoding="utf-8")
     m = mapping(tmp_path, '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\nunit = "m/s"\n'
                           '[columns.alt]\nname = "elevation_m"\nunit = "m"\nvalid = "ok"\n')
     dc, _ = read("columns", csv, m)
     assert np.isnan(dc["elevation_m"].iloc[0]) and list(dc["elevation_m"].iloc[1:]) == [500.0, 501.0]
-    m.write_text(m.read_text().replace('valid = "ok"', 'valid = "okay"'))
+    m.write_text(m.read_text(encoding="utf-8").replace('valid = "ok"', 'valid = "okay"'), encoding="utf-8")
     with pytest.raises(UserError, match="missing column 'okay' .the validity flag of 'alt'"):
         read("columns", csv, m)
 
@@ -374,14 +374,14 @@ def test_a_text_dat_file_is_still_read_as_csv(tmp_path):
     """MDF is told by its first bytes: a comma-separated .dat (as some loggers name their
     text exports) is read as CSV when named; in a folder beside an MDF .dat it is left out."""
     txt = tmp_path / "export.dat"
-    txt.write_text("t,v\n0,1\n1,2\n2,3\n")
+    txt.write_text("t,v\n0,1\n1,2\n2,3\n", encoding="utf-8")
     m = mapping(tmp_path, '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\nunit = "m/s"\n')
     df, _ = read("columns", txt, m)
     assert list(df["speed_mps"]) == [1.0, 2.0, 3.0]
     d = tmp_path / "logs"
     d.mkdir()
     write_mf4(d / "trip.dat", version="3.30")
-    (d / "notes.dat").write_text("not a log\n")
+    (d / "notes.dat").write_text("not a log\n", encoding="utf-8")
     df, _ = read("columns", d, mapping(tmp_path))
     assert set(df["trip_id"]) == {"trip"}
 
@@ -389,7 +389,7 @@ def test_a_text_dat_file_is_still_read_as_csv(tmp_path):
 def test_mdf_reader_is_not_offered_a_csv_mapping_requirement(tmp_path):
     """A CSV mapping still needs its time column (the MDF leniency is for MDF files only)."""
     csv = tmp_path / "log.csv"
-    csv.write_text("v\n1\n2\n")
+    csv.write_text("v\n1\n2\n", encoding="utf-8")
     with pytest.raises(UserError, match="no source column is mapped to 'time_s'"):
         read("columns", csv, mapping(tmp_path, '[columns.v]\nname = "speed_mps"\nunit = "m/s"\n'))
 

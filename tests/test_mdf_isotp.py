@@ -118,7 +118,7 @@ def _mapping(tmp_path: Path, layout: str | None = None) -> Path:
     p.write_text(f'[options]\ndbc = ["{HERE / "tp_uds.dbc"}"]\n'
                  + (f'isotp_layout = "{layout}"\n' if layout else "")
                  + '[columns.M_SID_0x220101_StateOfChargeBMS]\nname = "speed_mps"\nunit = "m/s"\n'
-                 + '[columns.M_SID_0x220100_OutdoorTemp]\nname = "ambient_c"\nunit = "degC"\n')
+                 + '[columns.M_SID_0x220100_OutdoorTemp]\nname = "ambient_c"\nunit = "degC"\n', encoding="utf-8")
     return p
 
 
@@ -143,7 +143,7 @@ def test_a_real_leaf_log_with_gnss_speed_imports_its_battery_responses(tmp_path)
     p.write_text(f'[options]\ndbc = ["{HERE / "tp_uds_nissan.dbc"}", "{HERE / "canmod-gps.dbc"}"]\n'
                  '[columns.Speed]\nname = "speed_mps"\n'
                  '[columns.SoC]\nname = "soc_pct"\nunit = "%"\n'
-                 '[columns.BatPackTemp1]\nname = "battery_temp_c"\nunit = "degC"\n')
+                 '[columns.BatPackTemp1]\nname = "battery_temp_c"\nunit = "degC"\n', encoding="utf-8")
     out = tmp_path / "leaf.parquet"
     assert cli_main(["import", "columns", str(HERE / "leaf_uds_gnss.MF4"), "--columns", str(p),
                      "--out", str(out)]) == 0

@@ -245,7 +245,7 @@ def _compare_streamed_and_in_memory(tmp_path, capsys, monkeypatch, d, target, eq
     from sumo_drvpw.cli import main as cli_main
 
     eq = tmp_path / "eq.toml"
-    eq.write_text(equation)
+    eq.write_text(equation, encoding="utf-8")
     monkeypatch.setattr(engine, "run", partial(engine.run, rows=ROWS))
     docs = {}
     for e in ("memory", "local"):
@@ -254,7 +254,7 @@ def _compare_streamed_and_in_memory(tmp_path, capsys, monkeypatch, d, target, eq
                        "--engine", e])
         assert rc == 0, capsys.readouterr().err
         capsys.readouterr()
-        docs[e] = json.loads((out / "report.json").read_text())
+        docs[e] = json.loads((out / "report.json").read_text(encoding="utf-8"))
     docs["local"]["settings"].pop("percentiles")
     corpus.assert_close_documents(docs["memory"], docs["local"], 1e-9)
     return docs["memory"]
@@ -312,7 +312,7 @@ def test_a_file_that_cannot_give_the_target_is_refused_by_name(tmp_path, capsys,
     assert str(mem.value) == str(streamed.value) == str(alone.value)
     assert str(mem.value).startswith(f"{bad}: ") and "\n" not in str(mem.value)
     if target != "wheel":  # an equation without measurement corrections
-        (tmp_path / "ev.toml").write_text(BATTERY_EQ if target == "battery" else FUEL_EQ)
+        (tmp_path / "ev.toml").write_text(BATTERY_EQ if target == "battery" else FUEL_EQ, encoding="utf-8")
         eq = str(tmp_path / "ev.toml")
     for e in ("memory", "local"):
         out = tmp_path / e

@@ -91,7 +91,7 @@ def test_every_step_as_sumos_emissions_driving_cycle(tmp_path, case):
         path = _sumo_home() / "data" / "emissions" / "MMPEVEM" / fname
     else:
         path = tmp_path / "x.xml"
-        path.write_text(f"<routes>{xml}</routes>")
+        path.write_text(f"<routes>{xml}</routes>", encoding="utf-8")
     vid, params, mass = _vtype_params(path)
     subprocess.run([sumolib.checkBinary("emissionsDrivingCycle"), "-t", "tl.csv", "-e", "MMPEVEM", "--have-slope",
                     "-o", "o.csv", "--additional-files", str(path), "--vtype", vid],
@@ -161,11 +161,11 @@ ROUTES = """<routes>
 def _routes(tmp_path: Path) -> Path:
     """SUMO's own BMW i3 vType, a bare MMPEVEM vType, the i3 with a 4.5-m/s² start (beyond
     its 107-kW motor from about 20 m/s: SUMO writes nan there) and an Energy-model car."""
-    text = (_sumo_home() / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text()
+    text = (_sumo_home() / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text(encoding="utf-8")
     i3 = text[text.index("<vType"):text.index("</vType>") + len("</vType>")]
     fast = i3.replace('id="BMW_i3"', 'id="fast" accel="4.5" maxSpeed="30"')
     p = tmp_path / "r.rou.xml"
-    p.write_text(ROUTES.format(i3=i3, fast=fast))
+    p.write_text(ROUTES.format(i3=i3, fast=fast), encoding="utf-8")
     return p
 
 

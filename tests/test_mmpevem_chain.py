@@ -194,7 +194,7 @@ def test_compare_books_the_motor_holding_a_car_on_a_slope(tmp_path, engine):
                   "mass_kg": 1417.0, "battery_voltage_v": 370.0, "battery_current_a": 2.0}).to_parquet(tmp_path / "s.parquet")
     assert cli_main(["compare", str(tmp_path / "s.parquet"), "--equation", str(tmp_path / "i3.toml"),
                      "--target", "battery", "--engine", engine, "--out", str(tmp_path / "o")]) == 0
-    rep = json.loads((tmp_path / "o" / "report.json").read_text())["equations"]["i3"]
+    rep = json.loads((tmp_path / "o" / "report.json").read_text(encoding="utf-8"))["equations"]["i3"]
     mo = eq.chain.motor
     torque = 1417.0 * 9.80665 * math.sin(th) * mo.wheel_radius_m / mo.gear_ratio / mo.gear_efficiency
     pb = float(mo.loss_map(0.0, torque)[0]) + mo.aux_power_w

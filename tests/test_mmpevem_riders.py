@@ -48,11 +48,11 @@ def test_riders_mass_as_sumos_mmpevem(tmp_path):
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0" z="0"/>'
                                         '<node id="b" x="1500" y="0" z="30"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="2" speed="16"/></edges>')
-    text = (Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text()
+    text = (Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text(encoding="utf-8")
     i3 = text[text.index("<vType"):text.index("</vType>") + len("</vType>")]
-    (tmp_path / "r.rou.xml").write_text(ROUTES.format(i3=i3))
+    (tmp_path / "r.rou.xml").write_text(ROUTES.format(i3=i3), encoding="utf-8")
     (tmp_path / "a.add.xml").write_text('<additional><busStop id="bs" lane="e_0" startPos="500" endPos="540"/>'
-                                        '<busStop id="bs2" lane="e_0" startPos="1200" endPos="1240"/></additional>')
+                                        '<busStop id="bs2" lane="e_0" startPos="1200" endPos="1240"/></additional>', encoding="utf-8")
     energy_scenario(tmp_path, 160, additional="a.add.xml")
     run_scenario(tmp_path / "s.toml", tmp_path / "o")
     sumo_wh, at_bs = defaultdict(float), []

@@ -33,7 +33,7 @@ def test_long_stop_switches_off_the_energy_model_only(tmp_path):
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0" z="0"/>'
                                         '<node id="b" x="1000" y="0" z="20"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="2" speed="16"/></edges>')
-    (tmp_path / "r.rou.xml").write_text(ROUTES)
+    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
     energy_scenario(tmp_path, 120)
     run_scenario(tmp_path / "s.toml", tmp_path / "o")
     sumo_wh, standing = defaultdict(float), defaultdict(list)

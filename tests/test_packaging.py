@@ -93,10 +93,10 @@ def test_demo_from_the_wheel(installed):
     r = _run(["demo", "--minutes", "3", "--out", "demo-out"], env, work)
     assert r.returncode == 0, r.stderr[-2000:]
     out = work / "demo-out"
-    man = json.loads((out / "manifest.json").read_text())
+    man = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
     files = {f["path"] for f in man["files"]}
     assert {"README.md", "drvpw_calibrated.toml", "report/report.json"} <= files
-    rep = json.loads((out / "report" / "report.json").read_text())
+    rep = json.loads((out / "report" / "report.json").read_text(encoding="utf-8"))
     assert "drvpw_calibrated" in rep["equations"]
     ctx = json.dumps(rep["context"])
     assert str(target / "sumo_drvpw" / "data" / "builtin" / "logs") in ctx, ctx[:500]  # the wheel's log

@@ -36,8 +36,8 @@ PARKING_AREA = ('<additional><parkingArea id="pa" lane="e_0" startPos="300" endP
 def scenario(d, params="", fcd=False):
     build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
-    (d / "r.rou.xml").write_text(ROUTES.format(params=params))
-    (d / "a.add.xml").write_text(PARKING_AREA)
+    (d / "r.rou.xml").write_text(ROUTES.format(params=params), encoding="utf-8")
+    (d / "a.add.xml").write_text(PARKING_AREA, encoding="utf-8")
     return energy_scenario(d, 300, additional="a.add.xml", fcd=fcd)
 
 
@@ -114,7 +114,7 @@ def test_a_car_switched_off_for_its_parking_stays_off_until_its_stop_ends(tmp_pa
     constant power (0.5 s × 100 W = 0.0139 Wh) above SUMO's."""
     scenario(tmp_path, '<param key="shutOffStopDuration" value="5"/>')
     r = tmp_path / "r.rou.xml"
-    r.write_text(r.read_text().replace('begin="2" end="70"', 'begin="2" end="3"'))
+    r.write_text(r.read_text(encoding="utf-8").replace('begin="2" end="70"', 'begin="2" end="3"'), encoding="utf-8")
     res, cv, sumo_wh, nan = run_against_sumo(tmp_path / "s.toml", tmp_path)
     assert not nan
     # (1e-4 Wh: SUMO's output at 6 decimals summed over the trip; one step is 0.0139 Wh)
@@ -139,10 +139,10 @@ def test_a_parked_fleet_is_not_asked_for_its_signals_before_its_parking_can_end(
         '<routes><vType id="ecar" vClass="passenger" emissionClass="Energy/unknown">'
         '<param key="rotatingMass" value="40"/></vType>'
         '<vehicle id="p" type="ecar" depart="0"><route edges="e"/><stop parkingArea="pa" duration="20"/></vehicle>'
-        f'{fleet}</routes>')
+        f'{fleet}</routes>', encoding="utf-8")
     (tmp_path / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e_0" startPos="100" endPos="130" '
                                         'roadsideCapacity="2"/><parkingArea id="pb" lane="e_0" startPos="300" '
-                                        'endPos="500" roadsideCapacity="30"/></additional>')
+                                        'endPos="500" roadsideCapacity="30"/></additional>', encoding="utf-8")
     energy_scenario(tmp_path, 150, additional="a.add.xml", fcd=False)
     calls = []
     real = libsumo.vehicle.getSignals
@@ -177,8 +177,8 @@ def test_a_car_whose_parking_is_over_when_it_arrives_idles_from_that_step(tmp_pa
     build_net(tmp_path, f'<nodes><node id="a" x="0" y="0" z="0"/><node id="b" x="600" y="0" z="{rise}"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>',
               *(["--lefthand"] if lefthand else []))
-    (tmp_path / "r.rou.xml").write_text(LATE)
-    (tmp_path / "a.add.xml").write_text(PARKING_AREA)
+    (tmp_path / "r.rou.xml").write_text(LATE, encoding="utf-8")
+    (tmp_path / "a.add.xml").write_text(PARKING_AREA, encoding="utf-8")
     res, cv, sumo_wh, nan = run_against_sumo(energy_scenario(tmp_path, 100, additional="a.add.xml", fcd=False),
                                              tmp_path)
     assert not nan
@@ -198,7 +198,7 @@ def test_a_rider_who_boarded_while_the_car_was_parked_is_booked_while_it_idles(t
 
     import sumo
 
-    i3 = (Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text()
+    i3 = (Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text(encoding="utf-8")
     vtype = re.search(r"<vType.*?</vType>", i3, re.S).group(0)
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0" z="0"/><node id="b" x="600" y="0" z="30"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
@@ -210,8 +210,8 @@ def test_a_rider_who_boarded_while_the_car_was_parked_is_booked_while_it_idles(t
     <ride from="e" to="e" lines="p" arrivalPos="590"/></person>
   <vehicle id="b" type="car" depart="1"><route edges="e"/><stop lane="e_0" endPos="590" duration="100"/></vehicle>
   <flow id="f" type="car" begin="2" end="70" period="1" departSpeed="max"><route edges="e"/></flow>
-</routes>""")
-    (tmp_path / "a.add.xml").write_text(PARKING_AREA)
+</routes>""", encoding="utf-8")
+    (tmp_path / "a.add.xml").write_text(PARKING_AREA, encoding="utf-8")
     res, cv, sumo_wh, nan = run_against_sumo(energy_scenario(tmp_path, 300, additional="a.add.xml", fcd=False),
                                              tmp_path)
     assert not nan
@@ -236,7 +236,7 @@ def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_
     the step it is back on the road at 0 (before the fix: 54.23 Wh booked against 49.51)."""
     params = '<param key="shutOffStopDuration" value="5"/>' if off else ""
     path = scenario(tmp_path)
-    (tmp_path / "r.rou.xml").write_text(ROUTES.format(params=params).replace('duration="20"', 'until="40"'))
+    (tmp_path / "r.rou.xml").write_text(ROUTES.format(params=params).replace('duration="20"', 'until="40"'), encoding="utf-8")
 
     def remove(conn, t):
         if removed_at is not None and abs(t - removed_at) < 1e-9:
@@ -263,18 +263,18 @@ def test_a_car_on_mmpevem_in_a_sloped_lot_space_is_booked_at_its_slope(tmp_path,
 
     import sumo
 
-    i3 = (Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text()
+    i3 = (Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml").read_text(encoding="utf-8")
     routes = re.sub(r'<vType id="ecar".*?</vType>', lambda _: re.search(r"<vType.*?</vType>", i3, re.S).group(0)
                     .replace('id="BMW_i3"', 'id="ecar"'), ROUTES.format(params=""), count=1, flags=re.S)
     assert 'emissionClass="MMPEVEM"' in routes
     if not blocked:
         routes = re.sub(r'<vehicle id="b".*?</vehicle>\s*<flow.*?</flow>', "", routes, flags=re.S)
     path = scenario(tmp_path)
-    (tmp_path / "r.rou.xml").write_text(routes)
+    (tmp_path / "r.rou.xml").write_text(routes, encoding="utf-8")
     (tmp_path / "a.add.xml").write_text(
         '<additional><parkingArea id="pa" lane="e_0" startPos="300" endPos="330" roadsideCapacity="0">'
         '<space x="315" y="-8" angle="0" slope="6"/><space x="320" y="-8" angle="0" slope="6"/>'
-        '</parkingArea></additional>')
+        '</parkingArea></additional>', encoding="utf-8")
     res, cv, sumo_wh, nan = run_against_sumo(path, tmp_path)
     assert not nan
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
@@ -292,15 +292,15 @@ def test_a_car_switched_off_in_a_bus_bay_or_beside_the_lane_stays_off_until_its_
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
     (tmp_path / "a.add.xml").write_text('<additional><busStop id="bs" lane="e_0" startPos="300" endPos="330" '
-                                        'parkingLength="20"/></additional>')
+                                        'parkingLength="20"/></additional>', encoding="utf-8")
     (tmp_path / "r.rou.xml").write_text(
         '<routes><vType id="ecar" vClass="passenger" emissionClass="Energy/unknown">'
         '<param key="rotatingMass" value="40"/><param key="shutOffStopDuration" value="5"/></vType>'
         f'<vehicle id="p" type="ecar" depart="0" departSpeed="max"><route edges="e"/>'
-        f'<stop {place} duration="20" parking="true"/></vehicle></routes>')
+        f'<stop {place} duration="20" parking="true"/></vehicle></routes>', encoding="utf-8")
     energy_scenario(tmp_path, 120, additional="a.add.xml", fcd=False)
     toml = tmp_path / "s.toml"
-    toml.write_text(toml.read_text().replace("[outputs]\n", "[outputs]\ntrace = true\n"))
+    toml.write_text(toml.read_text(encoding="utf-8").replace("[outputs]\n", "[outputs]\ntrace = true\n"), encoding="utf-8")
     res = run_scenario(toml, tmp_path / "o")
     # SUMO's step at 0 standing: its emission output's time is the step's start
     zero = [float(ts.get("time")) + 0.5 for ts in ET.parse(tmp_path / "em.xml").getroot() for v in ts
@@ -331,7 +331,7 @@ def test_a_bus_whose_bay_stop_a_script_ends_dwells_there_until_it_is_back_on_the
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
     (tmp_path / "a.add.xml").write_text('<additional><busStop id="bs" lane="e_0" startPos="300" endPos="330" '
-                                        'parkingLength="20"/></additional>')
+                                        'parkingLength="20"/></additional>', encoding="utf-8")
     bus = ('<vType id="ebus" vClass="bus" mass="12000" emissionClass="Energy/unknown">'
            '<param key="constantPowerIntake" value="2000"/></vType>')
     routes = ROUTES.format(params="").replace('<vType id="ecar"', bus + '<vType id="ecar"').replace(
@@ -340,7 +340,7 @@ def test_a_bus_whose_bay_stop_a_script_ends_dwells_there_until_it_is_back_on_the
         '<vehicle id="p" type="ebus" depart="0" departSpeed="max"><route edges="e"/>\n    '
         '<stop busStop="bs" duration="60" parking="true"/>')
     assert 'busStop="bs"' in routes
-    (tmp_path / "r.rou.xml").write_text(routes)
+    (tmp_path / "r.rou.xml").write_text(routes, encoding="utf-8")
     path = energy_scenario(tmp_path, 300, additional="a.add.xml", fcd=False)
     out = []  # steps the bus is out of SUMO's id list, before it arrives
     energy, res = resumed_at_30(path, connection, ["--tripinfo-output", str(tmp_path / "ti.xml")],

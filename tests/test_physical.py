@@ -102,7 +102,7 @@ def test_a_candidate_file_s_constraints_are_read_whatever_its_name(tmp_path):
 
     text = 'terms = ["acc", "grade", "aero", "roll"]\n[constraints]\ngrade = { fixed = 1.0 }\n'
     for name in ("cands_grade.toml", "cands_grade"):
-        (tmp_path / name).write_text(text)
+        (tmp_path / name).write_text(text, encoding="utf-8")
         spec = str(tmp_path / name)
         assert resolve_candidates(spec) == ("acc", "grade", "aero", "roll")
         assert constraints_of(spec)["grade"] == {"fixed": 1.0}, name
@@ -123,7 +123,7 @@ def test_calibrate_cli_uses_the_constrained_fit_when_implausible(tmp_path, capsy
     pd.DataFrame({"time_s": t, "speed_mps": x.v, "accel_mps2": x.a, "grade_rad": x.theta,
                   "mass_kg": x.mass, "power_w": y}).to_parquet(tmp_path / "log.parquet")
     (tmp_path / "c.toml").write_text('terms = ["acc", "grade", "aero", "roll"]\n'
-                                     '[constraints]\ngrade = { fixed = 2.5 }\n')
+                                     '[constraints]\ngrade = { fixed = 2.5 }\n', encoding="utf-8")
     out = tmp_path / "eq.toml"
     assert main(["calibrate", str(tmp_path / "log.parquet"), "--candidates", str(tmp_path / "c.toml"),
                  "--out", str(out), "--engine", engine]) == 0
@@ -186,7 +186,7 @@ def test_the_equation_files_r2_is_that_of_its_constrained_coefficients(tmp_path,
     assert eq.provenance["physical"]["used"] == "constrained", eq.terms
     assert eq.terms["grade"] == pytest.approx(1.3), eq.terms  # (the free fit reads ≈ 2: at its bound)
     assert cli_main(["compare", str(f), "--equation", str(out), "--out", str(tmp_path / "c")]) == 0
-    r2 = json.loads((tmp_path / "c" / "report.json").read_text())["equations"][eq.name]["r2"]
+    r2 = json.loads((tmp_path / "c" / "report.json").read_text(encoding="utf-8"))["equations"][eq.name]["r2"]
     assert eq.metrics["r2"] == pytest.approx(r2, abs=1e-9)
     assert eq.metrics["r2_unconstrained"] > eq.metrics["r2"]
 

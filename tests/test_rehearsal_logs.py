@@ -14,7 +14,7 @@ def _torque_csv(path, sessions):
     for start, n in sessions:
         for k in range(n):
             rows.append(f"-,27-Jun-2020 {start}:{k:02d}.000,{30 + k},{1500 + 10 * k}")
-    path.write_text("\n".join(rows) + "\n")
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
     return path
 
 
@@ -39,7 +39,7 @@ def test_a_clock_glitch_is_named_without_the_session_hint(tmp_path):
     rows = ["GPS Time, Device Time,Speed (OBD)(mph),Engine RPM(rpm)"]
     for k, s in enumerate(["00.000", "01.000", "02.000", "01.500", "03.000"]):
         rows.append(f"-,27-Jun-2020 15:19:{s},{30 + k},1500")
-    src.write_text("\n".join(rows) + "\n")
+    src.write_text("\n".join(rows) + "\n", encoding="utf-8")
     df, rep = read("torquepro", [src])
     f = rep["files"][0]
     assert f["dropped"] == {"time going backwards": 1}
@@ -87,7 +87,7 @@ def test_phone_altitude_is_the_elevation_of_a_torque_log_without_the_gps_altitud
         alt = "-" if k == 3 else f"{1300 + 2.5 * k}"
         rows.append(f"-,27-Jun-2020 15:19:{k:02d}.000,{alt},{40 + k},2000")
     src = tmp_path / "phone_alt.csv"
-    src.write_text("\n".join(rows) + "\n")
+    src.write_text("\n".join(rows) + "\n", encoding="utf-8")
     df, rep = read("torquepro", [src])
     assert "elevation_m" in df
     assert df["elevation_m"].iloc[7] == 1317.5 and df["elevation_m"].isna().sum() == 1
@@ -95,7 +95,7 @@ def test_phone_altitude_is_the_elevation_of_a_torque_log_without_the_gps_altitud
     # with the PID, the PID wins and the phone's value only fills its gaps (as before)
     rows = ["GPS Time, Device Time,GPS Altitude(ft), Altitude,Speed (OBD)(mph),Engine RPM(rpm)"]
     rows += [f"-,27-Jun-2020 15:19:{k:02d}.000,{'-' if k == 2 else 1000},500,40,2000" for k in range(4)]
-    src.write_text("\n".join(rows) + "\n")
+    src.write_text("\n".join(rows) + "\n", encoding="utf-8")
     df, rep = read("torquepro", [src])
     assert list(df["elevation_m"].round(2)) == [304.8, 304.8, 500.0, 304.8]
     assert not any("phone's 'Altitude'" in n for n in rep["files"][0]["notes"])
@@ -106,7 +106,7 @@ def test_torque_nissan_maf_in_gm_per_s_is_a_mass_flow(tmp_path):
     rows = ["GPS Time, Device Time,Speed (OBD)(mph),Engine RPM(rpm),[NADV] Mass Air Flow(gm/s)"]
     rows += [f"-,27-Jun-2020 15:19:{k:02d}.000,40,2000,{20 + k}" for k in range(4)]
     src = tmp_path / "maf.csv"
-    src.write_text("\n".join(rows) + "\n")
+    src.write_text("\n".join(rows) + "\n", encoding="utf-8")
     df, rep = read("torquepro", [src])
     assert list(df["nadv_mass_air_flow_gps"]) == [20.0, 21.0, 22.0, 23.0]
     assert not any("not known" in n for n in rep["files"][0]["notes"])

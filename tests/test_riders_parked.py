@@ -35,10 +35,10 @@ def test_parked_fleet_riders(tmp_path, monkeypatch):
     starts and ends); the rider's car as SUMO's emission output to 1e-6 after the fix."""
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="1500" y="0"/><node id="d" x="2000" y="0"/></nodes>',
               '<edges><edge id="e1" from="a" to="b" numLanes="1" speed="14"/><edge id="e2" from="b" to="d" numLanes="1" speed="14"/></edges>')
-    (tmp_path / "r.rou.xml").write_text(ROUTES.format(parked=PARKED))
+    (tmp_path / "r.rou.xml").write_text(ROUTES.format(parked=PARKED), encoding="utf-8")
     (tmp_path / "a.add.xml").write_text('<additional><parkingArea id="pa" lane="e1_0" startPos="400" endPos="450" '
                                         'roadsideCapacity="3"/><parkingArea id="pb" lane="e1_0" startPos="600" '
-                                        'endPos="1000" roadsideCapacity="40"/></additional>')
+                                        'endPos="1000" roadsideCapacity="40"/></additional>', encoding="utf-8")
     energy_scenario(tmp_path, 250, additional="a.add.xml", fcd=False)
     calls = [0]
     real = libsumo.vehicle.getPersonIDList

@@ -42,7 +42,7 @@ def test_mapping_role_reaches_the_log(tmp_path):
     (tmp_path / "m.toml").write_text(
         '[columns.t]\nname = "time_s"\nunit = "s"\n[columns.v]\nname = "speed_mps"\nunit = "km/h"\n'
         '[columns.pos]\nname = "pedal_pct"\nunit = "%"\nrole = "response"\n'
-        '[columns.foo]\nname = "foo"\nrole = "condition"\n')
+        '[columns.foo]\nname = "foo"\nrole = "condition"\n', encoding="utf-8")
     out = tmp_path / "log.parquet"
     assert main(["import", "columns", str(tmp_path / "a.csv"), "--columns", str(tmp_path / "m.toml"),
                  "--out", str(out)]) == 0
@@ -50,7 +50,7 @@ def test_mapping_role_reaches_the_log(tmp_path):
     assert r["pedal_pct"] == {"role": "response", "source": "declared"}
     assert r["foo"] == {"role": "condition", "source": "declared"}
     (tmp_path / "bad.toml").write_text(
-        '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\nunit = "km/h"\nrole = "cause"\n')
+        '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\nunit = "km/h"\nrole = "cause"\n', encoding="utf-8")
     assert main(["import", "columns", str(tmp_path / "a.csv"), "--columns", str(tmp_path / "bad.toml"),
                  "--out", str(tmp_path / "x.parquet")]) == 2
     assert not (tmp_path / "x.parquet").exists()

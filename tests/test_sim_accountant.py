@@ -58,7 +58,7 @@ def test_accountant_in_a_user_loop_equals_run(tmp_path):
     assert res["equations"] == ran["equations"]
     for name in ("vehicles.parquet", "edges.parquet", "classes.parquet", "edgedata.xml"):
         assert (tmp_path / "user" / name).is_file()
-    doc = json.loads((tmp_path / "user" / "summary.json").read_text())
+    doc = json.loads((tmp_path / "user" / "summary.json").read_text(encoding="utf-8"))
     assert doc["equations"]["phys"]["energy_j"] == ran["equations"]["phys"]["energy_j"]
     # energy(vehicle) while running: the vehicle's running totals, per equation and term
     row = b[(b.vehicle == seen["probe"]) & (b.equation == "phys")].iloc[0]
@@ -114,7 +114,7 @@ def test_edgedata_intervals_parsed_by_sumolib(tmp_path):
     import subprocess
 
     (tmp_path / "t.xml").write_text(
-        '<routes><trip id="t" depart="0" from="c00c10" to="c34c44"/></routes>')
+        '<routes><trip id="t" depart="0" from="c00c10" to="c34c44"/></routes>', encoding="utf-8")
     r = subprocess.run([sumolib.checkBinary("duarouter"), "-n",
                         str(NETS / "city.net.xml"),
                         "-r", str(tmp_path / "t.xml"), "--weight-files",
@@ -122,7 +122,7 @@ def test_edgedata_intervals_parsed_by_sumolib(tmp_path):
                         "phys_total_j", "-o", str(tmp_path / "eco.rou.xml"), "--no-step-log"],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    assert "<route edges=" in (tmp_path / "eco.rou.xml").read_text()
+    assert "<route edges=" in (tmp_path / "eco.rou.xml").read_text(encoding="utf-8")
 
 
 MIXED = """<routes>
@@ -240,7 +240,7 @@ def test_out_of_range_vehicle_steps_counted(tmp_path):
     assert res["equations"]["wide"]["out_of_range_samples"] == 0
     with pytest.raises(Exception, match="vehicles.vtypes names vType"):
         (tmp_path / "t.toml").write_text(
-            (tmp_path / "s.toml").read_text().replace('["car"]', '["car", "kar"]'))
+            (tmp_path / "s.toml").read_text(encoding="utf-8").replace('["car"]', '["car", "kar"]'), encoding="utf-8")
         run_scenario(tmp_path / "t.toml", None, equations=[slow])
 
 
@@ -284,7 +284,7 @@ def test_accountant_misuse_in_a_user_script_is_one_clear_error(tmp_path):
             acc.step()
         early = acc.result()
         n = len(early.vehicles)  # readable while the run has not moved on
-        (tmp_path / "file").write_text("x")
+        (tmp_path / "file").write_text("x", encoding="utf-8")
         with pytest.raises(UserError, match="is a file"):
             early.write(tmp_path / "file")
         conn.simulationStep()
@@ -499,10 +499,10 @@ def test_scenario_vtype_settings_no_vehicle_had_are_said(tmp_path):
     from sumo_drvpw.errors import UserError
 
     rou = tmp_path / "d.rou.xml"
-    rou.write_text((CITY.parent.parent / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.rou.xml").read_text()
+    rou.write_text((CITY.parent.parent / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.rou.xml").read_text(encoding="utf-8")
                    .replace("<routes>", '<routes><vTypeDistribution id="mix"><vType id="m1" probability="1"/>'
                             '</vTypeDistribution>', 1), encoding="utf-8")
-    assert "mix" in rou.read_text()
+    assert "mix" in rou.read_text(encoding="utf-8")
     (tmp_path / "s.toml").write_text(
         f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{CITY.parent / "city.sumocfg"}"\nend = 30\n'
         f'options = ["-r", "{rou}"]\n[vtypes.prius3]\nmass_kg = 1600\n[vtypes.mix]\nmass_kg = 1700\n',
@@ -522,7 +522,7 @@ def test_scenario_vtype_settings_no_vehicle_had_are_said(tmp_path):
     assert len(res.vehicles) > 0 and (res.vehicles.mass_kg == 1600.0).all()
     with pytest.raises(UserError, match=r"\[vtypes\.mix\] names a vTypeDistribution"):
         run_scenario(tmp_path / "s.toml", None, figures=False)  # a run refuses both before SUMO starts
-    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace("vtypes.mix", "vtypes.prius_3"))
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text(encoding="utf-8").replace("vtypes.mix", "vtypes.prius_3"), encoding="utf-8")
     with pytest.raises(UserError, match=r"\[vtypes\.prius_3\] names no vType .*did you mean 'prius3'"):
         run_scenario(tmp_path / "s.toml", None, figures=False)
 
@@ -573,7 +573,7 @@ def test_a_scenario_naming_another_network_than_sumo_runs_is_refused(tmp_path):
     no warning (a rehearsal). Now a UserError names the network and the first lane."""
     from sumo_drvpw.errors import UserError
 
-    (tmp_path / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NETS / "highway.net.xml"}"\n')
+    (tmp_path / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NETS / "highway.net.xml"}"\n', encoding="utf-8")
     sc = load_scenario(CITY, end=300)
     conn = start_sumo(sc.sumo_args)
     try:

@@ -110,7 +110,7 @@ def test_finished_vehicles_leave_memory_and_totals_are_unchanged(tmp_path):
     np.testing.assert_allclose(kb.select_dtypes("number"), kc.select_dtypes("number"), rtol=1e-11)
     for col in ("net_kwh", "fuel_l"):
         np.testing.assert_allclose(cb[col].sum(), kb[col].sum(), rtol=1e-10)
-    doc = json.loads((tmp_path / "bounded" / "summary.json").read_text())
+    doc = json.loads((tmp_path / "bounded" / "summary.json").read_text(encoding="utf-8"))
     assert doc["vehicles"] == total and doc["vehicles_in_memory_peak"] <= max(running)
     # a vehicle that left: the Accountant says so instead of a number
     gone = a.vehicle.iloc[0]

@@ -31,16 +31,16 @@ def test_battery_rows_keep_their_values_when_the_first_vehicles_written_out_burn
     <flow id="p" type="petrol" begin="0" end="30" period="5" departSpeed="0"><route edges="c00c10 c10c20"/></flow>
     <flow id="e" type="ev" begin="150" end="180" period="5" departSpeed="0"><route edges="c00c10 c10c20"/></flow>
 </routes>
-""")
+""", encoding="utf-8")
     (tmp_path / "c.sumocfg").write_text(f"""<configuration>
     <input><net-file value="{NET}"/><route-files value="r.rou.xml"/></input>
     <time><begin value="0"/><end value="400"/></time>
     <report><no-warnings value="true"/></report>
 </configuration>
-""")
+""", encoding="utf-8")
     (tmp_path / "s.toml").write_text('equations = ["epa_gasoline_car", "bmw_i3_battery"]\n[sumo]\n'
                                      'config = "c.sumocfg"\n[vehicles]\ncold_start = 0.5\n'
-                                     '[outputs]\nfigures = false\n')
+                                     '[outputs]\nfigures = false\n', encoding="utf-8")
     out = tmp_path / "o"
     run_scenario(tmp_path / "s.toml", out, flush_vehicles=2)
     veh = pd.read_csv(out / "chain_vehicles.csv", dtype={"key": str})

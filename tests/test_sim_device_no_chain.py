@@ -25,14 +25,14 @@ EQ = "moves_transit_bus"  # a road-load equation: no chain applies to its buses
 
 def _run(d: Path, vtype: str):
     d.mkdir()
-    (d / "bus.add.xml").write_text(vtype)
+    (d / "bus.add.xml").write_text(vtype, encoding="utf-8")
     (d / "r.rou.xml").write_text(
         '<routes><flow id="b" type="ebus" begin="0" end="60" period="15" departSpeed="0">'
-        '<route edges="c00c10 c10c20 c20c30 c30c31 c31c32"/></flow></routes>\n')
+        '<route edges="c00c10 c10c20 c20c30 c30c31 c31c32"/></flow></routes>\n', encoding="utf-8")
     (d / "s.toml").write_text(
         f'equations = ["{EQ}"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nadditional = ["bus.add.xml"]\n'
         'begin = 0\nend = 400\nstep_length = 1.0\noptions = ["--no-warnings", "true"]\n'
-        '[outputs]\nfigures = false\nsumo_device = true\n')
+        '[outputs]\nfigures = false\nsumo_device = true\n', encoding="utf-8")
     run_scenario(d / "s.toml", d / "o")
     row = pd.read_csv(d / "o" / "sumo_device.csv").set_index("equation").loc[EQ]
     v = pd.read_parquet(d / "o" / "vehicles.parquet")

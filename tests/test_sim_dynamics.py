@@ -121,7 +121,7 @@ def _run(tmp_path, accel, sigma, step=1.0, fcd=False, fcd_period=None):
                              f'routes = ["r.rou.xml"]\nend = 400\nstep_length = {step}\noptions = [{opts}]\n'
                              '[outputs]\nfigures = false\n')
     res = run_scenario(d / "s.toml", d / "o")
-    return res, json.loads((d / "o" / "summary.json").read_text()), d
+    return res, json.loads((d / "o" / "summary.json").read_text(encoding="utf-8")), d
 
 
 @pytest.mark.sumo

@@ -63,7 +63,7 @@ def test_fcd_equals_the_live_run(live, tmp_path, name):
                                        res["equations"]["phys"]["energy_j"][cls][t], rtol=1e-3)
     for f in ("vehicles.parquet", "edges.parquet", "edgedata.xml", "summary.json"):
         assert (tmp_path / "o" / f).is_file()
-    assert json.loads((tmp_path / "o" / "summary.json").read_text())["source"]["fcd"]
+    assert json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))["source"]["fcd"]
 
 
 def test_fcd_cold_starts_only_for_vehicles_departing_in_the_replay(live, tmp_path):
@@ -128,7 +128,7 @@ def test_fcd_cli(live, tmp_path, capsys):
                      "--equation", "vsp_ldv1999", "--end", "200", "--no-figures",
                      "--out", str(tmp_path / "o")])
     assert code == 0
-    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     assert s["vehicles"] == res["vehicles"] and (tmp_path / "o" / "manifest.json").is_file()
     assert s["assumptions"]["default_masses"] == {}  # masses from prius3.vtype.xml
 
@@ -142,7 +142,7 @@ def test_run_builtin_name_and_parallel_runs(tmp_path, capsys):
     runs = pd.read_csv(tmp_path / "runs" / "runs.csv")
     assert set(runs.scenario) == {"city", "highway"}
     for n in ("city", "highway"):
-        s = json.loads((tmp_path / "runs" / n / "summary.json").read_text())
+        s = json.loads((tmp_path / "runs" / n / "summary.json").read_text(encoding="utf-8"))
         tot = s["equations"]["drvpw_prius3"]["energy_j"]
         r = runs[(runs.scenario == n) & (runs.equation == "drvpw_prius3")]
         np.testing.assert_allclose(r.traction_kwh.sum(), sum(v["total"] for v in tot.values())
@@ -292,10 +292,10 @@ def test_fcd_without_equations_books_every_class(live, tmp_path, capsys):
             "--end", "200", "--no-figures"]
     assert cli_main([*base, "--out", str(tmp_path / "all")]) == 0
     assert "built-in equations made for its vClass" in capsys.readouterr().out
-    s = json.loads((tmp_path / "all" / "summary.json").read_text())
+    s = json.loads((tmp_path / "all" / "summary.json").read_text(encoding="utf-8"))
     assert list(s["equations"]) == list(CONFIG_EQUATIONS) and s["vehicles"] == res["vehicles"]
     assert cli_main([*base, "--equation", "vsp_ldv1999", "--out", str(tmp_path / "one")]) == 0
-    one = json.loads((tmp_path / "one" / "summary.json").read_text())
+    one = json.loads((tmp_path / "one" / "summary.json").read_text(encoding="utf-8"))
     assert s["equations"]["vsp_ldv1999"]["energy_j"] == one["equations"]["vsp_ldv1999"]["energy_j"]
 
 
@@ -317,7 +317,7 @@ def test_fcd_with_human_readable_time_reads_as_seconds(tmp_path, capsys):
                         "--no-step-log", "--no-warnings", *extra], check=True,
                        capture_output=True)
         runs[name] = read_fcd(tmp_path / name)
-    assert "00:00:" in (tmp_path / "hr.xml").read_text()[:4000]
+    assert "00:00:" in (tmp_path / "hr.xml").read_text(encoding="utf-8")[:4000]
     ref = runs["num.xml"][["time", "id", "speed", "pos"]].reset_index(drop=True)
     assert len(ref) > 500 and ref.time.max() > 90
     for name in ("hr.xml", "hr.csv", "hr.parquet"):
@@ -332,7 +332,7 @@ def test_fcd_with_human_readable_time_reads_as_seconds(tmp_path, capsys):
     import re
 
     (tmp_path / "bad.xml").write_text(re.sub(r'time="00:00:01[.0-9]*"', 'time="00:00:xx"',
-                                             (tmp_path / "hr.xml").read_text(), count=1))
+                                             (tmp_path / "hr.xml").read_text(encoding="utf-8"), count=1), encoding="utf-8")
     code = cli_main(["fcd", str(tmp_path / "bad.xml"), "--scenario", str(CITY),
                      "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err.strip()
@@ -349,7 +349,7 @@ def test_fcd_leaves_parked_vehicles_out_as_the_live_run_does(tmp_path):
     parking_scenario(tmp_path, end=400, stop_s=100)
     (tmp_path / "s.toml").write_text(
         f'equations = ["{I3_BATTERY}"]\n[sumo]\nconfig = "c.sumocfg"\n'
-        '[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n')
+        '[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n', encoding="utf-8")
     run_scenario(tmp_path / "s.toml", tmp_path / "live",
                  options=["--fcd-output", str(tmp_path / "fcd.xml"), "--precision", "6"])
 
@@ -371,9 +371,9 @@ def test_fcd_leaves_parked_vehicles_out_as_the_live_run_does(tmp_path):
         pd.testing.assert_series_equal(aux, live_aux, rtol=1e-6)
         assert 3 * 190 <= res["source"]["parked_rows"] <= 3 * 201  # 3 × ~100 s at 0.5 s
     # FCD without x, y: nothing tells parked from standing
-    text = (tmp_path / "fcd.xml").read_text()
+    text = (tmp_path / "fcd.xml").read_text(encoding="utf-8")
     import re
-    (tmp_path / "noxy.xml").write_text(re.sub(r' [xy]="[^"]*"', "", text))
+    (tmp_path / "noxy.xml").write_text(re.sub(r' [xy]="[^"]*"', "", text), encoding="utf-8")
     res = process_fcd(tmp_path / "noxy.xml", scenario=tmp_path / "s.toml",
                       out_dir=tmp_path / "noxy")
     t, _ = booked(tmp_path / "noxy")
@@ -625,10 +625,10 @@ def test_overtaking_on_the_opposite_lane_books_the_road_climbed(tmp_path):
 
     (tmp_path / "n.nod.xml").write_text(
         '<nodes><node id="A" x="0" y="0" z="0"/><node id="B" x="1500" y="0" z="45"/>'
-        '<node id="C" x="3000" y="0" z="15"/></nodes>')
+        '<node id="C" x="3000" y="0" z="15"/></nodes>', encoding="utf-8")
     (tmp_path / "n.edg.xml").write_text("<edges>" + "".join(
         f'<edge id="{a}{b}" from="{a}" to="{b}" numLanes="1" speed="27.8"/>'
-        for a, b in ("AB", "BA", "BC", "CB")) + "</edges>")
+        for a, b in ("AB", "BA", "BC", "CB")) + "</edges>", encoding="utf-8")
     subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml",
                     "--opposites.guess", "true", "-o", "n.net.xml", "--no-warnings"],
                    cwd=tmp_path, check=True, capture_output=True)
@@ -637,10 +637,10 @@ def test_overtaking_on_the_opposite_lane_books_the_road_climbed(tmp_path):
         '<vType id="fast" vClass="passenger" maxSpeed="30" lcOpposite="1"/>'
         '<route id="r" edges="AB BC"/>'
         '<flow id="t" type="slow" route="r" begin="0" end="200" period="40" departSpeed="max"/>'
-        '<flow id="c" type="fast" route="r" begin="5" end="200" period="9" departSpeed="max"/></routes>')
+        '<flow id="c" type="fast" route="r" begin="5" end="200" period="9" departSpeed="max"/></routes>', encoding="utf-8")
     sc = tmp_path / "s.toml"
     sc.write_text('equations = ["vsp_ldv1999"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\n'
-                  'begin = 0\nend = 500\nstep_length = 1\n')
+                  'begin = 0\nend = 500\nstep_length = 1\n', encoding="utf-8")
     fcd = tmp_path / "fcd.xml"
     kw = dict(equations=[PHYS], figures=False)
     books = {"tracked": run_scenario(sc, None, options=["--fcd-output", str(fcd), "--precision", "6"], **kw),
@@ -679,7 +679,7 @@ def test_an_exported_vtype_of_a_users_equation_runs_in_a_bare_config(tmp_path, c
     (tmp_path / "net").mkdir()
     assert cli_main(["export-vtype", str(tmp_path / "eqs" / "mine.toml"), "--mass", "1700", "--id", "ev",
                      "--out", str(tmp_path / "net" / "ev.add.xml")]) == 0
-    assert 'key="drvpw.equation" value="../eqs/mine.toml"' in (tmp_path / "net" / "ev.add.xml").read_text()
+    assert 'key="drvpw.equation" value="../eqs/mine.toml"' in (tmp_path / "net" / "ev.add.xml").read_text(encoding="utf-8")
     write_text(tmp_path / "net" / "r.rou.xml", EXPORT_ROUTES.format(vt="ev"))
     write_text(tmp_path / "net" / "c.sumocfg", f'<configuration><input><net-file value="{NETS / "highway.net.xml"}"/>'
                '<route-files value="r.rou.xml"/><additional-files value="ev.add.xml"/></input>'
@@ -710,7 +710,7 @@ def test_an_exported_vtype_naming_a_builtin_is_booked_by_it_and_said_so(tmp_path
     assert cli_main(["run", str(tmp_path / "c.sumocfg"), "--no-figures", "--out", str(tmp_path / "o")]) == 0
     out = capsys.readouterr().out
     assert "no vehicle of vType i3 ran" not in out and "vtype_energy.i3" not in out
-    doc = json.loads((tmp_path / "o" / "summary.json").read_text())
+    doc = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     ve = doc["assumptions"].get("vtype_energy", {})
     assert "i3" not in ve.get("booked", {})
     assert not ve or "drvpw.equation names its equation (bmw_i3_battery)" in ve["not_booked"]["i3"]

@@ -70,15 +70,15 @@ def _run_live(d: Path, routes: str, additional: str | None = None) -> Path:
     """The i3 battery chain on the routes ``routes`` (and the additional file ``additional``)
     of the city net, 0-1000 s at 1-s steps, run live in ``d``/live with its FCD
     (--precision 6) in ``d``/fcd.xml and SUMO's stop output in ``d``/stops.xml."""
-    (d / "r.rou.xml").write_text(routes)
+    (d / "r.rou.xml").write_text(routes, encoding="utf-8")
     add = ""
     if additional is not None:
-        (d / "p.add.xml").write_text(additional)
+        (d / "p.add.xml").write_text(additional, encoding="utf-8")
         add = 'additional = ["p.add.xml"]\n'
     (d / "s.toml").write_text(
         f'equations = ["{I3_BATTERY}"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n{add}'
         'begin = 0\nend = 1000\nstep_length = 1.0\noptions = ["--no-warnings", "true"]\n'
-        '[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n')
+        '[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n', encoding="utf-8")
     run_scenario(d / "s.toml", d / "live", options=["--fcd-output", str(d / "fcd.xml"), "--precision", "6",
                                                     "--stop-output", str(d / "stops.xml")])
     return d
@@ -87,7 +87,7 @@ def _run_live(d: Path, routes: str, additional: str | None = None) -> Path:
 def _booked(out: Path):
     c = pd.read_csv(out / "chain_vehicles.csv").set_index("key").sort_index()
     t = pd.read_parquet(out / "vehicles.parquet").groupby("vehicle")["time_s"].first().sort_index()
-    s = json.loads((out / "summary.json").read_text())["shut_off_at_long_stops"]
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))["shut_off_at_long_stops"]
     return c, t, s
 
 
@@ -143,7 +143,7 @@ def test_a_parking_stop_ends_when_the_vehicle_leaves_its_space(tmp_path):
                  '<stop lane="a_0" endPos="50" until="100" parking="true"/></vehicle>'
                  '<vehicle id="q" depart="0"><route edges="a"/><stop lane="a_0" endPos="50" until="100"/></vehicle>'
                  '<vehicle id="r" depart="0"><route edges="a"/><stop parkingArea="pa" until="100"/></vehicle>'
-                 '<parkingArea id="pa" lane="a_0" startPos="0" endPos="50"/></routes>')
+                 '<parkingArea id="pa" lane="a_0" startPos="0" endPos="50"/></routes>', encoding="utf-8")
     net = SimpleNamespace(lane_index={"a_0": 0}, lane_length=np.array([100.0]))
     tr = StopTracker(read_declared_stops([f]), net)
     ids, ends = ["p", "q", "r"], {}

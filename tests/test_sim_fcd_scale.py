@@ -86,9 +86,9 @@ def test_streamed_fcd_equals_the_whole_file(fcd, tmp_path, name):
         assert res[k] == ref[k]
     assert res["source"]["timesteps"] == ref["source"]["timesteps"] == res["steps"] > 100
     assert res["source"]["rows"] == ref["source"]["rows"] == res["samples"]
-    a = (tmp_path / "ref" / "edgedata.xml").read_text()
-    assert a == (tmp_path / "out" / "edgedata.xml").read_text()
-    assert json.loads((tmp_path / "out" / "summary.json").read_text())["vehicles"] > 40
+    a = (tmp_path / "ref" / "edgedata.xml").read_text(encoding="utf-8")
+    assert a == (tmp_path / "out" / "edgedata.xml").read_text(encoding="utf-8")
+    assert json.loads((tmp_path / "out" / "summary.json").read_text(encoding="utf-8"))["vehicles"] > 40
 
 
 def _block(times, rows, first=0):
@@ -150,7 +150,7 @@ def test_person_rows_are_not_vehicles_and_may_lack_speed_and_position(tmp_path):
         '<fcd-export><timestep time="0.00"><vehicle id="v" x="8.3" y="-1.6" speed="0" '
         'pos="5.1" lane="l_0" type="car"/><person id="q" x="1" y="2" type="ped" edge="l"/>'
         '</timestep><timestep time="1.00"><vehicle id="v" x="9.3" y="-1.6" speed="1" '
-        'pos="6.1" lane="l_0" type="car"/></timestep></fcd-export>\n')
+        'pos="6.1" lane="l_0" type="car"/></timestep></fcd-export>\n', encoding="utf-8")
     pd.DataFrame({"timestep_time": [0.0, 0.0, 1.0], "vehicle_id": ["v", "q", "v"],
                   "vehicle_type": ["car", "ped", "car"], "vehicle_speed": [0.0, 1.2, 1.0],
                   "vehicle_pos": [5.1, 3.0, 6.1], "vehicle_lane": ["l_0", None, "l_0"]}
@@ -162,7 +162,7 @@ def test_person_rows_are_not_vehicles_and_may_lack_speed_and_position(tmp_path):
         replay.simulationStep()
         assert replay.ids == ("v",) and replay.person_count == 1
         assert replay.simulation.getDepartedPersonIDList() == ("q",)
-    (tmp_path / "bad.xml").write_text((tmp_path / "f.xml").read_text().replace(' speed="1"', ""))
+    (tmp_path / "bad.xml").write_text((tmp_path / "f.xml").read_text(encoding="utf-8").replace(' speed="1"', ""), encoding="utf-8")
     with pytest.raises(UserError, match="column speed missing at vehicle row 3"):
         list(iter_fcd_blocks(tmp_path / "bad.xml"))
 
@@ -241,7 +241,7 @@ def test_fcd_on_dask_equals_local(fcd, tmp_path, capsys):
     assert set(bucket_of(va.vehicle.unique(), 3)) == {0, 1, 2}  # every bucket booked some
     for name in ("edges.parquet", "classes.parquet"):
         _numbers_equal(pd.read_parquet(a / name), pd.read_parquet(b / name))
-    sa, sb = (json.loads((d / "summary.json").read_text()) for d in (a, b))
+    sa, sb = (json.loads((d / "summary.json").read_text(encoding="utf-8")) for d in (a, b))
     for k in ("steps", "samples", "vehicles", "classes", "slope_corrected_samples", "end_s"):
         assert sb[k] == sa[k]
     for eq, d in sa["equations"].items():
@@ -266,7 +266,7 @@ def test_fcd_on_dask_equals_local(fcd, tmp_path, capsys):
     assert sb["source"]["buckets"] == 3 and sb["source"]["rows"] == sa["source"]["rows"]
     assert sb["warnings"] == sa["warnings"] and not any("matched no vehicle" in w for w in sb["warnings"])
     assert not (b / BUCKET_DIR).exists()
-    ea, eb = ((d / "edgedata.xml").read_text() for d in (a, b))
+    ea, eb = ((d / "edgedata.xml").read_text(encoding="utf-8") for d in (a, b))
     assert ea.count("<interval ") == eb.count("<interval ") == 4
     na, nb = (np.array(re.findall(r'="(-?[0-9.]+(?:e[-+]?[0-9]+)?)"', e), float) for e in (ea, eb))
     np.testing.assert_allclose(nb, na, rtol=1e-5, atol=2e-6)  # printed to 6 decimals
@@ -310,13 +310,13 @@ def test_fcd_on_dask_books_riders_as_local(tmp_path):
     run_scenario(sc, None, equations=["vsp_ldv1999"], figures=False,
                  options=["--fcd-output", str(tmp_path / "fcd.parquet")])
     (tmp_path / "bus.toml").write_text('[equation]\nname = "phys"\nvclasses = ["bus"]\n[terms]\n'
-                                       'acc = 1.0\ngrade = 1.0\naero_rho = 0.5575\nroll = 0.01\n')
+                                       'acc = 1.0\ngrade = 1.0\naero_rho = 0.5575\nroll = 0.01\n', encoding="utf-8")
     base = ["fcd", str(tmp_path / "fcd.parquet"), "--scenario", str(sc), "--equation",
             str(tmp_path / "bus.toml"), "--no-figures"]
     assert cli_main(base + ["--out", str(tmp_path / "local")]) == 0
     assert cli_main(base + ["--engine", "dask", "--workers", "2", "--buckets", "3",
                             "--out", str(tmp_path / "dask")]) == 0
-    sa, sb = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("local", "dask"))
+    sa, sb = (json.loads((tmp_path / d / "summary.json").read_text(encoding="utf-8")) for d in ("local", "dask"))
     assert sa["transportables"]["max_kg"] == 1600.0
     assert sb["transportables"] == sa["transportables"] and sb["skipped"] == sa["skipped"]
     assert sa["skipped"]["by_vclass"] == {"pedestrian": 20}

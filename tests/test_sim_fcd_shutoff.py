@@ -58,12 +58,12 @@ def recorded(tmp_path_factory):
     """The scenario run live (libsumo), with its FCD (--precision 6) and tripinfo."""
     d = tmp_path_factory.mktemp("shutoff")
     (d / "bs.add.xml").write_text('<additional><busStop id="bs1" lane="c01c02_0" startPos="30" '
-                                  'endPos="70"/></additional>\n')
-    (d / "r.rou.xml").write_text(ROUTES)
+                                  'endPos="70"/></additional>\n', encoding="utf-8")
+    (d / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
     (d / "s.toml").write_text(
         f'equations = ["epa_gasoline_car", "{I3_BATTERY}"]\n[sumo]\nnet = "{NET}"\n'
         'routes = ["r.rou.xml"]\nadditional = ["bs.add.xml"]\nbegin = 0\nend = 1000\nstep_length = 1.0\n'
-        'options = ["--no-warnings", "true"]\n[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n')
+        'options = ["--no-warnings", "true"]\n[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n', encoding="utf-8")
     run_scenario(d / "s.toml", d / "live", options=["--fcd-output", str(d / "fcd.xml"), "--precision", "6",
                                                     "--tripinfo-output", str(d / "ti.xml")])
     return d
@@ -72,7 +72,7 @@ def recorded(tmp_path_factory):
 def _booked(out: Path):
     c = pd.read_csv(out / "chain_vehicles.csv").set_index(["key", "equation"]).sort_index()
     t = pd.read_parquet(out / "vehicles.parquet").groupby("vehicle")["time_s"].first().sort_index()
-    s = json.loads((out / "summary.json").read_text())["shut_off_at_long_stops"]
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))["shut_off_at_long_stops"]
     return c, t, s
 
 
@@ -143,7 +143,7 @@ def test_declared_stops_are_read_in_sumos_order_and_a_bad_one_is_named(tmp_path,
     <vehicle id="v" route="r" depart="0"><stop lane="a_0" duration="5"/><stop lane="b_0" speed="3"/></vehicle>
     <flow id="f" route="r" begin="0" end="50" period="10"><stop edge="b" until="1:00:00"/></flow>
     <flow id="p" route="r" begin="0" end="50" probability="0.1"/>
-</routes>""")
+</routes>""", encoding="utf-8")
     ds = read_declared_stops([f])
     stops, shift, why = ds.stops_of("v")
     assert [s.lane for s in stops] == ["a_0", "c_0"] and shift == [0, 0] and why is None
@@ -153,9 +153,9 @@ def test_declared_stops_are_read_in_sumos_order_and_a_bad_one_is_named(tmp_path,
     assert np.isnan(ds.stops_of("p.2")[1][0])  # a flow by probability: its departs not known
     assert ds.stops_of("x")[0] is None
     f.write_text('<routes><vehicle id="v" depart="0"><route edges="a"/><stop lane="a_0" duration="long"/>'
-                 "</vehicle></routes>")
-    (tmp_path / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n')
-    (tmp_path / "fcd.xml").write_text('<fcd-export><timestep time="0.00"/><timestep time="1.00"/></fcd-export>')
+                 "</vehicle></routes>", encoding="utf-8")
+    (tmp_path / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n', encoding="utf-8")
+    (tmp_path / "fcd.xml").write_text('<fcd-export><timestep time="0.00"/><timestep time="1.00"/></fcd-export>', encoding="utf-8")
     code = cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
                      "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err.strip()
@@ -171,14 +171,14 @@ def test_a_stop_on_a_route_of_an_additional_file_is_matched(tmp_path):
     (tmp_path / "l.add.xml").write_text(
         '<additional><busStop id="bs1" lane="c01c02_0" startPos="30" endPos="70"/>\n'
         '<route id="line" edges="c00c01 c01c02 c02c03"><stop busStop="bs1" duration="600"/></route>'
-        "</additional>\n")
+        "</additional>\n", encoding="utf-8")
     (tmp_path / "r.rou.xml").write_text(
         '<routes><vType id="ev" vClass="passenger" mass="1500" emissionClass="Energy/unknown"/>\n'
-        '<vehicle id="bus" type="ev" route="line" depart="0" departSpeed="0"/></routes>\n')
+        '<vehicle id="bus" type="ev" route="line" depart="0" departSpeed="0"/></routes>\n', encoding="utf-8")
     (tmp_path / "s.toml").write_text(
         f'equations = ["{I3_BATTERY}"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n'
         'additional = ["l.add.xml"]\nbegin = 0\nend = 900\nstep_length = 1.0\n'
-        'options = ["--no-warnings", "true"]\n[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n')
+        'options = ["--no-warnings", "true"]\n[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n', encoding="utf-8")
     run_scenario(tmp_path / "s.toml", tmp_path / "live", options=["--fcd-output", str(tmp_path / "fcd.xml"),
                                                                  "--precision", "6"])
     process_fcd(tmp_path / "fcd.xml", scenario=tmp_path / "s.toml", out_dir=tmp_path / "o")

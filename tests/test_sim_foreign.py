@@ -53,7 +53,7 @@ def test_fcd_replays_the_ballistic_update_as_the_live_run(tmp_path):
     np.testing.assert_allclose(_totals(rep), a, rtol=1e-4)
     # without the header, the scenario's SUMO options say it (a flag without a value)
     bare = tmp_path / "bare.xml"
-    bare.write_text(re.sub(r"<!--.*?-->", "", fcd.read_text(), count=1, flags=re.S))
+    bare.write_text(re.sub(r"<!--.*?-->", "", fcd.read_text(encoding="utf-8"), count=1, flags=re.S), encoding="utf-8")
     rep = process_fcd(bare, scenario=CITY, equations=[PHYS], end=200, step_length=1.0,
                       figures=False, options=["--step-method.ballistic"])
     assert rep.summary["step_method"] == "ballistic"
@@ -76,13 +76,13 @@ def test_vtypes_in_included_files_and_sumo_default_types(tmp_path, capsys):
     (sc / "types").mkdir(parents=True)
     (sc / "types" / "diesel.add.xml").write_text(
         '<additional><vType id="heavy" vClass="passenger" mass="2500" '
-        'emissionClass="HBEFA4/PC_diesel_Euro-6ab"/></additional>\n')
-    (sc / "top.add.xml").write_text('<additional><include href="types/diesel.add.xml"/></additional>\n')
+        'emissionClass="HBEFA4/PC_diesel_Euro-6ab"/></additional>\n', encoding="utf-8")
+    (sc / "top.add.xml").write_text('<additional><include href="types/diesel.add.xml"/></additional>\n', encoding="utf-8")
     cfg = _city_config(sc, "", [("h", "heavy", WEST), ("b", "DEFAULT_BIKETYPE", WEST),
                                 ("c", "DEFAULT_VEHTYPE", WEST)])
-    cfg.write_text(cfg.read_text().replace(
+    cfg.write_text(cfg.read_text(encoding="utf-8").replace(
         '<route-files value="r.rou.xml"/>',
-        '<route-files value="r.rou.xml"/><additional-files value="top.add.xml"/>'))
+        '<route-files value="r.rou.xml"/><additional-files value="top.add.xml"/>'), encoding="utf-8")
     s, _ = _run_summary(cfg, tmp_path / "live", capsys)
     veh = pd.read_parquet(tmp_path / "live" / "vehicles.parquet")
     h = veh[veh.vehicle == "h"]  # (a MOVES equation books its own source mass: its row says so)
@@ -112,12 +112,12 @@ def test_sumo_shipped_mmpevem_vehicle_is_electric(tmp_path, capsys):
     import sumo
 
     i3 = Path(sumo.SUMO_HOME) / "data" / "emissions" / "MMPEVEM" / "BMW_i3.xml"
-    assert 'emissionClass="MMPEVEM"' in i3.read_text()
+    assert 'emissionClass="MMPEVEM"' in i3.read_text(encoding="utf-8")
     sc = tmp_path / "sc"
     sc.mkdir()
     cfg = _city_config(sc, "", [("e", "BMW_i3", WEST)])
-    cfg.write_text(cfg.read_text().replace(
-        '<route-files value="r.rou.xml"/>', f'<route-files value="{i3},r.rou.xml"/>'))
+    cfg.write_text(cfg.read_text(encoding="utf-8").replace(
+        '<route-files value="r.rou.xml"/>', f'<route-files value="{i3},r.rou.xml"/>'), encoding="utf-8")
     s, _ = _run_summary(cfg, tmp_path / "o", capsys)
     assert s["assumptions"]["energy_carrier"]["BMW_i3"]["carrier"] == "electricity"
     ch = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv")
@@ -136,7 +136,7 @@ def test_a_run_without_vehicles_writes_whole_tables(tmp_path, capsys):
     for name in ("chain_vehicles", "chain_edges", "chain_classes"):
         df = pd.read_csv(tmp_path / "o" / f"{name}.csv")
         assert len(df) == 0 and {"key", "equation", "fuel_l", "net_kwh"} <= set(df.columns)
-    assert json.loads((tmp_path / "o" / "manifest.json").read_text())
+    assert json.loads((tmp_path / "o" / "manifest.json").read_text(encoding="utf-8"))
 
 
 def test_streamed_replay_keeps_a_vehicle_missing_for_a_teleport(tmp_path):

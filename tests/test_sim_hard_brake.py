@@ -27,7 +27,7 @@ def _fcd(path: Path, stop_from: float, steps_to_stop: int) -> Path:
         pos += v
         rows.append(f'<timestep time="{t:.2f}"><vehicle id="car" type="DEFAULT_VEHTYPE" speed="{v:.4f}" '
                     f'pos="{pos:.4f}" lane="e01_0" x="{pos:.4f}" y="-4.80" angle="90.00"/></timestep>')
-    path.write_text("<fcd-export>\n" + "\n".join(rows) + "\n</fcd-export>\n")
+    path.write_text("<fcd-export>\n" + "\n".join(rows) + "\n</fcd-export>\n", encoding="utf-8")
     return path
 
 

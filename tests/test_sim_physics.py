@@ -86,26 +86,26 @@ def test_step_length_and_no_elevation_reported(tmp_path, z_c):
     nod = tmp_path / "f.nod.xml"
     edg = tmp_path / "f.edg.xml"
     if z_c is None:
-        nod.write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="500" y="0"/></nodes>')
-        edg.write_text('<edges><edge id="ab" from="a" to="b" numLanes="1" speed="20"/></edges>')
+        nod.write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="500" y="0"/></nodes>', encoding="utf-8")
+        edg.write_text('<edges><edge id="ab" from="a" to="b" numLanes="1" speed="20"/></edges>', encoding="utf-8")
     else:  # a 40-m ramp beyond the 500-m flat edge: z on 40 of 540 m of lanes
         nod.write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="500" y="0"/>'
-                       f'<node id="c" x="540" y="0" z="{z_c}"/></nodes>')
+                       f'<node id="c" x="540" y="0" z="{z_c}"/></nodes>', encoding="utf-8")
         edg.write_text('<edges><edge id="ab" from="a" to="b" numLanes="1" speed="20"/>'
-                       '<edge id="bc" from="b" to="c" numLanes="1" speed="20"/></edges>')
+                       '<edge id="bc" from="b" to="c" numLanes="1" speed="20"/></edges>', encoding="utf-8")
     subprocess.run([sumolib.checkBinary("netconvert"), "-n", str(nod), "-e", str(edg),
                     "-o", str(flat), "--no-warnings"], check=True, capture_output=True)
     (tmp_path / "r.rou.xml").write_text(
         '<routes><vType id="car" mass="1500"/><vehicle id="v" type="car" depart="0">'
-        '<route edges="ab"/></vehicle></routes>')
+        '<route edges="ab"/></vehicle></routes>', encoding="utf-8")
     (tmp_path / "c.sumocfg").write_text(
         '<configuration><input><net-file value="flat.net.xml"/><route-files value="r.rou.xml"/>'
-        '</input><time><step-length value="0.25"/></time></configuration>')
+        '</input><time><step-length value="0.25"/></time></configuration>', encoding="utf-8")
     (tmp_path / "s.toml").write_text('equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "c.sumocfg"\n'
-                                     '[outputs]\nfigures = false\n')
+                                     '[outputs]\nfigures = false\n', encoding="utf-8")
     s = run_scenario(tmp_path / "s.toml", tmp_path / "o")
     assert s["step_length_s"] == 0.25
-    doc = json.loads((tmp_path / "o" / "summary.json").read_text())
+    doc = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     if z_c is None:
         assert s["network"]["has_elevation"] is False and s["network"]["z_share"] == 0.0
         assert any("no elevation" in w for w in s["warnings"])
@@ -141,13 +141,13 @@ def _network(tmp_path, nodes: str, edges: str, routes: str, outputs: str = "") -
 
     import sumolib
 
-    (tmp_path / "n.nod.xml").write_text(f"<nodes>{nodes}</nodes>")
-    (tmp_path / "n.edg.xml").write_text(f"<edges>{edges}</edges>")
+    (tmp_path / "n.nod.xml").write_text(f"<nodes>{nodes}</nodes>", encoding="utf-8")
+    (tmp_path / "n.edg.xml").write_text(f"<edges>{edges}</edges>", encoding="utf-8")
     subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml",
                     "--no-warnings"], check=True, capture_output=True, cwd=tmp_path)
-    (tmp_path / "n.rou.xml").write_text(f"<routes>{routes}</routes>")
+    (tmp_path / "n.rou.xml").write_text(f"<routes>{routes}</routes>", encoding="utf-8")
     (tmp_path / "n.sumocfg").write_text('<configuration><input><net-file value="n.net.xml"/><route-files '
-                                        f'value="n.rou.xml"/></input>{outputs}</configuration>')
+                                        f'value="n.rou.xml"/></input>{outputs}</configuration>', encoding="utf-8")
     return tmp_path / "n.sumocfg"
 
 
@@ -179,9 +179,9 @@ def test_a_closed_loop_books_no_net_climb_on_odd_lanes(tmp_path, step):
              '<vehicle id="fast" type="car" route="loop" depart="0" departPos="100" arrivalPos="100"/>'
              '<vehicle id="slow" type="slow" route="loop" depart="0" departPos="50" arrivalPos="50"/>',
              '<output><fcd-output value="fcd.xml"/></output>')
-    (tmp_path / "g.toml").write_text('[equation]\nname = "g"\n[terms]\ngrade = 1.0\n')
+    (tmp_path / "g.toml").write_text('[equation]\nname = "g"\n[terms]\ngrade = 1.0\n', encoding="utf-8")
     (tmp_path / "s.toml").write_text(f'equations = ["g.toml"]\n[sumo]\nconfig = "n.sumocfg"\nstep_length = {step}\n'
-                                     '[outputs]\nfigures = false\ntrace = true\n')
+                                     '[outputs]\nfigures = false\ntrace = true\n', encoding="utf-8")
     run_scenario(tmp_path / "s.toml", tmp_path / "o")
     # no step books a grade beyond [slope] max_rad (0.25): the 3-m step was booked at up to
     # 0.41 rad in one step (MoST's 7.6-m step between lanes at 1.10 rad, 2.7 MW of a trailer's
@@ -237,7 +237,7 @@ def test_a_first_step_on_a_lane_steeper_than_max_rad_books_at_most_max_rad(tmp_p
                    '<vType id="car" mass="1500" sigma="0"/><route id="r" edges="ab bc"/>'
                    '<vehicle id="v" type="car" route="r" depart="0" departPos="5" departSpeed="5"/>')
     (tmp_path / "s.toml").write_text('equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "n.sumocfg"\n'
-                                     '[outputs]\nfigures = false\ntrace = true\n')
+                                     '[outputs]\nfigures = false\ntrace = true\n', encoding="utf-8")
     run_scenario(tmp_path / "s.toml", tmp_path / "o")
     tr = pd.read_parquet(tmp_path / "o" / "trace.parquet").sort_values("time_s")
     assert tr["theta_rad"].abs().max() <= 0.25 + 1e-9

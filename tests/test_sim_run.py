@@ -63,7 +63,7 @@ def test_city_run_balances_and_outputs(tmp_path):
     s = run_scenario(REPO / "scenarios" / "city.toml", out, end=300,
                      equations=[PHYS, VSP, HEAVY], trace=True, progress=False)
     assert s["steps"] == 600 and s["vehicles"] > 20
-    assert json.loads((out / "summary.json").read_text()) == json.loads(json.dumps(s.summary))
+    assert json.loads((out / "summary.json").read_text(encoding="utf-8")) == json.loads(json.dumps(s.summary))
     veh = pd.read_parquet(out / "vehicles.parquet")
     edges = pd.read_parquet(out / "edges.parquet")
     classes = pd.read_parquet(out / "classes.parquet")
@@ -106,7 +106,7 @@ def test_city_run_balances_and_outputs(tmp_path):
                                rtol=1e-6)
     assert (out / "shares.png").stat().st_size > 0
     assert (out / "difference_map.png").stat().st_size > 0
-    assert (out / "shares.csv").read_text().startswith("class,equation,term")
+    assert (out / "shares.csv").read_text(encoding="utf-8").startswith("class,equation,term")
     # vehicle counts per edge: every accounted vehicle enters at least one edge
     assert edges[edges.equation == "phys"].vehicles.sum() >= s["vehicles"]
 
@@ -289,22 +289,22 @@ def test_cli_bad_inputs(tmp_path, capsys):
     sc = tmp_path / "sc"
     sc.mkdir()
     for f in ("run.sumocfg", "b.toml", "notes.txt"):
-        (sc / f).write_text("")
+        (sc / f).write_text("", encoding="utf-8")
     code, err = _cli([sc, "--out", out], capsys)
     assert code == 2 and err.strip().endswith(f"{sc} is a folder; the scenario is a file in it: b.toml, run.sumocfg")
     code, err = _cli(["city", "--equation", tmp_path / "sc" / "..", "--out", out], capsys)
     assert code == 2 and "is a folder; the equation file is a file in it, and it has no *.toml file" in err
     bad_key = tmp_path / "k.toml"
-    bad_key.write_text('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\nbegn = 0\n')
+    bad_key.write_text('equations = ["x"]\n[sumo]\nconfig = "c.sumocfg"\nbegn = 0\n', encoding="utf-8")
     code, err = _cli([bad_key, "--out", out], capsys)
     assert code == 2 and "sumo.begn" in err
     no_cfg = tmp_path / "c.toml"
-    no_cfg.write_text('equations = ["x"]\n[sumo]\nconfig = "none.sumocfg"\n')
+    no_cfg.write_text('equations = ["x"]\n[sumo]\nconfig = "none.sumocfg"\n', encoding="utf-8")
     code, err = _cli([no_cfg, "--out", out], capsys)
     assert code == 2 and "SUMO config not found" in err
-    (tmp_path / "broken.sumocfg").write_text("<configuration><input><net-file value=")
+    (tmp_path / "broken.sumocfg").write_text("<configuration><input><net-file value=", encoding="utf-8")
     broken = tmp_path / "b.toml"
-    broken.write_text('equations = ["x"]\n[sumo]\nconfig = "broken.sumocfg"\n')
+    broken.write_text('equations = ["x"]\n[sumo]\nconfig = "broken.sumocfg"\n', encoding="utf-8")
     code, err = _cli([broken, "--out", out], capsys)
     assert code == 2 and "broken.sumocfg" in err
     code, err = _cli([REPO / "scenarios" / "city.toml", "--out", out, "--equation",
@@ -320,7 +320,7 @@ def test_cli_vtype_without_mass_and_sumo_start_failure(tmp_path, capsys):
                      capsys)
     assert code == 2 and "nonexistent.toml" in err
     eq = tmp_path / "g.toml"
-    eq.write_text('[equation]\nname = "g"\n[terms]\ngrade = 1.0\n')
+    eq.write_text('[equation]\nname = "g"\n[terms]\ngrade = 1.0\n', encoding="utf-8")
     code, err = _cli([p, "--out", tmp_path / "o", "--equation", eq], capsys)
     assert code == 2 and "vType 'test'" in err and "no mass" in err
     # SUMO itself refuses the routes (unknown edge): libsumo raises, we exit 2
@@ -398,10 +398,10 @@ def test_a_run_without_vehicles_says_so(tmp_path, routes, warned):
     the run now says it in one warning, and a run with a vehicle does not."""
     from sumo_drvpw.sim import run_scenario
 
-    (tmp_path / "r.rou.xml").write_text(f"<routes>{routes}</routes>\n")
+    (tmp_path / "r.rou.xml").write_text(f"<routes>{routes}</routes>\n", encoding="utf-8")
     cfg = tmp_path / "c.sumocfg"
     cfg.write_text(f'<configuration><input><net-file value="{NETS / "city.net.xml"}"/>'
-                   '<route-files value="r.rou.xml"/></input><time><end value="60"/></time></configuration>\n')
+                   '<route-files value="r.rou.xml"/></input><time><end value="60"/></time></configuration>\n', encoding="utf-8")
     s = run_scenario(cfg, tmp_path / "o", figures=False)
     said = [w for w in s.get("warnings", []) if w.startswith("no vehicle was on the road between 0 s and 60 s")]
     assert len(said) == (1 if warned else 0) and (s["vehicles"] == 0) == warned
@@ -427,9 +427,9 @@ def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_
     for f in ("city.rou.xml", "prius3.vtype.xml"):
         shutil.copy(builtin / "scenarios" / f, sc / f)
     (sc / "ed.add.xml").write_text('<additional><edgeData id="e1" file="ed_out.xml"/>'
-                                   '<include href="more.add.xml"/></additional>\n')
+                                   '<include href="more.add.xml"/></additional>\n', encoding="utf-8")
     (sc / "more.add.xml").write_text('<additional><edgeData id="e2" file="ed2_out.xml" '
-                                     'begin="0" end="60"/></additional>\n')
+                                     'begin="0" end="60"/></additional>\n', encoding="utf-8")
     cfg = sc / "c.sumocfg"
     cfg.write_text(f"""<configuration>
     <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="city.rou.xml"/>
@@ -438,18 +438,18 @@ def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_
     <time><begin value="0"/><end value="120"/><step-length value="0.5"/></time>
     <report><log value="sim.log.txt"/><no-warnings value="true"/></report>
 </configuration>
-""")
+""", encoding="utf-8")
     before = sorted(p.name for p in sc.iterdir())
     out = tmp_path / "o"
     code, err = _cli([cfg, "--out", out, "--no-figures", "--no-progress"], capsys)
     assert code == 0, err
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert list(summary["equations"]) == list(CONFIG_EQUATIONS) and summary["vehicles"] > 0
     assert (out / "sumo" / "ti.xml").is_file() and (out / "sumo" / "sim.log.txt").is_file()
     assert ET.parse(out / "sumo" / "ti.xml").getroot().find("tripinfo") is not None
     after = sorted(p.name for p in sc.iterdir())
     assert after == before   # no log, no tripinfo, no edgeData beside the config
-    assert (sc / "ed.add.xml").read_text().count("ed_out.xml") == 1   # not rewritten
+    assert (sc / "ed.add.xml").read_text(encoding="utf-8").count("ed_out.xml") == 1   # not rewritten
     assert ET.parse(out / "sumo" / "ed_out.xml").getroot().find("interval/edge") is not None
     assert "written into sumo/" in err and "ed.add.xml: ed_out.xml" in err
     assert "more.add.xml: ed2_out.xml" in err and (out / "sumo" / "ed2_out.xml").is_file()
@@ -461,7 +461,7 @@ def test_bare_sumocfg_runs_by_class_and_keeps_its_outputs_in_the_run_folder(tmp_
     code, err = _cli([cfg, "--out", tmp_path / "o2", "--equation", "drvpw_prius3", "--no-figures",
                       "--no-progress"], capsys)
     assert code == 0, err
-    assert list(json.loads((tmp_path / "o2" / "summary.json").read_text())["equations"]) == ["drvpw_prius3"]
+    assert list(json.loads((tmp_path / "o2" / "summary.json").read_text(encoding="utf-8"))["equations"]) == ["drvpw_prius3"]
     # a config that is not there: one line naming it, exit 2, nothing written
     code, err = _cli(["nothere.sumocfg", "--out", tmp_path / "o3"], capsys)
     assert code == 2 and "nothere.sumocfg: no such SUMO config" in err and not (tmp_path / "o3").exists()
@@ -482,10 +482,10 @@ def test_detectors_sharing_an_output_file_still_write_one_file(tmp_path, capsys)
         shutil.copy(builtin / "scenarios" / f, sc / f)
     loops = "".join(f'<inductionLoop id="L{i}" lane="{lane}" pos="10" period="60" file="loops.xml"/>'
                     for i, lane in enumerate(("c00c10_0", "c01c00_0", "c00c01_0")))
-    (sc / "det.add.xml").write_text(f"<additional>{loops}</additional>\n")
+    (sc / "det.add.xml").write_text(f"<additional>{loops}</additional>\n", encoding="utf-8")
     (sc / "sub" / "det.add.xml").write_text(
         '<additional><inductionLoop id="S" lane="c01c02_0" pos="5" period="60" '
-        'file="loops.xml"/></additional>\n')
+        'file="loops.xml"/></additional>\n', encoding="utf-8")
     cfg = sc / "c.sumocfg"
     cfg.write_text(f"""<configuration>
     <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="city.rou.xml"/>
@@ -493,7 +493,7 @@ def test_detectors_sharing_an_output_file_still_write_one_file(tmp_path, capsys)
     <time><begin value="0"/><end value="120"/><step-length value="0.5"/></time>
     <report><no-warnings value="true"/></report>
 </configuration>
-""")
+""", encoding="utf-8")
     out = tmp_path / "o"
     code, err = _cli([cfg, "--out", out, "--no-figures", "--no-progress"], capsys)
     assert code == 0, err
@@ -517,14 +517,14 @@ def _city_config(folder: Path, vtypes: str, vehicles, depart: str = "0", begin: 
     ``depart`` from rest; 0.5-s steps, SUMO's warnings off. Returns its path."""
     veh = "".join(f'    <vehicle id="{i}" type="{t}" depart="{depart}" departSpeed="0">'
                   f'<route edges="{e}"/></vehicle>\n' for i, t, e in vehicles)
-    (folder / "r.rou.xml").write_text(f"<routes>\n{vtypes}{veh}</routes>\n")
+    (folder / "r.rou.xml").write_text(f"<routes>\n{vtypes}{veh}</routes>\n", encoding="utf-8")
     cfg = folder / "c.sumocfg"
     cfg.write_text(f"""<configuration>
     <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/></input>
     <time><begin value="{begin}"/><end value="{end}"/><step-length value="0.5"/></time>
     <report><no-warnings value="true"/></report>
 </configuration>
-""")
+""", encoding="utf-8")
     return cfg
 
 
@@ -532,7 +532,7 @@ def _run_summary(cfg: Path, out: Path, capsys) -> tuple[dict, str]:
     """Run a config with the CLI (no figures); its summary.json and stderr."""
     code, err = _cli([cfg, "--out", out, "--no-figures", "--no-progress"], capsys)
     assert code == 0, err
-    return json.loads((out / "summary.json").read_text()), err
+    return json.loads((out / "summary.json").read_text(encoding="utf-8")), err
 
 
 def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(tmp_path, capsys):
@@ -607,10 +607,10 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     # a scenario file's vclasses.custom1 books the one the attributes could not name
     (sc / "s.toml").write_text(
         'equations = ["moves_light_commercial_truck", "vsp_ldv1999"]\n[sumo]\nconfig = "c.sumocfg"\n'
-        '[vclasses.custom1]\nequations = ["moves_light_commercial_truck"]\nmass_kg = 2500\n')
+        '[vclasses.custom1]\nequations = ["moves_light_commercial_truck"]\nmass_kg = 2500\n', encoding="utf-8")
     code, err = _cli([sc / "s.toml", "--out", tmp_path / "o2", "--no-figures", "--no-progress"], capsys)
     assert code == 0, err
-    s2 = json.loads((tmp_path / "o2" / "summary.json").read_text())
+    s2 = json.loads((tmp_path / "o2" / "summary.json").read_text(encoding="utf-8"))
     assert not s2["skipped"]["by_vtype"].get("ev_c1") and "van_c1" not in s2["assumptions"]["booked_as"]
     v2 = pd.read_parquet(tmp_path / "o2" / "vehicles.parquet").groupby("vehicle")["mass_kg"].first()
     assert v2["e"] == v2["d"] == 2500.0
@@ -649,9 +649,9 @@ def test_sumocfg_clock_times_and_vip_cars(tmp_path, capsys):
     code, err = _cli([cfg, "--out", tmp_path / "o2", "--end", "10:01:00", "--no-figures",
                       "--no-progress"], capsys)
     assert code == 0, err
-    assert json.loads((tmp_path / "o2" / "summary.json").read_text())["end_s"] == 36060.0
+    assert json.loads((tmp_path / "o2" / "summary.json").read_text(encoding="utf-8"))["end_s"] == 36060.0
     # a time SUMO would not read: one line naming the config and the key, exit 2
-    cfg.write_text(cfg.read_text().replace("10:00:00", "ten o'clock"))
+    cfg.write_text(cfg.read_text(encoding="utf-8").replace("10:00:00", "ten o'clock"), encoding="utf-8")
     code, err = _cli([cfg, "--out", tmp_path / "o3"], capsys)
     assert code == 2 and "c.sumocfg: 'begin' must be a time" in err
     assert not (tmp_path / "o3").exists()
@@ -668,7 +668,7 @@ def parking_scenario(folder: Path, end: float = 500, stop_s: float = 200) -> Non
     a parkingArea (pa.add.xml), each for ``stop_s``; step 0.5 s."""
     (folder / "pa.add.xml").write_text(
         '<additional><parkingArea id="pa1" lane="c10c20_0" startPos="20" endPos="80" '
-        'roadsideCapacity="5"/></additional>\n')
+        'roadsideCapacity="5"/></additional>\n', encoding="utf-8")
     (folder / "r.rou.xml").write_text(f"""<routes>
     <vType id="car" vClass="passenger" mass="1600"/>
     <vehicle id="starts_parked" type="car" depart="0" departPos="stop">
@@ -684,14 +684,14 @@ def parking_scenario(folder: Path, end: float = 500, stop_s: float = 200) -> Non
         <route edges="c00c10 c10c20"/><stop parkingArea="pa1" duration="{stop_s}"/>
     </vehicle>
 </routes>
-""")
+""", encoding="utf-8")
     (folder / "c.sumocfg").write_text(f"""<configuration>
     <input><net-file value="{NETS / 'city.net.xml'}"/><route-files value="r.rou.xml"/>
         <additional-files value="pa.add.xml"/></input>
     <time><begin value="0"/><end value="{end}"/><step-length value="0.5"/></time>
     <report><no-warnings value="true"/></report>
 </configuration>
-""")
+""", encoding="utf-8")
 
 
 def test_parked_vehicles_are_off_the_lane_and_draw_no_auxiliary_power(tmp_path):
@@ -710,7 +710,7 @@ def test_parked_vehicles_are_off_the_lane_and_draw_no_auxiliary_power(tmp_path):
     for positions in ("getter", "tracked"):
         (tmp_path / f"{positions}.toml").write_text(
             f'equations = ["{eq}"]\n[sumo]\nconfig = "c.sumocfg"\npositions = "{positions}"\n'
-            '[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n')
+            '[air]\ntemperature_c = 20.0\n[outputs]\nfigures = false\n', encoding="utf-8")
         res = run_scenario(tmp_path / f"{positions}.toml", tmp_path / positions)
         if positions == "tracked":  # parked vehicles are not read until their parking ends
             assert res["position_reads"] < 100  # (was 1259: every parked one every step)
@@ -739,7 +739,7 @@ def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path,
         code, err = _cli(["city", "--equation", eq, "--air-temperature", t, "--end", 200,
                           "--out", out, "--no-figures", "--no-progress"], capsys)
         assert code == 0, err
-        s = json.loads((out / "summary.json").read_text())
+        s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         row = next(r for r in s["chain"]["classes"] if r["key"] == "passenger")
         per_km[t], rho[t] = row["net_kwh_per_km"], s["air_density_kgm3"]
     assert rho[0] == pytest.approx(101325 / (287.058 * 273.15), rel=1e-3)
@@ -755,7 +755,7 @@ def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path,
                           "--out", out, "--no-figures", "--no-progress",
                           *(["--air-temperature", t] if t is not None else [])], capsys)
         assert code == 0, err
-        s = json.loads((out / "summary.json").read_text())
+        s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         row = next(r for r in s["chain"]["classes"] if r["key"] == "passenger")
         bare[t] = row["net_kwh_per_km"]
         assert s["chain"]["hvac_air_temperature_c"] == 20
@@ -769,12 +769,12 @@ def test_air_temperature_option_reaches_the_chain_hvac_and_the_density(tmp_path,
     renamed.write_text(eq.read_text(encoding="utf-8").replace(
         '[chain.hvac]\ncolumn = "ambient_c"',
         '[chain.loads]\nheater_w = 1.0\n\n[chain.hvac]\ncolumn = "t_outside"'), encoding="utf-8")
-    assert "heater_w" in renamed.read_text() and "t_outside" in renamed.read_text()
+    assert "heater_w" in renamed.read_text(encoding="utf-8") and "t_outside" in renamed.read_text(encoding="utf-8")
     out = tmp_path / "orenamed"
     code, err = _cli(["city", "--equation", renamed, "--air-temperature", 0, "--end", 200,
                       "--out", out, "--no-figures", "--no-progress"], capsys)
     assert code == 0, err
-    s = json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     row = next(r for r in s["chain"]["classes"] if r["key"] == "passenger")
     assert row["net_kwh_per_km"] == pytest.approx(per_km[0], rel=1e-9)
     assert not s["chain"]["hvac_air_temperature_assumed"] and "no air temperature" not in err
@@ -797,7 +797,7 @@ def bus_riders_scenario(folder: Path, transportable_mass: bool = True) -> Path:
     c00c01, ride a 10 t bus (line L1) to a stop on c02c03 and leave it there."""
     (folder / "bs.add.xml").write_text(
         '<additional><busStop id="bs1" lane="c00c01_0" startPos="20" endPos="50"/>'
-        '<busStop id="bs2" lane="c02c03_0" startPos="100" endPos="130"/></additional>\n')
+        '<busStop id="bs2" lane="c02c03_0" startPos="100" endPos="130"/></additional>\n', encoding="utf-8")
     persons = "\n".join(
         f'    <person id="p{i}" depart="0" type="ped"><walk edges="c00c01" busStop="bs1"/>'
         '<ride busStop="bs2" lines="L1"/></person>' for i in range(20))
@@ -879,7 +879,7 @@ def test_a_bus_parked_at_its_stop_dwells_there_booked_standing(tmp_path):
     from sumo_drvpw.sim.fcd import process_fcd
 
     (tmp_path / "bs.add.xml").write_text(
-        '<additional><busStop id="bs1" lane="c00c01_0" startPos="20" endPos="50"/></additional>\n')
+        '<additional><busStop id="bs1" lane="c00c01_0" startPos="20" endPos="50"/></additional>\n', encoding="utf-8")
     routes = """<routes>
     <vType id="bus" vClass="bus" mass="10000"/>
     <vType id="car" vClass="passenger" mass="1600"/>
@@ -941,7 +941,7 @@ def test_sumo_game_scenarios_as_shipped(tmp_path, capsys, config, booked, skippe
     out = tmp_path / "o"
     code, err = _cli([game / config, "--out", out, "--end", "300", "--no-figures", "--no-progress"], capsys)
     assert code == 0, err
-    s = json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert {k: v["booked_as"] for k, v in s["assumptions"]["booked_as"].items()} == booked
     assert set(s["skipped"]["by_vclass"]) == skipped
     warned = [w for w in s["warnings"] if "not booked" in w]
@@ -964,11 +964,11 @@ def test_a_config_written_for_traci_scripts_does_not_wait_for_a_client(tmp_path)
     sc = tmp_path / "sc"
     sc.mkdir()
     cfg = _city_config(sc, '    <vType id="car" vClass="passenger" mass="1500"/>\n', [("p", "car", WEST)])
-    cfg.write_text(cfg.read_text().replace("</configuration>", '    <remote-port value="8813"/>\n</configuration>'))
+    cfg.write_text(cfg.read_text(encoding="utf-8").replace("</configuration>", '    <remote-port value="8813"/>\n</configuration>'), encoding="utf-8")
     r = subprocess.run([sys.executable, "-m", "sumo_drvpw", "run", str(cfg), "--out", str(tmp_path / "o"),
                         "--no-figures", "--no-progress"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
-    assert json.loads((tmp_path / "o" / "summary.json").read_text())["vehicles"] == 1
+    assert json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))["vehicles"] == 1
 
 
 @pytest.mark.parametrize("ec, carrier", [
@@ -1042,7 +1042,7 @@ def test_chains_book_the_vehicles_of_their_energy_carrier(tmp_path, capsys):
     scen = sc / "s.toml"
     scen.write_text(f'equations = ["epa_gasoline_car", "epa_diesel_car", "{i3}", "vsp_ldv1999"]\n'
                     '[sumo]\nconfig = "c.sumocfg"\n[vtypes.ev_forced]\nequations = ["epa_gasoline_car"]\n'
-                    '[outputs]\nfigures = false\n')
+                    '[outputs]\nfigures = false\n', encoding="utf-8")
     out = tmp_path / "o"
     s, err = _run_summary(scen, out, capsys)
     veh = pd.read_parquet(out / "vehicles.parquet")
@@ -1072,7 +1072,7 @@ def test_chains_book_the_vehicles_of_their_energy_carrier(tmp_path, capsys):
     assert not any("no battery or fuel chain applies" in w for w in s["warnings"])  # every car has one
     # a diesel chain on petrol cars only: it books nobody, and says why
     scen.write_text('equations = ["epa_diesel_car", "vsp_ldv1999"]\n[sumo]\nconfig = "c.sumocfg"\n'
-                    '[vehicles]\nvtypes = ["petrol"]\n[outputs]\nfigures = false\n')
+                    '[vehicles]\nvtypes = ["petrol"]\n[outputs]\nfigures = false\n', encoding="utf-8")
     s, err = _run_summary(scen, tmp_path / "o2", capsys)
     w = [x for x in s["warnings"] if "emissionClass names their fuel" in x]
     assert len(w) == 1 and "epa_diesel_car not for gasoline: petrol (HBEFA3/PC_G_EU4)" in w[0]
@@ -1209,10 +1209,10 @@ def test_the_difference_of_two_equations_is_a_table_and_says_when_they_book_diff
     assert not any("booked different vehicles" in w for w in res.summary.get("warnings", []))
     (tmp_path / "s.toml").write_text(f'equations = ["vsp_ldv1999", "moves_transit_bus"]\n[sumo]\nconfig = "{cfg}"\n'
                                      '[vclasses.passenger]\nequations = ["vsp_ldv1999"]\n'
-                                     '[outputs]\ndifference = ["vsp_ldv1999", "moves_transit_bus"]\n')
+                                     '[outputs]\ndifference = ["vsp_ldv1999", "moves_transit_bus"]\n', encoding="utf-8")
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o2", end=60, figures=False)
     assert any("booked different vehicles" in w for w in res.summary["warnings"]), res.summary["warnings"]
-    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace(
-        'difference = ["vsp_ldv1999", "moves_transit_bus"]', 'difference = ["vsp_ldv1999", "vsp_ldv1999"]'))
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text(encoding="utf-8").replace(
+        'difference = ["vsp_ldv1999", "moves_transit_bus"]', 'difference = ["vsp_ldv1999", "vsp_ldv1999"]'), encoding="utf-8")
     with pytest.raises(UserError, match="two different equations"):
         run_scenario(tmp_path / "s.toml", None, end=10, figures=False)

@@ -96,9 +96,9 @@ def test_mesoscopic_simulation_is_refused_naming_the_option(tmp_path):
     segment, no acceleration): no driving power follows; before, such a run booked nothing
     and said 'no vehicle of their classes'. The config's option and sumo.options are named."""
     cfg = tmp_path / "m.sumocfg"
-    cfg.write_text((SCEN / "city.sumocfg").read_text().replace(
+    cfg.write_text((SCEN / "city.sumocfg").read_text(encoding="utf-8").replace(
         "<processing>", '<processing>\n        <mesosim value="true"/>').replace(
-        "../sumo_drvpw", str(REPO / "sumo_drvpw")))
+        "../sumo_drvpw", str(REPO / "sumo_drvpw")), encoding="utf-8")
     with pytest.raises(UserError, match=r"m\.sumocfg: mesosim: .*microscopically"):
         load_scenario(cfg, equations=EQ)
     text = (f'equations = ["x"]\n[sumo]\nconfig = "{(SCEN / "city.sumocfg").as_posix()}"\n'
@@ -610,12 +610,12 @@ def test_route_files_given_in_sumo_options_are_read_as_the_configs(tmp_path):
     petrol, diesel and battery chains alike, 11.04 L of petrol over 112 km instead of 5.80 L
     over 61 km); the same files in the config booked each by its own carrier."""
     from sumo_drvpw.sim import run_scenario
-    (tmp_path / "mix.rou.xml").write_text(MIX_ROUTES)
+    (tmp_path / "mix.rou.xml").write_text(MIX_ROUTES, encoding="utf-8")
     for name, options in (("opts", ["--route-files", str(tmp_path / "mix.rou.xml")]),
                           ("short", ["-r", str(tmp_path / "mix.rou.xml")])):
         (tmp_path / f"{name}.toml").write_text(
             'equations = ["epa_gasoline_car", "bmw_i3_battery"]\n[sumo]\n'
-            f'config = "{REPO / "scenarios" / "city.sumocfg"}"\noptions = {options!r}\n'.replace("'", '"'))
+            f'config = "{REPO / "scenarios" / "city.sumocfg"}"\noptions = {options!r}\n'.replace("'", '"'), encoding="utf-8")
         sc = load_scenario(tmp_path / f"{name}.toml")
         assert sc.route_files[0] == (tmp_path / "mix.rou.xml").resolve()
         assert not any(f.name == "city.rou.xml" for f in sc.route_files)
@@ -633,12 +633,12 @@ def test_route_and_additional_files_in_every_form_sumo_reads(tmp_path, options):
     takes `-r F` (SUMO 1.28: each loads F, or fails on a missing F); the plug-in read only
     the spaced long and short names, so these kept the config's city.rou.xml for the vTypes
     (every car booked by every carrier's chain, SUMO's masses) while SUMO drove F's cars."""
-    (tmp_path / "mix.rou.xml").write_text(MIX_ROUTES)
-    (tmp_path / "mix.add.xml").write_text("<additional/>\n")
+    (tmp_path / "mix.rou.xml").write_text(MIX_ROUTES, encoding="utf-8")
+    (tmp_path / "mix.add.xml").write_text("<additional/>\n", encoding="utf-8")
     opts = [o.replace("ROU", str(tmp_path / "mix.rou.xml")).replace("ADD", str(tmp_path / "mix.add.xml"))
             for o in options]
     (tmp_path / "s.toml").write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
-                                     f'options = {opts!r}\n'.replace("'", '"'))
+                                     f'options = {opts!r}\n'.replace("'", '"'), encoding="utf-8")
     files = load_scenario(tmp_path / "s.toml").route_files
     want = "mix.rou.xml" if "ROU" in options[-1] else "mix.add.xml"
     assert (tmp_path / want).resolve() in files, files
@@ -652,9 +652,9 @@ def test_additional_files_given_in_sumo_options_are_the_scenarios_additional_fil
     FCD replay's parked test reads, the outputs a run redirects) is F, not the config's
     prius3.vtype.xml that SUMO no longer loads."""
     add = tmp_path / "stops.add.xml"
-    add.write_text('<additional>\n    <edgeData id="d" file="ed.xml"/>\n</additional>\n')
+    add.write_text('<additional>\n    <edgeData id="d" file="ed.xml"/>\n</additional>\n', encoding="utf-8")
     (tmp_path / "s.toml").write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
-                                     f'options = ["-a", "{add}"]\n')
+                                     f'options = ["-a", "{add}"]\n', encoding="utf-8")
     sc = load_scenario(tmp_path / "s.toml")
     assert sc.additional_files == [add.resolve()]
     assert [o.split(" → ")[-1] for o in sc.additional_outputs] == ["ed.xml"], sc.additional_outputs
@@ -670,11 +670,11 @@ def test_outputs_of_additional_files_given_in_sumo_options_are_written_into_the_
     Hamburg's edgeOutputs.add.xml wrote 8 files into the scenario's folder)."""
     from sumo_drvpw.sim import run_scenario
     add = tmp_path / "ed.add.xml"
-    add.write_text('<additional><edgeData id="e1" file="ed_out.xml"/></additional>\n')
+    add.write_text('<additional><edgeData id="e1" file="ed_out.xml"/></additional>\n', encoding="utf-8")
     files = f"{REPO / 'sumo_drvpw' / 'sim' / 'builtin' / 'scenarios' / 'prius3.vtype.xml'},{add}"
     options = [form + files] if form.endswith("=") else [form, files]
     (tmp_path / "s.toml").write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
-                                     f'options = {options!r}\n'.replace("'", '"'))
+                                     f'options = {options!r}\n'.replace("'", '"'), encoding="utf-8")
     run_scenario(tmp_path / "s.toml", tmp_path / "out", end=30, figures=False)
     assert (tmp_path / "out" / "sumo" / "ed_out.xml").is_file()
     assert not (tmp_path / "ed_out.xml").exists()
@@ -693,9 +693,9 @@ def test_a_linked_config_reads_the_files_beside_the_link_as_sumo_does(tmp_path):
     for d in (home, mine):
         d.mkdir()
         (d / "net.net.xml").symlink_to(net)
-        (d / "r.rou.xml").write_text(routes.read_text())
+        (d / "r.rou.xml").write_text(routes.read_text(encoding="utf-8"), encoding="utf-8")
     (home / "run.sumocfg").write_text('<configuration><input><net-file value="net.net.xml"/>'
-                                      '<route-files value="r.rou.xml"/></input></configuration>\n')
+                                      '<route-files value="r.rou.xml"/></input></configuration>\n', encoding="utf-8")
     for name in ("run.sumocfg", "other.sumocfg"):
         (mine / name).symlink_to(home / "run.sumocfg")
         sc = load_scenario(mine / name)
@@ -719,6 +719,6 @@ def test_road_class_types_and_edges_that_match_nothing_are_said(tmp_path):
     assert "'no_such_edge'" in said[1] and net.edge_ids[1] not in said[1]
     assert road_class_warnings(RoadClassRule(), net) == []
     (tmp_path / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{SCEN / "city.sumocfg"}"\n'
-                                     '[road_class]\nedges = { nope = "special" }\n')
+                                     '[road_class]\nedges = { nope = "special" }\n', encoding="utf-8")
     res = run_scenario(tmp_path / "s.toml", None, end=10, figures=False)
     assert any("road classes: edges 'nope'" in w for w in res.summary["warnings"]), res.summary["warnings"]

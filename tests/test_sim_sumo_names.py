@@ -29,7 +29,7 @@ def _scenario(tmp_path: Path, output: str, more: str = "") -> Path:
     sc.mkdir()
     for f in ("city.rou.xml", "prius3.vtype.xml"):
         shutil.copy(BUILTIN / "scenarios" / f, sc / f)
-    (sc / "ed.add.xml").write_text('<additional><edgeData id="e1" file="ed_out.xml"/></additional>\n')
+    (sc / "ed.add.xml").write_text('<additional><edgeData id="e1" file="ed_out.xml"/></additional>\n', encoding="utf-8")
     cfg = sc / "c.sumocfg"
     cfg.write_text(f"""<configuration>
     <input><net-file value="{BUILTIN / 'networks' / 'city.net.xml'}"/><route-files value="city.rou.xml"/>
@@ -39,7 +39,7 @@ def _scenario(tmp_path: Path, output: str, more: str = "") -> Path:
     <time><begin value="0"/><end value="120"/><step-length value="0.5"/></time>
     <report><no-warnings value="true"/></report>
 </configuration>
-""")
+""", encoding="utf-8")
     return cfg
 
 
@@ -69,7 +69,7 @@ def test_output_prefix_names_the_outputs_and_the_comparison_reads_its_tripinfo(t
     assert _files(out / "sumo") == ["run1_ed_out.xml", "run1_sim.log.txt", "run1_ti.xml"]
     assert "tripinfo-output (run1_ti.xml)" in err and "log (run1_sim.log.txt)" in err
     assert "ed.add.xml: run1_ed_out.xml" in err and "(ti.xml)" not in err
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["sumo_device"] and summary["sumo_device"][0]["vehicles"] > 0
     ids = {t.get("id") for t in ET.parse(out / "sumo" / "run1_ti.xml").getroot().iter("tripinfo")}
     assert summary["sumo_device"][0]["vehicles"] <= len(ids)
@@ -93,7 +93,7 @@ def test_prefix_with_folder_and_time_and_a_suffix_with_the_runs_own_tripinfo(tmp
     stamp = summ[len("res/"):-len("_sum_S.xml")]
     assert len(stamp) == 19 and stamp[4] == "-" and "res/" + stamp + "_ed_out_S.xml" in files
     assert f"summary ({summ})" in err and f"ed.add.xml: res/{stamp}_ed_out_S.xml" in err
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["sumo_device"] and summary["sumo_device"][0]["vehicles"] > 0
 
 
@@ -148,10 +148,10 @@ def test_written_file_finds_the_stamp_or_an_unprefixed_file(tmp_path):
     the prefix (its save-configuration, measured) found under its own name."""
     from sumo_drvpw.sim.sumo_outputs import written_file
 
-    (tmp_path / "r_2026-01-02-03-04-05_ti.xml").write_text("x")
+    (tmp_path / "r_2026-01-02-03-04-05_ti.xml").write_text("x", encoding="utf-8")
     assert written_file(tmp_path / "ti.xml", {"output-prefix": "r_TIME_"}).name == \
         "r_2026-01-02-03-04-05_ti.xml"
-    (tmp_path / "c.sumocfg").write_text("x")
+    (tmp_path / "c.sumocfg").write_text("x", encoding="utf-8")
     assert written_file(tmp_path / "c.sumocfg", {"output-prefix": "P_"}).name == "c.sumocfg"
     assert written_file(tmp_path / "none.xml", {"output-prefix": "P_"}).name == "P_none.xml"
 
@@ -170,13 +170,13 @@ def test_comparison_with_the_device_and_tripinfo_set_in_the_scenarios_options(tm
             else [f"--tripinfo-output={ti}", "--device.emissions.probability=1"])
     sc = tmp_path / "s.toml"
     sc.write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{cfg}"\noptions = {json.dumps(opts)}\n'
-                  "[outputs]\nsumo_device = true\n")
+                  "[outputs]\nsumo_device = true\n", encoding="utf-8")
     out = tmp_path / "o"
     code, err = _cli([sc, "--out", out], capsys)
     assert code == 0, err
     written = out / "sumo" / "ti.xml" if form == "spaced" else ti
     ids = {t.get("id") for t in ET.parse(written).getroot().iter("tripinfo")}
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["sumo_device"] and 0 < summary["sumo_device"][0]["vehicles"] <= len(ids)
 
 
@@ -193,11 +193,11 @@ def test_the_device_switched_on_in_the_options_compares_as_in_the_config(tmp_pat
             "equals": ["--device.emissions.probability=1"],
             "explicit": ["--device.emissions.explicit", "f0.0,f1.0"]}[where]
     sc = tmp_path / "s.toml"
-    sc.write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{cfg}"\noptions = {json.dumps(opts)}\n')
+    sc.write_text(f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{cfg}"\noptions = {json.dumps(opts)}\n', encoding="utf-8")
     code, err = _cli([sc, "--out", tmp_path / "o"], capsys)
     assert code == 0, err
-    rows = (tmp_path / "o" / "sumo_device.csv").read_text().splitlines()
-    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    rows = (tmp_path / "o" / "sumo_device.csv").read_text(encoding="utf-8").splitlines()
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     assert len(rows) >= 2 and summary["sumo_device"][0]["vehicles"] > 0
 
 
@@ -230,12 +230,12 @@ def test_sumo_device_with_the_device_off_in_the_options_is_refused(tmp_path, cap
     cfg = _scenario(tmp_path, "")
     sc = tmp_path / "s.toml"
     body = f'equations = ["epa_gasoline_car"]\n[sumo]\nconfig = "{cfg}"\nend = 60\noptions = {json.dumps(opts)}\n'
-    sc.write_text(body + "[outputs]\nsumo_device = true\n")
+    sc.write_text(body + "[outputs]\nsumo_device = true\n", encoding="utf-8")
     code, err = _cli([sc, "--out", tmp_path / "o"], capsys)
     assert code == 2 and not (tmp_path / "o").exists()
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "outputs.sumo_device" in lines[0] and "--device.emissions.probability" in lines[0]
-    sc.write_text(body)
+    sc.write_text(body, encoding="utf-8")
     code, err = _cli([sc, "--out", tmp_path / "p"], capsys)
     assert code == 0, err
     assert not (tmp_path / "p" / "sumo_device.csv").exists()

@@ -53,7 +53,7 @@ def test_run_on_a_local_dask_cluster_equals_jobs_1(tmp_path):
             x = pd.read_parquet(tmp_path / "one" / n / f"{t}.parquet")
             y = pd.read_parquet(tmp_path / "dask" / n / f"{t}.parquet")
             pd.testing.assert_frame_equal(x, y, check_exact=True)
-        s = json.loads((tmp_path / "dask" / n / "summary.json").read_text())
+        s = json.loads((tmp_path / "dask" / n / "summary.json").read_text(encoding="utf-8"))
         assert s["vehicles"] > 5
     # the seeds make different runs (a sweep, not three copies)
     v = [pd.read_parquet(tmp_path / "one" / n / "vehicles.parquet").traction_total_j.sum()
@@ -80,7 +80,7 @@ def test_a_bad_scenario_in_a_sweep_is_refused_before_any_runs(tmp_path, capsys, 
 
     good = _scenarios(tmp_path)[0]
     bad = tmp_path / "late.toml"
-    bad.write_text(Path(good).read_text().replace("end = 90", "begin = 3600"), encoding="utf-8")
+    bad.write_text(Path(good).read_text(encoding="utf-8").replace("end = 90", "begin = 3600"), encoding="utf-8")
     ran = []
     monkeypatch.setattr(run_mod, "_sweep_task", lambda *a, **k: ran.append(a) or {})
     code = cli_main(["run", good, str(bad), "--end", "60", "--out", str(tmp_path / "o")])

@@ -282,7 +282,7 @@ def test_cli_compare_report_streamed(logs, tmp_path):
         assert cli_main(["compare", str(logs["parquet"]), "--vehicle", "prius3", "--equation",
                          "drvpw_prius3", "--equation", "vsp_spec", "--out", str(out),
                          "--engine", engine]) == 0
-        docs[engine] = json.loads((out / "report.json").read_text())
+        docs[engine] = json.loads((out / "report.json").read_text(encoding="utf-8"))
         assert (out / "fig8_error_speed.png").stat().st_size > 0
     _close(docs["memory"]["equations"], docs["local"]["equations"])
     assert docs["local"]["n_samples"] == docs["memory"]["n_samples"]

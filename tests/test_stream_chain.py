@@ -157,7 +157,7 @@ def chain_logs(tmp_path_factory):
         df[first].to_parquet(folder / "a.parquet", row_group_size=700)
         df[~first].to_csv(folder / "b.csv", index=False)
         eq = d / f"{kind}.toml"
-        eq.write_text(BATTERY_EQ if kind == "battery" else FUEL_EQ)
+        eq.write_text(BATTERY_EQ if kind == "battery" else FUEL_EQ, encoding="utf-8")
         out[kind] = (folder, eq, len(df))
     return out
 
@@ -217,7 +217,7 @@ def test_cli_chain_compare_streams_and_equals_the_memory_engine(chain_logs, kind
         assert cli_main(args) == 0
         cap = capsys.readouterr()
         said[e] = [ln for ln in cap.out.splitlines() if not ln.startswith("wrote")]
-        docs[e] = json.loads((out / "report.json").read_text())
+        docs[e] = json.loads((out / "report.json").read_text(encoding="utf-8"))
         assert (out / "fig8_error_speed.png").stat().st_size > 0
     assert "local engine:" in cap.err
     assert docs["local"]["settings"].pop("percentiles") == "exact"
@@ -309,7 +309,7 @@ def test_dask_chain_comparison_equals_local_and_memory(chain_logs, tmp_path, cap
             out = tmp_path / e
             assert cli_main(["compare", str(folder), "--equation", str(eq), "--out", str(out),
                              "--engine", e, *extra]) == 0
-            docs[e] = json.loads((out / "report.json").read_text())
+            docs[e] = json.loads((out / "report.json").read_text(encoding="utf-8"))
         assert "dask engine:" in capsys.readouterr().err
         assert docs["dask"]["settings"].pop("percentiles") == "exact"
         _close(docs["memory"], docs["dask"])

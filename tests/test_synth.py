@@ -34,7 +34,7 @@ def test_truth_in_parquet_metadata_and_csv_sidecar(tmp_path):
     assert truth["terms"]["acc"] == pytest.approx(1624 / 1625)
     c = tmp_path / "s.csv"
     assert cli_main(["synth", "--out", str(c), "--minutes", "2", "--seed", "9"]) == 0
-    assert json.loads((tmp_path / "s.truth.json").read_text())["seed"] == 9
+    assert json.loads((tmp_path / "s.truth.json").read_text(encoding="utf-8"))["seed"] == 9
 
 
 def test_same_seed_same_log():
@@ -50,7 +50,7 @@ def test_planted_load_found_by_diagnose_through_the_cli(tmp_path):
     assert cli_main(["synth", "--out", str(log), "--minutes", "6", "--trips", "3", "--plant", "ac,distractors"]) == 0
     out = tmp_path / "diag"
     assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--out", str(out), "--no-figures", "--quiet"]) == 0
-    rep = json.loads((out / "trace.json").read_text())
+    rep = json.loads((out / "trace.json").read_text(encoding="utf-8"))
     assert [f["signals"] for f in rep["findings"]] == [["ac_power_w"]]
     f = rep["findings"][0]
     assert f["coefficient"] == pytest.approx(1.0, rel=0.15)  # planted gain 1 W per W

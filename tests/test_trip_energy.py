@@ -137,7 +137,7 @@ def test_compare_report_flags_a_trip_that_lost_samples(tmp_path, engine):
     out = tmp_path / "cmp"
     assert cli_main(["compare", str(f), "--equation", "drvpw_prius3", "--engine", engine,
                      "--out", str(out)]) == 0
-    doc = json.loads((out / "report.json").read_text())
+    doc = json.loads((out / "report.json").read_text(encoding="utf-8"))
     for key in ("trip_energy", "trip_net_energy"):
         te = doc["equations"]["drvpw_prius3"][key]
         a, b = te["trips"]["a"], te["trips"]["b"]
@@ -147,7 +147,7 @@ def test_compare_report_flags_a_trip_that_lost_samples(tmp_path, engine):
         assert (a["partial"], b["partial"]) == (True, False)
         assert te["partial_trips"] == ["a"]
         assert {"measured_j", "predicted_j", "error"} <= set(a)  # the old keys stay
-    md = (out / "report.md").read_text()
+    md = (out / "report.md").read_text(encoding="utf-8")
     assert "**Partial trips**" in md and "a (30 % of time" in md
 
 
@@ -158,12 +158,12 @@ def test_diagnose_trace_flags_a_trip_that_lost_samples(tmp_path, stream):
     f = _log_with_a_gap(tmp_path)
     out = tmp_path / "dg"
     assert cli_main(["diagnose", str(f), "--stream", stream, "--out", str(out)]) == 0
-    doc = json.loads((out / "trace.json").read_text())
+    doc = json.loads((out / "trace.json").read_text(encoding="utf-8"))
     for key in ("baseline", "final"):
         te = doc[key]["trip_energy"]
         assert te["partial_trips"] == ["a"]
         assert te["trips"]["a"]["left_out_time_share"] == pytest.approx(0.3, abs=0.01)
-    rows = [ln for ln in (out / "trace.md").read_text().splitlines() if ln.startswith("| a |")]
+    rows = [ln for ln in (out / "trace.md").read_text(encoding="utf-8").splitlines() if ln.startswith("| a |")]
     assert rows and "partial: 30 % of time" in rows[0]
 
 
@@ -191,14 +191,14 @@ def test_chain_trace_flags_a_trip_that_lost_samples(tmp_path):
     out = tmp_path / "trace"
     assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--out", str(out),
                      "--quiet"]) == 0
-    rep = json.loads((out / "trace.json").read_text())
+    rep = json.loads((out / "trace.json").read_text(encoding="utf-8"))
     for key in ("baseline", "final"):
         te = rep[key]["trip_net_energy"]
         assert te["partial_trips"] == [str(first)]
         assert te["trips"][str(first)]["left_out_time_share"] == pytest.approx(0.3, abs=0.01)
         assert all(v["left_out_samples"] == 0 for t, v in te["trips"].items() if t != str(first))
         assert "fuel" not in te and all("measured_l" not in v for v in te["trips"].values())  # kWh: no litres
-    md = (out / "trace.md").read_text()
+    md = (out / "trace.md").read_text(encoding="utf-8")
     row = [ln for ln in md.splitlines() if ln.startswith(f"| {first} |")]
     assert row and "partial: 30 % of time" in row[0] and "**Partial trips**" in md
 
@@ -347,8 +347,8 @@ def test_compare_report_md_has_energy_per_trip_in_kwh(tmp_path, engine):
     out = tmp_path / "cmp"
     assert cli_main(["compare", str(_trips_log(tmp_path)), "--equation", "drvpw_prius3", "--equation",
                      "vsp_ldv1999", "--engine", engine, "--out", str(out)]) == 0
-    doc = json.loads((out / "report.json").read_text())
-    md = (out / "report.md").read_text()
+    doc = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    md = (out / "report.md").read_text(encoding="utf-8")
     assert "## Energy per trip" in md
     eqs = doc["equations"]
     assert eqs["drvpw_prius3"]["trip_energy"]["small_trips"] == ["t11"]
@@ -363,7 +363,7 @@ def _fuel_eq(tmp_path, name, fuel, v3):
     f = tmp_path / f"{name}.toml"
     f.write_text(f'[equation]\nname = "{name}"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = {v3}\n[chain]\n'
                  'predicts = "fuel"\ntraction_efficiency = 0.9\naux_power_w = 300.0\nidle_fuel_power_w = 3000.0\n'
-                 f'marginal_efficiency = 0.33\nengine_off_below_w = 0.0\nfuel = "{fuel}"\n')
+                 f'marginal_efficiency = 0.33\nengine_off_below_w = 0.0\nfuel = "{fuel}"\n', encoding="utf-8")
     return f
 
 
@@ -380,8 +380,8 @@ def test_compare_report_gives_a_fuel_chain_trip_energy_in_litres(tmp_path, engin
     out = tmp_path / "cmp"
     assert cli_main(["compare", str(_trips_log(tmp_path, fuel=ice)), "--equation", str(ice), "--equation", str(dsl),
                      "--target", "fuel", "--engine", engine, "--out", str(out)]) == 0
-    doc = json.loads((out / "report.json").read_text())
-    md = (out / "report.md").read_text()
+    doc = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    md = (out / "report.md").read_text(encoding="utf-8")
     assert doc["settings"]["target"] == "fuel"
     for nm, per_l in (("ice", 43.2e6 * 0.745), ("dsl", 43.1e6 * 0.832)):
         for key in ("trip_energy", "trip_net_energy"):
@@ -407,8 +407,8 @@ def test_chain_trace_md_gives_a_fuel_target_in_litres(tmp_path):
     out = tmp_path / "trace"
     assert cli_main(["diagnose", str(_trips_log(tmp_path, fuel=ice)), "--equation", str(ice), "--target", "fuel",
                      "--out", str(out), "--quiet"]) == 0
-    rep = json.loads((out / "trace.json").read_text())
-    md = (out / "trace.md").read_text()
+    rep = json.loads((out / "trace.json").read_text(encoding="utf-8"))
+    md = (out / "trace.md").read_text(encoding="utf-8")
     assert "| trip | measured L | before L |" in md and "Litres of gasoline" in md
     rows = _md_table(md, "## Before and after, per trip (net energy; after = held out)")
     per_l = 43.2e6 * 0.745
@@ -471,8 +471,8 @@ def test_energy_share_table_gives_a_fuel_target_in_litres(tmp_path, engine):
     out = tmp_path / "cmp"
     assert cli_main(["compare", str(log), "--equation", str(ice), "--target", "fuel", "--engine", engine,
                      "--out", str(out)]) == 0
-    doc = json.loads((out / "report.json").read_text())
-    head, rows = _share_rows((out / "report.md").read_text())
+    doc = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    head, rows = _share_rows((out / "report.md").read_text(encoding="utf-8"))
     assert "Predicted traction [L of gasoline]" in head and "Measured traction [L of gasoline]" in head
     d, per_l = doc["equations"]["ice"], 43.2e6 * 0.745
     row = rows["ice"]
@@ -482,8 +482,8 @@ def test_energy_share_table_gives_a_fuel_target_in_litres(tmp_path, engine):
                                                                             / per_l, abs=5.1e-4)
     out2 = tmp_path / "wheel"
     assert cli_main(["compare", str(log), "--equation", "drvpw_prius3", "--engine", engine, "--out", str(out2)]) == 0
-    doc2 = json.loads((out2 / "report.json").read_text())
-    head2, rows2 = _share_rows((out2 / "report.md").read_text())
+    doc2 = json.loads((out2 / "report.json").read_text(encoding="utf-8"))
+    head2, rows2 = _share_rows((out2 / "report.md").read_text(encoding="utf-8"))
     assert float(rows2["drvpw_prius3"]["Predicted traction [kWh]"]) == pytest.approx(
         doc2["equations"]["drvpw_prius3"]["predicted_traction_energy_j"] / 3.6e6, abs=5.1e-4)
 
@@ -499,8 +499,8 @@ def test_chain_trace_json_gives_a_fuel_target_in_litres(tmp_path):
     out = tmp_path / "trace"
     assert cli_main(["diagnose", str(_trips_log(tmp_path, fuel=ice)), "--equation", str(ice), "--target", "fuel",
                      "--out", str(out), "--quiet"]) == 0
-    rep = json.loads((out / "trace.json").read_text())
-    rows = _md_table((out / "trace.md").read_text(), "## Before and after, per trip (net energy; after = held out)")
+    rep = json.loads((out / "trace.json").read_text(encoding="utf-8"))
+    rows = _md_table((out / "trace.md").read_text(encoding="utf-8"), "## Before and after, per trip (net energy; after = held out)")
     per_l = 43.2e6 * 0.745
     for key in ("baseline", "final"):
         te = rep[key]["trip_net_energy"]
@@ -527,7 +527,7 @@ def test_compare_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as
     ice, dsl = _fuel_eq(tmp_path, "ice", "gasoline", 0.42), _fuel_eq(tmp_path, "dsl", "diesel", 0.38)
     log = _trips_log(tmp_path, fuel=ice)
     car = tmp_path / "car.toml"
-    car.write_text('[vehicle]\nname = "car"\nmass_kg = 1500\n[powertrain]\nfuel = "diesel"\n')
+    car.write_text('[vehicle]\nname = "car"\nmass_kg = 1500\n[powertrain]\nfuel = "diesel"\n', encoding="utf-8")
     runs = {"vehicle diesel, chain gasoline": (["--vehicle", str(car), "--equation", str(ice)], "diesel", "ice"),
             "no vehicle, chain diesel": (["--equation", str(dsl)], "diesel", None),
             "agree": (["--equation", str(ice)], "gasoline", None)}
@@ -535,8 +535,8 @@ def test_compare_says_when_the_chain_burns_another_fuel_than_the_log_was_read_as
     for i, (args, read_as, odd) in enumerate(runs.values()):
         out = tmp_path / f"cmp{i}"
         assert cli_main(["compare", str(log), *args, "--target", "fuel", "--engine", engine, "--out", str(out)]) == 0
-        doc = json.loads((out / "report.json").read_text())
-        s, md = doc["settings"], (out / "report.md").read_text()
+        doc = json.loads((out / "report.json").read_text(encoding="utf-8"))
+        s, md = doc["settings"], (out / "report.md").read_text(encoding="utf-8")
         assert s["measured_fuel"] == read_as
         measured[i] = next(iter(doc["equations"].values()))["trip_net_energy"]["trips"]
         if odd is None:
@@ -561,14 +561,14 @@ def test_chain_trace_says_when_the_chain_burns_another_fuel_than_the_log_was_rea
     ice, dsl = _fuel_eq(tmp_path, "ice", "gasoline", 0.42), _fuel_eq(tmp_path, "dsl", "diesel", 0.38)
     log = _trips_log(tmp_path, fuel=ice)
     car = tmp_path / "petrol_car.toml"
-    car.write_text('[vehicle]\nname = "petrol_car"\nmass_kg = 1500\n[powertrain]\nfuel = "gasoline"\n')
+    car.write_text('[vehicle]\nname = "petrol_car"\nmass_kg = 1500\n[powertrain]\nfuel = "gasoline"\n', encoding="utf-8")
     for eq, note, veh, read_as in ((dsl, True, ["--vehicle", str(car)], "gasoline"), (ice, False, [], "gasoline"),
                                    (dsl, False, [], "diesel")):
         out = tmp_path / f"trace_{eq.stem}_{len(veh)}"
         assert cli_main(["diagnose", str(log), "--equation", str(eq), *veh, "--target", "fuel", "--out", str(out),
                          "--quiet"]) == 0
-        rep = json.loads((out / "trace.json").read_text())
-        md = (out / "trace.md").read_text()
+        rep = json.loads((out / "trace.json").read_text(encoding="utf-8"))
+        md = (out / "trace.md").read_text(encoding="utf-8")
         assert rep["measured_fuel"] == read_as
         if note:
             assert "read as gasoline" in rep["fuel_note"] and "dsl burns diesel" in rep["fuel_note"]

@@ -74,7 +74,7 @@ def test_outputs_exist_and_are_linked(run):
     summary, out = run
     md = V.report_path(out).read_text(encoding="utf-8")
     assert (out / "summary.json").is_file()
-    assert json.loads((out / "summary.json").read_text()) == summary
+    assert json.loads((out / "summary.json").read_text(encoding="utf-8")) == summary
     assert summary["figures"]
     for f in summary["figures"]:
         assert (out / f).stat().st_size > 5000, f

@@ -234,7 +234,7 @@ def test_a_powertrain_key_or_word_the_tool_does_not_read_is_refused(tmp_path, po
     from sumo_drvpw.errors import UserError
 
     f = tmp_path / "car.toml"
-    f.write_text(f'[vehicle]\nname = "car"\nmass_kg = 1330\n[powertrain]\n{powertrain}\n')
+    f.write_text(f'[vehicle]\nname = "car"\nmass_kg = 1330\n[powertrain]\n{powertrain}\n', encoding="utf-8")
     with pytest.raises(UserError) as e:
         load_vehicle(str(f))
     assert str(e.value).startswith(f"{f}: ") and said in str(e.value), str(e.value)
@@ -254,7 +254,7 @@ def test_roadload_spec_reads_the_prius_files_road_load_and_names_what_is_missing
     rl = v.road_load
     assert eq.terms == {"acc": 1.0, "v1": rl["f0_N"], "v2": rl["f1_N_per_mps"], "v3": rl["f2_N_per_mps2"]}
     f = tmp_path / "car.toml"
-    f.write_text('[vehicle]\nname = "car"\nmass_kg = 1330\n[road_load]\na_n = 120.0\nb_n_per_mps = 1.0\n')
+    f.write_text('[vehicle]\nname = "car"\nmass_kg = 1330\n[road_load]\na_n = 120.0\nb_n_per_mps = 1.0\n', encoding="utf-8")
     with pytest.raises(UserError) as e:
         roadload_from_specs(load_vehicle(str(f)))
     assert "lacks 'c_n_per_mps2' or 'f2_N_per_mps2'" in str(e.value) and str(f) in str(e.value)

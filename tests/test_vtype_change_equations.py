@@ -69,7 +69,7 @@ def test_a_vtype_change_to_other_equations_books_each_its_part(tmp_path, chunk_r
     cfg = _scenario(tmp_path)
     live = run_scenario(cfg, tmp_path / "live", end=250, figures=False, trace=True,
                         options=["--fcd-output", str(tmp_path / "fcd.xml"), "--precision", "6"])
-    assert 'type="second"' in (tmp_path / "fcd.xml").read_text()
+    assert 'type="second"' in (tmp_path / "fcd.xml").read_text(encoding="utf-8")
     _check(live, tmp_path / "live")
     rep = process_fcd(tmp_path / "fcd.xml", scenario=cfg, end=250, figures=False, chunk_rows=chunk_rows)
     _check(rep)

@@ -116,11 +116,11 @@ def test_vtype_energy_books_sumos_radial_drag(tmp_path, dt):
     and warns."""
     _curve(tmp_path)
     for c in ("0.5", "0"):
-        (tmp_path / f"r{c}.rou.xml").write_text(ROUTES.format(c=c))
+        (tmp_path / f"r{c}.rou.xml").write_text(ROUTES.format(c=c), encoding="utf-8")
     (tmp_path / "s.toml").write_text(
         f'equations = ["vtype_energy"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r0.5.rou.xml"]\nend = 150\n'
         f'step_length = {dt}\noptions = ["--no-warnings", "true", "--precision", "6", "--emission-output", '
-        f'"{tmp_path / "em.xml"}", "--fcd-output", "{tmp_path / "fcd.xml"}"]\n[outputs]\nfigures = false\n')
+        f'"{tmp_path / "em.xml"}", "--fcd-output", "{tmp_path / "fcd.xml"}"]\n[outputs]\nfigures = false\n', encoding="utf-8")
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
     sumo = _emitted_wh(tmp_path / "em.xml", dt)
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv")
@@ -148,12 +148,12 @@ def test_vtype_energy_books_sumos_radial_drag(tmp_path, dt):
         import json
         import re
 
-        text = (tmp_path / "fcd.xml").read_text()
-        (tmp_path / "fcd_na.xml").write_text(re.sub(r' angle="[^"]*"', "", text))
+        text = (tmp_path / "fcd.xml").read_text(encoding="utf-8")
+        (tmp_path / "fcd_na.xml").write_text(re.sub(r' angle="[^"]*"', "", text), encoding="utf-8")
         assert cli_main(["fcd", str(tmp_path / "fcd_na.xml"), "--net", str(tmp_path / "n.net.xml"), "--vtypes",
                          str(tmp_path / "r0.5.rou.xml"), "--equation", "vtype_energy", "--end", "150",
                          "--out", str(tmp_path / "na"), "--no-figures"]) == 0
-        warn = json.loads((tmp_path / "na" / "summary.json").read_text())["warnings"]
+        warn = json.loads((tmp_path / "na" / "summary.json").read_text(encoding="utf-8"))["warnings"]
         assert any("has no angle column" in w and "booked as 0" in w for w in warn)
         c = pd.read_csv(tmp_path / "na" / "chain_vehicles.csv").groupby("equation").net_kwh.sum()
         assert c["vtype_energy.ecar"] < a["vtype_energy.ecar"] * 0.97
@@ -269,7 +269,7 @@ def test_a_replay_of_fcd_written_every_other_step_books_sumos_radial_drag(tmp_pa
     names the same step, and an FCD without angles warns as locally."""
     _curve(tmp_path)
     for c in ("0.5", "0"):
-        (tmp_path / f"r{c}.rou.xml").write_text(ROUTES.format(c=c))
+        (tmp_path / f"r{c}.rou.xml").write_text(ROUTES.format(c=c), encoding="utf-8")
         subprocess.run([sumolib.checkBinary("sumo"), "-n", "n.net.xml", "-r", f"r{c}.rou.xml", "-e", "150",
                         "--emission-output", f"em{c}.xml", "--precision", "6", "--fcd-output", f"fcd{c}.xml",
                         "--device.fcd.period", "2", "--no-step-log", "--no-warnings"],
@@ -291,12 +291,12 @@ def test_a_replay_of_fcd_written_every_other_step_books_sumos_radial_drag(tmp_pa
     import re
 
     note = "the term radial at c/Δt = 0.5 for Δt = 1 s"
-    summary = json.loads((tmp_path / "o0.5" / "summary.json").read_text())
+    summary = json.loads((tmp_path / "o0.5" / "summary.json").read_text(encoding="utf-8"))
     assert note in summary["assumptions"]["vtype_energy"]["booked"]["ecar"]["radial_drag"]
     # on Dask (vehicle buckets) the summary says the same; an FCD without angles warns there too
     from sumo_drvpw.sim.fcd_dask import process_fcd_dask
 
-    (tmp_path / "na.xml").write_text(re.sub(r' angle="[^"]*"', "", (tmp_path / "fcd0.5.xml").read_text()))
+    (tmp_path / "na.xml").write_text(re.sub(r' angle="[^"]*"', "", (tmp_path / "fcd0.5.xml").read_text(encoding="utf-8")), encoding="utf-8")
     dk = process_fcd_dask(tmp_path / "na.xml", tmp_path / "dask", net=tmp_path / "n.net.xml",
                           equations=["vtype_energy"], vtype_files=[tmp_path / "r0.5.rou.xml"], buckets=2, workers=1)
     assert note in dk["assumptions"]["vtype_energy"]["booked"]["ecar"]["radial_drag"]

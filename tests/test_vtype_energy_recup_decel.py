@@ -29,8 +29,8 @@ ROUTES = """<routes>
 def _flat_road(d: Path) -> Path:
     """A flat straight 2-lane road of 3 km (the built-in highway's grade changes would add
     the slopes' source to the comparison)."""
-    (d / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="3000" y="0"/></nodes>')
-    (d / "n.edg.xml").write_text('<edges><edge id="e" from="a" to="b" numLanes="2" speed="27.8"/></edges>')
+    (d / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="3000" y="0"/></nodes>', encoding="utf-8")
+    (d / "n.edg.xml").write_text('<edges><edge id="e" from="a" to="b" numLanes="2" speed="27.8"/></edges>', encoding="utf-8")
     subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml"],
                    check=True, capture_output=True, cwd=d)
     return d / "n.net.xml"
@@ -38,7 +38,7 @@ def _flat_road(d: Path) -> Path:
 
 def _sumo_wh(d: Path, name: str, param: str) -> float:
     """SUMO's own electricity [Wh] of the flow, from its emission output (60 steps of 1 s)."""
-    (d / f"{name}.rou.xml").write_text(ROUTES.format(param=param))
+    (d / f"{name}.rou.xml").write_text(ROUTES.format(param=param), encoding="utf-8")
     subprocess.run([sumolib.checkBinary("sumo"), "-n", str(_flat_road(d)), "-r", f"{name}.rou.xml", "-e", "60",
                     "--seed", "3", "--emission-output", f"{name}.xml", "--precision", "6",
                     "--no-step-log", "--no-warnings"], check=True, capture_output=True, cwd=d)
@@ -67,7 +67,7 @@ def test_the_key_sumo_reads_is_recuperationEfficiencyByDecel(tmp_path):
     (tmp_path / "s.toml").write_text(
         'equations = ["vtype_energy"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["short.rou.xml"]\nend = 60\n'
         'options = ["--no-warnings", "true", "--seed", "3", "--emission-output", "em.xml", "--precision", "6"]'
-        '\n[outputs]\nfigures = false\n')
+        '\n[outputs]\nfigures = false\n', encoding="utf-8")
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
     assert res["assumptions"]["vtype_energy"]["booked"]["k"]["not_expressed"] == []
     sumo = {}
@@ -80,7 +80,7 @@ def test_the_key_sumo_reads_is_recuperationEfficiencyByDecel(tmp_path):
     assert len(cv) >= 8
     for key, kwh in zip(cv.key, cv.net_kwh):
         assert kwh * 1000.0 == pytest.approx(sumo[key], rel=1e-4, abs=1e-4), key
-    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace("short.rou", "long.rou"))
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text(encoding="utf-8").replace("short.rou", "long.rou"), encoding="utf-8")
     with pytest.raises(UserError, match="no vType .* writes its Energy model .*k: writes no Energy-model"):
         run_scenario(tmp_path / "s.toml", tmp_path / "o2")  # (no out: SUMO writes em.xml into the cwd)
 

@@ -175,5 +175,5 @@ def test_an_energy_vtype_no_vehicle_ran_is_one_short_line(tmp_path, capsys):
     assert cli_main(["run", str(f), "--out", str(tmp_path / "o"), "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "  vtype_energy: no vehicle of vType no_device ran" in out and "booked no vehicle" not in out
-    summ = json.loads((tmp_path / "o" / "summary.json").read_text())
+    summ = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     assert set(summ["assumptions"]["vtype_energy"]["booked"]) == {"own_device", "bare_energy", "no_device"}
