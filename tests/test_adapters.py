@@ -799,3 +799,21 @@ def test_bmw_trip_below_someone_elses_overview_csv_is_read(tmp_path):
     (tmp_path / "tum" / "2019" / "overview.csv").write_text("name,value\na,1\n", encoding="utf-8")
     with pytest.raises(UserError, match="missing column 'Trip'"):
         read("bmw-i3-tum", f)
+
+
+def test_rows_wider_than_the_header_are_told_from_the_file_whatever_pandas_warns(tmp_path):
+    """pandas 2.x reads a file whose data rows end with a separator without the
+    ParserWarning pandas 3 gives (with dtype=str): the note "data rows hold more fields
+    than the header line" depended on the pandas version (a rehearsal on pandas 2.1, the
+    lower bound). The file itself says it; quoted separators are fields, not separators."""
+    from sumo_drvpw.data.adapters._common import _wider_first_row
+
+    wide = tmp_path / "wide.csv"
+    wide.write_text("t,v\n0,1,\n1,2,\n", encoding="utf-8")
+    plain = tmp_path / "plain.csv"
+    plain.write_text('t,v\n0,"1,5"\n1,2\n', encoding="utf-8")
+    semi = tmp_path / "semi.csv"
+    semi.write_text("t;v\n0;1;\n", encoding="utf-8")
+    assert _wider_first_row(wide, {}) and not _wider_first_row(plain, {})
+    assert _wider_first_row(semi, {"sep": ";"}) and not _wider_first_row(semi, {})
+    assert not _wider_first_row(wide, {"header": None})  # no header line to compare with

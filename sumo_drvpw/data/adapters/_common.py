@@ -214,7 +214,8 @@ def read_csv_strict(path: Path, **kw) -> pd.DataFrame:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", pd.errors.ParserWarning)
             df = pd.read_csv(path, **kw)
-        if any(issubclass(w.category, pd.errors.ParserWarning) for w in caught):
+        if (any(issubclass(w.category, pd.errors.ParserWarning) for w in caught)  # (pandas ≥ 3 warns;
+                or _wider_first_row(Path(path), kw)):                               #  2.x not with dtype=str)
             WIDER_ROWS.add(str(path))
     except pd.errors.EmptyDataError:
         raise UserError(f"{path}: file is empty") from None
@@ -242,6 +243,23 @@ def read_csv_strict(path: Path, **kw) -> pd.DataFrame:
 TRUNCATED: dict[str, int] = {}
 #: files whose data rows hold more fields than their header line, read by :func:`new_report`
 WIDER_ROWS: set[str] = set()
+
+
+def _wider_first_row(path: Path, kw: dict) -> bool:
+    """True when the first data row holds more fields than the header line (a logger that
+    ends every data row with a separator), told from the file, whatever pandas warns of.
+    Single-character separators, a header on the first line, plain encodings only."""
+    import csv
+    import io
+
+    sep, enc = kw.get("sep", ","), str(kw.get("encoding") or "utf-8")
+    if (not isinstance(sep, str) or len(sep) != 1 or kw.get("header", "infer") not in ("infer", 0)
+            or kw.get("skiprows") or enc.lower().replace("-", "").startswith(("utf16", "utf32"))):
+        return False
+    with open(path, "rb") as f:
+        text = f.read(65536).decode(enc, errors="replace")
+    rows = [r for r in csv.reader(io.StringIO(text), delimiter=sep) if r][:2]
+    return len(rows) == 2 and len(rows[1]) > len(rows[0])
 
 
 def _cut_mid_row(path: Path, sep: str, encoding: str) -> bool:
