@@ -535,3 +535,28 @@ def test_the_hvac_candidate_left_out_is_said_with_why():
     gap = df.copy()
     gap.loc[gap.index[::50], "ambient_c"] = np.nan
     assert "no number on 2.0% of the samples" in left(gap)["ambient_c"]
+
+
+def test_a_chains_logs_are_found_from_any_working_folder(tmp_path, clean, capsys, monkeypatch):
+    """calibrate stored its logs as typed (relative to where it ran), so diagnose of the
+    same logs from another folder missed that the chain was calibrated on them (a rehearsal:
+    the note came and went with the working folder). save_equation writes them relative to
+    the equation's folder: found from anywhere, and after the folder is moved whole."""
+    import tomllib
+
+    m, b, df = clean
+    (tmp_path / "logs").mkdir()
+    df.to_parquet(tmp_path / "logs" / "log.parquet")
+    (tmp_path / "eqs").mkdir()
+    monkeypatch.chdir(tmp_path)
+    eq = _declared(b)
+    eq.chain.provenance = {"logs": ["logs/log.parquet"]}  # as calibrate was given it, from tmp_path
+    save_equation(eq, "eqs/declared.toml")
+    assert eq.chain.provenance["logs"] == ["logs/log.parquet"]  # the equation itself is not changed
+    doc = tomllib.loads((tmp_path / "eqs" / "declared.toml").read_text(encoding="utf-8"))
+    assert doc["chain"]["provenance"]["logs"] == ["../logs/log.parquet"]
+    monkeypatch.chdir(tmp_path / "logs")
+    capsys.readouterr()
+    assert cli_main(["diagnose", "log.parquet", "--vehicle", "prius3", "--equation", "../eqs/declared.toml",
+                     "--out", str(tmp_path / "t"), "--quiet", "--max-findings", "1"]) == 0
+    assert "note: the declared chain was calibrated on 1 of these 1 log file(s)" in capsys.readouterr().out

@@ -103,3 +103,12 @@ def test_demo_from_the_wheel(installed):
     assert "skipped" not in r.stdout, r.stdout[-500:]  # SUMO scenarios found in the wheel
     assert any(f.startswith("sumo_city/") for f in files), sorted(files)[:20]
     assert any(f.startswith("sumo_highway/") for f in files), sorted(files)[:20]
+    # what the outputs name is where it is now, not the staging folder (a rehearsal: a dead
+    # '.demo-out.XXXX.tmp' path in the equation and summaries, so no two runs were alike)
+    import tomllib
+
+    eq = tomllib.loads((out / "drvpw_calibrated.toml").read_text(encoding="utf-8"))
+    assert eq["provenance"]["logs"] == ["prius3_calibration_log.parquet"]
+    assert (out / eq["provenance"]["logs"][0]).is_file()
+    summ = json.loads((out / "sumo_city" / "summary.json").read_text(encoding="utf-8"))
+    assert (work / summ["equation_sources"]["drvpw_calibrated"]).resolve() == (out / "drvpw_calibrated.toml").resolve()

@@ -126,7 +126,9 @@ def _sumo_runs(out: Path, eq_path: Path, final: Path) -> list[str]:
         from sumo_drvpw.model.equations import load_equation
         from sumo_drvpw.sim.scenario import load_scenario
 
-        eqs = list(load_scenario(scen).equations) + [load_equation(eq_path)]
+        calibrated = load_equation(eq_path)
+        calibrated.path = str(final / eq_path.name)  # where it will be (summary.json equation_sources)
+        eqs = list(load_scenario(scen).equations) + [calibrated]
         summary = run_scenario(scen, out / f"sumo_{name}", equations=eqs)
         print(f"[4/4] SUMO {name}: {summary['steps']} steps, {summary['vehicles']} vehicles → {final / f'sumo_{name}'}")
         lines += [f"### {name} (`sumo_{name}/`)", "", "| equation | class | acc | grade | aero | roll | traction [kWh] |",

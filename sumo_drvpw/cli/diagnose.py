@@ -246,8 +246,9 @@ def chain_notes(eq, files) -> list[str]:
     from sumo_drvpw.report.comparison import calibration_warnings
 
     notes = calibration_warnings(eq.name, {"chain": eq.chain.to_dict()})
-    logs = [str(x) for x in (eq.chain.provenance or {}).get("logs") or []]  # (as calibrate was given them:
-    here = [str(Path(eq.path).parent / x) for x in logs if eq.path and not Path(x).is_absolute()]  # or beside it)
+    logs = [str(x) for x in (eq.chain.provenance or {}).get("logs") or []]  # (relative to the equation's
+    here = [str(Path(eq.path).parent / x) for x in logs if eq.path and not Path(x).is_absolute()]  # folder;
+    # files written before 2026-11-29 name them as calibrate was given them: from the working folder)
     seen = files_in_common(logs + here, files)
     if seen:
         notes.append(f"the declared chain was calibrated on {len(seen)} of these {len(files)} log file(s) "

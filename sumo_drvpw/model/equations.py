@@ -439,12 +439,30 @@ def load_equation(spec: str | Path) -> Equation:
 
 
 def save_equation(eq: Equation, path: str | Path) -> None:
-    """Write an equation as TOML atomically."""
+    """Write an equation as TOML atomically. The logs its provenance (and its chain's)
+    names are written relative to the file's folder, so they name the same files from
+    any working folder and after the folder is moved whole (absolute where no relative
+    path exists: another drive)."""
+    import os
+
     import tomli_w
 
     from sumo_drvpw.fileio import plain, write_text
 
-    write_text(path, tomli_w.dumps(plain(eq.to_dict(), toml=True)))
+    folder = Path(path).resolve().parent
+
+    def rel(x) -> str:
+        try:
+            return Path(os.path.relpath(Path(x).resolve(), folder)).as_posix()
+        except ValueError:
+            return str(Path(x).resolve())
+
+    d = eq.to_dict()
+    for holder in (d, d.get("chain")):
+        prov = holder.get("provenance") if isinstance(holder, dict) else None
+        if isinstance(prov, dict) and prov.get("logs"):
+            holder["provenance"] = {**prov, "logs": [rel(x) for x in prov["logs"]]}
+    write_text(path, tomli_w.dumps(plain(d, toml=True)))
 
 
 def vsp_from_specs(vehicle) -> Equation:
