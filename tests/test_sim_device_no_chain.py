@@ -62,3 +62,29 @@ def test_a_row_without_chain_says_what_it_compares(tmp_path):
     assert exported["ours"] == pytest.approx(own["ours"], rel=1e-9)  # same buses, same driving
     assert exported["ratio"] == pytest.approx(1.0, abs=0.05)
     assert own["ratio"] < 0.7 * exported["ratio"]  # measured 0.564 vs 0.998
+
+
+def test_a_full_hybrids_row_says_its_ratio_is_the_hybrids_saving(tmp_path):
+    """The full-hybrid chain (engine off at light load, charge-sustaining) beside SUMO's
+    emissions device, which books the vType's HBEFA class as a conventional engine (SUMO has
+    no full-hybrid class): a rehearsal read its ratio 0.42 as an error. Its row now says
+    what the ratio holds (a Hamburg run of hybrid cars, HBEFA4 PC_PHEV_petrol_(P)); a
+    conventional petrol chain's row does not."""
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="hev" vClass="passenger" mass="1400" emissionClass="HBEFA4/PC_PHEV_petrol_Euro-6d_(P)"/>'
+        '<vType id="car" vClass="passenger" mass="1400" emissionClass="HBEFA4/PC_petrol_Euro-6d"/>'
+        '<flow id="h" type="hev" begin="0" end="60" period="15" departSpeed="0">'
+        '<route edges="c00c10 c10c20 c20c30 c30c31 c31c32"/></flow>'
+        '<flow id="p" type="car" begin="0" end="60" period="15" departSpeed="0">'
+        '<route edges="c00c10 c10c20 c20c30 c30c31 c31c32"/></flow></routes>\n', encoding="utf-8")
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["epa_gasoline_car", "epa_gasoline_hybrid_car"]\n[sumo]\nnet = "{NET}"\n'
+        'routes = ["r.rou.xml"]\nbegin = 0\nend = 400\nstep_length = 1.0\noptions = ["--no-warnings", "true"]\n'
+        '[outputs]\nfigures = false\nsumo_device = true\n', encoding="utf-8")
+    run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    rows = pd.read_csv(tmp_path / "o" / "sumo_device.csv").set_index("equation")
+    hev, car = rows.loc["epa_gasoline_hybrid_car"], rows.loc["epa_gasoline_car"]
+    assert hev["vehicles"] == car["vehicles"] == 4
+    assert "no full-hybrid class" in hev["note"] and "saving" in hev["note"]
+    assert not isinstance(car["note"], str) or "hybrid" not in car["note"]
+    assert hev["ratio"] < car["ratio"]  # the same trips: the hybrid's engine-off and recovered braking
