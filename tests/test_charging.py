@@ -47,7 +47,7 @@ def _with_charging_stop(tmp_path):
     """The planted battery log of test_chain (chain η_t 0.9, η_r 0.7, 500 W auxiliary,
     heater as a load), trip T2 starting with a 300-s fast-charging stop (−50 kW) before its
     standstill start (the car leaves the charger and drives off)."""
-    from tests.test_chain import _planted_battery_log
+    from test_chain import _planted_battery_log
 
     f, road = _planted_battery_log(tmp_path)
     df = pd.read_csv(f)

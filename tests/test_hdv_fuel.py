@@ -84,7 +84,7 @@ def test_builtins_are_what_the_module_writes():
 def _config(folder: Path) -> Path:
     """The mixed-class bare config: trucks, buses, a coach, an electric bus and a car that
     write no emissionClass but the electric bus (test_sim_run's city config helper)."""
-    from tests.test_sim_run import EAST, WEST, _city_config
+    from test_sim_run import EAST, WEST, _city_config
 
     vtypes = """\
     <vType id="lkw" vClass="truck" guiShape="truck"/>
