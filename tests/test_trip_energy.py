@@ -575,3 +575,21 @@ def test_chain_trace_says_when_the_chain_burns_another_fuel_than_the_log_was_rea
             assert md.count(rep["fuel_note"]) == 1
         else:
             assert "fuel_note" not in rep and "was read as" not in md
+
+
+def test_net_energy_error_of_a_descent_below_zero_is_the_miss_over_traction():
+    """fit.trip_energy.net_energy_errors' rule (its docstring): the relative net-energy error
+    only where the measured net energy is at least NET_SHARE_MIN of the measured traction
+    energy, a signed comparison. A descent that recuperates more than it drove has a negative
+    net energy however large |net| is, so it gets the miss as a share of its traction energy.
+    By hand: 10 s at +10 kW, 10 s at −15 kW measured (traction 100 kJ, net −50 kJ,
+    |net| = 0.5 × traction); predicted recuperation 2 kW weaker (−13 kW): net −30 kJ, the miss
+    +20 kJ → 20 kJ / 100 kJ = 0.2, not the relative error −30/−50 − 1 = −0.4."""
+    from sumo_drvpw.fit.trip_energy import NET_SHARE_MIN, net_energy_errors
+
+    meas = np.array([10e3] * 10 + [-15e3] * 10)
+    pred = np.array([10e3] * 10 + [-13e3] * 10)
+    trip = np.array(["descent"] * 20)
+    assert abs(-50e3) >= NET_SHARE_MIN * 100e3  # |net| is no small denominator: only its sign sends it
+    e = net_energy_errors(pred, meas, 1.0, trip)
+    assert e["descent"] == pytest.approx(20e3 / 100e3)
