@@ -1889,3 +1889,21 @@ def test_a_battery_chain_that_recuperates_nothing_is_flagged(tmp_path, capsys):
         hit = "IMPLAUSIBLE for a car that recuperates"
         assert ("warning: energy chain recuperation_efficiency" in said and hit in said) == flagged, said
         assert any(hit in w for w in chain.provenance.get("warnings", [])) == flagged
+
+
+def test_standstill_auxiliary_is_drawn_below_the_standstill_speed_only_by_hand():
+    """A battery chain's ``standstill_aux_w`` (model/chain.py: + P_stand·[v < v_stand],
+    v_stand = STANDSTILL_MPS = 0.1 m/s) adds to the auxiliary power only while the vehicle
+    stands: at 0 and 0.05 m/s, not at exactly 0.1 m/s (the threshold moves) nor at 15 m/s.
+    By hand with P_aux 400 W, P_stand 300 W, η_t 0.8 and no driving power where it stands:
+    auxiliary 700, 700, 400, 400 W; the moving sample at 8 kW draws 8/0.8 = 10 kW + 400 W."""
+    from sumo_drvpw.model.constants import STANDSTILL_MPS
+
+    ch = EnergyChain(predicts="battery", traction_efficiency=0.8, recuperation_efficiency=0.6,
+                     aux_power_w=400.0, standstill_aux_w=300.0)
+    v = np.array([0.0, 0.05, STANDSTILL_MPS, 15.0])
+    p = np.array([0.0, 0.0, 0.0, 8_000.0])
+    out = ch.evaluate(p, v, dt_s=2.0)
+    np.testing.assert_allclose(out["auxiliary_w"], [700.0, 700.0, 400.0, 400.0])
+    np.testing.assert_allclose(out["power_w"], [700.0, 700.0, 400.0, 10_400.0])
+    np.testing.assert_allclose(out["auxiliary_j"], [1400.0, 1400.0, 800.0, 800.0])
