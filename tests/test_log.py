@@ -434,3 +434,13 @@ def test_a_folder_whose_files_differ_in_optional_columns_keeps_every_row(tmp_pat
     assert_allclose(log.df["grade_rad"].to_numpy()[(log.df["trip_id"] == "b").to_numpy()],
                     read_log(d / "b.csv", veh).df["grade_rad"].to_numpy(), rtol=1e-12)
     assert log.counts["grade_flat_trips"] == ["c"] and log.counts["grade_filled_rows"] == 400
+
+
+def test_time_weight_is_half_the_interval_to_each_neighbour(tmp_path):
+    """data/log.py's per-sample time weight: dt_s = half the interval to the previous sample
+    plus half that to the next, within a trip (its ends get only their one inner half). By
+    hand, samples at 0, 1 and 3 s: 0.5·1 = 0.5 s, 0.5·1 + 0.5·2 = 1.5 s, 0.5·2 = 1.0 s (sum 3 s,
+    the trip's duration); a sum-only check cannot tell weights shifted by a sample."""
+    df = pd.DataFrame({"time_s": [0.0, 1.0, 3.0], "speed_mps": [10.0, 11.0, 12.0]})
+    log = read_log([_write(tmp_path, df)])
+    assert_allclose(log.df["dt_s"].to_numpy(), [0.5, 1.5, 1.0], rtol=0, atol=1e-12)
