@@ -501,3 +501,18 @@ def test_grade_elevation_gap_by_hand_and_reported(mounted, tmp_path, capsys):
                      "--out", str(tmp_path / "r")]) == 0
     out = capsys.readouterr().out
     assert f"on {c['grade_elevation_gap_trips']} trip(s) the corrected grade integrates" in out
+
+
+@pytest.mark.parametrize("h_m, p_kpa", [(0.0, 101.325), (1000.0, 89.875), (2000.0, 79.496), (3000.0, 70.109)])
+def test_standard_atmosphere_pressure_matches_the_icao_table(h_m, p_kpa):
+    """model/air.py's pressure at altitude against the ICAO standard atmosphere (ICAO Doc 7488,
+    ISO 2533) at geopotential altitudes 0, 1, 2, 3 km: 101.325, 89.875, 79.496, 70.109 kPa
+    (the tables' values, rounded to 89.88, 79.50, 70.11 kPa in short tables). To 0.02 kPa:
+    the g = 9.81 m/s² of constants.py where the ISA has 9.80665 lowers p(3 km) by 0.009 kPa
+    (by hand: the exponent g·M/(R·L) grows by 0.0018, times ln(1 − 0.0065·3000/288.15) =
+    −0.070). With the ISA sea-level temperature of 15 °C, ρ at 0 m is the ISA's 1.2250 kg/m³."""
+    from sumo_drvpw.model.air import air_density, pressure_at_altitude_kpa
+
+    assert float(pressure_at_altitude_kpa(h_m)) == pytest.approx(p_kpa, abs=0.02)
+    if h_m == 0.0:
+        assert air_density(15.0, float(pressure_at_altitude_kpa(h_m))) == pytest.approx(1.2250, abs=1e-4)
