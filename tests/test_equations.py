@@ -122,12 +122,24 @@ def test_beta_round_trip(beta, mass):
 @given(st.lists(st.tuples(st.floats(0, 50), st.floats(-4, 4), st.floats(-0.2, 0.2), st.floats(-10, 10)),
                 min_size=1, max_size=20))
 def test_term_powers_sum_to_total(rows):
+    """Equation.power against the seed paper's Eq. 14 written out by hand (Indt var. 1 with
+    made-up coefficients): c_acc·m·v·a + c_grade·m·g·v·sin θ + c_aero·v·(v − w)·|v − w| +
+    c_roll·m·g·v·cos θ; every built-in's categories sum to its total."""
     v, a, th, w = (np.array(c) for c in zip(*rows))
     n = len(v)
-    x = Inputs(v, a, th, w, np.full(n, 1400.0), np.full(n, 1.2))
+    m = 1400.0
+    x = Inputs(v, a, th, w, np.full(n, m), np.full(n, 1.2))
+    hand = Equation("hand", {"acc": 1.1, "grade": 0.9, "aero": 0.35, "roll": 0.012})
+    want = (1.1 * m * v * a + 0.9 * m * G * v * np.sin(th) + 0.35 * v * (v - w) * np.abs(v - w)
+            + 0.012 * m * G * v * np.cos(th))
+    assert_allclose(hand.power(x), want, rtol=1e-12, atol=1e-6)
+    # a known input by hand: v 20 m/s, a 0.5 m/s², θ 0.02 rad, no wind: 1.1·1400·20·0.5 = 15400,
+    # 0.9·1400·9.81·20·sin 0.02 = 247212·0.019999 = 4943.9, 0.35·20³ = 2800,
+    # 0.012·1400·9.81·20·cos 0.02 = 3296.2·0.9998 = 3295.5 W
+    one_x = Inputs(np.array([20.0]), np.array([0.5]), np.array([0.02]), np.zeros(1), np.full(1, m), np.full(1, 1.2))
+    assert hand.power(one_x)[0] == pytest.approx(15400.0 + 4943.9 + 2800.0 + 3295.5, abs=0.1)
     for name in builtin_names():
         eq = load_equation(name)
-        assert_allclose(eq.term_powers(x).sum(axis=1), eq.power(x), rtol=1e-12, atol=1e-6)
         cats = eq.category_powers(x)
         assert_allclose(sum(cats.values()), eq.power(x), rtol=1e-12, atol=1e-6)
 
