@@ -404,3 +404,31 @@ def test_an_equation_calibrated_on_a_power_split_s_output_says_it_predicts_that(
     assert cli_main(["calibrate", str(tmp_path / "w.parquet"), "--engine", engine,
                      "--out", str(tmp_path / "w.toml")]) == 0
     assert load_equation(tmp_path / "w.toml").predicts == "wheel"
+
+
+def test_a_term_between_p_enter_and_p_remove_stays_selected():
+    """Backward removal tests p against p-to-remove (0.15), not p-to-enter (0.10): a term whose
+    p ends between them stays. Planted: x1 = x2 + x3 + u is the best single proxy and enters
+    first; y = β1·x1 + x2 + x3 + e with e orthogonal to the three columns, so the full fit
+    returns β1 exactly with s² = eᵀe/(n − 3) and se1 = √(s²·[(XᵀX)⁻¹]₁₁), and β1 = t*·se1,
+    t* the t(n − 3) quantile of 0.94, puts x1's final p at 0.12 (checked with statsmodels)."""
+    from scipy import stats
+
+    from sumo_drvpw.fit.ols import dense_gram
+
+    rng = np.random.default_rng(7)
+    n = 400
+    x2, x3 = rng.normal(size=n), rng.normal(size=n)
+    x1 = x2 + x3 + 0.3 * rng.normal(size=n)
+    X = np.column_stack([x1, x2, x3])
+    e = 0.05 * rng.normal(size=n)
+    e -= X @ np.linalg.lstsq(X, e, rcond=None)[0]
+    se1 = np.sqrt(e @ e / (n - 3) * np.linalg.inv(X.T @ X)[0, 0])
+    y = X @ np.array([stats.t.isf(0.06, n - 3) * se1, 1.0, 1.0]) + e
+    assert sm.OLS(y, X).fit().pvalues[0] == pytest.approx(0.12, abs=1e-6)  # between 0.10 and 0.15
+    assert abs(np.corrcoef(x1, y)[0, 1]) > max(abs(np.corrcoef(x, y)[0, 1]) for x in (x2, x3))
+    sel, trace = stepwise(dense_gram(X, y, ("x1", "x2", "x3")), p_enter=0.10, p_remove=0.15)
+    assert trace[0]["term"] == "x1"
+    assert sorted(sel) == ["x1", "x2", "x3"]
+    assert not [s for s in trace if s["action"] == "remove"], trace
+
