@@ -432,3 +432,27 @@ def test_a_term_between_p_enter_and_p_remove_stays_selected():
     assert sorted(sel) == ["x1", "x2", "x3"]
     assert not [s for s in trace if s["action"] == "remove"], trace
 
+
+@pytest.mark.parametrize("lead", [0.0, 1e-11])
+@pytest.mark.parametrize("order", [("x1", "x2"), ("x2", "x1")])
+def test_tied_candidates_enter_in_candidate_order(order, lead):
+    """stepwise's docstring: |t| values equal within TIE_RTOL (1e-9) are a tie, broken by
+    candidate order. Two distinct columns, each the other's mirror (rows (a, b, y) and
+    (b, a, y) in integers): alone, each has the same |t| exactly (lead 0). Nudging y on one
+    row where x2 > x1 gives x2 a lead of about 7e-12 relative (rounding's size, checked with
+    statsmodels): still a tie. Either way the first in candidate order enters first."""
+    from sumo_drvpw.fit.calibrate import TIE_RTOL
+    from sumo_drvpw.fit.ols import dense_gram
+
+    rng = np.random.default_rng(1)
+    a, b = rng.integers(0, 20, 200).astype(float), rng.integers(0, 20, 200).astype(float)
+    y0 = a + b + rng.integers(-5, 6, 200)
+    cols = {"x1": np.r_[a, b], "x2": np.r_[b, a]}
+    y = np.r_[y0, y0]
+    if lead:
+        k = int(np.argmax(b - a))  # a row where x2 exceeds x1 most
+        y[k] += lead * float(y @ y) / (b[k] - a[k]) / 20.0
+    t = {c: abs(sm.OLS(y, cols[c]).fit().tvalues[0]) for c in cols}
+    assert 0.0 <= t["x2"] / t["x1"] - 1.0 < TIE_RTOL and (t["x2"] > t["x1"]) == bool(lead)
+    _, trace = stepwise(dense_gram(np.column_stack([cols[c] for c in order]), y, order))
+    assert [s["term"] for s in trace if s["action"] == "enter"][0] == order[0], trace
