@@ -242,3 +242,60 @@ def test_a_first_step_on_a_lane_steeper_than_max_rad_books_at_most_max_rad(tmp_p
     tr = pd.read_parquet(tmp_path / "o" / "trace.parquet").sort_values("time_s")
     assert tr["theta_rad"].abs().max() <= 0.25 + 1e-9
     assert tr["theta_rad"].iloc[0] == pytest.approx(0.25)  # (the lane's 0.40, clipped)
+
+
+def _own_loop(tmp_path, routes: str, end: float, options: tuple, eqs: list):
+    """A libsumo run of the highway's flat start stepped here (Δt 1 s), the Accountant
+    booking each step after this loop read every vehicle's speed and odometer
+    (vehicle.getSpeed, vehicle.getDistance) from SUMO itself: (vehicles table, speeds per
+    vehicle and step, last odometer reading per vehicle)."""
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    (tmp_path / "r.rou.xml").write_text(routes, encoding="utf-8")
+    opts = ", ".join(f'"{o}"' for o in ("--no-warnings", "true", *options))
+    toml = tmp_path / "s.toml"
+    toml.write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{HW_NET}"\nroutes = ["r.rou.xml"]\n'
+                    f'begin = 0\nend = {end}\nstep_length = 1.0\noptions = [{opts}]\n'
+                    '[outputs]\nfigures = false\nedgedata = false\n', encoding="utf-8")
+    conn = start_sumo(load_scenario(toml, equations=eqs).sumo_args)
+    speeds, odometer = {}, {}
+    try:
+        acc = Accountant(conn, equations=eqs, scenario=toml, figures=False, keep_vehicles=True)
+        while conn.simulation.getTime() < end - 1e-9:
+            conn.simulationStep()
+            for vid in conn.vehicle.getIDList():
+                speeds.setdefault(vid, []).append(conn.vehicle.getSpeed(vid))
+                odometer[vid] = conn.vehicle.getDistance(vid)
+            acc.step()
+        veh = acc.result().vehicles.set_index(["vehicle", "equation"])
+    finally:
+        close_sumo(conn)
+    return veh, {k: np.asarray(s) for k, s in speeds.items()}, odometer
+
+
+def test_acc_pos_books_the_kinetic_energy_gained_in_steps_that_speed_up(tmp_path):
+    """``acc_pos`` (m·v̄·max(a, 0), v̄ the step's mean speed, as ``acc``): in a SUMO run
+    (Euler, Δt 1 s, driver noise, a 5-s stop on the way) its energy per vehicle is the
+    kinetic energy gained, ½m·Σ(v_t² − v_t−1²) over the steps where v_t > v_t−1, with the
+    speeds read from SUMO by hand (m·v_t·a·Δt would add ½m·Σ(v_t − v_t−1)² there). It is the
+    difference of an equation with acc + acc_pos and one with acc alone, whose own energy is
+    ½m(v_last² − v_first²)."""
+    routes = """<routes>
+  <vType id="car" vClass="passenger" mass="1500" accel="2.6" decel="4.5"/>
+  <route id="r" edges="e01 e12"/>
+  <flow id="c" type="car" route="r" begin="0" end="12" period="4" departSpeed="0" departPos="0">
+    <stop lane="e01_0" endPos="500" duration="5"/></flow>
+</routes>"""
+    eqs = [Equation("kin", {"acc": 1.0}), Equation("kin_pos", {"acc": 1.0, "acc_pos": 1.0})]
+    veh, speeds, _ = _own_loop(tmp_path, routes, 150, (), eqs)
+    assert len(speeds) == 3
+    for vid, v in speeds.items():
+        gained = np.diff(v ** 2)
+        acc_e = {e.name: veh.loc[(vid, e.name), "traction_acc_j"] + veh.loc[(vid, e.name), "recup_acc_j"]
+                 for e in eqs}
+        assert (gained < 0).sum() > 5 and v.min() < 0.1  # it slowed down and stood at the stop
+        assert acc_e["kin"] == pytest.approx(0.5 * 1500 * (v[-1] ** 2 - v[0] ** 2), rel=1e-9)
+        want = 0.5 * 1500 * gained[gained > 0].sum()
+        assert acc_e["kin_pos"] - acc_e["kin"] == pytest.approx(want, rel=1e-9)
+
