@@ -299,3 +299,25 @@ def test_acc_pos_books_the_kinetic_energy_gained_in_steps_that_speed_up(tmp_path
         want = 0.5 * 1500 * gained[gained > 0].sum()
         assert acc_e["kin_pos"] - acc_e["kin"] == pytest.approx(want, rel=1e-9)
 
+
+def test_ballistic_books_the_distance_sumo_moved_cars_still_moving_at_the_end(tmp_path):
+    """Under SUMO's ballistic update a car moves v̄·Δt in a step (v̄ = (v_t + v_t−1)/2), so the
+    distance booked per vehicle is SUMO's own odometer (vehicle.getDistance) and Σ v̄·Δt from
+    its speeds, and a v³ term books Σ v̄³·Δt, by hand; v_t·Δt would book ½Δt·(v_end − v_0)
+    more (about 15 m for a car at 30 m/s), which a run from rest to rest cannot show. The
+    cars depart at rest and are still driving at the end (40 s)."""
+    routes = """<routes>
+  <vType id="car" vClass="passenger" mass="1500" accel="2.6" decel="4.5"/>
+  <route id="r" edges="e01 e12"/>
+  <flow id="c" type="car" route="r" begin="0" end="16" period="5" departSpeed="0" departPos="0"/>
+</routes>"""
+    eqs = [Equation("cube", {"v3": 1.0})]
+    veh, speeds, odometer = _own_loop(tmp_path, routes, 40, ("--step-method.ballistic", "true"), eqs)
+    assert len(speeds) == 4
+    for vid, v in speeds.items():
+        r = veh.loc[(vid, "cube")]
+        assert r.on_road_at_end and v[-1] > 20.0 and v[0] == 0.0
+        v_bar = 0.5 * (v[1:] + v[:-1])
+        assert r.distance_m == pytest.approx(odometer[vid], abs=1e-6)
+        assert r.distance_m == pytest.approx(v_bar.sum(), abs=1e-6)
+        assert r.traction_aero_j + r.recup_aero_j == pytest.approx(np.sum(v_bar ** 3), rel=1e-9)
