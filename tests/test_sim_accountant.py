@@ -746,3 +746,44 @@ def test_the_end_of_an_accountant_s_result_is_its_last_booked_step(tmp_path):
     assert res.summary["end_s"] == pytest.approx(100.0)
     ends = [float(i.end) for i in sumolib.xml.parse(str(tmp_path / "o" / "edgedata.xml"), "interval")]
     assert ends == [pytest.approx(100.0)]
+
+
+def test_edgedata_counts_every_vehicle_entering_an_edge_in_the_same_step(tmp_path):
+    """edgedata.xml's ``entered`` counts each accounted vehicle that entered the edge (its
+    first edge too, where it departed), also when several enter in one step: two cars depart
+    side by side on the highway's two lanes at t = 0 and two more at t = 10 (seen by this
+    test's own libsumo loop entering e01 in the same step, pairwise). The true number is what
+    SUMO's own edgeData (--edgedata-output) counts: entered + departed per edge."""
+    import sumolib
+
+    cars = "\n".join(f'  <vehicle id="v{w}{lane}" type="car" route="r" depart="{10 * w}" departLane="{lane}" '
+                     'departSpeed="20" departPos="0"/>' for w in range(2) for lane in range(2))
+    (tmp_path / "r.rou.xml").write_text(f"""<routes>
+  <vType id="car" vClass="passenger" mass="1500" sigma="0"/>
+  <route id="r" edges="e01 e12 e23"/>
+{cars}
+</routes>""", encoding="utf-8")
+    sumo_ed = tmp_path / "sumo_edgedata.xml"
+    toml = tmp_path / "s.toml"
+    toml.write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NETS / "highway.net.xml"}"\n'
+                    'routes = ["r.rou.xml"]\nbegin = 0\nend = 80\nstep_length = 1.0\n'
+                    f'options = ["--no-warnings", "true", "--edgedata-output", "{sumo_ed}"]\n'
+                    '[outputs]\nfigures = false\n', encoding="utf-8")
+    conn = start_sumo(load_scenario(toml, equations=[PHYS]).sumo_args)
+    first_on = {}  # (vehicle, edge) → the step it was first seen there
+    try:
+        acc = Accountant(conn, equations=[PHYS], scenario=toml, figures=False)
+        while conn.simulation.getTime() < 80 - 1e-9:
+            conn.simulationStep()
+            for vid in conn.vehicle.getIDList():
+                first_on.setdefault((vid, conn.vehicle.getRoadID(vid)), conn.simulation.getTime())
+            acc.step()
+        acc.result().write(tmp_path / "o")
+    finally:
+        close_sumo(conn)
+    assert first_on[("v00", "e01")] == first_on[("v01", "e01")] != first_on[("v10", "e01")] == first_on[("v11", "e01")]
+    (sumo_iv,) = sumolib.xml.parse(str(sumo_ed), "interval")
+    truth = {e.id: int(e.entered) + int(e.departed) for e in sumo_iv.edge}
+    assert truth["e01"] == 4
+    (ours,) = sumolib.xml.parse(str(tmp_path / "o" / "edgedata.xml"), "interval")
+    assert {e.id: int(e.entered) for e in ours.edge} == {k: n for k, n in truth.items() if n}
