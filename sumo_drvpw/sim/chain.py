@@ -357,13 +357,16 @@ class ChainLedger:
         """Keep the cumulative edge totals at time ``t`` [s] (with :meth:`Ledger.snapshot`)."""
         self.snapshots.append((float(t), self.edge))
 
-    def edge_attrs(self, q: np.ndarray) -> list[str]:
+    def edge_attrs(self, q: np.ndarray, booked=None) -> list[str]:
         """edgeData attributes of one edge's quantities ``q`` (E, Q) of an interval:
         ``<eq>_battery_{traction,recuperated,auxiliary,net}_kwh`` or ``<eq>_fuel_l``,
-        ``<eq>_co2_kg``."""
+        ``<eq>_co2_kg``; none for an equation that booked nothing there (``booked``: per
+        equation, whether any vehicle of it was on the edge; None: all)."""
         out = []
         for e in self.active:
             n = self.names[e]
+            if booked is not None and not booked[e] and not np.any(q[e]):
+                continue
             if self.chains[e].predicts == "fuel":
                 out += [f'{n}_fuel_l="{q[e, 5]:.6f}"', f'{n}_co2_kg="{q[e, 6]:.6f}"']
                 if self.cold_start_on:

@@ -161,6 +161,9 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
     or ``<eq>_fuel_l`` and ``<eq>_co2_kg`` (:meth:`sumo_drvpw.sim.chain.ChainLedger.edge_attrs`).
     Where teleports ended on an edge in the interval: ``<eq>_teleports``,
     ``<eq>_teleport_kinetic_j``, ``<eq>_teleport_potential_j`` (apart from the driving energy).
+    An equation that booked nothing on an edge in an interval (none of its vehicles drove
+    there) has no attributes on it, as SUMO leaves out what it did not measure: a 0 would
+    read as a free edge to a router taking it as a weight.
     """
     from xml.sax.saxutils import quoteattr
 
@@ -186,8 +189,11 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
         lines.append(f'    <interval begin="{t0:.2f}" end="{t1:.2f}" id="drvpw">')
         for i in np.flatnonzero((etime > 0) | (tcount > 0).any(axis=1)):
             attrs = [f'sampledSeconds="{etime[i]:.2f}"', f'entered="{entered[i]:.0f}"']
+            booked = (dist[i] > 0) | energy[i].any(axis=(0, 2)) | (tcount[i] > 0)  # per equation
             for e, name in enumerate(names):
                 tr = energy[i, 0, e]
+                if not booked[e]:
+                    continue  # none of its vehicles here: no attributes (a 0 reads as a free edge in routing)
                 tot = float(tr.sum())
                 for ci, cat in enumerate(cats):
                     attrs.append(f'{name}_{cat}_j="{tr[ci]:.3f}"')
@@ -201,7 +207,7 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
                 attrs.append(f'{name}_total_normed_jpm="{normed:.6f}"')
                 attrs += teleport.edge_attrs(name, tcount[i, e], tenergy[i, e])
             if chain is not None:
-                attrs += chain.edge_attrs(chain_at[b[0]][i] - chain_prev[i])
+                attrs += chain.edge_attrs(chain_at[b[0]][i] - chain_prev[i], booked)
             lines.append(f"        <edge id={quoteattr(net.edge_ids[i])} {' '.join(attrs)}/>")
         lines.append("    </interval>")
         if chain is not None:
