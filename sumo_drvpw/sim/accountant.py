@@ -42,6 +42,7 @@ from sumo_drvpw.sim.outputs import RunResult, summary_dict
 from sumo_drvpw.sim.trace import TraceWriter
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
 from sumo_drvpw.sim.scenario_paths import sumo_file_list
+from sumo_drvpw.sim.sumo_outputs import exported_vtypes
 from sumo_drvpw.sim.sumo_start import NewRun, scenario_option
 from sumo_drvpw.sim.vtype_energy import expand as expand_vtype_energy, listing_warning
 from sumo_drvpw.sim.vtypes import GENERIC_VCLASSES, default_mass_warnings, read_vtypes
@@ -324,9 +325,7 @@ class Accountant(_Listener):
             self.trace = None
 
     def _vtype_energy_listing(self) -> dict:
-        """summary.json assumptions.vtype_energy, with ``also_booked_by``: vtype_energy
-        equation → the other battery chains that booked its vType's vehicles too
-        (alternatives, not more vehicles)."""
+        """summary.json assumptions.vtype_energy, with ``also_booked_by`` (resolver.also_booked)."""
         also = dict(sorted(self.resolver.also_booked.items()))
         return {**self.vtype_energy, "also_booked_by": also} if also else self.vtype_energy
 
@@ -478,10 +477,12 @@ class Accountant(_Listener):
         by_carrier = self.resolver.skipped.get("by_carrier", {})
         if idle or by_carrier:
             summary["warnings"].append(carrier_warning(self.resolver.carriers, by_carrier, idle))
-        return RunResult(ledger=led, net=net, names=self.names,
-                         predicts=[e.predicts for e in self.equations], summary=summary,
-                         begin=self.begin, end=end, edgedata=sc.edgedata, figures=sc.figures,
-                         difference=sc.difference, period=getattr(sc, "period", None))
+        result = RunResult(ledger=led, net=net, names=self.names,
+                           predicts=[e.predicts for e in self.equations], summary=summary,
+                           begin=self.begin, end=end, edgedata=sc.edgedata, figures=sc.figures,
+                           difference=sc.difference, period=getattr(sc, "period", None))
+        result.exported_vtypes = exported_vtypes(self.file_vtypes)
+        return result
 
 
 def network_info(net, ledger, top: int = 10) -> dict:

@@ -406,6 +406,8 @@ class RunResult:
             edgedata, figures, difference, period
         #: SUMO's emissions-device totals per vehicle (outputs.sumo_device), or None
         self.sumo_device = None
+        #: equation → the vTypes of the files that are its export (sim/sumo_outputs.exported_vtypes)
+        self.exported_vtypes: dict = {}
         self._steps = getattr(ledger, "steps", None)  # what the summary was taken at
 
     def _check_current(self) -> None:
@@ -473,10 +475,10 @@ class RunResult:
 
         if self.sumo_device is None:
             return device_comparison(None, None, None, {})
-        v = self._vehicles_all().to_pandas()[["vehicle", "equation", "net_total_j"]]
+        v = self._vehicles_all().to_pandas()[["vehicle", "equation", "net_total_j", "vtype"]]
         ch = getattr(self.ledger, "chain", None)
         chains = {} if ch is None else {ch.names[i]: ch.chains[i] for i in ch.active}
-        return device_comparison(v, self.sumo_device, self.chain_vehicles(), chains)
+        return device_comparison(v, self.sumo_device, self.chain_vehicles(), chains, self.exported_vtypes)
 
     def edges_arrow(self) -> pa.Table:
         self._check_current()

@@ -348,6 +348,30 @@ HYBRID_NOTE = ("model difference: SUMO has no full-hybrid class, so its emission
                "is off at rest and at light load, the battery driving and the braking energy recovered: "
                "the ratio holds a full hybrid's saving (the EPA lists' full hybrids burn 33-56 % less "
                "than their petrol twins in town, docs/epa-hybrid.md)")
+EXPORTED_NOTE = ("like for like: these vehicles' vType is this equation's own export (sumo-drvpw "
+                 "export-vtype: its road load as SUMO's Energy model, efficiencies 1, no constant intake), "
+                 "so SUMO's electricity is the same net driving energy at the wheels; the slopes' source "
+                 "and a trip's last steps differ (docs/scenario.md)")
+
+
+def exported_vtypes(file_vtypes: dict) -> dict[str, set]:
+    """Equation name → the vTypes that are its export (``drvpw.equation`` names it, SUMO's
+    Energy model with efficiencies 1 and no constant intake, as export-vtype writes an
+    equation without a chain)."""
+    out: dict[str, set] = {}
+    for vt, info in (file_vtypes or {}).items():
+        p = getattr(info, "energy_params", None) or {}
+        try:
+            plain = (float(p.get("propulsionEfficiency", "nan")) == 1.0
+                     and float(p.get("recuperationEfficiency", "nan")) == 1.0
+                     and float(p.get("constantPowerIntake", "nan")) == 0.0)
+        except ValueError:
+            plain = False
+        if plain and getattr(info, "equation", None) and str(info.emission_class or "").startswith("Energy"):
+            out.setdefault(info.equation, set()).add(vt)
+    return out
+
+
 NO_CHAIN_NOTE = ("not like for like: this equation has no energy chain (another equation's may book "
                  "these vehicles), so its figure is the "
                  "equation's net driving energy at the wheels (traction less all recuperable "
@@ -360,14 +384,16 @@ NO_CHAIN_NOTE = ("not like for like: this equation has no energy chain (another 
                  "auxiliaries, which ours leaves out, lower it")
 
 
-def device_comparison(v, dev, cv, chains: dict):
+def device_comparison(v, dev, cv, chains: dict, exported: dict | None = None):
     """Per equation, over the vehicles SUMO's emissions device reports for (``dev``: vehicle,
     sumo_electricity_wh, sumo_fuel_mg), what the plug-in books beside what SUMO's own model
     books: an equation with a battery chain its battery kWh against SUMO's electricity; with
     a fuel chain its litres against SUMO's fuel (mg, in litres at the chain fuel's density);
     an equation without a chain its net driving energy at the wheel (``v``: vehicle,
     equation, net_total_j) against SUMO's electricity, with :data:`NO_CHAIN_NOTE`. ``cv``: the chains' per-vehicle rows
-    (vehicle, equation, net_kwh, auxiliary_kwh, fuel_l), or None; ``chains``: name → chain.
+    (vehicle, equation, net_kwh, auxiliary_kwh, fuel_l), or None; ``chains``: name → chain;
+    ``exported``: equation → the vTypes that are its export (:func:`exported_vtypes`; ``v``
+    then with a vtype column): a row whose vehicles all drive one is like for like.
 
     A battery chain's ratio is split additively: ``ratio_auxiliary`` = our auxiliary energy
     (``ours_auxiliary`` kWh: the chain's constant, HVAC and cabin warm-up, standing and
@@ -407,7 +433,8 @@ def device_comparison(v, dev, cv, chains: dict):
                     note = OWN_PARAMS_NOTE
             else:
                 ours, q = g.net_total_j.sum() / 3.6e6, "net driving energy kWh (no chain)"
-                note = NO_CHAIN_NOTE
+                own = (exported or {}).get(eq)
+                note = EXPORTED_NOTE if own and "vtype" in g and set(g.vtype) <= own else NO_CHAIN_NOTE
         if len(g):
             ok = bool(sumo) and aux == aux
             rows.append({"equation": eq, "quantity": q, "vehicles": int(len(g)),
