@@ -817,3 +817,16 @@ def test_rows_wider_than_the_header_are_told_from_the_file_whatever_pandas_warns
     assert _wider_first_row(wide, {}) and not _wider_first_row(plain, {})
     assert _wider_first_row(semi, {"sep": ";"}) and not _wider_first_row(semi, {})
     assert not _wider_first_row(wide, {"header": None})  # no header line to compare with
+
+
+def test_columns_a_file_whose_rows_end_in_cr_only_reads_and_is_told_when_wider(tmp_path):
+    """Rows ending in CR alone (old Mac-style loggers): the check of the first rows' widths
+    read them with the csv module, which raised "new-line character seen in unquoted field"
+    as a traceback (a review); pandas reads such a file, and so does the check."""
+    m = write(tmp_path, "map.toml", '[columns.t]\nname = "time_s"\n[columns.v]\nname = "speed_mps"\n'
+              'unit = "km/h"\n')
+    for name, text, wider in (("cr.csv", "t,v\r0,10\r1,12\r2,14\r3,16\r", False),
+                              ("crw.csv", "t,v,x\r0,10,1,\r1,12,2,\r2,14,3,\r3,16,4,\r", True)):
+        df, rep = read("columns", write(tmp_path, name, text), columns=m)
+        np.testing.assert_allclose(df["speed_mps"], np.array([10, 12, 14, 16]) / 3.6)
+        assert any("more fields than the header line" in n for n in rep["files"][0]["notes"]) == wider

@@ -346,13 +346,14 @@ def test_a_config_listing_its_files_after_a_comma_and_space_is_read_whole(tmp_pa
     (scen / "r.rou.xml").write_text("<routes/>", encoding="utf-8")
     vtypes, flows = ROUTES.split("    <flow", 1)
     (scen / "flows.rou.xml").write_text("<routes>\n    <flow" + flows, encoding="utf-8")
-    (scen / "types.xml").write_text(vtypes + "</routes>\n", encoding="utf-8")
-    (scen / "run.sumocfg").write_text(CONFIG.replace('value="r.rou.xml"', 'value="r.rou.xml, types.xml, flows.rou.xml"'), encoding="utf-8")
+    (scen / "sub").mkdir()
+    (scen / "sub" / "types.xml").write_text(vtypes + "</routes>\n", encoding="utf-8")
+    (scen / "run.sumocfg").write_text(CONFIG.replace('value="r.rou.xml"', 'value="r.rou.xml, sub/types.xml, flows.rou.xml"'), encoding="utf-8")
     monkeypatch.chdir(tmp_path)
     subprocess.run([sumolib.checkBinary("sumo"), "-c", "scen/run.sumocfg", "-e", "60",
                     "--fcd-output", "fcd.xml", "--no-step-log", "--no-warnings"],
                    check=True, capture_output=True)
-    assert "scen/ flows.rou.xml" in (tmp_path / "fcd.xml").read_text(encoding="utf-8")[:3000]  # as SUMO reports it
+    assert "scen/ sub/types.xml" in (tmp_path / "fcd.xml").read_text(encoding="utf-8")[:3000]  # as SUMO reports it
     assert cli_main(["fcd", "fcd.xml", "--no-figures", "--out", "replay"]) == 0
     v = pd.read_parquet(tmp_path / "replay" / "vehicles.parquet")
     assert set(v[v.vtype == "lorry"].mass_kg) == {12000.0} and set(v[v.vtype == "lorry"].vclass) == {"truck"}

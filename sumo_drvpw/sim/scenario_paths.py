@@ -5,6 +5,7 @@ files a SUMO config names (:func:`config_files`)."""
 from __future__ import annotations
 
 import os
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -49,9 +50,9 @@ def sumo_file_list(value) -> list[str]:
     an FCD's header), and SUMO itself loads dir/b.xml."""
     out = []
     for f in str(value or "").split(","):
-        f = f.strip()
-        cut = max(f.rfind("/"), f.rfind("\\")) + 1
-        f = f[:cut] + f[cut:].strip()
+        # the space SUMO leaves after its config's folder, before the name as the config wrote
+        # it (which may hold folders of its own: "dir/ sub/b.xml")
+        f = re.sub(r"^(.*?[/\\])\s+(?=\S)", r"\1", f.strip())
         if f:
             out.append(f)
     return out

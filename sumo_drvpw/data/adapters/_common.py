@@ -258,7 +258,10 @@ def _wider_first_row(path: Path, kw: dict) -> bool:
         return False
     with open(path, "rb") as f:
         text = f.read(65536).decode(enc, errors="replace")
-    rows = [r for r in csv.reader(io.StringIO(text), delimiter=sep) if r][:2]
+    try:  # (newline="": rows end at \r, \n or \r\n, as loggers write them)
+        rows = [r for _, r in zip(range(3), csv.reader(io.StringIO(text, newline=""), delimiter=sep)) if r][:2]
+    except csv.Error:  # not CSV as the csv module reads it: pandas has read it already
+        return False
     return len(rows) == 2 and len(rows[1]) > len(rows[0])
 
 
