@@ -666,6 +666,16 @@ def test_a_console_that_cannot_show_the_reports_symbols_gets_them_plain(tmp_path
     assert out.is_file() and b"Traceback" not in r.stderr
     text = r.stdout.decode("latin-1")
     assert text and "rho" in text  # ρ, plain
+    # stderr escapes what its encoding lacks by itself (errors="backslashreplace"): plain there too
+    import io
+
+    from sumo_drvpw.cli import _ClosedPipeSafe
+
+    raw = io.BytesIO()
+    err = io.TextIOWrapper(raw, encoding="latin-1", errors="backslashreplace")
+    _ClosedPipeSafe(err).write("C_d·A at ρ → 1.2 ×2 — ok\n")
+    err.flush()
+    assert raw.getvalue().decode("latin-1") == "C_d*A at rho -> 1.2 x2 - ok\n"
 
 
 def test_no_usable_temporary_folder_is_one_line(tmp_path, monkeypatch, capsys):

@@ -468,10 +468,13 @@ class _ClosedPipeSafe:
             return None
 
     def write(self, text):
-        try:
-            r = self._guard(self._stream.write, text)
-        except UnicodeEncodeError:  # a console whose encoding lacks →, Δ, − (Latin-1, cp1252)
-            r = self._guard(self._stream.write, _encodable(text, self._stream))
+        enc = str(getattr(self._stream, "encoding", None) or "utf-8")
+        if not enc.lower().replace("-", "").startswith("utf"):  # a console whose encoding lacks
+            try:                                                # →, Δ, − (Latin-1, cp1252):
+                text.encode(enc)                                # plain stand-ins, on stderr too
+            except (UnicodeEncodeError, LookupError):          # (which escapes them itself)
+                text = _encodable(text, self._stream)
+        r = self._guard(self._stream.write, text)
         return len(text) if r is None else r
 
     def flush(self):
