@@ -560,3 +560,15 @@ def test_a_chains_logs_are_found_from_any_working_folder(tmp_path, clean, capsys
     assert cli_main(["diagnose", "log.parquet", "--vehicle", "prius3", "--equation", "../eqs/declared.toml",
                      "--out", str(tmp_path / "t"), "--quiet", "--max-findings", "1"]) == 0
     assert "note: the declared chain was calibrated on 1 of these 1 log file(s)" in capsys.readouterr().out
+    # the study moved whole (and reached through a symbolic link): the same
+    import shutil
+
+    moved = tmp_path.parent / (tmp_path.name + "_moved")
+    shutil.move(str(tmp_path / "study"), moved) if (tmp_path / "study").exists() else None
+    shutil.copytree(tmp_path / "logs", moved / "logs")
+    shutil.copytree(tmp_path / "eqs", moved / "eqs")
+    (tmp_path / "link").symlink_to(moved, target_is_directory=True)
+    monkeypatch.chdir(tmp_path / "link" / "logs")
+    assert cli_main(["diagnose", "log.parquet", "--vehicle", "prius3", "--equation", "../eqs/declared.toml",
+                     "--out", str(tmp_path / "t2"), "--quiet", "--max-findings", "1"]) == 0
+    assert "note: the declared chain was calibrated on 1 of these 1 log file(s)" in capsys.readouterr().out

@@ -87,6 +87,6 @@ def test_a_full_hybrids_row_says_its_ratio_is_the_hybrids_saving(tmp_path):
     rows = pd.read_csv(tmp_path / "o" / "sumo_device.csv").set_index("equation")
     hev, car = rows.loc["epa_gasoline_hybrid_car"], rows.loc["epa_gasoline_car"]
     assert hev["vehicles"] == car["vehicles"] == 4
-    assert "no full-hybrid class" in hev["note"] and "saving" in hev["note"]
+    assert "no full-hybrid car class" in hev["note"] and "saving" in hev["note"]
     assert not isinstance(car["note"], str) or "hybrid" not in car["note"]
     assert hev["ratio"] < car["ratio"]  # the same trips: the hybrid's engine-off and recovered braking

@@ -449,13 +449,13 @@ def save_equation(eq: Equation, path: str | Path) -> None:
 
     from sumo_drvpw.fileio import plain, write_text
 
-    folder = Path(path).resolve().parent
+    folder = Path(os.path.abspath(path)).parent  # (symbolic links kept: the path as the user has it)
 
     def rel(x) -> str:
         try:
-            return Path(os.path.relpath(Path(x).resolve(), folder)).as_posix()
+            return Path(os.path.relpath(os.path.abspath(x), folder)).as_posix()
         except ValueError:
-            return str(Path(x).resolve())
+            return os.path.abspath(x)
 
     d = eq.to_dict()
     for holder in (d, d.get("chain")):

@@ -340,9 +340,8 @@ OWN_PARAMS_NOTE = ("like for like: the vType's own Energy-model parameters (SUMO
                    "there, where ours books it standing with its constantPowerIntake (an e-bus line: several %) "
                    "(summary.json assumptions.vtype_energy)")
 
-#: what the row of an equation without an energy chain compares (an electric bus: no battery
-#: chain applies to buses); its ratio is no verdict on the equation
-HYBRID_NOTE = ("model difference: SUMO has no full-hybrid class, so its emissions device books the "
+#: what a full hybrid's fuel-chain row compares: SUMO's device books the car as a conventional engine
+HYBRID_NOTE = ("model difference: SUMO has no full-hybrid car class, so its emissions device books the "
                "vType's emissionClass as HBEFA or PHEMlight gives it (a plug-in hybrid's petrol share "
                "(P) or a petrol car: the engine runs as a conventional one's), while this chain's engine "
                "is off at rest and at light load, the battery driving and the braking energy recovered: "
@@ -372,6 +371,8 @@ def exported_vtypes(file_vtypes: dict) -> dict[str, set]:
     return out
 
 
+#: what the row of an equation without an energy chain compares (an electric bus: no battery
+#: chain applies to buses); its ratio is no verdict on the equation
 NO_CHAIN_NOTE = ("not like for like: this equation has no energy chain (another equation's may book "
                  "these vehicles), so its figure is the "
                  "equation's net driving energy at the wheels (traction less all recuperable "
