@@ -172,9 +172,31 @@ def read_toml(path, what: str) -> dict:
     except OSError as e:  # PermissionError, I/O error
         raise UserError(f"{p}: cannot read the {what}: {e.strerror or e}") from None
     try:
-        return tomllib.loads(text)
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise UserError(f"{p}: not a valid TOML {what}: {e}") from None
+    check_toml_integers(doc, p)
+    return doc
+
+
+def check_toml_integers(doc, where) -> None:
+    """UserError naming the first integer beyond TOML's 64 bits (Python's reader keeps any
+    size, which no number of the project means: an integer of 400 digits overflowed a float
+    with a traceback), by its key path."""
+    from sumo_drvpw.errors import UserError
+
+    def walk(x, key):
+        if isinstance(x, dict):
+            for k, v in x.items():
+                walk(v, f"{key}.{k}" if key else str(k))
+        elif isinstance(x, list):
+            for i, v in enumerate(x):
+                walk(v, f"{key}[{i}]")
+        elif isinstance(x, int) and not isinstance(x, bool) and not -2**63 <= x < 2**63:
+            raise UserError(f"{where}: {key} = {str(x)[:12]}… ({len(str(x).lstrip('-'))} digits): an integer "
+                            "beyond TOML's 64 bits; give a number")
+
+    walk(doc, "")
 
 
 # ------------------------------------------------------------------ whole output sets

@@ -332,6 +332,9 @@ def resolve_candidates(spec: str) -> tuple[str, ...]:
             doc = tomllib.loads(p.read_text(encoding="utf-8"))
         except tomllib.TOMLDecodeError as e:
             raise UserError(f"candidate file {p}: invalid TOML: {e}") from None
+        from sumo_drvpw.fileio import check_toml_integers
+
+        check_toml_integers(doc, f"candidate file {p}")
         terms = doc.get("candidates", {}).get("terms") if isinstance(doc.get("candidates"), dict) else doc.get("terms")
         if not isinstance(terms, list) or not terms:
             raise UserError(f"candidate file {p}: needs `terms = [\"acc\", ...]` (top level or in [candidates])")

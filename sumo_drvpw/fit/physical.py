@@ -161,6 +161,9 @@ def implausible(reading: dict[str, dict]) -> list[str]:
 def parse_constraints(doc: dict, where: str) -> dict[str, dict]:
     """Check a ``[constraints]`` table: term → {"fixed": x} or {"min": lo, "max": hi}."""
     out = {}
+    if doc is not None and not isinstance(doc, dict):
+        raise UserError(f"{where}: [constraints] must be a table (term → {{fixed = x}} or {{min, max}}), "
+                        f"got {doc!r}")
     for t, spec in (doc or {}).items():
         if not isinstance(spec, dict) or not spec or set(spec) - {"fixed", "min", "max"}:
             raise UserError(f"{where}: constraints.{t} must be a table with 'fixed' or 'min'/'max', "

@@ -445,7 +445,7 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
             raise UserError(f"{where} [chain]: marginal_efficiency must be a number")
     if "standstill_aux_w" in doc:
         kw["standstill_aux_w"] = _number(doc["standstill_aux_w"], "standstill_aux_w", where)
-        if kw["standstill_aux_w"] + float(doc.get("aux_power_w", 0.0)) < 0:
+        if kw["standstill_aux_w"] + _number(doc.get("aux_power_w", 0.0), "aux_power_w", where) < 0:
             raise UserError(f"{where} [chain]: aux_power_w + standstill_aux_w (auxiliary power while standing) "
                             f"must be ≥ 0, got standstill_aux_w = {doc['standstill_aux_w']!r}")
     if "engine_off_below_w" in doc:  # any number: -inf keeps a conventional engine running
@@ -509,7 +509,7 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
             hv["warmup_j_per_k"] = _nonneg(h["warmup_j_per_k"], "hvac.warmup_j_per_k", where)
         kw["hvac"] = hv
     if "fuel" in doc:
-        if doc["fuel"] not in FUELS:
+        if not isinstance(doc["fuel"], str) or doc["fuel"] not in FUELS:
             raise UserError(f"{where} [chain]: fuel must be one of {', '.join(FUELS)}, got {doc['fuel']!r}")
         kw["fuel"] = doc["fuel"]
     if "motor" in doc:  # SUMO's MMPEVEM motor: its constantPowerIntake is the chain's aux_power_w
@@ -518,6 +518,8 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         kw.setdefault("aux_power_w", kw["motor"].aux_power_w)
     for k in ("std_err", "reading", "provenance", "metrics"):
         if k in doc:
+            if not isinstance(doc[k], dict):
+                raise UserError(f"{where} [chain]: '{k}' must be a table ([chain.{k}]), got {doc[k]!r}")
             kw[k] = dict(doc[k])
     # a fuel chain without its engine's keys declares what a calibration keeps (its fuel cut-off)
     # and predicts nothing: :meth:`EnergyChain.require_complete` where it is used

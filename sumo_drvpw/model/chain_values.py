@@ -57,15 +57,15 @@ def _efficiency(val, key: str, where: str) -> Efficiency:
         axes = {}
         for ax in ("speed_mps", "power_w"):
             if ax in val:
-                a = np.asarray(val[ax], float)
-                if a.ndim != 1 or a.size < 2 or np.any(np.diff(a) <= 0):
+                a = _numbers(val[ax], f"chain.{key}.{ax}", where)
+                if a.ndim != 1 or a.size < 2 or not np.all(np.isfinite(a)) or np.any(np.diff(a) <= 0):
                     raise UserError(f"{where} [chain.{key}]: '{ax}' must be ≥ 2 strictly "
                                     f"increasing numbers, got {val[ax]!r}")
                 axes[ax] = a
         if not axes or "values" not in val:
             raise UserError(f"{where} [chain.{key}]: a table needs 'values' and at least one "
                             "axis of speed_mps, power_w")
-        vals = np.asarray(val["values"], float)
+        vals = _numbers(val["values"], f"chain.{key}.values", where)
         shape = tuple(a.size for a in axes.values())
         if vals.shape != shape:
             raise UserError(f"{where} [chain.{key}]: 'values' has shape {vals.shape}, the axes "
@@ -81,13 +81,36 @@ def _efficiency(val, key: str, where: str) -> Efficiency:
     return x
 
 
+def _numbers(val, key: str, where: str) -> np.ndarray:
+    """A list (of lists) of numbers as an array; a UserError naming ``key`` for anything else
+    (strings, tables, rows of different lengths)."""
+    def ok(x):
+        return (isinstance(x, (int, float)) and not isinstance(x, bool)) or (
+            isinstance(x, list) and all(ok(y) for y in x))
+
+    try:
+        if not isinstance(val, list) or not ok(val):
+            raise ValueError
+        return np.asarray(val, float)
+    except (ValueError, OverflowError):
+        raise UserError(f"{where} [{key}]: must be a list of numbers (rows of one length), got {val!r}") from None
+
+
+#: the largest magnitude a finite chain number may have: beyond any road vehicle's power [W],
+#: energy per kelvin [J/K] or fuel per start [L] (a larger one printed litres in hundreds of digits)
+CHAIN_NUMBER_MAX = 1e9
+
+
 def _number(val, key: str, where: str, finite: bool = True) -> float:
-    """A number (finite unless ``finite`` is False; NaN never)."""
+    """A number (finite unless ``finite`` is False, and then within ±CHAIN_NUMBER_MAX; NaN never)."""
     if isinstance(val, bool) or not isinstance(val, (int, float)):
         raise UserError(f"{where} [chain]: '{key}' must be a number, got {val!r}")
     x = float(val)
     if np.isnan(x) or (finite and not np.isfinite(x)):
         raise UserError(f"{where} [chain]: '{key}' must be a finite number, got {val!r}")
+    if np.isfinite(x) and abs(x) > CHAIN_NUMBER_MAX:
+        raise UserError(f"{where} [chain]: '{key}' = {val!r} is beyond any road vehicle's "
+                        f"(|x| ≤ {CHAIN_NUMBER_MAX:g})")
     return x
 
 

@@ -413,6 +413,9 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
         from sumo_drvpw.model.measurement import measurement_from_dict
 
         measurement = measurement_from_dict(doc["measurement"], where)
+    for k in ("provenance", "metrics"):
+        if not isinstance(doc.get(k, {}), dict):
+            raise UserError(f"{where}: '{k}' must be a table ([{k}]), got {doc[k]!r}")
     try:
         return Equation(
             name=name, terms=terms, vclasses=tuple(vcl), terms_predict=pred, **ranges,

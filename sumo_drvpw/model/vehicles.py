@@ -110,6 +110,9 @@ NUMBER_RANGES = {
     "road_load.a_n": (-1e-12, 1.0e5),            # A, B, C ≥ 0
     "road_load.b_n_per_mps": (-1e-12, 1.0e4),
     "road_load.c_n_per_mps2": (-1e-12, 1.0e3),
+    "road_load.f0_N": (-1e-12, 1.0e5),           # the same, as the EPA's lists name them
+    "road_load.f1_N_per_mps": (-1.0e4, 1.0e4),   # (B may be below 0 in the EPA's lists)
+    "road_load.f2_N_per_mps2": (-1e-12, 1.0e3),
 }
 #: rotational inertias [kg·m²]: 0 ≤ J ≤ this
 INERTIA_MAX_KGM2 = 1.0e3
@@ -143,6 +146,8 @@ def check_numbers(doc: dict, p) -> None:
                 raise UserError(f"{p}: unknown key {key!r} (known: {known})")
             if TEXT_KEYS.get(key) is not None and v not in TEXT_KEYS[key]:
                 raise UserError(f"{p}: {key} = {v!r}: must be one of {', '.join(TEXT_KEYS[key])}")
+            if isinstance(v, dict) and key in NUMBER_RANGES:
+                raise UserError(f"{p}: {key} = {v!r}: must be a number")
             if isinstance(v, dict):
                 for k2, v2 in v.items():
                     if k == "inertia_kgm2" and k2 not in INERTIA_KEYS:
@@ -156,9 +161,8 @@ def check_numbers(doc: dict, p) -> None:
             if key in NUMBER_RANGES:
                 lo, hi = NUMBER_RANGES[key]
                 if not num(v) or not math.isfinite(v) or not lo < v <= hi:
-                    raise UserError(f"{p}: {key} = {v!r}: must be a number in "
-                                    f"({max(lo, 0):g}, {hi:g}]" if lo >= 0 else
-                                    f"{p}: {key} = {v!r}: must be a number in [0, {hi:g}]")
+                    span = (f"({lo:g}, {hi:g}]" if lo >= 0 or lo < -1e-9 else f"[0, {hi:g}]")
+                    raise UserError(f"{p}: {key} = {v!r}: must be a number in {span}")
             elif num(v) and not math.isfinite(v):
                 raise UserError(f"{p}: {key} = {v!r}: must be a finite number")
 

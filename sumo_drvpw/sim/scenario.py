@@ -23,6 +23,7 @@ from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_equation, check_vclass, load_equation
 from sumo_drvpw.sim.scenario_paths import config_files, sumo_file_list
+from sumo_drvpw.sim.sumo_start import NO_RUN_OPTIONS
 from sumo_drvpw.sim.vtype_energy import VTYPE_ENERGY, named_in_table, placeholder, reserved_name
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import (additional_outputs, device_wanted, is_output_option,
@@ -172,6 +173,9 @@ class Scenario:
 
 def _where(path) -> str:
     return str(path) if path else "<scenario>"
+
+
+MASS_MAX_KG, WIND_MAX_MPS = 1.0e5, 100.0  # a scenario's largest mass, wind (a vehicle file's; gusts)
 
 
 def _num(v, where: str, key: str, positive: bool = False, most: float = math.inf) -> float:
@@ -437,6 +441,12 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     if isinstance(opts, list):
         opts = [str(o) if isinstance(o, (int, float)) and not isinstance(o, bool) else o for o in opts]
     args += _strlist(opts, where, "sumo.options", '["--time-to-teleport", "120"]')
+    for a in args:  # options after which SUMO does not run a simulation (or waits for a client)
+        name = str(a).split("=", 1)[0]
+        if name in NO_RUN_OPTIONS:
+            raise UserError(f"{where}: sumo.options: {name} {NO_RUN_OPTIONS[name]}: the plug-in books a "
+                            "simulation SUMO runs itself; leave it out")
+    args = [x for a in args for x in (a.split("=", 1) if str(a).startswith("--mesosim=") else [a])]  # as "--mesosim v"
     files, adds = option_input_files(args, [f for f in files if f not in adds], adds)  # -r, -a override
     meso = cfgvals.get("mesosim", "false").strip().lower() in ("true", "1", "yes", "on", "x")
     src = f"SUMO config {cfg}" if meso else where
@@ -473,8 +483,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         for vt, d in doc.get(table, {}).items():  # keys were checked with the schema above
             entry = {}
             if "mass_kg" in d:
-                entry["mass_kg"] = _num(d["mass_kg"], where, f"{table}.{vt}.mass_kg",
-                                        positive=True)
+                entry["mass_kg"] = _num(d["mass_kg"], where, f"{table}.{vt}.mass_kg", positive=True, most=MASS_MAX_KG)
             if "equations" in d:
                 eqs = _strlist(d["equations"], where, f"{table}.{vt}.equations")
                 # a name, or a file of one of the scenario's equations (named by its name)
@@ -494,7 +503,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     cdata = entries("vclasses")
 
     wind = doc.get("wind", {})
-    ws = _num(wind.get("speed_mps", 0.0), where, "wind.speed_mps")
+    ws = _num(wind.get("speed_mps", 0.0), where, "wind.speed_mps", most=WIND_MAX_MPS)
     wd = _num(wind.get("from_deg", 0.0), where, "wind.from_deg")
     if wind and "speed_mps" not in wind:
         raise UserError(f"{where}: [wind] needs speed_mps (and from_deg)")

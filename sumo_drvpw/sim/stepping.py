@@ -45,6 +45,11 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
     output of the partial run can still be written.
     """
     ledger, dt = stepper.ledger, stepper.dt
+    if period and dt and (period < dt - 1e-9 or abs(period / dt - round(period / dt)) > 1e-6):
+        from sumo_drvpw.errors import UserError
+
+        raise UserError(f"edgeData period {period:g} s (outputs.period): an interval is a whole number of the run's {dt:g}-s "
+                        f"steps (its edges' totals are kept at a step); give {max(1, round(period / dt)) * dt:g} s")
     interrupted = False
     bar, steps0 = None, ledger.steps
     if progress and sys.stderr.isatty():  # (no end: steps counted, no total)

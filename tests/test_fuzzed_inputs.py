@@ -1,0 +1,123 @@
+"""Bad values a fuzzing helper put into scenario, equation, candidate and vehicle files
+(1013 mutations; 115 tracebacks or hangs, about 60 nonsense values run): each is refused in
+one line naming the file and key, exit 2, nothing written. Integers beyond TOML's 64 bits
+overflowed floats; a chain's sub-tables given as strings, a fuel as a list, ragged or NaN
+efficiency tables crashed; SUMO options after which SUMO runs no simulation crashed or hung;
+masses and winds of 1e308 booked inf litres; an edgeData period that is not a whole number
+of steps labelled its intervals wrongly."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import pytest
+import tomli_w
+
+from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.errors import UserError
+
+REPO = Path(__file__).resolve().parent.parent
+NET = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"
+EQS = REPO / "sumo_drvpw" / "model" / "builtin" / "equations"
+ROUTES = ('<routes><vType id="car" vClass="passenger" mass="1400"/>'
+          '<flow id="c" type="car" begin="0" end="10" number="2" departSpeed="0"><route edges="c00c10 c10c20"/></flow>'
+          '</routes>\n')
+BASE = (f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET.as_posix()}"\nroutes = ["r.rou.xml"]\n'
+        'begin = 0\nend = 20\nstep_length = 0.5\n')
+
+
+def _refused(capsys, argv, out: Path, *words):
+    capsys.readouterr()
+    assert cli_main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for w in words:
+        assert w in err, err
+    assert not out.exists()
+
+
+SCENARIOS = {  # name → (what replaces or adds to the base, words the message must hold)
+    "huge integer": (BASE.replace("begin = 0", "begin = 1" + "0" * 400), ("sumo.begin", "64 bits")),
+    "help": (BASE + 'options = ["--help"]\n', ("sumo.options", "--help")),
+    "version": (BASE + 'options = ["--version"]\n', ("sumo.options", "--version")),
+    "save a config": (BASE + 'options = ["--save-configuration", "x.sumocfg"]\n', ("--save-configuration",)),
+    "wait for a client": (BASE + 'options = ["--remote-port", "1"]\n', ("--remote-port",)),
+    "mass 1e308": (BASE + "[vtypes.car]\nmass_kg = 1e308\n", ("vtypes.car.mass_kg", "at most")),
+    "wind 1000": (BASE + "[wind]\nspeed_mps = 1000\nfrom_deg = 0\n", ("wind.speed_mps", "at most")),
+    "period not of steps": (BASE + "[outputs]\nperiod = 0.3\n", ("outputs.period", "0.5-s steps", "give 0.5 s")),
+}
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_a_scenario_value_is_refused_in_one_line(name, tmp_path, capsys, monkeypatch):
+    text, words = SCENARIOS[name]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
+    (tmp_path / "s.toml").write_text(text, encoding="utf-8")
+    where = () if name == "period not of steps" else ("s.toml",)  # (found at the first step: the key named)
+    _refused(capsys, ["run", "s.toml", "--no-figures", "--no-progress", "--out", "o"], tmp_path / "o", *where, *words)
+    assert not (tmp_path / "x.sumocfg").exists()
+
+
+def _chain(**change):
+    doc = tomllib.loads((EQS / "epa_gasoline_car.toml").read_text(encoding="utf-8"))
+    for k, v in change.items():
+        doc["chain"][k] = v
+    return doc
+
+
+EQUATIONS = {  # name → (the equation's document, words)
+    "fuel as a list": (_chain(fuel=[1, 2]), ("fuel must be one of",)),
+    "std_err a string": (_chain(std_err="x"), ("'std_err' must be a table",)),
+    "ragged efficiency table": (_chain(traction_efficiency={"speed_mps": [0, 10], "power_w": [0, 1000],
+                                                            "values": [[0.8, 0.88], [0.84]]}),
+                                ("traction_efficiency.values", "rows of one length")),
+    "NaN on an axis": (_chain(traction_efficiency={"speed_mps": [0.0, float("nan")], "values": [0.8, 0.9]}),
+                       ("speed_mps", "strictly increasing")),
+    "auxiliary a string": (_chain(standstill_aux_w=10, aux_power_w="abc"), ("aux_power_w", "number")),
+    "auxiliary 1 TW": (_chain(aux_power_w=1e12), ("aux_power_w", "beyond any road vehicle")),
+    "provenance a number": ({**_chain(), "provenance": 5}, ("'provenance' must be a table",)),
+}
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("name", EQUATIONS)
+def test_an_equation_value_is_refused_in_one_line(name, tmp_path, capsys, monkeypatch):
+    doc, words = EQUATIONS[name]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
+    (tmp_path / "s.toml").write_text(BASE, encoding="utf-8")
+    (tmp_path / "eq.toml").write_text(tomli_w.dumps(doc), encoding="utf-8")
+    _refused(capsys, ["run", "s.toml", "--equation", "eq.toml", "--no-figures", "--no-progress", "--out", "o"],
+             tmp_path / "o", "eq.toml", *words)
+
+
+def test_a_candidate_files_constraints_not_a_table_and_a_huge_integer(tmp_path):
+    from sumo_drvpw.fit.calibrate import resolve_candidates
+    from sumo_drvpw.fit.physical import parse_constraints
+
+    with pytest.raises(UserError, match=r"\[constraints\] must be a table"):
+        parse_constraints([1], "c.toml")
+    (tmp_path / "c.toml").write_text('terms = ["acc", "roll"]\nx = ' + "9" * 30 + "\n", encoding="utf-8")
+    with pytest.raises(UserError, match="x = 999.*64 bits"):
+        resolve_candidates(str(tmp_path / "c.toml"))
+
+
+def test_a_vehicle_files_table_where_a_number_goes_and_its_road_load_aliases(tmp_path):
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    base = (REPO / "sumo_drvpw" / "model" / "builtin" / "vehicles" / "prius3.toml").read_text(encoding="utf-8")
+    doc = tomllib.loads(base)
+    for table, key, value, words in (("body", "frontal_area_m2", {"a": 1}, "must be a number"),
+                                     ("road_load", "f0_N", -86.0, "[0, "),
+                                     ("road_load", "f2_N_per_mps2", "x", "must be a number"),
+                                     ("road_load", "f1_N_per_mps", 1e308, "(-10000, 10000]")):
+        bad = {k: dict(v) if isinstance(v, dict) else v for k, v in doc.items()}
+        bad[table] = {**bad[table], key: value}
+        p = tmp_path / "v.toml"
+        p.write_text(tomli_w.dumps(bad), encoding="utf-8")
+        with pytest.raises(UserError) as e:
+            load_vehicle(p)
+        assert f"{table}.{key}" in str(e.value) and words in str(e.value), str(e.value)
