@@ -45,6 +45,9 @@ SCENARIOS = {  # name → (what replaces or adds to the base, words the message 
     "wait for a client": (BASE + 'options = ["--remote-port", "1"]\n', ("--remote-port",)),
     "mass 1e308": (BASE + "[vtypes.car]\nmass_kg = 1e308\n", ("vtypes.car.mass_kg", "at most")),
     "wind 1000": (BASE + "[wind]\nspeed_mps = 1000\nfrom_deg = 0\n", ("wind.speed_mps", "at most")),
+    "negative begin": (BASE.replace("begin = 0", "begin = -5"), ("sumo.begin", "[0, 1e+09]")),
+    "end 1e308": (BASE.replace("end = 20", "end = 1e308"), ("sumo.end",)),
+    "step of 0.1 ms": (BASE.replace("step_length = 0.5", "step_length = 0.0001"), ("sumo.step_length", "0.001")),
     "period not of steps": (BASE + "[outputs]\nperiod = 0.3\n", ("outputs.period", "0.5-s steps", "give 0.5 s")),
 }
 

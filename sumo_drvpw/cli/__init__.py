@@ -63,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def sumo_time_arg(text: str) -> float:
     """argparse type of a SUMO time option: seconds or SUMO's h:m:s / d:h:m:s."""
-    from sumo_drvpw.sim.scenario import sumo_seconds
+    from sumo_drvpw.sim.scenario_values import sumo_seconds
 
     t = sumo_seconds(text)
     if t is None:
@@ -110,7 +110,7 @@ def check_air_temperature(t: float | None) -> None:
     if t is None:
         return
     from sumo_drvpw.errors import UserError
-    from sumo_drvpw.sim.scenario import AIR_RANGES
+    from sumo_drvpw.sim.scenario_values import AIR_RANGES
 
     lo, hi = AIR_RANGES["temperature_c"]
     if not lo <= t <= hi:

@@ -31,7 +31,7 @@ import pandas as pd
 from sumo_drvpw.data.log import SPEED_MAX_MPS
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
-from sumo_drvpw.sim.scenario import sumo_seconds
+from sumo_drvpw.sim.scenario_values import sumo_seconds
 from sumo_drvpw.sim.scenario_paths import sumo_file_list
 
 #: our name → SUMO's tabular FCD column (``<element>_<attribute>``)

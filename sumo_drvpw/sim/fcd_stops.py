@@ -66,7 +66,7 @@ import numpy as np
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.model.constants import STANDSTILL_MPS
-from sumo_drvpw.sim.scenario import sumo_seconds
+from sumo_drvpw.sim.scenario_values import sumo_seconds
 from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
 #: SUMO's default stop length on a lane [m]: ``startPos`` = ``endPos`` − 2·POSITION_EPS

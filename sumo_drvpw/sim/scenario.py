@@ -13,7 +13,6 @@ with none of them has no mass: SUMO would silently use its default, so this is a
 
 from __future__ import annotations
 
-import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -23,6 +22,8 @@ from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_equation, check_vclass, load_equation
 from sumo_drvpw.sim.scenario_paths import config_files, sumo_file_list
+from sumo_drvpw.sim.scenario_values import (AIR_RANGES, MASS_MAX_KG, WIND_MAX_MPS, _bool, _check_table,
+                                            _choice, _in_range, _num, _path, _share, _strlist, _strmap, sumo_time)
 from sumo_drvpw.sim.sumo_start import NO_RUN_OPTIONS
 from sumo_drvpw.sim.vtype_energy import VTYPE_ENERGY, named_in_table, placeholder, reserved_name
 from sumo_drvpw.errors import UserError
@@ -171,19 +172,13 @@ class Scenario:
     end_given: bool = False  # ``end`` given to the run (an override), not the file's or config's
 
 
+#: the scenario's SUMO times [s] SUMO takes: no negative begin; steps of at least SUMO's
+#: millisecond; an end within SUMO's time range, with room
+SUMO_TIME_RANGES = {"begin": (0.0, 1e9), "end": (0.0, 1e9), "step_length": (0.001, 3600.0)}
+
+
 def _where(path) -> str:
     return str(path) if path else "<scenario>"
-
-
-MASS_MAX_KG, WIND_MAX_MPS = 1.0e5, 100.0  # a scenario's largest mass, wind (a vehicle file's; gusts)
-
-
-def _num(v, where: str, key: str, positive: bool = False, most: float = math.inf) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise UserError(f"{where}: '{key}' must be a number, got {v!r}")
-    if (positive and v <= 0) or v > most:
-        raise UserError(f"{where}: '{key}' must be > 0{f' and at most {most:g}' * (most < math.inf)}, got {v!r}")
-    return float(v)
 
 
 def device_in_config(cfgvals: dict[str, str]) -> bool:
@@ -211,102 +206,10 @@ def _given_options(args: list[str], keys) -> dict[str, str]:
     return out
 
 
-def sumo_seconds(text: str) -> float | None:
-    """A time as SUMO writes and reads one, in seconds: "3600", "12.5", or clock time
-    "h:m:s" / "d:h:m:s" ("7:00:00" = 25200; what --human-readable-time writes; sumolib's
-    parseTime); None when it is neither."""
-    from sumolib.miscutils import parseTime
-    try:  # SUMO reads "h:m:s" and "d:h:m:s", nothing with fewer or more fields
-        t = parseTime(text.strip()) if text.count(":") in (0, 2, 3) else None
-    except (ValueError, IndexError):
-        return None
-    return t if t is None or math.isfinite(t) else None
-
-
-def sumo_time(v, where: str, key: str, positive: bool = False) -> float:
-    """A SUMO time value [s]: a number, or a string as SUMO reads one (:func:`sumo_seconds`)."""
-    if isinstance(v, str):
-        t = sumo_seconds(v)
-        if t is None:
-            raise UserError(f"{where}: '{key}' must be a time in seconds or h:m:s (SUMO's "
-                            f"format), got {v!r}")
-        v = t
-    return _num(v, where, key, positive)
-
-
-def _check_table(val, allowed: set[str], where: str, name: str) -> None:
-    """``val`` must be a table whose keys are all in ``allowed``; errors name the key."""
-    if not isinstance(val, dict):
-        raise UserError(f"{where}: '{name}' must be a table")
-    for k in val:
-        if k not in allowed:
-            raise UserError(f"{where}: unknown key '{name}.{k}' "
-                            f"(known: {', '.join(sorted(allowed))})")
-
-
-def _bool(v, where: str, key: str) -> bool:
-    if not isinstance(v, bool):
-        raise UserError(f"{where}: '{key}' must be true or false, got {v!r}")
-    return v
-
-
-def _share(v, where: str, key: str) -> float:
-    """true / false, or a share in [0, 1] (a fraction of the vehicles)."""
-    if isinstance(v, bool):
-        return 1.0 if v else 0.0
-    if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
-        raise UserError(f"{where}: '{key}' must be true, false or a share from 0 to 1, got {v!r}")
-    return float(v)
-
-
 def cold_start_shares(data: dict[str, dict]) -> dict[str, float]:
     """vType (or vClass) → its own cold-start share, from ``Scenario.vtype_data`` (or
     ``vclass_data``): those that give one."""
     return {k: d["cold_start"] for k, d in (data or {}).items() if "cold_start" in d}
-
-
-#: the air a road vehicle drives in (a value outside is a typo or a unit slip, e.g. Fahrenheit or
-#: Pa): temperature [°C] as the chains' set-points allow, density [kg/m³] from a 5000-m pass
-#: in summer to −50 °C at sea level, pressure [kPa] from 5000 m to the highest sea-level record
-AIR_RANGES = {"temperature_c": (-60.0, 60.0), "density_kgm3": (0.6, 1.6), "pressure_kpa": (50.0, 110.0)}
-
-
-def _in_range(x: float, lo_hi: tuple[float, float], where: str, key: str) -> None:
-    if not lo_hi[0] <= x <= lo_hi[1]:
-        raise UserError(f"{where}: '{key}' = {x:g} is not the air a vehicle drives in "
-                        f"({lo_hi[0]:g} … {lo_hi[1]:g})")
-
-
-def _choice(v, allowed: tuple[str, ...], where: str, key: str) -> str:
-    if v not in allowed:
-        raise UserError(f"{where}: '{key}' must be one of {', '.join(allowed)}, got {v!r}")
-    return str(v)
-
-
-def _strlist(v, where: str, key: str, example: str = '["..."]') -> list[str]:
-    """A TOML array of strings (a bare string is refused: "a b" or "a,b" would be one item;
-    ``equations`` may also hold Equation objects)."""
-    kinds = (str, Equation) if key == "equations" else str
-    if not isinstance(v, (list, tuple)) or not all(isinstance(x, kinds) for x in v):
-        raise UserError(f"{where}: '{key}' must be a list of strings, e.g. {example}, got {v!r}")
-    return list(v)
-
-
-def _strmap(v, where: str, key: str) -> dict[str, str]:
-    """A TOML table of name = road class (a non-empty string)."""
-    if not isinstance(v, dict):
-        raise UserError(f"{where}: '{key}' must be a table of name = road class, e.g. "
-                        f'{{ "highway.primary" = "arterial" }}, got {v!r}')
-    for k, c in v.items():
-        if not isinstance(c, str) or not c.strip():
-            raise UserError(f"{where}: '{key}.{k}' must be a road class name (a string), got {c!r}")
-    return {str(k): c for k, c in v.items()}
-
-
-def _path(v, where: str, key: str) -> str:
-    if not isinstance(v, str) or not v.strip():
-        raise UserError(f"{where}: '{key}' must be a file path (a string), got {v!r}")
-    return v
 
 
 def resolve_equation(spec, base: Path | None, where: str) -> Equation:
@@ -429,6 +332,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     for k in ("begin", "end", "step_length"):
         if k in sumo:
             times[k] = sumo_time(sumo[k], where, f"sumo.{k}", positive=(k == "step_length"))
+            lo, hi = SUMO_TIME_RANGES[k]  # what SUMO refuses, or cannot hold, in words of the key
+            if not lo <= times[k] <= hi:
+                raise UserError(f"{where}: 'sumo.{k}' must be in [{lo:g}, {hi:g}] s, got {sumo[k]!r}")
             args += [f"--{k.replace('_', '-')}", repr(times[k])]
         elif k.replace("_", "-") in cfgvals:
             times[k] = sumo_time(cfgvals[k.replace("_", "-")], f"SUMO config {cfg}",
@@ -443,8 +349,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     args += _strlist(opts, where, "sumo.options", '["--time-to-teleport", "120"]')
     for a in args:  # options after which SUMO does not run a simulation (or waits for a client)
         name = str(a).split("=", 1)[0]
-        if name in NO_RUN_OPTIONS:
-            raise UserError(f"{where}: sumo.options: {name} {NO_RUN_OPTIONS[name]}: the plug-in books a "
+        if name.startswith("-") and name.lstrip("-") in NO_RUN_OPTIONS:
+            raise UserError(f"{where}: sumo.options: {name} {NO_RUN_OPTIONS[name.lstrip('-')]}: the plug-in books a "
                             "simulation SUMO runs itself; leave it out")
     args = [x for a in args for x in (a.split("=", 1) if str(a).startswith("--mesosim=") else [a])]  # as "--mesosim v"
     files, adds = option_input_files(args, [f for f in files if f not in adds], adds)  # -r, -a override

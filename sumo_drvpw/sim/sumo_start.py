@@ -16,13 +16,13 @@ __all__ = ["start_sumo", "close_sumo", "step_method", "scenario_option", "signal
            "NewRun"]
 
 
-#: SUMO options after which it does not run a simulation here, and what they do instead
-NO_RUN_OPTIONS = {"--help": "prints SUMO's help and exits", "-?": "prints SUMO's help and exits",
-                  "--version": "prints SUMO's version and exits", "-V": "prints SUMO's version and exits",
-                  "--save-configuration": "writes a config and exits", "-C": "writes a config and exits",
-                  "--save-template": "writes a template and exits", "--save-schema": "writes a schema and exits",
-                  "--remote-port": "makes SUMO wait for a TraCI client", "--num-clients": "makes SUMO wait for "
-                  "TraCI clients"}
+#: SUMO options (without their dashes) after which it runs no simulation here, and what they do instead
+NO_RUN_OPTIONS = {"help": "prints SUMO's help and exits", "?": "prints SUMO's help and exits",
+                  "version": "prints SUMO's version and exits", "V": "prints SUMO's version and exits",
+                  "save-configuration": "writes a config and exits", "C": "writes a config and exits",
+                  "save-template": "writes a template and exits", "save-schema": "writes a schema and exits",
+                  "remote-port": "makes SUMO wait for a TraCI client",
+                  "num-clients": "makes SUMO wait for TraCI clients"}
 
 
 class NewRun(UserError):

@@ -1,0 +1,113 @@
+"""A scenario file's values checked as they are read: numbers, SUMO times, tables, flags,
+shares, choices, lists and paths, each refused in one line naming the file and key
+(:mod:`sumo_drvpw.sim.scenario` reads the file with them)."""
+
+from __future__ import annotations
+
+import math
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.equations import Equation
+
+
+MASS_MAX_KG, WIND_MAX_MPS = 1.0e5, 100.0  # a scenario's largest mass, wind (a vehicle file's; gusts)
+
+
+def _num(v, where: str, key: str, positive: bool = False, most: float = math.inf) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise UserError(f"{where}: '{key}' must be a number, got {v!r}")
+    if (positive and v <= 0) or v > most:
+        raise UserError(f"{where}: '{key}' must be > 0{f' and at most {most:g}' * (most < math.inf)}, got {v!r}")
+    return float(v)
+
+
+def sumo_seconds(text: str) -> float | None:
+    """A time as SUMO writes and reads one, in seconds: "3600", "12.5", or clock time
+    "h:m:s" / "d:h:m:s" ("7:00:00" = 25200; what --human-readable-time writes; sumolib's
+    parseTime); None when it is neither."""
+    from sumolib.miscutils import parseTime
+    try:  # SUMO reads "h:m:s" and "d:h:m:s", nothing with fewer or more fields
+        t = parseTime(text.strip()) if text.count(":") in (0, 2, 3) else None
+    except (ValueError, IndexError):
+        return None
+    return t if t is None or math.isfinite(t) else None
+
+
+def sumo_time(v, where: str, key: str, positive: bool = False) -> float:
+    """A SUMO time value [s]: a number, or a string as SUMO reads one (:func:`sumo_seconds`)."""
+    if isinstance(v, str):
+        t = sumo_seconds(v)
+        if t is None:
+            raise UserError(f"{where}: '{key}' must be a time in seconds or h:m:s (SUMO's "
+                            f"format), got {v!r}")
+        v = t
+    return _num(v, where, key, positive)
+
+
+def _check_table(val, allowed: set[str], where: str, name: str) -> None:
+    """``val`` must be a table whose keys are all in ``allowed``; errors name the key."""
+    if not isinstance(val, dict):
+        raise UserError(f"{where}: '{name}' must be a table")
+    for k in val:
+        if k not in allowed:
+            raise UserError(f"{where}: unknown key '{name}.{k}' "
+                            f"(known: {', '.join(sorted(allowed))})")
+
+
+def _bool(v, where: str, key: str) -> bool:
+    if not isinstance(v, bool):
+        raise UserError(f"{where}: '{key}' must be true or false, got {v!r}")
+    return v
+
+
+def _share(v, where: str, key: str) -> float:
+    """true / false, or a share in [0, 1] (a fraction of the vehicles)."""
+    if isinstance(v, bool):
+        return 1.0 if v else 0.0
+    if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
+        raise UserError(f"{where}: '{key}' must be true, false or a share from 0 to 1, got {v!r}")
+    return float(v)
+
+
+#: the air a road vehicle drives in (a value outside is a typo or a unit slip, e.g. Fahrenheit or
+#: Pa): temperature [°C] as the chains' set-points allow, density [kg/m³] from a 5000-m pass
+#: in summer to −50 °C at sea level, pressure [kPa] from 5000 m to the highest sea-level record
+AIR_RANGES = {"temperature_c": (-60.0, 60.0), "density_kgm3": (0.6, 1.6), "pressure_kpa": (50.0, 110.0)}
+
+
+def _in_range(x: float, lo_hi: tuple[float, float], where: str, key: str) -> None:
+    if not lo_hi[0] <= x <= lo_hi[1]:
+        raise UserError(f"{where}: '{key}' = {x:g} is not the air a vehicle drives in "
+                        f"({lo_hi[0]:g} … {lo_hi[1]:g})")
+
+
+def _choice(v, allowed: tuple[str, ...], where: str, key: str) -> str:
+    if v not in allowed:
+        raise UserError(f"{where}: '{key}' must be one of {', '.join(allowed)}, got {v!r}")
+    return str(v)
+
+
+def _strlist(v, where: str, key: str, example: str = '["..."]') -> list[str]:
+    """A TOML array of strings (a bare string is refused: "a b" or "a,b" would be one item;
+    ``equations`` may also hold Equation objects)."""
+    kinds = (str, Equation) if key == "equations" else str
+    if not isinstance(v, (list, tuple)) or not all(isinstance(x, kinds) for x in v):
+        raise UserError(f"{where}: '{key}' must be a list of strings, e.g. {example}, got {v!r}")
+    return list(v)
+
+
+def _strmap(v, where: str, key: str) -> dict[str, str]:
+    """A TOML table of name = road class (a non-empty string)."""
+    if not isinstance(v, dict):
+        raise UserError(f"{where}: '{key}' must be a table of name = road class, e.g. "
+                        f'{{ "highway.primary" = "arterial" }}, got {v!r}')
+    for k, c in v.items():
+        if not isinstance(c, str) or not c.strip():
+            raise UserError(f"{where}: '{key}.{k}' must be a road class name (a string), got {c!r}")
+    return {str(k): c for k, c in v.items()}
+
+
+def _path(v, where: str, key: str) -> str:
+    if not isinstance(v, str) or not v.strip():
+        raise UserError(f"{where}: '{key}' must be a file path (a string), got {v!r}")
+    return v
