@@ -48,6 +48,7 @@ SCENARIOS = {  # name → (what replaces or adds to the base, words the message 
     "negative begin": (BASE.replace("begin = 0", "begin = -5"), ("sumo.begin", "[0, 1e+09]")),
     "end 1e308": (BASE.replace("end = 20", "end = 1e308"), ("sumo.end",)),
     "step of 0.1 ms": (BASE.replace("step_length = 0.5", "step_length = 0.0001"), ("sumo.step_length", "0.001")),
+    "no vType to book": (BASE + "[vehicles]\nvtypes = []\n", ("vehicles.vtypes", "empty")),
     "period not of steps": (BASE + "[outputs]\nperiod = 0.3\n", ("outputs.period", "0.5-s steps", "give 0.5 s")),
 }
 

@@ -384,6 +384,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
 
     veh = doc.get("vehicles", {})
     vfilter = _strlist(veh["vtypes"], where, "vehicles.vtypes") if "vtypes" in veh else None
+    if vfilter == []:
+        raise UserError(f"{where}: 'vehicles.vtypes' is empty: it would book no vehicle; name the vTypes to "
+                        "book, or leave the key out to book all")
     def entries(table: str) -> dict[str, dict]:
         out = {}
         for vt, d in doc.get(table, {}).items():  # keys were checked with the schema above
