@@ -107,6 +107,13 @@ def test_a_candidate_files_constraints_not_a_table_and_a_huge_integer(tmp_path):
     (tmp_path / "c.toml").write_text('terms = ["acc", "roll"]\nx = ' + "9" * 30 + "\n", encoding="utf-8")
     with pytest.raises(UserError, match="x = 999.*64 bits"):
         resolve_candidates(str(tmp_path / "c.toml"))
+    # a key that sets nothing, and a constraint on a term the file does not offer: said
+    for text, words in (('terms = ["acc", "roll"]\np_enter = 0.5\n', "unknown key 'p_enter'"),
+                        ('terms = ["acc", "roll"]\n[constraints]\nwarp = { fixed = 1.0 }\n',
+                         "constraints.warp constrains no term")):
+        (tmp_path / "c.toml").write_text(text, encoding="utf-8")
+        with pytest.raises(UserError, match=words):
+            resolve_candidates(str(tmp_path / "c.toml"))
 
 
 def test_a_vehicle_files_table_where_a_number_goes_and_its_road_load_aliases(tmp_path):

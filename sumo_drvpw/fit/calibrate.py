@@ -343,6 +343,15 @@ def resolve_candidates(spec: str) -> tuple[str, ...]:
                 parse_term(str(t))
             except UserError as e:
                 raise UserError(f"candidate file {p}: {e}") from None
+        unknown = sorted(set(doc) - {"terms", "candidates", "constraints", "name", "description"})
+        if unknown:  # (p_enter = 0.5 here set nothing, silently)
+            raise UserError(f"candidate file {p}: unknown key {unknown[0]!r} (known: terms or [candidates] terms, "
+                            "[constraints], name, description)")
+        cons = doc.get("constraints")
+        stray = sorted(set(cons) - set(map(str, terms))) if isinstance(cons, dict) else []
+        if stray:
+            raise UserError(f"candidate file {p}: constraints.{stray[0]} constrains no term of its terms "
+                            f"({', '.join(map(str, terms))})")
         return tuple(map(str, terms))
     terms = tuple(s.strip() for s in spec.split(",") if s.strip())
     try:
