@@ -132,3 +132,13 @@ def test_a_vehicle_files_table_where_a_number_goes_and_its_road_load_aliases(tmp
         with pytest.raises(UserError) as e:
             load_vehicle(p)
         assert f"{table}.{key}" in str(e.value) and words in str(e.value), str(e.value)
+
+
+def test_a_mappings_time_unit_that_is_no_time_unit(tmp_path):
+    """options.time_unit = "fortnight" was reported as disagreeing with the column's unit 's'."""
+    from sumo_drvpw.data.adapters.columns import load_mapping
+
+    (tmp_path / "m.toml").write_text('[options]\ntime_unit = "fortnight"\n[columns.t]\nname = "time_s"\n'
+                                     '[columns.v]\nname = "speed_mps"\n', encoding="utf-8")
+    with pytest.raises(UserError, match="options.time_unit 'fortnight' is no time unit"):
+        load_mapping(tmp_path / "m.toml")

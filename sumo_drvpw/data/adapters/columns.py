@@ -42,7 +42,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midnight, clean_time_and_speed, is_number,
                       expand_paths, generic_name, lookup_unit, new_report, numeric, read_csv_strict,
-                      read_each, unique_names)
+                      read_each, unique_names, UNITS)
 
 from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
 
@@ -73,6 +73,9 @@ def load_mapping(path, mdf: bool = False) -> dict:
     if not isinstance(cols, dict) or not cols:
         raise UserError(f"{p}: no [columns.\"<source label>\"] table")
     time_unit = str(opts.get("time_unit", "s"))
+    if time_unit != "datetime" and (lookup_unit(time_unit) or ("",))[0] != "time":
+        known = sorted(u for u, (d, _, _) in UNITS.items() if d == "time")
+        raise UserError(f"{p}: options.time_unit {time_unit!r} is no time unit (known: {', '.join(known)}, datetime)")
     entries = {}
     for label, e in cols.items():
         key = f"columns.{label!r}" if not label.isidentifier() else f"columns.{label}"
