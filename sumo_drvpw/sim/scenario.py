@@ -347,9 +347,10 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     if isinstance(opts, list):
         opts = [str(o) if isinstance(o, (int, float)) and not isinstance(o, bool) else o for o in opts]
     args += _strlist(opts, where, "sumo.options", '["--time-to-teleport", "120"]')
-    for a in args:  # options after which SUMO does not run a simulation (or waits for a client)
-        name = str(a).split("=", 1)[0]
-        if name.startswith("-") and name.lstrip("-") in NO_RUN_OPTIONS:
+    for i, a in enumerate(args):  # options after which SUMO runs no simulation (or waits for a client)
+        name, _, val = str(a).partition("=")
+        val = val or (str(args[i + 1]) if i + 1 < len(args) else "")
+        if name.startswith("-") and name.lstrip("-") in NO_RUN_OPTIONS and not (name == "--remote-port" and val == "0"):
             raise UserError(f"{where}: sumo.options: {name} {NO_RUN_OPTIONS[name.lstrip('-')]}: the plug-in books a "
                             "simulation SUMO runs itself; leave it out")
     args = [x for a in args for x in (a.split("=", 1) if str(a).startswith("--mesosim=") else [a])]  # as "--mesosim v"

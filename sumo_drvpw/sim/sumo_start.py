@@ -21,7 +21,7 @@ NO_RUN_OPTIONS = {"help": "prints SUMO's help and exits", "?": "prints SUMO's he
                   "version": "prints SUMO's version and exits", "V": "prints SUMO's version and exits",
                   "save-configuration": "writes a config and exits", "C": "writes a config and exits",
                   "save-template": "writes a template and exits", "save-schema": "writes a schema and exits",
-                  "remote-port": "makes SUMO wait for a TraCI client",
+                  "remote-port": "makes SUMO wait for a TraCI client (but 0, no server)",
                   "num-clients": "makes SUMO wait for TraCI clients"}
 
 
