@@ -142,7 +142,8 @@ def _recorded_inputs(args: argparse.Namespace) -> None:
     """Without --scenario: the network (unless --net) and the route and additional files
     (unless --vtypes) of the run that recorded the FCD, as its header names them
     (:func:`sumo_drvpw.sim.fcd_read.run_inputs`: else the one SUMO config beside it that
-    writes it), each said in a note."""
+    writes it), each said in a note; a route or additional file found nowhere in a warning
+    (its vTypes are unknown)."""
     from sumo_drvpw.sim.fcd_read import run_inputs
 
     rec = run_inputs(args.fcd)

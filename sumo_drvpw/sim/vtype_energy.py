@@ -17,7 +17,9 @@ it and are listed (summary.json ``assumptions.vtype_energy``).
 
 The plug-in's own equations (a bare SUMO config, ``fcd`` without equations:
 :data:`~sumo_drvpw.sim.scenario.CONFIG_EQUATIONS`) bring it too: such a vType is booked by
-its ``vtype_energy.<id>`` beside its class's equations.
+its ``vtype_energy.<id>`` beside its class's equations — an electric car so by two battery
+chains, its own and the i3's (alternatives: the resolver's ``also_booked``, summary.json
+``assumptions.vtype_energy.also_booked_by``).
 
 Mass: the vType's Energy-model mass (``mass`` attribute, else param ``vehicleMass``, plus
 ``loading``). Where the run books the vType at that same mass (no ``drvpw.mass``, no
