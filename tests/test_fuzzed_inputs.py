@@ -37,6 +37,14 @@ def _refused(capsys, argv, out: Path, *words):
     assert not out.exists()
 
 
+def _run_refused(tmp_path, monkeypatch, capsys, scenario: str, more: list, *words):
+    """`run` of the scenario text (with the tiny route file) and ``more`` arguments: refused."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
+    (tmp_path / "s.toml").write_text(scenario, encoding="utf-8")
+    _refused(capsys, ["run", "s.toml", *more, "--no-figures", "--no-progress", "--out", "o"], tmp_path / "o", *words)
+
+
 SCENARIOS = {  # name → (what replaces or adds to the base, words the message must hold)
     "huge integer": (BASE.replace("begin = 0", "begin = 1" + "0" * 400), ("sumo.begin", "64 bits")),
     "help": (BASE + 'options = ["--help"]\n', ("sumo.options", "--help")),
@@ -57,11 +65,8 @@ SCENARIOS = {  # name → (what replaces or adds to the base, words the message 
 @pytest.mark.parametrize("name", SCENARIOS)
 def test_a_scenario_value_is_refused_in_one_line(name, tmp_path, capsys, monkeypatch):
     text, words = SCENARIOS[name]
-    monkeypatch.chdir(tmp_path)
-    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
-    (tmp_path / "s.toml").write_text(text, encoding="utf-8")
     where = () if name == "period not of steps" else ("s.toml",)  # (found at the first step: the key named)
-    _refused(capsys, ["run", "s.toml", "--no-figures", "--no-progress", "--out", "o"], tmp_path / "o", *where, *words)
+    _run_refused(tmp_path, monkeypatch, capsys, text, [], *where, *words)
     assert not (tmp_path / "x.sumocfg").exists()
 
 
@@ -90,12 +95,8 @@ EQUATIONS = {  # name → (the equation's document, words)
 @pytest.mark.parametrize("name", EQUATIONS)
 def test_an_equation_value_is_refused_in_one_line(name, tmp_path, capsys, monkeypatch):
     doc, words = EQUATIONS[name]
-    monkeypatch.chdir(tmp_path)
-    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
-    (tmp_path / "s.toml").write_text(BASE, encoding="utf-8")
     (tmp_path / "eq.toml").write_text(tomli_w.dumps(doc), encoding="utf-8")
-    _refused(capsys, ["run", "s.toml", "--equation", "eq.toml", "--no-figures", "--no-progress", "--out", "o"],
-             tmp_path / "o", "eq.toml", *words)
+    _run_refused(tmp_path, monkeypatch, capsys, BASE, ["--equation", "eq.toml"], "eq.toml", *words)
 
 
 def test_a_candidate_files_constraints_not_a_table_and_a_huge_integer(tmp_path):
