@@ -143,3 +143,46 @@ def test_a_mappings_time_unit_that_is_no_time_unit(tmp_path):
                                      '[columns.v]\nname = "speed_mps"\n', encoding="utf-8")
     with pytest.raises(UserError, match="options.time_unit 'fortnight' is no time unit"):
         load_mapping(tmp_path / "m.toml")
+
+
+def _fcd_with_pos(path: Path, pos: str) -> Path:
+    path.write_text('<fcd-export>\n<timestep time="0.00">\n<vehicle id="v" x="1" y="1" angle="90" type="DEFAULT_VEHTYPE" '
+                    f'speed="1.0" pos="{pos}" lane="c00c10_0" slope="0"/>\n</timestep>\n</fcd-export>\n', encoding="utf-8")
+    return path
+
+
+FLAGS = {  # name → (arguments, words); a second fuzzing helper's flags and files that crashed
+    "seed below 0": (["synth", "--out", "s.parquet", "--minutes", "1", "--seed", "-1"], ("--seed",)),
+    "3.6 seconds of driving": (["synth", "--out", "s.parquet", "--minutes", "0.001"], ("--minutes",)),
+    "demo of inf minutes": (["demo", "--no-sumo", "--minutes", "inf", "--out", "o"], ("--minutes",)),
+    "period 1e308": (["run", "city", "--end", "30", "--period", "1e308", "--out", "o"], ("--period",)),
+    "fusion of 1e308 s": (["calibrate", "LOG", "--vehicle", "prius3", "--grade-source", "fused:1e308s", "--out",
+                           "o.toml"], ("--grade-source", "fusion_tau_s")),
+    "1e23 folds": (["diagnose", "LOG", "--vehicle", "prius3", "--folds", "100000000000000000000000", "--out", "o"],
+                   ("folds",)),
+    "a billion workers": (["calibrate", "LOG", "--engine", "dask", "--workers", "1000000000", "--out", "o.toml"],
+                          ("--workers", "256")),
+    "FCD not there": (["fcd", "nope.xml", "--out", "o"], ("FCD file not found: nope.xml",)),
+    "FCD position 1e308": (["fcd", "POS", "--net", str(NET), "--out", "o"], ("attribute pos", "1e+308")),
+}
+
+
+@pytest.mark.parametrize("name", FLAGS)
+def test_a_flag_or_file_is_refused_in_one_line(name, tmp_path, capsys, monkeypatch):
+    from conftest import BUNDLED_LOG
+
+    args, words = FLAGS[name]
+    monkeypatch.chdir(tmp_path)
+    pos = _fcd_with_pos(tmp_path / "pos.xml", "1e308")
+    args = [str(BUNDLED_LOG) if a == "LOG" else str(pos) if a == "POS" else a for a in args]
+    out = tmp_path / next((args[i + 1] for i, a in enumerate(args) if a == "--out"), "o")
+    _refused(capsys, args, out, *words)
+
+
+def test_a_log_whose_rows_end_in_cr_alone_is_read(tmp_path, capsys):
+    """The header check split a CR-only CSV's header with the csv module: a csv.Error traceback
+    in calibrate, compare, dynamics and diagnose; pandas reads such a file."""
+    p = tmp_path / "cr.csv"
+    p.write_text("time_s,speed_mps,trip_id\r" + "".join(f"{t},{min(t, 10)},a\r" for t in range(40)), encoding="utf-8")
+    assert cli_main(["dynamics", str(p), "--out", str(tmp_path / "d")]) == 0
+    assert (tmp_path / "d" / "report.md").is_file()

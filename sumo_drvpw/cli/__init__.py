@@ -119,10 +119,10 @@ def check_air_temperature(t: float | None) -> None:
 
 def check_period(period: float | None) -> None:
     """``--period`` (``run``, ``fcd``): an edgeData interval."""
-    if period is not None and not 0 < period < float("inf"):
+    if period is not None and not 0 < period <= 1e9:
         from sumo_drvpw.errors import UserError
 
-        raise UserError(f"--period {period:g}: an edgeData interval is a finite number of seconds > 0")
+        raise UserError(f"--period {period:g}: an edgeData interval is a number of seconds > 0 and at most 1e9")
 
 
 def existing_paths(*groups) -> list[str]:

@@ -16,6 +16,8 @@ from sumo_drvpw.data.powertrain import terms_predict_of
 from sumo_drvpw.errors import NoDrivingPower, UserError
 
 ENGINES = ("local", "dask", "memory")
+#: the most processes a local Dask cluster is started with (a billion were started until memory ran out)
+MAX_WORKERS = 256
 
 
 def add_engine_arguments(p, engines=ENGINES, engine_help: str | None = None) -> None:
@@ -41,8 +43,9 @@ def check_engine_arguments(args) -> None:
             if getattr(args, flag, None) is not None:
                 raise UserError(f"--{flag} goes with --engine dask (got --engine {engine})")
     workers = getattr(args, "workers", None)
-    if workers is not None and workers < 1:
-        raise UserError(f"--workers must be at least 1, got {workers}")
+    if workers is not None and not 1 <= workers <= MAX_WORKERS:
+        raise UserError(f"--workers must be from 1 to {MAX_WORKERS} (processes of a local cluster; a larger "
+                        f"cluster: --scheduler ADDRESS), got {workers}")
     if engine == "dask":
         try:
             import distributed  # noqa: F401

@@ -30,10 +30,12 @@ def configure(p):
 def main(args) -> int:
     from sumo_drvpw.data.log import bundled_log
 
-    if not args.minutes > 0:
+    from sumo_drvpw.cli.synth import MAX_MINUTES, MIN_MINUTES
+
+    if not MIN_MINUTES <= args.minutes <= MAX_MINUTES:
         from sumo_drvpw.errors import UserError
 
-        raise UserError(f"--minutes must be > 0, got {args.minutes}")
+        raise UserError(f"--minutes must be from {MIN_MINUTES:g} to {MAX_MINUTES:g}, got {args.minutes}")
     final = Path(args.out)
     held_log = bundled_log()
     with output_set(args, final, [held_log]) as out:

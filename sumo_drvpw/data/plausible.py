@@ -4,6 +4,7 @@ columns named twice."""
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import numpy as np
@@ -119,10 +120,8 @@ def check_header(p: Path) -> None:
 
             names = list(pq.read_schema(p).names)
         else:
-            import csv
-
             with open(p, "rb") as fh:
-                head = fh.readline(1 << 20).decode("utf-8-sig").rstrip("\r\n")
+                head = (fh.readline(1 << 20).decode("utf-8-sig").splitlines() or [""])[0]  # (rows ending in CR alone)
             names = next(csv.reader([head]), [])
             if len(names) == 1:
                 for sep, word in ((";", "semicolons"), ("\t", "tabs"), ("|", "'|'")):
@@ -130,7 +129,7 @@ def check_header(p: Path) -> None:
                         raise UserError(f"{p}: the header {head[:60]!r} is separated by {word}; a canonical "
                                         "CSV drive log separates columns by commas (convert it, or map it "
                                         "with the import command's columns format and its options.sep)")
-    except (OSError, ValueError):  # UnicodeDecodeError among them
+    except (OSError, ValueError, csv.Error):  # UnicodeDecodeError among them
         return  # unreadable files are named by the reader itself
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:

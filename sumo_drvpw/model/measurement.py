@@ -150,9 +150,9 @@ def measurement_from_dict(doc, where: str) -> Measurement:
     if abs(kw.get("power_lag_s", 0.0)) > MAX_LAG_S:
         raise UserError(f"{where} [measurement] power_lag_s: {kw['power_lag_s']:g} s is beyond "
                         f"±{MAX_LAG_S:g} s (a lag of minutes is no signal timing)")
-    for key in ("fusion_tau_s", "fusion_distance_m"):
-        if key in kw and not kw[key] > 0:
-            raise UserError(f"{where} [measurement] {key}: must be > 0, got {kw[key]:g}")
+    for key, most in (("fusion_tau_s", 86400.0), ("fusion_distance_m", 1e6)):  # a day, 1000 km
+        if key in kw and not 0 < kw[key] <= most:
+            raise UserError(f"{where} [measurement] {key}: must be > 0 and at most {most:g}, got {kw[key]:g}")
     if "fusion_tau_s" in kw and "fusion_distance_m" in kw:
         raise UserError(f"{where} [measurement] fusion_distance_m: give it or fusion_tau_s, not both "
                         "(a crossover over distance or in time)")

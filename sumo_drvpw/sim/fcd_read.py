@@ -97,6 +97,9 @@ def fcd_parts(spec) -> list[Path]:
     return []
 
 
+LANE_MAX_M = 1.0e6  #: the longest lane a position may lie on [m] (SUMO's longest edges: tens of km)
+
+
 def _normalise(df: pd.DataFrame, label, first_row: int, names: dict | None = None) -> dict:
     """Checked columns of raw rows (our names): rows without an id dropped, numbers
     parsed (UserError naming the column and the row, counted over the whole file; a
@@ -138,6 +141,12 @@ def _normalise(df: pd.DataFrame, label, first_row: int, names: dict | None = Non
         raise UserError(f"FCD file {label}: {names['speed']} is {v[i]:g} at vehicle "
                         f"row {row(i)} (vehicle {df['id'].iloc[i]!r}): not a speed (finite, 0 to "
                         f"{SPEED_MAX_MPS:g} m/s)")
+    pos = out["pos"]  # a position on its lane: SUMO writes none below 0 or beyond any lane (a rounded −0.00 aside)
+    bad = ~person & (np.isinf(pos) | (pos < -0.01) | (pos > LANE_MAX_M))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"FCD file {label}: {names['pos']} is {pos[i]:g} at vehicle row {row(i)} "
+                        f"(vehicle {df['id'].iloc[i]!r}): not a position on a lane (0 to {LANE_MAX_M:g} m)")
     for k in ("type", "lane"):  # SUMO writes both for every vehicle (a person has no lane)
         miss = df[k].isna().to_numpy() & ~person
         if miss.any():

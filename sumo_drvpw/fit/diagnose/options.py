@@ -67,8 +67,8 @@ def check_validation(opt) -> None:
                         f"got '{opt.validation}'")
     if not opt.block_s > 0:
         raise UserError(f"diagnose option block_s must be > 0 s, got {opt.block_s}")
-    if opt.folds < 2:
-        raise UserError(f"diagnose option folds must be ≥ 2, got {opt.folds}")
+    if not 2 <= opt.folds <= 1000:
+        raise UserError(f"diagnose option folds must be from 2 to 1000, got {opt.folds}")
     if not 0 < opt.alpha < 1:
         raise UserError(f"diagnose option alpha must be between 0 and 1, got {opt.alpha}")
 
