@@ -164,6 +164,11 @@ FLAGS = {  # name → (arguments, words); a second fuzzing helper's flags and fi
                           ("--workers", "256")),
     "FCD not there": (["fcd", "nope.xml", "--out", "o"], ("FCD file not found: nope.xml",)),
     "FCD position 1e308": (["fcd", "POS", "--net", str(NET), "--out", "o"], ("attribute pos", "1e+308")),
+    "proxy correlation inf": (["diagnose", "LOG", "--vehicle", "prius3", "--proxy-corr", "inf", "--out", "o"],
+                              ("proxy_corr",)),
+    "vType of 1e308 kg": (["export-vtype", "vsp_ldv1999", "--mass", "1e308", "--id", "v", "--out", "v.add.xml"],
+                          ("--mass",)),
+    "elevation glitch": (["dynamics", "ELEV", "--out", "o"], ("elevation_m", "1e+300")),
 }
 
 
@@ -174,7 +179,11 @@ def test_a_flag_or_file_is_refused_in_one_line(name, tmp_path, capsys, monkeypat
     args, words = FLAGS[name]
     monkeypatch.chdir(tmp_path)
     pos = _fcd_with_pos(tmp_path / "pos.xml", "1e308")
-    args = [str(BUNDLED_LOG) if a == "LOG" else str(pos) if a == "POS" else a for a in args]
+    elev = tmp_path / "elev.csv"  # one elevation of 1e300 among good ones: the grade and the fit moved silently
+    elev.write_text("time_s,speed_mps,elevation_m,trip_id\n" + "".join(
+        f"{t},{min(t, 10)},{1e300 if t == 20 else 100 + t},a\n" for t in range(40)), encoding="utf-8")
+    args = [str(BUNDLED_LOG) if a == "LOG" else str(pos) if a == "POS" else str(elev) if a == "ELEV" else a
+            for a in args]
     out = tmp_path / next((args[i + 1] for i, a in enumerate(args) if a == "--out"), "o")
     _refused(capsys, args, out, *words)
 
@@ -186,3 +195,12 @@ def test_a_log_whose_rows_end_in_cr_alone_is_read(tmp_path, capsys):
     p.write_text("time_s,speed_mps,trip_id\r" + "".join(f"{t},{min(t, 10)},a\r" for t in range(40)), encoding="utf-8")
     assert cli_main(["dynamics", str(p), "--out", str(tmp_path / "d")]) == 0
     assert (tmp_path / "d" / "report.md").is_file()
+
+
+def test_a_wind_direction_that_is_no_angle():
+    """--wind 40@1e308 became 'from 296°' (1e308 % 360)."""
+    from sumo_drvpw.data.wind import parse_wind
+
+    with pytest.raises(UserError, match="direction must be in degrees"):
+        parse_wind("40@1e308", "--wind")
+    assert parse_wind("3@-90", "--wind") == (3.0, 270.0)

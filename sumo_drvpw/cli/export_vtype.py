@@ -45,6 +45,8 @@ def main(args: argparse.Namespace) -> int:
         check_vclass(args.vclass, "export-vtype", "--vclass")
     eq = load_equation(args.equation)
     mass, area = args.mass, None
+    if mass is not None and not 0 < mass <= 1e5:  # (a vehicle file's limit)
+        raise UserError(f"--mass {mass:g}: a vehicle's mass in kg, > 0 and at most 1e5")
     if args.vehicle:
         from sumo_drvpw.model.vehicles import load_vehicle
 

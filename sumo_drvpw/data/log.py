@@ -52,6 +52,7 @@ RANGES = {
     "wind_mps": (-100.0, 100.0, "m/s", "wind along the direction of travel, in m/s"),
     "airspeed_mps": (-50.0, 150.0, "m/s", "air speed in m/s"),
     "yaw_rate_rps": (-10.0, 10.0, "rad/s", "yaw rate in rad/s (in deg/s? multiply by π/180)"),
+    "elevation_m": (-500.0, 9000.0, "m", "elevation above sea level in m (in feet? multiply by 0.3048)"),
 }
 #: the largest lateral acceleration v·|ω| a yaw rate may give on more than 1 % of a log's
 #: rows [m/s²]: about 1.2 g, beyond a road tyre's grip (a yaw rate in deg/s gives 57× its own)

@@ -51,6 +51,8 @@ def parse_wind(text: str, where: str) -> tuple[float, float]:
                         "it blows from in degrees clockwise from north, e.g. 4.2@210")
     if not 0.0 <= s <= MAX_WIND_MPS:
         raise UserError(f"{where} {text}: the speed must be in 0…{MAX_WIND_MPS:g} m/s")
+    if not -360.0 <= d <= 720.0:  # (1e308 % 360 is a direction no one gave)
+        raise UserError(f"{where} {text}: the direction must be in degrees, 0…360")
     return s, d % 360.0
 
 

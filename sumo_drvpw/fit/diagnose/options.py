@@ -71,6 +71,8 @@ def check_validation(opt) -> None:
         raise UserError(f"diagnose option folds must be from 2 to 1000, got {opt.folds}")
     if not 0 < opt.alpha < 1:
         raise UserError(f"diagnose option alpha must be between 0 and 1, got {opt.alpha}")
+    if not 0 < getattr(opt, "proxy_corr", 0.9) <= 1:
+        raise UserError(f"diagnose option proxy_corr must be in (0, 1], got {opt.proxy_corr}")
 
 
 #: trips a finding must replicate on (lower the held-out error on more than half of them)
