@@ -560,15 +560,24 @@ def test_a_chains_logs_are_found_from_any_working_folder(tmp_path, clean, capsys
     assert cli_main(["diagnose", "log.parquet", "--vehicle", "prius3", "--equation", "../eqs/declared.toml",
                      "--out", str(tmp_path / "t"), "--quiet", "--max-findings", "1"]) == 0
     assert "note: the declared chain was calibrated on 1 of these 1 log file(s)" in capsys.readouterr().out
-    # the study moved whole (and reached through a symbolic link): the same
+    # logs reached through a symbolic link are named through it (the link kept, not resolved),
+    # so the study moves with the link re-pointed: the logs are found from the equation as before
     import shutil
 
-    moved = tmp_path.parent / (tmp_path.name + "_moved")
-    shutil.move(str(tmp_path / "study"), moved) if (tmp_path / "study").exists() else None
-    shutil.copytree(tmp_path / "logs", moved / "logs")
-    shutil.copytree(tmp_path / "eqs", moved / "eqs")
-    (tmp_path / "link").symlink_to(moved, target_is_directory=True)
-    monkeypatch.chdir(tmp_path / "link" / "logs")
-    assert cli_main(["diagnose", "log.parquet", "--vehicle", "prius3", "--equation", "../eqs/declared.toml",
+    (tmp_path / "data_a").mkdir()
+    df.to_parquet(tmp_path / "data_a" / "log.parquet")
+    (tmp_path / "study").mkdir()
+    (tmp_path / "study" / "data").symlink_to(tmp_path / "data_a", target_is_directory=True)
+    monkeypatch.chdir(tmp_path / "study")
+    save_equation(eq, "declared.toml")
+    eq.chain.provenance = {"logs": ["data/log.parquet"]}
+    save_equation(eq, "declared.toml")
+    doc = tomllib.loads((tmp_path / "study" / "declared.toml").read_text(encoding="utf-8"))
+    assert doc["chain"]["provenance"]["logs"] == ["data/log.parquet"]  # through the link (resolved: ../data_a/…)
+    shutil.move(str(tmp_path / "data_a"), tmp_path / "data_b")
+    (tmp_path / "study" / "data").unlink()
+    (tmp_path / "study" / "data").symlink_to(tmp_path / "data_b", target_is_directory=True)
+    capsys.readouterr()
+    assert cli_main(["diagnose", "data/log.parquet", "--vehicle", "prius3", "--equation", "declared.toml",
                      "--out", str(tmp_path / "t2"), "--quiet", "--max-findings", "1"]) == 0
     assert "note: the declared chain was calibrated on 1 of these 1 log file(s)" in capsys.readouterr().out

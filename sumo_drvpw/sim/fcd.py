@@ -479,7 +479,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     acc.stepper.replay_info = replay_info  # a --begin after the file's start: no cold starts then
     replay.count_persons = count_persons
     try:
-        info = step_until(replay, acc.stepper, end=None, progress=sc.progress and publish, period=sc.period)
+        info = step_until(replay, acc.stepper, end=None, progress=sc.progress and publish, period=sc.period,
+                          period_from=sc.period_from)
         acc.interrupted = info["interrupted"]
         acc.fcd_lanes = (replay.unknown_rows, replay.lane_rows, replay.first_unknown)
         rows = replay.rows if chunk_rows is not None else len(df)

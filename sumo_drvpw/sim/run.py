@@ -170,7 +170,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
                              spill_dir=Path(out_dir) / SPILL_DIR if out_dir is not None else None)
             try:
                 info = step_until(conn, acc.stepper, end=sc.end, progress=sc.progress,
-                                  period=sc.period)
+                                  period=sc.period, period_from=sc.period_from)
             except Exception as e:
                 if type(e).__name__ in ("TraCIException", "FatalTraCIError"):
                     raise UserError(f"SUMO failed during the run: {e}") from None

@@ -23,7 +23,8 @@ from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_equation, check_vclass, load_equation
 from sumo_drvpw.sim.scenario_paths import config_files, sumo_file_list
 from sumo_drvpw.sim.scenario_values import (AIR_RANGES, MASS_MAX_KG, WIND_MAX_MPS, _bool, _check_table,
-                                            _choice, _in_range, _num, _path, _share, _strlist, _strmap, sumo_time)
+                                            _choice, _in_range, _num, _path, _share, _strlist, _strmap,
+                                            sumo_seconds, sumo_time)  # noqa: F401 (sumo_seconds: public here too)
 from sumo_drvpw.sim.sumo_start import NO_RUN_OPTIONS
 from sumo_drvpw.sim.vtype_energy import VTYPE_ENERGY, named_in_table, placeholder, reserved_name
 from sumo_drvpw.errors import UserError
@@ -155,6 +156,8 @@ class Scenario:
     transportable_mass: bool = True
     #: edgeData interval [s] (None: one interval for the whole run)
     period: float | None = None
+    #: where the period was given, for its messages (the file's key, or the run's)
+    period_from: str = "outputs.period"
     #: also run SUMO's emissions device and put its per-vehicle totals beside ours
     sumo_device: bool = False
     #: the SUMO config or the SUMO options (sumo.options, a run's options) enable the
@@ -334,7 +337,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
             times[k] = sumo_time(sumo[k], where, f"sumo.{k}", positive=(k == "step_length"))
             lo, hi = SUMO_TIME_RANGES[k]  # what SUMO refuses, or cannot hold, in words of the key
             if not lo <= times[k] <= hi:
-                raise UserError(f"{where}: 'sumo.{k}' must be in [{lo:g}, {hi:g}] s, got {sumo[k]!r}")
+                what = f"the run's {k}" if k in overrides else f"{where}: 'sumo.{k}'"
+                raise UserError(f"{what} must be in [{lo:g}, {hi:g}] s, got {sumo[k]!r}")
             args += [f"--{k.replace('_', '-')}", repr(times[k])]
         elif k.replace("_", "-") in cfgvals:
             times[k] = sumo_time(cfgvals[k.replace("_", "-")], f"SUMO config {cfg}",
@@ -350,7 +354,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     for i, a in enumerate(args):  # options after which SUMO runs no simulation (or waits for a client)
         name, _, val = str(a).partition("=")
         val = val or (str(args[i + 1]) if i + 1 < len(args) else "")
-        if name.startswith("-") and name.lstrip("-") in NO_RUN_OPTIONS and not (name == "--remote-port" and val == "0"):
+        harmless = (name == "--remote-port" and val == "0") or (name == "--num-clients" and val == "1")  # the defaults
+        if name.startswith("-") and name.lstrip("-") in NO_RUN_OPTIONS and not harmless:
             raise UserError(f"{where}: sumo.options: {name} {NO_RUN_OPTIONS[name.lstrip('-')]}: the plug-in books a "
                             "simulation SUMO runs itself; leave it out")
     args = [x for a in args for x in (a.split("=", 1) if str(a).startswith("--mesosim=") else [a])]  # as "--mesosim v"
@@ -507,4 +512,5 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         sumo_device=device_wanted(_bool(out.get("sumo_device", device_on), where, "outputs.sumo_device"),
                                   device_on, given_device, where), sumo_device_in_config=device_on,
         period=None if out.get("period") is None else _num(out["period"], where,
-                                                             "outputs.period", positive=True))
+                                                             "outputs.period", positive=True),
+        period_from="the run's period" if "period" in overrides else f"{where}: outputs.period")

@@ -28,7 +28,7 @@ def run_loop(conn, net: Network, eqset: EquationSet, ledger: Ledger, physics: Ph
 
 
 def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool = False,
-               period: float | None = None) -> dict:
+               period: float | None = None, period_from: str = "outputs.period") -> dict:
     """Call ``simulationStep`` and book each step until ``end`` [s] (None: until
     ``getMinExpectedNumber`` is 0).
 
@@ -38,7 +38,8 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
     end : simulation end time [s]
     progress : tqdm progress bar on a TTY
     period : edgeData interval [s]: edge totals are kept every ``period`` from the first step's
-        time (the run's begin), as SUMO's own edgeData intervals
+        time (the run's begin), as SUMO's own edgeData intervals; ``period_from`` names where it
+        was given, for the message when it is no whole number of steps
 
     Returns ``{"interrupted": bool, "end_time_s": t, "step_length_s": Δt,
     "step_method": "euler"|"ballistic"}``; Ctrl-C stops the loop cleanly so that every
@@ -48,7 +49,7 @@ def step_until(conn, stepper: Stepper, end: float | None = None, progress: bool 
     if period and dt and (period < dt - 1e-9 or abs(period / dt - round(period / dt)) > 1e-6):
         from sumo_drvpw.errors import UserError
 
-        raise UserError(f"edgeData period {period:g} s (outputs.period): an interval is a whole number of the run's {dt:g}-s "
+        raise UserError(f"{period_from}: edgeData period {period:g} s: an interval is a whole number of the run's {dt:g}-s "
                         f"steps (its edges' totals are kept at a step); give {max(1, round(period / dt)) * dt:g} s")
     interrupted = False
     bar, steps0 = None, ledger.steps

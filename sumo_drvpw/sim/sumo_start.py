@@ -22,7 +22,7 @@ NO_RUN_OPTIONS = {"help": "prints SUMO's help and exits", "?": "prints SUMO's he
                   "save-configuration": "writes a config and exits", "C": "writes a config and exits",
                   "save-template": "writes a template and exits", "save-schema": "writes a schema and exits",
                   "remote-port": "makes SUMO wait for a TraCI client (but 0, no server)",
-                  "num-clients": "makes SUMO wait for TraCI clients"}
+                  "num-clients": "makes SUMO wait for TraCI clients (but 1)"}
 
 
 class NewRun(UserError):
