@@ -163,7 +163,8 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
     ``<eq>_teleport_kinetic_j``, ``<eq>_teleport_potential_j`` (apart from the driving energy).
     An equation that booked nothing on an edge in an interval (none of its vehicles drove
     there) has no attributes on it, as SUMO leaves out what it did not measure: a 0 would
-    read as a free edge to a router taking it as a weight.
+    read as a free edge to a router taking it as a weight (vehicles that only stood there:
+    their chain's idling or auxiliary energy in its chain attributes, no driving ones).
     """
     from xml.sax.saxutils import quoteattr
 
