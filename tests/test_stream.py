@@ -290,7 +290,7 @@ def test_cli_compare_report_streamed(logs, tmp_path):
 
 @pytest.mark.parametrize("argv,msg", [
     (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler goes with --engine dask"),
-    (["--engine", "dask", "--workers", "0"], "--workers must be at least 1"),
+    (["--engine", "dask", "--workers", "0"], "--workers must be from 1 to 256"),
 ])
 def test_engine_flag_errors_exit_2(logs, tmp_path, capsys, argv, msg):
     rc = cli_main(["calibrate", str(logs["parquet"]), "--vehicle", "prius3",
