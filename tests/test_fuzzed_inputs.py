@@ -192,6 +192,7 @@ FLAGS = {  # name → (arguments, words); a second fuzzing helper's flags and fi
     "a billion workers": (["calibrate", "LOG", "--engine", "dask", "--workers", "1000000000", "--out", "o.toml"],
                           ("--workers", "256")),
     "FCD not there": (["fcd", "nope.xml", "--out", "o"], ("FCD file not found: nope.xml",)),
+    "FCD not XML": (["fcd", "junk.xml", "--out", "o"], ("junk.xml: not valid XML",)),  # (it said "give --net")
     "FCD position 1e308": (["fcd", "POS", "--net", str(NET), "--out", "o"], ("attribute pos", "1e+308")),
     "proxy correlation inf": (["diagnose", "LOG", "--vehicle", "prius3", "--proxy-corr", "inf", "--out", "o"],
                               ("proxy_corr",)),
@@ -208,6 +209,7 @@ def test_a_flag_or_file_is_refused_in_one_line(name, tmp_path, capsys, monkeypat
     args, words = FLAGS[name]
     monkeypatch.chdir(tmp_path)
     pos = _fcd_with_pos(tmp_path / "pos.xml", "1e308")
+    (tmp_path / "junk.xml").write_text("not XML at all\n", encoding="utf-8")
     elev = tmp_path / "elev.csv"  # one elevation of 1e300 among good ones: the grade and the fit moved silently
     elev.write_text("time_s,speed_mps,elevation_m,trip_id\n" + "".join(
         f"{t},{min(t, 10)},{1e300 if t == 20 else 100 + t},a\n" for t in range(40)), encoding="utf-8")

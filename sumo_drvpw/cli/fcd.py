@@ -68,8 +68,10 @@ def main(args: argparse.Namespace) -> int:
     if args.scenario is None and args.net is None:
         from pathlib import Path
 
-        from sumo_drvpw.sim.fcd_read import configs_beside, configs_writing, fcd_parts, header_options
+        from sumo_drvpw.sim.fcd_read import (configs_beside, configs_writing, fcd_parts, header_options,
+                                             iter_fcd_blocks)
 
+        next(iter(iter_fcd_blocks(args.fcd)), None)  # a file it cannot read says so first, naming it
         msg = "give --net (the network of the FCD) or --scenario"
         # a header-less FCD (Parquet, CSV): the SUMO configs beside it that may have run it
         if Path(args.fcd).is_file() and not fcd_parts(args.fcd) and header_options(args.fcd) is None:
