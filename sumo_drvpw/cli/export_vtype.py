@@ -25,6 +25,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.fileio import write_text
+    from sumo_drvpw.model.constants import MASS_MAX_KG
     from sumo_drvpw.model.equations import load_equation
     from sumo_drvpw.sim.export import energy_vtype_xml
 
@@ -45,8 +46,8 @@ def main(args: argparse.Namespace) -> int:
         check_vclass(args.vclass, "export-vtype", "--vclass")
     eq = load_equation(args.equation)
     mass, area = args.mass, None
-    if mass is not None and not 0 < mass <= 1e5:  # (a vehicle file's limit)
-        raise UserError(f"--mass {mass:g}: a vehicle's mass in kg, > 0 and at most 1e5")
+    if mass is not None and not 0 < mass <= MASS_MAX_KG:
+        raise UserError(f"--mass {mass:g}: a vehicle's mass in kg, > 0 and at most {MASS_MAX_KG:g}")
     if args.vehicle:
         from sumo_drvpw.model.vehicles import load_vehicle
 

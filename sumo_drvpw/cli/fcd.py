@@ -59,15 +59,13 @@ def main(args: argparse.Namespace) -> int:
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.sim.fcd import process_fcd
 
-    from pathlib import Path as _P
+    from pathlib import Path
 
-    if not any(c in str(args.fcd) for c in "*?[") and not _P(args.fcd).exists():  # (a glob: said by the reader)
+    if not any(c in str(args.fcd) for c in "*?[") and not Path(args.fcd).exists():  # (a glob: said by the reader)
         raise UserError(f"FCD file not found: {args.fcd}")
     if args.scenario is None and (args.net is None or args.vtypes is None):
         _recorded_inputs(args)
     if args.scenario is None and args.net is None:
-        from pathlib import Path
-
         from sumo_drvpw.sim.fcd_read import (configs_beside, configs_writing, fcd_parts, header_options,
                                              iter_fcd_blocks)
 

@@ -18,6 +18,7 @@ from sumo_drvpw.data.paths import expand_paths as _expand_paths, parquet_frame
 from sumo_drvpw.data.resolution import accel_counts, accel_derivation, accel_window
 from sumo_drvpw.data.conditions import derive_conditions
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.constants import MASS_MAX_KG
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.data.trips import (derivative, grade_from_elevation,  # noqa: F401  (re-exported)
                                    per_trip_rolling_mean as _per_trip_rolling_mean,
@@ -35,8 +36,7 @@ NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "eleva
            "mg2_speed_rpm", "mg2_torque_nm", "motor_torque_nm", "motor_speed_rpm",
            "battery_voltage_v", "battery_current_a", "yaw_rate_rps",
            "battery_discharge_energy_j", "battery_charge_energy_j")
-REQUIRED = ("time_s", "speed_mps")
-FLAGS = ("brake", "reverse")
+REQUIRED, FLAGS = ("time_s", "speed_mps"), ("brake", "reverse")
 #: Columns the reader derives; every other column is an extra signal.
 DERIVED = ("trip_id", "time_s", "speed_mps", "accel_mps2", "grade_rad", "wind_mps",
            "air_density_kgm3", "mass_kg", "brake", "reverse", "dt_s")
@@ -45,7 +45,7 @@ SPEED_MAX_MPS = 100.0
 SPEED_UNITS = {"m/s": 1.0, "km/h": 1 / 3.6, "mph": 0.44704}
 #: Plausible ranges of optional physical columns: (low, high, unit, hint when outside).
 RANGES = {
-    "mass_kg": (1.0, 1.0e5, "kg", "a vehicle mass is > 0 and at most 100 t"),
+    "mass_kg": (1.0, MASS_MAX_KG, "kg", "a vehicle mass is > 0 and at most 100 t"),
     "pressure_kpa": (10.0, 200.0, "kPa", "ambient pressure in kPa (101.3 at sea level; in Pa? divide by 1000)"),
     "ambient_c": (-90.0, 80.0, "°C", "ambient temperature in °C (in K? subtract 273.15)"),
     "air_density_kgm3": (0.1, 2.0, "kg/m³", "air density is about 1.2 kg/m³"),

@@ -49,17 +49,23 @@ def drag_against_vehicle(eq, vehicle, rho_kgm3: float = RHO_DEFAULT) -> str | No
     c = float(eq.terms[term])
     cda = 2.0 * c / rho_kgm3 if term == "aero" else c
     ratio = cda / ref[0]
-    if 1.0 / DRAG_RATIO_MAX <= ratio <= DRAG_RATIO_MAX:
+    return _kept(eq, "vehicle_drag", ratio, DRAG_RATIO_MAX, lambda: (
+        f"{term} = {c:.4g} reads as C_d·A = {cda:.3g} m² at ρ = {rho_kgm3:.4g} kg/m³, "
+        f"{ratio:.2g} × the {ref[0]:.3g} m² of {_named(vehicle)} "
+        f"({ref[1]}): not this car's drag (outside 1/{DRAG_RATIO_MAX:g} … {DRAG_RATIO_MAX:g}×); "
+        "the data do not tell the drag apart from the other terms (a short log, a narrow "
+        "speed range?) — check the equation before using it at other speeds"),
+        term=term, coefficient=c, cda_m2=cda, declared_cda_m2=ref[0], declared_from=ref[1])
+
+
+def _kept(eq, key: str, ratio: float, most: float, note, **fields) -> str | None:
+    """None when ``ratio`` lies within 1/``most`` … ``most``; else the ``note()`` text, kept
+    with ``fields``, the ratio and itself in ``eq.provenance["physical"][key]``."""
+    if 1.0 / most <= ratio <= most:
         return None
-    note = (f"{term} = {c:.4g} reads as C_d·A = {cda:.3g} m² at ρ = {rho_kgm3:.4g} kg/m³, "
-            f"{ratio:.2g} × the {ref[0]:.3g} m² of {_named(vehicle)} "
-            f"({ref[1]}): not this car's drag (outside 1/{DRAG_RATIO_MAX:g} … {DRAG_RATIO_MAX:g}×); "
-            "the data do not tell the drag apart from the other terms (a short log, a narrow "
-            "speed range?) — check the equation before using it at other speeds")
-    eq.provenance.setdefault("physical", {})["vehicle_drag"] = {
-        "term": term, "coefficient": c, "cda_m2": cda, "declared_cda_m2": ref[0],
-        "declared_from": ref[1], "ratio": ratio, "note": note}
-    return note
+    text = note()
+    eq.provenance.setdefault("physical", {})[key] = {**fields, "ratio": ratio, "note": text}
+    return text
 
 
 #: a fitted ``roll`` coefficient carries, beside the tyres' c_r, the losses of a drivetrain
@@ -93,13 +99,9 @@ def roll_against_vehicle(eq, vehicle) -> str | None:
         return None
     c = float(eq.terms["roll"])
     ratio = c / ref if ref > 0 else float("inf")
-    if 1.0 / ROLL_RATIO_MAX <= ratio <= ROLL_RATIO_MAX:
-        return None
-    note = (f"roll = {c:.4g} reads as a rolling coefficient {ratio:.2g} × the {ref:.3g} of "
-            f"{_named(vehicle)} ({src}): not this car's rolling "
-            f"resistance (outside 1/{ROLL_RATIO_MAX:g} … {ROLL_RATIO_MAX:g}×, drivetrain losses included); the "
-            "term carries what the other terms leave (the drag, a speed-dependent loss, a narrow speed range?) "
-            "— SUMO books it at every speed")
-    eq.provenance.setdefault("physical", {})["vehicle_roll"] = {
-        "coefficient": c, "declared": ref, "declared_from": src, "ratio": ratio, "note": note}
-    return note
+    return _kept(eq, "vehicle_roll", ratio, ROLL_RATIO_MAX, lambda: (
+        f"roll = {c:.4g} reads as a rolling coefficient {ratio:.2g} × the {ref:.3g} of "
+        f"{_named(vehicle)} ({src}): not this car's rolling "
+        f"resistance (outside 1/{ROLL_RATIO_MAX:g} … {ROLL_RATIO_MAX:g}×, drivetrain losses included); the "
+        "term carries what the other terms leave (the drag, a speed-dependent loss, a narrow speed range?) "
+        "— SUMO books it at every speed"), coefficient=c, declared=ref, declared_from=src)

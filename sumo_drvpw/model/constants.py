@@ -5,6 +5,8 @@ SI inside: m, s, kg, rad, W, J. Units appear in names only where data leaves the
 
 #: Standard gravity used by the seed paper and by VSP (Jiménez-Palacios 1999) [m/s²].
 G = 9.81
+#: the largest vehicle mass any input may give [kg] (100 t: a road train; beyond it, a unit error)
+MASS_MAX_KG = 1.0e5
 #: Default air density at 20 °C, 101.325 kPa (also SUMO's Energy model) [kg/m³].
 RHO_DEFAULT = 1.2041
 #: Reference ambient temperature of the ``cold`` term factor, that of RHO_DEFAULT [°C].

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.constants import MASS_MAX_KG, G
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.model.terms import CATEGORIES, Inputs, parse_term, term_matrix
@@ -282,7 +282,7 @@ def builtin_names() -> list[str]:
 #: the basis; β on mass-free bases stay below 1e5 even for 40 t trucks)
 COEF_MAX = 1.0e6
 #: plausible vehicle mass for equation.mass_kg and reference_mass_kg [kg]
-MASS_RANGE_KG = (1.0, 1.0e5)
+MASS_RANGE_KG = (1.0, MASS_MAX_KG)
 
 
 def _floats(table: dict, where: str) -> dict[str, float]:

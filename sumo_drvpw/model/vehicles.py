@@ -49,7 +49,7 @@ from pathlib import Path
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
-from sumo_drvpw.model.constants import FUELS
+from sumo_drvpw.model.constants import FUELS, MASS_MAX_KG
 
 #: built-in vehicles: package data (importlib.resources; a regular install unpacks them)
 VEHICLE_DIR = Path(str(resources.files("sumo_drvpw.model") / "builtin" / "vehicles"))
@@ -94,7 +94,7 @@ class Vehicle:
 #: Physical ranges of vehicle-file numbers, "table.key" → (low, high) with low < value ≤ high
 #: (zero or negative is refused wherever physics forbids it). Units as in the key names.
 NUMBER_RANGES = {
-    "vehicle.mass_kg": (0.0, 1.0e5),
+    "vehicle.mass_kg": (0.0, MASS_MAX_KG),
     "body.drag_coefficient": (0.0, 3.0),
     "body.frontal_area_m2": (0.0, 30.0),
     "body.rolling_coefficient": (0.0, 0.1),

@@ -19,10 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from sumo_drvpw.model.air import air_density
-from sumo_drvpw.model.constants import KELVIN, P_STD_KPA, RHO_DEFAULT
+from sumo_drvpw.model.constants import KELVIN, MASS_MAX_KG, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_equation, check_vclass, load_equation
 from sumo_drvpw.sim.scenario_paths import config_files, sumo_file_list
-from sumo_drvpw.sim.scenario_values import (AIR_RANGES, MASS_MAX_KG, WIND_MAX_MPS, _bool, _check_table,
+from sumo_drvpw.sim.scenario_values import (AIR_RANGES, WIND_MAX_MPS, _bool, _check_table,
                                             _choice, _in_range, _num, _path, _share, _strlist, _strmap,
                                             sumo_seconds, sumo_time)  # noqa: F401 (sumo_seconds: public here too)
 from sumo_drvpw.sim.sumo_start import NO_RUN_OPTIONS

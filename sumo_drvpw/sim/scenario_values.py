@@ -10,7 +10,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.equations import Equation
 
 
-MASS_MAX_KG, WIND_MAX_MPS = 1.0e5, 100.0  # a scenario's largest mass, wind (a vehicle file's; gusts)
+WIND_MAX_MPS = 100.0  # a scenario's strongest steady wind [m/s] (beyond the strongest gusts measured)
 
 
 def _num(v, where: str, key: str, positive: bool = False, most: float = math.inf) -> float:
