@@ -15,6 +15,7 @@ import signal
 import sys
 import warnings
 
+from sumo_drvpw.cli._parser import _Parser
 from sumo_drvpw.errors import NoDrivingPower, OutputExists, UserError
 
 #: sub-command → (module, one-line help)
@@ -34,11 +35,6 @@ COMMANDS = {
     "dynamics": ("sumo_drvpw.cli.dynamics", "driving dynamics of drive logs, as a SUMO run reports its "
                  "trajectories' (EU RDE figures, accelerations by speed, a vType acceleration profile)"),
 }
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # exit 2 with one line, as for every other bad input
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:

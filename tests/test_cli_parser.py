@@ -1,0 +1,70 @@
+"""The command line's parser (sumo_drvpw/cli/_parser.py): an option holding one value given
+twice with different values is refused in one line, exit 2 (argparse keeps the last one
+silently: `run --end 600 … --end 900` ran 900 s while the user read 600 in the command)."""
+
+import argparse
+
+import pytest
+
+from sumo_drvpw.cli import build_parser, main
+
+
+def _single_valued_options():
+    """(command, option, two values that parse) for every store option of every command."""
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    out = []
+    for name, p in sub.choices.items():
+        for a in p._actions:
+            if not a.option_strings or not isinstance(a, argparse._StoreAction) or a.nargs not in (None, 1):
+                continue
+            if a.choices:
+                if len(list(a.choices)) < 2:
+                    continue
+                values = [str(c) for c in list(a.choices)[:2]]
+            else:
+                values = ["1", "2"]
+            try:
+                [a.type(v) if a.type else v for v in values]
+            except (TypeError, ValueError, argparse.ArgumentTypeError):
+                continue
+            out.append((name, a.option_strings[-1], values))
+    return out
+
+
+CASES = _single_valued_options()
+
+
+def test_the_introspection_finds_the_options_users_repeat():
+    opts = {(c, o) for c, o, _ in CASES}
+    assert {("run", "--end"), ("fcd", "--period"), ("calibrate", "--out")} <= opts
+    assert len(CASES) > 50
+
+
+@pytest.mark.parametrize("command,option,values", CASES, ids=[f"{c} {o}" for c, o, _ in CASES])
+def test_an_option_given_twice_differently_is_refused_in_one_line(command, option, values, capsys, tmp_path):
+    with pytest.raises(SystemExit) as e:
+        build_parser().parse_args([command, option, values[0], option, values[1]])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{option} given twice" in err, err
+    assert f"{option} {values[0]}" in err and f"{option} {values[1]}" in err
+
+
+def test_the_same_value_twice_and_a_flag_twice_are_no_contradiction(capsys, tmp_path):
+    out = tmp_path / "o"
+    rc = main(["synth", "--out", str(out / "a.parquet"), "--minutes", "0.05", "--minutes", "0.05",
+               "--seed", "3", "--seed", "3"])
+    assert rc == 0, capsys.readouterr().err
+    assert (out / "a.parquet").exists()
+    args = build_parser().parse_args(["calibrate", "x.parquet", "--out", "o", "--force", "--force"])
+    assert args.force is True
+
+
+def test_a_refused_repetition_writes_nothing(capsys, tmp_path):
+    out = tmp_path / "o"
+    with pytest.raises(SystemExit) as e:
+        main(["synth", "--out", str(out / "a.parquet"), "--minutes", "0.05", "--minutes", "0.1"])
+    assert e.value.code == 2
+    assert "--minutes given twice (--minutes 0.05, then --minutes 0.1)" in capsys.readouterr().err
+    assert not out.exists()
