@@ -370,10 +370,11 @@ def _driving_power_hint(e: NoDrivingPower, args) -> str:
         return ("; the chain needs a road load to sit on: give it with --equation (vsp_spec: the "
                 "vehicle file's [body]; roadload_spec: its published A + B·v + C·v²; or an equation "
                 "calibrated on logs with a driving power)")
-    if "fuel" in e.targets and target in (None, "wheel"):
-        return ("; calibrate its fuel chain with `sumo-drvpw calibrate LOG --vehicle V --target fuel "
-                "--equation vsp_spec|roadload_spec|EQ --out CHAIN.toml`, then compare or diagnose with "
-                "--target fuel --equation CHAIN.toml")
+    for kind in ("fuel", "battery"):
+        if kind in e.targets and target in (None, "wheel"):
+            return (f"; calibrate its {kind} chain with `sumo-drvpw calibrate LOG --vehicle V --target {kind} "
+                    "--equation vsp_spec|roadload_spec|EQ --out CHAIN.toml`, then compare or diagnose with "
+                    f"--target {kind} --equation CHAIN.toml")
     return ""
 
 

@@ -42,6 +42,7 @@ import re
 import numpy as np
 
 from sumo_drvpw.model.constants import RPM
+from sumo_drvpw.data.counters import COUNTERS
 from sumo_drvpw.errors import NoDrivingPower, UserError
 
 
@@ -142,13 +143,16 @@ def measured_power(log, vehicle=None, window_s: float | None = None) -> tuple[np
     for f, cols in _each_file(log, df):  # a file that has none is refused, as read alone
         if not any(all(c in cols for c in s) for s in POWER_SOURCES):
             flows = [c for c in flow_columns(sorted(_header_of(f) | cols)) if not c.endswith("_pct")]
+            counters = all(c in (_header_of(f) | cols) for c in COUNTERS)
             raise NoDrivingPower(
                 f"{f}: no measured power: the log needs 'power_w', or the power-split columns "
                 f"({', '.join(POWER_SPLIT_COLUMNS)}), or 'motor_torque_nm', or "
                 "'battery_voltage_v' and 'battery_current_a'"
                 + (f"; it holds {', '.join(flows[:3])}, the engine's fuel or air flow: a fuel-chain target, "
-                   "calibrated on a road-load equation" if flows else ""),
-                targets=("fuel",) if flows else ())
+                   "calibrated on a road-load equation" if flows else "")
+                + (f"; it holds {' and '.join(COUNTERS)}, the battery's energy counters: a battery-chain "
+                   "target, calibrated on a road-load equation" if counters else ""),
+                targets=(("fuel",) if flows else ()) + (("battery",) if counters else ()))
     codes = trip_codes_of(df["trip_id"])
     n = int(codes.max()) + 1
     pick = np.full(n, -1)
