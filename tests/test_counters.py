@@ -372,3 +372,38 @@ def test_a_capacity_without_a_mapped_soc_is_refused(tmp_path):
     m.write_text(m.read_text(encoding="utf-8").replace('name = "soc_pct"', 'name = "charge_pct"'), encoding="utf-8")
     with pytest.raises(UserError, match="options.soc_capacity_kwh estimates .* map a source column to 'soc_pct'"):
         load_mapping(m)
+
+
+def test_a_one_sample_soc_glitch_is_read_as_missing_not_as_energy(tmp_path):
+    """A BMS's SOC read wrong for one sample (the RSK Twizy's T3_05_25_2021_04: 14.72 → 0.02
+    → 13.32 % in 2 s, 0.9 kWh out and back in of a 6.1-kWh pack: 3 MW) is no energy: the
+    reading departs from both neighbours the same way, faster than 10 C could move any
+    traction battery and by more than 5 of the SOC's steps, so it is read as missing and
+    noted; the counters then book the SOC's change around it. A step dithering between
+    neighbours (one step out and back) stays, as does a lasting jump (the BMS's own
+    correction, which the trip's net energy keeps)."""
+    from sumo_drvpw.data.adapters import read
+
+    def imported(socs):
+        t = np.arange(len(socs), dtype=float)
+        rows = "\n".join(f"{a:g},20,{s}" for a, s in zip(t, socs))
+        f = tmp_path / "soc.csv"
+        f.write_text("t,kmh,soc\n" + rows + "\n")
+        m = tmp_path / "m.toml"
+        m.write_text('[options]\nsoc_capacity_kwh = 6.1\n[columns.t]\nname = "time_s"\n'
+                     '[columns.kmh]\nname = "speed_mps"\nunit = "km/h"\n[columns.soc]\nname = "soc_pct"\n')
+        return read("columns", [f], columns=m)
+
+    socs = [14.80, 14.78, 14.76, 14.74, 14.72, 0.02, 13.32, 13.30, 13.28]
+    df, rep = imported(socs)
+    d, c = (df[k].to_numpy() for k in COUNTERS)
+    cap = 6.1 * KWH / 100.0
+    assert c[-1] == pytest.approx(0.0, abs=1e-6)                      # nothing flowed in
+    assert d[-1] - d[0] == pytest.approx((14.80 - 13.28) * cap, rel=1e-9)
+    assert np.isnan(d[5]) and np.isnan(c[5])
+    notes = " ".join(n for r in rep["files"] for n in r["notes"])
+    assert "soc_pct" in notes and "data row 5" in notes and "0.02" in notes
+    dither, _ = imported([50.0, 50.0, 51.0, 50.0, 50.0, 49.0, 49.0])  # whole per cent, one step out and back
+    assert np.isfinite(dither[COUNTERS[0]]).all()
+    jump, _ = imported([92.14, 92.12, 92.10, 89.76, 89.74, 89.72])   # a lasting BMS correction: kept
+    assert jump[COUNTERS[0]].iloc[-1] == pytest.approx((92.14 - 89.72) * cap, rel=1e-9)

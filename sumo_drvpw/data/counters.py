@@ -244,6 +244,43 @@ def describe(time_s, codes, discharged_j, charged_j) -> str:
 
 #: a trip whose SOC readings leave more than this [s] at its ends unread is noted
 SOC_UNREAD_NOTE_S = 10.0
+#: a SOC reading is a misread only when it departs from both neighbours by more than this
+#: many of the SOC's steps too (a value dithering by a step or two between readings stays)
+SOC_SPIKE_STEPS = 5.0
+
+
+def _without_soc_spikes(soc: np.ndarray, trips: np.ndarray, time: np.ndarray, index, report: dict) -> np.ndarray:
+    """``soc`` [%] with its one-sample misreads NaN, noted with the first's data row: a reading
+    that departs from both its neighbours in the same trip the same way, each by more than
+    the SOC's change at :data:`~sumo_drvpw.model.constants.SOC_RATE_MAX_C` over that interval
+    and by more than :data:`SOC_SPIKE_STEPS` of its steps (a BMS read wrong once: 14.72 →
+    0.02 → 13.32 % in 2 s is 3 MW out and back in of a 6.1-kWh pack). A lasting jump (the
+    BMS correcting its estimate) is no spike and is kept."""
+    from sumo_drvpw.model.constants import SOC_RATE_MAX_C
+
+    ok = np.flatnonzero(np.isfinite(soc))
+    if len(ok) < 3:
+        return soc
+    moves = np.abs(np.diff(soc[ok]))
+    step = _step(moves[moves > 0])
+    s, t, tr = soc[ok], time[ok], trips[ok]
+    d_prev, d_next = s[1:-1] - s[:-2], s[1:-1] - s[2:]
+    rate = SOC_RATE_MAX_C * 100.0 / 3600.0  # [% per s]
+    lim_prev = np.maximum(rate * (t[1:-1] - t[:-2]), SOC_SPIKE_STEPS * step)
+    lim_next = np.maximum(rate * (t[2:] - t[1:-1]), SOC_SPIKE_STEPS * step)
+    spike = ((np.sign(d_prev) == np.sign(d_next)) & (np.abs(d_prev) > lim_prev) & (np.abs(d_next) > lim_next)
+             & (tr[1:-1] == tr[:-2]) & (tr[1:-1] == tr[2:]))
+    if not spike.any():
+        return soc
+    rows = ok[1:-1][spike]
+    k = int(np.flatnonzero(spike)[0]) + 1  # the first, among the readings
+    report["notes"].append(
+        f"soc_pct read as missing on {len(rows)} sample(s) that leave both neighbours faster than "
+        f"{SOC_RATE_MAX_C:g} C moves any traction battery (a misread, not energy); the first at data row "
+        f"{index[ok[k]]}: {s[k - 1]:g} → {s[k]:g} → {s[k + 1]:g} %")
+    out = soc.copy()
+    out[rows] = np.nan
+    return out
 
 
 def soc_counters(df: pd.DataFrame, report: dict, capacity_kwh: float) -> pd.DataFrame:
@@ -264,10 +301,11 @@ def soc_counters(df: pd.DataFrame, report: dict, capacity_kwh: float) -> pd.Data
         i = int(np.flatnonzero(bad)[0])
         raise UserError(f"{report['file']}: column 'soc_pct' is {soc[i]:g} at data row {df.index[i]}: a state "
                         "of charge is 0–100 % (options.soc_capacity_kwh reads it in %)")
-    e = soc * (capacity_kwh * 3.6e6 / 100.0)
-    dis, chg = np.full(len(df), np.nan), np.full(len(df), np.nan)
     trips = df["trip_id"].astype(str).to_numpy() if "trip_id" in df else np.zeros(len(df), str)
     time = df["time_s"].to_numpy(float)
+    soc = _without_soc_spikes(soc, trips, time, df.index, report)
+    e = soc * (capacity_kwh * 3.6e6 / 100.0)
+    dis, chg = np.full(len(df), np.nan), np.full(len(df), np.nan)
     unread = []  # (trip, seconds before its first and after its last SOC reading)
     for t in dict.fromkeys(trips.tolist()):
         own = np.flatnonzero(trips == t)

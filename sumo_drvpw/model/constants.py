@@ -61,3 +61,9 @@ FUELS = {
 #: fraction of O₂ in dry air 0.2314: 14.59 (textbooks: 14.6–14.7). A petrol engine's
 #: mass air flow over it is its fuel flow at λ = 1.
 AFR_STOICH_GASOLINE = (0.865 / 12.011 + (1 - 0.865) / 1.008 / 4) * 31.998 / 0.2314
+
+#: The fastest a traction battery's state of charge can move [C: its full 0–100 % per hour].
+#: Cars' packs deliver up to 2–5 C (a 13-kW Twizy on 6.1 kWh: 2 C; high-power packs with 0–100
+#: km/h in 2–3 s: about 10 C); a SOC reading that leaves both neighbours faster than this is
+#: a misread, not energy (data/counters.py).
+SOC_RATE_MAX_C = 10.0
