@@ -318,3 +318,18 @@ def test_fcd_replay_with_vtype_energy_books_as_the_live_run(tmp_path):
     assert list(a.index) == list(b.index) == ["vtype_energy.ebus", "vtype_energy.ecar", "vtype_energy.massonly"]
     np.testing.assert_allclose(b.values, a.values, rtol=1e-3)
     assert live["assumptions"]["vtype_energy"]["booked"].keys() == {"ebus", "ecar", "massonly"}
+
+
+def test_export_vtype_repeats_the_chain_s_calibration_warnings(tmp_path, capsys):
+    """A chain calibrated with an IMPLAUSIBLE efficiency (the RSK Twizy's on a guessed VSP road
+    load: η_t at its bound 1) becomes a vType whose propulsionEfficiency is that value: the
+    export says so, as compare, diagnose and a SUMO run do, instead of writing it silently."""
+    eq = tmp_path / "eq.toml"
+    eq.write_text('[equation]\nname = "t"\n[terms]\nacc = 1.1\nm_v1 = 0.118\naero_rho = 0.9\n'
+                  '[chain]\npredicts = "battery"\ntraction_efficiency = 1.0\nrecuperation_efficiency = 0.6\n'
+                  'aux_power_w = 1000.0\n[chain.provenance]\nwarnings = ["energy chain traction_efficiency = 1: '
+                  'IMPLAUSIBLE for a BEV"]\n')
+    out = tmp_path / "t.add.xml"
+    assert cli_main(["export-vtype", str(eq), "--mass", "549", "--id", "t", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert out.exists() and "warning: t: its chain's calibration warned: energy chain traction_efficiency = 1" in said

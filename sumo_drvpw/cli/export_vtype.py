@@ -68,4 +68,6 @@ def main(args: argparse.Namespace) -> int:
     print(f"wrote vType '{args.id}' ({model[0]}) from equation '{eq.name}' to {args.out}")
     for m in missing:
         print(f"  not expressible in SUMO's {model[1]}: {m}")
+    for w in (getattr(eq.chain, "provenance", None) or {}).get("warnings", []):  # as compare and run say
+        print(f"warning: {eq.name}: its chain's calibration warned: {w}")
     return 0
