@@ -319,7 +319,7 @@ def note_counts(counts: dict) -> None:
         print(f"note: {n} speed sample(s) in [-{tol:g}, 0) m/s clipped to 0 (standstill sensor noise)")
     if counts.get("speed_unit"):
         print(f"note: speed_mps read in {counts['speed_unit']}")
-    if "widened" in str(counts.get("accel_source", "")):
+    if any(w in str(counts.get("accel_source", "")) for w in ("widened", "held between updates")):
         print(f"note: acceleration {counts['accel_source'].split('derived: ', 1)[-1]}")
     parts = [f"{counts[k]} row(s) {what}" for k, what in (
         ("accel_derived_rows", "without accel_mps2 took the acceleration derived from the speed"),

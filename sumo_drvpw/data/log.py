@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.data.paths import expand_paths as _expand_paths, parquet_frame
-from sumo_drvpw.data.resolution import accel_counts, accel_derivation, accel_window
+from sumo_drvpw.data.resolution import accel_counts, accel_derivation, accel_speed, accel_window
 from sumo_drvpw.data.conditions import derive_conditions
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import MASS_MAX_KG
@@ -550,13 +550,13 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
         win, q = accel_window(opt, v, trip_codes)
         own = np.ones(len(win), bool) if lacking is None else lacking[start]  # trips derived
         win = np.where(own, win, opt.accel_window_s)  # a trip with the column: as read alone
-        win_seg = win[trip_codes[_trip_starts(seg)]]
-        derived = derivative(v, t, seg, win_seg)
+        win_seg, (vd, hold) = win[trip_codes[_trip_starts(seg)]], accel_speed(opt, v, t, trip_codes, q)
+        derived = derivative(vd, t, seg, win_seg)
         df["accel_mps2"] = derived if lacking is None else np.where(lacking, derived, df["accel_mps2"].to_numpy(float))
         deriv = (seg, win_seg)
         n_derived = len(df) if lacking is None else int(lacking.sum())
         counts.update(accel_counts(accel_derivation(opt, win[own], q[own], len(df) - n_derived, n_derived,
-                                                     med[own])))
+                                                     med[own], hold[own])))
     else:
         counts.update(accel_counts(accel_derivation(opt, [], [], len(df), 0)))
         deriv = (seg, np.full(int(seg[-1]) + 1, opt.accel_window_s))

@@ -47,14 +47,19 @@ def implied_acceleration(v: np.ndarray, t: np.ndarray, trip: np.ndarray, horizon
 
 
 def check_speed_unit(v: np.ndarray, t: np.ndarray, trip: np.ndarray, p: Path) -> None:
-    """Refuse m/s speeds whose implied accelerations only make sense in km/h."""
-    a = implied_acceleration(v, t, trip)
+    """Refuse m/s speeds whose implied accelerations only make sense in km/h (over 1 s, or
+    over three update intervals of a speed held between updates: its jumps are no km/h)."""
+    from sumo_drvpw.data.resolution import speed_hold
+
+    codes = np.cumsum(np.r_[False, trip[1:] != trip[:-1]]) if len(trip) else np.zeros(0, int)
+    horizon = max(1.0, 3.0 * float(speed_hold(v, t, codes).max(initial=0.0)))
+    a = implied_acceleration(v, t, trip, horizon)
     if len(a) < 50:
         return
     q = float(np.percentile(a, 99))
     if q > KMH_SUSPECT_ACCEL_MPS2:
         raise UserError(f"{p}: column 'speed_mps' implies accelerations of {q:.1f} m/s² (99th "
-                        f"percentile over 1 s; real driving stays below {KMH_SUSPECT_ACCEL_MPS2:g}), "
+                        f"percentile over {horizon:.2g} s; real driving stays below {KMH_SUSPECT_ACCEL_MPS2:g}), "
                         f"{q / 3.6:.1f} m/s² if the speed is in km/h: is it km/h? declare the unit "
                         "(speed unit km/h or m/s)")
 

@@ -75,7 +75,7 @@ def accel_window(opt, v: np.ndarray, trip_codes: np.ndarray) -> tuple[np.ndarray
 COARSE_STEP_S = 5.0
 
 
-def accel_derivation(opt, win, q, column_rows: int, derived_rows: int, step=()) -> dict:
+def accel_derivation(opt, win, q, column_rows: int, derived_rows: int, step=(), hold=()) -> dict:
     """Where a log's acceleration came from, as sums that merge over batches and files
     (:func:`merge_accel_derivation`) and read as the reader's text (:func:`accel_counts`).
 
@@ -88,6 +88,8 @@ def accel_derivation(opt, win, q, column_rows: int, derived_rows: int, step=()) 
         rows whose acceleration is derived from the speed [-]
     step : the median time step of each of those trips [s] (``coarse_trips`` and
         ``coarse_step_s``, the largest, count the trips sampled over COARSE_STEP_S apart)
+    hold : the update interval of each of those trips' held speed [s], 0 where not held
+        (``held_trips`` and ``hold_max_s``, the longest; :func:`accel_speed`)
     """
     win, q = np.asarray(win, float), np.asarray(q, float)
     wide = win > opt.accel_window_s
@@ -102,6 +104,9 @@ def accel_derivation(opt, win, q, column_rows: int, derived_rows: int, step=()) 
     coarse = step[np.isfinite(step) & (step > COARSE_STEP_S)]
     if coarse.size:
         d.update(coarse_trips=int(coarse.size), coarse_step_s=float(coarse.max()))
+    hold = np.asarray(hold, float)
+    if (hold > 0).any():
+        d.update(held_trips=int((hold > 0).sum()), hold_max_s=float(hold.max()))
     return d
 
 
@@ -110,9 +115,11 @@ def merge_accel_derivation(a: dict, b: dict) -> dict:
     the windows' range and the coarsest widened step span both)."""
     out = {k: a[k] + b[k] for k in ("column_rows", "derived_rows", "derived_trips", "widened_trips")}
     out.update(least_window_s=a["least_window_s"], noise_mps2=a["noise_mps2"])
-    if "coarse_trips" in a or "coarse_trips" in b:
-        out["coarse_trips"] = a.get("coarse_trips", 0) + b.get("coarse_trips", 0)
-    for k, f in (("window_min_s", min), ("window_max_s", max), ("widened_step_mps", max), ("coarse_step_s", max)):
+    for k in ("coarse_trips", "held_trips"):
+        if k in a or k in b:
+            out[k] = a.get(k, 0) + b.get(k, 0)
+    for k, f in (("window_min_s", min), ("window_max_s", max), ("widened_step_mps", max), ("coarse_step_s", max),
+                 ("hold_max_s", max)):
         have = [x[k] for x in (a, b) if k in x]
         if have:
             out[k] = f(have)
@@ -140,9 +147,118 @@ def accel_counts(d: dict) -> dict:
         text += (f"; the samples lie up to {d['coarse_step_s']:.3g} s apart" + ("" if c == n else f" on {c} of {n} trips")
                  + " (median step), so the difference spans twice that: the inertial power of shorter speed "
                  "changes is not in the log, and per-sample power fits poorly")
+    if d.get("held_trips"):
+        c = d["held_trips"]
+        text += (f"; the speed is held between updates up to {d['hold_max_s']:.2g} s apart"
+                 + ("" if c == n else f" on {c} of {n} trips") + " (it repeats where it must change): the "
+                 "acceleration is derived from it interpolated between its updates")
     out["accel_window_s"] = hi
     if d["column_rows"]:  # the files without it are the exception
         text = f"accel_mps2 column; {text} for the {d['derived_rows']} rows of files without it"
         out["accel_derived_rows"] = d["derived_rows"]
     out["accel_source"] = text
     return out
+
+
+#: a speed counts as held (logged more often than it is updated: a CAN or OBD speed polled
+#: slower than the logger writes) when at least this share of its samples repeat the previous
+#: value where the speed, moving and changing by two of its steps or more per sample, could not
+HELD_SHARE = 0.3
+#: ... judged on at least this many such samples of a trip
+HELD_MIN_SAMPLES = 30
+#: the speed a sample must exceed to be judged [m/s] (a standing car's speed repeats)
+HELD_MIN_SPEED_MPS = 1.0
+#: the half-width over which the speed's change is judged [s] (spans a few seconds' hold)
+HELD_SPAN_S = 3.0
+
+
+def speed_hold(v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, q=0.0) -> np.ndarray:
+    """The interval at which each trip's speed is updated, when it is held between updates [s];
+    0 for a trip whose speed is updated at every sample (or that cannot be judged).
+
+    A logger that writes a speed more often than the speed is updated repeats its last value:
+    the derived acceleration is 0 then a jump (a 3-s hold at 1 Hz: 0, 0, 3·a), noise in the
+    input that pulls the inertia coefficient towards 0 (the RSK Renault Twizy's 1-Hz CAN speed,
+    56 % of its moving samples repeats: acc 0.40 where the car's is about 1.1). Judged where a
+    speed updated every sample could not repeat: moving (> HELD_MIN_SPEED_MPS) and changing,
+    over ±HELD_SPAN_S, by at least two of its logged steps ``q`` [m/s] (per trip or one for all;
+    :func:`speed_resolution`; or the one step it changes by, :func:`_one_step`) and 0.02 m/s per
+    sample. A share r ≥ HELD_SHARE of repeats there
+    gives the update interval dt/(1 − r) (dt: the trip's median step).
+    """
+    v, t, codes = np.asarray(v, float), np.asarray(t, float), np.asarray(trip_codes)
+    first = np.flatnonzero(trip_starts(codes)) if len(codes) else np.zeros(0, np.int64)
+    bounds = list(zip(first, np.r_[first[1:], len(v)]))
+    q = np.broadcast_to(np.asarray(q, float), (len(bounds),))
+    out = np.zeros(len(bounds))
+    for j, (a, b) in enumerate(bounds):
+        if b - a < HELD_MIN_SAMPLES + 2:
+            continue
+        tv, vv = t[a:b], v[a:b]
+        dt = float(np.median(np.diff(tv)))
+        if not dt > 0:
+            continue
+        step = _one_step(vv, q[j])
+        k = max(1, int(np.ceil(HELD_SPAN_S / dt)))
+        i = np.arange(1, b - a)
+        lo, hi = np.maximum(i - k, 0), np.minimum(i + k, b - a - 1)
+        slope = np.abs(vv[hi] - vv[lo]) / np.maximum(tv[hi] - tv[lo], dt)
+        judged = ((vv[i] > HELD_MIN_SPEED_MPS) & (vv[i - 1] > HELD_MIN_SPEED_MPS)
+                  & (slope * dt >= max(2.0 * step, 0.02)) & np.isfinite(slope))
+        if judged.sum() < HELD_MIN_SAMPLES:
+            continue
+        r = float(np.mean(vv[i][judged] == vv[i - 1][judged]))
+        if r >= HELD_SHARE:
+            out[j] = dt / max(1.0 - r, 1e-3)
+    return out
+
+
+def _one_step(v: np.ndarray, q: float) -> float:
+    """The step a trip's speed changes by [m/s]: its resolution ``q``, or, for a speed that
+    changes by one step each time (whole km/h logged at 20 Hz: a ramp of equal steps, which
+    :func:`speed_resolution` does not count as logged in steps), that step."""
+    d = np.abs(np.diff(v))
+    d = d[np.isfinite(d) & (d > 1e-9)]
+    if d.size:
+        s = float(np.percentile(d, 10))
+        if np.mean(np.abs(d - s) <= MULTIPLE_TOL * s) >= QUANTISED_SHARE:
+            return max(q, s)
+    return q
+
+
+def unheld_speed(v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, hold) -> np.ndarray:
+    """The speed between its updates: each trip with a hold interval ``hold`` > 0 [s] (per trip,
+    :func:`speed_hold`) interpolated linearly from each update (a sample whose value differs from
+    the previous one) to the next; a value that stays longer than twice the hold is a speed that
+    did not change (a stop, a steady cruise in the speed's steps) and is kept until its last
+    sample. Trips without a hold are returned as they are."""
+    v, t, codes = np.asarray(v, float), np.asarray(t, float), np.asarray(trip_codes)
+    hold = np.asarray(hold, float)
+    if not (hold > 0).any():
+        return v
+    out = v.copy()
+    first = np.flatnonzero(trip_starts(codes))
+    for (a, b), h in zip(zip(first, np.r_[first[1:], len(v)]), hold):
+        if not h > 0 or b - a < 3:
+            continue
+        tv, vv = t[a:b], v[a:b]
+        new = np.r_[True, vv[1:] != vv[:-1]]  # an update, or the trip's first sample
+        run_start = np.flatnonzero(new)
+        run_last = np.r_[run_start[1:] - 1, b - a - 1]
+        steady = tv[run_last] - tv[run_start] > 2.0 * h
+        anchors = np.unique(np.r_[run_start, run_last[steady], b - a - 1])
+        ok = np.isfinite(vv[anchors])
+        if ok.sum() >= 2:  # a sample without a speed stays without one
+            out[a:b] = np.where(np.isfinite(vv), np.interp(tv, tv[anchors[ok]], vv[anchors[ok]]), vv)
+    return out
+
+
+def accel_speed(opt, v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, q) -> tuple[np.ndarray, np.ndarray]:
+    """(the speed the acceleration is derived from [m/s], each trip's hold interval [s]) for
+    reading options ``opt``: a trip whose speed is held between updates for longer than the
+    least acceleration window (:func:`speed_hold`; a hold within the window is averaged out)
+    is interpolated between its updates (:func:`unheld_speed`), any other trip as logged. The
+    speed column itself is kept as logged."""
+    hold = speed_hold(v, t, trip_codes, q)
+    hold = np.where(hold > opt.accel_window_s, hold, 0.0)
+    return unheld_speed(v, t, trip_codes, hold), hold
