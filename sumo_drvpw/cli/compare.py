@@ -89,8 +89,37 @@ def print_summary(doc: dict, out) -> None:
             print("note: " + x)
         for w in calibration_warnings(name, r):
             print("warning: " + w)
+    import json
+
+    written = Path(out) / "report.json"  # the per-trip energies and the context, as written
+    report = json.loads(written.read_text(encoding="utf-8")) if written.is_file() else doc
     for name, r in doc["equations"].items():
         print(f"{name:<24} n={r['n']:<8} R²={num(r['r2'], 3)}  R²<50kW={num(r['r2_light'], 3)}  "
               f"R²≥50kW={num(r['r2_heavy'], 3)}  RMSE={r['rmse_w'] / 1000:.2f} kW  bias={r['bias_w'] / 1000:+.2f} kW")
+        line = trip_energy_line(report.get("equations", {}).get(name, r))
+        if line:
+            print(f"{'':<24} {line}")
+    if "counters" in str((report.get("context") or {}).get("power_source", "")):
+        print("note: the measured power is the battery's energy counters', spread between their readings: the "
+              "per-sample figures set the model's sharp power beside it; read the per-trip energies")
     print(f"wrote {Path(out) / 'report.md'}")
+
+
+def trip_energy_line(r: dict) -> str:
+    """An equation's per-trip energy errors of a report.json (``trip_energy``, ``trip_net_energy``)
+    on one line: mean and worst |predicted/measured − 1| and the worst trip; '' without trips."""
+    parts = []
+    for key, what in (("trip_energy", "traction"), ("trip_net_energy", "net")):
+        te = r.get(key) or {}
+        trips = {t: x["error"] for t, x in (te.get("trips") or {}).items()
+                 if x.get("error") is not None and x["error"] == x["error"]}
+        if not trips:
+            continue
+        worst = max(trips, key=lambda t: abs(trips[t]))
+        parts.append(f"{what} energy |error| mean {100 * te['mean_abs_error']:.1f} %, worst "
+                     f"{100 * trips[worst]:+.1f} % ({worst})")
+    if not parts:
+        return ""
+    n = len((r.get("trip_energy") or r.get("trip_net_energy") or {}).get("trips") or {})
+    return f"per trip ({n}): " + "; ".join(parts)
 
