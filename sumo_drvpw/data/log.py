@@ -17,8 +17,8 @@ import pandas as pd
 from sumo_drvpw.data.paths import expand_paths as _expand_paths, parquet_frame
 from sumo_drvpw.data.resolution import accel_counts, accel_derivation, accel_speed, accel_window
 from sumo_drvpw.data.conditions import derive_conditions
+from sumo_drvpw.data.ranges import RANGES, check_ranges  # noqa: F401  (RANGES re-exported)
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.constants import MASS_MAX_KG
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.data.trips import (derivative, grade_from_elevation,  # noqa: F401  (re-exported)
                                    per_trip_rolling_mean as _per_trip_rolling_mean,
@@ -43,17 +43,6 @@ DERIVED = ("trip_id", "time_s", "speed_mps", "accel_mps2", "grade_rad", "wind_mp
 SPEED_MAX_MPS = 100.0
 #: Speed units a log may declare (``ReadOptions.speed_unit``) → factor to m/s.
 SPEED_UNITS = {"m/s": 1.0, "km/h": 1 / 3.6, "mph": 0.44704}
-#: Plausible ranges of optional physical columns: (low, high, unit, hint when outside).
-RANGES = {
-    "mass_kg": (1.0, MASS_MAX_KG, "kg", "a vehicle mass is > 0 and at most 100 t"),
-    "pressure_kpa": (10.0, 200.0, "kPa", "ambient pressure in kPa (101.3 at sea level; in Pa? divide by 1000)"),
-    "ambient_c": (-90.0, 80.0, "°C", "ambient temperature in °C (in K? subtract 273.15)"),
-    "air_density_kgm3": (0.1, 2.0, "kg/m³", "air density is about 1.2 kg/m³"),
-    "wind_mps": (-100.0, 100.0, "m/s", "wind along the direction of travel, in m/s"),
-    "airspeed_mps": (-50.0, 150.0, "m/s", "air speed in m/s"),
-    "yaw_rate_rps": (-10.0, 10.0, "rad/s", "yaw rate in rad/s (in deg/s? multiply by π/180)"),
-    "elevation_m": (-500.0, 9000.0, "m", "elevation above sea level in m (in feet? multiply by 0.3048)"),
-}
 #: the largest lateral acceleration v·|ω| a yaw rate may give on more than 1 % of a log's
 #: rows [m/s²]: about 1.2 g, beyond a road tyre's grip (a yaw rate in deg/s gives 57× its own)
 LATERAL_MAX_MPS2 = 12.0
@@ -326,17 +315,7 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
     if n_clipped:
         v = np.where(noise, 0.0, v)
         df["speed_mps"] = v
-    for c, (lo, hi, unit, hint) in RANGES.items():
-        if c in df:
-            x = df[c].to_numpy(float, na_value=np.nan)
-            bad = (x < lo) | (x > hi)
-            if bad.any():
-                i, ok = int(np.flatnonzero(bad)[0]), np.isfinite(x) & ~bad
-                few = ok.any() and bad.sum() <= 0.01 * ok.sum()  # a few glitches among good values
-                raise UserError(f"{p}: column '{c}' is {x[i]:g} at row {i}, outside [{lo:g}, {hi:g}] {unit}: "
-                                + (f"of the {int(bad.sum() + ok.sum())} values read with it, {int(bad.sum())} are outside ({', '.join(f'{u:g}' for u in np.unique(x[bad])[:4])}"
-                                   f"), the rest in [{x[ok].min():g}, {x[ok].max():g}]: a logger's glitch or 'no reading' "
-                                   "value? read them as missing (the import columns mapping's na_values)" if few else hint))
+    check_ranges(df, p)
     if "yaw_rate_rps" in df:  # in deg/s a gentle curve's yaw rate passes the range: the tyres' grip tells
         a_lat = np.abs(v * df["yaw_rate_rps"].to_numpy(float, na_value=np.nan))
         high = a_lat > LATERAL_MAX_MPS2
