@@ -216,6 +216,16 @@ def _extra_fields(df):  # row 100 (file line 102) has two fields more than the h
 
 _log_case("row longer than the header", _extra_fields, ("log.csv", "line 102", "saw 7"))
 _log_case("row longer than the header compare", _extra_fields, ("log.csv", "line 102"), cmd="compare")
+
+
+def _cut_last_row(df):  # a logger that lost power: the file ends inside row 1599 (no line break)
+    return df.to_csv(index=False)[:-12]
+
+
+_log_case("csv cut inside its last row", _cut_last_row, ("log.csv", "cut short", "row 1599"), expect="accept")
+_log_case("csv cut inside its last row compare", _cut_last_row, ("log.csv", "cut short", "row 1599"),
+          cmd="compare", expect="accept")
+_log_case("csv cut inside its second row", lambda df: _cut_last_row(df.iloc[:2]), ("log.csv", "cut short", "1 complete"))
 _log_case("tab separated compare", lambda df: df.to_csv(index=False, sep="\t"), ("log.csv", "tabs"),
           cmd="compare")
 

@@ -305,6 +305,10 @@ def say_traction_only(counts: dict) -> None:
 
 def note_counts(counts: dict) -> None:
     """Print what the log reader changed or assumed (e.g. clipped standstill noise)."""
+    from sumo_drvpw.data.truncated import cut_message
+
+    for f, row in (counts.get("truncated_rows") or {}).items():  # CSV files cut inside their last row
+        print(f"warning: {cut_message(f, row)}")
     say_traction_only(counts)
     moving, held = int(counts.get("moving_rows", 0) or 0), int(counts.get("held_moving_rows", 0) or 0)
     if moving >= 100 and held > 0.5 * moving:  # a logger's held values: fewer independent samples

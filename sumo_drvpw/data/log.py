@@ -18,6 +18,7 @@ from sumo_drvpw.data.paths import expand_paths as _expand_paths, parquet_frame
 from sumo_drvpw.data.resolution import accel_counts, accel_derivation, accel_speed, accel_window
 from sumo_drvpw.data.conditions import derive_conditions
 from sumo_drvpw.data.ranges import RANGES, check_ranges  # noqa: F401  (RANGES re-exported)
+from sumo_drvpw.data.truncated import read_complete_csv
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.data.trips import (derivative, grade_from_elevation,  # noqa: F401  (re-exported)
@@ -203,21 +204,23 @@ def read_error(p: Path, e: Exception) -> UserError:
     return UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}")
 
 
-def _read_table(p: Path) -> tuple[pd.DataFrame, dict]:
-    meta = {}
+def _read_table(p: Path) -> tuple[pd.DataFrame, dict, int | None]:
+    """A file's table, its Parquet metadata and, for a CSV cut inside its last row, that
+    row's number (left out: :mod:`sumo_drvpw.data.truncated`; else None)."""
+    meta, cut = {}, None
     try:
         if p.suffix.lower() == ".parquet":
             df, meta = parquet_frame(p, (b"sumo_drvpw", b"drive_log."))  # drive_log.roles: spec
         else:
             check_header(p)
-            df = pd.read_csv(p, low_memory=False)
+            df, cut = read_complete_csv(p, low_memory=False)
     except pd.errors.EmptyDataError:
         raise UserError(f"{p}: empty file (no header, no rows)") from None
     except (OSError, ValueError, pd.errors.ParserError) as e:
         raise read_error(p, e) from None
     if len(df) == 0:
         raise UserError(f"{p}: empty table (header only, no samples)")
-    return df, meta
+    return df, meta, cut
 
 
 def _check_numeric(df: pd.DataFrame, p: Path) -> None:
@@ -364,16 +367,17 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
     else 0; air density = ``air_density_kgm3``, else p/(R·T) from ``ambient_c`` and
     ``pressure_kpa`` (101.325 kPa if absent), else 1.2041 kg/m³. Each trip takes the first
     source that holds a value in it (:mod:`sumo_drvpw.data.conditions`), so a file of a
-    folder of different loggers is read as it is alone.
+    folder of different loggers is read as it is alone. A CSV file cut inside its last row
+    is read without it (``counts["truncated_rows"]``: file → row; :mod:`sumo_drvpw.data.truncated`).
     """
     opt = check_options(options or ReadOptions())
     vehicle = as_vehicle(vehicle)
     files = expand_paths(paths)
     from sumo_drvpw.data.powertrain import flow_columns
 
-    frames, meta, clipped, owner, columns, logged = [], {}, 0, {}, {}, {}
+    frames, meta, clipped, owner, columns, logged, cuts = [], {}, 0, {}, {}, {}, {}
     for p in files:
-        df, m = _read_table(p)
+        df, m, cuts[str(p)] = _read_table(p)
         meta.update(m)
         df, n = _prepare(df, p, p.stem, opt)
         for tid in pd.unique(df["trip_id"]):
@@ -387,6 +391,8 @@ def read_log(paths, vehicle=None, options: ReadOptions | None = None) -> DriveLo
         clipped += n
     df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
     log = _derive(df, [str(p) for p in files], meta, vehicle, opt, clipped)
+    if any(r is not None for r in cuts.values()):  # files cut inside their last row (said by the commands)
+        log.counts["truncated_rows"] = {f: r for f, r in cuts.items() if r is not None}
     if len(files) > 1:  # each file as read alone (data/powertrain.py)
         log.file_columns, log.file_logged = columns, logged
         log.file_trips = {str(f): [t for t, o in owner.items() if o == f] for f in files}

@@ -25,6 +25,7 @@ Row numbers in error messages count from the start of the batch named in the mes
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -35,6 +36,7 @@ import pandas as pd
 from sumo_drvpw.data.log import (DERIVED, FLAGS, NUMERIC, REQUIRED, ReadOptions, _validate, expand_paths,
                                  from_frame, read_error)
 from sumo_drvpw.data.plausible import check_header
+from sumo_drvpw.data.truncated import complete_bytes, open_complete, refuse_if_too_short
 from sumo_drvpw.errors import UserError
 
 #: Columns the reader and measured power use; calibrate and compare read these plus the
@@ -184,9 +186,12 @@ def _chunks(part: Part, rows: int, columns=None, categorical: bool = False) -> I
                 del b
         else:
             # every column read, then the wanted kept: with usecols, pandas drops the extra
-            # fields of a row longer than the header silently (the memory engine refuses it)
-            for df in pd.read_csv(p, chunksize=rows, low_memory=False):
-                yield df if columns is None else df[[c for c in df.columns if c in columns]]
+            # fields of a row longer than the header silently (the memory engine refuses it);
+            # a file cut inside its last row is read up to it (data/truncated.py)
+            size = complete_bytes(p)
+            with (nullcontext(p) if size is None else open_complete(p, size)) as src:
+                for df in pd.read_csv(src, chunksize=rows, low_memory=False):
+                    yield df if columns is None else df[[c for c in df.columns if c in columns]]
     except pd.errors.EmptyDataError:
         raise UserError(f"{p}: empty file (no header, no rows)") from None
     except (OSError, ValueError, pd.errors.ParserError) as e:
@@ -255,13 +260,15 @@ def logged_flows(path, rows: int = BATCH_ROWS) -> frozenset | None:
         found: set[str] = set()
         if not want:
             return frozenset()
-        chunks = (_parquet_file(p).iter_batches(batch_size=rows, columns=want) if _is_parquet(p)
-                  else pd.read_csv(p, usecols=want, chunksize=rows, low_memory=False))
-        for b in chunks:
-            df = b.to_pandas() if hasattr(b, "to_pandas") else b
-            found |= {c for c in want if c not in found and bool(df[c].notna().any())}
-            if len(found) == len(want):
-                break
+        size = None if _is_parquet(p) else complete_bytes(p)  # a cut last row: not read
+        with (nullcontext(p) if size is None else open_complete(p, size)) as src:
+            chunks = (_parquet_file(p).iter_batches(batch_size=rows, columns=want) if _is_parquet(p)
+                      else pd.read_csv(src, usecols=want, chunksize=rows, low_memory=False))
+            for b in chunks:
+                df = b.to_pandas() if hasattr(b, "to_pandas") else b
+                found |= {c for c in want if c not in found and bool(df[c].notna().any())}
+                if len(found) == len(want):
+                    break
         return frozenset(found)
     except (UserError, OSError, ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
         return None
@@ -280,7 +287,8 @@ def _concat(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
 
 
 def whole_trips(part: Part, rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRIP_ROWS,
-                columns=None, categorical: bool = False) -> Iterator[tuple[pd.DataFrame, int]]:
+                columns=None, categorical: bool = False,
+                truncated: dict | None = None) -> Iterator[tuple[pd.DataFrame, int]]:
     """Raw frames of whole trips of a Part, each with the offset of its first row
     (``columns``: read only these, when present; None: all).
 
@@ -288,6 +296,9 @@ def whole_trips(part: Part, rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRI
     trip starts; a trip longer than ``max_trip_rows`` raises :class:`UserError`.
     ``categorical``: a text ``trip_id`` of a Parquet file comes as a pandas categorical
     (dictionary-encoded, no Python string per row; the reader keeps it so); False: as read.
+    ``truncated``: when given, a CSV file cut inside its last row (left out, never read:
+    :mod:`sumo_drvpw.data.truncated`) puts ``truncated[path] = that row's number`` there before
+    the last frame is yielded; fewer than 2 complete rows before it are refused.
     """
     from sumo_drvpw.data.trips import trip_codes_of
 
@@ -322,6 +333,10 @@ def whole_trips(part: Part, rows: int = BATCH_ROWS, max_trip_rows: int = MAX_TRI
             raise UserError(f"{part.describe()}: trip '{trip}' has more than {max_trip_rows} rows "
                             f"(from row {offset}); split it into trips (column 'trip_id') to "
                             "stream it")
+    if not _is_parquet(Path(part.path)) and complete_bytes(part.path) is not None:
+        refuse_if_too_short(part.path, seen_rows)
+        if truncated is not None:
+            truncated[part.path] = seen_rows
     if seen_rows == 0:
         raise UserError(f"{part.path}: empty table (header only, no samples)")
     if carry is not None and len(carry):
@@ -362,7 +377,8 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
     rows = rows_for(read_width(part.path, columns), rows)  # a wide log in fewer rows
     # the fuel flow chosen once for the file, not per batch (a battery target: is there an engine)
     logged = logged_flows(part.path, rows) if target != "wheel" else None
-    for df, off in whole_trips(part, rows, max_trip_rows, columns, categorical=True):
+    cut: dict = {}
+    for df, off in whole_trips(part, rows, max_trip_rows, columns, categorical=True, truncated=cut):
         first = off + (part.start or 0)
         name = part.path if first == 0 else f"{part.path} (batch from row {first})"
         if "trip_id" not in df:
@@ -370,6 +386,8 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
         log = from_frame(df, vehicle, options, name=name)
         log.files = [part.path]
         log.logged = logged
+        if cut:  # the last batch of a file cut inside its last row: said as the reader says it
+            log.counts["truncated_rows"] = dict(cut)
         del df
         m = measure(log, vehicle, target, sign_check=False)
         del log

@@ -267,18 +267,12 @@ def _wider_first_row(path: Path, kw: dict) -> bool:
 
 def _cut_mid_row(path: Path, sep: str, encoding: str) -> bool:
     """True when the file ends inside a row: no final newline (loggers end every row with
-    one; a cut inside the last field leaves the field count whole)."""
-    if encoding.lower().replace("-", "").startswith(("utf16", "utf32")) or len(sep) != 1:
-        return False
-    with open(path, "rb") as f:
-        head = f.readline()
-        f.seek(0, 2)
-        size = f.tell()
-        f.seek(max(0, size - 65536))
-        tail = f.read()
-    if not tail or tail.endswith((b"\n", b"\r")):
-        return False
-    return True
+    one; a cut inside the last field leaves the field count whole), as the canonical reader
+    tells it (:func:`sumo_drvpw.data.truncated.complete_bytes`: blanks after the last line
+    break, which the CSV reader skips, are no cut row)."""
+    from sumo_drvpw.data.truncated import complete_bytes
+
+    return len(sep) == 1 and complete_bytes(path, encoding) is not None
 
 
 def new_report(path: Path, trip_id: str, rows: int) -> dict:

@@ -77,7 +77,8 @@ def read_batches(paths, vehicle=None, options=None, target: str = "wheel", rows:
             logged_of[part.path] = logged_flows(part.path, rows) if target != "wheel" else None
         cols = want["columns"]
         chunk = rows_for(read_width(part.path, cols), rows)  # a wide log in fewer rows
-        for df, off in whole_trips(part, chunk, columns=cols, categorical=True):
+        cut: dict = {}
+        for df, off in whole_trips(part, chunk, columns=cols, categorical=True, truncated=cut):
             first = off + (part.start or 0)
             pieces = [df]
             if sample_rows is not None and seen < sample_rows < seen + len(df):
@@ -92,6 +93,8 @@ def read_batches(paths, vehicle=None, options=None, target: str = "wheel", rows:
                 log = from_frame(piece, vehicle, options, name=name)
                 log.files = [part.path]
                 log.logged = logged_of[part.path]
+                if cut and not pieces:  # a file cut inside its last row: its last batch says so
+                    log.counts["truncated_rows"] = dict(cut)
                 n = len(piece)
                 del piece
                 seen += n
