@@ -167,6 +167,14 @@ _log_case("air density negative", lambda df: df.assign(air_density_kgm3=1.2).pip
           ("air_density_kgm3", "row 7"))
 _log_case("power inf", _set("power_w", 8, np.inf), ("power_w", "row 8"))
 _log_case("power text", _set("power_w", 9, "n/a?"), ("power_w", "n/a?"))
+# a single motor's shaft (torque and speed: power_w from them) with a logger's garbage
+_MOTOR = lambda df: df.drop(columns="power_w").assign(  # noqa: E731
+    motor_speed_rpm=df.speed_mps * 9.665 / 0.35 * 60 / (2 * math.pi),
+    motor_torque_nm=df.power_w / np.maximum(df.speed_mps * 9.665 / 0.35, 1.0))
+_log_case("motor speed absurd", lambda df: _MOTOR(df).pipe(_set("motor_speed_rpm", 44, 1e9)),
+          ("motor_speed_rpm", "row 44", "1e+09"))
+_log_case("motor torque absurd", lambda df: _MOTOR(df).pipe(_set("motor_torque_nm", 45, -1e7)),
+          ("motor_torque_nm", "row 45", "-1e+07"))
 _log_case("brake not boolean", lambda df: df.assign(brake="maybe"), ("brake", "maybe"))
 _log_case("trip id empty", _set("trip_id", 3, np.nan), ("trip_id", "row 3"))
 _log_case("single sample", lambda df: df.iloc[:1], ("sample",))
@@ -228,6 +236,15 @@ _log_case("csv cut inside its last row compare", _cut_last_row, ("log.csv", "cut
 _log_case("csv cut inside its second row", lambda df: _cut_last_row(df.iloc[:2]), ("log.csv", "cut short", "1 complete"))
 _log_case("tab separated compare", lambda df: df.to_csv(index=False, sep="\t"), ("log.csv", "tabs"),
           cmd="compare")
+
+
+@case("drive-log", "power-split MG2 speed absurd", ("log.csv", "mg2_speed_rpm", "row 700", "1e+06"))
+def _(d):
+    from sumo_drvpw.data.log import bundled_log
+
+    df = pd.read_parquet(bundled_log())
+    df.loc[700, "mg2_speed_rpm"] = 1e6
+    return _cal(write(d, "log.csv", df), d, "--vehicle", "prius3")
 
 
 @case("drive-log", "diagnose on two samples", ("log.csv", "sample"))

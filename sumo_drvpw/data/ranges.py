@@ -13,6 +13,25 @@ import pandas as pd
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import MASS_MAX_KG
 
+#: The fastest a shaft of a road vehicle's powertrain turns, either way [rpm]: engines stay
+#: below about 10,000 rpm (a road car's redline; a heavy diesel's about 2,500), traction
+#: motors below about 20,000 (the Prius 3's MG2 reaches about 13,500 rpm, ORNL's evaluation
+#: of the 2010 Prius; the BMW i3's motor 11,400; the shared logs: Prius Gen 2 MG1 7,700,
+#: MG2 4,500, engine 3,900, i3 motor 11,200). 30,000 leaves room for faster motors and
+#: still refuses a logger's garbage or a value scaled wrongly by far (1e6 'rpm'); speeds in
+#: rad/s taken for rpm read 9.5 times too slow and are not caught here.
+SHAFT_SPEED_MAX_RPM = 30_000.0
+#: The largest torque of a road vehicle's engine or traction motor shaft, either way [N·m]:
+#: the largest truck engines give about 3.7 kN·m (Scania's 770-hp V8: 3,700 N·m), the
+#: direct-drive traction motors of buses and trucks are of that order, a car's far less
+#: (Prius 3 MG2 207 N·m; the shared logs: Prius Gen 2 MG2 267, MG1 45, i3 motor 250).
+#: 20 kN·m is five times the largest and still refuses a logger's garbage (1e7 N·m) or a
+#: torque in N·cm of any sizeable machine.
+SHAFT_TORQUE_MAX_NM = 20_000.0
+_RPM_HINT = ("a shaft speed in rpm (revolutions per minute): no road vehicle's engine or traction motor turns "
+             f"faster than {SHAFT_SPEED_MAX_RPM:,.0f} rpm")
+_NM_HINT = ("a shaft torque in N·m: no road vehicle's engine or traction motor gives more than "
+            f"{SHAFT_TORQUE_MAX_NM:,.0f} N·m (in N·cm? divide by 100)")
 #: Plausible ranges of optional physical columns: (low, high, unit, hint when outside).
 RANGES = {
     "mass_kg": (1.0, MASS_MAX_KG, "kg", "a vehicle mass is > 0 and at most 100 t"),
@@ -23,6 +42,11 @@ RANGES = {
     "airspeed_mps": (-50.0, 150.0, "m/s", "air speed in m/s"),
     "yaw_rate_rps": (-10.0, 10.0, "rad/s", "yaw rate in rad/s (in deg/s? multiply by π/180)"),
     "elevation_m": (-500.0, 9000.0, "m", "elevation above sea level in m (in feet? multiply by 0.3048)"),
+    # the power-split (engine, MG1, MG2) and single-motor columns of the measured power
+    **{c: (-SHAFT_SPEED_MAX_RPM, SHAFT_SPEED_MAX_RPM, "rpm", _RPM_HINT)
+       for c in ("ice_speed_rpm", "mg1_speed_rpm", "mg2_speed_rpm", "motor_speed_rpm")},
+    **{c: (-SHAFT_TORQUE_MAX_NM, SHAFT_TORQUE_MAX_NM, "N·m", _NM_HINT)
+       for c in ("mg1_torque_nm", "mg2_torque_nm", "motor_torque_nm")},
 }
 
 
