@@ -175,6 +175,7 @@ _log_case("motor speed absurd", lambda df: _MOTOR(df).pipe(_set("motor_speed_rpm
           ("motor_speed_rpm", "row 44", "1e+09"))
 _log_case("motor torque absurd", lambda df: _MOTOR(df).pipe(_set("motor_torque_nm", 45, -1e7)),
           ("motor_torque_nm", "row 45", "-1e+07"))
+_log_case("power absurd", _set("power_w", 46, 1e12), ("power_w", "row 46", "1e+12"))
 _log_case("brake not boolean", lambda df: df.assign(brake="maybe"), ("brake", "maybe"))
 _log_case("trip id empty", _set("trip_id", 3, np.nan), ("trip_id", "row 3"))
 _log_case("single sample", lambda df: df.iloc[:1], ("sample",))
@@ -625,6 +626,29 @@ def _(d):  # said the log had no column 'heater'
     log = write(d, "log.parquet", _battery_log(heater="x"))
     return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--equation", "roadload_spec",
                 "--load", "heater")
+
+
+@case("drive-log", "battery chain on a current in mA", ("log.parquet", "battery_current_a", "row 39", "mA"))
+def _(d):
+    df = _battery_log()
+    log = write(d, "log.parquet", df.assign(battery_current_a=df["battery_current_a"] * 1000 + 500.0))
+    return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--equation", "roadload_spec")
+
+
+@case("drive-log", "fuel target on a fuel flow of text", ("log.csv", "fuel_rate_lph", "row 47", "n/a?"))
+def _(d):  # was a traceback (ValueError: could not convert string to float)
+    df = base_log()
+    df["fuel_rate_lph"] = (0.6 + df["power_w"].clip(lower=0) / 9000.0).astype(object)
+    df.loc[47, "fuel_rate_lph"] = "n/a?"
+    return _cal(write(d, "log.csv", df), d, "--target", "fuel")
+
+
+@case("drive-log", "fuel target on an infinite mass air flow", ("log.csv", "maf_gps", "row 48", "inf"))
+def _(d):  # was accepted: the fuel power of that sample infinite
+    df = base_log()
+    df["maf_gps"] = 3.0 + df["power_w"].clip(lower=0) / 3000.0
+    df.loc[48, "maf_gps"] = np.inf
+    return _cal(write(d, "log.csv", df), d, "--target", "fuel")
 
 
 @case("drive-log", "battery chain on a load column the log lacks", ("log.parquet", "no load column 'heater'"))

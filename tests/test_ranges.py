@@ -68,3 +68,84 @@ def test_the_bounds_cover_every_shaft_column_and_real_machines(tmp_path, prius_l
     df.to_parquet(p)
     with pytest.raises(UserError, match="mg1_speed_rpm' is 30000 at row 13"):
         read_log(p)
+
+
+# ------------------------------------------- power, battery, fuel and air flows, loads
+
+def _refused(capsys, code, path, *needles):
+    """Exit 2, one line naming the file and every needle, no traceback."""
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
+    for n in (str(path.name), *needles):
+        assert n in err, err
+
+
+def _base() -> pd.DataFrame:
+    from corpus import base_log
+
+    return base_log()
+
+
+def _battery() -> pd.DataFrame:
+    """The corpus log with the battery's V·I for its power (discharge positive)."""
+    df = _base()
+    return df.assign(battery_voltage_v=350.0, battery_current_a=df["power_w"] / 350.0).drop(columns="power_w")
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+@pytest.mark.parametrize("column,value", [("power_w", 1e12), ("battery_voltage_v", 1e9),
+                                          ("battery_voltage_v", -1.0), ("battery_current_a", -2e4)])
+def test_an_absurd_power_or_battery_value_is_refused(tmp_path, capsys, column, value, engine):
+    df = _base() if column == "power_w" else _battery()
+    df.loc[ROW, column] = value
+    p = tmp_path / "log.csv"
+    df.to_csv(p, index=False)
+    args = ["--target", "battery", "--vehicle", "jlu_bev", "--equation", "roadload_spec"] \
+        if column != "power_w" else []
+    code = cli_main(["calibrate", str(p), *args, "--engine", engine, "--out", str(tmp_path / "eq.toml")])
+    _refused(capsys, code, p, f"column '{column}'", f"row {ROW}", f"{value:g}")
+    assert not (tmp_path / "eq.toml").exists()
+
+
+def _fuel_log(column: str) -> pd.DataFrame:
+    df = _base()
+    if column == "fuel_rate_gps":
+        return df.assign(fuel_rate_gps=0.3 + df["power_w"].clip(lower=0) / 40000.0)
+    if column == "fuel_rate_lph":
+        return df.assign(fuel_rate_lph=0.6 + df["power_w"].clip(lower=0) / 9000.0)
+    # a petrol car's mass air flow and its fuel trim (no fuel flow): the fuel estimated from the air
+    return df.assign(maf_gps=3.0 + df["power_w"].clip(lower=0) / 3000.0, short_term_fuel_trim_bank_1_pct=2.0)
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+@pytest.mark.parametrize("column,value", [
+    ("fuel_rate_gps", "n/a?"), ("fuel_rate_gps", np.inf), ("fuel_rate_gps", 1e9),
+    ("fuel_rate_lph", "x"), ("fuel_rate_lph", np.inf), ("fuel_rate_lph", 5e4),
+    ("maf_gps", "x"), ("maf_gps", -np.inf), ("maf_gps", 1e7),
+    ("short_term_fuel_trim_bank_1_pct", "x"), ("short_term_fuel_trim_bank_1_pct", np.inf),
+    ("short_term_fuel_trim_bank_1_pct", 250.0)])
+def test_a_fuel_or_air_flow_that_is_text_infinite_or_absurd_is_refused(tmp_path, capsys, column, value, engine):
+    # text was a traceback (ValueError), an infinity or 1e9 g/s a fuel power taken as read
+    df = _fuel_log(column)
+    if isinstance(value, str):
+        df[column] = df[column].astype(object)
+    df.loc[ROW, column] = value
+    p = tmp_path / "log.csv"
+    df.to_csv(p, index=False)
+    code = cli_main(["calibrate", str(p), "--target", "fuel", "--engine", engine, "--out", str(tmp_path / "eq.toml")])
+    shown = value if isinstance(value, str) else f"{value:g}"
+    _refused(capsys, code, p, f"column '{column}'", f"row {ROW}", shown)
+    assert not (tmp_path / "eq.toml").exists()
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+@pytest.mark.parametrize("value", [np.inf, 1e12])
+def test_an_infinite_or_absurd_load_is_refused(tmp_path, capsys, value, engine):
+    df = _battery().assign(heater_w=1500.0)
+    df.loc[ROW, "heater_w"] = value
+    p = tmp_path / "log.parquet"
+    df.to_parquet(p)
+    code = cli_main(["calibrate", str(p), "--target", "battery", "--vehicle", "jlu_bev", "--equation",
+                     "roadload_spec", "--load", "heater_w", "--engine", engine, "--out", str(tmp_path / "eq.toml")])
+    _refused(capsys, code, p, "load column 'heater_w'", f"row {ROW}", f"{value:g}")

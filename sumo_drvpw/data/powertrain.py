@@ -40,7 +40,9 @@ from __future__ import annotations
 import re
 
 import numpy as np
+import pandas as pd
 
+from sumo_drvpw.data.ranges import flow_values
 from sumo_drvpw.model.constants import RPM
 from sumo_drvpw.data.counters import COUNTERS
 from sumo_drvpw.errors import NoDrivingPower, UserError
@@ -364,6 +366,8 @@ def measured_fuel_power(log, vehicle=None, fuel: str | None = None) -> tuple[np.
     with its mass air flow (:func:`air_flow_column`) gives an estimate: ṁ = MAF / AFR_st
     × (1 + fuel trims) / commanded λ (:func:`fuel_from_air_flow`).
 
+    A flow (or fuel trim) that is text, infinite or outside its plausible range is refused,
+    naming the column, the row and the value (:func:`sumo_drvpw.data.ranges.flow_values`).
     Each file of a folder read in memory takes its own flow, as read alone or streamed (a
     file without one is refused, named); the rows of each source go to
     ``log.counts["power_rows"]`` and the text says each.
@@ -428,17 +432,9 @@ def _fuel_of(log, logged, name: str, fp: dict) -> tuple[np.ndarray, str]:
                            "fuel_rate_lph (import columns mapping)" if len(several) > 1 else "")
                         + (f"; '{air}' is an air flow, and a {name} engine's fuel is not its air "
                            "over a fixed ratio (a diesel runs lean)" if air is not None else ""))
-    x = df[col].to_numpy(float)
+    x = flow_values(log, col, "fuel_rate_gps" if col == "fuel_rate_gps" else "fuel_lph")
     kgps = x / 1000.0 if col == "fuel_rate_gps" else x * fp["density_kg_per_l"] / 3600.0
-    _no_negative(log, col, x)
     return kgps * fp["lhv_j_per_kg"], f"fuel flow {col} × LHV of {name}"
-
-
-def _no_negative(log, col: str, x: np.ndarray) -> None:
-    bad = np.isfinite(x) & (x < 0)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise UserError(f"{log.describe()}: column '{col}' is negative at row {i} ({x[i]!r})")
 
 
 def air_flow_candidates(df, logged=None) -> list[str]:
@@ -471,14 +467,13 @@ def fuel_from_air_flow(log, air: str) -> tuple[np.ndarray, str]:
     from sumo_drvpw.model.constants import AFR_STOICH_GASOLINE
 
     df = log.df
-    x = df[air].to_numpy(float)
-    _no_negative(log, air, x)
+    x = flow_values(log, air, "air_gps")
     banks: dict[str, np.ndarray] = {}
     trims = []
     for c in df.columns:
         m = _TRIM.search(str(c))
         if m and str(c).endswith("_pct") and _logged(df, c, getattr(log, "logged", None)):  # an inline engine has one bank
-            t = np.nan_to_num(df[c].to_numpy(float))
+            t = np.nan_to_num(flow_values(log, c, "trim_pct"))
             banks[m.group(2)] = banks.get(m.group(2), 0.0) + t
             trims.append(str(c))
     factor = 1.0 + (np.mean(list(banks.values()), axis=0) / 100.0 if banks else 0.0)
@@ -488,7 +483,7 @@ def fuel_from_air_flow(log, air: str) -> tuple[np.ndarray, str]:
     if trims:
         how += f" × (1 + fuel trims {', '.join(sorted(trims))})"
     if len(lam) == 1:
-        lv = df[lam[0]].to_numpy(float)
+        lv = pd.to_numeric(df[lam[0]], errors="coerce").to_numpy(float)  # text: not a λ, as out of range
         lv = np.where(np.isfinite(lv) & (lv >= 0.5) & (lv <= 1.5), lv, 1.0)
         factor = factor / lv
         how += f" / commanded λ {lam[0]}"

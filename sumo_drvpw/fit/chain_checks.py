@@ -319,9 +319,26 @@ def check_load_columns(m, loads, use=None) -> None:
         if col is None:
             raise UserError(f"{where}: no load column '{c}' (extra columns: "
                             f"{', '.join(sorted(m.inputs.signals)) or 'none'})")
+        check_load_values(where, c, col)
         if not np.isfinite(np.asarray(col, float)[use]).any():
             raise UserError(f"{where}: load column '{c}' has no number on the "
                             f"{int(use.sum())} usable samples")
+
+
+def check_load_values(where: str, c: str, col) -> None:
+    """UserError naming the log ``where``, the load column ``c``, the row and the value: an
+    infinite load, or one beyond any road vehicle's power
+    (:data:`~sumo_drvpw.data.ranges.POWER_MAX_W`; an auxiliary draws kilowatts: a logger's
+    garbage). Empty cells (NaN) stay: those samples are left out."""
+    from sumo_drvpw.data.ranges import POWER_MAX_W
+
+    x = np.asarray(col, float)
+    bad = np.isinf(x) | (np.abs(x) > POWER_MAX_W)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"{where}: load column '{c}' is {x[i]:g} at row {i}: "
+                        + ("values must be finite" if np.isinf(x[i]) else
+                           f"beyond ±{POWER_MAX_W:.0e} W, more than any road vehicle's power (a load is power in W)"))
 
 
 def driving_power_of(path) -> str | None:

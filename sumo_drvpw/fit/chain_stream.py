@@ -239,6 +239,9 @@ class ChainStats:
                 if len(first):
                     self.load_text[c] = first.iloc[0]
             if col is not None:
+                from sumo_drvpw.fit.chain_checks import check_load_values
+
+                check_load_values(m.log.describe(), c, col)  # as read in memory (batch rows)
                 self.load_n[c] += int(np.isfinite(np.asarray(col, float)[use]).sum())
 
     def _checks(self, p, y, v, use) -> None:
