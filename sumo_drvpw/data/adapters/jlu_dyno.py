@@ -71,6 +71,26 @@ ROAD_NAMES = {
 }
 #: constant zero on the road (no schedule, no second channel): not written
 ROAD_DROP = ("DAScheduleSpeed", "REESSCurrent2", "REESSVoltage2")
+#: columns only a road log has (GPS position and elevation): no dynamometer test logs them
+ROAD_ONLY = ("elevation", "lat", "long")
+
+
+def refuse_other_kind(raw: pd.DataFrame, path: Path, road: bool) -> None:
+    """UserError for a file of the other kind than the one asked for (a folder that holds
+    dynamometer tests and road trips alike): a road trip read as a test would get grade 0 on
+    a hilly road, a test read as a road trip loses its schedule and passes for a flat road.
+    A road log logs elevation or GPS position; a test follows a speed schedule and logs
+    neither."""
+    road_cols = [c for c in ROAD_ONLY if c in raw.columns]
+    if not road and road_cols:
+        raise UserError(f"{path}: a road trip, not a dynamometer test (it logs {', '.join(road_cols)}; a "
+                        "test is read with grade 0): read it as format 'jlu-road', the tests apart")
+    if road and not road_cols and "DAScheduleSpeed" in raw.columns:
+        top = float(pd.to_numeric(raw["DAScheduleSpeed"], errors="coerce").abs().max())
+        if top > 0:
+            raise UserError(f"{path}: a dynamometer test, not a road trip (it follows a speed schedule, "
+                            f"DAScheduleSpeed up to {top:g} km/h, and logs no elevation or position): read it "
+                            "as format 'jlu-dyno', the road trips apart")
 
 
 def _clock_s(s: pd.Series, path: Path) -> pd.Series:
@@ -104,6 +124,7 @@ def read_file(path: Path, vehicle, road: bool = False) -> tuple[pd.DataFrame, di
     for k in REQUIRED:
         if k not in raw.columns:
             raise UserError(f"{path}: missing column '{k}'; found {', '.join(map(str, raw.columns))}")
+    refuse_other_kind(raw, path, road)
     names, cols = [], []
     known = dict(NAMES, **ROAD_NAMES) if road else NAMES
     for c in raw.columns:
