@@ -68,3 +68,34 @@ def test_the_shared_jlu_files_of_both_kinds_in_one_folder(shared_data, tmp_path)
         read("jlu-dyno", tmp_path)
     with pytest.raises(UserError, match="UDDS_01.parquet: a dynamometer test"):
         read("jlu-road", tmp_path)
+
+
+def _tum_trip(folder, name="TripA04"):
+    """A short TUM trip file (';', latin-1, CRLF, the TUM labels)."""
+    n = 30
+    rows = ["Time [s];Velocity [km/h];Elevation [m];Motor Torque [Nm];Battery Voltage [V];Battery Current [A]"]
+    rows += [f"{0.1 * i:.1f};{min(i, 20) * 1.0:g};500;{40 if i < 20 else 10};390;-30" for i in range(n)]
+    (folder / f"{name}.csv").write_bytes(("\r\n".join(rows) + "\r\n").encode("latin-1"))
+
+
+OVERVIEW_HEAD = ("Trip,Date,Route/Area,Weather,Battery Temperature (Start) [°C],Battery Temperature (End),"
+                 "Battery State of Charge (Start),Battery State of Charge (End),Ambient Temperature (Start) [°C],"
+                 "Target Cabin Temperature,Distance [km],Duration [min],Fan,Note\n")
+OVERVIEW_A04 = ('TripA04,2019-06-28_10-13-30,Munich East,sunny,25.0,27.0,0.751,0.667,24.0,22.0,10.7,6.87,'
+                '"Automatic, Level 1",')
+
+
+def test_an_i3_overview_that_lists_a_trip_twice_with_other_values_is_refused(tmp_path):
+    """An overview.csv re-exported with a trip's row twice, the copy noting an added load: the
+    reader kept the first row silently (mass 1270 kg where the other row says +80 kg). Two rows
+    that disagree are now refused, naming the trip, the rows and what differs; a row copied
+    unchanged still reads."""
+    _tum_trip(tmp_path)
+    ov = tmp_path / "overview.csv"
+    ov.write_text(OVERVIEW_HEAD + OVERVIEW_A04 + "\n" + OVERVIEW_A04 + "\n", encoding="utf-8")
+    df, _ = read("bmw-i3-tum", tmp_path)
+    assert (df["mass_kg"] == 1270).all() and df["route"].iloc[0] == "Munich East"
+    ov.write_text(OVERVIEW_HEAD + OVERVIEW_A04 + "\n" + OVERVIEW_A04 + "+80 kg\n", encoding="utf-8")
+    with pytest.raises(UserError, match=r"overview.csv: trip TripA04 is listed in data rows 0, 1 with different "
+                                        r"values \(note, added_mass_kg\): keep one row"):
+        read("bmw-i3-tum", tmp_path)

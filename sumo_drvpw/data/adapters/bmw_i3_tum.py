@@ -216,7 +216,14 @@ def read_overview(folder: Path) -> pd.DataFrame | None:
         "note": note.str.strip(),
         "added_mass_kg": added,
     })
-    return out.drop_duplicates("trip_id").set_index("trip_id")
+    out = out.drop_duplicates()  # a row copied twice says the same twice
+    again = out["trip_id"].duplicated(keep=False)
+    if again.any():  # two rows of one trip that disagree: which one holds is not for the reader to guess
+        rows = out.index[again & (out["trip_id"] == out.loc[again, "trip_id"].iloc[0])]
+        differ = [c for c in out.columns if out.loc[rows, c].astype(str).nunique() > 1]
+        raise UserError(f"{p}: trip {out.loc[rows[0], 'trip_id']} is listed in data rows "
+                        f"{', '.join(map(str, rows))} with different values ({', '.join(differ)}): keep one row")
+    return out.set_index("trip_id")
 
 
 def _join_overview(df, trip, overview, vehicle, rep):
