@@ -741,7 +741,27 @@ def moving_check(m, dyno_eq) -> dict:
     return out
 
 
-def main() -> int:
+def command_line(argv) -> str:
+    """The command this run was started with, as the report's header shows it (the
+    documented regeneration, CMD, when it was that one)."""
+    import shlex
+
+    return ".venv/bin/python scripts/closing_the_loop.py" + ("".join(" " + shlex.quote(a) for a in argv))
+
+
+def main(argv=None) -> int:
+    """Run the loop and write the report; bad input (a data folder an adapter refuses) is one
+    line on stderr, exit 2, nothing written."""
+    from sumo_drvpw.errors import UserError
+
+    try:
+        return _main(sys.argv[1:] if argv is None else list(argv))
+    except UserError as e:
+        print(f"closing_the_loop.py: error: {e}", file=sys.stderr)
+        return 2
+
+
+def _main(argv) -> int:
     global GRADE_CHOICE, SELECTION_ENERGY
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=os.environ.get(
@@ -752,7 +772,7 @@ def main() -> int:
                     help="how the grade source and the physical candidates are chosen (see GRADE_CHOICE)")
     ap.add_argument("--selection-energy", choices=SELECTION_ENERGIES, default=SELECTION_ENERGY,
                     help="the per-trip energy whose error chooses the structure (see SELECTION_ENERGY)")
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     GRADE_CHOICE, SELECTION_ENERGY = a.grade_choice, a.selection_energy
     from sumo_drvpw.data.adapters import read
     from sumo_drvpw.fileio import write_text
@@ -783,7 +803,10 @@ def main() -> int:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from closing_the_loop_report import render
 
-    write_text(out / "closing-the-loop.md", render(cars, time.perf_counter() - t0, CMD))
+    shared = Path(__file__).resolve().parents[2] / "shared" / "data"
+    other = None if data.resolve() == shared.resolve() else str(data)
+    write_text(out / "closing-the-loop.md", render(cars, time.perf_counter() - t0, command_line(argv),
+                                                   other_data=other))
     print(f"wrote {out / 'closing-the-loop.md'}")
     return 0
 

@@ -216,7 +216,9 @@ def _render_wind(w, car) -> list[str]:
         ""]
 
 
-def render(cars, took, cmd: str) -> str:
+def render(cars, took, cmd: str, other_data: str | None = None) -> str:
+    """The report's Markdown; ``other_data``: the data folder when it is not the shared data,
+    whose runs the closing prose ("What this shows") quotes."""
     from sumo_drvpw.fit.physical import PHYSICAL_CANDIDATES
 
     global PHYS_DESC
@@ -257,8 +259,8 @@ def render(cars, took, cmd: str) -> str:
           "neither). Potential energy is exact at the wheels, so 1 there says the grade and the drivetrain tell "
           "one story; on a planted symmetric drivetrain (η 0.85–0.95) it reads 1 within 1 %.", ""]
     for car in cars:
-        L += [f"## {car['name']} (vehicle `{car['vehicle']}`)", ""]
-        if car.get("error"):
+        L += [f"## {car['name']}" + (f" (vehicle `{car['vehicle']}`)" if car.get("vehicle") else ""), ""]
+        if car.get("error"):  # a data set not found: said, nothing run
             L += [car["error"], ""]
             continue
         if car["note"]:
@@ -466,7 +468,12 @@ def render(cars, took, cmd: str) -> str:
                              f"on {gg['trips']} of {len(run['held'])} trips"
                              + (": " + ", ".join(f"{k} {g:+.0f} m" for k, g in gaps) if gaps else "") + ".")
             L.append("")
-    L += ["## What this shows, and what it does not", "",
+    L += ["## What this shows, and what it does not", ""]
+    if other_data:
+        L += [f"(Read with care: this run read {other_data}; the points below were written from the runs on "
+              "the shared data, ../shared/data, and their figures are not recomputed here — the tables above "
+              "are.)", ""]
+    L += [
           "- Findings are kept only when they pass the held-out block test, lower the held-out error on most "
           "training trips and carry a plausible energy share; responses of the target (pedal, torques, "
           "currents, SOC, counters) are never offered by default.",
