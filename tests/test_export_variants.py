@@ -137,3 +137,55 @@ def test_the_closing_loop_report_names_the_data_it_read_and_refuses_bad_input_in
     assert md.split("```")[1].strip() == (".venv/bin/python scripts/closing_the_loop.py "
                                           f"--data '{data}' --out {out} --only jlu")
     assert f"this run read {data}; the points below were written from the runs on the shared data" in md
+
+
+def test_validation_reads_i3_trips_the_overview_lacks(shared_data, tmp_path):
+    """An i3 folder whose overview.csv lists only some of its trips (an export of a subset, a
+    trip added later): the import notes each unlisted trip, and the validation split by
+    season ended in a TypeError (the unlisted trip's season is missing, sorted beside
+    'summer'). Such trips now form a season 'unknown'."""
+    from sumo_drvpw.validation import i3
+    from sumo_drvpw.validation.data import load_dataset
+
+    src = shared_data / "bmw_i3_tum"
+    folder = tmp_path / "bmw_i3_tum"
+    folder.mkdir()
+    trips = ["TripA01", "TripA02", "TripA04", "TripB02", "TripB03"]
+    for t in trips:
+        (folder / f"{t}.csv").symlink_to(src / f"{t}.csv")
+    lines = (src / "overview.csv").read_text(encoding="utf-8").splitlines(keepends=True)
+    listed = [l for l in lines[1:] if l.split(",")[0] in trips and not l.startswith("TripA04,")]
+    (folder / "overview.csv").write_text(lines[0] + "".join(listed), encoding="utf-8")
+    ds = load_dataset(tmp_path, "bmw_i3_tum")
+    assert set(ds.log.df.loc[ds.log.df["season"].isna(), "trip_id"]) == {"TripA04"}
+    res = i3.study(ds, tmp_path)
+    split = res.summary["split"]
+    assert sorted(split["calibration_trips"] + split["test_trips"]) == trips
+
+
+def test_the_battery_validation_report_renders_i3_trips_without_a_season():
+    """An i3 folder without overview.csv (trips exported without the data set's table):
+    `validate --chain` ended in a KeyError ('season') and, past that, in a TypeError
+    formatting the missing summer and winter figures. The trips now read as season 'unknown'
+    (sumo_drvpw/validation/chain_i3.py) and the report says n/a where a season has no trip.
+    Rendered here from the committed summary with every season figure gone, as such a run
+    writes it."""
+    import copy
+    import json
+    from pathlib import Path
+
+    from sumo_drvpw.validation.chain_render import render
+
+    s = json.loads((Path(__file__).resolve().parent.parent / "docs" / "validation" / "summary.json")
+                   .read_text(encoding="utf-8"))
+    res = copy.deepcopy({k: v for k, v in s["energy_chain"].items()})
+    i3 = res["bmw_i3"]
+    for r in i3["rows"]:
+        r["season"] = "unknown"
+    for k in ("mean_abs_error_summer", "mean_abs_error_winter", "mean_error_summer", "mean_error_winter"):
+        i3[k] = None
+    for m in i3["sumo_models"].values():
+        m["mean_ratio_summer"] = m["mean_ratio_winter"] = None
+    md = render(res, "cmd")
+    assert "summer n/a (signed n/a), winter n/a (signed n/a)" in md
+    assert "(MMPEVEM shipped: summer n/a, winter n/a)" in md

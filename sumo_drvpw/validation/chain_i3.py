@@ -179,7 +179,8 @@ def i3_study(data: Path) -> dict:
     for k in variants[1:]:
         for r, a in zip(rows, trip_rows(pred[k], mb.power_w, dt, trips)):
             r[f"error_{k}"] = a["error"]
-    season = dict(zip(trips, np.asarray(log.df["season"]).astype(str)))
+    season = dict(zip(trips, log.df["season"].fillna("unknown").astype(str).to_numpy() if "season" in log.df
+                      else np.full(len(trips), "unknown")))  # (trips an overview.csv lacks, or none beside them)
     ok = np.isfinite(mb.power_w) & np.isfinite(mw.power_w)
     for r in rows:
         s = ok & (trips == r["trip"])

@@ -15,6 +15,16 @@ def _pct(x) -> str:
     return "n/a" if x is None or not math.isfinite(x) else f"{100 * x:+.1f} %"
 
 
+def _apct(x) -> str:
+    """An absolute error in per cent, no sign; "n/a" where there is none."""
+    return _pct(x).lstrip("+-")
+
+
+def _r3(x) -> str:
+    """A ratio to 3 decimals; "n/a" where there is none (no trip of that season)."""
+    return "n/a" if x is None or not math.isfinite(x) else f"{x:.3f}"
+
+
 def _param_table(params: dict) -> list[str]:
     out = ["| parameter | value | std. error | reading |", "|---|---|---|---|"]
     for k, p in params.items():
@@ -42,18 +52,18 @@ def render(res: dict, command: str) -> str:
         L += _param_table(j["dyno_chain"]) + [""]
         s = j["standstill_battery_w"]
         L += [f"Mean battery power at standstill: dyno {s['dyno']:.0f} W, road {s['road']:.0f} W.", "",
-              f"Mean |error| per road trip: before (dyno chain, flat) **{_pct(j['mean_abs_error_before'])[1:]}**, "
-              f"before with grade {_pct(j['mean_abs_error_before_grade'])[1:]}; after closing the loop "
+              f"Mean |error| per road trip: before (dyno chain, flat) **{_apct(j['mean_abs_error_before'])}**, "
+              f"before with grade {_apct(j['mean_abs_error_before_grade'])}; after closing the loop "
               f"with the battery-target tracer of `diagnose` (fit/chain_linear.py, leave-one-trip-out: the tracer "
               f"searches what the road adds to the dyno chain on the other five trips) "
-              f"**{_pct(j['mean_abs_error_after_diagnose'])[1:]}**. Target (issue #12): 8 %. Found "
+              f"**{_apct(j['mean_abs_error_after_diagnose'])}**. Target (issue #12): 8 %. Found "
               "(folds of 6): " + ", ".join(f"{k} {v}" for k, v in j["diagnose_found_on"].items()) + ".", "",
               f"For contrast, a fixed-structure closure (grade from elevation, the dyno's efficiencies "
               f"kept, auxiliary power and a recuperation limit kept by BIC, fitted on the other five "
-              f"trips): {_pct(j['mean_abs_error_after'])[1:]}.", "",
+              f"trips): {_apct(j['mean_abs_error_after'])}.", "",
               f"Sensitivity (not selected on these numbers, which would select on the test trips): "
-              f"the same without a recuperation limit {_pct(j['mean_abs_error_after_no_limit'])[1:]}; "
-              f"every chain parameter refitted on the road {_pct(j['mean_abs_error_after_all_refit'])[1:]}.", "",
+              f"the same without a recuperation limit {_apct(j['mean_abs_error_after_no_limit'])}; "
+              f"every chain parameter refitted on the road {_apct(j['mean_abs_error_after_all_refit'])}.", "",
               "| trip | ambient °C | standstill | net Δz m | measured kWh | before | before + grade | after (diagnose, LOO) | what it found | fixed-structure (LOO) | no limit | all refit |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for b, bg, a, a2, a3 in zip(j["before"], j["before_grade"], j["after"], j["after_no_limit"],
@@ -71,8 +81,8 @@ def render(res: dict, command: str) -> str:
                   "way on all six road trips (found: " + _found(dv["findings"]) + "). Compared with "
                   "new logs (`sumo-drvpw compare`, vehicle `jlu_bev`, this equation file) it reports the battery "
                   "energy per trip; its held-out quality is the leave-one-trip-out column above "
-                  f"({_pct(j['mean_abs_error_after_diagnose'])[1:]}); on the six trips themselves "
-                  f"{_pct(dv['mean_abs_error_in_sample'])[1:]}"
+                  f"({_apct(j['mean_abs_error_after_diagnose'])}); on the six trips themselves "
+                  f"{_apct(dv['mean_abs_error_in_sample'])}"
                   + (f". Found on all six trips and not kept, because the leave-one-out traces found it in "
                      f"fewer than half of their {dv['folds']} folds (a finding must replicate): "
                      + ", ".join(f"{k} ({n} of {dv['folds']})" for k, n in dv["not_replicated"].items())
@@ -86,9 +96,9 @@ def render(res: dict, command: str) -> str:
     p = res.get("prius2")
     if p:
         L += ["## Prius Gen 2: fuel per held-out trip", "",
-              f"Mean |error| against SOC-corrected fuel: **{_pct(p['mean_abs_error'])[1:]}** (2 trips); "
+              f"Mean |error| against SOC-corrected fuel: **{_apct(p['mean_abs_error'])}** (2 trips); "
               f"with the chain fitted on the road-load equation's power instead of the measured "
-              f"P_PTdrv: {_pct(p['mean_abs_error_chain_fitted_on_equation'])[1:]}, with implausible "
+              f"P_PTdrv: {_apct(p['mean_abs_error_chain_fitted_on_equation'])}, with implausible "
               "parameters (below).", "",
               "| trip | km | measured L | L/100 km | battery kWh | corrected L | predicted L | error | error vs raw | chain on equation | CO₂ kg |",
               "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -108,7 +118,7 @@ def render(res: dict, command: str) -> str:
                   "grade). Compared with new logs (`sumo-drvpw compare`, vehicle `prius2`, this equation file) it "
                   "reports the fuel per trip, scored with the battery's energy change taken off the prediction; its "
                   "held-out quality is the rows above (two trips: a hint, not a validation); on the two trips "
-                  f"themselves {_pct(dv['mean_abs_error_in_sample'])[1:]} ("
+                  f"themselves {_apct(dv['mean_abs_error_in_sample'])} ("
                   + ", ".join(f"{t} {_pct(e)}" for t, e in dv["in_sample"].items()) + ")."]
         for t, f in p["fits"].items():
             L += ["", f"Chain calibrated without {t} on the measured P_PTdrv (R² = {f['r2']:.3f}); "
@@ -134,7 +144,8 @@ SUMO_LABELS = {
 
 
 def _mean(rows, key, season=None) -> float:
-    return float(np.mean([1 + r[key] for r in rows if season is None or r["season"] == season]))
+    x = [1 + r[key] for r in rows if season is None or r["season"] == season]
+    return float(np.mean(x)) if x else float("nan")  # (no trip of that season)
 
 
 def _i3_dropouts(i3: dict) -> list[str]:
@@ -165,27 +176,27 @@ def _i3(i3: dict) -> list[str]:
          *_i3_kfold_head(i3),
          ("2-fold (odd/even trips; each fold's trips predicted by the other fold's calibration), "
           "mean |error|" if i3.get("kfold") else "Mean |error|")
-         + f" over {len(rows)} trips: **{_pct(i3['mean_abs_error'])[1:]}** (mean signed "
-         f"{_pct(i3['mean_error'])}); summer {_pct(i3['mean_abs_error_summer'])[1:]} (signed "
-         f"{_pct(i3['mean_error_summer'])}), winter {_pct(i3['mean_abs_error_winter'])[1:]} (signed "
+         + f" over {len(rows)} trips: **{_apct(i3['mean_abs_error'])}** (mean signed "
+         f"{_pct(i3['mean_error'])}); summer {_apct(i3['mean_abs_error_summer'])} (signed "
+         f"{_pct(i3['mean_error_summer'])}), winter {_apct(i3['mean_abs_error_winter'])} (signed "
          f"{_pct(i3['mean_error_winter'])}); the {len(rows) - i3['n_flagged']} trips with the heater's "
-         f"V·I logged {_pct(i3['mean_abs_error_unflagged'])[1:]}, the {i3['n_flagged']} without it "
-         f"{_pct(_flag_mean(rows))[1:]}. Target (issue #12): 5 %.", "",
+         f"V·I logged {_apct(i3['mean_abs_error_unflagged'])}, the {i3['n_flagged']} without it "
+         f"{_apct(_flag_mean(rows))}. Target (issue #12): 5 %.", "",
          "| variant (held out, mean abs error) | |", "|---|---|",
-         f"| the pipeline above | {_pct(i3['mean_abs_error'])[1:]} |",
-         f"| the chain alone, fed the measured motor power | {_pct(i3['mean_abs_error_chain_only'])[1:]} |",
-         f"| without the recuperation limit | {_pct(i3['mean_abs_error_no_limit'])[1:]} |",
-         f"| without the `[ambient_c]*v^2` term | {_pct(i3['mean_abs_error_no_ambient_term'])[1:]} |",
+         f"| the pipeline above | {_apct(i3['mean_abs_error'])} |",
+         f"| the chain alone, fed the measured motor power | {_apct(i3['mean_abs_error_chain_only'])} |",
+         f"| without the recuperation limit | {_apct(i3['mean_abs_error_no_limit'])} |",
+         f"| without the `[ambient_c]*v^2` term | {_apct(i3['mean_abs_error_no_ambient_term'])} |",
          "| the temperature term as `cold*v^2` (cold = 20 °C − T: the form the SUMO plug-in "
          "evaluates; coefficients " + "; ".join(
              f"fold {n}: " + ", ".join(f"`{k}` {v:.4g}" for k, v in f["road_load_cold_form"].items())
-             for n, f in i3["fits"].items()) + f") | {_pct(i3['mean_abs_error_cold_form'])[1:]} |",
+             for n, f in i3["fits"].items()) + f") | {_apct(i3['mean_abs_error_cold_form'])} |",
          f"| road load on the data as logged (no fused grade, no ρ at altitude; no ambient term) | "
-         f"{_pct(i3['mean_abs_error_as_logged'])[1:]} |",
-         f"| load gains fitted freely instead of 1 | {_pct(i3['mean_abs_error_loads_free'])[1:]} |",
-         f"| η_r held equal to η_t (a symmetric machine) | {_pct(i3['mean_abs_error_symmetric_efficiency'])[1:]} |",
-         *([f"| η_t, η_r as tables over the motor power (fit/chain_map.py) | {_pct(i3['mean_abs_error_efficiency_map'])[1:]} |",
-            f"| the chain alone with the tables, fed the measured motor power | {_pct(i3['mean_abs_error_chain_only_map'])[1:]} |"]
+         f"{_apct(i3['mean_abs_error_as_logged'])} |",
+         f"| load gains fitted freely instead of 1 | {_apct(i3['mean_abs_error_loads_free'])} |",
+         f"| η_r held equal to η_t (a symmetric machine) | {_apct(i3['mean_abs_error_symmetric_efficiency'])} |",
+         *([f"| η_t, η_r as tables over the motor power (fit/chain_map.py) | {_apct(i3['mean_abs_error_efficiency_map'])} |",
+            f"| the chain alone with the tables, fed the measured motor power | {_apct(i3['mean_abs_error_chain_only_map'])} |"]
            if "mean_abs_error_efficiency_map" in i3 else []),
          "",
          *_i3_kfold_table(i3),
@@ -224,20 +235,20 @@ def _i3(i3: dict) -> list[str]:
               "| model | predicted/measured (mean) | summer | winter | mean abs error | NaN steps |",
               "|---|---|---|---|---|---|"]
         for label, x in i3["sumo_models"].items():
-            L.append(f"| {SUMO_LABELS.get(label, label)} | {x['mean_ratio']:.3f} | {x['mean_ratio_summer']:.3f} | "
-                     f"{x['mean_ratio_winter']:.3f} | {_pct(x['mean_abs_error'])[1:]} | {x['nan_steps']} |")
-        L += [f"| energy chain (this project, held out) | {_mean(rows, 'error'):.3f} | "
-              f"{_mean(rows, 'error', 'summer'):.3f} | {_mean(rows, 'error', 'winter'):.3f} | "
-              f"{_pct(i3['mean_abs_error'])[1:]} | 0 |", ""]
+            L.append(f"| {SUMO_LABELS.get(label, label)} | {_r3(x['mean_ratio'])} | {_r3(x['mean_ratio_summer'])} | "
+                     f"{_r3(x['mean_ratio_winter'])} | {_apct(x['mean_abs_error'])} | {x['nan_steps']} |")
+        L += [f"| energy chain (this project, held out) | {_r3(_mean(rows, 'error'))} | "
+              f"{_r3(_mean(rows, 'error', 'summer'))} | {_r3(_mean(rows, 'error', 'winter'))} | "
+              f"{_apct(i3['mean_abs_error'])} | 0 |", ""]
         sm = i3["sumo_models"]
         if "sumo_energy_chain" in sm and "sumo_mmpevem_i3" in sm:
             L += ["What each gets right and wrong (from the table): SUMO's shipped models have no "
                   "heater and a small constant intake, so they miss the winter trips most "
-                  f"(MMPEVEM shipped: summer {sm['sumo_mmpevem_i3']['mean_ratio_summer']:.3f}, winter "
-                  f"{sm['sumo_mmpevem_i3']['mean_ratio_winter']:.3f}); the Energy model with the calibrated "
-                  f"parameters gets the level ({sm['sumo_energy_chain']['mean_ratio']:.3f}) but keeps a "
-                  f"seasonal spread (summer {sm['sumo_energy_chain']['mean_ratio_summer']:.3f}, winter "
-                  f"{sm['sumo_energy_chain']['mean_ratio_winter']:.3f}) because the temperature term has no "
+                  f"(MMPEVEM shipped: summer {_r3(sm['sumo_mmpevem_i3']['mean_ratio_summer'])}, winter "
+                  f"{_r3(sm['sumo_mmpevem_i3']['mean_ratio_winter'])}); the Energy model with the calibrated "
+                  f"parameters gets the level ({_r3(sm['sumo_energy_chain']['mean_ratio'])}) but keeps a "
+                  f"seasonal spread (summer {_r3(sm['sumo_energy_chain']['mean_ratio_summer'])}, winter "
+                  f"{_r3(sm['sumo_energy_chain']['mean_ratio_winter'])}) because the temperature term has no "
                   "counterpart there; MMPEVEM with the calibrated road load over-predicts: it adds its own "
                   "motor-map and battery losses and its recuperation caps (77 N·m, 50 kW) to a road "
                   "load calibrated at the motor shaft, whose coefficients already carry losses the "
@@ -304,9 +315,9 @@ def _i3_heater(h: dict | None) -> list[str]:
          + f"; no trip without V·I is over-predicted by more than {max(100 * none5['errors'][t] for t in flagged):.1f} % "
          "— a missing positive load, as a heater's. Given each such trip its own deficit as heater energy (a bound, "
          f"not an estimator: it reads the battery), the pipeline's mean |error| would be "
-         f"{_pct(pr[k5]['bound']['mean_abs_error'])[1:]} over all trips ({_pct(pr[k5]['bound']['mean_abs_error_flagged'])[1:]} "
-         f"on those without V·I) in the {k5} and {_pct(pr[k2]['bound']['mean_abs_error'])[1:]} "
-         f"({_pct(pr[k2]['bound']['mean_abs_error_flagged'])[1:]}) in the {k2}: the rest of those trips' error is the "
+         f"{_apct(pr[k5]['bound']['mean_abs_error'])} over all trips ({_apct(pr[k5]['bound']['mean_abs_error_flagged'])} "
+         f"on those without V·I) in the {k5} and {_apct(pr[k2]['bound']['mean_abs_error'])} "
+         f"({_apct(pr[k2]['bound']['mean_abs_error_flagged'])}) in the {k2}: the rest of those trips' error is the "
          "road-load equation's (the pipeline's error minus the chain's on the same trip, table below), not the heater's.", "",
          f"On the trips with V·I the CAN heater power and the requested heater power read the heater's V·I "
          f"(median ratio {sg['can_over_vi_median']:.3f} and {sg['req_over_vi_median']:.3f} while it draws > 100 W; "
@@ -326,12 +337,12 @@ def _i3_heater(h: dict | None) -> list[str]:
          "|---|---|---|---|---|---|"]
     for e in h["estimators"]:
         L.append(f"| {_HEATER_LABEL.get(e, e)} | {prm(e)} | {h['energy_cv'][e]['mean_abs_kwh']:.3f} | "
-                 f"{_pct(pr[k2][e]['pipeline']['mean_abs_error'])[1:]} / {_pct(pr[k2][e]['pipeline']['mean_abs_error_flagged'])[1:]} | "
-                 f"{_pct(pr[k5][e]['pipeline']['mean_abs_error'])[1:]} / {_pct(pr[k5][e]['pipeline']['mean_abs_error_flagged'])[1:]} | "
-                 f"{_pct(pr[k5][e]['chain_only']['mean_abs_error_flagged'])[1:]} |")
+                 f"{_apct(pr[k2][e]['pipeline']['mean_abs_error'])} / {_apct(pr[k2][e]['pipeline']['mean_abs_error_flagged'])} | "
+                 f"{_apct(pr[k5][e]['pipeline']['mean_abs_error'])} / {_apct(pr[k5][e]['pipeline']['mean_abs_error_flagged'])} | "
+                 f"{_apct(pr[k5][e]['chain_only']['mean_abs_error_flagged'])} |")
     L.append(f"| bound: each trip's own deficit (reads the battery) | – | – | "
-             f"{_pct(pr[k2]['bound']['mean_abs_error'])[1:]} / {_pct(pr[k2]['bound']['mean_abs_error_flagged'])[1:]} | "
-             f"{_pct(pr[k5]['bound']['mean_abs_error'])[1:]} / {_pct(pr[k5]['bound']['mean_abs_error_flagged'])[1:]} | "
+             f"{_apct(pr[k2]['bound']['mean_abs_error'])} / {_apct(pr[k2]['bound']['mean_abs_error_flagged'])} | "
+             f"{_apct(pr[k5]['bound']['mean_abs_error'])} / {_apct(pr[k5]['bound']['mean_abs_error_flagged'])} | "
              "0.0 % |")
     ch = h["training_choice"]
     co = {e: pr[k5][e]["chain_only"]["errors"] for e in ("none", "min_can_req", "heat_balance")}
@@ -345,8 +356,8 @@ def _i3_heater(h: dict | None) -> list[str]:
     spread = abs(pr[k5]["none"]["pipeline"]["mean_abs_error"] - pr[k2]["none"]["pipeline"]["mean_abs_error"])
     L += ["", f"The training side's choice is the {_HEATER_LABEL.get(ch, ch)} (heater energy within "
           f"{h['energy_cv'][ch]['mean_abs_kwh']:.3f} kWh per held-out trip with V·I); on the trips without V·I it takes "
-          f"the {k5} from {_pct(pr[k5]['none']['pipeline']['mean_abs_error_flagged'])[1:]} to "
-          f"{_pct(pr[k5][ch]['pipeline']['mean_abs_error_flagged'])[1:]}. None is adopted. The CAN and requested "
+          f"the {k5} from {_apct(pr[k5]['none']['pipeline']['mean_abs_error_flagged'])} to "
+          f"{_apct(pr[k5][ch]['pipeline']['mean_abs_error_flagged'])}. None is adopted. The CAN and requested "
           f"powers, which read the heater on the trips with V·I, book {sums['can']:.2f} and {sums['req']:.2f} kWh on "
           f"the trips without it against {pos:.2f} kWh of deficits: what they report there is not the draw. Their "
           f"minimum lowers the {k5} by {100 * gain[k5]:.2f} points and the {k2} by {100 * gain[k2]:.2f} (less than the "
@@ -354,7 +365,7 @@ def _i3_heater(h: dict | None) -> list[str]:
           + (", ".join(moved("min_can_req", 1)) or "no trip") + " and raises it by more than a point on "
           + (", ".join(moved("min_can_req", -1)) or "none") + "; it is not the training side's "
           "choice and was drawn up after looking at these trips, so that gain is not held out, and the headline "
-          f"stays above 5 % ({_pct(pr[k5]['min_can_req']['pipeline']['mean_abs_error'])[1:]}). The heat balance "
+          f"stays above 5 % ({_apct(pr[k5]['min_can_req']['pipeline']['mean_abs_error'])}). The heat balance "
           f"is physical (k {min(ks):.0f}–{max(ks):.0f} W/K: {min(ks) / 1005:.3f}–{max(ks) / 1005:.3f} kg/s of air "
           "through the heater core at the fixed fan level) but reads only heat the heater core gives the air above "
           "the air temperature: it helps " + (", ".join(moved("heat_balance", 1)) or "no trip")
@@ -362,7 +373,7 @@ def _i3_heater(h: dict | None) -> list[str]:
           "chain alone) — it misses reheat behind the A/C's evaporator and books heat the coolant kept from "
           f"the trip before — and its heater energy is off by {h['energy_cv']['heat_balance']['mean_abs_kwh']:.3f} kWh "
           f"per held-out trip with V·I. Even the bound leaves the {k5} at "
-          f"{_pct(pr[k5]['bound']['mean_abs_error'])[1:]}: the heater alone meets the target only at the margin.", "",
+          f"{_apct(pr[k5]['bound']['mean_abs_error'])}: the heater alone meets the target only at the margin.", "",
           f"Per trip without V·I ({k5}; kWh, errors of the battery energy):", "",
           "| trip | measured | deficit (chain alone) | CAN heater | requested heater | chain alone: none / min / heat balance "
           "| pipeline: none / min / heat balance / bound |", "|---|---|---|---|---|---|---|"]
@@ -378,7 +389,7 @@ def _i3_heater(h: dict | None) -> list[str]:
 
 def _selection(sel: dict) -> str:
     return (f"{sel['choice']} (the map lower on {sel['map_better_on']} of {sel['k']} inner folds: "
-            + ", ".join(f"{_pct(e['constant'])[1:]} → {_pct(e['power'])[1:]}" for e in sel["inner_folds"]) + ")")
+            + ", ".join(f"{_apct(e['constant'])} → {_apct(e['power'])}" for e in sel["inner_folds"]) + ")")
 
 
 def _i3_kfold_head(i3: dict) -> list[str]:
@@ -393,8 +404,8 @@ def _i3_kfold_head(i3: dict) -> list[str]:
             "as the headline before the run), with the efficiency (constant or tables over |P|) chosen "
             "per fold by an inner trip-grouped 5-fold CV on that fold's training trips only (tables "
             "only when they lower the inner error on every inner fold): mean |error| over "
-            f"{len(k['rows'])} trips **{_pct(k['mean_abs_error_selected'])[1:]}**; on the trips with "
-            f"the heater's V·I logged {_pct(k['mean_abs_error_selected_unflagged'])[1:]}. Target "
+            f"{len(k['rows'])} trips **{_apct(k['mean_abs_error_selected'])}**; on the trips with "
+            f"the heater's V·I logged {_apct(k['mean_abs_error_selected_unflagged'])}. Target "
             "(issue #12): 5 %." + _i3_in_sample_text(k.get("in_sample")), ""]
 
 
@@ -404,8 +415,8 @@ def _i3_in_sample_text(ins: dict | None) -> str:
     if not ins:
         return ""
     return (f" In sample — the pipeline (constant η) fitted on all {len(ins['errors'])} trips and scored on "
-            f"them — {_pct(ins['mean_abs_error'])[1:]}: {_pct(ins['mean_abs_error_unflagged'])[1:]} on the "
-            f"trips with the heater's V·I logged, {_pct(ins['mean_abs_error_flagged'])[1:]} on those without "
+            f"them — {_apct(ins['mean_abs_error'])}: {_apct(ins['mean_abs_error_unflagged'])} on the "
+            f"trips with the heater's V·I logged, {_apct(ins['mean_abs_error_flagged'])} on those without "
             "(whose heater draw no input carries); a held-out mean at 5 % is at the in-sample floor.")
 
 
@@ -416,26 +427,26 @@ def _i3_kfold_table(i3: dict) -> list[str]:
     L = [f"Both protocols side by side (mean |error| per held-out trip; the 2-fold trains on 25 "
          f"trips, the {k['k']}-fold on {round(len(k['rows']) * (k['k'] - 1) / k['k'])}):", "",
          f"| variant | 2-fold | {k['k']}-fold | {k['k']}-fold, heater V·I logged |", "|---|---|---|---|",
-         f"| pipeline, constant η | {_pct(i3['mean_abs_error'])[1:]} | {_pct(k['mean_abs_error'])[1:]} | "
-         f"{_pct(k['mean_abs_error_unflagged'])[1:]} |",
-         f"| pipeline, η tables over |P| | {_pct(i3.get('mean_abs_error_efficiency_map'))[1:]} | "
-         f"{_pct(k['mean_abs_error_efficiency_map'])[1:]} | {_pct(k['mean_abs_error_efficiency_map_unflagged'])[1:]} |",
-         f"| pipeline, η chosen by training-side CV | – | {_pct(k['mean_abs_error_selected'])[1:]} | "
-         f"{_pct(k['mean_abs_error_selected_unflagged'])[1:]} |",
-         f"| chain alone (measured motor power), constant η | {_pct(i3['mean_abs_error_chain_only'])[1:]} | "
-         f"{_pct(k['mean_abs_error_chain_only'])[1:]} | {_pct(k['mean_abs_error_chain_only_unflagged'])[1:]} |",
-         f"| chain alone, η tables | {_pct(i3.get('mean_abs_error_chain_only_map'))[1:]} | "
-         f"{_pct(k['mean_abs_error_chain_only_map'])[1:]} | {_pct(k['mean_abs_error_chain_only_map_unflagged'])[1:]} |",
+         f"| pipeline, constant η | {_apct(i3['mean_abs_error'])} | {_apct(k['mean_abs_error'])} | "
+         f"{_apct(k['mean_abs_error_unflagged'])} |",
+         f"| pipeline, η tables over |P| | {_apct(i3.get('mean_abs_error_efficiency_map'))} | "
+         f"{_apct(k['mean_abs_error_efficiency_map'])} | {_apct(k['mean_abs_error_efficiency_map_unflagged'])} |",
+         f"| pipeline, η chosen by training-side CV | – | {_apct(k['mean_abs_error_selected'])} | "
+         f"{_apct(k['mean_abs_error_selected_unflagged'])} |",
+         f"| chain alone (measured motor power), constant η | {_apct(i3['mean_abs_error_chain_only'])} | "
+         f"{_apct(k['mean_abs_error_chain_only'])} | {_apct(k['mean_abs_error_chain_only_unflagged'])} |",
+         f"| chain alone, η tables | {_apct(i3.get('mean_abs_error_chain_only_map'))} | "
+         f"{_apct(k['mean_abs_error_chain_only_map'])} | {_apct(k['mean_abs_error_chain_only_map_unflagged'])} |",
          f"| chain as a SUMO study has it: no heater or A/C log, HVAC over the ambient temperature "
          f"(set-point {k['hvac']['setpoint_c']:g} °C; η_r held at the free fit's η_t; fitted on every training trip) | – | "
-         f"{_pct(k['mean_abs_error_hvac_only'])[1:]} | {_pct(k['mean_abs_error_hvac_only_unflagged'])[1:]} |",
+         f"{_apct(k['mean_abs_error_hvac_only'])} | {_apct(k['mean_abs_error_hvac_only_unflagged'])} |",
          *([f"| the same with the cabin's warm-up at a cold start (`warmup_j_per_k`, fitted beside the steady "
             f"heating), booked from each held-out trip's own cabin start temperature — a SUMO study that knows "
-            f"which trips start cold | – | {_pct(k['mean_abs_error_hvac_warmup'])[1:]} | "
-            f"{_pct(k['mean_abs_error_hvac_warmup_unflagged'])[1:]} |",
+            f"which trips start cold | – | {_apct(k['mean_abs_error_hvac_warmup'])} | "
+            f"{_apct(k['mean_abs_error_hvac_warmup_unflagged'])} |",
             f"| the same, booked as if every trip started cold at the air temperature (`cold_start = true`) | – | "
-            f"{_pct(k['mean_abs_error_hvac_warmup_all_cold'])[1:]} | "
-            f"{_pct(k['mean_abs_error_hvac_warmup_all_cold_unflagged'])[1:]} |"] if k.get("warmup_fits") else []),
+            f"{_apct(k['mean_abs_error_hvac_warmup_all_cold'])} | "
+            f"{_apct(k['mean_abs_error_hvac_warmup_all_cold_unflagged'])} |"] if k.get("warmup_fits") else []),
          "", "The SUMO-study chain's parameters per fold (heating and cooling W per K from the set-point, "
          "constant auxiliary W): " + "; ".join(
              f"{h.get('hvac.heating_w_per_k', float('nan')):.0f} / {h.get('hvac.cooling_w_per_k', float('nan')):.0f} / "
@@ -489,7 +500,7 @@ def _deliverables(dv, dl, k) -> list[str]:
                     + "; with the closed loop's `[measurement]`. Compared with new logs (`sumo-drvpw compare`, "
                     "vehicle `bmw_i3`, this equation file) it reports the battery energy per trip "
                     f"(`trip_net_energy`); its held-out quality is the {k['k']}-fold pipeline's: "
-                    f"{_pct(k['mean_abs_error'])[1:]} over all trips, {_pct(k['mean_abs_error_unflagged'])[1:]} on "
+                    f"{_apct(k['mean_abs_error'])} over all trips, {_apct(k['mean_abs_error_unflagged'])} on "
                     "those with the heater's V·I logged (a trip without it is predicted without its heater)."]
     return out
 
@@ -517,9 +528,9 @@ def _warmup(k) -> list[str]:
             "warm-up kJ/K / steady heating W/K / constant W: " + "; ".join(
                 f"{f.get('hvac.warmup_j_per_k', float('nan')) / 1000:.0f} / {f.get('hvac.heating_w_per_k', float('nan')):.0f}"
                 f" / {f.get('aux_power_w', float('nan')):.0f}" for f in k["warmup_fits"])
-            + f". On the winter trips (TripB…) the held-out mean |error| goes from {_pct(winter('error_hvac_only'))[1:]} "
-            f"without the warm-up to {_pct(winter('error_hvac_warmup'))[1:]} with it booked from the cabin's start "
-            f"({_pct(winter('error_hvac_warmup_all_cold'))[1:]} booked as if every trip started cold); "
+            + f". On the winter trips (TripB…) the held-out mean |error| goes from {_apct(winter('error_hvac_only'))} "
+            f"without the warm-up to {_apct(winter('error_hvac_warmup'))} with it booked from the cabin's start "
+            f"({_apct(winter('error_hvac_warmup_all_cold'))} booked as if every trip started cold); "
             f"{len(warm)} winter trips started with a warm cabin (≥ 18 °C: {', '.join(warm)}). Summed over the "
             f"winter trips (a fleet's figure) the error is {_pct(total('error_hvac_only'))} without the warm-up, "
             f"{_pct(total('error_hvac_warmup'))} with it from the cabin's start and {_pct(total('error_hvac_warmup_all_cold'))} "
@@ -551,7 +562,7 @@ def _prius_sumo(rows) -> list[str]:
                  + " | ".join(f"{r[k + '_l']:.3f} ({_pct(r[k + '_error'])})" for k in labels) + " |")
     mean = {k: float(np.mean([abs(r[k + "_error"]) for r in rows])) for k in labels}
     L += ["", "What each gets right and wrong: " + "; ".join(
-        f"{SUMO_LABELS.get(k, k)} misses by {_pct(v)[1:]} on average — a conventional petrol car's "
+        f"{SUMO_LABELS.get(k, k)} misses by {_apct(v)} on average — a conventional petrol car's "
         "fuel map: it never switches the engine off at low power and recovers no braking energy, "
         "which is what a power-split hybrid saves" for k, v in mean.items())
         + f"; the energy chain (Willans line with engine-off, calibrated on the other trip) "

@@ -66,8 +66,8 @@ def study(ds: Dataset, out: Path) -> StudyResult:
     from sumo_drvpw.report import figures as plots
 
     df = ds.log.df
-    season = (df["season"].astype(str).to_numpy() if "season" in df
-              else np.full(len(df), "unknown"))
+    season = (df["season"].fillna("unknown").astype(str).to_numpy() if "season" in df  # (a trip the
+              else np.full(len(df), "unknown"))                                        # overview lacks)
     trips = ds.trip
     cal_trips, test_trips = split_trips(trips, season)
     cal = ds.usable & np.isin(trips, cal_trips)
