@@ -189,3 +189,24 @@ def test_the_battery_validation_report_renders_i3_trips_without_a_season():
     md = render(res, "cmd")
     assert "summer n/a (signed n/a), winter n/a (signed n/a)" in md
     assert "(MMPEVEM shipped: summer n/a, winter n/a)" in md
+
+
+def test_compare_says_when_an_equation_was_calibrated_on_the_logs_compared(tmp_path, capsys):
+    """`compare` on the very log file an equation was calibrated on printed its per-trip
+    errors as any other (a held-out test that is not one); `diagnose --target` already said
+    so for a chain. It now notes it, naming the equation and the file; another log: no note."""
+    a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
+    assert cli_main(["synth", "--out", str(a), "--minutes", "4", "--seed", "1"]) == 0
+    assert cli_main(["synth", "--out", str(b), "--minutes", "4", "--seed", "2"]) == 0
+    eq = tmp_path / "eqs" / "eq.toml"
+    eq.parent.mkdir()
+    assert cli_main(["calibrate", str(a), "--vehicle", "prius3", "--out", str(eq)]) == 0
+    capsys.readouterr()
+    assert cli_main(["compare", str(a), "--vehicle", "prius3", "--equation", str(eq),
+                     "--equation", "vsp_ldv1999", "--out", str(tmp_path / "c1")]) == 0
+    notes = [x for x in capsys.readouterr().out.splitlines() if "in sample" in x]
+    assert notes == ["note: eq was calibrated on 1 of these 1 log file(s) (a.parquet): its errors there are "
+                     "in sample, not held out"]
+    assert cli_main(["compare", str(b), "--vehicle", "prius3", "--equation", str(eq),
+                     "--out", str(tmp_path / "c2")]) == 0
+    assert "in sample" not in capsys.readouterr().out

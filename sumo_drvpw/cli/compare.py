@@ -32,6 +32,8 @@ def main(args) -> int:
     from sumo_drvpw.cli._scale import check_engine_arguments, compare_main
 
     check_engine_arguments(args)  # --workers, --scheduler only with --engine dask
+    for line in in_sample_lines(args.equation, args.logs):
+        print("note: " + line)
     if compare_main(args) is not None:  # driving power, streamed in bounded memory (issue #14)
         return 0
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
@@ -51,6 +53,36 @@ def main(args) -> int:
         write_comparison_report(comp, tmp, f"Equations against measured {what} power", ctx)
     print_summary(comp.to_json(), args.out)
     return 0
+
+
+def in_sample_lines(equations, logs) -> list[str]:
+    """One line per equation file calibrated on some of the log files compared (its
+    ``[provenance]`` or ``[chain.provenance]`` ``logs``, named relative to the equation's
+    folder): its errors there are in sample, not held out. Files only: the same trips
+    imported into another file are not recognised."""
+    from sumo_drvpw.data.log import expand_paths
+    from sumo_drvpw.data.paths import files_in_common
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
+
+    try:
+        files = [str(f) for f in expand_paths(logs)]
+    except UserError:  # the reader says what is wrong with them, below
+        return []
+    out = []
+    for spec in equations:
+        if spec in SPEC_EQUATIONS or not Path(spec).is_file():
+            continue
+        eq = load_equation(spec)
+        named = [str(x) for prov in (eq.provenance or {}, getattr(eq.chain, "provenance", None) or {})
+                 for x in prov.get("logs") or []]
+        named += [str(Path(spec).parent / x) for x in named if not Path(x).is_absolute()]
+        seen = files_in_common(named, files)
+        if seen:
+            out.append(f"{eq.name} was calibrated on {len(seen)} of these {len(files)} log file(s) "
+                       f"({', '.join(Path(f).name for f in seen[:3])}{' …' if len(seen) > 3 else ''}): its "
+                       "errors there are in sample, not held out")
+    return out
 
 
 def compare_target(args) -> tuple[str, str | None]:
