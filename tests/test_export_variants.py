@@ -210,3 +210,29 @@ def test_compare_says_when_an_equation_was_calibrated_on_the_logs_compared(tmp_p
     assert cli_main(["compare", str(b), "--vehicle", "prius3", "--equation", str(eq),
                      "--out", str(tmp_path / "c2")]) == 0
     assert "in sample" not in capsys.readouterr().out
+
+
+def test_a_trip_copied_under_another_name_is_not_counted_twice_silently(tmp_path, capsys):
+    """A folder with 'TripA04.csv' and its copy 'TripA04 - Kopie.csv' (or the trip re-saved by
+    a spreadsheet beside the original under a new name): both were imported, the copy as a
+    trip of its own (noted only as missing from overview.csv), so every fit and mean counted
+    the trip twice without a word. The import now says so, naming both files; two different
+    trips, no such note."""
+    src = tmp_path / "in"
+    src.mkdir()
+    _tum_trip(src)
+    (src / "overview.csv").write_text(OVERVIEW_HEAD + OVERVIEW_A04 + "\n", encoding="utf-8")
+    (src / "TripA04 - Kopie.csv").write_bytes((src / "TripA04.csv").read_bytes())
+    df, rep = read("bmw-i3-tum", src)
+    same = [n for n in rep["notes"] if "holds the same samples" in n]
+    assert len(same) == 1 and "TripA04.csv holds the same samples as" in same[0] and "Kopie.csv" in same[0]
+    assert cli_main(["import", "bmw-i3-tum", str(src), "--out", str(tmp_path / "x.parquet")]) == 0
+    out = capsys.readouterr().out
+    assert "note: " + same[0] in out and "counted twice by every fit and mean" in out
+    (src / "TripA04 - Kopie.csv").unlink()
+    _tum_trip(src, "TripA05")
+    text = (src / "TripA05.csv").read_bytes().replace(b";20;500;", b";19;500;")
+    (src / "TripA05.csv").write_bytes(text)
+    df, rep = read("bmw-i3-tum", src)
+    assert sorted(set(df["trip_id"])) == ["TripA04", "TripA05"]
+    assert not [n for n in rep["notes"] if "holds the same samples" in n]

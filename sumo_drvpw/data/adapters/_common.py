@@ -476,6 +476,7 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
     if dup:
         raise UserError(f"{fmt}: trip_id {dup[0]!r} comes from more than one file: "
                         + ", ".join(r["file"] for r in reports if r["trip_id"] == dup[0]))
+    copies = _copies(frames, reports)
     for f, r in zip(frames, reports):
         _refuse_infinite(f, r)
         _refuse_non_flags(f, r)
@@ -490,7 +491,7 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
         for k, n in r["dropped"].items():
             dropped[k] = dropped.get(k, 0) + n
     report = {"format": fmt, "files": reports, "rows_read": sum(r["rows_read"] for r in reports),
-              "kept": int(len(df)), "dropped": dropped, "notes": list(notes) + mixed,
+              "kept": int(len(df)), "dropped": dropped, "notes": list(notes) + mixed + copies,
               "columns": list(df.columns)}
     return df, report
 
@@ -512,6 +513,29 @@ def _text_in_some_files(df: pd.DataFrame, frames: list[pd.DataFrame], reports: l
         notes.append(f"column '{c}' is text in {len(text)} file(s) ({', '.join(Path(t).name for t in text[:3])}"
                      f"{', …' if len(text) > 3 else ''}) and numbers in others: kept as text in all")
     return notes
+
+
+def _copies(frames: list[pd.DataFrame], reports: list[dict]) -> list[str]:
+    """Notes on files whose samples equal another's, time and speed sample for sample (a copy
+    of one trip under another name, 'TripA01 - Copy.csv', or re-saved beside its original):
+    imported, such a trip counts twice in every fit and mean. Files that never move are not
+    compared (standing logs of one length may well agree)."""
+    import hashlib
+
+    seen: dict[str, str] = {}
+    out = []
+    for f, r in zip(frames, reports):
+        v = f["speed_mps"].to_numpy(float)
+        if not (v > 0).any():
+            continue
+        key = hashlib.sha1(np.ascontiguousarray(f["time_s"].to_numpy(float)).tobytes()
+                           + np.ascontiguousarray(v).tobytes()).hexdigest()
+        if key in seen:
+            out.append(f"{r['file']} holds the same samples as {seen[key]} (time and speed equal, sample "
+                       "for sample): one trip under two names, counted twice by every fit and mean; import one")
+        else:
+            seen[key] = r["file"]
+    return out
 
 
 def _refuse_infinite(df: pd.DataFrame, report: dict) -> None:
