@@ -354,6 +354,30 @@ def test_dropout_planted_hold_or_linear_fill_is_found_exactly(mode):
     assert out.any() and not wide[out].any()
 
 
+def test_a_standstill_whose_accelerometer_reads_one_value_is_no_dropout():
+    """A car parked for minutes: its speed is 0 and a coarse or filtered accelerometer may read
+    one constant value — held, but no logger dropout (a helper's rehearsal: 25 min parked in an
+    i3 trip were left out as a dropout, 15,960 of 23,808 samples, with their battery draw);
+    the same stretch held while moving still is one, and so is a 0 held while the car drove
+    off (the speed jumps to what it reached when the logger comes back)."""
+    df = _dropout_log()
+    own = np.flatnonzero(df["trip_id"].to_numpy() == "synth-2")
+    i = own[-8 * 60:]                                  # its last 60 s at 8 Hz: parked
+    parked = df.copy()
+    parked.loc[i, "speed_mps"] = 0.0
+    parked.loc[i, "imu_accel_mps2"] = 0.0123
+    assert not _mask(parked).any()
+    moving = df.copy()
+    moving.loc[i, "speed_mps"] = 7.0
+    moving.loc[i, "imu_accel_mps2"] = 0.0123
+    assert _mask(moving)[i].all()
+    k = own[400:400 + 8 * 60]                          # 60 s mid-trip, driving on after it
+    drove_off = df.copy()
+    drove_off.loc[k, "speed_mps"] = 0.0
+    drove_off.loc[k, "imu_accel_mps2"] = 0.0123
+    assert df["speed_mps"].to_numpy()[k[-1] + 1] > 1.0 and _mask(drove_off)[k].all()
+
+
 def test_accelerometer_offsets_hand_calculation():
     from sumo_drvpw.fit.input_checks import accelerometer_offsets
 

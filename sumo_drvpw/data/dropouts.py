@@ -22,11 +22,27 @@ from sumo_drvpw.data.corrections import ACCELEROMETER_COLUMNS
 DROPOUT_MIN_S = 5.0
 #: second difference at or below this is "exactly linear" (float noise of a linear fill)
 LINEAR_TOL = 1e-6
+#: a run whose speed stays at or below this [m/s] is a car standing, no dropout: its speed is
+#: constant, and a still accelerometer may read one value too (a coarse or filtered one)
+STANDSTILL_MPS = 0.1
+#: ... unless the next sample jumps faster than a car pulls away [m/s²] (4.5: hard launches)
+STANDSTILL_PULL_MPS2 = 4.5
 
 def _runs(flag: np.ndarray):
     """(start, stop) of runs of True."""
     d = np.diff(np.r_[0, flag.astype(np.int8), 0])
     return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+
+
+def _stood(v: np.ndarray, t: np.ndarray, codes: np.ndarray, a: int, b: int) -> bool:
+    """Whether the held run ``a:b`` is a car standing: its speed at or below STANDSTILL_MPS
+    and the next sample of its trip no faster than a car pulls away (STANDSTILL_PULL_MPS2;
+    a logger that held 0 while the car drove off ends in a jump to the speed it reached)."""
+    if v[a:b].max() > STANDSTILL_MPS:
+        return False
+    if b >= len(v) or codes[b] != codes[b - 1]:
+        return True
+    return bool(v[b] <= STANDSTILL_MPS + STANDSTILL_PULL_MPS2 * max(t[b] - t[b - 1], 0.0))
 
 
 def dropout_mask(time_s, signals, trip_codes, speed_mps=None, min_run_s: float = DROPOUT_MIN_S,
@@ -41,6 +57,8 @@ def dropout_mask(time_s, signals, trip_codes, speed_mps=None, min_run_s: float =
     signals : arrays that a real sensor never draws as a straight line for seconds (speed
         and a longitudinal accelerometer) — at least two, so a steady cruise is not a dropout
     trip_codes : integer trip code per sample (contiguous trips)
+    speed_mps : speed per sample [m/s]; a run in which it stays at or below STANDSTILL_MPS
+        is a car standing, not marked (unless the speed jumps after it: :func:`_stood`)
     """
     t = np.asarray(time_s, float)
     codes = np.asarray(trip_codes)
@@ -67,9 +85,10 @@ def dropout_mask(time_s, signals, trip_codes, speed_mps=None, min_run_s: float =
     # a run of k linear second differences covers k + 2 samples
     st, en = _runs(lin)
     out = np.zeros(n, bool)
+    v = None if speed_mps is None else np.abs(np.nan_to_num(np.asarray(speed_mps, float)))
     for a, b in zip(st, en):
         a0 = a - 2
-        if t[b - 1] - t[a0] >= min_run_s:
+        if t[b - 1] - t[a0] >= min_run_s and not (v is not None and _stood(v, t, codes, a0, b)):
             out[a0:b] = True
     if margin_m > 0 and speed_mps is not None and out.any():
         v = np.nan_to_num(np.asarray(speed_mps, float))
