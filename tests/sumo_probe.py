@@ -48,3 +48,54 @@ def emitted_wh(path: Path, dt: float) -> tuple[dict, dict]:
             else:
                 wh[v.get("id")] += e * dt
     return wh, nan
+
+
+
+def parking_moves_wh(scenario: Path, d: Path, vehicles=("p",)) -> dict:
+    """SUMO's electricity [Wh] per vehicle of ``vehicles`` over the steps in which it parks,
+    which its emission output leaves out: SUMO moves the car on its lane into its stop,
+    below 0.1 m/s, then takes it off the road, so the emission output (the vehicles on the
+    road at the step's end) does not write that step, while its emissions device books the
+    move (MSDevice_Emissions::notifyMove), as the plug-in does (sim/parking.py
+    ``Parking.started``). (Its battery device books only that step's recuperation:
+    MSDevice_Battery zeroes a parking car's consumption.) Probe runs of ``scenario`` (its
+    own command line, outputs into ``d``): one finds the steps — a vehicle's FCD rows the
+    emission output lacks, after one it has — and, per such step, SUMO's emissions device
+    (tripinfo, unfinished trips written) ended before and after it gives its energy (also
+    for a car switched off for its parking: SUMO 1.28's emissions device books that move).
+    """
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    d.mkdir(parents=True, exist_ok=True)
+    sc = load_scenario(scenario)
+    args = list(sc.sumo_args)
+    for opt in ("--emission-output", "--fcd-output", "--end"):  # (the scenario run's: kept)
+        if opt in args:
+            del args[args.index(opt):args.index(opt) + 2]
+
+    def sumo(end: float, *out: str) -> None:
+        subprocess.run([sumolib.checkBinary("sumo"), *args, "--end", f"{end:.6f}", *out], check=True,
+                       capture_output=True)
+
+    sumo(float(sc.end), "--emission-output", str(d / "em.xml"), "--fcd-output", str(d / "fcd.xml"))
+    written = {(ts.get("time"), v.get("id")) for ts in ET.parse(d / "em.xml").getroot() for v in ts}
+    entries, prev = [], {}
+    for ts in ET.parse(d / "fcd.xml").getroot():
+        t = ts.get("time")
+        for v in ts:
+            vid = v.get("id")
+            if vid in vehicles:
+                on = (t, vid) in written
+                if not on and prev.get(vid):
+                    entries.append((float(t), vid))
+                prev[vid] = on
+    out: dict = defaultdict(float)
+    for t, vid in entries:
+        wh = []
+        for end in (t, t + float(sc.step_length)):
+            sumo(end, "--tripinfo-output", str(d / "ti.xml"), "--tripinfo-output.write-unfinished",
+                 "--device.emissions.explicit", vid)
+            wh.append(next(float(e.find("emissions").get("electricity_abs"))
+                           for e in ET.parse(d / "ti.xml").getroot() if e.get("id") == vid))
+        out[vid] += wh[1] - wh[0]
+    return out

@@ -13,15 +13,15 @@ import pytest
 
 from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.fcd import process_fcd
-from sumo_probe import build_net, emitted_wh, energy_scenario
-from test_parking_exit_blocked import ROUTES
+from sumo_probe import build_net, energy_scenario
+from test_parking_exit_blocked import ROUTES, sumo_electricity
 
 
 def recorded(d, step=0.5, params="", stop='<stop parkingArea="pa" duration="20"/>', signals=False, extra=""):
     """The blocked-exit scenario of tests/test_parking_exit_blocked.py (the parked car's
     ``stop``, ``extra`` elements added to the routes) run live with SUMO's emission output
     and FCD at 6 decimals: (scenario, live chain_vehicles by key, SUMO's electricity per
-    vehicle [Wh])."""
+    vehicle [Wh], the step each car parks in included: test_parking_exit_blocked.sumo_electricity)."""
     build_net(d, '<nodes><node id="a" x="0" y="0"/><node id="b" x="600" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
     (d / "r.rou.xml").write_text(ROUTES.format(params=params).replace(
@@ -32,7 +32,7 @@ def recorded(d, step=0.5, params="", stop='<stop parkingArea="pa" duration="20"/
     if signals:
         sc.write_text(sc.read_text(encoding="utf-8").replace('"--fcd-output",', '"--fcd-output.signals", "true", "--fcd-output",'), encoding="utf-8")
     run_scenario(sc, d / "live")
-    return sc, _chain(d / "live"), emitted_wh(d / "em.xml", step)[0]
+    return sc, _chain(d / "live"), sumo_electricity(sc, d, dt=step)[0]
 
 
 def _chain(out):

@@ -15,7 +15,7 @@ import pytest
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim import run_scenario
-from sumo_probe import build_net, emitted_wh, energy_scenario
+from sumo_probe import build_net, emitted_wh, energy_scenario, parking_moves_wh
 
 ROUTES = """<routes>
   <vType id="ecar" vClass="passenger" mass="1500" emissionClass="Energy/unknown">
@@ -43,10 +43,22 @@ def scenario(d, params="", fcd=False):
 
 def run_against_sumo(toml, d, **overrides):
     """Run scenario ``toml`` (outputs in ``d``/o): its summary, its chain's vehicles, and
-    SUMO's emission output of the run per vehicle [Wh] with its nan steps."""
+    SUMO's electricity of the run per vehicle [Wh] — its emission output and the steps in
+    which car p parks, which that output leaves out and its emissions device books
+    (sumo_probe.parking_moves_wh) — with the emission output's nan steps."""
     res = run_scenario(toml, d / "o", **overrides)
-    sumo_wh, nan = emitted_wh(d / "em.xml", 0.5)
-    return res, pd.read_csv(d / "o" / "chain_vehicles.csv").set_index("key"), sumo_wh, nan
+    return res, pd.read_csv(d / "o" / "chain_vehicles.csv").set_index("key"), *sumo_electricity(toml, d)
+
+
+def sumo_electricity(toml, d, dt=0.5, vehicles=("p",)):
+    """SUMO's electricity per vehicle [Wh] of scenario ``toml`` run in ``d`` (its emission
+    output ``d``/em.xml at steps of ``dt`` [s]) with the steps in which ``vehicles`` park
+    (probe runs in ``d``/probe: sumo_probe.parking_moves_wh), and the emission output's nan
+    steps."""
+    sumo_wh, nan = emitted_wh(d / "em.xml", dt)
+    for vid, wh in parking_moves_wh(toml, d / "probe", vehicles).items():
+        sumo_wh[vid] += wh
+    return sumo_wh, nan
 
 
 def resumed_at_30(path, connection, extra=(), on_step=None):
@@ -100,7 +112,7 @@ def test_a_car_switched_off_for_its_parking_stays_off_while_blocked(tmp_path):
     res = run_scenario(path, tmp_path / "o")
     assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(path), "--out", str(tmp_path / "r"),
                      "--no-figures"]) == 0
-    sumo_wh, _ = emitted_wh(tmp_path / "em.xml", 0.5)
+    sumo_wh, _ = sumo_electricity(path, tmp_path)
     for out in ("o", "r"):
         cv = pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key")
         assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6), out
@@ -150,7 +162,7 @@ def test_a_parked_fleet_is_not_asked_for_its_signals_before_its_parking_can_end(
     res = run_scenario(tmp_path / "s.toml", tmp_path / "o")
     assert calls == []
     assert res["parking"]["idle_starts"] == 0
-    sumo_wh, _ = emitted_wh(tmp_path / "em.xml", 0.5)
+    sumo_wh, _ = sumo_electricity(tmp_path / "s.toml", tmp_path)
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], rel=1e-6)
 
@@ -245,7 +257,7 @@ def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_
 
     energy, res = resumed_at_30(path, connection, on_step=remove)
     booked = energy["vtype_energy.ecar"]["chain"]["net_j"] / 3600.0
-    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    sumo_wh, nan = sumo_electricity(path, tmp_path)  # (its parking starts before 30 s)
     assert not nan
     assert booked == pytest.approx(sumo_wh["p"], rel=1e-6)
     assert res["parking"]["idle_starts"] == (0 if off else 1)
@@ -313,7 +325,7 @@ def test_a_car_switched_off_in_a_bus_bay_or_beside_the_lane_stays_off_until_its_
     # dwelling in the bay it is ShutOff's stop; parked off the lane it is not (as replayed)
     assert (res["shut_off_at_long_stops"]["vehicle_s"] > 0.0) == place.startswith("busStop")
     if place.startswith("lane"):
-        sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+        sumo_wh, nan = sumo_electricity(toml, tmp_path)
         cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
         assert cv.loc["p", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["p"], abs=1e-4)
 

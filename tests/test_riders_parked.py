@@ -11,7 +11,8 @@ import pandas as pd
 import pytest
 
 from sumo_drvpw.sim import run_scenario
-from sumo_probe import build_net, emitted_wh, energy_scenario
+from sumo_probe import build_net, energy_scenario
+from test_parking_exit_blocked import sumo_electricity
 
 PARKED = "".join(f'<vehicle id="f{i}" type="ecar" depart="{100 + i}" departPos="5"><route edges="e1"/>'
                  f'<stop parkingArea="pb" duration="5000"/></vehicle>' for i in range(30))
@@ -52,7 +53,7 @@ def test_parked_fleet_riders(tmp_path, monkeypatch):
     assert res["transportables"]["max_kg"] == 400.0
     # 31 departures, 31 stop starts, 1 stop end: not one read per parked car and step
     assert calls[0] < 200, calls[0]
-    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    sumo_wh, nan = sumo_electricity(tmp_path / "s.toml", tmp_path, vehicles=("c",))  # (the step it parks in too)
     assert not nan
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
     assert cv.loc["c", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["c"], rel=1e-6)

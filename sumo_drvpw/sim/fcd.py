@@ -22,7 +22,8 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
   70 kg) as in the live loop (``summary.json`` ``source.riding_person_rows``);
 - a parked vehicle (SUMO writes it with its lane, at speed 0, at the parking space's x, y)
   is told from a standing one by its x, y beside the lane (:class:`ParkedTest`) and, as in
-  the live loop, not booked (``summary.json`` ``source.parked_rows``); FCD without x, y
+  the live loop, not booked (``summary.json`` ``source.parked_rows``) but for the row it
+  parks in, where SUMO moved it into its stop (booked driven, as live); FCD without x, y
   (``--fcd-output.attributes`` without them, or ``.geo``/``.utm`` coordinates) books it
   as standing; one whose parking is over but whose way out is blocked idles in its space
   and is booked standing there, as live (:mod:`sumo_drvpw.sim.fcd_idle`: told by the FCD's

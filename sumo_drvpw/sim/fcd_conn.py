@@ -171,6 +171,10 @@ class _Rows:
         #: calibrator id → its edge, of the scenario's files (set by replay_fcd): where SUMO
         #: changes vTypes, read every step there as the live run does (sim/reader.calibrator_lanes)
         self.calibrators: dict = {}
+        #: the vehicles whose last row was on their lane (not parked): one of them parked in
+        #: this row moved into its space in this step (:func:`_parks_now`)
+        self.on_lane_ids: set = set()
+        self.entry_slope: dict = {}  # vehicle id → the FCD's slope [rad] of the row it parks in
         self.person, self.vehicletype, self.calibrator = _Person(self), _VType(self), _Calib(self)
 
     def _vehicles(self, c: dict, nxt: dict | None) -> dict:
@@ -201,15 +205,21 @@ class _Rows:
                 if self.first_unknown is None:
                     j = int(np.argmax(bad))
                     self.first_unknown = (str(c["lane"][j]), float(c["time"][j]))
+        entry = None
+        if "off" in c:  # the row a vehicle parks in: its move into the space, booked as driven
+            entry, self.on_lane_ids = _parks_now(c["id"], c["off"], self.on_lane_ids)
+            # at the slope SUMO gave it then, its space's, as live (where the FCD has slopes)
+            self.entry_slope = (dict(zip(c["id"][entry], np.radians(np.asarray(c["slope"], float)[entry])))
+                                if "slope" in c and entry.any() else {})
         if "off" in c and len(c["id"]):  # parked vehicles (ParkedTest.mark)
             if nxt is not None and "person" in nxt and nxt["person"].any():
                 keep = ~nxt["person"]
                 nxt = {"id": nxt["id"][keep], "off": nxt["off"][keep]}
-            lanes, n = _unpark(c["lane"], c["id"], c["off"], nxt["id"] if nxt else None,
+            lanes, n = _unpark(c["lane"], c["id"], c["off"] & ~entry, nxt["id"] if nxt else None,
                                nxt["off"] if nxt else None)
             if self.idling is not None:  # idling in its space, its way out blocked: booked there
                 idle = self.idling.rows(self.t - self.dt, c["id"], c["type"], c["off"], c.get("signals"),
-                                        self.riders)
+                                        self.riders, entry)
                 idle &= lanes == ""
                 if idle.any():
                     lanes[idle] = c["lane"][idle]
@@ -218,10 +228,11 @@ class _Rows:
                     n -= k
                 shut = self.idling.shut
                 if shut:  # back on its lane a step before its stop ends, still switched off
-                    back = np.flatnonzero(c["off"] & (lanes != "") & ~idle)  # (SUMO writes 0)
+                    back = np.flatnonzero(c["off"] & ~entry & (lanes != "") & ~idle)  # (SUMO writes 0)
                     back = back[np.fromiter(map(shut.__contains__, c["id"][back]), bool, len(back))]
-                    lanes[back] = ""
-                    n += len(back)
+                    if len(back):
+                        lanes[back] = ""
+                        n += len(back)
             c = dict(c, lane=lanes)
             self.parked_rows += n
         return c
@@ -328,6 +339,21 @@ def calibrators(files) -> dict[str, str]:
     return {el.get("id", ""): el.get("edge") or el.get("lane").rsplit("_", 1)[0]
             for _, el in additional_elements(files)
             if el.tag == "calibrator" and (el.get("edge") or el.get("lane"))}
+
+
+def _parks_now(ids, off, on_lane_before: set) -> tuple[np.ndarray, set]:
+    """Which rows of a timestep (``ids``, ``off``: parked, :class:`ParkedTest`) are the one a
+    vehicle parks in — parked now, on its lane in its row before (``on_lane_before``) — and
+    the vehicles on their lane now. SUMO parks a car in the step it comes to rest at its stop
+    (below 0.1 m/s), after moving it there on its lane, and its FCD writes that row at the
+    space with the step's speed: the replay books it driven on its lane, as the live loop
+    books that step (:meth:`sumo_drvpw.sim.parking.Parking.started`)."""
+    ids = np.asarray(ids, object)
+    entry = np.zeros(len(ids), bool)
+    if on_lane_before and off.any():
+        k = np.flatnonzero(off)
+        entry[k] = np.fromiter(map(on_lane_before.__contains__, ids[k]), bool, len(k))
+    return entry, set(ids[~off])
 
 
 def _unpark(lanes, ids, off, nxt_ids, nxt_off) -> tuple[np.ndarray, int]:

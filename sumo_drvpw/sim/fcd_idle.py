@@ -106,10 +106,11 @@ class Idling:
             self.shut.discard(v)
             self.waiting.pop(v, None)
 
-    def rows(self, t: float, ids, types, off, signals=None, riders=None) -> np.ndarray:
+    def rows(self, t: float, ids, types, off, signals=None, riders=None, entering=None) -> np.ndarray:
         """Timestep ``t`` [s] (the FCD's time): which of its rows (ids, vTypes, ``off``:
         parked, :class:`~sumo_drvpw.sim.fcd_conn.ParkedTest`; ``signals``: the FCD's, NaN
-        or None where it has none; ``riders``: vehicle id → the persons riding in it) idle
+        or None where it has none; ``riders``: vehicle id → the persons riding in it;
+        ``entering``: the rows a vehicle parks in, booked driven, never untold) idle
         in their parking space; call it for every timestep, in order, after the stop
         tracker's step."""
         riders = riders or {}
@@ -138,6 +139,8 @@ class Idling:
             has = ~np.isnan(sk)
             idle[k[has]] = (sk[has].astype(np.int64) & BLINKERS) != 0
         untold = ~has & ~np.isfinite(frm)
+        if entering is not None:
+            untold &= ~entering[k]
         if untold.any() and self.waiting:  # a person-triggered stop ends when she boards
             untold &= ~np.fromiter(map(self.waiting.__contains__, vk), bool, len(k))
         if untold.any():

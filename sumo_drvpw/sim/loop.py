@@ -437,19 +437,21 @@ class Stepper:
         if self.parking.on and not on_lane.all():  # parked, dwelling, idling, or teleporting
             for j in np.flatnonzero(~on_lane):
                 d = self.parking.dwell.get(kids[j])
-                if d is None:
-                    if self.parking.started(ledger, kids[j], int(vidx[j]), t_now):
-                        d = self.parking.dwell[kids[j]]
-                    elif ledger.veh_parked[vidx[j]]:
+                if d is None:  # parks now: this step's move into its space booked (not a trip's first)
+                    i = int(vidx[j])
+                    d = self.parking.started(ledger, kids[j], i, t_now, i not in starts and i not in joined)
+                    if ledger.veh_parked[i]:
                         self.prev_ids = None  # the selection of vehicles read changes
-                if d is not None:  # at a bus stop's bay or idling in its space: standing there
+                if d is not None:  # at a bus stop's bay, idling in its space, or moving into it
                     lane[j], pos[j] = d
                     if kids[j] in self.parking.grade:  # idling, at the slope SUMO gives it there
                         tilt = np.full(len(kids), np.nan) if tilt is None else tilt
                         tilt[j] = self.parking.grade[kids[j]]
             on_lane = lane >= 0
-        if self.parking.once:  # back on the lane from a parking, at its space's slope this step
+        if self.parking.once:  # back on the lane from a parking, or parking, at its space's slope this step
             tilt = self.parking.tilt(kids, tilt)
+        if self.is_replay and getattr(conn, "entry_slope", None):  # (the FCD's slope of a row a car parks in)
+            tilt = self.parking.tilt(kids, tilt, conn.entry_slope)
         if placed.any():  # put back by a teleport: its energy jump booked apart, then driven on
             put_back(ledger, net, self.eqset.equations, placed, vidx, lane, pos, v, prev)
             on_lane &= ~placed
@@ -474,8 +476,9 @@ class Stepper:
             raw = net.raw[at]
         ledger.corrected += int(np.count_nonzero(
             (np.abs(raw - theta) > physics.slope_tol) | clipped))
-        if tilt is not None:
+        if tilt is not None:  # SUMO's slope in a parking space: that step's grade, not the lane's rise
             theta = np.where(np.isnan(tilt), theta, tilt)
+            ledger.veh_at[vidx[~np.isnan(tilt)], 2] = np.nan
         nclip = int(np.count_nonzero(clipped))
         if nclip:
             ledger.clipped += nclip

@@ -3,7 +3,8 @@ and booked idling while they wait in their space for a gap to leave by.
 
 SUMO takes a parking vehicle off its lane (``MSVehicleTransfer``): engine off, no auxiliary
 power, not in its emission output. The loop tells it once, when a read finds it without a
-lane and its stop state says parking, and does not read it again until its parking ends
+lane and its stop state says parking — the step in which SUMO moved it into its stop and
+parked it, booked as driven (:meth:`Parking.started`) — and does not read it again until its parking ends
 (``getParkingEndingVehiclesIDList``): a parked fleet costs no getter calls. A vehicle
 parked at a bus stop (a bus bay: ``parking="true"`` at a busStop) dwells there in service:
 it is booked standing on the stop's lane (time, auxiliary power), as at a stop on the lane.
@@ -130,8 +131,8 @@ class Parking:
         #: back slope on the lane), which its emission output takes (MMPEVEM's holding torque)
         self.grade: dict[str, float] = {}
         self.slope = getattr(veh, "getSlope", None)
-        #: vehicle id → its slope [rad] in the step its parking ended: back on its lane, its
-        #: stop not yet over, SUMO still gives it its space's (read once)
+        #: vehicle id → its slope [rad] in the step its parking ended (back on its lane, its
+        #: stop not yet over, SUMO still gives it its space's) or began (read once)
         self.once: dict[str, float] = {}
 
     def _standing(self, vid: str, stops=None) -> tuple[int, float] | None:
@@ -145,20 +146,33 @@ class Parking:
         pos = float(self.conn.vehicle.getLanePosition(vid))
         return lane, min(max(pos, 0.0), float(self.net.lane_length[lane]))
 
-    def started(self, ledger, vid: str, i: int, now: float) -> bool:
+    def started(self, ledger, vid: str, i: int, now: float, moved_in: bool = True) -> tuple[int, float] | None:
         """Vehicle ``vid`` (slot ``i``), just read without a lane: parked (not read until its
         parking ends), dwelling at a bus stop (booked standing there), or neither (a
-        teleport: read again next step). True when it dwells."""
+        teleport: read again next step). Returns the lane number and position to book this
+        step at, or None: where it dwells or idles, and — ``moved_in``: it was on the road
+        in the step before — the move into its space: SUMO parks a car in the step it comes
+        to rest at its stop (below 0.1 m/s), after moving it there on the lane (its speed
+        from the last step's to this one's, its distance, engine on: SUMO's emissions device
+        books that move), so this step is booked as driven, on the stop's lane at the
+        position SUMO gives it, and the car is parked from the next (before 2026-11-29 it was
+        not booked: the kinetic energy of the car's last speed on the lane, up to 7.6 m/s at
+        1-s steps, was lost from the acceleration term)."""
         st = int(self.conn.vehicle.getStopState(vid))
         if not st & STOP_PARKING:
-            return False
+            return None
         if st & STOP_AT_BUS_STOP:
             d = self._standing(vid)
             if d is not None:
                 self.dwell[vid] = d
-                return True
+                return d
         ledger.veh_parked[i] = True
         stops = self.conn.vehicle.getStops(vid, 1)
+        entry = self._standing(vid, stops) if moved_in else None
+        if entry is not None and self.slope is not None:  # at the slope SUMO gives it then: its space's
+            s = float(self.slope(vid))
+            if -90.0 <= s <= 90.0:
+                self.once[vid] = np.radians(s)
         # switched off for a stop longer than its vType's shutOffStopDuration, it stays
         # off while it idles (its stop is still SUMO's current one): nothing to book
         if stops and self.shutoff is not None and planned_duration_s(stops[0]) \
@@ -180,8 +194,8 @@ class Parking:
                 # farther than its speed took it: the rise since its last read is no grade)
                 ledger.veh_at[i, 2] = np.nan
                 self.idle_vehicle_s += self.dt  # (step() counted this step's before)
-                return self._idle(ledger, {vid: i}, vid)
-        return False
+                return self.dwell[vid] if self._idle(ledger, {vid: i}, vid) else None
+        return entry
 
     def _idle(self, ledger, vmap, vid: str) -> bool:
         """Parked vehicle ``vid`` idles in its space from this step (its blinker shows it):
@@ -328,10 +342,11 @@ class Parking:
                 self.forget(vid)
         return (*ids, *extra) if extra else ids
 
-    def tilt(self, kids, tilt):
+    def tilt(self, kids, tilt, once=None):
         """``tilt`` ((n,) slopes [rad] over ``kids``, NaN where the lane's; None: none yet)
-        with the slopes of the vehicles whose parking ended in this step (:attr:`once`)."""
-        for vid, g in self.once.items():
+        with the slopes of the vehicles whose parking ended or began in this step (:attr:`once`;
+        ``once``: others, vehicle id → slope [rad])."""
+        for vid, g in (self.once if once is None else once).items():
             try:
                 j = kids.index(vid)
             except ValueError:  # not read (a vType not booked)
