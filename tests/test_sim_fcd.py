@@ -345,7 +345,8 @@ def test_fcd_leaves_parked_vehicles_out_as_the_live_run_does(tmp_path):
     it by its x, y beside the lane: a chain's auxiliary energy and the time booked per
     vehicle equal the live run's (roadside parking from the start and after driving, a
     parkingArea), and a stop on the lane (not parked) is still booked standing. Without
-    x, y in the FCD the parked vehicles are booked as standing (the time parked)."""
+    x, y in the FCD the route files' parking stops tell them (before 2026-11-29 they were
+    booked standing, the ~100 s parked each), and a warning names the file."""
     parking_scenario(tmp_path, end=400, stop_s=100)
     (tmp_path / "s.toml").write_text(
         f'equations = ["{I3_BATTERY}"]\n[sumo]\nconfig = "c.sumocfg"\n'
@@ -370,15 +371,18 @@ def test_fcd_leaves_parked_vehicles_out_as_the_live_run_does(tmp_path):
         pd.testing.assert_series_equal(t, live_t, rtol=1e-9)
         pd.testing.assert_series_equal(aux, live_aux, rtol=1e-6)
         assert 3 * 190 <= res["source"]["parked_rows"] <= 3 * 201  # 3 × ~100 s at 0.5 s
-    # FCD without x, y: nothing tells parked from standing
+    # FCD without x, y: the declared parking stops tell parked from standing
     text = (tmp_path / "fcd.xml").read_text(encoding="utf-8")
     import re
     (tmp_path / "noxy.xml").write_text(re.sub(r' [xy]="[^"]*"', "", text), encoding="utf-8")
     res = process_fcd(tmp_path / "noxy.xml", scenario=tmp_path / "s.toml",
                       out_dir=tmp_path / "noxy")
-    t, _ = booked(tmp_path / "noxy")
-    assert res["source"]["parked_rows"] == 0
-    np.testing.assert_allclose(t.drop("waits") - live_t.drop("waits"), 100.0, atol=2.0)
+    t, aux = booked(tmp_path / "noxy")
+    pd.testing.assert_series_equal(t, live_t, rtol=1e-9)
+    pd.testing.assert_series_equal(aux, live_aux, rtol=1e-6)
+    assert 3 * 190 <= res["source"]["parked_rows"] <= 3 * 201
+    rows = res["source"]["unplaced_vehicle_rows"]
+    assert [w for w in res["warnings"] if w.startswith(f"FCD file {tmp_path / 'noxy.xml'}: {rows} vehicle rows without x, y")]
 
 
 def test_export_vtype_writes_a_table_efficiency_as_the_constant_of_its_energy():

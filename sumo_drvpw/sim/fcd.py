@@ -24,8 +24,9 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
   is told from a standing one by its x, y beside the lane (:class:`ParkedTest`) and, as in
   the live loop, not booked (``summary.json`` ``source.parked_rows``) but for the row it
   parks in, where SUMO moved it into its stop (booked driven, as live); FCD without x, y
-  (``--fcd-output.attributes`` without them, or ``.geo``/``.utm`` coordinates) books it
-  as standing; one whose parking is over but whose way out is blocked idles in its space
+  (``--fcd-output.attributes`` without them, or ``.geo``/``.utm`` coordinates) tells it
+  only at a parking stop the route files declare (:mod:`sumo_drvpw.sim.fcd_stops`; else
+  booked standing, warned of); one whose parking is over but whose way out is blocked idles in its space
   and is booked standing there, as live (:mod:`sumo_drvpw.sim.fcd_idle`: told by the FCD's
   blinker bits, else by its declared stop's planned end; ``source.idling_rows``);
 - vehicles are switched off at long planned stops and by start-stop systems as in the live
@@ -64,7 +65,8 @@ from sumo_drvpw.sim.fcd_begin import accel_at_begin, begin_frame
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_method import recorded_method
-from sumo_drvpw.sim.fcd_warn import lane_warnings, no_angle_warning, partial_warnings, unplaced_person_warning
+from sumo_drvpw.sim.fcd_warn import (lane_warnings, no_angle_warning, partial_warnings, unplaced_person_warning,
+                                     unplaced_vehicle_warning)
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
 from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
@@ -491,7 +493,9 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                             "untold_parked_rows": int(replay.idling.untold_rows),
                             "untold_parked_vehicles": len(replay.idling.untold_ids),
                             "riding_person_rows": int(replay.rider_rows),
-                            "unplaced_person_rows": int(replay.unplaced_person_rows)}}
+                            "unplaced_person_rows": int(replay.unplaced_person_rows),
+                            "unplaced_vehicle_rows": int(replay.blind_rows),
+                            "declared_parked_rows": int(replay.stops.inferred_rows if replay.stops else 0)}}
         if sc.trace and out_dir:
             extra["files"] = {"trace": "trace.parquet"}
         if not publish:
@@ -504,7 +508,10 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         if replay.unplaced_person_rows and sc.transportable_mass:
             warn.append(unplaced_person_warning(fcd_file, replay.unplaced_person_rows))
         if replay.idling.untold_rows:
-            warn.append(untold_warning(replay.idling.untold_rows, len(replay.idling.untold_ids)))
+            warn.append(untold_warning(fcd_file, replay.idling.untold_rows, len(replay.idling.untold_ids)))
+        if replay.blind_rows:
+            warn.append(unplaced_vehicle_warning(fcd_file, replay.blind_rows, extra["source"]["declared_parked_rows"],
+                                                 replay.stops is not None))
         if warn:
             extra["warnings"] = warn
         result = acc.result(extra)

@@ -175,10 +175,16 @@ class _Rows:
         #: this row moved into its space in this step (:func:`_parks_now`)
         self.on_lane_ids: set = set()
         self.entry_slope: dict = {}  # vehicle id → the FCD's slope [rad] of the row it parks in
+        self.riders_before: dict = {}  # the riders of the last timestep (vehicle id → persons)
+        self.riders_told = True  # persons matched to vehicles (their rows and the vehicles' have x, y)
+        self.last_ids: set = set()  # the vehicles of the last timestep
+        #: vehicle rows without x, y: parked vehicles told only by the route files' parking stops
+        self.blind_rows = 0
         self.person, self.vehicletype, self.calibrator = _Person(self), _VType(self), _Calib(self)
 
     def _vehicles(self, c: dict, nxt: dict | None) -> dict:
         """The vehicles' rows of timestep ``c`` (next timestep ``nxt``, None at the end)."""
+        self.riders_before = self.riders  # (a car's riders in its row before: who boards at a stop)
         person = c.get("person")
         if person is not None and person.any() and self.container_types:
             box = person & np.isin(c["type"], list(self.container_types))
@@ -193,9 +199,16 @@ class _Rows:
             self._ride(None, c)
         if self.idling is not None:
             self.idling.forget(self.arrived)
+        blind = ~_placed(c)  # rows without x, y: a parked vehicle is told by its declared stop
+        self.blind_rows += int(np.count_nonzero(blind))
         if self.stops is not None:  # (lanes as written: a parked vehicle serves its stop too)
             self.stops.forget(self.arrived)
-            self.stops.step(self.t - self.dt, c["id"], c["lane"], c["pos"], c["speed"], c.get("off"))
+            fresh = ~np.fromiter(map(self.last_ids.__contains__, c["id"]), bool, len(c["id"]))
+            self.stops.step(self.t - self.dt, c["id"], c["lane"], c["pos"], c["speed"], c.get("off"),
+                            blind if blind.any() else None, fresh)
+            if self.stops.inferred.any():
+                c = dict(c, off=c["off"] | self.stops.inferred)
+            self.last_ids = set(c["id"])
         ok = c.get("lane_ok")
         if ok is not None and len(ok):
             self.lane_rows += int(np.count_nonzero(ok > 0))
@@ -212,14 +225,15 @@ class _Rows:
             self.entry_slope = (dict(zip(c["id"][entry], np.radians(np.asarray(c["slope"], float)[entry])))
                                 if "slope" in c and entry.any() else {})
         if "off" in c and len(c["id"]):  # parked vehicles (ParkedTest.mark)
-            if nxt is not None and "person" in nxt and nxt["person"].any():
-                keep = ~nxt["person"]
-                nxt = {"id": nxt["id"][keep], "off": nxt["off"][keep]}
+            if nxt is not None:  # (next rows without x, y: standing is parked, moving is not)
+                keep = ~nxt["person"] if "person" in nxt else np.ones(len(nxt["id"]), bool)
+                nxt = {"id": nxt["id"][keep], "off": (nxt["off"] | (~_placed(nxt) & (np.asarray(
+                    nxt["speed"], float) < STANDSTILL_MPS)))[keep]}
             lanes, n = _unpark(c["lane"], c["id"], c["off"] & ~entry, nxt["id"] if nxt else None,
                                nxt["off"] if nxt else None)
             if self.idling is not None:  # idling in its space, its way out blocked: booked there
                 idle = self.idling.rows(self.t - self.dt, c["id"], c["type"], c["off"], c.get("signals"),
-                                        self.riders, entry)
+                                        self.riders, entry, self.riders_before, self.riders_told)
                 idle &= lanes == ""
                 if idle.any():
                     lanes[idle] = c["lane"][idle]
@@ -245,7 +259,8 @@ class _Rows:
             before = self.person_types
             self.person_types = dict(zip(p["id"], p["type"]))
             self.departed_persons = tuple(q for q in self.person_types if q not in before)
-            if not ("x" in p and "y" in p and "x" in v and "y" in v):
+            self.riders_told = "x" in p and "y" in p and "x" in v and "y" in v
+            if not self.riders_told:
                 self.unplaced_person_rows += len(p["id"])
             elif len(v["id"]):
                 at = dict(zip(zip(v["x"], v["y"], v["speed"]), v["id"]))
@@ -339,6 +354,13 @@ def calibrators(files) -> dict[str, str]:
     return {el.get("id", ""): el.get("edge") or el.get("lane").rsplit("_", 1)[0]
             for _, el in additional_elements(files)
             if el.tag == "calibrator" and (el.get("edge") or el.get("lane"))}
+
+
+def _placed(c: dict) -> np.ndarray:
+    """Which rows of columns ``c`` have x, y (an FCD written without them has neither)."""
+    if "x" not in c or "y" not in c:
+        return np.zeros(len(c["id"]), bool)
+    return np.isfinite(np.asarray(c["x"], float)) & np.isfinite(np.asarray(c["y"], float))
 
 
 def _parks_now(ids, off, on_lane_before: set) -> tuple[np.ndarray, set]:

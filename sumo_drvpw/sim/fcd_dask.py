@@ -79,6 +79,7 @@ def bucket_task(sc, fcd_file: str, part_dir: str, b: int, buckets: int, begin_s=
             "carriers": r.carriers, "powertrains": r.powertrains, "booked_as": r.booked_as,
             "also_booked": r.also_booked,
             "lanes": acc.fcd_lanes, "no_angle": bool(acc.conn.no_angle and acc.eqset.uses_yaw),
+            "stops_read": acc.conn.stops is not None,
             "shutoff": acc.stepper.shutoff.summary() if acc.stepper.shutoff is not None else None}
 
 
@@ -165,7 +166,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario, recorded_device_options, recorded_step
     from sumo_drvpw.sim.fcd_idle import untold_warning
     from sumo_drvpw.sim.fcd_warn import (lane_warnings, no_angle_warning, partial_warnings,
-                                         unplaced_person_warning)
+                                         unplaced_person_warning, unplaced_vehicle_warning)
     from sumo_drvpw.sim.fcd_read import fcd_parts, header_options
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import VehicleSpill, write_published
@@ -210,7 +211,10 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
             warn.append(unplaced_person_warning(spec, unplaced))
         untold = [sum(d["extra"]["source"][k] for d in done) for k in ("untold_parked_rows", "untold_parked_vehicles")]
         if untold[0]:  # (each vehicle in one bucket: their counts add up)
-            warn.append(untold_warning(*untold))
+            warn.append(untold_warning(spec, *untold))
+        blind = [sum(d["extra"]["source"][k] for d in done) for k in ("unplaced_vehicle_rows", "declared_parked_rows")]
+        if blind[0]:
+            warn.append(unplaced_vehicle_warning(spec, *blind, any(d["stops_read"] for d in done)))
         # the driver's own accountant (no rows) carries the scenario, network and resolver
         first = done[0]
         replay = FcdStream(iter(()), dt=first["dt"], label=spec)
@@ -243,6 +247,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
                                parked_rows=sum(d["extra"]["source"]["parked_rows"] for d in done),
                                idling_rows=sum(d["extra"]["source"]["idling_rows"] for d in done),
                                untold_parked_rows=untold[0], untold_parked_vehicles=untold[1],
+                               unplaced_vehicle_rows=blind[0], declared_parked_rows=blind[1],
                                riding_person_rows=sum(d["extra"]["source"]["riding_person_rows"]
                                                       for d in done),
                                engine="dask", buckets=k)

@@ -22,12 +22,14 @@ idling rows of a parked car:
   ``expected`` persons when it names them) waits, parked and not idling, until she
   boards: it ends at the later of her boarding and its planned end. SUMO's FCD writes a
   riding person at her vehicle's x, y and speed (:class:`~sumo_drvpw.sim.fcd_conn._Rows`
-  tells the riders so): the car idles from the row in which a person not riding in it at
-  its arrival (all the expected ones) rides in it, or from its planned end's row when that
+  tells the riders so): the car idles from the row in which a person not riding in it as
+  it came (its row before the one it parks in: one waiting there boards in that very step)
+  (all the expected ones) rides in it, or from its planned end's row when that
   is later (SUMO 1.28: boarding at 30 and 60 s, 20 s parked from 22 s, and without a
   ``duration``: the emission output's first idling step is that row). A stop waiting for a
   container or a joining train (``container``, ``join``, ``containerTriggered``), or with
-  an ``extension``, the replay does not tell: its rows are left out as parked. So are
+  an ``extension``, the replay does not tell: its rows are left out as parked (and a
+  person-triggered one in an FCD without x, y, whose riders are not matched). So are
   those of a parked car whose stop the files do not hold (added by TraCI, a rerouter, a
   parking reroute) or whose ``until`` the replay cannot shift.
 
@@ -81,7 +83,8 @@ class Idling:
 
     def _parked(self, vid: str, vtype: str, stop, riders: dict) -> None:
         """Vehicle ``vid`` of ``vtype`` just parked at its declared ``stop`` (fcd_stops);
-        ``riders``: vehicle id → the persons riding in it now."""
+        ``riders``: vehicle id → the persons riding in it as it came (its row before: one who
+        boards in the step it parks, waiting there, ends a person-triggered stop at once)."""
         ends = [x for x, given in ((stop.arrival + stop.duration, stop.duration >= 0),
                                    (stop.until, stop.until >= 0)) if given]
         # an until the replay cannot shift (NaN): its end not known; a triggered stop ends
@@ -106,16 +109,20 @@ class Idling:
             self.shut.discard(v)
             self.waiting.pop(v, None)
 
-    def rows(self, t: float, ids, types, off, signals=None, riders=None, entering=None) -> np.ndarray:
+    def rows(self, t: float, ids, types, off, signals=None, riders=None, entering=None,
+             riders_before=None, boardings: bool = True) -> np.ndarray:
         """Timestep ``t`` [s] (the FCD's time): which of its rows (ids, vTypes, ``off``:
         parked, :class:`~sumo_drvpw.sim.fcd_conn.ParkedTest`; ``signals``: the FCD's, NaN
         or None where it has none; ``riders``: vehicle id → the persons riding in it;
-        ``entering``: the rows a vehicle parks in, booked driven, never untold) idle
+        ``entering``: the rows a vehicle parks in, booked driven, never untold;
+        ``riders_before``: the riders of the timestep before, default ``riders``;
+        ``boardings``: False where the FCD cannot match persons to vehicles — no x, y —, so
+        a person-triggered stop's end is untold) idle
         in their parking space; call it for every timestep, in order, after the stop
         tracker's step."""
         riders = riders or {}
         for vid, j, stop in (self.stops.parking if self.stops is not None else ()):
-            self._parked(vid, types[j], stop, riders)
+            self._parked(vid, types[j], stop, riders if riders_before is None else riders_before)
         for vid, (before, expected, end) in list(self.waiting.items()):
             now = set(riders.get(vid, ()))
             if (expected <= now) if expected else bool(now - before):  # boarded: the stop
@@ -141,7 +148,7 @@ class Idling:
         untold = ~has & ~np.isfinite(frm)
         if entering is not None:
             untold &= ~entering[k]
-        if untold.any() and self.waiting:  # a person-triggered stop ends when she boards
+        if untold.any() and self.waiting and boardings:  # a person-triggered stop ends when she boards
             untold &= ~np.fromiter(map(self.waiting.__contains__, vk), bool, len(k))
         if untold.any():
             self.untold_rows += int(np.count_nonzero(untold))
@@ -152,11 +159,12 @@ class Idling:
         return idle
 
 
-def untold_warning(rows: int, vehicles: int) -> str:
-    """One line for a replay whose parked rows without signals it could not tell idling or
-    not (:attr:`Idling.untold_rows`)."""
-    return (f"{rows} parked FCD rows of {vehicles} vehicle(s), at stops the route files do not hold "
-            "(a taxi device's, a parking reroute's, a script's) or whose end the replay cannot "
-            "tell, carry no signals: all are booked parked, so a car SUMO kept idling in its "
-            "space, its way out blocked, books nothing there (record the FCD with SUMO's option "
-            "fcd-output.signals, whose blinker says it)")
+def untold_warning(fcd_file, rows: int, vehicles: int) -> str:
+    """One line for a replay of ``fcd_file`` whose parked rows without signals it could not
+    tell idling or not (:attr:`Idling.untold_rows`)."""
+    return (f"FCD file {fcd_file}: {rows} parked FCD rows of {vehicles} vehicle(s), at stops the route files "
+            "do not hold (a taxi device's, a parking reroute's, a script's) or whose end the replay cannot "
+            "tell (one waiting for a container or a joining train; without x, y for a person), carry no signals: "
+            "all are booked parked, "
+            "so a car SUMO kept idling in its space, its way out blocked, books nothing there (record the FCD "
+            "with SUMO's option fcd-output.signals, whose blinker says it)")

@@ -38,7 +38,12 @@ before SUMO parked it ends in its first parked row. The stop it parked at is tol
 (:attr:`StopTracker.parking`: arrival its first parked row, as SUMO parks a car in the
 step it reaches its stop; what it waits for when ``triggered``) so that a car still parked past the
 stop's planned end, its way out blocked, is booked idling there
-(:mod:`sumo_drvpw.sim.fcd_idle`). A vehicle that drives
+(:mod:`sumo_drvpw.sim.fcd_idle`). An FCD without x, y cannot show a parked vehicle beside
+its lane: a vehicle standing at its declared parking stop (``parking`` as SUMO reads it:
+true for a ``parkingArea``, and by default for a stop waiting for a person or container;
+not in a bus bay, where it dwells) is parked from the row it reaches it in until it moves
+again (:meth:`StopTracker.step` ``blind``), except in its first row (SUMO inserts it on its
+lane at its stop and parks it a step later). A vehicle that drives
 off before a planned end was not at its stop after all (SUMO holds it there): the stop is
 open to be matched again, and counted
 (``stops_left_before_their_end``). At a stopping place SUMO starts the stop of a vehicle
@@ -105,25 +110,32 @@ class _Stop:
     """One declared stop: where (``lane`` or ``edge``, or a stopping place ``place``), its
     positions as written, and its planned ``duration`` and ``until`` [s] (None: not given)."""
 
-    __slots__ = ("lane", "edge", "place", "start", "end", "duration", "until", "on_route", "parking", "trigger")
+    __slots__ = ("lane", "edge", "place", "bay", "start", "end", "duration", "until", "on_route", "parking", "trigger")
 
     def __init__(self, el, where: str, on_route: bool = False):
         a = el.attrib
         self.on_route = on_route  # a named route's stop: its until counts from the depart
         self.lane, self.edge = a.get("lane"), a.get("edge")
         self.place = next((a[k] for k in STOPPING_PLACES if a.get(k)), None)
+        # at a bus (or train) stop: parked there, a vehicle dwells in its bay, booked standing
+        self.bay = bool(a.get("busStop") or a.get("trainStop"))
         self.start = _num(a.get("startPos"), where, "startPos")
         self.end = _num(a.get("endPos"), where, "endPos")
         self.duration = _num(a.get("duration"), where, "duration", time=True)
         self.until = _num(a.get("until"), where, "until", time=True)
-        # parked beside the lane (a parkingArea's always): SUMO ends the stop when the
-        # vehicle can leave, which may be after its planned end
-        self.parking = bool(a.get("parkingArea")) or a.get("parking", "").strip().lower() in PARKING_TRUE
         # waits for a person, container or joining train: ends when it boards, not planned;
         # None, ("person", the ``expected`` person ids) or ("other", ())
         words = set(a.get("triggered", "").lower().replace(",", " ").split()) - set(NOT_TRIGGERED)
         if a.get("containerTriggered", "").strip().lower() not in NOT_TRIGGERED:
             words.add("container")
+        # parked beside the lane (a parkingArea's always): SUMO ends the stop when the
+        # vehicle can leave, which may be after its planned end. Not written: SUMO parks a
+        # stop that waits for a person or a container (SUMOVehicleParserHelper::parseStop:
+        # its default is triggered || containerTriggered || parkingArea; a joining train's not)
+        given = a.get("parking")
+        self.parking = bool(a.get("parkingArea")) or (
+            given.strip().lower() in PARKING_TRUE if given is not None
+            else bool(words & {*PERSON_TRIGGERED, "container"}))
         self.trigger = (None if not words else ("person", tuple(a.get("expected", "").split()))
                         if words <= set(PERSON_TRIGGERED) and not a.get("extension") else ("other", ()))
 
@@ -340,6 +352,11 @@ class StopTracker:
         #: the stop: ``duration``, ``until`` (NaN: not known), ``arrival`` its first parked
         #: row's time, ``trigger``), for telling a car idling in its space (sim/fcd_idle.py)
         self.parking: list[tuple] = []
+        #: rows without x, y (:meth:`step` ``blind``): which of the step's rows are parked at a
+        #: declared parking stop (the FCD cannot show it), the vehicles parked so, and their rows
+        self.inferred = np.zeros(0, bool)
+        self.parked_ids: set[str] = set()
+        self.inferred_rows = 0
 
     def _state(self, vid: str):
         st = self.state.get(vid)
@@ -383,13 +400,24 @@ class StopTracker:
             a += length
         return a, b
 
-    def step(self, t: float, ids, lanes, pos, speed, parked=None) -> None:
+    def step(self, t: float, ids, lanes, pos, speed, parked=None, blind=None, fresh=None) -> None:
         """Timestep ``t`` [s] (the FCD's time) with its vehicle rows: ids, lanes (as SUMO
         wrote them, parked vehicles' too), positions [m], speeds [m/s], and which rows are
-        parked (off the lane; their stop is served, not booked)."""
+        parked (off the lane; their stop is served, not booked). ``blind``: the rows without
+        x, y, which cannot show a parked vehicle beside its lane: one standing at a declared
+        parking stop (``parking``, not in a bus bay, where it dwells) is parked from the row
+        it reaches it in until it moves again (:attr:`inferred`), as SUMO parks it — but in a
+        vehicle's first row (``fresh``), where SUMO inserts it on its lane at its stop and parks
+        it in the step after."""
         starting, ending = [], []
         self.parking = []
         speed = np.asarray(speed, float)
+        self.inferred = np.zeros(len(speed), bool)
+        if self.parked_ids:  # parked at a declared parking stop, the FCD blind to it: until it moves
+            k = np.flatnonzero(np.fromiter(map(self.parked_ids.__contains__, ids), bool, len(speed)))
+            still = (speed[k] < STANDSTILL_MPS) & (blind[k] if blind is not None else False)
+            self.inferred[k[still]] = True
+            self.parked_ids.difference_update(np.asarray(ids, object)[k[~still]])
         if self.data:  # the vehicles at a stop: does it end in this row?
             rows = dict(zip(ids, range(len(ids))))
             for vid, cur in list(self.data.items()):
@@ -432,6 +460,9 @@ class StopTracker:
                 span = self._span(s, lanes[j])
                 if span is None or not (span[0] - STOP_TOLERANCE_M <= pos[j] <= span[1] + STOP_TOLERANCE_M):
                     continue
+                if (fresh is not None and fresh[j] and blind is not None and blind[j] and s.parking
+                        and not s.bay):  # on its lane in its first row, its x, y unwritten: it parks in its next
+                    break
                 st[1] = k + 1
                 self.matched += 1
                 until = -1.0 if s.until is None else s.until + st[2][k]
@@ -440,9 +471,12 @@ class StopTracker:
                     self.until_unknown += 1
                     until = -1.0
                 dur = -1.0 if s.duration is None else s.duration
-                if parked is not None and parked[j]:  # parked there: not booked (but it may
-                    self._park(vid, j, dur, np.nan if unknown else until, t, s.trigger)  # idle there)
-                    break
+                if blind is not None and blind[j] and s.parking and not s.bay and speed[j] < STANDSTILL_MPS:
+                    self.inferred[j] = True  # (parked as SUMO parks it there, its x, y unwritten)
+                    self.parked_ids.add(vid)
+                if (parked is not None and parked[j]) or self.inferred[j]:  # parked there: not
+                    self._park(vid, j, dur, np.nan if unknown else until, t, s.trigger)  # booked (but it
+                    break                                                                 # may idle there)
                 # SUMO ends it at the later of arrival + duration and until; neither
                 # given: when the vehicle drives off
                 ends = [x for x, given in ((t + dur, dur >= 0), (until, until >= 0)) if given]
@@ -454,6 +488,7 @@ class StopTracker:
                 starting.append(vid)
                 break
         self.starting, self.ending = tuple(starting), tuple(ending)
+        self.inferred_rows += int(np.count_nonzero(self.inferred))
 
     def _park(self, vid: str, j: int, dur: float, until: float, t: float, trigger) -> None:
         """Vehicle ``vid`` (row ``j``) parked off the lane at its declared stop at ``t`` [s]
@@ -465,6 +500,7 @@ class StopTracker:
         for v in vids:
             self.state.pop(v, None)
             self.data.pop(v, None)
+            self.parked_ids.discard(v)
 
     def report(self) -> dict:
         """What the replay matched and what it could not know (summary.json)."""

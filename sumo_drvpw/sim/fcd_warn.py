@@ -1,6 +1,7 @@
 """What an FCD replay warns of about the file itself: vehicle rows on lanes the network
 lacks, no angles for an equation with radial drag, a recording of part of the run (a share
-of the vehicles, part of the network), person rows that cannot be matched to vehicles."""
+of the vehicles, part of the network), person rows that cannot be matched to vehicles,
+vehicle rows without x, y (parking told only by the route files' stops)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,18 @@ def unplaced_person_warning(fcd_file, rows: int) -> str:
     riders are matched by place and speed (sim/fcd_conn)."""
     return (f"FCD file {fcd_file}: {rows} person rows without x, y (fcd-output.attributes without them): "
             "riding persons cannot be matched to their vehicles, whose riders' mass is not booked")
+
+
+def unplaced_vehicle_warning(fcd_file, rows: int, told: int, stops_read: bool) -> str:
+    """What a replay whose vehicle rows carry no x, y (``rows`` of them) says: SUMO's FCD
+    shows a parked vehicle beside its lane, and without x, y only the route files' parking
+    stops tell it (``told`` rows; ``stops_read``: the files declare any stop)."""
+    how = (f"only where one stands at a parking stop the route files declare (parking=\"true\", a parkingArea, a "
+           f"stop waiting for a person or container; {told} rows told so)" if stops_read
+           else "nowhere: no route file declares a stop")
+    return (f"FCD file {fcd_file}: {rows} vehicle rows without x, y (fcd-output.attributes without them): a "
+            f"parked vehicle is told {how}; one parked elsewhere (at a stop added while the run ran) is booked "
+            "standing there, with its auxiliary power and idle fuel, where the live run books it parked")
 
 
 def partial_warnings(fcd_file, head: dict | None) -> list[str]:
