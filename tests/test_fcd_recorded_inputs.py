@@ -388,3 +388,46 @@ def test_a_route_file_the_header_names_and_that_is_gone_is_warned_of(recorded, t
     assert "booked as passenger cars" in err
     v = pd.read_parquet(tmp_path / "o" / "vehicles.parquet")
     assert set(v[v.vtype == "lorry"].vclass) == {"passenger"}  # what the warning says
+
+
+@pytest.mark.sumo
+def test_a_route_file_the_header_names_and_that_is_gone_is_recorded_in_the_summary(recorded, tmp_path, monkeypatch,
+                                                                                   capsys):
+    """The warning that the header's route file is gone (its trucks booked as cars) was
+    printed and not recorded (measured 2026-11-29: summary.json's warnings without it, as
+    the replay's library call, process_fcd without vTypes, never said it at all). Now
+    summary.json records it, with the file in source.inputs_not_found — from the command,
+    from process_fcd and on Dask alike —, and the command prints it once, its note up front
+    naming the options that give the files."""
+    from sumo_drvpw.sim.fcd import process_fcd
+
+    study = tmp_path / "study"
+    shutil.copytree(recorded, study)
+    (study / "scen" / "r.rou.xml").unlink()
+    fcd = study / "out" / "fcd.xml"
+    monkeypatch.chdir(tmp_path)
+    assert cli_main(["fcd", str(fcd), "--no-figures", "--out", "o"]) == 0
+    cap = capsys.readouterr()
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
+    said = [w for w in summary["warnings"] if "names r.rou.xml, not found beside the FCD" in w]
+    assert len(said) == 1 and "booked as passenger cars" in said[0] and str(fcd) in said[0]
+    assert summary["source"]["inputs_not_found"] == ["r.rou.xml"]
+    assert "--" not in said[0]  # (library text: no command-line option)
+    assert cap.err.count("names r.rou.xml, not found beside the FCD") == 1  # the summary's, once
+    assert "give --vtypes (and --net) for its vTypes" in cap.out
+    res = process_fcd(fcd, net=study / "nets" / "city.net.xml", out_dir=tmp_path / "api", figures=False,
+                      equations=["vsp_ldv1999"])
+    assert said[0] in res["warnings"]
+    assert res["source"]["inputs_not_found"] == ["r.rou.xml"]
+    # given the files (--vtypes), nothing of the header's is said
+    (study / "types.rou.xml").write_text(ROUTES, encoding="utf-8")
+    res = process_fcd(fcd, net=study / "nets" / "city.net.xml", vtype_files=[study / "types.rou.xml"],
+                      out_dir=tmp_path / "given", figures=False, equations=["vsp_ldv1999"])
+    assert not [w for w in res["warnings"] if "not found beside the FCD" in w]
+    assert res["source"]["inputs_not_found"] == []
+    pytest.importorskip("distributed")
+    from sumo_drvpw.sim.fcd_dask import process_fcd_dask
+
+    dk = process_fcd_dask(fcd, tmp_path / "dask", net=study / "nets" / "city.net.xml", equations=["vsp_ldv1999"],
+                          buckets=2, workers=1, figures=False)
+    assert said[0] in dk["warnings"] and dk["source"]["inputs_not_found"] == ["r.rou.xml"]

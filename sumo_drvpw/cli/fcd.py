@@ -9,7 +9,6 @@ results are the local engine's summed."""
 from __future__ import annotations
 
 import argparse
-import sys
 
 from sumo_drvpw.cli import (add_cold_start, add_force, check_air_temperature, check_period,
                             cold_start_override, output_set, sumo_time_arg)
@@ -120,17 +119,19 @@ def main(args: argparse.Namespace) -> int:
         overrides["progress"] = False
     cold_start_override(args, overrides)
     meta: dict = {}
+    # the recording's own route files: the replay finds them again, and records those gone
+    vtypes = None if getattr(args, "vtypes_recorded", False) else args.vtypes
     with output_set(args, args.out, [args.fcd, args.net, args.scenario, args.vtypes], meta=meta) as tmp:
         if args.engine == "dask":
             from sumo_drvpw.sim.fcd_dask import process_fcd_dask
 
             res = process_fcd_dask(args.fcd, tmp, net=args.net, scenario=args.scenario,
-                                   equations=args.equation, vtype_files=args.vtypes,
+                                   equations=args.equation, vtype_files=vtypes,
                                    begin_s=args.begin, buckets=args.buckets,
                                    scheduler=args.scheduler, workers=args.workers, **overrides)
         else:
             res = process_fcd(args.fcd, net=args.net, scenario=args.scenario, out_dir=tmp,
-                              equations=args.equation, vtype_files=args.vtypes,
+                              equations=args.equation, vtype_files=vtypes,
                               begin_s=args.begin, **overrides)
         meta["interrupted"] = bool(res.summary.get("interrupted"))
     from sumo_drvpw.cli.run import _print_summary
@@ -146,8 +147,9 @@ def _recorded_inputs(args: argparse.Namespace) -> None:
     """Without --scenario: the network (unless --net) and the route and additional files
     (unless --vtypes) of the run that recorded the FCD, as its header names them
     (:func:`sumo_drvpw.sim.fcd_read.run_inputs`: else the one SUMO config beside it that
-    writes it), each said in a note; a route or additional file found nowhere in a warning
-    (its vTypes are unknown)."""
+    writes it), each said in a note; a route or additional file found nowhere in a note with
+    the options that give it (the replay warns of it, in summary.json too: its vTypes are
+    unknown)."""
     from sumo_drvpw.sim.fcd_read import run_inputs
 
     rec = run_inputs(args.fcd)
@@ -164,16 +166,12 @@ def _recorded_inputs(args: argparse.Namespace) -> None:
         took.append(f"network {rec['net']}")
     if args.vtypes is None and rec["files"]:
         args.vtypes = [str(f) for f in rec["files"]]
+        args.vtypes_recorded = True
         took.append("vTypes and stops from " + ", ".join(str(f) for f in rec["files"]))
     if took:
         print(f"note: {how}: " + "; ".join(took)
               + " (--net, --vtypes or --scenario choose others)")
     missing = [v for k, v in rec["missing"] if want[k]]
-    if missing and args.net is None:  # refused next, in one line: "give --net"
+    if missing:  # (without a network refused next, in one line: "give --net"; else warned at the end)
         print(f"note: {src} names {', '.join(missing)}, not found beside the FCD "
-              f"(looked in {', '.join(rec['looked_in'])}); give --vtypes (and --net) for its vTypes")
-    elif missing:
-        print(f"warning: {src} names {', '.join(missing)}, not found beside the FCD "
-              f"(looked in {', '.join(rec['looked_in'])}): the vTypes defined there are unknown, their vehicles "
-              "booked as passenger cars (SUMO's default vClass) at a car's mass; give --vtypes (and --net) for its vTypes",
-              file=sys.stderr)
+              f"(looked in {', '.join(str(p) for p in rec['looked_in'])}); give --vtypes (and --net) for its vTypes")

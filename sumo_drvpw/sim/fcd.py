@@ -65,8 +65,8 @@ from sumo_drvpw.sim.fcd_begin import accel_at_begin, begin_frame
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_method import recorded_method
-from sumo_drvpw.sim.fcd_warn import (lane_warnings, no_angle_warning, partial_warnings, unplaced_person_warning,
-                                     unplaced_vehicle_warning)
+from sumo_drvpw.sim.fcd_warn import (lane_warnings, missing_input_warnings, no_angle_warning, partial_warnings,
+                                     unplaced_person_warning, unplaced_vehicle_warning)
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
 from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
@@ -378,13 +378,16 @@ def process_fcd(fcd_file, net=None, scenario=None, out_dir=None, equations=None,
     """
     sc = fcd_scenario(net, scenario, equations, vtype_files, fcd_file, **overrides)
     return replay_fcd(sc, fcd_file, out_dir, begin_s=begin_s, keep_vehicles=keep_vehicles,
-                      flush_vehicles=flush_vehicles, chunk_rows=chunk_rows)
+                      flush_vehicles=flush_vehicles, chunk_rows=chunk_rows,
+                      inputs=missing_input_warnings(fcd_file, scenario, vtype_files))
 
 
 def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = False,
                flush_vehicles: int | None = None, chunk_rows: int | None = CHUNK_ROWS,
-               keep=None, publish: bool = True, count_persons: bool = True):
-    """:func:`process_fcd` with a prepared scenario (:func:`fcd_scenario`). ``keep``:
+               keep=None, publish: bool = True, count_persons: bool = True, inputs=([], [])):
+    """:func:`process_fcd` with a prepared scenario (:func:`fcd_scenario`). ``inputs``:
+    the warnings and the files of :func:`~sumo_drvpw.sim.fcd_warn.missing_input_warnings`
+    (summary.json ``warnings``, ``source.inputs_not_found``). ``keep``:
     optional function vehicle ids → boolean mask of the vehicles to book (a Dask task's
     share; every person's rows are kept, to be matched to the vehicle it rides);
     ``publish``: write the outputs into ``out_dir`` (else only the spill parts of the
@@ -495,14 +498,15 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                             "riding_person_rows": int(replay.rider_rows),
                             "unplaced_person_rows": int(replay.unplaced_person_rows),
                             "unplaced_vehicle_rows": int(replay.blind_rows),
-                            "declared_parked_rows": int(replay.stops.inferred_rows if replay.stops else 0)}}
+                            "declared_parked_rows": int(replay.stops.inferred_rows if replay.stops else 0),
+                            "inputs_not_found": list(inputs[1])}}
         if sc.trace and out_dir:
             extra["files"] = {"trace": "trace.parquet"}
         if not publish:
             acc.close_trace()
             return acc, extra
-        warn = (lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning + [method_note] * bool(method_note)
-                + partial_warnings(fcd_file, head))
+        warn = (list(inputs[0]) + lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning
+                + [method_note] * bool(method_note) + partial_warnings(fcd_file, head))
         if replay.no_angle and acc.eqset.uses_yaw:
             warn.append(no_angle_warning(fcd_file))
         if replay.unplaced_person_rows and sc.transportable_mass:

@@ -165,13 +165,14 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     from sumo_drvpw.sim.accountant import Accountant
     from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario, recorded_device_options, recorded_step
     from sumo_drvpw.sim.fcd_idle import untold_warning
-    from sumo_drvpw.sim.fcd_warn import (lane_warnings, no_angle_warning, partial_warnings,
-                                         unplaced_person_warning, unplaced_vehicle_warning)
+    from sumo_drvpw.sim.fcd_warn import (lane_warnings, missing_input_warnings, no_angle_warning,
+                                         partial_warnings, unplaced_person_warning, unplaced_vehicle_warning)
     from sumo_drvpw.sim.fcd_read import fcd_parts, header_options
     from sumo_drvpw.sim.run import check_vtype_filter
     from sumo_drvpw.sim.spill import VehicleSpill, write_published
 
     sc = fcd_scenario(net, scenario, equations, vtype_files, fcd_file, **overrides)
+    inputs = missing_input_warnings(fcd_file, scenario, vtype_files)
     if sc.trace:
         raise UserError("FCD on Dask: no per vehicle-step trace (outputs.trace); replay "
                         "locally for a trace")
@@ -200,9 +201,9 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
                 led = one if led is None else merge_ledgers([led, one])
                 done.append(d)
         firsts = [d["lanes"][2] for d in done if d["lanes"][2] is not None]
-        warn = lane_warnings(spec, sc.net_file, sum(d["lanes"][0] for d in done),
-                             sum(d["lanes"][1] for d in done),
-                             min(firsts, key=lambda x: x[1]) if firsts else None)
+        warn = inputs[0] + lane_warnings(spec, sc.net_file, sum(d["lanes"][0] for d in done),
+                                         sum(d["lanes"][1] for d in done),
+                                         min(firsts, key=lambda x: x[1]) if firsts else None)
         warn += partial_warnings(spec, head)
         if any(d["no_angle"] for d in done):
             warn.append(no_angle_warning(spec))
@@ -248,6 +249,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
                                idling_rows=sum(d["extra"]["source"]["idling_rows"] for d in done),
                                untold_parked_rows=untold[0], untold_parked_vehicles=untold[1],
                                unplaced_vehicle_rows=blind[0], declared_parked_rows=blind[1],
+                               inputs_not_found=inputs[1],
                                riding_person_rows=sum(d["extra"]["source"]["riding_person_rows"]
                                                       for d in done),
                                engine="dask", buckets=k)

@@ -1,13 +1,36 @@
 """What an FCD replay warns of about the file itself: vehicle rows on lanes the network
 lacks, no angles for an equation with radial drag, a recording of part of the run (a share
 of the vehicles, part of the network), person rows that cannot be matched to vehicles,
-vehicle rows without x, y (parking told only by the route files' stops)."""
+vehicle rows without x, y (parking told only by the route files' stops), route or
+additional files the recording names that are gone (their vTypes unknown)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from sumo_drvpw.errors import UserError
+
+
+def missing_input_warnings(fcd_file, scenario=None, vtype_files=None) -> tuple[list[str], list[str]]:
+    """Where a replay takes its vTypes from the files of the run that recorded ``fcd_file``
+    (no ``scenario``, no ``vtype_files``: :func:`sumo_drvpw.sim.fcd_read.run_inputs`, its
+    header's, else those of the SUMO config that writes it): a warning for the route and
+    additional files named there and found nowhere — the vTypes defined there are unknown,
+    their vehicles booked as passenger cars, SUMO's default vClass, at a car's mass — and
+    those files as written ([], [] when none is missing or the files are given)."""
+    if scenario is not None or vtype_files is not None:
+        return [], []
+    from sumo_drvpw.sim.fcd_read import run_inputs
+
+    rec = run_inputs(fcd_file) or {"missing": []}
+    gone = [v for k, v in rec["missing"] if k != "net-file"]  # (no network: refused before)
+    if not gone:
+        return [], []
+    src = f"the SUMO config {rec['config'].name} that writes the FCD" if "config" in rec else "the FCD's header"
+    return ([f"{src} names {', '.join(gone)}, not found beside the FCD {fcd_file} (looked in "
+             f"{', '.join(str(p) for p in rec['looked_in'])}): the vTypes defined there are unknown, their "
+             "vehicles booked as passenger cars (SUMO's default vClass) at a car's mass; give the run's route and "
+             "additional files for its vTypes"], gone)
 
 
 def unplaced_person_warning(fcd_file, rows: int) -> str:
