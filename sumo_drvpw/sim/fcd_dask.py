@@ -116,7 +116,7 @@ def merge_ledgers(ledgers: list):
         if led.steps != out.steps or len(led.snapshots) != len(out.snapshots):
             raise RuntimeError("fcd buckets stepped different timesteps")
         for name in ("_edge_closed", "_edge_dist_closed", "_edge_time_closed",
-                     "_edge_dist_eq_closed", "edge_count", "edge_entered", "out_of_range",
+                     "_edge_dist_eq_closed", "_edge_time_eq_closed", "edge_count", "edge_entered", "out_of_range",
                      "lane_clipped", "edge_teleports", "edge_tele"):
             setattr(out, name, getattr(out, name) + getattr(led, name))
         for name in ("samples", "corrected", "clipped", "position_reads", "position_mismatches",

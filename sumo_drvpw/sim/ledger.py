@@ -135,6 +135,7 @@ class Ledger:
         self._edge_dist_closed = np.zeros(n_edges)
         self._edge_time_closed = np.zeros(n_edges)
         self._edge_dist_eq_closed = np.zeros((n_edges, self.E))
+        self._edge_time_eq_closed = np.zeros((n_edges, self.E))  # vehicle-seconds of each equation's vehicles
         self._edge_cache = None
         self.edge_count = np.zeros((n_edges, self.E))
         #: accounted vehicles that entered each edge (SUMO's edgeData ``entered``)
@@ -200,13 +201,13 @@ class Ledger:
         #: the trajectories' driving dynamics against real driving (EU RDE)
         self.dynamics = Dynamics()
 
-    def _edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Edge energies (edges, 2, E, C), distances, times and distances per equation
-        (edges, E) of the vehicles it applies to: closed plus open segments."""
+    def _edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Edge energies (edges, 2, E, C), distances, times, and distances and times per
+        equation (edges, E) of the vehicles it applies to: closed plus open segments."""
         if self._edge_cache is None:
             energy, dist = self._edge_closed.copy(), self._edge_dist_closed.copy()
             etime = self._edge_time_closed.copy()
-            dist_eq = self._edge_dist_eq_closed.copy()
+            dist_eq, time_eq = self._edge_dist_eq_closed.copy(), self._edge_time_eq_closed.copy()
             n = self.n_veh
             open_ = np.flatnonzero(self.veh_prev_edge[:n] >= 0)
             e = self.veh_prev_edge[open_]
@@ -214,7 +215,8 @@ class Ledger:
             np.add.at(dist, e, self.veh_dist[open_] - self._seg_dist[open_])
             np.add.at(dist_eq, e, self.veh_dist_eq[open_] - self._seg_dist_eq[open_])
             np.add.at(etime, e, self.veh_time[open_] - self._seg_time[open_])
-            self._edge_cache = (energy, dist, etime, dist_eq)
+            np.add.at(time_eq, e, self.veh_time_eq[open_] - self._seg_time_eq[open_])
+            self._edge_cache = (energy, dist, etime, dist_eq, time_eq)
         return self._edge_cache
 
     @property
@@ -223,18 +225,24 @@ class Ledger:
         return self._edges()[3]
 
     @property
+    def edge_time_eq(self) -> np.ndarray:
+        """Vehicle-seconds per edge of the vehicles each equation applies to [s], (edges, E):
+        standing ones too (an equation with vehicles on an edge that drove none of it)."""
+        return self._edges()[4]
+
+    @property
     def edge_time(self) -> np.ndarray:
         """Vehicle-seconds spent per edge [s] (SUMO's ``sampledSeconds``), (edges,)."""
         return self._edges()[2]
 
     def snapshot(self, t: float) -> None:
         """Keep the cumulative edge totals at time ``t`` [s] (an interval boundary)."""
-        energy, dist, etime, dist_eq = self._edges()
+        energy, dist, etime, dist_eq, time_eq = self._edges()
         if self.chain is not None:
             self.chain.snapshot(t)
         self.snapshots.append((float(t), energy.copy(), dist_eq.copy(), etime.copy(),
                                self.edge_count.copy(), self.edge_entered.copy(),
-                               self.edge_teleports.copy(), self.edge_tele.copy()))
+                               self.edge_teleports.copy(), self.edge_tele.copy(), time_eq.copy()))
 
     @property
     def edge_trac(self) -> np.ndarray:
@@ -281,6 +289,7 @@ class Ledger:
         grow("veh_time_eq", (cap, E))
         grow("veh_app_seen", (cap, E), bool, False)
         grow("_seg_dist_eq", (cap, E))  # veh_dist_eq when the edge was entered
+        grow("_seg_time_eq", (cap, E))  # veh_time_eq when the edge was entered
         grow("veh_mass", (cap,), float, np.nan)
         grow("veh_load", (cap,), float, 0.0)  # riding persons [kg]
         grow("veh_app", (cap, E))
@@ -307,6 +316,7 @@ class Ledger:
     _VEH_ARRAYS = (("_veh_energy", 0.0), ("_seg_energy", 0.0), ("_seg_dist", 0.0),
                    ("_seg_time", 0.0), ("veh_dist", 0.0), ("veh_time", 0.0),
                    ("veh_dist_eq", 0.0), ("veh_time_eq", 0.0), ("veh_app_seen", False), ("_seg_dist_eq", 0.0),
+                   ("_seg_time_eq", 0.0),
                    ("veh_mass", np.nan), ("veh_load", 0.0), ("veh_app", 0.0),
                    ("veh_keep", False),
                    ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_prev_angle", np.nan),
@@ -424,6 +434,7 @@ class Ledger:
         np.add.at(self._edge_dist_closed, old, self.veh_dist[vo] - self._seg_dist[vo])
         np.add.at(self._edge_dist_eq_closed, old, self.veh_dist_eq[vo] - self._seg_dist_eq[vo])
         np.add.at(self._edge_time_closed, old, self.veh_time[vo] - self._seg_time[vo])
+        np.add.at(self._edge_time_eq_closed, old, self.veh_time_eq[vo] - self._seg_time_eq[vo])
 
     def flush(self) -> np.ndarray | None:
         """Write the finished vehicles (those finished :attr:`hold_steps` ago) to
@@ -501,6 +512,7 @@ class Ledger:
             self._seg_dist[vi] = self.veh_dist[vi]
             self._seg_dist_eq[vi] = self.veh_dist_eq[vi]
             self._seg_time[vi] = self.veh_time[vi]
+            self._seg_time_eq[vi] = self.veh_time_eq[vi]
             self.veh_prev_edge[vi] = eidx[enter]
             np.add.at(self.edge_count, eidx[enter], self.veh_app[vi])
             np.add.at(self.edge_entered, eidx[enter], 1.0)

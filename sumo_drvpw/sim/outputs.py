@@ -161,16 +161,20 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
     or ``<eq>_fuel_l`` and ``<eq>_co2_kg`` (:meth:`sumo_drvpw.sim.chain.ChainLedger.edge_attrs`).
     Where teleports ended on an edge in the interval: ``<eq>_teleports``,
     ``<eq>_teleport_kinetic_j``, ``<eq>_teleport_potential_j`` (apart from the driving energy).
-    An equation that booked nothing on an edge in an interval (none of its vehicles drove
-    there) has no attributes on it, as SUMO leaves out what it did not measure: a 0 would
-    read as a free edge to a router taking it as a weight (vehicles that only stood there:
-    their chain's idling or auxiliary energy in its chain attributes, no driving ones).
+    An equation none of whose vehicles was on an edge in an interval has no attributes on
+    it, as SUMO leaves out what it did not measure: a 0 would read as a free edge to a
+    router taking it as a weight. One whose vehicles were there but drove none of it (they
+    stood: a queue, a stop) has its sums — ``_<term>_j``, ``_recup_j``, ``_total_j`` (0 but
+    for a standing constant such as ``v^0``) and its chain's — and no ``_total_perVeh_j`` or
+    ``_total_normed_jpm``, which scale by the distance driven there: none, as SUMO's traffic
+    edgeData leaves out ``traveltime`` on an edge whose vehicles did not move (a router then
+    takes its default there, as on an edge without vehicles; a 0 would be a free edge).
     """
     from xml.sax.saxutils import quoteattr
 
-    energy_, _, etime_, dist_eq_ = ledger._edges()
+    energy_, _, etime_, dist_eq_, time_eq_ = ledger._edges()
     cur = (float(end), energy_, dist_eq_, etime_, ledger.edge_count, ledger.edge_entered,
-           ledger.edge_teleports, ledger.edge_tele)
+           ledger.edge_teleports, ledger.edge_tele, time_eq_)
     bounds = [s for s in ledger.snapshots if begin < s[0] < end] + [cur]
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              "<!-- sumo-drvpw: driving energy per edge, equation and term (traction [J], "
@@ -186,11 +190,12 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
         chain_prev = np.zeros_like(chain.edge)
     for b in bounds:
         t0, t1 = prev[0], b[0]
-        energy, dist, etime, count, entered, tcount, tenergy = (b[k] - prev[k] for k in range(1, 8))
+        energy, dist, etime, count, entered, tcount, tenergy, time_eq = (b[k] - prev[k] for k in range(1, 9))
         lines.append(f'    <interval begin="{t0:.2f}" end="{t1:.2f}" id="drvpw">')
         for i in np.flatnonzero((etime > 0) | (tcount > 0).any(axis=1)):
             attrs = [f'sampledSeconds="{etime[i]:.2f}"', f'entered="{entered[i]:.0f}"']
-            booked = (dist[i] > 0) | energy[i].any(axis=(0, 2)) | (tcount[i] > 0)  # per equation
+            # per equation: its vehicles were there (standing ones too), or booked there
+            booked = (time_eq[i] > 1e-9) | (dist[i] > 0) | energy[i].any(axis=(0, 2)) | (tcount[i] > 0)
             for e, name in enumerate(names):
                 tr = energy[i, 0, e]
                 if not booked[e]:
@@ -200,12 +205,11 @@ def edgedata_xml(ledger: Ledger, net: Network, names: list[str], begin: float,
                     attrs.append(f'{name}_{cat}_j="{tr[ci]:.3f}"')
                 attrs.append(f'{name}_recup_j="{energy[i, 1, e].sum():.3f}"')
                 attrs.append(f'{name}_total_j="{tot:.3f}"')
-                # SUMO's _perVeh: per vehicle driving the whole edge, the total × length / distance
-                # (per vehicle that entered in the interval gave 0 where one drove on across its start)
-                per_veh = tot * float(net.edge_length[i]) / dist[i, e] if dist[i, e] > 0 else 0.0
-                attrs.append(f'{name}_total_perVeh_j="{per_veh:.3f}"')
-                normed = tot / dist[i, e] if dist[i, e] > 0 else 0.0
-                attrs.append(f'{name}_total_normed_jpm="{normed:.6f}"')
+                if dist[i, e] > 0:  # (none driven, they stood: no per-vehicle figure, no free edge)
+                    # SUMO's _perVeh: per vehicle driving the whole edge, the total × length / distance
+                    # (per vehicle that entered in the interval gave 0 where one drove on across its start)
+                    attrs.append(f'{name}_total_perVeh_j="{tot * float(net.edge_length[i]) / dist[i, e]:.3f}"')
+                    attrs.append(f'{name}_total_normed_jpm="{tot / dist[i, e]:.6f}"')
                 attrs += teleport.edge_attrs(name, tcount[i, e], tenergy[i, e])
             if chain is not None:
                 attrs += chain.edge_attrs(chain_at[b[0]][i] - chain_prev[i], booked)
