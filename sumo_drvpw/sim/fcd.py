@@ -24,9 +24,10 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
   is told from a standing one by its x, y beside the lane (:class:`ParkedTest`) and, as in
   the live loop, not booked (``summary.json`` ``source.parked_rows``) but for the row it
   parks in, where SUMO moved it into its stop (booked driven, as live); FCD without x, y
-  (``--fcd-output.attributes`` without them, or ``.geo``/``.utm`` coordinates) tells it
-  only at a parking stop the route files declare (:mod:`sumo_drvpw.sim.fcd_stops`; else
-  booked standing, warned of); one whose parking is over but whose way out is blocked idles in its space
+  (``--fcd-output.attributes`` without them) tells it only at a parking stop the route
+  files declare (:mod:`sumo_drvpw.sim.fcd_stops`; else booked standing, warned of), and
+  ``.geo``/``.utm`` coordinates not at all (booked standing); one whose parking is over but
+  whose way out is blocked idles in its space
   and is booked standing there, as live (:mod:`sumo_drvpw.sim.fcd_idle`: told by the FCD's
   blinker bits, else by its declared stop's planned end; ``source.idling_rows``);
 - vehicles are switched off at long planned stops and by start-stop systems as in the live
