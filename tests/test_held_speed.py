@@ -107,3 +107,42 @@ def test_a_held_speed_gives_the_inertia_back(tmp_path, monkeypatch):
     as_logged, counts_logged = acc(ReadOptions(speed_unit="m/s"))
     assert "held" not in counts_logged["accel_source"]
     assert abs(fixed - 1) < 0.1 and as_logged < 0.8, (fixed, as_logged)
+
+
+def _whole_kmh_at_obd_rate(seed):
+    """A lively drive logged in whole km/h at an OBD app's irregular 1–2 Hz (as the shared
+    Prius Gen-2 logs): it repeats wherever the speed changes by less than a km/h between
+    samples, a third of its moving samples, and is updated at every sample all the same."""
+    rng = np.random.default_rng(seed)
+    dt = rng.choice([0.5, 0.7, 1.0], 3000, p=[0.3, 0.5, 0.2])
+    a = np.convolve(rng.normal(0.0, 0.3, 3000), np.full(10, 0.3), "same")
+    v = np.abs(np.cumsum(a * dt) + 12.0)
+    return np.cumsum(dt), np.round(v * 3.6) / 3.6
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_speed_in_whole_kmh_at_obd_rate_is_not_held_without_its_resolution_given(seed):
+    """speed_hold judges each trip in its own steps when no resolution is given (the km/h
+    check asks it so): with steps of 0, such a speed was taken for held (about 1.3 s)."""
+    t, v = _whole_kmh_at_obd_rate(seed)
+    codes = np.zeros(len(v), int)
+    assert R.speed_hold(v, t, codes)[0] == 0.0
+    assert R.speed_hold(v, t, codes, R.speed_resolution(v, codes))[0] == 0.0
+
+
+def test_the_kmh_check_judges_the_shared_prius_logs_over_one_second(shared_data, monkeypatch):
+    """The shared Prius Gen-2 OBD speed (whole km/h, about 1.4 Hz) is no held speed for the
+    km/h check either: its implied accelerations are judged over 1 s (the check judged its
+    first trip held at 1.05 s and looked over 3.1 s)."""
+    import sumo_drvpw.data.plausible as P
+    from sumo_drvpw.data.adapters import read
+    from sumo_drvpw.data.trips import trip_codes_of
+
+    df, _ = read("torquepro-prius2", [shared_data / "prius_gen2_torquepro"])
+    horizons = []
+    real = P.implied_acceleration
+    monkeypatch.setattr(P, "implied_acceleration",
+                        lambda v, t, trip, horizon_s=1.0: horizons.append(horizon_s) or real(v, t, trip, horizon_s))
+    P.check_speed_unit(df["speed_mps"].to_numpy(float), df["time_s"].to_numpy(float),
+                       trip_codes_of(df["trip_id"]), "prius.parquet")
+    assert horizons == [1.0]

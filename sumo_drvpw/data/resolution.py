@@ -49,6 +49,13 @@ def speed_resolution(v: np.ndarray, trip_codes: np.ndarray) -> float:
     return q
 
 
+def trip_resolutions(v: np.ndarray, trip_codes: np.ndarray) -> np.ndarray:
+    """:func:`speed_resolution` of each trip (runs of equal ``trip_codes``, in order) [m/s]."""
+    v, codes = np.asarray(v, float), np.asarray(trip_codes)
+    first = np.flatnonzero(trip_starts(codes)) if len(codes) else np.zeros(0, np.int64)
+    return np.array([speed_resolution(v[a:b], codes[a:b]) for a, b in zip(first, np.r_[first[1:], len(v)])])
+
+
 def accel_window(opt, v: np.ndarray, trip_codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(width of the acceleration's moving average [s], the speed's resolution [m/s]), each
     per trip (runs of equal ``trip_codes``, in order), for reading options ``opt``
@@ -64,8 +71,7 @@ def accel_window(opt, v: np.ndarray, trip_codes: np.ndarray) -> tuple[np.ndarray
     """
     v = np.asarray(v, float)
     codes = np.asarray(trip_codes)
-    first = np.flatnonzero(trip_starts(codes)) if len(codes) else np.zeros(0, np.int64)
-    q = np.array([speed_resolution(v[a:b], codes[a:b]) for a, b in zip(first, np.r_[first[1:], len(v)])])
+    q = trip_resolutions(v, codes)
     need = q / (np.sqrt(6.0) * opt.accel_noise_mps2) if opt.accel_noise_mps2 > 0 else np.zeros_like(q)
     return np.maximum(opt.accel_window_s, need), q
 
@@ -172,7 +178,7 @@ HELD_MIN_SPEED_MPS = 1.0
 HELD_SPAN_S = 3.0
 
 
-def speed_hold(v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, q=0.0) -> np.ndarray:
+def speed_hold(v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, q=None) -> np.ndarray:
     """The interval at which each trip's speed is updated, when it is held between updates [s];
     0 for a trip whose speed is updated at every sample (or that cannot be judged).
 
@@ -182,14 +188,15 @@ def speed_hold(v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, q=0.0) -> n
     56 % of its moving samples repeats: acc 0.40 where the car's is about 1.1). Judged where a
     speed updated every sample could not repeat: moving (> HELD_MIN_SPEED_MPS) and changing,
     over ±HELD_SPAN_S, by at least two of its logged steps ``q`` [m/s] (per trip or one for all;
-    :func:`speed_resolution`; or the one step it changes by, :func:`_one_step`) and 0.02 m/s per
-    sample. A share r ≥ HELD_SHARE of repeats there
+    None: each trip's own, :func:`trip_resolutions` — with 0 a speed in whole km/h at 1.4 Hz
+    repeats while it changes by less than a step and is taken for held; or the one step it
+    changes by, :func:`_one_step`) and 0.02 m/s per sample. A share r ≥ HELD_SHARE of repeats there
     gives the update interval dt/(1 − r) (dt: the trip's median step).
     """
     v, t, codes = np.asarray(v, float), np.asarray(t, float), np.asarray(trip_codes)
     first = np.flatnonzero(trip_starts(codes)) if len(codes) else np.zeros(0, np.int64)
     bounds = list(zip(first, np.r_[first[1:], len(v)]))
-    q = np.broadcast_to(np.asarray(q, float), (len(bounds),))
+    q = np.broadcast_to(trip_resolutions(v, codes) if q is None else np.asarray(q, float), (len(bounds),))
     out = np.zeros(len(bounds))
     for j, (a, b) in enumerate(bounds):
         if b - a < HELD_MIN_SAMPLES + 2:
