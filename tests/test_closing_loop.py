@@ -375,7 +375,15 @@ def test_a_standstill_whose_accelerometer_reads_one_value_is_no_dropout():
     drove_off = df.copy()
     drove_off.loc[k, "speed_mps"] = 0.0
     drove_off.loc[k, "imu_accel_mps2"] = 0.0123
-    assert df["speed_mps"].to_numpy()[k[-1] + 1] > 1.0 and _mask(drove_off)[k].all()
+    assert df["speed_mps"].to_numpy()[k[-1] + 1] > 2.0 and _mask(drove_off)[k].all()
+    # a wheel-speed sensor's first reading after 0 (it reads 0 below a few km/h): 0.6 m/s
+    # 0.05 s after a 20-Hz stop is a car pulling away, no dropout
+    from sumo_drvpw.data.dropouts import dropout_mask
+
+    t = np.arange(400) * 0.05
+    v = np.r_[np.zeros(200), 0.6 + 0.1 * np.arange(200)]
+    acc = np.r_[np.zeros(200), np.full(200, 2.0) + 0.01 * np.sin(np.arange(200))]
+    assert not dropout_mask(t, [v, acc], np.zeros(400, int), v).any()
 
 
 def test_accelerometer_offsets_hand_calculation():

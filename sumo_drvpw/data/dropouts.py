@@ -26,7 +26,10 @@ LINEAR_TOL = 1e-6
 #: constant, and a still accelerometer may read one value too (a coarse or filtered one)
 STANDSTILL_MPS = 0.1
 #: ... unless the next sample jumps faster than a car pulls away [m/s²] (4.5: hard launches)
+#: and beyond the lowest speed a wheel-speed sensor reports after 0 [m/s] (they read 0 below
+#: about 2–5 km/h, so a 20-Hz log's first reading may jump to that; 2 m/s = 7.2 km/h)
 STANDSTILL_PULL_MPS2 = 4.5
+STANDSTILL_FIRST_MPS = 2.0
 
 def _runs(flag: np.ndarray):
     """(start, stop) of runs of True."""
@@ -36,13 +39,14 @@ def _runs(flag: np.ndarray):
 
 def _stood(v: np.ndarray, t: np.ndarray, codes: np.ndarray, a: int, b: int) -> bool:
     """Whether the held run ``a:b`` is a car standing: its speed at or below STANDSTILL_MPS
-    and the next sample of its trip no faster than a car pulls away (STANDSTILL_PULL_MPS2;
-    a logger that held 0 while the car drove off ends in a jump to the speed it reached)."""
+    and the next sample of its trip no faster than a car pulls away (STANDSTILL_PULL_MPS2, or
+    the first speed a wheel-speed sensor reports, STANDSTILL_FIRST_MPS; a logger that held 0
+    while the car drove off ends in a jump to the speed it reached)."""
     if v[a:b].max() > STANDSTILL_MPS:
         return False
     if b >= len(v) or codes[b] != codes[b - 1]:
         return True
-    return bool(v[b] <= STANDSTILL_MPS + STANDSTILL_PULL_MPS2 * max(t[b] - t[b - 1], 0.0))
+    return bool(v[b] <= max(STANDSTILL_MPS + STANDSTILL_PULL_MPS2 * max(t[b] - t[b - 1], 0.0), STANDSTILL_FIRST_MPS))
 
 
 def dropout_mask(time_s, signals, trip_codes, speed_mps=None, min_run_s: float = DROPOUT_MIN_S,
