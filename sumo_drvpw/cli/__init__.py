@@ -309,6 +309,10 @@ def note_counts(counts: dict) -> None:
 
     for f, row in (counts.get("truncated_rows") or {}).items():  # CSV files cut inside their last row
         print(f"warning: {cut_message(f, row)}")
+    gaps = int(counts.get("time_gaps", 0) or 0)
+    if gaps:  # pauses in logging inside trips: weigh nothing (counted in the reports, said here)
+        print(f"note: {gaps} pause(s) in logging inside trips, {float(counts.get('time_gaps_s', 0.0)):.4g} s in "
+              "all: no energy is booked over them and no derivative reaches across them")
     say_traction_only(counts)
     moving, held = int(counts.get("moving_rows", 0) or 0), int(counts.get("held_moving_rows", 0) or 0)
     if moving >= 100 and held > 0.5 * moving:  # a logger's held values: fewer independent samples
