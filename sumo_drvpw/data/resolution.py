@@ -191,7 +191,10 @@ def speed_hold(v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, q=None) -> 
     None: each trip's own, :func:`trip_resolutions` — with 0 a speed in whole km/h at 1.4 Hz
     repeats while it changes by less than a step and is taken for held; or the one step it
     changes by, :func:`_one_step`) and 0.02 m/s per sample. A share r ≥ HELD_SHARE of repeats there
-    gives the update interval dt/(1 − r) (dt: the trip's median step).
+    gives the update interval dt/(1 − r) (dt: the trip's median step). A speed in steps too coarse
+    to change by two of them in one sample (whole km/h at 10 Hz) is judged over the least lag of
+    m = 2, 4, 8, … samples (m·dt ≤ HELD_SPAN_S) over which it must: repeats r over m samples give
+    m·dt/(1 − r).
     """
     v, t, codes = np.asarray(v, float), np.asarray(t, float), np.asarray(trip_codes)
     first = np.flatnonzero(trip_starts(codes)) if len(codes) else np.zeros(0, np.int64)
@@ -210,13 +213,17 @@ def speed_hold(v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, q=None) -> 
         i = np.arange(1, b - a)
         lo, hi = np.maximum(i - k, 0), np.minimum(i + k, b - a - 1)
         slope = np.abs(vv[hi] - vv[lo]) / np.maximum(tv[hi] - tv[lo], dt)
-        judged = ((vv[i] > HELD_MIN_SPEED_MPS) & (vv[i - 1] > HELD_MIN_SPEED_MPS)
-                  & (slope * dt >= max(2.0 * step, 0.02)) & np.isfinite(slope))
-        if judged.sum() < HELD_MIN_SAMPLES:
-            continue
-        r = float(np.mean(vv[i][judged] == vv[i - 1][judged]))
-        if r >= HELD_SHARE:
-            out[j] = dt / max(1.0 - r, 1e-3)
+        m = 1  # the lag [samples]: 1, or, for a speed in steps too coarse to change at every
+        while m * dt <= HELD_SPAN_S:  # sample (whole km/h at 10 Hz), the least that it must change over
+            im = i[i >= m]
+            judged = ((vv[im] > HELD_MIN_SPEED_MPS) & (vv[im - m] > HELD_MIN_SPEED_MPS)
+                      & (slope[im - 1] * m * dt >= max(2.0 * step, 0.02)) & np.isfinite(slope[im - 1]))
+            if judged.sum() >= HELD_MIN_SAMPLES:
+                r = float(np.mean(vv[im][judged] == vv[im - m][judged]))
+                if r >= HELD_SHARE:
+                    out[j] = m * dt / max(1.0 - r, 1e-3)
+                break
+            m *= 2
     return out
 
 
