@@ -48,12 +48,13 @@ def test_a_held_speed_is_found_with_its_update_interval(dt, every, seed):
 
 def test_between_updates_the_speed_is_interpolated_and_a_stop_stays_a_stop():
     """By hand: updates every 3 s at 1 Hz are joined linearly; a 10-s stop (longer than twice
-    the hold) stays at 0 until its last sample, then the speed rises to the next update."""
+    the hold) stays at 0 until one hold before the next update (last confirmed then), then the
+    speed rises to that update as between any two (it rose in one sample, 3 m/s² for 1 m/s²)."""
     t = np.arange(20.0)
     v = np.array([0.0] * 10 + [3.0, 3.0, 3.0, 6.0, 6.0, 6.0, 9.0, 9.0, 9.0, 9.0])
     out = R.unheld_speed(v, t, np.zeros(20, int), [3.0])
-    np.testing.assert_allclose(out[:10], 0.0)
-    np.testing.assert_allclose(out[10:17], [3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0])
+    np.testing.assert_allclose(out[:8], 0.0)
+    np.testing.assert_allclose(out[7:17], [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0])
     np.testing.assert_allclose(out[17:], 9.0)
     # a trip without a hold, and NaN speeds, are left as they are
     v2 = v.copy()
@@ -170,3 +171,23 @@ def test_a_speed_in_whole_kmh_logged_at_10_hz_and_held_is_found(seed, tmp_path):
     p.write_text("time_s,speed_mps\n" + "".join(f"{a:.1f},{b!r}\n" for a, b in zip(t.tolist(), h.tolist())), encoding="utf-8")
     log = read_log([p])
     assert "held between updates up to 2" in log.counts["accel_source"]
+
+
+def test_a_pull_away_of_a_held_speed_gives_no_acceleration_spike(tmp_path):
+    """A 2-s held speed logged at 8 Hz (the synthetic Prius trips, 8 Hz, held 16 samples): the
+    stops' 0 was kept until its last sample, so each pull-away rose to the first update in
+    one 0.125-s step: derived accelerations of 5.3 m/s² where the car's stays below 4; now
+    the derived acceleration never exceeds the truth's largest by more than 0.5 m/s²."""
+    import sumo_drvpw.synth.effects as E
+    from sumo_drvpw.data.log import read_log
+
+    df, _ = E.synth_trips(4, 10.0, seed=3, effects=[E.LogPower()])
+    df = df[["trip_id", "time_s", "speed_mps", "accel_mps2", "power_w"]]
+    k = df.groupby("trip_id").cumcount().to_numpy()
+    truth = df["accel_mps2"].to_numpy()
+    df = df.assign(speed_mps=df["speed_mps"].to_numpy()[np.arange(len(df)) - k % 16]).drop(columns=["accel_mps2"])
+    p = tmp_path / "held.csv"
+    df.to_csv(p, index=False, encoding="utf-8")
+    log = read_log([p])
+    assert log.counts["accel_derivation"]["held_trips"] == 4
+    assert np.nanmax(np.abs(log.df["accel_mps2"].to_numpy())) < np.abs(truth).max() + 0.5

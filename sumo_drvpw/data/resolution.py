@@ -244,8 +244,8 @@ def unheld_speed(v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, hold) -> 
     """The speed between its updates: each trip with a hold interval ``hold`` > 0 [s] (per trip,
     :func:`speed_hold`) interpolated linearly from each update (a sample whose value differs from
     the previous one) to the next; a value that stays longer than twice the hold is a speed that
-    did not change (a stop, a steady cruise in the speed's steps) and is kept until its last
-    sample. Trips without a hold are returned as they are."""
+    did not change (a stop, a steady cruise in the speed's steps) and is kept until one hold
+    before the next update (then joined to it linearly, as any update). Trips without a hold are returned as they are."""
     v, t, codes = np.asarray(v, float), np.asarray(t, float), np.asarray(trip_codes)
     hold = np.asarray(hold, float)
     if not (hold > 0).any():
@@ -260,10 +260,19 @@ def unheld_speed(v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, hold) -> 
         run_start = np.flatnonzero(new)
         run_last = np.r_[run_start[1:] - 1, b - a - 1]
         steady = tv[run_last] - tv[run_start] > 2.0 * h
-        anchors = np.unique(np.r_[run_start, run_last[steady], b - a - 1])
-        ok = np.isfinite(vv[anchors])
+        # a steady value was last confirmed one hold before the next update (the speed left it
+        # somewhere after that): kept until then, not until its last sample (a pull-away from a
+        # stop read in one sample's step: an acceleration spike of Δv/dt at every start)
+        nxt = np.minimum(run_last + 1, b - a - 1)
+        left = steady & (run_last < b - a - 1)
+        at_t = np.r_[tv[run_start], np.maximum(tv[nxt[left]] - h, tv[run_start[left]]), tv[run_last[steady & ~left]],
+                     tv[-1]]
+        at_v = np.r_[vv[run_start], vv[run_start[left]], vv[run_last[steady & ~left]], vv[-1]]
+        order = np.argsort(at_t, kind="stable")
+        at_t, at_v = at_t[order], at_v[order]
+        ok = np.isfinite(at_v)
         if ok.sum() >= 2:  # a sample without a speed stays without one
-            out[a:b] = np.where(np.isfinite(vv), np.interp(tv, tv[anchors[ok]], vv[anchors[ok]]), vv)
+            out[a:b] = np.where(np.isfinite(vv), np.interp(tv, at_t[ok], at_v[ok]), vv)
     return out
 
 
