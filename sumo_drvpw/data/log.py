@@ -537,6 +537,8 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
         win = np.where(own, win, opt.accel_window_s)  # a trip with the column: as read alone
         win_seg, (vd, hold) = win[trip_codes[_trip_starts(seg)]], accel_speed(opt, v, t, trip_codes, q)
         derived = derivative(vd, t, seg, win_seg)
+        if vd is not v:  # a speed held between updates: read between them, the terms' speed too
+            df["speed_mps"] = v = vd
         df["accel_mps2"] = derived if lacking is None else np.where(lacking, derived, df["accel_mps2"].to_numpy(float))
         deriv = (seg, win_seg)
         n_derived = len(df) if lacking is None else int(lacking.sum())

@@ -156,8 +156,8 @@ def accel_counts(d: dict) -> dict:
     if d.get("held_trips"):
         c = d["held_trips"]
         text += (f"; the speed is held between updates up to {d['hold_max_s']:.2g} s apart"
-                 + ("" if c == n else f" on {c} of {n} trips") + " (it repeats where it must change): the "
-                 "acceleration is derived from it interpolated between its updates")
+                 + ("" if c == n else f" on {c} of {n} trips") + " (it repeats where it must change): it is "
+                 "read interpolated between its updates, and the acceleration derived from that")
     out["accel_window_s"] = hi
     if d["column_rows"]:  # the files without it are the exception
         text = f"accel_mps2 column; {text} for the {d['derived_rows']} rows of files without it"
@@ -281,7 +281,9 @@ def accel_speed(opt, v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, q) ->
     reading options ``opt``: a trip whose speed is held between updates for longer than the
     least acceleration window (:func:`speed_hold`; a hold within the window is averaged out)
     is interpolated between its updates (:func:`unheld_speed`), any other trip as logged. The
-    speed column itself is kept as logged."""
+    reader takes that speed for the terms too (``speed_mps``): with the acceleration from one
+    and the speed from the other, the acceleration term's energy Σ m·a·v·Δt would miss the
+    kinetic-energy change by about m·h/2·Σa²·Δt (the held speed lags by half a hold)."""
     hold = speed_hold(v, t, trip_codes, q)
     hold = np.where(hold > opt.accel_window_s, hold, 0.0)
     return unheld_speed(v, t, trip_codes, hold), hold
