@@ -248,14 +248,9 @@ def test_closed_loop_form_runs_in_sumo_at_the_reference_temperature(tmp_path):
 
 
 def _script():
-    import importlib.util
-    from pathlib import Path
+    from script_module import load_script
 
-    p = Path(__file__).resolve().parent.parent / "scripts" / "closing_the_loop.py"
-    spec = importlib.util.spec_from_file_location("closing_the_loop", p)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("closing_the_loop")
 
 
 def test_split_rule_second_split_is_fixed_up_front_and_differs():

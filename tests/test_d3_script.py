@@ -6,7 +6,6 @@ without the four files is refused in one line, exit 2."""
 
 from __future__ import annotations
 
-import importlib.util
 import re
 import subprocess
 import sys
@@ -14,15 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from script_module import load_script
 
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "d3_camry.py"
 
 
 def _load():
-    spec = importlib.util.spec_from_file_location("d3_camry", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("d3_camry")
 
 
 def _schedule(rng, n_hills: int) -> np.ndarray:

@@ -102,14 +102,9 @@ def test_an_i3_overview_that_lists_a_trip_twice_with_other_values_is_refused(tmp
 
 
 def _closing_script():
-    import importlib.util
-    from pathlib import Path
+    from script_module import load_script
 
-    p = Path(__file__).resolve().parent.parent / "scripts" / "closing_the_loop.py"
-    spec = importlib.util.spec_from_file_location("closing_the_loop_variants", p)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("closing_the_loop", "closing_the_loop_variants")
 
 
 def test_the_closing_loop_report_names_the_data_it_read_and_refuses_bad_input_in_one_line(tmp_path, capsys):

@@ -63,22 +63,42 @@ def _fuel_log(tmp_path):
     return _write(tmp_path, "fuel.csv", "trip_id,time_s,speed_mps,fuel_flow_rate_hour_lph\n" + rows + "\n")
 
 
-@pytest.mark.parametrize("argv,want", [
-    (["calibrate"], "calibrate its fuel chain with `sumo-drvpw calibrate LOG --vehicle V --target fuel"),
-    (["compare", "--equation", "vsp_spec"], "then compare or diagnose with --target fuel"),
-    (["diagnose"], "calibrate its fuel chain with"),
-    (["calibrate", "--target", "fuel"], "give it with --equation (vsp_spec"),
-    (["calibrate", "--target", "fuel", "--engine", "memory"], "give it with --equation (vsp_spec"),
+# The RSK Renault Twizy logs (NaitMalekYoussef/RSK_Twizy_EV_Dataset, CC-BY-4.0): speed and the
+# BMS's state of charge, imported with options.soc_capacity_kwh into the battery's energy
+# counters, no V·I: the wheel-level commands name the battery target the log does hold
+def _counter_log(tmp_path):
+    t = np.arange(0.0, 120.0, 1.0)
+    v = 10.0 + 5.0 * np.sin(t / 10.0)
+    dis = np.cumsum(np.full(t.size, 2000.0))
+    rows = "\n".join(f"trip,{a:g},{b:.3f},{c:.1f},0" for a, b, c in zip(t, v, dis))
+    return _write(tmp_path, "soc.csv", "trip_id,time_s,speed_mps,battery_discharge_energy_j,"
+                  "battery_charge_energy_j\n" + rows + "\n")
+
+
+_FUEL = "it holds fuel_flow_rate_hour_lph"
+_COUNTERS = "battery_discharge_energy_j"
+
+
+@pytest.mark.parametrize("make,holds,argv,want", [
+    (_fuel_log, _FUEL, ["calibrate"], "calibrate its fuel chain with `sumo-drvpw calibrate LOG --vehicle V --target fuel"),
+    (_fuel_log, _FUEL, ["compare", "--equation", "vsp_spec"], "then compare or diagnose with --target fuel"),
+    (_fuel_log, _FUEL, ["diagnose"], "calibrate its fuel chain with"),
+    (_fuel_log, _FUEL, ["calibrate", "--target", "fuel"], "give it with --equation (vsp_spec"),
+    (_fuel_log, _FUEL, ["calibrate", "--target", "fuel", "--engine", "memory"], "give it with --equation (vsp_spec"),
+    (_counter_log, _COUNTERS, ["calibrate"],
+     "calibrate its battery chain with `sumo-drvpw calibrate LOG --vehicle V --target battery"),
+    (_counter_log, _COUNTERS, ["compare", "--equation", "vsp_spec"], "then compare or diagnose with --target battery"),
+    (_counter_log, _COUNTERS, ["diagnose"], "calibrate its battery chain with"),
 ])
-def test_a_fuel_log_without_driving_power_is_told_what_it_can_do(tmp_path, capsys, argv, want):
+def test_a_log_without_driving_power_is_told_its_fuel_or_battery_target(tmp_path, capsys, make, holds, argv, want):
     from sumo_drvpw.cli import main as cli_main
 
-    log = _fuel_log(tmp_path)
+    log = make(tmp_path)
     out = tmp_path / ("o.toml" if argv[0] == "calibrate" else "o")
     code = cli_main([argv[0], str(log), *argv[1:], "--vehicle", "prius3", "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1
-    assert "no measured power" in err and "it holds fuel_flow_rate_hour_lph" in err and want in err
+    assert "no measured power" in err and holds in err and want in err
     assert not out.exists()
 
 
@@ -349,30 +369,3 @@ def test_a_log_of_held_values_is_said_to_overstate_its_samples(tmp_path, capsys)
             assert "90% of the moving rows" in out and "about one new value per 10.0 rows" in out and "3.2×" in out
 
 
-# The RSK Renault Twizy logs (NaitMalekYoussef/RSK_Twizy_EV_Dataset, CC-BY-4.0): speed and the
-# BMS's state of charge, imported with options.soc_capacity_kwh into the battery's energy
-# counters, no V·I: the wheel-level commands name the battery target the log does hold
-def _counter_log(tmp_path):
-    t = np.arange(0.0, 120.0, 1.0)
-    v = 10.0 + 5.0 * np.sin(t / 10.0)
-    dis = np.cumsum(np.full(t.size, 2000.0))
-    rows = "\n".join(f"trip,{a:g},{b:.3f},{c:.1f},0" for a, b, c in zip(t, v, dis))
-    return _write(tmp_path, "soc.csv", "trip_id,time_s,speed_mps,battery_discharge_energy_j,"
-                  "battery_charge_energy_j\n" + rows + "\n")
-
-
-@pytest.mark.parametrize("argv,want", [
-    (["calibrate"], "calibrate its battery chain with `sumo-drvpw calibrate LOG --vehicle V --target battery"),
-    (["compare", "--equation", "vsp_spec"], "then compare or diagnose with --target battery"),
-    (["diagnose"], "calibrate its battery chain with"),
-])
-def test_a_counter_log_without_driving_power_is_told_what_it_can_do(tmp_path, capsys, argv, want):
-    from sumo_drvpw.cli import main as cli_main
-
-    log = _counter_log(tmp_path)
-    out = tmp_path / ("o.toml" if argv[0] == "calibrate" else "o")
-    code = cli_main([argv[0], str(log), *argv[1:], "--vehicle", "prius3", "--out", str(out)])
-    err = capsys.readouterr().err
-    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1
-    assert "no measured power" in err and "battery_discharge_energy_j" in err and want in err
-    assert not out.exists()

@@ -166,19 +166,14 @@ def test_wind_check_on_the_real_prius_pair_explains_the_opposite_fold_errors():
     the fit fall from about ±7 % (opposite signs: east with the wind, west against it) to
     within 2 %, and each fold trained on one trip misses the other by less than 5 %
     (±13 % in still air, docs/closing-the-loop.md)."""
-    import importlib.util
-    from pathlib import Path
-
+    from script_module import load_script
     from sumo_drvpw.data.adapters import read
     from sumo_drvpw.model.equations import Equation
 
     d = shared_data_dir()
     if d is None or not (d / "prius_gen2_torquepro").is_dir():
         pytest.skip("shared Prius Gen-2 data not found")
-    p = Path(__file__).resolve().parent.parent / "scripts" / "closing_the_loop.py"
-    spec = importlib.util.spec_from_file_location("closing_the_loop_w", p)
-    ctl = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(ctl)
+    ctl = load_script("closing_the_loop", "closing_the_loop_w")
     df, rep = read("torquepro-prius2", d / "prius_gen2_torquepro")
     eq = Equation("p", {"aero": 0.3, "acc": 1.0, "grade": 1.0, "roll": 0.02})
     car = {"runs": [{"lag": -1.44, "final_eq": eq, "held": [h], "tag": f"fold{i}"}
