@@ -213,3 +213,14 @@ def test_a_held_speed_read_conserves_kinetic_energy(tmp_path):
         v, a, dt = (g[c].to_numpy(float) for c in ("speed_mps", "accel_mps2", "dt_s"))
         booked = float(np.sum(a * v * dt))
         assert abs(booked - 0.5 * (v[-1] ** 2 - v[0] ** 2)) < 0.02 * float(np.sum(np.abs(a * v) * dt))
+
+
+def test_windows_that_print_alike_are_said_once():
+    """Two trips' windows of 2.2701 s and 2.2704 s were said as "2.27–2.27 s moving average
+    (each trip's own)"; windows that print alike are one window to the reader."""
+    d = {"column_rows": 0, "derived_rows": 10, "derived_trips": 2, "widened_trips": 0, "window_min_s": 2.2701,
+         "window_max_s": 2.2704, "least_window_s": 0.5, "noise_mps2": 0.1}
+    assert "2.27 s moving average" in R.accel_counts(d)["accel_source"]
+    assert "–" not in R.accel_counts(d)["accel_source"]
+    d["window_max_s"] = 2.5
+    assert "2.27–2.5 s moving average (each trip's own)" in R.accel_counts(d)["accel_source"]

@@ -142,8 +142,9 @@ def accel_counts(d: dict) -> dict:
         out["accel_source"] = "accel_mps2 column"
         return out
     lo, hi, n, k = d["window_min_s"], d["window_max_s"], d["derived_trips"], d["widened_trips"]
+    lo_s, hi_s = f"{lo:.3g}", f"{hi:.3g}"  # windows that print alike are said once ("2.27–2.27 s" was said)
     text = "derived: central difference of speed, " + (
-        f"{lo:.3g} s moving average" if lo == hi else f"{lo:.3g}–{hi:.3g} s moving average (each trip's own)")
+        f"{lo_s} s moving average" if lo_s == hi_s else f"{lo_s}–{hi_s} s moving average (each trip's own)")
     if k:
         text += (f" (widened from {d['least_window_s']:g} s" + ("" if k == n else f" on {k} of {n} trips")
                  + f": the speed is logged in steps of {d['widened_step_mps']:.3g} m/s, whose rounding would "
