@@ -39,6 +39,8 @@ from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
 from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.outputs import RunResult, summary_dict
+from sumo_drvpw.sim.resolver import (booked_as_warning, calibration_mass_warning, carrier_warning,
+                                     no_hybrid_chain_warning)
 from sumo_drvpw.sim.trace import TraceWriter
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
 from sumo_drvpw.sim.scenario_paths import sumo_file_list
@@ -357,6 +359,7 @@ class Accountant(_Listener):
                             "booked_as": dict(sorted(self.resolver.booked_as.items())),
                             "energy_carrier": dict(sorted(self.resolver.carriers.items())),
                             "powertrain": dict(sorted(self.resolver.powertrains.items())),
+                            "calibration_mass": dict(sorted(self.resolver.mass_far.items())),
                             "vtype_energy": self._vtype_energy_listing()},
         }
         summary_extra.update(extra or {})
@@ -388,9 +391,9 @@ class Accountant(_Listener):
                             + " (summary.json assumptions.sumo_masses; set vtypes.<id>.mass_kg)")
         if self.resolver.booked_as:
             warnings.append(booked_as_warning(self.resolver.booked_as))
-        no_hybrid = no_hybrid_chain_warning(self.resolver.powertrains)
-        if no_hybrid:
-            warnings.append(no_hybrid)
+        for w in (no_hybrid_chain_warning(self.resolver.powertrains), calibration_mass_warning(self.resolver.mass_far)):
+            if w:
+                warnings.append(w)
         vt_warning = listing_warning(self._vtype_energy_listing())
         if vt_warning:
             warnings.append(vt_warning)
@@ -533,56 +536,6 @@ def road_class_warnings(rule, net) -> list[str]:
         out.append(f"road classes: {kind} {', '.join(map(repr, gone[:6]))}{' …' if len(gone) > 6 else ''} "
                    f"match no edge of {net.path.name}: their class books nothing{hint}")
     return out
-
-
-def carrier_warning(carriers: dict[str, dict], skipped: dict[str, int], idle: list[str]) -> str:
-    """One line, for a run where a chain equation booked no vehicle (``idle``) or vehicles
-    were left with no equation (``skipped``: vClass → count) because their emissionClass
-    names another energy carrier: the vTypes each chain left out, grouped by carrier →
-    equations, up to three vType ids each."""
-    groups: dict[tuple[str, tuple], list[str]] = {}
-    for vt, c in sorted(carriers.items()):
-        eqs = tuple(e for e in c["not_booked_by"] if e in idle) if not skipped else tuple(c["not_booked_by"])
-        if eqs:
-            groups.setdefault((c["carrier"], eqs), []).append(f"{vt} ({c['emission_class']})")
-    parts = [f"{', '.join(eqs)} not for {carrier}: " + ", ".join(v[:3])
-             + (f" and {len(v) - 3} more" if len(v) > 3 else "") for (carrier, eqs), v in sorted(groups.items())]
-    left = (" — vehicles with no equation left were not booked: " + ", ".join(
-        f"{c} {n}" for c, n in sorted(skipped.items()))) if skipped else ""
-    return ("chain equations book only vehicles whose emissionClass names their fuel or the battery: "
-            + "; ".join(parts) + left
-            + " (summary.json assumptions.energy_carrier; vtypes.<id>.equations chooses instead)")
-
-
-def booked_as_warning(booked_as: dict[str, dict]) -> str:
-    """One line: the vTypes booked as the vehicle their emissionClass, guiShape, id or
-    length names rather than by their vClass (sim/vtypes.vehicle_body), grouped by vClass →
-    vehicle (up to three vType ids each)."""
-    groups: dict[tuple[str, str], list[str]] = {}
-    for vt, b in sorted(booked_as.items()):
-        groups.setdefault((b["vclass"], b["booked_as"]), []).append(f"{vt} ({b['from']})")
-    parts = [f"{c} → {body}: " + ", ".join(v[:3]) + (f" and {len(v) - 3} more" if len(v) > 3 else "")
-             for (c, body), v in sorted(groups.items())]
-    return ("vTypes whose vClass does not say what vehicle they are were booked as the one "
-            "their emissionClass, guiShape, id or length names: " + "; ".join(parts)
-            + " (summary.json assumptions.booked_as; vclasses.<vClass>.equations chooses instead)")
-
-
-def no_hybrid_chain_warning(powertrains: dict[str, dict]) -> str | None:
-    """One line, or None: the vTypes whose emissionClass names a hybrid but which only
-    conventional engines' fuel chains book (sim/resolver ``no_hybrid_chain``): they idle
-    at every stop and recuperate nothing, so their fuel is overstated in town."""
-    hits = {vt: p for vt, p in sorted(powertrains.items()) if p.get("no_hybrid_chain")}
-    if not hits:
-        return None
-    parts = [f"{vt} ({p['emission_class']}: {', '.join(p['no_hybrid_chain'])})" for vt, p in hits.items()]
-    return ("vTypes whose emissionClass names a hybrid were booked by a conventional engine's fuel "
-            "chain, as no hybrid chain is made for their vClass: " + ", ".join(parts[:5])
-            + (f" and {len(parts) - 5} more" if len(parts) > 5 else "")
-            + " — that chain idles at every stop and recuperates nothing, so it books a hybrid's town "
-            "driving high (full hybrid cars burn 33–56 % less than their petrol twins on the EPA's hot "
-            "UDDS, docs/epa-hybrid.md); give these vTypes a hybrid chain (a fuel chain calibrated on "
-            "such a vehicle's logs) in the scenario's equations (summary.json assumptions.powertrain)")
 
 
 def _names_a_file(value: str) -> bool:

@@ -15,6 +15,12 @@ from sumo_drvpw.sim.vtypes import (CAR_VCLASSES, SHORT_CAR_M, SUMO_DEFAULT_EMISS
                                    equation_carrier, is_hybrid_chain, is_hybrid_class)
 
 
+#: ratio of a vType's mass to the mass an equation booking it was calibrated at (or the
+#: reverse) from which the run says so: the mass-scaled terms (acc, grade, roll) follow the
+#: vType, the aero term and what else the fit absorbed stay the calibration vehicle's
+MASS_FAR = 1.5
+
+
 class VTypeResolver:
     """vType id → (mass [kg], applicability per equation, accounted?, vClass) for the loop.
 
@@ -61,6 +67,13 @@ class VTypeResolver:
         self.hybrid_of = {e.name: h for e in equations if not isinstance(e, str)
                           and (h := is_hybrid_chain(e)) is not None}
         self.cache: dict[str, tuple] = {}
+        #: equation → the vehicle mass its coefficients were calibrated at [kg] (a calibrated
+        #: equation's metrics.reference_mass_kg; none at a fixed mass: it books every vType at it)
+        self.calibrated_at = {e.name: float(m) for e in equations if not isinstance(e, str)
+                              and e.mass_kg is None and (m := (e.metrics or {}).get("reference_mass_kg"))}
+        #: vType → {"mass_kg", "calibrated_at_kg": {equation: kg}}: vTypes booked by equations
+        #: calibrated at a mass :data:`MASS_FAR` times theirs or more, or as little
+        self.mass_far: dict[str, dict] = {}
         self.energy_of = energy_vtype_of(equations)  # vtype_energy equation → its vType
         self.energy_mass = {e.name: e.mass_kg for e in equations if getattr(e, "name", None) in self.energy_of}
         #: vTypes resolved by other resolvers of the same run (Dask buckets of an FCD replay)
@@ -184,7 +197,7 @@ class VTypeResolver:
         (:func:`~sumo_drvpw.sim.vtypes.is_hybrid_class`) is booked by the hybrid's, any
         other by the conventional's; where only one kind applies, it books (a hybrid that
         only conventional engines' chains book is noted: ``no_hybrid_chain`` names them,
-        sim/accountant.no_hybrid_chain_warning)."""
+        no_hybrid_chain_warning below)."""
         fuel = [i for i, n in enumerate(self.names) if app[i] and n in self.hybrid_of]
         kinds = {self.hybrid_of[self.names[i]] for i in fuel}
         hybrid = is_hybrid_class(ec)
@@ -341,6 +354,10 @@ class VTypeResolver:
                           if a and o != n and self.carrier_of.get(o) == "electricity"]
                 if others:
                     self.also_booked[n] = others
+        far = {n: m for n, a in zip(self.names, app) if a and (m := self.calibrated_at.get(n))
+               and max(m / mass, mass / m) >= MASS_FAR}
+        if far:
+            self.mass_far[vt] = {"mass_kg": float(mass), "calibrated_at_kg": far}
         return (float(mass), app, True, vclass, "")
 
 
@@ -351,3 +368,71 @@ def builtin_equations_for(vclass: str) -> list[str]:
     from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
 
     return [n for n in CONFIG_EQUATIONS if vclass in (load_equation(n).vclasses or ())]
+
+
+def carrier_warning(carriers: dict[str, dict], skipped: dict[str, int], idle: list[str]) -> str:
+    """One line, for a run where a chain equation booked no vehicle (``idle``) or vehicles
+    were left with no equation (``skipped``: vClass → count) because their emissionClass
+    names another energy carrier: the vTypes each chain left out, grouped by carrier →
+    equations, up to three vType ids each."""
+    groups: dict[tuple[str, tuple], list[str]] = {}
+    for vt, c in sorted(carriers.items()):
+        eqs = tuple(e for e in c["not_booked_by"] if e in idle) if not skipped else tuple(c["not_booked_by"])
+        if eqs:
+            groups.setdefault((c["carrier"], eqs), []).append(f"{vt} ({c['emission_class']})")
+    parts = [f"{', '.join(eqs)} not for {carrier}: " + ", ".join(v[:3])
+             + (f" and {len(v) - 3} more" if len(v) > 3 else "") for (carrier, eqs), v in sorted(groups.items())]
+    left = (" — vehicles with no equation left were not booked: " + ", ".join(
+        f"{c} {n}" for c, n in sorted(skipped.items()))) if skipped else ""
+    return ("chain equations book only vehicles whose emissionClass names their fuel or the battery: "
+            + "; ".join(parts) + left
+            + " (summary.json assumptions.energy_carrier; vtypes.<id>.equations chooses instead)")
+
+
+def booked_as_warning(booked_as: dict[str, dict]) -> str:
+    """One line: the vTypes booked as the vehicle their emissionClass, guiShape, id or
+    length names rather than by their vClass (sim/vtypes.vehicle_body), grouped by vClass →
+    vehicle (up to three vType ids each)."""
+    groups: dict[tuple[str, str], list[str]] = {}
+    for vt, b in sorted(booked_as.items()):
+        groups.setdefault((b["vclass"], b["booked_as"]), []).append(f"{vt} ({b['from']})")
+    parts = [f"{c} → {body}: " + ", ".join(v[:3]) + (f" and {len(v) - 3} more" if len(v) > 3 else "")
+             for (c, body), v in sorted(groups.items())]
+    return ("vTypes whose vClass does not say what vehicle they are were booked as the one "
+            "their emissionClass, guiShape, id or length names: " + "; ".join(parts)
+            + " (summary.json assumptions.booked_as; vclasses.<vClass>.equations chooses instead)")
+
+
+def no_hybrid_chain_warning(powertrains: dict[str, dict]) -> str | None:
+    """One line, or None: the vTypes whose emissionClass names a hybrid but which only
+    conventional engines' fuel chains book (sim/resolver ``no_hybrid_chain``): they idle
+    at every stop and recuperate nothing, so their fuel is overstated in town."""
+    hits = {vt: p for vt, p in sorted(powertrains.items()) if p.get("no_hybrid_chain")}
+    if not hits:
+        return None
+    parts = [f"{vt} ({p['emission_class']}: {', '.join(p['no_hybrid_chain'])})" for vt, p in hits.items()]
+    return ("vTypes whose emissionClass names a hybrid were booked by a conventional engine's fuel "
+            "chain, as no hybrid chain is made for their vClass: " + ", ".join(parts[:5])
+            + (f" and {len(parts) - 5} more" if len(parts) > 5 else "")
+            + " — that chain idles at every stop and recuperates nothing, so it books a hybrid's town "
+            "driving high (full hybrid cars burn 33–56 % less than their petrol twins on the EPA's hot "
+            "UDDS, docs/epa-hybrid.md); give these vTypes a hybrid chain (a fuel chain calibrated on "
+            "such a vehicle's logs) in the scenario's equations (summary.json assumptions.powertrain)")
+
+
+def calibration_mass_warning(mass_far: dict[str, dict]) -> str | None:
+    """One line, or None: the vTypes booked by an equation calibrated on a vehicle of quite
+    another mass (:attr:`VTypeResolver.mass_far`), grouped by equation (up to three each)."""
+    groups: dict[tuple[str, float], list[str]] = {}
+    for vt, f in sorted(mass_far.items()):
+        for eq, m in f["calibrated_at_kg"].items():
+            groups.setdefault((eq, m), []).append(f"{vt} ({f['mass_kg']:,.0f} kg)")
+    if not groups:
+        return None
+    parts = [f"{eq} (calibrated at {m:,.0f} kg): " + ", ".join(v[:3]) + (f" and {len(v) - 3} more" if len(v) > 3 else "")
+             for (eq, m), v in sorted(groups.items())]
+    return (f"equations book vTypes {MASS_FAR:g} times as heavy or as light as the vehicle they were "
+            "calibrated on, or more: " + "; ".join(parts) + " — their acc, grade and roll terms scale with the vType's "
+            "mass, but the aero term (the calibration vehicle's drag) and whatever else the fit absorbed do "
+            "not: calibrate an equation on such vehicles, or name one for them (summary.json "
+            "assumptions.calibration_mass; vclasses.<vClass>.equations)")

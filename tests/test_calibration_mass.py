@@ -1,0 +1,95 @@
+"""A run says when an equation books vTypes far from the mass it was calibrated at
+(sim/resolver.py: VTypeResolver.mass_far, calibration_mass_warning): its acc, grade and
+roll terms scale with the vType's mass, but its aero term (the calibration vehicle's drag)
+does not, so a car's equation on a van books the van with a car's drag. Live run, FCD
+replay and the replay on Dask say the same."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.sim import run_scenario
+from sumo_drvpw.sim.fcd import process_fcd
+from sumo_drvpw.sim.resolver import MASS_FAR, calibration_mass_warning
+
+pytestmark = pytest.mark.sumo
+
+NET = Path(__file__).resolve().parent.parent / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml"
+TERMS = {"acc": 1.05, "grade": 1.0, "aero": 0.35, "roll": 0.01}
+#: calibrated on a 1,500 kg car (a calibrated equation's metrics carry its log's mass)
+CAR = Equation("car_fit", TERMS, vclasses=("passenger", "delivery"), metrics={"reference_mass_kg": 1500.0})
+#: the same numbers at a fixed mass: every vType is booked at it, so no vType is far from it
+FIXED = Equation("car_fixed", TERMS, mass_kg=1500.0, vclasses=("passenger", "delivery"),
+                 metrics={"reference_mass_kg": 1500.0})
+ROUTES = """<routes>
+  <vType id="car" vClass="passenger" mass="1700" sigma="0"/>
+  <vType id="light" vClass="passenger" mass="950" sigma="0"/>
+  <vType id="van" vClass="delivery" mass="3500" sigma="0"/>
+  <route id="east" edges="e01 e12 e23"/>
+  <vehicle id="c" type="car" route="east" depart="0" departSpeed="20"/>
+  <vehicle id="l" type="light" route="east" depart="2" departSpeed="20"/>
+  <vehicle id="v" type="van" route="east" depart="4" departSpeed="20"/>
+</routes>"""
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    d = tmp_path_factory.mktemp("mass")
+    (d / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
+    (d / "s.toml").write_text(f'equations = ["x"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n'
+                              'begin = 0\nend = 60\nstep_length = 0.5\noptions = ["--no-warnings", "true"]\n',
+                              encoding="utf-8")
+    res = run_scenario(d / "s.toml", d / "live", equations=[CAR, FIXED], figures=False,
+                       options=["--fcd-output", str(d / "fcd.xml"), "--precision", "6"])
+    return d, res
+
+
+def _mass_note(summary) -> list[str]:
+    return [w for w in summary["warnings"] if "as the vehicle they were calibrated on" in w]
+
+
+def test_a_van_booked_by_a_car_equation_is_said(live):
+    d, res = live
+    s = json.loads((d / "live" / "summary.json").read_text(encoding="utf-8"))
+    far = s["assumptions"]["calibration_mass"]
+    # 3500/1500 = 2.3 and 1500/950 = 1.58 are beyond 1.5; 1700/1500 = 1.13 is not
+    assert set(far) == {"van", "light"}
+    assert far["van"] == {"mass_kg": 3500.0, "calibrated_at_kg": {"car_fit": 1500.0}}
+    (note,) = _mass_note(s)
+    assert "car_fit (calibrated at 1,500 kg): light (950 kg), van (3,500 kg)" in note
+    assert "car_fixed" not in note and "aero term" in note
+
+
+def test_the_replay_says_the_same(live, tmp_path):
+    d, res = live
+    rep = process_fcd(d / "fcd.xml", scenario=d / "s.toml", out_dir=tmp_path / "o",
+                      equations=[CAR, FIXED], figures=False)
+    assert rep.summary["assumptions"]["calibration_mass"] == res.summary["assumptions"]["calibration_mass"]
+    assert _mass_note(rep.summary) == _mass_note(res.summary)
+
+
+def test_no_note_within_the_band_and_one_line_per_equation():
+    assert calibration_mass_warning({}) is None
+    far = {f"t{i}": {"mass_kg": 3000.0 + i, "calibrated_at_kg": {"a": 1500.0, "b": 1400.0}} for i in range(5)}
+    w = calibration_mass_warning(far)
+    assert w.count("(calibrated at") == 2 and "and 2 more" in w and f"{MASS_FAR:g} times" in w
+
+
+def test_the_replay_on_dask_says_the_same(live, tmp_path):
+    """Each bucket resolves its own vTypes: the driver joins what they found."""
+    pytest.importorskip("distributed")
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.equations import save_equation
+
+    d, res = live
+    save_equation(CAR, tmp_path / "car_fit.toml")
+    assert cli_main(["fcd", str(d / "fcd.xml"), "--scenario", str(d / "s.toml"), "--equation",
+                     str(tmp_path / "car_fit.toml"), "--engine", "dask", "--workers", "2", "--buckets", "3",
+                     "--no-figures", "--out", str(tmp_path / "o")]) == 0
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
+    assert s["assumptions"]["calibration_mass"] == res.summary["assumptions"]["calibration_mass"]
+    assert len(_mass_note(s)) == 1
