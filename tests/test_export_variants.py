@@ -207,6 +207,41 @@ def test_compare_says_when_an_equation_was_calibrated_on_the_logs_compared(tmp_p
     assert "in sample" not in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_compare_says_so_when_the_trips_calibrated_on_come_from_another_file(tmp_path, capsys, engine):
+    """The note above compared file names only: the same trips re-exported (CSV, speeds to
+    1 mm/s, renamed trips) beside another drive were compared as held out. The equation now
+    keeps each trip's signature (samples, duration, mean and rms speed: data/trips.py), and
+    compare names the trips it was calibrated on, whatever file they come from; on the other
+    drive alone, no note."""
+    import json
+
+    import pandas as pd
+
+    a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
+    assert cli_main(["synth", "--out", str(a), "--minutes", "4", "--seed", "1", "--trips", "2"]) == 0
+    assert cli_main(["synth", "--out", str(b), "--minutes", "4", "--seed", "7"]) == 0  # (seed 2: a's 2nd trip)
+    eq = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(a), "--vehicle", "prius3", "--out", str(eq), "--engine", engine]) == 0
+    da, db = pd.read_parquet(a), pd.read_parquet(b)
+    da["trip_id"] = "re_" + da["trip_id"].astype(str)
+    da["speed_mps"] = da["speed_mps"].round(3)
+    c = tmp_path / "mixed.csv"
+    pd.concat([db, da], ignore_index=True).to_csv(c, index=False)
+    capsys.readouterr()
+    assert cli_main(["compare", str(c), "--vehicle", "prius3", "--equation", str(eq),
+                     "--out", str(tmp_path / "c1"), "--engine", engine]) == 0
+    notes = [x for x in capsys.readouterr().out.splitlines() if "in sample" in x]
+    ids = ", ".join(dict.fromkeys(da["trip_id"]))
+    assert json.loads((tmp_path / "c1" / "report.json").read_text(encoding="utf-8"))["context"]["in sample"] == [
+        n.removeprefix("note: ") for n in notes]
+    assert notes == [f"note: eq was calibrated on 2 of these 3 trip(s) ({ids}; the same samples, read from "
+                     "other files): its errors there are in sample, not held out"]
+    assert cli_main(["compare", str(b), "--vehicle", "prius3", "--equation", str(eq),
+                     "--out", str(tmp_path / "c2")]) == 0
+    assert "in sample" not in capsys.readouterr().out
+
+
 def test_a_trip_copied_under_another_name_is_not_counted_twice_silently(tmp_path, capsys):
     """A folder with 'TripA04.csv' and its copy 'TripA04 - Kopie.csv' (or the trip re-saved by
     a spreadsheet beside the original under a new name): both were imported, the copy as a

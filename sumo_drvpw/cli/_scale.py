@@ -136,7 +136,7 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
         note_counts(st.counts)
     eq, note, res = fit_road_load(args, st, cands, veh, args.name or out.stem, {
         "logs": st.files, "vehicle": veh.path if veh else None, "power_source": st.source,
-        "candidates_spec": args.candidates})
+        "candidates_spec": args.candidates, "trip_signatures": list(st.signatures.values())})
     eq.terms_predict = terms_predict_of(st.source)  # (the P_PTdrv of a power-split: its output)
     from sumo_drvpw.cli import measurement_options
     from sumo_drvpw.cli.calibrate import declare_measurement
@@ -172,11 +172,13 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     return 0
 
 
-def compare_streamed(args, tmp: Path, title: str, target: str = "wheel", target_note: str | None = None):
+def compare_streamed(args, tmp: Path, title: str, target: str = "wheel", target_note: str | None = None,
+                     in_sample: list[str] | None = None):
     """`compare` through the streaming engines (``target``: driving power, or the energy
-    chains' battery or fuel power; ``target_note``: why, in the report's context): writes
-    the report into ``tmp`` and returns the comparison (whose ``to_json`` covers every
-    sample)."""
+    chains' battery or fuel power; ``target_note``: why, in the report's context;
+    ``in_sample``: the files' in-sample notes said, to which those of the trips are added,
+    printed and in the report's context): writes the report into ``tmp`` and returns the
+    comparison (whose ``to_json`` covers every sample)."""
     from sumo_drvpw.data.measured import resolve_equations
     from sumo_drvpw.fit.stream_compare import CompareStats
     from sumo_drvpw.model.vehicles import load_vehicle
@@ -188,6 +190,13 @@ def compare_streamed(args, tmp: Path, title: str, target: str = "wheel", target_
     from sumo_drvpw.cli import note_counts
 
     note_counts(cs.counts)
+    if in_sample is not None:
+        from sumo_drvpw.cli.compare import in_sample_trips
+
+        more = in_sample_trips(eqs, cs.signatures, in_sample)
+        for line in more:
+            print("note: " + line)
+        in_sample = in_sample + more
     try:
         comp = cs.comparison()
     except UserError as e:  # no usable sample: name the logs
@@ -200,14 +209,17 @@ def compare_streamed(args, tmp: Path, title: str, target: str = "wheel", target_
     ctx = _context(cs, veh, cs.n)
     if target_note:
         ctx["target"] = target_note
+    if in_sample:
+        ctx["in sample"] = in_sample
     write_comparison_report(comp, tmp, title, ctx)
     print(info.line(), file=sys.stderr)
     return comp
 
 
-def compare_main(args) -> int | None:
+def compare_main(args, in_sample: list[str] | None = None) -> int | None:
     """`compare` through the streaming engines, local or Dask (driving power, or battery or
-    fuel power through the equations' chains); None for ``--engine memory`` (read in memory)."""
+    fuel power through the equations' chains); None for ``--engine memory`` (read in memory).
+    ``in_sample``: the files' in-sample notes (cli/compare.in_sample_lines)."""
     from sumo_drvpw.cli import output_set
     from sumo_drvpw.cli.compare import print_summary
 
@@ -218,7 +230,8 @@ def compare_main(args) -> int | None:
     target, note = compare_target(args)
     what = {"wheel": "driving", "battery": "battery", "fuel": "fuel"}[target]
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
-        comp = compare_streamed(args, tmp, f"Equations against measured {what} power", target, note)
+        comp = compare_streamed(args, tmp, f"Equations against measured {what} power", target, note,
+                                in_sample)
     print_summary(comp.to_json(trips=False), args.out)
     return 0
 
@@ -285,7 +298,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
                             "roadload_spec, the vehicle's published A + B·v + C·v², or an equation calibrated "
                             "on logs with a driving power)")
         eq, note, _ = fit_road_load(args, st.road, cands, veh, args.name or out.stem, {
-            "logs": st.road.files, "power_source": st.road.source, "candidates_spec": args.candidates})
+            "logs": st.road.files, "power_source": st.road.source, "candidates_spec": args.candidates,
+            "trip_signatures": list(st.road.signatures.values())})
         road = f"road-load equation calibrated stepwise on {st.road.source}" + (
             " (physically constrained: the free fit was implausible)" if note else "")
     chain_input = f"driving power of {eq.name}" if src is None else f"measured driving power ({src})"
@@ -294,7 +308,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     eq.name = args.name or out.stem
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": st.files, "target": st.source, "road_load": road,
-                           "chain_input": chain_input, "vehicle": veh.path if veh else None}
+                           "chain_input": chain_input, "vehicle": veh.path if veh else None,
+                           "trip_signatures": list(st.signatures.values())}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     declare_measurement(eq, measurement_options(args))
     print(fit.summary())

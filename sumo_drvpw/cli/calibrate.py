@@ -10,6 +10,7 @@ import numpy as np
 from sumo_drvpw.cli import add_force, add_log_options, existing_paths, note_counts, output_set, read_options
 from sumo_drvpw.cli._scale import add_engine_arguments, replace_chain
 from sumo_drvpw.data.powertrain import terms_predict_of
+from sumo_drvpw.data.trips import trip_signatures
 from sumo_drvpw.errors import UserError
 
 
@@ -115,7 +116,8 @@ def main(args) -> int:
     name = args.name or out.stem
     eq = res.to_equation(name, provenance={
         "logs": m.log.files, "vehicle": m.vehicle.path if m.vehicle else None,
-        "power_source": m.source, "candidates_spec": args.candidates})
+        "power_source": m.source, "candidates_spec": args.candidates,
+        "trip_signatures": list(trip_signatures(m.log.df).values())})
     eq.terms_predict = terms_predict_of(m.source)  # (the P_PTdrv of a power-split: its output)
     print(res.summary(physics=False))  # (the physics: physical() says, below)
     eq, _ = physical(eq, m, args.candidates)
@@ -391,6 +393,7 @@ def main_chain(args) -> int:
     ro = read_options(args, [args.equation] if args.equation else ())
     m, mw = load_measured_pair(args.logs, args.vehicle, ro, args.target)
     note_counts(m.counts)
+    trips = list(trip_signatures(m.log.df).values())  # (the table is dropped before the chain's fit)
     check_load_columns(m, args.load)  # before the road-load fit
     if hvac and hvac["column"] not in m.inputs.signals:
         raise UserError(f"--hvac {args.hvac}: {m.log.describe()} has no column '{hvac['column']}' "
@@ -421,7 +424,8 @@ def main_chain(args) -> int:
                         reference_mass_kg=float(mw.inputs.mass[mw.usable].mean()))
         check_identified(res, mw.log.describe())
         eq = res.to_equation(args.name or out.stem, provenance={
-            "logs": mw.log.files, "power_source": mw.source, "candidates_spec": args.candidates})
+            "logs": mw.log.files, "power_source": mw.source, "candidates_spec": args.candidates,
+            "trip_signatures": trips})
         print(res.summary(physics=False))
         eq, note = physical(eq, mw, args.candidates)  # the same physics as `calibrate`
         road = f"road-load equation calibrated stepwise on {mw.source}" + (
@@ -443,7 +447,8 @@ def main_chain(args) -> int:
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": m.log.files, "target": m.source, "road_load": road,
                            "chain_input": chain_input,
-                           "vehicle": m.vehicle.path if m.vehicle else None}
+                           "vehicle": m.vehicle.path if m.vehicle else None,
+                           "trip_signatures": trips}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     declare_measurement(eq, ro.measurement)
     print(fit.summary())

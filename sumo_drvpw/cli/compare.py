@@ -29,18 +29,23 @@ def main(args) -> int:
     from sumo_drvpw.report.comparison import write_comparison_report
     from sumo_drvpw.data.measured import load_measured, resolve_equations
     from sumo_drvpw.data.powertrain import measured_fuel
+    from sumo_drvpw.data.trips import trip_signatures
     from sumo_drvpw.cli._scale import check_engine_arguments, compare_main
 
     check_engine_arguments(args)  # --workers, --scheduler only with --engine dask
-    for line in in_sample_lines(args.equation, args.logs):
+    in_sample = in_sample_lines(args.equation, args.logs)
+    for line in in_sample:
         print("note: " + line)
-    if compare_main(args) is not None:  # driving power, streamed in bounded memory (issue #14)
+    if compare_main(args, in_sample) is not None:  # driving power, streamed in bounded memory (issue #14)
         return 0
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
         target, note = compare_target(args)
         m = load_measured(args.logs, args.vehicle, read_options(args, args.equation), target=target)
         note_counts(m.counts)
         eqs = resolve_equations(args.equation, m.vehicle)
+        more = in_sample_trips(eqs, trip_signatures(m.log.df), in_sample)
+        for line in more:
+            print("note: " + line)
         u = m.usable
         comp = compare(m.power_w[u], m.inputs.take(u), eqs, dt_s=m.log.df["dt_s"].to_numpy()[u],
                        target=target, battery_w=None if m.battery_w is None else m.battery_w[u])
@@ -50,6 +55,8 @@ def main(args) -> int:
         ctx = m.context()
         if note:
             ctx["target"] = note
+        if in_sample + more:
+            ctx["in sample"] = in_sample + more
         write_comparison_report(comp, tmp, f"Equations against measured {what} power", ctx)
     print_summary(comp.to_json(), args.out)
     return 0
@@ -82,6 +89,28 @@ def in_sample_lines(equations, logs) -> list[str]:
             out.append(f"{eq.name} was calibrated on {len(seen)} of these {len(files)} log file(s) "
                        f"({', '.join(Path(f).name for f in seen[:3])}{' …' if len(seen) > 3 else ''}): its "
                        "errors there are in sample, not held out")
+    return out
+
+
+def in_sample_trips(eqs, trips: dict, said: list[str]) -> list[str]:
+    """One line per equation calibrated on some of the compared ``trips`` (trip → signature,
+    data/trips.trip_signatures; the equation's in its ``[provenance]`` or ``[chain.provenance]``
+    ``trip_signatures``), whichever files they were read from, unless
+    :func:`in_sample_lines` said it already."""
+    from sumo_drvpw.data.trips import same_trips
+
+    out = []
+    n = len(trips)
+    for eq in eqs:
+        if any(line.startswith(f"{eq.name} was calibrated on ") for line in said):
+            continue
+        sigs = [s for prov in (eq.provenance or {}, getattr(eq.chain, "provenance", None) or {})
+                for s in prov.get("trip_signatures") or []]
+        seen = same_trips(sigs, trips)
+        if seen:
+            out.append(f"{eq.name} was calibrated on {len(seen)} of these {n} trip(s) "
+                       f"({', '.join(seen[:3])}{' …' if len(seen) > 3 else ''}; the same samples, read "
+                       "from other files): its errors there are in sample, not held out")
     return out
 
 

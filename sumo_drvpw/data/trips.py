@@ -198,3 +198,54 @@ def trips_without(col: pd.Series, trip_codes: np.ndarray) -> np.ndarray:
     trips of a file without it), as a bool mask."""
     has = np.bincount(trip_codes, weights=col.notna().to_numpy(float)) > 0
     return ~has[trip_codes]
+
+
+#: sample-index edges of the blocks whose mean speeds a trip's signature carries (fixed, so
+#: a trip cut short by a row keeps the blocks it has whole)
+SIGNATURE_EDGES = (0, 64, 256, 1024, 4096, 16384, 65536, 262144)
+
+
+def trip_signatures(df: pd.DataFrame) -> dict[str, list[float]]:
+    """Trip → its signature [samples, duration s, mean speed, rms speed, then the mean speed
+    over each whole block of samples between :data:`SIGNATURE_EDGES` (m/s)] in a read log
+    ``df`` (``trip_id``, ``time_s``, ``speed_mps``): what tells the same trip read from another
+    file — re-exported, in another format or unit, renamed, or among other trips — so that
+    ``compare`` can say an equation is compared on trips it was calibrated on
+    (:func:`same_trips`). Rounded to 7 significant digits (an equation file keeps them)."""
+    trip = df["trip_id"].astype(str).to_numpy()
+    t, v = df["time_s"].to_numpy(float), df["speed_mps"].to_numpy(float)
+    starts = np.flatnonzero(np.r_[True, trip[1:] != trip[:-1]])
+    ends = np.r_[starts[1:], len(trip)]
+    out: dict[str, list[float]] = {}
+    for a, b in zip(starts, ends):  # (a trip's rows are contiguous in a read log)
+        x = v[a:b]
+        sig = [int(b - a), float(np.nanmax(t[a:b]) - np.nanmin(t[a:b])), float(np.nanmean(x)),
+               float(np.sqrt(np.nanmean(x * x)))]
+        sig += [float(np.nanmean(x[lo:hi])) for lo, hi in zip(SIGNATURE_EDGES, SIGNATURE_EDGES[1:])
+                if hi + 2 <= len(x)]
+        out.setdefault(str(trip[a]), [int(sig[0])] + [float(f"{y:.7g}") for y in sig[1:]])
+    return out
+
+
+def same_trips(signatures, trips: dict[str, list[float]]) -> list[str]:
+    """The trips of ``trips`` (trip → :func:`trip_signatures`) matching one of ``signatures``:
+    the same samples re-read, not another drive of the same route or cycle. Allowed: a few
+    samples lost at the end (a file cut in its last row: 0.2 % or 2) and what they move the
+    duration and the mean and rms speed, plus 0.01 % (or 1 mm/s) of rounding (speeds
+    re-exported to 1 mm/s move them by 1e-5); the blocks' mean speeds, whole in both, within
+    that rounding alone. A repeat drive of a dyno cycle differs by more (its driver's trace
+    error, some 0.1–0.5 km/h rms)."""
+    out = []
+    for tid, sig in trips.items():
+        n, dur, mv, rv = sig[:4]
+        for ref in signatures:
+            dn = abs(ref[0] - n)
+            lost = dn / max(n, 1)  # share of samples one of the two lacks
+            blocks = zip(ref[4:], sig[4:])
+            if (dn <= max(2.0, 0.002 * n) and abs(ref[1] - dur) <= 1e-3 + 1e-6 * dur + 2.0 * lost * dur
+                    and abs(ref[2] - mv) <= 1e-3 + 1e-4 * abs(mv) + 3.0 * lost * rv
+                    and abs(ref[3] - rv) <= 1e-3 + 1e-4 * rv + 3.0 * lost * rv
+                    and all(abs(p - q) <= 1e-3 + 1e-4 * abs(q) for p, q in blocks)):
+                out.append(tid)
+                break
+    return out

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sumo_drvpw.data.trips import trip_signatures
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import (LIMIT_QUANTILES, ChainFit, _bic, _col, _covariance, battery_chain,
                                   battery_columns, battery_design, factor_rows, solve_factor)
@@ -132,6 +133,7 @@ class ChainStats:
         self.target = spec.target
         self.rows, self.counts, self.files, self.source, self.vehicle = 0, {}, [], None, None
         self.inputs: dict = {}         # the chain's input (a measured source, or None) → its first file
+        self.signatures: dict = {}     # trip → its signature (data/trips.trip_signatures), scanned
         self.wheel_error = None        # why a batch had no measured driving power
         self.sign = self.falling = None
         self.usable = self.nonzero = self.n_ok = self.unknown = 0
@@ -177,6 +179,7 @@ class ChainStats:
             self.source = self.source or m.source
             self.vehicle = self.vehicle or m.vehicle
             self.files += [f for f in m.log.files if f not in self.files]
+            self.signatures.update(trip_signatures(m.log.df))
             if self.target == "battery":
                 self.sign = merge_sign_sums(self.sign, m.sign_test)
         wc = dict(m.log.counts)
@@ -322,6 +325,7 @@ class ChainStats:
         self.files += [f for f in o.files if f not in self.files]
         self.source, self.vehicle = self.source or o.source, self.vehicle or o.vehicle
         self.inputs = {**o.inputs, **self.inputs}
+        self.signatures = {**self.signatures, **o.signatures}
         self.wheel_error = self.wheel_error or o.wheel_error
         self.sign, self.falling = merge_sign_sums(self.sign, o.sign), merge_sign_sums(self.falling, o.falling)
         self.usable += o.usable

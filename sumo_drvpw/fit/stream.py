@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sumo_drvpw.data.trips import trip_signatures
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.ols import Gram
 from sumo_drvpw.model.terms import parse_term, term_matrix
@@ -238,6 +239,9 @@ class CalibrationStats:
     ranges: tuple = ((math.inf, -math.inf), (math.inf, -math.inf))
     #: trip → the file(s) of the batch it came in (to name both places of a repeated id)
     trip_files: dict = field(default_factory=dict)
+    #: trip → its signature (data/trips.trip_signatures: the equation keeps them, so compare
+    #: tells the trips it was calibrated on, from whatever file)
+    signatures: dict = field(default_factory=dict)
 
     def columns(self) -> frozenset:
         """Columns to read: the reader's canonical ones and the signals the candidates name."""
@@ -266,6 +270,7 @@ class CalibrationStats:
         for f in m.log.files:
             if f not in self.files:
                 self.files.append(f)
+        self.signatures.update(trip_signatures(m.log.df))
         idx = np.flatnonzero(use)
         if len(idx) == 0:
             return self
@@ -313,7 +318,8 @@ class CalibrationStats:
                                self.files + [f for f in o.files if f not in self.files],
                                self.rho_sum + o.rho_sum,
                                frozenset(list(self.speeds | o.speeds)[:2]), self.moving_mps,
-                               _merge_ranges(self.ranges, o.ranges), {**self.trip_files, **o.trip_files})
+                               _merge_ranges(self.ranges, o.ranges), {**self.trip_files, **o.trip_files},
+                               {**self.signatures, **o.signatures})
         out.source = out.counts.get("power_source") or out.source  # of both
         return out
 

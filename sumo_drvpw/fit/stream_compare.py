@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sumo_drvpw.data.trips import trip_signatures
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.ols import Gram
 from sumo_drvpw.fit.trip_energy import left_out_by_trip, with_fuel_volumes, with_left_out
@@ -182,15 +183,11 @@ class CompareStats:
 
     def __init__(self, equations, reference: str | None = None, reservoir: int = RESERVOIR,
                  target: str = "wheel"):
-        self.equations = list(equations)
-        self.reference = reference
-        self.k = int(reservoir)
-        self.target = target
+        self.equations, self.reference, self.k, self.target = list(equations), reference, int(reservoir), target
         self.sign = None          # the battery sign test's sums (data.measured.sign_sums)
         self.battery_seen = False # a fuel target's hybrid battery V·I in some batch
         self.seen: set = set()    # log columns the batches had (a chain's inputs among them)
-        self.n = 0
-        self.rows = 0
+        self.n = self.rows = 0
         self.meas = Moments.empty(1)
         self.meas_traction = 0.0
         self.n_light = self.n_heavy = self.n_high = 0
@@ -203,6 +200,7 @@ class CompareStats:
         self.source: str | None = None
         self.vehicle = None
         self.files: list = []
+        self.signatures: dict = {}  # trip → its signature (data/trips.trip_signatures)
 
     def columns(self) -> frozenset | None:
         """Columns to read: the reader's canonical ones and the signals the equations name;
@@ -226,6 +224,7 @@ class CompareStats:
         self.source = self.counts.get("power_source") or self.source or m.source  # of all batches
         self.vehicle = self.vehicle or m.vehicle
         self.files += [f for f in m.log.files if f not in self.files]
+        self.signatures.update(trip_signatures(m.log.df))
         if self.target == "battery":
             from sumo_drvpw.data.measured import merge_sign_sums
 
@@ -375,6 +374,7 @@ class CompareStats:
             raise trip_twice(dup[0], self.trips[dup[0]], o.trips[dup[0]])
         self.trips.update(o.trips)
         self.left_out.update(o.left_out)
+        self.signatures.update(o.signatures)
         self.n += o.n
         self.rows += o.rows
         self.counts = _add_counts(self.counts, o.counts)

@@ -1,0 +1,54 @@
+"""A trip's signature (data/trips.py: trip_signatures, same_trips) tells the same samples
+re-read from another file — re-exported, rounded, renamed, cut by a row — from another
+drive of the same route or cycle, so `compare` can say an equation's errors are in sample."""
+
+import numpy as np
+import pandas as pd
+from hypothesis import given, settings, strategies as st
+
+from sumo_drvpw.data.trips import same_trips, trip_signatures
+
+
+def _drive(seed: int, n: int, dt: float = 0.1) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    v = np.clip(12 + 8 * np.sin(2 * np.pi * t / 300) + np.cumsum(rng.normal(0, 0.05, n)), 0, None)
+    v[:20] = v[-20:] = 0.0  # starts and ends standing
+    return pd.DataFrame({"trip_id": f"trip{seed}", "time_s": t, "speed_mps": v})
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(300, 20_000), cut=st.integers(0, 2),
+       digits=st.sampled_from([None, 3, 6]), kmh=st.booleans())
+def test_the_same_samples_re_read_match(seed, n, cut, digits, kmh):
+    d = _drive(seed, n)
+    e = d.iloc[: n - cut].copy()
+    e["trip_id"] = "renamed"
+    if kmh:  # through km/h and back, as a mapping reads a km/h column
+        e["speed_mps"] = (e["speed_mps"] * 3.6) / 3.6
+    if digits is not None:
+        e["speed_mps"] = e["speed_mps"].round(digits)
+    ref = list(trip_signatures(d).values())
+    assert same_trips(ref, trip_signatures(e)) == ["renamed"]
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(300, 20_000), err_kmh=st.floats(0.1, 2.0))
+def test_a_repeat_of_the_same_cycle_does_not_match(seed, n, err_kmh):
+    """The same trace driven again (the same samples, a driver's trace error of 0.1–2 km/h
+    rms, slowly varying as a driver's is) is another drive."""
+    d = _drive(seed, n)
+    rng = np.random.default_rng(seed + 1)
+    k = max(n // 50, 2)  # an error that drifts over ~50 samples
+    err = np.interp(np.arange(n), np.linspace(0, n - 1, k), rng.normal(0, err_kmh / 3.6, k))
+    e = d.copy()
+    e["trip_id"] = "again"
+    e["speed_mps"] = np.clip(d["speed_mps"] + err, 0, None)
+    assert same_trips(list(trip_signatures(d).values()), trip_signatures(e)) == []
+
+
+def test_trips_are_told_apart_in_a_mixed_file():
+    a, b, c = _drive(1, 5000), _drive(2, 5000), _drive(3, 4000)
+    ref = list(trip_signatures(pd.concat([a, b])).values())
+    assert same_trips(ref, trip_signatures(pd.concat([c, b, a]))) == ["trip2", "trip1"]
+    assert same_trips([], trip_signatures(a)) == []
