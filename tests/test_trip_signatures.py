@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 from hypothesis import given, settings, strategies as st
 
-from sumo_drvpw.data.trips import same_trips, trip_signatures
+from sumo_drvpw.data.trips import same_trips, signature_texts, trip_signatures
 
 
 def _drive(seed: int, n: int, dt: float = 0.1) -> pd.DataFrame:
@@ -52,3 +52,12 @@ def test_trips_are_told_apart_in_a_mixed_file():
     ref = list(trip_signatures(pd.concat([a, b])).values())
     assert same_trips(ref, trip_signatures(pd.concat([c, b, a]))) == ["trip2", "trip1"]
     assert same_trips([], trip_signatures(a)) == []
+
+
+def test_kept_as_lines_of_numbers_and_a_hand_edited_one_is_passed_over():
+    a = _drive(4, 3000)
+    kept = signature_texts(trip_signatures(a))
+    assert len(kept) == 1 and len(kept[0].split()) == 4 + 3  # blocks ending at 64, 256, 1024 (4096 > 3000)
+    assert same_trips(kept, trip_signatures(a)) == ["trip4"]
+    assert same_trips(["not numbers", "1 2", None, 7] + kept, trip_signatures(a)) == ["trip4"]
+    assert same_trips(["not numbers"], trip_signatures(a)) == []

@@ -13,6 +13,7 @@ from functools import partial
 from pathlib import Path
 
 from sumo_drvpw.data.powertrain import terms_predict_of
+from sumo_drvpw.data.trips import signature_texts
 from sumo_drvpw.errors import NoDrivingPower, UserError
 
 ENGINES = ("local", "dask", "memory")
@@ -136,7 +137,7 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
         note_counts(st.counts)
     eq, note, res = fit_road_load(args, st, cands, veh, args.name or out.stem, {
         "logs": st.files, "vehicle": veh.path if veh else None, "power_source": st.source,
-        "candidates_spec": args.candidates, "trip_signatures": list(st.signatures.values())})
+        "candidates_spec": args.candidates, "trip_signatures": signature_texts(st.signatures)})
     eq.terms_predict = terms_predict_of(st.source)  # (the P_PTdrv of a power-split: its output)
     from sumo_drvpw.cli import measurement_options
     from sumo_drvpw.cli.calibrate import declare_measurement
@@ -299,7 +300,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
                             "on logs with a driving power)")
         eq, note, _ = fit_road_load(args, st.road, cands, veh, args.name or out.stem, {
             "logs": st.road.files, "power_source": st.road.source, "candidates_spec": args.candidates,
-            "trip_signatures": list(st.road.signatures.values())})
+            "trip_signatures": signature_texts(st.road.signatures)})
         road = f"road-load equation calibrated stepwise on {st.road.source}" + (
             " (physically constrained: the free fit was implausible)" if note else "")
     chain_input = f"driving power of {eq.name}" if src is None else f"measured driving power ({src})"
@@ -309,7 +310,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": st.files, "target": st.source, "road_load": road,
                            "chain_input": chain_input, "vehicle": veh.path if veh else None,
-                           "trip_signatures": list(st.signatures.values())}
+                           "trip_signatures": signature_texts(st.signatures)}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     declare_measurement(eq, measurement_options(args))
     print(fit.summary())

@@ -10,7 +10,7 @@ import numpy as np
 from sumo_drvpw.cli import add_force, add_log_options, existing_paths, note_counts, output_set, read_options
 from sumo_drvpw.cli._scale import add_engine_arguments, replace_chain
 from sumo_drvpw.data.powertrain import terms_predict_of
-from sumo_drvpw.data.trips import trip_signatures
+from sumo_drvpw.data.trips import signature_texts, trip_signatures
 from sumo_drvpw.errors import UserError
 
 
@@ -117,7 +117,7 @@ def main(args) -> int:
     eq = res.to_equation(name, provenance={
         "logs": m.log.files, "vehicle": m.vehicle.path if m.vehicle else None,
         "power_source": m.source, "candidates_spec": args.candidates,
-        "trip_signatures": list(trip_signatures(m.log.df).values())})
+        "trip_signatures": signature_texts(trip_signatures(m.log.df))})
     eq.terms_predict = terms_predict_of(m.source)  # (the P_PTdrv of a power-split: its output)
     print(res.summary(physics=False))  # (the physics: physical() says, below)
     eq, _ = physical(eq, m, args.candidates)
@@ -393,7 +393,7 @@ def main_chain(args) -> int:
     ro = read_options(args, [args.equation] if args.equation else ())
     m, mw = load_measured_pair(args.logs, args.vehicle, ro, args.target)
     note_counts(m.counts)
-    trips = list(trip_signatures(m.log.df).values())  # (the table is dropped before the chain's fit)
+    trips = signature_texts(trip_signatures(m.log.df))  # (the table is dropped before the chain's fit)
     check_load_columns(m, args.load)  # before the road-load fit
     if hvac and hvac["column"] not in m.inputs.signals:
         raise UserError(f"--hvac {args.hvac}: {m.log.describe()} has no column '{hvac['column']}' "

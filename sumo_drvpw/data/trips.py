@@ -227,6 +227,21 @@ def trip_signatures(df: pd.DataFrame) -> dict[str, list[float]]:
     return out
 
 
+def signature_texts(sigs: dict[str, list[float]]) -> list[str]:
+    """:func:`trip_signatures` as an equation's provenance keeps them: one line of numbers each."""
+    return [" ".join(f"{x:.7g}" for x in sig) for sig in sigs.values()]
+
+
+def _numbers(sig) -> list[float] | None:
+    """A kept signature (a line of numbers, or a list) as numbers; None when it is not one
+    (an equation file edited by hand: provenance informs, it does not refuse)."""
+    try:
+        out = [float(x) for x in (sig.split() if isinstance(sig, str) else sig)]
+    except (TypeError, ValueError):
+        return None
+    return out if len(out) >= 4 else None
+
+
 def same_trips(signatures, trips: dict[str, list[float]]) -> list[str]:
     """The trips of ``trips`` (trip → :func:`trip_signatures`) matching one of ``signatures``:
     the same samples re-read, not another drive of the same route or cycle. Allowed: a few
@@ -235,10 +250,11 @@ def same_trips(signatures, trips: dict[str, list[float]]) -> list[str]:
     re-exported to 1 mm/s move them by 1e-5); the blocks' mean speeds, whole in both, within
     that rounding alone. A repeat drive of a dyno cycle differs by more (its driver's trace
     error, some 0.1–0.5 km/h rms)."""
+    refs = [r for r in map(_numbers, signatures) if r is not None]
     out = []
     for tid, sig in trips.items():
         n, dur, mv, rv = sig[:4]
-        for ref in signatures:
+        for ref in refs:
             dn = abs(ref[0] - n)
             lost = dn / max(n, 1)  # share of samples one of the two lacks
             blocks = zip(ref[4:], sig[4:])
