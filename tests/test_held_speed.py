@@ -224,3 +224,40 @@ def test_windows_that_print_alike_are_said_once():
     assert "–" not in R.accel_counts(d)["accel_source"]
     d["window_max_s"] = 2.5
     assert "2.27–2.5 s moving average (each trip's own)" in R.accel_counts(d)["accel_source"]
+
+
+def _city_drive(seed, n_stops=25):
+    """A city drive at 1 Hz: pull-aways of 1.3–2 m/s² to 30–50 km/h, cruises, stops."""
+    rng = np.random.default_rng(seed)
+    v = [0.0]
+    for _ in range(n_stops):
+        top, up, down = rng.uniform(30, 50) / 3.6, rng.uniform(1.3, 2.0), rng.uniform(1.0, 2.0)
+        while v[-1] < top:
+            v.append(min(v[-1] + up, top))
+        v += [top] * int(rng.integers(10, 30))
+        while v[-1] > 0:
+            v.append(max(v[-1] - down, 0.0))
+        v += [0.0] * int(rng.integers(5, 20))
+    return np.arange(len(v), dtype=float), np.asarray(v)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_held_city_drive_in_kmh_is_told_km_h(seed):
+    """The fuzzer's finding: a city drive logged in whole km/h at 1 Hz and updated every 3–5 s
+    slipped past the km/h check (judged over three update intervals, its pull-aways averaged
+    below the bound). Judged interpolated between updates, as it is read, it is refused; the
+    same drive in m/s is not."""
+    from pathlib import Path
+
+    from sumo_drvpw.data.plausible import check_speed_unit
+
+    t, v = _city_drive(seed)
+    rng = np.random.default_rng(seed + 100)
+    upd = np.cumsum(np.r_[0, rng.integers(3, 6, len(t))])  # update samples, 3–5 s apart
+    src = np.searchsorted(upd, np.arange(len(t)), side="right") - 1  # the last update at or before
+    held = v[upd[src]]
+    trip = np.full(len(t), "city")
+    assert R.speed_hold(held, t, np.zeros(len(t), int))[0] >= 3.0
+    with pytest.raises(UserError, match="is it km/h"):
+        check_speed_unit(np.round(held * 3.6), t, trip, Path("city.csv"))
+    check_speed_unit(held, t, trip, Path("city.csv"))

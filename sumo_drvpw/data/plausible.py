@@ -47,13 +47,16 @@ def implied_acceleration(v: np.ndarray, t: np.ndarray, trip: np.ndarray, horizon
 
 
 def check_speed_unit(v: np.ndarray, t: np.ndarray, trip: np.ndarray, p: Path) -> None:
-    """Refuse m/s speeds whose implied accelerations only make sense in km/h (over 1 s, or
-    over three update intervals of a speed held between updates: its jumps are no km/h)."""
-    from sumo_drvpw.data.resolution import speed_hold
+    """Refuse m/s speeds whose implied accelerations only make sense in km/h, over 1 s; a
+    speed held between updates is judged interpolated between them, as it is read (its jumps
+    are no km/h; judged over three update intervals instead, a km/h city drive held 3 s
+    averaged its accelerations below the bound and passed as m/s)."""
+    from sumo_drvpw.data.resolution import speed_hold, unheld_speed
 
     codes = np.cumsum(np.r_[False, trip[1:] != trip[:-1]]) if len(trip) else np.zeros(0, int)
-    horizon = max(1.0, 3.0 * float(speed_hold(v, t, codes).max(initial=0.0)))
-    a = implied_acceleration(v, t, trip, horizon)
+    hold = speed_hold(v, t, codes)
+    horizon = 1.0
+    a = implied_acceleration(unheld_speed(v, t, codes, hold), t, trip, horizon)
     if len(a) < 50:
         return
     q = float(np.percentile(a, 99))
