@@ -8,7 +8,8 @@ Outer loop: the headline's trip-grouped 5-fold (fold j holds out every 5th trip 
 from the j-th; :mod:`sumo_drvpw.validation.chain_i3`). Inside each fold, on its training trips
 only:
 
-1. the road load as scripts/closing_the_loop.py builds it: the calibrated DrvPw terms, then
+1. the road load as the closing-the-loop study builds it
+   (:mod:`sumo_drvpw.validation.closing_the_loop`): the calibrated DrvPw terms, then
    the grade source and the physical candidates chosen together (GRADE_CHOICE "joint") on
    the trip traction energy, or with ``--selection-energy net`` on the net energy;
 2. the recuperation limit profiled from that equation's power against the measured motor
@@ -38,8 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
+from sumo_drvpw.validation import closing_the_loop_fit as F
+from sumo_drvpw.validation.closing_the_loop_read import load_checked, measurement_of, write_subset
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import closing_the_loop as C  # noqa: E402
 from closing_the_loop_report import _tau, wheel_of  # noqa: E402
 
 K = 5
@@ -108,9 +111,9 @@ def main() -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
-    ap.add_argument("--selection-energy", choices=C.SELECTION_ENERGIES, default=C.SELECTION_ENERGY,
+    ap.add_argument("--selection-energy", choices=F.SELECTION_ENERGIES, default=F.SELECTION_ENERGY,
                     help="the trip energy whose error chooses the closed loop's structure "
-                         "(closing_the_loop.SELECTION_ENERGY)")
+                         "(validation.closing_the_loop_fit.SELECTION_ENERGY)")
     a = ap.parse_args()
     df, rep = read("bmw-i3-tum", Path(a.data) / "bmw_i3_tum")
     df = with_i3_loads(df)
@@ -121,22 +124,22 @@ def main() -> int:
     err = {h: {} for h in how}
     road = {h: {} for h in how}
     flagged = {}
-    C.GRADE_CHOICE, C.SELECTION_ENERGY = "joint", a.selection_energy
+    F.GRADE_CHOICE, F.SELECTION_ENERGY = "joint", a.selection_energy
     with tempfile.TemporaryDirectory() as tmp:
-        full = C.write_subset(df, [], Path(tmp) / "all.parquet", keep=False, roles=roles)
+        full = write_subset(df, [], Path(tmp) / "all.parquet", keep=False, roles=roles)
         head = read_as(full, I3_MEASUREMENT)  # the headline pipeline's reading (60-s fusion)
         for j in range(K):
             t0 = time.perf_counter()
             held = trips[j::K]
             train_ids = set(trips) - set(held)
-            train = C.write_subset(df, held, Path(tmp) / "train.parquet", keep=False, roles=roles)
-            m_train = C.load_checked(train, "bmw_i3")
-            base_eq, _ = C.calibrate_physical(m_train, "i3_calibrated")
-            tau, _, eq, sel, r = C.grade_and_physics(train, "bmw_i3", 0.0, base_eq.terms, m_train,
+            train = write_subset(df, held, Path(tmp) / "train.parquet", keep=False, roles=roles)
+            m_train = load_checked(train, "bmw_i3")
+            base_eq, _ = F.calibrate_physical(m_train, "i3_calibrated")
+            tau, _, eq, sel, r = F.grade_and_physics(train, "bmw_i3", 0.0, base_eq.terms, m_train,
                                                      "i3_closed")
             del m_train
             off = tau["logger_offset"]["offset_mps2"]
-            closed = read_as(full, C.measurement_of(full, 0.0, True, tau["tau_s"], off))
+            closed = read_as(full, measurement_of(full, 0.0, True, tau["tau_s"], off))
             p_closed = eq.power(closed[1].inputs)
             p_closed = np.where(p_closed < 0, (1.0 + r) * p_closed, p_closed)
             mb, mw, drop = head

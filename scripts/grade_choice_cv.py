@@ -5,7 +5,8 @@ cross-validation over all trips of the shared BMW i3 logs.
 
 Outer loop: trip-grouped 5-fold (fold j holds out every 5th trip in name order from the
 j-th). Inside each fold, on its training trips only, the grade source and the physical
-candidates are chosen the two ways scripts/closing_the_loop.py offers (GRADE_CHOICE):
+candidates are chosen the two ways the closing-the-loop study offers
+(``sumo_drvpw.validation.closing_the_loop_fit.GRADE_CHOICE``):
 
 - **sequential**: the grade source from TAU_GRID_S with the calibrated terms
   (``choose_tau``), then the physical candidates on data read that way;
@@ -29,8 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
+from sumo_drvpw.validation import closing_the_loop_fit as F
+from sumo_drvpw.validation.closing_the_loop_read import corrected_measured, load_checked, write_subset
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import closing_the_loop as C  # noqa: E402
 from closing_the_loop_report import _tau  # noqa: E402
 
 K = 5
@@ -52,20 +55,20 @@ def main() -> int:
         for j in range(K):
             t0 = time.perf_counter()
             held = trips[j::K]
-            train = C.write_subset(df, held, Path(tmp) / "train.parquet", keep=False, roles=roles)
-            test = C.write_subset(df, held, Path(tmp) / "test.parquet", keep=True, roles=roles)
-            m_train = C.load_checked(train, "bmw_i3")
-            base_eq, _ = C.calibrate_physical(m_train, "i3_calibrated")
+            train = write_subset(df, held, Path(tmp) / "train.parquet", keep=False, roles=roles)
+            test = write_subset(df, held, Path(tmp) / "test.parquet", keep=True, roles=roles)
+            m_train = load_checked(train, "bmw_i3")
+            base_eq, _ = F.calibrate_physical(m_train, "i3_calibrated")
             line = []
             for how in errs:
-                C.GRADE_CHOICE = how
+                F.GRADE_CHOICE = how
                 # the closed-loop equation fitted on the training trips predicts the held-out
                 # trips, read with the same corrections (as scripts/closing_the_loop.py does)
-                tau, _, eq, sel, r = C.grade_and_physics(train, "bmw_i3", 0.0, base_eq.terms, m_train,
+                tau, _, eq, sel, r = F.grade_and_physics(train, "bmw_i3", 0.0, base_eq.terms, m_train,
                                                          "i3_closed")
-                m_held = C.corrected_measured(test, "bmw_i3", 0.0, True, tau["tau_s"],
-                                              tau["logger_offset"]["offset_mps2"])
-                e = C.regime_eval(m_held, eq, 1.0 + r)["trip_energy"]["trips"]
+                m_held = corrected_measured(test, "bmw_i3", 0.0, True, tau["tau_s"],
+                                            tau["logger_offset"]["offset_mps2"])
+                e = F.regime_eval(m_held, eq, 1.0 + r)["trip_energy"]["trips"]
                 errs[how].update({t: v["error"] for t, v in e.items()})
                 line.append(f"{how}: {_tau(tau['tau_s'])} + [{', '.join(sel['chosen']) or 'none'}], "
                             f"grade {eq.terms['grade']:.3f}")

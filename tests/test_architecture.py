@@ -59,7 +59,7 @@ def test_every_name_in_the_doc_exists():
         for name in re.findall(r"`([a-z_][a-z0-9_/]*(?:/|\.py))`", line):
             if name == "sumo_drvpw/":
                 continue
-            if name.startswith(("tests/", "docs/", "benchmarks/", "scenarios/")):
+            if name.startswith(("tests/", "docs/", "benchmarks/", "scenarios/", "scripts/")):
                 if not (PKG.parent / name).exists():
                     missing.append(name)
                 continue

@@ -247,14 +247,9 @@ def test_closed_loop_form_runs_in_sumo_at_the_reference_temperature(tmp_path):
         assert e_c[cat] == pytest.approx(val, rel=1e-12, abs=1e-9)
 
 
-def _script():
-    from script_module import load_script
-
-    return load_script("closing_the_loop")
-
-
 def test_split_rule_second_split_is_fixed_up_front_and_differs():
-    mod = _script()
+    from sumo_drvpw.validation import closing_the_loop as mod
+
     trips = [f"Trip{s}{i:02d}" for s in "AB" for i in range(1, 26)]
     a, b = mod.split_trips(trips, second=True)
     t = sorted(trips)
@@ -508,26 +503,28 @@ def test_the_documented_closed_equation_reproduces_its_held_out_figures_through_
 
 
 def test_grade_options_of_the_script_declare_what_they_read(tmp_path):
-    """Each grade option of the script's grid becomes the [measurement] a closed-loop
+    """Each grade option of the study's grid becomes the [measurement] a closed-loop
     equation declares: fused crossovers, per-trip offsets (∞), the logger's offset."""
     import math
 
     import sumo_drvpw.synth.effects as E
 
-    mod = _script()
+    from sumo_drvpw.validation import closing_the_loop_read as mod
+    from sumo_drvpw.validation.closing_the_loop_fit import TAU_GRID_S
+
     df, _ = E.synth_trips(2, 2.0, seed=5, effects=[E.LogPower()])
     path = tmp_path / "log.parquet"
     df.drop(columns=["gps_elevation_m"]).to_parquet(path)
     # no elevation: no logger offset can be estimated, and the option is not offered
-    assert math.isnan(_script().logger_offset(_script().load_checked(path, "prius3"))["offset_mps2"])
+    assert math.isnan(mod.logger_offset(mod.load_checked(path, "prius3"))["offset_mps2"])
     df.drop(columns=["grade_rad"]).rename(columns={"gps_elevation_m": "elevation_m"}).to_parquet(path)
-    assert mod.LOGGER_OFFSET in mod.TAU_GRID_S and math.inf in mod.TAU_GRID_S
+    assert mod.LOGGER_OFFSET in TAU_GRID_S and math.inf in TAU_GRID_S
     m = mod.measurement_of(path, 0.0, True, 120.0)
     assert (m.grade, m.fusion_tau_s, m.accelerometer_offset_mps2) == ("fused", 120.0, None)
     assert mod.measurement_of(path, 0.0, True, 60).grade == "fused"       # a crossover given as int
     m = mod.measurement_of(path, 0.0, True, "1000 m")                     # a crossover over distance
     assert (m.grade, m.fusion_tau_s, m.fusion_distance_m) == ("fused", None, 1000.0)
-    assert any(mod.distance_crossover_m(t) for t in mod.TAU_GRID_S)
+    assert any(mod.distance_crossover_m(t) for t in TAU_GRID_S)
     m = mod.measurement_of(path, 0.0, True, math.inf)
     assert (m.grade, m.accelerometer_offset_mps2) == ("accelerometer", None)
     m = mod.measurement_of(path, 0.0, True, mod.LOGGER_OFFSET, 0.03)
@@ -541,14 +538,14 @@ def test_grade_options_of_the_script_declare_what_they_read(tmp_path):
 
 
 def test_moving_check_separates_a_planted_standing_and_moving_constant(tmp_path):
-    """scripts/closing_the_loop.moving_check on synthetic trips whose power is a known road
+    """validation.closing_the_loop_checks.moving_check on synthetic trips whose power is a known road
     load + 400 W drawn all the time + 1000 W more while moving: the split recovers both,
     the power measured standing is the 400 W, and one constant alone lands in between."""
     import sumo_drvpw.synth.effects as E
     from sumo_drvpw.data.measured import load_measured
     from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.validation.closing_the_loop_checks import moving_check
 
-    mod = _script()
     df, _ = E.synth_trips(3, 6.0, seed=8, effects=[E.LogPower()])
     path = tmp_path / "log.parquet"
     df.to_parquet(path)
@@ -558,7 +555,7 @@ def test_moving_check_separates_a_planted_standing_and_moving_constant(tmp_path)
     moving = (m.inputs.v >= 0.1).astype(float)
     df["power_w"] = road.power(m.inputs) + 400.0 + 1000.0 * moving
     df.to_parquet(path)
-    r = mod.moving_check(load_measured([path], "prius3"), road)
+    r = moving_check(load_measured([path], "prius3"), road)
     sp, c = r["split"]["coefficients"], r["constant"]["coefficients"]
     assert sp["v^0"] == pytest.approx(400.0, abs=5.0) and sp["moving"] == pytest.approx(1000.0, abs=5.0)
     assert sp["acc"] == pytest.approx(1.0, abs=0.01)
@@ -568,15 +565,15 @@ def test_moving_check_separates_a_planted_standing_and_moving_constant(tmp_path)
 
 
 def test_joint_choice_judges_each_grade_source_by_its_own_closed_loop_structure(monkeypatch):
-    """scripts/closing_the_loop.py, GRADE_CHOICE: "sequential" takes the grade source whose
+    """validation.closing_the_loop_fit.GRADE_CHOICE: "sequential" takes the grade source whose
     calibrated terms cross-validate best; "joint" the one whose closed-loop structure (its
     own physical candidates) does — here a different source. The logger offset is left out
     of the grid when it cannot be estimated; the joint choice keeps the data read its way."""
     from types import SimpleNamespace
 
     import sumo_drvpw.fit.physical as phys
+    from sumo_drvpw.validation import closing_the_loop_fit as mod
 
-    mod = _script()
     # grade source → (CV of the calibrated terms, CV after its own physical candidates)
     table = {60.0: (0.061, 0.040), 300.0: (0.059, 0.042), "1000 m": (0.063, 0.031)}
     monkeypatch.setattr(mod, "TAU_GRID_S", (60.0, 300.0, "1000 m", mod.LOGGER_OFFSET))

@@ -161,24 +161,23 @@ def test_import_wind_option_on_the_real_prius_pair(tmp_path, capsys):
 
 
 def test_wind_check_on_the_real_prius_pair_explains_the_opposite_fold_errors():
-    """scripts/closing_the_loop.wind_check on the shared out-and-back Prius Gen-2 trips: the
+    """validation.closing_the_loop_checks.wind_check on the shared out-and-back Prius Gen-2 trips: the
     two trips together imply a wind of a few m/s; with it the in-sample per-trip errors of
     the fit fall from about ±7 % (opposite signs: east with the wind, west against it) to
     within 2 %, and each fold trained on one trip misses the other by less than 5 %
     (±13 % in still air, docs/closing-the-loop.md)."""
-    from script_module import load_script
     from sumo_drvpw.data.adapters import read
     from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.validation.closing_the_loop_checks import wind_check
 
     d = shared_data_dir()
     if d is None or not (d / "prius_gen2_torquepro").is_dir():
         pytest.skip("shared Prius Gen-2 data not found")
-    ctl = load_script("closing_the_loop", "closing_the_loop_w")
     df, rep = read("torquepro-prius2", d / "prius_gen2_torquepro")
     eq = Equation("p", {"aero": 0.3, "acc": 1.0, "grade": 1.0, "roll": 0.02})
     car = {"runs": [{"lag": -1.44, "final_eq": eq, "held": [h], "tag": f"fold{i}"}
                     for i, h in enumerate(("From_CdA_Act", "To_CdA_Act"))]}
-    w = ctl.wind_check("prius2", df, "prius2", car, roles=rep.get("roles"))
+    w = wind_check("prius2", df, "prius2", car, roles=rep.get("roles"))
     assert 2.0 < w["wind"]["speed_mps"] < 7.0
     still, windy = w["trips"]["still air"], w["trips"]["with the wind"]
     assert still["From_CdA_Act"] < -0.05 and still["To_CdA_Act"] > 0.05

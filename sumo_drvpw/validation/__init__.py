@@ -9,6 +9,9 @@ on every data set, ``render`` turns the summary into Markdown, and ``run`` is th
 ``chain_render``. The built-in chains' sources, each writing its docs page and equation
 files: ``epa_fleet`` (+ ``epa_fleet_report``, ``epa_cold``; docs/epa-fleet.md),
 ``epa_hybrid`` (docs/epa-hybrid.md) and ``hdv_fuel`` (+ ``hdv_fuel_report``; docs/hdv-fuel.md).
+The loop closed on real data, held out (docs/closing-the-loop.md, run by
+scripts/closing_the_loop.py): ``closing_the_loop`` (+ ``closing_the_loop_read``,
+``closing_the_loop_fit``, ``closing_the_loop_checks``).
 """
 
 from sumo_drvpw.validation.data import DATASETS, resolve_data
