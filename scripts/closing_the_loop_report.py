@@ -1,5 +1,6 @@
-"""Markdown of docs/closing-the-loop.md from the runs of scripts/closing_the_loop.py (its
-report half, split off by job: the runs there, their rendering here)."""
+"""Markdown of docs/closing-the-loop.md from the runs of the closing-the-loop study
+(:mod:`sumo_drvpw.validation.closing_the_loop`, run by scripts/closing_the_loop.py); its
+closing section, what the runs show, is scripts/closing_the_loop_notes.py."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import math
 from pathlib import Path
 
 import numpy as np
+
+from closing_the_loop_notes import READING
 
 #: largest gap between logged and accelerometer elevation along a trip reported as a finding [m]
 ELEVATION_GAP_M = 40.0
@@ -179,7 +182,7 @@ def _render_floor(fl) -> list[str]:
 
 
 def _render_wind(w, car) -> list[str]:
-    """The steady wind the car's trips imply together (scripts/closing_the_loop.wind_check)."""
+    """The steady wind the car's trips imply together (validation.closing_the_loop_checks.wind_check)."""
     if not w:
         return []
     e = w["wind"]
@@ -473,153 +476,5 @@ def render(cars, took, cmd: str, other_data: str | None = None) -> str:
         L += [f"(Read with care: this run read {other_data}; the points below were written from the runs on "
               "the shared data, ../shared/data, and their figures are not recomputed here — the tables above "
               "are.)", ""]
-    L += [
-          "- Findings are kept only when they pass the held-out block test, lower the held-out error on most "
-          "training trips and carry a plausible energy share; responses of the target (pedal, torques, "
-          "currents, SOC, counters) are never offered by default.",
-          "- The Prius Gen-2 folds each train on one trip and hold out the trip back: a wind along the road "
-          "goes into the trained trip's aero coefficient and is missed twice on the return (the direction "
-          "check above: a steady wind explains the opposite ±13 % misses). The tracer cannot find it "
-          "inside one straight trip (its heading is a constant there); logs of both directions, or the "
-          "day's wind from a weather record given at import, separate it from the drag.",
-          "- Structural terms found by the tracer (recuperation regimes, brake limits, per-trip offsets) are "
-          "reported with their size; the closed-loop equation carries only what passed the physical-candidate "
-          "stage on whole training trips (i3) or the tracer's condition and load findings (Prius, JLU). "
-          "Traction energy needs only the traction-side coefficients: when the recuperation regime is kept, "
-          "its fit keeps braking samples from bending them, and the positive part of the equation is the same "
-          "with or without the recuperation scale (the row '× recuperation scale' differs in R² only).",
-          "- The inertial power by direction (`acc_pos`, η ≈ 0.9 where kept) was found this session from the "
-          "per-trip errors of a cross-validation over all 50 i3 trips (they fell with the trip's positive kinetic "
-          "energy per km), then put through the same training-only selection as every candidate: kept on split 2 "
-          "and on all trips, not on split 1. Part of it may be a measurement property rather than the "
-          "drivetrain: the i3's logged regenerative torque under-reads the electrical power (the battery chain's "
-          "η_r runs to its bound 1, docs/energy-chain-validation.md), which lowers the measured power while "
-          "slowing down; an η of 0.9 for inertial power is at the low end of what gear and tyres lose.",
-          "- The tracer refits declared coefficients without constraints inside its folds; the physical "
-          "constraints act on the calibration.",
-          "- Fusion over driven distance (`data.corrections.fused_sin_grade_distance`, "
-          "`--grade-source fused:1000m`; the grid's \"<L> m\" entries): its slow part weights each "
-          "sample by the road it drove, so the grade keeps each trip's logged elevation change (on the 50 i3 trips "
-          "at 1000 m the largest gap is 10 m, against 130 m for the 300-s fusion in time). Exploratory (a trip-grouped "
-          "5-fold cross-validation over all 50 trips with the deliverable's structure, held-out trips included): "
-          "mean / worst trip error 3.5 % / 9.5 % at 1000 m against 3.8 % / 18.6 % at 300 s and 3.5 % / 11.1 % at 60 s. "
-          "It did not replicate in the training-only pipeline of the sequential choice: there, with the "
-          "calibrated equation, the distance crossovers lost to 300 s on both splits, and choosing only among grade sources "
-          "that keep the elevation change (tried once) made the held-out trips worse — split 1: 4.2 % / 9.7 %, "
-          "R² 0.941; split 2: 3.6 % / 15.2 %, R² 0.954; grade coefficient 1.04 and 1.15 free after the "
-          "corrections, 1.12 and 1.17 in the closed-loop equations — so the pipeline makes "
-          "its choice by cross-validation alone. In the battery pipeline (docs/energy-chain-validation.md, tried "
-          "once) a 1000-m fusion in place of the 60-s one moved the free grade coefficient from 1.00–1.01 to "
-          "1.19–1.26 (outside the ±10 % band) and the 5-fold battery error from 5.5 % to 5.4 %; why this grade "
-          "needs a larger coefficient on these logs is not resolved, and the fusion in time stays the default "
-          "(60 s).",
-          "- The grade source is chosen inside the training trips (grid and criterion fixed in the script: "
-          "TAU_GRID_S, mean abs. trip traction-energy error under trip-grouped 5-fold cross-validation). "
-          "Disclosure: an earlier session tried 30/60/120/300 s on the first i3 split's held-out trips; the "
-          "grid includes those values. The logger-offset option was added to the grid in a later session "
-          "after a 5-fold cross-validation over all 50 i3 trips (held-out trips included) compared grade "
-          "sources: the i3's logged elevation is coarse (whole metres, often straight lines between sparse "
-          "points), disagrees between consecutive trips that start where the last one ended (TripA17 ends at "
-          "586 m, TripA18 starts seconds later at 549 m), and one trip (TripA04) logs a constant elevation; a "
-          "fusion in time does not keep a trip's elevation change (its slow part is weighted by time, the "
-          "grade power by distance), and a per-trip offset carries each trip's elevation error into its "
-          "grade. An offset fixed for the logger reads no elevation. Trip energy is the criterion because it "
-          "is the product's.",
-          "- The grade source is chosen jointly with the physical candidates (GRADE_CHOICE \"joint\" in the "
-          "script, adopted in the session of 2026-11-27): every grade source is judged with the terms it will "
-          "be used with. Before, it was chosen with the calibrated equation and the physical candidates came "
-          "afterwards (`--grade-choice sequential`): that equation lacks the temperature term that dominates "
-          "these trips' errors, so the grade was chosen on the wrong errors. The evidence is a nested "
-          "cross-validation over all 50 i3 trips (`.venv/bin/python scripts/grade_choice_cv.py --data "
-          "../shared/data`, 20 min: outer trip-grouped 5-fold, both choices made inside each fold on its "
-          "training trips only, each trip predicted once): mean abs. trip traction-energy error 4.34 % → "
-          "3.68 % (median 3.96 % → 3.00 %), worst 16.8 % → 10.9 %, trips beyond 6 % 14 → 11 of 50; lower on "
-          "21 trips, higher on 19, the same on 10 (one fold chose alike), one-sided Wilcoxon p = 0.17 — better "
-          "in the mean and the tail, not significant trip by trip. On the two fixed splits the sequential choice gave 3.6 % / 10.1 % (R² 0.964) and "
-          "2.9 % / 11.4 % (R² 0.978); the joint choice's are in the summary above. Disclosure: those split "
-          "figures of the joint choice were seen (in an exploratory run) before it was adopted, so they are "
-          "no longer untouched proof; the nested cross-validation is what the choice rests on.",
-          "- Judged on the net energy instead (`--selection-energy net`: the grade source and the physical "
-          "candidates chosen on the trip energy Σ P·Δt, recuperation and the climbs' potential energy "
-          "included, instead of Σ max(P, 0)·Δt). In the same nested cross-validation, with the battery "
-          "chain on top (`.venv/bin/python scripts/battery_nested_cv.py --data ../shared/data "
-          "--selection-energy net`, 15 min; without the option, traction), every fold chose the same "
-          "structure — the logger offset with cold drag and inertia by direction, grade 1.12–1.14 — where "
-          "the traction criterion chose three different grade sources over the five folds. Held-out over "
-          "all 50 trips, traction → net criterion: traction-energy error 3.68 % → 3.21 % (worst 10.9 % → "
-          "9.4 %, beyond 6 % 11 → 8 trips; lower on 24 of 50, one-sided Wilcoxon p = 0.047 on the per-trip "
-          "errors as printed, to 0.1 %), net-energy "
-          "error 6.80 % → 5.36 %, battery energy 5.98 % → 5.34 % (the headline pipeline's 5.50 %; "
-          "docs/energy-chain.md). A trip whose measured net energy is below a fifth of its traction energy "
-          "(a descent) is judged on its net-energy miss as a share of its traction energy, so it cannot "
-          "dominate the mean (`fit.trip_energy.net_energy_errors`; on the 50 i3 trips the net energy is "
-          "46–90 % of the traction energy, so the figures above hold with it). Not adopted yet: it was tried "
-          "after the traction result was seen (two protocols compared on the same 50 trips), and its grade "
-          "stays outside issue #11's ±10 % band at the motor shaft (1.12–1.14; at the wheels, × the η 0.90–0.91 "
-          "of each fold's inertia by direction, 1.00–1.03: `scripts/battery_nested_cv.py` prints it per fold, "
-          "2026-11-28; the traction criterion's folds that carry the inertia read 0.97–1.02, the two without it "
-          "no η) — it needs a replication on other cars' logs (the shared "
-          "Prius Gen-2 and JLU logs have too few training trips "
-          "for these choices, MIN_CV_TRIPS: with `--only prius2,jlu --selection-energy net` their results are "
-          "the same as above).",
-          "- Reading the grade coefficient: with the accelerometer grade (the logger offset; no elevation "
-          "smoothing) free fits give grade 1.13–1.15 beside acc 1.18 (the inertial mass factor). Read "
-          "together, acc / grade ≈ 1.03–1.04 is the share of rotating mass — Larminie & Lowry (Electric Vehicle "
-          "Technology Explained, ch. 9) take 5 % of the mass for an electric car, in the acceleration term "
-          "only, not in hill climbing — and both coefficients put the car as driven 13–15 % above its "
-          "declared 1270 kg (measurement equipment or a passenger; the logs cannot confirm it). With the "
-          "300-s fusion in time the grade reads 0.94–0.95 beside the same acc 1.18: 24 % rotating mass, "
-          "more than a single-speed electric car has — that fusion's slow part attenuates the grade. So a "
-          "grade coefficient within ±10 % of 1 is no proof of a right grade here, and one above the band "
-          "can be the mass. In SUMO the coefficients multiply the vType's mass: the deliverable books the "
-          "car as these logs drove it when the vType carries the declared 1270 kg; if the extra mass is real "
-          "and a study's i3 carries less, its grade, acc and roll coefficients over-book that car by the same "
-          "ratio — the logs cannot tell. The closed-loop equations carry the inertia by direction, and with "
-          "it a third reading (the summary's grade at the wheels): the deliverable's acc while speeding up "
-          "(c_acc + c_acc_pos = 1.29), while slowing down (1.05) and its grade (1.135) fit a drivetrain that "
-          "passes η = 0.90 each way with the declared mass (c_grade·η = 1.02) — or a lossless drivetrain, a "
-          "car 13–15 % heavier and a regenerative torque that under-reads by about a fifth (the battery "
-          "chain's η_r at its bound 1, docs/energy-chain-validation.md). Both put the rotating mass at "
-          "acc while speeding up / grade = 1.14, more than the 5 % above, so part of the asymmetry may be "
-          "the torque signal's at high torque. The logs cannot tell these apart either; the reading rules "
-          "out only a grade and a drivetrain that disagree (tests/test_drivetrain.py plants one).",
-          "- Tried, not adopted: choosing the grade source a second time with the closed-loop terms "
-          "(`--grade-choice recheck`: sequential, then the grade source once more with the closed-loop "
-          "terms). On both i3 splits it switched to the logger offset; "
-          "held out, split 1 went from 3.6 % / 10.1 % to 4.7 % / 11.7 % (mean / worst), split 2 from "
-          "2.9 % / 11.4 % to 3.2 % / 7.2 %, the 5-fold CV over all 50 trips from 3.8 % / 18.6 % to "
-          "3.2 % / 9.4 %; the free grade coefficient after the correction became 1.12 and 1.14 (0.94 with "
-          "the fused grade). How the slow part of the grade is taken moves the grade coefficient a lot on these logs "
-          "(free fits on all trips: logged elevation 0.73, fusion over 60 s 1.01, over 300 s 0.96, the "
-          "accelerometer alone 1.15): the coefficient is not well identified by them alone (the reading above "
-          "puts them beside the acceleration coefficient).",
-          "- Disclosure: the plausibility bound of the c_r(T) coefficient k (0 … 0.03 /K, `K_CR_MAX` in "
-          "`fit/physical.py`; ISO 28580 corrects tyres with 0.008 /K) was written after seeing an estimate of "
-          "about 0.02 /K on the shared i3 data; the extra room is for bearings and the drivetrain share of the "
-          "`roll` term (a motor-shaft target).",
-          "- The temperature effect replicates on both i3 splits but its form does not separate: `cold drag` "
-          "(v²·(T_ref − T)) and `c_r(T)` (m·g·v·(T_ref − T)) are nearly collinear on these trips; the cross-"
-          "validation picks one and then rejects the other.",
-          "- Tyre and drivetrain warm-up, checked and not found (`.venv/bin/python scripts/warmup_check.py "
-          "--data ../shared/data`, exploratory: the deliverable's structure in the trip-grouped 5-fold over all "
-          "50 trips, held-out trips included): an extra rolling force decaying with the time since the trip's "
-          "start, exp(−t/τ), raises the mean abs. trip traction-energy error from 3.21 % to 3.25–3.33 % for τ "
-          "300–3600 s, helps on 23–26 of 50 trips (Wilcoxon p ≥ 0.69), and its start excess (46 % of c_r at "
-          "300 s, 227 % at 3600 s) grows with τ: it trades against the `roll` term instead of finding a warm-up. "
-          "The logs do not say how long the car stood before a trip (repeat trips start minutes apart), so a "
-          "warm-up that depends on it is not ruled out; one that follows the trip's start is.",
-          "- Input checks (`sumo_drvpw/fit/input_checks.py`) read inputs only, never a held-out target: a "
-          "logger dropout (speed and accelerometer exactly linear in time for ≥ 5 s within the logged digits: a "
-          "held or linearly filled stretch; a real accelerometer never draws a straight line for seconds) is taken "
-          "out of the usable samples of training and held-out logs alike, for every equation, with the 100-m grade "
-          "window around it (the elevation jumps where the log resumes). The power logged across such a stretch "
-          "is filled the same way, so it is not a measurement. The inertial mass of each training trip is a check "
-          "of the declared mass (reported, never substituted); the accelerometer's per-trip offset and the "
-          "elevation's agreement with the accelerometer are reported per trip.",
-          "- Conditions read from the trip notes are reported beside each remaining miss. A wet road raises "
-          "rolling resistance: it would make a rainy trip need more energy than predicted, so a rainy trip "
-          "predicted too high is not explained by rain. The remaining misses are not explained by the inputs "
-          "checked here (declared mass, dropouts, accelerometer offset, net elevation).",
-          "- In SUMO the `cold` factor reads the signal `ambient_c`; a run that does not pass the air "
-          "temperature evaluates the equation at the reference 20 °C (the factor is 0).", ""]
+    L += READING
     return "\n".join(L) + "\n"
