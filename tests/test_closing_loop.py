@@ -502,6 +502,33 @@ def test_the_documented_closed_equation_reproduces_its_held_out_figures_through_
         assert 100 * got["trip_energy"]["trips"][t]["error"] == pytest.approx(float(e), abs=0.051)
 
 
+def test_study_writes_its_train_and_test_logs_with_the_adapters_roles(tmp_path):
+    """validation.closing_the_loop_read.write_subset: the held-out trips (keep) or the rest,
+    written as a log that reads back with the adapter's roles for the columns it has (the
+    study's tracer leaves response columns out by them); a role of a column the log lacks is
+    dropped. On the first move into the package it raised TypeError on any roles (bytes
+    metadata keys passed as keywords)."""
+    import pyarrow.parquet as pq
+
+    import sumo_drvpw.synth.effects as E
+    from sumo_drvpw.data.measured import load_measured
+    from sumo_drvpw.data.roles import from_metadata, of_log
+    from sumo_drvpw.validation.closing_the_loop_read import write_subset
+
+    df, _ = E.synth_trips(3, 2.0, seed=3, effects=[E.LogPower()])
+    df["pedal_pct"] = 1.0
+    trips = sorted(df["trip_id"].unique())
+    roles = {"pedal_pct": "response", "not_a_column": "load"}
+    test = write_subset(df, trips[:1], tmp_path / "test.parquet", keep=True, roles=roles)
+    train = write_subset(df, trips[:1], tmp_path / "train.parquet", keep=False, roles=roles)
+    assert from_metadata(pq.read_schema(test).metadata) == {"pedal_pct": "response"}
+    got_test, got_train = pq.read_table(test).to_pandas(), pq.read_table(train).to_pandas()
+    assert sorted(got_test["trip_id"].unique()) == trips[:1]
+    assert sorted(got_train["trip_id"].unique()) == trips[1:]
+    assert len(got_test) + len(got_train) == len(df)
+    assert of_log(load_measured([train], "prius3").log)["pedal_pct"]["role"] == "response"
+
+
 def test_grade_options_of_the_script_declare_what_they_read(tmp_path):
     """Each grade option of the study's grid becomes the [measurement] a closed-loop
     equation declares: fused crossovers, per-trip offsets (∞), the logger's offset."""

@@ -36,7 +36,7 @@ def write_subset(df, trips, path, keep: bool, roles: dict | None = None):
     table = pa.Table.from_pandas(sub, preserve_index=False)
     kept = {c: r for c, r in (roles or {}).items() if c in sub.columns}
     if kept:
-        table = table.replace_schema_metadata(dict(table.schema.metadata or {}, **to_metadata(kept)))
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}), **to_metadata(kept)})
     write_parquet(path, table)
     return path
 
