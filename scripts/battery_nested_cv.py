@@ -124,7 +124,6 @@ def main() -> int:
     err = {h: {} for h in how}
     road = {h: {} for h in how}
     flagged = {}
-    F.GRADE_CHOICE, F.SELECTION_ENERGY = "joint", a.selection_energy
     with tempfile.TemporaryDirectory() as tmp:
         full = write_subset(df, [], Path(tmp) / "all.parquet", keep=False, roles=roles)
         head = read_as(full, I3_MEASUREMENT)  # the headline pipeline's reading (60-s fusion)
@@ -136,7 +135,7 @@ def main() -> int:
             m_train = load_checked(train, "bmw_i3")
             base_eq, _ = F.calibrate_physical(m_train, "i3_calibrated")
             tau, _, eq, sel, r = F.grade_and_physics(train, "bmw_i3", 0.0, base_eq.terms, m_train,
-                                                     "i3_closed")
+                                                     "i3_closed", choice="joint", energy=a.selection_energy)
             del m_train
             off = tau["logger_offset"]["offset_mps2"]
             closed = read_as(full, measurement_of(full, 0.0, True, tau["tau_s"], off))

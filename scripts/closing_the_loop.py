@@ -4,7 +4,7 @@
 
 The study — how the trips are split, what is fitted and chosen on the training trips only,
 how the held-out trips are scored — is :mod:`sumo_drvpw.validation.closing_the_loop` (its
-docstring is the method; the grade choices GRADE_CHOICE and SELECTION_ENERGY in
+docstring is the method; the grade choices GRADE_CHOICES and SELECTION_ENERGIES in
 ``closing_the_loop_fit``). This command takes the options, runs the study (each run's tracer
 report and closed-loop equation under ``<out>/closing-the-loop/``) and writes the Markdown
 ``<out>/closing-the-loop.md`` (scripts/closing_the_loop_report.py).
@@ -51,17 +51,16 @@ def _main(argv) -> int:
     ap.add_argument("--out", default="docs")
     ap.add_argument("--only", default="", help="comma list of i3, prius2, jlu (default: all)")
     ap.add_argument("--grade-choice", choices=fits.GRADE_CHOICES, default=fits.GRADE_CHOICE,
-                    help="how the grade source and the physical candidates are chosen (see GRADE_CHOICE)")
+                    help="how the grade source and the physical candidates are chosen (see GRADE_CHOICES)")
     ap.add_argument("--selection-energy", choices=fits.SELECTION_ENERGIES, default=fits.SELECTION_ENERGY,
-                    help="the per-trip energy whose error chooses the structure (see SELECTION_ENERGY)")
+                    help="the per-trip energy whose error chooses the structure (see SELECTION_ENERGIES)")
     a = ap.parse_args(argv)
-    fits.GRADE_CHOICE, fits.SELECTION_ENERGY = a.grade_choice, a.selection_energy
     from sumo_drvpw.fileio import write_text
 
     data, out = Path(a.data), Path(a.out)
     only = {s.strip() for s in a.only.split(",") if s.strip()}
     t0 = time.perf_counter()
-    cars = study.run(data, out / "closing-the-loop", only)
+    cars = study.run(data, out / "closing-the-loop", only, a.grade_choice, a.selection_energy)
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from closing_the_loop_report import render
 

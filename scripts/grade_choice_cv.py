@@ -6,7 +6,7 @@ cross-validation over all trips of the shared BMW i3 logs.
 Outer loop: trip-grouped 5-fold (fold j holds out every 5th trip in name order from the
 j-th). Inside each fold, on its training trips only, the grade source and the physical
 candidates are chosen the two ways the closing-the-loop study offers
-(``sumo_drvpw.validation.closing_the_loop_fit.GRADE_CHOICE``):
+(``sumo_drvpw.validation.closing_the_loop_fit.GRADE_CHOICES``):
 
 - **sequential**: the grade source from TAU_GRID_S with the calibrated terms
   (``choose_tau``), then the physical candidates on data read that way;
@@ -61,11 +61,10 @@ def main() -> int:
             base_eq, _ = F.calibrate_physical(m_train, "i3_calibrated")
             line = []
             for how in errs:
-                F.GRADE_CHOICE = how
                 # the closed-loop equation fitted on the training trips predicts the held-out
                 # trips, read with the same corrections (as scripts/closing_the_loop.py does)
                 tau, _, eq, sel, r = F.grade_and_physics(train, "bmw_i3", 0.0, base_eq.terms, m_train,
-                                                         "i3_closed")
+                                                         "i3_closed", choice=how)
                 m_held = corrected_measured(test, "bmw_i3", 0.0, True, tau["tau_s"],
                                             tau["logger_offset"]["offset_mps2"])
                 e = F.regime_eval(m_held, eq, 1.0 + r)["trip_energy"]["trips"]

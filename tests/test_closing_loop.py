@@ -592,9 +592,9 @@ def test_moving_check_separates_a_planted_standing_and_moving_constant(tmp_path)
 
 
 def test_joint_choice_judges_each_grade_source_by_its_own_closed_loop_structure(monkeypatch):
-    """validation.closing_the_loop_fit.GRADE_CHOICE: "sequential" takes the grade source whose
-    calibrated terms cross-validate best; "joint" the one whose closed-loop structure (its
-    own physical candidates) does — here a different source. The logger offset is left out
+    """validation.closing_the_loop_fit.grade_and_physics, choice: "sequential" takes the grade
+    source whose calibrated terms cross-validate best; "joint" (the default) the one whose
+    closed-loop structure (its own physical candidates) does — here a different source. The logger offset is left out
     of the grid when it cannot be estimated; the joint choice keeps the data read its way."""
     from types import SimpleNamespace
 
@@ -613,7 +613,7 @@ def test_joint_choice_judges_each_grade_source_by_its_own_closed_loop_structure(
         read.append(tau)
         return SimpleNamespace(tau=tau)
 
-    def stage(m, base, name):
+    def stage(m, base, name, energy="traction"):
         cv = {"mean_abs_error": table[m.tau][1], "max_abs_error": 2 * table[m.tau][1], "rmse_w": 1.0}
         return f"eq@{m.tau}", {"cv": cv, "chosen": [f"cand@{m.tau}"]}, 0.0
 
@@ -622,10 +622,9 @@ def test_joint_choice_judges_each_grade_source_by_its_own_closed_loop_structure(
     monkeypatch.setattr(mod, "_cv_args", lambda m: (m,))
     monkeypatch.setattr(phys, "trip_cv", lambda m, terms, energy="traction": {"mean_abs_error": table[m.tau][0],
                                                            "max_abs_error": 0.1, "rmse_w": 1.0})
-    monkeypatch.setattr(mod, "GRADE_CHOICE", "sequential")
-    tau, m, eq, sel, _ = mod.grade_and_physics("train.parquet", "car", 0.0, ["acc", "grade"], None, "x")
+    tau, m, eq, sel, _ = mod.grade_and_physics("train.parquet", "car", 0.0, ["acc", "grade"], None, "x",
+                                               choice="sequential")
     assert tau["tau_s"] == 300.0 and m.tau == 300.0 and eq == "eq@300.0"
-    monkeypatch.setattr(mod, "GRADE_CHOICE", "joint")
     read.clear()
     tau, m, eq, sel, _ = mod.grade_and_physics("train.parquet", "car", 0.0, ["acc", "grade"], None, "x")
     assert tau["joint"] and tau["tau_s"] == "1000 m" and m.tau == "1000 m" and eq == "eq@1000 m"

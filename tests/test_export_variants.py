@@ -134,6 +134,30 @@ def test_the_closing_loop_report_names_the_data_it_read_and_refuses_bad_input_in
     assert f"this run read {data}; the points below were written from the runs on the shared data" in md
 
 
+def test_the_closing_loop_command_hands_its_choices_to_the_study_and_keeps_none(tmp_path, monkeypatch):
+    """scripts/closing_the_loop.py gives --grade-choice and --selection-energy to the study as
+    arguments: a run without them uses the defaults, whatever an earlier run in the same
+    process chose. They were module globals the command set (the study's, once it moved into
+    the package), so a second run inherited the first one's choice as its default."""
+    from sumo_drvpw.validation import closing_the_loop as study
+    from sumo_drvpw.validation import closing_the_loop_fit as fits
+
+    seen = []
+
+    def run(data, out_dir, only, grade_choice=None, selection_energy=None):
+        # what the study would choose by: its arguments, else the module's values then
+        seen.append((grade_choice or fits.GRADE_CHOICE, selection_energy or fits.SELECTION_ENERGY))
+        return []
+
+    monkeypatch.setattr(study, "run", run)
+    mod = _closing_script()
+    args = ["--data", str(tmp_path / "data"), "--out", str(tmp_path / "out")]
+    assert mod.main(args + ["--grade-choice", "sequential", "--selection-energy", "net"]) == 0
+    assert mod.main(args) == 0
+    assert seen == [("sequential", "net"), ("joint", "traction")]
+    assert (fits.GRADE_CHOICE, fits.SELECTION_ENERGY) == ("joint", "traction")
+
+
 def test_validation_reads_i3_trips_the_overview_lacks(shared_data, tmp_path):
     """An i3 folder whose overview.csv lists only some of its trips (an export of a subset, a
     trip added later): the import notes each unlisted trip, and the validation split by

@@ -20,7 +20,7 @@ once in turn. The i3 is run on a second split fixed by the same rule from anothe
    is chosen from TAU_GRID_S together with the physical candidates of step 4: for every
    source its own candidates, and the source whose closed-loop structure has the lowest
    trip-grouped 5-fold cross-validated mean absolute trip traction-energy error on the
-   training trips (GRADE_CHOICE);
+   training trips (``closing_the_loop_fit.GRADE_CHOICE``, the default of ``grade_choice``);
 4. with at least 5 training trips, physical candidates in forms SUMO can evaluate
    (``fit.physical.PHYSICAL_CANDIDATES``: ρ(T, altitude) in the aero term, c_r(T),
    cold drivetrain drag, recuperation on its own coefficient, inertial power by direction, and a
@@ -58,9 +58,9 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.validation.closing_the_loop_checks import moving_check, wind_check
-from sumo_drvpw.validation.closing_the_loop_fit import (_cv_args, calibrate_physical, choose_tau, evaluate,
-                                                        fit_terms, grade_and_physics, physical_stage,
-                                                        regime_eval)
+from sumo_drvpw.validation.closing_the_loop_fit import (GRADE_CHOICE, SELECTION_ENERGY, _cv_args,
+                                                        calibrate_physical, choose_tau, evaluate, fit_terms,
+                                                        grade_and_physics, physical_stage, regime_eval)
 from sumo_drvpw.validation.closing_the_loop_read import (CHECK_DROPOUTS, _load, _offsets, _trip_inputs,
                                                          corrected_measured, input_checks, load_checked,
                                                          write_subset)
@@ -95,8 +95,10 @@ def split_trips(trips, every: int = HOLD_EVERY, second: bool = False):
     return [t[k - 1::k]] + ([t[2::k]] if second and len(t) >= 10 else [])
 
 
-def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
-    """One car: per held-out group, calibrate + diagnose on the rest, evaluate held out."""
+def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None, grade_choice=GRADE_CHOICE,
+               selection_energy=SELECTION_ENERGY):
+    """One car: per held-out group, calibrate + diagnose on the rest, evaluate held out
+    (``grade_choice``, ``selection_energy``: closing_the_loop_fit.grade_and_physics)."""
     from sumo_drvpw.report.diagnose import write_outputs
     from sumo_drvpw.fit.diagnose import DiagnoseOptions, diagnose
     from sumo_drvpw.model.equations import load_equation
@@ -122,10 +124,11 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
             physical = declared is None and n_train >= MIN_CV_TRIPS
             staged = None
             if acc_grade and physical:
-                staged = grade_and_physics(train, vehicle, lag, base_eq.terms, m_train, f"{name}_closed")
+                staged = grade_and_physics(train, vehicle, lag, base_eq.terms, m_train, f"{name}_closed",
+                                           grade_choice, selection_energy)
                 tau, m_corr = staged[0], staged[1]
             else:
-                tau = (choose_tau(train, vehicle, lag, base_eq.terms, m_train)
+                tau = (choose_tau(train, vehicle, lag, base_eq.terms, m_train, selection_energy)
                        if acc_grade and n_train >= MIN_CV_TRIPS else None)
                 m_corr = None
             tau_s = None if tau is None else tau["tau_s"]
@@ -146,7 +149,8 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
                 # a form SUMO can evaluate: physical candidates, not the log-only columns the
                 # tracer named (those are reported above)
                 final_eq, sel, rscale = (staged[2:] if staged is not None else
-                                         physical_stage(m_fit, list(base_eq.terms), f"{name}_closed"))
+                                         physical_stage(m_fit, list(base_eq.terms), f"{name}_closed",
+                                                        selection_energy))
                 rho = float(np.mean(m_fit.inputs.rho[m_fit.usable]))
                 from sumo_drvpw.fit.physical import physical_reading
                 final_info = {"free": final_eq.terms, "used": "unconstrained", "why": "",
@@ -194,7 +198,8 @@ def close_loop(name, df, vehicle, out_dir, declared=None, note="", roles=None):
     return {"name": name, "vehicle": vehicle, "note": note, "runs": runs}
 
 
-def final_fit(name, df, vehicle, out_dir, roles=None) -> dict | None:
+def final_fit(name, df, vehicle, out_dir, roles=None, grade_choice=GRADE_CHOICE,
+              selection_energy=SELECTION_ENERGY) -> dict | None:
     """The deliverable: the same pipeline on all trips of a car (calibration, tracer,
     corrections, physical candidates by trip-grouped CV), written as
     ``<out_dir>/<name>_all_trips/closed_equation.toml`` with its ``[measurement]``. Nothing
@@ -220,11 +225,11 @@ def final_fit(name, df, vehicle, out_dir, roles=None) -> dict | None:
         acc_grade = any(f["term"] == "[grade_accelerometer]" for f in res.report["findings"])
         if acc_grade:
             tau, m_corr, eq, sel, rscale = grade_and_physics(path, vehicle, lag, base_eq.terms, m,
-                                                             f"{name}_closed")
+                                                             f"{name}_closed", grade_choice, selection_energy)
         else:
             tau = None
             m_corr = corrected_measured(path, vehicle, lag, False)
-            eq, sel, rscale = physical_stage(m_corr, list(base_eq.terms), f"{name}_closed")
+            eq, sel, rscale = physical_stage(m_corr, list(base_eq.terms), f"{name}_closed", selection_energy)
         tau_s = None if tau is None else tau["tau_s"]
         floor = repeat_floor(m_corr, eq, sel, df)
     eq.measurement = m_corr.measurement
@@ -268,7 +273,7 @@ def repeat_floor(m, eq, sel, df) -> dict | None:
     return out
 
 
-def jlu(data: Path, out_dir: Path):
+def jlu(data: Path, out_dir: Path, grade_choice=GRADE_CHOICE, selection_energy=SELECTION_ENERGY):
     """Dyno-calibrated equation taken onto the road, then the loop closed on road trips."""
     from sumo_drvpw.data.adapters import read
     from sumo_drvpw.data.measured import load_measured
@@ -283,7 +288,7 @@ def jlu(data: Path, out_dir: Path):
     _log(f"[jlu] dyno equation: {dyno_eq.terms}")
     out = close_loop("jlu_road", road, "jlu_bev", out_dir, declared=dyno_eq,
                      note="declared: the equation calibrated on the 46 dynamometer tests",
-                     roles=road_rep.get("roles"))
+                     roles=road_rep.get("roles"), grade_choice=grade_choice, selection_energy=selection_energy)
     out["dyno_phys"] = dyno_phys
     with tempfile.TemporaryDirectory() as tmp:
         path = write_subset(road, sorted(road["trip_id"].unique()), Path(tmp) / "road.parquet", keep=True,
@@ -293,13 +298,17 @@ def jlu(data: Path, out_dir: Path):
     return out
 
 
-def run(data: Path, out_dir: Path, only=frozenset()) -> list[dict]:
+def run(data: Path, out_dir: Path, only=frozenset(), grade_choice: str = GRADE_CHOICE,
+        selection_energy: str = SELECTION_ENERGY) -> list[dict]:
     """Every car of the study whose logs are in the folder ``data`` (read in place through
     their adapters; ``only``: names among i3, prius2, jlu, empty for all), each run's tracer
     report and closed-loop equation written under ``out_dir``; a car whose folder is absent
-    is an entry saying so. Returns the cars' results, as the report renders them."""
+    is an entry saying so; ``grade_choice`` and ``selection_energy``: how the grade source and
+    the physical candidates are chosen (closing_the_loop_fit.grade_and_physics). Returns the
+    cars' results, as the report renders them."""
     from sumo_drvpw.data.adapters import read
 
+    how = {"grade_choice": grade_choice, "selection_energy": selection_energy}
     cars = []
     specs = [("i3", "bmw_i3", "bmw-i3-tum", "bmw_i3_tum", "target: mechanical motor power"),
              ("prius2", "prius2", "torquepro-prius2", "prius_gen2_torquepro",
@@ -311,13 +320,13 @@ def run(data: Path, out_dir: Path, only=frozenset()) -> list[dict]:
             cars.append({"name": key, "error": f"not run: {data / folder} not found"})
             continue
         df, rep = read(fmt, data / folder)
-        car = close_loop(key, df, vehicle, out_dir, note=note, roles=rep.get("roles"))
+        car = close_loop(key, df, vehicle, out_dir, note=note, roles=rep.get("roles"), **how)
         car["wind"] = wind_check(key, df, vehicle, car, roles=rep.get("roles")) if key in WIND_CHECK else None
-        car["all_trips"] = final_fit(key, df, vehicle, out_dir, roles=rep.get("roles"))
+        car["all_trips"] = final_fit(key, df, vehicle, out_dir, roles=rep.get("roles"), **how)
         cars.append(car)
     if not only or "jlu" in only:
         if (data / "jlu_bev_road").exists() and (data / "jlu_bev_dyno").exists():
-            cars.append(jlu(data, out_dir))
+            cars.append(jlu(data, out_dir, **how))
         else:
             cars.append({"name": "jlu_road", "error": "not run: jlu_bev_road/ or jlu_bev_dyno/ not found"})
     return cars

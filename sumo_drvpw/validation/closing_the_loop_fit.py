@@ -1,7 +1,9 @@
 """The closing-the-loop study's fits (:mod:`sumo_drvpw.validation.closing_the_loop`): the
 declared equation calibrated and read physically, least squares under physical constraints,
 held-out metrics, and the grade source and the physical candidates chosen by trip-grouped
-cross-validation on the training trips only (GRADE_CHOICE, SELECTION_ENERGY)."""
+cross-validation on the training trips only (how: a grade choice of GRADE_CHOICES and a
+selection energy of SELECTION_ENERGIES, given to each call; GRADE_CHOICE and SELECTION_ENERGY
+are the defaults)."""
 
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from sumo_drvpw.validation.closing_the_loop_read import LOGGER_OFFSET, corrected
 #: data.corrections.fused_sin_grade_distance); numbers are crossovers in time [s] (their slow
 #: part weights standing samples too, and the grade's integral drifts from the elevation).
 TAU_GRID_S = (60.0, 300.0, "250 m", "500 m", "1000 m", "2000 m", "4000 m", math.inf, LOGGER_OFFSET)
-#: how the grade source and the physical candidates are chosen (scripts/closing_the_loop.py sets it):
+#: how the grade source and the physical candidates are chosen (``choice`` of grade_and_physics):
 #: "joint" (default) — for every grade source its own physical candidates, and the grade
 #: source whose closed-loop structure cross-validates best; "sequential" — the grade source
 #: with the calibrated terms first (a missing temperature term then dominates the trip errors
@@ -31,16 +33,16 @@ TAU_GRID_S = (60.0, 300.0, "250 m", "500 m", "1000 m", "2000 m", "4000 m", math.
 #: source once more with the closed-loop terms. The comparison, a nested cross-validation
 #: over all trips: scripts/grade_choice_cv.py, docs/closing-the-loop.md ("What this shows")
 GRADE_CHOICES = ("joint", "sequential", "recheck")
-GRADE_CHOICE = "joint"
+GRADE_CHOICE = "joint"  # the default
 #: the per-trip energy whose cross-validated error chooses the grade source and the physical
-#: candidates (scripts/closing_the_loop.py sets it): "traction" (default; Σ max(P, 0)·Δt, the issue's
+#: candidates (``energy`` of the choosing functions): "traction" (default; Σ max(P, 0)·Δt, the issue's
 #: measure) or "net" (Σ P·Δt: recuperation and the climb's potential energy judged too, what a
 #: battery follows). In a nested cross-validation over the 50 i3 trips "net" chose the same
 #: structure in every fold and lowered the held-out traction, net and battery errors, but it
 #: was tried after the traction result was seen (a descent's net error is bounded:
 #: fit.trip_energy.net_energy_errors): scripts/battery_nested_cv.py, docs/energy-chain.md
 SELECTION_ENERGIES = ("traction", "net")
-SELECTION_ENERGY = "traction"
+SELECTION_ENERGY = "traction"  # the default
 
 
 def evaluate(m, equations) -> dict:
@@ -111,7 +113,7 @@ def each_grade_source(path, vehicle, lag, off):
         yield tau, corrected_measured(path, vehicle, lag, True, tau, off["offset_mps2"])
 
 
-def choose_tau(train, vehicle, lag, terms, m_train) -> dict:
+def choose_tau(train, vehicle, lag, terms, m_train, energy: str = SELECTION_ENERGY) -> dict:
     """The grade source from TAU_GRID_S (fusion crossovers, the accelerometer with per-trip
     offsets, the accelerometer with the logger's offset estimated on ``m_train``'s inputs)
     with the lowest trip-grouped cross-validated mean absolute trip traction-energy error of
@@ -121,39 +123,41 @@ def choose_tau(train, vehicle, lag, terms, m_train) -> dict:
     off = logger_offset(m_train)
     cv = {}
     for tau, m in each_grade_source(train, vehicle, lag, off):
-        cv[tau] = _cv_summary(trip_cv(*_cv_args(m), list(terms), energy=SELECTION_ENERGY))
+        cv[tau] = _cv_summary(trip_cv(*_cv_args(m), list(terms), energy=energy))
     best = min(cv, key=lambda t: cv[t]["mean_abs_error"])
-    return {"tau_s": best, "cv": cv, "logger_offset": off, "energy": SELECTION_ENERGY}
+    return {"tau_s": best, "cv": cv, "logger_offset": off, "energy": energy}
 
 
-def grade_and_physics(path, vehicle, lag, base_terms, m_train, name):
+def grade_and_physics(path, vehicle, lag, base_terms, m_train, name, choice: str = GRADE_CHOICE,
+                      energy: str = SELECTION_ENERGY):
     """The grade source and the physical candidates, chosen by trip-grouped CV on the
-    training log ``path`` as GRADE_CHOICE says: jointly (:func:`joint_grade_and_physics`), or
+    training log ``path`` as ``choice`` (GRADE_CHOICES) says, on the per-trip ``energy``
+    (SELECTION_ENERGIES): jointly (:func:`joint_grade_and_physics`), or
     the grade source with the calibrated terms (:func:`choose_tau`) and then the physical
     candidates on data read that way (:func:`physical_stage`) — with "recheck", the grade
     source once more with the closed-loop terms and, if that choice differs, the physical
     candidates again on data read the new way. Returns (tau, m_corr, equation, selection,
     regime r); ``tau["first"]`` is the first choice when the second replaced it."""
-    if GRADE_CHOICE == "joint":
-        return joint_grade_and_physics(path, vehicle, lag, base_terms, m_train, name)
-    tau = choose_tau(path, vehicle, lag, base_terms, m_train)
+    if choice == "joint":
+        return joint_grade_and_physics(path, vehicle, lag, base_terms, m_train, name, energy)
+    tau = choose_tau(path, vehicle, lag, base_terms, m_train, energy)
     off = tau["logger_offset"]["offset_mps2"]
     m_corr = corrected_measured(path, vehicle, lag, True, tau["tau_s"], off)
-    eq, sel, r = physical_stage(m_corr, list(base_terms), name)
-    if GRADE_CHOICE != "recheck":
+    eq, sel, r = physical_stage(m_corr, list(base_terms), name, energy)
+    if choice != "recheck":
         return tau, m_corr, eq, sel, r
-    again = choose_tau(path, vehicle, lag, eq.terms, m_train)
+    again = choose_tau(path, vehicle, lag, eq.terms, m_train, energy)
     again["terms"] = list(eq.terms)
     if again["tau_s"] == tau["tau_s"]:
         tau["recheck"] = again
         return tau, m_corr, eq, sel, r
     again["first"] = tau
     m_corr = corrected_measured(path, vehicle, lag, True, again["tau_s"], off)
-    eq, sel, r = physical_stage(m_corr, list(base_terms), name)
+    eq, sel, r = physical_stage(m_corr, list(base_terms), name, energy)
     return again, m_corr, eq, sel, r
 
 
-def joint_grade_and_physics(path, vehicle, lag, base_terms, m_train, name):
+def joint_grade_and_physics(path, vehicle, lag, base_terms, m_train, name, energy: str = SELECTION_ENERGY):
     """The grade source and the physical candidates chosen together on the training log
     ``path``: for every grade source of TAU_GRID_S, the data read that way and the physical
     candidates chosen on it (:func:`physical_stage`, trip-grouped 5-fold CV); the grade source
@@ -164,15 +168,15 @@ def joint_grade_and_physics(path, vehicle, lag, base_terms, m_train, name):
     off = logger_offset(m_train)
     cv, best = {}, None
     for tau, m in each_grade_source(path, vehicle, lag, off):
-        eq, sel, r = physical_stage(m, list(base_terms), name)
+        eq, sel, r = physical_stage(m, list(base_terms), name, energy)
         cv[tau] = dict(_cv_summary(sel["cv"]), chosen=list(sel["chosen"]))
         if best is None or cv[tau]["mean_abs_error"] < cv[best[0]]["mean_abs_error"]:
             best = (tau, m, eq, sel, r)  # one Measured kept at a time: each is the whole log
     tau, m, eq, sel, r = best
-    return {"tau_s": tau, "cv": cv, "logger_offset": off, "joint": True, "energy": SELECTION_ENERGY}, m, eq, sel, r
+    return {"tau_s": tau, "cv": cv, "logger_offset": off, "joint": True, "energy": energy}, m, eq, sel, r
 
 
-def physical_stage(m, base_terms, name):
+def physical_stage(m, base_terms, name, energy: str = SELECTION_ENERGY):
     """Physical candidates chosen on whole training trips (fit.physical.select_physical),
     then the closed-loop equation fitted on all training trips (traction coefficients; with
     the regime, recuperation on its own scale 1 + r kept in the provenance)."""
@@ -181,7 +185,7 @@ def physical_stage(m, base_terms, name):
     from sumo_drvpw.model.terms import term_matrix
 
     args = _cv_args(m)
-    sel = select_physical(*args, list(base_terms), energy=SELECTION_ENERGY)
+    sel = select_physical(*args, list(base_terms), energy=energy)
     X = term_matrix(sel["terms"], m.inputs)
     ok = args[2] & np.all(np.isfinite(X), axis=1)
     b, r = regime_fit(X[ok], args[1][ok], sel["regime"])
