@@ -11,6 +11,8 @@ Mapping file::
     na_values = ["-", "N/A"]  # cells read as missing
     keep_unmapped = true      # keep other columns as snake_case extras (default true)
     skip_rows = 2             # CSV lines before the header (an app's title lines; default 0)
+    time_step_s = 1.0         # a table without a time column: its rows follow at this step
+                              # [s] (time_s = data row × step; then time_s is not mapped)
 
     [columns."Speed"]         # source column label
     name = "speed_mps"        # canonical or extra name; the suffix must fit the unit
@@ -23,7 +25,7 @@ Mapping file::
     [columns."Trip"]
     name = "trip_id"          # text; without it trip_id = file stem
 
-``time_s`` and ``speed_mps`` must be mapped. Units: m/s km/h mph ft/s · m km ft mi ·
+``time_s`` (or ``options.time_step_s``) and ``speed_mps`` must be mapped. Units: m/s km/h mph ft/s · m km ft mi ·
 s ms min h · °C °F K · rpm rad/s · W kW hp · N kN lbf · Nm lbf·ft · kg t lb · m/s² g ·
 kPa Pa hPa bar psi · V mV · A mA · % · rad deg · J kJ Wh kWh · l/h gal/h · g/s kg/h lb/min · "" (none).
 Temperatures go to °C (``_c``), rotational speeds to rpm (``_rpm``), angles to rad
@@ -49,7 +51,7 @@ from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
 OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped",
-           "skip_rows", "dbc", "mdf_trips", "isotp_layout", "soc_capacity_kwh"}
+           "skip_rows", "dbc", "mdf_trips", "isotp_layout", "soc_capacity_kwh", "time_step_s"}
 #: lines of a CSV searched for a mapped label that is not in the header (the hint of the error)
 HEADER_SEARCH_LINES = 50
 #: the largest battery options.soc_capacity_kwh accepts [kWh] (a heavy truck's is about 1 MWh)
@@ -123,9 +125,15 @@ def load_mapping(path, mdf: bool = False) -> dict:
     if "time_format" in opts and not any(e["kind"] == "datetime" for e in entries.values()):
         raise UserError(f"{p}: options.time_format is for timestamps: it goes with a time "
                         "column read as dates (options.time_unit or its unit = \"datetime\")")
-    for need in ("speed_mps",) if mdf else ("time_s", "speed_mps"):
+    step = out["time_step_s"]
+    if step is not None and "time_s" in names:
+        raise UserError(f"{p}: options.time_step_s gives a table without a time column its time "
+                        "from the row number: map no column to 'time_s' beside it (or drop the option)")
+    for need in ("speed_mps",) if mdf or step is not None else ("time_s", "speed_mps"):
         if need not in names:
-            raise UserError(f"{p}: no source column is mapped to '{need}' (required)")
+            raise UserError(f"{p}: no source column is mapped to '{need}' (required"
+                            + ("; a table whose rows follow at a fixed rate without a time column: "
+                               "options.time_step_s = <seconds between rows>)" if need == "time_s" else ")"))
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise UserError(f"{p}: more than one source column is mapped to '{dup[0]}'")
@@ -174,6 +182,11 @@ def _options(p: Path, doc: dict) -> dict:
                             or not 0 < cap <= MAX_SOC_CAPACITY_KWH):
         raise UserError(f"{p}: options.soc_capacity_kwh must be the battery energy [kWh] that the "
                         f"logged SOC's 0–100 % spans (> 0, ≤ {MAX_SOC_CAPACITY_KWH:g}), got {cap!r}")
+    step = opts.get("time_step_s")
+    if step is not None and (isinstance(step, bool) or not isinstance(step, (int, float))
+                             or not 0 < step < math.inf):
+        raise UserError(f"{p}: options.time_step_s must be the seconds between a table's rows (> 0), "
+                        f"got {step!r}")
     na = opts.get("na_values", ["-", ""])
     if isinstance(na, str):
         na = [na]
@@ -183,7 +196,8 @@ def _options(p: Path, doc: dict) -> dict:
             "skip_rows": skip, "dbc": _dbc_files(p, opts.get("dbc", [])),
             "mdf_trips": _choice(p, opts, "mdf_trips", ("file", "folder")),
             "isotp_layout": _choice(p, opts, "isotp_layout", ISOTP_LAYOUTS),
-            "soc_capacity_kwh": None if cap is None else float(cap)}
+            "soc_capacity_kwh": None if cap is None else float(cap),
+            "time_step_s": None if step is None else float(step)}
 
 
 def _choice(p: Path, opts: dict, key: str, allowed: tuple[str, ...]) -> str:
@@ -399,6 +413,10 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
             if "valid" in e:
                 x = x.where(_valid_flag(raw, e["valid"], path, label, m, na) != 0)
             out.append((e["name"], x * e["factor"] + e["offset"]))
+    if m.get("time_step_s") is not None:  # no time column: the rows follow at a fixed step
+        out.insert(0, ("time_s", pd.Series(np.arange(len(raw)) * m["time_step_s"], index=raw.index)))
+        rep["notes"].append(f"time from the row number: options.time_step_s = {m['time_step_s']:g} s "
+                            "between data rows (data row 0 at 0 s)")
     names = unique_names([n for n, _ in out])
     df = pd.DataFrame(dict(zip(names, (x for _, x in out))), index=raw.index)
     if "trip_id" in df:
@@ -455,17 +473,37 @@ def _seconds(t: pd.Series, time_format, rep: dict) -> pd.Series:
 
 
 def _split_trips(df, path, rep):
-    """Clean time per trip when the file carries its own trip_id column."""
+    """Clean time per trip when the file carries its own trip_id column; each trip's notes
+    (why rows went: time going backwards, …) are the file's, named by trip."""
     parts = []
     for trip, g in df.groupby("trip_id", sort=False):
         sub = new_report(path, str(trip), len(g))
         parts.append(clean_time_and_speed(g, f"{path} (trip {trip})", sub))
         for k, n in sub["dropped"].items():
             rep["dropped"][k] = rep["dropped"].get(k, 0) + n
+        rep["notes"] += [f"trip {trip}: {n}" + (_restart_hint(g) if n.startswith("time going backwards") else "")
+                         for n in sub["notes"]]
     out = pd.concat(parts)
     rep["kept"] = int(len(out))
     rep["trip_id"] = ",".join(map(str, out["trip_id"].unique()))
     return out.reset_index(drop=True), rep
+
+
+def _restart_hint(g: pd.DataFrame) -> str:
+    """'; …two recordings share this trip id…' when a trip's time starts over (steps back to
+    its first time or before, after other rows: a trip number unique only per vehicle or per
+    day, as VED's with its VehId), else ''."""
+    t = g["time_s"].to_numpy(float)
+    ok = np.isfinite(t)
+    t = t[ok]
+    if len(t) < 2:
+        return ""
+    i = np.flatnonzero((np.diff(t) < 0) & (t[1:] <= t[0]))
+    if not len(i):
+        return ""
+    return (f"; its time starts over at data row {g.index[np.flatnonzero(ok)[i[0] + 1]]}: two recordings "
+            "share this trip id (a trip number unique only per vehicle or day, as VED's Trip with its "
+            "VehId) — give each recording a trip id of its own to keep both")
 
 
 def read(paths, columns):
@@ -483,6 +521,9 @@ def read(paths, columns):
         raise UserError(f"{first}: an ASAM MDF file among CSV/Parquet files: import MDF files "
                         "on their own (their mapping takes the time and units from the file)")
     m = load_mapping(columns, mdf=kinds == {True})
+    if kinds == {True} and m["time_step_s"] is not None:
+        raise UserError(f"{m['path']}: options.time_step_s gives a table without a time column its "
+                        "time: an MDF file carries its own (drop the option)")
     if kinds == {True}:
         groups = {f: None for f in files}  # each file a trip, or each folder's files one trip
         if m["mdf_trips"] == "folder":

@@ -114,7 +114,7 @@ def _table_columns(path: Path, m: dict) -> list[dict]:
 #: guesses of the mapping sketch
 GUESSES = {
     "time_s": ("time", r"time\b|zeit|timestamp|^t$", r"trip|duration|since"),
-    "speed_mps": ("speed", r"speed|velocity|geschw|vitesse|\bspd", r"wheel ?speed|motor|engine|fan|accuracy|max|limit|set"),
+    "speed_mps": ("speed", r"speed|velocity|geschw|vitesse|\bspd|\bvel\b", r"wheel ?speed|motor|engine|fan|accuracy|max|limit|set"),
     "elevation_m": ("length", r"elev|altitude|höhe|hoehe|height", r"accuracy|valid"),
     "ambient_c": ("temperature", r"ambient|amb\b|outside|outdoor|außen|aussen|environment", None),
     "battery_voltage_v": ("voltage", r"batt|\bhv\b|pack|traction|reess", r"cell|min|max|12 ?v|aux"),
@@ -130,6 +130,8 @@ GUESSES = {
     # a petrol engine's fuel target without a fuel-flow sensor (OBD PID 0x10), and a fuel flow
     "maf_gps": ("mass_flow", r"air ?flow|(?<![a-z])maf(?![a-z])|mass air", r"temp|pressure|volt"),
     "fuel_rate_lph": ("volume_flow", r"fuel", r"avg|average|trip|total|used|level|pressure|temp|trim|remaining"),
+    # a fuel mass flow (a PEMS's carbon balance, a truck's ECU): the fuel target in g/s, not an air flow
+    "fuel_rate_gps": ("mass_flow", r"fuel", r"avg|average|trip|total|used|level|pressure|temp|trim|remaining|air"),
     # an electric drive's power (+ driving, − recuperating): the driving power at its output
     "power_w": ("power", r"(motor|drive|traction|wheel|e-?machine|\bmg2\b).*(power|pwr)|(power|pwr).*(motor|drive|traction|wheel)",
                 r"aux|heat|hvac|a/?c\b|climate|limit|max|avail|request|charg"),
@@ -182,7 +184,9 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
                 lines.append(f"# {name}: perhaps {', '.join(unitless[:3])} (no unit recognised in the file: "
                              "give its unit)")
             elif name in ("time_s", "speed_mps"):
-                lines.append(f"# no label recognised as {name} (required): map one")
+                lines.append(f"# no label recognised as {name} (required): map one"
+                             + ("; rows at a fixed rate without a time column: [options] time_step_s = "
+                                "<seconds between rows>" if name == "time_s" and not mdf else ""))
             continue
         # the vehicle's own first; among those the best covered: an MDF channel's mean rate over
         # its group's span (a bursty one reads low), a table column's values

@@ -1,0 +1,106 @@
+"""Defects found rehearsing a public heavy-duty truck log nobody here had used (2026-11-29,
+docs/adapters.md): Virginia Tech's PEMS export of two diesel trucks (Torreskai0722/FEAD,
+``VT-Dataset/veh00N_all.csv``: one row per second, no time column, ``vel (mph)``,
+``fuel (g/s)``, ``elevation (m)``, a ``phase_num`` that recurs), and the Vehicle Energy
+Dataset's trip number, unique only with its vehicle. Synthetic files only."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.data.adapters import read
+from sumo_drvpw.errors import UserError
+
+HEADER = "CO2 (g/s),vel (mph),fuel (g/s),engine (rpm),elevation (m),phase_num"
+
+
+def _pems_csv(path, phases):
+    """A VT-style export: rows one second apart, no time column; ``phases`` = [(phase, n)]
+    written in that order (a phase number may recur)."""
+    rows = [HEADER]
+    for phase, n in phases:
+        for k in range(n):
+            rows.append(f"{2.0 + k / 10:g},{min(k, 40):g},{0.6 + k / 100:g},{650 + 20 * k:g},{100 + k / 10:g},{phase}")
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    return path
+
+
+def _mapping(path, options="time_step_s = 1\n", time=""):
+    path.write_text("[options]\n" + options + time
+                    + '[columns."vel (mph)"]\nname = "speed_mps"\nunit = "mph"\n'
+                    + '[columns."fuel (g/s)"]\nname = "fuel_rate_gps"\nunit = "g/s"\n'
+                    + '[columns."phase_num"]\nname = "trip_id"\n', encoding="utf-8")
+    return path
+
+
+def test_a_table_without_a_time_column_takes_its_time_from_the_row_number(tmp_path):
+    # the export had no time column, and the mapping no way to say 'one row a second': the
+    # user had to add a column by hand. options.time_step_s gives time_s = data row × step;
+    # a phase that recurs after other rows keeps the pause between its runs
+    src = _pems_csv(tmp_path / "veh.csv", [(1, 30), (2, 20), (1, 25)])
+    df, rep = read("columns", [src], _mapping(tmp_path / "map.toml", "time_step_s = 0.5\n"))
+    assert rep["rows_read"] == 75 and rep["kept"] == 75
+    one = df[df["trip_id"] == "1"]["time_s"].to_numpy()
+    np.testing.assert_allclose(one, np.r_[np.arange(30), np.arange(50, 75)] * 0.5)
+    np.testing.assert_allclose(df[df["trip_id"] == "2"]["time_s"], np.arange(30, 50) * 0.5)
+    assert any("time_step_s = 0.5 s" in n for n in rep["files"][0]["notes"]), rep["files"][0]["notes"]
+
+
+@pytest.mark.parametrize("options,time,says", [
+    ("time_step_s = 0\n", "", "options.time_step_s must be the seconds between a table's rows (> 0), got 0"),
+    ("time_step_s = true\n", "", "options.time_step_s must be"),
+    ("time_step_s = 1\n", '[columns."engine (rpm)"]\nname = "time_s"\n', "map no column to 'time_s' beside it"),
+    ("", "", "no source column is mapped to 'time_s' (required; a table whose rows follow at a fixed rate "
+             "without a time column: options.time_step_s"),
+])
+def test_the_time_step_is_checked_and_offered_when_no_time_is_mapped(tmp_path, options, time, says):
+    src = _pems_csv(tmp_path / "veh.csv", [(1, 10)])
+    with pytest.raises(UserError) as e:
+        read("columns", [src], _mapping(tmp_path / "map.toml", options, time))
+    assert says in str(e.value) and "map.toml" in str(e.value)
+
+
+def test_the_sketch_maps_vel_and_a_fuel_mass_flow_and_offers_the_time_step(tmp_path, capsys):
+    # the sketch saw no speed in 'vel (mph)', no fuel target in 'fuel (g/s)' (it guessed a
+    # fuel rate in L/h only) and said of the time only 'map one'
+    src = _pems_csv(tmp_path / "veh.csv", [(1, 20)])
+    assert cli_main(["import", "columns", str(src), "--list"]) == 0
+    out = capsys.readouterr().out
+    sk = out[out.index("# from "):]
+    for want in ('[columns."vel (mph)"]\nname = "speed_mps"\nunit = "mph"',
+                 '[columns."fuel (g/s)"]\nname = "fuel_rate_gps"\nunit = "g/s"',
+                 "[options] time_step_s = <seconds between rows>"):
+        assert want in sk, sk
+    assert "CO2" not in sk
+    (tmp_path / "map.toml").write_text("[options]\ntime_step_s = 1\n" + sk, encoding="utf-8")
+    assert cli_main(["import", "columns", str(src), "--columns", str(tmp_path / "map.toml"),
+                     "--out", str(tmp_path / "veh.parquet")]) == 0
+    from sumo_drvpw.data.log import read_log
+
+    df = read_log(tmp_path / "veh.parquet").df
+    np.testing.assert_allclose(df["time_s"], np.arange(20.0))
+    np.testing.assert_allclose(df["fuel_rate_gps"], 0.6 + np.arange(20) / 100)
+
+
+def test_two_recordings_under_one_trip_id_are_named_not_only_counted(tmp_path):
+    # VED numbers trips per vehicle ("each combination of VehId, Trip is unique"): two cars'
+    # trip 706 in one weekly file, mapped by Trip alone, lost the second car's rows as 'time
+    # going backwards' with nothing but the count — a trip column's notes were dropped
+    rows = ["DayNum,VehId,Trip,Timestamp(ms),Vehicle Speed[km/h]"]
+    for veh in (8, 10):
+        rows += [f"1.{veh},{veh},706,{i * 1000},{10 + i}" for i in range(20)]
+    src = tmp_path / "VED_171101_week.csv"
+    src.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    m = tmp_path / "map.toml"
+    m.write_text('[options]\ntime_unit = "ms"\n[columns."Trip"]\nname = "trip_id"\n[columns."Timestamp(ms)"]\n'
+                 'name = "time_s"\n[columns."Vehicle Speed[km/h]"]\nname = "speed_mps"\nunit = "km/h"\n',
+                 encoding="utf-8")
+    df, rep = read("columns", [src], m)
+    f = rep["files"][0]
+    assert len(df) == 20 and f["dropped"]["time going backwards"] == 19
+    note = [n for n in f["notes"] if "time going backwards" in n]
+    assert len(note) == 1, f["notes"]
+    assert note[0].startswith("trip 706: ") and "starts over at data row 20" in note[0]
+    assert "two recordings share this trip id" in note[0]
