@@ -96,6 +96,39 @@ def test_a_plausible_chain_has_no_warning(tmp_path, capsys):
     assert "warnings" not in eq.chain.provenance and "power_range_w" in eq.chain.provenance
 
 
+def test_a_zero_output_fuel_far_above_the_logs_own_idle_is_flagged(tmp_path, capsys):
+    # a rehearsal's PEMS logs of a diesel truck (docs/adapters.md): the Willans line, flattened
+    # by a noisy grade, put 99 kW at zero output where the truck stood at 10 kW (1.35 L/h) —
+    # 9.93 L/h, inside a 15-L engine's idle band, and nothing said. Here the plant burns 8 kW
+    # at zero output while driving (0.89 L/h: a plausible idle by itself) but 1.5 kW standing
+    # with the engine idling: the fit's intercept is then about 5× the log's idle
+    from sumo_drvpw.fit.chain_checks import idle_over_standing_note
+
+    plant = EnergyChain(predicts="fuel", idle_fuel_power_w=8000.0, marginal_efficiency=0.35,
+                        engine_off_below_w=-np.inf)
+    log, road, p = _planted_fuel_log(tmp_path, plant)
+    df = __import__("pandas").read_csv(log)
+    g = FUELS["gasoline"]
+    df.loc[df["speed_mps"] < 0.1, "fuel_flow_rate_hour_lph"] = 1500.0 / g["lhv_j_per_kg"] / g["density_kg_per_l"] * 3600.0
+    df.to_csv(log, index=False)
+    from sumo_drvpw.cli import main as cli_main
+
+    assert cli_main(["calibrate", str(log), "--target", "fuel", "--equation", str(road),
+                     "--out", str(tmp_path / "eq.toml")]) == 0
+    out = capsys.readouterr().out
+    eq = load_equation(tmp_path / "eq.toml")
+    assert eq.chain.engine_off_below_w == -np.inf and eq.chain.idle_fuel_power_w > 7000.0
+    r = eq.chain.reading["idle_fuel_power_w"]
+    assert "IMPLAUSIBLE: " in r and "× the fuel the log's engine burns standing (0.17 L/h over 79 s" in r, r
+    assert "warning: energy chain idle_fuel_power_w" in out
+    # the rule itself: only an engine that runs at stops and that the log shows idling there
+    idling = np.array([80.0, 80.0, 80.0 * 1500.0])
+    assert idle_over_standing_note(6100.0, -np.inf, idling, "gasoline").startswith("; IMPLAUSIBLE: 4.1×")
+    assert idle_over_standing_note(5900.0, -np.inf, idling, "gasoline") == ""
+    assert idle_over_standing_note(9000.0, 0.0, idling, "gasoline") == ""              # stops at rest
+    assert idle_over_standing_note(9000.0, -np.inf, np.array([80.0, 20.0, 3e4]), "gasoline") == ""  # not idling
+
+
 def test_a_power_split_hybrid_whose_engine_never_rests_at_light_load(tmp_path, capsys):
     # the engine runs at any positive driving power: no electric driving, as no Prius does
     plant = EnergyChain(predicts="fuel", idle_fuel_power_w=9000.0, marginal_efficiency=0.38,

@@ -140,6 +140,36 @@ def standing_fuel_note(standing, fuel: str, displacement_l: float | None = None)
             "in other units, or the wrong fuel declared — the chain fits that target, not the car's fuel")
 
 
+#: the most a fuel chain's zero-output fuel (in gear, at driving engine speeds) plausibly
+#: exceeds the fuel the same engine burns standing with the engine idling, as the log shows
+#: it: friction and pumping grow with engine speed, yet the EPA fleet fit's zero-output
+#: fuel is about 1.5× the idle fuel of [DOE861] per litre (0.45 against 0.30 L/h per litre,
+#: docs/epa-fleet.md) and a warm truck's or car's accessories run standing too. Beyond it
+#: the Willans line is flattened — its slope (the marginal efficiency) too high, its
+#: intercept booked at every stop — by noise in the driving power: a grade from a noisy
+#: elevation, a lag between fuel and speed, a mass or body declared wrong. A rehearsal's
+#: heavy-duty PEMS logs (docs/adapters.md): 99 kW fitted where the truck stood at 10 kW.
+IDLE_OVER_STANDING_MAX = 4.0
+
+
+def idle_over_standing_note(value_w: float, engine_off_below_w: float, standing, fuel: str) -> str:
+    """Why an engine's zero-output fuel is implausible against the log's own fuel at
+    standstill (:data:`IDLE_OVER_STANDING_MAX`), when the engine runs at stops (always on)
+    and the log shows it idling there; else ''."""
+    from sumo_drvpw.fit.chain_fuel import idles_at_stops
+
+    if engine_off_below_w != -np.inf or standing is None or len(standing) < 3 or not idles_at_stops(standing):
+        return ""
+    idle_w = standing[2] / standing[1]
+    if not idle_w > 0 or value_w <= IDLE_OVER_STANDING_MAX * idle_w:
+        return ""
+    return (f"; IMPLAUSIBLE: {value_w / idle_w:.1f}× the fuel the log's engine burns standing "
+            f"({fuel_l_per_h(idle_w, fuel):.2f} L/h over {standing[1]:.0f} s; in gear at most about "
+            f"{IDLE_OVER_STANDING_MAX:g}×): a Willans line flattened by noise in the driving power (a grade "
+            "from a noisy elevation, a lag between fuel and speed, a mass or body declared wrong) books it at "
+            "every stop, and its marginal efficiency reads too high")
+
+
 def engine_off_note(value_w: float, powertrain: str | None, idle_l_per_h: float) -> str:
     """Why a power-split hybrid's chain that starts the engine at any positive driving
     power is implausible (``idle_l_per_h``: its zero-output fuel [L/h])."""
@@ -180,9 +210,10 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
         params["idle_fuel_power_w"]["reading"] += idle_fuel_note(
             chain.idle_fuel_power_w, chain.engine_off_below_w, chain.fuel, powertrain,
             vehicle.powertrain.get("displacement_l") if vehicle is not None else None)
-        params["idle_fuel_power_w"]["reading"] += standing_fuel_note(
-            getattr(fit, "standing", None), chain.fuel,
-            vehicle.powertrain.get("displacement_l") if vehicle is not None else None)
+        target_note = standing_fuel_note(getattr(fit, "standing", None), chain.fuel,
+                                         vehicle.powertrain.get("displacement_l") if vehicle is not None else None)
+        params["idle_fuel_power_w"]["reading"] += target_note or idle_over_standing_note(
+            chain.idle_fuel_power_w, chain.engine_off_below_w, getattr(fit, "standing", None), chain.fuel)
         if "engine_off_below_w" in params:
             params["engine_off_below_w"]["reading"] += engine_off_note(
                 chain.engine_off_below_w, powertrain, fuel_l_per_h(chain.idle_fuel_power_w, chain.fuel))
