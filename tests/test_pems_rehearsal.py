@@ -104,3 +104,50 @@ def test_two_recordings_under_one_trip_id_are_named_not_only_counted(tmp_path):
     assert len(note) == 1, f["notes"]
     assert note[0].startswith("trip 706: ") and "starts over at data row 20" in note[0]
     assert "two recordings share this trip id" in note[0]
+
+
+def _truck(tmp_path, mass_kg):
+    veh = tmp_path / f"truck{mass_kg}.toml"
+    veh.write_text(f'[vehicle]\nname = "truck"\nmass_kg = {mass_kg}\n[body]\ndrag_coefficient = 0.62\n'
+                   'frontal_area_m2 = 10.0\nrolling_coefficient = 0.0065\n[powertrain]\ntype = "direct"\n'
+                   'fuel = "diesel"\ndisplacement_l = 15.0\n', encoding="utf-8")
+    return veh
+
+
+def _truck_log(tmp_path, mass_kg):
+    """Two 1-Hz trips with a planted wheel power of a ``mass_kg`` vehicle and its fuel."""
+    import pandas as pd
+
+    frames = []
+    for trip in ("a", "b"):
+        t = np.arange(1200.0)
+        v = (12 + 8 * np.sin(t / 60.0 + (trip == "b"))) * np.clip((t - 30.0) / 60.0, 0.0, 1.0)  # 30 s standing
+        a = np.gradient(v, t)
+        p = mass_kg * v * (1.05 * a + 9.81 * 0.0065) + 3.7 * v ** 3
+        fuel_w = 30000.0 + np.maximum(p, 0.0) / 0.4
+        frames.append(pd.DataFrame({"trip_id": trip, "time_s": t, "speed_mps": v, "power_w": p,
+                                    "fuel_rate_gps": fuel_w / 43.1e3}))
+    log = tmp_path / f"log{mass_kg}.csv"
+    pd.concat(frames).to_csv(log, index=False)
+    return log
+
+
+@pytest.mark.parametrize("mass_kg,extra,warned", [
+    (30000, [], True),                                                            # road load, truck
+    (30000, ["--target", "fuel", "--equation", "vsp_spec"], True),                # fuel chain, truck
+    (30000, ["--target", "fuel", "--equation", "moves_combination_truck"], False),  # says 'trailer'
+    (1500, [], False),                                                            # a car
+])
+def test_an_equation_calibrated_on_a_heavy_vehicle_that_declares_the_car_classes_is_said(
+        tmp_path, capsys, mass_kg, extra, warned):
+    # the rehearsal's truck chain, written without vclasses, booked every car of the built-in
+    # highway (161 passenger cars, 23.7 L/100 km), and nothing said: the default classes of
+    # an equation file are the car classes
+    out = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(_truck_log(tmp_path, mass_kg)), "--vehicle", str(_truck(tmp_path, mass_kg)),
+                     "--out", str(out), *extra]) == 0
+    said = [x for x in capsys.readouterr().out.splitlines() if "declares the car classes" in x]
+    assert bool(said) == warned, said
+    if warned:
+        assert said[0].startswith(f"warning: eq is calibrated on a {mass_kg:,}-kg vehicle") and str(out) in said[0]
+        assert 'vclasses = ["trailer"]' in said[0]

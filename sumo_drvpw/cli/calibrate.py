@@ -300,10 +300,37 @@ def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
 
 
 
+#: the heaviest vehicle an equation declaring the car classes is calibrated on without a
+#: warning [kg]: 3.5 t, the EU's limit of a car or light van (categories M1/N1; trucks N2/N3
+#: and buses M2/M3 above), the truck below: a rehearsal's 30-t diesel truck
+CAR_MAX_MASS_KG = 3500.0
+
+
+def say_vclasses(args, eq, out) -> None:
+    """Warn when an equation calibrated on a vehicle heavier than :data:`CAR_MAX_MASS_KG`
+    (the ``--vehicle`` file's mass) declares no vClasses of its own: a SUMO run books it on
+    the car classes, each car at its own mass (a truck's chain, 100 kW at zero output,
+    booked 23.7 L/100 km for every car of the built-in highway)."""
+    from sumo_drvpw.model.equations import DEFAULT_VCLASSES
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    if not getattr(args, "vehicle", None) or tuple(eq.vclasses) != DEFAULT_VCLASSES:
+        return
+    mass = float(load_vehicle(args.vehicle).mass_kg)
+    if mass > CAR_MAX_MASS_KG:
+        print(f"warning: {eq.name} is calibrated on a {mass:,.0f}-kg vehicle but declares the car classes "
+              f"({', '.join(DEFAULT_VCLASSES)}; no vclasses given): a SUMO run books it on every car at the "
+              f"car's mass — write its class under [equation] in {out}, e.g. vclasses = [\"trailer\"] "
+              "(or truck, bus, coach, delivery), or give it to its vTypes only (a scenario's "
+              "vtypes.<id>.equations)")
+
+
 def write_equation(args, eq, out, inputs, report=None) -> None:
     """The equation file, and with ``--report`` the report folder (``report(tmp)`` writes
     into it): both together, the equation written last, so neither is left without the other."""
     from sumo_drvpw.model.equations import save_equation
+
+    say_vclasses(args, eq, out)
 
     if args.report:
         with output_set(args, args.report, inputs) as tmp:
