@@ -129,6 +129,18 @@ def test_a_zero_output_fuel_far_above_the_logs_own_idle_is_flagged(tmp_path, cap
     assert idle_over_standing_note(9000.0, -np.inf, np.array([80.0, 20.0, 3e4]), "gasoline") == ""  # not idling
 
 
+def test_the_marginal_efficiency_is_read_as_fuel_to_driving_power():
+    # a calibrated fuel chain's slope is fuel → driving power (traction_efficiency 1: the
+    # road load's power at the wheels, or the log's at the powertrain's output), driveline
+    # included; it read "fuel → engine output", so a truck's 53.7 % looked like a diesel
+    # engine's (the built-in heavy-duty chains: 0.45 at the engine, 0.36 at the wheels)
+    from sumo_drvpw.fit.chain_checks import reading
+
+    r = reading("marginal_efficiency", 0.5366, "diesel")
+    assert r == "fuel → driving power at the margin 53.7% (Willans slope: engine and driveline together)"
+    assert "IMPLAUSIBLE for a diesel engine" in reading("marginal_efficiency", 0.569, "diesel")
+
+
 def test_a_power_split_hybrid_whose_engine_never_rests_at_light_load(tmp_path, capsys):
     # the engine runs at any positive driving power: no electric driving, as no Prius does
     plant = EnergyChain(predicts="fuel", idle_fuel_power_w=9000.0, marginal_efficiency=0.38,

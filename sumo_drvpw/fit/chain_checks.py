@@ -282,7 +282,9 @@ def reading(name: str, val: float, fuel: str | None = None) -> str:
     if name.startswith("hvac."):
         return f"{val:.0f} W per K from the set-point"
     if name == "marginal_efficiency":
-        s = f"fuel → engine output at the margin {val:.1%} (Willans slope)"
+        # (a calibrated fuel chain's driving power is the road load's or the log's, at the wheels
+        # or the powertrain's output, with traction_efficiency 1: its slope holds the driveline too)
+        s = f"fuel → driving power at the margin {val:.1%} (Willans slope: engine and driveline together)"
         (lo, hi), said, kind = MARGINAL_EFFICIENCY.get(fuel, MARGINAL_EFFICIENCY["gasoline"])
         return s + (f"; IMPLAUSIBLE for a {kind} engine (expected {said})" if not lo <= val <= hi else "")
     if name == "idle_fuel_power_w":
