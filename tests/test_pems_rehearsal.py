@@ -151,3 +151,40 @@ def test_an_equation_calibrated_on_a_heavy_vehicle_that_declares_the_car_classes
     if warned:
         assert said[0].startswith(f"warning: eq is calibrated on a {mass_kg:,}-kg vehicle") and str(out) in said[0]
         assert 'vclasses = ["trailer"]' in said[0]
+
+
+def test_a_one_sample_speed_step_is_left_out_not_read_as_a_deceleration(tmp_path, capsys):
+    # the VT logs splice recordings without a mark: 33.8 mph → 0 in one second (15.1 m/s).
+    # The central difference halved it to −7.5 m/s² on two samples, under the 8 m/s² outlier
+    # limit, and a 30-t truck's acceleration term booked −3.4 MW there: on a power planted on
+    # veh002's speeds the acc coefficient read 1.031 for 1.074 without the splices. Here a
+    # trip of two recordings (the first ends at 15 m/s, the second starts standing)
+    import pandas as pd
+
+    rng = np.random.default_rng(3)
+    m = 30000.0
+
+    def recording(n, v0, phase):
+        t = np.arange(n, dtype=float)
+        v = np.clip(v0 + 9 * np.sin(t / 45.0 + phase) + 6 * t / n, 0, None)
+        a = np.gradient(v, t)
+        return v, m * v * (1.08 * a + 9.81 * 0.0065) + 3.7 * v ** 3
+
+    parts = [recording(600, 9.0, 5 * np.pi - 599 / 45.0), recording(600, 0.0, -np.pi / 2),
+             recording(1200, 14.0, 1.0)]
+    v = np.concatenate([p[0] for p in parts])
+    p = np.concatenate([p[1] for p in parts]) + rng.normal(0, 2e3, len(v))
+    assert v[599] == pytest.approx(15.0, abs=0.1) and v[600] == 0.0  # the splice: 15 m/s to standstill
+    trip = np.r_[np.repeat("a", 1200), np.repeat("b", 1200)]
+    t = np.r_[np.arange(1200.0), np.arange(1200.0)]
+    log = tmp_path / "spliced.csv"
+    pd.DataFrame({"trip_id": trip, "time_s": t, "speed_mps": v, "power_w": p}).to_csv(log, index=False)
+    out = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(log), "--vehicle", str(_truck(tmp_path, 30000)), "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    from sumo_drvpw.model.equations import load_equation
+
+    assert load_equation(out).terms["acc"] == pytest.approx(1.08, rel=0.01)
+    note = [x for x in said.splitlines() if "one-sample speed step" in x]
+    assert note and note[0].startswith("note: 2 sample(s) left out around 1 one-sample speed step(s) "
+                                       "steeper than 8.0 m/s²"), said

@@ -305,6 +305,7 @@ def say_traction_only(counts: dict) -> None:
 
 def note_counts(counts: dict) -> None:
     """Print what the log reader changed or assumed (e.g. clipped standstill noise)."""
+    from sumo_drvpw.data.plausible import speed_step_note
     from sumo_drvpw.data.truncated import cut_message
 
     for f, row in (counts.get("truncated_rows") or {}).items():  # CSV files cut inside their last row
@@ -321,6 +322,8 @@ def note_counts(counts: dict) -> None:
               f"alike): values held between the logger's updates, about one new value per {k:.1f} rows; fitted "
               f"standard errors and p-values count every row, so the errors are about {k ** 0.5:.1f}× too small "
               "(and stepwise selection too willing)")
+    if counts.get("excluded_speed_step"):  # a splice, a speed lost and found (data/plausible.py speed_steps)
+        print(f"note: {speed_step_note(counts)}")
     n = int(counts.get("clipped_negative_speed", 0) or 0)
     if n:
         tol = counts.get("negative_speed_tolerance_mps", 0.1)

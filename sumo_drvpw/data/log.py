@@ -28,7 +28,7 @@ from sumo_drvpw.data.trips import (derivative, grade_from_elevation,  # noqa: F4
 from sumo_drvpw.data.counters import check_counters
 from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_header,  # noqa: F401
                                        check_distinct_trips, check_speed_unit, check_time_step,
-                                       exclusions, implied_acceleration)
+                                       exclusions, implied_acceleration, speed_steps)
 
 #: Canonical numeric columns the reader checks when present.
 NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "elevation_m",
@@ -573,6 +573,10 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     counts["excluded_accel_outlier"] = int((out & ~excluded).sum())
     counts["accel_outlier_limit_mps2"] = opt.accel_outlier_mps2
     excluded |= out
+    steps, counts["speed_steps"] = speed_steps(df["speed_mps"].to_numpy(float), t, seg, 0.5 * deriv[1][seg],
+                                               opt.accel_outlier_mps2)
+    counts["excluded_speed_step"] = int((steps & ~excluded).sum())
+    excluded |= steps
     steep = np.abs(np.tan(df["grade_rad"].to_numpy(float))) > opt.grade_outlier
     counts["excluded_grade_outlier"] = int((steep & ~excluded).sum())
     counts["grade_outlier_limit"] = opt.grade_outlier
