@@ -188,3 +188,20 @@ def test_a_one_sample_speed_step_is_left_out_not_read_as_a_deceleration(tmp_path
     note = [x for x in said.splitlines() if "one-sample speed step" in x]
     assert note and note[0].startswith("note: 2 sample(s) left out around 1 one-sample speed step(s) "
                                        "steeper than 8.0 m/s²"), said
+
+
+def test_compares_console_line_names_the_worst_of_the_trips_it_scores():
+    # compare's report.md left the truck's small trips out of mean and worst (veh002_s03_p4:
+    # 0.050 L measured, +860 %), but the console's line named that trip as the worst while
+    # printing the mean without it: 'mean 55.3 %, worst +860.2 % (veh002_s03_p4)' beside
+    # report.md's '55.3 % / 207.8 % (veh002_s09_p5)'
+    from sumo_drvpw.cli.compare import trip_energy_line
+    from sumo_drvpw.fit.trip_energy import trip_energy_doc
+
+    doc = trip_energy_doc(["s01", "s03", "s09", "s11"], [6.6e7, 1.8e6, 2.0e7, 6.6e7], [1.16e8, 1.72e7, 6.1e7, 5.8e7])
+    assert doc["small_trips"] == ["s03"]
+    line = trip_energy_line({"trip_energy": doc, "trip_net_energy": doc})
+    assert line.startswith("per trip (4; 1 small, left out of mean and worst): traction energy |error| mean ")
+    assert f"worst +{100 * (6.1e7 / 2.0e7 - 1):.1f} % (s09)" in line and "s03" not in line
+    assert trip_energy_line({"trip_energy": trip_energy_doc(["a", "b"], [1.0, 1.0], [1.1, 0.8])}) == \
+        "per trip (2): traction energy |error| mean 15.0 %, worst -20.0 % (b)"
