@@ -66,7 +66,8 @@ from sumo_drvpw.sim.fcd_begin import accel_at_begin, begin_frame
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_method import recorded_method
-from sumo_drvpw.sim.fcd_warn import (lane_warnings, missing_input_warnings, no_angle_warning, partial_warnings,
+from sumo_drvpw.sim.fcd_warn import (KineticGain, lane_warnings, missing_input_warnings, no_angle_warning,
+                                     partial_warnings, sparse_rows, sparse_warning,
                                      unplaced_person_warning, unplaced_vehicle_warning)
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
@@ -485,6 +486,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                            replay.recorded_step_s or replay.dt)
     acc.stepper.replay_info = replay_info  # a --begin after the file's start: no cold starts then
     replay.count_persons = count_persons
+    sparse = sparse_rows(head)  # rows written less often than the run stepped: what they hide, measured
+    replay.kinetic = KineticGain() if sparse else None
     try:
         info = step_until(replay, acc.stepper, end=None, progress=sc.progress and publish, period=sc.period,
                           period_from=sc.period_from)
@@ -507,7 +510,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
             acc.close_trace()
             return acc, extra
         warn = (list(inputs[0]) + lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning
-                + [method_note] * bool(method_note) + partial_warnings(fcd_file, head))
+                + [method_note] * bool(method_note) + partial_warnings(fcd_file, head)
+                + sparse_warning(fcd_file, sparse, replay.kinetic.doubled_loss() if sparse else None))
         if replay.no_angle and acc.eqset.uses_yaw:
             warn.append(no_angle_warning(fcd_file))
         if replay.unplaced_person_rows and sc.transportable_mass:
@@ -576,12 +580,8 @@ def row_interval(sc, fcd_file, head: dict | None) -> tuple[float | None, list[st
     except ValueError:
         return sc.step_length, []
     dt = max(step, period) if step > 0 else sc.step_length
-    sparse = ([f"FCD {Path(fcd_file).name}: written every {period:g} s of a run stepping {step:g} s (its header): "
-               "each vehicle is booked from the sampled trajectory, its speed changes between the rows unseen "
-               "(a few per cent less acceleration energy and battery or fuel than the run books live)"]
-              if step > 0 and period > step + 1e-9 else [])
     if sc.step_length is None or dt is None or abs(dt - sc.step_length) <= 1e-9:
-        return dt, sparse
+        return dt, []  # (rows sparser than the steps: fcd_warn.sparse_warning, after the replay)
     why = f"step-length {step:g} s" + (f", device.fcd.period {period:g} s" if period > step else "")
     return dt, [f"FCD {Path(fcd_file).name}: its rows are {dt:g} s apart (its header: {why}); each is booked "
-                f"over {dt:g} s, not the scenario's step length of {sc.step_length:g} s"] + sparse
+                f"over {dt:g} s, not the scenario's step length of {sc.step_length:g} s"]

@@ -160,6 +160,9 @@ class _Rows:
         #: set by replay_fcd, None: none told), and the rows booked so
         self.idling, self.idle_rows = None, 0
         self.count_persons = True
+        #: the vehicles' kinetic energy gained row to row (fcd_warn.KineticGain; set by replay_fcd
+        #: for rows sparser than the run's steps, None: not measured)
+        self.kinetic = None
         #: a timestep with vehicles but no angle column (no yaw rate for the radial factor)
         self.no_angle = False
         #: the step length [s] of the run that recorded the FCD (its header; set by replay_fcd,
@@ -197,6 +200,8 @@ class _Rows:
             c = {k: v[veh] for k, v in c.items()}
         elif self.riders or self.person_count:
             self._ride(None, c)
+        if self.kinetic is not None:
+            self.kinetic.add(c["id"], c["speed"])
         if self.idling is not None:
             self.idling.forget(self.arrived)
         blind = ~_placed(c)  # rows without x, y: a parked vehicle is told by its declared stop
