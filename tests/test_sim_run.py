@@ -593,7 +593,8 @@ def test_generic_vclasses_are_booked_as_the_vehicle_their_emission_class_names(t
     assert eqs["s"] == eqs["p"] and eqs["h"] == {"moves_transit_bus", "moves_transit_bus_diesel"}
     assert "vClass bus (a heavy one) only grants its lanes" in booked["lane_sedan"]["from"]
     mass = veh.groupby("vehicle")["mass_kg"].first()
-    assert (mass["i"], mass["d"], mass["t"], mass["c"]) == (1478.8, 2059.7, 8538.9, 15000.0)
+    # (the truck's class, RT_le7.5t, caps the truck's 8,538.9-kg default at its 7.5-t gross weight)
+    assert (mass["i"], mass["d"], mass["t"], mass["c"]) == (1478.8, 2059.7, 7500.0, 15000.0)
     assert (mass["s"], mass["h"]) == (1478.8, 16556.0)
     # a 6-m, 5-person shuttle in vClass bus (SUMO's DRT game) is a van, not a 16.6-t bus
     assert eqs["m"] == {"moves_light_commercial_truck", "epa_diesel_light_truck"} and mass["m"] == 2059.7

@@ -722,3 +722,50 @@ def test_road_class_types_and_edges_that_match_nothing_are_said(tmp_path):
                                      '[road_class]\nedges = { nope = "special" }\n', encoding="utf-8")
     res = run_scenario(tmp_path / "s.toml", None, end=10, figures=False)
     assert any("road classes: edges 'nope'" in w for w in res.summary["warnings"]), res.summary["warnings"]
+
+
+def test_a_default_mass_stays_within_the_gross_weight_its_emission_class_names(tmp_path):
+    """A public Lyngby scenario's trucks write HBEFA4/RT_le7.5t_Euro-VI_A-C (a rigid truck of
+    at most 7.5 t laden; SUMO's own default truck class) and its midi bus
+    UBus_Midi_P_le15t_Euro-VI, no mass: they were booked at the MOVES class masses, 8,538.9
+    and 16,556 kg — heavier than their class allows. A default mass is now capped at the
+    band's upper limit, said in the assumptions and the warning; a band it lies within
+    (RT_gt7.5-12t, RigidTruck_FCEV_gt7_5-12t), no band (RT_gt32t, motorcycles' cc), no
+    written class (SUMO's default is no statement about the vehicle), or a mass the vType
+    or the scenario gives, is not capped."""
+    from sumo_drvpw.sim.run import VTypeResolver
+    from sumo_drvpw.sim.vtypes import DEFAULT_MASS_KG, default_mass_warnings
+
+    f = _write(tmp_path, """<routes>
+      <vType id="small" vClass="truck" emissionClass="HBEFA4/RT_le7.5t_Euro-VI_A-C"/>
+      <vType id="fcev_small" vClass="truck" emissionClass="HBEFA4/RigidTruck_FCEV_le7_5t"/>
+      <vType id="mid" vClass="truck" emissionClass="HBEFA4/RT_gt7.5-12t_Euro-VI_A-C"/>
+      <vType id="fcev" vClass="truck" emissionClass="HBEFA4/RigidTruck_FCEV_gt7_5-12t"/>
+      <vType id="big" vClass="truck" emissionClass="HBEFA4/RT_gt32t_Euro-VI_A-C"/>
+      <vType id="plain" vClass="truck"/>
+      <vType id="given" vClass="truck" emissionClass="HBEFA4/RT_le7.5t_Euro-VI_A-C" mass="9000"/>
+      <vType id="loaded" vClass="truck" emissionClass="HBEFA4/RT_le7.5t_Euro-VI_A-C">
+         <param key="loading" value="2000"/></vType>
+      <vType id="midi" vClass="bus" emissionClass="HBEFA4/UBus_Midi_P_le15t_Euro-VI"/>
+      <vType id="std" vClass="bus" emissionClass="HBEFA4/UBus_Std_gt15-18t_Euro-VI_A-C"/>
+      <vType id="mc" vClass="motorcycle" emissionClass="HBEFA4/MC_4S_gt250cc_preEuro"/>
+    </routes>""", "r.rou.xml")
+    sc = load_scenario(doc={"equations": ["vsp_ldv1999"], "sumo": {"net": str(NETS / "highway.net.xml")}})
+    eqs = [Equation("t", {"roll": 0.01}, vclasses=("truck", "bus", "motorcycle"))]
+    res = VTypeResolver(sc, read_vtypes([f]), eqs)
+    mass = {v: res(v, "x")[0] for v in ("small", "fcev_small", "mid", "fcev", "big", "plain", "given",
+                                        "loaded", "midi", "std", "mc")}
+    t = DEFAULT_MASS_KG["truck"]
+    assert mass == {"small": 7500.0, "fcev_small": 7500.0, "mid": t, "fcev": t, "big": t, "plain": t,
+                    "given": 9000.0, "loaded": 7500.0, "midi": 15000.0, "std": DEFAULT_MASS_KG["bus"],
+                    "mc": DEFAULT_MASS_KG["motorcycle"]}
+    assert res.assumptions["small"]["capped_from_kg"] == t
+    assert "capped_from_kg" not in res.assumptions["mid"] and "capped_from_kg" not in res.assumptions["plain"]
+    general = default_mass_warnings(res.assumptions)[0]
+    assert "small (truck, 7500 kg)" in general and "midi (bus, 15000 kg)" in general
+    assert "capped at the gross weight their emissionClass names" in general
+    assert f"small (HBEFA4/RT_le7.5t_Euro-VI_A-C: {t:g} → 7500 kg)" in general
+    # the scenario's class mass is the user's: not capped
+    sc2 = load_scenario(doc={"equations": ["vsp_ldv1999"], "sumo": {"net": str(NETS / "highway.net.xml")},
+                             "vclasses": {"truck": {"mass_kg": 9000.0}}})
+    assert VTypeResolver(sc2, read_vtypes([f]), eqs)("small", "x")[0] == 9000.0

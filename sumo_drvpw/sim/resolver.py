@@ -6,6 +6,8 @@ energy carrier and powertrain (a hybrid's or a conventional engine's fuel chain)
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from sumo_drvpw.errors import UserError
@@ -19,6 +21,19 @@ from sumo_drvpw.sim.vtypes import (CAR_VCLASSES, SHORT_CAR_M, SUMO_DEFAULT_EMISS
 #: reverse) from which the run says so: the mass-scaled terms (acc, grade, roll) follow the
 #: vType, the aero term and what else the fit absorbed stay the calibration vehicle's
 MASS_FAR = 1.5
+
+#: an HBEFA 4 emissionClass naming its vehicles' gross weight band — ``RT_le7.5t``,
+#: ``RT_gt7.5-12t``, ``UBus_Midi_le15t``, ``Coach_Std_le18t``, ``TT_AT_gt34-40t``,
+#: ``RigidTruck_FCEV_le7_5t`` —: its upper limit [t], the most such a vehicle weighs laden
+_WEIGHT_BAND = re.compile(r"(?:^|_)(?:le|lt)(\d+(?:[._]\d+)?)t(?=_|$)|(?:^|_)gt\d+(?:[._]\d+)?-(\d+(?:[._]\d+)?)t(?=_|$)")
+
+
+def class_mass_limit_kg(emission_class: str | None) -> float | None:
+    """The gross weight [kg] an emissionClass's name bounds its vehicles by (``HBEFA4/
+    RT_le7.5t_Euro-VI_A-C`` → 7500, ``HBEFA4/UBus_Std_gt15-18t_…`` → 18000), None when it
+    names no upper limit (``RT_gt32t``, cars, motorcycles' cc)."""
+    m = _WEIGHT_BAND.search((emission_class or "").split("/")[-1])
+    return None if m is None else float((m.group(1) or m.group(2)).replace("_", ".")) * 1000.0
 
 
 class VTypeResolver:
@@ -338,6 +353,12 @@ class VTypeResolver:
             self.assumptions[vt] = {"vclass": body, "mass_kg": mass,
                                     "source": DEFAULT_MASS_SOURCE[body]
                                     + (f" + loading {loading:g} kg" if loading else "")}
+            # no heavier than the gross weight its written emissionClass names (a ≤ 7.5-t truck)
+            limit = class_mass_limit_kg(info.emission_class if info is not None else None)
+            if limit is not None and mass > limit:
+                self.assumptions[vt].update(mass_kg=limit, capped_from_kg=mass, emission_class=info.emission_class)
+                self.assumptions[vt]["source"] += f", capped at its emissionClass's gross weight {limit:g} kg"
+                mass = limit
             length = info.length_m if info is not None else None
             if body in CAR_VCLASSES and length is not None and length < SHORT_CAR_M:
                 self.assumptions[vt]["length_m"] = length  # a microcar or pod: warned of

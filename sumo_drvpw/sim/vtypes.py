@@ -174,6 +174,10 @@ def default_mass_warnings(assumptions: dict) -> list[str]:
     out = ["vTypes without a mass took their vClass's default mass: " + ", ".join(
         f"{vt} ({a['vclass']}, {a['mass_kg']:g} kg)" for vt, a in sorted(assumptions.items()))
         + " (summary.json assumptions; set vtypes.<id>.mass_kg or vclasses.<vClass>.mass_kg to override)"]
+    capped = {vt: a for vt, a in sorted(assumptions.items()) if a.get("capped_from_kg") is not None}
+    if capped:  # (sim/resolver.class_mass_limit_kg)
+        out[0] += ("; capped at the gross weight their emissionClass names: " + ", ".join(
+            f"{vt} ({a['emission_class']}: {a['capped_from_kg']:g} → {a['mass_kg']:g} kg)" for vt, a in capped.items()))
     short = {vt: a for vt, a in sorted(assumptions.items()) if a.get("length_m") is not None}
     if short:
         out.append("vTypes written far shorter than a car took a mid-size car's default mass all the "
