@@ -177,3 +177,24 @@ def test_an_energy_vtype_no_vehicle_ran_is_one_short_line(tmp_path, capsys):
     assert "  vtype_energy: no vehicle of vType no_device ran" in out and "booked no vehicle" not in out
     summ = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     assert set(summ["assumptions"]["vtype_energy"]["booked"]) == {"own_device", "bare_energy", "no_device"}
+
+
+def test_the_refusal_names_the_energy_vtype_without_parameters_first(tmp_path):
+    """``--equation vtype_energy`` on a scenario whose only Energy vType writes the bare
+    ``emissionClass="Energy"`` and no parameter (a public Lyngby scenario's ``veh_ev``)
+    besides five HBEFA vTypes: the one-line refusal listed the first five vTypes in
+    alphabetical order — the trucks and the bus, not ``veh_ev``, the one the user asked it
+    for. The Energy vTypes' reasons now come first, and the rest is counted."""
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.sim.vtype_energy import expand, placeholder
+
+    f = tmp_path / "r.rou.xml"
+    hbefa = "".join(f'<vType id="{v}" vClass="truck" emissionClass="HBEFA4/RT_le7.5t_Euro-VI_A-C"/>'
+                    for v in ("bus_a", "truck_b", "truck_c", "truck_d", "veh_diesel", "veh_petrol"))
+    f.write_text(f'<routes>{hbefa}<vType id="veh_ev" vClass="passenger" emissionClass="Energy"/></routes>',
+                 encoding="utf-8")
+    with pytest.raises(UserError) as e:
+        expand([placeholder()], read_vtypes([f]), _Options(0))
+    msg = str(e.value)
+    assert "veh_ev: writes no Energy-model parameter" in msg, msg
+    assert msg.index("veh_ev") < msg.index("bus_a") and "and 2 more" in msg and "\n" not in msg

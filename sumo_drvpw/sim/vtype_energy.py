@@ -321,10 +321,11 @@ def expand(equations: list, file_vtypes, sc, step_s: float | None = None) -> tup
     out = [x for e in equations for x in (eqs if is_placeholder(e) else [e])]
     if own and not has:
         out += eqs
-    if not out:
+    if not out:  # (the Energy vTypes' reasons first: those a user asks vtype_energy for)
+        why = sorted(listing["not_booked"].items(), key=lambda x: (x[1].startswith(("emissionClass ", "no emissionClass")), x[0]))
         raise UserError("equation vtype_energy: no vType of the route/additional files read runs SUMO's "
                         "MMPEVEM or writes its Energy model (emissionClass Energy/…, or none with SUMO's battery "
                         "device on, and at least one of its parameters: "
-                        + ", ".join(f"{vt}: {w}" for vt, w in sorted(listing["not_booked"].items())[:5])
-                        + "); name another equation")
+                        + ", ".join(f"{vt}: {w}" for vt, w in why[:5])
+                        + (f", and {len(why) - 5} more" if len(why) > 5 else "") + "); name another equation")
     return out, listing
