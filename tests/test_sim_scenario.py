@@ -769,3 +769,22 @@ def test_a_default_mass_stays_within_the_gross_weight_its_emission_class_names(t
     sc2 = load_scenario(doc={"equations": ["vsp_ldv1999"], "sumo": {"net": str(NETS / "highway.net.xml")},
                              "vclasses": {"truck": {"mass_kg": 9000.0}}})
     assert VTypeResolver(sc2, read_vtypes([f]), eqs)("small", "x")[0] == 9000.0
+
+
+def test_a_scenario_file_without_equations_books_as_its_bare_config(tmp_path):
+    """A new user gives SUMO options to a bare config through a scenario file ([sumo]
+    config, options: the run command has no flag for them): without an ``equations`` key
+    it was refused ("'equations' must name at least one equation"), and listing the 19
+    built-in names by hand was the only way to get what ``run X.sumocfg`` books. Without
+    the key it now books as the bare config (the plug-in's own equations, each vehicle by
+    its carrier); an empty list is still refused."""
+    from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+    cfg = REPO / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.sumocfg"
+    bare = load_scenario(cfg)
+    sc = load_scenario(_write(tmp_path, f'[sumo]\nconfig = "{cfg.as_posix()}"\noptions = ["--step-method.ballistic", "true"]\n'))
+    assert [e.name for e in sc.equations] == [e.name for e in bare.equations] == list(CONFIG_EQUATIONS)
+    assert sc.default_carrier and bare.default_carrier
+    assert sc.sumo_args[-2:] == ["--step-method.ballistic", "true"]
+    with pytest.raises(UserError, match="'equations' must name at least one equation"):
+        load_scenario(_write(tmp_path, f'equations = []\n[sumo]\nconfig = "{cfg.as_posix()}"\n', "e.toml"))

@@ -372,7 +372,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                         "from it; run the scenario microscopically (mesosim false)")
     connection = _choice(sumo.get("connection", "libsumo"), ("libsumo", "traci"), where, "sumo.connection")
 
-    eq_specs = overrides.get("equations", doc.get("equations"))
+    # no equations key: the plug-in's own equations, as for a bare SUMO config (a file that
+    # only gives a config SUMO options); an empty list is refused below
+    eq_specs = overrides.get("equations", doc.get("equations", list(CONFIG_EQUATIONS)))
     given = "equations" in overrides  # (from Python: one name, path or Equation alone too; paths as names)
     if given and isinstance(eq_specs, (str, os.PathLike, Equation)):
         eq_specs = [eq_specs]
