@@ -198,3 +198,29 @@ def test_the_refusal_names_the_energy_vtype_without_parameters_first(tmp_path):
     msg = str(e.value)
     assert "veh_ev: writes no Energy-model parameter" in msg, msg
     assert msg.index("veh_ev") < msg.index("bus_a") and "and 2 more" in msg and "\n" not in msg
+
+
+def test_sumo_device_row_says_when_sumo_runs_an_energy_vtype_at_another_mass(tmp_path):
+    """A vType writing the bare ``emissionClass="Energy"`` and no mass (a public Lyngby
+    scenario's ``veh_ev``) runs on SUMO's Energy model at its default 1830 kg; the battery
+    chain books it at the class's default car mass, 1478.8 kg. sumo_device.csv's row said
+    both take "the vType's mass", so its ratio (0.94 there) read as a model difference
+    alone. Its note now names the two masses; a vType that writes its mass is not named."""
+    routes = """<routes>
+  <vType id="ev" vClass="passenger" emissionClass="Energy" sigma="0"/>
+  <vType id="ev_m" vClass="passenger" emissionClass="Energy" mass="1500" sigma="0"/>
+  <flow id="a" type="ev" from="e01" to="e56" begin="0" end="20" period="10" departSpeed="0"/>
+  <flow id="b" type="ev_m" from="e01" to="e56" begin="5" end="25" period="10" departSpeed="0"/>
+</routes>"""
+    (tmp_path / "r.rou.xml").write_text(routes, encoding="utf-8")
+    f = tmp_path / "s.toml"
+    f.write_text(f'equations = ["bmw_i3_battery", "moves_passenger_car"]\n[sumo]\nnet = "{HW_NET}"\n'
+                 'routes = ["r.rou.xml"]\nend = 200\noptions = ["--no-warnings", "true"]\n'
+                 '[outputs]\nfigures = false\nsumo_device = true\n', encoding="utf-8")
+    res = run_scenario(f, tmp_path / "o")
+    dev = pd.read_csv(tmp_path / "o" / "sumo_device.csv").set_index("equation")
+    for eq in ("bmw_i3_battery", "moves_passenger_car"):
+        note = dev.loc[eq, "note"]
+        assert "SUMO's Energy model runs ev at its default 1830 kg" in note and "ours 1478.8 kg" in note, note
+        assert "ev_m" not in note
+    assert res.summary["assumptions"]["default_masses"]["ev"]["mass_kg"] == 1478.8

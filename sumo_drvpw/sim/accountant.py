@@ -44,7 +44,7 @@ from sumo_drvpw.sim.resolver import (booked_as_warning, calibration_mass_warning
 from sumo_drvpw.sim.trace import TraceWriter
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
 from sumo_drvpw.sim.scenario_paths import sumo_file_list
-from sumo_drvpw.sim.sumo_outputs import exported_vtypes
+from sumo_drvpw.sim.sumo_outputs import device_inputs
 from sumo_drvpw.sim.sumo_start import NewRun, scenario_option
 from sumo_drvpw.sim.vtype_energy import expand as expand_vtype_energy, listing_warning
 from sumo_drvpw.sim.vtypes import GENERIC_VCLASSES, default_mass_warnings, read_vtypes
@@ -484,7 +484,7 @@ class Accountant(_Listener):
                            predicts=[e.predicts for e in self.equations], summary=summary,
                            begin=self.begin, end=end, edgedata=sc.edgedata, figures=sc.figures,
                            difference=sc.difference, period=getattr(sc, "period", None))
-        result.exported_vtypes = exported_vtypes(self.file_vtypes)
+        result.exported_vtypes, result.energy_masses = device_inputs(self.file_vtypes, self.resolver.assumptions)
         return result
 
 

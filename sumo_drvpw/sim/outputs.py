@@ -413,6 +413,8 @@ class RunResult:
         self.sumo_device = None
         #: equation → the vTypes of the files that are its export (sim/sumo_outputs.exported_vtypes)
         self.exported_vtypes: dict = {}
+        #: vType → (SUMO's Energy-model default mass, ours) [kg] (sim/sumo_outputs.energy_default_masses)
+        self.energy_masses: dict = {}
         self._steps = getattr(ledger, "steps", None)  # what the summary was taken at
 
     def _check_current(self) -> None:
@@ -483,7 +485,8 @@ class RunResult:
         v = self._vehicles_all().to_pandas()[["vehicle", "equation", "net_total_j", "vtype"]]
         ch = getattr(self.ledger, "chain", None)
         chains = {} if ch is None else {ch.names[i]: ch.chains[i] for i in ch.active}
-        return device_comparison(v, self.sumo_device, self.chain_vehicles(), chains, self.exported_vtypes)
+        return device_comparison(v, self.sumo_device, self.chain_vehicles(), chains, self.exported_vtypes,
+                                 self.energy_masses)
 
     def edges_arrow(self) -> pa.Table:
         self._check_current()

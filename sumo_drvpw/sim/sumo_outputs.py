@@ -385,7 +385,26 @@ NO_CHAIN_NOTE = ("not like for like: this equation has no energy chain (another 
                  "auxiliaries, which ours leaves out, lower it")
 
 
-def device_comparison(v, dev, cv, chains: dict, exported: dict | None = None):
+def energy_default_masses(file_vtypes: dict, default_masses: dict) -> dict[str, tuple[float, float]]:
+    """vType → (SUMO's mass, ours) [kg] of the vTypes SUMO runs on its Energy model at its
+    default mass (a written ``Energy``/``Energy/…`` class and no mass: 1830 kg, whatever the
+    vClass) while the run booked them at a class default (``default_masses``: vType → its
+    summary.json assumption, with ``mass_kg``)."""
+    from sumo_drvpw.model.energy_params import SUMO_DEFAULTS
+    from sumo_drvpw.sim.vtype_energy import is_energy_class
+
+    return {vt: (SUMO_DEFAULTS["mass"], float(d["mass_kg"])) for vt, d in (default_masses or {}).items()
+            if vt in (file_vtypes or {}) and is_energy_class(getattr(file_vtypes[vt], "emission_class", None))
+            and float(d["mass_kg"]) != SUMO_DEFAULTS["mass"]}
+
+
+def device_inputs(file_vtypes: dict, default_masses: dict) -> tuple[dict, dict]:
+    """What :func:`device_comparison` reads of a run's vTypes: :func:`exported_vtypes` and
+    :func:`energy_default_masses`."""
+    return exported_vtypes(file_vtypes), energy_default_masses(file_vtypes, default_masses)
+
+
+def device_comparison(v, dev, cv, chains: dict, exported: dict | None = None, masses: dict | None = None):
     """Per equation, over the vehicles SUMO's emissions device reports for (``dev``: vehicle,
     sumo_electricity_wh, sumo_fuel_mg), what the plug-in books beside what SUMO's own model
     books: an equation with a battery chain its battery kWh against SUMO's electricity; with
@@ -394,7 +413,9 @@ def device_comparison(v, dev, cv, chains: dict, exported: dict | None = None):
     equation, net_total_j) against SUMO's electricity, with :data:`NO_CHAIN_NOTE`. ``cv``: the chains' per-vehicle rows
     (vehicle, equation, net_kwh, auxiliary_kwh, fuel_l), or None; ``chains``: name → chain;
     ``exported``: equation → the vTypes that are its export (:func:`exported_vtypes`; ``v``
-    then with a vtype column): a row whose vehicles all drive one is like for like.
+    then with a vtype column): a row whose vehicles all drive one is like for like;
+    ``masses``: :func:`energy_default_masses`, named in the note of an electricity row whose
+    vehicles drive such a vType (SUMO's electricity is then at another mass than ours).
 
     A battery chain's ratio is split additively: ``ratio_auxiliary`` = our auxiliary energy
     (``ours_auxiliary`` kWh: the chain's constant, HVAC and cabin warm-up, standing and
@@ -436,6 +457,12 @@ def device_comparison(v, dev, cv, chains: dict, exported: dict | None = None):
                 ours, q = g.net_total_j.sum() / 3.6e6, "net driving energy kWh (no chain)"
                 own = (exported or {}).get(eq)
                 note = EXPORTED_NOTE if own and "vtype" in g and set(g.vtype) <= own else NO_CHAIN_NOTE
+        fuel = c is not None and c.predicts == "fuel"
+        diff = sorted(set(g.vtype) & set(masses or {})) if "vtype" in g and not fuel else []
+        if diff:
+            note += ("; masses differ: SUMO's Energy model runs " + ", ".join(
+                f"{vt} at its default {masses[vt][0]:g} kg (the vType writes none), ours {masses[vt][1]:g} kg"
+                for vt in diff) + " (summary.json assumptions.default_masses)")
         if len(g):
             ok = bool(sumo) and aux == aux
             rows.append({"equation": eq, "quantity": q, "vehicles": int(len(g)),
