@@ -278,10 +278,10 @@ def ours_l_per_100km(name: str, v: np.ndarray, mass_kg: float) -> dict:
     return {"fuel_l": litres, "km": km, "l_per_100km": 100.0 * litres / km, "share_no_traction": idle}
 
 
-def sumo_l_per_100km(cls: str, v: np.ndarray, workdir: Path) -> dict | None:
+def sumo_l_per_100km(cls: str, v: np.ndarray, workdir: Path, fuel: str = FUEL) -> dict | None:
     """SUMO's emission class ``cls`` on schedule ``v`` through emissionsDrivingCycle (speed
     and a = v(t) − v(t−1) per second, no slope); None without SUMO's tools. Litres from the
-    tool's fuel mass with the project's diesel density."""
+    tool's fuel mass with the density of the project's ``fuel`` (diesel unless told)."""
     from sumo_drvpw.validation.chain_sumo import sumo_tool
 
     tool = sumo_tool("emissionsDrivingCycle")
@@ -297,9 +297,9 @@ def sumo_l_per_100km(cls: str, v: np.ndarray, workdir: Path) -> dict | None:
         raise UserError(f"SUMO's emissionsDrivingCycle with {cls}: exit {done.returncode}: {first}")
     mg = np.loadtxt(out, delimiter=";", ndmin=2)[:, 9]
     km = float(np.sum(0.5 * (v[1:] + v[:-1]))) / 1000.0
-    litres = float(np.nansum(mg)) * 1e-6 / FUELS[FUEL]["density_kg_per_l"]
+    litres = float(np.nansum(mg)) * 1e-6 / FUELS[fuel]["density_kg_per_l"]
     return {"fuel_l": litres, "km": km, "l_per_100km": 100.0 * litres / km,
-            "idle_l_per_h": float(mg[v == 0].mean()) * 3.6e-3 / FUELS[FUEL]["density_kg_per_l"]
+            "idle_l_per_h": float(mg[v == 0].mean()) * 3.6e-3 / FUELS[fuel]["density_kg_per_l"]
             if np.any(v == 0) else None}
 
 

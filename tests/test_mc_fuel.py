@@ -1,0 +1,166 @@
+"""The motorcycle and moped petrol fuel chains (sumo_drvpw/validation/mc_fuel.py, docs/mc-fuel.md).
+
+By hand: each built-in books P_fuel = P_idle + (max(P, 0)/η_d + P_aux)/η_e with the sourced
+numbers written out here (carculator_two_wheeler's engine efficiency 0.18, transmission 0.8,
+auxiliary 60 W or 30 W; the petrol cars' 4,037 W of zero-output fuel per litre times 0.6 L (to 0.1 W)
+or the moped's 50 cm³), on the MOVES motorcycle road load; the motorcycle cuts its fuel in
+overrun, the moped idles through. A bare SUMO config books motorcycles and mopeds in litres
+(before, no chain applied to them and the run said so), an electric moped is not booked by
+the petrol chain, and per vehicle the litres are the hand formula over its trace. On the
+ECE-15 urban cycle and the WLTC's low phase the motorcycle's L/100 km lies in the published
+range of new motorcycles; the committed report is what the module computes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sumo_drvpw.model.equations import load_equation
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("SUMO_DRVPW_DATA") or REPO.parent / "shared" / "data")
+LHV, RHO = 43.2e6, 0.745            # petrol [J/kg], [kg/L] (docs/sources.md, Fuels)
+
+#: name → (vClass, η_e, η_d, idle [W] = 4037 W/L × displacement, P_aux [W], overrun cut at P < 0)
+HAND = {
+    "moves_motorcycle_petrol": ("motorcycle", 0.18, 0.8, round(4037.0 * 0.6, 1), 60.0, True),
+    "moves_moped_petrol": ("moped", 0.18, 0.8, round(4037.0 * 0.05, 1), 30.0, False),
+}
+
+
+@pytest.mark.parametrize("name", sorted(HAND))
+def test_builtin_books_fuel_by_hand(name):
+    vclass, eta_e, eta_d, idle, aux, cut = HAND[name]
+    eq, mv = load_equation(name), load_equation("moves_motorcycle")
+    assert eq.terms == mv.terms and tuple(eq.vclasses) == (vclass,)
+    ch = eq.chain
+    assert ch.predicts == "fuel" and ch.fuel == "gasoline" and ch.engine_off_below_w == -np.inf
+    p = np.array([-3000.0, 0.0, 2000.0, 15000.0, -500.0])
+    v = np.array([8.0, 0.0, 10.0, 22.0, 0.0])
+    got = ch.evaluate(p, v, dt_s=2.0)
+    fuelled = np.array([0.0 if cut else 1.0, 1.0, 1.0, 1.0, 1.0])   # rolling at P < 0: cut or idling
+    want_w = fuelled * (idle + (np.maximum(p, 0.0) / eta_d + aux) / eta_e)
+    assert got["power_w"] == pytest.approx(want_w, rel=1e-4)
+    assert got["fuel_l"] == pytest.approx(want_w * 2.0 / LHV / RHO, rel=1e-4)
+    # the road load is MOVES source type 11's: (1000·A/M)·m·v + 1000·C·v³ at 10 m/s, flat, steady
+    from sumo_drvpw.model.terms import Inputs
+    one = np.ones(1)
+    x = Inputs(v=10 * one, a=0 * one, theta=0 * one, wind=0 * one, mass=285.0 * one, rho=1.2041 * one)
+    assert eq.power(x)[0] == pytest.approx(1000 * 0.0251 * 10 + 1000 * 0.000315 * 1000, rel=1e-6)
+
+
+def test_builtins_are_what_the_module_writes_with_their_sources():
+    """The two TOML files are :func:`builtin_doc` exactly; every chain parameter has a
+    reading that names a source key of the module's SOURCES or says ESTIMATE."""
+    from sumo_drvpw.model.equations import equation_from_dict
+    from sumo_drvpw.validation import mc_fuel as m
+
+    assert set(m.CHAINS) == set(HAND)
+    for name in m.CHAINS:
+        want = equation_from_dict(m.builtin_doc(name), f"<{name}>").to_dict()
+        assert load_equation(name).to_dict() == want, f"{name}: regenerate with python -m sumo_drvpw.validation.mc_fuel"
+        reading = load_equation(name).chain.reading
+        for key in ("traction_efficiency", "marginal_efficiency", "idle_fuel_power_w", "aux_power_w",
+                    "engine_off_below_w", "fuel_cut_below_w"):
+            keys = [k for k in m.SOURCES if f"[{k}]" in reading[key]]
+            assert keys or "ESTIMATE" in reading[key] or key == "fuel_cut_below_w", (name, key)
+        assert "[C2W]" in reading["marginal_efficiency"] and "[EPA-TCL]" in reading["idle_fuel_power_w"]
+
+
+def _config(folder: Path) -> Path:
+    """A bare config with a motorcycle and a moped that write no emissionClass (SUMO's
+    default petrol classes), an electric moped and a car."""
+    from test_sim_run import EAST, WEST, _city_config
+
+    vtypes = """\
+    <vType id="mc" vClass="motorcycle"/>
+    <vType id="mop" vClass="moped"/>
+    <vType id="emop" vClass="moped" emissionClass="Energy/unknown"/>
+    <vType id="car" vClass="passenger" mass="1400"/>
+"""
+    veh = [("m", "mc", WEST), ("s", "mop", EAST), ("e", "emop", WEST), ("p", "car", EAST)]
+    return _city_config(folder, vtypes, veh, end="150")
+
+
+def test_bare_config_books_motorcycles_and_mopeds_in_litres(tmp_path, capsys):
+    """A bare SUMO config books motorcycles and mopeds by their petrol chains, per vehicle
+    exactly P_idle·T_f + (E_traction/η_d + P_aux·T_f)/η_e over its fuelled time T_f (the
+    trace); the electric moped is not booked by the petrol chain, and it alone is in the
+    warning of vehicles no chain books (before: the motorcycle and moped were too)."""
+    pytest.importorskip("libsumo")
+    from sumo_drvpw.cli import main as cli_main
+
+    sc = tmp_path / "sc"
+    sc.mkdir()
+    out = tmp_path / "o"
+    code = cli_main(["run", str(_config(sc)), "--out", str(out), "--no-figures", "--no-progress", "--trace"])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    fuel = pd.read_csv(out / "chain_vehicles.csv", dtype={"key": str})
+    booked = dict(zip(fuel["key"], fuel["equation"]))
+    assert booked["m"] == "moves_motorcycle_petrol" and booked["s"] == "moves_moped_petrol"
+    assert booked["p"] == "epa_gasoline_car" and "e" not in booked
+    veh = pd.read_parquet(out / "vehicles.parquet")
+    trace = pd.read_parquet(out / "trace.parquet")
+    for vid in ("m", "s"):
+        name = booked[vid]
+        _, eta_e, eta_d, idle, aux, cut = HAND[name]
+        r = veh[(veh.vehicle == vid) & (veh.equation == name)].iloc[0]
+        t = trace[(trace.vehicle == vid) & (trace.equation == name)]
+        p, dt = t.p_total_w.to_numpy(), 0.5
+        fuelled = (p >= 0) | (t.speed_mps.to_numpy() <= 0.1) if cut else np.ones(p.size, bool)
+        want = (idle + aux / eta_e) * dt * fuelled.sum() + r.traction_total_j / (eta_d * eta_e)
+        got = fuel[(fuel.key == vid) & (fuel.equation == name)].iloc[0]
+        assert got.fuel_kwh * 3.6e6 == pytest.approx(want, rel=1e-6) and got.fuel_l > 0
+    cls = pd.read_csv(out / "chain_classes.csv").set_index("key")
+    assert {"motorcycle", "moped", "passenger"} <= set(cls.index)
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    assert "moves_moped_petrol" in summary["assumptions"]["energy_carrier"]["emop"]["not_booked_by"]
+    key = "no battery or fuel chain applies to"
+    said = err.split(key)[1].split("\n")[0] if key in err else ""
+    assert "moped" in said and "motorcycle" not in said
+
+
+HAVE_CYCLES = (DATA / "cycles").is_dir()
+
+
+@pytest.mark.shared_data
+@pytest.mark.skipif(not HAVE_CYCLES, reason=f"shared cycles not found at {DATA}")
+def test_motorcycle_urban_fuel_within_published_range():
+    """On the ECE-15 urban cycle and the WLTC's low phase, computed now at the plug-in's
+    default motorcycle mass (285 kg), the chain's L/100 km lies within 2.7–4.8, the range
+    of new Euro 4 and 5 motorcycles on ADEME's (2023) commuting test cycle; SUMO's default
+    HBEFA 4 class books more."""
+    from sumo_drvpw.validation import mc_fuel as m
+
+    eq = load_equation("moves_motorcycle_petrol")
+    for cyc in ("ece15", "wltc_low_3"):
+        got = m.chain_run(eq, m.read_trace(DATA / "cycles", cyc), 285.0)["l_per_100km"]
+        assert 2.7 <= got <= 4.8, (cyc, got)
+
+
+@pytest.mark.shared_data
+@pytest.mark.skipif(not HAVE_CYCLES, reason=f"shared cycles not found at {DATA}")
+def test_committed_report_is_regenerated():
+    """docs/mc-fuel.json's check is what the module computes now (ours exactly, SUMO's tool
+    to 1e-6), and docs/mc-fuel.md is the rendering of docs/mc-fuel.json."""
+    from sumo_drvpw.validation import mc_fuel as m
+
+    committed = json.loads((REPO / "docs" / "mc-fuel.json").read_text(encoding="utf-8"))
+    assert (REPO / "docs" / "mc-fuel.md").read_text(encoding="utf-8") == m.render(committed), (
+        "docs/mc-fuel.md is not the rendering of docs/mc-fuel.json: regenerate with "
+        "python -m sumo_drvpw.validation.mc_fuel docs/mc-fuel.md")
+    fresh = json.loads(json.dumps(m.check(DATA)))
+    for name, r in committed["check"].items():
+        for cyc, row in r["cycles"].items():
+            for who, val in row.items():
+                got = fresh[name]["cycles"][cyc][who]
+                if val is None or got is None:
+                    continue
+                assert got["l_per_100km"] == pytest.approx(val["l_per_100km"], rel=1e-6), (name, cyc, who)
