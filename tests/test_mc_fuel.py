@@ -29,7 +29,7 @@ LHV, RHO = 43.2e6, 0.745            # petrol [J/kg], [kg/L] (docs/sources.md, Fu
 
 #: name → (vClass, η_e, η_d, idle [W] = 4037 W/L × displacement, P_aux [W], overrun cut at P < 0)
 HAND = {
-    "moves_motorcycle_petrol": ("motorcycle", 0.18, 0.8, round(4037.0 * 0.6, 1), 60.0, True),
+    "moves_motorcycle_petrol": ("motorcycle", 0.24, 0.8, round(4037.0 * 0.6, 1), 60.0, True),
     "moves_moped_petrol": ("moped", 0.18, 0.8, round(4037.0 * 0.05, 1), 30.0, False),
 }
 
@@ -132,17 +132,22 @@ HAVE_CYCLES = (DATA / "cycles").is_dir()
 
 @pytest.mark.shared_data
 @pytest.mark.skipif(not HAVE_CYCLES, reason=f"shared cycles not found at {DATA}")
-def test_motorcycle_urban_fuel_within_published_range():
-    """On the ECE-15 urban cycle and the WLTC's low phase, computed now at the plug-in's
-    default motorcycle mass (285 kg), the chain's L/100 km lies within 2.7–4.8, the range
-    of new Euro 4 and 5 motorcycles on ADEME's (2023) commuting test cycle; SUMO's default
-    HBEFA 4 class books more."""
+def test_motorcycle_fuel_on_a_commuting_cycle_within_published_range():
+    """ADEME (2023) measured new Euro 4 and 5 motorcycles at 2.7–4.8 L/100 km on a commuting
+    test cycle (town to motorway); on the WLTC class 3b (town to motorway), computed now at
+    the plug-in's default motorcycle mass (285 kg), the chain lies in that range; on the
+    cars' Willans slope 0.40 instead of the two-wheeler model's 0.24 it would not. (The
+    urban traces alone land at the range's low end, 2.6–2.75: docs/mc-fuel.md.)"""
+    from dataclasses import replace
+
     from sumo_drvpw.validation import mc_fuel as m
 
     eq = load_equation("moves_motorcycle_petrol")
-    for cyc in ("ece15", "wltc_low_3"):
-        got = m.chain_run(eq, m.read_trace(DATA / "cycles", cyc), 285.0)["l_per_100km"]
-        assert 2.7 <= got <= 4.8, (cyc, got)
+    v = m.read_trace(DATA / "cycles", "wltc_3b")
+    got = m.chain_run(eq, v, 285.0)["l_per_100km"]
+    assert 2.7 <= got <= 4.8, got
+    eq.chain = replace(eq.chain, marginal_efficiency=0.40)
+    assert m.chain_run(eq, v, 285.0)["l_per_100km"] < 2.7
 
 
 @pytest.mark.shared_data
