@@ -25,9 +25,9 @@ slopes, wind and outputs are exactly those of ``run``; only what FCD lacks diffe
   the live loop, not booked (``summary.json`` ``source.parked_rows``) but for the row it
   parks in, where SUMO moved it into its stop (booked driven, as live); FCD without x, y
   (``--fcd-output.attributes`` without them) tells it only at a parking stop the route
-  files declare (:mod:`sumo_drvpw.sim.fcd_stops`; else booked standing, warned of), and
-  ``.geo``/``.utm`` coordinates not at all (booked standing); one whose parking is over but
-  whose way out is blocked idles in its space
+  files declare (:mod:`sumo_drvpw.sim.fcd_stops`; else booked standing, warned of);
+  ``.geo``/``.utm`` x, y are brought back into the network's (:mod:`sumo_drvpw.sim.fcd_geo`);
+  one whose parking is over but whose way out is blocked idles in its space
   and is booked standing there, as live (:mod:`sumo_drvpw.sim.fcd_idle`: told by the FCD's
   blinker bits, else by its declared stop's planned end; ``source.idling_rows``);
 - vehicles are switched off at long planned stops and by start-stop systems as in the live
@@ -64,6 +64,7 @@ import pandas as pd
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.fcd_begin import accel_at_begin, begin_frame
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators
+from sumo_drvpw.sim.fcd_geo import NetCoordinates, recorded_coordinates
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_method import recorded_method
 from sumo_drvpw.sim.fcd_warn import (KineticGain, lane_warnings, missing_input_warnings, no_angle_warning,
@@ -410,16 +411,22 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     # still end at the scenario's (its stops: read_declared_stops)
     cut = sc.end if sc.end_given else None
     # bus stops of the additional files, and of the files given for the vTypes (--vtypes)
-    parked = ParkedTest(net, bus_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files]))))
     from sumo_drvpw.sim.fcd_read import header_options
 
     head = header_options(fcd_file)  # the recording's options (None: no SUMO header)
+    # (x, y written as longitude, latitude or UTM: brought back into the network's)
+    coords = NetCoordinates(recorded_coordinates(head), sc.net_file)
+    parked = ParkedTest(net, bus_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files]))), coords)
     sc = recorded_device_options(sc, head)
     dt, dt_warning = row_interval(sc, fcd_file, head)
     method, method_note = recorded_method(sc, head, fcd_file, dt)  # (a header, the scenario, or the rows)
     net.jump_slack_m = hidden_steps_slack(recorded_step(head), dt)  # rows sparser than the step
     if chunk_rows is None:
         df = read_fcd(fcd_file)
+        if {"x", "y"} <= set(df.columns):
+            xy = {k: df[k].to_numpy() for k in ("x", "y", "lane", "pos")}
+            coords.convert(xy, net)
+            df["x"], df["y"] = xy["x"], xy["y"]
         df["off"] = parked({k: df[k].to_numpy() for k in df.columns})
         df["lane_ok"] = parked.lane_ok({"lane": df["lane"].to_numpy()})
         if keep is not None and len(df):
@@ -518,6 +525,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
             warn.append(unplaced_person_warning(fcd_file, replay.unplaced_person_rows))
         if replay.idling.untold_rows:
             warn.append(untold_warning(fcd_file, replay.idling.untold_rows, len(replay.idling.untold_ids)))
+        if coords.lost:
+            warn.append(f"FCD file {fcd_file}: {coords.lost}: its rows are read as without x, y")
         if replay.blind_rows:
             warn.append(unplaced_vehicle_warning(fcd_file, replay.blind_rows, extra["source"]["declared_parked_rows"],
                                                  replay.stops is not None))

@@ -293,11 +293,14 @@ class ParkedTest:
     space, booked standing there (:mod:`sumo_drvpw.sim.fcd_idle`, applied per timestep in
     ``_Rows._vehicles``). Applied once per block of rows (:meth:`mark`), not per timestep. A bus parked at
     one of ``bus_stops`` (lane id → [(start, end)] positions, :func:`bus_stops`) dwells
-    there in service and stays on its lane (booked standing), as in the live loop."""
+    there in service and stays on its lane (booked standing), as in the live loop. ``coords``:
+    the rows' x, y into the network's (:class:`~sumo_drvpw.sim.fcd_geo.NetCoordinates`; an
+    FCD written in geo or UTM coordinates), applied in :meth:`mark`."""
 
-    def __init__(self, net, bus_stops: dict | None = None):
+    def __init__(self, net, bus_stops: dict | None = None, coords=None):
         self.net = net
         self.bus_stops = bus_stops or {}
+        self.coords = coords
 
     def __call__(self, cols: dict) -> np.ndarray:
         """Rows (``speed``, ``lane``, ``pos``, ``x``, ``y``) → off their lane, standing."""
@@ -331,6 +334,8 @@ class ParkedTest:
         """The blocks (:func:`iter_fcd_blocks`) with the columns ``off`` (this test's rows)
         and ``lane_ok`` (:meth:`lane_ok`)."""
         for b in blocks:
+            if self.coords is not None:
+                self.coords.convert(b.cols, self.net)
             b.cols["off"] = self(b.cols)
             b.cols["lane_ok"] = self.lane_ok(b.cols)
             yield b
