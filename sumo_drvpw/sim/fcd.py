@@ -427,7 +427,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
             xy = {k: df[k].to_numpy() for k in ("x", "y", "lane", "pos")}
             coords.convert(xy, net)
             df["x"], df["y"] = xy["x"], xy["y"]
-        df["off"] = parked({k: df[k].to_numpy() for k in df.columns})
+        df["off"], df["bay"] = parked.marks({k: df[k].to_numpy() for k in df.columns})
         df["lane_ok"] = parked.lane_ok({"lane": df["lane"].to_numpy()})
         if keep is not None and len(df):
             times = df.attrs["times"]

@@ -183,6 +183,9 @@ class _Rows:
         self.last_ids: set = set()  # the vehicles of the last timestep
         #: vehicle rows without x, y: parked vehicles told only by the route files' parking stops
         self.blind_rows = 0
+        #: vehicles parked beside a bus stop's span at a declared stop of theirs that is no bus
+        #: stop (a parkingArea there): parked, not dwelling, while they stand there (:meth:`_bays`)
+        self.not_bay: set = set()
         self.person, self.vehicletype, self.calibrator = _Person(self), _VType(self), _Calib(self)
 
     def _vehicles(self, c: dict, nxt: dict | None) -> dict:
@@ -204,6 +207,8 @@ class _Rows:
             self.kinetic.add(c["id"], c["speed"])
         if self.idling is not None:
             self.idling.forget(self.arrived)
+        if "bay" in c:  # beside a bus stop: parked where its declared stop there is no bus stop
+            c = self._bays(c)
         blind = ~_placed(c)  # rows without x, y: a parked vehicle is told by its declared stop
         self.blind_rows += int(np.count_nonzero(blind))
         if self.stops is not None:  # (lanes as written: a parked vehicle serves its stop too)
@@ -232,7 +237,9 @@ class _Rows:
         if "off" in c and len(c["id"]):  # parked vehicles (ParkedTest.mark)
             if nxt is not None:  # (next rows without x, y: standing is parked, moving is not)
                 keep = ~nxt["person"] if "person" in nxt else np.ones(len(nxt["id"]), bool)
-                nxt = {"id": nxt["id"][keep], "off": (nxt["off"] | (~_placed(nxt) & (np.asarray(
+                nb = nxt["bay"] & np.fromiter(map(self.not_bay.__contains__, nxt["id"]), bool, len(nxt["id"])) \
+                    if "bay" in nxt and self.not_bay else False
+                nxt = {"id": nxt["id"][keep], "off": (nxt["off"] | nb | (~_placed(nxt) & (np.asarray(
                     nxt["speed"], float) < STANDSTILL_MPS)))[keep]}
             lanes, n = _unpark(c["lane"], c["id"], c["off"] & ~entry, nxt["id"] if nxt else None,
                                nxt["off"] if nxt else None)
@@ -255,6 +262,27 @@ class _Rows:
             c = dict(c, lane=lanes)
             self.parked_rows += n
         return c
+
+    def _bays(self, c: dict) -> dict:
+        """Rows ``c`` with the ones :class:`ParkedTest` took for a vehicle dwelling in a bus
+        bay (``bay``) marked parked (``off``) where the route files' stops say the vehicle
+        stands at a stop of its own there that is no bus stop (a parkingArea whose span
+        touches the bus stop's), and it stays parked while it stands there; without such a
+        stop (none declared, or one at the bus stop) it dwells, as before."""
+        bay = c["bay"]
+        if not bay.any():
+            self.not_bay = set()
+            return c
+        k = np.flatnonzero(bay)
+        ids, lanes, pos = c["id"], c["lane"], np.asarray(c["pos"], float)
+        sure = np.array([ids[j] in self.not_bay or (self.stops is not None and self.stops.at_bay(
+            ids[j], lanes[j], pos[j]) is False) for j in k], bool)
+        self.not_bay = set(np.asarray(ids, object)[k[sure]])
+        if not sure.any():
+            return c
+        off = c["off"].copy()
+        off[k[sure]] = True
+        return dict(c, off=off)
 
     def _ride(self, p: dict | None, v: dict) -> None:
         """Riders per vehicle from the persons' rows ``p`` and the vehicles' rows ``v``."""
@@ -304,9 +332,16 @@ class ParkedTest:
 
     def __call__(self, cols: dict) -> np.ndarray:
         """Rows (``speed``, ``lane``, ``pos``, ``x``, ``y``) → off their lane, standing."""
+        return self.marks(cols)[0]
+
+    def marks(self, cols: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Rows → (off their lane, standing; and ``bay``: off it within a bus stop's span,
+        taken for a vehicle dwelling in its bay, not parked — unless the route files say its
+        stop there is none: ``_Rows._bays``)."""
         off = np.asarray(cols["speed"], float) < STANDSTILL_MPS
+        bay = np.zeros(len(off), bool)
         if "x" not in cols or "y" not in cols:
-            return np.zeros(len(off), bool)
+            return np.zeros(len(off), bool), bay
         k = np.flatnonzero(off)  # only a standing vehicle can be parked
         if len(k):
             codes, uniq = pd.factorize(np.asarray(cols["lane"], object)[k])
@@ -319,8 +354,8 @@ class ParkedTest:
             k = np.flatnonzero(off)
             for i in k[np.isin(lanes[k], list(self.bus_stops))]:  # parked on a stop's lane
                 if any(a - 1.0 <= pos[i] <= b + 1.0 for a, b in self.bus_stops.get(lanes[i], ())):
-                    off[i] = False
-        return off
+                    off[i], bay[i] = False, True
+        return off, bay
 
     def lane_ok(self, cols: dict) -> np.ndarray:
         """Rows' lanes (``lane``) → 1 a lane of the network, 0 none (a person; ""), −1 a
@@ -336,7 +371,7 @@ class ParkedTest:
         for b in blocks:
             if self.coords is not None:
                 self.coords.convert(b.cols, self.net)
-            b.cols["off"] = self(b.cols)
+            b.cols["off"], b.cols["bay"] = self.marks(b.cols)
             b.cols["lane_ok"] = self.lane_ok(b.cols)
             yield b
 

@@ -490,6 +490,21 @@ class StopTracker:
         self.starting, self.ending = tuple(starting), tuple(ending)
         self.inferred_rows += int(np.count_nonzero(self.inferred))
 
+    def at_bay(self, vid: str, lane: str, pos: float) -> bool | None:
+        """Whether the declared stop vehicle ``vid`` stands at on ``lane`` at ``pos`` [m] —
+        its current one, else the next of its stops there — is at a bus or train stop (None:
+        no declared stop of it there)."""
+        st = self.state.get(vid) or self._state(vid)
+        if st[3] is not None:
+            return st[0][st[3].index].bay if st[3].index >= 0 else None
+        for s in st[0][st[1]:]:
+            if s.place is not None and s.place not in self.declared.places:
+                continue
+            span = self._span(s, lane)
+            if span is not None and span[0] - STOP_TOLERANCE_M <= pos <= span[1] + STOP_TOLERANCE_M:
+                return s.bay
+        return None
+
     def _park(self, vid: str, j: int, dur: float, until: float, t: float, trigger) -> None:
         """Vehicle ``vid`` (row ``j``) parked off the lane at its declared stop at ``t`` [s]
         (SUMO's arrival there: it parks in the step it reaches the stop)."""
