@@ -92,6 +92,8 @@ class Network:
     #: per lane: the opposite-direction lane SUMO lets vehicles overtake on (the net's
     #: ``<neigh>``, netconvert --opposites.guess), -1 none; its positions run the other way
     lane_opposite: np.ndarray | None = None
+    #: per lane: how far its edge's lanes' profiles part [m] (sim/lane_spread.py)
+    lane_spread: np.ndarray | None = None
     #: lane ids in lane-number order (for naming lanes in the summary)
     lane_ids: list[str] | None = None
     #: False when no lane shape has a z coordinate other than 0 (slopes are then all 0)
@@ -162,7 +164,9 @@ class Network:
                           np.where(last[:, 0] == lane, pos - last[:, 1], 0.0))
         steep = np.maximum(self.lane_steep[lane], self.lane_steep[prev])
         ok = np.isfinite(dz) & (ds >= 0.01)
-        ok[ok] = np.abs(dz[ok]) <= road[ok] * steep[ok] + 0.01 * np.minimum(road[ok], 1.0)  # (+ FCD's cm)
+        # (+ FCD's cm, + how far the lanes of each edge part: a lane change, sim/lane_spread.py)
+        spread = 0.0 if self.lane_spread is None else np.maximum(self.lane_spread[lane], self.lane_spread[prev])
+        ok[ok] = (np.abs(dz) <= road * steep + spread + 0.01 * np.minimum(road, 1.0))[ok]
         if self.lane_own_edge is not None and ok.any():
             # a jump to another edge (a teleport SUMO starts and ends in one step, which FCD
             # shows without a gap; the live run hears of it): the road from the last position
@@ -502,6 +506,8 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     """Read a SUMO network with sumolib and build the edge/lane table (see module doc)."""
     import sumolib
 
+    from sumo_drvpw.sim.lane_spread import lane_spread
+
     if not 0 < max_rad <= MAX_RAD_LIMIT:
         raise UserError(f"[slope] max_rad must be above 0 and at most {MAX_RAD_LIMIT:g} rad (86°), got {max_rad:g}")
     try:
@@ -574,7 +580,7 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     for c in classes:
         if c not in all_classes:
             all_classes.append(c)
-    return Network(
+    out = Network(
         path=Path(path), edge_ids=edge_ids, edge_class=classes, edge_type=types,
         edge_length=np.array([e.getLength() for e in edges], float), edge_speed=speeds,
         edge_shapes=[np.asarray(e.getLanes()[0].getShape(), float)[:, :2] for e in edges],
@@ -590,3 +596,5 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         lane_steep=np.maximum(np.array(steep, float), np.tan(max_rad)),
         has_elevation=z_len > 0.0,
         z_share=float(z_len / max(float(lane_length.sum()), 1e-9)))
+    out.lane_spread = lane_spread(out)
+    return out

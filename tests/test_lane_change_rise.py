@@ -1,0 +1,83 @@
+"""A lane change within an edge whose lanes' elevation profiles part (MoST: lanes of one edge
+up to 0.6 m apart, a 3D network's lanes each with its own shape) books the rise between
+the lanes as any other step's (sim/network.py Network.step_grade: clipped at max_rad, the
+rest carried), not as a jump; live with positions tracked (a lane change tracking misses
+until its next read), read every step, and the FCD replay alike. Real SUMO runs: cars
+overtaking slow trucks on a two-lane road whose left lane rises 1.5 m where the right lane
+stays flat, and changing back to the right lane, the one that goes on."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sumo_drvpw.model.constants import G
+from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.sim import run_scenario
+from sumo_drvpw.sim.fcd import process_fcd, read_fcd
+from sumo_drvpw.sim.network import lane_numbers, load_network
+from sumo_drvpw.sim.scenario import load_scenario
+from sumo_probe import build_net
+
+pytestmark = pytest.mark.sumo
+
+PHYS = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01})
+
+
+def _rise(net, rows):
+    """Per vehicle: profile elevation at its first and last rows, robust slope and speed at its first."""
+    rows = rows[~rows["person"]].sort_values("time", kind="stable")
+    lane = lane_numbers(net.lane_index, list(rows["lane"]))
+    rows = rows.assign(z=net.elevation(lane, rows["pos"].to_numpy()),
+                       theta=net.slope(lane, rows["pos"].to_numpy())[0])
+    g = rows.groupby("id")
+    return pd.DataFrame({"z0": g["z"].first(), "z1": g["z"].last(), "theta": g["theta"].first(),
+                         "v": g["speed"].first()})
+
+
+def test_a_lane_change_between_lanes_at_different_heights_books_the_rise(tmp_path):
+    """Before 2026-11-29 a step from one lane of an edge to another whose profile lies higher
+    by more than the step could climb at the lanes' steepest slope was taken for a jump and
+    booked at the slope, its rise lost (here 1.5 m per lane change where the lanes part), and the
+    tracked live run, which sees a lane change only at its next read (up to 25 steps on),
+    lost it where the replay, reading every row, did not: MoST 18000–19100 s, coach
+    commercial_1-2_4 net −7.57 MJ live against −7.69 MJ replayed (0.6 m of rise, 116 kJ).
+    Now every car's net grade is m·g·(z_last − z_first) + its first step's
+    (to 1 cm of rise), tracked, read and replayed."""
+    (tmp_path / "n.con.xml").write_text('<connections><connection from="AB" to="BC" fromLane="0" toLane="0"/>'
+                                        '</connections>', encoding="utf-8")  # (only the right lane goes on)
+    build_net(tmp_path, '<nodes><node id="A" x="0" y="0" z="0"/><node id="B" x="800" y="0" z="0"/>'
+                        '<node id="C" x="900" y="0" z="0"/></nodes>',
+              '<edges><edge id="AB" from="A" to="B" numLanes="2" speed="27.8">'
+              '<lane index="1" shape="0,-1.6,0 300,-1.6,1.5 800,-1.6,1.5"/></edge>'
+              '<edge id="BC" from="B" to="C" numLanes="1" speed="27.8"/></edges>', "-x", "n.con.xml")
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="slow" vClass="truck" maxSpeed="8" length="12"/>'
+        '<vType id="fast" vClass="passenger" maxSpeed="30"/><route id="r" edges="AB BC"/>'
+        '<flow id="t" type="slow" route="r" begin="0" end="150" period="20" departLane="0" departSpeed="max"/>'
+        '<flow id="c" type="fast" route="r" begin="3" end="150" period="4" departLane="0" departSpeed="max"/>'
+        '</routes>', encoding="utf-8")
+    sc = tmp_path / "s.toml"
+    sc.write_text('equations = ["vsp_ldv1999"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\n'
+                  'begin = 0\nend = 300\nstep_length = 0.25\n', encoding="utf-8")
+    fcd = tmp_path / "fcd.xml"
+    kw = dict(equations=[PHYS], figures=False)
+    books = {"tracked": run_scenario(sc, None, options=["--fcd-output", str(fcd), "--precision", "6"], **kw),
+             "getter": run_scenario(sc, None, positions="getter", **kw),
+             "replay": process_fcd(fcd, scenario=sc, **kw)}
+    rows = read_fcd(fcd)
+    s = load_scenario(sc)
+    net = load_network(s.net_file, s.road_class, s.slope_window, s.slope_max)
+    r = _rise(net, rows)
+    ab = rows[rows["id"].str.startswith("c") & rows["lane"].str.startswith("AB")].sort_values("time", kind="stable")
+    change = ab["lane"].ne(ab.groupby("id")["lane"].shift()) & ab.duplicated("id")
+    assert (change & (ab["pos"] > 320)).sum() >= 10  # (lane changes where the lanes lie 1.5 m apart)
+    for name, res in books.items():
+        b = res.vehicles.set_index("vehicle").sort_index()
+        b = b[b["vclass"] == "passenger"]
+        assert len(b) >= 30, name
+        m, z = b["mass_kg"] * G, r.reindex(b.index)
+        expect = m * (z.z1 - z.z0) + m * np.sin(z.theta) * z.v * 0.25
+        np.testing.assert_allclose(b["traction_grade_j"] + b["recup_grade_j"], expect,
+                                   rtol=0, atol=float(m.max()) * 0.01, err_msg=name)
