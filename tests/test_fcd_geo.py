@@ -39,7 +39,8 @@ def _record(d, mode: str):
     (d / "tl.add.xml").write_text(
         '<additional><tlLogic id="b" type="static" programID="long" offset="0"><phase duration="60" state="r"/>'
         '<phase duration="60" state="G"/></tlLogic></additional>', encoding="utf-8")
-    cars = "".join(f'<vehicle id="q{i}" type="ecar" depart="{3 + 2 * i}"><route edges="e1 e2"/></vehicle>' for i in range(6))
+    cars = "".join(f'<vehicle id="q{i}" type="ecar" depart="{3 + 2 * i}"><route edges="e1 e2"/></vehicle>'
+                   for i in range(6))
     (d / "r.rou.xml").write_text(
         '<routes><vType id="ecar" vClass="passenger" mass="1500" emissionClass="Energy/unknown"/>'
         '<vehicle id="park" type="ecar" depart="0"><route edges="e1 e2"/>'

@@ -158,15 +158,14 @@ class Network:
         z = self.elevation(lane, pos)
         dz = z - last[:, 2]
         prev = np.where(np.isfinite(last[:, 0]), last[:, 0], lane).astype(np.int64)
-        # a jump rises faster than the profile lets a vehicle climb over the road it covered
-        # (pos difference on one lane — FCD written less often than the step — or v·Δt)
+        # a jump rises faster than the profile lets a vehicle climb over the road covered (v·Δt, or pos on one lane)
         road = np.maximum((ds if reach is None else np.maximum(ds, reach)) + self.jump_slack_m,
                           np.where(last[:, 0] == lane, pos - last[:, 1], 0.0))
         steep = np.maximum(self.lane_steep[lane], self.lane_steep[prev])
-        ok = np.isfinite(dz) & (ds >= 0.01)
-        # (+ FCD's cm, + how far the lanes of each edge part: a lane change, sim/lane_spread.py)
+        ok = np.isfinite(dz)  # (+ FCD's cm, + how far the lanes of an edge part: a lane change, sim/lane_spread.py)
         spread = 0.0 if self.lane_spread is None else np.maximum(self.lane_spread[lane], self.lane_spread[prev])
         ok[ok] = (np.abs(dz) <= road * steep + spread + 0.01 * np.minimum(road, 1.0))[ok]
+        still, ok = ok & (ds < 0.01), ok & (ds >= 0.01)  # (< 1 cm: booked at the slope, the rest carried)
         if self.lane_own_edge is not None and ok.any():
             # a jump to another edge (a teleport SUMO starts and ends in one step, which FCD
             # shows without a gap; the live run hears of it): the road from the last position
@@ -183,10 +182,11 @@ class Network:
             booked = np.clip(want, -lim, lim)
             theta = np.where(ok, np.arcsin(np.clip(booked / np.where(ok, ds, 1.0), -1.0, 1.0)), theta)
             owed = np.where(ok, want - booked, owed)
-        # (a step booked from the slope — a first step, one shorter than 1 cm — at most max_rad
-        # too: a lane steeper on average than the limit keeps its mean gradient in the profile)
-        lim_rad = min(self.max_rad, 0.5 * np.pi)
-        return np.clip(theta, -lim_rad, lim_rad), np.column_stack([lane, pos, z, owed])
+        # (a step booked from the slope — a first step, one < 1 cm, e.g. a lane change standing — at most
+        # max_rad too: a lane steeper on average keeps its mean gradient; a short step's rest is carried)
+        theta = np.clip(theta, -min(self.max_rad, 0.5 * np.pi), min(self.max_rad, 0.5 * np.pi))
+        owed = np.where(still, owed + np.where(still, dz, 0.0) - np.sin(theta) * ds, owed)
+        return theta, np.column_stack([lane, pos, z, owed])
 
     def jumped(self, lp, p0, ln, p1, road) -> np.ndarray:
         """Which moves from lane numbers ``lp``, positions ``p0`` [m] to lanes ``ln`` of
