@@ -333,3 +333,22 @@ def test_export_vtype_repeats_the_chain_s_calibration_warnings(tmp_path, capsys)
     assert cli_main(["export-vtype", str(eq), "--mass", "549", "--id", "t", "--out", str(out)]) == 0
     said = capsys.readouterr().out
     assert out.exists() and "warning: t: its chain's calibration warned: energy chain traction_efficiency = 1" in said
+
+
+def test_export_vtype_gives_a_non_car_equation_its_vclass(tmp_path, capsys):
+    """A truck's equation (vclasses trailer) was exported without a vClass, so SUMO ran it as
+    a passenger car (lanes, outputs, and the plug-in's class tables); now it takes the
+    equation's vClass unless --vclass names one, and a car's equation stays SUMO's default."""
+    import xml.etree.ElementTree as ET
+
+    def vtype(*extra):
+        out = tmp_path / f"v{len(extra)}.add.xml"
+        assert cli_main(["export-vtype", *extra, "--mass", "30000", "--id", "t", "--out", str(out)]) == 0
+        return ET.parse(out).getroot().find("vType")
+
+    assert vtype("moves_combination_truck_diesel").get("vClass") == "trailer"
+    out = capsys.readouterr().out
+    assert "(vClass trailer, the equation's; --vclass chooses another)" in out
+    assert "SUMO alone books this vType's energy at the wheels as electricity" in out
+    assert vtype("moves_combination_truck_diesel", "--vclass", "truck").get("vClass") == "truck"
+    assert vtype("epa_gasoline_car").get("vClass") is None  # made for cars: SUMO's default

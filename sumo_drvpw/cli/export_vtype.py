@@ -14,7 +14,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mass", type=float, metavar="KG",
                         help="vehicle mass [kg] (instead of the vehicle file's)")
     parser.add_argument("--id", required=True, metavar="ID", help="vType id to write")
-    parser.add_argument("--vclass", metavar="VCLASS", help="SUMO vClass of the vType")
+    parser.add_argument("--vclass", metavar="VCLASS",
+                        help="SUMO vClass of the vType (default: the equation's first vClass when it is "
+                             "made for other vehicles than cars, else SUMO's default, passenger)")
     parser.add_argument("--air-temperature", type=float, metavar="C",
                         help="air temperature [°C] of the runs: a battery chain's HVAC power at it joins "
                              "constantPowerIntake (SUMO's Energy model has no temperature)")
@@ -62,10 +64,17 @@ def main(args: argparse.Namespace) -> int:
     from sumo_drvpw.cli import check_air_temperature
 
     check_air_temperature(args.air_temperature)
-    xml, missing = energy_vtype_xml(eq, args.id, mass, area, args.vclass, args.air_temperature, out=args.out)
+    from sumo_drvpw.model.equations import DEFAULT_VCLASSES
+
+    vclass = args.vclass
+    if vclass is None and eq.vclasses and not set(eq.vclasses) & set(DEFAULT_VCLASSES):
+        vclass = eq.vclasses[0]  # a truck's equation: not a passenger car in SUMO's lanes and outputs
+    xml, missing = energy_vtype_xml(eq, args.id, mass, area, vclass, args.air_temperature, out=args.out)
     write_text(args.out, xml)
     model = ("MMPEVEM", "MMPEVEM") if getattr(eq.chain, "motor", None) is not None else ("Energy/unknown", "Energy model")
-    print(f"wrote vType '{args.id}' ({model[0]}) from equation '{eq.name}' to {args.out}")
+    print(f"wrote vType '{args.id}' ({model[0]}) from equation '{eq.name}' to {args.out}"
+          + (f" (vClass {vclass}, the equation's{'' if len(eq.vclasses) == 1 else ' first'}; --vclass "
+             "chooses another)" if vclass is not None and args.vclass is None else ""))
     for m in missing:
         print(f"  not expressible in SUMO's {model[1]}: {m}")
     for w in (getattr(eq.chain, "provenance", None) or {}).get("warnings", []):  # as compare and run say

@@ -18,7 +18,9 @@ def chain_energy_params(chain, air_c: float | None = None, drive=None) -> tuple[
     p: dict = {}
     missing: list[str] = []
     if chain.predicts == "fuel":
-        return p, ["the fuel chain (SUMO's Energy model is electric)"]
+        return p, ["the fuel chain: SUMO's Energy model is electric, so SUMO alone books this vType's "
+                   "energy at the wheels as electricity (efficiencies 1); the plug-in's run and fcd book "
+                   "its litres through the vType's drvpw.equation"]
     if chain.motor is not None:  # its own model: written as efficiencies 1 it would book no loss
         return p, ["the MMPEVEM motor, loss map and battery of the chain (write its vType with "
                    "emissionClass MMPEVEM and those parameters instead)"]
