@@ -266,6 +266,34 @@ def test_compare_says_so_when_the_trips_calibrated_on_come_from_another_file(tmp
     assert "in sample" not in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_a_trip_re_exported_beside_a_calibration_file_is_said_in_sample(tmp_path, capsys, engine):
+    """Calibrated on two files; compared on one of them, the other's trip re-exported under
+    another name, and another drive: the note on the file named (1 of 3 files) kept the
+    trips' note from being said, so the re-exported trip was compared as held out. The
+    trips of other files than those named are said now."""
+    import pandas as pd
+
+    a, b, c = (tmp_path / f"{x}.parquet" for x in "abc")
+    for p, seed in ((a, 1), (b, 3), (c, 7)):
+        assert cli_main(["synth", "--out", str(p), "--minutes", "4", "--seed", str(seed)]) == 0
+        pd.read_parquet(p).assign(trip_id=p.stem).to_parquet(p)  # (each its own trip id)
+    eq = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(a), str(b), "--vehicle", "prius3", "--out", str(eq)]) == 0
+    db = pd.read_parquet(b)
+    db["trip_id"] = "again"
+    re = tmp_path / "re.csv"
+    db.to_csv(re, index=False)
+    capsys.readouterr()
+    assert cli_main(["compare", str(a), str(re), str(c), "--vehicle", "prius3", "--equation", str(eq),
+                     "--out", str(tmp_path / "o"), "--engine", engine]) == 0
+    notes = [x for x in capsys.readouterr().out.splitlines() if "in sample" in x]
+    assert notes == ["note: eq was calibrated on 1 of these 3 log file(s) (a.parquet): its errors there are "
+                     "in sample, not held out",
+                     "note: eq was also calibrated on 1 of these 3 trip(s) (again; the same samples, read from "
+                     "other files): its errors there are in sample, not held out"]
+
+
 def test_a_trip_copied_under_another_name_is_not_counted_twice_silently(tmp_path, capsys):
     """A folder with 'TripA04.csv' and its copy 'TripA04 - Kopie.csv' (or the trip re-saved by
     a spreadsheet beside the original under a new name): both were imported, the copy as a

@@ -194,7 +194,7 @@ def compare_streamed(args, tmp: Path, title: str, target: str = "wheel", target_
     if in_sample is not None:
         from sumo_drvpw.cli.compare import in_sample_trips
 
-        more = in_sample_trips(eqs, cs.signatures, in_sample)
+        more = in_sample_trips(eqs, cs.signatures, args.logs)
         for line in more:
             print("note: " + line)
         in_sample = in_sample + more

@@ -43,7 +43,7 @@ def main(args) -> int:
         m = load_measured(args.logs, args.vehicle, read_options(args, args.equation), target=target)
         note_counts(m.counts)
         eqs = resolve_equations(args.equation, m.vehicle)
-        more = in_sample_trips(eqs, trip_signatures(m.log.df), in_sample)
+        more = in_sample_trips(eqs, trip_signatures(m.log.df), args.logs)
         for line in more:
             print("note: " + line)
         u = m.usable
@@ -68,7 +68,6 @@ def in_sample_lines(equations, logs) -> list[str]:
     folder): its errors there are in sample, not held out. Files only: the same trips
     imported into another file are not recognised."""
     from sumo_drvpw.data.log import expand_paths
-    from sumo_drvpw.data.paths import files_in_common
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
 
@@ -81,10 +80,7 @@ def in_sample_lines(equations, logs) -> list[str]:
         if spec in SPEC_EQUATIONS or not Path(spec).is_file():
             continue
         eq = load_equation(spec)
-        named = [str(x) for prov in (eq.provenance or {}, getattr(eq.chain, "provenance", None) or {})
-                 for x in prov.get("logs") or []]
-        named += [str(Path(spec).parent / x) for x in named if not Path(x).is_absolute()]
-        seen = files_in_common(named, files)
+        seen = calibration_files(eq, files)
         if seen:
             out.append(f"{eq.name} was calibrated on {len(seen)} of these {len(files)} log file(s) "
                        f"({', '.join(Path(f).name for f in seen[:3])}{' …' if len(seen) > 3 else ''}): its "
@@ -92,23 +88,45 @@ def in_sample_lines(equations, logs) -> list[str]:
     return out
 
 
-def in_sample_trips(eqs, trips: dict, said: list[str]) -> list[str]:
+def calibration_files(eq, files: list[str]) -> list[str]:
+    """The ``files`` an equation was calibrated on: its ``[provenance]`` or
+    ``[chain.provenance]`` ``logs``, named relative to the equation's folder."""
+    from sumo_drvpw.data.paths import files_in_common
+
+    named = [str(x) for prov in (eq.provenance or {}, getattr(eq.chain, "provenance", None) or {})
+             for x in prov.get("logs") or []]
+    if eq.path:
+        named += [str(Path(eq.path).parent / x) for x in named if not Path(x).is_absolute()]
+    return files_in_common(named, files)
+
+
+def in_sample_trips(eqs, trips: dict, logs) -> list[str]:
     """One line per equation calibrated on some of the compared ``trips`` (trip → signature,
     data/trips.trip_signatures; the equation's in its ``[provenance]`` or ``[chain.provenance]``
-    ``trip_signatures``), whichever files they were read from, unless
-    :func:`in_sample_lines` said it already."""
+    ``trip_signatures``) read from other files than those it was calibrated on (``logs``
+    compared; those files :func:`in_sample_lines` names: a trip of them re-exported into
+    another file beside them was said held out)."""
+    from sumo_drvpw.data.log import expand_paths
+    from sumo_drvpw.data.plausible import trip_ids
     from sumo_drvpw.data.trips import same_trips
+    from sumo_drvpw.errors import UserError
 
+    try:
+        files = [str(f) for f in expand_paths(logs)]
+    except UserError:
+        files = []
     out = []
     n = len(trips)
     for eq in eqs:
-        if any(line.startswith(f"{eq.name} was calibrated on ") for line in said):
-            continue
         sigs = [s for prov in (eq.provenance or {}, getattr(eq.chain, "provenance", None) or {})
                 for s in prov.get("trip_signatures") or []]
         seen = same_trips(sigs, trips)
+        said = calibration_files(eq, files) if seen else []
+        if said:  # the trips of the files named already are said
+            inside = {t for f in said for t in trip_ids(Path(f))}
+            seen = [t for t in seen if t not in inside]
         if seen:
-            out.append(f"{eq.name} was calibrated on {len(seen)} of these {n} trip(s) "
+            out.append(f"{eq.name} was {'also ' if said else ''}calibrated on {len(seen)} of these {n} trip(s) "
                        f"({', '.join(seen[:3])}{' …' if len(seen) > 3 else ''}; the same samples, read "
                        "from other files): its errors there are in sample, not held out")
     return out

@@ -79,7 +79,7 @@ def check_distinct_trips(paths) -> None:
     seen: dict[str, Path] = {}
     for p in expand_paths(paths):
         check_header(p)
-        ids = _trip_ids(p)
+        ids = trip_ids(p)
         for tid in ids:
             if tid in seen:
                 raise UserError(f"{p}: trip_id '{tid}' is also in {seen[tid]}; samples of one trip "
@@ -88,7 +88,9 @@ def check_distinct_trips(paths) -> None:
             seen[tid] = p
 
 
-def _trip_ids(p: Path) -> list[str]:
+def trip_ids(p: Path) -> list[str]:
+    """The trip ids of a log file as its reader names them (the file's stem without
+    ``trip_id``), read from that column alone."""
     try:
         if p.suffix.lower() == ".parquet":
             import pyarrow.parquet as pq
