@@ -135,6 +135,9 @@ class Equation:
     #: corrections of the calibration logs (``[measurement]``,
     #: :class:`sumo_drvpw.model.measurement.Measurement`), None when none was declared
     measurement: object | None = None
+    #: the mass the coefficients were fitted at [kg] (``equation.reference_mass_kg``: that of a
+    #: ``[beta]`` equation, a published fit's test mass), None when not given
+    reference_mass_kg: float | None = None
 
     @property
     def predicts(self) -> str:
@@ -221,6 +224,8 @@ class Equation:
             eq["source"] = self.source
         if self.mass_kg is not None:
             eq["mass_kg"] = float(self.mass_kg)
+        if self.reference_mass_kg is not None:
+            eq["reference_mass_kg"] = float(self.reference_mass_kg)
         if tuple(self.vclasses) != DEFAULT_VCLASSES:
             eq["vclasses"] = list(self.vclasses)
         if self.terms_predict != "wheel":
@@ -419,7 +424,7 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
     try:
         return Equation(
             name=name, terms=terms, vclasses=tuple(vcl), terms_predict=pred, **ranges,
-            mass_kg=None if mass is None else float(mass),
+            mass_kg=None if mass is None else float(mass), reference_mass_kg=None if ref is None else float(ref),
             description=str(meta.get("description", "")), source=str(meta.get("source", "")),
             std_err=std, p_values=_floats(doc.get("p_values", {}), f"{where} [p_values]"),
             provenance=dict(doc.get("provenance", {})), metrics=dict(doc.get("metrics", {})),

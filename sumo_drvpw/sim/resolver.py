@@ -83,9 +83,11 @@ class VTypeResolver:
                           and (h := is_hybrid_chain(e)) is not None}
         self.cache: dict[str, tuple] = {}
         #: equation → the vehicle mass its coefficients were calibrated at [kg] (a calibrated
-        #: equation's metrics.reference_mass_kg; none at a fixed mass: it books every vType at it)
+        #: equation's metrics.reference_mass_kg, else its equation.reference_mass_kg: the test
+        #: mass of a published fit; none at a fixed mass: it books every vType at it)
         self.calibrated_at = {e.name: float(m) for e in equations if not isinstance(e, str)
-                              and e.mass_kg is None and (m := (e.metrics or {}).get("reference_mass_kg"))}
+                              and e.mass_kg is None and (m := (e.metrics or {}).get("reference_mass_kg")
+                                                         or getattr(e, "reference_mass_kg", None))}
         #: vType → {"mass_kg", "calibrated_at_kg": {equation: kg}}: vTypes booked by equations
         #: calibrated at a mass :data:`MASS_FAR` times theirs or more, or as little
         self.mass_far: dict[str, dict] = {}
