@@ -61,3 +61,16 @@ def test_kept_as_lines_of_numbers_and_a_hand_edited_one_is_passed_over():
     assert same_trips(kept, trip_signatures(a)) == ["trip4"]
     assert same_trips(["not numbers", "1 2", None, 7] + kept, trip_signatures(a)) == ["trip4"]
     assert same_trips(["not numbers"], trip_signatures(a)) == []
+
+
+def test_a_parked_session_is_not_taken_for_another_of_the_same_length():
+    """Two parked sessions (an EV's cabin pre-conditioned, the battery logged: speed 0 at
+    every sample) of the same length had the same signature, so a battery `compare` said an
+    equation calibrated on one was 'calibrated on' the other. Speed that never changes tells
+    nothing; a trip that moves is still found."""
+    parked = pd.DataFrame({"trip_id": "p1", "time_s": np.arange(1800) * 0.1, "speed_mps": 0.0})
+    other = parked.assign(trip_id="p2")
+    cruise = parked.assign(trip_id="c1", speed_mps=20.0)  # one speed throughout: the same
+    ref = signature_texts(trip_signatures(pd.concat([parked, cruise, _drive(5, 3000)])))
+    assert same_trips(ref, trip_signatures(pd.concat([other, cruise.assign(trip_id="c2"),
+                                                      _drive(5, 3000)]))) == ["trip5"]

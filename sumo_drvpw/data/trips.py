@@ -249,11 +249,14 @@ def same_trips(signatures, trips: dict[str, list[float]]) -> list[str]:
     duration and the mean and rms speed, plus 0.01 % (or 1 mm/s) of rounding (speeds
     re-exported to 1 mm/s move them by 1e-5); the blocks' mean speeds, whole in both, within
     that rounding alone. A repeat drive of a dyno cycle differs by more (its driver's trace
-    error, some 0.1–0.5 km/h rms)."""
+    error, some 0.1–0.5 km/h rms). A trip whose speed never changes (a parked session: all 0)
+    matches none: its speed cannot tell it from another session of the same length."""
     refs = [r for r in map(_numbers, signatures) if r is not None]
     out = []
     for tid, sig in trips.items():
         n, dur, mv, rv = sig[:4]
+        if not rv > abs(mv):  # rms = |mean|: one speed throughout
+            continue
         for ref in refs:
             dn = abs(ref[0] - n)
             lost = dn / max(n, 1)  # share of samples one of the two lacks
