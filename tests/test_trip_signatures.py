@@ -74,3 +74,30 @@ def test_a_parked_session_is_not_taken_for_another_of_the_same_length():
     ref = signature_texts(trip_signatures(pd.concat([parked, cruise, _drive(5, 3000)])))
     assert same_trips(ref, trip_signatures(pd.concat([other, cruise.assign(trip_id="c2"),
                                                       _drive(5, 3000)]))) == ["trip5"]
+
+
+def _battery(d: pd.DataFrame, seed: int) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    v = d["speed_mps"].to_numpy()
+    return d.assign(battery_voltage_v=np.round(398 - 0.002 * np.cumsum(v) + rng.normal(0, 0.3, len(d)), 2),
+                    battery_current_a=np.round(2.5 * v + rng.normal(0, 3, len(d)), 2))
+
+
+def test_two_tests_whose_speed_was_logged_alike_are_told_by_the_battery():
+    """The shared JLU dynamometer's UDDS_01 and UDDS_02 hold the same speed samples (every
+    one equal) but two tests' battery data (1.29 and 1.22 kWh): a battery `compare` on
+    UDDS_02 of an equation calibrated on UDDS_01 said it was 'calibrated on' it. The battery
+    power (V·I: mean and rms) is part of the signature now: the same speed with another
+    test's battery is another trip; the same samples re-read (V and I to 10 mV and 10 mA, the
+    current's sign the other way round, two rows cut) still match, and a signature kept
+    without the power (or a log without the battery) is judged by the speed alone."""
+    d = _drive(8, 6000)
+    one, two = _battery(d, 1), _battery(d, 2).assign(trip_id="other_test")
+    ref = signature_texts(trip_signatures(one))
+    assert same_trips(ref, trip_signatures(two)) == []
+    again = one.iloc[:-2].assign(trip_id="again", battery_current_a=lambda x: -x["battery_current_a"])
+    again[["battery_voltage_v", "battery_current_a"]] = again[["battery_voltage_v", "battery_current_a"]].round(2)
+    assert same_trips(ref, trip_signatures(again)) == ["again"]
+    speed_only = [" ".join(r.split()[:4 + 4]) for r in ref]  # n, duration, mean, rms, 4 blocks
+    assert same_trips(speed_only, trip_signatures(two)) == ["other_test"]
+    assert same_trips(ref, trip_signatures(d.assign(trip_id="no_battery"))) == ["no_battery"]

@@ -207,13 +207,18 @@ SIGNATURE_EDGES = (0, 64, 256, 1024, 4096, 16384, 65536, 262144)
 
 def trip_signatures(df: pd.DataFrame) -> dict[str, list[float]]:
     """Trip → its signature [samples, duration s, mean speed, rms speed, then the mean speed
-    over each whole block of samples between :data:`SIGNATURE_EDGES` (m/s)] in a read log
-    ``df`` (``trip_id``, ``time_s``, ``speed_mps``): what tells the same trip read from another
-    file — re-exported, in another format or unit, renamed, or among other trips — so that
-    ``compare`` can say an equation is compared on trips it was calibrated on
-    (:func:`same_trips`). Rounded to 7 significant digits (an equation file keeps them)."""
+    over each whole block of samples between :data:`SIGNATURE_EDGES` (m/s), then — when the
+    log has ``battery_voltage_v`` and ``battery_current_a`` — the mean and rms of their
+    product (W)] in a read log ``df`` (``trip_id``, ``time_s``, ``speed_mps``): what tells the
+    same trip read from another file — re-exported, in another format or unit, renamed, or
+    among other trips — so that ``compare`` can say an equation is compared on trips it was
+    calibrated on (:func:`same_trips`); the battery's power tells two tests whose speed was
+    logged alike (the shared JLU dynamometer's UDDS_01 and UDDS_02: the same speed samples,
+    1.29 and 1.22 kWh). Rounded to 7 significant digits (an equation file keeps them)."""
     trip = df["trip_id"].astype(str).to_numpy()
     t, v = df["time_s"].to_numpy(float), df["speed_mps"].to_numpy(float)
+    pw = (df["battery_voltage_v"].to_numpy(float) * df["battery_current_a"].to_numpy(float)
+          if {"battery_voltage_v", "battery_current_a"} <= set(df.columns) else None)
     starts = np.flatnonzero(np.r_[True, trip[1:] != trip[:-1]])
     ends = np.r_[starts[1:], len(trip)]
     out: dict[str, list[float]] = {}
@@ -223,6 +228,9 @@ def trip_signatures(df: pd.DataFrame) -> dict[str, list[float]]:
                float(np.sqrt(np.nanmean(x * x)))]
         sig += [float(np.nanmean(x[lo:hi])) for lo, hi in zip(SIGNATURE_EDGES, SIGNATURE_EDGES[1:])
                 if hi + 2 <= len(x)]
+        if pw is not None and np.isfinite(pw[a:b]).any():
+            p = pw[a:b]
+            sig += [float(np.nanmean(p)), float(np.sqrt(np.nanmean(p * p)))]
         out.setdefault(str(trip[a]), [int(sig[0])] + [float(f"{y:.7g}") for y in sig[1:]])
     return out
 
@@ -242,6 +250,13 @@ def _numbers(sig) -> list[float] | None:
     return out if len(out) >= 4 else None
 
 
+def _parts(sig) -> tuple[list, list]:
+    """(the blocks' mean speeds, [mean, rms battery power] or []) of a signature: as many
+    blocks as its samples give (:func:`trip_signatures`), then the power, if any."""
+    k = sum(hi + 2 <= sig[0] for hi in SIGNATURE_EDGES[1:])
+    return list(sig[4:4 + k]), list(sig[4 + k:6 + k])
+
+
 def same_trips(signatures, trips: dict[str, list[float]]) -> list[str]:
     """The trips of ``trips`` (trip → :func:`trip_signatures`) matching one of ``signatures``:
     the same samples re-read, not another drive of the same route or cycle. Allowed: a few
@@ -249,22 +264,28 @@ def same_trips(signatures, trips: dict[str, list[float]]) -> list[str]:
     duration and the mean and rms speed, plus 0.01 % (or 1 mm/s) of rounding (speeds
     re-exported to 1 mm/s move them by 1e-5); the blocks' mean speeds, whole in both, within
     that rounding alone. A repeat drive of a dyno cycle differs by more (its driver's trace
-    error, some 0.1–0.5 km/h rms). A trip whose speed never changes (a parked session: all 0)
-    matches none: its speed cannot tell it from another session of the same length."""
+    error, some 0.1–0.5 km/h rms). Where both carry the battery's power, its mean (either
+    sign: a current logged the other way round) and rms agree as the speed's do, plus 1 W. A
+    trip whose speed never changes (a parked session: all 0) matches none: its speed cannot
+    tell it from another session of the same length."""
     refs = [r for r in map(_numbers, signatures) if r is not None]
     out = []
     for tid, sig in trips.items():
         n, dur, mv, rv = sig[:4]
         if not rv > abs(mv):  # rms = |mean|: one speed throughout
             continue
+        blocks, power = _parts(sig)
         for ref in refs:
             dn = abs(ref[0] - n)
             lost = dn / max(n, 1)  # share of samples one of the two lacks
-            blocks = zip(ref[4:], sig[4:])
+            ref_blocks, ref_power = _parts(ref)
             if (dn <= max(2.0, 0.002 * n) and abs(ref[1] - dur) <= 1e-3 + 1e-6 * dur + 2.0 * lost * dur
                     and abs(ref[2] - mv) <= 1e-3 + 1e-4 * abs(mv) + 3.0 * lost * rv
                     and abs(ref[3] - rv) <= 1e-3 + 1e-4 * rv + 3.0 * lost * rv
-                    and all(abs(p - q) <= 1e-3 + 1e-4 * abs(q) for p, q in blocks)):
+                    and all(abs(p - q) <= 1e-3 + 1e-4 * abs(q) for p, q in zip(ref_blocks, blocks))
+                    and (len(power) < 2 or len(ref_power) < 2 or (
+                        abs(abs(ref_power[0]) - abs(power[0])) <= 1.0 + 1e-4 * abs(power[0]) + 3.0 * lost * power[1]
+                        and abs(ref_power[1] - power[1]) <= 1.0 + 1e-4 * power[1] + 3.0 * lost * power[1]))):
                 out.append(tid)
                 break
     return out
