@@ -269,23 +269,25 @@ def same_trips(signatures, trips: dict[str, list[float]]) -> list[str]:
     trip whose speed never changes (a parked session: all 0) matches none: its speed cannot
     tell it from another session of the same length."""
     refs = [r for r in map(_numbers, signatures) if r is not None]
+    head = np.array([r[:4] for r in refs], float).reshape(-1, 4)  # (each ref compared at once)
+    parts = [_parts(r) for r in refs]
     out = []
     for tid, sig in trips.items():
         n, dur, mv, rv = sig[:4]
         if not rv > abs(mv):  # rms = |mean|: one speed throughout
             continue
+        dn = np.abs(head[:, 0] - n)
+        lost = dn / max(n, 1)  # share of samples one of the two lacks
+        near = ((dn <= max(2.0, 0.002 * n)) & (np.abs(head[:, 1] - dur) <= 1e-3 + 1e-6 * dur + 2.0 * lost * dur)
+                & (np.abs(head[:, 2] - mv) <= 1e-3 + 1e-4 * abs(mv) + 3.0 * lost * rv)
+                & (np.abs(head[:, 3] - rv) <= 1e-3 + 1e-4 * rv + 3.0 * lost * rv))
         blocks, power = _parts(sig)
-        for ref in refs:
-            dn = abs(ref[0] - n)
-            lost = dn / max(n, 1)  # share of samples one of the two lacks
-            ref_blocks, ref_power = _parts(ref)
-            if (dn <= max(2.0, 0.002 * n) and abs(ref[1] - dur) <= 1e-3 + 1e-6 * dur + 2.0 * lost * dur
-                    and abs(ref[2] - mv) <= 1e-3 + 1e-4 * abs(mv) + 3.0 * lost * rv
-                    and abs(ref[3] - rv) <= 1e-3 + 1e-4 * rv + 3.0 * lost * rv
-                    and all(abs(p - q) <= 1e-3 + 1e-4 * abs(q) for p, q in zip(ref_blocks, blocks))
+        for j in np.flatnonzero(near):
+            ref_blocks, ref_power = parts[j]
+            if (all(abs(p - q) <= 1e-3 + 1e-4 * abs(q) for p, q in zip(ref_blocks, blocks))
                     and (len(power) < 2 or len(ref_power) < 2 or (
-                        abs(abs(ref_power[0]) - abs(power[0])) <= 1.0 + 1e-4 * abs(power[0]) + 3.0 * lost * power[1]
-                        and abs(ref_power[1] - power[1]) <= 1.0 + 1e-4 * power[1] + 3.0 * lost * power[1]))):
+                        abs(abs(ref_power[0]) - abs(power[0])) <= 1.0 + 1e-4 * abs(power[0]) + 3.0 * lost[j] * power[1]
+                        and abs(ref_power[1] - power[1]) <= 1.0 + 1e-4 * power[1] + 3.0 * lost[j] * power[1]))):
                 out.append(tid)
                 break
     return out
