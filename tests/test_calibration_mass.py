@@ -117,3 +117,29 @@ def test_a_published_fit_at_its_test_mass_is_held_to_it_too(tmp_path):
     (note,) = _mass_note(res.summary)
     assert "drvpw_prius3 (calibrated at 1,625 kg): light (950 kg), van (3,500 kg)" in note
     assert prius.to_dict()["equation"]["reference_mass_kg"] == 1625.0  # (kept by a copy written out)
+
+
+@pytest.mark.parametrize("spec, vehicle", [("roadload_spec", "jlu_bev"), ("vsp_spec", "prius3")])
+def test_an_equation_built_from_a_vehicle_file_is_held_to_its_mass(tmp_path, spec, vehicle):
+    """`calibrate --target battery --equation roadload_spec --vehicle jlu_bev` keeps the
+    vehicle's published A, B, C (a 1,919-kg car's rolling resistance and drag as fixed
+    forces) as its road load; its equation carried no mass, so named for vans it booked
+    them with that car's A, B and C, unsaid. Built from a vehicle file, an equation (the
+    published road load, VSP with the vehicle's specs) is held to that vehicle's mass, and
+    an equation file written from it keeps it."""
+    from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation, save_equation
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    veh = load_vehicle(vehicle)
+    save_equation(SPEC_EQUATIONS[spec](veh), tmp_path / "eq.toml")
+    eq = load_equation(tmp_path / "eq.toml")
+    (tmp_path / "r.rou.xml").write_text(ROUTES.replace('vClass="delivery" mass="3500"',
+                                                       'vClass="passenger" mass="3500"'), encoding="utf-8")
+    (tmp_path / "s.toml").write_text(f'equations = ["x"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n'
+                                     'begin = 0\nend = 30\nstep_length = 0.5\noptions = ["--no-warnings", "true"]\n',
+                                     encoding="utf-8")
+    res = run_scenario(tmp_path / "s.toml", tmp_path / "o", equations=[eq], figures=False)
+    # jlu_bev 1,919 kg: 3500/1919 = 1.82 and 1919/950 = 2.02 beyond 1.5, 1919/1700 = 1.13 not;
+    # prius3 1,625 kg: 2.15 and 1.71 beyond, 1.05 not
+    assert res.summary["assumptions"]["calibration_mass"] == {
+        vt: {"mass_kg": m, "calibrated_at_kg": {eq.name: veh.mass_kg}} for vt, m in (("light", 950.0), ("van", 3500.0))}

@@ -491,7 +491,14 @@ def vsp_from_specs(vehicle) -> Equation:
     return Equation(name=f"vsp_{vehicle.name}spec",
                     terms={"acc": 1.0 + eps, "grade": 1.0, "m_v1": G * cr, "aero_rho": cd * area},
                     description=f"VSP with the physical specs of {vehicle.name} (seed paper Eq. 1)",
-                    source=f"vehicle file {vehicle.path}")
+                    source=f"vehicle file {vehicle.path}", reference_mass_kg=_spec_mass(vehicle))
+
+
+def _spec_mass(vehicle) -> float | None:
+    """The mass a vehicle's specs describe it at [kg] (its drag, rolling resistance and
+    published A, B, C are that vehicle's): the equation's ``reference_mass_kg``."""
+    m = getattr(vehicle, "mass_kg", None)
+    return float(m) if m else None
 
 
 #: the [road_load] keys of A, B, C, each under either name (the second: the Prius files')
@@ -523,7 +530,7 @@ def roadload_from_specs(vehicle) -> Equation:
     return Equation(name=f"roadload_{vehicle.name}",
                     terms={"acc": 1.0, "v1": a, "v2": b, "v3": c},
                     description=f"published road load of {vehicle.name} (A + B·v + C·v², plus m·a)",
-                    source=f"vehicle file {vehicle.path} [road_load]")
+                    source=f"vehicle file {vehicle.path} [road_load]", reference_mass_kg=_spec_mass(vehicle))
 
 
 #: equations built from the vehicle file instead of read from one: name → builder
