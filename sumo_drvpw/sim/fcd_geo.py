@@ -34,6 +34,10 @@ _TRUE = ("true", "1", "yes", "on", "x", "t")
 #: easting and the southern hemisphere's false northing [m]
 WGS84_A, WGS84_F = 6378137.0, 1.0 / 298.257223563
 UTM_K0, UTM_E0, UTM_N0_SOUTH = 0.9996, 500000.0, 10000000.0
+#: a header-less FCD's coordinates (:meth:`NetCoordinates.convert`) are the ones that put its
+#: rows nearest their lanes only when that median distance is at most this [m] (a parked
+#: vehicle stands nearer its lane: network.PARKED_MAX_OFFSET_M); else its x, y are unknown
+AUTO_MAX_M = 50.0
 
 
 def recorded_coordinates(head: dict | None) -> str:
@@ -116,10 +120,10 @@ class NetCoordinates:
     def __call__(self, x, y) -> tuple[np.ndarray, np.ndarray]:
         """The rows' x, y in the network's coordinates [m] (NaN where they cannot be)."""
         x, y = np.asarray(x, float), np.asarray(y, float)
-        if self.mode == "net":
-            return x, y
         if self.lost is not None:
             return np.full(len(x), np.nan), np.full(len(y), np.nan)
+        if self.mode == "net":
+            return x, y
         if self._proj != "shift":
             x, y = self._proj(x, y)
         return x + self.offset[0], y + self.offset[1]
@@ -130,7 +134,7 @@ class NetCoordinates:
         (:class:`~sumo_drvpw.sim.network.Network`) tells the mode: the one that puts its
         rows nearest their lanes' centre lines at their positions (median distance over at
         most 500 rows)."""
-        if self.mode == "net" or "x" not in cols or "y" not in cols:
+        if (self.mode == "net" and self.lost is None) or "x" not in cols or "y" not in cols:
             return
         if self.mode == "auto":
             if net is None or net.centre_x is None or "lane" not in cols or "pos" not in cols:
@@ -143,14 +147,24 @@ class NetCoordinates:
             if not len(k):
                 return
             i = net.bin_index(lane[k], pos[k])
-            best = (np.inf, "net")
+            best, lost = (np.inf, "net"), []
             for mode in ("net", "geo", "utm"):
                 self.mode = mode
                 self._setup(self._net_file)
                 if self.lost is None:
                     cx, cy = self(x[k], y[k])
                     best = min(best, (float(np.median(np.hypot(cx - net.centre_x[i], cy - net.centre_y[i]))), mode))
+                else:
+                    lost.append(self.lost)
             self.mode, self.lost = best[1], None
             self._setup(self._net_file)
-        if self.mode != "net":
+            if not best[0] <= AUTO_MAX_M:  # none puts the rows on their lanes: x, y unknown, said
+                self.mode = "geo" if lost else "net"
+                self.lost = ((f"{lost[0]} (a file without a header: its x, y lie {best[0]:.3g} m from their "
+                              "lanes in the coordinates that could be computed)") if lost else
+                             (f"its x, y lie {best[0]:.3g} m from their lanes (median) in the network's, "
+                              "geo and UTM coordinates alike"))
+                cols["x"], cols["y"] = self(cols["x"], cols["y"])
+                return
+        if self.mode != "net" or self.lost is not None:
             cols["x"], cols["y"] = self(cols["x"], cols["y"])
