@@ -127,6 +127,34 @@ def test_bare_config_books_motorcycles_and_mopeds_in_litres(tmp_path, capsys):
     assert "moped" in said and "motorcycle" not in said
 
 
+def test_a_two_wheeler_or_bus_on_sumos_battery_device_gets_no_litres(tmp_path, capsys):
+    """A vType that writes no emissionClass but has param has.battery.device runs on SUMO's
+    Energy model (an electric scooter, an e-bus): before, where one carrier's chains alone
+    apply to its vClass (the moped's petrol, the bus's diesel) the carrier was not asked and
+    the scooter was booked 0.0166 L by moves_moped_petrol, the bus 0.21 L by
+    moves_transit_bus_diesel (a car so written was already booked by the i3's battery
+    chain); now neither gets litres, and the run says no chain books them."""
+    pytest.importorskip("libsumo")
+    from test_sim_run import EAST, WEST, _city_config
+
+    from sumo_drvpw.cli import main as cli_main
+
+    batt = '<param key="has.battery.device" value="true"/>'
+    vtypes = (f'    <vType id="escooter" vClass="moped">{batt}</vType>\n'
+              f'    <vType id="ebus" vClass="bus">{batt}</vType>\n    <vType id="mop" vClass="moped"/>\n')
+    cfg = _city_config(tmp_path, vtypes, [("b", "escooter", WEST), ("c", "ebus", EAST), ("s", "mop", EAST)],
+                       end="100")
+    code = cli_main(["run", str(cfg), "--out", str(tmp_path / "o"), "--no-figures", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    fuel = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv", dtype={"key": str})
+    assert set(fuel["key"]) == {"s"}  # (the petrol moped beside them: booked as before)
+    carriers = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))["assumptions"][
+        "energy_carrier"]
+    assert carriers["escooter"]["carrier"] == carriers["ebus"]["carrier"] == "electricity"
+    assert carriers["escooter"]["not_booked_by"] == ["moves_moped_petrol"]
+
+
 HAVE_CYCLES = (DATA / "cycles").is_dir()
 
 

@@ -11,7 +11,7 @@ import re
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.sim.vtype_energy import energy_vtype_of, own_energy
+from sumo_drvpw.sim.vtype_energy import battery_switch, energy_vtype_of, own_energy, run_emission_class
 from sumo_drvpw.sim.vtypes import (CAR_VCLASSES, SHORT_CAR_M, SUMO_DEFAULT_EMISSION_CLASS,
                                    SUMO_DEFAULT_EMISSION_CLASS_OTHER, SUMO_DEFAULT_VTYPES, energy_carrier,
                                    equation_carrier, is_hybrid_chain, is_hybrid_class)
@@ -193,6 +193,12 @@ class VTypeResolver:
             except Exception:  # (a connection that cannot say)
                 ec = None
             carrier, src = energy_carrier(ec), "SUMO's (a vType made at run time)"
+        if ec is None and info is not None:  # none written: SUMO's battery device runs it on its
+            # Energy model (param has.battery.device; device.battery.probability 1) — electric
+            # even where one carrier's chains alone apply (a moped's, a bus's petrol/diesel)
+            run_ec = run_emission_class(info, battery_switch(self.sc))
+            if run_ec is not None:
+                ec, carrier, src = run_ec, energy_carrier(run_ec), "SUMO's battery device (none written)"
         if carrier is None:  # none written, or a name of no known carrier
             if len(present) < 2 or not getattr(self.sc, "default_carrier", False):
                 return app
