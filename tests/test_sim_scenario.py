@@ -788,3 +788,21 @@ def test_a_scenario_file_without_equations_books_as_its_bare_config(tmp_path):
     assert sc.sumo_args[-2:] == ["--step-method.ballistic", "true"]
     with pytest.raises(UserError, match="'equations' must name at least one equation"):
         load_scenario(_write(tmp_path, f'equations = []\n[sumo]\nconfig = "{cfg.as_posix()}"\n', "e.toml"))
+
+
+def test_class_mass_limit_reads_only_an_upper_weight_bound_of_hbefa4_names():
+    """class_mass_limit_kg over HBEFA 4 names SUMO 1.28 ships: an upper limit (le/lt, or a
+    band's upper end) caps, a lower bound alone (gt…t), cm³ bands, years and cars do not.
+    SUMO also writes the band of TT_AT_28-34t_EE without its 'gt' (before: not capped)."""
+    from sumo_drvpw.sim.resolver import class_mass_limit_kg as limit
+
+    capped = {"HBEFA4/RT_le7.5t_Euro-VI_A-C": 7500.0, "HBEFA4/RT_gt7_5-12t_EE": 12000.0,
+              "HBEFA4/RigidTruck_BEV_gt7.5-12t": 12000.0, "HBEFA4/UBus_Electric_Midi_lt15t": 15000.0,
+              "HBEFA4/TT_AT_gt34-40t_Euro-VI_D-E": 40000.0, "HBEFA4/TT_AT_lt28t_EE": 28000.0,
+              "HBEFA4/TT_AT_28-34t_EE": 34000.0}
+    assert {k: limit(k) for k in capped} == capped
+    for name in ("HBEFA4/RT_gt32t_Euro-VI_A-C", "HBEFA4/Coach_3-Axes_gt18t_Euro-VI_D-E", "HBEFA4/TT_AT_gt60t_80ties",
+                 "HBEFA4/MC_4S_gt250cc_Euro-5", "HBEFA4/Moped_le50cc_(vlt30)_EU5", "HBEFA4/LCV_petrol_N1-II_Conv_lt1981",
+                 "HBEFA4/LCV_petrol_N1-III_3WCat_1987-1990", "HBEFA4/PC_diesel_1986-1988", "HBEFA3/HDV_D_EU4",
+                 "PHEMlight5/PC_EU4_D_MW", "Energy/unknown", None):
+        assert limit(name) is None, name

@@ -25,7 +25,8 @@ MASS_FAR = 1.5
 #: an HBEFA 4 emissionClass naming its vehicles' gross weight band — ``RT_le7.5t``,
 #: ``RT_gt7.5-12t``, ``UBus_Midi_le15t``, ``Coach_Std_le18t``, ``TT_AT_gt34-40t``,
 #: ``RigidTruck_FCEV_le7_5t`` —: its upper limit [t], the most such a vehicle weighs laden
-_WEIGHT_BAND = re.compile(r"(?:^|_)(?:le|lt)(\d+(?:[._]\d+)?)t(?=_|$)|(?:^|_)gt\d+(?:[._]\d+)?-(\d+(?:[._]\d+)?)t(?=_|$)")
+#: (SUMO 1.28 also ships ``TT_AT_28-34t_EE``, a band written without its ``gt``)
+_WEIGHT_BAND = re.compile(r"(?:^|_)(?:le|lt)(\d+(?:[._]\d+)?)t(?=_|$)|(?:^|_)(?:gt)?\d+(?:[._]\d+)?-(\d+(?:[._]\d+)?)t(?=_|$)")
 
 
 def class_mass_limit_kg(emission_class: str | None) -> float | None:
