@@ -114,3 +114,31 @@ def _scenario(d):
     (d / "s.toml").write_text('equations = ["vsp_ldv1999"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\n',
                               encoding="utf-8")
     return load_scenario(d / "s.toml")
+
+
+def test_a_lane_change_standing_where_the_lanes_part_most_between_samples_keeps_its_rise(tmp_path):
+    """The lanes' spread (sim/lane_spread.py) is their profiles' largest difference at the
+    same position: before 2026-11-29 it was sampled at 33 fractions of the lane's length,
+    25 m apart on this 800-m road whose left lane rises 3 m to a crest 100 m in: 2.906 m where
+    the lanes part 2.940 m at 106 m, so a lane change standing there was taken for a jump
+    and its 2.93-m rise lost (booked 0 of it, then the right lane's flat road)."""
+    build_net(tmp_path, '<nodes><node id="A" x="0" y="0" z="0"/><node id="B" x="800" y="0" z="0"/></nodes>',
+              '<edges><edge id="AB" from="A" to="B" numLanes="2" speed="27.8">'
+              '<lane index="1" shape="0,-1.6,0 100,-1.6,3 300,-1.6,1.5 800,-1.6,1.5"/></edge></edges>')
+    s = _scenario(tmp_path)
+    net = load_network(s.net_file, s.road_class, s.slope_window, s.slope_max)
+    up, down = net.lane_index["AB_1"], net.lane_index["AB_0"]
+    p = np.arange(0.0, 800.0, 0.5)
+    part = np.abs(net.elevation(np.full(p.size, up), p) - net.elevation(np.full(p.size, down), p))
+    assert net.lane_spread[up] == net.lane_spread[down] >= part.max() - 1e-9
+    at = float(p[np.argmax(part)])
+    last = net.place(np.array([up]), np.array([at]))
+    booked = 0.0
+    for lane, pos, ds in ((down, at, 0.0),) + tuple((down, at + 3 * k, 3.0) for k in range(1, 6)):
+        theta, last = net.step_grade(np.array([lane]), np.array([pos]), np.array([ds]), last,
+                                     net.slope(np.array([lane]), np.array([pos]))[0])
+        booked += float(np.sin(theta[0]) * ds)
+    z0 = net.elevation(np.array([up]), np.array([at]))[0]
+    z1 = net.elevation(np.array([down]), np.array([at + 15.0]))[0]
+    assert z0 - z1 > 2.9
+    assert booked + last[0, 3] == pytest.approx(z1 - z0, abs=1e-6)
