@@ -153,6 +153,21 @@ def test_an_equation_calibrated_on_a_heavy_vehicle_that_declares_the_car_classes
         assert 'vclasses = ["trailer"]' in said[0]
 
 
+@pytest.mark.parametrize("extra", [[], ["--engine", "memory"], ["--target", "fuel"],
+                                   ["--target", "fuel", "--engine", "memory"]])
+def test_a_heavy_log_with_its_own_mass_column_is_said_without_a_vehicle_file(tmp_path, capsys, extra):
+    # a log that carries mass_kg needs no --vehicle; the warning read only the vehicle file's
+    # mass, so a 30-t truck's equation was written for the car classes without a word
+    import pandas as pd
+
+    log = _truck_log(tmp_path, 30000)
+    pd.read_csv(log).assign(mass_kg=30000.0).to_csv(log, index=False)
+    out = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(log), "--out", str(out), *extra]) == 0
+    said = [x for x in capsys.readouterr().out.splitlines() if "declares the car classes" in x]
+    assert said and said[0].startswith("warning: eq is calibrated on a 30,000-kg vehicle"), said
+
+
 def test_a_one_sample_speed_step_is_left_out_not_read_as_a_deceleration(tmp_path, capsys):
     # the VT logs splice recordings without a mark: 33.8 mph → 0 in one second (15.1 m/s).
     # The central difference halved it to −7.5 m/s² on two samples, under the 8 m/s² outlier

@@ -167,7 +167,7 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
 
     from sumo_drvpw.cli.calibrate import write_equation
 
-    write_equation(args, eq, out, inputs, report)
+    write_equation(args, eq, out, inputs, report, st.mass_sum / st.mass_n)  # (the log's mean mass)
     for ln in lines:
         print(ln, file=sys.stderr)
     return 0
@@ -329,7 +329,9 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
 
     from sumo_drvpw.cli.calibrate import write_equation
 
-    write_equation(args, eq, out, inputs, report)
+    road_st = getattr(st, "road", None)  # (the log's mean mass where the road load was fitted on it)
+    write_equation(args, eq, out, inputs, report,
+                   road_st.mass_sum / road_st.mass_n if road_st is not None and road_st.mass_n else None)
     for info in infos:
         print(info.line(), file=sys.stderr)
     return 0

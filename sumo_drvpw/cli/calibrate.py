@@ -122,7 +122,8 @@ def main(args) -> int:
     print(res.summary(physics=False))  # (the physics: physical() says, below)
     eq, _ = physical(eq, m, args.candidates)
     declare_measurement(eq, m.log.options.measurement)
-    write_equation(args, eq, out, inputs, lambda tmp: write_calibration_report(m, eq, res, tmp, args.compare_with))
+    write_equation(args, eq, out, inputs, lambda tmp: write_calibration_report(m, eq, res, tmp, args.compare_with),
+                   ref_mass)
     return 0
 
 
@@ -306,18 +307,19 @@ def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
 CAR_MAX_MASS_KG = 3500.0
 
 
-def say_vclasses(args, eq, out) -> None:
+def say_vclasses(args, eq, out, log_mass_kg: float | None = None) -> None:
     """Warn when an equation calibrated on a vehicle heavier than :data:`CAR_MAX_MASS_KG`
-    (the ``--vehicle`` file's mass) declares no vClasses of its own: a SUMO run books it on
+    (the ``--vehicle`` file's mass, else ``log_mass_kg``, the log's own mean mass over the
+    rows fitted: a log with a mass_kg column needs no vehicle file) declares no vClasses of its own: a SUMO run books it on
     the car classes, each car at its own mass (a truck's chain, 100 kW at zero output,
     booked 23.7 L/100 km for every car of the built-in highway)."""
     from sumo_drvpw.model.equations import DEFAULT_VCLASSES
     from sumo_drvpw.model.vehicles import load_vehicle
 
-    if not getattr(args, "vehicle", None) or tuple(eq.vclasses) != DEFAULT_VCLASSES:
+    if tuple(eq.vclasses) != DEFAULT_VCLASSES:
         return
-    mass = float(load_vehicle(args.vehicle).mass_kg)
-    if mass > CAR_MAX_MASS_KG:
+    mass = float(load_vehicle(args.vehicle).mass_kg) if getattr(args, "vehicle", None) else log_mass_kg
+    if mass is not None and mass > CAR_MAX_MASS_KG:
         print(f"warning: {eq.name} is calibrated on a {mass:,.0f}-kg vehicle but declares the car classes "
               f"({', '.join(DEFAULT_VCLASSES)}; no vclasses given): a SUMO run books it on every car at the "
               f"car's mass — write its class under [equation] in {out}, e.g. vclasses = [\"trailer\"] "
@@ -325,12 +327,12 @@ def say_vclasses(args, eq, out) -> None:
               "vtypes.<id>.equations)")
 
 
-def write_equation(args, eq, out, inputs, report=None) -> None:
+def write_equation(args, eq, out, inputs, report=None, log_mass_kg: float | None = None) -> None:
     """The equation file, and with ``--report`` the report folder (``report(tmp)`` writes
     into it): both together, the equation written last, so neither is left without the other."""
     from sumo_drvpw.model.equations import save_equation
 
-    say_vclasses(args, eq, out)
+    say_vclasses(args, eq, out, log_mass_kg)
 
     if args.report:
         with output_set(args, args.report, inputs) as tmp:
@@ -420,6 +422,7 @@ def main_chain(args) -> int:
     ro = read_options(args, [args.equation] if args.equation else ())
     m, mw = load_measured_pair(args.logs, args.vehicle, ro, args.target)
     note_counts(m.counts)
+    log_mass = float(np.mean(m.inputs.mass[m.usable])) if m.usable.any() else None  # (say_vclasses)
     trips = signature_texts(trip_signatures(m.log.df))  # (the table is dropped before the chain's fit)
     check_load_columns(m, args.load)  # before the road-load fit
     if hvac and hvac["column"] not in m.inputs.signals:
@@ -498,5 +501,5 @@ def main_chain(args) -> int:
         write_comparison_report(comp, tmp, f"Energy chain of {eq.name} against measured "
                                 f"{args.target} power", ctx)
 
-    write_equation(args, eq, out, inputs, report)
+    write_equation(args, eq, out, inputs, report, log_mass)
     return 0
