@@ -446,9 +446,11 @@ def _run(h: dict | None) -> list[str]:
 
 #: the physical reading of the check (the numbers it refers to are in the tables above)
 CHECK_READING = (
-    "SUMO's HBEFA 4 motorcycle classes book two to four times our litres on the urban traces and lie above "
+    "SUMO's HBEFA 4 motorcycle classes book two to four times our litres on the urban traces (4.3 times: the "
+    "pre-Euro class on ECE-15) and lie above "
     "every published range there; HBEFA's > 250 cm³ classes also stand at several times our idle (their "
-    "'Standing' rates). Ours sits at the low end of the published motorcycle range in town and inside it on "
+    "'Standing' rates). Ours sits at the low end of the published motorcycle range in town (just below it on "
+    "the WLTC's low phase, and below LIPASTO's street driving) and inside it on "
     "the mixed WLTC 3b. The moped chain books below the published 50–200-cm³ scooters (which include 125-cm³ "
     "machines) and below HBEFA's moped on every trace (least on the WLTC's low phase); HBEFA's moped burns "
     "nothing standing. "
