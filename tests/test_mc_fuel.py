@@ -125,6 +125,12 @@ def test_bare_config_books_motorcycles_and_mopeds_in_litres(tmp_path, capsys):
     key = "no battery or fuel chain applies to"
     said = err.split(key)[1].split("\n")[0] if key in err else ""
     assert "moped" in said and "motorcycle" not in said
+    # each chain that booked says once that it is an estimate checked against no measured ride
+    for name in ("moves_motorcycle_petrol", "moves_moped_petrol"):
+        assert sum(w.startswith(f"{name}: its chain's calibration warned: an estimate") for w in summary["warnings"]) == 1
+    # the chains of the other built-ins, which booked nothing here, say nothing
+    assert not [w for w in summary["warnings"] if "its chain's calibration warned" in w
+                and not w.startswith(("moves_motorcycle_petrol", "moves_moped_petrol"))]
 
 
 def test_a_two_wheeler_or_bus_on_sumos_battery_device_gets_no_litres(tmp_path, capsys):
@@ -197,3 +203,16 @@ def test_committed_report_is_regenerated():
                 if val is None or got is None:
                     continue
                 assert got["l_per_100km"] == pytest.approx(val["l_per_100km"], rel=1e-6), (name, cyc, who)
+
+
+def test_a_chain_that_books_nobody_says_nothing_of_its_calibration(tmp_path):
+    """A chain's calibration warnings are about what it books: the moped chain in a run
+    without mopeds (the built-in highway's cars) gives none (it was said in every run that
+    listed it, as a bare config lists every built-in)."""
+    pytest.importorskip("libsumo")
+    from sumo_drvpw.sim import run_scenario
+
+    s = run_scenario("highway", tmp_path / "o", end=30, equations=["moves_moped_petrol", "vsp_ldv1999"],
+                     figures=False)
+    assert not any(w.startswith("moves_moped_petrol") for w in s.summary["warnings"])
+    assert not any(s.summary["equations"]["moves_moped_petrol"]["distance_m"].values())

@@ -457,7 +457,8 @@ class Accountant(_Listener):
                 "speed_range_mps": list(eq.speed_range_mps) if eq.speed_range_mps else None,
                 "accel_range_mps2": list(eq.accel_range_mps2) if eq.accel_range_mps2 else None,
                 "out_of_range_samples": int(led.out_of_range[e])})
-            for w in (getattr(eq.chain, "provenance", None) or {}).get("warnings", []):
+            for w in (getattr(eq.chain, "provenance", None) or {}).get("warnings", []) if any(
+                    summary["equations"][eq.name]["distance_m"].values()) else ():  # (of what it booked)
                 summary["warnings"].append(f"{eq.name}: its chain's calibration warned: {w}")
             vr, _, pr = eq.validity()  # a chain's fitted driving power (and speed) range
             if pr is not None:

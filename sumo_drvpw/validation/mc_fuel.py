@@ -129,6 +129,9 @@ CHAINS = {
         "fuel_cut_reading": "0: overrun fuel cut-off of an injected engine [MB-DFCO] (Euro 3 and later "
                             "motorcycles are injected: ESTIMATE for older carburetted ones, which idle through)",
         "sumo": ("HBEFA4/MC_4S_gt250cc_preEuro", "HBEFA4/MC_4S_gt250cc_Euro-5"),
+        "warning": "an estimate from published parameters (engine efficiency, driveline, idle fuel from cars' "
+                   "line), checked against no measured ride: at the published range's low end in town "
+                   "(docs/mc-fuel.md)",
     },
     "moves_moped_petrol": {
         "vclass": "moped", "what": "50 cm³ four-stroke moped (scooter)",
@@ -146,6 +149,9 @@ CHAINS = {
         "fuel_cut_reading": "none: a carburetted moped engine idles through overrun (ESTIMATE: injected 50 cm³ "
                             "engines with a cut exist)",
         "sumo": ("HBEFA4/Moped_le50cc_Euro-2", "HBEFA4/Moped_le50cc_Euro-5"),
+        "warning": "an estimate from published parameters, checked against no measured ride: it books less "
+                   "than published scooters' consumption on every cycle checked, and less still at a moped's "
+                   "own mass (the default is a motorcycle's 285 kg) (docs/mc-fuel.md)",
     },
 }
 
@@ -201,7 +207,7 @@ def builtin_doc(name: str) -> dict:
             "cold_start_fuel_l": "0: no two-wheeler cold-start measurement was read; not booked",
             "running_fuel_per_k": "0: no two-wheeler warm-running temperature factor was read",
         },
-        "provenance": {"displacement_l": c["displacement_l"], "idle_w_per_l": IDLE_W_PER_L,
+        "provenance": {"warnings": [c["warning"]], "displacement_l": c["displacement_l"], "idle_w_per_l": IDLE_W_PER_L,
                        "fuel_to_wheel_at_margin": round(c["engine"] * c["driveline"], 6),
                        "sources": "docs/sources.md 'Motorcycle and moped chains'; " + "; ".join(
                            f"[{k}]" for k in SOURCES if f"[{k}]" in " ".join(
