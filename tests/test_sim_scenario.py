@@ -771,6 +771,29 @@ def test_a_default_mass_stays_within_the_gross_weight_its_emission_class_names(t
     assert VTypeResolver(sc2, read_vtypes([f]), eqs)("small", "x")[0] == 9000.0
 
 
+def test_a_moped_without_mass_is_booked_at_a_moped_s_mass_with_its_rider(tmp_path):
+    """A vClass moped without a mass was booked at the MOVES motorcycle's 285 kg. A 50-cm³
+    scooter (EU L1e) weighs 80 kg (SUMO's moped default, no driver) to 91–94 kg
+    (carculator_two_wheeler's petrol scooter < 4 kW, manufacturers' data) in running order;
+    with the 75-kg driver of EU L-category approval, 155–169 kg. The default now lies there,
+    says kerb and rider in its source, and a motorcycle keeps the MOVES source mass."""
+    from sumo_drvpw.model.equations import load_equation
+    from sumo_drvpw.sim.run import VTypeResolver
+    from sumo_drvpw.sim.vtypes import DEFAULT_MASS_KG
+
+    f = _write(tmp_path, """<routes>
+      <vType id="mop" vClass="moped"/>
+      <vType id="mc" vClass="motorcycle"/>
+    </routes>""", "r.rou.xml")
+    sc = load_scenario(doc={"equations": ["vsp_ldv1999"], "sumo": {"net": str(NETS / "highway.net.xml")}})
+    res = VTypeResolver(sc, read_vtypes([f]), [Equation("t", {"roll": 0.01}, vclasses=("moped", "motorcycle"))])
+    mop, mc = res("mop", "x")[0], res("mc", "x")[0]
+    assert 80.0 + 75.0 <= mop <= 94.0 + 75.0, mop
+    src = res.assumptions["mop"]["source"]
+    assert "carculator_two_wheeler" in src and "75-kg driver" in src, src
+    assert mc == DEFAULT_MASS_KG["motorcycle"] == load_equation("moves_motorcycle").provenance["source_mass_t"] * 1000
+
+
 def test_a_scenario_file_without_equations_books_as_its_bare_config(tmp_path):
     """A new user gives SUMO options to a bare config through a scenario file ([sumo]
     config, options: the run command has no flag for them): without an ``equations`` key

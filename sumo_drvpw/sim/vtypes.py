@@ -26,13 +26,14 @@ from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
 #: Default mass per SUMO vClass [kg] for vTypes that give none: the MOVES source mass of
 #: the source type whose road load the class's built-in equation uses (docs/sources.md
-#: [MOVES-ST]; sourceTypeID in brackets). Used only when neither the vType nor the scenario
+#: [MOVES-ST]; sourceTypeID in brackets), but a moped's own (MOVES has none; kerb + rider:
+#: :data:`DEFAULT_MASS_SOURCE`). Used only when neither the vType nor the scenario
 #: gives a mass; every use is listed in summary.json ``assumptions``.
 DEFAULT_MASS_KG = {
     "passenger": 1478.8, "private": 1478.8, "taxi": 1478.8, "hov": 1478.8,  # (21)
     "vip": 1478.8,                                                          # (21)
     "evehicle": 1478.8, "authority": 1478.8,                                # (21)
-    "motorcycle": 285.0, "moped": 285.0,                                    # (11)
+    "motorcycle": 285.0, "moped": 92.0 + 75.0,                              # (11), C2W
     "delivery": 2059.7, "emergency": 2059.7,                                # (32)
     "bus": 16556.0,                                                         # (42)
     "coach": 19593.0,                                                       # (41)
@@ -44,7 +45,8 @@ DEFAULT_MASS_SOURCE = {
     **{c: "MOVES source type 21 (passenger car) source mass" for c in (
         "passenger", "private", "taxi", "hov", "vip", "evehicle", "authority")},
     "motorcycle": "MOVES source type 11 (motorcycle) source mass",
-    "moped": "MOVES source type 11 (motorcycle) source mass",
+    "moped": "a 50-cm³ petrol scooter (EU L1e) with its rider: kerb 92 kg (carculator_two_wheeler's petrol "
+             "scooter < 4 kW, 91-94 kg, manufacturers' data) + the 75-kg driver of EU L-category approval",
     "delivery": "MOVES source type 32 (light commercial truck) source mass",
     "emergency": "MOVES source type 32 (light commercial truck) source mass",
     "bus": "MOVES source type 42 (transit bus) source mass",
