@@ -161,6 +161,20 @@ def test_a_two_wheeler_or_bus_on_sumos_battery_device_gets_no_litres(tmp_path, c
     assert carriers["escooter"]["not_booked_by"] == ["moves_moped_petrol"]
 
 
+@pytest.mark.parametrize("name", sorted(HAND))
+def test_check_is_at_the_plug_in_s_default_mass_of_the_vclass(name):
+    """The check computes L/100 km at the mass a vType of the vClass without one is booked
+    at (sim/vtypes.py DEFAULT_MASS_KG): the moped's was checked at the MOVES motorcycle's
+    285 kg, a moped now books 167 kg (kerb + rider); the committed report says the same."""
+    from sumo_drvpw.sim.vtypes import DEFAULT_MASS_KG
+    from sumo_drvpw.validation import mc_fuel as m
+
+    vclass = HAND[name][0]
+    committed = json.loads((REPO / "docs" / "mc-fuel.json").read_text(encoding="utf-8"))
+    assert committed["check"][name]["mass_kg"] == DEFAULT_MASS_KG[vclass]
+    assert m.check_mass_kg(name) == DEFAULT_MASS_KG[vclass]
+
+
 HAVE_CYCLES = (DATA / "cycles").is_dir()
 
 
@@ -197,6 +211,7 @@ def test_committed_report_is_regenerated():
         "python -m sumo_drvpw.validation.mc_fuel docs/mc-fuel.md")
     fresh = json.loads(json.dumps(m.check(DATA)))
     for name, r in committed["check"].items():
+        assert fresh[name]["mass_kg"] == r["mass_kg"], name
         for cyc, row in r["cycles"].items():
             for who, val in row.items():
                 got = fresh[name]["cycles"][cyc][who]
