@@ -233,14 +233,15 @@ def builtin_doc(name: str) -> dict:
     return doc
 
 
-def write_builtins() -> list[Path]:
-    """Write the four built-in equations; returns their paths."""
+def write_builtins(names=None, doc=None) -> list[Path]:
+    """Write built-in equations: ``names`` (default: the four of :data:`CHAINS`) from ``doc(name)``
+    (default: :func:`builtin_doc`; validation/mc_fuel.py writes its own with it); returns their paths."""
     from sumo_drvpw.model.equations import BUILTIN_DIR, equation_from_dict, save_equation
 
     out = []
-    for name in CHAINS:
+    for name in CHAINS if names is None else names:
         p = BUILTIN_DIR / f"{name}.toml"
-        save_equation(equation_from_dict(builtin_doc(name), f"<{name}>"), p)
+        save_equation(equation_from_dict((doc or builtin_doc)(name), f"<{name}>"), p)
         out.append(p)
     return out
 
@@ -261,21 +262,28 @@ def read_cycle(folder: Path, name: str) -> np.ndarray:
     return v
 
 
-def ours_l_per_100km(name: str, v: np.ndarray, mass_kg: float) -> dict:
-    """Our chain on schedule ``v`` at ``mass_kg``: 1-s steps at the step's mean speed, m·v̄·Δv
-    the kinetic-energy change, flat road; fuel [L], distance [km], L/100 km, idle share."""
-    from sumo_drvpw.model.equations import equation_from_dict
+def chain_run(eq, v: np.ndarray, mass_kg: float) -> dict:
+    """Equation ``eq`` (road load and chain) on schedule ``v`` at ``mass_kg``: 1-s steps at the
+    step's mean speed, m·v̄·Δv the kinetic-energy change, flat road; fuel [L], distance [km],
+    L/100 km, and the share of the fuel burnt with no traction (``share_no_traction``)."""
     from sumo_drvpw.model.terms import Inputs
 
-    eq = equation_from_dict(builtin_doc(name), f"<{name}>")
     vm, dv = 0.5 * (v[1:] + v[:-1]), np.diff(v)
     z = np.zeros_like(vm)
     x = Inputs(v=vm, a=dv, theta=z, wind=z, mass=np.full_like(vm, float(mass_kg)),
                rho=np.full_like(vm, 1.2041), v_acc=vm)
-    r = eq.chain.evaluate(eq.power(x), vm, dt_s=1.0)
+    p = eq.power(x)
+    r = eq.chain.evaluate(p, vm, dt_s=1.0)
     litres, km = float(r["fuel_l"].sum()), float(vm.sum()) / 1000.0
-    idle = float(np.sum(r["power_j"] * (np.maximum(eq.power(x), 0) == 0)) / np.sum(r["power_j"]))
+    idle = float(np.sum(r["power_j"] * (np.maximum(p, 0) == 0)) / np.sum(r["power_j"]))
     return {"fuel_l": litres, "km": km, "l_per_100km": 100.0 * litres / km, "share_no_traction": idle}
+
+
+def ours_l_per_100km(name: str, v: np.ndarray, mass_kg: float) -> dict:
+    """Built-in ``name`` (:func:`builtin_doc`) on schedule ``v`` at ``mass_kg`` (:func:`chain_run`)."""
+    from sumo_drvpw.model.equations import equation_from_dict
+
+    return chain_run(equation_from_dict(builtin_doc(name), f"<{name}>"), v, mass_kg)
 
 
 def sumo_l_per_100km(cls: str, v: np.ndarray, workdir: Path, fuel: str = FUEL) -> dict | None:
@@ -329,7 +337,8 @@ def check(data: Path) -> dict:
 
 def hamburg(run: Path) -> dict:
     """The per-vClass fuel a finished run booked (``chain_classes.csv``), with its command
-    (``manifest.json``), end time and wall time (``summary.json``)."""
+    (``manifest.json``), begin and end time, wall time (``summary.json``) and the warning of
+    vehicles no chain booked (validation/mc_fuel.py reads its MoST run with it too)."""
     import pandas as pd
 
     run = Path(run)
@@ -349,9 +358,9 @@ def hamburg(run: Path) -> dict:
              "mean_speed_kmh": float(3.6 * tot.loc[r.equation, "distance_m"] / tot.loc[r.equation, "time_s"])}
             for r in cls.itertuples(index=False)]
     warn = [w for w in summ.get("warnings", []) if "no battery or fuel chain" in w]
-    return {"command": " ".join(man.get("command", [])), "end_s": summ.get("end_s"),
-            "wall_time_s": summ.get("wall_time_s"), "vehicles": summ.get("vehicles"), "classes": rows,
-            "chainless_warning": warn[0] if warn else None}
+    return {"command": " ".join(man.get("command", [])), "begin_s": summ.get("begin_s") or 0.0,
+            "end_s": summ.get("end_s"), "wall_time_s": summ.get("wall_time_s"), "vehicles": summ.get("vehicles"),
+            "classes": rows, "chainless_warning": warn[0] if warn else None}
 
 
 def main(argv=None) -> int:

@@ -49,11 +49,12 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import FUELS
-from sumo_drvpw.validation.hdv_fuel import CYCLES, read_cycle, sumo_l_per_100km
+from sumo_drvpw.validation.hdv_fuel import CYCLES, FLAG_SHARE, read_cycle, sumo_l_per_100km  # noqa: F401 (|ours/SUMO − 1| flagged)
+from sumo_drvpw.validation.hdv_fuel import chain_run as hdv_chain_run, hamburg as hdv_run_classes
+from sumo_drvpw.validation.hdv_fuel import write_builtins as write_equations
+from sumo_drvpw.validation.hdv_fuel_report import _ratio
 
 FUEL = "gasoline"
-#: |ours/SUMO − 1| above this is flagged in the report
-FLAG_SHARE = 0.25
 #: the traces of the check: name → (file, first seconds or None); ECE-15 from carculator's NEDC
 CHECK_CYCLES = {"ece15": ("carculator_car_driving_cycles.csv", 780), "wltc_low_3": ("wltc_low_3.csv", None),
                 "udds": ("udds.csv", None), "wltc_3b": ("wltc_3b.csv", None)}
@@ -232,14 +233,7 @@ def builtin_doc(name: str) -> dict:
 
 def write_builtins() -> list[Path]:
     """Write the built-in equations; returns their paths."""
-    from sumo_drvpw.model.equations import BUILTIN_DIR, equation_from_dict, save_equation
-
-    out = []
-    for name in CHAINS:
-        p = BUILTIN_DIR / f"{name}.toml"
-        save_equation(equation_from_dict(builtin_doc(name), f"<{name}>"), p)
-        out.append(p)
-    return out
+    return write_equations(CHAINS, builtin_doc)
 
 
 # ---------------------------------------------------------------------- the check
@@ -262,16 +256,9 @@ def read_trace(folder: Path, name: str) -> np.ndarray:
 
 def chain_run(eq, v: np.ndarray, mass_kg: float) -> dict:
     """Equation ``eq`` (road load and chain) on schedule ``v`` at ``mass_kg``: 1-s steps at the
-    step's mean speed, flat road; fuel [L], distance [km], L/100 km."""
-    from sumo_drvpw.model.terms import Inputs
-
-    vm, dv = 0.5 * (v[1:] + v[:-1]), np.diff(v)
-    z = np.zeros_like(vm)
-    x = Inputs(v=vm, a=dv, theta=z, wind=z, mass=np.full_like(vm, float(mass_kg)),
-               rho=np.full_like(vm, 1.2041), v_acc=vm)
-    r = eq.chain.evaluate(eq.power(x), vm, dt_s=1.0)
-    litres, km = float(r["fuel_l"].sum()), float(vm.sum()) / 1000.0
-    return {"fuel_l": litres, "km": km, "l_per_100km": 100.0 * litres / km}
+    step's mean speed, flat road; fuel [L], distance [km], L/100 km (validation/hdv_fuel.py)."""
+    r = hdv_chain_run(eq, v, mass_kg)
+    return {k: r[k] for k in ("fuel_l", "km", "l_per_100km")}
 
 
 def start_stop(name: str):
@@ -336,40 +323,11 @@ def check(data: Path) -> dict:
 
 def run_classes(run: Path) -> dict:
     """The litres per vClass a finished run booked (``chain_classes.csv``), its command and
-    the warning of vehicles no chain booked."""
-    import pandas as pd
-
-    run = Path(run)
-    try:
-        man = json.loads((run / "manifest.json").read_text(encoding="utf-8"))
-        summ = json.loads((run / "summary.json").read_text(encoding="utf-8"))
-        cls = pd.read_csv(run / "chain_classes.csv")
-    except (OSError, ValueError) as e:
-        raise UserError(f"{run}: not a finished sumo-drvpw run folder ({e})") from None
-    try:
-        veh = pd.read_parquet(run / "vehicles.parquet", columns=["equation", "distance_m", "time_s"])
-    except (OSError, ValueError) as e:
-        raise UserError(f"{run}: vehicles.parquet not readable ({e})") from None
-    tot = veh.groupby("equation")[["distance_m", "time_s"]].sum()
-    rows = [{"vclass": r.key, "equation": r.equation, "km": float(r.distance_km), "fuel_l": float(r.fuel_l),
-             "l_per_100km": float(r.fuel_l_per_100km),
-             "mean_speed_kmh": float(3.6 * tot.loc[r.equation, "distance_m"] / tot.loc[r.equation, "time_s"])}
-            for r in cls.itertuples(index=False)]
-    warn = [w for w in summ.get("warnings", []) if "no battery or fuel chain" in w]
-    return {"command": " ".join(man.get("command", [])), "begin_s": summ.get("begin_s") or 0.0,
-            "end_s": summ.get("end_s"), "wall_time_s": summ.get("wall_time_s"), "vehicles": summ.get("vehicles"),
-            "classes": rows,
-            "chainless_warning": warn[0] if warn else None}
+    the warning of vehicles no chain booked (validation/hdv_fuel.py ``hamburg``)."""
+    return hdv_run_classes(run)
 
 
 # ---------------------------------------------------------------------- the report
-def _ratio(a, b) -> tuple[str, bool]:
-    if a is None or b is None or not b:
-        return "–", False
-    r = a / b - 1.0
-    return f"{r:+.0%}".replace("%", " %"), abs(r) > FLAG_SHARE
-
-
 def render(res: dict) -> str:
     """The Markdown report of a :func:`main` result."""
     L = ["# Motorcycle and moped petrol fuel chains on MOVES road load", "",
