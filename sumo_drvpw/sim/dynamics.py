@@ -371,6 +371,27 @@ def vtype_driving(driving: dict | None, vclass: str | None) -> dict:
             "des_accel_profile": d.get("desAccelProfile") is not None}
 
 
+#: car-following models whose speed SUMO raises by at most the vType's ``accel``·Δt in a step
+#: (MSCFModel::maxNextSpeed in finalizeSpeed; KraussPS lower still uphill)
+ACCEL_CAPPED_MODELS = frozenset({*SIGMA_MODELS, "IDM", "IDMM"})
+
+
+def accel_bounds(file_vtypes) -> dict[str, float]:
+    """vType id → the most [m/s²] SUMO let its vehicles gain speed by driving (its ``accel`` as
+    written, else its vClass's default: :func:`vtype_driving`), for the vTypes of the route
+    files ``file_vtypes`` (:class:`~sumo_drvpw.sim.vtypes.FileVTypes`) whose car-following
+    model caps it there (:data:`ACCEL_CAPPED_MODELS`) and that write no ``maxAccelProfile``;
+    the others are not in it (their bound unknown)."""
+    out = {}
+    for vt, info in file_vtypes.items():
+        d = vtype_driving(info.driving, info.vclass)
+        acc = d["accel_mps2"]
+        if (d["car_follow_model"] in ACCEL_CAPPED_MODELS and isinstance(acc, float) and acc > 0
+                and "maxAccelProfile" not in (info.driving or {})):
+            out[vt] = acc
+    return out
+
+
 def _text(x) -> str:
     return f"{x:g}" if isinstance(x, float) else str(x)
 

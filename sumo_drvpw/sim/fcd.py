@@ -62,6 +62,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.dynamics import accel_bounds
 from sumo_drvpw.sim.fcd_begin import accel_at_begin, begin_frame
 from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators
 from sumo_drvpw.sim.fcd_geo import NetCoordinates, recorded_coordinates
@@ -475,6 +476,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     acc.ledger.hold_steps = int(np.ceil(TELEPORT_HOLD_S / replay.dt))
     replay.type_mass = {vt: i.mass_kg for vt, i in acc.file_vtypes.items() if i.mass_kg}
     replay.container_types = set(getattr(acc.file_vtypes, "container_types", ()))
+    replay.type_accel = accel_bounds(acc.file_vtypes)  # (a placement: a speed gain beyond them)
     replay.type_asl = {vt: i.action_step_s for vt, i in acc.file_vtypes.items() if i.action_step_s is not None}
     # long planned stops and start-stop systems as in the live run (sim/shutoff.py): the
     # vTypes' shut-off params and the vehicles' stops from the route and additional files

@@ -152,6 +152,9 @@ class _Rows:
         self.type_eclass: dict = {}
         #: vType → its actionStepLength [s] as the route files write it (set by replay_fcd)
         self.type_asl: dict = {}
+        #: vType → the speed gain per second [m/s²] its driving cannot exceed (set by replay_fcd:
+        #: sim/dynamics.accel_bounds), which tells a placement (sim/reader.reinserted)
+        self.type_accel: dict = {}
         self.default_eclass = ""  # (a vType the files do not hold: sim/vtype_energy.replay_emission_classes)
         #: the route files' stops matched to where vehicles stand (fcd_stops.StopTracker;
         #: set by replay_fcd, None: no file declares a stop)

@@ -432,7 +432,8 @@ class Stepper:
             ledger.veh_prev_angle[vidx] = angle
         if raw is not None:
             raw = np.radians(raw)
-        placed = reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, self.is_replay)  # not driven
+        placed = reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, self.is_replay,  # not driven
+                            prev, getattr(conn, "type_accel", None))
         on_lane, tilt = lane >= 0, None
         if self.parking.on and not on_lane.all():  # parked, dwelling, idling, or teleporting
             for j in np.flatnonzero(~on_lane):

@@ -174,22 +174,31 @@ class Reader:
 #: accelerations are at most 2.6 m/s², its motorcycles' 6 in some versions): a vehicle on
 #: another edge in the next row this much faster was put there by a teleport
 REINSERT_ACCEL_MPS2 = 8.0
+#: where the replay knows a vehicle's vType's acceleration bound (``type_accel``: sim/dynamics.
+#: accel_bounds), a gain beyond this multiple of it (plus :data:`SPEED_TOL_MPS`) tells the same
+VTYPE_ACCEL_MARGIN = 1.25
+#: the speed gain [m/s] a row's written precision may add (SUMO's FCD: 2 decimals by default)
+SPEED_TOL_MPS = 0.02
 
 
-def reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, replay: bool):
+def reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, replay: bool, prev_v=None, type_accel=None):
     """Which vehicles of a step SUMO put back on a lane at a teleport's end: placed, not
     driven (MSVehicleTransfer::checkInsertions → MSLane::freeInsertion: the front at its length
     from the next edge's start, at that lane's speed limit or the vType's maxSpeed, in the
     step after the moves). ``ends``: slots SUMO says ended a teleport (a live run; a replay: back
     after steps without rows). A replay also tells one SUMO started and ended in one step (no
     gap in the FCD) by its row: on another edge, it stood (≤ 0.1 m/s) and is faster by more
-    than :data:`REINSERT_ACCEL_MPS2`·Δt or farther along the lanes than its speed took it
+    than its speed could gain by driving or farther along the lanes than its speed took it
     (v_t·Δt, plus :attr:`Network.jump_slack_m` for rows sparser than the step), or it moved
     (a collision's teleport) and is that much faster or farther than max(v_t−1, v_t)·Δt (+ that
-    slack) took it
-    (:meth:`Network.jumped`, the test the grade makes of a jump). Parameters:
-    lane numbers, positions [m], speeds [m/s], accelerations [m/s²] (v_t − v_t−1)/Δt of slots
-    ``vidx``, Δt [s]."""
+    slack) took it (:meth:`Network.jumped`, the test the grade makes of a jump). The gain
+    driving can reach in Δt: :data:`VTYPE_ACCEL_MARGIN` × its vType's bound (``type_accel``,
+    vType id → m/s²; SUMO caps each step's gain at the vType's accel) + :data:`SPEED_TOL_MPS`,
+    at most and where the bound is unknown :data:`REINSERT_ACCEL_MPS2`·Δt (a car put back
+    from 7.3 at 13.9 m/s on a junction's next edge 10 m on: neither 8 m/s² faster nor farther
+    than it could go, 6.6 m/s faster than its accel of 2.6 m/s² allows). Parameters:
+    lane numbers, positions [m], speeds [m/s], accelerations [m/s²] of slots ``vidx``, Δt [s];
+    ``prev_v``: their speeds of the last row (NaN: none; None: (v_t − v_t−1)/Δt is ``a``)."""
     fresh = (np.isin(vidx, ends) if len(ends) else np.zeros(len(vidx), bool)) & (lane >= 0)
     if replay and net.lane_own_edge is not None:
         prev = ledger.veh_at[vidx, 0]
@@ -197,14 +206,21 @@ def reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, replay: bool):
         k = k[net.lane_own_edge[prev[k].astype(np.int64)] != net.lane_own_edge[lane[k]]]
         if len(k):
             lp, p0, was = prev[k].astype(np.int64), ledger.veh_at[vidx[k], 1], v[k] - a[k] * dt
+            if prev_v is not None:  # (``a`` may be the FCD's acceleration: at a placement not the jump's)
+                was = np.where(np.isfinite(prev_v[k]), prev_v[k], was)
+            gain = v[k] - was
+            limit = np.full(len(k), REINSERT_ACCEL_MPS2 * dt)
+            if type_accel:
+                bound = np.array([type_accel.get(ledger.veh_type[i], np.nan) for i in vidx[k].tolist()])
+                limit = np.where(np.isfinite(bound),
+                                 np.minimum(limit, VTYPE_ACCEL_MARGIN * bound * dt + SPEED_TOL_MPS), limit)
+            fast = gain > limit
             stood = was <= 0.1
             along = net.lane_length[lp] - p0 + pos[k]
-            fresh[k[stood & ((a[k] > REINSERT_ACCEL_MPS2)
-                             | (along > v[k] * dt + net.jump_slack_m + JUMP_TOL_M))]] = True
+            fresh[k[stood & (fast | (along > v[k] * dt + net.jump_slack_m + JUMP_TOL_M))]] = True
             m = ~stood  # a moving car put back (a collision's teleport): faster or farther than it could go
-            fresh[k[m][(a[k][m] > REINSERT_ACCEL_MPS2)
-                       | net.jumped(lp[m], p0[m], lane[k][m], pos[k][m],
-                                    np.maximum(v[k][m], was[m]) * dt + net.jump_slack_m)]] = True
+            fresh[k[m][fast[m] | net.jumped(lp[m], p0[m], lane[k][m], pos[k][m],
+                                            np.maximum(v[k][m], was[m]) * dt + net.jump_slack_m)]] = True
     return fresh
 
 

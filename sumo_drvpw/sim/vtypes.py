@@ -379,7 +379,8 @@ def is_true(val: str | None) -> bool:
 
 #: the route files' elements that define vehicles (and may carry a vehicle's own params)
 #: the car-following attributes a file's vType keeps (:attr:`VTypeInfo.driving`)
-CF_KEYS = ("carFollowModel", "accel", "decel", "sigma", "sigmaStep", "speedTable", "desAccelProfile")
+CF_KEYS = ("carFollowModel", "accel", "decel", "sigma", "sigmaStep", "speedTable", "desAccelProfile",
+           "maxAccelProfile")
 CF_CHILD = "carFollowing-"
 
 
