@@ -68,9 +68,9 @@ from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, ca
 from sumo_drvpw.sim.fcd_geo import NetCoordinates, recorded_coordinates
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_method import recorded_method
-from sumo_drvpw.sim.fcd_warn import (KineticGain, lane_warnings, missing_input_warnings, no_angle_warning,
-                                     partial_warnings, sparse_rows, sparse_warning,
-                                     unplaced_person_warning, unplaced_vehicle_warning)
+from sumo_drvpw.sim.fcd_warn import (KineticGain, lane_warnings, missed_count, missing_input_warnings, no_angle_warning,
+                                     partial_warnings, sparse_rows, sparse_warning, unplaced_person_warning,
+                                     unplaced_vehicle_warning, unseen_vehicles)
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
 from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
@@ -152,6 +152,7 @@ class FcdReplay(_Rows):
         self.back = self._back.get(self.k - 1, ())
         self._seen.update(new)
         self.departed = new
+        self.saw(new)
         self.arrived = self._leaving.get(self.k - 2, ())
 
     def close(self):
@@ -307,6 +308,7 @@ class FcdStream(FcdReplay):
         self.types = dict(zip(ids, c["type"]))
         now = set(ids)
         self.departed = tuple(v for v in ids if v not in self._prev_set)
+        self.saw(self.departed)
         self.arrived = tuple(v for v in self._prev if v not in now)
         self._prev, self._prev_set = ids, now
 
@@ -495,8 +497,9 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                            replay.recorded_step_s or replay.dt)
     acc.stepper.replay_info = replay_info  # a --begin after the file's start: no cold starts then
     replay.count_persons = count_persons
-    sparse = sparse_rows(head)  # rows written less often than the run stepped: what they hide, measured
+    sparse, t0 = sparse_rows(head), replay.t  # rows written less often than the run stepped; its first row's time
     replay.kinetic = KineticGain() if sparse else None
+    replay.unseen, unseen_why = unseen_vehicles(declared, head, begin_s, cut, keep) if sparse else ({}, "")
     try:
         info = step_until(replay, acc.stepper, end=None, progress=sc.progress and publish, period=sc.period,
                           period_from=sc.period_from)
@@ -505,14 +508,13 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         rows = replay.rows if chunk_rows is not None else len(df)
         extra = {"source": {"fcd": str(fcd_file), "rows": int(rows),
                             "timesteps": int(replay.k), "parked_rows": int(replay.parked_rows),
-                            "idling_rows": int(replay.idle_rows),
-                            "untold_parked_rows": int(replay.idling.untold_rows),
+                            "idling_rows": int(replay.idle_rows), "untold_parked_rows": int(replay.idling.untold_rows),
                             "untold_parked_vehicles": len(replay.idling.untold_ids),
-                            "riding_person_rows": int(replay.rider_rows),
+                            "riding_person_rows": int(replay.rider_rows), "unplaced_vehicle_rows": int(replay.blind_rows),
                             "unplaced_person_rows": int(replay.unplaced_person_rows),
-                            "unplaced_vehicle_rows": int(replay.blind_rows),
                             "declared_parked_rows": int(replay.stops.inferred_rows if replay.stops else 0),
                             "inputs_not_found": list(inputs[1])}}
+        replay.missed = missed_count(replay.unseen, unseen_why, t0, replay.t - replay.dt, len(declared.random_flows))
         if sc.trace and out_dir:
             extra["files"] = {"trace": "trace.parquet"}
         if not publish:
@@ -520,7 +522,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
             return acc, extra
         warn = (list(inputs[0]) + lane_warnings(fcd_file, sc.net_file, *acc.fcd_lanes) + dt_warning
                 + [method_note] * bool(method_note) + partial_warnings(fcd_file, head)
-                + sparse_warning(fcd_file, sparse, replay.kinetic.doubled_loss() if sparse else None))
+                + sparse_warning(fcd_file, sparse, replay.kinetic.doubled_loss() if sparse else None, replay.missed))
         if replay.no_angle and acc.eqset.uses_yaw:
             warn.append(no_angle_warning(fcd_file))
         if replay.unplaced_person_rows and sc.transportable_mass:

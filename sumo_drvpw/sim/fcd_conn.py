@@ -155,6 +155,9 @@ class _Rows:
         #: vType → the speed gain per second [m/s²] its driving cannot exceed (set by replay_fcd:
         #: sim/dynamics.accel_bounds), which tells a placement (sim/reader.reinserted)
         self.type_accel: dict = {}
+        #: vehicle id → depart [s] of the route files' vehicles not yet in a row (set by
+        #: replay_fcd for rows sparser than the steps; emptied as they appear: fcd_warn.missed_vehicles)
+        self.unseen: dict = {}
         self.default_eclass = ""  # (a vType the files do not hold: sim/vtype_energy.replay_emission_classes)
         #: the route files' stops matched to where vehicles stand (fcd_stops.StopTracker;
         #: set by replay_fcd, None: no file declares a stop)
@@ -190,6 +193,11 @@ class _Rows:
         #: stop (a parkingArea there): parked, not dwelling, while they stand there (:meth:`_bays`)
         self.not_bay: set = set()
         self.person, self.vehicletype, self.calibrator = _Person(self), _VType(self), _Calib(self)
+
+    def saw(self, ids) -> None:
+        """Vehicles ``ids`` are in a row: not among :attr:`unseen`."""
+        for v in ids if self.unseen else ():
+            self.unseen.pop(v, None)
 
     def _vehicles(self, c: dict, nxt: dict | None) -> dict:
         """The vehicles' rows of timestep ``c`` (next timestep ``nxt``, None at the end)."""

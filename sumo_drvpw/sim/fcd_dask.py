@@ -79,7 +79,7 @@ def bucket_task(sc, fcd_file: str, part_dir: str, b: int, buckets: int, begin_s=
             "carriers": r.carriers, "powertrains": r.powertrains, "booked_as": r.booked_as,
             "also_booked": r.also_booked, "mass_far": r.mass_far,
             "lanes": acc.fcd_lanes, "no_angle": bool(acc.conn.no_angle and acc.eqset.uses_yaw),
-            "stops_read": acc.conn.stops is not None,
+            "stops_read": acc.conn.stops is not None, "missed": getattr(acc.conn, "missed", None),
             "kinetic": (None if acc.conn.kinetic is None  # (rows sparser than the steps: fcd_warn)
                         else (acc.conn.kinetic.gain.tolist(), acc.conn.kinetic.n.tolist())),
             "shutoff": acc.stepper.shutoff.summary() if acc.stepper.shutoff is not None else None}
@@ -168,7 +168,8 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario, recorded_device_options, recorded_step
     from sumo_drvpw.sim.fcd_idle import untold_warning
     from sumo_drvpw.sim.fcd_warn import (KineticGain, lane_warnings, missing_input_warnings, no_angle_warning,
-                                         partial_warnings, sparse_rows, sparse_warning, unplaced_person_warning,
+                                         merge_missed, partial_warnings, sparse_rows,
+                                         sparse_warning, unplaced_person_warning,
                                          unplaced_vehicle_warning)
     from sumo_drvpw.sim.fcd_read import fcd_parts, header_options
     from sumo_drvpw.sim.run import check_vtype_filter
@@ -212,7 +213,9 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
         if gains:  # each vehicle in one bucket: the gains and intervals add up
             kin = KineticGain()
             kin.gain, kin.n = (np.sum([np.asarray(g[i]) for g in gains], axis=0) for i in (0, 1))
-            warn += sparse_warning(spec, sparse_rows(head), kin.doubled_loss())
+            missed = [d["missed"] for d in done if d.get("missed") is not None]  # (vehicles in no row)
+            warn += sparse_warning(spec, sparse_rows(head), kin.doubled_loss(),
+                                   merge_missed(missed) if missed else None)
         if any(d["no_angle"] for d in done):
             warn.append(no_angle_warning(spec))
         unplaced = max(d["extra"]["source"].get("unplaced_person_rows", 0) for d in done)

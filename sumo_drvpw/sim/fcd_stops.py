@@ -162,6 +162,12 @@ class DeclaredStops:
         self.unknown: dict[str, str] = {}         # vehicle or flow id → why
         self._routes: dict[str, tuple[list[str], list[_Stop], bool]] = {}
         self._dists: set[str] = set()             # routeDistributions with a member's stops
+        #: every <vehicle>/<trip> id → its depart [s] (a time), every <flow> id → (begin,
+        #: spacing, number, end) of a flow with a known spacing, and the flows without one
+        #: (random, or not a time): what :meth:`departing` reads
+        self.departs: dict[str, float] = {}
+        self.flow_departs: dict[str, tuple[float, float, int | None, float]] = {}
+        self.random_flows: list[str] = []
 
     def __bool__(self) -> bool:
         return bool(self.vehicles or self.flows or self.unknown)
@@ -192,6 +198,40 @@ class DeclaredStops:
             if flow in self.unknown:
                 return None, [], self.unknown[flow]
         return None, [], None
+
+    def departing(self, t0: float, t1: float) -> dict[str, float]:
+        """The vehicles the files declare to depart from ``t0`` to ``t1`` [s] (both in):
+        id → depart, a flow's as ``<flow id>.<n>`` at begin + n × its spacing (flows without
+        a spacing: :attr:`random_flows`)."""
+        out = {v: d for v, d in self.departs.items() if t0 - 1e-9 <= d <= t1 + 1e-9}
+        for f, (begin, spacing, number, end) in self.flow_departs.items():
+            lo = max(0.0, np.ceil((t0 - begin) / spacing - 1e-9))
+            hi = min(np.floor((min(t1, end - 1e-6) - begin) / spacing + 1e-9), np.inf if number is None else number - 1)
+            if not np.isfinite(hi):  # (no end to its flow nor to the window)
+                continue
+            lo, hi = int(lo), int(hi)
+            out.update((f"{f}.{n}", begin + n * spacing) for n in range(lo, hi + 1))
+        return out
+
+    def _departure(self, el, tag: str, vid: str) -> None:
+        """Where and when ``el`` departs, for :meth:`departing`."""
+        if tag != "flow":
+            d = sumo_seconds(el.get("depart") or "")  # "triggered", "now": not a time
+            if d is not None:
+                self.departs[vid] = d
+            return
+        begin, spacing = self._flow_timing(el)
+        if spacing is None or spacing != spacing or begin != begin or spacing <= 0:
+            self.random_flows.append(vid)
+            return
+        try:
+            number = int(el.get("number")) if el.get("number") is not None else None
+        except ValueError:
+            number = None
+        e = sumo_seconds(el.get("end")) if el.get("end") is not None else None
+        end = e if e is not None else (np.inf if number is not None else
+                                       self.end if self.end is not None else begin + 86400.0)
+        self.flow_departs[vid] = (begin, spacing, number, end)
 
     def _flow_timing(self, el) -> tuple[float, float | None]:
         """A flow's begin [s] (NaN: not a time, e.g. ``triggered``) and the spacing of its
@@ -246,6 +286,7 @@ class DeclaredStops:
         vid = el.get("id")
         if vid is None:
             return
+        self._departure(el, tag, vid)
         where = f"{where}: {tag} '{vid}'"
         own = [_Stop(s, where) for s in el if s.tag == "stop" and _is_stop(s)]
         inner = next((r for r in el if r.tag == "route"), None)

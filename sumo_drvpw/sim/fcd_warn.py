@@ -3,7 +3,8 @@ lacks, no angles for an equation with radial drag, a recording of part of the ru
 of the vehicles, part of the network), person rows that cannot be matched to vehicles,
 vehicle rows without x, y (parking told only by the route files' stops), route or
 additional files the recording names that are gone (their vTypes unknown), rows written
-less often than the run stepped (the speed changes between them unseen, measured)."""
+less often than the run stepped (the speed changes between them unseen, measured; the route
+files' vehicles in no row counted)."""
 
 from __future__ import annotations
 
@@ -59,12 +60,74 @@ class KineticGain:
         return float(1.0 - (self.gain[1] / self.n[1] / 2.0) / (self.gain[0] / self.n[0]))
 
 
-def sparse_warning(fcd_file, sparse: tuple[float, float] | None, lost: float | None) -> list[str]:
+def unseen_vehicles(declared, head: dict | None, begin_s, end_s, keep=None) -> tuple[dict, str | None]:
+    """The vehicles the route files (``declared``: :class:`~sumo_drvpw.sim.fcd_stops.
+    DeclaredStops`) declare to depart from ``begin_s`` to ``end_s`` [s] (None: open), id →
+    depart, for a replay of rows sparser than the steps to take out as they appear in a row
+    (:func:`missed_count`; ``keep``: a Dask task's mask function of the ids it books); ({}, why)
+    where their ids cannot be those of the FCD: no route file read, a run that scaled its
+    demand (SUMO's ``scale``: other ids, fewer or more vehicles), an FCD of a share of the
+    vehicles or of part of the network."""
+    head = head or {}
+    try:
+        scale = float(head.get("scale", 1.0))
+        share = float(head.get("device.fcd.probability", 1.0))
+    except ValueError:
+        scale = share = np.nan
+    why = ("no route file read" if not (declared.departs or declared.flow_departs or declared.random_flows)
+           else f"its run scaled the demand (scale {head.get('scale')})" if scale != 1.0
+           else "it records a share of the vehicles" if share != 1.0
+           else "it records part of the network" if any(head.get(k) for k in (
+               "fcd-output.filter-edges.input-file", "fcd-output.filter-shapes")) else None)
+    if why:
+        return {}, why
+    out = declared.departing(-np.inf if begin_s is None else begin_s, np.inf if end_s is None else end_s)
+    if keep is not None and out:
+        ids = np.array(list(out), dtype=object)
+        out = {v: out[v] for v in ids[keep(ids)].tolist()}
+    return out, None
+
+
+def missed_count(unseen: dict, why: str | None, t0: float, t1: float, random_flows: int) -> tuple:
+    """(vehicles of ``unseen`` (id → declared depart [s], those of :func:`unseen_vehicles` no
+    row showed) declared to depart from the first replayed row ``t0`` to the last ``t1``, or
+    None; ``why`` they cannot be counted (None: they can), t0, t1, ``random_flows``: flows
+    whose departures are random): what :func:`missed_vehicles` says, added up over Dask tasks
+    by :func:`merge_missed`."""
+    if why is not None:
+        return None, why, t0, t1, random_flows
+    return sum(1 for d in unseen.values() if t0 - 1e-9 <= d <= t1 + 1e-9), None, t0, t1, random_flows
+
+
+def merge_missed(parts: list) -> tuple:
+    """:func:`missed_count` of the vehicles of all Dask tasks from each one's."""
+    why = next((p[1] for p in parts if p[1] is not None), None)
+    n = None if why is not None else sum(p[0] for p in parts)
+    return n, why, min(p[2] for p in parts), max(p[3] for p in parts), parts[0][4]
+
+
+def missed_vehicles(n: int | None, why: str | None, t0: float, t1: float, random_flows: int) -> str:
+    """What a replay of sparse rows says of the vehicles in none of its rows
+    (:func:`missed_count`): ``n`` of those the route files declare to depart from ``t0`` to
+    ``t1`` [s], or why they cannot be counted, and the flows of random departures."""
+    if why is not None:
+        return (f"; a vehicle whose whole trip fell between two rows is in none and is not booked (how many "
+                f"cannot be told: {why})")
+    rnd = (f"; {random_flows} flow{'s' if random_flows > 1 else ''} of random departures not counted"
+           if random_flows else "")
+    return (f"; {n} vehicle{'s' if n != 1 else ''} the route files declare to depart from {t0:g} to {t1:g} s "
+            f"{'are' if n != 1 else 'is'} in no row and not booked (a trip that began and ended between two rows, "
+            f"or one SUMO had not inserted by then){rnd}")
+
+
+def sparse_warning(fcd_file, sparse: tuple[float, float] | None, lost: float | None, missed=None) -> list[str]:
     """What a replay of rows written every ``sparse`` = (step, period) says: the speed
     changes between rows are not booked, and how much the file itself shows of them
-    (``lost``: :meth:`KineticGain.doubled_loss`)."""
+    (``lost``: :meth:`KineticGain.doubled_loss`); ``missed``: what it says of the vehicles
+    in no row (:func:`missed_count`; None: not told)."""
     if sparse is None:
         return []
+    missed = missed_vehicles(*missed) if missed is not None else ""
     step, period = sparse
     told = ("" if lost is None else
             f"; its rows taken two at a time gain {max(lost, 0.0):.0%} less kinetic energy than taken one at a time, "
@@ -72,7 +135,7 @@ def sparse_warning(fcd_file, sparse: tuple[float, float] | None, lost: float | N
             "step (the first rows left out hide the most)")
     return [f"FCD {Path(fcd_file).name}: written every {period:g} s of a run stepping {step:g} s (its header): "
             "each vehicle is booked from the sampled trajectory, its speed changes between the rows unseen, so the "
-            f"acceleration term, the traction and the battery or fuel are booked low{told} (record the FCD at every "
+            f"acceleration term, the traction and the battery or fuel are booked low{told}{missed} (record the FCD at every "
             "step, without device.fcd.period, to book what the run booked)"]
 
 
