@@ -18,8 +18,8 @@ ROUTES = """<routes>
   <vType id="car" vClass="passenger" mass="1500" emissionClass="Energy/unknown"/>
   <vType id="bus" vClass="bus" mass="12000" emissionClass="Energy/unknown"/>
   <route id="rl" edges="ab"/><route id="rs" edges="cd"/>
-  <flow id="long" type="car" route="rl" begin="0" end="60" period="3" departSpeed="max"/>
-  <flow id="short" type="car" route="rs" begin="0" end="60" period="2" departSpeed="max"/>
+  <flow id="long" type="car" route="rl" begin="0" end="90" period="3" departSpeed="max"/>
+  <flow id="short" type="car" route="rs" begin="0" end="90" period="2" departSpeed="max"/>
   <vehicle id="b1" type="bus" route="rs" depart="12" departSpeed="max"/>
   <vehicle id="b2" type="bus" route="rl" depart="13" departSpeed="max"/>
 </routes>"""

@@ -514,7 +514,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                             "unplaced_person_rows": int(replay.unplaced_person_rows),
                             "declared_parked_rows": int(replay.stops.inferred_rows if replay.stops else 0),
                             "inputs_not_found": list(inputs[1])}}
-        replay.missed = missed_count(replay.unseen, unseen_why, t0, replay.t - replay.dt, len(declared.random_flows))
+        replay.missed = missed_count(replay.unseen, unseen_why, t0, replay.t - (sparse or [0])[0], len(declared.random_flows))
         if sc.trace and out_dir:
             extra["files"] = {"trace": "trace.parquet"}
         if not publish:

@@ -90,8 +90,9 @@ def unseen_vehicles(declared, head: dict | None, begin_s, end_s, keep=None) -> t
 
 def missed_count(unseen: dict, why: str | None, t0: float, t1: float, random_flows: int) -> tuple:
     """(vehicles of ``unseen`` (id → declared depart [s], those of :func:`unseen_vehicles` no
-    row showed) declared to depart from the first replayed row ``t0`` to the last ``t1``, or
-    None; ``why`` they cannot be counted (None: they can), t0, t1, ``random_flows``: flows
+    row showed) declared to depart from the first replayed row ``t0`` to ``t1`` (the replay
+    books to its last row + Δt: ``t1`` that less one step of the run, the last departure SUMO
+    could insert — a vehicle that departed after the last row is in none either), or None; ``why`` they cannot be counted (None: they can), t0, t1, ``random_flows``: flows
     whose departures are random): what :func:`missed_vehicles` says, added up over Dask tasks
     by :func:`merge_missed`."""
     if why is not None:
@@ -116,8 +117,8 @@ def missed_vehicles(n: int | None, why: str | None, t0: float, t1: float, random
     rnd = (f"; {random_flows} flow{'s' if random_flows > 1 else ''} of random departures not counted"
            if random_flows else "")
     return (f"; {n} vehicle{'s' if n != 1 else ''} the route files declare to depart from {t0:g} to {t1:g} s "
-            f"{'are' if n != 1 else 'is'} in no row and not booked (a trip that began and ended between two rows, "
-            f"or one SUMO had not inserted by then){rnd}")
+            f"{'are' if n != 1 else 'is'} in no row and not booked (a trip that began and ended between two rows or "
+            f"after the last, or one SUMO had not inserted by then: at most so many trips lost){rnd}")
 
 
 def sparse_warning(fcd_file, sparse: tuple[float, float] | None, lost: float | None, missed=None) -> list[str]:
