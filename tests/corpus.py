@@ -215,6 +215,8 @@ _log_case("energy counter inf", lambda df: _COUNTERS(df).pipe(_set("battery_disc
 _log_case("time as timestamps parquet", lambda df: df.assign(time_s=pd.to_datetime(df.time_s, unit="s")),
           ("time_s", "timestamps"), fmt="parquet")
 _log_case("time in milliseconds", lambda df: df.assign(time_s=df.time_s * 1000), ("time_s", "milliseconds"))
+_log_case("time in 1e-300 s steps", lambda df: df.assign(time_s=df.time_s * 1e-300),  # was an OverflowError
+          ("log.csv", "no usable sample"))
 _log_case("semicolon separated", lambda df: df.to_csv(index=False, sep=";"), ("log.csv", "semicolons"))
 
 def _extra_fields(df):  # row 100 (file line 102) has two fields more than the header

@@ -210,12 +210,12 @@ def speed_hold(v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, q=None) -> 
         if not dt > 0:
             continue
         step = _one_step(vv, q[j])
-        k = max(1, int(np.ceil(HELD_SPAN_S / dt)))
+        k = min(max(1, int(np.ceil(HELD_SPAN_S / dt))), b - a)  # a window longer than the trip is the trip
         i = np.arange(1, b - a)
         lo, hi = np.maximum(i - k, 0), np.minimum(i + k, b - a - 1)
         slope = np.abs(vv[hi] - vv[lo]) / np.maximum(tv[hi] - tv[lo], dt)
         m = 1  # the lag [samples]: 1, or, for a speed in steps too coarse to change at every
-        while m * dt <= HELD_SPAN_S:  # sample (whole km/h at 10 Hz), the least that it must change over
+        while m * dt <= HELD_SPAN_S and m < b - a:  # sample (whole km/h at 10 Hz), the least that it must change over
             im = i[i >= m]
             judged = ((vv[im] > HELD_MIN_SPEED_MPS) & (vv[im - m] > HELD_MIN_SPEED_MPS)
                       & (slope[im - 1] * m * dt >= max(2.0 * step, 0.02)) & np.isfinite(slope[im - 1]))
