@@ -492,6 +492,21 @@ _map_case("soc capacity without a soc", '[options]\nsoc_capacity_kwh = 20\n' + M
 _map_case("time unit given twice, differently", '[options]\ntime_unit = "ms"\n'
           + MAP_OK.replace('unit = "s"', 'unit = "h"'), ("columns.t.unit", "'h'", "'ms'"))
 
+# options.time_step_s (a table without a time column, b85350a): the step itself, and a time column beside it
+_MAP_V = '[columns."v"]\nname = "speed_mps"\nunit = "km/h"\n'
+_V_ONLY = "v\n" + "".join(f"{20 + i % 7}\n" for i in range(80))
+_map_case("time step zero", "[options]\ntime_step_s = 0\n" + _MAP_V, ("time_step_s", "0"), src=_V_ONLY)
+_map_case("time step nan", "[options]\ntime_step_s = nan\n" + _MAP_V, ("time_step_s", "nan"), src=_V_ONLY)
+_map_case("time step text", '[options]\ntime_step_s = "0.1"\n' + _MAP_V, ("time_step_s", "0.1"), src=_V_ONLY)
+_map_case("time step beside a mapped time", "[options]\ntime_step_s = 0.1\n" + MAP_OK, ("time_step_s", "time_s"))
+# were accepted: 1e308 s blamed the source's 'column time_s is inf' (it has none); a day per row wrote a
+# log that calibrate refuses; the file's own time column, left unmapped, was kept as time_s_2 unread
+_map_case("time step huge", "[options]\ntime_step_s = 1e308\n" + _MAP_V, ("time_step_s", "1e+308"), src=_V_ONLY)
+_map_case("time step a day", "[options]\ntime_step_s = 86400\n" + _MAP_V, ("time_step_s", "86400"), src=_V_ONLY)
+_map_case("time step beside an unmapped time column", "[options]\ntime_step_s = 0.125\n" + _MAP_V,
+          ("src.csv", "Time [s]", "time_step_s"),
+          src="Time [s],v\n" + "".join(f"{i / 8},{20 + i % 7}\n" for i in range(80)))
+
 
 @case("toml-mapping", "wrong encoding for the data", ("src.csv", "utf-16"))
 def _(d):

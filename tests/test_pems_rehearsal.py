@@ -49,7 +49,8 @@ def test_a_table_without_a_time_column_takes_its_time_from_the_row_number(tmp_pa
 
 
 @pytest.mark.parametrize("options,time,says", [
-    ("time_step_s = 0\n", "", "options.time_step_s must be the seconds between a table's rows (> 0), got 0"),
+    ("time_step_s = 0\n", "", "options.time_step_s must be the seconds between a table's rows (> 0, ≤ 30"),
+    ("time_step_s = 60\n", "", "options.time_step_s must be the seconds between a table's rows (> 0, ≤ 30"),
     ("time_step_s = true\n", "", "options.time_step_s must be"),
     ("time_step_s = 1\n", '[columns."engine (rpm)"]\nname = "time_s"\n', "map no column to 'time_s' beside it"),
     ("", "", "no source column is mapped to 'time_s' (required; a table whose rows follow at a fixed rate "

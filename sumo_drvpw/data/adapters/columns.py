@@ -182,10 +182,13 @@ def _options(p: Path, doc: dict) -> dict:
                             or not 0 < cap <= MAX_SOC_CAPACITY_KWH):
         raise UserError(f"{p}: options.soc_capacity_kwh must be the battery energy [kWh] that the "
                         f"logged SOC's 0–100 % spans (> 0, ≤ {MAX_SOC_CAPACITY_KWH:g}), got {cap!r}")
+    from sumo_drvpw.data.plausible import MAX_MEDIAN_STEP_S
+
     step = opts.get("time_step_s")
     if step is not None and (isinstance(step, bool) or not isinstance(step, (int, float))
-                             or not 0 < step < math.inf):
-        raise UserError(f"{p}: options.time_step_s must be the seconds between a table's rows (> 0), "
+                             or not 0 < step <= MAX_MEDIAN_STEP_S):
+        raise UserError(f"{p}: options.time_step_s must be the seconds between a table's rows (> 0, "
+                        f"≤ {MAX_MEDIAN_STEP_S:g}: driving power needs samples seconds apart at most), "
                         f"got {step!r}")
     na = opts.get("na_values", ["-", ""])
     if isinstance(na, str):
@@ -386,6 +389,10 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
                                     "separator): left out")
                 continue
             name, f, o = generic_name(label, rep["notes"])
+            if name == "time_s" and m.get("time_step_s") is not None:  # kept, it would pass unread
+                raise UserError(f"{path}: column '{label}' reads as a time (time_s), and {m['path']} takes the "
+                                "time from the row number (options.time_step_s): map that column to "
+                                "'time_s' and drop the option (or options.keep_unmapped = false)")
             try:
                 out.append((name, numeric(s, path, label, na) * f + o))
             except UserError:
