@@ -373,6 +373,21 @@ _eq_case("toml syntax", "[terms\nacc = 1\n", ("TOML",))
 _eq_case("name with quotes and markup", '[terms]\nacc = 1.0\n', ("name",),
          head='[equation]\nname = "x\\" evil=\\"<&"\n')
 _eq_case("std_err nan", "[terms]\nacc = 1.0\n[std_err]\nacc = nan\n", ("std_err",))
+# [provenance] edited by hand (trip_signatures: ddf5247, b35de9c): were a TypeError ('int' object is not iterable)
+_eq_case("provenance trip_signatures a number", "[terms]\nacc = 1.0\n[provenance]\ntrip_signatures = 5\n",
+         ("[provenance] trip_signatures", "5"))
+_eq_case("provenance trip_signatures a boolean", "[terms]\nacc = 1.0\n[provenance]\ntrip_signatures = true\n",
+         ("[provenance] trip_signatures", "true"))
+_eq_case("provenance logs a number", "[terms]\nacc = 1.0\n[provenance]\nlogs = 5\n", ("[provenance] logs", "5"))
+_eq_case("chain provenance warnings a number", '[terms]\nacc = 1.0\n[chain]\npredicts = "battery"\n'
+         "[chain.provenance]\nwarnings = 7\n", ("[chain.provenance] warnings", "7"))
+
+
+@case("toml-equation", "provenance logs a text, not a list", ("calibrated on 1 of these 1 log file",), expect="accept")
+def _(d):  # was read letter by letter: 'l', 'o', …, '.' (the working folder), never the log itself
+    log = write(d, "log.parquet", base_log())
+    eq = text(d, "eq.toml", EQ_HEAD + '[terms]\nacc = 1.0\naero = 0.3\n[provenance]\nlogs = "log.parquet"\n')
+    return _cmp(log, d, "--equation", str(eq))
 
 
 @case("toml-equation", "invalid utf-8", ("bad.toml",))

@@ -96,6 +96,7 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.chain_values import Efficiency, Table, _efficiency, _nonneg, _number  # noqa: F401
+from sumo_drvpw.model.chain_values import provenance_table
 from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
 
 PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
@@ -518,6 +519,9 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         kw.setdefault("aux_power_w", kw["motor"].aux_power_w)
     for k in ("std_err", "reading", "provenance", "metrics"):
         if k in doc:
+            if k == "provenance":
+                kw[k] = provenance_table(doc[k], f"{where} [chain]", "chain.provenance")
+                continue
             if not isinstance(doc[k], dict):
                 raise UserError(f"{where} [chain]: '{k}' must be a table ([chain.{k}]), got {doc[k]!r}")
             kw[k] = dict(doc[k])

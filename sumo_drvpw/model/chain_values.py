@@ -121,3 +121,25 @@ def _nonneg(val, key: str, where: str, inf: bool = False) -> float:
         raise UserError(f"{where} [chain]: '{key}' must be ≥ 0{'' if inf else ' and finite'}, "
                         f"got {val!r}")
     return x
+
+
+#: a provenance's keys read as lists (compare, run and export-vtype iterate them)
+PROVENANCE_LISTS = ("logs", "trip_signatures", "warnings")
+
+
+def provenance_table(value, where: str, table: str) -> dict:
+    """A ``[provenance]`` (or ``[chain.provenance]``) table, its :data:`PROVENANCE_LISTS` as
+    lists: a text alone is read as a list of one (it would be read character by character:
+    ``logs = "a/b.csv"`` named the folders '/' and '.'), another value is a UserError naming
+    ``where`` and the key. The rest is free-form."""
+    if not isinstance(value, dict):
+        raise UserError(f"{where}: '{table}' must be a table ([{table}]), got {value!r}")
+    out = dict(value)
+    for k in PROVENANCE_LISTS:
+        if k in out and isinstance(out[k], str):
+            out[k] = [out[k]]
+        elif k in out and not isinstance(out[k], list):
+            raise UserError(f"{where}: [{table}] {k} must be a list (one entry per "
+                            f"{'file' if k == 'logs' else 'trip' if k == 'trip_signatures' else 'warning'}), "
+                            f"got {out[k]!r}")
+    return out

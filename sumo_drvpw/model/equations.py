@@ -418,16 +418,19 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
         from sumo_drvpw.model.measurement import measurement_from_dict
 
         measurement = measurement_from_dict(doc["measurement"], where)
+    from sumo_drvpw.model.chain_values import provenance_table
+
     for k in ("provenance", "metrics"):
         if not isinstance(doc.get(k, {}), dict):
             raise UserError(f"{where}: '{k}' must be a table ([{k}]), got {doc[k]!r}")
+    prov = provenance_table(doc.get("provenance", {}), where, "provenance")
     try:
         return Equation(
             name=name, terms=terms, vclasses=tuple(vcl), terms_predict=pred, **ranges,
             mass_kg=None if mass is None else float(mass), reference_mass_kg=None if ref is None else float(ref),
             description=str(meta.get("description", "")), source=str(meta.get("source", "")),
             std_err=std, p_values=_floats(doc.get("p_values", {}), f"{where} [p_values]"),
-            provenance=dict(doc.get("provenance", {})), metrics=dict(doc.get("metrics", {})),
+            provenance=prov, metrics=dict(doc.get("metrics", {})),
             path=None if where.startswith("<") else where, chain=chain, measurement=measurement)
     except UserError as e:
         raise UserError(f"{where}: {e}") from None
