@@ -382,6 +382,15 @@ _eq_case("provenance logs a number", "[terms]\nacc = 1.0\n[provenance]\nlogs = 5
 _eq_case("chain provenance warnings a number", '[terms]\nacc = 1.0\n[chain]\npredicts = "battery"\n'
          "[chain.provenance]\nwarnings = 7\n", ("[chain.provenance] warnings", "7"))
 
+# [metrics] reference_mass_kg: a run holds the equation to it (7fc660e); was a ValueError (text), a
+# TypeError (list), or taken as it was (-1500 kg, nan, 1e300: 'calibrated at 1,000,…,160 kg')
+_eq_case("metrics reference mass text", '[terms]\nacc = 1.0\n[metrics]\nreference_mass_kg = "heavy"\n',
+         ("metrics.reference_mass_kg", "heavy"))
+_eq_case("metrics reference mass negative", "[terms]\nacc = 1.0\n[metrics]\nreference_mass_kg = -1500\n",
+         ("metrics.reference_mass_kg", "-1500"))
+_eq_case("metrics reference mass absurd", "[terms]\nacc = 1.0\n[metrics]\nreference_mass_kg = 1e300\n",
+         ("metrics.reference_mass_kg", "1e+300"))
+
 
 @case("toml-equation", "provenance logs a text, not a list", ("calibrated on 1 of these 1 log file",), expect="accept")
 def _(d):  # was read letter by letter: 'l', 'o', …, '.' (the working folder), never the log itself

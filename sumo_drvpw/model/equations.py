@@ -306,14 +306,14 @@ def _floats(table: dict, where: str) -> dict[str, float]:
     return out
 
 
-def _mass(meta: dict, key: str, where: str) -> float | None:
-    """equation.<key> as a plausible mass [kg], or None when absent."""
+def _mass(meta: dict, key: str, where: str, table: str = "equation") -> float | None:
+    """<table>.<key> as a plausible mass [kg], or None when absent."""
     v = meta.get(key)
     if v is None:
         return None
     lo, hi = MASS_RANGE_KG
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi):
-        raise UserError(f"{where}: equation.{key} must be a vehicle mass in [{lo:g}, {hi:g}] kg, "
+        raise UserError(f"{where}: {table}.{key} must be a vehicle mass in [{lo:g}, {hi:g}] kg, "
                         f"got {v!r}")
     return float(v)
 
@@ -424,6 +424,7 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
         if not isinstance(doc.get(k, {}), dict):
             raise UserError(f"{where}: '{k}' must be a table ([{k}]), got {doc[k]!r}")
     prov = provenance_table(doc.get("provenance", {}), where, "provenance")
+    _mass(doc.get("metrics", {}), "reference_mass_kg", where, "metrics")  # a run holds the equation to it
     try:
         return Equation(
             name=name, terms=terms, vclasses=tuple(vcl), terms_predict=pred, **ranges,
