@@ -935,6 +935,35 @@ def _(d):
     return ["run", str(d / "s.toml"), "--end", "5", "--out", str(d / "run")]
 
 
+CITY_NET = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"
+
+
+def _fcd_replay(d: Path, emission_class: str) -> list[str]:
+    """An FCD of one vType-less-mass truck on the built-in city (20 s, 11 m/s along c00c10) and
+    a route file writing its vType with ``emission_class``; ``fcd`` replays it."""
+    steps = "".join(f'<timestep time="{t}.00"><vehicle id="t0" x="{10.4 + 11 * t:.2f}" y="-1.60" angle="90.00" '
+                    f'type="tk" speed="11.00" pos="{7.2 + 11 * t:.2f}" lane="c00c10_0"/></timestep>\n' for t in range(20))
+    fcd = text(d, "fcd.xml", f"<fcd-export>\n{steps}</fcd-export>\n")
+    rou = text(d, "t.rou.xml", f'<routes><vType id="tk" vClass="truck" emissionClass="{emission_class}"/></routes>\n')
+    return ["fcd", str(fcd), "--net", str(CITY_NET), "--vtypes", str(rou), "--no-figures", "--no-progress",
+            "--out", str(d / "o")]
+
+
+@case("options", "fcd vType emissionClass of a 0-t weight band", ("t.rou.xml", "tk", "HBEFA4/RT_le0t_Euro-VI_A-C"))
+def _(d):  # was booked at 0 kg: the default truck mass 'capped at its emissionClass's gross weight' (4c53a24)
+    return _fcd_replay(d, "HBEFA4/RT_le0t_Euro-VI_A-C")
+
+
+@case("options", "fcd vType emissionClass of a 1e6-t weight band", ("t.rou.xml", "tk", "RT_le999999t"))
+def _(d):  # was taken for a band (no cap); SUMO knows no such class
+    return _fcd_replay(d, "HBEFA4/RT_le999999t_Euro-VI_A-C")
+
+
+@case("options", "fcd vType emissionClass of a 7.5-t band", ("capped", "7500 kg"), expect="accept")
+def _(d):
+    return _fcd_replay(d, "HBEFA4/RT_le7.5t_Euro-VI_A-C")
+
+
 @case("options", "calibrate --load of a power in kW", ("--load heater_kw", "kW"))
 def _(d):
     df = base_log()

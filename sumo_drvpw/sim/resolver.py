@@ -11,10 +11,11 @@ import re
 import numpy as np
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.constants import MASS_MAX_KG
 from sumo_drvpw.sim.vtype_energy import battery_switch, energy_vtype_of, own_energy, run_emission_class
 from sumo_drvpw.sim.vtypes import (CAR_VCLASSES, SHORT_CAR_M, SUMO_DEFAULT_EMISSION_CLASS,
                                    SUMO_DEFAULT_EMISSION_CLASS_OTHER, SUMO_DEFAULT_VTYPES, energy_carrier,
-                                   equation_carrier, is_hybrid_chain, is_hybrid_class)
+                                   equation_carrier, is_hybrid_chain, is_hybrid_class, VAN_MAX_MASS_KG)
 
 
 #: ratio of a vType's mass to the mass an equation booking it was calibrated at (or the
@@ -364,6 +365,11 @@ class VTypeResolver:
                                     + (f" + loading {loading:g} kg" if loading else "")}
             # no heavier than the gross weight its written emissionClass names (a ≤ 7.5-t truck)
             limit = class_mass_limit_kg(info.emission_class if info is not None else None)
+            if limit is not None and not VAN_MAX_MASS_KG < limit <= MASS_MAX_KG:  # (SUMO refuses it)
+                raise UserError(f"vType '{vt}' (defined in {info.source}): emissionClass "
+                                f"'{info.emission_class}' names a gross weight of {limit:g} kg: no HBEFA "
+                                f"class bounds its vehicles under {VAN_MAX_MASS_KG:g} or over "
+                                f"{MASS_MAX_KG:g} kg (a typo? SUMO knows no such class)")
             if limit is not None and mass > limit:
                 self.assumptions[vt].update(mass_kg=limit, capped_from_kg=mass, emission_class=info.emission_class)
                 self.assumptions[vt]["source"] += f", capped at its emissionClass's gross weight {limit:g} kg"
