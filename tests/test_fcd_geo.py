@@ -100,3 +100,48 @@ def test_utm_series_inverts_the_networks_geo_output(tmp_path):
     along = np.array([float(r["pos"]) for r in rows]) + np.where([r["lane"] == "e2_0" for r in rows], 300.0, 0.0)
     assert np.abs(y - lane_y).max() < 0.1
     assert np.abs(x - along).max() < 15.0  # (the junction's shape shortens the lanes a little)
+
+
+@pytest.mark.parametrize("edit", ["zone", "latitude", "swapped"])
+def test_a_geo_fcd_whose_rows_lie_off_the_network_is_read_without_x_y_and_said(tmp_path, edit):
+    """An FCD whose header says geo, but whose coordinates the network's projection does not
+    put on their lanes — the network of another UTM zone (zone 33 for 32), latitudes out of
+    range (+1000°), longitude and latitude swapped — was replayed at those coordinates: the
+    parked car lay hundreds of km off its lane and was booked standing (measured: 101 s
+    against the live run's 73 s), without a word. Now, as for a header-less FCD (AUTO_MAX_M),
+    rows lying so far from their lanes are read as without x, y, and said; the declared
+    parking stop tells the parked car."""
+    sc = _record(tmp_path, "geo")
+    live = _booked(tmp_path / "live")
+    fcd = (tmp_path / "fcd.xml").read_text(encoding="utf-8")
+    if edit == "zone":
+        net = tmp_path / "n.net.xml"
+        net.write_text(net.read_text(encoding="utf-8").replace("+zone=32", "+zone=33"), encoding="utf-8")
+    elif edit == "latitude":
+        fcd = re.sub(r'y="(53\.\d+)"', lambda m: f'y="{float(m.group(1)) + 1000:.6f}"', fcd)
+    else:
+        fcd = re.sub(r'x="([\d.]+)" y="([\d.]+)"', r'x="\2" y="\1"', fcd)
+    (tmp_path / "edited.xml").write_text(fcd, encoding="utf-8")
+    res = process_fcd(tmp_path / "edited.xml", scenario=sc, out_dir=tmp_path / "rep", figures=False)
+    rep = _booked(tmp_path / "rep")  # (the parked car's distance without x, y: to 1e-5)
+    pd.testing.assert_series_equal(rep["time_s"], live["time_s"], rtol=1e-9)
+    pd.testing.assert_frame_equal(rep, live, rtol=1e-4, atol=1e-9)
+    said = " ".join(res["warnings"]) if "warnings" in res else str(res)
+    assert "fcd-output.geo" in said and "another network" in said
+
+
+def test_a_row_out_of_range_is_without_x_y_not_the_file():
+    """Longitude beyond ±180° or latitude beyond ±90° is no position (NaN), and a pole
+    raises no numpy warning; the rest of the rows convert."""
+    import warnings
+
+    from sumo_drvpw.sim.fcd_geo import utm_forward
+
+    coords = NetCoordinates.__new__(NetCoordinates)
+    coords.mode, coords.lost, coords.offset = "geo", None, (-ORIGIN[0], -ORIGIN[1])
+    coords._proj = lambda lon, lat: utm_forward(lon, lat, 32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        x, y = coords(np.array([10.0, 200.0, 10.0, 10.0]), np.array([53.55, 53.55, 95.0, 90.0]))
+    assert abs(x[0]) < 1000 and abs(y[0]) < 1000  # (Hamburg: near the network's origin)
+    assert np.isnan(x[1:3]).all() and np.isnan(y[1:3]).all()

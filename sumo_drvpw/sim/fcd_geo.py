@@ -87,6 +87,7 @@ class NetCoordinates:
 
     def __init__(self, mode: str, net_file):
         self.mode, self.lost, self._proj, self._net_file = mode, None, None, net_file
+        self._checked = mode not in ("geo", "utm")  # a header's geo/utm: checked on the first rows on lanes
         self._setup(net_file)
 
     def _setup(self, net_file) -> None:
@@ -125,8 +126,30 @@ class NetCoordinates:
         if self.mode == "net":
             return x, y
         if self._proj != "shift":
-            x, y = self._proj(x, y)
+            off = (np.abs(x) > 180.0) | (np.abs(y) > 90.0)  # no longitude, latitude
+            with np.errstate(divide="ignore", invalid="ignore"):  # (a pole: ±90°)
+                x, y = self._proj(np.where(off, np.nan, x), np.where(off, np.nan, y))
         return x + self.offset[0], y + self.offset[1]
+
+    def _sample(self, cols: dict, net):
+        """(x, y, the bins of their lanes' positions) of at most 500 rows on lanes of ``net``
+        with finite x, y, pos; None when there are none."""
+        if net is None or net.centre_x is None or "lane" not in cols or "pos" not in cols:
+            return None
+        x, y = np.asarray(cols["x"], float), np.asarray(cols["y"], float)
+        lane = np.array([net.lane_index.get(v, -1) for v in np.asarray(cols["lane"], object)[:5000]], np.int64)
+        pos = np.asarray(cols["pos"], float)[:len(lane)]
+        k = np.flatnonzero((lane >= 0) & np.isfinite(x[:len(lane)]) & np.isfinite(y[:len(lane)])
+                           & np.isfinite(pos))[:500]
+        return (x[k], y[k], net.bin_index(lane[k], pos[k])) if len(k) else None
+
+    def _median_m(self, sample, net) -> float:
+        """The median distance [m] of ``sample``'s rows from their lanes in this mode."""
+        cx, cy = self(sample[0], sample[1])
+        with np.errstate(invalid="ignore"):
+            d = np.hypot(cx - net.centre_x[sample[2]], cy - net.centre_y[sample[2]])
+        d = d[np.isfinite(d)]  # (a row out of range: NaN)
+        return float(np.median(d)) if len(d) else np.inf
 
     def convert(self, cols: dict, net=None) -> None:
         """A block's columns (``x``, ``y``) converted in place. Without a header (mode
@@ -136,24 +159,24 @@ class NetCoordinates:
         most 500 rows)."""
         if (self.mode == "net" and self.lost is None) or "x" not in cols or "y" not in cols:
             return
+        if not self._checked and self.lost is None and (sample := self._sample(cols, net)) is not None:
+            self._checked = True  # a header's geo/utm whose rows lie far from their lanes: another network's
+            far = self._median_m(sample, net)
+            if not far <= AUTO_MAX_M:
+                self.lost = (f"its x, y (fcd-output.{self.mode}) "
+                             + (f"lie {far:.3g} m from their lanes (median) once brought into the network's"
+                                if far < np.inf else "are no longitude, latitude (out of range)")
+                             + ": recorded on another network (or another zone's), or its coordinates edited")
         if self.mode == "auto":
-            if net is None or net.centre_x is None or "lane" not in cols or "pos" not in cols:
+            sample = self._sample(cols, net)
+            if sample is None:
                 return
-            x, y = np.asarray(cols["x"], float), np.asarray(cols["y"], float)
-            lane = np.array([net.lane_index.get(v, -1) for v in np.asarray(cols["lane"], object)[:5000]], np.int64)
-            pos = np.asarray(cols["pos"], float)[:len(lane)]
-            k = np.flatnonzero((lane >= 0) & np.isfinite(x[:len(lane)]) & np.isfinite(y[:len(lane)])
-                               & np.isfinite(pos))[:500]
-            if not len(k):
-                return
-            i = net.bin_index(lane[k], pos[k])
             best, lost = (np.inf, "net"), []
             for mode in ("net", "geo", "utm"):
                 self.mode = mode
                 self._setup(self._net_file)
                 if self.lost is None:
-                    cx, cy = self(x[k], y[k])
-                    best = min(best, (float(np.median(np.hypot(cx - net.centre_x[i], cy - net.centre_y[i]))), mode))
+                    best = min(best, (self._median_m(sample, net), mode))
                 else:
                     lost.append(self.lost)
             self.mode, self.lost = best[1], None
