@@ -938,13 +938,13 @@ def _(d):
 CITY_NET = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"
 
 
-def _fcd_replay(d: Path, emission_class: str) -> list[str]:
+def _fcd_replay(d: Path, emission_class: str, attrs: str = "") -> list[str]:
     """An FCD of one vType-less-mass truck on the built-in city (20 s, 11 m/s along c00c10) and
-    a route file writing its vType with ``emission_class``; ``fcd`` replays it."""
+    a route file writing its vType with ``emission_class`` (and ``attrs``); ``fcd`` replays it."""
     steps = "".join(f'<timestep time="{t}.00"><vehicle id="t0" x="{10.4 + 11 * t:.2f}" y="-1.60" angle="90.00" '
                     f'type="tk" speed="11.00" pos="{7.2 + 11 * t:.2f}" lane="c00c10_0"/></timestep>\n' for t in range(20))
     fcd = text(d, "fcd.xml", f"<fcd-export>\n{steps}</fcd-export>\n")
-    rou = text(d, "t.rou.xml", f'<routes><vType id="tk" vClass="truck" emissionClass="{emission_class}"/></routes>\n')
+    rou = text(d, "t.rou.xml", f'<routes><vType id="tk" vClass="truck" emissionClass="{emission_class}"{attrs}/></routes>\n')
     return ["fcd", str(fcd), "--net", str(CITY_NET), "--vtypes", str(rou), "--no-figures", "--no-progress",
             "--out", str(d / "o")]
 
@@ -962,6 +962,11 @@ def _(d):  # was taken for a band (no cap); SUMO knows no such class
 @case("options", "fcd vType emissionClass of a 7.5-t band", ("capped", "7500 kg"), expect="accept")
 def _(d):
     return _fcd_replay(d, "HBEFA4/RT_le7.5t_Euro-VI_A-C")
+
+
+@case("options", "fcd vType mass inf", ("t.rou.xml", "tk", "mass", "inf"))
+def _(d):  # was booked: 'inf L over 0.495 km' (SUMO reads mass="inf")
+    return _fcd_replay(d, "HBEFA4/RT_le7.5t_Euro-VI_A-C", ' mass="inf"')
 
 
 @case("options", "calibrate --load of a power in kW", ("--load heater_kw", "kW"))

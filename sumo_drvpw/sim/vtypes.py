@@ -314,8 +314,8 @@ def _mass(where: str, key: str, val: str | None, zero: bool = False) -> float | 
         x = float(val)
     except ValueError:
         raise UserError(f"{where}: {key} is not a number: {val!r}") from None
-    if not (x >= 0 if zero else x > 0):
-        raise UserError(f"{where}: {key} must be {'≥' if zero else '>'} 0, got {val!r}")
+    if not (x >= 0 if zero else x > 0) or x == float("inf"):  # (inf: SUMO reads it; 'inf L' booked)
+        raise UserError(f"{where}: {key} must be a finite number {'≥' if zero else '>'} 0, got {val!r}")
     return x
 
 
