@@ -91,8 +91,11 @@ def test_current_and_voltage_averaged_together_keep_the_mean_power(seed, resista
     power = out["battery_current_a"] * out["battery_voltage_v"]
     assert np.sum(power * (b - a)) == pytest.approx(exact, rel=1e-9, abs=1e-6)
     assert np.sum(apart * (b - a)) >= exact - 1e-6 * abs(exact) - 1e-6  # V̄·Ī ≥ mean V·I when V falls with I
-    # the current stays a current: within the range of its samples in the whole span
-    assert np.all(np.abs(out["battery_current_a"]) <= np.abs(i).max() + 1e-9)
+    # the current stays a current: within the range of its samples in the whole span, up to the
+    # difference between the voltage's mean on its own clock (the column it is divided by, so that
+    # the columns' product is the mean power) and on the current's (seed 135, R = 1 Ω: 200.0021 A
+    # where the current stood at its 200-A clip: 1e-5; it was asserted to 1e-9, a flaky failure)
+    assert np.all(np.abs(out["battery_current_a"]) <= np.abs(i).max() * (1 + 1e-3))
 
 
 def test_a_shaft_that_reverses_keeps_the_plain_mean_torque():

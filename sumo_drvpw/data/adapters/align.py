@@ -178,7 +178,9 @@ def keep_power(ts: np.ndarray, raw: dict, out: dict) -> list[tuple[str, str]]:
     product of the means exceeds the mean power by R·var(I)). The new value is the first
     channel's mean weighted by its partner; it is taken where the partner keeps one sign
     over the interval (mean |partner| = |mean partner| > 0), so it stays within the
-    channel's own range; elsewhere (a shaft standing or reversing) the plain mean stays.
+    channel's own range (up to the difference between the partner's column, its mean on its
+    own clock, and its mean on the channel's clock, which weights the product: some 1e-5);
+    elsewhere (a shaft standing or reversing) the plain mean stays.
 
     ``raw``: name → (times, values) of the channels averaged; ``out``: name → values at the
     speed samples, changed in place. Returns the pairs (channel, partner) adjusted."""
