@@ -969,6 +969,11 @@ def _(d):  # was booked: 'inf L over 0.495 km' (SUMO reads mass="inf")
     return _fcd_replay(d, "HBEFA4/RT_le7.5t_Euro-VI_A-C", ' mass="inf"')
 
 
+@case("options", "fcd vType mass 1e9 kg", ("t.rou.xml", "tk", "beyond any road vehicle"))
+def _(d):  # was booked: a 1e9-kg motorcycle's 54,357 L over 0.5 km (no upper bound on a vType's mass)
+    return _fcd_replay(d, "HBEFA4/RT_le7.5t_Euro-VI_A-C", ' mass="1e9"')
+
+
 @case("options", "calibrate --load of a power in kW", ("--load heater_kw", "kW"))
 def _(d):
     df = base_log()

@@ -305,6 +305,12 @@ def _capacity(val: str | None) -> int | None:
     return x if x is not None and x >= 0 else None
 
 
+#: the heaviest mass [kg] a vType of a road vClass may have (Australian road trains: some 200 t);
+#: a train, tram, ship or aircraft (:data:`NOT_ROAD_VCLASSES`) is not held to it
+ROAD_MASS_MAX_KG = 1.0e6
+NOT_ROAD_VCLASSES = frozenset({"rail", "rail_urban", "rail_electric", "rail_fast", "tram", "subway", "cable_car", "ship", "aircraft"})
+
+
 def _mass(where: str, key: str, val: str | None, zero: bool = False) -> float | None:
     """A mass [kg] from a vType attribute or param (None when absent); > 0 (≥ 0 with
     ``zero``), else a UserError naming the vType and the key."""
@@ -466,6 +472,10 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                 mass = _mass(where, "drvpw.mass", params.get("drvpw.mass"))
                 if mass is None and sumo_mass is not None:
                     mass = sumo_mass + loading
+                if mass is not None and mass > ROAD_MASS_MAX_KG and el.attrib.get("vClass") not in NOT_ROAD_VCLASSES:
+                    raise UserError(f"{where}: mass {mass:g} kg (mass, loading or drvpw.mass) is beyond any road "
+                                    f"vehicle's (at most {ROAD_MASS_MAX_KG:,.0f} kg: a road train's few hundred "
+                                    "tonnes fit; a typo?)")
                 out[vid] = VTypeInfo(vid, mass, params.get("drvpw.equation") or None,
                                      str(path), el.attrib.get("vClass"), loading,
                                      el.attrib.get("emissionClass") or None,

@@ -1,0 +1,35 @@
+"""A road vehicle's vType mass beyond any road vehicle's is refused in one line naming the
+file and the vType (a motorcycle of mass 1e9 booked 54,357 L over 0.5 km, exit 0: the bad-input
+fuzz's finding); a road train's few hundred tonnes and a heavy train pass
+(sim/vtypes.py ROAD_MASS_MAX_KG)."""
+
+import pytest
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.vtypes import ROAD_MASS_MAX_KG, read_vtypes
+
+
+def _file(tmp_path, vtype: str):
+    p = tmp_path / "t.rou.xml"
+    p.write_text(f"<routes>\n  {vtype}\n</routes>\n", encoding="utf-8")
+    return p
+
+
+@pytest.mark.parametrize("vtype", [
+    '<vType id="m" vClass="motorcycle" mass="1e9"/>',
+    '<vType id="m" vClass="trailer" mass="40000"><param key="loading" value="2e6"/></vType>',
+    '<vType id="m"><param key="drvpw.mass" value="5e6"/></vType>',  # (no vClass: SUMO's passenger)
+])
+def test_a_road_vehicle_beyond_any_road_vehicle_s_mass_is_refused(tmp_path, vtype):
+    p = _file(tmp_path, vtype)
+    with pytest.raises(UserError, match=rf"{p}: vType 'm': mass .* beyond any road vehicle's"):
+        read_vtypes([p])
+
+
+@pytest.mark.parametrize("vtype, mass", [
+    ('<vType id="m" vClass="trailer" mass="200000"/>', 200000.0),  # a quad road train
+    ('<vType id="m" vClass="rail" mass="2e7"/>', 2e7),              # a 20,000-t ore train
+])
+def test_a_road_train_and_a_heavy_train_pass(tmp_path, vtype, mass):
+    assert read_vtypes([_file(tmp_path, vtype)])["m"].mass_kg == mass
+    assert mass <= ROAD_MASS_MAX_KG or "rail" in vtype
