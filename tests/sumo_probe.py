@@ -99,3 +99,43 @@ def parking_moves_wh(scenario: Path, d: Path, vehicles=("p",)) -> dict:
                            for e in ET.parse(d / "ti.xml").getroot() if e.get("id") == vid))
         out[vid] += wh[1] - wh[0]
     return out
+
+
+def booked_per_vehicle(out: Path):
+    """A run's (or replay's) booking per vehicle from its output folder ``out``: time and
+    distance (vehicles.parquet) with its battery chain's auxiliary and net kWh
+    (chain_vehicles.csv), sorted by vehicle."""
+    import pandas as pd
+
+    v = pd.read_parquet(out / "vehicles.parquet").set_index("vehicle")
+    c = pd.read_csv(out / "chain_vehicles.csv").set_index("key")
+    return v[["time_s", "distance_m"]].join(c[["auxiliary_kwh", "net_kwh"]]).sort_index()
+
+
+def fcd_rise(net, rows):
+    """Per vehicle: (profile elevation at its first row, at its last row, robust slope and
+    speed at its first row) of FCD rows ``rows`` (sim/fcd.read_fcd) on network ``net``."""
+    import pandas as pd
+
+    from sumo_drvpw.sim.network import lane_numbers
+
+    rows = rows[~rows["person"]].sort_values("time", kind="stable")
+    lane = lane_numbers(net.lane_index, list(rows["lane"]))
+    rows = rows.assign(z=net.elevation(lane, rows["pos"].to_numpy()),
+                       theta=net.slope(lane, rows["pos"].to_numpy())[0])
+    g = rows.groupby("id")
+    return pd.DataFrame({"z0": g["z"].first(), "z1": g["z"].last(),
+                         "theta": g["theta"].first(), "v": g["speed"].first()})
+
+
+def tracked_getter_replay(sc: Path, fcd: Path, equations) -> dict:
+    """Scenario ``sc`` booked three ways with ``equations``: the live run tracking positions
+    (recording its FCD at 6 decimals to ``fcd``), the live run reading them by getters every
+    step, and the replay of that FCD (RunResults by "tracked", "getter", "replay")."""
+    from sumo_drvpw.sim import run_scenario
+    from sumo_drvpw.sim.fcd import process_fcd
+
+    kw = dict(equations=equations, figures=False)
+    return {"tracked": run_scenario(sc, None, options=["--fcd-output", str(fcd), "--precision", "6"], **kw),
+            "getter": run_scenario(sc, None, positions="getter", **kw),
+            "replay": process_fcd(fcd, scenario=sc, **kw)}

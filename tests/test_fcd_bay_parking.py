@@ -13,7 +13,7 @@ import pytest
 
 from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.fcd import process_fcd
-from sumo_probe import build_net, energy_scenario
+from sumo_probe import booked_per_vehicle, build_net, energy_scenario
 
 pytestmark = pytest.mark.sumo
 
@@ -37,12 +37,6 @@ def _record(d, shut_off: bool):
     return sc
 
 
-def _booked(out):
-    v = pd.read_parquet(out / "vehicles.parquet").set_index("vehicle")
-    c = pd.read_csv(out / "chain_vehicles.csv").set_index("key")
-    return v[["time_s", "distance_m"]].join(c[["auxiliary_kwh", "net_kwh"]]).sort_index()
-
-
 @pytest.mark.parametrize("shut_off", [False, True])
 def test_parking_area_beside_a_bus_stop_books_parked_as_live(tmp_path, shut_off):
     """Before 2026-11-29 the van parked in the parkingArea at the bus stop's end was taken
@@ -52,10 +46,10 @@ def test_parking_area_beside_a_bus_stop_books_parked_as_live(tmp_path, shut_off)
     708.75 s against 708.5). Now the van and the bus book
     as the live run (time, distance, auxiliary and net energy per vehicle to 1e-6)."""
     sc = _record(tmp_path, shut_off)
-    live = _booked(tmp_path / "live")
+    live = booked_per_vehicle(tmp_path / "live")
     assert live.loc["bus", "time_s"] > live.loc["van", "time_s"]  # (the bus dwells booked, the van parks)
     for chunk in (None, 37):
         out = tmp_path / f"rep{chunk}"
         res = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=out, chunk_rows=chunk, figures=False)
-        pd.testing.assert_frame_equal(_booked(out), live, rtol=1e-6, atol=1e-9, obj=str(chunk))
+        pd.testing.assert_frame_equal(booked_per_vehicle(out), live, rtol=1e-6, atol=1e-9, obj=str(chunk))
         assert res["source"]["parked_rows"] > 100

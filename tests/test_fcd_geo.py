@@ -18,7 +18,7 @@ from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.fcd import process_fcd
 from sumo_drvpw.sim.fcd_geo import NetCoordinates
 from sumo_drvpw.sim.scenario import load_scenario
-from sumo_probe import build_net, energy_scenario
+from sumo_probe import booked_per_vehicle, build_net, energy_scenario
 
 pytestmark = pytest.mark.sumo
 
@@ -52,12 +52,6 @@ def _record(d, mode: str):
     return sc
 
 
-def _booked(out):
-    v = pd.read_parquet(out / "vehicles.parquet").set_index("vehicle")
-    c = pd.read_csv(out / "chain_vehicles.csv").set_index("key")
-    return v[["time_s", "distance_m"]].join(c[["auxiliary_kwh", "net_kwh"]]).sort_index()
-
-
 @pytest.mark.parametrize("mode", ["geo", "utm"])
 def test_geo_and_utm_fcd_book_as_the_live_run(tmp_path, mode):
     """Before 2026-11-29 the replay compared longitude, latitude (about 10, 53.56) with the
@@ -69,10 +63,10 @@ def test_geo_and_utm_fcd_book_as_the_live_run(tmp_path, mode):
     header says the coordinates) and, for geo, from SUMO's header-less CSV FCD (told by the
     rows' distance from their lanes)."""
     sc = _record(tmp_path, mode)
-    live = _booked(tmp_path / "live")
+    live = booked_per_vehicle(tmp_path / "live")
     assert live.loc["q0", "time_s"] > 80  # (the queue waits at the light)
     res = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "rep", chunk_rows=40, figures=False)
-    pd.testing.assert_frame_equal(_booked(tmp_path / "rep"), live, rtol=1e-6, atol=1e-9)
+    pd.testing.assert_frame_equal(booked_per_vehicle(tmp_path / "rep"), live, rtol=1e-6, atol=1e-9)
     assert res["source"]["parked_rows"] > 20  # (the parked car: told beside its lane)
     assert res["source"]["unplaced_vehicle_rows"] == 0
     if mode == "geo":  # SUMO's CSV FCD has no header: its coordinates told from its rows
@@ -83,7 +77,7 @@ def test_geo_and_utm_fcd_book_as_the_live_run(tmp_path, mode):
         head = (tmp_path / "fcd.csv").read_text(encoding="utf-8").splitlines()[:3]
         assert any("53.5" in line for line in head)  # (latitudes: SUMO wrote geo)
         process_fcd(tmp_path / "fcd.csv", scenario=sc, out_dir=tmp_path / "csv", figures=False)
-        pd.testing.assert_frame_equal(_booked(tmp_path / "csv"), live, rtol=1e-6, atol=1e-9)
+        pd.testing.assert_frame_equal(booked_per_vehicle(tmp_path / "csv"), live, rtol=1e-6, atol=1e-9)
 
 
 def test_utm_series_inverts_the_networks_geo_output(tmp_path):
@@ -112,7 +106,7 @@ def test_a_geo_fcd_whose_rows_lie_off_the_network_is_read_without_x_y_and_said(t
     rows lying so far from their lanes are read as without x, y, and said; the declared
     parking stop tells the parked car."""
     sc = _record(tmp_path, "geo")
-    live = _booked(tmp_path / "live")
+    live = booked_per_vehicle(tmp_path / "live")
     fcd = (tmp_path / "fcd.xml").read_text(encoding="utf-8")
     if edit == "zone":
         net = tmp_path / "n.net.xml"
@@ -123,7 +117,7 @@ def test_a_geo_fcd_whose_rows_lie_off_the_network_is_read_without_x_y_and_said(t
         fcd = re.sub(r'x="([\d.]+)" y="([\d.]+)"', r'x="\2" y="\1"', fcd)
     (tmp_path / "edited.xml").write_text(fcd, encoding="utf-8")
     res = process_fcd(tmp_path / "edited.xml", scenario=sc, out_dir=tmp_path / "rep", figures=False)
-    rep = _booked(tmp_path / "rep")  # (the parked car's distance without x, y: to 1e-5)
+    rep = booked_per_vehicle(tmp_path / "rep")  # (the parked car's distance without x, y: to 1e-5)
     pd.testing.assert_series_equal(rep["time_s"], live["time_s"], rtol=1e-9)
     pd.testing.assert_frame_equal(rep, live, rtol=1e-4, atol=1e-9)
     said = " ".join(res["warnings"]) if "warnings" in res else str(res)

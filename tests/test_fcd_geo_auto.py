@@ -13,6 +13,7 @@ import sumolib
 import test_fcd_geo as g
 from sumo_drvpw.sim.fcd import process_fcd
 from sumo_drvpw.sim.scenario import load_scenario
+from sumo_probe import booked_per_vehicle
 
 pytestmark = pytest.mark.sumo
 
@@ -30,13 +31,13 @@ def test_a_headerless_geo_fcd_that_cannot_be_converted_is_not_read_as_metres(tmp
         pytest.skip("pyproj installed: the projection is brought back")
     monkeypatch.setattr(g, "LOCATION", TMERC)
     sc = g._record(tmp_path, "geo")
-    live = g._booked(tmp_path / "live")
+    live = booked_per_vehicle(tmp_path / "live")
     args = list(load_scenario(sc).sumo_args)
     del args[args.index("--fcd-output"):args.index("--fcd-output") + 2]
     subprocess.run([sumolib.checkBinary("sumo"), *args, "--fcd-output", str(tmp_path / "fcd.csv")],
                    check=True, capture_output=True)
     res = process_fcd(tmp_path / "fcd.csv", scenario=sc, out_dir=tmp_path / "csv", figures=False)
-    rep = g._booked(tmp_path / "csv")
+    rep = booked_per_vehicle(tmp_path / "csv")
     queue = [f"q{i}" for i in range(4)]
     pd.testing.assert_series_equal(rep.loc[queue, "time_s"], live.loc[queue, "time_s"], rtol=1e-6)
     assert any("without x, y" in w for w in res.get("warnings", [])), res.get("warnings")

@@ -9,34 +9,21 @@ stays flat, and changing back to the right lane, the one that goes on."""
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 import pytest
 
 from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.equations import Equation
-from sumo_drvpw.sim import run_scenario
-from sumo_drvpw.sim.fcd import process_fcd, read_fcd
-from sumo_drvpw.sim.network import lane_numbers, load_network
+from sumo_drvpw.sim.fcd import read_fcd
+from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.scenario import load_scenario
-from sumo_probe import build_net
+from sumo_probe import build_net, fcd_rise, tracked_getter_replay
 
 pytestmark = pytest.mark.sumo
 
 PHYS = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero_rho": 0.25 * 2.23, "roll": 0.01})
 
 
-def _rise(net, rows):
-    """Per vehicle: profile elevation at its first and last rows, robust slope and speed at its first."""
-    rows = rows[~rows["person"]].sort_values("time", kind="stable")
-    lane = lane_numbers(net.lane_index, list(rows["lane"]))
-    rows = rows.assign(z=net.elevation(lane, rows["pos"].to_numpy()),
-                       theta=net.slope(lane, rows["pos"].to_numpy())[0])
-    g = rows.groupby("id")
-    return pd.DataFrame({"z0": g["z"].first(), "z1": g["z"].last(), "theta": g["theta"].first(),
-                         "v": g["speed"].first()})
-
-
-def test_a_lane_change_between_lanes_at_different_heights_books_the_rise(tmp_path):
+def test_a_lane_change_between_lanes_at_different_heights_books_thefcd_rise(tmp_path):
     """Before 2026-11-29 a step from one lane of an edge to another whose profile lies higher
     by more than the step could climb at the lanes' steepest slope was taken for a jump and
     booked at the slope, its rise lost (here 1.5 m per lane change where the lanes part), and the
@@ -62,14 +49,11 @@ def test_a_lane_change_between_lanes_at_different_heights_books_the_rise(tmp_pat
     sc.write_text('equations = ["vsp_ldv1999"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\n'
                   'begin = 0\nend = 300\nstep_length = 0.25\n', encoding="utf-8")
     fcd = tmp_path / "fcd.xml"
-    kw = dict(equations=[PHYS], figures=False)
-    books = {"tracked": run_scenario(sc, None, options=["--fcd-output", str(fcd), "--precision", "6"], **kw),
-             "getter": run_scenario(sc, None, positions="getter", **kw),
-             "replay": process_fcd(fcd, scenario=sc, **kw)}
+    books = tracked_getter_replay(sc, fcd, [PHYS])
     rows = read_fcd(fcd)
     s = load_scenario(sc)
     net = load_network(s.net_file, s.road_class, s.slope_window, s.slope_max)
-    r = _rise(net, rows)
+    r = fcd_rise(net, rows)
     ab = rows[rows["id"].str.startswith("c") & rows["lane"].str.startswith("AB")].sort_values("time", kind="stable")
     change = ab["lane"].ne(ab.groupby("id")["lane"].shift()) & ab.duplicated("id")
     assert (change & (ab["pos"] > 320)).sum() >= 10  # (lane changes where the lanes lie 1.5 m apart)
@@ -116,7 +100,7 @@ def _scenario(d):
     return load_scenario(d / "s.toml")
 
 
-def test_a_lane_change_standing_where_the_lanes_part_most_between_samples_keeps_its_rise(tmp_path):
+def test_a_lane_change_standing_where_the_lanes_part_most_between_samples_keeps_itsfcd_rise(tmp_path):
     """The lanes' spread (sim/lane_spread.py) is their profiles' largest difference at the
     same position: before 2026-11-29 it was sampled at 33 fractions of the lane's length,
     25 m apart on this 800-m road whose left lane rises 3 m to a crest 100 m in: 2.906 m where

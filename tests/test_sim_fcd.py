@@ -15,6 +15,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.fcd import process_fcd, read_fcd
+from sumo_probe import fcd_rise, tracked_getter_replay
 from test_sim_run import I3_BATTERY, parking_scenario
 
 pytestmark = pytest.mark.sumo
@@ -562,20 +563,6 @@ def test_fcd_books_a_teleport_without_a_gap_as_the_live_run(tmp_path):
         np.testing.assert_allclose(b[c], a[c], rtol=1e-6, atol=1.0, err_msg=c)
 
 
-def _rise(net, rows):
-    """Per vehicle: (profile elevation at its first row, at its last row, robust slope and
-    speed at its first row) of FCD rows."""
-    from sumo_drvpw.sim.network import lane_numbers
-
-    rows = rows[~rows["person"]].sort_values("time", kind="stable")
-    lane = lane_numbers(net.lane_index, list(rows["lane"]))
-    rows = rows.assign(z=net.elevation(lane, rows["pos"].to_numpy()),
-                       theta=net.slope(lane, rows["pos"].to_numpy())[0])
-    g = rows.groupby("id")
-    return pd.DataFrame({"z0": g["z"].first(), "z1": g["z"].last(),
-                         "theta": g["theta"].first(), "v": g["speed"].first()})
-
-
 def test_fcd_written_less_often_than_the_step_books_the_rise_between_its_rows_exactly(tmp_path):
     """Why a sparse FCD's grade energy differs from the live run's (2026-11-27, most, 600 s,
     rows every 2 s at 1-s steps: net grade 99.74 against 93.12 MJ). Between a vehicle's first
@@ -604,7 +591,7 @@ def test_fcd_written_less_often_than_the_step_books_the_rise_between_its_rows_ex
     live = books["1"][1]
     rep = f.vehicles.set_index("vehicle").sort_index()
     assert (live.index == rep.index).all() and len(rep) > 40
-    every, sparse = _rise(net, read_fcd(books["1"][0])), _rise(net, read_fcd(books["2"][0]))
+    every, sparse = fcd_rise(net, read_fcd(books["1"][0])), fcd_rise(net, read_fcd(books["2"][0]))
     for booked, r, dt in ((live, every, 1.0), (rep, sparse, 2.0)):
         r = r.reindex(booked.index)
         m = booked["mass_kg"] * G
@@ -695,14 +682,11 @@ def test_overtaking_on_the_opposite_lane_books_the_road_climbed(tmp_path):
     sc.write_text('equations = ["vsp_ldv1999"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\n'
                   'begin = 0\nend = 500\nstep_length = 1\n', encoding="utf-8")
     fcd = tmp_path / "fcd.xml"
-    kw = dict(equations=[PHYS], figures=False)
-    books = {"tracked": run_scenario(sc, None, options=["--fcd-output", str(fcd), "--precision", "6"], **kw),
-             "getter": run_scenario(sc, None, positions="getter", **kw),
-             "replay": process_fcd(fcd, scenario=sc, **kw)}
+    books = tracked_getter_replay(sc, fcd, [PHYS])
     rows = read_fcd(fcd)
     assert rows["lane"].str.startswith(("BA", "CB")).sum() > 100   # overtaking on them
     s = load_scenario(sc)
-    r = _rise(load_network(s.net_file, s.road_class, s.slope_window, s.slope_max), rows)
+    r = fcd_rise(load_network(s.net_file, s.road_class, s.slope_window, s.slope_max), rows)
     for name, res in books.items():
         b = res.vehicles.set_index("vehicle").sort_index()
         b = b[b["vclass"] == "passenger"]

@@ -219,7 +219,7 @@ def trip_signatures(df: pd.DataFrame) -> dict[str, list[float]]:
     t, v = df["time_s"].to_numpy(float), df["speed_mps"].to_numpy(float)
     pw = (df["battery_voltage_v"].to_numpy(float) * df["battery_current_a"].to_numpy(float)
           if {"battery_voltage_v", "battery_current_a"} <= set(df.columns) else None)
-    starts = np.flatnonzero(np.r_[True, trip[1:] != trip[:-1]])
+    starts = np.flatnonzero(trip_starts(trip)) if len(trip) else np.zeros(0, np.int64)
     ends = np.r_[starts[1:], len(trip)]
     out: dict[str, list[float]] = {}
     for a, b in zip(starts, ends):  # (a trip's rows are contiguous in a read log)

@@ -366,28 +366,40 @@ def hamburg(run: Path) -> dict:
 def main(argv=None) -> int:
     """``python -m sumo_drvpw.validation.hdv_fuel [REPORT.md [DATA_FOLDER [HAMBURG_RUN]]]``:
     writes the built-ins, the report and its JSON. Exit 2 with one line on bad input."""
+    from sumo_drvpw.validation.hdv_fuel_report import render
+
+    return study_main(argv, "sumo_drvpw.validation.hdv_fuel", "docs/hdv-fuel.md", "HAMBURG_RUN", "hamburg",
+                      check, hamburg, render, write_builtins)
+
+
+def study_main(argv, module: str, default_out: str, run_arg: str, run_key: str, check_fn, run_fn, render_fn,
+               write_fn) -> int:
+    """The command of a fuel-chain study (this module's, validation/mc_fuel.py's): arguments
+    ``[REPORT.md [DATA_FOLDER [RUN]]]``; writes the built-ins (``write_fn``), the check on the
+    data's cycles (``check_fn``), the run's litres per class (``run_fn`` of a run folder given,
+    else the report's JSON's ``run_key`` kept), the JSON and ``render_fn``'s report. Exit 2 with
+    one line on bad input."""
     from sumo_drvpw.fileio import plain, write_json, write_text
     from sumo_drvpw.validation.data import positional, resolve_data
-    from sumo_drvpw.validation.hdv_fuel_report import render
 
     t0 = time.perf_counter()
     try:
-        args = positional(sys.argv[1:] if argv is None else argv, "REPORT.md [DATA_FOLDER [HAMBURG_RUN]]")
-        out = Path(args[0] if args else "docs/hdv-fuel.md")
+        args = positional(sys.argv[1:] if argv is None else argv, f"REPORT.md [DATA_FOLDER [{run_arg}]]")
+        out = Path(args[0] if args else default_out)
         data = resolve_data(args[1] if len(args) > 1 else None, (CYCLES,))
-        res = {"check": check(data)}
+        write_fn()
+        res = {"check": check_fn(data)}
         if len(args) > 2:
-            res["hamburg"] = hamburg(Path(args[2]))
+            res[run_key] = run_fn(Path(args[2]))
         elif out.with_suffix(".json").is_file():
-            res["hamburg"] = json.loads(out.with_suffix(".json").read_text(encoding="utf-8")).get("hamburg")
+            res[run_key] = json.loads(out.with_suffix(".json").read_text(encoding="utf-8")).get(run_key)
     except UserError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    write_builtins()
     res["seconds"] = round(time.perf_counter() - t0)
-    res["command"] = "python -m sumo_drvpw.validation.hdv_fuel" + (f" {out}" if args else "")
+    res["command"] = f"python -m {module}" + (f" {out}" if args else "")
     write_json(out.with_suffix(".json"), plain(res))
-    write_text(out, render(res))
+    write_text(out, render_fn(res))
     print(f"wrote {out}")
     return 0
 

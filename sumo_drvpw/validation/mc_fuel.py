@@ -39,10 +39,8 @@ on ECE-15 beside Honda's published saving. With ``RUN`` (the output folder of a
 
 from __future__ import annotations
 
-import json
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +49,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import FUELS
 from sumo_drvpw.validation.hdv_fuel import CYCLES, FLAG_SHARE, read_cycle, sumo_l_per_100km  # noqa: F401 (|ours/SUMO − 1| flagged)
 from sumo_drvpw.validation.hdv_fuel import chain_run as hdv_chain_run, hamburg as hdv_run_classes
-from sumo_drvpw.validation.hdv_fuel import write_builtins as write_equations
+from sumo_drvpw.validation.hdv_fuel import study_main, write_builtins as write_equations
 from sumo_drvpw.validation.hdv_fuel_report import _ratio
 
 FUEL = "gasoline"
@@ -465,30 +463,10 @@ RUN_READING = (
 
 def main(argv=None) -> int:
     """``python -m sumo_drvpw.validation.mc_fuel [REPORT.md [DATA_FOLDER [RUN]]]``: writes the
-    built-ins, the report and its JSON. Exit 2 with one line on bad input."""
-    from sumo_drvpw.fileio import plain, write_json, write_text
-    from sumo_drvpw.validation.data import positional, resolve_data
-
-    t0 = time.perf_counter()
-    try:
-        args = positional(sys.argv[1:] if argv is None else argv, "REPORT.md [DATA_FOLDER [RUN]]")
-        out = Path(args[0] if args else "docs/mc-fuel.md")
-        data = resolve_data(args[1] if len(args) > 1 else None, (CYCLES,))
-        write_builtins()
-        res = {"check": check(data)}
-        if len(args) > 2:
-            res["run"] = run_classes(Path(args[2]))
-        elif out.with_suffix(".json").is_file():
-            res["run"] = json.loads(out.with_suffix(".json").read_text(encoding="utf-8")).get("run")
-    except UserError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    res["seconds"] = round(time.perf_counter() - t0)
-    res["command"] = "python -m sumo_drvpw.validation.mc_fuel" + (f" {out}" if args else "")
-    write_json(out.with_suffix(".json"), plain(res))
-    write_text(out, render(res))
-    print(f"wrote {out}")
-    return 0
+    built-ins, the report and its JSON (validation/hdv_fuel.study_main). Exit 2 with one line on
+    bad input."""
+    return study_main(argv, "sumo_drvpw.validation.mc_fuel", "docs/mc-fuel.md", "RUN", "run", check, run_classes,
+                      render, write_builtins)
 
 
 if __name__ == "__main__":
