@@ -12,7 +12,8 @@ from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.fcd import process_fcd, read_fcd
-from test_sim_fcd import CITY, PHYS, _rise
+from sumo_probe import fcd_rise
+from test_sim_fcd import CITY, PHYS
 
 pytestmark = pytest.mark.sumo
 
@@ -71,7 +72,7 @@ def test_a_vehicles_energy_balance_closes_with_its_teleports(teleported):
         dke = 0.5 * m * (v1.reindex(b.index) ** 2 - v0.reindex(b.index) ** 2)
         acc = (b["traction_acc_j"] + b["recup_acc_j"]) / c_acc
         np.testing.assert_allclose(acc + b["teleport_kinetic_j"], dke, rtol=1e-6, atol=1.0, err_msg=eq)
-        r = _rise(net, rows).reindex(b.index)
+        r = fcd_rise(net, rows).reindex(b.index)
         rise = m * G * (r.z1 - r.z0) + m * G * np.sin(r.theta) * r.v * DT
         grade = b["traction_grade_j"] + b["recup_grade_j"]
         np.testing.assert_allclose(grade + b["teleport_potential_j"], rise, rtol=1e-4, atol=m.max() * G * 0.01, err_msg=eq)
