@@ -521,8 +521,8 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     eidx = {e: i for i, e in enumerate(edge_ids)}
     types = [e.getType() or "" for e in edges]
     speeds = np.array([e.getSpeed() for e in edges], float)
-    classes = np.array([rule.classify(eid, t, s) for eid, t, s in zip(edge_ids, types, speeds)],
-                       dtype=object)
+    classes = np.array([rule.classify(e.getID(), t, s, set().union(*(ln.getPermissions() for ln in e.getLanes())))
+                        for e, t, s in zip(edges, types, speeds)], dtype=object)  # (rail, waterway: no road)
     lanes = [ln for e in net.getEdges() for ln in e.getLanes()]
     lane_index = {ln.getID(): i for i, ln in enumerate(lanes)}
 

@@ -74,21 +74,46 @@ CONFIG_EQUATIONS = ("vsp_ldv1999", "drvpw_prius3", "moves_passenger_car", "moves
                     "epa_gasoline_light_truck", "epa_diesel_light_truck", "moves_single_unit_truck_diesel",
                     "moves_combination_truck_diesel", "moves_transit_bus_diesel", "moves_intercity_bus_diesel",
                     "bmw_i3_battery", "epa_gasoline_hybrid_car", "moves_motorcycle_petrol", "moves_moped_petrol")
+
+#: the class of an edge that only vehicles of one of these vClass groups may use (the vClasses
+#: its lanes allow, persons and containers on foot aside): no road, so neither city nor
+#: highway by its speed (a tram line at 90 km/h was a highway); SUMO's deprecated names too
+NON_ROAD_CLASSES = {
+    "rail": frozenset({"rail", "rail_urban", "rail_electric", "rail_fast", "tram", "subway", "cable_car",
+                       "lightrail", "cityrail", "rail_slow"}),
+    "waterway": frozenset({"ship"}),
+    "air": frozenset({"aircraft", "drone"}),
+}
+#: vClasses that move on foot: a footway beside a tram line does not make it a road
+ON_FOOT_VCLASSES = frozenset({"pedestrian", "wheelchair", "container"})
+
+
+def non_road_class(allowed) -> str | None:
+    """The :data:`NON_ROAD_CLASSES` class of an edge whose lanes allow the vClasses ``allowed``
+    (their union), or None: a road (any road vehicle allowed), or no vehicle at all."""
+    vehicles = set(allowed or ()) - ON_FOOT_VCLASSES
+    return next((c for c, group in NON_ROAD_CLASSES.items() if vehicles and vehicles <= group), None)
+
+
 @dataclass
 class RoadClassRule:
-    """How an edge gets its road class: edge id map > type map > highway types/speed > city."""
+    """How an edge gets its road class: edge id map > type map > no road (rail, waterway, air:
+    :func:`non_road_class`) > highway types/speed > city."""
 
     highway_min_speed_mps: float = DEFAULT_HIGHWAY_MIN_SPEED_KMH / 3.6
     highway_types: tuple[str, ...] = DEFAULT_HIGHWAY_TYPES
     types: dict[str, str] = field(default_factory=dict)
     edges: dict[str, str] = field(default_factory=dict)
 
-    def classify(self, edge_id: str, edge_type: str, speed_mps: float) -> str:
-        """Road class of a (non-internal) edge; speed limit in [m/s]."""
+    def classify(self, edge_id: str, edge_type: str, speed_mps: float, allowed=None) -> str:
+        """Road class of a (non-internal) edge; speed limit in [m/s]; ``allowed``: the vClasses
+        its lanes allow (None: any)."""
         if edge_id in self.edges:
             return self.edges[edge_id]
         if edge_type in self.types:
             return self.types[edge_type]
+        if (other := non_road_class(allowed)) is not None:
+            return other
         if edge_type in self.highway_types or speed_mps >= self.highway_min_speed_mps - 1e-6:
             return "highway"
         return "city"
