@@ -25,6 +25,12 @@ Mapping file::
     [columns."Trip"]
     name = "trip_id"          # text; without it trip_id = file stem
 
+    [columns."Time (s)"]      # a column other loggers label differently (adapters/labels.py):
+    name = "time_s"
+    also = ["Zeit", "t [s]"]  # their labels, tried in order after the table's own; or another
+    first_wins = true         # table of the same name (its own unit); a file holding two of a
+                              # column's labels is refused, unless first_wins: the first listed
+
 ``time_s`` (or ``options.time_step_s``) and ``speed_mps`` must be mapped. Units: m/s km/h mph ft/s · m km ft mi ·
 s ms min h · °C °F K · rpm rad/s · W kW hp · N kN lbf · Nm lbf·ft · kg t lb · m/s² g ·
 kPa Pa hPa bar psi · V mV · A mA · % · rad deg · J kJ Wh kWh · l/h gal/h · g/s kg/h lb/min · "" (none).
@@ -46,6 +52,7 @@ from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midni
                       expand_paths, generic_name, lookup_unit, new_report, numeric, read_csv_strict,
                       read_each, unique_names, UNITS)
 
+from sumo_drvpw.data.adapters import labels as candidate_labels
 from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
 
 FORMAT = "columns"
@@ -56,7 +63,7 @@ OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values"
 HEADER_SEARCH_LINES = 50
 #: the largest battery options.soc_capacity_kwh accepts [kWh] (a heavy truck's is about 1 MWh)
 MAX_SOC_CAPACITY_KWH = 2000.0
-ENTRY = {"name", "unit", "scale", "role", "na_values", "valid"}
+ENTRY = {"name", "unit", "scale", "role", "na_values", "valid", *candidate_labels.KEYS}
 SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 
 
@@ -78,7 +85,7 @@ def load_mapping(path, mdf: bool = False) -> dict:
     if time_unit != "datetime" and (lookup_unit(time_unit) or ("",))[0] != "time":
         known = sorted(u for u, (d, _, _) in UNITS.items() if d == "time")
         raise UserError(f"{p}: options.time_unit {time_unit!r} is no time unit (known: {', '.join(known)}, datetime)")
-    entries = {}
+    entries, wins = {}, {}
     for label, e in cols.items():
         key = f"columns.{label!r}" if not label.isidentifier() else f"columns.{label}"
         if label.strip() != label:  # header labels are read stripped: a label copied with the
@@ -121,6 +128,14 @@ def load_mapping(path, mdf: bool = False) -> dict:
             from sumo_drvpw.data.roles import check_role
 
             entries[label]["role"] = check_role(str(e["role"]), f"{p}: {key}.role")
+        wins[key] = candidate_labels.first_wins(p, key, e)
+        for other in candidate_labels.also_labels(p, key, label, e):  # other loggers' labels of the column
+            tabled = any(other == c.strip() for c in cols)
+            if tabled or other in entries:
+                raise UserError(f"{p}: {key}.also lists {other!r}, which "
+                                + ("has a table of its own" if tabled else f"{entries[other]['key']}.also lists too")
+                                + " (a label names one column)")
+            entries[other] = dict(entries[label])
     names = [e["name"] for e in entries.values()]
     if "time_format" in opts and not any(e["kind"] == "datetime" for e in entries.values()):
         raise UserError(f"{p}: options.time_format is for timestamps: it goes with a time "
@@ -134,14 +149,13 @@ def load_mapping(path, mdf: bool = False) -> dict:
             raise UserError(f"{p}: no source column is mapped to '{need}' (required"
                             + ("; a table whose rows follow at a fixed rate without a time column: "
                                "options.time_step_s = <seconds between rows>)" if need == "time_s" else ")"))
-    dup = sorted({n for n in names if names.count(n) > 1})
-    if dup:
-        raise UserError(f"{p}: more than one source column is mapped to '{dup[0]}'")
+    groups, first = candidate_labels.candidates(p, entries, wins)  # a column's labels: the first a file holds is read
     _check_scales(p, entries)
     if out["soc_capacity_kwh"] is not None and "soc_pct" not in names:
         raise UserError(f"{p}: options.soc_capacity_kwh estimates the battery's energy from the state "
                         "of charge: map a source column to 'soc_pct' (in %)")
-    return {**out, "columns": entries}
+    return {**out, "columns": entries, "candidates": {n: g for n, g in groups.items() if len(g) > 1},
+            "first_wins": first}
 
 
 def load_options(path) -> dict:
@@ -363,6 +377,8 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     raw.columns = [str(c).strip() for c in raw.columns]
     rep = new_report(path, path.stem, len(raw))
     labels = list(raw.columns)
+    m, notes, left_out = candidate_labels.for_file(m, labels.__contains__, path)  # each column's label here
+    rep["notes"] += notes
     twice = [c for c in m["columns"] if labels.count(c) > 1]
     if twice:  # (the i3 logs label two columns 'Temperature Vent right [°C]', one with a space)
         raise UserError(f"{path}: {labels.count(twice[0])} columns are labelled '{twice[0]}' (spaces around "
@@ -372,7 +388,8 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
             hint = (f" (only one column '{raw.columns[0][:40]}': wrong sep {m['sep']!r}?)"
                     if raw.shape[1] == 1 else "")
             hint = _skip_hint(path, m) or _no_header_hint(raw) or _close_label(label, labels, m["encoding"]) or hint
-            raise UserError(f"{path}: missing column '{label}' named in {m['path']}{hint}")
+            raise UserError(f"{path}: missing column '{label}' named in {m['path']}"
+                            f"{candidate_labels.nor_others(m, label)}{hint}")
     na = tuple(m["na_values"])
     out: list[tuple[str, pd.Series]] = []  # (a list: two columns may read as one name)
     comma = m["decimal"] != "." and path.suffix.lower() not in (".parquet", ".pq")
@@ -382,7 +399,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
             s = s.astype(str).str.replace(m["decimal"], ".", regex=False)
         e = m["columns"].get(label)
         if e is None:
-            if not m["keep_unmapped"]:
+            if not m["keep_unmapped"] or label in left_out:
                 continue
             if label.startswith("Unnamed: ") and s.astype(str).str.strip().isin(na + ("",)).all():
                 rep["notes"].append(f"column {label!r} has no header and no value (a trailing "

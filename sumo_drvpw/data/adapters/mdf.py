@@ -190,6 +190,8 @@ def read_file(path: Path, m: dict, parts: list[Path] | None = None) -> tuple[pd.
     """One MDF file through the mapping ``m`` (:func:`~sumo_drvpw.data.adapters.columns.load_mapping`
     with ``mdf=True``) → canonical frame and report; or, with ``parts``, the files of one
     folder (``path``) joined in time as one trip named after it."""
+    from sumo_drvpw.data.adapters.labels import for_file, nor_others
+
     labels = {e["name"]: label for label, e in m["columns"].items()}
     for name in ("time_s", "trip_id"):
         if name in labels:
@@ -201,6 +203,13 @@ def read_file(path: Path, m: dict, parts: list[Path] | None = None) -> tuple[pd.
     missing, notes, averaged, fast_raw = [], [], [], {}
     mdf = _open(path, m, parts, notes)
     try:
+        # of a column's labels (other loggers'), the first channel this file holds
+        m, chosen_notes, _ = for_file(m, lambda lb: bool(_occurrences(mdf, lb)[1]), path)
+        notes += chosen_notes
+        for label, e in m["columns"].items():
+            if e["name"] in m.get("candidates", {}) and not _occurrences(mdf, label)[1]:
+                raise UserError(f"{path}: no channel '{label}' named in {m['path']}{nor_others(m, label)}")
+        labels = {e["name"]: label for label, e in m["columns"].items()}
         speed = _signal(mdf, path, labels["speed_mps"], m)
         ts = np.asarray(speed.timestamps, float)
         for label, e in m["columns"].items():
