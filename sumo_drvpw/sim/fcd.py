@@ -46,9 +46,10 @@ joined first), so memory holds one block plus the running vehicles whatever the 
 length; the ledger writes finished vehicles out (:mod:`sumo_drvpw.sim.spill`). A vehicle
 arrives the step after a timestep without it (SUMO's FCD does not tell an arrival from a
 teleport: a vehicle back after a gap is put back there, as a teleport's end, and books on
-from its next row; one whose rows end while it stands is held in memory for
-:data:`TELEPORT_HOLD_S`, so a flush of finished vehicles does not split it — one back later,
-or one that vanished driving and was flushed, books on in a second row). ``chunk_rows=None`` reads the whole file first
+from its next row; one whose rows end while it stands, or off its route's last edge — a moving
+car's collision —, is held in memory for :data:`TELEPORT_HOLD_S` (:func:`~sumo_drvpw.sim.fcd_stops.
+may_return`), so a flush of finished vehicles does not split it — one back later books on in a
+second row). ``chunk_rows=None`` reads the whole file first
 (:class:`FcdReplay`: the reference the streamed replay equals exactly on gap-free FCD).
 The rows must be in time order (SUMO writes them so). Split by vehicle on Dask:
 :mod:`sumo_drvpw.sim.fcd_dask`.
@@ -73,13 +74,13 @@ from sumo_drvpw.sim.fcd_warn import (KineticGain, lane_warnings, missed_count, m
                                      unplaced_vehicle_warning, unseen_vehicles)
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
-from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
+from sumo_drvpw.sim.fcd_stops import StopTracker, may_return, read_declared_stops
 from sumo_drvpw.sim.vtype_energy import battery_switch, replay_emission_classes
 
-#: how long [s] a vehicle whose rows end while it stands stays in memory, in case it comes
-#: back from a teleport (SUMO teleports a car waiting in a jam, writes no rows while it
-#: moves over the edges it skips at their speed limits — seconds to minutes — and puts it
-#: back); one back later, or one that vanished driving, books on in a second row
+#: how long [s] a vehicle whose rows end while it stands (or off its route's last edge) stays
+#: in memory, in case it comes back from a teleport (SUMO teleports a car waiting in a jam or
+#: colliding, writes no rows while it moves over the edges it skips at their speed limits —
+#: seconds to minutes — and puts it back); one back later books on in a second row
 TELEPORT_HOLD_S = 900.0
 
 
@@ -473,9 +474,6 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         from sumo_drvpw.sim.run import check_vtype_tables
 
         check_vtype_tables(sc, acc.file_vtypes)
-    # a vehicle whose rows end while it stands may be in a teleport: kept in memory (not
-    # flushed) so that it books on in its own row when it comes back within TELEPORT_HOLD_S
-    acc.ledger.hold_steps = int(np.ceil(TELEPORT_HOLD_S / replay.dt))
     replay.type_mass = {vt: i.mass_kg for vt, i in acc.file_vtypes.items() if i.mass_kg}
     replay.container_types = set(getattr(acc.file_vtypes, "container_types", ()))
     replay.type_accel = accel_bounds(acc.file_vtypes)  # (a placement: a speed gain beyond them)
@@ -491,6 +489,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                                    begin=sc.begin, end=sc.end)
     if declared:
         replay.stops = StopTracker(declared, net)
+    # a car whose rows end standing or off its route's last edge may be in a teleport: held (TELEPORT_HOLD_S)
+    acc.ledger.hold_steps, acc.ledger.may_return = int(np.ceil(TELEPORT_HOLD_S / replay.dt)), may_return(declared, net, acc.ledger)
     # a parked car idling in its space, its way out blocked, as the live run books it
     so = acc.stepper.shutoff
     replay.idling = Idling(replay.stops, so.limit_of if so is not None else lambda vt: np.inf,

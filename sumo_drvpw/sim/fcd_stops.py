@@ -168,6 +168,9 @@ class DeclaredStops:
         self.departs: dict[str, float] = {}
         self.flow_departs: dict[str, tuple[float, float, int | None, float]] = {}
         self.random_flows: list[str] = []
+        #: every <vehicle>/<trip>/<flow> id → the last edge of its route (its ``to``), where
+        #: the files tell it (:func:`may_return`)
+        self.destinations: dict[str, str] = {}
 
     def __bool__(self) -> bool:
         return bool(self.vehicles or self.flows or self.unknown)
@@ -301,6 +304,9 @@ class DeclaredStops:
             if ref in self._dists or (dist is not None and self._distribution(dist, where)):
                 self.unknown[vid] = "its route is drawn from a routeDistribution with stops"
                 return
+        to = edges[-1] if edges else el.get("to")
+        if to and el.get("arrivalEdge") is None:  # (arrivalEdge: an earlier edge of the route)
+            self.destinations[vid] = to
         if not (own or rstops):
             return
         if repeat:  # SUMO serves the stops again each round, their until shifted by its cycle
@@ -312,6 +318,28 @@ class DeclaredStops:
         else:
             depart = sumo_seconds(el.get("depart") or "")  # "triggered", "now": not known
             self.vehicles[vid] = (stops, np.nan if depart is None else depart)
+
+
+def may_return(declared: DeclaredStops, net, ledger):
+    """For :attr:`Ledger.may_return`: whether vehicles ``slots`` whose rows ended may come
+    back (a teleport SUMO ends later), read as they leave: all but those whose last row was on
+    their route's last edge (``declared`` :attr:`DeclaredStops.destinations`). SUMO arrives
+    a vehicle there, and one teleported there too ("teleports beyond arrival edge"); elsewhere
+    — on a junction, where a moving car collides and is taken off until the next edge has
+    room — it may be back. A vehicle of unknown route is held; one that reaches its arrival
+    position in the step it enters its last edge is held needlessly (memory only); one never
+    read on a lane (booked by no equation) is not held."""
+    def test(slots):
+        out = np.zeros(len(slots), bool)
+        for j, i in enumerate(np.asarray(slots).tolist()):
+            vid, lane = ledger.veh_ids[i], ledger.veh_at[i, 0]
+            if not np.isfinite(lane):
+                continue
+            flow, _, n = vid.rpartition(".")
+            to = declared.destinations.get(vid) or (declared.destinations.get(flow) if n.isdigit() else None)
+            out[j] = to is None or net.lane_ids[int(lane)].rpartition("_")[0] != to
+        return out
+    return test
 
 
 def _edge_of(s: _Stop, places: dict) -> str | None:

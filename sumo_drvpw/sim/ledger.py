@@ -188,6 +188,10 @@ class Ledger:
         #: FCD replay: one that vanished from its rows standing may be in a teleport and come
         #: back, sim/fcd.py TELEPORT_HOLD_S; 0: none held)
         self.hold_steps = 0
+        #: those among them that left moving are held too where this says they may come back
+        #: (slots → bool per slot, asked once as they leave; an FCD replay: not on their route's
+        #: last edge, sim/fcd_stops.may_return — a collision's teleport of a moving car); None: none
+        self.may_return = None
         #: vehicles written out by :meth:`flush` (all, and the accounted ones), their vTypes
         self.flushed_vehicles = 0
         self.flushed_kept = 0
@@ -302,6 +306,7 @@ class Ledger:
         grow("veh_at", (cap, 4), float, np.nan)  # last step's lane, position, profile z, rise not yet booked
         grow("veh_done", (cap,), bool, False)  # left the simulation, not yet flushed
         grow("veh_done_step", (cap,), np.int64, 0)  # the step it left at
+        grow("veh_may_return", (cap,), bool, False)  # left where it may come back (may_return)
         grow("veh_joined", (cap,), bool, False)  # on the road when the booking began (not departing)
         grow("veh_parked", (cap,), bool, False)  # parked off the lane: not read, not booked
         grow("veh_stand", (cap,), float, 0.0)  # standing since [s] (sim/shutoff.py)
@@ -321,7 +326,8 @@ class Ledger:
                    ("veh_keep", False),
                    ("veh_prev_edge", -1), ("veh_prev_speed", np.nan), ("veh_prev_angle", np.nan),
                    ("veh_lane", -2),
-                   ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_done_step", 0), ("veh_joined", False),
+                   ("veh_pos", np.nan), ("veh_at", np.nan), ("veh_done", False), ("veh_done_step", 0), ("veh_may_return", False),
+                   ("veh_joined", False),
                    ("veh_parked", False),
                    ("veh_stand", 0.0), ("veh_auto_off", np.inf), ("veh_teleports", 0),
                    ("veh_tele", 0.0), ("veh_rde", np.nan), ("veh_cls", -1))
@@ -398,6 +404,7 @@ class Ledger:
         new = slots[~self.veh_done[slots]]
         self.veh_done[new] = True
         self.veh_done_step[new] = -1 if at_end else self.steps
+        self.veh_may_return[new] = False if at_end or self.may_return is None else self.may_return(new)
         self.n_done += len(np.unique(new))
 
     def on_road_at_end(self, slots) -> np.ndarray:
@@ -406,13 +413,13 @@ class Ledger:
 
     def _flushable(self) -> np.ndarray:
         """Finished vehicles that may leave memory: all but those that left standing (last
-        speed ≤ :data:`HALTING_SPEED_MPS`, as a car stuck in a jam when SUMO teleports it)
-        less than :attr:`hold_steps` ago."""
+        speed ≤ :data:`HALTING_SPEED_MPS`, as a car stuck in a jam when SUMO teleports it) or
+        where :attr:`may_return` said they may come back, less than :attr:`hold_steps` ago."""
         n = self.n_veh
         done = self.veh_done[:n]
         if self.hold_steps > 0:
             done = done & ~((self.veh_done_step[:n] > self.steps - self.hold_steps)
-                            & (self.veh_prev_speed[:n] <= HALTING_SPEED_MPS))
+                            & ((self.veh_prev_speed[:n] <= HALTING_SPEED_MPS) | self.veh_may_return[:n]))
         return done
 
     def unretire(self, i: int) -> None:
