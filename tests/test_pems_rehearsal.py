@@ -221,3 +221,29 @@ def test_compares_console_line_names_the_worst_of_the_trips_it_scores():
     assert f"worst +{100 * (6.1e7 / 2.0e7 - 1):.1f} % (s09)" in line and "s03" not in line
     assert trip_energy_line({"trip_energy": trip_energy_doc(["a", "b"], [1.0, 1.0], [1.1, 0.8])}) == \
         "per trip (2): traction energy |error| mean 15.0 %, worst -20.0 % (b)"
+
+
+@pytest.mark.parametrize("target", ["fuel", "battery"])
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_a_heavy_log_s_chain_on_a_given_road_load_is_said_streamed_as_in_memory(tmp_path, capsys, target, engine):
+    # `calibrate --target fuel|battery --equation ROAD` on a 30-t log with its own mass column
+    # and no --vehicle: the in-memory path warned that the equation declares the car classes,
+    # the streamed path (the default engine) said nothing — it took the log's mass only from
+    # a road load fitted on the log, and with --equation none is
+    import pandas as pd
+
+    log = _truck_log(tmp_path, 30000)
+    d = pd.read_csv(log).assign(mass_kg=30000.0)
+    if target == "battery":  # an electric truck: the battery's V·I from the wheel power
+        p = d["power_w"].to_numpy()
+        d = d.drop(columns="fuel_rate_gps").assign(
+            battery_voltage_v=650.0, battery_current_a=np.where(p > 0, p / 0.9, p * 0.8) / 650.0 + 8.0)
+    d.to_csv(log, index=False)
+    road = tmp_path / "road.toml"
+    road.write_text('[equation]\nname = "road"\n[terms]\nacc = 1.05\ngrade = 1.0\nroll = 0.0065\naero = 3.7\n',
+                    encoding="utf-8")
+    out = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(log), "--target", target, "--equation", str(road), "--out", str(out),
+                     "--engine", engine]) == 0
+    said = [x for x in capsys.readouterr().out.splitlines() if "declares the car classes" in x]
+    assert said and said[0].startswith("warning: eq is calibrated on a 30,000-kg vehicle"), said

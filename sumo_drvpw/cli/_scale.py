@@ -329,9 +329,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
 
     from sumo_drvpw.cli.calibrate import write_equation
 
-    road_st = getattr(st, "road", None)  # (the log's mean mass where the road load was fitted on it)
-    write_equation(args, eq, out, inputs, report,
-                   road_st.mass_sum / road_st.mass_n if road_st is not None and road_st.mass_n else None)
+    # the log's mean mass over its usable rows, with or without a road load fitted on it (as in memory)
+    write_equation(args, eq, out, inputs, report, st.mass_sum / st.mass_n if st.mass_n else None)
     for info in infos:
         print(info.line(), file=sys.stderr)
     return 0

@@ -137,6 +137,7 @@ class ChainStats:
         self.wheel_error = None        # why a batch had no measured driving power
         self.sign = self.falling = None
         self.usable = self.nonzero = self.n_ok = self.unknown = 0
+        self.mass_sum, self.mass_n = 0.0, 0  # the log's mass over usable samples (the 3.5-t warning)
         self.load_n = dict.fromkeys(spec.loads, 0)
         self.load_text: dict = {}      # load column → its first value where it is not numeric
         self.seen: set = set()
@@ -196,6 +197,8 @@ class ChainStats:
         y = np.asarray(m.power_w, float)
         if scan:
             self._input_checks(m, y, use)
+            self.mass_sum += float(np.sum(np.asarray(m.inputs.mass, float)[use]))
+            self.mass_n += int(use.sum())
         if measured:
             p = np.asarray(mw.power_w, float)
         elif self.spec.equation is not None:
@@ -329,6 +332,7 @@ class ChainStats:
         self.wheel_error = self.wheel_error or o.wheel_error
         self.sign, self.falling = merge_sign_sums(self.sign, o.sign), merge_sign_sums(self.falling, o.falling)
         self.usable += o.usable
+        self.mass_sum, self.mass_n = self.mass_sum + o.mass_sum, self.mass_n + o.mass_n
         self.nonzero += o.nonzero
         self.n_ok += o.n_ok
         self.unknown += o.unknown
