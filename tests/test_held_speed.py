@@ -261,3 +261,48 @@ def test_a_held_city_drive_in_kmh_is_told_km_h(seed):
     with pytest.raises(UserError, match="is it km/h"):
         check_speed_unit(np.round(held * 3.6), t, trip, Path("city.csv"))
     check_speed_unit(held, t, trip, Path("city.csv"))
+
+
+def _short_held_trip(seed, n, amax, every_s=1.0, dt=0.5):
+    """A short trip of ``dt``-s rows whose speed is updated every ``every_s`` (held between):
+    the true speed from an acceleration of at most ``amax`` [m/s²]."""
+    import pandas as pd
+
+    rng = np.random.default_rng(seed)
+    fine = np.arange(0.0, n * dt + every_s, 0.01)
+    a = amax * np.sin(2 * np.pi * fine / rng.uniform(6.0, 20.0) + rng.uniform(0, 2 * np.pi))
+    true = 14.0 + np.cumsum(a) * 0.01  # 14 m/s ± a few: moving throughout
+    t = np.arange(n) * dt
+    v = np.interp(np.floor(t / every_s) * every_s, fine, true)  # the last update's value
+    return pd.DataFrame({"trip_id": f"t{seed}", "time_s": t, "speed_mps": v, "power_w": 1000.0})
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(12, 31), amax=st.floats(1.0, 3.0),
+       limit=st.floats(3.5, 8.0))
+def test_a_short_held_speed_s_updates_are_not_one_sample_steps(seed, n, amax, limit):
+    """A 2-Hz trip too short for speed_hold (n < 32 rows) whose speed is updated once a second
+    changes by a second's Δv in one 0.5-s row: data/plausible.speed_steps judged it over the
+    row (2·a) and left its samples out as a splice wherever 2·a passed the outlier limit (30
+    such 20-s trips, |a| ≤ 3 m/s², limit 5 m/s²: 41 'steps', 82 of 1,200 samples). Judged
+    over the speed's update interval, no genuine sample is left out."""
+    from sumo_drvpw.data.log import from_frame
+
+    d = _short_held_trip(seed, n, amax)
+    c = from_frame(d, options=ReadOptions(accel_outlier_mps2=limit)).counts
+    assert (c["speed_steps"], c["excluded_speed_step"]) == (0, 0), c
+
+
+@pytest.mark.parametrize("every_s", [0.5, 1.0])
+def test_a_splice_in_a_held_speed_is_still_left_out(every_s):
+    """A recording spliced without a mark (13 m/s to standing in one row) in the same short
+    2-Hz trip, held or not, is still a one-sample step steeper than the limit."""
+    from sumo_drvpw.data.log import from_frame
+
+    d = _short_held_trip(3, 30, 2.0, every_s)
+    v = d["speed_mps"].to_numpy().copy()
+    v[16:] = np.interp(np.floor(d["time_s"].to_numpy()[16:] / every_s) * every_s, [8.0, 15.0], [0.0, 9.0])
+    assert v[15] > 12.0 and v[16] == 0.0
+    lg = from_frame(d.assign(speed_mps=v), options=ReadOptions(accel_outlier_mps2=5.0))
+    assert lg.counts["speed_steps"] == 1, lg.counts
+    assert lg.excluded[15:17].all() and not lg.excluded[:12].any() and not lg.excluded[20:].any()

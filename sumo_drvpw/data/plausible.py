@@ -174,13 +174,22 @@ def speed_steps(v: np.ndarray, t: np.ndarray, seg: np.ndarray, half_window_s: np
     stretches derivatives do not cross (trips, logging gaps), ``t`` increasing within each;
     ``half_window_s``: half the derivative window per sample (0 where the acceleration is
     logged): samples within it of the step are marked.
+
+    A speed logged more often than it is updated (2-Hz rows of a speed updated once a
+    second) changes by a whole update interval's Δv in one row: a step is judged over the
+    longer of the row's interval and the stretch's update interval
+    (:func:`update_interval`), so a held speed's updates are not steps (30 20-s trips of such
+    rows, |a| ≤ 3 m/s², too short to be read as held: 82 of 1,200 samples left out at a
+    5 m/s² limit; 94 at 8 m/s² with |a| ≤ 4.5) while a splice steeper than the limit over an
+    update interval still is.
     """
     n = len(v)
     mask = np.zeros(n, bool)
     if n < 2:
         return mask, 0
     dt, dv = np.diff(t), np.diff(v)
-    step = np.flatnonzero((seg[1:] == seg[:-1]) & (dt >= SPEED_STEP_MIN_DT_S) & (np.abs(dv) > limit_mps2 * dt))
+    over = np.maximum(dt, update_interval(v, t, seg)[np.cumsum(np.r_[True, seg[1:] != seg[:-1]])[1:] - 1])
+    step = np.flatnonzero((seg[1:] == seg[:-1]) & (dt >= SPEED_STEP_MIN_DT_S) & (np.abs(dv) > limit_mps2 * over))
     if not len(step):
         return mask, 0
     starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])
@@ -192,6 +201,38 @@ def speed_steps(v: np.ndarray, t: np.ndarray, seg: np.ndarray, half_window_s: np
         hi = s + np.searchsorted(t[s:e], t[i + 1] + half_window_s[i + 1], side="right")
         mask[lo:max(hi, i + 2)] = True
     return mask, len(step)
+
+
+#: a speed counts as moving, for the update interval (:func:`update_interval`) [m/s]
+UPDATE_MIN_SPEED_MPS = 1.0
+#: the longest update interval a speed is taken to be held for [s] (a longer run of one value
+#: is a speed that did not change: a stop, a steady cruise)
+UPDATE_MAX_S = 3.0
+
+
+def update_interval(v: np.ndarray, t: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """The interval at which each stretch's speed is updated [s], per run of equal ``seg``
+    (0, 1, … in order): the median time from a value's first sample to the next value's,
+    over the values held while moving (> :data:`UPDATE_MIN_SPEED_MPS`), at most
+    :data:`UPDATE_MAX_S`; 0 where no value is followed by another in the stretch. A speed
+    updated at every sample gives its sampling interval; a held one (a speed updated once a
+    second in 2-Hz rows) its update interval — from the values themselves, so also in a trip
+    too short for :func:`sumo_drvpw.data.resolution.speed_hold` to judge."""
+    n = len(v)
+    first = np.r_[True, seg[1:] != seg[:-1]] if n else np.zeros(0, bool)
+    nseg = int(first.sum())
+    out = np.zeros(nseg)
+    if n < 2:
+        return out
+    new = first | np.r_[True, v[1:] != v[:-1]]  # a value's first sample (NaN: each its own)
+    at = np.flatnonzero(new)
+    follows = ~first[at[1:]]  # the next value is in the same stretch
+    ok = follows & (v[at[:-1]] > UPDATE_MIN_SPEED_MPS)
+    if ok.any():
+        run = (np.cumsum(first) - 1)[at[:-1][ok]]
+        med = pd.Series((t[at[1:]] - t[at[:-1]])[ok]).groupby(run).median()
+        out[med.index.to_numpy()] = np.minimum(med.to_numpy(), UPDATE_MAX_S)
+    return out
 
 
 def speed_step_note(counts: dict) -> str:
