@@ -203,18 +203,68 @@ def trips_without(col: pd.Series, trip_codes: np.ndarray) -> np.ndarray:
 #: sample-index edges of the blocks whose mean speeds a trip's signature carries (fixed, so
 #: a trip cut short by a row keeps the blocks it has whole)
 SIGNATURE_EDGES = (0, 64, 256, 1024, 4096, 16384, 65536, 262144)
+#: the speeds whose clear crossings are a trip's anchors (:func:`trip_anchors`): multiples of
+#: this [m/s]
+ANCHOR_LEVEL_MPS = 2.0
+#: samples a crossing's speed stays on each side of its level, so a speed hovering at it
+#: (noise, a steady cruise) gives none: each anchor is told by its own neighbourhood alone
+ANCHOR_CLEAR = 8
+#: samples from an anchor over which its mean speed (and battery power) is taken
+ANCHOR_SPAN = 16
+#: the most anchors an equation file keeps of a trip (evenly spread over it)
+KEPT_ANCHORS = 64
+#: anchors of a compared trip that must agree with a calibration trip's, at one offset, to
+#: tell the trip a part of it: at least this many, and this share of the calibration trip's
+#: kept anchors within the part
+PART_MIN_ANCHORS, PART_SHARE = 3, 0.6
+
+
+def trip_anchors(v: np.ndarray, p: np.ndarray | None = None) -> np.ndarray:
+    """A trip's anchors: (sample index, mean speed [m/s], mean battery power [W] or NaN over
+    the :data:`ANCHOR_SPAN` samples from it) at each sample where the speed crosses a multiple
+    of :data:`ANCHOR_LEVEL_MPS` clearly (below it over the :data:`ANCHOR_CLEAR` samples
+    before, at or above it over as many from the sample, or the other way round), as rows.
+
+    Each anchor depends on the samples around it only, so a part of a trip (rows dropped at
+    its start or end, a trip split in two files) has the anchors of the whole within it,
+    their indices shifted by the rows dropped before it (:func:`same_trips`)."""
+    n, c = len(v), ANCHOR_CLEAR
+    if n < c + ANCHOR_SPAN + 1:
+        return np.zeros((0, 3))
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d
+
+    ok = np.isfinite(v)  # (a sample without a speed: no anchor across it)
+    # the highest and lowest speed over the c samples from each index (origin: the window's start)
+    hi = maximum_filter1d(np.where(ok, v, np.inf), c, origin=-(c // 2), mode="nearest")
+    lo = minimum_filter1d(np.where(ok, v, -np.inf), c, origin=-(c // 2), mode="nearest")
+    i = np.arange(c, n - ANCHOR_SPAN + 1)
+    before_hi, before_lo, after_hi, after_lo = hi[i - c], lo[i - c], hi[i], lo[i]
+    step = ANCHOR_LEVEL_MPS
+    with np.errstate(invalid="ignore"):
+        up = (np.floor(before_hi / step) + 1) * step <= after_lo
+        down = (np.floor(before_lo / step) * step > after_hi) & (before_lo >= step)
+    span = i[up | down][:, None] + np.arange(ANCHOR_SPAN)  # each crossing's samples from it
+    x = v[span]
+    span = span[x.max(axis=1) > x.min(axis=1)]  # (NaN or a span at one speed: it tells little)
+    power = p[span].mean(axis=1) if p is not None else np.full(len(span), np.nan)
+    return np.column_stack([span[:, 0], v[span].mean(axis=1), power])
 
 
 def trip_signatures(df: pd.DataFrame) -> dict[str, list[float]]:
     """Trip → its signature [samples, duration s, mean speed, rms speed, then the mean speed
-    over each whole block of samples between :data:`SIGNATURE_EDGES` (m/s), then — when the
-    log has ``battery_voltage_v`` and ``battery_current_a`` — the mean and rms of their
-    product (W)] in a read log ``df`` (``trip_id``, ``time_s``, ``speed_mps``): what tells the
-    same trip read from another file — re-exported, in another format or unit, renamed, or
-    among other trips — so that ``compare`` can say an equation is compared on trips it was
-    calibrated on (:func:`same_trips`); the battery's power tells two tests whose speed was
-    logged alike (the shared JLU dynamometer's UDDS_01 and UDDS_02: the same speed samples,
-    1.29 and 1.22 kWh). Rounded to 7 significant digits (an equation file keeps them)."""
+    over each whole block of samples between :data:`SIGNATURE_EDGES` (m/s), then the mean and
+    rms of the product of ``battery_voltage_v`` and ``battery_current_a`` (W; 0 0 without
+    them), then 3 and the trip's anchors (:func:`trip_anchors`: sample index, mean speed,
+    mean power or 0, three numbers each)] in a read log ``df`` (``trip_id``, ``time_s``,
+    ``speed_mps``): what tells the same trip read from another file — re-exported, in another
+    format or unit, renamed, or among other trips — or a part of it (rows dropped at its start
+    or end, a trip split in two files), so that ``compare`` can say an equation is compared on
+    trips it was calibrated on (:func:`same_trips`); the battery's power tells two tests whose
+    speed was logged alike (the shared JLU dynamometer's UDDS_01 and UDDS_02: the same speed
+    samples, 1.29 and 1.22 kWh). Rounded to 7 significant digits (an equation file keeps them,
+    with at most :data:`KEPT_ANCHORS` anchors, :func:`signature_texts`); a signature written
+    before the anchors (4 numbers and the blocks, then the power's two if logged) is read as
+    it was."""
     trip = df["trip_id"].astype(str).to_numpy()
     t, v = df["time_s"].to_numpy(float), df["speed_mps"].to_numpy(float)
     pw = (df["battery_voltage_v"].to_numpy(float) * df["battery_current_a"].to_numpy(float)
@@ -228,16 +278,26 @@ def trip_signatures(df: pd.DataFrame) -> dict[str, list[float]]:
                float(np.sqrt(np.nanmean(x * x)))]
         sig += [float(np.nanmean(x[lo:hi])) for lo, hi in zip(SIGNATURE_EDGES, SIGNATURE_EDGES[1:])
                 if hi + 2 <= len(x)]
-        if pw is not None and np.isfinite(pw[a:b]).any():
-            p = pw[a:b]
-            sig += [float(np.nanmean(p)), float(np.sqrt(np.nanmean(p * p)))]
+        p = pw[a:b] if pw is not None and np.isfinite(pw[a:b]).any() else None
+        sig += [float(np.nanmean(p)), float(np.sqrt(np.nanmean(p * p)))] if p is not None else [0.0, 0.0]
+        anchors = trip_anchors(x, p)
+        sig += [3.0] + np.nan_to_num(anchors, nan=0.0).ravel().tolist()
         out.setdefault(str(trip[a]), [int(sig[0])] + [float(f"{y:.7g}") for y in sig[1:]])
     return out
 
 
 def signature_texts(sigs: dict[str, list[float]]) -> list[str]:
-    """:func:`trip_signatures` as an equation's provenance keeps them: one line of numbers each."""
-    return [" ".join(f"{x:.7g}" for x in sig) for sig in sigs.values()]
+    """:func:`trip_signatures` as an equation's provenance keeps them: one line of numbers
+    each, with at most :data:`KEPT_ANCHORS` of a trip's anchors, evenly spread over it."""
+    out = []
+    for sig in sigs.values():
+        sig = list(sig)
+        head, anchors = _split(sig)
+        if len(anchors) > KEPT_ANCHORS:
+            keep = np.unique(np.round(np.linspace(0, len(anchors) - 1, KEPT_ANCHORS)).astype(int))
+            sig = sig[:head] + [3.0] + anchors[keep].ravel().tolist()
+        out.append(" ".join(f"{x:.7g}" for x in sig))
+    return out
 
 
 def _numbers(sig) -> list[float] | None:
@@ -250,27 +310,50 @@ def _numbers(sig) -> list[float] | None:
     return out if len(out) >= 4 else None
 
 
-def _parts(sig) -> tuple[list, list]:
-    """(the blocks' mean speeds, [mean, rms battery power] or []) of a signature: as many
-    blocks as its samples give (:func:`trip_signatures`), then the power, if any."""
+def _split(sig) -> tuple[int, np.ndarray]:
+    """(the length of a signature's part before its anchors, its anchors as rows of three):
+    a signature written before the anchors has none (4 numbers, the blocks, the power's two
+    or none); one with anchors always has the power's two, then 3 and the anchors' numbers."""
     k = sum(hi + 2 <= sig[0] for hi in SIGNATURE_EDGES[1:])
-    return list(sig[4:4 + k]), list(sig[4 + k:6 + k])
+    head = 6 + k
+    rest = len(sig) - head - 1
+    if rest < 0 or sig[head] != 3.0 or rest % 3:
+        return min(len(sig), head), np.zeros((0, 3))
+    return head, np.asarray(sig[head + 1:], float).reshape(-1, 3)
+
+
+def _parts(sig) -> tuple[list, list, np.ndarray]:
+    """(the blocks' mean speeds, [mean, rms battery power] or [], the anchors' rows) of a
+    signature: as many blocks as its samples give (:func:`trip_signatures`), then the power,
+    if any (0 0: none), then the anchors, if any."""
+    k = sum(hi + 2 <= sig[0] for hi in SIGNATURE_EDGES[1:])
+    power = list(sig[4 + k:6 + k])
+    if len(power) == 2 and power[1] == 0.0:  # written without the battery
+        power = []
+    return list(sig[4:4 + k]), power, _split(sig)[1]
 
 
 def same_trips(signatures, trips: dict[str, list[float]]) -> list[str]:
     """The trips of ``trips`` (trip → :func:`trip_signatures`) matching one of ``signatures``:
-    the same samples re-read, not another drive of the same route or cycle. Allowed: a few
-    samples lost at the end (a file cut in its last row: 0.2 % or 2) and what they move the
-    duration and the mean and rms speed, plus 0.01 % (or 1 mm/s) of rounding (speeds
-    re-exported to 1 mm/s move them by 1e-5); the blocks' mean speeds, whole in both, within
-    that rounding alone. A repeat drive of a dyno cycle differs by more (its driver's trace
-    error, some 0.1–0.5 km/h rms). Where both carry the battery's power, its mean (either
-    sign: a current logged the other way round) and rms agree as the speed's do, plus 1 W. A
-    trip whose speed never changes (a parked session: all 0) matches none: its speed cannot
-    tell it from another session of the same length."""
+    the same samples re-read, or a part of them, not another drive of the same route or cycle.
+
+    The same samples: allowed a few samples lost at the end (a file cut in its last row: 0.2 %
+    or 2) and what they move the duration and the mean and rms speed, plus 0.01 % (or 1 mm/s)
+    of rounding (speeds re-exported to 1 mm/s move them by 1e-5); the blocks' mean speeds,
+    whole in both, within that rounding alone. A repeat drive of a dyno cycle differs by more
+    (its driver's trace error, some 0.1–0.5 km/h rms). Where both carry the battery's power,
+    its mean (either sign: a current logged the other way round) and rms agree as the speed's
+    do, plus 1 W. A trip whose speed never changes (a parked session: all 0) matches none: its
+    speed cannot tell it from another session of the same length.
+
+    A part (:func:`part_of`): a trip no longer than a kept one whose anchors
+    (:func:`trip_anchors`) are the kept trip's, shifted by the rows before it — rows dropped
+    at the start, at the end, one file of a trip split in two. Signatures written before the
+    anchors tell the same samples only."""
     refs = [r for r in map(_numbers, signatures) if r is not None]
     head = np.array([r[:4] for r in refs], float).reshape(-1, 4)  # (each ref compared at once)
     parts = [_parts(r) for r in refs]
+    index = _AnchorIndex(head[:, 0], [a for _, _, a in parts])
     out = []
     for tid, sig in trips.items():
         n, dur, mv, rv = sig[:4]
@@ -281,13 +364,63 @@ def same_trips(signatures, trips: dict[str, list[float]]) -> list[str]:
         near = ((dn <= max(2.0, 0.002 * n)) & (np.abs(head[:, 1] - dur) <= 1e-3 + 1e-6 * dur + 2.0 * lost * dur)
                 & (np.abs(head[:, 2] - mv) <= 1e-3 + 1e-4 * abs(mv) + 3.0 * lost * rv)
                 & (np.abs(head[:, 3] - rv) <= 1e-3 + 1e-4 * rv + 3.0 * lost * rv))
-        blocks, power = _parts(sig)
+        blocks, power, anchors = _parts(sig)
         for j in np.flatnonzero(near):
-            ref_blocks, ref_power = parts[j]
+            ref_blocks, ref_power, _ = parts[j]
             if (all(abs(p - q) <= 1e-3 + 1e-4 * abs(q) for p, q in zip(ref_blocks, blocks))
                     and (len(power) < 2 or len(ref_power) < 2 or (
                         abs(abs(ref_power[0]) - abs(power[0])) <= 1.0 + 1e-4 * abs(power[0]) + 3.0 * lost[j] * power[1]
                         and abs(ref_power[1] - power[1]) <= 1.0 + 1e-4 * power[1] + 3.0 * lost[j] * power[1]))):
                 out.append(tid)
                 break
+        else:
+            if index.part_of(int(n), anchors):
+                out.append(tid)
     return out
+
+
+class _AnchorIndex:
+    """The kept trips' anchors sorted by their mean speed, for :meth:`part_of`: each compared
+    trip's anchors are looked up among all kept trips' at once."""
+
+    def __init__(self, samples, anchors: list[np.ndarray]):
+        self.samples = np.asarray(samples, float)
+        rows = [np.column_stack([np.full(len(a), j), a]) for j, a in enumerate(anchors) if len(a)]
+        allrows = np.concatenate(rows) if rows else np.zeros((0, 4))
+        allrows = allrows[np.argsort(allrows[:, 2], kind="stable")]
+        self.ref, self.at, self.speed, self.power = (allrows[:, 0].astype(np.int64), allrows[:, 1],
+                                                     allrows[:, 2], allrows[:, 3])
+        self.own = [np.sort(a[:, 0]) if len(a) else np.zeros(0) for a in anchors]  # each trip's indices
+
+    def part_of(self, n: int, anchors: np.ndarray) -> bool:
+        """Whether a compared trip of ``n`` samples and these anchors is a part of a kept trip:
+        at one offset s ≥ 0 with s + n at most the kept trip's samples (+ 2: a row cut), at
+        least :data:`PART_MIN_ANCHORS` of its anchors and :data:`PART_SHARE` of the kept trip's
+        within the part (those with a whole neighbourhood in it) are the compared trip's:
+        the index shifted by s, the mean speed within 1 mm/s (+ 0.01 %), the battery power,
+        where both have it, within 3 W (+ 0.01 %) in either sign."""
+        if len(anchors) < PART_MIN_ANCHORS or not len(self.speed):
+            return False
+        tol = 1e-3 + 1e-4 * np.abs(anchors[:, 1])
+        lo = np.searchsorted(self.speed, anchors[:, 1] - tol, side="left")
+        hi = np.searchsorted(self.speed, anchors[:, 1] + tol, side="right")
+        count = hi - lo
+        if not count.sum():
+            return False
+        mine = np.repeat(np.arange(len(anchors)), count)  # every pair of agreeing speeds
+        theirs = np.repeat(lo, count) + np.arange(len(mine)) - np.repeat(np.cumsum(count) - count, count)
+        ref, shift = self.ref[theirs], self.at[theirs] - anchors[mine, 0]
+        p, q = self.power[theirs], anchors[mine, 2]
+        known = (p != 0) & (q != 0) & np.isfinite(p) & np.isfinite(q)
+        ok = ((shift >= 0) & (shift + n <= self.samples[ref] + 2)
+              & (~known | (np.abs(np.abs(p) - np.abs(q)) <= 3.0 + 1e-4 * np.abs(q))))
+        if not ok.any():
+            return False
+        pairs, votes = np.unique(np.column_stack([ref[ok], shift[ok]]), axis=0, return_counts=True)
+        for (j, s), k in zip(pairs[votes >= PART_MIN_ANCHORS], votes[votes >= PART_MIN_ANCHORS]):
+            own = self.own[int(j)]  # the kept trip's anchors within the part, as the part has them
+            within = (np.searchsorted(own, s + n - ANCHOR_SPAN, side="right")
+                      - np.searchsorted(own, s + ANCHOR_CLEAR, side="left"))
+            if k >= PART_SHARE * within:
+                return True
+        return False
