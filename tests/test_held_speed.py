@@ -306,3 +306,23 @@ def test_a_splice_in_a_held_speed_is_still_left_out(every_s):
     lg = from_frame(d.assign(speed_mps=v), options=ReadOptions(accel_outlier_mps2=5.0))
     assert lg.counts["speed_steps"] == 1, lg.counts
     assert lg.excluded[15:17].all() and not lg.excluded[:12].any() and not lg.excluded[20:].any()
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_splice_in_a_cruise_logged_in_whole_kmh_is_still_left_out(seed):
+    """A speed in whole km/h at 1 Hz holds a value for seconds on a highway: a median of the
+    times between its values (3 s) took it for a speed held that long and judged a 9-m/s
+    splice over 3 s (3 m/s², under 8); its update interval is the row's (it changes at the
+    next sample wherever it changes by a step)."""
+    import pandas as pd
+
+    from sumo_drvpw.data.log import from_frame
+
+    rng = np.random.default_rng(seed)
+    n = 1800
+    true = 27.8 + np.cumsum(rng.normal(0, 0.08, n)) * 0.3  # ~100 km/h, drifting slowly
+    true[1200:] -= 9.0  # the splice: 9 m/s down in one second
+    v = np.round(true * 3.6) / 3.6
+    d = pd.DataFrame({"trip_id": "h", "time_s": np.arange(n, dtype=float), "speed_mps": v, "power_w": 1e4})
+    lg = from_frame(d)
+    assert lg.counts["speed_steps"] == 1 and lg.excluded[1199:1201].all(), lg.counts
