@@ -270,8 +270,8 @@ def _short_held_trip(seed, n, amax, every_s=1.0, dt=0.5):
 
     rng = np.random.default_rng(seed)
     fine = np.arange(0.0, n * dt + every_s, 0.01)
-    a = amax * np.sin(2 * np.pi * fine / rng.uniform(6.0, 20.0) + rng.uniform(0, 2 * np.pi))
-    true = 14.0 + np.cumsum(a) * 0.01  # 14 m/s ± a few: moving throughout
+    a = amax * np.sin(2 * np.pi * fine / rng.uniform(6.0, 12.0) + rng.uniform(0, 2 * np.pi))
+    true = 15.0 + np.cumsum(a) * 0.01  # 15 m/s ± at most 2·amax·12 s/2π (11.5): moving throughout
     t = np.arange(n) * dt
     v = np.interp(np.floor(t / every_s) * every_s, fine, true)  # the last update's value
     return pd.DataFrame({"trip_id": f"t{seed}", "time_s": t, "speed_mps": v, "power_w": 1000.0})
