@@ -346,7 +346,7 @@ def same_trips(signatures, trips: dict[str, list[float]]) -> list[str]:
     do, plus 1 W. A trip whose speed never changes (a parked session: all 0) matches none: its
     speed cannot tell it from another session of the same length.
 
-    A part (:func:`part_of`): a trip no longer than a kept one whose anchors
+    A part (:meth:`_AnchorIndex.part_of`): a trip no longer than a kept one whose anchors
     (:func:`trip_anchors`) are the kept trip's, shifted by the rows before it — rows dropped
     at the start, at the end, one file of a trip split in two. Signatures written before the
     anchors tell the same samples only."""
