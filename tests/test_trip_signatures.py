@@ -197,6 +197,24 @@ def test_a_part_of_a_test_whose_speed_was_logged_alike_is_told_by_the_battery():
     assert same_trips(ref, trip_signatures(mine)) == ["part"]
 
 
+def test_many_trips_keep_fewer_anchors_each_and_their_halves_are_still_found():
+    """An equation file kept 64 anchors of every trip (some 1.6 kB a line): a calibration on
+    thousands of trips would write megabytes of them. Past KEPT_ANCHORS_TOTAL // trips each
+    keeps fewer (at least KEPT_ANCHORS_MIN): 1,000 signatures of long city drives keep at most
+    8 anchors each, and each drive's halves are still found in it alone."""
+    from sumo_drvpw.data.trips import KEPT_ANCHORS_MIN, _split
+
+    d = _city(11, 12_000)
+    sig = next(iter(trip_signatures(d).values()))
+    assert len(_split(sig)[1]) > 64  # a drive with more anchors than any file keeps
+    others = {f"other{k}": list(sig[:6]) + [1.0e6 + k] for k in range(999)}  # elsewhere, unmatched
+    few, alone = signature_texts({"d": sig} | others)[0], signature_texts({"d": sig})[0]
+    assert len(_split([float(x) for x in few.split()])[1]) == KEPT_ANCHORS_MIN
+    assert len(_split([float(x) for x in alone.split()])[1]) == 64 and len(few) < len(alone) / 4
+    first, second = _pieces(d, 0, 6000).assign(trip_id="first"), _pieces(d, 6000, 12_000).assign(trip_id="second")
+    assert same_trips([few], trip_signatures(pd.concat([first, second]))) == ["first", "second"]
+
+
 def test_a_signature_written_before_the_anchors_is_read_and_matched_as_before():
     """An equation file written before the anchors keeps [samples, duration, mean, rms, the
     blocks, the power's mean and rms where logged]: the same trips re-read are found as

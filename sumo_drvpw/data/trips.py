@@ -211,8 +211,10 @@ ANCHOR_LEVEL_MPS = 2.0
 ANCHOR_CLEAR = 8
 #: samples from an anchor over which its mean speed (and battery power) is taken
 ANCHOR_SPAN = 16
-#: the most anchors an equation file keeps of a trip (evenly spread over it)
-KEPT_ANCHORS = 64
+#: the most anchors an equation file keeps of a trip (evenly spread over it), and of all its
+#: trips together: a calibration on thousands of trips keeps fewer of each (at least
+#: KEPT_ANCHORS_MIN), so its file stays some 100 characters a trip, not 1.6 kB
+KEPT_ANCHORS, KEPT_ANCHORS_TOTAL, KEPT_ANCHORS_MIN = 64, 6400, 8
 #: anchors of a compared trip that must agree with a calibration trip's, at one offset, to
 #: tell the trip a part of it: at least this many, and this share of the calibration trip's
 #: kept anchors within the part
@@ -288,13 +290,15 @@ def trip_signatures(df: pd.DataFrame) -> dict[str, list[float]]:
 
 def signature_texts(sigs: dict[str, list[float]]) -> list[str]:
     """:func:`trip_signatures` as an equation's provenance keeps them: one line of numbers
-    each, with at most :data:`KEPT_ANCHORS` of a trip's anchors, evenly spread over it."""
+    each, with at most :data:`KEPT_ANCHORS` of a trip's anchors (fewer when the trips are
+    many: :data:`KEPT_ANCHORS_TOTAL`), evenly spread over it."""
     out = []
+    most = max(KEPT_ANCHORS_MIN, min(KEPT_ANCHORS, KEPT_ANCHORS_TOTAL // max(len(sigs), 1)))
     for sig in sigs.values():
         sig = list(sig)
         head, anchors = _split(sig)
-        if len(anchors) > KEPT_ANCHORS:
-            keep = np.unique(np.round(np.linspace(0, len(anchors) - 1, KEPT_ANCHORS)).astype(int))
+        if len(anchors) > most:
+            keep = np.unique(np.round(np.linspace(0, len(anchors) - 1, most)).astype(int))
             sig = sig[:head] + [3.0] + anchors[keep].ravel().tolist()
         out.append(" ".join(f"{x:.7g}" for x in sig))
     return out
