@@ -20,6 +20,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.model.energy_params import ENERGY_PARAMS
 from sumo_drvpw.model.mmpevem import MMPEVEM_PARAMS
+from sumo_drvpw.sim.scenario import NON_ROAD_CLASSES
 from sumo_drvpw.sim.shutoff import SHUT_OFF_PARAMS
 from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
@@ -305,10 +306,9 @@ def _capacity(val: str | None) -> int | None:
     return x if x is not None and x >= 0 else None
 
 
-#: the heaviest mass [kg] a vType of a road vClass may have (Australian road trains: some 200 t);
-#: a train, tram, ship or aircraft (:data:`NOT_ROAD_VCLASSES`) is not held to it
+#: the heaviest mass [kg] of a road vClass's vType (road trains: some 200 t); no rail, ship or aircraft's
 ROAD_MASS_MAX_KG = 1.0e6
-NOT_ROAD_VCLASSES = frozenset({"rail", "rail_urban", "rail_electric", "rail_fast", "tram", "subway", "cable_car", "ship", "aircraft"})
+NOT_ROAD_VCLASSES = frozenset().union(*NON_ROAD_CLASSES.values())  # the vClasses of no road edge
 
 
 def _mass(where: str, key: str, val: str | None, zero: bool = False) -> float | None:
