@@ -52,6 +52,7 @@ def main(argv=None) -> int:
 
     dlog, veh = read_shared(args.data, "jlu_bev_dyno", "jlu-dyno", "jlu_bev")
     terms = dict(roadload_from_specs(veh).terms)
+    terms.pop("grade")  # the dynamometer's flat road load: the study adds the grade itself
     flat, graded = Equation("dyno", dict(terms)), Equation("dyno_grade", dict(terms, grade=1.0))
     dy = measure(dlog, veh, "battery")
     rlog, _ = read_shared(args.data, "jlu_bev_road", "jlu-road", "jlu_bev")

@@ -1323,7 +1323,7 @@ def test_cli_dyno_chain_on_the_published_road_load(tmp_path, capsys):
     ch = load_equation(eq).chain
     assert ch.traction_efficiency == pytest.approx(0.9, rel=0.02)
     assert ch.aux_power_w == pytest.approx(500.0, rel=0.02)
-    assert load_equation(eq).terms == {"acc": 1.0, "v1": 150.0, "v2": 0.0, "v3": 0.35}
+    assert load_equation(eq).terms == {"acc": 1.0, "grade": 1.0, "v1": 150.0, "v2": 0.0, "v3": 0.35}
     veh.write_text(veh.read_text(encoding="utf-8").replace("c_n_per_mps2 = 0.35", "c_n_per_mps2 = -0.35"), encoding="utf-8")
     capsys.readouterr()
     assert cli_main(["calibrate", str(log), "--vehicle", str(veh), "--target", "battery",

@@ -252,7 +252,7 @@ def test_roadload_spec_reads_the_prius_files_road_load_and_names_what_is_missing
     v = load_vehicle("prius2")
     eq = roadload_from_specs(v)
     rl = v.road_load
-    assert eq.terms == {"acc": 1.0, "v1": rl["f0_N"], "v2": rl["f1_N_per_mps"], "v3": rl["f2_N_per_mps2"]}
+    assert eq.terms == {"acc": 1.0, "grade": 1.0, "v1": rl["f0_N"], "v2": rl["f1_N_per_mps"], "v3": rl["f2_N_per_mps2"]}
     f = tmp_path / "car.toml"
     f.write_text('[vehicle]\nname = "car"\nmass_kg = 1330\n[road_load]\na_n = 120.0\nb_n_per_mps = 1.0\n', encoding="utf-8")
     with pytest.raises(UserError) as e:

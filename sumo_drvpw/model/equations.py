@@ -511,11 +511,15 @@ ROAD_LOAD_KEYS = (("a_n", "f0_N"), ("b_n_per_mps", "f1_N_per_mps"), ("c_n_per_mp
 
 def roadload_from_specs(vehicle) -> Equation:
     """The vehicle's published road load as an equation: F = A + B·v + C·v² (coast-down or
-    chassis-dynamometer target coefficients) plus the inertial force m·a.
+    chassis-dynamometer target coefficients) plus the inertial force m·a and the grade
+    force m·g·sin θ.
 
-    P = m·v·a + A·v + B·v² + C·v³: in this basis acc = 1, v1 = A, v2 = B, v3 = C. No grade
-    term (a dynamometer has none; `diagnose` on road logs finds it) and no rotating mass
-    beyond what the test mass carries.
+    P = m·v·a + m·g·v·sin θ + A·v + B·v² + C·v³: in this basis acc = 1, grade = 1, v1 = A,
+    v2 = B, v3 = C. A, B, C are measured on a flat road (or a dynamometer, whose log has no
+    grade: the term is 0 there); on a road the potential energy is exact physics, as in
+    ``vsp_spec`` and the EPA built-ins — without it a chain calibrated on a hilly road log
+    booked the descents' recuperation to nothing (a LeafSpy log in Wales: η_r 0.001 at its
+    bound, 0.47 with it). No rotating mass beyond what the test mass carries.
 
     Parameters
     ----------
@@ -532,8 +536,8 @@ def roadload_from_specs(vehicle) -> Equation:
                         + " (the published A [N], B [N/(m/s)], C [N/(m/s)²])")
     a, b, c = (vehicle.need("road_load", k) for k in got)
     return Equation(name=f"roadload_{vehicle.name}",
-                    terms={"acc": 1.0, "v1": a, "v2": b, "v3": c},
-                    description=f"published road load of {vehicle.name} (A + B·v + C·v², plus m·a)",
+                    terms={"acc": 1.0, "grade": 1.0, "v1": a, "v2": b, "v3": c},
+                    description=f"published road load of {vehicle.name} (A + B·v + C·v², plus m·a and m·g·sin θ)",
                     source=f"vehicle file {vehicle.path} [road_load]", reference_mass_kg=_spec_mass(vehicle))
 
 

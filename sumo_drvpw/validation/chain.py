@@ -53,6 +53,7 @@ def jlu_study(data: Path) -> dict:
     dlog, veh = read_shared(data, "jlu_bev_dyno", "jlu-dyno", "jlu_bev")
     # the published dyno road load, as `--equation roadload_spec` builds it
     terms = dict(roadload_from_specs(veh).terms)
+    terms.pop("grade")  # the dynamometer's flat road load: the study adds the grade itself
     flat = Equation("jlu_dyno_roadload", dict(terms))
     graded = Equation("jlu_dyno_roadload_grade", dict(terms, grade=1.0))
     dy = measure(dlog, veh, "battery")
