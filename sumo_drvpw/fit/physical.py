@@ -62,7 +62,7 @@ from scipy.stats import wilcoxon
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.drivetrain import ETA_INERTIA_MIN, drivetrain_eta, wheel_grade
 from sumo_drvpw.fit.ols import Gram, gram
-from sumo_drvpw.model.constants import RHO_DEFAULT
+from sumo_drvpw.model.constants import FT, RHO_DEFAULT
 
 #: term → (low, high) of the plausible coefficient (see the module table)
 PLAUSIBLE = {"acc": (0.95, 1.4), "grade": (0.9, 1.3), "roll": (0.0, 0.03),
@@ -109,7 +109,8 @@ def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> 
             out[t] = {"coefficient": c, "reads_as": "1/η: share of m·g·v·sin θ (1 at the wheels)", "value": c,
                       "unit": "-", "plausible": ok, "note": "" if ok else (
                           "below 1: the logged grade is attenuated (coarse or smoothed elevation)"
-                          if c < PLAUSIBLE["grade"][0] else "above 1.3: the logged grade is too small")}
+                          if c < PLAUSIBLE["grade"][0] else "above 1.3: the logged grade is too small")
+                      + _foot_hint(c)}
             if (w := wheel_grade(terms)) is not None:   # c·η, η from the inertia by direction
                 out[t]["at_wheels"] = w
         elif t in ("aero", "aero_rho"):
@@ -132,6 +133,25 @@ def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> 
             out[t] = {"coefficient": c, "reads_as": "no physical reading", "value": None, "unit": "",
                       "plausible": None, "note": ""}
     return out
+
+
+#: grade coefficients that read as an elevation in the wrong length unit: ft read as m gives a
+#: grade 1/0.3048 = 3.28 × too steep, so a coefficient near 0.30 (smoothing alone attenuates a
+#: grade to 0.7–0.95); m read as ft, near 3.28
+FOOT_AS_METRE = (0.2, 0.45)
+METRE_AS_FOOT = (2.2, 4.5)
+
+
+def _foot_hint(c: float) -> str:
+    """The note's addition when a grade coefficient ``c`` reads as an elevation (or grade)
+    logged in feet and read as metres, or the reverse; '' otherwise."""
+    if FOOT_AS_METRE[0] <= c <= FOOT_AS_METRE[1]:
+        return (f"; near {FT:g}, the metres per foot: an elevation logged in feet and read as metres "
+                f"makes every grade {1 / FT:.2f} × too steep — check the elevation's unit")
+    if METRE_AS_FOOT[0] <= c <= METRE_AS_FOOT[1]:
+        return (f"; near {1 / FT:.2f}, the feet per metre: an elevation logged in metres and read as feet "
+                f"makes every grade {FT:g} × too flat — check the elevation's unit")
+    return ""
 
 
 #: a free acc coefficient outside this range is no mass factor: the power, the mass or the
