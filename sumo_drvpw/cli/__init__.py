@@ -87,8 +87,6 @@ def add_cold_start(p, during: str) -> None:
 
 def cold_start_override(args, overrides: dict) -> None:
     """Put the cold-start options into the scenario ``overrides`` (``cold_start``: a share)."""
-    from sumo_drvpw.errors import UserError
-
     share = getattr(args, "cold_start_share", None)
     if share is not None and getattr(args, "cold_start", False) and share != 1.0:
         raise UserError(f"--cold-start (every trip starts cold) and --cold-start-share {share:g} say "
@@ -105,7 +103,6 @@ def check_air_temperature(t: float | None) -> None:
     """``--air-temperature`` (``run``, ``export-vtype``): an air a vehicle drives in."""
     if t is None:
         return
-    from sumo_drvpw.errors import UserError
     from sumo_drvpw.sim.scenario_values import AIR_RANGES
 
     lo, hi = AIR_RANGES["temperature_c"]
@@ -116,8 +113,6 @@ def check_air_temperature(t: float | None) -> None:
 def check_period(period: float | None) -> None:
     """``--period`` (``run``, ``fcd``): an edgeData interval."""
     if period is not None and not 0 < period <= 1e9:
-        from sumo_drvpw.errors import UserError
-
         raise UserError(f"--period {period:g}: an edgeData interval is a number of seconds > 0 and at most 1e9")
 
 
@@ -154,13 +149,15 @@ def add_log_options(p) -> None:
 
 
 def add_read_options(p) -> None:
-    """--speed-unit and --negative-speed-tolerance."""
+    """--speed-unit, --negative-speed-tolerance and --flat-road."""
     g = p.add_argument_group("reading drive logs")
     g.add_argument("--speed-unit", choices=("m/s", "km/h", "mph"),
                    help="unit of the logs' speed_mps column (default m/s, checked: speeds whose implied "
                         "accelerations only make sense in km/h are refused; m/s = trust the log)")
     g.add_argument("--negative-speed-tolerance", type=float, default=0.1, metavar="M_S",
                    help="speeds in [-M_S, 0) are standstill noise, clipped to 0 and counted (default 0.1)")
+    g.add_argument("--flat-road", action="store_true", help="read the logs as a flat road: their grade_rad, "
+                   "grade_pct and elevation_m set aside (a phone's GPS altitude that is noise, not the road)")
 
 
 def _add_corrections(p) -> None:
@@ -271,7 +268,11 @@ def read_options(args, equations=()):
     tol = getattr(args, "negative_speed_tolerance", None)
     opt = ReadOptions(speed_unit=getattr(args, "speed_unit", None),
                       negative_speed_tolerance_mps=0.1 if tol is None else tol,
-                      measurement=measurement_options(args, equations), fuel=chains_fuel(equations))
+                      measurement=measurement_options(args, equations), fuel=chains_fuel(equations),
+                      flat_road=bool(getattr(args, "flat_road", False)))
+    if opt.flat_road and getattr(opt.measurement, "grade", "logged") != "logged":
+        raise UserError(f"--flat-road sets the logs' grade aside, the grade source '{opt.measurement.grade}' "
+                        "(--grade-source, or the equations' [measurement]) reads it: give one of them")
     try:
         opt = check_options(opt)
     except UserError as e:
@@ -283,9 +284,8 @@ def read_options(args, equations=()):
     return opt
 
 
-#: share of a log's samples left out as steeper than any road above which its elevation is
-#: read as noise (a phone's GPS altitude: 6.7 % on a flat coastal Torque Pro trip, ±150 m;
-#: none on the shared i3, JLU and Prius logs)
+#: share of a log's samples left out as steeper than any road above which its elevation is read as noise
+#: (a phone's GPS altitude: 6.7 % on a flat coastal Torque Pro trip, ±150 m; none on the i3, JLU, Prius logs)
 NOISY_ELEVATION_SHARE = 0.02
 
 
@@ -340,7 +340,7 @@ def note_counts(counts: dict) -> None:
     if parts:  # trips with no value in a column (in a folder: files without it), as read alone
         print("note: trips with no value in a column, read as a file without it: " + "; ".join(parts))
     grade_by = str((counts.get("measurement") or {}).get("grade", ""))
-    if str(counts.get("grade_source", "")).startswith("none") and grade_by != "accelerometer":
+    if str(counts.get("grade_source", "")).startswith("none (") and grade_by != "accelerometer":
         print("note: the logs carry no grade (no grade_rad, grade_pct or elevation_m values): a flat road "
               "is assumed, so a trip that climbs or descends Δh misses m·g·Δh (1.5 t over 100 m: "
               "0.41 kWh); log the elevation (e.g. GPS altitude) where the routes are not flat")
@@ -361,7 +361,7 @@ def note_counts(counts: dict) -> None:
               f"(source: {counts.get('grade_source', '?')})"
               + (f"; at {100 * share:.1f} % of the samples the elevation is noise, not glitches: its noise is "
                  "in the grade of the samples kept too, booked as climbs and descents (see the grade term's "
-                 "energy share in compare); where the roads are flat, read the logs without elevation_m"
+                 "energy share in compare); where the roads are flat, read the logs as such (--flat-road)"
                  if share >= NOISY_ELEVATION_SHARE else ""))
     n = int(counts.get("grade_elevation_gap_trips", 0) or 0)
     if n:

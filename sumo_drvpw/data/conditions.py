@@ -73,6 +73,8 @@ def source_counts(counts: dict) -> dict:
         g = counts["grade_rows"]
         some = {k: n for k, n in g.items() if _rank(k, "grade_rows") < 3}
         out["grade_source"] = said(some) if some else (
+            "none, set aside: read as a flat road (the logs' grade_rad, grade_pct and elevation_m not used)"
+            if counts.get("grade_set_aside_rows") else
             "none (elevation_m holds no value: flat road assumed)" if counts.get("grade_elevation_column")
             else "none (flat road assumed)")
         n_col = sum(n for k, n in g.items() if _rank(k, "grade_rows") < 2)
@@ -117,6 +119,10 @@ def derive_conditions(df: pd.DataFrame, t: np.ndarray, v: np.ndarray, trip_codes
     g = _pick(df, ("grade_rad", "grade_pct"), trip_codes)
     z_trip = _pick(df, ("elevation_m",), trip_codes, least=2) == 0
     g = np.where((g == 2) & z_trip, 2, np.where(g == 2, 3, g))
+    aside = bool(getattr(opt, "flat_road", False)) and bool((g < 3).any())
+    if aside:  # read as a flat road, as asked: the logged grade and elevation set aside
+        counts["grade_set_aside_rows"] = counts.get("grade_set_aside_rows", 0) + int((g < 3).sum())
+        g = np.full(n, 3)
     theta = np.zeros(n)
     theta = np.where(g == 0, col("grade_rad"), theta)
     theta = np.where(g == 1, np.arctan(col("grade_pct") / 100.0), theta)
@@ -134,7 +140,7 @@ def derive_conditions(df: pd.DataFrame, t: np.ndarray, v: np.ndarray, trip_codes
         f"elevation_m over distance: 1 m grid, {opt.grade_window_m:g} m moving average, gradient",
         "none (flat road assumed)"), g)
     flat = df["trip_id"].to_numpy()[start & (g == 3)]  # a trip without grade is read flat: said
-    if len(flat):
+    if len(flat) and not getattr(opt, "flat_road", False):
         counts["grade_flat_trips"] = [str(x) for x in flat]
 
     # wind
