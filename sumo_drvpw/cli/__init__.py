@@ -292,10 +292,10 @@ NOISY_ELEVATION_SHARE = 0.02
 def say_traction_only(counts: dict) -> None:
     """Warn when the measured power hardly ever goes negative where the car brakes hard
     (:func:`sumo_drvpw.data.measured.braking_counts`)."""
-    from sumo_drvpw.data.measured import BRAKING_PROXY_W, RECUPERATING_W, TRACTION_ONLY_SHARE
+    from sumo_drvpw.data.measured import BRAKING_PROXY_W, RECUPERATING_W, TRACTION_ONLY_MIN_BRAKING, TRACTION_ONLY_SHARE
 
     n, k = int(counts.get("braking_samples", 0) or 0), int(counts.get("braking_recuperating", 0) or 0)
-    if n >= 50 and k < TRACTION_ONLY_SHARE * n:
+    if n >= TRACTION_ONLY_MIN_BRAKING and k < TRACTION_ONLY_SHARE * n:
         print(f"warning: the measured power is below {RECUPERATING_W / 1000:g} kW in only {k} of {n} samples "
               f"where the car brakes (m·v·(a + g·sin θ) below {BRAKING_PROXY_W / 1000:g} kW): the log records "
               "traction only (a motor power or engine estimate that is never negative), not what braking "

@@ -186,6 +186,10 @@ BRAKING_PROXY_W = -10000.0
 RECUPERATING_W = -1000.0
 #: share of braking samples that recuperate below which a log records traction only
 TRACTION_ONLY_SHARE = 0.02
+#: braking samples a log needs for that verdict: a signed power recuperates in most of them
+#: (a LeafSpy log's battery V·I in 17 of 25, 17-s samples; its never-negative motor power
+#: in 0 of 17), so none of ten is no chance
+TRACTION_ONLY_MIN_BRAKING = 10
 
 
 def braking_counts(x: Inputs, p, usable) -> dict:
