@@ -189,6 +189,10 @@ def say_constrained(eq, phys) -> None:
     terms = ", ".join(f"{t} {c:.4g}" + (" (at its bound)" if t in active else "") for t, c in eq.terms.items())
     fit = "" if r2 is None else f"R² = {r2:.4f}" + ("" if free is None else f" (free fit {free:.4f})") + "; "
     print(f"written, physically constrained: {fit}{terms}")
+    still = {t: r for t, r in phys.get("reading", {}).items() if r.get("plausible") is False}
+    if still:  # a bound the constraints do not set (acc and roll have none above)
+        print("warning: implausible as written, beyond what the constraints bound: "
+              + "; ".join(f"{t} = {eq.terms[t]:.4g} ({r['note']})" for t, r in still.items()))
     if r2 is not None and r2 < 0:
         print(f"warning: the constrained equation explains less of the measured power than its mean does "
               f"(R² {r2:.3f}): the physics do not fit these data — check what the power column measures "

@@ -62,7 +62,7 @@ from scipy.stats import wilcoxon
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.drivetrain import ETA_INERTIA_MIN, drivetrain_eta, wheel_grade
 from sumo_drvpw.fit.ols import Gram, gram
-from sumo_drvpw.model.constants import FT, RHO_DEFAULT
+from sumo_drvpw.model.constants import FT, KMH, MPH, RHO_DEFAULT
 
 #: term → (low, high) of the plausible coefficient (see the module table)
 PLAUSIBLE = {"acc": (0.95, 1.4), "grade": (0.9, 1.3), "roll": (0.0, 0.03),
@@ -96,7 +96,8 @@ def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> 
             out[t] = {"coefficient": c, "reads_as": "mass factor", "value": c, "unit": "-",
                       "plausible": ok, "note": "" if ok else (
                           "below 1: a lag between power and speed or a smoothed speed absorbed"
-                          if c < PLAUSIBLE["acc"][0] else "above 1.4: more rotating mass than a car has")}
+                          if c < PLAUSIBLE["acc"][0] else "above 1.4: more rotating mass than a car has"
+                          + _mph_hint(c))}
         elif t == "acc_pos" and "acc" in terms:
             eta = (drivetrain_eta(terms) or (math.nan,))[0]
             ok = ETA_INERTIA_MIN <= eta <= 1.0
@@ -140,6 +141,20 @@ def physical_reading(terms: dict[str, float], rho_kgm3: float = RHO_DEFAULT) -> 
 #: grade to 0.7–0.95); m read as ft, near 3.28
 FOOT_AS_METRE = (0.2, 0.45)
 METRE_AS_FOOT = (2.2, 4.5)
+
+
+#: acc coefficients that read as a speed in mph read as km/h: m·v·a then falls by 1/1.609²,
+#: so a mass factor of 1.0–1.2 reads 2.6–3.1
+MPH_AS_KMH = (2.2, 3.4)
+
+
+def _mph_hint(c: float) -> str:
+    """The acc note's addition when ``c`` reads as a speed logged in mph and read as km/h."""
+    if MPH_AS_KMH[0] <= c <= MPH_AS_KMH[1]:
+        k = MPH / KMH
+        return (f"; near {k * k:.2f} (× the mass factor), the square of {k:.4g} km per mile: a speed "
+                "logged in mph and read as km/h — check the speed's unit")
+    return ""
 
 
 def _foot_hint(c: float) -> str:
