@@ -223,9 +223,7 @@ def measurement_options(args, equations=()):
     from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
 
     found = {}
-    for spec in equations or ():
-        if spec in SPEC_EQUATIONS:
-            continue
+    for spec in (s for s in equations or () if s not in SPEC_EQUATIONS):
         eq = load_equation(spec)
         if eq.measurement is not None and not eq.measurement.identity:
             found[spec] = eq.measurement
@@ -236,7 +234,8 @@ def measurement_options(args, equations=()):
                         f"({'; '.join(f'{k}: {v.describe()}' for k, v in found.items())}); give "
                         "--power-lag / --grade-source / --air-density to choose one")
     meas = next(iter(found.values()))
-    print(f"note: logs corrected as the [measurement] of {', '.join(found)} declares: {meas.describe()}")
+    print(f"note: logs corrected as the [measurement] of {', '.join(found)} declares: {meas.describe()} (corrections "
+          "given on the command line replace it: --grade-source logged reads the logs as they are)")
     return meas
 
 
