@@ -13,6 +13,8 @@ Mapping file::
     skip_rows = 2             # CSV lines before the header (an app's title lines; default 0)
     time_step_s = 1.0         # a table without a time column: its rows follow at this step
                               # [s] (time_s = data row × step; then time_s is not mapped)
+    trip_gap_s = 600          # a pause in logging longer than this [s] ends a trip: its parts
+                              # are trips <trip>_1, <trip>_2, … (a day's log of an app)
 
     [columns."Speed"]         # source column label
     name = "speed_mps"        # canonical or extra name; the suffix must fit the unit
@@ -58,7 +60,7 @@ from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
 OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped",
-           "skip_rows", "dbc", "mdf_trips", "isotp_layout", "soc_capacity_kwh", "time_step_s"}
+           "skip_rows", "dbc", "mdf_trips", "isotp_layout", "soc_capacity_kwh", "time_step_s", "trip_gap_s"}
 #: lines of a CSV searched for a mapped label that is not in the header (the hint of the error)
 HEADER_SEARCH_LINES = 50
 #: the largest battery options.soc_capacity_kwh accepts [kWh] (a heavy truck's is about 1 MWh)
@@ -204,6 +206,10 @@ def _options(p: Path, doc: dict) -> dict:
         raise UserError(f"{p}: options.time_step_s must be the seconds between a table's rows (> 0, "
                         f"≤ {MAX_MEDIAN_STEP_S:g}: driving power needs samples seconds apart at most), "
                         f"got {step!r}")
+    gap = opts.get("trip_gap_s")
+    if gap is not None and (isinstance(gap, bool) or not isinstance(gap, (int, float)) or not 0 < gap < 1e9):
+        raise UserError(f"{p}: options.trip_gap_s must be the seconds of a pause in logging that ends a "
+                        f"trip (> 0; e.g. 600: a car parked between two drives), got {gap!r}")
     na = opts.get("na_values", ["-", ""])
     if isinstance(na, str):
         na = [na]
@@ -214,7 +220,8 @@ def _options(p: Path, doc: dict) -> dict:
             "mdf_trips": _choice(p, opts, "mdf_trips", ("file", "folder")),
             "isotp_layout": _choice(p, opts, "isotp_layout", ISOTP_LAYOUTS),
             "soc_capacity_kwh": None if cap is None else float(cap),
-            "time_step_s": None if step is None else float(step)}
+            "time_step_s": None if step is None else float(step),
+            "trip_gap_s": None if gap is None else float(gap)}
 
 
 def _choice(p: Path, opts: dict, key: str, allowed: tuple[str, ...]) -> str:
@@ -557,8 +564,35 @@ def read(paths, columns):
         frames, reports = read_each(groups, lambda p: mdf.read_file(p, m, groups[p]))
     else:
         frames, reports = read_each(files, lambda f: read_file(f, m))
+    if m["trip_gap_s"] is not None:  # (before the SOC's energy: a pause's charging is no trip's)
+        frames = [split_at_pauses(f, r, m["trip_gap_s"]) for f, r in zip(frames, reports)]
     if m["soc_capacity_kwh"] is not None:  # the battery's energy estimated from its SOC
         from sumo_drvpw.data.counters import soc_counters
 
         frames = [soc_counters(f, r, m["soc_capacity_kwh"]) for f, r in zip(frames, reports)]
     return frames, reports, [f"mapping {m['path']}"]
+
+
+def split_at_pauses(df: pd.DataFrame, rep: dict, gap_s: float) -> pd.DataFrame:
+    """A trip whose logging pauses longer than ``gap_s`` [s] (a day's log of an app that runs
+    while the car is parked between drives) split there: its parts named ``<trip>_1``,
+    ``<trip>_2``, … (per-trip energies, held-out folds and trip signatures take a trip as
+    one drive); said in the file's notes. Trips without such a pause keep their id."""
+    if df.empty:
+        return df
+    trip = df["trip_id"].astype(str).to_numpy()
+    t = df["time_s"].to_numpy(float)
+    same = np.r_[False, trip[1:] == trip[:-1]]
+    pause = same & (np.r_[0.0, np.diff(t)] > gap_s)
+    if not pause.any():
+        return df
+    part = pd.Series(pause.astype(int)).groupby(trip, sort=False).cumsum().to_numpy() + 1
+    split = pd.Series(pause).groupby(trip, sort=False).transform("any").to_numpy()
+    df = df.copy()
+    df["trip_id"] = np.where(split, pd.Series(trip).str.cat(part.astype(str), sep="_").to_numpy(), trip)
+    longest = float(np.max(np.diff(t)[pause[1:]]))
+    rep["notes"].append(f"{int(pause.sum())} pause(s) in logging longer than options.trip_gap_s = {gap_s:g} s "
+                        f"(the longest {longest:.0f} s) split {len(set(trip[split]))} trip(s) into "
+                        f"{len(set(df['trip_id'][split]))}: each part a trip of its own")
+    rep["trip_id"] = ",".join(map(str, pd.unique(df["trip_id"])))
+    return df
