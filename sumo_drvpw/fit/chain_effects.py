@@ -48,14 +48,136 @@ class Cand:
         self.grid = self.grid or len(self.variants)
 
 
-def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = None) -> list[Cand]:
-    """Physical candidates for the chain of ``equation`` on the samples ``idx``; logged loads:
-    columns of role load, or named by ``opt.include`` (a column of unknown role too), less
-    those ``opt.exclude`` names; those left out, and why, go into ``left_out``."""
+def _load_columns(m, ch, opt) -> list:
+    """Logged loads the chain may lack: columns of role load, or named by ``opt.include``,
+    not among the chain's loads, in the order of the log's signals."""
     from sumo_drvpw.data.roles import of_log
 
+    roles = of_log(m.log)
+    inc = tuple(getattr(opt, "include", ()) or ())
+    return [col for col in (m.inputs.signals or {}) if col not in ch.loads and (
+        any(fnmatch.fnmatchcase(col, g) for g in inc) or roles.get(col, {}).get("role") == "load")]
+
+
+def offer_stats(m, equation: Equation, p, idx, opt=None, braking: bool = True) -> dict:
+    """What decides which candidates :func:`candidates` offers, as counts, extremes and
+    flags over the samples ``idx`` (of ``m``, driving power ``p`` [W]); of several batches
+    of whole trips merged by :func:`merge_offer` (``braking``: keep the braking powers the
+    recuperation limits are quantiles of; the streamed tracer keeps its first-look sample's)."""
     from sumo_drvpw.fit.chain_linear import gains
 
+    ch = equation.chain
+    x = m.inputs.with_mass(equation.mass_kg) if equation.mass_kg else m.inputs
+    v, pp = x.v[idx], p[idx]
+    sig = m.inputs.signals or {}
+    th = np.asarray(x.theta, float)[idx]
+    th = th[np.isfinite(th)]
+    brake = -pp[pp < 0]
+    st = {"n": int(idx.size), "theta": [float(th.min()), float(th.max())] if th.size else [np.inf, -np.inf],
+          "standing": int(np.sum(v < STANDSTILL_MPS)), "brake_n": int(brake.size),
+          "brake_max": float(brake.max()) if brake.size else -np.inf, "brake": [brake] if braking else [],
+          "fuel_cut": {}, "ambient": None, "loads": {}}
+    if ch.predicts == "fuel" and ch.fuel_cut_below_w is None and ch.idle_fuel_power_w > 0:
+        s = {k: np.asarray(a)[idx] for k, a in sig.items()}
+        st["fuel_cut"] = {c: [n, bool(np.any(col != 0))] for c, n, col in _fuel_cut_counts(ch, pp, v, s)}
+    if "ambient_c" in sig:
+        col = ch.temperature_column
+        _, ga = gains(ch, pp, v, {col: np.asarray(sig[col])[idx]} if col in sig else None)
+        t = np.asarray(sig["ambient_c"], float)[idx]
+        fin = t[np.isfinite(t)]
+        st["ambient"] = {"bad": int(t.size - fin.size), "lo": float(fin.min()) if fin.size else np.inf,
+                         "hi": float(fin.max()) if fin.size else -np.inf,
+                         "heat": bool(np.any(ga * np.maximum(HVAC_SETPOINT_C - t, 0.0) > 0)),
+                         "cool": bool(np.any(ga * np.maximum(t - HVAC_SETPOINT_C, 0.0) > 0))}
+    for col in _load_columns(m, ch, opt):
+        L = np.asarray(sig[col], float)[idx]
+        fin = L[np.isfinite(L)]
+        st["loads"][col] = [int(L.size - fin.size), float(fin.min()) if fin.size else np.inf,
+                            float(fin.max()) if fin.size else -np.inf]
+    return st
+
+
+def merge_offer(a: dict | None, b: dict) -> dict:
+    """Two :func:`offer_stats` of disjoint samples as one (a column a batch lacks: unknown there)."""
+    if a is None:
+        return b
+    lo_hi = lambda x, y: [min(x[0], y[0]), max(x[1], y[1])]  # noqa: E731
+    out = {"n": a["n"] + b["n"], "theta": lo_hi(a["theta"], b["theta"]), "standing": a["standing"] + b["standing"],
+           "brake_n": a["brake_n"] + b["brake_n"], "brake_max": max(a["brake_max"], b["brake_max"]),
+           "brake": a["brake"] + b["brake"],
+           "fuel_cut": {c: [a["fuel_cut"].get(c, [0, False])[0] + b["fuel_cut"].get(c, [0, False])[0],
+                            a["fuel_cut"].get(c, [0, False])[1] or b["fuel_cut"].get(c, [0, False])[1]]
+                        for c in dict.fromkeys([*a["fuel_cut"], *b["fuel_cut"]])}}
+    amb = [x["ambient"] or {"bad": x["n"], "lo": np.inf, "hi": -np.inf, "heat": False, "cool": False}
+           for x in (a, b)]
+    out["ambient"] = None if a["ambient"] is None and b["ambient"] is None else {
+        "bad": amb[0]["bad"] + amb[1]["bad"], "lo": min(amb[0]["lo"], amb[1]["lo"]),
+        "hi": max(amb[0]["hi"], amb[1]["hi"]), "heat": amb[0]["heat"] or amb[1]["heat"],
+        "cool": amb[0]["cool"] or amb[1]["cool"]}
+    out["loads"] = {}
+    for col in dict.fromkeys([*a["loads"], *b["loads"]]):
+        x, y = (s["loads"].get(col, [s["n"], np.inf, -np.inf]) for s in (a, b))
+        out["loads"][col] = [x[0] + y[0], min(x[1], y[1]), max(x[2], y[2])]
+    return out
+
+
+def decide(st: dict, equation: Equation, opt=None, left_out: dict | None = None) -> dict:
+    """Which candidates are offered (and at which grid values) from :func:`offer_stats`;
+    those left out, and why, go into ``left_out``."""
+    ch = equation.chain
+    left_out = {} if left_out is None else left_out
+    n = max(st["n"], 1)
+    d = {"grade": "grade" not in equation.terms and st["theta"][1] > st["theta"][0],
+         "fuel_cut": [c for c in FUEL_CUT_GRID_W if c in st["fuel_cut"]
+                      and st["fuel_cut"][c][0] >= FUEL_CUT_MIN_SAMPLES and st["fuel_cut"][c][1]],
+         "standstill": 0.01 < st["standing"] / n < 0.99, "limits": [], "hvac": None, "loads": []}
+    lim0 = np.inf if ch.recuperation_limit_w is None else ch.recuperation_limit_w
+    if ch.predicts == "battery" and st["brake_n"] > 50 and ch.motor is None:
+        brake = np.concatenate(st["brake"]) if st["brake"] else np.zeros(0)
+        qs = sorted({float(np.quantile(brake, q)) for q in LIMIT_QUANTILES if np.quantile(brake, q) < lim0}) \
+            if brake.size else []
+        d["limits"] = [L for L in qs if L > 0]
+        d["limit_top"] = float(min(st["brake_max"], lim0))
+    amb = st["ambient"]
+    if ch.hvac is None and amb is None:  # said, so a log's own temperature is mapped to it
+        left_out["ambient_c"] = ("no such column: the hvac candidate reads the air temperature as ambient_c "
+                                 "(map the log's to it)")
+    if ch.hvac is None and amb is not None:
+        if not (amb["bad"] == 0 and amb["hi"] > amb["lo"]):
+            left_out["ambient_c"] = ("the hvac candidate needs the air temperature on every sample, varying: "
+                                     + ("constant" if amb["bad"] == 0 else
+                                        f"no number on {amb['bad'] / n:.1%} of the samples"))
+        else:
+            d["hvac"] = tuple(k for k, on in enumerate((amb["heat"], amb["cool"])) if on)
+    inc, exc = tuple(getattr(opt, "include", ()) or ()), tuple(getattr(opt, "exclude", ()) or ())
+    for col, (bad, lo, hi) in st["loads"].items():
+        named = any(fnmatch.fnmatchcase(col, g) for g in inc)
+        if any(fnmatch.fnmatchcase(col, g) for g in exc):
+            left_out[col] = "excluded (exclude option)"
+        elif inc and not named:
+            left_out[col] = "not among the offered columns (signals option)"
+        elif bad:
+            left_out[col] = (f"no number on {bad / n:.1%} of the samples: a load of the chain "
+                             "needs one on every sample")
+        elif not hi > lo:
+            left_out[col] = "constant (the auxiliary power carries a constant load)"
+        else:
+            d["loads"].append(col)
+    return d
+
+
+def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = None,
+               decided: dict | None = None) -> list[Cand]:
+    """Physical candidates for the chain of ``equation`` on the samples ``idx``; logged loads:
+    columns of role load, or named by ``opt.include`` (a column of unknown role too), less
+    those ``opt.exclude`` names; those left out, and why, go into ``left_out``. Which are
+    offered is :func:`decide`'s, on these samples' :func:`offer_stats` or ``decided`` (of
+    all batches: the same candidates on each)."""
+    from sumo_drvpw.fit.chain_linear import gains
+
+    left_out = {} if left_out is None else left_out
+    if decided is None:
+        decided = decide(offer_stats(m, equation, p, idx, opt), equation, opt, left_out)
     ch = equation.chain
     x = m.inputs.with_mass(equation.mass_kg) if equation.mass_kg else m.inputs
     v = x.v[idx]
@@ -63,7 +185,7 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
     col, sig = ch.temperature_column, m.inputs.signals or {}
     gw, ga = gains(ch, pp, v, {col: np.asarray(sig[col])[idx]} if col in sig else None)
     out = []
-    if "grade" not in equation.terms and np.nanstd(x.theta[idx]) > 0:
+    if decided["grade"]:
         g = term_matrix(["grade"], x.take(idx))[:, 0]
         out.append(Cand("grade", "road grade m·g·v·sin θ through the chain (the declared road load has no grade "
                         "term: calibrated where the road is flat, e.g. on a dynamometer); coefficient 1 (potential "
@@ -71,28 +193,25 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
                         [(None, gw * g, 1.0)]))
     out.append(Cand("aux_power_w", "constant auxiliary power at the battery/engine the declared chain lacks",
                     "structural", "W", [(np.column_stack([ga]), None, None)]))
-    if ch.predicts == "fuel" and ch.fuel_cut_below_w is None and ch.idle_fuel_power_w > 0:
-        cut = _fuel_cut_columns(ch, pp, v, {k: np.asarray(a)[idx] for k, a in sig.items()})
-        if cut:
-            out.append(Cand("fuel_cut_below_w", "overrun fuel cut-off: moving with a driving power below the "
-                            "cut-off, the wheels turn the engine and its injection is cut (profiled over "
-                            f"{', '.join(f'{c / 1000:g}' for c in FUEL_CUT_GRID_W)} kW)", "structural", "W", cut))
+    if decided["fuel_cut"]:
+        s = {k: np.asarray(a)[idx] for k, a in sig.items()}
+        cut = [(None, col, c) for c, _, col in _fuel_cut_counts(ch, pp, v, s, decided["fuel_cut"])]
+        out.append(Cand("fuel_cut_below_w", "overrun fuel cut-off: moving with a driving power below the "
+                        "cut-off, the wheels turn the engine and its injection is cut (profiled over "
+                        f"{', '.join(f'{c / 1000:g}' for c in FUEL_CUT_GRID_W)} kW)", "structural", "W", cut))
     if ch.predicts == "battery":  # (SUMO's MMPEVEM motor has no η_t, η_r or limit of that kind: not offered)
-        st = (v < STANDSTILL_MPS).astype(float)
-        if 0.01 < st.mean() < 0.99:
+        if decided["standstill"]:
+            st = (v < STANDSTILL_MPS).astype(float)
             out.append(Cand("standstill_aux_w", "auxiliary power while standing (v < 0.1 m/s): HVAC, 12 V, "
                             "pumps of a waiting car", "structural", "W", [(np.column_stack([st]), None, None)]))
         eta_r = _eta(ch.recuperation_efficiency, v, pp)
         lim0 = np.inf if ch.recuperation_limit_w is None else ch.recuperation_limit_w
-        brake = -pp[pp < 0]
-        if brake.size > 50 and ch.motor is None:
-            qs = sorted({float(np.quantile(brake, q)) for q in LIMIT_QUANTILES if np.quantile(brake, q) < lim0})
+        if decided["limits"]:
             col = lambda L: eta_r * (np.maximum(pp, -L) - np.maximum(pp, -lim0))  # noqa: E731
-            var = [(None, col(L), L) for L in qs if L > 0]
-            if var:
-                out.append(Cand("recuperation_limit_w", "a recuperation limit: braking power beyond it goes to the "
-                                "friction brakes (profiled over quantiles of the braking power, refined between "
-                                "them)", "structural", "W", var, profile=(col, float(min(brake.max(), lim0)))))
+            out.append(Cand("recuperation_limit_w", "a recuperation limit: braking power beyond it goes to the "
+                            "friction brakes (profiled over quantiles of the braking power, refined between "
+                            "them)", "structural", "W", [(None, col(L), L) for L in decided["limits"]],
+                            profile=(col, decided["limit_top"])))
         if not isinstance(ch.recuperation_efficiency, Table) and ch.motor is None:
             rec = eta_r * np.maximum(np.minimum(pp, 0.0), -lim0)
             out.append(Cand("recuperation_efficiency", "recuperation efficiency differs from the declared chain's",
@@ -102,41 +221,17 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
         out.append(Cand("traction_efficiency", "traction efficiency differs from the declared chain's",
                         "structural", "-", [(np.column_stack([tra]), None, None)]))
     sig = x.signals
-    roles = of_log(m.log)
-    left_out = {} if left_out is None else left_out
-    if ch.hvac is None and "ambient_c" not in sig:  # said, so a log's own temperature is mapped to it
-        left_out["ambient_c"] = ("no such column: the hvac candidate reads the air temperature as ambient_c "
-                                 "(map the log's to it)")
-    if ch.hvac is None and "ambient_c" in sig:
+    if decided["hvac"] is not None:
         t = np.asarray(sig["ambient_c"], float)[idx]
-        if not (np.all(np.isfinite(t)) and np.std(t) > 0):
-            left_out["ambient_c"] = ("the hvac candidate needs the air temperature on every sample, varying: "
-                                     + ("constant" if np.all(np.isfinite(t)) else
-                                        f"no number on {np.mean(~np.isfinite(t)):.1%} of the samples"))
-        else:
-            c = [ga * np.maximum(HVAC_SETPOINT_C - t, 0.0), ga * np.maximum(t - HVAC_SETPOINT_C, 0.0)]
-            keep = [k for k in range(2) if np.any(c[k] > 0)]
-            out.append(Cand("hvac", f"heating/cooling power over the ambient temperature (set-point "
-                            f"{HVAC_SETPOINT_C:g} °C)", "condition", "W/K",
-                            [(np.column_stack([c[k] for k in keep]), None, tuple(keep))]))
-    inc, exc = tuple(getattr(opt, "include", ()) or ()), tuple(getattr(opt, "exclude", ()) or ())
-    for col in sig:
-        named = any(fnmatch.fnmatchcase(col, g) for g in inc)
-        if col in ch.loads or not (named or roles.get(col, {}).get("role") == "load"):
-            continue
+        keep = decided["hvac"]
+        c = [ga * np.maximum(HVAC_SETPOINT_C - t, 0.0), ga * np.maximum(t - HVAC_SETPOINT_C, 0.0)]
+        out.append(Cand("hvac", f"heating/cooling power over the ambient temperature (set-point "
+                        f"{HVAC_SETPOINT_C:g} °C)", "condition", "W/K",
+                        [(np.column_stack([c[k] for k in keep]), None, tuple(keep))]))
+    for col in decided["loads"]:
         L = np.asarray(sig[col], float)[idx]
-        if any(fnmatch.fnmatchcase(col, g) for g in exc):
-            left_out[col] = "excluded (exclude option)"
-        elif inc and not named:
-            left_out[col] = "not among the offered columns (signals option)"
-        elif not np.all(np.isfinite(L)):
-            left_out[col] = (f"no number on {np.mean(~np.isfinite(L)):.1%} of the samples: a load of the chain "
-                             "needs one on every sample")
-        elif np.std(L) == 0:
-            left_out[col] = "constant (the auxiliary power carries a constant load)"
-        else:
-            out.append(Cand(f"loads.{col}", f"logged load '{col}' the declared chain lacks", "load", "W/W",
-                            [(np.column_stack([ga * L]), None, None)]))
+        out.append(Cand(f"loads.{col}", f"logged load '{col}' the declared chain lacks", "load", "W/W",
+                        [(np.column_stack([ga * L]), None, None)]))
     skip = set(getattr(opt, "skip_effects", ()) or ())
     for c in out:
         if c.name in skip:
@@ -208,20 +303,20 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
 
 
 
-def _fuel_cut_columns(ch, p, v, signals) -> list:
-    """Variants (None, column, cut-off) of the overrun fuel cut-off: the fuel chain's
-    prediction with the cut-off at each power of :data:`FUEL_CUT_GRID_W` less its
-    prediction without (≤ 0), where enough moving samples lie below that power."""
+def _fuel_cut_counts(ch, p, v, signals, grid=None) -> list:
+    """(cut-off, moving samples below it, column) of the overrun fuel cut-off at each power of
+    :data:`FUEL_CUT_GRID_W` with a moving sample below it, or at each of ``grid``: the fuel
+    chain's prediction with the cut-off less its prediction without (≤ 0)."""
     import dataclasses
 
     base = ch.evaluate(p, v, signals=signals)["power_w"]
     moving = v > STANDSTILL_MPS
     out = []
-    for c in FUEL_CUT_GRID_W:
-        if int(np.sum(moving & (p < c))) >= FUEL_CUT_MIN_SAMPLES:
-            col = dataclasses.replace(ch, fuel_cut_below_w=c).evaluate(p, v, signals=signals)["power_w"] - base
-            if np.any(col != 0):
-                out.append((None, col, c))
+    for c in FUEL_CUT_GRID_W if grid is None else grid:
+        n = int(np.sum(moving & (p < c)))
+        if n or grid is not None:
+            out.append((c, n, dataclasses.replace(ch, fuel_cut_below_w=c).evaluate(p, v, signals=signals)["power_w"]
+                        - base))
     return out
 
 
@@ -261,35 +356,40 @@ def seen_candidates(cands: list, see) -> list:
 
 
 def best_variant(w, Z, t, c: Cand, rows=slice(None)) -> int:
-    """The variant of a candidate with the smallest weighted RSS of t − fixed ~ Z on ``rows``.
-
-    A candidate with a ``profile`` is refined: the best grid point's parameter is searched
-    between its neighbours (bounded scalar search, to 0.5 % of it; a parameter's RSS is
-    continuous in it), and a better parameter is appended as a variant of its own.
-    """
-    from scipy.optimize import minimize_scalar
-
-    from sumo_drvpw.fit.chain_linear import _full_fit
+    """The variant of a candidate with the smallest weighted RSS of t − fixed ~ Z on ``rows``
+    (:func:`refine`; a refined parameter is appended as a variant of its own)."""
+    from sumo_drvpw.fit.chain_blocks import full_fit
 
     if len(c.variants) == 1 and c.profile is None:
         return 0
-    rss = lambda col: _full_fit(w[rows], Z[rows], (t - col)[rows])[2]  # noqa: E731
+    rss = lambda col: full_fit(w[rows], Z[rows], (t - col)[rows])[2]  # noqa: E731
+    i, L = refine(c, [rss(v[1]) for v in c.variants[:c.grid]], lambda L: rss(c.profile[0](L)))
+    if L is None:
+        return i
+    c.variants.append((None, c.profile[0](L), L))
+    return len(c.variants) - 1
+
+
+def refine(c: Cand, scores: list, rss_at) -> tuple[int, float | None]:
+    """(the best grid variant of ``c`` by its RSS ``scores``, None); for a candidate with a
+    ``profile``, its parameter searched between the best grid point's neighbours (bounded
+    scalar search of ``rss_at(parameter)``, to 0.5 % of it; a parameter's RSS is continuous in
+    it): (that variant, the better parameter) when it beats the grid."""
+    from scipy.optimize import minimize_scalar
+
     grid = c.variants[:c.grid]
-    scores = [rss(v[1]) for v in grid]
     i = int(np.argmin(scores))
     if c.profile is None:
-        return i
-    col, top = c.profile
+        return i, None
+    top = c.profile[1]
     lo = grid[i - 1][2] if i > 0 else 0.5 * grid[0][2]
     hi = grid[i + 1][2] if i + 1 < len(grid) else top
     if not hi > lo:
-        return i
-    res = minimize_scalar(lambda L: rss(col(L)), bounds=(lo, hi), method="bounded",
-                          options={"xatol": 0.005 * grid[i][2]})
+        return i, None
+    res = minimize_scalar(rss_at, bounds=(lo, hi), method="bounded", options={"xatol": 0.005 * grid[i][2]})
     if not res.fun < scores[i]:
-        return i
-    c.variants.append((None, col(float(res.x)), float(res.x)))
-    return len(c.variants) - 1
+        return i, None
+    return i, float(res.x)
 
 
 def _flat(d: dict, pre: str = "") -> dict:

@@ -59,7 +59,6 @@ counters sees the model as they book it (:func:`~sumo_drvpw.fit.chain_effects.th
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass
 
@@ -68,13 +67,15 @@ import numpy as np
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import chain_target
 from sumo_drvpw.fit.compare import metrics as _metrics, trip_net_energy
-from sumo_drvpw.fit.diagnose.options import check_validation, stop_reason
+from sumo_drvpw.fit.diagnose.options import check_validation
 from sumo_drvpw.model.chain import EnergyChain
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import term_matrix
-from sumo_drvpw.fit.chain_effects import (_eta as _eff, apply, best_variant, candidates as _candidates, mark_changed,
-                                          seen_candidates, through_counters)
+from sumo_drvpw.fit.chain_blocks import Blocks, full_fit, heldout
+from sumo_drvpw.fit.chain_effects import (_eta as _eff, best_variant, candidates as _candidates, seen_candidates,
+                                          through_counters)
+from sumo_drvpw.fit.chain_search import close, fold_equations, report_doc, rms, search
 
 METRIC_KEYS = ("rmse_w", "mae_w", "r2", "bias_w")
 
@@ -170,123 +171,61 @@ def linearised_columns(equation: Equation, inputs) -> tuple[dict, np.ndarray]:
     return cols, off
 
 
-# ------------------------------------------------------------------ block statistics
+# ------------------------------------------------------------------ the samples in memory
 
-class _Blocks:
-    """Per-block weighted sufficient statistics of the residual r and model columns."""
+class _Memory:
+    """The search's engine on every sample's columns (:mod:`sumo_drvpw.fit.chain_search`)."""
 
-    def __init__(self, r, w, trip, t, opt: ChainTraceOptions):
-        self.r, self.w, self.block_s = r, w, opt.block_s
-        n = r.size
-        t0 = np.zeros(n)
-        codes, first = np.unique(trip, return_index=True)
-        t0 = np.asarray(t)[first][np.searchsorted(codes, trip)]
-        key = trip.astype(np.int64) * 10**7 + np.floor((np.asarray(t) - t0) / opt.block_s).astype(np.int64)
-        self.starts = np.r_[0, np.flatnonzero(np.diff(key) != 0) + 1]
-        self.block_trip = trip[self.starts]
-        nb = self.starts.size
-        self.n_blocks = nb
-        n_trips = int(trip.max()) + 1
-        present = np.unique(trip)
-        if opt.validation == "trip" and present.size < 3:
-            raise UserError(f"diagnose option validation 'trip' needs ≥ 3 trips, got {present.size}")
-        if present.size >= 3 and opt.validation != "blocks":
-            k = present.size if present.size <= 10 else opt.folds
-            fmap = np.zeros(n_trips, np.int64)
-            fmap[present] = np.arange(present.size) % k
-            self.fold = fmap[self.block_trip]
-            self.how = (f"{'leave-one-trip-out' if k == present.size else f'{k}-fold over whole trips'} "
-                        f"({present.size} trips)")
-        else:
-            j = np.zeros(nb, np.int64)
-            for tr in present:  # block number within its trip
-                b = np.flatnonzero(self.block_trip == tr)
-                j[b] = np.arange(b.size)
-            self.fold = j % opt.folds
-            self.how = f"{opt.folds}-fold interleaved {opt.block_s:g}-s blocks within trips"
-        self.K = int(self.fold.max()) + 1
+    def __init__(self, bl: Blocks, w, r, pred0):
+        self.bl, self.w, self.r = bl, w, r
+        self.sw = float(w.sum())
+        self.e_pred = float(np.sum(w * pred0))
 
-    def sums(self, x):
-        return np.add.reduceat(x, self.starts, axis=0)
+    def cols(self, acc):
+        """(Z, fixed) of the model ``acc``."""
+        n = self.r.size
+        Z, fx = np.zeros((n, 0)), np.zeros(n)
+        for c, vi in acc:
+            var = c.variants[vi]
+            if var[0] is not None:
+                Z = np.column_stack([Z, var[0]])
+            if var[1] is not None:
+                fx = fx + var[1]
+        return Z, fx
 
-    def sample_fold(self, n):
-        return np.repeat(self.fold, np.diff(np.r_[self.starts, n]))
+    def score(self, acc, pool):
+        Z, fx = self.cols(acc)
+        out = []
+        for c in pool:
+            if c is None:
+                t_v, Zc = [self.r - fx], Z
+            elif c.variants[0][0] is None:       # a fixed column profiled over its parameter
+                t_v, Zc = [self.r - fx - v[1] for v in c.variants[:c.grid]], Z
+            else:
+                t_v, Zc = [self.r - fx], np.column_stack([Z, c.variants[0][0]])
+            out.append(heldout(self.bl, Zc, t_v)[:2])
+        return out
 
-    def stats(self, Z, t):
-        """Per-block weighted ZᵀZ (B×q×q), Zᵀt (B×q), tᵀt (B)."""
-        w = self.w
-        nb, q = self.n_blocks, Z.shape[1]
-        zz = np.empty((nb, q, q))
-        for i in range(q):  # column pairs: memory O(n), not O(n·q²)
-            wz = w * Z[:, i]
-            for j in range(i, q):
-                zz[:, i, j] = zz[:, j, i] = self.sums(wz * Z[:, j])
-        return zz, self.sums(w[:, None] * Z * t[:, None]), self.sums(w * t * t)
+    def _rows(self, fold):
+        return slice(None) if fold is None else self.bl.sample_fold(self.r.size) != fold
 
-    def energy(self, Z, t):
-        """Per-block Σ w·Z (B×q) and Σ w·t (B): block energies [J] of columns and target."""
-        return self.sums(self.w[:, None] * Z), self.sums(self.w * t)
+    def best_variant(self, acc, c, fold):
+        Z, fx = self.cols(acc)
+        return best_variant(self.w, Z, self.r - fx, c, self._rows(fold))
 
-    def fold_beta(self, zz, zt):
-        """OLS coefficients fitted without each fold (K×q)."""
-        q = zz.shape[1]
-        if q == 0:
-            return np.zeros((self.K, 0))
-        A = np.zeros((self.K, q, q))
-        b = np.zeros((self.K, q))
-        np.add.at(A, self.fold, zz)
-        np.add.at(b, self.fold, zt)
-        At, bt = A.sum(0) - A, b.sum(0) - b
-        At = At + 1e-12 * np.eye(q) * np.maximum(np.einsum("kii->k", At), 1e-300)[:, None, None]
-        return np.linalg.solve(At, bt[..., None])[..., 0]
+    def fit(self, acc, fold):
+        Z, fx = self.cols(acc)
+        rows = self._rows(fold)
+        return full_fit(self.w[rows], Z[rows], (self.r - fx)[rows])[:2]
 
-    @staticmethod
-    def sse(zz, zt, tt, beta):
-        """SSE of every block under coefficients ``beta`` (B×q, one row per block)."""
-        return tt - 2 * np.einsum("bq,bq->b", beta, zt) + np.einsum("bi,bij,bj->b", beta, zz, beta)
+    def free_coef(self, acc, c, vi):
+        Z, fx = self.cols(acc)
+        return float(full_fit(self.w, np.column_stack([Z, c.variants[vi][1]]), self.r - fx)[0][-1])
 
-
-def _heldout(bl: _Blocks, Z, t_variants):
-    """Held-out block SSE and block energy error of t ~ Z, the profiled variant chosen per
-    fold on its training blocks. ``t_variants``: list of targets (one per variant of a
-    fixed column). Returns (per-block SSE [W²·s], per-block energy error [J], per-fold
-    variant index, per-fold β)."""
-    best = None
-    for vi, t in enumerate(t_variants):
-        zz, zt, tt = bl.stats(Z, t)
-        ez, et = bl.energy(Z, t)
-        beta = bl.fold_beta(zz, zt)                       # K × q
-        all_sse = np.stack([bl.sse(zz, zt, tt, np.broadcast_to(beta[k], (bl.n_blocks, beta.shape[1])))
-                            for k in range(bl.K)])        # K × B
-        train = np.array([all_sse[k][bl.fold != k].sum() for k in range(bl.K)])
-        held = all_sse[bl.fold, np.arange(bl.n_blocks)]
-        e = et - np.einsum("bq,bq->b", ez, beta[bl.fold])
-        if best is None:
-            best = [train, held.copy(), e.copy(), np.zeros(bl.K, int), beta.copy()]
-        else:
-            better = train < best[0]
-            best[0][better] = train[better]
-            sel = better[bl.fold]
-            best[1][sel] = held[sel]
-            best[2][sel] = e[sel]
-            best[3][better] = vi
-            best[4][better] = beta[better]
-    return np.maximum(best[1], 0.0), best[2], best[3], best[4]
-
-
-def _full_fit(w, Z, t):
-    """Weighted OLS on all samples: (β, standard errors)."""
-    q = Z.shape[1]
-    if q == 0:
-        return np.zeros(0), np.zeros(0), float(np.sum(w * t * t))
-    sw = np.sqrt(w)
-    beta, *_ = np.linalg.lstsq(Z * sw[:, None], t * sw, rcond=None)
-    res = t - Z @ beta
-    rss = float(np.sum(w * res * res))
-    dof = max(len(t) - q, 1)
-    A = (Z * w[:, None]).T @ Z
-    se = np.sqrt(np.maximum(np.diag(np.linalg.pinv(A)) * rss / dof * len(t) / max(w.sum(), 1e-300), 0.0))
-    return beta, se, rss
+    def contrib_j(self, c, vi, coef):
+        var = c.variants[vi]
+        contrib = (var[0] @ coef if var[0] is not None else 0.0) + (0.0 if var[1] is None else var[1])
+        return float(np.sum(self.w * contrib))
 
 
 def _pick(m) -> dict:
@@ -302,6 +241,19 @@ def check_chain_equation(equation: Equation, target: str) -> None:
     if target not in ("battery", "fuel"):
         raise UserError(f"chain trace: target must be battery or fuel, got '{target}'")
     ch.require_complete()
+
+
+def chain_samples(m, equation: Equation):
+    """(the usable samples with finite target, driving power, prediction and weight, the
+    driving power [W], the target [W], the declared chain's prediction [W], the weights [s])
+    of a :class:`~sumo_drvpw.data.measured.Measured` (or a batch of it)."""
+    x = m.inputs.with_mass(equation.mass_kg) if equation.mass_kg else m.inputs
+    p = equation.power(x)
+    y_all = chain_target(m, equation.chain)
+    pred0_all = equation.chain.evaluate(p, m.inputs.v, signals=m.inputs.signals)["power_w"]
+    dt_all = m.log.df["dt_s"].to_numpy(float)
+    ok = m.usable & np.isfinite(y_all) & np.isfinite(pred0_all) & np.isfinite(p) & np.isfinite(dt_all)
+    return ok, p, y_all, pred0_all, dt_all
 
 
 def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, progress=None,
@@ -321,19 +273,11 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
     findings with coefficient, unit and physical reading, per-trip net energy before and
     after on held-out trips) and ``equation``, the closed equation with its chain.
     """
-    from sumo_drvpw.fit.diagnose import paired_test
-
     opt = opt or ChainTraceOptions()
     opt.check()
     say = progress or (lambda s: None)
     check_chain_equation(equation, m.target)
-    ch = equation.chain
-    x = m.inputs.with_mass(equation.mass_kg) if equation.mass_kg else m.inputs
-    p = equation.power(x)
-    y_all = chain_target(m, ch)
-    pred0_all = ch.evaluate(p, m.inputs.v, signals=m.inputs.signals)["power_w"]
-    dt_all = m.log.df["dt_s"].to_numpy(float)
-    ok = m.usable & np.isfinite(y_all) & np.isfinite(pred0_all) & np.isfinite(p) & np.isfinite(dt_all)
+    ok, p, y_all, pred0_all, dt_all = chain_samples(m, equation)
     if mask is not None:
         ok &= np.asarray(mask, bool)
     idx = np.flatnonzero(ok)
@@ -346,222 +290,38 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
     see = through_counters(m, idx, y_all.size)
     pred0 = pred0 if see is None else m.counter_view(pred0_all)[idx]  # as the counters book it
     r = y - pred0
-    bl = _Blocks(r, w, trip, t, opt)
+    bl = Blocks(r, w, trip, t, opt)
     cands = _candidates(m, equation, p, idx, opt, left_out := {})  # (columns not offered, and why)
     cands = cands if see is None else seen_candidates(cands, see)
     say(f"{idx.size} samples, {len(trip_names)} trip(s), {bl.n_blocks} blocks; {len(cands)} candidate effects; "
         f"validation: {bl.how}")
-    # the model: accepted free columns (list of n×k) and accepted fixed columns
-    fixed = np.zeros(idx.size)
-    accepted: list[tuple] = []           # (cand, variant index, column slice)
-    Zcur = np.zeros((idx.size, 0))
-    sse_cur, e_cur, _, _ = _heldout(bl, Zcur, [r - fixed])
-    sse_base, e_base = sse_cur.copy(), e_cur.copy()
-    findings, rounds, rejected = [], [], []
-    in_model: set[str] = set()
-    for rnd in range(opt.max_findings):
-        pool = [c for c in cands if c.name not in in_model]
-        if not pool:
-            break
-        scored = []
-        for c in pool:
-            if c.variants[0][0] is None:       # a fixed column profiled over its parameter
-                sse_c, e_c, _, _ = _heldout(bl, Zcur, [r - fixed - v[1] for v in c.variants[:c.grid]])
-            else:
-                sse_c, e_c, _, _ = _heldout(bl, np.column_stack([Zcur, c.variants[0][0]]), [r - fixed])
-            e0, e1 = float(np.sum(e_cur ** 2)), float(np.sum(e_c ** 2))
-            gain = 1.0 - math.sqrt(e1 / e0) if e0 > 0 else 0.0
-            scored.append((gain, c, sse_c, e_c))
-        scored.sort(key=lambda s: -s[0])
-        m_scored = len(scored)
-        top = [{"effect": c.name, "energy_gain": g, "rmse_gain": _gain(sse_cur, s),
-                "p_value_bonferroni": min(1.0, paired_test(e_cur ** 2 - e ** 2) * m_scored)}
-               for g, c, s, e in scored[:10]]
-        added, tried = None, []  # tried: (effect, test failed, value) for the stop line
-        for gain, c, sse_c, e_c in scored[:5]:
-            p_adj = min(1.0, paired_test(e_cur ** 2 - e_c ** 2) * m_scored)
-            if not (p_adj < opt.alpha and gain >= opt.min_gain):
-                tried.append((c.name, "gain", gain) if gain < opt.min_gain else (c.name, "significance", p_adj))
-                break  # (not the wheel tracer's rule: the chain's noise leaves a ~36 W standing bias a
-                # next candidate would pass the test on, tests/test_diagnose_target.py)
-            helped, n_tr, per_trip = _replication(bl, trip, trip_names, e_cur, e_c)
-            if n_tr >= 3 and helped * 2 <= n_tr:
-                rejected.append({"effect": c.name, "round": rnd + 1, "rmse_gain": gain, "p_value_bonferroni": p_adj,
-                                 "reason": f"did not replicate: lowered the held-out error on {helped} of {n_tr} trips"})
-                in_model.add(c.name)
-                tried.append((c.name, "rejected", rejected[-1]["reason"]))
-                continue
-            # full-data fit of the model with the candidate (variant chosen on all samples)
-            vi = best_variant(w, Zcur, r - fixed, c)
-            var = c.variants[vi]
-            Znew = Zcur if var[0] is None else np.column_stack([Zcur, var[0]])
-            fx = fixed + (0.0 if var[1] is None else var[1])
-            beta, se, _ = _full_fit(w, Znew, r - fx)
-            coef = np.zeros(0) if var[0] is None else beta[Zcur.shape[1]:]
-            trial, reading = _closed(equation, accepted + [(c, vi, coef)], w, Znew, r - fx)
-            if trial is not None:
-                reading = reading[0]
-            if trial is None:
-                rejected.append({"effect": c.name, "round": rnd + 1, "rmse_gain": gain, "p_value_bonferroni": p_adj,
-                                 "reason": reading})
-                in_model.add(c.name)
-                say(f"round {rnd + 1}: {c.name} passes the block test but {reading}")
-                tried.append((c.name, "rejected", f"passes the block test but {reading}"))
-                continue
-            free_coef = (None if var[1] is None else   # what a free coefficient on the fixed column reads
-                         float(_full_fit(w, np.column_stack([Zcur, var[1]]), r - fixed)[0][-1]))
-            contrib = (Znew[:, Zcur.shape[1]:] @ coef if var[0] is not None else 0.0) + (0.0 if var[1] is None else var[1])
-            e_pred = float(np.sum(w * pred0))
-            share = float(np.sum(w * contrib)) / e_pred if e_pred else math.nan
-            f = {"term": c.name, "effect": c.effect, "role": c.role, "unit": c.unit,
-                 "coefficient": (None if var[0] is None else (float(coef[0]) if coef.size == 1 else
-                                                             [float(v) for v in coef])),
-                 "std_err": (None if var[0] is None else [float(v) for v in se[Zcur.shape[1]:]]),
-                 "parameter": (None if var[2] is None or c.name == "hvac" else var[2]),
-                 "free_coefficient": free_coef,
-                 "reading": reading, "p_value": p_adj, "energy_gain": gain, "rmse_gain": _gain(sse_cur, sse_c),
-                 "energy_share": share, "energy_j": float(np.sum(w * contrib)),
-                 "metrics_before": {"rmse_w": math.sqrt(sse_cur.sum() / w.sum()),
-                                    "block_energy_rms_j": _rms(e_cur)},
-                 "metrics_after": {"rmse_w": math.sqrt(sse_c.sum() / w.sum()), "block_energy_rms_j": _rms(e_c)},
-                 "replication": {"helped_trips": helped, "trips": n_tr, "per_trip": per_trip}}
-            findings.append(f)
-            accepted.append((c, vi, coef))
-            Zcur, fixed = Znew, fx
-            sse_cur, e_cur = sse_c, e_c
-            added = c
-            break
-        best = scored[0]
-        rounds.append({"round": rnd + 1, "candidates_scored": m_scored, "best": best[1].name,
-                       "energy_gain": best[0], "accepted": added is not None,
-                       "added": added.name if added else None, "top": top,
-                       **({} if added else {"stop_reason": stop_reason(tried, len(trip_names), m_scored, opt)})})
-        say(f"round {rnd + 1}: {m_scored} candidates, best {best[1].name} block-energy gain {100 * best[0]:.2f} % → "
-            + (f"added {added.name}" if added else f"stop: {rounds[-1]['stop_reason']}"))
-        if added is None:
-            break
-        in_model.add(added.name)
-    closed, (_, final) = _closed(equation, accepted, w, Zcur, r - fixed)
-    for f, (reading, co) in zip(findings, final):   # the final joint fit's values
-        f["reading_when_found"], f["coefficient_when_found"] = f["reading"], f["coefficient"]
-        f["reading"] = reading
-        if f["coefficient"] is not None:
-            f["coefficient"] = float(co[0]) if co.size == 1 else [float(v) for v in co]
-    closed.name = f"{equation.name}_closed" if accepted else equation.name
-    if accepted:  # the declared chain's fit statistics no longer describe what was changed
-        mark_changed(equation.chain, closed.chain, [f"{f['term']}: {f['reading']}" for f in findings])
-    closed.provenance = dict(getattr(equation, "provenance", {}) or {},
-                             closed_loop={"declared": equation.name, "target": m.target,
-                                          "findings": [f"{f['term']}: {f['reading']}" for f in findings],
-                                          "logs": list(m.log.files)})
+    eng = _Memory(bl, w, r, pred0)
+    findings, rounds, rejected, accepted, base_stats, cur_stats = search(eng, equation, cands, opt, trip_names, say)
+    closed = close(eng, equation, accepted, findings, m.target, m.log.files)
     # held-out, exact: each fold's closed equation predicts the samples it held out
-    held = _heldout_exact(m, equation, accepted, bl, idx, w, r, cands)
+    sfold = bl.sample_fold(idx.size)
+    held = np.full(idx.size, np.nan)
+    sub_inputs = m.inputs.take(idx)
+    for k, eq in enumerate(fold_equations(eng, equation, accepted)):
+        held[sfold == k] = predict(eq, sub_inputs)[sfold == k]
     held = held if see is None else see(held)
-    report = _report(m, equation, closed, bl, idx, y, pred0, held, w, trip_names, trip, findings, rounds,
-                     rejected, (sse_base, e_base), (sse_cur, e_cur), cands)
+    trips = trip_names[trip]
+    report = report_doc(m.target, equation, closed, bl, idx.size, trip_names, equation.chain.unknown_inputs(
+        {k: np.asarray(v)[idx] if np.ndim(v) else v for k, v in m.inputs.signals.items()}, idx.size, trips),
+        _metric_doc(pred0, y, base_stats), _metric_doc(held, y, cur_stats, w.sum()),
+        trip_net_energy(pred0, y, w, trips), trip_net_energy(held, y, w, trips), findings, rounds, rejected, cands)
     report["columns_left_out"] = left_out
     return ChainTraceResult(report, closed, equation, held, ok)
 
 
-def _gain(before, after) -> float:
-    return 1.0 - math.sqrt(float(np.sum(after)) / float(np.sum(before))) if np.sum(before) > 0 else 0.0
-
-
-def _rms(e) -> float:
-    return math.sqrt(float(np.mean(np.asarray(e) ** 2)))
-
-
-def _replication(bl, trip, trip_names, e_cur, e_c):
-    """Per trip: the held-out block energy error (RMS [J]) before and after; trips helped."""
-    bt = bl.block_trip
-    nb = np.bincount(bt, minlength=len(trip_names))
-    before = np.bincount(bt, weights=e_cur ** 2, minlength=len(trip_names))
-    after = np.bincount(bt, weights=e_c ** 2, minlength=len(trip_names))
-    present = nb > 0
-    helped = int((after[present] < before[present]).sum())
-    per = {str(trip_names[i]): {"block_energy_rms_before_j": math.sqrt(before[i] / nb[i]),
-                                "block_energy_rms_after_j": math.sqrt(after[i] / nb[i])}
-           for i in np.flatnonzero(present)}
-    return helped, int(present.sum()), per
-
-
-def _closed(equation, accepted, w, Z, t):
-    """The equation with every accepted finding written in, from a full-data fit of Z on t."""
-    beta, _, _ = _full_fit(w, Z, t)
-    eq, readings, j = equation, [], 0
-    for c, vi, _ in accepted:
-        var = c.variants[vi]
-        k = 0 if var[0] is None else var[0].shape[1]
-        eq, reading = apply(eq, c.name, beta[j:j + k], var[2])
-        if eq is None:
-            return None, reading
-        readings.append((reading, beta[j:j + k]))
-        j += k
-    if not accepted:
-        eq = copy.deepcopy(equation)
-    return eq, (readings[-1][0] if readings else "", readings)
-
-
-def _heldout_exact(m, equation, accepted, bl, idx, w, r, cands):
-    """Per-sample prediction of each fold's closed equation on the samples that fold held out."""
-    sfold = bl.sample_fold(idx.size)
-    out = np.full(idx.size, np.nan)
-    sub_inputs = m.inputs.take(idx)
-    for k in range(bl.K):
-        tr = sfold != k
-        Z, fx, acc = np.zeros((idx.size, 0)), np.zeros(idx.size), []
-        for c, _, _ in accepted:
-            vi = best_variant(w, Z, r - fx, c, tr)
-            var = c.variants[vi]
-            if var[0] is not None:
-                Z = np.column_stack([Z, var[0]])
-            if var[1] is not None:
-                fx = fx + var[1]
-            acc.append((c, vi, None))
-        beta, _, _ = _full_fit(w[tr], Z[tr], (r - fx)[tr])
-        eq, j = equation, 0
-        for c, vi, _ in acc:
-            var = c.variants[vi]
-            kk = 0 if var[0] is None else var[0].shape[1]
-            eq2, _ = apply(eq, c.name, beta[j:j + kk], var[2])
-            eq = eq2 if eq2 is not None else eq   # implausible on this fold: the finding is left out
-            j += kk
-        out[~tr] = predict(eq, sub_inputs)[~tr]
-    return out
-
-
-def _report(m, equation, closed, bl, idx, y, pred0, held, w, trip_names, trip, findings, rounds, rejected,
-            sse_base, sse_cur, cands) -> dict:
-    trips = trip_names[trip]
-    before = trip_net_energy(pred0, y, w, trips)
-    after = trip_net_energy(held, y, w, trips)
-    base = _pick(_metrics(pred0, y))
-    base["block_energy_rms_j"] = _rms(sse_base[1])
-    fin = _pick(_metrics(held, y))
-    fin["rmse_heldout_linear_w"] = math.sqrt(sse_cur[0].sum() / w.sum())
-    fin["block_energy_rms_j"] = _rms(sse_cur[1])
-    return {
-        "target": m.target, "declared_equation": equation.name, "closed_equation": closed.name,
-        "declared_chain": equation.chain.to_dict(), "closed_chain": closed.chain.to_dict(),
-        "declared_terms": dict(equation.terms), "closed_terms": dict(closed.terms),
-        "n_samples": int(idx.size), "trips": [str(s) for s in trip_names],
-        "chain_unknown_inputs": equation.chain.unknown_inputs(
-            {k: np.asarray(v)[idx] if np.ndim(v) else v for k, v in m.inputs.signals.items()}, idx.size, trips),
-        "validation": bl.how,
-        "test": (f"held-out {bl.block_s:g}-s blocks: one-sided paired test of d_b = e_b(model)² − "
-                 "e_b(model + effect)², e_b the block's energy error Σ w·(P_meas − P_pred) [J], Bonferroni over "
-                 "the round's candidates; relative gain in the blocks' RMS energy error ≥ min_gain; kept when it "
-                 "lowers the held-out error on more than half of the trips and is physically plausible"),
-        "linearisation": "columns in the target's watts: road-load changes × g_wheel (1/η_t traction, η_r "
-                         "recuperation, 0 beyond the limit), auxiliary loads × g_aux; baseline = the declared "
-                         "chain unchanged",
-        "candidates": [{"effect": c.name, "role": c.role, "unit": c.unit, "variants": c.grid} for c in cands],
-        "baseline": {"metrics": base, "trip_net_energy": before},
-        "findings": findings,
-        "final": {"metrics": fin, "trip_net_energy": after,
-                  "note": "each sample predicted by the closed equation (exact chain) of the fold that held it out"},
-        "not_replicated": rejected, "rounds": rounds,
-    }
+def _metric_doc(pred, y, stats, sw=None) -> dict:
+    """Metrics of a prediction with the block energy RMS (and, ``sw`` given, the held-out
+    linear RMSE) of its per-block ``stats``."""
+    doc = _pick(_metrics(pred, y))
+    if sw is not None:
+        doc["rmse_heldout_linear_w"] = math.sqrt(stats[0].sum() / sw)
+    doc["block_energy_rms_j"] = rms(stats[1])
+    return doc
 
 
 def close_loop_heldout(m, equation: Equation, opt: ChainTraceOptions | None = None, progress=None) -> dict:
