@@ -467,20 +467,13 @@ def test_chain_trace_honours_the_column_options_and_says_what_it_left_out():
     assert "loads.pump_w" not in found and "no number on 1.0% of the samples" in left["pump_w"]
 
 
-def test_a_promise_of_bounded_memory_the_chain_tracer_cannot_keep_is_refused(tmp_path, capsys):
-    """Rehearsal at fleet scale: `diagnose --target battery --stream yes` read 200 i3 files in
-    memory (5.5 GB, 3.75× the 50 files') without a word — the chain tracer has no streamed
-    path. `--stream yes` with a chain target is refused in one line, nothing written; and
-    `calibrate --engine memory` refuses --scheduler and --workers as `compare` does (it
-    ignored them: a user could believe a cluster was used)."""
+def test_calibrate_in_memory_refuses_the_cluster_flags(tmp_path, capsys):
+    """`calibrate --engine memory` refuses --scheduler and --workers as `compare` does (it
+    ignored them: a user could believe a cluster was used). (The chain tracer's `--stream yes`,
+    refused here before it had a streamed path, is tests/test_chain_trace_stream.py's.)"""
     from conftest import BUNDLED_LOG
     from sumo_drvpw.cli import main as cli_main
 
-    out = tmp_path / "d"
-    assert cli_main(["diagnose", str(BUNDLED_LOG), "--vehicle", "prius3", "--equation", "bmw_i3_battery",
-                     "--target", "battery", "--stream", "yes", "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--stream yes" in err[0] and "in memory" in err[0] and not out.exists()
     for flag in (["--scheduler", "tcp://1.2.3.4:8786"], ["--workers", "2"]):
         assert cli_main(["calibrate", str(BUNDLED_LOG), "--engine", "memory", *flag,
                          "--out", str(tmp_path / "w.toml")]) == 2

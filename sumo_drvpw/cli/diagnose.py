@@ -54,7 +54,8 @@ def configure(p):
                    help="read the logs batch by batch of whole trips in bounded memory (yes), all at once "
                         f"(no), or auto: streamed above {STREAM_ROWS:,} rows (default); streamed runs "
                         "screen columns on the first rows and draw no figures; the tracer of an energy "
-                        "chain (--target battery|fuel) reads in memory")
+                        "chain (--target battery|fuel) streams too, its recuperation limits offered at "
+                        "quantiles of the first rows' braking power")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     from sumo_drvpw.cli import add_force, add_log_options
 
@@ -268,29 +269,31 @@ def _chain_main(args, target, progress) -> int:
 
     if not args.equation:
         raise UserError(f"--target {target} needs --equation with an energy chain predicting {target}")
-    if args.stream == "yes":  # the chain tracer reads the logs in memory: a promise it cannot keep
-        raise UserError(f"--stream yes: the tracer of an energy chain (--target {target}) reads the logs in "
-                        "memory, it has no streamed path yet; give --stream no (or auto), or a share of the logs")
-    if args.stream == "auto" and should_stream(args.logs, "auto"):
-        print(f"note: these logs hold more than the {STREAM_ROWS:,} rows above which the driving power's "
-              "tracer streams; the tracer of an energy chain reads them in memory (no streamed path yet)")
+    streamed = should_stream(args.logs, args.stream)
     eq = load_equation(args.equation)
     check_chain_equation(eq, target)
     opt = ChainTraceOptions(block_s=args.block_s, folds=args.folds, alpha=args.alpha, min_gain=args.min_gain,
                             max_findings=args.max_findings, validation=args.validation,
                             include=_globs(args.signals), exclude=_globs(args.exclude))
+    from sumo_drvpw.cli import note_counts
+    from sumo_drvpw.data.powertrain import measured_fuel
+    from sumo_drvpw.fit.trip_energy import with_trace_fuel_volumes
+
     with output_set(args, args.out, [args.logs, args.vehicle, args.equation]) as tmp:
-        m = load_measured(args.logs, args.vehicle, read_options(args, [args.equation]), target=target)
-        from sumo_drvpw.cli import note_counts
+        ro = read_options(args, [args.equation])
+        if streamed:  # batches of whole trips in bounded memory (fit/chain_trace_stream.py)
+            res, veh = _chain_streamed(args, eq, target, opt, ro, progress)
+            files = res.files
+        else:
+            m = load_measured(args.logs, args.vehicle, ro, target=target)
+            note_counts(m.counts)
+            res = trace_chain(m, eq, opt, progress=progress)
+            from sumo_drvpw.fit.trip_energy import with_trace_left_out
 
-        note_counts(m.counts)
-        res = trace_chain(m, eq, opt, progress=progress)
-        res.report["notes"] = chain_notes(eq, m.log.files)
-        from sumo_drvpw.fit.trip_energy import with_trace_fuel_volumes, with_trace_left_out
-
-        from sumo_drvpw.data.powertrain import measured_fuel
-
-        with_trace_fuel_volumes(with_trace_left_out(res, m), measured_fuel(m.vehicle, m.log.options.fuel))  # a fuel target's litres
+            with_trace_left_out(res, m)
+            veh, files = m.vehicle, m.log.files
+        res.report["notes"] = chain_notes(eq, files)
+        with_trace_fuel_volumes(res.report, measured_fuel(veh, ro.fuel))  # a fuel target's litres
         write_chain_outputs(res, tmp)
     r = res.report
     from sumo_drvpw.report.comparison import unknown_input_lines
@@ -305,4 +308,36 @@ def _chain_main(args, target, progress) -> int:
         print(f"  + {f['term']}: {f['reading']} (held-out block energy error −{100 * f['energy_gain']:.1f} %)")
     print(f"after (held out): RMSE {r['final']['metrics']['rmse_w']:.1f} W, per-trip net energy "
           f"{100 * r['final']['trip_net_energy']['mean_abs_error']:.1f} %; wrote {Path(args.out) / 'trace.json'}")
+    if streamed:
+        import sys
+
+        from sumo_drvpw.fit.engine import peak_rss_mb
+
+        rs = r["resources"]
+        print(f"diagnose: {rs['rows']:,} rows streamed, {rs['passes']} passes over the prepared batches"
+              f"{' (on disk)' if rs['batches_on_disk'] else ''}, peak RSS {peak_rss_mb():,.0f} MB", file=sys.stderr)
     return 0
+
+
+def _chain_streamed(args, eq, target, opt, ro, progress):
+    """The chain trace streamed (:func:`sumo_drvpw.fit.chain_trace_stream.trace_chain_stream`):
+    (result, vehicle); the reader's counts said."""
+    from sumo_drvpw.cli import note_counts
+    from sumo_drvpw.data.stream import plan
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.fit.chain_trace_stream import trace_chain_stream
+    from sumo_drvpw.fit.engine import _progress
+    from sumo_drvpw.model.vehicles import load_vehicle
+
+    veh = load_vehicle(args.vehicle) if args.vehicle else None
+    bar = _progress(sum(p.rows for p in plan(args.logs)) or None, "rows")
+    try:
+        res = trace_chain_stream(args.logs, veh, eq, target, opt, ro, progress=progress, bar=bar.update)
+    except UserError as e:
+        if "traced in memory only" in str(e):  # (the library names no flag)
+            raise UserError(f"--stream {args.stream}: {e}; give --stream no") from None
+        raise
+    finally:
+        bar.close()
+    note_counts(res.counts)
+    return res, veh

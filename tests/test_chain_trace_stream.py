@@ -1,0 +1,197 @@
+"""The chain tracer streamed (fit/chain_trace_stream.py) against the in-memory one.
+
+Synthetic logs with a planted chain effect, read in chunks of a few thousand rows (several
+batches of whole trips, prepared in memory or on disk): the streamed trace finds what the
+in-memory trace finds, with the same coefficients, parameters, closed chain, metrics and
+per-trip net energies before and after, to 1e-9 relative (a per-trip *error* near 0, to
+1e-9 absolute); `diagnose --target battery --stream yes` runs it (it was refused).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from sumo_drvpw.data.log import from_frame
+from sumo_drvpw.data.measured import load_measured, measure
+from sumo_drvpw.fit.chain_linear import ChainTraceOptions, trace_chain
+from sumo_drvpw.fit.chain_trace_stream import trace_chain_stream
+from sumo_drvpw.fit.trip_energy import with_trace_left_out
+from sumo_drvpw.model.chain import EnergyChain
+from sumo_drvpw.model.constants import FUELS
+from sumo_drvpw.model.equations import Equation, load_equation, save_equation
+from sumo_drvpw.model.vehicles import load_vehicle
+from sumo_drvpw.synth.effects import BatteryLog, synth_trips
+from sumo_drvpw.synth.track import Noise
+
+QUIET = Noise(process_w=50.0, process_rel=0.002)
+ROWS = 3000   # rows per chunk read: a 6-trip log in a dozen batches
+
+
+@pytest.fixture(scope="module")
+def base():
+    b = BatteryLog(standstill_aux_w=0.0, noise_w=100.0)
+    df, _ = synth_trips(n_trips=6, minutes=8.0, seed=3, effects=(b,), noise=QUIET)
+    veh = load_vehicle("prius3")
+    truth = load_equation("drvpw_prius3")
+    p = truth.power(measure(from_frame(df, veh, name="synth"), veh, "battery").inputs)
+    return b, df, truth, p
+
+
+def _battery(df, extra_w):
+    d = df.copy()
+    d["battery_current_a"] = d["battery_current_a"] + extra_w / d["battery_voltage_v"]
+    return d
+
+
+def _fuel(df, p, chain, seed):
+    v = df["speed_mps"].to_numpy(float)
+    rng = np.random.default_rng(seed)
+    pf = chain.evaluate(p, v)["power_w"] * (1.0 + rng.normal(0, 0.03, p.size)).clip(0.0)
+    return df.drop(columns=["battery_voltage_v", "battery_current_a"]).assign(
+        fuel_rate_gps=pf / FUELS["gasoline"]["lhv_j_per_kg"] * 1000.0)
+
+
+def _compare(a, b, path=""):
+    """Reports equal: texts exactly, numbers to 1e-9 relative (per-trip errors: absolute)."""
+    if isinstance(a, dict):
+        assert set(a) == set(b), (path, set(a) ^ set(b))
+        for k in a:
+            _compare(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, (list, tuple)):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _compare(x, y, f"{path}[{i}]")
+    elif isinstance(a, float) and not isinstance(b, str):
+        if math.isnan(a):
+            assert math.isnan(b), path
+        elif path.endswith(("error", "energy_gain", "rmse_gain")) or "p_value" in path:
+            assert b == pytest.approx(a, rel=1e-9, abs=1e-9), path   # a relative error or gain near 0
+        else:
+            assert b == pytest.approx(a, rel=1e-9, abs=1e-6), path
+    else:
+        assert a == b, (path, a, b)
+
+
+def _both(tmp_path, df, eq, target, opt=None, **kw):
+    log = tmp_path / "log.parquet"
+    df.to_parquet(log)
+    m = load_measured([str(log)], "prius3", target=target)
+    mem = trace_chain(m, eq, opt)
+    with_trace_left_out(mem, m)
+    st = trace_chain_stream([str(log)], "prius3", eq, target, opt, rows=ROWS, **kw)
+    assert st.report.pop("resources")["passes"] > 3
+    _compare(mem.report, st.report)
+    _compare(mem.equation.chain.to_dict(), st.equation.chain.to_dict())
+    assert mem.equation.terms == pytest.approx(st.equation.terms, rel=1e-12)
+    return mem, st
+
+
+def test_planted_standstill_load_streamed_equals_in_memory(tmp_path, base):
+    b, df, truth, p = base
+    stand = 450.0 * (df["speed_mps"].to_numpy(float) < 0.1)
+    mem, st = _both(tmp_path, _battery(df, stand), Equation("declared", dict(truth.terms), truth.mass_kg,
+                                                               chain=b.chain()), "battery")
+    assert [f["term"] for f in st.report["findings"]][0] == "standstill_aux_w"
+    assert st.report["findings"][0]["coefficient"] == pytest.approx(450.0, rel=0.2)
+    before, after = (st.report[k]["trip_net_energy"] for k in ("baseline", "final"))
+    assert after["mean_abs_error"] < before["mean_abs_error"]
+    assert len(before["trips"]) == 6 and all("left_out_samples" in t for t in before["trips"].values())
+
+
+def test_planted_recuperation_limit_refined_streamed_equals_in_memory(tmp_path, base):
+    """A profiled parameter refined between its grid values by passes over the batches; the
+    batches on disk (cache 0 MB) read the same."""
+    b, df, truth, p = base
+    mem, st = _both(tmp_path, _battery(df, b.recuperation_efficiency * (np.maximum(p, -8000.0) - p)),
+                    Equation("declared", dict(truth.terms), truth.mass_kg, chain=b.chain()), "battery", cache_mb=0)
+    f = st.report["findings"][0]
+    assert f["term"] == "recuperation_limit_w" and f["parameter"] == pytest.approx(8000.0, rel=0.02)
+
+
+def test_heating_and_missing_grade_streamed_equal_in_memory(tmp_path, base):
+    b, df, truth, p = base
+    temps = dict(zip(df["trip_id"].unique(), [-5.0, 0.0, 5.0, 10.0, 15.0, 25.0]))
+    d = df.assign(ambient_c=df["trip_id"].map(temps))
+    d = _battery(d, 40.0 * np.maximum(20.0 - d["ambient_c"].to_numpy(), 0.0))
+    no_grade = Equation("declared", {k: v for k, v in truth.terms.items() if k != "grade"}, truth.mass_kg,
+                        chain=b.chain())
+    mem, st = _both(tmp_path, d, no_grade, "battery")
+    assert st.report["findings"][0]["term"] == "grade"
+    assert "hvac" in [c["effect"] for c in st.report["candidates"]]
+
+
+def test_fuel_cut_off_streamed_equals_in_memory_with_blocks_in_two_trips(tmp_path, base):
+    """A fuel chain's overrun cut-off (a fixed column on a grid); two trips: the folds are
+    blocks interleaved within trips, numbered across batches."""
+    b, df, truth, p = base
+    kw = dict(idle_fuel_power_w=6000.0, marginal_efficiency=0.33, engine_off_below_w=-np.inf)
+    d = _fuel(df, p, EnergyChain("fuel", 1.0, fuel_cut_below_w=-1000.0, **kw), 8)
+    two = d[d["trip_id"].isin(["synth-1", "synth-2"])].reset_index(drop=True)
+    eq = Equation("declared", dict(truth.terms), truth.mass_kg, chain=EnergyChain("fuel", 1.0, **kw))
+    mem, st = _both(tmp_path, two, eq, "fuel")
+    assert "interleaved" in st.report["validation"]
+    assert {f["term"]: f["parameter"] for f in st.report["findings"]} == {"fuel_cut_below_w": -1000.0}
+
+
+def test_cli_streams_the_chain_trace(tmp_path, base, capsys):
+    """`--stream yes` with a chain target was refused ("reads the logs in memory"); it now
+    streams and writes what `--stream no` writes (trace.md the same, the closed chain's
+    values to 1e-9)."""
+    from sumo_drvpw.cli import main as cli_main
+
+    b, df, truth, p = base
+    log = tmp_path / "log.parquet"
+    _battery(df, 450.0 * (df["speed_mps"].to_numpy(float) < 0.1)).to_parquet(log)
+    decl = tmp_path / "declared.toml"
+    save_equation(Equation("declared", dict(truth.terms), truth.mass_kg, chain=b.chain()), decl)
+    outs = {}
+    for mode in ("no", "yes"):
+        outs[mode] = tmp_path / mode
+        assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--target", "battery",
+                         "--stream", mode, "--out", str(outs[mode]), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "rows streamed" in err and "passes over the prepared batches" in err
+    assert (outs["no"] / "trace.md").read_text(encoding="utf-8") == (outs["yes"] / "trace.md").read_text(encoding="utf-8")
+    a, s = (json.loads((outs[k] / "trace.json").read_text(encoding="utf-8")) for k in ("no", "yes"))
+    assert "resources" in s and "resources" not in a
+    s.pop("resources")
+    _compare(a, s)
+    ca, cs = (load_equation(str(outs[k] / "final_equation.toml")).chain.to_dict() for k in ("no", "yes"))
+    _compare(ca, cs)
+
+
+def test_options_reach_the_streamed_trace(tmp_path, base):
+    """skip_effects and the column options: the same candidates and left-out columns."""
+    b, df, truth, p = base
+    d = df.assign(pump_w=np.random.default_rng(2).uniform(0, 500, len(df)))
+    opt = ChainTraceOptions(skip_effects=("standstill_aux_w",), include=("pump_*",), max_findings=2)
+    mem, st = _both(tmp_path, d, Equation("declared", dict(truth.terms), truth.mass_kg, chain=b.chain()),
+                    "battery", opt)
+    assert st.report["columns_left_out"]["standstill_aux_w"] == "not offered (skip_effects option)"
+    assert "loads.pump_w" in [c["effect"] for c in st.report["candidates"]]
+
+
+def test_a_counter_target_streamed_is_refused_in_one_line(tmp_path, capsys):
+    """A battery target from the BMS's energy counters (their view spans the log) is traced
+    in memory only: `--stream yes` says so in one line naming the option, nothing written."""
+    from sumo_drvpw.cli import main as cli_main
+
+    t = np.arange(0.0, 600.0, 1.0)
+    v = 10.0 + 5.0 * np.sin(t / 10.0)
+    dis = np.cumsum(np.full(t.size, 2000.0))
+    log = tmp_path / "soc.csv"
+    log.write_text("trip_id,time_s,speed_mps,battery_discharge_energy_j,battery_charge_energy_j\n"
+                   + "".join(f"trip,{a:g},{b:.3f},{c:.1f},0\n" for a, b, c in zip(t, v, dis)), encoding="utf-8")
+    decl = tmp_path / "declared.toml"
+    save_equation(Equation("ev", {"acc": 1.0, "v1": 150.0, "v3": 0.4},
+                           chain=EnergyChain("battery", 0.9, 0.85, aux_power_w=400.0)), decl)
+    out = tmp_path / "o"
+    assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--target", "battery",
+                     "--stream", "yes", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--stream yes" in err[0] and "energy counters" in err[0] and "--stream no" in err[0]
+    assert not out.exists()
