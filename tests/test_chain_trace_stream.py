@@ -195,3 +195,22 @@ def test_a_counter_target_streamed_is_refused_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--stream yes" in err[0] and "energy counters" in err[0] and "--stream no" in err[0]
     assert not out.exists()
+
+
+def test_a_trip_id_in_two_files_is_refused_streamed_as_in_memory(tmp_path, base):
+    """Two files holding the same trip ids: the in-memory reader refuses them in one line; the
+    streamed trace took them (two copies of a trip's sums, the second overwriting the first in
+    the per-trip energies) and now refuses them with the same line."""
+    from sumo_drvpw.errors import UserError
+
+    b, df, truth, p = base
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    for name in ("a", "b"):
+        df.to_parquet(folder / f"{name}.parquet")
+    eq = Equation("declared", dict(truth.terms), truth.mass_kg, chain=b.chain())
+    with pytest.raises(UserError) as mem:
+        load_measured([str(folder)], "prius3", target="battery")
+    with pytest.raises(UserError) as st:
+        trace_chain_stream([str(folder)], "prius3", eq, "battery", rows=ROWS)
+    assert str(st.value) == str(mem.value) and "is also in" in str(st.value)

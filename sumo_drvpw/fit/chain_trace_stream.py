@@ -235,6 +235,7 @@ def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOpt
     ``mask`` are None; the per-trip energies carry what each trip lost to left-out samples);
     ``report["resources"]`` holds rows, passes and whether the batches were on disk;
     ``files`` and ``counts`` attributes: the logs read and the reader's counts."""
+    from sumo_drvpw.data.plausible import check_distinct_trips
     from sumo_drvpw.model.vehicles import load_vehicle
 
     opt = opt or ChainTraceOptions()
@@ -242,6 +243,7 @@ def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOpt
     say = progress or (lambda s: None)
     check_chain_equation(equation, target)
     veh = load_vehicle(vehicle) if isinstance(vehicle, str) else vehicle
+    check_distinct_trips(paths)  # (a trip's sums are taken whole from one batch)
     files = list(dict.fromkeys(p.path for p in plan(paths)))
     meta = parquet_metadata(paths)
     batches = Batches(cache_mb)
