@@ -214,3 +214,30 @@ def test_a_trip_id_in_two_files_is_refused_streamed_as_in_memory(tmp_path, base)
     with pytest.raises(UserError) as st:
         trace_chain_stream([str(folder)], "prius3", eq, "battery", rows=ROWS)
     assert str(st.value) == str(mem.value) and "is also in" in str(st.value)
+
+
+def test_the_limits_quantiles_are_exact_over_all_batches(tmp_path, base):
+    """The recuperation limits are offered at np.quantile of the braking power of every
+    analysis sample (found from binned counts and the values of the bins that hold the order
+    statistics), not of a first-look sample: the same floats as in memory."""
+    from sumo_drvpw.fit.chain_effects import LIMIT_QUANTILES
+    from sumo_drvpw.fit.chain_linear import chain_samples
+    from sumo_drvpw.fit.chain_stream import _keys, _merge_hist
+    from sumo_drvpw.fit.chain_trace_stream import _brake_quantiles
+    from sumo_drvpw.fit.diagnose.source import Batches, INPUT_FIELDS, read_batches
+
+    b, df, truth, p = base
+    log = tmp_path / "log.parquet"
+    df.to_parquet(log)
+    eq = Equation("declared", dict(truth.terms), truth.mass_kg, chain=b.chain())
+    batches, hist, brakes = Batches(), None, []
+    for m in read_batches([str(log)], load_vehicle("prius3"), None, "battery", ROWS):
+        ok, pw, *_ = chain_samples(m, eq)
+        idx = np.flatnonzero(ok)
+        brake = -pw[idx][pw[idx] < 0]
+        brakes.append(brake)
+        hist = _merge_hist(hist, np.unique(_keys(brake), return_counts=True))
+        batches.append({f: np.asarray(getattr(m.inputs, f), float)[idx] for f in INPUT_FIELDS})
+    assert len(batches) > 5
+    every = np.concatenate(brakes)
+    assert _brake_quantiles(batches, eq, hist) == [float(np.quantile(every, q)) for q in LIMIT_QUANTILES]

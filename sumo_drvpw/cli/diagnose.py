@@ -54,8 +54,8 @@ def configure(p):
                    help="read the logs batch by batch of whole trips in bounded memory (yes), all at once "
                         f"(no), or auto: streamed above {STREAM_ROWS:,} rows (default); streamed runs "
                         "screen columns on the first rows and draw no figures; the tracer of an energy "
-                        "chain (--target battery|fuel) streams too, its recuperation limits offered at "
-                        "quantiles of the first rows' braking power")
+                        "chain (--target battery|fuel) streams too (not a target of a BMS's energy "
+                        "counters)")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     from sumo_drvpw.cli import add_force, add_log_options
 

@@ -63,7 +63,9 @@ def offer_stats(m, equation: Equation, p, idx, opt=None, braking: bool = True) -
     """What decides which candidates :func:`candidates` offers, as counts, extremes and
     flags over the samples ``idx`` (of ``m``, driving power ``p`` [W]); of several batches
     of whole trips merged by :func:`merge_offer` (``braking``: keep the braking powers the
-    recuperation limits are quantiles of; the streamed tracer keeps its first-look sample's)."""
+    recuperation limits are quantiles of; the streamed tracer, which does not, finds those
+    quantiles exactly from binned counts and gives them to :func:`decide` as
+    ``brake_quantiles``)."""
     from sumo_drvpw.fit.chain_linear import gains
 
     ch = equation.chain
@@ -133,9 +135,11 @@ def decide(st: dict, equation: Equation, opt=None, left_out: dict | None = None)
          "standstill": 0.01 < st["standing"] / n < 0.99, "limits": [], "hvac": None, "loads": []}
     lim0 = np.inf if ch.recuperation_limit_w is None else ch.recuperation_limit_w
     if ch.predicts == "battery" and st["brake_n"] > 50 and ch.motor is None:
-        brake = np.concatenate(st["brake"]) if st["brake"] else np.zeros(0)
-        qs = sorted({float(np.quantile(brake, q)) for q in LIMIT_QUANTILES if np.quantile(brake, q) < lim0}) \
-            if brake.size else []
+        qv = st.get("brake_quantiles")  # (exact, from binned counts: the streamed trace's)
+        if qv is None:
+            brake = np.concatenate(st["brake"]) if st["brake"] else np.zeros(0)
+            qv = [np.quantile(brake, q) for q in LIMIT_QUANTILES] if brake.size else []
+        qs = sorted({float(x) for x in qv if x < lim0})
         d["limits"] = [L for L in qs if L > 0]
         d["limit_top"] = float(min(st["brake_max"], lim0))
     amb = st["ambient"]

@@ -82,6 +82,39 @@ def quantile_of_order(order, n: int, q: float) -> float:
     return b - d * (1 - g) if g >= 0.5 else a + d * g
 
 
+def quantile_bins(hist, quantiles) -> tuple[list, tuple]:
+    """(the ranks of the order statistics ``np.quantile`` reads at ``quantiles`` among the
+    values counted in ``hist`` (bin keys of :func:`_keys`, counts), the bins that hold them)."""
+    n = int(hist[1].sum())
+    ranks = set()
+    for q in quantiles:
+        vi = (n - 1) * q
+        lo = math.floor(vi)
+        ranks |= {n - 1} if vi >= n - 1 else {lo, lo + 1}
+    cum = np.cumsum(hist[1])
+    bins = {int(hist[0][np.searchsorted(cum, r, side="right")]) for r in ranks}
+    return sorted(ranks), tuple(sorted(bins))
+
+
+def quantiles_of(hist, values, quantiles) -> list:
+    """``np.quantile`` (the same floats) at each of ``quantiles`` of the positive values
+    counted in ``hist`` (:func:`quantile_bins`), from ``values``: the sorted distinct values
+    of the bins that hold the order statistics, with their counts."""
+    n = int(hist[1].sum())
+    keys, counts = hist
+    before = dict(zip(keys.tolist(), (np.cumsum(counts) - counts).tolist()))
+    vals, vcum = values[0], np.cumsum(values[1])  # sorted distinct values
+    vkeys = _keys(vals)
+
+    def order(i):
+        b = int(keys[np.searchsorted(np.cumsum(counts), i, side="right")])
+        lo = int(np.searchsorted(vkeys, b))  # the bin's first value; i - before[b]: rank within it
+        base = int(vcum[lo - 1]) if lo else 0
+        return float(vals[lo + np.searchsorted(vcum[lo:] - base, i - before[b], side="right")])
+
+    return [quantile_of_order(order, n, q) for q in quantiles]
+
+
 def _keys(x: np.ndarray) -> np.ndarray:
     """Bin of each positive float (monotone in the value)."""
     return np.ascontiguousarray(x, np.float64).view(np.int64) >> KEY_SHIFT
@@ -426,31 +459,12 @@ class ChainStats:
         n = int(self.hist[1].sum()) if self.hist is not None else 0
         if n <= 20:
             return [], ()
-        ranks = set()
-        for q in LIMIT_QUANTILES:
-            vi = (n - 1) * q
-            lo = math.floor(vi)
-            ranks |= {n - 1} if vi >= n - 1 else {lo, lo + 1}
-        cum = np.cumsum(self.hist[1])
-        bins = {int(self.hist[0][np.searchsorted(cum, r, side="right")]) for r in ranks}
-        return sorted(ranks), tuple(sorted(bins))
+        return quantile_bins(self.hist, LIMIT_QUANTILES)
 
     def limits_from(self, collected: "ChainStats") -> list:
         """The recuperation limits tried: np.quantile of the braking powers at
         LIMIT_QUANTILES, from the values ``collected`` of the bins of :meth:`brake_bins`."""
-        n = int(self.hist[1].sum())
-        keys, counts = self.hist
-        before = dict(zip(keys.tolist(), (np.cumsum(counts) - counts).tolist()))
-        vals, vcum = collected.values[0], np.cumsum(collected.values[1])  # sorted distinct values
-        vkeys = _keys(vals)
-
-        def order(i):
-            b = int(keys[np.searchsorted(np.cumsum(counts), i, side="right")])
-            lo = int(np.searchsorted(vkeys, b))  # the bin's first value; i - before[b]: rank within it
-            base = int(vcum[lo - 1]) if lo else 0
-            return float(vals[lo + np.searchsorted(vcum[lo:] - base, i - before[b], side="right")])
-
-        return sorted({quantile_of_order(order, n, q) for q in LIMIT_QUANTILES})
+        return sorted(set(quantiles_of(self.hist, collected.values, LIMIT_QUANTILES)))
 
     def fit(self, limits=()) -> ChainFit:
         """The chain: every grid value solved on its factor, the best by BIC."""

@@ -19,11 +19,12 @@ its statistics come from:
    sums for the fits, the profiled parameters' refinement and each fold's closed equation;
    a last pass predicts each held-out sample with its fold's closed equation (exact chain).
 
-The recuperation limits offered are quantiles of the braking power on the first-look
-sample (the first ``sample_rows`` rows, whole trips), as the streamed residual tracer's
-regimes; with fewer rows the sample is all data and findings and per-trip figures equal
-the in-memory tracer's (tests/test_chain_trace_stream.py). A target read from a BMS's
-energy counters (their view spans a trip's samples) is traced in memory only.
+The recuperation limits offered are the quantiles of the braking power on all analysis
+samples, found exactly from its counts per bin and the distinct values of the bins that hold
+the order statistics (fit/chain_stream.py's method), so findings and per-trip figures equal
+the in-memory tracer's to rounding whatever the logs' length (tests/test_chain_trace_stream.py).
+A target read from a BMS's energy counters (their view spans the log) is traced in memory
+only; a trip id in two files is refused, as in memory.
 """
 
 from __future__ import annotations
@@ -39,7 +40,8 @@ from sumo_drvpw.fit.chain_effects import candidates, decide, merge_offer, offer_
 from sumo_drvpw.fit.chain_linear import (ChainTraceOptions, ChainTraceResult, _pick, chain_samples,
                                          check_chain_equation, predict)
 from sumo_drvpw.fit.chain_search import close, fold_equations, report_doc, rms, search
-from sumo_drvpw.fit.diagnose.source import CACHE_MB, INPUT_FIELDS, SAMPLE_ROWS, Batches, parquet_metadata, read_batches
+from sumo_drvpw.fit.chain_stream import _keys, _merge_hist, quantile_bins, quantiles_of
+from sumo_drvpw.fit.diagnose.source import CACHE_MB, INPUT_FIELDS, Batches, parquet_metadata, read_batches
 from sumo_drvpw.fit.diagnose.stream_run import READ_ROWS
 from sumo_drvpw.fit.diagnose.streamed import _MetricSums
 from sumo_drvpw.fit.stream import _add_counts
@@ -224,12 +226,12 @@ def _keep_signals(m, equation, opt) -> list:
 
 
 def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOptions | None = None,
-                       read_options=None, rows: int = READ_ROWS, sample_rows: int = SAMPLE_ROWS,
+                       read_options=None, rows: int = READ_ROWS,
                        cache_mb: float = CACHE_MB, progress=None, bar=None) -> ChainTraceResult:
     """:func:`~sumo_drvpw.fit.chain_linear.trace_chain` on drive logs of any length (module
     docstring): ``paths`` files or folders, ``vehicle`` a name, file or Vehicle, ``equation``
     the declared equation whose chain predicts ``target`` (battery or fuel); ``rows``,
-    ``sample_rows``, ``cache_mb`` as :func:`~sumo_drvpw.fit.diagnose.stream_run.diagnose_stream`.
+    ``cache_mb`` as :func:`~sumo_drvpw.fit.diagnose.stream_run.diagnose_stream`.
 
     Returns the :class:`ChainTraceResult` (no per-sample predictions: ``heldout_pred_w`` and
     ``mask`` are None; the per-trip energies carry what each trip lost to left-out samples);
@@ -247,13 +249,13 @@ def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOpt
     files = list(dict.fromkeys(p.path for p in plan(paths)))
     meta = parquet_metadata(paths)
     batches = Batches(cache_mb)
-    stats, counts, left, unknown, names = None, {}, {}, {}, set()
+    stats, counts, left, unknown, names, hist = None, {}, {}, {}, set(), None
     base, before = _MetricSums(), _TripSums()
     n_rows = n = 0
     sw = e_pred = 0.0
     keep = None
     try:
-        for m in read_batches(paths, veh, read_options, target, rows, sample_rows=sample_rows):
+        for m in read_batches(paths, veh, read_options, target, rows):
             if bar:
                 bar(len(m.power_w))
             if getattr(m, "counter_view", None) is not None:
@@ -265,7 +267,10 @@ def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOpt
             trips_all = m.log.df["trip_id"].astype(str).to_numpy()
             left.update(left_out_by_trip(y_all, ok, dt_all, trips_all))
             idx = np.flatnonzero(ok)
-            stats = merge_offer(stats, offer_stats(m, equation, p, idx, opt, braking=n_rows < sample_rows))
+            stats = merge_offer(stats, offer_stats(m, equation, p, idx, opt, braking=False))
+            brake = -p[idx][p[idx] < 0]
+            if brake.size:  # counted per bin: the limits' quantiles are found exactly (_brake_quantiles)
+                hist = _merge_hist(hist, np.unique(_keys(brake), return_counts=True))
             n_rows += len(y_all)
             if not idx.size:
                 continue
@@ -290,6 +295,8 @@ def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOpt
         if n < 50:
             raise UserError(f"{', '.join(files)}: only {n} samples with finite measured {target} power, "
                             "driving power and chain prediction; need at least 50")
+        if hist is not None and stats["brake_n"] > 50:
+            stats["brake_quantiles"] = _brake_quantiles(batches, equation, hist)
         res = _trace(batches, equation, target, opt, stats, np.array(sorted(names)), sw, e_pred, files, say)
         res.report["baseline"] = {"metrics": _metric_doc(base, res.base_stats),
                                   "trip_net_energy": before.doc()}
@@ -301,6 +308,25 @@ def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOpt
         batches.close()
     res.files, res.counts = files, counts
     return res
+
+
+def _brake_quantiles(batches, equation, hist) -> list:
+    """``np.quantile`` of the braking powers of all analysis samples at the recuperation
+    limits' quantiles (chain_effects.LIMIT_QUANTILES), exactly: from their counts per bin
+    (``hist``) and the distinct values of the bins that hold the order statistics, gathered
+    in one pass over the prepared batches (as fit/chain_stream.py does for calibrate)."""
+    from sumo_drvpw.fit.chain_effects import LIMIT_QUANTILES
+
+    bins = quantile_bins(hist, LIMIT_QUANTILES)[1]
+    values = None
+    for d in batches:
+        x = Inputs(*(np.asarray(d[f], float) for f in INPUT_FIELDS), {})
+        p = equation.power(x.with_mass(equation.mass_kg) if equation.mass_kg else x)
+        brake = -p[p < 0]
+        sel = brake[np.isin(_keys(brake), bins)]
+        if sel.size:
+            values = _merge_hist(values, np.unique(sel, return_counts=True))
+    return quantiles_of(hist, values, LIMIT_QUANTILES)
 
 
 def _metric_doc(ms: _MetricSums, stats, sw=None) -> dict:
