@@ -241,3 +241,27 @@ def test_the_limits_quantiles_are_exact_over_all_batches(tmp_path, base):
     assert len(batches) > 5
     every = np.concatenate(brakes)
     assert _brake_quantiles(batches, eq, hist) == [float(np.quantile(every, q)) for q in LIMIT_QUANTILES]
+
+
+def test_the_battery_sign_is_tested_on_all_batches_as_in_memory(tmp_path, base):
+    """One trip of six with its current's sign flipped: the in-memory reader tests the sign on
+    all samples (positive correlation: traced); the streamed trace tested it per batch and
+    refused that trip's batch. Now tested on the merged sums: traced, equal to in memory; a
+    log flipped whole is refused by both in one line."""
+    from sumo_drvpw.errors import UserError
+
+    b, df, truth, p = base
+    eq = Equation("declared", dict(truth.terms), truth.mass_kg, chain=b.chain())
+    d = df.copy()
+    one = d["trip_id"] == "synth-3"
+    d.loc[one, "battery_current_a"] = -d.loc[one, "battery_current_a"]
+    _both(tmp_path, d, eq, "battery", ChainTraceOptions(max_findings=1))
+    flipped = df.assign(battery_current_a=-df["battery_current_a"])
+    log = tmp_path / "flipped.parquet"
+    flipped.to_parquet(log)
+    with pytest.raises(UserError) as mem:
+        load_measured([str(log)], "prius3", target="battery")
+    with pytest.raises(UserError) as st:
+        trace_chain_stream([str(log)], "prius3", eq, "battery", rows=ROWS)
+    assert "sign" in str(st.value) or "falls" in str(st.value)
+    assert str(st.value).split(":")[0] == str(mem.value).split(":")[0]

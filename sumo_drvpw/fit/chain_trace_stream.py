@@ -237,6 +237,7 @@ def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOpt
     ``mask`` are None; the per-trip energies carry what each trip lost to left-out samples);
     ``report["resources"]`` holds rows, passes and whether the batches were on disk;
     ``files`` and ``counts`` attributes: the logs read and the reader's counts."""
+    from sumo_drvpw.data.measured import check_sign_sums, merge_sign_sums
     from sumo_drvpw.data.plausible import check_distinct_trips
     from sumo_drvpw.model.vehicles import load_vehicle
 
@@ -250,12 +251,13 @@ def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOpt
     meta = parquet_metadata(paths)
     batches = Batches(cache_mb)
     stats, counts, left, unknown, names, hist = None, {}, {}, {}, set(), None
+    sign = source = None  # the battery sign test's sums, tested on all batches as in memory
     base, before = _MetricSums(), _TripSums()
     n_rows = n = 0
     sw = e_pred = 0.0
     keep = None
     try:
-        for m in read_batches(paths, veh, read_options, target, rows):
+        for m in read_batches(paths, veh, read_options, target, rows, sign_check=False):
             if bar:
                 bar(len(m.power_w))
             if getattr(m, "counter_view", None) is not None:
@@ -263,6 +265,7 @@ def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOpt
                                 "traced in memory only (their view of the power spans the log)")
             m.log.metadata = meta  # (the columns' roles, as the whole log's reader has them)
             counts = _add_counts(counts, m.counts)
+            sign, source = merge_sign_sums(sign, m.sign_test), source or m.source
             ok, p, y_all, pred0_all, dt_all = chain_samples(m, equation)
             trips_all = m.log.df["trip_id"].astype(str).to_numpy()
             left.update(left_out_by_trip(y_all, ok, dt_all, trips_all))
@@ -292,6 +295,8 @@ def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOpt
                  **{"s:" + k: v for k, v in sig.items()}}
             del m
             batches.append(d)
+        if target == "battery":
+            check_sign_sums(files[0] if len(files) == 1 else f"{len(files)} files", source, sign)
         if n < 50:
             raise UserError(f"{', '.join(files)}: only {n} samples with finite measured {target} power, "
                             "driving power and chain prediction; need at least 50")

@@ -41,7 +41,7 @@ INPUT_FIELDS = ("v", "a", "theta", "wind", "mass", "rho")
 
 
 def read_batches(paths, vehicle=None, options=None, target: str = "wheel", rows: int = BATCH_ROWS,
-                 sample_rows: int | None = None, want: dict | None = None):
+                 sample_rows: int | None = None, want: dict | None = None, sign_check: bool = True):
     """:class:`~sumo_drvpw.data.measured.Measured` per batch of whole trips of every log, in
     reading order (the per-batch loader of the tracer; ``target`` as for ``load_measured``).
 
@@ -58,6 +58,10 @@ def read_batches(paths, vehicle=None, options=None, target: str = "wheel", rows:
     want : ``{"columns": set | None}``, the columns to read (None: all), looked up at each
         file and after each batch: narrowed, the rest of a Parquet file is read with only
         those columns from the next trip on (a CSV chunk is parsed whole, then cut)
+
+    sign_check : test a battery target's sign on each batch; False: its sums are left in
+        each batch's ``Measured.sign_test`` for the caller to test on all batches
+        (``data.measured.check_sign_sums``), as the in-memory reader tests all samples
 
     The extra columns' signals are read from each batch's table when asked for
     (``measure(lazy_signals=True)``), not copied.
@@ -99,7 +103,7 @@ def read_batches(paths, vehicle=None, options=None, target: str = "wheel", rows:
                 del piece
                 seen += n
                 at += n
-                m = measure(log, vehicle, target, lazy_signals=True)
+                m = measure(log, vehicle, target, sign_check=sign_check, lazy_signals=True)
                 del log
                 yield m
                 del m  # before the next chunk is read: one batch in memory at a time
