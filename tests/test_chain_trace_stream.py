@@ -265,3 +265,23 @@ def test_the_battery_sign_is_tested_on_all_batches_as_in_memory(tmp_path, base):
         trace_chain_stream([str(log)], "prius3", eq, "battery", rows=ROWS)
     assert "sign" in str(st.value) or "falls" in str(st.value)
     assert str(st.value).split(":")[0] == str(mem.value).split(":")[0]
+
+
+def test_cli_streams_the_chain_trace_above_the_row_limit(tmp_path, base, monkeypatch, capsys):
+    """`--stream auto` (the default) above the row limit: the chain trace streams (it printed
+    a note and read the logs in memory)."""
+    import sumo_drvpw.cli.diagnose as diag
+    from sumo_drvpw.cli import main as cli_main
+
+    b, df, truth, p = base
+    log = tmp_path / "log.parquet"
+    df.to_parquet(log)
+    decl = tmp_path / "declared.toml"
+    save_equation(Equation("declared", dict(truth.terms), truth.mass_kg, chain=b.chain()), decl)
+    monkeypatch.setattr(diag, "STREAM_ROWS", len(df) - 1)
+    out = tmp_path / "o"
+    assert cli_main(["diagnose", str(log), "--vehicle", "prius3", "--equation", str(decl), "--out", str(out),
+                     "--max-findings", "1", "--quiet"]) == 0
+    res = json.loads((out / "trace.json").read_text(encoding="utf-8"))["resources"]
+    assert res["rows"] == len(df) and res["passes"] > 3
+    assert "rows streamed" in capsys.readouterr().err
