@@ -25,6 +25,9 @@ CAR = Equation("car_fit", TERMS, vclasses=("passenger", "delivery"), metrics={"r
 #: the same numbers at a fixed mass: every vType is booked at it, so no vType is far from it
 FIXED = Equation("car_fixed", TERMS, mass_kg=1500.0, vclasses=("passenger", "delivery"),
                  metrics={"reference_mass_kg": 1500.0})
+#: calibrated on the 1,500 kg car, given a fixed mass of 3,200 kg: every vType is booked at
+#: 3,200 kg with the car's drag (3200/1500 = 2.13, beyond MASS_FAR)
+HEAVY = Equation("car_heavy", TERMS, mass_kg=3200.0, vclasses=("delivery",), metrics={"reference_mass_kg": 1500.0})
 ROUTES = """<routes>
   <vType id="car" vClass="passenger" mass="1700" sigma="0"/>
   <vType id="light" vClass="passenger" mass="950" sigma="0"/>
@@ -43,13 +46,19 @@ def live(tmp_path_factory):
     (d / "s.toml").write_text(f'equations = ["x"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\n'
                               'begin = 0\nend = 60\nstep_length = 0.5\noptions = ["--no-warnings", "true"]\n',
                               encoding="utf-8")
-    res = run_scenario(d / "s.toml", d / "live", equations=[CAR, FIXED], figures=False,
+    res = run_scenario(d / "s.toml", d / "live", equations=[CAR, FIXED, HEAVY], figures=False,
                        options=["--fcd-output", str(d / "fcd.xml"), "--precision", "6"])
     return d, res
 
 
 def _mass_note(summary) -> list[str]:
-    return [w for w in summary["warnings"] if "as the vehicle they were calibrated on" in w]
+    return [w for w in summary["warnings"] if "as the vehicle they were calibrated on" in w
+            and "at a fixed mass_kg" not in w]
+
+
+def _fixed_note(summary) -> list[str]:
+    return [w for w in summary["warnings"] if "as the vehicle they were calibrated on" in w
+            and "at a fixed mass_kg" in w]
 
 
 def test_a_van_booked_by_a_car_equation_is_said(live):
@@ -64,12 +73,31 @@ def test_a_van_booked_by_a_car_equation_is_said(live):
     assert "car_fixed" not in note and "aero term" in note
 
 
+def test_an_equation_at_a_fixed_mass_far_from_its_calibration_is_said(live):
+    """An equation that books every vType at a fixed mass_kg (3,200 kg) calibrated on a
+    1,500-kg car was not said (the resolver held only equations without a fixed mass to
+    their calibration mass): it books the van's acc, grade and roll at 3,200 kg and its
+    aero as the car's. It is said as the others are, in the same family of warning and a
+    sibling summary key; one at its calibration mass (car_fixed) is not."""
+    d, res = live
+    s = json.loads((d / "live" / "summary.json").read_text(encoding="utf-8"))
+    assert s["assumptions"]["calibration_mass_fixed"] == {
+        "car_heavy": {"mass_kg": 3200.0, "calibrated_at_kg": 1500.0, "vtypes": ["van"]}}
+    (note,) = _fixed_note(s)
+    assert "car_heavy (at 3,200 kg, calibrated at 1,500 kg): van" in note and "car_fixed" not in note
+    # the vehicles it booked carry that mass, not the vType's 3,500 kg
+    rows = res.vehicles[res.vehicles.equation == "car_heavy"]
+    assert list(rows.vehicle) == ["v"] and list(rows.mass_kg) == [3200.0]
+
+
 def test_the_replay_says_the_same(live, tmp_path):
     d, res = live
     rep = process_fcd(d / "fcd.xml", scenario=d / "s.toml", out_dir=tmp_path / "o",
-                      equations=[CAR, FIXED], figures=False)
-    assert rep.summary["assumptions"]["calibration_mass"] == res.summary["assumptions"]["calibration_mass"]
+                      equations=[CAR, FIXED, HEAVY], figures=False)
+    for key in ("calibration_mass", "calibration_mass_fixed"):
+        assert rep.summary["assumptions"][key] == res.summary["assumptions"][key]
     assert _mass_note(rep.summary) == _mass_note(res.summary)
+    assert _fixed_note(rep.summary) == _fixed_note(res.summary) and len(_fixed_note(rep.summary)) == 1
 
 
 def test_no_note_within_the_band_and_one_line_per_equation():
@@ -87,12 +115,15 @@ def test_the_replay_on_dask_says_the_same(live, tmp_path):
 
     d, res = live
     save_equation(CAR, tmp_path / "car_fit.toml")
+    save_equation(HEAVY, tmp_path / "car_heavy.toml")
     assert cli_main(["fcd", str(d / "fcd.xml"), "--scenario", str(d / "s.toml"), "--equation",
-                     str(tmp_path / "car_fit.toml"), "--engine", "dask", "--workers", "2", "--buckets", "3",
+                     str(tmp_path / "car_fit.toml"), "--equation", str(tmp_path / "car_heavy.toml"),
+                     "--engine", "dask", "--workers", "2", "--buckets", "3",
                      "--no-figures", "--out", str(tmp_path / "o")]) == 0
     s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
-    assert s["assumptions"]["calibration_mass"] == res.summary["assumptions"]["calibration_mass"]
-    assert len(_mass_note(s)) == 1
+    for key in ("calibration_mass", "calibration_mass_fixed"):
+        assert s["assumptions"][key] == res.summary["assumptions"][key]
+    assert len(_mass_note(s)) == 1 and len(_fixed_note(s)) == 1
 
 
 def test_a_published_fit_at_its_test_mass_is_held_to_it_too(tmp_path):

@@ -40,6 +40,7 @@ from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.outputs import RunResult, summary_dict
 from sumo_drvpw.sim.resolver import (booked_as_warning, calibration_mass_warning, carrier_warning,
+                                     fixed_mass_listing, fixed_mass_warning,
                                      no_hybrid_chain_warning)
 from sumo_drvpw.sim.trace import TraceWriter
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
@@ -360,6 +361,7 @@ class Accountant(_Listener):
                             "energy_carrier": dict(sorted(self.resolver.carriers.items())),
                             "powertrain": dict(sorted(self.resolver.powertrains.items())),
                             "calibration_mass": dict(sorted(self.resolver.mass_far.items())),
+                            "calibration_mass_fixed": fixed_mass_listing(self.resolver.fixed_far),
                             "vtype_energy": self._vtype_energy_listing()},
         }
         summary_extra.update(extra or {})
@@ -391,7 +393,8 @@ class Accountant(_Listener):
                             + " (summary.json assumptions.sumo_masses; set vtypes.<id>.mass_kg)")
         if self.resolver.booked_as:
             warnings.append(booked_as_warning(self.resolver.booked_as))
-        for w in (no_hybrid_chain_warning(self.resolver.powertrains), calibration_mass_warning(self.resolver.mass_far)):
+        for w in (no_hybrid_chain_warning(self.resolver.powertrains), calibration_mass_warning(self.resolver.mass_far),
+                  fixed_mass_warning(self.resolver.fixed_far)):
             if w:
                 warnings.append(w)
         vt_warning = listing_warning(self._vtype_energy_listing())

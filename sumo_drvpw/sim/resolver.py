@@ -38,6 +38,14 @@ def class_mass_limit_kg(emission_class: str | None) -> float | None:
     return None if m is None else float((m.group(1) or m.group(2)).replace("_", ".")) * 1000.0
 
 
+def calibration_mass_kg(eq) -> float | None:
+    """The vehicle mass [kg] an equation's coefficients were calibrated at: a calibrated
+    equation's ``metrics.reference_mass_kg``, else its ``equation.reference_mass_kg`` (the
+    test mass of a published fit, a vehicle file's mass); None when it gives none."""
+    m = (eq.metrics or {}).get("reference_mass_kg") or getattr(eq, "reference_mass_kg", None)
+    return float(m) if m else None
+
+
 class VTypeResolver:
     """vType id → (mass [kg], applicability per equation, accounted?, vClass) for the loop.
 
@@ -88,11 +96,18 @@ class VTypeResolver:
         #: equation's metrics.reference_mass_kg, else its equation.reference_mass_kg: the test
         #: mass of a published fit; none at a fixed mass: it books every vType at it)
         self.calibrated_at = {e.name: float(m) for e in equations if not isinstance(e, str)
-                              and e.mass_kg is None and (m := (e.metrics or {}).get("reference_mass_kg")
-                                                         or getattr(e, "reference_mass_kg", None))}
+                              and e.mass_kg is None and (m := calibration_mass_kg(e))}
         #: vType → {"mass_kg", "calibrated_at_kg": {equation: kg}}: vTypes booked by equations
         #: calibrated at a mass :data:`MASS_FAR` times theirs or more, or as little
         self.mass_far: dict[str, dict] = {}
+        #: equation → {"mass_kg", "calibrated_at_kg"}: equations that book every vType at a fixed
+        #: mass_kg :data:`MASS_FAR` times the mass they were calibrated at or more, or as little
+        #: (a [beta] equation read at its reference_mass_kg, a calibrated one given another mass_kg)
+        self.fixed_far_eq = {e.name: {"mass_kg": float(e.mass_kg), "calibrated_at_kg": float(m)}
+                             for e in equations if not isinstance(e, str) and e.mass_kg is not None
+                             and (m := calibration_mass_kg(e)) and max(m / e.mass_kg, e.mass_kg / m) >= MASS_FAR}
+        #: vType → {equation: its fixed_far_eq entry}: the vTypes such equations book
+        self.fixed_far: dict[str, dict] = {}
         self.energy_of = energy_vtype_of(equations)  # vtype_energy equation → its vType
         self.energy_mass = {e.name: e.mass_kg for e in equations if getattr(e, "name", None) in self.energy_of}
         #: vTypes resolved by other resolvers of the same run (Dask buckets of an FCD replay)
@@ -394,6 +409,9 @@ class VTypeResolver:
                and max(m / mass, mass / m) >= MASS_FAR}
         if far:
             self.mass_far[vt] = {"mass_kg": float(mass), "calibrated_at_kg": far}
+        at_fixed = {n: self.fixed_far_eq[n] for n, a in zip(self.names, app) if a and n in self.fixed_far_eq}
+        if at_fixed:
+            self.fixed_far[vt] = at_fixed
         return (float(mass), app, True, vclass, "")
 
 
@@ -472,3 +490,32 @@ def calibration_mass_warning(mass_far: dict[str, dict]) -> str | None:
             "mass, but the aero term (the calibration vehicle's drag) and whatever else the fit absorbed do "
             "not: calibrate an equation on such vehicles, or name one for them (summary.json "
             "assumptions.calibration_mass; vclasses.<vClass>.equations)")
+
+
+def fixed_mass_listing(fixed_far: dict[str, dict]) -> dict[str, dict]:
+    """summary.json ``assumptions.calibration_mass_fixed``: per equation that books at a fixed
+    mass far from its calibration mass (:attr:`VTypeResolver.fixed_far`), that mass, the
+    calibration mass and the vTypes it booked [kg]."""
+    out: dict[str, dict] = {}
+    for vt, eqs in sorted(fixed_far.items()):
+        for eq, f in eqs.items():
+            out.setdefault(eq, {**f, "vtypes": []})["vtypes"].append(vt)
+    return dict(sorted(out.items()))
+
+
+def fixed_mass_warning(fixed_far: dict[str, dict]) -> str | None:
+    """One line, or None: the equations that book every vType at a fixed ``mass_kg``
+    :data:`MASS_FAR` times as heavy or as light as the vehicle they were calibrated on, or
+    more (their vTypes, up to three each)."""
+    listing = fixed_mass_listing(fixed_far)
+    if not listing:
+        return None
+    parts = [f"{eq} (at {f['mass_kg']:,.0f} kg, calibrated at {f['calibrated_at_kg']:,.0f} kg): "
+             + ", ".join(f["vtypes"][:3]) + (f" and {len(f['vtypes']) - 3} more" if len(f["vtypes"]) > 3 else "")
+             for eq, f in listing.items()]
+    return (f"equations book every vType at a fixed mass_kg {MASS_FAR:g} times as heavy or as light as the "
+            "vehicle they were calibrated on, or more: " + "; ".join(parts) + " — their acc, grade and roll "
+            "terms are booked at that mass, but the aero term (the calibration vehicle's drag) and whatever "
+            "else the fit absorbed are the calibration vehicle's: give such an equation its calibration mass "
+            "(or none: each vType's), or calibrate one on vehicles of that mass (summary.json "
+            "assumptions.calibration_mass_fixed)")
