@@ -692,9 +692,10 @@ def test_a_vehicle_a_script_turns_electric_is_booked_by_the_battery_chain_from_t
     """vehicle.setEmissionClass on one car (SUMO gives it its own vType copy, 'prius3@<id>')
     was ignored: the petrol car stayed on the petrol chain for its whole trip. Now the copy's
     emissionClass chooses the chain from the type's equations: the petrol chain books the
-    car until the type check (every few seconds) sees the copy, the battery chain from then
-    on; the car's km
-    split between the two add up to its trip; a car left alone stays on petrol."""
+    car up to the call, the battery chain from the next step on (the copy adds a vType to
+    SUMO's, which has the type check run in that step: sim/riders.OwnCopies; before, the
+    petrol chain booked on to the next 25-step check); the car's km split between the two
+    add up to its trip; a car left alone stays on petrol."""
     sc = load_scenario(CITY, end=200)
     conn = start_sumo(sc.sumo_args)
     try:
@@ -705,19 +706,22 @@ def test_a_vehicle_a_script_turns_electric_is_booked_by_the_battery_chain_from_t
         conn.route.add("r_ev", ["c00c10", "c10c20"])
         conn.vehicle.add("turned", "r_ev", typeID="petrol", depart="0")
         conn.vehicle.add("left", "r_ev", typeID="petrol", depart="3")
-        switched = False
+        switched = None
         for _ in range(400):
             conn.simulationStep()
             acc.step()
-            if not switched and "turned" in conn.vehicle.getIDList():
+            if switched is None and "turned" in conn.vehicle.getIDList() \
+                    and conn.vehicle.getDistance("turned") > 30.0:  # (not at a multiple of 25 steps)
+                assert acc.stepper.ledger.steps % 25 != 0
                 conn.vehicle.setEmissionClass("turned", "Energy/unknown")
-                switched = True
+                switched = conn.vehicle.getDistance("turned")
         v = acc.result().vehicles
     finally:
         close_sumo(conn)
     t = v[v.vehicle == "turned"].set_index("equation")
     assert set(t.index) == {"epa_gasoline_car", "bmw_i3_battery"}, t
     assert t.loc["bmw_i3_battery", "distance_m"] > 2 * t.loc["epa_gasoline_car", "distance_m"] > 0
+    assert t.loc["epa_gasoline_car", "distance_m"] == pytest.approx(switched, abs=0.01)  # up to the call
     left = v[v.vehicle == "left"]
     assert list(left.equation) == ["epa_gasoline_car"]
     assert t["distance_m"].sum() == pytest.approx(left["distance_m"].iloc[0], rel=0.05)  # the same route

@@ -40,7 +40,7 @@ from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.outputs import RunResult, summary_dict
 from sumo_drvpw.sim.resolver import (booked_as_warning, calibration_mass_warning, carrier_warning,
-                                     fixed_mass_listing, fixed_mass_warning,
+                                     fixed_mass_listing, fixed_mass_warning, untold_copies_warning,
                                      no_hybrid_chain_warning)
 from sumo_drvpw.sim.trace import TraceWriter
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
@@ -362,6 +362,7 @@ class Accountant(_Listener):
                             "powertrain": dict(sorted(self.resolver.powertrains.items())),
                             "calibration_mass": dict(sorted(self.resolver.mass_far.items())),
                             "calibration_mass_fixed": fixed_mass_listing(self.resolver.fixed_far),
+                            "untold_copy_masses": dict(sorted(self.resolver.untold_copies.items())),
                             "vtype_energy": self._vtype_energy_listing()},
         }
         summary_extra.update(extra or {})
@@ -397,6 +398,8 @@ class Accountant(_Listener):
                   fixed_mass_warning(self.resolver.fixed_far)):
             if w:
                 warnings.append(w)
+        if self.resolver.untold_copies:
+            warnings.append(untold_copies_warning(self.resolver.untold_copies))
         vt_warning = listing_warning(self._vtype_energy_listing())
         if vt_warning:
             warnings.append(vt_warning)

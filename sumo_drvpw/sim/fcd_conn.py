@@ -107,6 +107,11 @@ class _VType(_Domain):
     def getMass(self, vt):  # noqa: N802 (a person type's: the route files', else SUMO's 70 kg)
         return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
 
+    def getIDCount(self):  # noqa: N802 (the vTypes the rows named so far: a vehicle's own copy
+        seen = self.__dict__.setdefault("_seen", set())  # <type>@<id> adds one, as in SUMO)
+        seen.update(self.r.types.values())
+        return len(seen)
+
 
 class _Calib(_Domain):
     def getIDList(self):  # noqa: N802 (the scenario files' calibrators: set by replay_fcd)

@@ -28,7 +28,7 @@ from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import LaneNumbers, Network
 from sumo_drvpw.sim.parking import Parking
 from sumo_drvpw.sim.reader import Reader, calibrator_lanes, on_road_acceleration, reinserted, tailwind, yaw_rate  # noqa: F401,E501
-from sumo_drvpw.sim.riders import Riders
+from sumo_drvpw.sim.riders import OwnCopies, Riders
 from sumo_drvpw.sim.shutoff import ShutOff
 from sumo_drvpw.sim.sumo_start import NewRun, action_step_switches, step_method
 from sumo_drvpw.sim.teleport import put_back
@@ -88,9 +88,10 @@ class Physics:
 #: rail/bidi_noconflict_insertion with a 400-t Energy-model train, SUMO 1.28, 2026-11-29)
 IMPOSSIBLE_DECEL_MPS2 = 1.2 * G
 
-#: every this many steps the running vehicles' vTypes are read again (a script's setType,
-#: setMass): a change books from then on (over traci, each read a round trip: 10× as many);
-#: vehicles on a calibrator's edge, where SUMO changes vTypes itself, are read every step
+#: every this many steps the running vehicles' vTypes are read again (a script's setType):
+#: a change books from then on (over traci, each read a round trip: 10× as many); vehicles
+#: on a calibrator's edge, where SUMO changes vTypes itself, are read every step, and all
+#: of them in a step where SUMO's vType count changed (a setMass's copy: sim/riders.OwnCopies)
 TYPE_CHECK_STEPS = 25
 
 
@@ -206,6 +207,7 @@ class Stepper:
         self.is_replay = bool(getattr(conn, "is_replay", False))  # an FCD replay
         #: riding persons (Physics.transportable_mass; sim/riders.py)
         self.riders = Riders(conn, physics.transportable_mass)
+        self.own = OwnCopies(conn, self.is_replay)  # a script's setMass (sim/riders.py)
         self.retyped = 0  # vehicles whose vType changed during their trip (check_types)
         self.seen_type: dict[str, str] = {}  # vehicle id → its last vType id seen there
         so = ShutOff(conn)  # long planned stops switch vehicles off, as in SUMO
@@ -260,8 +262,9 @@ class Stepper:
                 continue
             seen[vid] = vt
             if vt == f"{types[i]}@{vid}":  # its own copy: a mass or an emissionClass the script set
-                own = getattr(self.resolve, "own_copy", None)  # (a VTypeResolver's; FCD names the copy only)
-                if own and tget is not None and not self.is_replay and own(ledger, i, types[i], vt):
+                own = getattr(self.resolve, "own_copy", None)  # (a VTypeResolver's)
+                self.own.track(vid, vt)
+                if own and tget is not None and own(ledger, i, types[i], vt):
                     self.retyped += 1
                     self.every_equation_applies &= bool(np.all(ledger.veh_app[i] == 1.0))
                 continue
@@ -382,6 +385,7 @@ class Stepper:
             return
         if ledger.steps % (TYPE_CHECK_STEPS * (10 if self.reader.subs else 1)) == 0:
             self.check_types(kids, vidx)  # (a replay: at the steps a live libsumo run reads them)
+        self.own.step(self, kids, vidx)  # and when a vType copy was made; a copy's mass each step
         tracking = self.tracking
         v, a, angle, ln, pos, raw = self.reader.read(kids, skip_lanes=tracking)
         if self.parking.resumed:

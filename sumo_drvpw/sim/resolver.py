@@ -110,8 +110,12 @@ class VTypeResolver:
         self.fixed_far: dict[str, dict] = {}
         self.energy_of = energy_vtype_of(equations)  # vtype_energy equation → its vType
         self.energy_mass = {e.name: e.mass_kg for e in equations if getattr(e, "name", None) in self.energy_of}
-        #: vTypes resolved by other resolvers of the same run (Dask buckets of an FCD replay)
+        #: vTypes resolved by other resolvers of the same run (Dask buckets of an FCD replay),
+        #: and vehicles' own copies booked at the scenario's [vtypes."<type>@<id>"] mass
         self.seen: set[str] = set()
+        #: a replay's vehicles' own vType copies (``<type>@<id>``: a script's setMass …) whose
+        #: mass no [vtypes."<copy>"] mass_kg told: copy → its type, booked at that type's mass
+        self.untold_copies: dict[str, str] = {}
         #: vehicles not accounted because no equation is made for their vClass (by_vclass,
         #: by_vtype) or none books their energy carrier (by_carrier, when any: vClass → count)
         self.skipped: dict[str, dict[str, int]] = {"by_vclass": {}, "by_vtype": {}}
@@ -255,19 +259,42 @@ class VTypeResolver:
                                 "not_booked_by": [self.names[i] for i in other]}
         return app
 
+    def own_mass(self, ledger, i: int, vt: str, copy: str) -> bool:
+        """Book vehicle row ``i`` of vType ``vt``, now on its own copy ``copy``, at the copy's
+        mass: the scenario's ``[vtypes."<copy>"] mass_kg`` where it gives one (all an FCD
+        replay can know: FCD names the copy, not its mass), else, live, SUMO's mass of the
+        copy where a script set another than ``vt``'s, else ``vt``'s booked mass (a copy
+        made by another setter; a mass set back). A replay told none books ``vt``'s and
+        lists the copy in :attr:`untold_copies`. True when the booked mass changed."""
+        told = getattr(self.sc, "vtype_data", {}).get(copy, {}).get("mass_kg")
+        base = self.cache[vt][0] if vt in self.cache else float(ledger.veh_mass[i])
+        if told is not None:
+            m = float(told)
+            self.seen.add(copy)  # (its [vtypes] entry was used)
+        elif getattr(self.conn, "is_replay", False):
+            self.untold_copies.setdefault(copy, vt)
+            return False
+        else:
+            tget = self.conn.vehicletype
+            m = float(tget.getMass(copy))
+            if not (m > 0 and np.isfinite(m)) or m == float(tget.getMass(vt)):
+                m = base
+        if m == float(ledger.veh_mass[i]):
+            return False
+        ledger.veh_mass[i] = m
+        return True
+
     def own_copy(self, ledger, i: int, vt: str, copy: str) -> bool:
         """Vehicle row ``i`` of vType ``vt`` now runs on its own copy ``copy`` (``<vt>@<id>``:
         SUMO makes one when a script calls the vehicle's setMass, setEmissionClass, …): its
-        mass when the script set another, and where the copy's emissionClass names another
-        energy carrier than ``vt``'s, the equations of that carrier among those made for its
-        class (a petrol car a script turns electric: the battery chain, not the petrol one).
-        True when either changed."""
+        mass when the script set another (:meth:`own_mass`), and, live, where the copy's
+        emissionClass names another energy carrier than ``vt``'s, the equations of that
+        carrier among those made for its class (a petrol car a script turns electric: the
+        battery chain, not the petrol one). True when either changed."""
+        changed = self.own_mass(ledger, i, vt, copy)
+        if getattr(self.conn, "is_replay", False):  # (FCD names the copy, not its emissionClass)
+            return changed
         tget = self.conn.vehicletype
-        changed = False
-        m = float(tget.getMass(copy))
-        if m > 0 and m != float(tget.getMass(vt)):
-            ledger.veh_mass[i] = m
-            changed = True
         made = self.made_for_app.get(vt)
         ec = str(tget.getEmissionClass(copy)) or None
         carrier = energy_carrier(ec)
@@ -519,3 +546,14 @@ def fixed_mass_warning(fixed_far: dict[str, dict]) -> str | None:
             "else the fit absorbed are the calibration vehicle's: give such an equation its calibration mass "
             "(or none: each vType's), or calibrate one on vehicles of that mass (summary.json "
             "assumptions.calibration_mass_fixed)")
+
+
+def untold_copies_warning(untold: dict[str, str]) -> str:
+    """One line: the vehicles' own vType copies an FCD replay saw (``<type>@<id>``) and booked
+    at their type's mass, as FCD carries no mass (:attr:`VTypeResolver.untold_copies`)."""
+    ids = sorted(untold)
+    return ("the FCD names vehicles' own vType copies (<type>@<id>: SUMO makes one when a script calls "
+            "setMass or another vType setter on the vehicle) but not their mass, so they were booked at "
+            "their type's mass: " + ", ".join(ids[:5]) + (f" and {len(ids) - 5} more" if len(ids) > 5 else "")
+            + " — where a script set a mass, give it as [vtypes.\"<type>@<id>\"] mass_kg in the scenario "
+            "(one mass per copy; summary.json assumptions.untold_copy_masses)")

@@ -11,7 +11,8 @@ stop starts, as SUMO's emission output books them (probed 2026-11-27 with SUMO 1
 MMPEVEM, whose holding torque on a slope shows the mass of every standing step:
 tests/test_mmpevem_riders.py). Containers are not booked (TraCI has no containers'
 vehicle). The FCD replay answers the same getters from the persons' rows
-(:mod:`sumo_drvpw.sim.fcd_conn`).
+(:mod:`sumo_drvpw.sim.fcd_conn`). The mass a script sets on a vehicle (``setMass``, its
+own vType copy) is read from the step SUMO drives it: :class:`OwnCopies`.
 """
 
 from __future__ import annotations
@@ -71,3 +72,47 @@ class Riders:
             gone = [v for v in self.at_stop if (i := vmap.get(v)) is not None and parked[i]]
             self.at_stop.difference_update(gone)  # until its stop ends: parked all along
             self.update(ledger, vmap, [*departed, *ending, *self.at_stop])
+
+
+class OwnCopies:
+    """Masses a script sets on running vehicles (``vehicle.setMass``; ``Stepper.own``):
+    SUMO gives the vehicle its own copy of its vType, ``<type>@<id>``, and books the new
+    mass from the next step. The copy adds one vType to SUMO's, so a changed vType count
+    (one call a step) has the loop read the running vehicles' vTypes in that step, not only
+    every ``TYPE_CHECK_STEPS``; a vehicle on its own copy has its mass read every step, as
+    a script may set it again without a new copy (:meth:`VTypeResolver.own_mass`). An FCD
+    replay answers the count from the vTypes its rows named (sim/fcd_conn.py)."""
+
+    def __init__(self, conn, is_replay: bool):
+        vt = getattr(conn, "vehicletype", None)
+        self.count = getattr(vt, "getIDCount", None)
+        self.last: int | None = None
+        #: live: the vehicle's mass getter (a replay's copies carry none: told by the scenario)
+        self.mass = None if is_replay or self.count is None else getattr(conn.vehicle, "getMass", None)
+        #: vehicle id → (its copy, the copy's mass last read [kg])
+        self.on_copy: dict[str, tuple[str, float]] = {}
+
+    def track(self, vid: str, copy: str) -> None:
+        """Vehicle ``vid`` runs on its own copy ``copy`` from now on."""
+        if self.mass is not None:
+            self.on_copy[vid] = (copy, float(self.mass(vid)))
+
+    def step(self, st, kids, vidx) -> None:
+        """Once per step, after it was made, for the vehicles read (``kids``, rows ``vidx``)."""
+        if self.count is not None:
+            n = int(self.count())
+            if self.last is not None and n != self.last:  # a copy made (or a vType added, dropped)
+                st.check_types(kids, vidx)
+            self.last = n
+        ledger = st.ledger
+        for vid, (copy, m) in list(self.on_copy.items()):
+            i = st.vmap.get(vid)
+            if i is None or ledger.veh_done[i] or f"{ledger.veh_type[i]}@{vid}" != copy:
+                del self.on_copy[vid]  # gone, or a new trip under its id
+                continue
+            now = float(self.mass(vid))
+            if now != m:
+                self.on_copy[vid] = (copy, now)
+                own = getattr(st.resolve, "own_mass", None)  # (a VTypeResolver's)
+                if own is not None and own(ledger, i, ledger.veh_type[i], copy):
+                    st.retyped += 1

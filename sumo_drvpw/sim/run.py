@@ -40,7 +40,7 @@ def check_vtype_tables(sc, vtypes) -> None:
             raise UserError(f"{sc.path or 'the scenario'}: [vtypes.{vt}] names a vTypeDistribution: its vehicles "
                             "take its members' vType ids, so its settings would book none; give them per member "
                             "([vtypes.<member>])")
-        if vt not in known:
+        if vt not in known and vt.rpartition("@")[0] not in known:  # (a vehicle's own copy: <type>@<id>)
             near = difflib.get_close_matches(vt, sorted(known), n=1)
             raise UserError(f"{sc.path or 'the scenario'}: [vtypes.{vt}] names no vType of the route and "
                             f"additional files the run loads" + (f" (did you mean '{near[0]}'?)" if near else "")

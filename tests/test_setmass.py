@@ -1,0 +1,133 @@
+"""A script's ``traci.vehicle.setMass`` during a trip (SUMO gives the vehicle its own vType
+copy, ``<type>@<id>``, and drives it at the new mass from the next step): the live
+Accountant books each step at the mass SUMO drives it with — the first call from the next
+step (the copy adds a vType to SUMO's: sim/riders.OwnCopies), and a second call on the
+same copy too (its mass read every step) —, over libsumo and traci alike. Before, the first
+call was read at the next 25-step vType check (over traci: 250 steps, never in a short
+trip) and a second call never. An FCD replay, which sees the copy's name but not its mass,
+says so and books the masses a scenario tells it (``[vtypes."<type>@<id>"] mass_kg``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+from sumo_drvpw.sim.fcd import process_fcd
+from sumo_drvpw.sim.scenario import load_scenario
+
+pytestmark = pytest.mark.sumo
+
+NET = Path(__file__).resolve().parent.parent / "sumo_drvpw" / "sim" / "builtin" / "networks" / "highway.net.xml"
+PHYS = Equation("phys", {"acc": 1.0, "grade": 1.0, "aero": 0.35, "roll": 0.01}, vclasses=("passenger",))
+ROUTES = """<routes>
+  <vType id="car" vClass="passenger" mass="1500" sigma="0"/>
+  <route id="east" edges="e01 e12 e23"/>
+  <vehicle id="v" type="car" route="east" depart="0" departSpeed="0"/>
+  <vehicle id="w" type="car" route="east" depart="3" departSpeed="0"/>
+</routes>"""
+DT = 0.5
+#: after step k (0-based): (vehicle, mass set) — none at a multiple of 25 steps
+CALLS = {20: ("v", 3000.0), 40: ("w", 900.0), 80: ("v", 2000.0)}
+
+
+def _run(d: Path, tag: str, connection: str, calls: dict):
+    """The Accountant in the script's own loop; its result, its per-step trace (the step's
+    start time, vehicle → roll power [W]) and SUMO's mass of each vehicle per step driven."""
+    (d / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
+    (d / f"{tag}.toml").write_text(
+        f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nbegin = 0\nend = 70\n'
+        f'step_length = {DT}\nconnection = "{connection}"\noptions = ["--no-warnings", "true", "--fcd-output", '
+        f'"{d / (tag + "_fcd.xml")}", "--precision", "6"]\n', encoding="utf-8")
+    sc = load_scenario(d / f"{tag}.toml")
+    conn = start_sumo(sc.sumo_args, connection=connection)
+    driven = {}  # (start time of a step, vehicle) → the mass SUMO drives it with in that step
+    try:
+        acc = Accountant(conn, scenario=sc, equations=[PHYS], trace_path=d / f"{tag}_trace.parquet")
+        for k in range(140):
+            conn.simulationStep()
+            acc.step()
+            if k in calls:
+                conn.vehicle.setMass(*calls[k])
+            t = conn.simulation.getTime()
+            for vid in conn.vehicle.getIDList():
+                driven[(t, vid)] = conn.vehicle.getMass(vid)
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    roll = pd.read_parquet(d / f"{tag}_trace.parquet").set_index(["time_s", "vehicle"])["p_roll_w"]
+    return res, roll, pd.Series(driven)
+
+
+@pytest.fixture(scope="module")
+def ref(tmp_path_factory):
+    d = tmp_path_factory.mktemp("setmass")
+    return d, _run(d, "ref", "libsumo", {})
+
+
+@pytest.mark.parametrize("connection", ["libsumo", "traci"])
+def test_each_step_is_booked_at_the_mass_sumo_drives_it_with(ref, connection):
+    d, (_, roll0, _) = ref
+    res, roll, driven = _run(d, connection, connection, CALLS)
+    moving = roll0[roll0 > 0]
+    booked = (roll.reindex(moving.index) / moving * 1500.0)  # the roll term is linear in the mass
+    want = driven.reindex(moving.index)
+    assert len(moving) > 200 and want.notna().all()
+    assert set(want.round()) == {1500.0, 3000.0, 2000.0, 900.0}
+    wrong = booked[(booked - want).abs() > 1e-6 * want]
+    assert wrong.empty, wrong.head()
+    assert res["vtype_changes"] == 3
+    rows = res.vehicles.set_index("vehicle")
+    assert rows.mass_kg.to_dict() == {"v": 2000.0, "w": 900.0}  # the last mass booked
+    assert (rows.vtype == "car").all()
+
+
+def test_a_replay_says_it_cannot_see_the_mass_and_books_the_one_it_is_told(ref, tmp_path):
+    d, _ = ref
+    live, _, _ = _run(d, "live", "libsumo", CALLS)
+    fcd = d / "live_fcd.xml"
+    assert 'type="car@v"' in fcd.read_text(encoding="utf-8")
+    untold = process_fcd(fcd, scenario=d / "live.toml", equations=[PHYS], figures=False)
+    assert untold.summary["assumptions"]["untold_copy_masses"] == {"car@v": "car", "car@w": "car"}
+    (note,) = [w for w in untold.summary["warnings"] if "own vType copies" in w]
+    assert "car@v, car@w" in note and 'vtypes."<type>@<id>"' in note
+    assert set(untold.vehicles.mass_kg) == {1500.0}
+    # told w's one mass (v had two: a replay can be told one per copy)
+    (d / "told.toml").write_text((d / "live.toml").read_text(encoding="utf-8")
+                                 + '[vtypes."car@w"]\nmass_kg = 900\n', encoding="utf-8")
+    told = process_fcd(fcd, scenario=d / "told.toml", out_dir=tmp_path / "o", equations=[PHYS], figures=False)
+    a, b = live.vehicles.set_index("vehicle"), told.vehicles.set_index("vehicle")
+    assert b.mass_kg["w"] == 900.0 and told.summary["assumptions"]["untold_copy_masses"] == {"car@v": "car"}
+    for c in ("traction_roll_j", "traction_acc_j", "traction_total_j", "distance_m"):
+        np.testing.assert_allclose(b.loc["w", c], a.loc["w", c], rtol=1e-6, err_msg=c)
+    assert not any("matched no vehicle" in w for w in told.summary["warnings"])
+
+
+def test_the_replay_on_dask_says_and_books_the_same(ref, tmp_path):
+    """Each bucket sees its own vehicles' copies: the driver joins what they were told and not."""
+    pytest.importorskip("distributed")
+    import json
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.model.equations import save_equation
+
+    d, _ = ref
+    live, _, _ = _run(d, "dlive", "libsumo", CALLS)
+    (d / "dtold.toml").write_text((d / "dlive.toml").read_text(encoding="utf-8")
+                                  + '[vtypes."car@w"]\nmass_kg = 900\n', encoding="utf-8")
+    save_equation(PHYS, tmp_path / "phys.toml")
+    assert cli_main(["fcd", str(d / "dlive_fcd.xml"), "--scenario", str(d / "dtold.toml"), "--equation",
+                     str(tmp_path / "phys.toml"), "--engine", "dask", "--workers", "2", "--buckets", "2",
+                     "--no-figures", "--out", str(tmp_path / "o")]) == 0
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
+    assert s["assumptions"]["untold_copy_masses"] == {"car@v": "car"}
+    assert sum("own vType copies" in w for w in s["warnings"]) == 1
+    assert not any("matched no vehicle" in w for w in s["warnings"])
+    v = pd.read_parquet(tmp_path / "o" / "vehicles.parquet").set_index("vehicle")
+    a = live.vehicles.set_index("vehicle")
+    assert v.mass_kg["w"] == 900.0
+    np.testing.assert_allclose(v.loc["w", "traction_roll_j"], a.loc["w", "traction_roll_j"], rtol=1e-6)
