@@ -131,3 +131,36 @@ def test_the_replay_on_dask_says_and_books_the_same(ref, tmp_path):
     a = live.vehicles.set_index("vehicle")
     assert v.mass_kg["w"] == 900.0
     np.testing.assert_allclose(v.loc["w", "traction_roll_j"], a.loc["w", "traction_roll_j"], rtol=1e-6)
+
+
+def test_a_run_resumed_from_a_state_saved_after_a_setmass_books_the_copy_as_its_type(tmp_path):
+    """SUMO's saved state keeps a vehicle's own copy (``<vType id="car@v" mass="3000.00">``):
+    a run resumed from it first sees the vehicle on the copy. It was booked as a vType of no
+    file (warned as made by TraCI, the scenario's [vtypes.car] settings lost) and, with
+    ``vehicles.vtypes = ["car"]``, left out as not in the filter. Now booked as its type
+    with the copy's mass, as a copy made during the run is."""
+    import libsumo
+
+    (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
+    libsumo.start(["sumo", "-n", str(NET), "-r", str(tmp_path / "r.rou.xml"), "--no-warnings", "true",
+                   "--step-length", str(DT)])
+    try:
+        for _ in range(30):
+            libsumo.simulationStep()
+        libsumo.vehicle.setMass("v", 3000.0)
+        libsumo.simulationStep()
+        libsumo.simulation.saveState(str(tmp_path / "state.xml"))
+    finally:
+        libsumo.close()
+    assert 'type="car@v"' in (tmp_path / "state.xml").read_text(encoding="utf-8")
+    from sumo_drvpw.sim import run_scenario
+
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nbegin = 15.5\nend = 40\n'
+        f'step_length = {DT}\noptions = ["--no-warnings", "true", "--load-state", "{tmp_path / "state.xml"}"]\n'
+        '[vehicles]\nvtypes = ["car"]\n[vtypes.car]\nmass_kg = 1600\n', encoding="utf-8")
+    res = run_scenario(tmp_path / "s.toml", None, equations=[PHYS], figures=False)
+    v = res.vehicles.set_index("vehicle")
+    assert v.vtype.to_dict() == {"v": "car", "w": "car"}
+    assert v.mass_kg.to_dict() == {"v": 3000.0, "w": 1600.0}  # the script's mass; the scenario's for its type
+    assert res.summary["excluded_by_vehicles_vtypes"] == 0 and res.summary["assumptions"]["sumo_masses"] == {}

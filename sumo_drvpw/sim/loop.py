@@ -235,13 +235,19 @@ class Stepper:
             self.asl_seen.add(vt)
             if action_step_switches(float(self.asl(vt)), self.dt):  # SUMO moves ballistic from now
                 self.ballistic, self.tracking, self.asl = True, False, None
-        res = self.resolve(vt, vid)
+        # on its own copy when first seen (a state saved after a setMass): booked as its type is
+        base = vt[:-len(vid) - 1] if vt.endswith("@" + vid) and hasattr(self.resolve, "own_copy") else None
+        res = self.resolve(base or vt, vid)
         mass, app, keep = res[:3]
-        i = ledger.add_vehicle(vid, vt, mass, app, keep, res[3] if len(res) > 3 else "")
+        i = ledger.add_vehicle(vid, base or vt, mass, app, keep, res[3] if len(res) > 3 else "")
         self.vmap[vid] = i
         self.seen_type.pop(vid, None)
+        if base is not None and keep:  # then at the copy's mass (sim/resolver.own_mass)
+            self.seen_type[vid] = vt
+            self.own.track(vid, vt)
+            self.resolve.own_copy(ledger, i, base, vt)
         if self.shutoff is not None:
-            self.shutoff.registered(ledger, i, vt, vid)
+            self.shutoff.registered(ledger, i, base or vt, vid)
         if keep and not np.all(ledger.veh_app[i] == 1.0):
             self.every_equation_applies = False
         self.reader.subscribe_existing([vid])
