@@ -1,13 +1,16 @@
-"""Containers are not booked (their vehicle's load is not read): a run whose route files
-define containers says so, since SUMO's emission models add their mass to the vehicle that
-carries them (EnergyParams::getTotalMass) and such a vehicle then reads below SUMO's
-emission output."""
+"""Containers riding a vehicle: SUMO's emission models add their mass to the vehicle that
+carries them (EnergyParams::getTotalMass: mass + loading + the mass of its persons and
+containers). A live run books it, read from the vehicle's container device
+(``device.container.IDList``, each container's vType from the route files) at the same
+events as riding persons (sim/riders.py); an FCD replay does not read containers' rows and
+says so."""
 
 from __future__ import annotations
 
 import json
 
 import pandas as pd
+import pytest
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim import run_scenario
@@ -21,10 +24,11 @@ ROUTES = """<routes>
 </routes>"""
 
 
-def test_containers_not_booked_are_said(tmp_path):
-    """A 9-t Energy-model truck carrying one container 800 m at 0.5-s steps: booked 0.87 of
-    SUMO's emission output (measured 2026-11-27), and, since this commit, the run and the FCD
-    replay warn that containers are not booked (before: no word of it)."""
+def test_containers_are_booked_live_and_a_replay_says_it_does_not(tmp_path):
+    """A 9-t Energy-model truck carrying one container (SUMO's DEFAULT_CONTAINERTYPE, 1,500 kg
+    in SUMO 1.28) 800 m at 0.5-s steps: booked 0.87 of SUMO's emission output, with a warning
+    (measured 2026-11-27); now the live run books SUMO's electricity, and the FCD replay,
+    which does not, warns."""
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
     (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
@@ -33,12 +37,47 @@ def test_containers_not_booked_are_said(tmp_path):
     sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
     assert not nan
     cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
-    assert cv.loc["t", "net_kwh"] * 1000.0 < 0.95 * sumo_wh["t"]  # the container's mass is left out
+    assert cv.loc["t", "net_kwh"] * 1000.0 == pytest.approx(sumo_wh["t"], rel=2e-3)
     assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
                      "--out", str(tmp_path / "fcd"), "--no-figures"]) == 0
-    for out in ("o", "fcd"):
-        warnings = json.loads((tmp_path / out / "summary.json").read_text(encoding="utf-8"))["warnings"]
-        assert any("1 container(s)" in w and "not booked" in w for w in warnings), (out, warnings)
+    rv = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").set_index("key")
+    assert rv.loc["t", "net_kwh"] * 1000.0 < 0.95 * sumo_wh["t"]  # the container's mass is left out
+    for out, said in (("o", False), ("fcd", True)):
+        s = json.loads((tmp_path / out / "summary.json").read_text(encoding="utf-8"))
+        assert any("1 container(s)" in w and "not booked" in w for w in s["warnings"]) == said, (out, s["warnings"])
+    assert json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))["transportables"]["max_kg"] == 1500.0
+
+
+@pytest.mark.parametrize("connection", ["libsumo", "traci"])
+def test_containers_of_their_own_types_loaded_and_unloaded_at_stops(tmp_path, connection):
+    """A container of SUMO's default vType (1,500 kg) boarding at the truck's departure and one
+    of a containerFlow (``kf.0``, of the files' vType 'box', 2,000 kg: its vType found by its
+    flow's id) boarding on the way (SUMO 1.28 carries k0 from 0.5 s, k0 and kf.0 from 37 s,
+    kf.0 alone from 126.5 s to 216 s): the truck's electricity equals SUMO's emission output,
+    over libsumo and traci (0.965 of it before, with a warning)."""
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
+    (tmp_path / "r.rou.xml").write_text("""<routes>
+  <vType id="etruck" vClass="truck" mass="9000" emissionClass="Energy/unknown" containerCapacity="3">
+    <param key="rotatingMass" value="400"/></vType>
+  <vType id="box" vClass="ignoring" mass="2000"/>
+  <vehicle id="t" type="etruck" depart="containerTriggered" departPos="15" departSpeed="0"><route edges="e"/>
+    <stop lane="e_0" endPos="400" duration="100"/></vehicle>
+  <vehicle id="u" type="etruck" depart="0" departPos="5" departSpeed="0"><route edges="e"/></vehicle>
+  <container id="k0" depart="0" departPos="20"><transport from="e" to="e" lines="t"/></container>
+  <container id="k1" depart="0" departPos="20" type="box"><transport from="e" to="e" lines="t" arrivalPos="400"/></container>
+  <containerFlow id="kf" begin="0" number="1" departPos="390" type="box"><transport from="e" to="e" lines="t"/></containerFlow>
+</routes>""", encoding="utf-8")
+    energy_scenario(tmp_path, 600, fcd=False)
+    run_scenario(tmp_path / "s.toml", tmp_path / "o", connection=connection)
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan and set(sumo_wh) == {"t", "u"}
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    for vid in ("t", "u"):
+        assert cv.loc[vid, "net_kwh"] * 1000.0 == pytest.approx(sumo_wh[vid], rel=2e-3), vid
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
+    assert s["transportables"]["max_kg"] == 3500.0  # k0 and kf.0 (the flow's box: 2,000 kg, not the default's)
+    assert not any("container" in w for w in s["warnings"])
 
 
 def test_a_tabular_fcd_s_containers_are_not_read_as_riding_persons(tmp_path):

@@ -9,8 +9,10 @@ parked vehicle is not booked; its riders are read when its stop ends, or when it
 to idle in its space, its way out blocked: sim/parking.py) — from the step its
 stop starts, as SUMO's emission output books them (probed 2026-11-27 with SUMO 1.28's
 MMPEVEM, whose holding torque on a slope shows the mass of every standing step:
-tests/test_mmpevem_riders.py). Containers are not booked (TraCI has no containers'
-vehicle). The FCD replay answers the same getters from the persons' rows
+tests/test_mmpevem_riders.py). Containers count as persons do, in a live run whose route
+files define them, read from the vehicle's container device (``device.container.IDList``;
+TraCI has no container domain: each container's vType from those files); the FCD replay
+does not read them. The FCD replay answers the persons' getters from the persons' rows
 (:mod:`sumo_drvpw.sim.fcd_conn`). The mass a script sets on a vehicle (``setMass``, its
 own vType copy) is read from the step SUMO drives it: :class:`OwnCopies`.
 """
@@ -32,17 +34,26 @@ class Riders:
         self.any_load = False          # a booked vehicle has carried riders
         self.at_stop: set[str] = set()  # vehicles standing at a stop: read every step
         self._type_mass: dict[str, float] = {}
+        #: container id → its vType (the route files', sim/vtypes ``container_of``), set by a
+        #: live run whose files define containers: their mass is read too (None: not read)
+        self.box_of: dict[str, str] | None = None
+
+    def _mass(self, vt: str) -> float:
+        m = self._type_mass.get(vt)
+        if m is None:
+            m = self._type_mass[vt] = float(self.conn.vehicletype.getMass(vt))
+        return m
 
     def load_kg(self, vid: str) -> float:
-        """Mass of the persons riding in vehicle ``vid`` [kg]: the sum of their vTypes'
-        masses, as SUMO's emission models add them."""
-        conn, kg = self.conn, 0.0
-        for r in conn.vehicle.getPersonIDList(vid):
-            vt = conn.person.getTypeID(r)
-            m = self._type_mass.get(vt)
-            if m is None:
-                m = self._type_mass[vt] = float(conn.vehicletype.getMass(vt))
-            kg += m
+        """Mass of the persons and containers riding in vehicle ``vid`` [kg]: the sum of
+        their vTypes' masses, as SUMO's emission models add them (the containers' from
+        its container device, which TraCI names ``device.container.IDList``)."""
+        conn = self.conn
+        kg = sum(self._mass(conn.person.getTypeID(r)) for r in conn.vehicle.getPersonIDList(vid))
+        if self.box_of is not None and conn.vehicle.getParameter(vid, "has.container.device") == "true":
+            of = self.box_of
+            for c in conn.vehicle.getParameter(vid, "device.container.IDList").split():
+                kg += self._mass(of.get(c) or of.get(c.rpartition(".")[0]) or "DEFAULT_CONTAINERTYPE")
         return kg
 
     def update(self, ledger, vmap, vids) -> None:
@@ -64,7 +75,7 @@ class Riders:
         starting = list(self.starting()) if self.starting is not None else []
         self.at_stop.update(starting)
         self.at_stop.difference_update(ending)  # (the loop drops those that left the network)
-        if self.any_load or self.conn.person.getIDCount():
+        if self.any_load or self.box_of is not None or self.conn.person.getIDCount():
             # a parked vehicle (off the lane, not booked: Stepper.parking_started) is not read
             # while it stands; its riders are read when its stop ends (``ending``), so a
             # parked fleet costs no getter calls, also while persons walk

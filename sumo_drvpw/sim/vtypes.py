@@ -361,11 +361,9 @@ class FileVTypes(dict):
         super().__init__(*args, **kw)
         self.vehicle_cold_start: dict[str, float] = {}
         self.flow_cold_start: dict[str, float] = {}
-        #: ``<container>`` and ``<containerFlow>`` elements of the files (not booked: their
-        #: mass, which SUMO's emission models add to their vehicle's, is left out)
-        self.containers = 0
-        #: the vTypes of those elements (SUMO's tabular FCD writes containers as persons)
-        self.container_types: set[str] = set()
+        #: ``<container>``/``<containerFlow>`` elements of the files: their count, id → vType (a
+        #: flow's containers are ``<id>.<n>``) and vTypes (SUMO's tabular FCD writes them as persons)
+        self.containers, self.container_of, self.container_types = 0, {}, set()
         #: ids of the files' ``<vTypeDistribution>`` elements (vehicles name them as a type)
         self.distributions: set[str] = set()
 
@@ -452,7 +450,9 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                     continue
                 if tag in ("container", "containerFlow"):
                     out.containers += 1
-                    out.container_types.add(el.attrib.get("type", "DEFAULT_CONTAINERTYPE"))
+                    box = el.attrib.get("type", "DEFAULT_CONTAINERTYPE")
+                    out.container_of[el.attrib.get("id", "")] = box
+                    out.container_types.add(box)
                 if tag == "vTypeDistribution" and el.attrib.get("id"):
                     out.distributions.add(el.attrib["id"])
                 if tag != "vType":
