@@ -2,8 +2,8 @@
 carries them (EnergyParams::getTotalMass: mass + loading + the mass of its persons and
 containers). A live run books it, read from the vehicle's container device
 (``device.container.IDList``, each container's vType from the route files) at the same
-events as riding persons (sim/riders.py); an FCD replay does not read containers' rows and
-says so."""
+events as riding persons (sim/riders.py); an FCD replay from the containers' rows, which
+SUMO writes at their vehicle's x, y and speed (sim/fcd_conn.py)."""
 
 from __future__ import annotations
 
@@ -24,11 +24,10 @@ ROUTES = """<routes>
 </routes>"""
 
 
-def test_containers_are_booked_live_and_a_replay_says_it_does_not(tmp_path):
+def test_containers_are_booked_live_and_replayed(tmp_path):
     """A 9-t Energy-model truck carrying one container (SUMO's DEFAULT_CONTAINERTYPE, 1,500 kg
     in SUMO 1.28) 800 m at 0.5-s steps: booked 0.87 of SUMO's emission output, with a warning
-    (measured 2026-11-27); now the live run books SUMO's electricity, and the FCD replay,
-    which does not, warns."""
+    (measured 2026-11-27), live and replayed; now both book SUMO's electricity."""
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
     (tmp_path / "r.rou.xml").write_text(ROUTES, encoding="utf-8")
@@ -41,11 +40,11 @@ def test_containers_are_booked_live_and_a_replay_says_it_does_not(tmp_path):
     assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
                      "--out", str(tmp_path / "fcd"), "--no-figures"]) == 0
     rv = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").set_index("key")
-    assert rv.loc["t", "net_kwh"] * 1000.0 < 0.95 * sumo_wh["t"]  # the container's mass is left out
-    for out, said in (("o", False), ("fcd", True)):
+    assert rv.loc["t", "net_kwh"] == pytest.approx(cv.loc["t", "net_kwh"], rel=1e-4)
+    for out in ("o", "fcd"):
         s = json.loads((tmp_path / out / "summary.json").read_text(encoding="utf-8"))
-        assert any("1 container(s)" in w and "not booked" in w for w in s["warnings"]) == said, (out, s["warnings"])
-    assert json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))["transportables"]["max_kg"] == 1500.0
+        assert not any("container" in w for w in s["warnings"]), (out, s["warnings"])
+        assert s["transportables"]["max_kg"] == 1500.0, out
 
 
 @pytest.mark.parametrize("connection", ["libsumo", "traci"])
@@ -54,7 +53,7 @@ def test_containers_of_their_own_types_loaded_and_unloaded_at_stops(tmp_path, co
     of a containerFlow (``kf.0``, of the files' vType 'box', 2,000 kg: its vType found by its
     flow's id) boarding on the way (SUMO 1.28 carries k0 from 0.5 s, k0 and kf.0 from 37 s,
     kf.0 alone from 126.5 s to 216 s): the truck's electricity equals SUMO's emission output,
-    over libsumo and traci (0.965 of it before, with a warning)."""
+    over libsumo and traci and replayed (0.965 of it before, with a warning)."""
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
     (tmp_path / "r.rou.xml").write_text("""<routes>
@@ -68,7 +67,7 @@ def test_containers_of_their_own_types_loaded_and_unloaded_at_stops(tmp_path, co
   <container id="k1" depart="0" departPos="20" type="box"><transport from="e" to="e" lines="t" arrivalPos="400"/></container>
   <containerFlow id="kf" begin="0" number="1" departPos="390" type="box"><transport from="e" to="e" lines="t"/></containerFlow>
 </routes>""", encoding="utf-8")
-    energy_scenario(tmp_path, 600, fcd=False)
+    energy_scenario(tmp_path, 600)
     run_scenario(tmp_path / "s.toml", tmp_path / "o", connection=connection)
     sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
     assert not nan and set(sumo_wh) == {"t", "u"}
@@ -78,9 +77,17 @@ def test_containers_of_their_own_types_loaded_and_unloaded_at_stops(tmp_path, co
     s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     assert s["transportables"]["max_kg"] == 3500.0  # k0 and kf.0 (the flow's box: 2,000 kg, not the default's)
     assert not any("container" in w for w in s["warnings"])
+    # the replay reads the containers' rows (at their truck's x, y and speed) and books the same
+    assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
+                     "--out", str(tmp_path / "fcd"), "--no-figures"]) == 0
+    rv = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").set_index("key")
+    for vid in ("t", "u"):
+        assert rv.loc[vid, "net_kwh"] == pytest.approx(cv.loc[vid, "net_kwh"], rel=1e-4), vid
+    r = json.loads((tmp_path / "fcd" / "summary.json").read_text(encoding="utf-8"))
+    assert r["transportables"] == s["transportables"]
 
 
-def test_a_tabular_fcd_s_containers_are_not_read_as_riding_persons(tmp_path):
+def test_a_tabular_fcd_s_containers_are_read_as_the_xml_s(tmp_path):
     """SUMO's tabular FCD (CSV) writes a container in the vehicles' columns as it writes a
     person (an edge, no lane): the replay read it as a person riding in its truck, booked its
     mass (the 9-t truck +10 % in a rehearsal, 2026-11-29) and counted it among the persons,
@@ -105,5 +112,6 @@ def test_a_tabular_fcd_s_containers_are_not_read_as_riding_persons(tmp_path):
                          "--no-figures"]) == 0
         s = json.loads((tmp_path / name[4:] / "summary.json").read_text(encoding="utf-8"))
         rows[name] = pd.read_parquet(tmp_path / name[4:] / "vehicles.parquet").set_index("vehicle").net_total_j
-        assert s["transportables"] == {"samples": 0, "max_kg": 0.0}, (name, s["transportables"])
+        assert s["transportables"]["max_kg"] == 2000.0, (name, s["transportables"])  # the box, no person
+        assert s["source"]["riding_person_rows"] == 0 and s["skipped"]["by_vclass"].get("pedestrian") is None
     assert rows["fcd.csv"]["t"] == rows["fcd.xml"]["t"]

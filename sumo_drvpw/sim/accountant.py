@@ -233,8 +233,10 @@ class Accountant(_Listener):
         use_subs = getattr(conn, "__name__", "") != "libsumo" and hasattr(conn, "getLabel")
         self.stepper = Stepper(conn, self.net, self.eqset, self.ledger, self.physics,
                                self.resolver, self.trace, use_subscriptions=use_subs)
-        if getattr(self.file_vtypes, "containers", 0) and not getattr(conn, "is_replay", False):
-            self.stepper.riders.box_of = self.file_vtypes.container_of  # containers' mass read too
+        if getattr(conn, "is_replay", False):  # containers' mass read too (a replay: from their rows)
+            self.stepper.riders.box_of = conn.box_of
+        elif getattr(self.file_vtypes, "containers", 0):
+            self.stepper.riders.box_of = self.file_vtypes.container_of
         # a run that resumes a saved state (load-state): its first step's vehicles are not booked again
         self.stepper.resumed = (sc is not None and scenario_option(sc, "load-state") is not None) \
             or bool(_option_files(conn, "load-state"))  # (started so by the user's script)
@@ -405,12 +407,6 @@ class Accountant(_Listener):
         vt_warning = listing_warning(self._vtype_energy_listing())
         if vt_warning:
             warnings.append(vt_warning)
-        n_cont = getattr(self.file_vtypes, "containers", 0)
-        if n_cont and self.physics.transportable_mass and getattr(self.conn, "is_replay", False):
-            warnings.append(f"the route files define {n_cont} container(s) or containerFlow(s): their mass, "
-                            "which SUMO's emission models add to the vehicle carrying them, is not booked "
-                            "by an FCD replay (it does not read the containers' rows; a live run books it, as "
-                            "riding persons'); give it as the vType's param loading")
         # persons (counted as pedestrians) are never booked: no warning for them
         skipped = {c: n for c, n in self.resolver.skipped["by_vclass"].items() if c != "pedestrian"}
         if skipped:

@@ -76,6 +76,11 @@ class _Veh(_Domain):
     def getPersonIDList(self, vid):  # noqa: N802 (persons at the vehicle's x, y and speed)
         return self.r.riders.get(vid, ())
 
+    def getParameter(self, vid, key):  # noqa: N802 (its containers: those at its x, y and speed)
+        if key == "has.container.device":
+            return "true" if vid in self.r.boxes else "false"
+        return " ".join(self.r.boxes.get(vid, ())) if key == "device.container.IDList" else ""
+
     def getStops(self, vid, limit=0):  # noqa: N802 (the declared stop it is at: fcd_stops)
         cur = self.r.stops.data.get(vid) if self.r.stops is not None else None
         return [cur] if cur is not None else []
@@ -104,8 +109,9 @@ class _VType(_Domain):
     def getActionStepLength(self, vt):  # noqa: N802 (the route files', else the step length)
         return self.r.type_asl.get(vt, self.r.dt)
 
-    def getMass(self, vt):  # noqa: N802 (a person type's: the route files', else SUMO's 70 kg)
-        return self.r.type_mass.get(vt, DEFAULT_PERSON_MASS_KG)
+    def getMass(self, vt):  # noqa: N802 (a person's or container's type: the route files', else SUMO's default)
+        box = vt == "DEFAULT_CONTAINERTYPE" or vt in self.r.container_types
+        return self.r.type_mass.get(vt, DEFAULT_CONTAINER_MASS_KG if box else DEFAULT_PERSON_MASS_KG)
 
     def getIDCount(self):  # noqa: N802 (the vTypes the rows named so far: a vehicle's own copy
         seen = self.__dict__.setdefault("_seen", set())  # <type>@<id> adds one, as in SUMO)
@@ -124,6 +130,9 @@ class _Calib(_Domain):
 #: SUMO's default mass of a person's vType [kg] (libsumo vehicletype.getMass of a
 #: pedestrian type without a mass)
 DEFAULT_PERSON_MASS_KG = 70.0
+#: SUMO's default mass of a container's vType [kg] (libsumo vehicletype.getMass of
+#: DEFAULT_CONTAINERTYPE, SUMO 1.28, 2026-11-29)
+DEFAULT_CONTAINER_MASS_KG = 1500.0
 
 
 class _Rows:
@@ -150,8 +159,11 @@ class _Rows:
         #: vType → mass [kg] of the route files (set by replay_fcd)
         self.type_mass: dict = {}
         #: the route files' containers' vTypes (set by replay_fcd): SUMO's tabular FCD writes a
-        #: container as a person; left out as the XML's <container> rows are (not booked)
+        #: container as a person, the reader the XML's <container> rows too; told apart by them
+        #: (and SUMO's DEFAULT_CONTAINERTYPE), and matched to vehicles as riding persons are
         self.container_types: set = set()
+        self.boxes: dict = {}  # vehicle id → the containers at its x, y and speed
+        self.box_of: dict = {}  # container id → its vType (as its rows write it)
         #: vType → its shut-off params as the route files write them (set by replay_fcd)
         self.type_params: dict = {}
         self.type_eclass: dict = {}
@@ -208,9 +220,11 @@ class _Rows:
         """The vehicles' rows of timestep ``c`` (next timestep ``nxt``, None at the end)."""
         self.riders_before = self.riders  # (a car's riders in its row before: who boards at a stop)
         person = c.get("person")
-        if person is not None and person.any() and self.container_types:
-            box = person & np.isin(c["type"], list(self.container_types))
+        boxes = None
+        if person is not None and person.any():
+            box = person & np.isin(c["type"], [*self.container_types, "DEFAULT_CONTAINERTYPE"])
             if box.any():
+                boxes = {k: v[box] for k, v in c.items()}
                 c = {k: v[~box] for k, v in c.items()}
                 person = c["person"]
         if person is not None and person.any():
@@ -219,6 +233,8 @@ class _Rows:
             c = {k: v[veh] for k, v in c.items()}
         elif self.riders or self.person_count:
             self._ride(None, c)
+        if boxes is not None or self.boxes:
+            self._carry(boxes, c)
         if self.kinetic is not None:
             self.kinetic.add(c["id"], c["speed"])
         if self.idling is not None:
@@ -299,6 +315,22 @@ class _Rows:
         off = c["off"].copy()
         off[k[sure]] = True
         return dict(c, off=off)
+
+    def _carry(self, b: dict | None, v: dict) -> None:
+        """Containers per vehicle from the containers' rows ``b`` at a vehicle's x, y and speed
+        (SUMO writes them there, as riding persons), and the vehicles whose load changed."""
+        boxes: dict = {}
+        if b is not None and len(v["id"]) and all(k in b and k in v for k in ("x", "y")):
+            at = dict(zip(zip(v["x"], v["y"], v["speed"]), v["id"]))
+            for q, vt, key in zip(b["id"], b["type"], zip(b["x"], b["y"], b["speed"])):
+                vid = at.get(key)
+                if vid is not None:
+                    boxes.setdefault(vid, []).append(q)
+                    self.box_of[q] = vt
+        changed = {vid for vid in set(self.boxes) | set(boxes) if self.boxes.get(vid) != boxes.get(vid)}
+        if changed:
+            self.load_changed = tuple(set(self.load_changed) | changed)
+        self.boxes = boxes
 
     def _ride(self, p: dict | None, v: dict) -> None:
         """Riders per vehicle from the persons' rows ``p`` and the vehicles' rows ``v``."""

@@ -205,10 +205,10 @@ def _xml_blocks(path: Path, chunk_rows: int):
                         t = _seconds(el.attrib["time"])
                         times.append(t)
                     continue
-                if (tag == "vehicle" or tag == "person") and t is not None:
-                    a = el.attrib
+                if tag in ("vehicle", "person", "container") and t is not None:  # (a container: as a person
+                    a = el.attrib  # of a container type, as SUMO's tabular FCD writes it: fcd_conn)
                     cols["time"].append(t)
-                    cols["person"].append(tag == "person")
+                    cols["person"].append(tag != "vehicle")
                     for k, xk in _XML_ATTRS.items():
                         cols[k].append(a.get(xk))
                     el.clear()

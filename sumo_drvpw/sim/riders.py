@@ -11,8 +11,8 @@ stop starts, as SUMO's emission output books them (probed 2026-11-27 with SUMO 1
 MMPEVEM, whose holding torque on a slope shows the mass of every standing step:
 tests/test_mmpevem_riders.py). Containers count as persons do, in a live run whose route
 files define them, read from the vehicle's container device (``device.container.IDList``;
-TraCI has no container domain: each container's vType from those files); the FCD replay
-does not read them. The FCD replay answers the persons' getters from the persons' rows
+TraCI has no container domain: each container's vType from those files). The FCD replay
+answers the same getters from the persons' and containers' rows
 (:mod:`sumo_drvpw.sim.fcd_conn`). The mass a script sets on a vehicle (``setMass``, its
 own vType copy) is read from the step SUMO drives it: :class:`OwnCopies`.
 """
