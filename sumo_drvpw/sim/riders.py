@@ -50,7 +50,7 @@ class Riders:
         its container device, which TraCI names ``device.container.IDList``)."""
         conn = self.conn
         kg = sum(self._mass(conn.person.getTypeID(r)) for r in conn.vehicle.getPersonIDList(vid))
-        if self.box_of is not None and conn.vehicle.getParameter(vid, "has.container.device") == "true":
+        if self.box_of and conn.vehicle.getParameter(vid, "has.container.device") == "true":
             of = self.box_of
             for c in conn.vehicle.getParameter(vid, "device.container.IDList").split():
                 kg += self._mass(of.get(c) or of.get(c.rpartition(".")[0]) or "DEFAULT_CONTAINERTYPE")
@@ -75,7 +75,7 @@ class Riders:
         starting = list(self.starting()) if self.starting is not None else []
         self.at_stop.update(starting)
         self.at_stop.difference_update(ending)  # (the loop drops those that left the network)
-        if self.any_load or self.box_of is not None or self.conn.person.getIDCount():
+        if self.any_load or self.box_of or self.conn.person.getIDCount():
             # a parked vehicle (off the lane, not booked: Stepper.parking_started) is not read
             # while it stands; its riders are read when its stop ends (``ending``), so a
             # parked fleet costs no getter calls, also while persons walk
