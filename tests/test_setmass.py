@@ -31,8 +31,11 @@ ROUTES = """<routes>
   <vehicle id="w" type="car" route="east" depart="3" departSpeed="0"/>
 </routes>"""
 DT = 0.5
-#: after step k (0-based): (vehicle, mass set) — none at a multiple of 25 steps
-CALLS = {20: ("v", 3000.0), 40: ("w", 900.0), 80: ("v", 2000.0)}
+#: after step k (0-based): (vehicle, mass set) — none at a multiple of 25 steps; the last
+#: sets w back to its type's mass (booked as its type's again)
+CALLS = {20: ("v", 3000.0), 40: ("w", 900.0), 80: ("v", 2000.0), 110: ("w", 1500.0)}
+#: for the replays: w keeps its one mass (a replay can be told one mass per copy)
+ONE_MASS_W = {k: c for k, c in CALLS.items() if k != 110}
 
 
 def _run(d: Path, tag: str, connection: str, calls: dict):
@@ -80,15 +83,15 @@ def test_each_step_is_booked_at_the_mass_sumo_drives_it_with(ref, connection):
     assert set(want.round()) == {1500.0, 3000.0, 2000.0, 900.0}
     wrong = booked[(booked - want).abs() > 1e-6 * want]
     assert wrong.empty, wrong.head()
-    assert res["vtype_changes"] == 3
+    assert res["vtype_changes"] == 4
     rows = res.vehicles.set_index("vehicle")
-    assert rows.mass_kg.to_dict() == {"v": 2000.0, "w": 900.0}  # the last mass booked
+    assert rows.mass_kg.to_dict() == {"v": 2000.0, "w": 1500.0}  # the last mass booked
     assert (rows.vtype == "car").all()
 
 
 def test_a_replay_says_it_cannot_see_the_mass_and_books_the_one_it_is_told(ref, tmp_path):
     d, _ = ref
-    live, _, _ = _run(d, "live", "libsumo", CALLS)
+    live, _, _ = _run(d, "live", "libsumo", ONE_MASS_W)
     fcd = d / "live_fcd.xml"
     assert 'type="car@v"' in fcd.read_text(encoding="utf-8")
     untold = process_fcd(fcd, scenario=d / "live.toml", equations=[PHYS], figures=False)
@@ -116,7 +119,7 @@ def test_the_replay_on_dask_says_and_books_the_same(ref, tmp_path):
     from sumo_drvpw.model.equations import save_equation
 
     d, _ = ref
-    live, _, _ = _run(d, "dlive", "libsumo", CALLS)
+    live, _, _ = _run(d, "dlive", "libsumo", ONE_MASS_W)
     (d / "dtold.toml").write_text((d / "dlive.toml").read_text(encoding="utf-8")
                                   + '[vtypes."car@w"]\nmass_kg = 900\n', encoding="utf-8")
     save_equation(PHYS, tmp_path / "phys.toml")
