@@ -167,3 +167,40 @@ def test_a_run_resumed_from_a_state_saved_after_a_setmass_books_the_copy_as_its_
     assert v.vtype.to_dict() == {"v": "car", "w": "car"}
     assert v.mass_kg.to_dict() == {"v": 3000.0, "w": 1600.0}  # the script's mass; the scenario's for its type
     assert res.summary["excluded_by_vehicles_vtypes"] == 0 and res.summary["assumptions"]["sumo_masses"] == {}
+
+
+@pytest.mark.parametrize("override", [False, True], ids=["follows", "scenario_mass"])
+def test_a_vtype_s_mass_set_by_a_script_books_its_vehicles_from_the_next_check(tmp_path, override):
+    """``vehicletype.setMass("car", 3000)`` after step 10 (SUMO drives every vehicle of the type
+    at it from then on, those departing later too): every one of them stayed at the type's
+    1,500 kg (resolved once per vType), unsaid. Now read at the loop's vType checks (every
+    25 steps over libsumo): the running car books 3,000 kg from the next one, the car departing
+    at 20 s all its trip; a scenario's [vtypes.car] mass_kg still wins."""
+    (tmp_path / "r.rou.xml").write_text(ROUTES.replace('depart="3"', 'depart="20"'), encoding="utf-8")
+    extra = "[vtypes.car]\nmass_kg = 1600\n" if override else ""
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nbegin = 0\nend = 70\n'
+        f'step_length = {DT}\noptions = ["--no-warnings", "true"]\n' + extra, encoding="utf-8")
+    booked = {}
+    for call in (False, True):
+        sc = load_scenario(tmp_path / "s.toml")
+        conn = start_sumo(sc.sumo_args)
+        try:
+            acc = Accountant(conn, scenario=sc, equations=[PHYS])
+            for k in range(140):
+                conn.simulationStep()
+                acc.step()
+                if call and k == 10:
+                    conn.vehicletype.setMass("car", 3000.0)
+            booked[call] = acc.result()
+        finally:
+            close_sumo(conn)
+    a, b = (r.vehicles.set_index("vehicle") for r in (booked[False], booked[True]))
+    if override:
+        assert (b.mass_kg == 1600.0).all() and booked[True]["vtype_changes"] == 0
+        np.testing.assert_allclose(b.traction_roll_j, a.traction_roll_j, rtol=1e-12)
+        return
+    assert b.mass_kg.to_dict() == {"v": 3000.0, "w": 3000.0} and booked[True]["vtype_changes"] == 1
+    ratio = b.traction_roll_j / a.traction_roll_j
+    assert ratio["w"] == pytest.approx(2.0, rel=1e-9)  # departed after the call: all its trip
+    assert 1.5 < ratio["v"] < 2.0  # from the check at step 25 (its first 12 s at 1,500 kg)

@@ -391,6 +391,7 @@ class Stepper:
             return
         if ledger.steps % (TYPE_CHECK_STEPS * (10 if self.reader.subs else 1)) == 0:
             self.check_types(kids, vidx)  # (a replay: at the steps a live libsumo run reads them)
+            self.own.type_masses(self)  # and a script's vehicletype.setMass
         self.own.step(self, kids, vidx)  # and when a vType copy was made; a copy's mass each step
         tracking = self.tracking
         v, a, angle, ln, pos, raw = self.reader.read(kids, skip_lanes=tracking)

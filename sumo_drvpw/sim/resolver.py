@@ -113,6 +113,10 @@ class VTypeResolver:
         #: vTypes resolved by other resolvers of the same run (Dask buckets of an FCD replay),
         #: and vehicles' own copies booked at the scenario's [vtypes."<type>@<id>"] mass
         self.seen: set[str] = set()
+        #: vType → (SUMO's mass when resolved, its loading) [kg]: live vTypes booked at a mass
+        #: that follows SUMO's (not a scenario's mass_kg or a drvpw.mass), for a script's
+        #: vehicletype.setMass during the run (:meth:`type_masses_changed`)
+        self.watched: dict[str, tuple[float, float]] = {}
         #: a replay's vehicles' own vType copies (``<type>@<id>``: a script's setMass …) whose
         #: mass no [vtypes."<copy>"] mass_kg told: copy → its type, booked at that type's mass
         self.untold_copies: dict[str, str] = {}
@@ -284,6 +288,19 @@ class VTypeResolver:
         ledger.veh_mass[i] = m
         return True
 
+    def type_masses_changed(self) -> dict[str, float]:
+        """vType → its new booked mass [kg]: the watched vTypes (:attr:`watched`) whose mass a
+        script set (``vehicletype.setMass``) since they were resolved, at SUMO's new mass plus
+        their loading, as SUMO books their vehicles from then on (its later departures too)."""
+        out = {}
+        for vt, (was, loading) in list(self.watched.items()):
+            m = self._sumo_mass(vt)
+            if m is not None and m != was:
+                self.watched[vt] = (m, loading)
+                out[vt] = m + loading
+                self.cache[vt] = (out[vt], *self.cache[vt][1:])
+        return out
+
     def own_copy(self, ledger, i: int, vt: str, copy: str) -> bool:
         """Vehicle row ``i`` of vType ``vt`` now runs on its own copy ``copy`` (``<vt>@<id>``:
         SUMO makes one when a script calls the vehicle's setMass, setEmissionClass, …): its
@@ -436,6 +453,9 @@ class VTypeResolver:
                and max(m / mass, mass / m) >= MASS_FAR}
         if far:
             self.mass_far[vt] = {"mass_kg": float(mass), "calibrated_at_kg": far}
+        if data.get("mass_kg") is None and not (info is not None and info.drvpw_mass) \
+                and not self._param(vt, "drvpw.mass") and (sm := self._sumo_mass(vt)) is not None:
+            self.watched[vt] = (sm, loading)
         at_fixed = {n: self.fixed_far_eq[n] for n, a in zip(self.names, app) if a and n in self.fixed_far_eq}
         if at_fixed:
             self.fixed_far[vt] = at_fixed

@@ -127,3 +127,20 @@ class OwnCopies:
                 own = getattr(st.resolve, "own_mass", None)  # (a VTypeResolver's)
                 if own is not None and own(ledger, i, ledger.veh_type[i], copy):
                     st.retyped += 1
+
+    def type_masses(self, st) -> None:
+        """At the loop's vType checks: a script's ``vehicletype.setMass`` on a vType (not a
+        vehicle) books its running vehicles at the new mass (not those on their own copies,
+        which keep theirs, as in SUMO) and its later departures
+        (:meth:`VTypeResolver.type_masses_changed`)."""
+        changed = getattr(st.resolve, "type_masses_changed", None)
+        new = changed() if changed is not None and self.mass is not None else None
+        if not new:
+            return
+        ledger = st.ledger
+        for i in range(ledger.n_veh):
+            vt = ledger.veh_type[i]
+            if vt in new and not ledger.veh_done[i] and ledger.veh_ids[i] not in self.on_copy \
+                    and ledger.veh_mass[i] != new[vt]:
+                ledger.veh_mass[i] = new[vt]
+                st.retyped += 1
