@@ -128,13 +128,14 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     from sumo_drvpw.model.vehicles import load_vehicle
 
     veh = load_vehicle(args.vehicle) if args.vehicle else None
-    from sumo_drvpw.cli.calibrate import MOVING_MPS
+    from sumo_drvpw.cli.calibrate import MOVING_MPS, say_battery_power
 
     st, info = _run(args, partial(CalibrationStats, tuple(cands), moving_mps=MOVING_MPS), veh)
     from sumo_drvpw.cli import note_counts
 
     if st.mass_n:
         note_counts(st.counts)
+    say_battery_power(st.source)
     eq, note, res = fit_road_load(args, st, cands, veh, args.name or out.stem, {
         "logs": st.files, "vehicle": veh.path if veh else None, "power_source": st.source,
         "candidates_spec": args.candidates, "trip_signatures": signature_texts(st.signatures)})

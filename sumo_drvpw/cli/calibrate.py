@@ -108,6 +108,7 @@ def main(args) -> int:
         return calibrate_streamed(args, cands, out, inputs)
     m = load_measured(args.logs, args.vehicle, read_options(args))
     note_counts(m.counts)
+    say_battery_power(m.source)
     check_speed_varies(m, cands)
     ref_mass = float(m.inputs.mass[m.usable].mean())
     res = calibrate(m.inputs, m.power_w, cands, mask=m.usable, p_enter=args.p_enter,
@@ -303,6 +304,17 @@ def write_calibration_report(m, eq, res, out_dir, compare_with=None) -> dict:
     write_comparison_report(comp, out_dir, f"Calibration of {eq.name} against classic VSP", ctx)
     return comp.to_json()
 
+
+
+def say_battery_power(source: str) -> None:
+    """Warn when the driving power a road-load equation is fitted on is the battery's V·I
+    (data/powertrain.POWER_SOURCES' last source: the logs hold no wheel or motor power)."""
+    if "battery V·I" in str(source):
+        print("warning: the measured driving power is the battery's V·I (the logs hold no wheel or motor "
+              "power): the equation fitted on it books the drivetrain's losses and the auxiliary loads as "
+              "road load — its coefficients are not the vehicle's, and a battery chain in a SUMO run would "
+              "count the losses again; calibrate the chain on the battery instead (--target battery "
+              "--equation roadload_spec, vsp_spec or a road load calibrated elsewhere)")
 
 
 #: the heaviest vehicle an equation declaring the car classes is calibrated on without a

@@ -178,9 +178,15 @@ def print_summary(doc: dict, out) -> None:
         line = trip_energy_line(report.get("equations", {}).get(name, r))
         if line:
             print(f"{'':<24} {line}")
-    if "counters" in str((report.get("context") or {}).get("power_source", "")):
+    source = str((report.get("context") or {}).get("power_source", ""))
+    if "counters" in source:
         print("note: the measured power is the battery's energy counters', spread between their readings: the "
               "per-sample figures set the model's sharp power beside it; read the per-trip energies")
+    elif "battery V·I" in source and (report.get("settings") or {}).get("target", "wheel") == "wheel":
+        print("note: the measured driving power is the battery's V·I (the logs hold no wheel or motor power): "
+              "it carries the drivetrain's losses, less what braking returns, and the auxiliary loads, which "
+              "a driving-power equation does not — its errors here are those as much as the road load's; "
+              "compare a battery chain on the battery with --target battery")
     print(f"wrote {Path(out) / 'report.md'}")
 
 
