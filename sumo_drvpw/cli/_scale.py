@@ -269,8 +269,10 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
 
         cands = tuple(resolve_candidates(args.candidates))
     fuel = veh.powertrain.get("fuel", "gasoline") if veh is not None else "gasoline"
-    cut = getattr(getattr(eq, "chain", None), "fuel_cut_below_w", None)  # declared: kept
+    from sumo_drvpw.fit.chain import declared_fuel_cut
     from sumo_drvpw.fit.chain_fuel import engine_off_for
+
+    cut = declared_fuel_cut(eq) if args.target == "fuel" else None  # declared: kept
 
     spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut,
                      engine_off_for(veh, False, getattr(args, "engine_off", "profile")))  # (battery: at the fit)

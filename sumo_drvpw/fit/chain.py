@@ -410,6 +410,18 @@ def chain_target(m, chain: EnergyChain) -> np.ndarray:
     return m.power_w
 
 
+def declared_fuel_cut(equation) -> float | None:
+    """What a fuel chain's calibration keeps of the chain ``equation`` declares: its overrun
+    fuel cut-off (``fuel_cut_below_w``, None: none declared). A declared braking energy given
+    back (``recuperation_round_trip``, not fitted) is refused, not dropped without a word."""
+    ch = getattr(equation, "chain", None)
+    if getattr(ch, "recuperation_round_trip", 0.0):
+        raise UserError(f"{ch.where} [chain]: recuperation_round_trip (a hybrid's braking energy given back) is "
+                        "declared, not fitted, and a fuel chain's calibration would drop it: calibrate on an "
+                        "equation without it (the fitted marginal efficiency then holds the braking credit)")
+    return getattr(ch, "fuel_cut_below_w", None)
+
+
 def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engine_off="profile",
                  mask=None, p_drive_w=None, fixed: dict | None = None,
                  efficiency: str = "constant", warmup_rate=None) -> ChainFit:
@@ -441,7 +453,7 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
         fuel = m.vehicle.powertrain.get("fuel", "gasoline") if m.vehicle is not None else "gasoline"
         from sumo_drvpw.fit.chain_fuel import calibrate_fuel, engine_off_for
 
-        cut = getattr(getattr(equation, "chain", None), "fuel_cut_below_w", None)  # declared: kept
+        cut = declared_fuel_cut(equation)
         fit = calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads, mask=use,
                              engine_off=engine_off_for(m.vehicle, m.battery_w is not None, engine_off),
                              fuel=fuel, fuel_cut_below_w=cut)

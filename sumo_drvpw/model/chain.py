@@ -46,7 +46,8 @@ Fuel (``predicts = "fuel"``), a Willans line with engine-off (power-split hybrid
     P_eng  = max(P, 0) / η_t + P_aux                      (engine output demand) [W]
     on     = (P > P_off  or  v > v_on)  and not (v > v_0 and P < P_cut)     (engine fuelled)
     P_fuel = on · (P_idle,fuel + P_eng / η_m)             [W of fuel, lower heating value]
-    P_fuel = on · P_idle,fuel + P_eng / η_m               (``charge_sustaining = true``)
+    P_fuel = on · P_idle,fuel + (P_eng + η_rt · max(min(P, 0), −P_lim) / η_t) / η_m
+                                                          (``charge_sustaining = true``)
     fuel rate [L/s] = P_fuel / (LHV · ρ_fuel);  CO₂ [kg/s] = P_fuel / LHV · c_CO₂
 
 with ``idle_fuel_power_w`` (P_idle,fuel ≥ 0), ``marginal_efficiency`` (η_m, (0, 1]),
@@ -57,7 +58,12 @@ driving power below P_cut, typically 0, means the wheels turn the engine and its
 is cut: no fuel; standing, it idles; declared, kept, not fitted by calibration),
 ``charge_sustaining`` (a declared hybrid whose battery drives below P_off: the engine puts
 that energy back later, so it is booked at the margin all the same and only the idle fuel
-stops with the engine; default false, the engine-off power free) and ``fuel``
+stops with the engine; default false, the engine-off power free), for such a hybrid
+``recuperation_round_trip`` (η_rt in [0, 1], default 0: none; its braking energy at the wheels
+that the battery gives back at the wheels, capped at ``recuperation_limit_w`` P_lim, its
+motor's power: the engine output it replaces is credited at the margin when the vehicle
+brakes, so a braking sample books negative fuel, the battery's credit a later sample uses, as a
+battery chain's recuperation does; declared, kept, not fitted) and ``fuel``
 (a key of :data:`sumo_drvpw.model.constants.FUELS`). ``cold_start_fuel_l`` (≥ 0, default 0)
 is the extra fuel of one start of a cold engine [L] (warm-up enrichment, catalyst
 heating, cold oil) at the air temperature ``cold_start_ref_c`` (default 23.9 °C, the
@@ -103,7 +109,8 @@ PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 #: keys of the [chain] table, besides sub-tables loads, hvac and efficiency tables
 KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
         "recuperation_by_decel_mps2", "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
-        "engine_off_below_w", "engine_on_above_mps", "fuel_cut_below_w", "charge_sustaining", "fuel", "battery_to_fuel",
+        "engine_off_below_w", "engine_on_above_mps", "fuel_cut_below_w", "charge_sustaining", "recuperation_round_trip",
+        "fuel", "battery_to_fuel",
         "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "running_fuel_per_k",
         "motor", "std_err", "reading", "provenance", "metrics")
 #: the largest plausible warm-running fuel increase per kelvin (5 %/K: +150 % at −6.7 °C
@@ -136,6 +143,7 @@ class EnergyChain:
     engine_on_above_mps: float | None = None
     fuel_cut_below_w: float | None = None
     charge_sustaining: bool = False
+    recuperation_round_trip: float = 0.0
     fuel: str = "gasoline"
     battery_to_fuel: float | None = None
     cold_start_fuel_l: float = 0.0
@@ -321,6 +329,10 @@ class EnergyChain:
         on = self.engine_on(p, v)
         eng = np.maximum(p, 0.0) / _eval(self.traction_efficiency, v, p) + self.auxiliary(n, signals)
         pf = np.where(on, self.idle_fuel_power_w, 0.0) + np.where(self.paid(p, v), eng / self.marginal_efficiency, 0.0)
+        if self.recuperation_round_trip:  # a charge-sustaining hybrid's braking energy, given back
+            lim = np.inf if self.recuperation_limit_w is None else self.recuperation_limit_w
+            pf = pf + (self.recuperation_round_trip * np.maximum(np.minimum(p, 0.0), -lim)
+                       / _eval(self.traction_efficiency, v, p) / self.marginal_efficiency)
         if self.running_fuel_per_k:
             pf = pf * self.running_factor(n, signals)
         fp = self.fuel_props
@@ -375,7 +387,7 @@ class EnergyChain:
                 ("recuperation_efficiency",) if self.predicts != "fuel" else ()):
             val = getattr(self, k)
             d[k] = val.to_dict() if isinstance(val, Table) else float(val)
-        if self.predicts != "fuel" and self.recuperation_limit_w is not None:
+        if (self.predicts != "fuel" or self.recuperation_round_trip) and self.recuperation_limit_w is not None:
             d["recuperation_limit_w"] = float(self.recuperation_limit_w)
         if self.predicts != "fuel" and self.recuperation_by_decel_mps2:
             d["recuperation_by_decel_mps2"] = float(self.recuperation_by_decel_mps2)
@@ -396,6 +408,8 @@ class EnergyChain:
                     d[k] = float(getattr(self, k))
             if self.charge_sustaining:
                 d["charge_sustaining"] = True
+            if self.recuperation_round_trip:
+                d["recuperation_round_trip"] = float(self.recuperation_round_trip)
             if self.battery_to_fuel is not None:
                 d["battery_to_fuel"] = float(self.battery_to_fuel)
             if self.cold_start_fuel_l or self.cold_start_fuel_l_per_k:
@@ -459,6 +473,12 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
             raise UserError(f"{where} [chain]: 'charge_sustaining' must be true or false, for predicts = "
                             f"\"fuel\" only, got {doc['charge_sustaining']!r} (predicts = {pred!r})")
         kw["charge_sustaining"] = doc["charge_sustaining"]
+    if "recuperation_round_trip" in doc:
+        kw["recuperation_round_trip"] = _nonneg(doc["recuperation_round_trip"], "recuperation_round_trip", where)
+        if kw["recuperation_round_trip"] > 1.0 or not kw.get("charge_sustaining"):
+            raise UserError(f"{where} [chain]: 'recuperation_round_trip' is the share of a charge-sustaining "
+                            "hybrid's braking energy its battery gives back: in [0, 1], with predicts = \"fuel\" "
+                            f"and charge_sustaining = true, got {doc['recuperation_round_trip']!r}")
     if "fuel_cut_below_w" in doc:
         kw["fuel_cut_below_w"] = _number(doc["fuel_cut_below_w"], "fuel_cut_below_w", where)
         if pred != "fuel":
