@@ -377,11 +377,12 @@ def _without_from(d: dict) -> dict:
 
 def test_a_hybrid_without_a_hybrid_chain_for_its_vclass_is_said(tmp_path):
     """A bare SUMO config with a plug-in hybrid van's petrol share (vClass delivery) and a
-    hybrid city bus: no hybrid chain is made for those vClasses, so the conventional van's
-    and bus's chains book them — and the run says so, naming the vTypes, their classes and
-    the chains (summary.json assumptions.powertrain ``no_hybrid_chain``); the petrol van is
-    not named. Given a hybrid chain in a scenario (the built-in car's, for the van), the van
-    is no longer named; the bus still is."""
+    hybrid city bus: no hybrid chain is made for the van's vClass, so the conventional van's
+    chain books it — and the run says so, naming the vType, its class and the chain
+    (summary.json assumptions.powertrain ``no_hybrid_chain``); the petrol van is not named;
+    the bus is booked by the built-in hybrid bus's chain (docs/hdv-hybrid.md). Given a hybrid
+    chain in a scenario (the built-in car's, for the van) and only the diesel bus's, the van
+    is no longer named; the bus now is."""
     pytest.importorskip("libsumo")
     import json
 
@@ -414,12 +415,13 @@ def test_a_hybrid_without_a_hybrid_chain_for_its_vclass_is_said(tmp_path):
                       ch.groupby(ch["key"].str[0])["equation"].agg(lambda s: sorted(set(s))).to_dict())
     pt, warned, books = seen["bare"]
     assert books == {"h": ["epa_gasoline_light_truck"], "v": ["epa_gasoline_light_truck"],
-                     "b": ["moves_transit_bus_diesel"]}
+                     "b": ["moves_transit_bus_hybrid_diesel"]}
     assert pt["hvan"]["no_hybrid_chain"] == ["epa_gasoline_light_truck"]
-    assert pt["hbus"]["no_hybrid_chain"] == ["moves_transit_bus_diesel"]
+    assert pt["hbus"] == {"emission_class": "HBEFA4/UBus_Std_gt15-18t_HEV_Euro-VI_D-E", "from": "written",
+                          "powertrain": "hybrid", "not_booked_by": ["moves_transit_bus_diesel"]}
     assert "van" not in pt and len(warned) == 1
     assert "hvan (HBEFA4/LCV_PHEV_petrol_N1-II_Euro-6_(P): epa_gasoline_light_truck)" in warned[0]
-    assert "hbus (" in warned[0] and "van (" not in warned[0].replace("hvan (", "")
+    assert "hbus (" not in warned[0] and "van (" not in warned[0].replace("hvan (", "")
     pt, warned, books = seen["given"]
     assert books["h"] == [eh.NAME] and "hvan" not in pt and "hbus" in pt
-    assert len(warned) == 1 and "hvan" not in warned[0]
+    assert len(warned) == 1 and "hvan" not in warned[0] and "hbus (" in warned[0]

@@ -204,7 +204,8 @@ class VTypeResolver:
         """``app`` without the chain equations of another energy carrier than the vType's:
         its written emissionClass's; where that names none (or none is written) and chains
         of several carriers apply, SUMO's default one's when the scenario says
-        ``default_carrier``."""
+        ``default_carrier`` — which then also chooses between a hybrid's and a conventional
+        engine's chains of one carrier (a bus that writes none: the diesel bus's)."""
         present = {self.carrier_of[n] for n, a in zip(self.names, app) if a} - {None}
         if not present:
             return app
@@ -225,9 +226,11 @@ class VTypeResolver:
             if run_ec is not None:
                 ec, carrier, src = run_ec, energy_carrier(run_ec), "SUMO's battery device (none written)"
         if carrier is None:  # none written, or a name of no known carrier
-            if len(present) < 2 or not getattr(self.sc, "default_carrier", False):
+            if not getattr(self.sc, "default_carrier", False):
                 return app
             ec, src = self._default_emission_class(vt, vclass, written=ec is not None)
+            if len(present) < 2:  # one carrier's chains book it; a hybrid's only if SUMO's class is one
+                return self._by_powertrain(vt, ec, src, app)
             carrier = energy_carrier(ec)
             if carrier is None:
                 return app

@@ -64,7 +64,8 @@ OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equ
 #: the equations of a bare SUMO config (``run X.sumocfg``): every motor vehicle class has one — cars by
 #: VSP (LDV 1999), the seed paper's DrvPw and MOVES's passenger car; trucks, buses and motorcycles by their
 #: MOVES type — and cars and vans by the EPA fleet's fuel chains, trucks and buses by their MOVES type's
-#: diesel chain (docs/hdv-fuel.md), motorcycles and mopeds by their petrol chains (docs/mc-fuel.md),
+#: diesel chain (docs/hdv-fuel.md) — a hybrid bus by the diesel-electric hybrid's (docs/hdv-hybrid.md) —,
+#: motorcycles and mopeds by their petrol chains (docs/mc-fuel.md),
 #: electric cars by the i3's battery chain, each vehicle by the carrier of its emissionClass (SUMO's
 #: default where it writes none: ``default_carrier``; an evehicle's is electric), a hybrid's class
 #: (a plug-in's petrol share) by the full hybrids' chain (sim/resolver.py)
@@ -73,7 +74,8 @@ CONFIG_EQUATIONS = ("vsp_ldv1999", "drvpw_prius3", "moves_passenger_car", "moves
                     "moves_transit_bus", "moves_intercity_bus", "epa_gasoline_car", "epa_diesel_car",
                     "epa_gasoline_light_truck", "epa_diesel_light_truck", "moves_single_unit_truck_diesel",
                     "moves_combination_truck_diesel", "moves_transit_bus_diesel", "moves_intercity_bus_diesel",
-                    "bmw_i3_battery", "epa_gasoline_hybrid_car", "moves_motorcycle_petrol", "moves_moped_petrol")
+                    "moves_transit_bus_hybrid_diesel", "bmw_i3_battery", "epa_gasoline_hybrid_car",
+                    "moves_motorcycle_petrol", "moves_moped_petrol")
 
 #: the class of an edge that only vehicles of one of these vClass groups may use (the vClasses
 #: its lanes allow, persons and containers on foot aside): no road, so neither city nor
