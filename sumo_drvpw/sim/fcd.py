@@ -485,8 +485,8 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     replay.type_eclass, replay.default_eclass = replay_emission_classes(acc.file_vtypes, battery_switch(sc))
     # SUMO loads the additional files first: a route (with its stops) defined there serves
     # the vehicles of the route files
-    declared = read_declared_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files])),
-                                   begin=sc.begin, end=sc.end)
+    declared = read_declared_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files])), begin=sc.begin,
+                                   end=sc.end, option=lambda key: scenario_option(sc, key) or (head or {}).get(key))
     if declared:
         replay.stops = StopTracker(declared, net)
     # a car whose rows end standing or off its route's last edge may be in a teleport: held (TELEPORT_HOLD_S)

@@ -57,7 +57,8 @@ vehicles whose route is drawn from a ``routeDistribution`` (which member's stops
 in the FCD) or repeats (``repeat``), a named route's stop of a vehicle whose depart is
 random (a ``probability`` or ``period="exp(…)"`` flow's) or no time (``triggered``) where
 ``until`` alone makes the stop long, and stops on a stopping place of none of the files
-read. :meth:`StopTracker.report` counts them.
+read. :meth:`StopTracker.report` counts them. A taxi's stops end when it is dispatched, not as
+planned (:mod:`sumo_drvpw.sim.fcd_taxi`): their end is not told.
 """
 
 from __future__ import annotations
@@ -72,6 +73,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.sim.scenario_values import sumo_seconds
+from sumo_drvpw.sim.fcd_taxi import DISPATCH, TaxiDevices
 from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
 #: SUMO's default stop length on a lane [m]: ``startPos`` = ``endPos`` − 2·POSITION_EPS
@@ -139,6 +141,13 @@ class _Stop:
         self.trigger = (None if not words else ("person", tuple(a.get("expected", "").split()))
                         if words <= set(PERSON_TRIGGERED) and not a.get("extension") else ("other", ()))
 
+    def copy(self, **changed) -> _Stop:
+        """This stop with the attributes ``changed``."""
+        new = object.__new__(_Stop)
+        for k in self.__slots__:
+            setattr(new, k, changed.get(k, getattr(self, k)))
+        return new
+
 
 def _is_stop(el) -> bool:
     """A ``<stop>`` at which the vehicle halts (a waypoint, ``speed`` > 0, passes)."""
@@ -171,6 +180,7 @@ class DeclaredStops:
         #: every <vehicle>/<trip>/<flow> id → the last edge of its route (its ``to``), where
         #: the files tell it (:func:`may_return`)
         self.destinations: dict[str, str] = {}
+        self.taxis = TaxiDevices()  # (read_declared_stops sets the run's options)
 
     def __bool__(self) -> bool:
         return bool(self.vehicles or self.flows or self.unknown)
@@ -188,7 +198,7 @@ class DeclaredStops:
         shifted, and its vehicles' departs (a route's stops' shift) are random."""
         if vid in self.vehicles:
             stops, depart = self.vehicles[vid]
-            return stops, [depart if s.on_route else 0.0 for s in stops], None
+            return self._taxi(vid, vid, stops), [depart if s.on_route else 0.0 for s in stops], None
         if vid in self.unknown:
             return None, [], self.unknown[vid]
         flow, _, n = vid.rpartition(".")
@@ -197,10 +207,14 @@ class DeclaredStops:
                 stops, begin, spacing = self.flows[flow]
                 own = int(n) * spacing if spacing is not None else 0.0
                 depart = begin + own if spacing is not None else np.nan
-                return stops, [depart if s.on_route else own for s in stops], None
+                return self._taxi(vid, flow, stops), [depart if s.on_route else own for s in stops], None
             if flow in self.unknown:
                 return None, [], self.unknown[flow]
         return None, [], None
+
+    def _taxi(self, vid: str, by: str, stops: list) -> list:
+        """A taxi's stops wait for its dispatch (:mod:`sumo_drvpw.sim.fcd_taxi`)."""
+        return [s.copy(trigger=s.trigger or DISPATCH) for s in stops] if self.taxis.has(vid, by) else stops
 
     def departing(self, t0: float, t1: float) -> dict[str, float]:
         """The vehicles the files declare to depart from ``t0`` to ``t1`` [s] (both in):
@@ -290,6 +304,7 @@ class DeclaredStops:
         if vid is None:
             return
         self._departure(el, tag, vid)
+        self.taxis.read(el, tag)
         where = f"{where}: {tag} '{vid}'"
         own = [_Stop(s, where) for s in el if s.tag == "stop" and _is_stop(s)]
         inner = next((r for r in el if r.tag == "route"), None)
@@ -361,11 +376,14 @@ def _ordered(rstops: list, own: list, edges: list, places: dict) -> list:
 
 
 def read_declared_stops(files, depth: int = 0, out: DeclaredStops | None = None,
-                        begin: float | None = None, end: float | None = None) -> DeclaredStops:
+                        begin: float | None = None, end: float | None = None, option=None) -> DeclaredStops:
     """The stops of SUMO route/additional ``files`` (and of the files they ``<include>``),
     in load order; a bad number is a UserError naming the file, element and key. ``begin``,
-    ``end``: the run's [s] (a flow without them takes them)."""
-    out = DeclaredStops(begin, end) if out is None else out
+    ``end``: the run's [s] (a flow without them takes them); ``option``: key → the run's SUMO
+    option value or None (its taxi devices')."""
+    if out is None:
+        out = DeclaredStops(begin, end)
+        out.taxis = TaxiDevices(option)
     for f in files:
         path = Path(f)
         try:
@@ -381,6 +399,8 @@ def read_declared_stops(files, depth: int = 0, out: DeclaredStops | None = None,
                         where = f"{path}: {tag} '{el.get('id')}'"
                         out.places[el.get("id")] = (el.get("lane"), _num(el.get("startPos"), where, "startPos"),
                                                     _num(el.get("endPos"), where, "endPos"))
+                    if tag == "vType":
+                        out.taxis.read(el, tag)
                     if level != 1:  # inside a vehicle, route or distribution: read at its end
                         continue
                     if tag == "include" and el.get("href") and depth < INCLUDE_DEPTH:

@@ -1,0 +1,86 @@
+"""An idle taxi waits at its declared stop until it is dispatched (SUMO's taxi device turns
+its next stop into a triggered one: MSIdling_Stop), parked past the stop's planned end.
+An FCD replay without signals took it for a car whose parking was over and whose way out
+was blocked, and booked it idling until it drove off (sim/fcd_taxi.py, sim/fcd_stops.py).
+Real SUMO runs on a straight road: taxis equipped by every way SUMO equips them."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from sumo_drvpw.sim import run_scenario
+from sumo_drvpw.sim.fcd import process_fcd
+from sumo_drvpw.sim.fcd_taxi import TaxiDevices
+from sumo_probe import build_net, energy_scenario
+
+pytestmark = pytest.mark.sumo
+
+TAXI = '<param key="has.taxi.device" value="true"/>'
+
+
+def _booked(out):
+    v = pd.read_parquet(out / "vehicles.parquet").groupby("vehicle")[["time_s"]].first()
+    c = pd.read_csv(out / "chain_vehicles.csv").set_index("key")
+    return v.join(c[["fuel_l"]]).sort_index()
+
+
+def test_idle_taxis_parked_past_their_stops_planned_end_book_as_live(tmp_path):
+    """DLR's port_lübeck (SUMO 1.28, 3600 s): five container taxis (vType param
+    has.taxi.device) with a 10-s stop at a containerStop stayed parked there up to 470 s;
+    the replay booked them idling from the stop's planned end: its trucks' diesel 65.43 L
+    against the live run's 63.57 (+2.9 %). Here, before the fix (2026-11-29): the container
+    taxi 0.264 L against 0.0195 L live (192 s booked against 14), the car taxi 0.080 against
+    0.030 L. A car that is no taxi, parked for 10 s, is booked as before (its way out free)."""
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="900" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="tt" vClass="truck" mass="9000" containerCapacity="1"/>'
+        f'<vType id="tc" vClass="passenger" mass="1500"/><vType id="tf" vClass="passenger" mass="1500">{TAXI}</vType>'
+        f'<vehicle id="ttaxi" type="tt" depart="0"><route edges="e"/>{TAXI}<stop containerStop="cs" duration="10"/>'
+        f'</vehicle><vehicle id="ctaxi" type="tc" depart="1"><route edges="e"/>{TAXI}'
+        '<stop lane="e_0" endPos="300" duration="10" parking="true"/></vehicle>'
+        '<vehicle id="xtaxi" type="tc" depart="2"><route edges="e"/>'
+        '<stop lane="e_0" endPos="400" duration="10" parking="true"/></vehicle>'
+        '<flow id="f" type="tf" begin="3" number="2" period="2"><route edges="e"/>'
+        '<stop lane="e_0" endPos="500" duration="10" parking="true"/></flow>'
+        '<vehicle id="car" type="tc" depart="8"><route edges="e"/>'
+        '<stop lane="e_0" endPos="700" duration="10" parking="true"/></vehicle></routes>', encoding="utf-8")
+    (tmp_path / "a.add.xml").write_text(
+        '<additional><containerStop id="cs" lane="e_0" startPos="100" endPos="130"/></additional>', encoding="utf-8")
+    sc = energy_scenario(tmp_path, 200, step_length=1.0, additional="a.add.xml", fcd=True)
+    sc.write_text(sc.read_text(encoding="utf-8").replace('equations = ["vtype_energy"]\n', "").replace(
+        '"--fcd-output",', '"--device.taxi.explicit", "xtaxi", "--fcd-output",'), encoding="utf-8")
+    run_scenario(sc, tmp_path / "live")
+    live = _booked(tmp_path / "live")
+    res = process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "rep", figures=False)
+    taxis = ["ctaxi", "f.0", "f.1", "ttaxi", "xtaxi"]
+    assert (live.loc[taxis, "time_s"] < 100).all()  # parked from their stop to the end at 200 s
+    pd.testing.assert_frame_equal(_booked(tmp_path / "rep"), live, rtol=1e-6)
+    assert res["source"]["untold_parked_vehicles"] == len(taxis)
+
+
+def test_taxi_device_as_sumo_equips_it():
+    """SUMO's order: the vehicle's (or flow's) param, its vType's, then the options."""
+    opts = {"device.taxi.explicit": "a,b", "device.taxi.probability": None}
+    t = TaxiDevices(opts.get)
+    for el, tag in ((_el("vType", "yes", "1"), "vType"), (_el("vType", "no", "0"), "vType"),
+                    (_el("vehicle", "v1", None, "yes"), "vehicle"), (_el("vehicle", "a", "false", "yes"), "vehicle"),
+                    (_el("flow", "f", None, "no"), "flow"), (_el("vehicle", "b", None, "no"), "vehicle")):
+        t.read(el, tag)
+    assert t.has("v1", "v1") and not t.has("a", "a") and not t.has("f.0", "f") and not t.has("b", "b")
+    assert not t.has("c", "c") and t.has("b", "unknown")  # declared nowhere: the option's list
+    assert TaxiDevices({"device.taxi.probability": "0.5"}.get).has("c", "c")
+    assert not TaxiDevices({"device.taxi.probability": "0"}.get).has("c", "c")
+    circling = TaxiDevices({"device.taxi.idle-algorithm": "randomCircling", "device.taxi.probability": "1"}.get)
+    circling.read(_el("vehicle", "v", "true"), "vehicle")
+    assert not circling.has("v", "v")
+
+
+def _el(tag, key, taxi, vtype=None):
+    import xml.etree.ElementTree as ET
+
+    el = ET.Element(tag, {"id": key, **({"type": vtype} if vtype else {})})
+    if taxi is not None:
+        ET.SubElement(el, "param", {"key": "has.taxi.device", "value": taxi})
+    return el
