@@ -1907,3 +1907,42 @@ def test_standstill_auxiliary_is_drawn_below_the_standstill_speed_only_by_hand()
     np.testing.assert_allclose(out["auxiliary_w"], [700.0, 700.0, 400.0, 400.0])
     np.testing.assert_allclose(out["power_w"], [700.0, 700.0, 400.0, 10_400.0])
     np.testing.assert_allclose(out["auxiliary_j"], [1400.0, 1400.0, 800.0, 800.0])
+
+
+def test_ledger_evaluates_each_chain_only_on_the_vehicles_it_books(monkeypatch):
+    """A bare SUMO config books a dozen built-in chains, each for one kind of vehicle (petrol
+    cars, diesel trucks, electric cars …); the ledger evaluated every chain on every vehicle in
+    every step and zeroed what did not apply: DLR's port_lübeck (2026-11-29, cProfile) 42,744
+    chain evaluations over 3,562 steps, 12 a step, for the 3 chains that booked anything, and
+    60 edge bincounts a step — 18.6 of its 44.6 s of stepping. Now a chain is evaluated only
+    on the vehicles it applies to, and not at all in a step without one; the quantities are
+    those of evaluating every vehicle and zeroing the others."""
+    from sumo_drvpw.sim.chain import ChainLedger
+
+    eqs = [load_equation(n) for n in ("epa_gasoline_car", "bmw_i3_battery", "moves_single_unit_truck_diesel")]
+    calls = []
+    real = EnergyChain.evaluate
+
+    def counted(self, p, *a, **k):
+        calls.append((self, len(np.atleast_1d(p))))
+        return real(self, p, *a, **k)
+
+    rng = np.random.default_rng(4)
+    n, dt = 7, 1.0
+    v = rng.uniform(0, 20, n)
+    p = rng.normal(0, 2e4, (n, 3))
+    app = np.zeros((n, 3))
+    app[:4, 0] = 1.0  # four petrol cars, three trucks, no electric car in this step
+    app[4:, 2] = 1.0
+    eidx = rng.integers(0, 3, n)
+    ref = ChainLedger([e.name for e in eqs], [e.chain for e in eqs], n_edges=3)
+    want = ref.expand(ref.book(np.arange(n), eidx, v, dt, p)) * app[:, :, None]
+    led = ChainLedger([e.name for e in eqs], [e.chain for e in eqs], n_edges=3)
+    monkeypatch.setattr(EnergyChain, "evaluate", counted)
+    got = led.expand(led.book(np.arange(n), eidx, v, dt, p, app=app))
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=0)
+    assert sorted(k for _, k in calls) == [3, 4]
+    assert all(c is not eqs[1].chain for c, _ in calls)
+    per_edge = np.stack([want[eidx == k].sum(axis=0) for k in range(3)])
+    np.testing.assert_allclose(led.edge, per_edge, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(led.veh[:n], want, rtol=1e-12, atol=0)

@@ -260,7 +260,9 @@ class ChainLedger:
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
                         signals: dict | None = None, engine_off=None, v_mean=None, app=None) -> np.ndarray:
         """Chain quantities of one step, (n vehicles, C booked columns) (:meth:`expand` gives
-        (n, E, Q)); a chain with SUMO's motor is evaluated only where ``app`` (n, E) > 0.
+        (n, E, Q)); each chain is evaluated only where ``app`` (n, E) > 0 (zeros elsewhere,
+        and not at all in a step none of its vehicles is in: a bare config's thirteen
+        built-in chains each book one kind of vehicle).
 
         Parameters
         ----------
@@ -276,13 +278,17 @@ class ChainLedger:
         j = 0
         for e in self.active:
             ch = self.chains[e]
-            vv = v if v_mean is None or e not in self._motor else v_mean
-            out = (evaluate_where(ch, np.asarray(app)[:, e] > 0, p[:, e], vv, dt, signals)
-                   if app is not None and e in self._motor else ch.evaluate(p[:, e], vv, dt, signals))
-            if "invalid" in out:
-                self.motor_invalid[e] += int(np.count_nonzero(out["invalid"]))
             keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
                     ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
+            sel = None if app is None else np.asarray(app)[:, e] > 0
+            if sel is not None and not sel.any():
+                j += len(keys)
+                continue
+            vv = v if v_mean is None or e not in self._motor else v_mean
+            out = (evaluate_where(ch, sel, p[:, e], vv, dt, signals)
+                   if sel is not None else ch.evaluate(p[:, e], vv, dt, signals))
+            if "invalid" in out:
+                self.motor_invalid[e] += int(np.count_nonzero(out["invalid"]))
             for key in keys:
                 if key is not None:  # cold_start_l: booked at departures only (book)
                     q[:, j] = out[key]
@@ -345,7 +351,8 @@ class ChainLedger:
         ne = self._edge.shape[0]
         w = np.ascontiguousarray(np.concatenate([q, d[:, None] * a], axis=1).T)
         c = q.shape[1]
-        for j in range(w.shape[0]):  # a bincount per column: far cheaper than np.add.at
+        for j in np.flatnonzero(w.any(axis=1)):  # a bincount per column (none for a chain without
+            # vehicles in this step): far cheaper than np.add.at
             col = np.bincount(eidx, w[j], minlength=ne)
             if j < c:
                 self._edge[:, j] += col
