@@ -99,6 +99,20 @@ def test_cycles_read_as_published(tmp_path):
     assert "motorcycle (urban" in said and "two-wheeler's real driving may exceed it" in said
 
 
+def test_a_heavy_vehicle_smoother_than_a_cars_bound_is_said_to_be_judged_by_a_cars_bound():
+    """The RDE's lower RPA bound is a car's too: DLR's port_brunswick (2026-11-29, 900 s) said
+    its city buses were "smoother than a valid real-world test trip" (rural RPA 0.065 < 0.066
+    m/s²) and that the acceleration term booked less than real driving, which a bus, with a
+    fraction of a car's power per kg, need not show. The warning now says the bound is a car's
+    beside a heavy vClass, as it does when one drives harder; a car's reads as before."""
+    part = {"rpa_judged": True, "rpa_mps2": 0.065, "rde_rpa_min": 0.066, "mean_speed_kmh": 69.0,
+            "va_pos_95_judged": True, "va_pos_95_m2ps3": 10.0, "rde_va_pos_95_max": 24.0}
+    said = D.warnings({"bus": {"parts": {"rural": part}}, "passenger": {"parts": {"rural": part}}})
+    assert len(said) == 1 and said[0].startswith("driving dynamics: trajectories smoother")
+    assert "bus (rural 0.065 < 0.066 m/s² at 69 km/h; a car's bound: a heavy vehicle's real driving may stay below it)" in said[0]
+    assert "passenger (rural 0.065 < 0.066 m/s² at 69 km/h)" in said[0]
+
+
 ROUTES = """<routes>
     <vType id="t" vClass="passenger" mass="1500" accel="{accel}" decel="4.5" sigma="{sigma}" speedFactor="1"/>
     <flow id="f0" type="t" from="c00c10" to="c34c44" begin="0" end="300" period="6" departSpeed="0"/>

@@ -441,8 +441,9 @@ def warnings(summary: dict) -> list[str]:
                  for name, p in parts.items() if p["rpa_judged"] and p["rpa_mps2"] < p["rde_rpa_min"]]
         if over:
             hard.append(f"{lab} ({', '.join(over)}{heavy}{_vtypes(doc)})")
-        if under:
-            smooth.append(f"{lab} ({', '.join(under)})")
+        if under:  # a bus or truck, with a fraction of a car's power per kg, may drive smoother
+            low = "; a car's bound: a heavy vehicle's real driving may stay below it" if lab in HEAVY else ""
+            smooth.append(f"{lab} ({', '.join(under)}{low})")
     out = []
     strong = {lab: doc["beyond_engine_power"] for lab, doc in summary.items()
               if doc.get("beyond_engine_power", {}).get("share", 0.0) > HEAVY_POWER_WARN_SHARE}
