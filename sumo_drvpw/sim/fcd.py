@@ -47,7 +47,7 @@ length; the ledger writes finished vehicles out (:mod:`sumo_drvpw.sim.spill`). A
 arrives the step after a timestep without it (SUMO's FCD does not tell an arrival from a
 teleport: a vehicle back after a gap is put back there, as a teleport's end, and books on
 from its next row; one whose rows end while it stands, or off its route's last edge — a moving
-car's collision —, is held in memory for :data:`TELEPORT_HOLD_S` (:func:`~sumo_drvpw.sim.fcd_stops.
+car's collision —, is held in memory for :data:`TELEPORT_HOLD_S` (:func:`~sumo_drvpw.sim.teleport.
 may_return`), so a flush of finished vehicles does not split it — one back later books on in a
 second row). ``chunk_rows=None`` reads the whole file first
 (:class:`FcdReplay`: the reference the streamed replay equals exactly on gap-free FCD).
@@ -74,10 +74,11 @@ from sumo_drvpw.sim.fcd_warn import (KineticGain, lane_warnings, missed_count, m
                                      unplaced_vehicle_warning, unseen_vehicles)
 from sumo_drvpw.sim.fcd_read import (CHUNK_ROWS, FCD_COLUMNS, fcd_parts,  # noqa: F401
                                      iter_fcd_blocks, read_fcd)
-from sumo_drvpw.sim.fcd_stops import StopTracker, may_return, read_declared_stops
+from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
+from sumo_drvpw.sim.teleport import may_return
 from sumo_drvpw.sim.vtype_energy import battery_switch, replay_emission_classes
 
-#: how long [s] a vehicle whose rows end while it stands (or off its route's last edge) stays
+#: how long [s] a vehicle whose rows end while it stands (or off its route's last edge: may_return) stays
 #: in memory, in case it comes back from a teleport (SUMO teleports a car waiting in a jam or
 #: colliding, writes no rows while it moves over the edges it skips at their speed limits —
 #: seconds to minutes — and puts it back); one back later books on in a second row
@@ -489,7 +490,6 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
                                    end=sc.end, option=lambda key: scenario_option(sc, key) or (head or {}).get(key))
     if declared:
         replay.stops = StopTracker(declared, net)
-    # a car whose rows end standing or off its route's last edge may be in a teleport: held (TELEPORT_HOLD_S)
     acc.ledger.hold_steps, acc.ledger.may_return = int(np.ceil(TELEPORT_HOLD_S / replay.dt)), may_return(declared, net, acc.ledger)
     # a parked car idling in its space, its way out blocked, as the live run books it
     so = acc.stepper.shutoff

@@ -122,3 +122,25 @@ def summary(ledger, net, names: list[str], classes: list[str], net_j: dict[str, 
                "never booked to reach, so the run books less than if they had driven off" if faster else "")
             + " (summary.json teleports; vehicles.parquet teleport_kinetic_j, teleport_potential_j)")
     return block, per_eq, warnings
+
+
+def may_return(declared, net, ledger):
+    """For :attr:`Ledger.may_return`: whether vehicles ``slots`` whose rows ended may come
+    back (a teleport SUMO ends later), read as they leave: all but those whose last row was on
+    their route's last edge (``declared`` :attr:`sumo_drvpw.sim.fcd_stops.DeclaredStops.destinations`, an FCD replay's route files). SUMO arrives
+    a vehicle there, and one teleported there too ("teleports beyond arrival edge"); elsewhere
+    — on a junction, where a moving car collides and is taken off until the next edge has
+    room — it may be back. A vehicle of unknown route is held; one that reaches its arrival
+    position in the step it enters its last edge is held needlessly (memory only); one never
+    read on a lane (booked by no equation) is not held."""
+    def test(slots):
+        out = np.zeros(len(slots), bool)
+        for j, i in enumerate(np.asarray(slots).tolist()):
+            vid, lane = ledger.veh_ids[i], ledger.veh_at[i, 0]
+            if not np.isfinite(lane):
+                continue
+            flow, _, n = vid.rpartition(".")
+            to = declared.destinations.get(vid) or (declared.destinations.get(flow) if n.isdigit() else None)
+            out[j] = to is None or net.lane_ids[int(lane)].rpartition("_")[0] != to
+        return out
+    return test
