@@ -16,6 +16,8 @@ import sys
 import warnings
 
 from sumo_drvpw.cli._parser import _Parser
+from sumo_drvpw.cli._signals import (_INTERRUPTED, _TERMINATED, _Terminated, _on_sigint, _on_sigterm,  # noqa: F401
+                                      _quiet_signal_hook, _signal_exit, _stopped_by_signal)
 from sumo_drvpw.errors import NoDrivingPower, OutputExists, UserError
 
 #: sub-command → (module, one-line help)
@@ -388,55 +390,6 @@ def _driving_power_hint(e: NoDrivingPower, args) -> str:
     return ""
 
 
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where Ctrl-C (SIGINT) would be: the run stops the same clean way."""
-
-
-_TERMINATED = []  # set when SIGTERM arrived: an interrupted command then exits 143, not 130
-
-
-def _on_sigterm(signum, frame):
-    _TERMINATED.append(signum)
-    raise _Terminated()
-
-
-_INTERRUPTED = []  # set when SIGINT arrived
-
-
-def _on_sigint(signum, frame):
-    _INTERRUPTED.append(signum)
-    raise KeyboardInterrupt()
-
-
-def _quiet_signal_hook(prev):
-    """sys.unraisablehook that drops a signal's exception raised where Python cannot
-    propagate it (a garbage collector's weakref callback printed "Exception ignored in …" and a
-    traceback above the one line): the record of the signal decides the exit all the same."""
-    def hook(unraisable):
-        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
-            prev(unraisable)
-    return hook
-
-
-def _signal_exit(terminated: bool, finished: bool = False) -> int:
-    """The one line and exit code of a run a signal stopped: 143 (SIGTERM) or 130 (SIGINT);
-    ``finished``: the command completed its output all the same (the signal's exception
-    was swallowed inside a library), so what it wrote is whole."""
-    what = "its output was completed" if finished else "no partial output written"
-    if terminated:
-        print(f"sumo-drvpw: terminated (SIGTERM); {what}", file=sys.stderr)
-        return 128 + signal.SIGTERM
-    print(f"sumo-drvpw: interrupted; {what}", file=sys.stderr)
-    return 130
-
-
-def _stopped_by_signal() -> int | None:
-    """Exit code of a run a signal stopped, else None. A signal's exception raised inside a
-    library's C code (matplotlib drawing a path, say) can come out as that library's own
-    error; the record of the signal says what happened."""
-    return _signal_exit(bool(_TERMINATED)) if _TERMINATED or _INTERRUPTED else None
-
-
 #: plain stand-ins for the symbols the reports print, on a console that cannot show them
 _PLAIN = str.maketrans({"→": "->", "←": "<-", "−": "-", "–": "-", "—": "-", "≥": ">=", "≤": "<=",
                         "≈": "~", "±": "+/-", "×": "x", "·": "*", "Δ": "d", "Σ": "sum", "η": "eta",
@@ -566,13 +519,13 @@ def main(argv: list[str] | None = None) -> int:
             if isinstance(getattr(sys, name), _ClosedPipeSafe):
                 getattr(sys, name).flush()  # a pipe's buffer is written here, not at exit unguarded
                 setattr(sys, name, prev)
-        _TERMINATED.clear()
-        _INTERRUPTED.clear()
-        sys.unraisablehook = prev_hook
-        if prev_term is not None:
+        if prev_term is not None:  # (restored first: a stop's signal sent again until here is absorbed)
             signal.signal(signal.SIGTERM, prev_term)
         if prev_int is not None:
             signal.signal(signal.SIGINT, prev_int)
+        _TERMINATED.clear()
+        _INTERRUPTED.clear()
+        sys.unraisablehook = prev_hook
 
 
 #: what a library message calls an option (it names no flags) → the flag the user types,
