@@ -285,3 +285,21 @@ def test_cli_streams_the_chain_trace_above_the_row_limit(tmp_path, base, monkeyp
     res = json.loads((out / "trace.json").read_text(encoding="utf-8"))["resources"]
     assert res["rows"] == len(df) and res["passes"] > 3
     assert "rows streamed" in capsys.readouterr().err
+
+
+def test_a_road_load_that_reads_a_signal_streamed_equals_in_memory(tmp_path, base):
+    """A declared road load with terms that read log columns (``radial``: the yaw rate, 0
+    without it; ``[pump_w]*v^0``: a logged power, required): the streamed trace kept only the
+    chain's and its candidates' signals, so its driving power dropped the radial drag (the
+    candidates' gains, the limits and every held-out prediction off the in-memory ones) and
+    the column term was refused ('needs the signal pump_w'). Now the equation's columns are
+    kept: equal to in memory."""
+    b, df, truth, p = base
+    rng = np.random.default_rng(7)
+    yaw = 0.08 * np.sin(np.arange(len(df)) / 7.0) + rng.normal(0, 0.01, len(df))
+    pump = rng.uniform(100.0, 400.0, len(df))
+    d = _battery(df.assign(yaw_rate_rps=yaw, pump_w=pump), 450.0 * (df["speed_mps"].to_numpy(float) < 0.1))
+    eq = Equation("declared", dict(truth.terms, radial=0.3), truth.mass_kg, chain=b.chain())
+    _both(tmp_path, d, eq, "battery", ChainTraceOptions(max_findings=2))
+    eq = Equation("declared", dict(truth.terms, **{"[pump_w]*v^0": 1.0}), truth.mass_kg, chain=b.chain())
+    _both(tmp_path, d, eq, "battery", ChainTraceOptions(max_findings=1))

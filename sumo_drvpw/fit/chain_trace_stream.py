@@ -74,6 +74,12 @@ def _merge_unknown(a: dict, b: dict) -> dict:
     return a
 
 
+def _inputs(d) -> Inputs:
+    """A prepared batch's model inputs, with the signals it kept."""
+    keys = dict.fromkeys([*d, *getattr(d, "_files", ())])   # (a batch on disk: its files too)
+    return Inputs(*(np.asarray(d[f], float) for f in INPUT_FIELDS), {k[2:]: d[k] for k in keys if k.startswith("s:")})
+
+
 class _Streamed:
     """The search's engine on prepared batches (:mod:`sumo_drvpw.fit.chain_search`)."""
 
@@ -88,9 +94,7 @@ class _Streamed:
             yield i, d
 
     def inputs(self, d) -> Inputs:
-        keys = dict.fromkeys([*d, *getattr(d, "_files", ())])   # (a batch on disk: its files too)
-        return Inputs(*(np.asarray(d[f], float) for f in INPUT_FIELDS),
-                      {k[2:]: d[k] for k in keys if k.startswith("s:")})
+        return _inputs(d)
 
     def context(self, d):
         """A batch's inputs, residual and candidates (with their columns on it)."""
@@ -218,11 +222,15 @@ class _Streamed:
 
 
 def _keep_signals(m, equation, opt) -> list:
-    """The signals the chain, its closed equation and its candidates may read."""
+    """The signals the chain, its closed equation and its candidates may read: the road
+    load's own too (``radial``'s yaw rate, ``[col]`` terms), or its driving power would
+    differ from the one the batch was read with."""
     from sumo_drvpw.fit.chain_effects import _load_columns
+    from sumo_drvpw.model.terms import parse_term
 
     ch = equation.chain
-    return sorted(set(ch.signals) | {ch.temperature_column, "ambient_c"} | set(_load_columns(m, ch, opt)))
+    road = {c for t in equation.terms for c in parse_term(t).columns}
+    return sorted(set(ch.signals) | road | {ch.temperature_column, "ambient_c"} | set(_load_columns(m, ch, opt)))
 
 
 def trace_chain_stream(paths, vehicle, equation, target: str, opt: ChainTraceOptions | None = None,
@@ -325,7 +333,7 @@ def _brake_quantiles(batches, equation, hist) -> list:
     bins = quantile_bins(hist, LIMIT_QUANTILES)[1]
     values = None
     for d in batches:
-        x = Inputs(*(np.asarray(d[f], float) for f in INPUT_FIELDS), {})
+        x = _inputs(d)
         p = equation.power(x.with_mass(equation.mass_kg) if equation.mass_kg else x)
         brake = -p[p < 0]
         sel = brake[np.isin(_keys(brake), bins)]
