@@ -7,7 +7,7 @@ its statistics come from:
 1. **one read of the logs**, batch by batch of whole trips
    (:func:`~sumo_drvpw.fit.diagnose.source.read_batches`), into the arrays the trace needs
    per analysis sample — measured and declared target power, weight, time, trip, the
-   model inputs and the signals the chain and its candidates read — kept as
+   model inputs and the signals the road load, the chain and its candidates read — kept as
    :class:`~sumo_drvpw.fit.diagnose.source.Batches` (in memory up to a budget, else in a
    temporary folder); on the way, which candidates are offered
    (:func:`~sumo_drvpw.fit.chain_effects.offer_stats`, merged over batches), the baseline's
