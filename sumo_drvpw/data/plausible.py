@@ -213,13 +213,20 @@ UPDATE_MAX_S = 3.0
 #: at its next sample wherever it changes by a step or more — but holds a value for seconds
 #: in a cruise, so a median (3 s on a highway at 1 Hz) let a 9-m/s splice pass
 UPDATE_QUANTILE = 0.1
+#: a held speed's update clock (:func:`update_interval`): the median of the intervals between
+#: its values (its first value's, cut by the stretch's start, aside) when it is at least
+#: 1.5 rows and this share of them lie within a row of it — the jitter of a bus lands an
+#: update near a row's edge one row early or late (1-s updates in 2-Hz rows: 0.5, 1 and
+#: 1.5 s), where a low quantile read 0.5 s; a speed in steps holds values for irregular times
+UPDATE_CLOCK_SHARE = 0.8
 
 
 def update_interval(v: np.ndarray, t: np.ndarray, seg: np.ndarray) -> np.ndarray:
     """The interval at which each stretch's speed is updated [s], per run of equal ``seg``
     (0, 1, … in order): the :data:`UPDATE_QUANTILE` quantile of the times from a value's first
     sample to the next value's, over the values held while moving (> :data:`UPDATE_MIN_SPEED_MPS`),
-    at most :data:`UPDATE_MAX_S`; 0 where no value is followed by another in the stretch. A speed
+    or their update clock where they keep one (:data:`UPDATE_CLOCK_SHARE`), at most
+    :data:`UPDATE_MAX_S`; 0 where no value is followed by another in the stretch. A speed
     updated at every sample gives its sampling interval; a held one (a speed updated once a
     second in 2-Hz rows) its update interval — from the values themselves, so also in a trip
     too short for :func:`sumo_drvpw.data.resolution.speed_hold` to judge."""
@@ -235,8 +242,16 @@ def update_interval(v: np.ndarray, t: np.ndarray, seg: np.ndarray) -> np.ndarray
     ok = follows & (v[at[:-1]] > UPDATE_MIN_SPEED_MPS)
     if ok.any():
         run = (np.cumsum(first) - 1)[at[:-1][ok]]
-        low = pd.Series((t[at[1:]] - t[at[:-1]])[ok]).groupby(run).quantile(UPDATE_QUANTILE)
+        d = (t[at[1:]] - t[at[:-1]])[ok]
+        low = pd.Series(d).groupby(run).quantile(UPDATE_QUANTILE)
         out[low.index.to_numpy()] = np.minimum(low.to_numpy(), UPDATE_MAX_S)
+        row = pd.Series(np.diff(t)[~first[1:]]).groupby((np.cumsum(first) - 1)[1:][~first[1:]]).median()
+        inner = ~first[at[:-1][ok]]  # (the first value's interval starts with the stretch, not an update)
+        for r, g in pd.Series(d[inner]).groupby(run[inner]):
+            m, dt_row = float(g.median()), float(row.get(r, np.nan))
+            if (len(g) >= 3 and m >= 1.5 * dt_row
+                    and np.mean(np.abs(g.to_numpy() - m) <= dt_row + 1e-6) >= UPDATE_CLOCK_SHARE):
+                out[r] = min(m, UPDATE_MAX_S)
     return out
 
 
