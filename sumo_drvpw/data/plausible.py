@@ -217,7 +217,8 @@ UPDATE_QUANTILE = 0.1
 #: its values (its first value's, cut by the stretch's start, aside) when it is at least
 #: 1.5 rows and this share of them lie within a row of it — the jitter of a bus lands an
 #: update near a row's edge one row early or late (1-s updates in 2-Hz rows: 0.5, 1 and
-#: 1.5 s), where a low quantile read 0.5 s; a speed in steps holds values for irregular times
+#: 1.5 s), where a low quantile read 0.5 s; not a speed in steps (whole km/h) that changes by
+#: one step at a time, which holds its values as long as its drift takes to cross a step
 UPDATE_CLOCK_SHARE = 0.8
 
 
@@ -247,10 +248,13 @@ def update_interval(v: np.ndarray, t: np.ndarray, seg: np.ndarray) -> np.ndarray
         out[low.index.to_numpy()] = np.minimum(low.to_numpy(), UPDATE_MAX_S)
         row = pd.Series(np.diff(t)[~first[1:]]).groupby((np.cumsum(first) - 1)[1:][~first[1:]]).median()
         inner = ~first[at[:-1][ok]]  # (the first value's interval starts with the stretch, not an update)
-        for r, g in pd.Series(d[inner]).groupby(run[inner]):
-            m, dt_row = float(g.median()), float(row.get(r, np.nan))
+        dv = np.abs(v[at[1:]] - v[at[:-1]])[ok][inner]
+        for r, g in pd.DataFrame({"d": d[inner], "dv": dv}).groupby(run[inner]):
+            m, dt_row = float(g["d"].median()), float(row.get(r, np.nan))
+            steps = g["dv"].to_numpy()
             if (len(g) >= 3 and m >= 1.5 * dt_row
-                    and np.mean(np.abs(g.to_numpy() - m) <= dt_row + 1e-6) >= UPDATE_CLOCK_SHARE):
+                    and np.mean(np.abs(g["d"].to_numpy() - m) <= dt_row + 1e-6) >= UPDATE_CLOCK_SHARE
+                    and np.median(steps) >= 1.5 * steps.min()):  # (not a speed in steps, one at a time)
                 out[r] = min(m, UPDATE_MAX_S)
     return out
 
