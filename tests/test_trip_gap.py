@@ -59,3 +59,22 @@ def test_without_the_option_or_below_it_one_trip(tmp_path):
     for bad in ("trip_gap_s = 0", "trip_gap_s = \"10 min\"", "trip_gap_s = true"):
         with pytest.raises(UserError, match="options.trip_gap_s"):
             adapters.read("columns", [f], columns=_mapping(tmp_path, bad, False))
+
+
+def test_a_part_is_not_named_as_another_trip_of_the_file(tmp_path):
+    """A file with trip A (two drives an hour apart) and trip A_2 (a third drive): A's second
+    part was named A_2 and merged with the other drive into one trip of 1,200 samples spanning
+    2 h (no word); the parts take names no other trip of the file has."""
+    t1 = np.arange(0.0, 600.0, 1.0)
+    t2, t3 = t1 + 4200.0, t1 + 12000.0
+    v = np.clip(12 + 8 * np.sin(np.r_[t1, t2, t3] / 60.0), 0, None) * 3.6
+    f = tmp_path / "day.csv"
+    pd.DataFrame({"Trip": ["A"] * 1200 + ["A_2"] * 600, "t": np.r_[t1, t2, t3], "Speed": v}).to_csv(f, index=False)
+    m = tmp_path / "map.toml"
+    m.write_text('[options]\ntrip_gap_s = 600\n[columns.t]\nname = "time_s"\n[columns.Speed]\nname = "speed_mps"\n'
+                 'unit = "km/h"\n[columns.Trip]\nname = "trip_id"\n', encoding="utf-8")
+    df = adapters.read("columns", [f], columns=m)[0]
+    sizes = df.groupby("trip_id", sort=False)["time_s"].agg(["size", "min"])
+    assert len(sizes) == 3 and (sizes["size"] == 600).all(), sizes
+    assert list(sizes["min"]) == [0.0, 4200.0, 12000.0]
+    assert "A_2" in sizes.index and sizes.loc["A_2", "min"] == 12000.0   # the file's own A_2 keeps its id

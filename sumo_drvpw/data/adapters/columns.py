@@ -576,8 +576,9 @@ def read(paths, columns):
 def split_at_pauses(df: pd.DataFrame, rep: dict, gap_s: float) -> pd.DataFrame:
     """A trip whose logging pauses longer than ``gap_s`` [s] (a day's log of an app that runs
     while the car is parked between drives) split there: its parts named ``<trip>_1``,
-    ``<trip>_2``, … (per-trip energies, held-out folds and trip signatures take a trip as
-    one drive); said in the file's notes. Trips without such a pause keep their id."""
+    ``<trip>_2``, … (``<trip>_part1``, … where another trip of the file has such a name; per-trip
+    energies, held-out folds and trip signatures take a trip as one drive); said in the file's
+    notes. Trips without such a pause keep their id."""
     if df.empty:
         return df
     trip = df["trip_id"].astype(str).to_numpy()
@@ -588,8 +589,9 @@ def split_at_pauses(df: pd.DataFrame, rep: dict, gap_s: float) -> pd.DataFrame:
         return df
     part = pd.Series(pause.astype(int)).groupby(trip, sort=False).cumsum().to_numpy() + 1
     split = pd.Series(pause).groupby(trip, sort=False).transform("any").to_numpy()
-    df = df.copy()
-    df["trip_id"] = np.where(split, pd.Series(trip).str.cat(part.astype(str), sep="_").to_numpy(), trip)
+    sep = "_part" if set(trip[~split]) & {f"{a}_{k}" for a, k in zip(trip[split], part[split])} else "_"
+    df = df.copy()  # (a part named as another trip of the file would join it: then <trip>_part<k>)
+    df["trip_id"] = np.where(split, pd.Series(trip).str.cat(part.astype(str), sep=sep).to_numpy(), trip)
     longest = float(np.max(np.diff(t)[pause[1:]]))
     rep["notes"].append(f"{int(pause.sum())} pause(s) in logging longer than options.trip_gap_s = {gap_s:g} s "
                         f"(the longest {longest:.0f} s) split {len(set(trip[split]))} trip(s) into "
