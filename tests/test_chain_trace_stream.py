@@ -289,7 +289,8 @@ def test_cli_streams_the_chain_trace_above_the_row_limit(tmp_path, base, monkeyp
 
 def test_a_road_load_that_reads_a_signal_streamed_equals_in_memory(tmp_path, base):
     """A declared road load with terms that read log columns (``radial``: the yaw rate, 0
-    without it; ``[pump_w]*v^0``: a logged power, required): the streamed trace kept only the
+    without it; ``[pump_w]*v^0``: a logged power, required) or the trip ids (``trip=ID``): the
+    streamed trace kept only the
     chain's and its candidates' signals, so its driving power dropped the radial drag (the
     candidates' gains, the limits and every held-out prediction off the in-memory ones) and
     the column term was refused ('needs the signal pump_w'). Now the equation's columns are
@@ -302,4 +303,7 @@ def test_a_road_load_that_reads_a_signal_streamed_equals_in_memory(tmp_path, bas
     eq = Equation("declared", dict(truth.terms, radial=0.3), truth.mass_kg, chain=b.chain())
     _both(tmp_path, d, eq, "battery", ChainTraceOptions(max_findings=2))
     eq = Equation("declared", dict(truth.terms, **{"[pump_w]*v^0": 1.0}), truth.mass_kg, chain=b.chain())
+    _both(tmp_path, d, eq, "battery", ChainTraceOptions(max_findings=1))
+    # a trip's own offset (a trip=ID factor reads the trip ids: refused streamed, 'needs trip ids')
+    eq = Equation("declared", dict(truth.terms, **{"trip=synth-2*v^0": 300.0}), truth.mass_kg, chain=b.chain())
     _both(tmp_path, d, eq, "battery", ChainTraceOptions(max_findings=1))

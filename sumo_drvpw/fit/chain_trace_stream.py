@@ -74,10 +74,20 @@ def _merge_unknown(a: dict, b: dict) -> dict:
     return a
 
 
-def _inputs(d) -> Inputs:
-    """A prepared batch's model inputs, with the signals it kept."""
+def _inputs(d, trips: bool = False) -> Inputs:
+    """A prepared batch's model inputs, with the signals it kept (and its trip ids, for a
+    road load with ``trip=ID`` terms)."""
     keys = dict.fromkeys([*d, *getattr(d, "_files", ())])   # (a batch on disk: its files too)
-    return Inputs(*(np.asarray(d[f], float) for f in INPUT_FIELDS), {k[2:]: d[k] for k in keys if k.startswith("s:")})
+    trip = np.asarray(d["names"], dtype=object)[np.asarray(d["tloc"])] if trips and "names" in keys else None
+    return Inputs(*(np.asarray(d[f], float) for f in INPUT_FIELDS), {k[2:]: d[k] for k in keys if k.startswith("s:")},
+                  trip)
+
+
+def _reads_trips(equation) -> bool:
+    """Whether a term of ``equation`` reads the trip ids (a ``trip=ID`` factor)."""
+    from sumo_drvpw.model.terms import parse_term
+
+    return any(f.startswith("trip=") for t in equation.terms for f in parse_term(t).factors)
 
 
 class _Streamed:
@@ -87,6 +97,7 @@ class _Streamed:
         self.batches, self.eq, self.opt, self.decided = batches, equation, opt, decided
         self.bl, self.starts, self.offs, self.sw, self.e_pred = bl, starts, offs, sw, e_pred
         self.passes = 0
+        self.trips = _reads_trips(equation)
 
     def _batches(self):
         self.passes += 1
@@ -94,7 +105,7 @@ class _Streamed:
             yield i, d
 
     def inputs(self, d) -> Inputs:
-        return _inputs(d)
+        return _inputs(d, self.trips)
 
     def context(self, d):
         """A batch's inputs, residual and candidates (with their columns on it)."""
@@ -333,7 +344,7 @@ def _brake_quantiles(batches, equation, hist) -> list:
     bins = quantile_bins(hist, LIMIT_QUANTILES)[1]
     values = None
     for d in batches:
-        x = _inputs(d)
+        x = _inputs(d, _reads_trips(equation))
         p = equation.power(x.with_mass(equation.mass_kg) if equation.mass_kg else x)
         brake = -p[p < 0]
         sel = brake[np.isin(_keys(brake), bins)]
