@@ -61,3 +61,19 @@ def test_flat_road_and_a_grade_source_that_reads_the_elevation_are_refused(tmp_p
     err = capsys.readouterr().err
     assert "--flat-road" in err and "fused" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x.toml").exists()
+
+
+def test_flat_road_says_the_elevation_is_read_for_the_air_density_only(tmp_path):
+    """--flat-road with --air-density altitude: the grade is set aside, the air density still
+    reads elevation_m (the [measurement] says 'air density at the logged altitude'); the
+    report's grade source said 'elevation_m not used'. It says what is not read: the grade."""
+    import json
+
+    from sumo_drvpw.cli import main as cli_main
+
+    log = _flat_drive_with_gps_altitude(tmp_path)
+    assert cli_main(["calibrate", str(log), "--flat-road", "--air-density", "altitude", "--out",
+                     str(tmp_path / "eq.toml"), "--report", str(tmp_path / "rep")]) == 0
+    assert load_equation(tmp_path / "eq.toml").measurement.air_density == "altitude"
+    src = json.loads((tmp_path / "rep" / "report.json").read_text(encoding="utf-8"))["context"]["counts"]["grade_source"]
+    assert src.startswith("none, set aside") and "not used" not in src and "not read as grade" in src

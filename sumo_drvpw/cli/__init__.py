@@ -158,8 +158,8 @@ def add_read_options(p) -> None:
                         "accelerations only make sense in km/h are refused; m/s = trust the log)")
     g.add_argument("--negative-speed-tolerance", type=float, default=0.1, metavar="M_S",
                    help="speeds in [-M_S, 0) are standstill noise, clipped to 0 and counted (default 0.1)")
-    g.add_argument("--flat-road", action="store_true", help="read the logs as a flat road: their grade_rad, "
-                   "grade_pct and elevation_m set aside (a phone's GPS altitude that is noise, not the road)")
+    g.add_argument("--flat-road", action="store_true", help="read the logs as a flat road: no grade from grade_rad, "
+                   "grade_pct or elevation_m (a phone's GPS altitude: noise; --air-density altitude still reads it)")
 
 
 def _add_corrections(p) -> None:

@@ -73,7 +73,7 @@ def source_counts(counts: dict) -> dict:
         g = counts["grade_rows"]
         some = {k: n for k, n in g.items() if _rank(k, "grade_rows") < 3}
         out["grade_source"] = said(some) if some else (
-            "none, set aside: read as a flat road (the logs' grade_rad, grade_pct and elevation_m not used)"
+            "none, set aside: read as a flat road (the logs' grade_rad, grade_pct and elevation_m not read as grade)"
             if counts.get("grade_set_aside_rows") else
             "none (elevation_m holds no value: flat road assumed)" if counts.get("grade_elevation_column")
             else "none (flat road assumed)")

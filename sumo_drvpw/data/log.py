@@ -84,7 +84,7 @@ class ReadOptions:
     #: (:class:`sumo_drvpw.model.measurement.Measurement`: power lag, grade source, air
     #: density; :mod:`sumo_drvpw.data.corrections`); None = the log as read
     measurement: object | None = None
-    #: read the logs as a flat road: grade_rad, grade_pct and elevation_m set aside (a GPS
+    #: read the logs as a flat road: grade_rad, grade_pct and elevation_m not read as grade (a GPS
     #: altitude that is noise; :func:`sumo_drvpw.data.conditions.derive_conditions`)
     flat_road: bool = False
     #: the fuel a fuel flow is read as when no vehicle file names one (the fuel of the
