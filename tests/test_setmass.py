@@ -204,3 +204,30 @@ def test_a_vtype_s_mass_set_by_a_script_books_its_vehicles_from_the_next_check(t
     ratio = b.traction_roll_j / a.traction_roll_j
     assert ratio["w"] == pytest.approx(2.0, rel=1e-9)  # departed after the call: all its trip
     assert 1.5 < ratio["v"] < 2.0  # from the check at step 25 (its first 12 s at 1,500 kg)
+
+
+def test_a_setmass_on_a_vtype_with_a_loading_books_the_mass_plus_the_loading(tmp_path):
+    """SUMO books a vehicle at its vType's mass plus the param ``loading`` (EnergyParams::
+    getTotalMass), and its own copy keeps the param: after ``vehicle.setMass("v", 3000)`` on a
+    1,500-kg car loaded with 1,000 kg, SUMO drives it at 4,000 kg (its Energy model's
+    electricity from then on equals a 2,500-kg car's set to 4,000 kg; vehicle.getMass says
+    3,000, the loading aside). The plug-in booked the copy's 3,000 kg, the loading dropped."""
+    routes = ROUTES.replace('sigma="0"/>', 'sigma="0"><param key="loading" value="1000"/></vType>')
+    (tmp_path / "r.rou.xml").write_text(routes, encoding="utf-8")
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nbegin = 0\nend = 70\n'
+        f'step_length = {DT}\noptions = ["--no-warnings", "true"]\n', encoding="utf-8")
+    sc = load_scenario(tmp_path / "s.toml")
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, scenario=sc, equations=[PHYS])
+        for k in range(60):
+            conn.simulationStep()
+            acc.step()
+            if k == 20:
+                conn.vehicle.setMass("v", 3000.0)
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    v = res.vehicles.set_index("vehicle")
+    assert v.mass_kg.to_dict() == {"v": 4000.0, "w": 2500.0}

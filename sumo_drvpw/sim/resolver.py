@@ -270,7 +270,8 @@ class VTypeResolver:
         """Book vehicle row ``i`` of vType ``vt``, now on its own copy ``copy``, at the copy's
         mass: the scenario's ``[vtypes."<copy>"] mass_kg`` where it gives one (all an FCD
         replay can know: FCD names the copy, not its mass), else, live, SUMO's mass of the
-        copy where a script set another than ``vt``'s, else ``vt``'s booked mass (a copy
+        copy where a script set another than ``vt``'s (plus ``vt``'s loading, which SUMO adds
+        and the copy keeps), else ``vt``'s booked mass (a copy
         made by another setter; a mass set back). A replay told none books ``vt``'s and
         lists the copy in :attr:`untold_copies`. True when the booked mass changed."""
         told = getattr(self.sc, "vtype_data", {}).get(copy, {}).get("mass_kg")
@@ -286,6 +287,9 @@ class VTypeResolver:
             m = float(tget.getMass(copy))
             if not (m > 0 and np.isfinite(m)) or m == float(tget.getMass(vt)):
                 m = base
+            else:  # SUMO adds the type's loading, which the copy keeps (EnergyParams::getTotalMass)
+                info = self.files.get(vt)
+                m += info.loading_kg if info is not None else 0.0
         if m == float(ledger.veh_mass[i]):
             return False
         ledger.veh_mass[i] = m
