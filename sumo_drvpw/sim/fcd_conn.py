@@ -113,10 +113,13 @@ class _VType(_Domain):
         box = vt == "DEFAULT_CONTAINERTYPE" or vt in self.r.container_types
         return self.r.type_mass.get(vt, DEFAULT_CONTAINER_MASS_KG if box else DEFAULT_PERSON_MASS_KG)
 
-    def getIDCount(self):  # noqa: N802 (the vTypes the rows named so far: a vehicle's own copy
+    def getIDList(self):  # noqa: N802 (the vTypes the rows named so far: a vehicle's own copy
         seen = self.__dict__.setdefault("_seen", set())  # <type>@<id> adds one, as in SUMO)
         seen.update(self.r.types.values())
-        return len(seen)
+        return tuple(seen)
+
+    def getIDCount(self):  # noqa: N802
+        return len(self.getIDList())
 
 
 class _Calib(_Domain):

@@ -90,8 +90,9 @@ IMPOSSIBLE_DECEL_MPS2 = 1.2 * G
 
 #: every this many steps the running vehicles' vTypes are read again (a script's setType):
 #: a change books from then on (over traci, each read a round trip: 10× as many); vehicles
-#: on a calibrator's edge, where SUMO changes vTypes itself, are read every step, and all
-#: of them in a step where SUMO's vType count changed (a setMass's copy: sim/riders.OwnCopies)
+#: on a calibrator's edge, where SUMO changes vTypes itself, are read every step, and in a
+#: step where SUMO's vType count changed, those whose own copy it gained (a setMass's; all of
+#: them where it gained another vType: sim/riders.OwnCopies)
 TYPE_CHECK_STEPS = 25
 
 

@@ -19,6 +19,8 @@ own vType copy) is read from the step SUMO drives it: :class:`OwnCopies`.
 
 from __future__ import annotations
 
+import numpy as np
+
 
 class Riders:
     """The riders' mass of the vehicles of one run (``Stepper.riders``)."""
@@ -89,15 +91,16 @@ class OwnCopies:
     """Masses a script sets on running vehicles (``vehicle.setMass``; ``Stepper.own``):
     SUMO gives the vehicle its own copy of its vType, ``<type>@<id>``, and books the new
     mass from the next step. The copy adds one vType to SUMO's, so a changed vType count
-    (one call a step) has the loop read the running vehicles' vTypes in that step, not only
-    every ``TYPE_CHECK_STEPS``; a vehicle on its own copy has its mass read every step, as
+    (one call a step) has the loop read in that step the vTypes of the vehicles whose copy
+    SUMO's vType list gained (:meth:`_check_new`), not only every ``TYPE_CHECK_STEPS``; a vehicle on its own copy has its mass read every step, as
     a script may set it again without a new copy (:meth:`VTypeResolver.own_mass`). An FCD
-    replay answers the count from the vTypes its rows named (sim/fcd_conn.py)."""
+    replay answers the count and the list from the vTypes its rows named (sim/fcd_conn.py)."""
 
     def __init__(self, conn, is_replay: bool):
         vt = getattr(conn, "vehicletype", None)
         self.count = getattr(vt, "getIDCount", None)
         self.last: int | None = None
+        self.ids: set[str] | None = None  # SUMO's vType ids at the first step and each change of their count
         #: live: the vehicle's mass getter (a replay's copies carry none: told by the scenario)
         self.mass = None if is_replay or self.count is None else getattr(conn.vehicle, "getMass", None)
         #: vehicle id → (its copy, the copy's mass last read [kg])
@@ -113,7 +116,10 @@ class OwnCopies:
         if self.count is not None:
             n = int(self.count())
             if self.last is not None and n != self.last:  # a copy made (or a vType added, dropped)
-                st.check_types(kids, vidx)
+                self._check_new(st, kids, vidx)
+            elif self.last is None:  # (the list to tell a new copy by)
+                ids = getattr(st.conn.vehicletype, "getIDList", None)
+                self.ids = set(ids()) if ids is not None else None
             self.last = n
         ledger = st.ledger
         for vid, (copy, m) in list(self.on_copy.items()):
@@ -127,6 +133,31 @@ class OwnCopies:
                 own = getattr(st.resolve, "own_mass", None)  # (a VTypeResolver's)
                 if own is not None and own(ledger, i, ledger.veh_type[i], copy):
                     st.retyped += 1
+
+    def _check_new(self, st, kids, vidx) -> None:
+        """The vTypes of the vehicles read whose own copy SUMO's vType list gained; all of
+        theirs where it gained another vType (a script's ``vehicletype.copy``: a setType to it
+        may follow) or the connection lists none. A script that sets a vType attribute on
+        every departing vehicle (``setTau``, ``setShapeClass`` …) makes copies in most steps:
+        each read once, not every running vehicle in each such step (over traci a round
+        trip each)."""
+        ids = getattr(st.conn.vehicletype, "getIDList", None)
+        now = set(ids()) if ids is not None else None
+        before, self.ids = self.ids, now
+        if now is None or before is None:
+            st.check_types(kids, vidx)
+            return
+        at = {vid: j for j, vid in enumerate(kids)}
+        sel = []
+        for vt in now - before:
+            if "@" not in vt:
+                st.check_types(kids, vidx)
+                return
+            j = next((at[v] for k, c in enumerate(vt) if c == "@" and (v := vt[k + 1:]) in at), None)
+            if j is not None:  # (a copy of a vehicle not read in this step: read when it is)
+                sel.append(j)
+        if sel:
+            st.check_types([kids[j] for j in sel], np.asarray(vidx)[sel])
 
     def type_masses(self, st) -> None:
         """At the loop's vType checks: a script's ``vehicletype.setMass`` on a vType (not a
