@@ -276,3 +276,44 @@ def test_a_copy_made_reads_the_vtype_of_its_vehicle_only(tmp_path, monkeypatch):
     assert made > 150 and len(b) == len(a) > 150
     assert n1 <= n0 + made, (n0, n1, made)
     np.testing.assert_allclose(b.traction_total_j, a.traction_total_j, rtol=1e-12)
+
+
+def test_over_traci_the_copies_masses_come_with_the_step(tmp_path):
+    """A vehicle on its own copy has its mass read every step (a second setMass makes no new
+    copy); over traci that was a getMass round trip per such vehicle and step — with every
+    car given a copy at departure (setShapeClass, 600 s of a car a second: 64,033 calls, the
+    run 15.4 s for 6.4 s without the script). Now the step's context subscription carries
+    the mass: a getter only when a vehicle starts on a copy, the bookings the same."""
+    routes = ('<routes><vType id="car" vClass="passenger" mass="1500" sigma="0"/><route id="east" '
+              'edges="e01 e12 e23"/><flow id="f" type="car" route="east" begin="0" end="100" period="1" '
+              'departSpeed="max"/></routes>')
+    (tmp_path / "r.rou.xml").write_text(routes, encoding="utf-8")
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nbegin = 0\nend = 300\n'
+        'step_length = 1\nconnection = "traci"\noptions = ["--no-warnings", "true"]\n', encoding="utf-8")
+    sc = load_scenario(tmp_path / "s.toml")
+    conn = start_sumo(sc.sumo_args, connection="traci")
+    calls = [0]
+    try:
+        acc = Accountant(conn, scenario=sc, equations=[PHYS])
+        get = acc.stepper.own.mass
+
+        def counted(vid):
+            calls[0] += 1
+            return get(vid)
+        acc.stepper.own.mass = counted
+        for k in range(150):
+            conn.simulationStep()
+            acc.step()
+            for vid in conn.simulation.getDepartedIDList():
+                conn.vehicle.setShapeClass(vid, "passenger/sedan")
+            if k == 60:
+                conn.vehicle.setMass("f.20", 3000.0)
+                conn.vehicle.setMass("f.10", 2000.0)
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    v = res.vehicles.set_index("vehicle")
+    assert len(v) == 100 and v.mass_kg["f.20"] == 3000.0 and v.mass_kg["f.10"] == 2000.0
+    assert (v.mass_kg.drop(["f.10", "f.20"]) == 1500.0).all()
+    assert calls[0] <= 100, calls[0]  # one per copy, not per step

@@ -15,6 +15,9 @@ _VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE = 0x40, 0x72, 0x43
 _VAR_LANE_ID, _VAR_LANEPOSITION, _VAR_SLOPE = 0x51, 0x56, 0x36
 _TRACI_VARS = (_VAR_SPEED, _VAR_ACCEL, _VAR_ANGLE, _VAR_LANE_ID, _VAR_LANEPOSITION, _VAR_SLOPE)
 _CMD_GET_VEHICLE_VARIABLE = 0xa4
+#: the vehicle's mass, subscribed too: a vehicle on its own vType copy has it read every step
+#: (sim/riders.OwnCopies), which over traci was a round trip per such vehicle and step
+_VAR_MASS = 0xc8
 #: the context subscription's range [m]: the whole network around the simulation's "" (SUMO
 #: collects the vehicles on the lanes within it every step, so a vehicle a script removed is
 #: simply not among them; a subscription per vehicle made SUMO answer each of its variables
@@ -166,8 +169,16 @@ class Reader:
         """Through traci: the one context subscription, made at the first call."""
         if self.subs and not self.subscribed:
             self.conn.simulation.subscribeContext("", _CMD_GET_VEHICLE_VARIABLE, _EVERYWHERE_M,
-                                                  _TRACI_VARS)
+                                                  (*_TRACI_VARS, _VAR_MASS))
             self.subscribed = True
+
+    def mass_of(self, vid: str) -> float | None:
+        """SUMO's mass of vehicle ``vid`` this step [kg] from the subscription (traci), None
+        without one or where it does not hold the vehicle (then its getter)."""
+        if not self.subscribed:
+            return None
+        r = (self.conn.simulation.getContextSubscriptionResults("") or {}).get(vid)
+        return r.get(_VAR_MASS) if r else None
 
 
 #: a step's speed gain [m/s²] no vehicle reaches by driving (SUMO's vClass default

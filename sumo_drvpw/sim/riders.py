@@ -127,7 +127,8 @@ class OwnCopies:
             if i is None or ledger.veh_done[i] or f"{ledger.veh_type[i]}@{vid}" != copy:
                 del self.on_copy[vid]  # gone, or a new trip under its id
                 continue
-            now = float(self.mass(vid))
+            now = st.reader.mass_of(vid)  # (traci: the subscription's, no round trip)
+            now = float(self.mass(vid) if now is None else now)
             if now != m:
                 self.on_copy[vid] = (copy, now)
                 own = getattr(st.resolve, "own_mass", None)  # (a VTypeResolver's)
