@@ -146,3 +146,20 @@ def test_the_sumo_device_row_of_a_hybrid_bus_says_what_its_ratio_holds(tmp_path)
     assert "UBus_…_HEV_…" in hyb["note"] and "no full-hybrid car class" not in hyb["note"]
     assert not isinstance(dsl["note"], str) or "hybrid" not in dsl["note"]
     assert hyb["ratio"] < dsl["ratio"]
+
+
+def test_the_device_note_of_a_hybrid_chain_follows_the_vehicles_class():
+    """sumo_device.csv's note on a full hybrid's fuel chain: the bus note (SUMO books HBEFA's
+    hybrid bus) for buses, the car note (SUMO has no full-hybrid car class) for cars. It was
+    chosen by the chain's recuperation_round_trip, so a user's hybrid car chain declaring its
+    braking energy given back (docs/energy-chain.md) was told SUMO books a UBus_…_HEV_… class."""
+    from sumo_drvpw.sim.sumo_outputs import HYBRID_BUS_NOTE, HYBRID_NOTE, device_comparison
+
+    ch = load_equation(NAME).chain
+    dev = pd.DataFrame({"vehicle": ["b", "c"], "sumo_fuel_mg": [9e5, 3e5], "sumo_electricity_wh": [0.0, 0.0]})
+    cv = pd.DataFrame({"vehicle": ["b", "c"], "equation": ["hyb_bus", "hyb_car"], "fuel_l": [1.0, 0.3]})
+    v = pd.DataFrame({"vehicle": ["b", "c"], "equation": ["hyb_bus", "hyb_car"], "net_total_j": [1e7, 3e6],
+                      "vtype": ["hbus", "hcar"], "vclass": ["bus", "passenger"]})
+    rows = device_comparison(v, dev, cv, {"hyb_bus": ch, "hyb_car": ch}).set_index("equation")
+    assert rows.note["hyb_bus"] == HYBRID_BUS_NOTE
+    assert rows.note["hyb_car"] == HYBRID_NOTE

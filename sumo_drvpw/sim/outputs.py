@@ -482,7 +482,7 @@ class RunResult:
 
         if self.sumo_device is None:
             return device_comparison(None, None, None, {})
-        v = self._vehicles_all().to_pandas()[["vehicle", "equation", "net_total_j", "vtype"]]
+        v = self._vehicles_all().to_pandas()[["vehicle", "equation", "net_total_j", "vtype", "vclass"]]
         ch = getattr(self.ledger, "chain", None)
         chains = {} if ch is None else {ch.names[i]: ch.chains[i] for i in ch.active}
         return device_comparison(v, self.sumo_device, self.chain_vehicles(), chains, self.exported_vtypes,

@@ -347,7 +347,8 @@ HYBRID_NOTE = ("model difference: SUMO has no full-hybrid car class, so its emis
                "is off at rest and at light load, the battery driving and the braking energy recovered: "
                "the ratio holds a full hybrid's saving (the EPA lists' full hybrids burn 33-56 % less "
                "than their petrol twins in town, docs/epa-hybrid.md)")
-#: and a hybrid bus's row (a chain that declares its braking energy given back): SUMO's class is a hybrid's
+#: and a hybrid bus's row (its vehicles of these vClasses): SUMO's class is a hybrid's
+HYBRID_BUS_VCLASSES = ("bus", "coach")
 HYBRID_BUS_NOTE = ("model difference: SUMO's emissions device books the vType's emissionClass — for a hybrid "
                    "bus HBEFA 4's UBus_…_HEV_…, a function of speed and acceleration that burns about as much as "
                    "its diesel twin in town "
@@ -451,7 +452,8 @@ def device_comparison(v, dev, cv, chains: dict, exported: dict | None = None, ma
             ours, sumo = g.fuel_l.sum(), g.sumo_fuel_mg.sum() / 1e6 / dens
             q = f"fuel L (chain; SUMO's fuel mass at {dens:g} kg/L)"
             if c.charge_sustaining and c.engine_off_below_w > 0:  # a full hybrid's (sim/vtypes.is_hybrid_chain)
-                note = HYBRID_BUS_NOTE if c.recuperation_round_trip else HYBRID_NOTE
+                bus = "vclass" in g and len(g) and g.vclass.isin(HYBRID_BUS_VCLASSES).all()
+                note = HYBRID_BUS_NOTE if bus else HYBRID_NOTE  # (what SUMO books: its class's)
         else:
             g = g[g.sumo_electricity_wh.abs() > 0]
             sumo = g.sumo_electricity_wh.sum() / 1e3
