@@ -61,14 +61,16 @@ def test_idle_taxis_parked_past_their_stops_planned_end_book_as_live(tmp_path):
 
 
 def test_taxi_device_as_sumo_equips_it():
-    """SUMO's order: the vehicle's (or flow's) param, its vType's, then the options."""
+    """SUMO's order: the option device.taxi.explicit, then the vehicle's (or flow's) param,
+    its vType's, then device.taxi.probability (an explicit vehicle whose param says false has
+    the device: test_an_explicit_taxi_has_the_device_whatever_its_params_say)."""
     opts = {"device.taxi.explicit": "a,b", "device.taxi.probability": None}
     t = TaxiDevices(opts.get)
     for el, tag in ((_el("vType", "yes", "1"), "vType"), (_el("vType", "no", "0"), "vType"),
                     (_el("vehicle", "v1", None, "yes"), "vehicle"), (_el("vehicle", "a", "false", "yes"), "vehicle"),
                     (_el("flow", "f", None, "no"), "flow"), (_el("vehicle", "b", None, "no"), "vehicle")):
         t.read(el, tag)
-    assert t.has("v1", "v1") and not t.has("a", "a") and not t.has("f.0", "f") and not t.has("b", "b")
+    assert t.has("v1", "v1") and t.has("a", "a") and not t.has("f.0", "f") and t.has("b", "b")
     assert not t.has("c", "c") and t.has("b", "unknown")  # declared nowhere: the option's list
     assert TaxiDevices({"device.taxi.probability": "0.5"}.get).has("c", "c")
     assert not TaxiDevices({"device.taxi.probability": "0"}.get).has("c", "c")
@@ -84,3 +86,38 @@ def _el(tag, key, taxi, vtype=None):
     if taxi is not None:
         ET.SubElement(el, "param", {"key": "has.taxi.device", "value": taxi})
     return el
+
+
+def test_an_explicit_taxi_has_the_device_whatever_its_params_say(tmp_path):
+    """SUMO 1.28 equips a vehicle --device.taxi.explicit names even where its own param or
+    its vType's says has.taxi.device false; TaxiDevices took the param first, so such a
+    taxi's stops were replayed as planned (its idle wait booked idling, not parked)."""
+    import xml.etree.ElementTree as ET
+
+    import traci  # (its own SUMO process: libsumo keeps a device's explicit ids of an earlier run)
+
+    net = build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="900" y="0"/></nodes>',
+                    '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/></edges>')
+    no = '<param key="has.taxi.device" value="false"/>'
+    routes = (f'<routes><vType id="off" vClass="passenger">{no}</vType><vType id="p" vClass="passenger"/>'
+              f'<vehicle id="a" type="p" depart="0"><route edges="e"/>{no}</vehicle>'
+              '<vehicle id="b" type="off" depart="0"><route edges="e"/></vehicle>'
+              f'<vehicle id="c" type="p" depart="0"><route edges="e"/>{no}</vehicle>'
+              '<vehicle id="d" type="off" depart="0"><route edges="e"/></vehicle></routes>')
+    (tmp_path / "r.rou.xml").write_text(routes, encoding="utf-8")
+    opts = {"device.taxi.explicit": "a,b"}
+    import sumolib
+
+    traci.start([sumolib.checkBinary("sumo"), "-n", str(net), "-r", str(tmp_path / "r.rou.xml"), "--no-warnings", "true",
+                 "--device.taxi.explicit", opts["device.taxi.explicit"]], label="taxi_explicit")
+    conn = traci.getConnection("taxi_explicit")
+    try:
+        conn.simulationStep()
+        sumo = {v: conn.vehicle.getParameter(v, "has.taxi.device") == "true" for v in "abcd"}
+    finally:
+        conn.close()
+    t = TaxiDevices(opts.get)
+    for el in ET.fromstring(routes):
+        t.read(el, el.tag)
+    assert sumo == {"a": True, "b": True, "c": False, "d": False}
+    assert {v: t.has(v, v) for v in "abcd"} == sumo

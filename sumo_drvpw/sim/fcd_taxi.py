@@ -1,10 +1,11 @@
 """Which vehicles of an FCD replay have SUMO's taxi device, whose declared stops end when
 the taxi is dispatched, not as planned (:mod:`sumo_drvpw.sim.fcd_stops`).
 
-SUMO equips a vehicle with the device by its own param ``has.taxi.device`` (a flow's for
-its vehicles), else its vType's, else the options ``device.taxi.explicit`` (vehicle ids) or
-``device.taxi.probability`` (> 0: which of them the FCD cannot tell, so any may be one)
-(``MSDevice::equippedByDefaultAssignmentOptions``). An idle taxi — no customer, the
+SUMO equips a vehicle with the device when the option ``device.taxi.explicit`` names it
+(whatever its params say), else by its own param ``has.taxi.device`` (a flow's for its
+vehicles), else its vType's, else by ``device.taxi.probability`` (> 0: which of them the FCD
+cannot tell, so any may be one) (``MSDevice::equippedByDefaultAssignmentOptions``; probed
+with SUMO 1.28: an explicit vehicle whose param or vType's param says false has the device). An idle taxi — no customer, the
 default ``device.taxi.idle-algorithm`` stop — turns its next stop into a triggered one
 (``MSIdling_Stop::idle``: ``triggered``, or ``containerTriggered`` for a vType carrying
 containers) and waits there, parked, until it is dispatched: past the stop's planned end
@@ -57,5 +58,7 @@ class TaxiDevices:
         flow) waits at its stops until dispatched."""
         if self.circling:
             return False
+        if vid in self.explicit:
+            return True
         given = self.param.get(declared_by, self.param.get(self.types.get(declared_by, "")))
-        return given if given is not None else (self.all or vid in self.explicit)
+        return given if given is not None else self.all
