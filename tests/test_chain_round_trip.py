@@ -52,3 +52,19 @@ def test_a_calibration_refuses_a_declared_round_trip_it_would_drop():
         declared_fuel_cut(SimpleNamespace(chain=chain_from_dict(doc, "bus.toml")))
     assert "bus.toml" in str(e.value)
 
+
+
+def test_the_closed_loop_s_slope_holds_the_braking_credit():
+    """fit/chain_linear.gains (diagnose and the closed loop on a fuel target linearise the
+    chain with it) gave a fuel chain no slope where it brakes, so a hybrid that gives its
+    braking energy back read as if braking cost nothing either way: the chain's own change
+    per W of driving power there is η_rt/(η_t·η_m) (0.7/0.45 here), up to the motor's limit."""
+    from sumo_drvpw.fit.chain_linear import gains
+
+    ch = chain_from_dict({**DOC, "traction_efficiency": 0.85, "aux_power_w": 2000.0})
+    p = np.array([-80000.0, -30000.0, -100.0, 20000.0, 60000.0])
+    v = np.full(p.size, 8.0)
+    gw, _ = gains(ch, p, v)
+    num = (ch.evaluate(p + 1.0, v)["power_w"] - ch.evaluate(p - 1.0, v)["power_w"]) / 2.0
+    np.testing.assert_allclose(gw, num, rtol=1e-9)
+    assert gw[1] == pytest.approx(0.7 / 0.85 / 0.45) and gw[0] == 0.0  # beyond the 50-kW limit: none

@@ -13,7 +13,8 @@ Linearisation at the declared coefficients (P = the declared road load's driving
                       = η_r(v, P)    where −P_lim ≤ P ≤ 0
                       = 0            where P < −P_lim (friction brakes)
               g_aux   = 1
-    fuel:     g_wheel = on·[P > 0]/(η_t·η_m),   g_aux = on/η_m   (on: engine state)
+    fuel:     g_wheel = (on·[P > 0] + η_rt·[−P_lim < P < 0])/(η_t·η_m),   g_aux = on/η_m
+              (on: engine state; η_rt: a hybrid's recuperation_round_trip, else 0)
 
 A change δP of driving power changes the target by g_wheel·δP; an auxiliary load L by
 g_aux·L. The declared chain's own prediction is the baseline (nothing refitted: the
@@ -131,8 +132,12 @@ def gains(chain: EnergyChain, p_w, v_mps, signals=None) -> tuple[np.ndarray, np.
             chain.motor.battery(p, v, signals, chain.auxiliary(p.size, signals) + da)["power_w"])
         return (f(1.0, 0) - f(-1.0, 0)) / 2.0, (f(0.0, 1.0) - f(0.0, -1.0)) / 2.0
     if chain.predicts == "fuel":
-        paid = chain.paid(p, v).astype(float) * chain.running_factor(p.size, signals)
-        gw = paid * (p > 0) / (_eff(chain.traction_efficiency, v, p) * chain.marginal_efficiency)
+        rf = chain.running_factor(p.size, signals)
+        paid = chain.paid(p, v).astype(float) * rf
+        # a hybrid's braking energy given back (recuperation_round_trip): η_rt up to P_lim
+        lim = np.inf if chain.recuperation_limit_w is None else chain.recuperation_limit_w
+        back = chain.recuperation_round_trip * rf * ((p < 0) & (p > -lim))
+        gw = (paid * (p > 0) + back) / (_eff(chain.traction_efficiency, v, p) * chain.marginal_efficiency)
         return gw, paid / chain.marginal_efficiency
     lim = np.inf if chain.recuperation_limit_w is None else chain.recuperation_limit_w
     gw = np.where(p > 0, 1.0 / _eff(chain.traction_efficiency, v, p),
