@@ -540,6 +540,16 @@ def _(d):
 
 
 _map_case("decimal equals separator", "[options]\ndecimal = \",\"\n" + MAP_OK, ("decimal",))
+# several source labels per column (also = [...], several tables of one name: 832770c)
+_map_case("also not a list", MAP_OK + 'also = "w"\n', ("columns.v.also", "'w'"))
+_map_case("also lists a label with a table", MAP_OK + 'also = ["t"]\n', ("columns.v.also", "'t'", "table of its own"))
+_map_case("first_wins on a column of one label", MAP_OK + "first_wins = true\n", ("columns.v.first_wins",))
+_map_case("two labels of a column in one file", MAP_OK + 'also = ["w"]\n', ("src.csv", "'v'", "'w'", "first_wins"),
+          src="t,v,w\n" + "".join(f"{i / 8},{20 + i % 7},{20 + i % 7}\n" for i in range(80)))
+# was 'only one column … wrong sep?': the skip_rows hint looked for each column's first label only
+_map_case("other logger's labels below a title line", MAP_OK.replace('unit = "s"', 'unit = "s"\nalso = ["Zeit"]')
+          + 'also = ["w"]\n', ("src.csv", "'Zeit' is on line 2", "skip_rows = 1"),
+          src="Logger B\nZeit,w\n" + "".join(f"{i / 8},{20 + i % 7}\n" for i in range(80)))
 
 
 # --- output paths -------------------------------------------------------------------

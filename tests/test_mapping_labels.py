@@ -168,3 +168,18 @@ def test_mdf_channels_of_two_loggers_through_one_mapping(tmp_path):
     with pytest.raises(UserError, match=r"c.mf4: no channel 'VehSpd' named in .*\(nor its other labels "
                                         r"'WheelBasedVehicleSpeed'\)"):
         read("columns", tmp_path / "c.mf4", columns=m)
+
+
+def test_a_missing_column_s_hints_look_at_all_its_labels(tmp_path):
+    """A file of the second logger whose header sits below a title line, or whose label differs
+    from the mapped one by case: the hint names the line and the near label as for a plain
+    mapping of that logger's labels. Before, only the table's own label was looked for: 'only
+    one column … wrong sep?' and no hint at all."""
+    rows = "".join(f"{i},{v:g}\n" for i, v in enumerate(KMH))
+    m = write(tmp_path, "map.toml", ALSO)
+    titled = write(tmp_path, "titled.csv", "Logger B v2.1\nZeit,GPS Speed [km/h]\n" + rows)
+    with pytest.raises(UserError, match=r"'Zeit' is on line 2.*skip_rows = 1"):
+        read("columns", titled, columns=m)
+    near = write(tmp_path, "near.csv", "Zeit,gps speed [km/h]\n" + rows)
+    with pytest.raises(UserError, match=r"missing column 'Speed \(km/h\)'.*the file has 'gps speed \[km/h\]'"):
+        read("columns", near, columns=m)

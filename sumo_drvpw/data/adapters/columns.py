@@ -384,6 +384,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     raw.columns = [str(c).strip() for c in raw.columns]
     rep = new_report(path, path.stem, len(raw))
     labels = list(raw.columns)
+    whole = m  # (every label of a column: where a missing one's hints look)
     m, notes, left_out = candidate_labels.for_file(m, labels.__contains__, path)  # each column's label here
     rep["notes"] += notes
     twice = [c for c in m["columns"] if labels.count(c) > 1]
@@ -394,7 +395,8 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
         if label not in raw.columns:
             hint = (f" (only one column '{raw.columns[0][:40]}': wrong sep {m['sep']!r}?)"
                     if raw.shape[1] == 1 else "")
-            hint = _skip_hint(path, m) or _no_header_hint(raw) or _close_label(label, labels, m["encoding"]) or hint
+            near = (_close_label(x, labels, m["encoding"]) for x in candidate_labels.all_labels(whole, label))
+            hint = _skip_hint(path, whole) or _no_header_hint(raw) or next((h for h in near if h), "") or hint
             raise UserError(f"{path}: missing column '{label}' named in {m['path']}"
                             f"{candidate_labels.nor_others(m, label)}{hint}")
     na = tuple(m["na_values"])

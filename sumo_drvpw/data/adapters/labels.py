@@ -110,6 +110,12 @@ def for_file(m: dict, present, path) -> tuple[dict, list[str], set[str]]:
         notes, left
 
 
+def all_labels(m: dict, label: str) -> list[str]:
+    """A mapped label and its column's other labels, in the mapping's order."""
+    e = m["columns"].get(label)
+    return list(m.get("candidates", {}).get(e["name"], [label])) if e else [label]
+
+
 def nor_others(m: dict, label: str) -> str:
     """' (nor its other labels 'B', 'C')' for a mapped label whose column has other labels,
     else '' (the end of a 'missing column' error)."""
