@@ -984,6 +984,20 @@ def _(d):  # was booked: a 1e9-kg motorcycle's 54,357 L over 0.5 km (no upper bo
     return _fcd_replay(d, "HBEFA4/RT_le7.5t_Euro-VI_A-C", ' mass="1e9"')
 
 
+@case("options", "fcd drone vType mass 1e9 kg", ("t.rou.xml", "tk", "beyond any drone's"))
+def _(d):  # was accepted (ba80741 exempted drones, as trains and ships, from the road's mass bound)
+    argv = _fcd_replay(d, "HBEFA4/RT_le7.5t_Euro-VI_A-C", ' mass="1e9"')
+    (d / "t.rou.xml").write_text((d / "t.rou.xml").read_text().replace('vClass="truck"', 'vClass="drone"'))
+    return argv
+
+
+@case("options", "fcd rail vType mass 1e30 kg", ("t.rou.xml", "tk", "beyond any rail's"))
+def _(d):  # was accepted: no bound at all off the road
+    argv = _fcd_replay(d, "HBEFA4/RT_le7.5t_Euro-VI_A-C", ' mass="1e30"')
+    (d / "t.rou.xml").write_text((d / "t.rou.xml").read_text().replace('vClass="truck"', 'vClass="rail"'))
+    return argv
+
+
 @case("options", "calibrate --load of a power in kW", ("--load heater_kw", "kW"))
 def _(d):
     df = base_log()

@@ -33,3 +33,25 @@ def test_a_road_vehicle_beyond_any_road_vehicle_s_mass_is_refused(tmp_path, vtyp
 def test_a_road_train_and_a_heavy_train_pass(tmp_path, vtype, mass):
     assert read_vtypes([_file(tmp_path, vtype)])["m"].mass_kg == mass
     assert mass <= ROAD_MASS_MAX_KG or "rail" in vtype
+
+
+@pytest.mark.parametrize("vtype", [
+    '<vType id="m" vClass="drone" mass="1e9"/>',      # exempt from the road bound since ba80741
+    '<vType id="m" vClass="aircraft" mass="5e6"/>',   # 5,000 t: no aircraft (the heaviest some 640 t)
+    '<vType id="m" vClass="rail" mass="1e30"/>',      # was booked: no bound at all off the road
+    '<vType id="m" vClass="tram" mass="40000"><param key="loading" value="1e9"/></vType>',
+    '<vType id="m" vClass="ship" mass="1e12"/>',
+])
+def test_a_vehicle_off_the_road_beyond_any_of_its_kind_is_refused(tmp_path, vtype):
+    p = _file(tmp_path, vtype)
+    with pytest.raises(UserError, match=rf"{p}: vType 'm': mass .* beyond any (drone|aircraft|rail|tram|ship)'s"):
+        read_vtypes([p])
+
+
+@pytest.mark.parametrize("vtype, mass", [
+    ('<vType id="m" vClass="rail" mass="1e8"/>', 1e8),        # the heaviest trains run, some 100,000 t
+    ('<vType id="m" vClass="ship" mass="4e8"/>', 4e8),        # a very large crude carrier, laden
+    ('<vType id="m" vClass="aircraft" mass="6.4e5"/>', 6.4e5),  # an An-225 at take-off
+])
+def test_the_heaviest_trains_ships_and_aircraft_pass(tmp_path, vtype, mass):
+    assert read_vtypes([_file(tmp_path, vtype)])["m"].mass_kg == mass

@@ -86,6 +86,9 @@ NON_ROAD_CLASSES = {
     "waterway": frozenset({"ship"}),
     "air": frozenset({"aircraft", "drone"}),
 }
+#: the heaviest vType mass [kg] of each class's vClasses (sim/vtypes.py refuses more: a typo): the
+#: heaviest trains run some 100,000 t, the largest ships some 650,000 t displaced, aircraft 640 t
+NON_ROAD_MASS_MAX_KG = {"rail": 2.0e8, "waterway": 1.0e9, "air": 1.0e6}
 #: vClasses that move on foot: a footway beside a tram line does not make it a road
 ON_FOOT_VCLASSES = frozenset({"pedestrian", "wheelchair", "container"})
 

@@ -20,7 +20,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.model.energy_params import ENERGY_PARAMS
 from sumo_drvpw.model.mmpevem import MMPEVEM_PARAMS
-from sumo_drvpw.sim.scenario import NON_ROAD_CLASSES
+from sumo_drvpw.sim.scenario import NON_ROAD_CLASSES, NON_ROAD_MASS_MAX_KG
 from sumo_drvpw.sim.shutoff import SHUT_OFF_PARAMS
 from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
@@ -306,8 +306,7 @@ def _capacity(val: str | None) -> int | None:
     return x if x is not None and x >= 0 else None
 
 
-#: the heaviest mass [kg] of a road vClass's vType (road trains: some 200 t); no rail, ship or aircraft's
-ROAD_MASS_MAX_KG = 1.0e6
+ROAD_MASS_MAX_KG = 1.0e6  #: the heaviest mass [kg] of a road vClass's vType (road trains: some 200 t)
 NOT_ROAD_VCLASSES = frozenset().union(*NON_ROAD_CLASSES.values())  # the vClasses of no road edge
 
 
@@ -472,10 +471,11 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                 mass = _mass(where, "drvpw.mass", params.get("drvpw.mass"))
                 if mass is None and sumo_mass is not None:
                     mass = sumo_mass + loading
-                if mass is not None and mass > ROAD_MASS_MAX_KG and el.attrib.get("vClass") not in NOT_ROAD_VCLASSES:
-                    raise UserError(f"{where}: mass {mass:g} kg (mass, loading or drvpw.mass) is beyond any road "
-                                    f"vehicle's (at most {ROAD_MASS_MAX_KG:,.0f} kg: a road train's few hundred "
-                                    "tonnes fit; a typo?)")
+                group = next((g for g, vcs in NON_ROAD_CLASSES.items() if el.attrib.get("vClass") in vcs), None)
+                if mass is not None and mass > (cap := NON_ROAD_MASS_MAX_KG.get(group, ROAD_MASS_MAX_KG)):
+                    raise UserError(f"{where}: mass {mass:g} kg (mass, loading or drvpw.mass) is beyond any " + (
+                        f"{el.attrib['vClass']}'s (at most {cap:,.0f} kg" if group else
+                        f"road vehicle's (at most {cap:,.0f} kg: a road train's few hundred tonnes fit") + "; a typo?)")
                 out[vid] = VTypeInfo(vid, mass, params.get("drvpw.equation") or None,
                                      str(path), el.attrib.get("vClass"), loading,
                                      el.attrib.get("emissionClass") or None,
