@@ -546,6 +546,11 @@ _map_case("also lists a label with a table", MAP_OK + 'also = ["t"]\n', ("column
 _map_case("first_wins on a column of one label", MAP_OK + "first_wins = true\n", ("columns.v.first_wins",))
 _map_case("two labels of a column in one file", MAP_OK + 'also = ["w"]\n', ("src.csv", "'v'", "'w'", "first_wins"),
           src="t,v,w\n" + "".join(f"{i / 8},{20 + i % 7},{20 + i % 7}\n" for i in range(80)))
+# were accepted: pandas reads a label written twice as 'v' and 'v.1', the first read as the speed, the other kept
+_map_case("mapped label written twice", MAP_OK, ("src.csv", "2 columns are labelled 'v'"),
+          src="t,v,v\n" + "".join(f"{i / 8},{20 + i % 7},{30 + i % 7}\n" for i in range(80)))
+_map_case("other logger's label written twice", MAP_OK + 'also = ["w"]\n', ("src.csv", "2 columns are labelled 'w'"),
+          src="t,w,w\n" + "".join(f"{i / 8},{20 + i % 7},{30 + i % 7}\n" for i in range(80)))
 # was 'only one column … wrong sep?': the skip_rows hint looked for each column's first label only
 _map_case("other logger's labels below a title line", MAP_OK.replace('unit = "s"', 'unit = "s"\nalso = ["Zeit"]')
           + 'also = ["w"]\n', ("src.csv", "'Zeit' is on line 2", "skip_rows = 1"),

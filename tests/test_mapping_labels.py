@@ -4,6 +4,7 @@ or several tables of one name), the first a file holds read; two in one file ref
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -183,3 +184,32 @@ def test_a_missing_column_s_hints_look_at_all_its_labels(tmp_path):
     near = write(tmp_path, "near.csv", "Zeit,gps speed [km/h]\n" + rows)
     with pytest.raises(UserError, match=r"missing column 'Speed \(km/h\)'.*the file has 'gps speed \[km/h\]'"):
         read("columns", near, columns=m)
+
+
+@pytest.mark.parametrize("header, mapping", [
+    ("t,v,v", BASE + '[columns.v]\nname = "speed_mps"\nunit = "km/h"\n'),                    # a plain mapping
+    ("Zeit,w,w", ALSO),                                                                       # another logger's label
+    ("Zeit,GPS Speed [km/h],GPS Speed [km/h]", ALSO),
+])
+def test_a_mapped_label_written_twice_exactly_is_refused(tmp_path, capsys, header, mapping):
+    """Two columns labelled alike, character for character: pandas reads the second as 'v.1',
+    so the check for two columns of one label (which caught them alike but for a space) did
+    not see them; the first was read as the speed and the second kept as an extra 'v_1'."""
+    ALSO_W = ALSO.replace('"v_kmh"', '"w"')
+    src = write(tmp_path, "x.csv", header + "\n" + "".join(f"{i},{v:g},{v + 5:g}\n" for i, v in enumerate(KMH)))
+    m = write(tmp_path, "map.toml", ALSO_W if mapping is ALSO else mapping)
+    label = header.split(",")[1]
+    with pytest.raises(UserError, match=rf"x.csv: 2 columns are labelled '{re.escape(label)}'.*cannot tell them apart"):
+        read("columns", src, columns=m)
+    out = tmp_path / "out.parquet"
+    assert cli_main(["import", "columns", str(src), "--columns", str(m), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err and not out.exists()
+
+
+def test_a_label_ending_in_dot_one_is_its_own_column(tmp_path):
+    """A file whose labels are 'v' and 'v.1' (two labels, not one written twice) reads as before."""
+    src = write(tmp_path, "x.csv", "t,v,v.1\n" + "".join(f"{i},{v:g},{v + 5:g}\n" for i, v in enumerate(KMH)))
+    df, _ = read("columns", src, columns=write(tmp_path, "map.toml", BASE + '[columns.v]\nname = "speed_mps"\nunit = "km/h"\n'))
+    np.testing.assert_allclose(df["speed_mps"], KMH / 3.6, rtol=1e-12)
+    assert "v_1" in df.columns

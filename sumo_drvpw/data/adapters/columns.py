@@ -387,9 +387,12 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     whole = m  # (every label of a column: where a missing one's hints look)
     m, notes, left_out = candidate_labels.for_file(m, labels.__contains__, path)  # each column's label here
     rep["notes"] += notes
-    twice = [c for c in m["columns"] if labels.count(c) > 1]
+    # (pandas reads a label written twice as 'v' and 'v.1': the header line itself is counted then)
+    cells = _header_cells(path, m) if any(c.rpartition(".")[2].isdigit() for c in labels) else []
+    times = {c: max(labels.count(c), cells.count(c)) for c in m["columns"]}
+    twice = [c for c in m["columns"] if times[c] > 1]
     if twice:  # (the i3 logs label two columns 'Temperature Vent right [°C]', one with a space)
-        raise UserError(f"{path}: {labels.count(twice[0])} columns are labelled '{twice[0]}' (spaces around "
+        raise UserError(f"{path}: {times[twice[0]]} columns are labelled '{twice[0]}' (spaces around "
                         f"labels are not read), and {m['path']} maps that label: it cannot tell them apart")
     for label in m["columns"]:
         if label not in raw.columns:
@@ -457,6 +460,19 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     df = clean_time_and_speed(df, path, rep)
     df.insert(0, "trip_id", path.stem)
     return df.reset_index(drop=True), rep
+
+
+def _header_cells(path: Path, m: dict) -> list[str]:
+    """A CSV's header line as written, each label stripped ([] for Parquet, or where it cannot
+    be read so: reading the table says why)."""
+    if path.suffix.lower() in (".parquet", ".pq"):
+        return []
+    try:
+        row = pd.read_csv(path, sep=m["sep"], encoding=m["encoding"], header=None, nrows=1, dtype=str,
+                          keep_default_na=False, na_filter=False, skiprows=m.get("skip_rows", 0) or None)
+    except (ValueError, OSError, pd.errors.ParserError, pd.errors.EmptyDataError):
+        return []
+    return [str(c).strip().lstrip("\ufeff").strip() for c in row.iloc[0]] if len(row) else []
 
 
 def _valid_flag(raw: pd.DataFrame, flag: str, path: Path, label: str, m: dict, na) -> pd.Series:
