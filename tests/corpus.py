@@ -935,6 +935,14 @@ def _(d):
     return ["run", str(d / "s.toml"), "--end", "5", "--out", str(d / "run")]
 
 
+@case("options", "scenario road class a built-in one but for case", ("road_class.edges.c00c10", "'Rail'", "'rail'"))
+def _(d):  # was accepted: a class 'Rail' booked apart from the network's 'rail' edges
+    cfg = Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg"
+    (d / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{cfg.as_posix()}"\n'
+                              '[road_class]\nedges = { c00c10 = "Rail" }\n', encoding="utf-8")
+    return ["run", str(d / "s.toml"), "--end", "5", "--out", str(d / "run")]
+
+
 @case("options", "scenario names a missing equation file", ("mine/bus.toml",))
 def _(d):
     cfg = Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg"

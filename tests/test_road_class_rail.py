@@ -112,3 +112,25 @@ def test_non_road_class_of_an_edges_permissions(allowed, want):
     rule = RoadClassRule()
     assert rule.classify("e", "", 30.0, allowed) == (want or "highway")
     assert rule.classify("e", "", 10.0, allowed) == (want or "city")
+
+
+@pytest.mark.parametrize("table, value", [
+    ("edges", "city "), ("edges", "Rail"), ("types", " highway"), ("types", "WATERWAY"), ("edges", "Air"),
+])
+def test_a_class_that_is_a_built_in_one_but_for_case_or_spaces_is_refused(tram_net, table, value):
+    """`edges = { t2 = "Rail" }` put t2 in a class 'Rail' beside the 'rail' of the other tram
+    edges (and 'city ' beside 'city'): one class split in two in every output by class, exit 0."""
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    key = "t2" if table == "edges" else "highway.trunk"
+    text = SCENARIO.replace("[outputs]", f'[road_class]\n{table} = {{ "{key}" = "{value}" }}\n[outputs]')
+    (tram_net / "odd.toml").write_text(text, encoding="utf-8")
+    with pytest.raises(UserError, match=rf"odd.toml: 'road_class.{table}.{key}' .*'{value.strip().lower()}'"):
+        load_scenario(tram_net / "odd.toml")
+    (tram_net / "odd.toml").write_text(text.replace(value, "tramway "), encoding="utf-8")  # a class of its own, spaced
+    with pytest.raises(UserError, match=rf"odd.toml: 'road_class.{table}.{key}' 'tramway ' has spaces"):
+        load_scenario(tram_net / "odd.toml")
+    ok = SCENARIO.replace("[outputs]", f'[road_class]\n{table} = {{ "{key}" = "tramway" }}\n[outputs]')
+    (tram_net / "ok.toml").write_text(ok, encoding="utf-8")
+    assert "tramway" in load_scenario(tram_net / "ok.toml").road_class.classes

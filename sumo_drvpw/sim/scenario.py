@@ -489,8 +489,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                                    where, "road_class.highway_min_speed_kmh", True) / 3.6,
         highway_types=tuple(_strlist(rc.get("highway_types", list(DEFAULT_HIGHWAY_TYPES)),
                                      where, "road_class.highway_types", '["highway.motorway"]')),
-        types=_strmap(rc.get("types", {}), where, "road_class.types"),
-        edges=_strmap(rc.get("edges", {}), where, "road_class.edges"))
+        types=_strmap(rc.get("types", {}), where, "road_class.types", ("city", "highway", *NON_ROAD_CLASSES)),
+        edges=_strmap(rc.get("edges", {}), where, "road_class.edges", ("city", "highway", *NON_ROAD_CLASSES)))
     sl = doc.get("slope", {})
     out = dict(doc.get("outputs", {}))
     for k in ("trace", "edgedata", "figures", "progress", "difference", "period", "sumo_device"):

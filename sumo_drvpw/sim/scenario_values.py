@@ -96,14 +96,23 @@ def _strlist(v, where: str, key: str, example: str = '["..."]') -> list[str]:
     return list(v)
 
 
-def _strmap(v, where: str, key: str) -> dict[str, str]:
-    """A TOML table of name = road class (a non-empty string)."""
+def _strmap(v, where: str, key: str, builtin=()) -> dict[str, str]:
+    """A TOML table of name = road class (a non-empty string); a class that is one of
+    ``builtin`` but for case or surrounding spaces ('Rail', 'city '), which would split that
+    class in two, is refused."""
     if not isinstance(v, dict):
         raise UserError(f"{where}: '{key}' must be a table of name = road class, e.g. "
                         f'{{ "highway.primary" = "arterial" }}, got {v!r}')
     for k, c in v.items():
         if not isinstance(c, str) or not c.strip():
             raise UserError(f"{where}: '{key}.{k}' must be a road class name (a string), got {c!r}")
+        same = next((b for b in builtin if b == c.strip().lower() and b != c), None)
+        if same is None and c != c.strip():
+            raise UserError(f"{where}: '{key}.{k}' {c!r} has spaces around the road class name, and would "
+                            f"book apart from '{c.strip()}': write '{c.strip()}'")
+        if same is not None:
+            raise UserError(f"{where}: '{key}.{k}' {c!r} is the road class '{same}' but for case or spaces, "
+                            f"and would book apart from it: write '{same}' (or a name of its own)")
     return {str(k): c for k, c in v.items()}
 
 
