@@ -213,3 +213,16 @@ def test_a_label_ending_in_dot_one_is_its_own_column(tmp_path):
     df, _ = read("columns", src, columns=write(tmp_path, "map.toml", BASE + '[columns.v]\nname = "speed_mps"\nunit = "km/h"\n'))
     np.testing.assert_allclose(df["speed_mps"], KMH / 3.6, rtol=1e-12)
     assert "v_1" in df.columns
+
+
+def test_a_missing_column_of_many_labels_names_a_few(tmp_path):
+    """A column with many labels (a fleet's loggers): the 'missing column' line names the first
+    few of its other labels and how many more, not all (5,000 labels: a 44-kB line before)."""
+    also = ", ".join(f'"speed_{i}"' for i in range(5000))
+    m = write(tmp_path, "map.toml", BASE + f'[columns.v]\nname = "speed_mps"\nunit = "km/h"\nalso = [{also}]\n')
+    src = csv(tmp_path, "x.csv", "t", "Tempo", KMH)
+    with pytest.raises(UserError) as e:
+        read("columns", src, columns=m)
+    msg = str(e.value)
+    assert "(nor its other labels 'speed_0', 'speed_1', 'speed_2', 'speed_3', 'speed_4' or 4,995 more)" in msg
+    assert len(msg) < 500

@@ -117,8 +117,9 @@ def all_labels(m: dict, label: str) -> list[str]:
 
 
 def nor_others(m: dict, label: str) -> str:
-    """' (nor its other labels 'B', 'C')' for a mapped label whose column has other labels,
-    else '' (the end of a 'missing column' error)."""
+    """' (nor its other labels 'B', 'C')' for a mapped label whose column has other labels (the
+    first five, and how many more), else '' (the end of a 'missing column' error)."""
     e = m["columns"].get(label)
     others = [x for x in m.get("candidates", {}).get(e["name"], ()) if x != label] if e else []
-    return f" (nor its other labels {', '.join(repr(x) for x in others)})" if others else ""
+    more = f" or {len(others) - 5:,} more" if len(others) > 5 else ""  # (a fleet's loggers: one line still)
+    return f" (nor its other labels {', '.join(repr(x) for x in others[:5])}{more})" if others else ""
