@@ -344,3 +344,33 @@ def test_the_sketch_maps_a_motor_power_and_names_units_it_does_not_know(tmp_path
     assert '[columns."Motor Pwr(w)"]\nname = "power_w"' in sk, sk
     assert "Aux Pwr(100w)\"]" not in sk and "Charge Power" not in sk.split("# units")[0]
     assert "units not recognised" in sk and "Aux Pwr(100w) [100w]" in sk and "scale = 100" in sk
+
+
+def test_the_sketch_offers_an_abbreviated_elevation_and_no_traction_only_power(tmp_path, capsys):
+    """LeafSpy's CSV (and other apps') label the elevation 'Elv' or 'Alt' without a unit and
+    log a 'Motor Pwr(w)' that never goes below 0 (traction only). The sketch offered no
+    elevation and mapped the never-negative power as power_w, which no driving-power
+    equation fits. Now such an elevation is offered in a comment (its unit is the user's: m
+    or ft), and a power none of whose values read is negative is offered in a comment saying
+    so, while a signed one beside it is mapped."""
+    f = tmp_path / "leafspy.csv"
+    f.write_text("Date/Time,Speed,Elv,Motor Pwr(w),Pack Volts,Pack Amps\n"
+                 + "\n".join(f"2017-10-{t // 60 + 1:02d},{t % 50},{1100 + t},{max(0, 900 - 100 * t)},380.5,{12 - t}"
+                             for t in range(20)) + "\n", encoding="utf-8")
+    assert cli_main(["import", "columns", str(f), "--list"]) == 0
+    sk = _sketch(_lines(capsys))
+    assert "# elevation_m: perhaps Elv (no unit recognised" in sk, sk
+    assert 'name = "power_w"' not in sk, sk
+    assert "# power_w: perhaps Motor Pwr(w) (never negative in the 20 values read" in sk, sk
+    from sumo_drvpw.data.adapters.listing import sketch
+
+    rows = [{"label": "Motor Pwr(w)", "unit": "w", "samples": 20, "numbers": 20, "negatives": 0},
+            {"label": "Drive Power (kW)", "unit": "kW", "samples": 20, "numbers": 20, "negatives": 7},
+            {"label": "Alt (m)", "unit": "m", "samples": 20, "numbers": 20, "negatives": 0}]
+    sk = sketch(rows, False, {})
+    assert '[columns."Drive Power (kW)"]\nname = "power_w"' in sk, sk
+    assert '[columns."Alt (m)"]\nname = "elevation_m"' in sk, sk
+    # an MDF channel's values are not read for the listing: its power is mapped as before
+    assert 'name = "power_w"' in sketch([{"label": "MotorPower", "unit": "W"}], True, {})
+    # an alternator or altitude-hold is no elevation
+    assert "elevation_m" not in sketch([{"label": "Alternator load (m)", "unit": "m"}], False, {})

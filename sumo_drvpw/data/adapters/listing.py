@@ -105,8 +105,9 @@ def _table_columns(path: Path, m: dict) -> list[dict]:
         # (a missing value: NaN or None, whatever the dtype; pandas' str dtype keeps NaN a float)
         vals = [v for v in (str(x).strip() for x in df[c] if not _missing(x)) if v not in ("", "nan", "None", "-")]
         unit = split_header(str(c))[1]
-        rows.append({"label": str(c), "unit": unit, "samples": len(vals),
-                     "numbers": sum(is_number(v) for v in vals), "first": vals[0] if vals else ""})
+        nums = [float(v) for v in vals if is_number(v)]
+        rows.append({"label": str(c), "unit": unit, "samples": len(vals), "numbers": len(nums),
+                     "negatives": sum(x < 0 for x in nums), "first": vals[0] if vals else ""})
     return rows
 
 
@@ -115,7 +116,8 @@ def _table_columns(path: Path, m: dict) -> list[dict]:
 GUESSES = {
     "time_s": ("time", r"time\b|zeit|timestamp|^t$", r"trip|duration|since"),
     "speed_mps": ("speed", r"speed|velocity|geschw|vitesse|\bspd|\bvel\b", r"wheel ?speed|motor|engine|fan|accuracy|max|limit|set"),
-    "elevation_m": ("length", r"elev|altitude|höhe|hoehe|height", r"accuracy|valid"),
+    "elevation_m": ("length", r"elev|(?<![a-z])elv(?![a-z])|altitude|(?<![a-z])alt(?![a-z])|höhe|hoehe|height",
+                    r"accuracy|valid"),
     "ambient_c": ("temperature", r"ambient|amb\b|outside|outdoor|außen|aussen|environment", None),
     "battery_voltage_v": ("voltage", r"batt|\bhv\b|pack|traction|reess", r"cell|min|max|12 ?v|aux"),
     "battery_current_a": ("current", r"batt|\bhv\b|pack|traction|reess", r"cell|min|max|12 ?v|aux|limit"),
@@ -143,7 +145,7 @@ CLOCK_FORMATS = ((re.compile(r"^\d{1,2}:\d{2}:\d{2}\.\d+$"), "%H:%M:%S.%f"),
                  (re.compile(r"^\d{4}-\d{2}-\d{2}[ T]\d{1,2}:\d{2}:\d{2}$"), "%Y-%m-%d %H:%M:%S"))
 #: a label without a unit is offered for a name only when it also names the quantity
 UNITLESS_WORDS = {"percent": r"soc|state of charge", "time": r"time|zeit", "speed": r"speed|veloc|geschw|spd",
-                  "length": r"elev|alti|height|höhe",
+                  "length": r"elev|(?<![a-z])elv(?![a-z])|alti|(?<![a-z])alt(?![a-z])|height|höhe",
                   "temperature": r"temp|amb", "voltage": r"volt", "current": r"curr|amp",
                   "torque": r"torq|trq", "rotational_speed": r"rpm|speed|drehz", "energy": r"energy|ced|cec|tot_",
                   "mass_flow": r"maf|air ?flow", "volume_flow": r"fuel (rate|flow)", "power": r"power|pwr"}
@@ -176,6 +178,14 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
                 hits.append((label, unit, r))
             elif u is None and re.search(UNITLESS_WORDS[dim], text, re.I):  # no unit, or "(CED)": none known
                 unitless.append(label)
+        if name == "power_w":  # a table's power none of whose values read is negative: traction only
+            traction = [h for h in hits if h[2].get("negatives", 1) == 0 and h[2].get("numbers", 0)]
+            hits = [h for h in hits if h not in traction]
+            if not hits and traction:
+                lines.append(f"# {name}: perhaps {traction[0][0]} (never negative in the {traction[0][2]['numbers']} "
+                             "values read: traction only, which no driving-power equation fits; map it if it "
+                             "does go negative)")
+                continue
         if not hits and name == "time_s" and clock:
             lines += [f"[columns.{_toml(clock[0])}]", 'name = "time_s"  # clock times: [options] time_format']
             continue
