@@ -374,3 +374,29 @@ def test_the_sketch_offers_an_abbreviated_elevation_and_no_traction_only_power(t
     assert 'name = "power_w"' in sketch([{"label": "MotorPower", "unit": "W"}], True, {})
     # an alternator or altitude-hold is no elevation
     assert "elevation_m" not in sketch([{"label": "Alternator load (m)", "unit": "m"}], False, {})
+
+
+def test_a_log_sampled_minutes_apart_is_said_at_import(tmp_path, capsys):
+    """A log sampled every few minutes (a Leaf's owner summary, an app's minute export) was
+    imported without a word and refused only by calibrate ('steps by 301.954 … more than 30
+    s'). The import converts it still, and now says at once which file steps by how much
+    (median within a trip) and what the commands will do with it; a file seconds apart
+    beside it is not named."""
+    import pandas as pd
+
+    from sumo_drvpw.cli.import_ import read_report
+
+    m = tmp_path / "m.toml"
+    m.write_text('[columns."t (s)"]\nname = "time_s"\nunit = "s"\n'
+                 '[columns."v (km/h)"]\nname = "speed_mps"\nunit = "km/h"\n', encoding="utf-8")
+    slow, fast = tmp_path / "slow.csv", tmp_path / "fast.csv"
+    slow.write_text("t (s),v (km/h)\n" + "\n".join(f"{301.954 * k:.3f},{20 + k % 7}" for k in range(30)) + "\n",
+                    encoding="utf-8")
+    fast.write_text("t (s),v (km/h)\n" + "\n".join(f"{k},{20 + k % 7}" for k in range(30)) + "\n", encoding="utf-8")
+    log = tmp_path / "o.parquet"
+    assert cli_main(["import", "columns", str(slow), str(fast), "--columns", str(m), "--out", str(log)]) == 0
+    out = capsys.readouterr().out
+    warn = [line for line in out.splitlines() if line.startswith("warning:")]
+    assert len(warn) == 1 and str(slow) in warn[0] and "301.954 s" in warn[0] and "30 s" in warn[0], out
+    assert len(pd.read_parquet(log)) == 60
+    assert any("301.954 s" in w for w in read_report(log)["warnings"])

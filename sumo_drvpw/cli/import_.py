@@ -70,6 +70,7 @@ def format_report(report: dict) -> str:
     d = ", ".join(f"{k} {n}" for k, n in report["dropped"].items()) or "none"
     lines.append(f"total: read {report['rows_read']}, kept {report['kept']}, dropped: {d}")
     lines += [f"note: {n}" for n in report["notes"]]
+    lines += [f"warning: {w}" for w in report.get("warnings", [])]
     if shortened:
         lines.append("note: notes shortened here; the log's import report has them whole "
                      "(sumo_drvpw.cli.import_.read_report(LOG))")

@@ -492,8 +492,29 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
             dropped[k] = dropped.get(k, 0) + n
     report = {"format": fmt, "files": reports, "rows_read": sum(r["rows_read"] for r in reports),
               "kept": int(len(df)), "dropped": dropped, "notes": list(notes) + mixed + copies,
-              "columns": list(df.columns)}
+              "columns": list(df.columns), "warnings": _coarse_steps(frames, reports)}
     return df, report
+
+
+def _coarse_steps(frames: list[pd.DataFrame], reports: list[dict]) -> list[str]:
+    """Per file whose samples lie more than MAX_MEDIAN_STEP_S apart (median step within a
+    trip: a log kept one sample a minute, a time in the wrong unit), one warning naming it
+    and the step: imported, but the commands that need driving power refuse such a log."""
+    from sumo_drvpw.data.plausible import MAX_MEDIAN_STEP_S
+
+    out = []
+    for f, r in zip(frames, reports):
+        t = f["time_s"].to_numpy(float)
+        trip = f["trip_id"].to_numpy() if "trip_id" in f else np.zeros(len(f))
+        same = trip[1:] == trip[:-1]
+        if not same.any():
+            continue
+        step = float(np.median(np.diff(t)[same]))
+        if step > MAX_MEDIAN_STEP_S:
+            out.append(f"{r['file']}: samples {step:g} s apart (median within a trip), more than "
+                       f"{MAX_MEDIAN_STEP_S:g} s: imported, but calibrate, compare and diagnose will refuse "
+                       "it (driving power needs samples seconds apart); is the time column's unit right?")
+    return out
 
 
 def _text_in_some_files(df: pd.DataFrame, frames: list[pd.DataFrame], reports: list[dict]) -> list[str]:
