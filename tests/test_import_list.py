@@ -400,3 +400,18 @@ def test_a_log_sampled_minutes_apart_is_said_at_import(tmp_path, capsys):
     assert len(warn) == 1 and str(slow) in warn[0] and "301.954 s" in warn[0] and "30 s" in warn[0], out
     assert len(pd.read_parquet(log)) == 60
     assert any("301.954 s" in w for w in read_report(log)["warnings"])
+
+
+def test_the_sketch_takes_no_wind_or_air_speed_for_the_vehicle_speed():
+    """A weather-augmented log (the RSK Twizy data set's 'WindSpeedAv' beside 'Speed'): a wind
+    or air speed listed before the car's speed, in a speed unit and as well covered, was the
+    sketch's speed_mps. Neither is the vehicle's speed."""
+    from sumo_drvpw.data.adapters.listing import sketch
+
+    rows = [{"label": "Wind speed (m/s)", "unit": "m/s", "samples": 20},
+            {"label": "Airspeed (km/h)", "unit": "km/h", "samples": 20},
+            {"label": "Speed (km/h)", "unit": "km/h", "samples": 20}]
+    sk = sketch(rows, False, {})
+    assert '[columns."Speed (km/h)"]\nname = "speed_mps"\n' in sk, sk
+    assert "Wind" not in sk and "Airspeed" not in sk
+    assert "WindSpeedAv" not in sketch([{"label": "Speed", "unit": ""}, {"label": "WindSpeedAv", "unit": ""}], False, {})

@@ -115,7 +115,8 @@ def _table_columns(path: Path, m: dict) -> list[dict]:
 #: guesses of the mapping sketch
 GUESSES = {
     "time_s": ("time", r"time\b|zeit|timestamp|^t$", r"trip|duration|since"),
-    "speed_mps": ("speed", r"speed|velocity|geschw|vitesse|\bspd|\bvel\b", r"wheel ?speed|motor|engine|fan|accuracy|max|limit|set"),
+    "speed_mps": ("speed", r"speed|velocity|geschw|vitesse|\bspd|\bvel\b",
+                  r"wheel ?speed|motor|engine|fan|(?<![a-z])wind|air ?speed|accuracy|max|limit|set"),
     "elevation_m": ("length", r"elev|(?<![a-z])elv(?![a-z])|altitude|(?<![a-z])alt(?![a-z])|höhe|hoehe|height",
                     r"accuracy|valid"),
     "ambient_c": ("temperature", r"ambient|amb\b|outside|outdoor|außen|aussen|environment", None),
