@@ -415,3 +415,28 @@ def test_the_sketch_takes_no_wind_or_air_speed_for_the_vehicle_speed():
     assert '[columns."Speed (km/h)"]\nname = "speed_mps"\n' in sk, sk
     assert "Wind" not in sk and "Airspeed" not in sk
     assert "WindSpeedAv" not in sketch([{"label": "Speed", "unit": ""}, {"label": "WindSpeedAv", "unit": ""}], False, {})
+
+
+def test_a_doubly_encoded_degree_sign_is_read_as_the_unit(tmp_path, capsys):
+    """OBD exports re-saved through Latin-1 write '°C' as 'Â°C' (the KIT Seat Leon logs, a
+    BlueDriver export). lookup_unit meant to drop the 'Â' but lowered the label first ('â'),
+    so such a unit was unknown: the temperatures were kept unconverted and the sketch offered
+    no ambient_c. Now 'Â°C' and 'Â°F' read as °C and °F."""
+    import pandas as pd
+
+    from sumo_drvpw.data.adapters._common import lookup_unit
+
+    assert lookup_unit("Â°C") == lookup_unit("°C") and lookup_unit("Â°F") == lookup_unit("°F")
+    f = tmp_path / "leon.csv"
+    f.write_text("Time,Vehicle Speed Sensor [km/h],Ambient Air Temperature [Â°C],Coolant [Â°F]\n"
+                 + "\n".join(f"19:17:{t:02d}.418,{t},{20 + t % 2},{194}" for t in range(20)) + "\n", encoding="utf-8")
+    assert cli_main(["import", "columns", str(f), "--list"]) == 0
+    sk = _sketch(_lines(capsys))
+    assert '[columns."Ambient Air Temperature [Â°C]"]\nname = "ambient_c"' in sk, sk
+    assert "units not recognised" not in sk
+    (tmp_path / "m.toml").write_text(sk, encoding="utf-8")
+    log = tmp_path / "o.parquet"
+    assert cli_main(["import", "columns", str(f), "--columns", str(tmp_path / "m.toml"), "--out", str(log)]) == 0
+    df = pd.read_parquet(log)
+    assert set(df["ambient_c"]) == {20.0, 21.0}
+    assert df["coolant_c"].iloc[0] == 90.0, df.columns

@@ -105,8 +105,9 @@ _u("dimensionless", 1.0, 0.0, "", "-", "1", "bool", "text", ":1", "lambda", "λ"
 
 
 def lookup_unit(unit: str):
-    """(dimension, factor, offset) of a unit spelling, or None when unknown."""
-    return UNITS.get(unit.strip().lower().replace("Â", ""))
+    """(dimension, factor, offset) of a unit spelling, or None when unknown ('Â°C', a degree
+    sign encoded twice, reads as '°C': the 'Â' is dropped before the spelling is lowered)."""
+    return UNITS.get(unit.replace("Â", "").strip().lower())
 
 
 def snake(name: str) -> str:
