@@ -468,6 +468,7 @@ def fuel_from_air_flow(log, air: str) -> tuple[np.ndarray, str]:
 
     df = log.df
     x = flow_values(log, air, "air_gps")
+    count_throttling(log, x)
     banks: dict[str, np.ndarray] = {}
     trims = []
     for c in df.columns:
@@ -490,3 +491,45 @@ def fuel_from_air_flow(log, air: str) -> tuple[np.ndarray, str]:
     how += " × LHV of gasoline (deceleration fuel cut reads as air: an overestimate there)"
     return x / 1000.0 / AFR_STOICH_GASOLINE * factor, how
 
+
+
+#: a manifold pressure [kPa] below which an engine is throttled: a petrol engine's idling and
+#: coasting (20–40 kPa; a rehearsal's petrol Toyota: below it on 85 % of its running rows); a
+#: diesel's stays near the air outside or above it (KIT's Seat Leon: on 0.1 %)
+THROTTLED_KPA = 50.0
+
+
+def manifold_pressure_column(df) -> str | None:
+    """The one intake manifold absolute pressure of a log [kPa] (OBD PID 0x0B: 'Intake
+    Manifold Absolute Pressure [kPa]', Torque's 'Intake Manifold Pressure(psi)' as the
+    adapters name them), not a boost or vacuum gauge's relative one; else None."""
+    c = [str(n) for n in df.columns if str(n).endswith("_kpa") and ("manifold" in str(n) or str(n).startswith("map_"))
+         and not any(w in str(n) for w in ("boost", "vacuum", "gauge", "relative"))]
+    return c[0] if len(c) == 1 else None
+
+
+def count_throttling(log, air_gps: np.ndarray) -> None:
+    """Into ``log.counts``: the rows with the engine running (air flowing) and a manifold
+    pressure (``throttle_rows``), and those of them below :data:`THROTTLED_KPA`
+    (``throttled_rows``) — the fuel chain's check reads them (:func:`unthrottled_note`)."""
+    col = manifold_pressure_column(log.df)
+    counts = getattr(log, "counts", None)
+    if col is None or counts is None:
+        return
+    kpa = pd.to_numeric(log.df[col], errors="coerce").to_numpy(float)
+    run = np.isfinite(kpa) & (np.nan_to_num(air_gps) > 0)
+    counts["throttle_rows"], counts["throttled_rows"] = int(run.sum()), int((run & (kpa < THROTTLED_KPA)).sum())
+    counts["throttle_column"] = col
+
+
+def unthrottled_note(counts: dict | None) -> str:
+    """A fuel target from the air flow of an engine whose manifold pressure hardly ever falls
+    below :data:`THROTTLED_KPA` (under 5 % of at least 200 running rows): a reading's clause."""
+    n, k = int((counts or {}).get("throttle_rows", 0) or 0), int((counts or {}).get("throttled_rows", 0) or 0)
+    if n < 200 or k >= 0.05 * n:
+        return ""
+    return (f"; CHECK THE TARGET: the fuel is read from the mass air flow, yet the intake manifold pressure "
+            f"({counts.get('throttle_column')}) is below {THROTTLED_KPA:g} kPa on {k} of {n} rows with the engine "
+            "running ({:.1%}; a throttled petrol engine's falls to 20–40 kPa idling and coasting): an unthrottled "
+            "engine — a diesel, whose air flow says nothing of its fuel (declare powertrain.fuel = \"diesel\"), "
+            "or a petrol engine with valve-lift control".format(k / n))

@@ -463,7 +463,8 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
         fit = calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
                                 mask=use, limit=limit, fixed=fixed, efficiency=efficiency,
                                 warmup_rate=warmup_rate, counter_view=getattr(m, "counter_view", None))
-    check_chain(fit, m.vehicle, p, m.inputs.v, use, where=m.log.describe())  # plausibility, fitted range
+    check_chain(fit, m.vehicle, p, m.inputs.v, use, where=m.log.describe(),  # plausibility, fitted range
+                counts=getattr(m, "counts", None))
     return fit
 
 

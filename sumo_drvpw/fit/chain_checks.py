@@ -190,11 +190,12 @@ IDENTIFY_DRIVE_W = 2000.0
 
 
 def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
-                where: str = "the logs") -> None:
+                where: str = "the logs", counts: dict | None = None) -> None:
     """Add the readings, fitted ranges and warnings of this module to a ``ChainFit``
     (in place; see the module docstring); ``ranges``: the fitted ranges when known (a
-    streamed fit's), else from ``p_drive_w``, ``v_mps`` and ``use``. UserError, naming
-    ``where``, when the driving power never exceeds :data:`IDENTIFY_DRIVE_W`."""
+    streamed fit's), else from ``p_drive_w``, ``v_mps`` and ``use``; ``counts``: the log
+    reader's (a fuel target read from an unthrottled engine's air flow is said from them).
+    UserError, naming ``where``, when the driving power never exceeds :data:`IDENTIFY_DRIVE_W`."""
     chain = fit.chain
     ranges = fitted_ranges(p_drive_w, v_mps, use) if ranges is None else ranges
     if ranges and ranges["power_range_w"][1] < IDENTIFY_DRIVE_W:
@@ -214,6 +215,9 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
                                          vehicle.powertrain.get("displacement_l") if vehicle is not None else None)
         params["idle_fuel_power_w"]["reading"] += target_note or idle_over_standing_note(
             chain.idle_fuel_power_w, chain.engine_off_below_w, getattr(fit, "standing", None), chain.fuel)
+        from sumo_drvpw.data.powertrain import unthrottled_note
+
+        params["idle_fuel_power_w"]["reading"] += unthrottled_note(counts)
         if "engine_off_below_w" in params:
             params["engine_off_below_w"]["reading"] += engine_off_note(
                 chain.engine_off_below_w, powertrain, fuel_l_per_h(chain.idle_fuel_power_w, chain.fuel))
