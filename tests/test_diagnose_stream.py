@@ -192,10 +192,12 @@ def _held_bytes(obj) -> int:
 
 
 def test_lag_search_memory_does_not_grow_with_rows(tmp_path, monkeypatch):
-    # the same trips read 4 times (copies of the files, same trip ids): the lag search keeps
-    # per-trip and per-fold sums only — the same arrays of the same sizes, 4 × the sums —
-    # and nothing per block or per row (issue #14: memory flat in rows)
-    import shutil
+    # the same trips read 4 times (copies of the files, each copy's trips under ids of their
+    # own, same rows otherwise: a trip id in two files is refused): the lag search keeps
+    # per-fold sums — the same arrays of the same sizes, 4 × the sums — and per-trip sums,
+    # each copy's those of its original, and nothing per block or per row (issue #14: memory
+    # flat in rows)
+    import pandas as pd
 
     from sumo_drvpw.fit.diagnose import stream_run
 
@@ -212,21 +214,52 @@ def test_lag_search_memory_does_not_grow_with_rows(tmp_path, monkeypatch):
     for r in range(3):
         for p in paths:
             copies.append(tmp_path / f"copy{r}_{p.name}")
-            shutil.copy(p, copies[-1])
+            df = pd.read_parquet(p)
+            df["trip_id"] = df["trip_id"].astype(str) + f"-copy{r}"
+            df.to_parquet(copies[-1])
     eq, opt = load_equation("drvpw_prius3"), DiagnoseOptions(max_findings=1)
     diagnose_stream(paths, "prius3", eq, opt, rows=2500)
     diagnose_stream(paths + copies, "prius3", eq, opt, rows=2500)
     one, four = seen
 
-    def arrays(s):
-        return [s.fzy, s.fyy] + [a for t in sorted(s.trips) for a in s.trips[t][1:]]
+    def folds(s):
+        return [s.fzy, s.fyy]
 
-    assert list(one.lags) == list(four.lags) and sorted(one.trips) == sorted(four.trips)
-    assert [a.shape for a in arrays(one)] == [a.shape for a in arrays(four)]
-    assert _held_bytes(vars(one)) == _held_bytes(vars(four)) > 0    # every array it holds
-    for a, b in zip(arrays(one), arrays(four)):
+    def per_trip(s):  # the trips' sums, in an order that does not depend on their ids
+        return sorted((s.trips[t] for t in s.trips), key=lambda v: (v[0], float(v[3][0])))
+
+    assert list(one.lags) == list(four.lags) and len(four.trips) == 4 * len(one.trips) > 0
+    assert [a.shape for a in folds(one)] == [a.shape for a in folds(four)]
+    for a, b in zip(folds(one), folds(four)):
         np.testing.assert_allclose(b, 4 * a, rtol=1e-12, atol=0)
-    assert [four.trips[t][0] for t in sorted(four.trips)] == [4 * one.trips[t][0] for t in sorted(one.trips)]
+    mine, theirs = per_trip(one), per_trip(four)
+    for i, s in enumerate(mine):  # each trip four times, its copies' sums its own
+        for c in theirs[4 * i:4 * i + 4]:
+            assert c[0] == s[0]
+            for u, v in zip(s[1:], c[1:]):
+                np.testing.assert_allclose(v, u, rtol=1e-12, atol=0)
+    # every array it holds: the fold sums, and per trip the same bytes however many rows
+    rest = {k: v for k, v in vars(four).items() if k != "trips"}
+    assert _held_bytes(rest) == _held_bytes({k: v for k, v in vars(one).items() if k != "trips"}) > 0
+    assert _held_bytes(four.trips) == 4 * _held_bytes(one.trips) > 0
+
+
+def test_a_trip_id_in_two_files_is_refused_streamed_as_in_memory(tmp_path):
+    """Two files holding the same trip ids (a log and its copy): the in-memory reader refuses
+    them in one line; the streamed tracer took them (exit 0, each trip's sums and lag twice
+    under one id) and now refuses them with the same line."""
+    import shutil
+
+    from sumo_drvpw.errors import UserError
+
+    paths = _logs(tmp_path, [], n_trips=3)
+    shutil.copy(paths[0], tmp_path / "copy.parquet")
+    logs = paths + [tmp_path / "copy.parquet"]
+    with pytest.raises(UserError) as mem:
+        load_measured(logs, "prius3")
+    with pytest.raises(UserError) as st:
+        diagnose_stream(logs, "prius3", load_equation("drvpw_prius3"), DiagnoseOptions(), rows=2500)
+    assert str(st.value) == str(mem.value) and "is also in" in str(st.value)
 
 
 def test_a_declared_term_zero_on_the_logs_is_held_at_its_coefficient(tmp_path):

@@ -223,6 +223,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     Returns the :class:`DiagnoseResult`; ``details["resources"]`` holds rows, seconds,
     passes and whether the batches were on disk.
     """
+    from sumo_drvpw.data.plausible import check_distinct_trips
     from sumo_drvpw.data.roles import from_metadata, resolve
     from sumo_drvpw.fit.calibrate import CANDIDATES
     from sumo_drvpw.fit.physical import physical_calibration
@@ -233,6 +234,7 @@ def diagnose_stream(paths, vehicle=None, equation=None, opt: DiagnoseOptions | N
     opt.check()
     say = progress or (lambda s: None)
     veh = load_vehicle(vehicle) if isinstance(vehicle, str) else vehicle
+    check_distinct_trips(paths)  # (per-trip sums and lags are keyed by trip id across batches)
     # diagnose reads a chunk at a time (no reading ahead in a thread: on this shared 2-core
     # machine at load 3 it cost 20-30 % wall time, 10 M rows); every column for the first
     # look (screening), then only those the trace reads
