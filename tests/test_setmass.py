@@ -317,3 +317,46 @@ def test_over_traci_the_copies_masses_come_with_the_step(tmp_path):
     assert len(v) == 100 and v.mass_kg["f.20"] == 3000.0 and v.mass_kg["f.10"] == 2000.0
     assert (v.mass_kg.drop(["f.10", "f.20"]) == 1500.0).all()
     assert calls[0] <= 100, calls[0]  # one per copy, not per step
+
+
+EV_ROUTES = """<routes>
+  <vType id="ev" vClass="passenger" mass="1500" emissionClass="Energy/unknown" sigma="0">
+    <param key="rotatingMass" value="400"/>
+  </vType>
+  <vehicle id="v" type="ev" depart="0" departSpeed="0"><route edges="e"/><stop lane="e_0" endPos="1000" duration="10"/></vehicle>
+</routes>"""
+
+
+def test_an_energy_model_vtype_s_rotating_mass_stays_fixed_after_a_setmass(tmp_path):
+    """An Energy-model vType (``vtype_energy``, EV of 1,500 kg with rotatingMass 400) set to
+    3,000 kg by ``vehicle.setMass`` after step 30 on a 2-km road with a stop: SUMO books
+    (m' + m_rot)·v̄·a (HelpersEnergy: the total mass plus rotatingMass, which a setMass does not
+    touch); the plug-in booked (1 + m_rot/m)·m'·v̄·a, the rotating mass scaled with the set mass
+    (measured 2026-11-29 before the fix: 294.74 Wh booked for SUMO's 294.00, +0.25 %). Now
+    SUMO's emission output to 1e-6."""
+    from sumo_probe import build_net, emitted_wh, energy_scenario
+
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="c" x="2000" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="c" numLanes="1" speed="14"/></edges>')
+    (tmp_path / "r.rou.xml").write_text(EV_ROUTES, encoding="utf-8")
+    sc = load_scenario(energy_scenario(tmp_path, 400, fcd=False))
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, scenario=sc)
+        for k in range(800):
+            conn.simulationStep()
+            acc.step()
+            if k == 30:
+                conn.vehicle.setMass("v", 3000.0)
+                assert conn.vehicle.getMass("v") == 3000.0
+            if conn.simulation.getMinExpectedNumber() == 0:
+                break
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    assert res.vehicles.set_index("vehicle").mass_kg["v"] == 3000.0
+    assert res.summary["assumptions"]["vtype_energy"]["booked"]["ev"]["mass"] == "the vehicle's (riders included)"
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan and sumo_wh["v"] > 200.0
+    booked = res.chain_vehicles().set_index("vehicle").loc["v", "net_kwh"] * 1000.0
+    assert booked == pytest.approx(sumo_wh["v"], rel=1e-6)

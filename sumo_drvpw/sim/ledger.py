@@ -83,8 +83,10 @@ class EquationSet:
         #: an equation is evaluated at the step's mean speed (:func:`at_mean_speed`)
         self.uses_mean = any(g[3] for g in self.groups)
         #: SUMO Energy-model equations at the vehicle's mass (vtype_energy): their acc coefficient
-        #: 1 + m_rot/m holds the rotating mass of the vType's mass, which riders do not add to
-        self.rot_fixed = [(i, e.terms.get("acc", 1.0) - 1.0) for i, e in enumerate(self.equations)
+        #: 1 + m_rot/m holds the rotating mass m_rot of the vType's mass m, which neither riders
+        #: nor a setMass change (HelpersEnergy: the total mass plus rotatingMass)
+        self.rot_fixed = [(i, e.terms.get("acc", 1.0) - 1.0, float(e.provenance.get("rotating_mass_kg", 0.0)))
+                          for i, e in enumerate(self.equations)
                           if e.mass_kg is None and e.provenance.get("rotating_mass_fixed")]
 
     def category_powers(self, x: Inputs, app: np.ndarray | None = None, x_mean: Inputs | None = None) -> np.ndarray:
@@ -109,10 +111,10 @@ class EquationSet:
             vals = [t.evaluate(xm) for t in terms]
             for u, row, c in entries:
                 out[row] += c * vals[u]
-        if self.rot_fixed and "load_kg" in x.signals:  # riders: (m + L + m_rot)·v̄·a, not (1 + m_rot/m)(m + L)
-            va = np.asarray(x.signals["load_kg"], float) * (x.v if x.v_acc is None else x.v_acc) * x.a
-            for i, k in self.rot_fixed:
-                out[i * C + LEDGER_CATEGORIES.index("acc")] -= k * va
+        if self.rot_fixed:  # (m' + m_rot)·v̄·a at the booked mass m' (riders, a setMass), not (1 + m_rot/m)·m'
+            va = (x.v if x.v_acc is None else x.v_acc) * x.a
+            for i, k, m_rot in self.rot_fixed:
+                out[i * C + LEDGER_CATEGORIES.index("acc")] -= (k * np.asarray(x.mass, float) - m_rot) * va
         out = out.reshape(E, C, n)
         if app is not None:
             out *= np.asarray(app, float).T[:, None, :]

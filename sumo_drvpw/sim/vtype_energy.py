@@ -237,6 +237,7 @@ def vtype_equations(file_vtypes, sc=None, step_s: float | None = None) -> tuple[
         if same_mass:  # the vehicle's booked mass: the same, plus riders as SUMO adds them, but
             eq.mass_kg = None  # its rotating mass does not grow with them (sim/ledger.py)
             eq.provenance["rotating_mass_fixed"] = True
+            eq.provenance["rotating_mass_kg"] = model["rotatingMass"]["value"]  # (nor with a setMass)
         eqs.append(eq)
         booked[vt] = {"equation": eq.name,
                       "emission_class": info.emission_class or "none written: Energy/unknown, as SUMO "
