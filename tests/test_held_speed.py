@@ -293,6 +293,37 @@ def test_a_short_held_speed_s_updates_are_not_one_sample_steps(seed, n, amax, li
     assert (c["speed_steps"], c["excluded_speed_step"]) == (0, 0), c
 
 
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(12, 31), amax=st.floats(1.0, 3.0), skip=st.booleans())
+def test_a_short_held_speed_s_end_samples_are_judged_over_its_update_interval(seed, n, amax, skip):
+    """The same short 2-Hz trips (speed updated once a second, too short for speed_hold): the
+    acceleration at a trip's first and last sample was a one-row difference, a second's Δv
+    over 0.5 s (2·a) where an update falls in that row, and at --accel-outlier 5 the
+    genuine sample was left out as an outlier (200 trips of 12–31 rows, |a| ≤ 3: 37 lost
+    their last sample; starting between two updates, 95 their first or last; 0 at 8). Now
+    the ends span the update interval as the central differences inside do: |a| ≤ amax
+    everywhere, no sample left out. (``skip``: the trip starts between two updates, so its
+    first row holds the update.)"""
+    from sumo_drvpw.data.log import from_frame
+
+    d = _short_held_trip(seed, n + 1, amax).iloc[1 if skip else 0:][:n].reset_index(drop=True)
+    lg = from_frame(d, options=ReadOptions(accel_outlier_mps2=5.0))
+    a = lg.df["accel_mps2"].to_numpy()
+    assert np.abs(a).max() <= amax + 1e-9, (a[0], a[-1], amax)
+    assert not lg.excluded.any(), lg.counts
+
+
+def test_a_speed_updated_at_every_sample_keeps_its_one_sample_ends():
+    """A speed that changes at every row keeps the one-row differences at its trip's ends."""
+    from sumo_drvpw.data.log import from_frame
+
+    d = _short_held_trip(3, 30, 2.0, every_s=0.5)
+    v, t = d["speed_mps"].to_numpy(), d["time_s"].to_numpy()
+    a = from_frame(d).df["accel_mps2"].to_numpy()
+    assert a[0] == pytest.approx((v[1] - v[0]) / (t[1] - t[0]), rel=1e-12)
+    assert a[-1] == pytest.approx((v[-1] - v[-2]) / (t[-1] - t[-2]), rel=1e-12)
+
+
 @pytest.mark.parametrize("every_s", [0.5, 1.0])
 def test_a_splice_in_a_held_speed_is_still_left_out(every_s):
     """A recording spliced without a mark (13 m/s to standing in one row) in the same short

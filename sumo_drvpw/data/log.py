@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.data.paths import expand_paths as _expand_paths, parquet_frame
-from sumo_drvpw.data.resolution import accel_counts, accel_derivation, accel_speed, accel_window
+from sumo_drvpw.data.resolution import accel_counts, accel_derivation, accel_speed, accel_window, held_end_spans
 from sumo_drvpw.data.conditions import derive_conditions
 from sumo_drvpw.data.ranges import RANGES, check_ranges  # noqa: F401  (RANGES re-exported)
 from sumo_drvpw.data.truncated import read_complete_csv
@@ -539,7 +539,7 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
         own = np.ones(len(win), bool) if lacking is None else lacking[start]  # trips derived
         win = np.where(own, win, opt.accel_window_s)  # a trip with the column: as read alone
         win_seg, (vd, hold) = win[trip_codes[_trip_starts(seg)]], accel_speed(opt, v, t, trip_codes, q)
-        derived = derivative(vd, t, seg, win_seg)
+        derived = derivative(vd, t, seg, win_seg, held_end_spans(vd, t, seg))  # ends over a held speed's updates
         if vd is not v:  # a speed held between updates: read between them, the terms' speed too
             df["speed_mps"] = v = vd
         df["accel_mps2"] = derived if lacking is None else np.where(lacking, derived, df["accel_mps2"].to_numpy(float))

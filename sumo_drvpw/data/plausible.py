@@ -225,9 +225,10 @@ UPDATE_CLOCK_SHARE = 0.8
 def update_interval(v: np.ndarray, t: np.ndarray, seg: np.ndarray) -> np.ndarray:
     """The interval at which each stretch's speed is updated [s], per run of equal ``seg``
     (0, 1, … in order): the :data:`UPDATE_QUANTILE` quantile of the times from a value's first
-    sample to the next value's, over the values held while moving (> :data:`UPDATE_MIN_SPEED_MPS`),
-    or their update clock where they keep one (:data:`UPDATE_CLOCK_SHARE`), at most
-    :data:`UPDATE_MAX_S`; 0 where no value is followed by another in the stretch. A speed
+    sample to the next value's, over the values held while moving (> :data:`UPDATE_MIN_SPEED_MPS`)
+    but its first (held since before the stretch began, for all one knows), or their update
+    clock where they keep one (:data:`UPDATE_CLOCK_SHARE`), at most :data:`UPDATE_MAX_S`; 0
+    where no such value is followed by another in the stretch. A speed
     updated at every sample gives its sampling interval; a held one (a speed updated once a
     second in 2-Hz rows) its update interval — from the values themselves, so also in a trip
     too short for :func:`sumo_drvpw.data.resolution.speed_hold` to judge."""
@@ -240,16 +241,16 @@ def update_interval(v: np.ndarray, t: np.ndarray, seg: np.ndarray) -> np.ndarray
     new = first | np.r_[True, v[1:] != v[:-1]]  # a value's first sample (NaN: each its own)
     at = np.flatnonzero(new)
     follows = ~first[at[1:]]  # the next value is in the same stretch
-    ok = follows & (v[at[:-1]] > UPDATE_MIN_SPEED_MPS)
+    # a stretch's first value may have been updated before it began: its time is no interval
+    ok = follows & ~first[at[:-1]] & (v[at[:-1]] > UPDATE_MIN_SPEED_MPS)
     if ok.any():
         run = (np.cumsum(first) - 1)[at[:-1][ok]]
         d = (t[at[1:]] - t[at[:-1]])[ok]
         low = pd.Series(d).groupby(run).quantile(UPDATE_QUANTILE)
         out[low.index.to_numpy()] = np.minimum(low.to_numpy(), UPDATE_MAX_S)
         row = pd.Series(np.diff(t)[~first[1:]]).groupby((np.cumsum(first) - 1)[1:][~first[1:]]).median()
-        inner = ~first[at[:-1][ok]]  # (the first value's interval starts with the stretch, not an update)
-        dv = np.abs(v[at[1:]] - v[at[:-1]])[ok][inner]
-        for r, g in pd.DataFrame({"d": d[inner], "dv": dv}).groupby(run[inner]):
+        dv = np.abs(v[at[1:]] - v[at[:-1]])[ok]
+        for r, g in pd.DataFrame({"d": d, "dv": dv}).groupby(run):
             m, dt_row = float(g["d"].median()), float(row.get(r, np.nan))
             steps = g["dv"].to_numpy()
             if (len(g) >= 3 and m >= 1.5 * dt_row

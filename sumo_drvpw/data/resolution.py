@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sumo_drvpw.data.trips import trip_starts
+from sumo_drvpw.data.plausible import update_interval
+from sumo_drvpw.data.trips import run_median_step, trip_starts
 
 
 #: a speed is read as logged in steps of q when this share of its nonzero changes are whole
@@ -288,3 +289,22 @@ def accel_speed(opt, v: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, q) ->
     hold = speed_hold(v, t, trip_codes, q)
     hold = np.where(hold > opt.accel_window_s, hold, 0.0)
     return unheld_speed(v, t, trip_codes, hold), hold
+
+
+#: a stretch's speed is held for its end samples when its update interval exceeds this many
+#: of its rows (its median step): it changes at most every other row
+HELD_END_ROWS = 1.5
+
+
+def held_end_spans(v: np.ndarray, t: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """The least time the acceleration's one-sided differences at each stretch's ends span
+    [s], per run of equal ``seg`` (in order; ``derivative``'s ``end_span_s``): the speed's
+    update interval (:func:`sumo_drvpw.data.plausible.update_interval`) where it exceeds
+    :data:`HELD_END_ROWS` rows, 0 elsewhere. A speed held between updates in a stretch too
+    short for :func:`speed_hold` (2-Hz rows of a speed updated once a second) changes by an
+    update's Δv within one row: a one-row difference at an end read 2·a, where the central
+    differences inside span the update; a speed that changes at every row keeps its one-row
+    ends."""
+    upd = update_interval(v, t, seg)
+    med = run_median_step(t, seg)
+    return np.where(np.isfinite(med) & (upd > HELD_END_ROWS * np.nan_to_num(med, nan=np.inf)), upd, 0.0)

@@ -115,7 +115,7 @@ def trip_array(trip: pd.Series) -> np.ndarray:
     return trip.to_numpy()
 
 
-def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s) -> np.ndarray:
+def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s, end_span_s=None) -> np.ndarray:
     """Smoothed time derivative within trips: central difference, then a centred mean.
 
     Parameters
@@ -127,6 +127,12 @@ def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s) -
     window_s : width of the moving average [s], one for all, or one per run (in order); in
         samples at each run's own median interval, so a trip's derivative does not depend on
         the trips read with it
+    end_span_s : the least time a one-sided difference at a run's end spans [s], one for all
+        or one per run (None or 0: one sample): a signal updated less often than it is logged
+        (a speed held between updates, :func:`sumo_drvpw.data.plausible.update_interval`)
+        changes by an update's Δy within one sample, so a one-sample difference at an end
+        reads it over the row's interval (2·a for 2-Hz rows of a speed updated once a second)
+        where the central differences inside read it over their two rows
 
     Returns dy/dt [unit/s]; one-sided differences at trip ends, 0 for one-sample trips.
     """
@@ -143,6 +149,8 @@ def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s) -
     b = np.flatnonzero(start | end)
     lo = np.where(start[b], b, b - 1)
     hi = np.where(end[b], b, b + 1)
+    if end_span_s is not None:
+        lo, hi = _end_span(t, start, b, lo, hi, end_span_s)
     dy[b] = y[hi] - y[lo]
     dt[b] = t[hi] - t[lo]
     ok = dt > 0
@@ -154,6 +162,27 @@ def derivative(y: np.ndarray, t: np.ndarray, trip_codes: np.ndarray, window_s) -
     width = np.where(med > 0, np.minimum(win / np.where(med > 0, med, 1.0), length), 1.0)
     # an odd width keeps the centred mean centred (an even one shifts by half a sample)
     return rolling_mean_by_run(d, trip_codes, np.maximum(np.round(width), 1).astype(np.int64) | 1)
+
+
+def _end_span(t, start, b, lo, hi, span_s):
+    """The one-sided differences' ends ``lo``, ``hi`` at the run ends ``b`` (in order) of
+    :func:`derivative` widened to span at least ``span_s`` (per run) within the run."""
+    run = np.cumsum(start) - 1
+    span = np.broadcast_to(np.asarray(span_s, float), (int(run[-1]) + 1,))[run[b]]
+    short = np.flatnonzero((span > 0) & (t[hi] - t[lo] < span * (1 - 1e-9)))
+    if not len(short):
+        return lo, hi
+    lo, hi = lo.copy(), hi.copy()
+    first = np.flatnonzero(start)
+    last = np.r_[first[1:], len(t)] - 1
+    for j in short:  # few: the ends of runs whose signal is held between updates
+        r = run[b[j]]
+        s, e = first[r], last[r]
+        if lo[j] == b[j] and start[b[j]]:  # a run's first sample: forward to the first one span away
+            hi[j] = min(s + int(np.searchsorted(t[s:e + 1], t[s] + span[j] * (1 - 1e-9), side="left")), e)
+        if hi[j] == b[j] and b[j] == e:  # its last: back to the last one span before it
+            lo[j] = max(s + int(np.searchsorted(t[s:e + 1], t[e] - span[j] * (1 - 1e-9), side="right")) - 1, s)
+    return lo, hi
 
 
 def grade_from_elevation(z: np.ndarray, dist: np.ndarray, trip_codes: np.ndarray,
