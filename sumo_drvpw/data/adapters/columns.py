@@ -50,19 +50,18 @@ import pandas as pd
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
-from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midnight, clean_time_and_speed, is_number,
+from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midnight, clean_time_and_speed,
                       expand_paths, generic_name, lookup_unit, new_report, numeric, read_csv_strict,
                       read_each, unique_names, UNITS)
 
 from sumo_drvpw.data.adapters import labels as candidate_labels
+from sumo_drvpw.data.adapters.header_hints import close_label, header_cells, no_header_hint, skip_hint
 from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
 
 FORMAT = "columns"
 SUFFIXES = (".csv", ".txt", ".tsv", ".parquet", ".pq")
 OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values", "keep_unmapped",
            "skip_rows", "dbc", "mdf_trips", "isotp_layout", "soc_capacity_kwh", "time_step_s", "trip_gap_s"}
-#: lines of a CSV searched for a mapped label that is not in the header (the hint of the error)
-HEADER_SEARCH_LINES = 50
 #: the largest battery options.soc_capacity_kwh accepts [kWh] (a heavy truck's is about 1 MWh)
 MAX_SOC_CAPACITY_KWH = 2000.0
 ENTRY = {"name", "unit", "scale", "role", "na_values", "valid", *candidate_labels.KEYS}
@@ -316,66 +315,10 @@ def _read_table(path: Path, m: dict) -> pd.DataFrame:
                                dtype=str, keep_default_na=False, na_filter=False,
                                skiprows=m.get("skip_rows", 0) or None, nrows=m.get("nrows"))
     except UserError as e:  # title lines of another width above the header: say where it is
-        hint = _skip_hint(path, m)
+        hint = skip_hint(path, m)
         if hint:
             raise UserError(f"{e}{hint}") from None
         raise
-
-
-def _skip_hint(path: Path, m: dict) -> str:
-    """' (… set options.skip_rows = N)' when a mapped label sits on a line below the one read
-    as the header, else ''."""
-    for label in m["columns"]:
-        line = _header_line_of(path, m, label)
-        if line is not None and line != m.get("skip_rows", 0) + 1:
-            return (f" ('{label}' is on line {line}: the header is there, below {line - 1} other "
-                    f"line(s); set options.skip_rows = {line - 1} in {m['path']})")
-    return ""
-
-
-def _no_header_hint(raw: pd.DataFrame) -> str:
-    """' (… no header …)' when what was read as the header is mostly numbers or dates (a
-    logger's continuation file, written without the header of its first file), else ''."""
-    cells = [str(c) for c in raw.columns]
-    data = sum(is_number(c) or not pd.isna(pd.to_datetime(c, errors="coerce", format="mixed")) for c in cells)
-    if len(cells) < 2 or data < 0.5 * len(cells):
-        return ""
-    return (f" (its first line is data, not a header: '{','.join(cells[:3])[:60]},…' — a logger's "
-            "continuation file? put the header line of its other files above it)")
-
-
-def _header_line_of(path: Path, m: dict, label: str) -> int | None:
-    """The 1-based line among the first :data:`HEADER_SEARCH_LINES` of a CSV whose cells hold
-    ``label`` (a header below an app's title lines), or None."""
-    if path.suffix.lower() in (".parquet", ".pq"):
-        return None
-    try:
-        with open(path, encoding=m["encoding"], errors="replace") as f:
-            for i, line in enumerate(f, 1):
-                if i > HEADER_SEARCH_LINES:
-                    break
-                cells = [c.strip().strip('"').strip().lstrip("\ufeff") for c in line.split(m["sep"])]
-                if label in cells:
-                    return i
-    except (OSError, ValueError, LookupError):  # unreadable in that encoding: reading it says why
-        return None
-    return None
-
-
-def _close_label(label: str, labels: list[str], encoding: str) -> str:
-    """A hint naming the file's label that differs from ``label`` only by case, spacing or
-    a mis-decoded character ('°C' as 'Â°C': UTF-8 read as Latin-1, or written so), else ""."""
-    def key(x: str) -> str:
-        return "".join(str(x).replace("Â", "").replace("Ã", "").lower().split())
-    near = [c for c in labels if key(c) == key(label)]
-    if not near:
-        return ""
-    if not any("Â" in c or "Ã" in c for c in near):
-        return f" — the file has '{near[0]}': map that label"
-    latin = encoding.lower().replace("_", "-") in ("latin-1", "latin1", "iso-8859-1", "cp1252", "windows-1252")
-    return (f" — the file has '{near[0]}' (" + ("UTF-8 read as Latin-1: [options] encoding = \"utf-8\", or map "
-                                                "that label" if latin else
-                                                "its UTF-8 written twice over: map that label as it reads") + ")")
 
 
 def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
@@ -388,7 +331,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     m, notes, left_out = candidate_labels.for_file(m, labels.__contains__, path)  # each column's label here
     rep["notes"] += notes
     # (pandas reads a label written twice as 'v' and 'v.1': the header line itself is counted then)
-    cells = _header_cells(path, m) if any(c.rpartition(".")[2].isdigit() for c in labels) else []
+    cells = header_cells(path, m) if any(c.rpartition(".")[2].isdigit() for c in labels) else []
     times = {c: max(labels.count(c), cells.count(c)) for c in m["columns"]}
     twice = [c for c in m["columns"] if times[c] > 1]
     if twice:  # (the i3 logs label two columns 'Temperature Vent right [°C]', one with a space)
@@ -398,8 +341,8 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
         if label not in raw.columns:
             hint = (f" (only one column '{raw.columns[0][:40]}': wrong sep {m['sep']!r}?)"
                     if raw.shape[1] == 1 else "")
-            near = (_close_label(x, labels, m["encoding"]) for x in candidate_labels.all_labels(whole, label))
-            hint = _skip_hint(path, whole) or _no_header_hint(raw) or next((h for h in near if h), "") or hint
+            near = (close_label(x, labels, m["encoding"]) for x in candidate_labels.all_labels(whole, label))
+            hint = skip_hint(path, whole) or no_header_hint(raw) or next((h for h in near if h), "") or hint
             raise UserError(f"{path}: missing column '{label}' named in {m['path']}"
                             f"{candidate_labels.nor_others(m, label)}{hint}")
     na = tuple(m["na_values"])
@@ -460,19 +403,6 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     df = clean_time_and_speed(df, path, rep)
     df.insert(0, "trip_id", path.stem)
     return df.reset_index(drop=True), rep
-
-
-def _header_cells(path: Path, m: dict) -> list[str]:
-    """A CSV's header line as written, each label stripped ([] for Parquet, or where it cannot
-    be read so: reading the table says why)."""
-    if path.suffix.lower() in (".parquet", ".pq"):
-        return []
-    try:
-        row = pd.read_csv(path, sep=m["sep"], encoding=m["encoding"], header=None, nrows=1, dtype=str,
-                          keep_default_na=False, na_filter=False, skiprows=m.get("skip_rows", 0) or None)
-    except (ValueError, OSError, pd.errors.ParserError, pd.errors.EmptyDataError):
-        return []
-    return [str(c).strip().lstrip("\ufeff").strip() for c in row.iloc[0]] if len(row) else []
 
 
 def _valid_flag(raw: pd.DataFrame, flag: str, path: Path, label: str, m: dict, na) -> pd.Series:
