@@ -347,17 +347,18 @@ class ChainLedger:
         self.veh_time[vidx] += dt * a
         self._app[vidx] |= a > 0
         self.booked_any |= (a > 0).any(axis=0)
-        eidx = np.asarray(eidx, np.int64)
-        ne = self._edge.shape[0]
+        # the edges the step's vehicles are on, once each: a bincount per column over those
+        # (none for a chain without vehicles in this step), far cheaper than np.add.at, and
+        # not over every edge of the network (at a few vehicles, that was most of a step)
+        edges, at = np.unique(np.asarray(eidx, np.int64), return_inverse=True)
         w = np.ascontiguousarray(np.concatenate([q, d[:, None] * a], axis=1).T)
         c = q.shape[1]
-        for j in np.flatnonzero(w.any(axis=1)):  # a bincount per column (none for a chain without
-            # vehicles in this step): far cheaper than np.add.at
-            col = np.bincount(eidx, w[j], minlength=ne)
+        for j in np.flatnonzero(w.any(axis=1)):
+            col = np.bincount(at, w[j], minlength=len(edges))
             if j < c:
-                self._edge[:, j] += col
+                self._edge[edges, j] += col
             else:
-                self.edge_dist[:, j - c] += col
+                self.edge_dist[edges, j - c] += col
         return q
 
     def snapshot(self, t: float) -> None:
