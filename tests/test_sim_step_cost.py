@@ -6,7 +6,10 @@ from __future__ import annotations
 import numpy as np
 
 from sumo_drvpw.model.chain import EnergyChain
+from sumo_drvpw.model.equations import Equation
+from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim.chain import ChainLedger
+from sumo_drvpw.sim.ledger import EquationSet
 
 
 def test_chain_book_works_on_the_steps_edges_only(monkeypatch):
@@ -35,3 +38,27 @@ def test_chain_book_works_on_the_steps_edges_only(monkeypatch):
     assert max(lengths) <= 4, f"bincount over {max(lengths)} bins for 4 vehicles"
     np.testing.assert_allclose(led.edge, want_edge, rtol=1e-12, atol=1e-9)
 
+
+def test_equation_booking_no_vehicle_of_the_step_is_not_evaluated():
+    """An equation that applies to no vehicle of the step is not evaluated (its rows are 0):
+    one needing a signal the step lacks raises nothing, and the others' powers are those they
+    have alone."""
+    n, rng = 6, np.random.default_rng(1)
+    x = Inputs(rng.uniform(0, 40, n), rng.uniform(-3, 3, n), rng.uniform(-0.1, 0.1, n),
+               rng.uniform(-5, 5, n), rng.uniform(800, 3000, n), np.full(n, 1.2))
+    eqs = [Equation("a", {"acc": 1.1, "grade": 1.0, "m_v1": 0.132}),
+           Equation("needs_load", {"acc": 1.0, "[heater_w]": 1.0}),
+           Equation("c", {"acc": 1.0, "roll_v2": 0.001, "one": 300.0}, mass_kg=1530.9)]
+    app = np.ones((n, 3))
+    app[:, 1] = 0.0
+    app[:2, 2] = 0.0
+    es = EquationSet(eqs)
+    pc = es.category_powers(x, app)
+    assert not pc[:, 1].any()
+    alone = EquationSet([eqs[0], eqs[2]]).category_powers(x, app[:, [0, 2]])
+    np.testing.assert_array_equal(pc[:, [0, 2]], alone)
+    # the cached selection follows the step's vehicles: now the second equation books one
+    app[3, 1] = 1.0
+    x.signals["heater_w"] = np.full(n, 500.0)
+    pc = es.category_powers(x, app)
+    assert pc[3, 1].sum() != 0 and not pc[[0, 1, 2, 4, 5], 1].any()

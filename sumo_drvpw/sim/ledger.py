@@ -75,6 +75,7 @@ class EquationSet:
                     cat = LEDGER_CATEGORIES.index(parse_term(t).category)
                     entries.append((terms.index(t), i * C + cat, float(c)))
             self.groups.append((mass, [parse_term(t) for t in terms], entries, mean))
+        self._live_cache: dict = {}  # equations booking a vehicle of a step → their groups
         self.uses_other = any(parse_term(t).category == "other"
                               for e in self.equations for t in e.term_names)
         #: an equation has the ``radial`` factor: the loop passes the yaw rate
@@ -88,6 +89,25 @@ class EquationSet:
         self.rot_fixed = [(i, e.terms.get("acc", 1.0) - 1.0, float(e.provenance.get("rotating_mass_kg", 0.0)))
                           for i, e in enumerate(self.equations)
                           if e.mass_kg is None and e.provenance.get("rotating_mass_fixed")]
+
+    def _live_groups(self, app) -> list:
+        """The groups with only the equations that apply to a vehicle of the step (``app``
+        (n, E) > 0; None: all) and the terms those read: an equation no vehicle of the step
+        books is not evaluated (a bare SUMO config carries a built-in equation per vClass,
+        most of them booking no vehicle most of the time); its rows stay 0."""
+        live = None if app is None else np.asarray(app) != 0
+        key = None if live is None else np.packbits(live.any(axis=0)).tobytes()
+        got = self._live_cache.get(key)
+        if got is None:
+            C, on = len(LEDGER_CATEGORIES), None if live is None else live.any(axis=0)
+            got = []
+            for mass, terms, entries, mean in self.groups:
+                kept = [e for e in entries if on is None or on[e[1] // C]]
+                if kept:
+                    need = sorted({u for u, _, _ in kept})
+                    got.append((mass, [(u, terms[u]) for u in need], kept, mean))
+            self._live_cache[key] = got
+        return got
 
     def category_powers(self, x: Inputs, app: np.ndarray | None = None, x_mean: Inputs | None = None) -> np.ndarray:
         """Power [W] per sample, equation and category, shape (n, E, C).
@@ -104,11 +124,11 @@ class EquationSet:
         """
         E, C, n = len(self.equations), len(LEDGER_CATEGORIES), len(x)
         out = np.zeros((E * C, n))
-        for mass, terms, entries, mean in self.groups:
+        for mass, terms, entries, mean in self._live_groups(app):
             xm = (x_mean if mean and x_mean is not None else x).with_mass(mass)
             if mean and mass is not None and x_mean is not None and "load_kg" in x_mean.signals:
                 xm = replace(xm, mass=xm.mass + np.asarray(x_mean.signals["load_kg"], float))
-            vals = [t.evaluate(xm) for t in terms]
+            vals = {u: t.evaluate(xm) for u, t in terms}
             for u, row, c in entries:
                 out[row] += c * vals[u]
         if self.rot_fixed:  # (m' + m_rot)·v̄·a at the booked mass m' (riders, a setMass), not (1 + m_rot/m)·m'
