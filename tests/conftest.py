@@ -14,6 +14,11 @@ settings.register_profile("repeatable", derandomize=True, print_blob=True)
 settings.register_profile("explore", derandomize=False, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 
+# No network table kept on disk between tests (sim/net_cache.py): a test that patches the
+# network's computation sees it run, and the user's cache folder is not written
+# (tests/test_sim_net_cache.py turns the cache on in a folder of its own)
+os.environ["SUMO_DRVPW_CACHE"] = "off"
+
 REPO = Path(__file__).resolve().parent.parent
 BUNDLED_LOG = REPO / "sumo_drvpw" / "data" / "builtin" / "logs" / "prius3_testtrack.parquet"
 

@@ -112,8 +112,7 @@ class Network:
     def bin_index(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Index into the per-bin arrays (``profile``, ``clipped``, ``raw``,
         ``heading_deg``) of lane numbers ``lane`` at positions ``pos`` [m]."""
-        b = np.minimum((np.maximum(pos, 0.0) * (1.0 / BIN_M)).astype(np.int64),
-                       self.lane_nbins[lane] - 1)
+        b = np.minimum((np.maximum(pos, 0.0) * (1.0 / BIN_M)).astype(np.int64), self.lane_nbins[lane] - 1)
         return self.lane_offset[lane] + b
 
     def heading(self, lane: np.ndarray, pos: np.ndarray) -> np.ndarray:
@@ -315,8 +314,7 @@ class LaneNumbers:
                 f"(the first: {self.first!r}) were not booked: is the scenario's network the one SUMO runs?")
 
 
-def lane_profile(shape3d, length: float, window: float, max_rad: float,
-                 behind: bool = False, nodes: bool = False):
+def lane_profile(shape3d, length: float, window: float, max_rad: float, behind: bool = False, nodes: bool = False):
     """Robust slope profile of one lane: (θ per bin [rad], clipped flags[, z at the bin
     edges [m] with ``nodes``]).
 
@@ -480,8 +478,7 @@ PARKED_BEYOND_EDGE_M = 0.1
 PARKED_MAX_OFFSET_M = 50.0
 
 
-def off_lane(net: Network, lane: np.ndarray, pos: np.ndarray, x: np.ndarray,
-             y: np.ndarray) -> np.ndarray:
+def off_lane(net: Network, lane: np.ndarray, pos: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Whether points (x, y) [m] lie beside their lanes (lane numbers ``lane``, SUMO
     position ``pos``): farther from the lane's centre line than half its width plus
     ``PARKED_BEYOND_EDGE_M``, and nearer than ``PARKED_MAX_OFFSET_M``. A vehicle on its
@@ -501,8 +498,13 @@ def off_lane(net: Network, lane: np.ndarray, pos: np.ndarray, x: np.ndarray,
     return out
 
 
-def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
-                 max_rad: float = 0.25) -> Network:
+def load_network(path: Path, rule: RoadClassRule, window: float = 20.0, max_rad: float = 0.25) -> Network:
+    """:func:`read_network`, kept on disk for the next load of the same file, settings and code (sim/net_cache.py)."""
+    from sumo_drvpw.sim.net_cache import cached_network
+    return cached_network(path, (rule, float(window), float(max_rad)), lambda: read_network(path, rule, window, max_rad))
+
+
+def read_network(path: Path, rule: RoadClassRule, window: float = 20.0, max_rad: float = 0.25) -> Network:
     """Read a SUMO network with sumolib and build the edge/lane table (see module doc)."""
     import sumolib
 
@@ -572,8 +574,7 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
     lane_end = np.concatenate(
         [np.full(len(e.getLanes()), min(ln.getLength() for ln in e.getLanes()))
          for e in with_lanes] or [np.zeros(0)])
-    lane_own_edge = np.repeat(np.arange(len(with_lanes)),
-                              [len(e.getLanes()) for e in with_lanes]).astype(np.int64)
+    lane_own_edge = np.repeat(np.arange(len(with_lanes)), [len(e.getLanes()) for e in with_lanes]).astype(np.int64)
     nb = np.array([len(p) for p in profs], np.int64)
     off = np.concatenate([[0], np.cumsum(nb)[:-1]]).astype(np.int64)
     all_classes = list(rule.classes)
@@ -594,7 +595,6 @@ def load_network(path: Path, rule: RoadClassRule, window: float = 20.0,
         lane_opposite=np.array([lane_index.get(getattr(ln, "getNeigh", lambda: None)() or "", -1)
                                 for ln in lanes], np.int64),
         lane_steep=np.maximum(np.array(steep, float), np.tan(max_rad)),
-        has_elevation=z_len > 0.0,
-        z_share=float(z_len / max(float(lane_length.sum()), 1e-9)))
+        has_elevation=z_len > 0.0, z_share=float(z_len / max(float(lane_length.sum()), 1e-9)))
     out.lane_spread = lane_spread(out)
     return out

@@ -1,0 +1,119 @@
+"""The network table of a run kept on disk, keyed by what it is made of: the net file's bytes,
+the road-class rule and slope settings, and the code that builds it.
+
+:func:`sumo_drvpw.sim.network.load_network` reads a network with sumolib and computes every
+lane's slope profile, heading and centre line: seconds on a city's network (2.0 s of CPU on
+DLR's port_lübeck, 6.8 s on MoST), paid again by every run of the same scenario. The table it returns
+is kept in a cache folder, one file per key; the next load of the same network with the
+same settings and the same code reads it back instead. The key is a SHA-256 over
+
+- the net file's content (not its name or time: a file rewritten in place is a new key),
+- the settings (the :class:`RoadClassRule`'s repr, the slope window and limit),
+- every source file of the installed sumo_drvpw package, and the Python, numpy and sumolib
+  versions (a changed computation, or a pickle another numpy reads differently, is a new key).
+
+Folder: ``SUMO_DRVPW_CACHE`` (a path; ``off``, ``0`` or empty: no cache), else
+``$XDG_CACHE_HOME/sumo-drvpw/networks``, else ``~/.cache/sumo-drvpw/networks``. It is made
+readable by its owner only, and a file is read only from a folder the user owns that
+nobody else may write (a pickle runs code when read). Files are written whole (a temporary
+file renamed), the oldest beyond :data:`KEEP` are removed, and any failure of the cache
+(unwritable folder, disk full, a damaged file) falls back to reading the network.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import pickle
+import stat
+import sys
+import tempfile
+from pathlib import Path
+
+#: cached networks kept (the most recently used); a city's table is tens of MB
+KEEP = 8
+_CODE: list[str] = []  # the package's code digest, computed once per process
+
+
+def cache_dir() -> Path | None:
+    """The cache folder (see module doc), or None when caching is off."""
+    env = os.environ.get("SUMO_DRVPW_CACHE")
+    if env is not None:
+        return None if env.strip().lower() in ("", "0", "off", "no", "false") else Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "sumo-drvpw" / "networks"
+
+
+def _code_digest() -> str:
+    if not _CODE:
+        import numpy
+        import sumolib
+
+        h = hashlib.sha256(f"{sys.version}|{numpy.__version__}|{getattr(sumolib, '__version__', '')}"
+                           .encode())
+        pkg = Path(__file__).resolve().parent.parent
+        for p in sorted(pkg.rglob("*.py")):
+            h.update(str(p.relative_to(pkg)).encode())
+            h.update(p.read_bytes())
+        _CODE.append(h.hexdigest())
+    return _CODE[0]
+
+
+def network_key(path: Path, settings: tuple) -> str:
+    """The cache key of net file ``path`` loaded with ``settings`` (see module doc)."""
+    h = hashlib.sha256(_code_digest().encode())
+    h.update(repr(settings).encode())
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _private(folder: Path) -> bool:
+    """The folder is the user's and nobody else may write in it."""
+    st = folder.stat()
+    return (not hasattr(os, "getuid") or st.st_uid == os.getuid()) and not st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+
+
+def cached_network(path: Path, settings: tuple, build):
+    """``build()``'s network table, from the cache when it holds one for ``path`` and
+    ``settings``, else built and kept there. The table's ``path`` is ``path``."""
+    folder = cache_dir()
+    file = None
+    if folder is None:
+        return build()
+    try:
+        key = network_key(Path(path), settings)
+        file = folder / f"net-{key[:40]}.pickle"
+        if file.is_file() and _private(folder):
+            with open(file, "rb") as f:
+                net = pickle.load(f)
+            os.utime(file)  # (the most recently used are kept)
+            net.path = Path(path)
+            return net
+    except Exception:  # a damaged file (kept again below), no file to hash: read the network
+        pass
+    net = build()
+    if file is not None:
+        try:
+            _store(folder, file, net)
+        except Exception:  # a cache that cannot be written does not fail the run
+            pass
+    return net
+
+
+def _store(folder: Path, file: Path, net) -> None:
+    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+    if not _private(folder):
+        return
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".net-", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            pickle.dump(net, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, file)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+    old = sorted(folder.glob("net-*.pickle"), key=lambda p: p.stat().st_mtime, reverse=True)
+    for p in old[KEEP:]:
+        p.unlink(missing_ok=True)

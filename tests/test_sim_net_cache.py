@@ -1,0 +1,100 @@
+"""The network table kept on disk (sim/net_cache.py): read back for the same net file,
+settings and code; read anew when any of them changed or the kept file is damaged; never
+read from a folder others may write."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sumo_drvpw.sim import network
+from sumo_drvpw.sim.network import load_network, read_network
+from sumo_drvpw.sim.scenario import RoadClassRule
+
+CITY = Path(network.__file__).parent / "builtin" / "networks" / "city.net.xml"
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """The cache on, in a folder of the test's; returns the list of networks read."""
+    monkeypatch.setenv("SUMO_DRVPW_CACHE", str(tmp_path / "cache"))
+    reads = []
+
+    def counting(path, *a, **k):
+        reads.append(Path(path))
+        return read_network(path, *a, **k)
+
+    monkeypatch.setattr(network, "read_network", counting)
+    return reads
+
+
+def _same(a, b) -> None:
+    for k, v in vars(a).items():
+        if k == "path":
+            continue
+        w = getattr(b, k)
+        if isinstance(v, np.ndarray):
+            np.testing.assert_array_equal(v, w, err_msg=k)
+        elif isinstance(v, list) and v and isinstance(v[0], np.ndarray):
+            for x, y in zip(v, w):
+                np.testing.assert_array_equal(x, y, err_msg=k)
+        else:
+            assert v == w, k
+
+
+def test_second_load_reads_the_kept_table(cache, tmp_path):
+    net = tmp_path / "a.net.xml"
+    shutil.copy(CITY, net)
+    first = load_network(net, RoadClassRule())
+    again = load_network(net, RoadClassRule())
+    assert cache == [net], "the second load read the network again"
+    _same(first, again)
+    _same(read_network(net, RoadClassRule()), again)
+    other = tmp_path / "b.net.xml"  # the same content elsewhere: the same table, its own path
+    shutil.copy(CITY, other)
+    assert load_network(other, RoadClassRule()).path == other and cache == [net]
+
+
+def test_changed_file_or_settings_read_anew(cache, tmp_path):
+    net = tmp_path / "a.net.xml"
+    shutil.copy(CITY, net)
+    load_network(net, RoadClassRule())
+    load_network(net, RoadClassRule(), max_rad=0.2)  # other slope limit
+    load_network(net, RoadClassRule(types={"x": "service"}))  # other road-class rule
+    assert len(cache) == 3
+    text = net.read_text(encoding="utf-8")  # the file rewritten in place: one lane 1 m shorter
+    i = text.index('length="') + len('length="')
+    j = text.index('"', i)
+    net.write_text(text[:i] + f"{float(text[i:j]) - 1.0:.2f}" + text[j:], encoding="utf-8")
+    changed = load_network(net, RoadClassRule())
+    assert len(cache) == 4
+    _same(read_network(net, RoadClassRule()), changed)
+
+
+def test_damaged_or_foreign_cache_is_not_read(cache, tmp_path):
+    net = tmp_path / "a.net.xml"
+    shutil.copy(CITY, net)
+    load_network(net, RoadClassRule())
+    folder = tmp_path / "cache"
+    (kept,) = folder.glob("net-*.pickle")
+    kept.write_bytes(b"not a pickle")
+    _same(read_network(net, RoadClassRule()), load_network(net, RoadClassRule()))
+    assert len(cache) == 2
+    load_network(net, RoadClassRule())
+    assert len(cache) == 2  # (kept again whole)
+    os.chmod(folder, 0o777)  # others may write in it: a pickle there is not read
+    load_network(net, RoadClassRule())
+    assert len(cache) == 3
+
+
+def test_cache_off(cache, tmp_path, monkeypatch):
+    monkeypatch.setenv("SUMO_DRVPW_CACHE", "off")
+    net = tmp_path / "a.net.xml"
+    shutil.copy(CITY, net)
+    load_network(net, RoadClassRule())
+    load_network(net, RoadClassRule())
+    assert len(cache) == 2 and not (tmp_path / "cache").exists()
