@@ -29,14 +29,18 @@ def test_chain_book_works_on_the_steps_edges_only(monkeypatch):
         return real(x, weights, minlength)
 
     monkeypatch.setattr(np, "bincount", spy)
-    for _ in range(30):
+    for k in range(40):
         n = 4
-        vidx, eidx = np.arange(n), rng.choice([7, 7, 123, 49_999, 2], n)
+        vidx = np.arange(n)  # some steps one vehicle per edge, some several on one
+        eidx = rng.permutation([7, 123, 49_999, 2]) if k % 2 else rng.choice([7, 7, 123, 49_999, 2], n)
+        calls = len(lengths)
         full = led.expand(led.book(vidx, eidx, rng.uniform(0, 20, n), 0.5, rng.normal(0, 2e4, (n, 2))))
-        for i, e in enumerate(eidx):  # the step's quantities, summed on their edges
-            want_edge[e] += full[i]
+        assert not (k % 2 and len(lengths) > calls), "a bincount for a step of one vehicle per edge"
+        for e in range(2):  # the step's quantities summed per edge over the whole network, as before
+            for q in range(8):
+                want_edge[:, e, q] += real(eidx, full[:, e, q], minlength=n_edges)
     assert max(lengths) <= 4, f"bincount over {max(lengths)} bins for 4 vehicles"
-    np.testing.assert_allclose(led.edge, want_edge, rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(led.edge, want_edge)  # to the last bit
 
 
 def test_equation_booking_no_vehicle_of_the_step_is_not_evaluated():

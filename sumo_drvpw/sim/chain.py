@@ -276,12 +276,14 @@ class ChainLedger:
         n = p.shape[0]
         q = np.zeros((n, len(self._cols)))
         j = 0
+        on = None if app is None else np.asarray(app) > 0
+        live = None if on is None else on.any(axis=0)
         for e in self.active:
             ch = self.chains[e]
             keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
                     ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
-            sel = None if app is None else np.asarray(app)[:, e] > 0
-            if sel is not None and not sel.any():
+            sel = None if on is None else on[:, e]
+            if sel is not None and not live[e]:
                 j += len(keys)
                 continue
             vv = v if v_mean is None or e not in self._motor else v_mean
@@ -350,7 +352,12 @@ class ChainLedger:
         # the edges the step's vehicles are on, once each: a bincount per column over those
         # (none for a chain without vehicles in this step), far cheaper than np.add.at, and
         # not over every edge of the network (at a few vehicles, that was most of a step)
-        edges, at = np.unique(np.asarray(eidx, np.int64), return_inverse=True)
+        eidx = np.asarray(eidx, np.int64)
+        edges, at = np.unique(eidx, return_inverse=True)
+        if len(edges) == len(eidx):  # one vehicle per edge: each edge's sum is 0 + its row
+            self._edge[eidx] += q + 0.0
+            self.edge_dist[eidx] += d[:, None] * a + 0.0
+            return q
         w = np.ascontiguousarray(np.concatenate([q, d[:, None] * a], axis=1).T)
         c = q.shape[1]
         for j in np.flatnonzero(w.any(axis=1)):
