@@ -98,3 +98,33 @@ def test_cache_off(cache, tmp_path, monkeypatch):
     load_network(net, RoadClassRule())
     load_network(net, RoadClassRule())
     assert len(cache) == 2 and not (tmp_path / "cache").exists()
+
+
+def test_least_recently_used_removed_beyond_the_bounds(cache, tmp_path, monkeypatch):
+    """At most KEEP files and MAX_BYTES are kept; a file read is used (kept over older ones)."""
+    from sumo_drvpw.sim import net_cache
+
+    nets = []
+    for k in range(4):  # four networks of different content (one lane 0.5·k m shorter)
+        net = tmp_path / f"{k}.net.xml"
+        text = CITY.read_text(encoding="utf-8")
+        i = text.index('length="') + len('length="')
+        j = text.index('"', i)
+        net.write_text(text[:i] + f"{float(text[i:j]) - 0.5 * k:.2f}" + text[j:], encoding="utf-8")
+        nets.append(net)
+    folder = tmp_path / "cache"
+    monkeypatch.setattr(net_cache, "KEEP", 2)
+    for k, net in enumerate(nets[:3]):
+        load_network(net, RoadClassRule())
+        key = net_cache.network_key(net, (RoadClassRule(), 20.0, 0.25))
+        os.utime(folder / f"net-{key[:40]}.pickle", (1000.0 + k, 1000.0 + k))  # (distinct times)
+    assert len(list(folder.glob("net-*.pickle"))) == 2
+    assert len(cache) == 3
+    load_network(nets[0], RoadClassRule())  # the oldest was removed: read again
+    assert len(cache) == 4
+    size = max(p.stat().st_size for p in folder.glob("net-*.pickle"))
+    monkeypatch.setattr(net_cache, "MAX_BYTES", size + 1)  # room for one only
+    load_network(nets[3], RoadClassRule())
+    assert len(list(folder.glob("net-*.pickle"))) == 1
+    load_network(nets[3], RoadClassRule())
+    assert len(cache) == 5  # the newest kept

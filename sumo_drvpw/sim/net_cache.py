@@ -16,8 +16,9 @@ Folder: ``SUMO_DRVPW_CACHE`` (a path; ``off``, ``0`` or empty: no cache), else
 ``$XDG_CACHE_HOME/sumo-drvpw/networks``, else ``~/.cache/sumo-drvpw/networks``. It is made
 readable by its owner only, and a file is read only from a folder the user owns that
 nobody else may write (a pickle runs code when read). Files are written whole (a temporary
-file renamed), the oldest beyond :data:`KEEP` are removed, and any failure of the cache
-(unwritable folder, disk full, a damaged file) falls back to reading the network.
+file renamed), and any failure of the cache
+(unwritable folder, disk full, a damaged file) falls back to reading the network. At most
+:data:`KEEP` files and :data:`MAX_BYTES` are kept, the least recently used removed first.
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ from pathlib import Path
 
 #: cached networks kept (the most recently used); a city's table is tens of MB
 KEEP = 8
+#: … and at most this many bytes of them (the newest is kept whatever its size)
+MAX_BYTES = 1 << 30
 _CODE: list[str] = []  # the package's code digest, computed once per process
 
 
@@ -114,6 +117,9 @@ def _store(folder: Path, file: Path, net) -> None:
     except BaseException:
         os.unlink(tmp)
         raise
-    old = sorted(folder.glob("net-*.pickle"), key=lambda p: p.stat().st_mtime, reverse=True)
-    for p in old[KEEP:]:
-        p.unlink(missing_ok=True)
+    kept = sorted(((p.stat().st_mtime, p.stat().st_size, p) for p in folder.glob("net-*.pickle")), reverse=True)
+    total = 0
+    for k, (_, size, p) in enumerate(kept):
+        total += size
+        if k and (k >= KEEP or total > MAX_BYTES):
+            p.unlink(missing_ok=True)
