@@ -716,3 +716,22 @@ def test_a_stop_s_signal_delivered_again_is_raised_once(monkeypatch):
     clock[0] += 5.0
     with pytest.raises(KeyboardInterrupt):
         sg._on_sigint(signal.SIGINT, None)
+
+
+def test_a_stop_pressed_again_and_again_still_stops(monkeypatch):
+    """The window of a stop's repeat runs from the signal raised, not from the last one
+    recorded: Ctrl-C pressed every 0.6 s where a library swallows the first stop was absorbed
+    for ever (each press moved the window on)."""
+    import sumo_drvpw.cli._signals as sg
+
+    clock = [100.0]
+    monkeypatch.setattr(sg.time, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(sg, "_INTERRUPTED", []), monkeypatch.setattr(sg, "_TERMINATED", [])
+    monkeypatch.setattr(sg, "_LAST", [float("-inf")])
+    with pytest.raises(KeyboardInterrupt):
+        sg._on_sigint(signal.SIGINT, None)
+    clock[0] += 0.6
+    sg._on_sigint(signal.SIGINT, None)  # within RESENT_S of the raised one: recorded
+    clock[0] += 0.6  # 1.2 s after the raised one, 0.6 s after the last
+    with pytest.raises(KeyboardInterrupt):
+        sg._on_sigint(signal.SIGINT, None)

@@ -15,7 +15,7 @@ class _Terminated(KeyboardInterrupt):
 
 _TERMINATED = []  # set when SIGTERM arrived: an interrupted command then exits 143, not 130
 _INTERRUPTED = []  # set when SIGINT arrived
-_LAST = [float("-inf")]  # when the last of them arrived [s, time.monotonic]
+_LAST = [float("-inf")]  # when the last of them raised arrived [s, time.monotonic]
 
 #: a stop's signal delivered again within this time [s] is the same stop, recorded and not
 #: raised again: a library that caught it sends it once more when it lets go (pyarrow's
@@ -27,10 +27,13 @@ RESENT_S = 1.0
 
 
 def _again() -> bool:
-    """Whether a signal arriving now repeats the stop already under way."""
+    """Whether a signal arriving now repeats the stop already under way: within RESENT_S of
+    the signal last raised (a repeat recorded does not move the window on, or a Ctrl-C
+    pressed again and again would never stop a run whose first stop a library swallowed)."""
     now = time.monotonic()
     again = bool(_TERMINATED or _INTERRUPTED) and now - _LAST[0] < RESENT_S
-    _LAST[0] = now
+    if not again:
+        _LAST[0] = now
     return again
 
 
