@@ -1,6 +1,8 @@
 """Loading a SUMO network for a run (sim/network.py ``load_network``: sumolib's reader plus
 every lane's slope profile, heading and centre line) against sumolib's reader alone, the
-baseline measured in the same run: medians of ``--repeats`` loads.
+baseline measured in the same run: medians of ``--repeats`` loads. The load timed is
+``read_network``, what ``load_network`` does when the table is not kept on disk
+(sim/net_cache.py): the cache would make every repeat after the first a read of the kept file.
 
 By default a grid built with SUMO's netgenerate (``--grid-number``² junctions, 2 lanes each
 way, no elevation: most public scenarios' networks carry none); ``--net`` loads a given
@@ -51,14 +53,14 @@ def main() -> None:
 
     import sumolib
 
-    from sumo_drvpw.sim.network import load_network
+    from sumo_drvpw.sim.network import read_network
     from sumo_drvpw.sim.scenario import RoadClassRule
 
     with tempfile.TemporaryDirectory() as d:
         net = Path(a.net) if a.net else _grid(Path(d), a.grid_number)
         base = _time(lambda: sumolib.net.readNet(str(net), withInternal=True), a.repeats)
-        ours = _time(lambda: load_network(net, RoadClassRule()), a.repeats)
-        n = load_network(net, RoadClassRule())
+        ours = _time(lambda: read_network(net, RoadClassRule()), a.repeats)  # (not the kept table)
+        n = read_network(net, RoadClassRule())
     b, o = statistics.median(base), statistics.median(ours)
     print(f"network {net.name}: {len(n.lane_ids)} lanes, z on {100 * n.z_share:.3g} % of their length")
     print(f"sumolib reader: median {b:.2f} s {[round(x, 2) for x in base]}")
