@@ -128,3 +128,21 @@ def test_least_recently_used_removed_beyond_the_bounds(cache, tmp_path, monkeypa
     assert len(list(folder.glob("net-*.pickle"))) == 1
     load_network(nets[3], RoadClassRule())
     assert len(cache) == 5  # the newest kept
+
+
+def test_a_kept_table_read_is_used_when_its_time_cannot_be_set(cache, tmp_path, monkeypatch):
+    """A table read whole is used though its time cannot be set afterwards (another run's
+    pruning removed the file between the read and os.utime): it was thrown away and the
+    network read anew."""
+    from sumo_drvpw.sim import net_cache
+
+    net = tmp_path / "a.net.xml"
+    shutil.copy(CITY, net)
+    load_network(net, RoadClassRule())
+
+    def gone(*a, **k):
+        raise FileNotFoundError("removed by another run")
+
+    monkeypatch.setattr(net_cache.os, "utime", gone)
+    load_network(net, RoadClassRule())
+    assert cache == [net], "the table read back was thrown away"

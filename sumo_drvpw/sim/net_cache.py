@@ -91,7 +91,10 @@ def cached_network(path: Path, settings: tuple, build):
         if file.is_file() and _private(folder):
             with open(file, "rb") as f:
                 net = pickle.load(f)
-            os.utime(file)  # (the most recently used are kept)
+            try:
+                os.utime(file)  # (the most recently used are kept)
+            except OSError:  # gone since (another run's pruning): the table read is whole all the same
+                pass
             net.path = Path(path)
             return net
     except Exception:  # a damaged file (kept again below), no file to hash: read the network
