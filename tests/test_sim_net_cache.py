@@ -146,3 +146,22 @@ def test_a_kept_table_read_is_used_when_its_time_cannot_be_set(cache, tmp_path, 
     monkeypatch.setattr(net_cache.os, "utime", gone)
     load_network(net, RoadClassRule())
     assert cache == [net], "the table read back was thrown away"
+
+
+def test_a_killed_run_s_partial_file_is_removed_later(cache, tmp_path):
+    """A run killed while writing (SIGKILL, out of memory) left its '.net-*.tmp' for ever,
+    outside the KEEP and MAX_BYTES bounds; one older than STALE_TMP_S goes at the next store,
+    a younger one (another run writing now) stays."""
+    from sumo_drvpw.sim import net_cache
+
+    folder = tmp_path / "cache"
+    folder.mkdir(mode=0o700)
+    old, young = folder / ".net-old.tmp", folder / ".net-young.tmp"
+    old.write_bytes(b"x" * 1000)
+    young.write_bytes(b"y")
+    t = old.stat().st_mtime - getattr(net_cache, "STALE_TMP_S", 3600.0) - 60
+    os.utime(old, (t, t))
+    net = tmp_path / "a.net.xml"
+    shutil.copy(CITY, net)
+    load_network(net, RoadClassRule())
+    assert not old.exists() and young.exists()

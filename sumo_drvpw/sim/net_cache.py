@@ -18,7 +18,8 @@ readable by its owner only, and a file is read only from a folder the user owns 
 nobody else may write (a pickle runs code when read). Files are written whole (a temporary
 file renamed), and any failure of the cache
 (unwritable folder, disk full, a damaged file) falls back to reading the network. At most
-:data:`KEEP` files and :data:`MAX_BYTES` are kept, the least recently used removed first.
+:data:`KEEP` files and :data:`MAX_BYTES` are kept, the least recently used removed first; a
+partial file a killed run left goes once older than :data:`STALE_TMP_S`.
 """
 
 from __future__ import annotations
@@ -29,12 +30,15 @@ import pickle
 import stat
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 #: cached networks kept (the most recently used); a city's table is tens of MB
 KEEP = 8
 #: … and at most this many bytes of them (the newest is kept whatever its size)
 MAX_BYTES = 1 << 30
+#: a partial file ('.net-*.tmp') older than this [s] is a killed run's, removed at the next store
+STALE_TMP_S = 3600.0
 _CODE: list[str] = []  # the package's code digest, computed once per process
 
 
@@ -120,6 +124,12 @@ def _store(folder: Path, file: Path, net) -> None:
     except BaseException:
         os.unlink(tmp)
         raise
+    for p in folder.glob(".net-*.tmp"):  # a run killed while writing (SIGKILL) left it
+        try:
+            if p.stat().st_mtime < time.time() - STALE_TMP_S:
+                p.unlink()
+        except OSError:
+            pass
     kept = sorted(((p.stat().st_mtime, p.stat().st_size, p) for p in folder.glob("net-*.pickle")), reverse=True)
     total = 0
     for k, (_, size, p) in enumerate(kept):
