@@ -461,3 +461,29 @@ def test_the_commands_say_a_pause_in_logging(tmp_path, capsys):
     assert main(["compare", str(_write(tmp_path, _drive("T", 10.0, n_s=300.0, seed=4), "whole.csv")),
                  "--vehicle", "prius3", "--equation", "vsp_ldv1999", "--out", str(tmp_path / "w")]) == 0
     assert "pause(s) in logging" not in capsys.readouterr().out
+
+
+def test_a_logger_s_no_fix_elevation_is_named(tmp_path, capsys):
+    """A public Twizy log writes ALT = -111 where its GPS has no fix (122 samples in three
+    runs, its roads at 40-120 m): read as heights, only the grades steeper than any road were
+    counted, the value unnamed. A value the elevation jumps into, steeper than any road, at
+    least twice and far from its trip is named; a hilltop stopped at in whole metres, or one
+    glitch, is not."""
+    from sumo_drvpw.cli import main as cli_main
+
+    n = 1200
+    base = _log(n, hz=1.0).assign(speed_mps=10.0, power_w=3000.0, mass_kg=1500.0)
+    hills = np.round(80.0 + 40.0 * np.sin(np.arange(n) / 150.0))  # whole metres, 40-120 m
+    nofix = hills.copy()
+    nofix[200:240] = nofix[700:760] = -111.0
+    log = read_log([_write(tmp_path, base.assign(elevation_m=nofix), "nofix.csv")])
+    assert log.counts["elevation_no_fix_values"] == [-111.0] and log.counts["elevation_no_fix_samples"] == 100
+    once = hills.copy()
+    once[500] = 400.0  # one glitch
+    for z in (hills, once):
+        log = read_log([_write(tmp_path, base.assign(elevation_m=z), "plain.csv")])
+        assert "elevation_no_fix_values" not in log.counts
+    v = 10.0 + 4.0 * np.sin(base["time_s"].to_numpy() / 15.0)  # the CLI needs a varying speed
+    f = _write(tmp_path, base.assign(elevation_m=nofix, speed_mps=v), "cli.csv")
+    assert cli_main(["calibrate", str(f), "--out", str(tmp_path / "e.toml"), "--candidates", "acc,grade,roll"]) == 0
+    assert "jumps to -111 m and back, 100 sample(s)" in capsys.readouterr().out

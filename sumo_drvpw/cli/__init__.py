@@ -353,6 +353,11 @@ def note_counts(counts: dict) -> None:
     if n:
         print(f"note: {n} sample(s) without elevation (no GPS fix?): the elevation is bridged between the "
               "samples that have it, and held flat before the first and after the last")
+    held = counts.get("elevation_no_fix_values") or []
+    if held:  # (data/conditions.no_fix_elevations)
+        print(f"note: elevation_m jumps to {', '.join(f'{x:g}' for x in held[:5])} m and back, {int(counts.get('elevation_no_fix_samples', 0) or 0)} "
+              "sample(s) in all, far from the rest of their trips: a logger's value for 'no fix', not a height — "
+              "declare it no reading (na_values in a mapping's column) so that the elevation is bridged over it")
     n = int(counts.get("excluded_grade_outlier", 0) or 0)
     if n:
         lim = float(counts.get("grade_outlier_limit", 0.35))

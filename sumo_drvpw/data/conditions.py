@@ -87,6 +87,34 @@ def source_counts(counts: dict) -> dict:
     return out
 
 
+#: how far [m] the elevation jumps, steeper than any road, into a value a logger writes where
+#: it has no fix (an RSK Twizy log: ALT = −111 in 122 samples of three trips, its roads at
+#: 40–120 m): entered so at least twice and this far from its trip's median, it is no height
+NO_FIX_JUMP_M = 50.0
+
+
+def no_fix_elevations(z: np.ndarray, dist: np.ndarray, trip_codes: np.ndarray, use: np.ndarray,
+                      steepest: float) -> tuple[list[float], int]:
+    """The elevation values that are a logger's 'no fix' value, not a height, and the samples
+    holding them: values the elevation jumps into, within a trip, by more than
+    :data:`NO_FIX_JUMP_M` and steeper than ``steepest`` (rise over distance) at least twice,
+    each more than :data:`NO_FIX_JUMP_M` from its trip's median (a hilltop logged in whole
+    metres, stopped at, is none: no jump leads there). ``use``: the rows whose grade comes
+    from ``z``; ``dist``: the distance driven within each trip [m]."""
+    idx = np.flatnonzero(use & np.isfinite(z))
+    if len(idx) < 3:
+        return [], 0
+    zz, dd, tc = z[idx], dist[idx], trip_codes[idx]
+    dz = np.abs(np.diff(zz))
+    jump = (tc[1:] == tc[:-1]) & (dz > NO_FIX_JUMP_M) & (dz > steepest * np.abs(np.diff(dd)))
+    if not jump.any():
+        return [], 0
+    far = np.abs(zz - pd.Series(zz).groupby(tc).transform("median").to_numpy()) > NO_FIX_JUMP_M
+    vals, cnt = np.unique(zz[1:][jump & far[1:]], return_counts=True)
+    vals = vals[cnt >= 2]
+    return [float(v) for v in vals], int(np.isin(zz, vals).sum())
+
+
 def derive_conditions(df: pd.DataFrame, t: np.ndarray, v: np.ndarray, trip_codes: np.ndarray,
                       start: np.ndarray, opt, counts: dict) -> None:
     """``grade_rad``, ``wind_mps`` and ``air_density_kgm3`` of a validated table (``df``
@@ -135,6 +163,9 @@ def derive_conditions(df: pd.DataFrame, t: np.ndarray, v: np.ndarray, trip_codes
         theta = np.where(elev, grade_from_elevation(z, dist, trip_codes, opt.grade_window_m), theta)
         # a stretch without elevation (no GPS fix) is bridged or held: said (no grade energy there)
         counts["elevation_missing_samples"] = int((elev & ~np.isfinite(z)).sum())
+        held, n_held = no_fix_elevations(z, dist, trip_codes, elev, opt.grade_outlier)
+        if held:  # a logger's value for 'no fix' read as a height: said (the user maps it away)
+            counts["elevation_no_fix_values"], counts["elevation_no_fix_samples"] = held, n_held
     df["grade_rad"] = theta
     counts["grade_rows"] = _rows(GRADE_SOURCES[:2] + (
         f"elevation_m over distance: 1 m grid, {opt.grade_window_m:g} m moving average, gradient",
