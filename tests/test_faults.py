@@ -695,18 +695,24 @@ def test_no_usable_temporary_folder_is_one_line(tmp_path, monkeypatch, capsys):
     assert not (tmp_path / "o").exists()
 
 
-def test_a_stop_s_signal_delivered_again_is_raised_once(monkeypatch):
-    """A library that caught SIGINT sends it once more when it lets go (pyarrow's
-    SignalStopHandler): a second KeyboardInterrupt raised while the first one's exit was
-    written escaped main, and the process died of SIGINT (exit -2 after the one line; a
-    fresh clone's CI, about 1 run in 30 of test_signal_during_calibrate). Repeated within
-    RESENT_S it is recorded, not raised; later it stops again (Ctrl-C pressed once more)."""
+def _signal_clock(monkeypatch):
+    """cli/_signals with a clock the test sets ([seconds]) and no stop recorded yet."""
     import sumo_drvpw.cli._signals as sg
 
     clock = [100.0]
     monkeypatch.setattr(sg.time, "monotonic", lambda: clock[0])
     monkeypatch.setattr(sg, "_INTERRUPTED", []), monkeypatch.setattr(sg, "_TERMINATED", [])
     monkeypatch.setattr(sg, "_LAST", [float("-inf")])
+    return sg, clock
+
+
+def test_a_stop_s_signal_delivered_again_is_raised_once(monkeypatch):
+    """A library that caught SIGINT sends it once more when it lets go (pyarrow's
+    SignalStopHandler): a second KeyboardInterrupt raised while the first one's exit was
+    written escaped main, and the process died of SIGINT (exit -2 after the one line; a
+    fresh clone's CI, about 1 run in 30 of test_signal_during_calibrate). Repeated within
+    RESENT_S it is recorded, not raised; later it stops again (Ctrl-C pressed once more)."""
+    sg, clock = _signal_clock(monkeypatch)
     with pytest.raises(KeyboardInterrupt):
         sg._on_sigint(signal.SIGINT, None)
     clock[0] += 0.01
@@ -722,12 +728,7 @@ def test_a_stop_pressed_again_and_again_still_stops(monkeypatch):
     """The window of a stop's repeat runs from the signal raised, not from the last one
     recorded: Ctrl-C pressed every 0.6 s where a library swallows the first stop was absorbed
     for ever (each press moved the window on)."""
-    import sumo_drvpw.cli._signals as sg
-
-    clock = [100.0]
-    monkeypatch.setattr(sg.time, "monotonic", lambda: clock[0])
-    monkeypatch.setattr(sg, "_INTERRUPTED", []), monkeypatch.setattr(sg, "_TERMINATED", [])
-    monkeypatch.setattr(sg, "_LAST", [float("-inf")])
+    sg, clock = _signal_clock(monkeypatch)
     with pytest.raises(KeyboardInterrupt):
         sg._on_sigint(signal.SIGINT, None)
     clock[0] += 0.6

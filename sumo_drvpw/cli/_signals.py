@@ -37,18 +37,20 @@ def _again() -> bool:
     return again
 
 
-def _on_sigterm(signum, frame):
+def _stop(record: list, signum, raised: type) -> None:
+    """Record ``signum`` and raise ``raised`` unless it repeats the stop under way."""
     again = _again()
-    _TERMINATED.append(signum)
+    record.append(signum)
     if not again:
-        raise _Terminated()
+        raise raised()
+
+
+def _on_sigterm(signum, frame):
+    _stop(_TERMINATED, signum, _Terminated)
 
 
 def _on_sigint(signum, frame):
-    again = _again()
-    _INTERRUPTED.append(signum)
-    if not again:
-        raise KeyboardInterrupt()
+    _stop(_INTERRUPTED, signum, KeyboardInterrupt)
 
 
 def _quiet_signal_hook(prev):

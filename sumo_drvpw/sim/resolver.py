@@ -478,6 +478,11 @@ def builtin_equations_for(vclass: str) -> list[str]:
     return [n for n in CONFIG_EQUATIONS if vclass in (load_equation(n).vclasses or ())]
 
 
+def few(items: list[str], most: int = 3) -> str:
+    """The first ``most`` of ``items`` joined, and how many more: a warning's list kept short."""
+    return ", ".join(items[:most]) + (f" and {len(items) - most} more" if len(items) > most else "")
+
+
 def carrier_warning(carriers: dict[str, dict], skipped: dict[str, int], idle: list[str]) -> str:
     """One line, for a run where a chain equation booked no vehicle (``idle``) or vehicles
     were left with no equation (``skipped``: vClass → count) because their emissionClass
@@ -488,8 +493,7 @@ def carrier_warning(carriers: dict[str, dict], skipped: dict[str, int], idle: li
         eqs = tuple(e for e in c["not_booked_by"] if e in idle) if not skipped else tuple(c["not_booked_by"])
         if eqs:
             groups.setdefault((c["carrier"], eqs), []).append(f"{vt} ({c['emission_class']})")
-    parts = [f"{', '.join(eqs)} not for {carrier}: " + ", ".join(v[:3])
-             + (f" and {len(v) - 3} more" if len(v) > 3 else "") for (carrier, eqs), v in sorted(groups.items())]
+    parts = [f"{', '.join(eqs)} not for {carrier}: " + few(v) for (carrier, eqs), v in sorted(groups.items())]
     left = (" — vehicles with no equation left were not booked: " + ", ".join(
         f"{c} {n}" for c, n in sorted(skipped.items()))) if skipped else ""
     return ("chain equations book only vehicles whose emissionClass names their fuel or the battery: "
@@ -504,7 +508,7 @@ def booked_as_warning(booked_as: dict[str, dict]) -> str:
     groups: dict[tuple[str, str], list[str]] = {}
     for vt, b in sorted(booked_as.items()):
         groups.setdefault((b["vclass"], b["booked_as"]), []).append(f"{vt} ({b['from']})")
-    parts = [f"{c} → {body}: " + ", ".join(v[:3]) + (f" and {len(v) - 3} more" if len(v) > 3 else "")
+    parts = [f"{c} → {body}: " + few(v)
              for (c, body), v in sorted(groups.items())]
     return ("vTypes whose vClass does not say what vehicle they are were booked as the one "
             "their emissionClass, guiShape, id or length names: " + "; ".join(parts)
@@ -520,8 +524,7 @@ def no_hybrid_chain_warning(powertrains: dict[str, dict]) -> str | None:
         return None
     parts = [f"{vt} ({p['emission_class']}: {', '.join(p['no_hybrid_chain'])})" for vt, p in hits.items()]
     return ("vTypes whose emissionClass names a hybrid were booked by a conventional engine's fuel "
-            "chain, as no hybrid chain is made for their vClass: " + ", ".join(parts[:5])
-            + (f" and {len(parts) - 5} more" if len(parts) > 5 else "")
+            "chain, as no hybrid chain is made for their vClass: " + few(parts, 5)
             + " — that chain idles at every stop and recuperates nothing, so it books a hybrid's town "
             "driving high (full hybrid cars burn 33–56 % less than their petrol twins on the EPA's hot "
             "UDDS, docs/epa-hybrid.md); give these vTypes a hybrid chain (a fuel chain calibrated on "
@@ -537,7 +540,7 @@ def calibration_mass_warning(mass_far: dict[str, dict]) -> str | None:
             groups.setdefault((eq, m), []).append(f"{vt} ({f['mass_kg']:,.0f} kg)")
     if not groups:
         return None
-    parts = [f"{eq} (calibrated at {m:,.0f} kg): " + ", ".join(v[:3]) + (f" and {len(v) - 3} more" if len(v) > 3 else "")
+    parts = [f"{eq} (calibrated at {m:,.0f} kg): " + few(v)
              for (eq, m), v in sorted(groups.items())]
     return (f"equations book vTypes {MASS_FAR:g} times as heavy or as light as the vehicle they were "
             "calibrated on, or more: " + "; ".join(parts) + " — their acc, grade and roll terms scale with the vType's "
@@ -565,7 +568,7 @@ def fixed_mass_warning(fixed_far: dict[str, dict]) -> str | None:
     if not listing:
         return None
     parts = [f"{eq} (at {f['mass_kg']:,.0f} kg, calibrated at {f['calibrated_at_kg']:,.0f} kg): "
-             + ", ".join(f["vtypes"][:3]) + (f" and {len(f['vtypes']) - 3} more" if len(f["vtypes"]) > 3 else "")
+             + few(f["vtypes"])
              for eq, f in listing.items()]
     return (f"equations book every vType at a fixed mass_kg {MASS_FAR:g} times as heavy or as light as the "
             "vehicle they were calibrated on, or more: " + "; ".join(parts) + " — their acc, grade and roll "
@@ -581,6 +584,6 @@ def untold_copies_warning(untold: dict[str, str]) -> str:
     ids = sorted(untold)
     return ("the FCD names vehicles' own vType copies (<type>@<id>: SUMO makes one when a script calls "
             "setMass or another vType setter on the vehicle) but not their mass, so they were booked at "
-            "their type's mass: " + ", ".join(ids[:5]) + (f" and {len(ids) - 5} more" if len(ids) > 5 else "")
+            "their type's mass: " + few(ids, 5)
             + " — where a script set a mass, give it as [vtypes.\"<type>@<id>\"] mass_kg in the scenario "
             "(one mass per copy; summary.json assumptions.untold_copy_masses)")
