@@ -472,11 +472,12 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
         raise UserError(f"{fmt}: no input files")
     for r in reports:
         r["notes"] = _fold_unit_notes(r["notes"])
-    ids = [r["trip_id"] for r in reports]
-    dup = sorted({i for i in ids if ids.count(i) > 1})
+    ids = [set(map(str, pd.unique(f["trip_id"]))) if "trip_id" in f else {str(r["trip_id"])}
+           for f, r in zip(frames, reports)]  # (a file's trip column may hold several)
+    dup = sorted({i for k, s in enumerate(ids) for i in s if any(i in o for o in ids[k + 1:])})
     if dup:
         raise UserError(f"{fmt}: trip_id {dup[0]!r} comes from more than one file: "
-                        + ", ".join(r["file"] for r in reports if r["trip_id"] == dup[0]))
+                        + ", ".join(r["file"] for r, s in zip(reports, ids) if dup[0] in s))
     copies = _copies(frames, reports)
     for f, r in zip(frames, reports):
         _refuse_infinite(f, r)

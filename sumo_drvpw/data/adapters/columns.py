@@ -462,6 +462,12 @@ def _split_trips(df, path, rep):
             rep["dropped"][k] = rep["dropped"].get(k, 0) + n
         rep["notes"] += [f"trip {trip}: {n}" + (_restart_hint(g) if n.startswith("time going backwards") else "")
                          for n in sub["notes"]]
+        again = np.flatnonzero(np.diff(np.asarray(g.index)) > 1)  # its rows resume after other trips'
+        if len(again):
+            rep["notes"].append(f"trip {trip}: its rows come in {len(again) + 1} runs between other trips' "
+                                f"(again from data row {g.index[again[0] + 1]}), read as one trip: a number "
+                                "reused for another recording? give each its own id (options.trip_gap_s "
+                                "splits a trip at its pauses)")
     out = pd.concat(parts)
     rep["kept"] = int(len(out))
     rep["trip_id"] = ",".join(map(str, out["trip_id"].unique()))
@@ -512,6 +518,8 @@ def read(paths, columns):
         frames, reports = read_each(groups, lambda p: mdf.read_file(p, m, groups[p]))
     else:
         frames, reports = read_each(files, lambda f: read_file(f, m))
+        if any(e["name"] == "trip_id" for e in m["columns"].values()):
+            frames = qualify_shared_trips(frames, reports)
     if m["trip_gap_s"] is not None:  # (before the SOC's energy: a pause's charging is no trip's)
         frames = [split_at_pauses(f, r, m["trip_gap_s"]) for f, r in zip(frames, reports)]
     if m["soc_capacity_kwh"] is not None:  # the battery's energy estimated from its SOC
@@ -519,6 +527,30 @@ def read(paths, columns):
 
         frames = [soc_counters(f, r, m["soc_capacity_kwh"]) for f, r in zip(frames, reports)]
     return frames, reports, [f"mapping {m['path']}"]
+
+
+def qualify_shared_trips(frames: list[pd.DataFrame], reports: list[dict]) -> list[pd.DataFrame]:
+    """Trip ids that a trip column gives in more than one file (trips numbered 1, 2, … per
+    vehicle or per day, one file each) made unique: every trip of such a file named
+    ``<file stem>-<trip>``, said in its notes. Before, the files' trips of one number were
+    written as one trip (its rows from both files, its time running twice), which every
+    command then refused."""
+    ids = [set(map(str, pd.unique(f["trip_id"]))) for f in frames]
+    shared = {i for k, s in enumerate(ids) for i in s if any(i in o for j, o in enumerate(ids) if j != k)}
+    if not shared:
+        return frames
+    out = []
+    for f, r, s in zip(frames, reports, ids):
+        if s & shared:
+            stem = Path(r["file"]).stem
+            f = f.copy()
+            f["trip_id"] = stem + "-" + f["trip_id"].astype(str)
+            both = sorted(s & shared, key=lambda x: (len(x), x))
+            r["notes"].append(f"trip id(s) {', '.join(both[:3])}{' …' if len(both) > 3 else ''} also in another "
+                              f"file: this file's trips named '{stem}-<trip>' (e.g. '{stem}-{both[0]}')")
+            r["trip_id"] = ",".join(map(str, pd.unique(f["trip_id"])))
+        out.append(f)
+    return out
 
 
 def split_at_pauses(df: pd.DataFrame, rep: dict, gap_s: float) -> pd.DataFrame:
