@@ -246,3 +246,21 @@ def test_cold_starts_say_which_chains_book_the_trips_warm(tmp_path, capsys):
                      "--cold-start-share", "0.5"]) == 2
     assert "say different things" in capsys.readouterr().err
     assert not (tmp_path / "o2").exists()
+
+
+@pytest.mark.skipif(not HAVE_CYCLES, reason=f"shared cycles not found at {DATA}")
+def test_the_measured_trucks_section_survives_regeneration(tmp_path, monkeypatch):
+    """docs/hdv-fuel.json's ``measured`` (the chain on two measured trucks, made by hand: the
+    logs are not in the shared data) is kept when the report is regenerated, as the Hamburg
+    run's litres are, and rendered with its commands."""
+    from sumo_drvpw.validation import hdv_fuel as h
+
+    committed = json.loads((REPO / "docs" / "hdv-fuel.json").read_text(encoding="utf-8"))
+    out = tmp_path / "hdv.md"
+    out.with_suffix(".json").write_text(json.dumps(committed), encoding="utf-8")
+    monkeypatch.setattr(h, "write_builtins", lambda *a, **k: [])  # (the package's files stay as they are)
+    assert h.main([str(out), str(DATA)]) == 0
+    res = json.loads(out.with_suffix(".json").read_text(encoding="utf-8"))
+    assert res["measured"] == committed["measured"]
+    md = out.read_text(encoding="utf-8")
+    assert "## Measured: two class-8 tractors" in md and committed["measured"]["compare"] in md

@@ -84,7 +84,7 @@ def render(res: dict) -> str:
                   f"{_n(idle, 2)} L/h.", ""]
     L += ["### Reading", "", READING, ""]
     L += _hamburg(res.get("hamburg"))
-    L += MEASURED
+    L += _measured(res.get("measured"))
     L += ["## References", ""] + [f"- [{k}] {v}" for k, v in SOURCES.items()] + [""]
     return "\n".join(L)
 
@@ -135,56 +135,57 @@ def _hamburg(h: dict | None) -> list[str]:
     return L
 
 
-#: the combination truck's chain against two measured trucks: measured by hand with the commands
-#: it names (the logs are not in the shared data, so this module does not recompute it)
-MEASURED = [
-    "## Measured: two class-8 tractors with a 20-t trailer (`moves_combination_truck_diesel`)", "",
-    "Not computed by this module (the logs are not in the shared data): measured 2026-11-29 with the "
-    "commands below. Data: UC Riverside's on-road PEMS tests of heavy-duty diesel trucks, as Wang & Rakha, "
-    "'Fuel consumption model for heavy duty diesel trucks: model development and testing', Transp. Res. D 55 "
-    "(2017) 127–141, used them; two trucks' files are public in github.com/Torreskai0722/FEAD "
-    "(`VT-Dataset/veh002_all.csv`, `veh003_all.csv`; 20,876 and 22,152 rows at 1 Hz, no time column): "
-    "speed (mph), the engine's fuel rate (g/s), engine speed, elevation (−48 to 811 m), test phase. **No "
-    "licence is stated** there: read for this check only, nothing of it is in this repository. The trucks "
-    "are 1997–2001 class-8 tractors (7.0–8.1 t, 10.8–14.6 L, 330–475 hp; the paper's Table 1, which tractor "
-    "each file holds is not said) pulling UC Riverside's mobile emissions laboratory (MERL, about 45,000 lb): "
-    "booked here at 28,000 kg (ESTIMATE: 7.6 t + 20.4 t), vehicle file `type = \"direct\"`, diesel, 12.7 L.", "",
-    "```toml", "[options]", "time_step_s = 1        # no time column: 1 Hz",
-    "trip_gap_s = 60        # each file numbers its test phases 1, 2, … anew per run: split at the pauses",
-    "[columns.\"vel (mph)\"]", "name = \"speed_mps\"", "unit = \"mph\"", "[columns.\"elevation (m)\"]",
-    "name = \"elevation_m\"", "unit = \"m\"", "[columns.\"fuel (g/s)\"]", "name = \"fuel_rate_gps\"",
-    "unit = \"g/s\"", "[columns.\"phase_num\"]", "name = \"trip_id\"", "```", "",
-    "`sumo-drvpw import columns veh002_all.csv veh003_all.csv --columns vt_truck.toml --out vt.parquet` "
-    "(52 trips, `veh002-1_1` …; the files share phase numbers: docs/adapters.md, 'Trips numbered per file'), "
-    "then `sumo-drvpw compare vt.parquet --vehicle vt_truck.toml --equation moves_combination_truck_diesel "
-    "--out cmp`; trips grouped by their mean speed and the height they end at against where they start "
-    "(47 trips of ≥ 0.1 L):", "",
-    "| trips | n | measured [L] | booked at 28.0 t [L] | error | trips' errors | at MOVES's 24.4 t |",
-    "|---|---|---|---|---|---|---|",
-    "| slow and flat (mean 24–40 km/h; moving, the engine at a median 1,630 rpm) | 28 | 68.0 | 49.2 | −28 % | −57 … −6 % "
-    "| −34 % |",
-    "| fast (mean > 45 km/h), ending 36–131 m lower | 9 | 97.6 | 101.4 | +4 % | −6 … +56 % | −3 % |",
-    "| fast, ending 79–233 m higher | 6 | 141.4 | 152.0 | +7 % | −0 … +19 % | −1 % |",
-    "| standing and creeping (mean < 10 km/h) | 4 | 2.1 | 2.3 | +5 % | −15 … +33 % | +3 % |",
-    "| all | 47 | 309.1 | 304.9 | **−1.4 %** | mean abs. 21.9 %, worst −57 % | −8.6 %, mean abs. 25.6 % |", "",
-    "Standing, the trucks burned 2.87 L/h (veh002, fuel flowing all of its 2,983 s) and 1.03 L/h (veh003, "
-    "its engine off on 23 % of 5,133 s); the chain books 4.09 L/h.", "",
-    "Reading: the total balances only because two errors of opposite sign cancel on these tests. (1) At low "
-    "load the chain books too little: moving with less than 30 kW at the wheels (either way) the trucks burned "
-    "99 kW of fuel at a median 1,289 rpm, the chain books 49 kW; at 50–100 kW 298 against 248 kW. Its "
-    "zero-output fuel is the no-load idle (at about 650 rpm) plus the accessories, but a diesel's friction "
-    "and pumping grow with engine speed, and a truck in gear turns twice its idle speed: the slow phases, in "
-    "low gear, are booked 28 % low — an urban truck of a SUMO run would be, going by them, booked about a "
-    "quarter low. (2) At high load it books too much: at 200–250 kW at the wheels it matches (661 against "
-    "647 kW), above 300 kW (4 % of the moving samples, a mean 394 kW asked by the road load from 1-Hz "
-    "speed and elevation) it books 1,135 kW where the engines burned 726: an engine's rated power caps its "
-    "fuel, and the chain has no cap. Mass is a third lever: at the MOVES source mass (a vType without one) "
-    "the whole is 8.6 % low. What would carry the physics is a zero-output fuel for a moving engine above "
-    "the idle's (an engine-speed term) and the engine's power cap; one data set of two 1997–2001 trucks is no "
-    "ground to retune the built-in, so it stays as sourced.", "",
-    "`calibrate --target fuel --equation moves_combination_truck` on one truck, `compare` on the other (held "
-    "out truck against truck): the Willans line has one zero-output fuel for standing and moving, and comes "
-    "out at 99.1 and 95.6 kW (flagged implausible: 3.5 and 7.1 times the fuel the log burns standing) with "
-    "0.51 and 0.49 at the margin, flattened by the noise in the driving power; it books that fuel at every "
-    "stop, and its trips' errors on the other truck are larger than the built-in's (mean abs. 33.2 % and "
-    "29.3 % against 21.4 % and 22.3 %).", ""]
+def _measured(m: dict | None) -> list[str]:
+    """The combination truck's chain against two measured trucks: measured by hand with the
+    commands the JSON's ``measured`` names (the logs are not in the shared data, so the study
+    does not recompute it; its ``main`` keeps the key); nothing without it."""
+    if not m:
+        return []
+    return [
+        "## Measured: two class-8 tractors with a 20-t trailer (`moves_combination_truck_diesel`)", "",
+        "Not computed by this module (the logs are not in the shared data): measured 2026-11-29 with the "
+        "commands below. Data: UC Riverside's on-road PEMS tests of heavy-duty diesel trucks, as Wang & Rakha, "
+        "'Fuel consumption model for heavy duty diesel trucks: model development and testing', Transp. Res. D 55 "
+        "(2017) 127–141, used them; two trucks' files are public in github.com/Torreskai0722/FEAD "
+        "(`VT-Dataset/veh002_all.csv`, `veh003_all.csv`; 20,876 and 22,152 rows at 1 Hz, no time column): "
+        "speed (mph), the engine's fuel rate (g/s), engine speed, elevation (−48 to 811 m), test phase. **No "
+        "licence is stated** there: read for this check only, nothing of it is in this repository. The trucks "
+        "are 1997–2001 class-8 tractors (7.0–8.1 t, 10.8–14.6 L, 330–475 hp; the paper's Table 1, which tractor "
+        "each file holds is not said) pulling UC Riverside's mobile emissions laboratory (MERL, about 45,000 lb): "
+        "booked here at 28,000 kg (ESTIMATE: 7.6 t + 20.4 t), vehicle file `type = \"direct\"`, diesel, 12.7 L.", "",
+        "```toml", "[options]", "time_step_s = 1        # no time column: 1 Hz",
+        "trip_gap_s = 60        # each file numbers its test phases 1, 2, … anew per run: split at the pauses",
+        "[columns.\"vel (mph)\"]", "name = \"speed_mps\"", "unit = \"mph\"", "[columns.\"elevation (m)\"]",
+        "name = \"elevation_m\"", "unit = \"m\"", "[columns.\"fuel (g/s)\"]", "name = \"fuel_rate_gps\"",
+        "unit = \"g/s\"", "[columns.\"phase_num\"]", "name = \"trip_id\"", "```", "",
+        f"`{m['import']}` (52 trips, `veh002-1_1` …; the files share phase numbers: docs/adapters.md, "
+        f"'Trips numbered per file'), then `{m['compare']}`; trips grouped by their mean speed and the height they end at against where they start "
+        "(47 trips of ≥ 0.1 L):", "",
+        "| trips | n | measured [L] | booked at 28.0 t [L] | error | trips' errors | at MOVES's 24.4 t |",
+        "|---|---|---|---|---|---|---|",
+        "| slow and flat (mean 24–40 km/h; moving, the engine at a median 1,630 rpm) | 28 | 68.0 | 49.2 | −28 % | −57 … −6 % "
+        "| −34 % |",
+        "| fast (mean > 45 km/h), ending 36–131 m lower | 9 | 97.6 | 101.4 | +4 % | −6 … +56 % | −3 % |",
+        "| fast, ending 79–233 m higher | 6 | 141.4 | 152.0 | +7 % | −0 … +19 % | −1 % |",
+        "| standing and creeping (mean < 10 km/h) | 4 | 2.1 | 2.3 | +5 % | −15 … +33 % | +3 % |",
+        "| all | 47 | 309.1 | 304.9 | **−1.4 %** | mean abs. 21.9 %, worst −57 % | −8.6 %, mean abs. 25.6 % |", "",
+        "Standing, the trucks burned 2.87 L/h (veh002, fuel flowing all of its 2,983 s) and 1.03 L/h (veh003, "
+        "its engine off on 23 % of 5,133 s); the chain books 4.09 L/h.", "",
+        "Reading: the total balances only because two errors of opposite sign cancel on these tests. (1) At low "
+        "load the chain books too little: moving with less than 30 kW at the wheels (either way) the trucks burned "
+        "99 kW of fuel at a median 1,289 rpm, the chain books 49 kW; at 50–100 kW 298 against 248 kW. Its "
+        "zero-output fuel is the no-load idle (at about 650 rpm) plus the accessories, but a diesel's friction "
+        "and pumping grow with engine speed, and a truck in gear turns twice its idle speed: the slow phases, in "
+        "low gear, are booked 28 % low — an urban truck of a SUMO run would be, going by them, booked about a "
+        "quarter low. (2) At high load it books too much: at 200–250 kW at the wheels it matches (661 against "
+        "647 kW), above 300 kW (4 % of the moving samples, a mean 394 kW asked by the road load from 1-Hz "
+        "speed and elevation) it books 1,135 kW where the engines burned 726: an engine's rated power caps its "
+        "fuel, and the chain has no cap. Mass is a third lever: at the MOVES source mass (a vType without one) "
+        "the whole is 8.6 % low. What would carry the physics is a zero-output fuel for a moving engine above "
+        "the idle's (an engine-speed term) and the engine's power cap; one data set of two 1997–2001 trucks is no "
+        "ground to retune the built-in, so it stays as sourced.", "",
+        f"`{m['calibrate']}` on one truck, `compare` on the other (held out truck against truck): the "
+        "Willans line has one zero-output fuel for standing and moving, and comes out at 99.1 and 95.6 kW (flagged implausible: 3.5 and 7.1 times the fuel the log burns standing) with "
+        "0.51 and 0.49 at the margin, flattened by the noise in the driving power; it books that fuel at every "
+        "stop, and its trips' errors on the other truck are larger than the built-in's (mean abs. 33.2 % and "
+        "29.3 % against 21.4 % and 22.3 %).", ""]
