@@ -75,6 +75,10 @@ def test_a_trip_number_resumed_after_other_trips_is_named(tmp_path):
     m.write_text(MAPPING, encoding="utf-8")
     df, rep = read("columns", [_pems(tmp_path / "veh.csv", [1, 2, 1], 1.0)], m)
     assert (df["trip_id"] == "1").sum() == 60
-    note = [n for n in rep["files"][0]["notes"] if "runs between other trips'" in n]
-    assert len(note) == 1 and note[0].startswith("trip 1: its rows come in 2 runs")
-    assert "again from data row 60" in note[0] and "trip_gap_s" in note[0]
+    note = [n for n in rep["files"][0]["notes"] if "resume after other trips' rows" in n]
+    assert len(note) == 1 and note[0].startswith("1 trip id(s)")
+    assert "trip 1 in 2 runs, again from data row 60" in note[0] and "trip_gap_s" in note[0]
+    m.write_text(MAPPING.replace("time_step_s = 1\n", "time_step_s = 1\ntrip_gap_s = 5\n"), encoding="utf-8")
+    df, rep = read("columns", [_pems(tmp_path / "veh.csv", [1, 2, 1], 1.0)], m)  # split: the note is moot
+    assert sorted(df["trip_id"].unique()) == ["1_1", "1_2", "2"]
+    assert not any("resume after other trips' rows" in n for n in rep["files"][0]["notes"])

@@ -399,7 +399,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
     names = unique_names([n for n, _ in out])
     df = pd.DataFrame(dict(zip(names, (x for _, x in out))), index=raw.index)
     if "trip_id" in df:
-        return _split_trips(df, path, rep)
+        return _split_trips(df, path, rep, split_at_pauses=m["trip_gap_s"] is not None)
     df = clean_time_and_speed(df, path, rep)
     df.insert(0, "trip_id", path.stem)
     return df.reset_index(drop=True), rep
@@ -451,10 +451,11 @@ def _seconds(t: pd.Series, time_format, rep: dict) -> pd.Series:
     return pd.Series(x - np.nanmin(x), index=s.index)
 
 
-def _split_trips(df, path, rep):
+def _split_trips(df, path, rep, split_at_pauses=False):
     """Clean time per trip when the file carries its own trip_id column; each trip's notes
-    (why rows went: time going backwards, …) are the file's, named by trip."""
-    parts = []
+    (why rows went: time going backwards, …) are the file's, named by trip. A trip whose rows
+    resume after other trips' is noted, unless the mapping splits trips at their pauses."""
+    parts, resumed = [], []
     for trip, g in df.groupby("trip_id", sort=False):
         sub = new_report(path, str(trip), len(g))
         parts.append(clean_time_and_speed(g, f"{path} (trip {trip})", sub))
@@ -464,10 +465,12 @@ def _split_trips(df, path, rep):
                          for n in sub["notes"]]
         again = np.flatnonzero(np.diff(np.asarray(g.index)) > 1)  # its rows resume after other trips'
         if len(again):
-            rep["notes"].append(f"trip {trip}: its rows come in {len(again) + 1} runs between other trips' "
-                                f"(again from data row {g.index[again[0] + 1]}), read as one trip: a number "
-                                "reused for another recording? give each its own id (options.trip_gap_s "
-                                "splits a trip at its pauses)")
+            resumed.append(f"trip {trip} in {len(again) + 1} runs, again from data row {g.index[again[0] + 1]}")
+    if resumed and not split_at_pauses:
+        rep["notes"].append(f"{len(resumed)} trip id(s) whose rows resume after other trips' rows, each read as "
+                            f"one trip ({'; '.join(resumed[:3])}{' …' if len(resumed) > 3 else ''}): a number "
+                            "reused for another recording? give each its own id (options.trip_gap_s splits a "
+                            "trip at its pauses)")
     out = pd.concat(parts)
     rep["kept"] = int(len(out))
     rep["trip_id"] = ",".join(map(str, out["trip_id"].unique()))
