@@ -264,3 +264,17 @@ def test_the_measured_trucks_section_survives_regeneration(tmp_path, monkeypatch
     assert res["measured"] == committed["measured"]
     md = out.read_text(encoding="utf-8")
     assert "## Measured: two class-8 tractors" in md and committed["measured"]["compare"] in md
+
+
+@pytest.mark.skipif(not HAVE_CYCLES, reason=f"shared cycles not found at {DATA}")
+def test_a_study_without_a_measured_section_gains_none(tmp_path):
+    """The studies sharing study_main (mc-fuel, hdv-hybrid) keep their JSON as it was: no
+    empty 'measured' key is written where none was."""
+    from sumo_drvpw.validation.hdv_fuel import study_main
+
+    out = tmp_path / "study.md"
+    out.with_suffix(".json").write_text(json.dumps({"run": {"km": 1.0}}), encoding="utf-8")
+    args = (str(out), str(DATA))
+    assert study_main(args, "m", "x.md", "RUN", "run", lambda d: {}, None, lambda r: "report\n", lambda: None) == 0
+    res = json.loads(out.with_suffix(".json").read_text(encoding="utf-8"))
+    assert "measured" not in res and res["run"] == {"km": 1.0}

@@ -393,8 +393,10 @@ def study_main(argv, module: str, default_out: str, run_arg: str, run_key: str, 
             res[run_key] = run_fn(Path(args[2]))
         elif out.with_suffix(".json").is_file():
             res[run_key] = json.loads(out.with_suffix(".json").read_text(encoding="utf-8")).get(run_key)
-        if out.with_suffix(".json").is_file():  # a comparison on measured logs made by hand: kept
-            res["measured"] = json.loads(out.with_suffix(".json").read_text(encoding="utf-8")).get("measured")
+        measured = (json.loads(out.with_suffix(".json").read_text(encoding="utf-8")).get("measured")
+                    if out.with_suffix(".json").is_file() else None)
+        if measured:  # a comparison on measured logs made by hand (not recomputed): kept
+            res["measured"] = measured
     except UserError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
