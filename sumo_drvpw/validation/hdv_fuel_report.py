@@ -178,7 +178,7 @@ def _measured(m: dict | None) -> list[str]:
         "and pumping grow with engine speed, and a truck in gear turns twice its idle speed: the slow phases, in "
         "low gear, are booked 28 % low — an urban truck of a SUMO run would be, going by them, booked about a "
         "quarter low. (2) At high load it books too much: at 200–250 kW at the wheels it matches (661 against "
-        "647 kW), above 300 kW (4 % of the moving samples, a mean 394 kW asked by the road load from 1-Hz "
+        "647 kW), above 300 kW (5 % of the moving samples, a mean 394 kW asked by the road load from 1-Hz "
         "speed and elevation) it books 1,135 kW where the engines burned 726: an engine's rated power caps its "
         "fuel, and the chain has no cap. Mass is a third lever: at the MOVES source mass (a vType without one) "
         "the whole is 8.6 % low. What would carry the physics is a zero-output fuel for a moving engine above "
