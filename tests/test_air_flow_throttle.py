@@ -20,12 +20,14 @@ from sumo_drvpw.model.constants import AFR_STOICH_GASOLINE, FUELS
 from sumo_drvpw.model.equations import load_equation
 
 
-def _obd_log(tmp_path, manifold):
+def _obd_log(tmp_path, manifold, highway=False):
     """A petrol-like OBD log: a planted Willans line's fuel as mass air flow; ``manifold``:
     the intake manifold pressure [kPa] as a function of the driving power's share of its
-    top (None: not logged)."""
+    top (None: not logged); ``highway``: a cruise at 110–130 km/h, never standing."""
     rng = np.random.default_rng(11)
     df = corpus.sine_trips(rng, 5000, 11.0)
+    if highway:
+        df["speed_mps"] = 33.0 + 2.5 * np.sin(df["time_s"].to_numpy() / 45.0) + rng.normal(0, 0.05, len(df))
     road = corpus.road_equation(tmp_path)
     x = from_frame(df).inputs()
     p = load_equation(road).power(x)
@@ -58,3 +60,25 @@ def test_an_unthrottled_engine_s_air_flow_is_said_to_be_no_fuel(tmp_path, capsys
         assert "intake_manifold_absolute_pressure_kpa" in warn[0]
     reading = load_equation(out).chain.reading["idle_fuel_power_w"]
     assert ("manifold pressure" in reading) == said, reading
+
+
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_a_petrol_engine_cruising_on_a_highway_is_not_called_unthrottled(tmp_path, capsys, engine):
+    """A throttled engine's manifold pressure rises with its load: a downsized turbo petrol
+    (200 N·m from 1 L, boost to 200 kPa) cruising at 110–130 km/h carries 12–29 kW, its
+    manifold above 50 kPa on 99.5 % of the rows, and was called unthrottled ("a diesel")
+    before. The throttle is judged where the engine idles or runs on the overrun; a
+    highway cruise has neither, and is not judged."""
+    def turbo(share):  # the share of the cruise's top power; at 2600 rpm 200 N·m give 54 kW
+        return 25.0 + 175.0 * np.clip(share * 28.5 / 54.0, 0.0, 1.0)
+
+    log, road = _obd_log(tmp_path, turbo, highway=True)
+    import pandas as pd
+
+    kpa = pd.read_csv(log)["intake_manifold_absolute_pressure_kpa"]
+    assert (kpa < 50).mean() < 0.05                    # the old rule's case: it flagged this log
+    out = tmp_path / "eq.toml"
+    assert cli_main(["calibrate", str(log), "--target", "fuel", "--equation", str(road),
+                     "--engine", engine, "--out", str(out)]) == 0
+    assert "manifold pressure" not in capsys.readouterr().out
+    assert "manifold pressure" not in load_equation(out).chain.reading["idle_fuel_power_w"]

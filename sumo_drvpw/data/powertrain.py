@@ -497,6 +497,17 @@ def fuel_from_air_flow(log, air: str) -> tuple[np.ndarray, str]:
 #: coasting (20–40 kPa; a rehearsal's petrol Toyota: below it on 85 % of its running rows); a
 #: diesel's stays near the air outside or above it (KIT's Seat Leon: on 0.1 %)
 THROTTLED_KPA = 50.0
+#: the rows a throttle is judged on: the engine running at no load — standing (idling: speed
+#: below this [m/s]) or on the overrun (decelerating at least :data:`OVERRUN_MPS2`), where a
+#: petrol engine's throttle is closed and its manifold at 20–40 kPa while a diesel's stays
+#: near the air outside. Under load a throttled engine's manifold pressure rises with the load
+#: it carries (a downsized turbo petrol cruising on a highway: above 50 kPa on all but its
+#: lift-offs), so the other rows say nothing of a throttle.
+IDLING_MPS = 0.5
+#: the deceleration [m/s²] (negative) at or below which a moving car is on the overrun
+OVERRUN_MPS2 = -0.5
+#: the fewest idling or overrun rows the throttle is judged on
+THROTTLE_ROWS_MIN = 100
 
 
 def manifold_pressure_column(df) -> str | None:
@@ -509,27 +520,34 @@ def manifold_pressure_column(df) -> str | None:
 
 
 def count_throttling(log, air_gps: np.ndarray) -> None:
-    """Into ``log.counts``: the rows with the engine running (air flowing) and a manifold
+    """Into ``log.counts``: the rows with the engine running (air flowing) at no load —
+    idling or on the overrun (:data:`IDLING_MPS`, :data:`OVERRUN_MPS2`) — and a manifold
     pressure (``throttle_rows``), and those of them below :data:`THROTTLED_KPA`
     (``throttled_rows``) — the fuel chain's check reads them (:func:`unthrottled_note`)."""
     col = manifold_pressure_column(log.df)
     counts = getattr(log, "counts", None)
     if col is None or counts is None:
         return
-    kpa = pd.to_numeric(log.df[col], errors="coerce").to_numpy(float)
-    run = np.isfinite(kpa) & (np.nan_to_num(air_gps) > 0)
+    df = log.df
+    kpa = pd.to_numeric(df[col], errors="coerce").to_numpy(float)
+    v = df["speed_mps"].to_numpy(float)
+    a = df["accel_mps2"].to_numpy(float) if "accel_mps2" in df else np.full(len(df), np.nan)
+    no_load = (v < IDLING_MPS) | (a <= OVERRUN_MPS2)
+    run = np.isfinite(kpa) & (np.nan_to_num(air_gps) > 0) & no_load
     counts["throttle_rows"], counts["throttled_rows"] = int(run.sum()), int((run & (kpa < THROTTLED_KPA)).sum())
     counts["throttle_column"] = col
 
 
 def unthrottled_note(counts: dict | None) -> str:
     """A fuel target from the air flow of an engine whose manifold pressure hardly ever falls
-    below :data:`THROTTLED_KPA` (under 5 % of at least 200 running rows): a reading's clause."""
+    below :data:`THROTTLED_KPA` where it idles or runs on the overrun (under 5 % of at least
+    :data:`THROTTLE_ROWS_MIN` such rows; a log with fewer — a highway cruise — is not judged):
+    a reading's clause."""
     n, k = int((counts or {}).get("throttle_rows", 0) or 0), int((counts or {}).get("throttled_rows", 0) or 0)
-    if n < 200 or k >= 0.05 * n:
+    if n < THROTTLE_ROWS_MIN or k >= 0.05 * n:
         return ""
     return (f"; CHECK THE TARGET: the fuel is read from the mass air flow, yet the intake manifold pressure "
             f"({counts.get('throttle_column')}) is below {THROTTLED_KPA:g} kPa on {k} of {n} rows with the engine "
-            "running ({:.1%}; a throttled petrol engine's falls to 20–40 kPa idling and coasting): an unthrottled "
+            "running idle or on the overrun ({:.1%}; a throttled petrol engine's falls to 20–40 kPa there): an unthrottled "
             "engine — a diesel, whose air flow says nothing of its fuel (declare powertrain.fuel = \"diesel\"), "
             "or a petrol engine with valve-lift control".format(k / n))
