@@ -308,7 +308,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
             " (physically constrained: the free fit was implausible)" if note else "")
     chain_input = f"driving power of {eq.name}" if src is None else f"measured driving power ({src})"
     fit = fit_chain(reduce, st)
-    check_chain(fit, veh, None, None, None, ranges=st.fitted_ranges(), where=st.where, counts=st.counts)
+    check_chain(fit, veh, None, None, None, ranges=st.fitted_ranges(), where=st.where, counts=st.counts,
+                hvac_trips=st.hvac_trips)
     eq.name = args.name or out.stem
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": st.files, "target": st.source, "road_load": road,

@@ -463,8 +463,13 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
         fit = calibrate_battery(p, m.inputs.v, m.power_w, dt, sig, loads=loads, hvac=hvac,
                                 mask=use, limit=limit, fixed=fixed, efficiency=efficiency,
                                 warmup_rate=warmup_rate, counter_view=getattr(m, "counter_view", None))
+    from sumo_drvpw.fit.chain_checks import hvac_trip_sums
+
+    trips = (hvac_trip_sums(m.inputs.trip, sig.get(hvac.get("column", "ambient_c"), np.full(len(dt), np.nan)),
+                            float(hvac.get("setpoint_c", 20.0)),
+                            dt, use) if hvac and m.target == "battery" and m.inputs.trip is not None else None)
     check_chain(fit, m.vehicle, p, m.inputs.v, use, where=m.log.describe(),  # plausibility, fitted range
-                counts=getattr(m, "counts", None))
+                counts=getattr(m, "counts", None), hvac_trips=trips)
     return fit
 
 

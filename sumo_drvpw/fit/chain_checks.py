@@ -189,12 +189,60 @@ def engine_off_note(value_w: float, powertrain: str | None, idle_l_per_h: float)
 IDENTIFY_DRIVE_W = 2000.0
 
 
+#: the fewest trips' worth of an HVAC regressor a heating or cooling gain is read from: the
+#: air temperature changes between trips and hardly within one (weather), so the gain is
+#: identified between trips, and from fewer than this many it reads whatever else sets those
+#: trips apart — route, direction, load, a battery energy read from its SOC — as the climate's
+#: draw. Counted as the effective number (Σ H)² / Σ H² of the trips' H = ∫ max(T_set − T, 0) dt
+#: (heating; cooling alike): n equal trips count n, one trip that holds it all counts 1.
+HVAC_TRIPS_MIN = 5.0
+
+
+def hvac_trip_sums(trip, temp_c, setpoint_c: float, dt_s, ok) -> dict:
+    """Per trip (its key as text): [∫ max(T_set − T, 0) dt, ∫ max(T − T_set, 0) dt] [K·s]
+    over the samples ``ok`` with a known temperature ``temp_c`` [°C]: what an HVAC gain is
+    fitted on, trip by trip (mergeable: batches hold whole trips)."""
+    t = np.asarray(temp_c, float)
+    ok = np.asarray(ok, bool) & np.isfinite(t)
+    if not ok.any():
+        return {}
+    w = np.nan_to_num(np.asarray(dt_s, float))[ok]
+    heat, cool = np.maximum(setpoint_c - t[ok], 0.0) * w, np.maximum(t[ok] - setpoint_c, 0.0) * w
+    keys, inv = np.unique(np.asarray(trip)[ok].astype(str), return_inverse=True)
+    h, c = np.bincount(inv, heat, len(keys)), np.bincount(inv, cool, len(keys))
+    return {k: [float(a), float(b)] for k, a, b in zip(keys, h, c)}
+
+
+def hvac_trips_note(name: str, value: float, by_trip: dict | None) -> str:
+    """Why an HVAC gain ``name`` (``hvac.heating_w_per_k`` or ``hvac.cooling_w_per_k``) of
+    ``value`` [W/K] is not identified, when it rests on fewer than :data:`HVAC_TRIPS_MIN`
+    trips' worth of its regressor (``by_trip``: :func:`hvac_trip_sums`); else ''."""
+    if not by_trip or not value > 0 or name not in ("hvac.heating_w_per_k", "hvac.cooling_w_per_k"):
+        return ""
+    k = 0 if name == "hvac.heating_w_per_k" else 1
+    h = np.array([x[k] for x in by_trip.values()], float)
+    if not h.sum() > 0:
+        return ""
+    n_eff = h.sum() ** 2 / float(h @ h)
+    if n_eff >= HVAC_TRIPS_MIN:
+        return ""
+    what, below = ("heating", "below") if k == 0 else ("cooling", "above")
+    share = h.max() / h.sum()
+    return (f"; NOT IDENTIFIED: the {what} rests on {n_eff:.1f} trips' worth of the temperature {below} the set-point "
+            f"({int((h > 0).sum())} of {len(h)} trips carry it, the largest {share:.0%}; at least {HVAC_TRIPS_MIN:g} "
+            f"needed): the air temperature changes between trips, hardly within one, so this gain is whatever else "
+            f"sets those trips apart (route, direction, load, a battery read from its state of charge) — "
+            f"{value * h.sum() / 3.6e6:.2f} kWh booked on them as {what}, in a car that may have no such "
+            f"system; fit it on trips across more temperatures, or leave the HVAC out")
+
+
 def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
-                where: str = "the logs", counts: dict | None = None) -> None:
+                where: str = "the logs", counts: dict | None = None, hvac_trips: dict | None = None) -> None:
     """Add the readings, fitted ranges and warnings of this module to a ``ChainFit``
     (in place; see the module docstring); ``ranges``: the fitted ranges when known (a
     streamed fit's), else from ``p_drive_w``, ``v_mps`` and ``use``; ``counts``: the log
-    reader's (a fuel target read from an unthrottled engine's air flow is said from them).
+    reader's (a fuel target read from an unthrottled engine's air flow is said from them);
+    ``hvac_trips``: :func:`hvac_trip_sums` of a chain with HVAC gains (:func:`hvac_trips_note`).
     UserError, naming ``where``, when the driving power never exceeds :data:`IDENTIFY_DRIVE_W`."""
     chain = fit.chain
     ranges = fitted_ranges(p_drive_w, v_mps, use) if ranges is None else ranges
@@ -221,6 +269,10 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
         if "engine_off_below_w" in params:
             params["engine_off_below_w"]["reading"] += engine_off_note(
                 chain.engine_off_below_w, powertrain, fuel_l_per_h(chain.idle_fuel_power_w, chain.fuel))
+    for name in ("hvac.heating_w_per_k", "hvac.cooling_w_per_k"):
+        if name in params:
+            params[name]["reading"] = params[name].get("reading", "") + hvac_trips_note(
+                name, params[name]["value"], hvac_trips)
     chain.provenance = {**chain.provenance, **ranges}
     fit.warnings = [f"energy chain {name} = {_value(p['value'])}: {p.get('reading', '')}"
                     for name, p in params.items() if any(f in p.get("reading", "") for f in FLAGS)]

@@ -167,6 +167,7 @@ class ChainStats:
         self.rows, self.counts, self.files, self.source, self.vehicle = 0, {}, [], None, None
         self.inputs: dict = {}         # the chain's input (a measured source, or None) → its first file
         self.signatures: dict = {}     # trip → its signature (data/trips.trip_signatures), scanned
+        self.hvac_trips: dict = {}     # trip → its HVAC regressors' sums (fit.chain_checks.hvac_trip_sums)
         self.wheel_error = None        # why a batch had no measured driving power
         self.sign = self.falling = None
         self.usable = self.nonzero = self.n_ok = self.unknown = 0
@@ -246,6 +247,12 @@ class ChainStats:
         sig.update({c: np.full(len(y), np.nan) for c in need - set(sig)})  # unknown in this batch
         if scan:
             self._checks(p, y, v, use)
+        if scan and self.target == "battery" and self.spec.hvac:  # what an HVAC gain rests on, per trip
+            from sumo_drvpw.fit.chain_checks import hvac_trip_sums
+
+            trip = m.log.df["trip_id"] if "trip_id" in m.log.df else m.inputs.trip
+            hv = self.spec.hvac
+            self.hvac_trips.update(hvac_trip_sums(trip, sig[hv["column"]], float(hv.get("setpoint_c", 20.0)), w, use))
         if self.target == "battery":
             view = getattr(m, "counter_view", None)
             self._battery(p, y, w, sig, use, view)
@@ -362,6 +369,7 @@ class ChainStats:
         self.source, self.vehicle = self.source or o.source, self.vehicle or o.vehicle
         self.inputs = {**o.inputs, **self.inputs}
         self.signatures = {**self.signatures, **o.signatures}
+        self.hvac_trips = {**self.hvac_trips, **o.hvac_trips}
         self.wheel_error = self.wheel_error or o.wheel_error
         self.sign, self.falling = merge_sign_sums(self.sign, o.sign), merge_sign_sums(self.falling, o.falling)
         self.usable += o.usable
