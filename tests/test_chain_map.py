@@ -157,3 +157,28 @@ def test_cli_efficiency_map_writes_a_table_compare_reads(tmp_path):
     assert isinstance(true, EnergyChain)
     rc = main(["calibrate", str(f), "--efficiency", "power", "--out", str(tmp_path / "w.toml")])
     assert rc == 2 and not (tmp_path / "w.toml").exists()
+
+
+def test_a_lossless_traction_knot_is_flagged():
+    """η_t at 1 at a knot of positive power is no motor's (a rehearsal's Renault Twizy, SOC
+    logs on an assumed body, --efficiency power: η_t 1 at 8.1 kW, loss 0 W, not flagged, where
+    the constant chain's η_t 1 is). Planted: above the 75 % quantile of the traction power the
+    battery gives 0.97 of the driving power (a road load that reads too high there): the top
+    knot goes to its bound and is flagged, the knots below (η_t 0.80–0.90) are not."""
+    rng, v, p = _drive()
+    true, bt, br, eta_t, eta_r = _planted(p)
+    meas = true.evaluate(p, v)["power_w"]
+    hi = p > bt.power[3]
+    meas[hi] = 0.97 * p[hi] + 500.0
+    meas = meas + rng.normal(0, 200, p.size)
+    fit = calibrate_battery(p, v, meas, 0.1, limit=None, efficiency="power")
+    from sumo_drvpw.fit.chain_checks import check_chain
+
+    check_chain(fit, None, p, v, np.ones(p.size, bool))
+    knots = {k: q for k, q in fit.parameters.items() if k.startswith("traction_efficiency[")}
+    top = max(knots, key=lambda k: knots[k]["power_w"])
+    assert knots[top]["value"] >= 0.99
+    assert "IMPLAUSIBLE: lossless traction" in knots[top]["reading"]
+    assert any(w.startswith(f"energy chain {top}") for w in fit.warnings)
+    low = [k for k, q in knots.items() if 0 < q["power_w"] < bt.power[3]]
+    assert low and not any("lossless" in knots[k]["reading"] for k in low)

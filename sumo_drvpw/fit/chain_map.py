@@ -41,6 +41,11 @@ SPEED_QUANTILES = (0.1, 0.5, 0.9)
 REFINE = 8
 #: η at a knot of mid power (not the first, not the last) below this is flagged implausible
 ETA_IMPLAUSIBLE = 0.6
+#: η_t at a knot of positive power at or above this is lossless: no motor and inverter is
+#: (a BEV's battery → wheel 0.75–0.97, fit/chain_checks.reading's constant η_t); the traction
+#: power there is more than the battery gave: a road load too high there, or the battery's
+#: power under-read
+ETA_LOSSLESS = 0.99
 
 
 def hats(x: np.ndarray, knots: np.ndarray) -> np.ndarray:
@@ -139,6 +144,10 @@ def knot_parameters(name: str, basis: MapBasis, beta, se, active, traction: bool
         mid = 0 < j % basis.power.size < basis.power.size - 1
         if eta < ETA_IMPLAUSIBLE and mid:
             r += f"; IMPLAUSIBLE: below {ETA_IMPLAUSIBLE:.0%} at mid power"
+        if traction and eta >= ETA_LOSSLESS and pk[j] > 0:
+            r += ("; IMPLAUSIBLE: lossless traction (no motor and inverter is: expected 0.75–0.97): the driving "
+                  "power at this power is more than the battery gave — the road load too high there, or the "
+                  "battery's power under-read")
         if not traction and eta >= 0.99:
             r += "; at 1: lossless braking is not physical (the braking power is under-read or absorbed elsewhere)"
         out[key] = {"value": eta, "std_err": None if math.isnan(s_eta) else s_eta,
