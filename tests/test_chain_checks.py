@@ -1,6 +1,7 @@
 """A calibrated energy chain says when its parameters are implausible or extrapolated
 (fit/chain_checks.py): zero-output fuel against a car's idle fuel, a power-split hybrid's
-engine-on rule, and the driving power and speed it was fitted on, kept for SUMO runs."""
+engine-on rule, a chain that explains none of its target, and the driving power and speed it
+was fitted on, kept for SUMO runs."""
 
 import numpy as np
 import pytest
@@ -233,3 +234,40 @@ def test_a_fuel_chain_takes_no_hvac_and_a_load_must_be_a_power(tmp_path, capsys)
     assert chain.loads["fan_w"] == pytest.approx(1.8, rel=0.02)
     assert chain.reading["loads.fan_w"].startswith("1.8") and "W of engine output per W logged" in chain.reading["loads.fan_w"]
     assert "IMPLAUSIBLE" not in chain.reading["loads.fan_w"]
+
+
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_a_battery_chain_that_explains_none_of_its_target_says_check_the_target(tmp_path, capsys, engine):
+    """A power-split hybrid's battery (the shared Prius Gen-2: calibrate --target battery gave
+    R² −14.1 and predicted/measured energy −51, exit 0, its only warning "IMPLAUSIBLE for a BEV:
+    the road load is off") is charged by its engine: its power is no function of the driving
+    power. Planted: a battery that gives a fifth of the traction power (the engine the rest),
+    takes 0.6 of the braking power and cycles ±3 kW on its own (the engine charging it, charge
+    sustaining) under a 1.4-t car's driving; the chain's R² is below 0 and the reading says to check the target, naming the
+    hybrid's battery; the same drive with a BEV's battery does not."""
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.data.log import from_frame
+
+    rng = np.random.default_rng(3)
+    df = corpus.sine_trips(rng, 3000, 11.0)
+    road = corpus.road_equation(tmp_path)
+    x = from_frame(df).inputs()
+    p = load_equation(road).power(x)
+    bev = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.7, aux_power_w=400.0)
+    hybrid = 0.2 * np.maximum(p, 0.0) + 0.6 * np.minimum(p, 0.0) + 3000.0 * np.sin(df["time_s"].to_numpy() / 40.0)
+    for kind, batt in (("hybrid", hybrid),
+                       ("bev", bev.evaluate(p, x.v)["power_w"])):
+        log = tmp_path / f"{kind}.csv"
+        df.assign(battery_voltage_v=350.0, battery_current_a=(batt + rng.normal(0, 200.0, len(batt))) / 350.0).to_csv(
+            log, index=False)
+        out = tmp_path / f"{kind}_{engine}.toml"
+        capsys.readouterr()
+        assert cli_main(["calibrate", str(log), "--vehicle", "prius3", "--target", "battery", "--equation", str(road),
+                         "--engine", engine, "--out", str(out)]) == 0
+        said = capsys.readouterr().out
+        reading = load_equation(out).chain.reading["traction_efficiency"]
+        if kind == "hybrid":
+            assert "CHECK THE TARGET" in reading and "power-split hybrid's battery" in reading
+            assert any("CHECK THE TARGET" in w for w in said.splitlines() if w.startswith("warning:"))
+        else:
+            assert "CHECK THE TARGET" not in reading and "CHECK THE TARGET" not in said

@@ -97,3 +97,4 @@ def test_trips_worth_of_an_hvac_regressor():
     assert hvac_trips_note("hvac.heating_w_per_k", 0.0, s) == ""  # a gain at 0 books nothing
     many = {str(k): [1.0, 0.0] for k in range(int(np.ceil(HVAC_TRIPS_MIN)))}
     assert hvac_trips_note("hvac.heating_w_per_k", 100.0, many) == ""
+

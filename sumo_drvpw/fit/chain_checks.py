@@ -236,6 +236,21 @@ def hvac_trips_note(name: str, value: float, by_trip: dict | None) -> str:
             f"system; fit it on trips across more temperatures, or leave the HVAC out")
 
 
+def unexplained_note(r2: float, predicts: str, powertrain: str | None) -> str:
+    """Why a chain that explains none of its target (R² < 0 on the samples it was fitted on:
+    the bounded physical form is worse than the target's mean) was fitted on the wrong
+    target, when it is; else ''."""
+    if not r2 < 0:
+        return ""
+    s = (f"; CHECK THE TARGET: the chain explains none of the {predicts} power it was fitted on (R² {r2:.2f}: "
+         "worse than its mean), so the efficiencies read at their bounds say nothing of the powertrain")
+    if predicts == "battery" and powertrain in HYBRID_POWERTRAINS:
+        return s + (" — a power-split hybrid's battery is charged by its engine and drives the car at light "
+                    "load only: its power is no function of the driving power alone; its fuel target books the "
+                    "battery's share")
+    return s + " — a battery or fuel flow of another vehicle, in other units, or of a sign flipped in part of the log"
+
+
 def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
                 where: str = "the logs", counts: dict | None = None, hvac_trips: dict | None = None) -> None:
     """Add the readings, fitted ranges and warnings of this module to a ``ChainFit``
@@ -269,6 +284,10 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
         if "engine_off_below_w" in params:
             params["engine_off_below_w"]["reading"] += engine_off_note(
                 chain.engine_off_below_w, powertrain, fuel_l_per_h(chain.idle_fuel_power_w, chain.fuel))
+    slope = "traction_efficiency" if chain.predicts == "battery" else "marginal_efficiency"
+    if slope in params:
+        params[slope]["reading"] = params[slope].get("reading", "") + unexplained_note(
+            getattr(fit, "r2", math.nan), chain.predicts, powertrain)
     for name in ("hvac.heating_w_per_k", "hvac.cooling_w_per_k"):
         if name in params:
             params[name]["reading"] = params[name].get("reading", "") + hvac_trips_note(
