@@ -200,14 +200,14 @@ def high_speed_summary(err_w, speed_mps, threshold_mps: float = HIGH_SPEED_MPS) 
     return out
 
 
-def target_terms(chain, cats: dict, wheel, target, v, signals, battery_w, a, theta) -> dict:
+def target_terms(chain, cats: dict, wheel, target, v, signals, battery_w, a, theta, dt_s=None, trip=None) -> dict:
     """Each term's power as it reaches a chain's target (battery or fuel) [W]: the term's
     wheel power times the chain's slope from zero to the sample's driving power, (f(P) −
     f(0))/P (0 where |P| < 1 W), so that "which term carries the error" reads the error of
     the target in the target's watts (a partial slope s: about (1 − s) times that term).
     Regressed on the wheel powers instead, a fuel chain's slope 1/η_m came out as the term's
     error (a rehearsal read 'roll' −9.5: "10.5 × the rolling term")."""
-    base = chain.target_power(np.zeros_like(np.asarray(wheel, float)), v, signals, battery_w, a, theta)
+    base = chain.target_power(np.zeros_like(np.asarray(wheel, float)), v, signals, battery_w, a, theta, dt_s, trip)
     w = np.asarray(wheel, float)
     k = np.divide(np.asarray(target, float) - base, w, out=np.zeros_like(w), where=np.abs(w) >= 1.0)
     return {c: np.asarray(p, float) * k for c, p in cats.items()}
@@ -529,9 +529,9 @@ def compare(meas_w, inputs: Inputs, equations: list[Equation], dt_s=None,
                 raise UserError(f"compare: equation '{eq.name}' ({eq.path or 'built in'}) has no energy "
                                 f"chain predicting '{target}' (it predicts '{eq.predicts}')")
             wheel = pred
-            pred = eq.chain.target_power(pred, inputs.v, inputs.signals, battery_w, inputs.a, inputs.theta)
+            pred = eq.chain.target_power(pred, inputs.v, inputs.signals, battery_w, inputs.a, inputs.theta, dt, trip)
             cats_at = target_terms(eq.chain, cats, wheel, pred, inputs.v, inputs.signals, battery_w,
-                                   inputs.a, inputs.theta)  # (in the chain's target's watts)
+                                   inputs.a, inputs.theta, dt, trip)  # (in the chain's target's watts)
         prepared[eq.name] = (cats, pred, cats_at)
     for eq in equations:
         cats, pred, cats_at = prepared[eq.name]

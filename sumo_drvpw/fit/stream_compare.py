@@ -284,8 +284,8 @@ class CompareStats:
             wheel = np.sum(list(cw.values()), axis=0) if cw else zero
             pred, at = wheel, cw
             if self.target != "wheel":  # (compare.target_terms: each term as it reaches the target)
-                pred = eq.chain.target_power(wheel, x.v, sig, bat, x.a, x.theta)
-                at = target_terms(eq.chain, cw, wheel, pred, x.v, sig, bat, x.a, x.theta)
+                pred = eq.chain.target_power(wheel, x.v, sig, bat, x.a, x.theta, dt, x.trip)
+                at = target_terms(eq.chain, cw, wheel, pred, x.v, sig, bat, x.a, x.theta, dt, x.trip)
             pre[eq.name] = (cats, cw, wheel, pred, at)
         for eq in self.equations:
             prev = self.eq.get(eq.name)

@@ -101,8 +101,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.chain_values import Efficiency, Table, _efficiency, _nonneg, _number  # noqa: F401
-from sumo_drvpw.model.chain_values import provenance_table
+from sumo_drvpw.model.chain_buffer import buffered_return, usable_window
+from sumo_drvpw.model.chain_values import Efficiency, Table, _efficiency, _nonneg, _number, provenance_table  # noqa: F401
 from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
 
 PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
@@ -110,7 +110,7 @@ PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
         "recuperation_by_decel_mps2", "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
         "engine_off_below_w", "engine_on_above_mps", "fuel_cut_below_w", "charge_sustaining", "recuperation_round_trip",
-        "fuel", "battery_to_fuel",
+        "battery_usable_j", "fuel", "battery_to_fuel",
         "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "running_fuel_per_k",
         "motor", "std_err", "reading", "provenance", "metrics")
 #: the largest plausible warm-running fuel increase per kelvin (5 %/K: +150 % at −6.7 °C
@@ -144,6 +144,8 @@ class EnergyChain:
     fuel_cut_below_w: float | None = None
     charge_sustaining: bool = False
     recuperation_round_trip: float = 0.0
+    #: a hybrid's usable battery window [J] for its round trip (model/chain_buffer.py); None: unbounded
+    battery_usable_j: float | None = None
     fuel: str = "gasoline"
     battery_to_fuel: float | None = None
     cold_start_fuel_l: float = 0.0
@@ -193,14 +195,15 @@ class EnergyChain:
         return set(self.loads) | ({self.temperature_column} if self.hvac else set())
 
     def target_power(self, p_drive_w, v_mps, signals: dict | None = None, battery_w=None,
-                     accel=None, grade=None) -> np.ndarray:
+                     accel=None, grade=None, dt_s=None, trip=None) -> np.ndarray:
         """The chain's prediction in the form its measurement takes [W]: battery power, or
         fuel power less k·P_bat when the hybrid battery's V·I ``battery_w`` is given (so a
         state-of-charge swing is not a fuel error; k = :attr:`battery_fuel_factor`). ``accel``
-        [m/s²], ``grade`` [rad]: what a recuperation by deceleration or a motor reads."""
+        [m/s²], ``grade`` [rad]: what a recuperation by deceleration or a motor reads; ``dt_s``, ``trip``:
+        a hybrid's battery window, carried through each trip (:meth:`evaluate`)."""
         signals = {**(signals or {}), **({"accel_mps2": accel} if accel is not None and self.reads_accel else {}),
                    **({"grade_rad": grade} if grade is not None and self.motor is not None else {})}
-        pred = self.evaluate(p_drive_w, v_mps, signals=signals)["power_w"]
+        pred = self.evaluate(p_drive_w, v_mps, dt_s, signals, trip)["power_w"]
         if self.predicts == "fuel" and battery_w is not None:
             pred = pred - self.battery_fuel_factor * np.asarray(battery_w, float)
         return pred
@@ -250,7 +253,8 @@ class EnergyChain:
             p = p + float(self.hvac.get("cooling_w_per_k", 0.0)) * np.maximum(t - ts, 0.0)
         return p
 
-    def evaluate(self, p_drive_w, v_mps, dt_s=None, signals: dict | None = None) -> dict:
+    def evaluate(self, p_drive_w, v_mps, dt_s=None, signals: dict | None = None, trip=None,
+                 stored_j=None) -> dict:
         """Battery or fuel power per sample from driving power (vectorized); a fuel chain read
         from a file without its engine's keys is refused (:meth:`require_complete`).
 
@@ -261,6 +265,8 @@ class EnergyChain:
         dt_s : sample durations [s] (scalar or array); when given, energies [J] (and for fuel,
             litres and kg CO₂) per sample are added as ``*_j`` / ``fuel_l`` / ``co2_kg``
         signals : column → array for the loads and the HVAC temperature
+        trip, stored_j : a hybrid's battery window (``battery_usable_j``, needs ``dt_s``): one series,
+            empty at each ``trip``'s start, or one vehicle a sample, ``stored_j`` [J] before (chain_buffer.py)
 
         Returns
         -------
@@ -276,7 +282,7 @@ class EnergyChain:
         if self.predicts == "wheel":
             out = {"power_w": p.copy()}
         elif self.predicts == "fuel":
-            out = self._fuel(p, v, n, signals)
+            out = self._fuel(p, v, n, signals, dt_s, trip, stored_j)
         else:
             out = self._battery(p, v, n, signals)
         if dt_s is not None:
@@ -325,20 +331,27 @@ class EnergyChain:
         everywhere for a ``charge_sustaining`` chain (the battery's energy paid back)."""
         return self.engine_on(p, v) | self.charge_sustaining
 
-    def _fuel(self, p, v, n, signals) -> dict:
-        on = self.engine_on(p, v)
+    def _fuel(self, p, v, n, signals, dt_s=None, trip=None, stored_j=None) -> dict:
+        on, extra = self.engine_on(p, v), {}
         eng = np.maximum(p, 0.0) / _eval(self.traction_efficiency, v, p) + self.auxiliary(n, signals)
         pf = np.where(on, self.idle_fuel_power_w, 0.0) + np.where(self.paid(p, v), eng / self.marginal_efficiency, 0.0)
         if self.recuperation_round_trip:  # a charge-sustaining hybrid's braking energy, given back
             lim = np.inf if self.recuperation_limit_w is None else self.recuperation_limit_w
-            pf = pf + (self.recuperation_round_trip * np.maximum(np.minimum(p, 0.0), -lim)
-                       / _eval(self.traction_efficiency, v, p) / self.marginal_efficiency)
+            if self.battery_usable_j is None:
+                pf = pf + (self.recuperation_round_trip * np.maximum(np.minimum(p, 0.0), -lim)
+                           / _eval(self.traction_efficiency, v, p) / self.marginal_efficiency)
+            else:  # only what the battery's window holds (model/chain_buffer.py)
+                back, stored = buffered_return(p, dt_s, self.recuperation_round_trip, lim, self.battery_usable_j,
+                                               stored_j, trip, self.where)
+                pf = pf - back / _eval(self.traction_efficiency, v, p) / self.marginal_efficiency
+                extra = {"given_back_w": back, "stored_j": stored}
         if self.running_fuel_per_k:
             pf = pf * self.running_factor(n, signals)
         fp = self.fuel_props
         kgps = pf / fp["lhv_j_per_kg"]
         return {"engine_on": on, "engine_w": np.where(on, eng, 0.0), "power_w": pf,
-                "fuel_lps": kgps / fp["density_kg_per_l"], "co2_kgps": kgps * fp["co2_kg_per_kg"]}
+                "fuel_lps": kgps / fp["density_kg_per_l"], "co2_kgps": kgps * fp["co2_kg_per_kg"],
+                **extra}
 
     def running_factor(self, n: int, signals: dict | None = None) -> np.ndarray:
         """1 + r · max(T_ref − T, 0) per sample (``running_fuel_per_k``); 1 where the air
@@ -410,6 +423,8 @@ class EnergyChain:
                 d["charge_sustaining"] = True
             if self.recuperation_round_trip:
                 d["recuperation_round_trip"] = float(self.recuperation_round_trip)
+            if self.battery_usable_j is not None:
+                d["battery_usable_j"] = float(self.battery_usable_j)
             if self.battery_to_fuel is not None:
                 d["battery_to_fuel"] = float(self.battery_to_fuel)
             if self.cold_start_fuel_l or self.cold_start_fuel_l_per_k:
@@ -479,6 +494,8 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
             raise UserError(f"{where} [chain]: 'recuperation_round_trip' is the share of a charge-sustaining "
                             "hybrid's braking energy its battery gives back: in [0, 1], with predicts = \"fuel\" "
                             f"and charge_sustaining = true, got {doc['recuperation_round_trip']!r}")
+    if "battery_usable_j" in doc:
+        kw["battery_usable_j"] = usable_window(doc, kw.get("recuperation_round_trip"), where)
     if "fuel_cut_below_w" in doc:
         kw["fuel_cut_below_w"] = _number(doc["fuel_cut_below_w"], "fuel_cut_below_w", where)
         if pred != "fuel":

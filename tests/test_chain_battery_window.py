@@ -1,0 +1,129 @@
+"""A charge-sustaining hybrid's usable battery window (model/chain_buffer.py, ``[chain]
+battery_usable_j``): its braking energy is credited only while the battery has room, the
+room comes back only as traction spends what is stored; unbounded (no key) books as before.
+By hand and through ``compare`` per trip."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.chain import chain_from_dict
+
+ETA_T, ETA_M, RT, LIM = 0.9, 0.4, 0.64, 50000.0   # √η_rt = 0.8 each way
+DOC = {"predicts": "fuel", "fuel": "gasoline", "marginal_efficiency": ETA_M, "idle_fuel_power_w": 0.0,
+       "engine_off_below_w": 5000.0, "charge_sustaining": True, "recuperation_round_trip": RT,
+       "recuperation_limit_w": LIM, "traction_efficiency": ETA_T}
+W = 100e3   # J: the usable window
+
+
+def _chain(**kw):
+    return chain_from_dict({**DOC, **kw}, "h.toml")
+
+
+def test_a_descent_fills_the_window_and_a_climb_empties_it():
+    """−20 kW for 10 s: 0.8 × 20 kJ = 16 kJ offered a second; the 100-kJ window takes six
+    whole seconds and 4 kJ of the seventh, nothing after; each stored joule is credited as the
+    0.8 J it gives back at the wheels, through η_t and η_m. Then +10 kW: the battery gives back
+    10 kJ a second at the wheels, 12.5 kJ of stored energy: empty after 8 s, when a second
+    descent is credited again."""
+    p = np.r_[np.full(10, -20e3), np.full(10, 10e3), np.full(2, -20e3)]
+    out = _chain(battery_usable_j=W).evaluate(p, np.full(p.size, 10.0), 1.0)
+    acc = np.r_[np.full(6, 16e3), 4e3, np.zeros(3)]
+    np.testing.assert_allclose(out["given_back_j"][:10], 0.8 * acc)
+    np.testing.assert_allclose(out["stored_j"][:10], np.minimum(np.cumsum(acc), W))
+    np.testing.assert_allclose(out["stored_j"][10:20], np.maximum(W - 12.5e3 * np.arange(1, 11), 0.0))
+    np.testing.assert_allclose(out["given_back_j"][20:], [12.8e3, 12.8e3])
+    credit = -out["given_back_w"] / ETA_T / ETA_M
+    paid = np.maximum(p, 0.0) / ETA_T / ETA_M           # (idle fuel 0, no auxiliaries)
+    np.testing.assert_allclose(out["power_w"], paid + credit)
+    unb = _chain().evaluate(p, np.full(p.size, 10.0), 1.0)
+    # unbounded: all 200 kJ of the descent credited at 0.64; bounded: 80 kJ at the wheels
+    assert -unb["power_j"][:10].sum() * ETA_T * ETA_M == pytest.approx(RT * 200e3)
+    assert -out["power_j"][:10].sum() * ETA_T * ETA_M == pytest.approx(0.8 * W)
+
+
+def test_no_window_is_the_unbounded_credit_to_the_bit_and_a_large_one_the_same():
+    rng = np.random.default_rng(3)
+    p = rng.normal(0.0, 30e3, 500)
+    v = np.full(p.size, 12.0)
+    old = _chain().evaluate(p, v)["power_w"]
+    want = np.maximum(p, 0.0) / ETA_T / ETA_M \
+        + RT * np.maximum(np.minimum(p, 0.0), -LIM) / ETA_T / ETA_M
+    np.testing.assert_array_equal(old, want)
+    assert "stored_j" not in _chain().evaluate(p, v, 1.0)
+    big = _chain(battery_usable_j=1e9).evaluate(p, v, 1.0)
+    np.testing.assert_allclose(big["power_w"], old, rtol=1e-12, atol=1e-6)
+    assert _chain().to_dict().get("battery_usable_j") is None
+    ch = _chain(battery_usable_j=W)
+    assert chain_from_dict(ch.to_dict()) == ch and ch.to_dict()["battery_usable_j"] == W
+
+
+def test_energy_is_conserved_and_trips_and_vehicles_carry_their_own_battery():
+    """Σ stored ≤ W + Σ spent over any series; a new trip starts empty; one step of
+    independent vehicles, each from its own stored energy, is the series stepped one at a time."""
+    rng = np.random.default_rng(7)
+    p = rng.normal(-2000.0, 40e3, 2000)
+    dt = rng.uniform(0.1, 1.0, p.size)
+    out = _chain(battery_usable_j=W).evaluate(p, np.full(p.size, 9.0), dt)
+    stored_in = out["given_back_j"] / 0.8
+    s = np.r_[0.0, out["stored_j"]]
+    spent = np.maximum(s[:-1] - s[1:], 0.0)
+    assert out["stored_j"].min() >= 0.0 and out["stored_j"].max() <= W * (1 + 1e-12)
+    assert stored_in.sum() <= W + spent.sum() + 1e-6
+    assert stored_in.sum() == pytest.approx(s[-1] + spent.sum())
+    # spent only while driving, at most what gives min(P, P_lim)·Δt back at the wheels
+    assert np.all(spent[p <= 0] == 0.0)
+    assert np.all(spent <= np.minimum(np.maximum(p, 0.0), LIM) * dt / 0.8 + 1e-9)
+    # two trips: the second starts empty
+    trip = np.r_[np.zeros(1000), np.ones(1000)]
+    two = _chain(battery_usable_j=W).evaluate(p, 9.0, dt, trip=trip)
+    second = _chain(battery_usable_j=W).evaluate(p[1000:], 9.0, dt[1000:])
+    np.testing.assert_allclose(two["power_w"][1000:], second["power_w"])
+    np.testing.assert_array_equal(two["power_w"][:1000], out["power_w"][:1000])
+    # a step of vehicles: sample i from the state the series had before it
+    step = _chain(battery_usable_j=W).evaluate(p, 9.0, dt, stored_j=s[:-1])
+    np.testing.assert_allclose(step["power_w"], out["power_w"])
+    np.testing.assert_allclose(step["stored_j"], out["stored_j"])
+
+
+@pytest.mark.parametrize("doc, says", [
+    ({**DOC, "recuperation_round_trip": 0.0, "battery_usable_j": W}, "recuperation_round_trip > 0"),
+    ({k: x for k, x in DOC.items() if k != "recuperation_round_trip"} | {"battery_usable_j": W},
+     "recuperation_round_trip > 0"),
+    ({**DOC, "battery_usable_j": -1.0}, "must be ≥ 0"),
+])
+def test_a_window_without_a_round_trip_is_refused(doc, says):
+    with pytest.raises(UserError, match="battery_usable_j") as e:
+        chain_from_dict(doc, "h.toml")
+    assert says in str(e.value) and "h.toml" in str(e.value)
+
+
+def test_without_durations_a_window_says_so():
+    with pytest.raises(UserError, match="h.toml.*battery_usable_j.*duration"):
+        _chain(battery_usable_j=W).evaluate(np.array([-1e4]), np.array([5.0]))
+
+
+def test_compare_carries_the_window_through_each_trip():
+    """``compare`` on a fuel target: the chain's prediction is the series per trip (two trips
+    of one descent each: both credited up to the window, not the second left without room)."""
+    from sumo_drvpw.fit.compare import compare
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.model.terms import Inputs
+
+    n = 40
+    v = np.full(2 * n, 10.0)
+    a = np.zeros(2 * n)
+    theta = np.full(2 * n, -0.1)   # downhill: m·g·v·sin θ ≈ −14.6 kW at 1500 kg
+    x = Inputs(v=v, a=a, theta=theta, wind=np.zeros(2 * n), mass=np.full(2 * n, 1500.0),
+               rho=np.full(2 * n, 1.2), trip=np.repeat(["t1", "t2"], n))
+    eq = Equation("h", {"grade": 1.0}, chain=_chain(battery_usable_j=W))
+    cmp = compare(np.zeros(2 * n), x, [eq], dt_s=1.0, target="fuel")
+    pred = cmp.results["h"].pred_w
+    p = 1500.0 * 9.81 * 10.0 * math.sin(-0.1)
+    assert p == pytest.approx(eq.power(x)[0], rel=1e-3)
+    for t in (slice(0, n), slice(n, 2 * n)):   # each trip: its window's 0.8 × W back at the wheels
+        assert -pred[t].sum() * ETA_T * ETA_M == pytest.approx(0.8 * W)
