@@ -142,6 +142,11 @@ class ChainLedger:
         self._starting = np.zeros(capacity)
         self._cold_age = np.zeros(capacity)
         self._cold_new = np.zeros(capacity, bool)
+        #: per vehicle row and active chain equation: the energy a hybrid's battery window holds
+        #: [J] (``battery_usable_j``: model/chain_buffer.py), carried from step to step
+        self._bounded = {e for e in self.active if self.chains[e].battery_usable_j is not None
+                         and self.chains[e].recuperation_round_trip}
+        self._stored = np.zeros((capacity, self.A))
         #: departures booked (share of a cold start > 0) by a chain with one; their shares' sum
         self.cold_starts = 0
         self.cold_starts_expected = 0.0
@@ -218,6 +223,7 @@ class ChainLedger:
         self._starting = np.concatenate([self._starting, np.zeros(new - cap)])
         self._cold_age = np.concatenate([self._cold_age, np.zeros(new - cap)])
         self._cold_new = np.concatenate([self._cold_new, np.zeros(new - cap, bool)])
+        self._stored = np.concatenate([self._stored, np.zeros((new - cap, self.A))])
 
     def share_of(self, vtype: str, vclass: str, vid: str | None = None) -> float:
         """The share of a cold start a vehicle of this vType and vClass books from its departure:
@@ -258,7 +264,8 @@ class ChainLedger:
             self._cold_new[vidx] = True
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
-                        signals: dict | None = None, engine_off=None, v_mean=None, app=None) -> np.ndarray:
+                        signals: dict | None = None, engine_off=None, v_mean=None, app=None,
+                        vidx=None) -> np.ndarray:
         """Chain quantities of one step, (n vehicles, C booked columns) (:meth:`expand` gives
         (n, E, Q)); each chain is evaluated only where ``app`` (n, E) > 0 (zeros elsewhere,
         and not at all in a step none of its vehicles is in: a bare config's thirteen
@@ -271,6 +278,8 @@ class ChainLedger:
         dt : step length [s]
         signals : column → (n,) arrays for the chains' loads and HVAC temperature
         engine_off : optional (n,) bool: engines a start-stop system switched off: no fuel
+        vidx : the vehicles' rows: a hybrid's battery window is carried in them from step to step
+            (None: each step from an empty battery, nothing kept)
         """
         p = np.asarray(p_drive_w, float)
         n = p.shape[0]
@@ -278,7 +287,7 @@ class ChainLedger:
         j = 0
         on = None if app is None else np.asarray(app) > 0
         live = None if on is None else on.any(axis=0)
-        for e in self.active:
+        for a, e in enumerate(self.active):
             ch = self.chains[e]
             keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
                     ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
@@ -287,8 +296,13 @@ class ChainLedger:
                 j += len(keys)
                 continue
             vv = v if v_mean is None or e not in self._motor else v_mean
-            out = (evaluate_where(ch, sel, p[:, e], vv, dt, signals)
-                   if sel is not None else ch.evaluate(p[:, e], vv, dt, signals))
+            held = None if e not in self._bounded else (
+                np.zeros(n) if vidx is None else self._stored[vidx, a])
+            out = (evaluate_where(ch, sel, p[:, e], vv, dt, signals, held)
+                   if sel is not None else ch.evaluate(p[:, e], vv, dt, signals, stored_j=held))
+            if held is not None and vidx is not None:
+                keep = slice(None) if sel is None else sel
+                self._stored[vidx[keep], a] = out["stored_j"][keep]
             if "invalid" in out:
                 self.motor_invalid[e] += int(np.count_nonzero(out["invalid"]))
             for key in keys:
@@ -317,7 +331,8 @@ class ChainLedger:
             signals = {**signals, "accel_mps2": accel}
         if grade is not None and self._motor:
             signals = {**signals, "grade_rad": grade, **({} if load is None else {"load_kg": load})}
-        q = self.step_quantities(p_drive_w, v, dt, signals, engine_off, v_mean if self._motor else None, app)
+        q = self.step_quantities(p_drive_w, v, dt, signals, engine_off, v_mean if self._motor else None, app,
+                                 vidx)
         if self.cold_start_on:
             share = self._starting[vidx]
             s = share > 0
@@ -431,7 +446,7 @@ class ChainLedger:
         self._grow(n)
         m = len(keep)
         for arr in (self._veh, self.veh_dist, self.veh_time, self._app, self._starting,
-                    self._cold_age, self._cold_new):
+                    self._cold_age, self._cold_new, self._stored):
             arr[:m] = arr[keep]
             arr[m:n] = 0.0
 

@@ -266,7 +266,12 @@ def render(res: dict) -> str:
           f"gt18t_HEV_…`, `UBus_Midi_lt15t_HEV_…`) is booked by it, any other diesel bus by `{DIESEL}` "
           "(sim/resolver.py, summary.json `assumptions.powertrain`). Before it, a hybrid bus was booked by the "
           "diesel chain — engine idling at every stop, no braking energy back — with a warning that no hybrid "
-          "chain is made for its vClass.", ""]
+          "chain is made for its vClass.", "",
+          "Its battery is unbounded: the chain declares no usable battery window (`battery_usable_j`, "
+          "docs/energy-chain.md), as no published usable energy of these buses' batteries was found to cite, so a long "
+          "descent is credited in full at η_rt. Where a study's buses' window is known, a copy of this file with "
+          "`battery_usable_j` under `[chain]` credits braking only while the battery has room and books the rest on "
+          "the friction brakes.", ""]
     return "\n".join(L)
 
 
