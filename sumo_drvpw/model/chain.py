@@ -103,6 +103,7 @@ import numpy as np
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.chain_buffer import buffered_return, usable_window
 from sumo_drvpw.model.chain_values import Efficiency, Table, _efficiency, _nonneg, _number, provenance_table  # noqa: F401
+from sumo_drvpw.model import chain_values as _values
 from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
 
 PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
@@ -118,6 +119,8 @@ KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperat
 RUNNING_FUEL_PER_K_MAX = 0.05
 #: keys a fuel chain must give (docs/energy-chain.md): no default describes an engine
 FUEL_REQUIRED = ("fuel", "marginal_efficiency", "idle_fuel_power_w", "engine_off_below_w")
+#: (their home before chain_values.py)
+corrected_fuel_power, fuel_j_per_l = _values.corrected_fuel_power, _values.fuel_j_per_l
 HVAC_KEYS = ("column", "setpoint_c", "heating_w_per_k", "cooling_w_per_k", "warmup_j_per_k")
 
 
@@ -567,34 +570,3 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
     kw["missing"] = tuple(k for k in FUEL_REQUIRED if k not in doc) if pred == "fuel" else ()
     kw["where"] = where
     return EnergyChain(**kw)
-
-
-def corrected_fuel_power(fuel_power_w, battery_power_w, battery_to_fuel: float) -> np.ndarray:
-    """Fuel power corrected for the hybrid battery's energy change (SAE J1711 §4 idea) [W].
-
-    P_fuel,corr = P_fuel + k·P_bat: battery energy delivered (P_bat > 0, discharging) would
-    otherwise have come from fuel at k fuel joules per battery joule; energy stored
-    (P_bat < 0) was paid for with fuel. Summed over a trip this removes the bias of a
-    state-of-charge swing.
-
-    Parameters
-    ----------
-    fuel_power_w : measured fuel power (mass flow × LHV) [W]
-    battery_power_w : HV battery power, positive when discharging [W]
-    battery_to_fuel : k [-], fuel energy per unit of battery energy (≈ 1/η_marginal)
-    """
-    return np.asarray(fuel_power_w, float) + battery_to_fuel * np.asarray(battery_power_w, float)
-
-
-def fuel_j_per_l(fuel: str) -> float:
-    """A fuel's energy per litre at its lower heating value [J/L]: LHV [J/kg] · density [kg/L]
-    (:data:`sumo_drvpw.model.constants.FUELS`), so litres = fuel energy [J] / this, as
-    :meth:`EnergyChain.evaluate` turns fuel power into ``fuel_lps``.
-
-    >>> round(fuel_j_per_l("gasoline") / 1e6, 2)   # 43.2 MJ/kg · 0.745 kg/L
-    32.18
-    """
-    if fuel not in FUELS:
-        raise UserError(f"fuel must be one of {', '.join(FUELS)}, got {fuel!r}")
-    fp = FUELS[fuel]
-    return fp["lhv_j_per_kg"] * fp["density_kg_per_l"]

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.constants import FUELS
 
 
 @dataclass(eq=False)
@@ -143,3 +144,34 @@ def provenance_table(value, where: str, table: str) -> dict:
                             f"{'file' if k == 'logs' else 'trip' if k == 'trip_signatures' else 'warning'}), "
                             f"got {out[k]!r}")
     return out
+
+
+def corrected_fuel_power(fuel_power_w, battery_power_w, battery_to_fuel: float) -> np.ndarray:
+    """Fuel power corrected for the hybrid battery's energy change (SAE J1711 §4 idea) [W].
+
+    P_fuel,corr = P_fuel + k·P_bat: battery energy delivered (P_bat > 0, discharging) would
+    otherwise have come from fuel at k fuel joules per battery joule; energy stored
+    (P_bat < 0) was paid for with fuel. Summed over a trip this removes the bias of a
+    state-of-charge swing.
+
+    Parameters
+    ----------
+    fuel_power_w : measured fuel power (mass flow × LHV) [W]
+    battery_power_w : HV battery power, positive when discharging [W]
+    battery_to_fuel : k [-], fuel energy per unit of battery energy (≈ 1/η_marginal)
+    """
+    return np.asarray(fuel_power_w, float) + battery_to_fuel * np.asarray(battery_power_w, float)
+
+
+def fuel_j_per_l(fuel: str) -> float:
+    """A fuel's energy per litre at its lower heating value [J/L]: LHV [J/kg] · density [kg/L]
+    (:data:`sumo_drvpw.model.constants.FUELS`), so litres = fuel energy [J] / this, as
+    :meth:`EnergyChain.evaluate` turns fuel power into ``fuel_lps``.
+
+    >>> round(fuel_j_per_l("gasoline") / 1e6, 2)   # 43.2 MJ/kg · 0.745 kg/L
+    32.18
+    """
+    if fuel not in FUELS:
+        raise UserError(f"fuel must be one of {', '.join(FUELS)}, got {fuel!r}")
+    fp = FUELS[fuel]
+    return fp["lhv_j_per_kg"] * fp["density_kg_per_l"]
