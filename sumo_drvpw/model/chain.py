@@ -63,7 +63,9 @@ stops with the engine; default false, the engine-off power free), for such a hyb
 that the battery gives back at the wheels, capped at ``recuperation_limit_w`` P_lim, its
 motor's power: the engine output it replaces is credited at the margin when the vehicle
 brakes, so a braking sample books negative fuel, the battery's credit a later sample uses, as a
-battery chain's recuperation does; declared, kept, not fitted) and ``fuel``
+battery chain's recuperation does; declared, kept, not fitted; ``battery_usable_j``: only what
+its battery's usable window holds, :mod:`sumo_drvpw.model.chain_buffer`; ``[chain.depleting]``:
+a plug-in hybrid's battery spent first, :mod:`sumo_drvpw.model.chain_plugin`) and ``fuel``
 (a key of :data:`sumo_drvpw.model.constants.FUELS`). ``cold_start_fuel_l`` (≥ 0, default 0)
 is the extra fuel of one start of a cold engine [L] (warm-up enrichment, catalyst
 heating, cold oil) at the air temperature ``cold_start_ref_c`` (default 23.9 °C, the
@@ -101,7 +103,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.chain_buffer import buffered_return, usable_window
+from sumo_drvpw.model.chain_buffer import _durations, _starts, buffered_return, usable_window
+from sumo_drvpw.model.chain_plugin import depleting_from_dict, on_battery, plug_in
 from sumo_drvpw.model.chain_values import Efficiency, Table, _efficiency, _nonneg, _number, provenance_table  # noqa: F401
 from sumo_drvpw.model import chain_values as _values
 from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
@@ -111,7 +114,7 @@ PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
         "recuperation_by_decel_mps2", "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
         "engine_off_below_w", "engine_on_above_mps", "fuel_cut_below_w", "charge_sustaining", "recuperation_round_trip",
-        "battery_usable_j", "fuel", "battery_to_fuel",
+        "battery_usable_j", "depleting", "fuel", "battery_to_fuel",
         "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "running_fuel_per_k",
         "motor", "std_err", "reading", "provenance", "metrics")
 #: the largest plausible warm-running fuel increase per kelvin (5 %/K: +150 % at −6.7 °C
@@ -149,6 +152,8 @@ class EnergyChain:
     recuperation_round_trip: float = 0.0
     #: a hybrid's usable battery window [J] for its round trip (model/chain_buffer.py); None: unbounded
     battery_usable_j: float | None = None
+    #: a plug-in hybrid's charge-depleting battery (model/chain_plugin.py Depleting); None: none
+    depleting: object | None = None
     fuel: str = "gasoline"
     battery_to_fuel: float | None = None
     cold_start_fuel_l: float = 0.0
@@ -257,7 +262,7 @@ class EnergyChain:
         return p
 
     def evaluate(self, p_drive_w, v_mps, dt_s=None, signals: dict | None = None, trip=None,
-                 stored_j=None) -> dict:
+                 stored_j=None, spent_j=None) -> dict:
         """Battery or fuel power per sample from driving power (vectorized); a fuel chain read
         from a file without its engine's keys is refused (:meth:`require_complete`).
 
@@ -269,7 +274,8 @@ class EnergyChain:
             litres and kg CO₂) per sample are added as ``*_j`` / ``fuel_l`` / ``co2_kg``
         signals : column → array for the loads and the HVAC temperature
         trip, stored_j : a hybrid's battery window (``battery_usable_j``, needs ``dt_s``): one series,
-            empty at each ``trip``'s start, or one vehicle a sample, ``stored_j`` [J] before (chain_buffer.py)
+            empty at each ``trip``'s start, or one vehicle a sample, ``stored_j`` [J] before (chain_buffer.py);
+            ``spent_j``: a plug-in hybrid's battery energy spent, the same way (chain_plugin.py)
 
         Returns
         -------
@@ -285,7 +291,8 @@ class EnergyChain:
         if self.predicts == "wheel":
             out = {"power_w": p.copy()}
         elif self.predicts == "fuel":
-            out = self._fuel(p, v, n, signals, dt_s, trip, stored_j)
+            out = self._fuel(p, v, n, signals, dt_s, trip, stored_j) if self.depleting is None else \
+                self._plug_in(p, v, n, signals, dt_s, trip, stored_j, spent_j)
         else:
             out = self._battery(p, v, n, signals)
         if dt_s is not None:
@@ -334,7 +341,14 @@ class EnergyChain:
         everywhere for a ``charge_sustaining`` chain (the battery's energy paid back)."""
         return self.engine_on(p, v) | self.charge_sustaining
 
-    def _fuel(self, p, v, n, signals, dt_s=None, trip=None, stored_j=None) -> dict:
+    def _plug_in(self, p, v, n, signals, dt_s, trip, stored_j, spent_j) -> dict:
+        bat, dt = self.depleting.chain.evaluate(p, v, signals=signals), _durations(dt_s, self.where)
+        share, spent = on_battery(bat["power_w"] * dt, self.depleting.usable_j, spent_j, trip)
+        before = np.r_[0.0, spent[:-1]] * ~_starts(trip, n) if spent_j is None else spent_j
+        return plug_in(self.depleting, self._fuel(p, v, n, signals, dt_s, trip, stored_j, share == 0), bat, share,
+                       spent, before, np.broadcast_to(np.asarray(dt, float), p.shape))
+
+    def _fuel(self, p, v, n, signals, dt_s=None, trip=None, stored_j=None, sustaining=None) -> dict:
         on, extra = self.engine_on(p, v), {}
         eng = np.maximum(p, 0.0) / _eval(self.traction_efficiency, v, p) + self.auxiliary(n, signals)
         pf = np.where(on, self.idle_fuel_power_w, 0.0) + np.where(self.paid(p, v), eng / self.marginal_efficiency, 0.0)
@@ -344,7 +358,8 @@ class EnergyChain:
                 pf = pf + (self.recuperation_round_trip * np.maximum(np.minimum(p, 0.0), -lim)
                            / _eval(self.traction_efficiency, v, p) / self.marginal_efficiency)
             else:  # only what the battery's window holds (model/chain_buffer.py)
-                back, stored = buffered_return(p, dt_s, self.recuperation_round_trip, lim, self.battery_usable_j,
+                back, stored = buffered_return(p if sustaining is None else np.where(sustaining, p, 0.0), dt_s,
+                                               self.recuperation_round_trip, lim, self.battery_usable_j,
                                                stored_j, trip, self.where)
                 pf = pf - back / _eval(self.traction_efficiency, v, p) / self.marginal_efficiency
                 extra = {"given_back_w": back, "stored_j": stored}
@@ -428,6 +443,8 @@ class EnergyChain:
                 d["recuperation_round_trip"] = float(self.recuperation_round_trip)
             if self.battery_usable_j is not None:
                 d["battery_usable_j"] = float(self.battery_usable_j)
+            if self.depleting is not None:
+                d["depleting"] = self.depleting.to_dict()
             if self.battery_to_fuel is not None:
                 d["battery_to_fuel"] = float(self.battery_to_fuel)
             if self.cold_start_fuel_l or self.cold_start_fuel_l_per_k:
@@ -499,6 +516,8 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
                             f"and charge_sustaining = true, got {doc['recuperation_round_trip']!r}")
     if "battery_usable_j" in doc:
         kw["battery_usable_j"] = usable_window(doc, kw.get("recuperation_round_trip"), where)
+    if "depleting" in doc:
+        kw["depleting"] = depleting_from_dict(doc, where)
     if "fuel_cut_below_w" in doc:
         kw["fuel_cut_below_w"] = _number(doc["fuel_cut_below_w"], "fuel_cut_below_w", where)
         if pred != "fuel":

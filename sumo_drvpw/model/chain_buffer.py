@@ -57,9 +57,7 @@ def buffered_return(p_w, dt_s, round_trip: float, limit_w: float, window_j: floa
     trip : with ``stored_j`` None, trip id per sample: the buffer is empty at each trip's start
     where : the chain's file, named where the durations are missing
     """
-    if dt_s is None:
-        raise UserError(f"{where} [chain]: battery_usable_j (a hybrid's battery window) needs each sample's "
-                        "duration, which this use of the chain does not give")
+    dt_s = _durations(dt_s, where)
     p = np.nan_to_num(np.asarray(p_w, float), nan=0.0)
     dt = np.broadcast_to(np.asarray(dt_s, float), p.shape)
     leg = np.sqrt(round_trip)
@@ -75,6 +73,14 @@ def buffered_return(p_w, dt_s, round_trip: float, limit_w: float, window_j: floa
         acc, after = _series(offer, want, window_j, _starts(trip, p.size))
     given = np.divide(leg * acc, dt, out=np.zeros_like(acc), where=dt > 0)
     return given, after
+
+
+def _durations(dt_s, where: str):
+    """``dt_s``, which a battery's state needs: a UserError naming the chain's file without it."""
+    if dt_s is None:
+        raise UserError(f"{where} [chain]: a hybrid's battery (battery_usable_j, [chain.depleting]) needs each "
+                        "sample's duration, which this use of the chain does not give")
+    return dt_s
 
 
 def _starts(trip, n: int) -> np.ndarray:

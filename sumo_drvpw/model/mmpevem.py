@@ -353,16 +353,16 @@ def mmpevem_equation(name: str, params: Mapping, mass_kg: float | None = None, w
     return eq, notes
 
 
-def evaluate_where(chain, sel: np.ndarray, p_drive_w, v_mps, dt_s, signals: Mapping | None, stored_j=None) -> dict:
+def evaluate_where(chain, sel: np.ndarray, p_drive_w, v_mps, dt_s, signals: Mapping | None, **state) -> dict:
     """``chain.evaluate`` on the vehicles ``sel`` only (zeros elsewhere): SUMO's motor costs
-    about 1 µs per vehicle and step, and a run's MMPEVEM equation books one vType. ``stored_j``:
-    each vehicle's hybrid battery window (model/chain_buffer.py)."""
+    about 1 µs per vehicle and step, and a run's MMPEVEM equation books one vType. ``state``:
+    each vehicle's hybrid battery (``stored_j``, ``spent_j``: model/chain_buffer.py, chain_plugin.py)."""
     n = len(sel)
     if sel.all():
-        return chain.evaluate(p_drive_w, v_mps, dt_s, signals, stored_j=stored_j)
+        return chain.evaluate(p_drive_w, v_mps, dt_s, signals, **state)
     take = lambda x: np.asarray(x)[sel] if np.ndim(x) and np.shape(x)[0] == n else x  # noqa: E731
     sub = chain.evaluate(take(p_drive_w), take(v_mps), take(dt_s), {k: take(x) for k, x in (signals or {}).items()},
-                         stored_j=None if stored_j is None else take(stored_j))
+                         **{k: take(x) for k, x in state.items()})
     out = {}
     for k, x in sub.items():
         full = np.zeros(n, dtype=np.asarray(x).dtype)

@@ -94,8 +94,7 @@ class ChainLedger:
         self.motor_invalid = np.zeros(len(self.names), np.int64)
         self.E, self.Q = len(self.names), len(QUANTITIES)
         #: (equation, quantity) columns a chain books: battery 0–3, fuel 4–7
-        self._cols = [(e, k) for e in self.active
-                      for k in (FUEL_COLS if self.chains[e].predicts == "fuel" else BATTERY_COLS)]
+        self._cols = [(e, k) for e in self.active for k in self._booked(e)]
         self._ce = np.array([e for e, _ in self._cols], np.int64)
         self._ck = np.array([k for _, k in self._cols], np.int64)
         # compact storage: only the booked columns, (rows, C); veh/edge expand on read
@@ -147,9 +146,20 @@ class ChainLedger:
         self._bounded = {e for e in self.active if self.chains[e].battery_usable_j is not None
                          and self.chains[e].recuperation_round_trip}
         self._stored = np.zeros((capacity, self.A))
+        #: the same for a plug-in hybrid's battery energy spent ([chain.depleting]: model/chain_plugin.py)
+        self._spent = np.zeros((capacity, self.A))
         #: departures booked (share of a cold start > 0) by a chain with one; their shares' sum
         self.cold_starts = 0
         self.cold_starts_expected = 0.0
+
+    def _booked(self, e: int) -> tuple:
+        """The quantity columns chain ``e`` books: a fuel chain's, and a plug-in hybrid's battery too."""
+        ch = self.chains[e]
+        return BATTERY_COLS if ch.predicts != "fuel" else FUEL_COLS + (BATTERY_COLS if ch.depleting else ())
+
+    def plug_in(self, e: int) -> bool:
+        """Whether chain ``e`` is a plug-in hybrid's: fuel and battery columns."""
+        return self.chains[e].predicts == "fuel" and self.chains[e].depleting is not None
 
     @property
     def signals(self) -> set[str]:
@@ -224,6 +234,7 @@ class ChainLedger:
         self._cold_age = np.concatenate([self._cold_age, np.zeros(new - cap)])
         self._cold_new = np.concatenate([self._cold_new, np.zeros(new - cap, bool)])
         self._stored = np.concatenate([self._stored, np.zeros((new - cap, self.A))])
+        self._spent = np.concatenate([self._spent, np.zeros((new - cap, self.A))])
 
     def share_of(self, vtype: str, vclass: str, vid: str | None = None) -> float:
         """The share of a cold start a vehicle of this vType and vClass books from its departure:
@@ -291,24 +302,30 @@ class ChainLedger:
             ch = self.chains[e]
             keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
                     ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
+            if ch.predicts == "fuel" and ch.depleting is not None:  # (FUEL_COLS, then BATTERY_COLS)
+                keys += ("battery_traction_j", "battery_recuperated_j", "battery_auxiliary_j", "battery_j")
             sel = None if on is None else on[:, e]
             if sel is not None and not live[e]:
                 j += len(keys)
                 continue
             vv = v if v_mean is None or e not in self._motor else v_mean
-            held = None if e not in self._bounded else (
-                np.zeros(n) if vidx is None else self._stored[vidx, a])
-            out = (evaluate_where(ch, sel, p[:, e], vv, dt, signals, held)
-                   if sel is not None else ch.evaluate(p[:, e], vv, dt, signals, stored_j=held))
-            if held is not None and vidx is not None:
+            state = {}  # each vehicle's battery: a hybrid's window, a plug-in's energy spent
+            for key, arr, on_ in (("stored_j", self._stored, e in self._bounded),
+                                  ("spent_j", self._spent, ch.predicts == "fuel" and ch.depleting is not None)):
+                if on_:
+                    state[key] = np.zeros(n) if vidx is None else arr[vidx, a]
+            out = (evaluate_where(ch, sel, p[:, e], vv, dt, signals, **state)
+                   if sel is not None else ch.evaluate(p[:, e], vv, dt, signals, **state))
+            if vidx is not None:
                 keep = slice(None) if sel is None else sel
-                self._stored[vidx[keep], a] = out["stored_j"][keep]
+                for key in state:
+                    (self._stored if key == "stored_j" else self._spent)[vidx[keep], a] = out[key][keep]
             if "invalid" in out:
                 self.motor_invalid[e] += int(np.count_nonzero(out["invalid"]))
             for key in keys:
                 if key is not None:  # cold_start_l: booked at departures only (book)
                     q[:, j] = out[key]
-                    if engine_off is not None and ch.predicts == "fuel":
+                    if engine_off is not None and ch.predicts == "fuel" and not key.startswith("battery"):
                         q[engine_off, j] = 0.0
                 j += 1
         return q
@@ -401,7 +418,7 @@ class ChainLedger:
                 out += [f'{n}_fuel_l="{q[e, 5]:.6f}"', f'{n}_co2_kg="{q[e, 6]:.6f}"']
                 if self.cold_start_on:
                     out.append(f'{n}_cold_start_l="{q[e, 7]:.6f}"')
-            else:
+            if self.chains[e].predicts != "fuel" or self.plug_in(e):
                 out += [f'{n}_battery_{k}_kwh="{q[e, j] / KWH:.6f}"'
                         for j, k in enumerate(("traction", "recuperated", "auxiliary", "net"))]
         return out
@@ -446,7 +463,7 @@ class ChainLedger:
         self._grow(n)
         m = len(keep)
         for arr in (self._veh, self.veh_dist, self.veh_time, self._app, self._starting,
-                    self._cold_age, self._cold_new, self._stored):
+                    self._cold_age, self._cold_new, self._stored, self._spent):
             arr[:m] = arr[keep]
             arr[m:n] = 0.0
 
@@ -482,7 +499,7 @@ class ChainLedger:
                         r["cold_start_l"] = t[7]
                     r["fuel_l_per_100km"] = 100.0 * t[5] / km if km > 0 else np.nan
                     r["co2_g_per_km"] = 1000.0 * t[6] / km if km > 0 else np.nan
-                else:
+                if self.chains[e].predicts != "fuel" or self.plug_in(e):
                     r.update(traction_kwh=t[0] / KWH, recuperated_kwh=t[1] / KWH,
                              auxiliary_kwh=t[2] / KWH, net_kwh=t[3] / KWH)
                     r["net_kwh_per_km"] = t[3] / KWH / km if km > 0 else np.nan
@@ -496,7 +513,8 @@ class ChainLedger:
         battery = ["traction_kwh", "recuperated_kwh", "auxiliary_kwh", "net_kwh", "net_kwh_per_km"]
         cols = ["key", "equation", "distance_km"]
         for e in self.active:
-            cols += fuel if self.chains[e].predicts == "fuel" else battery
+            cols += (fuel if self.chains[e].predicts == "fuel" else []) + (
+                battery if self.chains[e].predicts != "fuel" or self.plug_in(e) else [])
         return list(dict.fromkeys(cols))
 
     def report(self, veh_ids: list[str], veh_classes: list[str], edge_ids: list[str],

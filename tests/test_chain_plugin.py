@@ -1,0 +1,124 @@
+"""A plug-in hybrid's charge-depleting start (model/chain_plugin.py, ``[chain.depleting]``):
+on its battery until the declared usable energy is spent, then the charge-sustaining hybrid's
+fuel; by hand, through the file, and in a real SUMO run, live and replayed from its FCD."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.chain import chain_from_dict
+
+ETA_M = 0.4
+DOC = {"predicts": "fuel", "fuel": "gasoline", "marginal_efficiency": ETA_M, "idle_fuel_power_w": 5000.0,
+       "engine_off_below_w": 8000.0, "charge_sustaining": True, "aux_power_w": 500.0,
+       "recuperation_round_trip": 0.64, "recuperation_limit_w": 30000.0}
+DEP = {"usable_j": 1.0e6, "traction_efficiency": 0.8, "recuperation_efficiency": 0.6}
+
+
+def _chain(**dep):
+    return chain_from_dict({**DOC, "depleting": {**DEP, **dep}}, "phev.toml")
+
+
+def test_on_the_battery_until_its_usable_energy_is_spent_then_on_fuel():
+    """+20 kW: 20/0.8 + 0.5 = 25.5 kW from the battery, 1 MJ lasts 39.2 s: 39 whole seconds on
+    the battery (no fuel), 0.216 of the 40th, then the charge-sustaining chain's fuel. A braking
+    second on the battery gives 0.6 × 10 kW back (less the 0.5-kW auxiliaries): it lasts longer."""
+    p = np.full(60, 20e3)
+    out = _chain().evaluate(p, np.full(60, 15.0), 1.0)
+    cs = chain_from_dict(DOC).evaluate(p, np.full(60, 15.0), 1.0)
+    np.testing.assert_allclose(out["battery_j"][:39], 25.5e3)
+    share = (1e6 - 39 * 25.5e3) / 25.5e3
+    assert out["battery_j"][39] == pytest.approx(share * 25.5e3)
+    assert out["battery_j"].sum() == pytest.approx(1e6) and np.all(out["battery_j"][40:] == 0.0)
+    assert np.all(out["fuel_l"][:39] == 0.0) and not out["engine_on"][:39].any()
+    assert out["fuel_l"][39] == pytest.approx((1 - share) * cs["fuel_l"][39])
+    np.testing.assert_array_equal(out["fuel_l"][40:], cs["fuel_l"][40:])
+    assert out["spent_j"][-1] == 1e6
+    # a braking second while on the battery: it gives 0.6 × 10 kW − 0.5 kW back
+    q = np.r_[np.full(10, 20e3), -10e3, np.full(50, 20e3)]
+    back = _chain().evaluate(q, 15.0, 1.0)
+    assert back["battery_w"][10] == pytest.approx(-0.6 * 10e3 + 500.0)
+    assert back["battery_j"].sum() == pytest.approx(1e6)
+    assert back["fuel_l"].sum() < out["fuel_l"].sum() and back["fuel_l"][10] == 0.0
+
+
+def test_trips_start_charged_and_vehicles_carry_their_own_battery():
+    rng = np.random.default_rng(5)
+    p = rng.normal(8e3, 20e3, 400)
+    dt = rng.uniform(0.2, 1.0, p.size)
+    trip = np.repeat([0, 1], 200)
+    ch = _chain(usable_j=2e6)
+    two = ch.evaluate(p, 12.0, dt, trip=trip)
+    np.testing.assert_allclose(two["power_w"][200:], ch.evaluate(p[200:], 12.0, dt[200:])["power_w"])
+    one = ch.evaluate(p, 12.0, dt)
+    before = np.r_[0.0, one["spent_j"][:-1]]
+    step = ch.evaluate(p, 12.0, dt, spent_j=before)
+    for k in ("power_w", "battery_w", "spent_j"):
+        np.testing.assert_allclose(step[k], one[k])
+    # energy: what the battery gave less what it took is what was spent (a full battery takes no more)
+    assert one["spent_j"].max() <= 2e6 and one["battery_j"].sum() == pytest.approx(one["spent_j"][-1])
+    assert one["spent_j"][-1] == 2e6 and one["fuel_l"][-50:].sum() > 0
+
+
+def test_the_file_keeps_it_and_refuses_what_is_no_plug_in():
+    ch = _chain()
+    assert chain_from_dict(ch.to_dict()) == ch and ch.to_dict()["depleting"]["usable_j"] == 1e6
+    plain = {k: x for k, x in DOC.items() if k != "recuperation_round_trip"}
+    for doc, says in [({**plain, "charge_sustaining": False, "depleting": DEP}, "charge_sustaining = true"),
+                      ({**DOC, "depleting": {"traction_efficiency": 0.8}}, "'usable_j'"),
+                      ({**DOC, "depleting": {**DEP, "usable_j": 0.0}}, "must be > 0"),
+                      ({**DOC, "depleting": {**DEP, "soc": 1}}, "unknown key")]:
+        with pytest.raises(UserError, match=r"phev\.toml \[chain\.depleting\]") as e:
+            chain_from_dict(doc, "phev.toml")
+        assert says in str(e.value)
+    with pytest.raises(UserError, match="duration"):
+        _chain().evaluate(np.array([1e4]), 5.0)
+
+
+@pytest.mark.sumo
+def test_a_plug_in_hybrid_in_sumo_books_its_battery_then_fuel_live_and_replayed(tmp_path):
+    """A real SUMO run: a plug-in hybrid (HBEFA 4's PC_PHEV_petrol class) drives 5.5 km at up to
+    22 m/s with 300 kJ usable: chain_vehicles.csv books its battery (net 300 kJ: spent, then
+    charge-sustaining) and fuel for the rest, less than the same car without the plug-in's
+    battery; the replay of the run's FCD books the same, the battery carried per vehicle."""
+    pytest.importorskip("libsumo")
+    import pandas as pd
+    from sumo_probe import build_net
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.sim.run import run_scenario
+
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="5500" y="0"/></nodes>',
+              '<edges><edge id="ab" from="a" to="b" numLanes="1" speed="22"/></edges>', "--no-warnings")
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="h" vClass="passenger" mass="1500" sigma="0" '
+        'emissionClass="HBEFA4/PC_PHEV_petrol_Euro-6d_(P)"/>'
+        '<vehicle id="v" type="h" depart="0"><route edges="ab"/></vehicle></routes>', encoding="utf-8")
+    files = []
+    for name, dep in (("phev", {**DEP, "usable_j": 3e5}), ("hev", None)):
+        lines = [f'[equation]\nname = "{name}"\nvclasses = ["passenger"]\n[terms]\nacc = 1.0\ngrade = 1.0\n'
+                 'roll = 0.008\naero_rho = 0.6\n[chain]']
+        lines += [f"{k} = {str(x).lower() if isinstance(x, bool) else repr(x)}" for k, x in DOC.items()]
+        if dep:
+            lines += ["[chain.depleting]"] + [f"{k} = {x!r}" for k, x in dep.items()]
+        (tmp_path / f"{name}.toml").write_text("\n".join(lines).replace("'", '"') + "\n", encoding="utf-8")
+        files.append(f"{name}.toml")
+    (tmp_path / "s.toml").write_text(f'equations = {files!r}\n'.replace("'", '"')
+                                     + '[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\nend = 600\n'
+                                     'step_length = 1.0\noptions = ["--no-warnings", "true", "--fcd-output", "fcd.xml"]\n'
+                                     '[outputs]\nfigures = false\n', encoding="utf-8")
+    run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    assert cli_main(["fcd", str(tmp_path / "o" / "sumo" / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
+                     "--out", str(tmp_path / "r")]) == 0
+    rows = {out: pd.read_csv(tmp_path / out / "chain_vehicles.csv", dtype={"key": str}).set_index("equation")
+            for out in ("o", "r")}
+    o = rows["o"]
+    assert o.loc["phev", "net_kwh"] == pytest.approx(3e5 / 3.6e6, rel=1e-9)   # all of it spent, no more
+    assert np.isnan(o.loc["hev", "net_kwh"])
+    assert 0 < o.loc["phev", "fuel_l"] < o.loc["hev", "fuel_l"]
+    for col in ("fuel_l", "net_kwh", "traction_kwh"):
+        assert rows["r"].loc["phev", col] == pytest.approx(o.loc["phev", col], rel=1e-6)
+    edges = pd.read_csv(tmp_path / "o" / "chain_edges.csv").set_index("equation")
+    assert edges.loc["phev", "net_kwh"].sum() == pytest.approx(o.loc["phev", "net_kwh"], rel=1e-9)
