@@ -130,14 +130,33 @@ def test_compare_carries_the_window_through_each_trip():
         assert -pred[t].sum() * ETA_T * ETA_M == pytest.approx(0.8 * W)
 
 
-def _toml(path, name, **kw):
-    """An equation file with the test's road load and chain (``kw`` added to it)."""
-    chain = {**DOC, **kw}
+def write_equation(path, name: str, chain: dict, sub: dict | None = None) -> str:
+    """An equation file at ``path``: the SUMO tests' road load and ``chain`` as its [chain]
+    (``sub``: its sub-tables, name → table); returns the file's name."""
+    def val(x):
+        return str(x).lower() if isinstance(x, bool) else repr(x).replace("'", '"')
+
     lines = [f'[equation]\nname = "{name}"\nvclasses = ["passenger"]\n[terms]\nacc = 1.0\ngrade = 1.0\n'
-             'roll = 0.008\naero_rho = 0.6\n[chain]']
-    lines += [f"{k} = {str(x).lower() if isinstance(x, bool) else repr(x)}" for k, x in chain.items()]
-    path.write_text("\n".join(lines).replace("'", '"') + "\n", encoding="utf-8")
+             'roll = 0.008\naero_rho = 0.6\n[chain]'] + [f"{k} = {val(x)}" for k, x in chain.items()]
+    for t, d in (sub or {}).items():
+        lines += [f"[chain.{t}]"] + [f"{k} = {val(x)}" for k, x in d.items()]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path.name
+
+
+def run_and_replay(tmp_path, files: list[str]) -> None:
+    """The equation ``files`` on ``n.net.xml`` and ``r.rou.xml`` in ``tmp_path``: run live into
+    ``o`` (with SUMO's FCD) and replayed from that FCD into ``r``."""
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.sim.run import run_scenario
+
+    (tmp_path / "s.toml").write_text(f'equations = {files!r}\n'.replace("'", '"')
+                                     + '[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\nend = 600\n'
+                                     'step_length = 1.0\noptions = ["--no-warnings", "true", "--fcd-output", "fcd.xml"]\n'
+                                     '[outputs]\nfigures = false\n', encoding="utf-8")
+    run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    assert cli_main(["fcd", str(tmp_path / "o" / "sumo" / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
+                     "--out", str(tmp_path / "r")]) == 0
 
 
 @pytest.mark.sumo
@@ -152,9 +171,6 @@ def test_a_hybrid_down_a_hill_in_sumo_books_only_its_window_live_and_replayed(tm
     import pandas as pd
     from sumo_probe import build_net
 
-    from sumo_drvpw.cli import main as cli_main
-    from sumo_drvpw.sim.run import run_scenario
-
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0" z="200"/><node id="b" x="4000" y="0" z="0"/>'
               '<node id="c" x="5500" y="0" z="0"/></nodes>',
               '<edges><edge id="ab" from="a" to="b" numLanes="1" speed="22"/>'
@@ -164,23 +180,9 @@ def test_a_hybrid_down_a_hill_in_sumo_books_only_its_window_live_and_replayed(tm
         'emissionClass="HBEFA4/PC_PHEV_petrol_Euro-6d_(P)"/>'
         '<vehicle id="v" type="h" depart="0" departSpeed="max"><route edges="ab bc"/></vehicle></routes>',
         encoding="utf-8")
-    names = {"none": {"recuperation_round_trip": None}, "unbounded": {}, "window": {"battery_usable_j": W}}
-    files = []
-    for name, kw in names.items():
-        doc = {k: x for k, x in kw.items() if x is not None}
-        drop = [k for k, x in kw.items() if x is None]
-        files.append(_toml(tmp_path / f"{name}.toml", name, **doc))
-        if drop:
-            text = (tmp_path / f"{name}.toml").read_text(encoding="utf-8")
-            (tmp_path / f"{name}.toml").write_text(
-                "\n".join(ln for ln in text.splitlines() if not ln.startswith(tuple(drop))) + "\n", encoding="utf-8")
-    (tmp_path / "s.toml").write_text(f'equations = {files!r}\n'.replace("'", '"')
-                                     + '[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\nend = 600\n'
-                                     'step_length = 1.0\noptions = ["--no-warnings", "true", "--fcd-output", "fcd.xml"]\n'
-                                     '[outputs]\nfigures = false\n', encoding="utf-8")
-    run_scenario(tmp_path / "s.toml", tmp_path / "o")
-    assert cli_main(["fcd", str(tmp_path / "o" / "sumo" / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
-                     "--out", str(tmp_path / "r")]) == 0
+    chains = {"none": {k: x for k, x in DOC.items() if k != "recuperation_round_trip"}, "unbounded": DOC,
+              "window": {**DOC, "battery_usable_j": W}}
+    run_and_replay(tmp_path, [write_equation(tmp_path / f"{n}.toml", n, c) for n, c in chains.items()])
     books = {}
     for out in ("o", "r"):
         rows = pd.read_csv(tmp_path / out / "chain_vehicles.csv", dtype={"key": str}).set_index("equation")
@@ -195,5 +197,5 @@ def test_a_hybrid_down_a_hill_in_sumo_books_only_its_window_live_and_replayed(tm
         assert credit["window"] <= 0.8 * W + traction + 1e-6   # and no more than the flat spent of it
         assert credit["window"] < 0.3 * credit["unbounded"]
         books[out] = (fuel, credit)
-    for k in names:   # live and replayed alike
+    for k in chains:   # live and replayed alike
         assert books["r"][0][k] == pytest.approx(books["o"][0][k], rel=1e-6)

@@ -86,9 +86,7 @@ def test_a_plug_in_hybrid_in_sumo_books_its_battery_then_fuel_live_and_replayed(
     pytest.importorskip("libsumo")
     import pandas as pd
     from sumo_probe import build_net
-
-    from sumo_drvpw.cli import main as cli_main
-    from sumo_drvpw.sim.run import run_scenario
+    from test_chain_battery_window import run_and_replay, write_equation
 
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="5500" y="0"/></nodes>',
               '<edges><edge id="ab" from="a" to="b" numLanes="1" speed="22"/></edges>', "--no-warnings")
@@ -96,22 +94,8 @@ def test_a_plug_in_hybrid_in_sumo_books_its_battery_then_fuel_live_and_replayed(
         '<routes><vType id="h" vClass="passenger" mass="1500" sigma="0" '
         'emissionClass="HBEFA4/PC_PHEV_petrol_Euro-6d_(P)"/>'
         '<vehicle id="v" type="h" depart="0"><route edges="ab"/></vehicle></routes>', encoding="utf-8")
-    files = []
-    for name, dep in (("phev", {**DEP, "usable_j": 3e5}), ("hev", None)):
-        lines = [f'[equation]\nname = "{name}"\nvclasses = ["passenger"]\n[terms]\nacc = 1.0\ngrade = 1.0\n'
-                 'roll = 0.008\naero_rho = 0.6\n[chain]']
-        lines += [f"{k} = {str(x).lower() if isinstance(x, bool) else repr(x)}" for k, x in DOC.items()]
-        if dep:
-            lines += ["[chain.depleting]"] + [f"{k} = {x!r}" for k, x in dep.items()]
-        (tmp_path / f"{name}.toml").write_text("\n".join(lines).replace("'", '"') + "\n", encoding="utf-8")
-        files.append(f"{name}.toml")
-    (tmp_path / "s.toml").write_text(f'equations = {files!r}\n'.replace("'", '"')
-                                     + '[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\nend = 600\n'
-                                     'step_length = 1.0\noptions = ["--no-warnings", "true", "--fcd-output", "fcd.xml"]\n'
-                                     '[outputs]\nfigures = false\n', encoding="utf-8")
-    run_scenario(tmp_path / "s.toml", tmp_path / "o")
-    assert cli_main(["fcd", str(tmp_path / "o" / "sumo" / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
-                     "--out", str(tmp_path / "r")]) == 0
+    run_and_replay(tmp_path, [write_equation(tmp_path / "phev.toml", "phev", DOC, {"depleting": {**DEP, "usable_j": 3e5}}),
+                              write_equation(tmp_path / "hev.toml", "hev", DOC)])
     rows = {out: pd.read_csv(tmp_path / out / "chain_vehicles.csv", dtype={"key": str}).set_index("equation")
             for out in ("o", "r")}
     o = rows["o"]
