@@ -77,6 +77,17 @@ def test_the_file_keeps_it_and_refuses_what_is_no_plug_in():
         _chain().evaluate(np.array([1e4]), 5.0)
 
 
+def test_a_calibration_refuses_a_declared_plug_in_battery_it_would_drop():
+    from types import SimpleNamespace
+
+    from sumo_drvpw.fit.chain import declared_fuel_cut
+
+    plain = {k: x for k, x in DOC.items() if k != "recuperation_round_trip"}
+    assert declared_fuel_cut(SimpleNamespace(chain=chain_from_dict({**plain, "fuel_cut_below_w": 0.0}))) == 0.0
+    with pytest.raises(UserError, match=r"phev\.toml \[chain\.depleting\].*not fitted"):
+        declared_fuel_cut(SimpleNamespace(chain=chain_from_dict({**plain, "depleting": DEP}, "phev.toml")))
+
+
 @pytest.mark.sumo
 def test_a_plug_in_hybrid_in_sumo_books_its_battery_then_fuel_live_and_replayed(tmp_path):
     """A real SUMO run: a plug-in hybrid (HBEFA 4's PC_PHEV_petrol class) drives 5.5 km at up to

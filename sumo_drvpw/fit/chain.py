@@ -413,12 +413,17 @@ def chain_target(m, chain: EnergyChain) -> np.ndarray:
 def declared_fuel_cut(equation) -> float | None:
     """What a fuel chain's calibration keeps of the chain ``equation`` declares: its overrun
     fuel cut-off (``fuel_cut_below_w``, None: none declared). A declared braking energy given
-    back (``recuperation_round_trip``, not fitted) is refused, not dropped without a word."""
+    back (``recuperation_round_trip``, not fitted) or plug-in battery (``[chain.depleting]``) is
+    refused, not dropped without a word."""
     ch = getattr(equation, "chain", None)
     if getattr(ch, "recuperation_round_trip", 0.0):
         raise UserError(f"{ch.where} [chain]: recuperation_round_trip (a hybrid's braking energy given back) is "
                         "declared, not fitted, and a fuel chain's calibration would drop it: calibrate on an "
                         "equation without it (the fitted marginal efficiency then holds the braking credit)")
+    if getattr(ch, "depleting", None) is not None:
+        raise UserError(f"{ch.where} [chain.depleting]: a plug-in hybrid's battery is declared, not fitted, and a fuel "
+                        "chain's calibration would drop it: calibrate on an equation without it (on charge-sustaining "
+                        "trips), then add it")
     return getattr(ch, "fuel_cut_below_w", None)
 
 
