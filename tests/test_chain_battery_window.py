@@ -199,3 +199,46 @@ def test_a_hybrid_down_a_hill_in_sumo_books_only_its_window_live_and_replayed(tm
         books[out] = (fuel, credit)
     for k in chains:   # live and replayed alike
         assert books["r"][0][k] == pytest.approx(books["o"][0][k], rel=1e-6)
+
+
+def test_compare_streamed_and_in_memory_carry_the_window_through_each_trip_alike(tmp_path):
+    """``compare --target fuel`` on a log of two trips (speed swinging ±9 m/s: a braking every
+    few minutes; each trip ends braking, its battery full), streamed in batches of whole trips
+    (the default) and in memory: each trip's predicted fuel the same to 1e-9 — the second, which
+    brakes from its start, starts with an empty battery in both —, and the window's more than
+    the unbounded chain's."""
+    import json
+
+    import corpus
+    import pandas as pd
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.data.log import from_frame
+    from sumo_drvpw.model.chain import EnergyChain
+    from sumo_drvpw.model.equations import load_equation
+
+    df = corpus.sine_trips(np.random.default_rng(5), 3400, 12.0)   # 680 s: decelerating for the last 67 s
+    t = np.arange(200) * 0.2   # T2: braking from 20 m/s to rest at 0.5 m/s², from its start
+    df = pd.concat([df[df.trip_id == "T1"], pd.DataFrame({"trip_id": "T2", "time_s": t, "speed_mps": 20.0 - 0.5 * t,
+                                                          "mass_kg": 1400.0})], ignore_index=True)
+    p = load_equation(corpus.road_equation(tmp_path)).power(from_frame(df).inputs())
+    plant = EnergyChain(predicts="fuel", idle_fuel_power_w=8000.0, marginal_efficiency=0.35, engine_off_below_w=-np.inf)
+    df["fuel_flow_rate_hour_lph"] = plant.evaluate(p, df["speed_mps"].to_numpy())["fuel_lps"] * 3600.0
+    log = tmp_path / "fuel.csv"
+    df.to_csv(log, index=False)
+    eqs = [write_equation(tmp_path / "w.toml", "w", {**DOC, "battery_usable_j": 20e3}),
+           write_equation(tmp_path / "u.toml", "u", DOC)]
+    pred = {}
+    for engine in ([], ["--engine", "memory"]):
+        out = tmp_path / f"c{len(engine)}"
+        assert cli_main(["compare", str(log), "--target", "fuel", "--out", str(out)]
+                        + [a for e in eqs for a in ("--equation", str(tmp_path / e))] + engine) == 0
+        rep = json.loads((out / "report.json").read_text(encoding="utf-8"))["equations"]
+        pred[len(engine)] = {n: {t: r["predicted_j"] for t, r in rep[n]["trip_net_energy"]["trips"].items()}
+                             for n in ("w", "u")}
+    for n in ("w", "u"):
+        assert set(pred[0][n]) == {"T1", "T2"}
+        for t in ("T1", "T2"):
+            assert pred[0][n][t] == pytest.approx(pred[2][n][t], rel=1e-9)
+    for t in ("T1", "T2"):
+        assert pred[0]["w"][t] > pred[0]["u"][t] * 1.01
