@@ -182,3 +182,28 @@ def test_a_lossless_traction_knot_is_flagged():
     assert any(w.startswith(f"energy chain {top}") for w in fit.warnings)
     low = [k for k, q in knots.items() if 0 < q["power_w"] < bt.power[3]]
     assert low and not any("lossless" in knots[k]["reading"] for k in low)
+
+
+def test_a_lossless_braking_knot_is_flagged():
+    """η_r at 1 at a braking knot of non-zero power is no generator's: the constant chain's η_r
+    1 is flagged IMPLAUSIBLE, the table's knot at 1 read only "at 1: … not physical" and made no
+    warning (docs/validation.md, the i3's recuperation_efficiency[25.0 kW] = 1). Planted: above
+    the 75 % quantile of the braking power the battery takes in all of it: the top braking knot
+    goes to 1 and is flagged, the knots below (η_r 0.70–0.90) are not, nor the 0-kW knot."""
+    rng, v, p = _drive()
+    true, bt, br, eta_t, eta_r = _planted(p)
+    meas = true.evaluate(p, v)["power_w"]
+    hi = -p > br.power[3]
+    meas[hi] = p[hi] + 500.0
+    meas = meas + rng.normal(0, 200, p.size)
+    fit = calibrate_battery(p, v, meas, 0.1, limit=None, efficiency="power")
+    from sumo_drvpw.fit.chain_checks import check_chain
+
+    check_chain(fit, None, p, v, np.ones(p.size, bool))
+    knots = {k: q for k, q in fit.parameters.items() if k.startswith("recuperation_efficiency[")}
+    top = max(knots, key=lambda k: abs(knots[k]["power_w"]))
+    assert knots[top]["value"] >= 0.99
+    assert "IMPLAUSIBLE: lossless braking" in knots[top]["reading"]
+    assert any(w.startswith(f"energy chain {top}") for w in fit.warnings)
+    rest = [k for k, q in knots.items() if k != top and abs(q["power_w"]) < br.power[3]]
+    assert rest and not any("lossless" in knots[k]["reading"] for k in rest)

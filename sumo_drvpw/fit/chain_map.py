@@ -148,8 +148,10 @@ def knot_parameters(name: str, basis: MapBasis, beta, se, active, traction: bool
             r += ("; IMPLAUSIBLE: lossless traction (no motor and inverter is: expected 0.75–0.97): the driving "
                   "power at this power is more than the battery gave — the road load too high there, or the "
                   "battery's power under-read")
-        if not traction and eta >= 0.99:
-            r += "; at 1: lossless braking is not physical (the braking power is under-read or absorbed elsewhere)"
+        if not traction and eta >= ETA_LOSSLESS and pk[j] != 0:
+            r += ("; IMPLAUSIBLE: lossless braking (no generator and inverter is): the battery took in more "
+                  "than the braking power at this power gives — the braking power under-read, or losses "
+                  "absorbed by other terms; booked in SUMO it would over-credit every braking")
         out[key] = {"value": eta, "std_err": None if math.isnan(s_eta) else s_eta,
                     "at_bound": bool(active[j] != 0), "power_w": float(pk[j]),
                     "speed_mps": None if math.isnan(vk[j]) else float(vk[j]),
