@@ -115,3 +115,72 @@ def test_a_tabular_fcd_s_containers_are_read_as_the_xml_s(tmp_path):
         assert s["transportables"]["max_kg"] == 2000.0, (name, s["transportables"])  # the box, no person
         assert s["source"]["riding_person_rows"] == 0 and s["skipped"]["by_vclass"].get("pedestrian") is None
     assert rows["fcd.csv"]["t"] == rows["fcd.xml"]["t"]
+
+
+def test_riders_of_vtypes_without_a_mass_weigh_their_vclass_s_default_live_and_replayed(tmp_path):
+    """SUMO gives a vType without a mass its vClass's default (SUMOVTypeParameter::
+    VClassDefaultValues: a truck 4,500 kg, a trailer 13,000 kg; a vType without a vClass is a
+    passenger's 1,500 kg, a person's too) and adds each rider's vType mass to its carrier
+    (EnergyParams::getTotalMass). A live run reads SUMO's masses; the replay booked every
+    container of the files at 1,500 kg and every person at 70 kg whatever its vType's
+    vClass (a container of vClass truck on a 9-t truck, a person of a vType without a vClass
+    on another: 0.789 and 0.872 of the live run's electricity, measured 2026-11-29). Now SUMO's
+    masses, live and replayed, and the live run equals SUMO's emission output."""
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="800" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
+    (tmp_path / "r.rou.xml").write_text("""<routes>
+  <vType id="etruck" vClass="truck" mass="9000" emissionClass="Energy/unknown" containerCapacity="2" personCapacity="2">
+    <param key="rotatingMass" value="400"/></vType>
+  <vType id="crate" vClass="truck"/>
+  <vType id="rider"/>
+  <vehicle id="t" type="etruck" depart="containerTriggered" departPos="15" departSpeed="0"><route edges="e"/></vehicle>
+  <container id="k0" depart="0" departPos="20" type="crate"><transport from="e" to="e" lines="t"/></container>
+  <vehicle id="u" type="etruck" depart="triggered" departPos="60" departSpeed="0"><route edges="e"/></vehicle>
+  <person id="p0" depart="0" departPos="60" type="rider"><ride from="e" to="e" lines="u"/></person>
+</routes>""", encoding="utf-8")
+    sc = energy_scenario(tmp_path, 100)
+    run_scenario(sc, tmp_path / "o")
+    sumo_wh, nan = emitted_wh(tmp_path / "em.xml", 0.5)
+    assert not nan
+    cv = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv").set_index("key")
+    for vid in ("t", "u"):
+        assert cv.loc[vid, "net_kwh"] * 1000.0 == pytest.approx(sumo_wh[vid], rel=2e-3), vid
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
+    assert s["transportables"]["max_kg"] == 4500.0  # SUMO's mass of the crate's vType
+    assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(sc), "--out", str(tmp_path / "fcd"),
+                     "--no-figures"]) == 0
+    rv = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").set_index("key")
+    for vid in ("t", "u"):
+        assert rv.loc[vid, "net_kwh"] == pytest.approx(cv.loc[vid, "net_kwh"], rel=1e-4), vid
+    r = json.loads((tmp_path / "fcd" / "summary.json").read_text(encoding="utf-8"))
+    assert r["transportables"] == s["transportables"]
+
+
+def test_the_replay_s_vclass_masses_are_sumo_s(tmp_path):
+    """The replay's table of SUMO's default masses per vClass is what SUMO gives a vType of
+    that vClass without a mass (libsumo vehicletype.getMass), for every vClass SUMO knows."""
+    import libsumo
+
+    from sumo_drvpw.sim.fcd_conn import sumo_type_mass
+
+    classes = ("passenger private taxi bus coach delivery truck trailer emergency motorcycle moped bicycle "
+               "pedestrian wheelchair scooter tram rail_urban subway rail rail_electric rail_fast ship evehicle "
+               "army authority vip hov custom1 custom2 container cable_car aircraft drone ignoring").split()
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="100" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
+    (tmp_path / "r.rou.xml").write_text("<routes>" + "".join(f'<vType id="{c}" vClass="{c}"/>' for c in classes)
+                                        + "</routes>", encoding="utf-8")
+    libsumo.start(["sumo", "-n", str(tmp_path / "n.net.xml"), "-r", str(tmp_path / "r.rou.xml"),
+                   "--no-step-log", "--no-warnings", "--end", "1"])
+    try:
+        sumo = {c: libsumo.vehicletype.getMass(c) for c in classes}
+        sumo.update({t: libsumo.vehicletype.getMass(t) for t in ("DEFAULT_PEDTYPE", "DEFAULT_CONTAINERTYPE",
+                                                                   "DEFAULT_BIKETYPE", "DEFAULT_RAILTYPE")})
+    finally:
+        libsumo.close()
+    from sumo_drvpw.sim.vtypes import read_vtypes
+
+    files = read_vtypes([tmp_path / "r.rou.xml"])
+    ours = {vt: sumo_type_mass(files, vt) for vt in sumo}
+    assert ours == sumo
+    assert len(set(sumo.values())) > 10

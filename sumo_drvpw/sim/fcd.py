@@ -65,7 +65,7 @@ import pandas as pd
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.dynamics import accel_bounds
 from sumo_drvpw.sim.fcd_begin import accel_at_begin, begin_frame
-from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators
+from sumo_drvpw.sim.fcd_conn import ParkedTest, _Rows, _Sim, _Veh, bus_stops, calibrators, sumo_type_mass
 from sumo_drvpw.sim.fcd_geo import NetCoordinates, recorded_coordinates
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_method import recorded_method
@@ -475,7 +475,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
         from sumo_drvpw.sim.run import check_vtype_tables
 
         check_vtype_tables(sc, acc.file_vtypes)
-    replay.type_mass = {vt: i.mass_kg for vt, i in acc.file_vtypes.items() if i.mass_kg}
+    replay.type_mass.update({vt: sumo_type_mass(acc.file_vtypes, vt) for vt in acc.file_vtypes})  # (riders')
     replay.container_types = set(getattr(acc.file_vtypes, "container_types", ()))
     replay.type_accel = accel_bounds(acc.file_vtypes)  # (a placement: a speed gain beyond them)
     replay.type_asl = {vt: i.action_step_s for vt, i in acc.file_vtypes.items() if i.action_step_s is not None}

@@ -16,6 +16,7 @@ import pandas as pd
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.sim.network import off_lane
 from sumo_drvpw.sim.sumo_outputs import additional_elements
+from sumo_drvpw.sim.vtypes import SUMO_DEFAULT_VTYPES
 
 
 class _Domain:
@@ -109,9 +110,12 @@ class _VType(_Domain):
     def getActionStepLength(self, vt):  # noqa: N802 (the route files', else the step length)
         return self.r.type_asl.get(vt, self.r.dt)
 
-    def getMass(self, vt):  # noqa: N802 (a person's or container's type: the route files', else SUMO's default)
-        box = vt == "DEFAULT_CONTAINERTYPE" or vt in self.r.container_types
-        return self.r.type_mass.get(vt, DEFAULT_CONTAINER_MASS_KG if box else DEFAULT_PERSON_MASS_KG)
+    def getMass(self, vt):  # noqa: N802 (a person's or container's type: SUMO's mass of the route
+        m = self.r.type_mass.get(vt)  # files' vType or SUMO's own type: sumo_type_mass)
+        if m is None:  # (a vType of no file read: SUMO's default person's or container's)
+            box = vt in self.r.container_types
+            m = SUMO_DEFAULT_TYPE_MASS_KG["DEFAULT_CONTAINERTYPE" if box else "DEFAULT_PEDTYPE"]
+        return m
 
     def getIDList(self):  # noqa: N802 (the vTypes the rows named so far: a vehicle's own copy
         seen = self.__dict__.setdefault("_seen", set())  # <type>@<id> adds one, as in SUMO)
@@ -130,12 +134,40 @@ class _Calib(_Domain):
         return self.r.calibrators[c]
 
 
-#: SUMO's default mass of a person's vType [kg] (libsumo vehicletype.getMass of a
-#: pedestrian type without a mass)
-DEFAULT_PERSON_MASS_KG = 70.0
-#: SUMO's default mass of a container's vType [kg] (libsumo vehicletype.getMass of
-#: DEFAULT_CONTAINERTYPE, SUMO 1.28, 2026-11-29)
-DEFAULT_CONTAINER_MASS_KG = 1500.0
+#: SUMO's mass of a vType that gives none, per vClass [kg] (SUMOVTypeParameter::
+#: VClassDefaultValues; libsumo 1.28 vehicletype.getMass agrees for every vClass,
+#: tests/test_containers_said.py); any other vClass (passenger, the vClass of a vType that
+#: names none, container, ignoring …): :data:`SUMO_VEH_MASS_KG`
+SUMO_VCLASS_MASS_KG = {
+    "pedestrian": 70.0, "wheelchair": 90.0, "bicycle": 10.0, "scooter": 10.0, "moped": 80.0,
+    "motorcycle": 200.0, "truck": 4500.0, "trailer": 13000.0, "bus": 12000.0, "coach": 25000.0,
+    "tram": 37900.0, "rail_urban": 59000.0, "subway": 59000.0, "rail": 79500.0,
+    "rail_electric": 83000.0, "rail_fast": 409000.0, "delivery": 5000.0, "emergency": 5000.0,
+    "ship": 100000.0}
+SUMO_VEH_MASS_KG = 1500.0  # (DEFAULT_VEH_MASS)
+#: the masses of SUMO's own vTypes [kg] (their vClasses': a person's DEFAULT_PEDTYPE 70 kg,
+#: a container's DEFAULT_CONTAINERTYPE 1,500 kg …)
+SUMO_DEFAULT_TYPE_MASS_KG = {vt: SUMO_VCLASS_MASS_KG.get(vc, SUMO_VEH_MASS_KG) for vt, vc in SUMO_DEFAULT_VTYPES.items()}
+
+
+def sumo_type_mass(files, vt: str) -> float | None:
+    """The mass SUMO gives vType ``vt`` [kg] (``vehicletype.getMass``), as the route files
+    ``files`` (:func:`~sumo_drvpw.sim.vtypes.read_vtypes`) declare it: its ``mass``, else its
+    ``vehicleMass`` param, else its vClass's default (:data:`SUMO_VCLASS_MASS_KG`; no vClass:
+    a passenger's, for a person's vType too — SUMO warns it "implicitly uses unsuitable vClass
+    'passenger'"); SUMO's own vTypes (``DEFAULT_PEDTYPE`` …) where no file redeclares them;
+    None for a vType of no file. What a rider adds to its vehicle (EnergyParams::
+    getTransportableMass: its vType's mass; neither ``loading`` nor ``drvpw.mass``)."""
+    info = files.get(vt)
+    if info is None:
+        return SUMO_DEFAULT_TYPE_MASS_KG.get(vt)
+    if info.mass_attr_kg is not None:
+        return info.mass_attr_kg
+    try:
+        return float((info.energy_params or {})["vehicleMass"])
+    except (KeyError, ValueError):
+        pass
+    return SUMO_VCLASS_MASS_KG.get(info.vclass or SUMO_DEFAULT_VTYPES.get(vt, "passenger"), SUMO_VEH_MASS_KG)
 
 
 class _Rows:
@@ -159,8 +191,9 @@ class _Rows:
         #: person rows of timesteps without x, y (persons or vehicles): no rider told (matched
         #: by place and speed), their mass not booked
         self.unplaced_person_rows = 0
-        #: vType → mass [kg] of the route files (set by replay_fcd)
-        self.type_mass: dict = {}
+        #: vType → SUMO's mass [kg] of the route files' vTypes and SUMO's own (set by replay_fcd:
+        #: sumo_type_mass), what a rider of that vType adds to its vehicle
+        self.type_mass: dict = dict(SUMO_DEFAULT_TYPE_MASS_KG)
         #: the route files' containers' vTypes (set by replay_fcd): SUMO's tabular FCD writes a
         #: container as a person, the reader the XML's <container> rows too; told apart by them
         #: (and SUMO's DEFAULT_CONTAINERTYPE), and matched to vehicles as riding persons are
