@@ -110,6 +110,27 @@ def test_a_replay_says_it_cannot_see_the_mass_and_books_the_one_it_is_told(ref, 
     assert not any("matched no vehicle" in w for w in told.summary["warnings"])
 
 
+def test_a_replay_told_every_copy_s_mass_still_says_a_second_setmass_is_not_followed(ref, tmp_path):
+    """v's script set its mass twice (3,000 kg after step 20, 2,000 kg after step 80): no SUMO
+    output carries a mass, so a replay told v's last mass books it from v's first row on its
+    copy. Told every copy, the replay said nothing (v's traction 0.869 of the live run's,
+    measured 2026-11-29, unsaid). Now one warning says a copy is booked at one mass and a
+    second setMass is not followed, and summary.json lists the masses told."""
+    d, _ = ref
+    live, _, _ = _run(d, "twice", "libsumo", ONE_MASS_W)
+    (d / "both.toml").write_text((d / "twice.toml").read_text(encoding="utf-8")
+                                 + '[vtypes."car@v"]\nmass_kg = 2000\n[vtypes."car@w"]\nmass_kg = 900\n',
+                                 encoding="utf-8")
+    told = process_fcd(d / "twice_fcd.xml", scenario=d / "both.toml", equations=[PHYS], figures=False)
+    a, b = live.vehicles.set_index("vehicle"), told.vehicles.set_index("vehicle")
+    assert told.summary["assumptions"]["untold_copy_masses"] == {}
+    assert told.summary["assumptions"]["told_copy_masses"] == {"car@v": 2000.0, "car@w": 900.0}
+    (note,) = [w for w in told.summary["warnings"] if "own vType copies" in w]
+    assert "car@v, car@w" in note and "second setMass" in note and "type's mass" not in note
+    np.testing.assert_allclose(b.loc["w", "traction_total_j"], a.loc["w", "traction_total_j"], rtol=1e-6)
+    assert b.loc["v", "traction_total_j"] < 0.99 * a.loc["v", "traction_total_j"]  # 3,000 kg for 30 s: not seen
+
+
 def test_the_replay_on_dask_says_and_books_the_same(ref, tmp_path):
     """Each bucket sees its own vehicles' copies: the driver joins what they were told and not."""
     pytest.importorskip("distributed")

@@ -367,6 +367,7 @@ class Accountant(_Listener):
                             "calibration_mass": dict(sorted(self.resolver.mass_far.items())),
                             "calibration_mass_fixed": fixed_mass_listing(self.resolver.fixed_far),
                             "untold_copy_masses": dict(sorted(self.resolver.untold_copies.items())),
+                            "told_copy_masses": dict(sorted(self.resolver.told_copies.items())),
                             "vtype_energy": self._vtype_energy_listing()},
         }
         summary_extra.update(extra or {})
@@ -402,8 +403,8 @@ class Accountant(_Listener):
                   fixed_mass_warning(self.resolver.fixed_far)):
             if w:
                 warnings.append(w)
-        if self.resolver.untold_copies:
-            warnings.append(untold_copies_warning(self.resolver.untold_copies))
+        if self.resolver.untold_copies or self.resolver.told_copies:
+            warnings.append(untold_copies_warning(self.resolver.untold_copies, self.resolver.told_copies))
         vt_warning = listing_warning(self._vtype_energy_listing())
         if vt_warning:
             warnings.append(vt_warning)

@@ -78,7 +78,7 @@ def bucket_task(sc, fcd_file: str, part_dir: str, b: int, buckets: int, begin_s=
             "assumptions": r.assumptions, "sumo_masses": r.sumo_masses, "seen_vtypes": [*r.cache, *r.seen],
             "carriers": r.carriers, "powertrains": r.powertrains, "booked_as": r.booked_as,
             "also_booked": r.also_booked, "mass_far": r.mass_far, "fixed_far": r.fixed_far,
-            "untold_copies": r.untold_copies,
+            "untold_copies": r.untold_copies, "told_copies": r.told_copies,
             "lanes": acc.fcd_lanes, "no_angle": bool(acc.conn.no_angle and acc.eqset.uses_yaw),
             "stops_read": acc.conn.stops is not None, "missed": getattr(acc.conn, "missed", None),
             "kinetic": (None if acc.conn.kinetic is None  # (rows sparser than the steps: fcd_warn)
@@ -250,7 +250,7 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
             r.assumptions.update(d["assumptions"])
             r.sumo_masses.update(d["sumo_masses"])
             for key in ("carriers", "powertrains", "booked_as", "also_booked", "mass_far", "fixed_far",
-                        "untold_copies"):  # what each bucket's vTypes were booked as
+                        "untold_copies", "told_copies"):  # what each bucket's vTypes were booked as
                 getattr(r, key).update(d[key])
             r.seen.update(d["seen_vtypes"])  # the vTypes the buckets resolved
             for key, counts in d["skipped"].items():

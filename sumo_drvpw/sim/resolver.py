@@ -120,6 +120,8 @@ class VTypeResolver:
         #: a replay's vehicles' own vType copies (``<type>@<id>``: a script's setMass …) whose
         #: mass no [vtypes."<copy>"] mass_kg told: copy → its type, booked at that type's mass
         self.untold_copies: dict[str, str] = {}
+        #: a replay's copies booked at the one mass their [vtypes."<copy>"] mass_kg tells: copy → kg
+        self.told_copies: dict[str, float] = {}
         #: vehicles not accounted because no equation is made for their vClass (by_vclass,
         #: by_vtype) or none books their energy carrier (by_carrier, when any: vClass → count)
         self.skipped: dict[str, dict[str, int]] = {"by_vclass": {}, "by_vtype": {}}
@@ -279,6 +281,8 @@ class VTypeResolver:
         if told is not None:
             m = float(told)
             self.seen.add(copy)  # (its [vtypes] entry was used)
+            if getattr(self.conn, "is_replay", False):
+                self.told_copies[copy] = m
         elif getattr(self.conn, "is_replay", False):
             self.untold_copies.setdefault(copy, vt)
             return False
@@ -578,12 +582,18 @@ def fixed_mass_warning(fixed_far: dict[str, dict]) -> str | None:
             "assumptions.calibration_mass_fixed)")
 
 
-def untold_copies_warning(untold: dict[str, str]) -> str:
+def untold_copies_warning(untold: dict[str, str], told: dict | None = None) -> str:
     """One line: the vehicles' own vType copies an FCD replay saw (``<type>@<id>``) and booked
-    at their type's mass, as FCD carries no mass (:attr:`VTypeResolver.untold_copies`)."""
-    ids = sorted(untold)
+    at their type's mass (``untold``) or at the one mass the scenario told (``told``), as no
+    SUMO output carries a vehicle's mass (:attr:`VTypeResolver.untold_copies`, ``told_copies``)."""
+    said = []
+    if untold:
+        said.append("booked at their type's mass: " + few(sorted(untold), 5) + " — where a script set a mass, "
+                    "give it as [vtypes.\"<type>@<id>\"] mass_kg in the scenario")
+    if told:
+        said.append("booked from their first row at the one mass the scenario tells: " + few(sorted(told), 5))
     return ("the FCD names vehicles' own vType copies (<type>@<id>: SUMO makes one when a script calls "
-            "setMass or another vType setter on the vehicle) but not their mass, so they were booked at "
-            "their type's mass: " + few(ids, 5)
-            + " — where a script set a mass, give it as [vtypes.\"<type>@<id>\"] mass_kg in the scenario "
-            "(one mass per copy; summary.json assumptions.untold_copy_masses)")
+            "setMass or another vType setter on the vehicle) but not their mass, which no SUMO output writes, "
+            "so they were " + "; ".join(said) + " (one mass per copy: a mass a script set again during the "
+            "trip, a second setMass on the vehicle, is not followed; summary.json assumptions."
+            + "untold_copy_masses, told_copy_masses)")
