@@ -158,7 +158,9 @@ def test_riders_of_vtypes_without_a_mass_weigh_their_vclass_s_default_live_and_r
 
 def test_the_replay_s_vclass_masses_are_sumo_s(tmp_path):
     """The replay's table of SUMO's default masses per vClass is what SUMO gives a vType of
-    that vClass without a mass (libsumo vehicletype.getMass), for every vClass SUMO knows."""
+    that vClass without a mass (libsumo vehicletype.getMass), for every vClass SUMO knows, and
+    for SUMO's own vTypes: a container's 1,500 kg, and DEFAULT_PEDTYPE redeclared without a
+    vClass a passenger's 1,500 kg, not a pedestrian's 70."""
     import libsumo
 
     from sumo_drvpw.sim.fcd_conn import sumo_type_mass
@@ -169,7 +171,7 @@ def test_the_replay_s_vclass_masses_are_sumo_s(tmp_path):
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="100" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="14"/></edges>')
     (tmp_path / "r.rou.xml").write_text("<routes>" + "".join(f'<vType id="{c}" vClass="{c}"/>' for c in classes)
-                                        + "</routes>", encoding="utf-8")
+                                        + '<vType id="DEFAULT_PEDTYPE" width="0.5"/></routes>', encoding="utf-8")
     libsumo.start(["sumo", "-n", str(tmp_path / "n.net.xml"), "-r", str(tmp_path / "r.rou.xml"),
                    "--no-step-log", "--no-warnings", "--end", "1"])
     try:
@@ -183,4 +185,5 @@ def test_the_replay_s_vclass_masses_are_sumo_s(tmp_path):
     files = read_vtypes([tmp_path / "r.rou.xml"])
     ours = {vt: sumo_type_mass(files, vt) for vt in sumo}
     assert ours == sumo
+    assert sumo["DEFAULT_PEDTYPE"] == 1500.0 and sumo["pedestrian"] == 70.0
     assert len(set(sumo.values())) > 10

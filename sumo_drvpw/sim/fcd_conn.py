@@ -155,8 +155,9 @@ def sumo_type_mass(files, vt: str) -> float | None:
     ``files`` (:func:`~sumo_drvpw.sim.vtypes.read_vtypes`) declare it: its ``mass``, else its
     ``vehicleMass`` param, else its vClass's default (:data:`SUMO_VCLASS_MASS_KG`; no vClass:
     a passenger's, for a person's vType too — SUMO warns it "implicitly uses unsuitable vClass
-    'passenger'"); SUMO's own vTypes (``DEFAULT_PEDTYPE`` …) where no file redeclares them;
-    None for a vType of no file. What a rider adds to its vehicle (EnergyParams::
+    'passenger'", and for SUMO's own ``DEFAULT_PEDTYPE`` … redeclared without one: SUMO 1.28
+    gives it 1,500 kg); SUMO's own vTypes where no file redeclares them; None for a vType of
+    no file. What a rider adds to its vehicle (EnergyParams::
     getTransportableMass: its vType's mass; neither ``loading`` nor ``drvpw.mass``)."""
     info = files.get(vt)
     if info is None:
@@ -167,7 +168,7 @@ def sumo_type_mass(files, vt: str) -> float | None:
         return float((info.energy_params or {})["vehicleMass"])
     except (KeyError, ValueError):
         pass
-    return SUMO_VCLASS_MASS_KG.get(info.vclass or SUMO_DEFAULT_VTYPES.get(vt, "passenger"), SUMO_VEH_MASS_KG)
+    return SUMO_VCLASS_MASS_KG.get(info.vclass or "passenger", SUMO_VEH_MASS_KG)
 
 
 class _Rows:
