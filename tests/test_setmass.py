@@ -149,6 +149,7 @@ def test_the_replay_on_dask_says_and_books_the_same(ref, tmp_path):
                      "--no-figures", "--out", str(tmp_path / "o")]) == 0
     s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     assert s["assumptions"]["untold_copy_masses"] == {"car@v": "car"}
+    assert s["assumptions"]["told_copy_masses"] == {"car@w": 900.0}  # (joined from the buckets)
     assert sum("own vType copies" in w for w in s["warnings"]) == 1
     assert not any("matched no vehicle" in w for w in s["warnings"])
     v = pd.read_parquet(tmp_path / "o" / "vehicles.parquet").set_index("vehicle")
