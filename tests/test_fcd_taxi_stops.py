@@ -121,3 +121,35 @@ def test_an_explicit_taxi_has_the_device_whatever_its_params_say(tmp_path):
         t.read(el, el.tag)
     assert sumo == {"a": True, "b": True, "c": False, "d": False}
     assert {v: t.has(v, v) for v in "abcd"} == sumo
+
+
+@pytest.mark.parametrize("step", [1.0, 0.5])
+def test_an_idle_taxi_parking_again_where_its_last_customer_left_books_as_live(tmp_path, step):
+    """Two taxis dispatched to three customers (SUMO's default dispatch and idle-algorithm
+    stop): when a taxi's last customer leaves at its drop-off and no dispatch follows, SUMO
+    keeps that stop as the idle one; libsumo reads the taxi on its lane, standing, for one
+    step, parked again (a parking entry) from the next, while the FCD writes it at its space
+    all along. The replay booked neither step: fuel 0.9956 and 0.9975 of the live run's at
+    1-s steps (measured 2026-11-29). Now the replay books them as live."""
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="2000" y="0"/></nodes>',
+              '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/>'
+              '<edge id="r" from="b" to="a" numLanes="1" speed="15"/></edges>')
+    (tmp_path / "r.rou.xml").write_text(
+        f'<routes><vType id="tx" vClass="taxi" mass="1500">{TAXI}</vType>'
+        '<vehicle id="t0" type="tx" depart="0"><route edges="e"/><stop lane="e_0" endPos="200" duration="5"/></vehicle>'
+        '<vehicle id="t1" type="tx" depart="2"><route edges="e"/></vehicle>'
+        '<person id="p0" depart="40" departPos="400"><ride from="e" to="e" arrivalPos="900" lines="taxi"/></person>'
+        '<person id="p1" depart="150" departPos="1000"><ride from="e" to="e" arrivalPos="1800" lines="taxi"/></person>'
+        '<person id="p2" depart="160" departPos="300"><ride from="e" to="e" arrivalPos="1200" lines="taxi"/></person>'
+        '</routes>', encoding="utf-8")
+    sc = energy_scenario(tmp_path, 400, step_length=step, fcd=True)
+    sc.write_text(sc.read_text(encoding="utf-8").replace('equations = ["vtype_energy"]\n', ""), encoding="utf-8")
+    run_scenario(sc, tmp_path / "live")
+    process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "rep", figures=False)
+    booked = {}
+    for out in ("live", "rep"):
+        v = pd.read_parquet(tmp_path / out / "vehicles.parquet").groupby("vehicle")[["time_s", "distance_m"]].sum()
+        c = pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key")
+        booked[out] = v.join(c[["fuel_l"]]).sort_index()
+    assert list(booked["live"].index) == ["t0", "t1"]
+    pd.testing.assert_frame_equal(booked["rep"], booked["live"], rtol=1e-6)

@@ -488,8 +488,7 @@ def replay_fcd(sc, fcd_file, out_dir=None, begin_s=None, keep_vehicles: bool = F
     # the vehicles of the route files
     declared = read_declared_stops(list(dict.fromkeys([*sc.additional_files, *sc.route_files])), begin=sc.begin,
                                    end=sc.end, option=lambda key: scenario_option(sc, key) or (head or {}).get(key))
-    if declared:
-        replay.stops = StopTracker(declared, net)
+    replay.stops, replay.taxis = StopTracker(declared, net) if declared else None, declared.taxis
     acc.ledger.hold_steps, acc.ledger.may_return = int(np.ceil(TELEPORT_HOLD_S / replay.dt)), may_return(declared, net, acc.ledger)
     # a parked car idling in its space, its way out blocked, as the live run books it
     so = acc.stepper.shutoff

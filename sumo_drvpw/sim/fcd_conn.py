@@ -200,6 +200,7 @@ class _Rows:
         #: (and SUMO's DEFAULT_CONTAINERTYPE), and matched to vehicles as riding persons are
         self.container_types: set = set()
         self.boxes: dict = {}  # vehicle id → the containers at its x, y and speed
+        self.boxes_before: dict = {}  # (those of the last timestep)
         self.box_of: dict = {}  # container id → its vType (as its rows write it)
         #: vType → its shut-off params as the route files write them (set by replay_fcd)
         self.type_params: dict = {}
@@ -246,6 +247,9 @@ class _Rows:
         #: vehicles parked beside a bus stop's span at a declared stop of theirs that is no bus
         #: stop (a parkingArea there): parked, not dwelling, while they stand there (:meth:`_bays`)
         self.not_bay: set = set()
+        #: the route files' taxi devices (fcd_taxi.TaxiDevices; set by replay_fcd, None: none
+        #: read), and the taxis whose last rider left in their last row, parked (:meth:`_reparks`)
+        self.taxis, self.emptied = None, set()
         self.person, self.vehicletype, self.calibrator = _Person(self), _VType(self), _Calib(self)
 
     def saw(self, ids) -> None:
@@ -270,6 +274,7 @@ class _Rows:
             c = {k: v[veh] for k, v in c.items()}
         elif self.riders or self.person_count:
             self._ride(None, c)
+        self.boxes_before = self.boxes
         if boxes is not None or self.boxes:
             self._carry(boxes, c)
         if self.kinetic is not None:
@@ -297,6 +302,8 @@ class _Rows:
                 if self.first_unknown is None:
                     j = int(np.argmax(bad))
                     self.first_unknown = (str(c["lane"][j]), float(c["time"][j]))
+        if self.taxis is not None and "off" in c:  # an idle taxi parking again where it stands
+            c = self._reparks(c, nxt)
         entry = None
         if "off" in c:  # the row a vehicle parks in: its move into the space, booked as driven
             entry, self.on_lane_ids = _parks_now(c["id"], c["off"], self.on_lane_ids)
@@ -331,6 +338,34 @@ class _Rows:
             c = dict(c, lane=lanes)
             self.parked_rows += n
         return c
+
+    def _reparks(self, c: dict, nxt: dict | None) -> dict:
+        """Rows ``c`` with an idle taxi's one step on its lane where it stands parked: when its
+        last rider (person or container) leaves at a parking stop and no dispatch follows,
+        SUMO keeps that stop as the idle one (``MSIdling_Stop::idle``: triggered, parking),
+        and libsumo reads the taxi on its lane, standing, in the next step, parked again (a
+        parking entry, :func:`_parks_now`) from the one after — while SUMO's FCD writes it at
+        its space all along (SUMO 1.28, 1-s and 0.5-s steps). Rows written every step only
+        (not sparser: :attr:`kinetic` None)."""
+        emptied, self.emptied = self.emptied, set()
+        if self.kinetic is not None or not self.riders_told:
+            return c
+        ids, off = c["id"], c["off"]
+        before = {v for v, r in self.riders_before.items() if r} | {v for v, b in self.boxes_before.items() if b}
+        if before:  # (those whose load left in this row, parked: on their lane in the next, if taxis)
+            left = before - {v for v, r in self.riders.items() if r} - {v for v, b in self.boxes.items() if b}
+            self.emptied = {v for v in left if self.taxis.of(v)}
+        if not emptied:
+            return c
+        k = np.flatnonzero(off & np.fromiter(map(emptied.__contains__, ids), bool, len(ids)))
+        if len(k) and nxt is not None:  # (still parked in the next row: no dispatch)
+            parked = set(np.asarray(nxt["id"], object)[np.asarray(nxt["off"], bool)])
+            k = k[np.fromiter((ids[j] in parked for j in k), bool, len(k))]
+        if not len(k) or nxt is None:
+            return c
+        off = off.copy()
+        off[k] = False
+        return dict(c, off=off)
 
     def _bays(self, c: dict) -> dict:
         """Rows ``c`` with the ones :class:`ParkedTest` took for a vehicle dwelling in a bus

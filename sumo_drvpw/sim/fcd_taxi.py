@@ -13,7 +13,9 @@ it is still parked, not idling with its way out blocked (DLR's port_lübeck, SUM
 container taxis with a 10-s stop parked for up to 470 s). The replay takes such stops as
 triggered by what it cannot see: their parked rows are booked parked and counted as untold
 (:mod:`sumo_drvpw.sim.fcd_idle`). With ``idle-algorithm`` randomCircling the taxi drives
-on and its stops end as planned.
+on and its stops end as planned. A taxi whose last rider leaves while it stands parked, with
+no dispatch, stays at that stop as its idle one, one step on its lane between (the replay:
+``fcd_conn._Rows._reparks``).
 """
 
 from __future__ import annotations
@@ -62,3 +64,9 @@ class TaxiDevices:
             return True
         given = self.param.get(declared_by, self.param.get(self.types.get(declared_by, "")))
         return given if given is not None else self.all
+
+    def of(self, vid: str) -> bool:
+        """Whether the replay's vehicle ``vid`` (a ``<vehicle>``/``<trip>`` of that id, else
+        ``<flow id>.<n>``) has the device."""
+        flow = vid.rpartition(".")[0]
+        return self.has(vid, vid if vid in self.types or not flow else flow)
