@@ -123,33 +123,42 @@ def test_an_explicit_taxi_has_the_device_whatever_its_params_say(tmp_path):
     assert {v: t.has(v, v) for v in "abcd"} == sumo
 
 
-@pytest.mark.parametrize("step", [1.0, 0.5])
-def test_an_idle_taxi_parking_again_where_its_last_customer_left_books_as_live(tmp_path, step):
-    """Two taxis dispatched to three customers (SUMO's default dispatch and idle-algorithm
-    stop): when a taxi's last customer leaves at its drop-off and no dispatch follows, SUMO
-    keeps that stop as the idle one; libsumo reads the taxi on its lane, standing, for one
-    step, parked again (a parking entry) from the next, while the FCD writes it at its space
-    all along. The replay booked neither step: fuel 0.9956 and 0.9975 of the live run's at
-    1-s steps (measured 2026-11-29). Now the replay books them as live."""
+PERSONS = ('<person id="p0" depart="40" departPos="400"><ride from="e" to="e" arrivalPos="900" lines="taxi"/></person>'
+           '<person id="p1" depart="150" departPos="1000"><ride from="e" to="e" arrivalPos="1800" lines="taxi"/></person>'
+           '<person id="p2" depart="160" departPos="300"><ride from="e" to="e" arrivalPos="1200" lines="taxi"/></person>')
+#: a container taxi's stop lasts the vType's loadingDuration (SUMO's default 90 s) after its container left
+CONTAINERS = '<container id="k0" depart="40" departPos="400"><transport from="e" to="e" arrivalPos="900" lines="taxi"/></container>'
+
+
+@pytest.mark.parametrize("step, load", [(1.0, PERSONS), (0.5, PERSONS), (1.0, CONTAINERS)],
+                         ids=["persons-1s", "persons-0.5s", "container-1s"])
+def test_an_idle_taxi_parking_again_where_its_last_customer_left_books_as_live(tmp_path, step, load):
+    """Two taxis dispatched to three customers, or one container taxi to a container (SUMO's
+    default dispatch and idle-algorithm stop): when a taxi's last customer leaves at its
+    drop-off and no dispatch follows, SUMO keeps that stop as the idle one once unloading is
+    over (the vType's boardingDuration, 0.5 s; for a container its loadingDuration, 90 s);
+    libsumo reads the taxi on its lane, standing, for one step, parked again (a parking
+    entry) from the next, while the FCD writes it at its space all along. The replay booked
+    neither step: with persons, fuel 0.9956 and 0.9975 of the live run's at 1-s steps
+    (measured 2026-11-29). Now the replay books them as live."""
     build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="2000" y="0"/></nodes>',
               '<edges><edge id="e" from="a" to="b" numLanes="1" speed="15"/>'
               '<edge id="r" from="b" to="a" numLanes="1" speed="15"/></edges>')
+    cap = ' containerCapacity="2" personCapacity="0"' if load == CONTAINERS else ""
     (tmp_path / "r.rou.xml").write_text(
-        f'<routes><vType id="tx" vClass="taxi" mass="1500">{TAXI}</vType>'
+        f'<routes><vType id="tx" vClass="taxi" mass="1500"{cap}>{TAXI}</vType>'
         '<vehicle id="t0" type="tx" depart="0"><route edges="e"/><stop lane="e_0" endPos="200" duration="5"/></vehicle>'
-        '<vehicle id="t1" type="tx" depart="2"><route edges="e"/></vehicle>'
-        '<person id="p0" depart="40" departPos="400"><ride from="e" to="e" arrivalPos="900" lines="taxi"/></person>'
-        '<person id="p1" depart="150" departPos="1000"><ride from="e" to="e" arrivalPos="1800" lines="taxi"/></person>'
-        '<person id="p2" depart="160" departPos="300"><ride from="e" to="e" arrivalPos="1200" lines="taxi"/></person>'
-        '</routes>', encoding="utf-8")
+        '<vehicle id="t1" type="tx" depart="2"><route edges="e"/></vehicle>' + load + '</routes>', encoding="utf-8")
     sc = energy_scenario(tmp_path, 400, step_length=step, fcd=True)
-    sc.write_text(sc.read_text(encoding="utf-8").replace('equations = ["vtype_energy"]\n', ""), encoding="utf-8")
+    sc.write_text(sc.read_text(encoding="utf-8").replace('equations = ["vtype_energy"]\n', "").replace(
+        "[outputs]\n", "[outputs]\ntrace = true\n"), encoding="utf-8")
     run_scenario(sc, tmp_path / "live")
     process_fcd(tmp_path / "fcd.xml", scenario=sc, out_dir=tmp_path / "rep", figures=False)
     booked = {}
     for out in ("live", "rep"):
-        v = pd.read_parquet(tmp_path / out / "vehicles.parquet").groupby("vehicle")[["time_s", "distance_m"]].sum()
-        c = pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key")
-        booked[out] = v.join(c[["fuel_l"]]).sort_index()
-    assert list(booked["live"].index) == ["t0", "t1"]
-    pd.testing.assert_frame_equal(booked["rep"], booked["live"], rtol=1e-6)
+        trace = pd.read_parquet(tmp_path / out / "trace.parquet")
+        booked[out] = (set(zip(trace.time_s, trace.vehicle)),
+                       pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key")[["fuel_l"]].sort_index())
+    assert list(booked["live"][1].index) == ["t0", "t1"]
+    assert booked["rep"][0] == booked["live"][0]  # the same vehicle-steps
+    pd.testing.assert_frame_equal(booked["rep"][1], booked["live"][1], rtol=1e-6)

@@ -248,8 +248,8 @@ class _Rows:
         #: stop (a parkingArea there): parked, not dwelling, while they stand there (:meth:`_bays`)
         self.not_bay: set = set()
         #: the route files' taxi devices (fcd_taxi.TaxiDevices; set by replay_fcd, None: none
-        #: read), and the taxis whose last rider left in their last row, parked (:meth:`_reparks`)
-        self.taxis, self.emptied = None, set()
+        #: read), and the parked taxis whose last rider left → when their stop ends [s] (:meth:`_reparks`)
+        self.taxis, self.emptied = None, {}
         self.person, self.vehicletype, self.calibrator = _Person(self), _VType(self), _Calib(self)
 
     def saw(self, ids) -> None:
@@ -341,27 +341,32 @@ class _Rows:
 
     def _reparks(self, c: dict, nxt: dict | None) -> dict:
         """Rows ``c`` with an idle taxi's one step on its lane where it stands parked: when its
-        last rider (person or container) leaves at a parking stop and no dispatch follows,
-        SUMO keeps that stop as the idle one (``MSIdling_Stop::idle``: triggered, parking),
-        and libsumo reads the taxi on its lane, standing, in the next step, parked again (a
-        parking entry, :func:`_parks_now`) from the one after — while SUMO's FCD writes it at
-        its space all along (SUMO 1.28, 1-s and 0.5-s steps). Rows written every step only
-        (not sparser: :attr:`kinetic` None)."""
-        emptied, self.emptied = self.emptied, set()
+        last rider leaves at a parking stop and no dispatch follows, SUMO keeps that stop as
+        the idle one (``MSIdling_Stop::idle``: triggered, parking) once its unloading is over
+        (:meth:`TaxiDevices.unloading_s`), and libsumo reads the taxi on its lane, standing, in
+        that step, parked again (a parking entry, :func:`_parks_now`) from the next — while
+        SUMO's FCD writes it at its space all along (SUMO 1.28: a person at 1-s and 0.5-s
+        steps, a container at 1-s steps). Rows written every step only (not sparser:
+        :attr:`kinetic` None)."""
         if self.kinetic is not None or not self.riders_told:
             return c
-        ids, off = c["id"], c["off"]
-        before = {v for v, r in self.riders_before.items() if r} | {v for v, b in self.boxes_before.items() if b}
-        if before:  # (those whose load left in this row, parked: on their lane in the next, if taxis)
-            left = before - {v for v, r in self.riders.items() if r} - {v for v, b in self.boxes.items() if b}
-            self.emptied = {v for v in left if self.taxis.of(v)}
-        if not emptied:
+        ids, off, now = c["id"], c["off"], self.t - self.dt
+        for load, load_before, box in ((self.riders, self.riders_before, False), (self.boxes, self.boxes_before, True)):
+            for v in [v for v, r in load_before.items() if r and not load.get(v)]:
+                if self.taxis.of(v):  # (its vType: as its last row names it)
+                    k = np.flatnonzero(ids == v)
+                    if len(k) and off[k[0]]:
+                        self.emptied[v] = now + self.taxis.unloading_s(str(c["type"][k[0]]), box)
+        if not self.emptied:
             return c
-        k = np.flatnonzero(off & np.fromiter(map(emptied.__contains__, ids), bool, len(ids)))
-        if len(k) and nxt is not None:  # (still parked in the next row: no dispatch)
-            parked = set(np.asarray(nxt["id"], object)[np.asarray(nxt["off"], bool)])
-            k = k[np.fromiter((ids[j] in parked for j in k), bool, len(k))]
-        if not len(k) or nxt is None:
+        due = {v for v, t in self.emptied.items() if t <= now + 1e-6}
+        if not due:
+            return c
+        for v in due:
+            del self.emptied[v]
+        parked = set(np.asarray(nxt["id"], object)[np.asarray(nxt["off"], bool)]) if nxt is not None else set()
+        k = np.flatnonzero(off & np.fromiter(((v in due and v in parked) for v in ids), bool, len(ids)))
+        if not len(k):  # (driven off, or dispatched: its stop ended as SUMO's dispatch says)
             return c
         off = off.copy()
         off[k] = False

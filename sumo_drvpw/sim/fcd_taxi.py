@@ -42,6 +42,8 @@ class TaxiDevices:
         self.all = some
         self.explicit = set((opt("device.taxi.explicit") or "").replace(",", " ").split())
         self.param: dict[str, bool] = {}  # vehicle, flow or vType id → its has.taxi.device
+        #: vType id → its (boardingDuration, loadingDuration) as written [s] (:meth:`unloading_s`)
+        self.durations: dict[str, tuple] = {}
         self.types: dict[str, str] = {}   # vehicle or flow id → its vType
 
     def read(self, el, tag: str) -> None:
@@ -51,6 +53,8 @@ class TaxiDevices:
             return
         if tag != "vType":
             self.types[key] = el.get("type", "DEFAULT_VEHTYPE")
+        else:
+            self.durations[key] = (el.get("boardingDuration"), el.get("loadingDuration"))
         val = next((p.get("value") for p in el if p.tag == "param" and p.get("key") == "has.taxi.device"), None)
         if val is not None:
             self.param[key] = is_true(val)
@@ -70,3 +74,14 @@ class TaxiDevices:
         ``<flow id>.<n>``) has the device."""
         flow = vid.rpartition(".")[0]
         return self.has(vid, vid if vid in self.types or not flow else flow)
+
+    def unloading_s(self, vtype: str, containers: bool) -> float:
+        """How long a taxi of vType ``vtype`` stays at its stop after its last rider left it
+        [s]: the vType's ``boardingDuration`` (persons; SUMO's default 0.5 s) or
+        ``loadingDuration`` (containers; 90 s) — SUMO 1.28's taxi on its lane that many
+        seconds after its person's or container's row left it (1-s and 0.5-s steps)."""
+        val = self.durations.get(vtype, (None, None))[1 if containers else 0]
+        try:
+            return float(val) if val is not None else (90.0 if containers else 0.5)
+        except ValueError:
+            return 90.0 if containers else 0.5
