@@ -47,6 +47,18 @@ def test_containers_are_booked_live_and_replayed(tmp_path):
         assert s["transportables"]["max_kg"] == 1500.0, out
 
 
+def _replayed_as_live(d, sc, live_chain, live_summary, vehicles=("t", "u")) -> None:
+    """The run's FCD (``d/fcd.xml``) replayed into ``d/fcd``: each vehicle's electricity that
+    of the live run to 1e-4 (``live_chain``: its chain_vehicles table), and its riders' mass
+    summary the live run's."""
+    assert cli_main(["fcd", str(d / "fcd.xml"), "--scenario", str(sc), "--out", str(d / "fcd"), "--no-figures"]) == 0
+    rv = pd.read_csv(d / "fcd" / "chain_vehicles.csv").set_index("key")
+    for vid in vehicles:
+        assert rv.loc[vid, "net_kwh"] == pytest.approx(live_chain.loc[vid, "net_kwh"], rel=1e-4), vid
+    r = json.loads((d / "fcd" / "summary.json").read_text(encoding="utf-8"))
+    assert r["transportables"] == live_summary["transportables"]
+
+
 @pytest.mark.parametrize("connection", ["libsumo", "traci"])
 def test_containers_of_their_own_types_loaded_and_unloaded_at_stops(tmp_path, connection):
     """A container of SUMO's default vType (1,500 kg) boarding at the truck's departure and one
@@ -78,13 +90,7 @@ def test_containers_of_their_own_types_loaded_and_unloaded_at_stops(tmp_path, co
     assert s["transportables"]["max_kg"] == 3500.0  # k0 and kf.0 (the flow's box: 2,000 kg, not the default's)
     assert not any("container" in w for w in s["warnings"])
     # the replay reads the containers' rows (at their truck's x, y and speed) and books the same
-    assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(tmp_path / "s.toml"),
-                     "--out", str(tmp_path / "fcd"), "--no-figures"]) == 0
-    rv = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").set_index("key")
-    for vid in ("t", "u"):
-        assert rv.loc[vid, "net_kwh"] == pytest.approx(cv.loc[vid, "net_kwh"], rel=1e-4), vid
-    r = json.loads((tmp_path / "fcd" / "summary.json").read_text(encoding="utf-8"))
-    assert r["transportables"] == s["transportables"]
+    _replayed_as_live(tmp_path, tmp_path / "s.toml", cv, s)
 
 
 def test_a_tabular_fcd_s_containers_are_read_as_the_xml_s(tmp_path):
@@ -147,13 +153,7 @@ def test_riders_of_vtypes_without_a_mass_weigh_their_vclass_s_default_live_and_r
         assert cv.loc[vid, "net_kwh"] * 1000.0 == pytest.approx(sumo_wh[vid], rel=2e-3), vid
     s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     assert s["transportables"]["max_kg"] == 4500.0  # SUMO's mass of the crate's vType
-    assert cli_main(["fcd", str(tmp_path / "fcd.xml"), "--scenario", str(sc), "--out", str(tmp_path / "fcd"),
-                     "--no-figures"]) == 0
-    rv = pd.read_csv(tmp_path / "fcd" / "chain_vehicles.csv").set_index("key")
-    for vid in ("t", "u"):
-        assert rv.loc[vid, "net_kwh"] == pytest.approx(cv.loc[vid, "net_kwh"], rel=1e-4), vid
-    r = json.loads((tmp_path / "fcd" / "summary.json").read_text(encoding="utf-8"))
-    assert r["transportables"] == s["transportables"]
+    _replayed_as_live(tmp_path, sc, cv, s)
 
 
 def test_the_replay_s_vclass_masses_are_sumo_s(tmp_path):
