@@ -593,7 +593,7 @@ def untold_copies_warning(untold: dict[str, str], told: dict | None = None) -> s
     if told:
         said.append("booked from their first row at the one mass the scenario tells: " + few(sorted(told), 5))
     return ("the FCD names vehicles' own vType copies (<type>@<id>: SUMO makes one when a script calls "
-            "setMass or another vType setter on the vehicle) but not their mass, as none of SUMO's outputs does, "
-            "so they were " + "; ".join(said) + " (one mass per copy: a mass a script set again during the "
+            "setMass or another vType setter on the vehicle) but not their mass (nor do SUMO's emission, battery "
+            "and vehroute outputs), so they were " + "; ".join(said) + " (one mass per copy: a mass a script set again during the "
             "trip, a second setMass on the vehicle, is not followed; summary.json assumptions."
             + "untold_copy_masses, told_copy_masses)")
