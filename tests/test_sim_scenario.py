@@ -646,6 +646,33 @@ def test_route_and_additional_files_in_every_form_sumo_reads(tmp_path, options):
         assert not any(f.name == "city.rou.xml" for f in files), files
 
 
+@pytest.mark.parametrize("missing", ["route", "additional"])
+def test_a_configs_missing_files_that_the_options_replace_are_not_asked_for(tmp_path, missing):
+    """A config whose route (or additional) file is not there, replaced by `[sumo] options`
+    (`-r F` / `-a F`): SUMO loads F and never opens the config's file (SUMO 1.28: `sumo -c
+    osm.sumocfg --route-files F` runs), so the scenario loads. Before it was refused, "SUMO
+    input file not found" naming the config's file (rehearsal 2026-11-29: DLR's Bad Hersfeld
+    config, whose activitygen demand its repository lacks, with its truck routes given so).
+    A file the options name that is not there is still refused."""
+    net = NETS / "city.net.xml"
+    rou = REPO / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.rou.xml"
+    (tmp_path / "here.add.xml").write_text("<additional/>\n", encoding="utf-8")
+    own = {"route": '<route-files value="gone.rou.xml"/><additional-files value="here.add.xml"/>',
+           "additional": f'<route-files value="{rou}"/><additional-files value="gone.add.xml"/>'}[missing]
+    (tmp_path / "c.sumocfg").write_text(f'<configuration><input><net-file value="{net}"/>{own}'
+                                        '</input></configuration>\n', encoding="utf-8")
+    given = {"route": ["-r", str(rou)], "additional": ["-a", str(tmp_path / "here.add.xml")]}[missing]
+    _write(tmp_path, f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{tmp_path / "c.sumocfg"}"\n'
+           f'options = {given!r}\n'.replace("'", '"'))
+    sc = load_scenario(tmp_path / "s.toml")
+    assert not any(f.name.startswith("gone.") for f in sc.route_files), sc.route_files
+    assert Path(given[1]).resolve() in sc.route_files
+    _write(tmp_path, f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{tmp_path / "c.sumocfg"}"\n'
+           f'options = ["{given[0]}", "{tmp_path / "nosuch.xml"}"]\n')
+    with pytest.raises(UserError, match="SUMO input file not found: .*nosuch.xml"):
+        load_scenario(tmp_path / "s.toml")
+
+
 def test_additional_files_given_in_sumo_options_are_the_scenarios_additional_files(tmp_path):
     """`[sumo] options = ["-a", F]` replaces the config's additional files on SUMO's command
     line: ``Scenario.additional_files`` ("the additional files SUMO loads": the bus stops an

@@ -359,9 +359,6 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         raise UserError(f"{where}: [sumo] needs 'config' or 'net' (+ 'routes')")
     if not net.is_file():
         raise UserError(f"{where}: SUMO network not found: {net}")
-    for f in files:
-        if not f.is_file():
-            raise UserError(f"{where}: SUMO input file not found: {f}")
     times = {}
     for k in ("begin", "end", "step_length"):
         if k in sumo:
@@ -391,6 +388,9 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                             "simulation SUMO runs itself; leave it out")
     args = [x for a in args for x in (a.split("=", 1) if str(a).startswith("--mesosim=") else [a])]  # as "--mesosim v"
     files, adds = option_input_files(args, [f for f in files if f not in adds], adds)  # -r, -a override
+    for f in files:  # those SUMO loads: a config's own that the options replace need not exist
+        if not f.is_file():
+            raise UserError(f"{where}: SUMO input file not found: {f}")
     meso = cfgvals.get("mesosim", "false").strip().lower() in ("true", "1", "yes", "on", "x")
     src = f"SUMO config {cfg}" if meso else where
     if "--mesosim" in args:
