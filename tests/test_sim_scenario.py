@@ -513,6 +513,53 @@ def test_vehicle_body_books_a_short_bus_or_truck_as_a_van(vclass, length, capaci
     assert (got[0] if got else None) == body
 
 
+@pytest.mark.parametrize("length, emission_class, mass, body", [
+    (None, None, None, "passenger"),                # SUMO's own army vehicle: a car
+    (4.5, None, 1400.0, "passenger"),
+    (10.0, None, None, None),                       # written longer than any car: a truck
+    (None, None, 12000.0, None),                    # a heavy mass written: a truck
+    (None, "HBEFA4/RT_le7.5t_Euro-VI_A-C", None, None),  # a truck's class written
+    (None, "Energy/unknown", None, None),           # its own model: nothing said of a car
+])
+def test_an_army_vtype_writing_nothing_heavy_is_booked_as_sumos_army_a_car(length, emission_class, mass, body):
+    """SUMO's vClass army vehicle is a car — 5 m, 1500 kg, HBEFA4/PC_petrol_Euro-4 (SUMO 1.28;
+    asked of SUMO in test_sumos_army_is_a_car_and_is_booked_as_one) —, but a vType in vClass
+    army that wrote nothing more was booked as an 8.5-t single-unit truck on its diesel chain
+    (rehearsal 2026-11-29, Bad Hersfeld's generic vTypes: 34.8 L/100 km where SUMO's emissions
+    device gave its army cars 8.2). Written heavy — a truck's length, mass or class — it stays
+    a truck."""
+    from sumo_drvpw.sim.vtypes import VTypeInfo, vehicle_body
+
+    info = VTypeInfo("t", mass, None, "f", "army", 0.0, emission_class, None, length, None)
+    got = vehicle_body("army", info, "t")
+    assert (got[0] if got else None) == body
+
+
+@pytest.mark.sumo
+def test_sumos_army_is_a_car_and_is_booked_as_one(tmp_path):
+    """The premise asked of SUMO (an army vType writing only its vClass: a car's length, mass
+    and emission class), and a bare config's run books it as a car — a petrol car's litres at
+    a car's mass —, not as a truck."""
+    import libsumo
+
+    from sumo_drvpw.sim import run_scenario
+    rou = _write(tmp_path, '<routes><vType id="a" vClass="army"/><vehicle id="v" type="a" depart="0">'
+                 '<route edges="c00c10 c10c20"/></vehicle></routes>', "a.rou.xml")
+    cfg = _write(tmp_path, f'<configuration><input><net-file value="{NETS / "city.net.xml"}"/>'
+                 f'<route-files value="{rou}"/></input></configuration>', "a.sumocfg")
+    libsumo.start(["sumo", "-c", str(cfg), "--no-step-log"])
+    try:
+        ask = libsumo.vehicletype
+        assert (ask.getLength("a"), ask.getMass("a")) == (5.0, 1500.0)
+        assert ask.getEmissionClass("a").startswith("HBEFA4/PC_petrol")
+    finally:
+        libsumo.close()
+    v = run_scenario(cfg, None, end=60, figures=False).vehicles
+    assert "epa_gasoline_car" in set(v.equation)
+    assert not any(e.startswith("moves_single_unit_truck") for e in v.equation)
+    assert set(v[v.equation == "epa_gasoline_car"].mass_kg) == {1478.8}
+
+
 @pytest.mark.parametrize("vclass, shape, length, body", [
     ("taxi", "motorcycle", 2.0, "motorcycle"),      # a motorcycle taxi (MotortaxiTraCI's "motortaxi")
     ("passenger", "scooter", 1.8, "moped"), ("private", "moped", 2.1, "moped"),

@@ -32,12 +32,10 @@ from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 #: gives a mass; every use is listed in summary.json ``assumptions``.
 DEFAULT_MASS_KG = {
     "passenger": 1478.8, "private": 1478.8, "taxi": 1478.8, "hov": 1478.8,  # (21)
-    "vip": 1478.8,                                                          # (21)
-    "evehicle": 1478.8, "authority": 1478.8,                                # (21)
+    "vip": 1478.8, "evehicle": 1478.8, "authority": 1478.8,                 # (21)
     "motorcycle": 285.0, "moped": 92.0 + 75.0,                              # (11), C2W
     "delivery": 2059.7, "emergency": 2059.7,                                # (32)
-    "bus": 16556.0,                                                         # (42)
-    "coach": 19593.0,                                                       # (41)
+    "bus": 16556.0, "coach": 19593.0,                                       # (42), (41)
     "truck": 8538.9, "army": 8538.9,                                        # (52)
     "trailer": 24419.0,                                                     # (62)
 }
@@ -48,12 +46,10 @@ DEFAULT_MASS_SOURCE = {
     "motorcycle": "MOVES source type 11 (motorcycle) source mass",
     "moped": "a 50-cm³ petrol scooter (EU L1e) with its rider: kerb 92 kg (carculator_two_wheeler's petrol "
              "scooter < 4 kW, 91-94 kg, manufacturers' data) + the 75-kg driver of EU L-category approval",
-    "delivery": "MOVES source type 32 (light commercial truck) source mass",
-    "emergency": "MOVES source type 32 (light commercial truck) source mass",
+    **{c: "MOVES source type 32 (light commercial truck) source mass" for c in ("delivery", "emergency")},
     "bus": "MOVES source type 42 (transit bus) source mass",
     "coach": "MOVES source type 41 (intercity bus) source mass",
-    "truck": "MOVES source type 52 (single unit short-haul truck) source mass",
-    "army": "MOVES source type 52 (single unit short-haul truck) source mass",
+    **{c: "MOVES source type 52 (single unit short-haul truck) source mass" for c in ("truck", "army")},
     "trailer": "MOVES source type 62 (combination long-haul truck) source mass",
 }
 
@@ -141,7 +137,7 @@ HEAVY_VCLASSES = ("truck", "army", "trailer", "bus", "coach")
 #: that vehicle: SUMO's default lengths are bus 12 m, coach 14 m, truck 7.1 m, delivery
 #: 6.5 m (SUMO vehicle-type defaults); a demand-responsive shuttle written as vClass bus
 #: for the bus lanes, 6 m long with 5 seats (SUMO's DRT game), is a van.
-VAN_LENGTH_M = {"bus": 7.5, "coach": 7.5, "truck": 6.5, "army": 6.5}
+VAN_LENGTH_M = {"bus": 7.5, "coach": 7.5, "truck": 6.5}
 #: a bus or coach of at most this many passengers (a minibus that drives on a car licence
 #: in the EU: up to 8 passenger seats) and at most :data:`MINIBUS_LENGTH_M` long is a van
 #: too (the DRT game's 8-m, 9-person shuttle)
@@ -224,6 +220,10 @@ def vehicle_body(vclass: str, info: "VTypeInfo | None", vtype_id: str) -> tuple[
         if (vclass in ("bus", "coach") and L is not None and L <= MINIBUS_LENGTH_M
                 and cap is not None and cap <= MINIBUS_CAPACITY):
             return "delivery", f"length {L:g} m and personCapacity {cap}: a minibus, not a {vclass}"
+        own = body_vclass(SUMO_DEFAULT_EMISSION_CLASS.get(vclass, SUMO_DEFAULT_EMISSION_CLASS_OTHER), None)
+        if (own and own[0] in LIGHT_VCLASSES and vclass in HEAVY_VCLASSES and info.emission_class is None
+                and (L is None or L < HEAVY_SHAPE_MIN_LENGTH_M)):  # army: SUMO's is a car, 5 m, 1500 kg
+            return own[0], f"nothing written says heavy, and SUMO's own {vclass} vehicle is light: its default {own[1]}"
         return None
     light = {c: True for c in LIGHT_VCLASSES} | {c: False for c in HEAVY_VCLASSES}
     if vclass in light and ec[0] in light and light[vclass] != light[ec[0]]:
@@ -285,7 +285,7 @@ class VTypeInfo:
 SUMO_DEFAULT_VTYPES = {"DEFAULT_VEHTYPE": "passenger", "DEFAULT_PEDTYPE": "pedestrian",
                        "DEFAULT_BIKETYPE": "bicycle", "DEFAULT_TAXITYPE": "taxi",
                        "DEFAULT_RAILTYPE": "rail", "DEFAULT_CONTAINERTYPE": "container"}
-SUMO_DEFAULT_LENGTH_M = {"bus": 12.0, "coach": 14.0, "truck": 7.1, "army": 7.1}
+SUMO_DEFAULT_LENGTH_M = {"bus": 12.0, "coach": 14.0, "truck": 7.1}  # (army: 5 m, a car's, below)
 
 
 def _length(val: str | None) -> float | None:
