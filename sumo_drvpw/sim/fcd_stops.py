@@ -33,8 +33,8 @@ parking ends there), and ends the stop in the step it drives off (one switched o
 its stop is written at 0 in the step between; the live loop books it again from its
 stop's end): the replay ends it in the row the vehicle moves in (past its planned end). A vehicle parked off the lane
 (beside it, at a containerStop or parkingArea; not in a bus bay) is not booked whatever
-its stop, and live no switched-off stop: a stop of it the replay took as started a row
-before SUMO parked it ends in its first parked row. The stop it parked at is told
+its stop, and live no switched-off stop: with x, y written its stop starts in its first
+parked row (SUMO's, as it parks it; at rest on the lane before, it manoeuvres or waits). The stop it parked at is told
 (:attr:`StopTracker.parking`: arrival its first parked row, as SUMO parks a car in the
 step it reaches its stop; what it waits for when ``triggered``) so that a car still parked past the
 stop's planned end, its way out blocked, is booked idling there
@@ -530,6 +530,9 @@ class StopTracker:
                 if (fresh is not None and fresh[j] and blind is not None and blind[j] and s.parking
                         and not s.bay):  # on its lane in its first row, its x, y unwritten: it parks in its next
                     break
+                if (s.parking and not s.bay and parked is not None and not parked[j]
+                        and not (blind is not None and blind[j])):  # SUMO starts it as it parks the vehicle:
+                    break  # on its lane it manoeuvres in (parking.maneuver) or waits, idling
                 st[1] = k + 1
                 self.matched += 1
                 until = -1.0 if s.until is None else s.until + st[2][k]
