@@ -184,7 +184,10 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
         check_vtype_filter(sc, acc.ledger)
         if tripinfo is not None:  # as SUMO named it (output-prefix, output-suffix)
             try:
-                result.sumo_device = read_tripinfo_emissions(written_file(tripinfo, naming))
+                from sumo_drvpw.sim.sumo_start import scenario_option
+                from sumo_drvpw.sim.vtypes import is_true
+                result.sumo_device = read_tripinfo_emissions(  # (fuel in ml with emissions.volumetric-fuel)
+                    written_file(tripinfo, naming), is_true(scenario_option(sc, "emissions.volumetric-fuel")))
             finally:
                 if tmpdir is not None:
                     tmpdir.cleanup()
@@ -256,17 +259,18 @@ def _output_naming(sc) -> dict[str, str]:
     return naming
 
 
-def read_tripinfo_emissions(path: Path):
+def read_tripinfo_emissions(path: Path, volumetric: bool = False):
     """Per vehicle SUMO's emissions-device totals from a tripinfo file: DataFrame vehicle,
-    sumo_electricity_wh (Energy model) and sumo_fuel_mg (fuel models); plain or gzipped
-    (a config's tripinfo-output named *.gz)."""
+    sumo_electricity_wh (Energy model) and sumo_fuel_mg (fuel models) — sumo_fuel_ml in its
+    place when the run set ``emissions.volumetric-fuel`` (SUMO 1.28 then writes ``fuel_abs``
+    in ml); plain or gzipped (a config's tripinfo-output named *.gz)."""
     import xml.etree.ElementTree as ET
 
     import pandas as pd
 
     from sumo_drvpw.fileio import open_maybe_gzip
 
-    rows = []
+    rows, fuel = [], "sumo_fuel_ml" if volumetric else "sumo_fuel_mg"
     try:
         with open_maybe_gzip(path) as src:
             for _, el in ET.iterparse(src, events=("end",)):
@@ -275,11 +279,11 @@ def read_tripinfo_emissions(path: Path):
                     if em is not None:
                         rows.append({"vehicle": el.get("id"),
                                      "sumo_electricity_wh": float(em.get("electricity_abs", "nan")),
-                                     "sumo_fuel_mg": float(em.get("fuel_abs", "nan"))})
+                                     fuel: float(em.get("fuel_abs", "nan"))})
                     el.clear()
     except (ET.ParseError, OSError, EOFError) as e:
         raise UserError(f"SUMO tripinfo {path}: cannot read: {e}") from None
-    return pd.DataFrame(rows, columns=["vehicle", "sumo_electricity_wh", "sumo_fuel_mg"])
+    return pd.DataFrame(rows, columns=["vehicle", "sumo_electricity_wh", fuel])
 
 
 def check_vtype_filter(sc, ledger) -> None:

@@ -446,11 +446,15 @@ def device_comparison(v, dev, cv, chains: dict, exported: dict | None = None, ma
     for eq, g in v.groupby("equation", sort=False):
         c = chains.get(eq)
         aux, note = nan, ""
-        if c is not None and c.predicts == "fuel":
+        if c is not None and c.predicts == "fuel" and "sumo_fuel_ml" in g:  # emissions.volumetric-fuel
+            g = g[g.sumo_fuel_ml.abs() > 0]
+            ours, sumo, q = g.fuel_l.sum(), g.sumo_fuel_ml.sum() / 1e3, "fuel L (chain; SUMO's volumetric fuel)"
+        elif c is not None and c.predicts == "fuel":
             g = g[g.sumo_fuel_mg.abs() > 0]
             dens = FUELS[c.fuel]["density_kg_per_l"]
             ours, sumo = g.fuel_l.sum(), g.sumo_fuel_mg.sum() / 1e6 / dens
             q = f"fuel L (chain; SUMO's fuel mass at {dens:g} kg/L)"
+        if c is not None and c.predicts == "fuel":
             if c.charge_sustaining and c.engine_off_below_w > 0:  # a full hybrid's (sim/vtypes.is_hybrid_chain)
                 bus = "vclass" in g and len(g) and g.vclass.isin(HYBRID_BUS_VCLASSES).all()
                 note = HYBRID_BUS_NOTE if bus else HYBRID_NOTE  # (what SUMO books: its class's)
