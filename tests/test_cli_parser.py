@@ -68,3 +68,35 @@ def test_a_refused_repetition_writes_nothing(capsys, tmp_path):
     assert e.value.code == 2
     assert "--minutes given twice (--minutes 0.05, then --minutes 0.1)" in capsys.readouterr().err
     assert not out.exists()
+
+
+_PROBE = """
+import sys
+from sumo_drvpw.cli import main
+try:
+    rc = main(sys.argv[1:])
+except SystemExit as e:
+    rc = e.code
+print("RC", rc, "pandas" in sys.modules, "sumo_drvpw.sim.loop" in sys.modules)
+"""
+
+
+@pytest.mark.parametrize("argv,rc", [
+    (["--help"], 0),
+    (["run", "--help"], 0),
+    (["run", "x.sumocfg", "--out", "o", "--end", "abc"], 2),  # a bad SUMO time (read by sim/scenario_values)
+    (["run", "x.sumocfg", "--out", "o", "--jobs", "2", "--jobs", "3"], 2),
+    (["runn", "x"], 2),
+], ids=["help", "run help", "run bad time", "run option twice", "no such command"])
+def test_help_and_refused_options_load_no_pandas(argv, rc, tmp_path):
+    """The command line's start: only the command given is configured, and its options read
+    without the sim package's loop or pandas (about half a second of every start); the
+    refusal's one line and exit 2 are those of any refusal."""
+    import subprocess
+    import sys
+
+    p = subprocess.run([sys.executable, "-c", _PROBE, *argv], capture_output=True, text=True, cwd=tmp_path)
+    assert p.stdout.splitlines()[-1] == f"RC {rc} False False", (p.stdout[-500:], p.stderr)
+    if rc == 2:
+        assert p.stderr.count("\n") == 1 and "error:" in p.stderr, p.stderr
+    assert not (tmp_path / "o").exists()

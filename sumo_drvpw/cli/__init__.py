@@ -39,24 +39,48 @@ COMMANDS = {
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(lazy: bool = False) -> argparse.ArgumentParser:
+    """The command line's parser; ``lazy``: a command's module is imported (and its options
+    added) only when it is the command given, so that ``--help`` and an option refused load no
+    other command's imports (pandas: half a second)."""
     from sumo_drvpw import __version__
 
     parser = _Parser(prog="sumo-drvpw", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"sumo-drvpw {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, action=_Commands)
     for name, (module, help_) in COMMANDS.items():
         p = sub.add_parser(name, help=help_, description=help_)
-        try:
-            mod = importlib.import_module(module)
-        except ModuleNotFoundError as e:
-            if e.name and e.name.startswith("sumo_drvpw"):
-                p.set_defaults(_missing=module)
-                continue
-            raise
-        mod.configure(p)
-        p.set_defaults(_main=mod.main)
+        if lazy:
+            sub.pending[name] = module
+        else:
+            _configure(p, module)
     return parser
+
+
+def _configure(p: argparse.ArgumentParser, module: str) -> None:
+    """A command's options (its module's ``configure``) and ``main`` on its parser ``p``."""
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as e:
+        if e.name and e.name.startswith("sumo_drvpw"):
+            p.set_defaults(_missing=module)
+            return
+        raise
+    mod.configure(p)
+    p.set_defaults(_main=mod.main)
+
+
+class _Commands(argparse._SubParsersAction):
+    """The sub-commands; those in ``pending`` (command → module) are configured when given."""
+
+    def __init__(self, *a, **kw):
+        super().__init__(*a, **kw)
+        self.pending: dict[str, str] = {}
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values and values[0] in self.pending:
+            _configure(self.choices[values[0]], self.pending.pop(values[0]))
+        super().__call__(parser, namespace, values, option_string)
 
 
 def sumo_time_arg(text: str) -> float:
@@ -453,7 +477,7 @@ def main(argv: list[str] | None = None) -> int:
     from sumo_drvpw import fileio
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
+    parser = build_parser(lazy=True)
     args = parser.parse_args(argv)
     if getattr(args, "_missing", None):
         print(f"sumo-drvpw: error: command '{args.command}' is not available in this build",

@@ -12,8 +12,6 @@ import sys
 from functools import partial
 from pathlib import Path
 
-from sumo_drvpw.data.powertrain import terms_predict_of
-from sumo_drvpw.data.trips import signature_texts
 from sumo_drvpw.errors import NoDrivingPower, UserError
 
 ENGINES = ("local", "dask", "memory")
@@ -123,6 +121,8 @@ def fit_road_load(args, st, cands, veh, name: str, provenance: dict):
 def calibrate_streamed(args, cands, out: Path, inputs) -> int:
     """`calibrate` (driving power) through the streaming engines; same outputs."""
     from sumo_drvpw.data.measured import resolve_equations
+    from sumo_drvpw.data.powertrain import terms_predict_of
+    from sumo_drvpw.data.trips import signature_texts
     from sumo_drvpw.fit.stream import CalibrationStats
     from sumo_drvpw.fit.stream_compare import CompareStats
     from sumo_drvpw.model.vehicles import load_vehicle
@@ -257,6 +257,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     from sumo_drvpw.cli import measurement_options, note_counts
     from sumo_drvpw.cli.calibrate import MOVING_MPS, declare_measurement
     from sumo_drvpw.data.measured import resolve_equations
+    from sumo_drvpw.data.trips import signature_texts
     from sumo_drvpw.fit.chain_checks import check_chain
     from sumo_drvpw.fit.chain_stream import ChainSpec, ChainStats, calibrate_chain_streamed as fit_chain
     from sumo_drvpw.model.vehicles import load_vehicle

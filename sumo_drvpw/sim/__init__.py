@@ -13,17 +13,18 @@ equations book a vType, at what mass), ``network`` (edge table, road classes, ro
 RunResult); ``sumo_start`` starts SUMO, ``run`` runs a scenario; ``fcd*`` replay FCD files.
 """
 
-from sumo_drvpw.sim.accountant import Accountant
-from sumo_drvpw.sim.outputs import RunResult
-from sumo_drvpw.sim.run import VTypeResolver, close_sumo, run_scenario, start_sumo
-
 __all__ = ["run_scenario", "start_sumo", "close_sumo", "VTypeResolver", "Accountant",
            "RunResult", "process_fcd"]
 
+#: each name's module, imported on first use: importing one module of the package (a command's
+#: option reading a SUMO time, sim/scenario_values.py) loads neither the loop nor pandas
+_HOME = {"Accountant": "accountant", "RunResult": "outputs", "VTypeResolver": "run", "close_sumo": "run",
+         "run_scenario": "run", "start_sumo": "run", "process_fcd": "fcd"}
 
-def __getattr__(name):  # process_fcd on first use (the FCD readers are not loaded before)
-    if name == "process_fcd":
-        from sumo_drvpw.sim.fcd import process_fcd
 
-        return process_fcd
+def __getattr__(name):
+    if name in _HOME:
+        from importlib import import_module
+
+        return getattr(import_module(f"sumo_drvpw.sim.{_HOME[name]}"), name)
     raise AttributeError(f"module 'sumo_drvpw.sim' has no attribute {name!r}")
