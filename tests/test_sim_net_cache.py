@@ -34,7 +34,7 @@ def cache(tmp_path, monkeypatch):
 
 def _same(a, b) -> None:
     for k, v in vars(a).items():
-        if k == "path":
+        if k in ("path", "table_source"):  # (where this load found it: test_the_table_says_where_it_came_from)
             continue
         w = getattr(b, k)
         if isinstance(v, np.ndarray):
@@ -165,3 +165,50 @@ def test_a_killed_run_s_partial_file_is_removed_later(cache, tmp_path):
     shutil.copy(CITY, net)
     load_network(net, RoadClassRule())
     assert not old.exists() and young.exists()
+
+
+def test_the_table_says_where_it_came_from(cache, tmp_path, monkeypatch):
+    """A run's network table says in one line whether it was read from the cache, kept there, or
+    why not (summary.json's network.table); the cache said nothing when it could not be written
+    (a file where its folder should be, a folder others may write) or when it was off."""
+    net = tmp_path / "a.net.xml"
+    shutil.copy(CITY, net)
+    folder = tmp_path / "cache"
+    first = load_network(net, RoadClassRule())
+    (kept,) = folder.glob("net-*.pickle")
+    assert first.table_source == f"read from the net file and kept in the cache ({kept})"
+    assert load_network(net, RoadClassRule()).table_source == f"read from the cache ({kept})"
+    kept.write_bytes(b"not a pickle")
+    damaged = load_network(net, RoadClassRule()).table_source
+    assert damaged.startswith(f"read from the net file and kept in the cache ({kept}); the kept one was not read: ")
+    os.chmod(folder, 0o777)  # others may write in it: neither read nor written
+    foreign = load_network(net, RoadClassRule()).table_source
+    assert foreign == (f"read from the net file; not kept in the cache ({folder}): PermissionError: the cache "
+                       f"folder {folder} may be written by others: nothing kept there")
+    blocked = tmp_path / "blocked"
+    blocked.write_text("a file, not a folder", encoding="utf-8")
+    monkeypatch.setenv("SUMO_DRVPW_CACHE", str(blocked / "networks"))
+    why = load_network(net, RoadClassRule()).table_source
+    assert why.startswith(f"read from the net file; not kept in the cache ({blocked / 'networks'}): ") and \
+        "NotADirectoryError" in why and "\n" not in why
+    monkeypatch.setenv("SUMO_DRVPW_CACHE", "off")
+    assert load_network(net, RoadClassRule()).table_source.startswith("read from the net file (the cache is off")
+    assert len(cache) == 5
+
+
+def test_a_run_s_summary_says_where_its_network_came_from(tmp_path, monkeypatch, capsys):
+    """summary.json's network block, from a real run twice with the cache on; nothing on the
+    console about it."""
+    import json
+
+    from sumo_drvpw.cli import main
+
+    monkeypatch.setenv("SUMO_DRVPW_CACHE", str(tmp_path / "cache"))
+    for k in range(2):
+        assert main(["run", "city", "--end", "5", "--out", str(tmp_path / f"o{k}"), "--no-figures",
+                     "--no-progress"]) == 0
+    first, again = (json.loads((tmp_path / f"o{k}" / "summary.json").read_text(encoding="utf-8"))["network"]["table"]
+                    for k in range(2))
+    assert first.startswith("read from the net file and kept in the cache (") and again.startswith("read from the cache (")
+    out = capsys.readouterr()
+    assert "cache" not in out.out + out.err

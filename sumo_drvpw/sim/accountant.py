@@ -496,13 +496,15 @@ class Accountant(_Listener):
 
 
 def network_info(net, ledger, top: int = 10) -> dict:
-    """The ``network`` block of summary.json: file, elevation, most-clipped lanes."""
+    """The ``network`` block of summary.json: file, elevation, most-clipped lanes, and where the
+    table was read from (``table``: the cache or the net file, and why it was not kept)."""
     counts = ledger.lane_clipped
     order = np.argsort(-counts, kind="stable")[:top] if len(counts) else []
     lanes = {net.lane_ids[i]: int(counts[i]) for i in order if counts[i] > 0} \
         if net.lane_ids is not None else {}
     return {"file": str(net.path), "has_elevation": bool(net.has_elevation),
-            "z_share": float(net.z_share), "slope_clipped_lanes": lanes}
+            "z_share": float(net.z_share), "slope_clipped_lanes": lanes,
+            **({"table": net.table_source} if getattr(net, "table_source", None) else {})}
 
 
 #: a network whose lane shapes carry z on less than this share of their length is warned of:

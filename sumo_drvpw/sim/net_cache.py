@@ -17,7 +17,8 @@ Folder: ``SUMO_DRVPW_CACHE`` (a path; ``off``, ``0`` or empty: no cache), else
 readable by its owner only, and a file is read only from a folder the user owns that
 nobody else may write (a pickle runs code when read). Files are written whole (a temporary
 file renamed), and any failure of the cache
-(unwritable folder, disk full, a damaged file) falls back to reading the network. At most
+(unwritable folder, disk full, a damaged file) falls back to reading the network, and the
+table's ``table_source`` says so (summary.json's ``network.table``). At most
 :data:`KEEP` files and :data:`MAX_BYTES` are kept, the least recently used removed first; a
 partial file a killed run left goes once older than :data:`STALE_TMP_S`.
 """
@@ -84,15 +85,21 @@ def _private(folder: Path) -> bool:
 
 def cached_network(path: Path, settings: tuple, build):
     """``build()``'s network table, from the cache when it holds one for ``path`` and
-    ``settings``, else built and kept there. The table's ``path`` is ``path``."""
+    ``settings``, else built and kept there. The table's ``path`` is ``path``; its
+    ``table_source`` says in one line where it came from — read from the cache, kept there, or
+    why it was not (a run's summary.json gives it under ``network``; nothing is printed)."""
     folder = cache_dir()
-    file = None
+    file, why = None, None
     if folder is None:
-        return build()
+        net = build()
+        net.table_source = "read from the net file (the cache is off: SUMO_DRVPW_CACHE)"
+        return net
     try:
         key = network_key(Path(path), settings)
         file = folder / f"net-{key[:40]}.pickle"
-        if file.is_file() and _private(folder):
+        if file.is_file():
+            if not _private(folder):
+                raise PermissionError(f"the cache folder {folder} may be written by others: not read")
             with open(file, "rb") as f:
                 net = pickle.load(f)
             try:
@@ -100,22 +107,33 @@ def cached_network(path: Path, settings: tuple, build):
             except OSError:  # gone since (another run's pruning): the table read is whole all the same
                 pass
             net.path = Path(path)
+            net.table_source = f"read from the cache ({file})"
             return net
-    except Exception:  # a damaged file (kept again below), no file to hash: read the network
-        pass
+    except Exception as e:  # a damaged file (kept again below), no file to hash: read the network
+        why = _reason(e)
     net = build()
     if file is not None:
         try:
             _store(folder, file, net)
-        except Exception:  # a cache that cannot be written does not fail the run
-            pass
+            net.table_source = f"read from the net file and kept in the cache ({file})" + (
+                f"; the kept one was not read: {why}" if why else "")
+            return net
+        except Exception as e:  # a cache that cannot be written does not fail the run
+            why = _reason(e)
+    net.table_source = f"read from the net file; not kept in the cache ({folder}): {why}"
     return net
+
+
+def _reason(e: Exception) -> str:
+    """An exception of the cache as a reason on one line."""
+    text = " ".join(str(e).split())
+    return f"{type(e).__name__}: {text}" if text else type(e).__name__
 
 
 def _store(folder: Path, file: Path, net) -> None:
     folder.mkdir(parents=True, exist_ok=True, mode=0o700)
     if not _private(folder):
-        return
+        raise PermissionError(f"the cache folder {folder} may be written by others: nothing kept there")
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=".net-", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
