@@ -21,6 +21,11 @@ kept between runs (sim/net_cache.py; ``SUMO_DRVPW_CACHE=off`` times every run's 
 the first repeat is a cold one unless the cache already holds the network). The last line is
 ``run_ratio=<plug-in / sumo>`` of the wall-time medians. Target: ≤ 3.0 on the default
 scenario. Not part of the test suite.
+
+``--baseline PATH`` times another ``sumo-drvpw`` executable (e.g. an earlier commit's checkout
+in its own virtual environment) in the same rounds — sumo, baseline, this one, in turn — so a
+change is measured before and after under the same machine load; its line is
+``baseline_ratio=<baseline / sumo>``.
 """
 
 from __future__ import annotations
@@ -93,6 +98,7 @@ def main(argv=None) -> int:
     ap.add_argument("--vehicles", type=int, default=5)
     ap.add_argument("--end", type=float, default=3600.0, help="end of the generated scenario [s]")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--baseline", metavar="PATH", help="another sumo-drvpw executable timed in the same rounds")
     a = ap.parse_args(argv)
     import sumo
     import sumolib
@@ -101,7 +107,8 @@ def main(argv=None) -> int:
     os.environ.update(env)
     sumo_bin = sumolib.checkBinary("sumo")
     cli = str(Path(sys.executable).with_name("sumo-drvpw"))
-    times: dict[str, list[tuple[float, float]]] = {"sumo": [], "plugin": []}
+    times: dict[str, list[tuple[float, float]]] = {"sumo": [], **({"baseline": []} if a.baseline else {}),
+                                                   "plugin": []}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         cfg = Path(a.config).resolve() if a.config else build(work, a.grid, a.vehicles, a.end)
@@ -109,9 +116,11 @@ def main(argv=None) -> int:
         for _ in range(a.repeats):
             times["sumo"].append(timed([sumo_bin, "-c", str(cfg), "--no-step-log", "true",
                                         "--duration-log.statistics", "false", "-v", "false"]))
-            shutil.rmtree(out, ignore_errors=True)
-            times["plugin"].append(timed([cli, "run", str(cfg), "--out", str(out), "--no-figures",
-                                          "--no-progress"]))
+            for name, exe in (("baseline", a.baseline), ("plugin", cli)):
+                if exe:
+                    shutil.rmtree(out, ignore_errors=True)
+                    times[name].append(timed([exe, "run", str(cfg), "--out", str(out), "--no-figures",
+                                              "--no-progress"]))
     med = {k: statistics.median(w for w, _ in v) for k, v in times.items()}
     cpu = {k: statistics.median(c for _, c in v) for k, v in times.items()}
     what = cfg.name if a.config else f"grid {a.grid}x{a.grid}, {a.vehicles} cars, {a.end:g} s"
@@ -120,6 +129,9 @@ def main(argv=None) -> int:
     for k, v in times.items():
         print(f"{k:7s} wall median {med[k]:.2f} s {[round(w, 2) for w, _ in v]}, "
               f"CPU median {cpu[k]:.2f} s {[round(c, 2) for _, c in v]}")
+    if a.baseline:
+        print(f"CPU ratio baseline / sumo: {cpu['baseline'] / cpu['sumo']:.2f}")
+        print(f"baseline_ratio={med['baseline'] / med['sumo']:.2f}")
     print(f"CPU ratio plug-in / sumo: {cpu['plugin'] / cpu['sumo']:.2f}")
     print(f"run_ratio={med['plugin'] / med['sumo']:.2f}")
     return 0
