@@ -154,8 +154,10 @@ class Dynamics:
         n = len(ledger.class_list)
         kin = np.bincount(code, np.maximum(v_mean[keep] * a[keep], 0.0) * dt, minlength=n)
         dist = np.bincount(code, v_dist[keep] * dt, minlength=n)
-        for c in np.flatnonzero(dist > 0):
-            acc = self.kinetic.setdefault(ledger.class_list[c], np.zeros(2))
+        for c in np.flatnonzero(dist > 0).tolist():
+            acc = self.kinetic.get(ledger.class_list[c])
+            if acc is None:  # (not setdefault: its default array was made every step)
+                acc = self.kinetic[ledger.class_list[c]] = np.zeros(2)
             acc += (kin[c], dist[c])
         heavy = [c for c in range(n) if ledger.class_list[c] in HEAVY]
         if theta is None or not heavy:
