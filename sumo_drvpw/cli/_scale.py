@@ -274,6 +274,10 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     from sumo_drvpw.fit.chain_fuel import engine_off_for
 
     cut = declared_fuel_cut(eq) if args.target == "fuel" else None  # declared: kept
+    if args.target == "fuel":
+        from sumo_drvpw.fit.chain_fuel import declared_engine
+
+        declared_engine(eq, streamed=True)
 
     spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut,
                      engine_off_for(veh, False, getattr(args, "engine_off", "profile")))  # (battery: at the fit)

@@ -456,12 +456,12 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
                             "target only; a fuel chain books the climate's draw as auxiliary power "
                             "(or a logged load in W)")
         fuel = m.vehicle.powertrain.get("fuel", "gasoline") if m.vehicle is not None else "gasoline"
-        from sumo_drvpw.fit.chain_fuel import calibrate_fuel, engine_off_for
+        from sumo_drvpw.fit.chain_fuel import calibrate_fuel, declared_engine, engine_off_for
 
         cut = declared_fuel_cut(equation)
         fit = calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads, mask=use,
                              engine_off=engine_off_for(m.vehicle, m.battery_w is not None, engine_off),
-                             fuel=fuel, fuel_cut_below_w=cut)
+                             fuel=fuel, fuel_cut_below_w=cut, **declared_engine(equation))
     elif m.target != "battery":
         raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
     else:

@@ -27,10 +27,13 @@ higher fuel of an engine in gear than at idle.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from sumo_drvpw.fit.chain import (ETA_MIN, ChainFit, _bic, _col, _covariance, _nan_none, _solve,
                                   _stats)
+from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain_checks import reading
 from sumo_drvpw.model.chain import EnergyChain, corrected_fuel_power
 from sumo_drvpw.model.constants import STANDSTILL_MPS
@@ -130,7 +133,7 @@ def fuel_names(tmpl: EnergyChain, loads) -> list[str]:
     battery carries it and the engine puts it back; with the engine off only while on, it is
     the idle fuel's), and the load gains."""
     return (["idle_fuel_power_w", "marginal_efficiency"] + ["aux_power_w"] * tmpl.charge_sustaining
-            + [f"loads.{c}" for c in loads])
+            + [f"loads.{c}" for c in loads] + ["moving_idle_fuel_power_w"] * (tmpl.moving_idle_fuel_power_w is not None))
 
 
 def fuel_bounds(names) -> tuple[list, list]:
@@ -144,8 +147,10 @@ def fuel_design(tmpl: EnergyChain, p, v, pb, lcols) -> np.ndarray:
     template (model/chain.py), which has the auxiliary power's column of ones."""
     paid = tmpl.paid(p, v).astype(float)
     aux = [np.ones(p.shape)] if tmpl.charge_sustaining else []
-    return np.column_stack([tmpl.engine_on(p, v).astype(float), paid * np.maximum(p, 0.0) - pb] + aux
-                           + [paid * c for c in lcols])
+    on = tmpl.engine_on(p, v).astype(float)
+    drive = np.maximum(p, 0.0) if tmpl.engine_max_w is None else np.clip(p, 0.0, tmpl.engine_max_w)
+    return np.column_stack([on, paid * drive - pb] + aux + [paid * c for c in lcols]
+                           + moving_columns(tmpl, on, v))
 
 
 def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fuel="gasoline",
@@ -210,7 +215,7 @@ def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fu
 def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict | None = None, *,
                    loads=(), mask=None, engine_off="profile", fuel: str = "gasoline",
                    engine_on_above_mps="profile", fuel_cut_below_w: float | None = None,
-                   charge_sustaining: bool = True) -> ChainFit:
+                   charge_sustaining: bool = True, moving_idle: bool = False, engine_max_w=None) -> ChainFit:
     """Calibrate a Willans-line fuel chain with engine-off and battery (SOC) correction.
 
     Parameters
@@ -230,6 +235,10 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     charge_sustaining : fit and return the charge-sustaining form for an engine that stops
         (default: the SOC-corrected target is that form's; an engine that never stops has
         one form); False: the plain form, the driving below P_off unfuelled
+    moving_idle : fit a moving zero-output fuel ≥ the idle fuel (model/chain.py
+        ``moving_idle_fuel_power_w``: an engine's friction at road speed, not its idle's)
+    engine_max_w : the engine's rated output [W] (model/chain.py): None (no cap), a number
+        (declared, kept: the fit books the demand above it at it) or "profile" (:func:`profile_cap`)
     """
     p = np.asarray(p_drive_w, float)
     n = p.size
@@ -251,6 +260,8 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
         engine_off = -np.inf  # it runs where the car stands: no threshold P_off ≥ 0 fits that
     # (no traction battery: nothing carries the car's loads while its engine is off)
     for tmpl in fuel_grid(engine_off, engine_on_above_mps, fuel_cut_below_w, charge_sustaining and not conventional):
+        tmpl.moving_idle_fuel_power_w = 0.0 if moving_idle else None
+        tmpl.engine_max_w = None if engine_max_w in (None, "profile") else float(engine_max_w)
         def make(sl, tmpl=tmpl):
             return fuel_design(tmpl, p[sl], v[sl], pb[sl], [c[sl] for c in lcols]), y[sl]
 
@@ -262,10 +273,24 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
         if best is None or bic < best[0]:
             best = (bic, tmpl, beta, active, xs, rss)
     _, tmpl, beta, active, xs, rss = best
+    capped = profile_cap(lambda c: _solve(lambda sl: (fuel_design(dataclasses.replace(tmpl, engine_max_w=c), p[sl], v[sl], pb[sl],
+                                                                   [c_[sl] for c_ in lcols]), y[sl]), w, ok,
+                                          *fuel_bounds(fuel_names(tmpl, loads))),
+                         p, ok, rss, int(ok.sum()), len(fuel_names(tmpl, loads)) + 1, yy) if engine_max_w == "profile" else None
+    if capped:
+        tmpl = dataclasses.replace(tmpl, engine_max_w=float(capped[0]))
+        beta, rss, active, xs = capped[1]
     off, engine_on_above_mps = tmpl.engine_off_below_w, tmpl.engine_on_above_mps
     low = float(w[ok & (v < CITY_SPEED_MPS)].sum() / max(w[ok].sum(), 1e-12))
     chain, params = fuel_chain(loads, beta, _covariance(xs, rss, active), active, off, engine_on_above_mps,
                                low, fuel, fuel_cut_below_w, tmpl.charge_sustaining, battery_w is not None)
+    if moving_idle:
+        set_moving(chain, params, beta, _covariance(xs, rss, active), active, fuel)
+    if tmpl.engine_max_w is not None:
+        chain.engine_max_w = tmpl.engine_max_w
+        params["engine_max_w"] = {"value": tmpl.engine_max_w, "std_err": None, "at_bound": False,
+                                  "how": "profiled (RSS, kept by BIC)" if capped else "declared",
+                                  "reading": f"the engine's rated output {tmpl.engine_max_w / 1000:.0f} kW"}
     fit_standing = stand if profiled else standing_sums(v, y, w, ok)
     if idling:
         note_idling(params, stand)
@@ -285,3 +310,55 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
 def fuel_target_text(battery: bool) -> str:
     """What a fuel chain was fitted to (its ``metrics["target"]``)."""
     return "fuel power + battery power / η_m (SOC-corrected)" if battery else "fuel power"
+
+
+def moving_columns(tmpl: EnergyChain, on, v) -> list:
+    """The design column of the moving zero-output fuel's excess over the idle fuel (engine on and
+    moving, v ≥ STANDSTILL_MPS; its coefficient ≥ 0 keeps the moving fuel ≥ the idle fuel) where
+    ``tmpl`` fits one (its ``moving_idle_fuel_power_w`` not None), else none."""
+    return [] if tmpl.moving_idle_fuel_power_w is None else [on * (np.asarray(v, float) >= STANDSTILL_MPS)]
+
+
+def set_moving(chain: EnergyChain, params: dict, beta, se, active, fuel: str) -> None:
+    """The moving zero-output fuel (the last of :func:`fuel_names`) into ``chain`` and ``params``."""
+    value = chain.idle_fuel_power_w + float(beta[-1])
+    chain.moving_idle_fuel_power_w = value
+    params["moving_idle_fuel_power_w"] = {
+        "value": value, "std_err": _nan_none(se[-1]), "at_bound": bool(active[-1] != 0),
+        "reading": (f"fuel at zero output while moving {value / 1000:.1f} kW, {float(beta[-1]) / 1000:.1f} kW above "
+                    "the idle fuel (friction at road engine speed; std_err of that excess)")}
+
+
+def profile_cap(solve, p, ok, rss0: float, n: int, k: int, yy: float):
+    """The engine's rated output profiled on the fit's RSS (``solve(cap)`` → (β, RSS, active, xs)):
+    a coarse grid over the driving power's upper half, refined by bounded Brent search; kept
+    (returned with its fit) only where its BIC beats the fit without a cap (RSS ``rss0``), else None."""
+    from scipy.optimize import minimize_scalar
+
+    pos = p[ok & (p > 0)]
+    if pos.size < 10:
+        return None
+    grid = np.quantile(pos, np.linspace(0.5, 0.999, 25))
+    rss = [solve(c)[1] for c in grid]
+    j = int(np.argmin(rss))
+    lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
+    cap = minimize_scalar(lambda c: solve(c)[1], bounds=(lo, hi), method="bounded",
+                          options={"xatol": 1e-4 * hi}).x if hi > lo else grid[j]
+    fit = solve(cap)
+    return (cap, fit) if _bic(fit[1], n, k + 1, yy) < _bic(rss0, n, k, yy) else None
+
+
+def declared_engine(equation, streamed: bool = False) -> dict:
+    """What a fuel chain's calibration does with the heavy-engine keys the chain of ``equation``
+    declares (model/chain.py), as :func:`calibrate_fuel`'s keywords: a moving zero-output fuel
+    (``moving_idle_fuel_power_w``) is fitted (≥ the idle fuel), a rated output (``engine_max_w``)
+    kept. ``streamed``: the calibration on statistics streamed in batches, which fits neither:
+    UserError naming the file where it declares one, not dropped without a word."""
+    ch = getattr(equation, "chain", None)
+    kw = {"moving_idle": getattr(ch, "moving_idle_fuel_power_w", None) is not None,
+          "engine_max_w": getattr(ch, "engine_max_w", None)}
+    if streamed and (kw["moving_idle"] or kw["engine_max_w"] is not None):
+        raise UserError(f"{ch.where} [chain]: moving_idle_fuel_power_w and engine_max_w are calibrated on logs "
+                        "read whole into memory only; the streamed calibration (local or Dask engine) would drop "
+                        "them: calibrate in memory, or on an equation without them")
+    return kw

@@ -66,7 +66,10 @@ brakes, so a braking sample books negative fuel, the battery's credit a later sa
 battery chain's recuperation does; declared, kept, not fitted; ``battery_usable_j``: only what
 its battery's usable window holds, :mod:`sumo_drvpw.model.chain_buffer`; ``[chain.depleting]``:
 a plug-in hybrid's battery spent first, :mod:`sumo_drvpw.model.chain_plugin`) and ``fuel``
-(a key of :data:`sumo_drvpw.model.constants.FUELS`). ``cold_start_fuel_l`` (≥ 0, default 0)
+(a key of :data:`sumo_drvpw.model.constants.FUELS`). Optional: ``moving_idle_fuel_power_w``
+(≥ P_idle,fuel; default P_idle,fuel) replaces P_idle,fuel while moving (v ≥ v_0: friction at road
+engine speed), ``engine_max_w`` caps P_eng (the demand above it is ``over_engine_w``, not delivered).
+``cold_start_fuel_l`` (≥ 0, default 0)
 is the extra fuel of one start of a cold engine [L] (warm-up enrichment, catalyst
 heating, cold oil) at the air temperature ``cold_start_ref_c`` (default 23.9 °C, the
 FTP's 75 °F), plus ``cold_start_fuel_l_per_k`` (≥ 0) for every kelvin colder::
@@ -106,6 +109,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.chain_buffer import _durations, _starts, buffered_return, usable_window
 from sumo_drvpw.model.chain_plugin import depleting_from_dict, on_battery, plug_in
 from sumo_drvpw.model.chain_values import Efficiency, Table, _efficiency, _nonneg, _number, provenance_table  # noqa: F401
+from sumo_drvpw.model.chain_values import engine_capped, engine_keys, zero_output_fuel
 from sumo_drvpw.model import chain_values as _values
 from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
 
@@ -114,7 +118,7 @@ PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
 KEYS = ("predicts", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
         "recuperation_by_decel_mps2", "aux_power_w", "standstill_aux_w", "loads", "hvac", "idle_fuel_power_w", "marginal_efficiency",
         "engine_off_below_w", "engine_on_above_mps", "fuel_cut_below_w", "charge_sustaining", "recuperation_round_trip",
-        "battery_usable_j", "depleting", "fuel", "battery_to_fuel",
+        "battery_usable_j", "depleting", "fuel", "battery_to_fuel", "moving_idle_fuel_power_w", "engine_max_w",
         "cold_start_fuel_l", "cold_start_fuel_l_per_k", "cold_start_ref_c", "running_fuel_per_k",
         "motor", "std_err", "reading", "provenance", "metrics")
 #: the largest plausible warm-running fuel increase per kelvin (5 %/K: +150 % at −6.7 °C
@@ -160,6 +164,8 @@ class EnergyChain:
     cold_start_fuel_l_per_k: float = 0.0
     cold_start_ref_c: float = 23.9
     running_fuel_per_k: float = 0.0
+    moving_idle_fuel_power_w: float | None = None
+    engine_max_w: float | None = None
     #: SUMO's MMPEVEM motor and battery (model/mmpevem.py SumoMotor), in place of η_t, η_r
     motor: object | None = None
     std_err: dict = field(default_factory=dict)
@@ -350,8 +356,10 @@ class EnergyChain:
 
     def _fuel(self, p, v, n, signals, dt_s=None, trip=None, stored_j=None, sustaining=None) -> dict:
         on, extra = self.engine_on(p, v), {}
-        eng = np.maximum(p, 0.0) / _eval(self.traction_efficiency, v, p) + self.auxiliary(n, signals)
-        pf = np.where(on, self.idle_fuel_power_w, 0.0) + np.where(self.paid(p, v), eng / self.marginal_efficiency, 0.0)
+        eng, over = engine_capped(np.maximum(p, 0.0) / _eval(self.traction_efficiency, v, p) + self.auxiliary(n, signals),
+                                  self.engine_max_w)
+        pf = (np.where(on, zero_output_fuel(self.idle_fuel_power_w, self.moving_idle_fuel_power_w, v, STANDSTILL_MPS), 0.0)
+              + np.where(self.paid(p, v), eng / self.marginal_efficiency, 0.0))
         if self.recuperation_round_trip:  # a charge-sustaining hybrid's braking energy, given back
             lim = np.inf if self.recuperation_limit_w is None else self.recuperation_limit_w
             if self.battery_usable_j is None:
@@ -369,7 +377,7 @@ class EnergyChain:
         kgps = pf / fp["lhv_j_per_kg"]
         return {"engine_on": on, "engine_w": np.where(on, eng, 0.0), "power_w": pf,
                 "fuel_lps": kgps / fp["density_kg_per_l"], "co2_kgps": kgps * fp["co2_kg_per_kg"],
-                **extra}
+                **extra, **({} if over is None else {"over_engine_w": over})}
 
     def running_factor(self, n: int, signals: dict | None = None) -> np.ndarray:
         """1 + r · max(T_ref − T, 0) per sample (``running_fuel_per_k``); 1 where the air
@@ -434,7 +442,7 @@ class EnergyChain:
             d.update(idle_fuel_power_w=float(self.idle_fuel_power_w),
                      marginal_efficiency=float(self.marginal_efficiency),
                      engine_off_below_w=float(self.engine_off_below_w), fuel=self.fuel)
-            for k in ("engine_on_above_mps", "fuel_cut_below_w"):
+            for k in ("engine_on_above_mps", "fuel_cut_below_w", "moving_idle_fuel_power_w", "engine_max_w"):
                 if getattr(self, k) is not None:
                     d[k] = float(getattr(self, k))
             if self.charge_sustaining:
@@ -527,6 +535,7 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
               "engine_on_above_mps", "battery_to_fuel", "cold_start_fuel_l", "cold_start_fuel_l_per_k"):
         if k in doc:
             kw[k] = _nonneg(doc[k], k, where, inf=k in ("recuperation_limit_w", "engine_on_above_mps"))
+    kw.update(engine_keys(doc, kw.get("idle_fuel_power_w", 0.0), pred, where))
     if "cold_start_ref_c" in doc:
         kw["cold_start_ref_c"] = _number(doc["cold_start_ref_c"], "cold_start_ref_c", where)
         if not -60.0 <= kw["cold_start_ref_c"] <= 60.0:

@@ -175,3 +175,39 @@ def fuel_j_per_l(fuel: str) -> float:
         raise UserError(f"fuel must be one of {', '.join(FUELS)}, got {fuel!r}")
     fp = FUELS[fuel]
     return fp["lhv_j_per_kg"] * fp["density_kg_per_l"]
+
+
+def engine_keys(doc: dict, idle_w: float, pred: str, where: str) -> dict:
+    """A fuel chain's optional engine keys, checked: ``moving_idle_fuel_power_w`` (the fuel at
+    zero output while moving, ≥ the standing idle fuel ``idle_w``: a diesel's friction grows with
+    engine speed) and ``engine_max_w`` (the engine's rated output, > 0) [W]; {} where neither."""
+    kw = {}
+    for k in ("moving_idle_fuel_power_w", "engine_max_w"):
+        if k not in doc:
+            continue
+        if pred != "fuel":
+            raise UserError(f"{where} [chain]: '{k}' is an engine's: only for predicts = \"fuel\", "
+                            f"got predicts = {pred!r}")
+        kw[k] = _nonneg(doc[k], k, where)
+    if kw.get("moving_idle_fuel_power_w", np.inf) < idle_w:
+        raise UserError(f"{where} [chain]: 'moving_idle_fuel_power_w' (fuel at zero output while moving) must be "
+                        f"≥ idle_fuel_power_w = {idle_w:g} W (an engine turning faster has more friction), "
+                        f"got {doc['moving_idle_fuel_power_w']!r}")
+    if kw.get("engine_max_w", 1.0) <= 0:
+        raise UserError(f"{where} [chain]: 'engine_max_w' (the engine's rated output) must be > 0 W, "
+                        f"got {doc['engine_max_w']!r}")
+    return kw
+
+
+def zero_output_fuel(idle_w: float, moving_w: float | None, v, standstill_mps: float):
+    """The fuel power at zero engine output [W] per sample: the idle fuel standing (v below
+    ``standstill_mps``), ``moving_w`` while moving where given (the friction at road engine speed)."""
+    return idle_w if moving_w is None else np.where(np.asarray(v, float) < standstill_mps, idle_w, moving_w)
+
+
+def engine_capped(eng_w, max_w: float | None) -> tuple:
+    """(the engine output delivered, the demand above the rated output ``max_w`` that it cannot
+    deliver) [W] per sample; no cap where ``max_w`` is None (the excess then None)."""
+    if max_w is None:
+        return eng_w, None
+    return np.minimum(eng_w, max_w), np.maximum(eng_w - max_w, 0.0)
