@@ -185,8 +185,21 @@ def engine_off_note(value_w: float, powertrain: str | None, idle_l_per_h: float)
 
 #: the driving power [W] a chain's efficiency needs the usable samples to exceed: below it
 #: a log holds standing, idling or creeping only, and the slope of battery or fuel power on
-#: driving power is not identified (an idling log's fit put η_m at its bound, 1, exit 0)
+#: driving power is not identified (an idling log's fit put η_m at its bound, 1, exit 0);
+#: for a car of :data:`IDENTIFY_DRIVE_MASS_KG`, scaled by mass (:func:`identify_drive_w`)
 IDENTIFY_DRIVE_W = 2000.0
+IDENTIFY_DRIVE_MASS_KG = 1500.0
+
+
+def identify_drive_w(vehicle) -> float:
+    """The driving power [W] a log must exceed for a chain's efficiency: :data:`IDENTIFY_DRIVE_W`
+    per :data:`IDENTIFY_DRIVE_MASS_KG` of the vehicle file's mass (≈ 1.3 W/kg: accelerating at
+    0.3 m/s² through 16 km/h, or climbing 3 % at 16 km/h — driving, not creeping, at any mass, as
+    the power to accelerate and climb is the mass's; a log's own power range cannot say whether it
+    drives): a 94 kg e-scooter's 125 W, a 30 t truck's 40 kW; 2 kW without a vehicle file."""
+    mass = getattr(vehicle, "mass_kg", None)
+    ok = mass is not None and np.isfinite(mass) and mass > 0
+    return IDENTIFY_DRIVE_W * (float(mass) / IDENTIFY_DRIVE_MASS_KG if ok else 1.0)
 
 
 #: the fewest trips' worth of an HVAC regressor a heating or cooling gain is read from: the
@@ -258,15 +271,18 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
     streamed fit's), else from ``p_drive_w``, ``v_mps`` and ``use``; ``counts``: the log
     reader's (a fuel target read from an unthrottled engine's air flow is said from them);
     ``hvac_trips``: :func:`hvac_trip_sums` of a chain with HVAC gains (:func:`hvac_trips_note`).
-    UserError, naming ``where``, when the driving power never exceeds :data:`IDENTIFY_DRIVE_W`."""
+    UserError, naming ``where``, when the driving power never exceeds :func:`identify_drive_w`."""
     chain = fit.chain
     ranges = fitted_ranges(p_drive_w, v_mps, use) if ranges is None else ranges
-    if ranges and ranges["power_range_w"][1] < IDENTIFY_DRIVE_W:
+    need = identify_drive_w(vehicle)
+    if ranges and ranges["power_range_w"][1] < need:
         (p0, p1), (_, v1) = ranges["power_range_w"], ranges["speed_range_mps"]
         what = "marginal efficiency" if chain.predicts == "fuel" else "traction efficiency"
         raise UserError(f"{where}: the driving power stays within {p0 / 1000:.1f} … {p1 / 1000:.1f} kW "
                         f"(speed up to {v1 * 3.6:.0f} km/h) on the usable samples, never above "
-                        f"{IDENTIFY_DRIVE_W / 1000:.0f} kW: the chain's {what} cannot be told from "
+                        f"{need / 1000:.3g} kW" + (f" ({need / vehicle.mass_kg:.2f} W/kg of its {vehicle.mass_kg:.0f} kg)"
+                                                  if need != IDENTIFY_DRIVE_W else "")
+                        + f": the chain's {what} cannot be told from "
                         "such a log (standing, idling or creeping only); calibrate on logs that drive")
     powertrain = vehicle.powertrain_type if vehicle is not None else None
     params = fit.parameters
