@@ -138,3 +138,29 @@ def test_calibrate_fits_the_moving_idle_an_equation_declares(tmp_path, capsys, e
     assert got["engine_max_w"] == 200000.0
     assert got["idle_fuel_power_w"] == pytest.approx(4000.0, rel=0.05)
     assert got["moving_idle_fuel_power_w"] == pytest.approx(9000.0, rel=0.05)
+
+
+def test_a_run_counts_and_says_the_demand_beyond_the_engine():
+    """The SUMO ledger books a capped truck's fuel at its rated output, counts the vehicle-steps and
+    energy asked beyond it, and says so (summary.json chain.engine_over_rated, a warning); a run
+    whose chains have no cap keeps its summary and warnings as before."""
+    from sumo_drvpw.sim.chain import ChainLedger
+    from sumo_drvpw.sim.chain_outputs import chain_summary, chain_warnings
+
+    capped = chain_from_dict({**TRUCK, "engine_max_w": CAP_W, "traction_efficiency": 0.8})
+    p = np.array([[400e3 * 0.8], [100e3 * 0.8]])  # engine output 400 kW (100 beyond), 100 kW
+    led = ChainLedger(["truck"], [capped], 1)
+    for _ in range(10):
+        led.book(np.arange(2), np.zeros(2, np.int64), np.full(2, 20.0), 1.0, p)
+    assert led.over_engine[0].tolist() == [10, pytest.approx(100e3 * 10)]
+    tot = led.vehicle_totals(2)
+    assert tot[0, 0, 4] == pytest.approx(10 * (IDLE_W + CAP_W / ETA))  # fuel at the cap
+    summ = chain_summary(led, ["a", "b"], ["trailer", "trailer"])
+    assert summ["engine_over_rated"] == {"truck": {"vehicle_steps": 10, "kwh": pytest.approx(1e6 / 3.6e6)}}
+    (w,) = [w for w in chain_warnings(led) if "rated output" in w]
+    assert w.startswith("truck: 10 vehicle-steps") and "300 kW" in w and "0.278 kWh" in w
+    plain = ChainLedger(["truck"], [chain_from_dict(dict(TRUCK))], 1)
+    plain.book(np.arange(2), np.zeros(2, np.int64), np.full(2, 20.0), 1.0, p)
+    assert "engine_over_rated" not in chain_summary(plain, ["a", "b"], ["trailer", "trailer"])
+    assert not [w for w in chain_warnings(plain) if "rated output" in w]
+

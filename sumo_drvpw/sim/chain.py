@@ -92,6 +92,8 @@ class ChainLedger:
         #: per equation: vehicle-steps its SUMO MMPEVEM motor could not serve (beyond its torque or
         #: power, off its loss map), where SUMO writes nan and the chain books the motor's limits
         self.motor_invalid = np.zeros(len(self.names), np.int64)
+        #: per equation: [vehicle-steps, J] of engine output demanded beyond its rated output (engine_max_w)
+        self.over_engine = np.zeros((len(self.names), 2))
         self.E, self.Q = len(self.names), len(QUANTITIES)
         #: (equation, quantity) columns a chain books: battery 0–3, fuel 4–7
         self._cols = [(e, k) for e in self.active for k in self._booked(e)]
@@ -322,6 +324,8 @@ class ChainLedger:
                     (self._stored if key == "stored_j" else self._spent)[vidx[keep], a] = out[key][keep]
             if "invalid" in out:
                 self.motor_invalid[e] += int(np.count_nonzero(out["invalid"]))
+            if "over_engine_j" in out:  # not delivered: the vType accelerates or climbs beyond its engine
+                self.over_engine[e] += over_engine(out["over_engine_j"], engine_off)
             for key in keys:
                 if key is not None:  # cold_start_l: booked at departures only (book)
                     q[:, j] = out[key]
@@ -558,3 +562,10 @@ def chain_ledger(equations, n_edges: int, signal_values: dict | None = None,
         return None
     return ChainLedger([e.name for e in equations], chains, n_edges, signal_values=signal_values,
                        **cold_start)
+
+
+def over_engine(excess_j, engine_off=None) -> tuple[int, float]:
+    """(vehicle-steps, J) of a step's engine output demand beyond the rated output, where the
+    engine runs (not switched off by ``engine_off``)."""
+    x = np.asarray(excess_j, float) if engine_off is None else np.where(engine_off, 0.0, excess_j)
+    return int(np.count_nonzero(x > 0)), float(x.sum())

@@ -61,6 +61,7 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
             "signals_assumed_zero": sorted(chain.assumed_zero),
             "signal_values": chain.signal_values,
             **({"warm_running": chain.warm_running()} if chain.running_columns else {}),
+            **over_engine_summary(chain),
             "hvac_air_temperature_c": chain.air_temperature_c if chain.hvac_columns else None,
             "hvac_air_temperature_assumed": chain.air_temperature_assumed}
 
@@ -102,6 +103,7 @@ def chain_warnings(chain: ChainLedger | None, chainless: dict | None = None,
                    + ": the demand exceeds the motor's torque or power, or leaves its loss map (a vType faster "
                    "or quicker than its motor: check maxSpeed and accel); booked at the motor's limits, with the "
                    "loss at the map's edge (summary.json chain.mmpevem_nan_steps)")
+    out += over_engine_warnings(chain)
     if chain.cold_start_on:  # fuel chains that drove but carry no cold-start fuel: booked warm, said
         drove = chain.edge_dist.sum(axis=0) > 0
         warm = [chain.names[e] for j, e in enumerate(chain.active) if drove[j] and chain.chains[e].predicts == "fuel"
@@ -160,3 +162,27 @@ def write_chain_outputs(out_dir, result) -> dict[str, str]:
             "the run's begin and end weigh heavily: a longer run or a larger demand gives a figure "
             "to quote)")
     return files
+
+
+def _capped(chain: ChainLedger) -> list[int]:
+    return [e for e in chain.active if chain.chains[e].engine_max_w is not None]
+
+
+def over_engine_summary(chain: ChainLedger) -> dict:
+    """summary.json's ``engine_over_rated``: per equation with an engine's rated output
+    (``engine_max_w``), the vehicle-steps and kWh of engine output demanded beyond it; {} where
+    no chain of the run has one (its summary unchanged)."""
+    if not _capped(chain):
+        return {}
+    return {"engine_over_rated": {chain.names[e]: {"vehicle_steps": int(chain.over_engine[e, 0]),
+                                                   "kwh": float(chain.over_engine[e, 1]) / 3.6e6}
+                                  for e in _capped(chain)}}
+
+
+def over_engine_warnings(chain: ChainLedger) -> list[str]:
+    """One warning per equation whose vehicles asked more than its engine's rated output."""
+    return [f"{chain.names[e]}: {int(chain.over_engine[e, 0])} vehicle-steps asked more than its engine's rated "
+            f"output (engine_max_w = {chain.chains[e].engine_max_w / 1000:g} kW), {chain.over_engine[e, 1] / 3.6e6:.3g} "
+            "kWh in all: SUMO drove those vehicles faster, or up steeper, than their engine can (check the vTypes' "
+            "accel and the grades); fuel is booked at the rated output (summary.json chain.engine_over_rated)"
+            for e in _capped(chain) if chain.over_engine[e, 0]]
