@@ -164,3 +164,39 @@ def test_a_run_counts_and_says_the_demand_beyond_the_engine():
     assert "engine_over_rated" not in chain_summary(plain, ["a", "b"], ["trailer", "trailer"])
     assert not [w for w in chain_warnings(plain) if "rated output" in w]
 
+
+def test_diagnose_finds_a_planted_moving_zero_output_fuel():
+    """The chain trace on a fuel target offers the moving zero-output fuel: a conventional engine
+    burning 6 kW standing and 9.5 kW at zero output while moving is found (≈ 3.5 kW above the idle)
+    and written into the chain; with nothing planted, it is not found."""
+    from sumo_drvpw.data.log import from_frame
+    from sumo_drvpw.data.measured import measure
+    from sumo_drvpw.fit.chain_linear import trace_chain
+    from sumo_drvpw.model.chain import EnergyChain
+    from sumo_drvpw.model.constants import FUELS
+    from sumo_drvpw.model.equations import Equation, load_equation
+    from sumo_drvpw.model.vehicles import load_vehicle
+    from sumo_drvpw.synth.effects import BatteryLog, synth_trips
+    from sumo_drvpw.synth.track import Noise
+
+    df, _ = synth_trips(n_trips=6, minutes=10.0, seed=3, effects=(BatteryLog(standstill_aux_w=0.0, noise_w=100.0),),
+                        noise=Noise(process_w=50.0, process_rel=0.002))
+    veh, truth = load_vehicle("prius3"), load_equation("drvpw_prius3")
+    x0 = measure(from_frame(df, veh, name="synth"), veh, "battery")
+    p, v = truth.power(x0.inputs), x0.inputs.v
+    assert 0.02 < np.mean(v < 0.1) < 0.95  # stands and moves
+    rng = np.random.default_rng(8)
+    lhv = FUELS["gasoline"]["lhv_j_per_kg"]
+    declared = EnergyChain("fuel", 1.0, idle_fuel_power_w=6000.0, marginal_efficiency=0.33, engine_off_below_w=-np.inf)
+    found = {}
+    for moving in (None, 9500.0):
+        ch = EnergyChain("fuel", 1.0, idle_fuel_power_w=6000.0, marginal_efficiency=0.33, engine_off_below_w=-np.inf,
+                         moving_idle_fuel_power_w=moving)
+        pf = ch.evaluate(p, v)["power_w"] * (1.0 + rng.normal(0, 0.03, p.size)).clip(0.0)
+        d = df.drop(columns=["battery_voltage_v", "battery_current_a"]).assign(fuel_rate_gps=pf / lhv * 1000.0)
+        m = measure(from_frame(d, veh, name="synth-fuel"), veh, "fuel")
+        res = trace_chain(m, Equation("declared", dict(truth.terms), truth.mass_kg, chain=declared))
+        found[moving] = ({f["term"]: f["coefficient"] for f in res.report["findings"]}, res.equation)
+    assert "moving_idle_fuel_power_w" not in found[None][0]
+    assert list(found[9500.0][0]) == ["moving_idle_fuel_power_w"]
+    assert found[9500.0][1].chain.moving_idle_fuel_power_w == pytest.approx(9500.0, rel=0.05)

@@ -203,6 +203,8 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
         out.append(Cand("fuel_cut_below_w", "overrun fuel cut-off: moving with a driving power below the "
                         "cut-off, the wheels turn the engine and its injection is cut (profiled over "
                         f"{', '.join(f'{c / 1000:g}' for c in FUEL_CUT_GRID_W)} kW)", "structural", "W", cut))
+    if ch.predicts == "fuel" and decided["standstill"]:
+        out.append(moving_idle_candidate(ch, pp, v, {k: np.asarray(a)[idx] for k, a in sig.items()}))
     if ch.predicts == "battery":  # (SUMO's MMPEVEM motor has no η_t, η_r or limit of that kind: not offered)
         if decided["standstill"]:
             st = (v < STANDSTILL_MPS).astype(float)
@@ -274,6 +276,8 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
         ch.fuel_cut_below_w = float(param)
         return eq, (f"overrun fuel cut-off below {param / 1000:g} kW of driving power while moving: the "
                     "wheels turn the engine, no fuel")
+    if name == "moving_idle_fuel_power_w":
+        return apply_moving_idle(eq, c[0])
     if name == "recuperation_limit_w":
         ch.recuperation_limit_w = float(param)
         return eq, f"braking power beyond {param / 1000:.1f} kW goes to the friction brakes"
@@ -305,6 +309,27 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
     raise UserError(f"unknown chain effect '{name}'")
 
 
+
+
+def moving_idle_candidate(ch, p, v, signals) -> Cand:
+    """The fuel at zero output while moving above the idle fuel (``moving_idle_fuel_power_w``): its
+    column is 1 W of fuel where the engine runs and the vehicle moves (times the warm-running factor)."""
+    col = (ch.engine_on(p, v) & (v >= STANDSTILL_MPS)) * ch.running_factor(p.size, signals)
+    return Cand("moving_idle_fuel_power_w", "fuel at zero output while moving above the idle fuel: an engine "
+                "turning at road speed has more friction than at idle (a heavy diesel's)", "structural", "W",
+                [(np.column_stack([col]), None, None)])
+
+
+def apply_moving_idle(eq: Equation, extra: float) -> tuple[Equation | None, str]:
+    """``eq`` (a copy) with ``extra`` [W] more fuel at zero output while moving, or (None, why)."""
+    ch = eq.chain
+    new = (ch.idle_fuel_power_w if ch.moving_idle_fuel_power_w is None else ch.moving_idle_fuel_power_w) + extra
+    if new < ch.idle_fuel_power_w:
+        return None, (f"fuel at zero output while moving {new:.0f} W would be below the idle fuel "
+                      f"{ch.idle_fuel_power_w:.0f} W (an engine at road speed has more friction, not less)")
+    ch.moving_idle_fuel_power_w = float(new)
+    return eq, (f"fuel at zero output while moving {new:.0f} W, {new - ch.idle_fuel_power_w:.0f} W above the idle "
+                "fuel (friction at road engine speed)")
 
 
 def _fuel_cut_counts(ch, p, v, signals, grid=None) -> list:

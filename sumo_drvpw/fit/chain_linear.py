@@ -34,6 +34,9 @@ Candidate effects (each a column, or a family profiled over one parameter):
 * ``fuel_cut_below_w`` — fuel chains whose engine runs in overrun: an overrun fuel cut-off
   (moving with P below P_cut, no fuel), the column the prediction with the cut-off less
   the prediction without, with coefficient 1, P_cut on a grid of −5 … 0 kW;
+* ``moving_idle_fuel_power_w`` — fuel chains on logs that stand and move: fuel at zero output
+  while moving above the idle fuel (an engine's friction at road speed), column 1 where the
+  engine runs and the vehicle moves; refused below the idle fuel;
 * ``traction_efficiency`` / ``recuperation_efficiency`` — the chain's efficiency differs
   (column P/η_t for P > 0, resp. η_r·P for P < 0; coefficient c → η_t/(1 + c), η_r·(1 + c));
 * ``hvac`` — heating and cooling power over the ambient temperature, max(T_set − T, 0)
