@@ -200,3 +200,29 @@ def test_diagnose_finds_a_planted_moving_zero_output_fuel():
     assert "moving_idle_fuel_power_w" not in found[None][0]
     assert list(found[9500.0][0]) == ["moving_idle_fuel_power_w"]
     assert found[9500.0][1].chain.moving_idle_fuel_power_w == pytest.approx(9500.0, rel=0.05)
+
+
+@pytest.mark.parametrize("keys", [{"moving_idle_fuel_power_w": MOVING_W}, {"engine_max_w": CAP_W},
+                                  {"moving_idle_fuel_power_w": MOVING_W, "engine_max_w": CAP_W,
+                                   "running_fuel_per_k": 0.003}])
+def test_the_chain_trace_linearises_the_heavy_engine_exactly(keys):
+    """The trace's columns (fit/chain_linear.py) sum to the chain's prediction with a moving
+    zero-output fuel and a rated output (the demand beyond it changes nothing: gain 0)."""
+    from sumo_drvpw.fit.chain_linear import gains, linearised_columns, predict
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.model.terms import Inputs
+
+    rng = np.random.default_rng(1)
+    n = 4000
+    v = np.abs(rng.normal(15, 8, n))
+    v[:300] = 0.0
+    x = Inputs(v, rng.normal(0, 0.6, n), rng.normal(0, 0.04, n), np.zeros(n), np.full(n, 30000.0),
+               np.full(n, 1.2), signals={"ambient_c": rng.normal(10, 8, n)})
+    ch = chain_from_dict({**TRUCK, "traction_efficiency": 0.8, "aux_power_w": 10000.0, "fuel_cut_below_w": 0.0, **keys})
+    eq = Equation("e", {"acc": 1.0, "aero": 3.0, "roll": 0.006, "grade": 1.0}, chain=ch)
+    cols, off = linearised_columns(eq, x)
+    np.testing.assert_allclose(sum(cols.values()) + off, predict(eq, x), rtol=1e-12, atol=1e-6)
+    if "engine_max_w" in keys:
+        p = eq.power(x)
+        beyond = p * 1.0 / 0.8 + 10000.0 > CAP_W
+        assert beyond.mean() > 0.05 and np.all(gains(ch, p, v, x.signals)[0][beyond] == 0)

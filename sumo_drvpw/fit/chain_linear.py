@@ -73,6 +73,7 @@ from sumo_drvpw.fit.chain import chain_target
 from sumo_drvpw.fit.compare import metrics as _metrics, trip_net_energy
 from sumo_drvpw.fit.diagnose.options import check_validation
 from sumo_drvpw.model.chain import EnergyChain
+from sumo_drvpw.model.chain_values import zero_output_fuel
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import term_matrix
@@ -141,11 +142,21 @@ def gains(chain: EnergyChain, p_w, v_mps, signals=None) -> tuple[np.ndarray, np.
         lim = np.inf if chain.recuperation_limit_w is None else chain.recuperation_limit_w
         back = chain.recuperation_round_trip * rf * ((p < 0) & (p > -lim))
         gw = (paid * (p > 0) + back) / (_eff(chain.traction_efficiency, v, p) * chain.marginal_efficiency)
-        return gw, paid / chain.marginal_efficiency
+        within = ~over_rated(chain, p, v, signals)  # beyond its rated output more demand books nothing
+        return gw * np.where(p > 0, within, 1.0), paid * within / chain.marginal_efficiency
     lim = np.inf if chain.recuperation_limit_w is None else chain.recuperation_limit_w
     gw = np.where(p > 0, 1.0 / _eff(chain.traction_efficiency, v, p),
                   np.where(p >= -lim, _eff(chain.recuperation_efficiency, v, p), 0.0))
     return gw, np.ones_like(p)
+
+
+def over_rated(chain: EnergyChain, p, v, signals=None) -> np.ndarray:
+    """Where a fuel chain's engine output demand reaches its rated output (``engine_max_w``):
+    fuel booked at the rating, the target's change per W of demand 0; False everywhere without one."""
+    if chain.engine_max_w is None:
+        return np.zeros(np.shape(p), bool)
+    eng = np.maximum(p, 0.0) / _eff(chain.traction_efficiency, v, p) + chain.auxiliary(np.size(p), signals)
+    return eng >= chain.engine_max_w
 
 
 def linearised_columns(equation: Equation, inputs) -> tuple[dict, np.ndarray]:
@@ -168,8 +179,12 @@ def linearised_columns(equation: Equation, inputs) -> tuple[dict, np.ndarray]:
     if ch.predicts == "fuel":
         aux = ch.auxiliary(n, inputs.signals)
         cols["aux"] = ga * aux
-        cols["idle_fuel_power_w"] = ch.engine_on(p, inputs.v) * ch.idle_fuel_power_w * ch.running_factor(n, inputs.signals)
-        return cols, np.zeros(n)
+        rf = ch.running_factor(n, inputs.signals)
+        cols["idle_fuel_power_w"] = ch.engine_on(p, inputs.v) * rf * zero_output_fuel(
+            ch.idle_fuel_power_w, ch.moving_idle_fuel_power_w, inputs.v, STANDSTILL_MPS)
+        # at the rated output the booking is the rated output's, no column's
+        over = over_rated(ch, p, inputs.v, inputs.signals)
+        return cols, np.where(over, ch.paid(p, inputs.v) * rf * (ch.engine_max_w or 0.0) / ch.marginal_efficiency, 0.0)
     aux = ch.auxiliary(n, inputs.signals) + ch.standstill_aux_w * (inputs.v < STANDSTILL_MPS)
     cols["aux"] = ga * aux
     off = np.zeros(n)
