@@ -101,6 +101,17 @@ def test_no_cap_where_the_engine_is_never_at_it():
     assert fit.chain.moving_idle_fuel_power_w == pytest.approx(MOVING_W, rel=0.02)
 
 
+def test_a_declared_rating_is_kept_at_the_wheels():
+    """The calibrated chain has η_t 1 and no separate auxiliaries: a rated output declared with
+    η_t 0.8 and 10 kW of accessories is kept where P/η_t + P_aux reaches it, (300 − 10)·0.8 kW."""
+    from sumo_drvpw.fit.chain_fuel import declared_engine
+    from sumo_drvpw.model.equations import Equation
+
+    decl = chain_from_dict({"predicts": "fuel", "engine_max_w": CAP_W, "traction_efficiency": 0.8, "aux_power_w": 1e4})
+    kw = declared_engine(Equation("e", {"v1": 1.0}, chain=decl))
+    assert kw == {"moving_idle": False, "engine_max_w": pytest.approx((CAP_W - 1e4) * 0.8)}
+
+
 @pytest.mark.parametrize("engine", ["memory", "local"])
 def test_calibrate_fits_the_moving_idle_an_equation_declares(tmp_path, capsys, engine):
     """`calibrate --target fuel --equation FILE` whose chain declares a moving zero-output fuel

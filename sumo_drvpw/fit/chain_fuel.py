@@ -352,11 +352,15 @@ def declared_engine(equation, streamed: bool = False) -> dict:
     """What a fuel chain's calibration does with the heavy-engine keys the chain of ``equation``
     declares (model/chain.py), as :func:`calibrate_fuel`'s keywords: a moving zero-output fuel
     (``moving_idle_fuel_power_w``) is fitted (≥ the idle fuel), a rated output (``engine_max_w``)
-    kept. ``streamed``: the calibration on statistics streamed in batches, which fits neither:
+    kept, at the wheels: (P_max − P_aux)·η_t of the declared chain, the fitted chain's η_t being 1. ``streamed``: the calibration on statistics streamed in batches, which fits neither:
     UserError naming the file where it declares one, not dropped without a word."""
     ch = getattr(equation, "chain", None)
     kw = {"moving_idle": getattr(ch, "moving_idle_fuel_power_w", None) is not None,
           "engine_max_w": getattr(ch, "engine_max_w", None)}
+    if kw["engine_max_w"] is not None and isinstance(ch.traction_efficiency, float):
+        # the fitted chain has η_t 1 and its auxiliaries in the idle fuel: the rating at the wheels,
+        # where P/η_t + P_aux reaches it
+        kw["engine_max_w"] = (kw["engine_max_w"] - ch.aux_power_w) * ch.traction_efficiency
     if streamed and (kw["moving_idle"] or kw["engine_max_w"] is not None):
         raise UserError(f"{ch.where} [chain]: moving_idle_fuel_power_w and engine_max_w are calibrated on logs "
                         "read whole into memory only; the streamed calibration (local or Dask engine) would drop "
