@@ -237,3 +237,25 @@ def test_the_chain_trace_linearises_the_heavy_engine_exactly(keys):
         p = eq.power(x)
         beyond = p * 1.0 / 0.8 + 10000.0 > CAP_W
         assert beyond.mean() > 0.05 and np.all(gains(ch, p, v, x.signals)[0][beyond] == 0)
+
+
+def test_dask_buckets_add_up_the_demand_beyond_the_engine():
+    """An FCD replay on Dask books vehicles in buckets whose ledgers merge_ledgers adds: the
+    counts of demand beyond a rated output (and of SUMO's MMPEVEM nan steps) are the buckets'
+    sums, not the first bucket's."""
+    from sumo_drvpw.sim.chain import ChainLedger
+    from sumo_drvpw.sim.fcd_dask import merge_ledgers
+    from sumo_drvpw.sim.ledger import Ledger
+
+    capped = chain_from_dict({**TRUCK, "engine_max_w": CAP_W})
+    leds = []
+    for steps in (3, 5):
+        led = Ledger(3, 1)
+        led.chain = ChainLedger(["truck"], [capped], 3)
+        for _ in range(steps):
+            led.chain.book(np.arange(1), np.zeros(1, np.int64), np.full(1, 20.0), 1.0, np.array([[CAP_W + 1e5]]))
+        led.chain.motor_invalid[0] = steps
+        leds.append(led)
+    out = merge_ledgers(leds).chain
+    assert out.over_engine[0].tolist() == [8, pytest.approx(8e5)]
+    assert out.motor_invalid.tolist() == [8]

@@ -151,6 +151,8 @@ def merge_ledgers(ledgers: list):
                 acc[0] = acc[0] + q
                 acc[1] += m
             a.assumed_zero |= b.assumed_zero
+            a.motor_invalid = a.motor_invalid + b.motor_invalid  # per equation: MMPEVEM nan steps
+            a.over_engine = a.over_engine + b.over_engine        # demand beyond a rated output
     out._edge_cache = None
     return out
 
