@@ -51,6 +51,24 @@ def test_metric_units_map_to_the_same_columns(tmp_path):
     assert not any("battery_current_a" in n for n in rep["notes"])  # no battery logged
 
 
+def test_a_unit_whose_slash_an_export_replaced_is_read_as_the_unit(tmp_path):
+    """PETS' third Prius trip (TO_REI_Actual_Data_3-24-17.json) writes 'Fuel flow
+    rate_hour(gal_hr)' and 'GPS Speed (Meters_second)': the '/' of Torque's labels saved as
+    '_' (the two shared trips of the same car save it as '-'). The units were unknown, the
+    fuel flow kept in gal/h under another name, so the fuel target found no flow."""
+    p = metric_csv(tmp_path / "trip.csv")
+    text = p.read_text(encoding="utf-8").replace("Fuel flow rate/hour(l/hr)", "Fuel flow rate_hour(gal_hr)")
+    lines = text.splitlines()
+    lines[0] += ", GPS Speed (Meters_second)"
+    lines[1:] = [r + f", {0.5 * i:.1f}" for i, r in enumerate(lines[1:])]
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    df, rep = read("torquepro", p)
+    np.testing.assert_allclose(df["fuel_flow_rate_hour_lph"], 1.2 * 3.785411784, rtol=1e-12)  # US gallon
+    np.testing.assert_allclose(df["gps_speed_phone_mps"], 0.5 * np.arange(40.0))
+    notes = " ".join(rep["files"][0]["notes"])
+    assert "gal_hr" not in notes and "Meters_second" not in notes  # not 'unit unknown'
+
+
 def test_a_powertrain_field_that_never_answers_does_not_hold_the_link_down(tmp_path):
     """An EV has no engine speed: Torque writes '-' in every row of 'Engine RPM(rpm)'. The
     whole log was refused ("no sample left after dropping {'link not up (-)': …}", found by

@@ -106,8 +106,20 @@ _u("dimensionless", 1.0, 0.0, "", "-", "1", "bool", "text", ":1", "lambda", "λ"
 
 def lookup_unit(unit: str):
     """(dimension, factor, offset) of a unit spelling, or None when unknown ('Â°C', a degree
-    sign encoded twice, reads as '°C': the 'Â' is dropped before the spelling is lowered)."""
-    return UNITS.get(unit.replace("Â", "").strip().lower())
+    sign encoded twice, reads as '°C': the 'Â' is dropped before the spelling is lowered).
+
+    A unit whose '/' a file-name-safe export wrote as '_' or '-' ('gal_hr', 'Meters_second',
+    'km-h': Torque logs re-saved by their users) reads as the unit with '/' when the spelling
+    itself is unknown."""
+    key = unit.replace("Â", "").strip().lower()
+    if key in UNITS:
+        return UNITS[key]
+    for sep in ("_", "-"):
+        if key.count(sep) == 1 and "/" not in key:
+            u = UNITS.get(key.replace(sep, "/"))
+            if u is not None:
+                return u
+    return None
 
 
 def snake(name: str) -> str:
