@@ -220,3 +220,20 @@ def test_export_writes_a_constant_term_through_the_chains_drivetrain():
     # without a chain the constant stays c (efficiencies 1)
     assert energy_model_params(Equation("e", {"roll": 0.01, "v^0": 500.0}), 1500.0)[0][
         "constantPowerIntake"] == 500.0
+
+
+def test_a_spec_equation_s_report_name_points_to_its_spec_name():
+    """calibrate's report lists 'VSP from the car's specs' under the name it takes for the
+    vehicle ('vsp_prius2spec' for --vehicle prius2); a new user who gave that name to compare
+    was told only the built-ins (a rehearsal on the Prius Gen-2 logs): the spec equations
+    were named nowhere in the message."""
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.model.equations import load_equation
+
+    with pytest.raises(UserError) as e:
+        load_equation("vsp_prius2spec")
+    assert "vsp_spec, roadload_spec" in str(e.value)
+    assert "'vsp_prius2spec' is vsp_spec for that vehicle" in str(e.value)
+    with pytest.raises(UserError) as e:
+        load_equation("no_such_equation")
+    assert "roadload_spec" in str(e.value) and "is vsp_spec" not in str(e.value)

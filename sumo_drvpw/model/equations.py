@@ -446,8 +446,10 @@ def load_equation(spec: str | Path) -> Equation:
     if builtin.is_file():
         eq = equation_from_dict(read_toml(builtin, "equation file"), str(builtin))
         return eq
+    named = [k for k in SPEC_EQUATIONS if str(spec).startswith(k[:-4]) and str(spec).endswith("spec")]
     raise UserError(f"unknown equation '{spec}': not a file and not a built-in "
-                    f"(built-ins: {', '.join(builtin_names())})")
+                    f"(built-ins: {', '.join(builtin_names())}; from the vehicle's specs: {', '.join(SPEC_EQUATIONS)}"
+                    + (f" — a report's '{spec}' is {named[0]} for that vehicle" if named else "") + ")")
 
 
 def save_equation(eq: Equation, path: str | Path) -> None:
