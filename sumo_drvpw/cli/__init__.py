@@ -330,6 +330,7 @@ def say_traction_only(counts: dict) -> None:
 
 def note_counts(counts: dict) -> None:
     """Print what the log reader changed or assumed (e.g. clipped standstill noise)."""
+    from sumo_drvpw.data.conditions import speed_gps_note
     from sumo_drvpw.data.plausible import speed_step_note
     from sumo_drvpw.data.truncated import cut_message
 
@@ -377,6 +378,9 @@ def note_counts(counts: dict) -> None:
     if n:
         print(f"note: {n} sample(s) without elevation (no GPS fix?): the elevation is bridged between the "
               "samples that have it, and held flat before the first and after the last")
+    gps = speed_gps_note(counts)  # (data/conditions.speed_against_gps)
+    if gps:
+        print(f"note: {gps}")
     held = counts.get("elevation_no_fix_values") or []
     if held:  # (data/conditions.no_fix_elevations)
         print(f"note: elevation_m jumps to {', '.join(f'{x:g}' for x in held[:5])} m and back, {int(counts.get('elevation_no_fix_samples', 0) or 0)} "

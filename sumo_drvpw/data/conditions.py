@@ -115,6 +115,56 @@ def no_fix_elevations(z: np.ndarray, dist: np.ndarray, trip_codes: np.ndarray, u
     return [float(v) for v in vals], int(np.isin(zz, vals).sum())
 
 
+#: a speed against a GPS speed logged beside it: compared where both exceed this [m/s] (a
+#: GPS speed is good when moving, noisy near standstill), from this many samples, and said
+#: where they differ by more than SPEED_GPS_DIFF
+SPEED_GPS_MIN_MPS, SPEED_GPS_SAMPLES, SPEED_GPS_DIFF = 8.0, 200, 0.01
+
+
+def gps_speed_columns(names) -> list[str]:
+    """The GPS speeds among a log's column names (``gps_speed…_mps``), in their order: read
+    beside the speed where a streamed reader reads only the columns it needs."""
+    return [str(c) for c in names if str(c).startswith("gps_speed") and str(c).endswith("_mps")]
+
+
+def speed_against_gps(df: pd.DataFrame, v: np.ndarray, counts: dict) -> None:
+    """The log's speed against a GPS speed logged beside it (a column ``gps_speed…_mps``, a
+    mapping's or an adapter's): their sums over the samples where both exceed
+    :data:`SPEED_GPS_MIN_MPS`, in mm/s so that batches add (``speed_gps_samples``,
+    ``speed_gps_sum_mm``, ``gps_speed_sum_mm``, ``speed_gps_column``). A speedometer or a
+    wheel-speed signal reads high or low by a few per cent (tyre wear, pressure, a
+    manufacturer's margin), and the coefficients take it: v' = k·v scales the kinetic term
+    by k² and the aerodynamic by k³, so a fit reads acc ≈ 1/k² and aero ≈ 1/k³ of the
+    vehicle's, where a SUMO run's speeds are exact (:func:`speed_gps_note`)."""
+    cols = gps_speed_columns(df.columns)
+    if not cols:
+        return
+    g = df[cols[0]].to_numpy(float)
+    both = np.isfinite(g) & np.isfinite(v) & (g > SPEED_GPS_MIN_MPS) & (v > SPEED_GPS_MIN_MPS)
+    if both.any():
+        counts["speed_gps_column"] = cols[0]
+        counts["speed_gps_samples"] = int(both.sum())
+        counts["speed_gps_sum_mm"] = int(round(float(v[both].sum()) * 1000))
+        counts["gps_speed_sum_mm"] = int(round(float(g[both].sum()) * 1000))
+
+
+def speed_gps_note(counts: dict) -> str:
+    """What a speed reading high or low against the GPS speed beside it does to a fit
+    (:func:`speed_against_gps`'s counts); '' where they agree within :data:`SPEED_GPS_DIFF`
+    or too few samples compare them."""
+    n, sv, sg = (int(counts.get(k, 0) or 0) for k in ("speed_gps_samples", "speed_gps_sum_mm", "gps_speed_sum_mm"))
+    if n < SPEED_GPS_SAMPLES or sg <= 0:
+        return ""
+    k = sv / sg
+    if abs(k - 1.0) <= SPEED_GPS_DIFF:
+        return ""
+    col = counts.get("speed_gps_column", "the GPS speed")
+    return (f"speed_mps reads {abs(k - 1):.1%} {'above' if k > 1 else 'below'} {col} ({n} samples where both exceed "
+            f"{SPEED_GPS_MIN_MPS:g} m/s): a speedometer's {'over' if k > 1 else 'under'}-read, which the coefficients take "
+            f"(acc × {1 / k ** 2:.3f}, aero × {1 / k ** 3:.3f} of the vehicle's, where a SUMO run's speeds are exact); "
+            f"correct the speed (a mapping's scale = {1 / k:.4f} on it) or log the GPS speed as speed_mps")
+
+
 def derive_conditions(df: pd.DataFrame, t: np.ndarray, v: np.ndarray, trip_codes: np.ndarray,
                       start: np.ndarray, opt, counts: dict) -> None:
     """``grade_rad``, ``wind_mps`` and ``air_density_kgm3`` of a validated table (``df``
@@ -135,6 +185,7 @@ def derive_conditions(df: pd.DataFrame, t: np.ndarray, v: np.ndarray, trip_codes
     opt : the reading options (:class:`sumo_drvpw.data.log.ReadOptions`)
     """
     n = len(df)
+    speed_against_gps(df, v, counts)
 
     def col(c):
         return df[c].to_numpy(float) if c in df else np.full(n, np.nan)

@@ -372,6 +372,10 @@ def iter_measured(part: Part, vehicle=None, options: ReadOptions | None = None,
         from sumo_drvpw.data.corrections import needed_columns
 
         columns = set(columns) | needed_columns(options.measurement)
+    if columns is not None:  # a GPS speed beside the speed: compared with it (data/conditions.py)
+        from sumo_drvpw.data.conditions import gps_speed_columns
+
+        columns = set(columns) | set(gps_speed_columns(column_names(part.path) or ()))
     stem = Path(part.path).stem
     check_required(part.path)
     rows = rows_for(read_width(part.path, columns), rows)  # a wide log in fewer rows
