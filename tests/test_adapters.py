@@ -830,3 +830,32 @@ def test_columns_a_file_whose_rows_end_in_cr_only_reads_and_is_told_when_wider(t
         df, rep = read("columns", write(tmp_path, name, text), columns=m)
         np.testing.assert_allclose(df["speed_mps"], np.array([10, 12, 14, 16]) / 3.6)
         assert any("more fields than the header line" in n for n in rep["files"][0]["notes"]) == wider
+
+
+def test_torque_device_time_is_read_whatever_the_process_locale(tmp_path):
+    """Torque's 'Device Time' names its month in English ('25-Mar-2017'); pandas reads a
+    format's %b by the process's LC_TIME, so a notebook or application that had called
+    ``locale.setlocale(LC_ALL, "")`` under German refused every row ('Mar' is no German
+    month: 'Mär') and under Turkish the October rows. Read the same in any locale."""
+    import locale
+
+    rec = [{"Device Time": f"{d}-{m}-2017 11:46:{29 + i}.500", "Speed (OBD)(mph)": 20.0 + i}
+           for i, (d, m) in enumerate([("25", "Mar"), ("31", "Oct"), ("01", "Dec"), ("02", "may")])]
+    p = write(tmp_path, "t.json", json.dumps(rec))
+    ref, _ = read("torquepro", p)
+    assert np.all(np.diff(ref["time_s"]) != 0)  # four different days, in order of the rows
+    old = locale.setlocale(locale.LC_TIME)
+    tried = 0
+    try:
+        for name in ("de_DE.UTF-8", "tr_TR.UTF-8", "fr_FR.UTF-8"):
+            try:
+                locale.setlocale(locale.LC_TIME, name)
+            except locale.Error:
+                continue
+            tried += 1
+            df, _ = read("torquepro", p)
+            np.testing.assert_array_equal(df["time_s"], ref["time_s"], err_msg=name)
+    finally:
+        locale.setlocale(locale.LC_TIME, old)
+    if not tried:
+        pytest.skip("no German, Turkish or French locale on this machine")

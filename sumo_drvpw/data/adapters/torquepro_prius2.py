@@ -46,7 +46,12 @@ from sumo_drvpw.data.adapters._common import (DIMENSIONS, clean_time_and_speed, 
 FORMAT = "torquepro-prius2"
 SUFFIXES = (".json", ".csv")
 TIME = "Device Time"
-TIME_FORMAT = "%d-%b-%Y %H:%M:%S.%f"
+TIME_FORMAT = "%d-%m-%Y %H:%M:%S.%f"  # its month, written in English (%b), as a number (MONTHS)
+#: the English month abbreviations of 'Device Time' ('25-Mar-2017 …') → month numbers: read by
+#: this table, not by %b, which pandas reads in the process's LC_TIME (an application or
+#: notebook that set a German locale read no 'Mar', a Turkish one no 'Oct')
+MONTHS = {m: f"{i:02d}" for i, m in enumerate(("jan", "feb", "mar", "apr", "may", "jun", "jul", "aug",
+                                               "sep", "oct", "nov", "dec"), 1)}
 
 #: vendor label → (name, factor, offset)
 NAMES = {
@@ -177,7 +182,9 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     again = raw[TIME].astype(str).str.strip() == TIME
     if again.any():  # a new logging session in the same CSV repeats the header
         raw = drop(raw, again.to_numpy(), "repeated header (a new logging session)", rep)
-    t = pd.to_datetime(raw[TIME].astype(str).str.strip(), format=TIME_FORMAT, errors="coerce")
+    t = pd.to_datetime(raw[TIME].astype(str).str.strip().str.replace(
+        r"^(\d{1,2})-([A-Za-z]{3})-", lambda m: f"{m[1]}-{MONTHS.get(m[2].lower(), m[2])}-", regex=True),
+        format=TIME_FORMAT, errors="coerce")
     bad = t.isna() & raw[TIME].notna()
     if bad.any():
         i = int(np.flatnonzero(bad.to_numpy())[0])
