@@ -415,17 +415,36 @@ def check_earlier_set(out, force: bool = False) -> tuple[list[str], list[str]]:
     return listed, extra
 
 
-def remove_stale(out, listed, since: float) -> None:
-    """Remove the files of an earlier set (``listed``: :func:`check_earlier_set`) that the
-    new one, written in place since the time ``since`` [s, epoch], did not write again: none
-    is left beside the new set's (a chain's CSVs of an earlier run beside a run without a
-    chain). Called once the new set is written, so a run refused or failed before leaves the
-    earlier set as it was."""
+def earlier_stamps(out, listed) -> dict[str, tuple]:
+    """Each file of an earlier set (``listed``: :func:`check_earlier_set`) as it is before the
+    new set is written: (inode, size, modification and change time [ns]), for
+    :func:`remove_stale` (a missing file: not there to remove)."""
     out = Path(out)
+    stamps = {}
     for f in listed:
+        try:
+            st = (out / f).stat()
+        except OSError:
+            continue
+        stamps[f] = (st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    return stamps
+
+
+def remove_stale(out, stamps: dict[str, tuple]) -> None:
+    """Remove the files of an earlier set that the new one, written in place, did not write
+    again: those still as :func:`earlier_stamps` found them before it was written (every
+    output is written under a temporary name and renamed, a new file). Told by the files
+    themselves, not by their times against this machine's clock: a file is stamped by the
+    file system's (Linux: a coarse tick, up to some ms behind ``time.time()``; a file
+    server's may be seconds off), which removed files just written. Called once the new set
+    is written, so a run refused or failed before leaves the earlier set as it was."""
+    out = Path(out)
+    for f, was in stamps.items():
         p = (out / f).resolve()
         try:
-            if p.is_file() and p.is_relative_to(out.resolve()) and p.stat().st_mtime < since:
+            st = p.stat()
+            if (p.is_file() and p.is_relative_to(out.resolve())
+                    and (st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns) == was):
                 p.unlink()
         except OSError:
             pass

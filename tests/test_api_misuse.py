@@ -141,6 +141,38 @@ def test_python_api_outputs_are_whole_sets_as_the_commands_are(tmp_path):
     assert (tmp_path / "fresh" / "vehicles.parquet").is_file() and (tmp_path / "fresh" / "manifest.json").is_file()
 
 
+def test_python_api_rewrite_keeps_its_files_whatever_the_file_system_clock(tmp_path, monkeypatch):
+    """An earlier set's files were told from the new set's by their modification time
+    against time.time() taken before writing; but a file's time is the file system's clock:
+    Linux stamps a new file with its coarse tick, up to 7 ms behind time.time() here (2977
+    of 3000 new files stamped before a time.time() read just before them), and a file
+    server's clock may be seconds off. A set written again then lost the files it had just
+    written (with this machine's clock 60 s ahead of the file system's: every file of
+    RunResult.write and of run_scenario into its earlier folder). The files written again
+    are kept, the earlier set's others still go, whatever either clock says."""
+    import json
+    import time
+
+    from sumo_drvpw.sim import run_scenario
+
+    d = tmp_path / "out"
+    run_scenario("city", d, end=30, figures=False, equations=["epa_gasoline_car"])
+    assert (d / "chain_vehicles.csv").is_file()
+    real = time.time
+    monkeypatch.setattr(time, "time", lambda: real() + 60.0)  # this machine's clock ahead of the files'
+
+    def whole():  # the set's files all there, each listed; the earlier set's chain CSVs gone
+        listed = {f["path"] for f in json.loads((d / "manifest.json").read_text(encoding="utf-8"))["files"]}
+        assert {"vehicles.parquet", "edges.parquet", "summary.json"} <= listed
+        assert {str(p.relative_to(d)) for p in d.rglob("*") if p.is_file()} == listed | {"manifest.json"}
+        assert not (d / "chain_vehicles.csv").exists()
+
+    res = run_scenario("city", d, end=30, figures=False, equations=["vsp_ldv1999"])
+    whole()
+    res.write(d)
+    whole()
+
+
 @pytest.mark.parametrize("kw,needle", [
     ({"terms": {"acc": float("nan"), "aero": 0.3}}, "must be a finite number, got nan"),
     ({"terms": {"acc": float("inf")}}, "must be a finite number"),

@@ -520,16 +520,15 @@ class RunResult:
         with its manifest.json (an earlier set's files there that are not written again
         removed once it is written; a folder holding other files refused unless ``force``,
         which keeps them)."""
-        import time
-
-        from sumo_drvpw.fileio import check_earlier_set, in_output_set, remove_stale, write_manifest
+        from sumo_drvpw.fileio import (check_earlier_set, earlier_stamps, in_output_set, remove_stale,
+                                       write_manifest)
 
         if in_output_set(out_dir):  # (a command's set, written whole by it)
             return write_outputs(Path(out_dir), self)
-        t0 = time.time()
         listed, kept = check_earlier_set(out_dir, force)
+        stamps = earlier_stamps(out_dir, listed)
         files = write_outputs(Path(out_dir), self)
-        remove_stale(out_dir, listed, t0)
+        remove_stale(out_dir, stamps)
         write_manifest(Path(out_dir), command=["RunResult.write"], kept=kept)
         return files
 

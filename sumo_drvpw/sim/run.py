@@ -82,13 +82,13 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
     if sc.trace and out_dir is None:
         raise UserError("outputs.trace needs an output directory")
     naming = _output_naming(sc)
-    import time
 
-    from sumo_drvpw.fileio import check_earlier_set, in_output_set, remove_stale, write_manifest
+    from sumo_drvpw.fileio import check_earlier_set, earlier_stamps, in_output_set, remove_stale, write_manifest
 
     standalone = out_dir is not None and not in_output_set(out_dir)  # (a command writes its set whole)
-    t0 = time.time()  # (the Python API: an earlier set's files not written again go once the run is written)
+    # (the Python API: an earlier set's files not written again go once the run is written)
     listed, kept = check_earlier_set(out_dir, force) if standalone else ([], [])
+    stamps = earlier_stamps(out_dir, listed) if standalone else {}
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     args = list(sc.sumo_args)
@@ -217,7 +217,7 @@ def run_scenario(scenario_path, out_dir=None, keep_vehicles: bool = False,
             write_published(result, out_dir)
         if standalone:
             discard_parts(acc.ledger)
-            remove_stale(out_dir, listed, t0)
+            remove_stale(out_dir, stamps)
             write_manifest(Path(out_dir), command=["run_scenario", str(scenario_path)], kept=kept)
     finally:  # the parts never stay in the output folder
         if acc is not None and out_dir is not None:
