@@ -127,6 +127,29 @@ def test_the_runs_own_folder_beside_the_fcds_is_the_one_holding_its_files(tmp_pa
                                                      ("route-files", "v.add.xml")]
 
 
+def test_the_runs_folder_among_many_is_found_whatever_order_the_file_system_lists_them(tmp_path, monkeypatch):
+    """The folders beside the FCD's are searched up to a cap (sim/fcd_read._SEARCH_DIRS), and
+    were taken in the order the file system lists them — its own (ext4: by a hash of the
+    name), another on another machine or in a copy of the same study: with more folders
+    than the cap, the run's folder was found in one order and not in another. Now each
+    level in name order: the same files in any listing order."""
+    import pathlib
+
+    from sumo_drvpw.sim import fcd_read
+
+    for i in range(fcd_read._SEARCH_DIRS + 1):
+        (tmp_path / f"d{i:05d}").mkdir()
+    _touch(tmp_path / "a_scen" / "r.rou.xml", tmp_path / "a_scen" / "v.add.xml")
+    fcd = _fcd_with_header(tmp_path / "out" / "fcd.xml", {"route-files": "r.rou.xml,v.add.xml"}, "../out/fcd.xml")
+    glob, iterdir = pathlib.Path.glob, pathlib.Path.iterdir
+    found = []
+    for rev in (False, True):  # listings in name order, then in reverse
+        monkeypatch.setattr(pathlib.Path, "glob", lambda self, pat, rev=rev: iter(sorted(glob(self, pat), reverse=rev)))
+        monkeypatch.setattr(pathlib.Path, "iterdir", lambda self, rev=rev: iter(sorted(iterdir(self), reverse=rev)))
+        found.append(recorded_inputs(fcd, cwd="/")["files"])
+    assert found[0] == found[1] == [tmp_path / "a_scen" / "r.rou.xml", tmp_path / "a_scen" / "v.add.xml"]
+
+
 def test_a_moved_fcd_falls_back_to_its_folders_and_the_working_folder(tmp_path):
     """An FCD moved or renamed on its own (its fcd-output path no longer leads to it):
     the FCD's folder, its parent and the working folder are tried; an absolute path is

@@ -30,6 +30,29 @@ def files_in_common(named, files) -> list[str]:
     return [f for f in files if Path(f).resolve() in seen]
 
 
+def folders_in_order(base, depth: int, most: int) -> list[Path]:
+    """The first ``most`` folders ``depth`` levels below ``base``, each level in name order:
+    the same on every machine (a file system lists a folder in an order of its own — ext4 by
+    a hash of the name —, so a search capped in that order saw other folders elsewhere)."""
+    out: list[Path] = []
+
+    def walk(d: Path, k: int) -> None:
+        if k == 0:
+            out.append(d)
+            return
+        try:
+            subs = sorted(p for p in d.iterdir() if p.is_dir())
+        except OSError:
+            return
+        for sub in subs:
+            if len(out) >= most:
+                return
+            walk(sub, k - 1)
+
+    walk(Path(base), depth)
+    return out[:most]
+
+
 def refuse_packed(p: Path) -> None:
     """UserError for a CANedge MF4 that the logger compressed or encrypted (:data:`PACKED_MF4`),
     naming the file and what unpacks it; else nothing."""

@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from sumo_drvpw.data.log import SPEED_MAX_MPS
+from sumo_drvpw.data.paths import folders_in_order
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.sim.scenario_values import sumo_seconds
@@ -460,11 +461,7 @@ def recorded_inputs(path, head: dict[str, str] | None = None, cwd=None) -> dict 
         up = known(next(iter(hidden.values())))  # "": the run's folder is below the FCD's
         if depth <= _SEARCH_DEPTH and all(known(r) == up for r in hidden.values()):
             best: list[tuple[int, dict]] = []
-            for n, cand in enumerate((fcd.parent / up).resolve().glob("/".join(["*"] * depth))):
-                if n >= _SEARCH_DIRS:
-                    break
-                if not cand.is_dir():
-                    continue
+            for cand in folders_in_order((fcd.parent / up).resolve(), depth, _SEARCH_DIRS):
                 sub = dict(zip(chain, cand.parts[-depth:]))
                 hits = sum(named(r, sub).is_file() for r in hidden.values())
                 if hits:
