@@ -239,3 +239,26 @@ def test_sumo_device_with_the_device_off_in_the_options_is_refused(tmp_path, cap
     code, err = _cli([sc, "--out", tmp_path / "p"], capsys)
     assert code == 0, err
     assert not (tmp_path / "p" / "sumo_device.csv").exists()
+
+
+def test_a_devices_explicit_vehicles_are_the_runs_own_after_another_run_in_the_process(tmp_path):
+    """libsumo keeps the explicit vehicle list of a device (``device.emissions.explicit``)
+    that the first run of a process set, for the process's life (SUMO's MSDevice fills it
+    once per device): a later run in the same process naming other vehicles equipped the
+    first run's (`run a.toml b.toml`, one after the other: b's sumo_device.csv had no row,
+    3 alone; this file's tests failed in a random order). Such a run is started in a SUMO
+    process of its own and equips its own list: as the same run over TraCI does."""
+    from sumo_drvpw.sim import run_scenario
+
+    cfg = _scenario(tmp_path, "")
+
+    def run(vehicles, name, **kw):
+        return run_scenario(cfg, None, end=120, figures=False, equations=["epa_gasoline_car"],
+                            options=["--device.emissions.explicit", vehicles], **kw).summary["sumo_device"]
+
+    run("f0.0", "a")
+    after = run("f1.0,f2.0,f3.0", "b")
+    alone = run("f1.0,f2.0,f3.0", "b", connection="traci")   # a SUMO process of its own
+    assert alone and [(r["equation"], r["vehicles"]) for r in after] == [(r["equation"], r["vehicles"]) for r in alone]
+    for k in ("ours", "sumo"):
+        assert [r[k] for r in after] == pytest.approx([r[k] for r in alone], rel=1e-12)

@@ -74,12 +74,43 @@ def _sumo_output():
             cap.close()
 
 
+#: device → the explicit vehicle list (``device.<device>.explicit``) the first libsumo run of
+#: this process set: libsumo keeps it for the process's life (SUMO's MSDevice fills its
+#: explicit ids once per device), so a later run in the process naming another list equipped
+#: the first run's vehicles (a sweep run one after the other, a notebook's runs)
+_EXPLICIT_SEEN: dict[str, str] = {}
+
+
+def explicit_lists(args: list[str]) -> dict[str, str]:
+    """Each device's explicit vehicle list that SUMO's ``args`` set: an option (empty too), else
+    a non-empty ``<device.X.explicit value=…/>`` of the config ``-c`` names."""
+    import re
+
+    from sumo_drvpw.sim.scenario_paths import config_files
+
+    out: dict[str, str] = {}
+    for i, a in enumerate(args[:-1]):
+        if a == "-c" and Path(args[i + 1]).is_file():
+            for k, v in config_files(Path(args[i + 1]))[2].items():
+                if (m := re.fullmatch(r"device\.(.+)\.explicit", k)) and str(v).strip():
+                    out[m[1]] = str(v)
+    for i, a in enumerate(args):
+        if m := re.fullmatch(r"--device\.(.+)\.explicit(?:=(.*))?", a):
+            out[m[1]] = m[2] if m[2] is not None else (args[i + 1] if i + 1 < len(args) else "")
+    return out
+
+
 def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
                label: str = "drvpw"):
-    """Start SUMO with command-line ``args``; returns the connection. UserError on failure."""
+    """Start SUMO with command-line ``args``; returns the connection. UserError on failure.
+    A libsumo run whose device explicit vehicle lists differ from those an earlier libsumo
+    run of this process set (:data:`_EXPLICIT_SEEN`) runs over TraCI, in a SUMO of its own."""
     import sumolib
 
     _sumo_env()
+    lists = explicit_lists(args)
+    if connection == "libsumo" and any(_EXPLICIT_SEEN.get(d, v) != v for d, v in lists.items()):
+        connection = "traci"
     if gui and sys.platform.startswith("linux") and not os.environ.get("WAYLAND_DISPLAY"):
         display = os.environ.get("DISPLAY")
         if not display:
@@ -118,6 +149,8 @@ def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
                             ) from None
         sys.stdout.write("".join(told))  # started: what SUMO wrote goes on as it wrote it
         sys.stderr.write("".join(said))
+        for d, v in lists.items():
+            _EXPLICIT_SEEN.setdefault(d, v)
         return libsumo
     import traci
 
