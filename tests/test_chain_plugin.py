@@ -62,6 +62,24 @@ def test_trips_start_charged_and_vehicles_carry_their_own_battery():
     assert one["spent_j"][-1] == 2e6 and one["fuel_l"][-50:].sum() > 0
 
 
+def test_a_rated_output_is_asked_beyond_only_while_the_engine_runs():
+    """A plug-in with an engine cap (engine_max_w) driving on its battery asks its engine for
+    nothing: no over_engine demand while the battery carries the car (share 1), (1 − share) of the
+    charge-sustaining chain's on the sample it runs out, all of it once spent."""
+    cap = {"engine_max_w": 30e3}
+    p = np.full(60, 40e3)
+    ch = chain_from_dict({**DOC, **cap, "depleting": DEP}, "phev.toml")
+    cs = chain_from_dict({**DOC, **cap}).evaluate(p, 15.0, 1.0)
+    out = ch.evaluate(p, 15.0, 1.0)
+    assert cs["over_engine_w"][0] > 0
+    k = int(np.flatnonzero(out["battery_w"] < out["battery_w"][0])[0])   # the sample the battery runs out
+    share = out["battery_w"][k] / out["battery_w"][0]
+    assert 0 < share < 1 and np.all(out["battery_w"][k + 1:] == 0)
+    assert np.all(out["over_engine_w"][:k] == 0.0) and np.all(out["over_engine_j"][:k] == 0.0)
+    assert out["over_engine_w"][k] == pytest.approx((1 - share) * cs["over_engine_w"][k])
+    np.testing.assert_array_equal(out["over_engine_w"][k + 1:], cs["over_engine_w"][k + 1:])
+
+
 def test_the_file_keeps_it_and_refuses_what_is_no_plug_in():
     ch = _chain()
     assert chain_from_dict(ch.to_dict()) == ch and ch.to_dict()["depleting"]["usable_j"] == 1e6

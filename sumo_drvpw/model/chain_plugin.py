@@ -39,7 +39,7 @@ from sumo_drvpw.model.chain_values import _nonneg
 DEPLETING_KEYS = ("usable_j", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
                   "aux_power_w")
 #: the fuel chain's outputs scaled by the share on fuel
-FUEL_OUT = ("engine_w", "power_w", "fuel_lps", "co2_kgps", "given_back_w")
+FUEL_OUT = ("engine_w", "power_w", "fuel_lps", "co2_kgps", "given_back_w", "over_engine_w")
 
 
 @dataclass
