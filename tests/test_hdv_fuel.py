@@ -278,3 +278,23 @@ def test_a_study_without_a_measured_section_gains_none(tmp_path):
     assert study_main(args, "m", "x.md", "RUN", "run", lambda d: {}, None, lambda r: "report\n", lambda: None) == 0
     res = json.loads(out.with_suffix(".json").read_text(encoding="utf-8"))
     assert "measured" not in res and res["run"] == {"km": 1.0}
+
+
+def test_the_measured_trucks_table_is_rendered_from_the_json():
+    """The measured trucks' figures (made by hand, kept in docs/hdv-fuel.json ``measured``) are
+    the JSON's: a group's litres, errors and the masses changed there change the table, and the
+    committed JSON renders the committed report's table."""
+    from sumo_drvpw.validation.hdv_fuel_report import render
+
+    res = json.loads((REPO / "docs" / "hdv-fuel.json").read_text(encoding="utf-8"))
+    table = [x for x in render(res).splitlines() if x.startswith("| trips | n |")]
+    assert table and table[0] in (REPO / "docs" / "hdv-fuel.md").read_text(encoding="utf-8")
+    m = res["measured"]
+    m["groups"][0].update(n=3, measured_l=12.3, booked_l=45.6, error_pct=271, trip_error_pct=[-1, 2])
+    m["all"].update(error_pct=-9.9, trip_mean_abs_pct=7.5)
+    m["mass_t"] = 31.5
+    md = render(res)
+    row = next(x for x in md.splitlines() if x.startswith(f"| {m['groups'][0]['trips']} |"))
+    row = row.rstrip(" |")
+    assert row.split(" | ")[1:7] == ["3", "12.3", "45.6", "+271 %", "−1 … +2 %", "−34 %"]
+    assert "| **−9.9 %** | mean abs. 7.5 %" in md and "booked at 31.5 t [L]" in md

@@ -138,7 +138,8 @@ def _hamburg(h: dict | None) -> list[str]:
 def _measured(m: dict | None) -> list[str]:
     """The combination truck's chain against two measured trucks: measured by hand with the
     commands the JSON's ``measured`` names (the logs are not in the shared data, so the study
-    does not recompute it; its ``main`` keeps the key); nothing without it."""
+    does not recompute it; its ``main`` keeps the key); the table's figures are the key's
+    (``groups``, ``all``, the masses); nothing without it."""
     if not m:
         return []
     return [
@@ -158,17 +159,9 @@ def _measured(m: dict | None) -> list[str]:
         "[columns.\"vel (mph)\"]", "name = \"speed_mps\"", "unit = \"mph\"", "[columns.\"elevation (m)\"]",
         "name = \"elevation_m\"", "unit = \"m\"", "[columns.\"fuel (g/s)\"]", "name = \"fuel_rate_gps\"",
         "unit = \"g/s\"", "[columns.\"phase_num\"]", "name = \"trip_id\"", "```", "",
-        f"`{m['import']}` (52 trips, `veh002-1_1` …; the files share phase numbers: docs/adapters.md, "
+        f"`{m['import']}` ({m['trips']} trips, `veh002-1_1` …; the files share phase numbers: docs/adapters.md, "
         f"'Trips numbered per file'), then `{m['compare']}`; trips grouped by their mean speed and the height they end at against where they start "
-        "(47 trips of ≥ 0.1 L):", "",
-        "| trips | n | measured [L] | booked at 28.0 t [L] | error | trips' errors | at MOVES's 24.4 t |",
-        "|---|---|---|---|---|---|---|",
-        "| slow and flat (mean 24–40 km/h; moving, the engine at a median 1,630 rpm) | 28 | 68.0 | 49.2 | −28 % | −57 … −6 % "
-        "| −34 % |",
-        "| fast (mean > 45 km/h), ending 36–131 m lower | 9 | 97.6 | 101.4 | +4 % | −6 … +56 % | −3 % |",
-        "| fast, ending 79–233 m higher | 6 | 141.4 | 152.0 | +7 % | −0 … +19 % | −1 % |",
-        "| standing and creeping (mean < 10 km/h) | 4 | 2.1 | 2.3 | +5 % | −15 … +33 % | +3 % |",
-        "| all | 47 | 309.1 | 304.9 | **−1.4 %** | mean abs. 21.9 %, worst −57 % | −8.6 %, mean abs. 25.6 % |", "",
+        f"({m['all']['n']} trips of ≥ 0.1 L):", ""] + _measured_table(m) + [
         "Standing, the trucks burned 2.87 L/h (veh002, fuel flowing all of its 2,983 s) and 1.03 L/h (veh003, "
         "its engine off on 23 % of 5,133 s); the chain books 4.09 L/h. In sustained overrun (the road load "
         "below −50 kW for 11 s on end, 216 samples) the median fuel was 0 kW (below 2 kW on 69 % of them): "
@@ -191,3 +184,22 @@ def _measured(m: dict | None) -> list[str]:
         "0.51 and 0.49 at the margin, flattened by the noise in the driving power; it books that fuel at every "
         "stop, and its trips' errors on the other truck are larger than the built-in's (mean abs. 33.2 % and "
         "29.3 % against 21.4 % and 22.3 %).", ""]
+
+
+def _pct(x, d: int = 0) -> str:
+    """A signed share in per cent as the report writes it (−28, +4, −0)."""
+    return f"{x:+.{d}f}".replace("-", "−")
+
+
+def _measured_table(m: dict) -> list[str]:
+    """The measured trucks' table from the JSON's ``measured``: its ``groups`` of trips and ``all``."""
+    a = m["all"]
+    L = [f"| trips | n | measured [L] | booked at {m['mass_t']:.1f} t [L] | error | trips' errors "
+         f"| at MOVES's {m['source_mass_t']:.1f} t |", "|---|---|---|---|---|---|---|"]
+    L += [f"| {g['trips']} | {g['n']} | {g['measured_l']:.1f} | {g['booked_l']:.1f} | {_pct(g['error_pct'])} % "
+          f"| {_pct(g['trip_error_pct'][0])} … {_pct(g['trip_error_pct'][1])} % | {_pct(g['at_source_mass_pct'])} % |"
+          for g in m["groups"]]
+    L += [f"| all | {a['n']} | {a['measured_l']:.1f} | {a['booked_l']:.1f} | **{_pct(a['error_pct'], 1)} %** "
+          f"| mean abs. {a['trip_mean_abs_pct']:.1f} %, worst {_pct(a['trip_worst_pct'])} % "
+          f"| {_pct(a['at_source_mass_pct'], 1)} %, mean abs. {a['at_source_mass_mean_abs_pct']:.1f} % |", ""]
+    return L
