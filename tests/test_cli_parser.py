@@ -100,3 +100,18 @@ def test_help_and_refused_options_load_no_pandas(argv, rc, tmp_path):
     if rc == 2:
         assert p.stderr.count("\n") == 1 and "error:" in p.stderr, p.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_the_sim_package_still_names_its_public_api():
+    """The lazily imported names of sumo_drvpw.sim (README: ``from sumo_drvpw.sim import
+    Accountant`` in a user's TraCI script) are the modules' own, ``import *`` gives them, and
+    ``dir()`` (help, tab completion) lists them as before the lazy imports."""
+    import sumo_drvpw.sim as sim
+    from sumo_drvpw.sim.accountant import Accountant
+
+    assert sim.Accountant is Accountant
+    ns: dict = {}
+    exec("from sumo_drvpw.sim import *", ns)
+    assert set(sim.__all__) <= set(ns) and set(sim.__all__) <= set(dir(sim))
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        sim.nope

@@ -28,3 +28,7 @@ def __getattr__(name):
 
         return getattr(import_module(f"sumo_drvpw.sim.{_HOME[name]}"), name)
     raise AttributeError(f"module 'sumo_drvpw.sim' has no attribute {name!r}")
+
+
+def __dir__():  # (the lazy names too: help(), tab completion)
+    return sorted({*globals(), *_HOME})
