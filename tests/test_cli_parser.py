@@ -115,3 +115,17 @@ def test_the_sim_package_still_names_its_public_api():
     assert set(sim.__all__) <= set(ns) and set(sim.__all__) <= set(dir(sim))
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
         sim.nope
+
+
+def test_the_sim_package_s_modules_are_its_attributes_as_before_the_lazy_names():
+    """Before the lazy names, ``import sumo_drvpw.sim`` loaded its modules, so a script could
+    write ``sim.chain.ChainLedger`` (docs/energy-chain.md names that dotted path); then it
+    raised AttributeError. A fresh process (this one has loaded them all already)."""
+    import subprocess
+    import sys
+
+    code = ("import sumo_drvpw.sim as s; from sumo_drvpw.sim.chain import ChainLedger; "
+            "assert s.chain.ChainLedger is ChainLedger and s.network.__name__ == 'sumo_drvpw.sim.network'\n"
+            "try:\n    s.no_such_module\nexcept AttributeError:\n    print('ok')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr

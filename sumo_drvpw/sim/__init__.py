@@ -27,6 +27,11 @@ def __getattr__(name):
         from importlib import import_module
 
         return getattr(import_module(f"sumo_drvpw.sim.{_HOME[name]}"), name)
+    if not name.startswith("_"):  # a module of the package (sim.chain.ChainLedger), as before the lazy names
+        from importlib import import_module, util
+
+        if util.find_spec(f"sumo_drvpw.sim.{name}") is not None:
+            return import_module(f"sumo_drvpw.sim.{name}")
     raise AttributeError(f"module 'sumo_drvpw.sim' has no attribute {name!r}")
 
 
