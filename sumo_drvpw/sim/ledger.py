@@ -45,6 +45,23 @@ def at_mean_speed(eq) -> bool:
     return ch is not None and getattr(ch, "motor", None) is not None
 
 
+def as_sumo(eq) -> bool:
+    """Whether the SUMO loop evaluates equation ``eq`` on the inputs as SUMO's own model
+    reads them: a ``vtype_energy`` equation (booked as SUMO's Energy model or MMPEVEM books
+    its vType). Its grade is taken at SUMO's slope of the vehicle (the signal
+    ``sumo_slope_rad``, getSlope: from its back to its front after the step) rather than at
+    the rise of the step."""
+    return bool(getattr(eq, "provenance", {}).get("vtype_energy"))
+
+
+def as_sumo_inputs(x: Inputs) -> Inputs:
+    """``x`` as SUMO's Energy model reads it (:func:`as_sumo`)."""
+    if "sumo_slope_rad" not in x.signals:
+        return x
+    s = np.asarray(x.signals["sumo_slope_rad"], float)  # SUMO's getSlope where it gave one
+    return replace(x, theta=np.where(np.isnan(s), x.theta, s))
+
+
 class EquationSet:
     """Several equations evaluated at once into per-category powers.
 
@@ -59,9 +76,9 @@ class EquationSet:
         C = len(LEDGER_CATEGORIES)
         groups: dict[tuple, list[int]] = {}
         for i, e in enumerate(self.equations):
-            groups.setdefault((e.mass_kg, at_mean_speed(e)), []).append(i)
+            groups.setdefault((e.mass_kg, at_mean_speed(e), as_sumo(e)), []).append(i)
         self.groups = []
-        for (mass, mean), members in groups.items():
+        for (mass, mean, sumo), members in groups.items():
             terms: list[str] = []
             for i in members:
                 for t in self.equations[i].term_names:
@@ -74,7 +91,7 @@ class EquationSet:
                 for t, c in self.equations[i].terms.items():
                     cat = LEDGER_CATEGORIES.index(parse_term(t).category)
                     entries.append((terms.index(t), i * C + cat, float(c)))
-            self.groups.append((mass, [parse_term(t) for t in terms], entries, mean))
+            self.groups.append((mass, [parse_term(t) for t in terms], entries, mean, sumo))
         self._live_cache: dict = {}  # equations booking a vehicle of a step → their groups
         self.uses_other = any(parse_term(t).category == "other"
                               for e in self.equations for t in e.term_names)
@@ -83,6 +100,9 @@ class EquationSet:
                             for e in self.equations for t in e.term_names)
         #: an equation is evaluated at the step's mean speed (:func:`at_mean_speed`)
         self.uses_mean = any(g[3] for g in self.groups)
+        #: an equation books the grade at SUMO's own slope (:func:`as_sumo`): the loop passes
+        #: getSlope as the signal ``sumo_slope_rad``
+        self.uses_sumo_slope = any(g[4] and any(t.category == "grade" for t in g[1]) for g in self.groups)
         #: SUMO Energy-model equations at the vehicle's mass (vtype_energy): their acc coefficient
         #: 1 + m_rot/m holds the rotating mass m_rot of the vType's mass m, which neither riders
         #: nor a setMass change (HelpersEnergy: the total mass plus rotatingMass)
@@ -101,11 +121,11 @@ class EquationSet:
         if got is None:
             C, on = len(LEDGER_CATEGORIES), None if live is None else live.any(axis=0)
             got = []
-            for mass, terms, entries, mean in self.groups:
+            for mass, terms, entries, mean, sumo in self.groups:
                 kept = [e for e in entries if on is None or on[e[1] // C]]
                 if kept:
                     need = sorted({u for u, _, _ in kept})
-                    got.append((mass, [(u, terms[u]) for u in need], kept, mean))
+                    got.append((mass, [(u, terms[u]) for u in need], kept, mean, sumo))
             self._live_cache[key] = got
         return got
 
@@ -124,10 +144,12 @@ class EquationSet:
         """
         E, C, n = len(self.equations), len(LEDGER_CATEGORIES), len(x)
         out = np.zeros((E * C, n))
-        for mass, terms, entries, mean in self._live_groups(app):
+        for mass, terms, entries, mean, sumo in self._live_groups(app):
             xm = (x_mean if mean and x_mean is not None else x).with_mass(mass)
             if mean and mass is not None and x_mean is not None and "load_kg" in x_mean.signals:
                 xm = replace(xm, mass=xm.mass + np.asarray(x_mean.signals["load_kg"], float))
+            if sumo:  # (a vtype_energy equation: SUMO's slope and radius)
+                xm = as_sumo_inputs(xm)
             vals = {u: t.evaluate(xm) for u, t in terms}
             for u, row, c in entries:
                 out[row] += c * vals[u]

@@ -141,12 +141,14 @@ class Stepper:
         self.lane_index[""] = -1
         self.lane_edge_ext = np.append(net.lane_edge, -1)  # lane -1 → edge -1
         read_accel = physics.acceleration == "getter"
-        read_slope = physics.slope_reference == "getslope"
+        self.read_slope = physics.slope_reference == "getslope"
+        #: a vtype_energy equation books SUMO's own slope (sim/ledger.sumo_slope); an FCD without slopes has none
+        self.sumo_slope = eqset.uses_sumo_slope and getattr(conn, "has_slope", True)
         self.yaw = eqset.uses_yaw  # an equation's ``radial`` factor: the angle's change per step
         self.reader = Reader(conn, use_subscriptions,
                               (True, read_accel, self.yaw or (
                                   physics.wind_speed != 0.0 and physics.heading == "getangle"),
-                               True, True, read_slope))
+                               True, True, self.read_slope or self.sumo_slope))
         self.heading_from_lane = physics.wind_speed != 0.0 and physics.heading == "geometry"
         method = step_method(conn, physics.ballistic_given)
         self.ballistic = method == "ballistic"
@@ -444,6 +446,9 @@ class Stepper:
             ledger.veh_prev_angle[vidx] = angle
         if raw is not None:
             raw = np.radians(raw)
+        own = raw if self.sumo_slope else None  # SUMO's slope of the vehicle, for vtype_energy
+        if not self.read_slope:
+            raw = None
         placed = reinserted(net, ledger, vidx, lane, pos, v, a, dt, ends, self.is_replay,  # not driven
                             prev, getattr(conn, "type_accel", None))
         on_lane, tilt = lane >= 0, None
@@ -478,7 +483,7 @@ class Stepper:
             ledger.veh_prev_angle[vidx[(lane < 0)]] = np.nan  # (and its turning)
             vidx, lane, v, a, angle, pos = (
                 x[on_lane] for x in (vidx, lane, v, a, angle, pos))
-            raw, yaw, tilt = (None if x is None else x[on_lane] for x in (raw, yaw, tilt))
+            raw, yaw, tilt, own = (None if x is None else x[on_lane] for x in (raw, yaw, tilt, own))
             if len(vidx) == 0:
                 return
         at = net.bin_index(lane, pos)  # robust slope, shape slope, heading there
@@ -511,6 +516,8 @@ class Stepper:
         sig = {} if physics.ambient_c is None else {"ambient_c": np.full(m, physics.ambient_c)}
         if yaw is not None:
             sig["yaw_rate_rps"] = yaw
+        if own is not None:
+            sig["sumo_slope_rad"] = own
         mass = ledger.veh_mass[vidx]
         if self.riders.any_load:  # riding persons (SUMO's getTotalMass)
             load = ledger.veh_load[vidx]

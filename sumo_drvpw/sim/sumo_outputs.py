@@ -333,8 +333,7 @@ BATTERY_NOTE = ("model difference, not a booking one: SUMO's Energy model takes 
 #: what the row of a ``vtype_energy`` equation compares (sim/vtype_energy.py)
 OWN_PARAMS_NOTE = ("like for like: the vType's own Energy-model parameters (SUMO's defaults for those it "
                    "leaves out) as terms and a battery chain, its radial drag in curves as SUMO books it "
-                   "per step; the slopes' source "
-                   "differs on grade changes, and SUMO's emissions device books a trip's last steps otherwise "
+                   "per step at SUMO's slope of the vehicle; SUMO's emissions device books a trip's last steps otherwise "
                    "than its own emission output (a few % of a short trip, docs/scenario.md); a bus dwelling "
                    "in a bay (a busStop with parking=\"true\") is off its lane for SUMO, which books nothing "
                    "there, where ours books it standing with its constantPowerIntake (an e-bus line: several %) "
