@@ -1,17 +1,22 @@
 """``vtype_energy`` reads the step as SUMO's Energy model does (sim/ledger.as_sumo): the grade
-at SUMO's slope of the vehicle (getSlope, from its back to its front after the step). Held
+at SUMO's slope of the vehicle (getSlope, from its back to its front after the step) and the
+radial drag at SUMO's radius, held within 10 km where the heading changed at all. Held
 against SUMO 1.28's own emission output per vehicle, live and replayed from its FCD."""
 
 from __future__ import annotations
 
+import math
 import re
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.sim import run_scenario
+from sumo_drvpw.sim.reader import yaw_rate
 from sumo_probe import build_net, emitted_wh, energy_scenario
 
 BUS = """<vType id="bus" vClass="bus" accel="1.0" decel="1.0" length="12" maxSpeed="100" sigma="0" minGap="2.5"
@@ -70,8 +75,51 @@ def test_the_grade_is_sumos_slope_of_the_vehicle_over_a_hill(tmp_path):
     assert (rise / sumo - 1.0).abs().loc[["b0", "b1"]].min() > 5e-4
 
 
+def test_the_radial_drag_takes_sumos_ten_km_radius_at_the_least(tmp_path):
+    """A 1.6-km road whose shape bends by ±0.01° every 40 m (a lane not quite straight, as
+    OSM networks are); 0.5-s steps, two 12-m e-buses at 15 m/s. SUMO's Energy model takes the
+    radius v·Δt/|Δψ| of each step at 10 km at the most wherever the heading changed at all,
+    so a bend under a bus costs it 0.5·m·v²/10⁴ in that step, where the plug-in booked the
+    radius of the small turn (tens of km). Step by step against SUMO's emission output, each
+    step is now either equal (to 0.01 W) or short by exactly that 10-km radius's drag: a
+    heading change of the rounding of SUMO's positions (~1e-16 rad), which its angle in
+    degrees (TraCI, FCD) does not show. Before, 126 of the 424 steps were off by other
+    amounts (a bend's turn booked at its own radius; measured 2026-11-29), each bus −4.30e-3
+    of SUMO's energy; now −1.57e-3, all of it in the 62 steps of those unseen changes."""
+    pts, x, y, h = [(0.0, 0.0)], 0.0, 0.0, 0.0
+    for k in range(40):
+        h += math.radians(0.01) * (1 if k % 2 == 0 else -1)
+        x, y = x + 40.0 * math.cos(h), y + 40.0 * math.sin(h)
+        pts.append((x, y))
+    shape = " ".join(f"{px:.4f},{py:.4f}" for px, py in pts)
+    build_net(tmp_path, f'<nodes><node id="a" x="0" y="0"/><node id="b" x="{x:.4f}" y="{y:.4f}"/></nodes>',
+              f'<edges><edge id="e" from="a" to="b" numLanes="1" speed="15" shape="{shape}"/></edges>')
+    (tmp_path / "r.rou.xml").write_text(
+        f'<routes>{BUS}<route id="r" edges="e"/>'
+        '<vehicle id="b0" type="bus" route="r" depart="0" departSpeed="max"/>'
+        '<vehicle id="b1" type="bus" route="r" depart="10" departSpeed="max"/></routes>', encoding="utf-8")
+    sc = energy_scenario(tmp_path, 200.0)
+    sc.write_text(sc.read_text(encoding="utf-8") + "trace = true\n", encoding="utf-8")
+    run_scenario(sc, tmp_path / "o")
+    tr = pd.read_parquet(tmp_path / "o" / "trace.parquet")
+    em = pd.DataFrame([(float(ts.get("time")), v.get("id"), float(v.get("electricity")))
+                       for ts in ET.parse(tmp_path / "em.xml").getroot() for v in ts],
+                      columns=["time_s", "vehicle", "wh_per_s"])
+    m = tr.merge(em, on=["time_s", "vehicle"])
+    assert len(m) == len(tr) > 400 and (m.speed_mps > 14.9).all()
+    p = m.p_total_w.to_numpy()  # the bus's battery: propulsion efficiency 0.9, 100 W beside it
+    gap = np.where(p > 0, p / 0.9, p * 0.9) + 100.0 - m.wh_per_s.to_numpy() * 3600.0
+    cap = 0.5 * 10000.0 * m.speed_mps.to_numpy() ** 2 / 1e4 / 0.5 / 0.9  # the 10-km radius's drag [W]
+    equal, unseen = np.abs(gap) < 0.01, np.abs(gap + cap) < 0.01
+    assert (equal | unseen).all(), m[~(equal | unseen)].head()
+    turned = m.p_roll_w.to_numpy() > m.p_roll_w.min() + 1.0  # steps a bend's drag is booked in
+    assert turned.sum() > 50 and equal[turned].all()
+
+
 def test_as_sumo_inputs_by_hand():
-    """SUMO's slope replaces the step's grade where it is known (NaN: the step's kept)."""
+    """SUMO's slope replaces the step's grade where it is known (NaN: the step's kept); a
+    heading change books at least the 10-km radius, |ω| ≥ v/10⁴, and at most 10⁻⁴ m, none
+    where the heading did not change."""
     from sumo_drvpw.sim.ledger import as_sumo_inputs
 
     v = np.array([10.0, 10.0, 10.0, 0.0, 10.0])
@@ -81,4 +129,12 @@ def test_as_sumo_inputs_by_hand():
                 "yaw_rate_rps": np.array([1e-9, -1e-3, 0.0, 0.5, 2e6])})
     got = as_sumo_inputs(x)
     np.testing.assert_array_equal(got.theta, [0.02, 0.01, 0.0, 0.0, -0.03])
-    assert x.theta[0] == 0.01  # (the inputs of the other equations unchanged)
+    np.testing.assert_allclose(got.signals["yaw_rate_rps"], [1e-3, 1e-3, 0.0, 0.0, 1e5])
+    assert x.signals["yaw_rate_rps"][0] == 1e-9  # (the inputs of the other equations unchanged)
+
+
+def test_yaw_rate_keeps_a_turn_too_small_for_the_modulo():
+    """A heading change of 1e-14° (a lane's rounding) is a change: it books SUMO's 10-km
+    radius; (d + 180) % 360 − 180 rounded it to 0 (180's spacing of doubles is 2.8e-14)."""
+    w = yaw_rate(np.array([10.0]), np.array([10.0 + 1e-14]), 0.5)
+    assert w[0] != 0.0 and w[0] == pytest.approx(math.radians(1e-14) / 0.5, rel=0.2)

@@ -54,11 +54,12 @@ def yaw_rate(prev_deg: np.ndarray, angle_deg: np.ndarray, dt: float) -> np.ndarr
     last angle (NaN: first seen, back from a teleport). It is the angle change SUMO's Energy
     model reads for its radial drag (probed with SUMO 1.28.0, 2026-11-27: on a 90° arc of 50 m
     radius at 21.2 m/s its emission output's electricity rose by radialDragCoefficient·m·v·|Δψ|/Δt
-    per step to 1e-9, Δψ the FCD angles' change in rad, at Δt 1, 0.5 and 0.25 s). Not
-    reproduced: SUMO caps the radius v·Δt/|Δψ| at 10 km, so a change below v·Δt/10⁴ rad
-    books as that radius (on Doerpfeldstr, 352 EVs over 600 s at radialDragCoefficient 0.5:
-    1,902 such steps of 39,146, 6 kJ of 37 kWh)."""
-    d = (np.asarray(angle_deg, float) - prev_deg + 180.0) % 360.0 - 180.0
+    per step to 1e-9, Δψ the FCD angles' change in rad, at Δt 1, 0.5 and 0.25 s). SUMO caps
+    the radius v·Δt/|Δψ| at 10 km, so a change below v·Δt/10⁴ rad books as that radius: the
+    ``vtype_energy`` equations take it so (sim/ledger.as_sumo), where the angle read changes
+    at all — a change of SUMO's rounding (~1e-16 rad) is lost in its angle in degrees."""
+    d = np.asarray(angle_deg, float) - prev_deg  # (not (d + 180) % 360 − 180: that rounds a change
+    d = np.where(d > 180.0, d - 360.0, np.where(d < -180.0, d + 360.0, d))  # below 3e-14° to 0)
     w = np.radians(d) / dt
     return np.where(np.isfinite(w), w, 0.0)
 
