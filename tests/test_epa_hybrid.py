@@ -289,13 +289,13 @@ PHEV_ROUTES = """<routes>
 </routes>"""
 
 
-def test_a_bare_config_books_a_plug_in_hybrids_petrol_share_with_the_hybrid_chain(tmp_path):
+def test_a_bare_config_books_a_plug_in_hybrids_petrol_share_with_the_plug_in_chain(tmp_path):
     """A bare SUMO config: the vType whose emissionClass names a plug-in hybrid's petrol share
-    (HBEFA4/PC_PHEV_petrol_Euro-6d_(P)) is booked by the full hybrids' chain and not by the
-    conventional petrol car's; a conventional class, written or SUMO's default, the
-    reverse; summary.json says which chain each left out. A scenario that names both chains
-    books a vType that writes no class with both (alternatives), and the hybrid class still
-    with the hybrid's only. A charge-sustaining chain whose engine stops only at P ≤ 0 (a
+    (HBEFA4/PC_PHEV_petrol_Euro-6d_(P)) is booked by the plug-in hybrid's chain and not by the
+    conventional petrol car's or the full hybrid's; a conventional class, written or SUMO's
+    default, by the conventional's only; summary.json says which chain each left out. A scenario that names both chains
+    books a vType that writes no class with both (alternatives), and the plug-in hybrid's class
+    with the full hybrid's only (no plug-in chain named: the nearest). A charge-sustaining chain whose engine stops only at P ≤ 0 (a
     start-stop engine's, as calibration writes it) is no hybrid's."""
     pytest.importorskip("libsumo")
     import json
@@ -318,10 +318,10 @@ def test_a_bare_config_books_a_plug_in_hybrids_petrol_share_with_the_hybrid_chai
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         books[name + "_summary"] = summary["assumptions"]["powertrain"]
         books[name + "_warned"] = [w for w in summary["warnings"] if "emissionClass names their fuel" in w]
-    assert books["bare"] == {"h": [eh.NAME], "p": ["epa_gasoline_car"], "n": ["epa_gasoline_car"]}
-    pt = books["bare_summary"]
-    assert pt["phev"]["powertrain"] == "hybrid" and pt["phev"]["not_booked_by"] == ["epa_gasoline_car"]
-    assert pt["petrol"]["not_booked_by"] == pt["plain"]["not_booked_by"] == [eh.NAME]
+    assert books["bare"] == {"h": ["epa_gasoline_phev_car"], "p": ["epa_gasoline_car"], "n": ["epa_gasoline_car"]}
+    pt = books["bare_summary"]   # the bare config's plug-in hybrid (tests/test_epa_phev.py)
+    assert pt["phev"]["powertrain"] == "plug-in hybrid" and pt["phev"]["not_booked_by"] == ["epa_gasoline_car", eh.NAME]
+    assert pt["petrol"]["not_booked_by"] == pt["plain"]["not_booked_by"] == [eh.NAME, "epa_gasoline_phev_car"]
     assert pt["plain"]["from"].startswith("SUMO's default")
     # the bare config's diesel and battery chains book nobody here (every car writes petrol):
     # the plug-in's own chains, one per carrier, are no news

@@ -1,7 +1,8 @@
 """Which equations book a vehicle, and at what mass: :class:`VTypeResolver`, asked once
 per vType by the run (sim/run.py), an FCD replay (sim/fcd.py) and the Accountant: its
 vClass and what vehicle it is (sim/vtypes.vehicle_body), the equations made for it, its
-energy carrier and powertrain (a hybrid's or a conventional engine's fuel chain), its mass.
+energy carrier and powertrain (a plug-in or full hybrid's or a conventional engine's fuel chain,
+sim/powertrain.py), its mass.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ from sumo_drvpw.model.constants import MASS_MAX_KG
 from sumo_drvpw.sim.vtype_energy import battery_switch, energy_vtype_of, own_energy, run_emission_class
 from sumo_drvpw.sim.vtypes import (CAR_VCLASSES, SHORT_CAR_M, SUMO_DEFAULT_EMISSION_CLASS,
                                    SUMO_DEFAULT_EMISSION_CLASS_OTHER, SUMO_DEFAULT_VTYPES, energy_carrier,
-                                   equation_carrier, is_hybrid_chain, is_hybrid_class, VAN_MAX_MASS_KG)
+                                   equation_carrier, is_hybrid_chain, VAN_MAX_MASS_KG)
+from sumo_drvpw.sim.powertrain import POWERTRAIN_ORDER, powertrain_of_class
 
 
 #: ratio of a vType's mass to the mass an equation booking it was calibrated at (or the
@@ -91,6 +93,8 @@ class VTypeResolver:
         #: fuel-chain equation → whether it is a hybrid's (sim/vtypes.is_hybrid_chain)
         self.hybrid_of = {e.name: h for e in equations if not isinstance(e, str)
                           and (h := is_hybrid_chain(e)) is not None}
+        #: fuel-chain equations of plug-in hybrids ([chain.depleting], model/chain_plugin.py)
+        self.plug_in = {e.name for e in equations if e.name in self.hybrid_of and e.chain.depleting is not None}
         self.cache: dict[str, tuple] = {}
         #: equation → the vehicle mass its coefficients were calibrated at [kg] (a calibrated
         #: equation's metrics.reference_mass_kg, else its equation.reference_mass_kg: the test
@@ -245,27 +249,28 @@ class VTypeResolver:
         return self._by_powertrain(vt, ec, src, app)
 
     def _by_powertrain(self, vt: str, ec: str, src: str, app: np.ndarray) -> np.ndarray:
-        """``app`` without the fuel chains of the other powertrain where both a hybrid's
-        and a conventional engine's apply: a class that names a hybrid
-        (:func:`~sumo_drvpw.sim.vtypes.is_hybrid_class`) is booked by the hybrid's, any
-        other by the conventional's; where only one kind applies, it books (a hybrid that
-        only conventional engines' chains book is noted: ``no_hybrid_chain`` names them,
-        no_hybrid_chain_warning below)."""
+        """``app`` with the fuel chains of one powertrain where several apply: the class's own
+        (:func:`powertrain_of_class`: a plug-in hybrid's, a full hybrid's or a conventional
+        engine's), else the nearest in :data:`POWERTRAIN_ORDER`; where only one kind applies,
+        it books (a hybrid that only conventional engines' chains book is noted:
+        ``no_hybrid_chain`` names them, no_hybrid_chain_warning below)."""
         fuel = [i for i, n in enumerate(self.names) if app[i] and n in self.hybrid_of]
-        kinds = {self.hybrid_of[self.names[i]] for i in fuel}
-        hybrid = is_hybrid_class(ec)
-        if kinds == {False} and hybrid:  # a hybrid, and only conventional engines' chains for it
+        kind = {i: "plug-in hybrid" if self.names[i] in self.plug_in else
+                ("hybrid" if self.hybrid_of[self.names[i]] else "conventional") for i in fuel}
+        want = powertrain_of_class(ec)
+        if set(kind.values()) == {"conventional"} and want != "conventional":  # only conventional chains
             self.powertrains[vt] = {"emission_class": ec, "from": src, "powertrain": "conventional",
-                                    "no_hybrid_chain": [self.names[i] for i in fuel],
-                                    "not_booked_by": []}
-        if len(kinds) < 2:
+                                    "no_hybrid_chain": [self.names[i] for i in fuel], "not_booked_by": []}
+        if len(set(kind.values())) < 2:
             return app
-        other = [i for i in fuel if self.hybrid_of[self.names[i]] != hybrid]
+        got = next(k for k in POWERTRAIN_ORDER[want] if k in kind.values())
+        other = [i for i in fuel if kind[i] != got]
         app = app.copy()
         app[other] = 0.0
-        self.powertrains[vt] = {"emission_class": ec, "from": src,
-                                "powertrain": "hybrid" if hybrid else "conventional",
+        self.powertrains[vt] = {"emission_class": ec, "from": src, "powertrain": got,
                                 "not_booked_by": [self.names[i] for i in other]}
+        if got == "plug-in hybrid":  # (model/chain_plugin.py: spent from each departure)
+            self.powertrains[vt]["battery"] = "charged at each departure: its usable energy first, then fuel"
         return app
 
     def own_mass(self, ledger, i: int, vt: str, copy: str) -> bool:

@@ -74,7 +74,7 @@ CONFIG_EQUATIONS = ("vsp_ldv1999", "drvpw_prius3", "moves_passenger_car", "moves
                     "moves_transit_bus", "moves_intercity_bus", "epa_gasoline_car", "epa_diesel_car",
                     "epa_gasoline_light_truck", "epa_diesel_light_truck", "moves_single_unit_truck_diesel",
                     "moves_combination_truck_diesel", "moves_transit_bus_diesel", "moves_intercity_bus_diesel",
-                    "moves_transit_bus_hybrid_diesel", "bmw_i3_battery", "epa_gasoline_hybrid_car",
+                    "moves_transit_bus_hybrid_diesel", "bmw_i3_battery", "epa_gasoline_hybrid_car", "epa_gasoline_phev_car",
                     "moves_motorcycle_petrol", "moves_moped_petrol")
 
 #: the class of an edge that only vehicles of one of these vClass groups may use (the vClasses
