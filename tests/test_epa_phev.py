@@ -47,12 +47,13 @@ ROUTES = """<routes>
 
 
 @pytest.mark.sumo
-def test_a_bare_config_runs_a_plug_in_hybrid_on_its_battery_then_on_fuel_live_and_replayed(tmp_path):
+def test_a_bare_config_runs_a_plug_in_hybrid_on_its_battery_then_on_fuel_live_and_replayed(tmp_path, capsys):
     """60 km at up to 30 m/s, six 10-km edges: the plug-in hybrid's vType is booked by
     ``epa_gasoline_phev_car`` alone (summary.json says so: its powertrain, not booked by the
     petrol or the full hybrid's chain, charged at departure); it spends exactly its usable
     battery energy — the first edges on battery and no fuel, the last on fuel and no battery —;
-    vehicle, edge and class totals agree; the FCD replay books the same."""
+    vehicle, edge and class totals agree; the FCD replay books the same; the console gives its
+    class's battery beside its litres."""
     pytest.importorskip("libsumo")
     from sumo_drvpw.cli import main as cli_main
     from sumo_probe import build_net
@@ -66,9 +67,11 @@ def test_a_bare_config_runs_a_plug_in_hybrid_on_its_battery_then_on_fuel_live_an
         '<output><fcd-output value="fcd.xml"/><precision value="6"/></output>'
         '<time><end value="2600"/></time></configuration>', encoding="utf-8")
     assert cli_main(["run", str(tmp_path / "c.sumocfg"), "--no-figures", "--out", str(tmp_path / "live")]) == 0
+    said = [ln for ln in capsys.readouterr().out.splitlines() if ln.strip().startswith(f"{ep.NAME} fuel, passenger")]
     assert cli_main(["fcd", str(tmp_path / "live" / "sumo" / "fcd.xml"), "--scenario", str(tmp_path / "c.sumocfg"),
                      "--no-figures", "--out", str(tmp_path / "replay")]) == 0
     usable_kwh = load_equation(ep.NAME).chain.depleting.usable_j / 3.6e6
+    assert len(said) == 1 and f"battery net {usable_kwh:.2f} kWh" in said[0]
     books = {}
     for run in ("live", "replay"):
         out = tmp_path / run

@@ -12,6 +12,7 @@ cluster (``--scheduler ADDRESS``, else a local cluster of ``--workers N`` proces
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from sumo_drvpw.cli import (add_cold_start, add_force, check_air_temperature, check_period,
@@ -156,7 +157,10 @@ def _print_summary(s: dict, out, label: str = "", replaced: bool = False) -> Non
             # idling at its stop) reads 1,000 L/100 km, which is true but not a consumption
             print(f"  {r['equation']} fuel, {r['key']}: {r['fuel_l']:.2f} L{cold} over "
                   f"{_km(r['distance_km'])} km, {r['fuel_l_per_100km']:.2f} L/100 km, "
-                  f"CO₂ {r['co2_kg']:.1f} kg")
+                  f"CO₂ {r['co2_kg']:.1f} kg"
+                  # a plug-in hybrid's battery, spent before its fuel (model/chain_plugin.py)
+                  + (f"; battery net {r['net_kwh']:.2f} kWh ({r['net_kwh_per_km']:.3f} kWh/km)"
+                     if isinstance(r.get("net_kwh"), (int, float)) and math.isfinite(r["net_kwh"]) else ""))
         else:
             print(f"  {r['equation']} battery, {r['key']}: net {r['net_kwh']:.2f} kWh over "
                   f"{_km(r['distance_km'])} km ({r['net_kwh_per_km']:.3f} kWh/km; auxiliary "
