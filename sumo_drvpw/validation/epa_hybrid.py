@@ -384,8 +384,8 @@ def builtin_equation(res: dict) -> dict:
                             f"fuel line with engine-off fitted on the certification tests of every full hybrid "
                             f"({res['configurations_used']} configurations, light trucks included); the mass "
                             "comes from the vType. In a bare SUMO config it books the petrol cars whose "
-                            "emissionClass names a hybrid (HBEFA 4's plug-in hybrids' petrol share); name it for "
-                            "other vTypes that are hybrids"),
+                            "emissionClass names a full hybrid (HBEFA 4's plug-in hybrids: epa_gasoline_phev_car); "
+                            "name it for other vTypes that are hybrids"),
             "source": ("US EPA Test Car List (data.gov), model years " + ", ".join(map(str, res["years"]))
                        + "; fitted by python -m sumo_drvpw.validation.epa_hybrid (docs/epa-hybrid.md)"),
         },
@@ -546,8 +546,9 @@ def render(res: dict, cmd: str, seconds: float) -> str:
     L += ["", "## Use", "",
           f"List `{NAME}` among a scenario's `equations` and as `[vtypes.<id>] equations = [\"{NAME}\"]` for the "
           "vTypes that are full hybrids (or give it as a run's equation for every car). A bare SUMO config books "
-          "with it the petrol cars whose emissionClass names a hybrid — SUMO has no full-hybrid class, but HBEFA 4's "
-          "plug-in hybrids' petrol share (`HBEFA4/PC_PHEV_petrol_Euro-6d_(P)`) drives as one — and every other "
+          "with it the petrol cars whose emissionClass names a full hybrid — SUMO 1.28 has no full-hybrid car class; "
+          "HBEFA 4's plug-in hybrids' petrol share (`HBEFA4/PC_PHEV_petrol_Euro-6d_(P)`) is booked by the plug-in "
+          "hybrid `epa_gasoline_phev_car`, this chain once its battery is spent (docs/energy-chain.md) — and every other "
           "petrol car with the conventional chain. What it leaves out: "
           "auxiliaries (A/C), the cold start's growth below "
           f"{ef.FTP_AIR_C} °C, and the state of charge: it books a trip as "
