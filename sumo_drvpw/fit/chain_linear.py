@@ -17,7 +17,9 @@ Linearisation at the declared coefficients (P = the declared road load's driving
               (on: engine state; η_rt: a hybrid's recuperation_round_trip, else 0)
 
 A change δP of driving power changes the target by g_wheel·δP; an auxiliary load L by
-g_aux·L. The declared chain's own prediction is the baseline (nothing refitted: the
+g_aux·L. A chain with a battery state (a hybrid's window ``battery_usable_j``, a plug-in's
+``[chain.depleting]``: :func:`stateful`) is evaluated with each sample's duration through each
+trip, and its gains are central differences of ±1 W along the battery's path. The declared chain's own prediction is the baseline (nothing refitted: the
 loop starts from what was calibrated elsewhere, e.g. on a dynamometer).
 
 Candidate effects (each a column, or a family profiled over one parameter):
@@ -116,21 +118,40 @@ class ChainTraceResult:
 
 # ------------------------------------------------------------------ linearisation
 
-def predict(equation: Equation, inputs, signals=None) -> np.ndarray:
-    """The equation's target power [W] (its chain applied to its driving power)."""
+def predict(equation: Equation, inputs, signals=None, dt_s=None) -> np.ndarray:
+    """The equation's target power [W] (its chain applied to its driving power); ``dt_s``
+    [s] given, a hybrid's battery (window, plug-in) carried through each of ``inputs.trip``."""
     x = inputs.with_mass(equation.mass_kg) if equation.mass_kg else inputs
     p = equation.power(x)
     if equation.chain is None:
         return p
-    return equation.chain.evaluate(p, inputs.v, signals=inputs.signals if signals is None else signals)["power_w"]
+    sig = inputs.signals if signals is None else signals
+    if dt_s is None:
+        return equation.chain.evaluate(p, inputs.v, signals=sig)["power_w"]
+    return equation.chain.evaluate(p, inputs.v, dt_s, sig, inputs.trip)["power_w"]
 
 
-def gains(chain: EnergyChain, p_w, v_mps, signals=None) -> tuple[np.ndarray, np.ndarray]:
+def stateful(chain: EnergyChain) -> bool:
+    """Whether a chain carries a battery from sample to sample (``battery_usable_j``,
+    ``[chain.depleting]``): its evaluation needs durations and trips."""
+    return chain.battery_usable_j is not None or chain.depleting is not None
+
+
+def gains(chain: EnergyChain, p_w, v_mps, signals=None, dt_s=None, trip=None) -> tuple[np.ndarray, np.ndarray]:
     """(g_wheel, g_aux): the target's change per W of driving power and per W of
     auxiliary load at driving power ``p_w`` [W] and speed ``v_mps`` [m/s] (module docstring);
-    a fuel chain's warm-running factor at the air temperature of ``signals`` included."""
+    a fuel chain's warm-running factor at the air temperature of ``signals`` included. A
+    chain with a battery state (:func:`stateful`; ``dt_s`` [s] and ``trip`` carry it): central
+    differences of ±1 W on every sample, the battery's path followed (a full window credits no
+    more braking; a plug-in on its battery burns no fuel: gain 0 there)."""
     p = np.asarray(p_w, float)
     v = np.broadcast_to(np.asarray(v_mps, float), p.shape)
+    if stateful(chain):
+        import dataclasses
+
+        f = lambda ch, dp: ch.evaluate(p + dp, v, dt_s, signals, trip)["power_w"]  # noqa: E731
+        aux = lambda da: dataclasses.replace(chain, aux_power_w=chain.aux_power_w + da)  # noqa: E731
+        return (f(chain, 1.0) - f(chain, -1.0)) / 2.0, (f(aux(1.0), 0.0) - f(aux(-1.0), 0.0)) / 2.0
     if chain.motor is not None:  # SUMO's MMPEVEM motor: its slopes by central differences of ±1 W
         f = lambda dp, da: chain.evaluate(p + dp, v, signals=signals)["power_w"] if da == 0 else (  # noqa: E731
             chain.motor.battery(p, v, signals, chain.auxiliary(p.size, signals) + da)["power_w"])
@@ -159,7 +180,7 @@ def over_rated(chain: EnergyChain, p, v, signals=None) -> np.ndarray:
     return eng >= chain.engine_max_w
 
 
-def linearised_columns(equation: Equation, inputs) -> tuple[dict, np.ndarray]:
+def linearised_columns(equation: Equation, inputs, dt_s=None) -> tuple[dict, np.ndarray]:
     """Columns [W of target] whose sum is the chain's prediction at the declared coefficients.
 
     Returns ({name: column}, offset): each road-load term's power × g_wheel, the chain's
@@ -171,7 +192,7 @@ def linearised_columns(equation: Equation, inputs) -> tuple[dict, np.ndarray]:
     ch = equation.chain
     x = inputs.with_mass(equation.mass_kg) if equation.mass_kg else inputs
     p = equation.power(x)
-    gw, ga = gains(ch, p, inputs.v, inputs.signals)
+    gw, ga = gains(ch, p, inputs.v, inputs.signals, dt_s, inputs.trip)
     names = equation.term_names
     tm = term_matrix(names, x)
     cols = {t: gw * tm[:, j] * equation.terms[t] for j, t in enumerate(names)}
@@ -182,6 +203,12 @@ def linearised_columns(equation: Equation, inputs) -> tuple[dict, np.ndarray]:
         rf = ch.running_factor(n, inputs.signals)
         cols["idle_fuel_power_w"] = ch.engine_on(p, inputs.v) * rf * zero_output_fuel(
             ch.idle_fuel_power_w, ch.moving_idle_fuel_power_w, inputs.v, STANDSTILL_MPS)
+        if stateful(ch):  # (a plug-in's engine idles only on its share on fuel: the idle fuel's own part)
+            import dataclasses
+
+            f = lambda c: c.evaluate(p, inputs.v, dt_s, inputs.signals, inputs.trip)["power_w"]  # noqa: E731
+            cols["idle_fuel_power_w"] = f(ch) - f(dataclasses.replace(
+                ch, idle_fuel_power_w=0.0, moving_idle_fuel_power_w=None if ch.moving_idle_fuel_power_w is None else 0.0))
         # at the rated output the booking is the rated output's, no column's
         over = over_rated(ch, p, inputs.v, inputs.signals)
         return cols, np.where(over, ch.paid(p, inputs.v) * rf * (ch.engine_max_w or 0.0) / ch.marginal_efficiency, 0.0)
@@ -273,8 +300,8 @@ def chain_samples(m, equation: Equation):
     x = m.inputs.with_mass(equation.mass_kg) if equation.mass_kg else m.inputs
     p = equation.power(x)
     y_all = chain_target(m, equation.chain)
-    pred0_all = equation.chain.evaluate(p, m.inputs.v, signals=m.inputs.signals)["power_w"]
     dt_all = m.log.df["dt_s"].to_numpy(float)
+    pred0_all = predict(equation, m.inputs, dt_s=dt_all if stateful(equation.chain) else None)
     ok = m.usable & np.isfinite(y_all) & np.isfinite(pred0_all) & np.isfinite(p) & np.isfinite(dt_all)
     return ok, p, y_all, pred0_all, dt_all
 
@@ -326,7 +353,9 @@ def trace_chain(m, equation: Equation, opt: ChainTraceOptions | None = None, pro
     held = np.full(idx.size, np.nan)
     sub_inputs = m.inputs.take(idx)
     for k, eq in enumerate(fold_equations(eng, equation, accepted)):
-        held[sfold == k] = predict(eq, sub_inputs)[sfold == k]
+        # (a battery's state through every sample of each trip, as the baseline's)
+        pk = predict(eq, m.inputs, dt_s=dt_all)[idx] if stateful(eq.chain) else predict(eq, sub_inputs)
+        held[sfold == k] = pk[sfold == k]
     held = held if see is None else see(held)
     trips = trip_names[trip]
     report = report_doc(m.target, equation, closed, bl, idx.size, trip_names, equation.chain.unknown_inputs(
@@ -360,13 +389,13 @@ def close_loop_heldout(m, equation: Equation, opt: ChainTraceOptions | None = No
     trips = m.log.df["trip_id"].astype(str).to_numpy()
     dt = m.log.df["dt_s"].to_numpy(float)
     y = chain_target(m, equation.chain)
-    pred0 = predict(equation, m.inputs)
+    pred0 = predict(equation, m.inputs, dt_s=dt if stateful(equation.chain) else None)
     out, found = {}, {}
     for t in dict.fromkeys(trips):
         test = trips == t
         res = trace_chain(m, equation, opt, mask=~test)
         use = test & m.usable & np.isfinite(y)
-        pred1 = predict(res.equation, m.inputs)
+        pred1 = predict(res.equation, m.inputs, dt_s=dt if stateful(res.equation.chain) else None)
         e_m = float(np.sum((y * dt)[use]))
         e0, e1 = float(np.sum((pred0 * dt)[use])), float(np.sum((pred1 * dt)[use]))
         fnd = {f["term"]: (f["parameter"] if f["coefficient"] is None else f["coefficient"])
