@@ -81,10 +81,11 @@ def offer_stats(m, equation: Equation, p, idx, opt=None, braking: bool = True) -
           "fuel_cut": {}, "ambient": None, "loads": {}}
     if ch.predicts == "fuel" and ch.fuel_cut_below_w is None and ch.idle_fuel_power_w > 0:
         s = {k: np.asarray(a)[idx] for k, a in sig.items()}
-        st["fuel_cut"] = {c: [n, bool(np.any(col != 0))] for c, n, col in _fuel_cut_counts(ch, pp, v, s)}
+        st["fuel_cut"] = {c: [n, bool(np.any(col != 0))] for c, n, col in _fuel_cut_counts(ch, pp, v, s,
+                                                                                           state=_state(m, ch, idx))}
     if "ambient_c" in sig:
         col = ch.temperature_column
-        _, ga = gains(ch, pp, v, {col: np.asarray(sig[col])[idx]} if col in sig else None)
+        _, ga = gains(ch, pp, v, {col: np.asarray(sig[col])[idx]} if col in sig else None, *_state(m, ch, idx))
         t = np.asarray(sig["ambient_c"], float)[idx]
         fin = t[np.isfinite(t)]
         st["ambient"] = {"bad": int(t.size - fin.size), "lo": float(fin.min()) if fin.size else np.inf,
@@ -187,7 +188,7 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
     v = x.v[idx]
     pp = p[idx]
     col, sig = ch.temperature_column, m.inputs.signals or {}
-    gw, ga = gains(ch, pp, v, {col: np.asarray(sig[col])[idx]} if col in sig else None)
+    gw, ga = gains(ch, pp, v, {col: np.asarray(sig[col])[idx]} if col in sig else None, *_state(m, ch, idx))
     out = []
     if decided["grade"]:
         g = term_matrix(["grade"], x.take(idx))[:, 0]
@@ -199,7 +200,7 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
                     "structural", "W", [(np.column_stack([ga]), None, None)]))
     if decided["fuel_cut"]:
         s = {k: np.asarray(a)[idx] for k, a in sig.items()}
-        cut = [(None, col, c) for c, _, col in _fuel_cut_counts(ch, pp, v, s, decided["fuel_cut"])]
+        cut = [(None, col, c) for c, _, col in _fuel_cut_counts(ch, pp, v, s, decided["fuel_cut"], _state(m, ch, idx))]
         out.append(Cand("fuel_cut_below_w", "overrun fuel cut-off: moving with a driving power below the "
                         "cut-off, the wheels turn the engine and its injection is cut (profiled over "
                         f"{', '.join(f'{c / 1000:g}' for c in FUEL_CUT_GRID_W)} kW)", "structural", "W", cut))
@@ -309,8 +310,6 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
     raise UserError(f"unknown chain effect '{name}'")
 
 
-
-
 def moving_idle_candidate(ch, p, v, signals) -> Cand:
     """The fuel at zero output while moving above the idle fuel (``moving_idle_fuel_power_w``): its
     column is 1 W of fuel where the engine runs and the vehicle moves (times the warm-running factor)."""
@@ -332,19 +331,31 @@ def apply_moving_idle(eq: Equation, extra: float) -> tuple[Equation | None, str]
                 "fuel (friction at road engine speed)")
 
 
-def _fuel_cut_counts(ch, p, v, signals, grid=None) -> list:
+def _state(m, ch, idx) -> tuple:
+    """(durations [s], trip ids) of the samples ``idx`` for a chain with a battery state
+    (fit/chain_linear.stateful), else (None, None)."""
+    from sumo_drvpw.fit.chain_linear import stateful
+
+    if not stateful(ch):
+        return None, None
+    dt = m.log.df["dt_s"].to_numpy(float) if hasattr(m, "log") else m.dt  # (the streamed tracer's batch: its own)
+    return np.asarray(dt, float)[idx], np.asarray(m.inputs.trip)[idx]
+
+
+def _fuel_cut_counts(ch, p, v, signals, grid=None, state=(None, None)) -> list:
     """(cut-off, moving samples below it, column) of the overrun fuel cut-off at each power of
     :data:`FUEL_CUT_GRID_W` with a moving sample below it, or at each of ``grid``: the fuel
-    chain's prediction with the cut-off less its prediction without (≤ 0)."""
+    chain's prediction with the cut-off less its prediction without (≤ 0); ``state``: the
+    samples' (durations, trips) of a chain with a battery state (:func:`_state`)."""
     import dataclasses
 
-    base = ch.evaluate(p, v, signals=signals)["power_w"]
+    base = ch.evaluate(p, v, state[0], signals, state[1])["power_w"]
     moving = v > STANDSTILL_MPS
     out = []
     for c in FUEL_CUT_GRID_W if grid is None else grid:
         n = int(np.sum(moving & (p < c)))
         if n or grid is not None:
-            out.append((c, n, dataclasses.replace(ch, fuel_cut_below_w=c).evaluate(p, v, signals=signals)["power_w"]
+            out.append((c, n, dataclasses.replace(ch, fuel_cut_below_w=c).evaluate(p, v, state[0], signals, state[1])["power_w"]
                         - base))
     return out
 

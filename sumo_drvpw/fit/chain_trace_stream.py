@@ -37,7 +37,7 @@ from sumo_drvpw.data.stream import plan
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain_blocks import Blocks, block_starts, block_stats, fit_from_sums, heldout_from_stats
 from sumo_drvpw.fit.chain_effects import candidates, decide, merge_offer, offer_stats, refine
-from sumo_drvpw.fit.chain_linear import (ChainTraceOptions, ChainTraceResult, _pick, chain_samples,
+from sumo_drvpw.fit.chain_linear import (ChainTraceOptions, ChainTraceResult, _pick, chain_samples, stateful,
                                          check_chain_equation, predict)
 from sumo_drvpw.fit.chain_search import close, fold_equations, report_doc, rms, search
 from sumo_drvpw.fit.chain_stream import _keys, _merge_hist, quantile_bins, quantiles_of
@@ -97,7 +97,7 @@ class _Streamed:
         self.batches, self.eq, self.opt, self.decided = batches, equation, opt, decided
         self.bl, self.starts, self.offs, self.sw, self.e_pred = bl, starts, offs, sw, e_pred
         self.passes = 0
-        self.trips = _reads_trips(equation)
+        self.trips = _reads_trips(equation) or stateful(equation.chain)  # (a battery's state: per trip)
 
     def _batches(self):
         self.passes += 1
@@ -113,7 +113,8 @@ class _Streamed:
         xe = x.with_mass(self.eq.mass_kg) if self.eq.mass_kg else x
         p = self.eq.power(xe)
         n = len(d["y"])
-        cands = candidates(SimpleNamespace(inputs=x), self.eq, p, np.arange(n), self.opt, {}, self.decided)
+        cands = candidates(SimpleNamespace(inputs=x, dt=np.asarray(d["w"], float)), self.eq, p, np.arange(n),
+                           self.opt, {}, self.decided)
         return {"x": x, "r": np.asarray(d["y"]) - np.asarray(d["pred0"]), "w": np.asarray(d["w"], float),
                 "cands": {c.name: c for c in cands}, "n": n}
 
@@ -226,7 +227,8 @@ class _Streamed:
             sfold = self._sample_fold(i, n)
             held = np.full(n, np.nan)
             for k in np.unique(sfold):
-                held[sfold == k] = predict(eqs[k], x)[sfold == k]
+                held[sfold == k] = predict(eqs[k], x, dt_s=np.asarray(d["w"], float) if stateful(eqs[k].chain)
+                                           else None)[sfold == k]
             ms.add(held, np.asarray(d["y"]))
             ts.add(held, d["y"], d["w"], np.asarray(d["names"])[d["tloc"]])
         return ms, ts
@@ -376,7 +378,7 @@ def _trace(batches, equation, target, opt, stats, trip_names, sw, e_pred, files,
     eng = _Streamed(batches, equation, opt, decided, bl, starts, offs, sw, e_pred)
     first = next(iter(batches))
     x = eng.inputs(first)
-    cands = candidates(SimpleNamespace(inputs=x), equation, equation.power(
+    cands = candidates(SimpleNamespace(inputs=x, dt=np.asarray(first["w"], float)), equation, equation.power(
         x.with_mass(equation.mass_kg) if equation.mass_kg else x), np.arange(len(first["y"])), opt, left_out, decided)
     for c in cands:  # the search's candidates: each variant's parameters, its columns rebuilt per batch
         c.variants = [(None if z is None else z.shape[1], None if f is None else True, par) for z, f, par in c.variants]
