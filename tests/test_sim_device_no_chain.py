@@ -90,3 +90,21 @@ def test_a_full_hybrids_row_says_its_ratio_is_the_hybrids_saving(tmp_path):
     assert "no full-hybrid car class" in hev["note"] and "saving" in hev["note"]
     assert not isinstance(car["note"], str) or "hybrid" not in car["note"]
     assert hev["ratio"] < car["ratio"]  # the same trips: the hybrid's engine-off and recovered braking
+
+
+def test_a_plug_in_hybrids_row_says_its_litres_begin_after_its_battery(tmp_path):
+    """The plug-in hybrid car's chain (epa_gasoline_phev_car: on its battery from departure) beside
+    SUMO's emissions device on the same HBEFA 4 plug-in class: its short trips burn no fuel, and its
+    row says why (the full hybrid's note did not: it named only the hybrid's saving)."""
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="phev" vClass="passenger" mass="1700" emissionClass="HBEFA4/PC_PHEV_petrol_Euro-6d_(P)"/>'
+        '<flow id="h" type="phev" begin="0" end="60" period="15" departSpeed="0">'
+        '<route edges="c00c10 c10c20 c20c30 c30c31 c31c32"/></flow></routes>\n', encoding="utf-8")
+    (tmp_path / "s.toml").write_text(
+        f'equations = ["epa_gasoline_phev_car"]\n[sumo]\nnet = "{NET}"\n'
+        'routes = ["r.rou.xml"]\nbegin = 0\nend = 400\nstep_length = 1.0\noptions = ["--no-warnings", "true"]\n'
+        '[outputs]\nfigures = false\nsumo_device = true\n', encoding="utf-8")
+    run_scenario(tmp_path / "s.toml", tmp_path / "o")
+    row = pd.read_csv(tmp_path / "o" / "sumo_device.csv").set_index("equation").loc["epa_gasoline_phev_car"]
+    assert row["vehicles"] == 4 and row["ratio"] == 0.0   # every trip on its battery
+    assert "on its charged battery" in row["note"] and "battery kWh are in chain_vehicles.csv" in row["note"]

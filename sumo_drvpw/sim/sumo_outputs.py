@@ -346,6 +346,12 @@ HYBRID_NOTE = ("model difference: SUMO has no full-hybrid car class, so its emis
                "is off at rest and at light load, the battery driving and the braking energy recovered: "
                "the ratio holds a full hybrid's saving (the EPA lists' full hybrids burn 33-56 % less "
                "than their petrol twins in town, docs/epa-hybrid.md)")
+#: a plug-in hybrid's row ([chain.depleting], model/chain_plugin.py): its litres begin after its battery
+PLUG_IN_NOTE = ("model difference: SUMO's emissions device books a plug-in hybrid's petrol share (P) as a "
+                "conventional engine's from the departure, while this chain drives each vehicle on its charged "
+                "battery until the usable energy is spent, burning no fuel, then as a full hybrid (engine off at "
+                "rest and at light load): the ratio holds the battery's trips and a full hybrid's saving; its "
+                "battery kWh are in chain_vehicles.csv (docs/energy-chain.md)")
 #: and a hybrid bus's row (its vehicles of these vClasses): SUMO's class is a hybrid's
 HYBRID_BUS_VCLASSES = ("bus", "coach")
 HYBRID_BUS_NOTE = ("model difference: SUMO's emissions device books the vType's emissionClass — for a hybrid "
@@ -457,6 +463,7 @@ def device_comparison(v, dev, cv, chains: dict, exported: dict | None = None, ma
             if c.charge_sustaining and c.engine_off_below_w > 0:  # a full hybrid's (sim/vtypes.is_hybrid_chain)
                 bus = "vclass" in g and len(g) and g.vclass.isin(HYBRID_BUS_VCLASSES).all()
                 note = HYBRID_BUS_NOTE if bus else HYBRID_NOTE  # (what SUMO books: its class's)
+                note = PLUG_IN_NOTE if c.depleting is not None else note
         else:
             g = g[g.sumo_electricity_wh.abs() > 0]
             sumo = g.sumo_electricity_wh.sum() / 1e3
