@@ -97,3 +97,19 @@ def test_a_bare_config_runs_a_plug_in_hybrid_on_its_battery_then_on_fuel_live_an
         books[run] = h
     for col in ("fuel_l", "net_kwh", "traction_kwh", "recuperated_kwh"):
         assert books["replay"][col] == pytest.approx(books["live"][col], rel=1e-6, abs=1e-9)
+
+
+def test_powertrain_of_a_class_and_a_resolver_with_a_plain_name_beside_the_plug_in():
+    """HBEFA 4's PHEV classes are plug-in hybrids, HEV/hybrid names full hybrids, the rest
+    conventional; an equation given by its plain name (booking any vType) beside the plug-in
+    built-in does not stop the resolver."""
+    from types import SimpleNamespace
+
+    from sumo_drvpw.sim.powertrain import powertrain_of_class
+    from sumo_drvpw.sim.resolver import VTypeResolver
+
+    assert [powertrain_of_class(c) for c in ("HBEFA4/PC_PHEV_petrol_Euro-6d_(P)", "HBEFA4/UBus_Std_gt15-18t_HEV_Euro-VI_D-E",
+                                             "HBEFA4/PC_petrol_Euro-6d", None)] == [
+        "plug-in hybrid", "hybrid", "conventional", "conventional"]
+    r = VTypeResolver(SimpleNamespace(), {}, ["road", load_equation(ep.NAME), load_equation(ep.FULL_HYBRID)])
+    assert r.plug_in == {ep.NAME}

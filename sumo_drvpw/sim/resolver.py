@@ -94,7 +94,8 @@ class VTypeResolver:
         self.hybrid_of = {e.name: h for e in equations if not isinstance(e, str)
                           and (h := is_hybrid_chain(e)) is not None}
         #: fuel-chain equations of plug-in hybrids ([chain.depleting], model/chain_plugin.py)
-        self.plug_in = {e.name for e in equations if e.name in self.hybrid_of and e.chain.depleting is not None}
+        self.plug_in = {e.name for e in equations if not isinstance(e, str) and e.name in self.hybrid_of
+                        and e.chain.depleting is not None}
         self.cache: dict[str, tuple] = {}
         #: equation → the vehicle mass its coefficients were calibrated at [kg] (a calibrated
         #: equation's metrics.reference_mass_kg, else its equation.reference_mass_kg: the test
