@@ -205,7 +205,7 @@ def candidates(m, equation: Equation, p, idx, opt=None, left_out: dict | None = 
                         "cut-off, the wheels turn the engine and its injection is cut (profiled over "
                         f"{', '.join(f'{c / 1000:g}' for c in FUEL_CUT_GRID_W)} kW)", "structural", "W", cut))
     if ch.predicts == "fuel" and decided["standstill"]:
-        out.append(moving_idle_candidate(ch, pp, v, {k: np.asarray(a)[idx] for k, a in sig.items()}))
+        out.append(moving_idle_candidate(ch, pp, v, {k: np.asarray(a)[idx] for k, a in sig.items()}, _state(m, ch, idx)))
     if ch.predicts == "battery":  # (SUMO's MMPEVEM motor has no η_t, η_r or limit of that kind: not offered)
         if decided["standstill"]:
             st = (v < STANDSTILL_MPS).astype(float)
@@ -310,10 +310,19 @@ def apply(equation: Equation, name: str, coef, param=None) -> tuple[Equation | N
     raise UserError(f"unknown chain effect '{name}'")
 
 
-def moving_idle_candidate(ch, p, v, signals) -> Cand:
+def moving_idle_candidate(ch, p, v, signals, state=(None, None)) -> Cand:
     """The fuel at zero output while moving above the idle fuel (``moving_idle_fuel_power_w``): its
-    column is 1 W of fuel where the engine runs and the vehicle moves (times the warm-running factor)."""
-    col = (ch.engine_on(p, v) & (v >= STANDSTILL_MPS)) * ch.running_factor(p.size, signals)
+    column is 1 W of fuel where the engine runs and the vehicle moves (times the warm-running factor);
+    for a chain with a battery state (``state``: :func:`_state`), the chain's own change per W, as a
+    plug-in's engine runs only on its share on fuel."""
+    if state[0] is not None:
+        import dataclasses
+
+        base = ch.idle_fuel_power_w if ch.moving_idle_fuel_power_w is None else ch.moving_idle_fuel_power_w
+        f = lambda c: c.evaluate(p, v, state[0], signals, state[1])["power_w"]  # noqa: E731
+        col = f(dataclasses.replace(ch, moving_idle_fuel_power_w=base + 1.0)) - f(ch)
+    else:
+        col = (ch.engine_on(p, v) & (v >= STANDSTILL_MPS)) * ch.running_factor(p.size, signals)
     return Cand("moving_idle_fuel_power_w", "fuel at zero output while moving above the idle fuel: an engine "
                 "turning at road speed has more friction than at idle (a heavy diesel's)", "structural", "W",
                 [(np.column_stack([col]), None, None)])
