@@ -40,8 +40,8 @@ from sumo_drvpw.sim.loop import Physics, Stepper
 from sumo_drvpw.sim.network import load_network
 from sumo_drvpw.sim.outputs import RunResult, summary_dict
 from sumo_drvpw.sim.resolver import (booked_as_warning, calibration_mass_warning, carrier_warning,
-                                     fixed_mass_listing, fixed_mass_warning, untold_copies_warning,
-                                     no_hybrid_chain_warning)
+                                     fixed_mass_listing, fixed_mass_warning, untold_copies_warning)
+from sumo_drvpw.sim.powertrain import no_hybrid_chain_warning
 from sumo_drvpw.sim.trace import TraceWriter
 from sumo_drvpw.sim.scenario import Scenario, cold_start_shares, load_scenario, resolve_equation
 from sumo_drvpw.sim.scenario_paths import sumo_file_list

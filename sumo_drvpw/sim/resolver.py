@@ -254,7 +254,7 @@ class VTypeResolver:
         (:func:`powertrain_of_class`: a plug-in hybrid's, a full hybrid's or a conventional
         engine's), else the nearest in :data:`POWERTRAIN_ORDER`; where only one kind applies,
         it books (a hybrid that only conventional engines' chains book is noted:
-        ``no_hybrid_chain`` names them, no_hybrid_chain_warning below)."""
+        ``no_hybrid_chain`` names them, sim/powertrain.no_hybrid_chain_warning)."""
         fuel = [i for i, n in enumerate(self.names) if app[i] and n in self.hybrid_of]
         kind = {i: "plug-in hybrid" if self.names[i] in self.plug_in else
                 ("hybrid" if self.hybrid_of[self.names[i]] else "conventional") for i in fuel}
@@ -523,22 +523,6 @@ def booked_as_warning(booked_as: dict[str, dict]) -> str:
     return ("vTypes whose vClass does not say what vehicle they are were booked as the one "
             "their emissionClass, guiShape, id or length names: " + "; ".join(parts)
             + " (summary.json assumptions.booked_as; vclasses.<vClass>.equations chooses instead)")
-
-
-def no_hybrid_chain_warning(powertrains: dict[str, dict]) -> str | None:
-    """One line, or None: the vTypes whose emissionClass names a hybrid but which only
-    conventional engines' fuel chains book (sim/resolver ``no_hybrid_chain``): they idle
-    at every stop and recuperate nothing, so their fuel is overstated in town."""
-    hits = {vt: p for vt, p in sorted(powertrains.items()) if p.get("no_hybrid_chain")}
-    if not hits:
-        return None
-    parts = [f"{vt} ({p['emission_class']}: {', '.join(p['no_hybrid_chain'])})" for vt, p in hits.items()]
-    return ("vTypes whose emissionClass names a hybrid were booked by a conventional engine's fuel "
-            "chain, as no hybrid chain is made for their vClass: " + few(parts, 5)
-            + " — that chain idles at every stop and recuperates nothing, so it books a hybrid's town "
-            "driving high (full hybrid cars burn 33–56 % less than their petrol twins on the EPA's hot "
-            "UDDS, docs/epa-hybrid.md); give these vTypes a hybrid chain (a fuel chain calibrated on "
-            "such a vehicle's logs) in the scenario's equations (summary.json assumptions.powertrain)")
 
 
 def calibration_mass_warning(mass_far: dict[str, dict]) -> str | None:
