@@ -355,21 +355,20 @@ class EnergyChain:
                        spent, before, np.broadcast_to(np.asarray(dt, float), p.shape))
 
     def _fuel(self, p, v, n, signals, dt_s=None, trip=None, stored_j=None, sustaining=None) -> dict:
-        on, extra = self.engine_on(p, v), {}
-        eng, over = engine_capped(np.maximum(p, 0.0) / _eval(self.traction_efficiency, v, p) + self.auxiliary(n, signals),
-                                  self.engine_max_w)
+        on, extra, eta_t = self.engine_on(p, v), {}, _eval(self.traction_efficiency, v, p)  # (:meth:`paid`: on | cs)
+        eng, over = engine_capped(np.maximum(p, 0.0) / eta_t + self.auxiliary(n, signals), self.engine_max_w)
         pf = (np.where(on, zero_output_fuel(self.idle_fuel_power_w, self.moving_idle_fuel_power_w, v, STANDSTILL_MPS), 0.0)
-              + np.where(self.paid(p, v), eng / self.marginal_efficiency, 0.0))
+              + np.where(on | self.charge_sustaining, eng / self.marginal_efficiency, 0.0))
         if self.recuperation_round_trip:  # a charge-sustaining hybrid's braking energy, given back
             lim = np.inf if self.recuperation_limit_w is None else self.recuperation_limit_w
             if self.battery_usable_j is None:
                 pf = pf + (self.recuperation_round_trip * np.maximum(np.minimum(p, 0.0), -lim)
-                           / _eval(self.traction_efficiency, v, p) / self.marginal_efficiency)
+                           / eta_t / self.marginal_efficiency)
             else:  # only what the battery's window holds (model/chain_buffer.py)
                 back, stored = buffered_return(p if sustaining is None else np.where(sustaining, p, 0.0), dt_s,
                                                self.recuperation_round_trip, lim, self.battery_usable_j,
                                                stored_j, trip, self.where)
-                pf = pf - back / _eval(self.traction_efficiency, v, p) / self.marginal_efficiency
+                pf = pf - back / eta_t / self.marginal_efficiency
                 extra = {"given_back_w": back, "stored_j": stored}
         if self.running_fuel_per_k:
             pf = pf * self.running_factor(n, signals)
