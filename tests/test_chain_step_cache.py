@@ -17,6 +17,66 @@ def _fuel(**kw) -> EnergyChain:
                           "engine_off_below_w": 0.0, **kw})
 
 
+def test_a_step_of_one_vehicle_per_edge_needs_no_unique(monkeypatch):
+    """np.unique (a sort, an inverse and more: a tenth of a step's booking at five vehicles)
+    runs only in a step where two vehicles share an edge; the edge totals are the per-edge
+    sums of the step's quantities either way."""
+    led = ChainLedger(["f"], [_fuel()], 100)
+    calls, real = [], np.unique
+
+    def spy(*a, **kw):
+        calls.append(1)
+        return real(*a, **kw)
+
+    monkeypatch.setattr(np, "unique", spy)
+    rng, want = np.random.default_rng(5), np.zeros((100, 1, 8))
+    for k in range(30):
+        eidx = rng.permutation(100)[:4] if k % 2 else np.array([3, 3, 50, 3])
+        before = len(calls)
+        full = led.expand(led.book(np.arange(4), eidx, rng.uniform(0, 20, 4), 1.0, rng.normal(0, 2e4, (4, 1))))
+        assert len(calls) == before + (0 if k % 2 else 1), k
+        for q in range(8):
+            want[:, 0, q] += np.bincount(eidx, full[:, 0, q], minlength=100)
+    np.testing.assert_allclose(led.edge, want, rtol=1e-12, atol=0.0)
+
+
+def test_constant_signals_are_built_once_and_read_the_run_values(monkeypatch):
+    """The chains' constant signals (the run's air temperature, a load given as a constant, a
+    load not given: 0) are the same read-only arrays from step to step at any number of
+    vehicles, each step's first n of them; the booked quantities are those of the chains
+    evaluated on freshly built constants."""
+    fuel = _fuel(running_fuel_per_k=0.01)
+    bat = EnergyChain(predicts="battery", aux_power_w=300.0, loads={"heater_w": 1.0, "fan_w": 0.5},
+                      hvac={"column": "ambient_c", "setpoint_c": 21.0, "heating_w_per_k": 150.0,
+                            "cooling_w_per_k": 50.0})
+    led = ChainLedger(["f", "b"], [fuel, bat], 10, signal_values={"ambient_c": 5.0, "heater_w": 800.0})
+    seen, real = [], EnergyChain.evaluate
+
+    def spy(self, p, v, dt=None, signals=None, *a, **kw):
+        seen.append(signals)
+        return real(self, p, v, dt, signals, *a, **kw)
+
+    monkeypatch.setattr(EnergyChain, "evaluate", spy)
+    rng = np.random.default_rng(2)
+    for n in (3, 5, 2, 70, 4):
+        p, v = rng.normal(0, 2e4, (n, 2)), rng.uniform(0, 20, n)
+        q = led.book(np.arange(n), np.arange(n) % 10, v, 1.0, p)
+        sig = {"ambient_c": np.full(n, 5.0), "heater_w": np.full(n, 800.0), "fan_w": np.zeros(n)}
+        np.testing.assert_array_equal(q[:, :4], np.stack([real(fuel, p[:, 0], v, 1.0, sig)[k]
+                                                           for k in ("power_j", "fuel_l", "co2_kg")]
+                                                          + [np.zeros(n)], axis=1))
+        np.testing.assert_array_equal(q[:, 4:], np.stack([real(bat, p[:, 1], v, 1.0, sig)[k] for k in
+                                                          ("traction_j", "recuperated_j", "auxiliary_j",
+                                                           "power_j")], axis=1))
+    assert led.assumed_zero == {"fan_w"}
+    steps = seen[::2]  # (both chains read one step's dict)
+    for s in steps:
+        assert set(s) == {"ambient_c", "heater_w", "fan_w"}
+        assert not any(x.flags.writeable for x in s.values())
+    for i, j in ((1, 2), (3, 4)):  # a step of no more vehicles than an earlier one: that step's arrays
+        assert all(np.shares_memory(steps[i][k], steps[j][k]) for k in steps[i]), (i, j)
+
+
 def test_a_fuel_chain_evaluates_its_engine_state_and_efficiency_table_once(monkeypatch):
     """A fuel chain's step evaluates whether the engine runs once (what it pays for is that, or
     everything for a charge-sustaining hybrid) and its η_t table once, also where a hybrid's

@@ -150,9 +150,30 @@ class ChainLedger:
         self._stored = np.zeros((capacity, self.A))
         #: the same for a plug-in hybrid's battery energy spent ([chain.depleting]: model/chain_plugin.py)
         self._spent = np.zeros((capacity, self.A))
+        #: per step, what does not change between steps (a live run books a few vehicles a step,
+        #: where per-call overhead dominates): the chains' signals, each active chain's
+        #: (row, equation, chain, output keys, which keys an engine switched off zeroes, its
+        #: battery states), the constant signals' values (:meth:`_constant_signals`)
+        self._signal_set = set().union(*(self.chains[i].signals for i in self.active)) if self.active else set()
+        self._plan = [(a, e, self.chains[e], *self._keys(e)) for a, e in enumerate(self.active)]
+        self._const: dict[str, np.ndarray] = {}
+        self._const_n = -1
         #: departures booked (share of a cold start > 0) by a chain with one; their shares' sum
         self.cold_starts = 0
         self.cold_starts_expected = 0.0
+
+    def _keys(self, e: int) -> tuple:
+        """Chain ``e``'s output keys in its booked columns' order (None: booked at departures
+        only), whether an engine switched off zeroes each, and its battery states (key, array)."""
+        ch = self.chains[e]
+        keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
+                ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
+        if ch.predicts == "fuel" and ch.depleting is not None:  # (FUEL_COLS, then BATTERY_COLS)
+            keys += ("battery_traction_j", "battery_recuperated_j", "battery_auxiliary_j", "battery_j")
+        off = tuple(k is not None and ch.predicts == "fuel" and not k.startswith("battery") for k in keys)
+        state = tuple(key for key, on_ in (("stored_j", e in self._bounded),
+                                           ("spent_j", ch.predicts == "fuel" and ch.depleting is not None)) if on_)
+        return keys, off, state
 
     def _booked(self, e: int) -> tuple:
         """The quantity columns chain ``e`` books: a fuel chain's, and a plug-in hybrid's battery too."""
@@ -167,7 +188,7 @@ class ChainLedger:
     def signals(self) -> set[str]:
         """Vehicle signals the chains read (logged loads have no SUMO source: give them as
         constants per vehicle, or leave them out of chains used in SUMO)."""
-        return set().union(*(self.chains[i].signals for i in self.active)) if self.active else set()
+        return set(self._signal_set)
 
     def expand(self, compact: np.ndarray) -> np.ndarray:
         """(rows, C) booked columns → (rows, E, Q), zeros where a chain books nothing."""
@@ -300,22 +321,15 @@ class ChainLedger:
         j = 0
         on = None if app is None else np.asarray(app) > 0
         live = None if on is None else on.any(axis=0)
-        for a, e in enumerate(self.active):
-            ch = self.chains[e]
-            keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
-                    ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
-            if ch.predicts == "fuel" and ch.depleting is not None:  # (FUEL_COLS, then BATTERY_COLS)
-                keys += ("battery_traction_j", "battery_recuperated_j", "battery_auxiliary_j", "battery_j")
+        for a, e, ch, keys, zero_off, states in self._plan:
             sel = None if on is None else on[:, e]
             if sel is not None and not live[e]:
                 j += len(keys)
                 continue
             vv = v if v_mean is None or e not in self._motor else v_mean
-            state = {}  # each vehicle's battery: a hybrid's window, a plug-in's energy spent
-            for key, arr, on_ in (("stored_j", self._stored, e in self._bounded),
-                                  ("spent_j", self._spent, ch.predicts == "fuel" and ch.depleting is not None)):
-                if on_:
-                    state[key] = np.zeros(n) if vidx is None else arr[vidx, a]
+            # each vehicle's battery: a hybrid's window, a plug-in's energy spent
+            state = {key: np.zeros(n) if vidx is None else (self._stored if key == "stored_j" else self._spent)[vidx, a]
+                     for key in states}
             out = (evaluate_where(ch, sel, p[:, e], vv, dt, signals, **state)
                    if sel is not None else ch.evaluate(p[:, e], vv, dt, signals, **state))
             if vidx is not None:
@@ -326,10 +340,10 @@ class ChainLedger:
                 self.motor_invalid[e] += int(np.count_nonzero(out["invalid"]))
             if "over_engine_j" in out:  # not delivered: the vType accelerates or climbs beyond its engine
                 self.over_engine[e] += over_engine(out["over_engine_j"], engine_off)
-            for key in keys:
+            for key, z in zip(keys, zero_off):
                 if key is not None:  # cold_start_l: booked at departures only (book)
                     q[:, j] = out[key]
-                    if engine_off is not None and ch.predicts == "fuel" and not key.startswith("battery"):
+                    if engine_off is not None and z:
                         q[engine_off, j] = 0.0
                 j += 1
         return q
@@ -389,11 +403,12 @@ class ChainLedger:
         # (none for a chain without vehicles in this step), far cheaper than np.add.at, and
         # not over every edge of the network (at a few vehicles, that was most of a step)
         eidx = np.asarray(eidx, np.int64)
-        edges, at = np.unique(eidx, return_inverse=True)
-        if len(edges) == len(eidx):  # one vehicle per edge: each edge's sum is 0 + its row
+        s = np.sort(eidx)
+        if (s[1:] != s[:-1]).all():  # one vehicle per edge: each edge's sum is 0 + its row
             self._edge[eidx] += q + 0.0
             self.edge_dist[eidx] += d[:, None] * a + 0.0
             return q
+        edges, at = np.unique(eidx, return_inverse=True)
         w = np.ascontiguousarray(np.concatenate([q, d[:, None] * a], axis=1).T)
         c = q.shape[1]
         for j in np.flatnonzero(w.any(axis=1)):
@@ -428,16 +443,21 @@ class ChainLedger:
         return out
 
     def _constant_signals(self, n: int) -> dict:
-        out = {}
-        for s in self.signals:
-            if s in self.signal_values:
-                out[s] = np.full(n, float(self.signal_values[s]))
-            elif s in self.hvac_columns or s in self.running_columns:
-                out[s] = np.full(n, self.air_temperature_c)
-            else:
-                self.assumed_zero.add(s)
-                out[s] = np.zeros(n)
-        return out
+        """The chains' signals as n constants (views of read-only arrays kept between steps)."""
+        if self._const_n < n:
+            self._const, m = {}, max(n, 64, 2 * self._const_n)
+            self._const_n = m
+            for s in self._signal_set:
+                if s in self.signal_values:
+                    x = np.full(m, float(self.signal_values[s]))
+                elif s in self.hvac_columns or s in self.running_columns:
+                    x = np.full(m, self.air_temperature_c)
+                else:
+                    self.assumed_zero.add(s)
+                    x = np.zeros(m)
+                x.flags.writeable = False
+                self._const[s] = x
+        return {s: x[:n] for s, x in self._const.items()}
 
     # ------------------------------------------------------------------ reports
     def vehicle(self, i: int) -> dict[str, dict[str, float]]:
