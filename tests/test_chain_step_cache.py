@@ -109,3 +109,27 @@ def test_a_fuel_chain_evaluates_its_engine_state_and_efficiency_table_once(monke
                 + rt * np.maximum(np.minimum(p, 0.0), -20000.0) / e / 0.35)
         np.testing.assert_allclose(pf, want, rtol=1e-12)
         assert FUELS[ch.fuel]["lhv_j_per_kg"] > 0
+
+
+def test_evaluation_on_a_steps_arrays_builds_no_broadcast_views(monkeypatch):
+    """A step's speeds, durations and air temperature already have the samples' shape (or are
+    one number): evaluate builds no broadcast view of them (three a fuel chain's step took),
+    and the result is bit for bit that of inputs broadcast by hand."""
+    ch = _fuel(running_fuel_per_k=0.01, aux_power_w=400.0)
+    rng, n = np.random.default_rng(4), 5
+    p, v, sig = rng.normal(0, 2e4, n), rng.uniform(0, 20, n), {"ambient_c": np.full(n, 3.0)}
+    views, real = [], np.broadcast_to
+
+    def spy(x, shape, *a, **kw):
+        views.append(shape)
+        return real(x, shape, *a, **kw)
+
+    monkeypatch.setattr(np, "broadcast_to", spy)
+    out = ch.evaluate(p, v, 0.5, sig)
+    assert views == []
+    by_hand = ch.evaluate(p, np.array(v), np.full(n, 0.5), {"ambient_c": np.array([3.0])})
+    assert set(out) == set(by_hand)
+    for k in out:
+        np.testing.assert_array_equal(out[k], by_hand[k])
+    np.testing.assert_array_equal(ch.evaluate(p, 7.0, 0.5, sig)["fuel_l"],
+                                  ch.evaluate(p, np.full(n, 7.0), np.full(n, 0.5), sig)["fuel_l"])

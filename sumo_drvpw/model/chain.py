@@ -292,7 +292,8 @@ class EnergyChain:
         """
         self.require_complete()
         p = np.asarray(p_drive_w, float)
-        v = np.broadcast_to(np.asarray(v_mps, float), p.shape)
+        v = np.asarray(v_mps, float)
+        v = v if v.shape == p.shape else np.broadcast_to(v, p.shape)  # (a step's few vehicles: no view to build)
         n = p.size
         if self.predicts == "wheel":
             out = {"power_w": p.copy()}
@@ -302,7 +303,7 @@ class EnergyChain:
         else:
             out = self._battery(p, v, n, signals)
         if dt_s is not None:
-            dt = np.broadcast_to(np.asarray(dt_s, float), p.shape)
+            dt = np.asarray(dt_s, float)  # a scalar multiplies as its broadcast does, bit for bit
             for k in [k for k in out if k.endswith("_w")]:
                 out[k[:-2] + "_j"] = out[k] * dt
             if self.predicts == "fuel":
@@ -382,7 +383,7 @@ class EnergyChain:
         """1 + r · max(T_ref − T, 0) per sample (``running_fuel_per_k``); 1 where the air
         temperature is unknown (no column, NaN)."""
         t = np.asarray((signals or {}).get(self.temperature_column, np.nan), float)
-        t = np.broadcast_to(t, (n,))
+        t = t if t.shape == (n,) else np.broadcast_to(t, (n,))
         d = np.where(np.isfinite(t), np.maximum(self.cold_start_ref_c - t, 0.0), 0.0)
         return 1.0 + self.running_fuel_per_k * d
 
