@@ -133,3 +133,27 @@ def test_evaluation_on_a_steps_arrays_builds_no_broadcast_views(monkeypatch):
         np.testing.assert_array_equal(out[k], by_hand[k])
     np.testing.assert_array_equal(ch.evaluate(p, 7.0, 0.5, sig)["fuel_l"],
                                   ch.evaluate(p, np.full(n, 7.0), np.full(n, 0.5), sig)["fuel_l"])
+
+
+def test_a_step_evaluates_the_chains_of_its_vehicles_into_their_columns():
+    """Each chain of a step's vehicles (a fuel car, a battery car, a bounded hybrid, a plug-in
+    hybrid, in any mix) books into its own columns what it books alone on those vehicles, and
+    chains none of the step's vehicles uses book zeros."""
+    hyb = dict(engine_off_below_w=8000.0, charge_sustaining=True, recuperation_round_trip=0.64,
+               recuperation_limit_w=30000.0, aux_power_w=500.0)
+    from sumo_drvpw.model.chain_plugin import depleting_from_dict
+    plug = depleting_from_dict({"predicts": "fuel", "charge_sustaining": True,
+                                "depleting": {"usable_j": 3e5, "traction_efficiency": 0.8,
+                                              "recuperation_efficiency": 0.6}}, "t.toml")
+    chains = [_fuel(), EnergyChain(predicts="battery", aux_power_w=300.0, traction_efficiency=0.9),
+              _fuel(battery_usable_j=1e5, **hyb), _fuel(depleting=plug, **hyb)]
+    names = ["f", "b", "h", "p"]
+    led = ChainLedger(names, chains, 5)
+    alone = [ChainLedger([nm], [c], 5) for nm, c in zip(names, chains)]
+    rng, n = np.random.default_rng(8), 6
+    for step in range(25):
+        app = (rng.uniform(size=(n, 4)) < 0.3).astype(float)
+        p, v, e = rng.normal(0, 2e4, (n, 4)), rng.uniform(0, 20, n), rng.integers(0, 5, n)
+        q = led.book(np.arange(n), e, v, 1.0, p, app=app)
+        cols = [alone[k].book(np.arange(n), e, v, 1.0, p[:, [k]], app=app[:, [k]]) for k in range(4)]
+        np.testing.assert_array_equal(q, np.concatenate(cols, axis=1), err_msg=str(step))

@@ -155,7 +155,11 @@ class ChainLedger:
         #: (row, equation, chain, output keys, which keys an engine switched off zeroes, its
         #: battery states), the constant signals' values (:meth:`_constant_signals`)
         self._signal_set = set().union(*(self.chains[i].signals for i in self.active)) if self.active else set()
-        self._plan = [(a, e, self.chains[e], *self._keys(e)) for a, e in enumerate(self.active)]
+        self._plan, j = [], 0
+        for a, e in enumerate(self.active):  # (… and its first booked column)
+            self._plan.append((a, e, self.chains[e], *self._keys(e), j))
+            j += len(self._plan[-1][3])
+        self._active = np.array(self.active, np.int64)
         self._const: dict[str, np.ndarray] = {}
         self._const_n = -1
         #: departures booked (share of a cold start > 0) by a chain with one; their shares' sum
@@ -318,14 +322,11 @@ class ChainLedger:
         p = np.asarray(p_drive_w, float)
         n = p.shape[0]
         q = np.zeros((n, len(self._cols)))
-        j = 0
         on = None if app is None else np.asarray(app) > 0
-        live = None if on is None else on.any(axis=0)
-        for a, e, ch, keys, zero_off, states in self._plan:
+        # the chains of the step's vehicles only (a bare config's thirteen: one or two a step)
+        plan = self._plan if on is None else [self._plan[i] for i in np.flatnonzero(on[:, self._active].any(axis=0))]
+        for a, e, ch, keys, zero_off, states, j in plan:
             sel = None if on is None else on[:, e]
-            if sel is not None and not live[e]:
-                j += len(keys)
-                continue
             vv = v if v_mean is None or e not in self._motor else v_mean
             # each vehicle's battery: a hybrid's window, a plug-in's energy spent
             state = {key: np.zeros(n) if vidx is None else (self._stored if key == "stored_j" else self._spent)[vidx, a]
@@ -397,8 +398,9 @@ class ChainLedger:
         d = np.asarray(v, float) * dt
         self.veh_dist[vidx] += d[:, None] * a
         self.veh_time[vidx] += dt * a
-        self._app[vidx] |= a > 0
-        self.booked_any |= (a > 0).any(axis=0)
+        booked = a > 0
+        self._app[vidx] |= booked
+        self.booked_any |= booked.any(axis=0)
         # the edges the step's vehicles are on, once each: a bincount per column over those
         # (none for a chain without vehicles in this step), far cheaper than np.add.at, and
         # not over every edge of the network (at a few vehicles, that was most of a step)
