@@ -157,3 +157,22 @@ def test_a_step_evaluates_the_chains_of_its_vehicles_into_their_columns():
         q = led.book(np.arange(n), e, v, 1.0, p, app=app)
         cols = [alone[k].book(np.arange(n), e, v, 1.0, p[:, [k]], app=app[:, [k]]) for k in range(4)]
         np.testing.assert_array_equal(q, np.concatenate(cols, axis=1), err_msg=str(step))
+
+
+def test_a_chain_of_some_of_the_steps_vehicles_spreads_back_only_what_the_step_reads():
+    """A chain that applies to some of a step's vehicles (a mixed fleet) is evaluated on those
+    and its outputs spread back to every vehicle: only the outputs the caller reads (a fuel
+    chain's thirteen, of which a step books five), each equal to the whole spread's."""
+    from sumo_drvpw.model.mmpevem import evaluate_where
+
+    ch = _fuel(running_fuel_per_k=0.01, engine_max_w=30000.0)
+    rng, n = np.random.default_rng(6), 7
+    p, v, sel = rng.normal(0, 3e4, n), rng.uniform(0, 20, n), np.array([1, 0, 1, 1, 0, 0, 1], bool)
+    sig = {"ambient_c": np.full(n, 2.0)}
+    full = evaluate_where(ch, sel, p, v, 1.0, sig)
+    read = {"power_j", "fuel_l", "co2_kg", "over_engine_j", "invalid"}
+    part = evaluate_where(ch, sel, p, v, 1.0, sig, read)
+    assert set(part) == read & set(full) and len(full) > len(part)
+    for k in part:
+        np.testing.assert_array_equal(part[k], full[k])
+        assert not part[k][~sel].any()

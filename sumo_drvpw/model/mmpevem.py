@@ -353,10 +353,13 @@ def mmpevem_equation(name: str, params: Mapping, mass_kg: float | None = None, w
     return eq, notes
 
 
-def evaluate_where(chain, sel: np.ndarray, p_drive_w, v_mps, dt_s, signals: Mapping | None, **state) -> dict:
+def evaluate_where(chain, sel: np.ndarray, p_drive_w, v_mps, dt_s, signals: Mapping | None, keys=None,
+                   **state) -> dict:
     """``chain.evaluate`` on the vehicles ``sel`` only (zeros elsewhere): SUMO's motor costs
     about 1 µs per vehicle and step, and a run's MMPEVEM equation books one vType. ``state``:
-    each vehicle's hybrid battery (``stored_j``, ``spent_j``: model/chain_buffer.py, chain_plugin.py)."""
+    each vehicle's hybrid battery (``stored_j``, ``spent_j``: model/chain_buffer.py, chain_plugin.py).
+    ``keys``: the outputs the caller reads (None: all; where only some vehicles are selected,
+    the others are not spread back to every vehicle)."""
     n = len(sel)
     if sel.all():
         return chain.evaluate(p_drive_w, v_mps, dt_s, signals, **state)
@@ -365,6 +368,8 @@ def evaluate_where(chain, sel: np.ndarray, p_drive_w, v_mps, dt_s, signals: Mapp
                          **{k: take(x) for k, x in state.items()})
     out = {}
     for k, x in sub.items():
+        if keys is not None and k not in keys:
+            continue
         full = np.zeros(n, dtype=np.asarray(x).dtype)
         full[sel] = x
         out[k] = full

@@ -168,7 +168,8 @@ class ChainLedger:
 
     def _keys(self, e: int) -> tuple:
         """Chain ``e``'s output keys in its booked columns' order (None: booked at departures
-        only), whether an engine switched off zeroes each, and its battery states (key, array)."""
+        only), whether an engine switched off zeroes each, its battery states' keys, and every
+        output a step reads of it (those, ``invalid``, ``over_engine_j``)."""
         ch = self.chains[e]
         keys = (("power_j", "fuel_l", "co2_kg", None) if ch.predicts == "fuel" else
                 ("traction_j", "recuperated_j", "auxiliary_j", "power_j"))
@@ -177,7 +178,7 @@ class ChainLedger:
         off = tuple(k is not None and ch.predicts == "fuel" and not k.startswith("battery") for k in keys)
         state = tuple(key for key, on_ in (("stored_j", e in self._bounded),
                                            ("spent_j", ch.predicts == "fuel" and ch.depleting is not None)) if on_)
-        return keys, off, state
+        return keys, off, state, frozenset(k for k in keys + state if k) | {"invalid", "over_engine_j"}
 
     def _booked(self, e: int) -> tuple:
         """The quantity columns chain ``e`` books: a fuel chain's, and a plug-in hybrid's battery too."""
@@ -325,13 +326,13 @@ class ChainLedger:
         on = None if app is None else np.asarray(app) > 0
         # the chains of the step's vehicles only (a bare config's thirteen: one or two a step)
         plan = self._plan if on is None else [self._plan[i] for i in np.flatnonzero(on[:, self._active].any(axis=0))]
-        for a, e, ch, keys, zero_off, states, j in plan:
+        for a, e, ch, keys, zero_off, states, read, j in plan:
             sel = None if on is None else on[:, e]
             vv = v if v_mean is None or e not in self._motor else v_mean
             # each vehicle's battery: a hybrid's window, a plug-in's energy spent
             state = {key: np.zeros(n) if vidx is None else (self._stored if key == "stored_j" else self._spent)[vidx, a]
                      for key in states}
-            out = (evaluate_where(ch, sel, p[:, e], vv, dt, signals, **state)
+            out = (evaluate_where(ch, sel, p[:, e], vv, dt, signals, read, **state)
                    if sel is not None else ch.evaluate(p[:, e], vv, dt, signals, **state))
             if vidx is not None:
                 keep = slice(None) if sel is None else sel
