@@ -21,20 +21,26 @@ pytestmark = pytest.mark.sumo
 REPO = Path(__file__).resolve().parent.parent
 NET = REPO / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"
 EQ = "moves_transit_bus"  # a road-load equation: no chain applies to its buses
+ROUTE = '<route edges="c00c10 c10c20 c20c30 c30c31 c31c32"/>'
 
 
-def _run(d: Path, vtype: str):
-    d.mkdir()
-    (d / "bus.add.xml").write_text(vtype, encoding="utf-8")
-    (d / "r.rou.xml").write_text(
-        '<routes><flow id="b" type="ebus" begin="0" end="60" period="15" departSpeed="0">'
-        '<route edges="c00c10 c10c20 c20c30 c30c31 c31c32"/></flow></routes>\n', encoding="utf-8")
+def _run(d: Path, vtype: str | None, eq: str = EQ, routes: str | None = None):
+    """A flow of four vehicles on the city net with equation ``eq`` and SUMO's device beside
+    it: (its sumo_device.csv row, vehicles.parquet); ``vtype`` an additional file's vType of
+    type ``ebus``, or ``routes`` a routes file of its own."""
+    d.mkdir(exist_ok=True)
+    if vtype is not None:
+        (d / "bus.add.xml").write_text(vtype, encoding="utf-8")
+    (d / "r.rou.xml").write_text(routes or (
+        f'<routes><flow id="b" type="ebus" begin="0" end="60" period="15" departSpeed="0">{ROUTE}</flow></routes>\n'),
+        encoding="utf-8")
+    add = '\nadditional = ["bus.add.xml"]' if vtype is not None else ""
     (d / "s.toml").write_text(
-        f'equations = ["{EQ}"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nadditional = ["bus.add.xml"]\n'
+        f'equations = ["{eq}"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]{add}\n'
         'begin = 0\nend = 400\nstep_length = 1.0\noptions = ["--no-warnings", "true"]\n'
         '[outputs]\nfigures = false\nsumo_device = true\n', encoding="utf-8")
     run_scenario(d / "s.toml", d / "o")
-    row = pd.read_csv(d / "o" / "sumo_device.csv").set_index("equation").loc[EQ]
+    row = pd.read_csv(d / "o" / "sumo_device.csv").set_index("equation").loc[eq]
     v = pd.read_parquet(d / "o" / "vehicles.parquet")
     return row, v
 
@@ -96,15 +102,8 @@ def test_a_plug_in_hybrids_row_says_its_litres_begin_after_its_battery(tmp_path)
     """The plug-in hybrid car's chain (epa_gasoline_phev_car: on its battery from departure) beside
     SUMO's emissions device on the same HBEFA 4 plug-in class: its short trips burn no fuel, and its
     row says why (the full hybrid's note did not: it named only the hybrid's saving)."""
-    (tmp_path / "r.rou.xml").write_text(
+    row, _ = _run(tmp_path, None, "epa_gasoline_phev_car", routes=(
         '<routes><vType id="phev" vClass="passenger" mass="1700" emissionClass="HBEFA4/PC_PHEV_petrol_Euro-6d_(P)"/>'
-        '<flow id="h" type="phev" begin="0" end="60" period="15" departSpeed="0">'
-        '<route edges="c00c10 c10c20 c20c30 c30c31 c31c32"/></flow></routes>\n', encoding="utf-8")
-    (tmp_path / "s.toml").write_text(
-        f'equations = ["epa_gasoline_phev_car"]\n[sumo]\nnet = "{NET}"\n'
-        'routes = ["r.rou.xml"]\nbegin = 0\nend = 400\nstep_length = 1.0\noptions = ["--no-warnings", "true"]\n'
-        '[outputs]\nfigures = false\nsumo_device = true\n', encoding="utf-8")
-    run_scenario(tmp_path / "s.toml", tmp_path / "o")
-    row = pd.read_csv(tmp_path / "o" / "sumo_device.csv").set_index("equation").loc["epa_gasoline_phev_car"]
+        f'<flow id="h" type="phev" begin="0" end="60" period="15" departSpeed="0">{ROUTE}</flow></routes>\n'))
     assert row["vehicles"] == 4 and row["ratio"] == 0.0   # every trip on its battery
     assert "on its charged battery" in row["note"] and "battery kWh are in chain_vehicles.csv" in row["note"]
