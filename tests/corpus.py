@@ -391,6 +391,15 @@ _eq_case("metrics reference mass negative", "[terms]\nacc = 1.0\n[metrics]\nrefe
 _eq_case("metrics reference mass absurd", "[terms]\nacc = 1.0\n[metrics]\nreference_mass_kg = 1e300\n",
          ("metrics.reference_mass_kg", "1e+300"))
 
+# a hybrid's battery window ([chain] battery_usable_j) and a plug-in hybrid's battery ([chain.depleting]):
+# a battery energy written in kWh or Wh was read as joules (0.5 J: no window; 8 J spent in the first second)
+_HYB = ('[terms]\nacc = 1.0\n[chain]\npredicts = "fuel"\nfuel = "gasoline"\nmarginal_efficiency = 0.4\n'
+        'idle_fuel_power_w = 2000.0\nengine_off_below_w = 5000.0\ncharge_sustaining = true\n'
+        'recuperation_round_trip = 0.64\n')
+_DEP = '[chain.depleting]\nusable_j = 2.9e7\ntraction_efficiency = 0.85\nrecuperation_efficiency = 0.65\n'
+_eq_case("hybrid window in kWh", _HYB + "battery_usable_j = 0.5\n", ("battery_usable_j", "0.5", "kWh"))
+_eq_case("plug-in battery in kWh", _HYB + _DEP.replace("2.9e7", "8"), ("depleting.usable_j", "8", "kWh"))
+
 
 @case("toml-equation", "provenance logs a text, not a list", ("calibrated on 1 of these 1 log file",), expect="accept")
 def _(d):  # was read letter by letter: 'l', 'o', …, '.' (the working folder), never the log itself

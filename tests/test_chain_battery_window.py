@@ -96,11 +96,19 @@ def test_energy_is_conserved_and_trips_and_vehicles_carry_their_own_battery():
     ({k: x for k, x in DOC.items() if k != "recuperation_round_trip"} | {"battery_usable_j": W},
      "recuperation_round_trip > 0"),
     ({**DOC, "battery_usable_j": -1.0}, "must be ≥ 0"),
+    ({**DOC, "battery_usable_j": 0.5}, "not kWh or Wh (0.5 kWh = 1.8e+06 J)"),   # a Prius's 0.5 kWh
+    ({**DOC, "battery_usable_j": 500}, "not kWh or Wh"),                       # … in Wh
 ])
 def test_a_window_without_a_round_trip_is_refused(doc, says):
     with pytest.raises(UserError, match="battery_usable_j") as e:
         chain_from_dict(doc, "h.toml")
     assert says in str(e.value) and "h.toml" in str(e.value)
+
+
+def test_a_window_of_zero_or_of_a_mild_hybrid_is_taken():
+    """0 is a window that holds nothing (no credit); 10 kJ and up, joules of a battery."""
+    for w in (0.0, 1e4, 1.8e6):
+        assert _chain(battery_usable_j=w).battery_usable_j == w
 
 
 def test_without_durations_a_window_says_so():

@@ -91,6 +91,8 @@ def test_the_file_keeps_it_and_refuses_what_is_no_plug_in():
         with pytest.raises(UserError, match=r"phev\.toml \[chain\.depleting\]") as e:
             chain_from_dict(doc, "phev.toml")
         assert says in str(e.value)
+    with pytest.raises(UserError, match=r"phev\.toml \[chain\]: 'depleting\.usable_j' = 8 J .*not kWh or Wh"):
+        chain_from_dict({**DOC, "depleting": {**DEP, "usable_j": 8}}, "phev.toml")   # 8 kWh written as J
     with pytest.raises(UserError, match="duration"):
         _chain().evaluate(np.array([1e4]), 5.0)
 

@@ -32,9 +32,26 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.chain_values import _nonneg
 
 
+#: the smallest battery energy a chain may declare other than 0 [J] (10 kJ, 2.8 Wh: braking at
+#: 20 kW fills it in half a second; a Prius's usable window is about 0.5 kWh, 1.8 MJ): a smaller
+#: number is a kWh or Wh figure written as joules (``battery_usable_j = 0.5`` held 0.5 J)
+BATTERY_ENERGY_MIN_J = 1e4
+
+
+def battery_energy(val, key: str, where: str) -> float:
+    """A battery energy [J] of a chain (``battery_usable_j``, ``depleting.usable_j``): a number
+    ≥ 0, refused between 0 and :data:`BATTERY_ENERGY_MIN_J` as kWh or Wh written as joules."""
+    x = _nonneg(val, key, where)
+    if 0 < x < BATTERY_ENERGY_MIN_J:
+        raise UserError(f"{where} [chain]: '{key}' = {val!r} J is below any vehicle battery's "
+                        f"(≥ {BATTERY_ENERGY_MIN_J:g} J): joules, not kWh or Wh ({val!r} kWh = {x * 3.6e6:g} J)")
+    return x
+
+
 def usable_window(doc: dict, round_trip, where: str) -> float:
-    """``[chain] battery_usable_j`` checked: a number ≥ 0, for a chain with a round trip."""
-    w = _nonneg(doc["battery_usable_j"], "battery_usable_j", where)
+    """``[chain] battery_usable_j`` checked: a number ≥ 0 (:func:`battery_energy`), for a chain
+    with a round trip."""
+    w = battery_energy(doc["battery_usable_j"], "battery_usable_j", where)
     if not round_trip:
         raise UserError(f"{where} [chain]: 'battery_usable_j' is the battery window of a hybrid's round trip: "
                         f"only with recuperation_round_trip > 0, got {doc['battery_usable_j']!r}")

@@ -5,7 +5,7 @@ sustains its charge as a full hybrid does. As data in the equation file, beside 
 charge-sustaining hybrid's fuel chain (``charge_sustaining = true``)::
 
     [chain.depleting]
-    usable_j = 2.9e7                  # battery energy spent before it sustains charge [J] (> 0)
+    usable_j = 2.9e7                  # battery energy spent before it sustains charge [J] (≥ 10 kJ)
     traction_efficiency = 0.85        # battery → wheels, η_t of a battery chain
     recuperation_efficiency = 0.65    # wheels → battery, η_r
     recuperation_limit_w = 40000      # optional
@@ -32,8 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.chain_buffer import _starts
-from sumo_drvpw.model.chain_values import _nonneg
+from sumo_drvpw.model.chain_buffer import _starts, battery_energy
 
 #: keys of [chain.depleting]
 DEPLETING_KEYS = ("usable_j", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
@@ -70,7 +69,7 @@ def depleting_from_dict(doc: dict, where: str) -> Depleting:
                         "predicts = \"fuel\" with charge_sustaining = true (the hybrid it becomes once spent)")
     if "usable_j" not in dep:
         raise UserError(f"{where} [chain.depleting]: 'usable_j' (the battery energy it spends first) is required")
-    usable = _nonneg(dep["usable_j"], "depleting.usable_j", where)
+    usable = battery_energy(dep["usable_j"], "depleting.usable_j", where)
     if not usable > 0:
         raise UserError(f"{where} [chain.depleting]: 'usable_j' must be > 0, got {dep['usable_j']!r}")
     hvac = {k: x for k, x in (doc.get("hvac") or {}).items() if k != "warmup_j_per_k"}
