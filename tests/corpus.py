@@ -399,6 +399,9 @@ _HYB = ('[terms]\nacc = 1.0\n[chain]\npredicts = "fuel"\nfuel = "gasoline"\nmarg
 _DEP = '[chain.depleting]\nusable_j = 2.9e7\ntraction_efficiency = 0.85\nrecuperation_efficiency = 0.65\n'
 _eq_case("hybrid window in kWh", _HYB + "battery_usable_j = 0.5\n", ("battery_usable_j", "0.5", "kWh"))
 _eq_case("plug-in battery in kWh", _HYB + _DEP.replace("2.9e7", "8"), ("depleting.usable_j", "8", "kWh"))
+# a [chain] key the plug-in battery inherits (aux_power_w, hvac, loads) was blamed on [chain.depleting]
+_eq_case("plug-in hybrid's chain auxiliary power text", _HYB.replace("[chain]\n", '[chain]\naux_power_w = "300 W"\n')
+         + _DEP, ("bad.toml [chain]: 'aux_power_w'", "300 W"))
 
 
 @case("toml-equation", "provenance logs a text, not a list", ("calibrated on 1 of these 1 log file",), expect="accept")

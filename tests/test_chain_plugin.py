@@ -97,6 +97,16 @@ def test_the_file_keeps_it_and_refuses_what_is_no_plug_in():
         _chain().evaluate(np.array([1e4]), 5.0)
 
 
+@pytest.mark.parametrize("key, value", [("aux_power_w", -5.0), ("aux_power_w", "300 W"),
+                                        ("hvac", {"column": 42}), ("loads", {"heater_w": -1.0})])
+def test_a_bad_key_of_the_chain_the_battery_inherits_is_blamed_on_the_chain(key, value):
+    """aux_power_w, loads and hvac are the fuel chain's, which [chain.depleting] inherits: an error
+    in them names [chain] (or [chain.hvac], [chain.loads]), not [chain.depleting], where the key is not."""
+    with pytest.raises(UserError, match=r"phev\.toml \[chain[.\]]") as e:
+        chain_from_dict({**DOC, key: value, "depleting": DEP}, "phev.toml")
+    assert "depleting" not in str(e.value)
+
+
 def test_a_calibration_refuses_a_declared_plug_in_battery_it_would_drop():
     from types import SimpleNamespace
 

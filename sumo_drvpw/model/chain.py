@@ -524,8 +524,6 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
                             f"and charge_sustaining = true, got {doc['recuperation_round_trip']!r}")
     if "battery_usable_j" in doc:
         kw["battery_usable_j"] = usable_window(doc, kw.get("recuperation_round_trip"), where)
-    if "depleting" in doc:
-        kw["depleting"] = depleting_from_dict(doc, where)
     if "fuel_cut_below_w" in doc:
         kw["fuel_cut_below_w"] = _number(doc["fuel_cut_below_w"], "fuel_cut_below_w", where)
         if pred != "fuel":
@@ -593,6 +591,8 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
             if not isinstance(doc[k], dict):
                 raise UserError(f"{where} [chain]: '{k}' must be a table ([chain.{k}]), got {doc[k]!r}")
             kw[k] = dict(doc[k])
+    if "depleting" in doc:  # (after the chain's own keys, which it inherits: their errors name [chain])
+        kw["depleting"] = depleting_from_dict(doc, where)
     # a fuel chain without its engine's keys declares what a calibration keeps (its fuel cut-off)
     # and predicts nothing: :meth:`EnergyChain.require_complete` where it is used
     kw["missing"] = tuple(k for k in FUEL_REQUIRED if k not in doc) if pred == "fuel" else ()
