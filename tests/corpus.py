@@ -539,6 +539,14 @@ _map_case("time step beside a mapped time", "[options]\ntime_step_s = 0.1\n" + M
 # log that calibrate refuses; the file's own time column, left unmapped, was kept as time_s_2 unread
 _map_case("time step huge", "[options]\ntime_step_s = 1e308\n" + _MAP_V, ("time_step_s", "1e+308"), src=_V_ONLY)
 _map_case("time step a day", "[options]\ntime_step_s = 86400\n" + _MAP_V, ("time_step_s", "86400"), src=_V_ONLY)
+# options.trip_gap_s (import columns: a pause in logging ends a trip): at or below the file's step every sample
+# was written as a trip of its own (80 one-sample trips, said only in a note)
+_map_case("trip gap below the time step", "[options]\ntrip_gap_s = 0.1\n" + MAP_OK, ("trip_gap_s = 0.1", "src.csv"))
+_map_case("trip gap nan", "[options]\ntrip_gap_s = nan\n" + MAP_OK, ("trip_gap_s", "nan"))
+_map_case("trip gap text", '[options]\ntrip_gap_s = "10 min"\n' + MAP_OK, ("trip_gap_s", "10 min"))
+_map_case("trip gap inf", "[options]\ntrip_gap_s = inf\n" + MAP_OK, ("trip_gap_s", "inf"))
+_map_case("trip gap negative", "[options]\ntrip_gap_s = -600\n" + MAP_OK, ("trip_gap_s", "-600"))
+_map_case("trip gap in a column's table", MAP_OK + "trip_gap_s = 600\n", ("trip_gap_s",))
 _map_case("time step beside an unmapped time column", "[options]\ntime_step_s = 0.125\n" + _MAP_V,
           ("src.csv", "Time [s]", "time_step_s"),
           src="Time [s],v\n" + "".join(f"{i / 8},{20 + i % 7}\n" for i in range(80)))

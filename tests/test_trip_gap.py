@@ -78,3 +78,15 @@ def test_a_part_is_not_named_as_another_trip_of_the_file(tmp_path):
     assert len(sizes) == 3 and (sizes["size"] == 600).all(), sizes
     assert list(sizes["min"]) == [0.0, 4200.0, 12000.0]
     assert "A_2" in sizes.index and sizes.loc["A_2", "min"] == 12000.0   # the file's own A_2 keeps its id
+
+
+def test_a_gap_not_longer_than_the_time_step_is_refused(tmp_path):
+    """A gap at or below the log's 2-s step (0.5 written for half an hour, say) made every sample
+    a trip of its own — 1,200 one-sample trips, written, said only in a note; refused naming the
+    mapping, the file and the step. Just above the step only the real pause splits."""
+    f = _day_log(tmp_path, False)
+    for bad in ("0.5", "2"):
+        with pytest.raises(UserError, match=rf"map\.toml: options\.trip_gap_s = {bad} s .*day\.csv \(2 s"):
+            adapters.read("columns", [f], columns=_mapping(tmp_path, f"trip_gap_s = {bad}", False))
+    df = adapters.read("columns", [f], columns=_mapping(tmp_path, "trip_gap_s = 2.5", False))[0]
+    assert list(pd.unique(df["trip_id"])) == ["day_1", "day_2"]

@@ -524,7 +524,7 @@ def read(paths, columns):
         if any(e["name"] == "trip_id" for e in m["columns"].values()):
             frames = qualify_shared_trips(frames, reports)
     if m["trip_gap_s"] is not None:  # (before the SOC's energy: a pause's charging is no trip's)
-        frames = [split_at_pauses(f, r, m["trip_gap_s"]) for f, r in zip(frames, reports)]
+        frames = [split_at_pauses(f, r, m["trip_gap_s"], m["path"]) for f, r in zip(frames, reports)]
     if m["soc_capacity_kwh"] is not None:  # the battery's energy estimated from its SOC
         from sumo_drvpw.data.counters import soc_counters
 
@@ -556,17 +556,25 @@ def qualify_shared_trips(frames: list[pd.DataFrame], reports: list[dict]) -> lis
     return out
 
 
-def split_at_pauses(df: pd.DataFrame, rep: dict, gap_s: float) -> pd.DataFrame:
+def split_at_pauses(df: pd.DataFrame, rep: dict, gap_s: float, mapping=None) -> pd.DataFrame:
     """A trip whose logging pauses longer than ``gap_s`` [s] (a day's log of an app that runs
     while the car is parked between drives) split there: its parts named ``<trip>_1``,
     ``<trip>_2``, … (``<trip>_part1``, … where another trip of the file has such a name; per-trip
     energies, held-out folds and trip signatures take a trip as one drive); said in the file's
-    notes. Trips without such a pause keep their id."""
+    notes. Trips without such a pause keep their id. A ``gap_s`` not longer than the file's time
+    step (the median within its trips) is a UserError naming the ``mapping`` and the file: it
+    would make every sample a trip of its own (0.1 written for 0.1 h)."""
     if df.empty:
         return df
     trip = df["trip_id"].astype(str).to_numpy()
     t = df["time_s"].to_numpy(float)
     same = np.r_[False, trip[1:] == trip[:-1]]
+    steps = np.diff(t)[same[1:]]
+    step = float(np.median(steps[steps > 0])) if (steps > 0).any() else np.nan
+    if gap_s <= step:
+        raise UserError(f"{mapping or 'mapping'}: options.trip_gap_s = {gap_s:g} s is not longer than the time step of "
+                        f"{rep['file']} ({step:g} s, its median): every sample would be a trip of its own (a pause "
+                        "in logging that ends a trip, e.g. 600 s: a car parked between two drives)")
     pause = same & (np.r_[0.0, np.diff(t)] > gap_s)
     if not pause.any():
         return df
