@@ -399,6 +399,16 @@ _HYB = ('[terms]\nacc = 1.0\n[chain]\npredicts = "fuel"\nfuel = "gasoline"\nmarg
 _DEP = '[chain.depleting]\nusable_j = 2.9e7\ntraction_efficiency = 0.85\nrecuperation_efficiency = 0.65\n'
 _eq_case("hybrid window in kWh", _HYB + "battery_usable_j = 0.5\n", ("battery_usable_j", "0.5", "kWh"))
 _eq_case("plug-in battery in kWh", _HYB + _DEP.replace("2.9e7", "8"), ("depleting.usable_j", "8", "kWh"))
+# a fuel chain's engine keys: a rated output in kW was read as watts (300 W: the engine capped, unsaid)
+_FUEL = _HYB.replace("charge_sustaining = true\nrecuperation_round_trip = 0.64\n", "")
+_eq_case("engine rated output in kW", _FUEL + "engine_max_w = 300\n", ("engine_max_w", "300", "kW"))
+_eq_case("engine rated output inf", _FUEL + "engine_max_w = inf\n", ("engine_max_w", "inf"))
+_eq_case("engine rated output on a battery chain", '[terms]\nacc = 1.0\n[chain]\npredicts = "battery"\nengine_max_w = 1e5\n',
+         ("engine_max_w", "battery"))
+_eq_case("moving zero-output fuel below the idle", _FUEL + "moving_idle_fuel_power_w = 3\n",
+         ("moving_idle_fuel_power_w", "idle_fuel_power_w"))
+_eq_case("moving zero-output fuel text", _FUEL + 'moving_idle_fuel_power_w = "3 kW"\n', ("moving_idle_fuel_power_w", "3 kW"))
+_eq_case("engine rated output in the plug-in battery", _HYB + _DEP + "engine_max_w = 1e5\n", ("[chain.depleting]", "engine_max_w"))
 # a [chain] key the plug-in battery inherits (aux_power_w, hvac, loads) was blamed on [chain.depleting]
 _eq_case("plug-in hybrid's chain auxiliary power text", _HYB.replace("[chain]\n", '[chain]\naux_power_w = "300 W"\n')
          + _DEP, ("bad.toml [chain]: 'aux_power_w'", "300 W"))

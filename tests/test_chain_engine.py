@@ -66,6 +66,7 @@ def test_moving_idle_and_cap_evaluate_and_round_trip():
     ({**TRUCK, "moving_idle_fuel_power_w": IDLE_W - 1}, "moving_idle_fuel_power_w"),
     ({**TRUCK, "engine_max_w": 0}, "engine_max_w"),
     ({**TRUCK, "engine_max_w": -5}, "engine_max_w"),
+    ({**TRUCK, "engine_max_w": 300}, r"engine_max_w.*watts, not kW.*got 300"),   # a 300-kW engine in kW
     ({"predicts": "battery", "engine_max_w": 1e5}, "engine_max_w"),
     ({"predicts": "battery", "moving_idle_fuel_power_w": 1e4}, "moving_idle_fuel_power_w")])
 def test_bad_engine_keys_are_one_line_naming_the_key(doc, key):

@@ -177,6 +177,10 @@ def fuel_j_per_l(fuel: str) -> float:
     return fp["lhv_j_per_kg"] * fp["density_kg_per_l"]
 
 
+#: the smallest rated engine output a fuel chain may declare [W]: below any engine's
+ENGINE_MAX_MIN_W = 1000.0
+
+
 def engine_keys(doc: dict, idle_w: float, pred: str, where: str) -> dict:
     """A fuel chain's optional engine keys, checked: ``moving_idle_fuel_power_w`` (the fuel at
     zero output while moving, ≥ the standing idle fuel ``idle_w``: a diesel's friction grows with
@@ -193,9 +197,9 @@ def engine_keys(doc: dict, idle_w: float, pred: str, where: str) -> dict:
         raise UserError(f"{where} [chain]: 'moving_idle_fuel_power_w' (fuel at zero output while moving) must be "
                         f"≥ idle_fuel_power_w = {idle_w:g} W (an engine turning faster has more friction), "
                         f"got {doc['moving_idle_fuel_power_w']!r}")
-    if kw.get("engine_max_w", 1.0) <= 0:
-        raise UserError(f"{where} [chain]: 'engine_max_w' (the engine's rated output) must be > 0 W, "
-                        f"got {doc['engine_max_w']!r}")
+    if kw.get("engine_max_w", ENGINE_MAX_MIN_W) < ENGINE_MAX_MIN_W:  # (a moped's is some 2 kW: 300 is kW as W)
+        raise UserError(f"{where} [chain]: 'engine_max_w' (the engine's rated output) must be ≥ {ENGINE_MAX_MIN_W:g} W "
+                        f"(watts, not kW), got {doc['engine_max_w']!r}")
     return kw
 
 
