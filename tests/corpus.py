@@ -1041,6 +1041,47 @@ def _(d):  # was accepted: no bound at all off the road
     return argv
 
 
+def _fcd_copy(d: Path, table: str) -> list[str]:
+    """:func:`_fcd_replay`'s truck on its own vType copy tk@t0 (a script's setMass) from its 6th row,
+    replayed with a scenario on the built-in city whose [vtypes] ``table`` tells the copy."""
+    argv = _fcd_replay(d, "HBEFA4/RT_le7.5t_Euro-VI_A-C")
+    fcd = d / "fcd.xml"
+    fcd.write_text(fcd.read_text().replace('type="tk"', 'type="tk@t0"').replace('type="tk@t0"', 'type="tk"', 5))
+    (d / "s.toml").write_text(f'equations = ["moves_single_unit_truck"]\n[sumo]\nnet = "{CITY_NET.as_posix()}"\n'
+                              f'routes = ["t.rou.xml"]\n{table}', encoding="utf-8")
+    return ["fcd", str(fcd), "--scenario", str(d / "s.toml"), "--no-figures", "--no-progress", "--out", argv[-1]]
+
+
+@case("options", "fcd vType copy's mass told", ("told_copy_masses", "tk@t0"), expect="accept")
+def _(d):
+    return _fcd_copy(d, '[vtypes."tk@t0"]\nmass_kg = 6000\n')
+
+
+@case("options", "fcd vType copy given equations", ("[vtypes.tk@t0]", "mass_kg only", "equations"))
+def _(d):  # was accepted: the copy's equations unread (its vehicle keeps its type's), no word
+    return _fcd_copy(d, '[vtypes."tk@t0"]\nmass_kg = 6000\nequations = ["moves_single_unit_truck"]\n')
+
+
+@case("options", "fcd vType copy's mass nan", ("vtypes.tk@t0.mass_kg", "nan"))
+def _(d):
+    return _fcd_copy(d, '[vtypes."tk@t0"]\nmass_kg = nan\n')
+
+
+@case("options", "fcd vType copy's mass in kg text", ("vtypes.tk@t0.mass_kg", "6 t"))
+def _(d):
+    return _fcd_copy(d, '[vtypes."tk@t0"]\nmass_kg = "6 t"\n')
+
+
+@case("options", "fcd vType copy of no vType", ("[vtypes.tx@t0]", "names no vType"))
+def _(d):
+    return _fcd_copy(d, '[vtypes."tx@t0"]\nmass_kg = 6000\n')
+
+
+@case("options", "fcd vType copy in the vClasses table", ("[vclasses.tk@t0]", "vClass"))
+def _(d):
+    return _fcd_copy(d, '[vclasses."tk@t0"]\nmass_kg = 6000\n')
+
+
 @case("options", "calibrate --load of a power in kW", ("--load heater_kw", "kW"))
 def _(d):
     df = base_log()

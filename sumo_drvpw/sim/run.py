@@ -29,7 +29,8 @@ def check_vtype_tables(sc, vtypes) -> None:
     """A scenario's ``[vtypes.<id>]`` that names no vType of the route and additional files the
     run loads, nor one of SUMO's own: refused before SUMO starts, with the nearest id (a typo
     would leave the vType's vehicles on the defaults); one naming a vTypeDistribution too (its
-    vehicles take its members' ids: its settings would book none)."""
+    vehicles take its members' ids: its settings would book none); a vehicle's own copy
+    (``<type>@<id>``) given more than its ``mass_kg`` (its equations and cold start are its type's)."""
     if vtypes is None or not getattr(sc, "vtype_data", None):
         return
     import difflib
@@ -45,6 +46,11 @@ def check_vtype_tables(sc, vtypes) -> None:
             raise UserError(f"{sc.path or 'the scenario'}: [vtypes.{vt}] names no vType of the route and "
                             f"additional files the run loads" + (f" (did you mean '{near[0]}'?)" if near else "")
                             + f"; their vTypes: {_listed(sorted(set(vtypes) | set(getattr(vtypes, 'distributions', ()))))}")
+        other = sorted(set(sc.vtype_data[vt]) - {"mass_kg"}) if vt not in known else []
+        if other:  # a copy keeps its type's resolution (sim/loop.py check_types): only its mass is its own
+            raise UserError(f"{sc.path or 'the scenario'}: [vtypes.{vt}] is a vehicle's own vType copy (<type>@<id>): "
+                            f"it takes mass_kg only — its vehicle keeps [vtypes.{vt.rpartition('@')[0]}]'s equations "
+                            f"and cold start — got {', '.join(other)}")
 
 
 def _listed(ids: list[str], most: int = 12) -> str:
