@@ -549,6 +549,9 @@ _map_case("time step beside a mapped time", "[options]\ntime_step_s = 0.1\n" + M
 # log that calibrate refuses; the file's own time column, left unmapped, was kept as time_s_2 unread
 _map_case("time step huge", "[options]\ntime_step_s = 1e308\n" + _MAP_V, ("time_step_s", "1e+308"), src=_V_ONLY)
 _map_case("time step a day", "[options]\ntime_step_s = 86400\n" + _MAP_V, ("time_step_s", "86400"), src=_V_ONLY)
+# a mapped trip column with empty cells: written as a trip of its own named '' (its rows from all over the file)
+_map_case("trip id cell empty", MAP_OK + '[columns."trip"]\nname = "trip_id"\n', ("src.csv", "'trip'", "data row 3"),
+          src="t,v,trip\n" + "".join(f"{i / 8},{20 + i % 7},{'' if i == 3 else 'a'}\n" for i in range(80)))
 # options.trip_gap_s (import columns: a pause in logging ends a trip): at or below the file's step every sample
 # was written as a trip of its own (80 one-sample trips, said only in a note)
 _map_case("trip gap below the time step", "[options]\ntrip_gap_s = 0.1\n" + MAP_OK, ("trip_gap_s = 0.1", "src.csv"))

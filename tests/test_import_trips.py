@@ -82,3 +82,23 @@ def test_a_trip_number_resumed_after_other_trips_is_named(tmp_path):
     df, rep = read("columns", [_pems(tmp_path / "veh.csv", [1, 2, 1], 1.0)], m)  # split: the note is moot
     assert sorted(df["trip_id"].unique()) == ["1_1", "1_2", "2"]
     assert not any("resume after other trips' rows" in n for n in rep["files"][0]["notes"])
+
+
+def test_a_row_without_a_trip_id_is_refused_naming_it(tmp_path):
+    # empty cells of a mapped trip column were written as a trip of their own named '' (its rows
+    # scattered through the file; 'a-' beside another file), a Parquet file's nulls as 'nan'
+    m = tmp_path / "map.toml"
+    m.write_text(MAPPING, encoding="utf-8")
+    a = _pems(tmp_path / "veh.csv", [1, 2], 1.0)
+    lines = a.read_text(encoding="utf-8").splitlines()
+    lines[4] = lines[4].rpartition(",")[0] + ","          # data row 3: no phase
+    a.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    with pytest.raises(UserError, match=r"veh\.csv: column 'phase_num' \(trip_id\) data row 3 holds no trip id"):
+        read("columns", [a], m)
+    import pandas as pd
+
+    df = pd.read_csv(_pems(tmp_path / "veh2.csv", [1, 2], 1.0)).astype({"phase_num": object})
+    df.loc[7, "phase_num"] = None
+    df.to_parquet(tmp_path / "veh2.parquet", index=False)
+    with pytest.raises(UserError, match=r"veh2\.parquet: column 'phase_num' \(trip_id\) data row 7 holds no trip id \('nan'\)"):
+        read("columns", [tmp_path / "veh2.parquet"], m)

@@ -25,7 +25,7 @@ Mapping file::
                               # the file's unit, or texts), read as missing and counted
 
     [columns."Trip"]
-    name = "trip_id"          # text; without it trip_id = file stem
+    name = "trip_id"          # text, in every row; without it trip_id = file stem
 
     [columns."Time (s)"]      # a column other loggers label differently (adapters/labels.py):
     name = "time_s"
@@ -372,6 +372,11 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
             continue
         if e["kind"] == "text":
             out.append((e["name"], cell.astype(str).str.strip()))
+            blank = (cell.isna() | out[-1][1].isin(na + ("",))).to_numpy() & (e["name"] == "trip_id")
+            if blank.any():  # (was written as a trip of its own, named '', 'nan' or 'None')
+                i = int(np.flatnonzero(blank)[0])
+                raise UserError(f"{path}: column '{label}' (trip_id) data row {i} holds no trip id ({str(cell.iloc[i])!r}): "
+                                f"give every row one, or map no trip column in {m['path']} (each file one trip, named by the file)")
         elif e["kind"] == "datetime":
             t = to_datetimes(s, m["time_format"])
             bad = t.isna() & ~s.astype(str).str.strip().isin(na)
