@@ -752,6 +752,13 @@ def _(d):  # was said only after the whole road-load fit
     return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--hvac", "cabin_c:21")
 
 
+@case("drive-log", "battery chain with an HVAC temperature logged empty", ("ambient_c", "unknown (NaN)"))
+def _(d):  # said only 'energy chain: only 0 usable samples for 5 parameters'
+    df = base_log()
+    df["battery_voltage_v"], df["battery_current_a"] = 350.0, (df["power_w"].clip(lower=-2e4) / 0.9 + 500) / 350.0
+    return _cal(write(d, "log.parquet", df.assign(ambient_c=np.nan)), d, "--target", "battery", "--hvac", "ambient_c:21")
+
+
 @case("options", "battery chain with --engine dask and an efficiency table",
       ("--engine dask", "--target battery", "--efficiency power"))
 def _(d):  # was accepted and ran in memory, the option silently ignored (compare refused it); constant

@@ -98,3 +98,21 @@ def test_trips_worth_of_an_hvac_regressor():
     many = {str(k): [1.0, 0.0] for k in range(int(np.ceil(HVAC_TRIPS_MIN)))}
     assert hvac_trips_note("hvac.heating_w_per_k", 100.0, many) == ""
 
+
+
+@pytest.mark.parametrize("engine", ["local", "memory"])
+def test_an_hvac_temperature_unknown_everywhere_is_named(tmp_path, capsys, engine):
+    """An air-temperature column logged empty (all NaN) leaves every sample out of an HVAC fit:
+    the one line said only 'energy chain: only 0 usable samples for 5 parameters'; it names the
+    column (and, streamed, the log)."""
+    log, road = _battery_log(tmp_path, [5.0, 10.0], 0.0, [0.0, 0.0])
+    df = pd.read_csv(log)
+    df["ambient_c"] = np.nan
+    df.to_csv(log, index=False)
+    capsys.readouterr()
+    assert cli_main(["calibrate", str(log), "--target", "battery", "--equation", str(road), "--hvac", "ambient_c:20",
+                     "--engine", engine, "--out", str(tmp_path / "eq.toml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "only 0 usable samples" in err
+    assert "1440 left out where ambient_c is unknown (NaN)" in err, err
+    assert not (tmp_path / "eq.toml").exists()

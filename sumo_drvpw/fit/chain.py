@@ -216,6 +216,15 @@ def battery_columns(p, y, w, sig: dict, loads=(), hvac=None, predicts="battery",
     return cols, names, lb, ub, ok & known, unknown
 
 
+def too_few_samples(n_ok: int, k: int, unknown: int, loads=(), hvac=None, where: str = "") -> UserError:
+    """The error of a battery chain with fewer usable samples than its ``k`` parameters need,
+    naming the declared loads' and HVAC temperature's columns where their unknown (NaN)
+    values left ``unknown`` samples out (an all-NaN air temperature said only '0 usable')."""
+    cols = [*loads, *([hvac.get("column", "ambient_c")] if hvac else [])]
+    why = f": {unknown} left out where {' or '.join(cols)} is unknown (NaN)" if unknown and cols else ""
+    return UserError(f"{where + ': ' if where else ''}energy chain: only {n_ok} usable samples for {k} parameters{why}")
+
+
 def battery_design(cols: list, neg: np.ndarray, sl, lim) -> list:
     """The columns of :func:`battery_columns` on the samples ``sl``, the recuperation
     column max(min(P, 0), −P_lim) for the limit ``lim`` [W] (None: no limit)."""
@@ -273,7 +282,7 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
         lb = [1.0] * bt.size + [ETA_MIN] * br.size + lb[2:]
         ub = [1.0 / ETA_MIN] * bt.size + [1.0] * br.size + ub[2:]
     if ok.sum() < len(names) + 2:
-        raise UserError(f"energy chain: only {int(ok.sum())} usable samples for {len(names)} parameters")
+        raise too_few_samples(int(ok.sum()), len(names), unknown, loads, hvac)
     neg = np.minimum(p, 0.0)
     brake = -neg[ok & (neg < 0)]
     if limit == "profile":

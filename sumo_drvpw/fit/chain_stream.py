@@ -34,7 +34,7 @@ import numpy as np
 from sumo_drvpw.data.trips import trip_signatures
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import (LIMIT_QUANTILES, ChainFit, _bic, _col, _covariance, battery_chain,
-                                  battery_columns, battery_design, factor_rows, solve_factor)
+                                  battery_columns, battery_design, factor_rows, solve_factor, too_few_samples)
 from sumo_drvpw.fit.chain_fuel import (CITY_SPEED_MPS, fuel_bounds, fuel_chain, fuel_design, fuel_grid,
                                        fuel_target_text, idles_at_stops, note_conventional, note_declared,
                                        note_idling, standing_sums, fuel_names)
@@ -460,7 +460,7 @@ class ChainStats:
                                      SIGN_CHECK_W, "the driving power"))
         k = len(getattr(self, "names", ())) or 3
         if self.n_ok < k + 2:
-            raise UserError(f"energy chain: only {self.n_ok} usable samples for {k} parameters")
+            raise too_few_samples(self.n_ok, k, self.unknown, self.spec.loads, self.spec.hvac, self.where)
 
     def brake_bins(self) -> tuple[list, tuple]:
         """(the order statistics' ranks np.quantile reads, the bins that hold them)."""
