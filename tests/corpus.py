@@ -1092,6 +1092,19 @@ def _(d):
     return _fcd_copy(d, '[vclasses."tk@t0"]\nmass_kg = 6000\n')
 
 
+@case("options", "fcd rider's vType mass without its decimal point", ("t.rou.xml", "ped", "beyond any pedestrian's"))
+def _(d):  # was booked: the car 7.5 t heavier for its one rider (0.033 -> 0.191 kWh over 200 m), exit 0
+    rows = "".join(f'<timestep time="{t}.00"><vehicle id="c0" x="{10.4 + 11 * t:.2f}" y="-1.60" angle="90.00" type="car" '
+                   f'speed="11.00" pos="{7.2 + 11 * t:.2f}" lane="c00c10_0"/><person id="p0" x="{10.4 + 11 * t:.2f}" '
+                   f'y="-1.60" angle="90.00" type="ped" speed="11.00" pos="{7.2 + 11 * t:.2f}" edge="c00c10"/></timestep>\n'
+                   for t in range(20))
+    fcd = text(d, "fcd.xml", f"<fcd-export>\n{rows}</fcd-export>\n")
+    rou = text(d, "t.rou.xml", '<routes><vType id="car" vClass="passenger" mass="1500"/>'
+               '<vType id="ped" vClass="pedestrian" mass="7500"/></routes>\n')
+    return ["fcd", str(fcd), "--net", str(CITY_NET), "--vtypes", str(rou), "--equation", "vsp_ldv1999", "--no-figures",
+            "--no-progress", "--out", str(d / "o")]
+
+
 @case("options", "calibrate --load of a power in kW", ("--load heater_kw", "kW"))
 def _(d):
     df = base_log()

@@ -55,3 +55,21 @@ def test_a_vehicle_off_the_road_beyond_any_of_its_kind_is_refused(tmp_path, vtyp
 ])
 def test_the_heaviest_trains_ships_and_aircraft_pass(tmp_path, vtype, mass):
     assert read_vtypes([_file(tmp_path, vtype)])["m"].mass_kg == mass
+
+
+@pytest.mark.parametrize("vtype, refused", [
+    ('<vType id="m" vClass="pedestrian" mass="7500"/>', True),   # 75.00 kg without its point
+    ('<vType id="m" vClass="wheelchair" mass="600"/>', True),
+    ('<vType id="m" vClass="pedestrian" mass="400"/>', False),   # the tests' heavy rider
+    ('<vType id="m" vClass="wheelchair" mass="250"/>', False),
+])
+def test_a_person_s_vtype_beyond_any_person_s_mass_is_refused(tmp_path, vtype, refused):
+    """A rider adds its vType's mass to its vehicle (live, as SUMO does, and in an FCD replay): a
+    pedestrian vType of 7500 kg booked a car 7.5 t heavier (0.033 → 0.191 kWh over 200 m), and
+    750 t passed the road bound (15.96 kWh), exit 0."""
+    p = _file(tmp_path, vtype)
+    if refused:
+        with pytest.raises(UserError, match=rf"{p}: vType 'm': mass .* beyond any (pedestrian|wheelchair)'s \(at most 500"):
+            read_vtypes([p])
+    else:
+        assert read_vtypes([p])["m"].mass_kg > 0

@@ -89,6 +89,9 @@ NON_ROAD_CLASSES = {
 #: the heaviest vType mass [kg] of each class's vClasses (sim/vtypes.py refuses more: a typo): the
 #: heaviest trains run some 100,000 t, the largest ships some 650,000 t displaced, aircraft 640 t
 NON_ROAD_MASS_MAX_KG = {"rail": 2.0e8, "waterway": 1.0e9, "air": 1.0e6}
+#: the heaviest vType mass [kg] of a person's vClasses (sim/vtypes.py refuses more: a rider adds it to
+#: its vehicle, as SUMO does; a pedestrian vType of mass="7500" for 75.00 booked a car 7.5 t heavier)
+ON_FOOT_MASS_MAX_KG = {"pedestrian": 500.0, "wheelchair": 500.0}
 #: vClasses that move on foot: a footway beside a tram line does not make it a road
 ON_FOOT_VCLASSES = frozenset({"pedestrian", "wheelchair", "container"})
 

@@ -20,7 +20,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.model.energy_params import ENERGY_PARAMS
 from sumo_drvpw.model.mmpevem import MMPEVEM_PARAMS
-from sumo_drvpw.sim.scenario import NON_ROAD_CLASSES, NON_ROAD_MASS_MAX_KG
+from sumo_drvpw.sim.scenario import NON_ROAD_CLASSES, NON_ROAD_MASS_MAX_KG, ON_FOOT_MASS_MAX_KG
 from sumo_drvpw.sim.shutoff import SHUT_OFF_PARAMS
 from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
 
@@ -471,8 +471,8 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                 mass = _mass(where, "drvpw.mass", params.get("drvpw.mass"))
                 if mass is None and sumo_mass is not None:
                     mass = sumo_mass + loading
-                group = next((g for g, vcs in NON_ROAD_CLASSES.items() if el.attrib.get("vClass") in vcs), None)
-                if mass is not None and mass > (cap := NON_ROAD_MASS_MAX_KG.get(group, ROAD_MASS_MAX_KG)):
+                group = next((g for g, vcs in {**NON_ROAD_CLASSES, **{c: {c} for c in ON_FOOT_MASS_MAX_KG}}.items() if el.attrib.get("vClass") in vcs), None)
+                if mass is not None and mass > (cap := {**NON_ROAD_MASS_MAX_KG, **ON_FOOT_MASS_MAX_KG}.get(group, ROAD_MASS_MAX_KG)):
                     raise UserError(f"{where}: mass {mass:g} kg (mass, loading or drvpw.mass) is beyond any " + (
                         f"{el.attrib['vClass']}'s (at most {cap:,.0f} kg" if group else
                         f"road vehicle's (at most {cap:,.0f} kg: a road train's few hundred tonnes fit") + "; a typo?)")
