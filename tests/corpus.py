@@ -399,6 +399,9 @@ _HYB = ('[terms]\nacc = 1.0\n[chain]\npredicts = "fuel"\nfuel = "gasoline"\nmarg
 _DEP = '[chain.depleting]\nusable_j = 2.9e7\ntraction_efficiency = 0.85\nrecuperation_efficiency = 0.65\n'
 _eq_case("hybrid window in kWh", _HYB + "battery_usable_j = 0.5\n", ("battery_usable_j", "0.5", "kWh"))
 _eq_case("plug-in battery in kWh", _HYB + _DEP.replace("2.9e7", "8"), ("depleting.usable_j", "8", "kWh"))
+# a plug-in battery without its efficiencies was read as lossless (a battery chain's default η 1)
+_eq_case("plug-in battery without efficiencies", _HYB + "[chain.depleting]\nusable_j = 2.9e7\n",
+         ("[chain.depleting]", "traction_efficiency", "recuperation_efficiency"))
 # a fuel chain's engine keys: a rated output in kW was read as watts (300 W: the engine capped, unsaid)
 _FUEL = _HYB.replace("charge_sustaining = true\nrecuperation_round_trip = 0.64\n", "")
 _eq_case("engine rated output in kW", _FUEL + "engine_max_w = 300\n", ("engine_max_w", "300", "kW"))

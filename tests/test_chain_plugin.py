@@ -87,7 +87,10 @@ def test_the_file_keeps_it_and_refuses_what_is_no_plug_in():
     for doc, says in [({**plain, "charge_sustaining": False, "depleting": DEP}, "charge_sustaining = true"),
                       ({**DOC, "depleting": {"traction_efficiency": 0.8}}, "'usable_j'"),
                       ({**DOC, "depleting": {**DEP, "usable_j": 0.0}}, "must be > 0"),
-                      ({**DOC, "depleting": {**DEP, "soc": 1}}, "unknown key")]:
+                      ({**DOC, "depleting": {**DEP, "soc": 1}}, "unknown key"),
+                      ({**DOC, "depleting": {"usable_j": 1e6, "traction_efficiency": 0.8}},
+                       "'recuperation_efficiency' required"),
+                      ({**DOC, "depleting": {"usable_j": 1e6}}, "'traction_efficiency' and 'recuperation_efficiency'")]:
         with pytest.raises(UserError, match=r"phev\.toml \[chain\.depleting\]") as e:
             chain_from_dict(doc, "phev.toml")
         assert says in str(e.value)

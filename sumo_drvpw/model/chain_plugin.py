@@ -55,7 +55,8 @@ class Depleting:
 
 def depleting_from_dict(doc: dict, where: str) -> Depleting:
     """``[chain.depleting]`` of the fuel chain ``doc`` checked: a table of :data:`DEPLETING_KEYS`,
-    ``usable_j`` > 0, for a charge-sustaining fuel chain; its auxiliaries default to the chain's."""
+    ``usable_j`` > 0 and both efficiencies given, for a charge-sustaining fuel chain; its auxiliaries
+    default to the chain's."""
     from sumo_drvpw.model.chain import chain_from_dict
 
     dep = doc["depleting"]
@@ -70,6 +71,11 @@ def depleting_from_dict(doc: dict, where: str) -> Depleting:
     if "usable_j" not in dep:
         raise UserError(f"{where} [chain.depleting]: 'usable_j' (the battery energy it spends first) is required")
     usable = battery_energy(dep["usable_j"], "depleting.usable_j", where)
+    lossless = [k for k in ("traction_efficiency", "recuperation_efficiency") if k not in dep]
+    if lossless:  # (a battery chain's efficiencies default to 1: no plug-in's battery and motor are lossless)
+        raise UserError(f"{where} [chain.depleting]: {' and '.join(repr(k) for k in lossless)} required (battery → "
+                        "wheels and wheels → battery, e.g. 0.89 and 0.87, the built-in epa_gasoline_phev_car's): "
+                        "without them the battery would drive and recuperate without loss")
     if not usable > 0:
         raise UserError(f"{where} [chain.depleting]: 'usable_j' must be > 0, got {dep['usable_j']!r}")
     hvac = {k: x for k, x in (doc.get("hvac") or {}).items() if k != "warmup_j_per_k"}
