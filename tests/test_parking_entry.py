@@ -100,8 +100,12 @@ def test_the_step_a_car_parks_in_is_booked_live_and_replayed(tmp_path, step, bal
         assert v["distance_m"] == pytest.approx(dist, abs=1e-4), out
     chains = {out: pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key").loc["p", "net_kwh"] * 1e3
               for out in outs}
+    # on the hill the live run reads SUMO's slope of the car (getSlope, back to front), the replay
+    # the FCD's slope column, written in degrees at 6 decimals (±5e-7°: about 2e-9 of this trip's
+    # battery), and the replay of an FCD without it the rise of each step (1.2e-3 and 2.1e-3 apart)
     for out in outs[1:]:
-        assert chains[out] == pytest.approx(chains["live"], rel=1e-9), out
+        tol = 1e-9 if rise == 0 else 5e-3 if out == "noslope" else 1e-8
+        assert chains[out] == pytest.approx(chains["live"], rel=tol), out
     if rise == 0:  # (on a hill SUMO's slopes and the plug-in's profile part by ~1e-3 anyway)
         sumo_wh = emitted_wh(tmp_path / "em.xml", step)[0]["p"]
         moves = parking_moves_wh(sc, tmp_path / "probe")["p"]
