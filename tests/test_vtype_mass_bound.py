@@ -73,3 +73,36 @@ def test_a_person_s_vtype_beyond_any_person_s_mass_is_refused(tmp_path, vtype, r
             read_vtypes([p])
     else:
         assert read_vtypes([p])["m"].mass_kg > 0
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("where", ["route file", "scenario", "param"])
+def test_a_vehicle_s_mass_in_tonnes_is_refused(tmp_path, capsys, where):
+    """A truck vType written 6 (tonnes) where kg are meant was booked as a 6-kg truck (an FCD
+    replay's truck: 0.040 kWh against 0.109 kWh at 6,000 kg), exit 0 (the bad-input fuzz's
+    finding). A written mass below 1 % of its vClass's SUMO default (a truck's 4,500 kg) is
+    refused in one line naming the vType and where the mass was written; 6,000 kg runs."""
+    from pathlib import Path
+
+    from sumo_drvpw.cli import main
+
+    net = Path(__file__).resolve().parent.parent / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"
+    for mass, rc in (("6", 2), ("6000", 0)):
+        d = tmp_path / mass
+        d.mkdir()
+        attr = f' mass="{mass}"' if where == "route file" else ""
+        param = f'<param key="drvpw.mass" value="{mass}"/>' if where == "param" else ""
+        (d / "r.rou.xml").write_text(
+            f'<routes><vType id="tk" vClass="truck"{attr}>{param}</vType>'
+            '<vehicle id="t0" type="tk" depart="0"><route edges="c00c10 c10c20"/></vehicle></routes>\n',
+            encoding="utf-8")
+        (d / "s.toml").write_text(
+            f'equations = ["moves_single_unit_truck"]\n[sumo]\nnet = "{net}"\nroutes = ["r.rou.xml"]\nbegin = 0\n'
+            'end = 20\nstep_length = 1.0\noptions = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n'
+            + (f'[vtypes.tk]\nmass_kg = {mass}\n' if where == "scenario" else ""), encoding="utf-8")
+        assert main(["run", str(d / "s.toml"), "--out", str(d / "o")]) == rc
+        err = capsys.readouterr().err
+        if rc:
+            said = {"route file": "its mass in", "scenario": "the scenario's mass_kg", "param": "its mass in"}[where]
+            assert f"vType 'tk': mass 6 kg ({said}" in err and "below 1 % of a truck's (4,500 kg" in err
+            assert len(err.strip().splitlines()) == 1 and not (d / "o").exists()

@@ -413,16 +413,17 @@ class VTypeResolver:
             body = vclass   # its own equations, so its own class's mass
         if body != vclass and cdata.get("mass_kg") is None:
             cdata = sc_classes.get(body, {})
-        mass = data.get("mass_kg")
+        mass, said = data.get("mass_kg"), "the scenario's mass_kg"
         if mass is None and info is not None:
-            mass = info.mass_kg
+            mass, said = info.mass_kg, f"its mass in {info.source}"
         if mass is None:
             p = self._param(vt, "drvpw.mass")
             if p:
                 try:
-                    mass = float(p)
+                    mass, said = float(p), "its drvpw.mass"
                 except ValueError:
                     raise UserError(f"vType '{vt}': drvpw.mass is not a number: {p!r}") from None
+        tiny_mass(vt, vclass, mass, said)
         if mass is None and info is None and vt not in SUMO_DEFAULT_VTYPES:
             mass = self._sumo_mass(vt)  # a vType made during the run (TraCI copy, setMass)
             if mass is not None:  # or loaded from a file the plug-in did not read: said
@@ -477,6 +478,16 @@ class VTypeResolver:
         if at_fixed:
             self.fixed_far[vt] = at_fixed
         return (float(mass), app, True, vclass, "")
+
+
+def tiny_mass(vt: str, vclass: str, mass, said: str) -> None:
+    """A written mass below 1 % of its vClass's SUMO default refused (a 6-kg truck: tonnes)."""
+    from sumo_drvpw.sim.fcd_conn import SUMO_VCLASS_MASS_KG, SUMO_VEH_MASS_KG
+
+    usual = SUMO_VCLASS_MASS_KG.get(vclass, SUMO_VEH_MASS_KG)
+    if mass is not None and mass < 0.01 * usual:
+        raise UserError(f"vType '{vt}': mass {mass:g} kg ({said}) is below 1 % of a {vclass}'s ({usual:,.0f} kg, "
+                        "SUMO's default): tonnes, not kg? (a typo?)")
 
 
 def builtin_equations_for(vclass: str) -> list[str]:
