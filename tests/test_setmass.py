@@ -66,6 +66,26 @@ def _run(d: Path, tag: str, connection: str, calls: dict):
     return res, roll, pd.Series(driven)
 
 
+def _scripted(d: Path, routes: str, steps: int, after_step, extra: str = "", end: float = 70, step: float = DT):
+    """The Accountant in a script's own loop on ``routes`` (``extra``: more scenario TOML):
+    ``after_step(conn, k)`` after each step k; its result."""
+    (d / "r.rou.xml").write_text(routes, encoding="utf-8")
+    (d / "s.toml").write_text(
+        f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nbegin = 0\nend = {end}\n'
+        f'step_length = {step}\noptions = ["--no-warnings", "true"]\n' + extra, encoding="utf-8")
+    sc = load_scenario(d / "s.toml")
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, scenario=sc, equations=[PHYS])
+        for k in range(steps):
+            conn.simulationStep()
+            acc.step()
+            after_step(conn, k)
+        return acc.result()
+    finally:
+        close_sumo(conn)
+
+
 @pytest.fixture(scope="module")
 def ref(tmp_path_factory):
     d = tmp_path_factory.mktemp("setmass")
@@ -198,25 +218,13 @@ def test_a_vtype_s_mass_set_by_a_script_books_its_vehicles_from_the_next_check(t
     1,500 kg (resolved once per vType), unsaid. Now read at the loop's vType checks (every
     25 steps over libsumo): the running car books 3,000 kg from the next one, the car departing
     at 20 s all its trip; a scenario's [vtypes.car] mass_kg still wins."""
-    (tmp_path / "r.rou.xml").write_text(ROUTES.replace('depart="3"', 'depart="20"'), encoding="utf-8")
     extra = "[vtypes.car]\nmass_kg = 1600\n" if override else ""
-    (tmp_path / "s.toml").write_text(
-        f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nbegin = 0\nend = 70\n'
-        f'step_length = {DT}\noptions = ["--no-warnings", "true"]\n' + extra, encoding="utf-8")
     booked = {}
     for call in (False, True):
-        sc = load_scenario(tmp_path / "s.toml")
-        conn = start_sumo(sc.sumo_args)
-        try:
-            acc = Accountant(conn, scenario=sc, equations=[PHYS])
-            for k in range(140):
-                conn.simulationStep()
-                acc.step()
-                if call and k == 10:
-                    conn.vehicletype.setMass("car", 3000.0)
-            booked[call] = acc.result()
-        finally:
-            close_sumo(conn)
+        def after(conn, k, call=call):
+            if call and k == 10:
+                conn.vehicletype.setMass("car", 3000.0)
+        booked[call] = _scripted(tmp_path, ROUTES.replace('depart="3"', 'depart="20"'), 140, after, extra)
     a, b = (r.vehicles.set_index("vehicle") for r in (booked[False], booked[True]))
     if override:
         assert (b.mass_kg == 1600.0).all() and booked[True]["vtype_changes"] == 0
@@ -235,22 +243,10 @@ def test_a_setmass_on_a_vtype_with_a_loading_books_the_mass_plus_the_loading(tmp
     electricity from then on equals a 2,500-kg car's set to 4,000 kg; vehicle.getMass says
     3,000, the loading aside). The plug-in booked the copy's 3,000 kg, the loading dropped."""
     routes = ROUTES.replace('sigma="0"/>', 'sigma="0"><param key="loading" value="1000"/></vType>')
-    (tmp_path / "r.rou.xml").write_text(routes, encoding="utf-8")
-    (tmp_path / "s.toml").write_text(
-        f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nbegin = 0\nend = 70\n'
-        f'step_length = {DT}\noptions = ["--no-warnings", "true"]\n', encoding="utf-8")
-    sc = load_scenario(tmp_path / "s.toml")
-    conn = start_sumo(sc.sumo_args)
-    try:
-        acc = Accountant(conn, scenario=sc, equations=[PHYS])
-        for k in range(60):
-            conn.simulationStep()
-            acc.step()
-            if k == 20:
-                conn.vehicle.setMass("v", 3000.0)
-        res = acc.result()
-    finally:
-        close_sumo(conn)
+    def after(conn, k):
+        if k == 20:
+            conn.vehicle.setMass("v", 3000.0)
+    res = _scripted(tmp_path, routes, 60, after)
     v = res.vehicles.set_index("vehicle")
     assert v.mass_kg.to_dict() == {"v": 4000.0, "w": 2500.0}
 
