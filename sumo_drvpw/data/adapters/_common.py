@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -478,6 +479,11 @@ def _refuse_non_flags(frame: pd.DataFrame, report: dict) -> None:
                             "position or a percentage to a column of its own name instead)")
 
 
+def in_several(ids: list[set]) -> set:
+    """The ids found in more than one of the files' sets ``ids`` (each file's trip ids)."""
+    return {i for i, n in Counter(i for s in ids for i in s).items() if n > 1}
+
+
 def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=()) -> tuple:
     """Concatenate per-file frames and build the import report (totals + per file)."""
     if not frames:
@@ -486,7 +492,7 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
         r["notes"] = _fold_unit_notes(r["notes"])
     ids = [set(map(str, pd.unique(f["trip_id"]))) if "trip_id" in f else {str(r["trip_id"])}
            for f, r in zip(frames, reports)]  # (a file's trip column may hold several)
-    dup = sorted({i for k, s in enumerate(ids) for i in s if any(i in o for o in ids[k + 1:])})
+    dup = sorted(in_several(ids))
     if dup:
         raise UserError(f"{fmt}: trip_id {dup[0]!r} comes from more than one file: "
                         + ", ".join(r["file"] for r, s in zip(reports, ids) if dup[0] in s))

@@ -51,7 +51,7 @@ import pandas as pd
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midnight, clean_time_and_speed,
-                      expand_paths, generic_name, lookup_unit, new_report, numeric, read_csv_strict,
+                      expand_paths, generic_name, in_several, lookup_unit, new_report, numeric, read_csv_strict,
                       read_each, unique_names, UNITS)
 
 from sumo_drvpw.data.adapters import labels as candidate_labels
@@ -544,7 +544,7 @@ def qualify_shared_trips(frames: list[pd.DataFrame], reports: list[dict]) -> lis
     written as one trip (its rows from both files, its time running twice), which every
     command then refused."""
     ids = [set(map(str, pd.unique(f["trip_id"]))) for f in frames]
-    shared = {i for k, s in enumerate(ids) for i in s if any(i in o for j, o in enumerate(ids) if j != k)}
+    shared = in_several(ids)
     if not shared:
         return frames
     out = []
