@@ -205,6 +205,10 @@ def _add_corrections(p) -> None:
     g.add_argument("--exclude-dropouts", action="store_true", default=None,
                    help="leave out logger dropouts: speed and a longitudinal accelerometer held or "
                         "linearly filled for seconds (inputs only)")
+    g.add_argument("--speed-scale", metavar="gps|K",
+                   help="the logged speed times K before acceleration, distance and grade are derived from it "
+                        "(e.g. 0.984 for a speedometer 1.6%% high), or gps: each trip's own K against the GPS speed "
+                        "logged beside it (gps_speed…_mps; steady samples above 8 m/s). Never used in SUMO")
 
 
 def measurement_options(args, equations=()):
@@ -214,11 +218,16 @@ def measurement_options(args, equations=()):
     error naming them). Prints a note when corrections come from the equations."""
     from sumo_drvpw.model.measurement import GRADE_SOURCES, measurement_from_dict
 
-    lag, grade, rho, drop = (getattr(args, k, None) for k in ("power_lag", "grade_source", "air_density",
-                                                              "exclude_dropouts"))
-    if lag is not None or grade is not None or rho is not None or drop:
+    lag, grade, rho, drop, scale = (getattr(args, k, None) for k in ("power_lag", "grade_source", "air_density",
+                                                                     "exclude_dropouts", "speed_scale"))
+    if lag is not None or grade is not None or rho is not None or drop or scale is not None:
         # given on the command line, they replace what the equations declare
         doc = {"exclude_dropouts": True} if drop else {}
+        if scale is not None:
+            try:
+                doc["speed_scale"] = "gps" if str(scale).strip().lower() == "gps" else float(scale)
+            except ValueError:
+                raise UserError(f"--speed-scale {scale}: give gps or a number (the factor on the logged speed)") from None
         if lag is not None:
             doc["power_lag_s"] = lag
         if grade is not None:
@@ -245,7 +254,7 @@ def measurement_options(args, equations=()):
         try:
             return measurement_from_dict(doc, "command line")
         except UserError as e:
-            raise UserError(f"--power-lag / --grade-source: {e}") from None
+            raise UserError(f"--power-lag / --grade-source / --speed-scale: {e}") from None
     from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
 
     found = {}
@@ -381,6 +390,11 @@ def note_counts(counts: dict) -> None:
     gps = speed_gps_note(counts)  # (data/conditions.speed_against_gps)
     if gps:
         print(f"note: {gps}")
+    scales = counts.get("speed_scale") or {}
+    if scales:  # (data/corrections.scale_speed)
+        ks = sorted(scales.values())
+        print(f"note: speed scaled by {ks[0]:.4f}" + (f"–{ks[-1]:.4f}" if ks[-1] != ks[0] else "")
+              + f" over {len(ks)} trip(s)" + (f" (against {counts['speed_scale_column']})" if counts.get("speed_scale_column") else ""))
     held = counts.get("elevation_no_fix_values") or []
     if held:  # (data/conditions.no_fix_elevations)
         print(f"note: elevation_m jumps to {', '.join(f'{x:g}' for x in held[:5])} m and back, {int(counts.get('elevation_no_fix_samples', 0) or 0)} "

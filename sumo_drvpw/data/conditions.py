@@ -162,7 +162,8 @@ def speed_gps_note(counts: dict) -> str:
     return (f"speed_mps reads {abs(k - 1):.1%} {'above' if k > 1 else 'below'} {col} ({n} samples where both exceed "
             f"{SPEED_GPS_MIN_MPS:g} m/s): a speedometer's {'over' if k > 1 else 'under'}-read, which the coefficients take "
             f"(acc × {1 / k ** 2:.3f}, aero × {1 / k ** 3:.3f} of the vehicle's, where a SUMO run's speeds are exact); "
-            f"correct the speed (a mapping's scale = {1 / k:.4f} on it) or log the GPS speed as speed_mps")
+            f"correct the speed: the measurement correction speed_scale = \"gps\" (each trip's own scale against "
+            f"the GPS speed) or {1 / k:.4f}, a mapping's scale = {1 / k:.4f} on it, or the GPS speed logged as speed_mps")
 
 
 def derive_conditions(df: pd.DataFrame, t: np.ndarray, v: np.ndarray, trip_codes: np.ndarray,

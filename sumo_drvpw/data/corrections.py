@@ -22,7 +22,15 @@ This module does the signal processing, trip by trip (nothing crosses a trip bou
 * **air density at altitude** — ρ·p(h)/p₀ with the standard-atmosphere pressure at the
   logged elevation (:func:`sumo_drvpw.model.air.pressure_at_altitude_kpa`), where pressure is
   not logged (the reader then assumed sea level);
-* **logger dropouts** left out of the usable samples (:mod:`sumo_drvpw.data.dropouts`).
+* **logger dropouts** left out of the usable samples (:mod:`sumo_drvpw.data.dropouts`);
+* **speed scale** — the logged speed times k, v' = k·v, before the reader derives anything
+  from it (:func:`scale_speed`, called by :func:`sumo_drvpw.data.log.read_log`): the
+  acceleration (k·a), the distance (k·s) and the grade from elevation over that distance
+  (tan θ/k; its power m·g·v·sin θ, the elevation's rate, is unchanged) follow. k declared,
+  or ``"gps"``: per trip, the median of GPS speed / speed over its steady samples (both
+  above 8 m/s, |dv/dt| below 0.3 m/s², where a GPS speed neither lags nor is noise;
+  :func:`gps_speed_scales`). A speed k too high puts 1/k² into the acc coefficient, 1/k
+  into roll and 1/k³ into aero — coefficients SUMO, whose speeds are exact, would use.
 """
 
 from __future__ import annotations
@@ -31,7 +39,8 @@ import math
 
 import numpy as np
 
-from sumo_drvpw.data.trips import per_trip_rolling_mean, trip_codes_of, trip_starts
+from sumo_drvpw.data.conditions import SPEED_GPS_MIN_MPS as GPS_SCALE_MIN_MPS, gps_speed_columns
+from sumo_drvpw.data.trips import derivative, per_trip_rolling_mean, trip_codes_of, trip_starts
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.air import pressure_at_altitude_kpa
 from sumo_drvpw.model.constants import G, P_STD_KPA
@@ -51,6 +60,78 @@ GAP_LISTED = 10
 #: shortest trip whose elevation change fixes an offset for the logger's estimate [m]: over
 #: 1 km a 10-m elevation error is a 0.1 m/s² offset error, over 10 km 0.01
 MIN_OFFSET_DISTANCE_M = 1000.0
+
+
+#: steady samples of a trip's speed against its GPS speed: both above GPS_SCALE_MIN_MPS (a GPS
+#: speed is noise near standstill), |dv/dt| below STEADY_ACCEL_MPS2 [m/s²] (a GPS speed lags
+#: behind a change of speed), at least GPS_SCALE_SAMPLES of them (their ratios' quartiles lie
+#: about ±0.6 % apart on the shared Prius logs: a scale from 100 is within about ±0.1 %)
+STEADY_ACCEL_MPS2, GPS_SCALE_SAMPLES = 0.3, 100
+#: a steady sample's ratio gps/v farther than this from its trip's median is a GPS glitch, not
+#: the speed's scale (the ratios' quartiles lie about ±0.6 % apart on the shared Prius logs)
+GPS_SCALE_BAND = 0.05
+#: width of the centred mean of the speed's derivative that tells a steady sample [s]
+STEADY_WINDOW_S = 2.0
+
+
+def gps_speed_scales(v, gps, t, trip_codes) -> tuple[np.ndarray, np.ndarray]:
+    """Per trip, the scale k that takes a speed to the GPS speed logged beside it, and the
+    number of the trip's steady samples it is measured on (both above
+    :data:`GPS_SCALE_MIN_MPS`, |dv/dt| over a centred :data:`STEADY_WINDOW_S` below
+    :data:`STEADY_ACCEL_MPS2`): k = Σ gps / Σ v over those of them whose ratio gps/v lies
+    within :data:`GPS_SCALE_BAND` of the trip's median ratio. The band keeps a GPS speed's
+    dropouts and jumps out; the sums, not the median itself, because speeds logged in whole
+    km/h put the median ratio on a few fractions (59/60 on the shared Prius logs for a
+    ratio of sums of 1/1.0166). NaN where a trip has no steady sample.
+
+    Parameters
+    ----------
+    v, gps : speed and GPS speed per sample [m/s]
+    t : time [s]; trip_codes : contiguous trip codes 0, 1, … per sample
+    """
+    v, g = np.asarray(v, float), np.asarray(gps, float)
+    codes = np.asarray(trip_codes)
+    a = derivative(v, np.asarray(t, float), codes, STEADY_WINDOW_S)
+    ok = (np.isfinite(v) & np.isfinite(g) & (v > GPS_SCALE_MIN_MPS) & (g > GPS_SCALE_MIN_MPS)
+          & (np.abs(a) < STEADY_ACCEL_MPS2))
+    n_trips = int(codes.max()) + 1 if len(codes) else 0
+    k, n = np.full(n_trips, np.nan), np.bincount(codes[ok], minlength=n_trips)
+    g, v, codes = g[ok], v[ok], codes[ok]
+    r = g / v
+    for c in np.flatnonzero(n):
+        i = codes == c
+        near = i & (np.abs(r - np.median(r[i])) <= GPS_SCALE_BAND)
+        k[c] = float(g[near].sum() / v[near].sum())
+    return k, n
+
+
+def scale_speed(df, v, t, trip_codes, meas: Measurement | None, counts: dict, where: str) -> np.ndarray:
+    """The speed times the scale of ``meas`` (``speed_scale``; the speed as read when it has
+    none), for the reader to derive the rest from; ``counts["speed_scale"]``: the scale per
+    trip (trip id → k). With ``"gps"``, each trip's own (:func:`gps_speed_scales`); a log
+    without a GPS speed column, or a trip with fewer than :data:`GPS_SCALE_SAMPLES` steady
+    samples, is a :class:`UserError` naming ``where``, the column and the trip."""
+    k_decl = getattr(meas, "speed_scale", None)
+    if k_decl is None or k_decl == 1.0:
+        return v
+    trips = df["trip_id"].to_numpy()[trip_starts(trip_codes)] if len(trip_codes) else []
+    if k_decl != "gps":
+        counts["speed_scale"] = {str(tid): round(float(k_decl), 6) for tid in trips}
+        return np.asarray(v, float) * float(k_decl)
+    cols = gps_speed_columns(df.columns)
+    if not cols:
+        raise UserError(f"{where}: speed scale 'gps' needs a GPS speed logged beside the speed (a column "
+                        "gps_speed…_mps); declare the scale as a number instead (e.g. 0.984 for a speed 1.6 % high)")
+    k, n = gps_speed_scales(v, df[cols[0]].to_numpy(float), t, trip_codes)
+    few = np.flatnonzero(n < GPS_SCALE_SAMPLES)
+    if len(few):
+        c = int(few[0])
+        raise UserError(f"{where}: trip '{trips[c]}': speed scale 'gps' needs at least {GPS_SCALE_SAMPLES} steady "
+                        f"samples of speed_mps and {cols[0]} (both above {GPS_SCALE_MIN_MPS:g} m/s, |dv/dt| below "
+                        f"{STEADY_ACCEL_MPS2:g} m/s²), found {int(n[c])}; declare the scale as a number for it")
+    counts["speed_scale"] = {str(tid): round(float(x), 6) for tid, x in zip(trips, k)}
+    counts["speed_scale_column"] = cols[0]
+    return np.asarray(v, float) * k[np.asarray(trip_codes)]
 
 
 def shift_within_trips(y: np.ndarray, trip_codes: np.ndarray, lag: int) -> np.ndarray:

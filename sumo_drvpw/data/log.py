@@ -515,6 +515,11 @@ def _derive(df: pd.DataFrame, files: list[str], meta: dict, vehicle, opt: ReadOp
     t = df["time_s"].to_numpy(float)
     v = df["speed_mps"].to_numpy(float)
     start = _trip_starts(trip_codes)
+    if getattr(opt.measurement, "speed_scale", None) not in (None, 1.0):  # before anything derives from it
+        from sumo_drvpw.data.corrections import scale_speed
+
+        df["speed_mps"] = v = scale_speed(df, v, t, trip_codes, opt.measurement, counts,
+                                          files[0] if len(files) == 1 else f"{len(files)} files")
 
     # time weight per sample: half the interval to each neighbour within the trip; an interval
     # longer than GAP_STEPS of the trip's own median step and GAP_MIN_S is a logging gap: no

@@ -2,7 +2,8 @@
 
 An equation that goes into SUMO describes the vehicle, not the logger (issue #11 §3): a lag
 between the power and the speed signal, a grade attenuated by coarse or smoothed
-elevation, air density at sea-level pressure where the car drove at altitude — these are
+elevation, air density at sea-level pressure where the car drove at altitude, a speedometer
+that reads a few per cent high — these are
 corrected in the data, not absorbed by coefficients. The corrections a calibration used
 are part of the equation, as its ``[measurement]`` table, so that every later comparison
 on new logs reads them the same way (in SUMO, inputs are clean: the table is not used
@@ -27,6 +28,10 @@ there)::
     exclude_dropouts = true  # leave out logger dropouts: speed and a longitudinal
                            # accelerometer held or linearly filled for seconds
                            # (sumo_drvpw.data.dropouts; inputs only)
+    speed_scale = "gps"    # the logged speed times a scale before anything is derived from
+                           # it (acceleration, distance, grade from elevation): "gps", each
+                           # trip's Σ GPS speed / Σ speed over its steady samples above
+                           # 8 m/s, or a number (0.984: a speedometer 1.6 % high)
 
 The correction itself (signal processing on a log) is :mod:`sumo_drvpw.data.corrections`.
 """
@@ -57,6 +62,12 @@ MAX_LAG_S = 60.0
 #: largest accelerometer offset a correction may declare [m/s²]: g·sin 10°, a logger
 #: mounted 10° off level (more is a wrong axis or unit, not a mounting pitch)
 MAX_ACC_OFFSET_MPS2 = 1.7
+#: a speed scale measured against the GPS speed logged beside the speed (``speed_scale = "gps"``)
+SPEED_SCALE_GPS = "gps"
+#: the farthest a declared speed scale may be from 1: a speedometer or wheel-speed signal is off
+#: by a few per cent (tyre wear and pressure, a manufacturer's margin); 20 % is a unit or a wrong
+#: column, not a reading error
+MAX_SPEED_SCALE_OFF = 0.2
 
 
 @dataclass(frozen=True)
@@ -78,6 +89,9 @@ class Measurement:
     accelerometer_offset_mps2: float | None = None
     #: with grade "fused": the crossover over driven distance [m] instead (None: in time)
     fusion_distance_m: float | None = None
+    #: the logged speed's scale: a number k (v' = k·v), "gps" (k per trip against the GPS
+    #: speed logged beside it), None (as read). Never used in SUMO, whose speeds are exact
+    speed_scale: float | str | None = None
 
     def __post_init__(self):
         if self.fusion_tau_s is not None and self.fusion_distance_m is not None:
@@ -97,7 +111,7 @@ class Measurement:
     def identity(self) -> bool:
         """True when nothing is corrected."""
         return (self.power_lag_s == 0.0 and self.grade == "logged" and self.air_density == "logged"
-                and not self.exclude_dropouts)
+                and not self.exclude_dropouts and self.speed_scale in (None, 1.0))
 
     def to_dict(self) -> dict:
         """The ``[measurement]`` table (every key that has a value, so the file says what was
@@ -128,6 +142,12 @@ class Measurement:
             parts.append("air density at the logged altitude (standard atmosphere)")
         if self.exclude_dropouts:
             parts.append("logger dropouts (speed and accelerometer held or linearly filled) left out")
+        if self.speed_scale == SPEED_SCALE_GPS:
+            parts.append("speed scaled per trip to the GPS speed logged beside it (Σ GPS speed / Σ speed over "
+                         "steady samples above 8 m/s)")
+        elif self.speed_scale not in (None, 1.0):
+            parts.append(f"speed × {self.speed_scale:.4g} (declared: a speed reading "
+                         f"{abs(1 / self.speed_scale - 1):.1%} {'high' if self.speed_scale < 1 else 'low'})")
         return "; ".join(parts)
 
 
@@ -136,7 +156,7 @@ def measurement_from_dict(doc, where: str) -> Measurement:
     if not isinstance(doc, dict):
         raise UserError(f"{where} [measurement]: must be a table")
     known = ("power_lag_s", "grade", "fusion_tau_s", "fusion_distance_m", "air_density", "exclude_dropouts",
-             "accelerometer_offset_mps2")
+             "accelerometer_offset_mps2", "speed_scale")
     bad = sorted(set(doc) - set(known))
     if bad:
         raise UserError(f"{where} [measurement]: unknown key {bad[0]!r} (known: {', '.join(known)})")
@@ -175,4 +195,19 @@ def measurement_from_dict(doc, where: str) -> Measurement:
             raise UserError(f"{where} [measurement] accelerometer_offset_mps2: "
                             f"{kw['accelerometer_offset_mps2']:g} m/s² is beyond ±{MAX_ACC_OFFSET_MPS2:g} "
                             "(a mounting pitch of more than 10°)")
+    if "speed_scale" in doc:
+        kw["speed_scale"] = speed_scale_value(doc["speed_scale"], f"{where} [measurement] speed_scale")
     return Measurement(**kw)
+
+
+def speed_scale_value(v, where: str) -> float | str:
+    """A speed scale as declared: "gps", or a finite number within ±:data:`MAX_SPEED_SCALE_OFF`
+    of 1; errors name ``where`` and the value."""
+    if v == SPEED_SCALE_GPS:
+        return SPEED_SCALE_GPS
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise UserError(f"{where}: must be \"gps\" or a finite number (the factor on the logged speed), got {v!r}")
+    if abs(float(v) - 1.0) > MAX_SPEED_SCALE_OFF:
+        raise UserError(f"{where}: {float(v):g} is more than {MAX_SPEED_SCALE_OFF:.0%} from 1 (a speedometer is off "
+                        "by a few per cent; more is a unit or a wrong column)")
+    return float(v)
