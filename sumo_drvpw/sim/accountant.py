@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.errors import UserError
+from sumo_drvpw.sim.chain_charge import DepartureCharges
 from sumo_drvpw.sim.chain_outputs import chain_warnings
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
 from sumo_drvpw.sim.loop import Physics, Stepper
@@ -233,6 +234,11 @@ class Accountant(_Listener):
         use_subs = getattr(conn, "__name__", "") != "libsumo" and hasattr(conn, "getLabel")
         self.stepper = Stepper(conn, self.net, self.eqset, self.ledger, self.physics,
                                self.resolver, self.trace, use_subscriptions=use_subs)
+        if self.ledger.chain is not None:  # a plug-in hybrid's declared charge at departure (sim/chain_charge.py)
+            fv, sw = self.file_vtypes, _where_of(sc)
+            self.ledger.chain.charges = DepartureCharges.of_files(fv, {
+                vt: (d["battery_charge_wh"], sw) for vt, d in getattr(sc, "vtype_data", {}).items()
+                if "battery_charge_wh" in d}) or None
         if getattr(conn, "is_replay", False):  # containers' mass read too (a replay: from their rows)
             self.stepper.riders.box_of = conn.box_of
         elif getattr(self.file_vtypes, "containers", 0):
@@ -560,3 +566,8 @@ def _connected(conn) -> bool:
         return True
     except Exception:
         return False
+
+
+def _where_of(sc) -> str:
+    """The scenario's file, as its keys are named in a refusal."""
+    return str(getattr(sc, "path", None) or "<scenario>")

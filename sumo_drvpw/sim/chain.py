@@ -150,6 +150,7 @@ class ChainLedger:
         self._stored = np.zeros((capacity, self.A))
         #: the same for a plug-in hybrid's battery energy spent ([chain.depleting]: model/chain_plugin.py)
         self._spent = np.zeros((capacity, self.A))
+        self.charges = None  #: the charges at departure that vehicles declare (sim/chain_charge.py), or None
         #: per step, what does not change between steps (a live run books a few vehicles a step,
         #: where per-call overhead dominates): the chains' signals, each active chain's
         #: (row, equation, chain, output keys, which keys an engine switched off zeroes, its

@@ -56,6 +56,7 @@ def chain_summary(chain: ChainLedger, veh_ids: list[str], veh_classes: list[str]
                                    "not booked: every trip taken as starting warm (through traffic, "
                                    "or engines already warm); [vehicles] cold_start = true or "
                                    "the run command's cold-start option books it"} if per_start or warmup else None,
+            **({"departure_charge": chain.charges.summary()} if chain.charges is not None else {}),
             **({"mmpevem_nan_steps": {chain.names[e]: int(chain.motor_invalid[e]) for e in _motors(chain)}}
                if _motors(chain) else {}),
             "signals_assumed_zero": sorted(chain.assumed_zero),

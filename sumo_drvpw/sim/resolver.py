@@ -271,7 +271,7 @@ class VTypeResolver:
         self.powertrains[vt] = {"emission_class": ec, "from": src, "powertrain": got,
                                 "not_booked_by": [self.names[i] for i in other]}
         if got == "plug-in hybrid":  # (model/chain_plugin.py: spent from each departure)
-            self.powertrains[vt]["battery"] = "charged at each departure: its usable energy first, then fuel"
+            self.powertrains[vt]["battery"] = "charged at each departure (unless declared: chain.departure_charge): its usable energy first, then fuel"
         return app
 
     def own_mass(self, ledger, i: int, vt: str, copy: str) -> bool:

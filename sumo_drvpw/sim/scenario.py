@@ -52,7 +52,7 @@ _SCHEMA: dict[str, set[str] | None] = {
     "outputs": {"trace", "edgedata", "figures", "difference", "progress", "period",
                 "sumo_device"},
 }
-_VTYPE_KEYS = {"mass_kg", "equations", "cold_start"}
+_VTYPE_KEYS = {"mass_kg", "equations", "cold_start", "battery_charge_wh"}  # (the last: [vtypes] only)
 MAX_RAD_LIMIT = 1.5  #: the steepest [slope] max_rad [rad] (tan θ of the profile: 90° is a wall)
 #: keyword overrides accepted by run_scenario (and the CLI)
 OVERRIDES = {"begin", "end", "step_length", "connection", "gui", "options", "equations",
@@ -447,6 +447,12 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
                 entry["equations"] = eqs
             if "cold_start" in d:
                 entry["cold_start"] = _share(d["cold_start"], where, f"{table}.{vt}.cold_start")
+            if "battery_charge_wh" in d:  # a plug-in hybrid's charge at departure [Wh] (sim/chain_charge.py)
+                key = f"{table}.{vt}.battery_charge_wh"
+                if table == "vclasses" or _num(d["battery_charge_wh"], where, key) < 0:
+                    raise UserError(f"{where}: '{key}' " + ("is a vType's: give it in [vtypes.<id>]" if table == "vclasses"
+                                    else f"must be a number of Wh ≥ 0, got {d['battery_charge_wh']!r}"))
+                entry["battery_charge_wh"] = float(d["battery_charge_wh"])
             out[str(vt)] = entry
         return out
 

@@ -20,6 +20,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import open_maybe_gzip
 from sumo_drvpw.model.energy_params import ENERGY_PARAMS
 from sumo_drvpw.model.mmpevem import MMPEVEM_PARAMS
+from sumo_drvpw.sim.chain_charge import note_charge
 from sumo_drvpw.sim.scenario import NON_ROAD_CLASSES, NON_ROAD_MASS_MAX_KG, ON_FOOT_MASS_MAX_KG
 from sumo_drvpw.sim.shutoff import SHUT_OFF_PARAMS
 from sumo_drvpw.sim.sumo_outputs import INCLUDE_DEPTH
@@ -278,14 +279,13 @@ class VTypeInfo:
     action_step_s: float | None = None
 
 
-#: SUMO's default vType lengths of the heavy classes [m] (for the booking note)
 #: the vTypes SUMO declares itself, and their vClasses (SUMO 1.28,
 #: ``vehicletype.getVehicleClass``): what an FCD replay, which has no SUMO to ask, reads
 #: for a vehicle of such a type that no file redeclares
 SUMO_DEFAULT_VTYPES = {"DEFAULT_VEHTYPE": "passenger", "DEFAULT_PEDTYPE": "pedestrian",
                        "DEFAULT_BIKETYPE": "bicycle", "DEFAULT_TAXITYPE": "taxi",
                        "DEFAULT_RAILTYPE": "rail", "DEFAULT_CONTAINERTYPE": "container"}
-SUMO_DEFAULT_LENGTH_M = {"bus": 12.0, "coach": 14.0, "truck": 7.1}  # (army: 5 m, a car's, below)
+SUMO_DEFAULT_LENGTH_M = {"bus": 12.0, "coach": 14.0, "truck": 7.1}  # SUMO's default lengths of heavy vTypes [m] (the booking note; army: 5 m, a car's, below)
 
 
 def _length(val: str | None) -> float | None:
@@ -380,7 +380,6 @@ def is_true(val: str | None) -> bool:
     return val is not None and val.strip().lower() in SUMO_TRUE
 
 
-#: the route files' elements that define vehicles (and may carry a vehicle's own params)
 #: the car-following attributes a file's vType keeps (:attr:`VTypeInfo.driving`)
 CF_KEYS = ("carFollowModel", "accel", "decel", "sigma", "sigmaStep", "speedTable", "desAccelProfile",
            "maxAccelProfile")
@@ -407,7 +406,7 @@ def _driving(el) -> dict | None:
     return out or None
 
 
-VEHICLE_TAGS = {"vehicle": "vehicle_cold_start", "trip": "vehicle_cold_start", "flow": "flow_cold_start"}
+VEHICLE_TAGS = {"vehicle": "vehicle_cold_start", "trip": "vehicle_cold_start", "flow": "flow_cold_start"}  # (vehicles' own params)
 
 
 def read_vtypes(files: list[Path]) -> FileVTypes:
@@ -432,6 +431,7 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
         with open_maybe_gzip(path) as fh:
             for _, el in ET.iterparse(fh, events=("end",)):
                 tag = el.tag.split("}")[-1]
+                note_charge(out, str(path), tag, el)  # a plug-in hybrid's battery charge at departure, if any
                 if tag == "include" and el.attrib.get("href"):
                     inc = path.parent / el.attrib["href"]
                     if depth >= INCLUDE_DEPTH:

@@ -1,0 +1,185 @@
+"""A plug-in hybrid's battery charge at departure (sim/chain_charge.py): read from the route
+files as SUMO's battery device reads it (checked against libsumo), booked in a real SUMO run
+live and replayed from its FCD, and bad values refused in one line."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from sumo_drvpw.errors import UserError
+from test_chain_plugin import DEP, DOC
+
+U_J = 1.2e6   # the test's plug-in battery: 333.3 Wh usable
+PHEV = 'emissionClass="HBEFA4/PC_PHEV_petrol_Euro-6d_(P)"'
+
+
+def _param(key, value):
+    return f'<param key="{key}" value="{value}"/>' if value is not None else ""
+
+
+#: (vType's params, vehicle's params) → what SUMO's battery device starts with [Wh]
+CASES = {
+    "vType's chargeLevel": ({"device.battery.chargeLevel": 1000}, {}),
+    "vehicle's over vType's": ({"device.battery.chargeLevel": 1000}, {"device.battery.chargeLevel": 2000}),
+    "vType's old key over the vehicle's new": ({"actualBatteryCapacity": 1500}, {"device.battery.chargeLevel": 2000}),
+    "vehicle's old key over all": ({"device.battery.chargeLevel": 1000, "actualBatteryCapacity": 1200},
+                                   {"actualBatteryCapacity": 2500}),
+}
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("case", list(CASES))
+def test_the_charge_is_read_as_sumos_battery_device_reads_it(tmp_path, case):
+    """For each case, the charge read from the route file (a vehicle, and a flow's vehicle) is
+    what libsumo's battery device departs with (device.battery.chargeLevel, Wh)."""
+    libsumo = pytest.importorskip("libsumo")
+    from sumo_probe import build_net
+
+    from sumo_drvpw.sim.chain_charge import DepartureCharges
+    from sumo_drvpw.sim.vtypes import read_vtypes
+
+    typ, veh = CASES[case]
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="500" y="0"/></nodes>',
+              '<edges><edge id="ab" from="a" to="b" numLanes="1" speed="22"/></edges>', "--no-warnings")
+    own = "".join(_param(k, x) for k, x in veh.items())
+    (tmp_path / "r.rou.xml").write_text(
+        f'<routes><vType id="h" {PHEV}>{_param("has.battery.device", "true")}'
+        f'{_param("device.battery.capacity", 8000)}{"".join(_param(k, x) for k, x in typ.items())}</vType>'
+        f'<vehicle id="v" type="h" depart="0"><route edges="ab"/>{own}</vehicle>'
+        f'<flow id="f" type="h" begin="0" number="1" period="1"><route edges="ab"/>{own}</flow></routes>',
+        encoding="utf-8")
+    fv = read_vtypes([tmp_path / "r.rou.xml"])
+    mine = DepartureCharges.of_files(fv)
+    libsumo.start(["sumo", "-n", str(tmp_path / "n.net.xml"), "-r", str(tmp_path / "r.rou.xml"),
+                   "--no-step-log", "--no-warnings"])
+    try:
+        libsumo.simulationStep()
+        for vid in ("v", "f.0"):
+            sumo = float(libsumo.vehicle.getParameter(vid, "device.battery.chargeLevel"))
+            assert float(mine.of(vid, "h")[0]) == pytest.approx(sumo, abs=0.01)
+    finally:
+        libsumo.close()
+
+
+def _road(tmp_path, routes: str) -> None:
+    """Three parallel roads A, B, C of five 1.1-km edges, and the route file ``routes``."""
+    from sumo_probe import build_net
+
+    nodes = "".join(f'<node id="{r}{i}" x="{1100 * i}" y="{500 * k}"/>' for k, r in enumerate("abc") for i in range(6))
+    edges = "".join(f'<edge id="{r.upper()}{i}" from="{r}{i}" to="{r}{i + 1}" numLanes="1" speed="22"/>'
+                    for r in "abc" for i in range(5))
+    build_net(tmp_path, f"<nodes>{nodes}</nodes>", f"<edges>{edges}</edges>", "--no-warnings")
+    (tmp_path / "r.rou.xml").write_text(routes, encoding="utf-8")
+
+
+def _vtype(params: str = "") -> str:
+    return f'<vType id="h" vClass="passenger" mass="1500" sigma="0" speedDev="0" {PHEV}>{params}</vType>'
+
+
+def _trip(vid, road, params="", tag="vehicle"):
+    when = 'depart="0"' if tag == "vehicle" else 'begin="0" number="1" period="1"'
+    return f'<{tag} id="{vid}" type="h" {when}><route edges="{" ".join(f"{road}{i}" for i in range(5))}"/>{params}</{tag}>'
+
+
+@pytest.mark.sumo
+def test_a_plug_in_departing_half_charged_burns_fuel_earlier_live_and_replayed(tmp_path):
+    """Three twins on three parallel 5.5-km roads at 22 m/s, 1.2 MJ usable: one departs charged
+    (no param), one with its own chargeLevel at half (166.67 Wh), a flow's with SUMO's old key
+    at 0. Each spends exactly what it departs with, no more; the less charge, the more fuel and
+    the earlier the first edge with fuel; vehicle, edge and class totals agree; the FCD replay
+    books the same. (Before: every one departed charged, 0.333 kWh each.)"""
+    pytest.importorskip("libsumo")
+    import pandas as pd
+    from test_chain_battery_window import run_and_replay, write_equation
+
+    half_wh = U_J / 3600.0 / 2
+    _road(tmp_path, f'<routes>{_vtype()}{_trip("full", "A")}'
+                    f'{_trip("half", "B", _param("device.battery.chargeLevel", half_wh))}'
+                    f'{_trip("e", "C", _param("actualBatteryCapacity", 0), "flow")}</routes>')
+    run_and_replay(tmp_path, [write_equation(tmp_path / "phev.toml", "phev", DOC, {"depleting": {**DEP, "usable_j": U_J}})])
+    got = {}
+    for run in ("o", "r"):
+        veh = pd.read_csv(tmp_path / run / "chain_vehicles.csv", dtype={"key": str}).set_index("key")
+        assert veh.loc["full", "net_kwh"] == pytest.approx(U_J / 3.6e6, rel=1e-9)
+        assert veh.loc["half", "net_kwh"] == pytest.approx(half_wh / 1000, rel=1e-9)
+        assert veh.loc["e.0", "net_kwh"] == pytest.approx(0.0, abs=1e-12)
+        assert veh.loc["e.0", "fuel_l"] > veh.loc["half", "fuel_l"] > veh.loc["full", "fuel_l"] > 0
+        edges = pd.read_csv(tmp_path / run / "chain_edges.csv", dtype={"key": str}).set_index("key")
+        first = {r: next(i for i in range(5) if edges.loc[f"{r}{i}", "fuel_l"] > 0) for r in "ABC"}
+        assert first["C"] == 0 < first["B"] < first["A"]
+        cls = pd.read_csv(tmp_path / run / "chain_classes.csv", dtype={"key": str})
+        for col in ("fuel_l", "net_kwh", "traction_kwh"):
+            assert edges[col].sum() == pytest.approx(veh[col].sum(), rel=1e-9)
+            assert cls[col].sum() == pytest.approx(veh[col].sum(), rel=1e-9)
+        summary = json.loads((tmp_path / run / "summary.json").read_text(encoding="utf-8"))
+        assert summary["chain"]["departure_charge"]["vehicles"] == 2
+        got[run] = veh
+    for col in ("fuel_l", "net_kwh", "traction_kwh", "recuperated_kwh"):
+        assert np.allclose(got["r"].loc[got["o"].index, col], got["o"][col], rtol=1e-6, atol=1e-12)
+
+
+def _scenario(tmp_path, vtypes: str = "") -> object:
+    from test_chain_battery_window import write_equation
+
+    eq = write_equation(tmp_path / "phev.toml", "phev", DOC, {"depleting": {**DEP, "usable_j": U_J}})
+    s = tmp_path / "s.toml"
+    s.write_text(f'equations = ["{eq}"]\n[sumo]\nnet = "n.net.xml"\nroutes = ["r.rou.xml"]\nend = 300\n'
+                 'options = ["--no-warnings", "true"]\n[outputs]\nfigures = false\n' + vtypes, encoding="utf-8")
+    return s
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("where, value, said", [
+    ("vehicle", "-1", r"r\.rou\.xml: vehicle 'v': device\.battery\.chargeLevel must be a number of Wh ≥ 0.*'-1'"),
+    ("vehicle", "half", r"r\.rou\.xml: vehicle 'v': device\.battery\.chargeLevel must be a number.*'half'"),
+    ("vType", "400", r"r\.rou\.xml: vType 'h' \(of vehicle 'v'\): device\.battery\.chargeLevel = '400' Wh is above "
+                     r"the usable energy of phev's plug-in battery \(333\.3 Wh"),
+])
+def test_a_bad_charge_is_refused_naming_the_vehicle_or_vtype_and_the_key(tmp_path, where, value, said):
+    """Negative, not a number, above the usable energy: one UserError naming the file, the
+    vehicle or vType and the key; no output set. A battery electric vehicle's charge far above
+    the plug-in's usable energy is not the plug-in's to refuse (it books no such vehicle)."""
+    pytest.importorskip("libsumo")
+    from sumo_drvpw.sim.run import run_scenario
+
+    p = _param("device.battery.chargeLevel", value)
+    ev = ('<vType id="ev" vClass="passenger" emissionClass="Energy/unknown">'
+          f'{_param("device.battery.chargeLevel", 30000)}</vType>'
+          '<vehicle id="b" type="ev" depart="0"><route edges="C0"/></vehicle>')
+    _road(tmp_path, f'<routes>{_vtype(p if where == "vType" else "")}{ev}'
+                    f'{_trip("v", "A", p if where == "vehicle" else "")}</routes>')
+    with pytest.raises(UserError, match=said):
+        run_scenario(_scenario(tmp_path), tmp_path / "o")
+    assert not (tmp_path / "o" / "summary.json").exists()
+    (tmp_path / "r.rou.xml").write_text(f'<routes>{_vtype()}{ev}{_trip("v", "A")}</routes>', encoding="utf-8")
+    run_scenario(_scenario(tmp_path), tmp_path / "ok")   # the electric car's 30 kWh is not refused
+
+
+@pytest.mark.sumo
+def test_the_scenario_declares_a_vtypes_charge_and_a_vehicle_s_own_wins(tmp_path, capsys):
+    """``[vtypes.h] battery_charge_wh = 100`` departs the vType's vehicles with 100 Wh (over its
+    own param's 300); a vehicle's own param wins over the scenario's; a negative value or one
+    under [vclasses] is refused in one line, exit 2."""
+    pytest.importorskip("libsumo")
+    import pandas as pd
+
+    from sumo_drvpw.cli import main as cli_main
+    from sumo_drvpw.sim.run import run_scenario
+
+    _road(tmp_path, f'<routes>{_vtype(_param("device.battery.chargeLevel", 300))}{_trip("t", "A")}'
+                    f'{_trip("own", "B", _param("device.battery.chargeLevel", 50))}</routes>')
+    run_scenario(_scenario(tmp_path, "[vtypes.h]\nbattery_charge_wh = 100\n"), tmp_path / "o")
+    veh = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv", dtype={"key": str}).set_index("key")
+    assert veh.loc["t", "net_kwh"] == pytest.approx(0.100, rel=1e-9)
+    assert veh.loc["own", "net_kwh"] == pytest.approx(0.050, rel=1e-9)
+    for table, value, said in (("vtypes.h", "-5", "'vtypes.h.battery_charge_wh' must be a number of Wh ≥ 0"),
+                               ("vclasses.passenger", "100", "'vclasses.passenger.battery_charge_wh' is a vType's")):
+        s = _scenario(tmp_path, f"[{table}]\nbattery_charge_wh = {value}\n")
+        capsys.readouterr()
+        assert cli_main(["run", str(s), "--out", str(tmp_path / "bad")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0] and "s.toml" in err[0]
+        assert not (tmp_path / "bad").exists()
