@@ -158,3 +158,37 @@ def test_a_plug_in_hybrid_in_sumo_books_its_battery_then_fuel_live_and_replayed(
         assert rows["r"].loc["phev", col] == pytest.approx(o.loc["phev", col], rel=1e-6)
     edges = pd.read_csv(tmp_path / "o" / "chain_edges.csv").set_index("equation")
     assert edges.loc["phev", "net_kwh"].sum() == pytest.approx(o.loc["phev", "net_kwh"], rel=1e-9)
+
+
+def test_the_trace_columns_of_a_capped_plug_in_sum_to_its_fuel():
+    """fit/chain_linear.linearised_columns of a plug-in with a rated output (40 kW) over four
+    generated 1000-s trips: Σ columns + offset is its fuel on every sample but those whose share on
+    the battery ±1 W changes, around where a trip spends its last joule (nonlinear) — also where it drives
+    on its battery beyond the rating, which burns nothing (before: the rating's fuel booked there,
+    40 kW/0.4 on each of 53 samples, 1.47 kWh of the 23.8 kWh predicted)."""
+    from sumo_drvpw.fit.chain_linear import linearised_columns, predict
+    from sumo_drvpw.model.chain_plugin import fuel_share
+    from sumo_drvpw.model.equations import Equation
+    from sumo_drvpw.model.terms import Inputs
+
+    rng = np.random.default_rng(1)
+    n = 4000
+    v = np.abs(rng.normal(15, 8, n))
+    v[:300] = 0.0
+    trip = np.repeat(np.arange(4), n // 4)
+    x = Inputs(v, rng.normal(0, 0.6, n), rng.normal(0, 0.04, n), np.zeros(n), np.full(n, 1800.0), np.full(n, 1.2),
+               trip=trip)
+    dt, cap = np.ones(n), 40000.0
+    plain = {k: x for k, x in DOC.items() if not k.startswith("recuperation")}  # (braking beyond a limit: no column's)
+    ch = chain_from_dict({**plain, "engine_max_w": cap, "moving_idle_fuel_power_w": 9000.0,
+                          "depleting": {**DEP, "usable_j": 2.0e6}})
+    eq = Equation("e", {"acc": 1.0, "aero": 0.6, "roll": 0.008, "grade": 1.0}, chain=ch)
+    cols, off = linearised_columns(eq, x, dt)
+    p = eq.power(x)
+    spent = ch.evaluate(p, v, dt, None, trip)["spent_j"]
+    # where ±1 W on every sample moves the battery's last joule (the regime changes: no linear column)
+    moved = fuel_share(ch, p + 1.0, v, dt, None, trip) != fuel_share(ch, p - 1.0, v, dt, None, trip)
+    assert 4 <= moved.sum() <= 12
+    over_on_battery = (spent < 2.0e6) & (p / 1.0 + DOC["aux_power_w"] >= cap)
+    assert over_on_battery.sum() > 20
+    np.testing.assert_allclose((sum(cols.values()) + off)[~moved], predict(eq, x, None, dt)[~moved], rtol=1e-9, atol=1e-6)

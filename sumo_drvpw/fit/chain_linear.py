@@ -75,6 +75,7 @@ from sumo_drvpw.fit.chain import chain_target
 from sumo_drvpw.fit.compare import metrics as _metrics, trip_net_energy
 from sumo_drvpw.fit.diagnose.options import check_validation
 from sumo_drvpw.model.chain import EnergyChain
+from sumo_drvpw.model.chain_plugin import fuel_share
 from sumo_drvpw.model.chain_values import zero_output_fuel
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.equations import Equation
@@ -209,9 +210,10 @@ def linearised_columns(equation: Equation, inputs, dt_s=None) -> tuple[dict, np.
             f = lambda c: c.evaluate(p, inputs.v, dt_s, inputs.signals, inputs.trip)["power_w"]  # noqa: E731
             cols["idle_fuel_power_w"] = f(ch) - f(dataclasses.replace(
                 ch, idle_fuel_power_w=0.0, moving_idle_fuel_power_w=None if ch.moving_idle_fuel_power_w is None else 0.0))
-        # at the rated output the booking is the rated output's, no column's
+        # at the rated output the booking is the rated output's, no column's (a plug-in's: on its share on fuel)
         over = over_rated(ch, p, inputs.v, inputs.signals)
-        return cols, np.where(over, ch.paid(p, inputs.v) * rf * (ch.engine_max_w or 0.0) / ch.marginal_efficiency, 0.0)
+        return cols, np.where(over, ch.paid(p, inputs.v) * rf * (ch.engine_max_w or 0.0) / ch.marginal_efficiency
+                              * fuel_share(ch, p, inputs.v, dt_s, inputs.signals, inputs.trip), 0.0)
     aux = ch.auxiliary(n, inputs.signals) + ch.standstill_aux_w * (inputs.v < STANDSTILL_MPS)
     cols["aux"] = ga * aux
     off = np.zeros(n)

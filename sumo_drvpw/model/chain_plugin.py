@@ -112,6 +112,15 @@ def on_battery(need_j, usable_j: float, spent_j=None, trip=None) -> tuple[np.nda
     return share, after
 
 
+def fuel_share(chain, p_w, v_mps, dt_s, signals=None, trip=None) -> np.ndarray:
+    """Each sample's share on fuel, 1 − its share on the battery, of a fuel chain through one
+    series (each ``trip`` starting charged, as :func:`on_battery`); 1 without ``[chain.depleting]``."""
+    if chain.depleting is None:
+        return np.ones(np.shape(p_w))
+    bat = chain.depleting.chain.evaluate(p_w, v_mps, signals=signals)["power_w"]
+    return 1.0 - on_battery(bat * np.asarray(dt_s, float), chain.depleting.usable_j, None, trip)[0]
+
+
 def plug_in(dep: Depleting, fuel_out: dict, bat: dict, share, spent, spent_before, dt) -> dict:
     """The fuel chain's outputs ``fuel_out`` on (1 − share), the battery chain's ``bat`` on
     ``share`` — where a full battery takes less than braking gives, on what it takes — and the
