@@ -32,13 +32,6 @@ SCENARIO_KEY = "battery_charge_wh"
 WH = 3600.0
 
 
-def charge_params(params, where: str) -> dict | None:
-    """{key: (value as written, where)} of the charge keys among an element's ``params``
-    (key → value), None when it writes neither."""
-    got = {k: (params[k], where) for k in CHARGE_KEYS if params.get(k) is not None}
-    return got or None
-
-
 #: the route files' elements whose params declare a charge → the FileVTypes attribute they go in (sim/vtypes.py)
 CHARGE_TAGS = {"vehicle": "vehicle_charge", "trip": "vehicle_charge", "flow": "flow_charge", "vType": "vtype_charge"}
 
@@ -47,14 +40,15 @@ def note_charge(out, path: str, tag: str, el) -> None:
     """The charge params of element ``el`` (its ``<param>`` children read; none but a
     :data:`CHARGE_TAGS` tag's) into ``out``'s (a :class:`~sumo_drvpw.sim.vtypes.FileVTypes`) dict
     of its tag, by id."""
-    got = tag in CHARGE_TAGS and el.attrib.get("id") is not None and charge_params(
-        {p.attrib.get("key"): p.attrib.get("value") for p in el if p.tag.split("}")[-1] == "param"}, path)
-    if got:
+    if not len(el) or tag not in CHARGE_TAGS or el.get("id") is None:  # (most <trip>s: no children)
+        return
+    got = {k: (p.get("value"), path) for p in el if (k := p.get("key")) in CHARGE_KEYS and p.get("value") is not None}
+    if got:  # (children other than <param> have no key)
         out.__dict__.setdefault(CHARGE_TAGS[tag], {})[el.attrib["id"]] = got
 
 
 class DepartureCharges:
-    """Who declares a charge at departure: vehicles (id → :func:`charge_params`), flows (id →
+    """Who declares a charge at departure: vehicles (id → {key: (value as written, file)}), flows (id →
     the same, for ids ``<flow>.<n>``), vTypes (id → the same), the scenario's vTypes (id → (Wh, its file))."""
 
     def __init__(self, vehicles=None, flows=None, vtypes=None, scenario=None):
