@@ -183,3 +183,38 @@ def test_the_scenario_declares_a_vtypes_charge_and_a_vehicle_s_own_wins(tmp_path
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and said in err[0] and "s.toml" in err[0]
         assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.sumo
+def test_a_traci_script_says_an_added_plug_in_s_charge(tmp_path):
+    """Accountant.set_battery_charge in a user's own libsumo loop: a vehicle the script adds
+    departs with the 100 Wh it is told (net 0.1 kWh), the route file's vehicle charged (0.333
+    kWh); a negative charge, or one said after the departure, is a ValueError."""
+    pytest.importorskip("libsumo")
+    import pandas as pd
+
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    _road(tmp_path, f'<routes>{_vtype()}{_trip("t", "A")}</routes>')
+    s = _scenario(tmp_path)
+    conn = start_sumo(load_scenario(s).sumo_args)
+    try:
+        acc = Accountant(conn, scenario=s)
+        conn.addStepListener(acc)
+        conn.route.add("rb", [f"B{i}" for i in range(5)])
+        conn.vehicle.add("added", "rb", typeID="h", depart="now")
+        acc.set_battery_charge("added", 100)
+        with pytest.raises(ValueError, match="≥ 0"):
+            acc.set_battery_charge("later", -1)
+        while conn.simulation.getTime() < 300 - 1e-9:
+            conn.simulationStep()
+        with pytest.raises(ValueError, match="departed already"):
+            acc.set_battery_charge("added", 50)
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    res.write(tmp_path / "o")
+    veh = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv", dtype={"key": str}).set_index("key")
+    assert veh.loc["added", "net_kwh"] == pytest.approx(0.100, rel=1e-9)
+    assert veh.loc["t", "net_kwh"] == pytest.approx(U_J / 3.6e6, rel=1e-9)

@@ -331,6 +331,28 @@ class Accountant(_Listener):
                              "cold start (say it before it departs)")
         chain.set_vehicle_share(vehicle_id, share)
 
+    def set_battery_charge(self, vehicle_id: str, charge_wh) -> None:
+        """Say that vehicle ``vehicle_id`` (e.g. one this script adds with ``vehicle.add``)
+        departs with ``charge_wh`` [Wh] of a plug-in hybrid chain's usable energy left, as a
+        route file's ``device.battery.chargeLevel`` param (sim/chain_charge.py), which this
+        overrides. Call it before the vehicle departs. ValueError when the charge is not a number
+        ≥ 0, the vehicle has departed already, or no equation of the run has a plug-in hybrid's
+        battery; a charge above the usable energy of a chain that books it is refused at its
+        departure."""
+        from sumo_drvpw.sim.chain_charge import CHARGE_LEVEL, _charge_wh
+
+        try:
+            wh = _charge_wh(charge_wh, CHARGE_LEVEL, "set_battery_charge")
+        except UserError as e:
+            raise ValueError(str(e)) from None
+        chain = getattr(self.ledger, "chain", None)
+        if chain is None or not any(chain.plug_in(e) for e in chain.active):
+            raise ValueError("set_battery_charge: no equation of this run has a plug-in hybrid's battery ([chain.depleting])")
+        if vehicle_id in self.stepper.vmap:
+            raise ValueError(f"set_battery_charge: vehicle '{vehicle_id}' has departed already (say it before it departs)")
+        chain.charges = chain.charges or DepartureCharges()
+        chain.charges.vehicles[str(vehicle_id)] = {CHARGE_LEVEL: (wh, "Accountant.set_battery_charge")}
+
     # -- the end --------------------------------------------------------------------------
     def close_trace(self) -> None:
         if self.trace is not None:
