@@ -218,3 +218,26 @@ def test_a_traci_script_says_an_added_plug_in_s_charge(tmp_path):
     veh = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv", dtype={"key": str}).set_index("key")
     assert veh.loc["added", "net_kwh"] == pytest.approx(0.100, rel=1e-9)
     assert veh.loc["t", "net_kwh"] == pytest.approx(U_J / 3.6e6, rel=1e-9)
+
+
+def test_dask_buckets_add_up_the_declared_charges():
+    """An FCD replay on Dask books vehicles in buckets whose ledgers merge_ledgers adds: the
+    vehicles that departed with a declared charge (summary.json chain.departure_charge) are the
+    buckets' sums, as each books its own; a bucket's vehicle departs with U − 3600·charge spent."""
+    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.sim.chain import ChainLedger
+    from sumo_drvpw.sim.chain_charge import CHARGE_LEVEL, DepartureCharges
+    from sumo_drvpw.sim.fcd_dask import merge_ledgers
+    from sumo_drvpw.sim.ledger import Ledger
+
+    ch = chain_from_dict({**DOC, "depleting": {**DEP, "usable_j": U_J}})
+    leds = []
+    for vids in (["a"], ["b", "c"]):
+        led = Ledger(3, 1)
+        led.chain = ChainLedger(["phev"], [ch], 3)
+        led.chain.charges = DepartureCharges({v: {CHARGE_LEVEL: ("100", "r.rou.xml")} for v in vids})
+        led.chain.charges.depart(led.chain, np.arange(len(vids)), vids, ["h"] * len(vids), np.ones((len(vids), 1)))
+        assert led.chain._spent[:len(vids), 0] == pytest.approx(U_J - 3.6e5)
+        leds.append(led)
+    got = merge_ledgers(leds).chain.charges.summary()
+    assert got["vehicles"] == 3 and got["mean_charge_wh"] == pytest.approx(100.0)
