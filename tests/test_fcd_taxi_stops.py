@@ -123,6 +123,20 @@ def test_an_explicit_taxi_has_the_device_whatever_its_params_say(tmp_path):
     assert {v: t.has(v, v) for v in "abcd"} == sumo
 
 
+def _reparks(em, fcd, step):
+    """(time, taxi) of the steps SUMO's emission output writes a taxi standing on its lane
+    between two steps it leaves it out (parked), while the FCD writes it in all three."""
+    import xml.etree.ElementTree as ET
+
+    def rows(path):
+        return {(round(float(ts.get("time")), 6), v.get("id")) for ts in ET.parse(path).getroot()
+                for v in ts if v.get("id", "").startswith("t")}
+
+    written, seen = rows(em), rows(fcd)
+    return sorted((t, v) for t, v in written if (round(t - step, 6), v) in seen - written
+                  and (round(t + step, 6), v) in seen - written)
+
+
 PERSONS = ('<person id="p0" depart="40" departPos="400"><ride from="e" to="e" arrivalPos="900" lines="taxi"/></person>'
            '<person id="p1" depart="150" departPos="1000"><ride from="e" to="e" arrivalPos="1800" lines="taxi"/></person>'
            '<person id="p2" depart="160" departPos="300"><ride from="e" to="e" arrivalPos="1200" lines="taxi"/></person>')
@@ -160,5 +174,13 @@ def test_an_idle_taxi_parking_again_where_its_last_customer_left_books_as_live(t
         booked[out] = (set(zip(trace.time_s, trace.vehicle)),
                        pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key")[["fuel_l"]].sort_index())
     assert list(booked["live"][1].index) == ["t0", "t1"]
+    # SUMO books a re-park once: its emission output writes the taxi in the step it stands
+    # on its lane (between two it is parked in), its emissions device books the next
+    # (tripinfo, probed 2026-11-29: 0 mg in that step, 493.1 mg in the next — one idle step
+    # either way). The live run booked both (before 2026-11-29); now the step on the lane.
+    reparks = _reparks(tmp_path / "em.xml", tmp_path / "fcd.xml", step)
+    assert reparks
+    for t, vid in reparks:
+        assert (t, vid) in booked["live"][0] and (t + step, vid) not in booked["live"][0]
     assert booked["rep"][0] == booked["live"][0]  # the same vehicle-steps
     pd.testing.assert_frame_equal(booked["rep"][1], booked["live"][1], rtol=1e-6)

@@ -249,7 +249,7 @@ class _Rows:
         self.not_bay: set = set()
         #: the route files' taxi devices (fcd_taxi.TaxiDevices; set by replay_fcd, None: none
         #: read), and the parked taxis whose last rider left → when their stop ends [s] (:meth:`_reparks`)
-        self.taxis, self.emptied = None, {}
+        self.taxis, self.emptied, self.reparked = None, {}, set()
         self.person, self.vehicletype, self.calibrator = _Person(self), _VType(self), _Calib(self)
 
     def saw(self, ids) -> None:
@@ -307,6 +307,8 @@ class _Rows:
         entry = None
         if "off" in c:  # the row a vehicle parks in: its move into the space, booked as driven
             entry, self.on_lane_ids = _parks_now(c["id"], c["off"], self.on_lane_ids)
+            if self.reparked:  # (its re-park booked once, on its lane: no entry in the next row)
+                self.on_lane_ids, self.reparked = self.on_lane_ids - self.reparked, set()
             # at the slope SUMO gave it then, its space's, as live (where the FCD has slopes)
             self.entry_slope = (dict(zip(c["id"][entry], np.radians(np.asarray(c["slope"], float)[entry])))
                                 if "slope" in c and entry.any() else {})
@@ -344,10 +346,12 @@ class _Rows:
         last rider leaves at a parking stop and no dispatch follows, SUMO keeps that stop as
         the idle one (``MSIdling_Stop::idle``: triggered, parking) once its unloading is over
         (:meth:`TaxiDevices.unloading_s`), and libsumo reads the taxi on its lane, standing, in
-        that step, parked again (a parking entry, :func:`_parks_now`) from the next — while
-        SUMO's FCD writes it at its space all along (SUMO 1.28: a person at 1-s and 0.5-s
-        steps, a container at 1-s steps). Rows written every step only (not sparser:
-        :attr:`kinetic` None)."""
+        that step, parked again from the next — while SUMO's FCD writes it at its space all
+        along (SUMO 1.28: a person at 1-s and 0.5-s steps, a container at 1-s steps). That
+        step is booked standing on its lane, the next not as a parking entry: SUMO books the
+        re-park once (its emission output the step on the lane, its emissions device the
+        next; :meth:`sumo_drvpw.sim.parking.Parking.started`). Rows written every step only
+        (not sparser: :attr:`kinetic` None)."""
         if self.kinetic is not None or not self.riders_told:
             return c
         ids, off, now = c["id"], c["off"], self.t - self.dt
@@ -370,6 +374,7 @@ class _Rows:
             return c
         off = off.copy()
         off[k] = False
+        self.reparked = set(ids[k])
         return dict(c, off=off)
 
     def _bays(self, c: dict) -> dict:

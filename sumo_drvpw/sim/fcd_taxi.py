@@ -14,7 +14,7 @@ container taxis with a 10-s stop parked for up to 470 s). The replay takes such 
 triggered by what it cannot see: their parked rows are booked parked and counted as untold
 (:mod:`sumo_drvpw.sim.fcd_idle`). With ``idle-algorithm`` randomCircling the taxi drives
 on and its stops end as planned. A taxi whose last rider leaves while it stands parked, with
-no dispatch, stays at that stop as its idle one, one step on its lane between (the replay:
+no dispatch, stays at that stop as its idle one, one step on its lane between, booked once (the replay:
 ``fcd_conn._Rows._reparks``).
 """
 

@@ -134,6 +134,8 @@ class Parking:
         #: vehicle id → its slope [rad] in the step its parking ended (back on its lane, its
         #: stop not yet over, SUMO still gives it its space's) or began (read once)
         self.once: dict[str, float] = {}
+        #: vehicles whose parking ended in this step, and in the step before (:meth:`started`)
+        self.back, self.back_before = set(), set()
 
     def _standing(self, vid: str, stops=None) -> tuple[int, float] | None:
         """The lane number and position of vehicle ``vid`` at its current stop (``stops``:
@@ -168,7 +170,10 @@ class Parking:
                 return d
         ledger.veh_parked[i] = True
         stops = self.conn.vehicle.getStops(vid, 1)
-        entry = self._standing(vid, stops) if moved_in else None
+        # back on its lane for one step and parked again (an idle taxi whose last customer
+        # left: its stop kept as the idle one): SUMO books that once — its emission output the
+        # step on the lane, its emissions device this one — so this one is not booked
+        entry = self._standing(vid, stops) if moved_in and vid not in self.back_before else None
         if entry is not None and self.slope is not None:  # at the slope SUMO gives it then: its space's
             s = float(self.slope(vid))
             if -90.0 <= s <= 90.0:
@@ -246,6 +251,7 @@ class Parking:
         vehicles read changes."""
         changed = False
         self.once = {}
+        self.back_before, self.back = self.back, set()
         waking, self.waking = self.waking, set()
         for vid in waking:  # back on the road a step ago, switched off at its stop: on now
             i = vmap.get(vid)
@@ -268,6 +274,7 @@ class Parking:
                 if off:
                     continue
                 self._unpark(ledger, i)
+                self.back.add(vid)
                 changed = True
             if i is not None and not off and self.slope is not None:
                 s = float(self.slope(vid))
