@@ -76,7 +76,7 @@ from sumo_drvpw.fit.compare import metrics as _metrics, trip_net_energy
 from sumo_drvpw.fit.diagnose.options import check_validation
 from sumo_drvpw.model.chain import EnergyChain
 from sumo_drvpw.model.chain_plugin import fuel_share
-from sumo_drvpw.model.chain_values import zero_output_fuel
+from sumo_drvpw.model.chain_values import engine_demand, zero_output_fuel
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.model.terms import term_matrix
@@ -175,10 +175,9 @@ def gains(chain: EnergyChain, p_w, v_mps, signals=None, dt_s=None, trip=None) ->
 def over_rated(chain: EnergyChain, p, v, signals=None) -> np.ndarray:
     """Where a fuel chain's engine output demand reaches its rated output (``engine_max_w``):
     fuel booked at the rating, the target's change per W of demand 0; False everywhere without one."""
-    if chain.engine_max_w is None:
+    if chain.engine_max_w is None:  # (nothing to evaluate)
         return np.zeros(np.shape(p), bool)
-    eng = np.maximum(p, 0.0) / _eff(chain.traction_efficiency, v, p) + chain.auxiliary(np.size(p), signals)
-    return eng >= chain.engine_max_w
+    return engine_demand(chain, p, v, signals).at_rating  # (the model's one engine formula)
 
 
 def linearised_columns(equation: Equation, inputs, dt_s=None) -> tuple[dict, np.ndarray]:

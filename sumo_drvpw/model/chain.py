@@ -109,7 +109,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.chain_buffer import _durations, _starts, buffered_return, usable_window
 from sumo_drvpw.model.chain_plugin import depleting_from_dict, on_battery, plug_in
 from sumo_drvpw.model.chain_values import Efficiency, Table, _efficiency, _nonneg, _number, provenance_table  # noqa: F401
-from sumo_drvpw.model.chain_values import engine_capped, engine_keys, zero_output_fuel
+from sumo_drvpw.model.chain_values import engine_demand, engine_keys
 from sumo_drvpw.model import chain_values as _values
 from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
 
@@ -357,9 +357,9 @@ class EnergyChain:
 
     def _fuel(self, p, v, n, signals, dt_s=None, trip=None, stored_j=None, sustaining=None) -> dict:
         on, extra, eta_t = self.engine_on(p, v), {}, _eval(self.traction_efficiency, v, p)  # (:meth:`paid`: on | cs)
-        eng, over = engine_capped(np.maximum(p, 0.0) / eta_t + self.auxiliary(n, signals), self.engine_max_w)
-        pf = (np.where(on, zero_output_fuel(self.idle_fuel_power_w, self.moving_idle_fuel_power_w, v, STANDSTILL_MPS), 0.0)
-              + np.where(on | self.charge_sustaining, eng / self.marginal_efficiency, 0.0))
+        e = engine_demand(self, p, v, signals, eta_t)  # (model/chain_values.py: the one engine formula)
+        eng, over = e.delivered_w, e.beyond_w
+        pf = np.where(on, e.zero_output_w, 0.0) + np.where(on | self.charge_sustaining, eng / self.marginal_efficiency, 0.0)
         if self.recuperation_round_trip:  # a charge-sustaining hybrid's braking energy, given back
             lim = np.inf if self.recuperation_limit_w is None else self.recuperation_limit_w
             if self.battery_usable_j is None:

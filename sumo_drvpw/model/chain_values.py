@@ -4,11 +4,12 @@ checked numbers of a ``[chain]`` table (:mod:`sumo_drvpw.model.chain` reads them
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.constants import FUELS
+from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
 
 
 @dataclass(eq=False)
@@ -215,3 +216,40 @@ def engine_capped(eng_w, max_w: float | None) -> tuple:
     if max_w is None:
         return eng_w, None
     return np.minimum(eng_w, max_w), np.maximum(eng_w - max_w, 0.0)
+
+
+class Engine(NamedTuple):
+    """A fuel chain's engine at each sample (:func:`engine_demand`) [W]."""
+
+    delivered_w: np.ndarray      #: the output it delivers, min(E, P_max)
+    beyond_w: np.ndarray | None  #: the demand above its rated output, max(E − P_max, 0); None without one
+    at_rating: np.ndarray        #: where the demand reaches the rated output (E ≥ P_max; False without one)
+    zero_output_w: np.ndarray | float  #: the fuel power at zero output (:func:`zero_output_fuel`)
+
+
+def engine_demand(chain, p, v, signals=None, eta_t=None) -> Engine:
+    """A fuel chain's engine, the one formula (the chain's evaluation, model/chain.py, and the
+    chain trace's linearisation, fit/chain_linear.py, both read it): the output demand
+
+        E = max(P, 0)/η_t(v, P) + P_aux                                  [W]
+
+    (P: driving power, η_t: ``traction_efficiency``, P_aux: the chain's auxiliary draw —
+    constant, loads, HVAC, :meth:`~sumo_drvpw.model.chain.EnergyChain.auxiliary`), capped at the
+    rated output P_max (``engine_max_w``; the demand above it not delivered), and the fuel at zero
+    output: the idle fuel standing, ``moving_idle_fuel_power_w`` while moving where declared.
+
+    Parameters
+    ----------
+    chain : the fuel chain (:class:`~sumo_drvpw.model.chain.EnergyChain`)
+    p, v : driving power [W], speed [m/s] per sample
+    signals : column → array (the loads, the HVAC temperature)
+    eta_t : η_t per sample where the caller has it (a table evaluated once), else evaluated here
+    """
+    if eta_t is None:
+        eff = chain.traction_efficiency
+        eta_t = eff(v, p) if isinstance(eff, Table) else eff
+    eng = np.maximum(p, 0.0) / eta_t + chain.auxiliary(np.size(p), signals)
+    delivered, beyond = engine_capped(eng, chain.engine_max_w)
+    at = np.zeros(np.shape(p), bool) if beyond is None else eng >= chain.engine_max_w
+    return Engine(delivered, beyond, at,
+                  zero_output_fuel(chain.idle_fuel_power_w, chain.moving_idle_fuel_power_w, v, STANDSTILL_MPS))
