@@ -274,13 +274,14 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     from sumo_drvpw.fit.chain_fuel import engine_off_for
 
     cut = declared_fuel_cut(eq) if args.target == "fuel" else None  # declared: kept
+    engine = {}
     if args.target == "fuel":
         from sumo_drvpw.fit.chain_fuel import declared_engine
 
-        declared_engine(eq, streamed=True)
+        engine = declared_engine(eq)  # a moving zero-output fuel fitted, a rated output kept
 
     spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut,
-                     engine_off_for(veh, False, getattr(args, "engine_off", "profile")))  # (battery: at the fit)
+                     engine_off_for(veh, False, getattr(args, "engine_off", "profile")), **engine)  # (battery: at the fit)
     infos = []
 
     def reduce(make):

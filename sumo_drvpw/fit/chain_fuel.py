@@ -33,7 +33,6 @@ import numpy as np
 
 from sumo_drvpw.fit.chain import (ETA_MIN, ChainFit, _bic, _col, _covariance, _nan_none, _solve,
                                   _stats)
-from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain_checks import reading
 from sumo_drvpw.model.chain import EnergyChain, corrected_fuel_power
 from sumo_drvpw.model.constants import STANDSTILL_MPS
@@ -286,11 +285,7 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
                                low, fuel, fuel_cut_below_w, tmpl.charge_sustaining, battery_w is not None)
     if moving_idle:
         set_moving(chain, params, beta, _covariance(xs, rss, active), active, fuel)
-    if tmpl.engine_max_w is not None:
-        chain.engine_max_w = tmpl.engine_max_w
-        params["engine_max_w"] = {"value": tmpl.engine_max_w, "std_err": None, "at_bound": False,
-                                  "how": "profiled (RSS, kept by BIC)" if capped else "declared",
-                                  "reading": f"the engine's rated output {tmpl.engine_max_w / 1000:.0f} kW"}
+    set_rating(chain, params, tmpl.engine_max_w, "profiled (RSS, kept by BIC)" if capped else "declared")
     fit_standing = stand if profiled else standing_sums(v, y, w, ok)
     if idling:
         note_idling(params, stand)
@@ -329,6 +324,16 @@ def set_moving(chain: EnergyChain, params: dict, beta, se, active, fuel: str) ->
                     "the idle fuel (friction at road engine speed; std_err of that excess)")}
 
 
+def set_rating(chain: EnergyChain, params: dict, cap: float | None, how: str) -> None:
+    """The engine's rated output ``cap`` [W] at the fitted chain's wheels (None: none) into ``chain``
+    and ``params``, with ``how`` it was found (declared, profiled)."""
+    if cap is None:
+        return
+    chain.engine_max_w = cap
+    params["engine_max_w"] = {"value": cap, "std_err": None, "at_bound": False, "how": how,
+                              "reading": f"the engine's rated output {cap / 1000:.0f} kW"}
+
+
 def profile_cap(solve, p, ok, rss0: float, n: int, k: int, yy: float):
     """The engine's rated output profiled on the fit's RSS (``solve(cap)`` → (β, RSS, active, xs)):
     a coarse grid over the driving power's upper half, refined by bounded Brent search; kept
@@ -348,12 +353,12 @@ def profile_cap(solve, p, ok, rss0: float, n: int, k: int, yy: float):
     return (cap, fit) if _bic(fit[1], n, k + 1, yy) < _bic(rss0, n, k, yy) else None
 
 
-def declared_engine(equation, streamed: bool = False) -> dict:
+def declared_engine(equation) -> dict:
     """What a fuel chain's calibration does with the heavy-engine keys the chain of ``equation``
-    declares (model/chain.py), as :func:`calibrate_fuel`'s keywords: a moving zero-output fuel
+    declares (model/chain.py), as :func:`calibrate_fuel`'s keywords (and the streamed
+    calibration's, fit/chain_stream.py ``ChainSpec``): a moving zero-output fuel
     (``moving_idle_fuel_power_w``) is fitted (≥ the idle fuel), a rated output (``engine_max_w``)
-    kept, at the wheels: (P_max − P_aux)·η_t of the declared chain, the fitted chain's η_t being 1. ``streamed``: the calibration on statistics streamed in batches, which fits neither:
-    UserError naming the file where it declares one, not dropped without a word."""
+    kept, at the wheels: (P_max − P_aux)·η_t of the declared chain, the fitted chain's η_t being 1."""
     ch = getattr(equation, "chain", None)
     kw = {"moving_idle": getattr(ch, "moving_idle_fuel_power_w", None) is not None,
           "engine_max_w": getattr(ch, "engine_max_w", None)}
@@ -361,8 +366,4 @@ def declared_engine(equation, streamed: bool = False) -> dict:
         # the fitted chain has η_t 1 and its auxiliaries in the idle fuel: the rating at the wheels,
         # where P/η_t + P_aux reaches it
         kw["engine_max_w"] = (kw["engine_max_w"] - ch.aux_power_w) * ch.traction_efficiency
-    if streamed and (kw["moving_idle"] or kw["engine_max_w"] is not None):
-        raise UserError(f"{ch.where} [chain]: moving_idle_fuel_power_w and engine_max_w are calibrated on logs "
-                        "read whole into memory only; the streamed calibration (local or Dask engine) would drop "
-                        "them: calibrate in memory, or on an equation without them")
     return kw

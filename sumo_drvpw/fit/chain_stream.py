@@ -37,7 +37,7 @@ from sumo_drvpw.fit.chain import (LIMIT_QUANTILES, ChainFit, _bic, _col, _covari
                                   battery_columns, battery_design, factor_rows, solve_factor, too_few_samples)
 from sumo_drvpw.fit.chain_fuel import (CITY_SPEED_MPS, fuel_bounds, fuel_chain, fuel_design, fuel_grid,
                                        fuel_target_text, idles_at_stops, note_conventional, note_declared,
-                                       note_idling, standing_sums, fuel_names)
+                                       note_idling, set_moving, set_rating, standing_sums, fuel_names)
 from sumo_drvpw.fit.stream import _add_counts
 
 #: the braking powers' bins: their float64 bits shifted right by this (12 mantissa bits kept)
@@ -55,7 +55,9 @@ class ChainSpec:
     driving power (None: the log's must be used); logged ``loads``; ``hvac`` {column,
     setpoint_c} or None; ``candidates`` of the stepwise road load fitted in the same pass
     (None: none); the fuel, a declared overrun cut-off and the engine-off threshold of a
-    fuel chain ("profile", −inf: never, or W)."""
+    fuel chain ("profile", −inf: never, or W), and the engine keys it fits or keeps as in memory
+    (:func:`~sumo_drvpw.fit.chain_fuel.declared_engine`: ``moving_idle`` fitted, ``engine_max_w``
+    [W] at the wheels kept)."""
 
     target: str
     equation: object = None
@@ -66,6 +68,8 @@ class ChainSpec:
     fuel: str = "gasoline"
     fuel_cut_below_w: float | None = None
     engine_off: "str | float" = "profile"
+    moving_idle: bool = False
+    engine_max_w: float | None = None
 
 
 def quantile_of_order(order, n: int, q: float) -> float:
@@ -199,6 +203,9 @@ class ChainStats:
                                               charge_sustaining=False) if t.engine_off_below_w > -np.inf]
                 self.grid += extra
                 self.conv += [True] * len(extra)
+            for tmpl in self.grid:  # (as calibrate_fuel: the moving zero-output fuel's column, the rating kept)
+                tmpl.moving_idle_fuel_power_w = 0.0 if spec.moving_idle else None
+                tmpl.engine_max_w = None if spec.engine_max_w is None else float(spec.engine_max_w)
 
     def columns(self):
         return None  # every column: the fuel flow, air flow and fuel trims are found by name
@@ -517,6 +524,9 @@ class ChainStats:
         chain, params = fuel_chain(sp.loads, beta, _covariance(xs, rss, act), act, tmpl.engine_off_below_w,
                                    tmpl.engine_on_above_mps, self.w_low / max(sw, 1e-12), sp.fuel,
                                    sp.fuel_cut_below_w, tmpl.charge_sustaining, self.battery)
+        if sp.moving_idle:
+            set_moving(chain, params, beta, _covariance(xs, rss, act), act, sp.fuel)
+        set_rating(chain, params, tmpl.engine_max_w, "declared")
         if idling:
             note_idling(params, self.standing)
         elif conventional:
