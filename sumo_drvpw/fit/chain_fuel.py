@@ -325,13 +325,17 @@ def set_moving(chain: EnergyChain, params: dict, beta, se, active, fuel: str) ->
 
 
 def set_rating(chain: EnergyChain, params: dict, cap: float | None, how: str) -> None:
-    """The engine's rated output ``cap`` [W] at the fitted chain's wheels (None: none) into ``chain``
-    and ``params``, with ``how`` it was found (declared, profiled)."""
+    """The engine's rated output into ``chain`` and ``params`` from ``cap`` [W], the driving power
+    at which the design (:func:`fuel_design`) caps the line (None: none), with ``how`` it was found
+    (declared, profiled). The chain caps its engine demand max(P, 0) + P_aux (model/chain_values.py
+    ``engine_demand``; η_t 1): its rating is ``cap`` + the fitted constant auxiliary power (a
+    charge-sustaining fit's ``aux_power_w``; 0 where the auxiliaries are in the idle fuel), so the
+    written chain books what the fit fitted."""
     if cap is None:
         return
-    chain.engine_max_w = cap
-    params["engine_max_w"] = {"value": cap, "std_err": None, "at_bound": False, "how": how,
-                              "reading": f"the engine's rated output {cap / 1000:.0f} kW"}
+    chain.engine_max_w = cap + chain.aux_power_w
+    params["engine_max_w"] = {"value": chain.engine_max_w, "std_err": None, "at_bound": False, "how": how,
+                              "reading": f"the engine's rated output {chain.engine_max_w / 1000:.0f} kW"}
 
 
 def profile_cap(solve, p, ok, rss0: float, n: int, k: int, yy: float):
