@@ -48,6 +48,10 @@ def configure(p):
                    help="fuel chain: the engine never stops ('never': a conventional engine without "
                         "start-stop), or stops below this driving power in W (default: profiled from "
                         "the log, and 'never' where it idles at stops)")
+    g.add_argument("--engine-max", choices=("declared", "profile"), default="declared", dest="engine_max",
+                   help="fuel chain: the engine's rated output (engine_max_w): 'declared' (default: kept where "
+                        "the --equation file's chain declares one, else none) or 'profile' (profiled on the "
+                        "fit's residuals, kept only where its BIC beats the line without; fitted in memory)")
     g.add_argument("--efficiency", choices=("constant", "power", "speed-power"), default="constant",
                    help="battery chain: traction and recuperation efficiency as constants (default) "
                         "or tables over |power| (and speed), fitted on a piecewise-linear basis")
@@ -404,6 +408,9 @@ def main_chain(args) -> int:
         raise UserError(f"--efficiency {efficiency} goes with --target battery (a fuel chain's "
                         "efficiency is its Willans line)")
     args.engine_off = engine_off_option(args)
+    rating = getattr(args, "engine_max", "declared")
+    if rating != "declared" and args.target != "fuel":
+        raise UserError(f"--engine-max {rating} goes with --target fuel (an engine's rated output)")
     inputs = existing_paths(args.logs, args.vehicle, args.equation)
     check_output_path(out, inputs, "file")
     from sumo_drvpw.fit.chain_checks import not_a_power
@@ -425,16 +432,20 @@ def main_chain(args) -> int:
             raise UserError(f"--hvac {args.hvac}: give COLUMN[:SETPOINT_C] with a cabin set-point in "
                             "-60 … 60 °C")
     engine = getattr(args, "engine", "memory")
-    if engine != "memory" and efficiency == "constant":  # streamed, bounded memory
+    if engine != "memory" and efficiency == "constant" and rating == "declared":  # streamed, bounded memory
         from sumo_drvpw.cli._scale import calibrate_chain_streamed
 
         return calibrate_chain_streamed(args, out, inputs, hvac)
     if engine == "dask":
         raise UserError(f"--engine dask with --target {args.target} fits constant efficiencies only "
-                        f"(--efficiency {efficiency} is fitted in memory): leave --engine out")
+                        f"(--efficiency {efficiency} is fitted in memory): leave --engine out" if rating == "declared" else
+                        "--engine dask: --engine-max profile is fitted in memory (its search reads the "
+                        "logs once per cap tried): leave --engine out")
     if engine == "local":
         print(f"note: --efficiency {efficiency} is fitted in memory (the tables' knots are quantiles of "
-              "the driving power); only constant efficiencies are streamed")
+              "the driving power); only constant efficiencies are streamed" if rating == "declared" else
+              "note: --engine-max profile is fitted in memory (its search reads the logs once per cap "
+              "tried); a declared rated output is streamed")
     ro = read_options(args, [args.equation] if args.equation else ())
     m, mw = load_measured_pair(args.logs, args.vehicle, ro, args.target)
     note_counts(m.counts)
@@ -488,7 +499,7 @@ def main_chain(args) -> int:
     m = keep_arrays(m, sorted(keep))  # the table goes with the last reference to it
     del mw
     fit = calibrate_on(m, eq, loads=args.load, hvac=hvac, p_drive_w=p_in, efficiency=efficiency,
-                       engine_off=args.engine_off)
+                       engine_off=args.engine_off, rating=rating)
     eq.name = args.name or out.stem
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": m.log.files, "target": m.source, "road_load": road,

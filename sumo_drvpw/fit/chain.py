@@ -438,9 +438,12 @@ def declared_fuel_cut(equation) -> float | None:
 
 def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engine_off="profile",
                  mask=None, p_drive_w=None, fixed: dict | None = None,
-                 efficiency: str = "constant", warmup_rate=None) -> ChainFit:
+                 efficiency: str = "constant", warmup_rate=None, rating: str = "declared") -> ChainFit:
     """Calibrate the chain of ``m.target`` on a :class:`~sumo_drvpw.data.measured.Measured`;
-    fit on ``m.usable`` (and ``mask``).
+    fit on ``m.usable`` (and ``mask``). A fuel chain's rated output (``engine_max_w``):
+    ``rating`` "declared" keeps the one ``equation``'s chain declares (none without), "profile"
+    profiles it (:func:`~sumo_drvpw.fit.chain_fuel.profile_cap`: kept only where its BIC beats
+    the line without; refused where the chain declares one, which it would replace).
 
     The chain's input is ``p_drive_w`` [W] when given, else ``equation``'s driving power.
     Give the *measured* driving power when the log has one (motor torque × speed, the
@@ -459,6 +462,9 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     _check_chain_inputs(m, use, loads, p)
     from sumo_drvpw.fit.chain_checks import check_chain
 
+    if rating != "declared" and m.target != "fuel":
+        raise UserError(f"energy chain: a rated output ({rating!r}) is an engine's: the fuel target only, "
+                        f"got '{m.target}'")
     if m.target == "fuel":
         if hvac:  # the fuel chain's calibration fits no HVAC power: not dropped without a word
             raise UserError(f"hvac {hvac.get('column')}: the HVAC power per kelvin is fitted for the battery "
@@ -468,9 +474,17 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
         from sumo_drvpw.fit.chain_fuel import calibrate_fuel, declared_engine, engine_off_for
 
         cut = declared_fuel_cut(equation)
+        engine = declared_engine(equation)
+        if rating == "profile":
+            if engine["engine_max_w"] is not None:
+                raise UserError(f"{equation.chain.where} [chain]: engine_max_w is declared; a profiled rated output "
+                                "would replace it: keep the declared one, or calibrate on an equation without it")
+            engine["engine_max_w"] = "profile"
+        elif rating != "declared":
+            raise UserError(f"energy chain: the rated output is 'declared' or 'profile', got {rating!r}")
         fit = calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads, mask=use,
                              engine_off=engine_off_for(m.vehicle, m.battery_w is not None, engine_off),
-                             fuel=fuel, fuel_cut_below_w=cut, **declared_engine(equation))
+                             fuel=fuel, fuel_cut_below_w=cut, **engine)
     elif m.target != "battery":
         raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
     else:
