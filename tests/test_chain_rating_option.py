@@ -67,3 +67,40 @@ def test_profile_is_refused_where_a_rating_is_declared_or_no_engine(truck, capsy
         rc, _, err = _run(capsys, *argv, "--engine-max", "profile", "--engine", "memory", "--out", out)
         assert rc == 2 and len(err.splitlines()) == 1 and not out.exists(), err
         assert all(w in err for w in words), err
+
+
+@pytest.mark.parametrize("values", [[0.85, 0.85, 0.85], [0.7, 0.85, 0.9]])
+def test_a_declared_rating_through_an_efficiency_table_is_kept_where_the_engine_reaches_it(values):
+    """A rating declared beside a traction-efficiency table over power is kept at the driving power P
+    where P/η_t(P) + P_aux reaches it (before: the table's chain kept P_max itself, 300 kW where a
+    constant 0.85 keeps (300 − 10)·0.85 = 246.5 kW)."""
+    import numpy as np
+
+    from sumo_drvpw.fit.chain_fuel import declared_engine
+    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.equations import Equation
+
+    doc = {"predicts": "fuel", "engine_max_w": 300e3, "aux_power_w": 1e4}
+    table = chain_from_dict({**doc, "traction_efficiency": {"power_w": [0.0, 1e5, 4e5], "values": values}})
+    cap = declared_engine(Equation("e", {"v1": 1.0}, chain=table))["engine_max_w"]
+    eta = float(np.ravel(table.traction_efficiency(0.0, cap))[0])
+    assert cap / eta + 1e4 == pytest.approx(300e3, rel=1e-9)
+    if len(set(values)) == 1:
+        flat = chain_from_dict({**doc, "traction_efficiency": values[0]})
+        assert cap == pytest.approx(declared_engine(Equation("e", {"v1": 1.0}, chain=flat))["engine_max_w"], rel=1e-9)
+
+
+@pytest.mark.parametrize("extra, words", [
+    ({"traction_efficiency": {"speed_mps": [0.0, 30.0], "values": [0.8, 0.9]}}, ("traction_efficiency", "speed")),
+    ({"aux_power_w": 5000.0, "engine_max_w": 4000.0}, ("aux_power_w", "engine_max_w"))])
+def test_a_declared_rating_with_no_one_driving_power_is_refused(extra, words):
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.fit.chain_fuel import declared_engine
+    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.equations import Equation
+
+    ch = chain_from_dict({"predicts": "fuel", "engine_max_w": 300e3, **extra}, "rated.toml")
+    with pytest.raises(UserError) as e:
+        declared_engine(Equation("e", {"v1": 1.0}, chain=ch))
+    msg = str(e.value)
+    assert "rated.toml" in msg and "\n" not in msg and all(w in msg for w in words), msg

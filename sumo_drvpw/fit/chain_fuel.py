@@ -34,7 +34,8 @@ import numpy as np
 from sumo_drvpw.fit.chain import (ETA_MIN, ChainFit, _bic, _col, _covariance, _nan_none, _solve,
                                   _stats)
 from sumo_drvpw.fit.chain_checks import reading
-from sumo_drvpw.model.chain import EnergyChain, corrected_fuel_power
+from sumo_drvpw.errors import UserError
+from sumo_drvpw.model.chain import EnergyChain, Table, corrected_fuel_power
 from sumo_drvpw.model.constants import STANDSTILL_MPS
 
 #: engine-off thresholds tried for the fuel chain [W]
@@ -362,12 +363,30 @@ def declared_engine(equation) -> dict:
     declares (model/chain.py), as :func:`calibrate_fuel`'s keywords (and the streamed
     calibration's, fit/chain_stream.py ``ChainSpec``): a moving zero-output fuel
     (``moving_idle_fuel_power_w``) is fitted (≥ the idle fuel), a rated output (``engine_max_w``)
-    kept, at the wheels: (P_max − P_aux)·η_t of the declared chain, the fitted chain's η_t being 1."""
+    kept, at the wheels: the driving power P at which P/η_t(P) + P_aux reaches P_max in the declared
+    chain ((P_max − P_aux)·η_t for a constant η_t), the fitted chain's η_t being 1. UserError where
+    there is no such one power: η_t a table over speed, or P_aux ≥ P_max."""
     ch = getattr(equation, "chain", None)
     kw = {"moving_idle": getattr(ch, "moving_idle_fuel_power_w", None) is not None,
           "engine_max_w": getattr(ch, "engine_max_w", None)}
-    if kw["engine_max_w"] is not None and isinstance(ch.traction_efficiency, float):
-        # the fitted chain has η_t 1 and its auxiliaries in the idle fuel: the rating at the wheels,
-        # where P/η_t + P_aux reaches it
-        kw["engine_max_w"] = (kw["engine_max_w"] - ch.aux_power_w) * ch.traction_efficiency
+    if kw["engine_max_w"] is None:
+        return kw
+    # the fitted chain has η_t 1 and its auxiliaries in the idle fuel: the rating at the wheels,
+    # where P/η_t + P_aux reaches it
+    left = kw["engine_max_w"] - ch.aux_power_w
+    if left <= 0:
+        raise UserError(f"{ch.where} [chain]: aux_power_w {ch.aux_power_w:g} W is not below engine_max_w "
+                        f"{kw['engine_max_w']:g} W: the engine's rated output would drive nothing")
+    eff = ch.traction_efficiency
+    if not isinstance(eff, Table):
+        kw["engine_max_w"] = left * eff
+    elif eff.speed_mps is not None:
+        raise UserError(f"{ch.where} [chain]: engine_max_w beside a traction_efficiency table over speed: the "
+                        "driving power at which the engine reaches its rating differs with the speed, and the "
+                        "calibrated chain (η_t 1) caps one driving power; calibrate on an equation whose "
+                        "traction_efficiency is a number or a table over power only")
+    else:  # P/η_t(P) rises from 0 to ≥ left on [0, left] (η_t ≤ 1)
+        from scipy.optimize import brentq
+
+        kw["engine_max_w"] = float(brentq(lambda p: p / float(np.ravel(eff(0.0, p))[0]) - left, 0.0, left, xtol=1e-6))
     return kw
