@@ -102,6 +102,26 @@ def test_help_and_refused_options_load_no_pandas(argv, rc, tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("argv", [
+    ["run", "no-such.sumocfg", "--out", "o"],
+    ["calibrate", "x.parquet", "--out", "o.toml", "--p-enter", "2"],
+    ["calibrate", "no-such.parquet", "--out", "o.toml", "--p-enter", "0.1", "--p-remove", "0.05"],
+], ids=["run of a missing config", "calibrate bad p-enter", "calibrate p-enter over p-remove"])
+def test_refusals_past_the_parser_load_no_pandas(argv, tmp_path):
+    """A run of a config that is not there is refused by the scenario's reading, after the
+    loop's modules are imported (sim/run.py), and calibrate's option checks come before its
+    fit: neither loads pandas (a quarter to half a second of CPU on every refusal; the run's
+    reader imported data/wind.py, which loads pandas, for a wind only some runs have, and
+    cli/calibrate.py the log's modules at its import)."""
+    import subprocess
+    import sys
+
+    p = subprocess.run([sys.executable, "-c", _PROBE, *argv], capture_output=True, text=True, cwd=tmp_path)
+    assert p.stdout.splitlines()[-1].startswith("RC 2 False"), (p.stdout[-500:], p.stderr)
+    assert p.stderr.count("\n") == 1 and "error:" in p.stderr, p.stderr
+    assert not (tmp_path / "o").exists() and not (tmp_path / "o.toml").exists()
+
+
 def test_the_sim_package_still_names_its_public_api():
     """The lazily imported names of sumo_drvpw.sim (README: ``from sumo_drvpw.sim import
     Accountant`` in a user's TraCI script) are the modules' own, ``import *`` gives them, and

@@ -9,8 +9,6 @@ import numpy as np
 
 from sumo_drvpw.cli import add_force, add_log_options, existing_paths, note_counts, output_set, read_options
 from sumo_drvpw.cli._scale import add_engine_arguments, replace_chain
-from sumo_drvpw.data.powertrain import terms_predict_of
-from sumo_drvpw.data.trips import signature_texts, trip_signatures
 from sumo_drvpw.errors import UserError
 
 
@@ -84,8 +82,6 @@ def main(args) -> int:
         raise UserError("--equation, --load and --hvac go with --target battery or fuel")
     if getattr(args, "efficiency", "constant") != "constant":
         raise UserError(f"--efficiency {args.efficiency} goes with --target battery")
-    from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates
-    from sumo_drvpw.data.measured import load_measured
     from sumo_drvpw.fileio import _is_within, check_output_path
 
     for opt in ("p_enter", "p_remove"):
@@ -105,6 +101,9 @@ def main(args) -> int:
         if _is_within(out.resolve(), Path(args.report).resolve()):
             raise UserError(f"--out {out} lies inside --report {args.report}, which is replaced "
                             "whole; write the equation elsewhere")
+    from sumo_drvpw.fit.calibrate import calibrate, resolve_candidates  # (scipy, pandas: after the options' checks)
+    from sumo_drvpw.data.measured import load_measured
+
     cands = resolve_candidates(args.candidates)
     if getattr(args, "engine", "memory") != "memory":  # streamed, bounded memory (issue #14)
         from sumo_drvpw.cli._scale import calibrate_streamed
@@ -119,6 +118,9 @@ def main(args) -> int:
                     p_remove=args.p_remove, counts=m.counts, reference_mass_kg=ref_mass)
     check_identified(res, m.log.describe())
     name = args.name or out.stem
+    from sumo_drvpw.data.powertrain import terms_predict_of
+    from sumo_drvpw.data.trips import signature_texts, trip_signatures
+
     eq = res.to_equation(name, provenance={
         "logs": m.log.files, "vehicle": m.vehicle.path if m.vehicle else None,
         "power_source": m.source, "candidates_spec": args.candidates,
@@ -450,6 +452,8 @@ def main_chain(args) -> int:
     m, mw = load_measured_pair(args.logs, args.vehicle, ro, args.target)
     note_counts(m.counts)
     log_mass = float(np.mean(m.inputs.mass[m.usable])) if m.usable.any() else None  # (say_vclasses)
+    from sumo_drvpw.data.trips import signature_texts, trip_signatures
+
     trips = signature_texts(trip_signatures(m.log.df))  # (the table is dropped before the chain's fit)
     check_load_columns(m, args.load)  # before the road-load fit
     if hvac and hvac["column"] not in m.inputs.signals:

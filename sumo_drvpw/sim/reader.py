@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from sumo_drvpw.data.wind import tailwind_mps
 from sumo_drvpw.sim.network import JUMP_TOL_M
 
 # traci variable ids (traci.constants), fixed by the TraCI protocol
@@ -45,6 +44,8 @@ def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray
     (:func:`sumo_drvpw.data.wind.tailwind_mps`, as a drive log's wind is written)."""
     if speed == 0.0:
         return np.zeros(len(angle_deg))
+    from sumo_drvpw.data.wind import tailwind_mps  # (data/wind.py loads pandas: not for a run in still air)
+
     return tailwind_mps(angle_deg, speed, from_deg)
 
 
