@@ -176,3 +176,40 @@ def test_a_chain_of_some_of_the_steps_vehicles_spreads_back_only_what_the_step_r
     for k in part:
         np.testing.assert_array_equal(part[k], full[k])
         assert not part[k][~sel].any()
+
+
+def test_an_efficiency_table_builds_its_interpolator_once(monkeypatch):
+    """A table evaluated every step builds its scipy interpolator once (it was built per call),
+    again only when its values or an axis are replaced, and not pickled with it; its values are
+    bit for bit a fresh interpolator's, clipped to the axes, |p| on the power axis."""
+    import pickle
+
+    import scipy.interpolate
+
+    real, built = scipy.interpolate.RegularGridInterpolator, []
+
+    class Counting(real):
+        def __init__(self, *a, **kw):
+            built.append(1)
+            super().__init__(*a, **kw)
+
+    monkeypatch.setattr(scipy.interpolate, "RegularGridInterpolator", Counting)
+    rng = np.random.default_rng(7)
+    t = Table(rng.uniform(0.7, 0.95, (4, 5)), np.array([0.0, 5.0, 15.0, 40.0]),
+              np.array([0.0, 5e3, 2e4, 5e4, 9e4]))
+    for k in range(6):
+        v, p = rng.uniform(-1.0, 45.0, 7), rng.normal(0.0, 4e4, 7)
+        want = real((t.speed_mps, t.power_w), t.values, method="linear")(
+            np.column_stack([np.clip(v, 0.0, 40.0), np.clip(np.abs(p), 0.0, 9e4)]))
+        np.testing.assert_array_equal(t(v, p), want)
+    assert len(built) == 1
+    t.values = t.values * 0.9  # replaced: built anew, at the new values
+    np.testing.assert_array_equal(t(10.0, 1e4), real((t.speed_mps, t.power_w), t.values)([[10.0, 1e4]]))
+    assert len(built) == 2
+    back = pickle.loads(pickle.dumps(t))
+    assert "_interp" not in back.__dict__
+    np.testing.assert_array_equal(back(v, p), t(v, p))
+    one = Table(np.array([0.8, 0.9, 0.92]), speed_mps=np.array([0.0, 10.0, 30.0]))  # one axis
+    np.testing.assert_array_equal(one(v, p), real((one.speed_mps,), one.values)(np.clip(v, 0.0, 30.0)[:, None]))
+    np.testing.assert_allclose(one(v, p), np.interp(np.clip(v, 0.0, 30.0), [0.0, 10.0, 30.0], [0.8, 0.9, 0.92]),
+                               rtol=1e-15)

@@ -22,17 +22,29 @@ class Table:
 
     def __call__(self, v, p) -> np.ndarray:
         """Interpolated value at speed ``v`` [m/s] and power ``p`` [W] (|p| is used)."""
-        from scipy.interpolate import RegularGridInterpolator
-
-        axes, pts = [], []
+        pts = []
         if self.speed_mps is not None:
-            axes.append(self.speed_mps)
             pts.append(np.clip(np.asarray(v, float), self.speed_mps[0], self.speed_mps[-1]))
         if self.power_w is not None:
-            axes.append(self.power_w)
             pts.append(np.clip(np.abs(np.asarray(p, float)), self.power_w[0], self.power_w[-1]))
-        f = RegularGridInterpolator(tuple(axes), self.values, method="linear")
-        return f(np.stack(np.broadcast_arrays(*pts), axis=-1))
+        return self._interpolator()(np.stack(np.broadcast_arrays(*pts), axis=-1))
+
+    def _interpolator(self):
+        """The table's scipy interpolator, built once (a chain evaluates its tables every step of
+        a run: building it cost about 6× its evaluation); built again if an axis or the values
+        are replaced."""
+        key = (id(self.values), id(self.speed_mps), id(self.power_w))
+        cached = self.__dict__.get("_interp")
+        if cached is None or cached[0] != key:
+            from scipy.interpolate import RegularGridInterpolator
+
+            axes = tuple(a for a in (self.speed_mps, self.power_w) if a is not None)
+            cached = (key, RegularGridInterpolator(axes, self.values, method="linear"))
+            self.__dict__["_interp"] = cached
+        return cached[1]
+
+    def __getstate__(self) -> dict:  # (pickled to a worker without its interpolator)
+        return {k: x for k, x in self.__dict__.items() if k != "_interp"}
 
     def __eq__(self, other) -> bool:
         return isinstance(other, Table) and self.to_dict() == other.to_dict()
