@@ -3,6 +3,8 @@ with equations no vehicle of the step books (benchmarks/run_ratio.py measures th
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from sumo_drvpw.model.chain import EnergyChain
@@ -66,3 +68,77 @@ def test_equation_booking_no_vehicle_of_the_step_is_not_evaluated():
     x.signals["heater_w"] = np.full(n, 500.0)
     pc = es.category_powers(x, app)
     assert pc[3, 1].sum() != 0 and not pc[[0, 1, 2, 4, 5], 1].any()
+
+
+_RING_ROUTES = """<routes>
+  <vType id="car" vClass="passenger" mass="1500" emissionClass="HBEFA4/PC_petrol_Euro-4"/>
+  <vType id="ev" vClass="passenger" mass="1600" emissionClass="Energy/unknown"/>
+  <route id="ring" edges="a b c d a b c d a b c d"/>
+  <vehicle id="v0" type="car" route="ring" depart="0" departSpeed="0"/>
+  <vehicle id="v1" type="ev" route="ring" depart="3" departSpeed="0">
+    <stop lane="b_0" endPos="150" duration="25" parking="true"/>
+  </vehicle>
+  <vehicle id="v2" type="car" route="ring" depart="6" departSpeed="max" departLane="1"/>
+  <vehicle id="v3" type="car" route="ring" depart="40" departSpeed="0"/>
+</routes>
+"""
+
+
+def _flat_ring(d) -> "Path":
+    """A ring of four 200-m edges, two lanes each, without any z: cars, an electric car that
+    parks on the way, a SUMO config of 240 s at 0.5-s steps."""
+    import subprocess
+
+    import sumolib
+
+    xy = [(0, 0), (200, 0), (200, 200), (0, 200)]
+    (d / "n.nod.xml").write_text("<nodes>" + "".join(
+        f'<node id="n{i}" x="{x}" y="{y}"/>' for i, (x, y) in enumerate(xy)) + "</nodes>", encoding="utf-8")
+    (d / "n.edg.xml").write_text("<edges>" + "".join(
+        f'<edge id="{e}" from="n{i}" to="n{(i + 1) % 4}" numLanes="2" speed="13.89"/>'
+        for i, e in enumerate("abcd")) + "</edges>", encoding="utf-8")
+    subprocess.run([sumolib.checkBinary("netconvert"), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml",
+                    "--no-turnarounds"], check=True, capture_output=True, cwd=d)
+    (d / "r.rou.xml").write_text(_RING_ROUTES, encoding="utf-8")
+    (d / "ring.sumocfg").write_text(
+        '<configuration><input><net-file value="n.net.xml"/><route-files value="r.rou.xml"/></input>'
+        '<time><begin value="0"/><end value="240"/><step-length value="0.5"/></time></configuration>',
+        encoding="utf-8")
+    return d / "ring.sumocfg"
+
+
+def test_a_network_without_elevation_books_its_grade_without_step_grade(tmp_path, monkeypatch):
+    """On a network with no z anywhere the step's grade is the slope where the vehicle
+    stands (0, or a parking space's) and nothing is carried: the loop skips Network.step_grade
+    (a tenth of a step of five cars) and writes the same rows. The run's outputs are byte for
+    byte those of the run that calls it; a network with elevation is not taken for flat."""
+    import json
+
+    from sumo_drvpw.sim import loop, run_scenario
+    from sumo_drvpw.sim.network import Network, load_network
+    from sumo_drvpw.sim.scenario import RoadClassRule
+
+    (tmp_path / "in").mkdir()
+    cfg = _flat_ring(tmp_path / "in")
+    calls, real = [], Network.step_grade
+
+    def spy(self, *a, **kw):
+        calls.append(1)
+        return real(self, *a, **kw)
+
+    monkeypatch.setattr(Network, "step_grade", spy)
+    run_scenario(cfg, tmp_path / "flat", figures=False, progress=False)
+    assert calls == []
+    monkeypatch.setattr(loop, "flat_network", lambda net: False)
+    run_scenario(cfg, tmp_path / "graded", figures=False, progress=False)
+    assert len(calls) > 400  # (the run the shortcut must equal: step_grade every step)
+    for name in ("vehicles.parquet", "edges.parquet", "classes.parquet", "edgedata.xml", "chain_vehicles.csv"):
+        assert (tmp_path / "flat" / name).read_bytes() == (tmp_path / "graded" / name).read_bytes(), name
+    a, b = (json.loads((tmp_path / f / "summary.json").read_text()) for f in ("flat", "graded"))
+    for s in (a, b):
+        s.pop("wall_time_s")
+        s.get("network", {}).pop("table", None)
+    assert a == b
+    assert a["vehicles"] == 4
+    hilly = load_network(Path(loop.__file__).parent / "builtin" / "networks" / "highway.net.xml", RoadClassRule())
+    assert not loop.flat_network(hilly)

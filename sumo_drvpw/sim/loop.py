@@ -88,6 +88,16 @@ class Physics:
 #: rail/bidi_noconflict_insertion with a 400-t Energy-model train, SUMO 1.28, 2026-11-29)
 IMPOSSIBLE_DECEL_MPS2 = 1.2 * G
 
+def flat_network(net) -> bool:
+    """Whether ``net`` has no elevation at all: every profile node at z = +0 and every bin's
+    slope +0 (a network without z in its shapes). Its steps' grades (Network.step_grade) are
+    then the slope given where the vehicle stands, and its rows [lane, pos, 0, 0]: Δz is +0
+    on every step, so nothing is owed and no jump is told."""
+    z, prof = getattr(net, "z_node", None), getattr(net, "profile", None)
+    return (z is not None and prof is not None and not np.any(z) and not np.signbit(z).any()
+            and not np.any(prof) and not np.signbit(prof).any())
+
+
 #: every this many steps the running vehicles' vTypes are read again (a script's setType):
 #: a change books from then on (over traci, each read a round trip: 10× as many); vehicles
 #: on a calibrator's edge, where SUMO changes vTypes itself, are read every step, and in a
@@ -150,6 +160,9 @@ class Stepper:
                                   physics.wind_speed != 0.0 and physics.heading == "getangle"),
                                True, True, self.read_slope or self.sumo_slope))
         self.heading_from_lane = physics.wind_speed != 0.0 and physics.heading == "geometry"
+        #: a network without elevation (every node's z and every bin's slope +0): a step's grade
+        #: is the slope where it stands (0 but at a parking space's), no rise is carried
+        self.flat = flat_network(net)
         method = step_method(conn, physics.ballistic_given)
         self.ballistic = method == "ballistic"
         #: SUMO switches Euler to ballistic when a vehicle of a vType with its own action step
@@ -512,7 +525,11 @@ class Stepper:
         v_state = v  # the speed SUMO gives the state (its outputs write it), whatever books the distance
         if self.ballistic:
             v = v_mean
-        if net.z_node is not None:  # the step's grade: m·g·Δz exactly
+        if self.flat:  # no rise anywhere: step_grade's θ and rows, without its work
+            lim = min(net.max_rad, 0.5 * np.pi)
+            theta = np.clip(theta, -lim, lim)
+            ledger.veh_at[vidx] = np.array([lane, pos, np.zeros(m), np.zeros(m)], float).T
+        elif net.z_node is not None:  # the step's grade: m·g·Δz exactly
             theta, ledger.veh_at[vidx] = net.step_grade(lane, pos, v * dt, ledger.veh_at[vidx], theta,
                                                         (v_mean + 0.5 * dt * np.abs(a)) * dt)  # max(v_t−1, v_t)·Δt
         sig = {} if physics.ambient_c is None else {"ambient_c": np.full(m, physics.ambient_c)}
