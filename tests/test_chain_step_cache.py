@@ -213,3 +213,42 @@ def test_an_efficiency_table_builds_its_interpolator_once(monkeypatch):
     np.testing.assert_array_equal(one(v, p), real((one.speed_mps,), one.values)(np.clip(v, 0.0, 30.0)[:, None]))
     np.testing.assert_allclose(one(v, p), np.interp(np.clip(v, 0.0, 30.0), [0.0, 10.0, 30.0], [0.8, 0.9, 0.92]),
                                rtol=1e-15)
+
+
+def test_mmpevem_battery_builds_no_broadcast_views_of_a_steps_arrays(monkeypatch):
+    """SUMO's MMPEVEM motor and battery (model/mmpevem.SumoMotor.battery) on a step's arrays
+    with signals missing (one number each) and a scalar or per-vehicle auxiliary power builds
+    no broadcast view (it built five, and its loss map two more, per call and step); every
+    output is bit for bit that of the inputs broadcast by hand."""
+    from sumo_drvpw.model.mmpevem import mmpevem_equation
+
+    mo = mmpevem_equation("x", {"maximumRecuperationPower": "40000"}, 1500.0, "x")[0].chain.motor
+    rng, n = np.random.default_rng(11), 6
+    p, v = rng.normal(0.0, 3e4, n), rng.uniform(0.0, 40.0, n)
+    v[2] = 0.0  # standing: the holding force
+    sig = {"accel_mps2": rng.normal(0.0, 1.0, n)}
+    full = {"accel_mps2": sig["accel_mps2"], "grade_rad": np.zeros(n), "load_kg": np.zeros(n)}
+    views = []
+    real_to, real_arrays = np.broadcast_to, np.broadcast_arrays
+
+    def spy_to(x, shape, *a, **kw):
+        views.append(shape)
+        return real_to(x, shape, *a, **kw)
+
+    def spy_arrays(*a, **kw):
+        views.append("arrays")
+        return real_arrays(*a, **kw)
+
+    for aux in (None, 250.0, rng.uniform(100.0, 900.0, n)):
+        monkeypatch.setattr(np, "broadcast_to", spy_to)
+        monkeypatch.setattr(np, "broadcast_arrays", spy_arrays)
+        out = mo.battery(p, v, sig, aux_w=aux)
+        monkeypatch.undo()
+        assert views == [], (aux, views)
+        by_hand = mo.battery(p, v.copy(), full, aux_w=np.full(n, mo.aux_power_w if aux is None else 0.0)
+                             + (0.0 if aux is None else aux))
+        assert set(out) == set(by_hand)
+        for k in out:
+            assert np.asarray(out[k]).shape == (n,), k
+            np.testing.assert_array_equal(out[k], by_hand[k], err_msg=k)
+    np.testing.assert_array_equal(mo.battery(p, 7.0, sig)["power_w"], mo.battery(p, np.full(n, 7.0), sig)["power_w"])

@@ -114,7 +114,8 @@ class LossMap:
 
     def __call__(self, n_rpm, m_nm) -> np.ndarray:
         pts = [np.atleast_1d(np.asarray(n_rpm, float)), np.atleast_1d(np.asarray(m_nm, float))]
-        pts = np.broadcast_arrays(*pts)
+        if pts[0].shape != pts[1].shape:  # (a step's speeds and torques: no views to build)
+            pts = np.broadcast_arrays(*pts)
         axes = (self.speed_rpm, self.torque_nm)
         idx, ok = [], np.ones(pts[0].shape, bool)
         for ax, x in zip(axes, pts):
@@ -148,6 +149,13 @@ class LossMap:
         return np.where(ok, y, np.nan)
 
 
+def _shaped(x, shape, scalar: bool = True) -> np.ndarray:
+    """``x`` as a float array of ``shape``: as it is where it has that shape (or, ``scalar``,
+    is one number, which NumPy's operations broadcast), else a broadcast view."""
+    x = np.asarray(x, float)
+    return x if x.shape == shape or (scalar and x.ndim == 0) else np.broadcast_to(x, shape)
+
+
 @dataclass(frozen=True, eq=False)
 class SumoMotor:
     """MMPEVEM's motor, gear, inverter and battery (module docstring; SI units, speeds of
@@ -174,12 +182,14 @@ class SumoMotor:
         (default :attr:`aux_power_w`; an :class:`EnergyChain` passes its own, loads, HVAC and
         standstill draw included)."""
         p = np.asarray(p_drive_w, float)
-        aux = np.broadcast_to(np.asarray(self.aux_power_w if aux_w is None else aux_w, float), p.shape)
-        v = np.broadcast_to(np.asarray(v_mps, float), p.shape)
+        # (a step's arrays have the samples' shape and a missing signal is one number: no
+        # broadcast view is built for them — elementwise the same operations, bit for bit)
+        aux = _shaped(self.aux_power_w if aux_w is None else aux_w, p.shape)
+        v = _shaped(v_mps, p.shape, scalar=False)
         sig = signals or {}
-        a = np.broadcast_to(np.nan_to_num(np.asarray(sig.get("accel_mps2", 0.0), float)), p.shape)
-        th = np.broadcast_to(np.nan_to_num(np.asarray(sig.get("grade_rad", 0.0), float)), p.shape)
-        load = np.broadcast_to(np.nan_to_num(np.asarray(sig.get("load_kg", 0.0), float)), p.shape)
+        a = np.nan_to_num(_shaped(sig.get("accel_mps2", 0.0), p.shape))
+        th = np.nan_to_num(_shaped(sig.get("grade_rad", 0.0), p.shape))
+        load = np.nan_to_num(_shaped(sig.get("load_kg", 0.0), p.shape))
         moving = np.abs(v) > EPS
         # riders (load L) add to m but not to Θ/r²: m·e_i becomes m + L + (e_i − 1)·m, while P was
         # evaluated with e_i·(m + L) (the equation's fixed acc coefficient)
@@ -224,7 +234,7 @@ class SumoMotor:
         total = u * u / (2.0 * res) - u * np.sqrt(np.maximum(disc, 0.0) / (4.0 * res * res))
         drive = total - aux
         return {"traction_w": np.maximum(drive, 0.0), "recuperated_w": np.minimum(drive, 0.0),
-                "auxiliary_w": np.array(aux, float),
+                "auxiliary_w": np.array(aux, float) if aux.shape == p.shape else np.full(p.shape, aux),
                 "friction_brake_w": np.where(rec, np.minimum(raw - pm, 0.0), 0.0),
                 "power_w": total, "invalid": bad}
 
