@@ -252,3 +252,31 @@ def test_mmpevem_battery_builds_no_broadcast_views_of_a_steps_arrays(monkeypatch
             assert np.asarray(out[k]).shape == (n,), k
             np.testing.assert_array_equal(out[k], by_hand[k], err_msg=k)
     np.testing.assert_array_equal(mo.battery(p, 7.0, sig)["power_w"], mo.battery(p, np.full(n, 7.0), sig)["power_w"])
+
+
+def test_a_chain_of_some_vehicles_takes_their_rows_without_numpy_s_shape_wrappers(monkeypatch):
+    """evaluate_where (a chain booking some of a step's vehicles) selects each per-vehicle
+    input's rows with one search of the mask, without np.ndim and np.shape on the step's
+    arrays (four calls per input and chain each step before); numbers and lists are taken as
+    before, and the outputs are bit for bit the chain's on the selected rows, zeros elsewhere."""
+    from sumo_drvpw.model.mmpevem import evaluate_where
+
+    ch = _fuel(traction_efficiency=0.3, aux_power_w=400.0, running_fuel_per_k=0.01)
+    rng, n = np.random.default_rng(12), 9
+    sel = np.array([True, False, True, True, False, False, True, False, True])
+    p, v = rng.normal(0.0, 2e4, n), rng.uniform(0.0, 30.0, n)
+    sig = {"ambient_c": rng.uniform(-5.0, 25.0, n), "accel_mps2": rng.normal(0.0, 1.0, n)}
+    calls, real_ndim, real_shape = [], np.ndim, np.shape
+    monkeypatch.setattr(np, "ndim", lambda x: calls.append("ndim") or real_ndim(x))
+    monkeypatch.setattr(np, "shape", lambda x: calls.append("shape") or real_shape(x))
+    out = evaluate_where(ch, sel, p, v, 0.5, sig, None)
+    assert calls == []
+    monkeypatch.undo()
+    want = ch.evaluate(p[sel], v[sel], 0.5, {k: x[sel] for k, x in sig.items()})
+    assert set(out) == set(want)
+    for k in out:
+        np.testing.assert_array_equal(out[k][sel], want[k], err_msg=k)
+        assert not out[k][~sel].any(), k
+    listed = evaluate_where(ch, sel, p.tolist(), v, [0.5] * n, {k: x.tolist() for k, x in sig.items()}, None)
+    for k in out:
+        np.testing.assert_array_equal(listed[k], out[k], err_msg=k)

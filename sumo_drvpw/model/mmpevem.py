@@ -373,7 +373,13 @@ def evaluate_where(chain, sel: np.ndarray, p_drive_w, v_mps, dt_s, signals: Mapp
     n = len(sel)
     if sel.all():
         return chain.evaluate(p_drive_w, v_mps, dt_s, signals, **state)
-    take = lambda x: np.asarray(x)[sel] if np.ndim(x) and np.shape(x)[0] == n else x  # noqa: E731
+    idx = np.flatnonzero(sel)  # (one search of the mask, not one per input)
+
+    def take(x):  # a per-vehicle input's selected rows; a number, or another shape, as it is
+        if type(x) is not np.ndarray:  # (np.ndim, np.shape: slow wrappers, on a step's arrays)
+            return x if isinstance(x, (float, int)) else (np.asarray(x)[idx] if np.ndim(x) and np.shape(x)[0] == n else x)
+        return x[idx] if x.ndim and x.shape[0] == n else x
+
     sub = chain.evaluate(take(p_drive_w), take(v_mps), take(dt_s), {k: take(x) for k, x in (signals or {}).items()},
                          **{k: take(x) for k, x in state.items()})
     out = {}
@@ -381,7 +387,7 @@ def evaluate_where(chain, sel: np.ndarray, p_drive_w, v_mps, dt_s, signals: Mapp
         if keys is not None and k not in keys:
             continue
         full = np.zeros(n, dtype=np.asarray(x).dtype)
-        full[sel] = x
+        full[idx] = x
         out[k] = full
     return out
 
