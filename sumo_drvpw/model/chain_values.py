@@ -262,6 +262,6 @@ def engine_demand(chain, p, v, signals=None, eta_t=None) -> Engine:
         eta_t = eff(v, p) if isinstance(eff, Table) else eff
     eng = np.maximum(p, 0.0) / eta_t + chain.auxiliary(np.size(p), signals)
     delivered, beyond = engine_capped(eng, chain.engine_max_w)
-    at = np.zeros(np.shape(p), bool) if beyond is None else eng >= chain.engine_max_w
+    at = np.zeros(eng.shape, bool) if beyond is None else eng >= chain.engine_max_w
     return Engine(delivered, beyond, at,
                   zero_output_fuel(chain.idle_fuel_power_w, chain.moving_idle_fuel_power_w, v, STANDSTILL_MPS))
