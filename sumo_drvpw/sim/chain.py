@@ -514,11 +514,12 @@ class ChainLedger:
         (``dist_m``: (keys, active equations), the distance each booked)."""
         rows = []
         dist_m = np.asarray(dist_m, float).reshape(-1, self.A)[:len(keys)]
+        booked = np.asarray(totals)[:len(keys)][:, list(self.active)].any(axis=-1)  # (one pass, not one per row)
         for i, k in enumerate(keys):
             for j, e in enumerate(self.active):
                 t = totals[i, e]
                 km = float(dist_m[i, j]) / 1000.0
-                if km == 0 and not np.any(t):
+                if km == 0 and not booked[i, j]:
                     continue  # the equation does not book this vehicle (or none on this edge)
                 r = {"key": k, "equation": self.names[e], "distance_km": km}
                 if self.chains[e].predicts == "fuel":
