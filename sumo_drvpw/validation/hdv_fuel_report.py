@@ -270,7 +270,12 @@ def _explained(e: dict | None) -> list[str]:
           f"the next stop; with it the slow trips' error goes from {_pct(hb['the built-in']['slow_pct'], 1)} to "
           f"{_pct(rot['slow_pct'], 1)} % and the zero-output fuel fitted on 30-s means falls "
           f"to an engine's friction plus accessories ({span('zero_output_kw', (30,), 'with rotating inertia')} kW: the S60's map gives "
-          "28–40 kW at 1,400–1,600 rpm). "
+          "28–40 kW at 1,400–1,600 rpm). From the road speed alone — the engine held at one truck's median moving "
+          "speed between its first and top gears' ratios, both read from its log, and scored on the other truck — "
+          "the same inertia brings " + "; ".join(
+              f"{t} from {hb['the built-in'][t]:.1f} to {h[t]:.1f} %" for h in e["hypotheses"]
+              if h["hypothesis"].startswith("rotating inertia, gear from speed") for t in ("veh002", "veh003")
+              if h.get(t) is not None) + ": a form a SUMO run could book. "
           "(3) What stays is on the fast trips, booked high: not the grade's smoothing, nor the air's density, "
           "nor the rated output's cap (which takes the climbs' peaks and makes the total low); the MOVES drag "
           f"and rolling terms (C_d·A 6.1 m², c_r 0.0062) book the fast trips {_pct(e['hypotheses'][0]['fast_pct'], 1)} % "

@@ -123,6 +123,16 @@ def rotating_mass_factor(rpm, v_mps, radius_m: float = TYRE_RADIUS_M) -> np.ndar
     return np.where(v >= 2.0, GILLESPIE[0] + GILLESPIE[1] * n**2, 1.0)
 
 
+def speed_gear_factor(v_mps, engine_rpm: float, top: float, first: float,
+                      radius_m: float = TYRE_RADIUS_M) -> np.ndarray:
+    """Gillespie's mass factor from the road speed alone (what a SUMO run has): the driver keeps
+    the engine near ``engine_rpm`` by shifting, between the ``first`` and ``top`` gears' overall
+    ratios; 1 below 2 m/s."""
+    v = np.asarray(v_mps, float)
+    n = np.clip(engine_rpm * RPM * radius_m / np.maximum(v, 2.0), top, first)
+    return np.where(v >= 2.0, GILLESPIE[0] + GILLESPIE[1] * n**2, 1.0)
+
+
 def s60_zero_output_w(rpm, idle_w: float) -> np.ndarray:
     """The S60 map's zero-output fuel at ``rpm`` [W], never below the idle's ``idle_w``."""
     return np.maximum(np.interp(np.asarray(rpm, float), S60_RPM, S60_ZERO_OUTPUT_W), idle_w)
@@ -262,6 +272,16 @@ def study(folder) -> dict:
         mk = float(np.interp(meas[on].sum(), totals[:, on].sum(1), MASS_GRID_KG))
         other = truck.index[~on]
         hyps.append(_score(f"one mass, {mk / 1e3:.1f} t, fitted on {t}'s trips", booked_l(eq, at_mass(x, mk), dt),
+                           base, meas[other], trips, truck[other], kmh, fitted_on=t))
+    ratio = rpm * RPM * TYRE_RADIUS_M / np.maximum(x.v, 2.0)
+    for t in sorted(truck.unique()):  # the speed-only gear model: read from t's log, scored on the other's
+        on_t = np.char.startswith(trips.astype(str), t)
+        top = float(np.percentile(ratio[on_t & (x.v > 22.0)], 5))
+        first = float(np.percentile(ratio[on_t & (x.v > 2.0) & (x.v < 5.0)], 95))
+        fit = float(np.median(rpm[on_t & (x.v > 2.0)]))  # its engine's median moving speed (not fitted to fuel)
+        other = truck.index[truck != t]
+        hyps.append(_score(f"rotating inertia, gear from speed alone ({fit:.0f} rpm, ratios {top:.1f}–{first:.1f}), "
+                           f"read from {t}'s log", booked_l(eq, x, dt, factor=speed_gear_factor(x.v, fit, top, first)),
                            base, meas[other], trips, truck[other], kmh, fitted_on=t))
     for w, flat in ((30.0, False), (300.0, False), (1000.0, False), (100.0, True)):
         lg = read_trucks(folder, w, flat)
