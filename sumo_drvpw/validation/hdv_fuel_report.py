@@ -277,7 +277,10 @@ def _explained(e: dict | None) -> list[str]:
               if h["hypothesis"].startswith("rotating inertia, gear from speed") for t in ("veh002", "veh003")
               if h.get(t) is not None) + ": a form a SUMO run could book. "
           "(3) What stays is on the fast trips, booked high: not the grade's smoothing, nor the air's density, "
-          "nor the rated output's cap (which takes the climbs' peaks and makes the total low); the MOVES drag "
+          "nor the rated output's cap (which takes the climbs' peaks and makes the total low); the 1-Hz power's "
+          "noise, booked where it is positive and cut where it is negative, takes some (5-s means: fast trips "
+          f"{_pct(next((h['fast_pct'] for h in e['hypotheses'] if h['hypothesis'].startswith('driving power averaged')), 0.0), 1)} %, "
+          "but the slow ones lose as much); the MOVES drag "
           f"and rolling terms (C_d·A 6.1 m², c_r 0.0062) book the fast trips {_pct(e['hypotheses'][0]['fast_pct'], 1)} % "
           "against the ECU's fuel (on the flat at a steady 90 km/h they are the whole road load, about 100 kW at "
           "28 t) — or the ECU reads high (the carbon balance says so). The engine speed these forms read is "

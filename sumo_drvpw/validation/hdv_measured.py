@@ -138,17 +138,22 @@ def s60_zero_output_w(rpm, idle_w: float) -> np.ndarray:
     return np.maximum(np.interp(np.asarray(rpm, float), S60_RPM, S60_ZERO_OUTPUT_W), idle_w)
 
 
-def booked_l(eq, x, dt, chain=None, rpm=None, factor=None, rho=None) -> np.ndarray:
+def booked_l(eq, x, dt, chain=None, rpm=None, factor=None, rho=None, smooth=None) -> np.ndarray:
     """Litres per sample the equation's chain (or ``chain``) books on inputs ``x``; with
     ``factor`` the acceleration term times the rotating-mass factor, with ``rpm`` the moving
     fuelled engine's zero-output fuel the S60's at that speed, with ``rho`` [kg/m³] the
-    equation's drag term (``v3``, a coefficient at RHO_DEFAULT) at that air density."""
+    equation's drag term (``v3``, a coefficient at RHO_DEFAULT) at that air density, with
+    ``smooth`` = (samples, trip per sample) the driving power averaged over that many samples
+    (centred, within each trip) before the chain cuts the fuel below 0."""
     ch = chain or eq.chain
     p = eq.power(x)
     if factor is not None:
         p = p + (factor - 1.0) * x.mass * x.v * x.a
     if rho is not None:
         p = p + (np.asarray(rho, float) / RHO_DEFAULT - 1.0) * eq.terms.get("v3", 0.0) * x.v**3
+    if smooth is not None:
+        p = pd.Series(p).groupby(np.asarray(smooth[1])).transform(
+            lambda q: q.rolling(smooth[0], center=True, min_periods=1).mean()).to_numpy()
     r = ch.evaluate(p, x.v, dt_s=dt)
     litres = r["fuel_l"]
     if rpm is not None:
@@ -296,6 +301,7 @@ def study(folder) -> dict:
             ("the S60's rated output caps the engine (332 kW)", {"chain": capped}, x),
             ("rotating inertia at the logged gear (Gillespie)", {"factor": f_rot}, x),
             ("air density at the logged height (ISA pressure, 20 °C)", {"rho": rho}, x),
+            ("driving power averaged over 5 s before the fuel cut-off (its 1-Hz noise)", {"smooth": (5, trips)}, x),
             ("zero-output fuel at the logged speed + rotating inertia", {"rpm": rpm, "factor": f_rot}, x),
             ("all four", {"rpm": rpm, "factor": f_rot, "chain": capped, "rho": rho}, x)):
         hyps.append(_score(name, booked_l(eq, xx, dt, **kw), base, meas, trips, truck, kmh))
