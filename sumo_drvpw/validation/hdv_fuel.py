@@ -91,6 +91,11 @@ SOURCES = {
                 "Minnesota, Metro Transit): 'a typical bus gets only between four and six miles per gallon'",
     "TRUCKNEWS": "trucknews.com, 'SuperTruck led to real-world truck gains, and more are coming': good fleet "
                  "tractor-trailers 8 mpg (29.4 L/100 km), 2009 best trucks 6–7 mpg",
+    "GILLESPIE": "T. D. Gillespie, Fundamentals of Vehicle Dynamics, SAE (1992), ch. 2: the mass factor of a "
+                 "vehicle's rotating parts, 1 + 0.04 + 0.0025·N² at overall gear ratio N (the measured trucks' "
+                 "check, validation/hdv_measured.py)",
+    "ISA": "ISO 2533:1975 standard atmosphere: pressure 101.325·(1 − 2.25577e-5·h)^5.25588 kPa at height h [m] "
+           "(the measured trucks' air density, validation/hdv_measured.py)",
 }
 
 #: the engine's Willans slope [-], shared by the four chains

@@ -240,7 +240,7 @@ def _explained(e: dict | None) -> list[str]:
                  f"{_pct(h['fast_pct'], 1)} % | {_pct(h['total_pct'], 1)} % |")
     gr = e["gear_ratio_median"]
     L += ["", "(Slow and fast: the mean signed error of those trips. The S60 is docs/sources.md [DDC-S60]; the "
-          f"rotating inertia is Gillespie's mass factor 1.04 + 0.0025·N² at the overall ratio N the logged engine "
+          f"rotating inertia is [GILLESPIE]'s mass factor 1.04 + 0.0025·N² at the overall ratio N the logged engine "
           f"speed and road speed give with a 0.49-m tyre: N is {gr['below_43_kmh']:.1f} (median) below 43 km/h, "
           f"{gr['above_79_kmh']:.1f} above 79 km/h, so the factor is about {1.04 + 0.0025 * gr['below_43_kmh'] ** 2:.2f} in the "
           f"slow phases and {1.04 + 0.0025 * gr['above_79_kmh'] ** 2:.2f} on the highway.)", "",

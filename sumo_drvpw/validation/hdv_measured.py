@@ -82,9 +82,11 @@ S60_MAX_W = 332e3
 #: unloaded (the size code: 22.5 in + 2 × 0.75 × 295 mm), less about 3 % under load. ESTIMATE:
 #: the trucks' tyres are not stated
 TYRE_RADIUS_M = 0.49
-#: Gillespie, Fundamentals of Vehicle Dynamics (SAE 1992), eq. 2-10: the mass factor of a
+#: [GILLESPIE] (hdv_fuel.SOURCES), Fundamentals of Vehicle Dynamics (SAE 1992): the mass factor of a
 #: vehicle's rotating parts, 1 + 0.04 + 0.0025·N² at overall gear ratio N (engine to wheel)
 GILLESPIE = (1.04, 0.0025)
+#: the standard atmosphere's pressure at height h: P_STD·(1 − ISA_LAPSE·h)^ISA_EXPONENT ([ISA], hdv_fuel.SOURCES)
+ISA_LAPSE, ISA_EXPONENT = 2.25577e-5, 5.25588
 #: CO's carbon as CO₂ [kg CO₂ per kg CO]: molar masses 44.0095 and 28.0101 g/mol
 CO_AS_CO2 = 44.0095 / 28.0101
 
@@ -295,12 +297,12 @@ def study(folder) -> dict:
     f_rot = rotating_mass_factor(rpm, x.v)
     capped = dataclasses.replace(eq.chain, engine_max_w=S60_MAX_W)
     h = d["elevation_m"].to_numpy(float)
-    rho = P_STD_KPA * 1e3 * (1.0 - 2.25577e-5 * h) ** 5.25588 / (R_DRY_AIR * (T_REF_C + KELVIN))
+    rho = P_STD_KPA * 1e3 * (1.0 - ISA_LAPSE * h) ** ISA_EXPONENT / (R_DRY_AIR * (T_REF_C + KELVIN))
     for name, kw, xx in (
             ("the S60's zero-output fuel at the logged engine speed", {"rpm": rpm}, x),
             ("the S60's rated output caps the engine (332 kW)", {"chain": capped}, x),
             ("rotating inertia at the logged gear (Gillespie)", {"factor": f_rot}, x),
-            ("air density at the logged height (ISA pressure, 20 °C)", {"rho": rho}, x),
+            ("air density at the logged height ([ISA] pressure, 20 °C)", {"rho": rho}, x),
             ("driving power averaged over 5 s before the fuel cut-off (its 1-Hz noise)", {"smooth": (5, trips)}, x),
             ("zero-output fuel at the logged speed + rotating inertia", {"rpm": rpm, "factor": f_rot}, x),
             ("all four", {"rpm": rpm, "factor": f_rot, "chain": capped, "rho": rho}, x)):
