@@ -94,6 +94,11 @@ SOURCES = {
     "GILLESPIE": "T. D. Gillespie, Fundamentals of Vehicle Dynamics, SAE (1992), ch. 2: the mass factor of a "
                  "vehicle's rotating parts, 1 + 0.04 + 0.0025·N² at overall gear ratio N (the measured trucks' "
                  "check, validation/hdv_measured.py)",
+    "ADVISOR": "NREL ADVISOR 2003 data files (public copy sateesh12/impact-of-uc-on-li-ion, advisor/data/): "
+               "FC_CI330.m (Detroit Diesel Series 60 12.7 L, 332 kW; engine inertia = its mass 4.2 kg/kW × "
+               "(1/3 + 2/9) × 0.075², the Bosch handbook's correlation: 4.36 kg·m²) and "
+               "WH_TractorTrailer_midRR.m (275/80R22.5 drive tyre, rolling radius 0.501 m; 80 kg per tyre and "
+               "wheel, 18 of them)",
     "ISA": "ISO 2533:1975 standard atmosphere: pressure 101.325·(1 − 2.25577e-5·h)^5.25588 kPa at height h [m] "
            "(the measured trucks' air density, validation/hdv_measured.py)",
 }

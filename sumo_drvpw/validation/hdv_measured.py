@@ -17,7 +17,7 @@ hypothesis for its per-trip error is scored on trips it was not fitted on:
 * the chain's form, from published engine physics and **not fitted** (every trip is held
   out): the zero-output fuel of a 12.7-L diesel at the logged engine speed (:data:`S60_RPM`,
   :data:`S60_ZERO_OUTPUT_W`), the rated output's cap (:data:`S60_MAX_W`), the rotating inertia
-  of engine and driveline at the logged gear (:func:`rotating_mass_factor`) and the air's
+  of engine and wheels at the logged gear (:func:`rotating_mass_factor`) and the air's
   density at the logged height.
 
 The engine speed is logged on these trucks, not in SUMO: a form that needs it says what
@@ -78,12 +78,20 @@ S60_RPM = np.array([1200.0, 1400.0, 1600.0, 1800.0])
 S60_ZERO_OUTPUT_W = np.array([16.6e3, 28.3e3, 39.8e3, 53.1e3])
 #: its rated output [W] (docs/sources.md [DDC-S60])
 S60_MAX_W = 332e3
-#: loaded rolling radius of a class-8 truck's drive tyre [m]: 295/75R22.5, 1,014 mm across
-#: unloaded (the size code: 22.5 in + 2 × 0.75 × 295 mm), less about 3 % under load. ESTIMATE:
-#: the trucks' tyres are not stated
-TYRE_RADIUS_M = 0.49
-#: [GILLESPIE] (hdv_fuel.SOURCES), Fundamentals of Vehicle Dynamics (SAE 1992): the mass factor of a
-#: vehicle's rotating parts, 1 + 0.04 + 0.0025·N² at overall gear ratio N (engine to wheel)
+#: rolling radius of a tractor-trailer's drive tyre (275/80R22.5) [m]: ADVISOR's
+#: WH_TractorTrailer_midRR.m ([ADVISOR], hdv_fuel.SOURCES); the trucks' own tyres are not stated
+TYRE_RADIUS_M = 0.501
+#: the rotating inertia of a 12.7-L diesel's engine [kg·m²]: ADVISOR's FC_CI330.m (the S60) —
+#: its mass (4.2 kg per kW of its 332 kW) × (1/3 + 2/9) × (0.075 m)², the Bosch handbook's
+#: correlation as the file writes it
+ENGINE_INERTIA_KGM2 = 4.2 * S60_MAX_W / 1e3 * (1.0 / 3.0 + 2.0 / 9.0) * 0.075**2
+#: the 18 wheels and tyres of a tractor-trailer [kg·m²]: ADVISOR's 80 kg per tyre and wheel
+#: (WH_TractorTrailer_midRR.m, after SAE 2000-01-3432) as solid cylinders of the tyre's radius.
+#: ESTIMATE: axles, brake drums and the gearbox are left out
+WHEELS_INERTIA_KGM2 = 18 * 80.0 * TYRE_RADIUS_M**2 / 2.0
+#: [GILLESPIE] (hdv_fuel.SOURCES), Fundamentals of Vehicle Dynamics (SAE 1992): a passenger car's
+#: mass factor, 1 + 0.04 + 0.0025·N² at overall gear ratio N (engine to wheel) — used here only
+#: as the contrast to a truck's own inertias
 GILLESPIE = (1.04, 0.0025)
 #: the standard atmosphere's pressure at height h: P_STD·(1 − ISA_LAPSE·h)^ISA_EXPONENT ([ISA], hdv_fuel.SOURCES)
 ISA_LAPSE, ISA_EXPONENT = 2.25577e-5, 5.25588
@@ -117,22 +125,40 @@ def carbon_balance_gps(co2_gps, co_gps, hc_gps, fuel: str = "diesel") -> np.ndar
     return co2 / FUELS[fuel]["co2_kg_per_kg"] + np.asarray(hc_gps, float)
 
 
-def rotating_mass_factor(rpm, v_mps, radius_m: float = TYRE_RADIUS_M) -> np.ndarray:
-    """Gillespie's mass factor at the gear the logged engine speed and road speed give
-    (N = ω_engine·r/v); 1 where the truck stands or creeps (v < 2 m/s: the clutch slips)."""
+def mass_factor(n, v_mps, mass_kg: float, engine_kgm2: float = ENGINE_INERTIA_KGM2,
+                wheels_kgm2: float = WHEELS_INERTIA_KGM2, radius_m: float = TYRE_RADIUS_M) -> np.ndarray:
+    """The rotating parts' mass factor at overall gear ratio ``n``: 1 + (I_wheels + I_engine·n²)/(m·r²)
+    (their kinetic energy ½·I·ω² over the vehicle's ½·m·v²); 1 where the truck stands or creeps
+    (v < 2 m/s: the clutch slips)."""
     v = np.asarray(v_mps, float)
-    n = np.where(v >= 2.0, np.asarray(rpm, float) * RPM * radius_m / np.maximum(v, 2.0), 0.0)
-    return np.where(v >= 2.0, GILLESPIE[0] + GILLESPIE[1] * n**2, 1.0)
+    extra = (wheels_kgm2 + engine_kgm2 * np.asarray(n, float) ** 2) / (float(mass_kg) * radius_m**2)
+    return np.where(v >= 2.0, 1.0 + extra, 1.0)
 
 
-def speed_gear_factor(v_mps, engine_rpm: float, top: float, first: float,
-                      radius_m: float = TYRE_RADIUS_M) -> np.ndarray:
-    """Gillespie's mass factor from the road speed alone (what a SUMO run has): the driver keeps
+def gear_ratio(rpm, v_mps, radius_m: float = TYRE_RADIUS_M) -> np.ndarray:
+    """Overall ratio engine ÷ wheel speed from the logged engine and road speeds (0 below 2 m/s)."""
+    v = np.asarray(v_mps, float)
+    return np.where(v >= 2.0, np.asarray(rpm, float) * RPM * radius_m / np.maximum(v, 2.0), 0.0)
+
+
+def rotating_mass_factor(rpm, v_mps, mass_kg: float = MASS_KG, car: bool = False) -> np.ndarray:
+    """The mass factor at the gear the logged engine and road speeds give: the truck's own
+    inertias (:data:`ENGINE_INERTIA_KGM2`, :data:`WHEELS_INERTIA_KGM2`), or with ``car``
+    Gillespie's passenger-car shares (0.04 and 0.0025 of m·r²)."""
+    n = gear_ratio(rpm, v_mps)
+    if car:
+        r2 = float(mass_kg) * TYRE_RADIUS_M**2
+        return mass_factor(n, v_mps, mass_kg, GILLESPIE[1] * r2, (GILLESPIE[0] - 1.0) * r2)
+    return mass_factor(n, v_mps, mass_kg)
+
+
+def speed_gear_factor(v_mps, engine_rpm: float, top: float, first: float, mass_kg: float = MASS_KG) -> np.ndarray:
+    """The truck's mass factor from the road speed alone (what a SUMO run has): the driver keeps
     the engine near ``engine_rpm`` by shifting, between the ``first`` and ``top`` gears' overall
     ratios; 1 below 2 m/s."""
     v = np.asarray(v_mps, float)
-    n = np.clip(engine_rpm * RPM * radius_m / np.maximum(v, 2.0), top, first)
-    return np.where(v >= 2.0, GILLESPIE[0] + GILLESPIE[1] * n**2, 1.0)
+    n = np.clip(engine_rpm * RPM * TYRE_RADIUS_M / np.maximum(v, 2.0), top, first)
+    return mass_factor(n, v, mass_kg)
 
 
 def s60_zero_output_w(rpm, idle_w: float) -> np.ndarray:
@@ -280,7 +306,7 @@ def study(folder) -> dict:
         other = truck.index[~on]
         hyps.append(_score(f"one mass, {mk / 1e3:.1f} t, fitted on {t}'s trips", booked_l(eq, at_mass(x, mk), dt),
                            base, meas[other], trips, truck[other], kmh, fitted_on=t))
-    ratio = rpm * RPM * TYRE_RADIUS_M / np.maximum(x.v, 2.0)
+    ratio = gear_ratio(rpm, x.v)
     for t in sorted(truck.unique()):  # the speed-only gear model: read from t's log, scored on the other's
         on_t = np.char.startswith(trips.astype(str), t)
         top = float(np.percentile(ratio[on_t & (x.v > 22.0)], 5))
@@ -294,21 +320,22 @@ def study(folder) -> dict:
         lg = read_trucks(folder, w, flat)
         name = "no grade (flat road)" if flat else f"elevation smoothed over {w:.0f} m (not 100 m)"
         hyps.append(_score(name, booked_l(eq, at_mass(lg.inputs(), MASS_KG), dt), base, meas, trips, truck, kmh))
-    f_rot = rotating_mass_factor(rpm, x.v)
+    f_rot, f_car = rotating_mass_factor(rpm, x.v), rotating_mass_factor(rpm, x.v, car=True)
     capped = dataclasses.replace(eq.chain, engine_max_w=S60_MAX_W)
     h = d["elevation_m"].to_numpy(float)
     rho = P_STD_KPA * 1e3 * (1.0 - ISA_LAPSE * h) ** ISA_EXPONENT / (R_DRY_AIR * (T_REF_C + KELVIN))
     for name, kw, xx in (
             ("the S60's zero-output fuel at the logged engine speed", {"rpm": rpm}, x),
             ("the S60's rated output caps the engine (332 kW)", {"chain": capped}, x),
-            ("rotating inertia at the logged gear (Gillespie)", {"factor": f_rot}, x),
+            ("rotating inertia at the logged gear: the truck's (ADVISOR's engine and wheels)", {"factor": f_rot}, x),
+            ("rotating inertia at the logged gear: a passenger car's share (Gillespie)", {"factor": f_car}, x),
             ("air density at the logged height ([ISA] pressure, 20 °C)", {"rho": rho}, x),
             ("driving power averaged over 5 s before the fuel cut-off (its 1-Hz noise)", {"smooth": (5, trips)}, x),
             ("zero-output fuel at the logged speed + rotating inertia", {"rpm": rpm, "factor": f_rot}, x),
             ("all four", {"rpm": rpm, "factor": f_rot, "chain": capped, "rho": rho}, x)):
         hyps.append(_score(name, booked_l(eq, xx, dt, **kw), base, meas, trips, truck, kmh))
     lines = []  # the moving line fitted on one truck's blocks, its trips' errors on the other's
-    for label, pp in (("MOVES road load", p0), ("with rotating inertia", p0 + (f_rot - 1.0) * x.mass * x.v * x.a)):
+    for label, pp in (("MOVES road load", p0), ("with the truck's rotating inertia", p0 + (f_rot - 1.0) * x.mass * x.v * x.a)):
         for k in BLOCKS_S:
             for t in sorted(truck.unique()):
                 on = np.char.startswith(trips.astype(str), t)
@@ -333,11 +360,16 @@ def study(folder) -> dict:
     lhv = FUELS["diesel"]["lhv_j_per_kg"] / 1e3  # J per g
     to_wheel = {k: round(wheel / float(np.sum((f * lhv - zero)[fast] * dt[fast])), 3) for k, f in (("ecu", ecu), ("carbon_balance", cb))}
     slow = (x.v > 2.0) & (x.v < 12.0)
+    n_slow, n_fast = float(np.median(ratio[slow])), float(np.median(ratio[x.v > 22.0]))
+    inertia = {"engine_kgm2": round(ENGINE_INERTIA_KGM2, 2), "wheels_kgm2": round(WHEELS_INERTIA_KGM2, 1),
+               "radius_m": TYRE_RADIUS_M, "factor_slow": round(float(mass_factor(n_slow, 10.0, MASS_KG)), 3),
+               "factor_fast": round(float(mass_factor(n_fast, 10.0, MASS_KG)), 3),
+               "car_factor_slow": round(GILLESPIE[0] + GILLESPIE[1] * n_slow**2, 3),
+               "car_engine_kgm2": round(GILLESPIE[1] * MASS_KG * TYRE_RADIUS_M**2, 1)}
     return {"equation": EQUATION, "mass_t": MASS_KG / 1e3, "trips": int(keep.size),
             "mean_abs_pct": round(float(base.abs().mean()), 1), "signal": sig, "per_trip": rows,
-            "moving_lines": lines, "fast_fuel_to_wheel": to_wheel, "hypotheses": [_score("the built-in", b0, base, meas, trips, truck, kmh)] + hyps, "gear_ratio_median": {"below_43_kmh": round(float(np.median(
-                rpm[slow] * RPM * TYRE_RADIUS_M / x.v[slow])), 1), "above_79_kmh": round(float(np.median(
-                    (rpm * RPM * TYRE_RADIUS_M / np.maximum(x.v, 2.0))[x.v > 22.0])), 1)}}
+            "moving_lines": lines, "fast_fuel_to_wheel": to_wheel, "hypotheses": [_score("the built-in", b0, base, meas, trips, truck, kmh)] + hyps, "inertia": inertia,
+            "gear_ratio_median": {"below_43_kmh": round(n_slow, 1), "above_79_kmh": round(n_fast, 1)}}
 
 
 def _mass(m: float):
