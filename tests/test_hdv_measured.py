@@ -145,6 +145,23 @@ def test_a_fuel_that_pays_the_rotating_inertia_is_found_by_that_hypothesis_alone
     assert min(slow) > max(fast) + 0.5
 
 
+def test_a_fuel_through_a_better_driveline_is_found_by_that_hypothesis(tmp_path):
+    """Fuel booked through ADVISOR's 0.92 gearbox instead of the built-in's 0.80: the built-in books
+    every moving trip high, the driveline hypothesis books them all, the inertia's does not."""
+    import dataclasses
+
+    from sumo_drvpw.model.equations import load_equation
+
+    _fead(tmp_path)
+    ch = dataclasses.replace(load_equation(H.EQUATION).chain, traction_efficiency=H.ADVISOR_GEARBOX)
+    _plant(tmp_path, lambda log: _booked_gps(log, H.MASS_KG, chain=ch))
+    r = H.study(tmp_path)
+    by = {h["hypothesis"][:40]: h for h in r["hypotheses"]}
+    assert by["driveline 0.92 (ADVISOR's Eaton 10-speed; "]["mean_abs_pct"] < 0.2
+    assert by["the built-in"]["slow_pct"] > 3.0 and by["the built-in"]["fast_pct"] > 3.0
+    assert by["rotating inertia at the logged gear: the"]["mean_abs_pct"] > by["the built-in"]["mean_abs_pct"]
+
+
 def test_a_noisy_driving_power_flattens_the_per_sample_line():
     """A planted line (30 kW at zero output, η 0.42) under a 1-Hz driving power with 80 kW of
     noise: on 1-s samples the fitted line is flatter with more zero-output fuel; on 60-s blocks

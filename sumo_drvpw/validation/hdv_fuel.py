@@ -98,7 +98,10 @@ SOURCES = {
                "FC_CI330.m (Detroit Diesel Series 60 12.7 L, 332 kW; engine inertia = its mass 4.2 kg/kW × "
                "(1/3 + 2/9) × 0.075², the Bosch handbook's correlation: 4.36 kg·m²) and "
                "WH_TractorTrailer_midRR.m (275/80R22.5 drive tyre, rolling radius 0.501 m; 80 kg per tyre and "
-               "wheel, 18 of them)",
+               "wheel, 18 of them; mid-resistance tyres' rolling coefficient 0.0055 by axle load); "
+               "VEH_KENT800Trailer.m (Kenworth T800 and trailer: C_D 0.70, frontal area 92 ft², WVU's rolling "
+               "coefficient 0.00938); TX_RTLO12610B.m (Eaton Fuller RTLO-12610B 10-speed: efficiency 0.92, "
+               "final drive loss unknown)",
     "ISA": "ISO 2533:1975 standard atmosphere: pressure 101.325·(1 − 2.25577e-5·h)^5.25588 kPa at height h [m] "
            "(the measured trucks' air density, validation/hdv_measured.py)",
 }

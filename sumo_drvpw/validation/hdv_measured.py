@@ -89,6 +89,9 @@ ENGINE_INERTIA_KGM2 = 4.2 * S60_MAX_W / 1e3 * (1.0 / 3.0 + 2.0 / 9.0) * 0.075**2
 #: (WH_TractorTrailer_midRR.m, after SAE 2000-01-3432) as solid cylinders of the tyre's radius.
 #: ESTIMATE: axles, brake drums and the gearbox are left out
 WHEELS_INERTIA_KGM2 = 18 * 80.0 * TYRE_RADIUS_M**2 / 2.0
+#: a class-8 truck's 10-speed gearbox's efficiency: ADVISOR's TX_RTLO12610B.m (Eaton Fuller
+#: RTLO-12610B, 0.92 in every gear; its final drive's loss unknown, left 0) [ADVISOR]
+ADVISOR_GEARBOX = 0.92
 #: [GILLESPIE] (hdv_fuel.SOURCES), Fundamentals of Vehicle Dynamics (SAE 1992): a passenger car's
 #: mass factor, 1 + 0.04 + 0.0025·N² at overall gear ratio N (engine to wheel) — used here only
 #: as the contrast to a truck's own inertias
@@ -331,8 +334,12 @@ def study(folder) -> dict:
             ("rotating inertia at the logged gear: a passenger car's share (Gillespie)", {"factor": f_car}, x),
             ("air density at the logged height ([ISA] pressure, 20 °C)", {"rho": rho}, x),
             ("driving power averaged over 5 s before the fuel cut-off (its 1-Hz noise)", {"smooth": (5, trips)}, x),
+            ("driveline 0.92 (ADVISOR's Eaton 10-speed; FASTSim's 0.80 in the built-in)",
+             {"chain": dataclasses.replace(eq.chain, traction_efficiency=ADVISOR_GEARBOX)}, x),
             ("zero-output fuel at the logged speed + rotating inertia", {"rpm": rpm, "factor": f_rot}, x),
-            ("all four", {"rpm": rpm, "factor": f_rot, "chain": capped, "rho": rho}, x)):
+            ("all four", {"rpm": rpm, "factor": f_rot, "chain": capped, "rho": rho}, x),
+            ("driveline 0.92 + the truck's inertia + the S60's zero-output fuel at the logged speed",
+             {"rpm": rpm, "factor": f_rot, "chain": dataclasses.replace(eq.chain, traction_efficiency=ADVISOR_GEARBOX)}, x)):
         hyps.append(_score(name, booked_l(eq, xx, dt, **kw), base, meas, trips, truck, kmh))
     lines = []  # the moving line fitted on one truck's blocks, its trips' errors on the other's
     for label, pp in (("MOVES road load", p0), ("with the truck's rotating inertia", p0 + (f_rot - 1.0) * x.mass * x.v * x.a)):
