@@ -156,10 +156,12 @@ def test_a_fuel_through_a_better_driveline_is_found_by_that_hypothesis(tmp_path)
     ch = dataclasses.replace(load_equation(H.EQUATION).chain, traction_efficiency=H.ADVISOR_GEARBOX)
     _plant(tmp_path, lambda log: _booked_gps(log, H.MASS_KG, chain=ch))
     r = H.study(tmp_path)
-    by = {h["hypothesis"][:40]: h for h in r["hypotheses"]}
-    assert by["driveline 0.92 (ADVISOR's Eaton 10-speed; "]["mean_abs_pct"] < 0.2
-    assert by["the built-in"]["slow_pct"] > 3.0 and by["the built-in"]["fast_pct"] > 3.0
-    assert by["rotating inertia at the logged gear: the"]["mean_abs_pct"] > by["the built-in"]["mean_abs_pct"]
+    def by(start):
+        return next(h for h in r["hypotheses"] if h["hypothesis"].startswith(start))
+
+    assert by("driveline 0.92 (ADVISOR")["mean_abs_pct"] < 0.2
+    assert by("the built-in")["slow_pct"] > 3.0 and by("the built-in")["fast_pct"] > 3.0
+    assert by("rotating inertia at the logged gear: the truck's")["mean_abs_pct"] > by("the built-in")["mean_abs_pct"]
 
 
 def test_a_noisy_driving_power_flattens_the_per_sample_line():
