@@ -337,7 +337,8 @@ def study(folder) -> dict:
             ("driveline 0.92 (ADVISOR's Eaton 10-speed; FASTSim's 0.80 in the built-in)",
              {"chain": dataclasses.replace(eq.chain, traction_efficiency=ADVISOR_GEARBOX)}, x),
             ("zero-output fuel at the logged speed + rotating inertia", {"rpm": rpm, "factor": f_rot}, x),
-            ("all four", {"rpm": rpm, "factor": f_rot, "chain": capped, "rho": rho}, x),
+            ("the S60's friction + the truck's inertia + the 332-kW cap + the air's density",
+             {"rpm": rpm, "factor": f_rot, "chain": capped, "rho": rho}, x),
             ("driveline 0.92 + the truck's inertia + the S60's zero-output fuel at the logged speed",
              {"rpm": rpm, "factor": f_rot, "chain": dataclasses.replace(eq.chain, traction_efficiency=ADVISOR_GEARBOX)}, x)):
         hyps.append(_score(name, booked_l(eq, xx, dt, **kw), base, meas, trips, truck, kmh))
