@@ -86,7 +86,8 @@ def builtin_equation(data: Path) -> tuple[dict, dict]:
         f"{kwh:.2f} kWh usable: the median of FASTSim's blended plug-in hybrid cars' ess_max_kwh × (max_soc − "
         f"min_soc) ({', '.join(FASTSIM_PHEV)}); η_t = trans_eff {TRANS_EFF} × motor {MOTOR_PART_LOAD} at part load × "
         f"√ess_round_trip_eff {ESS_ROUND_TRIP}, η_r = max_regen {MAX_REGEN} × η_t; the limit: the median motor power. "
-        "Spent from each vehicle's departure (a charged battery), then the full hybrid's chain")}
+        "Spent from each vehicle's departure (a charged battery, or the charge its SUMO battery device declares), "
+        "then the full hybrid's chain")}
     chain["provenance"] = {"fuel_chain": f"{FULL_HYBRID}'s, unchanged (docs/epa-hybrid.md)",
                            "etw_kg_median": round(dfl["etw_kg"], 1), "road_load_a_n_per_kg": dfl["a_n_per_kg"],
                            "road_load_b_n_per_mps": dfl["b_n_per_mps"], "road_load_c_n_per_mps2": dfl["c_n_per_mps2"]}
@@ -95,7 +96,8 @@ def builtin_equation(data: Path) -> tuple[dict, dict]:
         "description": (f"plug-in petrol hybrid car: median road load of the {dfl['configurations']} EPA-certified "
                         f"plug-in hybrid cars (charge-depleting tests on petrol), {kwh:.2f} kWh of usable battery "
                         "spent first (FASTSim's plug-in hybrids, median), then the full hybrid's fuel chain "
-                        f"({FULL_HYBRID}); each vehicle departs charged. In a bare SUMO config it books the "
+                        f"({FULL_HYBRID}); each vehicle departs charged unless its battery device's device.battery.chargeLevel "
+                        "says otherwise. In a bare SUMO config it books the "
                         "cars whose emissionClass names a plug-in hybrid (HBEFA 4's PC_PHEV_…_(P))"),
         "source": ("US EPA Test Car List (data.gov) road loads; NREL FASTSim vehicle database (commit bd9111bb) "
                    "battery and motor; python -m sumo_drvpw.validation.epa_phev (docs/energy-chain.md)"),
