@@ -64,7 +64,7 @@ def test_standstill_aux_by_hand():
         chain_from_dict({"aux_power_w": 100, "standstill_aux_w": -500})
 
 
-@pytest.mark.parametrize("kind", ["battery", "battery_limit", "fuel", "fuel_cold"])
+@pytest.mark.parametrize("kind", ["battery", "battery_limit", "fuel", "fuel_cold", "hybrid_limit"])
 def test_linearised_columns_sum_to_the_chain(kind):
     """Σ columns + offset = the chain's prediction at the declared coefficients (any regime;
     a fuel chain with a warm-running factor too, at each sample's air temperature)."""
@@ -82,12 +82,16 @@ def test_linearised_columns_sum_to_the_chain(kind):
           "fuel": EnergyChain("fuel", 0.95, aux_power_w=500, idle_fuel_power_w=9000, marginal_efficiency=0.38,
                               engine_off_below_w=3000, engine_on_above_mps=20.0),
           "fuel_cold": EnergyChain("fuel", 0.95, aux_power_w=500, idle_fuel_power_w=9000, marginal_efficiency=0.38,
-                                   engine_off_below_w=-np.inf, running_fuel_per_k=0.003)}[kind]
+                                   engine_off_below_w=-np.inf, running_fuel_per_k=0.003),
+          # a charge-sustaining hybrid giving back braking energy up to a limit (warm-running factor too)
+          "hybrid_limit": EnergyChain("fuel", 0.95, aux_power_w=500, idle_fuel_power_w=9000, marginal_efficiency=0.38,
+                                      engine_off_below_w=3000, charge_sustaining=True, recuperation_round_trip=0.6,
+                                      recuperation_limit_w=15000.0, running_fuel_per_k=0.003)}[kind]
     eq = Equation("e", {"acc": 1.05, "aero": 0.33, "roll": 0.012, "grade": 1.0}, chain=ch)
     cols, off = linearised_columns(eq, x)
     total = sum(cols.values()) + off
     np.testing.assert_allclose(total, predict(eq, x), rtol=1e-12, atol=1e-6)
-    if kind == "battery_limit":
+    if kind in ("battery_limit", "hybrid_limit"):
         assert np.any(off < 0)       # some braking beyond the limit
 
 

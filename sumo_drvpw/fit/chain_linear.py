@@ -211,8 +211,13 @@ def linearised_columns(equation: Equation, inputs, dt_s=None) -> tuple[dict, np.
                 ch, idle_fuel_power_w=0.0, moving_idle_fuel_power_w=None if ch.moving_idle_fuel_power_w is None else 0.0))
         # at the rated output the booking is the rated output's, no column's (a plug-in's: on its share on fuel)
         over = over_rated(ch, p, inputs.v, inputs.signals)
-        return cols, np.where(over, ch.paid(p, inputs.v) * rf * (ch.engine_max_w or 0.0) / ch.marginal_efficiency
-                              * fuel_share(ch, p, inputs.v, dt_s, inputs.signals, inputs.trip), 0.0)
+        off = np.where(over, ch.paid(p, inputs.v) * rf * (ch.engine_max_w or 0.0) / ch.marginal_efficiency
+                       * fuel_share(ch, p, inputs.v, dt_s, inputs.signals, inputs.trip), 0.0)
+        if ch.recuperation_round_trip and ch.recuperation_limit_w is not None and not stateful(ch):
+            # a hybrid's braking beyond its limit gives back the limit's energy, no column's
+            off = off - np.where(p < -ch.recuperation_limit_w, ch.recuperation_round_trip * rf * ch.recuperation_limit_w
+                                 / (_eff(ch.traction_efficiency, inputs.v, p) * ch.marginal_efficiency), 0.0)
+        return cols, off
     aux = ch.auxiliary(n, inputs.signals) + ch.standstill_aux_w * (inputs.v < STANDSTILL_MPS)
     cols["aux"] = ga * aux
     off = np.zeros(n)
