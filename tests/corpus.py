@@ -1211,6 +1211,26 @@ def _(d):
     return _cal(write(d, "log.csv", base_log().assign(elevation_m=np.nan)), d)
 
 
+# --- the last stop's features, fuzzed (sumo.options, chains, told masses, adapters) ----
+
+def _scn(d: Path, body: str) -> list[str]:
+    """A run of the built-in city config for 5 s with the scenario lines ``body`` (after [sumo]'s config)."""
+    cfg = Path(__file__).resolve().parent.parent / "scenarios" / "city.sumocfg"
+    (d / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{cfg.as_posix()}"\n{body}',
+                              encoding="utf-8")
+    return ["run", str(d / "s.toml"), "--end", "5", "--no-figures", "--out", str(d / "run")]
+
+
+@case("options", "sumo option without its value", ("s.toml", "sumo.options", "'-r' takes a value"))
+def _(d):  # SUMO said only "The parameter 'true' is not allowed in this context"
+    return _scn(d, 'options = ["-r"]\n')
+
+
+@case("options", "sumo option whose value is the next option", ("s.toml", "'--seed' takes a value", "--time-to-teleport"))
+def _(d):  # SUMO: "While processing option 'seed': The parameter '5' is not allowed in this context"
+    return _scn(d, 'options = ["--seed", "--time-to-teleport", "5"]\n')
+
+
 # ------------------------------------------------------------------------ running
 
 def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:

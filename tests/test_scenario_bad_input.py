@@ -377,3 +377,24 @@ def test_truncated_route_file_of_a_sumo_config_through_the_cli(tmp_path, capsys)
                    f'{scen / "prius3.vtype.xml"}"/></input></configuration>', encoding="utf-8")
     _cli_refused(capsys, ["run", str(cfg), "--end", "30", "--no-figures", "--no-progress"],
                  tmp_path / "out", str(gz), "not a readable gzip file")
+
+
+@pytest.mark.parametrize("options, named", [
+    ('["-r"]', "'-r' takes a value (SUMO's FILE) and is given none"),
+    ('["--time-to-teleport"]', "'--time-to-teleport' takes a value (SUMO's TIME)"),
+    ('["--seed", "--time-to-teleport", "5"]', "'--seed' takes a value (SUMO's INT) and is given none before "
+                                              "'--time-to-teleport'"),
+])
+def test_a_sumo_option_without_its_value_is_named(tmp_path, capsys, options, named):
+    """SUMO said only "The parameter 'true' is not allowed in this context" (exit 2, the
+    option unnamed): refused before SUMO starts, in one line naming the option."""
+    p = _write(tmp_path, HEAD + f"options = {options}\n")
+    _refused(p, "sumo.options", named)
+    _cli_refused(capsys, ["run", str(p), "--no-figures"], tmp_path / "out", str(p), named)
+
+
+def test_sumo_options_with_their_values_still_read(tmp_path):
+    """A negative number is a value; a true/false flag alone or with its value; --k=v."""
+    opts = ['--time-to-teleport', '-1', '--verbose', '--no-warnings', 'false', '--seed=3', '-b', '0']
+    p = _write(tmp_path, HEAD + f"options = {opts!r}\n".replace("'", '"'))
+    assert load_scenario(p).sumo_args[-len(opts):] == opts

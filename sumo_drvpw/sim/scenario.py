@@ -25,7 +25,7 @@ from sumo_drvpw.sim.scenario_paths import config_files, sumo_file_list
 from sumo_drvpw.sim.scenario_values import (AIR_RANGES, WIND_MAX_MPS, _bool, _check_table,
                                             _choice, _in_range, _num, _path, _share, _strlist, _strmap,
                                             sumo_seconds, sumo_time)  # noqa: F401 (sumo_seconds: public here too)
-from sumo_drvpw.sim.sumo_start import NO_RUN_OPTIONS
+from sumo_drvpw.sim.sumo_start import NO_RUN_OPTIONS, check_option_values
 from sumo_drvpw.sim.vtype_energy import VTYPE_ENERGY, named_in_table, placeholder, reserved_name
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.sumo_outputs import (additional_outputs, device_wanted, is_output_option,
@@ -382,6 +382,7 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     if isinstance(opts, list):
         opts = [str(o) if isinstance(o, (int, float)) and not isinstance(o, bool) else o for o in opts]
     args += _strlist(opts, where, "sumo.options", '["--time-to-teleport", "120"]')
+    check_option_values(opts, where)  # ["-r"]: SUMO would say only "The parameter 'true' is not allowed"
     for i, a in enumerate(args):  # options after which SUMO runs no simulation (or waits for a client)
         name, _, val = str(a).partition("=")
         val = val or (str(args[i + 1]) if i + 1 < len(args) else "")

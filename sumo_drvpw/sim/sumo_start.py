@@ -5,6 +5,7 @@ sumo-gui refused at once where no display answers."""
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import sys
 from pathlib import Path
@@ -13,7 +14,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import signals_blocked
 
 __all__ = ["start_sumo", "close_sumo", "step_method", "scenario_option", "signals_deferred",
-           "NewRun"]
+           "NewRun", "check_option_values"]
 
 
 #: SUMO options (without their dashes) after which it runs no simulation here, and what they do instead
@@ -23,6 +24,57 @@ NO_RUN_OPTIONS = {"help": "prints SUMO's help and exits", "?": "prints SUMO's he
                   "save-template": "writes a template and exits", "save-schema": "writes a schema and exits",
                   "remote-port": "makes SUMO wait for a TraCI client (but 0, no server)",
                   "num-clients": "makes SUMO wait for TraCI clients (but 1)"}
+
+
+@functools.lru_cache(maxsize=1)
+def option_types() -> dict[str, str]:
+    """SUMO's options by every name they go by (long names and synonyms: "route-files", "r",
+    "routes") → their type as SUMO's template writes it (BOOL, FILE, TIME, INT, …), from
+    ``sumo --save-template stdout``; {} where SUMO cannot be asked."""
+    import subprocess
+    import xml.etree.ElementTree as ET
+
+    import sumolib
+
+    _sumo_env()
+    try:
+        out = subprocess.run([sumolib.checkBinary("sumo"), "--save-template", "stdout"],
+                             capture_output=True, timeout=60, check=True).stdout
+        root = ET.fromstring(out)
+    except (OSError, subprocess.SubprocessError, ET.ParseError):
+        return {}
+    return {n: opt.get("type") for section in root for opt in section if opt.get("type")
+            for n in (opt.tag, *opt.get("synonymes", "").split())}
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def check_option_values(options: list[str], where: str) -> None:
+    """Each SUMO option of a scenario's ``options`` (its ``sumo.options``: the end of SUMO's
+    command line) that takes a value (all but SUMO's true/false flags) is given one: SUMO
+    would read a missing one as "true" or take the next option for it, and say only "The
+    parameter 'true' is not allowed in this context". UserError naming the option."""
+    types = option_types() if options else {}
+    i = 0
+    while i < len(options):
+        a = str(options[i])
+        kind = types.get(a.lstrip("-")) if a.startswith("-") and "=" not in a and not _is_number(a) else None
+        nxt = str(options[i + 1]) if i + 1 < len(options) else None
+        if kind is not None and kind != "BOOL":
+            if nxt is None or (nxt.startswith("-") and not _is_number(nxt)):
+                raise UserError(f"{where}: sumo.options: {a!r} takes a value (SUMO's {kind}) and is given "
+                                f"{'none' if nxt is None else f'none before {nxt!r}'}: write "
+                                f'["{a}", "<value>"] (or leave {a} out)')
+            i += 1
+        elif kind == "BOOL" and nxt is not None and nxt.lower() in ("true", "false", "yes", "no", "on", "off", "1", "0", "x"):
+            i += 1  # "--verbose false", as SUMO reads it
+        i += 1
 
 
 class NewRun(UserError):
