@@ -1085,6 +1085,11 @@ def _(d):
     return _fcd_copy(d, '[vtypes."tk@t0"]\nmass_kg = "6 t"\n')
 
 
+@case("options", "fcd vType copy's mass in tonnes", ("vtypes.tk@t0.mass_kg", "s.toml", "below 1 % of a truck's"))
+def _(d):  # was booked at 6 kg: 0.040 kWh against 0.109 kWh at 6,000 kg, exit 0
+    return _fcd_copy(d, '[vtypes."tk@t0"]\nmass_kg = 6\n')
+
+
 @case("options", "fcd vType copy of no vType", ("[vtypes.tx@t0]", "names no vType"))
 def _(d):
     return _fcd_copy(d, '[vtypes."tx@t0"]\nmass_kg = 6000\n')

@@ -106,3 +106,24 @@ def test_a_vehicle_s_mass_in_tonnes_is_refused(tmp_path, capsys, where):
             said = {"route file": "its mass in", "scenario": "the scenario's mass_kg", "param": "its mass in"}[where]
             assert f"vType 'tk': mass 6 kg ({said}" in err and "below 1 % of a truck's (4,500 kg" in err
             assert len(err.strip().splitlines()) == 1 and not (d / "o").exists()
+
+
+@pytest.mark.sumo
+def test_a_copy_s_told_mass_in_tonnes_is_refused(tmp_path, capsys):
+    """A setMass copy's mass told to an FCD replay ([vtypes."tk@t0"] mass_kg = 6, tonnes for
+    kg) booked the truck from its 6th row at 6 kg (0.040 kWh against 0.109 kWh at 6,000 kg),
+    exit 0: checked as a vType's written mass is (sim/scenario_values.tiny_mass), one line
+    naming the copy and the key, no output; 6,000 kg runs."""
+    import corpus
+    from sumo_drvpw.cli import main
+
+    for mass, rc in (("6", 2), ("6000", 0)):
+        d = tmp_path / mass
+        d.mkdir()
+        argv = corpus._fcd_copy(d, f'[vtypes."tk@t0"]\nmass_kg = {mass}\n')
+        assert main(argv) == rc
+        err = capsys.readouterr().err
+        if rc:
+            assert f"vType 'tk@t0': mass 6 kg (vtypes.tk@t0.mass_kg in {d / 's.toml'})" in err, err
+            assert "below 1 % of a truck's (4,500 kg" in err
+            assert len(err.strip().splitlines()) == 1 and not (d / "o").exists()

@@ -13,6 +13,7 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import MASS_MAX_KG
+from sumo_drvpw.sim.scenario_values import tiny_mass
 from sumo_drvpw.sim.vtype_energy import battery_switch, energy_vtype_of, own_energy, run_emission_class
 from sumo_drvpw.sim.vtypes import (CAR_VCLASSES, SHORT_CAR_M, SUMO_DEFAULT_EMISSION_CLASS,
                                    SUMO_DEFAULT_EMISSION_CLASS_OTHER, SUMO_DEFAULT_VTYPES, energy_carrier,
@@ -285,7 +286,8 @@ class VTypeResolver:
         told = getattr(self.sc, "vtype_data", {}).get(copy, {}).get("mass_kg")
         base = self.cache[vt][0] if vt in self.cache else float(ledger.veh_mass[i])
         if told is not None:
-            m = float(told)
+            tiny_mass(copy, self.cache.get(vt, (None,) * 4)[3], m := float(told),
+                      f"vtypes.{copy}.mass_kg in {getattr(self.sc, 'path', None) or 'the scenario'}")
             self.seen.add(copy)  # (its [vtypes] entry was used)
             if getattr(self.conn, "is_replay", False):
                 self.told_copies[copy] = m
@@ -478,16 +480,6 @@ class VTypeResolver:
         if at_fixed:
             self.fixed_far[vt] = at_fixed
         return (float(mass), app, True, vclass, "")
-
-
-def tiny_mass(vt: str, vclass: str, mass, said: str) -> None:
-    """A written mass below 1 % of its vClass's SUMO default refused (a 6-kg truck: tonnes)."""
-    from sumo_drvpw.sim.fcd_conn import SUMO_VCLASS_MASS_KG, SUMO_VEH_MASS_KG
-
-    usual = SUMO_VCLASS_MASS_KG.get(vclass, SUMO_VEH_MASS_KG)
-    if mass is not None and mass < 0.01 * usual:
-        raise UserError(f"vType '{vt}': mass {mass:g} kg ({said}) is below 1 % of a {vclass}'s ({usual:,.0f} kg, "
-                        "SUMO's default): tonnes, not kg? (a typo?)")
 
 
 def builtin_equations_for(vclass: str) -> list[str]:

@@ -120,3 +120,14 @@ def _path(v, where: str, key: str) -> str:
     if not isinstance(v, str) or not v.strip():
         raise UserError(f"{where}: '{key}' must be a file path (a string), got {v!r}")
     return v
+
+
+def tiny_mass(vt: str, vclass: str | None, mass, said: str) -> None:
+    """A written mass below 1 % of its vClass's SUMO default refused (a 6-kg truck: tonnes):
+    a vType's (:mod:`sumo_drvpw.sim.resolver`) and a told copy's (``[vtypes."<type>@<id>"]``)."""
+    from sumo_drvpw.sim.fcd_conn import SUMO_VCLASS_MASS_KG, SUMO_VEH_MASS_KG
+
+    usual = SUMO_VCLASS_MASS_KG.get(vclass, SUMO_VEH_MASS_KG)
+    if mass is not None and mass < 0.01 * usual:
+        raise UserError(f"vType '{vt}': mass {mass:g} kg ({said}) is below 1 % of a {vclass or 'vehicle'}'s "
+                        f"({usual:,.0f} kg, SUMO's default): tonnes, not kg? (a typo?)")
