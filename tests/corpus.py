@@ -1236,6 +1236,26 @@ def _(d):  # SUMO: "While processing option 'seed': The parameter '5' is not all
     return _scn(d, 'options = ["--seed", "--time-to-teleport", "5"]\n')
 
 
+def _two_logs(d: Path, second: str) -> list[str]:
+    """import columns of d1/log.csv and ``second`` (its copy, as CSV or Parquet), no trip column."""
+    (d / "d1").mkdir()
+    src = text(d / "d1", "log.csv", "t,v\n" + "".join(f"{i / 8},{20 + i % 7}\n" for i in range(80)))
+    (d / second).parent.mkdir(exist_ok=True)
+    pd.read_csv(src).to_parquet(d / second) if second.endswith(".parquet") else text(d, second, src.read_text())
+    m = text(d, "map.toml", MAP_OK)
+    return ["import", "columns", str(src), str(d / second), "--columns", str(m), "--out", str(d / "out.parquet")]
+
+
+@case("drive-log", "import files of one name in two folders", ("wrote", "d2-<trip>"), expect="accept")
+def _(d):  # was refused: trip_id 'log' comes from more than one file
+    return _two_logs(d, "d2/log.csv")
+
+
+@case("drive-log", "import files of one stem in one folder", ("trip_id 'log'", "log.parquet", "rename one"))
+def _(d):
+    return _two_logs(d, "d1/log.parquet")
+
+
 # ------------------------------------------------------------------------ running
 
 def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:

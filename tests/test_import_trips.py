@@ -56,15 +56,44 @@ def test_ids_unique_across_files_are_kept_as_they_are(tmp_path):
     assert not any("also in another file" in n for f in rep["files"] for n in f["notes"])
 
 
-def test_files_of_one_stem_sharing_a_trip_id_are_refused(tmp_path):
-    # the qualified ids would still collide: refused naming the trip and both files
+def test_files_of_one_name_in_two_folders_import_apart(tmp_path):
+    # d1/log.csv and d2/log.csv, each numbering its phases 1, …: were refused ("trip_id 'log-1'
+    # comes from more than one file"): the stem cannot tell them apart, their folder does
     m = tmp_path / "map.toml"
     m.write_text(MAPPING, encoding="utf-8")
     (tmp_path / "d1").mkdir()
     (tmp_path / "d2").mkdir()
-    a = _pems(tmp_path / "d1" / "log.csv", [1], 1.0)
-    b = _pems(tmp_path / "d2" / "log.csv", [1], 1.0)
-    with pytest.raises(UserError, match=r"trip_id 'log-1' comes from more than one file: .*d1.*d2"):
+    a = _pems(tmp_path / "d1" / "log.csv", [1, 2], 1.0)
+    b = _pems(tmp_path / "d2" / "log.csv", [1], 5.0)
+    df, rep = read("columns", [a, b], m)
+    assert sorted(df["trip_id"].unique()) == ["d1-log-1", "d1-log-2", "d2-log-1"]
+    assert df.groupby("trip_id")["fuel_rate_gps"].first()["d2-log-1"] == pytest.approx(5.0)
+    assert any("another folder" in n and "'d2-<trip>'" in n for n in rep["files"][1]["notes"])
+
+
+def test_files_of_one_name_in_two_folders_without_a_trip_column(tmp_path):
+    # each file one trip named after it: both 'log', refused before; now d1-log, d2-log
+    m = tmp_path / "map.toml"
+    m.write_text(MAPPING.split('[columns."phase_num"]')[0], encoding="utf-8")
+    for d, f0 in (("d1", 1.0), ("d2", 5.0)):
+        (tmp_path / d).mkdir()
+        _pems(tmp_path / d / "log.csv", [1], f0)
+    out = tmp_path / "o.parquet"
+    assert cli_main(["import", "columns", str(tmp_path / "d1" / "log.csv"), str(tmp_path / "d2" / "log.csv"),
+                     "--columns", str(m), "--out", str(out)]) == 0
+    df = read_log(out).df
+    assert df.groupby("trip_id")["fuel_rate_gps"].first().to_dict() == pytest.approx({"d1-log": 1.0, "d2-log": 5.0})
+
+
+def test_files_of_one_stem_in_one_folder_sharing_a_trip_id_are_refused_saying_how_to_fix(tmp_path):
+    m = tmp_path / "map.toml"
+    m.write_text(MAPPING, encoding="utf-8")
+    a = _pems(tmp_path / "log.csv", [1], 1.0)
+    b = tmp_path / "log.parquet"
+    import pandas as pd
+    pd.read_csv(a).to_parquet(b)
+    with pytest.raises(UserError, match=r"trip_id 'log-1' comes from more than one file: .*log.csv.*log.parquet; "
+                                        r"files of one name in one folder: rename one"):
         read("columns", [a, b], m)
 
 

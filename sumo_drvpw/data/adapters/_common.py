@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import re
-from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +15,7 @@ import pandas as pd
 
 from sumo_drvpw.data.counters import COUNTERS, describe
 from sumo_drvpw.data.adapters.align import align_channels
+from sumo_drvpw.data.adapters.trip_names import in_several, qualify_by_folder
 from sumo_drvpw.data.log import FLAGS
 from sumo_drvpw.data.paths import expand_paths  # noqa: F401  (re-exported for the adapters)
 from sumo_drvpw.model.constants import FT, G_UNIT, GAL, HP, KELVIN, KMH, LB, LBF, MILE, MPH, RPM
@@ -479,11 +479,6 @@ def _refuse_non_flags(frame: pd.DataFrame, report: dict) -> None:
                             "position or a percentage to a column of its own name instead)")
 
 
-def in_several(ids: list[set]) -> set:
-    """The ids found in more than one of the files' sets ``ids`` (each file's trip ids)."""
-    return {i for i, n in Counter(i for s in ids for i in s).items() if n > 1}
-
-
 def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=()) -> tuple:
     """Concatenate per-file frames and build the import report (totals + per file)."""
     if not frames:
@@ -492,10 +487,13 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
         r["notes"] = _fold_unit_notes(r["notes"])
     ids = [set(map(str, pd.unique(f["trip_id"]))) if "trip_id" in f else {str(r["trip_id"])}
            for f, r in zip(frames, reports)]  # (a file's trip column may hold several)
+    frames, ids = qualify_by_folder(frames, reports, ids)  # a/log.csv, b/log.csv
     dup = sorted(in_several(ids))
     if dup:
-        raise UserError(f"{fmt}: trip_id {dup[0]!r} comes from more than one file: "
-                        + ", ".join(r["file"] for r, s in zip(reports, ids) if dup[0] in s))
+        held = [r["file"] for r, s in zip(reports, ids) if dup[0] in s]
+        raise UserError(f"{fmt}: trip_id {dup[0]!r} comes from more than one file: " + ", ".join(held)
+                        + ("; files of one name in one folder: rename one (its trips are named after it)"
+                           if len({Path(f).stem for f in held}) == 1 else ""))
     copies = _copies(frames, reports)
     for f, r in zip(frames, reports):
         _refuse_infinite(f, r)

@@ -51,10 +51,11 @@ import pandas as pd
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
 from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midnight, clean_time_and_speed,
-                      expand_paths, generic_name, in_several, lookup_unit, new_report, numeric, read_csv_strict,
+                      expand_paths, generic_name, lookup_unit, new_report, numeric, read_csv_strict,
                       read_each, unique_names, UNITS)
 
 from sumo_drvpw.data.adapters import labels as candidate_labels
+from sumo_drvpw.data.adapters.trip_names import qualify_shared_trips
 from sumo_drvpw.data.adapters.header_hints import close_label, header_cells, no_header_hint, skip_hint
 from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
 
@@ -535,30 +536,6 @@ def read(paths, columns):
 
         frames = [soc_counters(f, r, m["soc_capacity_kwh"]) for f, r in zip(frames, reports)]
     return frames, reports, [f"mapping {m['path']}"]
-
-
-def qualify_shared_trips(frames: list[pd.DataFrame], reports: list[dict]) -> list[pd.DataFrame]:
-    """Trip ids that a trip column gives in more than one file (trips numbered 1, 2, … per
-    vehicle or per day, one file each) made unique: every trip of such a file named
-    ``<file stem>-<trip>``, said in its notes. Before, the files' trips of one number were
-    written as one trip (its rows from both files, its time running twice), which every
-    command then refused."""
-    ids = [set(map(str, pd.unique(f["trip_id"]))) for f in frames]
-    shared = in_several(ids)
-    if not shared:
-        return frames
-    out = []
-    for f, r, s in zip(frames, reports, ids):
-        if s & shared:
-            stem = Path(r["file"]).stem
-            f = f.copy()
-            f["trip_id"] = stem + "-" + f["trip_id"].astype(str)
-            both = sorted(s & shared, key=lambda x: (len(x), x))
-            r["notes"].append(f"trip id(s) {', '.join(both[:3])}{' …' if len(both) > 3 else ''} also in another "
-                              f"file: this file's trips named '{stem}-<trip>' (e.g. '{stem}-{both[0]}')")
-            r["trip_id"] = ",".join(map(str, pd.unique(f["trip_id"])))
-        out.append(f)
-    return out
 
 
 def split_at_pauses(df: pd.DataFrame, rep: dict, gap_s: float, mapping=None) -> pd.DataFrame:
