@@ -50,11 +50,12 @@ import pandas as pd
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
-from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, carry_midnight, clean_time_and_speed,
+from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, clean_time_and_speed,
                       expand_paths, generic_name, lookup_unit, new_report, numeric, read_csv_strict,
                       read_each, unique_names, UNITS)
 
 from sumo_drvpw.data.adapters import labels as candidate_labels
+from sumo_drvpw.data.adapters.timestamps import _seconds, to_datetimes
 from sumo_drvpw.data.adapters.trip_names import qualify_shared_trips
 from sumo_drvpw.data.adapters.header_hints import close_label, header_cells, no_header_hint, skip_hint
 from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
@@ -416,45 +417,6 @@ def _valid_flag(raw: pd.DataFrame, flag: str, path: Path, label: str, m: dict, n
     if flag not in raw.columns:
         raise UserError(f"{path}: missing column '{flag}' (the validity flag of '{label}' in {m['path']})")
     return numeric(raw[flag], path, flag, na).fillna(0)
-
-
-def to_datetimes(s: pd.Series, time_format) -> pd.Series:
-    """Timestamps as datetimes (NaT where a cell is none), in UTC where they carry a UTC
-    offset: a file holding a summer (+02:00) and a winter (+01:00) trip, or a trip across a
-    daylight-saving change, stays on one clock. Without a ``time_format``, ISO 8601 (with or
-    without fractions of a second, with or without an offset) is tried first, then the
-    format pandas infers from the first cell; the reading that leaves fewer cells unread
-    wins."""
-    if time_format is not None:
-        return pd.to_datetime(s, format=time_format, errors="coerce", utc=True)
-    best = None
-    for fmt in ("ISO8601", None):
-        try:
-            t = pd.to_datetime(s, format=fmt, errors="coerce", utc=True)
-        except (ValueError, TypeError):  # a format pandas cannot infer from the first cell
-            continue
-        if best is None or t.isna().sum() < best.isna().sum():
-            best = t
-    return best if best is not None else pd.Series(pd.NaT, index=s.index, dtype="datetime64[ns, UTC]")
-
-
-_DATE_DIRECTIVES = ("%d", "%j", "%m", "%b", "%B", "%y", "%Y", "%U", "%W", "%G", "%V", "%x", "%c", "%s")
-
-
-def _seconds(t: pd.Series, time_format, rep: dict) -> pd.Series:
-    """Seconds since the first timestamp. A time of day without a date (``%H:%M:%S.%f``,
-    as phone OBD apps log it) that steps back by more than 12 h has passed midnight: the
-    day is carried on (:func:`carry_midnight`) instead of the samples reading as time going
-    backwards."""
-    s = (t - t.min()).dt.total_seconds()
-    if time_format is None or str(time_format).upper() == "ISO8601" \
-            or any(d in str(time_format) for d in _DATE_DIRECTIVES):
-        return s
-    x, n = carry_midnight(s.to_numpy(float))
-    if not n:
-        return s
-    rep["notes"].append(f"time of day without a date passes midnight {n} time(s): the day is carried on")
-    return pd.Series(x - np.nanmin(x), index=s.index)
 
 
 def _split_trips(df, path, rep, split_at_pauses=False):
