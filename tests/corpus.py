@@ -1256,6 +1256,33 @@ def _(d):
     return _two_logs(d, "d1/log.parquet")
 
 
+def _rider(d: Path, tag: str, vtype: str) -> list[str]:
+    """An FCD replay of car c0 carrying ``tag`` p0 (person or container) of vType 'r' written ``vtype``."""
+    rows = "".join(f'<timestep time="{t}.00"><vehicle id="c0" x="{10.4 + 11 * t:.2f}" y="-1.60" angle="90.00" type="car" '
+                   f'speed="11.00" pos="{7.2 + 11 * t:.2f}" lane="c00c10_0"/><{tag} id="p0" x="{10.4 + 11 * t:.2f}" '
+                   f'y="-1.60" angle="90.00" type="r" speed="11.00" pos="{7.2 + 11 * t:.2f}" edge="c00c10"/></timestep>\n'
+                   for t in range(20))
+    fcd = text(d, "fcd.xml", f"<fcd-export>\n{rows}</fcd-export>\n")
+    rou = text(d, "t.rou.xml", f'<routes><vType id="car" vClass="passenger" mass="1500"/>{vtype}</routes>\n')
+    return ["fcd", str(fcd), "--net", str(CITY_NET), "--vtypes", str(rou), "--equation", "vsp_ldv1999", "--no-figures",
+            "--no-progress", "--out", str(d / "o")]
+
+
+@case("options", "fcd container's vType mass in tonnes", ("t.rou.xml", "'r'", "below 1 % of a truck's"))
+def _(d):  # was booked: the container 2 kg, the car 0.032 kWh against 0.074 kWh at 2,000 kg, exit 0
+    return _rider(d, "container", '<vType id="r" vClass="truck" mass="2"/>')
+
+
+@case("options", "fcd container's vehicleMass in tonnes", ("t.rou.xml", "'r'", "below 1 % of a truck's"))
+def _(d):
+    return _rider(d, "container", '<vType id="r" vClass="truck"><param key="vehicleMass" value="2"/></vType>')
+
+
+@case("options", "fcd rider's vType mass in tonnes", ("t.rou.xml", "'r'", "below 1 % of a pedestrian's"))
+def _(d):  # was booked: a 70-g rider
+    return _rider(d, "person", '<vType id="r" vClass="pedestrian" mass="0.07"/>')
+
+
 # ------------------------------------------------------------------------ running
 
 def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:

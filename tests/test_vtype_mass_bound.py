@@ -127,3 +127,56 @@ def test_a_copy_s_told_mass_in_tonnes_is_refused(tmp_path, capsys):
             assert f"vType 'tk@t0': mass 6 kg (vtypes.tk@t0.mass_kg in {d / 's.toml'})" in err, err
             assert "below 1 % of a truck's (4,500 kg" in err
             assert len(err.strip().splitlines()) == 1 and not (d / "o").exists()
+
+
+def _rider_replay(d, tag: str, vtype: str, scenario: str = ""):
+    """An FCD of car c0 carrying rider p0 (a ``tag``: person or container, of vType 'r' written
+    ``vtype``) 20 s along the city's c00c10; the CLI's argv replaying it."""
+    from pathlib import Path
+
+    net = Path(__file__).resolve().parent.parent / "sumo_drvpw" / "sim" / "builtin" / "networks" / "city.net.xml"
+    rows = "".join(f'<timestep time="{t}.00"><vehicle id="c0" x="{10.4 + 11 * t:.2f}" y="-1.60" angle="90.00" type="car" '
+                   f'speed="11.00" pos="{7.2 + 11 * t:.2f}" lane="c00c10_0"/><{tag} id="p0" x="{10.4 + 11 * t:.2f}" '
+                   f'y="-1.60" angle="90.00" type="r" speed="11.00" pos="{7.2 + 11 * t:.2f}" edge="c00c10"/></timestep>\n'
+                   for t in range(20))
+    d.mkdir()
+    (d / "fcd.xml").write_text(f"<fcd-export>\n{rows}</fcd-export>\n", encoding="utf-8")
+    (d / "t.rou.xml").write_text(f'<routes><vType id="car" vClass="passenger" mass="1500"/>{vtype}</routes>\n',
+                                 encoding="utf-8")
+    (d / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{net.as_posix()}"\nroutes = ["t.rou.xml"]\n'
+                              + scenario, encoding="utf-8")
+    return ["fcd", str(d / "fcd.xml"), "--scenario", str(d / "s.toml"), "--no-figures", "--no-progress",
+            "--out", str(d / "o")]
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("tag, vtype, usual", [
+    ("container", '<vType id="r" vClass="truck" mass="2"/>', "a truck's (4,500 kg"),
+    ("container", '<vType id="r" vClass="truck"><param key="vehicleMass" value="2"/></vType>', "a truck's (4,500 kg"),
+    ("person", '<vType id="r" vClass="pedestrian" mass="0.07"/>', "a pedestrian's (70 kg"),
+])
+def test_a_rider_s_mass_in_tonnes_is_refused(tmp_path, capsys, tag, vtype, usual):
+    """A rider's vType written in tonnes rode as kilograms, exit 0: a container of vClass truck
+    written 2 for 2 t made its car 0.032 kWh against 0.074 kWh at 2,000 kg (an FCD replay; a
+    live run reads the same files). Refused in one line naming the vType, its file and the
+    vClass's default, no output; written in kg it runs."""
+    from sumo_drvpw.cli import main
+
+    d = tmp_path / "t"
+    assert main(_rider_replay(d, tag, vtype)) == 2
+    err = capsys.readouterr().err
+    assert "vType 'r': mass " in err and f"(its mass in {d / 't.rou.xml'})" in err and usual in err, err
+    assert len(err.strip().splitlines()) == 1 and not (d / "o").exists()
+    kg = vtype.replace('"0.07"', '"70"').replace('"2"', '"2000"')
+    assert main(_rider_replay(tmp_path / "kg", tag, kg)) == 0
+
+
+@pytest.mark.sumo
+def test_a_vehicle_s_mass_in_tonnes_the_scenario_corrects_still_runs(tmp_path):
+    """A file's truck written 6 (t) that the scenario books at [vtypes.tk] mass_kg = 6000 runs:
+    the scenario's mass is the vehicle's (the file's is no rider's)."""
+    from sumo_drvpw.cli import main
+
+    argv = _rider_replay(tmp_path / "t", "person", '<vType id="tk" vClass="truck" mass="6"/>',
+                         '[vtypes.car]\nmass_kg = 1500\n[vtypes.tk]\nmass_kg = 6000\n')
+    assert main(argv) == 0

@@ -13,7 +13,7 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import MASS_MAX_KG
-from sumo_drvpw.sim.scenario_values import tiny_mass
+from sumo_drvpw.sim.scenario_values import tiny_file_masses, tiny_mass
 from sumo_drvpw.sim.vtype_energy import battery_switch, energy_vtype_of, own_energy, run_emission_class
 from sumo_drvpw.sim.vtypes import (CAR_VCLASSES, SHORT_CAR_M, SUMO_DEFAULT_EMISSION_CLASS,
                                    SUMO_DEFAULT_EMISSION_CLASS_OTHER, SUMO_DEFAULT_VTYPES, energy_carrier,
@@ -84,6 +84,7 @@ class VTypeResolver:
 
     def __init__(self, scenario, file_vtypes: dict, equations: list, conn=None):
         self.sc, self.files, self.conn = scenario, file_vtypes, conn
+        tiny_file_masses(file_vtypes, getattr(scenario, "vtype_data", None) or {})  # (riders' too)
         self.names = [e if isinstance(e, str) else e.name for e in equations]
         #: equation name → vClasses it is made for (names given as plain strings: any)
         self.vclasses = {(e if isinstance(e, str) else e.name):

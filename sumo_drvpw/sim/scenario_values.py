@@ -131,3 +131,17 @@ def tiny_mass(vt: str, vclass: str | None, mass, said: str) -> None:
     if mass is not None and mass < 0.01 * usual:
         raise UserError(f"vType '{vt}': mass {mass:g} kg ({said}) is below 1 % of a {vclass or 'vehicle'}'s "
                         f"({usual:,.0f} kg, SUMO's default): tonnes, not kg? (a typo?)")
+
+
+def tiny_file_masses(files, told: dict) -> None:
+    """The masses SUMO gives the vTypes of the route files ``files`` (``mass``, else param
+    ``vehicleMass``; :func:`~sumo_drvpw.sim.vtypes.read_vtypes`) whose vClass is written checked as
+    a booked vehicle's is (:func:`tiny_mass`), unless a ``drvpw.mass`` or the scenario's
+    ``[vtypes.<id>] mass_kg`` (``told``: its vtype_data) gives the vehicle's: a rider — a person,
+    a container — adds that mass to its vehicle, and no scenario key tells it (a container of
+    vClass truck written 2 for 2 t rode as 2 kg)."""
+    from sumo_drvpw.sim.fcd_conn import sumo_type_mass
+
+    for vt, info in files.items():
+        if info.vclass and not info.drvpw_mass and (told.get(vt) or {}).get("mass_kg") is None:
+            tiny_mass(vt, info.vclass, sumo_type_mass(files, vt), f"its mass in {info.source}")
