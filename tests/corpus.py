@@ -1283,6 +1283,14 @@ def _(d):  # was booked: a 70-g rider
     return _rider(d, "person", '<vType id="r" vClass="pedestrian" mass="0.07"/>')
 
 
+_log_case("GPS speed text", lambda df: df.assign(gps_speed_mps=df["speed_mps"].astype(object).where(df.index != 90, "abc")),
+          ("log.csv", "gps_speed_mps", "row 90", "abc"))  # was a traceback (ValueError)
+_log_case("GPS speed huge", lambda df: df.assign(gps_speed_mps=df["speed_mps"].where(df.index != 90, 1e306)),
+          ("log.csv", "gps_speed_mps", "row 90", "1e+306"))  # was a traceback (OverflowError)
+_log_case("GPS speed negative", lambda df: df.assign(gps_speed_phone_mps=-df["speed_mps"] - 1),
+          ("log.csv", "gps_speed_phone_mps", "row 0"))  # was passed over unsaid
+
+
 # ------------------------------------------------------------------------ running
 
 def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:

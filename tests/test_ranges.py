@@ -149,3 +149,28 @@ def test_an_infinite_or_absurd_load_is_refused(tmp_path, capsys, value, engine):
     code = cli_main(["calibrate", str(p), "--target", "battery", "--vehicle", "jlu_bev", "--equation",
                      "roadload_spec", "--load", "heater_w", "--engine", engine, "--out", str(tmp_path / "eq.toml")])
     _refused(capsys, code, p, "load column 'heater_w'", f"row {ROW}", f"{value:g}")
+
+
+@pytest.mark.parametrize("engine", ["memory", "local"])
+@pytest.mark.parametrize("column,value", [("gps_speed_mps", "abc"), ("gps_speed_mps", 1e306),
+                                          ("gps_speed_mps", np.inf), ("gps_speed_phone_mps", -20.0)])
+def test_a_gps_speed_that_is_text_infinite_or_absurd_is_refused(tmp_path, capsys, column, value, engine):
+    """A GPS speed column beside the speed (read for the speedometer's note, data/conditions.py)
+    was a traceback when text (ValueError) or huge (1e306: OverflowError summing it), and a
+    negative or infinite one was passed over unsaid: refused as the speed is, in memory and streamed."""
+    df = _base()
+    df[column] = df["speed_mps"].astype(object)
+    df.loc[ROW, column] = value
+    p = tmp_path / "log.csv"
+    df.to_csv(p, index=False)
+    code = cli_main(["calibrate", str(p), "--engine", engine, "--out", str(tmp_path / "eq.toml")])
+    _refused(capsys, code, p, f"column '{column}'", f"row {ROW}", value if isinstance(value, str) else f"{value:g}")
+    assert not (tmp_path / "eq.toml").exists()
+
+
+def test_a_gps_speed_in_range_is_read(tmp_path):
+    df = _base()
+    df["gps_speed_mps"] = df["speed_mps"] * 0.98
+    p = tmp_path / "log.csv"
+    df.to_csv(p, index=False)
+    assert cli_main(["calibrate", str(p), "--out", str(tmp_path / "eq.toml")]) == 0

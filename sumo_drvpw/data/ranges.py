@@ -77,6 +77,25 @@ def check_ranges(df: pd.DataFrame, p: Path) -> None:
     for c, (lo, hi, unit, hint) in RANGES.items():
         if c in df:
             _check_range(df[c].to_numpy(float, na_value=np.nan), p, c, lo, hi, unit, hint)
+    from sumo_drvpw.data.conditions import gps_speed_columns
+
+    for c in gps_speed_columns(df.columns):  # (read beside the speed, data/conditions.speed_against_gps)
+        _check_range(_numbers(df[c], p, c), p, c, 0.0, GPS_SPEED_MAX_MPS, "m/s", _GPS_HINT)
+
+
+#: A GPS speed [m/s], as the log's speed_mps: never negative, no road vehicle's above 100 m/s
+GPS_SPEED_MAX_MPS = 100.0
+_GPS_HINT = "a GPS speed in m/s: never negative, no road vehicle's above 100 m/s (in km/h? divide by 3.6)"
+
+
+def _numbers(s: pd.Series, p, c: str) -> np.ndarray:
+    """The numbers of column ``c`` (empty cells NaN); text refused naming the row and the value."""
+    x = pd.to_numeric(s, errors="coerce").to_numpy(float, na_value=np.nan)
+    text = np.isnan(x) & s.notna().to_numpy() & (s.astype(str).str.strip() != "").to_numpy()
+    if text.any():
+        i = int(np.flatnonzero(text)[0])
+        raise UserError(f"{p}: column '{c}' has a non-numeric value {s.iloc[i]!r} at row {i}")
+    return x
 
 
 def _check_range(x: np.ndarray, p, c: str, lo: float, hi: float, unit: str, hint: str) -> None:
