@@ -1291,6 +1291,24 @@ _log_case("GPS speed negative", lambda df: df.assign(gps_speed_phone_mps=-df["sp
           ("log.csv", "gps_speed_phone_mps", "row 0"))  # was passed over unsaid
 
 
+def _torque(d: Path, extra: str = "", twice: str = "") -> list[str]:
+    """A Torque Pro JSON of 20 records (OBD speed in mph, altitude in ft) and ``extra`` in each;
+    ``twice`` added to record 3 alone."""
+    recs = [f'{{"Device Time": "25-Mar-2017 11:46:{i:02d}.000", "Speed (OBD)(mph)": 20, "GPS Altitude(ft)": 300{extra}'
+            + (twice if i == 3 else "") + "}" for i in range(20)]
+    return ["import", "torquepro", str(text(d, "t.json", "[" + ",".join(recs) + "]")), "--out", str(d / "o.parquet")]
+
+
+@case("drive-log", "torquepro OBD speed in two units", ("t.json", "Speed (OBD)(mph)", "Speed (OBD)(km/h)", "speed_mps"))
+def _(d):  # was read from the later label alone: 99 km/h where the mph column said 20, unsaid
+    return _torque(d, ', "Speed (OBD)(km/h)": 99')
+
+
+@case("drive-log", "torquepro record with a key twice", ("t.json", "data row 3", "GPS Altitude(ft)", "twice"))
+def _(d):  # json kept the last: 9e9 ft read, unsaid
+    return _torque(d, twice=', "GPS Altitude(ft)": 9e9')
+
+
 # ------------------------------------------------------------------------ running
 
 def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:

@@ -7,6 +7,8 @@ refused ("missing column 'Speed (OBD)(mph)'"), and its other metric labels becam
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -162,3 +164,29 @@ def test_import_notes_are_folded_and_shortened_on_the_terminal_only(tmp_path, ca
     assert max(len(n) for n in notes) > NOTE_CHARS + 100
     assert all(len(line) < NOTE_CHARS + 80 for line in shown.splitlines()), shown
     assert "characters more" in shown and "read_report(LOG)" in shown
+
+
+@pytest.mark.parametrize("label, column", [("Speed (OBD)(mph)", "speed_mps"), ("GPS Altitude(ft)", "elevation_m")])
+def test_one_reading_in_two_units_is_refused(tmp_path, label, column):
+    """A log holding a column in two units (Speed (OBD) in km/h and in mph, 99 against 20: a
+    merged export) was read from the later label alone, the other dropped unsaid (speed
+    27.5 m/s from the km/h column where the mph one said 8.9): refused naming both."""
+    p = metric_csv(tmp_path / "trip.csv")
+    lines = p.read_text(encoding="utf-8").splitlines()
+    p.write_text("\n".join([lines[0] + f", {label}"] + [ln + ", 20" for ln in lines[1:]]) + "\n", encoding="utf-8")
+    first = {"speed_mps": "Speed (OBD)(km/h)", "elevation_m": "GPS Altitude(m)"}[column]
+    with pytest.raises(UserError, match=rf"trip.csv: columns '{re.escape(first)}' and '{re.escape(label)}' both give {column}"):
+        read("torquepro", p)
+
+
+def test_a_json_record_holding_a_key_twice_is_refused(tmp_path):
+    """json keeps the last of a key given twice: a record's 'GPS Altitude(ft)' of 302 and 9e9
+    was read as 9e9 ft, unsaid. Refused naming the data row and the key."""
+    recs = [f'{{"Device Time": "25-Mar-2017 11:46:{i:02d}.000", "Speed (OBD)(mph)": 20, "GPS Altitude(ft)": 300'
+            + (', "GPS Altitude(ft)": 9e9' if i == 3 else "") + "}" for i in range(20)]
+    p = tmp_path / "t.json"
+    p.write_text("[" + ",".join(recs) + "]", encoding="utf-8")
+    with pytest.raises(UserError, match=r"t.json: data row 3 holds 'GPS Altitude\(ft\)' twice"):
+        read("torquepro", p)
+    p.write_text("[" + ",".join(r.replace(', "GPS Altitude(ft)": 9e9', "") for r in recs) + "]", encoding="utf-8")
+    assert len(read("torquepro", p)[0]) == 20

@@ -157,7 +157,7 @@ def _load(path: Path) -> pd.DataFrame:
     if not text.strip():
         raise UserError(f"{path}: file is empty")
     try:
-        doc = json.loads(text)
+        doc = json.loads(text, object_pairs_hook=lambda pairs, n=[]: _record(pairs, path, n))
     except json.JSONDecodeError as e:
         raise UserError(f"{path}: not valid JSON: {e}") from None
     if not isinstance(doc, list) or not all(isinstance(r, dict) for r in doc):
@@ -165,6 +165,19 @@ def _load(path: Path) -> pd.DataFrame:
     if not doc:
         raise UserError(f"{path}: no data rows")
     return pd.DataFrame.from_records(doc)
+
+
+def _record(pairs: list, path: Path, seen: list) -> dict:
+    """A JSON object of a Torque log (``seen``: those read before it, one each); a key given twice
+    (a damaged or hand-edited file: which value to read cannot be told) is a UserError naming it
+    and the record (json keeps the last silently)."""
+    seen.append(1)
+    keys = [k for k, _ in pairs]
+    if len(set(keys)) < len(keys):
+        k = next(k for i, k in enumerate(keys) if k in keys[:i])
+        raise UserError(f"{path}: data row {len(seen) - 1} holds '{k}' twice (a damaged or hand-edited file?): which value to read "
+                        "cannot be told; keep one")
+    return dict(pairs)
 
 
 def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
@@ -191,7 +204,7 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
         raise UserError(f"{path}: column '{TIME}' data row {i} holds {raw[TIME].iloc[i]!r}, "
                         f"expected like '25-Mar-2017 11:46:29.523'")
     cols = {"time_s": (t - t.min()).dt.total_seconds()}
-    dash, infinite = {}, {}
+    dash, infinite, source = {}, {}, {}
     for label in labels:
         if label == TIME:
             continue
@@ -199,6 +212,10 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
             cols[TEXT[label]] = raw[label].astype(str)
             continue
         name, f, o = _mapping(label, rep["notes"])
+        if name in KNOWN and name in source:  # (one reading in two units: the later silently won)
+            raise UserError(f"{path}: columns '{source[name]}' and '{label}' both give {name}: which to read cannot "
+                            "be told; keep one")
+        source[name] = label
         s = raw[label]
         n_dash = int(s.map(lambda x: isinstance(x, str) and x.strip() == "-").sum())
         if n_dash:
