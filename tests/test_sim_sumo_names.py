@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from sumo_drvpw.cli import main as cli_main
+from sumo_drvpw.errors import UserError
 
 pytest.importorskip("libsumo")
 
@@ -209,10 +210,12 @@ def test_options_replace_the_configs_device_setting(tmp_path):
 
     on = _scenario(tmp_path, "", DEVICE)
     for opts, want in (([], True), (["--device.emissions.probability", "0"], False),
-                       (["--device.emissions.probability=0", "--device.emissions.probability", "0.5"], True),
-                       (["--device.emissions.probability"], True)):  # no value: SUMO refuses it
+                       (["--device.emissions.probability=0", "--device.emissions.probability", "0.5"], True)):
         assert load_scenario(doc={"equations": ["epa_gasoline_car"],
                                   "sumo": {"config": str(on), "options": opts}}).sumo_device is want, opts
+    with pytest.raises(UserError, match="'--device.emissions.probability' takes a value"):  # none: refused (40b3ad4)
+        load_scenario(doc={"equations": ["epa_gasoline_car"],
+                           "sumo": {"config": str(on), "options": ["--device.emissions.probability"]}})
     sc = load_scenario(doc={"equations": ["epa_gasoline_car"], "outputs": {"sumo_device": False},
                             "sumo": {"config": str(on), "options": ["--device.emissions.probability=1"]}})
     assert not sc.sumo_device
