@@ -1309,6 +1309,11 @@ def _(d):  # json kept the last: 9e9 ft read, unsaid
     return _torque(d, twice=', "GPS Altitude(ft)": 9e9')
 
 
+@case("options", "sumo output onto the scenario file", ("s.toml", "--tripinfo-output", "a file the run reads"))
+def _(d):  # was accepted: SUMO's tripinfo written over the scenario, exit 0
+    return _scn(d, f'options = ["--tripinfo-output", "{(d / "s.toml").as_posix()}"]\n')
+
+
 # ------------------------------------------------------------------------ running
 
 def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:

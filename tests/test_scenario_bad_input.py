@@ -398,3 +398,32 @@ def test_sumo_options_with_their_values_still_read(tmp_path):
     opts = ['--time-to-teleport', '-1', '--verbose', '--no-warnings', 'false', '--seed=3', '-b', '0']
     p = _write(tmp_path, HEAD + f"options = {opts!r}\n".replace("'", '"'))
     assert load_scenario(p).sumo_args[-len(opts):] == opts
+
+
+def test_an_output_option_naming_an_input_is_refused(tmp_path, capsys):
+    """sumo.options' outputs at an absolute path are kept where they are: one naming the
+    scenario file itself (exit 0, the scenario overwritten by SUMO's tripinfo) or the run's
+    route file (--vehroute-output onto -r's file: the file destroyed, SUMO failing half-read)
+    is refused before SUMO starts, naming the option and the file; the inputs stay as they were."""
+    routes = tmp_path / "r.rou.xml"
+    routes.write_text((BUILTIN / "scenarios" / "city.rou.xml").read_text(encoding="utf-8"), encoding="utf-8")
+    for name, opts in (("s.toml", ["--tripinfo-output", str(tmp_path / "s.toml")]),
+                       ("s2.toml", ["-r", str(routes), f"--vehroute-output={routes}"])):
+        p = _write(tmp_path, HEAD + f"options = {opts!r}\n".replace("'", '"'), name)
+        before = (p.read_bytes(), routes.read_bytes())
+        _refused(p, f"sumo.options: --{opts[-2 if len(opts) == 2 else -1][2:].split('=')[0]}",
+                 "a file the run reads")
+        _cli_refused(capsys, ["run", str(p), "--no-figures"], tmp_path / "out", str(p), "a file the run reads")
+        assert (p.read_bytes(), routes.read_bytes()) == before
+
+
+@pytest.mark.sumo
+def test_an_output_option_given_with_equals_goes_into_the_output_folder(tmp_path, monkeypatch):
+    """'--tripinfo-output=ti.xml' was written into the working folder (only '--tripinfo-output
+    ti.xml' went into OUT/sumo/, as docs/scenario.md says of a relative path), so '=s.toml' wrote
+    over the scenario there, exit 0; now both forms go into OUT/sumo/."""
+    monkeypatch.chdir(tmp_path)
+    p = _write(tmp_path, HEAD + 'options = ["--tripinfo-output=s.toml"]\n')
+    before = p.read_bytes()
+    assert cli_main(["run", str(p), "--end", "5", "--no-figures", "--out", str(tmp_path / "out")]) == 0
+    assert p.read_bytes() == before and (tmp_path / "out" / "sumo" / "s.toml").is_file()

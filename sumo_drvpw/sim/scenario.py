@@ -22,7 +22,7 @@ from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import KELVIN, MASS_MAX_KG, P_STD_KPA, RHO_DEFAULT
 from sumo_drvpw.model.equations import NAME_PATTERN, Equation, check_equation, check_vclass, load_equation
 from sumo_drvpw.sim.scenario_paths import config_files, sumo_file_list
-from sumo_drvpw.sim.scenario_values import (AIR_RANGES, WIND_MAX_MPS, _bool, _check_table,
+from sumo_drvpw.sim.scenario_values import (AIR_RANGES, WIND_MAX_MPS, _bool, _check_table, outputs_onto_inputs,
                                             _choice, _in_range, _num, _path, _share, _strlist, _strmap,
                                             sumo_seconds, sumo_time)  # noqa: F401 (sumo_seconds: public here too)
 from sumo_drvpw.sim.sumo_start import NO_RUN_OPTIONS, check_option_values
@@ -390,8 +390,10 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         if name.startswith("-") and name.lstrip("-") in NO_RUN_OPTIONS and not harmless:
             raise UserError(f"{where}: sumo.options: {name} {NO_RUN_OPTIONS[name.lstrip('-')]}: the plug-in books a "
                             "simulation SUMO runs itself; leave it out")
-    args = [x for a in args for x in (a.split("=", 1) if str(a).startswith("--mesosim=") else [a])]  # as "--mesosim v"
+    args = [x for a in args for x in (a.split("=", 1) if str(a).startswith("--mesosim=") or (  # as "--mesosim v",
+        str(a).startswith("--") and "=" in a and is_output_option(a[2:].partition("=")[0])) else [a])]  # an output's too
     files, adds = option_input_files(args, [f for f in files if f not in adds], adds)  # -r, -a override
+    outputs_onto_inputs(args, [p for p in (path, sumo.get("config") and cfg, net, *files) if p], where)
     for f in files:  # those SUMO loads: a config's own that the options replace need not exist
         if not f.is_file():
             raise UserError(f"{where}: SUMO input file not found: {f}")

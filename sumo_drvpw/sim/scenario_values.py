@@ -145,3 +145,21 @@ def tiny_file_masses(files, told: dict) -> None:
     for vt, info in files.items():
         if info.vclass and not info.drvpw_mass and (told.get(vt) or {}).get("mass_kg") is None:
             tiny_mass(vt, info.vclass, sumo_type_mass(files, vt), f"its mass in {info.source}")
+
+
+def outputs_onto_inputs(args: list[str], inputs: list, where: str) -> None:
+    """An output of SUMO's command line ``args`` (``--<key>-output F``, ``--log F`` …, a scenario's
+    ``sumo.options``: an absolute path is kept where it is) naming a file the run reads — the
+    scenario, its config, network, route or additional files (``inputs``) — refused naming the
+    option: SUMO would write over it as it starts (a route file then fails half-read)."""
+    from pathlib import Path
+
+    from sumo_drvpw.sim.sumo_outputs import is_output_option
+
+    ins = {Path(f).resolve() for f in inputs}
+    for key, val in zip(args, args[1:]):
+        if str(key).startswith("--") and is_output_option(str(key)[2:]):
+            for f in (x.strip() for x in str(val).split(",")):
+                if f and Path(f).is_absolute() and Path(f).resolve() in ins:
+                    raise UserError(f"{where}: sumo.options: {key} {f}: a file the run reads (an input is never "
+                                    "written); give the output another name, or a relative one (into OUT/sumo/)")
