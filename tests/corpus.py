@@ -1309,6 +1309,16 @@ def _(d):  # json kept the last: 9e9 ft read, unsaid
     return _torque(d, twice=', "GPS Altitude(ft)": 9e9')
 
 
+@case("options", "sumo option misspelt", ("s.toml", "'--time-to-teleprot' is no option"))
+def _(d):  # SUMO: "On processing option '--time-to-teleprot': The parameter '5' is not allowed in this context"
+    return _scn(d, 'options = ["--time-to-teleprot", "5"]\n')
+
+
+@case("options", "sumo option and value in one item", ("s.toml", "'--seed 7'", "an item of its own"))
+def _(d):
+    return _scn(d, 'options = ["--seed 7"]\n')
+
+
 @case("options", "sumo output onto the scenario file", ("s.toml", "--tripinfo-output", "a file the run reads"))
 def _(d):  # was accepted: SUMO's tripinfo written over the scenario, exit 0
     return _scn(d, f'options = ["--tripinfo-output", "{(d / "s.toml").as_posix()}"]\n')

@@ -427,3 +427,17 @@ def test_an_output_option_given_with_equals_goes_into_the_output_folder(tmp_path
     before = p.read_bytes()
     assert cli_main(["run", str(p), "--end", "5", "--no-figures", "--out", str(tmp_path / "out")]) == 0
     assert p.read_bytes() == before and (tmp_path / "out" / "sumo" / "s.toml").is_file()
+
+
+@pytest.mark.parametrize("options, named", [
+    ('["--time-to-teleprot", "5"]', "'--time-to-teleprot' is no option of SUMO's"),
+    ('["--seed 7"]', "give each option and value an item of its own"),
+    ('["seed", "7"]', "'seed' is neither a SUMO option nor an option's value"),
+    ('[""]', "'' is neither a SUMO option"),
+])
+def test_a_misspelt_sumo_option_or_a_stray_value_is_named(tmp_path, capsys, options, named):
+    """SUMO said "On processing option '--time-to-teleprot': The parameter '5' is not allowed
+    in this context" (or only "The parameter 'seed' is not allowed …"), naming no typo."""
+    p = _write(tmp_path, HEAD + f"options = {options}\n")
+    _refused(p, "sumo.options", named)
+    _cli_refused(capsys, ["run", str(p), "--no-figures"], tmp_path / "out", str(p), named)

@@ -56,23 +56,33 @@ def _is_number(s: str) -> bool:
 
 
 def check_option_values(options: list[str], where: str) -> None:
-    """Each SUMO option of a scenario's ``options`` (its ``sumo.options``: the end of SUMO's
-    command line) that takes a value (all but SUMO's true/false flags) is given one: SUMO
-    would read a missing one as "true" or take the next option for it, and say only "The
-    parameter 'true' is not allowed in this context". UserError naming the option."""
+    """A scenario's SUMO ``options`` (its ``sumo.options``: the end of SUMO's command line)
+    checked against SUMO's own options (:func:`option_types`): each is one of them, and each
+    that takes a value (all but SUMO's true/false flags) is given one, as its own item after
+    it or as ``--key=value``. SUMO would read a missing value as "true" or take the next option
+    for it, and says of that, of a misspelt option, a stray value or "--seed 7" in one item only
+    "The parameter '…' is not allowed in this context". UserError naming the item."""
     types = option_types() if options else {}
     i = 0
-    while i < len(options):
+    while types and i < len(options):
         a = str(options[i])
-        kind = types.get(a.lstrip("-")) if a.startswith("-") and "=" not in a and not _is_number(a) else None
+        if not a.startswith("-") or _is_number(a):
+            raise UserError(f"{where}: sumo.options: {a!r} is neither a SUMO option nor an option's value (an option "
+                            'starts with "-"; its value is the next item: ["--seed", "7"])')
+        kind = types.get(a.lstrip("-").partition("=")[0])
+        if kind is None:
+            raise UserError(f"{where}: sumo.options: {a!r} is no option of SUMO's (a typo? sumo --help lists them)"
+                            + ('; give each option and value an item of its own: ["--seed", "7"]' * (" " in a)))
         nxt = str(options[i + 1]) if i + 1 < len(options) else None
-        if kind is not None and kind != "BOOL":
+        if "=" in a:
+            pass
+        elif kind != "BOOL":
             if nxt is None or (nxt.startswith("-") and not _is_number(nxt)):
                 raise UserError(f"{where}: sumo.options: {a!r} takes a value (SUMO's {kind}) and is given "
                                 f"{'none' if nxt is None else f'none before {nxt!r}'}: write "
                                 f'["{a}", "<value>"] (or leave {a} out)')
             i += 1
-        elif kind == "BOOL" and nxt is not None and nxt.lower() in ("true", "false", "yes", "no", "on", "off", "1", "0", "x"):
+        elif nxt is not None and nxt.lower() in ("true", "false", "yes", "no", "on", "off", "1", "0", "x"):
             i += 1  # "--verbose false", as SUMO reads it
         i += 1
 
