@@ -1324,6 +1324,13 @@ def _(d):  # was accepted: SUMO's tripinfo written over the scenario, exit 0
     return _scn(d, f'options = ["--tripinfo-output", "{(d / "s.toml").as_posix()}"]\n')
 
 
+@case("drive-log", "torquepro csv header with a label twice", ("t.csv", "'Speed (OBD)(mph)' twice"))
+def _(d):  # was read from the first, the second kept as an extra 'speed_obd_mph_1', unsaid
+    rows = "".join(f"25-Mar-2017 11:46:{i:02d}.000, 20, 300, 99\n" for i in range(20))
+    p = text(d, "t.csv", "Device Time, Speed (OBD)(mph), GPS Altitude(ft), Speed (OBD)(mph)\n" + rows)
+    return ["import", "torquepro", str(p), "--out", str(d / "o.parquet")]
+
+
 # ------------------------------------------------------------------------ running
 
 def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:

@@ -190,3 +190,14 @@ def test_a_json_record_holding_a_key_twice_is_refused(tmp_path):
         read("torquepro", p)
     p.write_text("[" + ",".join(r.replace(', "GPS Altitude(ft)": 9e9', "") for r in recs) + "]", encoding="utf-8")
     assert len(read("torquepro", p)[0]) == 20
+
+
+def test_a_csv_header_holding_a_label_twice_is_refused(tmp_path):
+    """pandas names a repeated label's second column 'X.1': the speed was read from the first
+    'Speed (OBD)(km/h)', the second (99 km/h in every row) kept as an extra, unsaid."""
+    p = metric_csv(tmp_path / "trip.csv")
+    lines = p.read_text(encoding="utf-8").splitlines()
+    p.write_text("\n".join([lines[0] + ", Speed (OBD)(km/h)"] + [ln + ", 99" for ln in lines[1:]]) + "\n",
+                 encoding="utf-8")
+    with pytest.raises(UserError, match=r"trip.csv: the header holds 'Speed \(OBD\)\(km/h\)' twice"):
+        read("torquepro", p)

@@ -33,6 +33,7 @@ does not support) does not hold the link down: it stays NaN and is named in the 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -187,6 +188,9 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     rep = new_report(path, trip, len(raw))
     labels = [str(c).strip() for c in raw.columns]
     raw.columns = labels
+    twice = next((m[1] for lab in labels if (m := re.fullmatch(r"(.+)\.\d+", lab)) and m[1] in labels), None)
+    if path.suffix.lower() == ".csv" and twice is not None:  # (pandas names the second 'X.1')
+        raise UserError(f"{path}: the header holds '{twice}' twice: which to read cannot be told; keep one")
     speed = [lab for lab in labels if lab != TIME and _mapping(lab, [])[0] == "speed_mps"]
     for k, ok in ((TIME, TIME in labels), (SPEED, bool(speed))):
         if not ok:
