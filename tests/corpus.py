@@ -1331,6 +1331,13 @@ def _(d):  # was read from the first, the second kept as an extra 'speed_obd_mph
     return ["import", "torquepro", str(p), "--out", str(d / "o.parquet")]
 
 
+@case("drive-log", "torquepro OBD speed in knots", ("t.json", "'Speed (OBD)(knots)'", "unit 'knots'"))
+def _(d):  # was called missing: "missing column 'Speed (OBD)(mph)' (or the OBD speed in another unit)"
+    return ["import", "torquepro", str(text(d, "t.json", "[" + ",".join(
+        f'{{"Device Time": "25-Mar-2017 11:46:{i:02d}.000", "Speed (OBD)(knots)": 20}}' for i in range(20)) + "]")),
+            "--out", str(d / "o.parquet")]
+
+
 # ------------------------------------------------------------------------ running
 
 def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:

@@ -201,3 +201,14 @@ def test_a_csv_header_holding_a_label_twice_is_refused(tmp_path):
                  encoding="utf-8")
     with pytest.raises(UserError, match=r"trip.csv: the header holds 'Speed \(OBD\)\(km/h\)' twice"):
         read("torquepro", p)
+
+
+@pytest.mark.parametrize("unit", ["knots", "%", ""])
+def test_an_obd_speed_in_a_unit_this_reader_lacks_is_named(tmp_path, unit):
+    """'Speed (OBD)(knots)' was called missing ("missing column 'Speed (OBD)(mph)' (or the OBD
+    speed in another unit)"): now the column and its unit are named."""
+    p = metric_csv(tmp_path / "trip.csv")
+    p.write_text(p.read_text(encoding="utf-8").replace("Speed (OBD)(km/h)", f"Speed (OBD)({unit})", 1), encoding="utf-8")
+    with pytest.raises(UserError, match=rf"trip.csv: column 'Speed \(OBD\)\({re.escape(unit)}\)': unit '{re.escape(unit)}' "
+                                        "is no speed this reader knows"):
+        read("torquepro", p)

@@ -192,6 +192,10 @@ def read_file(path: Path) -> tuple[pd.DataFrame, dict]:
     if path.suffix.lower() == ".csv" and twice is not None:  # (pandas names the second 'X.1')
         raise UserError(f"{path}: the header holds '{twice}' twice: which to read cannot be told; keep one")
     speed = [lab for lab in labels if lab != TIME and _mapping(lab, [])[0] == "speed_mps"]
+    odd = [lab for lab in labels if split_header(lab)[0] == split_header(SPEED)[0]]
+    if not speed and odd:  # 'Speed (OBD)(knots)': its unit named, not the column called missing
+        raise UserError(f"{path}: column '{odd[0]}': unit '{split_header(odd[0])[1]}' is no speed this reader knows "
+                        "(km/h, mph, m/s, ft/s)")
     for k, ok in ((TIME, TIME in labels), (SPEED, bool(speed))):
         if not ok:
             raise UserError(f"{path}: missing column '{k}' (or the OBD speed in another unit); "
