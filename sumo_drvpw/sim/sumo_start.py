@@ -68,11 +68,11 @@ def check_option_values(options: list[str], where: str) -> None:
         a = str(options[i])
         if not a.startswith("-") or _is_number(a):
             raise UserError(f"{where}: sumo.options: {a!r} is neither a SUMO option nor an option's value (an option "
-                            'starts with "-"; its value is the next item: ["--seed", "7"])')
+                            'starts with "-"; its value is the next item: ["--time-to-teleport", "120"])')
         kind = types.get(a.lstrip("-").partition("=")[0])
         if kind is None:
             raise UserError(f"{where}: sumo.options: {a!r} is no option of SUMO's (a typo? sumo --help lists them)"
-                            + ('; give each option and value an item of its own: ["--seed", "7"]' * (" " in a)))
+                            + ('; give each option and value an item of its own: ["--time-to-teleport", "120"]' * (" " in a)))
         nxt = str(options[i + 1]) if i + 1 < len(options) else None
         if "=" in a:
             pass
