@@ -56,3 +56,17 @@ def test_a_time_format_s_names_are_read_in_english_in_any_locale(tmp_path, fmt):
         locale.setlocale(locale.LC_TIME, old)
     if tried < 2:
         pytest.skip("no German, Turkish or French locale on this machine")
+
+
+def test_timestamps_of_a_parquet_file_are_kept_whatever_the_time_format(tmp_path):
+    """A Parquet column of timestamps has no text to read: the time_format's names are not
+    read into it (1b749df's first form turned them into text and read every row as NaT)."""
+    import pandas as pd
+
+    src = tmp_path / "t.parquet"
+    pd.DataFrame({"t": pd.to_datetime([datetime(*w) for w in WHEN]), "v": 20.0 + np.arange(len(WHEN))}).to_parquet(src)
+    m = tmp_path / "map.toml"
+    m.write_text('[options]\ntime_unit = "datetime"\ntime_format = "%d-%b-%Y %I:%M:%S %p"\n[columns."t"]\n'
+                 'name = "time_s"\n[columns."v"]\nname = "speed_mps"\nunit = "km/h"\n', encoding="utf-8")
+    want = np.array([(datetime(*w) - datetime(*WHEN[0])).total_seconds() for w in WHEN])
+    np.testing.assert_array_equal(read("columns", src, m)[0]["time_s"].to_numpy(float), want)

@@ -49,6 +49,8 @@ def _english_names(s: pd.Series, fmt: str) -> tuple[pd.Series, str, np.ndarray |
     their numbers (%m), weekday names (%a, %A) left out, AM/PM (%p) left out and returned as
     a mask of the PM cells (12 h added to them: %I without %p reads 12 as 0). Returns (cells,
     format, PM mask or None)."""
+    if not (pd.api.types.is_object_dtype(s) or pd.api.types.is_string_dtype(s)):
+        return s, fmt, None  # (timestamps already, e.g. a Parquet file's: no text to read)
     fmt = fmt.replace("%c", "%a %b %d %H:%M:%S %Y").replace("%x", "%m/%d/%y").replace("%X", "%H:%M:%S")
     if not any(d in fmt for d in ("%b", "%B", "%h", "%a", "%A", "%p")):
         return s, fmt, None
