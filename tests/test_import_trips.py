@@ -131,3 +131,14 @@ def test_a_row_without_a_trip_id_is_refused_naming_it(tmp_path):
     df.to_parquet(tmp_path / "veh2.parquet", index=False)
     with pytest.raises(UserError, match=r"veh2\.parquet: column 'phase_num' \(trip_id\) data row 7 holds no trip id \('nan'\)"):
         read("columns", [tmp_path / "veh2.parquet"], m)
+
+
+def test_one_file_given_twice_is_refused_saying_so(tmp_path):
+    # a file given by itself and again in its folder: f14bbb9's hint said "files of one name in
+    # one folder: rename one", which renaming cannot fix
+    m = tmp_path / "map.toml"
+    m.write_text(MAPPING, encoding="utf-8")
+    (tmp_path / "d").mkdir()
+    a = _pems(tmp_path / "d" / "log.csv", [1], 1.0)
+    with pytest.raises(UserError, match=r"trip_id 'log-1' comes from more than one file: .*; one file given twice"):
+        read("columns", [a, tmp_path / "d"], m)

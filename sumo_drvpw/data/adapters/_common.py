@@ -492,8 +492,9 @@ def combine(fmt: str, frames: list[pd.DataFrame], reports: list[dict], notes=())
     if dup:
         held = [r["file"] for r, s in zip(reports, ids) if dup[0] in s]
         raise UserError(f"{fmt}: trip_id {dup[0]!r} comes from more than one file: " + ", ".join(held)
-                        + ("; files of one name in one folder: rename one (its trips are named after it)"
-                           if len({Path(f).stem for f in held}) == 1 else ""))
+                        + ("; one file given twice (also in its folder?): give it once" if len({Path(f).resolve()
+                           for f in held}) < len(held) else "; files of one name in one folder: rename one (its trips are "
+                           "named after it)" if len({Path(f).stem for f in held}) == 1 else ""))
     copies = _copies(frames, reports)
     for f, r in zip(frames, reports):
         _refuse_infinite(f, r)
