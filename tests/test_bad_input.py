@@ -301,3 +301,19 @@ def test_a_route_files_bad_vtype_mass_is_named_before_sumo_starts(tmp_path, caps
     err = capsys.readouterr().err.strip()
     assert code == 2 and err.count("\n") == 0 and "r.rou.xml" in err and "vType 'heavy'" in err and "-100" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_sumo_s_reason_on_the_line_after_its_error_is_kept(tmp_path):
+    """SUMO writes why an option's value is refused on an indented line of its own ("Error:
+    While processing option 'seed':" then " 'abc' is not a valid integer."): only the first
+    reached our one line, which so named no reason (a child process: real file descriptors)."""
+    cfg = (corpus.REPO / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.sumocfg").as_posix()
+    sc = tmp_path / "s.toml"
+    sc.write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nconfig = "{cfg}"\nend = 30\n'
+                  'options = ["--seed", "abc"]\n', encoding="utf-8")
+    r = subprocess.run([sys.executable, "-m", "sumo_drvpw", "run", str(sc), "--no-figures",
+                        "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=300)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "While processing option 'seed': 'abc' is not a valid integer" in lines[0], lines[0]
+    assert not (tmp_path / "o").exists()

@@ -206,7 +206,7 @@ def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
                 except Exception:
                     pass
         if failed is not None:  # SUMO's own error lines, in the one line of ours
-            why = "; ".join(x.strip() for x in said if x.strip().startswith("Error")) or str(failed)
+            why = "; ".join(_error_lines(said)) or str(failed)
             raise UserError(f"SUMO failed to start ({' '.join(args)}): {why}{_malformed(args)}"
                             ) from None
         sys.stdout.write("".join(told))  # started: what SUMO wrote goes on as it wrote it
@@ -222,6 +222,18 @@ def start_sumo(args: list[str], connection: str = "libsumo", gui: bool = False,
         raise UserError(f"SUMO failed to start ({' '.join(args)}): {e}{_malformed(args)}"
                         ) from None
     return traci.getConnection(label)
+
+
+def _error_lines(said: list[str]) -> list[str]:
+    """SUMO's error lines among the lines it wrote, each with the indented lines that go on
+    with it ("Error: While processing option 'seed':" and " 'abc' is not a valid integer.")."""
+    out: list[str] = []
+    for x in said:
+        if x.strip().startswith("Error"):
+            out.append(x.strip())
+        elif out and x[:1] in (" ", "\t") and x.strip():
+            out[-1] += " " + x.strip()
+    return out
 
 
 def _display_reachable(display: str, timeout_s: float = 2.0) -> bool:
