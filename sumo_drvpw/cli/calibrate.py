@@ -50,6 +50,11 @@ def configure(p):
                    help="fuel chain: the engine's rated output (engine_max_w): 'declared' (default: kept where "
                         "the --equation file's chain declares one, else none) or 'profile' (profiled on the "
                         "fit's residuals, kept only where its BIC beats the line without; fitted in memory)")
+    g.add_argument("--fit-window", type=float, metavar="SECONDS", dest="fit_window",
+                   help="fuel chain: fit the Willans line on means over windows of SECONDS within the trips "
+                        "(e.g. 30), not on the samples: noise in a 1-Hz driving power (an acceleration derived "
+                        "from speed, times the mass) flattens a per-sample line; use it where calibrate flags "
+                        "the marginal efficiency ATTENUATED (fitted in memory)")
     g.add_argument("--efficiency", choices=("constant", "power", "speed-power"), default="constant",
                    help="battery chain: traction and recuperation efficiency as constants (default) "
                         "or tables over |power| (and speed), fitted on a piecewise-linear basis")
@@ -413,6 +418,10 @@ def main_chain(args) -> int:
     rating = getattr(args, "engine_max", "declared")
     if rating != "declared" and args.target != "fuel":
         raise UserError(f"--engine-max {rating} goes with --target fuel (an engine's rated output)")
+    window = getattr(args, "fit_window", None)
+    if window is not None and (args.target != "fuel" or not window > 0 or not np.isfinite(window)):
+        raise UserError(f"--fit-window {window:g}: " + ("a positive number of seconds (e.g. 30)" if args.target == "fuel"
+                        else "goes with --target fuel (a fuel chain's Willans line on windowed means)"))
     inputs = existing_paths(args.logs, args.vehicle, args.equation)
     check_output_path(out, inputs, "file")
     from sumo_drvpw.fit.chain_checks import not_a_power
@@ -434,16 +443,21 @@ def main_chain(args) -> int:
             raise UserError(f"--hvac {args.hvac}: give COLUMN[:SETPOINT_C] with a cabin set-point in "
                             "-60 … 60 °C")
     engine = getattr(args, "engine", "memory")
-    if engine != "memory" and efficiency == "constant" and rating == "declared":  # streamed, bounded memory
+    if window is not None and engine != "memory":  # (the streamed fit refuses the windowed fit; fitted in memory)
+        if engine == "dask":
+            raise UserError("--engine dask: --fit-window is fitted in memory (its windows are read within whole "
+                            "trips of one table): leave --engine out")
+        print("note: --fit-window is fitted in memory (its windows within whole trips); without it the fit is streamed")
+    elif engine != "memory" and efficiency == "constant" and rating == "declared":  # streamed, bounded memory
         from sumo_drvpw.cli._scale import calibrate_chain_streamed
 
         return calibrate_chain_streamed(args, out, inputs, hvac)
-    if engine == "dask":
+    if engine == "dask" and window is None:
         raise UserError(f"--engine dask with --target {args.target} fits constant efficiencies only "
                         f"(--efficiency {efficiency} is fitted in memory): leave --engine out" if rating == "declared" else
                         "--engine dask: --engine-max profile is fitted in memory (its search reads the "
                         "logs once per cap tried): leave --engine out")
-    if engine == "local":
+    if engine == "local" and window is None:
         print(f"note: --efficiency {efficiency} is fitted in memory (the tables' knots are quantiles of "
               "the driving power); only constant efficiencies are streamed" if rating == "declared" else
               "note: --engine-max profile is fitted in memory (its search reads the logs once per cap "
@@ -503,7 +517,7 @@ def main_chain(args) -> int:
     m = keep_arrays(m, sorted(keep))  # the table goes with the last reference to it
     del mw
     fit = calibrate_on(m, eq, loads=args.load, hvac=hvac, p_drive_w=p_in, efficiency=efficiency,
-                       engine_off=args.engine_off, rating=rating)
+                       engine_off=args.engine_off, rating=rating, window_s=window)
     eq.name = args.name or out.stem
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": m.log.files, "target": m.source, "road_load": road,

@@ -61,6 +61,8 @@ class ChainFit:
     #: a fuel chain's target at standstill (:func:`~sumo_drvpw.fit.chain_fuel.standing_sums`:
     #: standing s, with fuel flowing s, that fuel J), or None
     standing: object = None
+    #: a fuel chain's line refitted on windowed means (fit/chain_windows.py ``windowed_lines``)
+    windowed: list = field(default_factory=list)
 
     def summary(self) -> str:
         lines = [f"energy chain ({self.chain.predicts}): n={self.n}  R²={self.r2:.4f}  "
@@ -438,12 +440,15 @@ def declared_fuel_cut(equation) -> float | None:
 
 def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engine_off="profile",
                  mask=None, p_drive_w=None, fixed: dict | None = None,
-                 efficiency: str = "constant", warmup_rate=None, rating: str = "declared") -> ChainFit:
+                 efficiency: str = "constant", warmup_rate=None, rating: str = "declared",
+                 window_s: float | None = None) -> ChainFit:
     """Calibrate the chain of ``m.target`` on a :class:`~sumo_drvpw.data.measured.Measured`;
     fit on ``m.usable`` (and ``mask``). A fuel chain's rated output (``engine_max_w``):
     ``rating`` "declared" keeps the one ``equation``'s chain declares (none without), "profile"
     profiles it (:func:`~sumo_drvpw.fit.chain_fuel.profile_cap`: kept only where its BIC beats
-    the line without; refused where the chain declares one, which it would replace).
+    the line without; refused where the chain declares one, which it would replace). A fuel chain
+    with ``window_s`` [s] is fitted on means over windows of that many seconds within the trips
+    (fit/chain_windows.py: a derived acceleration's noise out of the regressor).
 
     The chain's input is ``p_drive_w`` [W] when given, else ``equation``'s driving power.
     Give the *measured* driving power when the log has one (motor torque × speed, the
@@ -462,6 +467,9 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
     _check_chain_inputs(m, use, loads, p)
     from sumo_drvpw.fit.chain_checks import check_chain
 
+    if window_s is not None and m.target != "fuel":
+        raise UserError(f"energy chain: fitting on windowed means (window_s {window_s!r}) is the fuel target's "
+                        f"only, got '{m.target}'")
     if rating != "declared" and m.target != "fuel":
         raise UserError(f"energy chain: a rated output ({rating!r}) is an engine's: the fuel target only, "
                         f"got '{m.target}'")
@@ -484,7 +492,7 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
             raise UserError(f"energy chain: the rated output is 'declared' or 'profile', got {rating!r}")
         fit = calibrate_fuel(p, m.inputs.v, m.power_w, dt, m.battery_w, sig, loads=loads, mask=use,
                              engine_off=engine_off_for(m.vehicle, m.battery_w is not None, engine_off),
-                             fuel=fuel, fuel_cut_below_w=cut, **engine)
+                             fuel=fuel, fuel_cut_below_w=cut, trip=m.inputs.trip, window_s=window_s, **engine)
     elif m.target != "battery":
         raise UserError(f"energy chain: calibrate needs the battery or fuel target, got '{m.target}'")
     else:

@@ -45,7 +45,7 @@ IDLE_FUEL_REF_DISPLACEMENT_L = 2.0
 #: powertrains whose engine is off at standstill and drives electrically at light load
 HYBRID_POWERTRAINS = ("power_split",)
 #: readings that make a warning
-FLAGS = ("IMPLAUSIBLE", "NOT IDENTIFIED", "CHECK THE TARGET")
+FLAGS = ("IMPLAUSIBLE", "NOT IDENTIFIED", "CHECK THE TARGET", "ATTENUATED")
 #: a battery chain's recuperation efficiency below which it returns next to nothing: no
 #: electric or hybrid car's (a rehearsal's Nissan Leaf on a traction-only power: 0.001)
 RECUPERATION_MIN = 0.15
@@ -300,6 +300,8 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
         if "engine_off_below_w" in params:
             params["engine_off_below_w"]["reading"] += engine_off_note(
                 chain.engine_off_below_w, powertrain, fuel_l_per_h(chain.idle_fuel_power_w, chain.fuel))
+    if chain.predicts == "fuel" and "marginal_efficiency" in params:
+        params["marginal_efficiency"]["reading"] += dilution_note(fit, ranges)
     slope = "traction_efficiency" if chain.predicts == "battery" else "marginal_efficiency"
     if slope in params:
         params[slope]["reading"] = params[slope].get("reading", "") + unexplained_note(
@@ -313,6 +315,31 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
                     for name, p in params.items() if any(f in p.get("reading", "") for f in FLAGS)]
     if fit.warnings:
         chain.provenance["warnings"] = list(fit.warnings)
+
+
+def dilution_note(fit, ranges: dict | None = None) -> str:
+    """Why a fuel chain's per-sample line is attenuated (regression dilution: noise in the driving
+    power flattens it), when its refits on windowed means (``fit.windowed``:
+    :func:`~sumo_drvpw.fit.chain_windows.windowed_lines`) move its marginal efficiency by more
+    than :data:`~sumo_drvpw.fit.chain_windows.DILUTION_REL` and beyond twice their standard
+    error; else ''. Says the windowed figures and what to do."""
+    from sumo_drvpw.fit.chain_windows import DILUTION_REL
+
+    rows = getattr(fit, "windowed", None) or []
+    eta, idle = fit.chain.marginal_efficiency, fit.chain.idle_fuel_power_w
+    moved = [r for r in rows if abs(r["marginal_efficiency"] - eta) > max(DILUTION_REL * eta, 2.0 * (r["std_err"] or 0.0))]
+    if not moved:
+        return ""
+    figs = "; ".join(f"{r['window_s']:g} s: η {r['marginal_efficiency']:.3f}"
+                     + (f" ± {r['std_err']:.3f}" if r["std_err"] is not None else "")
+                     + f", {r['idle_fuel_power_w'] / 1000:.1f} kW at zero output ({r['windows']} windows)" for r in rows)
+    p = (ranges or {}).get("power_range_w")
+    span = f" (here {p[0] / 1000:.0f} … {p[1] / 1000:.0f} kW)" if p else ""
+    return (f"; ATTENUATED (errors in the variables): refitted on means over windows of the same trips — {figs} — "
+            f"against η {eta:.3f} and {idle / 1000:.1f} kW on the samples: noise in the driving power{span} — an "
+            "acceleration derived from a logged speed, times the mass; a grade from a logged elevation — flattens "
+            "the per-sample line, and SUMO, whose inputs are clean, would book its efficiency and zero-output fuel; "
+            "fit on windowed means (window_s, e.g. 30 s; docs/energy-chain.md) and compare the two on held-out trips")
 
 
 def range_note(ranges: dict) -> str:

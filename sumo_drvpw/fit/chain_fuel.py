@@ -215,7 +215,8 @@ def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fu
 def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict | None = None, *,
                    loads=(), mask=None, engine_off="profile", fuel: str = "gasoline",
                    engine_on_above_mps="profile", fuel_cut_below_w: float | None = None,
-                   charge_sustaining: bool = True, moving_idle: bool = False, engine_max_w=None) -> ChainFit:
+                   charge_sustaining: bool = True, moving_idle: bool = False, engine_max_w=None,
+                   trip=None, window_s: float | None = None, check_windows: bool = True) -> ChainFit:
     """Calibrate a Willans-line fuel chain with engine-off and battery (SOC) correction.
 
     Parameters
@@ -239,6 +240,12 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
         ``moving_idle_fuel_power_w``: an engine's friction at road speed, not its idle's)
     engine_max_w : the engine's rated output [W] (model/chain.py): None (no cap), a number
         (declared, kept: the fit books the demand above it at it) or "profile" (:func:`profile_cap`)
+    trip : trip id per sample (None: one trip): windows never cross trips
+    window_s : fit on means over windows of this many seconds (fit/chain_windows.py: the noise of a
+        derived acceleration out of the regressor); None: on the samples
+    check_windows : refit the per-sample line on windowed means
+        (:data:`~sumo_drvpw.fit.chain_windows.DILUTION_WINDOWS_S`) into ``ChainFit.windowed``, which
+        the plausibility check reads (fit/chain_checks.py ``dilution_note``)
     """
     p = np.asarray(p_drive_w, float)
     n = p.size
@@ -251,6 +258,13 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w)
     if mask is not None:
         ok &= np.asarray(mask, bool)
+    kw = {"loads": loads, "engine_off": engine_off, "fuel": fuel, "engine_on_above_mps": engine_on_above_mps,
+          "fuel_cut_below_w": fuel_cut_below_w, "charge_sustaining": charge_sustaining, "moving_idle": moving_idle}
+    if window_s is not None:
+        from sumo_drvpw.fit.chain_windows import calibrate_windowed
+
+        return calibrate_windowed(calibrate_fuel, p, v, y, w, battery_w, {c: sig[c] for c in loads}, ok, trip,
+                                  window_s, engine_max_w=engine_max_w, **kw)
     best, profile = None, []
     profiled = isinstance(engine_off, str) and engine_off in ("profile", "conventional")
     conventional = profiled and engine_off == "conventional"
@@ -300,7 +314,15 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
     chain.std_err = {k: p_["std_err"] for k, p_ in params.items() if p_["std_err"] is not None}
     chain.metrics = {"n": int(ok.sum()), "r2": r2, "rmse_w": rmse, "energy_ratio": ratio,
                      "target": fuel_target_text(battery_w is not None)}
-    return ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile, standing=fit_standing)
+    fit = ChainFit(chain, params, int(ok.sum()), r2, rmse, ratio, profile, standing=fit_standing)
+    if check_windows:  # the same engine state and form on windowed means (regression dilution)
+        from sumo_drvpw.fit.chain_windows import windowed_lines
+
+        kw.update(engine_off=off, engine_on_above_mps=engine_on_above_mps, charge_sustaining=tmpl.charge_sustaining)
+        fit.windowed = windowed_lines(lambda *a: calibrate_fuel(*a, engine_max_w=tmpl.engine_max_w, check_windows=False,
+                                                                **kw), p, v, y, w, battery_w,
+                                      {c: sig[c] for c in loads}, ok, trip)
+    return fit
 
 
 def fuel_target_text(battery: bool) -> str:

@@ -38,6 +38,7 @@ from sumo_drvpw.fit.chain import (LIMIT_QUANTILES, ChainFit, _bic, _col, _covari
 from sumo_drvpw.fit.chain_fuel import (CITY_SPEED_MPS, fuel_bounds, fuel_chain, fuel_design, fuel_grid,
                                        fuel_target_text, idles_at_stops, note_conventional, note_declared,
                                        note_idling, set_moving, set_rating, standing_sums, fuel_names)
+from sumo_drvpw.fit.chain_windows import factored_lines, window_designs
 from sumo_drvpw.fit.stream import _add_counts
 
 #: the braking powers' bins: their float64 bits shifted right by this (12 mantissa bits kept)
@@ -357,6 +358,9 @@ class ChainStats:
         ok = np.isfinite(p) & np.isfinite(y) & np.isfinite(w) & use
         for i, tmpl in enumerate(self.grid):
             self._factor(i, fuel_design(tmpl, p, v, pb, lcols), y, w, ok)
+        for key, x, yw, dur in window_designs(self.grid, p, v, y, w, m.battery_w, dict(zip(self.spec.loads, lcols)),
+                                                   self.spec.loads, ok, m.inputs.trip):
+            self._factor(key, x, yw, dur, np.ones(dur.size, bool))  # (the dilution check's refits)
         self.n_ok += int(ok.sum())
         self.mom = _merge_wmoments(self.mom, _wmoments(w[ok], [y[ok], pb[ok]]))
         self.w_low += float(w[ok & (v < CITY_SPEED_MPS)].sum())
@@ -540,7 +544,7 @@ class ChainStats:
         ratio = (float(self.fac[i][2] @ beta) + b * sw * float(mu[1])) / et if et != 0 else math.nan
         fit = self._finish(chain, params, r2, math.sqrt(rss / sw), ratio, profile)
         chain.metrics["target"] = fuel_target_text(self.battery)
-        fit.standing = self.standing
+        fit.standing, fit.windowed = self.standing, factored_lines(self.fac, i, fuel_bounds(fuel_names(tmpl, sp.loads)))
         return fit
 
     def _finish(self, chain, params, r2, rmse, ratio, profile) -> ChainFit:

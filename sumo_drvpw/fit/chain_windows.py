@@ -1,0 +1,185 @@
+"""A fuel chain's Willans line on windowed means: noise in the driving power (errors in the
+variables) and what the line fitted on 1-Hz samples makes of it.
+
+A drive log's driving power holds the acceleration derived from a logged speed (and a grade
+from a logged elevation); at a truck's mass the derivative's noise alone reaches megawatts. In
+the regressor it flattens the Willans line (regression dilution: the marginal efficiency reads
+high, the zero-output fuel too — the fuel the noise does not buy is booked at zero output). A
+derivative's noise cancels over a window (the mean acceleration is the speed's change over it),
+so the line fitted on means over windows of whole seconds sees the driving power, not the
+logger. A window is a run of the same trip's usable samples, chopped every ``window_s`` [s]; it
+never straddles
+
+* the line's kink at zero driving power (the mean of max(P, 0) is not max of the mean): runs
+  split where the sign of the driving power, smoothed over :data:`SIGN_SMOOTH_S` centred
+  within the trip (long enough for a derivative's noise to cancel, short enough to find the
+  change), changes;
+* the engine's state as the log shows it: fuel flowing or not (``FUEL_FLOWING_W``), so an
+  engine-off (a hybrid's, or a fuel cut on overrun) is never averaged into an engine-on window;
+* standing and moving (``STANDSTILL_MPS``): the standing idle fuel stays the standstill's.
+
+Every usable sample is in exactly one window; a window weighs its duration. Windows of less
+than half ``window_s`` (at the splits) are left out of the windowed fit: their noise is not
+averaged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sumo_drvpw.model.constants import STANDSTILL_MPS
+
+#: windows [s] the plausibility check refits the per-sample line on (:func:`windowed_lines`)
+DILUTION_WINDOWS_S = (10.0, 30.0, 60.0)
+#: the smoothing [s] of the driving power whose sign splits the windows (a longer one blurs
+#: where braking starts: windows then mix it with driving and the zero-output fuel reads high)
+SIGN_SMOOTH_S = 5.0
+#: a windowed marginal efficiency this far (relative) from the per-sample one, and beyond twice its
+#: standard error, flags the per-sample line as attenuated (chain_checks.dilution_note): a
+#: planted truck with 0.3 m/s of speed noise moves 0.93 → 0.40, the measured class-8 trucks 0.51 →
+#: 0.36 (docs/hdv-fuel.md); the Prius Gen-2's measured driving power 0.386 → 0.363–0.374, which
+#: held out is no better on windows (docs/energy-chain.md), stays below it
+DILUTION_REL = 0.10
+
+
+def window_ids(p, v, fuel_w, dt_s, ok, trip, window_s: float) -> np.ndarray:
+    """Per sample, the window it is averaged in (0, 1, …; −1 where not ``ok``), as the module
+    docstring says: runs of one trip's usable samples with one sign of the smoothed driving
+    power ``p`` [W], one engine state (fuel ``fuel_w`` [W] flowing or not) and one of standing
+    or moving (``v`` [m/s]), chopped every ``window_s`` [s] of duration ``dt_s``."""
+    from sumo_drvpw.fit.chain_fuel import FUEL_FLOWING_W
+
+    p, v, y = (np.asarray(a, float) for a in (p, v, fuel_w))
+    n = p.size
+    dt = np.nan_to_num(np.broadcast_to(np.asarray(dt_s, float), (n,)))
+    ok = np.asarray(ok, bool)
+    if n == 0:
+        return np.zeros(0, int)
+    tr = np.zeros(n, int) if trip is None else np.asarray(trip)
+    new = np.r_[True, tr[1:] != tr[:-1]]
+    half = SIGN_SMOOTH_S / 2.0
+    t = np.cumsum(dt) + np.cumsum(new) * (dt.sum() + 4.0 * half + 1.0)  # trips apart in time
+    cp, ck = np.r_[0.0, np.cumsum(np.where(ok, p, 0.0))], np.r_[0, np.cumsum(ok)]
+    lo, hi = np.searchsorted(t, t - half, "left"), np.searchsorted(t, t + half, "right")
+    ps = (cp[hi] - cp[lo]) / np.maximum(ck[hi] - ck[lo], 1)
+    state = (ps > 0) * 1 + (y > FUEL_FLOWING_W) * 2 + (v < STANDSTILL_MPS) * 4 + (~ok) * 8
+    run = np.cumsum(new | np.r_[True, state[1:] != state[:-1]])
+    start = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    tb = t - dt  # each sample's start
+    k = np.floor((tb - tb[start][run - 1]) / window_s).astype(np.int64)
+    wid = np.cumsum(np.r_[True, (run[1:] != run[:-1]) | (k[1:] != k[:-1])]) - 1
+    wid = np.where(ok, wid, -1)
+    return np.unique(wid, return_inverse=True)[1].reshape(n) - (1 if (~ok).any() else 0)
+
+
+def window_means(wid, dt_s, *cols):
+    """The duration-weighted means of ``cols`` over the windows ``wid`` (:func:`window_ids`) and
+    the windows' durations [s]: ``(durations, mean col 1, …)``."""
+    use = wid >= 0
+    k = int(wid.max()) + 1 if use.any() else 0
+    dt = np.broadcast_to(np.asarray(dt_s, float), wid.shape)[use]
+    dur = np.bincount(wid[use], dt, k)
+    return (dur, *(np.bincount(wid[use], np.broadcast_to(np.asarray(c, float), wid.shape)[use] * dt, k)
+                   / np.where(dur > 0, dur, 1.0) for c in cols))
+
+
+def windowed(p, v, fuel_w, dt_s, battery_w, signals: dict, ok, trip, window_s: float):
+    """The fuel chain's inputs as means over windows of ``window_s`` [s] (:func:`window_ids`;
+    the short ones left out): (P, v, fuel, durations, battery or None, signals) to calibrate
+    on, and the number of windows and of the samples in them."""
+    wid = window_ids(p, v, fuel_w, dt_s, ok, trip, window_s)
+    names = sorted(signals or {})
+    cols = [p, v, fuel_w] + ([] if battery_w is None else [np.nan_to_num(np.asarray(battery_w, float))])
+    out = window_means(wid, dt_s, *cols, *[np.nan_to_num(np.asarray(signals[c], float)) for c in names])
+    keep = out[0] >= window_s / 2.0
+    got = [np.asarray(a)[keep] for a in out]
+    nb = len(cols) - 3
+    sig = {c: a for c, a in zip(names, got[4 + nb:])}
+    return (got[1], got[2], got[3], got[0], got[4] if nb else None, sig,
+            int(keep.sum()), int(np.isin(wid, np.flatnonzero(keep)).sum()))
+
+
+def windowed_lines(fit_template, p, v, fuel_w, dt_s, battery_w, signals, ok, trip,
+                   windows=DILUTION_WINDOWS_S) -> list[dict]:
+    """The per-sample fit's line refitted on means over each of ``windows`` [s]
+    (``fit_template(P, v, fuel, durations, battery, signals)`` → ChainFit: the same engine
+    state and form as the per-sample fit): per window its zero-output fuel, marginal efficiency
+    and standard error, and the windows' number (windows too few for a line are skipped)."""
+    rows = []
+    for ws in windows:
+        pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws)
+        if nw < 10:
+            continue
+        f = fit_template(pp, vv, yy, dur, pb, sig)
+        eta = f.parameters["marginal_efficiency"]
+        rows.append({"window_s": ws, "windows": nw, "idle_fuel_power_w": f.chain.idle_fuel_power_w,
+                     "marginal_efficiency": eta["value"], "std_err": eta["std_err"],
+                     "at_bound": eta["at_bound"]})
+    return rows
+
+
+def calibrate_windowed(calibrate, p, v, fuel_w, dt_s, battery_w, signals, ok, trip, window_s, **kw):
+    """``calibrate`` (:func:`~sumo_drvpw.fit.chain_fuel.calibrate_fuel`, with its keywords
+    ``kw``) on the means over windows of ``window_s`` [s] (:func:`windowed`) of the samples
+    ``ok``; its R², RMSE and energy ratio on those samples, as a per-sample fit's. UserError
+    for a window that is no positive number of seconds, or too few windows for a line."""
+    from sumo_drvpw.errors import UserError
+    from sumo_drvpw.fit.chain import _stats
+    from sumo_drvpw.fit.chain_fuel import standing_sums
+    from sumo_drvpw.model.chain import corrected_fuel_power
+
+    ws = float(window_s) if isinstance(window_s, (int, float)) else float("nan")
+    if not np.isfinite(ws) or ws <= 0:
+        raise UserError(f"energy chain: window_s {window_s!r}: the window of the means to fit on is a positive "
+                        "number of seconds (e.g. 30)")
+    pp, vv, yy, dur, pb, sig, nw, ns = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws)
+    if nw < 10:
+        raise UserError(f"energy chain: windows of {ws:g} s: only {nw} of at least {ws / 2:g} s on the "
+                        f"{int(ok.sum())} usable samples, too few for a line: fit on a shorter window or more logs")
+    fit = calibrate(pp, vv, yy, dur, pb, sig, check_windows=False, **kw)
+    ch, w = fit.chain, np.broadcast_to(np.asarray(dt_s, float), ok.shape)
+    pred = ch.evaluate(p[ok], v[ok], signals={k: np.asarray(a)[ok] for k, a in signals.items()})["power_w"]
+    bw = np.zeros(ok.shape) if battery_w is None else np.nan_to_num(np.asarray(battery_w, float))
+    target = corrected_fuel_power(np.asarray(fuel_w, float), bw, ch.battery_fuel_factor)[ok]
+    fit.r2, fit.rmse_w, fit.energy_ratio = _stats(pred, target, w[ok])
+    fit.n = int(ok.sum())
+    ch.metrics.update({"n": fit.n, "r2": fit.r2, "rmse_w": fit.rmse_w, "energy_ratio": fit.energy_ratio,
+                       "fit_window_s": ws, "fit_windows": nw, "fit_windowed_samples": ns})
+    fit.standing = standing_sums(v, np.asarray(fuel_w, float), w, ok)
+    fit.parameters["marginal_efficiency"]["reading"] += (
+        f"; fitted on means over {nw} windows of {ws:g} s ({ns} of the {fit.n} usable samples; the shorter "
+        "ones at a change of power sign, engine state or standing left out): the noise of a derived "
+        "acceleration and grade averages out of the regressor there, not at 1 Hz")
+    return fit
+
+
+def window_designs(grid, p, v, fuel_w, dt_s, battery_w, signals, loads, ok, trip, windows=DILUTION_WINDOWS_S):
+    """For a streamed fit (fit/chain_stream.py): per window length of ``windows`` [s] and template
+    ``i`` of ``grid``, ``((i, window), X, y, durations)``, the Willans design (fit/chain_fuel.py
+    ``fuel_design``) on a batch's windowed means — batches hold whole trips, so their factors add up
+    to the in-memory refit's (:func:`windowed_lines`)."""
+    from sumo_drvpw.fit.chain_fuel import fuel_design
+
+    for ws in windows:
+        pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws)
+        if nw:
+            pb = np.zeros(nw) if pb is None else pb
+            for i, tmpl in enumerate(grid):
+                yield (i, ws), fuel_design(tmpl, pp, vv, pb, [sig[c] for c in loads]), yy, dur
+
+
+def factored_lines(fac: dict, i: int, bounds, windows=DILUTION_WINDOWS_S) -> list[dict]:
+    """:func:`windowed_lines`' rows from a streamed fit's factors ``fac[(i, window)]`` = [R, rows,
+    …] of its chosen template ``i`` (bounds: fit/chain_fuel.py ``fuel_bounds``)."""
+    from sumo_drvpw.fit.chain import _covariance, _nan_none, solve_factor
+
+    rows = []
+    for ws in windows:
+        if (i, ws) not in fac or fac[(i, ws)][1] < 10:
+            continue
+        beta, rss, act, xs = solve_factor(fac[(i, ws)][0], fac[(i, ws)][1], *bounds)
+        se = _covariance(xs, rss, act)
+        rows.append({"window_s": ws, "windows": int(fac[(i, ws)][1]), "idle_fuel_power_w": float(beta[0]),
+                     "marginal_efficiency": 1.0 / beta[1], "std_err": _nan_none(se[1] / beta[1] ** 2),
+                     "at_bound": bool(act[1] != 0)})
+    return rows
