@@ -305,6 +305,14 @@ def _explained(e: dict | None) -> list[str]:
           "highway (the carbon balance says so) and the driveline is FASTSim's. The engine speed the logged-gear "
           "forms read is not in SUMO. The built-in stays as sourced: one data set of two 1997–2001 trucks, and "
           "two published drivelines that disagree.", ""]
+    L += ["`calibrate` says so on these logs (veh002's, the fuel target on the road load moves_combination_truck, a "
+          "28-t diesel vehicle file): the fitted marginal efficiency is flagged "
+          "ATTENUATED with the line refitted on 10-, 30- and 60-s windows of the same trips (fit/chain_windows.py; "
+          "fuel → wheels, the driveline in it: η 0.507 on the samples, 0.378, 0.356 and 0.355 on the windows; 99.1 kW at "
+          "zero output against 56.2, 49.6 and 49.1 kW), and its fit on 30-s windows (docs/energy-chain.md) gives that line. Held out on the "
+          "other truck's trips its per-trip fuel is off by 23.0 % (fitted on veh002) and 22.2 % (on veh003), the "
+          "per-sample line's by 33.2 and 29.3 %, the built-in's by 21.4 and 22.3 % (measured 2026-11-30; the table, "
+          "with the Prius Gen-2's, in docs/energy-chain.md).", ""]
     return L
 
 
