@@ -51,19 +51,25 @@ def emitted_wh(path: Path, dt: float) -> tuple[dict, dict]:
 
 
 
-def parking_moves_wh(scenario: Path, d: Path, vehicles=("p",)) -> dict:
-    """SUMO's electricity [Wh] per vehicle of ``vehicles`` over the steps in which it parks,
-    which its emission output leaves out: SUMO moves the car on its lane into its stop,
-    below 0.1 m/s, then takes it off the road, so the emission output (the vehicles on the
-    road at the step's end) does not write that step, while its emissions device books the
-    move (MSDevice_Emissions::notifyMove), as the plug-in does (sim/parking.py
-    ``Parking.started``). (Its battery device books only that step's recuperation:
-    MSDevice_Battery zeroes a parking car's consumption.) Probe runs of ``scenario`` (its
-    own command line, outputs into ``d``): one finds the steps — a vehicle's FCD rows the
-    emission output lacks, after one it has — and, per such step, SUMO's emissions device
-    (tripinfo, unfinished trips written) ended before and after it gives its energy (also
-    for a car switched off for its parking: SUMO 1.28's emissions device books that move).
-    """
+def parking_steps_wh(scenario: Path, d: Path, vehicles=("p",), attr: str = "electricity",
+                     before: float | None = None) -> dict:
+    """What SUMO's emissions device books per vehicle of ``vehicles`` beyond its emission
+    output over the two steps of each parking where the two part [Wh; mg for another
+    ``attr``]: the step it parks in — SUMO moves the car on its lane into its stop, below
+    0.1 m/s, then takes it off the road: the output (the vehicles on the road at the step's
+    end) does not write it, the device books the move (MSDevice_Emissions::notifyMove) —
+    and the step its parking ends — SUMO puts it back on its lane at speed 0 after the
+    step's moves (MSVehicleTransfer::checkInsertions): the output writes it, the device
+    books nothing. The output plus this is the device's count, which the plug-in books
+    (sim/parking.py). Probe runs of ``scenario`` (its own command line, outputs into ``d``):
+    one finds the steps in its FCD — the first row beside the lane (farther from its
+    centre line than half its width) after one on it, the last before one on it — and,
+    per such step, the device (tripinfo, unfinished trips written) ended before and after
+    it gives its booking, the output its own. ``before``: only the steps before that time
+    [s] (a script acts from then, which these runs do not)."""
+    from sumolib.geomhelper import distancePointToPolygon
+    from sumolib.net import readNet
+
     from sumo_drvpw.sim.scenario import load_scenario
 
     d.mkdir(parents=True, exist_ok=True)
@@ -78,27 +84,52 @@ def parking_moves_wh(scenario: Path, d: Path, vehicles=("p",)) -> dict:
                        capture_output=True)
 
     sumo(float(sc.end), "--emission-output", str(d / "em.xml"), "--fcd-output", str(d / "fcd.xml"))
-    written = {(ts.get("time"), v.get("id")) for ts in ET.parse(d / "em.xml").getroot() for v in ts}
-    entries, prev = [], {}
+    dt = float(sc.step_length)
+    written = {(ts.get("time"), v.get("id")): float(v.get(attr)) * dt  # (per second written)
+               for ts in ET.parse(d / "em.xml").getroot() for v in ts}
+    net = readNet(str(sc.net_file))
+    rows = defaultdict(list)
     for ts in ET.parse(d / "fcd.xml").getroot():
-        t = ts.get("time")
         for v in ts:
-            vid = v.get("id")
-            if vid in vehicles:
-                on = (t, vid) in written
-                if not on and prev.get(vid):
-                    entries.append((float(t), vid))
-                prev[vid] = on
+            if v.get("id") in vehicles:
+                lane = net.getLane(v.get("lane"))
+                beside = distancePointToPolygon((float(v.get("x")), float(v.get("y"))), lane.getShape()) \
+                    > lane.getWidth() / 2 + 0.1
+                rows[v.get("id")].append((ts.get("time"), beside))
+    steps = []
+    for vid, r in rows.items():
+        r = [x for x in r if before is None or float(x[0]) < before - 1e-9]
+        for (t0, b0), (t1, b1) in zip(r, r[1:]):
+            if b1 and not b0:
+                steps.append((t1, vid))  # parks in
+            elif b0 and not b1:
+                steps.append((t0, vid))  # its parking ends in
     out: dict = defaultdict(float)
-    for t, vid in entries:
-        wh = []
-        for end in (t, t + float(sc.step_length)):
-            sumo(end, "--tripinfo-output", str(d / "ti.xml"), "--tripinfo-output.write-unfinished",
-                 "--device.emissions.explicit", vid)
-            wh.append(next(float(e.find("emissions").get("electricity_abs"))
-                           for e in ET.parse(d / "ti.xml").getroot() if e.get("id") == vid))
-        out[vid] += wh[1] - wh[0]
+    for t, vid in steps:
+        out[vid] += device_step(scenario, d, float(t), vid, attr) - written.get((t, vid), 0.0)
     return out
+
+
+def device_step(scenario: Path, d: Path, t: float, vid: str, attr: str = "electricity") -> float:
+    """What SUMO's emissions device books for vehicle ``vid`` in the step the outputs write at
+    time ``t`` [s] (``attr``: electricity [Wh], fuel [mg], …): its tripinfo (unfinished trips
+    written) of two runs of ``scenario`` (its own command line; files in ``d``), ended at
+    ``t`` and a step later."""
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    sc = load_scenario(scenario)
+    args = list(sc.sumo_args)
+    for opt in ("--emission-output", "--fcd-output", "--end", "--tripinfo-output"):
+        if opt in args:
+            del args[args.index(opt):args.index(opt) + 2]
+    dev = []
+    for end in (t, t + float(sc.step_length)):
+        subprocess.run([sumolib.checkBinary("sumo"), *args, "--end", f"{end:.6f}", "--tripinfo-output",
+                        str(d / "ti.xml"), "--tripinfo-output.write-unfinished", "--device.emissions.explicit", vid],
+                       check=True, capture_output=True)
+        dev.append(next(float(e.find("emissions").get(f"{attr}_abs"))
+                        for e in ET.parse(d / "ti.xml").getroot() if e.get("id") == vid))
+    return dev[1] - dev[0]
 
 
 def booked_per_vehicle(out: Path):

@@ -12,7 +12,7 @@ import pytest
 from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.fcd import process_fcd
 from sumo_drvpw.sim.fcd_taxi import TaxiDevices
-from sumo_probe import build_net, energy_scenario
+from sumo_probe import build_net, device_step, energy_scenario
 
 pytestmark = pytest.mark.sumo
 
@@ -175,12 +175,15 @@ def test_an_idle_taxi_parking_again_where_its_last_customer_left_books_as_live(t
                        pd.read_csv(tmp_path / out / "chain_vehicles.csv").set_index("key")[["fuel_l"]].sort_index())
     assert list(booked["live"][1].index) == ["t0", "t1"]
     # SUMO books a re-park once: its emission output writes the taxi in the step it stands
-    # on its lane (between two it is parked in), its emissions device books the next
-    # (tripinfo, probed 2026-11-29: 0 mg in that step, 493.1 mg in the next — one idle step
-    # either way). The live run booked both (before 2026-11-29); now the step on the lane.
+    # on its lane (between two it is parked in), its emissions device books the next (the
+    # step it parks in again) and not that one (its parking's end): one idle step either way.
+    # The plug-in books as the device (the live run booked both before 2026-11-29, then the
+    # step on the lane, as the emission output, until the device's count was taken for every
+    # parking's end: sim/parking.py).
     reparks = _reparks(tmp_path / "em.xml", tmp_path / "fcd.xml", step)
     assert reparks
     for t, vid in reparks:
-        assert (t, vid) in booked["live"][0] and (t + step, vid) not in booked["live"][0]
+        assert device_step(sc, tmp_path, t, vid, "fuel") == 0.0 < device_step(sc, tmp_path, t + step, vid, "fuel")
+        assert (t, vid) not in booked["live"][0] and (t + step, vid) in booked["live"][0]
     assert booked["rep"][0] == booked["live"][0]  # the same vehicle-steps
     pd.testing.assert_frame_equal(booked["rep"][1], booked["live"][1], rtol=1e-6)

@@ -17,7 +17,7 @@ import pytest
 
 from sumo_drvpw.sim import run_scenario
 from sumo_drvpw.sim.fcd import process_fcd
-from sumo_probe import build_net, emitted_wh, energy_scenario, parking_moves_wh
+from sumo_probe import build_net, emitted_wh, energy_scenario, parking_steps_wh
 
 pytestmark = pytest.mark.sumo
 
@@ -108,7 +108,7 @@ def test_the_step_a_car_parks_in_is_booked_live_and_replayed(tmp_path, step, bal
         assert chains[out] == pytest.approx(chains["live"], rel=tol), out
     if rise == 0:  # (on a hill SUMO's slopes and the plug-in's profile part by ~1e-3 anyway)
         sumo_wh = emitted_wh(tmp_path / "em.xml", step)[0]["p"]
-        moves = parking_moves_wh(sc, tmp_path / "probe")["p"]
+        moves = parking_steps_wh(sc, tmp_path / "probe")["p"]
         assert moves < -0.5  # SUMO's emissions device recuperates in that step
         assert chains["live"] == pytest.approx(sumo_wh + moves, abs=1e-4)
 

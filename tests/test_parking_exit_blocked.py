@@ -15,7 +15,7 @@ import pytest
 
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.sim import run_scenario
-from sumo_probe import build_net, emitted_wh, energy_scenario, parking_moves_wh
+from sumo_probe import build_net, emitted_wh, energy_scenario, parking_steps_wh
 
 ROUTES = """<routes>
   <vType id="ecar" vClass="passenger" mass="1500" emissionClass="Energy/unknown">
@@ -43,20 +43,22 @@ def scenario(d, params="", fcd=False):
 
 def run_against_sumo(toml, d, **overrides):
     """Run scenario ``toml`` (outputs in ``d``/o): its summary, its chain's vehicles, and
-    SUMO's electricity of the run per vehicle [Wh] — its emission output and the steps in
-    which car p parks, which that output leaves out and its emissions device books
-    (sumo_probe.parking_moves_wh) — with the emission output's nan steps."""
+    SUMO's electricity of the run per vehicle [Wh] — its emission output, with the steps in
+    which car p parks, which that output leaves out and its emissions device books, and
+    without those its parking ends in, which that output writes and the device does not
+    (sumo_probe.parking_steps_wh) — with the emission output's nan steps."""
     res = run_scenario(toml, d / "o", **overrides)
     return res, pd.read_csv(d / "o" / "chain_vehicles.csv").set_index("key"), *sumo_electricity(toml, d)
 
 
-def sumo_electricity(toml, d, dt=0.5, vehicles=("p",)):
+def sumo_electricity(toml, d, dt=0.5, vehicles=("p",), before=None):
     """SUMO's electricity per vehicle [Wh] of scenario ``toml`` run in ``d`` (its emission
-    output ``d``/em.xml at steps of ``dt`` [s]) with the steps in which ``vehicles`` park
-    (probe runs in ``d``/probe: sumo_probe.parking_moves_wh), and the emission output's nan
-    steps."""
+    output ``d``/em.xml at steps of ``dt`` [s]) as its emissions device books a parking —
+    the step in which ``vehicles`` park in, not the one their parking ends in (probe runs in
+    ``d``/probe: sumo_probe.parking_steps_wh; ``before``: of the steps before that time) —,
+    and the emission output's nan steps."""
     sumo_wh, nan = emitted_wh(d / "em.xml", dt)
-    for vid, wh in parking_moves_wh(toml, d / "probe", vehicles).items():
+    for vid, wh in parking_steps_wh(toml, d / "probe", vehicles, before=before).items():
         sumo_wh[vid] += wh
     return sumo_wh, nan
 
@@ -250,16 +252,25 @@ def test_a_parked_car_whose_stop_a_script_ends_is_booked_idling_out_of_sumos_id_
     path = scenario(tmp_path)
     (tmp_path / "r.rou.xml").write_text(ROUTES.format(params=params).replace('duration="20"', 'until="40"'), encoding="utf-8")
 
+    back = []
+
     def remove(conn, t):
+        if "p" in conn.simulation.getParkingEndingVehiclesIDList():
+            back.append(round(t - 0.5, 6))  # (the outputs' time of the step: libsumo's is its end)
         if removed_at is not None and abs(t - removed_at) < 1e-9:
             assert "p" not in conn.vehicle.getIDList()  # idling, out of SUMO's list
             conn.vehicle.remove("p")
 
     energy, res = resumed_at_30(path, connection, on_step=remove)
     booked = energy["vtype_energy.ecar"]["chain"]["net_j"] / 3600.0
-    sumo_wh, nan = sumo_electricity(path, tmp_path)  # (its parking starts before 30 s)
+    # the step it parks in (before 30 s, as without the script), less the step it is back on
+    # the road in, which SUMO's emission output writes and its emissions device does not
+    sumo_wh, nan = sumo_electricity(path, tmp_path, before=30.0)
     assert not nan
-    assert booked == pytest.approx(sumo_wh["p"], rel=1e-6)
+    assert len(back) == (0 if removed_at else 1)
+    exit_wh = sum(float(v.get("electricity")) * 0.5 for ts in ET.parse(tmp_path / "em.xml").getroot()
+                  if round(float(ts.get("time")), 6) in back for v in ts if v.get("id") == "p")
+    assert booked == pytest.approx(sumo_wh["p"] - exit_wh, rel=1e-6)
     assert res["parking"]["idle_starts"] == (0 if off else 1)
 
 

@@ -250,6 +250,7 @@ class _Rows:
         #: the route files' taxi devices (fcd_taxi.TaxiDevices; set by replay_fcd, None: none
         #: read), and the parked taxis whose last rider left → when their stop ends [s] (:meth:`_reparks`)
         self.taxis, self.emptied, self.reparked = None, {}, set()
+        self.at_once: set = set()  # vehicles idling from the row they parked in (:meth:`_vehicles`)
         self.person, self.vehicletype, self.calibrator = _Person(self), _VType(self), _Calib(self)
 
     def saw(self, ids) -> None:
@@ -307,8 +308,8 @@ class _Rows:
         entry = None
         if "off" in c:  # the row a vehicle parks in: its move into the space, booked as driven
             entry, self.on_lane_ids = _parks_now(c["id"], c["off"], self.on_lane_ids)
-            if self.reparked:  # (its re-park booked once, on its lane: no entry in the next row)
-                self.on_lane_ids, self.reparked = self.on_lane_ids - self.reparked, set()
+            if self.reparked:  # (on its lane in this row, not booked: parking again in the next, booked)
+                self.on_lane_ids, self.reparked = self.on_lane_ids | self.reparked, set()
             # at the slope SUMO gave it then, its space's, as live (where the FCD has slopes)
             self.entry_slope = (dict(zip(c["id"][entry], np.radians(np.asarray(c["slope"], float)[entry])))
                                 if "slope" in c and entry.any() else {})
@@ -319,24 +320,25 @@ class _Rows:
                     if "bay" in nxt and self.not_bay else False
                 nxt = {"id": nxt["id"][keep], "off": (nxt["off"] | nb | (~_placed(nxt) & (np.asarray(
                     nxt["speed"], float) < STANDSTILL_MPS)))[keep]}
-            lanes, n = _unpark(c["lane"], c["id"], c["off"] & ~entry, nxt["id"] if nxt else None,
-                               nxt["off"] if nxt else None)
+            lanes, n, back = _unpark(c["lane"], c["id"], c["off"] & ~entry, nxt["id"] if nxt else None,
+                                     nxt["off"] if nxt else None)
             if self.idling is not None:  # idling in its space, its way out blocked: booked there
                 idle = self.idling.rows(self.t - self.dt, c["id"], c["type"], c["off"], c.get("signals"),
                                         self.riders, entry, self.riders_before, self.riders_told)
-                idle &= lanes == ""
+                if (idle & entry).any():  # idling from the row it parks in: SUMO's device books that
+                    self.at_once.update(c["id"][idle & entry])  # step twice, and its end is booked
+                if self.at_once and back.any():  # (as live: sim/parking.py Parking.at_once)
+                    k = back & np.fromiter(map(self.at_once.__contains__, c["id"]), bool, len(back))
+                    self.at_once.difference_update(c["id"][k])
+                    back &= ~k
+                    lanes[k] = c["lane"][k]
+                    n -= int(np.count_nonzero(k))
+                idle &= (lanes == "") & ~back
                 if idle.any():
                     lanes[idle] = c["lane"][idle]
                     k = int(np.count_nonzero(idle))
                     self.idle_rows += k
                     n -= k
-                shut = self.idling.shut
-                if shut:  # back on its lane a step before its stop ends, still switched off
-                    back = np.flatnonzero(c["off"] & ~entry & (lanes != "") & ~idle)  # (SUMO writes 0)
-                    back = back[np.fromiter(map(shut.__contains__, c["id"][back]), bool, len(back))]
-                    if len(back):
-                        lanes[back] = ""
-                        n += len(back)
             c = dict(c, lane=lanes)
             self.parked_rows += n
         return c
@@ -347,10 +349,11 @@ class _Rows:
         the idle one (``MSIdling_Stop::idle``: triggered, parking) once its unloading is over
         (:meth:`TaxiDevices.unloading_s`), and libsumo reads the taxi on its lane, standing, in
         that step, parked again from the next — while SUMO's FCD writes it at its space all
-        along (SUMO 1.28: a person at 1-s and 0.5-s steps, a container at 1-s steps). That
-        step is booked standing on its lane, the next not as a parking entry: SUMO books the
-        re-park once (its emission output the step on the lane, its emissions device the
-        next; :meth:`sumo_drvpw.sim.parking.Parking.started`). Rows written every step only
+        along (SUMO 1.28: a person at 1-s and 0.5-s steps, a container at 1-s steps). SUMO
+        books the re-park once: its emissions device the next step (a parking entry,
+        :meth:`sumo_drvpw.sim.parking.Parking.started`), not the step on the lane (a parking's
+        end, :func:`_unpark`), which its emission output writes instead. That row stays
+        parked, the next is booked as the row the taxi parks in. Rows written every step only
         (not sparser: :attr:`kinetic` None)."""
         if self.kinetic is not None or not self.riders_told:
             return c
@@ -370,12 +373,9 @@ class _Rows:
             del self.emptied[v]
         parked = set(np.asarray(nxt["id"], object)[np.asarray(nxt["off"], bool)]) if nxt is not None else set()
         k = np.flatnonzero(off & np.fromiter(((v in due and v in parked) for v in ids), bool, len(ids)))
-        if not len(k):  # (driven off, or dispatched: its stop ended as SUMO's dispatch says)
-            return c
-        off = off.copy()
-        off[k] = False
-        self.reparked = set(ids[k])
-        return dict(c, off=off)
+        if len(k):  # (else driven off, or dispatched: its stop ended as SUMO's dispatch says)
+            self.reparked = set(ids[k])
+        return c
 
     def _bays(self, c: dict) -> dict:
         """Rows ``c`` with the ones :class:`ParkedTest` took for a vehicle dwelling in a bus
@@ -553,18 +553,21 @@ def _parks_now(ids, off, on_lane_before: set) -> tuple[np.ndarray, set]:
     return entry, set(ids[~off])
 
 
-def _unpark(lanes, ids, off, nxt_ids, nxt_off) -> tuple[np.ndarray, int]:
-    """The lanes of a timestep's rows with "" for the parked vehicles, and their number:
-    off the lane (``off``) and still off it in the next timestep (``nxt_*``; None: none).
-    libsumo's getLaneID reads "" from the step a vehicle parks to the one before it drives
-    off; in the step it leaves it is on its lane again, where FCD still shows it at the
-    parking space."""
+def _unpark(lanes, ids, off, nxt_ids, nxt_off) -> tuple[np.ndarray, int, np.ndarray]:
+    """The lanes of a timestep's rows with "" for the parked vehicles (``off``: off the
+    lane), their number, and which of them are back on their lane in the next timestep
+    (``nxt_*``; None: none). libsumo's getLaneID reads "" from the step a vehicle parks to
+    the one before it drives off; in that one SUMO puts it back on its lane at speed 0
+    (``MSVehicleTransfer::checkInsertions``, after the step's moves), where FCD still
+    shows it at the parking space: its emissions device books nothing there (its emission
+    output writes it), so that row is booked parked too, as the live loop leaves it
+    (:meth:`sumo_drvpw.sim.parking.Parking.step`)."""
+    back = np.zeros(len(off), bool)
     if not off.any():
-        return lanes, 0
-    off = off.copy()
+        return lanes, 0, back
     if nxt_ids is not None and len(nxt_ids):
-        back = set(np.asarray(nxt_ids, object)[~nxt_off])
-        off &= ~np.fromiter((v in back for v in ids), bool, len(ids))
+        on = set(np.asarray(nxt_ids, object)[~nxt_off])
+        back = off & np.fromiter((v in on for v in ids), bool, len(ids))
     lanes = np.array(lanes, dtype=object)
     lanes[off] = ""
-    return lanes, int(np.count_nonzero(off))
+    return lanes, int(np.count_nonzero(off)), back

@@ -9,6 +9,15 @@ parked it, booked as driven (:meth:`Parking.started`) — and does not read it a
 parked at a bus stop (a bus bay: ``parking="true"`` at a busStop) dwells there in service:
 it is booked standing on the stop's lane (time, auxiliary power), as at a stop on the lane.
 
+**The step a parking ends in** is not booked: SUMO puts the car back on its lane at speed 0
+after the step's moves (``MSVehicleTransfer::checkInsertions``), and its emissions device
+books nothing there (its emission output writes it); the car stays parked for the loop one
+step more (:attr:`Parking.waking`) and is booked from the step it drives off in — as the device
+counts a parking: the step it parks in, its idle steps, not this one (before 2026-11-30 one
+standing step more per parking). A car idling from the step it parks in (its parking over
+when it got there, its way blocked) is the exception: the device books that step twice
+(its move and an idle step), so its end is booked (:attr:`Parking.at_once`).
+
 **A way out that is blocked.** When the parking time is over but the lane has no gap at the
 space (``MSVehicleTransfer::checkInsertions``: insertion failed), SUMO keeps the vehicle in
 its space *idling* — "blocked from entering the road, engine assumed to be idling" — and
@@ -20,13 +29,14 @@ emissions device's tripinfo takes slope 0: the two differ only for a car on SUMO
 parked on a slope, by its holding torque). The grade is the slope SUMO gives the car in its
 space, read once when it starts to idle (``getSlope``: a parking area's ``<space>`` may
 have a ``slope`` of its own; beside the lane, the car's front-to-back slope there), and
-once in the step its parking ends, when it is back on the lane but still at its stop and
-SUMO still takes that slope — not the plug-in's robust profile of the lane, which parts
+once in the step its parking ends when that step is booked (below), back on the lane but
+still at its stop, where SUMO still takes that slope — not the plug-in's robust profile of the lane, which parts
 from it on a lot's sloped space or where the lane's grade changes within a car length (a
 probe, 2026-11-27, SUMO's MMPEVEM BMW i3: idling 158 s in a space of ``slope="6"`` beside
 a flat lane, −17 % of the car before, 5e-7 after; at 315 m, where a 7.0° ramp of the lane's
 shape ends, SUMO 0.326 Wh/s against 0.164 at the profile's 3.7°, −14 % before; a car
-leaving the sloped space at once, its one step back on the lane, −8.2e-4 before, 2e-9 after.
+leaving the sloped space at once, its one step back on the lane, −8.2e-4 before, 2e-9 after;
+that step is not booked since 2026-11-30, below.
 Its stop ended by a script, SUMO takes the lane's slope, and the loop the profile. A car
 standing on the lane at such a grade change — at a stop, in a queue — is still booked at
 the profile: an i3 stopping on the lane at 315 m, −11 %). A parked vehicle is asked for its signals
@@ -134,8 +144,9 @@ class Parking:
         #: vehicle id → its slope [rad] in the step its parking ended (back on its lane, its
         #: stop not yet over, SUMO still gives it its space's) or began (read once)
         self.once: dict[str, float] = {}
-        #: vehicles whose parking ended in this step, and in the step before (:meth:`started`)
-        self.back, self.back_before = set(), set()
+        #: vehicles idling from the step they parked in, whose device booked that step's move
+        #: and an idle step (MSVehicleTransfer::checkInsertions): the step they leave is booked
+        self.at_once: set[str] = set()
 
     def _standing(self, vid: str, stops=None) -> tuple[int, float] | None:
         """The lane number and position of vehicle ``vid`` at its current stop (``stops``:
@@ -170,10 +181,7 @@ class Parking:
                 return d
         ledger.veh_parked[i] = True
         stops = self.conn.vehicle.getStops(vid, 1)
-        # back on its lane for one step and parked again (an idle taxi whose last customer
-        # left: its stop kept as the idle one): SUMO books that once — its emission output the
-        # step on the lane, its emissions device this one — so this one is not booked
-        entry = self._standing(vid, stops) if moved_in and vid not in self.back_before else None
+        entry = self._standing(vid, stops) if moved_in else None
         if entry is not None and self.slope is not None:  # at the slope SUMO gives it then: its space's
             s = float(self.slope(vid))
             if -90.0 <= s <= 90.0:
@@ -195,6 +203,7 @@ class Parking:
             # gives it (the last of its creep into the space, in its emission output too)
             if due <= now + 1e-9 and int(self.signals(vid)) & BLINKERS:
                 ledger.veh_parked[i] = False
+                self.at_once.add(vid)  # (SUMO's device books this step twice: its end is booked)
                 # its grade: the slope at the space, as SUMO's (SUMO set it into the space
                 # farther than its speed took it: the rise since its last read is no grade)
                 ledger.veh_at[i, 2] = np.nan
@@ -243,6 +252,7 @@ class Parking:
         ledger.veh_lane[i] = -2          # read its lane and position again
         ledger.veh_prev_speed[i] = 0.0   # from standstill
         ledger.veh_at[i, 2] = np.nan
+        ledger.veh_prev_angle[i] = np.nan  # (no turn: one idling out of SUMO's list read angle 0)
 
     def step(self, ledger, vmap, now: float, dt: float) -> bool:
         """Once per step, before the vehicles are read: those whose parking ended are read
@@ -251,9 +261,8 @@ class Parking:
         vehicles read changes."""
         changed = False
         self.once = {}
-        self.back_before, self.back = self.back, set()
         waking, self.waking = self.waking, set()
-        for vid in waking:  # back on the road a step ago, switched off at its stop: on now
+        for vid in waking:  # back on the road a step ago (not booked then): booked from now
             i = vmap.get(vid)
             if i is not None and ledger.veh_parked[i] and not ledger.veh_done[i]:
                 self._unpark(ledger, i)
@@ -261,22 +270,21 @@ class Parking:
         for vid in self.ends():
             parked_off = vid in self.off  # switched off for its stop, parked off the lane
             off = parked_off or (self.shutoff is not None and vid in self.shutoff.off)  # (a bay)
+            idled, at_once = vid in self.idling, vid in self.at_once
             self.forget(vid)
             i = vmap.get(vid)
-            if i is not None and ledger.veh_parked[i]:
-                # back on its lane, still off in this step (SUMO 1.28 writes 0: the stop's
-                # duration its emission model reads is the step's before): booked from the
-                # next, when its stop ends — one parked off the lane by this class (also one
-                # whose stop a script ended: no ending for a step listener to hear then), one
-                # dwelling in a bus bay by ShutOff, whose own it is and which hears its end
-                if parked_off:
-                    self.waking.add(vid)
-                if off:
+            if i is not None and (ledger.veh_parked[i] or idled) and not at_once:
+                # back on its lane at speed 0 (MSVehicleTransfer::checkInsertions, after the
+                # step's moves): SUMO's emissions device books nothing in this step (its
+                # emission output writes it), so it is booked from the next — also one
+                # switched off for its stop (SUMO writes 0 here too); one dwelling in a bus
+                # bay switched off by ShutOff stays with ShutOff, whose own it is
+                if off and not parked_off:
                     continue
-                self._unpark(ledger, i)
-                self.back.add(vid)
-                changed = True
-            if i is not None and not off and self.slope is not None:
+                ledger.veh_parked[i] = True
+                self.waking.add(vid)
+                changed = changed or idled
+            if i is not None and at_once and self.slope is not None:  # booked now, at its space's slope
                 s = float(self.slope(vid))
                 if -90.0 <= s <= 90.0:
                     self.once[vid] = np.radians(s)
@@ -306,6 +314,7 @@ class Parking:
         self.waking.discard(vid)
         self.off.discard(vid)
         self.grade.pop(vid, None)
+        self.at_once.discard(vid)
 
     def resume(self, ledger, vmap, vids, now: float) -> list:
         """Vehicles ``vids`` left SUMO's id list without leaving the simulation: those
