@@ -219,7 +219,7 @@ def test_calibrate_writes_the_corrections_and_compare_reads_them_back(planted, t
     assert cli_main(["compare", str(planted), "--vehicle", "prius3", "--equation", str(eq), "--power-lag",
                      str(LAG_S), "--grade-source", f"fused:{TAU_S:g}", "--out", str(tmp_path / "hand")]) == 0
     assert cli_main(["compare", str(planted), "--vehicle", "prius3", "--equation", str(eq), "--power-lag", "0",
-                     "--out", str(tmp_path / "raw")]) == 0
+                     "--grade-source", "logged", "--out", str(tmp_path / "raw")]) == 0  # (each flag: its own setting)
     r = {k: json.loads((tmp_path / k / "report.json").read_text(encoding="utf-8"))["equations"]["eq"]["r2"]
          for k in ("auto", "hand", "raw")}
     assert r["auto"] == pytest.approx(r["hand"], rel=1e-12)

@@ -21,5 +21,6 @@ def test_the_measurement_note_says_how_to_read_the_logs_as_they_are(tmp_path, ca
     out = capsys.readouterr()
     assert "accelerometer" in out.err
     note = next(ln for ln in out.out.splitlines() if ln.startswith("note: logs corrected as the [measurement]"))
-    assert "--grade-source logged" in note
-    assert cli_main(args + ["--grade-source", "logged", "--out", str(tmp_path / "b")]) == 0
+    assert "--grade-source logged" in note and "--no-exclude-dropouts" in note
+    # each flag switches off its own setting only (cli/_measurement.py)
+    assert cli_main(args + ["--grade-source", "logged", "--no-exclude-dropouts", "--out", str(tmp_path / "b")]) == 0

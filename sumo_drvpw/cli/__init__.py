@@ -189,7 +189,7 @@ def add_read_options(p) -> None:
 def _add_corrections(p) -> None:
     g = p.add_argument_group(
         "measurement corrections (default: none, or what the --equation files declare in [measurement]; "
-        "given here, they replace that)")
+        "each given here sets only its own setting over that)")
     g.add_argument("--power-lag", type=float, metavar="S",
                    help="the power signal's lag behind the speed signal [s] (diagnose's timing finding): "
                         "the power is read S later within each trip")

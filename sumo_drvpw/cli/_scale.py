@@ -55,14 +55,25 @@ def check_engine_arguments(args) -> None:
 def _run(args, make, vehicle):
     from sumo_drvpw.fit.engine import run
 
-    from sumo_drvpw.cli import read_options
+    from sumo_drvpw.cli._measurement import read_options
 
     # a column named twice: the reader checks each file's header as it reads it
     # trip ids in two files: checked by the engine on the ids it reads (no extra pass)
-    eqs = getattr(args, "equation", None)
-    eqs = [eqs] if isinstance(eqs, str) else (eqs or ())
-    return run(args.logs, make, vehicle, options=read_options(args, eqs), engine=args.engine,
+    return run(args.logs, make, vehicle, options=read_options(args, _equations(args)), engine=args.engine,
                scheduler=args.scheduler, workers=args.workers)
+
+
+def _equations(args) -> list:
+    """The --equation(s) of a command, whose [measurement] the logs are read with."""
+    eqs = getattr(args, "equation", None)
+    return [eqs] if isinstance(eqs, str) else list(eqs or ())
+
+
+def _measurement(args):
+    """The corrections :func:`_run` reads the logs with (no note: the read said it)."""
+    from sumo_drvpw.cli._measurement import measurement_options
+
+    return measurement_options(args, _equations(args), say=False)
 
 
 def _context(st, vehicle, n_used: int) -> dict:
@@ -108,10 +119,9 @@ def fit_road_load(args, st, cands, veh, name: str, provenance: dict):
         raise UserError(f"{where}: {e}") from None
     if note:
         print(note)
-        from sumo_drvpw.cli import measurement_options
         from sumo_drvpw.cli.calibrate import hint_grade_source, log_columns
 
-        hint_grade_source(note, log_columns(args.logs), measurement_options(args))
+        hint_grade_source(note, log_columns(args.logs), _measurement(args))
     from sumo_drvpw.cli.calibrate import say_physics
 
     say_physics(eq, veh, st.rho_sum / st.mass_n if st.mass_n else None)
@@ -140,10 +150,9 @@ def calibrate_streamed(args, cands, out: Path, inputs) -> int:
         "logs": st.files, "vehicle": veh.path if veh else None, "power_source": st.source,
         "candidates_spec": args.candidates, "trip_signatures": signature_texts(st.signatures)})
     eq.terms_predict = terms_predict_of(st.source)  # (the P_PTdrv of a power-split: its output)
-    from sumo_drvpw.cli import measurement_options
     from sumo_drvpw.cli.calibrate import declare_measurement
 
-    declare_measurement(eq, measurement_options(args))
+    declare_measurement(eq, _measurement(args))
     lines = [info.line()]
 
     def report(tmp):
@@ -254,7 +263,7 @@ def calibrate_chain_streamed(args, out: Path, inputs, hvac) -> int:
 
 
 def _chain_streamed(args, out: Path, inputs, hvac) -> int:
-    from sumo_drvpw.cli import measurement_options, note_counts
+    from sumo_drvpw.cli import note_counts
     from sumo_drvpw.cli.calibrate import MOVING_MPS, declare_measurement
     from sumo_drvpw.data.measured import resolve_equations
     from sumo_drvpw.data.trips import signature_texts
@@ -322,7 +331,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
                            "chain_input": chain_input, "vehicle": veh.path if veh else None,
                            "trip_signatures": signature_texts(st.signatures)}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
-    declare_measurement(eq, measurement_options(args))
+    declare_measurement(eq, _measurement(args))
     print(fit.summary())
     for w in fit.warnings:
         print(f"warning: {w}")

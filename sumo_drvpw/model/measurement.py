@@ -200,6 +200,25 @@ def measurement_from_dict(doc, where: str) -> Measurement:
     return Measurement(**kw)
 
 
+#: the settings that go with the grade source: a grade given anew brings its own (or none)
+GRADE_KEYS = ("grade", "fusion_tau_s", "fusion_distance_m", "accelerometer_offset_mps2")
+
+
+def override_measurement(base: Measurement | None, doc: dict, where: str) -> Measurement:
+    """``base`` with the settings of ``doc`` (a partial ``[measurement]`` table) put over it,
+    every other setting of ``base`` kept; a grade in ``doc`` brings its own crossover and offset
+    (:data:`GRADE_KEYS`: those of ``base`` go with its grade). Errors name ``where``.
+
+    >>> override_measurement(Measurement(power_lag_s=-1.4, air_density="altitude"),
+    ...                      {"speed_scale": 0.98}, "x").power_lag_s
+    -1.4
+    """
+    kept = {} if base is None else base.to_dict()
+    if "grade" in doc:
+        kept = {k: v for k, v in kept.items() if k not in GRADE_KEYS}
+    return measurement_from_dict({**kept, **doc}, where)
+
+
 def speed_scale_value(v, where: str) -> float | str:
     """A speed scale as declared: "gps", or a finite number within ±:data:`MAX_SPEED_SCALE_OFF`
     of 1; errors name ``where`` and the value."""
