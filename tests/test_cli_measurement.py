@@ -102,12 +102,15 @@ def test_equations_that_differ_only_where_a_flag_sets_are_read_alike(planted, tm
 @pytest.mark.parametrize("engine", ["memory", "local"])
 def test_a_chain_calibrated_on_an_equation_declares_what_its_logs_were_read_with(planted, tmp_path, engine):
     """calibrate --target battery --equation EQ: the chain's equation keeps EQ's lag under a
-    --speed-scale."""
+    --speed-scale, and declares none when every setting is switched off (it kept EQ's lag
+    and air density, the logs read as they are)."""
     log, eq = planted
     base = ["calibrate", str(log), "--vehicle", "prius3", "--target", "battery", "--equation", str(eq),
             "--engine", engine]
     assert cli_main(base + ["--speed-scale", "0.98", "--out", str(tmp_path / "s.toml")]) == 0
     assert _toml(tmp_path / "s.toml")["measurement"] == {**DECLARED, "speed_scale": 0.98}
+    assert cli_main(base + ["--power-lag", "0", "--air-density", "logged", "--out", str(tmp_path / "n.toml")]) == 0
+    assert "measurement" not in _toml(tmp_path / "n.toml")
 
 
 def test_diagnose_keeps_the_equation_s_settings_under_a_flag(planted, tmp_path):

@@ -229,10 +229,14 @@ def hint_grade_source(note: str, columns, meas) -> None:
 
 def declare_measurement(eq, meas) -> None:
     """Write the corrections the logs were read with into the equation (``[measurement]``),
-    so that comparisons on new logs read them the same way; say so."""
+    so that comparisons on new logs read them the same way; say so. Logs read as they are
+    leave none, whatever the --equation a chain was fitted on declared."""
     if meas is not None and not meas.identity:
         eq.measurement = meas
         print(f"measurement corrections (kept in the equation's [measurement]): {meas.describe()}")
+    elif eq.measurement is not None and not eq.measurement.identity:
+        eq.measurement = None
+        print("measurement corrections: none, the logs as read (the road-load equation's [measurement] is not kept)")
 
 
 #: speeds above this count as moving for the identifiability check [m/s]
