@@ -168,3 +168,66 @@ def test_sumo_never_uses_it(tmp_path):
     s = run_scenario(REPO / "scenarios" / "highway.toml", tmp_path / "o", end=60, equations=eqs, figures=False)
     e = {n: s["equations"][n]["energy_j"] for n in ("plain", "scaled", "gps")}
     assert e["plain"] and e["plain"] == e["scaled"] == e["gps"]
+
+
+def _two_gps(df, factor, seed=1):
+    """``df`` with a second GPS speed, gps_speed_phone_mps, ``factor`` × the first and its own
+    0.3 % noise, put first among the columns."""
+    rng = np.random.default_rng(seed)
+    phone = df["gps_speed_mps"].to_numpy() * factor * (1 + rng.normal(0, 0.003, len(df)))
+    return pd.concat([pd.DataFrame({"gps_speed_phone_mps": phone}), df], axis=1)
+
+
+def test_two_gps_speeds_that_disagree_are_refused_until_one_is_named():
+    """A phone's GPS speed 2 % above the logger's: 'gps' does not take the first column
+    silently (it would scale the speed 2 % wrong), it refuses in one line naming both and how to
+    name one; "gps:COLUMN" scales to that one. Two that agree scale as one does."""
+    df = _two_gps(_trips(n_trips=2), 1.02)
+    with pytest.raises(UserError) as e:
+        _read(df, Measurement(speed_scale="gps"))
+    msg = str(e.value)
+    assert "gps_speed_phone_mps" in msg and "gps_speed_mps" in msg and "disagree" in msg and "\n" not in msg
+    assert 'speed_scale = "gps:gps_speed_phone_mps" or "gps:gps_speed_mps"' in msg
+    for col, k in (("gps_speed_mps", 1 / HIGH), ("gps_speed_phone_mps", 1.02 / HIGH)):
+        m = _read(df, measurement_from_dict({"speed_scale": f"gps:{col}"}, "e.toml"))
+        assert m.counts["speed_scale_column"] == col and m.counts["speed_gps_column"] == col
+        assert all(x == pytest.approx(k, rel=1e-3) for x in m.counts["speed_scale"].values())
+        # the speed now agrees with the GPS speed it was scaled to
+        assert m.counts["speed_gps_sum_mm"] / m.counts["gps_speed_sum_mm"] == pytest.approx(1.0, abs=0.005)
+    agree = _read(_two_gps(_trips(n_trips=2), 1.0), Measurement(speed_scale="gps"))
+    assert all(x == pytest.approx(1 / HIGH, rel=1e-3) for x in agree.counts["speed_scale"].values())
+    with pytest.raises(UserError, match="no column gps_speed_obd_mps .its GPS speeds: gps_speed_phone_mps, gps_"):
+        _read(df, Measurement(speed_scale="gps:gps_speed_obd_mps"))
+
+
+def test_a_named_gps_column_is_kept_in_the_table_and_checked():
+    m = measurement_from_dict({"speed_scale": "gps:gps_speed_mps"}, "e.toml")
+    assert m.speed_scale == "gps:gps_speed_mps" and measurement_from_dict(m.to_dict(), "e.toml") == m
+    assert "gps_speed_mps" in m.describe()
+    with pytest.raises(UserError, match="e.toml \\[measurement\\] speed_scale: 'gps:speed_mps' names no GPS speed"):
+        measurement_from_dict({"speed_scale": "gps:speed_mps"}, "e.toml")
+
+
+def test_compare_names_the_gps_column_on_the_command_line(tmp_path, capsys):
+    """--speed-scale gps:COLUMN, in memory and streamed alike; plain gps refused in one line."""
+    from sumo_drvpw.cli import main as cli_main
+
+    f = tmp_path / "log.parquet"
+    _two_gps(_trips(n_trips=2), 1.02).to_parquet(f)
+    eq = tmp_path / "eq.toml"
+    eq.write_text('[equation]\nname = "eq"\n[terms]\nacc = 1.0\ngrade = 1.0\naero = 0.36\nroll = 0.012\n',
+                  encoding="utf-8")
+    r2 = {}
+    for engine in ("memory", "local"):
+        out = tmp_path / engine
+        assert cli_main(["compare", str(f), "--equation", str(eq), "--speed-scale", "gps:gps_speed_mps",
+                         "--engine", engine, "--out", str(out)]) == 0
+        doc = __import__("json").loads((out / "report.json").read_text(encoding="utf-8"))
+        assert doc["context"]["counts"]["speed_scale_column"] == "gps_speed_mps"
+        r2[engine] = doc["equations"]["eq"]["r2"]
+    assert r2["local"] == pytest.approx(r2["memory"], rel=1e-9)
+    capsys.readouterr()
+    assert cli_main(["compare", str(f), "--equation", str(eq), "--speed-scale", "gps",
+                     "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "disagree" in err and len(err.splitlines()) == 1 and not (tmp_path / "x").exists()

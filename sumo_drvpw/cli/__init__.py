@@ -207,8 +207,8 @@ def _add_corrections(p) -> None:
                         "linearly filled for seconds (inputs only)")
     g.add_argument("--speed-scale", metavar="gps|K",
                    help="the logged speed times K before acceleration, distance and grade are derived from it "
-                        "(e.g. 0.984 for a speedometer 1.6%% high), or gps: each trip's own K against the GPS speed "
-                        "logged beside it (gps_speed…_mps; steady samples above 8 m/s). Never used in SUMO")
+                        "(0.984: a speedometer 1.6%% high; 1: as logged), or gps: each trip's own K against the GPS speed "
+                        "logged beside it (gps_speed…_mps, or gps:COLUMN; steady samples above 8 m/s). Never in SUMO")
 
 
 def measurement_options(args, equations=()):

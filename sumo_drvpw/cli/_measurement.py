@@ -41,17 +41,18 @@ def _given(args) -> list[str]:
 
 
 def speed_scale_flag(scale) -> float | str:
-    """--speed-scale as given: gps or a number, checked."""
+    """--speed-scale as given: gps, gps:COLUMN or a number, checked."""
     from sumo_drvpw.model.measurement import speed_scale_value
 
     s = str(scale).strip()
-    if s.lower() == "gps":
-        v = "gps"
+    if s.lower() == "gps" or s.lower().startswith("gps:"):
+        v = "gps" + s[3:]
     else:
         try:
             v = float(s)
         except ValueError:
-            raise UserError(f"--speed-scale {scale}: give gps or a number (the factor on the logged speed)") from None
+            raise UserError(f"--speed-scale {scale}: give gps, gps:COLUMN (the GPS speed column to measure it "
+                            "against) or a number (the factor on the logged speed)") from None
     return speed_scale_value(v, f"--speed-scale {scale}")
 
 

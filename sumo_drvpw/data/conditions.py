@@ -10,6 +10,7 @@ import pandas as pd
 from sumo_drvpw.data.trips import grade_from_elevation
 from sumo_drvpw.model.air import air_density
 from sumo_drvpw.model.constants import P_STD_KPA, RHO_DEFAULT
+from sumo_drvpw.model.measurement import gps_scale_column
 
 
 #: each condition's sources in the order a trip takes them: the first one that holds a
@@ -127,16 +128,16 @@ def gps_speed_columns(names) -> list[str]:
     return [str(c) for c in names if str(c).startswith("gps_speed") and str(c).endswith("_mps")]
 
 
-def speed_against_gps(df: pd.DataFrame, v: np.ndarray, counts: dict) -> None:
+def speed_against_gps(df: pd.DataFrame, v: np.ndarray, counts: dict, column: str | None = None) -> None:
     """The log's speed against a GPS speed logged beside it (a column ``gps_speed…_mps``, a
-    mapping's or an adapter's): their sums over the samples where both exceed
-    :data:`SPEED_GPS_MIN_MPS`, in mm/s so that batches add (``speed_gps_samples``,
+    mapping's or an adapter's; the first, or ``column`` where a speed scale names it): their
+    sums over the samples where both exceed :data:`SPEED_GPS_MIN_MPS`, in mm/s so that batches add (``speed_gps_samples``,
     ``speed_gps_sum_mm``, ``gps_speed_sum_mm``, ``speed_gps_column``). A speedometer or a
     wheel-speed signal reads high or low by a few per cent (tyre wear, pressure, a
     manufacturer's margin), and the coefficients take it: v' = k·v scales the kinetic term
     by k² and the aerodynamic by k³, so a fit reads acc ≈ 1/k² and aero ≈ 1/k³ of the
     vehicle's, where a SUMO run's speeds are exact (:func:`speed_gps_note`)."""
-    cols = gps_speed_columns(df.columns)
+    cols = [column] if column in df else gps_speed_columns(df.columns)
     if not cols:
         return
     g = df[cols[0]].to_numpy(float)
@@ -186,7 +187,7 @@ def derive_conditions(df: pd.DataFrame, t: np.ndarray, v: np.ndarray, trip_codes
     opt : the reading options (:class:`sumo_drvpw.data.log.ReadOptions`)
     """
     n = len(df)
-    speed_against_gps(df, v, counts)
+    speed_against_gps(df, v, counts, gps_scale_column(getattr(opt.measurement, "speed_scale", None)))
 
     def col(c):
         return df[c].to_numpy(float) if c in df else np.full(n, np.nan)

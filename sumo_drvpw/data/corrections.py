@@ -44,7 +44,7 @@ from sumo_drvpw.data.trips import derivative, per_trip_rolling_mean, trip_codes_
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.air import pressure_at_altitude_kpa
 from sumo_drvpw.model.constants import G, P_STD_KPA
-from sumo_drvpw.model.measurement import FUSION_DISTANCE_M, FUSION_TAU_S, Measurement
+from sumo_drvpw.model.measurement import FUSION_DISTANCE_M, FUSION_TAU_S, Measurement, gps_scale_column
 
 #: smoothing of the accelerometer grade [s]
 ACC_GRADE_WINDOW_S = 5.0
@@ -72,6 +72,10 @@ STEADY_ACCEL_MPS2, GPS_SCALE_SAMPLES = 0.3, 100
 GPS_SCALE_BAND = 0.05
 #: width of the centred mean of the speed's derivative that tells a steady sample [s]
 STEADY_WINDOW_S = 2.0
+#: two GPS speeds of a log disagree where their scales of a trip lie further apart than this
+#: (relative): each is measured within about ±0.1 % (GPS_SCALE_SAMPLES), so more is two
+#: sensors, one of them off (a phone's GPS against a logger's), and the log must name one
+GPS_COLUMNS_AGREE = 0.002
 
 
 def gps_speed_scales(v, gps, t, trip_codes) -> tuple[np.ndarray, np.ndarray]:
@@ -108,17 +112,23 @@ def gps_speed_scales(v, gps, t, trip_codes) -> tuple[np.ndarray, np.ndarray]:
 def scale_speed(df, v, t, trip_codes, meas: Measurement | None, counts: dict, where: str) -> np.ndarray:
     """The speed times the scale of ``meas`` (``speed_scale``; the speed as read when it has
     none), for the reader to derive the rest from; ``counts["speed_scale"]``: the scale per
-    trip (trip id → k). With ``"gps"``, each trip's own (:func:`gps_speed_scales`); a log
-    without a GPS speed column, or a trip with fewer than :data:`GPS_SCALE_SAMPLES` steady
-    samples, is a :class:`UserError` naming ``where``, the column and the trip."""
+    trip (trip id → k). With ``"gps"``, each trip's own (:func:`gps_speed_scales`) against the
+    log's GPS speed column, or the one ``"gps:COLUMN"`` names; a log without a GPS speed column
+    (or without the one named), a trip with fewer than :data:`GPS_SCALE_SAMPLES` steady samples,
+    or two GPS speeds whose scales of a trip differ by more than :data:`GPS_COLUMNS_AGREE` (none
+    named), is a :class:`UserError` naming ``where``, the columns and the trip."""
     k_decl = getattr(meas, "speed_scale", None)
     if k_decl is None or k_decl == 1.0:
         return v
     trips = df["trip_id"].to_numpy()[trip_starts(trip_codes)] if len(trip_codes) else []
-    if k_decl != "gps":
+    if not isinstance(k_decl, str):
         counts["speed_scale"] = {str(tid): round(float(k_decl), 6) for tid in trips}
         return np.asarray(v, float) * float(k_decl)
-    cols = gps_speed_columns(df.columns)
+    cols, named = gps_speed_columns(df.columns), gps_scale_column(k_decl)
+    if named is not None and named not in cols:
+        raise UserError(f"{where}: speed scale '{k_decl}': no column {named} (its GPS speeds: "
+                        f"{', '.join(cols) or 'none'})")
+    cols = [named] if named is not None else cols
     if not cols:
         raise UserError(f"{where}: speed scale 'gps' needs a GPS speed logged beside the speed (a column "
                         "gps_speed…_mps); declare the scale as a number instead (e.g. 0.984 for a speed 1.6 % high)")
@@ -126,9 +136,17 @@ def scale_speed(df, v, t, trip_codes, meas: Measurement | None, counts: dict, wh
     few = np.flatnonzero(n < GPS_SCALE_SAMPLES)
     if len(few):
         c = int(few[0])
-        raise UserError(f"{where}: trip '{trips[c]}': speed scale 'gps' needs at least {GPS_SCALE_SAMPLES} steady "
+        raise UserError(f"{where}: trip '{trips[c]}': speed scale '{k_decl}' needs at least {GPS_SCALE_SAMPLES} steady "
                         f"samples of speed_mps and {cols[0]} (both above {GPS_SCALE_MIN_MPS:g} m/s, |dv/dt| below "
                         f"{STEADY_ACCEL_MPS2:g} m/s²), found {int(n[c])}; declare the scale as a number for it")
+    for other in cols[1:]:  # two GPS speeds, none named: the same scale, or the user names one
+        k2, n2 = gps_speed_scales(v, df[other].to_numpy(float), t, trip_codes)
+        off = np.flatnonzero((n2 >= GPS_SCALE_SAMPLES) & (np.abs(k2 / k - 1) > GPS_COLUMNS_AGREE))
+        if len(off):
+            c = int(off[0])
+            raise UserError(f"{where}: trip '{trips[c]}': speed scale 'gps': the log's GPS speeds disagree, "
+                            f"{cols[0]} gives {k[c]:.4f} and {other} {k2[c]:.4f}; name the one to scale the speed "
+                            f"to: speed_scale = \"gps:{cols[0]}\" or \"gps:{other}\"")
     counts["speed_scale"] = {str(tid): round(float(x), 6) for tid, x in zip(trips, k)}
     counts["speed_scale_column"] = cols[0]
     return np.asarray(v, float) * k[np.asarray(trip_codes)]

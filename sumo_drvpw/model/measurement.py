@@ -31,7 +31,8 @@ there)::
     speed_scale = "gps"    # the logged speed times a scale before anything is derived from
                            # it (acceleration, distance, grade from elevation): "gps", each
                            # trip's Σ GPS speed / Σ speed over its steady samples above
-                           # 8 m/s, or a number (0.984: a speedometer 1.6 % high)
+                           # 8 m/s, or a number (0.984: a speedometer 1.6 % high); a log
+                           # with two GPS speeds that disagree names one: "gps:gps_speed_mps"
 
 The correction itself (signal processing on a log) is :mod:`sumo_drvpw.data.corrections`.
 """
@@ -90,7 +91,8 @@ class Measurement:
     #: with grade "fused": the crossover over driven distance [m] instead (None: in time)
     fusion_distance_m: float | None = None
     #: the logged speed's scale: a number k (v' = k·v), "gps" (k per trip against the GPS
-    #: speed logged beside it), None (as read). Never used in SUMO, whose speeds are exact
+    #: speed logged beside it; "gps:COLUMN" against that one of several), None (as read).
+    #: Never used in SUMO, whose speeds are exact
     speed_scale: float | str | None = None
 
     def __post_init__(self):
@@ -142,9 +144,10 @@ class Measurement:
             parts.append("air density at the logged altitude (standard atmosphere)")
         if self.exclude_dropouts:
             parts.append("logger dropouts (speed and accelerometer held or linearly filled) left out")
-        if self.speed_scale == SPEED_SCALE_GPS:
-            parts.append("speed scaled per trip to the GPS speed logged beside it (Σ GPS speed / Σ speed over "
-                         "steady samples above 8 m/s)")
+        if isinstance(self.speed_scale, str):
+            col = gps_scale_column(self.speed_scale)
+            parts.append("speed scaled per trip to the GPS speed logged beside it (" + (f"{col}; " if col else "")
+                         + "Σ GPS speed / Σ speed over steady samples above 8 m/s)")
         elif self.speed_scale not in (None, 1.0):
             parts.append(f"speed × {self.speed_scale:.4g} (declared: a speed reading "
                          f"{abs(1 / self.speed_scale - 1):.1%} {'high' if self.speed_scale < 1 else 'low'})")
@@ -219,13 +222,27 @@ def override_measurement(base: Measurement | None, doc: dict, where: str) -> Mea
     return measurement_from_dict({**kept, **doc}, where)
 
 
+def gps_scale_column(scale) -> str | None:
+    """The GPS speed column a speed scale ``"gps:COLUMN"`` names (None: any other scale)."""
+    if isinstance(scale, str) and scale.startswith(SPEED_SCALE_GPS + ":"):
+        return scale[len(SPEED_SCALE_GPS) + 1:]
+    return None
+
+
 def speed_scale_value(v, where: str) -> float | str:
-    """A speed scale as declared: "gps", or a finite number within ±:data:`MAX_SPEED_SCALE_OFF`
-    of 1; errors name ``where`` and the value."""
+    """A speed scale as declared: "gps", "gps:COLUMN" (a GPS speed column ``gps_speed…_mps``),
+    or a finite number within ±:data:`MAX_SPEED_SCALE_OFF` of 1; errors name ``where`` and the value."""
     if v == SPEED_SCALE_GPS:
         return SPEED_SCALE_GPS
+    col = gps_scale_column(v)
+    if col is not None:
+        if not (col.startswith("gps_speed") and col.endswith("_mps")):
+            raise UserError(f"{where}: {v!r} names no GPS speed column after 'gps:' (gps_speed…_mps, e.g. "
+                            "\"gps:gps_speed_mps\")")
+        return v
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise UserError(f"{where}: must be \"gps\" or a finite number (the factor on the logged speed), got {v!r}")
+        raise UserError(f"{where}: must be \"gps\" or a finite number (the factor on the logged speed), or "
+                        f"\"gps:COLUMN\" naming the GPS speed column, got {v!r}")
     if abs(float(v) - 1.0) > MAX_SPEED_SCALE_OFF:
         raise UserError(f"{where}: {float(v):g} is more than {MAX_SPEED_SCALE_OFF:.0%} from 1 (a speedometer is off "
                         "by a few per cent; more is a unit or a wrong column)")
