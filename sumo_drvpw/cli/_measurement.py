@@ -2,8 +2,9 @@
 equations declare, with each correction flag given put over its own setting only
 (``--speed-scale 0.98`` keeps the equation's power lag and air density). A flag switches its
 setting off with its "none" value: ``--power-lag 0``, ``--grade-source logged``,
-``--air-density logged``, ``--no-exclude-dropouts``, ``--speed-scale 1``. The note printed says which setting came from
-where. Argparse and printing only; the merge is :func:`sumo_drvpw.model.measurement.override_measurement`.
+``--air-density logged``, ``--no-exclude-dropouts``, ``--speed-scale 1``. The note printed
+says which setting came from where. Argparse and printing only; the merge is
+:func:`sumo_drvpw.model.measurement.override_measurement`.
 """
 
 from __future__ import annotations
