@@ -170,8 +170,10 @@ def output_set(args, out, inputs=(), meta=None):
 def add_log_options(p) -> None:
     """How drive logs are read: --speed-unit and --negative-speed-tolerance
     (:func:`add_read_options`), and the measurement corrections."""
+    from sumo_drvpw.cli._measurement import add_corrections
+
     add_read_options(p)
-    _add_corrections(p)
+    add_corrections(p)
 
 
 def add_read_options(p) -> None:
@@ -184,94 +186,6 @@ def add_read_options(p) -> None:
                    help="speeds in [-M_S, 0) are standstill noise, clipped to 0 and counted (default 0.1)")
     g.add_argument("--flat-road", action="store_true", help="read the logs as a flat road: no grade from grade_rad, "
                    "grade_pct or elevation_m (a phone's GPS altitude: noise; --air-density altitude still reads it)")
-
-
-def _add_corrections(p) -> None:
-    g = p.add_argument_group(
-        "measurement corrections (default: none, or what the --equation files declare in [measurement]; "
-        "each given here sets only its own setting over that)")
-    g.add_argument("--power-lag", type=float, metavar="S",
-                   help="the power signal's lag behind the speed signal [s] (diagnose's timing finding): "
-                        "the power is read S later within each trip")
-    g.add_argument("--grade-source", metavar="logged|fused[:LENGTHm|:TAU_Ss]|accelerometer[:OFFSET_MPS2]",
-                   help="grade from the elevation (logged), fused with a longitudinal accelerometer "
-                        "(accelerometer above the crossover, elevation below; in time, default 60s, or "
-                        "over driven distance, e.g. :1000m, which keeps each trip's elevation change), or the "
-                        "accelerometer alone: its per-trip offset fixed by the elevation change, or with "
-                        ":OFFSET_MPS2 less the logger's own fixed offset (no elevation used)")
-    g.add_argument("--air-density", choices=("logged", "altitude"),
-                   help="altitude = pressure of the standard atmosphere at the logged elevation when "
-                        "pressure is not logged (default: logged, i.e. sea level without pressure)")
-    g.add_argument("--exclude-dropouts", action="store_true", default=None,
-                   help="leave out logger dropouts: speed and a longitudinal accelerometer held or "
-                        "linearly filled for seconds (inputs only)")
-    g.add_argument("--speed-scale", metavar="gps|K",
-                   help="the logged speed times K before acceleration, distance and grade are derived from it "
-                        "(0.984: a speedometer 1.6%% high; 1: as logged), or gps: each trip's own K against the GPS speed "
-                        "logged beside it (gps_speed…_mps, or gps:COLUMN; steady samples above 8 m/s). Never in SUMO")
-
-
-def measurement_options(args, equations=()):
-    """The measurement corrections of a command (:class:`sumo_drvpw.model.measurement.Measurement`
-    or None): from --power-lag, --grade-source and --air-density when any is given, else the
-    ``[measurement]`` the equation files among ``equations`` declare (all the same, or an
-    error naming them). Prints a note when corrections come from the equations."""
-    from sumo_drvpw.model.measurement import GRADE_SOURCES, measurement_from_dict
-
-    lag, grade, rho, drop, scale = (getattr(args, k, None) for k in ("power_lag", "grade_source", "air_density",
-                                                                     "exclude_dropouts", "speed_scale"))
-    if lag is not None or grade is not None or rho is not None or drop or scale is not None:
-        # given on the command line, they replace what the equations declare
-        doc = {"exclude_dropouts": True} if drop else {}
-        if scale is not None:
-            try:
-                doc["speed_scale"] = "gps" if str(scale).strip().lower() == "gps" else float(scale)
-            except ValueError:
-                raise UserError(f"--speed-scale {scale}: give gps or a number (the factor on the logged speed)") from None
-        if lag is not None:
-            doc["power_lag_s"] = lag
-        if grade is not None:
-            src, _, num = str(grade).partition(":")
-            if src not in GRADE_SOURCES or (num and src == "logged"):
-                raise UserError(f"--grade-source {grade}: use one of logged, fused[:LENGTHm|:TAU_Ss], "
-                                "accelerometer[:OFFSET_MPS2]")
-            doc["grade"] = src
-            if num:
-                key, what = (("fusion_tau_s", "the crossover after ':' must be a distance in metres "
-                              "(e.g. 1000m) or a time in seconds (e.g. 60s; a bare number is seconds)")
-                             if src == "fused" else
-                             ("accelerometer_offset_mps2", "the offset after ':' must be a number in m/s²"))
-                if src == "fused" and num.strip().lower().endswith("m"):
-                    key, num = "fusion_distance_m", num.strip()[:-1]
-                elif src == "fused" and num.strip().lower().endswith("s"):
-                    num = num.strip()[:-1]
-                try:
-                    doc[key] = float(num)
-                except ValueError:
-                    raise UserError(f"--grade-source {grade}: {what}") from None
-        if rho is not None:
-            doc["air_density"] = rho
-        try:
-            return measurement_from_dict(doc, "command line")
-        except UserError as e:
-            raise UserError(f"--power-lag / --grade-source / --speed-scale: {e}") from None
-    from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
-
-    found = {}
-    for spec in (s for s in equations or () if s not in SPEC_EQUATIONS):
-        eq = load_equation(spec)
-        if eq.measurement is not None and not eq.measurement.identity:
-            found[spec] = eq.measurement
-    if not found:
-        return None
-    if len(set(found.values())) > 1:
-        raise UserError("--equation: the equations were calibrated on differently corrected logs "
-                        f"({'; '.join(f'{k}: {v.describe()}' for k, v in found.items())}); give "
-                        "--power-lag / --grade-source / --air-density to choose one")
-    meas = next(iter(found.values()))
-    print(f"note: logs corrected as the [measurement] of {', '.join(found)} declares: {meas.describe()} (corrections "
-          "given on the command line replace it: --grade-source logged reads the logs as they are)")
-    return meas
 
 
 def chains_fuel(equations) -> str | None:
@@ -296,7 +210,9 @@ def chains_fuel(equations) -> str | None:
 
 def read_options(args, equations=()):
     """:class:`sumo_drvpw.data.log.ReadOptions` from the options of :func:`add_log_options`
-    (measurement corrections: :func:`measurement_options`)."""
+    (measurement corrections: :func:`sumo_drvpw.cli._measurement.measurement_options`, each
+    flag given over its own setting of the equations' ``[measurement]``)."""
+    from sumo_drvpw.cli._measurement import measurement_options
     from sumo_drvpw.data.log import ReadOptions, check_options
 
     tol = getattr(args, "negative_speed_tolerance", None)

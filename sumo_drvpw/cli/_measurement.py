@@ -3,14 +3,12 @@ equations declare, with each correction flag given put over its own setting only
 (``--speed-scale 0.98`` keeps the equation's power lag and air density). A flag switches its
 setting off with its "none" value: ``--power-lag 0``, ``--grade-source logged``,
 ``--air-density logged``, ``--no-exclude-dropouts``, ``--speed-scale 1``. The note printed
-says which setting came from where. Argparse and printing only; the merge is
+says which setting came from where (:func:`sumo_drvpw.cli.add_log_options` adds these flags,
+:func:`sumo_drvpw.cli.read_options` reads with them). Argparse and printing only; the merge is
 :func:`sumo_drvpw.model.measurement.override_measurement`.
 """
 
 from __future__ import annotations
-
-import argparse
-import dataclasses
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.measurement import GRADE_KEYS
@@ -25,15 +23,71 @@ FLAGS = (("power_lag", "--power-lag", ("power_lag_s",)),
 OFF = "--power-lag 0, --grade-source logged, --air-density logged, --no-exclude-dropouts, --speed-scale 1"
 
 
-def add_log_options(p) -> None:
-    """:func:`sumo_drvpw.cli.add_log_options` and --no-exclude-dropouts, which switches off
-    the dropouts an equation's [measurement] leaves out (the other flags have a "none" value)."""
-    from sumo_drvpw import cli
+def add_corrections(p) -> None:
+    """The correction flags, each over its own setting of an equation's ``[measurement]``."""
+    g = p.add_argument_group(
+        "measurement corrections (default: none, or what the --equation files declare in [measurement]; "
+        "each given here sets only its own setting over that)")
+    g.add_argument("--power-lag", type=float, metavar="S",
+                   help="the power signal's lag behind the speed signal [s] (diagnose's timing finding): "
+                        "the power is read S later within each trip")
+    g.add_argument("--grade-source", metavar="logged|fused[:LENGTHm|:TAU_Ss]|accelerometer[:OFFSET_MPS2]",
+                   help="grade from the elevation (logged), fused with a longitudinal accelerometer "
+                        "(accelerometer above the crossover, elevation below; in time, default 60s, or "
+                        "over driven distance, e.g. :1000m, which keeps each trip's elevation change), or the "
+                        "accelerometer alone: its per-trip offset fixed by the elevation change, or with "
+                        ":OFFSET_MPS2 less the logger's own fixed offset (no elevation used)")
+    g.add_argument("--air-density", choices=("logged", "altitude"),
+                   help="altitude = pressure of the standard atmosphere at the logged elevation when "
+                        "pressure is not logged (default: logged, i.e. sea level without pressure)")
+    g.add_argument("--exclude-dropouts", action="store_true", default=None,
+                   help="leave out logger dropouts: speed and a longitudinal accelerometer held or "
+                        "linearly filled for seconds (inputs only)")
+    g.add_argument("--speed-scale", metavar="gps|K",
+                   help="the logged speed times K before acceleration, distance and grade are derived from it "
+                        "(0.984: a speedometer 1.6%% high; 1: as logged), or gps: each trip's own K against the GPS speed "
+                        "logged beside it (gps_speed…_mps, or gps:COLUMN; steady samples above 8 m/s). Never in SUMO")
+    g.add_argument("--no-exclude-dropouts", dest="exclude_dropouts", action="store_false", default=None,
+                   help="keep logger dropouts an equation's [measurement] leaves out")
 
-    cli.add_log_options(p)
-    group = next((g for g in p._action_groups if str(g.title).startswith("measurement corrections")), p)
-    group.add_argument("--no-exclude-dropouts", dest="exclude_dropouts", action="store_false", default=None,
-                       help="keep logger dropouts an equation's [measurement] leaves out")
+
+def _flags_measurement(args):
+    """The :class:`~sumo_drvpw.model.measurement.Measurement` of --power-lag, --grade-source,
+    --air-density and --exclude-dropouts alone (each checked as its flag; None when none is given)."""
+    from sumo_drvpw.model.measurement import GRADE_SOURCES, measurement_from_dict
+
+    lag, grade, rho, drop = (getattr(args, k, None) for k in ("power_lag", "grade_source", "air_density",
+                                                              "exclude_dropouts"))
+    if lag is not None or grade is not None or rho is not None or drop:
+        doc = {"exclude_dropouts": True} if drop else {}
+        if lag is not None:
+            doc["power_lag_s"] = lag
+        if grade is not None:
+            src, _, num = str(grade).partition(":")
+            if src not in GRADE_SOURCES or (num and src == "logged"):
+                raise UserError(f"--grade-source {grade}: use one of logged, fused[:LENGTHm|:TAU_Ss], "
+                                "accelerometer[:OFFSET_MPS2]")
+            doc["grade"] = src
+            if num:
+                key, what = (("fusion_tau_s", "the crossover after ':' must be a distance in metres "
+                              "(e.g. 1000m) or a time in seconds (e.g. 60s; a bare number is seconds)")
+                             if src == "fused" else
+                             ("accelerometer_offset_mps2", "the offset after ':' must be a number in m/s²"))
+                if src == "fused" and num.strip().lower().endswith("m"):
+                    key, num = "fusion_distance_m", num.strip()[:-1]
+                elif src == "fused" and num.strip().lower().endswith("s"):
+                    num = num.strip()[:-1]
+                try:
+                    doc[key] = float(num)
+                except ValueError:
+                    raise UserError(f"--grade-source {grade}: {what}") from None
+        if rho is not None:
+            doc["air_density"] = rho
+        try:
+            return measurement_from_dict(doc, "command line")
+        except UserError as e:
+            raise UserError(f"--power-lag / --grade-source / --speed-scale: {e}") from None
+    return None
 
 
 def _given(args) -> list[str]:
@@ -60,15 +114,10 @@ def speed_scale_flag(scale) -> float | str:
 def given_settings(args) -> dict:
     """The ``[measurement]`` settings the correction flags given set (a partial table, each
     checked as the flag's own); {} when none is given."""
-    from sumo_drvpw import cli
-
     given = _given(args)
     if not given:
         return {}
-    # the flags' own parsing and messages (cli.measurement_options, on the flags alone)
-    flags = argparse.Namespace(**{d: getattr(args, d, None) for d, _, _ in FLAGS if d != "speed_scale"},
-                               speed_scale=None)
-    meas = cli.measurement_options(flags) if any(d != "speed_scale" for d in given) else None
+    meas = _flags_measurement(args) if any(d != "speed_scale" for d in given) else None
     doc = {} if meas is None else meas.to_dict()
     out = {k: doc[k] for d, _, keys in FLAGS if d in given and d != "speed_scale" for k in keys if k in doc}
     if "exclude_dropouts" in given:  # (--exclude-dropouts True, --no-exclude-dropouts False)
@@ -127,17 +176,3 @@ def measurement_options(args, equations=(), say: bool = True):
               + f": {meas.describe()} ({src}; a correction flag sets only its own setting, and {OFF} "
               "switch one off)")
     return meas
-
-
-def read_options(args, equations=()):
-    """:func:`sumo_drvpw.cli.read_options` with the measurement corrections of
-    :func:`measurement_options` (each flag over its own setting of the equations')."""
-    from sumo_drvpw import cli
-
-    meas = measurement_options(args, equations)
-    bare = argparse.Namespace(**{**vars(args), **{d: None for d, _, _ in FLAGS}})
-    opt = cli.read_options(bare)  # the reading options' own checks: no correction, no equation
-    if opt.flat_road and getattr(meas, "grade", "logged") != "logged":
-        raise UserError(f"--flat-road sets the logs' grade aside, the grade source '{meas.grade}' "
-                        "(--grade-source, or the equations' [measurement]) reads it: give one of them")
-    return dataclasses.replace(opt, measurement=meas, fuel=cli.chains_fuel(equations))

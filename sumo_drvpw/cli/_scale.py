@@ -55,7 +55,7 @@ def check_engine_arguments(args) -> None:
 def _run(args, make, vehicle):
     from sumo_drvpw.fit.engine import run
 
-    from sumo_drvpw.cli._measurement import read_options
+    from sumo_drvpw.cli import read_options
 
     # a column named twice: the reader checks each file's header as it reads it
     # trip ids in two files: checked by the engine on the ids it reads (no extra pass)

@@ -7,8 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sumo_drvpw.cli import add_force, existing_paths, note_counts, output_set
-from sumo_drvpw.cli._measurement import add_log_options, read_options
+from sumo_drvpw.cli import add_force, add_log_options, existing_paths, note_counts, output_set, read_options
 from sumo_drvpw.cli._scale import add_engine_arguments, replace_chain
 from sumo_drvpw.errors import UserError
 

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sumo_drvpw.cli import add_force, note_counts, output_set
-from sumo_drvpw.cli._measurement import add_log_options, read_options
+from sumo_drvpw.cli import add_force, add_log_options, note_counts, output_set, read_options
 from sumo_drvpw.cli._scale import add_engine_arguments
 from sumo_drvpw.report.format import num
 

@@ -58,7 +58,7 @@ def configure(p):
                         "counters)")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     from sumo_drvpw.cli import add_force
-    from sumo_drvpw.cli._measurement import add_log_options
+    from sumo_drvpw.cli import add_log_options
 
     add_force(p)
     add_log_options(p)
@@ -170,7 +170,7 @@ def main(args) -> int:
         raise UserError(msg) from None
     progress = None if args.quiet else (lambda s: print(s, file=sys.stderr))
     from sumo_drvpw.cli import output_set
-    from sumo_drvpw.cli._measurement import read_options
+    from sumo_drvpw.cli import read_options
 
     target = _target(args)
     if target != "wheel":  # issue #12 §3: the loop closed on an energy chain
@@ -263,7 +263,7 @@ def chain_notes(eq, files) -> list[str]:
 
 def _chain_main(args, target, progress) -> int:
     from sumo_drvpw.cli import output_set
-    from sumo_drvpw.cli._measurement import read_options
+    from sumo_drvpw.cli import read_options
     from sumo_drvpw.data.measured import load_measured
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.fit.chain_linear import ChainTraceOptions, check_chain_equation, trace_chain
