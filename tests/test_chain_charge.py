@@ -241,3 +241,23 @@ def test_dask_buckets_add_up_the_declared_charges():
         leds.append(led)
     got = merge_ledgers(leds).chain.charges.summary()
     assert got["vehicles"] == 3 and got["mean_charge_wh"] == pytest.approx(100.0)
+
+
+@pytest.mark.parametrize("own, typ, scenario, want", [
+    # the scenario's key replaces the vType's params (its old key too), never the vehicle's own
+    ({"device.battery.chargeLevel": "100"}, {"actualBatteryCapacity": "50"}, 200.0, "100"),
+    ({}, {"actualBatteryCapacity": "50"}, 200.0, 200.0),
+    ({"actualBatteryCapacity": "70"}, {"device.battery.chargeLevel": "50"}, 200.0, "70"),
+    # without the scenario's key, SUMO's order: the old key anywhere wins
+    ({"device.battery.chargeLevel": "100"}, {"actualBatteryCapacity": "50"}, None, "50"),
+])
+def test_the_scenario_s_charge_replaces_the_vtype_s_params_not_the_vehicle_s(own, typ, scenario, want):
+    """docs/energy-chain.md, docs/scenario.md: ``[vtypes.<id>] battery_charge_wh`` replaces what
+    the vType's params say, a vehicle's own param wins over it — also where the vType's param is
+    SUMO's old key, which then no longer outranks the vehicle's chargeLevel."""
+    from sumo_drvpw.sim.chain_charge import DepartureCharges
+
+    d = DepartureCharges({"v": {k: (x, "r.rou.xml") for k, x in own.items()}}, None,
+                         {"t": {k: (x, "r.rou.xml") for k, x in typ.items()}},
+                         {} if scenario is None else {"t": (scenario, "s.toml")})
+    assert d.of("v", "t")[0] == want

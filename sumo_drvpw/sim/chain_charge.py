@@ -9,8 +9,8 @@ MSDevice_Battery::readParameterValue)::
     else param device.battery.chargeLevel: the vehicle's, else the vType's
     (a <flow>'s params are its vehicles' <flow id>.<n>, as SUMO copies them)
 
-The scenario's ``[vtypes.<id>] battery_charge_wh`` replaces what the vType's params say (as a
-vType's other scenario keys win over its params), not a vehicle's own; none of them: a charged
+The scenario's ``[vtypes.<id>] battery_charge_wh`` replaces what the vType's params say, its old
+key too (as a vType's other scenario keys win over its params), not a vehicle's own; none of them: a charged
 battery (U left). The energy spent at departure is then U − 3600 · charge [J];
 a charge that is not a number, negative or above U is refused, naming the vehicle, its vType,
 where the value was written and the key.
@@ -77,6 +77,8 @@ class DepartureCharges:
         """(value as written, key, where) of vehicle ``vid`` of vType ``vtype``'s charge at
         departure [Wh], None for a charged battery (module doc: SUMO's order)."""
         own, typ = self.own(vid), self.vtypes.get(vtype) or {}
+        if vtype in self.scenario:  # the scenario's key replaces the vType's params, its old key too
+            typ = {}
         key = OLD_CHARGE if OLD_CHARGE in own or OLD_CHARGE in typ else CHARGE_LEVEL  # the old key anywhere wins
         if key in own:
             return own[key][0], key, f"{own[key][1]}: vehicle '{vid}'"
@@ -119,7 +121,7 @@ class DepartureCharges:
                                 "scenario_vtypes": len(self.scenario)},
                 "rule": f"a plug-in hybrid departs with the Wh of its usable energy its SUMO battery device would: "
                         f"param {OLD_CHARGE} (vehicle, else vType), else {CHARGE_LEVEL} (vehicle, else the scenario's "
-                        f"[vtypes.<id>] {SCENARIO_KEY}, else vType); none: charged"}
+                        f"[vtypes.<id>] {SCENARIO_KEY}, which replaces the vType's params, else vType); none: charged"}
 
 
 def _charge_wh(val, key: str, where: str) -> float:
