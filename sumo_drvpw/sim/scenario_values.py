@@ -133,17 +133,24 @@ def tiny_mass(vt: str, vclass: str | None, mass, said: str) -> None:
                         f"({usual:,.0f} kg, SUMO's default): tonnes, not kg? (a typo?)")
 
 
+#: vClasses SUMO gives no mass of their own (``vehicletype.getMass``: the generic 1,500 kg, SUMO
+#: 1.28): no class's usual mass to read a tonne against — a 5-kg parcel (a container of vClass
+#: container), a 2-kg drone are written in kg
+NO_CLASS_MASS = frozenset({"container", "drone", "aircraft", "cable_car", "custom1", "custom2"})
+
+
 def tiny_file_masses(files, told: dict) -> None:
     """The masses SUMO gives the vTypes of the route files ``files`` (``mass``, else param
     ``vehicleMass``; :func:`~sumo_drvpw.sim.vtypes.read_vtypes`) whose vClass is written checked as
     a booked vehicle's is (:func:`tiny_mass`), unless a ``drvpw.mass`` or the scenario's
     ``[vtypes.<id>] mass_kg`` (``told``: its vtype_data) gives the vehicle's: a rider — a person,
     a container — adds that mass to its vehicle, and no scenario key tells it (a container of
-    vClass truck written 2 for 2 t rode as 2 kg)."""
+    vClass truck written 2 for 2 t rode as 2 kg). Not a vClass of :data:`NO_CLASS_MASS`."""
     from sumo_drvpw.sim.fcd_conn import sumo_type_mass
 
     for vt, info in files.items():
-        if info.vclass and not info.drvpw_mass and (told.get(vt) or {}).get("mass_kg") is None:
+        if info.vclass and info.vclass not in NO_CLASS_MASS and not info.drvpw_mass \
+                and (told.get(vt) or {}).get("mass_kg") is None:
             tiny_mass(vt, info.vclass, sumo_type_mass(files, vt), f"its mass in {info.source}")
 
 
