@@ -46,9 +46,9 @@ def window_ids(p, v, fuel_w, dt_s, ok, trip, window_s: float) -> np.ndarray:
     """Per sample, the window it is averaged in (0, 1, …; −1 where not ``ok``), as the module
     docstring says: runs of one trip's usable samples with one sign of the smoothed driving
     power ``p`` [W], one engine state (fuel ``fuel_w`` [W] flowing or not) and one of standing
-    or moving (``v`` [m/s]), chopped every ``window_s`` [s] of duration ``dt_s``."""
-    from sumo_drvpw.fit.chain_fuel import FUEL_FLOWING_W
-
+    or moving (``v`` [m/s]), chopped every ``window_s`` [s] of duration ``dt_s``. Each trip's
+    windows are found on its own clock (from 0 at its first sample), so a trip is cut alike
+    read whole or in a batch of other trips (a streamed fit's, fit/chain_stream.py)."""
     p, v, y = (np.asarray(a, float) for a in (p, v, fuel_w))
     n = p.size
     dt = np.nan_to_num(np.broadcast_to(np.asarray(dt_s, float), (n,)))
@@ -56,20 +56,31 @@ def window_ids(p, v, fuel_w, dt_s, ok, trip, window_s: float) -> np.ndarray:
     if n == 0:
         return np.zeros(0, int)
     tr = np.zeros(n, int) if trip is None else np.asarray(trip)
-    new = np.r_[True, tr[1:] != tr[:-1]]
+    starts = np.flatnonzero(np.r_[True, tr[1:] != tr[:-1]])
+    cut = np.zeros(n, bool)  # where a new window starts
+    for a, b in zip(starts, np.r_[starts[1:], n]):  # (one trip at a time: its own time from 0)
+        cut[a:b] = _trip_cuts(p[a:b], v[a:b], y[a:b], dt[a:b], ok[a:b], window_s)
+    wid = np.where(ok, np.cumsum(cut) - 1, -1)
+    return np.unique(wid, return_inverse=True)[1].reshape(n) - (1 if (~ok).any() else 0)
+
+
+def _trip_cuts(p, v, y, dt, ok, window_s: float) -> np.ndarray:
+    """Where one trip's windows (:func:`window_ids`) start: True at its first sample and
+    wherever the smoothed power's sign, the engine state, standing or moving, or usability
+    changes, or another ``window_s`` [s] of the run begins."""
+    from sumo_drvpw.fit.chain_fuel import FUEL_FLOWING_W
+
     half = SIGN_SMOOTH_S / 2.0
-    t = np.cumsum(dt) + np.cumsum(new) * (dt.sum() + 4.0 * half + 1.0)  # trips apart in time
+    t = np.cumsum(dt)
     cp, ck = np.r_[0.0, np.cumsum(np.where(ok, p, 0.0))], np.r_[0, np.cumsum(ok)]
     lo, hi = np.searchsorted(t, t - half, "left"), np.searchsorted(t, t + half, "right")
     ps = (cp[hi] - cp[lo]) / np.maximum(ck[hi] - ck[lo], 1)
     state = (ps > 0) * 1 + (y > FUEL_FLOWING_W) * 2 + (v < STANDSTILL_MPS) * 4 + (~ok) * 8
-    run = np.cumsum(new | np.r_[True, state[1:] != state[:-1]])
+    run = np.cumsum(np.r_[True, state[1:] != state[:-1]])
     start = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
     tb = t - dt  # each sample's start
     k = np.floor((tb - tb[start][run - 1]) / window_s).astype(np.int64)
-    wid = np.cumsum(np.r_[True, (run[1:] != run[:-1]) | (k[1:] != k[:-1])]) - 1
-    wid = np.where(ok, wid, -1)
-    return np.unique(wid, return_inverse=True)[1].reshape(n) - (1 if (~ok).any() else 0)
+    return np.r_[True, (run[1:] != run[:-1]) | (k[1:] != k[:-1])]
 
 
 def window_means(wid, dt_s, *cols):
