@@ -321,7 +321,7 @@ def calibrate_fuel(p_drive_w, v_mps, fuel_w, dt_s, battery_w=None, signals: dict
         kw.update(engine_off=off, engine_on_above_mps=engine_on_above_mps, charge_sustaining=tmpl.charge_sustaining)
         fit.windowed = windowed_lines(lambda *a: calibrate_fuel(*a, engine_max_w=tmpl.engine_max_w, check_windows=False,
                                                                 **kw), p, v, y, w, battery_w,
-                                      {c: sig[c] for c in loads}, ok, trip)
+                                      {c: sig[c] for c in loads}, ok, trip, cap_w=tmpl.engine_max_w)
     return fit
 
 

@@ -16,7 +16,9 @@ never straddles
   change), changes;
 * the engine's state as the log shows it: fuel flowing or not (``FUEL_FLOWING_W``), so an
   engine-off (a hybrid's, or a fuel cut on overrun) is never averaged into an engine-on window;
-* standing and moving (``STANDSTILL_MPS``): the standing idle fuel stays the standstill's.
+* standing and moving (``STANDSTILL_MPS``): the standing idle fuel stays the standstill's;
+* the line's other kink, the engine's rated output where a fuel chain has one (the mean of
+  min(P, P_max) is not min of the mean): runs split where the smoothed driving power reaches it.
 
 Every usable sample is in exactly one window; a window weighs its duration. Windows of less
 than half ``window_s`` (at the splits) are left out of the windowed fit: their noise is not
@@ -42,11 +44,12 @@ SIGN_SMOOTH_S = 5.0
 DILUTION_REL = 0.10
 
 
-def window_ids(p, v, fuel_w, dt_s, ok, trip, window_s: float) -> np.ndarray:
+def window_ids(p, v, fuel_w, dt_s, ok, trip, window_s: float, cap_w: float | None = None) -> np.ndarray:
     """Per sample, the window it is averaged in (0, 1, …; −1 where not ``ok``), as the module
     docstring says: runs of one trip's usable samples with one sign of the smoothed driving
     power ``p`` [W], one engine state (fuel ``fuel_w`` [W] flowing or not) and one of standing
-    or moving (``v`` [m/s]), chopped every ``window_s`` [s] of duration ``dt_s``. Each trip's
+    or moving (``v`` [m/s]), below or at the rated output ``cap_w`` [W] of driving power (None:
+    none), chopped every ``window_s`` [s] of duration ``dt_s``. Each trip's
     windows are found on its own clock (from 0 at its first sample), so a trip is cut alike
     read whole or in a batch of other trips (a streamed fit's, fit/chain_stream.py)."""
     p, v, y = (np.asarray(a, float) for a in (p, v, fuel_w))
@@ -59,15 +62,16 @@ def window_ids(p, v, fuel_w, dt_s, ok, trip, window_s: float) -> np.ndarray:
     starts = np.flatnonzero(np.r_[True, tr[1:] != tr[:-1]])
     cut = np.zeros(n, bool)  # where a new window starts
     for a, b in zip(starts, np.r_[starts[1:], n]):  # (one trip at a time: its own time from 0)
-        cut[a:b] = _trip_cuts(p[a:b], v[a:b], y[a:b], dt[a:b], ok[a:b], window_s)
+        cut[a:b] = _trip_cuts(p[a:b], v[a:b], y[a:b], dt[a:b], ok[a:b], window_s, cap_w)
     wid = np.where(ok, np.cumsum(cut) - 1, -1)
     return np.unique(wid, return_inverse=True)[1].reshape(n) - (1 if (~ok).any() else 0)
 
 
-def _trip_cuts(p, v, y, dt, ok, window_s: float) -> np.ndarray:
+def _trip_cuts(p, v, y, dt, ok, window_s: float, cap_w: float | None = None) -> np.ndarray:
     """Where one trip's windows (:func:`window_ids`) start: True at its first sample and
     wherever the smoothed power's sign, the engine state, standing or moving, or usability
-    changes, or another ``window_s`` [s] of the run begins."""
+    changes, the smoothed power reaches or leaves ``cap_w`` [W], or another ``window_s`` [s] of
+    the run begins."""
     from sumo_drvpw.fit.chain_fuel import FUEL_FLOWING_W
 
     half = SIGN_SMOOTH_S / 2.0
@@ -76,6 +80,8 @@ def _trip_cuts(p, v, y, dt, ok, window_s: float) -> np.ndarray:
     lo, hi = np.searchsorted(t, t - half, "left"), np.searchsorted(t, t + half, "right")
     ps = (cp[hi] - cp[lo]) / np.maximum(ck[hi] - ck[lo], 1)
     state = (ps > 0) * 1 + (y > FUEL_FLOWING_W) * 2 + (v < STANDSTILL_MPS) * 4 + (~ok) * 8
+    if cap_w is not None:
+        state = state + (ps >= cap_w) * 16
     run = np.cumsum(np.r_[True, state[1:] != state[:-1]])
     start = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
     tb = t - dt  # each sample's start
@@ -94,11 +100,11 @@ def window_means(wid, dt_s, *cols):
                    / np.where(dur > 0, dur, 1.0) for c in cols))
 
 
-def windowed(p, v, fuel_w, dt_s, battery_w, signals: dict, ok, trip, window_s: float):
+def windowed(p, v, fuel_w, dt_s, battery_w, signals: dict, ok, trip, window_s: float, cap_w: float | None = None):
     """The fuel chain's inputs as means over windows of ``window_s`` [s] (:func:`window_ids`;
     the short ones left out): (P, v, fuel, durations, battery or None, signals) to calibrate
     on, and the number of windows and of the samples in them."""
-    wid = window_ids(p, v, fuel_w, dt_s, ok, trip, window_s)
+    wid = window_ids(p, v, fuel_w, dt_s, ok, trip, window_s, cap_w)
     names = sorted(signals or {})
     cols = [p, v, fuel_w] + ([] if battery_w is None else [np.nan_to_num(np.asarray(battery_w, float))])
     out = window_means(wid, dt_s, *cols, *[np.nan_to_num(np.asarray(signals[c], float)) for c in names])
@@ -111,14 +117,14 @@ def windowed(p, v, fuel_w, dt_s, battery_w, signals: dict, ok, trip, window_s: f
 
 
 def windowed_lines(fit_template, p, v, fuel_w, dt_s, battery_w, signals, ok, trip,
-                   windows=DILUTION_WINDOWS_S) -> list[dict]:
+                   windows=DILUTION_WINDOWS_S, cap_w: float | None = None) -> list[dict]:
     """The per-sample fit's line refitted on means over each of ``windows`` [s]
     (``fit_template(P, v, fuel, durations, battery, signals)`` → ChainFit: the same engine
-    state and form as the per-sample fit): per window its zero-output fuel, marginal efficiency
+    state and form as the per-sample fit; ``cap_w`` its rated output [W], None: none): per window its zero-output fuel, marginal efficiency
     and standard error, and the windows' number (windows too few for a line are skipped)."""
     rows = []
     for ws in windows:
-        pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws)
+        pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws, cap_w)
         if nw < 10:
             continue
         f = fit_template(pp, vv, yy, dur, pb, sig)
@@ -143,7 +149,9 @@ def calibrate_windowed(calibrate, p, v, fuel_w, dt_s, battery_w, signals, ok, tr
     if not np.isfinite(ws) or ws <= 0:
         raise UserError(f"energy chain: window_s {window_s!r}: the window of the means to fit on is a positive "
                         "number of seconds (e.g. 30)")
-    pp, vv, yy, dur, pb, sig, nw, ns = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws)
+    cap = kw.get("engine_max_w")  # (a declared rating splits the windows; a profiled one is not known yet)
+    cap = float(cap) if isinstance(cap, (int, float)) else None
+    pp, vv, yy, dur, pb, sig, nw, ns = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws, cap)
     if nw < 10:
         raise UserError(f"energy chain: windows of {ws:g} s: only {nw} of at least {ws / 2:g} s on the "
                         f"{int(ok.sum())} usable samples, too few for a line: fit on a shorter window or more logs")
@@ -171,8 +179,10 @@ def window_designs(grid, p, v, fuel_w, dt_s, battery_w, signals, loads, ok, trip
     to the in-memory refit's (:func:`windowed_lines`)."""
     from sumo_drvpw.fit.chain_fuel import fuel_design
 
+    caps = {t.engine_max_w for t in grid}  # (the grid's templates keep one declared rating)
+    cap = caps.pop() if len(caps) == 1 else None
     for ws in windows:
-        pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws)
+        pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws, cap)
         if nw:
             pb = np.zeros(nw) if pb is None else pb
             for i, tmpl in enumerate(grid):
