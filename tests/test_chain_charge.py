@@ -261,3 +261,35 @@ def test_the_scenario_s_charge_replaces_the_vtype_s_params_not_the_vehicle_s(own
                          {"t": {k: (x, "r.rou.xml") for k, x in typ.items()}},
                          {} if scenario is None else {"t": (scenario, "s.toml")})
     assert d.of("v", "t")[0] == want
+
+
+@pytest.mark.sumo
+def test_a_traci_script_s_charge_wins_over_the_vtype_s_old_key(tmp_path):
+    """Accountant.set_battery_charge overrides what the route files say: also where the vehicle's
+    vType declares SUMO's old key actualBatteryCapacity (300 Wh), which outranks a vehicle's
+    chargeLevel param — the script's 100 Wh was stored as one and silently lost (the added car
+    booked the vType's 0.300 kWh). The route file's own vehicle keeps the vType's 300 Wh."""
+    pytest.importorskip("libsumo")
+    import pandas as pd
+
+    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
+    from sumo_drvpw.sim.scenario import load_scenario
+
+    _road(tmp_path, f'<routes>{_vtype(_param("actualBatteryCapacity", 300))}{_trip("t", "A")}</routes>')
+    s = _scenario(tmp_path)
+    conn = start_sumo(load_scenario(s).sumo_args)
+    try:
+        acc = Accountant(conn, scenario=s)
+        conn.addStepListener(acc)
+        conn.route.add("rb", [f"B{i}" for i in range(5)])
+        conn.vehicle.add("added", "rb", typeID="h", depart="now")
+        acc.set_battery_charge("added", 100)
+        while conn.simulation.getTime() < 300 - 1e-9:
+            conn.simulationStep()
+        res = acc.result()
+    finally:
+        close_sumo(conn)
+    res.write(tmp_path / "o")
+    veh = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv", dtype={"key": str}).set_index("key")
+    assert veh.loc["added", "net_kwh"] == pytest.approx(0.100, rel=1e-9)
+    assert veh.loc["t", "net_kwh"] == pytest.approx(0.300, rel=1e-9)

@@ -334,8 +334,8 @@ class Accountant(_Listener):
     def set_battery_charge(self, vehicle_id: str, charge_wh) -> None:
         """Say that vehicle ``vehicle_id`` (e.g. one this script adds with ``vehicle.add``)
         departs with ``charge_wh`` [Wh] of a plug-in hybrid chain's usable energy left, as a
-        route file's ``device.battery.chargeLevel`` param (sim/chain_charge.py), which this
-        overrides. Call it before the vehicle departs. ValueError when the charge is not a number
+        route file's ``device.battery.chargeLevel`` param (sim/chain_charge.py); this overrides
+        whatever the route files (its vType's ``actualBatteryCapacity`` too) or the scenario say. Call it before the vehicle departs. ValueError when the charge is not a number
         ≥ 0, the vehicle has departed already, or no equation of the run has a plug-in hybrid's
         battery; a charge above the usable energy of a chain that books it is refused at its
         departure."""
@@ -351,7 +351,7 @@ class Accountant(_Listener):
         if vehicle_id in self.stepper.vmap:
             raise ValueError(f"set_battery_charge: vehicle '{vehicle_id}' has departed already (say it before it departs)")
         chain.charges = chain.charges or DepartureCharges()
-        chain.charges.vehicles[str(vehicle_id)] = {CHARGE_LEVEL: (wh, "Accountant.set_battery_charge")}
+        chain.charges.told[str(vehicle_id)] = wh
 
     # -- the end --------------------------------------------------------------------------
     def close_trace(self) -> None:

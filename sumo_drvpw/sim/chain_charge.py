@@ -51,9 +51,11 @@ class DepartureCharges:
     """Who declares a charge at departure: vehicles (id → {key: (value as written, file)}), flows (id →
     the same, for ids ``<flow>.<n>``), vTypes (id → the same), the scenario's vTypes (id → (Wh, its file))."""
 
-    def __init__(self, vehicles=None, flows=None, vtypes=None, scenario=None):
+    def __init__(self, vehicles=None, flows=None, vtypes=None, scenario=None, told=None):
         self.vehicles, self.flows = dict(vehicles or {}), dict(flows or {})
         self.vtypes, self.scenario = dict(vtypes or {}), dict(scenario or {})
+        #: vehicle id → the charge [Wh] a TraCI script told (Accountant.set_battery_charge): first of all
+        self.told = dict(told or {})
         #: vehicles that departed with a declared charge, booked by a plug-in chain, and their Wh
         self.departed, self.charge_wh = 0, 0.0
 
@@ -64,7 +66,7 @@ class DepartureCharges:
         return cls(*(getattr(fv, CHARGE_TAGS[t], None) for t in ("vehicle", "flow", "vType")), scenario)
 
     def __bool__(self) -> bool:
-        return bool(self.vehicles or self.flows or self.vtypes or self.scenario)
+        return bool(self.vehicles or self.flows or self.vtypes or self.scenario or self.told)
 
     def own(self, vid: str) -> dict:
         """The vehicle's own params (its flow's for ``<flow>.<n>``)."""
@@ -75,7 +77,9 @@ class DepartureCharges:
 
     def of(self, vid: str, vtype: str) -> tuple[str, str, str] | None:
         """(value as written, key, where) of vehicle ``vid`` of vType ``vtype``'s charge at
-        departure [Wh], None for a charged battery (module doc: SUMO's order)."""
+        departure [Wh], None for a charged battery (module doc: SUMO's order; a script's word first)."""
+        if vid in self.told:
+            return self.told[vid], "charge_wh", f"Accountant.set_battery_charge: vehicle '{vid}'"
         own, typ = self.own(vid), self.vtypes.get(vtype) or {}
         if vtype in self.scenario:  # the scenario's key replaces the vType's params, its old key too
             typ = {}
@@ -118,10 +122,11 @@ class DepartureCharges:
         """summary.json ``chain.departure_charge``."""
         return {"vehicles": self.departed, "mean_charge_wh": round(self.charge_wh / self.departed, 6) if self.departed else None,
                 "declared_by": {"vehicles": len(self.vehicles), "flows": len(self.flows), "vtypes": len(self.vtypes),
-                                "scenario_vtypes": len(self.scenario)},
+                                "scenario_vtypes": len(self.scenario), "script": len(self.told)},
                 "rule": f"a plug-in hybrid departs with the Wh of its usable energy its SUMO battery device would: "
                         f"param {OLD_CHARGE} (vehicle, else vType), else {CHARGE_LEVEL} (vehicle, else the scenario's "
-                        f"[vtypes.<id>] {SCENARIO_KEY}, which replaces the vType's params, else vType); none: charged"}
+                        f"[vtypes.<id>] {SCENARIO_KEY}, which replaces the vType's params, else vType); none: charged; "
+                        "a TraCI script's Accountant.set_battery_charge before all"}
 
 
 def _charge_wh(val, key: str, where: str) -> float:
