@@ -303,7 +303,7 @@ def test_a_bare_config_books_a_plug_in_hybrids_petrol_share_with_the_plug_in_cha
     from sumo_drvpw.cli import main as cli_main
     from sumo_drvpw.model.chain import EnergyChain
     from sumo_drvpw.model.equations import Equation
-    from sumo_drvpw.sim.vtypes import is_hybrid_chain, is_hybrid_class
+    from sumo_drvpw.sim.carrier import is_hybrid_chain, is_hybrid_class
 
     _phev_config(tmp_path)
     books = {}

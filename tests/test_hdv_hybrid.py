@@ -53,7 +53,7 @@ def test_builtin_books_fuel_by_hand():
 
 def test_builtin_is_what_the_module_writes():
     from sumo_drvpw.model.equations import equation_from_dict
-    from sumo_drvpw.sim.vtypes import is_hybrid_chain
+    from sumo_drvpw.sim.carrier import is_hybrid_chain
     from sumo_drvpw.validation import hdv_hybrid as h
 
     want = equation_from_dict(h.builtin_doc(), f"<{NAME}>").to_dict()

@@ -25,7 +25,7 @@ from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.equations import Equation, load_equation
 from sumo_drvpw.sim import close_sumo, run_scenario, start_sumo
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, EquationSet, Ledger
-from sumo_drvpw.sim.vtypes import MODE_CARRIERS
+from sumo_drvpw.sim.carrier import MODE_CARRIERS
 from sumo_drvpw.sim.loop import Physics
 from sumo_drvpw.sim.stepping import run_loop
 from sumo_drvpw.sim.network import load_network
@@ -1002,7 +1002,7 @@ def test_energy_carrier_of_sumo_emission_classes(ec, carrier):
     """The carrier a SUMO emissionClass names (names as SUMO's emission-model pages and its
     defaults, vehicletype.getEmissionClass, give them; the bare "MMPEVEM" is what every file
     SUMO ships in data/emissions/MMPEVEM writes, and was booked as a petrol car)."""
-    from sumo_drvpw.sim.vtypes import energy_carrier
+    from sumo_drvpw.sim.carrier import energy_carrier
 
     assert energy_carrier(ec) == carrier
 
@@ -1016,7 +1016,7 @@ def test_energy_carrier_of_sumo_emission_classes(ec, carrier):
 def test_the_mode_a_class_names_last_is_its_carrier(base, sep, mode, case, model):
     """Whatever the body and fuel words before it, the model prefix, the separator and the
     case, a class name ending in a mode in parentheses books that mode's carrier."""
-    from sumo_drvpw.sim.vtypes import energy_carrier
+    from sumo_drvpw.sim.carrier import energy_carrier
 
     assert energy_carrier(f"{model}{base}{sep}({case(mode)})") == MODE_CARRIERS[mode]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import re
 
-from sumo_drvpw.sim.vtypes import is_hybrid_class
+from sumo_drvpw.sim.carrier import is_hybrid_class
 
 #: a vType's powertrain → the fuel chains' powertrains that book it, the first present of each
 POWERTRAIN_ORDER = {"plug-in hybrid": ("plug-in hybrid", "hybrid", "conventional"),

@@ -15,9 +15,9 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import MASS_MAX_KG
 from sumo_drvpw.sim.scenario_values import tiny_file_masses, tiny_mass
 from sumo_drvpw.sim.vtype_energy import battery_switch, energy_vtype_of, own_energy, run_emission_class
-from sumo_drvpw.sim.vtypes import (CAR_VCLASSES, SHORT_CAR_M, SUMO_DEFAULT_EMISSION_CLASS,
-                                   SUMO_DEFAULT_EMISSION_CLASS_OTHER, SUMO_DEFAULT_VTYPES, energy_carrier,
-                                   equation_carrier, is_hybrid_chain, VAN_MAX_MASS_KG)
+from sumo_drvpw.sim.carrier import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER, energy_carrier,
+                                    equation_carrier, is_hybrid_chain)
+from sumo_drvpw.sim.vtypes import CAR_VCLASSES, SHORT_CAR_M, SUMO_DEFAULT_VTYPES, VAN_MAX_MASS_KG
 from sumo_drvpw.sim.powertrain import POWERTRAIN_ORDER, powertrain_of_class
 
 
