@@ -14,7 +14,8 @@ from sumo_drvpw.model.constants import R_DRY_AIR
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.loop import tailwind
-from sumo_drvpw.sim.network import BIN_M, PARKED_MAX_OFFSET_M, lane_profile, load_network, off_lane
+from sumo_drvpw.sim.lane_geometry import BIN_M, lane_profile
+from sumo_drvpw.sim.network import PARKED_MAX_OFFSET_M, load_network, off_lane
 from sumo_drvpw.sim.scenario import RoadClassRule, load_scenario
 from sumo_drvpw.sim.vtypes import read_vtypes
 
@@ -226,7 +227,8 @@ def test_a_lane_without_z_takes_the_flat_profile_lane_profile_gives(xy, scale, w
     lane_profile gives such a lane — slope, clip flags and node elevations, and the raw
     profile — for any shape (points repeated included), 2-D or with z = 0, and any SUMO
     length against the shape's."""
-    from sumo_drvpw.sim.network import RAW_LENGTH_M, flat_profile
+    from sumo_drvpw.sim.lane_geometry import flat_profile
+    from sumo_drvpw.sim.network import RAW_LENGTH_M
 
     shape = [(x, y) if two_d else (x, y, 0.0) for x, y in xy]
     h = float(np.sum(np.hypot(*np.diff(np.asarray(xy, float), axis=0).T)))
@@ -247,7 +249,7 @@ def test_lane_headings_of_a_network_equal_each_lanes_heading(lanes):
     """load_network computes the headings and centre lines of the two-point lanes together
     (lane_headings): they equal lane_heading's of each lane, whatever the mix of shapes
     (one point, two — repeated included — or more) and SUMO lengths against the shapes'."""
-    from sumo_drvpw.sim.network import lane_heading, lane_headings
+    from sumo_drvpw.sim.lane_geometry import lane_heading, lane_headings
 
     shapes = [[(x, y, 0.0) for x, y in pts] for pts, _ in lanes]
     lengths = [max(0.1, scale * float(np.sum(np.hypot(*np.diff(np.asarray(pts, float), axis=0).T))))

@@ -22,7 +22,7 @@ def lane_spread(net) -> np.ndarray:
     part at most there. (Before 2026-11-29 at 33 fractions of each lane's length: on a lane
     rising 3 m to a crest 100 m in and falling again, 2.906 m where the lanes part 2.940 m at
     106 m; a lane change standing there was taken for a jump and its 2.93-m rise lost.)"""
-    from sumo_drvpw.sim.network import BIN_M
+    from sumo_drvpw.sim.lane_geometry import BIN_M
 
     n = len(net.lane_length)
     if net.z_node is None or net.lane_own_edge is None or not n:
