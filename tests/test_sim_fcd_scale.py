@@ -14,7 +14,8 @@ import pytest
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.equations import Equation
 from sumo_drvpw.sim import run_scenario
-from sumo_drvpw.sim.fcd import process_fcd, timesteps
+from sumo_drvpw.sim.fcd import process_fcd
+from sumo_drvpw.sim.fcd_replay import timesteps
 from sumo_drvpw.sim.fcd_read import Block, iter_fcd_blocks
 
 REPO = Path(__file__).resolve().parent.parent
@@ -119,7 +120,7 @@ def test_the_stream_reads_no_further_ahead_than_two_timesteps():
     """Memory does not grow with the file: with one block per timestep, when the replay
     has booked timestep k it has pulled at most the blocks up to k + 2 (the next timestep,
     and the block that shows it complete)."""
-    from sumo_drvpw.sim.fcd import FcdStream
+    from sumo_drvpw.sim.fcd_replay import FcdStream
 
     pulled = []
 
@@ -144,7 +145,7 @@ def test_person_rows_are_not_vehicles_and_may_lack_speed_and_position(tmp_path):
     """SUMO's XML FCD writes persons as <person> (speed and position optional); its tabular
     FCD writes them in the vehicles' columns without a lane. Both are read as persons: not
     vehicles of the replay, no error for a missing speed; a vehicle lacking one still is."""
-    from sumo_drvpw.sim.fcd import FcdStream
+    from sumo_drvpw.sim.fcd_replay import FcdStream
 
     (tmp_path / "f.xml").write_text(
         '<fcd-export><timestep time="0.00"><vehicle id="v" x="8.3" y="-1.6" speed="0" '

@@ -170,7 +170,8 @@ def process_fcd_dask(fcd_file, out_dir, net=None, scenario=None, equations=None,
     ``out_dir`` (required: the workers write their parts there) and returns the RunResult."""
     from sumo_drvpw.fit.engine import dask_client, guarded, unguarded
     from sumo_drvpw.sim.accountant import Accountant
-    from sumo_drvpw.sim.fcd import FcdStream, fcd_scenario, recorded_device_options, recorded_step
+    from sumo_drvpw.sim.fcd import fcd_scenario, recorded_device_options, recorded_step
+    from sumo_drvpw.sim.fcd_replay import FcdStream
     from sumo_drvpw.sim.fcd_idle import untold_warning
     from sumo_drvpw.sim.fcd_warn import (KineticGain, lane_warnings, missing_input_warnings, no_angle_warning,
                                          merge_missed, partial_warnings, sparse_rows,
