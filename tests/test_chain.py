@@ -12,7 +12,8 @@ import corpus
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import calibrate_battery
 from sumo_drvpw.fit.chain_fuel import calibrate_fuel
-from sumo_drvpw.model.chain import EnergyChain, chain_from_dict, corrected_fuel_power
+from sumo_drvpw.model.chain import EnergyChain, corrected_fuel_power
+from sumo_drvpw.model.chain_toml import chain_from_dict
 from sumo_drvpw.model.constants import CABIN_WARMUP_TAU_S, FUEL_COLD_START_TAU_S, FUELS
 from sumo_drvpw.model.equations import equation_from_dict, load_equation, save_equation
 

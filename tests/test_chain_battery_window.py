@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.chain import chain_from_dict
+from sumo_drvpw.model.chain_toml import chain_from_dict
 
 ETA_T, ETA_M, RT, LIM = 0.9, 0.4, 0.64, 50000.0   # √η_rt = 0.8 each way
 DOC = {"predicts": "fuel", "fuel": "gasoline", "marginal_efficiency": ETA_M, "idle_fuel_power_w": 0.0,

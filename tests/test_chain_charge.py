@@ -224,7 +224,7 @@ def test_dask_buckets_add_up_the_declared_charges():
     """An FCD replay on Dask books vehicles in buckets whose ledgers merge_ledgers adds: the
     vehicles that departed with a declared charge (summary.json chain.departure_charge) are the
     buckets' sums, as each books its own; a bucket's vehicle departs with U − 3600·charge spent."""
-    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.chain_toml import chain_from_dict
     from sumo_drvpw.sim.chain import ChainLedger
     from sumo_drvpw.sim.chain_charge import CHARGE_LEVEL, DepartureCharges
     from sumo_drvpw.sim.fcd_dask import merge_ledgers

@@ -14,7 +14,7 @@ import pytest
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain_fuel import calibrate_fuel
-from sumo_drvpw.model.chain import chain_from_dict
+from sumo_drvpw.model.chain_toml import chain_from_dict
 
 IDLE_W, MOVING_W, ETA, CAP_W = 8_000.0, 30_000.0, 0.40, 300_000.0
 TRUCK = {"predicts": "fuel", "fuel": "diesel", "marginal_efficiency": ETA, "idle_fuel_power_w": IDLE_W,

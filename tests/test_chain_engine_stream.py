@@ -20,7 +20,7 @@ import pytest
 import corpus
 import sumo_drvpw.fit.engine as engine_mod
 from sumo_drvpw.cli import main as cli_main
-from sumo_drvpw.model.chain import chain_from_dict
+from sumo_drvpw.model.chain_toml import chain_from_dict
 from sumo_drvpw.model.constants import FUELS
 
 RTOL = 1e-9

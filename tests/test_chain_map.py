@@ -10,7 +10,8 @@ from hypothesis import given, settings, strategies as st
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit import chain_map
 from sumo_drvpw.fit.chain import calibrate_battery
-from sumo_drvpw.model.chain import EnergyChain, Table, chain_from_dict
+from sumo_drvpw.model.chain import EnergyChain, Table
+from sumo_drvpw.model.chain_toml import chain_from_dict
 from sumo_drvpw.model.equations import equation_from_dict, load_equation, save_equation
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.chain import chain_from_dict
+from sumo_drvpw.model.chain_toml import chain_from_dict
 
 ETA_M = 0.4
 DOC = {"predicts": "fuel", "fuel": "gasoline", "marginal_efficiency": ETA_M, "idle_fuel_power_w": 5000.0,

@@ -77,7 +77,7 @@ def test_a_declared_rating_through_an_efficiency_table_is_kept_where_the_engine_
     import numpy as np
 
     from sumo_drvpw.fit.chain_fuel import declared_engine
-    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.chain_toml import chain_from_dict
     from sumo_drvpw.model.equations import Equation
 
     doc = {"predicts": "fuel", "engine_max_w": 300e3, "aux_power_w": 1e4}
@@ -96,7 +96,7 @@ def test_a_declared_rating_through_an_efficiency_table_is_kept_where_the_engine_
 def test_a_declared_rating_with_no_one_driving_power_is_refused(extra, words):
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.fit.chain_fuel import declared_engine
-    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.chain_toml import chain_from_dict
     from sumo_drvpw.model.equations import Equation
 
     ch = chain_from_dict({"predicts": "fuel", "engine_max_w": 300e3, **extra}, "rated.toml")

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.model.chain import chain_from_dict
+from sumo_drvpw.model.chain_toml import chain_from_dict
 
 DOC = {"predicts": "fuel", "fuel": "diesel", "marginal_efficiency": 0.45, "idle_fuel_power_w": 1000.0,
        "engine_off_below_w": 100.0, "charge_sustaining": True, "recuperation_round_trip": 0.7,

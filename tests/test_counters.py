@@ -282,7 +282,7 @@ def test_the_chain_tracer_sees_its_model_as_the_counters_book_it():
     import dataclasses
 
     from sumo_drvpw.fit.chain_linear import trace_chain
-    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.chain_toml import chain_from_dict
     from sumo_drvpw.model.equations import Equation
 
     m = measure(_log(_planted(step_j=7200.0)), None, "battery")

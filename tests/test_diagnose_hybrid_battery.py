@@ -10,7 +10,7 @@ import pytest
 from sumo_drvpw.data.log import from_frame
 from sumo_drvpw.data.measured import measure
 from sumo_drvpw.fit.chain_linear import gains, linearised_columns, trace_chain
-from sumo_drvpw.model.chain import chain_from_dict
+from sumo_drvpw.model.chain_toml import chain_from_dict
 from sumo_drvpw.model.constants import FUELS
 from sumo_drvpw.model.equations import Equation, load_equation
 from sumo_drvpw.model.vehicles import load_vehicle

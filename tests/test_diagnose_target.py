@@ -13,7 +13,8 @@ from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.data.log import from_frame
 from sumo_drvpw.data.measured import measure
 from sumo_drvpw.fit.chain_linear import ChainTraceOptions, linearised_columns, predict, trace_chain
-from sumo_drvpw.model.chain import EnergyChain, chain_from_dict
+from sumo_drvpw.model.chain import EnergyChain
+from sumo_drvpw.model.chain_toml import chain_from_dict
 from sumo_drvpw.model.equations import Equation, load_equation, save_equation
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.model.vehicles import load_vehicle

@@ -247,7 +247,7 @@ def test_charge_sustaining_key_round_trips_and_bad_values_are_one_line():
     nothing where the engine runs whenever the power is positive (P_off ≤ 0), and books the
     power below a positive threshold at η; a non-boolean or a battery chain is refused."""
     from sumo_drvpw.errors import UserError
-    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.chain_toml import chain_from_dict
 
     base = {"predicts": "fuel", "idle_fuel_power_w": 5000.0, "marginal_efficiency": 0.4, "engine_off_below_w": 0.0,
             "fuel": "gasoline"}

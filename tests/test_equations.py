@@ -202,7 +202,7 @@ def test_export_writes_a_constant_term_through_the_chains_drivetrain():
     chain's auxiliary power) and lists the recuperating case; before, it wrote c, 10 % short
     at η_t 0.9. Checked against the chain on a cruise: SUMO's formula with the exported
     values, P_rest/η_t + constantPowerIntake, equals the chain's battery power."""
-    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.chain_toml import chain_from_dict
     from sumo_drvpw.sim.export import energy_model_params
 
     chain = chain_from_dict({"predicts": "battery", "traction_efficiency": 0.9,

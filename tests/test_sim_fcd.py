@@ -225,7 +225,7 @@ def test_export_vtype_carries_a_battery_chain(tmp_path, capsys):
     within 3 % of the plug-in's chain kWh on a highway run at 0 °C (before, the vType had
     efficiencies 1 and booked the energy at the wheels). SUMO 1.28 books
     constantPowerIntake standing too, there without the efficiency (docs/scenario.md)."""
-    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.chain_toml import chain_from_dict
     from sumo_drvpw.model.equations import save_equation
 
     eq = Equation("ev_chain", {"acc": 1.08, "grade": 1.0, "aero_rho": 0.62, "m_v1": 0.0098 * 9.81})
@@ -393,7 +393,7 @@ def test_export_vtype_writes_a_table_efficiency_as_the_constant_of_its_energy():
     table's energy on the bundled test-track drive: the same traction and recuperation there."""
     import numpy as np
 
-    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.chain_toml import chain_from_dict
     from sumo_drvpw.sim.export import _bundled_drive, energy_model_params
 
     eq = Equation("ev_table", {"acc": 1.05, "grade": 1.0, "aero_rho": 0.6, "m_v1": 0.009 * 9.81})

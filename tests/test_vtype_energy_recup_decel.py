@@ -91,7 +91,8 @@ def test_the_chains_recuperation_by_deceleration_by_hand():
     it as accel=); without it a UserError names the key; the [chain] key round-trips."""
     import numpy as np
 
-    from sumo_drvpw.model.chain import EnergyChain, chain_from_dict
+    from sumo_drvpw.model.chain import EnergyChain
+    from sumo_drvpw.model.chain_toml import chain_from_dict
 
     ch = EnergyChain(predicts="battery", traction_efficiency=0.9, recuperation_efficiency=0.8,
                      aux_power_w=100.0, recuperation_by_decel_mps2=0.5)

@@ -57,7 +57,7 @@ def depleting_from_dict(doc: dict, where: str) -> Depleting:
     """``[chain.depleting]`` of the fuel chain ``doc`` checked: a table of :data:`DEPLETING_KEYS`,
     ``usable_j`` > 0 and both efficiencies given, for a charge-sustaining fuel chain; its auxiliaries
     default to the chain's."""
-    from sumo_drvpw.model.chain import chain_from_dict
+    from sumo_drvpw.model.chain_toml import chain_from_dict
 
     dep = doc["depleting"]
     if not isinstance(dep, dict):

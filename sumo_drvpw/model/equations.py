@@ -410,7 +410,7 @@ def equation_from_dict(doc: dict, where: str = "<equation>") -> Equation:
         ranges[key] = (float(r[0]), float(r[1]))
     chain = None
     if "chain" in doc:
-        from sumo_drvpw.model.chain import chain_from_dict
+        from sumo_drvpw.model.chain_toml import chain_from_dict
 
         chain = chain_from_dict(doc["chain"], where)
     measurement = None
