@@ -142,7 +142,7 @@ def main(args) -> int:
 def log_columns(paths) -> set[str]:
     """Column names of the logs (their headers only; one that cannot be read here was read,
     or refused, by the reader)."""
-    from sumo_drvpw.data.log import expand_paths
+    from sumo_drvpw.data.log_files import expand_paths
     from sumo_drvpw.data.stream import column_names
 
     return {c for p in expand_paths(paths) for c in column_names(p) or ()}

@@ -67,7 +67,7 @@ def in_sample_lines(equations, logs) -> list[str]:
     ``[provenance]`` or ``[chain.provenance]`` ``logs``, named relative to the equation's
     folder): its errors there are in sample, not held out. Files only: the same trips
     imported into another file are not recognised."""
-    from sumo_drvpw.data.log import expand_paths
+    from sumo_drvpw.data.log_files import expand_paths
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
 
@@ -106,7 +106,7 @@ def in_sample_trips(eqs, trips: dict, logs) -> list[str]:
     ``trip_signatures``) read from other files than those it was calibrated on (``logs``
     compared; those files :func:`in_sample_lines` names: a trip of them re-exported into
     another file beside them was said held out)."""
-    from sumo_drvpw.data.log import expand_paths
+    from sumo_drvpw.data.log_files import expand_paths
     from sumo_drvpw.data.plausible import trip_ids
     from sumo_drvpw.data.trips import same_trips
     from sumo_drvpw.errors import UserError

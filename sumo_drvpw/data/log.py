@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.paths import expand_paths as _expand_paths, parquet_frame
+from sumo_drvpw.data.log_files import (FLAGS, NUMERIC, REQUIRED, _check_flags, _check_numeric, _read_table,
+                                       expand_paths, vendor_hint)
 from sumo_drvpw.data.resolution import accel_counts, accel_derivation, accel_speed, accel_window, held_end_spans
 from sumo_drvpw.data.conditions import derive_conditions
 from sumo_drvpw.data.ranges import RANGES, check_ranges  # noqa: F401  (RANGES re-exported)
-from sumo_drvpw.data.truncated import read_complete_csv
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.terms import Inputs
 from sumo_drvpw.data.trips import (derivative, grade_from_elevation,  # noqa: F401  (re-exported)
@@ -26,18 +26,10 @@ from sumo_drvpw.data.trips import (derivative, grade_from_elevation,  # noqa: F4
                                    run_median_step, trip_array as _trip_array, trip_codes_of,
                                    trip_starts as _trip_starts, trips_without as _trips_without)
 from sumo_drvpw.data.counters import check_counters
-from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2, check_header,  # noqa: F401
+from sumo_drvpw.data.plausible import (KMH_SUSPECT_ACCEL_MPS2,  # noqa: F401
                                        check_distinct_trips, check_speed_unit, check_time_step,
                                        exclusions, implied_acceleration, speed_steps)
 
-#: Canonical numeric columns the reader checks when present.
-NUMERIC = ("time_s", "speed_mps", "accel_mps2", "grade_rad", "grade_pct", "elevation_m",
-           "wind_mps", "airspeed_mps", "air_density_kgm3", "ambient_c", "pressure_kpa",
-           "mass_kg", "power_w", "ice_speed_rpm", "mg1_speed_rpm", "mg1_torque_nm",
-           "mg2_speed_rpm", "mg2_torque_nm", "motor_torque_nm", "motor_speed_rpm",
-           "battery_voltage_v", "battery_current_a", "yaw_rate_rps",
-           "battery_discharge_energy_j", "battery_charge_energy_j")
-REQUIRED, FLAGS = ("time_s", "speed_mps"), ("brake", "reverse")
 #: Columns the reader derives; every other column is an extra signal.
 DERIVED = ("trip_id", "time_s", "speed_mps", "accel_mps2", "grade_rad", "wind_mps",
            "air_density_kgm3", "mass_kg", "brake", "reverse", "dt_s")
@@ -182,83 +174,6 @@ def bundled_log(name: str = BUNDLED_LOG) -> Path:
     if not p.is_file():
         raise UserError(f"bundled log {name!r} not found in the installed package ({p})")
     return p
-
-
-def expand_paths(paths) -> list[Path]:
-    """Files named, and the Parquet/CSV files inside folders named (sorted): the drive-log
-    case of :func:`sumo_drvpw.data.paths.expand_paths` (a named file of another type is
-    refused)."""
-    return _expand_paths(paths, (".parquet", ".csv"), "drive log", check_files=True)
-
-
-def vendor_hint() -> str:
-    """Where a file that is no canonical drive log should go: an adapter of the import command."""
-    from sumo_drvpw.data.adapters import FORMATS
-
-    return f"vendor logs are converted by the import command first (formats: {', '.join(FORMATS)})"
-
-
-def read_error(p: Path, e: Exception) -> UserError:
-    """The one-line error of a table that cannot be read (text that is not UTF-8 named with
-    its first offending byte, as a canonical CSV drive log is UTF-8)."""
-    if isinstance(e, UnicodeDecodeError):
-        return UserError(f"{p}: not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset {e.start}); "
-                         f"a canonical CSV drive log is UTF-8; {vendor_hint()}")
-    return UserError(f"{p}: cannot read as {p.suffix[1:]}: {e}")
-
-
-def _read_table(p: Path) -> tuple[pd.DataFrame, dict, int | None]:
-    """A file's table, its Parquet metadata and, for a CSV cut inside its last row, that
-    row's number (left out: :mod:`sumo_drvpw.data.truncated`; else None)."""
-    meta, cut = {}, None
-    try:
-        if p.suffix.lower() == ".parquet":
-            df, meta = parquet_frame(p, (b"sumo_drvpw", b"drive_log."))  # drive_log.roles: spec
-        else:
-            check_header(p)
-            df, cut = read_complete_csv(p, low_memory=False)
-    except pd.errors.EmptyDataError:
-        raise UserError(f"{p}: empty file (no header, no rows)") from None
-    except (OSError, ValueError, pd.errors.ParserError) as e:
-        raise read_error(p, e) from None
-    if len(df) == 0:
-        raise UserError(f"{p}: empty table (header only, no samples)")
-    return df, meta, cut
-
-
-def _check_numeric(df: pd.DataFrame, p: Path) -> None:
-    for c in NUMERIC:
-        if c in df and (pd.api.types.is_datetime64_any_dtype(df[c]) or pd.api.types.is_timedelta64_dtype(df[c])):
-            raise UserError(f"{p}: column '{c}' holds timestamps ({df[c].dtype}), not numbers; the "
-                            "drive-log schema wants numbers in SI units (time_s: seconds, e.g. since the trip start)")
-        if c not in df or pd.api.types.is_numeric_dtype(df[c]):
-            continue
-        conv = pd.to_numeric(df[c], errors="coerce")
-        bad = conv.isna() & df[c].notna() & (df[c].astype(str).str.strip() != "")
-        if bad.any():
-            i = int(np.flatnonzero(bad.to_numpy())[0])
-            raise UserError(f"{p}: column '{c}' has a non-numeric value {df[c].iloc[i]!r} "
-                            f"at row {i}")
-        df[c] = conv
-
-
-def _check_flags(df: pd.DataFrame, p: Path) -> None:
-    for c in FLAGS:
-        if c not in df:
-            continue
-        col = df[c]
-        if pd.api.types.is_bool_dtype(col):
-            df[c] = col.fillna(False).astype(bool)
-            continue
-        s = col.astype(object).where(col.notna(), "").astype(str).str.strip().str.lower()  # NA: not set
-        mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True,
-                   "0.0": False, "yes": True, "no": False, "nan": False, "": False,
-                   "none": False, "<na>": False}
-        bad = ~s.isin(list(mapping))
-        if bad.any():
-            i = int(np.flatnonzero(bad.to_numpy())[0])
-            raise UserError(f"{p}: column '{c}' must be boolean, got {col.iloc[i]!r} at row {i}")
-        df[c] = s.map(mapping).astype(bool)
 
 
 def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:

@@ -74,7 +74,7 @@ def check_distinct_trips(paths) -> None:
 
     Reads only headers and the ``trip_id`` column; raises UserError naming the file.
     """
-    from sumo_drvpw.data.log import expand_paths
+    from sumo_drvpw.data.log_files import expand_paths
 
     seen: dict[str, Path] = {}
     for p in expand_paths(paths):
@@ -113,7 +113,7 @@ def trip_ids(p: Path) -> list[str]:
     except pd.errors.EmptyDataError:
         return []
     except (OSError, ValueError, pd.errors.ParserError) as e:
-        from sumo_drvpw.data.log import read_error
+        from sumo_drvpw.data.log_files import read_error
 
         raise read_error(p, e) from None
     return [str(x) for x in pd.unique(col.dropna().astype(str))]

@@ -33,8 +33,8 @@ from typing import Iterator
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.log import (DERIVED, FLAGS, NUMERIC, REQUIRED, ReadOptions, _validate, expand_paths,
-                                 from_frame, read_error)
+from sumo_drvpw.data.log import DERIVED, ReadOptions, _validate, from_frame
+from sumo_drvpw.data.log_files import FLAGS, NUMERIC, REQUIRED, expand_paths, read_error
 from sumo_drvpw.data.plausible import check_header
 from sumo_drvpw.data.truncated import complete_bytes, open_complete, refuse_if_too_short
 from sumo_drvpw.errors import UserError

@@ -16,7 +16,7 @@ import pandas as pd
 from sumo_drvpw.data.counters import COUNTERS, describe
 from sumo_drvpw.data.adapters.align import align_channels
 from sumo_drvpw.data.adapters.trip_names import in_several, qualify_by_folder
-from sumo_drvpw.data.log import FLAGS
+from sumo_drvpw.data.log_files import FLAGS
 from sumo_drvpw.data.paths import expand_paths  # noqa: F401  (re-exported for the adapters)
 from sumo_drvpw.model.constants import FT, G_UNIT, GAL, HP, KELVIN, KMH, LB, LBF, MILE, MPH, RPM
 from sumo_drvpw.errors import UserError

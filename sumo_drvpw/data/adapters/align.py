@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from sumo_drvpw.data.log import FLAGS
+from sumo_drvpw.data.log_files import FLAGS
 
 #: a channel logged on its own rows is interpolated across gaps up to this many of its median
 #: sampling intervals; a longer gap (the logger paused the channel) stays missing
