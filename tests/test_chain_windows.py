@@ -24,7 +24,7 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import calibrate_on
 from sumo_drvpw.fit.chain_fuel import FUEL_FLOWING_W, calibrate_fuel
 from sumo_drvpw.fit.chain_windows import window_ids
-from sumo_drvpw.model.chain import chain_from_dict
+from sumo_drvpw.model.chain_toml import chain_from_dict
 from sumo_drvpw.model.constants import FUELS, STANDSTILL_MPS
 from sumo_drvpw.model.equations import load_equation
 

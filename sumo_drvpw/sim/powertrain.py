@@ -1,6 +1,6 @@
 """A vType's powertrain from its emissionClass, and which fuel chains' powertrains book it
 (sim/resolver.py): a plug-in hybrid's (a chain with ``[chain.depleting]``, model/chain_plugin.py),
-a full hybrid's (sim/vtypes.is_hybrid_chain) or a conventional engine's."""
+a full hybrid's (sim/carrier.is_hybrid_chain) or a conventional engine's."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ POWERTRAIN_ORDER = {"plug-in hybrid": ("plug-in hybrid", "hybrid", "conventional
 
 def powertrain_of_class(emission_class: str | None) -> str:
     """A SUMO emissionClass's powertrain: ``plug-in hybrid`` (the word PHEV: HBEFA 4's
-    ``PC_PHEV_petrol_Euro-6d_(P)``), ``hybrid`` (:func:`~sumo_drvpw.sim.vtypes.is_hybrid_class`), else
+    ``PC_PHEV_petrol_Euro-6d_(P)``), ``hybrid`` (:func:`~sumo_drvpw.sim.carrier.is_hybrid_class`), else
     ``conventional``."""
     if "phev" in re.split(r"[^a-z0-9]+", (emission_class or "").lower()):
         return "plug-in hybrid"

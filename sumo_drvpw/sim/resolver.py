@@ -66,7 +66,7 @@ class VTypeResolver:
     A vType with none is not accounted and counted in :attr:`skipped` (by vClass and vType).
     Energy carrier: unless the scenario or the vType names its equations, an equation whose
     chain books a fuel or the battery books only vehicles whose written emissionClass names
-    that carrier or none (:func:`sumo_drvpw.sim.vtypes.energy_carrier`): a petrol chain
+    that carrier or none (:func:`sumo_drvpw.sim.carrier.energy_carrier`): a petrol chain
     does not book an electric or a diesel car. A vType that writes none is booked by every
     chain made for its vClass (alternatives a user chose), except with the scenario's
     ``default_carrier`` (the plug-in's own equations) where chains of several carriers
@@ -92,7 +92,7 @@ class VTypeResolver:
         #: equation name → energy carrier its chain books (None: driving power only)
         self.carrier_of = {(e if isinstance(e, str) else e.name):
                            (None if isinstance(e, str) else equation_carrier(e)) for e in equations}
-        #: fuel-chain equation → whether it is a hybrid's (sim/vtypes.is_hybrid_chain)
+        #: fuel-chain equation → whether it is a hybrid's (sim/carrier.is_hybrid_chain)
         self.hybrid_of = {e.name: h for e in equations if not isinstance(e, str)
                           and (h := is_hybrid_chain(e)) is not None}
         #: fuel-chain equations of plug-in hybrids ([chain.depleting], model/chain_plugin.py)

@@ -460,7 +460,7 @@ def device_comparison(v, dev, cv, chains: dict, exported: dict | None = None, ma
             ours, sumo = g.fuel_l.sum(), g.sumo_fuel_mg.sum() / 1e6 / dens
             q = f"fuel L (chain; SUMO's fuel mass at {dens:g} kg/L)"
         if c is not None and c.predicts == "fuel":
-            if c.charge_sustaining and c.engine_off_below_w > 0:  # a full hybrid's (sim/vtypes.is_hybrid_chain)
+            if c.charge_sustaining and c.engine_off_below_w > 0:  # a full hybrid's (sim/carrier.is_hybrid_chain)
                 bus = "vclass" in g and len(g) and g.vclass.isin(HYBRID_BUS_VCLASSES).all()
                 note = HYBRID_BUS_NOTE if bus else HYBRID_NOTE  # (what SUMO books: its class's)
                 note = PLUG_IN_NOTE if c.depleting is not None else note
