@@ -426,6 +426,11 @@ def main_chain(args) -> int:
     if window is not None and (args.target != "fuel" or not window > 0 or not np.isfinite(window)):
         raise UserError(f"--fit-window {window:g}: " + ("a positive number of seconds (e.g. 30)" if args.target == "fuel"
                         else "goes with --target fuel (a fuel chain's Willans line on windowed means)"))
+    if window is not None and rating == "profile":  # a cap profiled on means that mix capped and uncapped driving
+        raise UserError(f"--fit-window {window:g} with --engine-max profile: a rated output profiled on windowed "
+                        "means reads low (a 300-kW engine read 191–299 kW on 60- to 10-s windows); profile it per "
+                        "sample (--engine-max profile alone), write it into the equation's [chain] engine_max_w "
+                        "and fit the windows with --engine-max declared")
     inputs = existing_paths(args.logs, args.vehicle, args.equation)
     check_output_path(out, inputs, "file")
     from sumo_drvpw.fit.chain_checks import not_a_power
