@@ -28,9 +28,8 @@ This module does the signal processing, trip by trip (nothing crosses a trip bou
   acceleration (k·a), the distance (k·s) and the grade from elevation over that distance
   (tan θ/k; its power m·g·v·sin θ, the elevation's rate, is unchanged) follow. k declared,
   or ``"gps"``: per trip, Σ GPS speed / Σ speed over its steady samples whose ratio lies near
-  the trip's median (both
-  above 8 m/s, |dv/dt| below 0.3 m/s², where a GPS speed neither lags nor is noise;
-  :func:`gps_speed_scales`). A speed k too high puts 1/k² into the acc coefficient, 1/k
+  the trip's median (both above 8 m/s, |dv/dt| below 0.3 m/s², where a GPS speed neither lags
+  nor is noise; :func:`gps_speed_scales`). A speed k too high puts 1/k² into the acc coefficient, 1/k
   into roll and 1/k³ into aero — coefficients SUMO, whose speeds are exact, would use.
 """
 
