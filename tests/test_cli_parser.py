@@ -149,3 +149,18 @@ def test_the_sim_package_s_modules_are_its_attributes_as_before_the_lazy_names()
             "try:\n    s.no_such_module\nexcept AttributeError:\n    print('ok')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
+
+
+@pytest.mark.parametrize("command", ["calibrate", "compare", "diagnose"])
+def test_a_switch_and_its_opposite_together_are_refused_in_one_line(command, capsys):
+    """--exclude-dropouts --no-exclude-dropouts set one setting two ways: refused naming both
+    (argparse kept the last silently: the dropouts kept); the same switch twice is no contradiction."""
+    with pytest.raises(SystemExit) as e:
+        build_parser().parse_args([command, "x.parquet", "--out", "o", "--equation", "e.toml", "--exclude-dropouts",
+                                   "--no-exclude-dropouts"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--exclude-dropouts and --no-exclude-dropouts" in err, err
+    args = build_parser().parse_args([command, "x.parquet", "--out", "o", "--equation", "e.toml",
+                                      "--no-exclude-dropouts", "--no-exclude-dropouts"])
+    assert args.exclude_dropouts is False

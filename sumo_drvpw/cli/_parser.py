@@ -23,11 +23,14 @@ def _given_once(base):
         def __call__(self, parser, namespace, values, option_string=None):
             given = namespace.__dict__.setdefault("_given", {})
             if option_string is not None:
+                value = self.const if self.nargs == 0 else values  # (a switch: what it sets)
                 first = given.get(self.dest)
-                if first is not None and first[1] != values:
+                if first is not None and first[1] != value:
+                    if first[0] != option_string:  # two options of one setting (--x and --no-x)
+                        parser.error(f"{first[0]} and {option_string} set one thing two ways: give one")
                     parser.error(f"{option_string} given twice ({first[0]} {_shown(first[1])}, then "
                                  f"{option_string} {_shown(values)}): give it once")
-                given[self.dest] = (option_string, values)
+                given[self.dest] = (option_string, value)
             super().__call__(parser, namespace, values, option_string)
 
     return Once
