@@ -193,9 +193,9 @@ def _validate(df: pd.DataFrame, p: Path, opt: ReadOptions | None = None) -> int:
                             f"(the second is read as '{mangled[0]}'); give each column once")
     for c in REQUIRED:
         if c not in df:
+            own = [str(x) for x in df.columns if not (x == "trip_id" and df.attrs.get("trip_id_added"))]
             raise UserError(f"{p}: missing required column '{c}' (columns: "
-                            f"{', '.join(map(str, df.columns[:12]))}{'…' if df.shape[1] > 12 else ''}); "
-                            f"{vendor_hint()}")
+                            f"{', '.join(own[:12])}{'…' if len(own) > 12 else ''}); {vendor_hint()}")
     for c in NUMERIC:
         if c in df and pd.api.types.is_bool_dtype(df[c]):
             raise UserError(f"{p}: column '{c}' is boolean (True/False), not a number in "
@@ -389,6 +389,7 @@ def _prepare(df: pd.DataFrame, p: Path, default_trip: str,
     Returns the frame and the number of standstill-noise speeds clipped to 0."""
     if "trip_id" not in df:
         df.insert(0, "trip_id", default_trip)
+        df.attrs["trip_id_added"] = True  # (not the file's: messages list the file's columns)
     else:
         tid = df["trip_id"]
         if tid.isna().any():
