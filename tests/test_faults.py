@@ -281,6 +281,37 @@ def test_signal_during_calibrate(tmp_path, sig):
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_process_stopping_on_a_signal_ignores_its_late_repeat(tmp_path, monkeypatch, capsys, sig):
+    """The process's own command line (main() without argv, as `sumo-drvpw` and `python -m
+    sumo_drvpw` call it) stopped by a signal: from main's return to the exit the stop's signals
+    are ignored — a library's re-send arriving after the handlers were restored killed the
+    process by SIGINT after its one line (exit −2; CI under load, test_signal_during_calibrate).
+    Called with argv (a script, a test), main restores the handlers it found."""
+    import sumo_drvpw.cli.calibrate as cal
+
+    def stopped(args):
+        os.kill(os.getpid(), sig)
+        time.sleep(5)                           # the handler raises here
+        return 0
+
+    monkeypatch.setattr(cal, "main", stopped)
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    argv = ["calibrate", str(BUNDLED_LOG), "--vehicle", "prius3", "--out", str(tmp_path / "e.toml")]
+    try:
+        monkeypatch.setattr(sys, "argv", ["sumo-drvpw", *argv])
+        assert cli_main() == 128 + sig
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN and signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+        os.kill(os.getpid(), sig)               # the late repeat: ignored, no KeyboardInterrupt
+        time.sleep(0.2)
+    finally:
+        for s, h in before.items():
+            signal.signal(s, h)
+    assert cli_main(argv) == 128 + sig          # with argv: the handlers it found, restored
+    assert {s: signal.getsignal(s) for s in before} == before
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_signal_swallowed_by_library_code_still_exits_as_the_signal(tmp_path, monkeypatch, capsys, sig):
     """A signal's exception raised inside a library's C code can come out as that library's
     own error (seen on CI: SIGTERM while matplotlib drew a figure gave 'ValueError: Invalid

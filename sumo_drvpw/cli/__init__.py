@@ -410,6 +410,7 @@ class _ClosedPipeSafe:
 def main(argv: list[str] | None = None) -> int:
     from sumo_drvpw import fileio
 
+    entry = argv is None  # the process's own command line: it exits when main returns
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(lazy=True)
     args = parser.parse_args(argv)
@@ -482,10 +483,13 @@ def main(argv: list[str] | None = None) -> int:
             if isinstance(getattr(sys, name), _ClosedPipeSafe):
                 getattr(sys, name).flush()  # a pipe's buffer is written here, not at exit unguarded
                 setattr(sys, name, prev)
-        if prev_term is not None:  # (restored first: a stop's signal sent again until here is absorbed)
-            signal.signal(signal.SIGTERM, prev_term)
+        # (restored last: a stop's signal sent again until here is absorbed; a process stopping on
+        # one ignores it from here to its exit — a library's late re-send killed it by SIGINT, exit −2)
+        stopping = entry and bool(_TERMINATED or _INTERRUPTED)
+        if prev_term is not None:
+            signal.signal(signal.SIGTERM, signal.SIG_IGN if stopping else prev_term)
         if prev_int is not None:
-            signal.signal(signal.SIGINT, prev_int)
+            signal.signal(signal.SIGINT, signal.SIG_IGN if stopping else prev_int)
         _TERMINATED.clear()
         _INTERRUPTED.clear()
         sys.unraisablehook = prev_hook
