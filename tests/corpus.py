@@ -1338,6 +1338,33 @@ def _(d):  # was called missing: "missing column 'Speed (OBD)(mph)' (or the OBD 
             "--out", str(d / "o.parquet")]
 
 
+@case("drive-log", "torquepro OBD speed true", ("t.json", "'Speed (OBD)(mph)'", "data row 5", "true"))
+def _(d):  # was read as 1 mph (JSON true → 1), exit 0
+    recs = [f'{{"Device Time": "25-Mar-2017 11:46:{i:02d}.000", "Speed (OBD)(mph)": {"true" if i == 5 else 20}}}'
+            for i in range(20)]
+    return ["import", "torquepro", str(text(d, "t.json", "[" + ",".join(recs) + "]")), "--out", str(d / "o.parquet")]
+
+
+def _bool_parquet(d: Path, label: str, name: str) -> list[str]:
+    """import columns of a Parquet file whose column ``label`` (mapped to ``name``) is true/false."""
+    n = 80
+    src = d / "src.parquet"
+    pd.DataFrame({"t": np.arange(n) / 8, "v": 20.0 + np.arange(n) % 7, "b": np.arange(n) % 9 == 4}).to_parquet(src)
+    m = text(d, "map.toml", f'[columns."t"]\nname = "time_s"\nunit = "s"\n[columns."v"]\nname = "speed_mps"\nunit = "km/h"\n'
+             f'[columns."b"]\nname = "{name}"\n' + ("" if name == "brake" else 'unit = "km/h"\n'))
+    return ["import", "columns", str(src), "--columns", str(m), "--out", str(d / "out.parquet")]
+
+
+@case("drive-log", "columns parquet speed true/false", ("src.parquet", "'b'", "data row 0", "false"))
+def _(d):  # was read as 0 and 1 km/h, exit 0
+    return _bool_parquet(d, "b", "gps_speed_mps")
+
+
+@case("drive-log", "columns parquet brake true/false", ("wrote",), expect="accept")
+def _(d):  # a flag: true/false read as 1/0
+    return _bool_parquet(d, "b", "brake")
+
+
 # ------------------------------------------------------------------------ running
 
 def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:

@@ -15,6 +15,7 @@ import pandas as pd
 
 from sumo_drvpw.data.counters import COUNTERS, describe
 from sumo_drvpw.data.adapters.align import align_channels
+from sumo_drvpw.data.adapters.cells import extra_values, is_number, numeric  # noqa: F401  (re-exported)
 from sumo_drvpw.data.adapters.trip_names import in_several, qualify_by_folder
 from sumo_drvpw.data.log_files import FLAGS
 from sumo_drvpw.data.paths import expand_paths  # noqa: F401  (re-exported for the adapters)
@@ -165,55 +166,6 @@ def unique_names(names: list[str]) -> list[str]:
         seen[n] = k
         out.append(n if k == 1 else f"{n}_{k}")
     return out
-
-
-def numeric(series: pd.Series, file, column: str, na_tokens=("-", "")) -> pd.Series:
-    """Float column from a vendor column; tokens in na_tokens become NaN, anything else non-numeric is a UserError."""
-    if pd.api.types.is_bool_dtype(series):
-        return series.astype(float)
-    if pd.api.types.is_numeric_dtype(series):
-        return series.astype(float)
-    s = series.astype(object)
-    # numbers parse at once, in numpy; only the cells that do not (usually none) are tested
-    # against the tokens (per-cell and per-Series work was most of a wide log's import time)
-    arr = s.to_numpy()
-    conv = pd.to_numeric(s, errors="coerce").to_numpy(float, copy=True)
-    tokens = {str(t).strip() for t in na_tokens}
-    is_na = pd.isna(arr)
-    check = ~is_na & (np.isnan(conv) | any(is_number(t) for t in tokens))
-    for i in np.flatnonzero(check):
-        x = arr[i]
-        if isinstance(x, str) and x.strip() in tokens:
-            is_na[i] = True
-    conv[is_na] = np.nan
-    bad = np.isnan(conv) & ~is_na
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise UserError(f"{file}: column '{column}' is not numeric: data row {i} holds "
-                        f"{s.iloc[i]!r}")
-    return pd.Series(conv, index=series.index)
-
-
-def is_number(text: str) -> bool:
-    """Whether ``text`` reads as a number (float() takes it)."""
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
-
-
-def extra_values(series: pd.Series, file, column: str, notes: list, factor: float = 1.0,
-                 offset: float = 0.0, na_tokens=("-", "")) -> pd.Series:
-    """A vendor column the adapter does not know: numeric (converted by factor and offset)
-    where it reads as numbers, else kept as text and noted — a logger's comment, driver or
-    mode label is no reason to refuse the file (as the ``columns`` format keeps it)."""
-    try:
-        return numeric(series, file, column, na_tokens) * factor + offset
-    except UserError as e:
-        notes.append(f"column '{column}' is not numeric ({str(e).split(': ', 2)[-1]}): "
-                     "kept as text")
-        return series.astype(str)
 
 
 def read_csv_strict(path: Path, **kw) -> pd.DataFrame:

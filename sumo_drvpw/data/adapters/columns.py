@@ -57,6 +57,7 @@ from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, clean_time_
 from sumo_drvpw.data.adapters import labels as candidate_labels
 from sumo_drvpw.data.adapters.timestamps import _seconds, to_datetimes
 from sumo_drvpw.data.adapters.trip_names import qualify_shared_trips
+from sumo_drvpw.data.log import FLAGS
 from sumo_drvpw.data.adapters.header_hints import close_label, header_cells, no_header_hint, skip_hint
 from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
 
@@ -368,7 +369,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
                                 "time from the row number (options.time_step_s): map that column to "
                                 "'time_s' and drop the option (or options.keep_unmapped = false)")
             try:
-                out.append((name, numeric(s, path, label, na) * f + o))
+                out.append((name, numeric(s, path, label, na, bools=True) * f + o))  # (true/false: a flag)
             except UserError:
                 out.append((name, cell.astype(str)))  # text extra (e.g. a date or a mode label)
             continue
@@ -388,7 +389,7 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
                                 "not a date/time")
             out.append(("time_s", _seconds(t, m["time_format"], rep)))
         else:
-            x = numeric(s, path, label, na + e.get("na_text", ()))
+            x = numeric(s, path, label, na + e.get("na_text", ()), bools=e["name"] in FLAGS)  # (a speed true: no 1)
             cells = cell.astype(str).str.strip()
             own = x.isin(e.get("na_num", ())) | (cells.isin(e.get("na_text", ())) & ~cells.isin(na))
             if own.any():
@@ -416,7 +417,7 @@ def _valid_flag(raw: pd.DataFrame, flag: str, path: Path, label: str, m: dict, n
     """The validity column ``flag`` of a mapped column (0: the sample is no reading)."""
     if flag not in raw.columns:
         raise UserError(f"{path}: missing column '{flag}' (the validity flag of '{label}' in {m['path']})")
-    return numeric(raw[flag], path, flag, na).fillna(0)
+    return numeric(raw[flag], path, flag, na, bools=True).fillna(0)
 
 
 def _split_trips(df, path, rep, split_at_pauses=False):

@@ -1,0 +1,71 @@
+"""A vendor column's cells read as numbers: no-reading tokens as missing, anything else that is
+no number (a word, a JSON or Parquet ``true``/``false`` where a number is due) refused naming the
+file, the column and its first such row."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from sumo_drvpw.errors import UserError
+
+
+def numeric(series: pd.Series, file, column: str, na_tokens=("-", ""), bools: bool = False) -> pd.Series:
+    """Float column from a vendor column; tokens in na_tokens become NaN, anything else non-numeric
+    is a UserError. A boolean cell (JSON ``true``, a Parquet bool column) is a UserError too unless
+    ``bools`` (a flag or validity column: read as 1/0) — a speed ``true`` is no 1 mph."""
+    if pd.api.types.is_bool_dtype(series) or pd.api.types.is_numeric_dtype(series):
+        if not bools and pd.api.types.is_bool_dtype(series) and len(series):
+            _refuse_bool(series, file, column, 0)
+        return series.astype(float)
+    s = series.astype(object)
+    # numbers parse at once, in numpy; only the cells that do not (usually none) are tested
+    # against the tokens (per-cell and per-Series work was most of a wide log's import time)
+    arr = s.to_numpy()
+    conv = pd.to_numeric(s, errors="coerce").to_numpy(float, copy=True)
+    if not bools:  # (pandas reads True as 1.0: only the cells that read as 0 or 1 are looked at)
+        i = next((i for i in np.flatnonzero((conv == 0) | (conv == 1)) if isinstance(arr[i], (bool, np.bool_))), None)
+        if i is not None:
+            _refuse_bool(s, file, column, int(i))
+    tokens = {str(t).strip() for t in na_tokens}
+    is_na = pd.isna(arr)
+    check = ~is_na & (np.isnan(conv) | any(is_number(t) for t in tokens))
+    for i in np.flatnonzero(check):
+        x = arr[i]
+        if isinstance(x, str) and x.strip() in tokens:
+            is_na[i] = True
+    conv[is_na] = np.nan
+    bad = np.isnan(conv) & ~is_na
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"{file}: column '{column}' is not numeric: data row {i} holds "
+                        f"{s.iloc[i]!r}")
+    return pd.Series(conv, index=series.index)
+
+
+def _refuse_bool(s: pd.Series, file, column: str, i: int) -> None:
+    raise UserError(f"{file}: column '{column}' is not numeric: data row {i} holds {str(s.iloc[i]).lower()} "
+                    "(a boolean, not a number: it would read as 1 or 0)")
+
+
+def is_number(text: str) -> bool:
+    """Whether ``text`` reads as a number (float() takes it)."""
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def extra_values(series: pd.Series, file, column: str, notes: list, factor: float = 1.0,
+                 offset: float = 0.0, na_tokens=("-", "")) -> pd.Series:
+    """A vendor column the adapter does not know: numeric (converted by factor and offset)
+    where it reads as numbers (true/false as 1/0: a flag), else kept as text and noted — a
+    logger's comment, driver or mode label is no reason to refuse the file (as the ``columns``
+    format keeps it)."""
+    try:
+        return numeric(series, file, column, na_tokens, bools=True) * factor + offset
+    except UserError as e:
+        notes.append(f"column '{column}' is not numeric ({str(e).split(': ', 2)[-1]}): "
+                     "kept as text")
+        return series.astype(str)
