@@ -1365,6 +1365,20 @@ def _(d):  # a flag: true/false read as 1/0
     return _bool_parquet(d, "b", "brake")
 
 
+_map_case("GPS speed named in km/h", MAP_OK + '[columns."t2"]\nname = "gps_speed_kmh"\nunit = "km/h"\n',
+          ("columns.t2.name", "'gps_speed_kmh'", "'gps_speed_mps'"))  # was written in m/s under that name, exit 0
+_map_case("temperature named in K", MAP_OK + '[columns."t2"]\nname = "coolant_k"\nunit = "K"\n',
+          ("columns.t2.name", "'coolant_k'", "'coolant_c'"))  # was written in °C under that name, exit 0
+
+
+@case("toml-mapping", "GPS speed named without its unit", ("columns.g.name 'gps_speed'", "not read as a GPS speed",
+                                                             "'gps_speed_mps'", "wrote"), expect="accept")
+def _(d):  # was written in m/s and never read as a GPS speed, unsaid
+    s = text(d, "src.csv", "t,v,g\n" + "".join(f"{i / 8},{20 + i % 7},{21 + i % 7}\n" for i in range(80)))
+    m = text(d, "map.toml", MAP_OK + '[columns."g"]\nname = "gps_speed"\nunit = "km/h"\n')
+    return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
+
+
 # ------------------------------------------------------------------------ running
 
 def judge(c: Case, code, out: str, err: str, before: dict, after: dict, exc: str | None = None) -> tuple[str, str]:

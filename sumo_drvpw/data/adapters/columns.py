@@ -89,7 +89,7 @@ def load_mapping(path, mdf: bool = False) -> dict:
     if time_unit != "datetime" and (lookup_unit(time_unit) or ("",))[0] != "time":
         known = sorted(u for u, (d, _, _) in UNITS.items() if d == "time")
         raise UserError(f"{p}: options.time_unit {time_unit!r} is no time unit (known: {', '.join(known)}, datetime)")
-    entries, wins = {}, {}
+    entries, wins, notes = {}, {}, []
     for label, e in cols.items():
         key = f"columns.{label!r}" if not label.isidentifier() else f"columns.{label}"
         if label.strip() != label:  # header labels are read stripped: a label copied with the
@@ -119,6 +119,8 @@ def load_mapping(path, mdf: bool = False) -> dict:
         else:
             entries[label] = {**_entry(p, key, name, unit, float(scale)), "unit": unit}
         entries[label].update(key=key, scale=float(scale))
+        if entries[label]["kind"] == "number" and (note := _name_note(key, name, entries[label]["unit"])):
+            notes.append(note)
         if "na_values" in e:
             own = e["na_values"] if isinstance(e["na_values"], list) else [e["na_values"]]
             if not own or any(isinstance(x, bool) or not isinstance(x, (str, int, float)) for x in own):
@@ -159,7 +161,7 @@ def load_mapping(path, mdf: bool = False) -> dict:
         raise UserError(f"{p}: options.soc_capacity_kwh estimates the battery's energy from the state "
                         "of charge: map a source column to 'soc_pct' (in %)")
     return {**out, "columns": entries, "candidates": {n: g for n, g in groups.items() if len(g) > 1},
-            "first_wins": first}
+            "first_wins": first, "notes": notes}
 
 
 def load_options(path) -> dict:
@@ -301,7 +303,25 @@ def _entry(p, key, name, unit, scale) -> dict:
                         f"'_{suffix}' ({SUFFIX_DIM[suffix]}); use a name ending in '_{DIMENSIONS[dim]}'")
     elif name in CANONICAL and dim == "dimensionless" and suffix in SUFFIX_DIM:
         raise UserError(f"{p}: {key}: '{name}' needs a {SUFFIX_DIM[suffix]} unit, got '{unit}'")
+    elif suffix and dim != "dimensionless" and suffix != DIMENSIONS[dim] and (lookup_unit(suffix) or ("",))[0] == dim:
+        # ('gps_speed_kmh' with unit km/h: written in m/s under a name that says km/h)
+        raise UserError(f"{p}: {key}.name '{name}' ends in '_{suffix}', but the {dim} is written in "
+                        f"'{DIMENSIONS[dim]}' (names end in their SI unit): name it '{name[:-len(suffix)]}{DIMENSIONS[dim]}'")
     return {"name": name, "kind": "number", "factor": f * scale, "offset": o * scale}
+
+
+def _name_note(key: str, name: str, unit: str | None) -> str | None:
+    """What a mapped number's name leaves unsaid: a quantity written in its SI unit under a name
+    without it ('gps_speed' from km/h: in m/s, and not read as a GPS speed, which only a
+    ``gps_speed…_mps`` column is), or None."""
+    dim = (lookup_unit(unit) or ("dimensionless",))[0] if unit is not None else "dimensionless"
+    suffix = name.rsplit("_", 1)[-1] if "_" in name else ""
+    gps = name.startswith("gps_speed") and not name.endswith("_mps")
+    if (dim == "dimensionless" and not gps) or suffix == DIMENSIONS.get(dim) or (dim == "angle" and suffix == "deg"):
+        return None
+    si = DIMENSIONS[dim] if dim != "dimensionless" else "mps"
+    return (f"{key}.name '{name}' has no unit suffix: " + (f"written in '{si}' from '{unit}'; " if dim != "dimensionless" else "")
+            + ("not read as a GPS speed (only gps_speed…_mps is); " if gps else "") + f"name it '{name}_{si}' to say so")
 
 
 def _read_table(path: Path, m: dict) -> pd.DataFrame:
@@ -498,7 +518,7 @@ def read(paths, columns):
         from sumo_drvpw.data.counters import soc_counters
 
         frames = [soc_counters(f, r, m["soc_capacity_kwh"]) for f, r in zip(frames, reports)]
-    return frames, reports, [f"mapping {m['path']}"]
+    return frames, reports, [f"mapping {m['path']}", *m["notes"]]
 
 
 def split_at_pauses(df: pd.DataFrame, rep: dict, gap_s: float, mapping=None) -> pd.DataFrame:
