@@ -412,6 +412,12 @@ _eq_case("moving zero-output fuel below the idle", _FUEL + "moving_idle_fuel_pow
          ("moving_idle_fuel_power_w", "idle_fuel_power_w"))
 _eq_case("moving zero-output fuel text", _FUEL + 'moving_idle_fuel_power_w = "3 kW"\n', ("moving_idle_fuel_power_w", "3 kW"))
 _eq_case("engine rated output in the plug-in battery", _HYB + _DEP + "engine_max_w = 1e5\n", ("[chain.depleting]", "engine_max_w"))
+# a plug-in battery's own key named two tables: "bad.toml [chain.depleting] [chain]: 'traction_efficiency' …"
+_eq_case("plug-in battery efficiency in percent", _HYB + _DEP.replace("0.85", "88.8"),
+         ("bad.toml [chain.depleting]: 'traction_efficiency'", "88.8"))
+_eq_case("plug-in battery efficiency table with an unknown key", _HYB + _DEP.replace("traction_efficiency = 0.85\n", "")
+         + "[chain.depleting.traction_efficiency]\npower_w = [0, 1e4]\nefficiency = [0.8, 0.9]\n",
+         ("bad.toml [chain.depleting.traction_efficiency]: unknown key", "'efficiency'"))
 # a [chain] key the plug-in battery inherits (aux_power_w, hvac, loads) was blamed on [chain.depleting]
 _eq_case("plug-in hybrid's chain auxiliary power text", _HYB.replace("[chain]\n", '[chain]\naux_power_w = "300 W"\n')
          + _DEP, ("bad.toml [chain]: 'aux_power_w'", "300 W"))

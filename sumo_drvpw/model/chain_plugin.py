@@ -81,7 +81,14 @@ def depleting_from_dict(doc: dict, where: str) -> Depleting:
     hvac = {k: x for k, x in (doc.get("hvac") or {}).items() if k != "warmup_j_per_k"}
     bat = {"predicts": "battery", "aux_power_w": doc.get("aux_power_w", 0.0), "loads": doc.get("loads", {}),
            **({"hvac": hvac} if hvac else {}), **{k: x for k, x in dep.items() if k != "usable_j"}}
-    return Depleting(chain_from_dict(bat, f"{where} [chain.depleting]"), usable)
+    try:
+        return Depleting(chain_from_dict(bat, f"{where} [chain.depleting]"), usable)
+    except UserError as e:  # (its errors name [chain] or [chain.<key>] after where: the table is [chain.depleting])
+        head = f"{where} [chain.depleting] [chain"
+        msg = str(e)
+        if msg.startswith(head) and msg[len(head):len(head) + 1] in ("]", "."):
+            msg = f"{where} [chain.depleting" + msg[len(head):]
+        raise UserError(msg) from None
 
 
 def on_battery(need_j, usable_j: float, spent_j=None, trip=None) -> tuple[np.ndarray, np.ndarray]:
