@@ -1279,9 +1279,21 @@ def _(d):  # was booked: the container 2 kg, the car 0.032 kWh against 0.074 kWh
     return _rider(d, "container", '<vType id="r" vClass="truck" mass="2"/>')
 
 
-@case("options", "fcd container's vehicleMass in tonnes", ("t.rou.xml", "'r'", "below 1 % of a truck's"))
+@case("options", "fcd container's vehicleMass in tonnes", ("t.rou.xml", "'r'", "param vehicleMass", "below 1 % of a truck's"))
 def _(d):
     return _rider(d, "container", '<vType id="r" vClass="truck"><param key="vehicleMass" value="2"/></vType>')
+
+
+@case("options", "fcd pedestrian's vehicleMass without its decimal point", ("t.rou.xml", "'r'", "(param vehicleMass)",
+                                                                          "beyond any pedestrian's"))
+def _(d):  # was blamed on "(mass, loading or drvpw.mass)", none of which it writes
+    return _rider(d, "person", '<vType id="r" vClass="pedestrian"><param key="vehicleMass" value="7500"/></vType>')
+
+
+@case("options", "fcd pedestrian's loading without its decimal point", ("t.rou.xml", "'r'", "(mass + param loading)",
+                                                                        "beyond any pedestrian's"))
+def _(d):
+    return _rider(d, "person", '<vType id="r" vClass="pedestrian" mass="70"><param key="loading" value="7500"/></vType>')
 
 
 @case("options", "fcd rider's vType mass in tonnes", ("t.rou.xml", "'r'", "below 1 % of a pedestrian's"))

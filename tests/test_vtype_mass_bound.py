@@ -103,7 +103,7 @@ def test_a_vehicle_s_mass_in_tonnes_is_refused(tmp_path, capsys, where):
         assert main(["run", str(d / "s.toml"), "--out", str(d / "o")]) == rc
         err = capsys.readouterr().err
         if rc:
-            said = {"route file": "its mass in", "scenario": "the scenario's mass_kg", "param": "its mass in"}[where]
+            said = {"route file": "its mass in", "scenario": "the scenario's mass_kg", "param": "its param drvpw.mass in"}[where]
             assert f"vType 'tk': mass 6 kg ({said}" in err and "below 1 % of a truck's (4,500 kg" in err
             assert len(err.strip().splitlines()) == 1 and not (d / "o").exists()
 
@@ -165,7 +165,7 @@ def test_a_rider_s_mass_in_tonnes_is_refused(tmp_path, capsys, tag, vtype, usual
     d = tmp_path / "t"
     assert main(_rider_replay(d, tag, vtype)) == 2
     err = capsys.readouterr().err
-    assert "vType 'r': mass " in err and f"(its mass in {d / 't.rou.xml'})" in err and usual in err, err
+    assert "vType 'r': mass " in err and f"(its {'param vehicleMass' if 'vehicleMass' in vtype else 'mass'} in {d / 't.rou.xml'})" in err and usual in err, err
     assert len(err.strip().splitlines()) == 1 and not (d / "o").exists()
     kg = vtype.replace('"0.07"', '"70"').replace('"2"', '"2000"')
     assert main(_rider_replay(tmp_path / "kg", tag, kg)) == 0

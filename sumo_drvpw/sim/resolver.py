@@ -13,7 +13,7 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.constants import MASS_MAX_KG
-from sumo_drvpw.sim.scenario_values import tiny_file_masses, tiny_mass
+from sumo_drvpw.sim.scenario_values import tiny_file_masses, tiny_mass, written_mass
 from sumo_drvpw.sim.vtype_energy import battery_switch, energy_vtype_of, own_energy, run_emission_class
 from sumo_drvpw.sim.carrier import (SUMO_DEFAULT_EMISSION_CLASS, SUMO_DEFAULT_EMISSION_CLASS_OTHER, energy_carrier,
                                     equation_carrier, is_hybrid_chain)
@@ -418,7 +418,7 @@ class VTypeResolver:
             cdata = sc_classes.get(body, {})
         mass, said = data.get("mass_kg"), "the scenario's mass_kg"
         if mass is None and info is not None:
-            mass, said = info.mass_kg, f"its mass in {info.source}"
+            mass, said = info.mass_kg, written_mass(info)
         if mass is None:
             p = self._param(vt, "drvpw.mass")
             if p:

@@ -139,6 +139,15 @@ def tiny_mass(vt: str, vclass: str | None, mass, said: str) -> None:
 NO_CLASS_MASS = frozenset({"container", "drone", "aircraft", "cable_car", "custom1", "custom2"})
 
 
+def written_mass(info, rider: bool = False) -> str:
+    """Which of a vType's keys (:class:`~sumo_drvpw.sim.vtypes.VTypeInfo` ``info``) wrote its mass,
+    and where: param drvpw.mass, else the mass attribute, else param vehicleMass (plus param
+    loading, which a ``rider``'s mass — what SUMO adds to its vehicle — leaves out)."""
+    key = ("param drvpw.mass" if info.drvpw_mass and not rider else "mass" if info.mass_attr_kg is not None
+           else "param vehicleMass")
+    return f"its {key}{' + param loading' if info.loading_kg and key != 'param drvpw.mass' and not rider else ''} in {info.source}"
+
+
 def tiny_file_masses(files, told: dict) -> None:
     """The masses SUMO gives the vTypes of the route files ``files`` (``mass``, else param
     ``vehicleMass``; :func:`~sumo_drvpw.sim.vtypes.read_vtypes`) whose vClass is written checked as
@@ -151,7 +160,7 @@ def tiny_file_masses(files, told: dict) -> None:
     for vt, info in files.items():
         if info.vclass and info.vclass not in NO_CLASS_MASS and not info.drvpw_mass \
                 and (told.get(vt) or {}).get("mass_kg") is None:
-            tiny_mass(vt, info.vclass, sumo_type_mass(files, vt), f"its mass in {info.source}")
+            tiny_mass(vt, info.vclass, sumo_type_mass(files, vt), written_mass(info, rider=True))
 
 
 def outputs_onto_inputs(args: list[str], inputs: list, where: str) -> None:

@@ -470,13 +470,13 @@ def _read_vtypes(path: Path, out: FileVTypes, depth: int) -> None:
                     sumo_mass = _mass(where, "param vehicleMass", params.get("vehicleMass"))
                 loading = _mass(where, "param loading", params.get("loading"), zero=True) or 0.0
                 mass = _mass(where, "drvpw.mass", params.get("drvpw.mass"))
+                said = "param drvpw.mass" if mass is not None else ("mass" if "mass" in el.attrib else "param vehicleMass") + (" + param loading" if loading else "")
                 if mass is None and sumo_mass is not None:
                     mass = sumo_mass + loading
                 group = next((g for g, vcs in {**NON_ROAD_CLASSES, **{c: {c} for c in ON_FOOT_MASS_MAX_KG}}.items() if el.attrib.get("vClass") in vcs), None)
                 if mass is not None and mass > (cap := {**NON_ROAD_MASS_MAX_KG, **ON_FOOT_MASS_MAX_KG}.get(group, ROAD_MASS_MAX_KG)):
-                    raise UserError(f"{where}: mass {mass:g} kg (mass, loading or drvpw.mass) is beyond any " + (
-                        f"{el.attrib['vClass']}'s (at most {cap:,.0f} kg" if group else
-                        f"road vehicle's (at most {cap:,.0f} kg: a road train's few hundred tonnes fit") + "; a typo?)")
+                    raise UserError(f"{where}: mass {mass:g} kg ({said}) is beyond any " + (f"{el.attrib['vClass']}'s (at most {cap:,.0f} kg"
+                                    if group else f"road vehicle's (at most {cap:,.0f} kg: a road train's few hundred tonnes fit") + "; a typo?)")
                 out[vid] = VTypeInfo(vid, mass, params.get("drvpw.equation") or None,
                                      str(path), el.attrib.get("vClass"), loading,
                                      el.attrib.get("emissionClass") or None,
