@@ -1327,6 +1327,24 @@ def _(d):  # json kept the last: 9e9 ft read, unsaid
     return _torque(d, twice=', "GPS Altitude(ft)": 9e9')
 
 
+@case("options", "sumo option the run sets", ("s.toml", "sumo.options", "'--end'", "the run's end (5 s)"))
+def _(d):  # SUMO: "A value for the option 'end' was already set. Possible synonymes: e"
+    return _scn(d, 'options = ["--end", "100"]\n')
+
+
+@case("options", "sumo option a [sumo] key sets", ("s.toml", "'-e' (SUMO's --end)", "sumo.end (50 s)"))
+def _(d):
+    argv = _scn(d, 'end = 50\noptions = ["-e", "100"]\n')
+    i = argv.index("--end")
+    return argv[:i] + argv[i + 2:]
+
+
+@case("options", "sumo route files over the config's", ("outputs in",), expect="accept")
+def _(d):  # a config's value SUMO lets the command line override: still run
+    rou = Path(__file__).resolve().parent.parent / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.rou.xml"
+    return _scn(d, f'options = ["-r", "{rou.as_posix()}"]\n')
+
+
 @case("options", "sumo option misspelt", ("s.toml", "'--time-to-teleprot' is no option"))
 def _(d):  # SUMO: "On processing option '--time-to-teleprot': The parameter '5' is not allowed in this context"
     return _scn(d, 'options = ["--time-to-teleprot", "5"]\n')

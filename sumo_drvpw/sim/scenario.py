@@ -382,7 +382,11 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
     if isinstance(opts, list):
         opts = [str(o) if isinstance(o, (int, float)) and not isinstance(o, bool) else o for o in opts]
     args += _strlist(opts, where, "sumo.options", '["--time-to-teleport", "120"]')
-    check_option_values(opts, where)  # ["-r"]: SUMO would say only "The parameter 'true' is not allowed"
+    given = {"configuration-file": "sumo.config"} if "config" in sumo else {"net-file": "sumo.net", **(  # SUMO's options
+        {"route-files": "sumo.routes"} if routes else {})}  # the plug-in sets (an option twice: SUMO stops)
+    given.update({k.replace("_", "-"): ("the run's " if k in overrides else "sumo.") + f"{k} ({times[k]:g} s)"
+                  for k in times if k in sumo})
+    check_option_values(opts, where, given)  # ["-r"]: SUMO would say only "The parameter 'true' is not allowed"
     for i, a in enumerate(args):  # options after which SUMO runs no simulation (or waits for a client)
         name, _, val = str(a).partition("=")
         val = val or (str(args[i + 1]) if i + 1 < len(args) else "")

@@ -26,11 +26,17 @@ NO_RUN_OPTIONS = {"help": "prints SUMO's help and exits", "?": "prints SUMO's he
                   "num-clients": "makes SUMO wait for TraCI clients (but 1)"}
 
 
-@functools.lru_cache(maxsize=1)
 def option_types() -> dict[str, str]:
     """SUMO's options by every name they go by (long names and synonyms: "route-files", "r",
     "routes") → their type as SUMO's template writes it (BOOL, FILE, TIME, INT, …), from
     ``sumo --save-template stdout``; {} where SUMO cannot be asked."""
+    return {n: t for n, (_, t) in option_template().items()}
+
+
+@functools.lru_cache(maxsize=1)
+def option_template() -> dict[str, tuple[str, str]]:
+    """SUMO's options by every name they go by → (their long name, their type): SUMO's template,
+    read once per process (:func:`option_types`)."""
     import subprocess
     import xml.etree.ElementTree as ET
 
@@ -43,7 +49,7 @@ def option_types() -> dict[str, str]:
         root = ET.fromstring(out)
     except (OSError, subprocess.SubprocessError, ET.ParseError):
         return {}
-    return {n: opt.get("type") for section in root for opt in section if opt.get("type")
+    return {n: (opt.tag, opt.get("type")) for section in root for opt in section if opt.get("type")
             for n in (opt.tag, *opt.get("synonymes", "").split())}
 
 
@@ -55,14 +61,17 @@ def _is_number(s: str) -> bool:
     return True
 
 
-def check_option_values(options: list[str], where: str) -> None:
+def check_option_values(options: list[str], where: str, given: dict[str, str] | None = None) -> None:
     """A scenario's SUMO ``options`` (its ``sumo.options``: the end of SUMO's command line)
     checked against SUMO's own options (:func:`option_types`): each is one of them, and each
     that takes a value (all but SUMO's true/false flags) is given one, as its own item after
     it or as ``--key=value``. SUMO would read a missing value as "true" or take the next option
     for it, and says of that, of a misspelt option, a stray value or "--seed 7" in one item only
-    "The parameter '…' is not allowed in this context". UserError naming the item."""
-    types = option_types() if options else {}
+    "The parameter '…' is not allowed in this context". UserError naming the item. An option the
+    plug-in's own command line sets already (``given``: its long name → what sets it, "sumo.end
+    (100 s)") is a UserError naming both: SUMO says only "A value for the option 'end' was already set"."""
+    template = option_template() if options else {}
+    types = {n: t for n, (_, t) in template.items()}
     i = 0
     while types and i < len(options):
         a = str(options[i])
@@ -73,6 +82,11 @@ def check_option_values(options: list[str], where: str) -> None:
         if kind is None:
             raise UserError(f"{where}: sumo.options: {a!r} is no option of SUMO's (a typo? sumo --help lists them)"
                             + ('; give each option and value an item of its own: ["--time-to-teleport", "120"]' * (" " in a)))
+        long = template[a.lstrip("-").partition("=")[0]][0]
+        if long in (given or {}):
+            said = f"{a!r}" + (f" (SUMO's --{long})" if a.lstrip("-").partition("=")[0] != long else "")
+            raise UserError(f"{where}: sumo.options: {said} is set by {given[long]} already, and SUMO takes an "
+                            "option once: give it there alone")
         nxt = str(options[i + 1]) if i + 1 < len(options) else None
         if "=" in a:
             pass
