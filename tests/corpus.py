@@ -1345,6 +1345,16 @@ def _(d):  # a config's value SUMO lets the command line override: still run
     return _scn(d, f'options = ["-r", "{rou.as_posix()}"]\n')
 
 
+@case("options", "sumo route files empty", ("s.toml", "sumo.options", "'--route-files='", "no file", "no vehicle"))
+def _(d):  # was run: 10 steps, 0 vehicles, "booked no vehicle" and exit 0
+    return _scn(d, 'options = ["--route-files="]\n')
+
+
+@case("options", "sumo route files an empty item", ("s.toml", "'-r' ''", "--route-files no file"))
+def _(d):  # was run with no vehicle, exit 0
+    return _scn(d, 'options = ["-r", ""]\n')
+
+
 @case("options", "sumo option misspelt", ("s.toml", "'--time-to-teleprot' is no option"))
 def _(d):  # SUMO: "On processing option '--time-to-teleprot': The parameter '5' is not allowed in this context"
     return _scn(d, 'options = ["--time-to-teleprot", "5"]\n')

@@ -33,6 +33,11 @@ def option_types() -> dict[str, str]:
     return {n: t for n, (_, t) in option_template().items()}
 
 
+#: SUMO's options that name the files it reads (long names), and what an empty one does
+INPUT_LISTS = {"route-files": "it would load no routes, and run no vehicle", "net-file": "it would load no network",
+               "additional-files": "it would load none", "configuration-file": "it would load no config"}
+
+
 @functools.lru_cache(maxsize=1)
 def option_template() -> dict[str, tuple[str, str]]:
     """SUMO's options by every name they go by → (their long name, their type): SUMO's template,
@@ -89,13 +94,17 @@ def check_option_values(options: list[str], where: str, given: dict[str, str] | 
                             "option once: give it there alone")
         nxt = str(options[i + 1]) if i + 1 < len(options) else None
         if "=" in a:
-            pass
+            val = a.partition("=")[2]
         elif kind != "BOOL":
             if nxt is None or (nxt.startswith("-") and not _is_number(nxt)):
                 raise UserError(f"{where}: sumo.options: {a!r} takes a value (SUMO's {kind}) and is given "
                                 f"{'none' if nxt is None else f'none before {nxt!r}'}: write "
                                 f'["{a}", "<value>"] (or leave {a} out)')
-            i += 1
+            val, i = nxt, i + 1
+        if long in INPUT_LISTS and not any(x.strip() for x in val.split(",")):  # (a file list: never a flag)
+            # ("--route-files=": SUMO ran no vehicle, and warned only of that)
+            raise UserError(f"{where}: sumo.options: {a!r}{'' if '=' in a else f' {val!r}'} gives SUMO's --{long} no "
+                            f"file: {INPUT_LISTS[long]}; name its files, or leave the option out")
         elif nxt is not None and nxt.lower() in ("true", "false", "yes", "no", "on", "off", "1", "0", "x"):
             i += 1  # "--verbose false", as SUMO reads it
         i += 1
