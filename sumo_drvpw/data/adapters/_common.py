@@ -15,12 +15,14 @@ import pandas as pd
 
 from sumo_drvpw.data.counters import COUNTERS, describe
 from sumo_drvpw.data.adapters.align import align_channels
-from sumo_drvpw.data.adapters.cells import extra_values, is_number, numeric  # noqa: F401  (re-exported)
+from sumo_drvpw.data.adapters import cells
 from sumo_drvpw.data.adapters.trip_names import in_several, qualify_by_folder
 from sumo_drvpw.data.log_files import FLAGS
 from sumo_drvpw.data.paths import expand_paths  # noqa: F401  (re-exported for the adapters)
 from sumo_drvpw.model.constants import FT, G_UNIT, GAL, HP, KELVIN, KMH, LB, LBF, MILE, MPH, RPM
 from sumo_drvpw.errors import UserError
+
+numeric, is_number, extra_values = cells.numeric, cells.is_number, cells.extra_values  # (for the adapters)
 
 #: Canonical columns in the order of the spec; everything else is an extra column.
 CANONICAL = (
