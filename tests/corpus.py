@@ -1417,6 +1417,14 @@ _map_case("temperature named in K", MAP_OK + '[columns."t2"]\nname = "coolant_k"
           ("columns.t2.name", "'coolant_k'", "'coolant_c'"))  # was written in °C under that name, exit 0
 
 
+@case("toml-mapping", "GPS speed in km/h given no unit", ("columns.g.name 'gps_speed_kmh' is not read as a GPS speed",
+                                                          "'gps_speed_mps'", "wrote"), expect="accept")
+def _(d):  # kept in km/h as written, and never read as a GPS speed, unsaid
+    s = text(d, "src.csv", "t,v,g\n" + "".join(f"{i / 8},{20 + i % 7},{21 + i % 7}\n" for i in range(80)))
+    m = text(d, "map.toml", MAP_OK + '[columns."g"]\nname = "gps_speed_kmh"\n')
+    return ["import", "columns", str(s), "--columns", str(m), "--out", str(d / "out.parquet")]
+
+
 @case("toml-mapping", "GPS speed named without its unit", ("columns.g.name 'gps_speed'", "not read as a GPS speed",
                                                              "'gps_speed_mps'", "wrote"), expect="accept")
 def _(d):  # was written in m/s and never read as a GPS speed, unsaid

@@ -319,9 +319,12 @@ def _name_note(key: str, name: str, unit: str | None) -> str | None:
     gps = name.startswith("gps_speed") and not name.endswith("_mps")
     if (dim == "dimensionless" and not gps) or suffix == DIMENSIONS.get(dim) or (dim == "angle" and suffix == "deg"):
         return None
-    si = DIMENSIONS[dim] if dim != "dimensionless" else "mps"
-    return (f"{key}.name '{name}' has no unit suffix: " + (f"written in '{si}' from '{unit}'; " if dim != "dimensionless" else "")
-            + ("not read as a GPS speed (only gps_speed…_mps is); " if gps else "") + f"name it '{name}_{si}' to say so")
+    if dim == "dimensionless":  # ('gps_speed_kmh' without a unit: kept as it is, in no speed the log reads)
+        stem = name[:-len(suffix) - 1] if suffix and lookup_unit(suffix) else name
+        return (f"{key}.name '{name}' is not read as a GPS speed (only a gps_speed…_mps column is, in m/s): give "
+                f"its unit and name it '{stem}_mps'")
+    return (f"{key}.name '{name}' has no unit suffix: written in '{DIMENSIONS[dim]}' from '{unit}'; "
+            + ("not read as a GPS speed (only gps_speed…_mps is); " if gps else "") + f"name it '{name}_{DIMENSIONS[dim]}' to say so")
 
 
 def _read_table(path: Path, m: dict) -> pd.DataFrame:
