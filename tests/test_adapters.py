@@ -859,3 +859,20 @@ def test_torque_device_time_is_read_whatever_the_process_locale(tmp_path):
         locale.setlocale(locale.LC_TIME, old)
     if not tried:
         pytest.skip("no German, Turkish or French locale on this machine")
+
+
+def test_a_boolean_where_a_number_is_due_is_refused_naming_its_row():
+    """A JSON true/false (a Python or numpy bool among numbers) or a (nullable) bool column read
+    where a number is due: refused naming the column and the first such row, not read as 1/0 (a
+    Torque speed `true` read as 1 mph, exit 0: today's fuzz). Numbers and number texts '0'/'1' pass;
+    a flag (``bools``) reads true/false as 1/0."""
+    from sumo_drvpw.data.adapters._common import numeric  # (data/adapters/cells.py, re-exported)
+
+    for col, row in ((pd.Series([20.0, "0", 1, True, 0.5], dtype=object), 3),
+                     (pd.Series([20.0, "-", np.bool_(False)], dtype=object), 2),
+                     (pd.Series([None, False, True], dtype="boolean"), 1),
+                     (pd.Series([True, False]), 0)):
+        with pytest.raises(UserError, match=rf"f\.json: column 'v' is not numeric: data row {row} holds (true|false) "):
+            numeric(col, "f.json", "v")
+        assert numeric(col, "f.json", "v", ("-",), bools=True).notna().sum() >= 2
+    assert numeric(pd.Series([20.0, "0", 1, 0.0, "-"], dtype=object), "f", "v").tolist()[:4] == [20.0, 0.0, 1.0, 0.0]

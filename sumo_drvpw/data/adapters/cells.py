@@ -15,18 +15,20 @@ def numeric(series: pd.Series, file, column: str, na_tokens=("-", ""), bools: bo
     is a UserError. A boolean cell (JSON ``true``, a Parquet bool column) is a UserError too unless
     ``bools`` (a flag or validity column: read as 1/0) — a speed ``true`` is no 1 mph."""
     if pd.api.types.is_bool_dtype(series) or pd.api.types.is_numeric_dtype(series):
-        if not bools and pd.api.types.is_bool_dtype(series) and len(series):
-            _refuse_bool(series, file, column, 0)
+        if not bools and pd.api.types.is_bool_dtype(series) and series.notna().any():
+            _refuse_bool(series, file, column, int(np.flatnonzero(series.notna().to_numpy())[0]))
         return series.astype(float)
     s = series.astype(object)
     # numbers parse at once, in numpy; only the cells that do not (usually none) are tested
     # against the tokens (per-cell and per-Series work was most of a wide log's import time)
     arr = s.to_numpy()
     conv = pd.to_numeric(s, errors="coerce").to_numpy(float, copy=True)
-    if not bools:  # (pandas reads True as 1.0: only the cells that read as 0 or 1 are looked at)
-        i = next((i for i in np.flatnonzero((conv == 0) | (conv == 1)) if isinstance(arr[i], (bool, np.bool_))), None)
-        if i is not None:
-            _refuse_bool(s, file, column, int(i))
+    cand = np.flatnonzero((conv == 0) | (conv == 1)) if not bools else []  # (pandas reads True as 1.0: only
+    if len(cand) and pd.api.types.infer_dtype(arr[cand]) not in ("floating", "integer", "mixed-integer-float"):
+        is_bool = np.frompyfunc(lambda x: isinstance(x, (bool, np.bool_)), 1, 1)  # the cells that read as 0 or
+        hit = cand[is_bool(arr[cand]).astype(bool)]  # 1 are looked at: numbers all at once, else cell by cell)
+        if len(hit):
+            _refuse_bool(s, file, column, int(hit[0]))
     tokens = {str(t).strip() for t in na_tokens}
     is_na = pd.isna(arr)
     check = ~is_na & (np.isnan(conv) | any(is_number(t) for t in tokens))
