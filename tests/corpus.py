@@ -1355,6 +1355,11 @@ def _(d):  # was run with no vehicle, exit 0
     return _scn(d, 'options = ["-r", ""]\n')
 
 
+@case("options", "sumo option misspelt after a value 1", ("s.toml", "'--time-to-teleprot' is no option"))
+def _(d):  # (f528918 read the value "1" as a flag's and skipped the misspelt option: "'5' is neither …")
+    return _scn(d, 'options = ["--seed", "1", "--time-to-teleprot", "5"]\n')
+
+
 @case("options", "sumo option misspelt", ("s.toml", "'--time-to-teleprot' is no option"))
 def _(d):  # SUMO: "On processing option '--time-to-teleprot': The parameter '5' is not allowed in this context"
     return _scn(d, 'options = ["--time-to-teleprot", "5"]\n')

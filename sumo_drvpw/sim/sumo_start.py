@@ -101,12 +101,12 @@ def check_option_values(options: list[str], where: str, given: dict[str, str] | 
                                 f"{'none' if nxt is None else f'none before {nxt!r}'}: write "
                                 f'["{a}", "<value>"] (or leave {a} out)')
             val, i = nxt, i + 1
+        elif nxt is not None and nxt.lower() in ("true", "false", "yes", "no", "on", "off", "1", "0", "x"):
+            i += 1  # "--verbose false", as SUMO reads it
         if long in INPUT_LISTS and not any(x.strip() for x in val.split(",")):  # (a file list: never a flag)
             # ("--route-files=": SUMO ran no vehicle, and warned only of that)
             raise UserError(f"{where}: sumo.options: {a!r}{'' if '=' in a else f' {val!r}'} gives SUMO's --{long} no "
                             f"file: {INPUT_LISTS[long]}; name its files, or leave the option out")
-        elif nxt is not None and nxt.lower() in ("true", "false", "yes", "no", "on", "off", "1", "0", "x"):
-            i += 1  # "--verbose false", as SUMO reads it
         i += 1
 
 
