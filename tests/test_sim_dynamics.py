@@ -326,3 +326,62 @@ def test_sumo_drives_the_vtype_profile_as_written(tmp_path):
     assert len(speeding) >= 5 and speeding[0][0] == 0.0
     for v0, dv in speeding:
         assert dv == pytest.approx(np.interp(v0, speeds, acc), abs=1e-6), v0
+
+
+def test_a_few_vehicles_samples_are_counted_without_np_add_at(monkeypatch):
+    """A step's few 1-Hz samples (a live run of a few cars: one add per whole second) fill the
+    histograms one by one, not by np.add.at (its per-call cost was most of the step's add);
+    the counts, sums and figures are those of the same samples added in one batch of many,
+    which np.add.at counts, and of their definition."""
+    rng = np.random.default_rng(7)
+    n = 600
+    v = rng.uniform(0.0, 40.0, n)  # every part
+    a = rng.normal(0.3, 0.8, n)
+    labels = np.array(["passenger", "bus"], dtype=object)[rng.integers(0, 2, n)]
+    one = D.Dynamics()
+    calls = []
+    monkeypatch.setattr(D, "np", _SpyNumpy(np, calls))  # (np.add is a ufunc: spied on through the module)
+    for s in range(0, n, 5):  # five vehicles a step
+        one.add(labels[s:s + 5], v[s:s + 5], a[s:s + 5], np.ones(5))
+    assert calls == []
+    monkeypatch.setattr(D, "np", np)
+    batch = D.Dynamics()
+    batch.add(labels, v, a, np.ones(n))
+    for lab in ("passenger", "bus"):
+        np.testing.assert_array_equal(one.hist[lab], batch.hist[lab])
+        np.testing.assert_array_equal(one.acc_hist[lab], batch.acc_hist[lab])
+        np.testing.assert_allclose(one.sums[lab], batch.sums[lab], rtol=1e-12)
+        m = labels == lab
+        pos = m & (a > D.A_POS_MIN)
+        assert one.acc_hist[lab].sum() == pos.sum()
+        assert one.sums[lab][:, 2].sum() == pos.sum() and one.sums[lab][:, 0].sum() == m.sum()
+        part = D.part_of(v)
+        for k in range(len(D.PARTS)):
+            pk = pos & (part == k)
+            want = np.bincount(np.minimum((v[pk] * a[pk] / D.HIST_STEP).astype(np.int64), D.HIST_BINS - 1),
+                               minlength=D.HIST_BINS)
+            np.testing.assert_array_equal(one.hist[lab][k], want)
+
+
+class _SpyNumpy:
+    """numpy, with np.add.at's calls recorded (the module's ``np`` replaced by this)."""
+
+    def __init__(self, real, calls):
+        self._real, self._calls = real, calls
+        spy = self
+
+        class _Add:
+            def __getattr__(self, name):
+                return getattr(real.add, name)
+
+            def __call__(self, *x, **k):
+                return real.add(*x, **k)
+
+            def at(self, *x):
+                spy._calls.append(len(x[1]) if not isinstance(x[1], tuple) else len(x[1][0]))
+                return real.add.at(*x)
+
+        self.add = _Add()
+
+    def __getattr__(self, name):
+        return getattr(self._real, name)

@@ -115,6 +115,20 @@ def _bins(x: np.ndarray, n: int) -> np.ndarray:
     return np.minimum(np.maximum(x, 0), n - 1)
 
 
+#: up to this many samples a histogram is counted one by one (np.add.at's per-call cost is
+#: most of a few vehicles' step); more take np.add.at
+FEW = 16
+
+
+def _count(hist: np.ndarray, *idx: np.ndarray) -> None:
+    """Add 1 to ``hist`` at each index (1-D: ``idx`` one array; 2-D: two), repeats counted."""
+    if len(idx[0]) > FEW:
+        np.add.at(hist, idx if len(idx) > 1 else idx[0], 1)
+        return
+    for i in zip(*(x.tolist() for x in idx)) if len(idx) > 1 else idx[0].tolist():
+        hist[i] += 1
+
+
 def part_of(v_mps: np.ndarray) -> np.ndarray:
     """The RDE part (index into :data:`PARTS`) of each speed [m/s]."""
     kmh = np.asarray(v_mps, float) * 3.6
@@ -179,7 +193,8 @@ class Dynamics:
     def sample(self, ledger, vidx: np.ndarray, v: np.ndarray, t_now: float) -> None:
         """Take this whole second's speeds ``v`` [m/s] of vehicles ``vidx`` (on a lane)."""
         keep = ledger.veh_keep[vidx]
-        vidx, v = vidx[keep], v[keep]
+        if not keep.all():  # (mostly every vehicle is accounted: no copies)
+            vidx, v = vidx[keep], v[keep]
         if len(vidx) == 0:
             return
         st = ledger.veh_rde[vidx]
@@ -187,7 +202,7 @@ class Dynamics:
         ok = np.isfinite(t2) & (t_now - t2 <= MAX_SPAN_S) & (t1 > t2)
         if ok.any():
             j = np.flatnonzero(ok)
-            labels = np.asarray(ledger.class_list, dtype=object)[ledger.veh_cls[vidx[j]]]
+            labels = self._labels(ledger.class_list)[ledger.veh_cls[vidx[j]]]
             self.add(labels, v1[j], (v[j] - v2[j]) / (t_now - t2[j]), 0.5 * (t_now - t2[j]))
         # shift the history: this sample becomes k−1, the old k−1 becomes k−2
         st[:, 2], st[:, 3] = v1, t1
@@ -207,12 +222,30 @@ class Dynamics:
             m = None if one else labels == lab
             sums, hist = self._acc(lab)
             mp = pos if m is None else m & pos
-            np.add.at(self.acc_hist[lab], (sbin[mp], abin[mp]), 1)
-            for k in sorted(set((part if m is None else part[m]).tolist())):  # the parts it has samples in
-                mk = part == k if m is None else m & (part == k)
-                pk = mk & pos
-                sums[k] += (dt[mk].sum(), (v[mk] * dt[mk]).sum(), pk.sum(), (va[pk] * dt[pk]).sum())
-                np.add.at(hist[k], _bins((va[pk] / HIST_STEP).astype(np.int64), HIST_BINS), 1)
+            _count(self.acc_hist[lab], sbin[mp], abin[mp])
+            ks = sorted(set((part if m is None else part[m]).tolist()))  # the parts it has samples in
+            for k in ks:
+                if m is None and len(ks) == 1:  # every sample in this part: the arrays as they are
+                    dk, vk, pk = dt, v, pos
+                else:
+                    mk = part == k if m is None else m & (part == k)
+                    pk = mk & pos
+                    dk, vk = dt[mk], v[mk]
+                s = sums[k]  # (each sum added as before: the same values, bit for bit)
+                s[0] += dk.sum()
+                s[1] += (vk * dk).sum()
+                s[2] += np.count_nonzero(pk)
+                s[3] += (va[pk] * dt[pk]).sum()
+                _count(hist[k], _bins((va[pk] / HIST_STEP).astype(np.int64), HIST_BINS))
+
+    def _labels(self, class_list: list[str]) -> np.ndarray:
+        """``class_list`` (a ledger's, which only grows) as an object array, made again only
+        when a class was added or the list is another's."""
+        src, got = getattr(self, "_labels_of", (None, None))
+        if src is not class_list or len(got) != len(class_list):
+            got = np.asarray(class_list, dtype=object)
+            self._labels_of = (class_list, got)
+        return got
 
     def add_trajectory(self, t_s, v_mps, label: str, dt: float | None = None) -> None:
         """Add one vehicle's trajectory (times [s], speeds [m/s], in time order, at a step
