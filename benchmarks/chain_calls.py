@@ -1,6 +1,8 @@
 """A step's chain calls at a few vehicles, this checkout against another: SUMO's MMPEVEM motor
 and battery (model/mmpevem.SumoMotor.battery), a chain booking some of the step's vehicles
-(model/mmpevem.evaluate_where) and an efficiency table (model/chain_values.Table). Each is
+(model/mmpevem.evaluate_where), an efficiency table (model/chain_values.Table), a step's whole
+booking of a bare SUMO config's chains (sim/chain.ChainLedger.book: its petrol cars, each on its
+own edge) and a whole second's 1-Hz samples of them (sim/dynamics.Dynamics.add). Each is
 timed in a fresh process of each checkout in turn (``--baseline PYTHON``: another checkout's
 interpreter, its own package installed), ``--rounds`` times, the median per call of each and
 their ratio; the values of both are compared bit for bit. Not part of the test suite.
@@ -17,7 +19,7 @@ import subprocess
 import sys
 import time
 
-CASES = ("mmpevem_battery", "evaluate_where", "table")
+CASES = ("mmpevem_battery", "evaluate_where", "table", "ledger_book", "dynamics_add")
 
 
 def _one(case: str, n: int, calls: int) -> dict:
@@ -40,6 +42,24 @@ def _one(case: str, n: int, calls: int) -> dict:
         ch, sel = load_equation("epa_gasoline_car").chain, np.arange(n) % 2 == 0  # (some of them)
         sig = {**sig, "grade_rad": np.zeros(n), "ambient_c": np.full(n, 20.0)}
         f = lambda: evaluate_where(ch, sel, p, v, 0.5, sig, None)  # noqa: E731
+    elif case == "ledger_book":
+        from sumo_drvpw.model.equations import load_equation
+        from sumo_drvpw.sim.chain import chain_ledger
+        from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+        eqs = [load_equation(e) for e in CONFIG_EQUATIONS]
+        led = chain_ledger(eqs, 1000)
+        app = np.array([[1.0 if "passenger" in (e.vclasses or ()) and (e.chain is None or e.name == "epa_gasoline_car")
+                         else 0.0 for e in eqs]] * n)  # (petrol cars: booked by the wheel equations and one chain)
+        pe, vi, ei = rng.normal(0.0, 2e4, (n, len(eqs))), np.arange(n), np.arange(n) * 7
+        f = lambda: {"q": led.book(vi, ei, v, 1.0, pe, app=app, accel=sig["accel_mps2"], v_mean=v,  # noqa: E731
+                                   grade=np.zeros(n)), "edge": led.edge, "veh_time": led.veh_time}
+    elif case == "dynamics_add":
+        from sumo_drvpw.sim.dynamics import Dynamics
+
+        d, lab, a, ones = Dynamics(), np.full(n, "passenger", dtype=object), sig["accel_mps2"], np.ones(n)
+        f = lambda: (d.add(lab, v % 16.0, a, ones), {"hist": d.hist["passenger"], "sums": d.sums["passenger"],  # noqa: E731
+                                                     "acc": d.acc_hist["passenger"]})[1]
     else:
         from sumo_drvpw.model.chain_values import Table
 

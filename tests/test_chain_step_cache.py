@@ -280,3 +280,27 @@ def test_a_chain_of_some_vehicles_takes_their_rows_without_numpy_s_shape_wrapper
     listed = evaluate_where(ch, sel, p.tolist(), v, [0.5] * n, {k: x.tolist() for k, x in sig.items()}, None)
     for k in out:
         np.testing.assert_array_equal(listed[k], out[k], err_msg=k)
+
+
+def test_a_steps_applicability_is_read_once_while_it_repeats():
+    """A few vehicles' ``app`` (which chains book which vehicle) rarely changes from step to
+    step: the mask, the chains to evaluate and ``app`` per column are made once per distinct
+    ``app`` and step length and kept (a step of many vehicles keeps none); every total is
+    bit for bit that of a ledger that makes them anew each step."""
+    chains = [_fuel(), EnergyChain(predicts="battery", aux_power_w=300.0, traction_efficiency=0.9), _fuel()]
+    kept, fresh = (ChainLedger(["f", "b", "g"], chains, 40) for _ in range(2))
+    rng, n = np.random.default_rng(11), 5
+    first, second = np.array([[1, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [0, 1, 0]], float), np.ones((n, 3))
+    for step in range(40):
+        app = (first if step < 15 or step >= 30 else second).copy()  # (a new array each step, as the loop's)
+        p, v, e = rng.normal(0, 2e4, (n, 3)), rng.uniform(0, 20, n), rng.permutation(40)[:n]
+        fresh._apps.clear()
+        for led in (kept, fresh):
+            led.book(np.arange(n), e, v, 1.0, p, app=app)
+    assert len(kept._apps) == 2
+    for name in ("_veh", "veh_dist", "veh_time", "_app", "_edge", "edge_dist", "booked_any"):
+        np.testing.assert_array_equal(getattr(kept, name), getattr(fresh, name), err_msg=name)
+    big = ChainLedger(["f", "b", "g"], chains, 400)
+    big.book(np.arange(100), np.arange(100), rng.uniform(0, 20, 100), 1.0, rng.normal(0, 2e4, (100, 3)),
+             app=np.ones((100, 3)))
+    assert big._apps == {}

@@ -163,6 +163,7 @@ class ChainLedger:
         self._active = np.array(self.active, np.int64)
         self._const: dict[str, np.ndarray] = {}
         self._const_n = -1
+        self._apps: dict = {}  # a few vehicles' app → what it gives (:meth:`_by_app`)
         #: departures booked (share of a cold start > 0) by a chain with one; their shares' sum
         self.cold_starts = 0
         self.cold_starts_expected = 0.0
@@ -255,15 +256,9 @@ class ChainLedger:
         if n <= cap:
             return
         new = max(n, 2 * cap)
-        self._veh = np.concatenate([self._veh, np.zeros((new - cap, self._veh.shape[1]))])
-        self.veh_dist = np.concatenate([self.veh_dist, np.zeros((new - cap, self.A))])
-        self.veh_time = np.concatenate([self.veh_time, np.zeros((new - cap, self.A))])
-        self._app = np.concatenate([self._app, np.zeros((new - cap, self.A), bool)])
-        self._starting = np.concatenate([self._starting, np.zeros(new - cap)])
-        self._cold_age = np.concatenate([self._cold_age, np.zeros(new - cap)])
-        self._cold_new = np.concatenate([self._cold_new, np.zeros(new - cap, bool)])
-        self._stored = np.concatenate([self._stored, np.zeros((new - cap, self.A))])
-        self._spent = np.concatenate([self._spent, np.zeros((new - cap, self.A))])
+        for k in ("_veh", "veh_dist", "veh_time", "_app", "_starting", "_cold_age", "_cold_new", "_stored", "_spent"):
+            x = getattr(self, k)
+            setattr(self, k, np.concatenate([x, np.zeros((new - cap, *x.shape[1:]), x.dtype)]))
 
     def share_of(self, vtype: str, vclass: str, vid: str | None = None) -> float:
         """The share of a cold start a vehicle of this vType and vClass books from its departure:
@@ -324,9 +319,8 @@ class ChainLedger:
         p = np.asarray(p_drive_w, float)
         n = p.shape[0]
         q = np.zeros((n, len(self._cols)))
-        on = None if app is None else np.asarray(app) > 0
         # the chains of the step's vehicles only (a bare config's thirteen: one or two a step)
-        plan = self._plan if on is None else [self._plan[i] for i in np.flatnonzero(on[:, self._active].any(axis=0))]
+        on, plan = (None, self._plan) if app is None else self._by_app(np.asarray(app, float), dt)[:2]
         for a, e, ch, keys, zero_off, states, read, j in plan:
             sel = None if on is None else on[:, e]
             vv = v if v_mean is None or e not in self._motor else v_mean
@@ -390,25 +384,22 @@ class ChainLedger:
                 self._cold_new[vs] = False
                 self.cold_starts += int(hit.sum())
                 self.cold_starts_expected += float(share[s][hit].sum())
-        if app is not None:
-            app = np.asarray(app, float)
-            q *= app[:, self._ce]
-            a = app[:, self.active]
-        else:
-            a = np.ones((len(vidx), self.A))
+        if app is None:
+            app = np.ones((len(vidx), len(self.names)))
+        _, _, app_ce, a, a_dt, booked, any_ = self._by_app(np.asarray(app, float), dt)
+        q *= app_ce
         self._veh[vidx] += q
         d = np.asarray(v, float) * dt
         self.veh_dist[vidx] += d[:, None] * a
-        self.veh_time[vidx] += dt * a
-        booked = a > 0
+        self.veh_time[vidx] += a_dt
         self._app[vidx] |= booked
-        self.booked_any |= booked.any(axis=0)
+        self.booked_any |= any_
         # the edges the step's vehicles are on, once each: a bincount per column over those
         # (none for a chain without vehicles in this step), far cheaper than np.add.at, and
         # not over every edge of the network (at a few vehicles, that was most of a step)
         eidx = np.asarray(eidx, np.int64)
-        s = np.sort(eidx)
-        if (s[1:] != s[:-1]).all():  # one vehicle per edge: each edge's sum is 0 + its row
+        if (len(set(eidx.tolist())) == len(eidx) if len(eidx) <= 64 else  # one vehicle per edge:
+                bool((np.diff(np.sort(eidx)) != 0).all())):  # each edge's sum is 0 + its row
             self._edge[eidx] += q + 0.0
             self.edge_dist[eidx] += d[:, None] * a + 0.0
             return q
@@ -422,6 +413,19 @@ class ChainLedger:
             else:
                 self.edge_dist[edges, j - c] += col
         return q
+
+    def _by_app(self, app: np.ndarray, dt: float) -> tuple:
+        """What a step's ``app`` (n, E) gives: ``app > 0``, the chains to evaluate, ``app`` per
+        booked column and per active equation, that times ``dt``, whether each books, and whether
+        any does; kept for the next step with the same (a few vehicles' app rarely changes)."""
+        key = (app.shape, app.tobytes(), dt) if len(app) <= 64 else None  # (many: not kept)
+        if (got := self._apps.get(key)) is None:
+            on, a = app > 0, app[:, self._active]
+            got = (on, [self._plan[i] for i in np.flatnonzero(on[:, self._active].any(axis=0))],
+                   app[:, self._ce], a, dt * a, a > 0, (a > 0).any(axis=0))
+            if key is not None:
+                self._apps = {**(self._apps if len(self._apps) < 64 else {}), key: got}
+        return got
 
     def snapshot(self, t: float) -> None:
         """Keep the cumulative edge totals at time ``t`` [s] (with :meth:`Ledger.snapshot`)."""
