@@ -2,7 +2,8 @@
 and battery (model/mmpevem.SumoMotor.battery), a chain booking some of the step's vehicles
 (model/mmpevem.evaluate_where), an efficiency table (model/chain_values.Table), a step's whole
 booking of a bare SUMO config's chains (sim/chain.ChainLedger.book: its petrol cars, each on its
-own edge) and a whole second's 1-Hz samples of them (sim/dynamics.Dynamics.add). Each is
+own edge), a whole second's 1-Hz samples of them (sim/dynamics.Dynamics.add) and their driving
+power per equation and category (sim/ledger.EquationSet.category_powers). Each is
 timed in a fresh process of each checkout in turn (``--baseline PYTHON``: another checkout's
 interpreter, its own package installed), ``--rounds`` times, the median per call of each and
 their ratio; the values of both are compared bit for bit. Not part of the test suite.
@@ -19,7 +20,7 @@ import subprocess
 import sys
 import time
 
-CASES = ("mmpevem_battery", "evaluate_where", "table", "ledger_book", "dynamics_add")
+CASES = ("mmpevem_battery", "evaluate_where", "table", "ledger_book", "dynamics_add", "category_powers")
 
 
 def _one(case: str, n: int, calls: int) -> dict:
@@ -54,6 +55,17 @@ def _one(case: str, n: int, calls: int) -> dict:
         pe, vi, ei = rng.normal(0.0, 2e4, (n, len(eqs))), np.arange(n), np.arange(n) * 7
         f = lambda: {"q": led.book(vi, ei, v, 1.0, pe, app=app, accel=sig["accel_mps2"], v_mean=v,  # noqa: E731
                                    grade=np.zeros(n)), "edge": led.edge, "veh_time": led.veh_time}
+    elif case == "category_powers":
+        from sumo_drvpw.model.equations import load_equation
+        from sumo_drvpw.model.terms import Inputs
+        from sumo_drvpw.sim.ledger import EquationSet
+        from sumo_drvpw.sim.scenario import CONFIG_EQUATIONS
+
+        eqs = [load_equation(e) for e in CONFIG_EQUATIONS]
+        es, x = EquationSet(eqs), Inputs(v, sig["accel_mps2"], np.zeros(n), np.zeros(n), np.full(n, 1500.0), np.full(n, 1.2))
+        app = np.array([[1.0 if "passenger" in (e.vclasses or ()) and (e.chain is None or e.name == "epa_gasoline_car")
+                         else 0.0 for e in eqs]] * n)
+        f = lambda: {"pc": es.category_powers(x, app)}  # noqa: E731
     elif case == "dynamics_add":
         from sumo_drvpw.sim.dynamics import Dynamics
 

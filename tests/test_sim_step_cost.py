@@ -142,3 +142,42 @@ def test_a_network_without_elevation_books_its_grade_without_step_grade(tmp_path
     assert a["vehicles"] == 4
     hilly = load_network(Path(loop.__file__).parent / "builtin" / "networks" / "highway.net.xml", RoadClassRule())
     assert not loop.flat_network(hilly)
+
+
+def test_a_few_vehicles_term_powers_are_added_in_one_call_per_group(monkeypatch):
+    """At up to 32 vehicles a group's term powers go into their (equation, category) rows in one
+    np.add.at (one add per term and equation before: most of category_powers at five cars),
+    at more one add each; either way bit for bit the sum, term by term in each equation's
+    order, of coefficient × term value."""
+    from sumo_drvpw.model.terms import parse_term
+    from sumo_drvpw.sim import ledger as L
+
+    eqs = [Equation("a", {"acc": 1.1, "grade": 1.0, "m_v1": 0.132, "m_v3": 3e-4}),
+           Equation("b", {"v1": 156.4, "v2": 2.0, "v3": 0.49, "acc": 1.0, "grade": 1.0}, mass_kg=1478.8),
+           Equation("c", {"roll": 0.0096, "v2": 2.11, "aero_rho": 0.72, "acc": 1.0, "grade": 1.0})]
+    calls = []
+
+    class Spy:  # the module's numpy, with np.add.at's calls counted (np.add is a ufunc)
+        def __getattr__(self, name):
+            return getattr(np, name)
+
+        class add:
+            @staticmethod
+            def at(*a):
+                calls.append(1)
+                return np.add.at(*a)
+
+    monkeypatch.setattr(L, "np", Spy())
+    rng = np.random.default_rng(4)
+    for n, want_calls in ((5, 2), (100, 0)):
+        x = Inputs(rng.uniform(0, 40, n), rng.uniform(-3, 3, n), rng.uniform(-0.1, 0.1, n),
+                   rng.uniform(-5, 5, n), rng.uniform(800, 3000, n), np.full(n, 1.2))
+        calls.clear()
+        pc = EquationSet(eqs).category_powers(x, np.ones((n, 3)))
+        assert len(calls) == want_calls, n
+        want = np.zeros((n, 3, len(L.LEDGER_CATEGORIES)))
+        for e, eq in enumerate(eqs):
+            xm = x.with_mass(eq.mass_kg)
+            for t, c in eq.terms.items():
+                want[:, e, L.LEDGER_CATEGORIES.index(parse_term(t).category)] += c * parse_term(t).evaluate(xm)
+        np.testing.assert_array_equal(pc, want)

@@ -132,9 +132,11 @@ class EquationSet:
             got = []
             for mass, terms, entries, mean, sumo in self.groups:
                 kept = [e for e in entries if on is None or on[e[1] // C]]
-                if kept:
+                if kept:  # (and its entries as arrays: term rows, output rows, coefficients)
                     need = sorted({u for u, _, _ in kept})
-                    got.append((mass, [(u, terms[u]) for u in need], kept, mean, sumo))
+                    arrays = tuple(np.array(x) for x in zip(*[(need.index(u), r, [c]) for u, r, c in kept]))
+                    got.append((mass, [terms[u] for u in need], [(need.index(u), r, c) for u, r, c in kept] + [arrays],
+                                mean, sumo))
             self._live_cache[key] = got
         return got
 
@@ -159,9 +161,15 @@ class EquationSet:
                 xm = replace(xm, mass=xm.mass + np.asarray(x_mean.signals["load_kg"], float))
             if sumo:  # (a vtype_energy equation: SUMO's slope and radius)
                 xm = as_sumo_inputs(xm)
-            vals = {u: t.evaluate(xm) for u, t in terms}
-            for u, row, c in entries:
-                out[row] += c * vals[u]
+            vals = np.empty((len(terms), n))
+            for i, t in enumerate(terms):
+                vals[i] = t.evaluate(xm)
+            if n <= 32:  # out[row] += c·term, entry by entry: np.add.at adds them in order in one call
+                u, rows, c = entries[-1]  # (at up to 32 vehicles; at more its per-element cost is more)
+                np.add.at(out, rows, c * vals[u])
+            else:
+                for u, row, c in entries[:-1]:
+                    out[row] += c * vals[u]
         if self.rot_fixed:  # (m' + m_rot)·v̄·a at the booked mass m' (riders, a setMass), not (1 + m_rot/m)·m'
             va = (x.v if x.v_acc is None else x.v_acc) * x.a
             for i, k, m_rot in self.rot_fixed:
