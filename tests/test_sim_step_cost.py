@@ -181,3 +181,32 @@ def test_a_few_vehicles_term_powers_are_added_in_one_call_per_group(monkeypatch)
             for t, c in eq.terms.items():
                 want[:, e, L.LEDGER_CATEGORIES.index(parse_term(t).category)] += c * parse_term(t).evaluate(xm)
         np.testing.assert_array_equal(pc, want)
+
+
+def test_the_edge_table_takes_its_names_by_index_arrays_not_row_by_row():
+    """edges.parquet's name columns (edge, equation, class, type) are taken from the network's
+    lists by index arrays, not read per row in Python (edges × equations rows: 700,000 on a
+    city's network with a bare config's equations); each row names its edge and equation."""
+    from types import SimpleNamespace
+
+    from sumo_drvpw.sim.ledger import Ledger
+    from sumo_drvpw.sim.outputs import edges_table
+
+    class Counted(list):  # a list whose reads by index are counted
+        reads = 0
+
+        def __getitem__(self, i):
+            Counted.reads += 1
+            return super().__getitem__(i)
+
+    n, names = 40, ["a", "b", "c"]
+    net = SimpleNamespace(edge_ids=Counted(f"e{i}" for i in range(n)), edge_class=Counted(["urban", "motorway"] * (n // 2)),
+                          edge_type=Counted([None if i % 7 == 0 else f"t{i % 3}" for i in range(n)]),
+                          edge_length=np.full(n, 100.0), edge_speed=np.full(n, 13.9))
+    t = edges_table(Ledger(n, len(names)), net, names)
+    assert Counted.reads == 0
+    assert t.column("edge").to_pylist() == [f"e{i}" for i in range(n) for _ in names]
+    assert t.column("equation").to_pylist() == names * n
+    assert t.column("class").to_pylist() == [c for c in net.edge_class for _ in names]
+    assert t.column("type").to_pylist() == [c for c in net.edge_type for _ in names]
+    assert str(t.schema.field("type").type) == "string"

@@ -91,8 +91,9 @@ def edges_table(ledger: Ledger, net: Network, names: list[str]) -> pa.Table:
     nE, E = ledger.n_edges, ledger.E
     ed = np.repeat(np.arange(nE), E)
     eq = np.tile(np.arange(E), nE)
-    cols = {"edge": [net.edge_ids[i] for i in ed], "equation": [names[e] for e in eq],
-            "class": [str(net.edge_class[i]) for i in ed], "type": [net.edge_type[i] for i in ed],
+    obj = lambda x: np.fromiter(x, object)  # noqa: E731  (taken by index arrays: no per-row Python)
+    cols = {"edge": obj(net.edge_ids)[ed], "equation": obj(names)[eq],
+            "class": obj(map(str, net.edge_class))[ed], "type": obj(net.edge_type)[ed],
             "length_m": net.edge_length[ed], "speed_limit_mps": net.edge_speed[ed],
             "vehicles": ledger.edge_count[ed, eq], "distance_m": ledger.edge_dist_eq[ed, eq]}
     cols.update(_energy_cols("traction", ledger.edge_trac[ed, eq]))
