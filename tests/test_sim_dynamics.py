@@ -385,3 +385,29 @@ class _SpyNumpy:
 
     def __getattr__(self, name):
         return getattr(self._real, name)
+
+
+def test_a_step_of_accounted_vehicles_takes_no_copies_of_its_arrays():
+    """Dynamics.step selects the accounted vehicles' rows only when some vehicle of the step
+    is not accounted (fancy-index copies of five arrays every step before); the kinetic sums
+    are those of the accounted vehicles either way."""
+    from types import SimpleNamespace
+
+    class Reads(np.ndarray):  # an array whose selections are counted
+        n = 0
+
+        def __getitem__(self, i):
+            Reads.n += 1
+            return np.asarray(self)[i]
+
+    n = 6
+    rng = np.random.default_rng(2)
+    v, a = rng.uniform(0, 20, n), rng.normal(0, 1, n)
+    for kept in (np.ones(n, bool), np.array([1, 1, 0, 1, 0, 1], bool)):
+        led = SimpleNamespace(veh_keep=kept, veh_cls=np.zeros(n, np.int64), class_list=["passenger"])
+        d = D.Dynamics()
+        Reads.n = 0
+        d.step(led, np.arange(n), v.view(Reads), a.view(Reads), v.view(Reads), 1.0, np.zeros(n).view(Reads))
+        assert (Reads.n == 0) == kept.all()
+        np.testing.assert_allclose(d.kinetic["passenger"], [np.maximum(v * a, 0)[kept].sum(), v[kept].sum()],
+                                   rtol=1e-15)

@@ -164,19 +164,23 @@ class Dynamics:
         grades ``theta`` [rad], count the heavy classes' steps beyond
         :data:`HEAVY_POWER_W_PER_KG`."""
         keep = ledger.veh_keep[vidx]
-        code = ledger.veh_cls[vidx[keep]]
+        if not keep.all():  # (mostly every vehicle is accounted: no copies)
+            vidx, v_mean, a, v_dist = vidx[keep], v_mean[keep], a[keep], v_dist[keep]
+            theta = None if theta is None else theta[keep]
+        code = ledger.veh_cls[vidx]
         n = len(ledger.class_list)
-        kin = np.bincount(code, np.maximum(v_mean[keep] * a[keep], 0.0) * dt, minlength=n)
-        dist = np.bincount(code, v_dist[keep] * dt, minlength=n)
+        kin = np.bincount(code, np.maximum(v_mean * a, 0.0) * dt, minlength=n)
+        dist = np.bincount(code, v_dist * dt, minlength=n)
         for c in np.flatnonzero(dist > 0).tolist():
             acc = self.kinetic.get(ledger.class_list[c])
             if acc is None:  # (not setdefault: its default array was made every step)
                 acc = self.kinetic[ledger.class_list[c]] = np.zeros(2)
-            acc += (kin[c], dist[c])
-        heavy = [c for c in range(n) if ledger.class_list[c] in HEAVY]
-        if theta is None or not heavy:
+            acc[0] += kin[c]
+            acc[1] += dist[c]
+        if theta is None or not HEAVY.intersection(ledger.class_list):
             return
-        sp = v_mean[keep] * a[keep] + G * v_dist[keep] * np.sin(theta[keep])
+        heavy = [c for c in range(n) if ledger.class_list[c] in HEAVY]
+        sp = v_mean * a + G * v_dist * np.sin(theta)
         over = np.bincount(code, sp > HEAVY_POWER_W_PER_KG, minlength=n).astype(np.int64)
         steps = np.bincount(code, minlength=n)
         for c in heavy:
