@@ -2,7 +2,8 @@
 and battery (model/mmpevem.SumoMotor.battery), a chain booking some of the step's vehicles
 (model/mmpevem.evaluate_where), an efficiency table (model/chain_values.Table), a step's whole
 booking of a bare SUMO config's chains (sim/chain.ChainLedger.book: its petrol cars, each on its
-own edge), a whole second's 1-Hz samples of them (sim/dynamics.Dynamics.add) and their driving
+own edge), a whole second's 1-Hz samples of them (sim/dynamics.Dynamics.add; and taken from their
+speeds, each with its two earlier samples, Dynamics.sample) and their driving
 power per equation and category (sim/ledger.EquationSet.category_powers). Each is
 timed in a fresh process of each checkout in turn (``--baseline PYTHON``: another checkout's
 interpreter, its own package installed), ``--rounds`` times, the median per call of each and
@@ -20,7 +21,7 @@ import subprocess
 import sys
 import time
 
-CASES = ("mmpevem_battery", "evaluate_where", "table", "ledger_book", "dynamics_add", "category_powers")
+CASES = ("mmpevem_battery", "evaluate_where", "table", "ledger_book", "dynamics_add", "dynamics_sample", "category_powers")
 
 
 def _one(case: str, n: int, calls: int) -> dict:
@@ -66,6 +67,16 @@ def _one(case: str, n: int, calls: int) -> dict:
         app = np.array([[1.0 if "passenger" in (e.vclasses or ()) and (e.chain is None or e.name == "epa_gasoline_car")
                          else 0.0 for e in eqs]] * n)
         f = lambda: {"pc": es.category_powers(x, app)}  # noqa: E731
+    elif case == "dynamics_sample":
+        from types import SimpleNamespace
+
+        from sumo_drvpw.sim.dynamics import Dynamics
+
+        d, clock = Dynamics(), iter(range(10 ** 9))  # (one sample a second: each vehicle's is added)
+        led = SimpleNamespace(veh_keep=np.ones(n, bool), veh_cls=np.zeros(n, np.int64), class_list=["passenger"],
+                              veh_rde=np.full((n, 4), np.nan))
+        f = lambda: (d.sample(led, np.arange(n), (v + (t := next(clock)) % 7) % 16.0, float(t)),  # noqa: E731
+                     {"hist": d.hist.get("passenger", np.zeros(1)), "rde": led.veh_rde})[1]
     elif case == "dynamics_add":
         from sumo_drvpw.sim.dynamics import Dynamics
 

@@ -411,3 +411,40 @@ def test_a_step_of_accounted_vehicles_takes_no_copies_of_its_arrays():
         assert (Reads.n == 0) == kept.all()
         np.testing.assert_allclose(d.kinetic["passenger"], [np.maximum(v * a, 0)[kept].sum(), v[kept].sum()],
                                    rtol=1e-15)
+
+
+def test_a_whole_second_of_vehicles_with_their_earlier_samples_takes_no_copies(monkeypatch):
+    """Dynamics.sample selects the vehicles with two earlier 1-Hz samples (np.flatnonzero and
+    copies of four arrays) only when some have not: every whole second before; the samples
+    added are those of the trajectories' definition either way."""
+    from types import SimpleNamespace
+
+    searches = []
+
+    class Spy:  # the module's numpy, with np.flatnonzero's calls counted
+        def __getattr__(self, name):
+            return getattr(np, name)
+
+        @staticmethod
+        def flatnonzero(x):
+            searches.append(1)
+            return np.flatnonzero(x)
+
+    monkeypatch.setattr(D, "np", Spy())
+    n, rng = 4, np.random.default_rng(6)
+    v = rng.uniform(0, 20, (30, n))
+    led = SimpleNamespace(veh_keep=np.ones(n, bool), veh_cls=np.zeros(n, np.int64), class_list=["passenger"],
+                          veh_rde=np.full((n, 4), np.nan))
+    d = D.Dynamics()
+    for t in range(30):
+        d.sample(led, np.arange(n), v[t], float(t))
+    assert searches == []
+    ref = D.Dynamics()
+    for k in range(n):
+        ref.add_trajectory(np.arange(30.0), v[:, k], "passenger", 1.0)
+    np.testing.assert_array_equal(d.hist["passenger"], ref.hist["passenger"])
+    np.testing.assert_array_equal(d.acc_hist["passenger"], ref.acc_hist["passenger"])
+    np.testing.assert_allclose(d.sums["passenger"], ref.sums["passenger"], rtol=1e-12)
+    led.veh_rde[1] = np.nan  # (a vehicle back from a teleport starts afresh: the others are selected)
+    d.sample(led, np.arange(n), v[0], 30.0)
+    assert searches == [1]

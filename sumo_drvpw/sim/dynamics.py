@@ -204,12 +204,15 @@ class Dynamics:
         st = ledger.veh_rde[vidx]
         v1, t1, v2, t2 = st[:, 0], st[:, 1], st[:, 2], st[:, 3]
         ok = np.isfinite(t2) & (t_now - t2 <= MAX_SPAN_S) & (t1 > t2)
-        if ok.any():
+        if ok.all():  # (mostly every vehicle has its two earlier samples: no copies)
+            span = t_now - t2
+            self.add(self._labels(ledger.class_list)[ledger.veh_cls[vidx]], v1, (v - v2) / span, 0.5 * span)
+        elif ok.any():
             j = np.flatnonzero(ok)
             labels = self._labels(ledger.class_list)[ledger.veh_cls[vidx[j]]]
             self.add(labels, v1[j], (v[j] - v2[j]) / (t_now - t2[j]), 0.5 * (t_now - t2[j]))
         # shift the history: this sample becomes k−1, the old k−1 becomes k−2
-        st[:, 2], st[:, 3] = v1, t1
+        st[:, 2:] = st[:, :2]
         st[:, 0], st[:, 1] = v, t_now
         ledger.veh_rde[vidx] = st
 
