@@ -210,3 +210,46 @@ def test_the_edge_table_takes_its_names_by_index_arrays_not_row_by_row():
     assert t.column("class").to_pylist() == [c for c in net.edge_class for _ in names]
     assert t.column("type").to_pylist() == [c for c in net.edge_type for _ in names]
     assert str(t.schema.field("type").type) == "string"
+
+
+def test_class_energy_sums_the_edges_of_each_class_in_their_order_without_np_add_at(monkeypatch):
+    """The road classes' energies (classes.parquet, the summary) are per class the sum over its
+    edges in their order, bit for bit what np.add.at adds (signed zeros too), by a bincount per
+    equation and category (np.add.at over a city's edges × equations × categories was slower)."""
+    from types import SimpleNamespace
+
+    from sumo_drvpw.sim import outputs as O
+    from sumo_drvpw.sim.ledger import Ledger
+
+    n, E, rng = 300, 3, np.random.default_rng(9)
+    led = Ledger(n, E)
+    C = led.C
+    trac, recup = rng.normal(size=(n, E, C)), rng.normal(size=(n, E, C))
+    trac[rng.uniform(size=trac.shape) < 0.5] = -0.0
+    monkeypatch.setattr(Ledger, "edge_trac", property(lambda self: trac))
+    monkeypatch.setattr(Ledger, "edge_recup", property(lambda self: recup))
+    classes = ["urban", "rural", "motorway", "unused"]
+    net = SimpleNamespace(classes=classes, edge_class=[classes[i] for i in rng.integers(0, 3, n)])
+    calls = []
+
+    class Spy:  # the module's numpy, with np.add.at's calls counted
+        def __getattr__(self, name):
+            return getattr(np, name)
+
+        class add:
+            @staticmethod
+            def at(*a):
+                calls.append(1)
+                return np.add.at(*a)
+
+    monkeypatch.setattr(O, "np", Spy())
+    got_classes, tr, rc = O.class_energy(led, net)
+    assert calls == [] and got_classes == classes
+    k = np.array([classes.index(c) for c in net.edge_class])
+    for got, x in ((tr, trac), (rc, recup)):
+        want = np.zeros((len(classes), E, C))
+        np.add.at(want, k, x)
+        assert got.tobytes() == want.tobytes()
+    monkeypatch.undo()  # (the ledger's own, empty, edge totals)
+    empty = O.class_energy(Ledger(0, E), SimpleNamespace(classes=[], edge_class=[]))
+    assert empty[1].shape == (0, E, C)

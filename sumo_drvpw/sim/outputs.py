@@ -109,10 +109,12 @@ def class_energy(ledger: Ledger, net: Network) -> tuple[list[str], np.ndarray, n
     """Energies by road class: (classes, traction (K, E, C), recup (K, E, C)) [J]."""
     classes = list(net.classes)
     k = np.array([classes.index(c) for c in net.edge_class], np.int64)
-    tr = np.zeros((len(classes), ledger.E, ledger.C))
-    rc = np.zeros_like(tr)
-    np.add.at(tr, k, ledger.edge_trac)
-    np.add.at(rc, k, ledger.edge_recup)
+    ec = ledger.E * ledger.C
+    tr, rc = np.zeros((len(classes), ledger.E, ledger.C)), np.zeros((len(classes), ledger.E, ledger.C))
+    for out, x in ((tr.reshape(len(classes), ec), ledger.edge_trac), (rc.reshape(len(classes), ec), ledger.edge_recup)):
+        x = x.reshape(len(k), ec)  # per class the sum over its edges in their order, as np.add.at
+        for j in range(x.shape[1]):  # adds, by a bincount per (equation, category): faster over many edges
+            out[:, j] = np.bincount(k, x[:, j], minlength=len(classes))
     return classes, tr, rc
 
 
