@@ -876,3 +876,28 @@ def test_a_boolean_where_a_number_is_due_is_refused_naming_its_row():
             numeric(col, "f.json", "v")
         assert numeric(col, "f.json", "v", ("-",), bools=True).notna().sum() >= 2
     assert numeric(pd.Series([20.0, "0", 1, 0.0, "-"], dtype=object), "f", "v").tolist()[:4] == [20.0, 0.0, 1.0, 0.0]
+
+
+def test_a_mapped_name_ending_in_another_spelling_of_its_si_unit_is_read(tmp_path):
+    """A name whose suffix spells its quantity's SI unit another way ('coolant_celsius' from
+    °C, 'throttle_percent' from %) holds the value in the unit it says: read, with no note
+    (aff912d refused it as if it named another unit); a suffix naming another unit of the
+    quantity ('coolant_k' from °C, written in °C) is still refused."""
+    from sumo_drvpw.data.adapters._common import DIMENSIONS, UNITS
+    from sumo_drvpw.data.adapters.columns import load_mapping
+
+    si = {k: d for k, (d, f, o) in UNITS.items()
+          if d != "dimensionless" and k.isidentifier() and k != DIMENSIONS[d] and (f, o) == (1.0, 0.0)}
+    assert si  # (the unit table spells some SI units more than one way)
+    base = '[columns."t"]\nname = "time_s"\nunit = "s"\n[columns."v"]\nname = "speed_mps"\nunit = "km/h"\n'
+    for word, dim in si.items():
+        unit = next(k for k, (d, f, o) in UNITS.items() if d == dim and (f, o) == (1.0, 0.0))
+        p = tmp_path / f"{word}.toml"
+        p.write_text(base + f'[columns."x"]\nname = "thing_{word}"\nunit = "{unit}"\n', encoding="utf-8")
+        m = load_mapping(p)
+        assert m["columns"]["x"]["factor"] == 1.0 and m["columns"]["x"]["offset"] == 0.0, word
+        assert m["notes"] == [], word
+    p = tmp_path / "k.toml"
+    p.write_text(base + '[columns."x"]\nname = "coolant_k"\nunit = "degC"\n', encoding="utf-8")
+    with pytest.raises(UserError, match="'coolant_k' ends in '_k'"):
+        load_mapping(p)

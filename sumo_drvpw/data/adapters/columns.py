@@ -303,11 +303,20 @@ def _entry(p, key, name, unit, scale) -> dict:
                         f"'_{suffix}' ({SUFFIX_DIM[suffix]}); use a name ending in '_{DIMENSIONS[dim]}'")
     elif name in CANONICAL and dim == "dimensionless" and suffix in SUFFIX_DIM:
         raise UserError(f"{p}: {key}: '{name}' needs a {SUFFIX_DIM[suffix]} unit, got '{unit}'")
-    elif suffix and dim != "dimensionless" and suffix != DIMENSIONS[dim] and (lookup_unit(suffix) or ("",))[0] == dim:
-        # ('gps_speed_kmh' with unit km/h: written in m/s under a name that says km/h)
+    elif suffix and dim != "dimensionless" and suffix != DIMENSIONS[dim] and (lookup_unit(suffix) or ("",))[0] == dim \
+            and not _si_spelling(suffix):
+        # ('gps_speed_kmh' with unit km/h: written in m/s under a name that says km/h; 'coolant_celsius'
+        # names the °C it holds by another spelling)
         raise UserError(f"{p}: {key}.name '{name}' ends in '_{suffix}', but the {dim} is written in "
                         f"'{DIMENSIONS[dim]}' (names end in their SI unit): name it '{name[:-len(suffix)]}{DIMENSIONS[dim]}'")
     return {"name": name, "kind": "number", "factor": f * scale, "offset": o * scale}
+
+
+def _si_spelling(word: str) -> bool:
+    """``word`` spells a dimension's SI unit ('celsius', 'percent', 'sec', 'volt': the value
+    written under a name ending in it is in the unit it says)."""
+    u = lookup_unit(word)
+    return u is not None and u[0] != "dimensionless" and u[1:] == (1.0, 0.0)
 
 
 def _name_note(key: str, name: str, unit: str | None) -> str | None:
@@ -317,7 +326,8 @@ def _name_note(key: str, name: str, unit: str | None) -> str | None:
     dim = (lookup_unit(unit) or ("dimensionless",))[0] if unit is not None else "dimensionless"
     suffix = name.rsplit("_", 1)[-1] if "_" in name else ""
     gps = name.startswith("gps_speed") and not name.endswith("_mps")
-    if (dim == "dimensionless" and not gps) or suffix == DIMENSIONS.get(dim) or (dim == "angle" and suffix == "deg"):
+    if (dim == "dimensionless" and not gps) or suffix == DIMENSIONS.get(dim) or (dim == "angle" and suffix == "deg") \
+            or (dim != "dimensionless" and not gps and _si_spelling(suffix) and lookup_unit(suffix)[0] == dim):
         return None
     if dim == "dimensionless":  # ('gps_speed_kmh' without a unit: kept as it is, in no speed the log reads)
         stem = name[:-len(suffix) - 1] if suffix and lookup_unit(suffix) else name
