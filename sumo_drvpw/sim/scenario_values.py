@@ -124,9 +124,12 @@ def _path(v, where: str, key: str) -> str:
 
 def tiny_mass(vt: str, vclass: str | None, mass, said: str) -> None:
     """A written mass below 1 % of its vClass's SUMO default refused (a 6-kg truck: tonnes):
-    a vType's (:mod:`sumo_drvpw.sim.resolver`) and a told copy's (``[vtypes."<type>@<id>"]``)."""
+    a vType's (:mod:`sumo_drvpw.sim.resolver`) and a told copy's (``[vtypes."<type>@<id>"]``);
+    not of a vClass SUMO gives no mass of its own (:data:`NO_CLASS_MASS`: a 2-kg drone)."""
     from sumo_drvpw.sim.fcd_conn import SUMO_VCLASS_MASS_KG, SUMO_VEH_MASS_KG
 
+    if vclass in NO_CLASS_MASS:
+        return
     usual = SUMO_VCLASS_MASS_KG.get(vclass, SUMO_VEH_MASS_KG)
     if mass is not None and mass < 0.01 * usual:
         raise UserError(f"vType '{vt}': mass {mass:g} kg ({said}) is below 1 % of a {vclass or 'vehicle'}'s "
