@@ -1339,6 +1339,17 @@ def _(d):
     return argv[:i] + argv[i + 2:]
 
 
+@case("options", "sumo option the [sumo] additional files set", ("s.toml", "'-a' (SUMO's --additional-files)",
+                                                                  "sumo.additional"))
+def _(d):  # SUMO: "A value for the option 'a' was already set", naming no key (92b7e39 left sumo.additional out)
+    b = Path(__file__).resolve().parent.parent / "sumo_drvpw" / "sim" / "builtin"
+    (d / "a.add.xml").write_text("<additional/>\n", encoding="utf-8")
+    (d / "s.toml").write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{(b / "networks" / "city.net.xml").as_posix()}"\n'
+                              f'routes = ["{(b / "scenarios" / "city.rou.xml").as_posix()}"]\nadditional = ["a.add.xml"]\n'
+                              f'options = ["-a", "{(d / "a.add.xml").as_posix()}"]\n', encoding="utf-8")
+    return ["run", str(d / "s.toml"), "--end", "5", "--no-figures", "--out", str(d / "run")]
+
+
 @case("options", "sumo route files over the config's", ("outputs in",), expect="accept")
 def _(d):  # a config's value SUMO lets the command line override: still run
     rou = Path(__file__).resolve().parent.parent / "sumo_drvpw" / "sim" / "builtin" / "scenarios" / "city.rou.xml"

@@ -383,7 +383,8 @@ def load_scenario(path: str | Path | None = None, doc: dict | None = None,
         opts = [str(o) if isinstance(o, (int, float)) and not isinstance(o, bool) else o for o in opts]
     args += _strlist(opts, where, "sumo.options", '["--time-to-teleport", "120"]')
     given = {"configuration-file": "sumo.config"} if "config" in sumo else {"net-file": "sumo.net", **(  # SUMO's options
-        {"route-files": "sumo.routes"} if routes else {})}  # the plug-in sets (an option twice: SUMO stops)
+        {"route-files": "sumo.routes"} if routes else {}), **(  # the plug-in sets (an option twice: SUMO stops)
+        {"additional-files": "sumo.additional"} if adds else {})}
     given.update({k.replace("_", "-"): ("the run's " if k in overrides else "sumo.") + f"{k} ({times[k]:g} s)"
                   for k in times if k in sumo})
     check_option_values(opts, where, given)  # ["-r"]: SUMO would say only "The parameter 'true' is not allowed"
