@@ -138,3 +138,24 @@ def test_a_grade_given_anew_brings_its_own_crossover():
     assert override_measurement(None, {"speed_scale": 0.98}, "e.toml") == Measurement(speed_scale=0.98)
     with pytest.raises(UserError, match="e.toml .measurement. power_lag_s"):
         override_measurement(base, {"power_lag_s": 600.0}, "e.toml")
+
+
+@pytest.mark.parametrize("flags, named, value", [
+    (["--power-lag", "nan"], "--power-lag nan", "power_lag_s"),
+    (["--power-lag", "1e6"], "--power-lag 1e+06", "power_lag_s"),
+    (["--air-density", "altitude", "--grade-source", "accelerometer:nan"], "--grade-source accelerometer:nan",
+     "accelerometer_offset_mps2"),
+    (["--power-lag", "1", "--grade-source", "fused:-5s"], "--grade-source fused:-5s", "fusion_tau_s"),
+])
+def test_a_bad_correction_flag_is_named_alone(tmp_path, capsys, flags, named, value):
+    """A correction flag's bad value names that flag as given, not three of them (it said
+    '--power-lag / --grade-source / --speed-scale: command line [measurement] …' for each,
+    naming --speed-scale, which that check never reads, and not --air-density)."""
+    from conftest import BUNDLED_LOG
+
+    assert cli_main(["compare", str(BUNDLED_LOG), "--equation", "drvpw_prius3", "--out", str(tmp_path / "c"),
+                     *flags]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"error: {named} [measurement] {value}:" in err, err
+    others = {"--power-lag", "--grade-source", "--air-density", "--speed-scale"} - {named.split()[0]}
+    assert not any(o in err for o in others), err

@@ -83,10 +83,15 @@ def _flags_measurement(args):
                     raise UserError(f"--grade-source {grade}: {what}") from None
         if rho is not None:
             doc["air_density"] = rho
+        for flag, val, keys in (("--power-lag", lag, ("power_lag_s",)), ("--grade-source", grade, GRADE_KEYS),
+                                ("--air-density", rho, ("air_density",))):  # (an error names its flag)
+            if val is not None:
+                measurement_from_dict({k: doc[k] for k in keys if k in doc}, f"{flag} {val:g}" if isinstance(val, float)
+                                      else f"{flag} {val}")
         try:
             return measurement_from_dict(doc, "command line")
         except UserError as e:
-            raise UserError(f"--power-lag / --grade-source / --speed-scale: {e}") from None
+            raise UserError(f"--power-lag / --grade-source / --air-density: {e}") from None
     return None
 
 
