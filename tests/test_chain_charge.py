@@ -185,18 +185,17 @@ def test_the_scenario_declares_a_vtypes_charge_and_a_vehicle_s_own_wins(tmp_path
         assert not (tmp_path / "bad").exists()
 
 
-@pytest.mark.sumo
-def test_a_traci_script_says_an_added_plug_in_s_charge(tmp_path):
-    """Accountant.set_battery_charge in a user's own libsumo loop: a vehicle the script adds
-    departs with the 100 Wh it is told (net 0.1 kWh), the route file's vehicle charged (0.333
-    kWh); a negative charge, or one said after the departure, is a ValueError."""
+def _scripted(tmp_path, vtype: str, after=None):
+    """A user's own libsumo loop with the Accountant: the route file's car 't' (vType ``vtype``)
+    and a car the script adds ('added') told 100 Wh by Accountant.set_battery_charge; ``after``
+    (the accountant) once the run has stepped to 300 s. Each vehicle's chain row (net_kwh …)."""
     pytest.importorskip("libsumo")
     import pandas as pd
 
     from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
     from sumo_drvpw.sim.scenario import load_scenario
 
-    _road(tmp_path, f'<routes>{_vtype()}{_trip("t", "A")}</routes>')
+    _road(tmp_path, f'<routes>{vtype}{_trip("t", "A")}</routes>')
     s = _scenario(tmp_path)
     conn = start_sumo(load_scenario(s).sumo_args)
     try:
@@ -209,13 +208,25 @@ def test_a_traci_script_says_an_added_plug_in_s_charge(tmp_path):
             acc.set_battery_charge("later", -1)
         while conn.simulation.getTime() < 300 - 1e-9:
             conn.simulationStep()
-        with pytest.raises(ValueError, match="departed already"):
-            acc.set_battery_charge("added", 50)
+        if after is not None:
+            after(acc)
         res = acc.result()
     finally:
         close_sumo(conn)
     res.write(tmp_path / "o")
-    veh = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv", dtype={"key": str}).set_index("key")
+    return pd.read_csv(tmp_path / "o" / "chain_vehicles.csv", dtype={"key": str}).set_index("key")
+
+
+@pytest.mark.sumo
+def test_a_traci_script_says_an_added_plug_in_s_charge(tmp_path):
+    """Accountant.set_battery_charge in a user's own libsumo loop: a vehicle the script adds
+    departs with the 100 Wh it is told (net 0.1 kWh), the route file's vehicle charged (0.333
+    kWh); a negative charge, or one said after the departure, is a ValueError."""
+    def said_late(acc):
+        with pytest.raises(ValueError, match="departed already"):
+            acc.set_battery_charge("added", 50)
+
+    veh = _scripted(tmp_path, _vtype(), said_late)
     assert veh.loc["added", "net_kwh"] == pytest.approx(0.100, rel=1e-9)
     assert veh.loc["t", "net_kwh"] == pytest.approx(U_J / 3.6e6, rel=1e-9)
 
@@ -269,27 +280,6 @@ def test_a_traci_script_s_charge_wins_over_the_vtype_s_old_key(tmp_path):
     vType declares SUMO's old key actualBatteryCapacity (300 Wh), which outranks a vehicle's
     chargeLevel param — the script's 100 Wh was stored as one and silently lost (the added car
     booked the vType's 0.300 kWh). The route file's own vehicle keeps the vType's 300 Wh."""
-    pytest.importorskip("libsumo")
-    import pandas as pd
-
-    from sumo_drvpw.sim import Accountant, close_sumo, start_sumo
-    from sumo_drvpw.sim.scenario import load_scenario
-
-    _road(tmp_path, f'<routes>{_vtype(_param("actualBatteryCapacity", 300))}{_trip("t", "A")}</routes>')
-    s = _scenario(tmp_path)
-    conn = start_sumo(load_scenario(s).sumo_args)
-    try:
-        acc = Accountant(conn, scenario=s)
-        conn.addStepListener(acc)
-        conn.route.add("rb", [f"B{i}" for i in range(5)])
-        conn.vehicle.add("added", "rb", typeID="h", depart="now")
-        acc.set_battery_charge("added", 100)
-        while conn.simulation.getTime() < 300 - 1e-9:
-            conn.simulationStep()
-        res = acc.result()
-    finally:
-        close_sumo(conn)
-    res.write(tmp_path / "o")
-    veh = pd.read_csv(tmp_path / "o" / "chain_vehicles.csv", dtype={"key": str}).set_index("key")
+    veh = _scripted(tmp_path, _vtype(_param("actualBatteryCapacity", 300)))
     assert veh.loc["added", "net_kwh"] == pytest.approx(0.100, rel=1e-9)
     assert veh.loc["t", "net_kwh"] == pytest.approx(0.300, rel=1e-9)
