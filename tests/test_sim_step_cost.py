@@ -14,6 +14,24 @@ from sumo_drvpw.sim.chain import ChainLedger
 from sumo_drvpw.sim.ledger import EquationSet
 
 
+def _count_add_at(monkeypatch, module) -> list:
+    """``module``'s numpy replaced by one whose np.add.at calls are counted: the list they append to."""
+    calls = []
+
+    class Spy:  # numpy, with np.add.at's calls counted (np.add is a ufunc)
+        def __getattr__(self, name):
+            return getattr(np, name)
+
+        class add:
+            @staticmethod
+            def at(*a):
+                calls.append(1)
+                return np.add.at(*a)
+
+    monkeypatch.setattr(module, "np", Spy())
+    return calls
+
+
 def test_chain_book_works_on_the_steps_edges_only(monkeypatch):
     """ChainLedger.book adds each booked column over the edges of the step's vehicles, not
     over an array as long as the network (13,000 edges in a port scenario: most of a step
@@ -155,19 +173,7 @@ def test_a_few_vehicles_term_powers_are_added_in_one_call_per_group(monkeypatch)
     eqs = [Equation("a", {"acc": 1.1, "grade": 1.0, "m_v1": 0.132, "m_v3": 3e-4}),
            Equation("b", {"v1": 156.4, "v2": 2.0, "v3": 0.49, "acc": 1.0, "grade": 1.0}, mass_kg=1478.8),
            Equation("c", {"roll": 0.0096, "v2": 2.11, "aero_rho": 0.72, "acc": 1.0, "grade": 1.0})]
-    calls = []
-
-    class Spy:  # the module's numpy, with np.add.at's calls counted (np.add is a ufunc)
-        def __getattr__(self, name):
-            return getattr(np, name)
-
-        class add:
-            @staticmethod
-            def at(*a):
-                calls.append(1)
-                return np.add.at(*a)
-
-    monkeypatch.setattr(L, "np", Spy())
+    calls = _count_add_at(monkeypatch, L)
     rng = np.random.default_rng(4)
     for n, want_calls in ((5, 2), (100, 0)):
         x = Inputs(rng.uniform(0, 40, n), rng.uniform(-3, 3, n), rng.uniform(-0.1, 0.1, n),
@@ -230,19 +236,7 @@ def test_class_energy_sums_the_edges_of_each_class_in_their_order_without_np_add
     monkeypatch.setattr(Ledger, "edge_recup", property(lambda self: recup))
     classes = ["urban", "rural", "motorway", "unused"]
     net = SimpleNamespace(classes=classes, edge_class=[classes[i] for i in rng.integers(0, 3, n)])
-    calls = []
-
-    class Spy:  # the module's numpy, with np.add.at's calls counted
-        def __getattr__(self, name):
-            return getattr(np, name)
-
-        class add:
-            @staticmethod
-            def at(*a):
-                calls.append(1)
-                return np.add.at(*a)
-
-    monkeypatch.setattr(O, "np", Spy())
+    calls = _count_add_at(monkeypatch, O)
     got_classes, tr, rc = O.class_energy(led, net)
     assert calls == [] and got_classes == classes
     k = np.array([classes.index(c) for c in net.edge_class])
