@@ -231,3 +231,5 @@ def test_compare_names_the_gps_column_on_the_command_line(tmp_path, capsys):
                      "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip()
     assert "disagree" in err and len(err.splitlines()) == 1 and not (tmp_path / "x").exists()
+    # named as the user types it on the command line (the library names the [measurement] setting)
+    assert "--speed-scale gps:gps_speed_phone_mps or --speed-scale gps:gps_speed_mps" in err, err

@@ -502,11 +502,21 @@ _FLAGS = (("speed_unit", "declare the unit (speed unit km/h or m/s)",
           ("speed_unit", "read it with speed unit km/h", "read it with --speed-unit km/h"))
 
 
+#: the same for a [measurement] setting a library message names with its value: the flag that sets it
+_SETTINGS = (("speed_scale", r'speed_scale = "(gps:[^"]+)" or "(gps:[^"]+)"',
+              r'--speed-scale \1 or --speed-scale \2 (in an equation file: speed_scale = "\1")'),)
+
+
 def _as_typed(msg: str, args) -> str:
     """A library message with its option names as the user types them on this command."""
+    import re
+
     for attr, said, typed in _FLAGS:
         if hasattr(args, attr):
             msg = msg.replace(said, typed)
+    for attr, said, typed in _SETTINGS:
+        if hasattr(args, attr):
+            msg = re.sub(said, typed, msg)
     return msg
 
 
