@@ -22,5 +22,9 @@ def test_the_measurement_note_says_how_to_read_the_logs_as_they_are(tmp_path, ca
     assert "accelerometer" in out.err
     note = next(ln for ln in out.out.splitlines() if ln.startswith("note: logs corrected as the [measurement]"))
     assert "--grade-source logged" in note and "--no-exclude-dropouts" in note
+    # the grade read as logged, the dropouts still left out: refused naming the flag that keeps them
+    assert cli_main(args + ["--grade-source", "logged", "--out", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert "leaving out logger dropouts needs" in err and "(--no-exclude-dropouts keeps them)" in err, err
     # each flag switches off its own setting only (cli/_measurement.py)
     assert cli_main(args + ["--grade-source", "logged", "--no-exclude-dropouts", "--out", str(tmp_path / "b")]) == 0

@@ -499,7 +499,9 @@ def main(argv: list[str] | None = None) -> int:
 #: for the commands that have it (argparse attribute)
 _FLAGS = (("speed_unit", "declare the unit (speed unit km/h or m/s)",
            "declare the unit (--speed-unit km/h, or --speed-unit m/s to keep it)"),
-          ("speed_unit", "read it with speed unit km/h", "read it with --speed-unit km/h"))
+          ("speed_unit", "read it with speed unit km/h", "read it with --speed-unit km/h"),
+          ("exclude_dropouts", "cannot be told from a held value",
+           "cannot be told from a held value (--no-exclude-dropouts keeps them)"))
 
 
 #: the same for a [measurement] setting a library message names with its value: the flag that sets it
