@@ -300,7 +300,7 @@ class ChainLedger(ChainTables):
 
     def step_quantities(self, p_drive_w: np.ndarray, v: np.ndarray, dt: float,
                         signals: dict | None = None, engine_off=None, v_mean=None, app=None,
-                        vidx=None) -> np.ndarray:
+                        vidx=None, by=None) -> np.ndarray:
         """Chain quantities of one step, (n vehicles, C booked columns) (:meth:`expand` gives
         (n, E, Q)); each chain is evaluated only where ``app`` (n, E) > 0 (zeros elsewhere,
         and not at all in a step none of its vehicles is in: a bare config's thirteen
@@ -315,12 +315,15 @@ class ChainLedger(ChainTables):
         engine_off : optional (n,) bool: engines a start-stop system switched off: no fuel
         vidx : the vehicles' rows: a hybrid's battery window is carried in them from step to step
             (None: each step from an empty battery, nothing kept)
+        by : what ``app`` gives (:meth:`_by_app`) where the caller has it already (:meth:`book`)
         """
         p = np.asarray(p_drive_w, float)
         n = p.shape[0]
         q = np.zeros((n, len(self._cols)))
         # the chains of the step's vehicles only (a bare config's thirteen: one or two a step)
-        on, plan = (None, self._plan) if app is None else self._by_app(np.asarray(app, float), dt)[:2]
+        if app is not None and by is None:
+            by = self._by_app(np.asarray(app, float), dt)
+        on, plan = (None, self._plan) if app is None else by[:2]
         for a, e, ch, keys, zero_off, states, read, j in plan:
             sel = None if on is None else on[:, e]
             vv = v if v_mean is None or e not in self._motor else v_mean
@@ -363,8 +366,9 @@ class ChainLedger(ChainTables):
             signals = {**signals, "accel_mps2": accel}
         if grade is not None and self._motor:
             signals = {**signals, "grade_rad": grade, **({} if load is None else {"load_kg": load})}
+        by = None if app is None else self._by_app(np.asarray(app, float), dt)  # (once a step: not kept above 64)
         q = self.step_quantities(p_drive_w, v, dt, signals, engine_off, v_mean if self._motor else None, app,
-                                 vidx)
+                                 vidx, by)
         if self.cold_start_on:
             share = self._starting[vidx]
             s = share > 0
@@ -384,9 +388,9 @@ class ChainLedger(ChainTables):
                 self._cold_new[vs] = False
                 self.cold_starts += int(hit.sum())
                 self.cold_starts_expected += float(share[s][hit].sum())
-        if app is None:
-            app = np.ones((len(vidx), len(self.names)))
-        _, _, app_ce, a, a_dt, booked, any_ = self._by_app(np.asarray(app, float), dt)
+        if by is None:
+            by = self._by_app(np.ones((len(vidx), len(self.names))), dt)
+        _, _, app_ce, a, a_dt, booked, any_ = by
         q *= app_ce
         self._veh[vidx] += q
         d = np.asarray(v, float) * dt
