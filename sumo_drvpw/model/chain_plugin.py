@@ -33,6 +33,7 @@ import numpy as np
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.chain_buffer import _starts, battery_energy
+from sumo_drvpw.model.chain_values import keyed_table
 
 #: keys of [chain.depleting]
 DEPLETING_KEYS = ("usable_j", "traction_efficiency", "recuperation_efficiency", "recuperation_limit_w",
@@ -59,12 +60,7 @@ def depleting_from_dict(doc: dict, where: str) -> Depleting:
     default to the chain's."""
     from sumo_drvpw.model.chain_toml import chain_from_dict
 
-    dep = doc["depleting"]
-    if not isinstance(dep, dict):
-        raise UserError(f"{where} [chain.depleting]: must be a table (a plug-in hybrid's battery)")
-    bad = set(dep) - set(DEPLETING_KEYS)
-    if bad:
-        raise UserError(f"{where} [chain.depleting]: unknown key(s) {sorted(bad)} (known: {', '.join(DEPLETING_KEYS)})")
+    dep = keyed_table(doc["depleting"], "chain.depleting", DEPLETING_KEYS, where, " (a plug-in hybrid's battery)")
     if doc.get("predicts") != "fuel" or doc.get("charge_sustaining") is not True:
         raise UserError(f"{where} [chain.depleting]: a plug-in hybrid's charge-depleting battery: only for "
                         "predicts = \"fuel\" with charge_sustaining = true (the hybrid it becomes once spent)")

@@ -11,7 +11,8 @@ from sumo_drvpw.errors import UserError
 from sumo_drvpw.model.chain import FUEL_REQUIRED, EnergyChain
 from sumo_drvpw.model.chain_buffer import usable_window
 from sumo_drvpw.model.chain_plugin import depleting_from_dict
-from sumo_drvpw.model.chain_values import Table, _efficiency, _nonneg, _number, engine_keys, provenance_table
+from sumo_drvpw.model.chain_values import (Table, _efficiency, _nonneg, _number, engine_keys, keyed_table,
+                                          provenance_table)
 from sumo_drvpw.model.constants import FUELS
 
 PREDICTS = ("wheel", "powertrain_output", "battery", "fuel")
@@ -98,12 +99,7 @@ def chain_from_dict(doc: dict, where: str = "<equation>") -> EnergyChain:
         raise UserError(f"{where} [chain.loads]: must be a table column → gain")
     kw["loads"] = {str(c): _nonneg(g, f"loads.{c}", where) for c, g in loads.items()}
     if "hvac" in doc:
-        h = doc["hvac"]
-        if not isinstance(h, dict):
-            raise UserError(f"{where} [chain.hvac]: must be a table")
-        bad = set(h) - set(HVAC_KEYS)
-        if bad:
-            raise UserError(f"{where} [chain.hvac]: unknown key(s) {sorted(bad)} (known: {', '.join(HVAC_KEYS)})")
+        h = keyed_table(doc["hvac"], "chain.hvac", HVAC_KEYS, where)
         if not isinstance(h.get("column", "ambient_c"), str) or not str(h.get("column", "ambient_c")).strip():
             raise UserError(f"{where} [chain.hvac]: 'column' must be a log column name (a string), "
                             f"got {h['column']!r}")

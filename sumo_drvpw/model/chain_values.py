@@ -137,6 +137,17 @@ def _nonneg(val, key: str, where: str, inf: bool = False) -> float:
     return x
 
 
+def keyed_table(value, name: str, keys, where: str, what: str = "") -> dict:
+    """An equation file's ``[name]`` table checked: a table (``what``: what it holds, said when it
+    is not) of ``keys`` only; a UserError naming ``where`` and the table otherwise."""
+    if not isinstance(value, dict):
+        raise UserError(f"{where} [{name}]: must be a table{what}")
+    bad = set(value) - set(keys)
+    if bad:
+        raise UserError(f"{where} [{name}]: unknown key(s) {sorted(bad)} (known: {', '.join(keys)})")
+    return value
+
+
 #: a provenance's keys read as lists (compare, run and export-vtype iterate them)
 PROVENANCE_LISTS = ("logs", "trip_signatures", "warnings")
 
