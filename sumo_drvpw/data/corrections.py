@@ -100,12 +100,13 @@ def gps_speed_scales(v, gps, t, trip_codes) -> tuple[np.ndarray, np.ndarray]:
           & (np.abs(a) < STEADY_ACCEL_MPS2))
     n_trips = int(codes.max()) + 1 if len(codes) else 0
     k, n = np.full(n_trips, np.nan), np.bincount(codes[ok], minlength=n_trips)
-    g, v, codes = g[ok], v[ok], codes[ok]
+    order = np.argsort(codes[ok], kind="stable")  # each trip's steady samples together, in their order
+    g, v = g[ok][order], v[ok][order]
     r = g / v
-    for c in np.flatnonzero(n):
-        i = codes == c
-        near = i & (np.abs(r - np.median(r[i])) <= GPS_SCALE_BAND)
-        k[c] = float(g[near].sum() / v[near].sum())
+    cuts = np.cumsum(n[n > 0])[:-1]  # (one pass over the samples, not one per trip)
+    for c, gi, vi, ri in zip(np.flatnonzero(n), np.split(g, cuts), np.split(v, cuts), np.split(r, cuts)):
+        near = np.abs(ri - np.median(ri)) <= GPS_SCALE_BAND
+        k[c] = float(gi[near].sum() / vi[near].sum())
     return k, n
 
 
