@@ -283,3 +283,59 @@ def test_a_traci_script_s_charge_wins_over_the_vtype_s_old_key(tmp_path):
     veh = _scripted(tmp_path, _vtype(_param("actualBatteryCapacity", 300)))
     assert veh.loc["added", "net_kwh"] == pytest.approx(0.100, rel=1e-9)
     assert veh.loc["t", "net_kwh"] == pytest.approx(0.300, rel=1e-9)
+
+
+@pytest.mark.sumo
+def test_a_replay_from_begin_says_the_plug_ins_driving_then_start_from_their_departure_charge(tmp_path):
+    """A replay from ``--begin 100`` (2.2 km into both trips): the two plug-ins driving then
+    (one declared half, one charged) spent some of their charge before it, which neither the
+    FCD nor the route files tell; each is booked from its charge at departure (its net kWh as
+    the whole run's) and counted and said once: ``driving_at_begin`` 2 and one warning; a car
+    departing after the begin is not counted. Without a declared charge at all (charges None)
+    the same. (Before: booked from the departure charge without a word.)"""
+    pytest.importorskip("libsumo")
+    import pandas as pd
+    from test_chain_battery_window import run_and_replay, write_equation
+
+    from sumo_drvpw.cli import main as cli_main
+
+    half_wh = U_J / 3600.0 / 2
+    late = _trip("late", "C").replace('depart="0"', 'depart="150"')
+    for declared in (True, False):
+        d = tmp_path / str(declared)
+        d.mkdir()
+        _road(d, f'<routes>{_vtype()}{_trip("full", "A")}'
+                 f'{_trip("half", "B", _param("device.battery.chargeLevel", half_wh) if declared else "")}{late}</routes>')
+        run_and_replay(d, [write_equation(d / "phev.toml", "phev", DOC, {"depleting": {**DEP, "usable_j": U_J}})])
+        assert cli_main(["fcd", str(d / "o" / "sumo" / "fcd.xml"), "--scenario", str(d / "s.toml"),
+                         "--begin", "100", "--out", str(d / "b")]) == 0
+        summary = json.loads((d / "b" / "summary.json").read_text(encoding="utf-8"))
+        assert summary["chain"]["departure_charge"]["driving_at_begin"] == 2
+        said = [w for w in summary["warnings"] if "driving at the run's first step" in w]
+        assert len(said) == 1 and said[0].startswith("2 plug-in hybrid vehicle(s)")
+        veh = pd.read_csv(d / "b" / "chain_vehicles.csv", dtype={"key": str}).set_index("key")
+        assert veh.loc["half", "net_kwh"] == pytest.approx(half_wh / 1000 if declared else U_J / 3.6e6, rel=1e-9)
+        whole = json.loads((d / "r" / "summary.json").read_text(encoding="utf-8"))  # from the start: none
+        assert "driving_at_begin" not in whole["chain"].get("departure_charge", {})
+        assert not [w for w in whole["warnings"] if "driving at the run's first step" in w]
+
+
+def test_dask_buckets_add_up_the_plug_ins_driving_at_begin():
+    """A replay from --begin on Dask: one bucket's plug-ins driving then, counted in a charges
+    record the bucket made (none declared), the other bucket's none: the merged ledger keeps
+    the count, whichever bucket comes first."""
+    from sumo_drvpw.model.chain_toml import chain_from_dict
+    from sumo_drvpw.sim.chain import ChainLedger
+    from sumo_drvpw.sim.chain_charge import book_departures
+    from sumo_drvpw.sim.fcd_dask import merge_ledgers
+    from sumo_drvpw.sim.ledger import Ledger
+
+    ch = chain_from_dict({**DOC, "depleting": {**DEP, "usable_j": U_J}})
+    leds = []
+    for vids, driving in ((["a"], False), (["b", "c"], True)):
+        led = Ledger(3, 1)
+        led.chain = ChainLedger(["phev"], [ch], 3)
+        book_departures(led.chain, np.arange(len(vids)), vids, ["h"] * len(vids), np.ones((len(vids), 1)), driving)
+        assert (led.chain.charges is not None) == driving
+        leds.append(led)
+    assert merge_ledgers(leds).chain.charges.summary()["driving_at_begin"] == 2

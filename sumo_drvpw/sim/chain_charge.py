@@ -14,6 +14,14 @@ key too (as a vType's other scenario keys win over its params), not a vehicle's 
 battery (U left). The energy spent at departure is then U − 3600 · charge [J];
 a charge that is not a number, negative or above U is refused, naming the vehicle, its vType,
 where the value was written and the key.
+
+A vehicle already driving at a run's first step — an FCD replay from ``--begin``, a run resuming
+a saved state — departed before it: what it spent since is in no FCD attribute nor route file
+(SUMO's FCD can write its battery device's ``device.battery.chargeLevel`` through
+``--fcd-output.params``, but for a plug-in's HBEFA class that device spends nothing: the value
+stays the declared one), so its charge then is not known. It is booked from its charge at
+departure (declared, else charged: an upper bound of what is left, its fuel a lower bound),
+counted (``driving_at_begin``) and said once (:func:`begin_warning`).
 """
 
 from __future__ import annotations
@@ -58,6 +66,8 @@ class DepartureCharges:
         self.told = dict(told or {})
         #: vehicles that departed with a declared charge, booked by a plug-in chain, and their Wh
         self.departed, self.charge_wh = 0, 0.0
+        #: vehicles a plug-in chain books that were driving at the run's first step (charge then unknown)
+        self.at_begin = 0
 
     @classmethod
     def of_files(cls, fv, scenario=None) -> "DepartureCharges":
@@ -92,15 +102,18 @@ class DepartureCharges:
             return typ[key][0], key, f"{typ[key][1]}: vType '{vtype}' (of vehicle '{vid}')"
         return None
 
-    def depart(self, chain, vidx, ids, veh_type, veh_app) -> None:
+    def depart(self, chain, vidx, ids, veh_type, veh_app, driving: bool = False) -> None:
         """Vehicle rows ``vidx`` (ids ``ids``) departed: each plug-in chain of ``chain`` (a
         :class:`~sumo_drvpw.sim.chain.ChainLedger`) that books one starts it with the energy
-        spent that its declared charge leaves, U − 3600 · charge [J]."""
+        spent that its declared charge leaves, U − 3600 · charge [J]. ``driving``: they were
+        driving already at the run's first step (module doc): counted in :attr:`at_begin`."""
         plug = [(a, e, chain.chains[e].depleting.usable_j) for a, e in enumerate(chain.active) if chain.plug_in(e)]
         if not plug or not len(vidx):
             return
         chain._grow(int(np.max(vidx)) + 1)
         for i, vid in zip(np.asarray(vidx, np.int64).tolist(), ids):
+            if driving and any(veh_app[i][e] > 0 for _, e, _ in plug):
+                self.at_begin += 1
             said = self.of(vid, veh_type[i])
             if said is None:
                 continue
@@ -120,13 +133,37 @@ class DepartureCharges:
 
     def summary(self) -> dict:
         """summary.json ``chain.departure_charge``."""
-        return {"vehicles": self.departed, "mean_charge_wh": round(self.charge_wh / self.departed, 6) if self.departed else None,
+        return {"vehicles": self.departed, **({"driving_at_begin": self.at_begin} if self.at_begin else {}),
+                "mean_charge_wh": round(self.charge_wh / self.departed, 6) if self.departed else None,
                 "declared_by": {"vehicles": len(self.vehicles), "flows": len(self.flows), "vtypes": len(self.vtypes),
                                 "scenario_vtypes": len(self.scenario), "script": len(self.told)},
                 "rule": f"a plug-in hybrid departs with the Wh of its usable energy its SUMO battery device would: "
                         f"param {OLD_CHARGE} (vehicle, else vType), else {CHARGE_LEVEL} (vehicle, else the scenario's "
                         f"[vtypes.<id>] {SCENARIO_KEY}, which replaces the vType's params, else vType); none: charged; "
                         "a TraCI script's Accountant.set_battery_charge before all"}
+
+
+def book_departures(chain, vidx, ids, veh_type, veh_app, driving: bool = False) -> None:
+    """The loop's call at departures: :meth:`DepartureCharges.depart` on ``chain.charges``,
+    made (empty) where none is declared but a plug-in chain books vehicles ``driving`` at the
+    run's first step, so they are counted and said (:func:`begin_warning`)."""
+    if chain.charges is None:
+        if not (driving and any(chain.plug_in(e) for e in chain.active)):
+            return
+        chain.charges = DepartureCharges()
+    chain.charges.depart(chain, vidx, ids, veh_type, veh_app, driving)
+
+
+def begin_warning(charges: DepartureCharges | None) -> list[str]:
+    """The warning, once, on the plug-in vehicles driving at the run's first step (module doc)."""
+    n = charges.at_begin if charges is not None else 0
+    if not n:
+        return []
+    return [f"{n} plug-in hybrid vehicle(s) were driving at the run's first step (an FCD replay from --begin, "
+            "or a resumed saved state): their battery charge then is not known (no FCD attribute nor route file "
+            "holds what they spent before), so each is booked from its charge at departure (declared, else "
+            "charged): their kWh are an upper bound, their fuel a lower bound (summary.json "
+            "chain.departure_charge.driving_at_begin; replay from the recording's start to book them whole)"]
 
 
 def _charge_wh(val, key: str, where: str) -> float:

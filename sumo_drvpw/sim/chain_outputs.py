@@ -8,6 +8,7 @@ from pathlib import Path
 
 from sumo_drvpw.model.constants import CABIN_WARMUP_TAU_S, FUEL_COLD_START_TAU_S, T_REF_C
 from sumo_drvpw.sim.chain import KWH, ChainLedger
+from sumo_drvpw.sim.chain_charge import begin_warning
 
 
 def _motors(chain: ChainLedger) -> list[int]:
@@ -104,7 +105,7 @@ def chain_warnings(chain: ChainLedger | None, chainless: dict | None = None,
                    + ": the demand exceeds the motor's torque or power, or leaves its loss map (a vType faster "
                    "or quicker than its motor: check maxSpeed and accel); booked at the motor's limits, with the "
                    "loss at the map's edge (summary.json chain.mmpevem_nan_steps)")
-    out += over_engine_warnings(chain)
+    out += over_engine_warnings(chain) + begin_warning(chain.charges)
     if chain.cold_start_on:  # fuel chains that drove but carry no cold-start fuel: booked warm, said
         drove = chain.edge_dist.sum(axis=0) > 0
         warm = [chain.names[e] for j, e in enumerate(chain.active) if drove[j] and chain.chains[e].predicts == "fuel"

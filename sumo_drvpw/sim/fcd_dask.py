@@ -145,8 +145,11 @@ def merge_ledgers(ledgers: list):
             a.booked_any = a.booked_any | b.booked_any
             a.cold_starts += b.cold_starts
             a.cold_starts_expected += b.cold_starts_expected
-            if a.charges is not None and b.charges is not None:  # plug-ins departing with a declared charge
+            if a.charges is None:  # (a bucket's plug-ins driving at --begin make one: sim/chain_charge.book_departures)
+                a.charges = b.charges
+            elif b.charges is not None:  # plug-ins departing with a declared charge, or driving at --begin
                 a.charges.departed, a.charges.charge_wh = a.charges.departed + b.charges.departed, a.charges.charge_wh + b.charges.charge_wh
+                a.charges.at_begin += b.charges.at_begin
             a.snapshots = [(s[0], s[1] + o[1]) for s, o in zip(a.snapshots, b.snapshots)]
             for c, (q, m) in b.flushed_class.items():
                 acc = a.flushed_class.setdefault(c, [np.zeros((a.E, a.Q)), np.zeros(a.A)])

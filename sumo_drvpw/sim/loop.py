@@ -23,6 +23,7 @@ import numpy as np
 
 from sumo_drvpw.model.constants import G
 from sumo_drvpw.model.terms import Inputs
+from sumo_drvpw.sim.chain_charge import book_departures
 from sumo_drvpw.sim.dynamics import whole_second
 from sumo_drvpw.sim.ledger import EquationSet, Ledger
 from sumo_drvpw.sim.network import LaneNumbers, Network
@@ -375,8 +376,8 @@ class Stepper:
         if starts and ledger.chain is not None and ledger.chain.cold_start_on \
                 and not (ledger.steps == 1 and (self.replay_info.get("skipped") or self.resumed)):
             ledger.chain.depart(starts, start_ids, ledger.veh_type, ledger.veh_class)
-        if starts and getattr(ledger.chain, "charges", None) is not None:  # a plug-in's charge (sim/chain_charge.py)
-            ledger.chain.charges.depart(ledger.chain, starts, start_ids, ledger.veh_type, ledger.veh_app)
+        if starts and ledger.chain is not None:  # a plug-in's charge (sim/chain_charge.py; driving: unknown)
+            book_departures(ledger.chain, starts, start_ids, ledger.veh_type, ledger.veh_app, bool(joined))
         self.riders.step(ledger, vmap, departed)
         if self.parking.on and self.parking.step(ledger, vmap, t_now, dt):
             self.prev_ids = None  # the selection of vehicles read changes
