@@ -378,3 +378,68 @@ def test_an_energy_model_vtype_s_rotating_mass_stays_fixed_after_a_setmass(tmp_p
     assert not nan and sumo_wh["v"] > 200.0
     booked = res.chain_vehicles().set_index("vehicle").loc["v", "net_kwh"] * 1000.0
     assert booked == pytest.approx(sumo_wh["v"], rel=1e-6)
+
+
+#: a vehicle's mass set twice by vType changes, and a setMass then a setType (after step k, 0-based):
+#: v car → heavy → light (its drvpw.mass), x car → heavy → car, w setMass then setType off its
+#: copy alone (SUMO drops the copy: one vType fewer), y the same in the step a setMass on x makes
+#: a copy (SUMO's vType count unchanged)
+TWICE = """<routes>
+  <vType id="car" vClass="passenger" mass="1500" sigma="0"/>
+  <vType id="heavy" vClass="passenger" mass="2500" sigma="0"/>
+  <vType id="light" vClass="passenger" mass="1000" sigma="0"><param key="drvpw.mass" value="1100"/></vType>
+  <route id="east" edges="e01 e12 e23"/>
+  <vehicle id="v" type="car" route="east" depart="0" departSpeed="0"/>
+  <vehicle id="w" type="car" route="east" depart="3" departSpeed="0"/>
+  <vehicle id="x" type="car" route="east" depart="5" departSpeed="0"/>
+  <vehicle id="y" type="car" route="east" depart="7" departSpeed="0"/>
+</routes>"""
+TWICE_CALLS = {20: [("setType", "v", "heavy"), ("setType", "x", "heavy")],
+               60: [("setType", "v", "light"), ("setMass", "w", 900.0), ("setMass", "y", 1200.0)],
+               90: [("setType", "x", "car")], 110: [("setType", "w", "heavy")],
+               120: [("setType", "y", "heavy"), ("setMass", "x", 1800.0)]}
+
+
+def test_a_mass_set_twice_in_a_trip_is_booked_as_live_in_the_replay(tmp_path):
+    """Two vType changes in a trip (each read at the live run's vType checks, the second too),
+    and a setType off a vehicle's own copy — alone, and in the step another vehicle's setMass
+    makes a copy —: the live run books each new vType's mass (before: a TraCIException, the
+    dropped copy's mass read, a traceback); the replay of its FCD, told the copies' masses
+    (an FCD names a copy, not its mass), books every vehicle as live (before: the second vType
+    change read 12.5 s early — the first row naming 'light' —, v's traction 2.6 % above
+    live's, measured 2026-11-30)."""
+
+    def after(conn, k):
+        for f, *a in TWICE_CALLS.get(k, []):
+            getattr(conn.vehicle, f)(*a)
+
+    (tmp_path / "r.rou.xml").write_text(TWICE, encoding="utf-8")
+    s = tmp_path / "s.toml"
+    s.write_text(f'equations = ["vsp_ldv1999"]\n[sumo]\nnet = "{NET}"\nroutes = ["r.rou.xml"]\nbegin = 0\nend = 70\n'
+                 f'step_length = {DT}\noptions = ["--no-warnings", "true", "--fcd-output", "{tmp_path / "fcd.xml"}", '
+                 '"--precision", "6"]\n', encoding="utf-8")
+    live = _live_with_fcd(tmp_path, after)
+    (tmp_path / "told.toml").write_text(s.read_text(encoding="utf-8") + '[vtypes."car@w"]\nmass_kg = 900\n'
+                                        '[vtypes."car@y"]\nmass_kg = 1200\n[vtypes."car@x"]\nmass_kg = 1800\n',
+                                        encoding="utf-8")
+    rep = process_fcd(tmp_path / "fcd.xml", scenario=tmp_path / "told.toml", equations=[PHYS], figures=False)
+    a, b = live.vehicles.set_index("vehicle").sort_index(), rep.vehicles.set_index("vehicle").sort_index()
+    assert a.vtype.to_dict() == b.vtype.to_dict() == {"v": "light", "w": "heavy", "x": "car", "y": "heavy"}
+    assert a.mass_kg.to_dict() == b.mass_kg.to_dict() == {"v": 1100.0, "w": 2500.0, "x": 1800.0, "y": 2500.0}
+    for c in ("traction_roll_j", "traction_acc_j", "traction_total_j", "distance_m"):
+        np.testing.assert_allclose(b[c], a[c], rtol=1e-6, err_msg=c)
+
+
+def _live_with_fcd(d: Path, after):
+    """The Accountant in a script's loop on ``d/s.toml`` (its FCD written): its result."""
+    sc = load_scenario(d / "s.toml")
+    conn = start_sumo(sc.sumo_args)
+    try:
+        acc = Accountant(conn, scenario=sc, equations=[PHYS])
+        for k in range(140):
+            conn.simulationStep()
+            acc.step()
+            after(conn, k)
+        return acc.result()
+    finally:
+        close_sumo(conn)

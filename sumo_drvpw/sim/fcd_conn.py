@@ -117,10 +117,13 @@ class _VType(_Domain):
             m = SUMO_DEFAULT_TYPE_MASS_KG["DEFAULT_CONTAINERTYPE" if box else "DEFAULT_PEDTYPE"]
         return m
 
-    def getIDList(self):  # noqa: N802 (the vTypes the rows named so far: a vehicle's own copy
-        seen = self.__dict__.setdefault("_seen", set())  # <type>@<id> adds one, as in SUMO)
-        seen.update(self.r.types.values())
-        return tuple(seen)
+    def getIDList(self):  # noqa: N802 (as SUMO's: the route files' vTypes, loaded from the start —
+        seen = self.__dict__.setdefault("_seen", set())  # a setType to one read when live reads it —
+        seen.update(self.r.type_mass)  # and those the rows named so far; a vehicle's own copy
+        now = self.r.types  # <type>@<id> while its vehicle is on it: SUMO drops it at a setType or the end
+        copies = {t for v, t in now.items() if t.endswith("@" + v)}
+        seen.update(set(now.values()) - copies)
+        return tuple(seen | copies)
 
     def getIDCount(self):  # noqa: N802
         return len(self.getIDList())

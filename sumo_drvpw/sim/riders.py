@@ -87,12 +87,19 @@ class Riders:
             self.update(ledger, vmap, [*departed, *ending, *self.at_stop])
 
 
+def _copy_of(vt: str, at: dict) -> int | None:
+    """``at``'s value (a row of the vehicles read) of the vehicle whose own copy ``vt``
+    (``<type>@<id>``) is, None for another vType or a vehicle not read."""
+    return next((at[v] for k, c in enumerate(vt) if c == "@" and (v := vt[k + 1:]) in at), None)
+
+
 class OwnCopies:
     """Masses a script sets on running vehicles (``vehicle.setMass``; ``Stepper.own``):
     SUMO gives the vehicle its own copy of its vType, ``<type>@<id>``, and books the new
     mass from the next step. The copy adds one vType to SUMO's, so a changed vType count
     (one call a step) has the loop read in that step the vTypes of the vehicles whose copy
-    SUMO's vType list gained (:meth:`_check_new`), not only every ``TYPE_CHECK_STEPS``; a vehicle on its own copy has its mass read every step, as
+    SUMO's vType list gained (:meth:`_check_new`), or lost (a ``setType`` off a copy, which SUMO
+    drops), not only every ``TYPE_CHECK_STEPS``; a vehicle on its own copy has its mass read every step, as
     a script may set it again without a new copy (:meth:`VTypeResolver.own_mass`). An FCD
     replay answers the count and the list from the vTypes its rows named (sim/fcd_conn.py)."""
 
@@ -103,13 +110,14 @@ class OwnCopies:
         self.ids: set[str] | None = None  # SUMO's vType ids at the first step and each change of their count
         #: live: the vehicle's mass getter (a replay's copies carry none: told by the scenario)
         self.mass = None if is_replay or self.count is None else getattr(conn.vehicle, "getMass", None)
-        #: vehicle id → (its copy, the copy's mass last read [kg])
+        self.replay = is_replay
+        #: vehicle id → (its copy, the copy's mass last read [kg]; a replay's: NaN)
         self.on_copy: dict[str, tuple[str, float]] = {}
 
     def track(self, vid: str, copy: str) -> None:
         """Vehicle ``vid`` runs on its own copy ``copy`` from now on."""
-        if self.mass is not None:
-            self.on_copy[vid] = (copy, float(self.mass(vid)))
+        if self.mass is not None or self.replay:
+            self.on_copy[vid] = (copy, float(self.mass(vid)) if self.mass is not None else np.nan)
 
     def step(self, st, kids, vidx) -> None:
         """Once per step, after it was made, for the vehicles read (``kids``, rows ``vidx``)."""
@@ -127,8 +135,18 @@ class OwnCopies:
             if i is None or ledger.veh_done[i] or f"{ledger.veh_type[i]}@{vid}" != copy:
                 del self.on_copy[vid]  # gone, or a new trip under its id
                 continue
+            if self.mass is None:  # a replay: its rows name the vType, as live the mass tells a setType
+                if st.conn.types.get(vid, copy) != copy:  # off the copy (below)
+                    st.check_types([vid], np.array([i]))
+                    del self.on_copy[vid]
+                continue
             now = st.reader.mass_of(vid)  # (traci: the subscription's, no round trip)
             now = float(self.mass(vid) if now is None else now)
+            if now != m and st.conn.vehicle.getTypeID(vid) != copy:  # a setType off its copy: SUMO
+                st.check_types([vid], np.array([i]))  # dropped the copy; the new vType's mass (check_types)
+                if f"{ledger.veh_type[i]}@{vid}" != copy:
+                    del self.on_copy[vid]
+                    continue
             if now != m:
                 self.on_copy[vid] = (copy, now)
                 own = getattr(st.resolve, "own_mass", None)  # (a VTypeResolver's)
@@ -149,12 +167,12 @@ class OwnCopies:
             st.check_types(kids, vidx)
             return
         at = {vid: j for j, vid in enumerate(kids)}
-        sel = []
-        for vt in now - before:
+        sel = [j for vt in before - now if (j := _copy_of(vt, at)) is not None]  # a copy SUMO dropped: a
+        for vt in now - before:  # setType off it (a vehicle gone: not read)
             if "@" not in vt:
                 st.check_types(kids, vidx)
                 return
-            j = next((at[v] for k, c in enumerate(vt) if c == "@" and (v := vt[k + 1:]) in at), None)
+            j = _copy_of(vt, at)
             if j is not None:  # (a copy of a vehicle not read in this step: read when it is)
                 sel.append(j)
         if sel:
