@@ -1428,9 +1428,18 @@ def _(d):  # a flag: true/false read as 1/0
 
 
 _map_case("GPS speed named in km/h", MAP_OK + '[columns."t2"]\nname = "gps_speed_kmh"\nunit = "km/h"\n',
-          ("columns.t2.name", "'gps_speed_kmh'", "'gps_speed_mps'"))  # was written in m/s under that name, exit 0
+          ("columns.t2.name", "'gps_speed_kmh'", 'name = "gps_speed_mps" with unit = "km/h"'))  # was written in m/s under that name, exit 0
 _map_case("temperature named in K", MAP_OK + '[columns."t2"]\nname = "coolant_k"\nunit = "K"\n',
-          ("columns.t2.name", "'coolant_k'", "'coolant_c'"))  # was written in °C under that name, exit 0
+          ("columns.t2.name", "'coolant_k'", 'name = "coolant_c" with unit = "K"'))  # was written in °C under that name, exit 0
+# suffixes read as their unit (test_unit_names.py): a name saying another unit than the value's
+_map_case("speed named km_h", MAP_OK + '[columns."t2"]\nname = "wheel_km_h"\nunit = "km/h"\n',
+          ("columns.t2.name", 'name = "wheel_mps" with unit = "km/h"'))  # was written in m/s under that name, exit 0
+_map_case("name says a power, unit a speed", MAP_OK + '[columns."t2"]\nname = "heater_kw"\nunit = "km/h"\n',
+          ("columns.t2", "'heater_kw'", "'km/h'", 'name = "heater_w"'))  # was converted as km/h, exit 0
+_map_case("canonical speed in kW", MAP_OK.replace('unit = "km/h"', 'unit = "kW"'),
+          ("columns.v", "'kW'", "write unit = one of", '"km/h"'))  # was told to rename speed_mps
+_map_case("speed mapped as speed_kmh", MAP_OK.replace('name = "speed_mps"', 'name = "speed_kmh"'),
+          ("columns.v.name", 'write name = "speed_mps" with unit = "km/h"'))
 
 
 @case("toml-mapping", "GPS speed in km/h given no unit", ("columns.g.name 'gps_speed_kmh' is not read as a GPS speed",

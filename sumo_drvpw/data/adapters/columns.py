@@ -50,13 +50,14 @@ import pandas as pd
 
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fileio import read_toml
-from sumo_drvpw.data.adapters._common import (CANONICAL, DIMENSIONS, clean_time_and_speed,
+from sumo_drvpw.data.adapters._common import (clean_time_and_speed,
                       expand_paths, generic_name, lookup_unit, new_report, numeric, read_csv_strict,
                       read_each, unique_names, UNITS)
 
 from sumo_drvpw.data.adapters import labels as candidate_labels
 from sumo_drvpw.data.adapters.timestamps import _seconds, to_datetimes
 from sumo_drvpw.data.adapters.trip_names import qualify_shared_trips
+from sumo_drvpw.data.adapters.unit_names import _entry, _name_note
 from sumo_drvpw.data.log import FLAGS
 from sumo_drvpw.data.adapters.header_hints import close_label, header_cells, no_header_hint, skip_hint
 from sumo_drvpw.data.adapters.isotp import LAYOUTS as ISOTP_LAYOUTS
@@ -68,7 +69,6 @@ OPTIONS = {"sep", "encoding", "decimal", "time_unit", "time_format", "na_values"
 #: the largest battery options.soc_capacity_kwh accepts [kWh] (a heavy truck's is about 1 MWh)
 MAX_SOC_CAPACITY_KWH = 2000.0
 ENTRY = {"name", "unit", "scale", "role", "na_values", "valid", *candidate_labels.KEYS}
-SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 
 
 def load_mapping(path, mdf: bool = False) -> dict:
@@ -280,61 +280,6 @@ def mapping_roles(path) -> dict[str, str]:
     if path is None:
         return {}
     return {e["name"]: e["role"] for e in load_mapping(path, mdf=True)["columns"].values() if "role" in e}
-
-
-def _entry(p, key, name, unit, scale) -> dict:
-    """Conversion of one mapped column: (kind, factor, offset) checked against the name's suffix."""
-    if name == "trip_id":
-        return {"name": name, "kind": "text", "factor": 1.0, "offset": 0.0}
-    if name == "time_s" and unit.strip().lower() == "datetime":
-        return {"name": name, "kind": "datetime", "factor": 1.0, "offset": 0.0}
-    u = lookup_unit(unit)
-    if u is None:
-        raise UserError(f"{p}: {key}.unit '{unit}' is not a known unit (e.g. km/h, mph, m/s, ft, "
-                        "°F, K, rpm, kW, lbf, …)")
-    dim, f, o = u
-    if unit.strip().lower() == "text":
-        return {"name": name, "kind": "text", "factor": 1.0, "offset": 0.0}
-    suffix = name.rsplit("_", 1)[-1] if "_" in name else ""
-    if dim == "angle" and suffix == "deg":
-        f = f * 180.0 / math.pi
-    elif suffix in SUFFIX_DIM and dim != "dimensionless" and SUFFIX_DIM[suffix] != dim:
-        raise UserError(f"{p}: {key}: unit '{unit}' is a {dim}, but name '{name}' ends in "
-                        f"'_{suffix}' ({SUFFIX_DIM[suffix]}); use a name ending in '_{DIMENSIONS[dim]}'")
-    elif name in CANONICAL and dim == "dimensionless" and suffix in SUFFIX_DIM:
-        raise UserError(f"{p}: {key}: '{name}' needs a {SUFFIX_DIM[suffix]} unit, got '{unit}'")
-    elif suffix and dim != "dimensionless" and suffix != DIMENSIONS[dim] and (lookup_unit(suffix) or ("",))[0] == dim \
-            and not _si_spelling(suffix):
-        # ('gps_speed_kmh' with unit km/h: written in m/s under a name that says km/h; 'coolant_celsius'
-        # names the °C it holds by another spelling)
-        raise UserError(f"{p}: {key}.name '{name}' ends in '_{suffix}', but the {dim} is written in "
-                        f"'{DIMENSIONS[dim]}' (names end in their SI unit): name it '{name[:-len(suffix)]}{DIMENSIONS[dim]}'")
-    return {"name": name, "kind": "number", "factor": f * scale, "offset": o * scale}
-
-
-def _si_spelling(word: str) -> bool:
-    """``word`` spells a dimension's SI unit ('celsius', 'percent', 'sec', 'volt': the value
-    written under a name ending in it is in the unit it says)."""
-    u = lookup_unit(word)
-    return u is not None and u[0] != "dimensionless" and u[1:] == (1.0, 0.0)
-
-
-def _name_note(key: str, name: str, unit: str | None) -> str | None:
-    """What a mapped number's name leaves unsaid: a quantity written in its SI unit under a name
-    without it ('gps_speed' from km/h: in m/s, and not read as a GPS speed, which only a
-    ``gps_speed…_mps`` column is), or None."""
-    dim = (lookup_unit(unit) or ("dimensionless",))[0] if unit is not None else "dimensionless"
-    suffix = name.rsplit("_", 1)[-1] if "_" in name else ""
-    gps = name.startswith("gps_speed") and not name.endswith("_mps")
-    if (dim == "dimensionless" and not gps) or suffix == DIMENSIONS.get(dim) or (dim == "angle" and suffix == "deg") \
-            or (dim != "dimensionless" and not gps and _si_spelling(suffix) and lookup_unit(suffix)[0] == dim):
-        return None
-    if dim == "dimensionless":  # ('gps_speed_kmh' without a unit: kept as it is, in no speed the log reads)
-        stem = name[:-len(suffix) - 1] if suffix and lookup_unit(suffix) else name
-        return (f"{key}.name '{name}' is not read as a GPS speed (only a gps_speed…_mps column is, in m/s): give "
-                f"its unit and name it '{stem}_mps'")
-    return (f"{key}.name '{name}' has no unit suffix: written in '{DIMENSIONS[dim]}' from '{unit}'; "
-            + ("not read as a GPS speed (only gps_speed…_mps is); " if gps else "") + f"name it '{name}_{DIMENSIONS[dim]}' to say so")
 
 
 def _read_table(path: Path, m: dict) -> pd.DataFrame:

@@ -173,7 +173,7 @@ def _numbers(sig, path: Path, label: str) -> np.ndarray:
 
 def _conversion(m: dict, label: str, file_unit: str, path: Path) -> dict:
     """A mapped label's conversion: the mapping's unit, else the channel's unit in the file."""
-    from sumo_drvpw.data.adapters.columns import _entry
+    from sumo_drvpw.data.adapters.unit_names import _entry
 
     e = m["columns"][label]
     if e["unit"] is not None:
