@@ -1021,6 +1021,41 @@ def _fcd_replay(d: Path, emission_class: str, attrs: str = "") -> list[str]:
             "--out", str(d / "o")]
 
 
+def _fcd_bare(d: Path) -> Path:
+    """An FCD whose header names no route or additional file (the _fcd_replay truck's rows)."""
+    _fcd_replay(d, "HBEFA4/RT_le7.5t_Euro-VI_A-C")
+    return d / "fcd.xml"
+
+
+# an empty file name (a shell variable left unset): was read as the working folder — '--vtypes ""'
+# said 'vType file not found: <cwd>', '--scenario ""' '. is a folder', '--out ""' 'holds the input'
+for _opt in ("--vtypes", "--net", "--scenario", "--equation", "--out"):
+    @case("options", f"fcd {_opt} empty", (_opt, "empty path", "''"))
+    def _(d, _opt=_opt):
+        net = ["--net", str(CITY_NET)] if _opt != "--net" else ["--equation", "vsp_ldv1999"]
+        out = ["--out", str(d / "o")] if _opt != "--out" else []
+        return ["fcd", str(_fcd_bare(d)), *net, "--no-figures", "--no-progress", _opt, "", *out]
+
+
+@case("options", "fcd --vtypes a folder", ("vType file is a folder",))
+def _(d):  # was 'vType file not found: <the folder>'
+    (d / "types").mkdir()
+    return ["fcd", str(_fcd_bare(d)), "--net", str(CITY_NET), "--vtypes", str(d / "types"), "--no-figures", "--no-progress",
+            "--out", str(d / "o")]
+
+
+@case("options", "fcd --net a folder", ("SUMO network is a folder",))
+def _(d):  # was '<scenario>: SUMO network not found: <the folder>'
+    (d / "nets").mkdir()
+    return ["fcd", str(_fcd_bare(d)), "--net", str(d / "nets"), "--equation", "vsp_ldv1999", "--no-figures", "--no-progress",
+            "--out", str(d / "o")]
+
+
+@case("options", "fcd header of no route file, no --vtypes", ("no vType file", "passenger"), expect="accept")
+def _(d):  # every vehicle a passenger car, said
+    return ["fcd", str(_fcd_bare(d)), "--net", str(CITY_NET), "--no-figures", "--no-progress", "--out", str(d / "o")]
+
+
 @case("options", "fcd vType emissionClass of a 0-t weight band", ("t.rou.xml", "tk", "HBEFA4/RT_le0t_Euro-VI_A-C"))
 def _(d):  # was booked at 0 kg: the default truck mass 'capped at its emissionClass's gross weight' (4c53a24)
     return _fcd_replay(d, "HBEFA4/RT_le0t_Euro-VI_A-C")

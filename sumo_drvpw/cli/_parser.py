@@ -36,6 +36,14 @@ def _given_once(base):
     return Once
 
 
+def path_arg(value: str) -> str:
+    """A file or folder argument: an empty or blank one ('--vtypes ""', a shell variable left
+    unset) names no file — refused, not read as the working folder."""
+    if not value.strip():
+        raise argparse.ArgumentTypeError(f"an empty path ({value!r} names no file)")
+    return value
+
+
 class _Parser(argparse.ArgumentParser):
     def __init__(self, *a, **kw):
         super().__init__(*a, **kw)

@@ -12,24 +12,25 @@ import argparse
 
 from sumo_drvpw.cli import (add_cold_start, add_force, check_air_temperature, check_period,
                             cold_start_override, output_set, sumo_time_arg)
+from sumo_drvpw.cli._parser import path_arg
 from sumo_drvpw.cli._scale import add_engine_arguments, check_engine_arguments
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("fcd", metavar="FCD_FILE",
+    parser.add_argument("fcd", metavar="FCD_FILE", type=path_arg,
                         help="SUMO --fcd-output file (.xml, .xml.gz, .parquet, .csv), or "
                              "partitioned Parquet FCD: a folder or a quoted glob ('fcd/*.parquet'); "
                              "--precision 6 keeps speeds exact")
-    parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    parser.add_argument("--net", metavar="NET", help="the network the FCD was recorded on "
+    parser.add_argument("--out", required=True, metavar="DIR", type=path_arg, help="output directory")
+    parser.add_argument("--net", metavar="NET", type=path_arg, help="the network the FCD was recorded on "
                         "(default: the scenario's, else the one the XML FCD's header names)")
-    parser.add_argument("--scenario", metavar="S.toml|X.sumocfg",
+    parser.add_argument("--scenario", metavar="S.toml|X.sumocfg", type=path_arg,
                         help="scenario (or the run's SUMO config) for equations, vTypes (masses, "
                              "vClasses) and options")
-    parser.add_argument("--vtypes", action="append", metavar="FILE",
+    parser.add_argument("--vtypes", action="append", metavar="FILE", type=path_arg,
                         help="route/additional file(s) with the vTypes (default: the scenario's, else "
                              "those the XML FCD's header names)")
-    parser.add_argument("--equation", action="append", metavar="NAME_OR_FILE",
+    parser.add_argument("--equation", action="append", metavar="NAME_OR_FILE", type=path_arg,
                         help="evaluate these equations instead of the scenario's (repeatable; "
                              "default without a scenario: the built-in equations of every vClass)")
     parser.add_argument("--begin", type=sumo_time_arg, help="ignore timesteps before this [s, or h:m:s]")

@@ -103,6 +103,8 @@ def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, fcd_
         vtype_files = vtype_files if vtype_files is not None else (rec.get("files") or None)
     if scenario is None and net is None:
         raise UserError("FCD: give the network the FCD was recorded on, or a scenario")
+    if net is not None and not Path(net).is_file():  # (before the scenario made of it names it)
+        raise UserError(f"SUMO network {'is a folder, not a file' if Path(net).is_dir() else 'not found'}: {Path(net).resolve()}")
     if equations is not None:
         overrides["equations"] = list(equations)
     if scenario is not None:
@@ -113,15 +115,12 @@ def fcd_scenario(net=None, scenario=None, equations=None, vtype_files=None, fcd_
         sc = load_scenario(doc={"sumo": {"net": str(net)}}, **overrides)  # equations: the run's own
     changes = {"positions": "getter"}
     if net is not None:
-        p = Path(net)
-        if not p.is_file():
-            raise UserError(f"SUMO network not found: {p}")
-        changes["net_file"] = p.resolve()
+        changes["net_file"] = Path(net).resolve()
     if vtype_files:
         files = [Path(f).resolve() for f in vtype_files]
         for f in files:
             if not f.is_file():
-                raise UserError(f"vType file not found: {f}")
+                raise UserError(f"vType file {'is a folder (give its route or additional files)' if f.is_dir() else 'not found'}: {f}")
         changes["route_files"] = files
     return dataclasses.replace(sc, **changes)
 
