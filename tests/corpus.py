@@ -961,6 +961,100 @@ def _(d):
     return _cal(write(d, "log.parquet", df), d, "--target", "fuel", "--hvac", "ambient_c:20")
 
 
+def _fuel_log(d: Path, gps: bool = False) -> Path:
+    """base_log with a fuel flow (and a GPS speed 2 % above the speed): a fuel target's log."""
+    df = base_log()
+    df["fuel_rate_lph"] = 0.6 + df["power_w"].clip(lower=0) / 9000.0
+    if gps:
+        df["gps_speed_mps"] = df["speed_mps"] * 1.02
+    return write(d, "log.parquet", df)
+
+
+# the newest options, each value a round of bad input (2026-11-30): one line naming the option and value
+for _v, _needles in (("0", ("--speed-scale 0", "20%")), ("-1", ("--speed-scale -1",)), ("nan", ("--speed-scale nan",)),
+                     ("inf", ("--speed-scale inf", "finite")), ("abc", ("--speed-scale abc", "gps:COLUMN")),
+                     ("gps:nope", ("--speed-scale gps:nope", "gps_speed")), ("", ("--speed-scale", "give gps"))):
+    @case("options", f"calibrate --speed-scale {_v!r}", _needles)
+    def _(d, _v=_v):
+        return _cal(_fuel_log(d, gps=True), d, "--target", "fuel", "--speed-scale", _v)
+
+
+@case("options", "calibrate --speed-scale gps:COLUMN not in the log", ("log.parquet", "--speed-scale gps:gps_speed_x_mps",
+                                                                       "gps_speed_mps"))
+def _(d):  # was "speed scale 'gps:gps_speed_x_mps'": not the option as typed
+    return _cal(_fuel_log(d, gps=True), d, "--target", "fuel", "--speed-scale", "gps:gps_speed_x_mps")
+
+
+@case("options", "calibrate --speed-scale gps, no GPS speed", ("log.parquet", "--speed-scale gps", "gps_speed…_mps"))
+def _(d):
+    return _cal(_fuel_log(d), d, "--target", "fuel", "--speed-scale", "gps")
+
+
+@case("options", "equation [measurement] speed_scale of a column not in the log",
+      ("log.parquet", "eq.toml [measurement] speed_scale", "gps_speed_x_mps"))
+def _(d):  # was "speed scale 'gps:…'": not the equation file nor its key
+    eq = text(d, "eq.toml", '[equation]\nname = "rl"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = 0.4\n[chain]\n'
+                            'predicts = "fuel"\n[measurement]\nspeed_scale = "gps:gps_speed_x_mps"\n')
+    return ["calibrate", str(_fuel_log(d)), "--target", "fuel", "--equation", str(eq), "--out", str(d / "o.toml")]
+
+
+for _v in ("0", "-1", "true", '"1.02"', "nan", "[1]"):
+    @case("equation", f"[measurement] speed_scale = {_v}", ("eq.toml [measurement] speed_scale",))
+    def _(d, _v=_v):
+        eq = text(d, "eq.toml", '[equation]\nname = "rl"\n[terms]\nacc = 1.0\nv1 = 150.0\nv3 = 0.4\n[chain]\n'
+                                f'predicts = "fuel"\n[measurement]\nspeed_scale = {_v}\n')
+        return ["calibrate", str(_fuel_log(d)), "--target", "fuel", "--equation", str(eq), "--out", str(d / "o.toml")]
+
+
+for _v in ("0", "-5", "nan", "inf"):
+    @case("options", f"calibrate --fit-window {_v}", (f"--fit-window {_v}", "positive"))
+    def _(d, _v=_v):
+        return _cal(_fuel_log(d), d, "--target", "fuel", "--fit-window", _v)
+
+
+@case("options", "calibrate --fit-window longer than the trips", ("--fit-window: windows of 1e+09 s", "too few"))
+def _(d):  # was "energy chain: windows of 1e+09 s": not the option
+    return _cal(_fuel_log(d), d, "--target", "fuel", "--fit-window", "1e9")
+
+
+@case("options", "calibrate --fit-window shorter than two samples", ("--fit-window: windows of 0.01 s", "per-sample"))
+def _(d):  # was accepted: one sample a window, the per-sample fit labelled 'fitted on means over windows of 0.01 s'
+    return _cal(_fuel_log(d), d, "--target", "fuel", "--fit-window", "0.01")
+
+
+@case("options", "calibrate --fit-window with --engine-max profile", ("--fit-window 30", "--engine-max profile"))
+def _(d):
+    return _cal(_fuel_log(d), d, "--target", "fuel", "--fit-window", "30", "--engine-max", "profile")
+
+
+@case("options", "calibrate --fit-window nan with --engine-max profile", ("--fit-window nan",))
+def _(d):
+    return _cal(_fuel_log(d), d, "--target", "fuel", "--fit-window", "nan", "--engine-max", "profile")
+
+
+for _v in ("max", "Profile", "none", ""):
+    @case("options", f"calibrate --engine-max {_v!r}", ("--engine-max", f"'{_v}'", "declared", "profile"))
+    def _(d, _v=_v):
+        return _cal(_fuel_log(d), d, "--target", "fuel", "--engine-max", _v)
+
+
+def _charge_run(d: Path, value: str) -> list[str]:
+    """A plug-in hybrid on the built-in city (the built-in plug-in chain) whose scenario says its
+    vType's charge at departure, ``[vtypes.h] battery_charge_wh = value``; ``run`` for 20 s."""
+    text(d, "r.rou.xml", '<routes><vType id="h" vClass="passenger" emissionClass="HBEFA4/PC_PHEV_petrol_Euro-6d_(P)"/>'
+                         '<vehicle id="v" type="h" depart="0"><route edges="c00c10"/></vehicle></routes>\n')
+    s = text(d, "s.toml", f'equations = ["epa_gasoline_phev_car"]\n[sumo]\nnet = "{CITY_NET.as_posix()}"\n'
+                          f'routes = ["r.rou.xml"]\nend = 20\n[outputs]\nfigures = false\n'
+                          f'[vtypes.h]\nbattery_charge_wh = {value}\n')
+    return ["run", str(s), "--out", str(d / "run")]
+
+
+for _v, _said in (("-5", "≥ 0"), ('"abc"', "'abc'"), ("true", "True"), ("nan", "nan"), ("1e9", "above the usable energy")):
+    @case("options", f"scenario battery_charge_wh = {_v}", ("s.toml", "battery_charge_wh", _said))
+    def _(d, _v=_v):
+        return _charge_run(d, _v)
+
+
 @case("options", "calibrate --load of a temperature column", ("--load coolant_c",))
 def _(d):
     df = base_log()

@@ -501,7 +501,8 @@ _FLAGS = (("speed_unit", "declare the unit (speed unit km/h or m/s)",
            "declare the unit (--speed-unit km/h, or --speed-unit m/s to keep it)"),
           ("speed_unit", "read it with speed unit km/h", "read it with --speed-unit km/h"),
           ("exclude_dropouts", "cannot be told from a held value",
-           "cannot be told from a held value (--no-exclude-dropouts keeps them)"))
+           "cannot be told from a held value (--no-exclude-dropouts keeps them)"),
+          ("fit_window", "energy chain: windows of ", "--fit-window: windows of "))
 
 
 #: the same for a [measurement] setting a library message names with its value: the flag that sets it
@@ -519,6 +520,13 @@ def _as_typed(msg: str, args) -> str:
     for attr, said, typed in _SETTINGS:
         if hasattr(args, attr):
             msg = re.sub(said, typed, msg)
+    if hasattr(args, "speed_scale") and re.search(r"speed scale '[^']*'", msg):  # where it was said
+        from sumo_drvpw.cli._measurement import speed_scale_origin
+
+        src = speed_scale_origin(args)
+        if src is not None:
+            msg = re.sub(r"speed scale '([^']*)'", lambda m: f"{src} {m[1]}" if src.startswith("--")
+                         else f'{src} = "{m[1]}"', msg)
     return msg
 
 

@@ -181,3 +181,24 @@ def measurement_options(args, equations=(), say: bool = True):
               + f": {meas.describe()} ({src}; a correction flag sets only its own setting, and {OFF} "
               "switch one off)")
     return meas
+
+
+def speed_scale_origin(args) -> str | None:
+    """Where a command's speed scale was said, as the user wrote it: ``--speed-scale``, else the
+    first ``--equation`` file whose ``[measurement]`` declares one ('EQ.toml [measurement]
+    speed_scale'); None for neither (a library message naming the scale is then left as it is)."""
+    if getattr(args, "speed_scale", None) is not None:
+        return "--speed-scale"
+    from sumo_drvpw.model.equations import SPEC_EQUATIONS, load_equation
+
+    specs = getattr(args, "equation", None) or ()
+    for spec in [specs] if isinstance(specs, str) else specs:
+        if not isinstance(spec, str) or spec in SPEC_EQUATIONS:
+            continue
+        try:
+            m = load_equation(spec).measurement
+        except (UserError, OSError):
+            continue
+        if m is not None and m.speed_scale not in (None, 1.0):
+            return f"{spec} [measurement] speed_scale"
+    return None

@@ -139,7 +139,8 @@ def calibrate_windowed(calibrate, p, v, fuel_w, dt_s, battery_w, signals, ok, tr
     """``calibrate`` (:func:`~sumo_drvpw.fit.chain_fuel.calibrate_fuel`, with its keywords
     ``kw``) on the means over windows of ``window_s`` [s] (:func:`windowed`) of the samples
     ``ok``; its R², RMSE and energy ratio on those samples, as a per-sample fit's. UserError
-    for a window that is no positive number of seconds, or too few windows for a line."""
+    for a window that is no positive number of seconds, shorter than two samples (the
+    per-sample fit), or too few windows for a line."""
     from sumo_drvpw.errors import UserError
     from sumo_drvpw.fit.chain import _stats
     from sumo_drvpw.fit.chain_fuel import standing_sums
@@ -149,6 +150,12 @@ def calibrate_windowed(calibrate, p, v, fuel_w, dt_s, battery_w, signals, ok, tr
     if not np.isfinite(ws) or ws <= 0:
         raise UserError(f"energy chain: window_s {window_s!r}: the window of the means to fit on is a positive "
                         "number of seconds (e.g. 30)")
+    dts = np.broadcast_to(np.asarray(dt_s, float), ok.shape)[ok]
+    step = float(np.median(dts)) if dts.size else float("nan")
+    if ws < 2.0 * step:  # (one sample a window: the per-sample fit, labelled windowed)
+        raise UserError(f"energy chain: windows of {ws:g} s: shorter than two of the logs' samples ({step:g} s apart): "
+                        "its windows hold one sample, or two, and the fit is the per-sample one, labelled windowed; "
+                        "give a window of several samples (e.g. 30 s)")
     cap = kw.get("engine_max_w")  # (a declared rating splits the windows; a profiled one is not known yet)
     cap = float(cap) if isinstance(cap, (int, float)) else None
     pp, vv, yy, dur, pb, sig, nw, ns = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws, cap)
