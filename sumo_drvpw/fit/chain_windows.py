@@ -27,6 +27,8 @@ averaged.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from sumo_drvpw.model.constants import STANDSTILL_MPS
@@ -44,34 +46,68 @@ SIGN_SMOOTH_S = 5.0
 DILUTION_REL = 0.10
 
 
-def window_ids(p, v, fuel_w, dt_s, ok, trip, window_s: float, cap_w: float | None = None) -> np.ndarray:
+def window_ids(p, v, fuel_w, dt_s, ok, trip, window_s: float, cap_w: float | None = None,
+               runs: "Runs | None" = None) -> np.ndarray:
     """Per sample, the window it is averaged in (0, 1, …; −1 where not ``ok``), as the module
     docstring says: runs of one trip's usable samples with one sign of the smoothed driving
     power ``p`` [W], one engine state (fuel ``fuel_w`` [W] flowing or not) and one of standing
     or moving (``v`` [m/s]), below or at the rated output ``cap_w`` [W] of driving power (None:
     none), chopped every ``window_s`` [s] of duration ``dt_s``. Each trip's
     windows are found on its own clock (from 0 at its first sample), so a trip is cut alike
-    read whole or in a batch of other trips (a streamed fit's, fit/chain_stream.py)."""
+    read whole or in a batch of other trips (a streamed fit's, fit/chain_stream.py). ``runs``:
+    the same samples' :func:`trip_runs`, found once for every window length (None: found here)."""
+    if runs is None:
+        runs = trip_runs(p, v, fuel_w, dt_s, ok, trip, cap_w)
+    return chop(runs, window_s)
+
+
+class Runs(NamedTuple):
+    """The runs windows are chopped from (:func:`trip_runs`), whatever the window's length."""
+
+    run: np.ndarray     #: per sample, its run (0, 1, … in sample order; a new one at each trip's start)
+    offset: np.ndarray  #: per sample, its start's time [s] since its run's first sample started
+    ok: np.ndarray      #: the usable samples
+
+
+def trip_runs(p, v, fuel_w, dt_s, ok, trip, cap_w: float | None = None) -> Runs:
+    """The runs of :func:`window_ids` (one trip's samples of one smoothed-power sign, engine
+    state, standing or moving, usability and side of ``cap_w``), found once: windows of any
+    length are chopped from them (:func:`chop`)."""
     p, v, y = (np.asarray(a, float) for a in (p, v, fuel_w))
     n = p.size
     dt = np.nan_to_num(np.broadcast_to(np.asarray(dt_s, float), (n,)))
     ok = np.asarray(ok, bool)
     if n == 0:
-        return np.zeros(0, int)
+        return Runs(np.zeros(0, np.int64), np.zeros(0), ok)
     tr = np.zeros(n, int) if trip is None else np.asarray(trip)
     starts = np.flatnonzero(np.r_[True, tr[1:] != tr[:-1]])
-    cut = np.zeros(n, bool)  # where a new window starts
+    run, offset = np.zeros(n, np.int64), np.zeros(n)
+    base = 0
     for a, b in zip(starts, np.r_[starts[1:], n]):  # (one trip at a time: its own time from 0)
-        cut[a:b] = _trip_cuts(p[a:b], v[a:b], y[a:b], dt[a:b], ok[a:b], window_s, cap_w)
+        r, o = _trip_cuts(p[a:b], v[a:b], y[a:b], dt[a:b], ok[a:b], cap_w)
+        run[a:b], offset[a:b] = r + base, o
+        base += int(r[-1]) + 1
+    return Runs(run, offset, ok)
+
+
+def chop(runs: Runs, window_s: float) -> np.ndarray:
+    """:func:`window_ids` from the :func:`trip_runs` ``runs``: each run chopped every
+    ``window_s`` [s] of its duration."""
+    run, ok = runs.run, runs.ok
+    n = run.size
+    if n == 0:
+        return np.zeros(0, int)
+    k = np.floor(runs.offset / window_s).astype(np.int64)
+    cut = np.r_[True, (run[1:] != run[:-1]) | (k[1:] != k[:-1])]
     wid = np.where(ok, np.cumsum(cut) - 1, -1)
     return np.unique(wid, return_inverse=True)[1].reshape(n) - (1 if (~ok).any() else 0)
 
 
-def _trip_cuts(p, v, y, dt, ok, window_s: float, cap_w: float | None = None) -> np.ndarray:
-    """Where one trip's windows (:func:`window_ids`) start: True at its first sample and
-    wherever the smoothed power's sign, the engine state, standing or moving, or usability
-    changes, the smoothed power reaches or leaves ``cap_w`` [W], or another ``window_s`` [s] of
-    the run begins."""
+def _trip_cuts(p, v, y, dt, ok, cap_w: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One trip's runs (:func:`trip_runs`): per sample its run (0, 1, …; a new one wherever the
+    smoothed power's sign, the engine state, standing or moving, or usability changes, or the
+    smoothed power reaches or leaves ``cap_w`` [W]) and its start's time [s] since its run's
+    first sample started."""
     from sumo_drvpw.fit.chain_fuel import FUEL_FLOWING_W
 
     half = SIGN_SMOOTH_S / 2.0
@@ -85,8 +121,7 @@ def _trip_cuts(p, v, y, dt, ok, window_s: float, cap_w: float | None = None) -> 
     run = np.cumsum(np.r_[True, state[1:] != state[:-1]])
     start = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
     tb = t - dt  # each sample's start
-    k = np.floor((tb - tb[start][run - 1]) / window_s).astype(np.int64)
-    return np.r_[True, (run[1:] != run[:-1]) | (k[1:] != k[:-1])]
+    return run - 1, tb - tb[start][run - 1]
 
 
 def window_means(wid, dt_s, *cols):
@@ -100,11 +135,13 @@ def window_means(wid, dt_s, *cols):
                    / np.where(dur > 0, dur, 1.0) for c in cols))
 
 
-def windowed(p, v, fuel_w, dt_s, battery_w, signals: dict, ok, trip, window_s: float, cap_w: float | None = None):
+def windowed(p, v, fuel_w, dt_s, battery_w, signals: dict, ok, trip, window_s: float, cap_w: float | None = None,
+             runs: Runs | None = None):
     """The fuel chain's inputs as means over windows of ``window_s`` [s] (:func:`window_ids`;
     the short ones left out): (P, v, fuel, durations, battery or None, signals) to calibrate
-    on, and the number of windows and of the samples in them."""
-    wid = window_ids(p, v, fuel_w, dt_s, ok, trip, window_s, cap_w)
+    on, and the number of windows and of the samples in them. ``runs``: :func:`trip_runs` of
+    these samples, found once for several window lengths (None: found here)."""
+    wid = window_ids(p, v, fuel_w, dt_s, ok, trip, window_s, cap_w, runs)
     names = sorted(signals or {})
     cols = [p, v, fuel_w] + ([] if battery_w is None else [np.nan_to_num(np.asarray(battery_w, float))])
     out = window_means(wid, dt_s, *cols, *[np.nan_to_num(np.asarray(signals[c], float)) for c in names])
@@ -122,9 +159,9 @@ def windowed_lines(fit_template, p, v, fuel_w, dt_s, battery_w, signals, ok, tri
     (``fit_template(P, v, fuel, durations, battery, signals)`` → ChainFit: the same engine
     state and form as the per-sample fit; ``cap_w`` its rated output [W], None: none): per window its zero-output fuel, marginal efficiency
     and standard error, and the windows' number (windows too few for a line are skipped)."""
-    rows = []
+    rows, runs = [], trip_runs(p, v, fuel_w, dt_s, ok, trip, cap_w)  # (the splits once; chopped per length)
     for ws in windows:
-        pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws, cap_w)
+        pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws, cap_w, runs)
         if nw < 10:
             continue
         f = fit_template(pp, vv, yy, dur, pb, sig)
@@ -188,8 +225,9 @@ def window_designs(grid, p, v, fuel_w, dt_s, battery_w, signals, loads, ok, trip
 
     caps = {t.engine_max_w for t in grid}  # (the grid's templates keep one declared rating)
     cap = caps.pop() if len(caps) == 1 else None
+    runs = trip_runs(p, v, fuel_w, dt_s, ok, trip, cap)  # (the splits once; chopped per length)
     for ws in windows:
-        pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws, cap)
+        pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws, cap, runs)
         if nw:
             pb = np.zeros(nw) if pb is None else pb
             for i, tmpl in enumerate(grid):
