@@ -144,13 +144,28 @@ def fuel_bounds(names) -> tuple[list, list]:
 def fuel_design(tmpl: EnergyChain, p, v, pb, lcols) -> np.ndarray:
     """The Willans line's design [on, paid·max(P, 0) − P_bat, (1), paid·L_k] of the engine
     state of ``tmpl`` (:func:`fuel_names`): paid = on, or everywhere for a charge-sustaining
-    template (model/chain.py), which has the auxiliary power's column of ones."""
+    template (model/chain.py), which has the auxiliary power's column of ones. A rated output
+    (``engine_max_w``) caps what the engine delivers, the driving power and the logged loads
+    together (:func:`capped_drive`)."""
     paid = tmpl.paid(p, v).astype(float)
     aux = [np.ones(p.shape)] if tmpl.charge_sustaining else []
     on = tmpl.engine_on(p, v).astype(float)
-    drive = np.maximum(p, 0.0) if tmpl.engine_max_w is None else np.clip(p, 0.0, tmpl.engine_max_w)
+    drive = capped_drive(p, tmpl.engine_max_w, lcols)
     return np.column_stack([on, paid * drive - pb] + aux + [paid * c for c in lcols]
                            + moving_columns(tmpl, on, v))
+
+
+def capped_drive(p, cap_w, lcols=()) -> np.ndarray:
+    """The driving power the engine delivers [W]: max(P, 0), at most the rated output ``cap_w``
+    [W] (None: no cap) less the logged loads ``lcols`` [W, at the engine output] — the chain caps
+    its engine demand max(P, 0) + P_aux + Σ g_k·L_k (model/chain_values.py ``engine_demand``), so
+    with g_k = 1, a load logged in watts at the engine, max(P, 0) + Σ L_k ≤ ``cap_w`` and the loads'
+    columns carry the rest. Without loads: min(max(P, 0), ``cap_w``)."""
+    if cap_w is None:
+        return np.maximum(p, 0.0)
+    if not len(lcols):
+        return np.clip(p, 0.0, cap_w)
+    return np.clip(p, 0.0, np.maximum(cap_w - np.sum(lcols, axis=0), 0.0))
 
 
 def fuel_chain(loads, beta, se, active, off, engine_on_above_mps, low: float, fuel="gasoline",

@@ -18,7 +18,11 @@ never straddles
   engine-off (a hybrid's, or a fuel cut on overrun) is never averaged into an engine-on window;
 * standing and moving (``STANDSTILL_MPS``): the standing idle fuel stays the standstill's;
 * the line's other kink, the engine's rated output where a fuel chain has one (the mean of
-  min(P, P_max) is not min of the mean): runs split where the smoothed driving power reaches it.
+  min(P, P_max) is not min of the mean): runs split where the smoothed driving power plus the
+  logged loads reaches it (the engine delivers both: fit/chain_fuel.py ``capped_drive``).
+
+The splits are found once per trip (:func:`trip_runs`) and chopped per window length
+(:func:`chop`), so the ATTENUATED check's three lengths cost one pass of the smoothing.
 
 Every usable sample is in exactly one window; a window weighs its duration. Windows of less
 than half ``window_s`` (at the splits) are left out of the windowed fit: their noise is not
@@ -47,17 +51,18 @@ DILUTION_REL = 0.10
 
 
 def window_ids(p, v, fuel_w, dt_s, ok, trip, window_s: float, cap_w: float | None = None,
-               runs: "Runs | None" = None) -> np.ndarray:
+               runs: "Runs | None" = None, load_w=None) -> np.ndarray:
     """Per sample, the window it is averaged in (0, 1, …; −1 where not ``ok``), as the module
     docstring says: runs of one trip's usable samples with one sign of the smoothed driving
     power ``p`` [W], one engine state (fuel ``fuel_w`` [W] flowing or not) and one of standing
     or moving (``v`` [m/s]), below or at the rated output ``cap_w`` [W] of driving power (None:
-    none), chopped every ``window_s`` [s] of duration ``dt_s``. Each trip's
+    none; with the logged loads ``load_w`` [W] added, :func:`trip_runs`), chopped every ``window_s``
+    [s] of duration ``dt_s``. Each trip's
     windows are found on its own clock (from 0 at its first sample), so a trip is cut alike
     read whole or in a batch of other trips (a streamed fit's, fit/chain_stream.py). ``runs``:
     the same samples' :func:`trip_runs`, found once for every window length (None: found here)."""
     if runs is None:
-        runs = trip_runs(p, v, fuel_w, dt_s, ok, trip, cap_w)
+        runs = trip_runs(p, v, fuel_w, dt_s, ok, trip, cap_w, load_w)
     return chop(runs, window_s)
 
 
@@ -69,22 +74,26 @@ class Runs(NamedTuple):
     ok: np.ndarray      #: the usable samples
 
 
-def trip_runs(p, v, fuel_w, dt_s, ok, trip, cap_w: float | None = None) -> Runs:
+def trip_runs(p, v, fuel_w, dt_s, ok, trip, cap_w: float | None = None, load_w=None) -> Runs:
     """The runs of :func:`window_ids` (one trip's samples of one smoothed-power sign, engine
-    state, standing or moving, usability and side of ``cap_w``), found once: windows of any
-    length are chopped from them (:func:`chop`)."""
+    state, standing or moving, usability and side of the rated output ``cap_w`` [W]), found once:
+    windows of any length are chopped from them (:func:`chop`). The engine delivers the driving
+    power and the logged loads ``load_w`` [W at the engine output, their sum per sample; None:
+    none] together, so it reaches its rating where the smoothed driving power plus the loads do
+    (fit/chain_fuel.py ``capped_drive``, the line's kink)."""
     p, v, y = (np.asarray(a, float) for a in (p, v, fuel_w))
     n = p.size
     dt = np.nan_to_num(np.broadcast_to(np.asarray(dt_s, float), (n,)))
     ok = np.asarray(ok, bool)
     if n == 0:
         return Runs(np.zeros(0, np.int64), np.zeros(0), ok)
+    load = np.zeros(n) if load_w is None else np.nan_to_num(np.broadcast_to(np.asarray(load_w, float), (n,)))
     tr = np.zeros(n, int) if trip is None else np.asarray(trip)
     starts = np.flatnonzero(np.r_[True, tr[1:] != tr[:-1]])
     run, offset = np.zeros(n, np.int64), np.zeros(n)
     base = 0
     for a, b in zip(starts, np.r_[starts[1:], n]):  # (one trip at a time: its own time from 0)
-        r, o = _trip_cuts(p[a:b], v[a:b], y[a:b], dt[a:b], ok[a:b], cap_w)
+        r, o = _trip_cuts(p[a:b], v[a:b], y[a:b], dt[a:b], ok[a:b], cap_w, load[a:b])
         run[a:b], offset[a:b] = r + base, o
         base += int(r[-1]) + 1
     return Runs(run, offset, ok)
@@ -103,11 +112,11 @@ def chop(runs: Runs, window_s: float) -> np.ndarray:
     return np.unique(wid, return_inverse=True)[1].reshape(n) - (1 if (~ok).any() else 0)
 
 
-def _trip_cuts(p, v, y, dt, ok, cap_w: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _trip_cuts(p, v, y, dt, ok, cap_w: float | None = None, load=0.0) -> tuple[np.ndarray, np.ndarray]:
     """One trip's runs (:func:`trip_runs`): per sample its run (0, 1, …; a new one wherever the
     smoothed power's sign, the engine state, standing or moving, or usability changes, or the
-    smoothed power reaches or leaves ``cap_w`` [W]) and its start's time [s] since its run's
-    first sample started."""
+    smoothed power plus the loads ``load`` [W] reaches or leaves ``cap_w`` [W]) and its start's
+    time [s] since its run's first sample started."""
     from sumo_drvpw.fit.chain_fuel import FUEL_FLOWING_W
 
     half = SIGN_SMOOTH_S / 2.0
@@ -117,11 +126,20 @@ def _trip_cuts(p, v, y, dt, ok, cap_w: float | None = None) -> tuple[np.ndarray,
     ps = (cp[hi] - cp[lo]) / np.maximum(ck[hi] - ck[lo], 1)
     state = (ps > 0) * 1 + (y > FUEL_FLOWING_W) * 2 + (v < STANDSTILL_MPS) * 4 + (~ok) * 8
     if cap_w is not None:
-        state = state + (ps >= cap_w) * 16
+        state = state + (ps + load >= cap_w) * 16
     run = np.cumsum(np.r_[True, state[1:] != state[:-1]])
     start = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
     tb = t - dt  # each sample's start
     return run - 1, tb - tb[start][run - 1]
+
+
+def load_sum(signals: dict | None, cap_w: float | None):
+    """The logged loads of ``signals`` (a fuel fit's: its load columns only) summed per sample [W],
+    where a rated output ``cap_w`` splits windows (:func:`trip_runs`); None where none does or
+    there are no loads."""
+    if cap_w is None or not signals:
+        return None
+    return sum(np.nan_to_num(np.asarray(signals[c], float)) for c in sorted(signals))
 
 
 def window_means(wid, dt_s, *cols):
@@ -141,7 +159,7 @@ def windowed(p, v, fuel_w, dt_s, battery_w, signals: dict, ok, trip, window_s: f
     the short ones left out): (P, v, fuel, durations, battery or None, signals) to calibrate
     on, and the number of windows and of the samples in them. ``runs``: :func:`trip_runs` of
     these samples, found once for several window lengths (None: found here)."""
-    wid = window_ids(p, v, fuel_w, dt_s, ok, trip, window_s, cap_w, runs)
+    wid = window_ids(p, v, fuel_w, dt_s, ok, trip, window_s, cap_w, runs, load_sum(signals, cap_w))
     names = sorted(signals or {})
     cols = [p, v, fuel_w] + ([] if battery_w is None else [np.nan_to_num(np.asarray(battery_w, float))])
     out = window_means(wid, dt_s, *cols, *[np.nan_to_num(np.asarray(signals[c], float)) for c in names])
@@ -159,7 +177,8 @@ def windowed_lines(fit_template, p, v, fuel_w, dt_s, battery_w, signals, ok, tri
     (``fit_template(P, v, fuel, durations, battery, signals)`` → ChainFit: the same engine
     state and form as the per-sample fit; ``cap_w`` its rated output [W], None: none): per window its zero-output fuel, marginal efficiency
     and standard error, and the windows' number (windows too few for a line are skipped)."""
-    rows, runs = [], trip_runs(p, v, fuel_w, dt_s, ok, trip, cap_w)  # (the splits once; chopped per length)
+    # (the splits found once, chopped per length)
+    rows, runs = [], trip_runs(p, v, fuel_w, dt_s, ok, trip, cap_w, load_sum(signals, cap_w))
     for ws in windows:
         pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws, cap_w, runs)
         if nw < 10:
@@ -225,7 +244,7 @@ def window_designs(grid, p, v, fuel_w, dt_s, battery_w, signals, loads, ok, trip
 
     caps = {t.engine_max_w for t in grid}  # (the grid's templates keep one declared rating)
     cap = caps.pop() if len(caps) == 1 else None
-    runs = trip_runs(p, v, fuel_w, dt_s, ok, trip, cap)  # (the splits once; chopped per length)
+    runs = trip_runs(p, v, fuel_w, dt_s, ok, trip, cap, load_sum(signals, cap))  # (the splits once; chopped per length)
     for ws in windows:
         pp, vv, yy, dur, pb, sig, nw, _ = windowed(p, v, fuel_w, dt_s, battery_w, signals, ok, trip, ws, cap, runs)
         if nw:
