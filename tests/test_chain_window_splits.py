@@ -109,3 +109,87 @@ def test_windows_split_where_the_driving_power_and_the_loads_reach_the_rating(wi
     same truck without its load, tests/test_chain_windows.py: within 1.5 and 12 %)."""
     _, d_eta, d_moving = _rated_fit(window_s=window_s, check_windows=False)
     assert abs(d_eta) < 0.015 and abs(d_moving) < 0.10, (d_eta, d_moving)
+
+
+def _wandering(rng, n_trips: int):
+    """Per trip a 1-Hz speed [m/s]: accelerate, cruise, wander ±3 m/s about the cruise, brake, stand."""
+    out = []
+    for top in rng.uniform(6.0, 30.0, n_trips):
+        seg = [np.arange(0.0, top, rng.uniform(0.4, 1.5)), np.full(int(rng.uniform(30, 200)), top)]
+        seg.append(top + 3.0 * np.sin(np.arange(int(rng.uniform(60, 200))) / rng.uniform(8, 20)))
+        seg += [np.arange(seg[-1][-1], 0.0, -rng.uniform(0.5, 1.5)), np.zeros(int(rng.uniform(10, 60)))]
+        out.append(np.maximum(np.concatenate(seg), 0.0))
+    return out
+
+
+def _car(chain: dict, loads=False, seed: int = 1, noise_mps: float = 0.3):
+    """A 1500-kg car's trips (:func:`_wandering`) whose fuel the planted ``chain`` burns on the clean
+    driving power (2 % noise), with (``loads``) a 3-kW A/C switched on and off in blocks of 20–120 s;
+    the driving power as a road load derives it from the logged speed (``noise_mps`` of noise while
+    moving). A charge-sustaining hybrid's battery drives while its engine is off and is recharged at
+    1.5 kW while it runs: the log's fuel is 0 while off, its V·I the rest of the planted target.
+    (P, v, fuel, battery V·I or None, trip, loads dict, planted engine on)."""
+    from sumo_drvpw.model.chain_toml import chain_from_dict
+
+    rng = np.random.default_rng(seed)
+    trips = _wandering(rng, 60)
+    v = np.concatenate(trips)
+    trip = np.concatenate([np.full(t.size, k) for k, t in enumerate(trips)])
+
+    def road(speeds):
+        return np.concatenate([1500.0 * np.gradient(t) * t + 150.0 * t + 0.35 * t ** 3 for t in speeds])
+
+    load = np.zeros(v.size)
+    i = 0
+    while loads and i < v.size:
+        k = int(rng.uniform(20, 120))
+        load[i:i + k] = 3000.0 * (rng.random() < 0.5)
+        i += k
+    ch = chain_from_dict({"predicts": "fuel", "fuel": "gasoline", **chain, **({"loads": {"ac_w": 1.0}} if loads else {})})
+    out = ch.evaluate(road(trips), v, signals={"ac_w": load})
+    target = out["power_w"] * (1.0 + 0.02 * rng.standard_normal(v.size))
+    pb = None
+    if ch.charge_sustaining:
+        pb = np.where(out["engine_on"], -1500.0, np.maximum(road(trips), 0.0) + ch.aux_power_w + load)
+        target = np.where(out["engine_on"], target - pb * ch.battery_fuel_factor, 0.0)
+    logged = np.where(v > 0, np.maximum(v + noise_mps * rng.standard_normal(v.size), 0.0), 0.0)
+    p = road([logged[trip == k] for k in range(len(trips))])
+    return p, logged, target, pb, trip, ({"ac_w": load} if loads else {}), out["engine_on"]
+
+
+def test_a_hybrid_s_engine_on_speed_is_not_averaged_across():
+    """A guard, not a fix (it passes before): a hybrid whose engine runs above 14 m/s or 8 kW and is
+    off below both (charge-sustaining, 6 kW at zero output, η 0.36, its speed logged with 0.3 m/s of
+    noise) is fitted on 30-s windows as planted — η +0.6 %, zero-output fuel +3.0 % with the thresholds
+    declared (per sample +70 % and +176 %) — since its windows split where the fuel starts or stops
+    flowing (the log's engine state, fit/chain_windows.py): no window holds both of the planted
+    engine's states, where the engine-on speed or the threshold turns it on or off."""
+    hybrid = {"marginal_efficiency": 0.36, "idle_fuel_power_w": 6000.0, "engine_off_below_w": 8000.0,
+              "engine_on_above_mps": 14.0, "charge_sustaining": True, "aux_power_w": 400.0}
+    p, v, fuel, pb, trip, _, on = _car(hybrid)
+    assert 0.2 < np.mean(on & (p < 8000.0)) and np.mean(~on & (v > 0)) > 0.05  # (on by speed; off moving)
+    wid = cw.window_ids(p, v, fuel, 1.0, np.ones(p.size, bool), trip, 30.0)
+    for k in range(wid.max() + 1):
+        assert on[wid == k].all() or not on[wid == k].any()
+    fit = calibrate_fuel(p, v, fuel, 1.0, pb, trip=trip, engine_off=8000.0, engine_on_above_mps=14.0,
+                         window_s=30.0, check_windows=False)
+    assert abs(fit.chain.marginal_efficiency / 0.36 - 1.0) < 0.015
+    assert abs(fit.chain.idle_fuel_power_w / 6000.0 - 1.0) < 0.05
+
+
+def test_windows_split_at_the_driving_power_s_sign_where_loads_are_logged():
+    """A guard, not a fix (it passes before): the Willans line's kink is at zero driving power, also
+    with logged loads — the engine demand max(P, 0)/η_t + P_aux + Σ g·L (model/chain_values.py
+    ``engine_demand``) takes the loads (and the design a hybrid's battery V·I) after the max, and never
+    falls below the auxiliaries, so it has no sign change to split at. A conventional car with a 3-kW
+    A/C logged, its speed with 0.3 m/s of noise: on 30-s windows η +0.4 %, zero-output fuel +1.3 %
+    (per sample +54 % and +81 %; split where the engine demand max(P, 0) + L changes sign instead,
+    i.e. at zero driving power only while the A/C is off: +3.0 % and +13 %; at P + L: +0.5 % and
+    +1.8 %)."""
+    conventional = {"marginal_efficiency": 0.36, "idle_fuel_power_w": 6000.0, "engine_off_below_w": -np.inf}
+    p, v, fuel, _, trip, loads, _ = _car(conventional, loads=True)
+    fit = calibrate_fuel(p, v, fuel, 1.0, None, loads, loads=("ac_w",), trip=trip, engine_off=-np.inf,
+                         engine_on_above_mps=None, window_s=30.0, check_windows=False)
+    assert abs(fit.chain.marginal_efficiency / 0.36 - 1.0) < 0.015
+    assert abs(fit.chain.idle_fuel_power_w / 6000.0 - 1.0) < 0.05
+    assert abs(fit.chain.loads["ac_w"] - 1.0) < 0.05

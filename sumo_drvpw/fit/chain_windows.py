@@ -13,9 +13,13 @@ never straddles
 * the line's kink at zero driving power (the mean of max(P, 0) is not max of the mean): runs
   split where the sign of the driving power, smoothed over :data:`SIGN_SMOOTH_S` centred
   within the trip (long enough for a derivative's noise to cancel, short enough to find the
-  change), changes;
+  change), changes — the driving power's, also with logged loads: the engine demand
+  max(P, 0)/η_t + P_aux + Σ g·L (model/chain_values.py ``engine_demand``) takes the loads, and
+  the design a hybrid's battery V·I, after the max, and never falls below the auxiliaries, so
+  its kink is at P = 0 and it has no sign change of its own (tests/test_chain_window_splits.py);
 * the engine's state as the log shows it: fuel flowing or not (``FUEL_FLOWING_W``), so an
-  engine-off (a hybrid's, or a fuel cut on overrun) is never averaged into an engine-on window;
+  engine-off (a hybrid's — at light load, or below its engine-on speed —, or a fuel cut on
+  overrun) is never averaged into an engine-on window;
 * standing and moving (``STANDSTILL_MPS``): the standing idle fuel stays the standstill's;
 * the line's other kink, the engine's rated output where a fuel chain has one (the mean of
   min(P, P_max) is not min of the mean): runs split where the smoothed driving power plus the
