@@ -324,7 +324,7 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     chain_input = f"driving power of {eq.name}" if src is None else f"measured driving power ({src})"
     fit = fit_chain(reduce, st)
     check_chain(fit, veh, None, None, None, ranges=st.fitted_ranges(), where=st.where, counts=st.counts,
-                hvac_trips=st.hvac_trips)
+                hvac_trips=st.hvac_trips, measured=src is not None)
     eq.name = args.name or out.stem
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": st.files, "target": st.source, "road_load": road,

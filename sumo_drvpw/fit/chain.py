@@ -505,7 +505,7 @@ def calibrate_on(m, equation=None, *, loads=(), hvac=None, limit="profile", engi
                             float(hvac.get("setpoint_c", 20.0)),
                             dt, use) if hvac and m.target == "battery" and m.inputs.trip is not None else None)
     check_chain(fit, m.vehicle, p, m.inputs.v, use, where=m.log.describe(),  # plausibility, fitted range
-                counts=getattr(m, "counts", None), hvac_trips=trips)
+                counts=getattr(m, "counts", None), hvac_trips=trips, measured=p_drive_w is not None)
     return fit
 
 

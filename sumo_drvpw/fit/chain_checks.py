@@ -265,12 +265,15 @@ def unexplained_note(r2: float, predicts: str, powertrain: str | None) -> str:
 
 
 def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
-                where: str = "the logs", counts: dict | None = None, hvac_trips: dict | None = None) -> None:
+                where: str = "the logs", counts: dict | None = None, hvac_trips: dict | None = None,
+                measured: bool = False) -> None:
     """Add the readings, fitted ranges and warnings of this module to a ``ChainFit``
     (in place; see the module docstring); ``ranges``: the fitted ranges when known (a
     streamed fit's), else from ``p_drive_w``, ``v_mps`` and ``use``; ``counts``: the log
     reader's (a fuel target read from an unthrottled engine's air flow is said from them);
-    ``hvac_trips``: :func:`hvac_trip_sums` of a chain with HVAC gains (:func:`hvac_trips_note`).
+    ``hvac_trips``: :func:`hvac_trip_sums` of a chain with HVAC gains (:func:`hvac_trips_note`);
+    ``measured``: the chain was fitted on a measured driving power, not an equation's
+    (:func:`dilution_note`).
     UserError, naming ``where``, when the driving power never exceeds :func:`identify_drive_w`."""
     chain = fit.chain
     ranges = fitted_ranges(p_drive_w, v_mps, use) if ranges is None else ranges
@@ -301,7 +304,7 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
             params["engine_off_below_w"]["reading"] += engine_off_note(
                 chain.engine_off_below_w, powertrain, fuel_l_per_h(chain.idle_fuel_power_w, chain.fuel))
     if chain.predicts == "fuel" and "marginal_efficiency" in params:
-        params["marginal_efficiency"]["reading"] += dilution_note(fit, ranges)
+        params["marginal_efficiency"]["reading"] += dilution_note(fit, ranges, measured)
     slope = "traction_efficiency" if chain.predicts == "battery" else "marginal_efficiency"
     if slope in params:
         params[slope]["reading"] = params[slope].get("reading", "") + unexplained_note(
@@ -317,12 +320,17 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
         chain.provenance["warnings"] = list(fit.warnings)
 
 
-def dilution_note(fit, ranges: dict | None = None) -> str:
+def dilution_note(fit, ranges: dict | None = None, measured: bool = False) -> str:
     """Why a fuel chain's per-sample line is attenuated (regression dilution: noise in the driving
     power flattens it), when its refits on windowed means (``fit.windowed``:
     :func:`~sumo_drvpw.fit.chain_windows.windowed_lines`) move its marginal efficiency by more
     than :data:`~sumo_drvpw.fit.chain_windows.DILUTION_REL` and beyond twice their standard
-    error; else ''. Says the windowed figures and what to do."""
+    error; else ''. Says the windowed figures and what to do. The noise it names is the input's:
+    an equation's driving power holds an acceleration derived from a logged speed and a grade from
+    a logged elevation; a ``measured`` one (torque × speed, the power-split P_PTdrv) has neither,
+    and its windows move the line also where its signals are logged out of step with the fuel or
+    the line bends (the Prius Gen-2's, fitted on one trip: η 0.373 per sample, 0.326 on 60-s
+    windows, flagged, and no better held out, docs/energy-chain.md)."""
     from sumo_drvpw.fit.chain_windows import DILUTION_REL
 
     rows = getattr(fit, "windowed", None) or []
@@ -335,11 +343,20 @@ def dilution_note(fit, ranges: dict | None = None) -> str:
                      + f", {r['idle_fuel_power_w'] / 1000:.1f} kW at zero output ({r['windows']} windows)" for r in rows)
     p = (ranges or {}).get("power_range_w")
     span = f" (here {p[0] / 1000:.0f} … {p[1] / 1000:.0f} kW)" if p else ""
-    return (f"; ATTENUATED (errors in the variables): refitted on means over windows of the same trips — {figs} — "
-            f"against η {eta:.3f} and {idle / 1000:.1f} kW on the samples: noise in the driving power{span} — an "
-            "acceleration derived from a logged speed, times the mass; a grade from a logged elevation — flattens "
-            "the per-sample line, and SUMO, whose inputs are clean, would book its efficiency and zero-output fuel; "
-            "fit on windowed means (window_s, e.g. 30 s; docs/energy-chain.md) and compare the two on held-out trips")
+    head = (f"; ATTENUATED (errors in the variables): refitted on means over windows of the same trips — {figs} — "
+            f"against η {eta:.3f} and {idle / 1000:.1f} kW on the samples: ")
+    if measured:  # no derivative in it: noise or timing, or a bent line, and only held-out trips tell
+        return head + (
+            f"noise in the measured driving power{span} — its torque and speed signals' own, or the fuel logged out "
+            "of step with them (a logger polling its signals one after another) — flattens the per-sample line, "
+            "or the line is not straight and the windows average over its bend (the Prius Gen-2's windowed lines "
+            "were no better held out); fit on windowed means (window_s, e.g. 30 s; docs/energy-chain.md) and keep "
+            "the one better on held-out trips")
+    return head + (
+        f"noise in the driving power{span} — an "
+        "acceleration derived from a logged speed, times the mass; a grade from a logged elevation — flattens "
+        "the per-sample line, and SUMO, whose inputs are clean, would book its efficiency and zero-output fuel; "
+        "fit on windowed means (window_s, e.g. 30 s; docs/energy-chain.md) and compare the two on held-out trips")
 
 
 def range_note(ranges: dict) -> str:
