@@ -332,6 +332,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
                            "trip_signatures": signature_texts(st.signatures)}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     declare_measurement(eq, _measurement(args))
+    if note := chain_input_note(args.equation, src):
+        print(note)
     print(fit.summary())
     for w in fit.warnings:
         print(f"warning: {w}")
@@ -364,3 +366,18 @@ def replace_chain(eq, chain) -> None:
               "(loss map, limits, battery): the calibrated chain replaces it, its road load stays")
         eq.description = f"road load of: {eq.description}; its MMPEVEM motor replaced by the calibrated chain"
     eq.chain = chain
+
+
+def chain_input_note(equation: str | None, src: str | None) -> str | None:
+    """The line a chain calibration prints when ``--equation`` names a road load but the log
+    has a measured driving power ``src``: the chain is fitted on ``src``, and `compare` and
+    SUMO runs apply it to the equation's power, so a sensor that reads low or high (LeafSpy's
+    Leaf motor torque: its τ·ω about 0.77 of the battery's V·I at cruise) goes into the
+    efficiencies and auxiliary power, not into a road load said to be 'off'."""
+    if not equation or src is None:
+        return None
+    return (f"note: the chain is fitted on the log's measured driving power ({src}), not on --equation "
+            f"{equation}'s; compare and SUMO runs apply it to {equation}'s power, so where the two differ "
+            "its efficiencies and auxiliary power carry the difference (an implausible one may be the "
+            "measured power's, not the road load's); to fit the chain on the equation, import the log "
+            "without the measured power's columns")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.cli import add_force, add_log_options, existing_paths, note_counts, output_set, read_options
-from sumo_drvpw.cli._scale import add_engine_arguments, replace_chain
+from sumo_drvpw.cli._scale import add_engine_arguments, chain_input_note, replace_chain
 from sumo_drvpw.errors import UserError
 
 
@@ -519,6 +519,7 @@ def main_chain(args) -> int:
     p_in, chain_input = None, f"driving power of {eq.name}"
     if not isinstance(mw, UserError) and not mw.source.startswith("battery"):
         p_in, chain_input = np.array(mw.power_w, float), f"measured driving power ({mw.source})"
+    mw_source = None if p_in is None else mw.source
     from sumo_drvpw.model.terms import parse_term
 
     keep = set(args.load) | ({hvac["column"]} if hvac else set())
@@ -535,6 +536,8 @@ def main_chain(args) -> int:
                            "trip_signatures": trips}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     declare_measurement(eq, ro.measurement)
+    if note := chain_input_note(args.equation, mw_source):
+        print(note)
     print(fit.summary())
     for w in fit.warnings:  # implausible or unidentified parameters (fit/chain_checks.py)
         print(f"warning: {w}")
