@@ -440,3 +440,44 @@ def test_a_doubly_encoded_degree_sign_is_read_as_the_unit(tmp_path, capsys):
     df = pd.read_parquet(log)
     assert set(df["ambient_c"]) == {20.0, 21.0}
     assert df["coolant_c"].iloc[0] == 90.0, df.columns
+
+
+def test_the_sketch_maps_a_unix_time_and_scales_a_leafspy_soc(tmp_path, capsys):
+    """A LeafSpy export of a 2020 Nissan Leaf (ericthobbs/TripViewer @ a58aa42,
+    examples/Log.csv; its header and first rows, columns cut): the sketch offered `Date/Time`
+    (US month/day/year, whole seconds; other exports whole minutes) and `epoch time` both
+    as 'perhaps, give its unit', and `SOC` — 869720, LeafSpy's 1/10000 % — as the state of
+    charge without a word on its scale. Now the Unix time is mapped in seconds (it keeps
+    the milliseconds: samples 5.136 s apart where the clock says 5 or 6), and the SOC's
+    comment gives the scale that reads it as a per cent; the file imports through the sketch."""
+    f = tmp_path / "Log.csv"
+    f.write_text("Date/Time,Lat,Long,Elv,Speed,Gids,SOC,Pack Volts,Pack Amps,epoch time,Torque Nm,RPM\n"
+                 "06/29/2025 21:09:36,34 11.28809,-117 25.75793,1932,68,412,869720,384.77,55.175,"
+                 "1751256576.729,-1.50,7612\n"
+                 "06/29/2025 21:09:41,34 11.23628,-117 25.8311,1938,64,412,869711,388.30,-9.856,"
+                 "1751256581.865,1.75,7151\n"
+                 "06/29/2025 21:09:46,34 11.18604,-117 25.90262,1942,63,412,869588,383.25,70.51,"
+                 "1751256587.000,22.25,7008\n", encoding="utf-8")
+    assert cli_main(["import", "columns", str(f), "--list"]) == 0
+    sk = _sketch(_lines(capsys))
+    assert '[columns."epoch time"]\nname = "time_s"  # Unix time [s]\nunit = "s"' in sk, sk
+    assert "Date/Time\"]" not in sk, sk
+    soc = next(ln for ln in sk.splitlines() if ln.startswith("# soc_pct:"))
+    assert "869720 is no per cent: scale = 0.0001 reads it as 86.972 %" in soc, soc
+    m = tmp_path / "m.toml"
+    m.write_text(sk + '\n[columns."Speed"]\nname = "speed_mps"\nunit = "mph"\n', encoding="utf-8")
+    out = tmp_path / "leaf.parquet"
+    assert cli_main(["import", "columns", str(f), "--columns", str(m), "--out", str(out)]) == 0
+    import pandas as pd
+
+    t = pd.read_parquet(out)["time_s"].to_numpy()
+    assert t[1] - t[0] == pytest.approx(5.136) and t[2] - t[1] == pytest.approx(5.135)
+    # a per-cent column within 0–100 is given no scale; nor is a clock time taken for a Unix one
+    from sumo_drvpw.data.adapters.listing import sketch
+
+    rows = [{"label": "SOC", "unit": "", "first": "86.5"}, {"label": "time", "unit": "", "first": "21:09:36"}]
+    sk = sketch(rows, False, {})
+    assert "no per cent" not in sk and "Unix" not in sk, sk
+    assert 'time_format = "%H:%M:%S"' in sk, sk
+    # milliseconds since 1970
+    assert 'unit = "ms"' in sketch([{"label": "timestamp", "unit": "", "first": "1751256576729"}], False, {})

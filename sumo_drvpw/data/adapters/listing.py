@@ -18,6 +18,7 @@ speed), to check and complete.
 from __future__ import annotations
 
 import codecs
+import math
 import os
 import re
 from pathlib import Path
@@ -114,7 +115,7 @@ def _table_columns(path: Path, m: dict) -> list[dict]:
 #: canonical name → (dimension of its unit, label pattern, labels it must not match): the
 #: guesses of the mapping sketch
 GUESSES = {
-    "time_s": ("time", r"time\b|zeit|timestamp|^t$", r"trip|duration|since"),
+    "time_s": ("time", r"time\b|zeit|timestamp|^t$|epoch|unix", r"trip|duration|since"),
     "speed_mps": ("speed", r"speed|velocity|geschw|vitesse|\bspd|\bvel\b",
                   r"wheel ?speed|motor|engine|fan|(?<![a-z])wind|air ?speed|accuracy|max|limit|set"),
     "elevation_m": ("length", r"elev|(?<![a-z])elv(?![a-z])|altitude|(?<![a-z])alt(?![a-z])|höhe|hoehe|height",
@@ -187,13 +188,16 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
                              "values read: traction only, which no driving-power equation fits; map it if it "
                              "does go negative)")
                 continue
+        if not hits and name == "time_s" and (unix := _unix_time(unitless, rows)):
+            lines += [f"[columns.{_toml(unix[0])}]", f'name = "time_s"  # Unix time [{unix[1]}]', f'unit = "{unix[1]}"']
+            continue
         if not hits and name == "time_s" and clock:
             lines += [f"[columns.{_toml(clock[0])}]", 'name = "time_s"  # clock times: [options] time_format']
             continue
         if not hits:
             if unitless:
                 lines.append(f"# {name}: perhaps {', '.join(unitless[:3])} (no unit recognised in the file: "
-                             "give its unit)")
+                             "give its unit)" + (_percent_scale(unitless[0], rows) if dim == "percent" else ""))
             elif name in ("time_s", "speed_mps"):
                 lines.append(f"# no label recognised as {name} (required): map one"
                              + ("; rows at a fixed rate without a time column: [options] time_step_s = "
@@ -220,6 +224,38 @@ def sketch(rows: list[dict], mdf: bool, options: dict) -> str:
         lines.append("# units not recognised (a mapping gives unit and scale, e.g. '100w': unit = \"W\", "
                      "scale = 100): " + ", ".join(f"{lb} [{u}]" for lb, u in odd[:6]) + (" …" if len(odd) > 6 else ""))
     return "\n".join(lines)
+
+
+def _unix_time(labels: list[str], rows: list[dict]) -> tuple[str, str] | None:
+    """The first of ``labels`` (time-like, without a unit) whose first value is a Unix time —
+    seconds (1e8 … 1e10: 1973–2286) or milliseconds (1e11 … 1e13) since 1970 —, with that
+    unit; else None. Preferred to a clock-time column: a phone app's clock may keep whole
+    seconds or minutes (LeafSpy's `Date/Time` in some exports) where its `epoch time` keeps
+    milliseconds."""
+    first = {r["label"]: r.get("first", "") for r in rows}
+    for label in labels:
+        v = str(first.get(label, "")).strip()
+        if not is_number(v):
+            continue
+        x = float(v)
+        if 1e8 <= x < 1e10:
+            return label, "s"
+        if 1e11 <= x < 1e13:
+            return label, "ms"
+    return None
+
+
+def _percent_scale(label: str, rows: list[dict]) -> str:
+    """For a per-cent column offered without a unit: where its first value is beyond 100, the
+    power of ten that reads it as a per cent (LeafSpy's `SOC` 869720 counts 1/10000 %:
+    scale = 0.0001 → 86.972 %), said in the sketch's comment; else ''."""
+    v = str(next((r.get("first", "") for r in rows if r["label"] == label), "")).strip()
+    if not is_number(v) or not abs(float(v)) > 100:
+        return ""
+    x = abs(float(v))
+    k = math.ceil(math.log10(x / 100.0))
+    return (f"; its first value {v} is no per cent: scale = {10.0 ** -k:g} reads it as "
+            f"{x * 10.0 ** -k:g} %, check it against the app's display")
 
 
 def _clock_time(rows: list[dict]) -> tuple[str, str] | None:
