@@ -4,6 +4,8 @@ file, the column and its first such row."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pandas as pd
 
@@ -40,9 +42,35 @@ def numeric(series: pd.Series, file, column: str, na_tokens=("-", ""), bools: bo
     bad = np.isnan(conv) & ~is_na
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
+        hint = ' (degrees and minutes: unit = "deg min" reads them)' if _DEG_MIN.match(str(s.iloc[i])) else ""
         raise UserError(f"{file}: column '{column}' is not numeric: data row {i} holds "
-                        f"{s.iloc[i]!r}")
+                        f"{s.iloc[i]!r}{hint}")
     return pd.Series(conv, index=series.index)
+
+
+#: a position in degrees and decimal minutes, "34 11.28809", "-117 25.75793"
+_DEG_MIN = re.compile(r"^\s*(-?)(\d{1,3})\s+(\d{1,2}(?:\.\d*)?)\s*$")
+
+
+def degrees_minutes(series: pd.Series, file, column: str, na_tokens=("-", "")) -> pd.Series:
+    """Degrees from a column of degrees and decimal minutes as text (LeafSpy's `Lat`, `Long`:
+    "34 11.28809" → 34.188135, "-117 25.75793" → −117.429299; the sign is the degrees'); a
+    plain number is degrees; tokens in ``na_tokens`` are missing. Anything else, or minutes
+    of 60 or more, is refused naming the file, the column and its first such row."""
+    tokens = {str(t).strip() for t in na_tokens}
+    out = np.full(len(series), np.nan)
+    for i, x in enumerate(series.astype(object).to_numpy()):
+        if x is None or (isinstance(x, float) and np.isnan(x)) or str(x).strip() in tokens:
+            continue
+        m = _DEG_MIN.match(str(x))
+        if m is None and is_number(str(x)):
+            out[i] = float(x)
+            continue
+        if m is None or float(m.group(3)) >= 60:
+            raise UserError(f"{file}: column '{column}' (unit deg min) data row {i} holds {x!r}: not degrees "
+                            "and decimal minutes ('34 11.28809', minutes below 60)")
+        out[i] = (-1 if m.group(1) else 1) * (int(m.group(2)) + float(m.group(3)) / 60.0)
+    return pd.Series(out, index=series.index)
 
 
 def _refuse_bool(s: pd.Series, file, column: str, i: int) -> None:

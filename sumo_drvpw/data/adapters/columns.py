@@ -55,6 +55,7 @@ from sumo_drvpw.data.adapters._common import (clean_time_and_speed,
                       read_each, unique_names, UNITS)
 
 from sumo_drvpw.data.adapters import labels as candidate_labels
+from sumo_drvpw.data.adapters.cells import degrees_minutes
 from sumo_drvpw.data.adapters.timestamps import _seconds, to_datetimes
 from sumo_drvpw.data.adapters.trip_names import qualify_shared_trips
 from sumo_drvpw.data.adapters.unit_names import _entry, _name_note
@@ -367,6 +368,8 @@ def read_file(path: Path, m: dict) -> tuple[pd.DataFrame, dict]:
                                 "not a date/time")
             out.append(("time_s", _seconds(t, m["time_format"], rep)))
         else:
+            if e.get("deg_min"):
+                s = degrees_minutes(s, path, label, na)
             x = numeric(s, path, label, na + e.get("na_text", ()), bools=e["name"] in FLAGS)  # (a speed true: no 1)
             cells = cell.astype(str).str.strip()
             own = x.isin(e.get("na_num", ())) | (cells.isin(e.get("na_text", ())) & ~cells.isin(na))

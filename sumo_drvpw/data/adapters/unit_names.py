@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from sumo_drvpw.errors import UserError
-from sumo_drvpw.data.adapters._common import CANONICAL, DIMENSIONS, UNITS, lookup_unit
+from sumo_drvpw.data.adapters._common import CANONICAL, DEG_MIN, DIMENSIONS, UNITS, lookup_unit
 
 SUFFIX_DIM = {v: k for k, v in DIMENSIONS.items() if v}
 
@@ -31,6 +31,9 @@ def _entry(p, key, name, unit, scale) -> dict:
         return {"name": name, "kind": "text", "factor": 1.0, "offset": 0.0}
     suffix = _suffix(name)
     said = (lookup_unit(suffix) or ("dimensionless",))[0] if len(suffix) > 1 and suffix not in LOOSE_SUFFIXES else None
+    if unit.strip().lower() in DEG_MIN:  # "34 11.28809": text read by cells.degrees_minutes, in degrees
+        return {"name": name, "kind": "number", "factor": scale * (1.0 if suffix == "deg" else math.pi / 180.0),
+                "offset": 0.0, "deg_min": True}
     if dim == "angle" and suffix == "deg":
         f = f * 180.0 / math.pi
     elif suffix in SUFFIX_DIM and suffix not in LOOSE_SUFFIXES and dim != "dimensionless" and SUFFIX_DIM[suffix] != dim:
