@@ -163,7 +163,7 @@ def test_the_replay_s_vclass_masses_are_sumo_s(tmp_path):
     vClass a passenger's 1,500 kg, not a pedestrian's 70."""
     import libsumo
 
-    from sumo_drvpw.sim.fcd_conn import sumo_type_mass
+    from sumo_drvpw.sim.vtypes import sumo_type_mass
 
     classes = ("passenger private taxi bus coach delivery truck trailer emergency motorcycle moped bicycle "
                "pedestrian wheelchair scooter tram rail_urban subway rail rail_electric rail_fast ship evehicle "

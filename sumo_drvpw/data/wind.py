@@ -18,12 +18,14 @@ or ``bearing_deg`` column, else the direction of travel between GPS positions
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
-from sumo_drvpw.data.trips import trip_codes_of, trip_starts
 from sumo_drvpw.errors import UserError
+
+if TYPE_CHECKING:  # (pandas is imported where a log is read: a SUMO run's tailwind_mps needs none)
+    import pandas as pd
 
 #: columns that give the heading [° clockwise from north] directly, first found wins
 HEADING_COLUMNS = ("heading_deg", "bearing_deg")
@@ -72,6 +74,10 @@ def heading_from_positions(lat_deg, lon_deg, speed_mps, trip_ids,
     ahead along the driven path (local flat-earth east/north; distance from the positions
     themselves); NaN where the car moves slower than HEADING_MIN_SPEED_MPS, where a
     position is missing, or where the trip has no such span."""
+    import pandas as pd
+
+    from sumo_drvpw.data.trips import trip_codes_of, trip_starts
+
     lat = np.asarray(lat_deg, float)
     lon = np.asarray(lon_deg, float)
     v = np.asarray(speed_mps, float)
@@ -106,6 +112,8 @@ def heading_of(df: pd.DataFrame, where: str = "the log") -> tuple[np.ndarray, st
     (:data:`HEADING_COLUMNS`), else GPS positions (:func:`heading_from_positions`); NaN
     where the car moves slower than :data:`HEADING_MIN_SPEED_MPS` either way. A log
     with neither is a UserError naming the columns."""
+    import pandas as pd
+
     for c in HEADING_COLUMNS:
         if c in df:
             h = pd.to_numeric(df[c], errors="coerce").to_numpy(float)

@@ -127,9 +127,8 @@ def write_chain_outputs(out_dir, result) -> dict[str, str]:
     """Write ``chain_vehicles.csv``, ``chain_edges.csv``, ``chain_classes.csv`` of a run
     (:class:`sumo_drvpw.sim.outputs.RunResult` whose ledger has a ``chain``) and put the
     per-class summary under ``result.summary["chain"]``; returns name → path."""
-    import pandas as pd
-
     from sumo_drvpw.fileio import write_text
+    from sumo_drvpw.sim.table_text import rows_csv
 
     led = result.ledger
     chain = led.chain
@@ -147,8 +146,7 @@ def write_chain_outputs(out_dir, result) -> dict[str, str]:
         if key == "vehicles" and spill is not None and spill.has_chain_rows:
             spill.write_chain_csv(path, rows)  # the flushed vehicles' rows, then the rest
         else:
-            write_text(path, pd.DataFrame(rows, columns=None if rows else chain.columns())
-                       .to_csv(index=False))
+            write_text(path, rows_csv(rows, None if rows else chain.columns()))  # (pandas' text)
         files[f"chain_{key}"] = str(path)
     result.summary["chain"] = chain_summary(chain, ids, classes, order)
     result.summary["chain"]["chainless"] = {  # accounted vehicles no chain books

@@ -64,7 +64,7 @@ import numpy as np
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.sim.dynamics import accel_bounds
 from sumo_drvpw.sim.fcd_begin import begin_frame
-from sumo_drvpw.sim.fcd_conn import ParkedTest, bus_stops, calibrators, sumo_type_mass
+from sumo_drvpw.sim.fcd_conn import ParkedTest, bus_stops, calibrators
 from sumo_drvpw.sim.fcd_geo import NetCoordinates, recorded_coordinates
 from sumo_drvpw.sim.fcd_idle import Idling, untold_warning
 from sumo_drvpw.sim.fcd_method import recorded_method
@@ -77,6 +77,7 @@ from sumo_drvpw.sim.fcd_replay import FcdReplay, FcdStream, timesteps
 from sumo_drvpw.sim.fcd_stops import StopTracker, read_declared_stops
 from sumo_drvpw.sim.teleport import may_return
 from sumo_drvpw.sim.vtype_energy import battery_switch, replay_emission_classes
+from sumo_drvpw.sim.vtypes import sumo_type_mass
 
 #: how long [s] a vehicle whose rows end while it stands (or off its route's last edge: may_return) stays
 #: in memory, in case it comes back from a teleport (SUMO teleports a car waiting in a jam or

@@ -19,6 +19,7 @@ from sumo_drvpw.fileio import write_figure, write_json, write_parquet, write_tex
 from sumo_drvpw.sim import dynamics, teleport
 from sumo_drvpw.sim.ledger import LEDGER_CATEGORIES, Ledger
 from sumo_drvpw.sim.network import Network
+from sumo_drvpw.sim.table_text import arrow_array, columns_csv, table_csv
 from sumo_drvpw.sim.vtypes import SUMO_DEFAULT_VTYPES
 
 UNITS = {"_j": "J", "_m": "m", "_s": "s", "_kg": "kg", "_w": "W", "_mps": "m/s",
@@ -34,10 +35,11 @@ def _unit(name: str) -> str | None:
 
 
 def table_with_units(cols: dict[str, object]) -> pa.Table:
-    """A pyarrow table whose numeric fields carry ``unit`` metadata from their name suffix."""
+    """A pyarrow table whose numeric fields carry ``unit`` metadata from their name suffix
+    (its arrays made without pandas: :func:`~sumo_drvpw.sim.table_text.arrow_array`)."""
     arrays, fields = [], []
     for name, val in cols.items():
-        arr = pa.array(val)
+        arr = arrow_array(val)
         u = _unit(name)
         fields.append(pa.field(name, arr.type, metadata={"unit": u} if u else None))
         arrays.append(arr)
@@ -336,17 +338,17 @@ def difference_table(ledger: Ledger, net: Network, names: list[str], pair: list[
     """Per edge driven by either of two equations' vehicles: each one's traction energy [J] and
     distance [m], and their difference per km of the lesser distance [Wh/km] (the map's);
     and a warning when the two booked different vehicles (their distances apart by more than
-    1 %: a bus equation beside a car's), whose difference is then no comparison of models."""
-    import pandas as pd
-
+    1 %: a bus equation beside a car's), whose difference is then no comparison of models.
+    The table: column name → values (``pd.DataFrame(table)``; difference.csv its
+    :func:`~sumo_drvpw.sim.table_text.columns_csv`)."""
     a, b = names.index(pair[0]), names.index(pair[1])
     ta, tb = ledger.edge_trac[:, a].sum(1), ledger.edge_trac[:, b].sum(1)
     da, db = ledger.edge_dist_eq[:, a], ledger.edge_dist_eq[:, b]
     k = np.flatnonzero((da > 0) | (db > 0))
-    table = pd.DataFrame({"edge": [net.edge_ids[i] for i in k], "class": [str(net.edge_class[i]) for i in k],
+    table = {"edge": [net.edge_ids[i] for i in k], "class": [str(net.edge_class[i]) for i in k],
                           f"{pair[0]}_traction_j": ta[k], f"{pair[1]}_traction_j": tb[k],
                           f"{pair[0]}_distance_m": da[k], f"{pair[1]}_distance_m": db[k],
-                          "difference_whpkm": _whpkm(ta[k] - tb[k], np.minimum(da[k], db[k]))})
+                          "difference_whpkm": _whpkm(ta[k] - tb[k], np.minimum(da[k], db[k]))}
     sa, sb = float(da.sum()), float(db.sum())
     note = None
     if max(sa, sb) > 0 and abs(sa - sb) > 0.01 * max(sa, sb):
@@ -554,7 +556,7 @@ def write_outputs(out_dir: Path, result: RunResult) -> dict[str, str]:
     write_parquet(out_dir / "edges.parquet", result.edges_arrow())
     ct = result.classes_arrow()
     write_parquet(out_dir / "classes.parquet", ct)
-    write_text(out_dir / "shares.csv", ct.to_pandas().to_csv(index=False))
+    write_text(out_dir / "shares.csv", table_csv(ct))
     files.update({k: str(out_dir / f) for k, f in (
         ("vehicles", "vehicles.parquet"), ("edges", "edges.parquet"),
         ("classes", "classes.parquet"), ("shares", "shares.csv"))})
@@ -568,7 +570,7 @@ def write_outputs(out_dir: Path, result: RunResult) -> dict[str, str]:
     pair = (result.difference or names[:2]) if len(names) >= 2 else None
     if pair is not None:  # the per-edge difference of two equations, as a table (and a map)
         table, note = difference_table(result.ledger, result.net, names, pair)
-        write_text(out_dir / "difference.csv", table.to_csv(index=False))
+        write_text(out_dir / "difference.csv", columns_csv(table))
         files["difference"] = str(out_dir / "difference.csv")
         if note and note not in summary.setdefault("warnings", []):
             summary["warnings"].append(note)

@@ -44,7 +44,7 @@ def tailwind(angle_deg: np.ndarray, speed: float, from_deg: float) -> np.ndarray
     (:func:`sumo_drvpw.data.wind.tailwind_mps`, as a drive log's wind is written)."""
     if speed == 0.0:
         return np.zeros(len(angle_deg))
-    from sumo_drvpw.data.wind import tailwind_mps  # (data/wind.py loads pandas: not for a run in still air)
+    from sumo_drvpw.data.wind import tailwind_mps  # (only where there is wind)
 
     return tailwind_mps(angle_deg, speed, from_deg)
 

@@ -126,7 +126,7 @@ def tiny_mass(vt: str, vclass: str | None, mass, said: str) -> None:
     """A written mass below 1 % of its vClass's SUMO default refused (a 6-kg truck: tonnes):
     a vType's (:mod:`sumo_drvpw.sim.resolver`) and a told copy's (``[vtypes."<type>@<id>"]``);
     not of a vClass SUMO gives no mass of its own (:data:`NO_CLASS_MASS`: a 2-kg drone)."""
-    from sumo_drvpw.sim.fcd_conn import SUMO_VCLASS_MASS_KG, SUMO_VEH_MASS_KG
+    from sumo_drvpw.sim.vtypes import SUMO_VCLASS_MASS_KG, SUMO_VEH_MASS_KG
 
     if vclass in NO_CLASS_MASS:
         return
@@ -158,7 +158,7 @@ def tiny_file_masses(files, told: dict) -> None:
     ``[vtypes.<id>] mass_kg`` (``told``: its vtype_data) gives the vehicle's: a rider — a person,
     a container — adds that mass to its vehicle, and no scenario key tells it (a container of
     vClass truck written 2 for 2 t rode as 2 kg). Not a vClass of :data:`NO_CLASS_MASS`."""
-    from sumo_drvpw.sim.fcd_conn import sumo_type_mass
+    from sumo_drvpw.sim.vtypes import sumo_type_mass
 
     for vt, info in files.items():
         if info.vclass and info.vclass not in NO_CLASS_MASS and not info.drvpw_mass \

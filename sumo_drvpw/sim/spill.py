@@ -78,15 +78,15 @@ class VehicleSpill:
         first part: a part whose vehicles had only some of the chains (petrol cars first,
         electric ones later) keeps the others' columns, and every Dask bucket writes the
         same (default: the first part's rows' own columns)."""
-        import pandas as pd
+        from sumo_drvpw.sim.table_text import rows_csv
 
         if not rows:
             return
-        df = pd.DataFrame(rows)
         if self.chain_columns is None:
-            self.chain_columns = list(columns) if columns is not None else list(df.columns)
+            self.chain_columns = list(columns) if columns is not None else list(dict.fromkeys(k for r in rows for k in r))
         path = self._dir() / f"chain-{len(self.chain_parts):06d}.csv"
-        df.reindex(columns=self.chain_columns).to_csv(path, index=False, header=False)
+        with open(path, "w", encoding="utf-8", newline="") as f:  # (pd.DataFrame(rows).reindex(columns=…)'s text)
+            f.write(rows_csv(rows, self.chain_columns, header=False))
         self.chain_parts.append(path)
 
     @property
@@ -128,7 +128,7 @@ class VehicleSpill:
     def write_chain_csv(self, path, tail_rows: list[dict]) -> None:
         """``chain_vehicles.csv`` at ``path``: header, the parts, then ``tail_rows``; the same
         text as one ``DataFrame(rows).to_csv(index=False)`` of every row."""
-        import pandas as pd
+        from sumo_drvpw.sim.table_text import columns_csv, rows_csv
 
         if self.published_chain is not None:
             with atomic_path(path) as tmp:
@@ -137,13 +137,12 @@ class VehicleSpill:
         cols = self.chain_columns
         with atomic_path(path) as tmp:
             with open(tmp, "w", encoding="utf-8", newline="") as out:
-                out.write(pd.DataFrame(columns=cols).to_csv(index=False))
+                out.write(columns_csv({c: [] for c in cols}))  # (the header)
                 for p in self.chain_parts:
                     with open(p, encoding="utf-8", newline="") as f:
                         shutil.copyfileobj(f, out)
                 if tail_rows:
-                    out.write(pd.DataFrame(tail_rows).reindex(columns=cols)
-                              .to_csv(index=False, header=False))
+                    out.write(rows_csv(tail_rows, cols, header=False))
 
     def publish(self, vehicles_file, chain_file=None) -> None:
         """The complete files were written (``vehicles.parquet``, ``chain_vehicles.csv``):

@@ -288,6 +288,42 @@ SUMO_DEFAULT_VTYPES = {"DEFAULT_VEHTYPE": "passenger", "DEFAULT_PEDTYPE": "pedes
                        "DEFAULT_RAILTYPE": "rail", "DEFAULT_CONTAINERTYPE": "container"}
 SUMO_DEFAULT_LENGTH_M = {"bus": 12.0, "coach": 14.0, "truck": 7.1}  # SUMO's default lengths of heavy vTypes [m] (the booking note; army: 5 m, a car's, below)
 
+#: SUMO's mass of a vType that gives none, per vClass [kg] (SUMOVTypeParameter::
+#: VClassDefaultValues; libsumo 1.28 vehicletype.getMass agrees for every vClass,
+#: tests/test_containers_said.py); any other vClass (passenger, the vClass of a vType that
+#: names none, container, ignoring …): :data:`SUMO_VEH_MASS_KG`
+SUMO_VCLASS_MASS_KG = {
+    "pedestrian": 70.0, "wheelchair": 90.0, "bicycle": 10.0, "scooter": 10.0, "moped": 80.0,
+    "motorcycle": 200.0, "truck": 4500.0, "trailer": 13000.0, "bus": 12000.0, "coach": 25000.0,
+    "tram": 37900.0, "rail_urban": 59000.0, "subway": 59000.0, "rail": 79500.0,
+    "rail_electric": 83000.0, "rail_fast": 409000.0, "delivery": 5000.0, "emergency": 5000.0,
+    "ship": 100000.0}
+SUMO_VEH_MASS_KG = 1500.0  # (DEFAULT_VEH_MASS)
+#: the masses of SUMO's own vTypes [kg] (their vClasses': a person's DEFAULT_PEDTYPE 70 kg,
+#: a container's DEFAULT_CONTAINERTYPE 1,500 kg …)
+SUMO_DEFAULT_TYPE_MASS_KG = {vt: SUMO_VCLASS_MASS_KG.get(vc, SUMO_VEH_MASS_KG) for vt, vc in SUMO_DEFAULT_VTYPES.items()}
+
+
+def sumo_type_mass(files, vt: str) -> float | None:
+    """The mass SUMO gives vType ``vt`` [kg] (``vehicletype.getMass``), as the route files
+    ``files`` (:func:`~sumo_drvpw.sim.vtypes.read_vtypes`) declare it: its ``mass``, else its
+    ``vehicleMass`` param, else its vClass's default (:data:`SUMO_VCLASS_MASS_KG`; no vClass:
+    a passenger's, for a person's vType too — SUMO warns it "implicitly uses unsuitable vClass
+    'passenger'", and for SUMO's own ``DEFAULT_PEDTYPE`` … redeclared without one: SUMO 1.28
+    gives it 1,500 kg); SUMO's own vTypes where no file redeclares them; None for a vType of
+    no file. What a rider adds to its vehicle (EnergyParams::
+    getTransportableMass: its vType's mass; neither ``loading`` nor ``drvpw.mass``)."""
+    info = files.get(vt)
+    if info is None:
+        return SUMO_DEFAULT_TYPE_MASS_KG.get(vt)
+    if info.mass_attr_kg is not None:
+        return info.mass_attr_kg
+    try:
+        return float((info.energy_params or {})["vehicleMass"])
+    except (KeyError, ValueError):
+        pass
+    return SUMO_VCLASS_MASS_KG.get(info.vclass or "passenger", SUMO_VEH_MASS_KG)
+
 
 def _length(val: str | None) -> float | None:
     """A written vType length [m]; None when absent or not a positive number (SUMO itself
