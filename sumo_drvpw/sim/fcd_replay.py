@@ -92,7 +92,7 @@ class FcdReplay(_Rows):
 def _state_columns(c: dict) -> list:
     """The getters' columns in the order of ``_Veh``: speed, acceleration, angle, lane,
     position, slope (NaN without the column: unknown, so a ``vtype_energy`` equation books the
-    rise of the step, sim/ledger.as_sumo)."""
+    rise of the step, sim/sumo_inputs.as_sumo)."""
     n = len(c["id"])
     return [c["speed"], c["accel"] if "accel" in c else np.full(n, np.nan),
             c["angle"] if "angle" in c else np.zeros(n), c["lane"], c["pos"],

@@ -153,7 +153,7 @@ class Stepper:
         self.lane_edge_ext = np.append(net.lane_edge, -1)  # lane -1 → edge -1
         read_accel = physics.acceleration == "getter"
         self.read_slope = physics.slope_reference == "getslope"
-        #: a vtype_energy equation books SUMO's own slope (sim/ledger.as_sumo; an FCD without slopes: NaN)
+        #: a vtype_energy equation books SUMO's own slope (sim/sumo_inputs.as_sumo; an FCD without slopes: NaN)
         self.sumo_slope = eqset.uses_sumo_slope
         self.yaw = eqset.uses_yaw  # an equation's ``radial`` factor: the angle's change per step
         self.reader = Reader(conn, use_subscriptions,

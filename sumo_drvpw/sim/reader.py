@@ -57,7 +57,7 @@ def yaw_rate(prev_deg: np.ndarray, angle_deg: np.ndarray, dt: float) -> np.ndarr
     radius at 21.2 m/s its emission output's electricity rose by radialDragCoefficient·m·v·|Δψ|/Δt
     per step to 1e-9, Δψ the FCD angles' change in rad, at Δt 1, 0.5 and 0.25 s). SUMO caps
     the radius v·Δt/|Δψ| at 10 km, so a change below v·Δt/10⁴ rad books as that radius: the
-    ``vtype_energy`` equations take it so (sim/ledger.as_sumo), where the angle read changes
+    ``vtype_energy`` equations take it so (sim/sumo_inputs.as_sumo), where the angle read changes
     at all — a change of SUMO's rounding (~1e-16 rad) is lost in its angle in degrees."""
     d = np.asarray(angle_deg, float) - prev_deg  # (not (d + 180) % 360 − 180: that rounds a change
     d = np.where(d > 180.0, d - 360.0, np.where(d < -180.0, d + 360.0, d))  # below 3e-14° to 0)
