@@ -163,6 +163,7 @@ class ChainLedger(ChainTables):
         self._active = np.array(self.active, np.int64)
         self._const: dict[str, np.ndarray] = {}
         self._const_n = -1
+        self._const_views: dict[int, dict] = {}  # n → the n-vehicle views (:meth:`_constant_signals`)
         self._apps: dict = {}  # a few vehicles' app → what it gives (:meth:`_by_app`)
         #: departures booked (share of a cold start > 0) by a chain with one; their shares' sum
         self.cold_starts = 0
@@ -394,7 +395,8 @@ class ChainLedger(ChainTables):
         q *= app_ce
         self._veh[vidx] += q
         d = np.asarray(v, float) * dt
-        self.veh_dist[vidx] += d[:, None] * a
+        da = d[:, None] * a  # (each applying equation's distance of the step)
+        self.veh_dist[vidx] += da
         self.veh_time[vidx] += a_dt
         self._app[vidx] |= booked
         self.booked_any |= any_
@@ -405,10 +407,10 @@ class ChainLedger(ChainTables):
         if (len(set(eidx.tolist())) == len(eidx) if len(eidx) <= 64 else  # one vehicle per edge:
                 bool((np.diff(np.sort(eidx)) != 0).all())):  # each edge's sum is 0 + its row
             self._edge[eidx] += q + 0.0
-            self.edge_dist[eidx] += d[:, None] * a + 0.0
+            self.edge_dist[eidx] += da + 0.0
             return q
         edges, at = np.unique(eidx, return_inverse=True)
-        w = np.ascontiguousarray(np.concatenate([q, d[:, None] * a], axis=1).T)
+        w = np.ascontiguousarray(np.concatenate([q, da], axis=1).T)
         c = q.shape[1]
         for j in np.flatnonzero(w.any(axis=1)):
             col = np.bincount(at, w[j], minlength=len(edges))
@@ -455,8 +457,13 @@ class ChainLedger(ChainTables):
         return out
 
     def _constant_signals(self, n: int) -> dict:
-        """The chains' signals as n constants (views of read-only arrays kept between steps)."""
+        """The chains' signals as n constants (views of read-only arrays kept between steps; the
+        dict of them too, per n: its readers take it as it is)."""
+        got = self._const_views.get(n)
+        if got is not None:
+            return got
         if self._const_n < n:
+            self._const_views = {}
             self._const, m = {}, max(n, 64, 2 * self._const_n)
             self._const_n = m
             for s in self._signal_set:
@@ -469,7 +476,10 @@ class ChainLedger(ChainTables):
                     x = np.zeros(m)
                 x.flags.writeable = False
                 self._const[s] = x
-        return {s: x[:n] for s, x in self._const.items()}
+        if len(self._const_views) >= 64:
+            self._const_views = {}
+        got = self._const_views[n] = {s: x[:n] for s, x in self._const.items()}
+        return got
 
     # ------------------------------------------------------------------ reports
     def vehicle(self, i: int) -> dict[str, dict[str, float]]:
