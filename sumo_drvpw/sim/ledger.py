@@ -72,6 +72,7 @@ class EquationSet:
                     entries.append((terms.index(t), i * C + cat, float(c)))
             self.groups.append((mass, [parse_term(t) for t in terms], entries, mean, sumo))
         self._live_cache: dict = {}  # equations booking a vehicle of a step → their groups
+        self._app_cache: dict = {}  # a few vehicles' app (shape, dtype, bytes) → the same
         self.uses_other = any(parse_term(t).category == "other"
                               for e in self.equations for t in e.term_names)
         #: an equation has the ``radial`` factor: the loop passes the yaw rate
@@ -93,8 +94,13 @@ class EquationSet:
         """The groups with only the equations that apply to a vehicle of the step (``app``
         (n, E) > 0; None: all) and the terms those read: an equation no vehicle of the step
         books is not evaluated (a bare SUMO config carries a built-in equation per vClass,
-        most of them booking no vehicle most of the time); its rows stay 0."""
-        live = None if app is None else np.asarray(app) != 0
+        most of them booking no vehicle most of the time); its rows stay 0. A few vehicles'
+        ``app`` is looked up by its bytes first (the same vehicles mostly: no mask to derive)."""
+        a = None if app is None else np.asarray(app)
+        raw = None if a is None or len(a) > 64 else (a.shape, a.dtype.str, a.tobytes())
+        if raw is not None and (got := self._app_cache.get(raw)) is not None:
+            return got
+        live = None if a is None else a != 0
         key = None if live is None else np.packbits(live.any(axis=0)).tobytes()
         got = self._live_cache.get(key)
         if got is None:
@@ -108,6 +114,8 @@ class EquationSet:
                     got.append((mass, [terms[u] for u in need], [(need.index(u), r, c) for u, r, c in kept] + [arrays],
                                 mean, sumo))
             self._live_cache[key] = got
+        if raw is not None:
+            self._app_cache = {**(self._app_cache if len(self._app_cache) < 64 else {}), raw: got}
         return got
 
     def category_powers(self, x: Inputs, app: np.ndarray | None = None, x_mean: Inputs | None = None) -> np.ndarray:
@@ -517,7 +525,7 @@ class Ledger:
         return remap
 
     def book(self, vidx: np.ndarray, eidx: np.ndarray, v: np.ndarray, dt: float,
-             pc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+             pc: np.ndarray, app: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Book one step for vehicles ``vidx`` on edges ``eidx``.
 
         Parameters
@@ -527,6 +535,7 @@ class Ledger:
         dt : step length [s]
         pc : power per vehicle, equation, category [W], (n, E, C), already zero where an
              equation does not apply to a vehicle
+        app : the vehicles' ``veh_app[vidx]`` where the caller has it (None: read here)
 
         Returns traction and recuperable energies [J] of the step, (n, E, C) each.
         """
@@ -560,7 +569,7 @@ class Ledger:
         d = v * dt
         self.veh_dist[vidx] += d
         self.veh_time[vidx] += dt
-        app = self.veh_app[vidx]
+        app = self.veh_app[vidx] if app is None else app
         self.veh_dist_eq[vidx] += d[:, None] * app
         self.veh_time_eq[vidx] += dt * app
         self.samples += n

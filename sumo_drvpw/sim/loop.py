@@ -528,8 +528,10 @@ class Stepper:
             v = v_mean
         if self.flat:  # no rise anywhere: step_grade's θ and rows, without its work
             lim = min(net.max_rad, 0.5 * np.pi)
-            theta = np.clip(theta, -lim, lim)
-            ledger.veh_at[vidx] = np.array([lane, pos, np.zeros(m), np.zeros(m)], float).T
+            theta = np.minimum(np.maximum(theta, -lim), lim)  # (np.clip's values, without its per-call cost)
+            rows = np.zeros((m, 4))
+            rows[:, 0], rows[:, 1] = lane, pos
+            ledger.veh_at[vidx] = rows
         elif net.z_node is not None:  # the step's grade: m·g·Δz exactly
             theta, ledger.veh_at[vidx] = net.step_grade(lane, pos, v * dt, ledger.veh_at[vidx], theta,
                                                         (v_mean + 0.5 * dt * np.abs(a)) * dt)  # max(v_t−1, v_t)·Δt
@@ -548,8 +550,8 @@ class Stepper:
                 ledger.load_max_kg = max(ledger.load_max_kg, float(load.max()))
         x = Inputs(v, a, theta, wind, mass, np.full(m, physics.rho), sig, v_acc=v_mean)
         xm = replace(x, v=v_mean, signals={**sig, "load_kg": ledger.veh_load[vidx]}) if self.eqset.uses_mean else None
-        pc = self.eqset.category_powers(x, None if self.every_equation_applies
-                                        else ledger.veh_app[vidx], xm)
+        app = ledger.veh_app[vidx]  # (read once: the ledger and the chains book by it too)
+        pc = self.eqset.category_powers(x, None if self.every_equation_applies else app, xm)
         for k, vr, ar, pr in self.ranges:  # vehicle-steps outside an equation's validity range
             out = np.zeros(m, bool)
             if vr is not None:
@@ -563,20 +565,22 @@ class Stepper:
                 out &= ledger.veh_app[vidx, k] > 0
             ledger.out_of_range[k] += int(np.count_nonzero(out))
         eidx = self.lane_edge_ext[lane]
-        ledger.book(vidx, eidx, v, dt, pc)
+        ledger.book(vidx, eidx, v, dt, pc, app)
         ledger.dynamics.step(ledger, vidx, v_mean, a, v, dt, theta)
         if whole_second(t_now - dt, dt):  # the trajectories at 1 Hz, as the RDE reads a trip (at the
             # time SUMO's outputs give this state: the step's begin, getTime() − Δt after the step)
             ledger.dynamics.sample(ledger, vidx, v_state, t_now - dt)
         hard = a < -IMPOSSIBLE_DECEL_MPS2  # braked beyond any brake: booked at the wheels, not recuperated
-        if hard.any():
+        any_hard = bool(hard.any())
+        if any_hard:
             ledger.hard_brakes += int(np.count_nonzero(hard))
             ledger.hard_brake_max_mps2 = max(ledger.hard_brake_max_mps2, float(-a[hard].min()))
         if ledger.chain is not None:  # battery/fuel accounts (sim/chain.py), standing included
             p_chain = pc.sum(axis=2)
-            p_chain[hard] = np.maximum(p_chain[hard], 0.0)
+            if any_hard:
+                p_chain[hard] = np.maximum(p_chain[hard], 0.0)
             off = None if self.shutoff is None else self.shutoff.auto_off(ledger, vidx, v, dt)
-            ledger.chain.book(vidx, eidx, v, dt, p_chain, app=ledger.veh_app[vidx], engine_off=off, accel=a,
+            ledger.chain.book(vidx, eidx, v, dt, p_chain, app=app, engine_off=off, accel=a,
                               v_mean=v_mean, grade=theta, load=None if xm is None else xm.signals["load_kg"])
         if self.trace is not None:
             # (at the time SUMO's own outputs give this state, as its FCD and emission output do:
