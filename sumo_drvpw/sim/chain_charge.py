@@ -159,9 +159,9 @@ def begin_warning(charges: DepartureCharges | None) -> list[str]:
     n = charges.at_begin if charges is not None else 0
     if not n:
         return []
-    return [f"{n} plug-in hybrid vehicle(s) were driving at the run's first step (an FCD replay from --begin, "
-            "or a resumed saved state): their battery charge then is not known (no FCD attribute nor route file "
-            "holds what they spent before), so each is booked from its charge at departure (declared, else "
+    return [f"{n} plug-in hybrid vehicle(s) were driving at the run's first step (an FCD replay from a begin "
+            "time after the recording's start, or a resumed saved state): their battery charge then is not "
+            "known (no FCD attribute nor route file holds what they spent before), so each is booked from its charge at departure (declared, else "
             "charged): their kWh are an upper bound, their fuel a lower bound (summary.json "
             "chain.departure_charge.driving_at_begin; replay from the recording's start to book them whole)"]
 
