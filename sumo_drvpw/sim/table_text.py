@@ -26,16 +26,24 @@ _NUMERIC = {np.dtype(t): pa.from_numpy_dtype(np.dtype(t)) for t in
 
 
 def _strings(values) -> pa.Array | None:
-    """A string array of ``values`` (every one a str), else None."""
-    if not all(type(x) is str for x in values):
+    """A string array of ``values`` (every one a str), else None. Their text joined and
+    encoded at once where it is ASCII (one C call each, not one per value)."""
+    try:
+        joined = "".join(values)
+    except TypeError:  # (a value that is no str: pa.array's to read)
         return None
-    enc = [x.encode("utf-8") for x in values]
-    off = np.zeros(len(enc) + 1, np.int64)
-    np.cumsum([len(b) for b in enc], out=off[1:])
-    if off[-1] >= 2**31:  # (pa.array makes a chunked large column then: left to it)
+    if joined.isascii():
+        data = joined.encode("ascii")
+        lens = np.fromiter(map(len, values), np.int64, len(values))
+    else:
+        enc = [x.encode("utf-8") for x in values]
+        data = b"".join(enc)
+        lens = np.fromiter(map(len, enc), np.int64, len(enc))
+    if len(data) >= 2**31:  # (pa.array makes a chunked large column then: left to it)
         return None
-    return pa.Array.from_buffers(pa.string(), len(enc), [None, pa.py_buffer(off.astype(np.int32)),
-                                                          pa.py_buffer(b"".join(enc))])
+    off = np.zeros(len(lens) + 1, np.int32)
+    np.cumsum(lens, out=off[1:])
+    return pa.Array.from_buffers(pa.string(), len(lens), [None, pa.py_buffer(off), pa.py_buffer(data)])
 
 
 def arrow_array(values) -> pa.Array:
