@@ -121,10 +121,12 @@ def rows_csv(rows: list[dict], columns: list | None = None, header: bool = True)
     """``pd.DataFrame(rows, columns=columns).to_csv(index=False, header=header)`` (also as
     ``pd.DataFrame(rows).reindex(columns=columns)`` writes it): the columns in their first
     row's order then any new key's (or ``columns``), a key a row lacks left empty."""
-    if columns is None:
-        columns = list(dict.fromkeys(k for r in rows for k in r))
-    cols = {c: [r.get(c) for r in rows] for c in columns}
-    return columns_csv(cols, header) if all(isinstance(c, str) for c in columns) else _by_pandas(cols, header)
+    names = list(dict.fromkeys(k for r in rows for k in r)) if columns is None else list(columns)
+    if not names or not all(isinstance(c, str) for c in names):  # (no column, or a name no str)
+        import pandas as pd
+
+        return pd.DataFrame(rows, columns=columns).to_csv(index=False, header=header)
+    return columns_csv({c: [r.get(c) for r in rows] for c in names}, header)
 
 
 def columns_csv(cols: dict, header: bool = True) -> str:
