@@ -101,7 +101,7 @@ def cached_network(path: Path, settings: tuple, build):
             if not _private(folder):
                 raise PermissionError(f"the cache folder {folder} may be written by others: not read")
             with open(file, "rb") as f:
-                net = pickle.load(f)
+                net = _unpacked(pickle.load(f))
             try:
                 os.utime(file)  # (the most recently used are kept)
             except OSError:  # gone since (another run's pruning): the table read is whole all the same
@@ -124,6 +124,31 @@ def cached_network(path: Path, settings: tuple, build):
     return net
 
 
+def _packed(net):
+    """A shallow copy of ``net`` whose edge shapes (one small array per edge) are one array and
+    their lengths: a pickle of thousands of arrays read back one by one was a fifth of
+    MoST's table's load (220 → 175 ms for its 10,914 edges)."""
+    import copy
+
+    import numpy as np
+
+    out = copy.copy(net)
+    shapes = net.edge_shapes
+    out.edge_shapes = ("packed", np.concatenate(shapes) if len(shapes) else np.zeros((0, 2)),
+                       np.array([len(x) for x in shapes], np.int64))
+    return out
+
+
+def _unpacked(net):
+    """``net`` as :func:`_packed` kept it, its edge shapes a list again (views of one array)."""
+    import numpy as np
+
+    got = net.edge_shapes
+    if type(got) is tuple and got and got[0] == "packed":
+        net.edge_shapes = np.split(got[1], np.cumsum(got[2])[:-1]) if len(got[2]) else []
+    return net
+
+
 def _reason(e: Exception) -> str:
     """An exception of the cache as a reason on one line."""
     text = " ".join(str(e).split())
@@ -137,7 +162,7 @@ def _store(folder: Path, file: Path, net) -> None:
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=".net-", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
-            pickle.dump(net, f, protocol=pickle.HIGHEST_PROTOCOL)
+            pickle.dump(_packed(net), f, protocol=pickle.HIGHEST_PROTOCOL)
         os.replace(tmp, file)
     except BaseException:
         os.unlink(tmp)
