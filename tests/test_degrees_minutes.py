@@ -72,3 +72,39 @@ def test_mapped_in_degrees_the_error_says_the_unit_that_reads_them(tmp_path, cap
     assert "column 'Lat' is not numeric: data row 0 holds '34 11.28809'" in err
     assert 'unit = "deg min" reads them' in err
     assert not (tmp_path / "o.parquet").exists()
+
+
+@pytest.mark.parametrize("name, said", [
+    ("speed_mps", "unit 'deg min' is an angle, but 'speed_mps' holds a speed"),
+    ("lat_kmh", "unit 'deg min' is an angle, but name 'lat_kmh' ends in '_kmh', a speed unit"),
+    ("heading_s", "unit 'deg min' is an angle, but name 'heading_s' ends in '_s'"),
+])
+def test_deg_min_is_an_angle_checked_against_the_name_as_deg_is(tmp_path, capsys, name, said):
+    """'deg min' is an angle's unit: a name that says another quantity is refused as with 'deg'
+    (one line naming the mapping file and key, exit 2, nothing written). Before, 'deg min' was
+    returned ahead of the name checks: `Lat` mapped as speed_mps was written as a speed of
+    0.597 m/s (34.19° in radians)."""
+    f = tmp_path / "Log.csv"
+    f.write_text(ROWS, encoding="utf-8")
+    m = tmp_path / "m.toml"
+    m.write_text('[columns."epoch time"]\nname = "time_s"\nunit = "s"\n'
+                 + ('' if name == "speed_mps" else '[columns."Speed"]\nname = "speed_mps"\nunit = "mph"\n')
+                 + f'[columns."Lat"]\nname = "{name}"\nunit = "deg min"\n', encoding="utf-8")
+    rc = cli_main(["import", "columns", str(f), "--columns", str(m), "--out", str(tmp_path / "o.parquet")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1, err
+    assert f"{m}: columns.Lat: {said}" in err
+    assert not (tmp_path / "o.parquet").exists()
+
+
+def test_deg_min_under_a_radian_name_reads_radians(tmp_path):
+    """'latitude_rad' from 'deg min' is the same position in radians as 'latitude_deg' in degrees."""
+    f = tmp_path / "Log.csv"
+    f.write_text(ROWS, encoding="utf-8")
+    m = tmp_path / "m.toml"
+    m.write_text(_mapping(tmp_path, "deg min").read_text(encoding="utf-8").replace("latitude_deg", "latitude_rad"),
+                 encoding="utf-8")
+    assert cli_main(["import", "columns", str(f), "--columns", str(m), "--out", str(tmp_path / "o.parquet")]) == 0
+    d = pd.read_parquet(tmp_path / "o.parquet")
+    assert d["latitude_rad"].iloc[0] == pytest.approx(34.1881348 * 3.141592653589793 / 180, abs=1e-9)
+    assert d["longitude_deg"].iloc[0] == pytest.approx(-117.4292988, abs=1e-7)

@@ -31,9 +31,6 @@ def _entry(p, key, name, unit, scale) -> dict:
         return {"name": name, "kind": "text", "factor": 1.0, "offset": 0.0}
     suffix = _suffix(name)
     said = (lookup_unit(suffix) or ("dimensionless",))[0] if len(suffix) > 1 and suffix not in LOOSE_SUFFIXES else None
-    if unit.strip().lower() in DEG_MIN:  # "34 11.28809": text read by cells.degrees_minutes, in degrees
-        return {"name": name, "kind": "number", "factor": scale * (1.0 if suffix == "deg" else math.pi / 180.0),
-                "offset": 0.0, "deg_min": True}
     if dim == "angle" and suffix == "deg":
         f = f * 180.0 / math.pi
     elif suffix in SUFFIX_DIM and suffix not in LOOSE_SUFFIXES and dim != "dimensionless" and SUFFIX_DIM[suffix] != dim:
@@ -59,7 +56,9 @@ def _entry(p, key, name, unit, scale) -> dict:
         raise UserError(f"{p}: {key}.name '{name}' ends in '_{suffix}', but the {dim.replace('_', ' ')} is written in "
                         f"'{DIMENSIONS[dim]}' (names end in their SI unit, the value converted to it): write "
                         f"name = \"{name[:-len(suffix)]}{DIMENSIONS[dim]}\" with unit = \"{unit}\"")
-    return {"name": name, "kind": "number", "factor": f * scale, "offset": o * scale}
+    # ("deg min", "34 11.28809": an angle checked as "deg" is above, its text read by cells.degrees_minutes)
+    return {"name": name, "kind": "number", "factor": f * scale, "offset": o * scale,
+            **({"deg_min": True} if unit.strip().lower() in DEG_MIN else {})}
 
 
 #: one-part name suffixes that spell a unit but in a column's name often say something else: 'speed_ms'
