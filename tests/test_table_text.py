@@ -118,3 +118,20 @@ def test_a_run_imports_no_pandas(tmp_path):
     assert "PANDAS False" in r.stdout
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["vehicles"] > 0 and {"shares.csv", "difference.csv", "vehicles.parquet"} <= set(summary["files"].values())
+
+
+@pytest.mark.parametrize("values", [
+    [np.float32(0.1), np.float32(2.5), np.float32(3.0)],   # a float32 array's items (pandas: float32)
+    [np.float16(0.1), np.float16(1.0), np.float16(-2.0)],
+    [np.float32(0.1), None, np.float32(1.0)],
+    [np.float32(0.1), 0.2, 1],                               # mixed with Python numbers
+    [np.longdouble(0.1), 0.5, 1.0],
+])
+def test_narrow_or_wide_float_scalars_are_written_as_pandas_writes_them(values):
+    """A column of NumPy float scalars other than float64 (a float32 array's items in a chain row)
+    is pandas' text too: before, it was widened to float64 and written 0.10000000149011612 where
+    pandas writes the float32 column 0.1."""
+    cols = {"x": values, "n": [1, 2, 3]}
+    assert columns_csv(cols) == pd.DataFrame(cols).to_csv(index=False)
+    rows = [{"x": x, "n": k} for k, x in enumerate(values)]
+    assert rows_csv(rows) == pd.DataFrame(rows).to_csv(index=False)

@@ -92,6 +92,8 @@ def _column_text(values: list) -> list | None:
         return None if present else [""] * len(values)  # (bools with missing: object; none: float)
     if all(isinstance(x, str) for x in present):
         return ["" if _missing(x) else x for x in values]
+    if any(isinstance(x, np.floating) and type(x) is not np.float64 for x in present):
+        return None  # (float32 items: pandas may keep a float32 column, written by its own repr)
     if all(isinstance(x, Real) and not isinstance(x, (bool, np.bool_)) for x in present):
         if len(present) == len(values) and all(isinstance(x, Integral) for x in present):
             return [str(int(x)) for x in values]
