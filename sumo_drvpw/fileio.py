@@ -231,10 +231,14 @@ def check_output_path(out, inputs=(), kind: str = "folder") -> Path:
 
     Raises :class:`sumo_drvpw.errors.UserError` when ``out`` equals an input, lies inside
     an input folder, or (a folder replaced whole) contains an input; when a folder output
+    has no name of its own ('', '.', '..': the working folder or a parent); when a folder output
     is an existing file or a file output is an existing folder.
     """
     from sumo_drvpw.errors import UserError
 
+    if kind == "folder" and Path(out).name in ("", ".."):  # ('', '.', '..', 'a/..': no name of its own)
+        raise UserError(f"{str(out)!r}: names the working folder or one above it, not an output folder of "
+                        "its own (an output set replaces its folder whole): give the folder's name")
     out = Path(out)
     res = out.resolve()
     for i in inputs:

@@ -767,3 +767,25 @@ def test_a_stop_pressed_again_and_again_still_stops(monkeypatch):
     clock[0] += 0.6  # 1.2 s after the raised one, 0.6 s after the last
     with pytest.raises(KeyboardInterrupt):
         sg._on_sigint(signal.SIGINT, None)
+
+
+@pytest.mark.parametrize("out", ["", ".", "..", "sub/.."])
+@pytest.mark.parametrize("force", [False, True])
+def test_an_output_folder_that_names_the_working_folder_or_its_parent_is_one_line(tmp_path, monkeypatch, capsys,
+                                                                                  out, force):
+    """``--out ''`` (a shell variable left unset), ``--out .`` or ``--out ..`` name no output folder
+    of their own: refused in one line naming the path, exit 2, the working folder untouched and no
+    temporary folder left. Before: with --force (or an empty working folder) a FileExistsError
+    traceback from output_set (the set's folder named '' or '..' inside its temporary sibling),
+    and a hidden '..*.tmp' folder left in the working folder."""
+    work = tmp_path / "work"
+    (work / "sub").mkdir(parents=True)
+    (work / "precious.txt").write_text("keep", encoding="utf-8")
+    monkeypatch.chdir(work)
+    rc = cli_main(["compare", str(BUNDLED_LOG), "--equation", "drvpw_prius3", "--out", out]
+                  + (["--force"] if force else []))
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert "names the working folder" in err and repr(out or ".") in err, err  # ('' read as '.' by the CLI)
+    assert sorted(p.name for p in work.iterdir()) == ["precious.txt", "sub"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["work"]
