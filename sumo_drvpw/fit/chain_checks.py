@@ -273,7 +273,7 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
     reader's (a fuel target read from an unthrottled engine's air flow is said from them);
     ``hvac_trips``: :func:`hvac_trip_sums` of a chain with HVAC gains (:func:`hvac_trips_note`);
     ``measured``: the chain was fitted on a measured driving power, not an equation's
-    (:func:`dilution_note`).
+    (:func:`dilution_note`; an implausible traction efficiency blames it, :data:`MEASURED_OFF`).
     UserError, naming ``where``, when the driving power never exceeds :func:`identify_drive_w`."""
     chain = fit.chain
     ranges = fitted_ranges(p_drive_w, v_mps, use) if ranges is None else ranges
@@ -306,6 +306,8 @@ def check_chain(fit, vehicle, p_drive_w, v_mps, use, ranges: dict | None = None,
     if chain.predicts == "fuel" and "marginal_efficiency" in params:
         params["marginal_efficiency"]["reading"] += dilution_note(fit, ranges, measured)
     slope = "traction_efficiency" if chain.predicts == "battery" else "marginal_efficiency"
+    if measured and slope == "traction_efficiency" and slope in params:  # (no road load was fitted on)
+        params[slope]["reading"] = params[slope].get("reading", "").replace(ROAD_LOAD_OFF, MEASURED_OFF)
     if slope in params:
         params[slope]["reading"] = params[slope].get("reading", "") + unexplained_note(
             getattr(fit, "r2", math.nan), chain.predicts, powertrain)
@@ -381,12 +383,20 @@ MARGINAL_EFFICIENCY = {"gasoline": ((0.25, 0.5), "0.3–0.45", "petrol"),
                        "diesel": ((0.3, 0.55), "0.35–0.5", "diesel")}
 
 
+#: why a traction efficiency fitted on an equation's driving power is implausible (:func:`reading`),
+#: and, fitted on a measured one (no road load in the fit, :func:`check_chain` ``measured``), why then
+ROAD_LOAD_OFF = ": the road load is off"
+MEASURED_OFF = (": the measured driving power it was fitted on (a motor's torque × speed, a power-split "
+                "signal; not a road load's power) is off against the battery — a torque or speed signal's scale "
+                "(a 2020 Leaf's LeafSpy τ·ω is 0.77 of its V·I, docs/adapters.md) or timing — or a draw beside it")
+
+
 def reading(name: str, val: float, fuel: str | None = None) -> str:
     """One-line physical reading of a calibrated parameter, flagging implausible values
     (an engine's by its ``fuel``, a key of :data:`sumo_drvpw.model.constants.FUELS`)."""
     if name == "traction_efficiency":
         s = f"battery → wheel on traction {val:.1%} (motor, inverter, gear, battery resistance)"
-        return s + ("; IMPLAUSIBLE for a BEV (expected 0.75–0.95): the road load is off"
+        return s + ("; IMPLAUSIBLE for a BEV (expected 0.75–0.95)" + ROAD_LOAD_OFF
                     if not 0.7 <= val <= 0.97 else "")
     if name == "recuperation_efficiency":
         s = f"wheel → battery on braking {val:.1%} (incl. the blended friction share)"
