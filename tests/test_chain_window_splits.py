@@ -226,3 +226,30 @@ def test_the_attenuated_note_names_the_noise_of_a_measured_driving_power(tmp_pat
     assert len(said["local"]) == 1 and said["local"] == said["memory"]
     assert "noise in the measured driving power" in said["local"][0] and "held-out" in said["local"][0]
     assert "derived from a logged speed" not in said["local"][0]
+
+
+@pytest.mark.parametrize("measured", [False, True])
+def test_windows_that_read_the_efficiency_higher_are_not_called_attenuated(measured):
+    """Noise in the driving power (the regressor) flattens the per-sample Willans line: its
+    marginal efficiency reads high, and the windowed means, less noisy, read it lower
+    (docs/energy-chain.md). A windowed line that reads η_m more than 10 % higher is no
+    dilution (the Prius Gen-2 on To_CdA_Act: 0.430 on 60-s windows against 0.402 per sample,
+    de5ffc7): the note says the windows disagree — a line that is not straight, or inputs out of
+    step — and to keep the fit better on held-out trips, not 'ATTENUATED (errors in the
+    variables)'. Before, either direction was called ATTENUATED. The windows reading lower
+    keep that note."""
+    from types import SimpleNamespace
+
+    from sumo_drvpw.fit.chain_checks import FLAGS, dilution_note
+
+    def fit(*etas):
+        rows = [{"window_s": w, "marginal_efficiency": e, "std_err": 0.005, "idle_fuel_power_w": 6000.0,
+                 "windows": 400} for w, e in zip((10.0, 30.0, 60.0), etas)]
+        return SimpleNamespace(chain=SimpleNamespace(marginal_efficiency=0.40, idle_fuel_power_w=7000.0), windowed=rows)
+
+    up = dilution_note(fit(0.41, 0.43, 0.46), None, measured)  # +15 % at 60 s
+    assert up and "ATTENUATED" not in up and "errors in the variables" not in up
+    assert "WINDOWS DISAGREE" in up and "WINDOWS DISAGREE" in FLAGS and "η 0.460" in up and "held-out" in up
+    down = dilution_note(fit(0.39, 0.37, 0.34), None, measured)  # −15 %: the per-sample line flattened
+    assert down.startswith("; ATTENUATED (errors in the variables)") and "WINDOWS DISAGREE" not in down
+    assert dilution_note(fit(0.41, 0.42, 0.43), None, measured) == ""  # within 10 %

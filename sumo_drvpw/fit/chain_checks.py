@@ -45,7 +45,7 @@ IDLE_FUEL_REF_DISPLACEMENT_L = 2.0
 #: powertrains whose engine is off at standstill and drives electrically at light load
 HYBRID_POWERTRAINS = ("power_split",)
 #: readings that make a warning
-FLAGS = ("IMPLAUSIBLE", "NOT IDENTIFIED", "CHECK THE TARGET", "ATTENUATED")
+FLAGS = ("IMPLAUSIBLE", "NOT IDENTIFIED", "CHECK THE TARGET", "ATTENUATED", "WINDOWS DISAGREE")
 #: a battery chain's recuperation efficiency below which it returns next to nothing: no
 #: electric or hybrid car's (a rehearsal's Nissan Leaf on a traction-only power: 0.001)
 RECUPERATION_MIN = 0.15
@@ -327,7 +327,9 @@ def dilution_note(fit, ranges: dict | None = None, measured: bool = False) -> st
     power flattens it), when its refits on windowed means (``fit.windowed``:
     :func:`~sumo_drvpw.fit.chain_windows.windowed_lines`) move its marginal efficiency by more
     than :data:`~sumo_drvpw.fit.chain_windows.DILUTION_REL` and beyond twice their standard
-    error; else ''. Says the windowed figures and what to do. The noise it names is the input's:
+    error; else ''. Says the windowed figures and what to do. ATTENUATED where a windowed line reads
+    η lower (noise in the regressor reads it high per sample); WINDOWS DISAGREE where every moved
+    one reads it higher, which no dilution does. The noise it names is the input's:
     an equation's driving power holds an acceleration derived from a logged speed and a grade from
     a logged elevation; a ``measured`` one (torque × speed, the power-split P_PTdrv) has neither,
     and its windows move the line also where its signals are logged out of step with the fuel or
@@ -345,6 +347,12 @@ def dilution_note(fit, ranges: dict | None = None, measured: bool = False) -> st
                      + f", {r['idle_fuel_power_w'] / 1000:.1f} kW at zero output ({r['windows']} windows)" for r in rows)
     p = (ranges or {}).get("power_range_w")
     span = f" (here {p[0] / 1000:.0f} … {p[1] / 1000:.0f} kW)" if p else ""
+    if all(r["marginal_efficiency"] > eta for r in moved):  # (noise reads η high per sample: not this)
+        return (f"; WINDOWS DISAGREE: refitted on means over windows of the same trips — {figs} — against η "
+                f"{eta:.3f} and {idle / 1000:.1f} kW on the samples, the windowed lines read the efficiency higher, "
+                "which noise in the driving power does not do (it flattens the per-sample line, reading η high): the "
+                "line is not straight over the power driven, or the fuel is logged out of step with the power; keep "
+                "the fit better on held-out trips (window_s, e.g. 30 s; docs/energy-chain.md)")
     head = (f"; ATTENUATED (errors in the variables): refitted on means over windows of the same trips — {figs} — "
             f"against η {eta:.3f} and {idle / 1000:.1f} kW on the samples: ")
     if measured:  # no derivative in it: noise or timing, or a bent line, and only held-out trips tell
