@@ -141,3 +141,20 @@ def test_the_command_line_imports_the_names_once_refused_and_refuses_the_ones_on
     assert len(err) == 1 and "bad.toml" in err[0] and "columns.w.name" in err[0]
     assert 'write name = "wheel_mps" with unit = "km/h"' in err[0]
     assert not (tmp_path / "bad.parquet").exists()
+
+
+@pytest.mark.parametrize("unit", ["g/s", "kg/s", "kg/h"])
+def test_a_mass_flow_named_in_kg_per_s_is_told_the_si_name(tmp_path, unit):
+    """'maf_kg_s' (a mass flow whose name says kg/s, the '/' written '_'): refused, told to write
+    name = "maf_gps" with the file's unit. Before, kg/s was no unit: the name's suffix read as
+    '_s' (time) and the advice was name = "maf_kg_gps" — a name saying kg and g/s at once — and
+    unit = "kg/s" was refused as unknown."""
+    p = _map(tmp_path, "maf_kg_s", unit)
+    with pytest.raises(UserError) as e:
+        load_mapping(p)
+    assert str(p) in str(e.value) and f'write name = "maf_gps" with unit = "{unit}"' in str(e.value), str(e.value)
+
+
+def test_kg_per_s_reads_as_a_thousand_g_per_s(tmp_path):
+    m = load_mapping(_map(tmp_path, "maf_gps", "kg/s"))
+    assert m["columns"]["x"]["factor"] == pytest.approx(1000.0, rel=1e-12)
