@@ -23,7 +23,7 @@ import test_stream_chain as planted
 import sumo_drvpw.fit.engine as engine_mod
 from sumo_drvpw.cli import main as cli_main
 from sumo_drvpw.fit import chain_stream
-from sumo_drvpw.fit.chain_stream import _keys, quantile_of_order
+from sumo_drvpw.fit.chain_quantiles import _keys, quantile_of_order
 
 RTOL = 1e-9
 _RUN = engine_mod.run
