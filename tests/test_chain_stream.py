@@ -93,6 +93,24 @@ def test_streamed_chain_calibration_equals_in_memory(chain_logs, kind, tmp_path,
     assert said_l == said_m
 
 
+def test_streamed_chain_with_held_parameters_equals_in_memory(chain_logs, tmp_path, monkeypatch, capsys):
+    """``--fix``: a logged load's gain, an HVAC gain and the auxiliary draw held at the planted
+    values (BATTERY_EQ), the recuperation limit profiled: streamed (the held part taken off
+    the factors, fit/chain_fixed.py) = in memory (off the target, row by row) to 1e-9."""
+    folder, eq, _ = chain_logs["battery"]
+    extra = ["--target", "battery", "--equation", str(eq), "--load", "heater_power_w", "--hvac", "ambient_c:20",
+             "--fix", "loads.heater_power_w=1", "--fix", "hvac.cooling_w_per_k=40", "--fix", "aux_power_w=450"]
+    ref, _, said_m = _calibrate(monkeypatch, capsys, folder, tmp_path / "memory.toml", "memory", *extra)
+    got, cl, said_l = _calibrate(monkeypatch, capsys, folder, tmp_path / "local.toml", "local", *extra)
+    corpus.assert_close_documents(ref, got, RTOL)
+    ch = got["chain"]
+    assert ch["loads"]["heater_power_w"] == 1.0 and ch["hvac"]["cooling_w_per_k"] == 40.0
+    assert ch["aux_power_w"] == 450.0 and ch["traction_efficiency"] == pytest.approx(0.88, rel=0.03)
+    assert ch["provenance"]["fixed"] == {"loads.heater_power_w": 1.0, "hvac.cooling_w_per_k": 40.0,
+                                         "aux_power_w": 450.0}
+    assert cl.err.count("local engine:") == 1 and said_l == said_m
+
+
 def test_streamed_chain_on_a_stepwise_road_load_equals_in_memory(tmp_path, monkeypatch, capsys):
     """No --equation: the road load calibrated stepwise in the same pass (the chain's input
     is the log's measured driving power), the chain after it: both equal the in-memory ones."""

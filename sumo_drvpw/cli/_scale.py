@@ -290,7 +290,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
         engine = declared_engine(eq)  # a moving zero-output fuel fitted, a rated output kept
 
     spec = ChainSpec(args.target, eq, tuple(args.load), hvac, cands, MOVING_MPS, fuel, cut,
-                     engine_off_for(veh, False, getattr(args, "engine_off", "profile")), **engine)  # (battery: at the fit)
+                     engine_off_for(veh, False, getattr(args, "engine_off", "profile")), **engine,  # (battery: at the fit)
+                     fixed=getattr(args, "fix_values", None))
     infos = []
 
     def reduce(make):
@@ -329,7 +330,8 @@ def _chain_streamed(args, out: Path, inputs, hvac) -> int:
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": st.files, "target": st.source, "road_load": road,
                            "chain_input": chain_input, "vehicle": veh.path if veh else None,
-                           "trip_signatures": signature_texts(st.signatures)}
+                           "trip_signatures": signature_texts(st.signatures),
+                           **({"fixed": spec.fixed} if spec.fixed else {})}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     declare_measurement(eq, _measurement(args))
     if note := chain_input_note(args.equation, src):

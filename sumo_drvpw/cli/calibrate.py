@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from sumo_drvpw.cli import add_force, add_log_options, existing_paths, note_counts, output_set, read_options
+from sumo_drvpw.cli._fix import add_fix_argument, fix_option
 from sumo_drvpw.cli._scale import add_engine_arguments, chain_input_note, replace_chain
 from sumo_drvpw.errors import UserError
 
@@ -58,6 +59,7 @@ def configure(p):
     g.add_argument("--efficiency", choices=("constant", "power", "speed-power"), default="constant",
                    help="battery chain: traction and recuperation efficiency as constants (default) "
                         "or tables over |power| (and speed), fitted on a piecewise-linear basis")
+    add_fix_argument(g)
 
 
 def _check_name(args) -> None:
@@ -87,6 +89,7 @@ def main(args) -> int:
         raise UserError("--equation, --load and --hvac go with --target battery or fuel")
     if getattr(args, "efficiency", "constant") != "constant":
         raise UserError(f"--efficiency {args.efficiency} goes with --target battery")
+    fix_option(args, None)  # (refused: a battery chain's)
     from sumo_drvpw.fileio import _is_within, check_output_path
 
     for opt in ("p_enter", "p_remove"):
@@ -451,6 +454,7 @@ def main_chain(args) -> int:
         if not col or not -60.0 <= hvac["setpoint_c"] <= 60.0:
             raise UserError(f"--hvac {args.hvac}: give COLUMN[:SETPOINT_C] with a cabin set-point in "
                             "-60 … 60 °C")
+    args.fix_values = fix_option(args, hvac)  # held at known values (in memory and streamed)
     engine = getattr(args, "engine", "memory")
     if window is not None and engine != "memory":  # (the streamed fit refuses the windowed fit; fitted in memory)
         if engine == "dask":
@@ -527,13 +531,13 @@ def main_chain(args) -> int:
     m = keep_arrays(m, sorted(keep))  # the table goes with the last reference to it
     del mw
     fit = calibrate_on(m, eq, loads=args.load, hvac=hvac, p_drive_w=p_in, efficiency=efficiency,
-                       engine_off=args.engine_off, rating=rating, window_s=window)
+                       engine_off=args.engine_off, rating=rating, window_s=window, fixed=args.fix_values)
     eq.name = args.name or out.stem
     replace_chain(eq, fit.chain)
     eq.chain.provenance = {**fit.chain.provenance, "logs": m.log.files, "target": m.source, "road_load": road,
                            "chain_input": chain_input,
                            "vehicle": m.vehicle.path if m.vehicle else None,
-                           "trip_signatures": trips}
+                           "trip_signatures": trips, **({"fixed": args.fix_values} if args.fix_values else {})}
     eq.chain.reading = {k: p.get("reading", "") for k, p in fit.parameters.items()}
     declare_measurement(eq, ro.measurement)
     if note := chain_input_note(args.equation, mw_source):

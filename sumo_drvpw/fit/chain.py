@@ -73,7 +73,8 @@ class ChainFit:
                          "unknown load)")
         for k, p in self.parameters.items():
             se = p.get("std_err")
-            se_s = "at bound" if p.get("at_bound") else (f"± {se:.4g}" if se is not None else "")
+            se_s = ("fixed" if p.get("fixed") else "at bound" if p.get("at_bound")
+                    else (f"± {se:.4g}" if se is not None else ""))
             lines.append(f"  {k:<28} {p['value']:>12.5g} {se_s:<14} {p.get('reading', '')}")
         from sumo_drvpw.fit.chain_checks import range_note
 
@@ -136,6 +137,13 @@ def solve_factor(r: np.ndarray, n: int, lb, ub):
     beta = np.clip(res.x / scale, lb, ub)
     e = z - rx @ beta
     return beta, float(e @ e) + rho2, res.active_mask, (rx, n)
+
+
+def _held_rss(make, w: np.ndarray, ok: np.ndarray) -> float:
+    """The weighted RSS of a fit with every column held (``make(sl)`` gives no free column
+    and the target less the held part)."""
+    r, _ = factor_rows(make, w, ok, 0)
+    return float(r[:, 0] @ r[:, 0])
 
 
 def _covariance(fac: tuple, rss: float, active: np.ndarray) -> np.ndarray:
@@ -314,12 +322,12 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
             c[1] = c[1][:, None] * emap[1].matrix(p[sl], v[sl])
         return np.column_stack(c)
 
-    fixed = dict(fixed or {})
-    bad = set(fixed) - set(names)
-    if bad:
-        raise UserError(f"energy chain: cannot fix {sorted(bad)}: not among {', '.join(names)}")
-    fx = {j: (1.0 / fixed[n] if n == "traction_efficiency" else float(fixed[n]))
-          for j, n in enumerate(names) if n in fixed}
+    from sumo_drvpw.fit.chain_fixed import check_fixed, coefficients
+
+    fixed = check_fixed(fixed, names)  # (streamed, the held part is taken off the factor: chain_fixed.py)
+    if "recuperation_limit_w" in fixed:  # held: not profiled
+        grid = [fixed["recuperation_limit_w"]]
+    fx = coefficients(names, fixed)
     free = [j for j in range(len(names)) if j not in fx]
     lb_f, ub_f = [lb[j] for j in free], [ub[j] for j in free]
     best, profile = None, []
@@ -329,7 +337,8 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
             off = sum(x[:, j] * val for j, val in fx.items()) if fx else 0.0
             return x[:, free], y[sl] - off
 
-        b_free, rss, act_free, xs = _solve(make, w, ok, lb_f, ub_f)
+        b_free, rss, act_free, xs = _solve(make, w, ok, lb_f, ub_f) if free else (
+            np.empty(0), _held_rss(make, w, ok), np.zeros(0, int), None)
         k = len(free) + (lim is not None)
         bic = _bic(rss, int(ok.sum()), k)
         profile.append({"recuperation_limit_w": lim, "rss": rss, "bic": bic})
@@ -339,7 +348,8 @@ def calibrate_battery(p_drive_w, v_mps, meas_w, dt_s, signals: dict | None = Non
     beta = np.empty(len(names))
     beta[free] = b_free
     se = np.full(len(names), np.nan)
-    se[free] = _covariance(xs, rss, act_free)
+    if free:
+        se[free] = _covariance(xs, rss, act_free)
     active = np.zeros(len(names), int)
     active[free] = act_free
     for j, val in fx.items():
@@ -395,6 +405,8 @@ def battery_chain(names, beta, se, active, lim, hvac, predicts="battery", fixed=
         kw["recuperation_limit_w"] = lim
         params["recuperation_limit_w"] = {"value": lim, "std_err": None, "at_bound": False,
                                           "how": "profiled (BIC) over quantiles of the braking power"}
+        if "recuperation_limit_w" in fixed:
+            params["recuperation_limit_w"].update(how="fixed: given, not profiled", fixed=True)
     for name, p_ in params.items():
         if "reading" not in p_:
             p_["reading"] = reading(name, p_["value"])

@@ -35,6 +35,7 @@ from sumo_drvpw.data.trips import trip_signatures
 from sumo_drvpw.errors import UserError
 from sumo_drvpw.fit.chain import (LIMIT_QUANTILES, ChainFit, _bic, _col, _covariance, battery_chain,
                                   battery_columns, battery_design, factor_rows, solve_factor, too_few_samples)
+from sumo_drvpw.fit.chain_fixed import check_fixed, coefficients, solve_fixed
 from sumo_drvpw.fit.chain_fuel import (CITY_SPEED_MPS, fuel_bounds, fuel_chain, fuel_design, fuel_grid,
                                        fuel_target_text, idles_at_stops, note_conventional, note_declared,
                                        note_idling, set_moving, set_rating, standing_sums, fuel_names)
@@ -70,6 +71,13 @@ class ChainSpec:
     engine_off: "str | float" = "profile"
     moving_idle: bool = False
     engine_max_w: float | None = None
+    #: a battery chain's parameters held at given values (name → value; fit/chain_fixed.py)
+    fixed: dict | None = None
+
+    @property
+    def held_limit(self) -> float | None:
+        """The recuperation limit held (``fixed``), not profiled, or None."""
+        return (self.fixed or {}).get("recuperation_limit_w")
 
 
 
@@ -282,7 +290,7 @@ class ChainStats:
             if sel.size:  # distinct values and counts: a power repeated many times is one entry
                 self.values = _merge_hist(self.values, np.unique(sel, return_counts=True))
             return
-        for lim in ((None,) if self.phase == "scan" else self.limits):
+        for lim in ((sp.held_limit,) if self.phase == "scan" else self.limits):
             x = np.column_stack(battery_design(cols, neg, slice(None), lim))
             self._factor(lim, x if view is None else view(x), y, w, ok)  # as the counters book it
         if self.phase == "scan":
@@ -431,14 +439,16 @@ class ChainStats:
         if self.target == "fuel":
             return self._fit_fuel()
         sp, best, profile = self.spec, None, []
-        for lim in [None] + list(limits):
-            beta, rss, act, xs = solve_factor(self.fac[lim][0], self.fac[lim][1], self.lb, self.ub)
-            bic = _bic(rss, self.n_ok, len(self.names) + (lim is not None))
+        fixed = check_fixed(sp.fixed, self.names)
+        fx = coefficients(self.names, fixed)
+        for lim in [sp.held_limit] if sp.held_limit is not None else [None] + list(limits):
+            beta, rss, act, se = solve_fixed(self.fac[lim][0], self.fac[lim][1], self.lb, self.ub, fx)
+            bic = _bic(rss, self.n_ok, len(self.names) - len(fx) + (lim is not None))
             profile.append({"recuperation_limit_w": lim, "rss": rss, "bic": bic})
             if best is None or bic < best[0]:
-                best = (bic, lim, beta, rss, act, xs)
-        _, lim, beta, rss, act, xs = best
-        chain, params = battery_chain(self.names, beta, _covariance(xs, rss, act), act, lim, sp.hvac)
+                best = (bic, lim, beta, rss, act, se)
+        _, lim, beta, rss, act, se = best
+        chain, params = battery_chain(self.names, beta, se, act, lim, sp.hvac, fixed=fixed, fx=fx)
         sw, mu, c = self.mom
         r2 = 1.0 - rss / float(c[0, 0]) if c[0, 0] > 0 else math.nan
         ey = sw * float(mu[0])
@@ -524,7 +534,7 @@ def calibrate_chain_streamed(reduce, st: ChainStats) -> ChainFit:
         reduce = partial(replay, kept=st.kept)
     st.kept = None
     limits = []
-    if st.target == "battery":
+    if st.target == "battery" and st.spec.held_limit is None:  # (a held limit: factored by the scan)
         _, bins = st.brake_bins()
         if bins:
             limits = st.limits_from(reduce(partial(ChainStats, st.spec, "collect", bins=bins)))
