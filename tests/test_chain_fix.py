@@ -94,6 +94,13 @@ def test_held_values_are_kept_and_bounds_hold(fix_log, tmp_path, monkeypatch, ca
     ch = docs["local"]["chain"]
     assert ch["traction_efficiency"] == 1.0 and ch["recuperation_efficiency"] == 0.5
     assert ch["aux_power_w"] > TRUE["aux_power_w"]  # η 1 books the traction losses as auxiliary power
+    assert ch["aux_power_w"] >= 0 and ch.get("recuperation_limit_w", 1.0) > 0
+    # compare's report marks the held values (from the TOML's [chain.provenance] fixed)
+    assert cli_main(["compare", str(log), "--equation", str(tmp_path / "local.toml"), "--target", "battery",
+                     "--out", str(tmp_path / "cmp")]) == 0
+    md = (tmp_path / "cmp" / "report.md").read_text(encoding="utf-8")
+    assert "| `traction_efficiency` | 1 (fixed) |" in md and "| `recuperation_efficiency` | 0.5 (fixed) |" in md
+    assert "`aux_power_w` | " in md and "(fixed)" not in md.split("`aux_power_w` | ")[1].split("\n")[0]
 
 
 @pytest.mark.parametrize("args, said", [

@@ -117,12 +117,14 @@ def chain_lines(comp) -> list[str]:
         if ch is None or ch.predicts not in ("battery", "fuel"):
             continue
         d = ch.to_dict()
+        held = (ch.provenance or {}).get("fixed") or {}  # held at given values (calibrate --fix)
         for k, v in d.items():
             if k in ("predicts", "std_err", "reading", "provenance", "metrics") or isinstance(v, (dict, list)):
                 continue
             se = (ch.std_err or {}).get(k)
             val = coef(v) if isinstance(v, float) and math.isfinite(v) else str(v)
-            rows.append(f"| {nm} | `{k}` | {val}{f' ± {coef(se)}' if se is not None else ''} | "
+            val += " (fixed)" if k in held else f" ± {coef(se)}" if se is not None else ""
+            rows.append(f"| {nm} | `{k}` | {val} | "
                         f"{(ch.reading or {}).get(k, '')} |")
     if not rows:
         return []
