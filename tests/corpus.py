@@ -777,6 +777,28 @@ def _(d):  # was accepted and ran in memory, the option silently ignored (compar
                 "--efficiency", "power", "--engine", "dask")
 
 
+@case("options", "battery chain --fix of a name the chain has not", ("--fix aux_power=300", "cannot fix 'aux_power'",
+                                                                    "aux_power_w"))
+def _(d):  # calibrate --fix (cli/_fix.py): the fixable names listed
+    log = write(d, "log.parquet", _battery_log())
+    return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--equation", "roadload_spec",
+                "--fix", "aux_power=300")
+
+
+@case("options", "battery chain --fix of an efficiency in percent", ("--fix traction_efficiency=90", "(0, 1]"))
+def _(d):
+    log = write(d, "log.parquet", _battery_log())
+    return _cal(log, d, "--vehicle", "jlu_bev", "--target", "battery", "--equation", "roadload_spec",
+                "--fix", "traction_efficiency=90")
+
+
+@case("options", "fuel chain --fix", ("--fix aux_power_w=300", "holds no parameter"))
+def _(d):  # refused, not ignored: the fuel chain's fit holds nothing at a given value
+    log = write(d, "log.parquet", _battery_log())
+    return _cal(log, d, "--vehicle", "jlu_bev", "--target", "fuel", "--equation", "roadload_spec",
+                "--fix", "aux_power_w=300")
+
+
 @case("options", "compare --workers without --engine dask", ("--workers", "--engine dask"))
 def _(d):  # was accepted and ignored with --engine memory (calibrate refused it)
     return _cmp(write(d, "log.parquet", base_log()), d, "--equation", "vsp_ldv1999", "--engine", "memory",
