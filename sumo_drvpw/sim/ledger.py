@@ -108,11 +108,11 @@ class EquationSet:
             got = []
             for mass, terms, entries, mean, sumo in self.groups:
                 kept = [e for e in entries if on is None or on[e[1] // C]]
-                if kept:  # (and its entries as arrays: term rows, output rows, coefficients)
+                if kept:  # its entries (term row, output row, coefficient), and as arrays for np.add.at
                     need = sorted({u for u, _, _ in kept})
-                    arrays = tuple(np.array(x) for x in zip(*[(need.index(u), r, [c]) for u, r, c in kept]))
-                    got.append((mass, [terms[u] for u in need], [(need.index(u), r, c) for u, r, c in kept] + [arrays],
-                                mean, sumo))
+                    rows = [(need.index(u), r, c) for u, r, c in kept]
+                    arrays = tuple(np.array(x) for x in zip(*[(u, r, [c]) for u, r, c in rows]))
+                    got.append((mass, [terms[u] for u in need], rows, arrays, mean, sumo))
             self._live_cache[key] = got
         if raw is not None:
             self._app_cache = {**(self._app_cache if len(self._app_cache) < 64 else {}), raw: got}
@@ -133,7 +133,7 @@ class EquationSet:
         """
         E, C, n = len(self.equations), len(LEDGER_CATEGORIES), len(x)
         out = np.zeros((E * C, n))
-        for mass, terms, entries, mean, sumo in self._live_groups(app):
+        for mass, terms, entries, arrays, mean, sumo in self._live_groups(app):
             xm = (x_mean if mean and x_mean is not None else x).with_mass(mass)
             if mean and mass is not None and x_mean is not None and "load_kg" in x_mean.signals:
                 xm = replace(xm, mass=xm.mass + np.asarray(x_mean.signals["load_kg"], float))
@@ -143,10 +143,10 @@ class EquationSet:
             for i, t in enumerate(terms):
                 vals[i] = t.evaluate(xm)
             if n <= 32:  # out[row] += c·term, entry by entry: np.add.at adds them in order in one call
-                u, rows, c = entries[-1]  # (at up to 32 vehicles; at more its per-element cost is more)
+                u, rows, c = arrays  # (at up to 32 vehicles; at more its per-element cost is more)
                 np.add.at(out, rows, c * vals[u])
             else:
-                for u, row, c in entries[:-1]:
+                for u, row, c in entries:
                     out[row] += c * vals[u]
         if self.rot_fixed:  # (m' + m_rot)·v̄·a at the booked mass m' (riders, a setMass), not (1 + m_rot/m)·m'
             va = (x.v if x.v_acc is None else x.v_acc) * x.a
